@@ -1,0 +1,39 @@
+"""Errors of the acquisition layer (cameras, capture, recording).
+
+Each class also inherits the matching built-in exception. Messages follow
+``"<where>: <what is wrong>; expected <what>"`` and add a remedy when one is known.
+"""
+
+from __future__ import annotations
+
+
+class CameraError(OSError):
+    """A camera failed or refused a setting; the message names the camera and the feature."""
+
+
+class CameraNotFoundError(CameraError, LookupError):
+    """No camera matched; the message lists what was found."""
+
+
+class FrameTimeoutError(CameraError, TimeoutError):
+    """No frame arrived in time; the message names the step and the timeout."""
+
+
+class CaptureError(RuntimeError):
+    """A capture sequence could not complete."""
+
+
+class DroppedFrameError(CaptureError):
+    """A frame was lost or incomplete; frames already saved stay saved."""
+
+
+class ReplayMismatchError(CaptureError):
+    """The plan differs from the recording being replayed; names the first differing step and field."""
+
+
+class RigOpenError(CaptureError):
+    """One or more devices of a rig failed to open; every device's failure is listed."""
+
+
+class RecordingError(CaptureError, ValueError):
+    """A sequence on disk is malformed; the message names the file and the field."""

@@ -1,0 +1,344 @@
+"""Spectral data: one wavelength-grid type, one spectra container, the only resampler.
+
+Public objects
+--------------
+- :class:`WavelengthGrid`: a uniform wavelength grid in nanometres.
+- :class:`Spectra`: a set of spectra sampled on one grid, knowing their kind and unit.
+- :func:`energy_to_photons` / :func:`photons_to_energy`: the unit conversion, in one place.
+- :func:`require_same_grid`: the check every function combining spectra performs.
+
+Everything in msflash that changes the sampling of a spectrum goes through
+:meth:`Spectra.resample`; nothing else interpolates spectra.
+
+Units
+-----
+Spectral power distributions (``kind="spd"``) and camera responsivities
+(``kind="responsivity"``) carry a unit: ``"energy"`` or ``"photons"``. The conversion is
+``photons = energy · λ / λ_ref`` for power and the inverse for responsivities, so that
+``responsivityᵀ · spd`` (a camera response) is the same in both units. ``λ_ref`` is
+:data:`PHOTON_REFERENCE_NM`: all spectra in msflash are relative, and the reference keeps
+photon-unit values of the same magnitude as the energy-unit ones (the factor ``1/(h c)`` would
+only scale every spectrum by ~5e18). Reflectances (``kind="reflectance"``) have no unit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from processing.errors import SpectralDataError
+
+SpectralKind = Literal["spd", "responsivity", "reflectance"]
+SpectralUnit = Literal["energy", "photons", "none"]
+
+PHOTON_REFERENCE_NM = 555.0
+"""Reference wavelength of the relative photon unit (see the module notes)."""
+
+_GRID_TOLERANCE_NM = 1e-6
+
+
+@dataclass(frozen=True)
+class WavelengthGrid:
+    """A uniform wavelength grid, ``start_nm, start_nm + step_nm, …, stop_nm`` inclusive.
+
+    Examples
+    --------
+    >>> WavelengthGrid(400, 700, 10).size
+    31
+    """
+
+    start_nm: float
+    """First wavelength."""
+    stop_nm: float
+    """Last wavelength (inclusive)."""
+    step_nm: float
+    """Spacing between samples."""
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.start_nm) and np.isfinite(self.stop_nm) and np.isfinite(self.step_nm)):
+            raise SpectralDataError(f"wavelength grid {self}: values must be finite")
+        if self.step_nm <= 0:
+            raise SpectralDataError(f"wavelength grid: step_nm is {self.step_nm}; expected > 0")
+        if self.stop_nm < self.start_nm:
+            raise SpectralDataError(
+                f"wavelength grid: stop_nm {self.stop_nm} is below start_nm {self.start_nm}"
+            )
+        count = (self.stop_nm - self.start_nm) / self.step_nm
+        if abs(count - round(count)) > 1e-6:
+            raise SpectralDataError(
+                f"wavelength grid {self.start_nm}–{self.stop_nm} nm: step {self.step_nm} nm does "
+                "not divide the range; expected a whole number of steps"
+            )
+
+    @property
+    def size(self) -> int:
+        """Number of wavelengths."""
+        return int(round((self.stop_nm - self.start_nm) / self.step_nm)) + 1
+
+    @property
+    def wavelengths_nm(self) -> np.ndarray:
+        """The wavelengths, shape (n_wavelengths,)."""
+        return self.start_nm + self.step_nm * np.arange(self.size, dtype=float)
+
+    def __str__(self) -> str:
+        return f"{self.start_nm:g}–{self.stop_nm:g} nm step {self.step_nm:g} nm"
+
+    @classmethod
+    def from_wavelengths(cls, wavelengths_nm: Sequence[float] | np.ndarray, where: str = "wavelengths") -> WavelengthGrid:
+        """The grid of a list of wavelengths, which must be uniform and increasing.
+
+        Parameters
+        ----------
+        wavelengths_nm
+            The sampled wavelengths.
+        where
+            Names the source in error messages (a file and field).
+
+        Raises
+        ------
+        SpectralDataError
+            If the list is empty, not increasing, not uniform or not finite.
+
+        Examples
+        --------
+        >>> WavelengthGrid.from_wavelengths([400, 410, 420])
+        WavelengthGrid(start_nm=400.0, stop_nm=420.0, step_nm=10.0)
+        """
+        try:
+            values = np.asarray(wavelengths_nm, dtype=float)
+        except (TypeError, ValueError) as err:
+            raise SpectralDataError(f"{where}: expected a list of numbers ({err})") from err
+        if values.ndim != 1 or values.size < 2:
+            raise SpectralDataError(f"{where}: expected at least two wavelengths, got shape {values.shape}")
+        if not np.all(np.isfinite(values)):
+            raise SpectralDataError(f"{where}: wavelengths must be finite numbers")
+        steps = np.diff(values)
+        if np.any(steps <= 0):
+            raise SpectralDataError(f"{where}: wavelengths must increase strictly")
+        step = float(np.mean(steps))
+        if np.max(np.abs(steps - step)) > max(_GRID_TOLERANCE_NM, 1e-6 * step):
+            raise SpectralDataError(
+                f"{where}: wavelengths are not uniformly spaced (steps {steps.min():g}…{steps.max():g} nm); "
+                "expected a uniform grid"
+            )
+        return cls(float(values[0]), float(values[-1]), step)
+
+    def same_as(self, other: WavelengthGrid) -> bool:
+        """Whether two grids sample the same wavelengths."""
+        return (
+            self.size == other.size
+            and abs(self.start_nm - other.start_nm) <= _GRID_TOLERANCE_NM
+            and abs(self.step_nm - other.step_nm) <= _GRID_TOLERANCE_NM
+        )
+
+
+DEFAULT_GRID = WavelengthGrid(400.0, 700.0, 10.0)
+"""The processing grid of msflash and of the paper's simulations."""
+
+
+def energy_to_photons(values: np.ndarray, wavelengths_nm: np.ndarray, kind: SpectralKind = "spd") -> np.ndarray:
+    """Convert spectral values from energy to (relative) photon units.
+
+    Parameters
+    ----------
+    values
+        Spectra, shape (n_wavelengths,) or (n_wavelengths, n).
+    wavelengths_nm
+        The wavelengths, shape (n_wavelengths,).
+    kind
+        ``"spd"`` multiplies by ``λ/λ_ref``; ``"responsivity"`` divides by it, so that a
+        camera response ``responsivityᵀ · spd`` is unchanged.
+
+    Examples
+    --------
+    >>> energy_to_photons(np.array([1.0, 1.0]), np.array([555.0, 1110.0])).tolist()
+    [1.0, 2.0]
+    """
+    factor = np.asarray(wavelengths_nm, dtype=float) / PHOTON_REFERENCE_NM
+    factor = factor if kind == "spd" else 1.0 / factor
+    values = np.asarray(values, dtype=float)
+    return values * (factor[:, None] if values.ndim == 2 else factor)
+
+
+def photons_to_energy(values: np.ndarray, wavelengths_nm: np.ndarray, kind: SpectralKind = "spd") -> np.ndarray:
+    """Convert spectral values from (relative) photon units to energy; inverse of :func:`energy_to_photons`."""
+    inverse_kind: SpectralKind = "responsivity" if kind == "spd" else "spd"
+    return energy_to_photons(values, wavelengths_nm, inverse_kind)
+
+
+@dataclass(frozen=True)
+class Spectra:
+    """A set of spectra sampled on one wavelength grid.
+
+    ``values`` is made read-only on construction, so a frozen ``Spectra`` really is frozen.
+    """
+
+    grid: WavelengthGrid
+    """The wavelength grid of every spectrum."""
+    values: np.ndarray
+    """The spectra, shape (n_wavelengths, n), one column per spectrum."""
+    names: tuple[str, ...]
+    """One name per column."""
+    kind: SpectralKind = "spd"
+    """What the spectra are: power distributions, camera responsivities or reflectances."""
+    unit: SpectralUnit = "energy"
+    """``"energy"`` or ``"photons"`` for power and responsivity, ``"none"`` for reflectance."""
+    source: str = ""
+    """Where the data came from (a file, a dataset, a computation), for messages and provenance."""
+    metadata: dict = field(default_factory=dict, compare=False)
+    """Free-form extra information (licence, peak wavelengths…)."""
+
+    def __post_init__(self) -> None:
+        where = self.source or "spectra"
+        values = np.array(self.values, dtype=float, copy=True)
+        if values.ndim == 1:
+            values = values[:, None]
+        if values.ndim != 2:
+            raise SpectralDataError(f"{where}: values have shape {values.shape}; expected (n_wavelengths, n)")
+        if values.shape[0] != self.grid.size:
+            raise SpectralDataError(
+                f"{where}: {values.shape[0]} samples per spectrum but the grid {self.grid} has "
+                f"{self.grid.size}; expected one value per wavelength"
+            )
+        if not np.all(np.isfinite(values)):
+            bad = np.argwhere(~np.isfinite(values))[0]
+            name = self.names[bad[1]] if len(self.names) > bad[1] else str(bad[1])
+            raise SpectralDataError(
+                f"{where}: spectrum '{name}' has a non-finite value at "
+                f"{self.grid.wavelengths_nm[bad[0]]:g} nm; expected finite numbers"
+            )
+        names = tuple(str(n) for n in self.names)
+        if len(names) != values.shape[1]:
+            raise SpectralDataError(f"{where}: {len(names)} names for {values.shape[1]} spectra")
+        if self.kind not in ("spd", "responsivity", "reflectance"):
+            raise SpectralDataError(f"{where}: kind '{self.kind}'; expected spd, responsivity or reflectance")
+        expected_units = ("none",) if self.kind == "reflectance" else ("energy", "photons")
+        if self.unit not in expected_units:
+            raise SpectralDataError(
+                f"{where}: unit '{self.unit}' for kind '{self.kind}'; expected one of {', '.join(expected_units)}"
+            )
+        values.flags.writeable = False
+        object.__setattr__(self, "values", values)
+        object.__setattr__(self, "names", names)
+
+    # -- basic accessors --------------------------------------------------------------------
+    @property
+    def count(self) -> int:
+        """Number of spectra (columns)."""
+        return self.values.shape[1]
+
+    @property
+    def wavelengths_nm(self) -> np.ndarray:
+        """The grid's wavelengths, shape (n_wavelengths,)."""
+        return self.grid.wavelengths_nm
+
+    def column(self, name: str) -> np.ndarray:
+        """One spectrum by name, shape (n_wavelengths,)."""
+        try:
+            return self.values[:, self.names.index(name)]
+        except ValueError:
+            raise SpectralDataError(
+                f"{self.source or 'spectra'}: no spectrum named '{name}'; available: {', '.join(self.names)}"
+            ) from None
+
+    def select(self, which: Sequence[int] | Sequence[str]) -> Spectra:
+        """A subset of the spectra, by index or by name, in the order given."""
+        indices = [self.names.index(w) if isinstance(w, str) else int(w) for w in which]
+        return self.replace(values=self.values[:, indices], names=tuple(self.names[i] for i in indices))
+
+    def replace(self, **changes: object) -> Spectra:
+        """A copy with some fields changed (``dataclasses.replace`` that re-validates)."""
+        fields = dict(
+            grid=self.grid, values=self.values, names=self.names, kind=self.kind, unit=self.unit,
+            source=self.source, metadata=dict(self.metadata),
+        )
+        fields.update(changes)
+        return Spectra(**fields)  # type: ignore[arg-type]
+
+    # -- units and normalisation ------------------------------------------------------------
+    def to_unit(self, unit: SpectralUnit) -> Spectra:
+        """The same spectra in another unit (see the module notes); reflectances are unchanged."""
+        if self.kind == "reflectance" or unit == self.unit:
+            return self
+        if unit not in ("energy", "photons"):
+            raise SpectralDataError(f"{self.source or 'spectra'}: cannot convert to unit '{unit}'")
+        convert = energy_to_photons if unit == "photons" else photons_to_energy
+        return self.replace(values=convert(self.values, self.wavelengths_nm, self.kind), unit=unit)
+
+    def normalised(self, how: Literal["max", "each_max"] = "max") -> Spectra:
+        """Scaled so the largest value of all spectra (``"max"``) or of each (``"each_max"``) is 1."""
+        values = self.values
+        peak = np.max(np.abs(values), axis=0 if how == "each_max" else None)
+        peak = np.where(peak > 0, peak, 1.0)
+        return self.replace(values=values / peak)
+
+    # -- the one resampler -----------------------------------------------------------------
+    def resample(self, grid: WavelengthGrid, outside: Literal["error", "zero", "edge"] = "error") -> Spectra:
+        """The spectra on another grid, by linear interpolation; the only resampler in msflash.
+
+        Parameters
+        ----------
+        grid
+            The target grid.
+        outside
+            What to do for target wavelengths outside the source range: ``"error"`` raises,
+            ``"zero"`` fills with zeros (right for emission spectra measured beyond their
+            support), ``"edge"`` repeats the end values.
+
+        Raises
+        ------
+        SpectralDataError
+            If ``outside="error"`` and the target grid extends beyond the source grid.
+
+        Examples
+        --------
+        >>> s = Spectra(WavelengthGrid(400, 700, 100), [0.0, 1.0, 2.0, 3.0], ("ramp",))
+        >>> s.resample(WavelengthGrid(400, 700, 50)).values[:, 0].tolist()
+        [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0]
+        """
+        if grid.same_as(self.grid):
+            return self
+        source_nm = self.wavelengths_nm
+        target_nm = grid.wavelengths_nm
+        beyond = (target_nm < source_nm[0] - _GRID_TOLERANCE_NM) | (target_nm > source_nm[-1] + _GRID_TOLERANCE_NM)
+        if np.any(beyond) and outside == "error":
+            raise SpectralDataError(
+                f"{self.source or 'spectra'}: cannot resample from {self.grid} to {grid} without "
+                "extrapolating; expected a target grid inside the measured range (or outside='zero')"
+            )
+        values = np.empty((grid.size, self.count))
+        for column in range(self.count):
+            values[:, column] = np.interp(target_nm, source_nm, self.values[:, column])
+        if outside == "zero":
+            values[beyond, :] = 0.0
+        return self.replace(grid=grid, values=values)
+
+
+def require_same_grid(*spectra: Spectra) -> WavelengthGrid:
+    """Check that spectra share one grid and return it.
+
+    Raises
+    ------
+    SpectralDataError
+        Naming both sources and both grids, on the first mismatch.
+    """
+    first = spectra[0]
+    for other in spectra[1:]:
+        if not other.grid.same_as(first.grid):
+            raise SpectralDataError(
+                f"{first.source or 'spectra'} is sampled on {first.grid} but {other.source or 'spectra'} on "
+                f"{other.grid}; expected one grid (resample with Spectra.resample first)"
+            )
+    return first.grid
+
+
+def require_unit(spectra: Spectra, unit: SpectralUnit) -> Spectra:
+    """Check that power/responsivity spectra are in ``unit``; reflectances pass unchanged."""
+    if spectra.kind != "reflectance" and spectra.unit != unit:
+        raise SpectralDataError(
+            f"{spectra.source or 'spectra'}: in unit '{spectra.unit}'; expected '{unit}' (convert with to_unit)"
+        )
+    return spectra
