@@ -1,0 +1,502 @@
+"""Shipped spectral data and standard illuminants, loaded as :class:`~processing.spectra.Spectra`.
+
+Public objects
+--------------
+- :func:`load_spectra_csv`: the one CSV reader for spectral tables.
+- Paper data (Blasinski & Farrell 2017): :func:`paper_leds`, :func:`paper_led_subset`,
+  :func:`natural100`, :func:`chart110`, :func:`macbeth`, :func:`paper_cameras`.
+- Other shipped sets: :func:`isetcam_camera`, :func:`isetcam_leds`, :func:`vrhel`,
+  :func:`water_absorption`, :func:`water_transmittance`.
+- Illuminants: :func:`illuminant` (colour-science's CIE tables and black bodies) and
+  :func:`ambient_spectrum` (the ambients of the simulated rig).
+
+Files live in ``processing/data`` with their provenance and licences in
+``processing/data/SOURCES.md``. Loaders return spectra on the file's own grid; callers resample
+with :meth:`Spectra.resample`. Only :func:`illuminant` and :func:`ambient_spectrum` take a grid,
+because they compute or convert rather than read a file.
+
+This module is the only place that converts colour-science objects into ``Spectra``.
+
+References
+----------
+Blasinski H., Farrell J. "Computational multispectral flash", ICCP 2017.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from processing.errors import SpectralDataError
+from processing.spectra import DEFAULT_GRID, SpectralKind, SpectralUnit, Spectra, WavelengthGrid, require_same_grid
+
+DATA_DIR = Path(__file__).resolve().parent / "data"
+"""Folder of the shipped data files (see ``SOURCES.md`` there)."""
+
+PAPER_LED_PEAKS_NM = (440, 480, 500, 520, 596, 636, 660)
+"""Nominal peaks of the paper's 7 Luxeon LEDs, in file order."""
+
+PAPER_LED_SUBSETS: dict[int, tuple[int, ...]] = {
+    3: (1, 4, 7),
+    4: (1, 3, 4, 7),
+    5: (1, 3, 4, 5, 7),
+    6: (1, 2, 3, 4, 5, 7),
+    7: (1, 2, 3, 4, 5, 6, 7),
+}
+"""The paper's LED subsets by count, as 1-based indices into :func:`paper_leds` (Section 5)."""
+
+ISETCAM_CAMERAS = (
+    "AptinaMT9M031", "AptinaMT9M131", "NikonD1", "NikonD70", "NikonD100", "NikonD200IR", "NikonD2xsNikon50mm",
+)
+"""Cameras whose ISETCam responsivities are shipped (MIT licence)."""
+
+ISETCAM_LED_SETS = {
+    "luxeon8": "LuxeonLEDSpectra_8LED.csv",
+    "luxeon4": "Luxeon4LEDs.csv",
+    "luxeon5": "Luxeon5LEDs.csv",
+    "six": "SixLEDs.csv",
+    "ledsix": "ledSixSpectra.csv",
+}
+"""ISETCam LED sets by short name."""
+
+VRHEL_SETS = {
+    "objects": "Objects_Vhrel.csv",
+    "munsell": "MunsellSamples_Vhrel.csv",
+    "dupont": "DupontPaintChip_Vhrel.csv",
+    "nature": "Nature_Vhrel.csv",
+    "food": "Food_Vhrel.csv",
+    "clothes": "Clothes_Vhrel.csv",
+    "hair": "Hair_Vhrel.csv",
+    "skin_african_american": "AfricanAmerican_Vhrel.csv",
+    "skin_asian": "Asian_Vhrel.csv",
+    "skin_caucasian": "Caucasian_Vhrel.csv",
+    "skin_east_indian": "EastIndian_Vhrel.csv",
+}
+"""Vrhel et al. (1994) reflectance sets by short name; ``"skin"`` joins the four skin sets."""
+
+AMBIENTS = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange")
+"""Names accepted by :func:`ambient_spectrum`."""
+
+_ISETCAM_LICENCE = "MIT (ISETCam, © 2020 Stanford SCIEN); see processing/data/LICENSE-ISETCam-MIT.txt"
+_PAPER_LICENCE = "no licence stated by the authors (hblasins/compMultispFlash); cite Blasinski & Farrell 2017"
+_JIANG_LICENCE = "CC BY-NC-SA 4.0 (Jiang et al. 2013, © RIT); non-commercial; see processing/data/noncommercial/LICENSE.md"
+
+
+# -- the CSV reader ---------------------------------------------------------------------------
+def load_spectra_csv(
+    path: str | Path,
+    kind: SpectralKind,
+    unit: SpectralUnit,
+    names: Sequence[str] | None = None,
+    source: str | None = None,
+    nan: Literal["error", "zero"] = "error",
+) -> Spectra:
+    """Read a spectral table: first column ``wavelength_nm``, one column per spectrum.
+
+    Lines starting with ``#`` are comments (kept in ``metadata["comments"]``), blank lines are
+    skipped, the first other line is the header, and ``nan`` or an empty cell is a missing value.
+
+    Parameters
+    ----------
+    path
+        The CSV file.
+    kind, unit
+        What the values are (see :class:`Spectra`).
+    names
+        Names for the spectra, replacing the header's (same count).
+    source
+        Provenance text for ``Spectra.source``; the file path by default.
+    nan
+        ``"error"`` (default) refuses missing values; ``"zero"`` replaces them with 0, as the
+        paper does for the AptinaMT9M031 responsivities.
+
+    Returns
+    -------
+    Spectra
+        On the file's own wavelength grid, which must be uniform.
+
+    Raises
+    ------
+    SpectralDataError
+        On an unreadable file, a bad header, a ragged row, a non-number or (with
+        ``nan="error"``) a missing value; the message names the file, line and column.
+    """
+    path = Path(path)
+    where = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise SpectralDataError(f"{where}: cannot read spectral table ({err}); expected a UTF-8 CSV file") from err
+
+    comments: list[str] = []
+    header: list[str] | None = None
+    rows: list[list[float]] = []
+    missing: list[tuple[int, str]] = []
+    for line_number, raw_line in enumerate(text.splitlines(), start=1):
+        line = raw_line.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            comments.append(line[1:].strip())
+            continue
+        cells = [cell.strip() for cell in line.split(",")]
+        if header is None:
+            if not cells[0].lower().startswith("wavelength") or len(cells) < 2:
+                raise SpectralDataError(
+                    f"{where}:{line_number}: header is '{line[:60]}'; expected 'wavelength_nm,<name>,…'"
+                )
+            header = cells
+            continue
+        if len(cells) != len(header):
+            raise SpectralDataError(
+                f"{where}:{line_number}: {len(cells)} cells; expected {len(header)} as in the header"
+            )
+        row: list[float] = []
+        for column, cell in enumerate(cells):
+            if cell == "" or cell.lower() == "nan":
+                if column == 0 or nan == "error":
+                    raise SpectralDataError(
+                        f"{where}:{line_number}: column '{header[column]}' is missing (NaN); expected a number "
+                        "(load with nan='zero' if zero is the right value)"
+                    )
+                missing.append((line_number, header[column]))
+                row.append(0.0)
+                continue
+            try:
+                value = float(cell)
+            except ValueError as err:
+                raise SpectralDataError(
+                    f"{where}:{line_number}: column '{header[column]}' holds '{cell}'; expected a number"
+                ) from err
+            if not math.isfinite(value):
+                raise SpectralDataError(
+                    f"{where}:{line_number}: column '{header[column]}' holds '{cell}'; expected a finite number"
+                )
+            row.append(value)
+        rows.append(row)
+
+    if header is None or len(rows) < 2:
+        raise SpectralDataError(f"{where}: no data rows; expected a header and at least two wavelengths")
+    table = np.asarray(rows, dtype=float)
+    grid = WavelengthGrid.from_wavelengths(table[:, 0], where=f"{where}: column '{header[0]}'")
+    spectrum_names = tuple(header[1:]) if names is None else tuple(names)
+    if len(spectrum_names) != table.shape[1] - 1:
+        raise SpectralDataError(
+            f"{where}: {len(spectrum_names)} names given for {table.shape[1] - 1} spectra; expected one per column"
+        )
+    metadata: dict = {"path": where, "comments": comments, "header": tuple(header[1:])}
+    if missing:
+        metadata["nan_set_to_zero"] = missing
+    return Spectra(grid, table[:, 1:], spectrum_names, kind=kind, unit=unit, source=source or where, metadata=metadata)
+
+
+def _shipped(relative: str, kind: SpectralKind, unit: SpectralUnit, licence: str, **options: object) -> Spectra:
+    """Load a shipped file and record its licence."""
+    spectra = load_spectra_csv(DATA_DIR / relative, kind, unit, source=f"msflash data {relative}", **options)  # type: ignore[arg-type]
+    return spectra.replace(metadata={**spectra.metadata, "licence": licence})
+
+
+def _choose(what: str, name: str, valid: Sequence[str]) -> str:
+    """Case-insensitive lookup of a dataset name, or an error listing the valid ones."""
+    for candidate in valid:
+        if candidate.lower() == name.lower():
+            return candidate
+    raise SpectralDataError(f"{what}: unknown name '{name}'; expected one of {', '.join(valid)}")
+
+
+# -- the paper's data -------------------------------------------------------------------------
+def paper_leds() -> Spectra:
+    """The paper's 7 Luxeon LEDs at full drive, energy units, true ratios between LEDs.
+
+    Names are ``led440, led480, led500, led520, led596, led636, led660`` (nominal peaks; 596 is a
+    broad phosphor-converted amber). Grid 380–1068 nm / 4 nm.
+
+    Examples
+    --------
+    >>> paper_leds().names[:3]
+    ('led440', 'led480', 'led500')
+    """
+    names = tuple(f"led{peak}" for peak in PAPER_LED_PEAKS_NM)
+    spectra = _shipped("paper/ximeaLights_energy_380_1068_4nm.csv", "spd", "energy", _PAPER_LICENCE, names=names)
+    return spectra.replace(metadata={**spectra.metadata, "peaks_nm": PAPER_LED_PEAKS_NM})
+
+
+def paper_led_subset(n_leds: int) -> Spectra:
+    """The paper's subset of ``n_leds`` LEDs (3 → 1,4,7; 4 → 1,3,4,7; 5 → 1,3,4,5,7; 6 → 1,2,3,4,5,7; 7 → all).
+
+    Raises
+    ------
+    SpectralDataError
+        For a count the paper does not define.
+
+    Examples
+    --------
+    >>> paper_led_subset(3).names
+    ('led440', 'led520', 'led660')
+    """
+    if n_leds not in PAPER_LED_SUBSETS:
+        raise SpectralDataError(
+            f"paper LED subset: {n_leds} LEDs; expected one of {', '.join(map(str, PAPER_LED_SUBSETS))}"
+        )
+    return paper_leds().select([index - 1 for index in PAPER_LED_SUBSETS[n_leds]])
+
+
+def natural100() -> Spectra:
+    """Natural-100 reflectances (20 clothes, 20 food, 20 nature, 5 hair, 15 skin, 20 DuPont), 400–700/10."""
+    return _shipped("paper/natural100_reflectance_400_700_10nm.csv", "reflectance", "none", _PAPER_LICENCE)
+
+
+def chart110() -> Spectra:
+    """The paper's 110-patch simulation chart: Natural-100 then a 10-step gray strip, 400–700/10."""
+    return _shipped("paper/natural110_chart_reflectance_400_700_10nm_DERIVED.csv", "reflectance", "none", _PAPER_LICENCE)
+
+
+def macbeth(source: Literal["isetcam", "paper"] = "isetcam") -> Spectra:
+    """Macbeth ColorChecker, 24 patches in ISET order (white = patch 4), 380–1068/4.
+
+    Parameters
+    ----------
+    source
+        ``"isetcam"`` (MIT, default) or ``"paper"`` (the authors' copy, a different measurement).
+    """
+    if source == "isetcam":
+        spectra = _shipped("reflectances/charts/macbethChart_24.csv", "reflectance", "none", _ISETCAM_LICENCE)
+    elif source == "paper":
+        spectra = _shipped("paper/macbethChart_reflectance_380_1068_4nm.csv", "reflectance", "none", _PAPER_LICENCE)
+    else:
+        raise SpectralDataError(f"macbeth: unknown source '{source}'; expected isetcam or paper")
+    return spectra.replace(names=tuple(f"macbeth{i:02d}" for i in range(1, spectra.count + 1)))
+
+
+def _split_cameras(spectra: Spectra, licence: str) -> dict[str, Spectra]:
+    """Split a table with ``<camera>|<channel>`` columns into one 3-channel Spectra per camera."""
+    cameras: dict[str, list[int]] = {}
+    for index, name in enumerate(spectra.names):
+        camera, _, _channel = name.partition("|")
+        cameras.setdefault(camera, []).append(index)
+    result = {}
+    for camera, columns in cameras.items():
+        if len(columns) != 3:
+            raise SpectralDataError(f"{spectra.source}: camera '{camera}' has {len(columns)} channels; expected R, G, B")
+        result[camera] = spectra.select(columns).replace(
+            names=("R", "G", "B"), source=f"{spectra.source} [{camera}]",
+            metadata={"camera": camera, "licence": licence, "path": spectra.metadata.get("path", "")},
+        )
+    return result
+
+
+def paper_cameras(include_noncommercial: bool = True) -> dict[str, Spectra]:
+    """The paper's 34 cameras (6 ISETCam + 28 Jiang et al. 2013), 400–700/10, each max-normalised.
+
+    Responsivities are labelled ``photons``, the unit of the paper's simulations (ISETCam's
+    convention; the paper uses the Jiang curves in the same way).
+
+    Parameters
+    ----------
+    include_noncommercial
+        Include the 28 Jiang cameras, licensed CC BY-NC-SA 4.0 (non-commercial; see
+        ``processing/data/noncommercial/LICENSE.md``). With False, only the 6 MIT cameras.
+
+    Returns
+    -------
+    dict
+        Camera name → Spectra with channels ``R, G, B``; each carries its licence in metadata.
+    """
+    cameras = _split_cameras(
+        _shipped("cameras/paper_isetcam6_cameras_400_700_10nm.csv", "responsivity", "photons", _ISETCAM_LICENCE),
+        _ISETCAM_LICENCE,
+    )
+    if include_noncommercial:
+        cameras.update(_split_cameras(
+            _shipped("noncommercial/jiang2013_paper28_cameras_400_700_10nm.csv", "responsivity", "photons", _JIANG_LICENCE),
+            _JIANG_LICENCE,
+        ))
+    return cameras
+
+
+# -- other shipped sets -----------------------------------------------------------------------
+def isetcam_camera(name: str) -> Spectra:
+    """ISETCam RGB responsivities (photons) of one camera, on the file's grid, channels ``R, G, B``.
+
+    Missing values in the source (3 at 400 nm for ``AptinaMT9M031``) are set to 0, as the paper
+    does; ``metadata["nan_set_to_zero"]`` lists them.
+
+    Examples
+    --------
+    >>> isetcam_camera("AptinaMT9M031").names
+    ('R', 'G', 'B')
+    """
+    camera = _choose("isetcam camera", name, ISETCAM_CAMERAS)
+    spectra = _shipped(f"cameras/isetcam/{camera}.csv", "responsivity", "photons", _ISETCAM_LICENCE,
+                       names=("R", "G", "B"), nan="zero")
+    return spectra.replace(metadata={**spectra.metadata, "camera": camera})
+
+
+def isetcam_leds(name: str) -> Spectra:
+    """An ISETCam LED set (``luxeon8``, ``luxeon4``, ``luxeon5``, ``six``, ``ledsix``).
+
+    ISETCam does not tag these with a unit; they are spectroradiometer outputs and are returned
+    as energy.
+    """
+    key = _choose("isetcam leds", name, tuple(ISETCAM_LED_SETS))
+    return _shipped(f"leds/isetcam/{ISETCAM_LED_SETS[key]}", "spd", "energy", _ISETCAM_LICENCE)
+
+
+def vrhel(name: str) -> Spectra:
+    """A Vrhel et al. (1994) reflectance set, 400–700/10 (see :data:`VRHEL_SETS`; ``"skin"`` joins all skin sets)."""
+    if name.lower() == "skin":
+        parts = [vrhel(key) for key in VRHEL_SETS if key.startswith("skin_")]
+        require_same_grid(*parts)
+        return parts[0].replace(
+            values=np.hstack([part.values for part in parts]),
+            names=tuple(n for part in parts for n in part.names),
+            source="msflash data reflectances/vrhel/*skin*",
+        )
+    key = _choose("vrhel", name, tuple(VRHEL_SETS))
+    return _shipped(f"reflectances/vrhel/{VRHEL_SETS[key]}", "reflectance", "none", _ISETCAM_LICENCE)
+
+
+def water_absorption(source: Literal["pope_fry", "paper"] = "pope_fry") -> Spectra:
+    """Pure-water absorption coefficient ``a_w(λ)`` in 1/m (Pope & Fry 1997, 380–700/2.5 by default).
+
+    ``Spectra`` has no kind for absorption coefficients, so the result is returned as a unitless
+    per-wavelength coefficient (``kind="reflectance"``, ``unit="none"``) with
+    ``metadata["quantity"]`` saying what it really is. Use :func:`water_transmittance` for the
+    attenuation factor of a path.
+    """
+    if source == "pope_fry":
+        spectra = _shipped("water/pope_fry_1997_380_700_2p5nm.csv", "reflectance", "none",
+                           "published table, Pope & Fry, Appl. Opt. 36, 8710 (1997)", names=("a_w",))
+    elif source == "paper":
+        spectra = _shipped("paper/water_pure_absorption_400_700_5nm.csv", "reflectance", "none", _PAPER_LICENCE,
+                           names=("a_w",))
+    else:
+        raise SpectralDataError(f"water_absorption: unknown source '{source}'; expected pope_fry or paper")
+    return spectra.replace(metadata={**spectra.metadata, "quantity": "absorption coefficient a_w", "unit": "1/m"})
+
+
+def water_transmittance(path_m: float, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """Transmittance ``exp(-a_w(λ) · path_m)`` of ``path_m`` metres of pure water, on ``grid``.
+
+    Examples
+    --------
+    >>> t = water_transmittance(5.0)
+    >>> bool(t.column("water_5m")[0] > t.column("water_5m")[-1])
+    True
+    """
+    if not (math.isfinite(path_m) and path_m >= 0):
+        raise SpectralDataError(f"water_transmittance: path_m is {path_m}; expected a finite length ≥ 0 m")
+    absorption = water_absorption().resample(grid)
+    return absorption.replace(
+        values=np.exp(-absorption.values * path_m), names=(f"water_{path_m:g}m",),
+        source=f"pure-water transmittance over {path_m:g} m (Pope & Fry 1997)",
+        metadata={"quantity": "transmittance", "path_m": path_m},
+    )
+
+
+# -- illuminants ------------------------------------------------------------------------------
+def _from_colour(wavelengths_nm: np.ndarray, values: np.ndarray, name: str, grid: WavelengthGrid) -> Spectra:
+    """A colour-science spectral distribution as energy ``Spectra`` on ``grid``, peak 1."""
+    native = Spectra(
+        WavelengthGrid.from_wavelengths(wavelengths_nm, where=f"colour-science '{name}'"),
+        np.asarray(values, dtype=float), (name,), kind="spd", unit="energy", source=f"colour-science {name}",
+    )
+    return native.resample(grid).normalised("max")
+
+
+def illuminant(name: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """A standard illuminant from colour-science, as energy ``Spectra`` on ``grid`` scaled to peak 1.
+
+    Parameters
+    ----------
+    name
+        A key of ``colour.SDS_ILLUMINANTS`` (``A``, ``D50``, ``D65``, ``FL2``, ``FL11``…), case
+        insensitive, or ``"blackbody:<kelvin>"`` (Planck's law evaluated on the grid).
+    grid
+        The wavelength grid; the tables must cover it (no extrapolation).
+
+    Raises
+    ------
+    SpectralDataError
+        For an unknown name (the message lists a few valid ones) or a grid beyond the table.
+
+    Examples
+    --------
+    >>> illuminant("D65").names
+    ('D65',)
+    """
+    import colour  # imported here: loading colour-science takes a second and only these helpers need it
+
+    if name.lower().startswith("blackbody:"):
+        try:
+            kelvin = float(name.split(":", 1)[1])
+        except ValueError as err:
+            raise SpectralDataError(f"illuminant '{name}': bad temperature; expected e.g. 'blackbody:3200'") from err
+        if not (math.isfinite(kelvin) and kelvin > 0):
+            raise SpectralDataError(f"illuminant '{name}': temperature {kelvin}; expected > 0 K")
+        wavelengths = grid.wavelengths_nm
+        with warnings.catch_warnings():
+            # colour warns about its own numeric edge cases; they do not apply to a plain Planck evaluation.
+            warnings.simplefilter("ignore", colour.utilities.ColourWarning)
+            sd = colour.sd_blackbody(kelvin, colour.SpectralShape(wavelengths[0], wavelengths[-1], grid.step_nm))
+        return _from_colour(sd.wavelengths, sd.values, f"blackbody {kelvin:g} K", grid)
+
+    keys = list(colour.SDS_ILLUMINANTS.keys())
+    key = next((k for k in keys if k.lower() == name.lower()), None)
+    if key is None:
+        raise SpectralDataError(
+            f"illuminant '{name}': not a colour-science illuminant; expected one of A, D50, D65, FL2, FL11, "
+            f"blackbody:<kelvin> (all: {', '.join(keys[:30])}, …)"
+        )
+    sd = colour.SDS_ILLUMINANTS[key]
+    return _from_colour(sd.wavelengths, sd.values, key, grid)
+
+
+def _smooth_filter(wavelengths_nm: np.ndarray, kind: str) -> np.ndarray:
+    """Transmittance of a plausible gel filter: a band-pass for green, a long-pass for orange.
+
+    Real gels never block completely, hence the small floor.
+    """
+    if kind == "green":
+        return 0.04 + 0.96 * np.exp(-0.5 * ((wavelengths_nm - 530.0) / 35.0) ** 2)
+    return 0.03 + 0.97 / (1.0 + np.exp(-(wavelengths_nm - 585.0) / 12.0))
+
+
+def ambient_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID, water_path_m: float = 5.0) -> Spectra:
+    """An ambient light of the simulated rig, energy units, peak 1, on ``grid``.
+
+    Parameters
+    ----------
+    name
+        ``tungsten`` (CIE A), ``fluorescent`` (FL2), ``daylight`` (D65), ``underwater`` (D65
+        through ``water_path_m`` of pure water, ``exp(-a_w(λ)·d)``), ``green`` (A through a
+        band-pass gel near 530 nm) or ``orange`` (A through a long-pass gel from ~585 nm) — the
+        paper's booth and pool ambients (Section 6).
+    grid
+        The wavelength grid.
+    water_path_m
+        Light path through water for ``underwater`` (the paper dived to 5 m).
+
+    Examples
+    --------
+    >>> ambient_spectrum("orange").unit
+    'energy'
+    """
+    key = _choose("ambient", name, AMBIENTS)
+    if key in ("tungsten", "fluorescent", "daylight"):
+        base = illuminant({"tungsten": "A", "fluorescent": "FL2", "daylight": "D65"}[key], grid)
+        return base.replace(names=(key,), source=f"ambient '{key}' ({base.source})")
+    if key == "underwater":
+        base = illuminant("D65", grid)
+        values = base.values * water_transmittance(water_path_m, grid).values
+        source = f"ambient 'underwater' (D65 through {water_path_m:g} m of pure water)"
+    else:
+        base = illuminant("A", grid)
+        values = base.values * _smooth_filter(grid.wavelengths_nm, key)[:, None]
+        source = f"ambient '{key}' (CIE A through a {key} gel)"
+    return base.replace(values=values, names=(key,), source=source).normalised("max")

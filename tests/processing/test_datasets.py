@@ -1,0 +1,191 @@
+"""Shipped spectral data, the CSV reader and the illuminants."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from processing import datasets
+from processing.errors import SpectralDataError
+from processing.spectra import DEFAULT_GRID, WavelengthGrid
+
+
+class TestShippedFiles:
+    def test_provenance_and_licences_are_beside_the_data(self) -> None:
+        sources = (datasets.DATA_DIR / "SOURCES.md").read_text(encoding="utf-8")
+        assert (datasets.DATA_DIR / "LICENSE-ISETCam-MIT.txt").read_text(encoding="utf-8").startswith("The files")
+        assert "CC BY-NC-SA" in (datasets.DATA_DIR / "noncommercial" / "LICENSE.md").read_text(encoding="utf-8")
+        for path in datasets.DATA_DIR.rglob("*.csv"):
+            assert path.name in sources, f"{path.name} is shipped but not described in SOURCES.md"
+
+    def test_total_size_stays_small(self) -> None:
+        total = sum(p.stat().st_size for p in datasets.DATA_DIR.rglob("*") if p.is_file())
+        assert total < 1_000_000
+
+    def test_noncommercial_data_only_in_its_folder(self) -> None:
+        for path in datasets.DATA_DIR.rglob("*.csv"):
+            if "noncommercial" not in path.parts:
+                assert "Jiang" not in path.read_text(encoding="utf-8").splitlines()[0], path
+
+
+class TestPaperData:
+    def test_leds(self) -> None:
+        leds = datasets.paper_leds()
+        assert leds.names == ("led440", "led480", "led500", "led520", "led596", "led636", "led660")
+        assert (leds.kind, leds.unit, leds.count) == ("spd", "energy", 7)
+        assert leds.grid == WavelengthGrid(380, 1068, 4)
+        peaks = leds.wavelengths_nm[np.argmax(leds.values, axis=0)]
+        np.testing.assert_allclose(peaks, datasets.PAPER_LED_PEAKS_NM, atol=8)
+
+    @pytest.mark.parametrize(
+        ("count", "expected"),
+        [(3, ("led440", "led520", "led660")), (4, ("led440", "led500", "led520", "led660")),
+         (5, ("led440", "led500", "led520", "led596", "led660")),
+         (6, ("led440", "led480", "led500", "led520", "led596", "led660")), (7, None)],
+    )
+    def test_led_subsets_follow_the_paper(self, count: int, expected: tuple[str, ...] | None) -> None:
+        subset = datasets.paper_led_subset(count)
+        assert subset.names == (expected or datasets.paper_leds().names)
+
+    def test_led_subset_rejects_unknown_count(self) -> None:
+        with pytest.raises(SpectralDataError, match="expected one of 3, 4, 5, 6, 7"):
+            datasets.paper_led_subset(2)
+
+    def test_charts(self) -> None:
+        assert datasets.natural100().count == 100
+        chart = datasets.chart110()
+        assert (chart.count, chart.kind, chart.unit, chart.grid) == (110, "reflectance", "none", DEFAULT_GRID)
+        np.testing.assert_allclose(chart.values[:, :100], datasets.natural100().values)
+        gray = chart.values[:, 100:]
+        np.testing.assert_allclose(gray, np.broadcast_to(np.logspace(0, np.log10(0.05), 10), gray.shape), rtol=1e-5)
+        for source in ("isetcam", "paper"):
+            assert datasets.macbeth(source).count == 24  # type: ignore[arg-type]
+
+    def test_paper_cameras(self) -> None:
+        cameras = datasets.paper_cameras()
+        assert len(cameras) == 34
+        for name, camera in cameras.items():
+            assert camera.names == ("R", "G", "B"), name
+            assert (camera.kind, camera.unit, camera.grid) == ("responsivity", "photons", DEFAULT_GRID)
+            assert camera.values.max() == pytest.approx(1.0)
+        assert "CC BY-NC-SA" in cameras["Canon 20D"].metadata["licence"]
+        permissive = datasets.paper_cameras(include_noncommercial=False)
+        assert sorted(permissive) == sorted(
+            ["AptinaMT9M031", "AptinaMT9M131", "NikonD1", "NikonD70", "NikonD100", "NikonD200IR"]
+        )
+        assert all("MIT" in c.metadata["licence"] for c in permissive.values())
+
+
+class TestOtherSets:
+    @pytest.mark.parametrize("name", datasets.ISETCAM_CAMERAS)
+    def test_isetcam_cameras(self, name: str) -> None:
+        camera = datasets.isetcam_camera(name)
+        assert (camera.names, camera.kind, camera.unit) == (("R", "G", "B"), "responsivity", "photons")
+        assert np.all(np.isfinite(camera.values))
+        camera.resample(DEFAULT_GRID)  # every shipped camera covers the processing grid
+
+    def test_aptina_nan_set_to_zero_as_the_paper_does(self) -> None:
+        camera = datasets.isetcam_camera("aptinamt9m031")
+        assert len(camera.metadata["nan_set_to_zero"]) == 3
+        assert camera.values[0, 0] == 0.0 and camera.values[0, 2] == 0.0
+
+    def test_isetcam_leds_and_vrhel(self) -> None:
+        assert datasets.isetcam_leds("luxeon8").count == 8
+        assert datasets.isetcam_leds("luxeon4").unit == "energy"
+        assert datasets.vrhel("munsell").count == 64
+        assert datasets.vrhel("skin").count == 26
+        with pytest.raises(SpectralDataError, match="expected one of objects"):
+            datasets.vrhel("plastic")
+
+    def test_water(self) -> None:
+        absorption = datasets.water_absorption().resample(DEFAULT_GRID)
+        assert absorption.metadata["unit"] == "1/m"
+        # pure water absorbs red far more than blue (Pope & Fry 1997)
+        assert absorption.column("a_w")[-1] > 10 * absorption.column("a_w")[5]
+        transmittance = datasets.water_transmittance(2.0).values[:, 0]
+        np.testing.assert_allclose(transmittance, np.exp(-2.0 * absorption.values[:, 0]))
+
+
+class TestCsvReader:
+    def write(self, tmp_path: Path, text: str) -> Path:
+        path = tmp_path / "table.csv"
+        path.write_text(text, encoding="utf-8")
+        return path
+
+    def test_reads_comments_header_and_values(self, tmp_path: Path) -> None:
+        path = self.write(tmp_path, "# a comment\nwavelength_nm,a,b\n400,1,2\n\n410,3,4\n")
+        spectra = datasets.load_spectra_csv(path, "spd", "energy")
+        assert spectra.names == ("a", "b") and spectra.grid == WavelengthGrid(400, 410, 10)
+        assert spectra.values.tolist() == [[1, 2], [3, 4]]
+        assert spectra.metadata["comments"] == ["a comment"] and spectra.source == str(path)
+
+    def test_nan_is_an_error_naming_file_line_and_column(self, tmp_path: Path) -> None:
+        path = self.write(tmp_path, "# c\nwavelength_nm,a,b\n400,1,nan\n410,3,4\n")
+        with pytest.raises(SpectralDataError, match=r"table\.csv:3: column 'b' is missing"):
+            datasets.load_spectra_csv(path, "spd", "energy")
+        spectra = datasets.load_spectra_csv(path, "spd", "energy", nan="zero")
+        assert spectra.values[0, 1] == 0.0 and spectra.metadata["nan_set_to_zero"] == [(3, "b")]
+
+    @pytest.mark.parametrize(
+        ("text", "match"),
+        [
+            ("wavelength_nm,a\n400,1\n410,x\n", r"table\.csv:3: column 'a' holds 'x'; expected a number"),
+            ("wavelength_nm,a\n400,1\n410,1,2\n", r"table\.csv:3: 3 cells; expected 2"),
+            ("lambda,a\n400,1\n", r"table\.csv:1: header"),
+            ("wavelength_nm,a\n400,1\n410,2\n430,3\n", r"table\.csv.*not uniformly spaced"),
+            ("# only comments\n", r"table\.csv: no data rows"),
+        ],
+    )
+    def test_bad_tables_are_named(self, tmp_path: Path, text: str, match: str) -> None:
+        with pytest.raises(SpectralDataError, match=match):
+            datasets.load_spectra_csv(self.write(tmp_path, text), "spd", "energy")
+
+    def test_missing_file(self, tmp_path: Path) -> None:
+        with pytest.raises(SpectralDataError, match="missing.csv: cannot read"):
+            datasets.load_spectra_csv(tmp_path / "missing.csv", "spd", "energy")
+
+    def test_names_must_match_columns(self, tmp_path: Path) -> None:
+        path = self.write(tmp_path, "wavelength_nm,a,b\n400,1,2\n410,3,4\n")
+        with pytest.raises(SpectralDataError, match="1 names given for 2 spectra"):
+            datasets.load_spectra_csv(path, "spd", "energy", names=["x"])
+
+
+class TestIlluminants:
+    @pytest.mark.parametrize("name", ["A", "D50", "D65", "FL2", "fl11", "blackbody:3200"])
+    def test_standard_illuminants(self, name: str) -> None:
+        spectrum = datasets.illuminant(name)
+        assert (spectrum.grid, spectrum.kind, spectrum.unit) == (DEFAULT_GRID, "spd", "energy")
+        assert spectrum.values.max() == pytest.approx(1.0)
+
+    def test_blackbody_follows_planck(self) -> None:
+        grid = WavelengthGrid(400, 700, 50)
+        wavelengths_m = grid.wavelengths_nm * 1e-9
+        # colour uses the ITS-90 second radiation constant, hence the loose tolerance
+        planck = 1.0 / (wavelengths_m**5 * (np.exp(6.62607015e-34 * 299792458.0 / (wavelengths_m * 1.380649e-23 * 3200)) - 1))
+        np.testing.assert_allclose(datasets.illuminant("blackbody:3200", grid).values[:, 0], planck / planck.max(), rtol=2e-4)
+
+    def test_unknown_illuminant(self) -> None:
+        with pytest.raises(SpectralDataError, match="illuminant 'D99'.*expected one of A, D50"):
+            datasets.illuminant("D99")
+        with pytest.raises(SpectralDataError, match="bad temperature"):
+            datasets.illuminant("blackbody:hot")
+
+    @pytest.mark.parametrize("name", datasets.AMBIENTS)
+    def test_ambients(self, name: str) -> None:
+        spectrum = datasets.ambient_spectrum(name)
+        assert (spectrum.names, spectrum.unit, spectrum.grid) == ((name,), "energy", DEFAULT_GRID)
+        assert np.all(spectrum.values >= 0) and spectrum.values.max() == pytest.approx(1.0)
+
+    def test_ambient_shapes_are_plausible(self) -> None:
+        wavelengths = DEFAULT_GRID.wavelengths_nm
+        assert 500 <= wavelengths[np.argmax(datasets.ambient_spectrum("green").values)] <= 560
+        orange = datasets.ambient_spectrum("orange").values[:, 0]
+        assert orange[wavelengths >= 620].min() > 10 * orange[wavelengths <= 520].max()
+        daylight = datasets.ambient_spectrum("daylight").values[:, 0]
+        underwater = datasets.ambient_spectrum("underwater", water_path_m=5.0).values[:, 0]
+        ratio = underwater / daylight
+        assert ratio[-1] < 0.1 * ratio[4]  # red is absorbed first
+        with pytest.raises(SpectralDataError, match="expected one of tungsten"):
+            datasets.ambient_spectrum("moonlight")
