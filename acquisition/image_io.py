@@ -1,0 +1,298 @@
+"""Frame image files: the only module of msflash that uses OpenImageIO.
+
+Public objects
+--------------
+- :func:`read_image`: pixels of a frame file in their native type, (H, W) or (H, W, 3).
+- :func:`read_image_header`: size, channel count, type and msflash attributes, without the pixels.
+- :func:`write_image`: a 16-bit TIFF (integer data) or float EXR (float data), atomically.
+- :func:`image_suffix`: the file suffix :func:`write_image` needs for some pixels.
+
+Frames describe themselves: :func:`write_image` stores its ``attributes`` (``msflash:role``,
+``msflash:exposure_us``, ``msflash:led_levels``…) as a JSON object in the standard
+``ImageDescription`` tag, because OpenImageIO's TIFF writer drops arbitrary attributes; EXR files
+also get them as native header attributes. :func:`read_image_header` reads both back.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from acquisition.errors import RecordingError
+
+INTEGER_SUFFIX = ".tiff"
+"""Suffix of integer frames (16-bit TIFF, zip compression)."""
+FLOAT_SUFFIX = ".exr"
+"""Suffix of float frames (32-bit float EXR)."""
+
+_ATTRIBUTE_PREFIX = "msflash:"
+_INTEGER_SUFFIXES = (".tif", ".tiff")
+_FLOAT_SUFFIXES = (".exr",)
+
+# Native integer types are kept as they are (they are camera counts); every float type is
+# returned as float32 so callers see one float type whatever the file stored (half, float, double).
+_NATIVE_TYPES = {
+    oiio.UINT8: ("uint8", np.uint8),
+    oiio.UINT16: ("uint16", np.uint16),
+    oiio.HALF: ("float", np.float32),
+    oiio.FLOAT: ("float", np.float32),
+    oiio.DOUBLE: ("float", np.float32),
+}
+
+
+@dataclass(frozen=True)
+class ImageHeader:
+    """What a frame file holds, read without decoding its pixels."""
+
+    path: Path
+    """The file."""
+    width: int
+    """Width in pixels."""
+    height: int
+    """Height in pixels."""
+    channels: int
+    """Number of channels: 1 (raw mosaic or mono) or 3 (RGB)."""
+    dtype: np.dtype
+    """The type :func:`read_image` returns: uint8, uint16 or float32."""
+    attributes: dict = field(default_factory=dict, compare=False)
+    """The msflash attributes stored by :func:`write_image` (empty for other files)."""
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """The shape :func:`read_image` returns: (H, W) or (H, W, 3)."""
+        return (self.height, self.width) if self.channels == 1 else (self.height, self.width, self.channels)
+
+
+def _oiio_error() -> str:
+    # OpenImageIO keeps a per-thread error string; reading it also clears it, so a stale message
+    # never leaks into the next failure.
+    message = oiio.geterror()
+    return message.strip() or "unknown OpenImageIO error"
+
+
+@contextlib.contextmanager
+def _open_input(path: Path):
+    if not path.exists():
+        raise RecordingError(f"{path}: image file is missing; expected a frame image")
+    if not path.is_file():
+        raise RecordingError(f"{path}: is not a regular file; expected a frame image")
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        raise RecordingError(f"{path}: cannot be read as an image ({_oiio_error()}); expected a TIFF, PNG or EXR")
+    try:
+        yield image
+    finally:
+        image.close()
+
+
+def _header(path: Path, image: oiio.ImageInput) -> tuple[ImageHeader, str]:
+    spec = image.spec()
+    if spec.nchannels not in (1, 3):
+        raise RecordingError(
+            f"{path}: image has {spec.nchannels} channels; expected 1 (raw mosaic or mono) or 3 (RGB)"
+        )
+    if spec.depth > 1:
+        raise RecordingError(f"{path}: image is a volume (depth {spec.depth}); expected a 2-D image")
+    basetype = spec.format.basetype
+    if basetype not in _NATIVE_TYPES:
+        raise RecordingError(
+            f"{path}: pixel type '{spec.format}' is not supported; expected uint8, uint16 or float (EXR)"
+        )
+    request, dtype = _NATIVE_TYPES[basetype]
+    header = ImageHeader(path, spec.width, spec.height, spec.nchannels, np.dtype(dtype), _attributes(spec))
+    return header, request
+
+
+def _attributes(spec: oiio.ImageSpec) -> dict:
+    attributes: dict = {}
+    description = spec.getattribute("ImageDescription")
+    if isinstance(description, str) and description.startswith("{"):
+        with contextlib.suppress(ValueError):
+            decoded = json.loads(description)
+            if isinstance(decoded, dict):
+                attributes.update({k: v for k, v in decoded.items() if k.startswith(_ATTRIBUTE_PREFIX)})
+    for attribute in spec.extra_attribs:
+        if attribute.name.startswith(_ATTRIBUTE_PREFIX) and attribute.name not in attributes:
+            value = attribute.value
+            attributes[attribute.name] = list(value) if isinstance(value, tuple) else value
+    return attributes
+
+
+def read_image_header(path: str | os.PathLike) -> ImageHeader:
+    """Size, channel count, pixel type and msflash attributes of an image file, without its pixels.
+
+    Raises
+    ------
+    RecordingError
+        Naming the file, if it is missing, unreadable, or has a channel count other than 1 or 3.
+    """
+    path = Path(path)
+    with _open_input(path) as image:
+        return _header(path, image)[0]
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """The pixels of an image file.
+
+    Parameters
+    ----------
+    path
+        Any image OpenImageIO reads (16-bit TIFF or PNG, float EXR…).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (H, W) for one channel, (H, W, 3) for three. Integer files keep their type
+        (uint8, uint16) and values; float files (half, float, double) come back as float32.
+
+    Raises
+    ------
+    RecordingError
+        Naming the file, if it is missing, unreadable, of an unsupported pixel type, or has a
+        channel count other than 1 or 3.
+    """
+    path = Path(path)
+    with _open_input(path) as image:
+        header, request = _header(path, image)
+        pixels = image.read_image(0, 0, 0, header.channels, request)
+        if pixels is None:
+            raise RecordingError(f"{path}: pixels cannot be decoded ({_oiio_error()}); expected a readable image")
+    pixels = np.asarray(pixels, dtype=header.dtype).reshape(header.height, header.width, header.channels)
+    return pixels[:, :, 0] if header.channels == 1 else pixels
+
+
+def image_suffix(pixels: np.ndarray) -> str:
+    """The file suffix :func:`write_image` requires for ``pixels``: ``.tiff`` (integer) or ``.exr`` (float)."""
+    return FLOAT_SUFFIX if np.issubdtype(np.asarray(pixels).dtype, np.floating) else INTEGER_SUFFIX
+
+
+def _prepare_pixels(path: Path, pixels: np.ndarray) -> tuple[np.ndarray, str]:
+    pixels = np.asarray(pixels)
+    if pixels.ndim == 3 and pixels.shape[2] == 1:
+        pixels = pixels[:, :, 0]
+    if pixels.ndim not in (2, 3) or (pixels.ndim == 3 and pixels.shape[2] != 3) or pixels.size == 0:
+        raise RecordingError(f"{path}: pixels have shape {pixels.shape}; expected (H, W), (H, W, 1) or (H, W, 3)")
+    if np.issubdtype(pixels.dtype, np.floating):
+        if path.suffix.lower() not in _FLOAT_SUFFIXES:
+            raise RecordingError(f"{path}: float pixels need a float format; expected a {FLOAT_SUFFIX} file")
+        return np.ascontiguousarray(pixels, dtype=np.float32), "float"
+    if np.issubdtype(pixels.dtype, np.integer) and pixels.dtype != np.bool_:
+        if path.suffix.lower() not in _INTEGER_SUFFIXES:
+            raise RecordingError(f"{path}: integer pixels are stored as 16-bit TIFF; expected a {INTEGER_SUFFIX} file")
+        low, high = int(pixels.min()), int(pixels.max())
+        if low < 0 or high > 65535:
+            raise RecordingError(
+                f"{path}: integer pixels span {low}…{high}; expected counts in 0…65535 (16-bit TIFF)"
+            )
+        # Cast in numpy rather than letting OpenImageIO convert: its conversion rescales
+        # normalised integers (uint8 255 would become 65535), and counts must stay counts.
+        return np.ascontiguousarray(pixels, dtype=np.uint16), "uint16"
+    raise RecordingError(f"{path}: pixel type {pixels.dtype} is not supported; expected integer counts or floats")
+
+
+def _attribute_json(path: Path, attributes: dict) -> str:
+    for name in attributes:
+        if not isinstance(name, str) or not name.startswith(_ATTRIBUTE_PREFIX):
+            raise RecordingError(f"{path}: attribute name {name!r}; expected a name starting with '{_ATTRIBUTE_PREFIX}'")
+    try:
+        return json.dumps(attributes, allow_nan=False, default=_json_default)
+    except (TypeError, ValueError) as err:
+        raise RecordingError(f"{path}: attributes cannot be stored ({err}); expected JSON-compatible values") from err
+
+
+def _json_default(value: object) -> object:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def _set_native_attribute(spec: oiio.ImageSpec, name: str, value: object) -> None:
+    # Native header attributes are a convenience for EXR viewers; the JSON description is what
+    # read_image_header relies on, so values without a simple OpenImageIO type are skipped here.
+    value = _json_default(value) if isinstance(value, np.ndarray | np.generic) else value
+    if isinstance(value, bool):
+        spec.attribute(name, int(value))
+    elif isinstance(value, str | int | float):
+        spec.attribute(name, value)
+    elif isinstance(value, list | tuple) and value and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in value
+    ):
+        spec.attribute(name, oiio.TypeDesc(f"float[{len(value)}]"), tuple(float(v) for v in value))
+
+
+def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | None = None) -> Path:
+    """Write a frame image atomically: a temporary file in the same directory, then ``os.replace``.
+
+    Parameters
+    ----------
+    path
+        Target file: ``.tif``/``.tiff`` for integer pixels (written as 16-bit TIFF, zip
+        compression, values unchanged), ``.exr`` for float pixels (written as 32-bit float).
+    pixels
+        Shape (H, W), (H, W, 1) or (H, W, 3). Integer values must lie in 0…65535.
+    attributes
+        ``msflash:``-prefixed metadata (``msflash:role``, ``msflash:exposure_us``,
+        ``msflash:led_levels``…) with JSON-compatible values, so the file describes itself.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+
+    Raises
+    ------
+    RecordingError
+        If the pixels, suffix or attributes cannot be stored as described.
+    OSError
+        If the file cannot be written (permissions, disk full).
+    """
+    path = Path(path)
+    data, type_name = _prepare_pixels(path, pixels)
+    attributes = dict(attributes or {})
+    description = _attribute_json(path, attributes)
+    channels = 1 if data.ndim == 2 else 3
+    spec = oiio.ImageSpec(data.shape[1], data.shape[0], channels, type_name)
+    if attributes:
+        spec.attribute("ImageDescription", description)
+    if type_name == "uint16":
+        spec.attribute("compression", "zip")
+        format_name = "tiff"
+    else:
+        spec.attribute("compression", "zip")
+        format_name = "openexr"
+        for name, value in attributes.items():
+            _set_native_attribute(spec, name, value)
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # The temporary name keeps the real suffix and starts with a dot, so a crash leaves an
+    # obviously stray file that no sequence lists, never a truncated frame under the real name.
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    os.close(handle)
+    try:
+        output = oiio.ImageOutput.create(format_name)
+        if output is None:
+            raise OSError(f"{path}: no OpenImageIO writer for {format_name} ({_oiio_error()})")
+        try:
+            # Always hand OpenImageIO an (H, W, C) array: a 2-D array is read as (pixels, channels)
+            # and would come out transposed.
+            if not output.open(temporary, spec) or not output.write_image(data.reshape(data.shape[0], data.shape[1], channels)):
+                raise OSError(f"{path}: cannot write image ({output.geterror() or _oiio_error()})")
+        finally:
+            output.close()
+        with open(temporary, "rb+") as written:
+            os.fsync(written.fileno())
+        os.replace(temporary, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temporary)
+        raise
+    return path
