@@ -1,0 +1,258 @@
+"""Flash spectra: matching (eq. 7) and complementary (eq. 8–9) LED mixes.
+
+Both modes compare illuminants through the camera: ``A = Cᵀ I`` (3 × k) maps LED weights to
+the camera response of a white surface. ``A`` has rank ≤ 3 while k is usually larger, so many
+mixes look the same to the camera; every mode therefore breaks ties explicitly, by adding to the
+objective small terms that only choose among (near-)optimal solutions:
+
+- **matching** prefers the mix whose *spectrum* is closest to the ambient's (so the match holds
+  for every surface and observer, not only for the camera on white), then rescales to
+  ``max(w_f) = 1`` (most light, same colour cast);
+- **complementary** prefers the least total LED power ``Σ w_f`` (less heat, less glare, least
+  noise added), then the smallest change from ``previous_weights`` (a stable mix from frame
+  to frame).
+
+The tie-break weights are :data:`TIE_BREAK` and :data:`TIE_BREAK_CHANGE` relative to the problem's scale: far below any visible
+change in the objective, far above round-off.
+
+Bounds (``bounds=``): ``"physical"`` is ``0 ≤ w_f ≤ 1`` (the LEDs' drive range, for a
+re-capture); ``"nonnegative"`` drops the upper bound (the computational mode of the paper: the
+image is synthesised, so the flash images can be scaled up, at the price of noise);
+``"free"`` drops both (negative weights subtract LED images; the complementary scale ``s`` is
+then fixed to the non-negative solution's, otherwise ``s = 0, w_f = −w_a`` would trivially win).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from processing.errors import SolverError, SpectralDataError, TargetUnreachableWarning
+from processing.least_squares import minimise_quadratic
+from processing.spectra import Spectra, require_same_grid, require_unit
+
+FlashMode = Literal["matching", "complementary"]
+FlashBounds = Literal["physical", "nonnegative", "free"]
+
+TIE_BREAK = 1e-6
+"""Relative weight of the first tie-break (spectral closeness; least total power)."""
+TIE_BREAK_CHANGE = 1e-8
+"""Relative weight of the second tie-break (change from the previous mix) and of the ridge that
+keeps the rank-3 camera problems strictly convex."""
+UNREACHABLE_RELATIVE_ERROR = 0.02
+"""Relative camera-space error ``‖A(w_a + w_f) − s t‖ / ‖s t‖`` above which the target counts as not reached."""
+
+
+@dataclass(frozen=True)
+class FlashSolution:
+    """A flash LED mix and how well it does its job."""
+
+    mode: str
+    """``matching`` or ``complementary``."""
+    ambient_weights: np.ndarray
+    """``w_a``, shape (k,)."""
+    flash_weights: np.ndarray
+    """``w_f``, shape (k,), in LED drive units (1 = full drive at the capture's exposure)."""
+    scale: float | None
+    """The complementary slack ``s`` of eq. 8–9 (None for matching)."""
+    relative_error: float
+    """Camera-space error of the result relative to its goal (0 = exact)."""
+    bounds: str
+    """``physical``, ``nonnegative`` or ``free``."""
+    target_reached: bool
+    """Whether the relative error is within :data:`UNREACHABLE_RELATIVE_ERROR`."""
+    warnings: tuple[str, ...] = field(default=())
+    """Human-readable warnings."""
+
+
+def camera_led_matrix(camera_responsivities: Spectra, led_spectra: Spectra) -> np.ndarray:
+    """``A = Cᵀ I``: camera response of a white surface to each LED at full drive, shape (3, k)."""
+    require_same_grid(camera_responsivities, led_spectra)
+    require_unit(camera_responsivities, "photons")
+    require_unit(led_spectra, "photons")
+    return camera_responsivities.values.T @ led_spectra.values
+
+
+def _box(k: int, bounds: str) -> tuple[np.ndarray, np.ndarray]:
+    """Constraint rows ``G w ≥ h`` for the flash weights."""
+    if bounds == "physical":
+        return np.vstack([np.eye(k), -np.eye(k)]), np.concatenate([np.zeros(k), -np.ones(k)])
+    if bounds == "nonnegative":
+        return np.eye(k), np.zeros(k)
+    if bounds == "free":
+        return np.zeros((0, k)), np.zeros(0)
+    raise ValueError(f"flash bounds '{bounds}' are unknown; expected physical, nonnegative or free")
+
+
+def solve_matching(
+    ambient_weights: np.ndarray, led_spectra: Spectra, camera_responsivities: Spectra,
+    bounds: FlashBounds = "physical",
+) -> FlashSolution:
+    """Matching flash, eq. 7: ``min ‖Cᵀ I (w_a − w_f)‖`` subject to the bounds, then ``max(w_f) = 1``.
+
+    When ``w_a ≥ 0`` the answer is ``w_a / max(w_a)`` (the spectral tie-break makes it exact);
+    otherwise the closest non-negative mix in camera space, preferring spectral closeness.
+
+    Examples
+    --------
+    >>> from processing.spectra import WavelengthGrid
+    >>> g = WavelengthGrid(400, 700, 100)
+    >>> leds = Spectra(g, np.eye(4), ("a", "b", "c", "d"), unit="photons")
+    >>> cam = Spectra(g, np.ones((4, 3)), ("R", "G", "B"), kind="responsivity", unit="photons")
+    >>> solve_matching(np.array([0.5, 1.0, 0.25, 0.0]), leds, cam).flash_weights.tolist()
+    [0.5, 1.0, 0.25, 0.0]
+    """
+    ambient_weights = np.asarray(ambient_weights, dtype=float)
+    matrix = camera_led_matrix(camera_responsivities, led_spectra)
+    k = ambient_weights.size
+    _check_count(ambient_weights, matrix, led_spectra)
+    peak = np.max(np.abs(ambient_weights))
+    if peak == 0:
+        raise SolverError("matching flash: the ambient weights are all zero; expected an estimated ambient")
+    goal = ambient_weights / peak
+    spectra = led_spectra.values
+    norm = max(np.linalg.norm(matrix, 2) ** 2, 1e-300)
+    spectral_norm = max(np.linalg.norm(spectra, 2) ** 2, 1e-300)
+    # ½‖A(g − w)‖² + ½ε‖I(g − w)‖², scaled so the camera term has unit size.
+    hessian = matrix.T @ matrix / norm + TIE_BREAK * spectra.T @ spectra / spectral_norm + TIE_BREAK_CHANGE * np.eye(k)
+    linear = hessian @ goal
+    constraints, limits = _box(k, bounds)
+    weights = minimise_quadratic(hessian, linear, constraints, limits, where="matching flash").x
+    weights[np.abs(weights) < 1e-12] = 0.0
+    top = np.max(weights)
+    if top <= 0:
+        raise SolverError(
+            "matching flash: no non-negative LED mix matches the ambient's colour; "
+            "expected an ambient inside the LEDs' gamut"
+        )
+    weights = weights / top
+    response = matrix @ weights
+    wanted = matrix @ goal
+    relative_error = _chromatic_error(response, wanted)
+    return _finish("matching", ambient_weights, weights, None, relative_error, bounds)
+
+
+def solve_complementary(
+    ambient_weights: np.ndarray, led_spectra: Spectra, camera_responsivities: Spectra, target: Spectra,
+    bounds: FlashBounds = "physical", previous_weights: np.ndarray | None = None,
+) -> FlashSolution:
+    """Complementary flash, eq. 8–9: ``min ‖Cᵀ I (w_a + w_f) − s Cᵀ i_d‖`` over ``w_f`` and ``s ≥ 0``.
+
+    Parameters
+    ----------
+    ambient_weights
+        ``w_a`` from the ambient estimate.
+    led_spectra, camera_responsivities
+        ``I`` and ``C`` in photons on one grid.
+    target
+        The desired illuminant ``i_d`` (one spectrum, photons, same grid); D65 in the paper.
+    bounds
+        ``physical`` (0 ≤ w_f ≤ 1), ``nonnegative`` or ``free`` (see the module notes).
+    previous_weights
+        The previous mix, for the second tie-break (default: no preference).
+
+    Warns
+    -----
+    TargetUnreachableWarning
+        When ambient + flash cannot be brought to the target's colour within the bounds.
+    """
+    ambient_weights = np.asarray(ambient_weights, dtype=float)
+    matrix = camera_led_matrix(camera_responsivities, led_spectra)
+    require_same_grid(led_spectra, target)
+    require_unit(target, "photons")
+    if target.count != 1:
+        raise SpectralDataError(f"{target.source or 'target'}: {target.count} spectra; expected one target illuminant")
+    _check_count(ambient_weights, matrix, led_spectra)
+    k = ambient_weights.size
+    target_response = camera_responsivities.values.T @ target.values[:, 0]
+    ambient_response = matrix @ ambient_weights
+    if np.linalg.norm(target_response) == 0:
+        raise SpectralDataError(f"{target.source or 'target'}: the camera sees nothing of the target illuminant")
+    # Normalise so the ambient (or, with no ambient, the full flash) has unit camera response and
+    # the target's response unit norm: the tie-break weights are then relative.
+    unit = max(np.linalg.norm(ambient_response), np.linalg.norm(matrix.sum(axis=1)) * 1e-3, 1e-300)
+    a_matrix = matrix / unit
+    t_vector = target_response / np.linalg.norm(target_response)
+    ambient_unit = ambient_response / unit
+    previous = np.zeros(k) if previous_weights is None else np.asarray(previous_weights, dtype=float)
+
+    def solve(weight_bounds: str, fixed_scale: float | None) -> tuple[np.ndarray, float]:
+        constraints, limits = _box(k, weight_bounds)
+        if fixed_scale is None:
+            # Variables x = [w_f, s]; residual A w_f − s t + A w_a.
+            design = np.hstack([a_matrix, -t_vector[:, None]])
+            hessian = design.T @ design
+            hessian[:k, :k] += TIE_BREAK_CHANGE * np.eye(k)
+            hessian[k, k] += TIE_BREAK_CHANGE
+            linear = -design.T @ ambient_unit
+            linear[:k] += TIE_BREAK_CHANGE * previous
+            if weight_bounds != "free":
+                linear[:k] -= TIE_BREAK * np.ones(k)  # least total power first
+            full_constraints = np.zeros((constraints.shape[0] + 1, k + 1))
+            full_constraints[:-1, :k] = constraints
+            full_constraints[-1, k] = 1.0  # s ≥ 0
+            full_limits = np.concatenate([limits, [0.0]])
+            x = minimise_quadratic(hessian, linear, full_constraints, full_limits, where="complementary flash").x
+            return x[:k], float(x[k])
+        hessian = a_matrix.T @ a_matrix + TIE_BREAK_CHANGE * np.eye(k)
+        linear = a_matrix.T @ (fixed_scale * t_vector - ambient_unit) + TIE_BREAK_CHANGE * previous
+        x = minimise_quadratic(hessian, linear, constraints, limits, where="complementary flash").x
+        return x, fixed_scale
+
+    if bounds == "free":
+        _, scale_unit = solve("nonnegative", None)
+        weights, scale_unit = solve("free", scale_unit)
+    else:
+        weights, scale_unit = solve(bounds, None)
+    weights[np.abs(weights) < 1e-10] = 0.0
+    if bounds == "physical":
+        weights = np.clip(weights, 0.0, 1.0)
+    elif bounds == "nonnegative":
+        weights = np.clip(weights, 0.0, None)
+    scale = scale_unit * unit / np.linalg.norm(target_response)
+    result = matrix @ (ambient_weights + weights)
+    relative_error = _chromatic_error(result, target_response) if scale > 0 else 1.0
+    return _finish("complementary", ambient_weights, weights, float(scale), relative_error, bounds)
+
+
+def _chromatic_error(response: np.ndarray, wanted: np.ndarray) -> float:
+    """Scale-free camera-space error: ``‖r/‖r‖ − t/‖t‖‖`` (0 when the colours agree)."""
+    response_norm, wanted_norm = np.linalg.norm(response), np.linalg.norm(wanted)
+    if response_norm == 0 or wanted_norm == 0:
+        return 1.0
+    return float(np.linalg.norm(response / response_norm - wanted / wanted_norm))
+
+
+def _check_count(ambient_weights: np.ndarray, matrix: np.ndarray, led_spectra: Spectra) -> None:
+    if ambient_weights.ndim != 1 or ambient_weights.size != matrix.shape[1]:
+        raise SpectralDataError(
+            f"flash: {ambient_weights.size} ambient weights for {matrix.shape[1]} LEDs in "
+            f"{led_spectra.source or 'the LED spectra'}; expected one weight per LED"
+        )
+    if not np.all(np.isfinite(ambient_weights)):
+        raise SpectralDataError("flash: the ambient weights are not finite; expected numbers")
+
+
+def _finish(mode: str, ambient_weights: np.ndarray, weights: np.ndarray, scale: float | None,
+            relative_error: float, bounds: str) -> FlashSolution:
+    reached = relative_error <= UNREACHABLE_RELATIVE_ERROR
+    notes: list[str] = []
+    if not reached:
+        goal = "the ambient's colour" if mode == "matching" else "the target illuminant"
+        message = (
+            f"{mode} flash: the LEDs cannot reach {goal} within the {bounds} bounds "
+            f"(camera-space chromatic error {relative_error:.3f}); the closest mix is returned"
+        )
+        notes.append(message)
+        warnings.warn(message, TargetUnreachableWarning, stacklevel=3)
+    return FlashSolution(
+        mode=mode, ambient_weights=ambient_weights, flash_weights=weights, scale=scale,
+        relative_error=relative_error, bounds=bounds, target_reached=reached, warnings=tuple(notes),
+    )
+
+
+FLASH_MODES = {"matching": solve_matching, "complementary": solve_complementary}
+"""Flash solvers by mode name."""

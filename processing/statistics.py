@@ -1,0 +1,253 @@
+"""Sufficient statistics of a flash sequence, accumulated in one pass over the pixels.
+
+Ambient estimation (eq. 4–6) needs only the k×k Gram matrix of the LED-only images, their
+k products with the ambient image, the ambient image's squared norm and the sample count
+(DESIGN §8). They are accumulated chunk by chunk straight from the raw frames: each chunk is
+linearised (``(value − black_level) / (exposure_us · gain)``), saturated pixels are masked, the
+LED frames are differenced against the ambient frame and the products are added up. No full-size
+float copy of the stack ever exists.
+
+Frames need not light one LED each: any LED frame may drive several LEDs at any levels (a
+multiplexed sequence). With ``L`` the (n_led_frames, k) matrix of levels, the per-LED images at
+full drive are ``pinv(L) · (frames − ambient)``, applied to the statistics after accumulation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from processing.errors import SpectralDataError
+
+DEFAULT_CHUNK_PIXELS = 1 << 15
+"""Pixels per chunk: small enough to stay in cache for k ≈ 8 frames, large enough to amortise numpy calls."""
+
+
+@dataclass(frozen=True)
+class FrameStackSpec:
+    """How to linearise the frames of one sequence."""
+
+    black_level: float
+    """Raw value of no light."""
+    white_level: float
+    """Raw value at or above which a pixel is saturated."""
+    ambient_scale: float
+    """``1 / (exposure_us · gain)`` of the ambient frame."""
+    led_scales: tuple[float, ...]
+    """``1 / (exposure_us · gain)`` of each LED frame."""
+    led_levels: np.ndarray
+    """Drive levels, shape (n_led_frames, k): frame j lights LED i at ``led_levels[j, i]``."""
+
+    def __post_init__(self) -> None:
+        levels = np.array(self.led_levels, dtype=float, copy=True)
+        if levels.ndim != 2 or levels.shape[0] != len(self.led_scales):
+            raise SpectralDataError(
+                f"frame stack: led_levels has shape {levels.shape}; expected ({len(self.led_scales)}, n_leds)"
+            )
+        if not self.white_level > self.black_level:
+            raise SpectralDataError(
+                f"frame stack: white_level {self.white_level} is not above black_level {self.black_level}"
+            )
+        if np.linalg.matrix_rank(levels) < levels.shape[1]:
+            raise SpectralDataError(
+                "frame stack: the LED levels of the frames do not separate every LED "
+                f"(rank {np.linalg.matrix_rank(levels)} < {levels.shape[1]} LEDs); expected each LED "
+                "lit in some frame independently of the others"
+            )
+        levels.flags.writeable = False
+        object.__setattr__(self, "led_levels", levels)
+
+    @property
+    def n_leds(self) -> int:
+        """Number of LEDs k."""
+        return self.led_levels.shape[1]
+
+    @property
+    def unmixing(self) -> np.ndarray:
+        """pinv(L), shape (k, n_led_frames): LED-only images at full drive from frame differences."""
+        return np.linalg.pinv(self.led_levels)
+
+
+@dataclass(frozen=True)
+class SequenceStatistics:
+    """Sufficient statistics for ambient estimation (eq. 4–6) over the unsaturated samples.
+
+    With ``a`` the linear ambient image and ``f_i`` the LED-only image of LED i at full drive,
+    both flattened over the valid samples: ``gram[i, j] = f_i · f_j``, ``cross[i] = f_i · a``,
+    ``ambient_energy = a · a``.
+    """
+
+    gram: np.ndarray
+    """LED-only Gram matrix, shape (k, k)."""
+    cross: np.ndarray
+    """Products of the LED-only images with the ambient image, shape (k,)."""
+    ambient_energy: float
+    """Squared norm of the ambient image."""
+    n_samples: int
+    """Number of valid (unsaturated) samples summed."""
+    n_total: int
+    """Number of samples in a frame (valid or not)."""
+    ambient_sum: float
+    """Sum of the ambient image (mean level = ambient_sum / n_samples)."""
+    led_sums: np.ndarray
+    """Sum of each LED-only image, shape (k,)."""
+
+    @property
+    def n_leds(self) -> int:
+        """Number of LEDs k."""
+        return self.cross.size
+
+    @property
+    def saturated_fraction(self) -> float:
+        """Fraction of samples excluded because some frame saturated there."""
+        return 1.0 - self.n_samples / self.n_total if self.n_total else 0.0
+
+    def residual_energy(self, weights: np.ndarray) -> float:
+        """``‖a − Σ wᵢ fᵢ‖²`` for ambient weights ``w``, from the statistics alone."""
+        w = np.asarray(weights, dtype=float)
+        return float(max(self.ambient_energy - 2.0 * self.cross @ w + w @ self.gram @ w, 0.0))
+
+    def select_leds(self, which: Sequence[int]) -> SequenceStatistics:
+        """Statistics restricted to a subset of the LEDs (for leave-one-out and LED-count studies)."""
+        idx = np.asarray(which, dtype=int)
+        return SequenceStatistics(
+            gram=self.gram[np.ix_(idx, idx)], cross=self.cross[idx], ambient_energy=self.ambient_energy,
+            n_samples=self.n_samples, n_total=self.n_total, ambient_sum=self.ambient_sum,
+            led_sums=self.led_sums[idx],
+        )
+
+    def permuted(self, order: Sequence[int]) -> SequenceStatistics:
+        """The same statistics with the LEDs in another order."""
+        return self.select_leds(order)
+
+    def __add__(self, other: SequenceStatistics) -> SequenceStatistics:
+        """Statistics of the union of two disjoint sets of samples (for tiles, chunks, workers)."""
+        return SequenceStatistics(
+            gram=self.gram + other.gram, cross=self.cross + other.cross,
+            ambient_energy=self.ambient_energy + other.ambient_energy,
+            n_samples=self.n_samples + other.n_samples, n_total=self.n_total + other.n_total,
+            ambient_sum=self.ambient_sum + other.ambient_sum, led_sums=self.led_sums + other.led_sums,
+        )
+
+
+def _as_samples(frame: np.ndarray, where: str) -> np.ndarray:
+    """View a frame as (n_pixels, n_channels) without copying."""
+    if frame.ndim == 2:
+        return frame.reshape(-1, 1)
+    if frame.ndim == 3:
+        return frame.reshape(-1, frame.shape[2])
+    raise SpectralDataError(f"{where}: frame has shape {frame.shape}; expected (H, W) or (H, W, C)")
+
+
+def accumulate_statistics(
+    ambient: np.ndarray,
+    led_frames: Sequence[np.ndarray],
+    spec: FrameStackSpec,
+    *,
+    sample_mask: np.ndarray | None = None,
+    chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
+) -> SequenceStatistics:
+    """Accumulate the sufficient statistics of eq. 4–6 in one pass over raw frames.
+
+    Parameters
+    ----------
+    ambient
+        The ambient frame m_a, raw values, shape (H, W) (mono or raw mosaic) or (H, W, C).
+    led_frames
+        The frames m_a + m_f,j, raw values, each the shape of ``ambient``.
+    spec
+        Black/white levels, per-frame exposure·gain scales and LED levels.
+    sample_mask
+        Optional boolean (H, W) mask of the pixels to use (a region, a subsample).
+    chunk_pixels
+        Pixels processed per chunk.
+
+    Returns
+    -------
+    SequenceStatistics
+        Statistics of the LED-only images at full drive.
+
+    Raises
+    ------
+    SpectralDataError
+        If frames differ in shape or contain non-finite values.
+
+    Notes
+    -----
+    A pixel is excluded when any channel of it, in any frame, is at or above the white level
+    (DESIGN §6). Moments are accumulated in float64.
+    """
+    frames = [ambient, *led_frames]
+    if len(led_frames) != spec.led_levels.shape[0]:
+        raise SpectralDataError(
+            f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}"
+        )
+    shape = ambient.shape
+    for index, frame in enumerate(frames):
+        if frame.shape != shape:
+            raise SpectralDataError(
+                f"frame stack: frame {index} has shape {frame.shape} but the ambient frame {shape}; "
+                "expected frames of one size"
+            )
+    samples = [_as_samples(f, f"frame {i}") for i, f in enumerate(frames)]
+    n_pixels, n_channels = samples[0].shape
+    mask_flat = None
+    if sample_mask is not None:
+        if sample_mask.shape != shape[:2]:
+            raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {shape[:2]}")
+        mask_flat = sample_mask.reshape(-1)
+    n_led_frames = len(led_frames)
+    n_rows = n_led_frames + 2
+    white = spec.white_level
+    # Raw second moments of the rows [F_1 … F_n, A, 1] over the valid samples. Every statistic of
+    # the linearised differences is a linear transform of these (below), so the per-chunk work is
+    # one conversion and one Gram product: no per-frame subtract, scale or difference passes.
+    # float64 keeps the cancellation in (s_j F_j − s_a A) harmless.
+    moments = np.zeros((n_rows, n_rows))
+    block = np.empty((n_rows, min(chunk_pixels, n_pixels), n_channels))
+    for start in range(0, n_pixels, chunk_pixels):
+        stop = min(start + chunk_pixels, n_pixels)
+        rows = stop - start
+        view = block[:, :rows]
+        for j in range(n_led_frames):
+            view[j] = samples[j + 1][start:stop]
+        view[n_led_frames] = samples[0][start:stop]
+        view[n_led_frames + 1] = 1.0
+        brightest = np.maximum.reduce(view[:n_rows - 1], axis=0)
+        if not np.isfinite(brightest).all():
+            raise SpectralDataError(
+                "frame stack: a frame holds non-finite values (NaN or inf); expected finite pixels"
+            )
+        saturated = brightest[:, 0] >= white
+        for channel in range(1, n_channels):
+            saturated |= brightest[:, channel] >= white
+        if mask_flat is not None:
+            saturated |= ~mask_flat[start:stop]
+        if saturated.any():
+            view[:, saturated] = 0.0
+        flat = view.reshape(n_rows, -1)
+        moments += flat @ flat.T
+
+    # Linear map from the raw rows to [d_1 … d_n, a]: d_j = s_j (F_j − b) − s_a (A − b), a = s_a (A − b).
+    transform = np.zeros((n_led_frames + 1, n_rows))
+    scales = np.asarray(spec.led_scales, dtype=float)
+    black = float(spec.black_level)
+    transform[:n_led_frames, :n_led_frames] = np.diag(scales)
+    transform[:n_led_frames, n_led_frames] = -spec.ambient_scale
+    transform[:n_led_frames, n_led_frames + 1] = (spec.ambient_scale - scales) * black
+    transform[n_led_frames, n_led_frames] = spec.ambient_scale
+    transform[n_led_frames, n_led_frames + 1] = -spec.ambient_scale * black
+    linear_moments = transform @ moments @ transform.T
+    linear_sums = transform @ moments[:, -1]
+    unmixing = spec.unmixing
+    return SequenceStatistics(
+        gram=unmixing @ linear_moments[:n_led_frames, :n_led_frames] @ unmixing.T,
+        cross=unmixing @ linear_moments[:n_led_frames, n_led_frames],
+        ambient_energy=float(linear_moments[n_led_frames, n_led_frames]),
+        n_samples=int(round(moments[-1, -1])),
+        n_total=n_pixels * n_channels,
+        ambient_sum=float(linear_sums[n_led_frames]),
+        led_sums=unmixing @ linear_sums[:n_led_frames],
+    )

@@ -1,0 +1,109 @@
+"""The computational flash image: ``m_a + Σ_k w_k m_f,k`` from the frames already taken.
+
+With the LED-only images ``m_f = pinv(L) · (F − m_a)`` (see :mod:`processing.statistics`), the
+synthesised image is a weighted sum of the *raw* frames, ``(1 − Σ_j c_j) m_a + Σ_j c_j F_j``
+with ``c = pinv(L)ᵀ w`` — one pass over the frames, in chunks, no LED-only image ever stored.
+Works identically on RGB images and raw mosaics (each sample is just a number).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from processing.errors import SpectralDataError
+from processing.statistics import DEFAULT_CHUNK_PIXELS, FrameStackSpec
+
+
+def frame_coefficients(spec: FrameStackSpec, flash_weights: np.ndarray) -> tuple[float, np.ndarray]:
+    """Coefficients of the linearised ambient and LED frames in ``m_a + Σ w_k m_f,k``.
+
+    Returns
+    -------
+    tuple
+        ``(ambient_coefficient, led_frame_coefficients)`` applied to linearised frames.
+
+    Examples
+    --------
+    >>> spec = FrameStackSpec(0, 100, 1.0, (1.0, 1.0), np.eye(2))
+    >>> a, c = frame_coefficients(spec, np.array([0.5, 0.25]))
+    >>> float(a), c.tolist()
+    (0.25, [0.5, 0.25])
+    """
+    weights = np.asarray(flash_weights, dtype=float)
+    if weights.shape != (spec.n_leds,):
+        raise SpectralDataError(f"synthesis: {weights.size} flash weights; expected {spec.n_leds} (one per LED)")
+    if not np.all(np.isfinite(weights)):
+        raise SpectralDataError("synthesis: flash weights must be finite numbers")
+    coefficients = spec.unmixing.T @ weights
+    return float(1.0 - coefficients.sum()), coefficients
+
+
+def synthesize(
+    ambient: np.ndarray,
+    led_frames: Sequence[np.ndarray],
+    spec: FrameStackSpec,
+    flash_weights: np.ndarray,
+    *,
+    chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Synthesise the computational flash image from raw frames.
+
+    Parameters
+    ----------
+    ambient, led_frames
+        Raw frames as captured (any exposures and gains; see ``spec``).
+    spec
+        Black/white levels, per-frame ``1/(exposure·gain)`` and LED levels.
+    flash_weights
+        ``w_f``, one weight per LED (in full-drive units).
+
+    Returns
+    -------
+    image : ndarray
+        The linear image ``m_a + Σ w_k m_f,k`` in units of value per (µs · gain), float32, the
+        shape of the frames.
+    saturated : ndarray
+        Boolean (H, W) mask of pixels saturated in some input frame (their values are unreliable).
+    """
+    ambient_coefficient, coefficients = frame_coefficients(spec, flash_weights)
+    frames = [ambient, *led_frames]
+    for index, frame in enumerate(frames):
+        if frame.shape != ambient.shape:
+            raise SpectralDataError(
+                f"synthesis: frame {index} has shape {frame.shape} but the ambient frame {ambient.shape}"
+            )
+    # Per-frame factors on raw values, and one constant absorbing every black-level offset.
+    factors = np.concatenate([[ambient_coefficient * spec.ambient_scale],
+                              coefficients * np.asarray(spec.led_scales)]).astype(np.float32)
+    offset = np.float32(-spec.black_level * float(factors.astype(float).sum()))
+    output = np.empty(ambient.shape, dtype=np.float32)
+    height = ambient.shape[0]
+    row_pixels = int(np.prod(ambient.shape[1:2]))
+    rows_per_chunk = max(1, chunk_pixels // max(row_pixels, 1))
+    saturated = np.zeros(ambient.shape[:2], dtype=bool)
+    scratch = None
+    for start in range(0, height, rows_per_chunk):
+        stop = min(start + rows_per_chunk, height)
+        target = output[start:stop]
+        np.multiply(frames[0][start:stop], factors[0], out=target, dtype=np.float32)
+        bright = frames[0][start:stop] >= spec.white_level
+        for factor, frame in zip(factors[1:], frames[1:]):
+            chunk = frame[start:stop]
+            if scratch is None or scratch.shape != target.shape:
+                scratch = np.empty_like(target)
+            np.multiply(chunk, factor, out=scratch, dtype=np.float32)
+            target += scratch
+            bright |= chunk >= spec.white_level
+        target += offset
+        saturated[start:stop] = bright.any(axis=2) if bright.ndim == 3 else bright
+    return output, saturated
+
+
+def to_raw_values(image: np.ndarray, exposure_us: float, gain: float, black_level: float,
+                  white_level: float, dtype: type = np.uint16) -> np.ndarray:
+    """Encode a linear image as raw values at a given exposure and gain (clipped to the white level)."""
+    values = image.astype(np.float64) * (exposure_us * gain) + black_level
+    values = np.clip(np.rint(values), 0, white_level)
+    return values.astype(dtype)
