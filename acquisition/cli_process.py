@@ -1,0 +1,149 @@
+"""``msflash estimate``, ``msflash flash`` and ``msflash synthesize`` on recorded sequences."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from acquisition import analysis
+from acquisition.cli_common import UsageError, print_json, progress
+from acquisition.image_io import write_image
+from acquisition.sequence_format import read_sequence
+from processing.ambient import AMBIENT_METHODS
+from processing.errors import TargetUnreachableWarning
+from processing.synthesis import to_raw_values
+
+
+def _alpha(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise UsageError(f"--alpha '{text}': expected a non-negative number or 'auto'") from None
+    if not value >= 0:
+        raise UsageError(f"--alpha {text}: expected a non-negative number or 'auto'")
+    return value
+
+
+def _weights(text: str, n_leds: int) -> np.ndarray:
+    try:
+        values = np.array([float(v) for v in text.split(",")], dtype=float)
+    except ValueError:
+        raise UsageError(f"--weights '{text}': expected comma-separated numbers, one per LED") from None
+    if values.size != n_leds:
+        raise UsageError(f"--weights has {values.size} values; expected {n_leds} (one per LED)")
+    if not np.all(np.isfinite(values)):
+        raise UsageError("--weights: expected finite numbers")
+    return values
+
+
+def add_estimation_options(parser: argparse.ArgumentParser) -> None:
+    """The options every command that estimates the ambient shares."""
+    parser.add_argument("--method", default="tikhonov", choices=sorted(AMBIENT_METHODS),
+                        help="ambient estimator (default: tikhonov, non-negative with roughness penalty)")
+    parser.add_argument("--alpha", default="auto", type=_alpha,
+                        help="dimensionless roughness weight, or 'auto' (generalised cross-validation)")
+
+
+def _estimate(args: argparse.Namespace) -> int:
+    sequence = read_sequence(args.sequence)
+    if sequence.partial:
+        progress(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
+    estimate = analysis.estimate_sequence(sequence, args.method, args.alpha)
+    payload = analysis.estimate_payload(sequence, estimate)
+    for warning in estimate.warnings:
+        progress(f"warning: {warning}")
+    if args.json:
+        print_json(payload)
+    else:
+        names = payload["led_names"]
+        print(f"ambient estimate of {sequence.directory} ({estimate.method}, alpha {estimate.alpha:.3g})")
+        print("ambient weights: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, estimate.ambient_weights)))
+        print(f"relative residual {estimate.relative_residual:.4f}, condition {estimate.condition_number:.3g}, "
+              f"{estimate.n_samples} samples, {estimate.saturated_fraction:.1%} saturated")
+        peak = float(np.max(payload["spectrum"])) or 1.0
+        for wavelength, value in zip(sequence.wavelengths_nm, payload["spectrum"]):
+            print(f"  {wavelength:6.1f} nm  {value / peak:7.4f}  {'#' * int(round(max(value, 0) / peak * 40))}")
+    return 0
+
+
+def _flash(args: argparse.Namespace) -> int:
+    sequence = read_sequence(args.sequence)
+    estimate = analysis.estimate_sequence(sequence, args.method, args.alpha)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", TargetUnreachableWarning)
+        solution = analysis.solve_sequence_flash(sequence, args.mode, estimate.ambient_weights, args.target, args.bounds)
+    for warning in caught:
+        progress(f"warning: {warning.message}")
+    payload = analysis.flash_payload(sequence, solution, args.target)
+    payload["estimate_warnings"] = list(estimate.warnings)
+    if args.json:
+        print_json(payload)
+    else:
+        names = payload["led_names"]
+        print(f"{solution.mode} flash for {sequence.directory} ({solution.bounds} bounds)")
+        print("flash weights: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, solution.flash_weights)))
+        if solution.scale is not None:
+            print(f"scale s = {solution.scale:.4g} (target {args.target})")
+        print(f"camera-space chromatic error {solution.relative_error:.4f}"
+              + ("" if solution.target_reached else " (target NOT reached)"))
+    return 0
+
+
+def _synthesize(args: argparse.Namespace) -> int:
+    sequence = read_sequence(args.sequence)
+    weights = _weights(args.weights, len(sequence.leds))
+    output = Path(args.out)
+    image, saturated, stack = analysis.synthesize_sequence(sequence, weights)
+    suffix = output.suffix.lower()
+    if suffix == ".exr":
+        write_image(output, image, {"msflash:flash_weights": weights.tolist(), "msflash:units": "value per us*gain"})
+    elif suffix in (".tif", ".tiff"):
+        ambient = sequence.frames[stack.ambient_index]
+        raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level,
+                            sequence.camera.white_level)
+        write_image(output, raw, {"msflash:flash_weights": weights.tolist(),
+                                  "msflash:exposure_us": ambient.exposure_us, "msflash:gain": ambient.gain})
+    else:
+        raise UsageError(f"--out {output}: unsupported image type; expected .exr (linear float) or .tiff (16-bit raw)")
+    clipped = float(saturated.mean())
+    if clipped > 0:
+        progress(f"warning: {clipped:.1%} of the pixels were saturated in some input frame")
+    if args.json:
+        print_json({"out": str(output), "flash_weights": weights, "saturated_fraction": clipped})
+    else:
+        print(f"wrote {output}")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``estimate``, ``flash`` and ``synthesize``."""
+    estimate = subparsers.add_parser("estimate", help="estimate the ambient illuminant spectrum of a sequence")
+    estimate.add_argument("sequence", help="sequence directory (format v1)")
+    add_estimation_options(estimate)
+    estimate.add_argument("--json", action="store_true", help="print one JSON object")
+    estimate.set_defaults(handler=_estimate)
+
+    flash = subparsers.add_parser("flash", help="solve the matching or complementary flash for a sequence")
+    flash.add_argument("sequence", help="sequence directory (format v1)")
+    flash.add_argument("--mode", required=True, choices=("complementary", "matching"))
+    flash.add_argument("--target", default="D65", help="complementary target: an illuminant name (D65, A, FL2…) or a CSV file")
+    flash.add_argument("--bounds", default="physical", choices=("physical", "nonnegative", "free"),
+                       help="physical: 0..1 (re-capture); nonnegative/free: computational synthesis")
+    add_estimation_options(flash)
+    flash.add_argument("--json", action="store_true", help="print one JSON object")
+    flash.set_defaults(handler=_flash)
+
+    synth = subparsers.add_parser("synthesize", help="synthesise the computational flash image from a sequence")
+    synth.add_argument("sequence", help="sequence directory (format v1)")
+    synth.add_argument("--weights", required=True, help="flash weights W1,W2,… (one per LED, full-drive units)")
+    synth.add_argument("--out", required=True, help="output image: .exr (linear float) or .tiff (16-bit raw at the ambient exposure)")
+    synth.add_argument("--json", action="store_true", help="print one JSON object")
+    synth.set_defaults(handler=_synthesize)
+
+
