@@ -1,0 +1,457 @@
+"""Image formation (eq. 1–3 of the paper) and a simple sensor model, for simulation.
+
+Public objects
+--------------
+- :class:`Scene`: surfaces (reflectances) laid out by a label image, with optional shading and
+  a specular area; :func:`chart_scene` and :func:`uniform_scene` build common ones.
+- :class:`SensorModel`: black and white level, bit depth, conversion gain, read noise, full well,
+  colour filter array.
+- :func:`total_illumination`: ``i = i_a + I w`` (eq. 2 with the flash as weighted LEDs).
+- :func:`expected_response`: the noise-free ``m = g Cᵀ diag(r) i`` for every pixel (eq. 1–3).
+- :func:`render_frame`: an integer raw frame with photon and read noise, black level, gain,
+  saturation, quantisation and an optional Bayer mosaic.
+- :func:`mosaic`, :data:`CFA_PATTERNS`, :func:`cfa_channel_map`: the Bayer layouts.
+- :func:`exposure_for_peak`: the exposure putting the brightest pixel at a fraction of full scale.
+
+Units
+-----
+Everything inside works in **photons**: illuminants and responsivities given in energy are
+converted with ``Spectra.to_unit("photons")`` (the paper's simulations do the same), so a
+response counts photo-electrons. The integral of eq. 1 is discretised as a sum times the grid
+step, so the response does not depend on the sampling interval. ``scale`` carries everything
+the spectra leave out (aperture, pixel area, quantum efficiency): it is the number of electrons
+one unit of ``Σ r c i Δλ`` produces per microsecond.
+
+The response is computed once per *surface* (n × 3 numbers) and then indexed by the label image;
+no per-pixel spectral products are ever formed.
+
+References
+----------
+Blasinski H., Farrell J. "Computational multispectral flash", ICCP 2017, eq. 1–3:
+``m_j = g ∫ r(λ) c_j(λ) i(λ) dλ``, ``i = i_a + i_f``,
+``m = g Cᵀ diag(r) i_a + g Cᵀ diag(r) i_f``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+from processing.errors import SpectralDataError
+from processing.spectra import Spectra, require_same_grid
+
+if TYPE_CHECKING:
+    from numpy.random import Generator
+
+CFA_PATTERNS: dict[str, tuple[tuple[int, int], tuple[int, int]]] = {
+    "RGGB": ((0, 1), (1, 2)),
+    "BGGR": ((2, 1), (1, 0)),
+    "GRBG": ((1, 0), (2, 1)),
+    "GBRG": ((1, 2), (0, 1)),
+}
+"""Channel index (0 = R, 1 = G, 2 = B) at ``(row % 2, column % 2)`` for each Bayer layout."""
+
+
+# -- scenes -----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Scene:
+    """A flat scene: each pixel shows one surface, optionally shaded, optionally specular.
+
+    Arrays are copied and made read-only on construction.
+    """
+
+    reflectances: Spectra
+    """Surface reflectances, shape (n_wavelengths, n_surfaces)."""
+    labels: np.ndarray
+    """Surface index of every pixel, integer array (H, W), values in ``[0, n_surfaces)``."""
+    shading: np.ndarray | None = None
+    """Per-pixel factor on the diffuse reflection (geometry, vignetting), (H, W), ≥ 0; None = 1."""
+    specular: np.ndarray | None = None
+    """Pixels that also show a neutral highlight (dichromatic model), bool (H, W); None = none."""
+    specular_gain: float = 4.0
+    """Strength of the highlight relative to a perfect white diffuser; > 1 saturates at metered exposures."""
+
+    def __post_init__(self) -> None:
+        where = f"scene ({self.reflectances.source or 'reflectances'})"
+        if self.reflectances.kind != "reflectance":
+            raise SpectralDataError(f"{where}: reflectances have kind '{self.reflectances.kind}'; expected reflectance")
+        labels = np.array(self.labels, copy=True)
+        if labels.ndim != 2 or labels.size == 0 or not np.issubdtype(labels.dtype, np.integer):
+            raise SpectralDataError(f"{where}: labels have shape {labels.shape} and type {labels.dtype}; "
+                                    "expected a non-empty integer array (H, W)")
+        if labels.min() < 0 or labels.max() >= self.reflectances.count:
+            raise SpectralDataError(f"{where}: labels span {labels.min()}…{labels.max()}; expected "
+                                    f"0…{self.reflectances.count - 1} (one per surface)")
+        labels.flags.writeable = False
+        object.__setattr__(self, "labels", labels)
+        if self.shading is not None:
+            shading = np.array(self.shading, dtype=float, copy=True)
+            if shading.shape != labels.shape or not np.all(np.isfinite(shading)) or np.any(shading < 0):
+                raise SpectralDataError(f"{where}: shading has shape {shading.shape}; expected finite values ≥ 0 "
+                                        f"of shape {labels.shape}")
+            shading.flags.writeable = False
+            object.__setattr__(self, "shading", shading)
+        if self.specular is not None:
+            specular = np.array(self.specular, dtype=bool, copy=True)
+            if specular.shape != labels.shape:
+                raise SpectralDataError(f"{where}: specular mask has shape {specular.shape}; expected {labels.shape}")
+            specular.flags.writeable = False
+            object.__setattr__(self, "specular", specular)
+        if not (math.isfinite(self.specular_gain) and self.specular_gain >= 0):
+            raise SpectralDataError(f"{where}: specular_gain is {self.specular_gain}; expected a finite value ≥ 0")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Image size (H, W)."""
+        return (int(self.labels.shape[0]), int(self.labels.shape[1]))
+
+    def surface_mask(self, surface: int | str) -> np.ndarray:
+        """Pixels showing one surface (by index or name) without a highlight, bool (H, W)."""
+        index = self.reflectances.names.index(surface) if isinstance(surface, str) else int(surface)
+        mask = self.labels == index
+        return mask & ~self.specular if self.specular is not None else mask
+
+
+def uniform_scene(reflectance: Spectra, height: int, width: int) -> Scene:
+    """A scene showing the first surface of ``reflectance`` everywhere (for tests and noise studies)."""
+    return Scene(reflectance.select([0]), np.zeros((height, width), dtype=np.int32))
+
+
+def chart_scene(
+    reflectances: Spectra | Literal["chart110", "macbeth"] = "chart110",
+    patch_px: int = 8,
+    columns: int | None = None,
+    border_px: int = 2,
+    border_reflectance: float = 0.03,
+    specular_strip_px: int = 0,
+) -> Scene:
+    """A reflectance chart: square patches on a dark border, filled column by column (ISET order).
+
+    Parameters
+    ----------
+    reflectances
+        The patches, or ``"chart110"`` (the paper's Natural-100 + gray strip, default: 10 rows ×
+        11 columns, the gray strip last) or ``"macbeth"`` (ISETCam's, 4 rows × 6 columns).
+    patch_px
+        Side of a patch in pixels.
+    columns
+        Patches per row; by default 6 for 24 patches, otherwise ``ceil(sqrt(n))``.
+    border_px
+        Gap between and around patches, filled with a flat dark surface.
+    border_reflectance
+        Reflectance of that surface (real charts are printed on near-black board).
+    specular_strip_px
+        If > 0, a strip of this height below the chart with a neutral highlight
+        (:attr:`Scene.specular`), which saturates at exposures metered on the chart.
+
+    Returns
+    -------
+    Scene
+        Surfaces are the patches followed by one named ``"border"``; patch ``k`` has label ``k``.
+    """
+    if isinstance(reflectances, str):
+        # Resolved here so callers can name a chart; the data loaders are the only file readers.
+        from processing import datasets
+
+        loaders = {"chart110": datasets.chart110, "macbeth": datasets.macbeth}
+        if reflectances not in loaders:
+            raise SpectralDataError(f"chart_scene: unknown chart '{reflectances}'; expected chart110 or macbeth")
+        reflectances = loaders[reflectances]()
+    n = reflectances.count
+    if patch_px < 1 or border_px < 0 or specular_strip_px < 0:
+        raise SpectralDataError(f"chart_scene: patch_px {patch_px}, border_px {border_px}, specular_strip_px "
+                                f"{specular_strip_px}; expected patch_px ≥ 1 and the others ≥ 0")
+    if columns is None:
+        columns = 6 if n == 24 else math.ceil(math.sqrt(n))
+    rows = math.ceil(n / columns)
+    border = n
+    height = rows * patch_px + (rows + 1) * border_px
+    width = columns * patch_px + (columns + 1) * border_px
+    labels = np.full((height + specular_strip_px, width), border, dtype=np.int32)
+    for k in range(n):
+        row, column = k % rows, k // rows  # column-major, as ISET lays out its charts
+        top = border_px + row * (patch_px + border_px)
+        left = border_px + column * (patch_px + border_px)
+        labels[top:top + patch_px, left:left + patch_px] = k
+    surfaces = reflectances.replace(
+        values=np.hstack([reflectances.values, np.full((reflectances.grid.size, 1), float(border_reflectance))]),
+        names=reflectances.names + ("border",),
+    )
+    specular = None
+    if specular_strip_px:
+        specular = np.zeros(labels.shape, dtype=bool)
+        specular[height:, :] = True
+    return Scene(surfaces, labels, specular=specular)
+
+
+# -- the sensor -------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SensorModel:
+    """A linear sensor: electrons → (gain, conversion gain) → digital numbers above a black level."""
+
+    black_level: float = 256.0
+    """Digital value of no light."""
+    white_level: float = 65535.0
+    """Digital value at and above which a pixel is saturated; clipped pixels read exactly this."""
+    bit_depth: int = 16
+    """Bits per sample; ``white_level`` must fit."""
+    electrons_per_dn: float = 0.5
+    """Conversion gain at gain 1: electrons per digital number."""
+    read_noise_e: float = 2.0
+    """Standard deviation of the read noise, in electrons (referred to the input)."""
+    full_well_e: float = 40000.0
+    """Electrons a pixel holds; a fuller pixel is clipped and reads ``white_level``."""
+    cfa: str | None = None
+    """Bayer layout of a raw mosaic (RGGB, BGGR, GRBG, GBRG) or None for full RGB frames."""
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.bit_depth <= 32:
+            raise SpectralDataError(f"sensor model: bit_depth {self.bit_depth}; expected 1–32")
+        if not 0 <= self.black_level < self.white_level <= 2 ** self.bit_depth - 1:
+            raise SpectralDataError(
+                f"sensor model: black_level {self.black_level}, white_level {self.white_level}; expected "
+                f"0 ≤ black < white ≤ {2 ** self.bit_depth - 1} ({self.bit_depth} bits)"
+            )
+        for name in ("electrons_per_dn", "full_well_e"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise SpectralDataError(f"sensor model: {name} is {value}; expected a finite value > 0")
+        if not (math.isfinite(self.read_noise_e) and self.read_noise_e >= 0):
+            raise SpectralDataError(f"sensor model: read_noise_e is {self.read_noise_e}; expected ≥ 0")
+        if self.cfa is not None and self.cfa not in CFA_PATTERNS:
+            raise SpectralDataError(f"sensor model: cfa '{self.cfa}'; expected None or one of {', '.join(CFA_PATTERNS)}")
+
+    @property
+    def dtype(self) -> np.dtype:
+        """The smallest unsigned integer type holding ``bit_depth`` bits."""
+        return np.dtype(np.uint8 if self.bit_depth <= 8 else np.uint16 if self.bit_depth <= 16 else np.uint32)
+
+    def saturation_electrons(self, gain: float) -> float:
+        """Electrons at which a pixel saturates at ``gain``: the full well or the top code, whichever first."""
+        return min(self.full_well_e, (self.white_level - self.black_level) * self.electrons_per_dn / gain)
+
+
+# -- Bayer mosaics ----------------------------------------------------------------------------
+def cfa_channel_map(cfa: str, shape: tuple[int, int]) -> np.ndarray:
+    """Channel index (0 R, 1 G, 2 B) of every pixel of a ``cfa`` mosaic, int array ``shape``.
+
+    Examples
+    --------
+    >>> cfa_channel_map("BGGR", (2, 2)).tolist()
+    [[2, 1], [1, 0]]
+    """
+    if cfa not in CFA_PATTERNS:
+        raise SpectralDataError(f"cfa '{cfa}': unknown layout; expected one of {', '.join(CFA_PATTERNS)}")
+    tile = np.asarray(CFA_PATTERNS[cfa], dtype=np.int8)
+    height, width = shape
+    return np.tile(tile, ((height + 1) // 2, (width + 1) // 2))[:height, :width]
+
+
+def mosaic(rgb: np.ndarray, cfa: str) -> np.ndarray:
+    """Sample an (H, W, 3) image through a Bayer filter: (H, W), one channel per pixel.
+
+    Examples
+    --------
+    >>> rgb = np.zeros((2, 2, 3)); rgb[..., 0], rgb[..., 1], rgb[..., 2] = 1, 2, 3
+    >>> mosaic(rgb, "RGGB").tolist()
+    [[1.0, 2.0], [2.0, 3.0]]
+    """
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise SpectralDataError(f"mosaic: image has shape {rgb.shape}; expected (H, W, 3)")
+    channels = cfa_channel_map(cfa, rgb.shape[:2])
+    return np.take_along_axis(rgb, channels[..., None].astype(np.intp), axis=2)[..., 0]
+
+
+# -- image formation (eq. 1–3) ----------------------------------------------------------------
+def total_illumination(ambient: Spectra, led_spectra: Spectra, led_levels: Sequence[float]) -> Spectra:
+    """``i = i_a + I w``: the ambient plus the LEDs at their drive levels (eq. 2).
+
+    Parameters
+    ----------
+    ambient
+        ``i_a``, one spectrum.
+    led_spectra
+        ``I``, (n_wavelengths, k): each LED at full drive, true ratios between LEDs.
+    led_levels
+        ``w``, k drive levels (0 = off, 1 = full).
+
+    Returns
+    -------
+    Spectra
+        One spectrum, in the ambient's unit, on the common grid.
+    """
+    grid = require_same_grid(ambient, led_spectra)
+    levels = np.asarray(led_levels, dtype=float)
+    if levels.shape != (led_spectra.count,) or not np.all(np.isfinite(levels)):
+        raise SpectralDataError(
+            f"total illumination: {levels.size} LED levels for {led_spectra.count} LEDs ({led_spectra.source}); "
+            "expected one finite level per LED"
+        )
+    if ambient.count != 1 or ambient.kind != "spd" or led_spectra.kind != "spd":
+        raise SpectralDataError("total illumination: expected one ambient spectrum and LED spectra of kind 'spd'")
+    flash = led_spectra.to_unit(ambient.unit).values @ levels
+    return Spectra(grid, ambient.values[:, 0] + flash, ("illumination",), kind="spd", unit=ambient.unit,
+                   source=f"{ambient.source or 'ambient'} + LEDs at {tuple(round(float(v), 4) for v in levels)}")
+
+
+def surface_responses(reflectances: Spectra, illuminant: Spectra, camera_responsivities: Spectra) -> np.ndarray:
+    """``Cᵀ diag(r) i Δλ`` for every surface: the per-surface core of eq. 1–3, in photons.
+
+    Returns
+    -------
+    np.ndarray
+        (n_surfaces, n_channels) expected electrons per microsecond at unit ``scale``.
+    """
+    grid = require_same_grid(reflectances, illuminant, camera_responsivities)
+    if illuminant.kind != "spd" or illuminant.count != 1:
+        raise SpectralDataError(f"{illuminant.source or 'illuminant'}: expected one spectrum of kind 'spd'")
+    if camera_responsivities.kind != "responsivity":
+        raise SpectralDataError(
+            f"{camera_responsivities.source or 'camera responsivities'}: kind '{camera_responsivities.kind}'; "
+            "expected responsivity"
+        )
+    photons = illuminant.to_unit("photons").values[:, 0]
+    responsivities = camera_responsivities.to_unit("photons").values
+    return (reflectances.values * photons[:, None]).T @ responsivities * grid.step_nm
+
+
+def expected_response(
+    scene: Scene,
+    illuminant: Spectra,
+    camera_responsivities: Spectra,
+    exposure_us: float,
+    gain: float = 1.0,
+    scale: float = 1.0,
+) -> np.ndarray:
+    """The noise-free response ``m = g Cᵀ diag(r) i`` of every pixel (eq. 1–3), in electrons × gain.
+
+    Parameters
+    ----------
+    scene
+        Surfaces and their layout.
+    illuminant
+        ``i`` (e.g. from :func:`total_illumination`), one spectrum; energy is converted to photons.
+    camera_responsivities
+        ``C``, (n_wavelengths, n_channels); energy is converted to photons.
+    exposure_us, gain, scale
+        Together the paper's ``g``: ``g = scale · exposure_us · gain``.
+
+    Returns
+    -------
+    np.ndarray
+        (H, W, n_channels) float: expected photo-electrons times ``gain`` (divide by the sensor's
+        ``electrons_per_dn`` for digital numbers above black). Linear in the illuminant and in
+        ``g``; not clipped.
+    """
+    for name, value in (("exposure_us", exposure_us), ("gain", gain), ("scale", scale)):
+        if not (math.isfinite(value) and value >= 0):
+            raise SpectralDataError(f"expected response: {name} is {value}; expected a finite value ≥ 0")
+    per_surface = surface_responses(scene.reflectances, illuminant, camera_responsivities)
+    g = scale * exposure_us * gain
+    image = per_surface[scene.labels] * g
+    if scene.shading is not None:
+        image *= scene.shading[..., None]
+    if scene.specular is not None and scene.specular_gain > 0:
+        # Dichromatic model: the interface reflection is neutral, i.e. the illuminant as a white
+        # diffuser would show it, added on top of the body reflection.
+        white = Spectra(illuminant.grid, np.ones(illuminant.grid.size), ("white",), kind="reflectance", unit="none")
+        highlight = surface_responses(white, illuminant, camera_responsivities)[0] * g * scene.specular_gain
+        image[scene.specular] += highlight
+    return image
+
+
+def render_frame(
+    scene: Scene,
+    illuminant: Spectra,
+    camera_responsivities: Spectra,
+    sensor: SensorModel,
+    exposure_us: float,
+    gain: float = 1.0,
+    scale: float = 1.0,
+    rng: Generator | None = None,
+    noise: bool = True,
+) -> np.ndarray:
+    """A raw frame: eq. 1–3 through a sensor with photon and read noise.
+
+    Steps: expected electrons (:func:`expected_response` at gain 1) → Bayer sampling if
+    ``sensor.cfa`` → Poisson photon noise → full-well clip → Gaussian read noise → ×
+    ``gain / electrons_per_dn`` → + black level → rounding → clip to ``[0, white_level]``. Pixels
+    that hit the full well or the top code read exactly ``white_level``, so "≥ white_level" finds
+    every saturated pixel.
+
+    Parameters
+    ----------
+    scene, illuminant, camera_responsivities, exposure_us, scale
+        As for :func:`expected_response`.
+    sensor
+        The sensor model.
+    gain
+        Linear analogue gain, applied after the photo-electrons are collected.
+    rng
+        Random generator (seed it for reproducible frames); a fresh unseeded one if None.
+    noise
+        False gives the noise-free frame (still quantised and clipped), as in the paper's simulations.
+
+    Returns
+    -------
+    np.ndarray
+        Unsigned integers of ``sensor.dtype``, (H, W, 3) or (H, W) for a mosaic.
+    """
+    if not (math.isfinite(gain) and gain > 0):
+        raise SpectralDataError(f"render frame: gain is {gain}; expected a finite value > 0")
+    electrons = expected_response(scene, illuminant, camera_responsivities, exposure_us, 1.0, scale)
+    if sensor.cfa is not None:
+        if electrons.shape[2] != 3:
+            raise SpectralDataError(f"render frame: a {sensor.cfa} mosaic needs 3 channels; the camera has {electrons.shape[2]}")
+        electrons = mosaic(electrons, sensor.cfa)
+    if noise:
+        rng = rng if rng is not None else np.random.default_rng()
+        electrons = rng.poisson(electrons).astype(float)
+    full_well = electrons >= sensor.full_well_e
+    if noise and sensor.read_noise_e > 0:
+        electrons = electrons + rng.normal(0.0, sensor.read_noise_e, electrons.shape)  # type: ignore[union-attr]
+    values = np.rint(sensor.black_level + electrons * (gain / sensor.electrons_per_dn))
+    values = np.clip(values, 0, sensor.white_level)
+    values[full_well] = sensor.white_level
+    return values.astype(sensor.dtype)
+
+
+def exposure_for_peak(
+    scene: Scene,
+    illuminant: Spectra,
+    camera_responsivities: Spectra,
+    sensor: SensorModel,
+    fraction: float = 0.95,
+    gain: float = 1.0,
+    scale: float = 1.0,
+    include_specular: bool = False,
+) -> float:
+    """The exposure (µs) putting the brightest expected pixel value at ``fraction`` of full scale.
+
+    Full scale is the saturation point (:meth:`SensorModel.saturation_electrons`); the paper's
+    simulations use 95%. Highlights are left out unless ``include_specular``, as a photographer
+    meters the subject.
+
+    Raises
+    ------
+    SpectralDataError
+        If ``fraction`` is not in (0, 1] or the scene gives no signal.
+    """
+    if not 0 < fraction <= 1:
+        raise SpectralDataError(f"exposure for peak: fraction {fraction}; expected 0 < fraction ≤ 1")
+    metered = scene
+    if scene.specular is not None and not include_specular:
+        metered = Scene(scene.reflectances, scene.labels, scene.shading, None)
+    response = expected_response(metered, illuminant, camera_responsivities, 1.0, 1.0, scale)
+    if scene.specular is not None and not include_specular:
+        response = response[~scene.specular]
+    peak = float(np.max(response)) if response.size else 0.0
+    if peak <= 0:
+        raise SpectralDataError("exposure for peak: the scene gives no signal under this illuminant; "
+                                "expected some light reaching the camera")
+    return fraction * sensor.saturation_electrons(gain) / peak
