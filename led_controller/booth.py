@@ -1,0 +1,621 @@
+"""``LedBooth``: the driver of an msflash LED booth over any pyserial URL.
+
+The far end of the wire may be the real firmware, the emulator on a pseudo-terminal, or a
+recorded transcript; the driver code is the same in every case. A reader thread frames the
+incoming lines and puts replies and events into two separate queues; every byte is logged in
+:meth:`LedBooth._wire` and nowhere else.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import errno
+import itertools
+import logging
+import math
+import queue
+import signal
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from types import TracebackType
+from typing import IO, Any, Literal
+
+import serial
+
+from led_controller import protocol
+from led_controller.errors import (
+    BoothError,
+    BoothNotFoundError,
+    BoothProtocolError,
+    BoothTimeoutError,
+)
+from led_controller.protocol import BoothEvent, BoothInfo, BoothStatus, Command, Mode
+
+log = logging.getLogger(__name__)
+
+SyncMode = Literal["host", "booth", "camera"]
+
+_READ_POLL_S = 0.02
+"""Read timeout of the port: how quickly the reader thread notices ``close``."""
+
+
+class _LinkLost:
+    """Queue item: the serial link failed (carries the cause)."""
+
+    def __init__(self, error: BaseException) -> None:
+        self.error = error
+
+
+class _Garbled:
+    """Queue item: a line that is not a valid frame (carries the protocol error)."""
+
+    def __init__(self, error: BoothProtocolError) -> None:
+        self.error = error
+
+
+class LedBooth:
+    """Driver of an msflash LED booth (protocol v1, see ``docs/booth-protocol.md``).
+
+    Use :meth:`open` rather than the constructor; use the booth as a context manager so that
+    every exit path switches the LEDs off.
+
+    Parameters
+    ----------
+    port : serial.SerialBase
+        An already-open port (a device, a pty, ``loop://``, ``spy://`` or a test transport).
+        Its read timeout should be short (tens of ms): it bounds how fast ``close`` returns.
+    timeout_s : float
+        Reply timeout of every command, in seconds.
+    log_serial : str or Path or None
+        If given, a transcript file of ``> request`` / ``< reply`` / ``! event`` lines.
+    name : str or None
+        Name used in messages and logs (defaults to the port name).
+    """
+
+    def __init__(
+        self,
+        port: Any,
+        *,
+        timeout_s: float = 1.0,
+        log_serial: str | Path | None = None,
+        name: str | None = None,
+    ) -> None:
+        if not timeout_s > 0:
+            raise ValueError(f"LedBooth: timeout_s {timeout_s!r} invalid; expected a positive number")
+        self._port = port
+        self._name = name or str(getattr(port, "name", None) or getattr(port, "portstr", "booth"))
+        self.timeout_s = float(timeout_s)
+        self._replies: queue.Queue[protocol.Frame | _Garbled | _LinkLost] = queue.Queue()
+        self._events: collections.deque[BoothEvent | _Garbled | _LinkLost] = collections.deque()
+        self._events_cv = threading.Condition()
+        self._command_lock = threading.Lock()
+        self._wire_lock = threading.Lock()
+        self._seqs = itertools.cycle(range(1, 256))
+        self._last_event_seq: int | None = None
+        self._link_error: BaseException | None = None
+        self._stop = threading.Event()
+        self._closed = False
+        self._info: BoothInfo | None = None
+        self._transcript: IO[str] | None = (
+            open(log_serial, "w", encoding="ascii", newline="\n") if log_serial else None  # noqa: SIM115
+        )
+        if self._transcript is not None:
+            self._transcript.write(f"# msflash booth transcript, port {self._name}, {time.strftime('%Y-%m-%d')}\n")
+        self._reader = threading.Thread(target=self._read_loop, name=f"booth-reader {self._name}", daemon=True)
+        self._reader.start()
+
+    # -- opening and closing -------------------------------------------------------------
+
+    @classmethod
+    def open(
+        cls,
+        url: str,
+        *,
+        timeout_s: float = 1.0,
+        log_serial: str | Path | None = None,
+        baudrate: int = 115200,
+    ) -> LedBooth:
+        """Open the booth at a pyserial URL and identify it.
+
+        Parameters
+        ----------
+        url : str
+            A device path (``/dev/ttyACM0``), a pty path, or a pyserial URL (``loop://``,
+            ``spy:///dev/ttyACM0?file=trace.txt``).
+        timeout_s : float
+            Reply timeout of every command, in seconds.
+        log_serial : str or Path or None
+            Transcript file to record the exchange in.
+        baudrate : int
+            Baud rate (ignored by USB CDC devices and ptys).
+
+        Returns
+        -------
+        LedBooth
+            An identified booth (:attr:`info` is set).
+
+        Raises
+        ------
+        BoothNotFoundError
+            If the port does not exist.
+        BoothError
+            If the port cannot be opened (permissions, busy) or does not answer as a booth.
+        """
+        try:
+            port = serial.serial_for_url(
+                url, baudrate=baudrate, timeout=_READ_POLL_S, write_timeout=timeout_s
+            )
+        except serial.SerialException as err:
+            raise _open_error(url, err) from err
+        except ValueError as err:
+            raise BoothError(f"booth {url}: cannot open ({err}); expected a device path or pyserial URL") from err
+        booth = cls(port, timeout_s=timeout_s, log_serial=log_serial, name=url)
+        try:
+            booth.identify()
+        except BaseException:
+            booth.close()
+            raise
+        return booth
+
+    def close(self) -> None:
+        """Stop the reader thread and close the port (idempotent; does not switch LEDs off)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        with contextlib.suppress(Exception):
+            self._port.cancel_read()
+        self._reader.join(timeout=2.0)
+        try:
+            self._port.close()
+        except (OSError, serial.SerialException) as err:
+            log.warning("%s: closing the port failed: %s", self._name, err)
+        if self._transcript is not None:
+            self._transcript.close()
+
+    def __enter__(self) -> LedBooth:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> Literal[False]:
+        try:
+            self.all_off()
+        except Exception as off_err:
+            if exc is None:
+                raise
+            # The original error is what the user needs to see; the failed all_off is
+            # attached to it (the booth's watchdog switches the LEDs off in the end).
+            log.error("%s: all_off failed while handling %r: %s", self._name, exc, off_err)
+            exc.add_note(f"while handling this, all_off on {self._name} also failed: {off_err}")
+        finally:
+            self.close()
+        return False
+
+    # -- public commands -----------------------------------------------------------------
+
+    @property
+    def info(self) -> BoothInfo:
+        """Get what :meth:`identify` last returned (:class:`BoothInfo`)."""
+        if self._info is None:
+            return self.identify()
+        return self._info
+
+    @property
+    def name(self) -> str:
+        """Get the port name used in messages (str)."""
+        return self._name
+
+    def identify(self) -> BoothInfo:
+        """Ask the booth for its firmware, channels, channel names and peak wavelengths."""
+        reply, raw = self._command(Command.IDENTIFY)
+        self._info = protocol.parse_identify(reply, raw, where=self._name)
+        log.info(
+            "%s: booth %s, %d channels %s", self._name, self._info.firmware,
+            self._info.channels, ",".join(self._info.names),
+        )
+        return self._info
+
+    def set_levels(self, levels: Sequence[float]) -> None:
+        """Set every LED level (one value per channel, each in [0, 1], 16-bit on the wire).
+
+        Raises
+        ------
+        ValueError
+            If the count differs from the channel count or a level is outside [0, 1].
+        """
+        words = protocol.encode_levels(levels, self.info.channels)
+        self._command(Command.SET, *words)
+
+    def all_off(self) -> None:
+        """Switch every LED off and abort any running sequence."""
+        self._command(Command.OFF)
+
+    def ping(self) -> None:
+        """Check the link (and feed the booth's watchdog)."""
+        self._command(Command.PING)
+
+    def set_watchdog(self, timeout_s: float) -> None:
+        """Set the booth's watchdog: LEDs go off after ``timeout_s`` of host silence (0 disables)."""
+        ms = int(round(float(timeout_s) * 1000))
+        if ms != 0 and not 50 <= ms <= 600_000:
+            raise ValueError(f"set_watchdog: {timeout_s!r} s out of range; expected 0 or 0.05..600 s")
+        self._command(Command.WATCHDOG, ms)
+
+    def load_pattern(self, steps: Sequence[Sequence[float]]) -> None:
+        """Replace the booth's pattern table (each step: one level per channel, in [0, 1]).
+
+        Every step is checked before anything is sent, so a bad step never leaves a half table.
+
+        Raises
+        ------
+        ValueError
+            If the table is empty, too long for the booth, or a step is malformed.
+        """
+        info = self.info
+        if not 1 <= len(steps) <= info.max_steps:
+            raise ValueError(
+                f"load_pattern: {len(steps)} steps; expected 1..{info.max_steps} (the booth's table size)"
+            )
+        encoded = []
+        for i, step in enumerate(steps):
+            try:
+                encoded.append(protocol.encode_levels(step, info.channels))
+            except ValueError as err:
+                raise ValueError(f"load_pattern: step {i}: {err}") from err
+        self._command(Command.PATTERN_CLEAR)
+        for i, words in enumerate(encoded):
+            reply, raw = self._command(Command.PATTERN_ADD, *words)
+            index = protocol.parse_count(reply, raw, command=Command.PATTERN_ADD, where=self._name)
+            if index != i:
+                raise BoothProtocolError(
+                    f"{self._name}: PADD stored step {i} at index {index}; expected index {i}",
+                    command=Command.PATTERN_ADD, expected=f"'OK PADD {i}'", raw=raw,
+                )
+
+    def arm(
+        self,
+        mode: SyncMode,
+        *,
+        settle_us: int = 1000,
+        pulse_us: int = 100,
+        period_us: int = 0,
+    ) -> None:
+        """Arm the loaded pattern table in a synchronisation mode (resets the trigger counter).
+
+        Parameters
+        ----------
+        mode : {"host", "booth", "camera"}
+            ``camera``: the camera's ExposureActive line advances the table; ``booth``: the
+            booth sets each step, waits ``settle_us``, pulses the camera trigger for
+            ``pulse_us`` and moves on every ``period_us``; ``host``: each :meth:`next_step`
+            applies a step and replies after ``settle_us``, then the host triggers the camera.
+        settle_us, pulse_us, period_us : int
+            LED settle time, trigger pulse width and (booth mode) step period, in µs.
+        """
+        modes = {"host": Mode.HOST, "booth": Mode.BOOTH, "camera": Mode.CAMERA}
+        if mode not in modes:
+            raise ValueError(f"arm: mode {mode!r} unknown; expected one of {', '.join(modes)}")
+        values = {"settle_us": settle_us, "pulse_us": pulse_us, "period_us": period_us}
+        for key, value in values.items():
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 10_000_000:
+                raise ValueError(f"arm: {key} {value!r} invalid; expected an integer in 0..10000000")
+        if mode == "booth" and period_us < settle_us + pulse_us:
+            raise ValueError(
+                f"arm: period_us {period_us} shorter than settle_us + pulse_us ({settle_us + pulse_us}); "
+                "expected a period long enough for settle, pulse and exposure"
+            )
+        self._command(Command.ARM, modes[mode], settle_us, pulse_us, period_us)
+
+    def start(self) -> None:
+        """Start the armed sequence."""
+        self._command(Command.START)
+
+    def next_step(self) -> int | None:
+        """Host-paced mode: apply the next pattern step; returns its index, None after the last.
+
+        The booth replies once the LEDs have settled, so the camera may be triggered at once.
+        """
+        reply, raw = self._command(Command.NEXT, timeout_s=self.timeout_s + 10.0)
+        if reply.args == ("DONE",):
+            return None
+        return protocol.parse_count(reply, raw, command=Command.NEXT, where=self._name)
+
+    def trigger_count(self) -> int:
+        """Get the number of triggers since the last :meth:`arm`."""
+        reply, raw = self._command(Command.COUNT)
+        return protocol.parse_count(reply, raw, command=Command.COUNT, where=self._name)
+
+    def status(self) -> BoothStatus:
+        """Get a snapshot of the booth's state (:class:`BoothStatus`)."""
+        reply, raw = self._command(Command.STATUS)
+        return protocol.parse_status(reply, raw, where=self._name)
+
+    def wait_event(self, kind: str | None = None, *, timeout_s: float | None = None) -> BoothEvent:
+        """Wait for the next event (of ``kind`` if given: ``TRIG``, ``DONE``, ``WDOG``).
+
+        Events of other kinds stay queued for later calls.
+
+        Raises
+        ------
+        BoothTimeoutError
+            If no such event arrives within ``timeout_s`` (default: the command timeout).
+        BoothError
+            If the booth's watchdog fired while waiting for another kind, or the link was lost.
+        BoothProtocolError
+            If an event line was damaged or events were lost (sequence gap).
+        """
+        timeout = self.timeout_s if timeout_s is None else float(timeout_s)
+        deadline = time.monotonic() + timeout
+        with self._events_cv:
+            while True:
+                for item in list(self._events):
+                    if isinstance(item, (_Garbled, _LinkLost)):
+                        self._events.remove(item)
+                        if isinstance(item, _Garbled):
+                            raise item.error
+                        raise self._link_lost_error("waiting for an event", item.error) from item.error
+                    if kind is None or item.kind == kind:
+                        self._events.remove(item)
+                        return item
+                    if item.kind == protocol.Event.WATCHDOG:
+                        self._events.remove(item)
+                        raise BoothError(
+                            f"{self._name}: the booth's watchdog switched the LEDs off while waiting "
+                            f"for {kind}; expected the host to send a command at least every watchdog period"
+                        )
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise BoothTimeoutError(
+                        f"{self._name}: no {kind or 'event'} event within {timeout:g} s; "
+                        "expected the booth to report it (is the sequence armed and started?)",
+                        command=f"event {kind or '*'}",
+                        timeout_s=timeout,
+                    )
+                self._events_cv.wait(remaining)
+
+    def pending_events(self) -> list[BoothEvent]:
+        """Remove and return the events received but not yet waited for."""
+        with self._events_cv:
+            out = [e for e in self._events if isinstance(e, BoothEvent)]
+            self._events.clear()
+            return out
+
+    # -- the exchange ---------------------------------------------------------------------
+
+    def _command(
+        self, command: str, *args: object, timeout_s: float | None = None
+    ) -> tuple[protocol.Reply, bytes]:
+        timeout = self.timeout_s if timeout_s is None else timeout_s
+        name = str(command)
+        with self._command_lock:
+            if self._closed:
+                raise BoothError(f"{self._name}: {name} on a closed booth; expected an open LedBooth")
+            if self._link_error is not None:
+                raise self._link_lost_error(name, self._link_error) from self._link_error
+            self._drop_stale_replies()
+            seq = next(self._seqs)
+            self._send(protocol.encode_request(seq, name, *args), name, timeout)
+            deadline = time.monotonic() + timeout
+            while True:
+                remaining = deadline - time.monotonic()
+                try:
+                    if remaining <= 0:
+                        raise queue.Empty
+                    item = self._replies.get(timeout=remaining)
+                except queue.Empty:
+                    raise BoothTimeoutError(
+                        f"{self._name}: no reply to {name} within {timeout:g} s; expected "
+                        f"'={seq:02X}:…'; check that the booth is powered and the port is right",
+                        command=name,
+                        timeout_s=timeout,
+                    ) from None
+                if isinstance(item, _LinkLost):
+                    raise self._link_lost_error(name, item.error) from item.error
+                if isinstance(item, _Garbled):
+                    err = item.error
+                    raise BoothProtocolError(
+                        f"{self._name}: bad reply to {name}: {err.raw[:80]!r}; expected "
+                        f"{protocol.FRAME_FORM} (line noise? check the cable and baud rate)",
+                        command=name, expected=err.expected, raw=err.raw,
+                    ) from err
+                if item.seq == protocol.SEQ_FRAME_ERROR:
+                    reply = protocol.parse_reply(item, name, where=self._name)
+                    raise BoothProtocolError(
+                        f"{self._name}: the booth could not read the {name} request "
+                        f"({reply.code} {reply.text}); expected a clean link (check the cable)",
+                        command=name, expected=f"'={seq:02X}:…'", raw=item.raw,
+                    )
+                if item.seq != seq:
+                    # A late reply to an earlier command that timed out: not ours.
+                    log.warning("%s: dropped stale reply %r while waiting for %s", self._name, item.raw, name)
+                    continue
+                reply = protocol.parse_reply(item, name, where=self._name)
+                if not reply.ok:
+                    if reply.code in protocol.FRAME_ERROR_CODES:
+                        raise BoothProtocolError(
+                            f"{self._name}: the booth could not read the {name} request "
+                            f"({reply.code} {reply.text}); expected a clean link (check the cable)",
+                            command=name, expected=f"'={seq:02X}:…'", raw=item.raw,
+                        )
+                    raise BoothError(
+                        f"{self._name}: booth refused {name} ({reply.code}: {reply.text}); "
+                        f"expected 'OK {name}'"
+                    )
+                return reply, item.raw
+
+    def _drop_stale_replies(self) -> None:
+        while True:
+            try:
+                item = self._replies.get_nowait()
+            except queue.Empty:
+                return
+            if isinstance(item, _LinkLost):
+                self._replies.put(item)
+                return
+            raw = item.raw if isinstance(item, protocol.Frame) else item.error.raw
+            log.warning("%s: dropped unclaimed reply %r", self._name, raw)
+
+    def _send(self, frame: bytes, command: str, timeout: float) -> None:
+        self._wire(">", frame)
+        try:
+            self._port.write(frame)
+            self._port.flush()
+        except serial.SerialTimeoutException as err:
+            raise BoothTimeoutError(
+                f"{self._name}: writing {command} blocked for {timeout:g} s; expected the booth to read its input",
+                command=command, timeout_s=timeout,
+            ) from err
+        except (serial.SerialException, OSError) as err:
+            self._link_error = err
+            raise self._link_lost_error(command, err) from err
+
+    def _link_lost_error(self, doing: str, cause: BaseException) -> BoothError:
+        return BoothError(
+            f"{self._name}: serial link lost during {doing} ({cause}); expected an open port; "
+            "check the USB cable and the booth's power, then reopen"
+        )
+
+    def _wire(self, direction: str, data: bytes) -> None:
+        """Log every byte on the wire (the one place where this happens) and record the transcript.
+
+        ``direction`` is ``>`` for host to booth and ``<`` for booth to host; complete lines
+        only, so the transcript reads back line by line.
+        """
+        log.debug("%s %s %r", self._name, direction, data)
+        if self._transcript is None:
+            return
+        line = data.rstrip(b"\n").decode("ascii", errors="backslashreplace")
+        mark = "!" if direction == "<" and line.startswith(protocol.MARK_EVENT) else direction
+        with self._wire_lock:
+            self._transcript.write(f"{mark} {line}\n")
+            self._transcript.flush()
+
+    def _read_loop(self) -> None:
+        buffer = bytearray()
+        while not self._stop.is_set():
+            try:
+                waiting = self._port.in_waiting
+                data = self._port.read(max(1, min(waiting, 4096)))
+            except Exception as err:  # any failure of the transport means the link is gone
+                if self._stop.is_set():
+                    return
+                log.error("%s: serial link lost: %s", self._name, err)
+                self._link_error = err
+                lost = _LinkLost(err)
+                self._replies.put(lost)
+                with self._events_cv:
+                    self._events.append(lost)
+                    self._events_cv.notify_all()
+                return
+            if not data:
+                continue
+            buffer += data
+            while True:
+                end = buffer.find(protocol.TERMINATOR)
+                if end < 0:
+                    break
+                line = bytes(buffer[:end])
+                del buffer[: end + 1]
+                self._wire("<", line + protocol.TERMINATOR)
+                self._dispatch(line)
+            if len(buffer) > protocol.MAX_LINE:
+                line = bytes(buffer)
+                buffer.clear()
+                self._wire("<", line)
+                self._dispatch(line)
+
+    def _dispatch(self, line: bytes) -> None:
+        try:
+            frame = protocol.parse_frame(line, where=self._name)
+        except BoothProtocolError as err:
+            if line.startswith(protocol.MARK_EVENT.encode()):
+                self._push_event(_Garbled(err))
+            else:
+                self._replies.put(_Garbled(err))
+            return
+        if frame.mark == protocol.MARK_REPLY:
+            self._replies.put(frame)
+        elif frame.mark == protocol.MARK_EVENT:
+            try:
+                event = protocol.parse_event(frame, where=self._name)
+            except BoothProtocolError as err:
+                self._push_event(_Garbled(err))
+                return
+            self._check_event_seq(event)
+            self._push_event(event)
+        else:
+            self._replies.put(_Garbled(BoothProtocolError(
+                f"{self._name}: received a request frame {line[:80]!r}; expected replies and events "
+                "only (is echo on, or is another host on this port?)",
+                command=None, expected="'=…' or '!…' frames", raw=line,
+            )))
+
+    def _check_event_seq(self, event: BoothEvent) -> None:
+        last = self._last_event_seq
+        self._last_event_seq = event.seq
+        if last is None:
+            return
+        expected = last % 255 + 1
+        if event.seq != expected:
+            self._push_event(_Garbled(BoothProtocolError(
+                f"{self._name}: event sequence jumped from {last} to {event.seq}; expected {expected} "
+                "(events were lost on the link)",
+                command=None, expected=f"event seq {expected}", raw=event.raw,
+            )))
+
+    def _push_event(self, item: BoothEvent | _Garbled) -> None:
+        with self._events_cv:
+            self._events.append(item)
+            self._events_cv.notify_all()
+
+
+def _open_error(url: str, err: serial.SerialException) -> BoothError:
+    code = getattr(err, "errno", None)
+    text = str(err)
+    if code == errno.ENOENT or "No such file" in text or "could not open port" in text and "[Errno 2]" in text:
+        return BoothNotFoundError(
+            f"booth {url}: no such port; expected an existing serial device "
+            "(run 'msflash doctor' or 'msflash devices' to list booths)"
+        )
+    if code == errno.EACCES or "Permission denied" in text or "[Errno 13]" in text:
+        return BoothError(
+            f"booth {url}: permission denied; expected read/write access — add your user to "
+            "the 'dialout' group (sudo usermod -aG dialout $USER, then log in again)"
+        )
+    if code == errno.EBUSY or "[Errno 16]" in text or "exclusively lock" in text:
+        return BoothError(f"booth {url}: port busy; expected it free — close other programs using it")
+    return BoothError(f"booth {url}: cannot open ({text}); expected a serial device or pyserial URL")
+
+
+@contextlib.contextmanager
+def sigterm_as_exit() -> Iterator[None]:
+    """Turn SIGTERM into ``SystemExit`` while active, so ``with LedBooth…`` blocks clean up.
+
+    Only effective in the main thread (elsewhere it does nothing): Python's default SIGTERM
+    action kills the process without running ``__exit__``, which would leave LEDs on until
+    the booth's watchdog fires.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def _raise(signum: int, _frame: object) -> None:
+        raise SystemExit(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, _raise)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def levels_close(a: Sequence[float], b: Sequence[float]) -> bool:
+    """Whether two level vectors agree to within one 16-bit wire step."""
+    return len(a) == len(b) and all(math.isclose(x, y, abs_tol=1.0 / protocol.LEVEL_MAX) for x, y in zip(a, b))

@@ -1,0 +1,702 @@
+"""``BoothEmulator``: the booth firmware in Python, written from ``docs/booth-protocol.md``.
+
+It parses frames with its own code (its own CRC table too) and shares only the name
+constants with the driver, so a parser bug cannot look consistent on both sides. It models
+the trigger line (``on_trigger_out`` for booth-master pulses, :meth:`exposure_active` for the
+camera's ExposureActive line), a watchdog and timed sequences on an injectable clock, and
+offers fault injection for tests. :func:`serve_on_pty` serves it on a real pseudo-terminal.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import select
+import threading
+import time
+import tty
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from types import TracebackType
+
+from led_controller.protocol import (
+    MARK_EVENT,
+    MARK_REPLY,
+    MARK_REQUEST,
+    MAX_BODY,
+    MAX_LINE,
+    PROTOCOL_VERSION,
+    Command,
+    ErrorCode,
+    Event,
+    Mode,
+)
+
+log = logging.getLogger(__name__)
+
+DEFAULT_NAMES = ("led440", "led480", "led500", "led520", "led596", "led636", "led660")
+DEFAULT_PEAKS_NM = (440.0, 480.0, 500.0, 520.0, 596.0, 636.0, 660.0)
+FULL_SCALE = 0xFFFF
+
+Clock = Callable[[], float]
+
+
+def _crc_table() -> list[int]:
+    table = []
+    for byte in range(256):
+        crc = byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
+        table.append(crc & 0xFFFF)
+    return table
+
+
+_CRC_TABLE = _crc_table()
+
+
+def firmware_crc(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE, table-driven as the firmware computes it (independent of the driver's)."""
+    crc = 0xFFFF
+    for byte in data:
+        crc = ((crc << 8) & 0xFFFF) ^ _CRC_TABLE[((crc >> 8) ^ byte) & 0xFF]
+    return crc
+
+
+class ManualClock:
+    """A clock that only moves when told to (inject into :class:`BoothEmulator` in tests)."""
+
+    def __init__(self, start_s: float = 0.0) -> None:
+        self._now = float(start_s)
+        self._lock = threading.Lock()
+
+    def __call__(self) -> float:
+        with self._lock:
+            return self._now
+
+    def advance(self, seconds: float) -> None:
+        """Move the clock forward by ``seconds``."""
+        if seconds < 0:
+            raise ValueError(f"ManualClock.advance: {seconds} s; expected a non-negative duration")
+        with self._lock:
+            self._now += seconds
+
+
+class _Refused(Exception):
+    def __init__(self, code: ErrorCode, text: str) -> None:
+        super().__init__(text)
+        self.code = code
+        self.text = text
+
+
+@dataclass(frozen=True)
+class EmulatorFault:
+    """A pending fault: ``kind`` is drop, flip, garble_input or stall."""
+
+    kind: str
+    count: int = 1
+
+
+FAULT_KINDS = ("drop", "flip", "garble_input", "stall", "close")
+
+
+class BoothEmulator:
+    """The msflash booth firmware, emulated.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Channel names (their number is the channel count).
+    peaks_nm : sequence of float
+        Peak wavelength of each channel in nm.
+    clock : callable returning float
+        Monotonic seconds; inject a :class:`ManualClock` in tests.
+    watchdog_s : float
+        Host-silence timeout after which LEDs go off (0 disables); the host can change it.
+    firmware : str
+        Firmware name reported by ``ID`` (no spaces).
+    max_steps : int
+        Pattern table capacity.
+    level_bits : int
+        Reported drive resolution (12..16); levels are quantised to it.
+
+    Attributes
+    ----------
+    on_trigger_out : callable or None
+        Called with the trigger count each time the booth pulses the camera's trigger line
+        (booth-master mode). Runs on the emulator's thread with the booth's state consistent,
+        so :attr:`levels` already holds the step being exposed; keep it short.
+    """
+
+    def __init__(
+        self,
+        *,
+        names: Sequence[str] = DEFAULT_NAMES,
+        peaks_nm: Sequence[float] = DEFAULT_PEAKS_NM,
+        clock: Clock = time.monotonic,
+        watchdog_s: float = 3.0,
+        firmware: str = "msflash-emulator-0.1",
+        max_steps: int = 256,
+        level_bits: int = 16,
+    ) -> None:
+        if len(names) != len(peaks_nm) or not 1 <= len(names) <= 64:
+            raise ValueError(
+                f"BoothEmulator: {len(names)} names and {len(peaks_nm)} peaks; expected 1..64 of each, as many names as peaks"
+            )
+        if any(not n or " " in n or "," in n or "*" in n for n in names):
+            raise ValueError(f"BoothEmulator: names {list(names)!r}; expected words without spaces, commas or '*'")
+        if not 12 <= level_bits <= 16:
+            raise ValueError(f"BoothEmulator: level_bits {level_bits}; expected 12..16")
+        self.names = tuple(names)
+        self.peaks_nm = tuple(float(p) for p in peaks_nm)
+        self.channels = len(self.names)
+        self.firmware = firmware
+        self.max_steps = max_steps
+        self.level_bits = level_bits
+        self.on_trigger_out: Callable[[int], None] | None = None
+        self._clock = clock
+        self._lock = threading.RLock()
+        self._out_lock = threading.Lock()
+        self._output: Callable[[bytes], None] | None = None
+        self._inbuf = bytearray()
+        self._codes = [0] * self.channels
+        self._pattern: list[list[int]] = []
+        self._state = "IDLE"
+        self._mode: Mode | None = None
+        self._settle_us = self._pulse_us = self._period_us = 0
+        self._step = -1
+        self._triggers = 0
+        self._event_seq = 0
+        self._watchdog_ms = int(round(watchdog_s * 1000))
+        self._last_host = clock()
+        self._watchdog_tripped = False
+        self._last_error: str | None = None
+        self._bad_frames = 0
+        self._t0 = 0.0
+        self._next_action: tuple[float, str] | None = None
+        self._deferred: list[tuple[float, int, str]] = []
+        self._faults: list[EmulatorFault] = []
+        self._stalled = False
+        self.hangup_requested = threading.Event()
+
+    # -- the camera side and observers ------------------------------------------------------
+
+    @property
+    def levels(self) -> tuple[float, ...]:
+        """Get the LED levels now (tuple of float in [0, 1], one per channel); thread-safe."""
+        with self._lock:
+            return tuple(c / FULL_SCALE for c in self._codes)
+
+    @property
+    def state(self) -> str:
+        """Get the sequencer state: IDLE, ARMED, RUNNING or DONE."""
+        with self._lock:
+            return self._state
+
+    @property
+    def trigger_count(self) -> int:
+        """Get the triggers counted since the last ARM."""
+        with self._lock:
+            return self._triggers
+
+    @property
+    def pattern(self) -> tuple[tuple[float, ...], ...]:
+        """Get the loaded pattern table (levels in [0, 1])."""
+        with self._lock:
+            return tuple(tuple(c / FULL_SCALE for c in step) for step in self._pattern)
+
+    def exposure_active(self, edge: bool) -> None:
+        """Drive the camera's ExposureActive line (camera-master mode).
+
+        A rising edge (``True``) counts a trigger and reports ``TRIG``; a falling edge
+        (``False``, exposure ended) loads the next step, or switches off and reports ``DONE``
+        after the last. Edges outside a running camera-master sequence are ignored.
+        """
+        with self._lock:
+            if self._state != "RUNNING" or self._mode != Mode.CAMERA:
+                return
+            if edge:
+                self._triggers += 1
+                self._event(f"{Event.TRIGGER} {self._triggers} {self._step}")
+            else:
+                self._advance()
+
+    def camera_strobe(self) -> None:
+        """One whole exposure on the ExposureActive line: a rising then a falling edge."""
+        self.exposure_active(True)
+        self.exposure_active(False)
+
+    # -- faults -------------------------------------------------------------------------
+
+    def inject_fault(self, kind: str, count: int = 1) -> None:
+        """Arrange a fault on the link.
+
+        ``drop``: drop one byte from each of the next ``count`` outgoing frames; ``flip``:
+        flip one bit in each; ``garble_input``: flip one bit in the next ``count`` incoming
+        frames; ``stall``: neither read nor answer until :meth:`resume` (the firmware keeps
+        running, so its watchdog fires); ``close``: ask the transport to hang up.
+        """
+        if kind not in FAULT_KINDS:
+            raise ValueError(f"inject_fault: kind {kind!r} unknown; expected one of {', '.join(FAULT_KINDS)}")
+        with self._lock:
+            if kind == "stall":
+                self._stalled = True
+            elif kind == "close":
+                self.hangup_requested.set()
+            else:
+                self._faults.extend(EmulatorFault(kind) for _ in range(count))
+
+    def resume(self) -> None:
+        """End a stall; bytes that arrived meanwhile are lost (as on a stuck USB link)."""
+        with self._lock:
+            self._stalled = False
+
+    def host_lost(self) -> None:
+        """The link to the host is gone (unplug, hang-up): LEDs off, sequence aborted."""
+        with self._lock:
+            self._all_off()
+
+    # -- the transport side -----------------------------------------------------------------
+
+    def connect_output(self, write: Callable[[bytes], None] | None) -> None:
+        """Set where outgoing bytes (replies and events) go."""
+        with self._out_lock:
+            self._output = write
+
+    def receive(self, data: bytes) -> None:
+        """Feed bytes from the host; complete frames are answered through the output."""
+        with self._lock:
+            if self._stalled:
+                return
+            self._inbuf += data
+            while True:
+                end = self._inbuf.find(b"\n")
+                if end < 0:
+                    break
+                line = bytes(self._inbuf[:end])
+                del self._inbuf[: end + 1]
+                line = self._apply_input_fault(line)
+                self._handle_line(line)
+            if len(self._inbuf) > MAX_LINE:
+                # Too long to be a frame: throw it away and say so once.
+                self._inbuf.clear()
+                self._reject(ErrorCode.LENGTH, "line too long")
+            self.tick()
+
+    def tick(self) -> None:
+        """Run what is due on the clock: watchdog, booth-master steps, delayed replies."""
+        with self._lock:
+            now = self._clock()
+            for entry in [d for d in self._deferred if d[0] <= now]:
+                self._deferred.remove(entry)
+                self._reply(entry[1], entry[2])
+            while self._next_action is not None and self._next_action[0] <= now:
+                self._run_action()
+            if (
+                self._watchdog_ms > 0
+                and not self._watchdog_tripped
+                and now - self._last_host >= self._watchdog_ms / 1000.0
+            ):
+                self._watchdog_tripped = True
+                if any(self._codes) or self._state in ("ARMED", "RUNNING"):
+                    self._all_off()
+                    self._event(str(Event.WATCHDOG))
+
+    # -- parsing (the firmware's own) --------------------------------------------------
+
+    def _apply_input_fault(self, line: bytes) -> bytes:
+        for fault in self._faults:
+            if fault.kind == "garble_input" and line:
+                self._faults.remove(fault)
+                flipped = bytearray(line)
+                flipped[len(flipped) // 2] ^= 0x04
+                return bytes(flipped)
+        return line
+
+    def _reject(self, code: ErrorCode, text: str) -> None:
+        self._bad_frames += 1
+        self._last_error = code.value
+        self._reply(0, f"ERR - {code} {text}")
+
+    def _handle_line(self, line: bytes) -> None:
+        # Layout: '?' SS ':' LLL ':' body '*' CCCC — checked field by field, the way a
+        # microcontroller would walk the buffer.
+        if len(line) < 13:
+            self._reject(ErrorCode.FRAME, "frame too short")
+            return
+        star = len(line) - 5
+        if line[star] != ord("*"):
+            self._reject(ErrorCode.FRAME, "no checksum field")
+            return
+        head, crc_text = line[:star], line[star + 1:]
+        if not _is_hex(crc_text):
+            self._reject(ErrorCode.FRAME, "checksum not hex")
+            return
+        if firmware_crc(head) != int(crc_text, 16):
+            self._reject(ErrorCode.CRC, "checksum mismatch")
+            return
+        if head[0] != ord(MARK_REQUEST) or head[3] != ord(":") or head[7] != ord(":"):
+            self._reject(ErrorCode.FRAME, "bad header")
+            return
+        seq_text, len_text, body = head[1:3], head[4:7], head[8:]
+        if not _is_hex(seq_text) or not _is_hex(len_text):
+            self._reject(ErrorCode.FRAME, "header not hex")
+            return
+        if int(len_text, 16) != len(body) or len(body) > MAX_BODY:
+            self._reject(ErrorCode.LENGTH, "length mismatch")
+            return
+        if any(b < 0x20 or b > 0x7E or b == 0x2A for b in body):
+            self._reject(ErrorCode.FRAME, "body not printable")
+            return
+        seq = int(seq_text, 16)
+        if seq == 0:
+            self._reject(ErrorCode.FRAME, "sequence 00 is reserved")
+            return
+        # A valid frame from the host: feed the watchdog.
+        self._last_host = self._clock()
+        self._watchdog_tripped = False
+        words = body.decode("ascii").split(" ")
+        name, args = words[0], words[1:]
+        handler = self._handlers().get(name)
+        if handler is None:
+            self._refuse(seq, name, ErrorCode.COMMAND, "unknown command")
+            return
+        try:
+            result = handler(args)
+        except _Refused as refusal:
+            self._refuse(seq, name, refusal.code, refusal.text)
+            return
+        if isinstance(result, tuple):  # (delay_s, text): reply once the LEDs have settled
+            delay_s, text = result
+            self._deferred.append((self._clock() + delay_s, seq, f"OK {name} {text}".rstrip()))
+            return
+        self._reply(seq, f"OK {name} {result}".rstrip())
+
+    def _refuse(self, seq: int, name: str, code: ErrorCode, text: str) -> None:
+        self._last_error = code.value
+        self._reply(seq, f"ERR {name} {code} {text}")
+
+    def _handlers(self) -> dict[str, Callable[[list[str]], str | tuple[float, str]]]:
+        return {
+            Command.IDENTIFY: self._cmd_identify,
+            Command.SET: self._cmd_set,
+            Command.OFF: self._cmd_off,
+            Command.PATTERN_CLEAR: self._cmd_pattern_clear,
+            Command.PATTERN_ADD: self._cmd_pattern_add,
+            Command.ARM: self._cmd_arm,
+            Command.START: self._cmd_start,
+            Command.NEXT: self._cmd_next,
+            Command.COUNT: self._cmd_count,
+            Command.STATUS: self._cmd_status,
+            Command.WATCHDOG: self._cmd_watchdog,
+            Command.PING: self._cmd_ping,
+        }
+
+    # -- commands ----------------------------------------------------------------------
+
+    def _no_args(self, args: list[str]) -> None:
+        if args:
+            raise _Refused(ErrorCode.ARGUMENT, "takes no arguments")
+
+    def _levels_arg(self, args: list[str]) -> list[int]:
+        if len(args) != self.channels:
+            raise _Refused(ErrorCode.ARGUMENT, f"needs {self.channels} levels")
+        if not all(len(a) == 4 and _is_hex(a.encode()) for a in args):
+            raise _Refused(ErrorCode.ARGUMENT, "levels are 4 hex digits")
+        drop = 16 - self.level_bits
+        # The drive has level_bits of resolution: keep the top bits, as the PWM would.
+        return [(int(a, 16) >> drop) * FULL_SCALE // ((1 << self.level_bits) - 1) for a in args]
+
+    def _cmd_identify(self, args: list[str]) -> str:
+        self._no_args(args)
+        peaks = ",".join(f"{p:g}" for p in self.peaks_nm)
+        return (
+            f"FW={self.firmware} PROTO={PROTOCOL_VERSION} CH={self.channels} "
+            f"NAMES={','.join(self.names)} PEAKS={peaks} BITS={self.level_bits} STEPS={self.max_steps}"
+        )
+
+    def _cmd_set(self, args: list[str]) -> str:
+        codes = self._levels_arg(args)
+        if self._state == "RUNNING" and self._mode in (Mode.BOOTH, Mode.CAMERA):
+            raise _Refused(ErrorCode.STATE, "sequence running")
+        self._codes = codes
+        return ""
+
+    def _cmd_off(self, args: list[str]) -> str:
+        self._no_args(args)
+        self._all_off()
+        return ""
+
+    def _cmd_pattern_clear(self, args: list[str]) -> str:
+        self._no_args(args)
+        self._editable()
+        self._pattern = []
+        return ""
+
+    def _cmd_pattern_add(self, args: list[str]) -> str:
+        codes = self._levels_arg(args)
+        self._editable()
+        if len(self._pattern) >= self.max_steps:
+            raise _Refused(ErrorCode.FULL, "pattern table full")
+        self._pattern.append(codes)
+        return str(len(self._pattern) - 1)
+
+    def _editable(self) -> None:
+        if self._state in ("ARMED", "RUNNING"):
+            raise _Refused(ErrorCode.STATE, "table in use")
+
+    def _cmd_arm(self, args: list[str]) -> str:
+        if len(args) != 4 or args[0] not in (Mode.HOST, Mode.BOOTH, Mode.CAMERA):
+            raise _Refused(ErrorCode.ARGUMENT, "ARM HOST|BOOTH|CAMERA settle_us pulse_us period_us")
+        if not all(a.isdigit() and len(a) <= 8 for a in args[1:]):
+            raise _Refused(ErrorCode.ARGUMENT, "times are decimal microseconds")
+        settle, pulse, period = (int(a) for a in args[1:])
+        if self._state == "RUNNING":
+            raise _Refused(ErrorCode.STATE, "sequence running")
+        mode = Mode(args[0])
+        if mode != Mode.HOST and not self._pattern:
+            raise _Refused(ErrorCode.STATE, "pattern table empty")
+        if mode == Mode.BOOTH and (period == 0 or period < settle + pulse):
+            raise _Refused(ErrorCode.RANGE, "period shorter than settle plus pulse")
+        self._mode, self._settle_us, self._pulse_us, self._period_us = mode, settle, pulse, period
+        self._state, self._step, self._triggers = "ARMED", -1, 0
+        return ""
+
+    def _cmd_start(self, args: list[str]) -> str:
+        self._no_args(args)
+        if self._state != "ARMED":
+            raise _Refused(ErrorCode.STATE, "not armed")
+        self._state = "RUNNING"
+        if self._mode == Mode.CAMERA:
+            self._apply_step(0)
+        elif self._mode == Mode.BOOTH:
+            self._t0 = self._clock()
+            self._next_action = (self._t0, "apply")
+        return ""
+
+    def _cmd_next(self, args: list[str]) -> str | tuple[float, str]:
+        self._no_args(args)
+        if self._state != "RUNNING" or self._mode != Mode.HOST:
+            raise _Refused(ErrorCode.STATE, "not running in HOST mode")
+        if not self._pattern or self._step + 1 >= len(self._pattern):
+            self._finish()
+            return "DONE"
+        self._apply_step(self._step + 1)
+        self._triggers += 1
+        return (self._settle_us / 1e6, str(self._step))
+
+    def _cmd_count(self, args: list[str]) -> str:
+        self._no_args(args)
+        return str(self._triggers)
+
+    def _cmd_status(self, args: list[str]) -> str:
+        self._no_args(args)
+        return (
+            f"STATE={self._state} MODE={self._mode or '-'} STEP={self._step} STEPS={len(self._pattern)} "
+            f"TRIG={self._triggers} WDOG={self._watchdog_ms} ERR={self._last_error or '-'} "
+            f"BAD={self._bad_frames} LEVELS={','.join(f'{c:04X}' for c in self._codes)}"
+        )
+
+    def _cmd_watchdog(self, args: list[str]) -> str:
+        if len(args) != 1 or not args[0].isdigit() or len(args[0]) > 7:
+            raise _Refused(ErrorCode.ARGUMENT, "WDOG <milliseconds>")
+        ms = int(args[0])
+        if ms != 0 and not 50 <= ms <= 600_000:
+            raise _Refused(ErrorCode.RANGE, "0 or 50..600000 ms")
+        self._watchdog_ms = ms
+        return str(ms)
+
+    def _cmd_ping(self, args: list[str]) -> str:
+        self._no_args(args)
+        return ""
+
+    # -- sequencing -------------------------------------------------------------------
+
+    def _apply_step(self, index: int) -> None:
+        self._step = index
+        self._codes = list(self._pattern[index])
+
+    def _advance(self) -> None:
+        if self._step + 1 >= len(self._pattern):
+            self._finish()
+        else:
+            self._apply_step(self._step + 1)
+
+    def _finish(self) -> None:
+        self._codes = [0] * self.channels
+        self._state = "DONE"
+        self._next_action = None
+        self._event(f"{Event.DONE} {self._triggers}")
+
+    def _all_off(self) -> None:
+        self._codes = [0] * self.channels
+        self._next_action = None
+        if self._state in ("ARMED", "RUNNING"):
+            self._state = "IDLE"
+
+    def _run_action(self) -> None:
+        assert self._next_action is not None
+        when, kind = self._next_action
+        period = self._period_us / 1e6
+        if kind == "apply":
+            index = self._step + 1
+            if index >= len(self._pattern):
+                self._finish()
+                return
+            self._apply_step(index)
+            self._next_action = (self._t0 + index * period + self._settle_us / 1e6, "pulse")
+        else:
+            self._triggers += 1
+            self._event(f"{Event.TRIGGER} {self._triggers} {self._step}")
+            callback = self.on_trigger_out
+            if callback is not None:
+                callback(self._triggers)
+            self._next_action = (self._t0 + (self._step + 1) * period, "apply")
+
+    # -- output ----------------------------------------------------------------------
+
+    def _event(self, body: str) -> None:
+        self._event_seq = self._event_seq % 255 + 1
+        self._send(_frame(MARK_EVENT, self._event_seq, body))
+
+    def _reply(self, seq: int, body: str) -> None:
+        self._send(_frame(MARK_REPLY, seq, body))
+
+    def _send(self, frame: bytes) -> None:
+        if self._stalled:
+            return
+        for fault in self._faults:
+            if fault.kind in ("drop", "flip"):
+                self._faults.remove(fault)
+                data = bytearray(frame)
+                middle = len(data) // 2
+                if fault.kind == "drop":
+                    del data[middle]
+                else:
+                    data[middle] ^= 0x10
+                frame = bytes(data)
+                break
+        with self._out_lock:
+            output = self._output
+            if output is None:
+                return
+            output(frame)
+
+
+def _is_hex(text: bytes) -> bool:
+    return bool(text) and all(chr(b) in "0123456789ABCDEF" for b in text)
+
+
+def _frame(mark: str, seq: int, body: str) -> bytes:
+    payload = body.encode("ascii")
+    head = b"%s%02X:%03X:%s" % (mark.encode("ascii"), seq, len(payload), payload)
+    return head + b"*%04X\n" % firmware_crc(head)
+
+
+class PtyBoothServer:
+    """A :class:`BoothEmulator` served on a pseudo-terminal (a thread on the master end).
+
+    Open :attr:`port` (the slave path) with :meth:`LedBooth.open`. Use as a context manager
+    or call :meth:`close`.
+    """
+
+    def __init__(self, emulator: BoothEmulator, *, poll_s: float = 0.002) -> None:
+        self.emulator = emulator
+        self._poll_s = poll_s
+        self._master, self._slave = os.openpty()
+        # Raw mode before anyone opens the slave: no echo, no line editing, no CR/LF mapping.
+        tty.setraw(self._slave)
+        self.port = os.ttyname(self._slave)
+        self._wake_r, self._wake_w = os.pipe()
+        self._stop = threading.Event()
+        self._closed = False
+        self._close_lock = threading.Lock()
+        emulator.connect_output(self._write)
+        self._thread = threading.Thread(target=self._run, name=f"booth-emulator {self.port}", daemon=True)
+        self._thread.start()
+        log.info("booth emulator serving on %s", self.port)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([self._master, self._wake_r], [], [], self._poll_s)
+                if self._master in ready:
+                    data = os.read(self._master, 4096)
+                    if data:
+                        self.emulator.receive(data)
+            except OSError as err:
+                if not self._stop.is_set():
+                    log.error("booth emulator %s: pty failed: %s", self.port, err)
+                break
+            self.emulator.tick()
+            if self.emulator.hangup_requested.is_set():
+                self._shutdown(from_thread=True)
+                return
+
+    def _write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            try:
+                written = os.write(self._master, view)
+            except OSError:
+                return  # the pty is gone: the host sees a dead link, as with an unplugged booth
+            view = view[written:]
+
+    def hangup(self) -> None:
+        """Close the pty as an unplugged booth would (the host's next read fails)."""
+        self._shutdown(from_thread=False)
+
+    def close(self) -> None:
+        """Stop serving and close the pty; the emulator's LEDs go off."""
+        self._shutdown(from_thread=False)
+
+    def _shutdown(self, *, from_thread: bool) -> None:
+        with self._close_lock:
+            if self._closed:
+                return
+            self._closed = True
+        self._stop.set()
+        os.write(self._wake_w, b"x")
+        if not from_thread:
+            self._thread.join(timeout=2.0)
+        self.emulator.connect_output(None)
+        self.emulator.host_lost()
+        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+    @property
+    def closed(self) -> bool:
+        """Get whether the pty has been closed (bool)."""
+        return self._closed
+
+    def __enter__(self) -> PtyBoothServer:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+def serve_on_pty(emulator: BoothEmulator | None = None, **kwargs: object) -> PtyBoothServer:
+    """Serve a booth emulator on a new pseudo-terminal.
+
+    Parameters
+    ----------
+    emulator : BoothEmulator or None
+        The emulator to serve; a new one is built from ``kwargs`` if None.
+    **kwargs
+        Arguments of :class:`BoothEmulator` (only when ``emulator`` is None).
+
+    Returns
+    -------
+    PtyBoothServer
+        Has ``.port`` (the path to open), ``.emulator`` and ``.close()``.
+    """
+    if emulator is None:
+        emulator = BoothEmulator(**kwargs)  # type: ignore[arg-type]
+    elif kwargs:
+        raise ValueError("serve_on_pty: got an emulator and emulator arguments; expected one or the other")
+    return PtyBoothServer(emulator)

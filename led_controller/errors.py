@@ -1,0 +1,64 @@
+"""Errors of the booth package (driver, discovery).
+
+Each class also inherits the matching built-in exception, so callers that only know the
+standard library still catch them. Messages follow ``"<where>: <what is wrong>; expected
+<what>"`` and add a remedy when one is known.
+"""
+
+from __future__ import annotations
+
+
+class BoothError(OSError):
+    """The LED booth failed, refused a command or its link was lost."""
+
+    def __init__(self, message: str) -> None:
+        # OSError's own constructor treats two or more arguments as (errno, strerror);
+        # keeping one positional argument keeps ``str(err)`` equal to the message.
+        super().__init__(message)
+
+
+class BoothNotFoundError(BoothError, LookupError):
+    """No booth at the given port, or none among the serial ports; the message lists what was found."""
+
+
+class BoothTimeoutError(BoothError, TimeoutError):
+    """The booth did not answer in time.
+
+    Parameters
+    ----------
+    message : str
+        Full message (names the port, the command and the timeout).
+    command : str
+        Name of the command that got no reply.
+    timeout_s : float
+        How long the driver waited, in seconds.
+    """
+
+    def __init__(self, message: str, *, command: str, timeout_s: float) -> None:
+        super().__init__(message)
+        self.command = command
+        self.timeout_s = timeout_s
+
+
+class BoothProtocolError(BoothError):
+    """A frame broke the booth protocol (bad checksum or length, unexpected form).
+
+    Parameters
+    ----------
+    message : str
+        Full message (names the port, the command, the expected form and the raw bytes).
+    command : str or None
+        Name of the command whose reply was bad, or None for an unsolicited line.
+    expected : str
+        The expected form of the frame, in words.
+    raw : bytes
+        The raw line as received (without its terminator).
+    """
+
+    def __init__(
+        self, message: str, *, command: str | None, expected: str, raw: bytes
+    ) -> None:
+        super().__init__(message)
+        self.command = command
+        self.expected = expected
+        self.raw = raw

@@ -1,0 +1,190 @@
+"""The driver against the emulator over a real pseudo-terminal."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import pytest
+
+from led_controller import (
+    BoothEmulator,
+    BoothError,
+    BoothNotFoundError,
+    BoothTimeoutError,
+    LedBooth,
+    ManualClock,
+    PtyBoothServer,
+    serve_on_pty,
+)
+from led_controller.booth import levels_close
+
+Wait = Callable[..., None]
+
+
+def test_identify_reports_the_default_channels(booth: LedBooth) -> None:
+    info = booth.info
+    assert info.channels == 7
+    assert info.names == ("led440", "led480", "led500", "led520", "led596", "led636", "led660")
+    assert info.peaks_nm == (440.0, 480.0, 500.0, 520.0, 596.0, 636.0, 660.0)
+    assert info.protocol == 1 and info.level_bits == 16
+
+
+def test_configurable_channels() -> None:
+    emulator = BoothEmulator(names=("uv", "ir"), peaks_nm=(365, 850), level_bits=12, max_steps=4)
+    with serve_on_pty(emulator) as server, LedBooth.open(server.port) as booth:
+        assert booth.info.names == ("uv", "ir") and booth.info.peaks_nm == (365.0, 850.0)
+        assert booth.info.level_bits == 12 and booth.info.max_steps == 4
+        booth.set_levels([1.0, 0.5])
+        # 12-bit drive: 0.5 lands on the nearest lower 12-bit step.
+        assert emulator.levels[0] == 1.0 and abs(emulator.levels[1] - 0.5) < 1 / 4095
+        with pytest.raises(ValueError, match="expected 1..4"):
+            booth.load_pattern([[0, 0]] * 5)
+
+
+def test_set_levels_reach_the_emulator_with_16_bit_precision(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+    levels = [0.0, 1.0, 0.5, 1 / 65535, 0.123456, 0.999, 0.25]
+    booth.set_levels(levels)
+    assert levels_close(booth_on_pty.emulator.levels, levels)
+    assert levels_close(booth.status().levels, levels)
+    booth.all_off()
+    assert booth_on_pty.emulator.levels == (0.0,) * 7
+
+
+def test_bad_levels_are_refused_before_anything_is_sent(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+    booth.set_levels([0.5] * 7)
+    with pytest.raises(ValueError, match="LED level 2"):
+        booth.set_levels([0.1, 0.1, 1.5, 0.1, 0.1, 0.1, 0.1])
+    with pytest.raises(ValueError, match="step 1: LED levels: got 6 values"):
+        booth.load_pattern([[0] * 7, [0] * 6])
+    assert levels_close(booth_on_pty.emulator.levels, [0.5] * 7)
+    assert booth_on_pty.emulator.pattern == ()
+
+
+def test_context_manager_switches_off_on_exception(booth_on_pty: PtyBoothServer) -> None:
+    with pytest.raises(RuntimeError, match="boom"), LedBooth.open(booth_on_pty.port) as booth:
+        booth.set_levels([1.0] * 7)
+        assert booth_on_pty.emulator.levels == (1.0,) * 7
+        raise RuntimeError("boom")
+    assert booth_on_pty.emulator.levels == (0.0,) * 7
+
+
+def test_context_manager_switches_off_on_keyboard_interrupt(booth_on_pty: PtyBoothServer) -> None:
+    with pytest.raises(KeyboardInterrupt), LedBooth.open(booth_on_pty.port) as booth:
+        booth.set_levels([0.3] * 7)
+        raise KeyboardInterrupt
+    assert booth_on_pty.emulator.levels == (0.0,) * 7
+
+
+def test_booth_refusal_names_command_and_code(booth: LedBooth) -> None:
+    with pytest.raises(BoothError, match=r"booth refused START \(E_STATE: not armed\)"):
+        booth.start()
+    with pytest.raises(BoothError, match="pattern table empty"):
+        booth.arm("camera")
+    assert booth.status().last_error == "E_STATE"
+
+
+def test_camera_master_advances_on_exposure_active(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+    emulator = booth_on_pty.emulator
+    steps = [[i / 10] * 7 for i in range(1, 4)]
+    booth.load_pattern(steps)
+    booth.arm("camera", settle_us=200)
+    booth.start()
+    seen = []
+    for i in range(3):
+        seen.append(emulator.levels)  # what the simulated camera would render for frame i
+        emulator.camera_strobe()
+        event = booth.wait_event("TRIG")
+        assert event.args == (str(i + 1), str(i))
+    done = booth.wait_event("DONE")
+    assert done.args == ("3",)
+    assert all(levels_close(s, e) for s, e in zip(seen, steps))
+    assert emulator.levels == (0.0,) * 7
+    assert booth.trigger_count() == 3
+    assert booth.status().state == "DONE"
+
+
+def test_booth_master_pulses_the_trigger_after_settling(
+    booth: LedBooth, booth_on_pty: PtyBoothServer, clock: ManualClock, wait_until: Wait
+) -> None:
+    emulator = booth_on_pty.emulator
+    exposed: list[tuple[int, tuple[float, ...]]] = []
+    emulator.on_trigger_out = lambda count: exposed.append((count, emulator.levels))
+    steps = [[0.2] * 7, [0.4] * 7]
+    booth.load_pattern(steps)
+    booth.arm("booth", settle_us=1000, pulse_us=100, period_us=10_000)
+    booth.start()
+    wait_until(lambda: emulator.state == "RUNNING" and levels_close(emulator.levels, steps[0]))
+    assert exposed == []  # the LEDs are still settling
+    clock.advance(0.001)
+    wait_until(lambda: len(exposed) == 1)
+    assert exposed[0][0] == 1 and levels_close(exposed[0][1], steps[0])
+    assert booth.wait_event("TRIG").args == ("1", "0")
+    clock.advance(0.010)
+    wait_until(lambda: len(exposed) == 2)
+    assert levels_close(exposed[1][1], steps[1])
+    clock.advance(0.010)
+    assert booth.wait_event("DONE").args == ("2",)
+    assert emulator.levels == (0.0,) * 7
+
+
+def test_host_paced_steps_reply_after_settling(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+    steps = [[0.1] * 7, [0.9] * 7]
+    booth.load_pattern(steps)
+    booth.arm("host", settle_us=0)
+    booth.start()
+    assert booth.next_step() == 0
+    assert levels_close(booth_on_pty.emulator.levels, steps[0])
+    assert booth.next_step() == 1
+    assert levels_close(booth_on_pty.emulator.levels, steps[1])
+    assert booth.next_step() is None
+    assert booth.wait_event("DONE").args == ("2",)
+    assert booth_on_pty.emulator.levels == (0.0,) * 7
+
+
+def test_watchdog_switches_off_when_the_host_falls_silent(
+    booth: LedBooth, booth_on_pty: PtyBoothServer, clock: ManualClock, wait_until: Wait
+) -> None:
+    booth.set_watchdog(0.5)
+    booth.set_levels([1.0] * 7)
+    clock.advance(0.4)
+    booth.ping()  # feeds the watchdog
+    clock.advance(0.4)
+    booth_on_pty.emulator.tick()
+    assert booth_on_pty.emulator.levels == (1.0,) * 7
+    clock.advance(0.2)
+    wait_until(lambda: booth_on_pty.emulator.levels == (0.0,) * 7)
+    assert booth.wait_event("WDOG").kind == "WDOG"
+
+
+def test_watchdog_event_interrupts_a_wait_for_another_event(
+    booth: LedBooth, booth_on_pty: PtyBoothServer, clock: ManualClock
+) -> None:
+    booth.load_pattern([[0.5] * 7])
+    booth.arm("camera")
+    booth.start()
+    clock.advance(10.0)
+    with pytest.raises(BoothError, match="watchdog switched the LEDs off while waiting for DONE"):
+        booth.wait_event("DONE")
+    assert booth_on_pty.emulator.state == "IDLE"
+
+
+def test_wait_event_times_out_naming_the_event(booth: LedBooth) -> None:
+    with pytest.raises(BoothTimeoutError, match="no TRIG event within 0.01 s") as info:
+        booth.wait_event("TRIG", timeout_s=0.01)
+    assert info.value.timeout_s == 0.01
+
+
+def test_missing_port_is_not_found(tmp_path) -> None:
+    with pytest.raises(BoothNotFoundError, match="no such port"):
+        LedBooth.open(str(tmp_path / "ttyNOPE"))
+
+
+def test_transcript_is_recorded(booth_on_pty: PtyBoothServer, tmp_path) -> None:
+    path = tmp_path / "t.txt"
+    booth_on_pty.emulator.camera_strobe()  # ignored: nothing armed
+    with LedBooth.open(booth_on_pty.port, log_serial=path) as booth:
+        booth.set_levels([0.0] * 7)
+    lines = path.read_text().splitlines()
+    assert lines[0].startswith("# msflash booth transcript")
+    assert [line[:5] for line in lines[1:]] == ["> ?01", "< =01", "> ?02", "< =02", "> ?03", "< =03"]
+    assert "SET 0000" in lines[3] and "OFF" in lines[5]
