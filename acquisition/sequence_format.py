@@ -286,7 +286,7 @@ class _Fields:
         self.file = file
         self.where = where
         if not isinstance(value, dict):
-            self.fail(where, f"is {_json_type(value)}", "an object")
+            self.fail(where or "the document", f"is {_json_type(value)}", "an object")
         self.value: dict = value
         self.extra = {k: copy.deepcopy(v) for k, v in value.items() if k not in known}
 
