@@ -13,6 +13,8 @@ ambient image), never from the pixels.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +23,21 @@ from scipy.optimize import nnls
 from processing.errors import SolverError
 
 _FEASIBILITY_TOLERANCE = 1e-9
+_recorders: list[list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = []
+
+
+@contextmanager
+def recording_problems() -> Iterator[list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]]:
+    """Collect every problem ``(H, f, G, h)`` solved inside the ``with`` block.
+
+    The benchmark uses it to hand exactly the same problems to a general-purpose solver.
+    """
+    problems: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+    _recorders.append(problems)
+    try:
+        yield problems
+    finally:
+        _recorders.remove(problems)
 
 
 @dataclass(frozen=True)
@@ -116,6 +133,8 @@ def minimise_quadratic(
         bounds = np.zeros(0)
     constraints = np.asarray(constraints, dtype=float)
     bounds = np.asarray(bounds, dtype=float)
+    for recorder in _recorders:
+        recorder.append((hessian.copy(), linear.copy(), constraints.copy(), bounds.copy()))
     inverse_factor = _inverse_factor(hessian, where)
     # z = R x − d with d = R⁻ᵀ f turns the objective into ½‖z‖² − const (Lawson & Hanson 23.4).
     shift = inverse_factor.T @ linear

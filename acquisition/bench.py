@@ -1,0 +1,139 @@
+"""``msflash bench``: speed figures as ratios measured in one run (these machines are noisy).
+
+Processing part (issue: foundation), on a 1280×1024 RGB sequence with 7 LEDs:
+
+- ``estimate_over_copy``: ambient estimation (one-pass statistics + the default solver) ÷ the time
+  to read those frames once (a numpy copy) — target ≤ 3;
+- ``solver_speedup``: each estimation and flash solver ÷ cvxpy on exactly the same problems
+  (recorded from our solver), with the objectives' relative difference — target ≥ 50×, ≤ 1e-6;
+- ``synthesis_over_copy``: synthesis ÷ the same memory copy — target ≤ 2.
+
+Camera and booth parts are added by their modules when present.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from processing import datasets
+from processing.ambient import estimate_ambient
+from processing.flash import solve_complementary, solve_matching
+from processing.image_formation import SensorModel, chart_scene, exposure_for_peak, render_frame
+from processing.least_squares import minimise_quadratic, recording_problems
+from processing.spectra import DEFAULT_GRID, Spectra
+from processing.statistics import FrameStackSpec, accumulate_statistics
+from processing.synthesis import synthesize
+
+
+def _best_time(function: Callable[[], Any], repeats: int) -> float:
+    """Minimum wall time of ``repeats`` calls (the least disturbed by other load)."""
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function()
+        best = min(best, time.perf_counter() - start)
+    return float(best)
+
+
+def benchmark_world(height: int = 1024, width: int = 1280, seed: int = 0) -> dict[str, Any]:
+    """A rendered 7-LED RGB sequence (tungsten ambient, 110-patch chart) for the benchmarks."""
+    grid = DEFAULT_GRID
+    leds = datasets.paper_leds().resample(grid, outside="zero").to_unit("photons")
+    camera = datasets.isetcam_camera("NikonD100").resample(grid, outside="zero").to_unit("photons")
+    ambient = datasets.ambient_spectrum("tungsten", grid).to_unit("photons")
+    reflectances = datasets.chart110().resample(grid)
+    patch = max(4, min(height, width) // 12)
+    scene = chart_scene(reflectances, patch_px=patch)
+    scene_tiles = (int(np.ceil(height / scene.labels.shape[0])), int(np.ceil(width / scene.labels.shape[1])))
+    labels = np.tile(scene.labels, scene_tiles)[:height, :width]
+    scene = type(scene)(reflectances=scene.reflectances, labels=labels)
+    sensor = SensorModel()
+    rng = np.random.default_rng(seed)
+    # The ambient at 45% of full scale leaves room for each LED frame (LED peak = ambient peak).
+    exposure = exposure_for_peak(scene, ambient, camera, sensor, fraction=0.45)
+    frames = [render_frame(scene, ambient, camera, sensor, exposure, rng=rng)]
+    led_scale = float(np.max(ambient.values) / np.max(leds.values))
+    for k in range(leds.count):
+        lit = Spectra(grid, ambient.values[:, 0] + led_scale * leds.values[:, k], ("lit",), unit="photons")
+        frames.append(render_frame(scene, lit, camera, sensor, exposure, rng=rng))
+    spec = FrameStackSpec(sensor.black_level, sensor.white_level, 1.0 / exposure, (1.0 / exposure,) * leds.count,
+                          np.eye(leds.count))
+    return {"frames": frames, "spec": spec, "leds": leds, "camera": camera,
+            "target": datasets.illuminant("D65", grid).to_unit("photons")}
+
+
+def _cvxpy_solve(problem: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> tuple[float, float]:
+    import cvxpy as cp
+
+    hessian, linear, constraints, bounds = problem
+    hessian = 0.5 * (hessian + hessian.T)
+    x = cp.Variable(linear.size)
+    objective = cp.Minimize(0.5 * cp.quad_form(x, cp.psd_wrap(hessian)) - linear @ x)
+    cons = [constraints @ x >= bounds] if constraints.shape[0] else []
+    start = time.perf_counter()
+    cp.Problem(objective, cons).solve(solver=cp.CLARABEL, tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
+    elapsed = time.perf_counter() - start
+    value = x.value
+    return elapsed, float(0.5 * value @ hessian @ value - linear @ value)
+
+
+def _compare_with_cvxpy(name: str, run: Callable[[], Any], repeats: int) -> dict[str, Any]:
+    with recording_problems() as problems:
+        run()
+    ours = _best_time(run, repeats)
+    total_cvxpy, worst_difference = 0.0, 0.0
+    for problem in problems:
+        elapsed, value = _cvxpy_solve(problem)
+        total_cvxpy += elapsed
+        ours_value = minimise_quadratic(*problem).objective
+        scale = max(abs(value), abs(ours_value), 1e-300)
+        # Positive when ours is worse (higher) than cvxpy's.
+        worst_difference = max(worst_difference, (ours_value - value) / scale)
+    return {"solver": name, "problems": len(problems), "ours_s": ours, "cvxpy_s": total_cvxpy,
+            "speedup": total_cvxpy / ours if ours > 0 else None,
+            "objective_relative_excess": worst_difference}
+
+
+def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) -> dict[str, Any]:
+    """The three processing figures (see the module notes)."""
+    world = benchmark_world(height, width)
+    frames, spec = world["frames"], world["spec"]
+    copy_time = _best_time(lambda: [f.copy() for f in frames], repeats)
+    statistics = accumulate_statistics(frames[0], frames[1:], spec)
+
+    def estimate() -> None:
+        estimate_ambient(accumulate_statistics(frames[0], frames[1:], spec), world["leds"])
+
+    estimate_time = _best_time(estimate, repeats)
+    weights = estimate_ambient(statistics, world["leds"]).ambient_weights
+    flash_weights = np.clip(weights, 0, 1)
+    synthesis_time = _best_time(lambda: synthesize(frames[0], frames[1:], spec, flash_weights), repeats)
+    result: dict[str, Any] = {
+        "frames": f"{len(frames)} × {height}×{width}×3 uint16",
+        "copy_s": copy_time,
+        "estimate_s": estimate_time,
+        "estimate_over_copy": estimate_time / copy_time,
+        "synthesis_s": synthesis_time,
+        "synthesis_over_copy": synthesis_time / copy_time,
+    }
+    try:
+        import cvxpy  # noqa: F401
+    except ImportError:
+        result["solvers"] = "cvxpy not installed (pip install cvxpy) — solver comparison skipped"
+        return result
+    leds, camera, target = world["leds"], world["camera"], world["target"]
+    solvers = {
+        "estimate nonneg": lambda: estimate_ambient(statistics, leds, "nonneg"),
+        "estimate tikhonov (alpha 1e-3)": lambda: estimate_ambient(statistics, leds, "tikhonov", 1e-3),
+        "flash matching": lambda: solve_matching(weights, leds, camera),
+        "flash complementary": lambda: solve_complementary(weights, leds, camera, target),
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result["solvers"] = [_compare_with_cvxpy(name, run, 20) for name, run in solvers.items()]
+    return result
