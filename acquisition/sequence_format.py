@@ -581,15 +581,19 @@ def _fsync_directory(directory: Path) -> None:
             os.close(handle)
 
 
-def _replace_json(path: Path, document: dict) -> None:
+def _json_text(path: Path, document: dict) -> str:
     try:
-        text = json.dumps(document, indent=1, allow_nan=False)
+        return json.dumps(document, indent=1, allow_nan=False) + "\n"
     except (TypeError, ValueError) as err:
         raise RecordingError(f"{path}: cannot be written ({err}); expected JSON-compatible extra values") from err
+
+
+def _replace_json(path: Path, document: dict | str) -> None:
+    text = document if isinstance(document, str) else _json_text(path, document)
     handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(handle, "w", encoding="utf-8") as stream:
-            stream.write(text + "\n")
+            stream.write(text)
             stream.flush()
             os.fsync(stream.fileno())
         os.replace(temporary, path)
@@ -700,21 +704,28 @@ class SequenceWriter:
         pixels = np.asarray(pixels)
         if pixels.ndim == 3 and pixels.shape[2] == 1:
             pixels = pixels[:, :, 0]
-        relative = f"{FRAMES_DIR}/{index:03d}-{role}{image_suffix(pixels)}"
+        # An invalid role is refused by _parse_frame below; it must not shape a path before that.
+        name_role = role if role in FRAME_ROLES else "frame"
+        relative = f"{FRAMES_DIR}/{index:03d}-{name_role}{image_suffix(pixels)}"
         where = f"{self._path}: frames[{index}]"
+        clash = sorted(set(extra or {}) & set(_FRAME_KEYS))
+        if clash:
+            raise RecordingError(f"{where}: extra keys {clash} clash with format keys; expected only unknown keys")
         entry = {
             "file": relative, "role": role, "led_levels": [_as_float(v) for v in led_levels],
             "exposure_us": _as_float(exposure_us), "gain": _as_float(gain), **dict(extra or {}),
         }
         frame = _parse_frame(self._path, self._directory, index, entry, len(self._sequence.leds), must_exist=False)
         self._check_pixels(where, relative, pixels)
+        updated = _replace(self._sequence, frames=(*self._sequence.frames, frame))
+        # Serialised before the frame file is written, so unstorable extras fail with nothing on disk.
+        text = _json_text(self._path, _document(updated))
         write_image(self._directory / relative, pixels, {
             "msflash:role": frame.role, "msflash:index": index, "msflash:led_levels": list(frame.led_levels),
             "msflash:exposure_us": frame.exposure_us, "msflash:gain": frame.gain,
             "msflash:led_names": [led.name for led in self._sequence.leds],
         })
-        updated = _replace(self._sequence, frames=(*self._sequence.frames, frame))
-        _replace_json(self._path, _document(updated))
+        _replace_json(self._path, text)
         self._sequence = updated
         return frame
 

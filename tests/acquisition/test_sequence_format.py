@@ -520,6 +520,8 @@ def test_writer_refuses_invalid_frames_before_writing_anything(tmp_path: Path) -
         (lambda: writer.add_frame(_pixels(), "led", (0, 1, 0), 5, gain=0), r"frames\[0\].gain is 0"),
         (lambda: writer.add_frame(_pixels("RGGB"), "led", (0, 1, 0), 5), "pixels have 1 channel but camera.cfa is null"),
         (lambda: writer.add_frame(np.zeros((2, 2, 4), np.uint16), "led", (0, 1, 0), 5), r"shape \(2, 2, 4\)"),
+        (lambda: writer.add_frame(_pixels(), "led", (0, 1, 0), 5, extra={"file": "../x"}), r"extra keys \['file'\] clash"),
+        (lambda: writer.add_frame(_pixels(), "ambient", (0, 0, 0), 5, extra={"t": object()}), "cannot be written"),
     ]
     for call, message in cases:
         with pytest.raises(RecordingError, match=rf"^{path}: .*{message}"):
