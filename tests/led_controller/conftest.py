@@ -70,7 +70,8 @@ class ReplayPort:
         self._pending = bytearray()
         self._cv = threading.Condition()
         self.unexpected: list[str] = []
-        self._release()
+        with self._cv:
+            self._release()
 
     @classmethod
     def from_file(cls, path: Path) -> ReplayPort:

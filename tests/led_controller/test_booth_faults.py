@@ -1,0 +1,104 @@
+"""Fault injection on the pty: every fault gives a clear error and the booth's LEDs end up off."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import pytest
+
+from led_controller import (
+    BoothError,
+    BoothProtocolError,
+    BoothTimeoutError,
+    LedBooth,
+    ManualClock,
+    PtyBoothServer,
+)
+from led_controller.booth import levels_close
+
+OFF = (0.0,) * 7
+
+
+@pytest.mark.parametrize("kind", ["drop", "flip"])
+def test_damaged_reply_is_a_protocol_error_and_exit_switches_off(booth_on_pty: PtyBoothServer, kind: str) -> None:
+    emulator = booth_on_pty.emulator
+    with pytest.raises(BoothProtocolError, match="bad reply to SET") as info, LedBooth.open(booth_on_pty.port) as booth:
+        emulator.inject_fault(kind)
+        booth.set_levels([0.7] * 7)
+    assert info.value.command == "SET"
+    assert info.value.raw.startswith(b"=0")
+    assert emulator.levels == OFF
+
+
+def test_damaged_request_never_sets_a_wrong_level(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+    emulator = booth_on_pty.emulator
+    booth.set_levels([0.2] * 7)
+    emulator.inject_fault("garble_input")
+    with pytest.raises(BoothProtocolError, match=r"could not read the SET request \(E_CRC"):
+        booth.set_levels([0.9] * 7)
+    assert levels_close(emulator.levels, [0.2] * 7)
+    status = booth.status()
+    assert status.bad_frames == 1 and status.last_error == "E_CRC"
+
+
+def test_damaged_event_is_reported(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+    emulator = booth_on_pty.emulator
+    booth.load_pattern([[0.5] * 7])
+    booth.arm("camera")
+    booth.start()
+    emulator.inject_fault("flip")
+    emulator.exposure_active(True)
+    with pytest.raises(BoothProtocolError, match="bad line"):
+        booth.wait_event("TRIG")
+
+
+def test_stall_times_out_and_the_watchdog_switches_off(
+    booth_on_pty: PtyBoothServer, clock: ManualClock, wait_until: Callable[..., None]
+) -> None:
+    emulator = booth_on_pty.emulator
+    with pytest.raises(BoothTimeoutError, match=r"no reply to STAT within 0.05 s") as info, LedBooth.open(
+        booth_on_pty.port, timeout_s=0.05
+    ) as booth:
+        booth.set_levels([1.0] * 7)
+        emulator.inject_fault("stall")
+        booth.status()
+    assert info.value.command == "STAT" and info.value.timeout_s == 0.05
+    # all_off in __exit__ also timed out: attached to the original error, not replacing it.
+    assert any("all_off" in note and "OFF" in note for note in info.value.__notes__)
+    assert emulator.levels == (1.0,) * 7
+    clock.advance(3.0)  # the default watchdog period
+    wait_until(lambda: emulator.levels == OFF)
+    assert emulator.state == "IDLE"
+
+
+def test_unplug_is_a_clear_error_and_the_booth_is_off(booth_on_pty: PtyBoothServer) -> None:
+    emulator = booth_on_pty.emulator
+    with pytest.raises(BoothError, match="serial link lost during PING") as info, LedBooth.open(
+        booth_on_pty.port, timeout_s=1.0
+    ) as booth:
+        booth.set_levels([1.0] * 7)
+        booth_on_pty.hangup()
+        booth.ping()
+    assert "check the USB cable" in str(info.value)
+    assert any("all_off" in note for note in info.value.__notes__)
+    assert emulator.levels == OFF
+
+
+def test_close_fault_while_waiting_for_an_event(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+    emulator = booth_on_pty.emulator
+    booth.load_pattern([[0.5] * 7])
+    booth.arm("camera")
+    booth.start()
+    assert levels_close(emulator.levels, [0.5] * 7)
+    emulator.inject_fault("close")
+    with pytest.raises(BoothError, match="serial link lost during waiting for an event"):
+        booth.wait_event("DONE", timeout_s=5.0)
+    assert emulator.levels == OFF
+    with pytest.raises(BoothError, match="serial link lost during OFF"):
+        booth.all_off()
+
+
+def test_commands_after_close_are_refused(booth: LedBooth) -> None:
+    booth.close()
+    with pytest.raises(BoothError, match="PING on a closed booth"):
+        booth.ping()

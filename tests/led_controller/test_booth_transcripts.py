@@ -1,0 +1,105 @@
+"""The driver against recorded transcripts: every line consumed, nothing unexpected or left over."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from led_controller import BoothError, BoothProtocolError, BoothTimeoutError, LedBooth
+from led_controller.booth import levels_close
+from led_controller.protocol import encode_frame, encode_request
+
+
+def test_camera_master_transcript(replay_port, transcripts_dir: Path) -> None:
+    port = replay_port.from_file(transcripts_dir / "emulator-camera-master.txt")
+    booth = LedBooth(port, timeout_s=2.0)
+    with booth:
+        info = booth.identify()
+        assert info.channels == 7 and info.names[0] == "led440"
+        booth.set_levels([0.25, 0.5, 0.75, 1.0, 0.0, 0.125, 1 / 65535])
+        booth.load_pattern([[0.1] * 7, [0.2] * 7, [0.3] * 7])
+        booth.arm("camera", settle_us=500)
+        booth.start()
+        triggers = [booth.wait_event("TRIG").args for _ in range(3)]
+        assert triggers == [("1", "0"), ("2", "1"), ("3", "2")]
+        assert booth.wait_event("DONE").args == ("3",)
+        assert booth.trigger_count() == 3
+        status = booth.status()
+        assert status.state == "DONE" and status.trigger_count == 3
+        assert levels_close(status.levels, [0.0] * 7)
+        assert booth.pending_events() == []
+    port.assert_done()
+
+
+def test_error_transcript(replay_port, transcripts_dir: Path) -> None:
+    port = replay_port.from_file(transcripts_dir / "emulator-errors.txt")
+    with LedBooth(port, timeout_s=2.0) as booth:
+        booth.identify()
+        with pytest.raises(BoothError, match=r"refused START \(E_STATE"):
+            booth.start()
+        with pytest.raises(BoothProtocolError, match="could not read the SET request") as bad_request:
+            booth.set_levels([0.5] * 7)
+        assert bad_request.value.command == "SET"
+        with pytest.raises(BoothProtocolError, match="bad reply to PING") as bad_reply:
+            booth.ping()
+        assert bad_reply.value.raw == b"=04:007:OK0PING*789C"
+        booth.ping()
+    port.assert_done()
+
+
+def _lines(*pairs: tuple[str, bytes]) -> list[tuple[str, bytes]]:
+    return list(pairs)
+
+
+def test_replay_fails_on_an_unexpected_request(replay_port) -> None:
+    port = replay_port(_lines((">", encode_request(1, "PING")), ("<", encode_frame("=", 1, "OK PING"))))
+    booth = LedBooth(port, timeout_s=0.5)
+    try:
+        with pytest.raises(AssertionError, match="expected > .*PING.* got > .*OFF"):
+            booth.all_off()
+    finally:
+        booth.close()
+    with pytest.raises(AssertionError, match="unexpected"):
+        port.assert_done()
+
+
+def test_replay_fails_on_left_over_lines(replay_port) -> None:
+    port = replay_port(_lines(
+        (">", encode_request(1, "PING")), ("<", encode_frame("=", 1, "OK PING")),
+        (">", encode_request(2, "PING")), ("<", encode_frame("=", 2, "OK PING")),
+    ))
+    booth = LedBooth(port, timeout_s=0.5)
+    booth.ping()
+    booth.close()
+    with pytest.raises(AssertionError, match="not consumed"):
+        port.assert_done()
+
+
+def test_stale_reply_is_dropped_and_the_command_times_out(replay_port) -> None:
+    # The booth answers with a reply for another sequence number: never taken for ours.
+    port = replay_port(_lines((">", encode_request(1, "CNT")), ("<", encode_frame("=", 9, "OK CNT 5"))))
+    booth = LedBooth(port, timeout_s=0.05)
+    try:
+        with pytest.raises(BoothTimeoutError, match="no reply to CNT within 0.05 s") as info:
+            booth.trigger_count()
+        assert info.value.command == "CNT"
+    finally:
+        booth.close()
+    port.assert_done()
+
+
+def test_lost_event_is_reported(replay_port) -> None:
+    port = replay_port(_lines(
+        (">", encode_request(1, "START")), ("<", encode_frame("=", 1, "OK START")),
+        ("!", encode_frame("!", 1, "TRIG 1 0")), ("!", encode_frame("!", 3, "DONE 2")),
+    ))
+    booth = LedBooth(port, timeout_s=0.5)
+    try:
+        booth.start()
+        assert booth.wait_event("TRIG").seq == 1
+        with pytest.raises(BoothProtocolError, match="event sequence jumped from 1 to 3"):
+            booth.wait_event("DONE")
+    finally:
+        booth.close()
+    port.assert_done()
