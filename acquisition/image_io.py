@@ -263,11 +263,10 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | 
     spec = oiio.ImageSpec(data.shape[1], data.shape[0], channels, type_name)
     if attributes:
         spec.attribute("ImageDescription", description)
+    spec.attribute("compression", "zip")
     if type_name == "uint16":
-        spec.attribute("compression", "zip")
         format_name = "tiff"
     else:
-        spec.attribute("compression", "zip")
         format_name = "openexr"
         for name, value in attributes.items():
             _set_native_attribute(spec, name, value)
@@ -284,7 +283,8 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | 
         try:
             # Always hand OpenImageIO an (H, W, C) array: a 2-D array is read as (pixels, channels)
             # and would come out transposed.
-            if not output.open(temporary, spec) or not output.write_image(data.reshape(data.shape[0], data.shape[1], channels)):
+            planes = data.reshape(data.shape[0], data.shape[1], channels)
+            if not output.open(temporary, spec) or not output.write_image(planes):
                 raise OSError(f"{path}: cannot write image ({output.geterror() or _oiio_error()})")
         finally:
             output.close()
