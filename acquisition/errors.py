@@ -37,3 +37,15 @@ class RigOpenError(CaptureError):
 
 class RecordingError(CaptureError, ValueError):
     """A sequence on disk is malformed; the message names the file and the field."""
+
+
+class CameraDisconnectedError(CameraError, ConnectionError):
+    """The camera stopped answering (GigE Vision ``control-lost``, unplugged, powered off)."""
+
+
+class FrameLostError(CameraError, DroppedFrameError):
+    """A frame arrived incomplete or the frame counter skipped; names the camera, step and frame id.
+
+    It is both a camera failure and a dropped frame, so a capture runner catching
+    :class:`DroppedFrameError` handles it as it handles any other lost frame.
+    """
