@@ -128,6 +128,7 @@ def chart_scene(
     border_px: int = 2,
     border_reflectance: float = 0.03,
     specular_strip_px: int = 0,
+    specular_gain: float = 10.0,
 ) -> Scene:
     """A reflectance chart: square patches on a dark border, filled column by column (ISET order).
 
@@ -147,6 +148,9 @@ def chart_scene(
     specular_strip_px
         If > 0, a strip of this height below the chart with a neutral highlight
         (:attr:`Scene.specular`), which saturates at exposures metered on the chart.
+    specular_gain
+        Strength of that highlight relative to a white diffuser (glossy highlights mirror the
+        light source, so they are many times brighter than any diffuse patch).
 
     Returns
     -------
@@ -185,7 +189,7 @@ def chart_scene(
     if specular_strip_px:
         specular = np.zeros(labels.shape, dtype=bool)
         specular[height:, :] = True
-    return Scene(surfaces, labels, specular=specular)
+    return Scene(surfaces, labels, specular=specular, specular_gain=specular_gain)
 
 
 # -- the sensor -------------------------------------------------------------------------------

@@ -1,0 +1,369 @@
+"""A camera that renders a spectral scene: the ``sim`` rig's camera, with known ground truth.
+
+:class:`SimulatedCamera` implements the :class:`~acquisition.camera.Camera` protocol. Each frame
+is rendered through :mod:`processing.image_formation` (eq. 1–3 of the paper, photon and read
+noise, black level, saturation, optional Bayer mosaic) under the true ambient plus the LEDs at the
+levels in force *at exposure time* — read from an injected ``led_levels_source`` (the booth
+emulator in the ``sim`` rig) when the frame is triggered.
+
+Triggering
+----------
+- ``plan.trigger == "software"`` or ``"camera"``: :meth:`SimulatedCamera.trigger` renders one frame.
+- ``plan.trigger == "booth"``: :meth:`trigger` is a no-op, as the protocol says for cameras paced
+  by a hardware line; the booth (emulator) pulses :meth:`SimulatedCamera.trigger_line` instead.
+
+Frames are rendered synchronously and queued. :meth:`next_frame` pops the oldest; with nothing
+queued it raises :class:`~acquisition.errors.FrameTimeoutError` at once when no trigger can be
+on its way (software/camera triggering, nothing rendering), and waits at most ``timeout_s`` only
+when the trigger comes from another thread (booth triggering) or a render is in progress.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from collections.abc import Callable, Sequence
+from typing import Literal
+
+import numpy as np
+
+from acquisition.camera import CameraInfo, RawFrame
+from acquisition.errors import CameraError, FrameTimeoutError
+from acquisition.plan import CapturePlan, CaptureStep
+from processing import datasets
+from processing.image_formation import (
+    Scene,
+    SensorModel,
+    chart_scene,
+    expected_response,
+    exposure_for_peak,
+    render_frame,
+    total_illumination,
+)
+from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid, require_same_grid
+
+LedLevelsSource = Callable[[], Sequence[float]]
+"""Returns the drive level (0–1) of every LED channel at the moment it is called."""
+
+_GENICAM_BAYER = {"RGGB": "BayerRG", "BGGR": "BayerBG", "GRBG": "BayerGR", "GBRG": "BayerGB"}
+
+
+class SimulatedCamera:
+    """Renders ``scene`` under ``ambient`` + LEDs at the levels of ``led_levels_source``.
+
+    Parameters
+    ----------
+    scene
+        Surfaces and layout (:class:`processing.image_formation.Scene`).
+    ambient
+        The true ambient spectrum ``i_a`` (one spectrum; its scale is the ambient's power).
+    led_spectra
+        ``I``, (n_wavelengths, k): each LED at full drive, with the true ratios between LEDs.
+    camera_responsivities
+        ``C``, (n_wavelengths, 3).
+    sensor
+        The sensor model (bit depth, levels, noise, CFA).
+    scale
+        Electrons per unit ``Σ r c i Δλ`` per microsecond (see :mod:`processing.image_formation`).
+    led_levels_source
+        Called at each exposure for the LED levels; None uses each plan step's own levels.
+    seed
+        Seed of the noise generator (frames are reproducible for a given seed and trigger order).
+    noise
+        False renders noise-free frames, as the paper's simulations.
+    name
+        Model name reported in :attr:`info`.
+    frame_interval_ns
+        Extra simulated time between frames, for timestamps (no real waiting happens).
+
+    All spectra must share one grid (resample first); mismatches raise ``SpectralDataError``.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        ambient: Spectra,
+        led_spectra: Spectra,
+        camera_responsivities: Spectra,
+        sensor: SensorModel,
+        scale: float = 1.0,
+        led_levels_source: LedLevelsSource | None = None,
+        seed: int = 0,
+        noise: bool = True,
+        name: str = "SimulatedCamera",
+        frame_interval_ns: int = 2_000_000,
+    ) -> None:
+        require_same_grid(scene.reflectances, ambient, led_spectra, camera_responsivities)
+        if camera_responsivities.count != 3:
+            raise CameraError(f"simulated camera '{name}': {camera_responsivities.count} channels; expected R, G, B")
+        self.scene = scene
+        self.ambient = ambient
+        self.led_spectra = led_spectra
+        self.camera_responsivities = camera_responsivities
+        self.sensor = sensor
+        self.scale = float(scale)
+        self.led_levels_source = led_levels_source
+        """Called at exposure time for the LED levels; may be set after construction (rig wiring)."""
+        self.noise = noise
+        self.seed = seed
+        self.suggested_exposure_us: float | None = None
+        """An exposure that suits this world (set by :meth:`default`), or None."""
+        self._name = name
+        self._rng = np.random.default_rng(seed)
+        self._frame_interval_ns = int(frame_interval_ns)
+        self._condition = threading.Condition()
+        self._render_lock = threading.Lock()
+        self._queue: deque[RawFrame] = deque()
+        self._plan: CapturePlan | None = None
+        self._next_step = 0
+        self._rendering = 0
+        self._started = False
+        self._closed = False
+        self._frame_id = 0
+        self._clock_ns = 0
+        self._rendered_levels: list[tuple[float, ...]] = []
+
+    # -- ground truth and identity ------------------------------------------------------------
+    @property
+    def true_ambient(self) -> Spectra:
+        """The ambient spectrum the frames are rendered under (ground truth for reports)."""
+        return self.ambient
+
+    @property
+    def rendered_levels(self) -> tuple[tuple[float, ...], ...]:
+        """The LED levels used for each frame rendered so far, in order."""
+        with self._condition:
+            return tuple(self._rendered_levels)
+
+    @property
+    def info(self) -> CameraInfo:
+        """Identity and pixel encoding; ``extra`` names the ground-truth spectra."""
+        bits = 8 if self.sensor.bit_depth <= 8 else 16
+        pixel_format = f"RGB{bits}" if self.sensor.cfa is None else f"{_GENICAM_BAYER[self.sensor.cfa]}{bits}"
+        height, width = self.scene.shape
+        return CameraInfo(
+            vendor="msflash", model=self._name, serial=f"SIM-{self.seed}", pixel_format=pixel_format,
+            cfa=self.sensor.cfa, black_level=self.sensor.black_level, white_level=self.sensor.white_level,
+            width=width, height=height,
+            extra={"simulated": True, "bit_depth": self.sensor.bit_depth, "ambient": self.ambient.source,
+                   "leds": self.led_spectra.names, "responsivity": self.camera_responsivities.source},
+        )
+
+    # -- the Camera protocol ------------------------------------------------------------------
+    def prepare(self, plan: CapturePlan) -> None:
+        """Take the steps' exposures and gains from ``plan``; the next trigger renders step 0."""
+        self._check_open()
+        if not plan.steps:
+            raise CameraError(f"simulated camera '{self._name}': empty capture plan; expected at least one step")
+        if plan.n_leds != self.led_spectra.count:
+            raise CameraError(
+                f"simulated camera '{self._name}': plan drives {plan.n_leds} LEDs but the world has "
+                f"{self.led_spectra.count} ({', '.join(self.led_spectra.names)}); expected the same count"
+            )
+        for step in plan.steps:
+            if not (step.exposure_us >= 0 and step.gain > 0):
+                raise CameraError(
+                    f"simulated camera '{self._name}': step {step.index} ({step.label}) has exposure "
+                    f"{step.exposure_us} µs and gain {step.gain}; expected exposure ≥ 0 and gain > 0"
+                )
+        with self._condition:
+            self._plan = plan
+            self._next_step = 0
+            self._queue.clear()
+
+    def start(self) -> None:
+        """Start acquisition; frames queued before are dropped."""
+        self._check_open()
+        if self._plan is None:
+            raise CameraError(f"simulated camera '{self._name}': start() before prepare(plan); expected a plan")
+        with self._condition:
+            self._queue.clear()
+            self._started = True
+
+    def trigger(self) -> None:
+        """Render the next step's frame (software/camera triggering); a no-op when the booth triggers."""
+        plan = self._require_started()
+        if plan.trigger == "booth":
+            return
+        self._render_next(plan)
+
+    def trigger_line(self) -> None:
+        """The hardware trigger input: render the next step's frame whatever the trigger mode.
+
+        The booth emulator calls this when it pulses the camera's trigger line (booth master).
+        """
+        self._render_next(self._require_started())
+
+    def next_frame(self, timeout_s: float) -> RawFrame:
+        """The oldest queued frame; ``FrameTimeoutError`` if none arrives within ``timeout_s``."""
+        with self._condition:
+            while not self._queue:
+                self._check_open()
+                plan = self._plan
+                external = plan is not None and plan.trigger == "booth"
+                if not external and self._rendering == 0:
+                    raise FrameTimeoutError(self._timeout_message(timeout_s, "no trigger was issued"))
+                if not self._condition.wait_for(lambda: bool(self._queue) or self._closed, timeout=timeout_s):
+                    raise FrameTimeoutError(self._timeout_message(timeout_s, "the trigger did not arrive"))
+            return self._queue.popleft()
+
+    def stop(self) -> None:
+        """Stop acquisition; idempotent. Queued frames stay readable until the next start."""
+        with self._condition:
+            self._started = False
+
+    def close(self) -> None:
+        """Release the camera; idempotent."""
+        with self._condition:
+            self._started = False
+            self._closed = True
+            self._queue.clear()
+            self._condition.notify_all()
+
+    # -- internals ----------------------------------------------------------------------------
+    def _check_open(self) -> None:
+        if self._closed:
+            raise CameraError(f"simulated camera '{self._name}': used after close(); expected an open camera")
+
+    def _require_started(self) -> CapturePlan:
+        self._check_open()
+        if not self._started or self._plan is None:
+            raise CameraError(f"simulated camera '{self._name}': triggered before start(); expected prepare() then start()")
+        return self._plan
+
+    def _timeout_message(self, timeout_s: float, why: str) -> str:
+        plan = self._plan
+        if plan is not None and self._next_step < len(plan.steps):
+            step = plan.steps[self._next_step]
+            where = f"step {step.index} ({step.label})"
+        else:
+            where = "after the last step"
+        return (f"simulated camera '{self._name}': no frame within {timeout_s:g} s for {where}: {why}; "
+                "expected trigger() (or the booth's trigger line) before next_frame()")
+
+    def _levels_for(self, step: CaptureStep) -> tuple[float, ...]:
+        """The LED levels at exposure time: from the injected source, else the plan step."""
+        raw = self.led_levels_source() if self.led_levels_source is not None else step.led_levels
+        try:
+            levels = tuple(float(v) for v in raw)
+        except (TypeError, ValueError) as err:
+            raise CameraError(f"simulated camera '{self._name}': LED levels {raw!r} are not numbers; "
+                              "expected a tuple of floats in [0, 1]") from err
+        if len(levels) != self.led_spectra.count or not all(0.0 <= v <= 1.0 for v in levels):
+            raise CameraError(
+                f"simulated camera '{self._name}': LED levels {levels} at step {step.index} ({step.label}); "
+                f"expected {self.led_spectra.count} values in [0, 1]"
+            )
+        return levels
+
+    def _render_next(self, plan: CapturePlan) -> None:
+        with self._condition:
+            if self._next_step >= len(plan.steps):
+                raise CameraError(
+                    f"simulated camera '{self._name}': trigger {self._next_step + 1} but the plan has "
+                    f"{len(plan.steps)} steps; expected one trigger per step"
+                )
+            step = plan.steps[self._next_step]
+            self._next_step += 1
+            self._rendering += 1
+        try:
+            with self._render_lock:  # one render at a time keeps the noise stream in trigger order
+                levels = self._levels_for(step)
+                illumination = total_illumination(self.ambient, self.led_spectra, levels)
+                pixels = render_frame(
+                    self.scene, illumination, self.camera_responsivities, self.sensor, step.exposure_us,
+                    step.gain, self.scale, rng=self._rng, noise=self.noise,
+                )
+                with self._condition:
+                    self._frame_id += 1
+                    self._clock_ns += int(step.exposure_us * 1000) + self._frame_interval_ns
+                    frame = RawFrame(pixels, self._frame_id, self._clock_ns, step.exposure_us, step.gain)
+                    self._rendered_levels.append(levels)
+                    self._queue.append(frame)
+        finally:
+            with self._condition:
+                self._rendering -= 1
+                self._condition.notify_all()
+
+    # -- a ready-made world -------------------------------------------------------------------
+    @classmethod
+    def default(
+        cls,
+        scene: Literal["chart110", "macbeth"] | Scene = "chart110",
+        ambient: str | Spectra = "tungsten",
+        cfa: str | None = None,
+        seed: int = 0,
+        camera: str = "NikonD100",
+        n_leds: int = 7,
+        flash_to_ambient: float = 2.0,
+        reference_exposure_us: float = 10_000.0,
+        ambient_peak_fraction: float = 0.25,
+        sensor: SensorModel | None = None,
+        led_levels_source: LedLevelsSource | None = None,
+        patch_px: int = 8,
+        specular_strip_px: int = 4,
+        grid: WavelengthGrid = DEFAULT_GRID,
+        noise: bool = True,
+    ) -> SimulatedCamera:
+        """The ``sim`` rig's world: a chart, a named ambient, the paper's LEDs, an ISETCam camera.
+
+        Parameters
+        ----------
+        scene
+            ``"chart110"`` (the paper's 110 surfaces), ``"macbeth"`` or a :class:`Scene`.
+        ambient
+            A name of :func:`processing.datasets.ambient_spectrum` or a spectrum on ``grid``.
+        cfa
+            None for RGB frames, or a Bayer layout.
+        seed
+            Noise seed.
+        camera
+            An ISETCam camera (MIT licensed, :func:`processing.datasets.isetcam_camera`).
+        n_leds
+            The paper's LED subset (3–7).
+        flash_to_ambient
+            All LEDs at full drive give this many times the ambient's mean camera signal; with 7
+            LEDs each LED-only image is then about 0.3× the ambient image — well above the noise,
+            and ambient + a full flash still fits the sensor.
+        reference_exposure_us, ambient_peak_fraction
+            At ``reference_exposure_us`` and gain 1 the brightest diffuse pixel under the ambient
+            alone reads ``ambient_peak_fraction`` of full scale (room for the flash on top).
+            ``suggested_exposure_us`` is set to ``reference_exposure_us``.
+        sensor
+            Default: 16-bit, black 256, 0.5 e⁻/DN, 2 e⁻ read noise, 40 000 e⁻ full well.
+        led_levels_source, noise
+            As for the constructor.
+        patch_px, specular_strip_px
+            Chart patch size and the height of a saturating highlight strip under it (0: none).
+        grid
+            The wavelength grid of the world.
+        """
+        if isinstance(scene, str):
+            scene = chart_scene(scene, patch_px=patch_px, specular_strip_px=specular_strip_px)
+        scene = Scene(scene.reflectances.resample(grid), scene.labels, scene.shading, scene.specular, scene.specular_gain)
+        ambient_spd = datasets.ambient_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)
+        leds = datasets.paper_led_subset(n_leds).resample(grid)
+        responsivities = datasets.isetcam_camera(camera).resample(grid)
+        sensor = sensor if sensor is not None else SensorModel(cfa=cfa)
+        if cfa is not None and sensor.cfa != cfa:
+            raise CameraError(f"simulated camera: cfa '{cfa}' but the sensor model has '{sensor.cfa}'; expected one")
+
+        # LED power relative to the ambient, measured the way the camera sees it (mean signal over
+        # the diffuse scene), so "a decent fraction" holds whatever the ambient's spectrum.
+        diffuse = Scene(scene.reflectances, scene.labels, scene.shading)
+        ambient_signal = float(np.mean(expected_response(diffuse, ambient_spd, responsivities, 1.0)))
+        dark = ambient_spd.replace(values=np.zeros_like(ambient_spd.values))
+        flash_signal = float(np.mean(expected_response(
+            diffuse, total_illumination(dark, leds, np.ones(leds.count)), responsivities, 1.0)))
+        if ambient_signal <= 0 or flash_signal <= 0:
+            raise CameraError("simulated camera: the ambient or the LEDs give no signal in this camera; "
+                              "expected light within the camera's sensitivity")
+        led_spectra = leds.replace(values=leds.values * (flash_to_ambient * ambient_signal / flash_signal))
+        exposure_at_unit_scale = exposure_for_peak(scene, ambient_spd, responsivities, sensor, ambient_peak_fraction)
+        simulated = cls(
+            scene, ambient_spd, led_spectra, responsivities, sensor,
+            scale=exposure_at_unit_scale / reference_exposure_us, led_levels_source=led_levels_source, seed=seed,
+            noise=noise, name=f"SimulatedCamera ({camera})",
+        )
+        simulated.suggested_exposure_us = reference_exposure_us
+        return simulated

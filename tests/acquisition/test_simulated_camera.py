@@ -1,0 +1,196 @@
+"""SimulatedCamera: the Camera protocol over a rendered spectral world."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from acquisition.camera import Camera
+from acquisition.errors import CameraError, FrameTimeoutError
+from acquisition.plan import CapturePlan
+from acquisition.simulated_camera import SimulatedCamera
+from processing import datasets
+from processing.image_formation import SensorModel, chart_scene, expected_response, total_illumination
+from processing.spectra import DEFAULT_GRID, Spectra
+
+N_LEDS = 7
+
+
+def small_world(**options: object) -> SimulatedCamera:
+    """A fast world without colour-science: flat ambient, Macbeth chart, paper LEDs, NikonD100."""
+    scene = chart_scene(datasets.macbeth().resample(DEFAULT_GRID), patch_px=3, border_px=1, specular_strip_px=2)
+    ambient = Spectra(DEFAULT_GRID, np.ones(DEFAULT_GRID.size), ("flat",), source="flat test ambient")
+    leds = datasets.paper_leds().resample(DEFAULT_GRID)
+    leds = leds.replace(values=leds.values / leds.values.max())
+    camera = datasets.isetcam_camera("NikonD100").resample(DEFAULT_GRID)
+    settings: dict = dict(scale=0.02, seed=3) | options
+    return SimulatedCamera(scene, ambient, leds, camera, SensorModel(), **settings)
+
+
+def capture(camera: SimulatedCamera, plan: CapturePlan) -> list:
+    camera.prepare(plan)
+    camera.start()
+    frames = []
+    for _ in plan.steps:
+        camera.trigger()
+        frames.append(camera.next_frame(timeout_s=10.0))
+    camera.stop()
+    return frames
+
+
+class TestProtocol:
+    def test_is_a_camera(self) -> None:
+        camera = small_world()
+        assert isinstance(camera, Camera)
+        info = camera.info
+        assert (info.height, info.width) == camera.scene.shape
+        assert (info.pixel_format, info.black_level, info.white_level) == ("RGB16", 256.0, 65535.0)
+
+    def test_one_frame_per_step_with_the_plan_settings(self) -> None:
+        camera = small_world()
+        exposures = [1000.0 + 100 * k for k in range(N_LEDS)]
+        plan = CapturePlan.ambient_then_each_led(N_LEDS, 2000.0, gain=2.0, led_exposures_us=exposures)
+        frames = capture(camera, plan)
+        assert len(frames) == N_LEDS + 1
+        assert [f.frame_id for f in frames] == list(range(1, N_LEDS + 2))
+        assert all(b.timestamp_ns > a.timestamp_ns for a, b in zip(frames, frames[1:]))
+        assert [f.exposure_us for f in frames] == [2000.0] + exposures
+        assert all(f.gain == 2.0 for f in frames)
+        assert frames[0].pixels.shape == camera.scene.shape + (3,) and frames[0].pixels.dtype == np.uint16
+        assert not frames[0].pixels.flags.writeable
+        assert camera.rendered_levels == tuple(step.led_levels for step in plan.steps)
+
+    def test_frames_follow_eq_1_to_3(self) -> None:
+        camera = small_world(noise=False)
+        plan = CapturePlan.ambient_then_each_led(N_LEDS, 3000.0)
+        frames = capture(camera, plan)
+        ambient = frames[0].pixels.astype(float)
+        diffuse = ~camera.scene.specular
+        dark = camera.ambient.replace(values=np.zeros_like(camera.ambient.values))
+        for k, frame in enumerate(frames[1:]):
+            flash_only = frame.pixels.astype(float) - ambient
+            expected = expected_response(
+                camera.scene, total_illumination(dark, camera.led_spectra, np.eye(N_LEDS)[k]),
+                camera.camera_responsivities, 3000.0, 1.0, camera.scale,
+            ) / camera.sensor.electrons_per_dn
+            unclipped = diffuse[..., None] & (frame.pixels < camera.sensor.white_level)
+            assert unclipped.sum() > 0.9 * diffuse.sum() * 3
+            np.testing.assert_allclose(flash_only[unclipped], expected[unclipped], atol=1.0)  # rounding only
+
+    def test_same_seed_same_frames(self) -> None:
+        plan = CapturePlan.ambient_then_each_led(N_LEDS, 1000.0)
+        first = capture(small_world(seed=11), plan)
+        second = capture(small_world(seed=11), plan)
+        other = capture(small_world(seed=12), plan)
+        for a, b, c in zip(first, second, other):
+            np.testing.assert_array_equal(a.pixels, b.pixels)
+            assert not np.array_equal(a.pixels, c.pixels)
+
+
+class TestInjectedLevels:
+    def test_levels_are_read_at_trigger_time(self) -> None:
+        held = {"levels": (0.0,) * N_LEDS}
+        camera = small_world(led_levels_source=lambda: held["levels"], noise=False)
+        plan = CapturePlan.ambient_then_each_led(N_LEDS, 1000.0)
+        camera.prepare(plan)
+        camera.start()
+        sent = [(0.0,) * N_LEDS, (0.5,) + (0.0,) * 6, (0.0,) * 6 + (1.0,)]
+        for levels in sent:
+            held["levels"] = levels
+            camera.trigger()
+            held["levels"] = (1.0,) * N_LEDS  # changed after the exposure: must not matter
+        frames = [camera.next_frame(10.0) for _ in sent]
+        assert camera.rendered_levels == tuple(sent)  # the source's levels, not the plan's
+        assert len(frames) == 3
+        reference = small_world(noise=False)
+        reference.prepare(CapturePlan.single(sent[1], 1000.0))
+        reference.start()
+        reference.trigger()
+        np.testing.assert_array_equal(frames[1].pixels, reference.next_frame(1.0).pixels)
+
+    @pytest.mark.parametrize("levels", [(0.5,) * 3, (2.0,) * N_LEDS, ("x",) * N_LEDS])
+    def test_bad_levels_from_the_source(self, levels: tuple) -> None:
+        camera = small_world(led_levels_source=lambda: levels)
+        camera.prepare(CapturePlan.ambient_then_each_led(N_LEDS, 1000.0))
+        camera.start()
+        with pytest.raises(CameraError, match="LED levels"):
+            camera.trigger()
+
+
+class TestTriggeringAndErrors:
+    def test_timeout_without_a_trigger_is_immediate(self) -> None:
+        camera = small_world()
+        camera.prepare(CapturePlan.ambient_then_each_led(N_LEDS, 1000.0))
+        camera.start()
+        # nothing was triggered: raises at once instead of waiting 100 s
+        with pytest.raises(FrameTimeoutError, match=r"step 0 \(ambient\).*no trigger was issued"):
+            camera.next_frame(timeout_s=100.0)
+        camera.trigger()
+        camera.next_frame(timeout_s=100.0)
+        with pytest.raises(FrameTimeoutError, match=r"step 1 \(led:1\)"):
+            camera.next_frame(timeout_s=100.0)
+
+    def test_booth_triggered_plan_uses_the_trigger_line(self) -> None:
+        camera = small_world()
+        plan = CapturePlan(CapturePlan.ambient_then_each_led(N_LEDS, 1000.0).steps, trigger="booth")
+        camera.prepare(plan)
+        camera.start()
+        camera.trigger()  # the protocol's software trigger is a no-op for a hardware-paced camera
+        with pytest.raises(FrameTimeoutError, match="the trigger did not arrive"):
+            camera.next_frame(timeout_s=0.01)
+        line = threading.Thread(target=camera.trigger_line)
+        line.start()
+        frame = camera.next_frame(timeout_s=30.0)
+        line.join()
+        assert frame.frame_id == 1 and camera.rendered_levels == ((0.0,) * N_LEDS,)
+
+    def test_misuse_is_named(self) -> None:
+        camera = small_world()
+        with pytest.raises(CameraError, match="before start"):
+            camera.trigger()
+        with pytest.raises(CameraError, match="start\\(\\) before prepare"):
+            camera.start()
+        with pytest.raises(CameraError, match="plan drives 3 LEDs but the world has 7"):
+            camera.prepare(CapturePlan.ambient_then_each_led(3, 1000.0))
+        camera.prepare(CapturePlan.single((0.0,) * N_LEDS, 1000.0, role="ambient"))
+        camera.start()
+        camera.trigger()
+        with pytest.raises(CameraError, match="trigger 2 but the plan has 1 steps"):
+            camera.trigger()
+        camera.stop()
+        camera.stop()
+        camera.close()
+        camera.close()
+        with pytest.raises(CameraError, match="after close"):
+            camera.prepare(CapturePlan.single((0.0,) * N_LEDS, 1000.0))
+
+
+@pytest.fixture(scope="module")
+def default_world() -> SimulatedCamera:
+    return SimulatedCamera.default(seed=5)
+
+
+class TestDefaultWorld:
+    def test_default_world_is_sensible(self, default_world: SimulatedCamera) -> None:
+        camera = default_world
+        assert camera.led_spectra.names == datasets.paper_leds().names
+        np.testing.assert_allclose(camera.true_ambient.values, datasets.ambient_spectrum("tungsten").values)
+        assert camera.suggested_exposure_us is not None
+        frames = capture(camera, CapturePlan.ambient_then_each_led(N_LEDS, camera.suggested_exposure_us))
+        diffuse = ~camera.scene.specular
+        white = camera.sensor.white_level
+        ambient = frames[0].pixels.astype(float) - camera.sensor.black_level
+        assert ambient[diffuse].max() < 0.5 * white  # room for the flash
+        assert np.all(frames[0].pixels[camera.scene.specular].max(axis=-1) == white)  # the highlight saturates
+        for frame in frames[1:]:
+            assert not np.any(frame.pixels[diffuse] >= white)
+            ratio = (frame.pixels[diffuse].astype(float) - camera.sensor.black_level).mean() / ambient[diffuse].mean() - 1
+            assert 0.05 < ratio < 1.0  # each LED-only image is a decent fraction of the ambient
+
+    def test_default_world_with_a_mosaic(self) -> None:
+        camera = SimulatedCamera.default(scene="macbeth", ambient="daylight", cfa="BGGR", seed=1, patch_px=4)
+        assert camera.info.pixel_format == "BayerBG16" and camera.info.cfa == "BGGR"
+        frames = capture(camera, CapturePlan.ambient_then_each_led(N_LEDS, 10_000.0))
+        assert len(frames) == N_LEDS + 1 and frames[0].pixels.shape == camera.scene.shape
