@@ -1,0 +1,78 @@
+"""``msflash booth-emulator`` and the bench function."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+from acquisition.cli_booth import booth_emulator, register
+from acquisition.cli_common import UsageError
+from led_controller import LedBooth
+from led_controller.bench import run_bench
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _parse(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="msflash")
+    register(parser.add_subparsers())
+    return parser.parse_args(list(argv))
+
+
+def test_booth_emulator_handler_serves_until_stopped(capsys: pytest.CaptureFixture[str]) -> None:
+    args = _parse("booth-emulator", "--names", "a,b", "--peaks-nm", "450,650")
+    stop = threading.Event()
+    result: list[int] = []
+    thread = threading.Thread(target=lambda: result.append(booth_emulator(args, stop=stop)))
+    thread.start()
+    try:
+        port = ""
+        while not port and thread.is_alive():
+            port = capsys.readouterr().out.strip()
+        with LedBooth.open(port) as booth:
+            assert booth.info.names == ("a", "b")
+    finally:
+        stop.set()
+        thread.join(5)
+    assert result == [0]
+
+
+def test_booth_emulator_rejects_mismatched_peaks() -> None:
+    with pytest.raises(UsageError, match="2 names but 1 peaks"):
+        booth_emulator(_parse("booth-emulator", "--names", "a,b", "--peaks-nm", "450"))
+
+
+def test_booth_emulator_process_prints_its_port_and_stops_on_ctrl_c() -> None:
+    code = "import argparse,sys; from acquisition.cli_booth import register; p=argparse.ArgumentParser(); " \
+           "register(p.add_subparsers()); a=p.parse_args(sys.argv[1:]); sys.exit(a.handler(a))"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, "booth-emulator"], cwd=ROOT, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        port = proc.stdout.readline().strip()
+        assert port.startswith("/dev/pts/")
+        with LedBooth.open(port) as booth:
+            assert booth.info.channels == 7
+        os.kill(proc.pid, signal.SIGINT)
+        assert proc.wait(10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        proc.stdout.close()
+        proc.stderr.close()
+
+
+def test_bench_reports_its_figures() -> None:
+    figures = run_bench(round_trips=5, uploads=1, steps=16, channels=8)
+    assert figures["booth_round_trip_ms_median"] > 0
+    assert figures["booth_pattern_upload_ms_median"] > 0
+    assert (figures["booth_pattern_steps"], figures["booth_pattern_channels"]) == (16, 8)
