@@ -1,0 +1,104 @@
+"""``minimise_quadratic``: exact small QPs, checked by KKT conditions and by scipy."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import minimize
+
+from processing.errors import SolverError
+from processing.least_squares import minimise_quadratic, recording_problems
+from tests.helpers import SOLVER
+
+PROPERTY = settings(max_examples=25, deadline=None)
+
+
+def random_problem(seed: int, n: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A positive definite H, f, and constraints G x ≥ h feasible at a known point x0."""
+    rng = np.random.default_rng(seed)
+    factor = rng.normal(size=(n + 2, n))
+    hessian = factor.T @ factor + 0.05 * np.eye(n)
+    linear = rng.normal(size=n) * 3
+    constraints = rng.normal(size=(m, n))
+    x0 = rng.normal(size=n)
+    bounds = constraints @ x0 - rng.uniform(0, 1, size=m)  # x0 strictly feasible
+    return hessian, linear, constraints, bounds, x0
+
+
+def objective(hessian: np.ndarray, linear: np.ndarray, x: np.ndarray) -> float:
+    return float(0.5 * x @ hessian @ x - linear @ x)
+
+
+@PROPERTY
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 6), m=st.integers(0, 10))
+def test_kkt_conditions_hold(seed: int, n: int, m: int) -> None:
+    hessian, linear, constraints, bounds, _ = random_problem(seed, n, m)
+    solution = minimise_quadratic(hessian, linear, constraints, bounds)
+    x = solution.x
+    scale = max(1.0, float(np.abs(linear).max()), float(np.abs(bounds).max(initial=0)))
+    slack = constraints @ x - bounds
+    assert np.all(slack >= -SOLVER * scale), "primal feasibility"
+    gradient = hessian @ x - linear
+    active = np.flatnonzero(slack <= 1e-6 * scale)
+    # Stationarity: ∇ = Gᵀ_active λ with λ ≥ 0 (and so complementary slackness: λ = 0 off the active set).
+    if active.size:
+        multipliers, *_ = np.linalg.lstsq(constraints[active].T, gradient, rcond=None)
+        assert np.all(multipliers >= -1e-6 * scale), "dual feasibility"
+        residual = constraints[active].T @ multipliers - gradient
+    else:
+        residual = gradient
+    assert np.linalg.norm(residual) <= 1e-6 * scale, "stationarity"
+    assert solution.objective == pytest.approx(objective(hessian, linear, x), rel=1e-12, abs=1e-12)
+    np.testing.assert_array_equal(solution.active, slack <= 1e-9 * np.maximum(1.0, np.abs(bounds)))
+
+
+@PROPERTY
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 5), m=st.integers(1, 8))
+def test_not_worse_than_scipy_or_random_feasible_points(seed: int, n: int, m: int) -> None:
+    hessian, linear, constraints, bounds, x0 = random_problem(seed, n, m)
+    best = objective(hessian, linear, minimise_quadratic(hessian, linear, constraints, bounds).x)
+    reference = minimize(
+        lambda x: objective(hessian, linear, x), x0, jac=lambda x: hessian @ x - linear, method="SLSQP",
+        constraints=[{"type": "ineq", "fun": lambda x: constraints @ x - bounds, "jac": lambda x: constraints}],
+        options={"ftol": 1e-14, "maxiter": 500},
+    )
+    scale = max(1.0, abs(best))
+    if reference.success and np.all(constraints @ reference.x - bounds >= -1e-9):
+        assert best <= reference.fun + SOLVER * scale
+    rng = np.random.default_rng(seed + 1)
+    points = x0 + rng.normal(size=(200, n)) * rng.uniform(0.01, 3, size=(200, 1))
+    feasible = points[np.all(points @ constraints.T >= bounds, axis=1)]
+    for point in feasible:
+        assert best <= objective(hessian, linear, point) + SOLVER * scale
+
+
+def test_unconstrained_is_the_linear_solve() -> None:
+    hessian, linear, *_ = random_problem(1, 4, 0)
+    x = minimise_quadratic(hessian, linear).x
+    np.testing.assert_allclose(x, np.linalg.solve(hessian, linear), rtol=1e-10)
+
+
+def test_box_constrained_is_clipped_for_diagonal_hessian() -> None:
+    n = 5
+    hessian = np.diag([1.0, 2.0, 3.0, 4.0, 5.0])
+    linear = np.array([-3.0, 0.5, 10.0, 2.0, -0.1])
+    constraints = np.vstack([np.eye(n), -np.eye(n)])
+    bounds = np.concatenate([np.zeros(n), -np.ones(n)])
+    x = minimise_quadratic(hessian, linear, constraints, bounds).x
+    np.testing.assert_allclose(x, np.clip(linear / np.diag(hessian), 0, 1), atol=1e-12)
+
+
+def test_infeasible_and_indefinite_raise() -> None:
+    with pytest.raises(SolverError, match="cannot all be met"):
+        minimise_quadratic(np.eye(1), np.zeros(1), np.array([[1.0], [-1.0]]), np.array([1.0, 0.0]), where="test")
+    with pytest.raises(SolverError, match="test: the normal matrix is not positive definite"):
+        minimise_quadratic(np.zeros((2, 2)), np.zeros(2), where="test")
+
+
+def test_recording_problems_collects_what_was_solved() -> None:
+    with recording_problems() as problems:
+        minimise_quadratic(np.eye(2), np.ones(2), np.eye(2), np.zeros(2))
+    assert len(problems) == 1
+    np.testing.assert_array_equal(problems[0][0], np.eye(2))
