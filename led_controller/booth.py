@@ -579,7 +579,8 @@ class LedBooth:
 def _open_error(url: str, err: serial.SerialException) -> BoothError:
     code = getattr(err, "errno", None)
     text = str(err)
-    if code == errno.ENOENT or "No such file" in text or "could not open port" in text and "[Errno 2]" in text:
+    # pyserial folds the OSError into its message, so match the errno text as well as the code.
+    if code == errno.ENOENT or "[Errno 2]" in text or "No such file" in text:
         return BoothNotFoundError(
             f"booth {url}: no such port; expected an existing serial device "
             "(run 'msflash doctor' or 'msflash devices' to list booths)"

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -36,6 +37,7 @@ def test_booth_emulator_handler_serves_until_stopped(capsys: pytest.CaptureFixtu
         port = ""
         while not port and thread.is_alive():
             port = capsys.readouterr().out.strip()
+            time.sleep(0.001)
         with LedBooth.open(port) as booth:
             assert booth.info.names == ("a", "b")
     finally:
