@@ -16,6 +16,8 @@ Frames are rendered synchronously and queued. :meth:`next_frame` pops the oldest
 queued it raises :class:`~acquisition.errors.FrameTimeoutError` at once when no trigger can be
 on its way (software/camera triggering, nothing rendering), and waits at most ``timeout_s`` only
 when the trigger comes from another thread (booth triggering) or a render is in progress.
+A trigger that fails (bad LED levels, more triggers than steps) raises ``CameraError`` and, in
+the first case, still consumes its step: the capture is broken at that point anyway.
 """
 
 from __future__ import annotations
