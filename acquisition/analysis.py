@@ -81,9 +81,23 @@ def load_frame_stack(sequence: Sequence) -> FrameStack:
     return FrameStack(ambient, led_frames, spec, ambient_index, led_indices)
 
 
-def sequence_statistics(stack: FrameStack) -> SequenceStatistics:
+DEFAULT_BIN_FACTOR = 4
+"""Block size summed before estimation: the model is linear so block sums obey it exactly, and the
+noise of the LED-only images (which biases the weights) drops by its square; the authors'
+code downsamples by 4 as well. Frames too small for it fall back to smaller blocks. On the two
+independent samples it brought the spectrum RMSE from 0.233/0.283 (every pixel) to 0.178/0.191,
+against 0.192/0.165 for the best non-negative LED fit of the true spectrum."""
+
+
+def sequence_statistics(stack: FrameStack, cfa: str | None = None, bin_factor: int = DEFAULT_BIN_FACTOR) -> SequenceStatistics:
     """The sufficient statistics of eq. 4–6 for a loaded frame stack."""
-    return accumulate_statistics(stack.ambient, stack.led_frames, stack.spec)
+    period = 2 if cfa is not None else 1
+    height, width = stack.ambient.shape[:2]
+    # Keep at least 8 blocks per side, so that tiny frames still give enough samples.
+    while bin_factor > 1 and min(height, width) // (bin_factor * period) < 8:
+        bin_factor //= 2
+    return accumulate_statistics(stack.ambient, stack.led_frames, stack.spec, bin_factor=max(bin_factor, 1),
+                                 cfa_period=period)
 
 
 def led_spectra_photons(sequence: Sequence) -> Spectra:
@@ -103,10 +117,11 @@ def camera_responsivities_photons(sequence: Sequence) -> Spectra:
 
 
 def estimate_sequence(sequence: Sequence, method: str = "tikhonov", alpha: float | str = "auto",
-                      stack: FrameStack | None = None) -> AmbientEstimate:
+                      stack: FrameStack | None = None, bin_factor: int = DEFAULT_BIN_FACTOR) -> AmbientEstimate:
     """Estimate the ambient illuminant of a sequence (eq. 4–6)."""
     stack = stack or load_frame_stack(sequence)
-    return estimate_ambient(sequence_statistics(stack), led_spectra_photons(sequence), method=method, alpha=alpha)
+    statistics = sequence_statistics(stack, sequence.camera.cfa, bin_factor)
+    return estimate_ambient(statistics, led_spectra_photons(sequence), method=method, alpha=alpha)
 
 
 def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarray:

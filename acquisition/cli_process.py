@@ -30,6 +30,16 @@ def _alpha(text: str) -> float | str:
     return value
 
 
+def _bin(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise UsageError(f"--bin '{text}': expected a whole number ≥ 1") from None
+    if value < 1:
+        raise UsageError(f"--bin {value}: expected a whole number ≥ 1")
+    return value
+
+
 def _weights(text: str, n_leds: int) -> np.ndarray:
     try:
         values = np.array([float(v) for v in text.split(",")], dtype=float)
@@ -48,13 +58,15 @@ def add_estimation_options(parser: argparse.ArgumentParser) -> None:
                         help="ambient estimator (default: tikhonov, non-negative with roughness penalty)")
     parser.add_argument("--alpha", default="auto", type=_alpha,
                         help="dimensionless roughness weight, or 'auto' (generalised cross-validation)")
+    parser.add_argument("--bin", type=_bin, default=analysis.DEFAULT_BIN_FACTOR,
+                        help=f"sum BIN×BIN pixel blocks before estimating (default {analysis.DEFAULT_BIN_FACTOR}; 1 = every pixel)")
 
 
 def _estimate(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
     if sequence.partial:
         progress(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
-    estimate = analysis.estimate_sequence(sequence, args.method, args.alpha)
+    estimate = analysis.estimate_sequence(sequence, args.method, args.alpha, bin_factor=args.bin)
     payload = analysis.estimate_payload(sequence, estimate)
     for warning in estimate.warnings:
         progress(f"warning: {warning}")
@@ -74,7 +86,7 @@ def _estimate(args: argparse.Namespace) -> int:
 
 def _flash(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
-    estimate = analysis.estimate_sequence(sequence, args.method, args.alpha)
+    estimate = analysis.estimate_sequence(sequence, args.method, args.alpha, bin_factor=args.bin)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
         solution = analysis.solve_sequence_flash(sequence, args.mode, estimate.ambient_weights, args.target, args.bounds)

@@ -1,0 +1,173 @@
+"""What ``msflash run`` leaves next to the sequence: JSON results, images, a plot and a report.
+
+Matplotlib (Agg) draws the spectra plot and writes the 8-bit PNG previews; linear results go
+through :mod:`acquisition.image_io` as float EXR.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from acquisition import analysis
+from acquisition.cli_common import dumps_json
+from acquisition.image_io import write_image
+from acquisition.sequence_format import Sequence
+from processing import datasets
+from processing.ambient import AmbientEstimate
+from processing.flash import FlashSolution
+from processing.metrics import spectrum_rmse
+from processing.render import camera_to_xyz_matrix, demosaic_superpixel, srgb_preview
+from processing.spectra import Spectra
+from processing.synthesis import synthesize
+
+
+def _pyplot():  # noqa: ANN202 - matplotlib is imported lazily, with the non-interactive backend
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def write_png(path: Path, rgb8: np.ndarray) -> Path:
+    """Write an 8-bit RGB preview as PNG."""
+    _pyplot().imsave(path, rgb8)
+    return path
+
+
+def linear_rgb(sequence: Sequence, image: np.ndarray) -> np.ndarray:
+    """An (H, W, 3) linear camera image from a linear frame (demosaicked 2×2 if it is a mosaic)."""
+    if image.ndim == 2:
+        if sequence.camera.cfa is None:
+            return np.repeat(image[:, :, None], 3, axis=2)
+        return demosaic_superpixel(image, sequence.camera.cfa)
+    return image
+
+
+def _camera_to_xyz(sequence: Sequence) -> np.ndarray | None:
+    responsivities = sequence.camera_responsivities()
+    if responsivities is None:
+        return None
+    grid = sequence.grid
+    chart = datasets.macbeth().resample(grid, outside="edge")
+    return camera_to_xyz_matrix(responsivities.to_unit("photons"), chart,
+                                datasets.illuminant("D65", grid).to_unit("photons"))
+
+
+def _linearise(sequence: Sequence, index: int) -> np.ndarray:
+    frame = sequence.frames[index]
+    raw = sequence.load_frame(index).astype(np.float32)
+    return (raw - sequence.camera.black_level) / (frame.exposure_us * frame.gain)
+
+
+def plot_spectra(path: Path, sequence: Sequence, estimate: AmbientEstimate, solutions: dict[str, FlashSolution],
+                 true_ambient: Spectra | None, target: Spectra | None) -> Path:
+    """The spectra plot: true ambient, estimate ± band, flash mixes, ambient + complementary flash."""
+    plt = _pyplot()
+    wavelengths = sequence.wavelengths_nm
+    leds = sequence.led_spectra()
+    estimate_values = analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum)
+    std = estimate.spectrum.replace(values=estimate.spectrum_std[:, None]).to_unit(sequence.spectral_unit).values[:, 0]
+    peak = float(np.max(estimate_values)) or 1.0
+    figure, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    left, right = axes
+    left.fill_between(wavelengths, (estimate_values - std) / peak, (estimate_values + std) / peak,
+                      color="tab:blue", alpha=0.2, label="estimate ± 1σ")
+    left.plot(wavelengths, estimate_values / peak, color="tab:blue", lw=2, label=f"estimate ({estimate.method})")
+    if true_ambient is not None:
+        truth = true_ambient.resample(sequence.grid).to_unit(sequence.spectral_unit).values[:, 0]
+        scale = float(estimate_values @ truth) / float(truth @ truth) / peak
+        left.plot(wavelengths, truth * scale, color="black", ls="--", lw=1.5, label="true ambient")
+    left.set_title("Ambient illuminant")
+    left.set_xlabel("wavelength (nm)")
+    left.set_ylabel(f"relative spectral power ({sequence.spectral_unit})")
+    left.legend()
+    for mode, solution in solutions.items():
+        flash = leds.values @ solution.flash_weights
+        right.plot(wavelengths, flash / peak, lw=1.5, label=f"{mode} flash")
+    complementary = solutions.get("complementary")
+    if complementary is not None:
+        total = leds.values @ (complementary.ambient_weights + complementary.flash_weights)
+        right.plot(wavelengths, total / peak, color="tab:purple", lw=2, label="ambient + complementary")
+        if target is not None and complementary.scale:
+            target_values = target.to_unit(sequence.spectral_unit).values[:, 0]
+            target_scale = float(total @ target_values) / float(target_values @ target_values) / peak
+            right.plot(wavelengths, target_values * target_scale, color="gray", ls=":", label="target (scaled)")
+    right.plot(wavelengths, estimate_values / peak, color="tab:blue", lw=1, alpha=0.6, label="ambient (estimate)")
+    right.set_title("Flash mixes")
+    right.set_xlabel("wavelength (nm)")
+    right.legend()
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    return path
+
+
+def write_run_report(out: Path, sequence: Sequence, estimate: AmbientEstimate, solutions: dict[str, FlashSolution],
+                     mode: str, true_ambient: Spectra | None, stack: analysis.FrameStack, target_name: str) -> dict[str, Any]:
+    """Write everything a run shows a person; return the summary (also written as run.json)."""
+    out = Path(out)
+    estimate_payload = analysis.estimate_payload(sequence, estimate)
+    (out / "estimate.json").write_text(dumps_json(estimate_payload) + "\n")
+    for name, solution in solutions.items():
+        (out / f"flash-{name}.json").write_text(dumps_json(analysis.flash_payload(sequence, solution, target_name)) + "\n")
+
+    matrix = _camera_to_xyz(sequence)
+    ambient_linear = _linearise(sequence, stack.ambient_index)
+    previews = {"ambient": write_png(out / "ambient.png", srgb_preview(linear_rgb(sequence, ambient_linear), matrix))}
+    for name, solution in solutions.items():
+        image, _ = synthesize(stack.ambient, stack.led_frames, stack.spec, solution.flash_weights)
+        write_image(out / f"{name}.exr", image, {"msflash:flash_weights": solution.flash_weights.tolist()})
+        previews[name] = write_png(out / f"{name}.png", srgb_preview(linear_rgb(sequence, image), matrix))
+    flash_indices = sequence.indices("flash")
+    if flash_indices:
+        captured = _linearise(sequence, flash_indices[-1])
+        previews["flash-capture"] = write_png(out / "flash-capture.png", srgb_preview(linear_rgb(sequence, captured), matrix))
+
+    target = None
+    if "complementary" in solutions:
+        target = analysis.target_illuminant(target_name, sequence).to_unit(sequence.spectral_unit)
+    plot = plot_spectra(out / "spectra.png", sequence, estimate, solutions, true_ambient, target)
+    summary: dict[str, Any] = {
+        "sequence": str(out / "sequence"),
+        "frames": len(sequence.frames),
+        "ambient_weights": estimate.ambient_weights,
+        "relative_residual": estimate.relative_residual,
+        "estimate_warnings": list(estimate.warnings),
+        "flash": {name: {"flash_weights": s.flash_weights, "scale": s.scale, "target_reached": s.target_reached}
+                  for name, s in solutions.items()},
+        "recaptured_mode": mode,
+        "previews": {name: str(path) for name, path in previews.items()},
+        "plot": str(plot),
+    }
+    if true_ambient is not None:
+        truth = true_ambient.resample(sequence.grid).to_unit(sequence.spectral_unit).values[:, 0]
+        summary["spectrum_rmse_vs_truth"] = spectrum_rmse(analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum), truth)
+    _write_markdown(out / "report.md", summary, sequence)
+    return summary
+
+
+def _write_markdown(path: Path, summary: dict[str, Any], sequence: Sequence) -> None:
+    names = [led.name for led in sequence.leds]
+    lines = [
+        "# msflash run", "",
+        f"Sequence: `{summary['sequence']}` ({summary['frames']} frames, camera {sequence.camera.model}).", "",
+        "![spectra](spectra.png)", "",
+        "| LED | " + " | ".join(names) + " |", "|---|" + "---|" * len(names),
+        "| ambient weights | " + " | ".join(f"{w:.3g}" for w in summary["ambient_weights"]) + " |",
+    ]
+    for mode, flash in summary["flash"].items():
+        lines.append(f"| {mode} flash | " + " | ".join(f"{w:.3g}" for w in flash["flash_weights"]) + " |")
+    lines += ["", f"Relative residual of the ambient fit: {summary['relative_residual']:.4f}."]
+    if "spectrum_rmse_vs_truth" in summary:
+        lines.append(f"Spectrum RMSE against the true ambient (paper's Table 1 metric): {summary['spectrum_rmse_vs_truth']:.4f}.")
+    for note in summary["estimate_warnings"]:
+        lines.append(f"- warning: {note}")
+    lines += ["", "| ambient | matching (synthesised) | complementary (synthesised) | flash re-capture |", "|---|---|---|---|",
+              "| ![](ambient.png) | ![](matching.png) | ![](complementary.png) | "
+              + ("![](flash-capture.png)" if "flash-capture" in summary["previews"] else "—") + " |", ""]
+    path.write_text("\n".join(lines))
