@@ -22,6 +22,7 @@ from acquisition.cli_process import add_estimation_options
 from acquisition.plan import CapturePlan
 from acquisition.rig import Rig, open_rig
 from acquisition.sequence_format import SequenceWriter, read_sequence
+from led_controller.booth import sigterm_as_exit
 from processing.errors import TargetUnreachableWarning
 
 CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG")
@@ -62,7 +63,8 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f"--out {out}: already holds a run; expected a new directory")
     out.mkdir(parents=True, exist_ok=True)
     progress(f"opening rig '{args.rig}' (ambient {args.ambient}, scene {args.scene})")
-    with _open(args) as rig, _writer(rig, out) as writer:
+    # SIGTERM unwinds like Ctrl-C, so the LEDs go off and the partial sequence stays readable.
+    with sigterm_as_exit(), _open(args) as rig, _writer(rig, out) as writer:
         exposure = _capture_led_sequence(rig, writer, args.exposure_us)
         # Estimate from the frames as recorded (the sequence is still open: complete is false).
         sequence = read_sequence(writer.path.parent)
@@ -99,7 +101,7 @@ def _capture(args: argparse.Namespace) -> int:
     if (out / "sequence" / "sequence.json").exists():
         raise UsageError(f"--out {out}: already holds a sequence; expected a new directory")
     out.mkdir(parents=True, exist_ok=True)
-    with _open(args) as rig, _writer(rig, out) as writer:
+    with sigterm_as_exit(), _open(args) as rig, _writer(rig, out) as writer:
         _capture_led_sequence(rig, writer, args.exposure_us)
         writer.finish()
     print(out / "sequence")
