@@ -550,6 +550,8 @@ class AravisCamera:
         self._stats = AcquisitionStats()
         self._trigger = TriggerConfig(mode="free")
         self._strobe: StrobeConfig | None = None
+        self._step_request: tuple[float, float] | None = None
+        self._current: tuple[float, float] = (float("nan"), float("nan"))
         self._open()
         try:
             self._setup(pixel_format, roi)
@@ -1038,18 +1040,22 @@ class AravisCamera:
             raise CameraError(f"{self._name}: plan trigger {plan.trigger!r}; expected software, booth or camera")
         if self._strobe_request is not None:
             self.configure_strobe(self._strobe_request)
+        self._step_request = None
+        self._current = (self.exposure_us, self.gain)
         self._apply_step(0, plan)
         self._plan = plan
         self._build_stream(len(plan.steps) + self._extra_buffers)
 
     def _apply_step(self, index: int, plan: CapturePlan) -> tuple[float, float]:
+        # Write only what changes: each write and read-back is a GVCP round trip on the trigger path.
         step = plan.steps[index]
-        exposure = self.exposure_us
-        if abs(exposure - step.exposure_us) > 1e-6:
+        requested = self._step_request
+        exposure, gain = self._current
+        if requested is None or requested[0] != step.exposure_us:
             exposure = self.set_exposure_us(step.exposure_us)
-        gain = self.gain
-        if abs(gain - step.gain) > 1e-9 * max(1.0, step.gain):
+        if requested is None or requested[1] != step.gain:
             gain = self.set_gain(step.gain)
+        self._step_request = (step.exposure_us, step.gain)
         log.debug("%s: step %d exposure %.1f us gain %.3f", self._name, index, exposure, gain)
         self._current = (exposure, gain)
         return exposure, gain
@@ -1136,7 +1142,10 @@ class AravisCamera:
         index = self._n_triggered
         settings = self._current
         if self._plan is not None and index < len(self._plan.steps):
-            settings = self._apply_step(index, self._plan)
+            try:
+                settings = self._apply_step(index, self._plan)
+            except CameraError as err:
+                raise type(err)(f"{err} (while setting up {self._step_label(index)})") from err
         try:
             self._live().execute_command("TriggerSoftware")
         except GLib.Error as err:

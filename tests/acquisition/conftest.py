@@ -111,7 +111,8 @@ def gv_fake_process(aravis: ModuleType) -> Iterator[Callable[..., subprocess.Pop
     processes: list[subprocess.Popen[bytes]] = []
 
     def start(serial: str = "MSFPROC1", lost_per_thousand: float | None = None) -> subprocess.Popen[bytes]:
-        stack.enter_context(aravis.gvcp_port_lock())
+        if not processes:  # one lock for the whole test (flock would block a second time)
+            stack.enter_context(aravis.gvcp_port_lock())
         command = [FAKE_GV_TOOL, "-i", "127.0.0.1", "-s", serial, "-g", str(aravis.FAKE_SFNC_XML)]
         if lost_per_thousand is not None:
             command += ["-r", str(lost_per_thousand)]
