@@ -12,24 +12,16 @@ import json
 import sys
 from typing import Any
 
-import numpy as np
+from acquisition.image_io import json_default
 
 
 class UsageError(ValueError):
     """Bad input from the user (a file, field or option); the CLI exits with status 2."""
 
 
-def _to_jsonable(value: Any) -> Any:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
-
-
 def dumps_json(payload: dict[str, Any]) -> str:
     """One JSON object as text (numpy arrays and scalars converted)."""
-    return json.dumps(payload, default=_to_jsonable, allow_nan=False)
+    return json.dumps(payload, default=json_default, allow_nan=False)
 
 
 def print_json(payload: dict[str, Any]) -> None:

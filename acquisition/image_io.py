@@ -202,12 +202,13 @@ def _attribute_json(path: Path, attributes: dict) -> str:
         if not isinstance(name, str) or not name.startswith(_ATTRIBUTE_PREFIX):
             raise RecordingError(f"{path}: attribute name {name!r}; expected a name starting with '{_ATTRIBUTE_PREFIX}'")
     try:
-        return json.dumps(attributes, allow_nan=False, default=_json_default)
+        return json.dumps(attributes, allow_nan=False, default=json_default)
     except (TypeError, ValueError) as err:
         raise RecordingError(f"{path}: attributes cannot be stored ({err}); expected JSON-compatible values") from err
 
 
-def _json_default(value: object) -> object:
+def json_default(value: object) -> object:
+    """``json.dumps`` fallback for numpy arrays and scalars (the one such converter in msflash)."""
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.generic):
@@ -218,7 +219,7 @@ def _json_default(value: object) -> object:
 def _set_native_attribute(spec: oiio.ImageSpec, name: str, value: object) -> None:
     # Native header attributes are a convenience for EXR viewers; the JSON description is what
     # read_image_header relies on, so values without a simple OpenImageIO type are skipped here.
-    value = _json_default(value) if isinstance(value, np.ndarray | np.generic) else value
+    value = json_default(value) if isinstance(value, np.ndarray | np.generic) else value
     if isinstance(value, bool):
         spec.attribute(name, int(value))
     elif isinstance(value, str | int | float):
