@@ -1,0 +1,226 @@
+"""Ambient estimation (eq. 4–6): exact recovery, best approximation, invariances, reliability signals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from processing.ambient import AMBIENT_METHODS, CONDITION_WARNING, RESIDUAL_WARNING, estimate_ambient
+from processing.errors import SolverError, SpectralDataError
+from processing.image_formation import CFA_PATTERNS, Scene, SensorModel
+from processing.statistics import FrameStackSpec, accumulate_statistics
+from tests.helpers import (
+    EXACT,
+    WEIGHTS_EXACT,
+    WEIGHTS_ILL_POSED,
+    WEIGHTS_QUANTISED,
+    ambient,
+    chart,
+    direct_lstsq_weights,
+    led_mix,
+    leds_photons,
+    linear_frames,
+    one_hot_levels,
+    rendered_frames,
+    spec_for,
+)
+
+PROPERTY = settings(max_examples=25, deadline=None)
+TRUE_WEIGHTS = np.array([0.2, 0.05, 0.4, 0.3, 0.6, 0.1, 0.25])
+"""A non-negative mix of the 7 LEDs used as the ambient."""
+EXACT_METHODS = [("lstsq", "auto"), ("nonneg", "auto"), ("tikhonov", 0.0), ("roughness", 0.0)]
+"""Methods that recover an in-span ambient exactly (the penalised ones with α = 0)."""
+
+
+def estimate(ambient_frame, led_frames, spec, led_spectra=None, method="lstsq", alpha="auto", **options):
+    statistics = accumulate_statistics(ambient_frame, led_frames, spec, **options)
+    return estimate_ambient(statistics, leds_photons() if led_spectra is None else led_spectra, method, alpha)
+
+
+@pytest.fixture(scope="module")
+def mix_frames():
+    return linear_frames(led_mix(TRUE_WEIGHTS))
+
+
+@pytest.mark.parametrize(("method", "alpha"), EXACT_METHODS)
+def test_led_mix_recovered_from_float_frames(mix_frames, method: str, alpha) -> None:
+    result = estimate(*mix_frames, method=method, alpha=alpha)
+    np.testing.assert_allclose(result.ambient_weights, TRUE_WEIGHTS, atol=WEIGHTS_EXACT)
+    np.testing.assert_allclose(result.spectrum.values[:, 0], led_mix(TRUE_WEIGHTS).values[:, 0],
+                               atol=WEIGHTS_EXACT * led_mix(TRUE_WEIGHTS).values.max())
+    assert result.relative_residual < WEIGHTS_EXACT
+    assert result.warnings == ()
+    assert result.saturated_fraction == 0.0
+    assert result.method == method
+
+
+def test_led_mix_default_method_near_exact(mix_frames) -> None:
+    # GCV picks the smallest α on the grid for noise-free data; the bias it leaves is tiny.
+    result = estimate(*mix_frames, method="tikhonov", alpha="auto")
+    np.testing.assert_allclose(result.ambient_weights, TRUE_WEIGHTS, atol=WEIGHTS_QUANTISED)
+
+
+@pytest.mark.parametrize("method", sorted(AMBIENT_METHODS))
+def test_led_mix_recovered_from_rendered_frames(method: str) -> None:
+    # noise=False still rounds to integer DN: ±0.5 DN on values up to ~6·10⁴ DN, differenced
+    # frames with exposures metered per frame — a relative error of order 10⁻⁴ on the weights.
+    sensor = SensorModel()
+    a, f, exposures, gains = rendered_frames(led_mix(TRUE_WEIGHTS), sensor=sensor)
+    result = estimate(a, f, spec_for(sensor, exposures, gains, one_hot_levels(7)), method=method,
+                      alpha=0.0 if method in ("tikhonov", "roughness") else "auto")
+    np.testing.assert_allclose(result.ambient_weights, TRUE_WEIGHTS, atol=WEIGHTS_QUANTISED * TRUE_WEIGHTS.max())
+
+
+def test_ambient_outside_span_gives_best_camera_space_fit() -> None:
+    frames = linear_frames(ambient("tungsten"))
+    result = estimate(*frames, method="lstsq")
+    direct = direct_lstsq_weights(*frames)
+    np.testing.assert_allclose(result.ambient_weights, direct, rtol=WEIGHTS_ILL_POSED)
+    statistics = accumulate_statistics(*frames)
+    assert statistics.residual_energy(result.ambient_weights) == pytest.approx(
+        statistics.residual_energy(direct), rel=WEIGHTS_EXACT)
+    assert result.relative_residual > 1e-3  # really outside the span
+
+
+def test_exposure_and_gain_normalisation() -> None:
+    reference = estimate(*linear_frames(ambient("fluorescent")))
+    exposures = [5000.0, 8000.0, 10000.0, 2500.0, 12500.0, 3000.0, 9000.0, 4000.0]
+    gains = [1.5, 1.0, 2.0, 1.0, 4.0, 1.0, 1.25, 3.0]
+    varied = estimate(*linear_frames(ambient("fluorescent"), exposures=exposures, gains=gains, black=256.0))
+    np.testing.assert_allclose(varied.ambient_weights, reference.ambient_weights, rtol=WEIGHTS_ILL_POSED)
+    np.testing.assert_allclose(varied.spectrum.values, reference.spectrum.values,
+                               atol=WEIGHTS_ILL_POSED * reference.spectrum.values.max())
+
+
+@pytest.mark.parametrize("cfa", sorted(CFA_PATTERNS))
+def test_mosaic_gives_the_same_weights_as_rgb(mix_frames, cfa: str) -> None:
+    mosaic_frames = linear_frames(led_mix(TRUE_WEIGHTS), cfa=cfa)
+    assert mosaic_frames[0].ndim == 2
+    rgb = estimate(*mix_frames)
+    raw = estimate(*mosaic_frames)
+    np.testing.assert_allclose(raw.ambient_weights, rgb.ambient_weights, atol=WEIGHTS_EXACT)
+    assert raw.n_samples == mix_frames[0].shape[0] * mix_frames[0].shape[1]
+
+
+def test_mosaic_outside_span_matches_direct_fit_of_the_mosaic() -> None:
+    frames = linear_frames(ambient("tungsten"), cfa="BGGR")
+    statistics = accumulate_statistics(*frames)
+    weights = estimate_ambient(statistics, leds_photons(), "lstsq").ambient_weights
+    direct = direct_lstsq_weights(*frames)
+    np.testing.assert_allclose(weights, direct, rtol=WEIGHTS_ILL_POSED)
+    # The fitted image is the best one: its residual equals the direct fit's.
+    assert statistics.residual_energy(weights) == pytest.approx(statistics.residual_energy(direct), rel=WEIGHTS_EXACT)
+
+
+def test_saturated_strip_is_ignored() -> None:
+    sensor = SensorModel()
+    strip = 6
+    scene = chart(specular_strip_px=strip)
+    plain = chart()
+    levels = one_hot_levels(7)
+    a, f, exposures, gains = rendered_frames(led_mix(TRUE_WEIGHTS), sensor=sensor, scene=scene)
+    assert np.all(a[-strip:] == sensor.white_level)  # the highlight saturates at the metered exposure
+    with_strip = estimate(a, f, spec_for(sensor, exposures, gains, levels), method="nonneg")
+    a0, f0, exposures0, gains0 = rendered_frames(led_mix(TRUE_WEIGHTS), sensor=sensor, scene=plain)
+    without = estimate(a0, f0, spec_for(sensor, exposures0, gains0, levels), method="nonneg")
+    np.testing.assert_allclose(with_strip.ambient_weights, without.ambient_weights, rtol=EXACT, atol=EXACT)
+    assert with_strip.saturated_fraction == pytest.approx(strip / scene.shape[0])
+    assert without.saturated_fraction == 0.0
+    # Had the clipped pixels been used, the estimate would be biased.
+    unmasked = FrameStackSpec(sensor.black_level, 1e9, 1 / exposures[0], tuple(1 / e for e in exposures[1:]), levels)
+    biased = estimate(a, f, unmasked, method="nonneg")
+    assert np.max(np.abs(biased.ambient_weights - TRUE_WEIGHTS)) > 10 * WEIGHTS_QUANTISED
+    np.testing.assert_allclose(without.ambient_weights, TRUE_WEIGHTS, atol=WEIGHTS_QUANTISED)
+
+
+def test_many_saturated_samples_are_flagged() -> None:
+    a, f, spec = linear_frames(ambient("tungsten"))
+    brightest = np.max(np.stack([a, *f]), axis=(0, 3))
+    white = np.quantile(brightest, 0.4)  # 60 % of the pixels reach white in some frame
+    result = estimate(a, f, FrameStackSpec(0.0, float(white), spec.ambient_scale, spec.led_scales, spec.led_levels))
+    assert result.saturated_fraction > 0.5
+    assert any("saturated" in warning for warning in result.warnings)
+
+
+# -- invariances (hypothesis) -------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def tungsten_frames():
+    return linear_frames(ambient("tungsten"))
+
+
+@PROPERTY
+@given(gain=st.floats(1e-3, 1e3), method=st.sampled_from(sorted(AMBIENT_METHODS)))
+def test_spectrum_shape_invariant_to_global_gain(tungsten_frames, gain: float, method: str) -> None:
+    a, f, spec = tungsten_frames
+    reference = estimate(a, f, spec, method=method)
+    scaled = estimate(a * gain, [x * gain for x in f], spec, method=method)
+    shape = reference.spectrum.values[:, 0] / reference.spectrum.values.max()
+    np.testing.assert_allclose(scaled.spectrum.values[:, 0] / scaled.spectrum.values.max(), shape, atol=WEIGHTS_ILL_POSED)
+    np.testing.assert_allclose(scaled.ambient_weights, reference.ambient_weights, rtol=WEIGHTS_ILL_POSED)
+
+
+@PROPERTY
+@given(order=st.permutations(range(7)), method=st.sampled_from(sorted(AMBIENT_METHODS)))
+def test_weights_permute_with_the_leds(tungsten_frames, order: list[int], method: str) -> None:
+    a, f, spec = tungsten_frames
+    reference = estimate(a, f, spec, method=method)
+    permuted = estimate(a, [f[i] for i in order], spec, led_spectra=leds_photons().select(order), method=method)
+    np.testing.assert_allclose(permuted.ambient_weights, reference.ambient_weights[order], rtol=WEIGHTS_ILL_POSED)
+    np.testing.assert_allclose(permuted.spectrum.values, reference.spectrum.values,
+                               atol=WEIGHTS_ILL_POSED * reference.spectrum.values.max())
+
+
+# -- reliability signals ----------------------------------------------------------------------
+def test_nearly_dependent_leds_are_flagged() -> None:
+    base = leds_photons()
+    values = base.values.copy()
+    values[:, 3] = values[:, 2] * (1 + 1e-5 * np.linspace(-1, 1, values.shape[0]))  # LED 4 ≈ LED 3
+    twins = base.replace(values=values)
+    result = estimate(*linear_frames(ambient("tungsten"), led_spectra=twins), led_spectra=twins)
+    assert result.condition_number > CONDITION_WARNING
+    assert any("nearly dependent" in warning for warning in result.warnings)
+
+
+def test_large_residual_is_flagged() -> None:
+    # The scene moved between the ambient and the LED frames: the LEDs cannot explain the ambient image.
+    a, f, spec = linear_frames(ambient("tungsten"))
+    moved = np.roll(a, 7, axis=1)
+    result = estimate(moved, [moved + (x - a) for x in f], spec)
+    assert result.relative_residual > RESIDUAL_WARNING
+    assert any("explain the ambient image poorly" in warning for warning in result.warnings)
+
+
+def test_good_estimate_has_no_warnings(tungsten_frames) -> None:
+    result = estimate(*tungsten_frames, method="tikhonov")
+    assert result.warnings == ()
+    assert result.relative_residual < RESIDUAL_WARNING
+    low, high = result.band
+    assert np.all(low <= result.spectrum.values[:, 0]) and np.all(result.spectrum.values[:, 0] <= high)
+
+
+# -- bad input --------------------------------------------------------------------------------
+def test_bad_input_is_refused(tungsten_frames) -> None:
+    statistics = accumulate_statistics(*tungsten_frames)
+    with pytest.raises(SpectralDataError, match="7 LED images"):
+        estimate_ambient(statistics, leds_photons().select([0, 1, 2]))
+    with pytest.raises(SpectralDataError, match="expected 'photons'"):
+        estimate_ambient(statistics, leds_photons().to_unit("energy"))
+    with pytest.raises(ValueError, match="ambient method 'bogus' is unknown"):
+        estimate_ambient(statistics, leds_photons(), "bogus")
+
+
+def test_dark_led_raises_solver_error(tungsten_frames) -> None:
+    a, f, spec = tungsten_frames
+    frames = list(f)
+    frames[2] = a.copy()  # LED 3 adds nothing
+    with pytest.raises(SolverError, match="led500 is empty"):
+        estimate(a, frames, spec)
+
+
+def test_single_surface_scene_is_refused() -> None:
+    # One surface gives 3 independent equations for 7 unknowns: the LED-only images are dependent.
+    scene = Scene(chart().reflectances, np.zeros((6, 6), dtype=np.int32))
+    with pytest.raises(SolverError, match="lstsq estimate: the normal matrix is not positive definite"):
+        estimate(*linear_frames(ambient("tungsten"), scene=scene), method="lstsq")
