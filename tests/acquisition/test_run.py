@@ -1,0 +1,97 @@
+"""`msflash run` and `msflash capture` on the sim rig, end to end (SimulatedCamera + emulator on a pty)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from acquisition import rig as rig_module
+from acquisition.cli import main
+from acquisition.sequence_format import read_sequence
+
+# The sim world's spectrum RMSE is ~0.15–0.26 (the best LED fit of its ambients is 0.16–0.21);
+# 0.35 catches a broken estimator without pinning noise.
+SPECTRUM_RMSE_LIMIT = 0.35
+
+
+@pytest.fixture(scope="module")
+def tungsten_run(tmp_path_factory: pytest.TempPathFactory) -> tuple:
+    out = tmp_path_factory.mktemp("run") / "demo"
+    status = main(["run", "--out", str(out), "--ambient", "tungsten"])
+    return status, out
+
+
+def test_run_writes_a_complete_sequence_with_a_flash_frame(tungsten_run: tuple) -> None:
+    status, out = tungsten_run
+    assert status == 0
+    sequence = read_sequence(out / "sequence")
+    assert sequence.complete
+    assert [f.role for f in sequence.frames] == ["ambient"] + ["led"] * 7 + ["flash"]
+    flash = sequence.frames[-1]
+    summary = json.loads((out / "run.json").read_text())
+    np.testing.assert_allclose(flash.led_levels, np.clip(summary["flash"]["complementary"]["flash_weights"], 0, 1),
+                               atol=1e-9)
+    assert any(level > 0 for level in flash.led_levels)
+
+
+def test_run_outputs_and_accuracy(tungsten_run: tuple) -> None:
+    _, out = tungsten_run
+    for name in ("estimate.json", "flash-matching.json", "flash-complementary.json", "spectra.png", "ambient.png",
+                 "matching.png", "complementary.png", "flash-capture.png", "matching.exr", "complementary.exr",
+                 "report.md"):
+        assert (out / name).stat().st_size > 0, name
+    estimate = json.loads((out / "estimate.json").read_text())
+    assert len(estimate["spectrum"]) == len(estimate["wavelengths_nm"]) == 31
+    summary = json.loads((out / "run.json").read_text())
+    assert summary["spectrum_rmse_vs_truth"] < SPECTRUM_RMSE_LIMIT
+    weights = np.array(summary["flash"]["matching"]["flash_weights"])
+    assert weights.max() == pytest.approx(1.0) and weights.min() >= 0
+
+
+def test_run_refuses_an_existing_run(tungsten_run: tuple, capsys: pytest.CaptureFixture) -> None:
+    _, out = tungsten_run
+    assert main(["run", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().startswith("msflash: error: --out")
+
+
+def test_capture_mosaic_sequence(tmp_path) -> None:
+    assert main(["capture", "--out", str(tmp_path / "c"), "--cfa", "GRBG", "--ambient", "fluorescent"]) == 0
+    sequence = read_sequence(tmp_path / "c" / "sequence")
+    assert sequence.complete and sequence.camera.cfa == "GRBG"
+    assert sequence.load_frame(0).ndim == 2
+    assert main(["estimate", str(tmp_path / "c" / "sequence"), "--json"]) == 0
+
+
+def test_leds_off_and_partial_sequence_kept_when_capture_fails(tmp_path, monkeypatch, capsys) -> None:
+    """A camera failure mid-sequence: exit 1, LEDs off on the emulator, frames so far readable."""
+    opened = {}
+    original = rig_module.open_sim_rig
+
+    def open_and_break(**options):
+        rig = original(**options)
+        opened["rig"] = rig
+        camera = rig.camera
+        real_next = camera.next_frame
+        calls = {"n": 0}
+
+        def failing_next(timeout_s: float):
+            calls["n"] += 1
+            if calls["n"] == 4:
+                from acquisition.errors import FrameTimeoutError
+                raise FrameTimeoutError("simulated camera: injected timeout")
+            return real_next(timeout_s)
+
+        camera.next_frame = failing_next  # fault injection on a real SimulatedCamera instance
+        return rig
+
+    monkeypatch.setattr(rig_module, "open_sim_rig", open_and_break)
+    out = tmp_path / "broken"
+    assert main(["capture", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "step 3" in err and "3 frame(s) already saved" in err
+    sequence = read_sequence(out / "sequence")
+    assert not sequence.complete and len(sequence.frames) == 3
+    booth_levels = opened["rig"].camera.led_levels_source()
+    assert all(level == 0 for level in booth_levels)
