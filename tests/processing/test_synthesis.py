@@ -1,0 +1,90 @@
+"""The computational flash image: ``m_a + Σ w_k m_f,k`` on linearised frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from processing.errors import SpectralDataError
+from processing.image_formation import SensorModel
+from processing.statistics import FrameStackSpec
+from processing.synthesis import frame_coefficients, synthesize, to_raw_values
+from tests.helpers import EXACT, FLOAT32, ambient, chart, one_hot_levels, rendered_frames, spec_for
+
+WEIGHTS = np.array([0.5, 0.0, 1.0, 0.25, 2.0, -0.3, 0.8])
+
+
+def naive(ambient_frame: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, weights: np.ndarray) -> np.ndarray:
+    a = (ambient_frame.astype(float) - spec.black_level) * spec.ambient_scale
+    diffs = np.stack([(f.astype(float) - spec.black_level) * s - a for f, s in zip(led_frames, spec.led_scales)])
+    only = np.tensordot(spec.unmixing, diffs, axes=1)
+    return a + np.tensordot(weights, only, axes=1)
+
+
+def saturated_naive(frames: list[np.ndarray], white: float) -> np.ndarray:
+    bright = np.any(np.stack(frames) >= white, axis=0)
+    return bright.any(axis=2) if bright.ndim == 3 else bright
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB", "GBRG"])
+@pytest.mark.parametrize("chunk", [1, 50, 1 << 15])
+def test_equals_naive_sum_with_differing_exposures(cfa: str | None, chunk: int) -> None:
+    sensor = SensorModel(cfa=cfa)
+    scene = chart(specular_strip_px=3)
+    gains = [1.0, 2.0, 1.0, 1.5, 1.0, 4.0, 1.0, 1.0]
+    a, f, exposures, gains = rendered_frames(ambient("fluorescent"), sensor=sensor, scene=scene, noise=True, gains=gains)
+    assert len(set(exposures)) > 1
+    spec = spec_for(sensor, exposures, gains, one_hot_levels(7))
+    image, saturated = synthesize(a, f, spec, WEIGHTS, chunk_pixels=chunk)
+    assert image.dtype == np.float32 and image.shape == a.shape
+    expected = naive(a, f, spec, WEIGHTS)
+    np.testing.assert_allclose(image, expected, rtol=0, atol=FLOAT32 * np.abs(expected).max())
+    np.testing.assert_array_equal(saturated, saturated_naive([a, *f], sensor.white_level))
+    assert saturated[-3:].all() and saturated.sum() == 3 * scene.shape[1]
+
+
+def test_multiplexed_levels() -> None:
+    rng = np.random.default_rng(0)
+    levels = np.array([[1.0, 0.5, 0.0], [0.0, 1.0, 0.5], [0.5, 0.0, 1.0], [1.0, 1.0, 1.0]])
+    a = rng.integers(100, 2000, (9, 7, 3)).astype(np.uint16)
+    frames = [a + rng.integers(0, 900, a.shape).astype(np.uint16) for _ in range(4)]
+    spec = FrameStackSpec(64.0, 4095.0, 1 / 700.0, (1 / 500.0, 1 / 900.0, 1 / 300.0, 1 / 1000.0), levels)
+    weights = np.array([0.7, -0.2, 1.3])
+    image, saturated = synthesize(a, frames, spec, weights, chunk_pixels=10)
+    expected = naive(a, frames, spec, weights)
+    np.testing.assert_allclose(image, expected, atol=FLOAT32 * np.abs(expected).max())
+    assert not saturated.any()
+
+
+def test_zero_weights_give_the_linear_ambient() -> None:
+    sensor = SensorModel()
+    a, f, exposures, gains = rendered_frames(ambient("tungsten"), sensor=sensor)
+    spec = spec_for(sensor, exposures, gains, one_hot_levels(7))
+    image, _ = synthesize(a, f, spec, np.zeros(7))
+    linear = (a.astype(float) - sensor.black_level) * spec.ambient_scale
+    np.testing.assert_allclose(image, linear, atol=FLOAT32 * linear.max())
+
+
+def test_frame_coefficients_sum_to_one_with_the_ambient() -> None:
+    spec = FrameStackSpec(0, 100, 1.0, (1.0, 1.0, 1.0), np.array([[1.0, 0, 0], [0, 1.0, 0], [1.0, 1.0, 1.0]]))
+    ambient_coefficient, coefficients = frame_coefficients(spec, np.array([0.2, 0.3, 0.4]))
+    np.testing.assert_allclose(coefficients, np.linalg.pinv(spec.led_levels).T @ [0.2, 0.3, 0.4], atol=EXACT)
+    assert ambient_coefficient + coefficients.sum() == pytest.approx(1.0, abs=EXACT)
+
+
+def test_to_raw_values_round_trip() -> None:
+    image = np.array([[[0.0, 1.0, 2.5]]])
+    raw = to_raw_values(image, exposure_us=100.0, gain=2.0, black_level=64.0, white_level=300.0)
+    assert raw.dtype == np.uint16
+    assert raw.tolist() == [[[64, 264, 300]]]  # 2.5·200 + 64 = 564 clips to the white level
+
+
+def test_bad_weights_and_shapes() -> None:
+    spec = FrameStackSpec(0, 100, 1.0, (1.0, 1.0), np.eye(2))
+    a = np.zeros((4, 4, 3))
+    with pytest.raises(SpectralDataError, match="3 flash weights; expected 2"):
+        synthesize(a, [a, a], spec, np.ones(3))
+    with pytest.raises(SpectralDataError, match="finite"):
+        synthesize(a, [a, a], spec, np.array([np.inf, 0.0]))
+    with pytest.raises(SpectralDataError, match="frame 2 has shape"):
+        synthesize(a, [a, a[:2]], spec, np.ones(2))
