@@ -156,12 +156,14 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
     factor
         Block size.
     cfa_period
-        2 for a Bayer mosaic (blocks gather same-colour samples and keep the mosaic layout), else 1.
+        2 for a Bayer mosaic: the four CFA planes are binned separately and returned as the
+        channels of a (H/2/factor, W/2/factor, 4) array (estimation needs no mosaic layout).
 
     Returns
     -------
     tuple
-        ``(sums, maxima)``: float64 block sums and block maxima, shaped like a smaller frame.
+        ``(sums, maxima)``: float32 block sums (exact for ≤ 16-bit data and blocks ≤ 16×16) and
+        block maxima in the frame's type.
 
     Examples
     --------
@@ -169,19 +171,30 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
     >>> sums.tolist(), top.tolist()
     ([[10.0, 18.0], [42.0, 50.0]], [[5.0, 7.0], [13.0, 15.0]])
     """
+    if cfa_period == 2:
+        rows, columns = frame.shape[0] // 2, frame.shape[1] // 2
+        frame = np.stack([frame[p:2 * rows:2, q:2 * columns:2] for p in (0, 1) for q in (0, 1)], axis=-1)
     if factor == 1:
-        return frame.astype(np.float64), frame
-    span = factor * cfa_period
-    height, width = (frame.shape[0] // span) * span, (frame.shape[1] // span) * span
+        return frame.astype(np.float32), frame
+    height, width = (frame.shape[0] // factor) * factor, (frame.shape[1] // factor) * factor
     if height == 0 or width == 0:
-        raise SpectralDataError(f"frame of shape {frame.shape} is smaller than one {span}×{span} block; expected a larger frame")
+        raise SpectralDataError(
+            f"frame of shape {frame.shape} is smaller than one {factor}×{factor} block; expected a larger frame"
+        )
     cropped = frame[:height, :width]
-    tail = cropped.shape[2:]
-    blocks = cropped.reshape(height // span, factor, cfa_period, width // span, factor, cfa_period, *tail)
-    sums = blocks.sum(axis=(1, 4), dtype=np.float64)
-    maxima = blocks.max(axis=(1, 4))
-    out_shape = (height // factor, width // factor, *tail)
-    return sums.reshape(out_shape), maxima.reshape(out_shape)
+    # Strided slices summed one offset at a time: each pass streams through memory, where a
+    # reshape-and-sum over two strided axes would crawl.
+    row_sums = cropped[0::factor].astype(np.float32)
+    row_max = cropped[0::factor].copy()
+    for offset in range(1, factor):
+        row_sums += cropped[offset::factor]
+        np.maximum(row_max, cropped[offset::factor], out=row_max)
+    sums = row_sums[:, 0::factor].copy()
+    maxima = row_max[:, 0::factor].copy()
+    for offset in range(1, factor):
+        sums += row_sums[:, offset::factor]
+        np.maximum(maxima, row_max[:, offset::factor], out=maxima)
+    return sums, maxima
 
 
 def accumulate_statistics(
@@ -327,7 +340,8 @@ def _accumulate_binned(ambient: np.ndarray, led_frames: Sequence[np.ndarray], sp
         if sample_mask.shape != ambient.shape[:2]:
             raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {ambient.shape[:2]}")
         mask_sums, _ = bin_frame(sample_mask.astype(np.uint8), factor, cfa_period)
-        valid &= mask_sums == factor * factor
+        full = mask_sums == factor * factor
+        valid &= full.all(axis=2) if full.ndim == 3 else full
     block_spec = FrameStackSpec(
         black_level=spec.black_level * factor * factor, white_level=np.inf,
         ambient_scale=spec.ambient_scale, led_scales=spec.led_scales, led_levels=spec.led_levels,
