@@ -26,6 +26,7 @@ xdist workers, and other suites on the machine using the same lock, take turns t
 
 from __future__ import annotations
 
+import ctypes
 import shutil
 import signal
 import socket
@@ -93,6 +94,10 @@ def gv_camera(aravis: ModuleType, gv_fake: Any) -> Iterator[Any]:
         camera.close()
 
 
+def _die_with_parent() -> None:
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
+
+
 def _port_in_use(address: str = "127.0.0.1", port: int = 3956) -> bool:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         try:
@@ -116,7 +121,10 @@ def gv_fake_process(aravis: ModuleType) -> Iterator[Callable[..., subprocess.Pop
         command = [FAKE_GV_TOOL, "-i", "127.0.0.1", "-s", serial, "-g", str(aravis.FAKE_SFNC_XML)]
         if lost_per_thousand is not None:
             command += ["-r", str(lost_per_thousand)]
-        process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        # PR_SET_PDEATHSIG: the fake dies with this worker even if the worker crashes, so no
+        # orphan keeps 127.0.0.1:3956 after the lock is gone.
+        process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                   preexec_fn=_die_with_parent)
         processes.append(process)
         deadline = time.monotonic() + 10.0
         while not _port_in_use():  # wait until the fake has bound its control port
