@@ -224,3 +224,24 @@ def test_single_surface_scene_is_refused() -> None:
     scene = Scene(chart().reflectances, np.zeros((6, 6), dtype=np.int32))
     with pytest.raises(SolverError, match="lstsq estimate: the normal matrix is not positive definite"):
         estimate(*linear_frames(ambient("tungsten"), scene=scene), method="lstsq")
+
+
+@pytest.mark.parametrize(("cfa", "period"), [(None, 1), ("RGGB", 2), ("BGGR", 2)])
+@pytest.mark.parametrize("factor", [2, 4])
+def test_binned_statistics_recover_the_mix(cfa: str | None, period: int, factor: int) -> None:
+    # Block sums obey the linear model exactly; the binner sums in float32, exact for integer raw
+    # data (it is documented for ≤ 16-bit frames), so use rendered integer frames.
+    sensor = SensorModel(cfa=cfa)
+    a, f, exposures, gains = rendered_frames(led_mix(TRUE_WEIGHTS), sensor=sensor)
+    result = estimate(a, f, spec_for(sensor, exposures, gains, one_hot_levels(7)), method="lstsq",
+                      bin_factor=factor, cfa_period=period)
+    np.testing.assert_allclose(result.ambient_weights, TRUE_WEIGHTS, atol=WEIGHTS_QUANTISED * TRUE_WEIGHTS.max())
+
+
+def test_binned_statistics_exclude_saturated_blocks() -> None:
+    sensor = SensorModel()
+    scene = chart(specular_strip_px=8)
+    a, f, exposures, gains = rendered_frames(led_mix(TRUE_WEIGHTS), sensor=sensor, scene=scene)
+    result = estimate(a, f, spec_for(sensor, exposures, gains, one_hot_levels(7)), method="nonneg", bin_factor=4)
+    assert result.saturated_fraction > 0
+    np.testing.assert_allclose(result.ambient_weights, TRUE_WEIGHTS, atol=WEIGHTS_QUANTISED)
