@@ -188,7 +188,8 @@ def list_devices(interfaces: str | Iterable[str]) -> tuple[DeviceEntry, ...]:
     return tuple(entries)
 
 
-def _is_ipv4(text: str) -> bool:
+def is_ipv4_address(text: str) -> bool:
+    """Whether ``text`` is a dotted IPv4 address (such a device id opens without discovery)."""
     try:
         ipaddress.IPv4Address(text)
     except ValueError:
@@ -566,7 +567,7 @@ class AravisCamera:
         use_interfaces(self._interfaces)
         entry: DeviceEntry | None = None
         try:
-            if _is_ipv4(device):
+            if is_ipv4_address(device):
                 if "gige" not in self._interfaces:
                     raise CameraNotFoundError(
                         f"camera {device!r}: an IP address needs the GigE Vision interface; expected "
@@ -606,7 +607,7 @@ class AravisCamera:
         self._serial = self._camera.get_device_serial_number() or (entry.serial if entry else device)
         self._device_id = entry.device_id if entry else (self._camera.get_device_id() or device)
         self._protocol = "gige" if self._camera.is_gv_device() else ("usb3" if self._camera.is_uv_device() else "fake")
-        self._address = device if _is_ipv4(device) else (entry.address if entry else "")
+        self._address = device if is_ipv4_address(device) else (entry.address if entry else "")
         self._name = f"camera {self._model or '?'} (serial {self._serial})"
         self._profile = match_profile(self._vendor, self._model)
         log.info("%s: opened as %s over %s, profile %s", self._name, self._device_id, self._protocol,

@@ -1,0 +1,45 @@
+"""``msflash devices`` on the Fake interface and on the GigE Vision fake by address (no discovery)."""
+
+from __future__ import annotations
+
+import json
+from types import ModuleType
+from typing import Any
+
+import pytest
+
+from acquisition.cli import main
+
+pytestmark = pytest.mark.aravis
+
+
+def test_devices_json_lists_the_fake(aravis: ModuleType, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["devices", "--interfaces", "fake", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["interfaces"] == ["fake"]
+    assert [c["device_id"] for c in report["cameras"]] == ["Fake_1"]
+    assert report["cameras"][0]["model"] == "Fake"
+
+
+def test_devices_human_output(aravis: ModuleType, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["devices", "--interfaces", "fake"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("Fake_1\tfake\tAravis Fake\tserial 1")
+
+
+def test_devices_by_address_without_discovery(aravis: ModuleType, gv_fake: Any,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["devices", "--interfaces", "fake", "--address", gv_fake.address, "--json"]) == 0
+    cameras = json.loads(capsys.readouterr().out)["cameras"]
+    assert [(c["interface"], c["serial"]) for c in cameras] == [("fake", "1"), ("gige", "MSFTEST1")]
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["devices", "--interfaces", "fake,firewire"], "--interfaces: interfaces 'fake,firewire': unknown firewire"),
+    (["devices", "--interfaces", "fake", "--address", "camera7"], "--address 'camera7': not an IPv4 address"),
+])
+def test_devices_bad_input_exits_2_with_one_line(aravis: ModuleType, capsys: pytest.CaptureFixture[str],
+                                                  argv: list[str], message: str) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"msflash: error: {message}") and err.count("\n") == 1
