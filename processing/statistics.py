@@ -162,8 +162,8 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
     Returns
     -------
     tuple
-        ``(sums, maxima)``: float32 block sums (exact for ≤ 16-bit data and blocks ≤ 16×16) and
-        block maxima in the frame's type.
+        ``(sums, maxima)``: block sums (float32 for integer frames — exact for ≤ 16-bit data and
+        blocks ≤ 16×16 — float64 for float frames) and block maxima in the frame's type.
 
     Examples
     --------
@@ -174,8 +174,10 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
     if cfa_period == 2:
         rows, columns = frame.shape[0] // 2, frame.shape[1] // 2
         frame = np.stack([frame[p:2 * rows:2, q:2 * columns:2] for p in (0, 1) for q in (0, 1)], axis=-1)
+    # float32 sums are exact for integer data ≤ 16 bits in blocks ≤ 16×16; float frames keep float64.
+    sum_type = np.float64 if np.issubdtype(frame.dtype, np.floating) else np.float32
     if factor == 1:
-        return frame.astype(np.float32), frame
+        return frame.astype(sum_type), frame
     height, width = (frame.shape[0] // factor) * factor, (frame.shape[1] // factor) * factor
     if height == 0 or width == 0:
         raise SpectralDataError(
@@ -184,7 +186,7 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
     cropped = frame[:height, :width]
     # Strided slices summed one offset at a time: each pass streams through memory, where a
     # reshape-and-sum over two strided axes would crawl.
-    row_sums = cropped[0::factor].astype(np.float32)
+    row_sums = cropped[0::factor].astype(sum_type)
     row_max = cropped[0::factor].copy()
     for offset in range(1, factor):
         row_sums += cropped[offset::factor]
