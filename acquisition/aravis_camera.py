@@ -693,7 +693,8 @@ class AravisCamera:
                 err.matches(Aravis.DeviceError.quark(), Aravis.DeviceError.TRANSFER_ERROR)):
             self._unreachable = True  # skip further control writes (each would wait out its retries)
             return CameraDisconnectedError(f"{self._name}: {action} {feature}: no answer from the "
-                                           f"device ({err.message}); expected a connected camera")
+                                           f"device ({err.message}); expected a connected camera — check "
+                                           "power and cable, and that no other program controls it")
         return CameraError(f"{self._name}: {action} {feature} failed: {err.message}")
 
     def has_feature(self, feature: str) -> bool:

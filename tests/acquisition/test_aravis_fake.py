@@ -218,3 +218,19 @@ def test_frame_lost_error_is_a_dropped_frame(aravis: ModuleType) -> None:
 def test_start_before_prepare_is_an_error(fake_camera: Any) -> None:
     with pytest.raises(CameraError, match="start\\(\\) before prepare\\(\\)"):
         fake_camera.start()
+
+
+def test_control_lost_signal_becomes_a_clear_error_naming_the_step(fake_camera: Any) -> None:
+    from acquisition.errors import CameraDisconnectedError
+
+    plan = CapturePlan.ambient_then_each_led(2, 1000.0)
+    fake_camera.prepare(plan)
+    fake_camera.start()
+    fake_camera.next_frame(5.0)
+    fake_camera._on_control_lost(None)  # what Aravis's "control-lost" signal calls (Fake_1 never emits it)
+    with pytest.raises(CameraDisconnectedError, match=r"camera Fake \(serial 1\): control lost before "
+                                                      r"step 1 'led:1'.*check power and cable"):
+        fake_camera.next_frame(5.0)
+    with pytest.raises(CameraDisconnectedError, match="control of the device was lost"):
+        fake_camera.set_exposure_us(2000.0)
+    fake_camera.close()  # still releases everything

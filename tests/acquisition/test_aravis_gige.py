@@ -183,3 +183,13 @@ def test_lossy_link_reports_incomplete_frames_and_never_returns_them(
     assert sum(stats.statuses.values()) == stats.frames_incomplete
     assert all("serial MSFLOSSY" in str(err) for err in lost)
     assert all(frame.pixels.shape == (256, 256) for frame in good)
+
+
+def test_close_releases_control_for_the_next_controller(aravis: ModuleType, gv_fake: Any) -> None:
+    first = aravis.AravisCamera(gv_fake.address, interfaces="gige")
+    first.set_exposure_us(1500.0)
+    first.close()
+    # GigE Vision grants one controller at a time: writing works only if `first` let go.
+    with aravis.AravisCamera(gv_fake.address, interfaces="gige") as second:
+        assert second.set_exposure_us(1700.0) == 1700.0
+    assert gv_fake.read_register(REG_EXPOSURE_US) == 1700
