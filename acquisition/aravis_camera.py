@@ -1310,6 +1310,16 @@ class AravisGvFake:
         How often the fake checks for a software trigger (its trigger-to-frame latency).
     lost_packet_ratio
         Fraction of GVSP packets the fake drops (a lossy link).
+
+    Examples
+    --------
+    A rig on the fake (no network beyond loopback, no discovery)::
+
+        with AravisGvFake(serial="RIG01") as fake, \
+                AravisCamera(fake.address, interfaces="gige", pixel_format="Mono16") as camera:
+            camera.prepare(plan)
+            camera.start()
+            ...
     """
 
     address = "127.0.0.1"
