@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     "acquisition.cli_bench",
     "acquisition.cli_devices",
     "acquisition.cli_booth",
+    "acquisition.cli_study",
 )
 """Modules contributing subcommands, in help order."""
 

@@ -24,8 +24,10 @@ then fixed to the non-negative solution's, otherwise ``s = 0, w_f = −w_a`` wou
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Literal
 
 import numpy as np
@@ -76,8 +78,21 @@ def camera_led_matrix(camera_responsivities: Spectra, led_spectra: Spectra) -> n
     return camera_responsivities.values.T @ led_spectra.values
 
 
+def _norm(vector: np.ndarray) -> float:
+    """Euclidean norm of a vector (np.linalg.norm costs ~15 µs of checks on 3-vectors)."""
+    return math.sqrt(float(vector @ vector))
+
+
+@lru_cache(maxsize=64)
 def _box(k: int, bounds: str) -> tuple[np.ndarray, np.ndarray]:
-    """Constraint rows ``G w ≥ h`` for the flash weights."""
+    """Constraint rows ``G w ≥ h`` for the flash weights (cached; the arrays are read-only)."""
+    constraints, limits = _box_rows(k, bounds)
+    constraints.flags.writeable = False
+    limits.flags.writeable = False
+    return constraints, limits
+
+
+def _box_rows(k: int, bounds: str) -> tuple[np.ndarray, np.ndarray]:
     if bounds == "physical":
         return np.vstack([np.eye(k), -np.eye(k)]), np.concatenate([np.zeros(k), -np.ones(k)])
     if bounds == "nonnegative":
@@ -114,8 +129,9 @@ def solve_matching(
         raise SolverError("matching flash: the ambient weights are all zero; expected an estimated ambient")
     goal = ambient_weights / peak
     spectra = led_spectra.values
-    norm = max(np.linalg.norm(matrix, 2) ** 2, 1e-300)
-    spectral_norm = max(np.linalg.norm(spectra, 2) ** 2, 1e-300)
+    # Frobenius norms: any consistent scale makes the tie-break weight relative.
+    norm = max(float((matrix * matrix).sum()), 1e-300)
+    spectral_norm = max(float((spectra * spectra).sum()), 1e-300)
     # ½‖A(g − w)‖² + ½ε‖I(g − w)‖², scaled so the camera term has unit size.
     hessian = matrix.T @ matrix / norm + TIE_BREAK * spectra.T @ spectra / spectral_norm + TIE_BREAK_CHANGE * np.eye(k)
     linear = hessian @ goal
@@ -169,13 +185,14 @@ def solve_complementary(
     k = ambient_weights.size
     target_response = camera_responsivities.values.T @ target.values[:, 0]
     ambient_response = matrix @ ambient_weights
-    if np.linalg.norm(target_response) == 0:
+    target_norm = _norm(target_response)
+    if target_norm == 0:
         raise SpectralDataError(f"{target.source or 'target'}: the camera sees nothing of the target illuminant")
     # Normalise so the ambient (or, with no ambient, the full flash) has unit camera response and
     # the target's response unit norm: the tie-break weights are then relative.
-    unit = max(np.linalg.norm(ambient_response), np.linalg.norm(matrix.sum(axis=1)) * 1e-3, 1e-300)
+    unit = max(_norm(ambient_response), _norm(matrix.sum(axis=1)) * 1e-3, 1e-300)
     a_matrix = matrix / unit
-    t_vector = target_response / np.linalg.norm(target_response)
+    t_vector = target_response / target_norm
     ambient_unit = ambient_response / unit
     previous = np.zeros(k) if previous_weights is None else np.asarray(previous_weights, dtype=float)
 
@@ -212,7 +229,7 @@ def solve_complementary(
         weights = np.clip(weights, 0.0, 1.0)
     elif bounds == "nonnegative":
         weights = np.clip(weights, 0.0, None)
-    scale = scale_unit * unit / np.linalg.norm(target_response)
+    scale = scale_unit * unit / target_norm
     result = matrix @ (ambient_weights + weights)
     relative_error = _chromatic_error(result, target_response) if scale > 0 else 1.0
     return _finish("complementary", ambient_weights, weights, float(scale), relative_error, bounds)
@@ -220,10 +237,10 @@ def solve_complementary(
 
 def _chromatic_error(response: np.ndarray, wanted: np.ndarray) -> float:
     """Scale-free camera-space error: ``‖r/‖r‖ − t/‖t‖‖`` (0 when the colours agree)."""
-    response_norm, wanted_norm = np.linalg.norm(response), np.linalg.norm(wanted)
+    response_norm, wanted_norm = _norm(response), _norm(wanted)
     if response_norm == 0 or wanted_norm == 0:
         return 1.0
-    return float(np.linalg.norm(response / response_norm - wanted / wanted_norm))
+    return _norm(response / response_norm - wanted / wanted_norm)
 
 
 def _check_count(ambient_weights: np.ndarray, matrix: np.ndarray, led_spectra: Spectra) -> None:
