@@ -1,14 +1,41 @@
 """Run a capture plan: pair every frame with its step and write it to disk at once.
 
-Host-paced synchronisation (DESIGN §4): for each step the booth is set to the step's levels, then
-the camera is triggered and the frame awaited. Whatever happens, the LEDs go off and the camera
-stops in ``finally``; frames already written stay on disk (the writer keeps the sequence readable
-with ``complete: false`` until it is finished).
+Three synchronisation modes (DESIGN §4), chosen by ``plan.trigger``:
+
+``"software"`` — *host paced* (the fallback)
+    For each step the booth is set to the step's levels (``SET``, which replies once applied),
+    then the camera is software-triggered and the frame awaited. Frames pair with steps in
+    order; the camera's frame ids must be consecutive.
+
+``"booth"`` — *booth master*
+    The plan's levels are loaded as the booth's pattern table and armed in ``BOOTH`` mode with
+    the plan's settle time and a period covering settle + trigger pulse + the longest exposure +
+    deadtime; ``START`` runs it. The booth applies each step, waits ``settle``, pulses the
+    camera's trigger input and reports ``TRIG <count> <step>``.
+
+``"camera"`` — *camera master*
+    The table is armed in ``CAMERA`` mode; the host triggers the camera (software trigger) and
+    the camera's ExposureActive output advances the table: each exposure start counts a trigger
+    (``TRIG <count> <step>``), each exposure end applies the next step. The host leaves at least
+    ``settle_s`` between exposures.
+
+Pairing (booth and camera master): a frame's trigger number comes from its frame id — the
+first frame of the run is trigger 1 and later ones count on from its id (modulo 2^16, the
+GigE Vision block-id wrap) — and its step is the one the booth reported for that trigger
+(``TRIG`` event), never its position in the arrival order. A skipped frame id, a booth trigger
+count ahead of the frames received when a frame times out, or a ``TRIG`` whose step is not the
+plan's raises :class:`DroppedFrameError` naming the missing step. Frames already written stay on
+disk (the writer keeps the sequence readable with ``complete: false``).
+
+Whatever happens the LEDs go off (``OFF`` also aborts a running table) and the camera stops in
+``finally``.
 """
 
 from __future__ import annotations
 
 import logging
+import math
+import time
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
@@ -22,9 +49,15 @@ log = logging.getLogger(__name__)
 FRAME_ID_MODULUS = 1 << 16
 """GigE Vision block ids wrap at 16 bits; continuity is checked modulo this."""
 
+TRIGGER_PULSE_US = 100
+"""Width of the booth's trigger pulse in booth-master mode."""
+
+READOUT_US = 2_000
+"""Camera readout / host slack added to each booth-master period beyond exposure and deadtime."""
+
 
 class LedControl(Protocol):
-    """What the capture runner needs of the booth (``led_controller.LedBooth`` provides it)."""
+    """What the host-paced runner needs of the booth (``led_controller.LedBooth`` provides it)."""
 
     def set_levels(self, levels: Sequence[float]) -> None:
         """Drive every channel to ``levels`` (0–1)."""
@@ -35,6 +68,36 @@ class LedControl(Protocol):
         ...
 
 
+class SequencedLedControl(LedControl, Protocol):
+    """What booth- and camera-master capture need: the pattern table and its events."""
+
+    def load_pattern(self, steps: Sequence[Sequence[float]]) -> None:
+        """Replace the pattern table."""
+        ...
+
+    def arm(self, mode: str, *, settle_us: int = ..., pulse_us: int = ..., period_us: int = ...) -> None:
+        """Arm the table in a sync mode."""
+        ...
+
+    def start(self) -> None:
+        """Start the armed table."""
+        ...
+
+    def trigger_count(self) -> int:
+        """Triggers counted since ``arm``."""
+        ...
+
+    def wait_event(self, kind: str | None = None, *, timeout_s: float | None = None):  # noqa: ANN201
+        """Next event (``TRIG``, ``DONE``…) with ``.args``."""
+        ...
+
+
+def booth_period_us(plan: CapturePlan) -> int:
+    """Booth-master step period: settle + pulse + longest exposure + deadtime + readout, in µs."""
+    longest = max((s.exposure_us for s in plan.steps), default=0.0)
+    return int(math.ceil(plan.settle_s * 1e6 + TRIGGER_PULSE_US + longest + plan.deadtime_s * 1e6 + READOUT_US))
+
+
 def run_capture(
     camera: Camera,
     booth: LedControl,
@@ -42,15 +105,41 @@ def run_capture(
     writer: SequenceWriter,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
 ) -> list[SequenceFrame]:
-    """Capture every step of ``plan`` host-paced, writing each frame as it arrives.
+    """Capture every step of ``plan`` in its sync mode, writing each frame as it arrives.
 
     Raises
     ------
     FrameTimeoutError
-        No frame within ``plan.frame_timeout_s``; names the step.
+        No frame within the frame timeout (and the booth counted no trigger for it); names the step.
     DroppedFrameError
-        The camera's frame ids skipped (a frame was lost); names the step.
+        A frame was lost (frame ids skipped, or the booth triggered a frame that never came);
+        names the step. Frames already written stay on disk.
     """
+    if plan.trigger == "software":
+        return _host_paced(camera, booth, plan, writer, on_frame)
+    if plan.trigger in ("booth", "camera"):
+        return _table_paced(camera, booth, plan, writer, on_frame)  # type: ignore[arg-type]
+    raise ValueError(f"run_capture: plan trigger {plan.trigger!r}; expected software, booth or camera")
+
+
+def _saved(writer: SequenceWriter, written: list[SequenceFrame]) -> str:
+    return f"{len(written)} frame(s) already saved in {writer.path.parent}"
+
+
+def _write(writer: SequenceWriter, step: CaptureStep, frame: RawFrame, written: list[SequenceFrame],
+           on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None, trigger: int | None = None) -> None:
+    extra: dict = {"frame_id": frame.frame_id, "timestamp_ns": frame.timestamp_ns}
+    if trigger is not None:
+        extra["trigger"] = trigger
+    entry = writer.add_frame(frame.pixels, step.role, step.led_levels, frame.exposure_us, frame.gain, extra=extra)
+    written.append(entry)
+    log.info("step %d (%s): frame %d saved as %s", step.index, step.label, frame.frame_id, entry.file)
+    if on_frame is not None:
+        on_frame(step, frame, entry)
+
+
+def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: SequenceWriter,
+                on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None) -> list[SequenceFrame]:
     written: list[SequenceFrame] = []
     previous_id: int | None = None
     try:
@@ -62,26 +151,100 @@ def run_capture(
             try:
                 frame = camera.next_frame(plan.frame_timeout_s)
             except FrameTimeoutError as err:
-                raise FrameTimeoutError(
-                    f"step {step.index} ({step.label}): {err}; {len(written)} frame(s) already saved in {writer.path.parent}"
-                ) from err
+                raise FrameTimeoutError(f"step {step.index} ({step.label}): {err}; {_saved(writer, written)}") from err
             if previous_id is not None and (frame.frame_id - previous_id) % FRAME_ID_MODULUS != 1:
                 raise DroppedFrameError(
                     f"step {step.index} ({step.label}): camera frame id {frame.frame_id} follows {previous_id}; "
-                    f"a frame was lost. {len(written)} frame(s) already saved in {writer.path.parent}"
+                    f"a frame was lost. {_saved(writer, written)}"
                 )
             previous_id = frame.frame_id
-            entry = writer.add_frame(
-                frame.pixels, step.role, step.led_levels, frame.exposure_us, frame.gain,
-                extra={"frame_id": frame.frame_id, "timestamp_ns": frame.timestamp_ns},
-            )
-            written.append(entry)
-            log.info("step %d (%s): frame %d saved as %s", step.index, step.label, frame.frame_id, entry.file)
-            if on_frame is not None:
-                on_frame(step, frame, entry)
+            _write(writer, step, frame, written, on_frame)
     finally:
         try:
             booth.all_off()
         finally:
             camera.stop()
     return written
+
+
+def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, writer: SequenceWriter,
+                 on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None) -> list[SequenceFrame]:
+    written: list[SequenceFrame] = []
+    mode = plan.trigger
+    settle_us = int(round(plan.settle_s * 1e6))
+    period_us = booth_period_us(plan) if mode == "booth" else 0
+    # Booth master: frames come one period apart, so waiting for any one frame may take a period
+    # on top of the usual timeout.
+    frame_timeout_s = plan.frame_timeout_s + period_us * 1e-6
+    first_id: int | None = None
+    try:
+        booth.all_off()  # idle the booth (a previous table may be DONE) before editing the table
+        drain = getattr(booth, "pending_events", None)
+        if drain is not None:
+            drain()  # events of an earlier, aborted table must not pair with this one's frames
+        booth.load_pattern([step.led_levels for step in plan.steps])
+        booth.arm(mode, settle_us=settle_us, pulse_us=TRIGGER_PULSE_US, period_us=period_us)
+        camera.prepare(plan)
+        camera.start()
+        booth.start()
+        for number, step in enumerate(plan.steps, start=1):
+            if mode == "camera":
+                if number > 1:
+                    time.sleep(plan.settle_s)  # the next step's LEDs settle between exposures
+                camera.trigger()
+            try:
+                frame = camera.next_frame(frame_timeout_s)
+            except FrameTimeoutError as err:
+                counted = booth.trigger_count()
+                if counted >= number:
+                    raise DroppedFrameError(
+                        f"step {step.index} ({step.label}): the booth counted trigger {number} but no frame "
+                        f"arrived within {frame_timeout_s:.3g} s; the frame was lost. {_saved(writer, written)}"
+                    ) from err
+                raise FrameTimeoutError(
+                    f"step {step.index} ({step.label}): {err}; the booth counted {counted} trigger(s) "
+                    f"({mode} master); {_saved(writer, written)}"
+                ) from err
+            if first_id is None:
+                first_id = frame.frame_id
+            trigger = 1 + (frame.frame_id - first_id) % FRAME_ID_MODULUS
+            if trigger != number:
+                missing = plan.steps[number - 1]
+                raise DroppedFrameError(
+                    f"step {missing.index} ({missing.label}): no frame for trigger {number}; the next frame "
+                    f"(id {frame.frame_id}) is trigger {trigger}. {_saved(writer, written)}"
+                )
+            paired = plan.steps[_booth_step_of(booth, trigger, frame_timeout_s, step)]
+            if paired.index != step.index:
+                raise DroppedFrameError(
+                    f"step {step.index} ({step.label}): the booth exposed table step {paired.index} on trigger "
+                    f"{trigger}; expected step {step.index} — a trigger was missed or doubled. {_saved(writer, written)}"
+                )
+            _write(writer, paired, frame, written, on_frame, trigger=trigger)
+        done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
+        log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))
+    finally:
+        try:
+            booth.all_off()
+        finally:
+            camera.stop()
+    return written
+
+
+def _booth_step_of(booth: SequencedLedControl, trigger: int, timeout_s: float, step: CaptureStep) -> int:
+    """The table step the booth reported for ``trigger`` (``TRIG <count> <step>`` events arrive in order)."""
+    while True:
+        event = booth.wait_event("TRIG", timeout_s=timeout_s)
+        try:
+            count, index = int(event.args[0]), int(event.args[1])
+        except (IndexError, ValueError) as err:
+            raise DroppedFrameError(f"step {step.index} ({step.label}): booth event {event.args!r}; "
+                                    "expected 'TRIG <count> <step>'") from err
+        if count == trigger:
+            return index
+        if count > trigger:
+            raise DroppedFrameError(
+                f"step {step.index} ({step.label}): the booth reported trigger {count} before {trigger}; "
+                "expected one TRIG event per trigger"
+            )
+        # count < trigger: an event of an earlier trigger left over; skip it.

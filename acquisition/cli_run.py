@@ -3,6 +3,14 @@
 ``run``: capture ambient + each LED → estimate the ambient from the recorded sequence → solve the
 matching and complementary flashes → re-capture with the chosen one (same sequence, role
 ``flash``) → synthesise both computational images → previews, a spectra plot and a report.
+
+``--sync host|booth|camera`` picks who paces the frames (DESIGN §4; :mod:`acquisition.capture`).
+
+A degenerate estimate (the LED-only images do not determine the ambient: a non-finite condition
+number, spectrum or weight — e.g. the ``aravis-fake`` rig's test patterns) does not stop the
+capture: the flash the solvers return is still re-captured, so the sequence is complete. No
+report is written from it (its numbers are not finite); ``run`` then exits 1 with one
+``msflash: error:`` line saying so and where the sequence is.
 """
 
 from __future__ import annotations
@@ -19,13 +27,16 @@ from acquisition import analysis, report
 from acquisition.capture import run_capture
 from acquisition.cli_common import UsageError, dumps_json, progress
 from acquisition.cli_process import add_estimation_options
-from acquisition.plan import CapturePlan
+from acquisition.errors import CaptureError
+from acquisition.plan import CapturePlan, TriggerSource
 from acquisition.rig import Rig, open_rig
 from acquisition.sequence_format import SequenceWriter, read_sequence
 from led_controller.booth import sigterm_as_exit
 from processing.errors import TargetUnreachableWarning
 
 CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG")
+SYNC_MODES: dict[str, TriggerSource] = {"host": "software", "booth": "booth", "camera": "camera"}
+"""``--sync`` names and the plan trigger each stands for."""
 
 
 def _default_out() -> Path:
@@ -47,13 +58,26 @@ def _report_frame(step, frame, entry) -> None:  # noqa: ANN001 - capture callbac
     progress(f"captured step {step.index} ({step.label}) → {entry.file}")
 
 
-def _capture_led_sequence(rig: Rig, writer: SequenceWriter, exposure_us: float | None) -> float:
-    exposure = float(exposure_us or rig.camera.suggested_exposure_us or 10_000.0)
+def _capture_led_sequence(rig: Rig, writer: SequenceWriter, exposure_us: float | None, sync: str = "host") -> float:
+    suggested = getattr(rig.camera, "suggested_exposure_us", None)
+    exposure = float(exposure_us or suggested or 10_000.0)
     if not exposure > 0:
         raise UsageError(f"--exposure-us {exposure_us}: expected a positive exposure")
-    plan = CapturePlan.ambient_then_each_led(len(writer.sequence.leds), exposure)
+    plan = CapturePlan.ambient_then_each_led(len(writer.sequence.leds), exposure, trigger=SYNC_MODES[sync])
     run_capture(rig.camera, rig.booth, plan, writer, on_frame=_report_frame)
     return exposure
+
+
+def _degenerate(estimate) -> str | None:  # noqa: ANN001 - processing.ambient.AmbientEstimate
+    """Why the estimate cannot be reported (non-finite numbers), or None."""
+    checks = {"condition number": np.asarray(estimate.condition_number, dtype=float),
+              "spectrum": np.asarray(estimate.spectrum.values, dtype=float),
+              "ambient weights": np.asarray(estimate.ambient_weights, dtype=float),
+              "spectrum uncertainty": np.asarray(estimate.spectrum_std, dtype=float)}
+    bad = [name for name, values in checks.items() if not np.all(np.isfinite(values))]
+    if not bad:
+        return None
+    return f"not finite: {', '.join(bad)}; condition number {float(estimate.condition_number):.3g}"
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -65,7 +89,7 @@ def _run(args: argparse.Namespace) -> int:
     progress(f"opening rig '{args.rig}' (ambient {args.ambient}, scene {args.scene})")
     # SIGTERM unwinds like Ctrl-C, so the LEDs go off and the partial sequence stays readable.
     with sigterm_as_exit(), _open(args) as rig, _writer(rig, out) as writer:
-        exposure = _capture_led_sequence(rig, writer, args.exposure_us)
+        exposure = _capture_led_sequence(rig, writer, args.exposure_us, args.sync)
         # Estimate from the frames as recorded (the sequence is still open: complete is false).
         sequence = read_sequence(writer.path.parent)
         progress("estimating the ambient spectrum")
@@ -73,6 +97,7 @@ def _run(args: argparse.Namespace) -> int:
         estimate = analysis.estimate_sequence(sequence, args.method, args.alpha, stack=stack, bin_factor=args.bin)
         for note in estimate.warnings:
             progress(f"warning: {note}")
+        degenerate = _degenerate(estimate)
         solutions = {}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", TargetUnreachableWarning)
@@ -82,10 +107,16 @@ def _run(args: argparse.Namespace) -> int:
             progress(f"warning: {warning.message}")
         chosen = solutions[args.mode]
         progress(f"re-capturing with the {args.mode} flash: " + ", ".join(f"{w:.3f}" for w in chosen.flash_weights))
-        run_capture(rig.camera, rig.booth, CapturePlan.single(chosen.flash_weights, exposure), writer,
-                    on_frame=_report_frame)
+        flash_plan = CapturePlan.single(np.clip(chosen.flash_weights, 0.0, 1.0), exposure, trigger=SYNC_MODES[args.sync])
+        run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=_report_frame)
         writer.finish()
         true_ambient = rig.true_ambient
+    if degenerate is not None:
+        raise CaptureError(
+            f"rig '{args.rig}': the ambient estimate is degenerate ({degenerate}): the LED-only images do not "
+            f"determine the ambient (test patterns, or LEDs that do not reach the scene?); no report written. "
+            f"The sequence is complete in {out / 'sequence'}"
+        )
     sequence = read_sequence(out / "sequence")
     progress("synthesising the computational images, previews and report")
     summary = report.write_run_report(out, sequence, estimate, solutions, args.mode, true_ambient, stack, args.target)
@@ -102,14 +133,20 @@ def _capture(args: argparse.Namespace) -> int:
         raise UsageError(f"--out {out}: already holds a sequence; expected a new directory")
     out.mkdir(parents=True, exist_ok=True)
     with sigterm_as_exit(), _open(args) as rig, _writer(rig, out) as writer:
-        _capture_led_sequence(rig, writer, args.exposure_us)
+        _capture_led_sequence(rig, writer, args.exposure_us, args.sync)
         writer.finish()
     print(out / "sequence")
     return 0
 
 
 def _rig_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--rig", default="sim", help="rig: sim (default; simulated camera + booth emulator on a pty)")
+    parser.add_argument("--rig", default="sim",
+                        help="rig: sim (default; simulated camera + booth emulator on a pty), aravis-fake (Aravis "
+                             "GigE Vision fake on 127.0.0.1 + emulator), replay:DIR (a recorded sequence + emulator)")
+    parser.add_argument("--sync", default="host", choices=tuple(SYNC_MODES),
+                        help="who paces the frames: host (serial command, then software trigger; default), "
+                             "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "
+                             "exposure-active line advances the booth's pattern table)")
     parser.add_argument("--ambient", default="tungsten",
                         help="sim ambient: tungsten, fluorescent, daylight, underwater, green, orange")
     parser.add_argument("--scene", default="chart110", choices=("chart110", "macbeth"), help="sim scene")

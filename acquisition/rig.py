@@ -4,23 +4,63 @@
 the booth *emulator* holds at exposure time, and the real :class:`led_controller.LedBooth`
 driver talking to that emulator over a real pseudo-terminal. The whole pipeline runs, with a
 known ground-truth ambient, through the same driver code a real booth uses.
+
+``aravis-fake``: :class:`~acquisition.aravis_camera.AravisCamera` on the Aravis GigE Vision fake
+served in this process on 127.0.0.1 (opened by address: no discovery broadcast), the emulator on a
+pty and ``LedBooth``. Frames are the fake's test patterns, so spectra estimated from them mean
+nothing; the rig proves the Aravis path (features, triggers, buffers) inside the whole pipeline.
+
+``replay:DIR``: :class:`~acquisition.replay_camera.ReplayCamera` serving a recorded sequence, with
+the emulator on a pty; re-runs estimation, flash solving and synthesis on recorded frames.
+
+The trigger wires (DESIGN §4, three sync modes) are modelled in every rig:
+
+- *booth master*: the emulator's trigger output (``on_trigger_out``) drives the camera's trigger
+  input — :meth:`SimulatedCamera.trigger_line` on ``sim``; on ``aravis-fake`` (the fake has no
+  input lines) the callback issues the camera's software trigger;
+- *camera master*: the camera's ExposureActive output drives the emulator's input — on ``sim``
+  a rising edge just before the frame reads the LED levels and a falling edge right after; on
+  ``aravis-fake`` a rising edge before ``TriggerSoftware`` and a falling edge when the frame
+  arrives. The booth ignores the line outside a running camera-master sequence, as firmware does.
+
+A callback that fails on the emulator's thread is logged and kept in :attr:`Rig.line_errors`
+(it must not kill the emulator); the capture then sees the missing frame.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from acquisition.camera import CameraInfo, RawFrame
 from acquisition.cli_common import UsageError
 from acquisition.errors import RigOpenError
+from acquisition.plan import CapturePlan
 from acquisition.sequence_format import SequenceCamera, SequenceLed
 from acquisition.simulated_camera import SimulatedCamera
 from led_controller import BoothEmulator, LedBooth, serve_on_pty
+from processing import datasets
 from processing.datasets import AMBIENTS
-from processing.spectra import Spectra
+from processing.spectra import DEFAULT_GRID, Spectra
+
+log = logging.getLogger(__name__)
+
+RIG_SPECS = ("sim", "aravis-fake", "replay:DIR")
+"""What ``--rig`` accepts."""
+
+AravisFakeNominalCamera = "NikonD100"
+"""ISETCam camera whose responsivities the ``aravis-fake`` rig records as *nominal* (the fake's
+test patterns have no spectral meaning; the flash solvers need some camera model)."""
 
 
 @dataclass
@@ -28,9 +68,9 @@ class Rig:
     """An open camera + booth pair; close it (or use ``with``) to switch LEDs off and release both."""
 
     name: str
-    """The rig spec (``sim``…)."""
-    camera: SimulatedCamera
-    """The camera."""
+    """The rig spec (``sim``, ``aravis-fake``, ``replay:DIR``)."""
+    camera: Any
+    """The camera (a :class:`~acquisition.camera.Camera`; may offer ``suggested_exposure_us``)."""
     booth: LedBooth
     """The booth driver."""
     led_spectra: Spectra
@@ -40,6 +80,12 @@ class Rig:
     true_ambient: Spectra | None = None
     """Ground truth, for simulated rigs."""
     _closers: list = field(default_factory=list, repr=False)
+    emulator: BoothEmulator | None = None
+    """The booth emulator at the far end of the pty (emulated rigs), for tests and diagnostics."""
+    line_errors: list[BaseException] = field(default_factory=list)
+    """Failures of trigger-line callbacks on the emulator's thread (logged, kept here)."""
+    camera_extra: dict = field(default_factory=dict)
+    """Extra keys for the sequence's ``camera`` entry (e.g. how a mono camera is recorded)."""
 
     def sequence_header(self) -> tuple[np.ndarray, SequenceCamera, tuple[SequenceLed, ...]]:
         """Wavelengths, camera and LED entries for a format-v1 sequence written from this rig (energy units)."""
@@ -52,6 +98,7 @@ class Rig:
         camera = SequenceCamera(
             model=info.model, serial=info.serial, pixel_format=info.pixel_format, cfa=info.cfa,
             black_level=info.black_level, white_level=info.white_level, responsivity=responsivity,
+            extra=dict(self.camera_extra),
         )
         entries = tuple(SequenceLed(name, leds.values[:, i]) for i, name in enumerate(leds.names))
         return leds.wavelengths_nm, camera, entries
@@ -75,38 +122,261 @@ class Rig:
         self.close()
 
 
+def _line(rig_errors: list[BaseException], what: str, action: Callable[[], None]) -> Callable[..., None]:
+    """A trigger-line callback for the emulator's thread: failures are logged and kept, never raised there."""
+
+    def fire(*_args: object) -> None:
+        try:
+            action()
+        except Exception as err:  # noqa: BLE001 - raising would kill the emulator's thread
+            log.error("%s failed: %s", what, err)
+            rig_errors.append(err)
+
+    return fire
+
+
+def _emulator_for(leds: Spectra) -> BoothEmulator:
+    peaks = [float(leds.wavelengths_nm[np.argmax(leds.values[:, i])]) for i in range(leds.count)]
+    return BoothEmulator(names=[n.replace(" ", "_") for n in leds.names], peaks_nm=peaks)
+
+
+def _close_all(closers: list) -> None:
+    for closer in reversed(closers):
+        with contextlib.suppress(Exception):
+            closer()
+
+
 def open_sim_rig(ambient: str = "tungsten", scene: str = "chart110", cfa: str | None = None, seed: int = 0,
                  camera: str = "NikonD100", n_leds: int = 7, log_serial: str | Path | None = None) -> Rig:
     """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver."""
     if ambient not in AMBIENTS:
         raise UsageError(f"--ambient '{ambient}': unknown; expected one of {', '.join(AMBIENTS)}")
     closers: list = []
+    line_errors: list[BaseException] = []
     try:
         world = SimulatedCamera.default(scene=scene, ambient=ambient, cfa=cfa, seed=seed, camera=camera, n_leds=n_leds)  # type: ignore[arg-type]
         closers.append(world.close)
-        names = world.led_spectra.names
-        peaks = [float(world.led_spectra.wavelengths_nm[np.argmax(world.led_spectra.values[:, i])])
-                 for i in range(world.led_spectra.count)]
-        emulator = BoothEmulator(names=[n.replace(" ", "_") for n in names], peaks_nm=peaks)
+        emulator = _emulator_for(world.led_spectra)
         server = serve_on_pty(emulator)
         closers.append(server.close)
         booth = LedBooth.open(server.port, log_serial=log_serial)
         closers.append(booth.close)
         closers.append(booth.all_off)
-        # Exposure-time coupling: the camera renders with what the emulator's LEDs are doing.
-        world.led_levels_source = lambda: emulator.levels
+
+        # Exposure-time coupling: the camera renders with what the emulator's LEDs are doing. The
+        # ExposureActive line is high while the levels are read (the exposure) — camera master.
+        def levels_during_exposure() -> tuple[float, ...]:
+            emulator.exposure_active(True)
+            try:
+                return emulator.levels
+            finally:
+                emulator.exposure_active(False)
+
+        world.led_levels_source = levels_during_exposure
+        # Booth master: the booth's trigger output is the camera's trigger input.
+        emulator.on_trigger_out = _line(line_errors, "sim camera trigger line", world.trigger_line)
     except Exception as err:
-        for closer in reversed(closers):
-            with contextlib.suppress(Exception):
-                closer()
+        _close_all(closers)
         if isinstance(err, UsageError):
             raise
         raise RigOpenError(f"rig 'sim': {err}") from err
-    return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers)
+    return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers,
+               emulator=emulator, line_errors=line_errors)
+
+
+class WiredFakeCamera:
+    """An ``AravisCamera`` on the GigE fake with the trigger wires the fake lacks, emulated.
+
+    The fake honours only software triggers and has no ExposureActive output, so:
+
+    - every plan is prepared on the fake with software triggering;
+    - booth master (``plan.trigger == "booth"``): :meth:`trigger` is a no-op and the emulator's
+      trigger output calls :meth:`trigger_line`, which issues the software trigger;
+    - camera master (``"camera"``): :meth:`trigger` raises the emulator's ExposureActive line and
+      issues the software trigger; the frame's arrival lowers it (exposure over).
+
+    The fake latches a software trigger in a register that its stream thread polls and clears
+    (``TriggerSoftware`` at 0x30c, about 1 kHz): two triggers between polls make one frame. A real
+    trigger input takes every edge, so booth pulses go through a queue and a thread that issues
+    each software trigger only once the fake has acknowledged the previous one.
+
+    Mono frames are recorded as three identical channels (format v1 holds RGB or raw mosaics);
+    the sequence's ``camera.extra`` says so.
+    """
+
+    suggested_exposure_us = 10_000.0
+    TRIGGER_REGISTER = 0x30C
+    """The fake's TriggerSoftware register (see ``genicam/fake_sfnc.xml``): 1 until the fake takes the trigger."""
+
+    def __init__(self, camera: Any, emulator: BoothEmulator, fake: Any = None,
+                 errors: list[BaseException] | None = None) -> None:
+        self.aravis = camera
+        self._emulator = emulator
+        self._fake = fake
+        self._errors = errors if errors is not None else []
+        self._mode = "software"
+        self._exposing = False
+        self._pulses: queue.Queue[bool] = queue.Queue()
+        self._pulse_thread: threading.Thread | None = None
+
+    @property
+    def info(self) -> CameraInfo:
+        """The fake's identity; mono frames are delivered as RGB."""
+        return dataclasses.replace(self.aravis.info, cfa=None)
+
+    def prepare(self, plan: CapturePlan) -> None:
+        """Prepare the fake for ``plan`` with software triggering whatever the sync mode."""
+        self._mode = plan.trigger
+        self.aravis.prepare(dataclasses.replace(plan, trigger="software"))
+
+    def start(self) -> None:
+        """Start acquisition (and, for booth-paced plans, the thread that turns pulses into triggers)."""
+        self._exposing = False
+        self.aravis.start()
+        if self._mode == "booth":
+            self._pulses = queue.Queue()
+            self._pulse_thread = threading.Thread(target=self._issue_pulses, name="aravis-fake trigger line",
+                                                  daemon=True)
+            self._pulse_thread.start()
+
+    def _issue_pulses(self) -> None:
+        while self._pulses.get():
+            try:
+                self._wait_trigger_taken()
+                self.aravis.trigger()
+            except Exception as err:  # noqa: BLE001 - the capture sees the missing frame
+                log.error("aravis-fake trigger line: %s", err)
+                self._errors.append(err)
+
+    def _wait_trigger_taken(self, timeout_s: float = 1.0) -> None:
+        if self._fake is None:
+            return
+        deadline = time.monotonic() + timeout_s
+        while self._fake.read_register(self.TRIGGER_REGISTER) != 0 and time.monotonic() < deadline:
+            time.sleep(0.0005)
+
+    def trigger(self) -> None:
+        """Host-paced: software trigger; camera master: ExposureActive high, then software trigger."""
+        if self._mode == "booth":
+            return
+        if self._mode == "camera":
+            self._emulator.exposure_active(True)
+            self._exposing = True
+        self.aravis.trigger()
+
+    def trigger_line(self) -> None:
+        """The booth pulsed the trigger input: queue a software trigger (see the class notes)."""
+        self._pulses.put(True)
+
+    def next_frame(self, timeout_s: float) -> RawFrame:
+        """The next frame as (H, W, 3); in camera master the exposure line falls when it arrives."""
+        try:
+            frame = self.aravis.next_frame(timeout_s)
+        finally:
+            if self._exposing:
+                self._exposing = False
+                self._emulator.exposure_active(False)
+        pixels = frame.pixels
+        if pixels.ndim == 2:
+            pixels = np.repeat(pixels[:, :, None], 3, axis=2)
+        return dataclasses.replace(frame, pixels=pixels)
+
+    def stop(self) -> None:
+        """Stop acquisition and the trigger-line thread."""
+        if self._pulse_thread is not None:
+            self._pulses.put(False)
+            self._pulse_thread.join(timeout=5.0)
+            self._pulse_thread = None
+        self.aravis.stop()
+
+    def close(self) -> None:
+        """Release the fake camera."""
+        self.aravis.close()
+
+
+def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int = 64, height: int = 48,
+                         pixel_format: str = "Mono16", serial: str = "MSFRIG01", **_ignored: object) -> Rig:
+    """The ``aravis-fake`` rig: AravisCamera on the GigE fake at 127.0.0.1 + emulator on a pty + LedBooth.
+
+    Holds the machine-wide GVCP port lock (:func:`~acquisition.aravis_camera.gvcp_port_lock`)
+    until closed. LED spectra: the paper's seven LEDs on :data:`DEFAULT_GRID` (zero outside their
+    measured range). Responsivity: ISETCam's :data:`AravisFakeNominalCamera`, recorded as nominal.
+    Sim-only options (``ambient``, ``scene``…) are ignored.
+    """
+    try:
+        from acquisition import aravis_camera
+    except ImportError as err:
+        raise RigOpenError(f"rig 'aravis-fake': {err}") from err
+    closers: list = []
+    line_errors: list[BaseException] = []
+    failures: dict[str, BaseException] = {}
+    camera = booth = emulator = None
+    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
+    responsivities = datasets.isetcam_camera(AravisFakeNominalCamera).resample(DEFAULT_GRID, outside="zero")
+    try:
+        fake = aravis_camera.AravisGvFake(serial=serial)
+        fake.start()
+        closers.append(fake.close)
+        aravis = aravis_camera.AravisCamera(fake.address, interfaces="gige", pixel_format=pixel_format,
+                                            roi=(0, 0, width, height))
+        closers.append(aravis.close)
+    except Exception as err:  # noqa: BLE001 - reported with the booth's failure, if any
+        failures[f"camera GigE fake {serial} at 127.0.0.1"] = err
+        aravis = None
+    try:
+        emulator = _emulator_for(leds)
+        server = serve_on_pty(emulator)
+        closers.append(server.close)
+        booth = LedBooth.open(server.port, log_serial=log_serial)
+        closers.append(booth.close)
+        closers.append(booth.all_off)
+    except Exception as err:  # noqa: BLE001
+        failures[f"booth emulator on {getattr(locals().get('server'), 'port', 'a pty')}"] = err
+    if failures:
+        _close_all(closers)
+        listing = "; ".join(f"{device}: {err}" for device, err in failures.items())
+        raise RigOpenError(f"rig 'aravis-fake': {listing}") from next(iter(failures.values()))
+    assert aravis is not None and emulator is not None and booth is not None
+    camera = WiredFakeCamera(aravis, emulator, fake, line_errors)
+    closers.insert(2, camera.stop)  # before the AravisCamera and the fake are released
+    emulator.on_trigger_out = _line(line_errors, "aravis-fake trigger line", camera.trigger_line)
+    extra = {"channels": f"{pixel_format} replicated to R, G, B", "responsivity_note":
+             f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning"}
+    return Rig("aravis-fake", camera, booth, leds, responsivities, None, closers, emulator=emulator,
+               line_errors=line_errors, camera_extra=extra)
+
+
+def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None, **_ignored: object) -> Rig:
+    """The ``replay:DIR`` rig: ReplayCamera on a recorded sequence + emulator on a pty + LedBooth."""
+    from acquisition.replay_camera import ReplayCamera
+
+    camera = ReplayCamera.open(directory)  # RecordingError for a missing or malformed sequence
+    sequence = camera.sequence
+    leds = sequence.led_spectra()
+    responsivities = sequence.camera_responsivities()
+    closers: list = [camera.close]
+    try:
+        emulator = _emulator_for(leds)
+        server = serve_on_pty(emulator)
+        closers.append(server.close)
+        booth = LedBooth.open(server.port, log_serial=log_serial)
+        closers.append(booth.close)
+        closers.append(booth.all_off)
+    except Exception as err:
+        _close_all(closers)
+        raise RigOpenError(f"rig 'replay:{directory}': booth emulator: {err}") from err
+    line_errors: list[BaseException] = []
+    emulator.on_trigger_out = _line(line_errors, "replay trigger line", camera.trigger_line)
+    return Rig(f"replay:{directory}", camera, booth, leds, responsivities, None, closers, emulator=emulator,
+               line_errors=line_errors, camera_extra=dict(sequence.camera.extra))
 
 
 def open_rig(spec: str, **options: object) -> Rig:
-    """Open a rig by its ``--rig`` spec."""
+    """Open a rig by its ``--rig`` spec: ``sim``, ``aravis-fake`` or ``replay:DIR``."""
     if spec == "sim":
         return open_sim_rig(**options)  # type: ignore[arg-type]
-    raise UsageError(f"--rig '{spec}': not available yet; expected 'sim'")
+    if spec == "aravis-fake":
+        return open_aravis_fake_rig(log_serial=options.get("log_serial"))  # type: ignore[arg-type]
+    if spec.startswith("replay:") and len(spec) > len("replay:"):
+        return open_replay_rig(spec[len("replay:"):], log_serial=options.get("log_serial"))  # type: ignore[arg-type]
+    raise UsageError(f"--rig '{spec}': unknown; expected one of {', '.join(RIG_SPECS)}")
