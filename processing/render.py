@@ -1,5 +1,14 @@
 """Rendering camera images for people: demosaic, camera → XYZ, sRGB.
 
+Public objects
+--------------
+- :func:`demosaic_superpixel` (half resolution, exact) and :func:`demosaic_bilinear` (full
+  resolution, the paper's figures), :data:`DEMOSAIC_METHODS` and :func:`demosaic`.
+- :func:`reflectances_to_xyz`: CIE 1931 XYZ of surfaces under an illuminant (white Y = 1).
+- :func:`camera_to_xyz_matrix`: the 3×3 camera → XYZ matrix fitted on a chart.
+- :func:`camera_to_srgb_linear`: camera RGB → linear sRGB, with optional von Kries white balance.
+- :func:`srgb_preview`: an 8-bit sRGB image.
+
 The paper's figures are rendered without white balance: a 3×3 camera → XYZ matrix fitted on a
 Macbeth chart under D65, then sRGB (PAPER.md). That keeps the ambient's colour cast visible,
 which is the point of comparing ambient-only, matching and complementary images. Conversion to
@@ -46,15 +55,87 @@ def demosaic_superpixel(mosaic: np.ndarray, cfa: str) -> np.ndarray:
     return np.stack([red, green, blue], axis=-1)
 
 
-def _xyz_of_reflectances(reflectances: Spectra, illuminant_energy: Spectra) -> np.ndarray:
-    """CIE 1931 XYZ of each surface under an illuminant (energy units), shape (n, 3), Y of white = 1."""
-    grid = require_same_grid(reflectances, illuminant_energy)
+def _bilinear_kernels() -> tuple[np.ndarray, np.ndarray]:
+    green = np.array([[0.0, 1.0, 0.0], [1.0, 4.0, 1.0], [0.0, 1.0, 0.0]]) / 4.0
+    red_blue = np.array([[1.0, 2.0, 1.0], [2.0, 4.0, 2.0], [1.0, 2.0, 1.0]]) / 4.0
+    return green, red_blue
+
+
+def demosaic_bilinear(mosaic: np.ndarray, cfa: str) -> np.ndarray:
+    """Full-resolution RGB from a raw mosaic by bilinear interpolation (the paper's rendering).
+
+    Each channel keeps its own samples and fills the others with the mean of the nearest
+    same-colour neighbours (edges mirrored). Linear, so it commutes with the weighted sum of
+    the computational flash.
+
+    Examples
+    --------
+    >>> demosaic_bilinear(np.tile([[1.0, 2.0], [2.0, 3.0]], (2, 2)), "RGGB")[1, 1].tolist()
+    [1.0, 2.0, 3.0]
+    """
+    from scipy.ndimage import convolve
+
+    from processing.image_formation import cfa_channel_map
+
+    if cfa not in CFA_PATTERNS:
+        raise SpectralDataError(f"demosaic: CFA '{cfa}'; expected one of {', '.join(CFA_PATTERNS)}")
+    if mosaic.ndim != 2 or min(mosaic.shape) < 2:
+        raise SpectralDataError(f"demosaic: mosaic has shape {mosaic.shape}; expected (H, W) with H, W ≥ 2")
+    channels = cfa_channel_map(cfa, mosaic.shape)
+    values = mosaic.astype(np.float64)
+    green_kernel, red_blue_kernel = _bilinear_kernels()
+    planes = []
+    for channel in range(3):
+        kernel = green_kernel if channel == 1 else red_blue_kernel
+        present = (channels == channel).astype(np.float64)
+        # Normalised convolution: exact at the borders (mirror) and for any layout.
+        total = convolve(values * present, kernel, mode="mirror")
+        weight = convolve(present, kernel, mode="mirror")
+        planes.append(np.where(present > 0, values, total / np.maximum(weight, 1e-12)))
+    return np.stack(planes, axis=-1)
+
+
+DEMOSAIC_METHODS = {"superpixel": demosaic_superpixel, "bilinear": demosaic_bilinear}
+"""Demosaicking methods by name: ``superpixel`` (half resolution) and ``bilinear`` (full)."""
+
+
+def demosaic(mosaic: np.ndarray, cfa: str, method: str = "bilinear") -> np.ndarray:
+    """Demosaic with a method of :data:`DEMOSAIC_METHODS`."""
+    if method not in DEMOSAIC_METHODS:
+        raise ValueError(f"demosaic method '{method}' is unknown; expected one of {', '.join(DEMOSAIC_METHODS)}")
+    return DEMOSAIC_METHODS[method](mosaic, cfa)
+
+
+def _observer(grid_wavelengths_nm: np.ndarray) -> np.ndarray:
     with warnings.catch_warnings():
+        # colour-science warns about its own table handling; a plain lookup is unaffected.
         warnings.simplefilter("ignore")
         cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
-        observer = np.stack([np.interp(grid.wavelengths_nm, cmfs.wavelengths, cmfs.values[:, i]) for i in range(3)], 1)
-    light = illuminant_energy.values[:, 0]
+        return np.stack([np.interp(grid_wavelengths_nm, cmfs.wavelengths, cmfs.values[:, i]) for i in range(3)], 1)
+
+
+def reflectances_to_xyz(reflectances: Spectra, illuminant: Spectra) -> np.ndarray:
+    """CIE 1931 2° XYZ of each surface under an illuminant, shape (n_surfaces, 3), Y of a perfect white = 1.
+
+    ``illuminant`` may be in energy or photons (converted to energy: the colour-matching
+    functions are defined on radiance).
+
+    Examples
+    --------
+    >>> from processing import datasets
+    >>> white = Spectra(datasets.DEFAULT_GRID, np.ones(31), ("white",), kind="reflectance", unit="none")
+    >>> xyz = reflectances_to_xyz(white, datasets.illuminant("D65"))
+    >>> [round(float(v), 3) for v in xyz[0]]  # D65 white point on a 10 nm grid
+    [0.949, 1.0, 1.087]
+    """
+    grid = require_same_grid(reflectances, illuminant)
+    if illuminant.kind != "spd" or illuminant.count != 1:
+        raise SpectralDataError(f"{illuminant.source or 'illuminant'}: expected one spectrum of kind 'spd'")
+    observer = _observer(grid.wavelengths_nm)
+    light = illuminant.to_unit("energy").values[:, 0]
     white_y = float(observer[:, 1] @ light)
+    if white_y <= 0:
+        raise SpectralDataError(f"{illuminant.source or 'illuminant'}: no visible light; expected Y > 0")
     return (reflectances.values * light[:, None]).T @ observer / white_y
 
 
@@ -67,13 +148,50 @@ def camera_to_xyz_matrix(camera_responsivities: Spectra, chart: Spectra, illumin
     rgb = surface_responses(chart, illuminant, camera_responsivities)
     white = camera_responsivities.values.T @ illuminant.values[:, 0]
     rgb = rgb / white[1]
-    xyz = _xyz_of_reflectances(chart, illuminant.to_unit("energy"))
+    xyz = reflectances_to_xyz(chart, illuminant)
     matrix, *_ = np.linalg.lstsq(rgb, xyz, rcond=None)
     return matrix.T
 
 
+def camera_to_srgb_linear(linear_rgb: np.ndarray, camera_to_xyz: np.ndarray | None = None,
+                          white_balance: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Linear camera RGB → (linear sRGB, luminance Y), both unclipped.
+
+    Parameters
+    ----------
+    linear_rgb
+        (H, W, 3) or (n, 3) linear camera values.
+    camera_to_xyz
+        The 3×3 camera → XYZ matrix; None treats camera RGB as linear sRGB.
+    white_balance
+        Optional per-channel von Kries gains applied to camera RGB first
+        (:func:`processing.colour_metrics.von_kries_gains`); None renders as captured, as the paper does.
+    """
+    rgb = np.asarray(linear_rgb, dtype=np.float64)
+    if rgb.shape[-1] != 3:
+        raise SpectralDataError(f"render: image has shape {rgb.shape}; expected (..., 3)")
+    if white_balance is not None:
+        gains = np.asarray(white_balance, dtype=np.float64)
+        if gains.shape != (3,) or not np.all(np.isfinite(gains)) or np.any(gains <= 0):
+            raise SpectralDataError(f"render: white balance gains {gains}; expected three finite values > 0")
+        rgb = rgb * gains
+    if camera_to_xyz is None:
+        return rgb, rgb @ np.array([0.2126, 0.7152, 0.0722])
+    xyz = rgb @ np.asarray(camera_to_xyz, dtype=np.float64).T
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # colour's domain-range notes; the conversion is a plain 3×3 product
+        srgb_linear = colour.XYZ_to_RGB(xyz, "sRGB", apply_cctf_encoding=False)
+    return srgb_linear, xyz[..., 1]
+
+
+def encode_srgb(srgb_linear: np.ndarray, white_value: float) -> np.ndarray:
+    """Linear sRGB scaled so ``white_value`` is display white, clipped and sRGB-encoded, float in [0, 1]."""
+    white_value = white_value if (np.isfinite(white_value) and white_value > 0) else 1.0
+    return colour.cctf_encoding(np.clip(srgb_linear / white_value, 0.0, 1.0), function="sRGB")
+
+
 def srgb_preview(linear_rgb: np.ndarray, camera_to_xyz: np.ndarray | None = None, white_value: float | None = None,
-                 percentile: float = 99.5) -> np.ndarray:
+                 percentile: float = 99.5, white_balance: np.ndarray | None = None) -> np.ndarray:
     """An 8-bit sRGB preview of a linear camera RGB image (no white balance).
 
     Parameters
@@ -85,18 +203,12 @@ def srgb_preview(linear_rgb: np.ndarray, camera_to_xyz: np.ndarray | None = None
     white_value
         The linear Y that maps to display white; default: the ``percentile`` of Y, so previews
         of images with different exposures are comparable only when given one ``white_value``.
+    white_balance
+        Optional von Kries gains on camera RGB (see :func:`camera_to_srgb_linear`).
     """
     if linear_rgb.ndim != 3 or linear_rgb.shape[2] != 3:
         raise SpectralDataError(f"preview: image has shape {linear_rgb.shape}; expected (H, W, 3)")
-    if camera_to_xyz is None:
-        srgb_linear = linear_rgb.astype(np.float64)
-        luminance = srgb_linear @ np.array([0.2126, 0.7152, 0.0722])
-    else:
-        xyz = linear_rgb.astype(np.float64) @ camera_to_xyz.T
-        luminance = xyz[..., 1]
-        srgb_linear = colour.XYZ_to_RGB(xyz, "sRGB", apply_cctf_encoding=False)
+    srgb_linear, luminance = camera_to_srgb_linear(linear_rgb, camera_to_xyz, white_balance)
     if white_value is None:
         white_value = float(np.percentile(luminance, percentile)) if luminance.size else 1.0
-    white_value = white_value if white_value > 0 else 1.0
-    encoded = colour.cctf_encoding(np.clip(srgb_linear / white_value, 0.0, 1.0), function="sRGB")
-    return np.round(encoded * 255).astype(np.uint8)
+    return np.round(encode_srgb(srgb_linear, white_value) * 255).astype(np.uint8)
