@@ -1,0 +1,141 @@
+"""The three sync modes of run_capture on the sim rig (SimulatedCamera + booth emulator on a real pty).
+
+Host paced, booth master (the emulator pulses the camera's trigger line) and camera master (the
+camera's exposure advances the booth's pattern table) must give the same frames for the same
+seed, each paired with its step by trigger count; lost frames raise DroppedFrameError naming the
+step and keep what was written.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from acquisition.capture import run_capture
+from acquisition.cli import main
+from acquisition.errors import DroppedFrameError
+from acquisition.plan import CapturePlan
+from acquisition.rig import Rig, open_sim_rig
+from acquisition.sequence_format import SequenceWriter, read_sequence
+
+MODES = ("software", "booth", "camera")
+
+
+def _writer(rig: Rig, path: Path) -> SequenceWriter:
+    wavelengths, camera, leds = rig.sequence_header()
+    return SequenceWriter(path, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera, leds=leds)
+
+
+def _plan(trigger: str, n_leds: int = 4, **timing: float) -> CapturePlan:
+    return CapturePlan.ambient_then_each_led(n_leds, 10_000.0, trigger=trigger, **timing)
+
+
+@pytest.fixture
+def sim_rig():
+    with open_sim_rig(n_leds=4, seed=3) as rig:
+        yield rig
+
+
+@pytest.fixture(scope="module")
+def host_frames(tmp_path_factory: pytest.TempPathFactory) -> list[np.ndarray]:
+    path = tmp_path_factory.mktemp("host") / "sequence"
+    with open_sim_rig(n_leds=4, seed=3) as rig, _writer(rig, path) as writer:
+        run_capture(rig.camera, rig.booth, _plan("software"), writer)
+        writer.finish()
+    sequence = read_sequence(path)
+    return [sequence.load_frame(i) for i in range(len(sequence.frames))]
+
+
+@pytest.mark.parametrize("trigger", ["booth", "camera"])
+def test_table_paced_modes_give_the_host_paced_frames(sim_rig: Rig, tmp_path: Path, host_frames, trigger: str) -> None:
+    plan = _plan(trigger)
+    with _writer(sim_rig, tmp_path / "sequence") as writer:
+        written = run_capture(sim_rig.camera, sim_rig.booth, plan, writer)
+        writer.finish()
+    assert len(written) == len(plan.steps)
+    # The camera exposed each step under exactly the levels the booth's table held for it.
+    assert sim_rig.camera.rendered_levels == tuple(step.led_levels for step in plan.steps)
+    sequence = read_sequence(tmp_path / "sequence")
+    assert sequence.complete
+    assert [f.extra["trigger"] for f in sequence.frames] == [1, 2, 3, 4, 5]
+    assert [tuple(f.led_levels) for f in sequence.frames] == [s.led_levels for s in plan.steps]
+    for index, expected in enumerate(host_frames):
+        np.testing.assert_array_equal(sequence.load_frame(index), expected)
+    assert sim_rig.booth.trigger_count() == len(plan.steps)
+    assert sim_rig.emulator is not None and sim_rig.emulator.levels == (0.0,) * 4
+    assert not sim_rig.line_errors
+
+
+def test_modes_follow_each_other_on_one_rig(sim_rig: Rig, tmp_path: Path) -> None:
+    """A sequence then a one-frame flash, switching modes, as msflash run does."""
+    with _writer(sim_rig, tmp_path / "sequence") as writer:
+        for trigger in MODES:
+            run_capture(sim_rig.camera, sim_rig.booth, _plan(trigger), writer)
+            run_capture(sim_rig.camera, sim_rig.booth,
+                        CapturePlan.single([0.25, 0.5, 0.0, 1.0], 10_000.0, trigger=trigger), writer)
+        writer.finish()
+    flash = (0.25, 0.5, 0.0, 1.0)  # within one 16-bit wire step
+    assert np.allclose(sim_rig.camera.rendered_levels[5::6], [flash] * 3, atol=1 / 65535)
+    assert len(sim_rig.camera.rendered_levels) == 18
+
+
+@pytest.mark.parametrize("trigger", MODES)
+def test_a_lost_frame_names_its_step_and_keeps_the_frames_written(sim_rig: Rig, tmp_path: Path, trigger: str) -> None:
+    camera = sim_rig.camera
+    real_next = camera.next_frame
+    calls = {"n": 0}
+
+    def losing_next(timeout_s: float):
+        calls["n"] += 1
+        if calls["n"] == 3:  # the frame of step 2 never reaches the host
+            real_next(timeout_s)
+            if trigger != "booth":
+                camera.trigger()  # host and camera master trigger the next step themselves
+        return real_next(timeout_s)
+
+    camera.next_frame = losing_next
+    with pytest.raises(DroppedFrameError) as caught, _writer(sim_rig, tmp_path / "sequence") as writer:
+        run_capture(camera, sim_rig.booth, _plan(trigger), writer)
+    assert str(caught.value).startswith("step 2 (led:2)")
+    assert "2 frame(s) already saved" in str(caught.value)
+    sequence = read_sequence(tmp_path / "sequence")
+    assert not sequence.complete and len(sequence.frames) == 2
+    assert sim_rig.emulator.levels == (0.0,) * 4
+
+
+def test_booth_master_trigger_without_a_frame_is_a_dropped_frame(sim_rig: Rig, tmp_path: Path) -> None:
+    """The camera missed the booth's 4th pulse: DroppedFrameError, not a hang.
+
+    Frame ids count the camera's own frames, so a pulse the camera never saw is found only when
+    the booth has counted more triggers than frames arrived (here at the last step); the frames
+    after the missed pulse were already written with the step their trigger number implies.
+    """
+    emulator = sim_rig.emulator
+    assert emulator is not None
+    wired = emulator.on_trigger_out
+
+    def missed_pulse(count: int) -> None:
+        if count != 4:
+            wired(count)
+
+    emulator.on_trigger_out = missed_pulse
+    plan = dataclasses.replace(_plan("booth"), timeout_margin_s=0.2)
+    with pytest.raises(DroppedFrameError) as caught, _writer(sim_rig, tmp_path / "sequence") as writer:
+        run_capture(sim_rig.camera, sim_rig.booth, plan, writer)
+    assert str(caught.value).startswith("step 4 (led:4): the booth counted trigger 5 but no frame arrived")
+    sequence = read_sequence(tmp_path / "sequence")
+    assert not sequence.complete and len(sequence.frames) == 4
+
+
+@pytest.mark.parametrize("sync", ["booth", "camera"])
+def test_cli_capture_sync(tmp_path: Path, sync: str) -> None:
+    out = tmp_path / sync
+    log = tmp_path / f"{sync}.txt"
+    assert main(["capture", "--sync", sync, "--out", str(out), "--log-serial", str(log)]) == 0
+    sequence = read_sequence(out / "sequence")
+    assert sequence.complete and len(sequence.frames) == 8
+    transcript = log.read_text()
+    assert f"ARM {sync.upper()} " in transcript and "DONE 8" in transcript
