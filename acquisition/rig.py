@@ -367,6 +367,7 @@ def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None,
         raise RigOpenError(f"rig 'replay:{directory}': booth emulator: {err}") from err
     line_errors: list[BaseException] = []
     emulator.on_trigger_out = _line(line_errors, "replay trigger line", camera.trigger_line)
+    camera.exposure_line = emulator.exposure_active
     return Rig(f"replay:{directory}", camera, booth, leds, responsivities, None, closers, emulator=emulator,
                line_errors=line_errors, camera_extra=dict(sequence.camera.extra))
 

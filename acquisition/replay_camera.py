@@ -1,0 +1,214 @@
+"""``ReplayCamera``: serves the frames of a recorded sequence, checked against the plan (``--rig replay:DIR``).
+
+pymeasure's expected-protocol idea applied to images: the recording is what the camera *must* be
+asked for. :meth:`ReplayCamera.prepare` compares each step of the plan with the next recorded
+frames (role, LED levels, exposure, gain) and raises :class:`ReplayMismatchError` naming the first
+differing step and field; :meth:`ReplayCamera.next_frame` then serves those frames in order, with
+the exposure and gain recorded for them. Successive plans consume the recording in order (``run``:
+the ambient + LED plan, then the one-frame flash plan).
+
+Triggering follows :class:`~acquisition.simulated_camera.SimulatedCamera`: ``trigger()`` releases
+the next frame for software- and camera-paced plans (and drives :attr:`exposure_line` high then
+low around it, so a booth in camera-master mode advances); booth-paced plans are released by
+:meth:`trigger_line` (the booth emulator's trigger output).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import deque
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from acquisition.camera import CameraInfo, RawFrame
+from acquisition.errors import CameraError, FrameTimeoutError, ReplayMismatchError
+from acquisition.plan import CapturePlan
+from acquisition.sequence_format import Sequence, read_sequence
+
+LEVEL_TOLERANCE = 2.0 / 0xFFFF
+"""LED levels match when within two 16-bit wire steps."""
+EXPOSURE_RTOL = 0.01
+"""Exposures (and gains) match within 1 % (cameras round exposure to their own steps)."""
+
+
+class ReplayCamera:
+    """A camera that serves the frames of the sequence in ``directory``.
+
+    Use :meth:`open`. Frames are served in recording order; each ``prepare(plan)`` checks the plan
+    against the recorded frames not yet served.
+    """
+
+    def __init__(self, sequence: Sequence) -> None:
+        if not sequence.frames:
+            raise ReplayMismatchError(f"{sequence.directory}: the recording has no frames; expected at least one")
+        self.sequence = sequence
+        self.exposure_line: Callable[[bool], None] | None = None
+        """The camera's ExposureActive output (camera-master sync); the rig wires it to the booth."""
+        self._cursor = 0
+        self._plan: CapturePlan | None = None
+        self._plan_start = 0
+        self._released = 0
+        self._queue: deque[RawFrame] = deque()
+        self._condition = threading.Condition()
+        self._started = False
+        self._closed = False
+        first = sequence.load_frame(0)
+        self._shape = first.shape
+
+    @classmethod
+    def open(cls, directory: str | Path) -> ReplayCamera:
+        """Read the recorded sequence (``RecordingError`` naming the file and field if malformed)."""
+        return cls(read_sequence(Path(directory)))
+
+    # -- identity -------------------------------------------------------------------------
+    @property
+    def info(self) -> CameraInfo:
+        """The recorded camera."""
+        camera = self.sequence.camera
+        return CameraInfo(
+            vendor="replay", model=camera.model, serial=camera.serial or "", pixel_format=camera.pixel_format,
+            cfa=camera.cfa, black_level=camera.black_level, white_level=camera.white_level,
+            width=int(self._shape[1]), height=int(self._shape[0]),
+            extra={"replay": str(self.sequence.directory)},
+        )
+
+    @property
+    def suggested_exposure_us(self) -> float:
+        """The exposure of the first recorded frame (what ``run`` must ask for to match)."""
+        return float(self.sequence.frames[0].exposure_us)
+
+    @property
+    def frames_served(self) -> int:
+        """Recorded frames served so far."""
+        return self._cursor
+
+    # -- the Camera protocol --------------------------------------------------------------
+    def prepare(self, plan: CapturePlan) -> None:
+        """Check ``plan`` against the next recorded frames.
+
+        Raises
+        ------
+        ReplayMismatchError
+            Naming the first step (and field) that differs from the recording, or a step the
+            recording has no frame for.
+        """
+        self._check_open()
+        where = self.sequence.directory / "sequence.json"
+        for offset, step in enumerate(plan.steps):
+            index = self._cursor + offset
+            name = f"step {step.index} ({step.label})"
+            if index >= len(self.sequence.frames):
+                raise ReplayMismatchError(
+                    f"{where}: {name}: the recording has no frame {index} (it holds {len(self.sequence.frames)}); "
+                    "expected the plan to ask for the frames that were recorded"
+                )
+            frame = self.sequence.frames[index]
+            recorded = f"frames[{index}]"
+            if frame.role != step.role:
+                raise ReplayMismatchError(f"{where}: {name}: role '{step.role}' but {recorded}.role is "
+                                          f"'{frame.role}'; expected the recorded role")
+            if len(frame.led_levels) != len(step.led_levels) or not all(
+                    math.isclose(a, b, abs_tol=LEVEL_TOLERANCE) for a, b in zip(frame.led_levels, step.led_levels)):
+                raise ReplayMismatchError(
+                    f"{where}: {name}: led_levels {_fmt(step.led_levels)} but {recorded}.led_levels is "
+                    f"{_fmt(frame.led_levels)}; expected them within {LEVEL_TOLERANCE:.1e}")
+            if not math.isclose(frame.exposure_us, step.exposure_us, rel_tol=EXPOSURE_RTOL):
+                raise ReplayMismatchError(
+                    f"{where}: {name}: exposure_us {step.exposure_us:g} but {recorded}.exposure_us is "
+                    f"{frame.exposure_us:g}; expected it within {EXPOSURE_RTOL:.0%}")
+            if not math.isclose(frame.gain, step.gain, rel_tol=EXPOSURE_RTOL):
+                raise ReplayMismatchError(
+                    f"{where}: {name}: gain {step.gain:g} but {recorded}.gain is {frame.gain:g}; "
+                    f"expected it within {EXPOSURE_RTOL:.0%}")
+        with self._condition:
+            self._plan = plan
+            self._plan_start = self._cursor
+            self._released = 0
+            self._queue.clear()
+
+    def start(self) -> None:
+        """Start serving the prepared plan's frames."""
+        self._check_open()
+        if self._plan is None:
+            raise CameraError("replay camera: start() before prepare(plan); expected a plan")
+        with self._condition:
+            self._started = True
+
+    def trigger(self) -> None:
+        """Release the next frame (software/camera pacing); a no-op for booth-paced plans."""
+        plan = self._require_started()
+        if plan.trigger == "booth":
+            return
+        line = self.exposure_line
+        if line is not None:
+            line(True)
+        try:
+            self._release(plan)
+        finally:
+            if line is not None:
+                line(False)
+
+    def trigger_line(self) -> None:
+        """The hardware trigger input (booth master): release the next frame."""
+        self._release(self._require_started())
+
+    def next_frame(self, timeout_s: float) -> RawFrame:
+        """The oldest released frame; ``FrameTimeoutError`` if none within ``timeout_s``."""
+        with self._condition:
+            plan = self._plan
+            if not self._queue and not (plan is not None and plan.trigger == "booth"):
+                raise FrameTimeoutError(f"replay camera: no frame for frame {self._cursor}: no trigger was issued; "
+                                        "expected trigger() before next_frame()")
+            if not self._condition.wait_for(lambda: bool(self._queue) or self._closed, timeout=timeout_s):
+                raise FrameTimeoutError(f"replay camera: no frame within {timeout_s:g} s for recorded frame "
+                                        f"{self._cursor}: the trigger did not arrive")
+            self._check_open()
+            return self._queue.popleft()
+
+    def stop(self) -> None:
+        """Stop serving; idempotent."""
+        with self._condition:
+            self._started = False
+
+    def close(self) -> None:
+        """Release; idempotent."""
+        with self._condition:
+            self._started = False
+            self._closed = True
+            self._queue.clear()
+            self._condition.notify_all()
+
+    # -- internals ------------------------------------------------------------------------
+    def _check_open(self) -> None:
+        if self._closed:
+            raise CameraError("replay camera: used after close(); expected an open camera")
+
+    def _require_started(self) -> CapturePlan:
+        self._check_open()
+        if not self._started or self._plan is None:
+            raise CameraError("replay camera: triggered before start(); expected prepare() then start()")
+        return self._plan
+
+    def _release(self, plan: CapturePlan) -> None:
+        with self._condition:
+            if self._released >= len(plan.steps):
+                raise CameraError(f"replay camera: trigger {self._released + 1} but the plan has {len(plan.steps)} "
+                                  "steps; expected one trigger per step")
+            index = self._cursor
+            self._cursor += 1
+            self._released += 1
+        recorded = self.sequence.frames[index]
+        pixels = self.sequence.load_frame(index)
+        timestamp = recorded.extra.get("timestamp_ns", 0)
+        frame = RawFrame(np.asarray(pixels), index + 1, int(timestamp) if isinstance(timestamp, int) else 0,
+                         recorded.exposure_us, recorded.gain)
+        with self._condition:
+            self._queue.append(frame)
+            self._condition.notify_all()
+
+
+def _fmt(levels: tuple[float, ...] | list[float]) -> str:
+    return "[" + ", ".join(f"{v:.4g}" for v in levels) + "]"

@@ -1,0 +1,101 @@
+"""ReplayCamera and the ``replay:DIR`` rig on a small recorded sim sequence (tests/data/sequences)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from acquisition.cli import main
+from acquisition.errors import ReplayMismatchError
+from acquisition.plan import CapturePlan
+from acquisition.replay_camera import ReplayCamera
+from acquisition.sequence_format import read_sequence
+
+RECORDED = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
+
+
+def _recorded_plan(**timing) -> CapturePlan:
+    return CapturePlan.ambient_then_each_led(7, 10_000.0, **timing)
+
+
+def test_recording_is_small_and_complete() -> None:
+    sequence = read_sequence(RECORDED)
+    assert sequence.complete and [f.role for f in sequence.frames] == ["ambient"] + ["led"] * 7 + ["flash"]
+    assert sum(p.stat().st_size for p in RECORDED.rglob("*") if p.is_file()) < 300_000
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda s: s[3].__class__(3, "led", (0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0), 10_000.0), "step 3 (led:3): led_levels"),
+        (lambda s: dataclasses.replace(s[2], exposure_us=12_000.0), "step 2 (led:2): exposure_us 12000"),
+        (lambda s: dataclasses.replace(s[5], gain=2.0), "step 5 (led:5): gain 2"),
+        (lambda s: dataclasses.replace(s[0], role="dark"), "step 0 (dark): role 'dark'"),
+    ],
+)
+def test_prepare_names_the_first_differing_step_and_field(change, message: str) -> None:
+    plan = _recorded_plan()
+    steps = list(plan.steps)
+    changed = change(steps)
+    steps[changed.index] = changed
+    camera = ReplayCamera.open(RECORDED)
+    with pytest.raises(ReplayMismatchError) as caught:
+        camera.prepare(dataclasses.replace(plan, steps=tuple(steps)))
+    assert message in str(caught.value)
+    assert "frames[" in str(caught.value) and "sequence.json" in str(caught.value)
+
+
+def test_prepare_refuses_steps_beyond_the_recording() -> None:
+    camera = ReplayCamera.open(RECORDED)
+    camera.prepare(_recorded_plan())
+    camera.start()
+    for _ in range(8):
+        camera.trigger()
+        camera.next_frame(1.0)
+    flash = CapturePlan.single(camera.sequence.frames[8].led_levels, 10_000.0).steps[0]
+    with pytest.raises(ReplayMismatchError, match=r"step 1 \(flash\): the recording has no frame 9"):
+        camera.prepare(CapturePlan((flash, dataclasses.replace(flash, index=1))))
+
+
+def test_frames_are_served_in_order_with_the_recorded_pixels() -> None:
+    camera = ReplayCamera.open(RECORDED)
+    camera.prepare(_recorded_plan())
+    camera.start()
+    for index in range(8):
+        camera.trigger()
+        frame = camera.next_frame(1.0)
+        np.testing.assert_array_equal(frame.pixels, camera.sequence.load_frame(index))
+        assert frame.frame_id == index + 1
+
+
+def test_replayed_run_reproduces_the_estimate(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["estimate", str(RECORDED), "--json"]) == 0
+    expected = json.loads(capsys.readouterr().out)
+    out = tmp_path / "replayed"
+    assert main(["run", "--rig", f"replay:{RECORDED}", "--out", str(out)]) == 0
+    replayed = json.loads((out / "estimate.json").read_text())
+    np.testing.assert_allclose(replayed["spectrum"], expected["spectrum"], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(replayed["ambient_weights"], expected["ambient_weights"], rtol=1e-12, atol=0)
+    sequence = read_sequence(out / "sequence")
+    assert sequence.complete and len(sequence.frames) == 9  # the flash matched the recorded flash
+    recorded = read_sequence(RECORDED)
+    np.testing.assert_array_equal(sequence.load_frame(8), recorded.load_frame(8))
+
+
+@pytest.mark.parametrize("sync", ["booth", "camera"])
+def test_replay_in_table_paced_sync(tmp_path: Path, sync: str) -> None:
+    out = tmp_path / sync
+    assert main(["capture", "--rig", f"replay:{RECORDED}", "--sync", sync, "--out", str(out)]) == 0
+    sequence = read_sequence(out / "sequence")
+    assert sequence.complete and [f.extra["trigger"] for f in sequence.frames] == list(range(1, 9))
+
+
+def test_replay_mismatch_through_the_cli_is_one_error_line(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    status = main(["capture", "--rig", f"replay:{RECORDED}", "--exposure-us", "5000", "--out", str(tmp_path / "x")])
+    assert status == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("msflash: error: ") and "step 0 (ambient): exposure_us 5000" in err[-1]
