@@ -79,7 +79,7 @@ VRHEL_SETS = {
 }
 """Vrhel et al. (1994) reflectance sets by short name; ``"skin"`` joins the four skin sets."""
 
-AMBIENTS = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange")
+AMBIENTS = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange", "underwater_ocean")
 """Names accepted by :func:`ambient_spectrum`."""
 
 _ISETCAM_LICENCE = "MIT (ISETCam, © 2020 Stanford SCIEN); see processing/data/LICENSE-ISETCam-MIT.txt"
@@ -476,7 +476,9 @@ def ambient_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID, water_path_
         ``tungsten`` (CIE A), ``fluorescent`` (FL2), ``daylight`` (D65), ``underwater`` (D65
         through ``water_path_m`` of pure water, ``exp(-a_w(λ)·d)``), ``green`` (A through a
         band-pass gel near 530 nm) or ``orange`` (A through a long-pass gel from ~585 nm) — the
-        paper's booth and pool ambients (Section 6).
+        paper's booth and pool ambients (Section 6) — or ``underwater_ocean`` (daylight at 5 m
+        depth in mesotrophic ocean water, seen over 1 m: :func:`processing.water.underwater_ambient`
+        with chlorophyll, CDOM and particles).
     grid
         The wavelength grid.
     water_path_m
@@ -491,6 +493,10 @@ def ambient_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID, water_path_
     if key in ("tungsten", "fluorescent", "daylight"):
         base = illuminant({"tungsten": "A", "fluorescent": "FL2", "daylight": "D65"}[key], grid)
         return base.replace(names=(key,), source=f"ambient '{key}' ({base.source})")
+    if key == "underwater_ocean":
+        from processing.water import underwater_ambient  # processing.water builds on this module
+
+        return underwater_ambient(5.0, 1.0, grid=grid, water="ocean").replace(names=(key,))
     if key == "underwater":
         base = illuminant("D65", grid)
         values = base.values * water_transmittance(water_path_m, grid).values
