@@ -9,8 +9,11 @@ failures raise the package error roots (exit 1). ``--json`` output goes through 
 from __future__ import annotations
 
 import json
+import math
 import sys
 from typing import Any
+
+import numpy as np
 
 from acquisition.image_io import json_default
 
@@ -19,9 +22,26 @@ class UsageError(ValueError):
     """Bad input from the user (a file, field or option); the CLI exits with status 2."""
 
 
+def _strict(value: Any) -> Any:
+    """``value`` with numpy arrays/scalars made plain and non-finite numbers made ``None``.
+
+    JSON has no NaN or infinity; a reader would choke on Python's ``NaN``/``Infinity`` tokens,
+    so an undefined figure (say, the condition number of a degenerate fit) is written as null.
+    """
+    if isinstance(value, dict):
+        return {key: _strict(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_strict(item) for item in value]
+    if isinstance(value, np.ndarray | np.generic):
+        return _strict(json_default(value))
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def dumps_json(payload: dict[str, Any]) -> str:
-    """One JSON object as text (numpy arrays and scalars converted)."""
-    return json.dumps(payload, default=json_default, allow_nan=False)
+    """One JSON object as text (numpy converted; NaN and infinities written as null)."""
+    return json.dumps(_strict(payload), allow_nan=False)
 
 
 def print_json(payload: dict[str, Any]) -> None:
