@@ -298,6 +298,69 @@ def accumulate_statistics(
         flat = view.reshape(n_rows, -1)
         moments += flat @ flat.T
 
+    return _statistics_from_moments(moments, spec, n_pixels * n_channels)
+
+
+def _accumulate_binned(ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec,
+                       sample_mask: np.ndarray | None, chunk_pixels: int, factor: int,
+                       cfa_period: int) -> SequenceStatistics:
+    """Statistics of block sums: a block is valid when no member is saturated (or masked out)."""
+    frames = [ambient, *led_frames]
+    if len(led_frames) != spec.led_levels.shape[0]:
+        raise SpectralDataError(
+            f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}"
+        )
+    for index, frame in enumerate(frames):
+        if frame.shape != ambient.shape:
+            raise SpectralDataError(
+                f"frame stack: frame {index} has shape {frame.shape} but the ambient frame {ambient.shape}; "
+                "expected frames of one size"
+            )
+    if sample_mask is not None and sample_mask.shape != ambient.shape[:2]:
+        raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {ambient.shape[:2]}")
+    planes = [_cfa_planes(frame, cfa_period) for frame in frames]
+    height, width = planes[0].shape[0] // factor, planes[0].shape[1] // factor
+    if height == 0 or width == 0:
+        raise SpectralDataError(
+            f"frame of shape {planes[0].shape} is smaller than one {factor}×{factor} block; expected a larger frame"
+        )
+    channels = planes[0].shape[2]
+    n_led_frames = len(led_frames)
+    # Rows [F_1 … F_n, A, 1] of block sums, laid out (block row, channel, block column) per frame:
+    # any sample order works for moments, and this one lets every copy run along long rows.
+    rows = np.empty((n_led_frames + 2, height * channels * width))
+    for row, plane in zip([n_led_frames, *range(n_led_frames)], planes):
+        _block_sums_into(plane, factor, rows[row].reshape(height, channels, width))
+    rows[n_led_frames + 1] = 1.0
+    # Integer sums are always finite; for float frames one sum flags NaN/inf (exact check only then).
+    floating = any(np.issubdtype(plane.dtype, np.floating) for plane in planes)
+    if floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
+        raise SpectralDataError("frame stack: a frame holds non-finite values (NaN or inf); expected finite pixels")
+    invalid = None
+    # One contiguous max per frame finds the frames that saturate at all; only those build masks.
+    for plane in planes:
+        if _may_saturate(plane, spec.white_level):
+            hit = _block_any(_any_channel(plane >= spec.white_level), factor)
+            invalid = hit if invalid is None else invalid | hit
+    if sample_mask is not None:
+        mask_sums, _ = bin_frame(sample_mask.astype(np.uint8), factor, cfa_period)
+        full = mask_sums == factor * factor
+        outside = ~(full.all(axis=2) if full.ndim == 3 else full)
+        invalid = outside if invalid is None else invalid | outside
+    if invalid is not None and invalid.any():
+        rows.reshape(n_led_frames + 2, height, channels, width)[:, np.broadcast_to(
+            invalid[:, None, :], (height, channels, width))] = 0.0
+    block_spec = FrameStackSpec(
+        black_level=spec.black_level * factor * factor, white_level=np.inf,
+        ambient_scale=spec.ambient_scale, led_scales=spec.led_scales, led_levels=spec.led_levels,
+    )
+    return _statistics_from_moments(_gram(rows, chunk_pixels * channels), block_spec, rows.shape[1])
+
+
+def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total: int) -> SequenceStatistics:
+    """Statistics from the raw second moments of the rows [F_1 … F_n, A, 1]."""
+    n_led_frames = moments.shape[0] - 2
+    n_rows = n_led_frames + 2
     # Linear map from the raw rows to [d_1 … d_n, a]: d_j = s_j (F_j − b) − s_a (A − b), a = s_a (A − b).
     transform = np.zeros((n_led_frames + 1, n_rows))
     scales = np.asarray(spec.led_scales, dtype=float)
@@ -315,39 +378,85 @@ def accumulate_statistics(
         cross=unmixing @ linear_moments[:n_led_frames, n_led_frames],
         ambient_energy=float(linear_moments[n_led_frames, n_led_frames]),
         n_samples=int(round(moments[-1, -1])),
-        n_total=n_pixels * n_channels,
+        n_total=n_total,
         ambient_sum=float(linear_sums[n_led_frames]),
         led_sums=unmixing @ linear_sums[:n_led_frames],
     )
 
 
-def _accumulate_binned(ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec,
-                       sample_mask: np.ndarray | None, chunk_pixels: int, factor: int,
-                       cfa_period: int) -> SequenceStatistics:
-    """Statistics of block sums: a block is valid when no member is saturated (or masked out)."""
-    frames = [ambient, *led_frames]
-    for index, frame in enumerate(frames):
-        if frame.shape != ambient.shape:
-            raise SpectralDataError(
-                f"frame stack: frame {index} has shape {frame.shape} but the ambient frame {ambient.shape}; "
-                "expected frames of one size"
-            )
-    binned = [bin_frame(frame, factor, cfa_period) for frame in frames]
-    brightest = np.maximum.reduce([maxima for _, maxima in binned])
-    saturated = brightest >= spec.white_level
-    if saturated.ndim == 3:
-        saturated = saturated.any(axis=2)
-    valid = ~saturated
-    if sample_mask is not None:
-        if sample_mask.shape != ambient.shape[:2]:
-            raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {ambient.shape[:2]}")
-        mask_sums, _ = bin_frame(sample_mask.astype(np.uint8), factor, cfa_period)
-        full = mask_sums == factor * factor
-        valid &= full.all(axis=2) if full.ndim == 3 else full
-    block_spec = FrameStackSpec(
-        black_level=spec.black_level * factor * factor, white_level=np.inf,
-        ambient_scale=spec.ambient_scale, led_scales=spec.led_scales, led_levels=spec.led_levels,
-    )
-    statistics = accumulate_statistics(binned[0][0], [sums for sums, _ in binned[1:]], block_spec,
-                                       sample_mask=valid, chunk_pixels=chunk_pixels)
-    return statistics
+def _cfa_planes(frame: np.ndarray, cfa_period: int) -> np.ndarray:
+    """(H, W, C) view of a frame; a Bayer mosaic becomes its four CFA planes as channels."""
+    if cfa_period == 2:
+        rows, columns = frame.shape[0] // 2, frame.shape[1] // 2
+        return np.stack([frame[p:2 * rows:2, q:2 * columns:2] for p in (0, 1) for q in (0, 1)], axis=-1)
+    return frame if frame.ndim == 3 else frame[:, :, None]
+
+
+def _may_saturate(frame: np.ndarray, white: float) -> bool:
+    """Whether any sample of a frame reaches the white level (a fast contiguous max)."""
+    if np.issubdtype(frame.dtype, np.integer) and np.iinfo(frame.dtype).max < white:
+        return False  # the type cannot reach the white level
+    return bool(frame.size) and bool(frame.max() >= white)
+
+
+def _any_channel(mask: np.ndarray) -> np.ndarray:
+    """(H, W) mask of the pixels of an (H, W, C) mask with any channel set."""
+    # ``|`` over strided channel views: .any(axis=2) over a tiny trailing axis is slow in numpy.
+    result = mask[:, :, 0].copy()
+    for channel in range(1, mask.shape[2]):
+        result |= mask[:, :, channel]
+    return result
+
+
+def _block_any(mask: np.ndarray, factor: int) -> np.ndarray:
+    """(H/f, W/f) mask of the ``factor × factor`` blocks of an (H, W) mask with any member set."""
+    height, width = mask.shape[0] // factor, mask.shape[1] // factor
+    row_any = mask[:height * factor:factor, :width * factor].copy()
+    for offset in range(1, factor):
+        row_any |= mask[offset:height * factor:factor, :width * factor]
+    result = row_any[:, 0::factor].copy()
+    for offset in range(1, factor):
+        result |= row_any[:, offset::factor]
+    return result
+
+
+def _block_sums_into(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
+    """Write the ``factor × factor`` block sums of an (H, W, C) plane into ``out`` (H/f, C, W/f), float64.
+
+    Sums are exact: integer data is summed in float32 (exact for ≤ 16 bits in blocks ≤ 16×16),
+    float data in float64.
+    """
+    height, channels, width = out.shape
+    sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
+    cropped = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
+    # Bands of block rows small enough (~1 MiB of float32 sums) that every pass below stays in L2.
+    band = max(1, (1 << 18) // (width * factor * channels))
+    for start in range(0, height, band):
+        stop = min(start + band, height)
+        rows = cropped[start:stop]
+        # Whole rows added with long contiguous inner loops (no strided 2-axis reduction).
+        row_sums = np.add(rows[:, 0], rows[:, 1], dtype=sum_type) if factor > 1 else rows[:, 0].astype(sum_type)
+        for offset in range(2, factor):
+            row_sums += rows[:, offset]
+        # Column members sit ``channels`` samples apart: shifted adds along the flat rows give every
+        # block's sum at its first member (neighbouring sums are computed too, cheaper than gathering).
+        flat = row_sums.reshape(-1)
+        length = flat.size - (factor - 1) * channels
+        sums = flat[:length].copy()
+        for offset in range(1, factor):
+            sums += flat[offset * channels:offset * channels + length]
+        # Pick each block's first member; the (row, channel, column) order keeps the copy's inner loop long.
+        itemsize = sums.itemsize
+        picked = np.lib.stride_tricks.as_strided(
+            sums, shape=(stop - start, channels, width),
+            strides=(width * factor * channels * itemsize, itemsize, factor * channels * itemsize))
+        np.copyto(out[start:stop], picked)
+
+
+def _gram(rows: np.ndarray, chunk: int) -> np.ndarray:
+    """``rows @ rows.T`` in float64, accumulated over column chunks."""
+    moments = np.zeros((rows.shape[0], rows.shape[0]))
+    for start in range(0, rows.shape[1], max(chunk, 1)):
+        block = rows[:, start:start + max(chunk, 1)]
+        moments += block @ block.T
+    return moments

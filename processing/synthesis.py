@@ -79,26 +79,77 @@ def synthesize(
                               coefficients * np.asarray(spec.led_scales)]).astype(np.float32)
     offset = np.float32(-spec.black_level * float(factors.astype(float).sum()))
     output = np.empty(ambient.shape, dtype=np.float32)
-    height = ambient.shape[0]
-    row_pixels = int(np.prod(ambient.shape[1:2]))
-    rows_per_chunk = max(1, chunk_pixels // max(row_pixels, 1))
     saturated = np.zeros(ambient.shape[:2], dtype=bool)
-    scratch = None
+    white = spec.white_level
+    channels = ambient.shape[2] if ambient.ndim == 3 else 1
+    # Flat sample views (a copy only for non-contiguous frames): chunks then need no row alignment.
+    flat_frames = [np.ascontiguousarray(frame).reshape(-1) for frame in frames]
+    flat_output = output.reshape(-1)
+    flat_saturated = saturated.reshape(-1)
+    # One contiguous max per frame (a fast streaming reduction) finds the frames that saturate
+    # anywhere; only those get per-chunk comparison masks.
+    saturating = [index for index, frame in enumerate(flat_frames) if frame.size and frame.max() >= white]
+    chunk_samples = max(1, chunk_pixels) * channels
+    # One float32 row per frame: a chunk's output is then a single weighted sum of rows.
+    stack = np.empty((len(frames), min(chunk_samples, flat_output.size)), dtype=np.float32)
+    for start in range(0, flat_output.size, chunk_samples):
+        stop = min(start + chunk_samples, flat_output.size)
+        rows = stack[:, :stop - start]
+        for index, frame in enumerate(flat_frames):
+            # Casting into a preallocated row is one streaming pass (exact for integers ≤ 24 bits).
+            np.copyto(rows[index], frame[start:stop], casting="unsafe")
+        bright = None
+        for index in saturating:
+            chunk = flat_frames[index][start:stop]
+            if chunk.max() >= white:
+                hit = chunk >= white
+                bright = hit if bright is None else bright | hit
+        target = flat_output[start:stop]
+        # einsum's own single-threaded loop: as fast as BLAS gemv here, without OpenBLAS waking
+        # threads per call (which stalls badly when the other core is busy).
+        np.einsum("i,in->n", factors, rows, out=target)
+        target += offset
+        if bright is not None:
+            flat_saturated[start // channels:stop // channels] = _any_channel(bright.reshape(-1, channels))
+    return output, saturated
+    white = spec.white_level
+    row_samples = output.size // height
+    rows_per_chunk = max(1, chunk_pixels // max(int(np.prod(ambient.shape[1:2])), 1))
+    # Integer frames whose type cannot reach the white level never saturate: skip every check.
+    can_saturate = [not (np.issubdtype(f.dtype, np.integer) and np.iinfo(f.dtype).max < white) for f in frames]
+    # One float32 row per frame: the chunk's output is then a single (1 × n)·(n × samples) product.
+    stack = np.empty((len(frames), rows_per_chunk * row_samples), dtype=np.float32)
+    flat_output = output.reshape(height, row_samples)
     for start in range(0, height, rows_per_chunk):
         stop = min(start + rows_per_chunk, height)
-        target = output[start:stop]
-        np.multiply(frames[0][start:stop], factors[0], out=target, dtype=np.float32)
-        bright = frames[0][start:stop] >= spec.white_level
-        for factor, frame in zip(factors[1:], frames[1:]):
-            chunk = frame[start:stop]
-            if scratch is None or scratch.shape != target.shape:
-                scratch = np.empty_like(target)
-            np.multiply(chunk, factor, out=scratch, dtype=np.float32)
-            target += scratch
-            bright |= chunk >= spec.white_level
+        n = (stop - start) * row_samples
+        rows = stack[:, :n]
+        bright = None
+        for index, frame in enumerate(frames):
+            chunk = frame[start:stop].reshape(n)
+            # Casting into a preallocated row is one streaming pass (and exact for ≤ 24-bit integers).
+            np.copyto(rows[index], chunk, casting="unsafe")
+            # A contiguous max is far cheaper than a comparison mask: build the mask only when needed.
+            if can_saturate[index] and chunk.max() >= white:
+                hit = frame[start:stop] >= white
+                bright = hit if bright is None else bright | hit
+        target = flat_output[start:stop].reshape(n)
+        # einsum's own single-threaded loop: as fast as BLAS gemv here, without OpenBLAS waking
+        # threads per call (which stalls badly when the other core is busy).
+        np.einsum("i,in->n", factors, rows, out=target)
         target += offset
-        saturated[start:stop] = bright.any(axis=2) if bright.ndim == 3 else bright
+        if bright is not None:
+            saturated[start:stop] = _any_channel(bright)
     return output, saturated
+
+
+def _any_channel(bright: np.ndarray) -> np.ndarray:
+    """(pixels,) mask of the rows of a (pixels, channels) mask with any channel set."""
+    # ``|`` over strided channel columns: .any(axis=1) over a tiny trailing axis is slow in numpy.
+    result = bright[:, 0].copy()
+    for channel in range(1, bright.shape[1]):
+        result |= bright[:, channel]
+    return result
 
 
 def to_raw_values(image: np.ndarray, exposure_us: float, gain: float, black_level: float,

@@ -1,0 +1,92 @@
+"""Fast paths (no-saturation skip, block sums, flat synthesis chunks) against the plain computations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from processing.statistics import FrameStackSpec, accumulate_statistics, bin_frame
+from processing.synthesis import synthesize
+from tests.processing.test_statistics import MULTIPLEXED, assert_matches, naive_statistics, random_stack
+
+
+def naive_binned(ambient, leds, spec, factor, cfa_period=1, mask=None):
+    """Block sums and block maxima from :func:`bin_frame`, then the naive statistics."""
+    binned = [bin_frame(f, factor, cfa_period) for f in [ambient, *leds]]
+    saturated = np.maximum.reduce([top for _, top in binned]) >= spec.white_level
+    valid = ~saturated.any(axis=2) if saturated.ndim == 3 else ~saturated
+    if mask is not None:
+        sums, _ = bin_frame(mask.astype(np.uint8), factor, cfa_period)
+        full = sums == factor * factor
+        valid &= full.all(axis=2) if full.ndim == 3 else full
+    block = FrameStackSpec(spec.black_level * factor * factor, np.inf, spec.ambient_scale, spec.led_scales,
+                           spec.led_levels)
+    sums = [s.astype(float) for s, _ in binned]
+    return naive_statistics(sums[0], sums[1:], block, valid)
+
+
+@pytest.mark.parametrize("saturate", [0.0, 0.02], ids=["none", "some"])
+@pytest.mark.parametrize(("shape", "cfa"), [((37, 45, 3), 1), ((37, 45), 1), ((38, 46), 2)], ids=["rgb", "mono", "bayer"])
+@pytest.mark.parametrize("factor", [1, 2, 4])
+def test_binned_equals_naive(saturate: float, shape: tuple[int, ...], cfa: int, factor: int) -> None:
+    if factor == 1 and cfa == 2:
+        pytest.skip("bin_factor 1 uses every mosaic sample (no CFA planes)")
+    rng = np.random.default_rng(factor + len(shape) + cfa)
+    ambient, leds, spec = random_stack(rng, shape, MULTIPLEXED, white=4095.0, saturate=saturate)
+    stats = accumulate_statistics(ambient, leds, spec, bin_factor=factor, cfa_period=cfa, chunk_pixels=97)
+    assert_matches(stats, naive_binned(ambient, leds, spec, factor, cfa))
+
+
+def test_saturation_in_one_chunk_only() -> None:
+    rng = np.random.default_rng(11)
+    ambient, leds, spec = random_stack(rng, (64, 40, 3), np.eye(3), white=4095.0)
+    leds[2][50, 7, 1] = 4095  # one sample of one frame, far from the first chunks
+    for factor in (1, 4):
+        stats = accumulate_statistics(ambient, leds, spec, bin_factor=factor, chunk_pixels=64)
+        expected = naive_binned(ambient, leds, spec, factor) if factor > 1 else naive_statistics(ambient, leds, spec)
+        assert stats.n_samples == stats.n_total - 3  # one pixel (or block) of three channels
+        assert_matches(stats, expected)
+
+
+def test_uint16_at_type_maximum_is_saturated() -> None:
+    rng = np.random.default_rng(12)
+    ambient, leds, spec = random_stack(rng, (16, 16, 3), np.eye(2), white=65535.0)
+    leds[0][3, 3, 0] = 65535
+    assert_matches(accumulate_statistics(ambient, leds, spec, bin_factor=4), naive_binned(ambient, leds, spec, 4))
+    image, saturated = synthesize(ambient, leds, spec, np.ones(2), chunk_pixels=10)
+    assert saturated.sum() == 1 and saturated[3, 3]
+
+
+@pytest.mark.parametrize("factor", [1, 4])
+def test_float_frames_match_integer_frames(factor: int) -> None:
+    rng = np.random.default_rng(13)
+    ambient, leds, spec = random_stack(rng, (32, 24, 3), MULTIPLEXED, white=4095.0, saturate=0.01)
+    as_int = accumulate_statistics(ambient, leds, spec, bin_factor=factor)
+    as_float = accumulate_statistics(ambient.astype(float), [f.astype(float) for f in leds], spec, bin_factor=factor)
+    assert_matches(as_float, naive_binned(ambient, leds, spec, factor) if factor > 1 else naive_statistics(ambient, leds, spec))
+    assert as_float.n_samples == as_int.n_samples
+
+
+def test_binned_mask_equals_naive() -> None:
+    rng = np.random.default_rng(14)
+    ambient, leds, spec = random_stack(rng, (40, 36, 3), MULTIPLEXED, white=4095.0, saturate=0.005)
+    mask = np.ones((40, 36), dtype=bool)
+    mask[5:9, 10:30] = False
+    stats = accumulate_statistics(ambient, leds, spec, bin_factor=4, sample_mask=mask)
+    assert_matches(stats, naive_binned(ambient, leds, spec, 4, mask=mask))
+
+
+@pytest.mark.parametrize("chunk", [1, 13, 1 << 15])
+def test_synthesis_saturation_in_one_chunk_and_float_frames(chunk: int) -> None:
+    rng = np.random.default_rng(15)
+    ambient, leds, spec = random_stack(rng, (30, 20, 3), MULTIPLEXED, white=4095.0)
+    leds[1][25, 4, 2] = 4095
+    weights = np.array([0.4, 1.2, -0.3])
+    image, saturated = synthesize(ambient, leds, spec, weights, chunk_pixels=chunk)
+    expected = np.zeros((30, 20), dtype=bool)
+    expected[25, 4] = True
+    np.testing.assert_array_equal(saturated, expected)
+    float_image, float_saturated = synthesize(ambient.astype(float), [f.astype(float) for f in leds], spec, weights,
+                                              chunk_pixels=chunk)
+    np.testing.assert_array_equal(float_saturated, expected)
+    np.testing.assert_allclose(float_image, image, rtol=0, atol=1e-5 * np.abs(image).max())
