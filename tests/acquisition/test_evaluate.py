@@ -1,0 +1,212 @@
+"""msflash evaluate / colour-study: Fig. 9 ΔE00 and Fig. 3 noise on simulated charts, and the HTML report.
+
+Acceptance numbers of the issue, measured on small simulations (Macbeth, 10-pixel patches,
+NikonD100, the paper's 7 LEDs, physical flash bounds, seed 3). At the time of writing, mean ΔE00
+ambient / + matching / + complementary: tungsten 18.3 / 18.4 / 3.6, fluorescent 13.2 / 13.2 /
+2.9, green 32.3 / 32.0 / 2.4, orange 34.7 / 34.5 / 19.9 (target out of reach with bounded
+weights), underwater 20.4 / 20.2 / 1.5; red SNR under water 23 (von Kries) vs 38 (complementary).
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+from functools import cache
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from acquisition import cli_evaluate
+from acquisition.cli import main as msflash_main
+from acquisition.cli_common import UsageError
+from acquisition.html_report import PNG_SIGNATURE, HtmlReport
+from acquisition.image_io import read_image, read_image_header
+
+ACCEPTANCE_AMBIENTS = ("tungsten", "fluorescent", "underwater")
+
+
+@cache
+def study(ambient: str) -> dict:
+    return cli_evaluate.study_ambient(ambient, seed=3, patch_px=10)
+
+
+def parser() -> argparse.ArgumentParser:
+    root = argparse.ArgumentParser(prog="msflash")
+    cli_evaluate.register(root.add_subparsers(dest="command"))
+    return root
+
+
+def run_cli(argv: list[str]) -> int:
+    args = parser().parse_args(argv)
+    return int(args.handler(args))
+
+
+class ReportParser(HTMLParser):
+    """Collects embedded images and table cells by table id."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.images: list[bytes] = []
+        self.tables: dict[str, list[list[str]]] = {}
+        self._table: str | None = None
+        self._cell: list[str] | None = None
+
+    def handle_starttag(self, tag: str, attrs: list) -> None:
+        attributes = dict(attrs)
+        if tag == "img":
+            prefix = "data:image/png;base64,"
+            assert attributes["src"].startswith(prefix)
+            self.images.append(base64.b64decode(attributes["src"][len(prefix):]))
+        elif tag == "table":
+            self._table = attributes.get("id", f"table{len(self.tables)}")
+            self.tables[self._table] = []
+        elif tag == "tr" and self._table:
+            self.tables[self._table].append([])
+        elif tag in ("td", "th"):
+            self._cell = []
+
+    def handle_data(self, data: str) -> None:
+        if self._cell is not None:
+            self._cell.append(data)
+
+    def handle_endtag(self, tag: str) -> None:
+        if tag in ("td", "th") and self._cell is not None and self._table:
+            self.tables[self._table][-1].append("".join(self._cell))
+            self._cell = None
+        elif tag == "table":
+            self._table = None
+
+
+def parse_report(path: Path) -> ReportParser:
+    report = ReportParser()
+    report.feed(path.read_text(encoding="utf-8"))
+    return report
+
+
+class TestAcceptance:
+    @pytest.mark.parametrize("ambient", ACCEPTANCE_AMBIENTS)
+    def test_complementary_cuts_delta_e_by_a_third(self, ambient: str) -> None:
+        delta_e = study(ambient)["delta_e"]
+        before, after = delta_e["ambient"]["mean"], delta_e["complementary"]["mean"]
+        assert before > 10  # a strong cast to begin with
+        assert after <= 0.7 * before
+        # The re-captured complementary image agrees with the synthesised one.
+        assert delta_e["complementary-capture"]["mean"] == pytest.approx(after, abs=0.5)
+
+    @pytest.mark.parametrize("ambient", cli_evaluate.STUDY_AMBIENTS)
+    def test_matching_keeps_the_cast(self, ambient: str) -> None:
+        delta_e = study(ambient)["delta_e"]
+        assert abs(delta_e["matching"]["mean"] - delta_e["ambient"]["mean"]) <= 1.0
+
+    def test_underwater_red_snr_complementary_beats_von_kries(self) -> None:
+        noise = study("underwater")["noise"]
+        von_kries, complementary = noise["von_kries"], noise["complementary"]
+        assert complementary["mean_snr"]["R"] > 1.3 * von_kries["mean_snr"]["R"]
+        assert np.all(complementary["snr"]["R"] > von_kries["snr"]["R"])  # on every neutral patch
+        assert complementary["mean_chroma_noise"] < von_kries["mean_chroma_noise"]
+        assert noise["von_kries_gains"][0] > 1.5  # the balance amplified red
+
+    def test_summary(self) -> None:
+        summary = cli_evaluate.delta_e_summary({name: study(name) for name in ACCEPTANCE_AMBIENTS})
+        for values in summary.values():
+            assert values["complementary_cut"] >= 0.3
+            assert abs(values["matching_change"]) <= 1.0
+
+
+@pytest.fixture(scope="module")
+def macbeth_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("run") / "tungsten"
+    assert msflash_main(["run", "--rig", "sim", "--scene", "macbeth", "--ambient", "tungsten", "--out", str(out)]) == 0
+    return out
+
+
+class TestEvaluateSequence:
+    def test_json_files_and_report(self, macbeth_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+        out = tmp_path / "evaluation"
+        assert run_cli(["evaluate", str(macbeth_run / "sequence"), "--chart", "macbeth", "--out", str(out), "--json"]) == 0
+        result = json.loads(capsys.readouterr().out)
+        delta_e = result["delta_e"]
+        assert set(delta_e) == {"ambient", "matching", "complementary", "complementary-capture", "ambient-von-kries"}
+        assert delta_e["complementary"]["mean"] <= 0.7 * delta_e["ambient"]["mean"]
+        assert abs(delta_e["matching"]["mean"] - delta_e["ambient"]["mean"]) <= 1.0
+        assert len(delta_e["ambient"]["per_patch"]) == 24
+        assert result["layout_uniformity"] < 0.1 and result["noise_flash_image"] == "complementary-capture"
+
+        report = parse_report(out / "report.html")
+        assert len(report.images) >= 6 and all(image.startswith(PNG_SIGNATURE) for image in report.images)
+        rows = report.tables["delta-e"]
+        assert rows[0] == ["image", "mean ΔE00", "max ΔE00"]
+        shown = {row[0]: float(row[1]) for row in rows[1:]}
+        assert shown.keys() == delta_e.keys()
+        for name, value in shown.items():
+            assert value == pytest.approx(delta_e[name]["mean"], abs=0.006)
+        assert [row[0] for row in report.tables["noise"][1:]] == ["ambient, von Kries balanced", "complementary flash"]
+
+        saved = json.loads((out / "evaluation.json").read_text())
+        assert saved["delta_e"]["ambient"]["mean"] == pytest.approx(delta_e["ambient"]["mean"])
+        header = read_image_header(out / "complementary.exr")
+        assert header.attributes["msflash:image"] == "complementary"
+        assert header.attributes["msflash:flash_weights"] == pytest.approx(result["flash_weights"]["complementary"])
+        assert read_image(out / "ambient.tiff").dtype == np.uint16
+        assert (out / "ambient.png").read_bytes().startswith(PNG_SIGNATURE)
+
+    def test_a_run_directory_is_accepted_and_output_defaults_beside_the_sequence(self, macbeth_run: Path,
+                                                                                 capsys: pytest.CaptureFixture) -> None:
+        assert run_cli(["evaluate", str(macbeth_run), "--chart", "macbeth"]) == 0
+        assert capsys.readouterr().out.strip() == str((macbeth_run / "evaluation").resolve())
+        assert (macbeth_run / "evaluation" / "report.html").exists()
+
+    @pytest.mark.parametrize(("options", "message"), [
+        (["--patch-px", "10"], "--patch-px 10 --border-px 2: the macbeth chart is 50×74 pixels"),
+        (["--patch-px", "7", "--border-px", "2"], "patches are not uniform"),
+        (["--margin-px", "4"], "--margin-px 4 leaves nothing"),
+    ])
+    def test_a_wrong_layout_is_refused(self, macbeth_run: Path, tmp_path: Path, options: list[str], message: str) -> None:
+        with pytest.raises(UsageError, match=message):
+            run_cli(["evaluate", str(macbeth_run), "--chart", "macbeth", "--out", str(tmp_path), *options])
+
+    def test_an_unknown_chart_is_a_usage_error(self, macbeth_run: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture) -> None:
+        with pytest.raises(SystemExit) as exit_info:
+            run_cli(["evaluate", str(macbeth_run), "--chart", "esser"])
+        assert exit_info.value.code == 2
+
+
+class TestColourStudyCommand:
+    def test_report_holds_the_fig9_table_and_noise(self, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+        out = tmp_path / "study"
+        assert run_cli(["colour-study", "--ambients", "underwater,tungsten", "--patch-px", "8", "--out", str(out),
+                        "--json"]) == 0
+        payload = json.loads(capsys.readouterr().out)
+        assert set(payload["delta_e"]) == {"underwater", "tungsten"}
+        report = parse_report(out / "report.html")
+        rows = report.tables["delta-e"]
+        assert [row[0] for row in rows[1:]] == ["underwater", "tungsten"]
+        for row in rows[1:]:
+            assert float(row[3]) == pytest.approx(payload["delta_e"][row[0]]["complementary"], abs=0.006)
+        assert "noise-underwater" in report.tables
+        # Fig. 9 chart + 4 previews and a spectra plot per ambient + the Fig. 3 panel (3 images).
+        assert len(report.images) == 1 + 2 * 5 + 3
+        assert (out / "underwater" / "complementary-capture.exr").exists()
+
+    def test_bad_ambient(self) -> None:
+        with pytest.raises(UsageError, match="--ambients 'moon'"):
+            run_cli(["colour-study", "--ambients", "moon", "--json"])
+
+    def test_cfa_frames_give_the_same_picture(self) -> None:
+        result = cli_evaluate.study_ambient("underwater", seed=1, patch_px=10, cfa="GRBG")
+        assert result["delta_e"]["complementary"]["mean"] <= 0.3 * result["delta_e"]["ambient"]["mean"]
+        assert result["noise"]["complementary"]["mean_snr"]["R"] > result["noise"]["von_kries"]["mean_snr"]["R"]
+
+
+class TestHtmlReport:
+    def test_escapes_text_and_rejects_non_png(self) -> None:
+        report = HtmlReport("a <b> & c")
+        report.add_paragraph("<script>alert(1)</script>")
+        text = report.to_html()
+        assert "<script>" not in text and "a &lt;b&gt; &amp; c" in text
+        with pytest.raises(ValueError, match="not a PNG"):
+            report.add_images([("x", b"GIF89a")])
