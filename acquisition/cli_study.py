@@ -177,6 +177,9 @@ def _surfaces_text(result: dict[str, Any]) -> str:
              f"{'surfaces':>9s} {'spectrum RMSE':>14s} {'std':>7s} {'pixel RMSE x1e-2':>17s}"]
     for count, mean, std, pixel in zip(result["counts"], result["spectrum_rmse"], result["spectrum_rmse_std"],
                                        result["pixel_rmse"], strict=True):
+        if mean is None:
+            lines.append(f"{count:>9d} {'failed':>14s}   (estimate_ambient refused or failed for every draw)")
+            continue
         lines.append(f"{count:>9d} {mean:>14.4f} {std:>7.4f} {pixel:>17.4f}")
     lines.append(f"bound (direct LED fit of the truth): {result['bound']:.4f}")
     return "\n".join(lines)
@@ -215,7 +218,10 @@ def _plot_table1(result: dict[str, Any], path: Path) -> None:
 def _plot_surfaces(result: dict[str, Any], path: Path) -> None:
     plt = _pyplot()
     figure, axis = plt.subplots(figsize=(5, 3.6))
-    axis.errorbar(result["counts"], result["spectrum_rmse"], yerr=result["spectrum_rmse_std"], fmt="o-",
+    def numbers(values: list[Any]) -> list[float]:  # JSON null (all estimates failed) → NaN, not drawn
+        return [float("nan") if value is None else value for value in values]
+
+    axis.errorbar(result["counts"], numbers(result["spectrum_rmse"]), yerr=numbers(result["spectrum_rmse_std"]), fmt="o-",
                   capsize=3, label="estimate (mean ± std over draws)")
     axis.axhline(result["bound"], color="k", linestyle="--", label="direct LED fit")
     axis.set_xlabel("distinct surfaces")

@@ -115,6 +115,16 @@ def test_cli_writes_json_and_png(tmp_path, capsys):
     assert (tmp_path / "table1.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_cli_surfaces_plot_survives_a_refused_count(tmp_path, capsys):
+    args = _parser().parse_args(["study", "surfaces", "--out", str(tmp_path), "--cameras", "1", "--illuminants", "1",
+                                 "--draws", "2", "--scheduler", "none"])
+    assert args.handler(args) == 0
+    saved = json.loads((tmp_path / "surfaces.json").read_text())
+    assert saved["spectrum_rmse"][0] is None and saved["failures"][0] == 2  # one surface: 3 values < 7 LEDs
+    assert (tmp_path / "surfaces.png").exists()
+    assert "bound" in capsys.readouterr().out
+
+
 def test_cli_rejects_bad_input():
     from acquisition.cli_common import UsageError
 
