@@ -1,10 +1,12 @@
 """msflash evaluate / colour-study: Fig. 9 ΔE00 and Fig. 3 noise on simulated charts, and the HTML report.
 
 Acceptance numbers of the issue, measured on small simulations (Macbeth, 10-pixel patches,
-NikonD100, the paper's 7 LEDs, physical flash bounds, seed 3). At the time of writing, mean ΔE00
-ambient / + matching / + complementary: tungsten 18.3 / 18.4 / 3.6, fluorescent 13.2 / 13.2 /
-2.9, green 32.3 / 32.0 / 2.4, orange 34.7 / 34.5 / 19.9 (target out of reach with bounded
-weights), underwater 20.4 / 20.2 / 1.5; red SNR under water 23 (von Kries) vs 38 (complementary).
+NikonD100, the paper's 7 LEDs, physical flash bounds, seed 3). When written, mean ΔE00
+ambient / + matching / + complementary: tungsten 18.33 / 18.35 / 3.73, fluorescent 13.26 /
+13.15 / 2.77, green 32.33 / 32.00 / 2.43, orange 34.67 / 34.55 / 19.91 (the target is out of
+reach with bounded weights), underwater (ocean, 5 m, 1 m) 20.42 / 20.09 / 1.36. Under water,
+red-channel SNR on the neutral patches 22.7 (von Kries) vs 40.2 (complementary re-capture at
+the same exposure); chroma noise 3.07 vs 2.50.
 """
 
 from __future__ import annotations
