@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "acquisition.cli_devices",
     "acquisition.cli_booth",
     "acquisition.cli_study",
+    "acquisition.cli_evaluate",
 )
 """Modules contributing subcommands, in help order."""
 

@@ -22,6 +22,17 @@ class UsageError(ValueError):
     """Bad input from the user (a file, field or option); the CLI exits with status 2."""
 
 
+def positive_int(text: str) -> int:
+    """argparse type: a whole number ≥ 1 (bad input is a UsageError, exit 2)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise UsageError(f"'{text}': expected a whole number ≥ 1") from None
+    if value < 1:
+        raise UsageError(f"{value}: expected a whole number ≥ 1")
+    return value
+
+
 def _strict(value: Any) -> Any:
     """``value`` with numpy arrays/scalars made plain and non-finite numbers made ``None``.
 

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import sys
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from acquisition import analysis
-from acquisition.cli_common import UsageError, print_json, progress
+from acquisition.cli_common import UsageError, positive_int, print_json, progress
 from acquisition.image_io import write_image
 from acquisition.sequence_format import read_sequence
 from processing.ambient import AMBIENT_METHODS
@@ -27,16 +26,6 @@ def _alpha(text: str) -> float | str:
         raise UsageError(f"--alpha '{text}': expected a non-negative number or 'auto'") from None
     if not value >= 0:
         raise UsageError(f"--alpha {text}: expected a non-negative number or 'auto'")
-    return value
-
-
-def _bin(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise UsageError(f"--bin '{text}': expected a whole number ≥ 1") from None
-    if value < 1:
-        raise UsageError(f"--bin {value}: expected a whole number ≥ 1")
     return value
 
 
@@ -58,7 +47,7 @@ def add_estimation_options(parser: argparse.ArgumentParser) -> None:
                         help="ambient estimator (default: tikhonov, non-negative with roughness penalty)")
     parser.add_argument("--alpha", default="auto", type=_alpha,
                         help="dimensionless roughness weight, or 'auto' (generalised cross-validation)")
-    parser.add_argument("--bin", type=_bin, default=analysis.DEFAULT_BIN_FACTOR,
+    parser.add_argument("--bin", type=positive_int, default=analysis.DEFAULT_BIN_FACTOR,
                         help=f"sum BIN×BIN pixel blocks before estimating (default {analysis.DEFAULT_BIN_FACTOR}; 1 = every pixel)")
 
 

@@ -17,7 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from acquisition.cli_common import UsageError, dumps_json, print_json, progress
+from acquisition.cli_common import UsageError, dumps_json, positive_int, print_json, progress
 from processing.ambient import AMBIENT_METHODS
 
 STUDIES = ("table1", "surfaces")
@@ -34,16 +34,6 @@ def _alpha(text: str) -> float | str | list[float]:
     if not all(value >= 0 for value in values):
         raise UsageError(f"--alpha {text}: expected values ≥ 0")
     return values[0] if len(values) == 1 else values
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise UsageError(f"'{text}': expected a whole number ≥ 1") from None
-    if value < 1:
-        raise UsageError(f"{value}: expected a whole number ≥ 1")
-    return value
 
 
 def _counts(text: str) -> list[int]:
@@ -247,12 +237,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     study.add_argument("--alpha-units", default="dimensionless", choices=("dimensionless", "paper"),
                        help="'paper': alpha is the authors' eq.-6 weight (--method roughness)")
     study.add_argument("--leds", type=_counts, default=[3, 4, 5, 6, 7], help="table1: LED counts (default 3,4,5,6,7)")
-    study.add_argument("--cameras", type=_positive_int, default=None, help="use the first N of the 34 cameras")
-    study.add_argument("--illuminants", type=_positive_int, default=None,
+    study.add_argument("--cameras", type=positive_int, default=None, help="use the first N of the 34 cameras")
+    study.add_argument("--illuminants", type=positive_int, default=None,
                        help="use N of the 23 feasible illuminants, spread over the grid")
-    study.add_argument("--draws", type=_positive_int, default=10, help="surfaces: draws per count (default 10)")
+    study.add_argument("--draws", type=positive_int, default=10, help="surfaces: draws per count (default 10)")
     study.add_argument("--seed", type=int, default=0, help="surfaces: random seed of the draws")
     study.add_argument("--scheduler", default="local",
                        help="'local' (a local dask cluster, default), 'none' (serial, in this process) or a dask scheduler ADDRESS")
-    study.add_argument("--workers", type=_positive_int, default=None, help="workers of --scheduler local (default: CPUs)")
+    study.add_argument("--workers", type=positive_int, default=None, help="workers of --scheduler local (default: CPUs)")
     study.set_defaults(handler=_run)

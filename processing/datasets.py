@@ -409,6 +409,26 @@ def _from_colour(wavelengths_nm: np.ndarray, values: np.ndarray, name: str, grid
     return native.resample(grid).normalised("max")
 
 
+def cie1931_cmfs(grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """The CIE 1931 2° colour-matching functions from colour-science on ``grid``.
+
+    Returned as energy-unit responsivities (``x̄ᵀ s`` is X of an energy spectrum ``s``), columns
+    ``x_bar, y_bar, z_bar``; ``to_unit("photons")`` gives the weights for photon spectra.
+    """
+    import colour  # imported here: loading colour-science takes a second and only these helpers need it
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # colour-science's own table handling; a plain lookup is unaffected
+        cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
+        wavelengths, values = np.asarray(cmfs.wavelengths, dtype=float), np.asarray(cmfs.values, dtype=float)
+    native = Spectra(
+        WavelengthGrid.from_wavelengths(wavelengths, where="colour-science CIE 1931 CMFs"), values,
+        ("x_bar", "y_bar", "z_bar"), kind="responsivity", unit="energy",
+        source="colour-science CIE 1931 2 Degree Standard Observer",
+    )
+    return native.resample(grid, outside="zero")
+
+
 def illuminant(name: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
     """A standard illuminant from colour-science, as energy ``Spectra`` on ``grid`` scaled to peak 1.
 

@@ -24,7 +24,8 @@ import numpy as np
 
 from processing.errors import SpectralDataError
 from processing.image_formation import surface_responses
-from processing.spectra import Spectra, require_same_grid
+from processing import datasets
+from processing.spectra import Spectra, WavelengthGrid, require_same_grid
 
 CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 
@@ -106,12 +107,9 @@ def demosaic(mosaic: np.ndarray, cfa: str, method: str = "bilinear") -> np.ndarr
     return DEMOSAIC_METHODS[method](mosaic, cfa)
 
 
-def _observer(grid_wavelengths_nm: np.ndarray) -> np.ndarray:
-    with warnings.catch_warnings():
-        # colour-science warns about its own table handling; a plain lookup is unaffected.
-        warnings.simplefilter("ignore")
-        cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
-        return np.stack([np.interp(grid_wavelengths_nm, cmfs.wavelengths, cmfs.values[:, i]) for i in range(3)], 1)
+def _observer(grid: WavelengthGrid) -> np.ndarray:
+    """CIE 1931 CMFs on ``grid`` (energy weights), shape (n_wavelengths, 3)."""
+    return datasets.cie1931_cmfs(grid).values
 
 
 def reflectances_to_xyz(reflectances: Spectra, illuminant: Spectra) -> np.ndarray:
@@ -131,7 +129,7 @@ def reflectances_to_xyz(reflectances: Spectra, illuminant: Spectra) -> np.ndarra
     grid = require_same_grid(reflectances, illuminant)
     if illuminant.kind != "spd" or illuminant.count != 1:
         raise SpectralDataError(f"{illuminant.source or 'illuminant'}: expected one spectrum of kind 'spd'")
-    observer = _observer(grid.wavelengths_nm)
+    observer = _observer(grid)
     light = illuminant.to_unit("energy").values[:, 0]
     white_y = float(observer[:, 1] @ light)
     if white_y <= 0:

@@ -112,35 +112,6 @@ def synthesize(
         if bright is not None:
             flat_saturated[start // channels:stop // channels] = _any_channel(bright.reshape(-1, channels))
     return output, saturated
-    white = spec.white_level
-    row_samples = output.size // height
-    rows_per_chunk = max(1, chunk_pixels // max(int(np.prod(ambient.shape[1:2])), 1))
-    # Integer frames whose type cannot reach the white level never saturate: skip every check.
-    can_saturate = [not (np.issubdtype(f.dtype, np.integer) and np.iinfo(f.dtype).max < white) for f in frames]
-    # One float32 row per frame: the chunk's output is then a single (1 × n)·(n × samples) product.
-    stack = np.empty((len(frames), rows_per_chunk * row_samples), dtype=np.float32)
-    flat_output = output.reshape(height, row_samples)
-    for start in range(0, height, rows_per_chunk):
-        stop = min(start + rows_per_chunk, height)
-        n = (stop - start) * row_samples
-        rows = stack[:, :n]
-        bright = None
-        for index, frame in enumerate(frames):
-            chunk = frame[start:stop].reshape(n)
-            # Casting into a preallocated row is one streaming pass (and exact for ≤ 24-bit integers).
-            np.copyto(rows[index], chunk, casting="unsafe")
-            # A contiguous max is far cheaper than a comparison mask: build the mask only when needed.
-            if can_saturate[index] and chunk.max() >= white:
-                hit = frame[start:stop] >= white
-                bright = hit if bright is None else bright | hit
-        target = flat_output[start:stop].reshape(n)
-        # einsum's own single-threaded loop: as fast as BLAS gemv here, without OpenBLAS waking
-        # threads per call (which stalls badly when the other core is busy).
-        np.einsum("i,in->n", factors, rows, out=target)
-        target += offset
-        if bright is not None:
-            saturated[start:stop] = _any_channel(bright)
-    return output, saturated
 
 
 def _any_channel(bright: np.ndarray) -> np.ndarray:

@@ -30,13 +30,13 @@ hblasins/compMultispFlash ``Utilities/xy2Spectrum.m``.
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Literal
 
 import numpy as np
 
+from processing import datasets
 from processing.errors import SolverError, SpectralDataError
 from processing.least_squares import minimise_quadratic
 from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
@@ -52,20 +52,8 @@ PAPER_FEASIBLE_COUNT = 23
 
 @lru_cache(maxsize=8)
 def _cmfs(grid: WavelengthGrid) -> Spectra:
-    """CIE 1931 2° colour-matching functions on ``grid`` (energy responsivities)."""
-    import colour  # slow import; only the studies need it
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
-        wavelengths = np.asarray(cmfs.wavelengths, dtype=float)
-        values = np.asarray(cmfs.values, dtype=float)
-    native = Spectra(
-        WavelengthGrid.from_wavelengths(wavelengths, where="colour-science CIE 1931 CMFs"),
-        values, ("x_bar", "y_bar", "z_bar"), kind="responsivity", unit="energy",
-        source="colour-science CIE 1931 2 Degree Standard Observer",
-    )
-    return native.resample(grid)
+    """CIE 1931 2° colour-matching functions on ``grid`` (energy responsivities), cached."""
+    return datasets.cie1931_cmfs(grid)
 
 
 def cmfs_photons(grid: WavelengthGrid = DEFAULT_GRID) -> np.ndarray:
