@@ -43,7 +43,7 @@ def _weights(text: str, n_leds: int) -> np.ndarray:
 
 def add_estimation_options(parser: argparse.ArgumentParser) -> None:
     """The options every command that estimates the ambient shares."""
-    parser.add_argument("--method", default="tikhonov", choices=sorted(AMBIENT_METHODS),
+    parser.add_argument("--solver", default="tikhonov", choices=sorted(AMBIENT_METHODS),
                         help="ambient estimator (default: tikhonov, non-negative with roughness penalty)")
     parser.add_argument("--alpha", default="auto", type=_alpha,
                         help="dimensionless roughness weight, or 'auto' (generalised cross-validation)")
@@ -55,7 +55,7 @@ def _estimate(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
     if sequence.partial:
         progress(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
-    estimate = analysis.estimate_sequence(sequence, args.method, args.alpha, bin_factor=args.bin)
+    estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
     payload = analysis.estimate_payload(sequence, estimate)
     for warning in estimate.warnings:
         progress(f"warning: {warning}")
@@ -75,7 +75,7 @@ def _estimate(args: argparse.Namespace) -> int:
 
 def _flash(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
-    estimate = analysis.estimate_sequence(sequence, args.method, args.alpha, bin_factor=args.bin)
+    estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
         solution = analysis.solve_sequence_flash(sequence, args.mode, estimate.ambient_weights, args.target, args.bounds)

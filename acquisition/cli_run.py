@@ -94,7 +94,7 @@ def _run(args: argparse.Namespace) -> int:
         sequence = read_sequence(writer.path.parent)
         progress("estimating the ambient spectrum")
         stack = analysis.load_frame_stack(sequence)
-        estimate = analysis.estimate_sequence(sequence, args.method, args.alpha, stack=stack, bin_factor=args.bin)
+        estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
         for note in estimate.warnings:
             progress(f"warning: {note}")
         degenerate = _degenerate(estimate)

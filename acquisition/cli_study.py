@@ -92,15 +92,15 @@ def _run(args: argparse.Namespace) -> int:
     alpha = args.alpha
     alpha_units = args.alpha_units
     if alpha == "paper":
-        if args.method != "roughness":
-            raise UsageError("--alpha paper is the authors' sweep of eq. 6; expected --method roughness")
+        if args.solver != "roughness":
+            raise UsageError("--alpha paper is the authors' sweep of eq. 6; expected --solver roughness")
         from processing.study.table1 import PAPER_ALPHAS
 
         alpha, alpha_units = (list(PAPER_ALPHAS) if args.name == "table1" else 0.06), "paper"
     if isinstance(alpha, list) and args.name != "table1":
         raise UsageError("--alpha: a sweep is only for table1; expected one value")
-    if alpha_units == "paper" and args.method != "roughness":
-        raise UsageError("--alpha-units paper is the authors' eq. 6; expected --method roughness")
+    if alpha_units == "paper" and args.solver != "roughness":
+        raise UsageError("--alpha-units paper is the authors' eq. 6; expected --solver roughness")
     out = Path(args.out) if args.out else None
     if out is not None:
         try:
@@ -112,13 +112,13 @@ def _run(args: argparse.Namespace) -> int:
         if args.name == "table1":
             from processing.study.table1 import run_table1
 
-            result = run_table1(n_leds_list=args.leds, method=args.method, alpha=alpha, cameras=args.cameras,
+            result = run_table1(n_leds_list=args.leds, method=args.solver, alpha=alpha, cameras=args.cameras,
                                 illuminants=args.illuminants, alpha_units=alpha_units, progress=progress,
                                 map_function=mapper)
         else:
             from processing.study.surfaces import run_surfaces
 
-            result = run_surfaces(draws=args.draws, method=args.method, alpha=alpha, cameras=args.cameras,
+            result = run_surfaces(draws=args.draws, method=args.solver, alpha=alpha, cameras=args.cameras,
                                   illuminants=args.illuminants, alpha_units=alpha_units, seed=args.seed,
                                   progress=progress, map_function=mapper)
     result = json.loads(dumps_json(result))  # plain JSON types (numpy scalars, tuples) from here on
@@ -229,13 +229,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     study.add_argument("name", metavar="NAME", help=f"the study: {', '.join(STUDIES)}")
     study.add_argument("--out", metavar="DIR", help="write NAME.json and NAME.png to this folder")
     study.add_argument("--json", action="store_true", help="print the result as one JSON object")
-    study.add_argument("--method", default="tikhonov", choices=sorted(AMBIENT_METHODS),
+    study.add_argument("--solver", default="tikhonov", choices=sorted(AMBIENT_METHODS),
                        help="ambient estimator (default: tikhonov, the app's default)")
     study.add_argument("--alpha", default="auto", type=_alpha,
                        help="roughness weight: a number, a comma-separated sweep (table1: best per metric), 'auto', "
-                            "or 'paper' (the authors' logspace(-3,1,10) sweep of eq. 6; --method roughness)")
+                            "or 'paper' (the authors' logspace(-3,1,10) sweep of eq. 6; --solver roughness)")
     study.add_argument("--alpha-units", default="dimensionless", choices=("dimensionless", "paper"),
-                       help="'paper': alpha is the authors' eq.-6 weight (--method roughness)")
+                       help="'paper': alpha is the authors' eq.-6 weight (--solver roughness)")
     study.add_argument("--leds", type=_counts, default=[3, 4, 5, 6, 7], help="table1: LED counts (default 3,4,5,6,7)")
     study.add_argument("--cameras", type=positive_int, default=None, help="use the first N of the 34 cameras")
     study.add_argument("--illuminants", type=positive_int, default=None,

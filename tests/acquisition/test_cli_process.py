@@ -144,7 +144,7 @@ def test_estimate_json(capsys, base_sequence: Path) -> None:
 
 def test_estimate_json_recovers_led_mix(capsys, mix_sequence: Path) -> None:
     # Energy units in the file: the spectrum comes back in energy, proportional to the LED mix's energy SPD.
-    status, out, err = run(capsys, "estimate", str(mix_sequence), "--json", "--method", "nonneg")
+    status, out, err = run(capsys, "estimate", str(mix_sequence), "--json", "--solver", "nonneg")
     assert status == 0, err
     payload = json.loads(out)
     np.testing.assert_allclose(payload["ambient_weights"], MIX, atol=QUANTISED)
@@ -152,7 +152,7 @@ def test_estimate_json_recovers_led_mix(capsys, mix_sequence: Path) -> None:
 
 
 def test_estimate_bayer_with_differing_gains(capsys, bayer_sequence: Path) -> None:
-    status, out, err = run(capsys, "estimate", str(bayer_sequence), "--json", "--method", "lstsq")
+    status, out, err = run(capsys, "estimate", str(bayer_sequence), "--json", "--solver", "lstsq")
     assert status == 0, err
     np.testing.assert_allclose(json.loads(out)["ambient_weights"], MIX, atol=QUANTISED)
 

@@ -135,7 +135,7 @@ def test_cli_rejects_bad_input():
     with pytest.raises(UsageError):
         parser.parse_args(["study", "table1", "--alpha", "-1"])
     with pytest.raises(UsageError):
-        args = parser.parse_args(["study", "table1", "--alpha", "paper", "--method", "tikhonov", "--scheduler", "none"])
+        args = parser.parse_args(["study", "table1", "--alpha", "paper", "--solver", "tikhonov", "--scheduler", "none"])
         args.handler(args)
 
 
