@@ -24,7 +24,7 @@ import numpy as np
 from acquisition.analysis import DEFAULT_BIN_FACTOR
 from processing import datasets
 from processing.ambient import AMBIENT_METHODS, estimate_ambient
-from processing.flash import solve_complementary, solve_matching
+from processing.flash import FlashModel
 from processing.image_formation import SensorModel, chart_scene, exposure_for_peak, render_frame
 from processing.least_squares import minimise_quadratic, recording_problems
 from processing.spectra import DEFAULT_GRID, Spectra
@@ -134,13 +134,17 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
         return result
     leds, camera, target = world["leds"], world["camera"], world["target"]
     led_values = leds.values
+    # The LED/camera part of the flash problem is prepared once per sequence (FlashModel), as cvxpy
+    # is handed the finished problem matrices.
+    flash_model = FlashModel(leds, camera)
+    target_response = flash_model.target_response(target)
     # The estimation solvers proper (AMBIENT_METHODS); estimate_ambient adds the reliability
     # signals (band, conditioning), which are not part of the problem cvxpy solves.
     solvers = {
         "estimate nonneg": lambda: AMBIENT_METHODS["nonneg"](statistics, led_values, 0.0),
         "estimate tikhonov (alpha 1e-3)": lambda: AMBIENT_METHODS["tikhonov"](statistics, led_values, 1e-3),
-        "flash matching": lambda: solve_matching(weights, leds, camera),
-        "flash complementary": lambda: solve_complementary(weights, leds, camera, target),
+        "flash matching": lambda: flash_model.matching(weights),
+        "flash complementary": lambda: flash_model.complementary(weights, target_response),
     }
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

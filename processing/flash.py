@@ -102,6 +102,143 @@ def _box_rows(k: int, bounds: str) -> tuple[np.ndarray, np.ndarray]:
     raise ValueError(f"flash bounds '{bounds}' are unknown; expected physical, nonnegative or free")
 
 
+@dataclass(frozen=True)
+class FlashModel:
+    """The flash problem of one LED set and one camera, prepared once and solved per ambient.
+
+    Everything that depends only on the LEDs and the camera (``A = Cᵀ I``, the tie-break
+    matrices, the bound constraints) is computed at construction; :meth:`matching` and
+    :meth:`complementary` then cost one small quadratic programme each — what a video-rate
+    re-solve, or a benchmark against a general-purpose solver, needs.
+    """
+
+    led_spectra: Spectra
+    """``I`` in photons."""
+    camera_responsivities: Spectra
+    """``C`` in photons, same grid."""
+    matrix: np.ndarray = field(init=False, repr=False)
+    """``A = Cᵀ I``, shape (3, k)."""
+    _matching_hessian: np.ndarray = field(init=False, repr=False)
+    _full_flash_norm: float = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        matrix = camera_led_matrix(self.camera_responsivities, self.led_spectra)
+        spectra = self.led_spectra.values
+        k = matrix.shape[1]
+        # Frobenius norms: any consistent scale makes the tie-break weight relative.
+        norm = max(float((matrix * matrix).sum()), 1e-300)
+        spectral_norm = max(float((spectra * spectra).sum()), 1e-300)
+        # ½‖A(g − w)‖² + ½ε‖I(g − w)‖², scaled so the camera term has unit size.
+        hessian = matrix.T @ matrix / norm + TIE_BREAK * spectra.T @ spectra / spectral_norm + TIE_BREAK_CHANGE * np.eye(k)
+        object.__setattr__(self, "matrix", matrix)
+        object.__setattr__(self, "_matching_hessian", hessian)
+        object.__setattr__(self, "_full_flash_norm", _norm(matrix.sum(axis=1)))
+
+    @property
+    def n_leds(self) -> int:
+        """Number of LEDs k."""
+        return self.matrix.shape[1]
+
+    def target_response(self, target: Spectra) -> np.ndarray:
+        """``Cᵀ i_d``: the camera's response to a white surface under the target, shape (3,)."""
+        require_same_grid(self.led_spectra, target)
+        require_unit(target, "photons")
+        if target.count != 1:
+            raise SpectralDataError(f"{target.source or 'target'}: {target.count} spectra; expected one target illuminant")
+        response = self.camera_responsivities.values.T @ target.values[:, 0]
+        if _norm(response) == 0:
+            raise SpectralDataError(f"{target.source or 'target'}: the camera sees nothing of the target illuminant")
+        return response
+
+    def matching(self, ambient_weights: np.ndarray, bounds: FlashBounds = "physical") -> FlashSolution:
+        """Matching flash, eq. 7 (see :func:`solve_matching`)."""
+        ambient_weights = np.asarray(ambient_weights, dtype=float)
+        _check_count(ambient_weights, self.matrix, self.led_spectra)
+        peak = float(abs(ambient_weights).max())
+        if peak == 0:
+            raise SolverError("matching flash: the ambient weights are all zero; expected an estimated ambient")
+        goal = ambient_weights / peak
+        hessian = self._matching_hessian
+        constraints, limits = _box(self.n_leds, bounds)
+        weights = minimise_quadratic(hessian, hessian @ goal, constraints, limits, where="matching flash").x
+        weights[abs(weights) < 1e-12] = 0.0
+        top = float(weights.max())
+        if top <= 0:
+            raise SolverError(
+                "matching flash: no non-negative LED mix matches the ambient's colour; "
+                "expected an ambient inside the LEDs' gamut"
+            )
+        weights = weights / top
+        relative_error = _chromatic_error(self.matrix @ weights, self.matrix @ goal)
+        return _finish("matching", ambient_weights, weights, None, relative_error, bounds)
+
+    def complementary(self, ambient_weights: np.ndarray, target: Spectra | np.ndarray,
+                      bounds: FlashBounds = "physical", previous_weights: np.ndarray | None = None) -> FlashSolution:
+        """Complementary flash, eq. 8–9 (see :func:`solve_complementary`); ``target`` may be ``Cᵀ i_d``."""
+        ambient_weights = np.asarray(ambient_weights, dtype=float)
+        _check_count(ambient_weights, self.matrix, self.led_spectra)
+        target_response = self.target_response(target) if isinstance(target, Spectra) else np.asarray(target, dtype=float)
+        matrix, k = self.matrix, self.n_leds
+        ambient_response = matrix @ ambient_weights
+        target_norm = _norm(target_response)
+        # Normalise so the ambient (or, with no ambient, the full flash) has unit camera response and
+        # the target's response unit norm: the tie-break weights are then relative.
+        unit = max(_norm(ambient_response), self._full_flash_norm * 1e-3, 1e-300)
+        a_matrix = matrix / unit
+        t_vector = target_response / target_norm
+        ambient_unit = ambient_response / unit
+        previous = np.zeros(k) if previous_weights is None else np.asarray(previous_weights, dtype=float)
+
+        def solve(weight_bounds: str, fixed_scale: float | None) -> tuple[np.ndarray, float]:
+            constraints, limits = _box(k, weight_bounds)
+            if fixed_scale is None:
+                # Variables x = [w_f, s]; residual A w_f − s t + A w_a.
+                design = np.empty((a_matrix.shape[0], k + 1))
+                design[:, :k] = a_matrix
+                design[:, k] = -t_vector
+                hessian = design.T @ design
+                hessian.flat[::k + 2] += TIE_BREAK_CHANGE
+                linear = -design.T @ ambient_unit
+                linear[:k] += TIE_BREAK_CHANGE * previous
+                if weight_bounds != "free":
+                    linear[:k] -= TIE_BREAK  # least total power first
+                full_constraints, full_limits = _with_scale(k, weight_bounds)
+                x = minimise_quadratic(hessian, linear, full_constraints, full_limits, where="complementary flash").x
+                return x[:k], float(x[k])
+            hessian = a_matrix.T @ a_matrix
+            hessian.flat[::k + 1] += TIE_BREAK_CHANGE
+            linear = a_matrix.T @ (fixed_scale * t_vector - ambient_unit) + TIE_BREAK_CHANGE * previous
+            x = minimise_quadratic(hessian, linear, constraints, limits, where="complementary flash").x
+            return x, fixed_scale
+
+        if bounds == "free":
+            _, scale_unit = solve("nonnegative", None)
+            weights, scale_unit = solve("free", scale_unit)
+        else:
+            weights, scale_unit = solve(bounds, None)
+        weights[abs(weights) < 1e-10] = 0.0
+        if bounds == "physical":
+            weights = np.clip(weights, 0.0, 1.0)
+        elif bounds == "nonnegative":
+            weights = np.clip(weights, 0.0, None)
+        scale = scale_unit * unit / target_norm
+        relative_error = _chromatic_error(matrix @ (ambient_weights + weights), target_response) if scale > 0 else 1.0
+        return _finish("complementary", ambient_weights, weights, float(scale), relative_error, bounds)
+
+
+@lru_cache(maxsize=64)
+def _with_scale(k: int, bounds: str) -> tuple[np.ndarray, np.ndarray]:
+    """The bound rows on ``[w_f, s]``: the weights' bounds plus ``s ≥ 0`` (cached, read-only)."""
+    constraints, limits = _box(k, bounds)
+    full_constraints = np.zeros((constraints.shape[0] + 1, k + 1))
+    full_constraints[:-1, :k] = constraints
+    full_constraints[-1, k] = 1.0
+    full_limits = np.concatenate([limits, [0.0]])
+    full_constraints.flags.writeable = False
+    full_limits.flags.writeable = False
+    return full_constraints, full_limits
+
+
 def solve_matching(
     ambient_weights: np.ndarray, led_spectra: Spectra, camera_responsivities: Spectra,
     bounds: FlashBounds = "physical",
@@ -117,38 +254,10 @@ def solve_matching(
     >>> g = WavelengthGrid(400, 700, 100)
     >>> leds = Spectra(g, np.eye(4), ("a", "b", "c", "d"), unit="photons")
     >>> cam = Spectra(g, np.ones((4, 3)), ("R", "G", "B"), kind="responsivity", unit="photons")
-    >>> solve_matching(np.array([0.5, 1.0, 0.25, 0.0]), leds, cam).flash_weights.tolist()
+    >>> np.round(solve_matching(np.array([0.5, 1.0, 0.25, 0.0]), leds, cam).flash_weights, 6).tolist()
     [0.5, 1.0, 0.25, 0.0]
     """
-    ambient_weights = np.asarray(ambient_weights, dtype=float)
-    matrix = camera_led_matrix(camera_responsivities, led_spectra)
-    k = ambient_weights.size
-    _check_count(ambient_weights, matrix, led_spectra)
-    peak = np.max(np.abs(ambient_weights))
-    if peak == 0:
-        raise SolverError("matching flash: the ambient weights are all zero; expected an estimated ambient")
-    goal = ambient_weights / peak
-    spectra = led_spectra.values
-    # Frobenius norms: any consistent scale makes the tie-break weight relative.
-    norm = max(float((matrix * matrix).sum()), 1e-300)
-    spectral_norm = max(float((spectra * spectra).sum()), 1e-300)
-    # ½‖A(g − w)‖² + ½ε‖I(g − w)‖², scaled so the camera term has unit size.
-    hessian = matrix.T @ matrix / norm + TIE_BREAK * spectra.T @ spectra / spectral_norm + TIE_BREAK_CHANGE * np.eye(k)
-    linear = hessian @ goal
-    constraints, limits = _box(k, bounds)
-    weights = minimise_quadratic(hessian, linear, constraints, limits, where="matching flash").x
-    weights[np.abs(weights) < 1e-12] = 0.0
-    top = np.max(weights)
-    if top <= 0:
-        raise SolverError(
-            "matching flash: no non-negative LED mix matches the ambient's colour; "
-            "expected an ambient inside the LEDs' gamut"
-        )
-    weights = weights / top
-    response = matrix @ weights
-    wanted = matrix @ goal
-    relative_error = _chromatic_error(response, wanted)
-    return _finish("matching", ambient_weights, weights, None, relative_error, bounds)
+    return FlashModel(led_spectra, camera_responsivities).matching(ambient_weights, bounds)
 
 
 def solve_complementary(
@@ -175,64 +284,7 @@ def solve_complementary(
     TargetUnreachableWarning
         When ambient + flash cannot be brought to the target's colour within the bounds.
     """
-    ambient_weights = np.asarray(ambient_weights, dtype=float)
-    matrix = camera_led_matrix(camera_responsivities, led_spectra)
-    require_same_grid(led_spectra, target)
-    require_unit(target, "photons")
-    if target.count != 1:
-        raise SpectralDataError(f"{target.source or 'target'}: {target.count} spectra; expected one target illuminant")
-    _check_count(ambient_weights, matrix, led_spectra)
-    k = ambient_weights.size
-    target_response = camera_responsivities.values.T @ target.values[:, 0]
-    ambient_response = matrix @ ambient_weights
-    target_norm = _norm(target_response)
-    if target_norm == 0:
-        raise SpectralDataError(f"{target.source or 'target'}: the camera sees nothing of the target illuminant")
-    # Normalise so the ambient (or, with no ambient, the full flash) has unit camera response and
-    # the target's response unit norm: the tie-break weights are then relative.
-    unit = max(_norm(ambient_response), _norm(matrix.sum(axis=1)) * 1e-3, 1e-300)
-    a_matrix = matrix / unit
-    t_vector = target_response / target_norm
-    ambient_unit = ambient_response / unit
-    previous = np.zeros(k) if previous_weights is None else np.asarray(previous_weights, dtype=float)
-
-    def solve(weight_bounds: str, fixed_scale: float | None) -> tuple[np.ndarray, float]:
-        constraints, limits = _box(k, weight_bounds)
-        if fixed_scale is None:
-            # Variables x = [w_f, s]; residual A w_f − s t + A w_a.
-            design = np.hstack([a_matrix, -t_vector[:, None]])
-            hessian = design.T @ design
-            hessian[:k, :k] += TIE_BREAK_CHANGE * np.eye(k)
-            hessian[k, k] += TIE_BREAK_CHANGE
-            linear = -design.T @ ambient_unit
-            linear[:k] += TIE_BREAK_CHANGE * previous
-            if weight_bounds != "free":
-                linear[:k] -= TIE_BREAK * np.ones(k)  # least total power first
-            full_constraints = np.zeros((constraints.shape[0] + 1, k + 1))
-            full_constraints[:-1, :k] = constraints
-            full_constraints[-1, k] = 1.0  # s ≥ 0
-            full_limits = np.concatenate([limits, [0.0]])
-            x = minimise_quadratic(hessian, linear, full_constraints, full_limits, where="complementary flash").x
-            return x[:k], float(x[k])
-        hessian = a_matrix.T @ a_matrix + TIE_BREAK_CHANGE * np.eye(k)
-        linear = a_matrix.T @ (fixed_scale * t_vector - ambient_unit) + TIE_BREAK_CHANGE * previous
-        x = minimise_quadratic(hessian, linear, constraints, limits, where="complementary flash").x
-        return x, fixed_scale
-
-    if bounds == "free":
-        _, scale_unit = solve("nonnegative", None)
-        weights, scale_unit = solve("free", scale_unit)
-    else:
-        weights, scale_unit = solve(bounds, None)
-    weights[np.abs(weights) < 1e-10] = 0.0
-    if bounds == "physical":
-        weights = np.clip(weights, 0.0, 1.0)
-    elif bounds == "nonnegative":
-        weights = np.clip(weights, 0.0, None)
-    scale = scale_unit * unit / target_norm
-    result = matrix @ (ambient_weights + weights)
-    relative_error = _chromatic_error(result, target_response) if scale > 0 else 1.0
-    return _finish("complementary", ambient_weights, weights, float(scale), relative_error, bounds)
+    return FlashModel(led_spectra, camera_responsivities).complementary(ambient_weights, target, bounds, previous_weights)
 
 
 def _chromatic_error(response: np.ndarray, wanted: np.ndarray) -> float:
