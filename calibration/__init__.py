@@ -1,1 +1,10 @@
-"""msflash: calibration."""
+"""msflash calibration: LED spectra, camera responsivities, dark/linearity and calibration files.
+
+Pure (arrays and :class:`~processing.spectra.Spectra` in, results out) apart from
+:mod:`calibration.spectrometer` and :mod:`calibration.files`, which read and write the text files
+calibration owns. Imports only :mod:`processing`.
+"""
+
+from calibration.errors import CalibrationError, CalibrationWarning
+
+__all__ = ["CalibrationError", "CalibrationWarning"]

@@ -1,0 +1,257 @@
+"""Versioned calibration files: one directory with ``calibration.json`` and its CSV tables.
+
+Layout (format ``msflash-calibration``, version 1)::
+
+    calibration.json   id, created_utc, and one optional section per measurement:
+                         "leds":   {"file": "leds.csv", "unit", "names", "peaks_nm", "fwhm_nm",
+                                    "models", "relative_power", "sources", "warnings"}
+                         "camera": {"file": "camera.csv", "unit", "channels", "method", "validation"}
+                         "dark":   {"black_level": [per channel], "read_noise_dn": [...], "cfa"}
+                         "linearity": {"slope_dn_per_us": [...], "max_relative_deviation",
+                                       "saturation_level", "linear_limit"}
+    leds.csv           wavelength_nm, one column per LED (full-drive spectra, true ratios)
+    camera.csv         wavelength_nm, R, G, B (responsivities)
+
+Unknown keys are kept and written back; a newer ``version`` is refused. A sequence refers to a
+calibration with ``"calibration": {"id": …, "file": "<dir>"}`` (a path relative to the sequence
+directory or absolute). Each calibrate command updates the sections it measures and keeps the
+others, so ``leds``, ``camera`` and ``dark`` can be run one after another into one directory;
+every save gets a new ``id``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+import uuid
+from dataclasses import dataclass, field, replace
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration.errors import CalibrationError
+from processing.datasets import load_spectra_csv
+from processing.errors import SpectralDataError
+from processing.spectra import Spectra
+
+FORMAT = "msflash-calibration"
+VERSION = 1
+CALIBRATION_FILE = "calibration.json"
+LED_FILE = "leds.csv"
+CAMERA_FILE = "camera.csv"
+_KNOWN = ("format", "version", "id", "created_utc", "leds", "camera", "dark", "linearity")
+
+
+def new_calibration_id() -> str:
+    """A fresh id: UTC time plus 8 random hex digits."""
+    return f"cal-{datetime.now(UTC):%Y%m%dT%H%M%SZ}-{uuid.uuid4().hex[:8]}"
+
+
+@dataclass(frozen=True)
+class CalibrationSet:
+    """A calibration: any of LED spectra, camera responsivities, dark and linearity results."""
+
+    id: str = field(default_factory=new_calibration_id)
+    """Identifier, new on every save (sequences record it)."""
+    created_utc: str = field(default_factory=lambda: datetime.now(UTC).isoformat(timespec="seconds"))
+    """When it was written."""
+    led_spectra: Spectra | None = None
+    """LED spectra at full drive, (n_wavelengths, k), true ratios between LEDs."""
+    leds: dict = field(default_factory=dict)
+    """The ``leds`` section without the spectra: peaks, FWHM, models, relative power, warnings."""
+    camera_responsivities: Spectra | None = None
+    """Camera responsivities, (n_wavelengths, 3), channels R, G, B."""
+    camera: dict = field(default_factory=dict)
+    """The ``camera`` section without the curves: method, validation."""
+    dark: dict | None = None
+    """Black level per channel and read noise."""
+    linearity: dict | None = None
+    """Linearity and saturation level."""
+    extra: dict = field(default_factory=dict)
+    """Unknown top-level keys, kept."""
+
+    def updated(self, **changes: Any) -> CalibrationSet:
+        """A copy with some sections changed and a new id and time."""
+        return replace(self, id=new_calibration_id(),
+                       created_utc=datetime.now(UTC).isoformat(timespec="seconds"), **changes)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return _plain(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _write_text(path: Path, text: str) -> None:
+    """Write atomically (temporary file in the same directory, then rename)."""
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "w", encoding="utf-8") as stream:
+            stream.write(text)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def _csv_text(spectra: Spectra, calibration_id: str, what: str) -> str:
+    lines = [f"# msflash calibration {calibration_id}: {what}, unit {spectra.unit}",
+             "wavelength_nm," + ",".join(spectra.names)]
+    for wavelength, row in zip(spectra.wavelengths_nm, spectra.values):
+        lines.append(f"{wavelength:g}," + ",".join(repr(float(v)) for v in row))
+    return "\n".join(lines) + "\n"
+
+
+def save_calibration(calibration: CalibrationSet, directory: str | Path) -> Path:
+    """Write a calibration directory (created if needed); returns the ``calibration.json`` path."""
+    directory = Path(directory)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise CalibrationError(f"{directory}: cannot create the calibration directory ({err.strerror or err})") from err
+    document: dict[str, Any] = {"format": FORMAT, "version": VERSION, "id": calibration.id,
+                                "created_utc": calibration.created_utc}
+    if calibration.led_spectra is not None:
+        _write_text(directory / LED_FILE, _csv_text(calibration.led_spectra, calibration.id, "LED spectra"))
+        document["leds"] = {**calibration.leds, "file": LED_FILE, "unit": calibration.led_spectra.unit,
+                            "names": list(calibration.led_spectra.names)}
+    if calibration.camera_responsivities is not None:
+        _write_text(directory / CAMERA_FILE,
+                    _csv_text(calibration.camera_responsivities, calibration.id, "camera responsivities"))
+        document["camera"] = {**calibration.camera, "file": CAMERA_FILE,
+                              "unit": calibration.camera_responsivities.unit,
+                              "channels": list(calibration.camera_responsivities.names)}
+    if calibration.dark is not None:
+        document["dark"] = calibration.dark
+    if calibration.linearity is not None:
+        document["linearity"] = calibration.linearity
+    document.update(calibration.extra)
+    path = directory / CALIBRATION_FILE
+    _write_text(path, json.dumps(_plain(document), indent=2, allow_nan=False) + "\n")
+    return path
+
+
+def _section(path: Path, document: dict, key: str) -> dict | None:
+    value = document.get(key)
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        raise CalibrationError(f"{path}: field '{key}' is a {type(value).__name__}; expected an object")
+    return value
+
+
+def _spectra(path: Path, section: dict, key: str, kind: str, names_key: str) -> Spectra:
+    file_name = section.get("file")
+    if not isinstance(file_name, str) or not file_name:
+        raise CalibrationError(f"{path}: field '{key}.file' is {file_name!r}; expected a CSV file name")
+    table = path.parent / file_name
+    if Path(file_name).is_absolute() or ".." in Path(file_name).parts:
+        raise CalibrationError(f"{path}: field '{key}.file' '{file_name}' leaves the calibration directory; "
+                               "expected a file name inside it")
+    unit = section.get("unit")
+    if unit not in ("energy", "photons"):
+        raise CalibrationError(f"{path}: field '{key}.unit' is {unit!r}; expected 'energy' or 'photons'")
+    if not table.is_file():
+        raise CalibrationError(f"{path}: field '{key}.file': {table} is missing; expected the CSV table beside it")
+    try:
+        spectra = load_spectra_csv(table, kind=kind, unit=unit)  # type: ignore[arg-type]
+    except SpectralDataError as err:
+        raise CalibrationError(f"{path}: field '{key}.file': {err}") from err
+    names = section.get(names_key)
+    if names is not None and list(names) != list(spectra.names):
+        raise CalibrationError(f"{path}: field '{key}.{names_key}' is {names}; expected the columns of {table.name}: "
+                               f"{list(spectra.names)}")
+    if np.any(spectra.values < 0):
+        raise CalibrationError(f"{table}: negative values; expected {key} spectra ≥ 0")
+    return spectra
+
+
+def _number_list(path: Path, section: dict, key: str, field_name: str) -> None:
+    value = section.get(field_name)
+    if value is None:
+        return
+    if not isinstance(value, list) or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+        raise CalibrationError(f"{path}: field '{key}.{field_name}' is {value!r}; expected a list of numbers")
+
+
+def load_calibration(directory: str | Path) -> CalibrationSet:
+    """Read and validate a calibration directory (or its ``calibration.json``).
+
+    Raises
+    ------
+    CalibrationError
+        Naming the file and field: missing or unreadable file, wrong format, a newer version,
+        a section of the wrong type, a missing or malformed table.
+    """
+    directory = Path(directory)
+    path = directory if directory.suffix == ".json" else directory / CALIBRATION_FILE
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        raise CalibrationError(f"{path}: cannot be read ({err.strerror or err}); expected a calibration directory "
+                               "written by 'msflash calibrate'") from err
+    try:
+        document = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise CalibrationError(f"{path}:{err.lineno}: not valid JSON ({err.msg})") from err
+    if not isinstance(document, dict):
+        raise CalibrationError(f"{path}: top level is a {type(document).__name__}; expected an object")
+    if document.get("format") != FORMAT:
+        raise CalibrationError(f"{path}: field 'format' is {document.get('format')!r}; expected '{FORMAT}'")
+    version = document.get("version")
+    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+        raise CalibrationError(f"{path}: field 'version' is {version!r}; expected a whole number ≥ 1")
+    if version > VERSION:
+        raise CalibrationError(f"{path}: field 'version' is {version}; this msflash reads version {VERSION} — "
+                               "upgrade msflash to read it")
+    calibration_id = document.get("id")
+    if not isinstance(calibration_id, str) or not calibration_id:
+        raise CalibrationError(f"{path}: field 'id' is {calibration_id!r}; expected a non-empty string")
+    created = document.get("created_utc", "")
+    led_section = _section(path, document, "leds")
+    camera_section = _section(path, document, "camera")
+    dark = _section(path, document, "dark")
+    linearity = _section(path, document, "linearity")
+    led_spectra = camera = None
+    if led_section is not None:
+        led_spectra = _spectra(path, led_section, "leds", "spd", "names")
+        for name in ("peaks_nm", "fwhm_nm", "relative_power"):
+            _number_list(path, led_section, "leds", name)
+    if camera_section is not None:
+        camera = _spectra(path, camera_section, "camera", "responsivity", "channels")
+        if camera.count != 3:
+            raise CalibrationError(f"{path}: field 'camera.file' holds {camera.count} channels; expected R, G, B")
+    if dark is not None:
+        if "black_level" not in dark:
+            raise CalibrationError(f"{path}: field 'dark.black_level' is missing; expected one number per channel")
+        _number_list(path, dark, "dark", "black_level")
+    strip = ("file", "unit", "names", "channels")
+    return CalibrationSet(
+        id=calibration_id, created_utc=str(created),
+        led_spectra=led_spectra.replace(source=f"calibration {calibration_id} ({led_spectra.source})") if led_spectra else None,
+        leds={k: v for k, v in (led_section or {}).items() if k not in strip},
+        camera_responsivities=camera.replace(source=f"calibration {calibration_id} ({camera.source})") if camera else None,
+        camera={k: v for k, v in (camera_section or {}).items() if k not in strip},
+        dark=dark, linearity=linearity,
+        extra={k: v for k, v in document.items() if k not in _KNOWN},
+    )
+
+
+def load_or_new(directory: str | Path) -> CalibrationSet:
+    """The calibration in ``directory`` if there is one (to update), else an empty one."""
+    directory = Path(directory)
+    if (directory / CALIBRATION_FILE).exists():
+        return load_calibration(directory)
+    return CalibrationSet()

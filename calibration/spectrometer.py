@@ -1,0 +1,308 @@
+"""Reading spectrometer exports: two-column text (CSV, tab, semicolon or space separated).
+
+Public objects
+--------------
+- :class:`SpectrometerMeasurement`: the raw samples of one export, on the instrument's own grid.
+- :func:`parse_spectrometer_text`, :func:`read_spectrometer_file`: the parser and its file form.
+- :func:`subtract_dark`: a dark (shutter closed) export taken off a measurement.
+- :func:`measurement_to_spectra`: the samples as :class:`~processing.spectra.Spectra` on a grid.
+
+Accepted layout
+---------------
+Comment lines start with ``#``, ``%``, ``//`` or ``;``. Any non-numeric lines *before* the data
+are a header (instrument exports carry a few: ``Wavelength (nm)\tIrradiance``, Ocean Optics'
+``>>>>>Begin Spectral Data<<<<<`` block); the last of them names the columns if it has as many
+cells as the data. After the data starts, every line must be numeric, except an end marker
+(``>>>>>End Spectral Data<<<<<``). Decimal commas are not guessed: ``1,5`` is two cells.
+
+Spectrometers sample on their own, often non-uniform, grids (a CCD's pixel-to-wavelength
+polynomial). :func:`measurement_to_spectra` averages the samples in 1-nm-or-finer bins (a
+box-car, what a coarser spectral sample means) to reach a uniform grid and then uses
+:meth:`Spectra.resample`, the project's resampler, for everything else. Uniform exports skip the
+binning.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calibration.errors import CalibrationError
+from processing.errors import SpectralDataError
+from processing.spectra import Spectra, SpectralUnit, WavelengthGrid
+
+_COMMENT_PREFIXES = ("#", "%", "//", ";")
+_END_MARKERS = ("end", ">>>>>end")
+_SEPARATORS = re.compile(r"[,\t; ]+")
+NEGATIVE_TOLERANCE = 0.05
+"""Negative values down to this fraction of the peak are measurement noise (clipped to 0 later by
+the models); anything more negative is refused: a spectral power cannot be negative."""
+
+
+@dataclass(frozen=True)
+class SpectrometerMeasurement:
+    """The samples of one spectrometer export."""
+
+    wavelengths_nm: np.ndarray
+    """Sampled wavelengths, strictly increasing, shape (n,)."""
+    values: np.ndarray
+    """Spectral power at each wavelength, shape (n,)."""
+    unit: SpectralUnit
+    """``energy`` (radiance/irradiance, W…) or ``photons`` (quanta)."""
+    source: str
+    """The file (or text) it came from, for messages."""
+    name: str
+    """A short name (the file stem unless given)."""
+    header: tuple[str, ...] = ()
+    """The header lines, as read."""
+    metadata: dict = field(default_factory=dict, compare=False)
+    """Extras: the value column's header, the line of each sample (``lines``)."""
+
+    @property
+    def uniform(self) -> bool:
+        """Whether the samples are on a uniform grid (within 0.1 % of the step)."""
+        steps = np.diff(self.wavelengths_nm)
+        return bool(steps.size and np.max(np.abs(steps - steps.mean())) <= 1e-3 * steps.mean())
+
+
+def _is_comment(line: str) -> bool:
+    return line.startswith(_COMMENT_PREFIXES)
+
+
+def _cells(line: str) -> list[str]:
+    return [cell for cell in _SEPARATORS.split(line.strip()) if cell != ""]
+
+
+def _numbers(cells: list[str]) -> list[float] | None:
+    try:
+        return [float(cell) for cell in cells]
+    except ValueError:
+        return None
+
+
+def parse_spectrometer_text(
+    text: str, source: str = "<text>", unit: SpectralUnit = "energy", column: int | None = None,
+    name: str | None = None,
+) -> SpectrometerMeasurement:
+    """Parse a spectrometer export (see the module notes for the layout).
+
+    Parameters
+    ----------
+    text
+        The file's contents.
+    source
+        Names the file in messages.
+    unit
+        ``energy`` or ``photons``: what the value column holds.
+    column
+        The value column (1-based after the wavelength column: 1 is the second column). Needed
+        when the data have more than two columns.
+    name
+        Name of the measurement (default: derived from ``source``).
+
+    Raises
+    ------
+    CalibrationError
+        Naming the file and line: no data, a non-numeric or ragged data line, wrong column
+        count, NaN/infinite values, non-increasing wavelengths, a negative power, no signal.
+
+    Examples
+    --------
+    >>> m = parse_spectrometer_text("# PR-715\\nnm,W\\n400,0.1\\n404,0.5\\n408,0.2\\n")
+    >>> m.wavelengths_nm.tolist(), m.values.tolist()
+    ([400.0, 404.0, 408.0], [0.1, 0.5, 0.2])
+    """
+    if unit not in ("energy", "photons"):
+        raise CalibrationError(f"{source}: unit '{unit}'; expected energy or photons")
+    header: list[str] = []
+    rows: list[list[float]] = []
+    lines: list[int] = []
+    width: int | None = None
+    ended = False
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip().lstrip("\ufeff")
+        if not line or _is_comment(line):
+            continue
+        if ended:
+            continue
+        cells = _cells(line)
+        values = _numbers(cells)
+        if values is None:
+            if not rows:
+                header.append(line)
+                continue
+            if line.lower().startswith(_END_MARKERS):
+                ended = True
+                continue
+            raise CalibrationError(
+                f"{source}:{number}: '{line[:50]}' is not numeric; expected 'wavelength, value' numbers on every data line"
+            )
+        if width is None:
+            width = len(values)
+            if width < 2:
+                raise CalibrationError(
+                    f"{source}:{number}: 1 column; expected at least 2 (wavelength_nm, value)"
+                )
+            if width > 2 and column is None:
+                raise CalibrationError(
+                    f"{source}:{number}: {width} columns; expected 2 (wavelength_nm, value), or choose the "
+                    "value column (column=N / --column N)"
+                )
+            if column is not None and not 1 <= column < width:
+                raise CalibrationError(
+                    f"{source}:{number}: value column {column} requested but the data have {width} columns; "
+                    f"expected 1…{width - 1}"
+                )
+        elif len(values) != width:
+            raise CalibrationError(
+                f"{source}:{number}: {len(values)} columns; expected {width} as on the first data line"
+            )
+        bad = [i for i, v in enumerate(values) if not math.isfinite(v)]
+        if bad:
+            field_name = "wavelength" if bad[0] == 0 else f"column {bad[0] + 1}"
+            raise CalibrationError(f"{source}:{number}: {field_name} is '{cells[bad[0]]}'; expected a finite number")
+        rows.append(values)
+        lines.append(number)
+    if len(rows) < 3:
+        raise CalibrationError(
+            f"{source}: {len(rows)} data lines; expected at least 3 lines of 'wavelength_nm, value'"
+        )
+    table = np.asarray(rows, dtype=float)
+    wavelengths = table[:, 0]
+    values = table[:, column if column is not None else 1]
+    steps = np.diff(wavelengths)
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0)) + 1
+        raise CalibrationError(
+            f"{source}:{lines[k]}: wavelength {wavelengths[k]:g} nm after {wavelengths[k - 1]:g} nm; "
+            "expected strictly increasing wavelengths"
+        )
+    if wavelengths[0] < 100 or wavelengths[-1] > 3000:
+        raise CalibrationError(
+            f"{source}:{lines[0]}: wavelengths span {wavelengths[0]:g}–{wavelengths[-1]:g}; expected nanometres "
+            "(100–3000)"
+        )
+    peak = float(np.max(values))
+    if peak <= 0:
+        raise CalibrationError(f"{source}: no positive value in the value column; expected a measured emission")
+    too_negative = values < -NEGATIVE_TOLERANCE * peak
+    if np.any(too_negative):
+        k = int(np.argmax(too_negative))
+        raise CalibrationError(
+            f"{source}:{lines[k]}: value {values[k]:g} at {wavelengths[k]:g} nm is negative beyond noise "
+            f"(peak {peak:g}); expected spectral power ≥ 0 (was the dark subtracted twice?)"
+        )
+    column_name = ""
+    if header:
+        header_cells = _cells(header[-1])
+        if width is not None and len(header_cells) >= width:
+            column_name = header_cells[column if column is not None else 1]
+    return SpectrometerMeasurement(
+        wavelengths, values, unit, source, name or Path(source).stem, tuple(header),
+        {"column": column_name, "lines": tuple(lines)},
+    )
+
+
+def read_spectrometer_file(
+    path: str | Path, unit: SpectralUnit = "energy", column: int | None = None, name: str | None = None,
+) -> SpectrometerMeasurement:
+    """Read a spectrometer export from a file (UTF-8 or Latin-1 text; see :func:`parse_spectrometer_text`)."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as err:
+        raise CalibrationError(f"{path}: cannot be read ({err.strerror or err}); expected a spectrometer text file") from err
+    if b"\x00" in data[:4096]:
+        raise CalibrationError(f"{path}: binary data; expected a text export (CSV or tab/space separated)")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")  # instrument software often writes µ or ° in Latin-1
+    return parse_spectrometer_text(text, str(path), unit, column, name)
+
+
+def subtract_dark(measurement: SpectrometerMeasurement, dark: SpectrometerMeasurement) -> SpectrometerMeasurement:
+    """The measurement minus a dark export taken on the same wavelengths.
+
+    Raises
+    ------
+    CalibrationError
+        If the two exports do not sample the same wavelengths.
+    """
+    if dark.wavelengths_nm.shape != measurement.wavelengths_nm.shape or not np.allclose(
+        dark.wavelengths_nm, measurement.wavelengths_nm, atol=1e-6
+    ):
+        raise CalibrationError(
+            f"{dark.source}: dark export samples {dark.wavelengths_nm.size} wavelengths "
+            f"{dark.wavelengths_nm[0]:g}–{dark.wavelengths_nm[-1]:g} nm but {measurement.source} samples "
+            f"{measurement.wavelengths_nm.size} ({measurement.wavelengths_nm[0]:g}–{measurement.wavelengths_nm[-1]:g} nm); "
+            "expected the same instrument grid"
+        )
+    metadata = {**measurement.metadata, "dark": dark.source}
+    return SpectrometerMeasurement(
+        measurement.wavelengths_nm, measurement.values - dark.values, measurement.unit, measurement.source,
+        measurement.name, measurement.header, metadata,
+    )
+
+
+def _uniform_grid(measurement: SpectrometerMeasurement) -> tuple[WavelengthGrid, np.ndarray]:
+    """A uniform grid and values for the samples: as is if uniform, else box-car bin means."""
+    wavelengths, values = measurement.wavelengths_nm, measurement.values
+    if measurement.uniform:
+        step = float(np.mean(np.diff(wavelengths)))
+        return WavelengthGrid(float(wavelengths[0]), float(wavelengths[0]) + step * (wavelengths.size - 1), step), values
+    # Bins no finer than the coarsest sample spacing (no empty bins), at most 1 nm.
+    step = min(1.0, float(np.max(np.diff(wavelengths))))
+    step = 1.0 / math.ceil(1.0 / step) if step < 1.0 else 1.0
+    start = math.ceil(wavelengths[0] / step) * step
+    stop = math.floor(wavelengths[-1] / step) * step
+    grid = WavelengthGrid(start, stop, step)
+    centres = grid.wavelengths_nm
+    edges = np.concatenate([[centres[0] - step / 2], centres + step / 2])
+    index = np.clip(np.searchsorted(edges, wavelengths, side="right") - 1, 0, centres.size - 1)
+    sums = np.bincount(index, weights=values, minlength=centres.size)
+    counts = np.bincount(index, minlength=centres.size)
+    # A bin without a sample (never with the step above) takes its nearest neighbour's samples.
+    filled = counts > 0
+    binned = np.where(filled, sums / np.maximum(counts, 1), np.nan)
+    if not filled.all():
+        nearest = np.searchsorted(centres[filled], centres[~filled]).clip(0, filled.sum() - 1)
+        binned[~filled] = binned[filled][nearest]
+    return grid, binned
+
+
+def measurement_to_spectra(
+    measurements: list[SpectrometerMeasurement] | SpectrometerMeasurement, grid: WavelengthGrid,
+    unit: SpectralUnit | None = None,
+) -> Spectra:
+    """Measurements as one ``Spectra`` (one column each) on ``grid``, zero outside their range.
+
+    Parameters
+    ----------
+    measurements
+        One or more exports (possibly on different instrument grids).
+    grid
+        The target grid (the sequence's, usually 400–700/10).
+    unit
+        The unit of the result (default: the first measurement's).
+    """
+    if isinstance(measurements, SpectrometerMeasurement):
+        measurements = [measurements]
+    if not measurements:
+        raise CalibrationError("LED spectra: no measurement given; expected at least one spectrometer file")
+    unit = unit or measurements[0].unit
+    columns = []
+    for measurement in measurements:
+        own_grid, values = _uniform_grid(measurement)
+        try:
+            native = Spectra(own_grid, values, (measurement.name,), kind="spd", unit=measurement.unit,
+                             source=measurement.source)
+            columns.append(native.to_unit(unit).resample(grid, outside="zero").values[:, 0])
+        except SpectralDataError as err:
+            raise CalibrationError(f"{measurement.source}: {err}") from err
+    return Spectra(grid, np.column_stack(columns), tuple(m.name for m in measurements), kind="spd", unit=unit,
+                   source=", ".join(m.source for m in measurements))

@@ -1,0 +1,129 @@
+"""Spectrometer exports: formats, units, grids, dark subtraction and bad files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibration.errors import CalibrationError
+from calibration.spectrometer import (
+    measurement_to_spectra,
+    parse_spectrometer_text,
+    read_spectrometer_file,
+    subtract_dark,
+)
+from processing.spectra import DEFAULT_GRID, PHOTON_REFERENCE_NM
+
+
+def gaussian(w, peak=520.0, sigma=10.0):
+    return np.exp(-0.5 * ((w - peak) / sigma) ** 2)
+
+
+def export(w, v, separator=",", header="wavelength_nm,value", comments=("# PR-715 export",)):
+    lines = list(comments) + ([header] if header else [])
+    lines += [f"{a:.6f}{separator}{b:.9g}" for a, b in zip(w, v)]
+    return "\n".join(lines) + "\n"
+
+
+class TestParse:
+    def test_csv_with_comments_and_header(self, tmp_path):
+        w = np.arange(380.0, 781.0, 4.0)
+        path = tmp_path / "led520.csv"
+        path.write_text(export(w, gaussian(w)))
+        m = read_spectrometer_file(path)
+        assert m.name == "led520" and m.unit == "energy"
+        np.testing.assert_allclose(m.wavelengths_nm, w)
+        np.testing.assert_allclose(m.values, gaussian(w), rtol=1e-8)
+
+    @pytest.mark.parametrize("separator", ["\t", " ", "   ", ";"])
+    def test_text_separators(self, separator):
+        w = np.arange(400.0, 701.0, 1.0)
+        m = parse_spectrometer_text(export(w, gaussian(w), separator, header="Wavelength (nm)\tIrradiance"), "x.txt")
+        np.testing.assert_allclose(m.values, gaussian(w), rtol=1e-8)
+
+    def test_ocean_optics_block(self):
+        w = np.arange(400.0, 500.0, 0.5)
+        text = ("Data from x.txt Node\nIntegration Time (sec): 0.1\n>>>>>Begin Spectral Data<<<<<\n"
+                + "\n".join(f"{a:.2f}\t{b:.6f}" for a, b in zip(w, gaussian(w, 450))) + "\n>>>>>End Spectral Data<<<<<\n")
+        m = parse_spectrometer_text(text, "oo.txt")
+        assert m.values.size == w.size and len(m.header) == 3
+
+    def test_value_column_chosen(self):
+        text = "nm,dark,raw,counts\n400,1,2,3\n410,1,5,6\n420,1,2,3\n"
+        assert parse_spectrometer_text(text, "three.csv", column=2).values.tolist() == [2, 5, 2]
+        with pytest.raises(CalibrationError, match=r"three\.csv:2: 4 columns; expected 2"):
+            parse_spectrometer_text(text, "three.csv")
+
+    def test_photon_units_convert(self):
+        w = np.arange(400.0, 701.0, 10.0)
+        photons = parse_spectrometer_text(export(w, np.ones_like(w)), "p.csv", unit="photons")
+        energy = measurement_to_spectra(photons, DEFAULT_GRID, unit="energy")
+        np.testing.assert_allclose(energy.values[:, 0], PHOTON_REFERENCE_NM / w)
+
+    def test_arbitrary_nonuniform_grid(self):
+        rng = np.random.default_rng(1)
+        w = np.sort(rng.uniform(350, 800, 2500))  # a CCD spectrometer: ~0.18 nm, uneven
+        m = parse_spectrometer_text(export(w, gaussian(w, 530, 12)), "ccd.txt")
+        assert not m.uniform
+        spectra = measurement_to_spectra(m, DEFAULT_GRID)
+        np.testing.assert_allclose(spectra.values[:, 0], gaussian(DEFAULT_GRID.wavelengths_nm, 530, 12), atol=5e-3)
+
+    def test_dark_subtraction(self):
+        w = np.arange(400.0, 701.0, 2.0)
+        light = parse_spectrometer_text(export(w, gaussian(w) + 0.1), "l.csv")
+        dark = parse_spectrometer_text(export(w, np.full_like(w, 0.1)), "d.csv")
+        np.testing.assert_allclose(subtract_dark(light, dark).values, gaussian(w), atol=1e-8)
+        other = parse_spectrometer_text(export(w[:-1], np.full(w.size - 1, 0.1)), "d2.csv")
+        with pytest.raises(CalibrationError, match=r"d2\.csv: dark export .*expected the same instrument grid"):
+            subtract_dark(light, other)
+
+
+class TestBadFiles:
+    def test_empty(self, tmp_path):
+        path = tmp_path / "empty.csv"
+        path.write_text("# nothing\n")
+        with pytest.raises(CalibrationError, match=r"empty\.csv: 0 data lines"):
+            read_spectrometer_file(path)
+
+    def test_missing_file(self, tmp_path):
+        with pytest.raises(CalibrationError, match=r"nope\.csv: cannot be read"):
+            read_spectrometer_file(tmp_path / "nope.csv")
+
+    def test_binary(self, tmp_path):
+        path = tmp_path / "spec.spc"
+        path.write_bytes(b"\x00\x01\x02" * 10)
+        with pytest.raises(CalibrationError, match="binary data"):
+            read_spectrometer_file(path)
+
+    def test_non_monotonic(self):
+        with pytest.raises(CalibrationError, match=r"bad\.csv:4: wavelength 405 nm after 410 nm"):
+            parse_spectrometer_text("nm,v\n400,1\n410,2\n405,1\n420,0\n", "bad.csv")
+
+    def test_nan(self):
+        with pytest.raises(CalibrationError, match=r"nan\.csv:3: column 2 is 'nan'; expected a finite number"):
+            parse_spectrometer_text("nm,v\n400,1\n410,nan\n420,0\n", "nan.csv")
+
+    def test_negative(self):
+        with pytest.raises(CalibrationError, match=r"neg\.csv:4: value -0\.5 .*expected spectral power ≥ 0"):
+            parse_spectrometer_text("nm,v\n400,1\n410,2\n420,-0.5\n", "neg.csv")
+
+    def test_small_negative_noise_kept(self):
+        assert parse_spectrometer_text("nm,v\n400,-0.01\n410,2\n420,0\n", "ok.csv").values[0] == -0.01
+
+    def test_wrong_columns(self):
+        with pytest.raises(CalibrationError, match=r"one\.csv:2: 1 column; expected at least 2"):
+            parse_spectrometer_text("value\n1\n2\n3\n", "one.csv")
+        with pytest.raises(CalibrationError, match=r"ragged\.csv:3: 3 columns; expected 2"):
+            parse_spectrometer_text("400,1\n410,2\n420,3,4\n", "ragged.csv")
+
+    def test_text_inside_data(self):
+        with pytest.raises(CalibrationError, match=r"mid\.csv:3: 'oops' is not numeric"):
+            parse_spectrometer_text("400,1\n410,2\noops\n420,3\n", "mid.csv")
+
+    def test_not_nanometres(self):
+        with pytest.raises(CalibrationError, match="expected nanometres"):
+            parse_spectrometer_text("0.4,1\n0.41,2\n0.42,1\n", "um.csv")
+
+    def test_no_signal(self):
+        with pytest.raises(CalibrationError, match="no positive value"):
+            parse_spectrometer_text("400,0\n410,0\n420,0\n", "zero.csv")
