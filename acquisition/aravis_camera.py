@@ -368,6 +368,10 @@ class CameraProfile:
     """The camera rounds exposure to whole microseconds (the read-back value is recorded anyway)."""
     user_outputs: tuple[str, ...] = ()
     """Names of the user outputs in order, when known; otherwise read from the camera."""
+    electrons_per_dn: float | None = None
+    """Conversion gain at 0 dB (electrons per digital number of the pixel format), when known."""
+    read_noise_e: float | None = None
+    """Read noise in electrons, when known (with ``electrons_per_dn`` it lets exposure planning predict SNR)."""
     notes: str = ""
     """Where the quirks come from."""
 
@@ -869,6 +873,28 @@ class AravisCamera:
     def exposure_us(self) -> float:
         """Exposure time read back from the camera, microseconds."""
         return self._number(self._exposure_feature)
+
+    @property
+    def exposure_range_us(self) -> tuple[float, float] | None:
+        """(min, max) of the exposure feature in microseconds, or None when the camera does not say."""
+        try:
+            node = self._live().get_feature(self._exposure_feature)
+            low, high = float(node.get_min()), float(node.get_max())
+        except (GLib.Error, AttributeError, TypeError):
+            return None
+        return (low, high) if 0 <= low < high and math.isfinite(high) else None
+
+    @property
+    def profile(self) -> CameraProfile:
+        """The per-model profile in use."""
+        return self._profile
+
+    @property
+    def noise_model(self) -> tuple[float, float] | None:
+        """(electrons per DN at 0 dB, read noise in electrons) from the profile, or None when unknown."""
+        if self._profile.electrons_per_dn is None or self._profile.read_noise_e is None:
+            return None
+        return float(self._profile.electrons_per_dn), float(self._profile.read_noise_e)
 
     def set_gain(self, gain: float) -> float:
         """Set the analogue gain (linear, 1.0 = 0 dB); returns the linear gain read back."""

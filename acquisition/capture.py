@@ -248,3 +248,32 @@ def _booth_step_of(booth: SequencedLedControl, trigger: int, timeout_s: float, s
                 "expected one TRIG event per trigger"
             )
         # count < trigger: an event of an earlier trigger left over; skip it.
+
+
+def preview_frames(camera: Camera, booth: LedControl, plan: CapturePlan) -> list[RawFrame]:
+    """Capture ``plan`` host paced and return the frames in memory, writing nothing (exposure previews).
+
+    Frames pair with steps in order (host pacing); a skipped frame id raises
+    :class:`DroppedFrameError`. LEDs off and camera stopped at the end, as for :func:`run_capture`.
+    """
+    frames: list[RawFrame] = []
+    try:
+        camera.prepare(plan)
+        camera.start()
+        for step in plan.steps:
+            booth.set_levels(step.led_levels)
+            camera.trigger()
+            try:
+                frame = camera.next_frame(plan.frame_timeout_s)
+            except FrameTimeoutError as err:
+                raise FrameTimeoutError(f"preview step {step.index} ({step.label}): {err}") from err
+            if frames and (frame.frame_id - frames[-1].frame_id) % FRAME_ID_MODULUS != 1:
+                raise DroppedFrameError(f"preview step {step.index} ({step.label}): camera frame id "
+                                        f"{frame.frame_id} follows {frames[-1].frame_id}; a frame was lost")
+            frames.append(frame)
+    finally:
+        try:
+            booth.all_off()
+        finally:
+            camera.stop()
+    return frames

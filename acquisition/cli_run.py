@@ -39,12 +39,40 @@ SYNC_MODES: dict[str, TriggerSource] = {"host": "software", "booth": "booth", "c
 """``--sync`` names and the plan trigger each stands for."""
 
 
+def _exposure_value(text: str) -> str | float:
+    """``--exposure``: ``auto`` or a positive number of microseconds."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}': expected auto or an exposure in microseconds") from None
+    if not (value > 0 and np.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"'{text}': expected a positive exposure in microseconds")
+    return value
+
+
 def _default_out() -> Path:
     return Path("runs") / datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
 
 
+def _rig_spec(args: argparse.Namespace) -> str:
+    """The rig to open: ``--rig``, or ``hw`` when ``--camera``/``--port`` name real devices."""
+    devices = args.camera is not None or args.port is not None
+    if args.rig is None:
+        return "hw" if devices else "sim"
+    if devices and args.rig != "hw":
+        raise UsageError(f"--rig {args.rig}: --camera/--port name hardware devices; expected --rig hw (or no --rig)")
+    return args.rig
+
+
 def _open(args: argparse.Namespace) -> Rig:
-    return open_rig(args.rig, ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
+    spec = _rig_spec(args)
+    if spec == "hw":
+        return open_rig("hw", camera=args.camera, port=args.port, interfaces=args.interfaces,
+                        calibration=args.calibration, led_spectra=args.led_spectra, responsivity=args.responsivity,
+                        log_serial=args.log_serial, sync=args.sync, pixel_format=args.pixel_format)
+    return open_rig(spec, ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
                     log_serial=args.log_serial)
 
 
@@ -86,10 +114,11 @@ def _run(args: argparse.Namespace) -> int:
     if (out / "sequence" / "sequence.json").exists():
         raise UsageError(f"--out {out}: already holds a run; expected a new directory")
     out.mkdir(parents=True, exist_ok=True)
-    progress(f"opening rig '{args.rig}' (ambient {args.ambient}, scene {args.scene})")
+    spec = _rig_spec(args)
+    progress(f"opening rig '{spec}'" + (f" (ambient {args.ambient}, scene {args.scene})" if spec == "sim" else ""))
     # SIGTERM unwinds like Ctrl-C, so the LEDs go off and the partial sequence stays readable.
     with sigterm_as_exit(), _open(args) as rig, _writer(rig, out) as writer:
-        exposure = _capture_led_sequence(rig, writer, args.exposure_us, args.sync)
+        exposure = _capture_led_sequence(rig, writer, (None if args.exposure == 'auto' else args.exposure), args.sync)
         # Estimate from the frames as recorded (the sequence is still open: complete is false).
         sequence = read_sequence(writer.path.parent)
         progress("estimating the ambient spectrum")
@@ -113,7 +142,7 @@ def _run(args: argparse.Namespace) -> int:
         true_ambient = rig.true_ambient
     if degenerate is not None:
         raise CaptureError(
-            f"rig '{args.rig}': the ambient estimate is degenerate ({degenerate}): the LED-only images do not "
+            f"rig '{spec}': the ambient estimate is degenerate ({degenerate}): the LED-only images do not "
             f"determine the ambient (test patterns, or LEDs that do not reach the scene?); no report written. "
             f"The sequence is complete in {out / 'sequence'}"
         )
@@ -133,16 +162,33 @@ def _capture(args: argparse.Namespace) -> int:
         raise UsageError(f"--out {out}: already holds a sequence; expected a new directory")
     out.mkdir(parents=True, exist_ok=True)
     with sigterm_as_exit(), _open(args) as rig, _writer(rig, out) as writer:
-        _capture_led_sequence(rig, writer, args.exposure_us, args.sync)
+        _capture_led_sequence(rig, writer, (None if args.exposure == 'auto' else args.exposure), args.sync)
         writer.finish()
     print(out / "sequence")
     return 0
 
 
 def _rig_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--rig", default="sim",
+    parser.add_argument("--rig", default=None,
                         help="rig: sim (default; simulated camera + booth emulator on a pty), aravis-fake (Aravis "
-                             "GigE Vision fake on 127.0.0.1 + emulator), replay:DIR (a recorded sequence + emulator)")
+                             "GigE Vision fake on 127.0.0.1 + emulator), replay:DIR (a recorded sequence + emulator), "
+                             "hw (a real camera and booth; implied by --camera/--port)")
+    hardware = parser.add_argument_group("hardware rig (--rig hw)")
+    hardware.add_argument("--camera", default=None, metavar="ID",
+                          help="camera device id, serial number or IP address (default: the single camera found)")
+    hardware.add_argument("--port", default=None, metavar="PATH",
+                          help="booth serial port, e.g. /dev/ttyACM0 (default: the single booth found)")
+    hardware.add_argument("--interfaces", default="usb3",
+                          help="Aravis interfaces to search: usb3 (default), gige, fake, comma-separated; gige "
+                               "broadcasts discovery on every network interface unless --camera is an IP address")
+    hardware.add_argument("--calibration", default=None, metavar="DIR",
+                          help="calibration directory with led_spectra.csv (and camera_responsivity.csv)")
+    hardware.add_argument("--led-spectra", default=None, metavar="FILE.csv",
+                          help="LED spectra: first column wavelength_nm, one column per booth channel (energy)")
+    hardware.add_argument("--responsivity", default=None, metavar="FILE.csv",
+                          help="camera responsivities: wavelength_nm, R, G, B (energy); needed by the flash solvers")
+    hardware.add_argument("--pixel-format", default=None,
+                          help="camera PixelFormat to set (default: keep the camera's)")
     parser.add_argument("--sync", default="host", choices=tuple(SYNC_MODES),
                         help="who paces the frames: host (serial command, then software trigger; default), "
                              "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "
@@ -152,7 +198,10 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scene", default="chart110", choices=("chart110", "macbeth"), help="sim scene")
     parser.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="sim: raw Bayer mosaic frames with this layout")
     parser.add_argument("--seed", type=int, default=0, help="sim noise seed")
-    parser.add_argument("--exposure-us", type=float, default=None, help="exposure (default: the rig's suggestion)")
+    parser.add_argument("--exposure", "--exposure-us", dest="exposure", type=_exposure_value, default="auto",
+                        metavar="auto|MICROSECONDS",
+                        help="auto (default: meter an ambient preview, then choose each LED frame's exposure for "
+                             "SNR below saturation) or one exposure in microseconds for every frame")
     parser.add_argument("--log-serial", default=None, help="write the booth serial transcript to this file")
 
 

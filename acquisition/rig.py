@@ -13,6 +13,14 @@ nothing; the rig proves the Aravis path (features, triggers, buffers) inside the
 ``replay:DIR``: :class:`~acquisition.replay_camera.ReplayCamera` serving a recorded sequence, with
 the emulator on a pty; re-runs estimation, flash solving and synthesis on recorded frames.
 
+``hw`` (real use; also implied by ``--camera`` / ``--port``): :class:`HardwareCamera` around an
+:class:`~acquisition.aravis_camera.AravisCamera` opened by device id, serial or IP on the given
+interfaces (default ``usb3``: GigE Vision discovery broadcasts, so ``gige`` only when named, and an
+IP address opens one GigE camera without discovery), and :class:`led_controller.LedBooth` on
+``port`` or on the single booth :func:`led_controller.discovery.find_booth` finds. Every device is
+tried; :class:`RigOpenError` lists each one's failure. LED spectra (and optionally the camera's
+responsivities) come from a calibration directory or CSV files (:func:`load_hw_spectra`).
+
 The trigger wires (DESIGN §4, three sync modes) are modelled in every rig:
 
 - *booth master*: the emulator's trigger output (``on_trigger_out``) drives the camera's trigger
@@ -55,7 +63,7 @@ from processing.spectra import DEFAULT_GRID, Spectra
 
 log = logging.getLogger(__name__)
 
-RIG_SPECS = ("sim", "aravis-fake", "replay:DIR")
+RIG_SPECS = ("sim", "aravis-fake", "replay:DIR", "hw")
 """What ``--rig`` accepts."""
 
 AravisFakeNominalCamera = "NikonD100"
@@ -373,7 +381,9 @@ def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None,
 
 
 def open_rig(spec: str, **options: object) -> Rig:
-    """Open a rig by its ``--rig`` spec: ``sim``, ``aravis-fake`` or ``replay:DIR``."""
+    """Open a rig by its ``--rig`` spec: ``sim``, ``aravis-fake``, ``replay:DIR`` or ``hw``."""
+    if spec == "hw":
+        return open_hw_rig(**options)  # type: ignore[arg-type]
     if spec == "sim":
         return open_sim_rig(**options)  # type: ignore[arg-type]
     if spec == "aravis-fake":
@@ -381,3 +391,208 @@ def open_rig(spec: str, **options: object) -> Rig:
     if spec.startswith("replay:") and len(spec) > len("replay:"):
         return open_replay_rig(spec[len("replay:"):], log_serial=options.get("log_serial"))  # type: ignore[arg-type]
     raise UsageError(f"--rig '{spec}': unknown; expected one of {', '.join(RIG_SPECS)}")
+
+
+# -- the hardware rig --------------------------------------------------------------------------
+
+CALIBRATION_LED_FILES = ("led_spectra.csv", "leds.csv")
+"""File names looked for in ``--calibration DIR`` for the LED spectra (first found wins)."""
+CALIBRATION_RESPONSIVITY_FILES = ("camera_responsivity.csv", "responsivity.csv")
+"""File names looked for in ``--calibration DIR`` for the camera's responsivities."""
+
+
+def load_hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | None = None,
+                    responsivity: str | Path | None = None) -> tuple[Spectra, Spectra | None]:
+    """LED spectra and camera responsivities for the hardware rig, on :data:`DEFAULT_GRID`.
+
+    ``calibration`` is a directory holding ``led_spectra.csv`` (or ``leds.csv``) and optionally
+    ``camera_responsivity.csv`` (or ``responsivity.csv``); ``led_spectra`` / ``responsivity`` name
+    the files directly and win over the directory. Files are CSV tables read by
+    :func:`processing.datasets.load_spectra_csv`: first column ``wavelength_nm``, one column per LED
+    (in booth channel order) or per camera channel (R, G, B), energy units, each LED at full drive
+    with the true ratios between LEDs. Values outside a file's range are taken as zero.
+
+    Raises
+    ------
+    UsageError
+        Nothing gives the LED spectra, a named file or directory is missing, or a file is malformed.
+    """
+    from processing.errors import SpectralDataError
+
+    led_path = Path(led_spectra) if led_spectra else None
+    resp_path = Path(responsivity) if responsivity else None
+    if calibration is not None:
+        directory = Path(calibration)
+        if not directory.is_dir():
+            raise UsageError(f"--calibration {directory}: not a directory; expected a calibration directory "
+                             f"holding {CALIBRATION_LED_FILES[0]}")
+        if led_path is None:
+            led_path = next((directory / n for n in CALIBRATION_LED_FILES if (directory / n).is_file()), None)
+            if led_path is None:
+                raise UsageError(f"--calibration {directory}: no {' or '.join(CALIBRATION_LED_FILES)}; expected the "
+                                 "LED spectra (first column wavelength_nm, one column per LED)")
+        if resp_path is None:
+            resp_path = next((directory / n for n in CALIBRATION_RESPONSIVITY_FILES if (directory / n).is_file()), None)
+    if led_path is None:
+        raise UsageError("rig 'hw': the LED spectra are needed for the sequence header; expected --calibration DIR "
+                         "or --led-spectra FILE.csv (first column wavelength_nm, one column per LED at full drive, "
+                         "energy units), and --responsivity FILE.csv for the flash solvers")
+    try:
+        leds = datasets.load_spectra_csv(led_path, kind="spd", unit="energy").resample(DEFAULT_GRID, outside="zero")
+        camera = None
+        if resp_path is not None:
+            camera = datasets.load_spectra_csv(resp_path, kind="responsivity", unit="energy").resample(
+                DEFAULT_GRID, outside="zero")
+    except (SpectralDataError, OSError) as err:
+        raise UsageError(str(err)) from err
+    if camera is not None and camera.count != 3:
+        raise UsageError(f"{resp_path}: {camera.count} responsivity columns; expected 3 (R, G, B)")
+    return leds, camera
+
+
+class HardwareCamera:
+    """An :class:`~acquisition.aravis_camera.AravisCamera` as the hardware rig's camera.
+
+    Forwards the :class:`~acquisition.camera.Camera` protocol; mono frames are recorded as three
+    identical channels (format v1 holds RGB or raw mosaics, and the sequence's ``camera.extra``
+    says so). Offers what exposure planning asks of a camera: :attr:`exposure_range_us` and
+    :attr:`noise_model` (from the camera's profile, when it knows the conversion gain).
+    """
+
+    suggested_exposure_us = 10_000.0
+
+    def __init__(self, camera: Any) -> None:
+        self.aravis = camera
+
+    @property
+    def info(self) -> CameraInfo:
+        """The camera's identity (mono frames are delivered as RGB; ``cfa`` stays None)."""
+        return self.aravis.info
+
+    @property
+    def exposure_range_us(self) -> tuple[float, float] | None:
+        """The camera's exposure limits in microseconds, if it reports them."""
+        return getattr(self.aravis, "exposure_range_us", None)
+
+    @property
+    def noise_model(self) -> Any:
+        """Conversion gain and read noise from the camera profile, or None."""
+        return getattr(self.aravis, "noise_model", None)
+
+    def prepare(self, plan: CapturePlan) -> None:
+        """Prepare the camera for ``plan``."""
+        self.aravis.prepare(plan)
+
+    def start(self) -> None:
+        """Start acquisition."""
+        self.aravis.start()
+
+    def trigger(self) -> None:
+        """Software trigger (a no-op when a line paces the camera)."""
+        self.aravis.trigger()
+
+    def next_frame(self, timeout_s: float) -> RawFrame:
+        """The next frame; mono frames as (H, W, 3)."""
+        frame = self.aravis.next_frame(timeout_s)
+        if frame.pixels.ndim == 2 and self.aravis.info.cfa is None:
+            return dataclasses.replace(frame, pixels=np.repeat(frame.pixels[:, :, None], 3, axis=2))
+        return frame
+
+    def stop(self) -> None:
+        """Stop acquisition."""
+        self.aravis.stop()
+
+    def close(self) -> None:
+        """Release the camera."""
+        self.aravis.close()
+
+
+def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format: str | None) -> Any:
+    from acquisition import aravis_camera
+
+    names = aravis_camera.parse_interfaces(interfaces)
+    if camera is None:
+        found = aravis_camera.list_devices(names)
+        if len(found) != 1:
+            listing = ", ".join(f"{e.device_id} (serial {e.serial})" for e in found) or "none"
+            raise aravis_camera.CameraNotFoundError(
+                f"camera: {'no camera' if not found else f'{len(found)} cameras'} on {','.join(names)} "
+                f"(found: {listing}); expected one — pass --camera ID (device id, serial or IP) "
+                "or --interfaces")
+        camera = found[0].device_id
+    strobe = aravis_camera.StrobeConfig(line="Line1") if sync == "camera" else None
+    return aravis_camera.AravisCamera(camera, interfaces=names, pixel_format=pixel_format, strobe=strobe)
+
+
+def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: str = "usb3",
+                calibration: str | Path | None = None, led_spectra: str | Path | None = None,
+                responsivity: str | Path | None = None, log_serial: str | Path | None = None,
+                sync: str = "host", pixel_format: str | None = None, **_ignored: object) -> Rig:
+    """The hardware rig: a GenICam camera by id/serial/IP + a booth on ``port`` (or the one discovered).
+
+    Parameters
+    ----------
+    camera
+        Aravis device id, serial number or IPv4 address; None takes the single camera found on
+        ``interfaces``.
+    port
+        The booth's serial port (``/dev/ttyACM0``, a pty path, a pyserial URL); None discovers it.
+    interfaces
+        Aravis interfaces to enable (``usb3`` by default; ``gige`` broadcasts discovery unless
+        ``camera`` is an IP address; ``fake`` is Aravis's in-process test camera).
+    calibration, led_spectra, responsivity
+        Where the LED spectra and camera responsivities come from (:func:`load_hw_spectra`).
+    sync
+        ``host``, ``booth`` or ``camera``: camera master configures a strobe output on Line1.
+    pixel_format
+        PixelFormat to set, or None to keep the camera's.
+
+    Raises
+    ------
+    UsageError
+        No LED spectra given (checked before any device is opened).
+    RigOpenError
+        One or both devices failed to open; the message lists each device's failure.
+    """
+    from led_controller.discovery import find_booth
+
+    leds, responsivities = load_hw_spectra(calibration, led_spectra, responsivity)
+    closers: list = []
+    failures: list[str] = []
+    errors: list[BaseException] = []
+    aravis = booth = None
+    try:
+        aravis = _open_hw_camera(camera, interfaces, sync, pixel_format)
+        closers.append(aravis.close)
+    except ImportError as err:
+        failures.append(f"camera{f' {camera!r}' if camera else ''}: Aravis unavailable ({err}); run setup.sh")
+        errors.append(err)
+    except (OSError, ValueError) as err:  # CameraError is an OSError; bad interface names ValueError
+        message = str(err)
+        failures.append(message if message.startswith("camera") else f"camera {camera!r}: {message}")
+        errors.append(err)
+    try:
+        booth_port = port if port is not None else find_booth().device
+        booth = LedBooth.open(booth_port, log_serial=log_serial)
+        closers.append(booth.close)
+        closers.append(booth.all_off)
+        if booth.info.channels != leds.count:
+            raise RigOpenError(
+                f"booth {booth_port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the LED "
+                f"spectra have {leds.count} ({', '.join(leds.names)}); expected one spectrum per channel")
+    except Exception as err:  # noqa: BLE001 - reported with the camera's failure, if any
+        message = str(err)
+        failures.append(message if message.startswith("booth") else f"booth: {message}")
+        errors.append(err)
+    if failures:
+        _close_all(closers)
+        raise RigOpenError(f"rig 'hw': {'; '.join(failures)}") from errors[0]
+    assert aravis is not None and booth is not None
+    hardware = HardwareCamera(aravis)
+    info = aravis.info
+    extra: dict = {}
+    if info.cfa is None and info.pixel_format.startswith("Mono"):
+        extra["channels"] = f"{info.pixel_format} replicated to R, G, B"
+    if responsivities is None:
+        extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
+    return Rig("hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra)
