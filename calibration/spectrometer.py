@@ -16,8 +16,9 @@ cells as the data. After the data starts, every line must be numeric, except an 
 (``>>>>>End Spectral Data<<<<<``). Decimal commas are not guessed: ``1,5`` is two cells.
 
 Spectrometers sample on their own, often non-uniform, grids (a CCD's pixel-to-wavelength
-polynomial). :func:`measurement_to_spectra` averages the samples in 1-nm-or-finer bins (a
-box-car, what a coarser spectral sample means) to reach a uniform grid and then uses
+polynomial). :func:`measurement_to_spectra` integrates the piecewise-linear curve through the
+samples over 1-nm (or finer) bins — a box-car, what a coarser spectral sample means — to reach a
+uniform grid and then uses
 :meth:`Spectra.resample`, the project's resampler, for everything else. Uniform exports skip the
 binning.
 """
@@ -255,23 +256,19 @@ def _uniform_grid(measurement: SpectrometerMeasurement) -> tuple[WavelengthGrid,
     if measurement.uniform:
         step = float(np.mean(np.diff(wavelengths)))
         return WavelengthGrid(float(wavelengths[0]), float(wavelengths[0]) + step * (wavelengths.size - 1), step), values
-    # Bins no finer than the coarsest sample spacing (no empty bins), at most 1 nm.
-    step = min(1.0, float(np.max(np.diff(wavelengths))))
-    step = 1.0 / math.ceil(1.0 / step) if step < 1.0 else 1.0
+    # 1-nm bins, or finer for an instrument sampling much more finely than 1 nm everywhere.
+    coarsest = float(np.max(np.diff(wavelengths)))
+    step = 1.0 / min(10, math.floor(1.0 / coarsest)) if coarsest < 0.5 else 1.0
     start = math.ceil(wavelengths[0] / step) * step
     stop = math.floor(wavelengths[-1] / step) * step
     grid = WavelengthGrid(start, stop, step)
     centres = grid.wavelengths_nm
-    edges = np.concatenate([[centres[0] - step / 2], centres + step / 2])
-    index = np.clip(np.searchsorted(edges, wavelengths, side="right") - 1, 0, centres.size - 1)
-    sums = np.bincount(index, weights=values, minlength=centres.size)
-    counts = np.bincount(index, minlength=centres.size)
-    # A bin without a sample (never with the step above) takes its nearest neighbour's samples.
-    filled = counts > 0
-    binned = np.where(filled, sums / np.maximum(counts, 1), np.nan)
-    if not filled.all():
-        nearest = np.searchsorted(centres[filled], centres[~filled]).clip(0, filled.sum() - 1)
-        binned[~filled] = binned[filled][nearest]
+    edges = np.clip(np.concatenate([[centres[0] - step / 2], centres + step / 2]), wavelengths[0], wavelengths[-1])
+    # Box-car of the piecewise-linear curve through the samples: differences of its running
+    # integral at the bin edges (the end bins are half inside the measured range).
+    running = np.concatenate([[0.0], np.cumsum(np.diff(wavelengths) * (values[1:] + values[:-1]) / 2)])
+    integral = np.interp(edges, wavelengths, running)
+    binned = np.diff(integral) / np.diff(edges)
     return grid, binned
 
 
