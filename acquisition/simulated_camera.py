@@ -34,6 +34,7 @@ from acquisition.errors import CameraError, FrameTimeoutError
 from acquisition.plan import CapturePlan, CaptureStep
 from processing import datasets
 from processing.image_formation import (
+    MixedIllumination,
     Scene,
     SensorModel,
     chart_scene,
@@ -77,6 +78,10 @@ class SimulatedCamera:
         Model name reported in :attr:`info`.
     frame_interval_ns
         Extra simulated time between frames, for timestamps (no real waiting happens).
+    second_ambient, ambient_map
+        A spatially varying ambient (issue 9): pixel ``x`` sees ``(1 − m(x)) · ambient +
+        m(x) · second_ambient`` with ``m = ambient_map`` (H, W) in [0, 1] (a boundary, a
+        gradient). Both None (the default) keep the single uniform ambient.
 
     All spectra must share one grid (resample first); mismatches raise ``SpectralDataError``.
     """
@@ -94,8 +99,20 @@ class SimulatedCamera:
         noise: bool = True,
         name: str = "SimulatedCamera",
         frame_interval_ns: int = 2_000_000,
+        second_ambient: Spectra | None = None,
+        ambient_map: np.ndarray | None = None,
     ) -> None:
         require_same_grid(scene.reflectances, ambient, led_spectra, camera_responsivities)
+        self.ambient_illumination: MixedIllumination | None = None
+        """The spatially varying ambient, or None for a uniform one."""
+        if (second_ambient is None) != (ambient_map is None):
+            raise CameraError(f"simulated camera '{name}': second_ambient and ambient_map go together; expected both or neither")
+        if second_ambient is not None and ambient_map is not None:
+            require_same_grid(ambient, second_ambient)
+            if np.shape(ambient_map) != scene.shape:
+                raise CameraError(f"simulated camera '{name}': ambient_map has shape {np.shape(ambient_map)}; "
+                                  f"expected the scene's {scene.shape}")
+            self.ambient_illumination = MixedIllumination.two_ambients(ambient, second_ambient, ambient_map)
         if camera_responsivities.count != 3:
             raise CameraError(f"simulated camera '{name}': {camera_responsivities.count} channels; expected R, G, B")
         self.scene = scene
@@ -272,6 +289,10 @@ class SimulatedCamera:
             with self._render_lock:  # one render at a time keeps the noise stream in trigger order
                 levels = self._levels_for(step)
                 illumination = total_illumination(self.ambient, self.led_spectra, levels)
+                if self.ambient_illumination is not None:
+                    dark = self.ambient.replace(values=np.zeros_like(self.ambient.values))
+                    illumination = self.ambient_illumination.plus(
+                        total_illumination(dark, self.led_spectra, levels))  # type: ignore[assignment]
                 pixels = render_frame(
                     self.scene, illumination, self.camera_responsivities, self.sensor, step.exposure_us,
                     step.gain, self.scale, rng=self._rng, noise=self.noise,
@@ -306,6 +327,8 @@ class SimulatedCamera:
         specular_strip_px: int = 4,
         grid: WavelengthGrid = DEFAULT_GRID,
         noise: bool = True,
+        second_ambient: str | Spectra | None = None,
+        ambient_map: np.ndarray | None = None,
     ) -> SimulatedCamera:
         """The ``sim`` rig's world: a chart, a named ambient, the paper's LEDs, an ISETCam camera.
 
@@ -339,11 +362,23 @@ class SimulatedCamera:
             Chart patch size and the height of a saturating highlight strip under it (0: none).
         grid
             The wavelength grid of the world.
+        second_ambient, ambient_map
+            A second ambient (name or spectrum) and the (H, W) map in [0, 1] of its share at each
+            pixel of the scene (see the constructor); LED power and exposure are then set on
+            the mixed ambient.
         """
         if isinstance(scene, str):
             scene = chart_scene(scene, patch_px=patch_px, specular_strip_px=specular_strip_px)
         scene = Scene(scene.reflectances.resample(grid), scene.labels, scene.shading, scene.specular, scene.specular_gain)
         ambient_spd = datasets.ambient_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)
+        second_spd = None
+        if second_ambient is not None:
+            second_spd = (datasets.ambient_spectrum(second_ambient, grid) if isinstance(second_ambient, str)
+                          else second_ambient.resample(grid)).to_unit(ambient_spd.unit)
+        if (second_spd is None) != (ambient_map is None):
+            raise CameraError("simulated camera: second_ambient and ambient_map go together; expected both or neither")
+        metered_ambient = (ambient_spd if second_spd is None
+                           else MixedIllumination.two_ambients(ambient_spd, second_spd, ambient_map))  # type: ignore[arg-type]
         leds = datasets.paper_led_subset(n_leds).resample(grid)
         responsivities = datasets.isetcam_camera(camera).resample(grid)
         sensor = sensor if sensor is not None else SensorModel(cfa=cfa)
@@ -353,7 +388,7 @@ class SimulatedCamera:
         # LED power relative to the ambient, measured the way the camera sees it (mean signal over
         # the diffuse scene), so "a decent fraction" holds whatever the ambient's spectrum.
         diffuse = Scene(scene.reflectances, scene.labels, scene.shading)
-        ambient_signal = float(np.mean(expected_response(diffuse, ambient_spd, responsivities, 1.0)))
+        ambient_signal = float(np.mean(expected_response(diffuse, metered_ambient, responsivities, 1.0)))
         dark = ambient_spd.replace(values=np.zeros_like(ambient_spd.values))
         flash_signal = float(np.mean(expected_response(
             diffuse, total_illumination(dark, leds, np.ones(leds.count)), responsivities, 1.0)))
@@ -361,11 +396,12 @@ class SimulatedCamera:
             raise CameraError("simulated camera: the ambient or the LEDs give no signal in this camera; "
                               "expected light within the camera's sensitivity")
         led_spectra = leds.replace(values=leds.values * (flash_to_ambient * ambient_signal / flash_signal))
-        exposure_at_unit_scale = exposure_for_peak(scene, ambient_spd, responsivities, sensor, ambient_peak_fraction)
+        exposure_at_unit_scale = exposure_for_peak(scene, metered_ambient, responsivities, sensor,  # type: ignore[arg-type]
+                                                   ambient_peak_fraction)
         simulated = cls(
             scene, ambient_spd, led_spectra, responsivities, sensor,
             scale=exposure_at_unit_scale / reference_exposure_us, led_levels_source=led_levels_source, seed=seed,
-            noise=noise, name=f"SimulatedCamera ({camera})",
+            noise=noise, name=f"SimulatedCamera ({camera})", second_ambient=second_spd, ambient_map=ambient_map,
         )
         simulated.suggested_exposure_us = reference_exposure_us
         return simulated

@@ -326,7 +326,7 @@ def surface_responses(reflectances: Spectra, illuminant: Spectra, camera_respons
 
 def expected_response(
     scene: Scene,
-    illuminant: Spectra,
+    illuminant: Spectra | MixedIllumination,
     camera_responsivities: Spectra,
     exposure_us: float,
     gain: float = 1.0,
@@ -340,6 +340,8 @@ def expected_response(
         Surfaces and their layout.
     illuminant
         ``i`` (e.g. from :func:`total_illumination`), one spectrum; energy is converted to photons.
+        A :class:`MixedIllumination` gives a spatially varying illuminant
+        (:func:`expected_response_mixed`).
     camera_responsivities
         ``C``, (n_wavelengths, n_channels); energy is converted to photons.
     exposure_us, gain, scale
@@ -355,6 +357,8 @@ def expected_response(
     for name, value in (("exposure_us", exposure_us), ("gain", gain), ("scale", scale)):
         if not (math.isfinite(value) and value >= 0):
             raise SpectralDataError(f"expected response: {name} is {value}; expected a finite value ≥ 0")
+    if isinstance(illuminant, MixedIllumination):
+        return expected_response_mixed(scene, illuminant, camera_responsivities, exposure_us, gain, scale)
     per_surface = surface_responses(scene.reflectances, illuminant, camera_responsivities)
     g = scale * exposure_us * gain
     image = per_surface[scene.labels] * g
@@ -459,3 +463,86 @@ def exposure_for_peak(
         raise SpectralDataError("exposure for peak: the scene gives no signal under this illuminant; "
                                 "expected some light reaching the camera")
     return fraction * sensor.saturation_electrons(gain) / peak
+
+
+# -- spatially varying illumination (issue 9) -------------------------------------------------
+@dataclass(frozen=True)
+class MixedIllumination:
+    """A spatially varying illuminant: pixel ``x`` sees ``Σ_n weights[x, n] · spectra[:, n]``.
+
+    Two ambients with a boundary or a gradient, plus the LEDs as a component of weight 1
+    everywhere (:meth:`plus`). Light is additive, so the response is the per-pixel weighted sum of
+    the responses to each component (:func:`expected_response_mixed`). Arrays are copied and made
+    read-only; spectra are kept in photons.
+    """
+
+    spectra: Spectra
+    """The components, (n_wavelengths, n) SPDs."""
+    weights: np.ndarray
+    """Per-pixel weight of each component, (H, W, n), finite and ≥ 0."""
+
+    def __post_init__(self) -> None:
+        if self.spectra.kind != "spd":
+            raise SpectralDataError(f"mixed illumination: spectra of kind '{self.spectra.kind}'; expected spd")
+        weights = np.array(self.weights, dtype=float, copy=True)
+        if weights.ndim != 3 or weights.shape[2] != self.spectra.count:
+            raise SpectralDataError(f"mixed illumination: weights have shape {weights.shape}; expected (H, W, "
+                                    f"{self.spectra.count}) (one map per component)")
+        if not np.all(np.isfinite(weights)) or np.any(weights < 0):
+            raise SpectralDataError("mixed illumination: weights must be finite and ≥ 0")
+        weights.flags.writeable = False
+        object.__setattr__(self, "weights", weights)
+        object.__setattr__(self, "spectra", self.spectra.to_unit("photons"))
+
+    @classmethod
+    def two_ambients(cls, first: Spectra, second: Spectra, mixing_map: np.ndarray) -> MixedIllumination:
+        """``(1 − m(x)) · first + m(x) · second`` for a mixing map ``m`` (H, W) in [0, 1]."""
+        grid = require_same_grid(first, second)
+        mixing = np.asarray(mixing_map, dtype=float)
+        if mixing.ndim != 2 or np.any(mixing < 0) or np.any(mixing > 1) or not np.all(np.isfinite(mixing)):
+            raise SpectralDataError(f"mixed illumination: mixing map of shape {mixing.shape}; expected (H, W) "
+                                    "values in [0, 1]")
+        values = np.column_stack([first.to_unit("photons").values[:, 0], second.to_unit("photons").values[:, 0]])
+        spectra = Spectra(grid, values, ("first", "second"), kind="spd", unit="photons",
+                          source=f"{first.source or 'first'} | {second.source or 'second'}")
+        return cls(spectra, np.stack([1.0 - mixing, mixing], axis=-1))
+
+    def plus(self, uniform: Spectra) -> MixedIllumination:
+        """This illumination plus a spatially uniform one (the flash: ``total_illumination`` of a dark ambient)."""
+        require_same_grid(self.spectra, uniform)
+        extra = uniform.to_unit("photons").values[:, :1]
+        spectra = Spectra(self.spectra.grid, np.hstack([self.spectra.values, extra]),
+                          self.spectra.names + (f"uniform {self.spectra.count}",), kind="spd", unit="photons",
+                          source=self.spectra.source)
+        ones = np.ones(self.weights.shape[:2] + (1,))
+        return MixedIllumination(spectra, np.concatenate([self.weights, ones], axis=-1))
+
+    def mean_spectrum(self, mask: np.ndarray | None = None) -> np.ndarray:
+        """The illumination averaged over the pixels of ``mask`` (all by default), photons, (n_wavelengths,)."""
+        weights = self.weights if mask is None else self.weights[np.asarray(mask, dtype=bool)]
+        return self.spectra.values @ weights.reshape(-1, self.spectra.count).mean(axis=0)
+
+
+def expected_response_mixed(
+    scene: Scene,
+    illumination: MixedIllumination,
+    camera_responsivities: Spectra,
+    exposure_us: float,
+    gain: float = 1.0,
+    scale: float = 1.0,
+) -> np.ndarray:
+    """:func:`expected_response` under a spatially varying illuminant.
+
+    The response to each component is computed per surface (as for a uniform illuminant) and the
+    pixels take the weighted sum: exact by the linearity of eq. 1–3. Highlights mirror the local
+    illuminant.
+    """
+    if illumination.weights.shape[:2] != scene.shape:
+        raise SpectralDataError(f"mixed illumination: weights cover {illumination.weights.shape[:2]} pixels but the "
+                                f"scene has {scene.shape}; expected one weight map per scene pixel")
+    image = np.zeros(scene.shape + (camera_responsivities.count,))
+    for index in range(illumination.spectra.count):
+        component = illumination.spectra.select([index])
+        image += expected_response(scene, component, camera_responsivities, exposure_us, gain, scale) \
+            * illumination.weights[:, :, index:index + 1]
+    return image

@@ -1,0 +1,609 @@
+"""Spatially varying ambient light: tiled statistics, local estimates and model selection (issue 9).
+
+The paper assumes one ambient over the whole scene and names patch-based local estimation as
+future work (PAPER.md, "Limits the authors name"). Here the frame is cut into a grid of tiles and
+the sufficient statistics of eq. 4–6 (:class:`~processing.statistics.SequenceStatistics`) are
+accumulated per tile in one pass. Statistics of disjoint samples add, so
+
+- the global statistics are the sum of the tiles' (:meth:`TiledStatistics.total`),
+- a Gaussian-weighted sum of neighbouring tiles' statistics is a *local weighted least squares*
+  (:meth:`TiledStatistics.smoothed`): each tile borrows surfaces from its neighbours, in
+  proportion to ``exp(−d²/2σ²)`` with ``d`` the distance in tiles,
+- and every tile is then solved in microseconds (:func:`estimate_local`).
+
+Model selection (:func:`select_model`)
+-------------------------------------
+Candidates are the global model and local models with smoothing widths :data:`SMOOTHING_GRID`
+(the smallest is "local", the larger ones "local-smoothed"). Each is scored by **leave-one-tile-out
+prediction**: tile ``t``'s ambient image is predicted from LED weights fitted *without* tile ``t``
+— on all other tiles for the global model, on the Gaussian-weighted neighbours for a local one —
+and the held-out squared errors are summed over the tiles (from the statistics alone:
+``‖a_t − F_t w‖² = E_t − 2 c_tᵀ w + wᵀ G_t w``). Holding out whole tiles, not pixels, matters:
+when the ambient is uniform but outside the LEDs' span, a local fit adapts to the local surfaces
+and would win a pixel-wise split (neighbouring pixels share surfaces), but it does not generalise
+to the next tile's surfaces, while a truly varying ambient is shared by neighbours. A local model
+is chosen only when it cuts the held-out error by more than :data:`SELECTION_MARGIN` — the
+safeguard that keeps uniform scenes global (calibrated on simulated uniform scenes:
+docs/local-estimation.md).
+
+Public objects
+--------------
+- :class:`TiledStatistics`, :func:`tile_statistics`, :func:`tile_edges`
+- :class:`ModelSelection`, :func:`select_model`
+- :class:`LocalEstimate`, :func:`estimate_local`, :data:`LOCAL_METHODS`
+- :func:`coefficient_maps`, :func:`synthesize_local`: the spatially varying computational image.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+
+from processing.ambient import AMBIENT_METHODS, AmbientEstimate, _gcv_alpha, estimate_ambient
+from processing.errors import SolverError, SpectralDataError
+from processing.spectra import Spectra, require_unit
+from processing.statistics import FrameStackSpec, SequenceStatistics
+from processing.synthesis import frame_coefficients
+
+LOCAL_METHODS = ("auto", "global", "local")
+"""``auto`` selects the model from the data; ``global`` is the paper's; ``local`` forces tiles."""
+DEFAULT_TILES = 8
+"""Tiles per side of the frame (8 × 8 = 64 tiles)."""
+SMOOTHING_GRID = (0.5, 1.0, 2.0)
+"""Gaussian widths (in tiles) of the local candidates: 0.5 is "local" (a tile and a little of its
+four neighbours), 1 and 2 "local-smoothed"."""
+SELECTION_MARGIN = 0.10
+"""A local model must cut the leave-one-tile-out prediction error by more than this fraction of the
+global model's; otherwise the global model is kept (calibrated on uniform scenes, see the docs)."""
+MIN_TILE_SAMPLES_PER_LED = 4
+"""A tile with fewer valid samples than this many per LED borrows its estimate from the smoothed fit."""
+
+
+# -- tile geometry ----------------------------------------------------------------------------
+def tile_edges(n_blocks: int, n_tiles: int) -> np.ndarray:
+    """Block indices where the tiles of one axis start and end, shape (n_tiles + 1,).
+
+    Examples
+    --------
+    >>> tile_edges(10, 4).tolist()
+    [0, 2, 5, 7, 10]
+    """
+    if n_tiles < 1 or n_blocks < n_tiles:
+        raise SpectralDataError(f"tiles: {n_tiles} tiles over {n_blocks} blocks; expected 1 ≤ tiles ≤ blocks "
+                                "(fewer tiles, or a smaller bin factor)")
+    return np.rint(np.linspace(0, n_blocks, n_tiles + 1)).astype(int)
+
+
+# -- tiled statistics -------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TiledStatistics:
+    """:class:`SequenceStatistics` of every tile of a grid, stored as arrays (tile row, tile column, …)."""
+
+    gram: np.ndarray
+    """(ty, tx, k, k)."""
+    cross: np.ndarray
+    """(ty, tx, k)."""
+    ambient_energy: np.ndarray
+    """(ty, tx)."""
+    n_samples: np.ndarray
+    """(ty, tx) valid samples (weighted sums after smoothing)."""
+    n_total: np.ndarray
+    """(ty, tx) samples, valid or not."""
+    ambient_sum: np.ndarray
+    """(ty, tx)."""
+    led_sums: np.ndarray
+    """(ty, tx, k)."""
+    row_edges: np.ndarray
+    """Pixel rows where the tile rows start and end, (ty + 1,); the last is the frame height."""
+    column_edges: np.ndarray
+    """Pixel columns where the tile columns start and end, (tx + 1,)."""
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Tiles (rows, columns)."""
+        return (int(self.gram.shape[0]), int(self.gram.shape[1]))
+
+    @property
+    def n_leds(self) -> int:
+        """Number of LEDs k."""
+        return int(self.cross.shape[-1])
+
+    @property
+    def frame_shape(self) -> tuple[int, int]:
+        """(H, W) of the frame the tiles cover."""
+        return (int(self.row_edges[-1]), int(self.column_edges[-1]))
+
+    @property
+    def centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates of the tile centres: (rows (ty,), columns (tx,))."""
+        return ((self.row_edges[:-1] + self.row_edges[1:] - 1) / 2.0,
+                (self.column_edges[:-1] + self.column_edges[1:] - 1) / 2.0)
+
+    @property
+    def areas(self) -> np.ndarray:
+        """Pixel area of every tile, (ty, tx)."""
+        return np.outer(np.diff(self.row_edges), np.diff(self.column_edges)).astype(float)
+
+    def tile(self, row: int, column: int) -> SequenceStatistics:
+        """The statistics of one tile."""
+        return SequenceStatistics(
+            gram=self.gram[row, column].copy(), cross=self.cross[row, column].copy(),
+            ambient_energy=float(self.ambient_energy[row, column]),
+            n_samples=int(round(float(self.n_samples[row, column]))), n_total=int(round(float(self.n_total[row, column]))),
+            ambient_sum=float(self.ambient_sum[row, column]), led_sums=self.led_sums[row, column].copy(),
+        )
+
+    def total(self) -> SequenceStatistics:
+        """The statistics of the whole frame: the sum of the tiles'."""
+        return SequenceStatistics(
+            gram=self.gram.sum(axis=(0, 1)), cross=self.cross.sum(axis=(0, 1)),
+            ambient_energy=float(self.ambient_energy.sum()), n_samples=int(round(float(self.n_samples.sum()))),
+            n_total=int(round(float(self.n_total.sum()))), ambient_sum=float(self.ambient_sum.sum()),
+            led_sums=self.led_sums.sum(axis=(0, 1)),
+        )
+
+    def smoothed(self, sigma: float, leave_out: bool = False) -> TiledStatistics:
+        """Gaussian-weighted sums of the neighbours' statistics (width ``sigma`` tiles).
+
+        With ``leave_out`` each tile's own statistics are excluded (its neighbours only), for
+        leave-one-tile-out scoring. The kernel is not normalised: least-squares solutions do not
+        depend on a common factor, and the dimensionless roughness weight scales with ``tr G``.
+        """
+        if not sigma > 0:
+            raise SpectralDataError(f"smoothing: sigma {sigma}; expected > 0 tiles")
+        rows, columns = _kernel(self.shape[0], sigma), _kernel(self.shape[1], sigma)
+
+        def smooth(values: np.ndarray) -> np.ndarray:
+            result = np.tensordot(rows, np.tensordot(columns, values, axes=([1], [1])).swapaxes(0, 1), axes=([1], [0]))
+            return result - values if leave_out else result
+
+        return TiledStatistics(
+            gram=smooth(self.gram), cross=smooth(self.cross), ambient_energy=smooth(self.ambient_energy),
+            n_samples=smooth(self.n_samples), n_total=smooth(self.n_total), ambient_sum=smooth(self.ambient_sum),
+            led_sums=smooth(self.led_sums), row_edges=self.row_edges, column_edges=self.column_edges,
+        )
+
+
+@lru_cache(maxsize=64)
+def _kernel(n: int, sigma: float) -> np.ndarray:
+    """(n, n) Gaussian weights ``exp(−(i − j)²/2σ²)`` between tiles of one axis (diagonal 1)."""
+    index = np.arange(n, dtype=float)
+    kernel = np.exp(-((index[:, None] - index[None, :]) ** 2) / (2.0 * sigma * sigma))
+    kernel[kernel < 1e-12] = 0.0
+    kernel.flags.writeable = False
+    return kernel
+
+
+def _planes(frame: np.ndarray, cfa_period: int) -> np.ndarray:
+    """(H, W, C) view of a frame; a Bayer mosaic becomes its four same-colour planes."""
+    if cfa_period == 2:
+        rows, columns = frame.shape[0] // 2, frame.shape[1] // 2
+        return np.stack([frame[p:2 * rows:2, q:2 * columns:2] for p in (0, 1) for q in (0, 1)], axis=-1)
+    return frame if frame.ndim == 3 else frame[:, :, None]
+
+
+@lru_cache(maxsize=32)
+def _gather(factor: int, channels: int, dtype: type) -> np.ndarray:
+    gather = np.zeros((factor * channels, channels), dtype=dtype)
+    for member in range(factor):
+        gather[member * channels:(member + 1) * channels] = np.eye(channels, dtype=dtype)
+    gather.flags.writeable = False
+    return gather
+
+
+def _block_sums(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
+    """``factor × factor`` block sums of an (H, W, C) plane into ``out`` (H/f, W/f, C), exactly.
+
+    Rows of a block by a reduction over a middle axis, columns by a thin 0/1 matrix product (the
+    technique of :mod:`processing.statistics`): integer data is summed in float32, exact for ≤ 16
+    bits and blocks ≤ 16×16.
+    """
+    height, width, channels = out.shape
+    if factor == 1:
+        np.copyto(out, plane[:height, :width], casting="unsafe")
+        return
+    sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
+    cropped = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
+    row_sums = cropped.sum(axis=1, dtype=sum_type)
+    grouped = row_sums.reshape(height * width, factor * channels) @ _gather(factor, channels, sum_type)
+    np.copyto(out, grouped.reshape(height, width, channels))
+
+
+def _block_any(mask: np.ndarray, factor: int, height: int, width: int) -> np.ndarray:
+    """(height, width) blocks of an (H, W) mask with any member set."""
+    if factor == 1:
+        return mask[:height, :width].copy()
+    return mask[:height * factor, :width * factor].reshape(height, factor, width, factor).any(axis=(1, 3))
+
+
+def tile_statistics(
+    ambient: np.ndarray,
+    led_frames: Sequence[np.ndarray],
+    spec: FrameStackSpec,
+    tiles: int | tuple[int, int] = DEFAULT_TILES,
+    *,
+    bin_factor: int = 1,
+    cfa_period: int = 1,
+) -> TiledStatistics:
+    """The statistics of eq. 4–6 of every tile of a ``tiles`` grid, in one pass over the frames.
+
+    Blocks (``bin_factor``, see :func:`processing.statistics.bin_frame`) are assigned to tiles
+    whole; a block is left out when any member saturates in any frame. The tiles' statistics sum
+    to those of :func:`processing.statistics.accumulate_statistics` with the same binning.
+
+    Parameters
+    ----------
+    ambient, led_frames, spec
+        As for :func:`processing.statistics.accumulate_statistics`.
+    tiles
+        Tiles per side, or (rows, columns).
+    bin_factor, cfa_period
+        Block size, and 2 for Bayer mosaics.
+    """
+    rows_tiles, columns_tiles = (tiles, tiles) if isinstance(tiles, int) else tiles
+    if bin_factor < 1 or cfa_period not in (1, 2):
+        raise SpectralDataError(f"tiled statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2")
+    if len(led_frames) != spec.led_levels.shape[0]:
+        raise SpectralDataError(f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}")
+    frames = [*led_frames, ambient]
+    for index, frame in enumerate(frames):
+        if frame.shape != ambient.shape:
+            raise SpectralDataError(f"frame stack: frame {index} has shape {frame.shape} but the ambient frame "
+                                    f"{ambient.shape}; expected frames of one size")
+    planes = [_planes(frame, cfa_period) for frame in frames]
+    height, width, channels = planes[0].shape[0] // bin_factor, planes[0].shape[1] // bin_factor, planes[0].shape[2]
+    if height == 0 or width == 0:
+        raise SpectralDataError(f"frame of shape {ambient.shape} is smaller than one {bin_factor}×{bin_factor} block")
+    n_rows = len(frames) + 1
+    data = np.empty((n_rows, height, width, channels))
+    for row, plane in enumerate(planes):
+        _block_sums(plane, bin_factor, data[row])
+    floating = any(np.issubdtype(plane.dtype, np.floating) for plane in planes)
+    if floating and not np.isfinite(data[:-1].sum()):
+        raise SpectralDataError("frame stack: a frame holds non-finite values (NaN or inf); expected finite pixels")
+    data[-1] = 1.0
+    invalid = np.zeros((height, width), dtype=bool)
+    for plane in planes:
+        if plane.size and plane.max() >= spec.white_level:
+            hit = plane >= spec.white_level
+            invalid |= _block_any(hit.any(axis=2), bin_factor, height, width)
+    if invalid.any():
+        data[:, invalid] = 0.0
+    row_blocks, column_blocks = tile_edges(height, rows_tiles), tile_edges(width, columns_tiles)
+    moments = np.empty((rows_tiles, columns_tiles, n_rows, n_rows))
+    totals = np.empty((rows_tiles, columns_tiles))
+    for i in range(rows_tiles):
+        band = data[:, row_blocks[i]:row_blocks[i + 1]]
+        for j in range(columns_tiles):
+            samples = band[:, :, column_blocks[j]:column_blocks[j + 1]].reshape(n_rows, -1)
+            moments[i, j] = samples @ samples.T
+            totals[i, j] = samples.shape[1]
+    block_spec = FrameStackSpec(black_level=spec.black_level * bin_factor * bin_factor, white_level=np.inf,
+                                ambient_scale=spec.ambient_scale, led_scales=spec.led_scales, led_levels=spec.led_levels)
+    pixel = bin_factor * cfa_period
+    row_edges = row_blocks * pixel
+    column_edges = column_blocks * pixel
+    row_edges[-1], column_edges[-1] = ambient.shape[0], ambient.shape[1]
+    return _tiled_from_moments(moments, totals, block_spec, row_edges, column_edges)
+
+
+def _tiled_from_moments(moments: np.ndarray, totals: np.ndarray, spec: FrameStackSpec, row_edges: np.ndarray,
+                        column_edges: np.ndarray) -> TiledStatistics:
+    """Tiled statistics from raw moments of the rows [F_1 … F_n, A, 1] (one (R, R) matrix per tile)."""
+    n_led_frames = moments.shape[-1] - 2
+    scales = np.asarray(spec.led_scales, dtype=float)
+    black = float(spec.black_level)
+    # d_j = s_j (F_j − b) − s_a (A − b), a = s_a (A − b): a linear map of the raw rows.
+    transform = np.zeros((n_led_frames + 1, n_led_frames + 2))
+    transform[:n_led_frames, :n_led_frames] = np.diag(scales)
+    transform[:n_led_frames, n_led_frames] = -spec.ambient_scale
+    transform[:n_led_frames, n_led_frames + 1] = (spec.ambient_scale - scales) * black
+    transform[n_led_frames, n_led_frames] = spec.ambient_scale
+    transform[n_led_frames, n_led_frames + 1] = -spec.ambient_scale * black
+    linear = np.einsum("ar,tsrq,bq->tsab", transform, moments, transform, optimize=True)
+    sums = np.einsum("ar,tsr->tsa", transform, moments[..., :, -1])
+    unmixing = spec.unmixing
+    led = linear[..., :n_led_frames, :n_led_frames]
+    return TiledStatistics(
+        gram=np.einsum("ia,tsab,jb->tsij", unmixing, led, unmixing, optimize=True),
+        cross=np.einsum("ia,tsa->tsi", unmixing, linear[..., :n_led_frames, n_led_frames]),
+        ambient_energy=linear[..., n_led_frames, n_led_frames].copy(),
+        n_samples=np.rint(moments[..., -1, -1]),
+        n_total=totals.astype(float),
+        ambient_sum=sums[..., n_led_frames].copy(),
+        led_sums=np.einsum("ia,tsa->tsi", unmixing, sums[..., :n_led_frames]),
+        row_edges=np.asarray(row_edges, dtype=int), column_edges=np.asarray(column_edges, dtype=int),
+    )
+
+
+# -- model selection --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ModelSelection:
+    """The outcome of leave-one-tile-out model selection."""
+
+    model: str
+    """``global`` or ``local``."""
+    smoothing: float | None
+    """Gaussian width in tiles of the chosen local model (None for global)."""
+    scores: dict[str, float]
+    """Held-out prediction error of every candidate relative to the global model's (global = 1)."""
+    best_local: float
+    """The smoothing width of the best local candidate (used when ``local`` is forced)."""
+    margin: float
+    """The margin a local model had to beat."""
+
+
+def _batched_ridge(gram: np.ndarray, cross: np.ndarray, penalty: np.ndarray, alpha: float) -> np.ndarray:
+    """Tikhonov weights ``(G + λ LᵀL)⁻¹ c`` of every tile, λ = α tr(G)/tr(LᵀL) (unconstrained, batched)."""
+    k = gram.shape[-1]
+    trace = np.trace(gram, axis1=-2, axis2=-1)
+    weight = alpha * trace / max(float(np.trace(penalty)), 1e-300)
+    system = gram + weight[..., None, None] * penalty + (1e-12 * np.maximum(trace, 1e-300) / k)[..., None, None] * np.eye(k)
+    return np.linalg.solve(system, cross[..., None])[..., 0]
+
+
+def _held_out_error(tiles: TiledStatistics, weights: np.ndarray) -> np.ndarray:
+    """``‖a_t − F_t w_t‖²`` of every tile for per-tile weights (ty, tx, k)."""
+    quadratic = np.einsum("tsi,tsij,tsj->ts", weights, tiles.gram, weights)
+    return np.clip(tiles.ambient_energy - 2.0 * np.einsum("tsi,tsi->ts", tiles.cross, weights) + quadratic, 0.0, None)
+
+
+def select_model(tiles: TiledStatistics, led_spectra: Spectra, alpha: float | None = None,
+                 smoothing_grid: Sequence[float] = SMOOTHING_GRID, margin: float = SELECTION_MARGIN) -> ModelSelection:
+    """Choose between the global and local models by leave-one-tile-out prediction error.
+
+    Parameters
+    ----------
+    tiles
+        Tiled statistics.
+    led_spectra
+        The LED spectra (photons): the fits are Tikhonov-regularised with their roughness.
+    alpha
+        Dimensionless roughness weight of the scoring fits; None chooses it by GCV on the global
+        statistics.
+    smoothing_grid
+        Widths (tiles) of the local candidates.
+    margin
+        Relative improvement over the global model a local one must exceed.
+    """
+    roughness = np.diff(led_spectra.values, axis=0)
+    penalty = roughness.T @ roughness
+    total = tiles.total()
+    if alpha is None:
+        alpha = _gcv_alpha(total, roughness)
+    # Global model without tile t: all statistics minus tile t's.
+    global_gram = total.gram[None, None] - tiles.gram
+    global_cross = total.cross[None, None] - tiles.cross
+    global_error = float(_held_out_error(tiles, _batched_ridge(global_gram, global_cross, penalty, alpha)).sum())
+    scores = {"global": 1.0}
+    reference = max(global_error, 1e-300)
+    best_sigma, best_score = float(smoothing_grid[0]), np.inf
+    for sigma in smoothing_grid:
+        neighbours = tiles.smoothed(float(sigma), leave_out=True)
+        usable = neighbours.n_samples > tiles.n_leds
+        weights = _batched_ridge(neighbours.gram, neighbours.cross, penalty, alpha)
+        error = _held_out_error(tiles, weights)
+        # A tile whose neighbourhood is empty (tiny grids) is predicted by the global model.
+        if not usable.all():
+            fallback = _held_out_error(tiles, _batched_ridge(global_gram, global_cross, penalty, alpha))
+            error = np.where(usable, error, fallback)
+        score = float(error.sum()) / reference
+        scores[f"local(sigma={sigma:g})"] = score
+        if score < best_score:
+            best_sigma, best_score = float(sigma), score
+    chosen = "local" if best_score < 1.0 - margin else "global"
+    return ModelSelection(model=chosen, smoothing=best_sigma if chosen == "local" else None, scores=scores,
+                          best_local=best_sigma, margin=margin)
+
+
+# -- local estimates --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LocalEstimate:
+    """The ambient of a scene: global, or one estimate per tile."""
+
+    model: str
+    """``global`` or ``local`` (what was used)."""
+    method: str
+    """What was asked: ``auto``, ``global`` or ``local``."""
+    smoothing: float | None
+    """Gaussian width in tiles of the local fit (None for global)."""
+    global_estimate: AmbientEstimate
+    """The paper's single estimate (always computed: it is the sum of the tiles)."""
+    tile_weights: np.ndarray
+    """Ambient weights of every tile, (ty, tx, k); all equal to the global weights for the global model."""
+    tile_residuals: np.ndarray
+    """Relative residual ``‖a_t − F_t w_t‖ / ‖a_t‖`` of every tile under its own weights, (ty, tx)."""
+    tile_samples: np.ndarray
+    """Valid samples of every tile (own, before smoothing), (ty, tx)."""
+    tiles: TiledStatistics
+    """The tiled statistics (and geometry)."""
+    selection: ModelSelection | None
+    """The model selection (None when the method was forced and selection skipped)."""
+    led_values: np.ndarray = field(repr=False)
+    """The LED spectra (photons, n_wavelengths × k) the weights refer to."""
+    warnings: tuple[str, ...] = ()
+    """Human-readable warnings."""
+
+    @property
+    def tile_spectra(self) -> np.ndarray:
+        """``I w_t`` of every tile, (ty, tx, n_wavelengths), photons."""
+        return np.einsum("lk,tsk->tsl", self.led_values, self.tile_weights)
+
+    @property
+    def mean_weights(self) -> np.ndarray:
+        """Area-weighted mean of the tiles' weights, (k,) — the global weights for the global model."""
+        if self.model == "global":
+            return self.global_estimate.ambient_weights
+        areas = self.tiles.areas
+        return np.einsum("ts,tsk->k", areas, self.tile_weights) / areas.sum()
+
+    @property
+    def mean_spectrum(self) -> np.ndarray:
+        """``I`` times :attr:`mean_weights`, photons (n_wavelengths,)."""
+        return self.led_values @ self.mean_weights
+
+    def weights_map(self, shape: tuple[int, int] | None = None) -> np.ndarray:
+        """Per-pixel ambient weights (H, W, k), bilinear between tile centres."""
+        return upsample_tiles(self.tile_weights, self.tiles, shape)
+
+
+def estimate_local(
+    tiles: TiledStatistics,
+    led_spectra: Spectra,
+    method: str = "auto",
+    solver: str = "tikhonov",
+    alpha: float | str = "auto",
+    smoothing: float | None = None,
+    margin: float = SELECTION_MARGIN,
+) -> LocalEstimate:
+    """Estimate the ambient globally or per tile, choosing the model from the data for ``auto``.
+
+    Parameters
+    ----------
+    tiles
+        Tiled statistics (:func:`tile_statistics`).
+    led_spectra
+        The k LED spectra at full drive, photons.
+    method
+        ``auto`` (:func:`select_model`), ``global`` (the paper) or ``local``.
+    solver, alpha
+        The estimator of :func:`processing.ambient.estimate_ambient` and its roughness weight. For
+        ``alpha="auto"`` with ``tikhonov``, GCV chooses it per tile.
+    smoothing
+        Gaussian width in tiles of the local fit; None takes the best of the selection.
+    margin
+        See :func:`select_model`.
+    """
+    if method not in LOCAL_METHODS:
+        raise ValueError(f"local method '{method}' is unknown; expected one of {', '.join(LOCAL_METHODS)}")
+    if solver not in AMBIENT_METHODS:
+        raise ValueError(f"ambient method '{solver}' is unknown; expected one of {', '.join(AMBIENT_METHODS)}")
+    require_unit(led_spectra, "photons")
+    total = tiles.total()
+    global_estimate = estimate_ambient(total, led_spectra, method=solver, alpha=alpha)
+    led_values = led_spectra.values
+    shape = tiles.shape
+    selection = None
+    if method == "auto" or (method == "local" and smoothing is None):
+        scoring_alpha = global_estimate.alpha if solver == "tikhonov" and global_estimate.alpha > 0 else None
+        selection = select_model(tiles, led_spectra, scoring_alpha, margin=margin)
+    model = selection.model if method == "auto" else method  # type: ignore[union-attr]
+    if model == "global":
+        weights = np.broadcast_to(global_estimate.ambient_weights, shape + (tiles.n_leds,)).copy()
+        used_sigma = None
+        warnings: list[str] = []
+    else:
+        used_sigma = float(smoothing if smoothing is not None else selection.best_local)  # type: ignore[union-attr]
+        weights, warnings = _solve_tiles(tiles.smoothed(used_sigma), tiles, led_values, solver, alpha,
+                                         global_estimate)
+    residual = np.sqrt(_held_out_error(tiles, weights) / np.maximum(tiles.ambient_energy, 1e-300))
+    return LocalEstimate(
+        model=model, method=method, smoothing=used_sigma, global_estimate=global_estimate, tile_weights=weights,
+        tile_residuals=residual, tile_samples=tiles.n_samples.copy(), tiles=tiles, selection=selection,
+        led_values=led_values, warnings=tuple(warnings),
+    )
+
+
+def _solve_tiles(smoothed: TiledStatistics, own: TiledStatistics, led_values: np.ndarray, solver: str,
+                 alpha: float | str, global_estimate: AmbientEstimate) -> tuple[np.ndarray, list[str]]:
+    """The chosen solver on every tile's smoothed statistics; empty tiles take the global weights."""
+    weights = np.empty(smoothed.shape + (smoothed.n_leds,))
+    fallback = 0
+    for i in range(smoothed.shape[0]):
+        for j in range(smoothed.shape[1]):
+            statistics = smoothed.tile(i, j)
+            if statistics.n_samples < MIN_TILE_SAMPLES_PER_LED * statistics.n_leds or not np.all(np.diag(statistics.gram) > 0):
+                weights[i, j] = global_estimate.ambient_weights
+                fallback += 1
+                continue
+            try:
+                weights[i, j] = AMBIENT_METHODS[solver](statistics, led_values, alpha)[0]
+            except SolverError:
+                weights[i, j] = global_estimate.ambient_weights
+                fallback += 1
+    warnings = []
+    if fallback:
+        warnings.append(f"{fallback} of {own.shape[0] * own.shape[1]} tiles had too few valid samples and "
+                        "took the global estimate")
+    return weights, warnings
+
+
+# -- the spatially varying computational image ------------------------------------------------
+def _interpolation_matrix(centres: np.ndarray, size: int) -> np.ndarray:
+    """(size, n) linear interpolation between tile centres, constant beyond the outer ones."""
+    n = centres.size
+    if n == 1:
+        return np.ones((size, 1))
+    position = np.clip(np.interp(np.arange(size, dtype=float), centres, np.arange(n, dtype=float)), 0, n - 1)
+    lower = np.minimum(np.floor(position).astype(int), n - 2)
+    fraction = position - lower
+    matrix = np.zeros((size, n))
+    matrix[np.arange(size), lower] = 1.0 - fraction
+    matrix[np.arange(size), lower + 1] = fraction
+    return matrix
+
+
+def upsample_tiles(values: np.ndarray, tiles: TiledStatistics, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Per-pixel maps (H, W, …) of per-tile values (ty, tx, …), bilinear between tile centres."""
+    height, width = shape if shape is not None else tiles.frame_shape
+    scale_rows, scale_columns = height / tiles.frame_shape[0], width / tiles.frame_shape[1]
+    centre_rows, centre_columns = tiles.centres
+    rows = _interpolation_matrix(centre_rows * scale_rows, height)
+    columns = _interpolation_matrix(centre_columns * scale_columns, width)
+    return np.einsum("hi,ij...,wj->hw...", rows, values, columns, optimize=True)
+
+
+def coefficient_maps(spec: FrameStackSpec, tile_flash_weights: np.ndarray, tiles: TiledStatistics,
+                     shape: tuple[int, int]) -> np.ndarray:
+    """Per-pixel coefficients of the linearised frames [ambient, LED frames…], (H, W, 1 + n_frames).
+
+    Each tile's flash weights give frame coefficients (:func:`processing.synthesis.frame_coefficients`);
+    they are linear in the weights, so interpolating coefficients = interpolating weights.
+    """
+    per_tile = np.empty(tile_flash_weights.shape[:2] + (1 + len(spec.led_scales),))
+    for i in range(per_tile.shape[0]):
+        for j in range(per_tile.shape[1]):
+            ambient_coefficient, coefficients = frame_coefficients(spec, tile_flash_weights[i, j])
+            per_tile[i, j, 0], per_tile[i, j, 1:] = ambient_coefficient, coefficients
+    return upsample_tiles(per_tile, tiles, shape)
+
+
+def synthesize_local(ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec,
+                     tile_flash_weights: np.ndarray, tiles: TiledStatistics) -> tuple[np.ndarray, np.ndarray]:
+    """The spatially varying computational flash image ``m_a + Σ_k w_k(x) m_f,k``.
+
+    Per-tile flash weights (e.g. complementary to each tile's ambient) are blended bilinearly
+    between tile centres into per-pixel coefficient maps, and the image is the per-pixel weighted
+    sum of the raw frames (a Bayer mosaic stays a mosaic: every sample has its own coefficients).
+    With equal weights in every tile it equals :func:`processing.synthesis.synthesize`.
+
+    Returns
+    -------
+    image, saturated
+        float32 linear image (value per µs·gain), the frames' shape; (H, W) mask of pixels
+        saturated in some input frame.
+    """
+    frames = [ambient, *led_frames]
+    for index, frame in enumerate(frames):
+        if frame.shape != ambient.shape:
+            raise SpectralDataError(f"synthesis: frame {index} has shape {frame.shape} but the ambient frame {ambient.shape}")
+    if tile_flash_weights.shape != tiles.shape + (spec.n_leds,):
+        raise SpectralDataError(f"synthesis: tile flash weights of shape {tile_flash_weights.shape}; expected "
+                                f"{tiles.shape + (spec.n_leds,)}")
+    shape = ambient.shape[:2]
+    maps = coefficient_maps(spec, tile_flash_weights, tiles, shape)
+    scales = np.concatenate([[spec.ambient_scale], np.asarray(spec.led_scales, dtype=float)])
+    factors = (maps * scales).astype(np.float32)
+    offset = (-spec.black_level * factors.astype(float).sum(axis=-1)).astype(np.float32)
+    output = np.empty(ambient.shape, dtype=np.float32)
+    saturated = np.zeros(shape, dtype=bool)
+    expand = (lambda m: m[:, :, None]) if ambient.ndim == 3 else (lambda m: m)
+    output[...] = expand(offset)
+    for index, frame in enumerate(frames):
+        output += expand(factors[:, :, index]) * frame.astype(np.float32)
+        hit = frame >= spec.white_level
+        saturated |= hit.any(axis=2) if hit.ndim == 3 else hit
+    return output, saturated

@@ -1,0 +1,308 @@
+"""Study of local ambient estimation (issue 9): when does ``auto`` choose local, what does it gain, what does it cost.
+
+Protocol
+--------
+- Scenes: random mosaics of the paper's 110 surfaces (:func:`random_mosaic`, square patches of
+  random sizes, surfaces drawn with repetition, mild random shading) — a different scene for every
+  seed, never the tests' chart.
+- Ambients: the rig's named ambients (:data:`AMBIENT_POOL`); a **uniform** scene has one, a
+  **boundary** scene two split by a straight edge at a random angle and offset, a **gradient**
+  scene two blended linearly across the frame (:func:`mixing_map`). The second ambient's power is
+  drawn in [0.5, 2] × the first's.
+- Camera: the NikonD100 (ISETCam), the 7 paper LEDs, the default 16-bit sensor with photon and read
+  noise. All LEDs together give ``flash_to_ambient`` × the ambient's mean signal; one exposure for
+  every frame, the brightest ambient pixel at ``ambient_peak_fraction`` of full scale (the sim
+  rig's conventions, :meth:`acquisition.simulated_camera.SimulatedCamera.default`).
+- Estimation: blocks of ``bin_factor`` × ``bin_factor`` (the CLI's default 4), ``tiles`` × ``tiles``
+  tiles, Tikhonov solver with GCV.
+- Metric: spectrum RMSE (:func:`processing.metrics.spectrum_rmse`) of each tile's estimate against
+  the tile's true ambient (the mean of the per-pixel ambient over the tile), averaged over the
+  tiles with area weights. A global estimate is scored the same way (its one spectrum against
+  every tile's truth), so on uniform scenes it is the usual spectrum RMSE.
+- Cost: wall time of statistics + estimate on a full-size frame (1024 × 1280, the Ximea's) for the
+  global estimate (:func:`processing.statistics.accumulate_statistics` + :func:`estimate_ambient`)
+  and for ``auto`` (:func:`processing.local.tile_statistics` + :func:`estimate_local`), medians of
+  repeats; frames in memory.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from processing import datasets
+from processing.ambient import estimate_ambient
+from processing.image_formation import (
+    MixedIllumination,
+    Scene,
+    SensorModel,
+    expected_response,
+    exposure_for_peak,
+    render_frame,
+    total_illumination,
+)
+from processing.local import DEFAULT_TILES, LocalEstimate, estimate_local, tile_statistics
+from processing.metrics import spectrum_rmse
+from processing.spectra import DEFAULT_GRID, Spectra
+from processing.statistics import FrameStackSpec, accumulate_statistics
+
+AMBIENT_POOL = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange")
+"""Ambients the scenarios draw from."""
+KINDS = ("uniform", "boundary", "gradient")
+"""Scenario kinds."""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One simulated capture with its ground truth."""
+
+    kind: str
+    ambient: np.ndarray
+    led_frames: list[np.ndarray]
+    spec: FrameStackSpec
+    led_spectra: Spectra
+    """Photons, as the estimator wants them."""
+    illumination: MixedIllumination
+    """The true per-pixel ambient."""
+    names: tuple[str, ...]
+
+
+def random_mosaic(rng: np.random.Generator, shape: tuple[int, int], grid=DEFAULT_GRID) -> Scene:  # noqa: ANN001
+    """A random scene: square patches (6–24 px) of the 110 chart surfaces, with smooth shading."""
+    surfaces = datasets.chart110().resample(grid)
+    height, width = shape
+    patch = int(rng.integers(6, 25))
+    rows, columns = -(-height // patch), -(-width // patch)
+    labels = rng.integers(0, surfaces.count, size=(rows, columns))
+    labels = np.repeat(np.repeat(labels, patch, axis=0), patch, axis=1)[:height, :width].astype(np.int32)
+    y, x = np.mgrid[0:height, 0:width] / max(height, width)
+    tilt = rng.uniform(-0.3, 0.3, size=2)
+    shading = np.clip(1.0 + tilt[0] * (y - 0.5) + tilt[1] * (x - 0.5), 0.5, 1.5)
+    return Scene(surfaces, labels, shading=shading)
+
+
+def mixing_map(kind: str, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
+    """Share of the second ambient at every pixel: 0 (uniform), a straight edge, or a linear ramp."""
+    height, width = shape
+    if kind == "uniform":
+        return np.zeros(shape)
+    y, x = np.mgrid[0:height, 0:width].astype(float)
+    angle = rng.uniform(0, 2 * np.pi)
+    direction = np.cos(angle) * (x - width / 2) / width + np.sin(angle) * (y - height / 2) / height
+    if kind == "boundary":
+        return (direction > rng.uniform(-0.2, 0.2)).astype(float)
+    if kind == "gradient":
+        span = np.ptp(direction)
+        return np.clip((direction - direction.min()) / span, 0.0, 1.0)
+    raise ValueError(f"scenario kind '{kind}' is unknown; expected one of {', '.join(KINDS)}")
+
+
+def make_scenario(kind: str, seed: int, shape: tuple[int, int] = (240, 320), camera: str = "NikonD100",
+                  flash_to_ambient: float = 2.0, ambient_peak_fraction: float = 0.3, noise: bool = True) -> Scenario:
+    """Render one scenario (see the module notes)."""
+    rng = np.random.default_rng(seed)
+    grid = DEFAULT_GRID
+    scene = random_mosaic(rng, shape, grid)
+    first, second = rng.choice(len(AMBIENT_POOL), size=2, replace=False)
+    names = (AMBIENT_POOL[first],) if kind == "uniform" else (AMBIENT_POOL[first], AMBIENT_POOL[second])
+    spectra = [datasets.ambient_spectrum(name, grid).to_unit("photons") for name in names]
+    spectra = [s.replace(values=s.values / s.values.max()) for s in spectra]
+    if kind != "uniform":
+        spectra[1] = spectra[1].replace(values=spectra[1].values * rng.uniform(0.5, 2.0))
+    mixing = mixing_map(kind, shape, rng)
+    illumination = MixedIllumination.two_ambients(spectra[0], spectra[-1], mixing)
+    leds = datasets.paper_led_subset(7).resample(grid).to_unit("photons")
+    responsivities = datasets.isetcam_camera(camera).resample(grid)
+    sensor = SensorModel()
+    ambient_signal = float(np.mean(expected_response(scene, illumination, responsivities, 1.0)))
+    dark = spectra[0].replace(values=np.zeros_like(spectra[0].values))
+    flash_signal = float(np.mean(expected_response(scene, total_illumination(dark, leds, np.ones(leds.count)),
+                                                   responsivities, 1.0)))
+    leds = leds.replace(values=leds.values * (flash_to_ambient * ambient_signal / flash_signal))
+    exposure = exposure_for_peak(scene, illumination, responsivities, sensor, ambient_peak_fraction)  # type: ignore[arg-type]
+    levels = np.eye(leds.count)
+    frames = []
+    for row in [np.zeros(leds.count), *levels]:
+        lit = illumination.plus(total_illumination(dark, leds, row))
+        frames.append(render_frame(scene, lit, responsivities, sensor, exposure, rng=rng, noise=noise))  # type: ignore[arg-type]
+    spec = FrameStackSpec(black_level=sensor.black_level, white_level=sensor.white_level, ambient_scale=1.0 / exposure,
+                          led_scales=(1.0 / exposure,) * leds.count, led_levels=levels)
+    return Scenario(kind, frames[0], frames[1:], spec, leds, illumination, names)
+
+
+def tile_truth(scenario: Scenario, estimate: LocalEstimate) -> np.ndarray:
+    """The true ambient of every tile (mean over its pixels), (ty, tx, n_wavelengths), photons."""
+    rows, columns = estimate.tiles.row_edges, estimate.tiles.column_edges
+    weights = scenario.illumination.weights
+    truth = np.empty(estimate.tiles.shape + (scenario.illumination.spectra.grid.size,))
+    for i in range(truth.shape[0]):
+        for j in range(truth.shape[1]):
+            share = weights[rows[i]:rows[i + 1], columns[j]:columns[j + 1]].reshape(-1, weights.shape[2]).mean(axis=0)
+            truth[i, j] = scenario.illumination.spectra.values @ share
+    return truth
+
+
+def tiled_rmse(spectra: np.ndarray, truth: np.ndarray, areas: np.ndarray) -> float:
+    """Area-weighted mean over tiles of the spectrum RMSE of (ty, tx, n) estimates against truths."""
+    errors = np.array([[spectrum_rmse(spectra[i, j], truth[i, j]) for j in range(truth.shape[1])]
+                       for i in range(truth.shape[0])])
+    return float((errors * areas).sum() / areas.sum())
+
+
+def evaluate_scenario(kind: str, seed: int, tiles: int = DEFAULT_TILES, bin_factor: int = 4,
+                      shape: tuple[int, int] = (240, 320)) -> dict:
+    """Global, forced-local and auto estimates of one scenario, with their tiled spectrum RMSEs."""
+    scenario = make_scenario(kind, seed, shape)
+    tiled = tile_statistics(scenario.ambient, scenario.led_frames, scenario.spec, tiles, bin_factor=bin_factor)
+    auto = estimate_local(tiled, scenario.led_spectra, "auto")
+    local = estimate_local(tiled, scenario.led_spectra, "local")
+    truth = tile_truth(scenario, auto)
+    areas = tiled.areas
+    global_spectra = np.broadcast_to(auto.global_estimate.spectrum.values[:, 0], truth.shape)
+    return {
+        "kind": kind, "seed": seed, "ambients": list(scenario.names),
+        "chosen": auto.model, "smoothing": auto.smoothing, "scores": auto.selection.scores,  # type: ignore[union-attr]
+        "rmse_global": tiled_rmse(global_spectra, truth, areas),
+        "rmse_local": tiled_rmse(local.tile_spectra, truth, areas),
+        "rmse_auto": tiled_rmse(auto.tile_spectra, truth, areas),
+    }
+
+
+def time_estimates(shape: tuple[int, int] = (1024, 1280), tiles: int = DEFAULT_TILES, bin_factor: int = 4,
+                   repeats: int = 5, seed: int = 0) -> dict:
+    """Median wall times of the global estimate and of ``auto`` / ``local`` on full-size frames (in memory)."""
+    scenario = make_scenario("boundary", seed, shape)
+    leds = scenario.led_spectra
+
+    def global_run() -> None:
+        statistics = accumulate_statistics(scenario.ambient, scenario.led_frames, scenario.spec, bin_factor=bin_factor)
+        estimate_ambient(statistics, leds)
+
+    def local_run(method: str) -> None:
+        tiled = tile_statistics(scenario.ambient, scenario.led_frames, scenario.spec, tiles, bin_factor=bin_factor)
+        estimate_local(tiled, leds, method)
+
+    def median_time(run) -> float:  # noqa: ANN001
+        run()  # warm caches
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            run()
+            times.append(time.perf_counter() - start)
+        return float(np.median(times))
+
+    timing = {"shape": list(shape), "tiles": tiles, "bin_factor": bin_factor, "repeats": repeats,
+              "global_s": median_time(global_run), "auto_s": median_time(lambda: local_run("auto")),
+              "local_s": median_time(lambda: local_run("local"))}
+    timing["auto_ratio"] = timing["auto_s"] / timing["global_s"]
+    timing["local_ratio"] = timing["local_s"] / timing["global_s"]
+    return timing
+
+
+def tiles_sweep(seeds: range, tile_counts: tuple[int, ...] = (4, 6, 8, 12, 16), shape: tuple[int, int] = (240, 320)) -> list[dict]:
+    """Accuracy of forced-local estimates against the tile count on boundary scenes (accuracy vs time)."""
+    rows = []
+    for tiles in tile_counts:
+        errors_local, errors_global, elapsed = [], [], []
+        for seed in seeds:
+            scenario = make_scenario("boundary", seed, shape)
+            start = time.perf_counter()
+            tiled = tile_statistics(scenario.ambient, scenario.led_frames, scenario.spec, tiles, bin_factor=4)
+            local = estimate_local(tiled, scenario.led_spectra, "local")
+            elapsed.append(time.perf_counter() - start)
+            truth = tile_truth(scenario, local)
+            errors_local.append(tiled_rmse(local.tile_spectra, truth, tiled.areas))
+            errors_global.append(tiled_rmse(np.broadcast_to(local.global_estimate.spectrum.values[:, 0], truth.shape),
+                                            truth, tiled.areas))
+        rows.append({"tiles": tiles, "rmse_local": float(np.mean(errors_local)),
+                     "rmse_global": float(np.mean(errors_global)), "time_s": float(np.median(elapsed))})
+    return rows
+
+
+def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILES, seed0: int = 1000,
+              out: Path | None = None, timing: bool = True, sweep: bool = True) -> dict:
+    """The acceptance study: auto → global rate on uniform scenes, RMSE cut on two-illuminant ones, cost.
+
+    Seeds start at ``seed0`` (the tests use seeds below 100). Writes ``local-study.json`` and plots
+    to ``out`` when given.
+    """
+    results = [evaluate_scenario("uniform", seed0 + s, tiles) for s in range(n_uniform)]
+    for kind in ("boundary", "gradient"):
+        results += [evaluate_scenario(kind, seed0 + 10_000 + s, tiles) for s in range(n_mixed)]
+    summary: dict = {"tiles": tiles, "n_uniform": n_uniform, "n_mixed_per_kind": n_mixed}
+    for kind in KINDS:
+        rows = [r for r in results if r["kind"] == kind]
+        if not rows:
+            continue
+        entry = {name: float(np.mean([r[name] for r in rows])) for name in ("rmse_global", "rmse_local", "rmse_auto")}
+        entry["global_rate"] = float(np.mean([r["chosen"] == "global" for r in rows]))
+        entry["auto_cut"] = 1.0 - entry["rmse_auto"] / entry["rmse_global"]
+        entry["local_cut"] = 1.0 - entry["rmse_local"] / entry["rmse_global"]
+        entry["n"] = len(rows)
+        summary[kind] = entry
+    mixed = [r for r in results if r["kind"] != "uniform"]
+    if mixed:
+        summary["two_illuminant"] = {
+            "rmse_global": float(np.mean([r["rmse_global"] for r in mixed])),
+            "rmse_auto": float(np.mean([r["rmse_auto"] for r in mixed])),
+            "rmse_local": float(np.mean([r["rmse_local"] for r in mixed])),
+        }
+        summary["two_illuminant"]["auto_cut"] = 1.0 - summary["two_illuminant"]["rmse_auto"] / summary["two_illuminant"]["rmse_global"]
+    if timing:
+        summary["timing"] = time_estimates(tiles=tiles)
+    if sweep:
+        summary["tiles_sweep"] = tiles_sweep(range(seed0 + 20_000, seed0 + 20_000 + min(n_mixed, 10)))
+    summary["scenarios"] = results
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "local-study.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
+        summary["plots"] = _plots(summary, results, out)
+    return summary
+
+
+def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
+    """Scatter of local vs global RMSE per scenario, the selection scores, and accuracy vs tiles/time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = []
+    figure, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+    colours = {"uniform": "tab:blue", "boundary": "tab:red", "gradient": "tab:orange"}
+    for kind in KINDS:
+        rows = [r for r in results if r["kind"] == kind]
+        axes[0].scatter([r["rmse_global"] for r in rows], [r["rmse_auto"] for r in rows], s=10, c=colours[kind], label=kind)
+        best = [min(v for key, v in r["scores"].items() if key != "global") for r in rows]
+        axes[1].hist(best, bins=30, alpha=0.6, color=colours[kind], label=kind)
+    top = max(max(r["rmse_global"] for r in results), max(r["rmse_auto"] for r in results))
+    axes[0].plot([0, top], [0, top], "k:", lw=1)
+    axes[0].plot([0, top], [0, 0.7 * top], "k--", lw=1, label="30 % cut")
+    axes[0].set(xlabel="global spectrum RMSE", ylabel="auto spectrum RMSE", title="per scenario")
+    axes[0].legend()
+    axes[1].axvline(1.0 - results and 1.0 - 0.0 or 1.0, color="k", lw=1)
+    from processing.local import SELECTION_MARGIN
+
+    axes[1].axvline(1.0 - SELECTION_MARGIN, color="k", ls="--", lw=1, label="decision threshold")
+    axes[1].set(xlabel="best local held-out error / global's", ylabel="scenarios", title="model selection")
+    axes[1].legend()
+    sweep = summary.get("tiles_sweep")
+    if sweep:
+        axes[2].plot([r["time_s"] * 1e3 for r in sweep], [r["rmse_local"] for r in sweep], "o-", label="local")
+        for r in sweep:
+            axes[2].annotate(f"{r['tiles']}²", (r["time_s"] * 1e3, r["rmse_local"]))
+        axes[2].axhline(float(np.mean([r["rmse_global"] for r in sweep])), color="k", ls=":", label="global")
+        axes[2].set(xlabel="time per estimate, 240×320 frame (ms)", ylabel="spectrum RMSE (boundary scenes)",
+                    title="accuracy vs time (tiles per side)")
+        axes[2].legend()
+    figure.tight_layout()
+    path = out / "local-study.png"
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    paths.append(str(path))
+    return paths
