@@ -18,6 +18,7 @@ from processing import datasets
 from processing.ambient import AmbientEstimate, estimate_ambient
 from processing.errors import SpectralDataError
 from processing.flash import FlashSolution, solve_complementary, solve_matching
+from processing.local import DEFAULT_TILES, LocalEstimate, estimate_local, synthesize_local, tile_statistics
 from processing.spectra import Spectra
 from processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
 from processing.synthesis import synthesize
@@ -141,7 +142,8 @@ def estimate_payload(sequence: Sequence, estimate: AmbientEstimate) -> dict:
         "spectrum_std": std,
         "ambient_weights": estimate.ambient_weights,
         "led_names": [led.name for led in sequence.leds],
-        "method": estimate.method,
+        "method": "global",
+        "solver": estimate.method,
         "alpha": estimate.alpha,
         "relative_residual": estimate.relative_residual,
         "residual_rms": estimate.residual_rms,
@@ -209,4 +211,105 @@ def synthesize_sequence(sequence: Sequence, flash_weights: np.ndarray, stack: Fr
     """The computational flash image ``m_a + Σ w_k m_f,k`` of a sequence (linear, per µs·gain)."""
     stack = stack or load_frame_stack(sequence)
     image, saturated = synthesize(stack.ambient, stack.led_frames, stack.spec, flash_weights)
+    return image, saturated, stack
+
+
+# -- local estimation (issue 9) ---------------------------------------------------------------
+def _local_grid(stack: FrameStack, cfa: str | None, tiles: int, bin_factor: int) -> tuple[int, int, int]:
+    """The bin factor and tiles (rows, columns) that fit a frame: at least 2 blocks per tile side."""
+    period = 2 if cfa is not None else 1
+    height, width = stack.ambient.shape[:2]
+    while bin_factor > 1 and min(height, width) // (bin_factor * period) < 8:
+        bin_factor //= 2
+    bin_factor = max(bin_factor, 1)
+    blocks = (height // (bin_factor * period), width // (bin_factor * period))
+    return bin_factor, max(1, min(tiles, blocks[0] // 2)), max(1, min(tiles, blocks[1] // 2))
+
+
+def estimate_sequence_local(sequence: Sequence, method: str = "auto", solver: str = "tikhonov",
+                            alpha: float | str = "auto", tiles: int = DEFAULT_TILES, stack: FrameStack | None = None,
+                            bin_factor: int = DEFAULT_BIN_FACTOR) -> LocalEstimate:
+    """Estimate the ambient of a sequence globally or per tile (``method`` auto|global|local, issue 9)."""
+    stack = stack or load_frame_stack(sequence)
+    factor, rows, columns = _local_grid(stack, sequence.camera.cfa, tiles, bin_factor)
+    tiled = tile_statistics(stack.ambient, stack.led_frames, stack.spec, (rows, columns), bin_factor=factor,
+                            cfa_period=2 if sequence.camera.cfa is not None else 1)
+    return estimate_local(tiled, led_spectra_photons(sequence), method, solver, alpha)
+
+
+def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:
+    """The ``msflash estimate --method … --json`` object: DESIGN §7 keys plus the model and the tiles.
+
+    ``spectrum`` and ``ambient_weights`` are the global estimate for the global model and the
+    area-weighted mean over the tiles for the local one; the tiles are under ``tiles``.
+    """
+    payload = estimate_payload(sequence, local.global_estimate)
+    unit = sequence.spectral_unit
+    grid_spectra = local.global_estimate.spectrum
+
+    def to_unit(values: np.ndarray) -> np.ndarray:
+        flat = values.reshape(-1, values.shape[-1]).T
+        converted = grid_spectra.replace(values=flat, names=tuple(f"t{i}" for i in range(flat.shape[1])))
+        return converted.to_unit(unit).values.T.reshape(values.shape)
+
+    payload["method"] = local.model
+    payload["method_requested"] = local.method
+    payload["model_selection"] = None if local.selection is None else {
+        "chosen": local.selection.model, "scores": local.selection.scores, "margin": local.selection.margin,
+        "best_local_smoothing_tiles": local.selection.best_local,
+        "criterion": "leave-one-tile-out prediction error relative to the global model's",
+    }
+    payload["warnings"] = payload["warnings"] + list(local.warnings)
+    if local.model == "local":
+        payload["spectrum"] = to_unit(local.mean_spectrum)
+        payload["ambient_weights"] = local.mean_weights
+        payload["spectrum_global"] = to_unit(local.global_estimate.spectrum.values[:, 0])
+        payload["ambient_weights_global"] = local.global_estimate.ambient_weights
+        payload["tiles"] = {
+            "grid": list(local.tiles.shape),
+            "row_edges": local.tiles.row_edges, "column_edges": local.tiles.column_edges,
+            "smoothing_tiles": local.smoothing,
+            "ambient_weights": local.tile_weights,
+            "spectra": to_unit(local.tile_spectra),
+            "relative_residual": local.tile_residuals,
+            "n_samples": local.tile_samples,
+        }
+    return payload
+
+
+def solve_sequence_flash_local(sequence: Sequence, mode: str, local: LocalEstimate, target: str = "D65",
+                               bounds: str = "physical") -> tuple[FlashSolution, np.ndarray, list[FlashSolution]]:
+    """Per-tile flash solutions for a local estimate.
+
+    Returns
+    -------
+    tuple
+        ``(mean, tile_flash_weights, tile_solutions)``: the solution for the area-weighted mean
+        ambient weights with the area-weighted mean flash weights (within the bounds, as a mean of
+        weights that are), the (ty, tx, k) per-tile weights and the per-tile solutions.
+    """
+    if local.model == "global":
+        solution = solve_sequence_flash(sequence, mode, local.global_estimate.ambient_weights, target, bounds)
+        weights = np.broadcast_to(solution.flash_weights, local.tiles.shape + (solution.flash_weights.size,)).copy()
+        return solution, weights, [solution]
+    solutions = [solve_sequence_flash(sequence, mode, local.tile_weights[index], target, bounds)
+                 for index in np.ndindex(local.tiles.shape)]
+    weights = np.array([solution.flash_weights for solution in solutions]).reshape(local.tiles.shape + (-1,))
+    areas = local.tiles.areas
+    mean_weights = np.einsum("ts,tsk->k", areas, weights) / areas.sum()
+    mean_solution = solve_sequence_flash(sequence, mode, local.mean_weights, target, bounds)
+    mean = FlashSolution(
+        mode=mean_solution.mode, ambient_weights=local.mean_weights, flash_weights=mean_weights,
+        scale=mean_solution.scale, relative_error=max(s.relative_error for s in solutions), bounds=bounds,
+        target_reached=all(s.target_reached for s in solutions),
+        warnings=tuple(dict.fromkeys(w for s in solutions for w in s.warnings)),
+    )
+    return mean, weights, solutions
+
+
+def synthesize_sequence_local(sequence: Sequence, tile_flash_weights: np.ndarray, local: LocalEstimate,
+                              stack: FrameStack | None = None) -> tuple[np.ndarray, np.ndarray, FrameStack]:
+    """The spatially varying computational flash image (per-tile weights blended between tile centres)."""
+    stack = stack or load_frame_stack(sequence)
+    image, saturated = synthesize_local(stack.ambient, stack.led_frames, stack.spec, tile_flash_weights, local.tiles)
     return image, saturated, stack

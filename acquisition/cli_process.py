@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import warnings
 from pathlib import Path
 
@@ -14,7 +15,12 @@ from acquisition.image_io import write_image
 from acquisition.sequence_format import read_sequence
 from processing.ambient import AMBIENT_METHODS
 from processing.errors import TargetUnreachableWarning
+from processing.local import DEFAULT_TILES, LOCAL_METHODS
 from processing.synthesis import to_raw_values
+
+
+DEFAULT_LOCAL_METHOD = "global"
+"""Default of ``--method`` (docs/local-estimation.md: ``auto`` returns the global estimate on uniform scenes)."""
 
 
 def _alpha(text: str) -> float | str:
@@ -55,6 +61,8 @@ def _estimate(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
     if sequence.partial:
         progress(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
+    if args.method != "global":
+        return _estimate_local(args, sequence)
     estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
     payload = analysis.estimate_payload(sequence, estimate)
     for warning in estimate.warnings:
@@ -75,6 +83,8 @@ def _estimate(args: argparse.Namespace) -> int:
 
 def _flash(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
+    if args.method != "global" or args.out is not None:
+        return _flash_local(args, sequence)
     estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
@@ -122,11 +132,105 @@ def _synthesize(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- spatially varying ambient (issue 9) -------------------------------------------------------
+def add_local_options(parser: argparse.ArgumentParser) -> None:
+    """``--method auto|global|local`` and ``--tiles N`` (docs/local-estimation.md)."""
+    parser.add_argument("--method", default=DEFAULT_LOCAL_METHOD, choices=LOCAL_METHODS,
+                        help="ambient model: global (one spectrum, the paper), local (per tile, smoothed across "
+                             "neighbours) or auto (chosen by leave-one-tile-out prediction error; uniform scenes "
+                             f"stay global) (default: {DEFAULT_LOCAL_METHOD})")
+    parser.add_argument("--tiles", type=positive_int, default=DEFAULT_TILES,
+                        help=f"tiles per side for local estimation (default {DEFAULT_TILES})")
+
+
+def _estimate_local(args: argparse.Namespace, sequence: object) -> int:
+    local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,  # type: ignore[arg-type]
+                                             bin_factor=args.bin)
+    payload = analysis.local_estimate_payload(sequence, local)  # type: ignore[arg-type]
+    for warning in payload["warnings"]:
+        progress(f"warning: {warning}")
+    if args.json:
+        print_json(payload)
+        return 0
+    names = payload["led_names"]
+    chosen = f"{local.model} model" + (f", {local.tiles.shape[0]}x{local.tiles.shape[1]} tiles, smoothing "
+                                       f"{local.smoothing:g} tiles" if local.model == "local" else "")
+    print(f"ambient estimate of {payload['sequence']} ({chosen}; asked {local.method}; solver {local.global_estimate.method})")
+    if local.selection is not None:
+        print("held-out error relative to global: " + ", ".join(f"{k} {v:.3f}" for k, v in local.selection.scores.items()))
+    label = "area-weighted mean ambient weights" if local.model == "local" else "ambient weights"
+    print(f"{label}: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, payload["ambient_weights"])))
+    if local.model == "local":
+        print(f"tile relative residuals: median {np.median(local.tile_residuals):.4f}, max {local.tile_residuals.max():.4f}")
+    peak = float(np.max(payload["spectrum"])) or 1.0
+    for wavelength, value in zip(payload["wavelengths_nm"], payload["spectrum"]):
+        print(f"  {wavelength:6.1f} nm  {value / peak:7.4f}  {'#' * int(round(max(value, 0) / peak * 40))}")
+    return 0
+
+
+def _flash_local(args: argparse.Namespace, sequence: object) -> int:
+    stack = analysis.load_frame_stack(sequence)  # type: ignore[arg-type]
+    local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,  # type: ignore[arg-type]
+                                             stack=stack, bin_factor=args.bin)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", TargetUnreachableWarning)
+        solution, tile_weights, _ = analysis.solve_sequence_flash_local(sequence, args.mode, local, args.target,  # type: ignore[arg-type]
+                                                                        args.bounds)
+    for message in dict.fromkeys(str(warning.message) for warning in caught):
+        progress(f"warning: {message}")
+    payload = analysis.flash_payload(sequence, solution, args.target)  # type: ignore[arg-type]
+    payload["estimate_warnings"] = list(local.global_estimate.warnings) + list(local.warnings)
+    payload["method"] = local.model
+    payload["method_requested"] = local.method
+    if local.model == "local":
+        payload["tiles"] = {"grid": list(local.tiles.shape), "row_edges": local.tiles.row_edges,
+                            "column_edges": local.tiles.column_edges, "smoothing_tiles": local.smoothing,
+                            "ambient_weights": local.tile_weights, "flash_weights": tile_weights}
+    if args.out is not None:
+        output = Path(args.out)
+        if local.model == "local":
+            image, saturated, _ = analysis.synthesize_sequence_local(sequence, tile_weights, local, stack)  # type: ignore[arg-type]
+        else:
+            image, saturated, _ = analysis.synthesize_sequence(sequence, solution.flash_weights, stack)  # type: ignore[arg-type]
+        metadata = {"msflash:flash_weights": solution.flash_weights.tolist(), "msflash:method": local.model,
+                    "msflash:mode": solution.mode}
+        if local.model == "local":
+            metadata["msflash:tile_flash_weights"] = json.dumps(np.round(tile_weights, 6).tolist())
+        _write_flash_image(output, image, stack, sequence, metadata)
+        payload["out"] = str(output)
+        payload["saturated_fraction"] = float(saturated.mean())
+    if args.json:
+        print_json(payload)
+    else:
+        names = payload["led_names"]
+        print(f"{solution.mode} flash for {payload['sequence']} ({solution.bounds} bounds, {local.model} model)")
+        label = "area-weighted mean flash weights" if local.model == "local" else "flash weights"
+        print(f"{label}: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, solution.flash_weights)))
+        if args.out is not None:
+            print(f"wrote {args.out}")
+    return 0
+
+
+def _write_flash_image(output: Path, image: np.ndarray, stack: analysis.FrameStack, sequence: object,
+                       metadata: dict) -> None:
+    suffix = output.suffix.lower()
+    if suffix == ".exr":
+        write_image(output, image, {**metadata, "msflash:units": "value per us*gain"})
+    elif suffix in (".tif", ".tiff"):
+        ambient = sequence.frames[stack.ambient_index]  # type: ignore[attr-defined]
+        raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level,  # type: ignore[attr-defined]
+                            sequence.camera.white_level)  # type: ignore[attr-defined]
+        write_image(output, raw, {**metadata, "msflash:exposure_us": ambient.exposure_us, "msflash:gain": ambient.gain})
+    else:
+        raise UsageError(f"--out {output}: unsupported image type; expected .exr (linear float) or .tiff (16-bit raw)")
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``estimate``, ``flash`` and ``synthesize``."""
     estimate = subparsers.add_parser("estimate", help="estimate the ambient illuminant spectrum of a sequence")
     estimate.add_argument("sequence", help="sequence directory (format v1)")
     add_estimation_options(estimate)
+    add_local_options(estimate)
     estimate.add_argument("--json", action="store_true", help="print one JSON object")
     estimate.set_defaults(handler=_estimate)
 
@@ -137,6 +241,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     flash.add_argument("--bounds", default="physical", choices=("physical", "nonnegative", "free"),
                        help="physical: 0..1 (re-capture); nonnegative/free: computational synthesis")
     add_estimation_options(flash)
+    add_local_options(flash)
+    flash.add_argument("--out", default=None,
+                       help="also write the computational flash image (.exr linear float, .tiff 16-bit raw); "
+                            "with a local estimate the flash weights vary across the frame")
     flash.add_argument("--json", action="store_true", help="print one JSON object")
     flash.set_defaults(handler=_flash)
 
