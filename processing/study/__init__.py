@@ -5,6 +5,10 @@
 - :mod:`processing.study.table1`: Table 1 (accuracy vs number of LEDs over 34 cameras and the
   feasible illuminants).
 - :mod:`processing.study.surfaces`: Fig. 5 (accuracy vs number of distinct surfaces).
+- :mod:`processing.study.cameras`: Figs. 6–7 (camera invariance vs number of LEDs; error over the xy grid).
+- :mod:`processing.study.noisy`: noisy rendered frame stacks through the app's estimation path.
+- :mod:`processing.study.failure`: where estimates fail and whether their reliability signals warn.
+- :mod:`processing.study.pareto`: accuracy against time per solver × pixel subsampling.
 
 Nothing here reads or writes files beyond the shipped data loaders; the CLI
 (``acquisition.cli_study``) writes the results.
