@@ -18,19 +18,35 @@ from __future__ import annotations
 import argparse
 import time
 import warnings
-from datetime import datetime, timezone
+from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
 from acquisition import analysis, report
-from acquisition.capture import run_capture
+from acquisition.camera import RawFrame
+from acquisition.capture import preview_frames, run_capture
 from acquisition.cli_common import UsageError, dumps_json, progress
 from acquisition.cli_process import add_estimation_options
 from acquisition.errors import CaptureError
+from acquisition.exposure import (
+    ExposurePlan,
+    ExposurePolicy,
+    camera_exposure_range,
+    camera_noise_model,
+    flash_exposure,
+    measure_led_snr,
+    plan_exposures,
+)
 from acquisition.plan import CapturePlan, TriggerSource
 from acquisition.rig import Rig, open_rig
-from acquisition.sequence_format import SequenceWriter, read_sequence
+from acquisition.sequence_format import (
+    Sequence,
+    SequenceFrame,
+    SequenceWriter,
+    read_sequence,
+)
 from led_controller.booth import sigterm_as_exit
 from processing.errors import TargetUnreachableWarning
 
@@ -53,7 +69,7 @@ def _exposure_value(text: str) -> str | float:
 
 
 def _default_out() -> Path:
-    return Path("runs") / datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
+    return Path("runs") / datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
 
 
 def _rig_spec(args: argparse.Namespace) -> str:
@@ -76,27 +92,134 @@ def _open(args: argparse.Namespace) -> Rig:
                     log_serial=args.log_serial)
 
 
-def _writer(rig: Rig, out: Path) -> SequenceWriter:
+def _writer(rig: Rig, out: Path, exposure: ExposurePlan | None = None) -> SequenceWriter:
     wavelengths, camera, leds = rig.sequence_header()
+    msflash = {"rig": rig.name, "booth": rig.booth.info.firmware}
+    if exposure is not None:
+        msflash["exposure"] = exposure.to_dict()
     return SequenceWriter(out / "sequence", wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
-                          leds=leds, extra={"msflash": {"rig": rig.name, "booth": rig.booth.info.firmware}})
+                          leds=leds, extra={"msflash": msflash})
 
 
-def _report_frame(step, frame, entry) -> None:  # noqa: ANN001 - capture callback
+def _report_frame(step, frame, entry) -> None:
     progress(f"captured step {step.index} ({step.label}) → {entry.file}")
 
 
-def _capture_led_sequence(rig: Rig, writer: SequenceWriter, exposure_us: float | None, sync: str = "host") -> float:
-    suggested = getattr(rig.camera, "suggested_exposure_us", None)
-    exposure = float(exposure_us or suggested or 10_000.0)
-    if not exposure > 0:
-        raise UsageError(f"--exposure-us {exposure_us}: expected a positive exposure")
-    plan = CapturePlan.ambient_then_each_led(len(writer.sequence.leds), exposure, trigger=SYNC_MODES[sync])
-    run_capture(rig.camera, rig.booth, plan, writer, on_frame=_report_frame)
-    return exposure
+def _policy(args: argparse.Namespace) -> ExposurePolicy:
+    try:
+        return ExposurePolicy(max_saturated_fraction=args.max_saturated / 100.0)
+    except ValueError as err:
+        raise UsageError(f"--max-saturated {args.max_saturated}: {err}") from err
 
 
-def _degenerate(estimate) -> str | None:  # noqa: ANN001 - processing.ambient.AmbientEstimate
+def _recorded_exposures(rig: Rig) -> tuple[float, tuple[float, ...], float | None] | None:
+    """A replay rig's recorded exposures (ambient, LEDs, flash): replay must ask for exactly those."""
+    sequence = getattr(rig.camera, "sequence", None)
+    if sequence is None or not rig.name.startswith("replay:"):
+        return None
+    ambient = sequence.indices("ambient")
+    leds = sequence.indices("led")
+    flash = sequence.indices("flash")
+    if not ambient:
+        return None
+    return (sequence.frames[ambient[0]].exposure_us, tuple(sequence.frames[i].exposure_us for i in leds),
+            sequence.frames[flash[0]].exposure_us if flash else None)
+
+
+def _plan_exposure(rig: Rig, args: argparse.Namespace) -> ExposurePlan:
+    """``--exposure``: fixed, the replay's recording, the fake's suggestion, or metered previews (auto)."""
+    n_leds = rig.led_spectra.count
+    limits = camera_exposure_range(rig.camera)
+    policy = _policy(args)
+    noise = camera_noise_model(rig.camera)
+    method = "photon+read noise" if noise is not None else "difference image"
+    nan = (float("nan"),) * n_leds
+    if args.exposure != "auto":
+        exposure = float(args.exposure)
+        if not limits[0] <= exposure <= limits[1]:
+            raise UsageError(f"--exposure {exposure:g}: outside the camera's range {limits[0]:g}–{limits[1]:g} µs")
+        return ExposurePlan(exposure, (exposure,) * n_leds, nan, method, limits, policy, mode="fixed")
+    recorded = _recorded_exposures(rig)
+    if recorded is not None and len(recorded[1]) == n_leds:
+        return ExposurePlan(recorded[0], recorded[1], nan, method, limits, policy, mode="recorded")
+    suggested = float(getattr(rig.camera, "suggested_exposure_us", None) or 10_000.0)
+    if rig.name == "aravis-fake":  # test patterns: nothing to meter
+        return ExposurePlan(suggested, (suggested,) * n_leds, nan, method, limits, policy, mode="suggested",
+                            warnings=["aravis-fake: test patterns carry no light to meter; the rig's exposure is used"])
+    progress(f"auto exposure: metering ambient previews (≤ {policy.max_saturated_fraction:.2%} saturated, "
+             f"bright end at {policy.target_fraction:.0%} of full scale)")
+    info = rig.camera.info
+
+    def capture(levels, exposure_us: float):
+        role = "led" if any(level > 0 for level in levels) else "ambient"
+        preview = CapturePlan.single(levels, exposure_us, role=role)
+        return preview_frames(rig.camera, rig.booth, preview)[0].pixels
+
+    return plan_exposures(capture, n_leds, info.black_level, info.white_level, limits, noise, policy,
+                          start_us=suggested, cfa=info.cfa is not None)
+
+
+def _report_exposure(plan: ExposurePlan, names: list[str]) -> None:
+    progress(f"exposure ({plan.mode}): ambient {plan.ambient_exposure_us:.0f} µs; LEDs "
+             + ", ".join(f"{n} {e:.0f}" for n, e in zip(names, plan.led_exposures_us)) + " µs")
+    if plan.mode == "auto":
+        progress(f"planned LED SNR ({plan.snr_method}, median pixel): "
+                 + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, plan.predicted_snr)))
+    for note in plan.warnings:
+        progress(f"warning: {note}")
+
+
+@dataclass
+class _LedCapture:
+    """The ambient + LED frames as captured, kept in memory for estimation (no re-read from disk)."""
+
+    plan: ExposurePlan
+    frames: list[RawFrame]
+    entries: list[SequenceFrame]
+    last_frame_at: float
+    """``time.perf_counter()`` when the last LED frame was handed over (written)."""
+    snr: list[float]
+    snr_method: str
+
+
+def _capture_led_sequence(rig: Rig, writer: SequenceWriter, plan: ExposurePlan, sync: str = "host") -> _LedCapture:
+    frames: list[RawFrame] = []
+    stamp = {"t": 0.0}
+
+    def keep(step, frame, entry) -> None:
+        frames.append(frame)
+        stamp["t"] = time.perf_counter()
+        _report_frame(step, frame, entry)
+
+    capture_plan = CapturePlan.ambient_then_each_led(len(writer.sequence.leds), plan.ambient_exposure_us,
+                                                    led_exposures_us=plan.led_exposures_us, trigger=SYNC_MODES[sync])
+    entries = run_capture(rig.camera, rig.booth, capture_plan, writer, on_frame=keep)
+    info = rig.camera.info
+    snr, method = measure_led_snr(frames[0].pixels, frames[0].exposure_us, [f.pixels for f in frames[1:]],
+                                  [f.exposure_us for f in frames[1:]], info.black_level, info.white_level,
+                                  camera_noise_model(rig.camera), cfa=info.cfa is not None,
+                                  gain=frames[0].gain)
+    names = [led.name for led in writer.sequence.leds]
+    progress(f"LED SNR ({method}, median pixel): " + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, snr)))
+    return _LedCapture(plan, frames, entries, stamp["t"], snr, method)
+
+
+class _InMemorySequence:
+    """A sequence being written whose frames are served from memory (what ``load_frame_stack`` reads)."""
+
+    def __init__(self, sequence: Sequence, frames: list[RawFrame]) -> None:
+        self._sequence = sequence
+        self._frames = frames
+
+    def __getattr__(self, name: str):
+        return getattr(self._sequence, name)
+
+    def load_frame(self, index: int) -> np.ndarray:
+        pixels = self._frames[index].pixels
+        return pixels[:, :, 0] if pixels.ndim == 3 and pixels.shape[2] == 1 else pixels
+
+
+def _degenerate(estimate) -> str | None:
     """Why the estimate cannot be reported (non-finite numbers), or None."""
     checks = {"condition number": np.asarray(estimate.condition_number, dtype=float),
               "spectrum": np.asarray(estimate.spectrum.values, dtype=float),
@@ -117,29 +240,45 @@ def _run(args: argparse.Namespace) -> int:
     spec = _rig_spec(args)
     progress(f"opening rig '{spec}'" + (f" (ambient {args.ambient}, scene {args.scene})" if spec == "sim" else ""))
     # SIGTERM unwinds like Ctrl-C, so the LEDs go off and the partial sequence stays readable.
-    with sigterm_as_exit(), _open(args) as rig, _writer(rig, out) as writer:
-        exposure = _capture_led_sequence(rig, writer, (None if args.exposure == 'auto' else args.exposure), args.sync)
-        # Estimate from the frames as recorded (the sequence is still open: complete is false).
-        sequence = read_sequence(writer.path.parent)
-        progress("estimating the ambient spectrum")
-        stack = analysis.load_frame_stack(sequence)
-        estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
-        for note in estimate.warnings:
-            progress(f"warning: {note}")
-        degenerate = _degenerate(estimate)
-        solutions = {}
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", TargetUnreachableWarning)
-            for mode in ("matching", "complementary"):
-                solutions[mode] = analysis.solve_sequence_flash(sequence, mode, estimate.ambient_weights, args.target)
-        for warning in caught:
-            progress(f"warning: {warning.message}")
-        chosen = solutions[args.mode]
-        progress(f"re-capturing with the {args.mode} flash: " + ", ".join(f"{w:.3f}" for w in chosen.flash_weights))
-        flash_plan = CapturePlan.single(np.clip(chosen.flash_weights, 0.0, 1.0), exposure, trigger=SYNC_MODES[args.sync])
-        run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=_report_frame)
-        writer.finish()
-        true_ambient = rig.true_ambient
+    with sigterm_as_exit(), _open(args) as rig:
+        if rig.camera_responsivities is None:
+            raise UsageError(f"rig '{spec}': the flash solvers need the camera's responsivities; expected "
+                             "--responsivity FILE.csv (wavelength_nm, R, G, B) or a calibration with a camera section")
+        exposure = _plan_exposure(rig, args)
+        _report_exposure(exposure, list(rig.led_spectra.names))
+        with _writer(rig, out, exposure) as writer:
+            captured = _capture_led_sequence(rig, writer, exposure, args.sync)
+            # Estimate from the frames in memory, as written (the sequence is still open: complete is false).
+            sequence = writer.sequence
+            if args.from_disk:
+                sequence = read_sequence(writer.path.parent)
+                stack = analysis.load_frame_stack(sequence)
+            else:
+                stack = analysis.load_frame_stack(_InMemorySequence(sequence, captured.frames))  # type: ignore[arg-type]
+            estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
+            degenerate = _degenerate(estimate)
+            solutions = {}
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", TargetUnreachableWarning)
+                for mode in ("matching", "complementary"):
+                    solutions[mode] = analysis.solve_sequence_flash(sequence, mode, estimate.ambient_weights,
+                                                                    args.target)
+            chosen = solutions[args.mode]
+            levels = np.clip(chosen.flash_weights, 0.0, 1.0)
+            flash_us = _flash_exposure(rig, exposure, captured, levels)
+            flash_plan = CapturePlan.single(levels, flash_us, trigger=SYNC_MODES[args.sync])
+            decided = time.perf_counter()
+            run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=_report_frame)
+            writer.finish()
+            true_ambient = rig.true_ambient
+    decision_ms = (decided - captured.last_frame_at) * 1e3
+    progress(f"estimated the ambient and solved the flash in {decision_ms:.1f} ms after the last LED frame")
+    for note in estimate.warnings:
+        progress(f"warning: {note}")
+    for warning in caught:
+        progress(f"warning: {warning.message}")
+    progress(f"re-captured with the {args.mode} flash at {flash_us:.0f} µs: "
+             + ", ".join(f"{w:.3f}" for w in chosen.flash_weights))
     if degenerate is not None:
         raise CaptureError(
             f"rig '{spec}': the ambient estimate is degenerate ({degenerate}): the LED-only images do not "
@@ -149,6 +288,9 @@ def _run(args: argparse.Namespace) -> int:
     sequence = read_sequence(out / "sequence")
     progress("synthesising the computational images, previews and report")
     summary = report.write_run_report(out, sequence, estimate, solutions, args.mode, true_ambient, stack, args.target)
+    summary["exposure"] = {**exposure.to_dict(), "flash_exposure_us": flash_us, "led_snr": captured.snr,
+                           "led_snr_method": captured.snr_method}
+    summary["decision_ms"] = round(decision_ms, 3)
     summary["elapsed_s"] = round(time.perf_counter() - started, 3)
     (out / "run.json").write_text(dumps_json(summary) + "\n")
     progress(f"done in {summary['elapsed_s']:.1f} s: {out}")
@@ -156,14 +298,31 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _flash_exposure(rig: Rig, plan: ExposurePlan, captured: _LedCapture, levels: np.ndarray) -> float:
+    """The flash frame's exposure: fixed, recorded (replay), or predicted from the frames in memory."""
+    if plan.mode != "auto":
+        recorded = _recorded_exposures(rig)
+        if plan.mode == "recorded" and recorded is not None and recorded[2] is not None:
+            return recorded[2]
+        return plan.ambient_exposure_us
+    info = rig.camera.info
+    frames = captured.frames
+    return flash_exposure(frames[0].pixels, frames[0].exposure_us, [f.pixels for f in frames[1:]],
+                          [f.exposure_us for f in frames[1:]], levels, info.black_level, info.white_level,
+                          plan.exposure_range_us, plan.policy)
+
+
 def _capture(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if (out / "sequence" / "sequence.json").exists():
         raise UsageError(f"--out {out}: already holds a sequence; expected a new directory")
     out.mkdir(parents=True, exist_ok=True)
-    with sigterm_as_exit(), _open(args) as rig, _writer(rig, out) as writer:
-        _capture_led_sequence(rig, writer, (None if args.exposure == 'auto' else args.exposure), args.sync)
-        writer.finish()
+    with sigterm_as_exit(), _open(args) as rig:
+        exposure = _plan_exposure(rig, args)
+        _report_exposure(exposure, list(rig.led_spectra.names))
+        with _writer(rig, out, exposure) as writer:
+            _capture_led_sequence(rig, writer, exposure, args.sync)
+            writer.finish()
     print(out / "sequence")
     return 0
 
@@ -203,6 +362,8 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
                         help="auto (default: meter an ambient preview, then choose each LED frame's exposure for "
                              "SNR below saturation) or one exposure in microseconds for every frame")
     parser.add_argument("--log-serial", default=None, help="write the booth serial transcript to this file")
+    parser.add_argument("--max-saturated", type=float, default=0.1, metavar="PERCENT",
+                        help="auto exposure: at most this percentage of pixels may saturate in a frame (default 0.1)")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -214,6 +375,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      help="flash to re-capture with (both are synthesised)")
     run.add_argument("--target", default="D65", help="complementary target illuminant (name or CSV file)")
     add_estimation_options(run)
+    run.add_argument("--from-disk", action="store_true",
+                     help="estimate from the frames re-read from disk instead of those in memory (slower; a check)")
     run.set_defaults(handler=_run)
 
     capture = subparsers.add_parser("capture", help="capture an ambient + each-LED sequence on a rig")

@@ -397,7 +397,7 @@ def open_rig(spec: str, **options: object) -> Rig:
 
 CALIBRATION_LED_FILES = ("led_spectra.csv", "leds.csv")
 """File names looked for in ``--calibration DIR`` for the LED spectra (first found wins)."""
-CALIBRATION_RESPONSIVITY_FILES = ("camera_responsivity.csv", "responsivity.csv")
+CALIBRATION_RESPONSIVITY_FILES = ("camera_responsivity.csv", "responsivity.csv", "camera.csv")
 """File names looked for in ``--calibration DIR`` for the camera's responsivities."""
 
 
@@ -405,8 +405,10 @@ def load_hw_spectra(calibration: str | Path | None = None, led_spectra: str | Pa
                     responsivity: str | Path | None = None) -> tuple[Spectra, Spectra | None]:
     """LED spectra and camera responsivities for the hardware rig, on :data:`DEFAULT_GRID`.
 
-    ``calibration`` is a directory holding ``led_spectra.csv`` (or ``leds.csv``) and optionally
-    ``camera_responsivity.csv`` (or ``responsivity.csv``); ``led_spectra`` / ``responsivity`` name
+    ``calibration`` is a ``msflash calibrate`` directory (``calibration.json``, read by
+    :func:`calibration.files.load_calibration`), or a directory holding ``led_spectra.csv`` (or
+    ``leds.csv``) and optionally ``camera_responsivity.csv`` (or ``responsivity.csv``,
+    ``camera.csv``); ``led_spectra`` / ``responsivity`` name
     the files directly and win over the directory. Files are CSV tables read by
     :func:`processing.datasets.load_spectra_csv`: first column ``wavelength_nm``, one column per LED
     (in booth channel order) or per camera channel (R, G, B), energy units, each LED at full drive
@@ -417,36 +419,65 @@ def load_hw_spectra(calibration: str | Path | None = None, led_spectra: str | Pa
     UsageError
         Nothing gives the LED spectra, a named file or directory is missing, or a file is malformed.
     """
-    from processing.errors import SpectralDataError
-
     led_path = Path(led_spectra) if led_spectra else None
     resp_path = Path(responsivity) if responsivity else None
+    leds: Spectra | None = None
+    camera: Spectra | None = None
     if calibration is not None:
         directory = Path(calibration)
         if not directory.is_dir():
             raise UsageError(f"--calibration {directory}: not a directory; expected a calibration directory "
-                             f"holding {CALIBRATION_LED_FILES[0]}")
-        if led_path is None:
-            led_path = next((directory / n for n in CALIBRATION_LED_FILES if (directory / n).is_file()), None)
+                             "(calibration.json from 'msflash calibrate', or led_spectra.csv)")
+        if (directory / "calibration.json").is_file():
+            leds, camera = _load_calibration_set(directory)
+        else:
             if led_path is None:
-                raise UsageError(f"--calibration {directory}: no {' or '.join(CALIBRATION_LED_FILES)}; expected the "
-                                 "LED spectra (first column wavelength_nm, one column per LED)")
-        if resp_path is None:
-            resp_path = next((directory / n for n in CALIBRATION_RESPONSIVITY_FILES if (directory / n).is_file()), None)
-    if led_path is None:
+                led_path = next((directory / n for n in CALIBRATION_LED_FILES if (directory / n).is_file()), None)
+                if led_path is None:
+                    raise UsageError(f"--calibration {directory}: no calibration.json or "
+                                     f"{' or '.join(CALIBRATION_LED_FILES)}; expected the LED spectra")
+            if resp_path is None:
+                resp_path = next((directory / n for n in CALIBRATION_RESPONSIVITY_FILES
+                                  if (directory / n).is_file()), None)
+    if led_path is not None:
+        leds = _read_spectra_csv(led_path, "spd")
+    if resp_path is not None:
+        camera = _read_spectra_csv(resp_path, "responsivity")
+    if leds is None:
         raise UsageError("rig 'hw': the LED spectra are needed for the sequence header; expected --calibration DIR "
                          "or --led-spectra FILE.csv (first column wavelength_nm, one column per LED at full drive, "
                          "energy units), and --responsivity FILE.csv for the flash solvers")
+    leds = leds.resample(DEFAULT_GRID, outside="zero")
+    if camera is not None:
+        if camera.count != 3:
+            raise UsageError(f"{resp_path or calibration}: {camera.count} responsivity columns; expected 3 (R, G, B)")
+        camera = camera.resample(DEFAULT_GRID, outside="zero")
+    return leds, camera
+
+
+def _read_spectra_csv(path: Path, kind: str) -> Spectra:
+    from processing.errors import SpectralDataError
+
     try:
-        leds = datasets.load_spectra_csv(led_path, kind="spd", unit="energy").resample(DEFAULT_GRID, outside="zero")
-        camera = None
-        if resp_path is not None:
-            camera = datasets.load_spectra_csv(resp_path, kind="responsivity", unit="energy").resample(
-                DEFAULT_GRID, outside="zero")
+        return datasets.load_spectra_csv(path, kind=kind, unit="energy")  # type: ignore[arg-type]
     except (SpectralDataError, OSError) as err:
         raise UsageError(str(err)) from err
-    if camera is not None and camera.count != 3:
-        raise UsageError(f"{resp_path}: {camera.count} responsivity columns; expected 3 (R, G, B)")
+
+
+def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | None]:
+    """LED spectra and responsivities of a ``msflash calibrate`` directory (``calibration.json``)."""
+    try:
+        from calibration.files import load_calibration
+    except ImportError as err:
+        raise UsageError(f"--calibration {directory}: calibration files unreadable here ({err})") from err
+    try:
+        found = load_calibration(directory)
+    except (OSError, ValueError) as err:
+        raise UsageError(str(err)) from err
+    except Exception as err:  # CalibrationError's base is the calibration package's choice
+        raise UsageError(str(err)) from err
+    leds = found.led_spectra.to_unit("energy") if found.led_spectra is not None else None
+    camera = found.camera_responsivities.to_unit("energy") if found.camera_responsivities is not None else None
     return leds, camera
 
 

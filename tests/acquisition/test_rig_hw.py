@@ -7,6 +7,7 @@ id on the ``fake`` interface (nothing is broadcast) and the booth emulator's pty
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -80,9 +81,9 @@ def test_capture_on_fake_camera_and_emulated_booth(aravis: ModuleType, calibrati
     assert sequence.camera.model == "Fake" and sequence.camera.cfa is None
     assert "replicated" in sequence.camera.extra["channels"]
     assert sequence.camera_responsivities() is not None
-    assert [led.name for led in sequence.leds][0] == "led440"
+    assert sequence.leds[0].name == "led440"
     ids = [f.extra["frame_id"] for f in sequence.frames]
-    assert all(b - a == 1 for a, b in zip(ids, ids[1:]))
+    assert all(b - a == 1 for a, b in itertools.pairwise(ids))
     pixels = sequence.load_frame(1)
     assert pixels.ndim == 3 and np.array_equal(pixels[..., 0], pixels[..., 1])
     assert sequence.frames[0].exposure_us == pytest.approx(10_000)
@@ -141,10 +142,24 @@ def test_spectra_are_required_before_any_device_opens(tmp_path: Path, capsys: py
         load_hw_spectra()
     assert main(["capture", "--port", "/dev/does-not-exist", "--out", str(tmp_path / "x")]) == 2
     assert "LED spectra are needed" in capsys.readouterr().err
-    with pytest.raises(UsageError, match="no led_spectra.csv"):
+    with pytest.raises(UsageError, match="no calibration.json or led_spectra.csv"):
         load_hw_spectra(calibration=tmp_path)
 
 
 def test_rig_sim_with_a_camera_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["capture", "--rig", "sim", "--camera", "SN1", "--out", str(tmp_path / "x")]) == 2
     assert "--rig hw" in capsys.readouterr().err
+
+
+def test_calibration_directory_from_msflash_calibrate(tmp_path: Path) -> None:
+    """A ``calibration.json`` directory (the calibration package's format) gives both spectra."""
+    files = pytest.importorskip("calibration.files")
+    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
+    camera = datasets.isetcam_camera("NikonD100").resample(DEFAULT_GRID, outside="zero")
+    files.save_calibration(files.CalibrationSet(led_spectra=leds, camera_responsivities=camera), tmp_path / "cal")
+    found_leds, found_camera = load_hw_spectra(tmp_path / "cal")
+    assert found_leds.count == 7 and found_leds.unit == "energy"
+    assert found_camera is not None and found_camera.count == 3 and found_camera.unit == "energy"
+    # a file on the command line wins over the calibration's section
+    only = _write_csv(tmp_path / "three.csv", leds.select([0, 1, 2]))
+    assert load_hw_spectra(tmp_path / "cal", led_spectra=only)[0].count == 3

@@ -88,7 +88,7 @@ def test_leds_off_and_partial_sequence_kept_when_capture_fails(tmp_path, monkeyp
 
     monkeypatch.setattr(rig_module, "open_sim_rig", open_and_break)
     out = tmp_path / "broken"
-    assert main(["capture", "--out", str(out)]) == 1
+    assert main(["capture", "--exposure", "10000", "--out", str(out)]) == 1  # no previews before the failure
     err = capsys.readouterr().err
     assert "step 3" in err and "3 frame(s) already saved" in err
     sequence = read_sequence(out / "sequence")

@@ -1,0 +1,167 @@
+"""Exposure planning on the sim rig: ambient metering, LED exposures below saturation, SNR.
+
+The sim scene has a specular strip (3.8 % of the pixels, 10× the diffuse signal); with the
+default 0.1 % saturation budget the strip sets the exposure, as a highlight would in a photo.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from acquisition import exposure as ex
+from acquisition.capture import preview_frames
+from acquisition.cli import main
+from acquisition.plan import CapturePlan
+from acquisition.rig import Rig, open_sim_rig
+from acquisition.sequence_format import read_sequence
+
+N_LEDS = 4
+POLICY = ex.ExposurePolicy()
+
+
+@pytest.fixture
+def rig() -> Iterator[Rig]:
+    with open_sim_rig(n_leds=N_LEDS, seed=5) as opened:
+        yield opened
+
+
+def _scale_ambient(rig: Rig, factor: float) -> None:
+    camera = rig.camera
+    camera.ambient = camera.ambient.replace(values=camera.ambient.values * factor)
+
+
+def _capture(rig: Rig):
+    def capture(levels, exposure_us: float) -> np.ndarray:
+        return preview_frames(rig.camera, rig.booth, CapturePlan.single(levels, exposure_us, role="led"))[0].pixels
+    return capture
+
+
+def _plan(rig: Rig, limits: tuple[float, float] = ex.DEFAULT_EXPOSURE_RANGE_US, noise: bool = True,
+          policy: ex.ExposurePolicy = POLICY) -> ex.ExposurePlan:
+    info = rig.camera.info
+    return ex.plan_exposures(_capture(rig), N_LEDS, info.black_level, info.white_level, limits,
+                             ex.camera_noise_model(rig.camera) if noise else None, policy, start_us=10_000.0)
+
+
+def _check_frames(rig: Rig, plan: ex.ExposurePlan) -> tuple[ex.Levels, list[float]]:
+    """Capture the planned frames; none saturates beyond the budget; return the ambient's levels and the SNR."""
+    info = rig.camera.info
+    capture = _capture(rig)
+    ambient = capture((0.0,) * N_LEDS, plan.ambient_exposure_us)
+    levels = ex.meter(ambient, info.black_level, info.white_level, POLICY)
+    assert levels.saturated_fraction <= POLICY.max_saturated_fraction
+    leds = []
+    for led, exposure in enumerate(plan.led_exposures_us):
+        frame = capture(tuple(1.0 if i == led else 0.0 for i in range(N_LEDS)), exposure)
+        metered = ex.meter(frame, info.black_level, info.white_level, POLICY)
+        assert metered.saturated_fraction <= POLICY.max_saturated_fraction, (led, metered)
+        assert metered.bright_end <= POLICY.headroom_fraction * 1.05
+        leds.append(frame)
+    snr, method = ex.measure_led_snr(ambient, plan.ambient_exposure_us, leds, plan.led_exposures_us,
+                                     info.black_level, info.white_level, ex.camera_noise_model(rig.camera))
+    assert method == "photon+read noise"
+    return levels, snr
+
+
+def test_normal_ambient_lands_on_target(rig: Rig) -> None:
+    plan = _plan(rig)
+    levels, snr = _check_frames(rig, plan)
+    assert levels.bright_end == pytest.approx(POLICY.target_fraction, rel=POLICY.tolerance)
+    assert all(math.isfinite(v) and v > 0 for v in plan.predicted_snr)
+    # planned (from a 4× shorter preview) and measured SNR agree
+    np.testing.assert_allclose(snr, plan.predicted_snr, rtol=0.35)
+    # ambient + LED gets no more than the headroom over the ambient's target: LED exposures ≤ 1.3× ambient
+    assert max(plan.led_exposures_us) <= plan.ambient_exposure_us * POLICY.headroom_fraction / (
+        POLICY.target_fraction * (1 - POLICY.tolerance))
+    assert plan.to_dict()["led_exposures_us"] == list(plan.led_exposures_us)
+
+
+@pytest.mark.parametrize("factor", [30.0, 0.01])
+def test_too_bright_and_too_dark_ambients(rig: Rig, factor: float) -> None:
+    reference = _plan(rig).ambient_exposure_us
+    _scale_ambient(rig, factor)
+    plan = _plan(rig)
+    levels, _ = _check_frames(rig, plan)
+    # the sensor is linear: exposure scales inversely with the light
+    assert plan.ambient_exposure_us == pytest.approx(reference / factor, rel=0.2)
+    assert levels.bright_end == pytest.approx(POLICY.target_fraction, rel=POLICY.tolerance)
+    assert not any("did not settle" in w for w in plan.warnings)
+
+
+def test_camera_exposure_limit_gives_a_too_dark_warning(rig: Rig) -> None:
+    _scale_ambient(rig, 0.01)
+    plan = _plan(rig, limits=(10.0, 20_000.0))
+    assert plan.ambient_exposure_us == 20_000.0
+    assert all(10.0 <= e <= 20_000.0 for e in plan.led_exposures_us)
+    assert any("ambient too dark" in w for w in plan.warnings)
+
+
+def test_too_bright_at_the_shortest_exposure_warns(rig: Rig) -> None:
+    _scale_ambient(rig, 1000.0)
+    plan = _plan(rig, limits=(50.0, 1e6))
+    assert plan.ambient_exposure_us == 50.0 and any("ambient too bright" in w for w in plan.warnings)
+
+
+def test_difference_image_snr_without_a_noise_model(rig: Rig) -> None:
+    with_model = _plan(rig)
+    without = _plan(rig, noise=False)
+    assert without.snr_method == "difference image"
+    np.testing.assert_allclose(without.predicted_snr, with_model.predicted_snr, rtol=0.5)
+
+
+def test_flash_exposure_keeps_the_flash_frame_below_saturation(rig: Rig) -> None:
+    plan = _plan(rig)
+    info = rig.camera.info
+    capture = _capture(rig)
+    ambient = capture((0.0,) * N_LEDS, plan.ambient_exposure_us)
+    leds = [capture(tuple(1.0 if i == k else 0.0 for i in range(N_LEDS)), e) for k, e in enumerate(plan.led_exposures_us)]
+    weights = np.ones(N_LEDS)
+    exposure = ex.flash_exposure(ambient, plan.ambient_exposure_us, leds, plan.led_exposures_us, weights,
+                                 info.black_level, info.white_level, plan.exposure_range_us)
+    flash = capture(tuple(weights), exposure)
+    levels = ex.meter(flash, info.black_level, info.white_level, POLICY)
+    assert levels.saturated_fraction <= POLICY.max_saturated_fraction
+    assert levels.bright_end == pytest.approx(POLICY.target_fraction, rel=0.15)
+
+
+def test_capture_reports_exposures_and_snr(tmp_path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "c"
+    assert main(["capture", "--out", str(out), "--ambient", "daylight"]) == 0
+    err = capsys.readouterr().err
+    assert "exposure (auto): ambient" in err and "LED SNR (photon+read noise" in err
+    sequence = read_sequence(out / "sequence")
+    planned = sequence.extra["msflash"]["exposure"]
+    assert planned["mode"] == "auto" and len(planned["predicted_led_snr"]) == 7
+    assert [f.exposure_us for f in sequence.frames[1:]] == pytest.approx(planned["led_exposures_us"])
+    for index in range(len(sequence.frames)):
+        pixels = sequence.load_frame(index)
+        saturated = np.mean((pixels >= sequence.camera.white_level).any(axis=-1))
+        assert saturated <= POLICY.max_saturated_fraction
+
+
+def test_fixed_exposure_and_bad_values(tmp_path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "f"
+    assert main(["capture", "--out", str(out), "--exposure-us", "4000"]) == 0
+    sequence = read_sequence(out / "sequence")
+    assert {f.exposure_us for f in sequence.frames} == {4000.0}
+    assert sequence.extra["msflash"]["exposure"]["mode"] == "fixed"
+    capsys.readouterr()
+    assert main(["capture", "--out", str(tmp_path / "g"), "--exposure", "-3"]) == 2
+    assert "--exposure" in capsys.readouterr().err
+
+
+def test_run_json_reports_exposure_and_snr(tmp_path) -> None:
+    out = tmp_path / "r"
+    assert main(["run", "--out", str(out), "--ambient", "fluorescent", "--scene", "macbeth"]) == 0
+    summary = json.loads((out / "run.json").read_text())
+    exposure = summary["exposure"]
+    assert exposure["mode"] == "auto" and len(exposure["led_snr"]) == 7
+    assert all(v > 0 for v in exposure["led_snr"]) and exposure["flash_exposure_us"] > 0
+    assert summary["decision_ms"] >= 0
+    flash = read_sequence(out / "sequence").frames[-1]
+    assert flash.role == "flash" and flash.exposure_us == pytest.approx(exposure["flash_exposure_us"])
