@@ -50,6 +50,11 @@ RESIDUAL_WARNING = 0.1
 """Relative residual ``‖m_a − Σ w m_f‖ / ‖m_a‖`` above which the estimate is flagged."""
 SATURATION_WARNING = 0.5
 """Fraction of saturated samples above which the estimate is flagged."""
+LED_FILL_WARNING = 0.2
+"""An LED-only image whose mean is below this fraction of its RMS is noise, not light: the LED
+did not fire (or does not reach the scene). A real LED image is non-negative light, mean/RMS
+≈ 0.5–0.9 on ordinary scenes; a noise-only difference has mean ≈ 0 (study `failure`: 126 of 126
+dead LEDs flagged, none of the working ones)."""
 
 
 @dataclass(frozen=True)
@@ -284,6 +289,13 @@ def estimate_ambient(
         )
     if statistics.saturated_fraction > SATURATION_WARNING:
         warnings.append(f"{statistics.saturated_fraction:.0%} of the samples are saturated; lower the exposure")
+    fill = statistics.led_sums / np.sqrt(np.maximum(statistics.n_samples * np.diag(statistics.gram), 1e-300))
+    dark = [name for name, value in zip(led_spectra.names, fill) if value < LED_FILL_WARNING]
+    if dark:
+        warnings.append(
+            f"the image of LED {', '.join(dark)} holds noise, not light (mean/RMS below {LED_FILL_WARNING}); "
+            "did it fire, and does it reach the scene?"
+        )
     centre = led_values @ weights
     if np.any(spectrum_std > 0.5 * np.max(np.abs(centre))):
         warnings.append("the uncertainty band is wider than half the spectrum's peak")
