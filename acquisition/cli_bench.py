@@ -11,6 +11,7 @@ from acquisition.cli_common import print_json, progress
 _OPTIONAL_PARTS = {
     "camera": ("acquisition.bench_camera", "camera_bench"),
     "booth": ("led_controller.bench", "run_bench"),
+    "capture": ("acquisition.bench_capture", "capture_bench"),
 }
 """Bench parts contributed by other modules: part name → (module, function returning a dict)."""
 

@@ -1,0 +1,147 @@
+"""Capture bench: the whole capture → estimate → flash → re-capture loop on the GigE Vision fake.
+
+The ``aravis-fake`` rig (AravisCamera on the fake at 127.0.0.1, booth emulator on a pty, the real
+``LedBooth`` driver) runs booth master: the booth pulses the trigger once per period, so the
+camera runs at a fixed frame rate (``frame_rate_hz``; the exposure is what fills the rest of the
+period, :func:`acquisition.capture.booth_period_us`). Each run captures ambient + k LEDs, then
+estimates the ambient from the frames in memory, solves the complementary flash, predicts its
+exposure, loads it as a one-step table and captures the flash frame — what ``msflash run`` does.
+
+Figures (one run of the bench, :func:`capture_bench`):
+
+- ``wall_ratio``: wall time from the start of the LED sequence to the flash frame's arrival,
+  divided by (k + 2) frame periods — the ideal of a camera streaming k + 2 frames back to back.
+  Target ≤ 1.15 (median over runs; each run's ratio is listed).
+- ``latency_ms``: from the last LED frame's arrival (``next_frame`` returns it) to the booth's
+  flash trigger pulse: writing that frame, estimation, flash solving, exposure, the serial
+  commands that load, arm and start the flash step, and the booth's LED settle time. Median and
+  max over the runs. Targets: median ≤ 5 ms, max below one frame period at 60 fps (16.7 ms).
+  ``compute_ms`` is the estimation + solving part alone.
+
+The fake's frames are test patterns, so the estimate means nothing here (it may be degenerate);
+only time is measured.
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from acquisition.capture import READOUT_US, TRIGGER_PULSE_US, run_capture
+from acquisition.plan import CapturePlan
+
+WALL_RATIO_TARGET = 1.15
+LATENCY_MEDIAN_TARGET_MS = 5.0
+
+
+def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, height: int = 240,
+                  pixel_format: str = "Mono16") -> dict[str, Any]:
+    """Time the capture loop on the GigE Vision fake; see the module notes for the figures.
+
+    Parameters
+    ----------
+    runs
+        Sequences timed (each: ambient + 7 LEDs + flash).
+    frame_rate_hz
+        The booth's trigger rate; the exposure fills the period.
+    width, height, pixel_format
+        Frame format of the fake.
+    """
+    import warnings
+
+    from acquisition import analysis
+    from acquisition.cli_run import _InMemorySequence
+    from acquisition.exposure import ExposurePolicy, flash_exposure
+    from acquisition.rig import open_aravis_fake_rig
+    from acquisition.sequence_format import SequenceWriter
+
+    period_us = 1e6 / frame_rate_hz
+    settle_s, deadtime_s = 0.001, 0.001
+    exposure_us = period_us - settle_s * 1e6 - TRIGGER_PULSE_US - deadtime_s * 1e6 - READOUT_US
+    if exposure_us <= 0:
+        raise ValueError(f"capture bench: {frame_rate_hz} fps leaves no time for an exposure; expected ≤ 200 fps")
+    timing = {"settle_s": settle_s, "deadtime_s": deadtime_s, "trigger": "booth"}
+    ratios: list[float] = []
+    latencies: list[float] = []
+    computes: list[float] = []
+    with tempfile.TemporaryDirectory(prefix="msflash-bench-capture-") as scratch, \
+            open_aravis_fake_rig(width=width, height=height, pixel_format=pixel_format) as rig:
+        n_leds = rig.led_spectra.count
+        camera, emulator = rig.camera, rig.emulator
+        assert emulator is not None
+        arrivals: list[float] = []
+        pulses: list[float] = []
+        real_next, real_pulse = camera.next_frame, emulator.on_trigger_out
+
+        def timed_next(timeout_s: float):  # noqa: ANN202 - wraps the camera for timestamps
+            frame = real_next(timeout_s)
+            arrivals.append(time.perf_counter())
+            return frame
+
+        def timed_pulse(*args: object) -> None:
+            pulses.append(time.perf_counter())
+            if real_pulse is not None:
+                real_pulse(*args)
+
+        camera.next_frame = timed_next  # type: ignore[method-assign]
+        emulator.on_trigger_out = timed_pulse
+        info = camera.info
+        policy = ExposurePolicy()
+        for run in range(runs + 1):  # run 0 warms up (imports, first stream) and is not counted
+            arrivals.clear()
+            pulses.clear()
+            wavelengths, seq_camera, leds = rig.sequence_header()
+            writer = SequenceWriter(Path(scratch) / f"run{run}", wavelengths_nm=wavelengths, spectral_unit="energy",
+                                    camera=seq_camera, leds=leds)
+            frames = []
+            plan = CapturePlan.ambient_then_each_led(n_leds, exposure_us, **timing)  # type: ignore[arg-type]
+            started = time.perf_counter()
+            run_capture(camera, rig.booth, plan, writer, on_frame=lambda step, frame, entry: frames.append(frame))
+            last_arrival = arrivals[-1]
+            n_pulses = len(pulses)
+            computed = time.perf_counter()
+            stack = analysis.load_frame_stack(_InMemorySequence(writer.sequence, frames))  # type: ignore[arg-type]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                estimate = analysis.estimate_sequence(writer.sequence, stack=stack)
+                weights = analysis.solve_sequence_flash(writer.sequence, "complementary",
+                                                        np.nan_to_num(estimate.ambient_weights)).flash_weights
+            levels = np.clip(np.nan_to_num(weights), 0.0, 1.0)
+            flash_us = min(flash_exposure(frames[0].pixels, exposure_us, [f.pixels for f in frames[1:]],
+                                          [exposure_us] * n_leds, levels, info.black_level, info.white_level,
+                                          (1.0, exposure_us), policy), exposure_us)
+            computed = time.perf_counter() - computed
+            run_capture(camera, rig.booth, CapturePlan.single(levels, flash_us, **timing), writer)  # type: ignore[arg-type]
+            finished = arrivals[-1]
+            if run == 0:
+                continue
+            ratios.append((finished - started) / ((n_leds + 2) * period_us * 1e-6))
+            latencies.append((pulses[n_pulses] - last_arrival) * 1e3)
+            computes.append(computed * 1e3)
+    period_ms = period_us * 1e-3
+    report: dict[str, Any] = {
+        "format": f"{width}x{height} {pixel_format}, booth master at {frame_rate_hz:g} fps, {n_leds} LEDs",
+        "exposure_us": exposure_us,
+        "runs": runs,
+        "wall_ratio": statistics.median(ratios),
+        "wall_ratios": ratios,
+        "wall_ratio_target": WALL_RATIO_TARGET,
+        "latency_ms_median": statistics.median(latencies),
+        "latency_ms_max": max(latencies),
+        "latencies_ms": latencies,
+        "compute_ms_median": statistics.median(computes),
+        "latency_median_target_ms": LATENCY_MEDIAN_TARGET_MS,
+        "frame_period_ms": period_ms,
+    }
+    report["wall_target_met"] = bool(report["wall_ratio"] <= WALL_RATIO_TARGET)
+    report["latency_target_met"] = bool(report["latency_ms_median"] <= LATENCY_MEDIAN_TARGET_MS
+                                        and report["latency_ms_max"] < 1e3 / 60.0)
+    return report
+
+
+__all__ = ["capture_bench"]

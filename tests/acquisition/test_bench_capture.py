@@ -1,0 +1,24 @@
+"""Smoke test of the capture bench on the GigE Vision fake: every figure is there (no timed assertion)."""
+
+from __future__ import annotations
+
+import math
+from types import ModuleType
+
+import pytest
+
+from acquisition.cli_bench import _OPTIONAL_PARTS
+
+pytestmark = pytest.mark.aravis
+
+
+def test_capture_bench_returns_every_figure(aravis: ModuleType) -> None:
+    from acquisition.bench_capture import capture_bench
+
+    report = capture_bench(runs=1, width=64, height=48)
+    for key in ("wall_ratio", "latency_ms_median", "latency_ms_max", "compute_ms_median", "frame_period_ms",
+                "exposure_us"):
+        assert math.isfinite(report[key]) and report[key] > 0, key
+    assert len(report["wall_ratios"]) == len(report["latencies_ms"]) == 1
+    assert isinstance(report["wall_target_met"], bool) and isinstance(report["latency_target_met"], bool)
+    assert _OPTIONAL_PARTS["capture"] == ("acquisition.bench_capture", "capture_bench")
