@@ -78,7 +78,7 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
         pulses: list[float] = []
         real_next, real_pulse = camera.next_frame, emulator.on_trigger_out
 
-        def timed_next(timeout_s: float):  # noqa: ANN202 - wraps the camera for timestamps
+        def timed_next(timeout_s: float):
             frame = real_next(timeout_s)
             arrivals.append(time.perf_counter())
             return frame
@@ -101,7 +101,7 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
             frames = []
             plan = CapturePlan.ambient_then_each_led(n_leds, exposure_us, **timing)  # type: ignore[arg-type]
             started = time.perf_counter()
-            run_capture(camera, rig.booth, plan, writer, on_frame=lambda step, frame, entry: frames.append(frame))
+            run_capture(camera, rig.booth, plan, writer, on_frame=lambda _s, frame, _e, kept=frames: kept.append(frame))
             last_arrival = arrivals[-1]
             n_pulses = len(pulses)
             computed = time.perf_counter()
