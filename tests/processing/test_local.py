@@ -1,0 +1,195 @@
+"""Local ambient estimation (issue 9): tiled statistics, smoothing, model selection, local synthesis.
+
+Scenes come from :func:`processing.local_study.make_scenario` (random surface mosaics, the sim rig's
+sensor with noise); the seeds here (< 100) are not the study's (≥ 1000), and the selection margin
+was calibrated on the study's scenes, not on these.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pytest
+
+from processing.image_formation import MixedIllumination, expected_response
+from processing.local import (
+    SELECTION_MARGIN,
+    TiledStatistics,
+    estimate_local,
+    select_model,
+    synthesize_local,
+    tile_statistics,
+    upsample_tiles,
+)
+from processing.local_study import Scenario, led_bound, make_scenario, run_study, tile_truth, tiled_rmse
+from processing.statistics import accumulate_statistics
+from processing.synthesis import synthesize
+from tests.helpers import EXACT, FLOAT32, ambient, camera, chart, leds_photons, linear_frames, rendered_frames, spec_for
+
+SHAPE = (160, 192)
+TILES = 6
+
+
+@cache
+def scenario(kind: str, seed: int) -> Scenario:
+    return make_scenario(kind, seed, SHAPE)
+
+
+@cache
+def tiled(kind: str, seed: int) -> TiledStatistics:
+    s = scenario(kind, seed)
+    return tile_statistics(s.ambient, s.led_frames, s.spec, TILES, bin_factor=4)
+
+
+# -- tiled statistics ---------------------------------------------------------------------------
+@pytest.mark.parametrize(("bin_factor", "cfa", "tiles"), [(1, None, 5), (2, None, (3, 4)), (4, None, 2), (2, "GRBG", 3)])
+def test_tiles_sum_to_the_global_statistics(bin_factor: int, cfa: str | None, tiles: int | tuple[int, int]) -> None:
+    from processing.image_formation import SensorModel
+
+    sensor = SensorModel(cfa=cfa)
+    frames = rendered_frames(ambient("tungsten"), sensor=sensor, noise=True, scene=chart(specular_strip_px=5))
+    a, led_frames, exposures, gains = frames
+    a, led_frames = a[:56], [f[:56] for f in led_frames]  # even height: the CFA planes lose nothing
+    spec = spec_for(sensor, exposures, gains, np.eye(7))
+    period = 2 if cfa else 1
+    reference = accumulate_statistics(a, led_frames, spec, bin_factor=bin_factor, cfa_period=period)
+    total = tile_statistics(a, led_frames, spec, tiles, bin_factor=bin_factor, cfa_period=period).total()
+    assert reference.saturated_fraction > 0  # the specular strip saturates: masking is exercised
+    np.testing.assert_allclose(total.gram, reference.gram, rtol=EXACT * 100)
+    np.testing.assert_allclose(total.cross, reference.cross, rtol=EXACT * 100)
+    np.testing.assert_allclose(total.led_sums, reference.led_sums, rtol=EXACT * 100)
+    assert total.ambient_energy == pytest.approx(reference.ambient_energy, rel=EXACT)
+    assert total.ambient_sum == pytest.approx(reference.ambient_sum, rel=EXACT)
+    assert (total.n_samples, total.n_total) == (reference.n_samples, reference.n_total)
+
+
+def test_tile_geometry_covers_the_frame() -> None:
+    t = tiled("uniform", 1)
+    assert t.shape == (TILES, TILES)
+    assert t.row_edges[0] == 0 and t.row_edges[-1] == SHAPE[0] and t.column_edges[-1] == SHAPE[1]
+    assert t.areas.sum() == SHAPE[0] * SHAPE[1]
+
+
+def test_smoothing_is_a_weighted_sum_of_neighbours() -> None:
+    t = tiled("boundary", 2)
+    wide = t.smoothed(1e6)  # every tile sees all the others with weight 1
+    np.testing.assert_allclose(wide.gram[2, 3], t.total().gram, rtol=1e-9)
+    narrow = t.smoothed(1e-3)  # only itself
+    np.testing.assert_allclose(narrow.gram, t.gram, rtol=1e-12)
+    left_out = t.smoothed(1.0, leave_out=True)
+    np.testing.assert_allclose(left_out.cross, t.smoothed(1.0).cross - t.cross, rtol=1e-9, atol=1e-9 * np.abs(t.cross).max())
+    expected = sum(np.exp(-((i - 2) ** 2 + (j - 3) ** 2) / 2.0) * t.cross[i, j] for i in range(TILES) for j in range(TILES))
+    np.testing.assert_allclose(t.smoothed(1.0).cross[2, 3], expected, rtol=1e-9)
+
+
+def test_noise_free_in_span_local_recovers_each_side_exactly() -> None:
+    """Two LED-mix ambients split down the middle: tiles entirely on one side recover its weights."""
+    left_mix, right_mix = np.array([0.2, 0.05, 0.4, 0.3, 0.6, 0.1, 0.25]), np.array([0.6, 0.3, 0.1, 0.05, 0.2, 0.4, 0.1])
+    leds = leds_photons()
+    scene = chart()
+    mixing = np.zeros(scene.shape)
+    mixing[:, 28:] = 1.0
+    left = leds.replace(values=(leds.values @ left_mix)[:, None], names=("left",))
+    right = leds.replace(values=(leds.values @ right_mix)[:, None], names=("right",))
+    illumination = MixedIllumination.two_ambients(left, right, mixing)
+    dark = left.replace(values=np.zeros_like(left.values))
+    cam = camera()
+    frames = [expected_response(scene, illumination.plus(dark.replace(values=leds.values @ row[:, None])), cam, 1.0)
+              for row in np.vstack([np.zeros(7), np.eye(7)])]
+    _, _, spec = linear_frames(left)
+    t = tile_statistics(frames[0], frames[1:], spec, (1, 4))
+    local = estimate_local(t, leds, "local", solver="lstsq", smoothing=1e-3)
+    np.testing.assert_allclose(local.tile_weights[0, 0], left_mix, rtol=1e-6)
+    np.testing.assert_allclose(local.tile_weights[0, 3], right_mix, rtol=1e-6)
+    assert estimate_local(t, leds, "auto", solver="lstsq").model == "local"
+
+
+# -- model selection ------------------------------------------------------------------------------
+@pytest.mark.parametrize("seed", [1, 3, 5, 7, 9])
+def test_uniform_scene_auto_chooses_global(seed: int) -> None:
+    s = scenario("uniform", seed)
+    selection = select_model(tiled("uniform", seed), s.led_spectra)
+    assert selection.model == "global", selection.scores
+    assert min(v for k, v in selection.scores.items() if k != "global") > 1.0 - SELECTION_MARGIN
+    auto = estimate_local(tiled("uniform", seed), s.led_spectra, "auto")
+    # No loss of accuracy: auto *is* the global estimate.
+    np.testing.assert_array_equal(auto.mean_weights, auto.global_estimate.ambient_weights)
+
+
+@pytest.mark.parametrize(("kind", "seed"), [("boundary", 2), ("boundary", 4), ("boundary", 6), ("gradient", 8)])
+def test_two_illuminant_scene_auto_chooses_local(kind: str, seed: int) -> None:
+    s = scenario(kind, seed)
+    selection = select_model(tiled(kind, seed), s.led_spectra)
+    assert selection.model == "local", selection.scores
+    assert min(v for k, v in selection.scores.items() if k != "global") < 0.5
+
+
+@pytest.mark.parametrize("seed", [2, 4, 6])
+def test_local_cuts_the_spectrum_rmse_on_two_illuminant_scenes(seed: int) -> None:
+    s = scenario("boundary", seed)
+    t = tiled("boundary", seed)
+    auto = estimate_local(t, s.led_spectra, "auto")
+    truth = tile_truth(s, auto)
+    global_rmse = tiled_rmse(np.broadcast_to(auto.global_estimate.spectrum.values[:, 0], truth.shape), truth, t.areas)
+    local_rmse = tiled_rmse(auto.tile_spectra, truth, t.areas)
+    # Part of either error is the LEDs' inability to reproduce the named ambients (the bound no
+    # estimate beats, ~0.18 here): the raw cut is smaller than the cut of the excess over it.
+    bound = tiled_rmse(led_bound(s.led_spectra.values, truth), truth, t.areas)
+    assert local_rmse <= 0.8 * global_rmse, (s.names, global_rmse, local_rmse)
+    assert local_rmse - bound <= 0.7 * (global_rmse - bound), (s.names, global_rmse, local_rmse, bound)
+
+
+def test_forced_global_and_bad_method() -> None:
+    s = scenario("boundary", 2)
+    forced = estimate_local(tiled("boundary", 2), s.led_spectra, "global")
+    assert forced.model == "global" and forced.selection is None
+    assert np.all(forced.tile_weights == forced.global_estimate.ambient_weights)
+    with pytest.raises(ValueError, match="auto, global, local"):
+        estimate_local(tiled("boundary", 2), s.led_spectra, "patchy")
+
+
+# -- the spatially varying image ----------------------------------------------------------------
+def test_upsampling_is_exact_at_tile_centres_and_constant_for_constant_tiles() -> None:
+    t = tiled("uniform", 1)
+    values = np.arange(TILES * TILES, dtype=float).reshape(TILES, TILES)
+    maps = upsample_tiles(values, t)
+    rows, columns = t.centres
+    assert maps.shape == SHAPE
+    for i in range(TILES):
+        for j in range(TILES):
+            if float(rows[i]).is_integer() and float(columns[j]).is_integer():
+                assert maps[int(rows[i]), int(columns[j])] == pytest.approx(values[i, j])
+    np.testing.assert_allclose(upsample_tiles(np.full((TILES, TILES, 2), 3.0), t), 3.0)
+    assert maps.min() >= values.min() and maps.max() <= values.max()
+
+
+def test_local_synthesis_equals_global_for_equal_weights_and_blends_between() -> None:
+    s = scenario("boundary", 2)
+    t = tiled("boundary", 2)
+    weights = np.array([0.5, 0.1, 0.0, 0.3, 1.0, 0.2, 0.7])
+    image, saturated = synthesize_local(s.ambient, s.led_frames, s.spec, np.broadcast_to(weights, (TILES, TILES, 7)), t)
+    reference, reference_saturated = synthesize(s.ambient, s.led_frames, s.spec, weights)
+    np.testing.assert_allclose(image, reference, rtol=0, atol=FLOAT32 * float(np.abs(reference).max()))
+    np.testing.assert_array_equal(saturated, reference_saturated)
+    # Two different mixes left and right: pixels at the tile centres get their own tile's image.
+    varying = np.zeros((TILES, TILES, 7))
+    varying[:, :TILES // 2] = weights
+    varying[:, TILES // 2:] = weights[::-1]
+    image, _ = synthesize_local(s.ambient, s.led_frames, s.spec, varying, t)
+    reversed_image, _ = synthesize(s.ambient, s.led_frames, s.spec, weights[::-1])
+    rows, columns = t.centres
+    r, c0, c1 = int(rows[1]), int(columns[0]), int(columns[-1])
+    np.testing.assert_allclose(image[r, c0], reference[r, c0], rtol=1e-4)
+    np.testing.assert_allclose(image[r, c1], reversed_image[r, c1], rtol=1e-4)
+
+
+# -- the acceptance study (long) ------------------------------------------------------------------
+@pytest.mark.study
+def test_acceptance_study() -> None:
+    """Issue 9 acceptance: ≥ 95 % global on uniform scenes, ≥ 30 % RMSE cut on boundary scenes, ≤ 3× cost."""
+    summary = run_study(n_uniform=100, n_mixed=30, sweep=False)
+    assert summary["uniform"]["global_rate"] >= 0.95
+    assert summary["uniform"]["rmse_auto"] <= summary["uniform"]["rmse_global"] * 1.001
+    assert summary["boundary"]["auto_cut"] >= 0.30
+    assert summary["timing"]["auto_ratio"] <= 3.0
