@@ -50,11 +50,12 @@ RESIDUAL_WARNING = 0.1
 """Relative residual ``‖m_a − Σ w m_f‖ / ‖m_a‖`` above which the estimate is flagged."""
 SATURATION_WARNING = 0.5
 """Fraction of saturated samples above which the estimate is flagged."""
-LED_FILL_WARNING = 0.2
-"""An LED-only image whose mean is below this fraction of its RMS is noise, not light: the LED
-did not fire (or does not reach the scene). A real LED image is non-negative light, mean/RMS
-≈ 0.5–0.9 on ordinary scenes; a noise-only difference has mean ≈ 0 (study `failure`: 126 of 126
-dead LEDs flagged, none of the working ones)."""
+LED_SIGNAL_Z = 4.0
+"""Below this z-score (one-sided p ≈ 3e-5 for noise) the LED-only image is noise, not light: the LED did not fire (or does not
+reach the scene). ``z = Σ f / ‖f‖`` over the N samples: a noise-only difference image has mean 0
+and z ~ N(0, 1) whatever the noise level, while light is non-negative and z = √N · mean/RMS —
+in the hundreds for real frames even when a highlight dominates the RMS. A fixed mean/RMS bound
+would misfire on such scenes (the independent samples' LED images have mean/RMS ≈ 0.15–0.3)."""
 
 
 @dataclass(frozen=True)
@@ -289,11 +290,11 @@ def estimate_ambient(
         )
     if statistics.saturated_fraction > SATURATION_WARNING:
         warnings.append(f"{statistics.saturated_fraction:.0%} of the samples are saturated; lower the exposure")
-    fill = statistics.led_sums / np.sqrt(np.maximum(statistics.n_samples * np.diag(statistics.gram), 1e-300))
-    dark = [name for name, value in zip(led_spectra.names, fill) if value < LED_FILL_WARNING]
+    signal_z = statistics.led_sums / np.sqrt(np.maximum(np.diag(statistics.gram), 1e-300))
+    dark = [name for name, value in zip(led_spectra.names, signal_z) if value < LED_SIGNAL_Z]
     if dark:
         warnings.append(
-            f"the image of LED {', '.join(dark)} holds noise, not light (mean/RMS below {LED_FILL_WARNING}); "
+            f"the image of LED {', '.join(dark)} holds noise, not light (z-score below {LED_SIGNAL_Z:g}); "
             "did it fire, and does it reach the scene?"
         )
     centre = led_values @ weights

@@ -59,5 +59,26 @@ def test_samples_read_and_estimate_cleanly(name: str) -> None:
     assert estimate.ambient_weights.shape == (7,)
     assert np.all(estimate.spectrum.values >= -1e-12)
     assert estimate.relative_residual < 0.1
+    # Every LED fired: no reliability warning (the LED images are dominated by a bright strip,
+    # which once fooled a mean/RMS "dead LED" test).
+    assert estimate.warnings == ()
     # The README promises a saturating specular strip, but no sample pixel reaches the white level.
     assert estimate.saturated_fraction == 0.0
+
+
+@pytest.mark.parametrize("dead", [0, 4])
+def test_a_dead_led_in_a_sample_is_flagged(dead: int) -> None:
+    """Replace one LED frame by the ambient frame plus fresh noise of the same size: only that LED is flagged."""
+    sequence, _ = load(SAMPLES[0])
+    stack = analysis.load_frame_stack(sequence)
+    rng = np.random.default_rng(dead)
+    ambient = stack.ambient.astype(np.float64)
+    noisy = ambient + rng.normal(0.0, np.sqrt(np.maximum(ambient - sequence.camera.black_level, 1.0)))
+    frames = list(stack.led_frames)
+    frames[dead] = np.clip(np.rint(noisy), 0, 65535).astype(np.uint16)
+    broken = analysis.FrameStack(stack.ambient, tuple(frames), stack.spec, stack.ambient_index, stack.led_indices)
+    estimate = analysis.estimate_sequence(sequence, stack=broken)
+    flagged = [w for w in estimate.warnings if "holds noise" in w]
+    assert len(flagged) == 1
+    assert sequence.leds[dead].name in flagged[0]
+    assert all(led.name not in flagged[0] for i, led in enumerate(sequence.leds) if i != dead)
