@@ -101,6 +101,52 @@ def sequence_statistics(stack: FrameStack, cfa: str | None = None, bin_factor: i
                                  cfa_period=period)
 
 
+def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -> tuple[Sequence, list[str]]:
+    """The sequence with LED spectra and/or responsivities taken from a calibration, and what changed.
+
+    ``directory`` is a ``msflash calibrate`` output; without it, the sequence's own
+    ``"calibration": {"file": …}`` reference is used if present (relative to the sequence
+    directory). LEDs are matched by name; spectra are resampled onto the sequence's grid and
+    converted to its unit. Without either, the sequence is returned unchanged.
+
+    Raises
+    ------
+    RecordingError
+        If the calibration cannot be read or lacks one of the sequence's LEDs.
+    """
+    from dataclasses import replace
+
+    from calibration.errors import CalibrationError
+    from calibration.files import load_calibration
+
+    if directory is None:
+        reference = sequence.extra.get("calibration")
+        if not isinstance(reference, dict) or not reference.get("file"):
+            return sequence, []
+        directory = sequence.directory / str(reference["file"])
+    try:
+        calibration = load_calibration(directory)
+    except CalibrationError as err:
+        raise RecordingError(str(err)) from err
+    notes: list[str] = []
+    grid = sequence.grid
+    leds = sequence.leds
+    if calibration.led_spectra is not None:
+        spectra = calibration.led_spectra.resample(grid, outside="zero").to_unit(sequence.spectral_unit)
+        missing = [led.name for led in leds if led.name not in spectra.names]
+        if missing:
+            raise RecordingError(f"{directory}: calibration {calibration.id} has no LED named {', '.join(missing)}; "
+                                 f"expected the sequence's LEDs ({', '.join(led.name for led in leds)})")
+        leds = tuple(replace(led, spd=spectra.column(led.name)) for led in leds)
+        notes.append(f"LED spectra from calibration {calibration.id} ({directory}) replace the sequence's")
+    camera = sequence.camera
+    if calibration.camera_responsivities is not None:
+        curves = calibration.camera_responsivities.resample(grid, outside="zero").to_unit(sequence.spectral_unit)
+        camera = replace(camera, responsivity={name: curves.column(name) for name in curves.names})
+        notes.append(f"camera responsivities from calibration {calibration.id} ({directory}) replace the sequence's")
+    return replace(sequence, leds=leds, camera=camera), notes
+
+
 def led_spectra_photons(sequence: Sequence) -> Spectra:
     """The sequence's LED spectra in photons (the processing unit)."""
     return sequence.led_spectra().to_unit("photons")

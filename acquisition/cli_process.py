@@ -57,8 +57,21 @@ def add_estimation_options(parser: argparse.ArgumentParser) -> None:
                         help=f"sum BIN×BIN pixel blocks before estimating (default {analysis.DEFAULT_BIN_FACTOR}; 1 = every pixel)")
 
 
+def _add_calibration_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--calibration", metavar="DIR", default=None,
+                        help="LED spectra / responsivities from this calibration (msflash calibrate) override the sequence's")
+
+
+def _read_calibrated(args: argparse.Namespace):
+    """The sequence, with a calibration applied (``--calibration`` or the sequence's reference); notes on stderr."""
+    sequence, notes = analysis.apply_calibration(read_sequence(args.sequence), getattr(args, "calibration", None))
+    for note in notes:
+        progress(note)
+    return sequence
+
+
 def _estimate(args: argparse.Namespace) -> int:
-    sequence = read_sequence(args.sequence)
+    sequence = _read_calibrated(args)
     if sequence.partial:
         progress(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
     if args.method != "global":
@@ -82,7 +95,7 @@ def _estimate(args: argparse.Namespace) -> int:
 
 
 def _flash(args: argparse.Namespace) -> int:
-    sequence = read_sequence(args.sequence)
+    sequence = _read_calibrated(args)
     if args.method != "global" or args.out is not None:
         return _flash_local(args, sequence)
     estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
@@ -230,6 +243,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     estimate = subparsers.add_parser("estimate", help="estimate the ambient illuminant spectrum of a sequence")
     estimate.add_argument("sequence", help="sequence directory (format v1)")
     add_estimation_options(estimate)
+    _add_calibration_option(estimate)
     add_local_options(estimate)
     estimate.add_argument("--json", action="store_true", help="print one JSON object")
     estimate.set_defaults(handler=_estimate)
@@ -241,6 +255,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     flash.add_argument("--bounds", default="physical", choices=("physical", "nonnegative", "free"),
                        help="physical: 0..1 (re-capture); nonnegative/free: computational synthesis")
     add_estimation_options(flash)
+    _add_calibration_option(flash)
     add_local_options(flash)
     flash.add_argument("--out", default=None,
                        help="also write the computational flash image (.exr linear float, .tiff 16-bit raw); "

@@ -1,0 +1,201 @@
+"""``msflash calibrate leds|camera|dark|linearity``: measure and store a calibration (calibration/files.py).
+
+Every command updates the calibration directory given by ``--out`` (sections it does not measure
+are kept; each save gets a new id). Bad input (a malformed spectrometer file, a sequence without
+dark frames) exits with status 2 and one ``msflash: error:`` line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from acquisition.cli_common import UsageError, positive_int, print_json, progress
+from acquisition.sequence_format import read_sequence
+from calibration.camera_response import estimate_responsivities, learn_prior, responsivity_rmse
+from calibration.dark import measure_dark, measure_linearity
+from calibration.errors import CalibrationError
+from calibration.files import load_or_new, save_calibration
+from calibration.led_spectra import characterise_led
+from calibration.spectrometer import measurement_to_spectra, read_spectrometer_file, subtract_dark
+from calibration.validation import calibration_lights, simulate_chart_responses
+from processing import datasets
+from processing.spectra import DEFAULT_GRID
+
+
+def _bad_input(handler: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    """Calibration errors are bad input: exit 2 with one line."""
+    def run(args: argparse.Namespace) -> int:
+        try:
+            return handler(args)
+        except CalibrationError as err:
+            raise UsageError(str(err)) from err
+    return run
+
+
+def _plot_leds(path: Path, spectra, characterisations) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot
+
+    figure, axis = pyplot.subplots(figsize=(7, 4))
+    for index, item in enumerate(characterisations):
+        axis.plot(spectra.wavelengths_nm, spectra.values[:, index], label=f"{item.name} ({item.peak_nm:.0f} nm, FWHM {item.fwhm_nm:.0f})")
+    axis.set_xlabel("wavelength (nm)")
+    axis.set_ylabel(f"spectral power ({spectra.unit})")
+    axis.legend(fontsize=7)
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    pyplot.close(figure)
+
+
+def _leds(args: argparse.Namespace) -> int:
+    dark = read_spectrometer_file(args.dark, args.unit, args.column) if args.dark else None
+    measurements, characterisations = [], []
+    for file in args.files:
+        measurement = read_spectrometer_file(file, args.unit, args.column)
+        if dark is not None:
+            measurement = subtract_dark(measurement, dark)
+        item = characterise_led(measurement)
+        for warning in item.warnings:
+            progress(f"warning: {warning}")
+        measurements.append(measurement)
+        characterisations.append(item)
+    spectra = measurement_to_spectra(measurements, DEFAULT_GRID).to_unit("energy")
+    calibration = load_or_new(args.out)
+    calibration = calibration.updated(led_spectra=spectra, leds={
+        "peaks_nm": [c.peak_nm for c in characterisations], "fwhm_nm": [c.fwhm_nm for c in characterisations],
+        "centroids_nm": [c.centroid_nm for c in characterisations],
+        "models": [{"model": "Ohno2005 asymmetric", **c.model, "relative_rms_residual": c.model_residual}
+                   for c in characterisations],
+        "sources": [str(f) for f in args.files], "dark": str(args.dark) if args.dark else None,
+        "relative_power": None,
+        "relative_power_note": "ratios as measured by the spectrometer; measure them through the camera on a white "
+                               "reference (calibration.led_spectra.relative_power_through_camera) when the probe moved",
+        "warnings": [w for c in characterisations for w in c.warnings],
+    })
+    path = save_calibration(calibration, args.out)
+    _plot_leds(Path(args.out) / "leds.png", spectra, characterisations)
+    payload = {"calibration": str(path), "id": calibration.id,
+               "leds": [{"name": c.name, "peak_nm": c.peak_nm, "fwhm_nm": c.fwhm_nm, "model_residual": c.model_residual,
+                         "saturated": c.saturated, "snr": c.snr} for c in characterisations]}
+    if args.json:
+        print_json(payload)
+    else:
+        for c in characterisations:
+            print(f"{c.name}: peak {c.peak_nm:.1f} nm, FWHM {c.fwhm_nm:.1f} nm, model residual {c.model_residual:.3f}"
+                  + (" SATURATED" if c.saturated else ""))
+        print(f"wrote {path} (id {calibration.id})")
+    return 0
+
+
+def _camera(args: argparse.Namespace) -> int:
+    if not args.simulate:
+        raise UsageError("calibrate camera: only --simulate is implemented so far (chart patch extraction from "
+                         "recorded sequences is not written yet); expected --simulate")
+    cameras = {name: s.resample(DEFAULT_GRID, outside="zero") for name, s in datasets.paper_cameras().items()}
+    if args.camera not in cameras:
+        raise UsageError(f"--camera '{args.camera}': not one of the 34 paper cameras; expected e.g. NikonD100")
+    chart = datasets.macbeth().resample(DEFAULT_GRID) if args.chart == "macbeth" else datasets.chart110()
+    lights = calibration_lights(DEFAULT_GRID)
+    progress(f"simulating {args.chart} under {lights.count} lights ({', '.join(lights.names)}) with {args.camera}")
+    truth = cameras[args.camera]
+    responses, std = simulate_chart_responses(truth, chart, lights, rng=np.random.default_rng(args.seed))
+    prior = learn_prior(cameras, exclude=[args.camera])  # never the camera under test
+    estimate = estimate_responsivities(responses, chart, lights, args.method,
+                                       prior if args.method == "pca_prior" else None, std)
+    rmse = responsivity_rmse(estimate.responsivities, truth)
+    calibration = load_or_new(args.out).updated(
+        camera_responsivities=estimate.responsivities,
+        camera={"method": estimate.method, "alphas": list(estimate.alphas), "shrinkages": list(estimate.shrinkages),
+                "relative_residual": list(estimate.relative_residual), "chart": args.chart,
+                "lights": list(lights.names), "simulated_camera": args.camera, "rmse_vs_truth": rmse},
+    )
+    path = save_calibration(calibration, args.out)
+    payload = {"calibration": str(path), "id": calibration.id, "method": estimate.method, "rmse_vs_truth": rmse}
+    if args.json:
+        print_json(payload)
+    else:
+        print(f"{args.camera}: responsivities recovered ({estimate.method}), RMSE vs truth {rmse:.4f}")
+        print(f"wrote {path} (id {calibration.id})")
+    return 0
+
+
+def _dark(args: argparse.Namespace) -> int:
+    sequence = read_sequence(args.sequence)
+    indices = sequence.indices("dark")
+    if not indices:
+        raise UsageError(f"{sequence.path}: frames has no 'dark' frame; expected frames with role 'dark'")
+    result = measure_dark([sequence.load_frame(i) for i in indices], sequence.camera.cfa)
+    calibration = load_or_new(args.out).updated(dark={**result.as_dict(), "cfa": sequence.camera.cfa,
+                                                      "sequence": str(sequence.directory)})
+    path = save_calibration(calibration, args.out)
+    if args.json:
+        print_json({"calibration": str(path), "id": calibration.id, **result.as_dict()})
+    else:
+        print("black level per channel: " + ", ".join(f"{v:.2f}" for v in result.black_level))
+        print("read noise (DN): " + ", ".join(f"{v:.2f}" for v in result.read_noise_dn))
+        print(f"wrote {path} (id {calibration.id})")
+    return 0
+
+
+def _linearity(args: argparse.Namespace) -> int:
+    sequence = read_sequence(args.sequence)
+    indices = [i for i, f in enumerate(sequence.frames) if f.role != "dark"]
+    if len(indices) < 3:
+        raise UsageError(f"{sequence.path}: {len(indices)} lit frames; expected at least 3 exposures of a uniform target")
+    calibration = load_or_new(args.out)
+    black = calibration.dark["black_level"] if calibration.dark else sequence.camera.black_level
+    frames = [sequence.load_frame(i) for i in indices]
+    exposures = [sequence.frames[i].exposure_us * sequence.frames[i].gain for i in indices]
+    result = measure_linearity(frames, exposures, black, sequence.camera.cfa, sequence.camera.white_level)
+    calibration = calibration.updated(linearity={**result.as_dict(), "sequence": str(sequence.directory)})
+    path = save_calibration(calibration, args.out)
+    if args.json:
+        print_json({"calibration": str(path), "id": calibration.id, **result.as_dict()})
+    else:
+        print(f"max deviation from linear {result.max_relative_deviation:.4f}, linear up to "
+              f"{result.linear_limit_dn} DN, saturation level {result.saturation_level}")
+        print(f"wrote {path} (id {calibration.id})")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``calibrate`` with ``leds``, ``camera``, ``dark`` and ``linearity``."""
+    calibrate = subparsers.add_parser("calibrate", help="measure LED spectra, camera responsivities, dark and linearity")
+    commands = calibrate.add_subparsers(dest="calibrate_command", metavar="WHAT", parser_class=type(calibrate))
+    calibrate.set_defaults(handler=lambda args: (_ for _ in ()).throw(
+        UsageError("calibrate: expected one of leds, camera, dark, linearity")))
+
+    leds = commands.add_parser("leds", help="LED spectra from spectrometer exports")
+    leds.add_argument("files", nargs="+", help="spectrometer exports (CSV or text: wavelength, value), one per LED")
+    leds.add_argument("--unit", default="energy", choices=("energy", "photons"), help="what the value column holds")
+    leds.add_argument("--column", type=positive_int, default=None, help="value column when there are more than two")
+    leds.add_argument("--dark", help="a dark export (shutter closed) to subtract")
+    leds.add_argument("--out", required=True, help="calibration directory (created or updated)")
+    leds.add_argument("--json", action="store_true")
+    leds.set_defaults(handler=_bad_input(_leds))
+
+    camera = commands.add_parser("camera", help="camera responsivities from a chart under the LEDs and broadband lights")
+    camera.add_argument("--sequence", nargs="+", default=[], help="recorded chart sequences (not yet supported)")
+    camera.add_argument("--simulate", action="store_true", help="render the chart in the sim world instead")
+    camera.add_argument("--camera", default="NikonD100", help="simulated camera (one of the 34 paper cameras)")
+    camera.add_argument("--chart", default="macbeth", choices=("macbeth", "chart110"))
+    camera.add_argument("--method", default="pca_prior", choices=("pca_prior", "smoothness"))
+    camera.add_argument("--seed", type=int, default=0)
+    camera.add_argument("--out", required=True, help="calibration directory (created or updated)")
+    camera.add_argument("--json", action="store_true")
+    camera.set_defaults(handler=_bad_input(_camera))
+
+    for name, handler, text in (("dark", _dark, "black level and read noise from a sequence's dark frames"),
+                                ("linearity", _linearity, "linearity and saturation from frames at several exposures")):
+        sub = commands.add_parser(name, help=text)
+        sub.add_argument("sequence", help="sequence directory (format v1)")
+        sub.add_argument("--out", required=True, help="calibration directory (created or updated)")
+        sub.add_argument("--json", action="store_true")
+        sub.set_defaults(handler=_bad_input(handler))
