@@ -73,7 +73,9 @@ def _mapper(scheduler: str, workers: int | None) -> Iterator[Callable[[Callable[
     cluster = None
     if scheduler == "local":
         n = workers or os.cpu_count() or 1
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0")
+        # Loopback only: the scheduler, workers and dashboard never listen on other interfaces.
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0")
         client = Client(cluster)
         progress(f"dask: local cluster with {n} workers")
     else:
