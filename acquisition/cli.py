@@ -27,10 +27,22 @@ COMMAND_MODULES = (
     "acquisition.cli_booth",
     "acquisition.cli_study",
     "acquisition.cli_evaluate",
+    "acquisition.cli_calibrate",
 )
 """Modules contributing subcommands, in help order."""
 
 _BAD_INPUT = (UsageError, RecordingError, SpectralDataError, FileNotFoundError)
+
+
+def _bad_input_errors() -> tuple[type[BaseException], ...]:
+    errors: list[type[BaseException]] = list(_BAD_INPUT)
+    try:
+        from calibration.errors import CalibrationError
+    except ImportError:  # the calibration package is optional for processing-only use
+        pass
+    else:
+        errors.append(CalibrationError)
+    return tuple(errors)
 
 
 def _runtime_errors() -> tuple[type[BaseException], ...]:
@@ -92,7 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         sys.stderr.write("msflash: interrupted; LEDs off, partial data kept\n")
         return 130
-    except _BAD_INPUT as err:
+    except _bad_input_errors() as err:
         sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
         return 2
     except _runtime_errors() as err:

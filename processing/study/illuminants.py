@@ -71,8 +71,10 @@ def xy_of(spectra: np.ndarray, grid: WavelengthGrid = DEFAULT_GRID) -> np.ndarra
 
     Examples
     --------
-    >>> bool(np.allclose(xy_of(np.ones(31)), [0.3333, 0.3333], atol=0.02))
-    True
+    >>> from processing.spectra import energy_to_photons
+    >>> equal_energy = energy_to_photons(np.ones(31), DEFAULT_GRID.wavelengths_nm)
+    >>> np.round(xy_of(equal_energy), 2).tolist()  # illuminant E on a 10 nm grid
+    [0.33, 0.33]
     """
     values = np.asarray(spectra, dtype=float)
     xyz = cmfs_photons(grid).T @ values  # (3,) or (3, n)
