@@ -28,7 +28,7 @@ import OpenImageIO as oiio
 from acquisition.errors import RecordingError
 
 INTEGER_SUFFIX = ".tiff"
-"""Suffix of integer frames (16-bit TIFF, zip compression)."""
+"""Suffix of integer frames (16-bit TIFF, uncompressed)."""
 FLOAT_SUFFIX = ".exr"
 """Suffix of float frames (32-bit float EXR)."""
 
@@ -237,7 +237,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | 
     ----------
     path
         Target file: ``.tif``/``.tiff`` for integer pixels (written as 16-bit TIFF, zip
-        compression, values unchanged), ``.exr`` for float pixels (written as 32-bit float).
+        no compression, values unchanged), ``.exr`` for float pixels (written as 32-bit float).
     pixels
         Shape (H, W), (H, W, 1) or (H, W, 3). Integer values must lie in 0…65535.
     attributes
@@ -264,10 +264,13 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | 
     spec = oiio.ImageSpec(data.shape[1], data.shape[0], channels, type_name)
     if attributes:
         spec.attribute("ImageDescription", description)
-    spec.attribute("compression", "zip")
     if type_name == "uint16":
+        # Uncompressed: capture writes every frame as it arrives, and zip costs ~10× the write
+        # itself (73 ms vs 6 ms for a 640×480 RGB16 frame here) for a 2× size gain on real data.
+        spec.attribute("compression", "none")
         format_name = "tiff"
     else:
+        spec.attribute("compression", "zip")  # EXR: derived float images, not on the capture path
         format_name = "openexr"
         for name, value in attributes.items():
             _set_native_attribute(spec, name, value)
