@@ -22,7 +22,7 @@ Protocol
 - Cost: wall time of statistics + estimate on a full-size frame (1024 × 1280, the Ximea's) for the
   global estimate (:func:`processing.statistics.accumulate_statistics` + :func:`estimate_ambient`)
   and for ``auto`` (:func:`processing.local.tile_statistics` + :func:`estimate_local`), medians of
-  repeats; frames in memory.
+  repeats (interleaved, best of each); frames in memory.
 """
 
 from __future__ import annotations
@@ -186,7 +186,7 @@ def evaluate_scenario(kind: str, seed: int, tiles: int = DEFAULT_TILES, bin_fact
 
 def time_estimates(shape: tuple[int, int] = (1024, 1280), tiles: int = DEFAULT_TILES, bin_factor: int = 4,
                    repeats: int = 5, seed: int = 0) -> dict:
-    """Median wall times of the global estimate and of ``auto`` / ``local`` on full-size frames (in memory)."""
+    """Best-of-``repeats`` wall times of the global estimate and of ``auto`` / ``local`` on full-size frames (in memory)."""
     scenario = make_scenario("boundary", seed, shape)
     leds = scenario.led_spectra
 
@@ -198,18 +198,18 @@ def time_estimates(shape: tuple[int, int] = (1024, 1280), tiles: int = DEFAULT_T
         tiled = tile_statistics(scenario.ambient, scenario.led_frames, scenario.spec, tiles, bin_factor=bin_factor)
         estimate_local(tiled, leds, method)
 
-    def median_time(run) -> float:  # noqa: ANN001
+    runs = {"global_s": global_run, "auto_s": lambda: local_run("auto"), "local_s": lambda: local_run("local")}
+    for run in runs.values():
         run()  # warm caches
-        times = []
-        for _ in range(repeats):
+    # Interleaved repeats, best of each: the least disturbed by other work on the machine.
+    times: dict[str, list[float]] = {name: [] for name in runs}
+    for _ in range(repeats):
+        for name, run in runs.items():
             start = time.perf_counter()
             run()
-            times.append(time.perf_counter() - start)
-        return float(np.median(times))
-
+            times[name].append(time.perf_counter() - start)
     timing = {"shape": list(shape), "tiles": tiles, "bin_factor": bin_factor, "repeats": repeats,
-              "global_s": median_time(global_run), "auto_s": median_time(lambda: local_run("auto")),
-              "local_s": median_time(lambda: local_run("local"))}
+              **{name: float(min(values)) for name, values in times.items()}}
     timing["auto_ratio"] = timing["auto_s"] / timing["global_s"]
     timing["local_ratio"] = timing["local_s"] / timing["global_s"]
     return timing

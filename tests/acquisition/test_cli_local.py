@@ -56,15 +56,15 @@ def run_json(capsys: pytest.CaptureFixture[str], *argv: str) -> dict:
 
 
 def test_estimate_global_keeps_the_contract(sequences: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
-    payload = run_json(capsys, "estimate", str(sequences["boundary"]), "--json")
+    payload = run_json(capsys, "estimate", str(sequences["boundary"]), "--method", "global", "--json")
     assert payload["method"] == "global" and payload["solver"] == "tikhonov"
     assert len(payload["spectrum"]) == len(payload["wavelengths_nm"]) and len(payload["ambient_weights"]) == 7
     assert "tiles" not in payload
 
 
 def test_estimate_auto_uniform_is_the_global_estimate(sequences: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
-    global_payload = run_json(capsys, "estimate", str(sequences["uniform"]), "--json")
-    payload = run_json(capsys, "estimate", str(sequences["uniform"]), "--method", "auto", "--json")
+    global_payload = run_json(capsys, "estimate", str(sequences["uniform"]), "--method", "global", "--json")
+    payload = run_json(capsys, "estimate", str(sequences["uniform"]), "--json")  # auto is the default
     assert payload["method"] == "global" and payload["method_requested"] == "auto"
     assert payload["model_selection"]["chosen"] == "global"
     assert payload["model_selection"]["scores"]["global"] == 1.0
