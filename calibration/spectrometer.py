@@ -250,28 +250,6 @@ def subtract_dark(measurement: SpectrometerMeasurement, dark: SpectrometerMeasur
     )
 
 
-def _uniform_grid(measurement: SpectrometerMeasurement) -> tuple[WavelengthGrid, np.ndarray]:
-    """A uniform grid and values for the samples: as is if uniform, else box-car bin means."""
-    wavelengths, values = measurement.wavelengths_nm, measurement.values
-    if measurement.uniform:
-        step = float(np.mean(np.diff(wavelengths)))
-        return WavelengthGrid(float(wavelengths[0]), float(wavelengths[0]) + step * (wavelengths.size - 1), step), values
-    # 1-nm bins, or finer for an instrument sampling much more finely than 1 nm everywhere.
-    coarsest = float(np.max(np.diff(wavelengths)))
-    step = 1.0 / min(10, math.floor(1.0 / coarsest)) if coarsest < 0.5 else 1.0
-    start = math.ceil(wavelengths[0] / step) * step
-    stop = math.floor(wavelengths[-1] / step) * step
-    grid = WavelengthGrid(start, stop, step)
-    centres = grid.wavelengths_nm
-    edges = np.clip(np.concatenate([[centres[0] - step / 2], centres + step / 2]), wavelengths[0], wavelengths[-1])
-    # Box-car of the piecewise-linear curve through the samples: differences of its running
-    # integral at the bin edges (the end bins are half inside the measured range).
-    running = np.concatenate([[0.0], np.cumsum(np.diff(wavelengths) * (values[1:] + values[:-1]) / 2)])
-    integral = np.interp(edges, wavelengths, running)
-    binned = np.diff(integral) / np.diff(edges)
-    return grid, binned
-
-
 def measurement_to_spectra(
     measurements: list[SpectrometerMeasurement] | SpectrometerMeasurement, grid: WavelengthGrid,
     unit: SpectralUnit | None = None,
@@ -294,10 +272,9 @@ def measurement_to_spectra(
     unit = unit or measurements[0].unit
     columns = []
     for measurement in measurements:
-        own_grid, values = _uniform_grid(measurement)
         try:
-            native = Spectra(own_grid, values, (measurement.name,), kind="spd", unit=measurement.unit,
-                             source=measurement.source)
+            native = Spectra.from_samples(measurement.wavelengths_nm, measurement.values, (measurement.name,),
+                                          kind="spd", unit=measurement.unit, source=measurement.source)
             columns.append(native.to_unit(unit).resample(grid, outside="zero").values[:, 0])
         except SpectralDataError as err:
             raise CalibrationError(f"{measurement.source}: {err}") from err

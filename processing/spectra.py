@@ -258,6 +258,62 @@ class Spectra:
         fields.update(changes)
         return Spectra(**fields)  # type: ignore[arg-type]
 
+    @classmethod
+    def from_samples(
+        cls, wavelengths_nm: Sequence[float] | np.ndarray, values: np.ndarray, names: Sequence[str],
+        kind: SpectralKind = "spd", unit: SpectralUnit = "energy", source: str = "",
+    ) -> Spectra:
+        """Spectra from samples on any increasing wavelengths (an instrument's own grid).
+
+        Uniform samples are kept as they are. Non-uniform ones (spectrometers sample unevenly)
+        become box-car means over 1-nm bins (finer if every sample step is much finer): the
+        running integral of the piecewise-linear curve through the samples, differenced at the
+        bin edges — what a coarser spectral sample means. This and :meth:`resample` are the only
+        places where msflash changes the sampling of a spectrum.
+
+        Parameters
+        ----------
+        wavelengths_nm
+            Increasing wavelengths, shape (n_samples,).
+        values
+            Shape (n_samples,) or (n_samples, n).
+        names, kind, unit, source
+            As for :class:`Spectra`.
+
+        Examples
+        --------
+        >>> s = Spectra.from_samples([400.0, 400.5, 402.0], [1.0, 1.0, 1.0], ("flat",))
+        >>> s.grid.step_nm, s.values[:, 0].tolist()
+        (1.0, [1.0, 1.0, 1.0])
+        """
+        where = source or "samples"
+        wavelengths = np.asarray(wavelengths_nm, dtype=float)
+        data = np.asarray(values, dtype=float)
+        data = data[:, None] if data.ndim == 1 else data
+        if wavelengths.ndim != 1 or wavelengths.size < 2 or data.shape[0] != wavelengths.size:
+            raise SpectralDataError(
+                f"{where}: {wavelengths.size} wavelengths for values of shape {data.shape}; expected one row per wavelength"
+            )
+        steps = np.diff(wavelengths)
+        if not np.all(np.isfinite(wavelengths)) or np.any(steps <= 0):
+            raise SpectralDataError(f"{where}: wavelengths must be finite and increase strictly")
+        step = float(np.mean(steps))
+        if np.max(np.abs(steps - step)) <= max(_GRID_TOLERANCE_NM, 1e-6 * step):
+            grid = WavelengthGrid(float(wavelengths[0]), float(wavelengths[0]) + step * (wavelengths.size - 1), step)
+            return cls(grid, data, tuple(names), kind, unit, source)
+        coarsest = float(np.max(steps))
+        bin_nm = 1.0 / min(10, int(np.floor(1.0 / coarsest))) if coarsest < 0.5 else 1.0
+        start = float(np.ceil(wavelengths[0] / bin_nm) * bin_nm)
+        stop = float(np.floor(wavelengths[-1] / bin_nm) * bin_nm)
+        grid = WavelengthGrid(start, stop, bin_nm)
+        centres = grid.wavelengths_nm
+        edges = np.clip(np.concatenate([[centres[0] - bin_nm / 2], centres + bin_nm / 2]), wavelengths[0], wavelengths[-1])
+        binned = np.empty((grid.size, data.shape[1]))
+        for column in range(data.shape[1]):
+            running = np.concatenate([[0.0], np.cumsum(steps * (data[1:, column] + data[:-1, column]) / 2)])
+            binned[:, column] = np.diff(np.interp(edges, wavelengths, running)) / np.diff(edges)
+        return cls(grid, binned, tuple(names), kind, unit, source)
+
     # -- units and normalisation ------------------------------------------------------------
     def to_unit(self, unit: SpectralUnit) -> Spectra:
         """The same spectra in another unit (see the module notes); reflectances are unchanged."""
