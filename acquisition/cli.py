@@ -28,6 +28,7 @@ COMMAND_MODULES = (
     "acquisition.cli_study",
     "acquisition.cli_evaluate",
     "acquisition.cli_calibrate",
+    "acquisition.cli_local",
 )
 """Modules contributing subcommands, in help order."""
 

@@ -8,7 +8,6 @@ dark frames) exits with status 2 and one ``msflash: error:`` line.
 from __future__ import annotations
 
 import argparse
-import warnings
 from collections.abc import Callable
 from pathlib import Path
 

@@ -126,7 +126,7 @@ def _solve_penalised(statistics: SequenceStatistics, led_values: np.ndarray, pen
     return minimise_quadratic(hessian, linear, where=where).x
 
 
-def _gcv_alpha(statistics: SequenceStatistics, roughness: np.ndarray) -> float:
+def gcv_alpha(statistics: SequenceStatistics, roughness: np.ndarray) -> float:
     """The dimensionless α minimising generalised cross-validation for the Tikhonov estimate.
 
     ``GCV(λ) = N · RSS(λ) / (N − tr A(λ))²`` with ``tr A(λ) = tr(G (G + λ LᵀL)⁻¹)``, all from the
@@ -163,7 +163,7 @@ def _weights_nonneg(statistics: SequenceStatistics, led_values: np.ndarray, alph
 
 def _weights_tikhonov(statistics: SequenceStatistics, led_values: np.ndarray, alpha: float | str) -> tuple[np.ndarray, float]:
     roughness = np.diff(led_values, axis=0)
-    alpha_value = _gcv_alpha(statistics, roughness) if alpha == "auto" else float(alpha)
+    alpha_value = gcv_alpha(statistics, roughness) if alpha == "auto" else float(alpha)
     weight = alpha_value * _penalty_scale(statistics, roughness)
     return _solve_penalised(statistics, led_values, roughness, weight, True, "tikhonov estimate"), alpha_value
 

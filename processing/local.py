@@ -42,7 +42,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from processing.ambient import AMBIENT_METHODS, AmbientEstimate, _gcv_alpha, estimate_ambient
+from processing.ambient import AMBIENT_METHODS, AmbientEstimate, gcv_alpha, estimate_ambient
 from processing.errors import SolverError, SpectralDataError
 from processing.spectra import Spectra, require_unit
 from processing.statistics import FrameStackSpec, SequenceStatistics
@@ -69,7 +69,7 @@ def tile_edges(n_blocks: int, n_tiles: int) -> np.ndarray:
     Examples
     --------
     >>> tile_edges(10, 4).tolist()
-    [0, 2, 5, 7, 10]
+    [0, 2, 5, 8, 10]
     """
     if n_tiles < 1 or n_blocks < n_tiles:
         raise SpectralDataError(f"tiles: {n_tiles} tiles over {n_blocks} blocks; expected 1 ≤ tiles ≤ blocks "
@@ -373,7 +373,7 @@ def select_model(tiles: TiledStatistics, led_spectra: Spectra, alpha: float | No
     penalty = roughness.T @ roughness
     total = tiles.total()
     if alpha is None:
-        alpha = _gcv_alpha(total, roughness)
+        alpha = gcv_alpha(total, roughness)
     # Global model without tile t: all statistics minus tile t's.
     global_gram = total.gram[None, None] - tiles.gram
     global_cross = total.cross[None, None] - tiles.cross
