@@ -78,8 +78,11 @@ def test_replayed_run_reproduces_the_estimate(tmp_path: Path, capsys: pytest.Cap
     out = tmp_path / "replayed"
     assert main(["run", "--rig", f"replay:{RECORDED}", "--out", str(out)]) == 0
     replayed = json.loads((out / "estimate.json").read_text())
-    np.testing.assert_allclose(replayed["spectrum"], expected["spectrum"], rtol=1e-12, atol=0)
-    np.testing.assert_allclose(replayed["ambient_weights"], expected["ambient_weights"], rtol=1e-12, atol=0)
+    # `estimate` (method auto, global chosen) sums per-tile statistics, `run` the whole frame at once:
+    # the same numbers in another summation order, so agreement is to rounding, not bit for bit.
+    assert expected["method"] == "global"
+    np.testing.assert_allclose(replayed["spectrum"], expected["spectrum"], rtol=1e-9, atol=0)
+    np.testing.assert_allclose(replayed["ambient_weights"], expected["ambient_weights"], rtol=1e-9, atol=0)
     sequence = read_sequence(out / "sequence")
     assert sequence.complete and len(sequence.frames) == 9  # the flash matched the recorded flash
     recorded = read_sequence(RECORDED)
