@@ -3,9 +3,12 @@
 The ``aravis-fake`` rig (AravisCamera on the fake at 127.0.0.1, booth emulator on a pty, the real
 ``LedBooth`` driver) runs booth master: the booth pulses the trigger once per period, so the
 camera runs at a fixed frame rate (``frame_rate_hz``; the exposure is what fills the rest of the
-period, :func:`acquisition.capture.booth_period_us`). Each run captures ambient + k LEDs, then
-estimates the ambient from the frames in memory, solves the complementary flash, predicts its
-exposure, loads it as a one-step table and captures the flash frame — what ``msflash run`` does.
+period, :func:`acquisition.capture.booth_period_us`). Each run is one stream of ambient + k LEDs
++ flash (:func:`acquisition.capture.run_capture_with_flash`): the table is armed with the flash
+step held; when the last LED frame arrives the ambient is estimated from the frames in memory
+(:class:`acquisition.flash_session.FlashSession`, prepared once per rig), the complementary flash
+solved, its exposure predicted, and one ``PSET`` releases the held step — what ``msflash run``
+does. Frames are written by a writer thread (:mod:`acquisition.async_writer`).
 
 Figures (one run of the bench, :func:`capture_bench`):
 
@@ -13,8 +16,8 @@ Figures (one run of the bench, :func:`capture_bench`):
   divided by (k + 2) frame periods — the ideal of a camera streaming k + 2 frames back to back.
   Target ≤ 1.15 (median over runs; each run's ratio is listed).
 - ``latency_ms``: from the last LED frame's arrival (``next_frame`` returns it) to the booth's
-  flash trigger pulse: writing that frame, estimation, flash solving, exposure, the serial
-  commands that load, arm and start the flash step, and the booth's LED settle time. Median and
+  flash trigger pulse: handing that frame to the writer, estimation, flash solving, exposure, the
+  ``PSET`` round trip and the booth's LED settle time. Median and
   max over the runs. Targets: median ≤ 5 ms, max below one frame period at 60 fps (16.7 ms).
   ``compute_ms`` is the estimation + solving part alone.
 
@@ -30,9 +33,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from acquisition.capture import READOUT_US, TRIGGER_PULSE_US, run_capture
+from acquisition.capture import READOUT_US, TRIGGER_PULSE_US
 from acquisition.plan import CapturePlan
 
 WALL_RATIO_TARGET = 1.15
@@ -54,9 +55,10 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
     """
     import warnings
 
-    from acquisition import analysis
-    from acquisition.cli_run import _InMemorySequence
+    from acquisition.async_writer import AsyncSequenceWriter
+    from acquisition.capture import run_capture_with_flash
     from acquisition.exposure import ExposurePolicy, flash_exposure
+    from acquisition.flash_session import FlashSession
     from acquisition.rig import open_aravis_fake_rig
     from acquisition.sequence_format import SequenceWriter
 
@@ -92,37 +94,45 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
         emulator.on_trigger_out = timed_pulse
         info = camera.info
         policy = ExposurePolicy()
+        wavelengths, seq_camera, leds = rig.sequence_header()
+        session: FlashSession | None = None
         for run in range(runs + 1):  # run 0 warms up (imports, first stream) and is not counted
             arrivals.clear()
             pulses.clear()
-            wavelengths, seq_camera, leds = rig.sequence_header()
             writer = SequenceWriter(Path(scratch) / f"run{run}", wavelengths_nm=wavelengths, spectral_unit="energy",
                                     camera=seq_camera, leds=leds)
-            frames = []
+            if session is None:  # once per rig: LED/camera model, target response
+                session = FlashSession.prepare(writer.sequence)
+            session.begin()
             plan = CapturePlan.ambient_then_each_led(n_leds, exposure_us, **timing)  # type: ignore[arg-type]
+            mark: dict[str, float] = {}
+
+            def decide(frames, session=session, mark=mark):
+                mark["last_arrival"] = arrivals[-1]
+                mark["pulses"] = len(pulses)
+                began = time.perf_counter()
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    levels = session.decide("complementary", sanitise=True).levels
+                flash_us = min(flash_exposure(frames[0].pixels, exposure_us, [f.pixels for f in frames[1:]],
+                                              [exposure_us] * n_leds, levels, info.black_level, info.white_level,
+                                              (1.0, exposure_us), policy), exposure_us)
+                mark["compute"] = time.perf_counter() - began
+                return levels, flash_us
+
+            def keep(step, frame, _entry, session=session) -> None:
+                if step.role != "flash":
+                    session.add(frame, step.role, step.led_levels)
+
             started = time.perf_counter()
-            run_capture(camera, rig.booth, plan, writer, on_frame=lambda _s, frame, _e, kept=frames: kept.append(frame))
-            last_arrival = arrivals[-1]
-            n_pulses = len(pulses)
-            computed = time.perf_counter()
-            stack = analysis.load_frame_stack(_InMemorySequence(writer.sequence, frames))  # type: ignore[arg-type]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                estimate = analysis.estimate_sequence(writer.sequence, stack=stack)
-                weights = analysis.solve_sequence_flash(writer.sequence, "complementary",
-                                                        np.nan_to_num(estimate.ambient_weights)).flash_weights
-            levels = np.clip(np.nan_to_num(weights), 0.0, 1.0)
-            flash_us = min(flash_exposure(frames[0].pixels, exposure_us, [f.pixels for f in frames[1:]],
-                                          [exposure_us] * n_leds, levels, info.black_level, info.white_level,
-                                          (1.0, exposure_us), policy), exposure_us)
-            computed = time.perf_counter() - computed
-            run_capture(camera, rig.booth, CapturePlan.single(levels, flash_us, **timing), writer)  # type: ignore[arg-type]
-            finished = arrivals[-1]
+            with AsyncSequenceWriter(writer) as background:
+                run_capture_with_flash(camera, rig.booth, plan, background, decide, on_frame=keep)
+                finished = arrivals[-1]
             if run == 0:
                 continue
             ratios.append((finished - started) / ((n_leds + 2) * period_us * 1e-6))
-            latencies.append((pulses[n_pulses] - last_arrival) * 1e3)
-            computes.append(computed * 1e3)
+            latencies.append((pulses[int(mark["pulses"])] - mark["last_arrival"]) * 1e3)
+            computes.append(mark["compute"] * 1e3)
     period_ms = period_us * 1e-3
     report: dict[str, Any] = {
         "format": f"{width}x{height} {pixel_format}, booth master at {frame_rate_hz:g} fps, {n_leds} LEDs",

@@ -27,17 +27,33 @@ count ahead of the frames received when a frame times out, or a ``TRIG`` whose s
 plan's raises :class:`DroppedFrameError` naming the missing step. Frames already written stay on
 disk (the writer keeps the sequence readable with ``complete: false``).
 
+The flash in the same run (:func:`run_capture_with_flash`): the plan gets one more step, a
+placeholder ``flash`` step, and the camera keeps streaming from the ambient frame to the flash
+frame. When the last LED frame arrives, ``decide(frames)`` computes the flash levels and
+exposure; the camera's plan takes them and the booth gets them — host paced: ``SET`` then the
+software trigger as for any step; booth and camera master: the table was loaded with the flash
+step *held* (``PADD … HOLD``), and one ``PSET`` (one serial round trip) releases it with its
+levels. A held step is never exposed with stale levels: the booth waits at it with the LEDs off
+and no trigger (booth master) or reports an exposure during it as ``TRIG <n> HOLD`` (camera
+master), which the pairing refuses (``docs/booth-protocol.md`` §5).
+
+The writer may be a :class:`~acquisition.sequence_format.SequenceWriter` or an
+:class:`~acquisition.async_writer.AsyncSequenceWriter` (frames handed to a writer thread: the
+loop never waits for the disk).
+
 Whatever happens the LEDs go off (``OFF`` also aborts a running table) and the camera stops in
 ``finally``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
 from collections.abc import Callable, Sequence
-from typing import Protocol
+from contextlib import nullcontext
+from typing import Any, Protocol
 
 from acquisition.camera import Camera, RawFrame
 from acquisition.errors import DroppedFrameError, FrameTimeoutError
@@ -71,8 +87,12 @@ class LedControl(Protocol):
 class SequencedLedControl(LedControl, Protocol):
     """What booth- and camera-master capture need: the pattern table and its events."""
 
-    def load_pattern(self, steps: Sequence[Sequence[float]]) -> None:
-        """Replace the pattern table."""
+    def load_pattern(self, steps: Sequence[Sequence[float]], *, held: Sequence[int] = ()) -> None:
+        """Replace the pattern table; ``held`` steps wait for :meth:`set_step` (never exposed before)."""
+        ...
+
+    def set_step(self, index: int, levels: Sequence[float]) -> None:
+        """Set one step's levels (also while running) and release it if held."""
         ...
 
     def arm(self, mode: str, *, settle_us: int = ..., pulse_us: int = ..., period_us: int = ...) -> None:
@@ -96,6 +116,74 @@ def booth_period_us(plan: CapturePlan) -> int:
     """Booth-master step period: settle + pulse + longest exposure + deadtime + readout, in µs."""
     longest = max((s.exposure_us for s in plan.steps), default=0.0)
     return int(math.ceil(plan.settle_s * 1e6 + TRIGGER_PULSE_US + longest + plan.deadtime_s * 1e6 + READOUT_US))
+
+
+FlashDecide = Callable[[list[RawFrame]], tuple[Sequence[float], float]]
+"""``decide(frames) -> (levels, exposure_us)``: the flash step from the frames captured so far."""
+
+
+def run_capture_with_flash(
+    camera: Camera,
+    booth: LedControl,
+    plan: CapturePlan,
+    writer: Any,
+    decide: FlashDecide,
+    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
+) -> list[SequenceFrame]:
+    """Capture ``plan`` and then a flash frame whose levels ``decide`` computes, in one stream.
+
+    ``decide`` runs on the capturing thread right after the last frame of ``plan`` arrived; it
+    returns the flash levels and exposure. Booth master: the step period is fixed when the table
+    is armed, so the flash exposure is capped at the plan's longest exposure (logged). Returns the
+    entries of every frame, the flash last. Errors as :func:`run_capture`.
+    """
+    if not plan.steps:
+        raise ValueError("run_capture_with_flash: the plan has no steps; expected ambient + LED steps")
+    longest = max(s.exposure_us for s in plan.steps)
+    placeholder = CaptureStep(len(plan.steps), "flash", (0.0,) * plan.n_leds, longest, plan.steps[0].gain)
+    full = dataclasses.replace(plan, steps=(*plan.steps, placeholder))
+
+    def flash_step(frames: list[RawFrame]) -> CaptureStep:
+        levels, exposure_us = decide(frames)
+        levels = tuple(float(v) for v in levels)
+        exposure_us = float(exposure_us)
+        if plan.trigger == "booth" and exposure_us > longest:
+            log.warning("flash exposure %.0f µs capped at %.0f µs: the booth's period was fixed for the "
+                        "longest step when the table was armed", exposure_us, longest)
+            exposure_us = longest
+        return dataclasses.replace(placeholder, led_levels=levels, exposure_us=exposure_us)
+
+    if plan.trigger == "software":
+        return _host_paced(camera, booth, full, writer, on_frame, flash_step)
+    if plan.trigger in ("booth", "camera"):
+        return _table_paced(camera, booth, full, writer, on_frame, flash_step)  # type: ignore[arg-type]
+    raise ValueError(f"run_capture_with_flash: plan trigger {plan.trigger!r}; expected software, booth or camera")
+
+
+def _replan(camera: Camera, plan: CapturePlan, index: int) -> None:
+    """Give a streaming camera its plan with step ``index`` filled in, before that step's trigger.
+
+    The Camera protocol has no call for it yet: the implementations read their prepared plan
+    (``_plan``) when a step is triggered (Aravis with software trigger, the simulated camera) or,
+    with a hardware trigger line, right after the previous frame (Aravis): that step is then
+    re-applied here. ``WiredFakeCamera`` (the aravis-fake rig) wraps an ``AravisCamera`` as
+    ``.aravis``. A camera offering ``update_plan(plan, index)`` is asked instead.
+    """
+    update = getattr(camera, "update_plan", None)
+    if update is not None:
+        update(plan, index)
+        return
+    targets = [t for t in (camera, getattr(camera, "aravis", None)) if t is not None and hasattr(t, "_plan")]
+    if not targets:
+        raise TypeError(f"{type(camera).__name__}: cannot change a step of a prepared plan; expected a camera "
+                        "with update_plan(plan, index) (or use two captures for the flash)")
+    for target in targets:
+        with getattr(target, "_condition", None) or nullcontext():
+            target._plan = plan
+        trigger = getattr(target, "_trigger", None)
+        if (trigger is not None and getattr(trigger, "mode", "software") != "software"
+                and getattr(target, "_n_consumed", None) == index and hasattr(target, "_apply_step")):
+            target._apply_step(index, plan)  # the line-triggered step was set up after the previous frame
 
 
 def run_capture(
@@ -139,13 +227,19 @@ def _write(writer: SequenceWriter, step: CaptureStep, frame: RawFrame, written: 
 
 
 def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: SequenceWriter,
-                on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None) -> list[SequenceFrame]:
+                on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
+                flash: Callable[[list[RawFrame]], CaptureStep] | None = None) -> list[SequenceFrame]:
     written: list[SequenceFrame] = []
+    frames: list[RawFrame] = []
     previous_id: int | None = None
     try:
         camera.prepare(plan)
         camera.start()
         for step in plan.steps:
+            if flash is not None and step.index == len(plan.steps) - 1:
+                step = flash(frames)
+                plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
+                _replan(camera, plan, step.index)
             booth.set_levels(step.led_levels)
             camera.trigger()
             try:
@@ -158,6 +252,7 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Se
                     f"a frame was lost. {_saved(writer, written)}"
                 )
             previous_id = frame.frame_id
+            frames.append(frame)
             _write(writer, step, frame, written, on_frame)
     finally:
         try:
@@ -168,8 +263,11 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Se
 
 
 def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, writer: SequenceWriter,
-                 on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None) -> list[SequenceFrame]:
+                 on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
+                 flash: Callable[[list[RawFrame]], CaptureStep] | None = None) -> list[SequenceFrame]:
     written: list[SequenceFrame] = []
+    frames: list[RawFrame] = []
+    last = len(plan.steps) - 1
     mode = plan.trigger
     settle_us = int(round(plan.settle_s * 1e6))
     period_us = booth_period_us(plan) if mode == "booth" else 0
@@ -182,12 +280,20 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
         drain = getattr(booth, "pending_events", None)
         if drain is not None:
             drain()  # events of an earlier, aborted table must not pair with this one's frames
-        booth.load_pattern([step.led_levels for step in plan.steps])
+        if flash is not None:  # the flash step is held until its levels are known (PSET)
+            booth.load_pattern([step.led_levels for step in plan.steps], held=(last,))
+        else:
+            booth.load_pattern([step.led_levels for step in plan.steps])
         booth.arm(mode, settle_us=settle_us, pulse_us=TRIGGER_PULSE_US, period_us=period_us)
         camera.prepare(plan)
         camera.start()
         booth.start()
         for number, step in enumerate(plan.steps, start=1):
+            if flash is not None and step.index == last:
+                step = flash(frames)
+                plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
+                _replan(camera, plan, step.index)
+                booth.set_step(step.index, step.led_levels)
             if mode == "camera":
                 if number > 1:
                     time.sleep(plan.settle_s)  # the next step's LEDs settle between exposures
@@ -220,6 +326,7 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
                     f"step {step.index} ({step.label}): the booth exposed table step {paired.index} on trigger "
                     f"{trigger}; expected step {step.index} — a trigger was missed or doubled. {_saved(writer, written)}"
                 )
+            frames.append(frame)
             _write(writer, paired, frame, written, on_frame, trigger=trigger)
         done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
         log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))

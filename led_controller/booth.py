@@ -248,10 +248,13 @@ class LedBooth:
             raise ValueError(f"set_watchdog: {timeout_s!r} s out of range; expected 0 or 0.05..600 s")
         self._command(Command.WATCHDOG, ms)
 
-    def load_pattern(self, steps: Sequence[Sequence[float]]) -> None:
+    def load_pattern(self, steps: Sequence[Sequence[float]], *, held: Sequence[int] = ()) -> None:
         """Replace the booth's pattern table (each step: one level per channel, in [0, 1]).
 
         Every step is checked before anything is sent, so a bad step never leaves a half table.
+        Steps listed in ``held`` are loaded as placeholders (``PADD … HOLD``): the booth does not
+        expose them (no trigger, LEDs off) until :meth:`set_step` gives their levels, even while
+        the sequence runs; their levels in ``steps`` are not used until then.
 
         Raises
         ------
@@ -259,6 +262,9 @@ class LedBooth:
             If the table is empty, too long for the booth, or a step is malformed.
         """
         info = self.info
+        held = tuple(int(i) for i in held)
+        if any(not 0 <= i < len(steps) for i in held):
+            raise ValueError(f"load_pattern: held steps {list(held)}; expected indices in 0..{len(steps) - 1}")
         if not 1 <= len(steps) <= info.max_steps:
             raise ValueError(
                 f"load_pattern: {len(steps)} steps; expected 1..{info.max_steps} (the booth's table size)"
@@ -271,13 +277,32 @@ class LedBooth:
                 raise ValueError(f"load_pattern: step {i}: {err}") from err
         self._command(Command.PATTERN_CLEAR)
         for i, words in enumerate(encoded):
-            reply, raw = self._command(Command.PATTERN_ADD, *words)
+            flag = (protocol.HOLD_FLAG,) if i in held else ()
+            reply, raw = self._command(Command.PATTERN_ADD, *words, *flag)
             index = protocol.parse_count(reply, raw, command=Command.PATTERN_ADD, where=self._name)
             if index != i:
                 raise BoothProtocolError(
                     f"{self._name}: PADD stored step {i} at index {index}; expected index {i}",
                     command=Command.PATTERN_ADD, expected=f"'OK PADD {i}'", raw=raw,
                 )
+
+    def set_step(self, index: int, levels: Sequence[float]) -> None:
+        """Set the levels of pattern step ``index`` (``PSET``) and release it if it was held.
+
+        Allowed while the sequence runs, for a step the booth has not reached or is holding at:
+        the booth then exposes it with these levels (after ``settle_us``). One round trip.
+
+        Raises
+        ------
+        ValueError
+            If the count differs from the channel count or a level is outside [0, 1].
+        BoothError
+            ``E_RANGE`` for a step beyond the table, ``E_STATE`` for a step already exposed.
+        """
+        if isinstance(index, bool) or not isinstance(index, int) or index < 0:
+            raise ValueError(f"set_step: index {index!r}; expected a non-negative integer")
+        words = protocol.encode_levels(levels, self.info.channels)
+        self._command(Command.PATTERN_SET, index, *words)
 
     def arm(
         self,

@@ -27,6 +27,7 @@ from led_controller.protocol import (
     MAX_LINE,
     PROTOCOL_VERSION,
     Command,
+    HOLD_FLAG,
     ErrorCode,
     Event,
     Mode,
@@ -160,6 +161,8 @@ class BoothEmulator:
         self._inbuf = bytearray()
         self._codes = [0] * self.channels
         self._pattern: list[list[int]] = []
+        self._held: list[bool] = []
+        self._holding = False
         self._state = "IDLE"
         self._mode: Mode | None = None
         self._settle_us = self._pulse_us = self._period_us = 0
@@ -199,6 +202,26 @@ class BoothEmulator:
             return self._triggers
 
     @property
+    def holding(self) -> int | None:
+        """Get the step the sequence is waiting at for its ``PSET`` (LEDs off), or None."""
+        with self._lock:
+            return self._step if self._holding else None
+
+    @property
+    def held_steps(self) -> tuple[int, ...]:
+        """Get the table steps still held (loaded with ``PADD … HOLD`` and not yet ``PSET``)."""
+        with self._lock:
+            return tuple(i for i, held in enumerate(self._held) if held)
+
+    def next_due_s(self) -> float | None:
+        """Seconds until the next timed action (booth-master step, delayed reply), or None."""
+        with self._lock:
+            times = [d[0] for d in self._deferred]
+            if self._next_action is not None:
+                times.append(self._next_action[0])
+            return max(0.0, min(times) - self._clock()) if times else None
+
+    @property
     def pattern(self) -> tuple[tuple[float, ...], ...]:
         """Get the loaded pattern table (levels in [0, 1])."""
         with self._lock:
@@ -216,7 +239,10 @@ class BoothEmulator:
                 return
             if edge:
                 self._triggers += 1
-                self._event(f"{Event.TRIGGER} {self._triggers} {self._step}")
+                # An exposure during a held step (LEDs off, levels not given yet) is reported as
+                # such, never as that step: the host must not take it for the step's frame.
+                step = HOLD_FLAG if self._holding else str(self._step)
+                self._event(f"{Event.TRIGGER} {self._triggers} {step}")
             else:
                 self._advance()
 
@@ -382,6 +408,7 @@ class BoothEmulator:
             Command.OFF: self._cmd_off,
             Command.PATTERN_CLEAR: self._cmd_pattern_clear,
             Command.PATTERN_ADD: self._cmd_pattern_add,
+            Command.PATTERN_SET: self._cmd_pattern_set,
             Command.ARM: self._cmd_arm,
             Command.START: self._cmd_start,
             Command.NEXT: self._cmd_next,
@@ -430,15 +457,34 @@ class BoothEmulator:
         self._no_args(args)
         self._editable()
         self._pattern = []
+        self._held = []
         return ""
 
     def _cmd_pattern_add(self, args: list[str]) -> str:
-        codes = self._levels_arg(args)
+        held = len(args) == self.channels + 1 and args[-1] == HOLD_FLAG
+        codes = self._levels_arg(args[:-1] if held else args)
         self._editable()
         if len(self._pattern) >= self.max_steps:
             raise _Refused(ErrorCode.FULL, "pattern table full")
         self._pattern.append(codes)
+        self._held.append(held)
         return str(len(self._pattern) - 1)
+
+    def _cmd_pattern_set(self, args: list[str]) -> str:
+        if len(args) != self.channels + 1 or not args[0].isdigit() or len(args[0]) > 5:
+            raise _Refused(ErrorCode.ARGUMENT, f"PSET <step> and {self.channels} levels")
+        index = int(args[0])
+        codes = self._levels_arg(args[1:])
+        if index >= len(self._pattern):
+            raise _Refused(ErrorCode.RANGE, "no such step")
+        running = self._state == "RUNNING"
+        if running and (index < self._step or (index == self._step and not self._holding)):
+            raise _Refused(ErrorCode.STATE, "step already exposed")
+        self._pattern[index] = codes
+        self._held[index] = False
+        if running and self._holding and index == self._step:
+            self._release_hold()
+        return ""
 
     def _editable(self) -> None:
         if self._state in ("ARMED", "RUNNING"):
@@ -459,6 +505,7 @@ class BoothEmulator:
             raise _Refused(ErrorCode.RANGE, "period shorter than settle plus pulse")
         self._mode, self._settle_us, self._pulse_us, self._period_us = mode, settle, pulse, period
         self._state, self._step, self._triggers = "ARMED", -1, 0
+        self._holding = False
         return ""
 
     def _cmd_start(self, args: list[str]) -> str:
@@ -480,6 +527,8 @@ class BoothEmulator:
         if not self._pattern or self._step + 1 >= len(self._pattern):
             self._finish()
             return "DONE"
+        if self._held[self._step + 1]:
+            raise _Refused(ErrorCode.STATE, "next step held; expected PSET first")
         self._apply_step(self._step + 1)
         self._triggers += 1
         return (self._settle_us / 1e6, str(self._step))
@@ -511,9 +560,26 @@ class BoothEmulator:
 
     # -- sequencing -------------------------------------------------------------------
 
-    def _apply_step(self, index: int) -> None:
+    def _apply_step(self, index: int) -> bool:
+        """Apply step ``index``; a held step instead waits for its PSET with the LEDs off (False)."""
         self._step = index
+        if self._held[index]:
+            self._holding = True
+            self._codes = [0] * self.channels
+            return False
+        self._holding = False
         self._codes = list(self._pattern[index])
+        return True
+
+    def _release_hold(self) -> None:
+        """PSET reached the step being held: apply it now and carry on from here."""
+        self._holding = False
+        self._codes = list(self._pattern[self._step])
+        if self._mode == Mode.BOOTH:
+            now = self._clock()
+            # The step's slot starts now: settle, pulse, and the later steps keep their period.
+            self._t0 = now - self._step * self._period_us / 1e6
+            self._next_action = (now + self._settle_us / 1e6, "pulse")
 
     def _advance(self) -> None:
         if self._step + 1 >= len(self._pattern):
@@ -524,11 +590,13 @@ class BoothEmulator:
     def _finish(self) -> None:
         self._codes = [0] * self.channels
         self._state = "DONE"
+        self._holding = False
         self._next_action = None
         self._event(f"{Event.DONE} {self._triggers}")
 
     def _all_off(self) -> None:
         self._codes = [0] * self.channels
+        self._holding = False
         self._next_action = None
         if self._state in ("ARMED", "RUNNING"):
             self._state = "IDLE"
@@ -542,7 +610,9 @@ class BoothEmulator:
             if index >= len(self._pattern):
                 self._finish()
                 return
-            self._apply_step(index)
+            if not self._apply_step(index):
+                self._next_action = None  # held: PSET resumes the sequence (_release_hold)
+                return
             self._next_action = (self._t0 + index * period + self._settle_us / 1e6, "pulse")
         else:
             self._triggers += 1
@@ -618,7 +688,10 @@ class PtyBoothServer:
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
-                ready, _, _ = select.select([self._master, self._wake_r], [], [], self._poll_s)
+                # Wake for the emulator's next timed action (booth-master pulse), not only every poll.
+                due = self.emulator.next_due_s()
+                wait = self._poll_s if due is None else min(self._poll_s, due)
+                ready, _, _ = select.select([self._master, self._wake_r], [], [], wait)
                 if self._master in ready:
                     data = os.read(self._master, 4096)
                     if data:

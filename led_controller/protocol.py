@@ -55,6 +55,7 @@ class Command(StrEnum):
     OFF = "OFF"
     PATTERN_CLEAR = "PCLR"
     PATTERN_ADD = "PADD"
+    PATTERN_SET = "PSET"
     ARM = "ARM"
     START = "START"
     NEXT = "NEXT"
@@ -62,6 +63,11 @@ class Command(StrEnum):
     STATUS = "STAT"
     WATCHDOG = "WDOG"
     PING = "PING"
+
+
+HOLD_FLAG = "HOLD"
+"""Trailing word of ``PADD <levels> HOLD``: the step is a placeholder the booth will not expose
+until ``PSET`` gives its levels (``docs/booth-protocol.md`` §4–5)."""
 
 
 class Event(StrEnum):

@@ -1,0 +1,174 @@
+"""Write a sequence from a background thread so the capture loop never waits for the disk.
+
+:class:`AsyncSequenceWriter` wraps a :class:`~acquisition.sequence_format.SequenceWriter` (the
+format and its crash-safety contract are unchanged: each frame file is written, then
+``sequence.json`` replaced atomically, in capture order). :meth:`AsyncSequenceWriter.add_frame`
+only queues the frame and returns at once with the entry it *will* have; one writer thread
+calls ``SequenceWriter.add_frame`` for each queued frame in order.
+
+Guarantees
+----------
+- **Order**: frames reach the disk in the order they were added (one thread, a FIFO).
+- **Back-pressure, never loss**: the queue is bounded (``max_queued``); when the disk falls
+  behind, ``add_frame`` blocks until there is room rather than dropping a frame.
+- **Drain on every exit a Python process survives**: leaving the ``with`` block — normally,
+  through an exception, or through ``KeyboardInterrupt`` / ``SystemExit`` (Ctrl-C, SIGTERM via
+  :func:`led_controller.booth.sigterm_as_exit`) — first writes every queued frame, then re-raises
+  the original exception. So ``sequence.json`` lists every frame captured (``complete: false``
+  after an error).
+- **SIGKILL / power loss**: what is on disk is still a readable sequence (the wrapped writer's
+  guarantee), but the frames still in the queue — at most ``max_queued`` plus the one being
+  written — are lost.
+- **Write errors**: the first error of the writer thread (disk full, a frame the format refuses)
+  is raised by the next ``add_frame``, :meth:`flush`, :meth:`finish` or by leaving the ``with``
+  block normally; frames after it are not written (the sequence stays consistent and incomplete).
+
+Pixels are not copied: the caller must not modify an array after handing it over (camera frames,
+:class:`~acquisition.camera.RawFrame`, are read-only).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from types import TracebackType
+
+import numpy as np
+
+from acquisition.errors import RecordingError
+from acquisition.image_io import image_suffix
+from acquisition.sequence_format import FRAME_ROLES, FRAMES_DIR, Sequence, SequenceFrame, SequenceWriter
+
+log = logging.getLogger(__name__)
+
+DEFAULT_MAX_QUEUED = 16
+"""Frames that may wait for the disk before ``add_frame`` blocks (a sequence is ~10 frames)."""
+
+_STOP = object()
+
+
+class AsyncSequenceWriter:
+    """A :class:`SequenceWriter` fed through a bounded queue and a writer thread.
+
+    Parameters
+    ----------
+    writer
+        The sequence writer to feed (already created: its ``sequence.json`` exists).
+    max_queued
+        Queue bound; ``add_frame`` blocks while this many frames wait for the disk.
+    """
+
+    def __init__(self, writer: SequenceWriter, max_queued: int = DEFAULT_MAX_QUEUED) -> None:
+        if max_queued < 1:
+            raise ValueError(f"AsyncSequenceWriter: max_queued {max_queued}; expected at least 1")
+        self._writer = writer
+        self._queue: queue.Queue = queue.Queue(maxsize=max_queued)
+        self._error: BaseException | None = None
+        self._added = len(writer.sequence.frames)
+        self._written = self._added
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name=f"sequence-writer {writer.path.parent}", daemon=False)
+        self._thread.start()
+
+    # -- what SequenceWriter offers ----------------------------------------------------------
+    @property
+    def writer(self) -> SequenceWriter:
+        """The wrapped writer."""
+        return self._writer
+
+    @property
+    def path(self) -> Path:
+        """The ``sequence.json`` being written."""
+        return self._writer.path
+
+    @property
+    def sequence(self) -> Sequence:
+        """What is on disk so far (frames still queued are not listed yet; :meth:`flush` first)."""
+        return self._writer.sequence
+
+    @property
+    def queued(self) -> int:
+        """Frames handed over but not yet on disk."""
+        return self._added - self._written
+
+    def add_frame(self, pixels: np.ndarray, role: str, led_levels: Iterable[float], exposure_us: float,
+                  gain: float = 1.0, extra: Mapping | None = None) -> SequenceFrame:
+        """Queue one frame for :meth:`SequenceWriter.add_frame`; returns the entry it will be written as.
+
+        Blocks only while the queue is full (back-pressure). Raises the writer thread's error, if any.
+        """
+        self._raise_error()
+        if self._closed:
+            raise RecordingError(f"{self.path}: the asynchronous writer is closed; expected add_frame before close()")
+        pixels = np.asarray(pixels)
+        name_role = role if role in FRAME_ROLES else "frame"
+        entry = SequenceFrame(f"{FRAMES_DIR}/{self._added:03d}-{name_role}{image_suffix(pixels)}", role,  # type: ignore[arg-type]
+                              tuple(led_levels), exposure_us, gain, dict(extra or {}))
+        self._added += 1
+        self._queue.put((pixels, role, entry.led_levels, exposure_us, gain, dict(extra or {})))
+        return entry
+
+    def flush(self) -> Sequence:
+        """Wait until every queued frame is on disk; raises the writer thread's error, if any."""
+        self._queue.join()
+        self._raise_error()
+        return self._writer.sequence
+
+    def finish(self) -> Sequence:
+        """Write every queued frame, stop the thread, then mark the sequence complete."""
+        self.close()
+        self._raise_error()
+        return self._writer.finish()
+
+    def close(self) -> None:
+        """Write every queued frame and stop the writer thread; idempotent. Never raises the thread's error."""
+        if self._closed:
+            return
+        self._closed = True
+        self._queue.put(_STOP)
+        while self._thread.is_alive():
+            try:
+                self._thread.join()
+            except KeyboardInterrupt:  # a second Ctrl-C while draining: keep draining, then re-raise
+                self._thread.join()
+                raise
+
+    def __enter__(self) -> AsyncSequenceWriter:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        self.close()  # drain first, whatever happened: nothing captured is lost
+        if exc_type is None:
+            self._raise_error()
+        elif self._error is not None:
+            log.error("%s: writing failed as well: %s", self.path, self._error)
+
+    # -- the writer thread -------------------------------------------------------------------
+    def _raise_error(self) -> None:
+        if self._error is not None:
+            error = self._error
+            raise RecordingError(f"{self.path}: writing a frame failed: {error}") from error
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            try:
+                if item is _STOP:
+                    return
+                if self._error is None:  # after an error nothing more is written: the sequence stays consistent
+                    pixels, role, levels, exposure_us, gain, extra = item
+                    self._writer.add_frame(pixels, role, levels, exposure_us, gain, extra=extra)
+            except BaseException as err:  # noqa: BLE001 - handed to the capture thread
+                self._error = err
+                log.error("%s: writing a frame failed: %s", self.path, err)
+            finally:
+                if item is not _STOP:
+                    self._written += 1
+                self._queue.task_done()
+
+
+__all__ = ["DEFAULT_MAX_QUEUED", "AsyncSequenceWriter"]
