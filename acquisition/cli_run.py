@@ -6,6 +6,14 @@ matching and complementary flashes → re-capture with the chosen one (same sequ
 
 ``--sync host|booth|camera`` picks who paces the frames (DESIGN §4; :mod:`acquisition.capture`).
 
+The flash is captured in the same stream as the LED frames
+(:func:`acquisition.capture.run_capture_with_flash`): the estimate and the flash are computed
+from the frames in memory by a :class:`acquisition.flash_session.FlashSession` prepared before
+the sequence starts, as soon as the last LED frame arrives, and frames are written by a writer
+thread (:class:`acquisition.async_writer.AsyncSequenceWriter`; all queued frames are written
+before an error or Ctrl-C ends the command). A replay rig checks every plan against its
+recording up front, so there the flash stays a second capture.
+
 A degenerate estimate (the LED-only images do not determine the ambient: a non-finite condition
 number, spectrum or weight — e.g. the ``aravis-fake`` rig's test patterns) does not stop the
 capture: the flash the solvers return is still re-captured, so the sequence is complete. No
@@ -26,10 +34,12 @@ import numpy as np
 
 from acquisition import analysis, report
 from acquisition.camera import RawFrame
-from acquisition.capture import preview_frames, run_capture
+from acquisition.async_writer import AsyncSequenceWriter
+from acquisition.capture import preview_frames, run_capture, run_capture_with_flash
 from acquisition.cli_common import UsageError, dumps_json, progress
 from acquisition.cli_process import add_estimation_options
 from acquisition.errors import CaptureError
+from acquisition.flash_session import FlashSession
 from acquisition.exposure import (
     ExposurePlan,
     ExposurePolicy,
@@ -194,6 +204,12 @@ def _capture_led_sequence(rig: Rig, writer: SequenceWriter, plan: ExposurePlan, 
     capture_plan = CapturePlan.ambient_then_each_led(len(writer.sequence.leds), plan.ambient_exposure_us,
                                                     led_exposures_us=plan.led_exposures_us, trigger=SYNC_MODES[sync])
     entries = run_capture(rig.camera, rig.booth, capture_plan, writer, on_frame=keep)
+    return _led_capture(rig, writer, plan, frames, entries, stamp["t"])
+
+
+def _led_capture(rig: Rig, writer, plan: ExposurePlan, frames: list[RawFrame], entries: list[SequenceFrame],
+                 last_frame_at: float) -> _LedCapture:
+    """The LED frames with their measured SNR (reported)."""
     info = rig.camera.info
     snr, method = measure_led_snr(frames[0].pixels, frames[0].exposure_us, [f.pixels for f in frames[1:]],
                                   [f.exposure_us for f in frames[1:]], info.black_level, info.white_level,
@@ -201,7 +217,7 @@ def _capture_led_sequence(rig: Rig, writer: SequenceWriter, plan: ExposurePlan, 
                                   gain=frames[0].gain)
     names = [led.name for led in writer.sequence.leds]
     progress(f"LED SNR ({method}, median pixel): " + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, snr)))
-    return _LedCapture(plan, frames, entries, stamp["t"], snr, method)
+    return _LedCapture(plan, frames, entries, last_frame_at, snr, method)
 
 
 class _InMemorySequence:
@@ -246,29 +262,15 @@ def _run(args: argparse.Namespace) -> int:
                              "--responsivity FILE.csv (wavelength_nm, R, G, B) or a calibration with a camera section")
         exposure = _plan_exposure(rig, args)
         _report_exposure(exposure, list(rig.led_spectra.names))
-        with _writer(rig, out, exposure) as writer:
-            captured = _capture_led_sequence(rig, writer, exposure, args.sync)
-            # Estimate from the frames in memory, as written (the sequence is still open: complete is false).
-            sequence = writer.sequence
-            if args.from_disk:
-                sequence = read_sequence(writer.path.parent)
-                stack = analysis.load_frame_stack(sequence)
+        with _writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
+            if rig.name.startswith("replay:"):
+                estimate, solutions, caught, captured, flash_us, stack, decided = _run_two_captures(
+                    rig, writer, exposure, args)
             else:
-                stack = analysis.load_frame_stack(_InMemorySequence(sequence, captured.frames))  # type: ignore[arg-type]
-            estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
-            degenerate = _degenerate(estimate)
-            solutions = {}
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", TargetUnreachableWarning)
-                for mode in ("matching", "complementary"):
-                    solutions[mode] = analysis.solve_sequence_flash(sequence, mode, estimate.ambient_weights,
-                                                                    args.target)
+                estimate, solutions, caught, captured, flash_us, stack, decided = _run_one_stream(
+                    rig, writer, exposure, args)
             chosen = solutions[args.mode]
-            levels = np.clip(chosen.flash_weights, 0.0, 1.0)
-            flash_us = _flash_exposure(rig, exposure, captured, levels)
-            flash_plan = CapturePlan.single(levels, flash_us, trigger=SYNC_MODES[args.sync])
-            decided = time.perf_counter()
-            run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=_report_frame)
+            degenerate = _degenerate(estimate)
             writer.finish()
             true_ambient = rig.true_ambient
     decision_ms = (decided - captured.last_frame_at) * 1e3
@@ -298,7 +300,84 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _flash_exposure(rig: Rig, plan: ExposurePlan, captured: _LedCapture, levels: np.ndarray) -> float:
+def _solve_both(solve, weights: np.ndarray, first: str) -> tuple[dict, list]:
+    """Both flashes (``first`` solved first), with the TargetUnreachable warnings recorded."""
+    solutions = {}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", TargetUnreachableWarning)
+        for mode in (first, *(m for m in ("matching", "complementary") if m != first)):
+            solutions[mode] = solve(mode, weights)
+    return solutions, list(caught)
+
+
+def _run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, args: argparse.Namespace):
+    """Ambient + LEDs + flash in one stream, the flash decided from the frames in memory."""
+    session = FlashSession.prepare(writer.sequence, args.target, args.solver, args.alpha, args.bin)
+    n_leds = len(writer.sequence.leds)
+    frames: list[RawFrame] = []
+    stamp = {"t": 0.0, "decided": 0.0}
+    result: dict = {}
+
+    def keep(step, frame, entry) -> None:
+        if step.role != "flash":
+            session.add(frame, step.role, step.led_levels)
+            frames.append(frame)
+            stamp["t"] = time.perf_counter()
+        _report_frame(step, frame, entry)
+
+    def decide(_frames):
+        if args.from_disk:
+            sequence = read_sequence(writer.flush().directory)
+            stack = analysis.load_frame_stack(sequence)
+            estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
+        else:
+            stack = session.stack()
+            estimate = session.estimate(stack)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", TargetUnreachableWarning)
+            chosen = session.solve(args.mode, estimate.ambient_weights)
+        levels = np.clip(chosen.flash_weights, 0.0, 1.0)
+        flash_us = _flash_exposure(rig, exposure, frames, levels)
+        result.update(estimate=estimate, chosen=chosen, caught=list(caught), stack=stack, flash_us=flash_us)
+        stamp["decided"] = time.perf_counter()
+        return levels, flash_us
+
+    plan = CapturePlan.ambient_then_each_led(n_leds, exposure.ambient_exposure_us,
+                                             led_exposures_us=exposure.led_exposures_us, trigger=SYNC_MODES[args.sync])
+    entries = run_capture_with_flash(rig.camera, rig.booth, plan, writer, decide, on_frame=keep)
+    estimate = result["estimate"]
+    other = "matching" if args.mode == "complementary" else "complementary"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", TargetUnreachableWarning)
+        solutions = {args.mode: result["chosen"], other: session.solve(other, estimate.ambient_weights)}
+    captured = _led_capture(rig, writer, exposure, frames, list(entries[:-1]), stamp["t"])
+    flash_entry = entries[-1]
+    return (estimate, solutions, result["caught"] + list(caught),
+            captured, flash_entry.exposure_us, result["stack"], stamp["decided"])
+
+
+def _run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, args: argparse.Namespace):
+    """LED sequence, then the flash as a second capture (replay rigs: plans are checked up front)."""
+    captured = _capture_led_sequence(rig, writer, exposure, args.sync)
+    sequence = writer.flush()
+    if args.from_disk:
+        sequence = read_sequence(writer.path.parent)
+        stack = analysis.load_frame_stack(sequence)
+    else:
+        stack = analysis.load_frame_stack(_InMemorySequence(sequence, captured.frames))  # type: ignore[arg-type]
+    estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
+    solutions, caught = _solve_both(
+        lambda mode, weights: analysis.solve_sequence_flash(sequence, mode, weights, args.target),
+        estimate.ambient_weights, args.mode)
+    levels = np.clip(solutions[args.mode].flash_weights, 0.0, 1.0)
+    flash_us = _flash_exposure(rig, exposure, captured.frames, levels)
+    flash_plan = CapturePlan.single(levels, flash_us, trigger=SYNC_MODES[args.sync])
+    decided = time.perf_counter()
+    run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=_report_frame)
+    return estimate, solutions, caught, captured, flash_us, stack, decided
+
+
+def _flash_exposure(rig: Rig, plan: ExposurePlan, frames: list[RawFrame], levels: np.ndarray) -> float:
     """The flash frame's exposure: fixed, recorded (replay), or predicted from the frames in memory."""
     if plan.mode != "auto":
         recorded = _recorded_exposures(rig)
@@ -306,7 +385,6 @@ def _flash_exposure(rig: Rig, plan: ExposurePlan, captured: _LedCapture, levels:
             return recorded[2]
         return plan.ambient_exposure_us
     info = rig.camera.info
-    frames = captured.frames
     return flash_exposure(frames[0].pixels, frames[0].exposure_us, [f.pixels for f in frames[1:]],
                           [f.exposure_us for f in frames[1:]], levels, info.black_level, info.white_level,
                           plan.exposure_range_us, plan.policy)
@@ -320,7 +398,7 @@ def _capture(args: argparse.Namespace) -> int:
     with sigterm_as_exit(), _open(args) as rig:
         exposure = _plan_exposure(rig, args)
         _report_exposure(exposure, list(rig.led_spectra.names))
-        with _writer(rig, out, exposure) as writer:
+        with _writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
             _capture_led_sequence(rig, writer, exposure, args.sync)
             writer.finish()
     print(out / "sequence")
