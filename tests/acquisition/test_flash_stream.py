@@ -1,0 +1,141 @@
+"""Async writer (order, drain on exception, back-pressure) and the one-stream flash in each sync mode."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from acquisition.async_writer import AsyncSequenceWriter
+from acquisition.capture import run_capture_with_flash
+from acquisition.flash_session import FlashSession
+from acquisition.plan import CapturePlan
+from acquisition.rig import open_sim_rig
+from acquisition.sequence_format import SequenceWriter, read_sequence
+
+
+def _writer(rig, path: Path) -> SequenceWriter:
+    wavelengths, camera, leds = rig.sequence_header()
+    return SequenceWriter(path, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera, leds=leds)
+
+
+@pytest.fixture
+def sim_rig():
+    with open_sim_rig(n_leds=4, seed=3) as rig:
+        yield rig
+
+
+def _pixels(rig, value: int) -> np.ndarray:
+    info = rig.camera.info
+    return np.full((info.height, info.width, 3), value, dtype=np.uint16)
+
+
+def test_async_writer_keeps_order_and_drains_on_exception(sim_rig, tmp_path: Path) -> None:
+    levels = (0.0,) * 4
+    with pytest.raises(KeyboardInterrupt), _writer(sim_rig, tmp_path / "s") as inner, \
+            AsyncSequenceWriter(inner, max_queued=2) as writer:
+        for value in range(5):
+            entry = writer.add_frame(_pixels(sim_rig, 100 + value), "ambient", levels, 1000.0 + value)
+            assert entry.file == f"frames/{value:03d}-ambient.tiff"
+        raise KeyboardInterrupt
+    sequence = read_sequence(tmp_path / "s")
+    assert not sequence.complete
+    assert [f.exposure_us for f in sequence.frames] == [1000.0 + v for v in range(5)]
+    assert [int(sequence.load_frame(i)[0, 0, 0]) for i in range(5)] == [100 + v for v in range(5)]
+
+
+def test_async_writer_applies_back_pressure_instead_of_dropping(sim_rig, tmp_path: Path) -> None:
+    inner = _writer(sim_rig, tmp_path / "s")
+    gate = threading.Event()
+    real_add = inner.add_frame
+
+    def slow_add(*args, **kwargs):
+        gate.wait()
+        return real_add(*args, **kwargs)
+
+    inner.add_frame = slow_add  # type: ignore[method-assign]
+    writer = AsyncSequenceWriter(inner, max_queued=1)
+    blocked = threading.Event()
+    done = threading.Event()
+
+    def produce() -> None:
+        for value in range(3):
+            if value == 2:
+                blocked.set()
+            writer.add_frame(_pixels(sim_rig, value), "ambient", (0.0,) * 4, 1000.0)
+        done.set()
+
+    thread = threading.Thread(target=produce)
+    thread.start()
+    assert blocked.wait(10)
+    assert not done.wait(0.2)  # one frame being written, one queued: the third waits for room
+    gate.set()
+    thread.join(10)
+    assert done.is_set()
+    writer.finish()
+    assert len(read_sequence(tmp_path / "s").frames) == 3
+
+
+def test_async_writer_reports_a_write_error(sim_rig, tmp_path: Path) -> None:
+    from acquisition.errors import RecordingError
+
+    with _writer(sim_rig, tmp_path / "s") as inner, pytest.raises(RecordingError, match="writing a frame failed"):
+        writer = AsyncSequenceWriter(inner)
+        writer.add_frame(np.zeros((2, 2, 3), dtype=np.uint16), "ambient", (0.0,) * 4, 1000.0)
+        writer.add_frame(np.zeros((3, 3, 3), dtype=np.uint16), "ambient", (0.0,) * 4, 1000.0)  # size mismatch
+        writer.finish()
+
+
+@pytest.mark.parametrize("trigger", ["software", "booth", "camera"])
+def test_flash_in_the_same_stream(sim_rig, tmp_path: Path, trigger: str) -> None:
+    plan = CapturePlan.ambient_then_each_led(4, 10_000.0, trigger=trigger)
+    flash = (0.25, 0.5, 0.0, 1.0)
+    seen: list[int] = []
+    with _writer(sim_rig, tmp_path / "s") as inner, AsyncSequenceWriter(inner) as writer:
+        session = FlashSession.prepare(writer.sequence)
+
+        def keep(step, frame, _entry) -> None:
+            if step.role != "flash":
+                session.add(frame, step.role, step.led_levels)
+
+        def decide(frames):
+            seen.append(len(frames))
+            # The booth holds the flash step: nothing exposed with stale levels meanwhile.
+            if trigger != "software":
+                assert sim_rig.emulator.levels == (0.0,) * 4 or sim_rig.emulator.holding is None
+            decision = session.decide("complementary")
+            assert decision.levels.shape == (4,)
+            return flash, 8_000.0
+
+        entries = run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, decide, on_frame=keep)
+        writer.finish()
+    assert seen == [5]
+    assert [e.role for e in entries] == ["ambient"] + ["led"] * 4 + ["flash"]
+    sequence = read_sequence(tmp_path / "s")
+    assert sequence.complete and sequence.frames[-1].role == "flash"
+    assert sequence.frames[-1].exposure_us == 8_000.0 or trigger == "booth"
+    # The camera exposed the flash under exactly the levels decided (within one 16-bit step).
+    np.testing.assert_allclose(sim_rig.camera.rendered_levels[-1], flash, atol=1 / 65535)
+    np.testing.assert_allclose(sequence.frames[-1].led_levels, flash)
+    assert not sim_rig.line_errors
+
+
+def test_flash_session_matches_the_sequence_path(sim_rig, tmp_path: Path) -> None:
+    from acquisition import analysis
+    from acquisition.capture import run_capture
+
+    plan = CapturePlan.ambient_then_each_led(4, 10_000.0)
+    with _writer(sim_rig, tmp_path / "s") as writer:
+        session = FlashSession.prepare(writer.sequence)
+        run_capture(sim_rig.camera, sim_rig.booth, plan, writer,
+                    on_frame=lambda step, frame, _e: session.add(frame, step.role, step.led_levels))
+        writer.finish()
+    sequence = read_sequence(tmp_path / "s")
+    reference = analysis.estimate_sequence(sequence)
+    estimate = session.estimate(session.stack())
+    np.testing.assert_allclose(estimate.ambient_weights, reference.ambient_weights, rtol=1e-9, atol=1e-12)
+    expected = analysis.solve_sequence_flash(sequence, "complementary", reference.ambient_weights)
+    np.testing.assert_allclose(session.solve("complementary", estimate.ambient_weights).flash_weights,
+                               expected.flash_weights, rtol=1e-7, atol=1e-9)

@@ -1,0 +1,103 @@
+"""Held pattern steps and PSET: a computed flash step is never exposed with stale levels."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import pytest
+
+from led_controller.booth import LedBooth, levels_close
+from led_controller.emulator import BoothEmulator, ManualClock, PtyBoothServer
+from led_controller.errors import BoothError
+from led_controller.protocol import Command, encode_request
+
+Wait = Callable[[Callable[[], bool]], None]
+STALE = [0.9] * 7
+FLASH = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7]
+
+
+def test_pset_round_trip_is_framed_like_any_request() -> None:
+    frame = encode_request(5, Command.PATTERN_SET, 2, *(["FFFF"] * 7))
+    assert frame.startswith(b"?05:") and b":PSET 2 FFFF" in frame
+
+
+def test_booth_master_holds_then_exposes_the_pset_levels(
+    booth: LedBooth, booth_on_pty: PtyBoothServer, clock: ManualClock, wait_until: Wait
+) -> None:
+    emulator = booth_on_pty.emulator
+    exposed: list[tuple[int, tuple[float, ...]]] = []
+    emulator.on_trigger_out = lambda count: exposed.append((count, emulator.levels))
+    booth.load_pattern([[0.2] * 7, STALE], held=(1,))
+    assert emulator.held_steps == (1,)
+    booth.arm("booth", settle_us=1000, pulse_us=100, period_us=10_000)
+    booth.start()
+    clock.advance(0.001)
+    wait_until(lambda: len(exposed) == 1)
+    clock.advance(0.050)  # long past the held step's time: it waits, LEDs off, no pulse
+    wait_until(lambda: emulator.holding == 1)
+    assert len(exposed) == 1 and emulator.levels == (0.0,) * 7 and emulator.state == "RUNNING"
+    booth.set_step(1, FLASH)
+    assert levels_close(emulator.levels, FLASH) and len(exposed) == 1  # settling
+    clock.advance(0.001)
+    wait_until(lambda: len(exposed) == 2)
+    assert levels_close(exposed[1][1], FLASH)
+    assert [booth.wait_event("TRIG").args for _ in range(2)] == [("1", "0"), ("2", "1")]
+    clock.advance(0.010)
+    assert booth.wait_event("DONE").args == ("2",)
+
+
+def test_pset_before_the_step_fills_it_without_waiting(
+    booth: LedBooth, booth_on_pty: PtyBoothServer, clock: ManualClock, wait_until: Wait
+) -> None:
+    emulator = booth_on_pty.emulator
+    exposed: list[tuple[float, ...]] = []
+    emulator.on_trigger_out = lambda count: exposed.append(emulator.levels)
+    booth.load_pattern([[0.2] * 7, STALE], held=(1,))
+    booth.arm("booth", settle_us=1000, pulse_us=100, period_us=10_000)
+    booth.start()
+    booth.set_step(1, FLASH)
+    clock.advance(0.001)
+    wait_until(lambda: len(exposed) == 1)
+    clock.advance(0.010)
+    wait_until(lambda: len(exposed) == 2)
+    assert levels_close(exposed[1], FLASH)
+    with pytest.raises(BoothError, match="E_STATE"):
+        booth.set_step(0, FLASH)  # already exposed
+    with pytest.raises(BoothError, match="E_RANGE"):
+        booth.set_step(5, FLASH)
+
+
+def test_camera_master_exposure_during_a_held_step_is_reported_as_hold(
+    booth: LedBooth, booth_on_pty: PtyBoothServer
+) -> None:
+    emulator = booth_on_pty.emulator
+    booth.load_pattern([[0.2] * 7, STALE], held=(1,))
+    booth.arm("camera", settle_us=0, pulse_us=0, period_us=0)
+    booth.start()
+    emulator.camera_strobe()  # step 0 exposed; its end reaches the held step
+    assert emulator.holding == 1 and emulator.levels == (0.0,) * 7
+    emulator.exposure_active(True)  # an exposure nobody should have started
+    assert [booth.wait_event("TRIG").args for _ in range(2)] == [("1", "0"), ("2", "HOLD")]
+    emulator.exposure_active(False)
+
+
+def test_host_mode_refuses_next_onto_a_held_step(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+    booth.load_pattern([STALE], held=(0,))
+    booth.arm("host", settle_us=0, pulse_us=0, period_us=0)
+    booth.start()
+    with pytest.raises(BoothError, match="E_STATE"):
+        booth.next_step()
+    assert booth_on_pty.emulator.levels == (0.0,) * 7
+    booth.set_step(0, FLASH)
+    assert booth.next_step() == 0
+    assert levels_close(booth_on_pty.emulator.levels, FLASH)
+
+
+def test_emulator_parses_pset_itself() -> None:
+    emulator = BoothEmulator(clock=ManualClock())
+    out: list[bytes] = []
+    emulator.connect_output(out.append)
+    emulator.receive(encode_request(1, Command.PATTERN_SET, 0, *(["0000"] * 7)))
+    assert b"ERR PSET E_RANGE" in out[-1]
+    emulator.receive(encode_request(2, Command.PATTERN_SET, "x", *(["0000"] * 7)))
+    assert b"ERR PSET E_ARG" in out[-1]
