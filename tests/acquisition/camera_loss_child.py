@@ -1,0 +1,99 @@
+"""Child process of the camera-loss tests: the camera side of a GigE camera that dies mid-sequence.
+
+Run as ``python camera_loss_child.py SCENARIO OUT_DIR``. It opens the GigE Vision fake at 127.0.0.1
+(no discovery), takes two frames, prints ``READY`` and waits for the parent to kill the fake
+process and answer ``KILLED`` on stdin, then carries on and prints one JSON line with what it saw.
+
+Why a child: Aravis 0.8.26 has crashed (SIGSEGV) a few times while tearing down a device whose
+control was lost — inside Aravis, after msflash had already reported the error. In-process, that
+crash took the whole pytest worker down with it; here it is seen, and reported, as what it is.
+
+Scenarios: ``camera`` (AravisCamera alone: the error names the step) and ``capture`` (through
+``run_capture`` with a SequenceWriter and the booth emulator: frames so far on disk, the sequence
+incomplete, the LEDs off).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def _wait_for_kill() -> None:
+    print("READY", flush=True)
+    if sys.stdin.readline().strip() != "KILLED":
+        raise SystemExit("camera-loss child: the parent did not confirm the kill")
+
+
+def camera_scenario() -> dict:
+    from acquisition import aravis_camera
+    from acquisition.errors import CameraDisconnectedError, FrameTimeoutError
+    from acquisition.plan import CapturePlan
+
+    plan = CapturePlan.ambient_then_each_led(3, 1000.0)
+    result: dict = {}
+    with aravis_camera.AravisCamera("127.0.0.1", interfaces="gige", roi=(0, 0, 32, 32)) as camera:
+        camera.prepare(plan)
+        camera.start()
+        for _ in range(2):
+            camera.trigger()
+            camera.next_frame(plan.frame_timeout_s + 2.0)  # the process fake polls triggers slowly
+        _wait_for_kill()
+        try:
+            camera.trigger()
+            camera.next_frame(1.0)
+        except (CameraDisconnectedError, FrameTimeoutError) as err:
+            result = {"error": type(err).__name__, "message": str(err)}
+    return result
+
+
+def capture_scenario(out_dir: Path) -> dict:
+    from acquisition import aravis_camera
+    from acquisition.capture import run_capture
+    from acquisition.errors import CameraError
+    from acquisition.plan import CapturePlan
+    from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
+    from led_controller import LedBooth, serve_on_pty
+
+    peaks = (450.0, 550.0, 650.0)
+    server = serve_on_pty(names=[f"led{i}" for i in range(3)], peaks_nm=list(peaks))
+    wavelengths = np.arange(400.0, 701.0, 10.0)
+    leds = [SequenceLed(f"led{i}", np.exp(-0.5 * ((wavelengths - peak) / 15) ** 2)) for i, peak in enumerate(peaks)]
+    # One-channel frames need a CFA in format v1; the fake streams Mono16 test patterns.
+    entry = SequenceCamera(model="Fake", serial="MSFLOSS", pixel_format="Mono16", cfa="RGGB",
+                           black_level=0, white_level=65535)
+    plan = CapturePlan.ambient_then_each_led(3, 1000.0, timeout_margin_s=3.0)  # the process fake polls slowly
+
+    def on_frame(step, frame, written) -> None:  # noqa: ANN001 - capture callback
+        if step.index == 1:
+            _wait_for_kill()
+
+    result: dict = {}
+    try:
+        with LedBooth.open(server.port) as booth, \
+                aravis_camera.AravisCamera("127.0.0.1", interfaces="gige", roi=(0, 0, 32, 32)) as camera:
+            writer = SequenceWriter(out_dir / "seq", wavelengths_nm=wavelengths, spectral_unit="energy",
+                                    camera=entry, leds=leds)
+            try:
+                with writer:
+                    run_capture(camera, booth, plan, writer, on_frame=on_frame)
+            except CameraError as err:
+                result = {"error": type(err).__name__, "message": str(err)}
+            result["led_levels_after"] = list(server.emulator.levels)
+    finally:
+        server.close()
+    return result
+
+
+def main() -> int:
+    scenario, out_dir = sys.argv[1], Path(sys.argv[2])
+    result = camera_scenario() if scenario == "camera" else capture_scenario(out_dir)
+    print("RESULT " + json.dumps(result), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

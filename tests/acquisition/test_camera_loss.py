@@ -1,0 +1,78 @@
+"""A GigE camera whose process dies mid-sequence (issue 3): a clear error naming the step; through the
+capture path, the frames so far on disk, the sequence marked incomplete and the LEDs off.
+
+The camera side runs in a child process (``camera_loss_child.py``, see its docstring for why).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import pytest
+
+from acquisition.sequence_format import read_sequence
+
+pytestmark = pytest.mark.aravis
+
+CHILD = Path(__file__).with_name("camera_loss_child.py")
+REPO = Path(__file__).resolve().parents[2]
+ATTEMPTS = 2
+"""A child killed by a signal (the Aravis teardown crash) is run once more; twice is a failure."""
+
+
+def _run_scenario(scenario: str, out_dir: Path, gv_fake_process: Callable[..., Any], serial: str) -> dict:
+    crashes = []
+    for attempt in range(ATTEMPTS):
+        work = out_dir / f"attempt{attempt}"
+        work.mkdir()
+        fake = gv_fake_process(serial=f"{serial}{attempt}")
+        child = subprocess.Popen([sys.executable, str(CHILD), scenario, str(work)], cwd=REPO, text=True,
+                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        assert child.stdout is not None and child.stdin is not None
+        line = child.stdout.readline().strip()
+        assert line == "READY", f"child did not reach the kill point: {line!r} {child.stderr.read() if child.stderr else ''}"
+        fake.send_signal(signal.SIGKILL)
+        fake.wait(timeout=10)
+        # Releasing the dead device waits out GVCP retries (5 × 500 ms per write); a fresh fake on
+        # the port answers them at once, which keeps the test short.
+        answering = gv_fake_process(serial=f"{serial}{attempt}R")
+        child.stdin.write("KILLED\n")
+        child.stdin.flush()
+        out, err = child.communicate(timeout=120)
+        answering.send_signal(signal.SIGKILL)  # free the port for a further attempt
+        answering.wait(timeout=10)
+        if child.returncode < 0:
+            crashes.append(f"attempt {attempt}: child killed by signal {-child.returncode}; stderr tail: {err[-400:]}")
+            continue
+        assert child.returncode == 0, err
+        result_lines = [line for line in out.splitlines() if line.startswith("RESULT ")]
+        assert result_lines, out
+        return {**json.loads(result_lines[-1][len("RESULT "):]), "work": str(work), "crashes": crashes}
+    pytest.fail("the camera side crashed in every attempt: " + " | ".join(crashes))
+
+
+def test_killed_camera_process_gives_a_clear_error_naming_the_step(
+        aravis: ModuleType, gv_fake_process: Callable[..., Any], tmp_path: Path) -> None:
+    result = _run_scenario("camera", tmp_path, gv_fake_process, "MSFKILL")
+    assert result["error"] in ("CameraDisconnectedError", "FrameTimeoutError")
+    assert "camera Fake (serial MSFKILL" in result["message"]
+    assert "step 2 'led:2'" in result["message"]
+
+
+def test_killed_camera_mid_capture_keeps_the_frames_and_marks_the_sequence_incomplete(
+        aravis: ModuleType, gv_fake_process: Callable[..., Any], tmp_path: Path) -> None:
+    result = _run_scenario("capture", tmp_path, gv_fake_process, "MSFLOSS")
+    assert result["error"] in ("CameraDisconnectedError", "FrameTimeoutError")
+    assert "step 2" in result["message"]
+    assert result["led_levels_after"] == [0.0, 0.0, 0.0]  # LEDs off on the failure path
+    sequence = read_sequence(Path(result["work"]) / "seq")
+    assert not sequence.complete
+    assert [frame.role for frame in sequence.frames] == ["ambient", "led"]
+    assert all(sequence.load_frame(i).shape[:2] == (32, 32) for i in range(2))
