@@ -79,8 +79,9 @@ INTERFACES: dict[str, str] = {"fake": "Fake", "gige": "GigEVision", "usb3": "USB
 
 _GV_FRAME_ID_WRAP = 1 << 16
 """GigE Vision 1.x block ids are 16 bits and skip 0 when they wrap (65535 is followed by 1)."""
-_POP_POLL_US = 50_000
-"""How long the pump thread waits in one ``timeout_pop_buffer`` call, so stop() is prompt."""
+_POP_POLL_US = 10_000
+"""How long the pump thread waits in one ``timeout_pop_buffer`` call, so stop() is prompt (a frame
+ends the wait at once; only stop() waits for the timeout)."""
 _MAX_POOL_BYTES = 512 * 1024 * 1024
 """Upper bound on the buffer pool; a plan asking for more buffers gets fewer, with a warning."""
 
@@ -543,6 +544,8 @@ class AravisCamera:
         self._camera: Any = None
         self._device: Any = None
         self._stream: Any = None
+        self._spare: tuple[Any, int, int, tuple] | None = None  # a stopped stream kept for the next prepare
+        self._stale_before_ns = 0
         self._control_lost_handler: int | None = None
         self._control_lost = threading.Event()
         self._unreachable = False
@@ -658,6 +661,7 @@ class AravisCamera:
             self._control_lost_handler = None
             # Drop every reference: Aravis keeps control of the device while one lives.
             self._stream = None
+            self._spare = None
             self._device = None
             self._camera = None
 
@@ -1094,8 +1098,18 @@ class AravisCamera:
         return exposure, gain
 
     def _build_stream(self, n_buffers: int) -> None:
+        # Creating (and destroying) a stream costs tens of ms on GigE Vision (socket, thread, stream
+        # channel registers): the stream of the previous capture is reused when the frame layout,
+        # the payload and the pool still fit. Buffers it still holds are stale: start() drains them.
+        spare, self._spare = self._spare, None
         try:
             payload = int(self._camera.get_payload())
+            layout = (str(self.get_feature("PixelFormat")),) + self.roi[2:]
+            if spare is not None and spare[2] == payload and spare[3] == layout and spare[1] >= n_buffers:
+                self._stream, self._n_buffers, self._layout_key = spare[0], spare[1], layout
+                self._stale_before_ns = 1  # start() sets the acquisition's start time
+                return
+            spare = None
             stream = self._camera.create_stream(None, None)
         except GLib.Error as err:
             raise self._fail("creating the stream for", "PayloadSize", err) from err
@@ -1110,7 +1124,9 @@ class AravisCamera:
             stream.push_buffer(Aravis.Buffer.new_allocate(payload))
         self._stream = stream
         self._n_buffers = n_buffers
-        self._layout_key = (str(self.get_feature("PixelFormat")),) + self.roi[2:]
+        self._layout_key = layout
+        self._payload = payload
+        self._stale_before_ns = 0
 
     def start(self) -> None:
         """Start acquisition and the thread that pops buffers."""
@@ -1125,6 +1141,10 @@ class AravisCamera:
         with self._stats_lock:
             self._stats = AcquisitionStats(n_buffers=self._n_buffers)
         self._pump_stop.clear()
+        if self._stale_before_ns:  # a reused stream: drop what the previous acquisition left in it
+            while (buffer := self._stream.try_pop_buffer()) is not None:
+                self._stream.push_buffer(buffer)
+            self._stale_before_ns = time.time_ns()
         self._pump = threading.Thread(target=self._pump_buffers, args=(self._stream,),
                                       name=f"aravis-pump-{self._serial}", daemon=True)
         self._pump.start()
@@ -1138,11 +1158,14 @@ class AravisCamera:
     def _pump_buffers(self, stream: Any) -> None:
         # A dedicated thread popping with a timeout: stream callbacks lost most frames under load.
         pixel_format, width, height = self._layout_key
+        stale_before_ns = self._stale_before_ns
         while not self._pump_stop.is_set():
             buffer = stream.timeout_pop_buffer(_POP_POLL_US)
             if buffer is None:
                 continue
             try:
+                if 0 < int(buffer.get_system_timestamp()) < stale_before_ns:
+                    continue  # a frame of the previous acquisition still in flight when it stopped
                 status = buffer.get_status()
                 frame_id = int(buffer.get_frame_id())
                 if status != Aravis.BufferStatus.SUCCESS:
@@ -1275,6 +1298,8 @@ class AravisCamera:
                 log.warning("%s: AcquisitionStop failed: %s", self._name, err.message)
         self._acquiring = False
         self._stop_pump()
+        if self._stream is not None and not (self._control_lost.is_set() or self._unreachable):
+            self._spare = (self._stream, self._n_buffers, getattr(self, "_payload", -1), self._layout_key)
         self._stream = None
 
 

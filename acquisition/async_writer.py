@@ -70,6 +70,8 @@ class AsyncSequenceWriter:
         self._added = len(writer.sequence.frames)
         self._written = self._added
         self._closed = False
+        self._running = threading.Event()  # cleared by pause(): the thread waits before its next frame
+        self._running.set()
         self._thread = threading.Thread(target=self._run, name=f"sequence-writer {writer.path.parent}", daemon=False)
         self._thread.start()
 
@@ -108,11 +110,31 @@ class AsyncSequenceWriter:
         entry = SequenceFrame(f"{FRAMES_DIR}/{self._added:03d}-{name_role}{image_suffix(pixels)}", role,  # type: ignore[arg-type]
                               tuple(led_levels), exposure_us, gain, dict(extra or {}))
         self._added += 1
-        self._queue.put((pixels, role, entry.led_levels, exposure_us, gain, dict(extra or {})))
+        item = (pixels, role, entry.led_levels, exposure_us, gain, dict(extra or {}))
+        try:
+            self._queue.put_nowait(item)
+        except queue.Full:
+            self._running.set()  # back-pressure: a paused writer must make room
+            self._queue.put(item)
         return entry
+
+    def pause(self) -> None:
+        """Hold the writer thread before its next frame (the frame being written is finished).
+
+        For a latency-critical moment of the capture loop (the flash decision): frames keep being
+        queued (nothing is dropped; ``add_frame`` still blocks only on a full queue) and are written,
+        in order, after :meth:`resume`. :meth:`close`, :meth:`flush` and leaving the ``with`` block
+        resume first.
+        """
+        self._running.clear()
+
+    def resume(self) -> None:
+        """Let the writer thread go on after :meth:`pause`; idempotent."""
+        self._running.set()
 
     def flush(self) -> Sequence:
         """Wait until every queued frame is on disk; raises the writer thread's error, if any."""
+        self._running.set()
         self._queue.join()
         self._raise_error()
         return self._writer.sequence
@@ -128,6 +150,7 @@ class AsyncSequenceWriter:
         if self._closed:
             return
         self._closed = True
+        self._running.set()
         self._queue.put(_STOP)
         while self._thread.is_alive():
             try:
@@ -156,6 +179,7 @@ class AsyncSequenceWriter:
     def _run(self) -> None:
         while True:
             item = self._queue.get()
+            self._running.wait()
             try:
                 if item is _STOP:
                     return

@@ -36,6 +36,11 @@ step *held* (``PADD … HOLD``), and one ``PSET`` (one serial round trip) releas
 levels. A held step is never exposed with stale levels: the booth waits at it with the LEDs off
 and no trigger (booth master) or reports an exposure during it as ``TRIG <n> HOLD`` (camera
 master), which the pairing refuses (``docs/booth-protocol.md`` §5).
+Booth master sends ``PSET … NOW``: the last LED frame is in, so its exposure is over and the flash
+step starts at once (settle, pulse) instead of waiting for its scheduled slot. An
+:class:`~acquisition.async_writer.AsyncSequenceWriter` is paused from the wait for the last LED
+frame until the ``PSET`` is out (frames stay queued, in order; nothing is dropped), so the disk
+writes do not compete with the decision for the CPU.
 
 The writer may be a :class:`~acquisition.sequence_format.SequenceWriter` or an
 :class:`~acquisition.async_writer.AsyncSequenceWriter` (frames handed to a writer thread: the
@@ -48,6 +53,7 @@ Whatever happens the LEDs go off (``OFF`` also aborts a running table) and the c
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import logging
 import math
 import time
@@ -91,8 +97,8 @@ class SequencedLedControl(LedControl, Protocol):
         """Replace the pattern table; ``held`` steps wait for :meth:`set_step` (never exposed before)."""
         ...
 
-    def set_step(self, index: int, levels: Sequence[float]) -> None:
-        """Set one step's levels (also while running) and release it if held."""
+    def set_step(self, index: int, levels: Sequence[float], *, now: bool = False) -> None:
+        """Set one step's levels (also while running) and release it if held; ``now``: start it at once."""
         ...
 
     def arm(self, mode: str, *, settle_us: int = ..., pulse_us: int = ..., period_us: int = ...) -> None:
@@ -275,6 +281,7 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
     # on top of the usual timeout.
     frame_timeout_s = plan.frame_timeout_s + period_us * 1e-6
     first_id: int | None = None
+    pause, resume = getattr(writer, "pause", None), getattr(writer, "resume", None)
     try:
         booth.all_off()  # idle the booth (a previous table may be DONE) before editing the table
         drain = getattr(booth, "pending_events", None)
@@ -289,11 +296,19 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
         camera.start()
         booth.start()
         for number, step in enumerate(plan.steps, start=1):
+            if flash is not None and step.index == last - 1 and pause is not None:
+                pause()  # the writer thread waits from the last LED frame until the PSET is out
             if flash is not None and step.index == last:
-                step = flash(frames)
-                plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
-                _replan(camera, plan, step.index)
-                booth.set_step(step.index, step.led_levels)
+                try:
+                    step = flash(frames)
+                    plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
+                    _replan(camera, plan, step.index)
+                    # The last LED frame is in, so its exposure is over: the flash step need not
+                    # wait for its scheduled slot (booth master, PSET … NOW).
+                    _set_step(booth, step.index, step.led_levels, now=mode == "booth")
+                finally:
+                    if resume is not None:
+                        resume()
             if mode == "camera":
                 if number > 1:
                     time.sleep(plan.settle_s)  # the next step's LEDs settle between exposures
@@ -331,11 +346,21 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
         done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
         log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))
     finally:
+        if resume is not None:
+            resume()
         try:
             booth.all_off()
         finally:
             camera.stop()
     return written
+
+
+def _set_step(booth: SequencedLedControl, index: int, levels: Sequence[float], *, now: bool) -> None:
+    """``booth.set_step``, asking to start the step at once when ``now`` (and the booth offers it)."""
+    if now and "now" in inspect.signature(booth.set_step).parameters:
+        booth.set_step(index, levels, now=True)
+    else:
+        booth.set_step(index, levels)
 
 
 def _booth_step_of(booth: SequencedLedControl, trigger: int, timeout_s: float, step: CaptureStep) -> int:

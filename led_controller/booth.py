@@ -38,6 +38,9 @@ log = logging.getLogger(__name__)
 
 SyncMode = Literal["host", "booth", "camera"]
 
+PSET_NOW_FLAG = "NOW"
+"""Last word of ``PSET <step> <levels> NOW``: start the step at once (``docs/booth-protocol.md`` §5)."""
+
 _READ_POLL_S = 0.02
 """Read timeout of the port: how quickly the reader thread notices ``close``."""
 
@@ -99,6 +102,7 @@ class LedBooth:
         self._stop = threading.Event()
         self._closed = False
         self._info: BoothInfo | None = None
+        self._pset_now = True
         self._transcript: IO[str] | None = (
             open(log_serial, "w", encoding="ascii", newline="\n") if log_serial else None  # noqa: SIM115
         )
@@ -286,11 +290,16 @@ class LedBooth:
                     command=Command.PATTERN_ADD, expected=f"'OK PADD {i}'", raw=raw,
                 )
 
-    def set_step(self, index: int, levels: Sequence[float]) -> None:
+    def set_step(self, index: int, levels: Sequence[float], *, now: bool = False) -> None:
         """Set the levels of pattern step ``index`` (``PSET``) and release it if it was held.
 
         Allowed while the sequence runs, for a step the booth has not reached or is holding at:
         the booth then exposes it with these levels (after ``settle_us``). One round trip.
+
+        ``now`` (``PSET … NOW``, booth master): if the booth has already triggered the step before
+        ``index``, step ``index`` starts at once instead of at its scheduled time. Send it only
+        once that previous frame is in (its exposure is over). A booth that does not know ``NOW``
+        (``E_ARG``) gets the plain ``PSET`` (remembered for the next calls).
 
         Raises
         ------
@@ -302,6 +311,15 @@ class LedBooth:
         if isinstance(index, bool) or not isinstance(index, int) or index < 0:
             raise ValueError(f"set_step: index {index!r}; expected a non-negative integer")
         words = protocol.encode_levels(levels, self.info.channels)
+        if now and self._pset_now:
+            try:
+                self._command(Command.PATTERN_SET, index, *words, PSET_NOW_FLAG)
+                return
+            except BoothError as err:
+                if "E_ARG" not in str(err) or isinstance(err, (BoothProtocolError, BoothTimeoutError)):
+                    raise
+                log.info("%s: the booth does not know PSET … NOW; sending plain PSET", self._name)
+                self._pset_now = False
         self._command(Command.PATTERN_SET, index, *words)
 
     def arm(

@@ -38,6 +38,8 @@ log = logging.getLogger(__name__)
 DEFAULT_NAMES = ("led440", "led480", "led500", "led520", "led596", "led636", "led660")
 DEFAULT_PEAKS_NM = (440.0, 480.0, 500.0, 520.0, 596.0, 636.0, 660.0)
 FULL_SCALE = 0xFFFF
+_NOW_FLAG = "NOW"
+"""``PSET … NOW``: start the step at once once the previous one was triggered (booth-protocol.md §5)."""
 
 Clock = Callable[[], float]
 
@@ -471,8 +473,11 @@ class BoothEmulator:
         return str(len(self._pattern) - 1)
 
     def _cmd_pattern_set(self, args: list[str]) -> str:
+        now = len(args) == self.channels + 2 and args[-1] == _NOW_FLAG
+        if now:
+            args = args[:-1]
         if len(args) != self.channels + 1 or not args[0].isdigit() or len(args[0]) > 5:
-            raise _Refused(ErrorCode.ARGUMENT, f"PSET <step> and {self.channels} levels")
+            raise _Refused(ErrorCode.ARGUMENT, f"PSET <step> and {self.channels} levels [NOW]")
         index = int(args[0])
         codes = self._levels_arg(args[1:])
         if index >= len(self._pattern):
@@ -483,6 +488,12 @@ class BoothEmulator:
         self._pattern[index] = codes
         self._held[index] = False
         if running and self._holding and index == self._step:
+            self._release_hold()
+        elif (now and running and self._mode == Mode.BOOTH and index == self._step + 1
+              and self._next_action is not None and self._next_action[1] == "apply"):
+            # NOW: the previous step has been triggered and the host has its frame (its exposure
+            # is over): this step's slot starts at once rather than at its scheduled time.
+            self._apply_step(index)
             self._release_hold()
         return ""
 

@@ -139,3 +139,42 @@ def test_flash_session_matches_the_sequence_path(sim_rig, tmp_path: Path) -> Non
     expected = analysis.solve_sequence_flash(sequence, "complementary", reference.ambient_weights)
     np.testing.assert_allclose(session.solve("complementary", estimate.ambient_weights).flash_weights,
                                expected.flash_weights, rtol=1e-7, atol=1e-9)
+
+
+def test_async_writer_pause_holds_frames_then_writes_them_in_order(sim_rig, tmp_path: Path) -> None:
+    writer = AsyncSequenceWriter(_writer(sim_rig, tmp_path / "s"), max_queued=2)
+    writer.add_frame(_pixels(sim_rig, 100), "ambient", (0.0,) * 4, 1000.0)
+    writer.flush()
+    writer.pause()
+    for value in range(1, 4):  # one more than the queue holds: a paused writer still makes room
+        writer.add_frame(_pixels(sim_rig, 100 + value), "ambient", (0.0,) * 4, 1000.0 + value)
+    writer.resume()
+    sequence = writer.finish()
+    assert [f.exposure_us for f in sequence.frames] == [1000.0 + v for v in range(4)]
+    assert [int(read_sequence(tmp_path / "s").load_frame(i)[0, 0, 0]) for i in range(4)] == [100, 101, 102, 103]
+
+
+def test_async_writer_paused_still_drains_on_exit(sim_rig, tmp_path: Path) -> None:
+    with pytest.raises(KeyboardInterrupt), AsyncSequenceWriter(_writer(sim_rig, tmp_path / "s")) as writer:
+        writer.pause()
+        for value in range(3):
+            writer.add_frame(_pixels(sim_rig, value), "ambient", (0.0,) * 4, 1000.0)
+        raise KeyboardInterrupt
+    assert len(read_sequence(tmp_path / "s").frames) == 3
+
+
+def test_flash_stream_pauses_the_writer_only_around_the_decision(sim_rig, tmp_path: Path) -> None:
+    plan = CapturePlan.ambient_then_each_led(4, 2000.0, settle_s=0.001, deadtime_s=0.001, trigger="booth")
+    states: list[bool] = []
+    with AsyncSequenceWriter(_writer(sim_rig, tmp_path / "s")) as writer:
+
+        def decide(frames):
+            states.append(writer._running.is_set())
+            return (0.5,) * 4, 2000.0
+
+        entries = run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, decide)
+        assert writer._running.is_set()  # resumed after the PSET
+        writer.finish()
+    assert states == [False]
+    assert [e.role for e in entries] == ["ambient"] + ["led"] * 4 + ["flash"]
+    assert len(read_sequence(tmp_path / "s").frames) == 6

@@ -101,3 +101,67 @@ def test_emulator_parses_pset_itself() -> None:
     assert b"ERR PSET E_RANGE" in out[-1]
     emulator.receive(encode_request(2, Command.PATTERN_SET, "x", *(["0000"] * 7)))
     assert b"ERR PSET E_ARG" in out[-1]
+
+
+def test_pset_now_starts_the_next_step_at_once_after_the_previous_trigger(
+    booth: LedBooth, booth_on_pty: PtyBoothServer, clock: ManualClock, wait_until: Wait
+) -> None:
+    emulator = booth_on_pty.emulator
+    exposed: list[tuple[float, ...]] = []
+    emulator.on_trigger_out = lambda count: exposed.append(emulator.levels)
+    booth.load_pattern([[0.2] * 7, STALE, [0.3] * 7], held=(1,))
+    booth.arm("booth", settle_us=1000, pulse_us=100, period_us=10_000)
+    booth.start()
+    clock.advance(0.001)
+    wait_until(lambda: len(exposed) == 1)  # step 0 triggered; step 1 due at 10 ms
+    booth.set_step(1, FLASH, now=True)  # the host has step 0's frame: start step 1 now
+    assert levels_close(emulator.levels, FLASH) and len(exposed) == 1  # settling, no pulse yet
+    clock.advance(0.001)  # 2 ms: one settle later, long before its scheduled 11 ms
+    wait_until(lambda: len(exposed) == 2)
+    assert levels_close(exposed[1], FLASH)
+    clock.advance(0.009)  # later steps keep the period from the new slot: step 2 at 1 + 10 + 1 ms
+    assert len(exposed) == 2
+    clock.advance(0.001)
+    wait_until(lambda: len(exposed) == 3)
+    assert levels_close(exposed[2], [0.3] * 7)
+    assert [booth.wait_event("TRIG").args for _ in range(3)] == [("1", "0"), ("2", "1"), ("3", "2")]
+
+
+def test_pset_now_before_the_previous_trigger_only_fills_the_step(
+    booth: LedBooth, booth_on_pty: PtyBoothServer, clock: ManualClock, wait_until: Wait
+) -> None:
+    emulator = booth_on_pty.emulator
+    exposed: list[tuple[float, ...]] = []
+    emulator.on_trigger_out = lambda count: exposed.append(emulator.levels)
+    booth.load_pattern([[0.2] * 7, STALE], held=(1,))
+    booth.arm("booth", settle_us=1000, pulse_us=100, period_us=10_000)
+    booth.start()
+    booth.set_step(1, FLASH, now=True)  # step 0 not triggered yet: its exposure must not see FLASH
+    clock.advance(0.001)
+    wait_until(lambda: len(exposed) == 1)
+    assert levels_close(exposed[0], [0.2] * 7)
+    clock.advance(0.005)
+    assert len(exposed) == 1 and levels_close(emulator.levels, [0.2] * 7)  # step 1 keeps its slot
+    clock.advance(0.005)
+    wait_until(lambda: len(exposed) == 2)
+    assert levels_close(exposed[1], FLASH)
+
+
+def test_pset_now_on_a_booth_without_it_falls_back_to_plain_pset(
+    booth: LedBooth, booth_on_pty: PtyBoothServer
+) -> None:
+    emulator = booth_on_pty.emulator
+    real = emulator._cmd_pattern_set
+
+    def old_firmware(args: list[str]) -> str:
+        if args and args[-1] == "NOW":
+            return real(["x"])  # E_ARG, as firmware without NOW answers
+        return real(args)
+
+    emulator._handlers = lambda real_handlers=emulator._handlers: {  # type: ignore[method-assign]
+        **real_handlers(), Command.PATTERN_SET: old_firmware}
+    booth.load_pattern([[0.2] * 7, STALE], held=(1,))
+    booth.set_step(1, FLASH, now=True)
+    assert emulator.held_steps == ()
+    booth.set_step(0, FLASH, now=True)  # remembered: plain PSET at once
+    assert emulator.held_steps == ()
