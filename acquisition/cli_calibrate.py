@@ -15,12 +15,25 @@ import numpy as np
 
 from acquisition.cli_common import UsageError, positive_int, print_json, progress
 from acquisition.sequence_format import read_sequence
-from calibration.camera_response import estimate_responsivities, learn_prior, responsivity_rmse
+from calibration.camera_response import (
+    estimate_responsivities,
+    learn_prior,
+    responsivity_rmse,
+)
+from calibration.chart_sequence import (
+    estimate_from_measurements,
+    resolve_light,
+    sequence_measurements,
+)
 from calibration.dark import measure_dark, measure_linearity
 from calibration.errors import CalibrationError
 from calibration.files import load_or_new, save_calibration
 from calibration.led_spectra import characterise_led
-from calibration.spectrometer import measurement_to_spectra, read_spectrometer_file, subtract_dark
+from calibration.spectrometer import (
+    measurement_to_spectra,
+    read_spectrometer_file,
+    subtract_dark,
+)
 from calibration.validation import calibration_lights, simulate_chart_responses
 from processing import datasets
 from processing.spectra import DEFAULT_GRID
@@ -93,10 +106,73 @@ def _leds(args: argparse.Namespace) -> int:
     return 0
 
 
+def _camera_from_sequences(args: argparse.Namespace) -> int:
+    from acquisition.cli_evaluate import (  # the layout `msflash evaluate` uses
+        chart_layout,
+        check_layout,
+    )
+
+    if args.chart != "macbeth":
+        raise UsageError(f"--chart {args.chart}: recorded sequences support the macbeth layout only; expected --chart macbeth")
+    sequences = [read_sequence(directory) for directory in args.sequence]
+    if args.light and len(args.light) != len(sequences):
+        raise UsageError(f"--light given {len(args.light)} times for {len(sequences)} sequences; expected one per "
+                         "sequence, in order (NAME, CSV file, or 'none' for an unknown ambient)")
+    grid = sequences[0].grid
+    lights = [None if spec is None or spec.lower() == "none" else resolve_light(spec, grid)
+              for spec in (args.light or [None] * len(sequences))]
+    chart = datasets.macbeth().resample(grid, outside="edge")
+
+    def labels_for(shape: tuple[int, int], excluded: np.ndarray) -> np.ndarray:
+        return chart_layout(shape, args.chart, args.patch_px, args.border_px, args.margin_px, excluded).labels
+
+    for sequence in sequences:  # the layout must fit before anything is estimated
+        index = sequence.indices("ambient")[0] if sequence.indices("ambient") else 0
+        raw = sequence.load_frame(index).astype(np.float64)
+        check_layout(raw, chart_layout(raw.shape[:2], args.chart, args.patch_px, args.border_px, args.margin_px),
+                     sequence.camera.cfa)
+    measurements = sequence_measurements(sequences, lights, chart, labels_for)
+    cameras = {name: s.resample(grid, outside="zero") for name, s in datasets.paper_cameras().items()}
+    unknown = [name for name in args.prior_exclude if name not in cameras]
+    if unknown:
+        raise UsageError(f"--prior-exclude {unknown}: not among the 34 paper cameras; expected names like NikonD100")
+    prior = learn_prior(cameras, exclude=args.prior_exclude) if args.method == "pca_prior" else None
+    progress(f"{len(measurements.frames)} chart frames, {measurements.data.shape[0]} patch means; "
+             f"prior from {len(prior.cameras) if prior else 0} cameras")
+    result = estimate_from_measurements(measurements, args.method, prior)
+    estimate = result.estimate
+    recorded = sequences[0].camera_responsivities()
+    rmse = responsivity_rmse(estimate.responsivities, recorded.to_unit("photons")) if recorded is not None else None
+    calibration = load_or_new(args.out).updated(
+        camera_responsivities=estimate.responsivities,
+        camera={"method": estimate.method, "alphas": list(estimate.alphas), "shrinkages": list(estimate.shrinkages),
+                "relative_residual": list(estimate.relative_residual), "chart": args.chart,
+                "sequences": [str(s.directory) for s in sequences], "lights": args.light or [],
+                "light_scales": result.light_scales, "frames": list(measurements.frames),
+                "prior_excluded": list(args.prior_exclude),
+                "layout": {"patch_px": args.patch_px, "border_px": args.border_px, "margin_px": args.margin_px},
+                "rmse_vs_sequence_responsivity": rmse},
+    )
+    path = save_calibration(calibration, args.out)
+    payload = {"calibration": str(path), "id": calibration.id, "method": estimate.method,
+               "light_scales": result.light_scales, "relative_residual": list(estimate.relative_residual),
+               "rmse_vs_sequence_responsivity": rmse}
+    if args.json:
+        print_json(payload)
+    else:
+        print(f"responsivities recovered ({estimate.method}) from {len(measurements.frames)} chart frames"
+              + (f", RMSE vs the sequence's recorded responsivities {rmse:.4f}" if rmse is not None else ""))
+        print(f"wrote {path} (id {calibration.id})")
+    return 0
+
+
 def _camera(args: argparse.Namespace) -> int:
+    if args.sequence and args.simulate:
+        raise UsageError("calibrate camera: --sequence and --simulate exclude each other; expected one")
+    if args.sequence:
+        return _camera_from_sequences(args)
     if not args.simulate:
-        raise UsageError("calibrate camera: only --simulate is implemented so far (chart patch extraction from "
-                         "recorded sequences is not written yet); expected --simulate")
+        raise UsageError("calibrate camera: expected --sequence SEQ… (recorded chart sequences) or --simulate")
     cameras = {name: s.resample(DEFAULT_GRID, outside="zero") for name, s in datasets.paper_cameras().items()}
     if args.camera not in cameras:
         raise UsageError(f"--camera '{args.camera}': not one of the 34 paper cameras; expected e.g. NikonD100")
@@ -181,7 +257,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     leds.set_defaults(handler=_bad_input(_leds))
 
     camera = commands.add_parser("camera", help="camera responsivities from a chart under the LEDs and broadband lights")
-    camera.add_argument("--sequence", nargs="+", default=[], help="recorded chart sequences (not yet supported)")
+    camera.add_argument("--sequence", nargs="+", default=[], metavar="SEQ",
+                        help="recorded chart sequences (format v1): LED frames and each ambient frame")
+    camera.add_argument("--light", action="append", default=[], metavar="NAME_OR_CSV",
+                        help="the known broadband light of each sequence's ambient frame, in order (a name like "
+                             "tungsten/daylight/D65, a CSV 'wavelength_nm, value' in energy, or 'none'); its power is "
+                             "estimated")
+    camera.add_argument("--patch-px", type=positive_int, default=8, help="sequences: chart patch side (sim rig 8)")
+    camera.add_argument("--border-px", type=int, default=2, help="sequences: gap between patches (sim rig 2)")
+    camera.add_argument("--margin-px", type=int, default=1, help="sequences: pixels ignored inside each patch edge")
+    camera.add_argument("--prior-exclude", action="append", default=[], metavar="NAME",
+                        help="leave this paper camera out of the learned prior (e.g. the camera under test)")
     camera.add_argument("--simulate", action="store_true", help="render the chart in the sim world instead")
     camera.add_argument("--camera", default="NikonD100", help="simulated camera (one of the 34 paper cameras)")
     camera.add_argument("--chart", default="macbeth", choices=("macbeth", "chart110"))

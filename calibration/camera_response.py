@@ -246,7 +246,36 @@ def estimate_responsivities(
         if std.shape != data.shape or not np.all(np.isfinite(std)) or np.any(std <= 0):
             raise CalibrationError(f"response_std has shape {np.shape(response_std)}; expected {expected} positive values")
     design = measurement_matrix(reflectances, illuminants)
-    n_wl = grid.size
+    fit = fit_channels(design, data, std, method, prior)
+    return fit.normalised(grid, f"estimated from {reflectances.count} patches × {illuminants.count} lights ({method})")
+
+
+@dataclass(frozen=True)
+class ChannelFit:
+    """Raw (un-normalised) per-channel MAP curves of :func:`fit_channels` and how they were chosen."""
+
+    curves: np.ndarray
+    """(n_wavelengths, 3), in the units that make ``design @ curves`` predict the data."""
+    method: str
+    alphas: tuple[float, ...]
+    shrinkages: tuple[float, ...]
+    relative_residual: tuple[float, ...]
+    noise_scale: tuple[float, ...]
+
+    def normalised(self, grid: WavelengthGrid, source: str) -> ResponsivityEstimate:
+        """The estimate, max-normalised over the three channels."""
+        peak = float(self.curves.max())
+        if not peak > 0:
+            raise CalibrationError("recovered responsivities are all zero; expected a camera that sees the chart")
+        spectra = Spectra(grid, self.curves / peak, CHANNELS, kind="responsivity", unit="photons", source=source)
+        return ResponsivityEstimate(spectra, self.method, self.alphas, self.shrinkages, self.relative_residual,
+                                    self.noise_scale)
+
+
+def fit_channels(design: np.ndarray, data: np.ndarray, std: np.ndarray, method: str,
+                 prior: ResponsivityPrior | None) -> ChannelFit:
+    """Per-channel evidence-weighted MAP with ``c ≥ 0`` for rows ``design`` (photons · Δλ), data and std (rows, 3)."""
+    n_wl = design.shape[1]
     # Work with curves of peak ~1: scale the design so a max-normalised curve predicts the data.
     smooth = _smooth_covariance(n_wl)
     curves, alphas, shrinks, residuals, noise = [], [], [], [], []
@@ -255,6 +284,9 @@ def estimate_responsivities(
         weighted = design * weights[:, None]
         target = data[:, c] * weights
         scale = float(np.linalg.norm(target)) / max(float(np.linalg.norm(weighted.sum(axis=1))), 1e-300) * n_wl
+        if not scale > 0:
+            raise CalibrationError(f"responsivity {channel}: the chart gives no signal in this channel; expected "
+                                   "responses above zero")
         weighted = weighted * scale  # now c ≈ O(1) when its samples are O(1)
         normal = weighted.T @ weighted
         rhs = weighted.T @ target
@@ -287,13 +319,7 @@ def estimate_responsivities(
         alphas.append(alpha)
         shrinks.append(shrinkage)
         noise.append(float(np.sqrt(tau2)))
-    values = np.column_stack(curves)
-    peak = float(values.max())
-    if not peak > 0:
-        raise CalibrationError("recovered responsivities are all zero; expected a camera that sees the chart")
-    spectra = Spectra(grid, values / peak, CHANNELS, kind="responsivity", unit="photons",
-                      source=f"estimated from {reflectances.count} patches × {illuminants.count} lights ({method})")
-    return ResponsivityEstimate(spectra, method, tuple(alphas), tuple(shrinks), tuple(residuals), tuple(noise))
+    return ChannelFit(np.column_stack(curves), method, tuple(alphas), tuple(shrinks), tuple(residuals), tuple(noise))
 
 
 def responsivity_rmse(estimate: Spectra, truth: Spectra) -> float:

@@ -1,0 +1,297 @@
+"""Camera responsivities from recorded sequences of a chart (``msflash calibrate camera --sequence``).
+
+Public objects
+--------------
+- :func:`resolve_light`: a known broadband light by name or CSV file, on a sequence's grid.
+- :class:`ChartMeasurements`, :func:`sequence_measurements`: linear patch means and standard errors
+  of every usable frame of one or more format-v1 sequences, with the light each was taken under.
+- :func:`estimate_from_measurements`: the responsivities, with the unknown power of each broadband
+  light estimated jointly (alternating: curves given powers, powers given curves).
+
+What is measured
+----------------
+Per sequence, frames are linearised as ``(raw − black) / (exposure_us · gain)``. Each ``led``
+frame minus the ambient frame is the chart under ``Σ_k level_k · LED_k`` alone (the sequence's LED
+spectra, true ratios). The ambient frame itself is the chart under the sequence's known broadband
+light (``--light``), if one is given; its *power* relative to the LEDs is not known (a booth lamp
+is rarely measured at the chart's position with the LEDs' geometry), so each broadband light gets
+one unknown scale, common to all patches and channels. Likewise the LED spectra of a sequence have
+true ratios among themselves, but two sequences (another day, another gain, a re-measured booth)
+need not share a scale: the LEDs of every sequence after the first get one unknown scale too. ``flash`` and ``dark`` frames are not used.
+
+Patches come from a label map (the CLI rebuilds the chart layout as ``msflash evaluate`` does);
+pixels saturated in either frame of a difference are excluded before the edge margin is applied,
+and a Bayer mosaic is read through :func:`processing.colour_metrics.patch_pixels` (each channel its
+own sites, no demosaicking). A patch with too few usable pixels in a frame is dropped from that
+frame only; a frame that loses more than half of the chart is an error.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration.camera_response import (
+    CHANNELS,
+    ChannelFit,
+    ResponsivityEstimate,
+    ResponsivityPrior,
+    fit_channels,
+    measurement_matrix,
+)
+from calibration.errors import CalibrationError
+from processing import datasets
+from processing.colour_metrics import patch_pixels
+from processing.errors import SpectralDataError
+from processing.spectra import Spectra, WavelengthGrid
+
+LabelBuilder = Callable[[tuple[int, int], np.ndarray], np.ndarray]
+"""``(image shape, excluded mask) → label map`` (patch index, −1 for unusable pixels)."""
+MIN_PIXELS = 4
+"""Fewest usable samples per channel for a patch mean."""
+SCALE_ITERATIONS = 60
+"""Most alternations between curves and unknown powers."""
+MISFIT_NOISE, MISFIT_RESIDUAL = 4.0, 0.05
+"""A fit whose residual is both > 4× the measured noise and > 5 % of the signal is refused: a wrong
+layout or a wrong --light (the sim sequences fit to 1.0× the noise and 2 %; a 5-px layout on 8-px
+patches gives 10–17× and 77–92 %, swapped lights 6–16× and 12–31 %)."""
+SCALE_TOLERANCE = 1e-3
+"""Largest relative change of any unknown power at convergence."""
+
+
+def resolve_light(spec: str, grid: WavelengthGrid) -> Spectra:
+    """A broadband light (energy, one column) on ``grid``: a CSV ``wavelength_nm, value`` (energy) or a name.
+
+    Names: the sim rig's ambients (:data:`processing.datasets.AMBIENTS`: tungsten, daylight, …)
+    or CIE illuminants (:func:`processing.datasets.illuminant`: A, D65, FL2, …).
+    """
+    path = Path(spec)
+    if path.suffix.lower() in (".csv", ".txt") or path.exists():
+        if not path.exists():
+            raise CalibrationError(f"{spec}: light file not found; expected a CSV file 'wavelength_nm, value' or a "
+                                   "name like tungsten or D65")
+        try:
+            spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
+            light = spectra.select([0]).resample(grid, outside="error")
+        except (SpectralDataError, ValueError) as err:
+            raise CalibrationError(f"{spec}: {err}") from err
+    else:
+        try:
+            light = (datasets.ambient_spectrum(spec, grid) if spec in datasets.AMBIENTS
+                     else datasets.illuminant(spec, grid))
+        except (SpectralDataError, ValueError, KeyError) as err:
+            raise CalibrationError(f"--light '{spec}': not a known light ({err}); expected a CSV file or one of "
+                                   f"{', '.join(datasets.AMBIENTS)}, A, D65, …") from err
+    if not np.all(np.isfinite(light.values)) or np.any(light.values < 0) or not light.values.max() > 0:
+        raise CalibrationError(f"{spec}: light spectrum is not finite, non-negative and non-zero on "
+                               f"{grid}; expected a measured broadband light")
+    return light.replace(names=(Path(spec).stem if path.suffix else spec,))
+
+
+@dataclass(frozen=True)
+class ChartMeasurements:
+    """Rows of the linear model ``m = (diag(r_p) i_l Δλ) c`` gathered from sequences."""
+
+    grid: WavelengthGrid
+    design: np.ndarray
+    """(rows, n_wavelengths), photons · Δλ, at unit power of the light."""
+    data: np.ndarray
+    """(rows, 3) linear patch means per µs · gain."""
+    std: np.ndarray
+    """(rows, 3) their standard errors."""
+    group: np.ndarray
+    """(rows,) −1 for rows of known power (the first sequence with LED frames: its LEDs), g ≥ 0 for
+    rows of unknown power g (a broadband light, or the LEDs of a later sequence)."""
+    group_names: tuple[str, ...]
+    """Name of each unknown-power group (``sequence index: light`` or ``sequence index: LEDs``)."""
+    frames: tuple[dict[str, Any], ...] = field(default=())
+    """Per used frame: sequence, file, light, patches used."""
+
+
+def _linear(sequence: Any, index: int) -> tuple[np.ndarray, np.ndarray]:
+    frame = sequence.frames[index]
+    raw = sequence.load_frame(index)
+    saturated = raw >= sequence.camera.white_level
+    saturated = saturated.any(axis=2) if saturated.ndim == 3 else saturated
+    return (raw.astype(np.float64) - sequence.camera.black_level) / (frame.exposure_us * frame.gain), saturated
+
+
+def _patch_stats(image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Means and standard errors per patch and channel; NaN where a patch has < MIN_PIXELS samples."""
+    means = np.full((n_patches, 3), np.nan)
+    errors = np.full((n_patches, 3), np.nan)
+    for patch in range(n_patches):
+        samples = patch_pixels(image, labels, patch, cfa)
+        if len(samples) != 3 or min(s.size for s in samples) < MIN_PIXELS:
+            continue
+        means[patch] = [s.mean() for s in samples]
+        errors[patch] = [s.std(ddof=1) / np.sqrt(s.size) for s in samples]
+    return means, errors
+
+
+def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | None], reflectances: Spectra,
+                          labels_for: LabelBuilder) -> ChartMeasurements:
+    """Patch means of every LED frame (minus the ambient) and of each ambient with a known light.
+
+    Parameters
+    ----------
+    sequences
+        Format-v1 sequences (:class:`acquisition.sequence_format.Sequence`) of the same chart.
+    lights
+        Per sequence, its ambient's known broadband light (energy, on the sequence's grid), or None
+        when the ambient is not a known light (then only its LED frames are used).
+    reflectances
+        The chart's patches on the sequences' grid, in label order.
+    labels_for
+        Builds the label map of an image shape, excluding a mask (saturated pixels).
+
+    Raises
+    ------
+    CalibrationError
+        Mismatched grids, a sequence without ambient frame or LED frames, colour-less frames, a
+        frame where most patches are unusable, or no signal at all.
+    """
+    if len(lights) != len(sequences):
+        raise CalibrationError(f"{len(lights)} lights for {len(sequences)} sequences; expected one per sequence")
+    if not sequences:
+        raise CalibrationError("no sequence given; expected at least one chart sequence")
+    grid = sequences[0].grid
+    if not reflectances.grid.same_as(grid):
+        raise CalibrationError(f"chart reflectances on {reflectances.grid} but the sequence on {grid}; expected one grid")
+    n_patches = reflectances.count
+    design_rows, data_rows, std_rows, groups, names, used = [], [], [], [], [], []
+
+    def add(image: np.ndarray, excluded: np.ndarray, light: Spectra, group: int, where: str, cfa: str | None) -> None:
+        labels = labels_for(image.shape[:2], excluded)
+        means, errors = _patch_stats(image, labels, n_patches, cfa)
+        valid = np.all(np.isfinite(means), axis=1)
+        if valid.sum() < max(3, n_patches // 2):
+            raise CalibrationError(f"{where}: only {int(valid.sum())} of {n_patches} chart patches have {MIN_PIXELS} "
+                                   "unsaturated pixels; expected most of the chart usable (check exposure and "
+                                   "--patch-px/--border-px)")
+        rows = measurement_matrix(reflectances, light.to_unit("photons"))
+        design_rows.append(rows[valid])
+        data_rows.append(means[valid])
+        std_rows.append(errors[valid])
+        groups.append(np.full(int(valid.sum()), group))
+        used.append({"frame": where, "light": light.names[0], "patches": int(valid.sum())})
+
+    for s, (sequence, light) in enumerate(zip(sequences, lights, strict=True)):
+        where = str(sequence.path)
+        if not sequence.grid.same_as(grid):
+            raise CalibrationError(f"{where}: wavelengths_nm {sequence.grid} differ from {grid} of the first "
+                                   "sequence; expected one grid")
+        cfa = sequence.camera.cfa
+        ambient_indices = sequence.indices("ambient")
+        if not ambient_indices:
+            raise CalibrationError(f"{where}: frames has no 'ambient' frame; expected one (the LED frames are "
+                                   "measured against it)")
+        led_indices = sequence.indices("led")
+        if not led_indices and light is None:
+            raise CalibrationError(f"{where}: no 'led' frame and no --light for its ambient; expected LED frames "
+                                   "or a known broadband light")
+        a = ambient_indices[0]
+        if any(level > 0 for level in sequence.frames[a].led_levels):
+            raise CalibrationError(f"{where}: frames[{a}] has role 'ambient' but LED levels "
+                                   f"{list(sequence.frames[a].led_levels)}; expected all zero")
+        ambient, ambient_saturated = _linear(sequence, a)
+        if ambient.ndim != 3 and cfa is None:
+            raise CalibrationError(f"{where}: frames are one-channel without a cfa; expected RGB or a Bayer mosaic")
+        leds = sequence.led_spectra()
+        led_group = -1
+        if led_indices and any(g < 0 for g in np.concatenate(groups or [np.zeros(0)])):
+            # LED spectra hold true ratios within a sequence; between sequences (another day, gain or
+            # LED calibration) only the first sequence's LEDs fix the scale.
+            names.append(f"{s}: LEDs")
+            led_group = len(names) - 1
+        for i in led_indices:
+            frame = sequence.frames[i]
+            levels = np.asarray(frame.led_levels, dtype=float)
+            if not levels.any():
+                raise CalibrationError(f"{where}: frames[{i}] ('{frame.file}') has role 'led' but all LED levels are "
+                                       "0; expected at least one LED on")
+            image, saturated = _linear(sequence, i)
+            spectrum = leds.replace(values=leds.values @ levels[:, None],
+                                    names=("+".join(n for n, v in zip(leds.names, levels) if v > 0),))
+            add(image - ambient, saturated | ambient_saturated, spectrum, led_group, f"{where}: {frame.file}", cfa)
+        if light is not None:
+            names.append(f"{s}: {light.names[0]}")
+            add(ambient, ambient_saturated, light, len(names) - 1, f"{where}: {sequence.frames[a].file}", cfa)
+    group = np.concatenate(groups)
+    if not np.any(group < 0):
+        raise CalibrationError("no LED frame in any sequence; expected LED frames (they fix the scale of the "
+                               "broadband lights)")
+    data = np.vstack(data_rows)
+    std = np.vstack(std_rows)
+    # A floor on the standard error: flat (noise-free or quantised) patches must not get infinite weight.
+    std = np.maximum(std, 1e-4 * np.nanmax(np.abs(data), axis=0) + 1e-300)
+    return ChartMeasurements(grid, np.vstack(design_rows), data, std, group, tuple(names), tuple(used))
+
+
+@dataclass(frozen=True)
+class SequenceCalibration:
+    """The result of :func:`estimate_from_measurements`."""
+
+    estimate: ResponsivityEstimate
+    light_scales: dict[str, float]
+    """Estimated power of each unknown-power group relative to its given spectrum (units of the
+    first sequence's LEDs)."""
+    iterations: int
+
+
+def estimate_from_measurements(measurements: ChartMeasurements, method: str = "pca_prior",
+                               prior: ResponsivityPrior | None = None) -> SequenceCalibration:
+    """Responsivities from :class:`ChartMeasurements`, the broadband lights' powers estimated jointly.
+
+    Starts from the LED rows alone, then alternates: each broadband power by weighted least
+    squares over all its patches and channels given the curves, the curves given the powers, until
+    the powers change by less than :data:`SCALE_TOLERANCE` (relative).
+
+    Raises
+    ------
+    CalibrationError
+        If the model does not fit (see :data:`MISFIT_NOISE`).
+    """
+    m = measurements
+    known = m.group < 0
+    fit: ChannelFit = fit_channels(m.design[known], m.data[known], m.std[known], method, prior)
+    scales = np.ones(len(m.group_names))
+    iterations = 0
+    for iterations in range(1, SCALE_ITERATIONS + 1):
+        if not m.group_names:
+            break
+        new = scales.copy()
+        for g in range(len(m.group_names)):
+            rows = m.group == g
+            predicted = (m.design[rows] @ fit.curves) / m.std[rows]
+            observed = m.data[rows] / m.std[rows]
+            denominator = float(np.sum(predicted * predicted))
+            if not denominator > 0:
+                raise CalibrationError(f"broadband light {m.group_names[g]}: the LED-only curves predict no signal; "
+                                       "expected LEDs that cover the camera's channels")
+            new[g] = max(float(np.sum(predicted * observed)) / denominator, 1e-12)
+        row_scale = np.where(known, 1.0, new[np.maximum(m.group, 0)])
+        fit = fit_channels(m.design * row_scale[:, None], m.data, m.std, method, prior)
+        change = float(np.max(np.abs(new - scales) / np.maximum(np.abs(new), 1e-300)))
+        scales = new
+        if change < SCALE_TOLERANCE:
+            break
+    for c, channel in enumerate(CHANNELS):
+        if fit.noise_scale[c] > MISFIT_NOISE and fit.relative_residual[c] > MISFIT_RESIDUAL:
+            raise CalibrationError(
+                f"chart frames: the model does not fit the patch means (channel {channel}: residual "
+                f"{100 * fit.relative_residual[c]:.0f} % of the signal, {fit.noise_scale[c]:.1f}× the measurement noise); "
+                "expected the right --light for each sequence's ambient and the chart layout of the frames "
+                "(--patch-px/--border-px)")
+    source = f"estimated from {len(m.frames)} chart frames ({method})"
+    estimate = fit.normalised(m.grid, source)
+    return SequenceCalibration(estimate, dict(zip(m.group_names, map(float, scales), strict=True)), iterations)
+
+
+__all__ = ["CHANNELS", "ChartMeasurements", "SequenceCalibration", "estimate_from_measurements", "resolve_light",
+           "sequence_measurements"]
