@@ -136,7 +136,7 @@ def _camera_from_sequences(args: argparse.Namespace) -> int:
     unknown = [name for name in args.prior_exclude if name not in cameras]
     if unknown:
         raise UsageError(f"--prior-exclude {unknown}: not among the 34 paper cameras; expected names like NikonD100")
-    prior = learn_prior(cameras, exclude=args.prior_exclude) if args.method == "pca_prior" else None
+    prior = learn_prior(cameras, exclude=args.prior_exclude) if args.method != "smoothness" else None
     progress(f"{len(measurements.frames)} chart frames, {measurements.data.shape[0]} patch means; "
              f"prior from {len(prior.cameras) if prior else 0} cameras")
     result = estimate_from_measurements(measurements, args.method, prior)
@@ -183,7 +183,7 @@ def _camera(args: argparse.Namespace) -> int:
     responses, std = simulate_chart_responses(truth, chart, lights, rng=np.random.default_rng(args.seed))
     prior = learn_prior(cameras, exclude=[args.camera])  # never the camera under test
     estimate = estimate_responsivities(responses, chart, lights, args.method,
-                                       prior if args.method == "pca_prior" else None, std)
+                                       prior if args.method != "smoothness" else None, std)
     rmse = responsivity_rmse(estimate.responsivities, truth)
     calibration = load_or_new(args.out).updated(
         camera_responsivities=estimate.responsivities,
@@ -271,7 +271,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     camera.add_argument("--simulate", action="store_true", help="render the chart in the sim world instead")
     camera.add_argument("--camera", default="NikonD100", help="simulated camera (one of the 34 paper cameras)")
     camera.add_argument("--chart", default="macbeth", choices=("macbeth", "chart110"))
-    camera.add_argument("--method", default="pca_prior", choices=("pca_prior", "smoothness"))
+    camera.add_argument("--method", default="pca_prior", choices=("pca_prior", "pca_subspace", "smoothness"),
+                        help="prior: the learned second moment (default), its best subspace by evidence, or smoothness")
     camera.add_argument("--seed", type=int, default=0)
     camera.add_argument("--out", required=True, help="calibration directory (created or updated)")
     camera.add_argument("--json", action="store_true")

@@ -141,7 +141,7 @@ def learn_prior(cameras: Mapping[str, Spectra], exclude: Sequence[str] = ()) -> 
     return ResponsivityPrior(first.grid, moments, tuple(training))
 
 
-RESPONSIVITY_METHODS = ("smoothness", "pca_prior")
+RESPONSIVITY_METHODS = ("smoothness", "pca_prior", "pca_subspace")
 """Priors of :func:`estimate_responsivities`."""
 SHRINKAGES = (0.003, 0.01, 0.03, 0.1, 0.3)
 """Candidate weights of the smooth part of the learned prior (chosen by the evidence)."""
@@ -272,6 +272,28 @@ class ChannelFit:
                                     self.noise_scale)
 
 
+SUBSPACE_DIMENSIONS = (1, 2, 3, 4, 6, 8, 12)
+"""Candidate dimensions of the learned subspace of ``pca_subspace`` (chosen by the evidence with the
+smooth share; the full second moment is a candidate too)."""
+
+
+def _prior_options(method: str, prior: ResponsivityPrior | None, channel: str, smooth: np.ndarray
+                   ) -> list[tuple[float, np.ndarray]]:
+    """(smooth share, prior covariance) candidates of a method, compared by the evidence."""
+    if method == "smoothness":
+        return [(0.0, smooth)]
+    assert prior is not None
+    options = [(s, prior.covariance(channel, s)) for s in SHRINKAGES]
+    if method == "pca_subspace":
+        values, vectors = np.linalg.eigh(prior.moments[channel])
+        order = np.argsort(values)[::-1]
+        values, vectors = np.clip(values[order], 0, None), vectors[:, order]
+        for k in SUBSPACE_DIMENSIONS:
+            moment = (vectors[:, :k] * values[:k]) @ vectors[:, :k].T
+            options += [(s, moment + s * np.trace(moment) * smooth) for s in SHRINKAGES]
+    return options
+
+
 def fit_channels(design: np.ndarray, data: np.ndarray, std: np.ndarray, method: str,
                  prior: ResponsivityPrior | None) -> ChannelFit:
     """Per-channel evidence-weighted MAP with ``c ≥ 0`` for rows ``design`` (photons · Δλ), data and std (rows, 3)."""
@@ -291,8 +313,7 @@ def fit_channels(design: np.ndarray, data: np.ndarray, std: np.ndarray, method: 
         normal = weighted.T @ weighted
         rhs = weighted.T @ target
         data_norm2 = float(target @ target)
-        options = [(0.0, smooth)] if method == "smoothness" else \
-            [(s, prior.covariance(channel, s)) for s in SHRINKAGES]  # type: ignore[union-attr]
+        options = _prior_options(method, prior, channel, smooth)
         best = (-np.inf, 1.0, 0.0, None)
         for shrinkage, covariance in options:
             covariance = covariance / np.trace(covariance) * n_wl

@@ -148,3 +148,45 @@ def summarise(results: Sequence[CameraCalibrationResult]) -> dict:
         "flash_delta_e_mean": float(np.mean([r.flash_delta_e_mean for r in results])),
         "flash_delta_e_max": float(max(r.flash_delta_e_max for r in results)),
     }
+
+
+LIGHT_SETS = {"LEDs": (), "LEDs+A": ("A",), "LEDs+A+D65": ("A", "D65")}
+"""Light sets of :func:`regime_study`: the LEDs alone, plus one, plus two broadband lights."""
+
+
+def regime_study(
+    noise_factors: Sequence[float] = (1.0, 4.0, 16.0), methods: Sequence[str] = ("smoothness", "pca_prior", "pca_subspace"),
+    camera_names: Sequence[str] | None = None, chart: str = "macbeth", seed: int = 0,
+) -> dict[tuple[float, str, str], list[float]]:
+    """Leave-one-camera-out RMSE per (noise factor, light set, method), one value per camera.
+
+    The chart is rendered once per camera under all lights (as :func:`leave_one_camera_out`);
+    a noise factor ``k > 1`` adds Gaussian noise of ``sqrt(k² − 1)`` × the standard error to every
+    patch mean (and multiplies the standard error by ``k``), i.e. ``k`` times the noise of the
+    study's sensor. Light subsets drop rows; nothing is tuned on the camera under test.
+    """
+    from calibration.camera_response import fit_channels, measurement_matrix
+
+    grid = DEFAULT_GRID
+    cameras = {name: spectra.resample(grid, outside="zero") for name, spectra in datasets.paper_cameras().items()}
+    names = list(cameras) if camera_names is None else list(camera_names)
+    reflectances = datasets.macbeth().resample(grid) if chart == "macbeth" else datasets.chart110()
+    lights = calibration_lights(grid)
+    rng = np.random.default_rng(seed)
+    results: dict[tuple[float, str, str], list[float]] = {}
+    for name in names:
+        truth = cameras[name]
+        responses, std = simulate_chart_responses(truth, reflectances, lights, rng=rng)
+        prior = learn_prior(cameras, exclude=[name])
+        for factor in noise_factors:
+            noisy = responses + rng.normal(size=responses.shape) * std * np.sqrt(max(factor ** 2 - 1, 0.0))
+            for set_name, broadband in LIGHT_SETS.items():
+                index = list(range(lights.count - len(BROADBAND_LIGHTS))) + [
+                    lights.names.index(b) for b in broadband]
+                design = measurement_matrix(reflectances, lights.select(index))
+                data, errors = noisy[index].reshape(-1, 3), (std[index] * factor).reshape(-1, 3)
+                for method in methods:
+                    fit = fit_channels(design, data, errors, method, None if method == "smoothness" else prior)
+                    estimate = fit.normalised(grid, "regime study").responsivities
+                    results.setdefault((float(factor), set_name, method), []).append(responsivity_rmse(estimate, truth))
+    return results

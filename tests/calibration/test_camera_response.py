@@ -48,7 +48,7 @@ def test_bad_inputs():
     good = np.ones((lights.count, chart.count, 3))
     with pytest.raises(CalibrationError, match=r"expected \(9, 24, 3\)"):
         estimate_responsivities(good[:, :3], chart, lights, "smoothness")
-    with pytest.raises(CalibrationError, match="unknown; expected one of smoothness, pca_prior"):
+    with pytest.raises(CalibrationError, match="unknown; expected one of smoothness, pca_prior, pca_subspace"):
         estimate_responsivities(good, chart, lights, "magic")
     with pytest.raises(CalibrationError, match="needs a prior"):
         estimate_responsivities(good, chart, lights, "pca_prior")
@@ -58,3 +58,14 @@ def test_bad_inputs():
         estimate_responsivities(bad, chart, lights, "smoothness")
     with pytest.raises(CalibrationError, match="training cameras"):
         learn_prior({"a": datasets.paper_cameras()["NikonD100"]})
+
+
+def test_subspace_prior_recovers_noise_free_camera():
+    chart = datasets.macbeth().resample(DEFAULT_GRID)
+    lights = calibration_lights()
+    cameras = {k: v.resample(DEFAULT_GRID, outside="zero") for k, v in datasets.paper_cameras().items()}
+    truth = cameras["Canon 40D"]
+    responses = np.stack([surface_responses(chart, lights.select([l]), truth) for l in range(lights.count)])
+    estimate = estimate_responsivities(responses, chart, lights, "pca_subspace", learn_prior(cameras, ["Canon 40D"]),
+                                       response_std=1e-6 * responses.max() + 0 * responses)
+    assert responsivity_rmse(estimate.responsivities, truth) < 2e-3
