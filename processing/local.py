@@ -58,6 +58,13 @@ four neighbours), 1 and 2 "local-smoothed"."""
 SELECTION_MARGIN = 0.10
 """A local model must cut the leave-one-tile-out prediction error by more than this fraction of the
 global model's; otherwise the global model is kept (calibrated on uniform scenes, see the docs)."""
+REGION_RADIUS = 2
+"""Half-width in blocks of the box over which block residuals are pooled before labelling (5 × 5 blocks)."""
+REGION_ITERATIONS = 3
+"""Alternations of labelling blocks and re-pooling the regions' statistics."""
+MAX_REGION_CELLS = 6000
+"""Blocks are grouped into cells of g × g blocks so that the labels have at most about this many cells
+(cost: a 240 × 320 frame at 4× binning keeps its 4 800 blocks; a 1024 × 1280 frame gets 16-pixel cells)."""
 MIN_TILE_SAMPLES_PER_LED = 4
 """A tile with fewer valid samples than this many per LED borrows its estimate from the smoothed fit."""
 
@@ -78,6 +85,49 @@ def tile_edges(n_blocks: int, n_tiles: int) -> np.ndarray:
 
 
 # -- tiled statistics -------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BlockData:
+    """The binned samples of a frame stack, linearised on demand (for :func:`segment_regions`)."""
+
+    raw: np.ndarray = field(repr=False)
+    """(n_frames + 2, h, w, C) block sums of the rows [F_1 … F_n, A, 1] (invalid blocks zeroed)."""
+    valid: np.ndarray = field(repr=False)
+    """(h, w) blocks without a saturated member."""
+    spec: FrameStackSpec
+    """The block-level spec (black level scaled to the block)."""
+    pixel: int
+    """Block side in pixels (bin factor × CFA period)."""
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Blocks (rows, columns)."""
+        return (int(self.valid.shape[0]), int(self.valid.shape[1]))
+
+    def linear(self, group: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The ambient ``a`` (N, C) and unmixed LED images ``F`` (N, C, k) of ``group × group`` cells of blocks.
+
+        Sums of blocks obey the same linear model, so grouping only coarsens the labels. A cell is
+        kept (``valid``, (h/group, w/group)) when all its blocks are valid.
+        """
+        rows, columns = self.shape[0] // group, self.shape[1] // group
+        raw = self.raw[:, :rows * group, :columns * group]
+        valid = self.valid[:rows * group, :columns * group]
+        if group > 1:
+            n_rows, channels = raw.shape[0], raw.shape[-1]
+            raw = raw.reshape(n_rows, rows, group, columns * group * channels).sum(axis=2)
+            raw = (raw.reshape(-1, group * channels) @ _gather(group, channels, np.float64)).reshape(
+                n_rows, rows, columns, channels)
+            valid = valid.reshape(rows, group, columns, group).all(axis=(1, 3))
+        cells = raw[:, valid]  # (R, N, C)
+        n_led_frames = cells.shape[0] - 2
+        black = float(self.spec.black_level) * cells[-1]  # the ones row counts the blocks
+        ambient = self.spec.ambient_scale * (cells[n_led_frames] - black)
+        scales = np.asarray(self.spec.led_scales, dtype=float)
+        differences = scales[:, None, None] * (cells[:n_led_frames] - black[None]) - ambient[None]
+        led = np.einsum("ia,anc->nci", self.spec.unmixing, differences, optimize=True)
+        return ambient, led, valid
+
+
 @dataclass(frozen=True)
 class TiledStatistics:
     """:class:`SequenceStatistics` of every tile of a grid, stored as arrays (tile row, tile column, …)."""
@@ -100,6 +150,8 @@ class TiledStatistics:
     """Pixel rows where the tile rows start and end, (ty + 1,); the last is the frame height."""
     column_edges: np.ndarray
     """Pixel columns where the tile columns start and end, (tx + 1,)."""
+    blocks: BlockData | None = field(default=None, repr=False, compare=False)
+    """The binned samples themselves (for region segmentation); None when built from moments only."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -164,6 +216,7 @@ class TiledStatistics:
             gram=smooth(self.gram), cross=smooth(self.cross), ambient_energy=smooth(self.ambient_energy),
             n_samples=smooth(self.n_samples), n_total=smooth(self.n_total), ambient_sum=smooth(self.ambient_sum),
             led_sums=smooth(self.led_sums), row_edges=self.row_edges, column_edges=self.column_edges,
+            blocks=self.blocks,
         )
 
 
@@ -287,7 +340,10 @@ def tile_statistics(
     row_edges = row_blocks * pixel
     column_edges = column_blocks * pixel
     row_edges[-1], column_edges[-1] = ambient.shape[0], ambient.shape[1]
-    return _tiled_from_moments(moments, totals, block_spec, row_edges, column_edges)
+    tiled = _tiled_from_moments(moments, totals, block_spec, row_edges, column_edges)
+    blocks = BlockData(raw=data, valid=~invalid, spec=block_spec, pixel=pixel)
+    return TiledStatistics(**{name: getattr(tiled, name) for name in tiled.__dataclass_fields__ if name != "blocks"},
+                           blocks=blocks)
 
 
 def _tiled_from_moments(moments: np.ndarray, totals: np.ndarray, spec: FrameStackSpec, row_edges: np.ndarray,
@@ -399,6 +455,137 @@ def select_model(tiles: TiledStatistics, led_spectra: Spectra, alpha: float | No
                           best_local=best_sigma, margin=margin)
 
 
+# -- two illuminant regions ---------------------------------------------------------------------
+@dataclass(frozen=True)
+class RegionSegmentation:
+    """Two ambient regions: block labels and one estimate per region pooled over all its blocks."""
+
+    labels: np.ndarray
+    """(h, w) bool block labels: True = region 1."""
+    weights: np.ndarray
+    """(2, k) ambient weights of regions 0 and 1 (the chosen solver on each region's pooled statistics)."""
+    residual: float
+    """In-sample ``Σ_b ‖a_b − F_b w_label(b)‖²`` over the valid blocks."""
+    affine_residual: float
+    """In-sample residual of the smooth alternative: weights affine in the position, ``w(x) = w₀ + u wᵤ + v wᵥ``."""
+    pixel: int
+    """Block side in pixels."""
+
+    @property
+    def chosen(self) -> bool:
+        """Whether two regions explain the ambient image better than a smooth (affine) field."""
+        return bool(self.labels.any() and not self.labels.all() and self.residual < self.affine_residual)
+
+    def label_map(self, shape: tuple[int, int]) -> np.ndarray:
+        """(H, W) per-pixel region labels (blocks repeated, the uncovered margin takes the nearest block)."""
+        rows = np.minimum(np.arange(shape[0]) // self.pixel, self.labels.shape[0] - 1)
+        columns = np.minimum(np.arange(shape[1]) // self.pixel, self.labels.shape[1] - 1)
+        return self.labels[rows[:, None], columns[None, :]]
+
+
+def _box(values: np.ndarray, radius: int) -> np.ndarray:
+    """Sums over (2r + 1)² windows of an (h, w) map, truncated at the border (cumulative sums)."""
+    def along(x: np.ndarray, axis: int) -> np.ndarray:
+        n = x.shape[axis]
+        padded = np.concatenate([np.zeros_like(np.take(x, [0], axis=axis)), np.cumsum(x, axis=axis)], axis=axis)
+        upper = np.minimum(np.arange(n) + radius + 1, n)
+        lower = np.maximum(np.arange(n) - radius, 0)
+        return np.take(padded, upper, axis=axis) - np.take(padded, lower, axis=axis)
+
+    return along(along(values, 0), 1)
+
+
+def _region_statistics(ambient: np.ndarray, led: np.ndarray, member: np.ndarray) -> SequenceStatistics:
+    """Pooled statistics of the blocks where ``member`` is set (ambient (N, C), led (N, C, k))."""
+    a, f = ambient[member].reshape(-1), led[member].reshape(-1, led.shape[-1])
+    return SequenceStatistics(gram=f.T @ f, cross=f.T @ a, ambient_energy=float(a @ a), n_samples=int(a.size),
+                              n_total=int(a.size), ambient_sum=float(a.sum()), led_sums=f.sum(axis=0))
+
+
+def _affine_residual(tiles: TiledStatistics, penalty: np.ndarray, alpha: float) -> float:
+    """In-sample residual of weights affine in the tile-centre position (Tikhonov, from the tile statistics)."""
+    rows, columns = tiles.centres
+    height, width = tiles.frame_shape
+    u = np.broadcast_to((columns / width - 0.5)[None, :], tiles.shape)
+    v = np.broadcast_to((rows / height - 0.5)[:, None], tiles.shape)
+    basis = np.stack([np.ones(tiles.shape), u, v], axis=-1)  # (ty, tx, 3)
+    k = tiles.n_leds
+    gram = np.einsum("tsb,tsc,tsij->bicj", basis, basis, tiles.gram, optimize=True).reshape(3 * k, 3 * k)
+    cross = np.einsum("tsb,tsi->bi", basis, tiles.cross).reshape(3 * k)
+    theta = _batched_ridge(gram, cross, np.kron(np.eye(3), penalty), alpha)
+    return float(max(tiles.ambient_energy.sum() - 2.0 * cross @ theta + theta @ gram @ theta, 0.0))
+
+
+def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, solver: str = "tikhonov",
+                    solver_alpha: float | str = "auto", radius: int = REGION_RADIUS,
+                    iterations: int = REGION_ITERATIONS) -> RegionSegmentation | None:
+    """Split the frame into two ambient regions and estimate each from all of its blocks.
+
+    1. Tile estimates (ridge on the σ = 0.5 smoothed statistics) seed two clusters: the two tiles
+       whose normalised spectra differ most, every tile to the nearer; each cluster's tiles are
+       pooled into a first estimate.
+    2. Every block is labelled with the region whose weights predict its ambient image better,
+       the residual differences summed over a (2r + 1)² box of cells first (a vote: the label
+       follows the data, not the tile grid; a bright neighbour can pull a boundary by ≤ r cells). Each region's statistics are then
+       pooled from its blocks and re-solved; repeated ``iterations`` times.
+    3. The chosen solver runs on each region's pooled statistics: a region sees as many surfaces
+       as it covers, not a tile's worth.
+
+    Returns None when the tiles hold no block data (statistics built from moments only).
+    """
+    blocks = tiles.blocks
+    if blocks is None or not blocks.valid.any():
+        return None
+    led_values = led_spectra.values
+    roughness = np.diff(led_values, axis=0)
+    penalty = roughness.T @ roughness
+    smoothed = tiles.smoothed(0.5)
+    tile_weights = _batched_ridge(smoothed.gram, smoothed.cross, penalty, alpha).reshape(-1, tiles.n_leds)
+    spectra = tile_weights @ led_values.T
+    spectra /= np.maximum(np.linalg.norm(spectra, axis=1, keepdims=True), 1e-300)
+    distances = ((spectra[:, None] - spectra[None]) ** 2).sum(axis=-1)
+    first, second = np.unravel_index(int(distances.argmax()), distances.shape)
+    in_second = distances[second] < distances[first]
+    gram = tiles.gram.reshape(-1, tiles.n_leds, tiles.n_leds)
+    cross = tiles.cross.reshape(-1, tiles.n_leds)
+    weights = np.stack([_batched_ridge(gram[~in_second].sum(axis=0), cross[~in_second].sum(axis=0), penalty, alpha),
+                        _batched_ridge(gram[in_second].sum(axis=0), cross[in_second].sum(axis=0), penalty, alpha)])
+    group = max(1, int(np.ceil(np.sqrt(blocks.valid.size / MAX_REGION_CELLS))))
+    ambient, led, valid = blocks.linear(group)
+    if not valid.any():
+        return None
+    difference = np.zeros(valid.shape)
+    labels = np.zeros(valid.shape, dtype=bool)
+    for _ in range(iterations):
+        errors = ((ambient[None] - np.einsum("nci,ri->rnc", led, weights, optimize=True)) ** 2).sum(axis=-1)
+        # Residual differences summed over a (2r + 1)² box of cells: a vote weighted by the cells'
+        # brightness (normalised votes were tried: noisy dark cells then flip labels, worse on the study).
+        difference[valid] = errors[1] - errors[0]
+        labels = _box(difference, radius) < 0.0
+        member = labels[valid]
+        if member.all() or not member.any():
+            break
+        weights = np.stack([_pooled_ridge(ambient, led, mask, penalty, alpha) for mask in (~member, member)])
+    member = labels[valid]
+    final = weights.copy()
+    if member.any() and not member.all():
+        for index, mask in enumerate((~member, member)):
+            statistics = _region_statistics(ambient, led, mask)
+            try:
+                final[index] = AMBIENT_METHODS[solver](statistics, led_values, solver_alpha)[0]
+            except SolverError:
+                pass
+    predicted = np.einsum("nci,ni->nc", led, np.where(member[:, None], final[1], final[0]), optimize=True)
+    residual = float(((ambient - predicted) ** 2).sum())
+    return RegionSegmentation(labels=labels, weights=final, residual=residual,
+                              affine_residual=_affine_residual(tiles, penalty, alpha), pixel=blocks.pixel * group)
+
+
+def _pooled_ridge(ambient: np.ndarray, led: np.ndarray, member: np.ndarray, penalty: np.ndarray, alpha: float) -> np.ndarray:
+    f = led[member].reshape(-1, led.shape[-1])
+    return _batched_ridge(f.T @ f, f.T @ ambient[member].reshape(-1), penalty, alpha)
+
+
 # -- local estimates --------------------------------------------------------------------------
 @dataclass(frozen=True)
 class LocalEstimate:
@@ -426,6 +613,10 @@ class LocalEstimate:
     """The LED spectra (photons, n_wavelengths × k) the weights refer to."""
     warnings: tuple[str, ...] = ()
     """Human-readable warnings."""
+    structure: str | None = None
+    """For the local model: ``regions`` (two illuminant regions, :func:`segment_regions`) or ``tiles``."""
+    regions: RegionSegmentation | None = None
+    """The two-region segmentation when ``structure == "regions"``."""
 
     @property
     def tile_spectra(self) -> np.ndarray:
@@ -446,7 +637,10 @@ class LocalEstimate:
         return self.led_values @ self.mean_weights
 
     def weights_map(self, shape: tuple[int, int] | None = None) -> np.ndarray:
-        """Per-pixel ambient weights (H, W, k), bilinear between tile centres."""
+        """Per-pixel ambient weights (H, W, k): each pixel's region's, or bilinear between tile centres."""
+        if self.regions is not None:
+            labels = self.regions.label_map(shape if shape is not None else self.tiles.frame_shape)
+            return np.where(labels[..., None], self.regions.weights[1], self.regions.weights[0])
         return upsample_tiles(self.tile_weights, self.tiles, shape)
 
 
@@ -458,6 +652,7 @@ def estimate_local(
     alpha: float | str = "auto",
     smoothing: float | None = None,
     margin: float = SELECTION_MARGIN,
+    regions_allowed: bool = True,
 ) -> LocalEstimate:
     """Estimate the ambient globally or per tile, choosing the model from the data for ``auto``.
 
@@ -473,9 +668,14 @@ def estimate_local(
         The estimator of :func:`processing.ambient.estimate_ambient` and its roughness weight. For
         ``alpha="auto"`` with ``tikhonov``, GCV chooses it per tile.
     smoothing
-        Gaussian width in tiles of the local fit; None takes the best of the selection.
+        Gaussian width in tiles of the local fit; None takes the best of the selection. Giving it
+        forces the tile model.
     margin
         See :func:`select_model`.
+    regions_allowed
+        When the local model is used (and ``smoothing`` is None), try the two-region model
+        (:func:`segment_regions`) and keep it when two regions explain the ambient image better
+        than a smooth affine field; otherwise (or when False) solve per tile.
     """
     if method not in LOCAL_METHODS:
         raise ValueError(f"local method '{method}' is unknown; expected one of {', '.join(LOCAL_METHODS)}")
@@ -495,16 +695,45 @@ def estimate_local(
         weights = np.broadcast_to(global_estimate.ambient_weights, shape + (tiles.n_leds,)).copy()
         used_sigma = None
         warnings: list[str] = []
-    else:
+    structure, regions = None, None
+    if model == "local":
         used_sigma = float(smoothing if smoothing is not None else selection.best_local)  # type: ignore[union-attr]
-        weights, warnings = _solve_tiles(tiles.smoothed(used_sigma), tiles, led_values, solver, alpha,
-                                         global_estimate)
+        warnings = []
+        if smoothing is None and regions_allowed:
+            scoring_alpha = global_estimate.alpha if solver == "tikhonov" and global_estimate.alpha > 0 else gcv_alpha(
+                total, np.diff(led_values, axis=0))
+            regions = segment_regions(tiles, led_spectra, scoring_alpha, solver, alpha)
+            if regions is not None and not regions.chosen:
+                regions = None
+        if regions is not None:
+            structure = "regions"
+            weights = _region_tile_weights(regions, tiles)
+        else:
+            structure = "tiles"
+            weights, warnings = _solve_tiles(tiles.smoothed(used_sigma), tiles, led_values, solver, alpha,
+                                             global_estimate)
     residual = np.sqrt(_held_out_error(tiles, weights) / np.maximum(tiles.ambient_energy, 1e-300))
     return LocalEstimate(
         model=model, method=method, smoothing=used_sigma, global_estimate=global_estimate, tile_weights=weights,
         tile_residuals=residual, tile_samples=tiles.n_samples.copy(), tiles=tiles, selection=selection,
-        led_values=led_values, warnings=tuple(warnings),
+        led_values=led_values, warnings=tuple(warnings), structure=structure, regions=regions,
     )
+
+
+def _region_tile_weights(regions: RegionSegmentation, tiles: TiledStatistics) -> np.ndarray:
+    """Every tile's weights for a two-region estimate: the regions' mixed by their shares of the tile's cells."""
+    cells_rows, cells_columns = regions.labels.shape
+    centre_rows = (np.arange(cells_rows) + 0.5) * regions.pixel
+    centre_columns = (np.arange(cells_columns) + 0.5) * regions.pixel
+    tile_rows = np.clip(np.searchsorted(tiles.row_edges, centre_rows, side="right") - 1, 0, tiles.shape[0] - 1)
+    tile_columns = np.clip(np.searchsorted(tiles.column_edges, centre_columns, side="right") - 1, 0, tiles.shape[1] - 1)
+    index = (tile_rows[:, None] * tiles.shape[1] + tile_columns[None, :]).ravel()
+    count = np.bincount(index, minlength=tiles.shape[0] * tiles.shape[1]).astype(float)
+    ones = np.bincount(index, weights=regions.labels.ravel().astype(float), minlength=count.size)
+    # A tile without a cell centre (tiny tiles) takes its nearest cell's label.
+    nearest = regions.label_map(tiles.frame_shape)[tiles.centres[0].astype(int)[:, None], tiles.centres[1].astype(int)[None, :]]
+    share = np.where(count > 0, ones / np.maximum(count, 1.0), nearest.ravel().astype(float)).reshape(tiles.shape)
+    return (1.0 - share)[..., None] * regions.weights[0] + share[..., None] * regions.weights[1]
 
 
 def _solve_tiles(smoothed: TiledStatistics, own: TiledStatistics, led_values: np.ndarray, solver: str,

@@ -15,6 +15,7 @@ import pytest
 from processing.image_formation import MixedIllumination, expected_response
 from processing.local import (
     SELECTION_MARGIN,
+    segment_regions,
     TiledStatistics,
     estimate_local,
     select_model,
@@ -22,7 +23,18 @@ from processing.local import (
     tile_statistics,
     upsample_tiles,
 )
-from processing.local_study import Scenario, led_bound, make_scenario, run_study, tile_truth, tiled_rmse
+from processing.local_study import (
+    Scenario,
+    led_bound,
+    make_scenario,
+    pixel_bound,
+    pixel_rmse,
+    pixel_truth,
+    run_study,
+    tile_truth,
+    tiled_rmse,
+)
+from processing.metrics import spectrum_rmse
 from processing.statistics import accumulate_statistics
 from processing.synthesis import synthesize
 from tests.helpers import EXACT, FLOAT32, ambient, camera, chart, leds_photons, linear_frames, rendered_frames, spec_for
@@ -103,6 +115,29 @@ def test_noise_free_in_span_local_recovers_each_side_exactly() -> None:
     np.testing.assert_allclose(local.tile_weights[0, 0], left_mix, rtol=1e-6)
     np.testing.assert_allclose(local.tile_weights[0, 3], right_mix, rtol=1e-6)
     assert estimate_local(t, leds, "auto", solver="lstsq").model == "local"
+    # The two-region model finds the split.
+    regions = estimate_local(t, leds, "local", solver="lstsq")
+    assert regions.structure == "regions"
+    labels = regions.regions.label_map(frames[0].shape[:2])  # type: ignore[union-attr]
+    left_label = bool(labels[0, 0])
+    # The box vote may pull the edge by up to its radius (2 blocks) towards the brighter side.
+    assert np.all(labels[:, :26] == left_label) and np.all(labels[:, 30:] != left_label)
+    assert np.mean(labels[:, :28] == left_label) > 0.9 and np.mean(labels[:, 28:] != left_label) > 0.9
+    # (The pooled weights are then not exact: the unregularised lstsq amplifies the few mixed cells.)
+
+
+def test_block_cells_sum_to_the_tile_statistics() -> None:
+    """The linearised blocks (and cells of 2 × 2 blocks) carry the same statistics as the tiles."""
+    t = tiled("boundary", 2)
+    total = t.total()
+    for group in (1, 2):
+        ambient_cells, led_cells, valid = t.blocks.linear(group)  # type: ignore[union-attr]
+        assert valid.shape == (t.blocks.shape[0] // group, t.blocks.shape[1] // group)  # type: ignore[union-attr]
+        f = led_cells.reshape(-1, 7)
+        if group == 1:  # every block: exactly the tiles' sums
+            np.testing.assert_allclose(f.T @ f, total.gram, rtol=1e-9)
+            np.testing.assert_allclose(f.T @ ambient_cells.reshape(-1), total.cross, rtol=1e-9)
+        np.testing.assert_allclose(f.sum(axis=0), total.led_sums, rtol=1e-9 if group == 1 else 0.05)
 
 
 # -- model selection ------------------------------------------------------------------------------
@@ -130,14 +165,44 @@ def test_local_cuts_the_spectrum_rmse_on_two_illuminant_scenes(seed: int) -> Non
     s = scenario("boundary", seed)
     t = tiled("boundary", seed)
     auto = estimate_local(t, s.led_spectra, "auto")
-    truth = tile_truth(s, auto)
-    global_rmse = tiled_rmse(np.broadcast_to(auto.global_estimate.spectrum.values[:, 0], truth.shape), truth, t.areas)
-    local_rmse = tiled_rmse(auto.tile_spectra, truth, t.areas)
-    # Part of either error is the LEDs' inability to reproduce the named ambients (the bound no
-    # estimate beats, ~0.18 here): the raw cut is smaller than the cut of the excess over it.
-    bound = tiled_rmse(led_bound(s.led_spectra.values, truth), truth, t.areas)
+    assert auto.structure == "regions"
+    global_rmse = pixel_rmse(auto.global_estimate.spectrum.values[:, 0], s)
+    local_rmse = pixel_rmse(auto, s)
+    tiles_rmse = pixel_rmse(estimate_local(t, s.led_spectra, "local", regions_allowed=False), s)
+    # Part of either error is the LEDs' inability to reproduce the named ambients (~0.18 here):
+    # the raw cut is smaller than the cut of the excess over that bound.
+    bound = pixel_bound(s)
     assert local_rmse <= 0.8 * global_rmse, (s.names, global_rmse, local_rmse)
-    assert local_rmse - bound <= 0.7 * (global_rmse - bound), (s.names, global_rmse, local_rmse, bound)
+    assert local_rmse - bound <= 0.5 * (global_rmse - bound), (s.names, global_rmse, local_rmse, bound)
+    assert local_rmse <= tiles_rmse * 1.02, (s.names, local_rmse, tiles_rmse)
+    # The labels follow the true boundary, not the tile grid.
+    labels = auto.regions.label_map(SHAPE)  # type: ignore[union-attr]
+    truth = s.illumination.weights[..., 1] > s.illumination.weights[..., 0]
+    assert max(np.mean(labels == truth), np.mean(labels != truth)) >= 0.9
+
+
+def test_gradient_scene_keeps_the_tile_model() -> None:
+    """A smooth ramp is explained better by an affine field than by two regions: tiles are solved."""
+    s = scenario("gradient", 8)
+    t = tiled("gradient", 8)
+    regions = segment_regions(t, s.led_spectra, 0.01)
+    assert regions is not None and regions.residual > regions.affine_residual
+    auto = estimate_local(t, s.led_spectra, "auto")
+    assert (auto.model, auto.structure, auto.regions) == ("local", "tiles", None)
+
+
+def test_pixel_metric_is_each_pixels_estimate_against_its_own_ambient() -> None:
+    """The study's metric: per pixel, the pixel's estimate against the pixel's true ambient, averaged."""
+    s = scenario("boundary", 2)
+    truth = pixel_truth(s)
+    second = (s.illumination.weights[..., 1] > 0).ravel()
+    sides = [truth[~second][0], truth[second][0]]
+    estimate = s.led_spectra.values @ np.full(7, 0.3)
+    expected = (np.mean(~second) * spectrum_rmse(estimate, sides[0]) + np.mean(second) * spectrum_rmse(estimate, sides[1]))
+    assert pixel_rmse(estimate, s) == pytest.approx(expected, rel=1e-9)
+    # The bound is the best LED fit of each side, weighted by the sides' areas.
+    fits = [tiled_rmse(led_bound(s.led_spectra.values, side[None, None]), side[None, None], np.ones((1, 1))) for side in sides]
+    assert pixel_bound(s) == pytest.approx(np.mean(~second) * fits[0] + np.mean(second) * fits[1], rel=1e-6)
 
 
 def test_forced_global_and_bad_method() -> None:
@@ -189,14 +254,12 @@ def test_local_synthesis_equals_global_for_equal_weights_and_blends_between() ->
 def test_acceptance_study() -> None:
     """Issue 9 acceptance: ≥ 95 % global on uniform scenes, RMSE cut on boundary scenes, ≤ 3× cost.
 
-    Measured (docs/local-estimation.md): 100/100 global; boundary scenes cut the spectrum RMSE by
-    22 % (0.289 → 0.224) and its excess over the LED bound (0.184) by 61 %; 2.3× the global time.
-    The issue's ≥ 30 % raw cut is NOT reached with the rig's named ambients, which the 7 LEDs
-    cannot reproduce (the bound alone is 64 % of the global error): asserted on the excess instead.
+    Measured numbers: docs/local-estimation.md (per-pixel metric). The boundary cut is asserted at
+    the issue's 30 %; gradients are not (their floor leaves little: see the docs).
     """
     summary = run_study(n_uniform=100, n_mixed=30, sweep=False)
     assert summary["uniform"]["global_rate"] >= 0.95
     assert summary["uniform"]["rmse_auto"] <= summary["uniform"]["rmse_global"] * 1.001
-    assert summary["boundary"]["auto_cut"] >= 0.20
-    assert summary["boundary"]["excess_cut"] >= 0.30
+    assert summary["boundary"]["auto_cut"] >= 0.30
+    assert summary["boundary"]["excess_cut"] >= 0.60
     assert summary["timing"]["auto_ratio"] <= 3.0
