@@ -24,8 +24,9 @@ def _local_study(args: argparse.Namespace) -> int:
         entry = summary.get(kind)
         if entry:
             print(f"{kind:9s} n={entry['n']:4d}  auto→global {entry['global_rate']:6.1%}  spectrum RMSE global "
-                  f"{entry['rmse_global']:.4f} auto {entry['rmse_auto']:.4f} (cut {entry['auto_cut']:+.1%}), "
-                  f"LED bound {entry['rmse_bound']:.4f}")
+                  f"{entry['rmse_global']:.4f} auto {entry['rmse_auto']:.4f} (cut {entry['auto_cut']:+.1%}, of the excess "
+                  f"over the LED bound {entry['excess_cut']:+.1%}), LED bound {entry['rmse_bound']:.4f}, "
+                  f"two regions {entry['regions_rate']:.0%}")
     timing = summary.get("timing")
     if timing:
         print(f"cost on {timing['shape'][0]}x{timing['shape'][1]}: global {timing['global_s'] * 1e3:.1f} ms, auto "
