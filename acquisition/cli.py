@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
@@ -105,6 +106,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         sys.stderr.write("msflash: interrupted; LEDs off, partial data kept\n")
         return 130
+    except BrokenPipeError:
+        # The reader of stdout went away (``msflash estimate SEQ | head``): stop quietly, and keep
+        # Python from complaining again when it flushes stdout at exit.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except _bad_input_errors() as err:
         sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
         return 2
