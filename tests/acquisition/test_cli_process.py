@@ -190,3 +190,22 @@ def test_synthesize_writes_a_readable_exr(capsys, base_sequence: Path, tmp_path:
     zero = tmp_path / "zero.exr"
     assert run(capsys, "synthesize", str(base_sequence), "--weights", ",".join(["0"] * N_LEDS), "--out", str(zero))[0] == 0
     assert np.all(read_image(out) >= read_image(zero) - 1e-3 * read_image(zero).max())  # adding light only adds
+
+
+def test_a_closed_stdout_pipe_ends_quietly(tmp_path: Path) -> None:
+    """`msflash estimate SEQ | head -1`: no traceback when the reader goes away."""
+    import subprocess
+    import sys
+
+    from tests.helpers import SAMPLES_DIR
+
+    sequence = SAMPLES_DIR / "sample-rgb-tungsten"
+    if not (sequence / "sequence.json").exists():
+        pytest.skip(f"shared sample {sequence} is absent (CI puts shared/ beside the clone)")
+    reader = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.readline()"], stdin=subprocess.PIPE)
+    writer = subprocess.run([sys.executable, "-m", "acquisition.cli", "estimate", str(sequence)],
+                            stdout=reader.stdin, stderr=subprocess.PIPE, text=True, timeout=120)
+    reader.stdin.close()
+    reader.wait(timeout=10)
+    assert "Traceback" not in writer.stderr
+    assert writer.returncode in (0, 141)
