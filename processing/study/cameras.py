@@ -23,8 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from processing import datasets
-from processing.errors import SpectralDataError
 from processing.metrics import spectrum_rmse
 from processing.spectra import DEFAULT_GRID, WavelengthGrid
 from processing.study.illuminants import SmoothIlluminant
@@ -33,11 +31,7 @@ from processing.study.table1 import (
     Progress,
     direct_fit,
     evaluate_camera,
-    flash_norm,
-    led_subset_indices,
-    select_cameras,
-    select_illuminants,
-    transfer_matrix,
+    evaluate_all_cameras,
 )
 
 
@@ -45,24 +39,10 @@ def _per_camera(n_leds_list: Sequence[int], method: str, alpha: float | str, cam
                 illuminants: Sequence[SmoothIlluminant] | int | None, progress: Progress | None,
                 map_function: MapFunction | None, grid: WavelengthGrid, label: str) -> dict[str, Any]:
     started = time.perf_counter()
-    counts = [int(n) for n in n_leds_list]
-    if not counts:
-        raise SpectralDataError(f"{label} study: no LED counts; expected some of 3–7")
-    subsets = [led_subset_indices(n) for n in counts]
-    chosen_cameras = select_cameras(cameras)
-    chosen_illuminants = select_illuminants(illuminants, grid)
-    leds = flash_norm(grid)
-    chart = datasets.chart110().resample(grid)
-    truths = np.column_stack([ill.spectrum.values[:, 0] for ill in chosen_illuminants])
-    names = list(chosen_cameras)
-    jobs = [(transfer_matrix(chart, chosen_cameras[name]), leds.values, truths, subsets, method, [alpha],
-             "dimensionless", grid) for name in names]
-    mapper = map_function or (lambda function, items: map(function, items))
-    results = []
-    for done, result in enumerate(mapper(_evaluate_job, jobs), start=1):
-        results.append(result)
-        if progress:
-            progress(f"{label}: camera {done}/{len(names)} done ({time.perf_counter() - started:.1f} s)")
+    run = evaluate_all_cameras(n_leds_list, method, [alpha], "dimensionless", cameras, illuminants, progress, map_function,
+                               grid, label, started)
+    counts, subsets, names, chosen_illuminants = run.counts, run.subsets, run.names, run.illuminants
+    truths, leds, results = run.truths, run.leds, run.results
     return {
         "counts": counts, "subsets": subsets, "names": names, "illuminants": chosen_illuminants, "truths": truths,
         "leds": leds, "started": started,

@@ -53,6 +53,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -304,6 +305,52 @@ def shared_scale_rmse(estimates: np.ndarray, truth: np.ndarray) -> float:
 
 
 # -- the table --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CameraRuns:
+    """The noise-free protocol evaluated for every camera: what Table 1 and the camera study share."""
+
+    counts: list[int]
+    """LED counts."""
+    subsets: list[list[int]]
+    """The paper's LED subsets (0-based indices) for each count."""
+    names: list[str]
+    """Camera names, in the order of ``results``."""
+    illuminants: list[Any]
+    """The illuminants (smoothest spectra of the feasible xy grid)."""
+    truths: np.ndarray
+    """True spectra, (n_wavelengths, n_illuminants)."""
+    leds: Any
+    """The flash LED spectra (photons, one global maximum)."""
+    results: list[dict[str, Any]]
+    """One :func:`_evaluate_job` result per camera."""
+
+
+def evaluate_all_cameras(n_leds_list: Sequence[int], method: str, alphas: Sequence[float | str], alpha_units: str,
+                cameras: Sequence[str] | int | None, illuminants: Sequence[Any] | int | None,
+                progress: Progress | None, map_function: MapFunction | None, grid: WavelengthGrid, label: str,
+                started: float) -> CameraRuns:
+    """Evaluate every camera × illuminant × LED subset (in parallel through ``map_function``)."""
+    counts = [int(n) for n in n_leds_list]
+    if not counts:
+        raise SpectralDataError(f"{label} study: no LED counts; expected some of 3–7")
+    subsets = [led_subset_indices(n) for n in counts]
+    chosen_cameras = select_cameras(cameras)
+    chosen_illuminants = select_illuminants(illuminants, grid)
+    leds = flash_norm(grid)
+    chart = datasets.chart110().resample(grid)
+    truths = np.column_stack([ill.spectrum.values[:, 0] for ill in chosen_illuminants])
+    names = list(chosen_cameras)
+    jobs = [(transfer_matrix(chart, chosen_cameras[name]), leds.values, truths, subsets, method, list(alphas),
+             alpha_units, grid) for name in names]
+    mapper = map_function or (lambda function, items: map(function, items))
+    results = []
+    for done, result in enumerate(mapper(_evaluate_job, jobs), start=1):
+        results.append(result)
+        if progress:
+            progress(f"{label}: camera {done}/{len(names)} done ({time.perf_counter() - started:.1f} s)")
+    return CameraRuns(counts, subsets, names, chosen_illuminants, truths, leds, results)
+
+
 def run_table1(
     n_leds_list: Sequence[int] = (3, 4, 5, 6, 7),
     method: str = "tikhonov",
@@ -358,23 +405,10 @@ def run_table1(
     alphas: list[float | str] = [alpha] if isinstance(alpha, (str, int, float)) else list(alpha)
     if not alphas:
         raise SpectralDataError("table 1: an empty alpha sweep; expected at least one value")
-    counts = [int(n) for n in n_leds_list]
-    subsets = [led_subset_indices(n) for n in counts]
-    chosen_cameras = select_cameras(cameras)
-    chosen_illuminants = select_illuminants(illuminants, grid)
-    leds = flash_norm(grid)
-    chart = datasets.chart110().resample(grid)
-    truths = np.column_stack([ill.spectrum.values[:, 0] for ill in chosen_illuminants])
-
-    names = list(chosen_cameras)
-    jobs = [(transfer_matrix(chart, chosen_cameras[name]), leds.values, truths, subsets, method, alphas,
-             alpha_units, grid) for name in names]
-    mapper = map_function or (lambda function, items: map(function, items))
-    results = []
-    for done, result in enumerate(mapper(_evaluate_job, jobs), start=1):
-        results.append(result)
-        if progress:
-            progress(f"table1: camera {done}/{len(names)} done ({time.perf_counter() - started:.1f} s)")
+    run = evaluate_all_cameras(n_leds_list, method, alphas, alpha_units, cameras, illuminants, progress, map_function, grid,
+                      "table1", started)
+    counts, subsets, names, chosen_illuminants = run.counts, run.subsets, run.names, run.illuminants
+    truths, leds, results = run.truths, run.leds, run.results
 
     # (n_cameras, n_ill, n_sets, n_alpha)
     stacked = {name: np.stack([r[name] for r in results]) for name in (*METRICS, "alpha_used", "failed")}
