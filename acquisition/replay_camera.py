@@ -16,15 +16,14 @@ low around it, so a booth in camera-master mode advances); booth-paced plans are
 from __future__ import annotations
 
 import math
-import threading
-from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from acquisition.camera import CameraInfo, RawFrame
-from acquisition.errors import CameraError, FrameTimeoutError, ReplayMismatchError
+from acquisition.errors import CameraError, ReplayMismatchError
+from acquisition.frame_queue import TriggeredFrames
 from acquisition.plan import CapturePlan
 from acquisition.sequence_format import Sequence, read_sequence
 
@@ -34,7 +33,7 @@ EXPOSURE_RTOL = 0.01
 """Exposures (and gains) match within 1 % (cameras round exposure to their own steps)."""
 
 
-class ReplayCamera:
+class ReplayCamera(TriggeredFrames):
     """A camera that serves the frames of the sequence in ``directory``.
 
     Use :meth:`open`. Frames are served in recording order; each ``prepare(plan)`` checks the plan
@@ -47,14 +46,11 @@ class ReplayCamera:
         self.sequence = sequence
         self.exposure_line: Callable[[bool], None] | None = None
         """The camera's ExposureActive output (camera-master sync); the rig wires it to the booth."""
+        super().__init__()
+        self._label = "replay camera"
         self._cursor = 0
-        self._plan: CapturePlan | None = None
         self._plan_start = 0
         self._released = 0
-        self._queue: deque[RawFrame] = deque()
-        self._condition = threading.Condition()
-        self._started = False
-        self._closed = False
         first = sequence.load_frame(0)
         self._shape = first.shape
 
@@ -155,42 +151,10 @@ class ReplayCamera:
         """The hardware trigger input (booth master): release the next frame."""
         self._release(self._require_started())
 
-    def next_frame(self, timeout_s: float) -> RawFrame:
-        """The oldest released frame; ``FrameTimeoutError`` if none within ``timeout_s``."""
-        with self._condition:
-            plan = self._plan
-            if not self._queue and not (plan is not None and plan.trigger == "booth"):
-                raise FrameTimeoutError(f"replay camera: no frame for frame {self._cursor}: no trigger was issued; "
-                                        "expected trigger() before next_frame()")
-            if not self._condition.wait_for(lambda: bool(self._queue) or self._closed, timeout=timeout_s):
-                raise FrameTimeoutError(f"replay camera: no frame within {timeout_s:g} s for recorded frame "
-                                        f"{self._cursor}: the trigger did not arrive")
-            self._check_open()
-            return self._queue.popleft()
-
-    def stop(self) -> None:
-        """Stop serving; idempotent."""
-        with self._condition:
-            self._started = False
-
-    def close(self) -> None:
-        """Release; idempotent."""
-        with self._condition:
-            self._started = False
-            self._closed = True
-            self._queue.clear()
-            self._condition.notify_all()
-
     # -- internals ------------------------------------------------------------------------
-    def _check_open(self) -> None:
-        if self._closed:
-            raise CameraError("replay camera: used after close(); expected an open camera")
-
-    def _require_started(self) -> CapturePlan:
-        self._check_open()
-        if not self._started or self._plan is None:
-            raise CameraError("replay camera: triggered before start(); expected prepare() then start()")
-        return self._plan
+    def _timeout_message(self, timeout_s: float, why: str) -> str:
+        return (f"replay camera: no frame within {timeout_s:g} s for recorded frame {self._cursor}: {why}; "
+                "expected trigger() (or the booth's trigger line) before next_frame()")
 
     def _release(self, plan: CapturePlan) -> None:
         with self._condition:
@@ -200,14 +164,16 @@ class ReplayCamera:
             index = self._cursor
             self._cursor += 1
             self._released += 1
-        recorded = self.sequence.frames[index]
-        pixels = self.sequence.load_frame(index)
-        timestamp = recorded.extra.get("timestamp_ns", 0)
-        frame = RawFrame(np.asarray(pixels), index + 1, int(timestamp) if isinstance(timestamp, int) else 0,
-                         recorded.exposure_us, recorded.gain)
-        with self._condition:
-            self._queue.append(frame)
-            self._condition.notify_all()
+            self._begin_frame()
+        frame = None
+        try:
+            recorded = self.sequence.frames[index]
+            pixels = self.sequence.load_frame(index)
+            timestamp = recorded.extra.get("timestamp_ns", 0)
+            frame = RawFrame(np.asarray(pixels), index + 1, int(timestamp) if isinstance(timestamp, int) else 0,
+                             recorded.exposure_us, recorded.gain)
+        finally:
+            self._end_frame(frame)
 
 
 def _fmt(levels: tuple[float, ...] | list[float]) -> str:

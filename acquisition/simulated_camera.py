@@ -23,14 +23,14 @@ the first case, still consumes its step: the capture is broken at that point any
 from __future__ import annotations
 
 import threading
-from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Literal
 
 import numpy as np
 
 from acquisition.camera import CameraInfo, RawFrame
-from acquisition.errors import CameraError, FrameTimeoutError
+from acquisition.errors import CameraError
+from acquisition.frame_queue import TriggeredFrames
 from acquisition.plan import CapturePlan, CaptureStep
 from processing import datasets
 from processing.image_formation import (
@@ -51,7 +51,7 @@ LedLevelsSource = Callable[[], Sequence[float]]
 _GENICAM_BAYER = {"RGGB": "BayerRG", "BGGR": "BayerBG", "GRBG": "BayerGR", "GBRG": "BayerGB"}
 
 
-class SimulatedCamera:
+class SimulatedCamera(TriggeredFrames):
     """Renders ``scene`` under ``ambient`` + LEDs at the levels of ``led_levels_source``.
 
     Parameters
@@ -127,17 +127,13 @@ class SimulatedCamera:
         self.seed = seed
         self.suggested_exposure_us: float | None = None
         """An exposure that suits this world (set by :meth:`default`), or None."""
+        super().__init__()
         self._name = name
+        self._label = f"simulated camera '{name}'"
         self._rng = np.random.default_rng(seed)
         self._frame_interval_ns = int(frame_interval_ns)
-        self._condition = threading.Condition()
         self._render_lock = threading.Lock()
-        self._queue: deque[RawFrame] = deque()
-        self._plan: CapturePlan | None = None
         self._next_step = 0
-        self._rendering = 0
-        self._started = False
-        self._closed = False
         self._frame_id = 0
         self._clock_ns = 0
         self._rendered_levels: list[tuple[float, ...]] = []
@@ -213,43 +209,7 @@ class SimulatedCamera:
         """
         self._render_next(self._require_started())
 
-    def next_frame(self, timeout_s: float) -> RawFrame:
-        """The oldest queued frame; ``FrameTimeoutError`` if none arrives within ``timeout_s``."""
-        with self._condition:
-            while not self._queue:
-                self._check_open()
-                plan = self._plan
-                external = plan is not None and plan.trigger == "booth"
-                if not external and self._rendering == 0:
-                    raise FrameTimeoutError(self._timeout_message(timeout_s, "no trigger was issued"))
-                if not self._condition.wait_for(lambda: bool(self._queue) or self._closed, timeout=timeout_s):
-                    raise FrameTimeoutError(self._timeout_message(timeout_s, "the trigger did not arrive"))
-            return self._queue.popleft()
-
-    def stop(self) -> None:
-        """Stop acquisition; idempotent. Queued frames stay readable until the next start."""
-        with self._condition:
-            self._started = False
-
-    def close(self) -> None:
-        """Release the camera; idempotent."""
-        with self._condition:
-            self._started = False
-            self._closed = True
-            self._queue.clear()
-            self._condition.notify_all()
-
     # -- internals ----------------------------------------------------------------------------
-    def _check_open(self) -> None:
-        if self._closed:
-            raise CameraError(f"simulated camera '{self._name}': used after close(); expected an open camera")
-
-    def _require_started(self) -> CapturePlan:
-        self._check_open()
-        if not self._started or self._plan is None:
-            raise CameraError(f"simulated camera '{self._name}': triggered before start(); expected prepare() then start()")
-        return self._plan
-
     def _timeout_message(self, timeout_s: float, why: str) -> str:
         plan = self._plan
         if plan is not None and self._next_step < len(plan.steps):
@@ -284,7 +244,8 @@ class SimulatedCamera:
                 )
             step = plan.steps[self._next_step]
             self._next_step += 1
-            self._rendering += 1
+            self._begin_frame()
+        delivered = False
         try:
             with self._render_lock:  # one render at a time keeps the noise stream in trigger order
                 levels = self._levels_for(step)
@@ -302,11 +263,12 @@ class SimulatedCamera:
                     self._clock_ns += int(step.exposure_us * 1000) + self._frame_interval_ns
                     frame = RawFrame(pixels, self._frame_id, self._clock_ns, step.exposure_us, step.gain)
                     self._rendered_levels.append(levels)
-                    self._queue.append(frame)
+                # Delivered under the render lock, so frames queue in trigger order.
+                self._end_frame(frame)
+                delivered = True
         finally:
-            with self._condition:
-                self._rendering -= 1
-                self._condition.notify_all()
+            if not delivered:
+                self._end_frame(None)
 
     # -- a ready-made world -------------------------------------------------------------------
     @classmethod
