@@ -45,7 +45,7 @@ import numpy as np
 from processing.ambient import AMBIENT_METHODS, AmbientEstimate, gcv_alpha, estimate_ambient
 from processing.errors import SolverError, SpectralDataError
 from processing.spectra import Spectra, require_unit
-from processing.statistics import FrameStackSpec, SequenceStatistics
+from processing.statistics import FrameStackSpec, SequenceStatistics, block_sums, cfa_planes, gather_matrix
 from processing.synthesis import frame_coefficients
 
 LOCAL_METHODS = ("auto", "global", "local")
@@ -115,7 +115,7 @@ class BlockData:
         if group > 1:
             n_rows, channels = raw.shape[0], raw.shape[-1]
             raw = raw.reshape(n_rows, rows, group, columns * group * channels).sum(axis=2)
-            raw = (raw.reshape(-1, group * channels) @ _gather(group, channels, np.float64)).reshape(
+            raw = (raw.reshape(-1, group * channels) @ gather_matrix(group, channels, np.float64)).reshape(
                 n_rows, rows, columns, channels)
             valid = valid.reshape(rows, group, columns, group).all(axis=(1, 3))
         cells = raw[:, valid]  # (R, N, C)
@@ -230,39 +230,13 @@ def _kernel(n: int, sigma: float) -> np.ndarray:
     return kernel
 
 
-def _planes(frame: np.ndarray, cfa_period: int) -> np.ndarray:
-    """(H, W, C) view of a frame; a Bayer mosaic becomes its four same-colour planes."""
-    if cfa_period == 2:
-        rows, columns = frame.shape[0] // 2, frame.shape[1] // 2
-        return np.stack([frame[p:2 * rows:2, q:2 * columns:2] for p in (0, 1) for q in (0, 1)], axis=-1)
-    return frame if frame.ndim == 3 else frame[:, :, None]
-
-
-@lru_cache(maxsize=32)
-def _gather(factor: int, channels: int, dtype: type) -> np.ndarray:
-    gather = np.zeros((factor * channels, channels), dtype=dtype)
-    for member in range(factor):
-        gather[member * channels:(member + 1) * channels] = np.eye(channels, dtype=dtype)
-    gather.flags.writeable = False
-    return gather
-
-
 def _block_sums(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
-    """``factor × factor`` block sums of an (H, W, C) plane into ``out`` (H/f, W/f, C), exactly.
-
-    Rows of a block by a reduction over a middle axis, columns by a thin 0/1 matrix product (the
-    technique of :mod:`processing.statistics`): integer data is summed in float32, exact for ≤ 16
-    bits and blocks ≤ 16×16.
-    """
-    height, width, channels = out.shape
+    """``factor × factor`` block sums of an (H, W, C) plane into ``out`` (H/f, W/f, C), exactly."""
+    height, width, _ = out.shape
     if factor == 1:
         np.copyto(out, plane[:height, :width], casting="unsafe")
         return
-    sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
-    cropped = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
-    row_sums = cropped.sum(axis=1, dtype=sum_type)
-    grouped = row_sums.reshape(height * width, factor * channels) @ _gather(factor, channels, sum_type)
-    np.copyto(out, grouped.reshape(height, width, channels))
+    np.copyto(out, block_sums(plane, factor)[:height, :width])
 
 
 def _block_any(mask: np.ndarray, factor: int, height: int, width: int) -> np.ndarray:
@@ -306,7 +280,7 @@ def tile_statistics(
         if frame.shape != ambient.shape:
             raise SpectralDataError(f"frame stack: frame {index} has shape {frame.shape} but the ambient frame "
                                     f"{ambient.shape}; expected frames of one size")
-    planes = [_planes(frame, cfa_period) for frame in frames]
+    planes = [cfa_planes(frame, cfa_period) for frame in frames]
     height, width, channels = planes[0].shape[0] // bin_factor, planes[0].shape[1] // bin_factor, planes[0].shape[2]
     if height == 0 or width == 0:
         raise SpectralDataError(f"frame of shape {ambient.shape} is smaller than one {bin_factor}×{bin_factor} block")

@@ -173,8 +173,7 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
     ([[10.0, 18.0], [42.0, 50.0]], [[5.0, 7.0], [13.0, 15.0]])
     """
     if cfa_period == 2:
-        rows, columns = frame.shape[0] // 2, frame.shape[1] // 2
-        frame = np.stack([frame[p:2 * rows:2, q:2 * columns:2] for p in (0, 1) for q in (0, 1)], axis=-1)
+        frame = cfa_planes(frame, 2)
     # float32 sums are exact for integer data ≤ 16 bits in blocks ≤ 16×16; float frames keep float64.
     sum_type = np.float64 if np.issubdtype(frame.dtype, np.floating) else np.float32
     if factor == 1:
@@ -319,7 +318,7 @@ def _accumulate_binned(ambient: np.ndarray, led_frames: Sequence[np.ndarray], sp
             )
     if sample_mask is not None and sample_mask.shape != ambient.shape[:2]:
         raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {ambient.shape[:2]}")
-    planes = [_cfa_planes(frame, cfa_period) for frame in frames]
+    planes = [cfa_planes(frame, cfa_period) for frame in frames]
     height, width = planes[0].shape[0] // factor, planes[0].shape[1] // factor
     if height == 0 or width == 0:
         raise SpectralDataError(
@@ -385,7 +384,7 @@ def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total:
     )
 
 
-def _cfa_planes(frame: np.ndarray, cfa_period: int) -> np.ndarray:
+def cfa_planes(frame: np.ndarray, cfa_period: int) -> np.ndarray:
     """(H, W, C) view of a frame; a Bayer mosaic becomes its four CFA planes as channels."""
     if cfa_period == 2:
         rows, columns = frame.shape[0] // 2, frame.shape[1] // 2
@@ -422,7 +421,7 @@ def _block_any(mask: np.ndarray, factor: int) -> np.ndarray:
 
 
 @lru_cache(maxsize=32)
-def _gather_matrix(factor: int, channels: int, dtype: type) -> np.ndarray:
+def gather_matrix(factor: int, channels: int, dtype: type) -> np.ndarray:
     """(factor·channels, channels) 0/1 matrix summing the ``factor`` pixels of a row group per channel."""
     gather = np.zeros((factor * channels, channels), dtype=dtype)
     for member in range(factor):
@@ -431,13 +430,18 @@ def _gather_matrix(factor: int, channels: int, dtype: type) -> np.ndarray:
     return gather
 
 
-def _block_sums_into(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
-    """Write the ``factor × factor`` block sums of an (H, W, C) plane into ``out`` (H/f, C, W/f), float64.
+def block_sums(plane: np.ndarray, factor: int) -> np.ndarray:
+    """Exact ``factor × factor`` block sums of an (H, W, C) plane, shape (H/f, W/f, C); edges dropped.
 
-    Sums are exact: integer data is summed in float32 (exact for ≤ 16 bits in blocks ≤ 16×16),
-    float data in float64.
+    Integer data is summed in float32 (exact for ≤ 16 bits in blocks ≤ 16×16), float data in
+    float64.
+
+    Examples
+    --------
+    >>> block_sums(np.arange(16.0).reshape(4, 4, 1), 2)[:, :, 0].tolist()
+    [[10.0, 18.0], [42.0, 50.0]]
     """
-    height, channels, width = out.shape
+    height, width, channels = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
     sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
     cropped = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
     # Rows of a block: a reduction over the middle axis streams whole rows (long inner loops).
@@ -445,8 +449,13 @@ def _block_sums_into(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
     # Columns of a block: each group of ``factor`` pixels is factor·channels contiguous values, so a
     # thin matrix product with a 0/1 gather matrix sums them per channel in one BLAS call — far
     # faster than strided slicing, and exact (0/1 weights, integer sums below 2²⁴ in float32).
-    grouped = row_sums.reshape(height * width, factor * channels) @ _gather_matrix(factor, channels, sum_type)
-    np.copyto(out, grouped.reshape(height, width, channels).transpose(0, 2, 1))
+    grouped = row_sums.reshape(height * width, factor * channels) @ gather_matrix(factor, channels, sum_type)
+    return grouped.reshape(height, width, channels)
+
+
+def _block_sums_into(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
+    """Write the block sums of an (H, W, C) plane into ``out`` (H/f, C, W/f), float64 (moment-row order)."""
+    np.copyto(out, block_sums(plane, factor).transpose(0, 2, 1))
 
 
 def _gram(rows: np.ndarray, chunk: int) -> np.ndarray:
