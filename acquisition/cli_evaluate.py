@@ -56,7 +56,7 @@ from processing.image_formation import chart_scene
 from processing.render import camera_to_srgb_linear, camera_to_xyz_matrix, demosaic_bilinear, encode_srgb
 from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from processing.statistics import FrameStackSpec, accumulate_statistics
-from processing.synthesis import synthesize
+from processing.synthesis import linearise, synthesize
 
 CHARTS = ("macbeth",)
 """Charts ``evaluate`` knows the layout and reference of."""
@@ -237,10 +237,8 @@ def write_outputs(out: Path, name: str, image: np.ndarray, context: ColourContex
 # -- evaluate a sequence ----------------------------------------------------------------------
 def _linear_frame(sequence: Sequence, index: int) -> tuple[np.ndarray, np.ndarray]:
     frame = sequence.frames[index]
-    raw = sequence.load_frame(index)
-    saturated = raw >= sequence.camera.white_level
-    saturated = saturated.any(axis=2) if saturated.ndim == 3 else saturated
-    return (raw.astype(np.float64) - sequence.camera.black_level) / (frame.exposure_us * frame.gain), saturated
+    return linearise(sequence.load_frame(index), sequence.camera.black_level, sequence.camera.white_level,
+                     frame.exposure_us, frame.gain)
 
 
 def _solve_both(ambient_weights: np.ndarray, leds: Spectra, camera: Spectra, target: Spectra, bounds: str

@@ -21,7 +21,7 @@ from processing.flash import FlashSolution
 from processing.metrics import spectrum_rmse
 from processing.render import camera_to_xyz_matrix, demosaic_superpixel, srgb_preview
 from processing.spectra import Spectra
-from processing.synthesis import synthesize
+from processing.synthesis import linearise, synthesize
 
 
 def _pyplot():  # noqa: ANN202 - matplotlib is imported lazily, with the non-interactive backend
@@ -60,8 +60,9 @@ def _camera_to_xyz(sequence: Sequence) -> np.ndarray | None:
 
 def _linearise(sequence: Sequence, index: int) -> np.ndarray:
     frame = sequence.frames[index]
-    raw = sequence.load_frame(index).astype(np.float32)
-    return (raw - sequence.camera.black_level) / (frame.exposure_us * frame.gain)
+    linear, _ = linearise(sequence.load_frame(index), sequence.camera.black_level, sequence.camera.white_level,
+                          frame.exposure_us, frame.gain)
+    return linear
 
 
 def plot_spectra(path: Path, sequence: Sequence, estimate: AmbientEstimate, solutions: dict[str, FlashSolution],

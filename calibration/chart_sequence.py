@@ -48,6 +48,7 @@ from processing import datasets
 from processing.colour_metrics import patch_pixels
 from processing.errors import SpectralDataError
 from processing.spectra import Spectra, WavelengthGrid
+from processing.synthesis import linearise
 
 LabelBuilder = Callable[[tuple[int, int], np.ndarray], np.ndarray]
 """``(image shape, excluded mask) → label map`` (patch index, −1 for unusable pixels)."""
@@ -114,10 +115,8 @@ class ChartMeasurements:
 
 def _linear(sequence: Any, index: int) -> tuple[np.ndarray, np.ndarray]:
     frame = sequence.frames[index]
-    raw = sequence.load_frame(index)
-    saturated = raw >= sequence.camera.white_level
-    saturated = saturated.any(axis=2) if saturated.ndim == 3 else saturated
-    return (raw.astype(np.float64) - sequence.camera.black_level) / (frame.exposure_us * frame.gain), saturated
+    return linearise(sequence.load_frame(index), sequence.camera.black_level, sequence.camera.white_level,
+                     frame.exposure_us, frame.gain)
 
 
 def _patch_stats(image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str | None

@@ -16,6 +16,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import nnls
@@ -110,16 +111,21 @@ def flash_delta_e(true_camera: Spectra, recovered: Spectra, chart: Spectra, ambi
     return float(delta.mean()), float(delta.max())
 
 
+def _study_world(camera_names: Sequence[str] | None, chart: str, seed: int, grid: WavelengthGrid) -> tuple[
+        dict[str, Spectra], list[str], Spectra, Any, np.random.Generator]:
+    """The 34 cameras on ``grid``, the cameras to study, the chart, the lights and the noise generator."""
+    cameras = {name: spectra.resample(grid, outside="zero") for name, spectra in datasets.paper_cameras().items()}
+    names = list(cameras) if camera_names is None else list(camera_names)
+    reflectances = datasets.macbeth().resample(grid) if chart == "macbeth" else datasets.chart110()
+    return cameras, names, reflectances, calibration_lights(grid), np.random.default_rng(seed)
+
+
 def leave_one_camera_out(
     camera_names: Sequence[str] | None = None, chart: str = "macbeth", seed: int = 0,
 ) -> list[CameraCalibrationResult]:
     """Run the study over ``camera_names`` (default: all 34), each against a prior learned without it."""
     grid = DEFAULT_GRID
-    cameras = {name: spectra.resample(grid, outside="zero") for name, spectra in datasets.paper_cameras().items()}
-    names = list(cameras) if camera_names is None else list(camera_names)
-    reflectances = datasets.macbeth().resample(grid) if chart == "macbeth" else datasets.chart110()
-    lights = calibration_lights(grid)
-    rng = np.random.default_rng(seed)
+    cameras, names, reflectances, lights, rng = _study_world(camera_names, chart, seed, grid)
     results = []
     for name in names:
         truth = cameras[name]
@@ -168,11 +174,7 @@ def regime_study(
     from calibration.camera_response import fit_channels, measurement_matrix
 
     grid = DEFAULT_GRID
-    cameras = {name: spectra.resample(grid, outside="zero") for name, spectra in datasets.paper_cameras().items()}
-    names = list(cameras) if camera_names is None else list(camera_names)
-    reflectances = datasets.macbeth().resample(grid) if chart == "macbeth" else datasets.chart110()
-    lights = calibration_lights(grid)
-    rng = np.random.default_rng(seed)
+    cameras, names, reflectances, lights, rng = _study_world(camera_names, chart, seed, grid)
     results: dict[tuple[float, str, str], list[float]] = {}
     for name in names:
         truth = cameras[name]

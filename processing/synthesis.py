@@ -123,6 +123,28 @@ def _any_channel(bright: np.ndarray) -> np.ndarray:
     return result
 
 
+def linearise(raw: np.ndarray, black_level: float, white_level: float, exposure_us: float,
+              gain: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """A raw frame in processing units, ``(raw − black) / (exposure_us · gain)``, and its saturation.
+
+    Returns
+    -------
+    linear : ndarray
+        float64, the frame's shape.
+    saturated : ndarray
+        Boolean (H, W): some channel at or above the white level.
+
+    Examples
+    --------
+    >>> linear, saturated = linearise(np.array([[64, 1064]]), 64, 1000, 10.0)
+    >>> linear.tolist(), saturated.tolist()
+    ([[0.0, 100.0]], [[False, True]])
+    """
+    saturated = raw >= white_level
+    saturated = saturated.any(axis=2) if saturated.ndim == 3 else saturated
+    return (raw.astype(np.float64) - black_level) / (exposure_us * gain), saturated
+
+
 def to_raw_values(image: np.ndarray, exposure_us: float, gain: float, black_level: float,
                   white_level: float, dtype: type = np.uint16) -> np.ndarray:
     """Encode a linear image as raw values at a given exposure and gain (clipped to the white level)."""
