@@ -14,6 +14,9 @@ Public objects
 - :func:`decode_pixels`, :data:`PIXEL_FORMATS`, :func:`frame_id_gap`: pure helpers.
 - :class:`AravisGvFake`, :func:`gvcp_port_lock`, :data:`FAKE_SFNC_XML`: the Aravis GigE Vision
   fake camera served on 127.0.0.1 with msflash's SFNC GenICam description.
+- :class:`FrameTiming` (:attr:`AravisCamera.last_frame_timing`), :func:`bare_aravis_run` with
+  :class:`BareRun` and :class:`TriggerTiming`: stage times of frames, and the plain Aravis loop
+  the camera bench compares against.
 
 Network safety: Aravis discovers GigE Vision cameras by broadcasting on every network interface,
 and opening a camera by a name that is not an IP address makes the GigE Vision interface resolve
@@ -476,10 +479,31 @@ class AcquisitionStats:
 
 
 @dataclass(frozen=True)
+class FrameTiming:
+    """When one frame passed each stage on its way to :meth:`AravisCamera.next_frame`.
+
+    ``received_ns``, ``popped_ns`` and ``delivered_ns`` are host ``CLOCK_REALTIME`` nanoseconds
+    (what ``time.time_ns`` and Aravis's ``g_get_real_time`` read); ``device_ns`` is the camera's
+    clock, which for the in-process GigE Vision fake is that same host clock.
+    """
+
+    device_ns: int
+    """The buffer's timestamp: frame start on the camera's clock (the fake stamps it as it fills the image)."""
+    received_ns: int
+    """Aravis's system timestamp: when its stream thread received the frame's leader packet."""
+    popped_ns: int
+    """When the buffer thread got the completed buffer from the stream."""
+    delivered_ns: int
+    """When :meth:`AravisCamera.next_frame` returned the frame."""
+
+
+@dataclass(frozen=True)
 class _Good:
     pixels: np.ndarray
     frame_id: int
     timestamp_ns: int
+    received_ns: int
+    popped_ns: int
 
 
 @dataclass(frozen=True)
@@ -565,6 +589,7 @@ class AravisCamera:
         self._strobe: StrobeConfig | None = None
         self._step_request: tuple[float, float] | None = None
         self._current: tuple[float, float] = (float("nan"), float("nan"))
+        self._last_timing: FrameTiming | None = None
         self._open()
         try:
             self._setup(pixel_format, roi)
@@ -1157,32 +1182,38 @@ class AravisCamera:
 
     def _pump_buffers(self, stream: Any) -> None:
         # A dedicated thread popping with a timeout: stream callbacks lost most frames under load.
-        pixel_format, width, height = self._layout_key
         stale_before_ns = self._stale_before_ns
         while not self._pump_stop.is_set():
             buffer = stream.timeout_pop_buffer(_POP_POLL_US)
             if buffer is None:
                 continue
+            popped_ns = time.time_ns()
             try:
                 if 0 < int(buffer.get_system_timestamp()) < stale_before_ns:
                     continue  # a frame of the previous acquisition still in flight when it stopped
-                status = buffer.get_status()
-                frame_id = int(buffer.get_frame_id())
-                if status != Aravis.BufferStatus.SUCCESS:
-                    self._queue.put(_Bad(frame_id, status.value_nick))
-                    continue
-                w, h = buffer.get_image_width(), buffer.get_image_height()
-                if (w, h) != (width, height):
-                    self._queue.put(_Failure(CameraError(
-                        f"{self._name}: frame {frame_id} is {w}x{h}; expected {width}x{height}")))
-                    continue
-                pixels = decode_pixels(buffer.get_data(), pixel_format, w, h, where=self._name)
-                timestamp = int(buffer.get_timestamp()) or int(buffer.get_system_timestamp())
-                self._queue.put(_Good(pixels, frame_id, timestamp))
+                item = self._take(buffer, popped_ns)
             except Exception as exc:  # noqa: BLE001 - handed to the consumer, never lost
-                self._queue.put(_Failure(exc))
+                item = _Failure(exc)
             finally:
                 stream.push_buffer(buffer)
+            # Queued after the buffer is back in the pool: the pixels are already copied, and the
+            # caller's thread, woken by the queue, need not wait for this one to release the GIL.
+            self._queue.put(item)
+
+    def _take(self, buffer: Any, popped_ns: int) -> _Good | _Bad | _Failure:
+        """What the consumer gets for one popped buffer; the pixels are copied out of it."""
+        pixel_format, width, height = self._layout_key
+        status = buffer.get_status()
+        frame_id = int(buffer.get_frame_id())
+        if status != Aravis.BufferStatus.SUCCESS:
+            return _Bad(frame_id, status.value_nick)
+        w, h = buffer.get_image_width(), buffer.get_image_height()
+        if (w, h) != (width, height):
+            return _Failure(CameraError(f"{self._name}: frame {frame_id} is {w}x{h}; expected {width}x{height}"))
+        pixels = decode_pixels(buffer.get_data(), pixel_format, w, h, where=self._name)
+        received = int(buffer.get_system_timestamp())
+        timestamp = int(buffer.get_timestamp()) or received
+        return _Good(pixels, frame_id, timestamp, received, popped_ns)
 
     def _step_label(self, index: int) -> str:
         if self._plan is not None and index < len(self._plan.steps):
@@ -1266,7 +1297,14 @@ class AravisCamera:
             # deadtime must cover these writes.
             self._apply_step(self._n_consumed, self._plan)
         exposure_us, gain = settings
-        return RawFrame(item.pixels, item.frame_id, item.timestamp_ns, exposure_us, gain)
+        frame = RawFrame(item.pixels, item.frame_id, item.timestamp_ns, exposure_us, gain)
+        self._last_timing = FrameTiming(item.timestamp_ns, item.received_ns, item.popped_ns, time.time_ns())
+        return frame
+
+    @property
+    def last_frame_timing(self) -> FrameTiming | None:
+        """Stage times of the frame :meth:`next_frame` returned last (None before the first)."""
+        return self._last_timing
 
     def _check_continuity(self, frame_id: int) -> int:
         previous, self._last_frame_id = self._last_frame_id, frame_id
@@ -1436,30 +1474,43 @@ class AravisGvFake:
 
 
 @dataclass(frozen=True)
+class TriggerTiming:
+    """One software trigger and its frame, as a latency run times them (``CLOCK_REALTIME`` ns)."""
+
+    sent_ns: int
+    """Just before the trigger call."""
+    triggered_ns: int
+    """When the trigger call returned (the device acknowledged the TriggerSoftware write)."""
+    frame: FrameTiming
+    """The frame's stage times; ``delivered_ns`` is when the caller had it in hand."""
+
+
+@dataclass(frozen=True)
 class BareRun:
     """What a bare Aravis loop measured."""
 
     frames: int
-    """Complete frames received."""
+    """Complete frames received (warm-up frames excluded)."""
     bad: int
     """Buffers with a status other than success."""
     missing: int
     """Frame ids skipped."""
     seconds: float
     """Wall time from the first to the last frame received."""
-    latencies_s: tuple[float, ...] = ()
-    """Software trigger to buffer popped, per trigger (latency runs only)."""
+    timings: tuple[TriggerTiming, ...] = ()
+    """Per trigger, its stage times (software-trigger runs only; warm-up frames excluded)."""
 
 
 def bare_aravis_run(address: str, *, width: int, height: int, pixel_format: str, n_frames: int,
                     software_trigger: bool, frame_rate_hz: float | None = None, n_buffers: int = 16,
-                    timeout_s: float = 2.0, dither_s: float = 0.0) -> BareRun:
+                    timeout_s: float = 2.0, dither_s: float = 0.0, warm_up_frames: int = 0) -> BareRun:
     """The smallest correct Aravis loop on the GigE Vision camera at ``address``: pop, check, push.
 
     With ``software_trigger`` each frame is triggered and waited for (latency); otherwise the
     camera free-runs at ``frame_rate_hz`` and the loop measures throughput. It is the baseline
     the bench compares :class:`AravisCamera` against; it never copies pixels. ``dither_s`` waits a
-    random time up to that long before each trigger (see ``bench_camera``).
+    random time up to that long before each trigger, and the first ``warm_up_frames`` frames are
+    received but not counted or timed (see ``bench_camera`` for why both matter on the fake).
     """
     use_interfaces(("gige",))
     camera = Aravis.Camera.new(address)
@@ -1482,39 +1533,44 @@ def bare_aravis_run(address: str, *, width: int, height: int, pixel_format: str,
         camera.start_acquisition()
         frames = bad = missing = 0
         previous: int | None = None
-        latencies: list[float] = []
+        timings: list[TriggerTiming] = []
         first = last = time.perf_counter()
         try:
-            while frames + bad < n_frames:
+            for index in range(-warm_up_frames, n_frames):
                 if dither_s > 0:
                     time.sleep(random.uniform(0.0, dither_s))
-                sent = time.perf_counter()
+                sent = triggered = time.time_ns()
                 if software_trigger:
                     camera.software_trigger()
+                    triggered = time.time_ns()
                 buffer = stream.timeout_pop_buffer(int(timeout_s * 1e6))
+                popped = time.time_ns()
                 now = time.perf_counter()
                 if buffer is None:
                     raise CameraError(f"bare Aravis loop on {address}: no frame within {timeout_s} s; "
                                       "expected a streaming camera")
                 try:
-                    if buffer.get_status() == Aravis.BufferStatus.SUCCESS:
-                        frames += 1
-                    else:
-                        bad += 1
+                    good = buffer.get_status() == Aravis.BufferStatus.SUCCESS
                     frame_id = int(buffer.get_frame_id())
-                    if previous is not None:
-                        missing += max(0, frame_id_gap(previous, frame_id))
-                    else:
-                        first = now
-                    previous = frame_id
+                    stamps = int(buffer.get_timestamp()), int(buffer.get_system_timestamp())
                 finally:
                     stream.push_buffer(buffer)
+                delivered = time.time_ns()
+                if index < 0:
+                    previous = frame_id
+                    continue
+                frames, bad = frames + good, bad + (not good)
+                if previous is not None:
+                    missing += max(0, frame_id_gap(previous, frame_id))
+                if index == 0:
+                    first = now
+                previous = frame_id
                 last = now
-                latencies.append(now - sent)
+                if software_trigger:
+                    timings.append(TriggerTiming(sent, triggered, FrameTiming(*stamps, popped, delivered)))
         finally:
             camera.stop_acquisition()
-        return BareRun(frames, bad, missing, last - first,
-                       tuple(latencies) if software_trigger else ())
+        return BareRun(frames, bad, missing, last - first, tuple(timings))
     finally:
         stream = None  # noqa: F841 - release the stream before the camera
         camera = None  # noqa: F841
