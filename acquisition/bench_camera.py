@@ -11,33 +11,36 @@ Figures (returned by :func:`camera_bench`, printed by ``msflash bench``):
   differs (below), with a 95 % bootstrap interval ``latency_excess_ci95_ms``. Target ≤ 1 ms,
   met when the whole interval is.
 
-How the fake schedules frames (Aravis 0.8.26, ``arvgvfakecamera.c`` and ``arvfakecamera.c``):
-one thread of the fake polls its sockets and, at each tick of a grid aligned to the host clock
-with period 1 / trigger frequency (1 ms here), starts a frame if a software trigger was latched
-since the last tick: it stamps the frame start (``g_get_real_time``, the host clock) into the
-GVSP leader, fills the test pattern and sends the packets. Until its first frame of an
-acquisition it ticks only every 100 ms, so that first trigger waits up to 100 ms; after it the
-thread busy-polls a core. The old bench compared end-to-end means over four short blocks per side
-and got −3.0, +2.8, +5.1 ms in three runs: each block's first frame (up to 100 ms) and the
-transfer's own jitter decided the sign.
+How the fake schedules frames (Aravis 0.8.26, ``arvgvfakecamera.c`` and ``arvfakecamera.c``): one
+thread of the fake polls its sockets and, at each tick of a grid aligned to the host clock with
+period 1 / trigger frequency (1 ms here), starts a frame if a software trigger was latched since
+the last tick: it stamps the frame start (``g_get_real_time``, the host clock) into the GVSP
+leader, fills the test pattern and sends the packets. Until its first frame of an acquisition it
+ticks only every 100 ms, so that first trigger waits up to 100 ms (110 ms measured); after it the
+thread spins between ticks (0.4 CPU-second per second measured on the loaded machine). The old
+bench compared end-to-end means over four short blocks per side and got −3.0, +2.8, +5.1 ms in
+three runs: each block's first frame (up to 100 ms) and the transfer's own jitter decided the
+sign.
 
 So each trigger's latency is split, on the host clock, into
 
 - ``issue``: the trigger call (our Python, the GVCP write and its acknowledgement);
 - ``wait``: to the fake's next tick — uniform over one tick, because every trigger is sent after
   a random delay of up to one tick — until the frame start stamped in the buffer;
-- ``transit``: the fake fills 2.6 MB and sends ~1 800 UDP packets over loopback, Aravis
-  reassembles them and the popping thread wakes;
+- ``transit``: the fake fills 2.6 MB and sends ~1 900 UDP packets of 1 400 bytes over loopback,
+  Aravis reassembles them and the popping thread wakes;
 - ``handoff``: from the buffer popped to the frame in hand. For AravisCamera: status and size
   checks, the one copy of the pixels out of the Aravis buffer (``get_data``), the queue to the
   caller's thread and ``next_frame``'s bookkeeping; for the bare loop: status and id checks and
   the push back.
 
-``wait`` and ``transit`` run the fake's and Aravis's code, the same for both sides, with our
-layer idle (its popping thread waits inside Aravis with the GIL released, the caller on a queue),
-yet on a loaded two-core machine ``transit`` alone varies by tens of milliseconds between frames
-and drifts between blocks — far beyond the resolution wanted. ``issue + handoff`` is where the
-code differs, and it is timed per trigger with microsecond noise. The excess is the sum over those
+``wait`` and ``transit`` run the fake's and Aravis's code, the same for both sides, with our layer
+idle (its popping thread waits inside Aravis with the GIL released, the caller on a queue), and
+each side's pool holds the same number of buffers, each frame landing in one not used before in
+that acquisition (so first-write page faults, paid during ``transit``, are alike). Yet on a loaded
+two-core machine ``transit`` alone varies by tens of milliseconds between frames and drifts
+between blocks, far beyond the resolution wanted. ``issue + handoff`` is where the code differs,
+and its median is resolved to a few hundredths of a millisecond. The excess is the sum over those
 two stages of the difference of the sides' medians (the typical trigger; the means, which carry
 scheduler stalls of the caller's thread on a loaded machine, are ``latency_excess_mean_ms``). The
 interval resamples each side's triggers. One warm-up frame per acquisition is received and not
@@ -68,6 +71,8 @@ BOOTSTRAP_RESAMPLES = 2000
 """Resamples of each side's triggers behind a 95 % interval."""
 _WARM_UP_FRAMES = 1
 """Frames triggered and received, but not timed, at the start of each latency block."""
+_EXTRA_BUFFERS = 4
+"""Buffers beyond one per frame in each latency block's pool, on both sides."""
 
 
 def _plan(n: int, exposure_us: float, trigger: str) -> CapturePlan:
@@ -210,7 +215,8 @@ def camera_bench(n_frames: int = 150, n_triggers: int = 200, repeats: int = 3, w
 
     def msflash_latency(address: str, n: int) -> list[TriggerTiming]:
         timings: list[TriggerTiming] = []
-        with AravisCamera(address, interfaces="gige", pixel_format=pixel_format, roi=roi) as camera:
+        with AravisCamera(address, interfaces="gige", pixel_format=pixel_format, roi=roi,
+                          extra_buffers=_EXTRA_BUFFERS) as camera:
             plan = _plan(n + _WARM_UP_FRAMES, exposure_us, "software")
             camera.prepare(plan)
             camera.start()
@@ -227,7 +233,8 @@ def camera_bench(n_frames: int = 150, n_triggers: int = 200, repeats: int = 3, w
 
     def bare_latency(address: str, n: int) -> list[TriggerTiming]:
         run = bare_aravis_run(address, width=width, height=height, pixel_format=pixel_format, n_frames=n,
-                              software_trigger=True, dither_s=tick_s, warm_up_frames=_WARM_UP_FRAMES)
+                              software_trigger=True, dither_s=tick_s, warm_up_frames=_WARM_UP_FRAMES,
+                              n_buffers=n + _WARM_UP_FRAMES + _EXTRA_BUFFERS)
         return list(run.timings)
 
     with AravisGvFake(serial="MSFBENCH", trigger_frequency_hz=trigger_frequency_hz) as fake:
