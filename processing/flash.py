@@ -33,7 +33,7 @@ from typing import Literal
 import numpy as np
 
 from processing.errors import SolverError, SpectralDataError, TargetUnreachableWarning
-from processing.least_squares import minimise_quadratic
+from processing.least_squares import FactoredQuadratic, minimise_quadratic
 from processing.spectra import Spectra, require_same_grid, require_unit
 
 FlashMode = Literal["matching", "complementary"]
@@ -119,6 +119,9 @@ class FlashModel:
     matrix: np.ndarray = field(init=False, repr=False)
     """``A = Cᵀ I``, shape (3, k)."""
     _matching_hessian: np.ndarray = field(init=False, repr=False)
+    _matching_problems: dict[str, FactoredQuadratic] = field(init=False, repr=False)
+    _design: np.ndarray = field(init=False, repr=False)
+    _power_tie_break: np.ndarray = field(init=False, repr=False)
     _full_flash_norm: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -132,7 +135,21 @@ class FlashModel:
         hessian = matrix.T @ matrix / norm + TIE_BREAK * spectra.T @ spectra / spectral_norm + TIE_BREAK_CHANGE * np.eye(k)
         object.__setattr__(self, "matrix", matrix)
         object.__setattr__(self, "_matching_hessian", hessian)
+        # The matching problem's Hessian and bound rows depend on the LEDs and camera alone: factor
+        # them once per bound set, so a solve pays only for its ambient-dependent linear term.
+        object.__setattr__(self, "_matching_problems", {
+            name: FactoredQuadratic.prepare(hessian, *_box(k, name), where="matching flash")
+            for name in ("physical", "nonnegative", "free")})
         object.__setattr__(self, "_full_flash_norm", _norm(matrix.sum(axis=1)))
+        # Complementary: [A, ·] (the last column is the target's, set per solve) and the least-power
+        # tie-break on [w_f, s] — per-solve work is then only what depends on the ambient.
+        design = np.zeros((matrix.shape[0], k + 1))
+        design[:, :k] = matrix
+        power = np.zeros(k + 1)
+        power[:k] = TIE_BREAK
+        for name, value in (("_design", design), ("_power_tie_break", power)):
+            value.flags.writeable = False
+            object.__setattr__(self, name, value)
 
     @property
     def n_leds(self) -> int:
@@ -158,9 +175,9 @@ class FlashModel:
         if peak == 0:
             raise SolverError("matching flash: the ambient weights are all zero; expected an estimated ambient")
         goal = ambient_weights / peak
-        hessian = self._matching_hessian
-        constraints, limits = _box(self.n_leds, bounds)
-        weights = minimise_quadratic(hessian, hessian @ goal, constraints, limits, where="matching flash").x
+        if bounds not in self._matching_problems:
+            _box_rows(self.n_leds, bounds)  # raises the unknown-bounds error
+        weights = self._matching_problems[bounds].minimise(self._matching_hessian @ goal).x
         weights[abs(weights) < 1e-12] = 0.0
         top = float(weights.max())
         if top <= 0:
@@ -184,30 +201,32 @@ class FlashModel:
         # Normalise so the ambient (or, with no ambient, the full flash) has unit camera response and
         # the target's response unit norm: the tie-break weights are then relative.
         unit = max(_norm(ambient_response), self._full_flash_norm * 1e-3, 1e-300)
-        a_matrix = matrix / unit
         t_vector = target_response / target_norm
         ambient_unit = ambient_response / unit
-        previous = np.zeros(k) if previous_weights is None else np.asarray(previous_weights, dtype=float)
+        previous = None if previous_weights is None else np.asarray(previous_weights, dtype=float)
 
         def solve(weight_bounds: str, fixed_scale: float | None) -> tuple[np.ndarray, float]:
             constraints, limits = _box(k, weight_bounds)
             if fixed_scale is None:
-                # Variables x = [w_f, s]; residual A w_f − s t + A w_a.
-                design = np.empty((a_matrix.shape[0], k + 1))
-                design[:, :k] = a_matrix
+                # Variables x = [w_f, s]; residual A w_f − s t + A w_a (A/unit in the first k columns).
+                design = self._design / unit
                 design[:, k] = -t_vector
                 hessian = design.T @ design
-                hessian.flat[::k + 2] += TIE_BREAK_CHANGE
-                linear = -design.T @ ambient_unit
-                linear[:k] += TIE_BREAK_CHANGE * previous
+                hessian += _ridge(k + 1)
+                linear = design.T @ -ambient_unit
+                if previous is not None:
+                    linear[:k] += TIE_BREAK_CHANGE * previous
                 if weight_bounds != "free":
-                    linear[:k] -= TIE_BREAK  # least total power first
+                    linear -= self._power_tie_break  # least total power first
                 full_constraints, full_limits = _with_scale(k, weight_bounds)
                 x = minimise_quadratic(hessian, linear, full_constraints, full_limits, where="complementary flash").x
                 return x[:k], float(x[k])
+            a_matrix = matrix / unit
             hessian = a_matrix.T @ a_matrix
-            hessian.flat[::k + 1] += TIE_BREAK_CHANGE
-            linear = a_matrix.T @ (fixed_scale * t_vector - ambient_unit) + TIE_BREAK_CHANGE * previous
+            hessian += _ridge(k)
+            linear = a_matrix.T @ (fixed_scale * t_vector - ambient_unit)
+            if previous is not None:
+                linear += TIE_BREAK_CHANGE * previous
             x = minimise_quadratic(hessian, linear, constraints, limits, where="complementary flash").x
             return x, fixed_scale
 
@@ -217,13 +236,22 @@ class FlashModel:
         else:
             weights, scale_unit = solve(bounds, None)
         weights[abs(weights) < 1e-10] = 0.0
+        # np.maximum/np.minimum: np.clip's argument handling costs more than the clipping here.
         if bounds == "physical":
-            weights = np.clip(weights, 0.0, 1.0)
+            weights = np.minimum(np.maximum(weights, 0.0), 1.0)
         elif bounds == "nonnegative":
-            weights = np.clip(weights, 0.0, None)
+            weights = np.maximum(weights, 0.0)
         scale = scale_unit * unit / target_norm
-        relative_error = _chromatic_error(matrix @ (ambient_weights + weights), target_response) if scale > 0 else 1.0
+        relative_error = _error_to_unit(matrix @ (ambient_weights + weights), t_vector) if scale > 0 else 1.0
         return _finish("complementary", ambient_weights, weights, float(scale), relative_error, bounds)
+
+
+@lru_cache(maxsize=64)
+def _ridge(n: int) -> np.ndarray:
+    """``TIE_BREAK_CHANGE · I`` (n × n, cached, read-only): the ridge added to the flash Hessians."""
+    ridge = TIE_BREAK_CHANGE * np.eye(n)
+    ridge.flags.writeable = False
+    return ridge
 
 
 @lru_cache(maxsize=64)
@@ -289,10 +317,14 @@ def solve_complementary(
 
 def _chromatic_error(response: np.ndarray, wanted: np.ndarray) -> float:
     """Scale-free camera-space error: ``‖r/‖r‖ − t/‖t‖‖`` (0 when the colours agree)."""
-    response_norm, wanted_norm = _norm(response), _norm(wanted)
-    if response_norm == 0 or wanted_norm == 0:
-        return 1.0
-    return _norm(response / response_norm - wanted / wanted_norm)
+    wanted_norm = _norm(wanted)
+    return _error_to_unit(response, wanted / wanted_norm) if wanted_norm != 0 else 1.0
+
+
+def _error_to_unit(response: np.ndarray, unit_wanted: np.ndarray) -> float:
+    """``‖r/‖r‖ − t̂‖`` for an already normalised ``t̂`` (1 when ``r = 0``)."""
+    response_norm = _norm(response)
+    return _norm(response / response_norm - unit_wanted) if response_norm != 0 else 1.0
 
 
 def _check_count(ambient_weights: np.ndarray, matrix: np.ndarray, led_spectra: Spectra) -> None:
@@ -301,7 +333,8 @@ def _check_count(ambient_weights: np.ndarray, matrix: np.ndarray, led_spectra: S
             f"flash: {ambient_weights.size} ambient weights for {matrix.shape[1]} LEDs in "
             f"{led_spectra.source or 'the LED spectra'}; expected one weight per LED"
         )
-    if not np.all(np.isfinite(ambient_weights)):
+    # One sum tells finite weights apart; the exact check runs only if it is not finite (overflow).
+    if not math.isfinite(ambient_weights.sum()) and not np.isfinite(ambient_weights).all():
         raise SpectralDataError("flash: the ambient weights are not finite; expected numbers")
 
 

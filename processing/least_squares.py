@@ -13,6 +13,7 @@ ambient image), never from the pixels.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -58,9 +59,10 @@ def _inverse_factor(hessian: np.ndarray, where: str) -> np.ndarray:
 
     The problems have a handful of variables, so an explicit inverse is cheap and accurate. LAPACK
     is called directly (``dpotrf``, ``dtrtri``): for 8×8 matrices numpy's wrappers cost ~20 µs
-    each in checks, the routines themselves ~1 µs.
+    each in checks, the routines themselves ~1 µs. One sum tells finite matrices apart (the exact
+    check runs only when it is not finite, e.g. on overflow).
     """
-    if not np.isfinite(hessian).all():
+    if not math.isfinite(hessian.sum()) and not np.isfinite(hessian).all():
         raise SolverError(f"{where}: the normal matrix has non-finite entries; expected finite data")
     factor, info = lapack.dpotrf(hessian, lower=0, clean=1)
     if info != 0:
@@ -83,7 +85,7 @@ def least_distance(constraints: np.ndarray, bounds: np.ndarray, where: str = "le
         If the constraints are infeasible.
     """
     m, n = constraints.shape
-    if m == 0 or (bounds <= 0).all():
+    if m == 0 or bounds.max() <= 0:
         return np.zeros(n)
     stacked = np.empty((n + 1, m))
     stacked[:n] = constraints.T
@@ -92,9 +94,9 @@ def least_distance(constraints: np.ndarray, bounds: np.ndarray, where: str = "le
     target = np.zeros(n + 1)
     target[n] = 1.0
     multipliers, _ = nnls(stacked, target, maxiter=50 * m)
-    residual = stacked @ multipliers
+    residual = stacked.dot(multipliers)
     residual[n] -= 1.0
-    if abs(residual[n]) < 1e-12 or float(residual @ residual) < 1e-24:
+    if abs(residual[n]) < 1e-12 or float(residual.dot(residual)) < 1e-24:
         raise SolverError(f"{where}: the constraints cannot all be met; expected a feasible problem")
     z = -residual[:n] / residual[n]
     return _polish(constraints, bounds, z, multipliers > 0)
@@ -107,15 +109,15 @@ def _polish(constraints: np.ndarray, bounds: np.ndarray, z: np.ndarray, active: 
     the shortest z solving ``G_A z = h_A`` is ``G_Aᵀ λ`` with ``(G_A G_Aᵀ) λ = h_A``; it is the
     LDP minimiser when ``λ ≥ 0`` and every other constraint holds.
     """
-    if not active.any():
+    if not np.count_nonzero(active):
         return z
     equality = constraints[active]
-    *_, multipliers, info = lapack.dgesv(equality @ equality.T, bounds[active])
-    if info != 0 or multipliers.min() < 0:
+    *_, multipliers, info = lapack.dgesv(equality.dot(equality.T), bounds[active])
+    if info != 0 or not multipliers.min() >= 0:
         return z  # dependent active constraints or a wrong active set: keep the NNLS answer
-    candidate = equality.T @ multipliers
+    candidate = equality.T.dot(multipliers)
     tolerance = 1e-9 * max(1.0, float(abs(bounds).max()))
-    return candidate if ((constraints @ candidate - bounds) >= -tolerance).all() else z
+    return candidate if (constraints.dot(candidate) - bounds).min() >= -tolerance else z
 
 
 def minimise_quadratic(
@@ -151,27 +153,81 @@ def minimise_quadratic(
     >>> np.round(sol.x, 12).tolist()
     [1.0, 0.0]
     """
-    hessian = np.asarray(hessian, dtype=float)
-    linear = np.asarray(linear, dtype=float)
-    n = linear.size
-    if constraints is None:
-        constraints = np.zeros((0, n))
-        bounds = np.zeros(0)
-    constraints = np.asarray(constraints, dtype=float)
-    bounds = np.asarray(bounds, dtype=float)
-    for recorder in _recorders:
-        recorder.append((hessian.copy(), linear.copy(), constraints.copy(), bounds.copy()))
-    inverse_factor = _inverse_factor(hessian, where)
-    # z = R x − d with d = R⁻ᵀ f turns the objective into ½‖z‖² − const (Lawson & Hanson 23.4).
-    shift = inverse_factor.T @ linear
-    constraints_z = constraints @ inverse_factor
-    bounds_z = bounds - constraints_z @ shift
-    z = least_distance(constraints_z, bounds_z, where)
-    x = inverse_factor @ (z + shift)
-    slack = constraints @ x - bounds
-    scale = np.maximum(1.0, abs(bounds))
-    if (slack < -1e-7 * scale).any():
-        raise SolverError(f"{where}: constraint violated by {-slack.min():.3g} after solving; expected feasibility")
-    active = slack <= _FEASIBILITY_TOLERANCE * scale
-    objective = float(0.5 * x @ hessian @ x - linear @ x)
-    return QuadraticSolution(x=x, objective=objective, active=active)
+    return FactoredQuadratic.prepare(hessian, constraints, bounds, where).minimise(linear)
+
+
+@dataclass(frozen=True)
+class FactoredQuadratic:
+    """The part of ``min ½ xᵀ H x − fᵀ x, G x ≥ h`` that does not depend on f, factored once.
+
+    :func:`minimise_quadratic` prepares it for every call. A caller that solves many problems with
+    the same H, G and h — the matching flash of one LED set and camera, whose Hessian and bound
+    rows are fixed — prepares it once and pays per solve only for what depends on f: the
+    Cholesky factor, its check and the transformed constraint rows are the bulk of a solve's fixed
+    cost at these sizes (k ≈ 8 variables: numpy-call overhead, not arithmetic).
+    """
+
+    hessian: np.ndarray
+    """H, shape (n, n)."""
+    constraints: np.ndarray
+    """G, shape (m, n) (m may be 0)."""
+    bounds: np.ndarray
+    """h, shape (m,)."""
+    inverse_factor: np.ndarray
+    """R⁻¹ for H = Rᵀ R (upper R)."""
+    constraints_z: np.ndarray
+    """``G R⁻¹``: the constraint rows in the LDP variable z = R x − R⁻ᵀ f."""
+    violation_limit: np.ndarray
+    """``−10⁻⁷ max(1, |h|)``: slack below this after solving is an error."""
+    active_limit: np.ndarray
+    """``10⁻⁹ max(1, |h|)``: slack at or below this marks an active constraint."""
+    where: str
+    """Names the caller in error messages."""
+
+    @classmethod
+    def prepare(cls, hessian: np.ndarray, constraints: np.ndarray | None = None, bounds: np.ndarray | None = None,
+                where: str = "quadratic solver") -> FactoredQuadratic:
+        """Factor H and transform G (see :func:`minimise_quadratic` for the arguments).
+
+        Raises
+        ------
+        SolverError
+            If H is not positive definite.
+        """
+        hessian = np.asarray(hessian, dtype=float)
+        if constraints is None:
+            constraints = np.zeros((0, hessian.shape[0]))
+            bounds = np.zeros(0)
+        constraints = np.asarray(constraints, dtype=float)
+        bounds = np.asarray(bounds, dtype=float)
+        inverse_factor = _inverse_factor(hessian, where)
+        scale = np.maximum(1.0, abs(bounds))
+        return cls(hessian, constraints, bounds, inverse_factor, constraints.dot(inverse_factor),
+                   -1e-7 * scale, _FEASIBILITY_TOLERANCE * scale, where)
+
+    def minimise(self, linear: np.ndarray) -> QuadraticSolution:
+        """The minimiser for the linear term f, shape (n,).
+
+        Raises
+        ------
+        SolverError
+            If the constraints are infeasible.
+        """
+        linear = np.asarray(linear, dtype=float)
+        hessian, constraints, bounds = self.hessian, self.constraints, self.bounds
+        for recorder in _recorders:
+            recorder.append((hessian.copy(), linear.copy(), constraints.copy(), bounds.copy()))
+        inverse_factor, where = self.inverse_factor, self.where
+        # z = R x − d with d = R⁻ᵀ f turns the objective into ½‖z‖² − const (Lawson & Hanson 23.4).
+        # (``.dot`` rather than ``@``: the same BLAS call with less dispatch, which is most of the
+        # cost at this size.)
+        shift = inverse_factor.T.dot(linear)
+        constraints_z = self.constraints_z
+        bounds_z = bounds - constraints_z.dot(shift)
+        z = least_distance(constraints_z, bounds_z, where)
+        x = inverse_factor.dot(z + shift)
+        slack = constraints.dot(x) - bounds
+        if np.count_nonzero(slack < self.violation_limit):
+            raise SolverError(f"{where}: constraint violated by {-slack.min():.3g} after solving; expected feasibility")
+        objective = float((0.5 * x).dot(hessian).dot(x) - linear.dot(x))
+        return QuadraticSolution(x=x, objective=objective, active=slack <= self.active_limit)

@@ -134,3 +134,23 @@ def test_flash_bad_input() -> None:
         solve_complementary(AMBIENT_WEIGHTS, leds_photons(), camera(), d65().to_unit("energy"))
     with pytest.raises(ValueError, match="flash bounds 'loose'"):
         solve_matching(AMBIENT_WEIGHTS, leds_photons(), camera(), bounds="loose")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("bounds", BOUNDS)
+def test_prepared_matching_problem_is_the_plain_quadratic(bounds: str) -> None:
+    """FlashModel factors the matching problem once; each solve equals the one-shot QP on it."""
+    from processing.flash import FlashModel, _box
+    from processing.least_squares import minimise_quadratic
+
+    model = FlashModel(leds_photons(), camera())
+    rng = np.random.default_rng(3)
+    for ambient in [AMBIENT_WEIGHTS, rng.normal(size=7), rng.uniform(0, 1, size=7)]:
+        goal = ambient / abs(ambient).max()
+        hessian = model._matching_hessian
+        plain = minimise_quadratic(hessian, hessian @ goal, *_box(7, bounds)).x
+        plain[abs(plain) < 1e-12] = 0.0
+        if plain.max() <= 0:
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", TargetUnreachableWarning)
+            np.testing.assert_array_equal(model.matching(ambient, bounds).flash_weights, plain / plain.max())

@@ -102,3 +102,43 @@ def test_recording_problems_collects_what_was_solved() -> None:
         minimise_quadratic(np.eye(2), np.ones(2), np.eye(2), np.zeros(2))
     assert len(problems) == 1
     np.testing.assert_array_equal(problems[0][0], np.eye(2))
+
+
+@PROPERTY
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 8), m=st.integers(0, 12), kind=st.sampled_from(
+    ["random", "box", "duplicated"]))
+def test_factored_problem_solves_as_the_one_shot_call(seed: int, n: int, m: int, kind: str) -> None:
+    """A FactoredQuadratic prepared once gives exactly minimise_quadratic's answer for every linear term.
+
+    Includes box constraints (the flash problems, many bounds active) and duplicated rows active
+    at the same point (degenerate active sets).
+    """
+    from processing.least_squares import FactoredQuadratic
+
+    hessian, _, constraints, bounds, x0 = random_problem(seed, n, m)
+    if kind == "box":
+        constraints, bounds = np.vstack([np.eye(n), -np.eye(n)]), np.concatenate([np.zeros(n), -np.ones(n)])
+    elif kind == "duplicated" and m:
+        constraints = np.vstack([constraints, constraints])
+        bounds = np.concatenate([constraints[:m] @ x0, constraints[:m] @ x0])
+    problem = FactoredQuadratic.prepare(hessian, constraints, bounds)
+    rng = np.random.default_rng(seed)
+    for _ in range(3):
+        linear = rng.normal(size=n) * 3
+        fast = problem.minimise(linear)
+        reference = minimise_quadratic(hessian, linear, constraints, bounds)
+        np.testing.assert_array_equal(fast.x, reference.x)
+        np.testing.assert_array_equal(fast.active, reference.active)
+        assert fast.objective == reference.objective
+
+
+def test_factored_problem_refuses_what_the_one_shot_call_refuses() -> None:
+    from processing.least_squares import FactoredQuadratic
+
+    with pytest.raises(SolverError, match="flash: the normal matrix is not positive definite"):
+        FactoredQuadratic.prepare(np.zeros((2, 2)), np.eye(2), np.zeros(2), where="flash")
+    with pytest.raises(SolverError, match="non-finite"):
+        FactoredQuadratic.prepare(np.array([[1.0, np.nan], [np.nan, 1.0]]))
+    problem = FactoredQuadratic.prepare(np.eye(2), np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([1.0, 0.0]))
+    with pytest.raises(SolverError, match="cannot all be met"):
+        problem.minimise(np.zeros(2))
