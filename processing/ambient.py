@@ -30,9 +30,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Literal
 
 import numpy as np
+from scipy.linalg import lapack
 
 from processing.errors import SolverError, SpectralDataError
 from processing.least_squares import minimise_quadratic
@@ -97,6 +99,45 @@ def roughness_operator(led_spectra: Spectra) -> np.ndarray:
     return np.diff(led_spectra.values, axis=0)
 
 
+@dataclass(frozen=True)
+class LedTerms:
+    """What the estimation problems need of the LED spectra alone, computed once per LED set.
+
+    Every solve used to rebuild these from ``I`` (the roughness operator, its Gram matrix, the
+    rows of the non-negativity constraint); at k ≈ 7 that rebuilding cost as much as the solve.
+    :class:`AmbientModel` holds one; :data:`AMBIENT_METHODS` builds one per call.
+    """
+
+    values: np.ndarray
+    """``I``, shape (n_wl, k)."""
+    roughness: np.ndarray
+    """``L = ∇ I``, shape (n_wl − 1, k)."""
+    penalty_gram: np.ndarray
+    """``LᵀL``, shape (k, k)."""
+    penalty_trace: float
+    """``tr(LᵀL)``."""
+    emitting: np.ndarray
+    """The rows of ``I`` where some LED emits: ``I w ≥ 0`` there (elsewhere it reads 0 ≥ 0)."""
+    ridge: np.ndarray
+    """``10⁻¹² · Id`` (k × k), added to the scaled normal matrix."""
+
+    @classmethod
+    def of(cls, led_values: np.ndarray) -> LedTerms:
+        """The terms of the LED spectra ``I`` (n_wl × k)."""
+        values = np.asarray(led_values, dtype=float)
+        roughness = np.diff(values, axis=0)
+        penalty_gram = roughness.T @ roughness
+        terms = cls(values, roughness, penalty_gram, float(np.trace(penalty_gram)),
+                    values[np.any(values != 0, axis=1)], 1e-12 * np.eye(values.shape[1]))
+        for array in (terms.roughness, terms.penalty_gram, terms.emitting, terms.ridge):
+            array.flags.writeable = False
+        return terms
+
+    def penalty_scale(self, statistics: SequenceStatistics) -> float:
+        """``tr(G) / tr(LᵀL)``: makes the dimensionless α independent of image size and exposure."""
+        return float(np.trace(statistics.gram) / max(self.penalty_trace, 1e-300))
+
+
 def _scaled_condition(gram: np.ndarray) -> float:
     diagonal = np.sqrt(np.clip(np.diag(gram), 1e-300, None))
     scaled = gram / np.outer(diagonal, diagonal)
@@ -104,24 +145,19 @@ def _scaled_condition(gram: np.ndarray) -> float:
     return float(eigenvalues[-1] / eigenvalues[0]) if eigenvalues[0] > 0 else float("inf")
 
 
-def _penalty_scale(statistics: SequenceStatistics, roughness: np.ndarray) -> float:
-    penalty_gram = roughness.T @ roughness
-    return float(np.trace(statistics.gram) / max(np.trace(penalty_gram), 1e-300))
-
-
-def _solve_penalised(statistics: SequenceStatistics, led_values: np.ndarray, penalty: np.ndarray,
-                     weight: float, nonnegative: bool, where: str) -> np.ndarray:
-    """argmin ‖a − F w‖² + weight ‖P w‖² (subject to I w ≥ 0 when ``nonnegative``)."""
-    hessian = statistics.gram + weight * (penalty.T @ penalty)
+def _solve_penalised(statistics: SequenceStatistics, terms: LedTerms, weight: float, nonnegative: bool,
+                     where: str) -> np.ndarray:
+    """argmin ‖a − F w‖² + weight ‖L w‖² (subject to I w ≥ 0 when ``nonnegative``)."""
+    hessian = statistics.gram + weight * terms.penalty_gram if weight else statistics.gram
     scale = max(np.trace(hessian) / hessian.shape[0], 1e-300)
     hessian = hessian / scale
     linear = statistics.cross / scale
     # A vanishing ridge keeps H positive definite when two LED images are nearly identical;
     # it is 1e-12 of the mean diagonal, far below any effect on the estimate.
-    hessian = hessian + 1e-12 * np.eye(hessian.shape[0])
+    hessian = hessian + terms.ridge
     if nonnegative:
-        # Wavelengths where no LED emits give the empty constraint 0 ≥ 0: leave them out.
-        emitting = led_values[np.any(led_values != 0, axis=1)]
+        # Wavelengths where no LED emits give the empty constraint 0 ≥ 0: they are left out.
+        emitting = terms.emitting
         return minimise_quadratic(hessian, linear, emitting, np.zeros(emitting.shape[0]), where=where).x
     return minimise_quadratic(hessian, linear, where=where).x
 
@@ -132,43 +168,71 @@ def gcv_alpha(statistics: SequenceStatistics, roughness: np.ndarray) -> float:
     ``GCV(λ) = N · RSS(λ) / (N − tr A(λ))²`` with ``tr A(λ) = tr(G (G + λ LᵀL)⁻¹)``, all from the
     statistics (Golub, Heath & Wahba 1979). Computed without the positivity constraint.
     """
+    penalty_gram = roughness.T @ roughness
+    return _gcv_alpha(statistics, penalty_gram, float(np.trace(penalty_gram)))
+
+
+def _gcv_alpha(statistics: SequenceStatistics, penalty_gram: np.ndarray, penalty_trace: float) -> float:
+    """:func:`gcv_alpha` for a prepared ``LᵀL`` and its trace.
+
+    LAPACK is called directly where that gives numpy's own results (``dgesv`` for the inverse,
+    ``dsyevd`` for the eigenvectors): at k ≈ 7 numpy's linalg wrappers cost several times the
+    routines, and this runs on the capture's latency path (the flash decision).
+    """
     gram, cross = statistics.gram, statistics.cross
     n = max(statistics.n_samples, statistics.n_leds + 1)
     # Diagonalise G and the penalty together (G = RᵀR, R⁻ᵀ P R⁻¹ = U Λ Uᵀ): with filter factors
     # f = 1/(1 + αλ), b·w = Σ z² f, wᵀGw = Σ z² f², tr A = Σ f — every α of the grid in one pass.
-    ridge = 1e-12 * np.trace(gram) * np.eye(gram.shape[0])
+    trace = gram.trace()
+    identity = _identity(gram.shape[0])
     try:
-        inverse_factor = np.linalg.inv(np.linalg.cholesky(gram + ridge).T)
+        factor = np.linalg.cholesky(gram + (1e-12 * trace) * identity).T
     except np.linalg.LinAlgError:
         return float(ALPHA_GRID[0])
-    penalty = _penalty_scale(statistics, roughness) * (roughness.T @ roughness)
-    eigenvalues, vectors = np.linalg.eigh(inverse_factor.T @ penalty @ inverse_factor)
-    z_squared = (vectors.T @ (inverse_factor.T @ cross)) ** 2
-    filters = 1.0 / (1.0 + np.outer(ALPHA_GRID, np.clip(eigenvalues, 0.0, None)))  # (n_alpha, k)
-    rss = np.clip(statistics.ambient_energy - filters @ z_squared * 2 + (filters**2) @ z_squared, 0.0, None)
+    *_, inverse_factor, info = lapack.dgesv(factor, identity)  # what np.linalg.inv computes
+    if info != 0:
+        return float(ALPHA_GRID[0])
+    # C order as numpy returns it: the products below then take the same BLAS paths (same bits).
+    inverse_factor = np.ascontiguousarray(inverse_factor)
+    penalty = float(trace / max(penalty_trace, 1e-300)) * penalty_gram
+    eigenvalues, vectors, info = lapack.dsyevd(inverse_factor.T.dot(penalty).dot(inverse_factor), compute_v=1, lower=1)
+    if info != 0:
+        return float(ALPHA_GRID[0])
+    z_squared = np.ascontiguousarray(vectors).T.dot(inverse_factor.T.dot(cross)) ** 2
+    filters = 1.0 / (1.0 + _ALPHA_COLUMN * np.maximum(eigenvalues, 0.0))  # (n_alpha, k)
+    rss = np.maximum(statistics.ambient_energy - filters.dot(z_squared) * 2 + (filters * filters).dot(z_squared), 0.0)
     denominator = (n - filters.sum(axis=1)) ** 2
-    scores = np.where(denominator > 0, n * rss / np.where(denominator > 0, denominator, 1.0), np.inf)
+    positive = denominator > 0
+    scores = np.where(positive, n * rss / np.where(positive, denominator, 1.0), np.inf)
     # The first of (numerically) equal minima: the smallest penalty that does as well.
-    best = int(np.flatnonzero(scores <= scores.min() * (1 + 1e-12))[0])
-    return float(ALPHA_GRID[best])
+    return float(ALPHA_GRID[np.argmax(scores <= scores.min() * (1 + 1e-12))])
 
 
-def _weights_lstsq(statistics: SequenceStatistics, led_values: np.ndarray, alpha: float | str) -> tuple[np.ndarray, float]:
-    return _solve_penalised(statistics, led_values, np.zeros((1, statistics.n_leds)), 0.0, False, "lstsq estimate"), 0.0
+@lru_cache(maxsize=16)
+def _identity(k: int) -> np.ndarray:
+    identity = np.eye(k)
+    identity.flags.writeable = False
+    return identity
 
 
-def _weights_nonneg(statistics: SequenceStatistics, led_values: np.ndarray, alpha: float | str) -> tuple[np.ndarray, float]:
-    return _solve_penalised(statistics, led_values, np.zeros((1, statistics.n_leds)), 0.0, True, "nonneg estimate"), 0.0
+_ALPHA_COLUMN = ALPHA_GRID[:, None]
 
 
-def _weights_tikhonov(statistics: SequenceStatistics, led_values: np.ndarray, alpha: float | str) -> tuple[np.ndarray, float]:
-    roughness = np.diff(led_values, axis=0)
-    alpha_value = gcv_alpha(statistics, roughness) if alpha == "auto" else float(alpha)
-    weight = alpha_value * _penalty_scale(statistics, roughness)
-    return _solve_penalised(statistics, led_values, roughness, weight, True, "tikhonov estimate"), alpha_value
+def _weights_lstsq(statistics: SequenceStatistics, terms: LedTerms, alpha: float | str) -> tuple[np.ndarray, float]:
+    return _solve_penalised(statistics, terms, 0.0, False, "lstsq estimate"), 0.0
 
 
-def _weights_roughness(statistics: SequenceStatistics, led_values: np.ndarray, alpha: float | str,
+def _weights_nonneg(statistics: SequenceStatistics, terms: LedTerms, alpha: float | str) -> tuple[np.ndarray, float]:
+    return _solve_penalised(statistics, terms, 0.0, True, "nonneg estimate"), 0.0
+
+
+def _weights_tikhonov(statistics: SequenceStatistics, terms: LedTerms, alpha: float | str) -> tuple[np.ndarray, float]:
+    alpha_value = _gcv_alpha(statistics, terms.penalty_gram, terms.penalty_trace) if alpha == "auto" else float(alpha)
+    weight = alpha_value * terms.penalty_scale(statistics)
+    return _solve_penalised(statistics, terms, weight, True, "tikhonov estimate"), alpha_value
+
+
+def _weights_roughness(statistics: SequenceStatistics, terms: LedTerms, alpha: float | str,
                        iterations: int = 100) -> tuple[np.ndarray, float]:
     """Paper eq. 6 (unsquared norms) by majorise–minimise.
 
@@ -176,10 +240,10 @@ def _weights_roughness(statistics: SequenceStatistics, led_values: np.ndarray, a
     iterate, so each step is a Tikhonov problem with weight ``α' · ‖r_t‖ / ‖L w_t‖`` and the
     objective never increases.
     """
-    roughness = np.diff(led_values, axis=0)
+    roughness = terms.roughness
     alpha_value = 0.01 if alpha == "auto" else float(alpha)
-    alpha_scaled = alpha_value * np.sqrt(_penalty_scale(statistics, roughness))
-    weights = _solve_penalised(statistics, led_values, roughness, 0.0, True, "roughness estimate")
+    alpha_scaled = alpha_value * np.sqrt(terms.penalty_scale(statistics))
+    weights = _solve_penalised(statistics, terms, 0.0, True, "roughness estimate")
 
     def objective(w: np.ndarray) -> float:
         return np.sqrt(statistics.residual_energy(w)) + alpha_scaled * float(np.linalg.norm(roughness @ w))
@@ -190,7 +254,7 @@ def _weights_roughness(statistics: SequenceStatistics, led_values: np.ndarray, a
         residual_norm = max(np.sqrt(statistics.residual_energy(weights)), floor)
         roughness_norm = max(float(np.linalg.norm(roughness @ weights)), floor)
         weight = alpha_scaled * residual_norm / roughness_norm
-        candidate = _solve_penalised(statistics, led_values, roughness, weight, True, "roughness estimate")
+        candidate = _solve_penalised(statistics, terms, weight, True, "roughness estimate")
         value = objective(candidate)
         if value > previous * (1 + 1e-12):
             break
@@ -201,13 +265,138 @@ def _weights_roughness(statistics: SequenceStatistics, led_values: np.ndarray, a
     return weights, alpha_value
 
 
-AMBIENT_METHODS: dict[str, Callable[[SequenceStatistics, np.ndarray, float | str], tuple[np.ndarray, float]]] = {
+_METHODS: dict[str, Callable[[SequenceStatistics, LedTerms, float | str], tuple[np.ndarray, float]]] = {
     "lstsq": _weights_lstsq,
     "nonneg": _weights_nonneg,
     "tikhonov": _weights_tikhonov,
     "roughness": _weights_roughness,
 }
-"""Ambient estimators by name; each returns (ambient_weights, alpha used)."""
+
+
+def _on_values(method: Callable[[SequenceStatistics, LedTerms, float | str], tuple[np.ndarray, float]],
+               ) -> Callable[[SequenceStatistics, np.ndarray, float | str], tuple[np.ndarray, float]]:
+    def solve(statistics: SequenceStatistics, led_values: np.ndarray, alpha: float | str) -> tuple[np.ndarray, float]:
+        return method(statistics, LedTerms.of(led_values), alpha)
+
+    solve.__doc__ = method.__doc__
+    return solve
+
+
+AMBIENT_METHODS: dict[str, Callable[[SequenceStatistics, np.ndarray, float | str], tuple[np.ndarray, float]]] = {
+    name: _on_values(method) for name, method in _METHODS.items()
+}
+"""Ambient estimators by name: ``(statistics, led_values, alpha) -> (ambient_weights, alpha used)``.
+
+Each call prepares the LED terms anew; :class:`AmbientModel` prepares them once."""
+
+
+@dataclass(frozen=True)
+class AmbientModel:
+    """Ambient estimation for one LED set, prepared once and solved per sequence (eq. 4–6).
+
+    The LED-only terms (:class:`LedTerms`) are computed at construction. :meth:`weights` is the
+    solve alone — what the flash decision needs before the trigger; :meth:`estimate` adds the
+    reliability signals (band, conditioning, warnings), which can wait until after it.
+    """
+
+    led_spectra: Spectra
+    """The k LED spectra at full drive, in photons."""
+    terms: LedTerms = field(init=False, repr=False)
+    """The LED-only terms of the problems."""
+
+    def __post_init__(self) -> None:
+        require_unit(self.led_spectra, "photons")
+        object.__setattr__(self, "terms", LedTerms.of(self.led_spectra.values))
+
+    def weights(self, statistics: SequenceStatistics, method: str = "tikhonov",
+                alpha: float | str = "auto") -> tuple[np.ndarray, float]:
+        """``(w_a, α used)`` for the statistics (see :func:`estimate_ambient`; same errors)."""
+        if method not in _METHODS:
+            raise ValueError(f"ambient method '{method}' is unknown; expected one of {', '.join(_METHODS)}")
+        led_spectra = self.led_spectra
+        if led_spectra.count != statistics.n_leds:
+            raise SpectralDataError(
+                f"{led_spectra.source or 'LED spectra'}: {led_spectra.count} LEDs but the sequence has "
+                f"{statistics.n_leds} LED images; expected one spectrum per LED"
+            )
+        if statistics.n_samples <= statistics.n_leds:
+            raise SpectralDataError(
+                f"frame stack: only {statistics.n_samples} valid samples ({statistics.saturated_fraction:.0%} "
+                "saturated); expected many more than the number of LEDs — lower the exposure"
+            )
+        diagonal = np.diag(statistics.gram)
+        if not diagonal.min() > 0:
+            dark = [led_spectra.names[i] for i in np.flatnonzero(~(diagonal > 0))]
+            raise SolverError(
+                f"ambient estimate: the LED-only image of {', '.join(dark)} is empty; expected every LED to add light "
+                "(is it connected, and its level above 0?)"
+            )
+        return _METHODS[method](statistics, self.terms, alpha)
+
+    def estimate(self, statistics: SequenceStatistics, method: str = "tikhonov",
+                 alpha: float | str = "auto") -> AmbientEstimate:
+        """The full estimate of :func:`estimate_ambient`."""
+        weights, alpha_used = self.weights(statistics, method, alpha)
+        return self.reliability(statistics, weights, method, alpha_used)
+
+    def reliability(self, statistics: SequenceStatistics, weights: np.ndarray, method: str,
+                    alpha_used: float) -> AmbientEstimate:
+        """The :class:`AmbientEstimate` of weights found by :meth:`weights`: spectrum and reliability signals."""
+        led_spectra, terms = self.led_spectra, self.terms
+        led_values = terms.values
+        rss = statistics.residual_energy(weights)
+        dof = max(statistics.n_samples - statistics.n_leds, 1)
+        noise_variance = rss / dof
+        penalty_weight = alpha_used * terms.penalty_scale(statistics) if method == "tikhonov" else 0.0
+        try:
+            system_inverse = np.linalg.pinv(statistics.gram + penalty_weight * terms.penalty_gram)
+            weights_cov = noise_variance * system_inverse @ statistics.gram @ system_inverse
+        except np.linalg.LinAlgError:
+            weights_cov = np.full((statistics.n_leds,) * 2, np.inf)
+        spectrum_std = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", led_values, weights_cov, led_values), 0, None))
+
+        condition = _scaled_condition(statistics.gram)
+        relative_residual = float(np.sqrt(rss / statistics.ambient_energy)) if statistics.ambient_energy > 0 else 0.0
+        warnings = []
+        if condition > CONDITION_WARNING:
+            warnings.append(
+                f"the LED-only images are nearly dependent (condition number {condition:.3g}); "
+                "the weights are poorly determined — more surfaces or more distinct LEDs would help"
+            )
+        if relative_residual > RESIDUAL_WARNING:
+            warnings.append(
+                f"the LEDs explain the ambient image poorly (relative residual {relative_residual:.3f}); "
+                "the ambient may lie outside the LEDs' span, vary across the scene, or the scene moved"
+            )
+        if statistics.saturated_fraction > SATURATION_WARNING:
+            warnings.append(f"{statistics.saturated_fraction:.0%} of the samples are saturated; lower the exposure")
+        signal_z = statistics.led_sums / np.sqrt(np.maximum(np.diag(statistics.gram), 1e-300))
+        dark = [name for name, value in zip(led_spectra.names, signal_z) if value < LED_SIGNAL_Z]
+        if dark:
+            warnings.append(
+                f"the image of LED {', '.join(dark)} holds noise, not light (z-score below {LED_SIGNAL_Z:g}); "
+                "did it fire, and does it reach the scene?"
+            )
+        centre = led_values @ weights
+        if np.any(spectrum_std > 0.5 * np.max(np.abs(centre))):
+            warnings.append("the uncertainty band is wider than half the spectrum's peak")
+
+        spectrum = led_spectra.replace(
+            values=centre[:, None], names=("ambient",), source=f"ambient estimate ({method})", metadata={}
+        )
+        return AmbientEstimate(
+            spectrum=spectrum,
+            ambient_weights=weights,
+            method=method,
+            alpha=float(alpha_used),
+            relative_residual=relative_residual,
+            residual_rms=float(np.sqrt(rss / statistics.n_samples)),
+            condition_number=condition,
+            spectrum_std=spectrum_std,
+            n_samples=statistics.n_samples,
+            saturated_fraction=statistics.saturated_fraction,
+            warnings=tuple(warnings),
+        )
 
 
 def estimate_ambient(
@@ -243,77 +432,4 @@ def estimate_ambient(
     """
     if method not in AMBIENT_METHODS:
         raise ValueError(f"ambient method '{method}' is unknown; expected one of {', '.join(AMBIENT_METHODS)}")
-    require_unit(led_spectra, "photons")
-    if led_spectra.count != statistics.n_leds:
-        raise SpectralDataError(
-            f"{led_spectra.source or 'LED spectra'}: {led_spectra.count} LEDs but the sequence has "
-            f"{statistics.n_leds} LED images; expected one spectrum per LED"
-        )
-    if statistics.n_samples <= statistics.n_leds:
-        raise SpectralDataError(
-            f"frame stack: only {statistics.n_samples} valid samples ({statistics.saturated_fraction:.0%} "
-            "saturated); expected many more than the number of LEDs — lower the exposure"
-        )
-    if not np.all(np.diag(statistics.gram) > 0):
-        dark = [led_spectra.names[i] for i in np.flatnonzero(~(np.diag(statistics.gram) > 0))]
-        raise SolverError(
-            f"ambient estimate: the LED-only image of {', '.join(dark)} is empty; expected every LED to add light "
-            "(is it connected, and its level above 0?)"
-        )
-    led_values = led_spectra.values
-    weights, alpha_used = AMBIENT_METHODS[method](statistics, led_values, alpha)
-
-    rss = statistics.residual_energy(weights)
-    dof = max(statistics.n_samples - statistics.n_leds, 1)
-    noise_variance = rss / dof
-    roughness = np.diff(led_values, axis=0)
-    penalty_weight = alpha_used * _penalty_scale(statistics, roughness) if method == "tikhonov" else 0.0
-    try:
-        system_inverse = np.linalg.pinv(statistics.gram + penalty_weight * roughness.T @ roughness)
-        weights_cov = noise_variance * system_inverse @ statistics.gram @ system_inverse
-    except np.linalg.LinAlgError:
-        weights_cov = np.full((statistics.n_leds,) * 2, np.inf)
-    spectrum_std = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", led_values, weights_cov, led_values), 0, None))
-
-    condition = _scaled_condition(statistics.gram)
-    relative_residual = float(np.sqrt(rss / statistics.ambient_energy)) if statistics.ambient_energy > 0 else 0.0
-    warnings = []
-    if condition > CONDITION_WARNING:
-        warnings.append(
-            f"the LED-only images are nearly dependent (condition number {condition:.3g}); "
-            "the weights are poorly determined — more surfaces or more distinct LEDs would help"
-        )
-    if relative_residual > RESIDUAL_WARNING:
-        warnings.append(
-            f"the LEDs explain the ambient image poorly (relative residual {relative_residual:.3f}); "
-            "the ambient may lie outside the LEDs' span, vary across the scene, or the scene moved"
-        )
-    if statistics.saturated_fraction > SATURATION_WARNING:
-        warnings.append(f"{statistics.saturated_fraction:.0%} of the samples are saturated; lower the exposure")
-    signal_z = statistics.led_sums / np.sqrt(np.maximum(np.diag(statistics.gram), 1e-300))
-    dark = [name for name, value in zip(led_spectra.names, signal_z) if value < LED_SIGNAL_Z]
-    if dark:
-        warnings.append(
-            f"the image of LED {', '.join(dark)} holds noise, not light (z-score below {LED_SIGNAL_Z:g}); "
-            "did it fire, and does it reach the scene?"
-        )
-    centre = led_values @ weights
-    if np.any(spectrum_std > 0.5 * np.max(np.abs(centre))):
-        warnings.append("the uncertainty band is wider than half the spectrum's peak")
-
-    spectrum = led_spectra.replace(
-        values=centre[:, None], names=("ambient",), source=f"ambient estimate ({method})", metadata={}
-    )
-    return AmbientEstimate(
-        spectrum=spectrum,
-        ambient_weights=weights,
-        method=method,
-        alpha=float(alpha_used),
-        relative_residual=relative_residual,
-        residual_rms=float(np.sqrt(rss / statistics.n_samples)),
-        condition_number=condition,
-        spectrum_std=spectrum_std,
-        n_samples=statistics.n_samples,
-        saturated_fraction=statistics.saturated_fraction,
-        warnings=tuple(warnings),
-    )
+    return AmbientModel(led_spectra).estimate(statistics, method, alpha)

@@ -245,3 +245,63 @@ def test_binned_statistics_exclude_saturated_blocks() -> None:
     result = estimate(a, f, spec_for(sensor, exposures, gains, one_hot_levels(7)), method="nonneg", bin_factor=4)
     assert result.saturated_fraction > 0
     np.testing.assert_allclose(result.ambient_weights, TRUE_WEIGHTS, atol=WEIGHTS_QUANTISED)
+
+
+# -- prepared model (the capture's latency path) ----------------------------------------------
+def reference_gcv_alpha(statistics, roughness) -> float:
+    """GCV written plainly with numpy.linalg: the prepared path must pick exactly the same α."""
+    from processing.ambient import ALPHA_GRID
+
+    gram, cross = statistics.gram, statistics.cross
+    n = max(statistics.n_samples, statistics.n_leds + 1)
+    inverse_factor = np.linalg.inv(np.linalg.cholesky(gram + 1e-12 * np.trace(gram) * np.eye(len(gram))).T)
+    penalty_gram = roughness.T @ roughness
+    penalty = float(np.trace(gram) / max(np.trace(penalty_gram), 1e-300)) * penalty_gram
+    eigenvalues, vectors = np.linalg.eigh(inverse_factor.T @ penalty @ inverse_factor)
+    z_squared = (vectors.T @ (inverse_factor.T @ cross)) ** 2
+    filters = 1.0 / (1.0 + np.outer(ALPHA_GRID, np.clip(eigenvalues, 0.0, None)))
+    rss = np.clip(statistics.ambient_energy - filters @ z_squared * 2 + (filters**2) @ z_squared, 0.0, None)
+    denominator = (n - filters.sum(axis=1)) ** 2
+    scores = np.where(denominator > 0, n * rss / np.where(denominator > 0, denominator, 1.0), np.inf)
+    return float(ALPHA_GRID[int(np.flatnonzero(scores <= scores.min() * (1 + 1e-12))[0])])
+
+
+@PROPERTY
+@given(seed=st.integers(0, 2**31 - 1), dependent=st.booleans())
+def test_gcv_alpha_is_the_plain_computation(seed: int, dependent: bool) -> None:
+    """Bit for bit: GCV scores are flat at small α, so any round-off change could move the minimum."""
+    from processing.ambient import gcv_alpha
+    from processing.statistics import SequenceStatistics
+
+    rng = np.random.default_rng(seed)
+    leds = leds_photons().values
+    images = rng.normal(size=(300, leds.shape[1])) * rng.uniform(0.1, 10, leds.shape[1])
+    if dependent:
+        images[:, 1] = images[:, 0] * (1 + 1e-6 * rng.normal(size=300))
+    target = images @ rng.normal(size=leds.shape[1]) + rng.normal(size=300) * rng.uniform(1e-3, 3)
+    statistics = SequenceStatistics(images.T @ images, images.T @ target, float(target @ target),
+                                    int(rng.integers(20, 10**5)), 300, float(target.sum()), images.sum(axis=0))
+    roughness = np.diff(leds, axis=0)
+    assert gcv_alpha(statistics, roughness) == reference_gcv_alpha(statistics, roughness)
+
+
+@pytest.mark.parametrize("method", sorted(AMBIENT_METHODS))
+def test_prepared_model_equals_the_one_shot_estimate(tungsten_frames, method: str) -> None:
+    from processing.ambient import AmbientModel
+
+    a, f, spec = tungsten_frames
+    statistics = accumulate_statistics(a, f, spec)
+    model = AmbientModel(leds_photons())
+    reference = estimate_ambient(statistics, leds_photons(), method)
+    weights, alpha = model.weights(statistics, method)
+    np.testing.assert_array_equal(weights, reference.ambient_weights)
+    assert alpha == reference.alpha
+    np.testing.assert_array_equal(AMBIENT_METHODS[method](statistics, leds_photons().values, "auto")[0], weights)
+    full = model.estimate(statistics, method)
+    np.testing.assert_array_equal(full.spectrum_std, reference.spectrum_std)
+    assert (full.condition_number, full.relative_residual, full.warnings) == (
+        reference.condition_number, reference.relative_residual, reference.warnings)
+    with pytest.raises(ValueError, match="unknown"):
+        model.weights(statistics, "magic")
+    with pytest.raises(SpectralDataError, match="expected one spectrum per LED"):
+        model.weights(statistics.select_leds(range(3)))
