@@ -14,9 +14,11 @@ full drive are ``pinv(L) · (frames − ambient)``, applied to the statistics af
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -24,6 +26,12 @@ from processing.errors import SpectralDataError
 
 DEFAULT_CHUNK_PIXELS = 1 << 15
 """Pixels per chunk: small enough to stay in cache for k ≈ 8 frames, large enough to amortise numpy calls."""
+
+DEFAULT_WORKERS = 2 if (os.cpu_count() or 1) >= 2 else 1
+"""Threads for the image passes (block sums, moments, synthesis): the app runs on 2 cores."""
+
+GATHER_ROWS = 2048
+"""Rows per BLAS call in :func:`block_sums`: below OpenBLAS's threading threshold for this thin product."""
 
 
 @dataclass(frozen=True)
@@ -51,7 +59,7 @@ class FrameStackSpec:
             raise SpectralDataError(
                 f"frame stack: white_level {self.white_level} is not above black_level {self.black_level}"
             )
-        if np.linalg.matrix_rank(levels) < levels.shape[1]:
+        if not _is_invertible_diagonal(levels) and np.linalg.matrix_rank(levels) < levels.shape[1]:
             raise SpectralDataError(
                 "frame stack: the LED levels of the frames do not separate every LED "
                 f"(rank {np.linalg.matrix_rank(levels)} < {levels.shape[1]} LEDs); expected each LED "
@@ -65,10 +73,24 @@ class FrameStackSpec:
         """Number of LEDs k."""
         return self.led_levels.shape[1]
 
-    @property
+    @cached_property
     def unmixing(self) -> np.ndarray:
-        """pinv(L), shape (k, n_led_frames): LED-only images at full drive from frame differences."""
-        return np.linalg.pinv(self.led_levels)
+        """pinv(L), shape (k, n_led_frames): LED-only images at full drive from frame differences (computed once)."""
+        levels = self.led_levels
+        # One LED per frame (the usual plan): pinv of a diagonal is exactly its reciprocal — what
+        # the SVD gives too, without its cost on the capture's latency path.
+        unmixing = np.diag(1.0 / np.diag(levels)) if _is_invertible_diagonal(levels) else np.linalg.pinv(levels)
+        unmixing.flags.writeable = False
+        return unmixing
+
+
+def _is_invertible_diagonal(levels: np.ndarray) -> bool:
+    """Whether the levels are square, diagonal and without a zero on the diagonal."""
+    if levels.shape[0] != levels.shape[1]:
+        return False
+    diagonal = np.diag(levels)
+    return bool(np.count_nonzero(levels) == np.count_nonzero(diagonal) == levels.shape[0]) and \
+        bool(np.isfinite(diagonal).all())
 
 
 @dataclass(frozen=True)
@@ -208,6 +230,7 @@ def accumulate_statistics(
     chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
     bin_factor: int = 1,
     cfa_period: int = 1,
+    workers: int = DEFAULT_WORKERS,
 ) -> SequenceStatistics:
     """Accumulate the sufficient statistics of eq. 4–6 in one pass over raw frames.
 
@@ -227,6 +250,9 @@ def accumulate_statistics(
         Sum ``bin_factor × bin_factor`` blocks first (see :func:`bin_frame`); 1 uses every pixel.
     cfa_period
         2 when the frames are Bayer mosaics (blocks then gather same-colour samples).
+    workers
+        Threads sharing the frames of the binned pass (numpy releases the GIL while it sums); 1
+        runs on the calling thread. The statistics do not depend on it.
 
     Returns
     -------
@@ -246,7 +272,8 @@ def accumulate_statistics(
     if bin_factor < 1 or cfa_period not in (1, 2):
         raise SpectralDataError(f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2")
     if bin_factor > 1:
-        return _accumulate_binned(ambient, led_frames, spec, sample_mask, chunk_pixels, bin_factor, cfa_period)
+        return _accumulate_binned(ambient, led_frames, spec, sample_mask, chunk_pixels, bin_factor, cfa_period,
+                                  workers)
     frames = [ambient, *led_frames]
     if len(led_frames) != spec.led_levels.shape[0]:
         raise SpectralDataError(
@@ -303,7 +330,7 @@ def accumulate_statistics(
 
 def _accumulate_binned(ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec,
                        sample_mask: np.ndarray | None, chunk_pixels: int, factor: int,
-                       cfa_period: int) -> SequenceStatistics:
+                       cfa_period: int, workers: int) -> SequenceStatistics:
     """Statistics of block sums: a block is valid when no member is saturated (or masked out)."""
     frames = [ambient, *led_frames]
     if len(led_frames) != spec.led_levels.shape[0]:
@@ -319,52 +346,139 @@ def _accumulate_binned(ambient: np.ndarray, led_frames: Sequence[np.ndarray], sp
     if sample_mask is not None and sample_mask.shape != ambient.shape[:2]:
         raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {ambient.shape[:2]}")
     planes = [cfa_planes(frame, cfa_period) for frame in frames]
-    height, width = planes[0].shape[0] // factor, planes[0].shape[1] // factor
-    if height == 0 or width == 0:
-        raise SpectralDataError(
-            f"frame of shape {planes[0].shape} is smaller than one {factor}×{factor} block; expected a larger frame"
-        )
-    channels = planes[0].shape[2]
     n_led_frames = len(led_frames)
-    # Rows [F_1 … F_n, A, 1] of block sums, laid out (block row, channel, block column) per frame:
-    # any sample order works for moments, and this one lets every copy run along long rows.
-    rows = np.empty((n_led_frames + 2, height * channels * width))
-    for row, plane in zip([n_led_frames, *range(n_led_frames)], planes):
-        _block_sums_into(plane, factor, rows[row].reshape(height, channels, width))
-    rows[n_led_frames + 1] = 1.0
-    # Integer sums are always finite; for float frames one sum flags NaN/inf (exact check only then).
-    floating = any(np.issubdtype(plane.dtype, np.floating) for plane in planes)
-    if floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
-        raise SpectralDataError("frame stack: a frame holds non-finite values (NaN or inf); expected finite pixels")
-    invalid = None
-    # One contiguous max per frame finds the frames that saturate at all; only those build masks.
-    for plane in planes:
-        if _may_saturate(plane, spec.white_level):
-            hit = _block_any(_any_channel(plane >= spec.white_level), factor)
-            invalid = hit if invalid is None else invalid | hit
+    rows = BlockRows(n_led_frames, planes[0].shape, factor, spec.white_level)
+    # Rows [F_1 … F_n, A, 1]: the ambient frame is row n. Each frame is one independent pass
+    # (block sums, saturation), so ``workers`` threads share the frames: numpy releases the GIL
+    # inside each pass.
+    jobs = list(zip([n_led_frames, *range(n_led_frames)], planes))
+    if workers > 1 and len(jobs) > 1:
+        list(thread_pool(workers).map(lambda job: rows.add(*job), jobs))
+    else:
+        for row, plane in jobs:
+            rows.add(row, plane)
     if sample_mask is not None:
         mask_sums, _ = bin_frame(sample_mask.astype(np.uint8), factor, cfa_period)
         full = mask_sums == factor * factor
-        outside = ~(full.all(axis=2) if full.ndim == 3 else full)
-        invalid = outside if invalid is None else invalid | outside
-    if invalid is not None and invalid.any():
-        rows.reshape(n_led_frames + 2, height, channels, width)[:, np.broadcast_to(
-            invalid[:, None, :], (height, channels, width))] = 0.0
-    block_spec = FrameStackSpec(
-        black_level=spec.black_level * factor * factor, white_level=np.inf,
-        ambient_scale=spec.ambient_scale, led_scales=spec.led_scales, led_levels=spec.led_levels,
-    )
-    return _statistics_from_moments(_gram(rows, chunk_pixels * channels), block_spec, rows.shape[1])
+        rows.exclude(~(full.all(axis=2) if full.ndim == 3 else full))
+    return rows.statistics(spec, chunk_pixels, workers)
 
 
-def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total: int) -> SequenceStatistics:
-    """Statistics from the raw second moments of the rows [F_1 … F_n, A, 1]."""
+@lru_cache(maxsize=4)
+def thread_pool(workers: int) -> ThreadPoolExecutor:
+    """A process-wide pool of ``workers`` threads for the image passes (created on first use, then reused)."""
+    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="msflash-image")
+
+
+class BlockRows:
+    """Block sums of an ambient + LED frame stack as the rows ``[F_1 … F_n, A, 1]`` of the moments.
+
+    The binned statistics (eq. 4–6 on ``factor × factor`` block sums, see :func:`bin_frame`) need,
+    per frame, its block sums and which blocks saturate; then the second moments of the rows. The
+    binned pass of :func:`accumulate_statistics` adds every frame and takes the moments in one
+    product. A capture adds each frame as it arrives (``incremental=True``): the new row's
+    products with the rows already in are taken then, so once the last frame is in only its own
+    block sums and one matrix–vector product remain — no full moment product on the latency path.
+    Blocks saturated in any frame (or :meth:`exclude`-d) are left out of the moments.
+
+    Frames may be added from several threads (distinct rows), but not in incremental mode.
+    """
+
+    def __init__(self, n_led_frames: int, plane_shape: tuple[int, ...], factor: int, white_level: float,
+                 incremental: bool = False) -> None:
+        height, width = plane_shape[0] // factor, plane_shape[1] // factor
+        if height == 0 or width == 0:
+            raise SpectralDataError(
+                f"frame of shape {plane_shape} is smaller than one {factor}×{factor} block; expected a larger frame"
+            )
+        self.factor, self.white_level, self.n_led_frames = factor, white_level, n_led_frames
+        self.plane_shape = tuple(plane_shape)
+        self.block_shape = (height, plane_shape[2], width)
+        n_rows = n_led_frames + 2
+        # Laid out (block row, channel, block column) per frame: any sample order works for
+        # moments, and this one lets every copy run along long rows.
+        self.rows = np.zeros((n_rows, height * plane_shape[2] * width))
+        self.rows[n_led_frames + 1] = 1.0
+        self._invalid: list[np.ndarray] = []
+        self._filled = [n_led_frames + 1]
+        self._floating = False
+        self._moments: np.ndarray | None = None
+        if incremental:
+            self._moments = np.zeros((n_rows, n_rows))
+            self._moments[-1, -1] = self.rows.shape[1]
+
+    def add(self, row: int, plane: np.ndarray) -> None:
+        """Block-sum one (H, W, C) plane into ``row`` (LED frame j → j, ambient → n) and note its saturated blocks."""
+        if plane.shape != self.plane_shape:
+            raise SpectralDataError(f"frame stack: a frame has shape {plane.shape}; expected {self.plane_shape}")
+        _block_sums_into(plane, self.factor, self.rows[row].reshape(self.block_shape))
+        if np.issubdtype(plane.dtype, np.floating):
+            self._floating = True  # only ever set: safe when worker threads add frames
+        # One contiguous max per frame finds the frames that saturate at all; only those build masks.
+        if _may_saturate(plane, self.white_level):
+            self._invalid.append(_block_any(_any_channel(plane >= self.white_level), self.factor))
+        if self._moments is not None:
+            # One matrix–vector product with every row (rows not filled yet are zeros; their
+            # products are set when they arrive): cheaper than gathering the filled rows first.
+            filled = [*self._filled, row]
+            products = self.rows @ self.rows[row]
+            self._moments[row, filled] = products[filled]
+            self._moments[filled, row] = products[filled]
+        self._filled.append(row)
+
+    def exclude(self, blocks: np.ndarray) -> None:
+        """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
+        self._invalid.append(blocks)
+
+    def statistics(self, spec: FrameStackSpec, chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
+                   workers: int = 1) -> SequenceStatistics:
+        """The statistics of the rows added so far (every row must be in); ``spec`` as for the raw frames.
+
+        ``workers`` threads share the moment product (when it is not already accumulated).
+        """
+        rows = self.rows
+        if len(self._filled) != rows.shape[0]:
+            raise SpectralDataError(
+                f"frame stack: {len(self._filled) - 1} of {rows.shape[0] - 1} frames added; expected all of them"
+            )
+        # Integer sums are always finite; for float frames one sum flags NaN/inf (exact check only then).
+        if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
+            raise SpectralDataError("frame stack: a frame holds non-finite values (NaN or inf); expected finite pixels")
+        invalid = None
+        for mask in self._invalid:
+            invalid = mask if invalid is None else invalid | mask
+        channels = self.block_shape[1]
+        if invalid is not None and invalid.any():
+            columns = np.broadcast_to(invalid[:, None, :], self.block_shape).reshape(-1)
+            if self._moments is not None and np.count_nonzero(columns) * 4 < columns.size:
+                # Few saturated blocks: take their products back out of the moments.
+                dropped = rows[:, columns]
+                moments = self._moments - _gram(dropped, chunk_pixels * channels)
+            else:
+                kept = rows.copy()
+                kept[:, columns] = 0.0
+                moments = _gram(kept, chunk_pixels * channels, workers)
+        elif self._moments is not None:
+            moments = self._moments
+        else:
+            moments = _gram(rows, chunk_pixels * channels, workers)
+        # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
+        factor = self.factor
+        return _statistics_from_moments(moments, spec, rows.shape[1], black_level=spec.black_level * factor * factor)
+
+
+def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total: int,
+                             black_level: float | None = None) -> SequenceStatistics:
+    """Statistics from the raw second moments of the rows [F_1 … F_n, A, 1].
+
+    ``black_level`` replaces the spec's (block sums: the black level times the block area).
+    """
     n_led_frames = moments.shape[0] - 2
     n_rows = n_led_frames + 2
     # Linear map from the raw rows to [d_1 … d_n, a]: d_j = s_j (F_j − b) − s_a (A − b), a = s_a (A − b).
     transform = np.zeros((n_led_frames + 1, n_rows))
     scales = np.asarray(spec.led_scales, dtype=float)
-    black = float(spec.black_level)
+    black = float(spec.black_level if black_level is None else black_level)
     transform[:n_led_frames, :n_led_frames] = np.diag(scales)
     transform[:n_led_frames, n_led_frames] = -spec.ambient_scale
     transform[:n_led_frames, n_led_frames + 1] = (spec.ambient_scale - scales) * black
@@ -447,9 +561,15 @@ def block_sums(plane: np.ndarray, factor: int) -> np.ndarray:
     # Rows of a block: a reduction over the middle axis streams whole rows (long inner loops).
     row_sums = cropped.sum(axis=1, dtype=sum_type)
     # Columns of a block: each group of ``factor`` pixels is factor·channels contiguous values, so a
-    # thin matrix product with a 0/1 gather matrix sums them per channel in one BLAS call — far
-    # faster than strided slicing, and exact (0/1 weights, integer sums below 2²⁴ in float32).
-    grouped = row_sums.reshape(height * width, factor * channels) @ gather_matrix(factor, channels, sum_type)
+    # thin matrix product with a 0/1 gather matrix sums them per channel — far faster than strided
+    # slicing, and exact (0/1 weights, integer sums below 2²⁴ in float32). The product runs in
+    # slices of GATHER_ROWS groups: OpenBLAS splits larger ones across threads, whose wake-up and
+    # spinning cost more than the product on a busy 2-core machine (measured 4× slower under load).
+    groups = row_sums.reshape(height * width, factor * channels)
+    gather = gather_matrix(factor, channels, sum_type)
+    grouped = np.empty((height * width, channels), dtype=sum_type)
+    for start in range(0, groups.shape[0], GATHER_ROWS):
+        np.matmul(groups[start:start + GATHER_ROWS], gather, out=grouped[start:start + GATHER_ROWS])
     return grouped.reshape(height, width, channels)
 
 
@@ -458,10 +578,21 @@ def _block_sums_into(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
     np.copyto(out, block_sums(plane, factor).transpose(0, 2, 1))
 
 
-def _gram(rows: np.ndarray, chunk: int) -> np.ndarray:
-    """``rows @ rows.T`` in float64, accumulated over column chunks."""
+def _gram(rows: np.ndarray, chunk: int, workers: int = 1) -> np.ndarray:
+    """``rows @ rows.T`` in float64, accumulated over column chunks (``workers`` threads share them).
+
+    The chunks' products are added in chunk order whatever the number of workers, so the result
+    does not depend on it.
+    """
+    chunk = max(chunk, 1)
+
+    def product(start: int) -> np.ndarray:
+        block = rows[:, start:start + chunk]
+        return block @ block.T
+
+    starts = range(0, rows.shape[1], chunk)
+    products = thread_pool(workers).map(product, starts) if workers > 1 and len(starts) > 1 else map(product, starts)
     moments = np.zeros((rows.shape[0], rows.shape[0]))
-    for start in range(0, rows.shape[1], max(chunk, 1)):
-        block = rows[:, start:start + max(chunk, 1)]
-        moments += block @ block.T
+    for part in products:
+        moments += part
     return moments

@@ -8,12 +8,13 @@ Works identically on RGB images and raw mosaics (each sample is just a number).
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 
 import numpy as np
 
 from processing.errors import SpectralDataError
-from processing.statistics import DEFAULT_CHUNK_PIXELS, FrameStackSpec
+from processing.statistics import DEFAULT_CHUNK_PIXELS, DEFAULT_WORKERS, FrameStackSpec, thread_pool
 
 
 def frame_coefficients(spec: FrameStackSpec, flash_weights: np.ndarray) -> tuple[float, np.ndarray]:
@@ -47,6 +48,7 @@ def synthesize(
     flash_weights: np.ndarray,
     *,
     chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
+    workers: int = DEFAULT_WORKERS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Synthesise the computational flash image from raw frames.
 
@@ -58,6 +60,11 @@ def synthesize(
         Black/white levels, per-frame ``1/(exposure·gain)`` and LED levels.
     flash_weights
         ``w_f``, one weight per LED (in full-drive units).
+    chunk_pixels
+        Pixels per chunk (each chunk is one cache-resident weighted sum).
+    workers
+        Threads sharing the chunks (numpy releases the GIL inside each chunk's passes); the image
+        does not depend on it.
 
     Returns
     -------
@@ -90,10 +97,14 @@ def synthesize(
     # anywhere; only those get per-chunk comparison masks.
     saturating = [index for index, frame in enumerate(flat_frames) if frame.size and frame.max() >= white]
     chunk_samples = max(1, chunk_pixels) * channels
-    # One float32 row per frame: a chunk's output is then a single weighted sum of rows.
-    stack = np.empty((len(frames), min(chunk_samples, flat_output.size)), dtype=np.float32)
-    for start in range(0, flat_output.size, chunk_samples):
+    buffers = threading.local()
+
+    def synthesize_chunk(start: int) -> None:
         stop = min(start + chunk_samples, flat_output.size)
+        # One float32 row per frame (per thread): a chunk's output is then one weighted sum of rows.
+        stack = getattr(buffers, "stack", None)
+        if stack is None:
+            stack = buffers.stack = np.empty((len(frames), min(chunk_samples, flat_output.size)), dtype=np.float32)
         rows = stack[:, :stop - start]
         for index, frame in enumerate(flat_frames):
             # Casting into a preallocated row is one streaming pass (exact for integers ≤ 24 bits).
@@ -111,6 +122,14 @@ def synthesize(
         target += offset
         if bright is not None:
             flat_saturated[start // channels:stop // channels] = _any_channel(bright.reshape(-1, channels))
+
+    starts = range(0, flat_output.size, chunk_samples)
+    if workers > 1 and len(starts) > 1:
+        # Chunks write disjoint slices of the output; each is computed exactly as on one thread.
+        list(thread_pool(workers).map(synthesize_chunk, starts))
+    else:
+        for start in starts:
+            synthesize_chunk(start)
     return output, saturated
 
 

@@ -90,3 +90,68 @@ def test_synthesis_saturation_in_one_chunk_and_float_frames(chunk: int) -> None:
                                               chunk_pixels=chunk)
     np.testing.assert_array_equal(float_saturated, expected)
     np.testing.assert_allclose(float_image, image, rtol=0, atol=1e-5 * np.abs(image).max())
+
+
+@pytest.mark.parametrize("saturate", [0.0, 0.0003, 0.002], ids=["none", "few-blocks", "many-blocks"])
+def test_block_rows_frame_by_frame_equals_the_binned_pass(saturate: float) -> None:
+    """BlockRows filled one frame at a time (a capture) gives the binned pass's statistics.
+
+    Few saturated blocks are taken back out of the running moments, many make it recompute them.
+    """
+    from processing.statistics import BlockRows, cfa_planes
+
+    rng = np.random.default_rng(11)
+    ambient, leds, spec = random_stack(rng, (41, 53, 3), np.eye(4), white=4095.0, saturate=saturate)
+    reference = accumulate_statistics(ambient, leds, spec, bin_factor=4, workers=1)
+    rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level, incremental=True)
+    for row in [2, 0, 4, 1, 3]:  # any arrival order; row 4 is the ambient frame
+        rows.add(row, cfa_planes(ambient if row == 4 else leds[row], 1))
+    stats = rows.statistics(spec)
+    assert 0 < stats.n_samples <= stats.n_total
+    assert (stats.n_samples < stats.n_total) == (saturate > 0)
+    assert_matches(stats, {"gram": reference.gram, "cross": reference.cross, "ambient_energy": reference.ambient_energy,
+                           "n_samples": reference.n_samples, "n_total": reference.n_total,
+                           "ambient_sum": reference.ambient_sum, "led_sums": reference.led_sums})
+
+
+def test_block_rows_refuses_a_missing_frame() -> None:
+    from processing.errors import SpectralDataError
+    from processing.statistics import BlockRows, cfa_planes
+
+    rng = np.random.default_rng(12)
+    ambient, leds, spec = random_stack(rng, (16, 16, 3), np.eye(2), white=4095.0, saturate=0.0)
+    rows = BlockRows(2, ambient.shape, 4, spec.white_level, incremental=True)
+    rows.add(2, cfa_planes(ambient, 1))
+    rows.add(0, cfa_planes(leds[0], 1))
+    with pytest.raises(SpectralDataError, match="2 of 3 frames"):
+        rows.statistics(spec)
+    with pytest.raises(SpectralDataError, match="expected"):
+        rows.add(1, cfa_planes(leds[1][:8], 1))
+
+
+@pytest.mark.parametrize("saturate", [0.0, 0.02], ids=["none", "some"])
+def test_threads_do_not_change_the_results(saturate: float) -> None:
+    """Two worker threads give bit-identical statistics and synthesis (same sums, same order)."""
+    rng = np.random.default_rng(13)
+    ambient, leds, spec = random_stack(rng, (67, 71, 3), MULTIPLEXED, white=4095.0, saturate=saturate)
+    one = accumulate_statistics(ambient, leds, spec, bin_factor=2, workers=1, chunk_pixels=101)
+    two = accumulate_statistics(ambient, leds, spec, bin_factor=2, workers=2, chunk_pixels=101)
+    for name in ("gram", "cross", "led_sums"):
+        np.testing.assert_array_equal(getattr(one, name), getattr(two, name))
+    assert (one.ambient_energy, one.n_samples) == (two.ambient_energy, two.n_samples)
+    weights = np.linspace(0.1, 0.9, spec.n_leds)
+    image_one, saturated_one = synthesize(ambient, leds, spec, weights, chunk_pixels=97, workers=1)
+    image_two, saturated_two = synthesize(ambient, leds, spec, weights, chunk_pixels=97, workers=2)
+    np.testing.assert_array_equal(image_one, image_two)
+    np.testing.assert_array_equal(saturated_one, saturated_two)
+    assert saturated_one.any() == (saturate > 0)
+
+
+def test_diagonal_levels_unmix_as_the_pseudo_inverse() -> None:
+    """One LED per frame: the reciprocal fast path is exactly numpy's pinv."""
+    rng = np.random.default_rng(14)
+    for _ in range(200):
+        k = int(rng.integers(1, 9))
+        levels = np.diag(rng.uniform(-3, 3, k) * 10.0 ** rng.uniform(-4, 4, k))
+        spec = FrameStackSpec(0.0, 1.0, 1.0, (1.0,) * k, levels)
+        np.testing.assert_array_equal(spec.unmixing, np.linalg.pinv(levels))
