@@ -2,21 +2,25 @@
 
 Between the last LED frame and the flash trigger only the per-frame work may run. Everything
 that depends on the rig and the plan alone — LED spectra and camera responsivities in photons,
-the :class:`~processing.flash.FlashModel` (``A = Cᵀ I``, the tie-break matrices), the target's
-camera response ``Cᵀ i_d`` (a colour-science lookup and unit conversion), the frame stack's
-black/white levels and block size — is computed once by :meth:`FlashSession.prepare`.
-:meth:`FlashSession.decide` then costs one statistics pass over the frames in memory, one
-ambient solve and one small quadratic programme.
+the :class:`~processing.flash.FlashModel` (``A = Cᵀ I``, the tie-break matrices, the factored
+matching problem), the :class:`~processing.ambient.AmbientModel` (roughness operator and
+non-negativity rows), the target's camera response ``Cᵀ i_d`` (a colour-science lookup and unit
+conversion), the frame stack's black/white levels and block size — is computed once by
+:meth:`FlashSession.prepare`. Each frame's block sums, saturated blocks and products with the
+frames before it are taken by :meth:`FlashSession.add` as the frame arrives (between frames).
+:meth:`FlashSession.decide` then costs the statistics from those moments, one ambient solve and
+one small quadratic programme; the estimate's reliability signals wait until they are read.
 
 The results are those of :func:`acquisition.analysis.estimate_sequence` and
 :func:`acquisition.analysis.solve_sequence_flash` on the same frames (same statistics code,
-same solvers); ``tests/acquisition/test_flash_session.py`` checks it.
+same solvers; only the order of the moment sums differs); ``tests/acquisition/test_flash_stream.py``
+checks it.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from collections.abc import Sequence as Seq
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -24,22 +28,36 @@ from acquisition import analysis
 from acquisition.camera import RawFrame
 from acquisition.errors import RecordingError
 from acquisition.sequence_format import Sequence
-from processing.ambient import AmbientEstimate, estimate_ambient
+from processing.ambient import AmbientEstimate, AmbientModel
 from processing.flash import FlashModel, FlashSolution
 from processing.spectra import Spectra
-from processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics, bin_frame
+from processing.statistics import BlockRows, FrameStackSpec, SequenceStatistics, cfa_planes
 
 
-@dataclass
 class FlashDecision:
-    """What the flash step needs, and how it was reached."""
+    """What the flash step needs, and how it was reached.
 
-    estimate: AmbientEstimate
-    solution: FlashSolution
-    levels: np.ndarray
-    """The flash weights clipped to [0, 1]: the LED levels to drive."""
-    stack: analysis.FrameStack
-    """The in-memory frame stack the estimate used (indices as in the sequence)."""
+    The ambient estimate's reliability signals (band, conditioning, warnings) are not needed to
+    drive the flash, so :meth:`FlashSession.decide` leaves them out of the latency-critical path:
+    :attr:`estimate` computes them on first access (after the flash is triggered).
+    """
+
+    def __init__(self, solution: FlashSolution, levels: np.ndarray, stack: analysis.FrameStack,
+                 estimate: Callable[[], AmbientEstimate]) -> None:
+        self.solution = solution
+        self.levels = levels
+        """The flash weights clipped to [0, 1]: the LED levels to drive."""
+        self.stack = stack
+        """The in-memory frame stack the estimate used (indices as in the sequence)."""
+        self._estimate = estimate
+        self._estimated: AmbientEstimate | None = None
+
+    @property
+    def estimate(self) -> AmbientEstimate:
+        """The full ambient estimate (as :meth:`FlashSession.estimate`), computed once on first access."""
+        if self._estimated is None:
+            self._estimated = self._estimate()
+        return self._estimated
 
 
 class FlashSession:
@@ -54,6 +72,7 @@ class FlashSession:
         self.header = header
         self.leds = leds
         self.model = model
+        self.ambient_model = AmbientModel(leds)
         self.target_response = target_response
         self.method = method
         self.alpha = alpha
@@ -82,38 +101,57 @@ class FlashSession:
         self._frames: list[RawFrame] = []
         self._roles: list[str] = []
         self._levels: list[tuple[float, ...]] = []
-        self._binned: list[tuple[np.ndarray, np.ndarray] | None] = []
         self._factor: int | None = None
+        self._rows: BlockRows | None = None
+        self._n_led_rows = 0
+        self._rows_complete = True  # False when a frame did not fit the prepared rows
+        self._stack: analysis.FrameStack | None = None
 
     def add(self, frame: RawFrame, role: str, levels: Seq[float]) -> None:
         """Take one captured frame; ambient and LED frames are block-summed now (between frames).
 
-        The block sums and the per-block saturation are what the binned statistics pass of
-        :func:`processing.statistics.accumulate_statistics` computes first; doing it as each frame
-        arrives leaves only the small Gram product for :meth:`decide`.
+        The block sums, the per-block saturation and the frame's products with the frames before
+        it are what the binned statistics of :func:`processing.statistics.accumulate_statistics`
+        compute (:class:`~processing.statistics.BlockRows`); doing it as each frame arrives leaves
+        :meth:`decide` only the small solves.
         """
         if not hasattr(self, "_frames"):
             self.begin()
-        pixels = _plane(frame.pixels)
-        binned = None
-        if role in ("ambient", "led"):
-            period = 2 if self.header.camera.cfa is not None else 1
-            if self._factor is None:
-                factor = self.bin_factor
-                while factor > 1 and min(pixels.shape[:2]) // (factor * period) < 8:  # as analysis.sequence_statistics
-                    factor //= 2
-                self._factor = max(factor, 1)
-            if self._factor > 1:
-                sums, maxima = bin_frame(pixels, self._factor, period)
-                top = maxima if maxima.ndim == 2 else maxima.max(axis=2)
-                binned = (sums, top >= self.header.camera.white_level)
         self._frames.append(frame)
         self._roles.append(role)
         self._levels.append(tuple(float(v) for v in levels))
-        self._binned.append(binned)
+        self._stack = None
+        if role == "ambient" and role in self._roles[:-1]:
+            return  # the estimate uses the first ambient frame only
+        if role in ("ambient", "led"):
+            self._add_rows(_plane(frame.pixels), role)
+
+    def _add_rows(self, pixels: np.ndarray, role: str) -> None:
+        camera = self.header.camera
+        period = 2 if camera.cfa is not None else 1
+        if self._factor is None:
+            factor = self.bin_factor
+            while factor > 1 and min(pixels.shape[:2]) // (factor * period) < 8:  # as analysis.sequence_statistics
+                factor //= 2
+            self._factor = max(factor, 1)
+        if self._factor == 1 or not self._rows_complete:
+            return
+        plane = cfa_planes(pixels, period)
+        n_leds = self.leds.count  # one row per LED frame of a plain plan; more frames use the general path
+        if self._rows is None:
+            self._rows = BlockRows(n_leds, plane.shape, self._factor, camera.white_level, incremental=True)
+        row = n_leds if role == "ambient" else self._n_led_rows
+        if role == "led":
+            self._n_led_rows += 1
+        if row > n_leds or (role == "led" and row == n_leds) or plane.shape != self._rows.plane_shape:
+            self._rows_complete = False
+            return
+        self._rows.add(row, plane)
 
     def stack(self) -> analysis.FrameStack:
         """The frame stack of the frames taken so far (first ``ambient`` and every ``led`` frame), in memory."""
+        if self._stack is not None:
+            return self._stack
         roles, frames = self._roles, self._frames
         ambient = [i for i, role in enumerate(roles) if role == "ambient"]
         leds = tuple(i for i, role in enumerate(roles) if role == "led")
@@ -128,35 +166,27 @@ class FlashSession:
         spec = FrameStackSpec(black_level=camera.black_level, white_level=camera.white_level,
                               ambient_scale=scale(ambient[0]), led_scales=tuple(scale(i) for i in leds),
                               led_levels=np.array([self._levels[i] for i in leds], dtype=float))
-        return analysis.FrameStack(_plane(frames[ambient[0]].pixels), tuple(_plane(frames[i].pixels) for i in leds),
-                                   spec, ambient[0], leds)
+        self._stack = analysis.FrameStack(_plane(frames[ambient[0]].pixels),
+                                          tuple(_plane(frames[i].pixels) for i in leds), spec, ambient[0], leds)
+        return self._stack
 
     def statistics(self, stack: analysis.FrameStack) -> SequenceStatistics:
         """The statistics of :func:`analysis.sequence_statistics` from the block sums taken in :meth:`add`.
 
         Block sums with the black level scaled by the block area, no white level and the
-        saturated blocks masked are exactly what the binned pass feeds its moments (only the
-        summation order differs).
+        saturated blocks left out are exactly what the binned pass feeds its moments (only the
+        summation order differs). Frames that did not fit the rows prepared for one frame per LED
+        (a multiplexed plan with more LED frames) take the general path.
         """
-        factor = self._factor or 1
-        if factor == 1:
+        rows = self._rows
+        if (self._factor or 1) == 1 or rows is None or not self._rows_complete \
+                or self._n_led_rows != len(stack.led_indices) or self._n_led_rows != self.leds.count:
             return analysis.sequence_statistics(stack, self.header.camera.cfa, self.bin_factor)
-        indices = (stack.ambient_index, *stack.led_indices)
-        binned = [self._binned[i] for i in indices]
-        assert all(b is not None for b in binned)
-        invalid = binned[0][1].copy()  # type: ignore[index]
-        for _, saturated in binned[1:]:  # type: ignore[misc]
-            invalid |= saturated
-        spec = stack.spec
-        block_spec = FrameStackSpec(black_level=spec.black_level * factor * factor, white_level=np.inf,
-                                    ambient_scale=spec.ambient_scale, led_scales=spec.led_scales,
-                                    led_levels=spec.led_levels)
-        sums = [b[0] for b in binned]  # type: ignore[index]
-        return accumulate_statistics(sums[0], sums[1:], block_spec, sample_mask=~invalid)
+        return rows.statistics(stack.spec)
 
     def estimate(self, stack: analysis.FrameStack) -> AmbientEstimate:
         """The ambient estimate of :func:`analysis.estimate_sequence` for the frames taken."""
-        return estimate_ambient(self.statistics(stack), self.leds, method=self.method, alpha=self.alpha)
+        return self.ambient_model.estimate(self.statistics(stack), self.method, self.alpha)
 
     def solve(self, mode: str, ambient_weights: np.ndarray, bounds: str = "physical") -> FlashSolution:
         """The matching or complementary flash (as :func:`analysis.solve_sequence_flash`)."""
@@ -171,17 +201,22 @@ class FlashSession:
     def decide(self, mode: str = "complementary", sanitise: bool = False) -> FlashDecision:
         """Estimate the ambient from the frames taken and solve the ``mode`` flash.
 
-        ``sanitise`` replaces non-finite ambient weights by 0 before solving (a degenerate estimate
-        still yields a flash to capture, e.g. on the test patterns of the aravis fake).
+        Only the weights are estimated here; the estimate's reliability signals are computed when
+        :attr:`FlashDecision.estimate` is first read. ``sanitise`` replaces non-finite ambient
+        weights by 0 before solving (a degenerate estimate still yields a flash to capture, e.g. on
+        the test patterns of the aravis fake).
         """
         stack = self.stack()
-        estimate = self.estimate(stack)
-        weights = np.asarray(estimate.ambient_weights, dtype=float)
+        statistics = self.statistics(stack)
+        raw_weights, alpha_used = self.ambient_model.weights(statistics, self.method, self.alpha)
+        weights = np.asarray(raw_weights, dtype=float)
         if sanitise:
             weights = np.nan_to_num(weights, nan=0.0, posinf=0.0, neginf=0.0)
         solution = self.solve(mode, weights)
         flash = np.clip(np.nan_to_num(np.asarray(solution.flash_weights, dtype=float)), 0.0, 1.0)
-        return FlashDecision(estimate, solution, flash, stack)
+        model, method = self.ambient_model, self.method
+        return FlashDecision(solution, flash, stack,
+                             lambda: model.reliability(statistics, raw_weights, method, alpha_used))
 
 
 def _plane(pixels: np.ndarray) -> np.ndarray:

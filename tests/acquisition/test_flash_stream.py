@@ -178,3 +178,66 @@ def test_flash_stream_pauses_the_writer_only_around_the_decision(sim_rig, tmp_pa
     assert states == [False]
     assert [e.role for e in entries] == ["ambient"] + ["led"] * 4 + ["flash"]
     assert len(read_sequence(tmp_path / "s").frames) == 6
+
+
+def _session_and_frames(sim_rig, tmp_path: Path, levels: list[tuple[float, ...]], saturate: float = 0.0):
+    """A FlashSession fed synthetic frames (ambient + one frame per entry of ``levels``)."""
+    from acquisition.camera import RawFrame
+
+    info = sim_rig.camera.info
+    rng = np.random.default_rng(len(levels))
+    white = int(info.white_level)
+    ambient = rng.integers(200, 3000, size=(info.height, info.width, 3))
+    session = FlashSession.prepare(_writer(sim_rig, tmp_path / "s").sequence)
+    pixels = [ambient] + [ambient + rng.integers(100, 2000, size=ambient.shape) for _ in levels]
+    for index, (values, level) in enumerate(zip(pixels, [(0.0,) * 4, *levels])):
+        values = values.astype(np.uint16)
+        values[rng.random(values.shape[:2]) < saturate] = white
+        frame = RawFrame(values, index, 0, 1000.0 * (1 + index % 3), 1.0)
+        session.add(frame, "ambient" if index == 0 else "led", level)
+    return session
+
+
+@pytest.mark.parametrize(("levels", "saturate"), [
+    ([tuple(float(i == j) for i in range(4)) for j in range(4)], 0.0),
+    ([tuple(float(i == j) for i in range(4)) for j in range(4)], 0.003),
+    ([(1.0, 0.5, 0.0, 0.0), (0.0, 1.0, 0.5, 0.0), (0.0, 0.0, 1.0, 0.5), (0.5, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0, 1.0)], 0.0),
+], ids=["one-led-per-frame", "saturated-blocks", "multiplexed-more-frames"])
+def test_flash_session_statistics_are_the_sequence_statistics(sim_rig, tmp_path: Path, levels, saturate) -> None:
+    """Frame-by-frame moments (or, for more frames than LEDs, the general path) = the sequence path."""
+    from acquisition import analysis
+
+    session = _session_and_frames(sim_rig, tmp_path, levels, saturate)
+    stack = session.stack()
+    ours = session.statistics(stack)
+    reference = analysis.sequence_statistics(stack, session.header.camera.cfa, session.bin_factor)
+    assert ours.n_samples == reference.n_samples and (ours.n_samples < ours.n_total) == (saturate > 0)
+    np.testing.assert_allclose(ours.gram, reference.gram, rtol=1e-9, atol=1e-9 * abs(reference.gram).max())
+    np.testing.assert_allclose(ours.cross, reference.cross, rtol=1e-9, atol=1e-9 * abs(reference.cross).max())
+
+
+def test_flash_decision_reads_the_full_estimate_only_when_asked(sim_rig, tmp_path: Path, monkeypatch) -> None:
+    """decide() solves with the weights alone; the reliability signals are computed on first access."""
+    import warnings
+
+    from processing.ambient import AmbientModel
+
+    session = _session_and_frames(sim_rig, tmp_path, [tuple(float(i == j) for i in range(4)) for j in range(4)])
+    calls: list[int] = []
+    real = AmbientModel.reliability
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(AmbientModel, "reliability", counted)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        decision = session.decide("matching")
+        assert calls == []
+        full = session.estimate(session.stack())
+        assert decision.estimate is decision.estimate and len(calls) == 2
+        expected_levels = np.clip(session.solve("matching", full.ambient_weights).flash_weights, 0, 1)
+    np.testing.assert_array_equal(decision.estimate.ambient_weights, full.ambient_weights)
+    np.testing.assert_array_equal(decision.estimate.spectrum_std, full.spectrum_std)
+    np.testing.assert_array_equal(decision.levels, expected_levels)
