@@ -113,23 +113,58 @@ def chart_layout(shape: tuple[int, int], chart: str = "macbeth", patch_px: int =
                        f"top-left pixel, {margin_px}-pixel margin")
 
 
-def check_layout(image: np.ndarray, layout: ChartLayout, cfa: str | None) -> float:
-    """Ratio of within-patch to between-patch spread (green channel); raises if the layout does not fit."""
+def check_layout(image: np.ndarray, layout: ChartLayout, cfa: str | None, *, worst_patch_limit: float = 1.0,
+                 twin_z: float = 4.0) -> float:
+    """Check that ``layout`` fits the chart in ``image``; return the median within/between spread ratio.
+
+    Three tests, each aimed at one way a wrong ``--patch-px/--border-px/--margin-px`` shows:
+
+    - the median patch's within-patch spread (green) must stay below
+      :data:`LAYOUT_UNIFORMITY_LIMIT` × the spread between patch means (most patches misplaced);
+    - the worst patch's within spread must stay below ``worst_patch_limit`` × the between spread
+      (a patch straddling two chart patches or a border);
+    - at most a quarter of the patches may read the same colour as another patch, i.e. differ
+      from it by less than ``twin_z`` standard errors in every channel (a layout of smaller pitch
+      that samples parts of the chart several times while every sampled area is uniform).
+
+    Raises
+    ------
+    UsageError
+        Naming the failed test and the options to check.
+    """
     green = 1 if (image.ndim == 3 or cfa is not None) else 0
-    within, means = [], []
+    within, means, errors = [], [], []
     for patch in range(layout.n_patches):
-        samples = colour_metrics.patch_pixels(image, layout.labels, patch, cfa)[green]
+        channels = colour_metrics.patch_pixels(image, layout.labels, patch, cfa)
+        samples = channels[green]
         if samples.size < 2:
             raise UsageError(f"chart layout: patch {patch} has {samples.size} usable pixels; expected a layout that "
                              "fits the image (--patch-px/--border-px/--margin-px)")
         within.append(samples.std())
-        means.append(samples.mean())
-    between = float(np.std(means))
-    ratio = float(np.median(within)) / between if between > 0 else np.inf
+        means.append([c.mean() if c.size else np.nan for c in channels])
+        errors.append([c.std(ddof=1) / np.sqrt(c.size) if c.size > 1 else np.nan for c in channels])
+    patch_means, standard_errors = np.array(means), np.array(errors)
+    between = float(np.std(patch_means[:, green]))
+    spread = np.array(within) / between if between > 0 else np.full(len(within), np.inf)
+    ratio = float(np.median(spread))
     if not ratio <= LAYOUT_UNIFORMITY_LIMIT:
         raise UsageError(f"chart layout: patches are not uniform in the ambient image (within/between spread "
                          f"{ratio:.2f} > {LAYOUT_UNIFORMITY_LIMIT}); expected the sim rig's chart with these "
                          "--patch-px/--border-px (a real photograph needs its own patch map)")
+    worst = int(np.argmax(spread))
+    if not spread[worst] <= worst_patch_limit:
+        raise UsageError(f"chart layout: patch {worst} is not uniform in the ambient image (within/between spread "
+                         f"{spread[worst]:.2f} > {worst_patch_limit}); expected every patch inside one chart patch "
+                         "(check --patch-px/--border-px/--margin-px)")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = np.abs(patch_means[:, None] - patch_means[None]) / np.hypot(standard_errors[:, None], standard_errors[None])
+    z = np.where(np.isfinite(z), z, -np.inf).max(axis=2)  # the most distinct channel with ≥ 2 samples each
+    np.fill_diagonal(z, np.inf)
+    twins = int(np.sum((z < twin_z).any(axis=1)))
+    if twins > layout.n_patches / 4:
+        raise UsageError(f"chart layout: {twins} of {layout.n_patches} patches read the same colour as another patch "
+                         f"(< {twin_z:g} standard errors apart); expected {layout.n_patches} distinct chart patches — "
+                         "the layout samples parts of the chart several times (check --patch-px/--border-px)")
     return ratio
 
 

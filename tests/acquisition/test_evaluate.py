@@ -164,6 +164,8 @@ class TestEvaluateSequence:
     @pytest.mark.parametrize(("options", "message"), [
         (["--patch-px", "10"], "--patch-px 10 --border-px 2: the macbeth chart is 50×74 pixels"),
         (["--patch-px", "7", "--border-px", "2"], "patches are not uniform"),
+        (["--patch-px", "5"], r"patch \d+ is not uniform .* expected every patch inside one chart patch"),
+        (["--patch-px", "4", "--border-px", "1"], r"2\d of 24 patches read the same colour as another patch"),
         (["--margin-px", "4"], "--margin-px 4 leaves nothing"),
     ])
     def test_a_wrong_layout_is_refused(self, macbeth_run: Path, tmp_path: Path, options: list[str], message: str) -> None:
