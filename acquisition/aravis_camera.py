@@ -87,6 +87,9 @@ _POP_POLL_US = 10_000
 ends the wait at once; only stop() waits for the timeout)."""
 _MAX_POOL_BYTES = 512 * 1024 * 1024
 """Upper bound on the buffer pool; a plan asking for more buffers gets fewer, with a warning."""
+_MAX_SPARE_BYTES = 256 * 1024 * 1024
+"""Upper bound on the spare arrays a zero-copy pool readies for a plan (beyond, the popping thread
+allocates each replacement after queueing its frame)."""
 
 _aravis_lock = threading.RLock()
 """Aravis's interface list and device list are process globals."""
@@ -270,6 +273,25 @@ PIXEL_FORMATS: dict[str, PixelLayout] = _pixel_formats()
 """Pixel formats msflash decodes (unpacked only; packed 10/12-bit formats are refused)."""
 
 
+def _frame_shape(pixel_format: str, width: int, height: int, n_bytes: int,
+                 where: str) -> tuple[PixelLayout, int, tuple[int, ...]]:
+    """The layout of ``pixel_format``, the sample count of one image and the frame's shape.
+
+    Raises :class:`CameraError` for an unknown format or a payload of ``n_bytes`` too short.
+    """
+    layout = PIXEL_FORMATS.get(pixel_format)
+    if layout is None:
+        raise CameraError(f"{where}: pixel format {pixel_format!r} is not supported; expected one of "
+                          f"{', '.join(PIXEL_FORMATS)}")
+    n = width * height * layout.channels
+    itemsize = np.dtype(layout.dtype).itemsize
+    if n_bytes < n * itemsize:
+        raise CameraError(f"{where}: payload of {n_bytes} bytes is too short for {width}x{height} "
+                          f"{pixel_format}; expected {n * itemsize} bytes")
+    shape = (height, width) if layout.channels == 1 else (height, width, layout.channels)
+    return layout, n, shape
+
+
 def decode_pixels(data: bytes | memoryview, pixel_format: str, width: int, height: int,
                   where: str = "decode_pixels") -> np.ndarray:
     """Turn an image payload into an owned, read-only array of raw linear values.
@@ -296,17 +318,8 @@ def decode_pixels(data: bytes | memoryview, pixel_format: str, width: int, heigh
     CameraError
         Unknown pixel format or a payload shorter than the image.
     """
-    layout = PIXEL_FORMATS.get(pixel_format)
-    if layout is None:
-        raise CameraError(f"{where}: pixel format {pixel_format!r} is not supported; expected one of "
-                          f"{', '.join(PIXEL_FORMATS)}")
-    n = width * height * layout.channels
-    itemsize = np.dtype(layout.dtype).itemsize
-    if len(data) < n * itemsize:
-        raise CameraError(f"{where}: payload of {len(data)} bytes is too short for {width}x{height} "
-                          f"{pixel_format}; expected {n * itemsize} bytes")
+    layout, n, shape = _frame_shape(pixel_format, width, height, len(data), where)
     flat = np.frombuffer(data, dtype=layout.dtype, count=n)
-    shape = (height, width) if layout.channels == 1 else (height, width, layout.channels)
     native = np.dtype(layout.dtype).newbyteorder("=")
     # An array over immutable ``bytes`` (what PyGObject's Buffer.get_data returns, already a copy
     # of the Aravis buffer) is safe to keep without another 2.6 MB copy per frame.
@@ -314,6 +327,42 @@ def decode_pixels(data: bytes | memoryview, pixel_format: str, width: int, heigh
     pixels = flat.reshape(shape) if owned else flat.reshape(shape).astype(native, copy=True)
     if layout.bgr:
         pixels = np.ascontiguousarray(pixels[..., ::-1])
+    pixels.flags.writeable = False
+    return pixels
+
+
+def is_zero_copy_format(pixel_format: str) -> bool:
+    """Whether a payload of ``pixel_format`` already is its frame, so :func:`view_pixels` applies.
+
+    True for the formats of :data:`PIXEL_FORMATS` stored in this host's byte order and in R, G, B
+    order (mono, Bayer, RGB8, RGB16); False for BGR8 (reordered) and unknown formats.
+
+    Examples
+    --------
+    >>> is_zero_copy_format("Mono16"), is_zero_copy_format("BayerRG8"), is_zero_copy_format("BGR8")
+    (True, True, False)
+    """
+    layout = PIXEL_FORMATS.get(pixel_format)
+    return layout is not None and not layout.bgr and np.dtype(layout.dtype).isnative
+
+
+def view_pixels(payload: np.ndarray, pixel_format: str, width: int, height: int,
+                where: str = "view_pixels") -> np.ndarray:
+    """The frame inside ``payload`` (a byte array), as a read-only view: no copy.
+
+    The result has the shape and dtype :func:`decode_pixels` gives and keeps ``payload`` alive.
+
+    Raises
+    ------
+    CameraError
+        A format :func:`is_zero_copy_format` refuses, or a payload shorter than the image.
+    """
+    if not is_zero_copy_format(pixel_format):
+        raise CameraError(f"{where}: pixel format {pixel_format!r} needs decoding; expected one "
+                          "is_zero_copy_format accepts")
+    layout, n, shape = _frame_shape(pixel_format, width, height, payload.nbytes, where)
+    dtype = np.dtype(layout.dtype)
+    pixels = payload[:n * dtype.itemsize].view(dtype).reshape(shape)
     pixels.flags.writeable = False
     return pixels
 
@@ -519,6 +568,133 @@ class _Failure:
 
 _CONTROL_LOST = object()
 
+ZERO_COPY_PROTOCOLS = ("gige", "fake")
+"""Transports whose streams can hand buffers out as frames. USB3 Vision keeps copying: Aravis's
+asynchronous USB3 stream (0.8.26, ``arvuvstream.c``) sets up one set of USB transfers per buffer
+*address*, pointing at that buffer's memory, and reuses it for any later buffer at the same
+address, so a buffer replaced by a new one would be filled through the old one's pointer."""
+
+
+def _prefaulted(n_bytes: int) -> np.ndarray:
+    """A new byte array with every page written once, so the first write by Aravis's receive
+    thread takes no page fault (``np.zeros`` would map untouched zero pages)."""
+    array = np.empty(n_bytes, dtype=np.uint8)
+    array.fill(0)
+    return array
+
+
+class _BufferPool:
+    """One Aravis stream with its buffers and, when frames are delivered without a copy, the numpy
+    arrays whose memory those buffers use.
+
+    A copying pool lets Aravis allocate each buffer; frames are copied out (:func:`decode_pixels`)
+    and buffers are pushed back. A zero-copy pool builds every buffer over a pre-faulted array it
+    allocates (``Aravis.Buffer.new(size, address)``); a complete frame is handed to the caller as a
+    view of its array (:func:`view_pixels`) and its buffer is never pushed again: a replacement over
+    a fresh array (a spare readied beforehand, else a new one) takes its place in the stream.
+
+    Memory-safety invariant (zero-copy): Aravis's stream thread writes into the memory of every
+    buffer the stream holds — queued for input, being filled, or complete and not yet popped —
+    and never frees memory it did not allocate. So every array backing a buffer the stream may
+    hold is referenced from ``_in_stream``: registered *before* its buffer is pushed, removed only
+    by :meth:`hand_out` (its buffer popped, complete, and never to be pushed again) or by
+    :meth:`release`, which first stops the stream's thread (joined) and deletes every buffer the
+    stream still holds. A buffer popped and pushed back (incomplete, stale, refused) keeps its
+    array registered throughout. Call :meth:`release` after acquisition stopped and after the thread
+    popping the stream exited; if that thread cannot be stopped, :meth:`abandon` keeps the arrays
+    for the life of the process instead. A pool dropped unreleased releases itself first.
+    """
+
+    def __init__(self, stream: Any, payload: int, zero_copy: bool) -> None:
+        self.stream: Any = stream
+        """The Aravis stream (None once released)."""
+        self.payload = payload
+        """Bytes per buffer."""
+        self.zero_copy = zero_copy
+        """Frames are views of the buffers' arrays (else copies)."""
+        self._in_stream: dict[Any, np.ndarray] = {}  # Aravis.Buffer wrapper -> the array it writes into
+        self._spares: list[tuple[Any, np.ndarray]] = []
+        self._abandoned = False
+
+    @property
+    def counts(self) -> tuple[int, int]:
+        """(arrays backing buffers in the stream, spare arrays ready to replace handed-out ones)."""
+        return len(self._in_stream), len(self._spares)
+
+    def _new_buffer(self) -> tuple[Any, np.ndarray]:
+        array = _prefaulted(self.payload)
+        return Aravis.Buffer.new(self.payload, array.ctypes.data), array
+
+    def _push(self, buffer: Any, array: np.ndarray) -> None:
+        self._in_stream[buffer] = array  # referenced before Aravis can write into it
+        self.stream.push_buffer(buffer)
+
+    def fill(self, n_buffers: int) -> None:
+        """Push ``n_buffers`` new buffers into the stream."""
+        for _ in range(n_buffers):
+            if self.zero_copy:
+                self._push(*self._new_buffer())
+            else:
+                self.stream.push_buffer(Aravis.Buffer.new_allocate(self.payload))
+
+    def reserve(self, n_spares: int) -> None:
+        """Have at least ``n_spares`` spare buffers ready (zero-copy pools only)."""
+        while self.zero_copy and len(self._spares) < n_spares:
+            self._spares.append(self._new_buffer())
+
+    def array_of(self, buffer: Any) -> np.ndarray | None:
+        """The array behind a popped buffer, or None when its memory is Aravis's (copy it out)."""
+        return self._in_stream.get(buffer)
+
+    def hand_out(self, buffer: Any) -> None:
+        """Give up a popped buffer's array to the caller; the buffer must never be pushed again."""
+        del self._in_stream[buffer]
+
+    def replace(self) -> None:
+        """Push a buffer in place of one handed out: a spare, else a new one allocated now."""
+        buffer, array = self._spares.pop() if self._spares else self._new_buffer()
+        self._push(buffer, array)
+
+    def release(self) -> None:
+        """Stop the stream's thread, delete the buffers it holds, drop the stream, then the arrays.
+
+        Call it after acquisition stopped and the popping thread exited. The stream's thread is
+        started again, with no buffer left to write into, so that Aravis's finalisation (which
+        stops it) finds it running. Idempotent.
+        """
+        stream, self.stream = self.stream, None
+        if stream is not None and self._in_stream:
+            stream.stop_thread(True)  # joins the thread, then unrefs every buffer in its queues
+            stream.start_thread()
+        stream = None  # noqa: F841 - the stream goes before the arrays
+        self._in_stream.clear()
+        self._spares.clear()
+
+    def abandon(self) -> None:
+        """Keep the stream and the arrays for the life of the process: the stream may still write
+        into them, and its buffers may still be pushed back by a thread that did not stop."""
+        self._abandoned = True
+        _ABANDONED.append(self)
+        self._spares.clear()
+
+    def __del__(self) -> None:
+        if self.stream is not None and self._in_stream and not self._abandoned:
+            self.release()
+
+
+@dataclass(frozen=True)
+class _SpareStream:
+    """A stopped stream kept, with its buffers, for the next :meth:`AravisCamera.prepare`."""
+
+    pool: _BufferPool
+    n_buffers: int
+    layout: tuple[str, int, int]
+
+
+_ABANDONED: list[_BufferPool] = []
+"""Pools whose stream may still write into their arrays (its popping thread did not stop):
+leaked on purpose, since freeing them could let Aravis write into freed memory."""
+
 
 class AravisCamera:
     """A GenICam camera (GigE Vision, USB3 Vision or the Aravis fake) behind the ``Camera`` protocol.
@@ -541,6 +717,8 @@ class AravisCamera:
         given, and required for camera-paced plans (``plan.trigger == "camera"``).
     extra_buffers
         Buffers in the pool beyond one per plan step.
+    zero_copy
+        Deliver frames without copying them where possible (see Notes); False always copies.
 
     Raises
     ------
@@ -553,22 +731,30 @@ class AravisCamera:
     -----
     Release the camera with :meth:`close` (or use it as a context manager): Aravis keeps control
     of a GigE Vision device as long as any reference to it lives.
+
+    Frames of formats stored as the frame itself (:func:`is_zero_copy_format`) on GigE Vision and
+    the fake (:data:`ZERO_COPY_PROTOCOLS`) are not copied: Aravis writes each frame into a numpy
+    array msflash allocated, and that array, once the frame is complete, is the frame returned
+    (read-only, owned by the caller from then on). A new buffer replaces it in the stream after
+    the frame is queued; :meth:`prepare` readies one per plan step so that a sequence allocates
+    nothing while it runs. :attr:`pool_arrays` counts the arrays the camera holds.
     """
 
     def __init__(self, device: str, *, interfaces: str | Iterable[str] = ("fake",),
                  pixel_format: str | None = None, roi: tuple[int, int, int, int] | None = None,
                  line_trigger: TriggerConfig | None = None, strobe: StrobeConfig | None = None,
-                 extra_buffers: int = 4) -> None:
+                 extra_buffers: int = 4, zero_copy: bool = True) -> None:
         self._requested = device
         self._interfaces = parse_interfaces(interfaces)
         self._line_trigger = line_trigger or TriggerConfig(mode="line")
         self._strobe_request = strobe
         self._extra_buffers = max(1, int(extra_buffers))
+        self._zero_copy = bool(zero_copy)
         self._name = f"camera {device!r}"
         self._camera: Any = None
         self._device: Any = None
-        self._stream: Any = None
-        self._spare: tuple[Any, int, int, tuple] | None = None  # a stopped stream kept for the next prepare
+        self._pool: _BufferPool | None = None  # the stream and its buffers (see _BufferPool's invariant)
+        self._spare: _SpareStream | None = None  # a stopped stream kept for the next prepare
         self._stale_before_ns = 0
         self._control_lost_handler: int | None = None
         self._control_lost = threading.Event()
@@ -684,9 +870,12 @@ class AravisCamera:
                 except (TypeError, GLib.Error):  # pragma: no cover - already gone
                     pass
             self._control_lost_handler = None
-            # Drop every reference: Aravis keeps control of the device while one lives.
-            self._stream = None
-            self._spare = None
+            # Drop every reference: Aravis keeps control of the device while one lives. stop() left
+            # no stream but a spare: its thread is stopped and its buffers deleted before the arrays
+            # behind them go.
+            spare, self._spare = self._spare, None
+            if spare is not None:
+                spare.pool.release()
             self._device = None
             self._camera = None
 
@@ -1107,6 +1296,9 @@ class AravisCamera:
         self._apply_step(0, plan)
         self._plan = plan
         self._build_stream(len(plan.steps) + self._extra_buffers)
+        # One spare buffer per step: a sequence hands out one buffer per frame and allocates none.
+        assert self._pool is not None
+        self._pool.reserve(min(len(plan.steps), _MAX_SPARE_BYTES // self._pool.payload))
 
     def _apply_step(self, index: int, plan: CapturePlan) -> tuple[float, float]:
         # Write only what changes: each write and read-back is a GVCP round trip on the trigger path.
@@ -1124,17 +1316,27 @@ class AravisCamera:
 
     def _build_stream(self, n_buffers: int) -> None:
         # Creating (and destroying) a stream costs tens of ms on GigE Vision (socket, thread, stream
-        # channel registers): the stream of the previous capture is reused when the frame layout,
-        # the payload and the pool still fit. Buffers it still holds are stale: start() drains them.
+        # channel registers): the stream of the previous capture is reused, with its buffers, when
+        # the frame layout, the payload and the pool still fit. Buffers it still holds are stale:
+        # start() drains them.
         spare, self._spare = self._spare, None
+        fits = False
         try:
-            payload = int(self._camera.get_payload())
+            try:
+                payload = int(self._camera.get_payload())
+            except GLib.Error as err:
+                raise self._fail("reading", "PayloadSize", err) from err
             layout = (str(self.get_feature("PixelFormat")),) + self.roi[2:]
-            if spare is not None and spare[2] == payload and spare[3] == layout and spare[1] >= n_buffers:
-                self._stream, self._n_buffers, self._layout_key = spare[0], spare[1], layout
-                self._stale_before_ns = 1  # start() sets the acquisition's start time
-                return
-            spare = None
+            fits = spare is not None and (spare.pool.payload, spare.layout) == (payload, layout) and (
+                spare.n_buffers >= n_buffers)
+        finally:
+            if spare is not None and not fits:
+                spare.pool.release()
+        if spare is not None and fits:
+            self._pool, self._n_buffers, self._layout_key = spare.pool, spare.n_buffers, layout
+            self._stale_before_ns = 1  # start() sets the acquisition's start time
+            return
+        try:
             stream = self._camera.create_stream(None, None)
         except GLib.Error as err:
             raise self._fail("creating the stream for", "PayloadSize", err) from err
@@ -1145,19 +1347,35 @@ class AravisCamera:
             log.warning("%s: %d buffers of %d bytes exceed %d MiB; using %d", self._name, n_buffers, payload,
                         _MAX_POOL_BYTES >> 20, reduced)
             n_buffers = reduced
-        for _ in range(n_buffers):
-            stream.push_buffer(Aravis.Buffer.new_allocate(payload))
-        self._stream = stream
+        zero_copy = self._zero_copy and self._protocol in ZERO_COPY_PROTOCOLS and is_zero_copy_format(layout[0])
+        pool = _BufferPool(stream, payload, zero_copy)
+        try:
+            pool.fill(n_buffers)
+        except BaseException:
+            pool.release()
+            raise
+        self._pool = pool
         self._n_buffers = n_buffers
         self._layout_key = layout
-        self._payload = payload
         self._stale_before_ns = 0
+
+    @property
+    def pool_arrays(self) -> tuple[int, int]:
+        """Arrays the camera holds for zero-copy frames: (behind buffers in the stream, spares).
+
+        The first stays at the pool size and the second only shrinks during an acquisition
+        (:meth:`prepare` tops it up): frames handed out are the caller's, not the camera's.
+        Both are 0 for a copying camera and after :meth:`close`.
+        """
+        pool = self._pool if self._pool is not None else (self._spare.pool if self._spare is not None else None)
+        return pool.counts if pool is not None else (0, 0)
 
     def start(self) -> None:
         """Start acquisition and the thread that pops buffers."""
         if self._acquiring:
             return
-        if self._stream is None:
+        pool = self._pool
+        if pool is None:
             raise CameraError(f"{self._name}: start() before prepare(); expected a prepared camera")
         self._queue = queue.Queue()
         self._triggered_settings.clear()
@@ -1167,10 +1385,10 @@ class AravisCamera:
             self._stats = AcquisitionStats(n_buffers=self._n_buffers)
         self._pump_stop.clear()
         if self._stale_before_ns:  # a reused stream: drop what the previous acquisition left in it
-            while (buffer := self._stream.try_pop_buffer()) is not None:
-                self._stream.push_buffer(buffer)
+            while (buffer := pool.stream.try_pop_buffer()) is not None:
+                pool.stream.push_buffer(buffer)
             self._stale_before_ns = time.time_ns()
-        self._pump = threading.Thread(target=self._pump_buffers, args=(self._stream,),
+        self._pump = threading.Thread(target=self._pump_buffers, args=(pool,),
                                       name=f"aravis-pump-{self._serial}", daemon=True)
         self._pump.start()
         try:
@@ -1180,40 +1398,55 @@ class AravisCamera:
             raise self._fail("starting", "AcquisitionStart", err) from err
         self._acquiring = True
 
-    def _pump_buffers(self, stream: Any) -> None:
+    def _pump_buffers(self, pool: _BufferPool) -> None:
         # A dedicated thread popping with a timeout: stream callbacks lost most frames under load.
+        stream = pool.stream
         stale_before_ns = self._stale_before_ns
         while not self._pump_stop.is_set():
             buffer = stream.timeout_pop_buffer(_POP_POLL_US)
             if buffer is None:
                 continue
             popped_ns = time.time_ns()
+            handed_out = False
             try:
                 if 0 < int(buffer.get_system_timestamp()) < stale_before_ns:
                     continue  # a frame of the previous acquisition still in flight when it stopped
-                item = self._take(buffer, popped_ns)
+                item, handed_out = self._take(buffer, pool, popped_ns)
             except Exception as exc:  # noqa: BLE001 - handed to the consumer, never lost
                 item = _Failure(exc)
             finally:
-                stream.push_buffer(buffer)
-            # Queued after the buffer is back in the pool: the pixels are already copied, and the
-            # caller's thread, woken by the queue, need not wait for this one to release the GIL.
+                if not handed_out:
+                    stream.push_buffer(buffer)  # its array (if any) stays registered in the pool
+            # The caller's thread, woken by the queue, need not wait for this one: a copy is already
+            # made, and a handed-out buffer's replacement is pushed only now.
             self._queue.put(item)
+            if handed_out:
+                try:
+                    pool.replace()
+                except Exception as exc:  # noqa: BLE001 - the pool is one buffer short, frames still flow
+                    log.warning("%s: no buffer to replace one handed out (%s); the pool shrinks by one",
+                                self._name, exc)
 
-    def _take(self, buffer: Any, popped_ns: int) -> _Good | _Bad | _Failure:
-        """What the consumer gets for one popped buffer; the pixels are copied out of it."""
+    def _take(self, buffer: Any, pool: _BufferPool, popped_ns: int) -> tuple[_Good | _Bad | _Failure, bool]:
+        """What the consumer gets for one popped buffer, and whether the buffer's own array went
+        with it (then the buffer must never be pushed again); otherwise the pixels are copied."""
         pixel_format, width, height = self._layout_key
         status = buffer.get_status()
         frame_id = int(buffer.get_frame_id())
         if status != Aravis.BufferStatus.SUCCESS:
-            return _Bad(frame_id, status.value_nick)
+            return _Bad(frame_id, status.value_nick), False
         w, h = buffer.get_image_width(), buffer.get_image_height()
         if (w, h) != (width, height):
-            return _Failure(CameraError(f"{self._name}: frame {frame_id} is {w}x{h}; expected {width}x{height}"))
-        pixels = decode_pixels(buffer.get_data(), pixel_format, w, h, where=self._name)
+            return _Failure(CameraError(f"{self._name}: frame {frame_id} is {w}x{h}; expected {width}x{height}")), False
         received = int(buffer.get_system_timestamp())
         timestamp = int(buffer.get_timestamp()) or received
-        return _Good(pixels, frame_id, timestamp, received, popped_ns)
+        array = pool.array_of(buffer)
+        if array is None:
+            pixels = decode_pixels(buffer.get_data(), pixel_format, w, h, where=self._name)
+            return _Good(pixels, frame_id, timestamp, received, popped_ns), False
+        pixels = view_pixels(array, pixel_format, w, h, where=self._name)
+        pool.hand_out(buffer)  # last: nothing after it can fail and push the buffer back
+        return _Good(pixels, frame_id, timestamp, received, popped_ns), True
 
     def _step_label(self, index: int) -> str:
         if self._plan is not None and index < len(self._plan.steps):
@@ -1318,16 +1551,25 @@ class AravisCamera:
             return gap
         return 0
 
-    def _stop_pump(self) -> None:
+    def _stop_pump(self) -> bool:
+        """Stop the popping thread; False when it did not exit (it may still touch the stream)."""
         self._pump_stop.set()
         if self._pump is not None:
             self._pump.join(timeout=5.0)
             if self._pump.is_alive():  # pragma: no cover - Aravis stuck in pop
                 log.error("%s: buffer thread did not stop", self._name)
+                return False
         self._pump = None
+        return True
 
     def stop(self) -> None:
-        """Stop acquisition, stop the buffer thread and drop the stream; idempotent."""
+        """Stop acquisition, stop the buffer thread and drop the stream; idempotent.
+
+        The order keeps Aravis from writing into freed memory: acquisition stops first, then the
+        popping thread, then the stream is kept for the next :meth:`prepare` with its buffers and
+        their arrays, or — control lost — released (its thread stopped, its buffers deleted)
+        before the arrays go (see :class:`_BufferPool`).
+        """
         if self._acquiring and self._camera is not None:
             try:
                 if not (self._control_lost.is_set() or self._unreachable):
@@ -1335,10 +1577,17 @@ class AravisCamera:
             except GLib.Error as err:
                 log.warning("%s: AcquisitionStop failed: %s", self._name, err.message)
         self._acquiring = False
-        self._stop_pump()
-        if self._stream is not None and not (self._control_lost.is_set() or self._unreachable):
-            self._spare = (self._stream, self._n_buffers, getattr(self, "_payload", -1), self._layout_key)
-        self._stream = None
+        stopped = self._stop_pump()
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        if not stopped:  # pragma: no cover - the thread may still push a buffer back
+            pool.abandon()
+        elif self._control_lost.is_set() or self._unreachable:
+            pool.release()
+        else:
+            self._spare = _SpareStream(pool, self._n_buffers, self._layout_key)
+
 
 
 # --------------------------------------------------------------------------------------------
@@ -1508,12 +1757,14 @@ def bare_aravis_run(address: str, *, width: int, height: int, pixel_format: str,
 
     With ``software_trigger`` each frame is triggered and waited for (latency); otherwise the
     camera free-runs at ``frame_rate_hz`` and the loop measures throughput. It is the baseline
-    the bench compares :class:`AravisCamera` against; it never copies pixels. ``dither_s`` waits a
-    random time up to that long before each trigger, and the first ``warm_up_frames`` frames are
-    received but not counted or timed (see ``bench_camera`` for why both matter on the fake).
+    the bench compares :class:`AravisCamera` against; it never copies pixels, and its buffers,
+    like AravisCamera's, use pre-faulted memory. ``dither_s`` waits a random time up to that long
+    before each trigger, and the first ``warm_up_frames`` frames are received but not counted or
+    timed (see ``bench_camera`` for why both matter on the fake).
     """
     use_interfaces(("gige",))
     camera = Aravis.Camera.new(address)
+    pool: _BufferPool | None = None
     try:
         device = camera.get_device()
         camera.set_acquisition_mode(Aravis.AcquisitionMode.CONTINUOUS)
@@ -1527,9 +1778,8 @@ def bare_aravis_run(address: str, *, width: int, height: int, pixel_format: str,
             if frame_rate_hz is not None:
                 camera.set_frame_rate(frame_rate_hz)
         stream = camera.create_stream(None, None)
-        payload = camera.get_payload()
-        for _ in range(n_buffers):
-            stream.push_buffer(Aravis.Buffer.new_allocate(payload))
+        pool = _BufferPool(stream, int(camera.get_payload()), zero_copy=True)  # buffers only pushed back
+        pool.fill(n_buffers)
         camera.start_acquisition()
         frames = bad = missing = 0
         previous: int | None = None
@@ -1572,5 +1822,7 @@ def bare_aravis_run(address: str, *, width: int, height: int, pixel_format: str,
             camera.stop_acquisition()
         return BareRun(frames, bad, missing, last - first, tuple(timings))
     finally:
+        if pool is not None:
+            pool.release()  # the stream and its buffers go before their arrays
         stream = None  # noqa: F841 - release the stream before the camera
         camera = None  # noqa: F841
