@@ -45,7 +45,7 @@ import numpy as np
 from processing.ambient import AMBIENT_METHODS, AmbientEstimate, gcv_alpha, estimate_ambient
 from processing.errors import SolverError, SpectralDataError
 from processing.spectra import Spectra, require_unit
-from processing.statistics import FrameStackSpec, SequenceStatistics, block_sums, cfa_planes, gather_matrix
+from processing.statistics import FrameStackSpec, SequenceStatistics, block_sums, cfa_planes
 from processing.synthesis import frame_coefficients
 
 LOCAL_METHODS = ("auto", "global", "local")
@@ -60,8 +60,9 @@ SELECTION_MARGIN = 0.10
 global model's; otherwise the global model is kept (calibrated on uniform scenes, see the docs)."""
 REGION_RADIUS = 2
 """Half-width in blocks of the box over which block residuals are pooled before labelling (5 × 5 blocks)."""
-REGION_ITERATIONS = 3
-"""Alternations of labelling blocks and re-pooling the regions' statistics."""
+REGION_ITERATIONS = 20
+"""At most this many alternations of labelling blocks and re-pooling the regions' statistics (they stop
+when no label changes; a few suffice on most scenes)."""
 MAX_REGION_CELLS = 6000
 """Blocks are grouped into cells of g × g blocks so that the labels have at most about this many cells
 (cost: a 240 × 320 frame at 4× binning keeps its 4 800 blocks; a 1024 × 1280 frame gets 16-pixel cells)."""
@@ -103,29 +104,70 @@ class BlockData:
         """Blocks (rows, columns)."""
         return (int(self.valid.shape[0]), int(self.valid.shape[1]))
 
-    def linear(self, group: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The ambient ``a`` (N, C) and unmixed LED images ``F`` (N, C, k) of ``group × group`` cells of blocks.
+
+@dataclass(frozen=True)
+class Cells:
+    """The valid cells of ``g × g`` blocks, reduced once to their statistics for :func:`segment_regions`.
+
+    Every cell's products of its ambient and LED images (eq. 4–5), so that any region's or tile's
+    statistics, and any weights' residual per cell, are sums and products over the cells.
+    """
+
+    valid: np.ndarray = field(repr=False)
+    """(h, w) the cell grid's valid cells (the N rows are its True entries in row-major order)."""
+    size: int
+    """Cell side in pixels."""
+    channels: int
+    """Samples per cell (colour channels)."""
+    gram: np.ndarray = field(repr=False)
+    """(N, k·k) ``F_bᵀ F_b`` of every cell, flattened."""
+    cross: np.ndarray = field(repr=False)
+    """(N, k) ``F_bᵀ a_b``."""
+    energy: np.ndarray = field(repr=False)
+    """(N,) ``a_bᵀ a_b``."""
+    sums: np.ndarray = field(repr=False)
+    """(N, 1 + k) sums over the channels of ``a_b`` and of every LED image."""
+
+    @classmethod
+    def of(cls, blocks: BlockData, group: int | None = None) -> Cells:
+        """The cells of ``group × group`` blocks (None: at most about :data:`MAX_REGION_CELLS` cells).
 
         Sums of blocks obey the same linear model, so grouping only coarsens the labels. A cell is
-        kept (``valid``, (h/group, w/group)) when all its blocks are valid.
+        kept when all its blocks are valid. Each cell's statistics come from the raw moments of its
+        samples by the map of :func:`tile_statistics`: a cell is a tiny tile.
         """
-        rows, columns = self.shape[0] // group, self.shape[1] // group
-        raw = self.raw[:, :rows * group, :columns * group]
-        valid = self.valid[:rows * group, :columns * group]
+        if group is None:
+            group = max(1, int(np.ceil(np.sqrt(blocks.valid.size / MAX_REGION_CELLS))))
+        rows, columns = blocks.shape[0] // group, blocks.shape[1] // group
+        raw = blocks.raw[:, :rows * group, :columns * group]
+        valid = blocks.valid[:rows * group, :columns * group]
         if group > 1:
-            n_rows, channels = raw.shape[0], raw.shape[-1]
-            raw = raw.reshape(n_rows, rows, group, columns * group * channels).sum(axis=2)
-            raw = (raw.reshape(-1, group * channels) @ gather_matrix(group, channels, np.float64)).reshape(
-                n_rows, rows, columns, channels)
+            raw = np.stack([block_sums(row, group) for row in raw])
             valid = valid.reshape(rows, group, columns, group).all(axis=(1, 3))
-        cells = raw[:, valid]  # (R, N, C)
-        n_led_frames = cells.shape[0] - 2
-        black = float(self.spec.black_level) * cells[-1]  # the ones row counts the blocks
-        ambient = self.spec.ambient_scale * (cells[n_led_frames] - black)
-        scales = np.asarray(self.spec.led_scales, dtype=float)
-        differences = scales[:, None, None] * (cells[:n_led_frames] - black[None]) - ambient[None]
-        led = np.einsum("ia,anc->nci", self.spec.unmixing, differences, optimize=True)
-        return ambient, led, valid
+        samples = raw[:, valid]  # (R, N, C)
+        moments = np.einsum("rnc,snc->nrs", samples, samples, optimize=True)[:, None]
+        cells = _tiled_from_moments(moments, np.ones((samples.shape[1], 1)), blocks.spec, np.zeros(2, dtype=int),
+                                    np.zeros(2, dtype=int))
+        k = cells.n_leds
+        return cls(valid=valid, size=blocks.pixel * group, channels=int(samples.shape[2]),
+                   gram=cells.gram.reshape(-1, k * k), cross=cells.cross.reshape(-1, k),
+                   energy=cells.ambient_energy.reshape(-1),
+                   # The sums are products with the ones row, which counts a cell's group² blocks.
+                   sums=np.column_stack([cells.ambient_sum.reshape(-1), cells.led_sums.reshape(-1, k)]) / group ** 2)
+
+    def errors(self, weights: np.ndarray) -> np.ndarray:
+        """``‖a_b − F_b w‖²`` of every cell for each row of ``weights`` (R, k): (R, N)."""
+        quadratic = np.einsum("ri,rj->rij", weights, weights).reshape(weights.shape[0], -1)
+        return np.clip(self.energy[None] - 2.0 * weights @ self.cross.T + quadratic @ self.gram.T, 0.0, None)
+
+    def statistics(self, member: np.ndarray) -> SequenceStatistics:
+        """Pooled statistics of the cells where ``member`` (N,) is set."""
+        k = self.cross.shape[1]
+        select = np.asarray(member, dtype=float)
+        n = int(select.sum()) * self.channels
+        return SequenceStatistics(gram=(select @ self.gram).reshape(k, k), cross=select @ self.cross,
+                                  ambient_energy=float(select @ self.energy), n_samples=n, n_total=n,
+                                  ambient_sum=float(select @ self.sums[:, 0]), led_sums=select @ self.sums[:, 1:])
 
 
 @dataclass(frozen=True)
@@ -333,18 +375,20 @@ def _tiled_from_moments(moments: np.ndarray, totals: np.ndarray, spec: FrameStac
     transform[:n_led_frames, n_led_frames + 1] = (spec.ambient_scale - scales) * black
     transform[n_led_frames, n_led_frames] = spec.ambient_scale
     transform[n_led_frames, n_led_frames + 1] = -spec.ambient_scale * black
-    linear = np.einsum("ar,tsrq,bq->tsab", transform, moments, transform, optimize=True)
-    sums = np.einsum("ar,tsr->tsa", transform, moments[..., :, -1])
+    # Unmixed LED images at full drive (pinv of the levels) and the ambient: one (k + 1, R) map.
     unmixing = spec.unmixing
-    led = linear[..., :n_led_frames, :n_led_frames]
+    k = unmixing.shape[0]
+    projection = np.vstack([unmixing @ transform[:n_led_frames], transform[n_led_frames:]])
+    linear = np.matmul(np.matmul(projection, moments), projection.T)  # (…, k + 1, k + 1)
+    sums = moments[..., :, -1] @ projection.T
     return TiledStatistics(
-        gram=np.einsum("ia,tsab,jb->tsij", unmixing, led, unmixing, optimize=True),
-        cross=np.einsum("ia,tsa->tsi", unmixing, linear[..., :n_led_frames, n_led_frames]),
-        ambient_energy=linear[..., n_led_frames, n_led_frames].copy(),
+        gram=linear[..., :k, :k].copy(),
+        cross=linear[..., :k, k].copy(),
+        ambient_energy=linear[..., k, k].copy(),
         n_samples=np.rint(moments[..., -1, -1]),
         n_total=totals.astype(float),
-        ambient_sum=sums[..., n_led_frames].copy(),
-        led_sums=np.einsum("ia,tsa->tsi", unmixing, sums[..., :n_led_frames]),
+        ambient_sum=sums[..., k].copy(),
+        led_sums=sums[..., :k].copy(),
         row_edges=np.asarray(row_edges, dtype=int), column_edges=np.asarray(column_edges, dtype=int),
     )
 
@@ -469,13 +513,6 @@ def _box(values: np.ndarray, radius: int) -> np.ndarray:
     return along(along(values, 0), 1)
 
 
-def _region_statistics(ambient: np.ndarray, led: np.ndarray, member: np.ndarray) -> SequenceStatistics:
-    """Pooled statistics of the blocks where ``member`` is set (ambient (N, C), led (N, C, k))."""
-    a, f = ambient[member].reshape(-1), led[member].reshape(-1, led.shape[-1])
-    return SequenceStatistics(gram=f.T @ f, cross=f.T @ a, ambient_energy=float(a @ a), n_samples=int(a.size),
-                              n_total=int(a.size), ambient_sum=float(a.sum()), led_sums=f.sum(axis=0))
-
-
 def _affine_residual(tiles: TiledStatistics, penalty: np.ndarray, alpha: float) -> float:
     """In-sample residual of weights affine in the tile-centre position (Tikhonov, from the tile statistics)."""
     rows, columns = tiles.centres
@@ -492,7 +529,7 @@ def _affine_residual(tiles: TiledStatistics, penalty: np.ndarray, alpha: float) 
 
 def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, solver: str = "tikhonov",
                     solver_alpha: float | str = "auto", radius: int = REGION_RADIUS,
-                    iterations: int = REGION_ITERATIONS) -> RegionSegmentation | None:
+                    iterations: int = REGION_ITERATIONS, cells: Cells | None = None) -> RegionSegmentation | None:
     """Split the frame into two ambient regions and estimate each from all of its blocks.
 
     1. Tile estimates (ridge on the σ = 0.5 smoothed statistics) seed two clusters: the two tiles
@@ -501,14 +538,18 @@ def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, 
     2. Every block is labelled with the region whose weights predict its ambient image better,
        the residual differences summed over a (2r + 1)² box of cells first (a vote: the label
        follows the data, not the tile grid; a bright neighbour can pull a boundary by ≤ r cells). Each region's statistics are then
-       pooled from its blocks and re-solved; repeated ``iterations`` times.
+       pooled from its blocks and re-solved; repeated until no label changes (at most ``iterations`` times).
     3. The chosen solver runs on each region's pooled statistics: a region sees as many surfaces
        as it covers, not a tile's worth.
 
-    Returns None when the tiles hold no block data (statistics built from moments only).
+    ``cells`` are the tiles' :class:`Cells` when already built. Returns None when the tiles hold no
+    block data (statistics built from moments only).
     """
     blocks = tiles.blocks
     if blocks is None or not blocks.valid.any():
+        return None
+    cells = Cells.of(blocks) if cells is None else cells
+    if not cells.valid.any():
         return None
     led_values = led_spectra.values
     roughness = np.diff(led_values, axis=0)
@@ -524,40 +565,33 @@ def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, 
     cross = tiles.cross.reshape(-1, tiles.n_leds)
     weights = np.stack([_batched_ridge(gram[~in_second].sum(axis=0), cross[~in_second].sum(axis=0), penalty, alpha),
                         _batched_ridge(gram[in_second].sum(axis=0), cross[in_second].sum(axis=0), penalty, alpha)])
-    group = max(1, int(np.ceil(np.sqrt(blocks.valid.size / MAX_REGION_CELLS))))
-    ambient, led, valid = blocks.linear(group)
-    if not valid.any():
-        return None
+    valid = cells.valid
     difference = np.zeros(valid.shape)
     labels = np.zeros(valid.shape, dtype=bool)
-    for _ in range(iterations):
-        errors = ((ambient[None] - np.einsum("nci,ri->rnc", led, weights, optimize=True)) ** 2).sum(axis=-1)
+    for iteration in range(iterations):
+        errors = cells.errors(weights)
         # Residual differences summed over a (2r + 1)² box of cells: a vote weighted by the cells'
         # brightness (normalised votes were tried: noisy dark cells then flip labels, worse on the study).
         difference[valid] = errors[1] - errors[0]
-        labels = _box(difference, radius) < 0.0
+        previous, labels = labels, _box(difference, radius) < 0.0
         member = labels[valid]
-        if member.all() or not member.any():
+        if member.all() or not member.any() or (iteration > 0 and np.array_equal(labels, previous)):
             break
-        weights = np.stack([_pooled_ridge(ambient, led, mask, penalty, alpha) for mask in (~member, member)])
+        pooled = [cells.statistics(mask) for mask in (~member, member)]
+        weights = np.stack([_batched_ridge(p.gram, p.cross, penalty, alpha) for p in pooled])
     member = labels[valid]
     final = weights.copy()
     if member.any() and not member.all():
         for index, mask in enumerate((~member, member)):
-            statistics = _region_statistics(ambient, led, mask)
+            statistics = cells.statistics(mask)
             try:
                 final[index] = AMBIENT_METHODS[solver](statistics, led_values, solver_alpha)[0]
             except SolverError:
                 pass
-    predicted = np.einsum("nci,ni->nc", led, np.where(member[:, None], final[1], final[0]), optimize=True)
-    residual = float(((ambient - predicted) ** 2).sum())
+    errors = cells.errors(final)
+    residual = float(np.where(member, errors[1], errors[0]).sum())
     return RegionSegmentation(labels=labels, weights=final, residual=residual,
-                              affine_residual=_affine_residual(tiles, penalty, alpha), pixel=blocks.pixel * group)
-
-
-def _pooled_ridge(ambient: np.ndarray, led: np.ndarray, member: np.ndarray, penalty: np.ndarray, alpha: float) -> np.ndarray:
-    f = led[member].reshape(-1, led.shape[-1])
-    return _batched_ridge(f.T @ f, f.T @ ambient[member].reshape(-1), penalty, alpha)
+                              affine_residual=_affine_residual(tiles, penalty, alpha), pixel=cells.size)
 
 
 # -- local estimates --------------------------------------------------------------------------
@@ -612,8 +646,9 @@ class LocalEstimate:
 
     def weights_map(self, shape: tuple[int, int] | None = None) -> np.ndarray:
         """Per-pixel ambient weights (H, W, k): each pixel's region's, or bilinear between tile centres."""
+        shape = shape if shape is not None else self.tiles.frame_shape
         if self.regions is not None:
-            labels = self.regions.label_map(shape if shape is not None else self.tiles.frame_shape)
+            labels = self.regions.label_map(shape)
             return np.where(labels[..., None], self.regions.weights[1], self.regions.weights[0])
         return upsample_tiles(self.tile_weights, self.tiles, shape)
 
@@ -665,14 +700,10 @@ def estimate_local(
         scoring_alpha = global_estimate.alpha if solver == "tikhonov" and global_estimate.alpha > 0 else None
         selection = select_model(tiles, led_spectra, scoring_alpha, margin=margin)
     model = selection.model if method == "auto" else method  # type: ignore[union-attr]
-    if model == "global":
-        weights = np.broadcast_to(global_estimate.ambient_weights, shape + (tiles.n_leds,)).copy()
-        used_sigma = None
-        warnings: list[str] = []
-    structure, regions = None, None
+    weights = np.broadcast_to(global_estimate.ambient_weights, shape + (tiles.n_leds,)).copy()
+    used_sigma, structure, regions, warnings = None, None, None, []
     if model == "local":
         used_sigma = float(smoothing if smoothing is not None else selection.best_local)  # type: ignore[union-attr]
-        warnings = []
         if smoothing is None and regions_allowed:
             scoring_alpha = global_estimate.alpha if solver == "tikhonov" and global_estimate.alpha > 0 else gcv_alpha(
                 total, np.diff(led_values, axis=0))
@@ -705,7 +736,9 @@ def _region_tile_weights(regions: RegionSegmentation, tiles: TiledStatistics) ->
     count = np.bincount(index, minlength=tiles.shape[0] * tiles.shape[1]).astype(float)
     ones = np.bincount(index, weights=regions.labels.ravel().astype(float), minlength=count.size)
     # A tile without a cell centre (tiny tiles) takes its nearest cell's label.
-    nearest = regions.label_map(tiles.frame_shape)[tiles.centres[0].astype(int)[:, None], tiles.centres[1].astype(int)[None, :]]
+    rows = np.minimum(tiles.centres[0].astype(int) // regions.pixel, cells_rows - 1)
+    columns = np.minimum(tiles.centres[1].astype(int) // regions.pixel, cells_columns - 1)
+    nearest = regions.labels[rows[:, None], columns[None, :]]
     share = np.where(count > 0, ones / np.maximum(count, 1.0), nearest.ravel().astype(float)).reshape(tiles.shape)
     return (1.0 - share)[..., None] * regions.weights[0] + share[..., None] * regions.weights[1]
 

@@ -15,6 +15,7 @@ import pytest
 from processing.image_formation import MixedIllumination, expected_response
 from processing.local import (
     SELECTION_MARGIN,
+    Cells,
     segment_regions,
     TiledStatistics,
     estimate_local,
@@ -31,7 +32,6 @@ from processing.local_study import (
     pixel_rmse,
     pixel_truth,
     run_study,
-    tile_truth,
     tiled_rmse,
 )
 from processing.metrics import spectrum_rmse
@@ -127,17 +127,22 @@ def test_noise_free_in_span_local_recovers_each_side_exactly() -> None:
 
 
 def test_block_cells_sum_to_the_tile_statistics() -> None:
-    """The linearised blocks (and cells of 2 × 2 blocks) carry the same statistics as the tiles."""
+    """The cells (single blocks, and 2 × 2 blocks) carry the same statistics as the tiles."""
     t = tiled("boundary", 2)
     total = t.total()
     for group in (1, 2):
-        ambient_cells, led_cells, valid = t.blocks.linear(group)  # type: ignore[union-attr]
-        assert valid.shape == (t.blocks.shape[0] // group, t.blocks.shape[1] // group)  # type: ignore[union-attr]
-        f = led_cells.reshape(-1, 7)
+        cells = Cells.of(t.blocks, group)  # type: ignore[arg-type]
+        assert cells.valid.shape == (t.blocks.shape[0] // group, t.blocks.shape[1] // group)  # type: ignore[union-attr]
+        everything = cells.statistics(np.ones(cells.gram.shape[0], dtype=bool))
+        np.testing.assert_allclose(everything.led_sums, total.led_sums, rtol=1e-9 if group == 1 else 0.05)
         if group == 1:  # every block: exactly the tiles' sums
-            np.testing.assert_allclose(f.T @ f, total.gram, rtol=1e-9)
-            np.testing.assert_allclose(f.T @ ambient_cells.reshape(-1), total.cross, rtol=1e-9)
-        np.testing.assert_allclose(f.sum(axis=0), total.led_sums, rtol=1e-9 if group == 1 else 0.05)
+            np.testing.assert_allclose(everything.gram, total.gram, rtol=1e-9)
+            np.testing.assert_allclose(everything.cross, total.cross, rtol=1e-9)
+            assert everything.ambient_energy == pytest.approx(total.ambient_energy, rel=1e-9)
+        # Per-cell residuals of any weights add up to the pooled statistics' residual.
+        w = np.array([0.2, 0.1, 0.0, 0.3, 0.5, 0.2, 0.1])
+        expected = everything.ambient_energy - 2 * everything.cross @ w + w @ everything.gram @ w
+        assert cells.errors(w[None]).sum() == pytest.approx(expected, rel=1e-9)
 
 
 # -- model selection ------------------------------------------------------------------------------
