@@ -216,12 +216,19 @@ class BoothEmulator:
             return tuple(i for i, held in enumerate(self._held) if held)
 
     def next_due_s(self) -> float | None:
-        """Seconds until the next timed action (booth-master step, delayed reply), or None."""
+        """Seconds until the next timed action (booth-master step, delayed reply, watchdog), or None."""
         with self._lock:
             times = [d[0] for d in self._deferred]
             if self._next_action is not None:
                 times.append(self._next_action[0])
+            if self._watchdog_ms > 0 and not self._watchdog_tripped:
+                times.append(self._last_host + self._watchdog_ms / 1000.0)
             return max(0.0, min(times) - self._clock()) if times else None
+
+    @property
+    def real_time(self) -> bool:
+        """Whether the emulator runs on the real monotonic clock (not a test's manual clock)."""
+        return self._clock is time.monotonic
 
     @property
     def pattern(self) -> tuple[tuple[float, ...], ...]:
@@ -678,11 +685,18 @@ class PtyBoothServer:
 
     Open :attr:`port` (the slave path) with :meth:`LedBooth.open`. Use as a context manager
     or call :meth:`close`.
+
+    The thread wakes for input, for the emulator's next timed action (:meth:`BoothEmulator.next_due_s`:
+    booth-master steps, delayed replies, the watchdog) and otherwise every ``poll_s``. On the real
+    clock every timed action is known in advance, so it polls only every ``idle_poll_s`` (for a
+    ``close`` fault): an in-process emulator that woke every 2 ms took the GIL ~500 times a second
+    from the capture loop it serves. A test's manual clock moves on its own, so it is polled every
+    ``poll_s``.
     """
 
-    def __init__(self, emulator: BoothEmulator, *, poll_s: float = 0.002) -> None:
+    def __init__(self, emulator: BoothEmulator, *, poll_s: float = 0.002, idle_poll_s: float = 0.05) -> None:
         self.emulator = emulator
-        self._poll_s = poll_s
+        self._poll_s = idle_poll_s if emulator.real_time else poll_s
         self._master, self._slave = os.openpty()
         # Raw mode before anyone opens the slave: no echo, no line editing, no CR/LF mapping.
         tty.setraw(self._slave)
