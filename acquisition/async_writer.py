@@ -72,6 +72,9 @@ class AsyncSequenceWriter:
         self._closed = False
         self._running = threading.Event()  # cleared by pause(): the thread waits before its next frame
         self._running.set()
+        self._max_queued = max_queued
+        self._held: list[tuple] = []  # frames added while paused, not yet handed to the thread
+        self._held_lock = threading.Lock()
         self._thread = threading.Thread(target=self._run, name=f"sequence-writer {writer.path.parent}", daemon=False)
         self._thread.start()
 
@@ -111,30 +114,44 @@ class AsyncSequenceWriter:
                               tuple(led_levels), exposure_us, gain, dict(extra or {}))
         self._added += 1
         item = (pixels, role, entry.led_levels, exposure_us, gain, dict(extra or {}))
+        with self._held_lock:
+            # Paused: keep the frame here rather than wake the writer thread only for it to wait
+            # (each wake-up takes the GIL from the latency-critical capture thread).
+            paused = not self._running.is_set()
+            if paused and len(self._held) + self._queue.qsize() < self._max_queued:
+                self._held.append(item)
+                return entry
+        if paused:
+            self.resume()  # back-pressure: a paused writer must make room (held frames go first)
         try:
             self._queue.put_nowait(item)
         except queue.Full:
-            self._running.set()  # back-pressure: a paused writer must make room
+            self.resume()
             self._queue.put(item)
         return entry
 
     def pause(self) -> None:
         """Hold the writer thread before its next frame (the frame being written is finished).
 
-        For a latency-critical moment of the capture loop (the flash decision): frames keep being
-        queued (nothing is dropped; ``add_frame`` still blocks only on a full queue) and are written,
-        in order, after :meth:`resume`. :meth:`close`, :meth:`flush` and leaving the ``with`` block
-        resume first.
+        For a latency-critical moment of the capture loop (the flash decision and trigger): frames
+        keep being accepted (nothing is dropped; ``add_frame`` blocks only when ``max_queued`` are
+        waiting) and are written, in order, after :meth:`resume`. Frames added while paused are
+        held back from the thread, so adding one does not wake it. :meth:`close`, :meth:`flush`
+        and leaving the ``with`` block resume first.
         """
         self._running.clear()
 
     def resume(self) -> None:
-        """Let the writer thread go on after :meth:`pause`; idempotent."""
-        self._running.set()
+        """Let the writer thread go on after :meth:`pause` (frames added meanwhile follow, in order); idempotent."""
+        with self._held_lock:
+            self._running.set()
+            for item in self._held:  # in order, after what was queued before the pause
+                self._queue.put(item)  # never waits long: held + queued stay within max_queued
+            self._held.clear()
 
     def flush(self) -> Sequence:
         """Wait until every queued frame is on disk; raises the writer thread's error, if any."""
-        self._running.set()
+        self.resume()
         self._queue.join()
         self._raise_error()
         return self._writer.sequence
@@ -150,7 +167,7 @@ class AsyncSequenceWriter:
         if self._closed:
             return
         self._closed = True
-        self._running.set()
+        self.resume()
         self._queue.put(_STOP)
         while self._thread.is_alive():
             try:

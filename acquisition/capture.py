@@ -39,8 +39,8 @@ master), which the pairing refuses (``docs/booth-protocol.md`` §5).
 Booth master sends ``PSET … NOW``: the last LED frame is in, so its exposure is over and the flash
 step starts at once (settle, pulse) instead of waiting for its scheduled slot. An
 :class:`~acquisition.async_writer.AsyncSequenceWriter` is paused from the wait for the last LED
-frame until the ``PSET`` is out (frames stay queued, in order; nothing is dropped), so the disk
-writes do not compete with the decision for the CPU.
+frame until the flash frame is in (frames stay queued, in order; nothing is dropped), so the disk
+writes compete neither with the decision nor with the flash trigger for the CPU and the GIL.
 
 The writer may be a :class:`~acquisition.sequence_format.SequenceWriter` or an
 :class:`~acquisition.async_writer.AsyncSequenceWriter` (frames handed to a writer thread: the
@@ -297,18 +297,14 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
         booth.start()
         for number, step in enumerate(plan.steps, start=1):
             if flash is not None and step.index == last - 1 and pause is not None:
-                pause()  # the writer thread waits from the last LED frame until the PSET is out
+                pause()  # the writer thread waits from the last LED frame until the flash frame is in
             if flash is not None and step.index == last:
-                try:
-                    step = flash(frames)
-                    plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
-                    _replan(camera, plan, step.index)
-                    # The last LED frame is in, so its exposure is over: the flash step need not
-                    # wait for its scheduled slot (booth master, PSET … NOW).
-                    _set_step(booth, step.index, step.led_levels, now=mode == "booth")
-                finally:
-                    if resume is not None:
-                        resume()
+                step = flash(frames)
+                plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
+                _replan(camera, plan, step.index)
+                # The last LED frame is in, so its exposure is over: the flash step need not
+                # wait for its scheduled slot (booth master, PSET … NOW).
+                _set_step(booth, step.index, step.led_levels, now=mode == "booth")
             if mode == "camera":
                 if number > 1:
                     time.sleep(plan.settle_s)  # the next step's LEDs settle between exposures
@@ -342,6 +338,10 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
                     f"{trigger}; expected step {step.index} — a trigger was missed or doubled. {_saved(writer, written)}"
                 )
             frames.append(frame)
+            if flash is not None and step.index == last and resume is not None:
+                # Only now: a writer resumed at the PSET took the GIL for its queued frames while
+                # the booth's thread was due to pulse the flash trigger (seen up to ~8 ms late).
+                resume()
             _write(writer, paired, frame, written, on_frame, trigger=trigger)
         done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
         log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))

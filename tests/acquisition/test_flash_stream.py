@@ -146,7 +146,9 @@ def test_async_writer_pause_holds_frames_then_writes_them_in_order(sim_rig, tmp_
     writer.add_frame(_pixels(sim_rig, 100), "ambient", (0.0,) * 4, 1000.0)
     writer.flush()
     writer.pause()
-    for value in range(1, 4):  # one more than the queue holds: a paused writer still makes room
+    writer.add_frame(_pixels(sim_rig, 101), "ambient", (0.0,) * 4, 1001.0)
+    assert writer._queue.qsize() == 0 and writer.queued == 1  # held back: the writer thread is not woken
+    for value in range(2, 4):  # one more than the queue holds: a paused writer still makes room
         writer.add_frame(_pixels(sim_rig, 100 + value), "ambient", (0.0,) * 4, 1000.0 + value)
     writer.resume()
     sequence = writer.finish()
@@ -163,9 +165,17 @@ def test_async_writer_paused_still_drains_on_exit(sim_rig, tmp_path: Path) -> No
     assert len(read_sequence(tmp_path / "s").frames) == 3
 
 
-def test_flash_stream_pauses_the_writer_only_around_the_decision(sim_rig, tmp_path: Path) -> None:
+def test_flash_stream_pauses_the_writer_only_around_the_decision(sim_rig, tmp_path: Path, monkeypatch) -> None:
     plan = CapturePlan.ambient_then_each_led(4, 2000.0, settle_s=0.001, deadtime_s=0.001, trigger="booth")
     states: list[bool] = []
+    waits: list[bool] = []
+    real_next = sim_rig.camera.next_frame
+
+    def next_frame(timeout_s):
+        waits.append(writer._running.is_set())
+        return real_next(timeout_s)
+
+    monkeypatch.setattr(sim_rig.camera, "next_frame", next_frame)
     with AsyncSequenceWriter(_writer(sim_rig, tmp_path / "s")) as writer:
 
         def decide(frames):
@@ -173,9 +183,12 @@ def test_flash_stream_pauses_the_writer_only_around_the_decision(sim_rig, tmp_pa
             return (0.5,) * 4, 2000.0
 
         entries = run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, decide)
-        assert writer._running.is_set()  # resumed after the PSET
+        assert writer._running.is_set()  # resumed once the flash frame is in
         writer.finish()
     assert states == [False]
+    # Running while the ambient and the first LED frames arrive; paused from the wait for the
+    # last LED frame through the flash trigger to the flash frame's arrival.
+    assert waits == [True] * 4 + [False, False]
     assert [e.role for e in entries] == ["ambient"] + ["led"] * 4 + ["flash"]
     assert len(read_sequence(tmp_path / "s").frames) == 6
 
