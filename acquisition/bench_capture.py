@@ -19,7 +19,13 @@ Figures (one run of the bench, :func:`capture_bench`):
   flash trigger pulse: handing that frame to the writer, estimation, flash solving, exposure, the
   ``PSET`` round trip and the booth's LED settle time. Median and
   max over the runs. Targets: median ≤ 5 ms, max below one frame period at 60 fps (16.7 ms).
-  ``compute_ms`` is the estimation + solving part alone.
+- its parts (medians, ms): ``handoff_ms`` from the arrival to the start of the decision (pairing
+  with the booth's ``TRIG``, queueing to the writer, the session's block sums of the last frame);
+  ``compute_ms`` the estimation + solving (:meth:`FlashSession.decide`); ``exposure_ms`` the flash
+  exposure prediction (:func:`acquisition.exposure.flash_exposure`); ``pset_ms`` from the end of
+  the decision to the booth's ``PSET`` reply (camera re-plan, serial round trip);
+  ``pset_to_trigger_ms`` from the ``PSET`` being sent to the pulse, which includes the booth's
+  LED settle time (``settle_s``, 1 ms here) — the booth's part, not the host's.
 
 The fake's frames are test patterns, so the estimate means nothing here (it may be degenerate);
 only time is measured.
@@ -78,7 +84,8 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
         assert emulator is not None
         arrivals: list[float] = []
         pulses: list[float] = []
-        real_next, real_pulse = camera.next_frame, emulator.on_trigger_out
+        psets: list[tuple[float, float]] = []
+        real_next, real_pulse, real_set_step = camera.next_frame, emulator.on_trigger_out, rig.booth.set_step
 
         def timed_next(timeout_s: float):
             frame = real_next(timeout_s)
@@ -90,15 +97,24 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
             if real_pulse is not None:
                 real_pulse(*args)
 
+        def timed_set_step(*args: Any, **kwargs: Any) -> None:
+            sent = time.perf_counter()
+            real_set_step(*args, **kwargs)
+            psets.append((sent, time.perf_counter()))
+
         camera.next_frame = timed_next  # type: ignore[method-assign]
         emulator.on_trigger_out = timed_pulse
+        rig.booth.set_step = timed_set_step  # type: ignore[method-assign]
         info = camera.info
         policy = ExposurePolicy()
         wavelengths, seq_camera, leds = rig.sequence_header()
         session: FlashSession | None = None
+        parts: dict[str, list[float]] = {name: [] for name in
+                                          ("handoff_ms", "compute_ms", "exposure_ms", "pset_ms", "pset_to_trigger_ms")}
         for run in range(runs + 1):  # run 0 warms up (imports, first stream) and is not counted
             arrivals.clear()
             pulses.clear()
+            psets.clear()
             writer = SequenceWriter(Path(scratch) / f"run{run}", wavelengths_nm=wavelengths, spectral_unit="energy",
                                     camera=seq_camera, leds=leds)
             if session is None:  # once per rig: LED/camera model, target response
@@ -108,16 +124,20 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
             mark: dict[str, float] = {}
 
             def decide(frames, session=session, mark=mark):
+                began = time.perf_counter()
                 mark["last_arrival"] = arrivals[-1]
                 mark["pulses"] = len(pulses)
-                began = time.perf_counter()
+                mark["began"] = began
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     levels = session.decide("complementary", sanitise=True).levels
+                solved = time.perf_counter()
                 flash_us = min(flash_exposure(frames[0].pixels, exposure_us, [f.pixels for f in frames[1:]],
                                               [exposure_us] * n_leds, levels, info.black_level, info.white_level,
                                               (1.0, exposure_us), policy), exposure_us)
-                mark["compute"] = time.perf_counter() - began
+                mark["compute"] = solved - began
+                mark["decided"] = time.perf_counter()
+                mark["exposure"] = mark["decided"] - solved
                 return levels, flash_us
 
             def keep(step, frame, _entry, session=session) -> None:
@@ -131,8 +151,14 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
             if run == 0:
                 continue
             ratios.append((finished - started) / ((n_leds + 2) * period_us * 1e-6))
-            latencies.append((pulses[int(mark["pulses"])] - mark["last_arrival"]) * 1e3)
+            pulse = pulses[int(mark["pulses"])]
+            latencies.append((pulse - mark["last_arrival"]) * 1e3)
             computes.append(mark["compute"] * 1e3)
+            sent, replied = psets[-1]
+            for name, value in (("handoff_ms", mark["began"] - mark["last_arrival"]), ("compute_ms", mark["compute"]),
+                                ("exposure_ms", mark["exposure"]), ("pset_ms", replied - mark["decided"]),
+                                ("pset_to_trigger_ms", pulse - sent)):
+                parts[name].append(value * 1e3)
     period_ms = period_us * 1e-3
     report: dict[str, Any] = {
         "format": f"{width}x{height} {pixel_format}, booth master at {frame_rate_hz:g} fps, {n_leds} LEDs",
@@ -145,6 +171,8 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
         "latency_ms_max": max(latencies),
         "latencies_ms": latencies,
         "compute_ms_median": statistics.median(computes),
+        "latency_parts_ms_median": {name: statistics.median(values) for name, values in parts.items()},
+        "booth_settle_ms": settle_s * 1e3,
         "latency_median_target_ms": LATENCY_MEDIAN_TARGET_MS,
         "frame_period_ms": period_ms,
     }
