@@ -3,11 +3,15 @@
 Processing part (issue: foundation), on a 1280×1024 RGB sequence with 7 LEDs:
 
 - ``estimate_over_copy``: ambient estimation as ``msflash estimate`` does it (4×4 block sums, one-pass
-  statistics, the default solver) ÷ the time to read those frames once (a numpy copy) — target ≤ 3;
-  ``estimate_all_pixels_over_copy`` the same without binning;
+  statistics, the default solver, the image passes on ``DEFAULT_WORKERS`` threads) ÷ the time to
+  read those frames once (a numpy copy, one thread) — target ≤ 3; ``estimate_over_copy_by_threads``
+  the same on 1 and on 2 threads; ``estimate_all_pixels_over_copy`` without binning;
 - ``solver_speedup``: each estimation and flash solver ÷ cvxpy on exactly the same problems
   (recorded from our solver), with the objectives' relative difference — target ≥ 50×, ≤ 1e-6;
-- ``synthesis_over_copy``: synthesis ÷ the same memory copy — target ≤ 2.
+  the LED/camera part of each problem is prepared once per sequence (:class:`AmbientModel`,
+  :class:`FlashModel`), as cvxpy is handed the finished problem matrices;
+- ``synthesis_over_copy``: synthesis ÷ the same memory copy — target ≤ 2 (``DEFAULT_WORKERS``
+  threads; ``synthesis_over_copy_by_threads`` on 1 and 2).
 
 Camera and booth parts are added by their modules when present.
 """
@@ -23,12 +27,12 @@ import numpy as np
 
 from acquisition.analysis import DEFAULT_BIN_FACTOR
 from processing import datasets
-from processing.ambient import AMBIENT_METHODS, estimate_ambient
+from processing.ambient import AmbientModel, estimate_ambient
 from processing.flash import FlashModel
 from processing.image_formation import SensorModel, chart_scene, exposure_for_peak, render_frame
 from processing.least_squares import minimise_quadratic, recording_problems
 from processing.spectra import DEFAULT_GRID, Spectra
-from processing.statistics import FrameStackSpec, accumulate_statistics
+from processing.statistics import DEFAULT_WORKERS, FrameStackSpec, accumulate_statistics
 from processing.synthesis import synthesize
 
 
@@ -108,24 +112,32 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
     copy_time = _best_time(lambda: [f.copy() for f in frames], repeats)
     statistics = accumulate_statistics(frames[0], frames[1:], spec)
 
-    def estimate(bin_factor: int) -> Callable[[], None]:
+    def estimate(bin_factor: int, workers: int = DEFAULT_WORKERS) -> Callable[[], None]:
         return lambda: estimate_ambient(
-            accumulate_statistics(frames[0], frames[1:], spec, bin_factor=bin_factor), world["leds"])
+            accumulate_statistics(frames[0], frames[1:], spec, bin_factor=bin_factor, workers=workers), world["leds"])
+
+    weights = estimate_ambient(statistics, world["leds"]).ambient_weights
+    flash_weights = np.clip(weights, 0, 1)
+
+    def synthesis(workers: int = DEFAULT_WORKERS) -> Callable[[], object]:
+        return lambda: synthesize(frames[0], frames[1:], spec, flash_weights, workers=workers)
 
     estimate_time = _best_time(estimate(DEFAULT_BIN_FACTOR), repeats)
     estimate_all_pixels_time = _best_time(estimate(1), repeats)
-    weights = estimate_ambient(statistics, world["leds"]).ambient_weights
-    flash_weights = np.clip(weights, 0, 1)
-    synthesis_time = _best_time(lambda: synthesize(frames[0], frames[1:], spec, flash_weights), repeats)
+    synthesis_time = _best_time(synthesis(), repeats)
     result: dict[str, Any] = {
         "frames": f"{len(frames)} × {height}×{width}×3 uint16",
         "copy_s": copy_time,
+        "threads": DEFAULT_WORKERS,
         "estimate_s": estimate_time,
         "estimate_over_copy": estimate_time / copy_time,
+        "estimate_over_copy_by_threads": {
+            str(n): _best_time(estimate(DEFAULT_BIN_FACTOR, n), repeats) / copy_time for n in (1, 2)},
         "estimate_bin": DEFAULT_BIN_FACTOR,
         "estimate_all_pixels_over_copy": estimate_all_pixels_time / copy_time,
         "synthesis_s": synthesis_time,
         "synthesis_over_copy": synthesis_time / copy_time,
+        "synthesis_over_copy_by_threads": {str(n): _best_time(synthesis(n), repeats) / copy_time for n in (1, 2)},
     }
     try:
         import cvxpy  # noqa: F401
@@ -133,16 +145,16 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
         result["solvers"] = "cvxpy not installed (pip install cvxpy) — solver comparison skipped"
         return result
     leds, camera, target = world["leds"], world["camera"], world["target"]
-    led_values = leds.values
-    # The LED/camera part of the flash problem is prepared once per sequence (FlashModel), as cvxpy
-    # is handed the finished problem matrices.
+    # The LED/camera part of each problem is prepared once per sequence (AmbientModel, FlashModel),
+    # as cvxpy is handed the finished problem matrices.
+    ambient_model = AmbientModel(leds)
     flash_model = FlashModel(leds, camera)
     target_response = flash_model.target_response(target)
-    # The estimation solvers proper (AMBIENT_METHODS); estimate_ambient adds the reliability
+    # The estimation solvers proper (AmbientModel.weights); the estimate adds the reliability
     # signals (band, conditioning), which are not part of the problem cvxpy solves.
     solvers = {
-        "estimate nonneg": lambda: AMBIENT_METHODS["nonneg"](statistics, led_values, 0.0),
-        "estimate tikhonov (alpha 1e-3)": lambda: AMBIENT_METHODS["tikhonov"](statistics, led_values, 1e-3),
+        "estimate nonneg": lambda: ambient_model.weights(statistics, "nonneg", 0.0),
+        "estimate tikhonov (alpha 1e-3)": lambda: ambient_model.weights(statistics, "tikhonov", 1e-3),
         "flash matching": lambda: flash_model.matching(weights),
         "flash complementary": lambda: flash_model.complementary(weights, target_response),
     }
