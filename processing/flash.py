@@ -121,6 +121,7 @@ class FlashModel:
     _matching_hessian: np.ndarray = field(init=False, repr=False)
     _matching_problems: dict[str, FactoredQuadratic] = field(init=False, repr=False)
     _design: np.ndarray = field(init=False, repr=False)
+    _complementary_rows: dict[str, FactoredQuadratic] = field(init=False, repr=False)
     _power_tie_break: np.ndarray = field(init=False, repr=False)
     _full_flash_norm: float = field(init=False, repr=False)
 
@@ -150,6 +151,10 @@ class FlashModel:
         for name, value in (("_design", design), ("_power_tie_break", power)):
             value.flags.writeable = False
             object.__setattr__(self, name, value)
+        # Its bound rows on [w_f, s] (and their tolerances) are fixed too; only H changes per solve.
+        object.__setattr__(self, "_complementary_rows", {
+            name: FactoredQuadratic.prepare(np.eye(k + 1), *_with_scale(k, name), where="complementary flash")
+            for name in ("physical", "nonnegative")})
 
     @property
     def n_leds(self) -> int:
@@ -218,8 +223,7 @@ class FlashModel:
                     linear[:k] += TIE_BREAK_CHANGE * previous
                 if weight_bounds != "free":
                     linear -= self._power_tie_break  # least total power first
-                full_constraints, full_limits = _with_scale(k, weight_bounds)
-                x = minimise_quadratic(hessian, linear, full_constraints, full_limits, where="complementary flash").x
+                x = self._complementary_rows[weight_bounds].with_hessian(hessian).minimise(linear).x
                 return x[:k], float(x[k])
             a_matrix = matrix / unit
             hessian = a_matrix.T @ a_matrix

@@ -205,6 +205,20 @@ class FactoredQuadratic:
         return cls(hessian, constraints, bounds, inverse_factor, constraints.dot(inverse_factor),
                    -1e-7 * scale, _FEASIBILITY_TOLERANCE * scale, where)
 
+    def with_hessian(self, hessian: np.ndarray) -> FactoredQuadratic:
+        """The same constraints with another H, factored (for problems whose H changes per solve).
+
+        Raises
+        ------
+        SolverError
+            If H is not positive definite.
+        """
+        hessian = np.asarray(hessian, dtype=float)
+        inverse_factor = _inverse_factor(hessian, self.where)
+        return FactoredQuadratic(hessian, self.constraints, self.bounds, inverse_factor,
+                                 self.constraints.dot(inverse_factor), self.violation_limit, self.active_limit,
+                                 self.where)
+
     def minimise(self, linear: np.ndarray) -> QuadraticSolution:
         """The minimiser for the linear term f, shape (n,).
 
