@@ -15,10 +15,12 @@ Protocol
   rig's conventions, :meth:`acquisition.simulated_camera.SimulatedCamera.default`).
 - Estimation: blocks of ``bin_factor`` × ``bin_factor`` (the CLI's default 4), ``tiles`` × ``tiles``
   tiles, Tikhonov solver with GCV.
-- Metric: spectrum RMSE (:func:`processing.metrics.spectrum_rmse`) of each tile's estimate against
-  the tile's true ambient (the mean of the per-pixel ambient over the tile), averaged over the
-  tiles with area weights. A global estimate is scored the same way (its one spectrum against
-  every tile's truth), so on uniform scenes it is the usual spectrum RMSE.
+- Metric: spectrum RMSE (:func:`processing.metrics.spectrum_rmse`) of every pixel's estimate
+  against that pixel's true ambient, averaged over the pixels (:func:`pixel_rmse`). A global
+  estimate is scored the same way (its one spectrum against every pixel's truth), so on uniform
+  scenes it is the usual spectrum RMSE. Two references: the LED bound (:func:`pixel_bound`, the
+  best LED fit of every pixel's truth) and the paper's estimator run on each ambient alone over
+  the whole scene (:func:`alone_rmse`) — the error left when locality is solved perfectly.
 - Cost: wall time of statistics + estimate on a full-size frame (1024 × 1280, the Ximea's) for the
   global estimate (:func:`processing.statistics.accumulate_statistics` + :func:`estimate_ambient`)
   and for ``auto`` (:func:`processing.local.tile_statistics` + :func:`estimate_local`), medians of
@@ -102,8 +104,13 @@ def mixing_map(kind: str, shape: tuple[int, int], rng: np.random.Generator) -> n
 
 
 def make_scenario(kind: str, seed: int, shape: tuple[int, int] = (240, 320), camera: str = "NikonD100",
-                  flash_to_ambient: float = 2.0, ambient_peak_fraction: float = 0.3, noise: bool = True) -> Scenario:
-    """Render one scenario (see the module notes)."""
+                  flash_to_ambient: float = 2.0, ambient_peak_fraction: float = 0.3, noise: bool = True,
+                  alone: int | None = None) -> Scenario:
+    """Render one scenario (see the module notes).
+
+    With ``alone`` = 0 or 1 the same scene (same surfaces, ambients and powers) is rendered lit by
+    that ambient alone over the whole frame: the reference capture of :func:`alone_rmse`.
+    """
     rng = np.random.default_rng(seed)
     grid = DEFAULT_GRID
     scene = random_mosaic(rng, shape, grid)
@@ -114,6 +121,8 @@ def make_scenario(kind: str, seed: int, shape: tuple[int, int] = (240, 320), cam
     if kind != "uniform":
         spectra[1] = spectra[1].replace(values=spectra[1].values * rng.uniform(0.5, 2.0))
     mixing = mixing_map(kind, shape, rng)
+    if alone is not None:
+        mixing = np.full(shape, float(alone))
     illumination = MixedIllumination.two_ambients(spectra[0], spectra[-1], mixing)
     leds = datasets.paper_led_subset(7).resample(grid).to_unit("photons")
     responsivities = datasets.isetcam_camera(camera).resample(grid)
@@ -211,12 +220,35 @@ def pixel_bound(scenario: Scenario, truth: np.ndarray | None = None) -> float:
     return float(pixel_rmses(fits[np.ravel(inverse)], truth).mean())
 
 
+def alone_rmse(kind: str, seed: int, shape: tuple[int, int] = (240, 320), bin_factor: int = 4,
+               truth: np.ndarray | None = None) -> float:
+    """Reference for local estimates: each ambient estimated by the paper's method from a capture where it lights the whole scene alone.
+
+    The two estimated spectra (absolute photons) are mixed by the true map, ``(1 − m(x)) Ŝ₁ + m(x) Ŝ₂``,
+    and scored per pixel (:func:`pixel_rmse`). This is what a local method would reach with a
+    perfect segmentation and every surface of the frame seen under each ambient: the part of the
+    error left to the paper's estimator itself.
+    """
+    scenario = make_scenario(kind, seed, shape)
+    truth = pixel_truth(scenario) if truth is None else truth
+    spectra = []
+    for index in (0, 1):
+        single = make_scenario(kind, seed, shape, alone=index)
+        statistics = accumulate_statistics(single.ambient, single.led_frames, single.spec, bin_factor=bin_factor)
+        spectra.append(estimate_ambient(statistics, single.led_spectra).spectrum.values[:, 0])
+    mixing = scenario.illumination.weights[..., 1].reshape(-1, 1)
+    return float(pixel_rmses((1.0 - mixing) * spectra[0] + mixing * spectra[1], truth).mean())
+
+
 def evaluate_scenario(kind: str, seed: int, tiles: int = DEFAULT_TILES, bin_factor: int = 4,
                       shape: tuple[int, int] = (240, 320)) -> dict:
     """Global, forced-local, tiles-only and auto estimates of one scenario, with their spectrum RMSEs.
 
     ``rmse_*`` is the per-pixel metric (:func:`pixel_rmse`); ``tile_rmse_*`` the earlier per-tile
     one (each tile's estimate against the tile's mean truth, area-weighted), kept for comparison.
+    ``rmse_alone`` is :func:`alone_rmse` (for a uniform scene the capture is the same, so it is
+    the global RMSE); ``label_accuracy`` the share of pixels the two-region labels put on their
+    true side (boundary scenes with the region model, else None).
     """
     scenario = make_scenario(kind, seed, shape)
     tiled = tile_statistics(scenario.ambient, scenario.led_frames, scenario.spec, tiles, bin_factor=bin_factor)
@@ -227,15 +259,23 @@ def evaluate_scenario(kind: str, seed: int, tiles: int = DEFAULT_TILES, bin_fact
     global_spectrum = auto.global_estimate.spectrum.values[:, 0]
     tile_truths = tile_truth(scenario, auto)
     areas = tiled.areas
+    rmse_global = pixel_rmse(global_spectrum, scenario, truth)
+    label_accuracy = None
+    if kind == "boundary" and local.regions is not None:
+        labels = local.regions.label_map(shape)
+        side = scenario.illumination.weights[..., 1] > 0.5
+        label_accuracy = float(max(np.mean(labels == side), np.mean(labels != side)))
     return {
         "kind": kind, "seed": seed, "ambients": list(scenario.names),
         "chosen": auto.model, "structure": auto.structure, "local_structure": local.structure,
         "smoothing": auto.smoothing, "scores": auto.selection.scores,  # type: ignore[union-attr]
-        "rmse_global": pixel_rmse(global_spectrum, scenario, truth),
+        "rmse_global": rmse_global,
         "rmse_local": pixel_rmse(local, scenario, truth),
         "rmse_tiles": pixel_rmse(tiles_only, scenario, truth),
         "rmse_auto": pixel_rmse(auto, scenario, truth),
+        "rmse_alone": rmse_global if kind == "uniform" else alone_rmse(kind, seed, shape, bin_factor, truth),
         "rmse_bound": pixel_bound(scenario, truth),
+        "label_accuracy": label_accuracy,
         "tile_rmse_global": tiled_rmse(np.broadcast_to(global_spectrum, tile_truths.shape), tile_truths, areas),
         "tile_rmse_auto": tiled_rmse(auto.tile_spectra, tile_truths, areas),
         "tile_rmse_bound": tiled_rmse(led_bound(scenario.led_spectra.values, tile_truths), tile_truths, areas),
@@ -274,21 +314,26 @@ def time_estimates(shape: tuple[int, int] = (1024, 1280), tiles: int = DEFAULT_T
 
 
 def tiles_sweep(seeds: range, tile_counts: tuple[int, ...] = (4, 6, 8, 12, 16), shape: tuple[int, int] = (240, 320)) -> list[dict]:
-    """Accuracy of forced-local estimates against the tile count on boundary scenes (accuracy vs time)."""
+    """Per-pixel accuracy and time of forced-local estimates against the tile count on boundary scenes.
+
+    ``rmse_local`` is the default local estimate (two regions where they fit), ``rmse_tiles`` the
+    tile model alone; ``time_s`` the median time of tiled statistics + forced-local estimate.
+    """
     rows = []
     for tiles in tile_counts:
-        errors_local, errors_global, elapsed = [], [], []
+        errors_local, errors_tiles, errors_global, elapsed = [], [], [], []
         for seed in seeds:
             scenario = make_scenario("boundary", seed, shape)
+            truth = pixel_truth(scenario)
             start = time.perf_counter()
             tiled = tile_statistics(scenario.ambient, scenario.led_frames, scenario.spec, tiles, bin_factor=4)
             local = estimate_local(tiled, scenario.led_spectra, "local")
             elapsed.append(time.perf_counter() - start)
-            truth = tile_truth(scenario, local)
-            errors_local.append(tiled_rmse(local.tile_spectra, truth, tiled.areas))
-            errors_global.append(tiled_rmse(np.broadcast_to(local.global_estimate.spectrum.values[:, 0], truth.shape),
-                                            truth, tiled.areas))
-        rows.append({"tiles": tiles, "rmse_local": float(np.mean(errors_local)),
+            errors_local.append(pixel_rmse(local, scenario, truth))
+            errors_tiles.append(pixel_rmse(estimate_local(tiled, scenario.led_spectra, "local", regions_allowed=False),
+                                           scenario, truth))
+            errors_global.append(pixel_rmse(local.global_estimate.spectrum.values[:, 0], scenario, truth))
+        rows.append({"tiles": tiles, "rmse_local": float(np.mean(errors_local)), "rmse_tiles": float(np.mean(errors_tiles)),
                      "rmse_global": float(np.mean(errors_global)), "time_s": float(np.median(elapsed))})
     return rows
 
@@ -297,19 +342,20 @@ def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILE
               out: Path | None = None, timing: bool = True, sweep: bool = True) -> dict:
     """The acceptance study: auto → global rate on uniform scenes, RMSE cut on two-illuminant ones, cost.
 
-    Seeds start at ``seed0`` (the tests use seeds below 100). Writes ``local-study.json`` and plots
-    to ``out`` when given.
+    Seeds: uniform scenes ``seed0 + s``; boundary and gradient scenes ``seed0 + 10 000 + s`` (the same
+    surfaces and ambient pair, mixed two ways); the tiles sweep ``seed0 + 20 000 + s``. The tests
+    use seeds below 100. Writes ``local-study.json`` and plots to ``out`` when given.
     """
     results = [evaluate_scenario("uniform", seed0 + s, tiles) for s in range(n_uniform)]
     for kind in ("boundary", "gradient"):
         results += [evaluate_scenario(kind, seed0 + 10_000 + s, tiles) for s in range(n_mixed)]
-    summary: dict = {"tiles": tiles, "n_uniform": n_uniform, "n_mixed_per_kind": n_mixed}
+    summary: dict = {"tiles": tiles, "n_uniform": n_uniform, "n_mixed_per_kind": n_mixed, "seed0": seed0}
     for kind in KINDS:
         rows = [r for r in results if r["kind"] == kind]
         if not rows:
             continue
         entry = {name: float(np.mean([r[name] for r in rows]))
-                 for name in ("rmse_global", "rmse_local", "rmse_tiles", "rmse_auto", "rmse_bound",
+                 for name in ("rmse_global", "rmse_local", "rmse_tiles", "rmse_auto", "rmse_alone", "rmse_bound",
                               "tile_rmse_global", "tile_rmse_auto", "tile_rmse_bound")}
         # The LED bound is common to every estimate: the excess over it is what estimation controls.
         entry["excess_cut"] = 1.0 - (entry["rmse_auto"] - entry["rmse_bound"]) / (entry["rmse_global"] - entry["rmse_bound"])
@@ -317,20 +363,22 @@ def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILE
         entry["auto_cut"] = 1.0 - entry["rmse_auto"] / entry["rmse_global"]
         entry["local_cut"] = 1.0 - entry["rmse_local"] / entry["rmse_global"]
         entry["tiles_cut"] = 1.0 - entry["rmse_tiles"] / entry["rmse_global"]
+        entry["alone_cut"] = 1.0 - entry["rmse_alone"] / entry["rmse_global"]
+        accuracies = [r["label_accuracy"] for r in rows if r["label_accuracy"] is not None]
+        entry["label_accuracy"] = float(np.mean(accuracies)) if accuracies else None
         entry["regions_rate"] = float(np.mean([r["structure"] == "regions" for r in rows]))
         entry["tile_auto_cut"] = 1.0 - entry["tile_rmse_auto"] / entry["tile_rmse_global"]
         entry["n"] = len(rows)
         summary[kind] = entry
     mixed = [r for r in results if r["kind"] != "uniform"]
     if mixed:
-        summary["two_illuminant"] = {
-            "rmse_global": float(np.mean([r["rmse_global"] for r in mixed])),
-            "rmse_auto": float(np.mean([r["rmse_auto"] for r in mixed])),
-            "rmse_local": float(np.mean([r["rmse_local"] for r in mixed])),
-            "rmse_bound": float(np.mean([r["rmse_bound"] for r in mixed])),
-        }
+        summary["two_illuminant"] = {name: float(np.mean([r[name] for r in mixed]))
+                                     for name in ("rmse_global", "rmse_auto", "rmse_local", "rmse_alone", "rmse_bound")}
         both = summary["two_illuminant"]
+        both["n"] = len(mixed)
         both["auto_cut"] = 1.0 - both["rmse_auto"] / both["rmse_global"]
+        both["local_cut"] = 1.0 - both["rmse_local"] / both["rmse_global"]
+        both["alone_cut"] = 1.0 - both["rmse_alone"] / both["rmse_global"]
         both["excess_cut"] = 1.0 - (both["rmse_auto"] - both["rmse_bound"]) / (both["rmse_global"] - both["rmse_bound"])
     if timing:
         summary["timing"] = time_estimates(tiles=tiles)
@@ -346,14 +394,16 @@ def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILE
 
 
 def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
-    """Scatter of local vs global RMSE per scenario, the selection scores, and accuracy vs tiles/time."""
+    """Per-scenario auto vs global RMSE, the selection scores, where the error stays, and accuracy vs tiles/time."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from processing.local import SELECTION_MARGIN
+
     paths = []
-    figure, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+    figure, axes = plt.subplots(1, 4, figsize=(20, 4.5))
     colours = {"uniform": "tab:blue", "boundary": "tab:red", "gradient": "tab:orange"}
     for kind in KINDS:
         rows = [r for r in results if r["kind"] == kind]
@@ -363,26 +413,38 @@ def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
     top = max(max(r["rmse_global"] for r in results), max(r["rmse_auto"] for r in results))
     axes[0].plot([0, top], [0, top], "k:", lw=1)
     axes[0].plot([0, top], [0, 0.7 * top], "k--", lw=1, label="30 % cut")
-    axes[0].set(xlabel="global spectrum RMSE", ylabel="auto spectrum RMSE", title="per scenario")
+    axes[0].set(xlabel="global spectrum RMSE (per pixel)", ylabel="auto spectrum RMSE (per pixel)", title="per scenario")
     axes[0].legend()
     axes[1].axvline(1.0, color="k", lw=1)
-    from processing.local import SELECTION_MARGIN
-
     axes[1].axvline(1.0 - SELECTION_MARGIN, color="k", ls="--", lw=1, label="decision threshold")
     axes[1].set(xlabel="best local held-out error / global's", ylabel="scenarios", title="model selection")
     axes[1].legend()
+    # Where the error stays: mean RMSE of every estimate and of the two references, per scene kind.
+    names = (("rmse_global", "global"), ("rmse_tiles", "tiles"), ("rmse_auto", "auto"),
+             ("rmse_alone", "each ambient alone"), ("rmse_bound", "LED bound"))
+    kinds = [kind for kind in KINDS if kind in summary]
+    width = 0.8 / len(names)
+    for index, (key, label) in enumerate(names):
+        axes[2].bar(np.arange(len(kinds)) + (index - (len(names) - 1) / 2) * width, [summary[k][key] for k in kinds],
+                    width, label=label)
+    axes[2].set_xticks(np.arange(len(kinds)), kinds)
+    axes[2].set(ylabel="mean spectrum RMSE (per pixel)", title="estimates and references")
+    axes[2].set_ylim(0.12, None)
+    axes[2].legend(fontsize=8)
     sweep = summary.get("tiles_sweep")
     if sweep:
-        axes[2].plot([r["time_s"] * 1e3 for r in sweep], [r["rmse_local"] for r in sweep], "o-", label="local")
-        for r in sweep:
-            axes[2].annotate(f"{r['tiles']}²", (r["time_s"] * 1e3, r["rmse_local"]))
-        axes[2].axhline(float(np.mean([r["rmse_global"] for r in sweep])), color="k", ls=":", label="global")
-        axes[2].set(xlabel="time per estimate, 240×320 frame (ms)", ylabel="spectrum RMSE (boundary scenes)",
+        times = [r["time_s"] * 1e3 for r in sweep]
+        axes[3].plot(times, [r["rmse_local"] for r in sweep], "o-", label="local (regions)")
+        axes[3].plot(times, [r["rmse_tiles"] for r in sweep], "s--", label="tiles only")
+        for r, elapsed in zip(sweep, times):
+            axes[3].annotate(f"{r['tiles']}²", (elapsed, r["rmse_local"]))
+        axes[3].axhline(float(np.mean([r["rmse_global"] for r in sweep])), color="k", ls=":", label="global")
+        axes[3].set(xlabel="time per estimate, 240×320 frame (ms)", ylabel="spectrum RMSE (boundary scenes)",
                     title="accuracy vs time (tiles per side)")
-        axes[2].legend()
+        axes[3].legend()
     figure.tight_layout()
     path = out / "local-study.png"
-    figure.savefig(path, dpi=110)
+    figure.savefig(path, dpi=100)
     plt.close(figure)
     paths.append(str(path))
     return paths

@@ -128,9 +128,12 @@ def test_local_study_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     if "local-study" not in subparsers.choices:
         cli_local.register(subparsers)
     args = parser.parse_args(["local-study", "--uniform", "2", "--mixed", "1", "--no-timing", "--out", str(tmp_path),
-                              "--json"])
+                              "--json", "--seed0", "7"])
     assert args.handler(args) == 0
     summary = json.loads(capsys.readouterr().out)
-    assert summary["uniform"]["n"] == 2 and summary["boundary"]["n"] == 1
-    assert {"rmse_global", "rmse_auto", "global_rate"} <= set(summary["uniform"])
+    assert summary["uniform"]["n"] == 2 and summary["boundary"]["n"] == 1 and summary["seed0"] == 7
+    assert {"rmse_global", "rmse_auto", "rmse_alone", "global_rate"} <= set(summary["uniform"])
+    # A uniform scene's "each ambient alone" capture is the capture itself: the reference is the global RMSE.
+    assert summary["uniform"]["rmse_alone"] == summary["uniform"]["rmse_global"]
+    assert summary["two_illuminant"]["n"] == 2 and 0.0 < summary["boundary"]["label_accuracy"] <= 1.0
     assert (tmp_path / "local-study.json").exists() and (tmp_path / "local-study.png").exists()

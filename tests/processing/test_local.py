@@ -26,6 +26,7 @@ from processing.local import (
 )
 from processing.local_study import (
     Scenario,
+    alone_rmse,
     led_bound,
     make_scenario,
     pixel_bound,
@@ -179,6 +180,10 @@ def test_local_cuts_the_spectrum_rmse_on_two_illuminant_scenes(seed: int) -> Non
     bound = pixel_bound(s)
     assert local_rmse <= 0.8 * global_rmse, (s.names, global_rmse, local_rmse)
     assert local_rmse - bound <= 0.5 * (global_rmse - bound), (s.names, global_rmse, local_rmse, bound)
+    # Most of the error left is the paper's estimator's own: with each ambient estimated alone over
+    # the whole scene (perfect locality) the error drops little further.
+    alone = alone_rmse("boundary", seed, SHAPE)
+    assert alone < global_rmse and local_rmse - alone <= 0.35 * (global_rmse - alone), (alone, local_rmse, global_rmse)
     assert local_rmse <= tiles_rmse * 1.02, (s.names, local_rmse, tiles_rmse)
     # The labels follow the true boundary, not the tile grid.
     labels = auto.regions.label_map(SHAPE)  # type: ignore[union-attr]
@@ -208,6 +213,15 @@ def test_pixel_metric_is_each_pixels_estimate_against_its_own_ambient() -> None:
     # The bound is the best LED fit of each side, weighted by the sides' areas.
     fits = [tiled_rmse(led_bound(s.led_spectra.values, side[None, None]), side[None, None], np.ones((1, 1))) for side in sides]
     assert pixel_bound(s) == pytest.approx(np.mean(~second) * fits[0] + np.mean(second) * fits[1], rel=1e-6)
+
+
+def test_alone_reference_renders_the_same_scene_under_each_ambient() -> None:
+    mixed = scenario("boundary", 2)
+    for index in (0, 1):
+        single = make_scenario("boundary", 2, SHAPE, alone=index)
+        assert single.names == mixed.names
+        np.testing.assert_array_equal(single.illumination.spectra.values, mixed.illumination.spectra.values)
+        assert np.all(single.illumination.weights[..., 1] == index)
 
 
 def test_forced_global_and_bad_method() -> None:
