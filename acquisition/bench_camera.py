@@ -2,7 +2,7 @@
 
 Figures (returned by :func:`camera_bench`, printed by ``msflash bench``):
 
-- ``fps_ratio``: frames per second AravisCamera delivers (owned numpy copies, status and
+- ``fps_ratio``: frames per second AravisCamera delivers (frames as owned numpy arrays, status and
   frame-id checks, one popping thread) at 1280×1024 Mono16 with the fake free-running, divided by
   the frames per second of a bare pop/check/push loop on the same fake. Target ≥ 0.95; each
   side's drops are reported and a run with drops says so.
@@ -30,14 +30,15 @@ So each trigger's latency is split, on the host clock, into
 - ``transit``: the fake fills 2.6 MB and sends ~1 900 UDP packets of 1 400 bytes over loopback,
   Aravis reassembles them and the popping thread wakes;
 - ``handoff``: from the buffer popped to the frame in hand. For AravisCamera: status and size
-  checks, the one copy of the pixels out of the Aravis buffer (``get_data``), the queue to the
-  caller's thread and ``next_frame``'s bookkeeping; for the bare loop: status and id checks and
-  the push back.
+  checks, the frame (Mono16 is delivered without a copy: the buffer's memory is a numpy array
+  AravisCamera allocated, and that array becomes the frame), the queue to the caller's thread and
+  ``next_frame``'s bookkeeping — the replacement buffer is pushed after the frame is queued; for
+  the bare loop: status and id checks and the push back.
 
 ``wait`` and ``transit`` run the fake's and Aravis's code, the same for both sides, with our layer
 idle (its popping thread waits inside Aravis with the GIL released, the caller on a queue), and
-each side's pool holds the same number of buffers, each frame landing in one not used before in
-that acquisition (so first-write page faults, paid during ``transit``, are alike). Yet on a loaded
+each side's pool holds the same number of buffers, all over memory written once beforehand (so
+neither side's ``transit`` pays first-write page faults in the receive thread). Yet on a loaded
 two-core machine ``transit`` alone varies by tens of milliseconds between frames and drifts
 between blocks, far beyond the resolution wanted. ``issue + handoff`` is where the code differs,
 and its median is resolved to a few hundredths of a millisecond. The excess is the sum over those
@@ -47,6 +48,12 @@ interval resamples each side's triggers. One warm-up frame per acquisition is re
 timed; bare and AravisCamera run in alternating blocks (ABBA) so drift favours neither side.
 ``latency_stages_ms`` has every stage's median per side; ``latency_ms_*`` are the end-to-end
 medians, which include the tick wait and the transfer.
+
+Measured on the loaded, shared two-core machine, 5 runs of each version: with the copy
+out of the Aravis buffer the excess was 0.87–0.94 ms (median 0.89; handoff 0.88 ms against the
+bare loop's 0.05); with zero-copy frames 0.21–0.29 ms (median 0.26; handoff 0.26 ms). The upper
+end of the interval stays under 0.33 ms except in runs where the caller's thread was stalled
+(one run: 1.15 ms).
 """
 
 from __future__ import annotations
