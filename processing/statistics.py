@@ -397,7 +397,10 @@ class BlockRows:
         n_rows = n_led_frames + 2
         # Laid out (block row, channel, block column) per frame: any sample order works for
         # moments, and this one lets every copy run along long rows.
-        self.rows = np.zeros((n_rows, height * plane_shape[2] * width))
+        # Incremental moments take every row's product with the new one: rows not filled yet must
+        # be zeros then; otherwise each row is written whole before use (no zeroing pass).
+        shape = (n_rows, height * plane_shape[2] * width)
+        self.rows = np.zeros(shape) if incremental else np.empty(shape)
         self.rows[n_led_frames + 1] = 1.0
         self._invalid: list[np.ndarray] = []
         self._filled = [n_led_frames + 1]
