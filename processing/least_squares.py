@@ -14,15 +14,16 @@ ambient image), never from the pixels.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy.linalg import lapack
 from scipy.optimize import nnls
 
-from processing.errors import SolverError
+from processing.errors import SolverError, SpectralDataError
 
 _FEASIBILITY_TOLERANCE = 1e-9
 _recorders: list[list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = []
@@ -44,14 +45,31 @@ def recording_problems() -> Iterator[list[tuple[np.ndarray, np.ndarray, np.ndarr
 
 @dataclass(frozen=True)
 class QuadraticSolution:
-    """The minimiser of a constrained quadratic and what is known about it."""
+    """The minimiser of a constrained quadratic and what is known about it.
+
+    The objective and the active set are computed when first read: most callers need only ``x``,
+    and at these sizes each array operation costs more than its arithmetic.
+    """
 
     x: np.ndarray
     """The minimiser, shape (n,)."""
-    objective: float
-    """``½ xᵀ H x − fᵀ x`` at the minimiser."""
-    active: np.ndarray
-    """Boolean mask of the inequality constraints that hold with equality, shape (m,)."""
+    slack: np.ndarray
+    """``G x − h``, shape (m,)."""
+    problem: FactoredQuadratic = field(repr=False)
+    """The problem solved."""
+    linear: np.ndarray = field(repr=False)
+    """Its linear term f."""
+
+    @cached_property
+    def objective(self) -> float:
+        """``½ xᵀ H x − fᵀ x`` at the minimiser."""
+        x = self.x
+        return float((0.5 * x).dot(self.problem.hessian).dot(x) - self.linear.dot(x))
+
+    @cached_property
+    def active(self) -> np.ndarray:
+        """Boolean mask of the inequality constraints that hold with equality, shape (m,)."""
+        return self.slack <= self.problem.active_limit
 
 
 def _inverse_factor(hessian: np.ndarray, where: str) -> np.ndarray:
@@ -76,6 +94,38 @@ def _inverse_factor(hessian: np.ndarray, where: str) -> np.ndarray:
     return inverse
 
 
+def _checked_nnls_core() -> Callable[[np.ndarray, np.ndarray, int], tuple] | None:
+    """The routine behind :func:`scipy.optimize.nnls`, if it is there and answers as expected.
+
+    The public function re-validates its (already finite, float64, C-ordered) inputs, which costs
+    more than the solve at these sizes. The core is private to scipy, so it is used only after it
+    solves a known problem correctly; otherwise the public function is.
+    """
+    try:
+        from scipy.optimize._slsqplib import nnls as core
+    except ImportError:
+        return None
+    try:
+        x, _, info = core(np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), np.array([2.0, 1.0, -1.0]), 6)
+        expected = np.allclose(x, [1.5, 0.0], rtol=0, atol=1e-12) and info == 1
+    except Exception:  # noqa: BLE001 - any surprise means: do not use it
+        return None
+    return core if expected else None
+
+
+_NNLS_CORE = _checked_nnls_core()
+
+
+def _nnls(matrix: np.ndarray, target: np.ndarray, maxiter: int) -> np.ndarray:
+    """``argmin ‖A u − b‖, u ≥ 0`` (as :func:`scipy.optimize.nnls`) for finite float64 inputs."""
+    if _NNLS_CORE is None:
+        return nnls(matrix, target, maxiter=maxiter)[0]
+    multipliers, _, info = _NNLS_CORE(matrix, target, maxiter)
+    if info == 3:
+        raise RuntimeError("Maximum number of iterations reached.")  # as scipy.optimize.nnls
+    return multipliers
+
+
 def least_distance(constraints: np.ndarray, bounds: np.ndarray, where: str = "least distance") -> np.ndarray:
     """Shortest vector z with ``constraints @ z ≥ bounds`` (LDP, Lawson & Hanson ch. 23).
 
@@ -90,10 +140,13 @@ def least_distance(constraints: np.ndarray, bounds: np.ndarray, where: str = "le
     stacked = np.empty((n + 1, m))
     stacked[:n] = constraints.T
     stacked[n] = bounds
-    stacked /= max(float(abs(stacked).max()), 1e-300)
+    peak = float(abs(stacked).max())
+    if not math.isfinite(peak):
+        raise SpectralDataError(f"{where}: the constraints or the linear term are not finite; expected finite numbers")
+    stacked /= max(peak, 1e-300)
     target = np.zeros(n + 1)
     target[n] = 1.0
-    multipliers, _ = nnls(stacked, target, maxiter=50 * m)
+    multipliers = _nnls(stacked, target, 50 * m)
     residual = stacked.dot(multipliers)
     residual[n] -= 1.0
     if abs(residual[n]) < 1e-12 or float(residual.dot(residual)) < 1e-24:
@@ -243,5 +296,4 @@ class FactoredQuadratic:
         slack = constraints.dot(x) - bounds
         if np.count_nonzero(slack < self.violation_limit):
             raise SolverError(f"{where}: constraint violated by {-slack.min():.3g} after solving; expected feasibility")
-        objective = float((0.5 * x).dot(hessian).dot(x) - linear.dot(x))
-        return QuadraticSolution(x=x, objective=objective, active=slack <= self.active_limit)
+        return QuadraticSolution(x, slack, self, linear)

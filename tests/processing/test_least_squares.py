@@ -142,3 +142,21 @@ def test_factored_problem_refuses_what_the_one_shot_call_refuses() -> None:
     problem = FactoredQuadratic.prepare(np.eye(2), np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([1.0, 0.0]))
     with pytest.raises(SolverError, match="cannot all be met"):
         problem.minimise(np.zeros(2))
+
+
+def test_public_nnls_fallback_gives_the_same_solutions(monkeypatch) -> None:
+    """Without scipy's NNLS core (private, checked at import) the public nnls is used: same answers."""
+    import processing.least_squares as least_squares
+
+    problems = [random_problem(seed, 1 + seed % 6, seed % 9) for seed in range(40)]
+    fast = [minimise_quadratic(h, f, g, b).x for h, f, g, b, _ in problems]
+    monkeypatch.setattr(least_squares, "_NNLS_CORE", None)
+    for (h, f, g, b, _), expected in zip(problems, fast):
+        np.testing.assert_array_equal(minimise_quadratic(h, f, g, b).x, expected)
+
+
+def test_non_finite_constraints_are_refused() -> None:
+    from processing.errors import SpectralDataError
+
+    with pytest.raises(SpectralDataError, match="flash: the constraints or the linear term are not finite"):
+        minimise_quadratic(np.eye(2), np.zeros(2), np.eye(2), np.array([1.0, np.inf]), where="flash")
