@@ -60,6 +60,22 @@ def test_bad_inputs():
         learn_prior({"a": datasets.paper_cameras()["NikonD100"]})
 
 
+def test_prior_learns_curve_shapes_not_channel_gains():
+    """A training camera's channel gains (white balance, peak normalisation) do not change the prior."""
+    cameras = {k: v.resample(DEFAULT_GRID, outside="zero") for k, v in list(datasets.paper_cameras().items())[:5]}
+    regained = dict(cameras)
+    first = next(iter(cameras))
+    regained[first] = cameras[first].replace(values=cameras[first].values * np.array([3.0, 0.5, 7.0]))
+    a, b = learn_prior(cameras), learn_prior(regained)
+    for channel in ("R", "G", "B"):
+        np.testing.assert_allclose(a.moments[channel], b.moments[channel], rtol=1e-12)
+        assert np.trace(a.moments[channel]) == pytest.approx(1.0)  # every shape has unit norm
+    dead = dict(cameras)
+    dead[first] = cameras[first].replace(values=cameras[first].values * np.array([1.0, 0.0, 1.0]))
+    with pytest.raises(CalibrationError, match=f"camera '{first}' channel G is zero everywhere"):
+        learn_prior(dead)
+
+
 def test_subspace_prior_recovers_noise_free_camera():
     chart = datasets.macbeth().resample(DEFAULT_GRID)
     lights = calibration_lights()
