@@ -414,6 +414,9 @@ class BlockRows:
         """Block-sum one (H, W, C) plane into ``row`` (LED frame j → j, ambient → n) and note its saturated blocks."""
         if plane.shape != self.plane_shape:
             raise SpectralDataError(f"frame stack: a frame has shape {plane.shape}; expected {self.plane_shape}")
+        if row in self._filled or not 0 <= row <= self.n_led_frames:
+            raise SpectralDataError(f"frame stack: row {row} is taken or out of range; expected each of "
+                                    f"0…{self.n_led_frames} once")
         _block_sums_into(plane, self.factor, self.rows[row].reshape(self.block_shape))
         if np.issubdtype(plane.dtype, np.floating):
             self._floating = True  # only ever set: safe when worker threads add frames

@@ -127,6 +127,8 @@ def test_block_rows_refuses_a_missing_frame() -> None:
         rows.statistics(spec)
     with pytest.raises(SpectralDataError, match="expected"):
         rows.add(1, cfa_planes(leds[1][:8], 1))
+    with pytest.raises(SpectralDataError, match="row 0 is taken"):
+        rows.add(0, cfa_planes(leds[1], 1))
 
 
 @pytest.mark.parametrize("saturate", [0.0, 0.02], ids=["none", "some"])
