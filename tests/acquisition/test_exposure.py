@@ -165,3 +165,61 @@ def test_run_json_reports_exposure_and_snr(tmp_path) -> None:
     assert summary["decision_ms"] >= 0
     flash = read_sequence(out / "sequence").frames[-1]
     assert flash.role == "flash" and flash.exposure_us == pytest.approx(exposure["flash_exposure_us"])
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.uint16])
+def test_linear_quantile_is_numpy_quantile_bit_for_bit(dtype) -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        n = int(rng.integers(1, 5000))
+        values = (rng.random(n) * 60_000).astype(dtype)
+        if dtype is np.float64 and rng.random() < 0.5:
+            values = np.round(values / 1000.0)  # ties
+        for q in (0.0, 0.5, 0.999, 1.0, float(rng.random())):
+            assert ex.linear_quantile(values, q) == float(np.quantile(values, q))
+    kept = np.array([5.0, 1.0, 3.0])
+    ex.linear_quantile(kept, 0.5)
+    assert kept.tolist() == [5.0, 1.0, 3.0]  # partitions a copy unless told to overwrite
+    assert math.isnan(ex.linear_quantile(np.array([1.0, math.nan, 2.0]), 0.5))
+    with pytest.raises(ValueError, match="no values"):
+        ex.linear_quantile(np.array([]), 0.5)
+
+
+@pytest.mark.parametrize("channels", [0, 3])
+def test_flash_exposure_from_frames_as_they_arrive(channels: int) -> None:
+    """FlashExposure (frames added one by one) = the one-shot flash_exposure = the linear model written out."""
+    rng = np.random.default_rng(channels)
+    shape = (48, 64, channels) if channels else (48, 64)
+    black, white, limits = 64.0, 4095.0, (10.0, 50_000.0)
+    ambient = rng.integers(64, 1500, size=shape).astype(np.uint16)
+    leds = [(ambient + rng.integers(0, 800, size=shape)).astype(np.uint16) for _ in range(5)]
+    ambient_us, led_us = 2000.0, [1000.0, 1500.0, 2000.0, 2500.0, 3000.0]
+    predictor = ex.FlashExposure(black, white, limits, POLICY)
+    predictor.add_ambient(ambient, ambient_us)
+    for frame, exposure in zip(leds, led_us):
+        predictor.add_led(frame, exposure)
+    step = 2 * POLICY.stride
+    rate = (ambient[::step, ::step].astype(float) - black) / ambient_us
+    for weights in ([0.3, 0.0, 1.0, 0.2, 0.7], [0.0] * 5, [1.0] * 5):
+        one_shot = ex.flash_exposure(ambient, ambient_us, leds, led_us, weights, black, white, limits, POLICY)
+        assert predictor.predict(weights) == one_shot
+        total = rate + sum(w * ((f[::step, ::step].astype(float) - black) / e - rate)
+                           for f, e, w in zip(leds, led_us, weights))
+        brightest = total.max(axis=2) if channels else total
+        bright_end = np.quantile(brightest, 1.0 - POLICY.max_saturated_fraction)
+        expected = min(max(POLICY.target_fraction * (white - black) / bright_end, limits[0]), limits[1])
+        assert one_shot == pytest.approx(expected, rel=1e-12)
+    with pytest.raises(ValueError, match="strict|shorter|longer"):
+        predictor.predict([1.0] * 4)  # one weight per LED frame
+
+
+def test_flash_exposure_refuses_frames_out_of_order() -> None:
+    predictor = ex.FlashExposure(0.0, 4095.0, (1.0, 1e5))
+    frame = np.ones((8, 8), dtype=np.uint16)
+    with pytest.raises(ValueError, match="before the ambient"):
+        predictor.add_led(frame, 100.0)
+    with pytest.raises(ValueError, match="no ambient frame"):
+        predictor.predict([])
+    predictor.add_ambient(frame, 100.0)
+    with pytest.raises(ValueError, match="second ambient"):
+        predictor.add_ambient(frame, 100.0)
