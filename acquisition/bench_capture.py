@@ -22,7 +22,7 @@ Figures (one run of the bench, :func:`capture_bench`):
 - its parts (medians, ms): ``handoff_ms`` from the arrival to the start of the decision (pairing
   with the booth's ``TRIG``, queueing to the writer, the session's block sums of the last frame);
   ``compute_ms`` the estimation + solving (:meth:`FlashSession.decide`); ``exposure_ms`` the flash
-  exposure prediction (:func:`acquisition.exposure.flash_exposure`); ``pset_ms`` from the end of
+  exposure prediction (:meth:`FlashSession.flash_exposure`, from the rates taken as frames arrived); ``pset_ms`` from the end of
   the decision to the booth's ``PSET`` reply (camera re-plan, serial round trip);
   ``pset_to_trigger_ms`` from the ``PSET`` being sent to the pulse, which includes the booth's
   LED settle time (``settle_s``, 1 ms here) — the booth's part, not the host's.
@@ -63,7 +63,7 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
 
     from acquisition.async_writer import AsyncSequenceWriter
     from acquisition.capture import run_capture_with_flash
-    from acquisition.exposure import ExposurePolicy, flash_exposure
+    from acquisition.exposure import ExposurePolicy
     from acquisition.flash_session import FlashSession
     from acquisition.rig import open_aravis_fake_rig
     from acquisition.sequence_format import SequenceWriter
@@ -105,7 +105,6 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
         camera.next_frame = timed_next  # type: ignore[method-assign]
         emulator.on_trigger_out = timed_pulse
         rig.booth.set_step = timed_set_step  # type: ignore[method-assign]
-        info = camera.info
         policy = ExposurePolicy()
         wavelengths, seq_camera, leds = rig.sequence_header()
         session: FlashSession | None = None
@@ -118,7 +117,8 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
             writer = SequenceWriter(Path(scratch) / f"run{run}", wavelengths_nm=wavelengths, spectral_unit="energy",
                                     camera=seq_camera, leds=leds)
             if session is None:  # once per rig: LED/camera model, target response
-                session = FlashSession.prepare(writer.sequence)
+                session = FlashSession.prepare(writer.sequence, exposure_limits_us=(1.0, exposure_us),
+                                               exposure_policy=policy)
             session.begin()
             plan = CapturePlan.ambient_then_each_led(n_leds, exposure_us, **timing)  # type: ignore[arg-type]
             mark: dict[str, float] = {}
@@ -132,9 +132,7 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
                     warnings.simplefilter("ignore")
                     levels = session.decide("complementary", sanitise=True).levels
                 solved = time.perf_counter()
-                flash_us = min(flash_exposure(frames[0].pixels, exposure_us, [f.pixels for f in frames[1:]],
-                                              [exposure_us] * n_leds, levels, info.black_level, info.white_level,
-                                              (1.0, exposure_us), policy), exposure_us)
+                flash_us = session.flash_exposure(levels)
                 mark["compute"] = solved - began
                 mark["decided"] = time.perf_counter()
                 mark["exposure"] = mark["decided"] - solved

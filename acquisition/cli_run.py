@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 import warnings
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -312,7 +313,10 @@ def _solve_both(solve, weights: np.ndarray, first: str) -> tuple[dict, list]:
 
 def _run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, args: argparse.Namespace):
     """Ambient + LEDs + flash in one stream, the flash decided from the frames in memory."""
-    session = FlashSession.prepare(writer.sequence, args.target, args.solver, args.alpha, args.bin)
+    auto = exposure.mode == "auto"  # then the session predicts the flash exposure from the frames as they arrive
+    session = FlashSession.prepare(writer.sequence, args.target, args.solver, args.alpha, args.bin,
+                                   exposure_limits_us=exposure.exposure_range_us if auto else None,
+                                   exposure_policy=exposure.policy)
     n_leds = len(writer.sequence.leds)
     frames: list[RawFrame] = []
     stamp = {"t": 0.0, "decided": 0.0}
@@ -326,26 +330,31 @@ def _run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePla
         _report_frame(step, frame, entry)
 
     def decide(_frames):
-        if args.from_disk:
-            sequence = read_sequence(writer.flush().directory)
-            stack = analysis.load_frame_stack(sequence)
-            estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
-        else:
-            stack = session.stack()
-            estimate = session.estimate(stack)
+        # As the capture bench: FlashSession.decide, the estimate's reliability signals left for
+        # after the flash trigger (``decision.estimate`` is read once the capture is over).
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", TargetUnreachableWarning)
-            chosen = session.solve(args.mode, estimate.ambient_weights)
-        levels = np.clip(chosen.flash_weights, 0.0, 1.0)
-        flash_us = _flash_exposure(rig, exposure, frames, levels)
-        result.update(estimate=estimate, chosen=chosen, caught=list(caught), stack=stack, flash_us=flash_us)
+            if args.from_disk:
+                sequence = read_sequence(writer.flush().directory)
+                stack = analysis.load_frame_stack(sequence)
+                estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack,
+                                                      bin_factor=args.bin)
+                chosen = session.solve(args.mode, estimate.ambient_weights)
+                levels = np.clip(chosen.flash_weights, 0.0, 1.0)
+                result.update(estimate=lambda: estimate, chosen=chosen, stack=stack)
+            else:
+                decision = session.decide(args.mode)
+                levels = decision.levels
+                result.update(estimate=lambda: decision.estimate, chosen=decision.solution, stack=decision.stack)
+        flash_us = _flash_exposure(rig, exposure, levels, session.flash_exposure)
+        result.update(caught=list(caught), flash_us=flash_us)
         stamp["decided"] = time.perf_counter()
         return levels, flash_us
 
     plan = CapturePlan.ambient_then_each_led(n_leds, exposure.ambient_exposure_us,
                                              led_exposures_us=exposure.led_exposures_us, trigger=SYNC_MODES[args.sync])
     entries = run_capture_with_flash(rig.camera, rig.booth, plan, writer, decide, on_frame=keep)
-    estimate = result["estimate"]
+    estimate = result["estimate"]()
     other = "matching" if args.mode == "complementary" else "complementary"
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
@@ -370,24 +379,25 @@ def _run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposureP
         lambda mode, weights: analysis.solve_sequence_flash(sequence, mode, weights, args.target),
         estimate.ambient_weights, args.mode)
     levels = np.clip(solutions[args.mode].flash_weights, 0.0, 1.0)
-    flash_us = _flash_exposure(rig, exposure, captured.frames, levels)
+    frames = captured.frames
+    flash_us = _flash_exposure(rig, exposure, levels, lambda weights: flash_exposure(
+        frames[0].pixels, frames[0].exposure_us, [f.pixels for f in frames[1:]], [f.exposure_us for f in frames[1:]],
+        weights, rig.camera.info.black_level, rig.camera.info.white_level, exposure.exposure_range_us,
+        exposure.policy))
     flash_plan = CapturePlan.single(levels, flash_us, trigger=SYNC_MODES[args.sync])
     decided = time.perf_counter()
     run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=_report_frame)
     return estimate, solutions, caught, captured, flash_us, stack, decided
 
 
-def _flash_exposure(rig: Rig, plan: ExposurePlan, frames: list[RawFrame], levels: np.ndarray) -> float:
-    """The flash frame's exposure: fixed, recorded (replay), or predicted from the frames in memory."""
+def _flash_exposure(rig: Rig, plan: ExposurePlan, levels: np.ndarray, predict: Callable[[np.ndarray], float]) -> float:
+    """The flash frame's exposure: fixed, recorded (replay), or ``predict(levels)`` from the frames in memory."""
     if plan.mode != "auto":
         recorded = _recorded_exposures(rig)
         if plan.mode == "recorded" and recorded is not None and recorded[2] is not None:
             return recorded[2]
         return plan.ambient_exposure_us
-    info = rig.camera.info
-    return flash_exposure(frames[0].pixels, frames[0].exposure_us, [f.pixels for f in frames[1:]],
-                          [f.exposure_us for f in frames[1:]], levels, info.black_level, info.white_level,
-                          plan.exposure_range_us, plan.policy)
+    return predict(levels)
 
 
 def _capture(args: argparse.Namespace) -> int:

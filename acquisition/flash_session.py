@@ -10,6 +10,9 @@ conversion), the frame stack's black/white levels and block size — is computed
 frames before it are taken by :meth:`FlashSession.add` as the frame arrives (between frames).
 :meth:`FlashSession.decide` then costs the statistics from those moments, one ambient solve and
 one small quadratic programme; the estimate's reliability signals wait until they are read.
+Prepared with exposure limits, the session also takes each frame's rates for the flash exposure
+(:class:`~acquisition.exposure.FlashExposure`) as it arrives, and :meth:`FlashSession.flash_exposure`
+only sums them.
 
 The results are those of :func:`acquisition.analysis.estimate_sequence` and
 :func:`acquisition.analysis.solve_sequence_flash` on the same frames (same statistics code,
@@ -27,6 +30,7 @@ import numpy as np
 from acquisition import analysis
 from acquisition.camera import RawFrame
 from acquisition.errors import RecordingError
+from acquisition.exposure import ExposurePolicy, FlashExposure
 from acquisition.sequence_format import Sequence
 from processing.ambient import AmbientEstimate, AmbientModel
 from processing.flash import FlashModel, FlashSolution
@@ -68,7 +72,9 @@ class FlashSession:
     """
 
     def __init__(self, header: Sequence, leds: Spectra, model: FlashModel, target_response: np.ndarray | None,
-                 method: str, alpha: float | str, bin_factor: int) -> None:
+                 method: str, alpha: float | str, bin_factor: int,
+                 exposure_limits_us: tuple[float, float] | None = None,
+                 exposure_policy: ExposurePolicy = ExposurePolicy()) -> None:
         self.header = header
         self.leds = leds
         self.model = model
@@ -77,12 +83,18 @@ class FlashSession:
         self.method = method
         self.alpha = alpha
         self.bin_factor = bin_factor
+        self.exposure_limits_us = exposure_limits_us
+        self.exposure_policy = exposure_policy
         self.begin()
 
     @classmethod
     def prepare(cls, header: Sequence, target: str = "D65", method: str = "tikhonov", alpha: float | str = "auto",
-                bin_factor: int = analysis.DEFAULT_BIN_FACTOR) -> FlashSession:
+                bin_factor: int = analysis.DEFAULT_BIN_FACTOR, exposure_limits_us: tuple[float, float] | None = None,
+                exposure_policy: ExposurePolicy = ExposurePolicy()) -> FlashSession:
         """Prepare from a sequence header (LEDs, camera, grid); ``target`` for the complementary flash.
+
+        With ``exposure_limits_us`` (the camera's range) the flash exposure is predicted too
+        (:meth:`flash_exposure`, aiming as ``exposure_policy`` says).
 
         Raises
         ------
@@ -93,7 +105,7 @@ class FlashSession:
         camera = analysis.camera_responsivities_photons(header)
         model = FlashModel(leds, camera)
         response = model.target_response(analysis.target_illuminant(target, header)) if target else None
-        return cls(header, leds, model, response, method, alpha, bin_factor)
+        return cls(header, leds, model, response, method, alpha, bin_factor, exposure_limits_us, exposure_policy)
 
     # -- per capture -------------------------------------------------------------------------
     def begin(self) -> None:
@@ -106,6 +118,9 @@ class FlashSession:
         self._n_led_rows = 0
         self._rows_complete = True  # False when a frame did not fit the prepared rows
         self._stack: analysis.FrameStack | None = None
+        camera = self.header.camera
+        self._exposure = None if self.exposure_limits_us is None else FlashExposure(
+            camera.black_level, camera.white_level, self.exposure_limits_us, self.exposure_policy)
 
     def add(self, frame: RawFrame, role: str, levels: Seq[float]) -> None:
         """Take one captured frame; ambient and LED frames are block-summed now (between frames).
@@ -125,6 +140,10 @@ class FlashSession:
             return  # the estimate uses the first ambient frame only
         if role in ("ambient", "led"):
             self._add_rows(_plane(frame.pixels), role)
+        if self._exposure is not None and role == "ambient":
+            self._exposure.add_ambient(frame.pixels, frame.exposure_us)
+        elif self._exposure is not None and role == "led":
+            self._exposure.add_led(frame.pixels, frame.exposure_us)
 
     def _add_rows(self, pixels: np.ndarray, role: str) -> None:
         camera = self.header.camera
@@ -197,6 +216,19 @@ class FlashSession:
                 raise RecordingError("complementary flash: the session was prepared without a target")
             return self.model.complementary(ambient_weights, self.target_response, bounds=bounds)  # type: ignore[arg-type]
         raise RecordingError(f"flash mode '{mode}' is unknown; expected matching or complementary")
+
+    def flash_exposure(self, levels: Seq[float]) -> float:
+        """The flash frame's exposure (µs) for LED ``levels``, from the frames taken (see :class:`FlashExposure`).
+
+        Raises
+        ------
+        RecordingError
+            If the session was prepared without exposure limits.
+        """
+        if self._exposure is None:
+            raise RecordingError("flash exposure: the session was prepared without exposure_limits_us; "
+                                 "expected FlashSession.prepare(…, exposure_limits_us=(shortest, longest))")
+        return self._exposure.predict(levels)
 
     def decide(self, mode: str = "complementary", sanitise: bool = False) -> FlashDecision:
         """Estimate the ambient from the frames taken and solve the ``mode`` flash.

@@ -193,7 +193,8 @@ def test_flash_stream_pauses_the_writer_only_around_the_decision(sim_rig, tmp_pa
     assert len(read_sequence(tmp_path / "s").frames) == 6
 
 
-def _session_and_frames(sim_rig, tmp_path: Path, levels: list[tuple[float, ...]], saturate: float = 0.0):
+def _session_and_frames(sim_rig, tmp_path: Path, levels: list[tuple[float, ...]], saturate: float = 0.0,
+                        exposure_limits_us: tuple[float, float] | None = None):
     """A FlashSession fed synthetic frames (ambient + one frame per entry of ``levels``)."""
     from acquisition.camera import RawFrame
 
@@ -201,7 +202,7 @@ def _session_and_frames(sim_rig, tmp_path: Path, levels: list[tuple[float, ...]]
     rng = np.random.default_rng(len(levels))
     white = int(info.white_level)
     ambient = rng.integers(200, 3000, size=(info.height, info.width, 3))
-    session = FlashSession.prepare(_writer(sim_rig, tmp_path / "s").sequence)
+    session = FlashSession.prepare(_writer(sim_rig, tmp_path / "s").sequence, exposure_limits_us=exposure_limits_us)
     pixels = [ambient] + [ambient + rng.integers(100, 2000, size=ambient.shape) for _ in levels]
     for index, (values, level) in enumerate(zip(pixels, [(0.0,) * 4, *levels])):
         values = values.astype(np.uint16)
@@ -254,3 +255,29 @@ def test_flash_decision_reads_the_full_estimate_only_when_asked(sim_rig, tmp_pat
     np.testing.assert_array_equal(decision.estimate.ambient_weights, full.ambient_weights)
     np.testing.assert_array_equal(decision.estimate.spectrum_std, full.spectrum_std)
     np.testing.assert_array_equal(decision.levels, expected_levels)
+
+
+def test_flash_session_predicts_the_flash_exposure_of_the_frames_taken(sim_rig, tmp_path: Path) -> None:
+    """The rates taken frame by frame give flash_exposure's answer on the same frames (first ambient only)."""
+    from acquisition.camera import RawFrame
+    from acquisition.errors import RecordingError
+    from acquisition.exposure import flash_exposure
+
+    levels = [tuple(float(i == j) for i in range(4)) for j in range(4)]
+    limits = (10.0, 1e6)
+    session = _session_and_frames(sim_rig, tmp_path, levels, exposure_limits_us=limits)
+    first = session._frames[0]
+    session.add(RawFrame(first.pixels // 2, 99, 0, first.exposure_us, 1.0), "ambient", (0.0,) * 4)  # ignored
+    frames = session._frames[:5]
+    camera = session.header.camera
+    for weights in ([0.2, 0.9, 0.0, 0.5], [1.0, 1.0, 1.0, 1.0]):
+        expected = flash_exposure(frames[0].pixels, frames[0].exposure_us, [f.pixels for f in frames[1:]],
+                                  [f.exposure_us for f in frames[1:]], weights, camera.black_level,
+                                  camera.white_level, limits)
+        assert session.flash_exposure(weights) == expected
+    session.begin()
+    with pytest.raises(ValueError, match="no ambient frame"):
+        session.flash_exposure([0.0] * 4)
+    plain = _session_and_frames(sim_rig, tmp_path / "plain", levels)
+    with pytest.raises(RecordingError, match="exposure_limits_us"):
+        plain.flash_exposure([0.0] * 4)

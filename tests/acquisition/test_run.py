@@ -95,3 +95,36 @@ def test_leds_off_and_partial_sequence_kept_when_capture_fails(tmp_path, monkeyp
     assert not sequence.complete and len(sequence.frames) == 3
     booth_levels = opened["rig"].camera.led_levels_source()
     assert all(level == 0 for level in booth_levels)
+
+
+def test_run_decides_the_flash_before_the_reliability_signals(tmp_path, monkeypatch) -> None:
+    """`msflash run` drives the flash from FlashSession.decide (weights, flash, exposure predicted from the
+    frames as they arrived); the estimate's reliability signals are computed only after the capture."""
+    from acquisition import cli_run
+    from acquisition.flash_session import FlashSession
+    from processing.ambient import AmbientModel
+
+    order: list[str] = []
+
+    def recorded(name, real):
+        def call(*args, **kwargs):
+            order.append(name)
+            return real(*args, **kwargs)
+        return call
+
+    monkeypatch.setattr(FlashSession, "decide", recorded("decide", FlashSession.decide))
+    monkeypatch.setattr(FlashSession, "flash_exposure", recorded("exposure", FlashSession.flash_exposure))
+    monkeypatch.setattr(AmbientModel, "reliability", recorded("reliability", AmbientModel.reliability))
+    real_capture = cli_run.run_capture_with_flash
+
+    def capture(*args, **kwargs):
+        entries = real_capture(*args, **kwargs)
+        order.append("captured")
+        return entries
+
+    monkeypatch.setattr(cli_run, "run_capture_with_flash", capture)
+    assert main(["run", "--out", str(tmp_path / "r"), "--ambient", "daylight"]) == 0
+    assert order[:4] == ["decide", "exposure", "captured", "reliability"]
+    summary = json.loads((tmp_path / "r" / "run.json").read_text())
+    assert read_sequence(tmp_path / "r" / "sequence").frames[-1].exposure_us == pytest.approx(
+        summary["exposure"]["flash_exposure_us"])
