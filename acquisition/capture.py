@@ -53,7 +53,6 @@ Whatever happens the LEDs go off (``OFF`` also aborts a running table) and the c
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import logging
 import math
 import time
@@ -304,7 +303,8 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
                 _replan(camera, plan, step.index)
                 # The last LED frame is in, so its exposure is over: the flash step need not
                 # wait for its scheduled slot (booth master, PSET … NOW).
-                _set_step(booth, step.index, step.led_levels, now=mode == "booth")
+                # (A booth firmware without NOW refuses it; LedBooth.set_step then falls back to plain PSET.)
+                booth.set_step(step.index, step.led_levels, now=mode == "booth")
             if mode == "camera":
                 if number > 1:
                     time.sleep(plan.settle_s)  # the next step's LEDs settle between exposures
@@ -353,14 +353,6 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
         finally:
             camera.stop()
     return written
-
-
-def _set_step(booth: SequencedLedControl, index: int, levels: Sequence[float], *, now: bool) -> None:
-    """``booth.set_step``, asking to start the step at once when ``now`` (and the booth offers it)."""
-    if now and "now" in inspect.signature(booth.set_step).parameters:
-        booth.set_step(index, levels, now=True)
-    else:
-        booth.set_step(index, levels)
 
 
 def _booth_step_of(booth: SequencedLedControl, trigger: int, timeout_s: float, step: CaptureStep) -> int:

@@ -281,3 +281,22 @@ def test_flash_session_predicts_the_flash_exposure_of_the_frames_taken(sim_rig, 
     plain = _session_and_frames(sim_rig, tmp_path / "plain", levels)
     with pytest.raises(RecordingError, match="exposure_limits_us"):
         plain.flash_exposure([0.0] * 4)
+
+
+@pytest.mark.parametrize("trigger", ["booth", "camera"])
+def test_flash_step_released_with_now_only_in_booth_master(sim_rig, tmp_path: Path, trigger: str) -> None:
+    """The held flash step is released by one PSET, with NOW in booth master — also through a wrapper
+    whose signature hides ``now`` (the capture bench times set_step with one)."""
+    plan = CapturePlan.ambient_then_each_led(4, 5_000.0, trigger=trigger)
+    calls: list[tuple[tuple, dict]] = []
+    real = sim_rig.booth.set_step
+
+    def timed(*args, **kwargs) -> None:
+        calls.append((args, kwargs))
+        real(*args, **kwargs)
+
+    sim_rig.booth.set_step = timed
+    with _writer(sim_rig, tmp_path / "s") as writer:
+        run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, lambda frames: ((0.5,) * 4, 5_000.0))
+    assert calls == [((5, (0.5,) * 4), {"now": trigger == "booth"})]
+    assert not sim_rig.line_errors
