@@ -634,10 +634,12 @@ class BoothEmulator:
             self._next_action = (self._t0 + index * period + self._settle_us / 1e6, "pulse")
         else:
             self._triggers += 1
-            self._event(f"{Event.TRIGGER} {self._triggers} {self._step}")
+            # The pulse first, then its report, as the firmware does: the report's write to the
+            # host may block or yield the GIL to another thread, which must not delay the pulse.
             callback = self.on_trigger_out
             if callback is not None:
                 callback(self._triggers)
+            self._event(f"{Event.TRIGGER} {self._triggers} {self._step}")
             self._next_action = (self._t0 + (self._step + 1) * period, "apply")
 
     # -- output ----------------------------------------------------------------------
