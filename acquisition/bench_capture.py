@@ -19,13 +19,15 @@ Figures (one run of the bench, :func:`capture_bench`):
   flash trigger pulse: handing that frame to the writer, estimation, flash solving, exposure, the
   ``PSET`` round trip and the booth's LED settle time. Median and
   max over the runs. Targets: median ≤ 5 ms, max below one frame period at 60 fps (16.7 ms).
-- its parts (medians, ms): ``handoff_ms`` from the arrival to the start of the decision (pairing
+- its parts (``latency_parts_ms`` per run, ``latency_parts_ms_median``; ms): ``handoff_ms`` from the arrival to the start of the decision (pairing
   with the booth's ``TRIG``, queueing to the writer, the session's block sums of the last frame);
   ``compute_ms`` the estimation + solving (:meth:`FlashSession.decide`); ``exposure_ms`` the flash
-  exposure prediction (:meth:`FlashSession.flash_exposure`, from the rates taken as frames arrived); ``pset_ms`` from the end of
-  the decision to the booth's ``PSET`` reply (camera re-plan, serial round trip);
-  ``pset_to_trigger_ms`` from the ``PSET`` being sent to the pulse, which includes the booth's
-  LED settle time (``settle_s``, 1 ms here) — the booth's part, not the host's.
+  exposure prediction (:meth:`FlashSession.flash_exposure`, from the rates taken as frames arrived);
+  ``replan_ms`` from the end of the decision to sending the ``PSET`` (the camera takes the flash
+  step); ``pset_to_trigger_ms`` from the ``PSET`` being sent to the pulse, which includes the
+  booth's LED settle time (``settle_s``, 1 ms here) — the booth's part, not the host's. These five
+  add up to each run's latency. ``pset_ms``, the ``PSET`` round trip (sent to reply), overlaps the
+  settle time: the booth starts the step when it reads the line, not when the host reads the reply.
 
 The fake's frames are test patterns, so the estimate means nothing here (it may be degenerate);
 only time is measured.
@@ -109,7 +111,8 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
         wavelengths, seq_camera, leds = rig.sequence_header()
         session: FlashSession | None = None
         parts: dict[str, list[float]] = {name: [] for name in
-                                          ("handoff_ms", "compute_ms", "exposure_ms", "pset_ms", "pset_to_trigger_ms")}
+                                          ("handoff_ms", "compute_ms", "exposure_ms", "replan_ms",
+                                           "pset_to_trigger_ms", "pset_ms")}
         for run in range(runs + 1):  # run 0 warms up (imports, first stream) and is not counted
             arrivals.clear()
             pulses.clear()
@@ -154,8 +157,8 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
             computes.append(mark["compute"] * 1e3)
             sent, replied = psets[-1]
             for name, value in (("handoff_ms", mark["began"] - mark["last_arrival"]), ("compute_ms", mark["compute"]),
-                                ("exposure_ms", mark["exposure"]), ("pset_ms", replied - mark["decided"]),
-                                ("pset_to_trigger_ms", pulse - sent)):
+                                ("exposure_ms", mark["exposure"]), ("replan_ms", sent - mark["decided"]),
+                                ("pset_to_trigger_ms", pulse - sent), ("pset_ms", replied - sent)):
                 parts[name].append(value * 1e3)
     period_ms = period_us * 1e-3
     report: dict[str, Any] = {
@@ -170,6 +173,7 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
         "latencies_ms": latencies,
         "compute_ms_median": statistics.median(computes),
         "latency_parts_ms_median": {name: statistics.median(values) for name, values in parts.items()},
+        "latency_parts_ms": parts,
         "booth_settle_ms": settle_s * 1e3,
         "latency_median_target_ms": LATENCY_MEDIAN_TARGET_MS,
         "frame_period_ms": period_ms,
