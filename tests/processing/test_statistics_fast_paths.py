@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing.statistics import FrameStackSpec, accumulate_statistics, bin_frame
+from processing.statistics import FrameStackSpec, _saturated_blocks, accumulate_statistics, bin_frame
 from processing.synthesis import synthesize
 from tests.processing.test_statistics import MULTIPLEXED, assert_matches, naive_statistics, random_stack
 
@@ -157,3 +157,21 @@ def test_diagonal_levels_unmix_as_the_pseudo_inverse() -> None:
         levels = np.diag(rng.uniform(-3, 3, k) * 10.0 ** rng.uniform(-4, 4, k))
         spec = FrameStackSpec(0.0, 1.0, 1.0, (1.0,) * k, levels)
         np.testing.assert_array_equal(spec.unmixing, np.linalg.pinv(levels))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32, np.float64])
+def test_saturated_blocks_equal_the_any_of_each_block(dtype: type) -> None:
+    """Block maxima ≥ white ⇔ some sample of the block ≥ white, for any factor, channels and crop."""
+    rng = np.random.default_rng(7)
+    for _ in range(60):
+        factor = int(rng.choice([1, 2, 3, 4, 8]))
+        channels = int(rng.choice([1, 3]))
+        height, width = (int(v) for v in rng.integers(factor, 50, size=2))
+        plane = (rng.random((height, width, channels)) * 250).astype(dtype)
+        if np.issubdtype(dtype, np.floating):
+            plane[0, 0, 0] = np.nan  # NaN never counts as saturated, as with >=
+        white = float(rng.choice([120, 240, 249]))
+        rows, columns = height // factor, width // factor
+        hit = (plane >= white).any(axis=2)[:rows * factor, :columns * factor]
+        expected = hit.reshape(rows, factor, columns, factor).any(axis=(1, 3))
+        np.testing.assert_array_equal(_saturated_blocks(plane, factor, white), expected)
