@@ -93,9 +93,11 @@ def synthesize(
     flat_frames = [np.ascontiguousarray(frame).reshape(-1) for frame in frames]
     flat_output = output.reshape(-1)
     flat_saturated = saturated.reshape(-1)
-    # One contiguous max per frame (a fast streaming reduction) finds the frames that saturate
-    # anywhere; only those get per-chunk comparison masks.
-    saturating = [index for index, frame in enumerate(flat_frames) if frame.size and frame.max() >= white]
+    # Frames whose type cannot reach the white level never saturate; the others are checked chunk
+    # by chunk right after the chunk is cast, while it is in cache (a whole-frame max first would be
+    # one more pass over every frame in memory, on one thread).
+    saturating = [not (np.issubdtype(frame.dtype, np.integer) and np.iinfo(frame.dtype).max < white)
+                  for frame in flat_frames]
     chunk_samples = max(1, chunk_pixels) * channels
     buffers = threading.local()
 
@@ -106,13 +108,13 @@ def synthesize(
         if stack is None:
             stack = buffers.stack = np.empty((len(frames), min(chunk_samples, flat_output.size)), dtype=np.float32)
         rows = stack[:, :stop - start]
-        for index, frame in enumerate(flat_frames):
-            # Casting into a preallocated row is one streaming pass (exact for integers ≤ 24 bits).
-            np.copyto(rows[index], frame[start:stop], casting="unsafe")
         bright = None
-        for index in saturating:
-            chunk = flat_frames[index][start:stop]
-            if chunk.max() >= white:
+        for index, frame in enumerate(flat_frames):
+            chunk = frame[start:stop]
+            # Casting into a preallocated row is one streaming pass (exact for integers ≤ 24 bits).
+            np.copyto(rows[index], chunk, casting="unsafe")
+            # A fast reduction on the cached chunk; the comparison mask only where it is needed.
+            if saturating[index] and chunk.max() >= white:
                 hit = chunk >= white
                 bright = hit if bright is None else bright | hit
         target = flat_output[start:stop]
