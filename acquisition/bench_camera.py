@@ -151,7 +151,7 @@ def excess_ci(ours: dict[str, np.ndarray], theirs: dict[str, np.ndarray], stages
     return estimate, float(low), float(high)
 
 
-def camera_bench(n_frames: int = 150, n_triggers: int = 200, repeats: int = 3, width: int = 1280, height: int = 1024,
+def camera_bench(n_frames: int = 150, n_triggers: int = 200, repeats: int = 5, width: int = 1280, height: int = 1024,
                  pixel_format: str = "Mono16", frame_rate_hz: float = 1000.0,
                  exposure_us: float = 100.0, latency_blocks: int = 4,
                  trigger_frequency_hz: float = 1000.0) -> dict[str, Any]:
