@@ -17,7 +17,7 @@ import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy.linalg import lapack
@@ -80,7 +80,7 @@ def _inverse_factor(hessian: np.ndarray, where: str) -> np.ndarray:
     each in checks, the routines themselves ~1 µs. One sum tells finite matrices apart (the exact
     check runs only when it is not finite, e.g. on overflow).
     """
-    if not math.isfinite(hessian.sum()) and not np.isfinite(hessian).all():
+    if not math.isfinite(np.add.reduce(hessian, axis=None)) and not np.isfinite(hessian).all():
         raise SolverError(f"{where}: the normal matrix has non-finite entries; expected finite data")
     factor, info = lapack.dpotrf(hessian, lower=0, clean=1)
     if info != 0:
@@ -135,42 +135,64 @@ def least_distance(constraints: np.ndarray, bounds: np.ndarray, where: str = "le
         If the constraints are infeasible.
     """
     m, n = constraints.shape
-    if m == 0 or bounds.max() <= 0:
+    if m == 0:
+        return np.zeros(n)
+    # Reductions through the ufuncs: ``ndarray.max`` adds a Python wrapper that costs as much as
+    # the reduction on a few dozen numbers.
+    bound_top = float(_largest(bounds))
+    if bound_top <= 0:
         return np.zeros(n)
     stacked = np.empty((n + 1, m))
     stacked[:n] = constraints.T
     stacked[n] = bounds
-    peak = float(abs(stacked).max())
+    peak = float(_largest(abs(stacked), axis=None))
     if not math.isfinite(peak):
         raise SpectralDataError(f"{where}: the constraints or the linear term are not finite; expected finite numbers")
     stacked /= max(peak, 1e-300)
-    target = np.zeros(n + 1)
-    target[n] = 1.0
-    multipliers = _nnls(stacked, target, 50 * m)
+    multipliers = _nnls(stacked, _last_unit(n + 1), 50 * m)
     residual = stacked.dot(multipliers)
-    residual[n] -= 1.0
-    if abs(residual[n]) < 1e-12 or float(residual.dot(residual)) < 1e-24:
+    # The residual of the NNLS is r = E u − e_{n+1}; z = −r[:n] / r[n] (Lawson & Hanson 23.3).
+    # A vanishing r[n] means infeasible; ‖r‖ ≥ |r[n]|, so a vanishing ‖r‖ is caught by it too.
+    last = float(residual[n]) - 1.0
+    if abs(last) < 1e-12:
         raise SolverError(f"{where}: the constraints cannot all be met; expected a feasible problem")
-    z = -residual[:n] / residual[n]
-    return _polish(constraints, bounds, z, multipliers > 0)
+    z = residual[:n] / -last
+    # max |h| without the abs array: max(max h, −min h), both exact.
+    bound_peak = max(bound_top, -float(_smallest(bounds)))
+    return _polish(constraints, bounds, z, multipliers > 0, bound_peak)
 
 
-def _polish(constraints: np.ndarray, bounds: np.ndarray, z: np.ndarray, active: np.ndarray) -> np.ndarray:
+_largest = np.maximum.reduce
+_smallest = np.minimum.reduce
+
+
+@lru_cache(maxsize=64)
+def _last_unit(size: int) -> np.ndarray:
+    """``e_size``: the NNLS target of an LDP with ``size − 1`` variables (cached, read-only)."""
+    unit = np.zeros(size)
+    unit[-1] = 1.0
+    unit.flags.writeable = False
+    return unit
+
+
+def _polish(constraints: np.ndarray, bounds: np.ndarray, z: np.ndarray, active: np.ndarray,
+            bound_peak: float) -> np.ndarray:
     """Re-solve the LDP exactly on its active set; keep the result if it is feasible and optimal.
 
     NNLS finds the right active set but the point only to its own tolerance. On the active set
     the shortest z solving ``G_A z = h_A`` is ``G_Aᵀ λ`` with ``(G_A G_Aᵀ) λ = h_A``; it is the
-    LDP minimiser when ``λ ≥ 0`` and every other constraint holds.
+    LDP minimiser when ``λ ≥ 0`` and every other constraint holds (to ``10⁻⁹ max(1, max|h|)``,
+    ``bound_peak`` being ``max|h|``).
     """
-    if not np.count_nonzero(active):
-        return z
     equality = constraints[active]
+    if not equality.shape[0]:
+        return z
     *_, multipliers, info = lapack.dgesv(equality.dot(equality.T), bounds[active])
-    if info != 0 or not multipliers.min() >= 0:
+    if info != 0 or not _smallest(multipliers) >= 0:
         return z  # dependent active constraints or a wrong active set: keep the NNLS answer
     candidate = equality.T.dot(multipliers)
-    tolerance = 1e-9 * max(1.0, float(abs(bounds).max()))
-    return candidate if (constraints.dot(candidate) - bounds).min() >= -tolerance else z
+    tolerance = 1e-9 * max(1.0, bound_peak)
+    return candidate if _smallest(constraints.dot(candidate) - bounds) >= -tolerance else z
 
 
 def minimise_quadratic(
@@ -258,19 +280,22 @@ class FactoredQuadratic:
         return cls(hessian, constraints, bounds, inverse_factor, constraints.dot(inverse_factor),
                    -1e-7 * scale, _FEASIBILITY_TOLERANCE * scale, where)
 
-    def with_hessian(self, hessian: np.ndarray) -> FactoredQuadratic:
+    def with_hessian(self, hessian: np.ndarray, where: str | None = None) -> FactoredQuadratic:
         """The same constraints with another H, factored (for problems whose H changes per solve).
+
+        ``where`` renames the caller in error messages (default: keep this problem's).
 
         Raises
         ------
         SolverError
             If H is not positive definite.
         """
+        where = self.where if where is None else where
         hessian = np.asarray(hessian, dtype=float)
-        inverse_factor = _inverse_factor(hessian, self.where)
+        inverse_factor = _inverse_factor(hessian, where)
         return FactoredQuadratic(hessian, self.constraints, self.bounds, inverse_factor,
                                  self.constraints.dot(inverse_factor), self.violation_limit, self.active_limit,
-                                 self.where)
+                                 where)
 
     def minimise(self, linear: np.ndarray) -> QuadraticSolution:
         """The minimiser for the linear term f, shape (n,).
