@@ -80,7 +80,7 @@ def camera_led_matrix(camera_responsivities: Spectra, led_spectra: Spectra) -> n
 
 def _norm(vector: np.ndarray) -> float:
     """Euclidean norm of a vector (np.linalg.norm costs ~15 µs of checks on 3-vectors)."""
-    return math.sqrt(float(vector @ vector))
+    return math.sqrt(float(vector.dot(vector)))
 
 
 @lru_cache(maxsize=64)
@@ -201,7 +201,7 @@ class FlashModel:
         _check_count(ambient_weights, self.matrix, self.led_spectra)
         target_response = self.target_response(target) if isinstance(target, Spectra) else np.asarray(target, dtype=float)
         matrix, k = self.matrix, self.n_leds
-        ambient_response = matrix @ ambient_weights
+        ambient_response = matrix.dot(ambient_weights)
         target_norm = _norm(target_response)
         # Normalise so the ambient (or, with no ambient, the full flash) has unit camera response and
         # the target's response unit norm: the tie-break weights are then relative.
@@ -211,20 +211,20 @@ class FlashModel:
         previous = None if previous_weights is None else np.asarray(previous_weights, dtype=float)
 
         def solve(weight_bounds: str, fixed_scale: float | None) -> tuple[np.ndarray, float]:
-            constraints, limits = _box(k, weight_bounds)
             if fixed_scale is None:
                 # Variables x = [w_f, s]; residual A w_f − s t + A w_a (A/unit in the first k columns).
                 design = self._design / unit
                 design[:, k] = -t_vector
-                hessian = design.T @ design
+                hessian = design.T.dot(design)
                 hessian += _ridge(k + 1)
-                linear = design.T @ -ambient_unit
+                linear = design.T.dot(-ambient_unit)
                 if previous is not None:
                     linear[:k] += TIE_BREAK_CHANGE * previous
                 if weight_bounds != "free":
                     linear -= self._power_tie_break  # least total power first
                 x = self._complementary_rows[weight_bounds].with_hessian(hessian).minimise(linear).x
                 return x[:k], float(x[k])
+            constraints, limits = _box(k, weight_bounds)
             a_matrix = matrix / unit
             hessian = a_matrix.T @ a_matrix
             hessian += _ridge(k)
@@ -239,14 +239,17 @@ class FlashModel:
             weights, scale_unit = solve("free", scale_unit)
         else:
             weights, scale_unit = solve(bounds, None)
-        weights[abs(weights) < 1e-10] = 0.0
-        # np.maximum/np.minimum: np.clip's argument handling costs more than the clipping here.
+        # Round-off below 10⁻¹⁰ becomes 0 and the result is clipped to the bounds. With a lower
+        # bound of 0 both are one step: every weight below 10⁻¹⁰ (tiny or negative) becomes +0.
+        # (np.minimum: np.clip's argument handling costs more than the clipping here.)
         if bounds == "physical":
-            weights = np.minimum(np.maximum(weights, 0.0), 1.0)
-        elif bounds == "nonnegative":
-            weights = np.maximum(weights, 0.0)
+            weights = np.minimum(weights, 1.0)
+        if bounds == "free":
+            weights[abs(weights) < 1e-10] = 0.0
+        else:
+            weights[weights < 1e-10] = 0.0
         scale = scale_unit * unit / target_norm
-        relative_error = _error_to_unit(matrix @ (ambient_weights + weights), t_vector) if scale > 0 else 1.0
+        relative_error = _error_to_unit(matrix.dot(ambient_weights + weights), t_vector) if scale > 0 else 1.0
         return _finish("complementary", ambient_weights, weights, float(scale), relative_error, bounds)
 
 
@@ -338,7 +341,7 @@ def _check_count(ambient_weights: np.ndarray, matrix: np.ndarray, led_spectra: S
             f"{led_spectra.source or 'the LED spectra'}; expected one weight per LED"
         )
     # One sum tells finite weights apart; the exact check runs only if it is not finite (overflow).
-    if not math.isfinite(ambient_weights.sum()) and not np.isfinite(ambient_weights).all():
+    if not math.isfinite(np.add.reduce(ambient_weights)) and not np.isfinite(ambient_weights).all():
         raise SpectralDataError("flash: the ambient weights are not finite; expected numbers")
 
 

@@ -184,10 +184,11 @@ def _polish(constraints: np.ndarray, bounds: np.ndarray, z: np.ndarray, active: 
     LDP minimiser when ``λ ≥ 0`` and every other constraint holds (to ``10⁻⁹ max(1, max|h|)``,
     ``bound_peak`` being ``max|h|``).
     """
-    equality = constraints[active]
+    # ``compress``: the rows of a boolean mask, as ``constraints[active]``, with less dispatch.
+    equality = constraints.compress(active, axis=0)
     if not equality.shape[0]:
         return z
-    *_, multipliers, info = lapack.dgesv(equality.dot(equality.T), bounds[active])
+    *_, multipliers, info = lapack.dgesv(equality.dot(equality.T), bounds.compress(active))
     if info != 0 or not _smallest(multipliers) >= 0:
         return z  # dependent active constraints or a wrong active set: keep the NNLS answer
     candidate = equality.T.dot(multipliers)
