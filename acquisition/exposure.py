@@ -37,8 +37,16 @@ from typing import Any
 
 import numpy as np
 
+from acquisition import exposure_information as info
+
 DEFAULT_EXPOSURE_RANGE_US = (1.0, 10_000_000.0)
 """Exposure limits assumed for a camera that does not report its own."""
+
+MAX_INFORMATION_BLOCKS = 4096
+"""The information criterion looks at most at this many blocks (evenly spaced) of a large frame."""
+
+CRITERIA = ("bright_end", "information")
+"""The exposure criteria :class:`ExposurePolicy` offers."""
 
 
 @dataclass(frozen=True)
@@ -62,8 +70,26 @@ class ExposurePolicy:
     estimate pools every pixel and bins 4×4 blocks (×4 SNR) first."""
     stride: int = 2
     """Metering looks at every ``stride``-th row and column (4× fewer pixels by default)."""
+    criterion: str = "information"
+    """How exposures are chosen: ``"bright_end"`` (the ambient's bright end at ``target_fraction``, each
+    LED frame's at ``headroom_fraction``; at most ``max_saturated_fraction`` saturated per frame) or
+    ``"information"`` (starting from the bright-end plan, the ambient and LED exposures that maximise the
+    information the unsaturated blocks carry about the LED-only signals; see
+    :mod:`acquisition.exposure_information`)."""
+    max_lost_fraction: float = 0.25
+    """Information criterion: at most this fraction of the estimator's blocks may be lost to saturation
+    in the union of the frames (a guard; the criterion itself weighs what a lost block costs)."""
+    block_size: int = 4
+    """The estimator's block (pixels per side, per CFA plane for a mosaic): a block saturated in any frame
+    is dropped from every frame (``processing/statistics.py``)."""
 
     def __post_init__(self) -> None:
+        if self.criterion not in CRITERIA:
+            raise ValueError(f"criterion {self.criterion!r}; expected one of {', '.join(CRITERIA)}")
+        if not 0 <= self.max_lost_fraction < 1:
+            raise ValueError(f"max_lost_fraction {self.max_lost_fraction}; expected 0 ≤ f < 1")
+        if self.block_size < 1:
+            raise ValueError(f"block_size {self.block_size}; expected ≥ 1")
         if not 0 <= self.max_saturated_fraction < 0.5:
             raise ValueError(f"max_saturated_fraction {self.max_saturated_fraction}; expected 0 ≤ f < 0.5")
         if not 0 < self.target_fraction <= self.headroom_fraction <= 1:
@@ -110,6 +136,8 @@ class ExposurePlan:
     previews: list[dict] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     mode: str = "auto"
+    lost_block_fraction: float | None = None
+    """Information criterion: the predicted fraction of the estimator's blocks saturated in some frame."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (for the sequence's ``extra`` and run.json)."""
@@ -123,6 +151,7 @@ class ExposurePlan:
             "policy": asdict(self.policy),
             "previews": self.previews,
             "warnings": list(self.warnings),
+            "lost_block_fraction": self.lost_block_fraction,
         }
 
 
@@ -276,7 +305,7 @@ def plan_exposures(capture: Callable[[Sequence[float], float], np.ndarray], n_le
     ambient_rate = _rates(ambient_px, ambient_px_us, black, stride)
     ambient_ok = _valid(ambient_px, white, stride)
     led_us: list[float] = []
-    snrs: list[float] = []
+    led_previews: list[tuple[np.ndarray, float]] = []
     for led in range(n_leds):
         levels = tuple(1.0 if i == led else 0.0 for i in range(n_leds))
         preview_us = _clamp(ambient_us * policy.led_preview_fraction, limits)
@@ -288,7 +317,6 @@ def plan_exposures(capture: Callable[[Sequence[float], float], np.ndarray], n_le
                 break
             preview_us = _clamp(preview_us / 4.0, limits)
         led_rate = _rates(pixels, preview_us, black, stride)
-        valid = ambient_ok & _valid(pixels, white, stride)
         combined = led_rate.max(axis=2) if led_rate.ndim == 3 else led_rate
         bright_rate = linear_quantile(combined, 1.0 - policy.max_saturated_fraction)
         if bright_rate > 0:
@@ -301,7 +329,17 @@ def plan_exposures(capture: Callable[[Sequence[float], float], np.ndarray], n_le
             notes.append(f"LED {led + 1}: saturates {metered_led.saturated_fraction:.2%} of pixels at the shortest "
                          f"exposure {limits[0]:g} µs; dim the LED")
         led_us.append(exposure)
+        led_previews.append((pixels, preview_us))
+    lost: float | None = None
+    if policy.criterion == "information" and n_leds:
+        ambient_us, chosen, lost = _most_informative(ambient_px, ambient_px_us, led_previews, ambient_us, led_us,
+                                                     black, white, limits, noise, policy, cfa)
+        led_us = list(chosen)
+    snrs: list[float] = []
+    for led, ((pixels, preview_us), exposure) in enumerate(zip(led_previews, led_us, strict=True)):
         if noise is not None:
+            led_rate = _rates(pixels, preview_us, black, stride)
+            valid = ambient_ok & _valid(pixels, white, stride)
             snr = snr_with_model(ambient_rate, led_rate, ambient_us, exposure, noise, valid)
         else:
             measured = snr_from_difference(ambient_px, pixels, ambient_px_us, preview_us, black, white, cfa)
@@ -312,7 +350,36 @@ def plan_exposures(capture: Callable[[Sequence[float], float], np.ndarray], n_le
                          "the ambient; dim the ambient or move the booth closer")
     return ExposurePlan(ambient_us, tuple(led_us), tuple(snrs),
                         "photon+read noise" if noise is not None else "difference image",
-                        limits, policy, previews, notes)
+                        limits, policy, previews, notes, lost_block_fraction=lost)
+
+
+def _most_informative(ambient_px: np.ndarray, ambient_px_us: float, led_previews: Sequence[tuple[np.ndarray, float]],
+                      ambient_us: float, led_us: Sequence[float], black: float, white: float,
+                      limits: tuple[float, float], noise: NoiseModel | None, policy: ExposurePolicy, cfa: bool
+                      ) -> tuple[float, tuple[float, ...], float]:
+    """The information criterion on the previews, from the bright-end plan: ambient and LED exposures, lost fraction.
+
+    Every pixel of the previews (a mosaic's too: each pixel's own channel), grouped by the
+    estimator's blocks (``block_size`` per side, per CFA plane: 2·``block_size`` raw pixels).
+    """
+    block = policy.block_size * (2 if cfa else 1)
+    limit_dn = policy.headroom_fraction * (white - black)
+
+    def grouped(pixels: np.ndarray, exposure_us: float) -> tuple[np.ndarray, np.ndarray]:
+        rate = info.group_blocks(_rates(pixels, exposure_us, black, 1), block)
+        clipped = info.group_blocks(np.asarray(pixels) >= white, block).any(axis=1)
+        if rate.shape[0] > MAX_INFORMATION_BLOCKS:  # an even sample of the blocks estimates the sums and fractions
+            keep = np.linspace(0, rate.shape[0] - 1, MAX_INFORMATION_BLOCKS).astype(int)
+            rate, clipped = rate[keep], clipped[keep]
+        crossing = info.crossings(rate, clipped, exposure_us, limit_dn)
+        return info.thin_members(rate, block, 2 if cfa else 1), crossing
+
+    ambient, ambient_crossing = grouped(ambient_px, ambient_px_us)
+    leds = [grouped(pixels, preview_us) for pixels, preview_us in led_previews]
+    blocks = info.Blocks(ambient, tuple(r for r, _ in leds), ambient_crossing, tuple(c for _, c in leds))
+    dn_per_e = 1.0 / noise.electrons_per_dn if noise is not None else 1.0
+    read_dn = noise.read_noise_e * dn_per_e if noise is not None else 0.0
+    return info.most_informative(blocks, ambient_us, led_us, limits, dn_per_e, read_dn, policy.max_lost_fraction)
 
 
 def measure_led_snr(ambient: np.ndarray, ambient_us: float, led_frames: Sequence[np.ndarray],

@@ -1,7 +1,8 @@
 """Exposure planning on the sim rig: ambient metering, LED exposures below saturation, SNR.
 
 The sim scene has a specular strip (3.8 % of the pixels, 10× the diffuse signal); with the
-default 0.1 % saturation budget the strip sets the exposure, as a highlight would in a photo.
+bright-end criterion's 0.1 % saturation budget the strip sets the exposure, as a highlight would in
+a photo; the information criterion (the default) lets it saturate and exposes the rest longer.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from acquisition.rig import Rig, open_sim_rig
 from acquisition.sequence_format import read_sequence
 
 N_LEDS = 4
-POLICY = ex.ExposurePolicy()
+POLICY = ex.ExposurePolicy(criterion="bright_end")
+DEFAULT = ex.ExposurePolicy()
 
 
 @pytest.fixture
@@ -138,10 +140,10 @@ def test_capture_reports_exposures_and_snr(tmp_path, capsys: pytest.CaptureFixtu
     planned = sequence.extra["msflash"]["exposure"]
     assert planned["mode"] == "auto" and len(planned["predicted_led_snr"]) == 7
     assert [f.exposure_us for f in sequence.frames[1:]] == pytest.approx(planned["led_exposures_us"])
-    for index in range(len(sequence.frames)):
-        pixels = sequence.load_frame(index)
-        saturated = np.mean((pixels >= sequence.camera.white_level).any(axis=-1))
-        assert saturated <= POLICY.max_saturated_fraction
+    # the default (information) criterion: the union of saturated blocks is what it predicted, within the bound
+    lost = _lost_blocks([sequence.load_frame(i) for i in range(len(sequence.frames))], sequence.camera.white_level)
+    assert lost <= DEFAULT.max_lost_fraction
+    assert lost == pytest.approx(planned["lost_block_fraction"], abs=0.02)
 
 
 def test_fixed_exposure_and_bad_values(tmp_path, capsys: pytest.CaptureFixture) -> None:
@@ -223,3 +225,140 @@ def test_flash_exposure_refuses_frames_out_of_order() -> None:
     predictor.add_ambient(frame, 100.0)
     with pytest.raises(ValueError, match="second ambient"):
         predictor.add_ambient(frame, 100.0)
+
+
+# -- the information criterion -----------------------------------------------------------------
+
+BLACK, WHITE = 0.0, 4095.0
+NOISE = ex.NoiseModel(electrons_per_dn=2.0, read_noise_e=3.0)
+
+
+def _lost_blocks(frames, white: float, block: int = 4) -> float:
+    """Fraction of ``block × block`` blocks with a pixel at white in any frame (the estimator's rule)."""
+    union = None
+    for frame in frames:
+        saturated = frame >= white
+        saturated = saturated.any(axis=-1) if saturated.ndim == 3 else saturated
+        rows, cols = saturated.shape[0] // block, saturated.shape[1] // block
+        blocks = saturated[:rows * block, :cols * block].reshape(rows, block, cols, block).any(axis=(1, 3))
+        union = blocks if union is None else union | blocks
+    return float(np.mean(union))
+
+
+def _synthetic(ambient: np.ndarray, leds: list[np.ndarray]):
+    """A noise-free linear sensor: ``capture(levels, t)`` = clip(black + t·(ambient + Σ level·LED-only))."""
+    def capture(levels, exposure_us: float) -> np.ndarray:
+        rate = ambient + sum(level * led for level, led in zip(levels, leds))
+        return np.minimum(BLACK + rate * exposure_us, WHITE)
+    return capture
+
+
+def _scene(strips: list[tuple[int, int]], n_leds: int = 1, ambient_strips: bool = True
+           ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """64×64×3 rates: a textured diffuse scene; LED k's rows ``strips[k]`` 10× brighter (the ambient's too:
+    a specular strip; or not: each LED's own glare)."""
+    rng = np.random.default_rng(3)
+    diffuse = 0.5 + 0.5 * rng.random((64, 64, 1)) * np.array([1.0, 0.8, 0.6])
+    ambient = diffuse.copy()
+    leds = []
+    for k in range(n_leds):
+        led = 0.3 * diffuse
+        rows = slice(*strips[k % len(strips)])
+        led[rows] *= 10.0
+        if ambient_strips:
+            ambient[rows] = diffuse[rows] * 10.0
+        leds.append(led)
+    return ambient, leds
+
+
+def _plan_synthetic(ambient, leds, criterion: str, **policy) -> ex.ExposurePlan:
+    chosen = ex.ExposurePolicy(criterion=criterion, **policy)
+    return ex.plan_exposures(_synthetic(ambient, leds), len(leds), BLACK, WHITE, (1.0, 1e6), NOISE, chosen,
+                             start_us=100.0)
+
+
+def _frames(plan: ex.ExposurePlan, ambient, leds) -> list[np.ndarray]:
+    capture = _synthetic(ambient, leds)
+    n = len(leds)
+    return [capture((0.0,) * n, plan.ambient_exposure_us)] + [
+        capture(tuple(1.0 if i == k else 0.0 for i in range(n)), t) for k, t in enumerate(plan.led_exposures_us)]
+
+
+def test_information_lets_a_bright_strip_saturate_and_exposes_the_rest_longer() -> None:
+    ambient, leds = _scene([(8, 12)])  # 4 of 64 rows (6 %) 10× brighter
+    bright = _plan_synthetic(ambient, leds, "bright_end")
+    informed = _plan_synthetic(ambient, leds, "information")
+    # the strip sets the bright end; the information criterion gives it up (only it) for ~10× the exposure
+    assert _lost_blocks(_frames(bright, ambient, leds), WHITE) == 0.0
+    lost = _lost_blocks(_frames(informed, ambient, leds), WHITE)
+    assert lost == pytest.approx(1 / 16) and informed.lost_block_fraction == pytest.approx(lost)
+    for before, after in zip(bright.led_exposures_us, informed.led_exposures_us):
+        assert after > 5 * before
+    assert informed.ambient_exposure_us > 5 * bright.ambient_exposure_us
+    assert all(a > 2 * b for a, b in zip(informed.predicted_snr, bright.predicted_snr))
+    # outside the strip nothing saturates: the headroom holds
+    for frame in _frames(informed, ambient, leds):
+        assert frame[16:].max() <= DEFAULT.headroom_fraction * WHITE * 1.000001
+
+
+def test_information_on_a_uniform_scene_is_the_bright_end() -> None:
+    ambient = np.full((64, 64, 3), 1.0)
+    leds = [np.full((64, 64, 3), 0.4), np.full((64, 64, 3), 0.1)]
+    bright = _plan_synthetic(ambient, leds, "bright_end")
+    informed = _plan_synthetic(ambient, leds, "information")
+    # nothing to trade: each LED frame's bright end at the headroom, as the bright-end rule puts it
+    np.testing.assert_allclose(informed.led_exposures_us, bright.led_exposures_us, rtol=1e-9)
+    assert informed.lost_block_fraction == 0.0
+    # the ambient frame goes to the headroom too (its noise enters every LED-only difference)
+    assert informed.ambient_exposure_us * 1.0 == pytest.approx(DEFAULT.headroom_fraction * WHITE, rel=1e-9)
+    assert _lost_blocks(_frames(informed, ambient, leds), WHITE) == 0.0
+
+
+@pytest.mark.parametrize("bound", [0.0, 0.1, 0.2])
+def test_information_keeps_the_union_of_lost_blocks_within_the_bound(bound: float) -> None:
+    # two specular strips (6 % of the blocks each, 12 % together), in every frame
+    ambient, leds = _scene([(8, 12), (40, 44)], n_leds=2)
+    plan = _plan_synthetic(ambient, leds, "information", max_lost_fraction=bound)
+    lost = _lost_blocks(_frames(plan, ambient, leds), WHITE)
+    # the plan counts a block lost when it passes the headroom (a margin below white)
+    past_headroom = _lost_blocks(_frames(plan, ambient, leds), DEFAULT.headroom_fraction * WHITE * 1.000001)
+    assert lost <= past_headroom == pytest.approx(plan.lost_block_fraction) and past_headroom <= bound
+    # at 0 nothing is lost; at 20 % both strips go, and every frame is exposed for the diffuse scene
+    if bound == 0.0:
+        assert lost == 0.0
+    if bound == 0.2:
+        bright = _plan_synthetic(ambient, leds, "bright_end")
+        assert lost == pytest.approx(2 / 16)
+        assert all(a > 5 * b for a, b in zip(plan.led_exposures_us, bright.led_exposures_us))
+
+
+def test_information_keeps_a_strip_whose_led_only_signal_outweighs_the_gain() -> None:
+    # glare of the LED alone (not the ambient): its LED-only signal is 10× the diffuse one, so each of its
+    # pixels carries ~60× a diffuse pixel's information; exposing 3× longer would not pay for losing it
+    ambient, leds = _scene([(8, 12)], ambient_strips=False)
+    plan = _plan_synthetic(ambient, leds, "information")
+    assert _lost_blocks(_frames(plan, ambient, leds), WHITE) == 0.0
+
+
+def test_information_plan_on_the_sim_rig_predicts_its_losses_and_gains_snr(rig: Rig) -> None:
+    bright = _plan(rig)
+    informed = _plan(rig, policy=DEFAULT)
+    info = rig.camera.info
+    capture = _capture(rig)
+    frames = [capture((0.0,) * N_LEDS, informed.ambient_exposure_us)] + [
+        capture(tuple(1.0 if i == k else 0.0 for i in range(N_LEDS)), t) for k, t in enumerate(informed.led_exposures_us)]
+    lost = _lost_blocks(frames, info.white_level)
+    assert 0 < lost <= DEFAULT.max_lost_fraction
+    assert lost == pytest.approx(informed.lost_block_fraction, abs=0.02)
+    snr, _ = ex.measure_led_snr(frames[0], informed.ambient_exposure_us, frames[1:], informed.led_exposures_us,
+                                info.black_level, info.white_level, ex.camera_noise_model(rig.camera))
+    _, before = _check_frames(rig, bright)
+    gains = np.array(snr) / np.array(before)
+    assert gains.min() > 1.2 and np.median(gains) > 2.0, gains
+
+
+def test_policy_refuses_an_unknown_criterion() -> None:
+    with pytest.raises(ValueError, match="criterion 'brightest'; expected one of bright_end, information"):
+        ex.ExposurePolicy(criterion="brightest")
+    with pytest.raises(ValueError, match="max_lost_fraction"):
+        ex.ExposurePolicy(max_lost_fraction=1.5)
