@@ -157,8 +157,9 @@ def least_distance(constraints: np.ndarray, bounds: np.ndarray, where: str = "le
     if abs(last) < 1e-12:
         raise SolverError(f"{where}: the constraints cannot all be met; expected a feasible problem")
     z = residual[:n] / -last
-    # max |h| without the abs array: max(max h, −min h), both exact.
-    bound_peak = max(bound_top, -float(_smallest(bounds)))
+    # max |h| without the abs array: max(max h, −min h), both exact (h is finite here, so Python's
+    # min, cheaper than a numpy reduction on a few numbers, gives the same).
+    bound_peak = max(bound_top, -min(bounds.tolist()))
     return _polish(constraints, bounds, z, multipliers > 0, bound_peak)
 
 
@@ -189,7 +190,9 @@ def _polish(constraints: np.ndarray, bounds: np.ndarray, z: np.ndarray, active: 
     if not equality.shape[0]:
         return z
     *_, multipliers, info = lapack.dgesv(equality.dot(equality.T), bounds.compress(active))
-    if info != 0 or not _smallest(multipliers) >= 0:
+    # (Python's min on a few numbers: a NaN it might skip would make the candidate NaN, which the
+    # feasibility test below rejects, so the outcome is the same as with a NaN-propagating min.)
+    if info != 0 or not min(multipliers.tolist()) >= 0:
         return z  # dependent active constraints or a wrong active set: keep the NNLS answer
     candidate = equality.T.dot(multipliers)
     tolerance = 1e-9 * max(1.0, bound_peak)

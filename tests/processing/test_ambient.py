@@ -305,3 +305,23 @@ def test_prepared_model_equals_the_one_shot_estimate(tungsten_frames, method: st
         model.weights(statistics, "magic")
     with pytest.raises(SpectralDataError, match="expected one spectrum per LED"):
         model.weights(statistics.select_leds(range(3)))
+
+
+@pytest.mark.parametrize("method", ["lstsq", "nonneg", "tikhonov"])
+def test_prepared_constraint_rows_solve_as_the_one_shot_quadratic(tungsten_frames, method: str) -> None:
+    """AmbientModel prepares the I w ≥ 0 rows once (LedTerms); each solve equals the one-shot QP on it.
+
+    (Roughness is left out: its last problem may be a majorise–minimise step it rejects.)
+    """
+    from processing.ambient import AmbientModel
+    from processing.least_squares import minimise_quadratic, recording_problems
+
+    a, f, spec = tungsten_frames
+    statistics = accumulate_statistics(a, f, spec)
+    model = AmbientModel(leds_photons())
+    with recording_problems() as problems:
+        weights, _ = model.weights(statistics, method, 1e-3)
+    assert problems
+    np.testing.assert_array_equal(minimise_quadratic(*problems[-1]).x, weights)
+    constrained = method != "lstsq"
+    assert problems[-1][2].shape[0] == (model.terms.emitting.shape[0] if constrained else 0)

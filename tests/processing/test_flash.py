@@ -154,3 +154,30 @@ def test_prepared_matching_problem_is_the_plain_quadratic(bounds: str) -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", TargetUnreachableWarning)
             np.testing.assert_array_equal(model.matching(ambient, bounds).flash_weights, plain / plain.max())
+
+
+@pytest.mark.parametrize("bounds", ["physical", "nonnegative", "free"])
+def test_complementary_weights_are_the_rounded_clipped_qp_solution(bounds: str) -> None:
+    """The weights are the QP's last solution with |w| < 1e-10 set to 0, then clipped to the bounds.
+
+    The rounding and the clipping are fused in FlashModel when the lower bound is 0; this checks
+    the fused form against the two-step definition, bit for bit, with ambients inside and outside
+    the LEDs' gamut (negative weights, upper bounds active).
+    """
+    from processing.flash import FlashModel
+    from processing.least_squares import minimise_quadratic, recording_problems
+
+    model = FlashModel(leds_photons(), camera())
+    target = model.target_response(datasets.illuminant("D65", GRID).to_unit("photons"))
+    rng = np.random.default_rng(5)
+    ambients = [AMBIENT_WEIGHTS, rng.normal(size=7), rng.uniform(0, 3, size=7), np.zeros(7)]
+    for ambient in ambients:
+        with warnings.catch_warnings(), recording_problems() as problems:
+            warnings.simplefilter("ignore", TargetUnreachableWarning)
+            weights = model.complementary(ambient, target, bounds).flash_weights
+        x = minimise_quadratic(*problems[-1]).x[:7]
+        x[abs(x) < 1e-10] = 0.0
+        if bounds != "free":
+            x = np.clip(x, 0.0, 1.0 if bounds == "physical" else None)
+        np.testing.assert_array_equal(weights, x)
+        assert not np.signbit(weights[weights == 0]).any()

@@ -160,3 +160,23 @@ def test_non_finite_constraints_are_refused() -> None:
 
     with pytest.raises(SpectralDataError, match="flash: the constraints or the linear term are not finite"):
         minimise_quadratic(np.eye(2), np.zeros(2), np.eye(2), np.array([1.0, np.inf]), where="flash")
+
+
+def test_refactored_hessian_solves_as_the_one_shot_call_and_names_its_caller() -> None:
+    """with_hessian keeps the prepared rows and factors a new H: same bits as preparing anew."""
+    from processing.least_squares import FactoredQuadratic
+
+    rng = np.random.default_rng(11)
+    n = 6
+    constraints, bounds = np.vstack([np.eye(n), -np.eye(n)]), np.concatenate([np.zeros(n), -np.ones(n)])
+    rows = FactoredQuadratic.prepare(np.eye(n), constraints, bounds, where="rows")
+    for _ in range(5):
+        hessian, linear, *_ = random_problem(int(rng.integers(2**31)), n, 0)
+        fast = rows.with_hessian(hessian, "renamed").minimise(linear * 5)
+        reference = minimise_quadratic(hessian, linear * 5, constraints, bounds)
+        np.testing.assert_array_equal(fast.x, reference.x)
+        np.testing.assert_array_equal(fast.active, reference.active)
+        assert fast.problem.where == "renamed"
+    assert rows.with_hessian(np.eye(n)).where == "rows"
+    with pytest.raises(SolverError, match="renamed: the normal matrix is not positive definite"):
+        rows.with_hessian(-np.eye(n), "renamed")
