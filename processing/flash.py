@@ -207,17 +207,16 @@ class FlashModel:
         # the target's response unit norm: the tie-break weights are then relative.
         unit = max(_norm(ambient_response), self._full_flash_norm * 1e-3, 1e-300)
         t_vector = target_response / target_norm
-        ambient_unit = ambient_response / unit
         previous = None if previous_weights is None else np.asarray(previous_weights, dtype=float)
 
         def solve(weight_bounds: str, fixed_scale: float | None) -> tuple[np.ndarray, float]:
             if fixed_scale is None:
                 # Variables x = [w_f, s]; residual A w_f − s t + A w_a (A/unit in the first k columns).
                 design = self._design / unit
-                design[:, k] = -t_vector
+                np.negative(t_vector, out=design[:, k])
                 hessian = design.T.dot(design)
                 hessian += _ridge(k + 1)
-                linear = design.T.dot(-ambient_unit)
+                linear = design.T.dot(ambient_response / -unit)  # −(a/u) and a/(−u): the same bits
                 if previous is not None:
                     linear[:k] += TIE_BREAK_CHANGE * previous
                 if weight_bounds != "free":
@@ -228,7 +227,7 @@ class FlashModel:
             a_matrix = matrix / unit
             hessian = a_matrix.T @ a_matrix
             hessian += _ridge(k)
-            linear = a_matrix.T @ (fixed_scale * t_vector - ambient_unit)
+            linear = a_matrix.T @ (fixed_scale * t_vector - ambient_response / unit)
             if previous is not None:
                 linear += TIE_BREAK_CHANGE * previous
             x = minimise_quadratic(hessian, linear, constraints, limits, where="complementary flash").x

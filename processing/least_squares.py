@@ -137,15 +137,17 @@ def least_distance(constraints: np.ndarray, bounds: np.ndarray, where: str = "le
     m, n = constraints.shape
     if m == 0:
         return np.zeros(n)
-    # Reductions through the ufuncs: ``ndarray.max`` adds a Python wrapper that costs as much as
-    # the reduction on a few dozen numbers.
-    bound_top = float(_largest(bounds))
-    if bound_top <= 0:
+    # Python's max/min/sum on the list: a numpy reduction costs several times more on a few dozen
+    # numbers. Python's max may skip a NaN, so a NaN (found by the sum) never takes the early exit:
+    # it reaches the finiteness test below, as with numpy's NaN-propagating max.
+    bound_values = bounds.tolist()
+    bound_top = max(bound_values)
+    if bound_top <= 0 and not math.isnan(sum(bound_values)):
         return np.zeros(n)
     stacked = np.empty((n + 1, m))
     stacked[:n] = constraints.T
     stacked[n] = bounds
-    peak = float(_largest(abs(stacked), axis=None))
+    peak = float(np.maximum.reduce(abs(stacked), axis=None))
     if not math.isfinite(peak):
         raise SpectralDataError(f"{where}: the constraints or the linear term are not finite; expected finite numbers")
     stacked /= max(peak, 1e-300)
@@ -157,14 +159,9 @@ def least_distance(constraints: np.ndarray, bounds: np.ndarray, where: str = "le
     if abs(last) < 1e-12:
         raise SolverError(f"{where}: the constraints cannot all be met; expected a feasible problem")
     z = residual[:n] / -last
-    # max |h| without the abs array: max(max h, −min h), both exact (h is finite here, so Python's
-    # min, cheaper than a numpy reduction on a few numbers, gives the same).
-    bound_peak = max(bound_top, -min(bounds.tolist()))
+    # max |h| without the abs array: max(max h, −min h), both exact (h is finite here).
+    bound_peak = max(bound_top, -min(bound_values))
     return _polish(constraints, bounds, z, multipliers > 0, bound_peak)
-
-
-_largest = np.maximum.reduce
-_smallest = np.minimum.reduce
 
 
 @lru_cache(maxsize=64)
@@ -196,7 +193,7 @@ def _polish(constraints: np.ndarray, bounds: np.ndarray, z: np.ndarray, active: 
         return z  # dependent active constraints or a wrong active set: keep the NNLS answer
     candidate = equality.T.dot(multipliers)
     tolerance = 1e-9 * max(1.0, bound_peak)
-    return candidate if _smallest(constraints.dot(candidate) - bounds) >= -tolerance else z
+    return candidate if np.minimum.reduce(constraints.dot(candidate) - bounds) >= -tolerance else z
 
 
 def minimise_quadratic(

@@ -160,6 +160,11 @@ def test_non_finite_constraints_are_refused() -> None:
 
     with pytest.raises(SpectralDataError, match="flash: the constraints or the linear term are not finite"):
         minimise_quadratic(np.eye(2), np.zeros(2), np.eye(2), np.array([1.0, np.inf]), where="flash")
+    # A NaN among otherwise non-positive LDP bounds (here h_z = −f = [−1, NaN]) must not pass for
+    # "already feasible": a max that skips the NaN would return the zero step.
+    for linear in ([1.0, np.nan], [np.nan, 1.0]):
+        with pytest.raises(SpectralDataError, match="not finite"):
+            minimise_quadratic(np.eye(2), np.array(linear), np.eye(2), np.zeros(2))
 
 
 def test_refactored_hessian_solves_as_the_one_shot_call_and_names_its_caller() -> None:
