@@ -18,7 +18,8 @@ Between two crossings ``F`` only grows with an exposure, so each coordinate's op
 crossing: coordinate ascent over ``T, t₁ … t_K`` evaluates ``F`` exactly at the crossings (a
 geometric ladder of lost fractions, refined around the best), counting a block already lost to
 another frame as free (the union effect), and never lets the union of lost blocks pass
-``max_lost_fraction``. Each step keeps the current value as a candidate, so ``F`` never decreases.
+``max_lost_fraction``. Each sweep first scales all exposures together (a bright patch pays only
+when every frame gives it up: one frame alone is held back by the others' noise), then each one. Each step keeps the current value as a candidate, so ``F`` never decreases.
 """
 
 from __future__ import annotations
@@ -146,7 +147,19 @@ def most_informative(blocks: Blocks, start_ambient_us: float, start_led_us: Sequ
 
     for _ in range(sweeps):
         before = (ambient_us, tuple(led_us))
-        if optimise_ambient:
+        if optimise_ambient:  # every exposure × λ: a bright patch given up by all frames at once
+            exposures = np.array([ambient_us, *led_us])
+            joint = np.min(np.stack((blocks.ambient_crossing, *blocks.led_crossings)) / exposures[:, None], axis=0)
+            scale_limits = (float(np.max(limits[0] / exposures)), float(np.min(limits[1] / exposures)))
+
+            def joint_score(values: np.ndarray) -> np.ndarray:
+                scale = values[:, None, None]
+                return sum(information(r, blocks.ambient, scale * led_us[k], scale * ambient_us, dn_per_e, read_dn)
+                           for k, r in enumerate(leds))
+
+            if scale_limits[0] <= 1.0 <= scale_limits[1]:
+                factor = _optimise(joint, np.zeros(n_blocks, dtype=bool), 1.0, scale_limits, max_lost, joint_score)
+                ambient_us, led_us = ambient_us * factor, [t * factor for t in led_us]
             elsewhere = lost_by(-1)
 
             def ambient_score(values: np.ndarray) -> np.ndarray:
