@@ -70,12 +70,14 @@ class ExposurePolicy:
     estimate pools every pixel and bins 4×4 blocks (×4 SNR) first."""
     stride: int = 2
     """Metering looks at every ``stride``-th row and column (4× fewer pixels by default)."""
-    criterion: str = "information"
+    criterion: str = "bright_end"
     """How exposures are chosen: ``"bright_end"`` (the ambient's bright end at ``target_fraction``, each
     LED frame's at ``headroom_fraction``; at most ``max_saturated_fraction`` saturated per frame) or
     ``"information"`` (starting from the bright-end plan, the ambient and LED exposures that maximise the
     information the unsaturated blocks carry about the LED-only signals; see
-    :mod:`acquisition.exposure_information`)."""
+    :mod:`acquisition.exposure_information`). Not the default: it lowers the sim's mean spectrum RMSE
+    by 12 % but raises it under the underwater ambient, and the blocks it gives up (up to
+    ``max_lost_fraction``: the chart's white patches) are missing from the synthesised images too."""
     max_lost_fraction: float = 0.25
     """Information criterion: at most this fraction of the estimator's blocks may be lost to saturation
     in the union of the frames (a guard; the criterion itself weighs what a lost block costs)."""
