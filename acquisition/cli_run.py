@@ -118,9 +118,11 @@ def _report_frame(step, frame, entry) -> None:
 
 def _policy(args: argparse.Namespace) -> ExposurePolicy:
     try:
-        return ExposurePolicy(max_saturated_fraction=args.max_saturated / 100.0)
+        return ExposurePolicy(max_saturated_fraction=args.max_saturated / 100.0, criterion=args.exposure_criterion,
+                              max_lost_fraction=args.max_lost / 100.0)
     except ValueError as err:
-        raise UsageError(f"--max-saturated {args.max_saturated}: {err}") from err
+        raise UsageError(f"--max-saturated {args.max_saturated} / --exposure-criterion {args.exposure_criterion} / "
+                         f"--max-lost {args.max_lost}: {err}") from err
 
 
 def _recorded_exposures(rig: Rig) -> tuple[float, tuple[float, ...], float | None] | None:
@@ -452,6 +454,13 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-serial", default=None, help="write the booth serial transcript to this file")
     parser.add_argument("--max-saturated", type=float, default=0.1, metavar="PERCENT",
                         help="auto exposure: at most this percentage of pixels may saturate in a frame (default 0.1)")
+    parser.add_argument("--exposure-criterion", choices=("bright_end", "information"), default="bright_end",
+                        help="auto exposure: bright_end (default: the brightest pixels just below saturation, so "
+                             "every chart patch stays usable) or information (longest exposures whose unsaturated "
+                             "blocks carry the most LED-only information; highlights may clip — see README)")
+    parser.add_argument("--max-lost", type=float, default=25.0, metavar="PERCENT",
+                        help="information criterion: at most this percentage of the estimator's blocks may be lost "
+                             "to saturation over all frames (default 25)")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -365,3 +365,19 @@ def test_policy_refuses_an_unknown_criterion() -> None:
         ex.ExposurePolicy(criterion="brightest")
     with pytest.raises(ValueError, match="max_lost_fraction"):
         ex.ExposurePolicy(max_lost_fraction=1.5)
+
+
+def test_capture_with_the_information_criterion_from_the_command_line(tmp_path, capsys: pytest.CaptureFixture) -> None:
+    """``--exposure-criterion information --max-lost 10`` reaches the plan: longer LED exposures, ≤ 10 % blocks lost."""
+    bright, informed = tmp_path / "b", tmp_path / "i"
+    assert main(["capture", "--out", str(bright), "--ambient", "tungsten"]) == 0
+    assert main(["capture", "--out", str(informed), "--ambient", "tungsten", "--exposure-criterion", "information",
+                 "--max-lost", "10"]) == 0
+    plans = [read_sequence(out / "sequence").extra["msflash"]["exposure"] for out in (bright, informed)]
+    assert plans[1]["policy"]["criterion"] == "information"
+    assert plans[1]["policy"]["max_lost_fraction"] == pytest.approx(0.10)
+    assert 0 <= plans[1]["lost_block_fraction"] <= 0.10
+    assert sum(plans[1]["led_exposures_us"]) > sum(plans[0]["led_exposures_us"])
+    capsys.readouterr()
+    assert main(["capture", "--out", str(tmp_path / "x"), "--exposure-criterion", "information", "--max-lost", "150"]) == 2
+    assert "--max-lost 150" in capsys.readouterr().err
