@@ -184,8 +184,28 @@ def camera_noise_model(camera: Any) -> NoiseModel | None:
 
 # -- metering ----------------------------------------------------------------------------------
 
+def _sample(pixels: np.ndarray, stride: int) -> np.ndarray:
+    """Every ``stride``-th pixel of a frame, as (h, w[, channels]) — for a one-plane frame whole 2×2 quads.
+
+    Striding a raw mosaic by an even step would read a single CFA site (one colour: a blue LED
+    metered on red sites looks dark), so a 2-D frame is sampled as 2×2 quads, each a 4-channel
+    "pixel" (every colour of the mosaic; for a mono frame four neighbours), on every
+    ``stride / 2``-th quad — the same number of values as before. ``stride`` 1 keeps the frame.
+    """
+    if stride <= 1:
+        return pixels
+    if pixels.ndim == 3:
+        return pixels[::stride, ::stride]
+    height, width = (pixels.shape[0] // 2) * 2, (pixels.shape[1] // 2) * 2
+    if height == 0 or width == 0:
+        return pixels[::stride, ::stride]
+    step = max(1, stride // 2)
+    quads = pixels[:height, :width].reshape(height // 2, 2, width // 2, 2)[::step, :, ::step, :]
+    return quads.transpose(0, 2, 1, 3).reshape(quads.shape[0], quads.shape[2], 4)
+
+
 def _brightest(pixels: np.ndarray, stride: int) -> np.ndarray:
-    sub = pixels[::stride, ::stride] if stride > 1 else pixels
+    sub = _sample(pixels, stride)
     return sub.max(axis=2) if sub.ndim == 3 else sub
 
 
@@ -249,7 +269,7 @@ def auto_ambient_exposure(capture: Callable[[float], np.ndarray], start_us: floa
 
 
 def _rates(pixels: np.ndarray, exposure_us: float, black: float, stride: int) -> np.ndarray:
-    sub = pixels[::stride, ::stride] if stride > 1 else pixels
+    sub = _sample(pixels, stride)
     return (sub.astype(np.float64) - black) / exposure_us
 
 

@@ -202,13 +202,20 @@ def test_flash_exposure_from_frames_as_they_arrive(channels: int) -> None:
     for frame, exposure in zip(leds, led_us):
         predictor.add_led(frame, exposure)
     step = 2 * POLICY.stride
-    rate = (ambient[::step, ::step].astype(float) - black) / ambient_us
+
+    def sampled(frame: np.ndarray) -> np.ndarray:
+        # RGB: every step-th pixel; a one-plane (mosaic) frame: every (step/2)-th 2×2 quad, its four sites as channels
+        if frame.ndim == 3:
+            return frame[::step, ::step]
+        return np.stack([frame[i::2, j::2][::step // 2, ::step // 2] for i in (0, 1) for j in (0, 1)], axis=2)
+
+    rate = (sampled(ambient).astype(float) - black) / ambient_us
     for weights in ([0.3, 0.0, 1.0, 0.2, 0.7], [0.0] * 5, [1.0] * 5):
         one_shot = ex.flash_exposure(ambient, ambient_us, leds, led_us, weights, black, white, limits, POLICY)
         assert predictor.predict(weights) == one_shot
-        total = rate + sum(w * ((f[::step, ::step].astype(float) - black) / e - rate)
+        total = rate + sum(w * ((sampled(f).astype(float) - black) / e - rate)
                            for f, e, w in zip(leds, led_us, weights))
-        brightest = total.max(axis=2) if channels else total
+        brightest = total.max(axis=2)
         bright_end = np.quantile(brightest, 1.0 - POLICY.max_saturated_fraction)
         expected = min(max(POLICY.target_fraction * (white - black) / bright_end, limits[0]), limits[1])
         assert one_shot == pytest.approx(expected, rel=1e-12)
@@ -381,3 +388,13 @@ def test_capture_with_the_information_criterion_from_the_command_line(tmp_path, 
     capsys.readouterr()
     assert main(["capture", "--out", str(tmp_path / "x"), "--exposure-criterion", "information", "--max-lost", "150"]) == 2
     assert "--max-lost 150" in capsys.readouterr().err
+
+
+def test_a_mosaic_is_metered_on_every_colour_site() -> None:
+    """An even stride on a raw mosaic would read one CFA site: a frame bright only on the blue sites
+    must meter bright (and saturate) all the same."""
+    frame = np.full((64, 64), 100, dtype=np.uint16)
+    frame[1::2, 1::2] = 4095  # every blue site of an RGGB mosaic saturated, red sites dark
+    levels = ex.meter(frame, 64.0, 4095.0, POLICY)
+    assert levels.saturated_fraction == 1.0  # every 2×2 quad holds a saturated site
+    assert levels.bright_end == pytest.approx(1.0)
