@@ -45,7 +45,7 @@ import numpy as np
 from processing.ambient import AMBIENT_METHODS, AmbientEstimate, gcv_alpha, estimate_ambient
 from processing.errors import SolverError, SpectralDataError
 from processing.spectra import Spectra, require_unit
-from processing.statistics import FrameStackSpec, SequenceStatistics, block_sums, cfa_planes
+from processing.statistics import FrameStackSpec, SequenceStatistics, block_sums, cfa_planes, saturated_blocks
 from processing.synthesis import frame_coefficients
 
 LOCAL_METHODS = ("auto", "global", "local")
@@ -281,13 +281,6 @@ def _block_sums(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
     np.copyto(out, block_sums(plane, factor)[:height, :width])
 
 
-def _block_any(mask: np.ndarray, factor: int, height: int, width: int) -> np.ndarray:
-    """(height, width) blocks of an (H, W) mask with any member set."""
-    if factor == 1:
-        return mask[:height, :width].copy()
-    return mask[:height * factor, :width * factor].reshape(height, factor, width, factor).any(axis=(1, 3))
-
-
 def tile_statistics(
     ambient: np.ndarray,
     led_frames: Sequence[np.ndarray],
@@ -337,8 +330,7 @@ def tile_statistics(
     invalid = np.zeros((height, width), dtype=bool)
     for plane in planes:
         if plane.size and plane.max() >= spec.white_level:
-            hit = plane >= spec.white_level
-            invalid |= _block_any(hit.any(axis=2), bin_factor, height, width)
+            invalid |= saturated_blocks(plane, bin_factor, spec.white_level)
     if invalid.any():
         data[:, invalid] = 0.0
     row_blocks, column_blocks = tile_edges(height, rows_tiles), tile_edges(width, columns_tiles)

@@ -422,7 +422,7 @@ class BlockRows:
             self._floating = True  # only ever set: safe when worker threads add frames
         # One contiguous max per frame finds the frames that saturate at all; only those build masks.
         if _may_saturate(plane, self.white_level):
-            self._invalid.append(_saturated_blocks(plane, self.factor, self.white_level))
+            self._invalid.append(saturated_blocks(plane, self.factor, self.white_level))
         if self._moments is not None:
             # One matrix–vector product with every row (rows not filled yet are zeros; their
             # products are set when they arrive): cheaper than gathering the filled rows first.
@@ -528,7 +528,7 @@ def _any_channel(mask: np.ndarray) -> np.ndarray:
     return result
 
 
-def _saturated_blocks(plane: np.ndarray, factor: int, white: float) -> np.ndarray:
+def saturated_blocks(plane: np.ndarray, factor: int, white: float) -> np.ndarray:
     """(H/f, W/f) mask of the ``factor × factor`` blocks of an (H, W, C) plane with any sample ≥ ``white``.
 
     Block maxima first, then one comparison: the maxima over a block's ``factor`` rows run along

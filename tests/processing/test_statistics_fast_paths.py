@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing.statistics import FrameStackSpec, _saturated_blocks, accumulate_statistics, bin_frame
+from processing.statistics import FrameStackSpec, accumulate_statistics, bin_frame, saturated_blocks
 from processing.synthesis import synthesize
 from tests.processing.test_statistics import MULTIPLEXED, assert_matches, naive_statistics, random_stack
 
@@ -174,4 +174,4 @@ def test_saturated_blocks_equal_the_any_of_each_block(dtype: type) -> None:
         rows, columns = height // factor, width // factor
         hit = (plane >= white).any(axis=2)[:rows * factor, :columns * factor]
         expected = hit.reshape(rows, factor, columns, factor).any(axis=(1, 3))
-        np.testing.assert_array_equal(_saturated_blocks(plane, factor, white), expected)
+        np.testing.assert_array_equal(saturated_blocks(plane, factor, white), expected)
