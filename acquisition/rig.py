@@ -166,6 +166,31 @@ def _emulator_for(leds: Spectra) -> BoothEmulator:
     return BoothEmulator(names=[n.replace(" ", "_") for n in leds.names], peaks_nm=peaks)
 
 
+def _open_emulated_booth(leds: Spectra, log_serial: str | Path | None, closers: list) -> tuple[BoothEmulator, LedBooth]:
+    """The booth emulator for ``leds`` served on a new pty, and the ``LedBooth`` driver on that pty.
+
+    Each part's closer is appended to ``closers`` as soon as the part is open, so the caller's
+    :func:`_close_all` undoes a partial open.
+
+    Raises
+    ------
+    RigOpenError
+        Naming the pty (``booth emulator on /dev/pts/N: …``) when any part fails.
+    """
+    port = "a new pty"
+    try:
+        emulator = _emulator_for(leds)
+        server = serve_on_pty(emulator)
+        closers.append(server.close)
+        port = server.port
+        booth = LedBooth.open(server.port, log_serial=log_serial)
+        closers.append(booth.close)
+        closers.append(booth.all_off)
+    except Exception as err:
+        raise RigOpenError(f"booth emulator on {port}: {err}") from err
+    return emulator, booth
+
+
 def _close_all(closers: list) -> None:
     for closer in reversed(closers):
         with contextlib.suppress(Exception):
@@ -182,12 +207,7 @@ def open_sim_rig(ambient: str = "tungsten", scene: str = "chart110", cfa: str | 
     try:
         world = SimulatedCamera.default(scene=scene, ambient=ambient, cfa=cfa, seed=seed, camera=camera, n_leds=n_leds)  # type: ignore[arg-type]
         closers.append(world.close)
-        emulator = _emulator_for(world.led_spectra)
-        server = serve_on_pty(emulator)
-        closers.append(server.close)
-        booth = LedBooth.open(server.port, log_serial=log_serial)
-        closers.append(booth.close)
-        closers.append(booth.all_off)
+        emulator, booth = _open_emulated_booth(world.led_spectra, log_serial, closers)
 
         # Exposure-time coupling: the camera renders with what the emulator's LEDs are doing. The
         # ExposureActive line is high while the levels are read (the exposure) — camera master.
@@ -350,14 +370,9 @@ def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int = 64, 
         failures[f"camera GigE fake {serial} at 127.0.0.1"] = err
         aravis = None
     try:
-        emulator = _emulator_for(leds)
-        server = serve_on_pty(emulator)
-        closers.append(server.close)
-        booth = LedBooth.open(server.port, log_serial=log_serial)
-        closers.append(booth.close)
-        closers.append(booth.all_off)
-    except Exception as err:  # noqa: BLE001
-        failures[f"booth emulator on {getattr(locals().get('server'), 'port', 'a pty')}"] = err
+        emulator, booth = _open_emulated_booth(leds, log_serial, closers)
+    except RigOpenError as err:
+        failures["booth"] = err
     if failures:
         _close_all(closers)
         listing = "; ".join(f"{device}: {err}" for device, err in failures.items())
@@ -382,15 +397,10 @@ def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None,
     responsivities = sequence.camera_responsivities()
     closers: list = [camera.close]
     try:
-        emulator = _emulator_for(leds)
-        server = serve_on_pty(emulator)
-        closers.append(server.close)
-        booth = LedBooth.open(server.port, log_serial=log_serial)
-        closers.append(booth.close)
-        closers.append(booth.all_off)
-    except Exception as err:
+        emulator, booth = _open_emulated_booth(leds, log_serial, closers)
+    except RigOpenError as err:
         _close_all(closers)
-        raise RigOpenError(f"rig 'replay:{directory}': booth emulator: {err}") from err
+        raise RigOpenError(f"rig 'replay:{directory}': {err}") from err
     line_errors: list[BaseException] = []
     emulator.on_trigger_out = _line(line_errors, "replay trigger line", camera.trigger_line)
     camera.exposure_line = emulator.exposure_active

@@ -102,3 +102,21 @@ def test_replay_mismatch_through_the_cli_is_one_error_line(tmp_path: Path, capsy
     assert status == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("msflash: error: ") and "step 0 (ambient): exposure_us 5000" in err[-1]
+
+
+def test_a_booth_that_fails_to_open_is_named_and_the_rig_is_closed(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fault injected into the driver's open (the emulator and its pty are real): the error names the
+    rig and the pty, and what was already open (camera, pty server) is closed again."""
+    import threading
+
+    from acquisition import rig
+    from acquisition.errors import RigOpenError
+
+    def refuse(port, **_kwargs):
+        raise OSError(f"cannot open {port}")
+
+    monkeypatch.setattr(rig.LedBooth, "open", staticmethod(refuse))
+    threads = threading.active_count()
+    with pytest.raises(RigOpenError, match=r"rig 'replay:.*': booth emulator on /dev/pts/\d+: cannot open /dev/pts/\d+"):
+        rig.open_replay_rig(RECORDED)
+    assert threading.active_count() <= threads  # the pty server's thread is gone
