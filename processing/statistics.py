@@ -519,15 +519,6 @@ def _may_saturate(frame: np.ndarray, white: float) -> bool:
     return bool(frame.size) and bool(frame.max() >= white)
 
 
-def _any_channel(mask: np.ndarray) -> np.ndarray:
-    """(H, W) mask of the pixels of an (H, W, C) mask with any channel set."""
-    # ``|`` over strided channel views: .any(axis=2) over a tiny trailing axis is slow in numpy.
-    result = mask[:, :, 0].copy()
-    for channel in range(1, mask.shape[2]):
-        result |= mask[:, :, channel]
-    return result
-
-
 def saturated_blocks(plane: np.ndarray, factor: int, white: float) -> np.ndarray:
     """(H/f, W/f) mask of the ``factor × factor`` blocks of an (H, W, C) plane with any sample ≥ ``white``.
 
