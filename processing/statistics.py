@@ -132,6 +132,28 @@ class SequenceStatistics:
         w = np.asarray(weights, dtype=float)
         return float(max(self.ambient_energy - 2.0 * self.cross @ w + w @ self.gram @ w, 0.0))
 
+    def replicated(self, copies: int) -> SequenceStatistics:
+        """The statistics of ``copies`` identical copies of these samples: every sum times ``copies``.
+
+        A mono frame recorded as three identical channels (format v1 stores RGB or mosaics) has
+        the statistics of its one plane, replicated 3 times: taking them from the plane reads a
+        third of the data for the same result.
+
+        Examples
+        --------
+        >>> one = SequenceStatistics(np.eye(2), np.ones(2), 4.0, 10, 12, 5.0, np.ones(2))
+        >>> three = one.replicated(3)
+        >>> float(three.gram[0, 0]), three.ambient_energy, three.n_samples, three.saturated_fraction == one.saturated_fraction
+        (3.0, 12.0, 30, True)
+        """
+        if copies < 1:
+            raise SpectralDataError(f"replicated statistics: {copies} copies; expected at least 1")
+        return SequenceStatistics(
+            gram=self.gram * copies, cross=self.cross * copies, ambient_energy=self.ambient_energy * copies,
+            n_samples=self.n_samples * copies, n_total=self.n_total * copies,
+            ambient_sum=self.ambient_sum * copies, led_sums=self.led_sums * copies,
+        )
+
     def select_leds(self, which: Sequence[int]) -> SequenceStatistics:
         """Statistics restricted to a subset of the LEDs (for leave-one-out and LED-count studies)."""
         idx = np.asarray(which, dtype=int)
@@ -379,7 +401,9 @@ class BlockRows:
     product. A capture adds each frame as it arrives (``incremental=True``): the new row's
     products with the rows already in are taken then, so once the last frame is in only its own
     block sums and one matrix–vector product remain — no full moment product on the latency path.
-    Blocks saturated in any frame (or :meth:`exclude`-d) are left out of the moments.
+    Blocks saturated in any frame (or :meth:`exclude`-d) are left out of the moments; in
+    incremental mode as soon as they are known (their columns zeroed in every row, their products
+    taken out of the moments), so :meth:`statistics` has no mask left to apply.
 
     Frames may be added from several threads (distinct rows), but not in incremental mode.
     """
@@ -406,6 +430,7 @@ class BlockRows:
         self._filled = [n_led_frames + 1]
         self._floating = False
         self._moments: np.ndarray | None = None
+        self._excluded: np.ndarray | None = None  # incremental mode: columns already left out
         if incremental:
             self._moments = np.zeros((n_rows, n_rows))
             self._moments[-1, -1] = self.rows.shape[1]
@@ -421,9 +446,16 @@ class BlockRows:
         if np.issubdtype(plane.dtype, np.floating):
             self._floating = True  # only ever set: safe when worker threads add frames
         # One contiguous max per frame finds the frames that saturate at all; only those build masks.
-        if _may_saturate(plane, self.white_level):
-            self._invalid.append(saturated_blocks(plane, self.factor, self.white_level))
-        if self._moments is not None:
+        saturated = saturated_blocks(plane, self.factor, self.white_level) \
+            if _may_saturate(plane, self.white_level) else None
+        if self._moments is None:
+            if saturated is not None:
+                self._invalid.append(saturated)
+        else:
+            if saturated is not None:
+                self._drop(saturated)  # the new row is not in the moments yet: its columns are only zeroed
+            if self._excluded is not None:
+                self.rows[row, self._excluded] = 0.0
             # One matrix–vector product with every row (rows not filled yet are zeros; their
             # products are set when they arrive): cheaper than gathering the filled rows first.
             filled = [*self._filled, row]
@@ -434,7 +466,33 @@ class BlockRows:
 
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
-        self._invalid.append(blocks)
+        if self._moments is None:
+            self._invalid.append(blocks)
+        else:
+            self._drop(blocks)
+
+    def _drop(self, blocks: np.ndarray) -> None:
+        """Incremental mode: zero the columns of the (H/f, W/f) mask ``blocks`` in every row and take
+        the products of the filled rows over the newly left-out columns back out of the moments.
+
+        Once a quarter of the columns or more is out, the moments of the filled rows are taken
+        anew instead (subtracting most of a sum loses precision), as :meth:`statistics` does.
+        """
+        assert self._moments is not None
+        columns = np.broadcast_to(blocks[:, None, :], self.block_shape).reshape(-1)
+        new = columns if self._excluded is None else columns & ~self._excluded
+        fresh = np.flatnonzero(new)
+        if not fresh.size:
+            return
+        self._excluded = new if self._excluded is None else self._excluded | new
+        filled = self._filled
+        if np.count_nonzero(self._excluded) * 4 < columns.size:
+            dropped = self.rows[np.ix_(filled, fresh)]
+            self.rows[:, fresh] = 0.0
+            self._moments[np.ix_(filled, filled)] -= dropped @ dropped.T
+        else:
+            self.rows[:, fresh] = 0.0
+            self._moments[np.ix_(filled, filled)] = _gram(self.rows[filled], DEFAULT_CHUNK_PIXELS * self.block_shape[1])
 
     def statistics(self, spec: FrameStackSpec, chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
                    workers: int = 1) -> SequenceStatistics:
@@ -450,24 +508,20 @@ class BlockRows:
         # Integer sums are always finite; for float frames one sum flags NaN/inf (exact check only then).
         if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
             raise SpectralDataError("frame stack: a frame holds non-finite values (NaN or inf); expected finite pixels")
-        invalid = None
-        for mask in self._invalid:
-            invalid = mask if invalid is None else invalid | mask
-        channels = self.block_shape[1]
-        if invalid is not None and invalid.any():
-            columns = np.broadcast_to(invalid[:, None, :], self.block_shape).reshape(-1)
-            if self._moments is not None and np.count_nonzero(columns) * 4 < columns.size:
-                # Few saturated blocks: take their products back out of the moments.
-                dropped = rows[:, columns]
-                moments = self._moments - _gram(dropped, chunk_pixels * channels)
-            else:
+        if self._moments is not None:
+            moments = self._moments  # incremental: saturated blocks were left out as they came (_drop)
+        else:
+            invalid = None
+            for mask in self._invalid:
+                invalid = mask if invalid is None else invalid | mask
+            chunk = chunk_pixels * self.block_shape[1]
+            if invalid is not None and invalid.any():
+                columns = np.broadcast_to(invalid[:, None, :], self.block_shape).reshape(-1)
                 kept = rows.copy()
                 kept[:, columns] = 0.0
-                moments = _gram(kept, chunk_pixels * channels, workers)
-        elif self._moments is not None:
-            moments = self._moments
-        else:
-            moments = _gram(rows, chunk_pixels * channels, workers)
+                moments = _gram(kept, chunk, workers)
+            else:
+                moments = _gram(rows, chunk, workers)
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
         factor = self.factor
         return _statistics_from_moments(moments, spec, rows.shape[1], black_level=spec.black_level * factor * factor)

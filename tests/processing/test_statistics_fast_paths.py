@@ -92,11 +92,12 @@ def test_synthesis_saturation_in_one_chunk_and_float_frames(chunk: int) -> None:
     np.testing.assert_allclose(float_image, image, rtol=0, atol=1e-5 * np.abs(image).max())
 
 
-@pytest.mark.parametrize("saturate", [0.0, 0.0003, 0.002], ids=["none", "few-blocks", "many-blocks"])
+@pytest.mark.parametrize("saturate", [0.0, 0.0003, 0.002, 0.02], ids=["none", "few-blocks", "many-blocks", "most-blocks"])
 def test_block_rows_frame_by_frame_equals_the_binned_pass(saturate: float) -> None:
     """BlockRows filled one frame at a time (a capture) gives the binned pass's statistics.
 
-    Few saturated blocks are taken back out of the running moments, many make it recompute them.
+    Saturated blocks leave the running moments as each frame brings them: a few are taken back
+    out, once a quarter of the columns is out the moments are taken anew.
     """
     from processing.statistics import BlockRows, cfa_planes
 
@@ -109,6 +110,8 @@ def test_block_rows_frame_by_frame_equals_the_binned_pass(saturate: float) -> No
     stats = rows.statistics(spec)
     assert 0 < stats.n_samples <= stats.n_total
     assert (stats.n_samples < stats.n_total) == (saturate > 0)
+    if saturate == 0.02:
+        assert stats.n_samples < 0.75 * stats.n_total  # the recomputing branch ran
     assert_matches(stats, {"gram": reference.gram, "cross": reference.cross, "ambient_energy": reference.ambient_energy,
                            "n_samples": reference.n_samples, "n_total": reference.n_total,
                            "ambient_sum": reference.ambient_sum, "led_sums": reference.led_sums})
@@ -175,3 +178,26 @@ def test_saturated_blocks_equal_the_any_of_each_block(dtype: type) -> None:
         hit = (plane >= white).any(axis=2)[:rows * factor, :columns * factor]
         expected = hit.reshape(rows, factor, columns, factor).any(axis=(1, 3))
         np.testing.assert_array_equal(saturated_blocks(plane, factor, white), expected)
+
+
+def test_block_rows_exclude_between_frames_equals_a_masked_pass() -> None:
+    """Blocks excluded by the caller part-way through an incremental fill leave every product."""
+    from processing.statistics import BlockRows, cfa_planes
+
+    rng = np.random.default_rng(5)
+    ambient, leds, spec = random_stack(rng, (40, 48, 3), np.eye(3), white=4095.0, saturate=0.0005)
+    blocks = rng.random((10, 12)) < 0.1
+    rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level, incremental=True)
+    batch = BlockRows(len(leds), ambient.shape, 4, spec.white_level)
+    for row in [3, 0, 1, 2]:
+        frame = cfa_planes(ambient if row == 3 else leds[row], 1)
+        rows.add(row, frame)
+        batch.add(row, frame)
+        if row == 0:
+            rows.exclude(blocks)
+    batch.exclude(blocks)
+    ours, reference = rows.statistics(spec), batch.statistics(spec)
+    assert ours.n_samples == reference.n_samples < ours.n_total - np.count_nonzero(blocks) * 3 + 1
+    np.testing.assert_allclose(ours.gram, reference.gram, rtol=1e-10)
+    np.testing.assert_allclose(ours.cross, reference.cross, rtol=1e-10)
+    assert ours.ambient_energy == pytest.approx(reference.ambient_energy, rel=1e-10)
