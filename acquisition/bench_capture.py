@@ -68,7 +68,6 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
     from acquisition.exposure import ExposurePolicy
     from acquisition.flash_session import FlashSession
     from acquisition.rig import open_aravis_fake_rig
-    from acquisition.sequence_format import SequenceWriter
 
     period_us = 1e6 / frame_rate_hz
     settle_s, deadtime_s = 0.001, 0.001
@@ -108,7 +107,6 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
         emulator.on_trigger_out = timed_pulse
         rig.booth.set_step = timed_set_step  # type: ignore[method-assign]
         policy = ExposurePolicy()
-        wavelengths, seq_camera, leds = rig.sequence_header()
         session: FlashSession | None = None
         parts: dict[str, list[float]] = {name: [] for name in
                                           ("handoff_ms", "compute_ms", "exposure_ms", "replan_ms",
@@ -117,8 +115,7 @@ def capture_bench(runs: int = 5, frame_rate_hz: float = 60.0, width: int = 320, 
             arrivals.clear()
             pulses.clear()
             psets.clear()
-            writer = SequenceWriter(Path(scratch) / f"run{run}", wavelengths_nm=wavelengths, spectral_unit="energy",
-                                    camera=seq_camera, leds=leds)
+            writer = rig.sequence_writer(Path(scratch) / f"run{run}")
             if session is None:  # once per rig: LED/camera model, target response
                 session = FlashSession.prepare(writer.sequence, exposure_limits_us=(1.0, exposure_us),
                                                exposure_policy=policy)

@@ -56,6 +56,7 @@ from acquisition.sequence_format import (
     Sequence,
     SequenceFrame,
     SequenceWriter,
+    mono_as_rgb,
     read_sequence,
 )
 from led_controller.booth import sigterm_as_exit
@@ -104,12 +105,10 @@ def _open(args: argparse.Namespace) -> Rig:
 
 
 def _writer(rig: Rig, out: Path, exposure: ExposurePlan | None = None) -> SequenceWriter:
-    wavelengths, camera, leds = rig.sequence_header()
     msflash = {"rig": rig.name, "booth": rig.booth.info.firmware}
     if exposure is not None:
         msflash["exposure"] = exposure.to_dict()
-    return SequenceWriter(out / "sequence", wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
-                          leds=leds, extra={"msflash": msflash})
+    return rig.sequence_writer(out / "sequence", extra={"msflash": msflash})
 
 
 def _report_frame(step, frame, entry) -> None:
@@ -235,7 +234,10 @@ class _InMemorySequence:
 
     def load_frame(self, index: int) -> np.ndarray:
         pixels = self._frames[index].pixels
-        return pixels[:, :, 0] if pixels.ndim == 3 and pixels.shape[2] == 1 else pixels
+        if pixels.ndim == 3 and pixels.shape[2] == 1:
+            return pixels[:, :, 0]
+        # A mono camera's (H, W) frame is on disk as three identical channels: serve what is read back.
+        return mono_as_rgb(pixels) if pixels.ndim == 2 and self._sequence.camera.cfa is None else pixels
 
 
 def _degenerate(estimate) -> str | None:

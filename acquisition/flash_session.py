@@ -118,6 +118,7 @@ class FlashSession:
         self._n_led_rows = 0
         self._rows_complete = True  # False when a frame did not fit the prepared rows
         self._stack: analysis.FrameStack | None = None
+        self._copies = 1  # 3 for a mono camera's (H, W) frames, recorded as three identical channels
         camera = self.header.camera
         self._exposure = None if self.exposure_limits_us is None else FlashExposure(
             camera.black_level, camera.white_level, self.exposure_limits_us, self.exposure_policy)
@@ -136,6 +137,10 @@ class FlashSession:
         self._roles.append(role)
         self._levels.append(tuple(float(v) for v in levels))
         self._stack = None
+        if frame.pixels.ndim == 2 and self.header.camera.cfa is None:
+            # A mono camera: the writer records (H, W) as three identical channels; one plane has
+            # their statistics divided by 3 (see :meth:`statistics`) at a third of the work.
+            self._copies = 3
         if role == "ambient" and role in self._roles[:-1]:
             return  # the estimate uses the first ambient frame only
         if role in ("ambient", "led"):
@@ -195,13 +200,17 @@ class FlashSession:
         Block sums with the black level scaled by the block area, no white level and the
         saturated blocks left out are exactly what the binned pass feeds its moments (only the
         summation order differs). Frames that did not fit the rows prepared for one frame per LED
-        (a multiplexed plan with more LED frames) take the general path.
+        (a multiplexed plan with more LED frames) take the general path. A mono camera's frames
+        are taken as one plane, and the statistics of the three identical channels the sequence
+        records are those of that plane replicated.
         """
         rows = self._rows
         if (self._factor or 1) == 1 or rows is None or not self._rows_complete \
                 or self._n_led_rows != len(stack.led_indices) or self._n_led_rows != self.leds.count:
-            return analysis.sequence_statistics(stack, self.header.camera.cfa, self.bin_factor)
-        return rows.statistics(stack.spec)
+            statistics = analysis.sequence_statistics(stack, self.header.camera.cfa, self.bin_factor)
+        else:
+            statistics = rows.statistics(stack.spec)
+        return statistics.replicated(self._copies) if self._copies > 1 else statistics
 
     def estimate(self, stack: analysis.FrameStack) -> AmbientEstimate:
         """The ambient estimate of :func:`analysis.estimate_sequence` for the frames taken."""

@@ -54,7 +54,7 @@ from acquisition.camera import CameraInfo, RawFrame
 from acquisition.cli_common import UsageError
 from acquisition.errors import RigOpenError
 from acquisition.plan import CapturePlan
-from acquisition.sequence_format import SequenceCamera, SequenceLed
+from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
 from acquisition.simulated_camera import SimulatedCamera
 from led_controller import BoothEmulator, LedBooth, serve_on_pty
 from processing import datasets
@@ -94,6 +94,9 @@ class Rig:
     """Failures of trigger-line callbacks on the emulator's thread (logged, kept here)."""
     camera_extra: dict = field(default_factory=dict)
     """Extra keys for the sequence's ``camera`` entry (e.g. how a mono camera is recorded)."""
+    mono: bool = False
+    """The camera is monochrome: frames come as (H, W) with ``cfa`` None, and the writer
+    (:meth:`sequence_writer`) records them as three identical channels."""
 
     def sequence_header(self) -> tuple[np.ndarray, SequenceCamera, tuple[SequenceLed, ...]]:
         """Wavelengths, camera and LED entries for a format-v1 sequence written from this rig (energy units)."""
@@ -110,6 +113,15 @@ class Rig:
         )
         entries = tuple(SequenceLed(name, leds.values[:, i]) for i, name in enumerate(leds.names))
         return leds.wavelengths_nm, camera, entries
+
+    def sequence_writer(self, directory: str | Path, extra: dict | None = None) -> SequenceWriter:
+        """A :class:`SequenceWriter` for a sequence from this rig (header of :meth:`sequence_header`).
+
+        A mono camera's (H, W) frames are recorded as three identical channels (:attr:`mono`).
+        """
+        wavelengths, camera, leds = self.sequence_header()
+        return SequenceWriter(directory, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
+                              leds=leds, extra=extra, mono=self.mono)
 
     def close(self) -> None:
         """Switch the LEDs off, close the booth link, the emulator and the camera (each attempted)."""
@@ -141,24 +153,6 @@ def _line(rig_errors: list[BaseException], what: str, action: Callable[[], None]
             rig_errors.append(err)
 
     return fire
-
-
-def mono_as_rgb(pixels: np.ndarray) -> np.ndarray:
-    """A mono frame (H, W) as (H, W, 3) with its value in every channel; other shapes unchanged.
-
-    Format v1 (DESIGN §6) stores three channels, or one channel only for a raw mosaic with
-    ``camera.cfa`` set, and ``camera.responsivity`` holds R, G and B: a mono camera's frames are
-    recorded as three identical channels and the sequence's ``camera.extra["channels"]`` says so.
-    ``np.stack`` writes the copy in about a quarter of ``np.repeat``'s time (1280×1024 uint16:
-    2.7 ms against 10.5 ms measured), and this runs on the capture path for every frame.
-
-    Examples
-    --------
-    >>> mono_as_rgb(np.arange(4, dtype=np.uint16).reshape(2, 2))[1]
-    array([[2, 2, 2],
-           [3, 3, 3]], dtype=uint16)
-    """
-    return np.stack((pixels, pixels, pixels), axis=-1) if pixels.ndim == 2 else pixels
 
 
 def _emulator_for(leds: Spectra) -> BoothEmulator:
@@ -246,8 +240,9 @@ class WiredFakeCamera:
     trigger input takes every edge, so booth pulses go through a queue and a thread that issues
     each software trigger only once the fake has acknowledged the previous one.
 
-    Mono frames are recorded as three identical channels (:func:`mono_as_rgb`; format v1 holds
-    RGB or raw mosaics); the sequence's ``camera.extra`` says so. The fake's frames carry no
+    Mono frames are delivered as (H, W) and recorded as three identical channels by the writer
+    (:attr:`Rig.mono`; format v1 holds RGB or raw mosaics); the sequence's ``camera.extra`` says
+    so. The fake's frames carry no
     light: its Mono16 test pattern (``arv_fake_camera_diagonal_ramp`` in Aravis 0.8.26) is
     ``256 (x + y + frame_id) mod 65535`` scaled by gain and exposure, blind to the LED levels, so no
     ambient estimate from it means anything with one channel or three.
@@ -318,14 +313,13 @@ class WiredFakeCamera:
         self._pulses.put(True)
 
     def next_frame(self, timeout_s: float) -> RawFrame:
-        """The next frame as (H, W, 3); in camera master the exposure line falls when it arrives."""
+        """The next frame, (H, W) for mono; in camera master the exposure line falls when it arrives."""
         try:
-            frame = self.aravis.next_frame(timeout_s)
+            return self.aravis.next_frame(timeout_s)
         finally:
             if self._exposing:
                 self._exposing = False
                 self._emulator.exposure_active(False)
-        return dataclasses.replace(frame, pixels=mono_as_rgb(frame.pixels))
 
     def stop(self) -> None:
         """Stop acquisition and the trigger-line thread."""
@@ -384,7 +378,7 @@ def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int = 64, 
     extra = {"channels": f"{pixel_format} replicated to R, G, B", "responsivity_note":
              f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning"}
     return Rig("aravis-fake", camera, booth, leds, responsivities, None, closers, emulator=emulator,
-               line_errors=line_errors, camera_extra=extra)
+               line_errors=line_errors, camera_extra=extra, mono=True)
 
 
 def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None, **_ignored: object) -> Rig:
@@ -512,26 +506,21 @@ def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | No
 class HardwareCamera:
     """An :class:`~acquisition.aravis_camera.AravisCamera` as the hardware rig's camera.
 
-    Forwards the :class:`~acquisition.camera.Camera` protocol; mono frames are recorded as three
-    identical channels (:func:`mono_as_rgb`; format v1 holds RGB or raw mosaics, and the
-    sequence's ``camera.extra`` says so). Offers what exposure planning asks of a camera:
-    :attr:`exposure_range_us` and :attr:`noise_model` (from the camera's profile, when it knows
-    the conversion gain).
+    Forwards the :class:`~acquisition.camera.Camera` protocol; mono frames come as (H, W) and
+    the writer records them as three identical channels (:attr:`Rig.mono`; format v1 holds RGB
+    or raw mosaics, and the sequence's ``camera.extra`` says so). Offers what exposure planning
+    asks of a camera: :attr:`exposure_range_us` and :attr:`noise_model` (from the camera's
+    profile, when it knows the conversion gain).
     """
 
     suggested_exposure_us = 10_000.0
 
     def __init__(self, camera: Any) -> None:
         self.aravis = camera
-        self._mono = self._reads_mono()
-
-    def _reads_mono(self) -> bool:
-        # Read once per plan, not per frame: ``info`` costs several feature reads (GVCP round trips).
-        return self.aravis.info.cfa is None
 
     @property
     def info(self) -> CameraInfo:
-        """The camera's identity (mono frames are delivered as RGB; ``cfa`` stays None)."""
+        """The camera's identity (a mono camera has ``cfa`` None and (H, W) frames)."""
         return self.aravis.info
 
     @property
@@ -547,7 +536,6 @@ class HardwareCamera:
     def prepare(self, plan: CapturePlan) -> None:
         """Prepare the camera for ``plan``."""
         self.aravis.prepare(plan)
-        self._mono = self._reads_mono()
 
     def start(self) -> None:
         """Start acquisition."""
@@ -558,11 +546,8 @@ class HardwareCamera:
         self.aravis.trigger()
 
     def next_frame(self, timeout_s: float) -> RawFrame:
-        """The next frame; mono frames as (H, W, 3)."""
-        frame = self.aravis.next_frame(timeout_s)
-        if frame.pixels.ndim == 2 and self._mono:
-            return dataclasses.replace(frame, pixels=mono_as_rgb(frame.pixels))
-        return frame
+        """The next frame as the camera delivers it ((H, W) for mono and mosaics)."""
+        return self.aravis.next_frame(timeout_s)
 
     def stop(self) -> None:
         """Stop acquisition."""
@@ -657,8 +642,9 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     hardware = HardwareCamera(aravis)
     info = aravis.info
     extra: dict = {}
-    if info.cfa is None and info.pixel_format.startswith("Mono"):
+    mono = info.cfa is None and info.pixel_format.startswith("Mono")
+    if mono:
         extra["channels"] = f"{info.pixel_format} replicated to R, G, B"
     if responsivities is None:
         extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
-    return Rig("hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra)
+    return Rig("hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono)

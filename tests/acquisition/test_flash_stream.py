@@ -13,6 +13,7 @@ from acquisition.capture import run_capture_with_flash
 from acquisition.flash_session import FlashSession
 from acquisition.plan import CapturePlan
 from acquisition.rig import open_sim_rig
+from acquisition.errors import RecordingError
 from acquisition.sequence_format import SequenceWriter, read_sequence
 
 
@@ -300,3 +301,49 @@ def test_flash_step_released_with_now_only_in_booth_master(sim_rig, tmp_path: Pa
         run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, lambda frames: ((0.5,) * 4, 5_000.0))
     assert calls == [((5, (0.5,) * 4), {"now": trigger == "booth"})]
     assert not sim_rig.line_errors
+
+
+@pytest.mark.parametrize("levels", [
+    [tuple(float(i == j) for i in range(4)) for j in range(4)],
+    [(1.0, 0.5, 0.0, 0.0), (0.0, 1.0, 0.5, 0.0), (0.0, 0.0, 1.0, 0.5), (0.5, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0, 1.0)],
+], ids=["one-led-per-frame", "multiplexed-more-frames"])
+def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim_rig, tmp_path: Path, levels) -> None:
+    """A mono camera's (H, W) frames: the writer records three identical channels; the session
+    block-sums the one plane and gives the statistics (and estimate) of the recorded sequence."""
+    from acquisition import analysis
+    from acquisition.camera import RawFrame
+
+    info = sim_rig.camera.info
+    rng = np.random.default_rng(7)
+    white = int(info.white_level)
+    ambient = rng.integers(200, 3000, size=(info.height, info.width))
+    pixels = [ambient] + [ambient + rng.integers(100, 2000, size=ambient.shape) for _ in levels]
+    refused = sim_rig.sequence_writer(tmp_path / "s")  # not a mono rig: (H, W) without cfa is an error
+    with pytest.raises(RecordingError, match="mono=True"):
+        refused.add_frame(pixels[0].astype(np.uint16), "ambient", (0.0,) * 4, 1000.0)
+    written = []
+    wavelengths, camera, leds = sim_rig.sequence_header()
+    with SequenceWriter(tmp_path / "mono", wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
+                        leds=leds, mono=True) as writer:
+        session = FlashSession.prepare(writer.sequence)
+        for index, (values, level) in enumerate(zip(pixels, [(0.0,) * 4, *levels])):
+            values = values.astype(np.uint16)
+            values[rng.random(values.shape) < 0.002] = white  # some saturated blocks
+            written.append(values)
+            frame = RawFrame(values, index, 0, 1000.0 * (1 + index % 3), 1.0)
+            role = "ambient" if index == 0 else "led"
+            writer.add_frame(frame.pixels, role, level, frame.exposure_us)
+            session.add(frame, role, level)
+    sequence = read_sequence(tmp_path / "mono")
+    for index, values in enumerate(written):
+        recorded = sequence.load_frame(index)
+        assert recorded.shape == (info.height, info.width, 3)
+        assert all(np.array_equal(recorded[:, :, channel], values) for channel in range(3))
+    reference = analysis.sequence_statistics(analysis.load_frame_stack(sequence), None, session.bin_factor)
+    ours = session.statistics(session.stack())
+    assert ours.n_samples == reference.n_samples < ours.n_total == reference.n_total
+    np.testing.assert_allclose(ours.gram, reference.gram, rtol=1e-9, atol=1e-9 * abs(reference.gram).max())
+    np.testing.assert_allclose(ours.cross, reference.cross, rtol=1e-9, atol=1e-9 * abs(reference.cross).max())
+    np.testing.assert_allclose(ours.led_sums, reference.led_sums, rtol=1e-9)
+    np.testing.assert_allclose(session.estimate(session.stack()).ambient_weights,
+                               analysis.estimate_sequence(sequence).ambient_weights, rtol=1e-7, atol=1e-12)
