@@ -48,6 +48,7 @@ from acquisition.exposure import (
     camera_noise_model,
     flash_exposure,
     measure_led_snr,
+    metering_view,
     plan_exposures,
 )
 from acquisition.plan import CapturePlan, TriggerSource
@@ -165,7 +166,7 @@ def _plan_exposure(rig: Rig, args: argparse.Namespace) -> ExposurePlan:
     def capture(levels, exposure_us: float):
         role = "led" if any(level > 0 for level in levels) else "ambient"
         preview = CapturePlan.single(levels, exposure_us, role=role)
-        return preview_frames(rig.camera, rig.booth, preview)[0].pixels
+        return metering_view(preview_frames(rig.camera, rig.booth, preview)[0].pixels, mosaic=info.cfa is not None)
 
     return plan_exposures(capture, n_leds, info.black_level, info.white_level, limits, noise, policy,
                           start_us=suggested, cfa=info.cfa is not None)
@@ -213,7 +214,8 @@ def _led_capture(rig: Rig, writer, plan: ExposurePlan, frames: list[RawFrame], e
                  last_frame_at: float) -> _LedCapture:
     """The LED frames with their measured SNR (reported)."""
     info = rig.camera.info
-    snr, method = measure_led_snr(frames[0].pixels, frames[0].exposure_us, [f.pixels for f in frames[1:]],
+    pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
+    snr, method = measure_led_snr(pixels[0], frames[0].exposure_us, pixels[1:],
                                   [f.exposure_us for f in frames[1:]], info.black_level, info.white_level,
                                   camera_noise_model(rig.camera), cfa=info.cfa is not None,
                                   gain=frames[0].gain)
@@ -384,8 +386,9 @@ def _run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposureP
         estimate.ambient_weights, args.mode)
     levels = np.clip(solutions[args.mode].flash_weights, 0.0, 1.0)
     frames = captured.frames
+    pixels = [metering_view(f.pixels, mosaic=rig.camera.info.cfa is not None) for f in frames]
     flash_us = _flash_exposure(rig, exposure, levels, lambda weights: flash_exposure(
-        frames[0].pixels, frames[0].exposure_us, [f.pixels for f in frames[1:]], [f.exposure_us for f in frames[1:]],
+        pixels[0], frames[0].exposure_us, pixels[1:], [f.exposure_us for f in frames[1:]],
         weights, rig.camera.info.black_level, rig.camera.info.white_level, exposure.exposure_range_us,
         exposure.policy))
     flash_plan = CapturePlan.single(levels, flash_us, trigger=SYNC_MODES[args.sync])

@@ -184,6 +184,24 @@ def camera_noise_model(camera: Any) -> NoiseModel | None:
 
 # -- metering ----------------------------------------------------------------------------------
 
+def metering_view(pixels: np.ndarray, mosaic: bool) -> np.ndarray:
+    """A frame as the metering functions here should read it.
+
+    They take an (H, W) frame for a raw mosaic and read it in whole 2×2 quads (every colour of
+    the mosaic). A mono camera's (H, W) frame (``mosaic`` False) becomes an (H, W, 1) view, read
+    pixel by pixel like any channel image: its bright end is that of its pixels, not of the
+    brightest of four neighbours, and a quarter of the values are read. Other frames are returned
+    as they are.
+
+    Examples
+    --------
+    >>> frame = np.zeros((4, 6), dtype=np.uint16)
+    >>> metering_view(frame, mosaic=False).shape, metering_view(frame, mosaic=True).shape
+    ((4, 6, 1), (4, 6))
+    """
+    return pixels[:, :, None] if pixels.ndim == 2 and not mosaic else pixels
+
+
 def _sample(pixels: np.ndarray, stride: int) -> np.ndarray:
     """Every ``stride``-th pixel of a frame, as (h, w[, channels]) — for a one-plane frame whole 2×2 quads.
 

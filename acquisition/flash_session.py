@@ -30,7 +30,7 @@ import numpy as np
 from acquisition import analysis
 from acquisition.camera import RawFrame
 from acquisition.errors import RecordingError
-from acquisition.exposure import ExposurePolicy, FlashExposure
+from acquisition.exposure import ExposurePolicy, FlashExposure, metering_view
 from acquisition.sequence_format import Sequence
 from processing.ambient import AmbientEstimate, AmbientModel
 from processing.flash import FlashModel, FlashSolution
@@ -145,10 +145,12 @@ class FlashSession:
             return  # the estimate uses the first ambient frame only
         if role in ("ambient", "led"):
             self._add_rows(_plane(frame.pixels), role)
-        if self._exposure is not None and role == "ambient":
-            self._exposure.add_ambient(frame.pixels, frame.exposure_us)
-        elif self._exposure is not None and role == "led":
-            self._exposure.add_led(frame.pixels, frame.exposure_us)
+        if self._exposure is not None and role in ("ambient", "led"):
+            metered = metering_view(frame.pixels, mosaic=self.header.camera.cfa is not None)
+            if role == "ambient":
+                self._exposure.add_ambient(metered, frame.exposure_us)
+            else:
+                self._exposure.add_led(metered, frame.exposure_us)
 
     def _add_rows(self, pixels: np.ndarray, role: str) -> None:
         camera = self.header.camera

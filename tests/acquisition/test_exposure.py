@@ -398,3 +398,39 @@ def test_a_mosaic_is_metered_on_every_colour_site() -> None:
     levels = ex.meter(frame, 64.0, 4095.0, POLICY)
     assert levels.saturated_fraction == 1.0  # every 2×2 quad holds a saturated site
     assert levels.bright_end == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("criterion", ["bright_end", "information"])
+def test_a_mono_camera_meters_as_its_frames_recorded_in_rgb(criterion: str) -> None:
+    """A mono camera's (H, W) frames, read through metering_view, give the plan, the LED SNR and the
+    flash exposure of the same frames as three identical channels (how the sequence records them),
+    not those of 2×2 neighbour quads."""
+    rng = np.random.default_rng(8)
+    ambient = 0.4 + rng.random((48, 64))
+    leds = [0.2 * rng.random((48, 64)) + 0.05 * k for k in range(3)]
+    ambient[5:9, 10:30] *= 12.0  # a highlight to meter
+    mono, rgb = _synthetic(ambient, leds), _synthetic(ambient[..., None], [led[..., None] for led in leds])
+    chosen = ex.ExposurePolicy(criterion=criterion)
+
+    def as_mono(levels, exposure_us):
+        return ex.metering_view(mono(levels, exposure_us), mosaic=False)
+
+    def as_rgb(levels, exposure_us):
+        return np.repeat(rgb(levels, exposure_us), 3, axis=2)
+
+    planned = ex.plan_exposures(as_mono, 3, BLACK, WHITE, (1.0, 1e6), NOISE, chosen, start_us=100.0)
+    reference = ex.plan_exposures(as_rgb, 3, BLACK, WHITE, (1.0, 1e6), NOISE, chosen, start_us=100.0)
+    assert planned.ambient_exposure_us == reference.ambient_exposure_us
+    assert planned.led_exposures_us == reference.led_exposures_us
+    np.testing.assert_allclose(planned.predicted_snr, reference.predicted_snr, rtol=1e-12)
+    frames = [as_mono((0.0,) * 3, 500.0)] + [as_mono(tuple(float(i == k) for i in range(3)), 400.0) for k in range(3)]
+    coloured = [np.repeat(f, 3, axis=2) for f in frames]
+    for noise in (NOISE, None):
+        ours = ex.measure_led_snr(frames[0], 500.0, frames[1:], [400.0] * 3, BLACK, WHITE, noise)
+        assert ours == ex.measure_led_snr(coloured[0], 500.0, coloured[1:], [400.0] * 3, BLACK, WHITE, noise)
+    weights = [0.5, 0.0, 1.0]
+    assert ex.flash_exposure(frames[0], 500.0, frames[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6)) == \
+        ex.flash_exposure(coloured[0], 500.0, coloured[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6))
+    quads = ex.flash_exposure(frames[0][:, :, 0], 500.0, [f[:, :, 0] for f in frames[1:]], [400.0] * 3, weights,
+                              BLACK, WHITE, (1.0, 1e6))
+    assert quads != ex.flash_exposure(frames[0], 500.0, frames[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6))

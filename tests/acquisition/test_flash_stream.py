@@ -312,6 +312,7 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim
     block-sums the one plane and gives the statistics (and estimate) of the recorded sequence."""
     from acquisition import analysis
     from acquisition.camera import RawFrame
+    from acquisition.exposure import flash_exposure
 
     info = sim_rig.camera.info
     rng = np.random.default_rng(7)
@@ -325,7 +326,7 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim
     wavelengths, camera, leds = sim_rig.sequence_header()
     with SequenceWriter(tmp_path / "mono", wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
                         leds=leds, mono=True) as writer:
-        session = FlashSession.prepare(writer.sequence)
+        session = FlashSession.prepare(writer.sequence, exposure_limits_us=(1.0, 1e6))
         for index, (values, level) in enumerate(zip(pixels, [(0.0,) * 4, *levels])):
             values = values.astype(np.uint16)
             values[rng.random(values.shape) < 0.002] = white  # some saturated blocks
@@ -347,3 +348,9 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim
     np.testing.assert_allclose(ours.led_sums, reference.led_sums, rtol=1e-9)
     np.testing.assert_allclose(session.estimate(session.stack()).ambient_weights,
                                analysis.estimate_sequence(sequence).ambient_weights, rtol=1e-7, atol=1e-12)
+    # The flash exposure is metered pixel by pixel, as on the recorded RGB frames.
+    recorded_frames = [sequence.load_frame(i) for i in range(len(written))]
+    weights = [0.3] * len(levels)
+    assert session.flash_exposure(weights) == flash_exposure(
+        recorded_frames[0], sequence.frames[0].exposure_us, recorded_frames[1:],
+        [f.exposure_us for f in sequence.frames[1:]], weights, info.black_level, info.white_level, (1.0, 1e6))
