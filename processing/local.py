@@ -37,15 +37,23 @@ Public objects
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
 
-from processing.ambient import AMBIENT_METHODS, AmbientEstimate, gcv_alpha, estimate_ambient
+from processing.ambient import AMBIENT_METHODS, AmbientEstimate, AmbientModel, gcv_alpha
 from processing.errors import SolverError, SpectralDataError
 from processing.spectra import Spectra, require_unit
-from processing.statistics import FrameStackSpec, SequenceStatistics, block_sums, cfa_planes, saturated_blocks
+from processing.statistics import (
+    GATHER_ROWS,
+    FrameStackSpec,
+    SequenceStatistics,
+    block_sums,
+    cfa_planes,
+    gather_matrix,
+    saturated_blocks,
+)
 from processing.synthesis import frame_coefficients
 
 LOCAL_METHODS = ("auto", "global", "local")
@@ -92,6 +100,9 @@ class BlockData:
 
     raw: np.ndarray = field(repr=False)
     """(n_frames + 2, h, w, C) block sums of the rows [F_1 … F_n, A, 1] (invalid blocks zeroed)."""
+    differences: np.ndarray | None = field(repr=False)
+    """(n_frames + 2, h, w, C) the blocks' even-column sums minus their odd-column sums (the ones row 0,
+    invalid blocks zeroed): the noise probe of :attr:`TiledStatistics.denoised`. None for odd bin factors."""
     valid: np.ndarray = field(repr=False)
     """(h, w) blocks without a saturated member."""
     spec: FrameStackSpec
@@ -127,6 +138,11 @@ class Cells:
     """(N,) ``a_bᵀ a_b``."""
     sums: np.ndarray = field(repr=False)
     """(N, 1 + k) sums over the channels of ``a_b`` and of every LED image."""
+    spec: FrameStackSpec | None = field(default=None, repr=False)
+    """The block-level spec that maps raw moments to statistics (for :meth:`denoised_statistics`)."""
+    noise: np.ndarray | None = field(default=None, repr=False)
+    """(N, R·R) raw moments ``d dᵀ`` of every cell's half difference (the noise probe of
+    :attr:`TiledStatistics.denoised`); None when the blocks carry none."""
 
     @classmethod
     def of(cls, blocks: BlockData, group: int | None = None) -> Cells:
@@ -139,21 +155,31 @@ class Cells:
         if group is None:
             group = max(1, int(np.ceil(np.sqrt(blocks.valid.size / MAX_REGION_CELLS))))
         rows, columns = blocks.shape[0] // group, blocks.shape[1] // group
-        raw = blocks.raw[:, :rows * group, :columns * group]
         valid = blocks.valid[:rows * group, :columns * group]
         if group > 1:
-            raw = np.stack([block_sums(row, group) for row in raw])
             valid = valid.reshape(rows, group, columns, group).all(axis=(1, 3))
-        samples = raw[:, valid]  # (R, N, C)
+
+        def cell_samples(values: np.ndarray) -> np.ndarray:
+            values = values[:, :rows * group, :columns * group]
+            if group > 1:
+                values = np.stack([block_sums(row, group) for row in values])
+            return values[:, valid]  # (R, N, C)
+
+        samples = cell_samples(blocks.raw)
         moments = np.einsum("rnc,snc->nrs", samples, samples, optimize=True)[:, None]
         cells = _tiled_from_moments(moments, np.ones((samples.shape[1], 1)), blocks.spec, np.zeros(2, dtype=int),
                                     np.zeros(2, dtype=int))
+        noise = None
+        if blocks.differences is not None:
+            differences = cell_samples(blocks.differences)
+            noise = np.einsum("rnc,snc->nrs", differences, differences, optimize=True).reshape(differences.shape[1], -1)
         k = cells.n_leds
         return cls(valid=valid, size=blocks.pixel * group, channels=int(samples.shape[2]),
                    gram=cells.gram.reshape(-1, k * k), cross=cells.cross.reshape(-1, k),
                    energy=cells.ambient_energy.reshape(-1),
                    # The sums are products with the ones row, which counts a cell's group² blocks.
-                   sums=np.column_stack([cells.ambient_sum.reshape(-1), cells.led_sums.reshape(-1, k)]) / group ** 2)
+                   sums=np.column_stack([cells.ambient_sum.reshape(-1), cells.led_sums.reshape(-1, k)]) / group ** 2,
+                   spec=blocks.spec, noise=noise)
 
     def errors(self, weights: np.ndarray) -> np.ndarray:
         """``‖a_b − F_b w‖²`` of every cell for each row of ``weights`` (R, k): (R, N)."""
@@ -168,6 +194,20 @@ class Cells:
         return SequenceStatistics(gram=(select @ self.gram).reshape(k, k), cross=select @ self.cross,
                                   ambient_energy=float(select @ self.energy), n_samples=n, n_total=n,
                                   ambient_sum=float(select @ self.sums[:, 0]), led_sums=select @ self.sums[:, 1:])
+
+    def denoised_statistics(self, member: np.ndarray) -> SequenceStatistics | None:
+        """:meth:`statistics` with the noise's contribution removed (:attr:`TiledStatistics.denoised`), or None.
+
+        The cells' raw noise moments are pooled first and mapped once (the map is linear).
+        """
+        if self.noise is None or self.spec is None:
+            return None
+        observed = self.statistics(member)
+        size = int(round(np.sqrt(self.noise.shape[1])))
+        pooled = (np.asarray(member, dtype=float) @ self.noise).reshape(1, 1, size, size)
+        noise = _tiled_from_moments(pooled, np.ones((1, 1)), self.spec, np.zeros(2, dtype=int), np.zeros(2, dtype=int))
+        return replace(observed, gram=observed.gram - noise.gram[0, 0], cross=observed.cross - noise.cross[0, 0],
+                       ambient_energy=observed.ambient_energy - float(noise.ambient_energy[0, 0]))
 
 
 @dataclass(frozen=True)
@@ -194,6 +234,17 @@ class TiledStatistics:
     """Pixel columns where the tile columns start and end, (tx + 1,)."""
     blocks: BlockData | None = field(default=None, repr=False, compare=False)
     """The binned samples themselves (for region segmentation); None when built from moments only."""
+    denoised: TiledStatistics | None = field(default=None, repr=False, compare=False)
+    """The same tiles with the noise's contribution to their moments removed, or None (odd bin factors).
+
+    The LED-only images are differences of noisy frames, so ``GᵀG``-type moments are biased by the
+    noise variance (eq. 5 regresses on noisy regressors: errors in variables). Each block's columns
+    are split into two interleaved halves with independent noise; with ``x = x₁ + x₂`` the block's
+    row of sums and ``d = x₁ − x₂``, ``E[d dᵀ]`` holds the noise covariance of ``x`` (plus the
+    halves' texture difference), and ``Σ (x xᵀ − d dᵀ) = 2 Σ (x₁ x₂ᵀ + x₂ x₁ᵀ)`` is a cross-product
+    of independent halves: the estimating equations of eq. 5 on these moments have no noise bias (an
+    instrumental-variable estimate; no noise model needed). The valid-sample counts and sums are the
+    tiles' own."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -245,6 +296,7 @@ class TiledStatistics:
         With ``leave_out`` each tile's own statistics are excluded (its neighbours only), for
         leave-one-tile-out scoring. The kernel is not normalised: least-squares solutions do not
         depend on a common factor, and the dimensionless roughness weight scales with ``tr G``.
+        The result has no :attr:`denoised` part (smooth that one itself when it is needed).
         """
         if not sigma > 0:
             raise SpectralDataError(f"smoothing: sigma {sigma}; expected > 0 tiles")
@@ -279,6 +331,35 @@ def _block_sums(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
         np.copyto(out, plane[:height, :width], casting="unsafe")
         return
     np.copyto(out, block_sums(plane, factor)[:height, :width])
+
+
+@lru_cache(maxsize=16)
+def _difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
+    """(factor·channels, channels) ±1 matrix: per channel, a row group's even pixels minus its odd ones."""
+    gather = np.zeros((factor, channels, channels), dtype=dtype)
+    for member in range(factor):
+        gather[member] = np.eye(channels, dtype=dtype) * (1.0 if member % 2 == 0 else -1.0)
+    gather = gather.reshape(factor * channels, channels)
+    gather.flags.writeable = False
+    return gather
+
+
+def _block_sums_and_differences(plane: np.ndarray, factor: int, sums: np.ndarray, differences: np.ndarray) -> None:
+    """Block sums of an (H, W, C) plane and their even-column minus odd-column parts, into (H/f, W/f, C) arrays.
+
+    The rows of each block are summed once; products with the 0/1 and ±1 gather matrices then give
+    both parts per channel (exact: integers below 2²⁴ in float32 for ≤ 16-bit data and blocks ≤ 16×16).
+    """
+    height, width, channels = sums.shape
+    sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
+    rows = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
+    groups = rows.sum(axis=1, dtype=sum_type).reshape(height * width, factor * channels)
+    for gather, out in ((gather_matrix(factor, channels, sum_type), sums),
+                        (_difference_gather(factor, channels, sum_type), differences)):
+        part = np.empty((height * width, channels), dtype=sum_type)
+        for start in range(0, groups.shape[0], GATHER_ROWS):  # below OpenBLAS's threading threshold (see block_sums)
+            np.matmul(groups[start:start + GATHER_ROWS], gather, out=part[start:start + GATHER_ROWS])
+        np.copyto(out, part.reshape(height, width, channels))
 
 
 def tile_statistics(
@@ -321,8 +402,13 @@ def tile_statistics(
         raise SpectralDataError(f"frame of shape {ambient.shape} is smaller than one {bin_factor}×{bin_factor} block")
     n_rows = len(frames) + 1
     data = np.empty((n_rows, height, width, channels))
+    # Even bin factors also give every block's half difference, the noise probe of ``denoised``.
+    differences = np.zeros_like(data) if bin_factor % 2 == 0 else None
     for row, plane in enumerate(planes):
-        _block_sums(plane, bin_factor, data[row])
+        if differences is None:
+            _block_sums(plane, bin_factor, data[row])
+        else:
+            _block_sums_and_differences(plane, bin_factor, data[row], differences[row])
     floating = any(np.issubdtype(plane.dtype, np.floating) for plane in planes)
     if floating and not np.isfinite(data[:-1].sum()):
         raise SpectralDataError("frame stack: a frame holds non-finite values (NaN or inf); expected finite pixels")
@@ -333,15 +419,22 @@ def tile_statistics(
             invalid |= saturated_blocks(plane, bin_factor, spec.white_level)
     if invalid.any():
         data[:, invalid] = 0.0
+        if differences is not None:
+            differences[:, invalid] = 0.0
     row_blocks, column_blocks = tile_edges(height, rows_tiles), tile_edges(width, columns_tiles)
     moments = np.empty((rows_tiles, columns_tiles, n_rows, n_rows))
+    noise = np.empty_like(moments) if differences is not None else None
     totals = np.empty((rows_tiles, columns_tiles))
     for i in range(rows_tiles):
-        band = data[:, row_blocks[i]:row_blocks[i + 1]]
+        rows = slice(row_blocks[i], row_blocks[i + 1])
         for j in range(columns_tiles):
-            samples = band[:, :, column_blocks[j]:column_blocks[j + 1]].reshape(n_rows, -1)
+            columns = slice(column_blocks[j], column_blocks[j + 1])
+            samples = data[:, rows, columns].reshape(n_rows, -1)
             moments[i, j] = samples @ samples.T
             totals[i, j] = samples.shape[1]
+            if noise is not None:
+                probe = differences[:, rows, columns].reshape(n_rows, -1)  # type: ignore[index]
+                noise[i, j] = probe @ probe.T
     block_spec = FrameStackSpec(black_level=spec.black_level * bin_factor * bin_factor, white_level=np.inf,
                                 ambient_scale=spec.ambient_scale, led_scales=spec.led_scales, led_levels=spec.led_levels)
     pixel = bin_factor * cfa_period
@@ -349,9 +442,12 @@ def tile_statistics(
     column_edges = column_blocks * pixel
     row_edges[-1], column_edges[-1] = ambient.shape[0], ambient.shape[1]
     tiled = _tiled_from_moments(moments, totals, block_spec, row_edges, column_edges)
-    blocks = BlockData(raw=data, valid=~invalid, spec=block_spec, pixel=pixel)
-    return TiledStatistics(**{name: getattr(tiled, name) for name in tiled.__dataclass_fields__ if name != "blocks"},
-                           blocks=blocks)
+    blocks = BlockData(raw=data, differences=differences, valid=~invalid, spec=block_spec, pixel=pixel)
+    denoised = None
+    if noise is not None:
+        denoised = _tiled_from_moments(moments - noise, totals, block_spec, row_edges, column_edges)
+    return TiledStatistics(**{name: getattr(tiled, name) for name in tiled.__dataclass_fields__
+                              if name not in ("blocks", "denoised")}, blocks=blocks, denoised=denoised)
 
 
 def _tiled_from_moments(moments: np.ndarray, totals: np.ndarray, spec: FrameStackSpec, row_edges: np.ndarray,
@@ -505,6 +601,18 @@ def _box(values: np.ndarray, radius: int) -> np.ndarray:
     return along(along(values, 0), 1)
 
 
+def _interior(region: np.ndarray) -> np.ndarray:
+    """(h, w) cells of a boolean map whose 3 × 3 neighbourhood (truncated at the frame's border) is all in it.
+
+    Examples
+    --------
+    >>> _interior(np.array([[1, 1, 1, 0], [1, 1, 1, 0], [1, 1, 1, 0]], dtype=bool)).astype(int).tolist()
+    [[1, 1, 0, 0], [1, 1, 0, 0], [1, 1, 0, 0]]
+    """
+    inside = region.astype(float)
+    return region & (_box(inside, 1) == _box(np.ones_like(inside), 1))
+
+
 def _affine_residual(tiles: TiledStatistics, penalty: np.ndarray, alpha: float) -> float:
     """In-sample residual of weights affine in the tile-centre position (Tikhonov, from the tile statistics)."""
     rows, columns = tiles.centres
@@ -521,7 +629,8 @@ def _affine_residual(tiles: TiledStatistics, penalty: np.ndarray, alpha: float) 
 
 def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, solver: str = "tikhonov",
                     solver_alpha: float | str = "auto", radius: int = REGION_RADIUS,
-                    iterations: int = REGION_ITERATIONS, cells: Cells | None = None) -> RegionSegmentation | None:
+                    iterations: int = REGION_ITERATIONS, cells: Cells | None = None,
+                    noise_correction: bool = True) -> RegionSegmentation | None:
     """Split the frame into two ambient regions and estimate each from all of its blocks.
 
     1. Tile estimates (ridge on the σ = 0.5 smoothed statistics) seed two clusters: the two tiles
@@ -532,7 +641,9 @@ def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, 
        follows the data, not the tile grid; a bright neighbour can pull a boundary by ≤ r cells). Each region's statistics are then
        pooled from its blocks and re-solved; repeated until no label changes (at most ``iterations`` times).
     3. The chosen solver runs on each region's pooled statistics: a region sees as many surfaces
-       as it covers, not a tile's worth.
+       as it covers, not a tile's worth. With ``noise_correction`` (and cells that carry a noise
+       probe) these are the denoised statistics (:attr:`TiledStatistics.denoised`); labelling uses
+       the statistics as observed.
 
     ``cells`` are the tiles' :class:`Cells` when already built. Returns None when the tiles hold no
     block data (statistics built from moments only).
@@ -574,10 +685,16 @@ def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, 
     member = labels[valid]
     final = weights.copy()
     if member.any() and not member.all():
-        for index, mask in enumerate((~member, member)):
-            statistics = cells.statistics(mask)
+        model = AmbientModel(led_spectra)
+        for index, region in enumerate((~labels, labels)):
+            # The cells next to the label edge may straddle the true boundary (light of both sides) or
+            # be mislabelled: each region is solved on its interior (cells whose 3 × 3 neighbourhood
+            # shares the label), or on all its cells when it has no interior.
+            interior = _interior(region)[valid]
+            mask = interior if interior.any() else region[valid]
             try:
-                final[index] = AMBIENT_METHODS[solver](statistics, led_values, solver_alpha)[0]
+                final[index] = _solve(model, cells.statistics(mask),
+                                      cells.denoised_statistics(mask) if noise_correction else None, solver, solver_alpha)[0]
             except SolverError:
                 pass
     errors = cells.errors(final)
@@ -654,6 +771,7 @@ def estimate_local(
     smoothing: float | None = None,
     margin: float = SELECTION_MARGIN,
     regions_allowed: bool = True,
+    noise_correction: bool = True,
 ) -> LocalEstimate:
     """Estimate the ambient globally or per tile, choosing the model from the data for ``auto``.
 
@@ -677,6 +795,10 @@ def estimate_local(
         When the local model is used (and ``smoothing`` is None), try the two-region model
         (:func:`segment_regions`) and keep it when two regions explain the ambient image better
         than a smooth affine field; otherwise (or when False) solve per tile.
+    noise_correction
+        Solve on the denoised statistics (:attr:`TiledStatistics.denoised`: the noise bias of the
+        LED-only images' moments removed) when the tiles have them (even bin factors); model
+        selection, region labels and the reliability signals use the statistics as observed.
     """
     if method not in LOCAL_METHODS:
         raise ValueError(f"local method '{method}' is unknown; expected one of {', '.join(LOCAL_METHODS)}")
@@ -684,12 +806,20 @@ def estimate_local(
         raise ValueError(f"ambient method '{solver}' is unknown; expected one of {', '.join(AMBIENT_METHODS)}")
     require_unit(led_spectra, "photons")
     total = tiles.total()
-    global_estimate = estimate_ambient(total, led_spectra, method=solver, alpha=alpha)
+    clean = tiles.denoised if noise_correction else None
+    ambient_model = AmbientModel(led_spectra)
+    global_weights, global_alpha = _solve(ambient_model, total, None if clean is None else clean.total(), solver, alpha)
+    global_estimate = ambient_model.reliability(total, global_weights, solver, global_alpha)
     led_values = led_spectra.values
     shape = tiles.shape
     selection = None
+    # The scoring fits' roughness weight: GCV on the statistics as observed (the denoised ones carry
+    # no noise, and GCV's α there would be near 0), or the given α.
+    scoring_alpha = None
+    if solver == "tikhonov":
+        scoring_alpha = gcv_alpha(total, np.diff(led_values, axis=0)) if alpha == "auto" else float(alpha)
+        scoring_alpha = scoring_alpha if scoring_alpha > 0 else None
     if method == "auto" or (method == "local" and smoothing is None):
-        scoring_alpha = global_estimate.alpha if solver == "tikhonov" and global_estimate.alpha > 0 else None
         selection = select_model(tiles, led_spectra, scoring_alpha, margin=margin)
     model = selection.model if method == "auto" else method  # type: ignore[union-attr]
     weights = np.broadcast_to(global_estimate.ambient_weights, shape + (tiles.n_leds,)).copy()
@@ -697,9 +827,9 @@ def estimate_local(
     if model == "local":
         used_sigma = float(smoothing if smoothing is not None else selection.best_local)  # type: ignore[union-attr]
         if smoothing is None and regions_allowed:
-            scoring_alpha = global_estimate.alpha if solver == "tikhonov" and global_estimate.alpha > 0 else gcv_alpha(
-                total, np.diff(led_values, axis=0))
-            regions = segment_regions(tiles, led_spectra, scoring_alpha, solver, alpha)
+            labelling_alpha = scoring_alpha if scoring_alpha is not None else gcv_alpha(total, np.diff(led_values, axis=0))
+            regions = segment_regions(tiles, led_spectra, labelling_alpha, solver, alpha,
+                                      noise_correction=noise_correction)
             if regions is not None and not regions.chosen:
                 regions = None
         if regions is not None:
@@ -707,8 +837,8 @@ def estimate_local(
             weights = _region_tile_weights(regions, tiles)
         else:
             structure = "tiles"
-            weights, warnings = _solve_tiles(tiles.smoothed(used_sigma), tiles, led_values, solver, alpha,
-                                             global_estimate)
+            weights, warnings = _solve_tiles(tiles.smoothed(used_sigma), None if clean is None else clean.smoothed(used_sigma),
+                                             tiles, ambient_model, solver, alpha, global_estimate)
     residual = np.sqrt(_held_out_error(tiles, weights) / np.maximum(tiles.ambient_energy, 1e-300))
     return LocalEstimate(
         model=model, method=method, smoothing=used_sigma, global_estimate=global_estimate, tile_weights=weights,
@@ -735,9 +865,22 @@ def _region_tile_weights(regions: RegionSegmentation, tiles: TiledStatistics) ->
     return (1.0 - share)[..., None] * regions.weights[0] + share[..., None] * regions.weights[1]
 
 
-def _solve_tiles(smoothed: TiledStatistics, own: TiledStatistics, led_values: np.ndarray, solver: str,
-                 alpha: float | str, global_estimate: AmbientEstimate) -> tuple[np.ndarray, list[str]]:
-    """The chosen solver on every tile's smoothed statistics; empty tiles take the global weights."""
+def _solve(model: AmbientModel, observed: SequenceStatistics, denoised: SequenceStatistics | None, solver: str,
+           alpha: float | str) -> tuple[np.ndarray, float]:
+    """``(w_a, α used)`` from the denoised statistics, or from the observed ones when there are none or
+    denoising left a Gram matrix that is not positive definite (noise probe larger than the signal)."""
+    if denoised is not None:
+        try:
+            np.linalg.cholesky(denoised.gram)
+            return model.weights(denoised, solver, alpha)
+        except (np.linalg.LinAlgError, SolverError):
+            pass
+    return model.weights(observed, solver, alpha)
+
+
+def _solve_tiles(smoothed: TiledStatistics, denoised: TiledStatistics | None, own: TiledStatistics, model: AmbientModel,
+                 solver: str, alpha: float | str, global_estimate: AmbientEstimate) -> tuple[np.ndarray, list[str]]:
+    """The chosen solver on every tile's smoothed (denoised when given) statistics; empty tiles take the global weights."""
     weights = np.empty(smoothed.shape + (smoothed.n_leds,))
     fallback = 0
     for i in range(smoothed.shape[0]):
@@ -748,7 +891,7 @@ def _solve_tiles(smoothed: TiledStatistics, own: TiledStatistics, led_values: np
                 fallback += 1
                 continue
             try:
-                weights[i, j] = AMBIENT_METHODS[solver](statistics, led_values, alpha)[0]
+                weights[i, j] = _solve(model, statistics, None if denoised is None else denoised.tile(i, j), solver, alpha)[0]
             except SolverError:
                 weights[i, j] = global_estimate.ambient_weights
                 fallback += 1

@@ -16,6 +16,7 @@ from processing.image_formation import MixedIllumination, expected_response
 from processing.local import (
     SELECTION_MARGIN,
     Cells,
+    _block_sums_and_differences,
     segment_regions,
     TiledStatistics,
     estimate_local,
@@ -36,7 +37,7 @@ from processing.local_study import (
     tiled_rmse,
 )
 from processing.metrics import spectrum_rmse
-from processing.statistics import accumulate_statistics
+from processing.statistics import FrameStackSpec, accumulate_statistics
 from processing.synthesis import synthesize
 from tests.helpers import EXACT, FLOAT32, ambient, camera, chart, leds_photons, linear_frames, rendered_frames, spec_for
 
@@ -75,6 +76,73 @@ def test_tiles_sum_to_the_global_statistics(bin_factor: int, cfa: str | None, ti
     assert total.ambient_energy == pytest.approx(reference.ambient_energy, rel=EXACT)
     assert total.ambient_sum == pytest.approx(reference.ambient_sum, rel=EXACT)
     assert (total.n_samples, total.n_total) == (reference.n_samples, reference.n_total)
+
+
+@pytest.mark.parametrize("dtype", [np.uint16, np.float64])
+@pytest.mark.parametrize(("factor", "channels"), [(2, 1), (4, 3), (6, 4)])
+def test_block_sums_and_half_differences_are_exact(dtype: type, factor: int, channels: int) -> None:
+    """One pass gives each block's sum and its even-column minus odd-column sum (edges dropped)."""
+    rng = np.random.default_rng(factor)
+    plane = rng.integers(0, 65536, size=(5 * factor + 1, 7 * factor + 3, channels)).astype(dtype)
+    sums, differences = np.empty((5, 7, channels)), np.empty((5, 7, channels))
+    _block_sums_and_differences(plane, factor, sums, differences)
+    blocks = plane[:5 * factor, :7 * factor].astype(float).reshape(5, factor, 7, factor, channels)
+    np.testing.assert_array_equal(sums, blocks.sum(axis=(1, 3)))
+    np.testing.assert_array_equal(differences, blocks[:, :, :, 0::2].sum(axis=(1, 3)) - blocks[:, :, :, 1::2].sum(axis=(1, 3)))
+
+
+def _in_span_noisy_stack(noise_gain: float, seed: int = 0) -> tuple[np.ndarray, list[np.ndarray], FrameStackSpec, np.ndarray]:
+    """Float frames whose ambient is exactly ``Σ w_k`` LED image k, with signal-dependent noise ``σ² = gain · signal``.
+
+    The LED images are 8 × 8-pixel patches of random levels per channel with a ±20 % texture inside
+    (blocks of 4 see both), so the weights are well determined once the noise bias is gone. At gain 10
+    the per-pixel noise is about the size of one LED's signal (far noisier than the sim rig's frames).
+    """
+    rng = np.random.default_rng(seed)
+    k, height, width = 7, 256, 384
+    patches = rng.uniform(0.1, 1.0, size=(k, height // 8, width // 8, 3))
+    images = np.repeat(np.repeat(patches, 8, axis=1), 8, axis=2) * rng.uniform(0.8, 1.2, size=(k, height, width, 3)) * 100
+    weights = rng.uniform(0.2, 1.0, size=k)
+    ambient_image = np.tensordot(weights, images, axes=1)
+
+    def noisy(x: np.ndarray) -> np.ndarray:
+        return x + rng.normal(size=x.shape) * np.sqrt(noise_gain * x)
+
+    spec = FrameStackSpec(black_level=0.0, white_level=1e12, ambient_scale=1.0, led_scales=(1.0,) * k, led_levels=np.eye(k))
+    return noisy(ambient_image), [noisy(ambient_image + image) for image in images], spec, weights
+
+
+def test_denoised_statistics_remove_the_noise_bias_of_the_led_only_images() -> None:
+    """Errors in variables: the LED-only images are differences of noisy frames, so their moments are biased.
+
+    Plain least squares on the observed statistics is pulled away from the true weights; on the
+    denoised statistics (half-block cross-products) it recovers them, with no noise model given.
+    """
+    ambient_frame, led_frames, spec, weights = _in_span_noisy_stack(noise_gain=10.0)
+    t = tile_statistics(ambient_frame, led_frames, spec, 3, bin_factor=4)
+    assert t.denoised is not None and t.denoised.shape == t.shape
+    observed, denoised = t.total(), t.denoised.total()
+    # Counts and sums carry no noise bias: they are the observed ones.
+    assert denoised.n_samples == observed.n_samples and denoised.ambient_sum == observed.ambient_sum
+    # The noise adds to every diagonal of the observed Gram matrix (independent frames).
+    assert np.all(np.diag(observed.gram) > np.diag(denoised.gram))
+    error_observed = np.abs(np.linalg.solve(observed.gram, observed.cross) - weights).max()
+    error_denoised = np.abs(np.linalg.solve(denoised.gram, denoised.cross) - weights).max()
+    assert error_observed > 0.07 and error_denoised < 0.4 * error_observed, (error_observed, error_denoised)
+    # estimate_local solves on the denoised statistics (the reliability signals stay the observed ones).
+    leds = leds_photons()
+    corrected = estimate_local(t, leds, "global", solver="lstsq")
+    plain = estimate_local(t, leds, "global", solver="lstsq", noise_correction=False)
+    assert np.abs(corrected.global_estimate.ambient_weights - weights).max() < 0.4 * error_observed
+    np.testing.assert_allclose(plain.global_estimate.ambient_weights, np.linalg.solve(observed.gram, observed.cross), rtol=1e-6)
+    assert corrected.global_estimate.n_samples == observed.n_samples
+    # The cells carry the same correction (single blocks: exactly the tiles'); odd bin factors have none.
+    cells = Cells.of(t.blocks, 1)  # type: ignore[arg-type]
+    everything = cells.denoised_statistics(np.ones(cells.gram.shape[0], dtype=bool))
+    assert everything is not None
+    np.testing.assert_allclose(everything.gram, denoised.gram, rtol=1e-9)
+    np.testing.assert_allclose(everything.cross, denoised.cross, rtol=1e-9)
+    assert tile_statistics(ambient_frame, led_frames, spec, 3, bin_factor=3).denoised is None
 
 
 def test_tile_geometry_covers_the_frame() -> None:
@@ -166,29 +234,36 @@ def test_two_illuminant_scene_auto_chooses_local(kind: str, seed: int) -> None:
     assert min(v for k, v in selection.scores.items() if k != "global") < 0.5
 
 
-@pytest.mark.parametrize("seed", [2, 4, 6])
-def test_local_cuts_the_spectrum_rmse_on_two_illuminant_scenes(seed: int) -> None:
-    s = scenario("boundary", seed)
-    t = tiled("boundary", seed)
-    auto = estimate_local(t, s.led_spectra, "auto")
-    assert auto.structure == "regions"
-    global_rmse = pixel_rmse(auto.global_estimate.spectrum.values[:, 0], s)
-    local_rmse = pixel_rmse(auto, s)
-    tiles_rmse = pixel_rmse(estimate_local(t, s.led_spectra, "local", regions_allowed=False), s)
+def test_local_cuts_the_spectrum_rmse_on_two_illuminant_scenes() -> None:
+    """Boundary scenes 2, 4, 6: per scene local beats global; on their mean, most of what perfect locality gives."""
+    rows = []
+    for seed in (2, 4, 6):
+        s = scenario("boundary", seed)
+        t = tiled("boundary", seed)
+        auto = estimate_local(t, s.led_spectra, "auto")
+        assert auto.structure == "regions"
+        global_rmse = pixel_rmse(auto.global_estimate.spectrum.values[:, 0], s)
+        local_rmse = pixel_rmse(auto, s)
+        assert local_rmse < 0.9 * global_rmse, (s.names, global_rmse, local_rmse)
+        # The labels follow the true boundary, not the tile grid.
+        labels = auto.regions.label_map(SHAPE)  # type: ignore[union-attr]
+        truth = s.illumination.weights[..., 1] > s.illumination.weights[..., 0]
+        assert max(np.mean(labels == truth), np.mean(labels != truth)) >= 0.9
+        rows.append([global_rmse, local_rmse,
+                     pixel_rmse(estimate_local(t, s.led_spectra, "local", regions_allowed=False), s),
+                     alone_rmse("boundary", seed, SHAPE), pixel_bound(s),
+                     pixel_rmse(estimate_local(t, s.led_spectra, "auto", noise_correction=False), s)])
+    global_rmse, local_rmse, tiles_rmse, alone, bound, observed_rmse = np.mean(rows, axis=0)
+    assert local_rmse <= 0.75 * global_rmse, rows
     # Part of either error is the LEDs' inability to reproduce the named ambients (~0.18 here):
     # the raw cut is smaller than the cut of the excess over that bound.
-    bound = pixel_bound(s)
-    assert local_rmse <= 0.8 * global_rmse, (s.names, global_rmse, local_rmse)
-    assert local_rmse - bound <= 0.5 * (global_rmse - bound), (s.names, global_rmse, local_rmse, bound)
-    # Most of the error left is the paper's estimator's own: with each ambient estimated alone over
-    # the whole scene (perfect locality) the error drops little further.
-    alone = alone_rmse("boundary", seed, SHAPE)
-    assert alone < global_rmse and local_rmse - alone <= 0.35 * (global_rmse - alone), (alone, local_rmse, global_rmse)
-    assert local_rmse <= tiles_rmse * 1.02, (s.names, local_rmse, tiles_rmse)
-    # The labels follow the true boundary, not the tile grid.
-    labels = auto.regions.label_map(SHAPE)  # type: ignore[union-attr]
-    truth = s.illumination.weights[..., 1] > s.illumination.weights[..., 0]
-    assert max(np.mean(labels == truth), np.mean(labels != truth)) >= 0.9
+    assert local_rmse - bound <= 0.5 * (global_rmse - bound), rows
+    # Most of the error left is the estimator's own: with each ambient estimated alone over the
+    # whole scene (perfect locality) the error drops little further.
+    assert alone < global_rmse and local_rmse - alone <= 0.35 * (global_rmse - alone), rows
+    assert local_rmse <= tiles_rmse, rows
+    # Without the noise correction the regions' estimates are worse (tungsten and daylight sides).
+    assert local_rmse < observed_rmse, rows
 
 
 def test_gradient_scene_keeps_the_tile_model() -> None:
