@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from acquisition.cli_common import UsageError, positive_int, print_json, progress
+from acquisition.cli_evaluate import check_layout, layout_options, sequence_layout  # the layouts of `msflash evaluate`
 from acquisition.sequence_format import read_sequence
 from calibration.camera_response import (
     estimate_responsivities,
@@ -107,11 +108,6 @@ def _leds(args: argparse.Namespace) -> int:
 
 
 def _camera_from_sequences(args: argparse.Namespace) -> int:
-    from acquisition.cli_evaluate import (  # the layout `msflash evaluate` uses
-        chart_layout,
-        check_layout,
-    )
-
     if args.chart != "macbeth":
         raise UsageError(f"--chart {args.chart}: recorded sequences support the macbeth layout only; expected --chart macbeth")
     sequences = [read_sequence(directory) for directory in args.sequence]
@@ -123,14 +119,17 @@ def _camera_from_sequences(args: argparse.Namespace) -> int:
               for spec in (args.light or [None] * len(sequences))]
     chart = datasets.macbeth().resample(grid, outside="edge")
 
-    def labels_for(shape: tuple[int, int], excluded: np.ndarray) -> np.ndarray:
-        return chart_layout(shape, args.chart, args.patch_px, args.border_px, args.margin_px, excluded).labels
-
-    for sequence in sequences:  # the layout must fit before anything is estimated
+    # Each sequence its own layout (detected unless --patch-px/--border-px): the chart may move.
+    layouts = [sequence_layout(sequence, args.chart, args.patch_px, args.border_px, args.margin_px)
+               for sequence in sequences]
+    for sequence, layout in zip(sequences, layouts, strict=True):  # the layout must fit before anything is estimated
         index = sequence.indices("ambient")[0] if sequence.indices("ambient") else 0
         raw = sequence.load_frame(index).astype(np.float64)
-        check_layout(raw, chart_layout(raw.shape[:2], args.chart, args.patch_px, args.border_px, args.margin_px),
-                     sequence.camera.cfa)
+        layout_map = layout.build(raw.shape[:2])
+        check_layout(raw, layout_map, sequence.camera.cfa)
+        if layout.report["detected"]:
+            progress(f"{sequence.directory}: {layout_map.description}")
+    labels_for = [lambda shape, excluded, layout=layout: layout.build(shape, excluded).labels for layout in layouts]
     measurements = sequence_measurements(sequences, lights, chart, labels_for)
     cameras = {name: s.resample(grid, outside="zero") for name, s in datasets.paper_cameras().items()}
     unknown = [name for name in args.prior_exclude if name not in cameras]
@@ -150,12 +149,13 @@ def _camera_from_sequences(args: argparse.Namespace) -> int:
                 "sequences": [str(s.directory) for s in sequences], "lights": args.light or [],
                 "light_scales": result.light_scales, "frames": list(measurements.frames),
                 "prior_excluded": list(args.prior_exclude),
-                "layout": {"patch_px": args.patch_px, "border_px": args.border_px, "margin_px": args.margin_px},
+                "layouts": [layout.report for layout in layouts],
                 "rmse_vs_sequence_responsivity": rmse},
     )
     path = save_calibration(calibration, args.out)
     payload = {"calibration": str(path), "id": calibration.id, "method": estimate.method,
                "light_scales": result.light_scales, "relative_residual": list(estimate.relative_residual),
+               "layouts": [{"sequence": str(s.directory), **layout.report} for s, layout in zip(sequences, layouts, strict=True)],
                "rmse_vs_sequence_responsivity": rmse}
     if args.json:
         print_json(payload)
@@ -263,9 +263,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="the known broadband light of each sequence's ambient frame, in order (a name like "
                              "tungsten/daylight/D65, a CSV 'wavelength_nm, value' in energy, or 'none'); its power is "
                              "estimated")
-    camera.add_argument("--patch-px", type=positive_int, default=8, help="sequences: chart patch side (sim rig 8)")
-    camera.add_argument("--border-px", type=int, default=2, help="sequences: gap between patches (sim rig 2)")
-    camera.add_argument("--margin-px", type=int, default=1, help="sequences: pixels ignored inside each patch edge")
+    layout_options(camera, patch_type=positive_int)  # with --sequence, as `msflash evaluate`
     camera.add_argument("--prior-exclude", action="append", default=[], metavar="NAME",
                         help="leave this paper camera out of the learned prior (e.g. the camera under test)")
     camera.add_argument("--simulate", action="store_true", help="render the chart in the sim world instead")

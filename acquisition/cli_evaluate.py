@@ -14,13 +14,15 @@ Fig. 9 chart — and the Fig. 3 noise comparison under water.
 
 Which pixels are which patch
 ----------------------------
-A sequence does not record its chart layout, so ``evaluate`` rebuilds the label map with
-:func:`processing.image_formation.chart_scene` from ``--patch-px`` and ``--border-px`` (the sim
-rig's defaults, 8 and 2), anchored at the top-left pixel; pixels outside the chart (the sim
-rig's highlight strip) and within ``--margin-px`` of a patch edge are ignored. The fit is
-checked: if the patches are not uniform in the ambient image (within-patch spread larger than a
-quarter of the spread between patches) evaluation stops with a message naming the options.
-Detecting charts in real photographs is not attempted.
+A sequence does not record its chart layout. By default ``evaluate`` detects the chart
+(:mod:`calibration.chart_detection`: anywhere in the frames, any scale, a small rotation, either
+orientation, RGB or Bayer) and reports where it found it (``layout_parameters``). Given
+``--patch-px`` and/or ``--border-px`` it rebuilds the label map with
+:func:`processing.image_formation.chart_scene` instead (the sim rig's defaults, 8 and 2), anchored
+at the top-left pixel. Pixels outside the chart (the sim rig's highlight strip) and within
+``--margin-px`` of a patch edge are ignored. The layout is checked either way: if the patches are
+not uniform in the ambient image (within-patch spread larger than a quarter of the spread between
+patches) evaluation stops with a message naming the options.
 
 Underwater world of ``colour-study``
 ------------------------------------
@@ -37,6 +39,7 @@ import argparse
 import io
 import json
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,6 +51,7 @@ from acquisition.cli_common import UsageError, dumps_json, print_json, progress
 from acquisition.html_report import HtmlReport
 from acquisition.image_io import write_image
 from acquisition.sequence_format import Sequence, read_sequence
+from calibration import chart_detection
 from processing import colour_metrics, datasets, water
 from processing.ambient import estimate_ambient
 from processing.errors import TargetUnreachableWarning
@@ -111,6 +115,54 @@ def chart_layout(shape: tuple[int, int], chart: str = "macbeth", patch_px: int =
     return ChartLayout(usable, n_patches, MACBETH_NEUTRALS,
                        f"{chart} chart rebuilt with chart_scene(patch_px={patch_px}, border_px={border_px}) at the "
                        f"top-left pixel, {margin_px}-pixel margin")
+
+
+@dataclass(frozen=True)
+class SequenceLayout:
+    """How a sequence's patches are found: a given sim-rig layout or a detected chart."""
+
+    build: Callable[..., ChartLayout]
+    """``build(shape, excluded=None)``: the label map for an image shape, dropping excluded pixels."""
+    report: dict[str, Any]
+    """For JSON output: ``detected`` and the layout's parameters."""
+
+
+def sequence_layout(sequence: Sequence, chart: str = "macbeth", patch_px: int | None = None,
+                    border_px: int | None = None, margin_px: int = 1) -> SequenceLayout:
+    """The chart layout of ``sequence``: detected when neither ``patch_px`` nor ``border_px`` is given.
+
+    Detection (:func:`calibration.chart_detection.detect_in_sequence`) finds the chart anywhere in
+    the frames, at any scale and a small rotation; given options rebuild the sim rig's chart at the
+    top left (:func:`chart_layout`, the other option at its sim-rig default).
+
+    Raises
+    ------
+    UsageError
+        An unknown chart, or no single chart found (naming the sequence and the layout options).
+    """
+    if chart not in CHARTS:
+        raise UsageError(f"--chart '{chart}': unknown; expected one of {', '.join(CHARTS)}")
+    if patch_px is not None or border_px is not None:
+        patch, border = (8 if patch_px is None else patch_px), (2 if border_px is None else border_px)
+        return SequenceLayout(
+            lambda shape, excluded=None: chart_layout(shape, chart, patch, border, margin_px, excluded),
+            {"detected": False, "patch_px": patch, "border_px": border, "margin_px": margin_px})
+    if margin_px < 0:
+        raise UsageError(f"--margin-px {margin_px}: expected ≥ 0")
+    reflectances = datasets.macbeth().resample(sequence.grid, outside="edge")
+    try:
+        grid = chart_detection.detect_in_sequence(sequence, reflectances, *chart_detection.MACBETH_GRID)
+    except chart_detection.ChartDetectionError as err:
+        raise UsageError(str(err)) from err
+    patch = min(grid.as_dict()["patch_px"])
+    if 2 * margin_px >= patch:
+        raise UsageError(f"--margin-px {margin_px} leaves nothing of the {patch:.1f}-pixel patches of the chart "
+                         f"detected in {sequence.path}; expected margin < patch/2")
+    description = f"{grid.describe()}, {margin_px}-pixel margin"
+    return SequenceLayout(
+        lambda shape, excluded=None: ChartLayout(grid.labels(shape, margin_px, excluded), grid.rows * grid.columns,
+                                                 MACBETH_NEUTRALS, description),
+        {"detected": True, **grid.as_dict(), "margin_px": margin_px})
 
 
 def check_layout(image: np.ndarray, layout: ChartLayout, cfa: str | None, *, worst_patch_limit: float = 1.0,
@@ -285,17 +337,22 @@ def _solve_both(ambient_weights: np.ndarray, leds: Spectra, camera: Spectra, tar
     return solutions, [str(w.message) for w in caught]
 
 
-def evaluate_sequence(sequence: Sequence, out: Path, chart: str = "macbeth", patch_px: int = 8, border_px: int = 2,
-                      margin_px: int = 1, bounds: str = "physical", target: str = "D65") -> dict[str, Any]:
-    """Evaluate a sequence of a chart; writes images, ``evaluation.json`` and ``report.html`` to ``out``."""
+def evaluate_sequence(sequence: Sequence, out: Path, chart: str = "macbeth", patch_px: int | None = None,
+                      border_px: int | None = None, margin_px: int = 1, bounds: str = "physical",
+                      target: str = "D65") -> dict[str, Any]:
+    """Evaluate a sequence of a chart; writes images, ``evaluation.json`` and ``report.html`` to ``out``.
+
+    Without ``patch_px`` and ``border_px`` the chart is detected (:func:`sequence_layout`).
+    """
     out.mkdir(parents=True, exist_ok=True)
     camera = analysis.camera_responsivities_photons(sequence)
     leds = analysis.led_spectra_photons(sequence)
     stack = analysis.load_frame_stack(sequence)
     cfa = sequence.camera.cfa
     ambient, saturated = _linear_frame(sequence, stack.ambient_index)
-    # Check the layout before any processing, so a wrong --patch-px fails at once.
-    check_layout(ambient, chart_layout(ambient.shape[:2], chart, patch_px, border_px, margin_px, saturated), cfa)
+    # Find and check the layout before any processing, so a wrong --patch-px fails at once.
+    found = sequence_layout(sequence, chart, patch_px, border_px, margin_px)
+    check_layout(ambient, found.build(ambient.shape[:2], saturated), cfa)
     progress("estimating the ambient and solving the flashes")
     estimate = analysis.estimate_sequence(sequence, stack=stack)
     target_spd = analysis.target_illuminant(target, sequence)
@@ -315,7 +372,7 @@ def evaluate_sequence(sequence: Sequence, out: Path, chart: str = "macbeth", pat
         name = f"{closest}-capture" if f"{closest}-capture" not in images else f"flash-{index}"
         images[name], weights[name] = image, levels
         saturated |= flash_saturated
-    layout = chart_layout(ambient.shape[:2], chart, patch_px, border_px, margin_px, excluded=saturated)
+    layout = found.build(ambient.shape[:2], saturated)
     uniformity = check_layout(ambient, layout, cfa)
     context = colour_context(camera, sequence.grid, layout, cfa)
     d65_white = camera.values.T @ datasets.illuminant("D65", sequence.grid).to_unit("photons").values[:, 0]
@@ -324,6 +381,7 @@ def evaluate_sequence(sequence: Sequence, out: Path, chart: str = "macbeth", pat
     result = _measure(out, images, context, gains, images[noise_image], weights)
     result.update({
         "sequence": str(sequence.directory), "chart": chart, "layout": layout.description,
+        "layout_parameters": found.report,
         "layout_uniformity": uniformity, "bounds": bounds, "target": target,
         "ambient_weights": estimate.ambient_weights, "flash_weights": {m: s.flash_weights for m, s in solutions.items()},
         "complementary_target_reached": solutions["complementary"].target_reached, "warnings": notes,
@@ -664,6 +722,16 @@ def _study(args: argparse.Namespace) -> int:
     return 0
 
 
+def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], int] = int) -> None:
+    """``--patch-px``, ``--border-px``, ``--margin-px``: a given chart layout, or none (detect the chart)."""
+    parser.add_argument("--patch-px", type=patch_type, default=None,
+                        help="patch side in pixels of a chart at the top left (sim rig 8); without it and "
+                             "--border-px the chart is detected in each sequence")
+    parser.add_argument("--border-px", type=int, default=None,
+                        help="gap between patches in pixels (sim rig 2; default 2 with --patch-px)")
+    parser.add_argument("--margin-px", type=int, default=1, help="pixels ignored inside each patch edge")
+
+
 def _bounds_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bounds", default="physical", choices=("physical", "nonnegative"),
                         help="flash weights in [0, 1] (physical, default: re-capturable) or ≥ 0 (computational)")
@@ -674,9 +742,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     evaluate = subparsers.add_parser("evaluate", help="ΔE00 against the chart under D65 and noise, for a chart sequence")
     evaluate.add_argument("sequence", metavar="SEQ", help="sequence directory (or a run directory holding 'sequence')")
     evaluate.add_argument("--chart", required=True, choices=CHARTS, help="the chart in the scene")
-    evaluate.add_argument("--patch-px", type=int, default=8, help="patch side in pixels (sim rig default 8)")
-    evaluate.add_argument("--border-px", type=int, default=2, help="gap between patches in pixels (sim rig default 2)")
-    evaluate.add_argument("--margin-px", type=int, default=1, help="pixels ignored inside each patch edge")
+    layout_options(evaluate)
     evaluate.add_argument("--target", default="D65", help="complementary target illuminant (name or CSV file)")
     _bounds_option(evaluate)
     evaluate.add_argument("--out", default=None, help="output directory (default: evaluation/ beside the sequence)")

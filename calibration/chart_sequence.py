@@ -19,7 +19,8 @@ one unknown scale, common to all patches and channels. Likewise the LED spectra 
 true ratios among themselves, but two sequences (another day, another gain, a re-measured booth)
 need not share a scale: the LEDs of every sequence after the first get one unknown scale too. ``flash`` and ``dark`` frames are not used.
 
-Patches come from a label map (the CLI rebuilds the chart layout as ``msflash evaluate`` does);
+Patches come from a label map per sequence (the CLI detects the chart in each sequence,
+:mod:`calibration.chart_detection`, or rebuilds a given layout as ``msflash evaluate`` does);
 pixels saturated in either frame of a difference are excluded before the edge margin is applied,
 and a Bayer mosaic is read through :func:`processing.colour_metrics.patch_pixels` (each channel its
 own sites, no demosaicking). A patch with too few usable pixels in a frame is dropped from that
@@ -134,7 +135,7 @@ def _patch_stats(image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str
 
 
 def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | None], reflectances: Spectra,
-                          labels_for: LabelBuilder) -> ChartMeasurements:
+                          labels_for: LabelBuilder | Sequence[LabelBuilder]) -> ChartMeasurements:
     """Patch means of every LED frame (minus the ambient) and of each ambient with a known light.
 
     Parameters
@@ -147,7 +148,8 @@ def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | N
     reflectances
         The chart's patches on the sequences' grid, in label order.
     labels_for
-        Builds the label map of an image shape, excluding a mask (saturated pixels).
+        Builds the label map of an image shape, excluding a mask (saturated pixels): one for all
+        sequences, or one per sequence (a chart detected in each, :mod:`calibration.chart_detection`).
 
     Raises
     ------
@@ -159,14 +161,18 @@ def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | N
         raise CalibrationError(f"{len(lights)} lights for {len(sequences)} sequences; expected one per sequence")
     if not sequences:
         raise CalibrationError("no sequence given; expected at least one chart sequence")
+    builders = list(labels_for) if isinstance(labels_for, Sequence) else [labels_for] * len(sequences)
+    if len(builders) != len(sequences):
+        raise CalibrationError(f"{len(builders)} label maps for {len(sequences)} sequences; expected one per sequence")
     grid = sequences[0].grid
     if not reflectances.grid.same_as(grid):
         raise CalibrationError(f"chart reflectances on {reflectances.grid} but the sequence on {grid}; expected one grid")
     n_patches = reflectances.count
     design_rows, data_rows, std_rows, groups, names, used = [], [], [], [], [], []
 
-    def add(image: np.ndarray, excluded: np.ndarray, light: Spectra, group: int, where: str, cfa: str | None) -> None:
-        labels = labels_for(image.shape[:2], excluded)
+    def add(image: np.ndarray, excluded: np.ndarray, light: Spectra, group: int, where: str, cfa: str | None,
+            labels_of: LabelBuilder) -> None:
+        labels = labels_of(image.shape[:2], excluded)
         means, errors = _patch_stats(image, labels, n_patches, cfa)
         valid = np.all(np.isfinite(means), axis=1)
         if valid.sum() < max(3, n_patches // 2):
@@ -217,10 +223,12 @@ def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | N
             image, saturated = _linear(sequence, i)
             spectrum = leds.replace(values=leds.values @ levels[:, None],
                                     names=("+".join(n for n, v in zip(leds.names, levels) if v > 0),))
-            add(image - ambient, saturated | ambient_saturated, spectrum, led_group, f"{where}: {frame.file}", cfa)
+            add(image - ambient, saturated | ambient_saturated, spectrum, led_group, f"{where}: {frame.file}", cfa,
+                builders[s])
         if light is not None:
             names.append(f"{s}: {light.names[0]}")
-            add(ambient, ambient_saturated, light, len(names) - 1, f"{where}: {sequence.frames[a].file}", cfa)
+            add(ambient, ambient_saturated, light, len(names) - 1, f"{where}: {sequence.frames[a].file}", cfa,
+                builders[s])
     group = np.concatenate(groups)
     if not np.any(group < 0):
         raise CalibrationError("no LED frame in any sequence; expected LED frames (they fix the scale of the "

@@ -1,0 +1,236 @@
+"""Chart detection (calibration/chart_detection.py): the sim rig's Macbeth chart anywhere in the frame.
+
+Sequences are recorded through the whole sim rig (``msflash capture``) with the chart placed by
+:func:`processing.image_formation.placed_scene`; the truth is the placed scene's own label image.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from acquisition import cli
+from acquisition import rig as rig_module
+from acquisition.sequence_format import read_sequence
+from acquisition.simulated_camera import SimulatedCamera
+from calibration.chart_detection import (
+    MACBETH_GRID,
+    ChartDetectionError,
+    ColourFrames,
+    detect_chart,
+    detect_in_sequence,
+)
+from processing import datasets
+from processing.image_formation import Scene, chart_scene, placed_scene, uniform_scene
+from tests.helpers import GRID, SAMPLES_DIR, ambient, leds_photons, linear_frames
+
+N_PATCHES = MACBETH_GRID[0] * MACBETH_GRID[1]
+
+
+@pytest.fixture(autouse=True)
+def with_calibrate(monkeypatch):
+    if "acquisition.cli_calibrate" not in cli.COMMAND_MODULES:
+        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("acquisition.cli_calibrate",))
+
+
+def _chart(patch_px: int = 8) -> Scene:
+    return chart_scene("macbeth", patch_px=patch_px, specular_strip_px=4)
+
+
+def _record(out: Path, scene: Scene | None, ambient_name: str = "tungsten", seed: int = 1, cfa: str | None = None) -> Path:
+    """A sim rig capture of ``scene`` (None: the rig's own chart at the top left)."""
+    default = SimulatedCamera.default.__func__
+
+    class PlacedWorld(SimulatedCamera):
+        @classmethod
+        def default(cls, **options):
+            if scene is not None:
+                options["scene"] = scene
+            return default(cls, **options)
+
+    argv = ["capture", "--rig", "sim", "--scene", "macbeth", "--ambient", ambient_name, "--seed", str(seed),
+            "--out", str(out)]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(rig_module, "SimulatedCamera", PlacedWorld)
+        assert cli.main(argv + (["--cfa", cfa] if cfa else [])) == 0
+    return out / "sequence"
+
+
+# Offsets (odd and fractional), scales, small rotations, upside down; RGB and RGGB.
+PLACEMENTS = {
+    "offset-rgb": (dict(shape=(90, 120), centre_yx=(50.3, 61.7)), None),
+    "rotated-scaled-rgb": (dict(shape=(110, 150), centre_yx=(60.0, 68.0), angle_deg=6.0, scale=1.5), None),
+    "rotated-rggb": (dict(shape=(100, 130), centre_yx=(47.0, 70.0), angle_deg=-5.0, scale=1.3), "RGGB"),
+    "upside-down-rggb": (dict(shape=(90, 120), centre_yx=(44.5, 57.5), angle_deg=183.0), "RGGB"),
+}
+
+
+@pytest.fixture(scope="module")
+def placed(tmp_path_factory) -> dict[str, tuple[Path, Scene]]:
+    root = tmp_path_factory.mktemp("placed")
+    recorded = {}
+    for seed, (name, (placement, cfa)) in enumerate(PLACEMENTS.items()):
+        scene = placed_scene(_chart(), **placement)
+        recorded[name] = (_record(root / name, scene, seed=seed + 1, cfa=cfa), scene)
+    return recorded
+
+
+def _true_centres(scene: Scene) -> np.ndarray:
+    """Centroids (x, y) of the scene's chart patches, chart order."""
+    centres = []
+    for k in range(N_PATCHES):
+        y, x = np.nonzero(scene.labels == k)
+        centres.append([x.mean(), y.mean()])
+    return np.array(centres)
+
+
+def _detect(path: Path):
+    sequence = read_sequence(path)
+    return sequence, detect_in_sequence(sequence, datasets.macbeth().resample(sequence.grid, outside="edge"),
+                                        *MACBETH_GRID)
+
+
+def _assert_labels_inside_true_patches(labels: np.ndarray, scene: Scene, min_pixels: int) -> None:
+    labelled = labels >= 0
+    assert np.array_equal(labels[labelled], scene.labels[labelled])  # every labelled pixel is that patch
+    assert np.bincount(labels[labelled], minlength=N_PATCHES).min() >= min_pixels
+
+
+@pytest.mark.parametrize("name", list(PLACEMENTS))
+def test_detection_agrees_with_the_placed_chart_within_a_pixel(placed, name):
+    path, scene = placed[name]
+    sequence, grid = _detect(path)
+    error = np.hypot(*(grid.patch_centres() - _true_centres(scene)).T)
+    assert error.max() <= 1.0, f"{name}: patch centres off by up to {error.max():.2f} px"
+    placement = PLACEMENTS[name][0]
+    scale, angle = placement.get("scale", 1.0), placement.get("angle_deg", 0.0)
+    assert grid.pitch_px == pytest.approx((10 * scale, 10 * scale), abs=0.3)  # 8-px patches, 2-px border
+    assert (grid.rotation_deg - angle + 180) % 360 - 180 == pytest.approx(0, abs=1.0)
+    assert grid.corner == ("bottom-right" if abs(angle) > 90 else "top-left") and not grid.mirrored
+    labels = grid.labels(sequence.load_frame(0).shape[:2])
+    _assert_labels_inside_true_patches(labels, scene, min_pixels=9)
+    assert grid.misfit < grid.runner_up_misfit / 10
+
+
+def test_the_sim_rigs_own_layout_is_found_exactly(tmp_path):
+    path = _record(tmp_path / "default", None)
+    sequence, grid = _detect(path)
+    scene = _chart()
+    assert np.allclose(grid.patch_centres(), _true_centres(scene), atol=0.05)
+    from acquisition.cli_evaluate import chart_layout
+
+    given = chart_layout(sequence.load_frame(0).shape[:2], "macbeth", 8, 2, 1).labels
+    assert np.array_equal(grid.labels(given.shape), given)  # the same label map as --patch-px 8 --border-px 2
+
+
+def test_a_mirrored_chart_in_noise_free_frames():
+    scene = placed_scene(_chart(), (80, 100), centre_yx=(41.0, 47.0), angle_deg=3.0)
+    mirrored = Scene(scene.reflectances.resample(GRID), scene.labels[:, ::-1], specular=scene.specular[:, ::-1])
+    ambient_frame, led_frames, spec = linear_frames(ambient("daylight"), scene=mirrored)
+    lights = leds_photons().replace(values=leds_photons().values @ spec.led_levels.T)
+    colour = ColourFrames(0, tuple(range(1, len(led_frames) + 1)), lights)
+    chart = datasets.macbeth().resample(lights.grid, outside="edge")
+    grid = detect_chart([ambient_frame, *led_frames], np.zeros(mirrored.shape, dtype=bool), None, colour, chart,
+                        *MACBETH_GRID)
+    assert grid.mirrored and grid.corner == "top-right"
+    assert np.abs(grid.patch_centres() - _true_centres(mirrored)).max() <= 1.0
+    _assert_labels_inside_true_patches(grid.labels(mirrored.shape), mirrored, min_pixels=16)
+
+
+@pytest.mark.parametrize(("sigma_px", "found"), [(1.0, True), (3.0, False)])
+def test_a_blurred_chart_is_found_until_its_patches_have_no_flat_centre(sigma_px, found):
+    # 12-px patches on a 2-px border, LED signals ~30 % of the ambient, noise 0.2 % of full scale.
+    from scipy.ndimage import gaussian_filter
+
+    scene = placed_scene(chart_scene("macbeth", patch_px=12), (100, 130), centre_yx=(50.0, 63.0), angle_deg=4.0)
+    scene = Scene(scene.reflectances.resample(GRID), scene.labels)
+    ambient_frame, led_frames, spec = linear_frames(ambient("tungsten"), scene=scene)
+    led_frames = [ambient_frame + 100 * (frame - ambient_frame) for frame in led_frames]
+    rng = np.random.default_rng(7)
+    frames = [gaussian_filter(frame, (sigma_px, sigma_px, 0)) + rng.normal(0, 2e-3 * frame.max(), frame.shape)
+              for frame in [ambient_frame, *led_frames]]
+    lights = leds_photons().replace(values=leds_photons().values @ spec.led_levels.T)
+    colour = ColourFrames(0, tuple(range(1, len(frames))), lights)
+    chart = datasets.macbeth().resample(GRID, outside="edge")
+    excluded = np.zeros(scene.shape, dtype=bool)
+    if found:
+        grid = detect_chart(frames, excluded, None, colour, chart, *MACBETH_GRID)
+        assert np.abs(grid.patch_centres() - _true_centres(scene)).max() <= 1.0
+    else:
+        with pytest.raises(ChartDetectionError, match="fewer than 18 uniform, equally sized, rectangular regions"):
+            detect_chart(frames, excluded, None, colour, chart, *MACBETH_GRID, where="blurred")
+
+
+def _calibrate(sequences: list[Path], out: Path, capsys, *extra: str) -> dict:
+    argv = ["calibrate", "camera", "--sequence", *map(str, sequences), "--light", "tungsten", "--light", "daylight",
+            "--prior-exclude", "NikonD100", "--out", str(out), "--json", *extra]
+    capsys.readouterr()
+    assert cli.main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_calibration_from_detected_layouts_matches_the_given_layout(tmp_path, capsys):
+    default = [_record(tmp_path / "t", None, "tungsten", 1), _record(tmp_path / "d", None, "daylight", 2)]
+    detected = _calibrate(default, tmp_path / "a", capsys)
+    given = _calibrate(default, tmp_path / "b", capsys, "--patch-px", "8", "--border-px", "2")
+    assert detected["rmse_vs_sequence_responsivity"] == pytest.approx(given["rmse_vs_sequence_responsivity"], abs=1e-9)
+    assert [layout["detected"] for layout in detected["layouts"]] == [True, True]
+    assert {key: given["layouts"][0][key] for key in ("detected", "patch_px", "border_px", "margin_px")} == {
+        "detected": False, "patch_px": 8, "border_px": 2, "margin_px": 1}
+    # The chart moved between the two sequences (another place, scale and rotation) and one is a mosaic.
+    moved = [_record(tmp_path / "mt", placed_scene(_chart(), (90, 120), centre_yx=(50.3, 61.7)), "tungsten", 1),
+             _record(tmp_path / "md", placed_scene(_chart(), (100, 130), centre_yx=(47.0, 70.0), angle_deg=-5.0,
+                                                   scale=1.3), "daylight", 2)]
+    payload = _calibrate(moved, tmp_path / "c", capsys)
+    assert payload["rmse_vs_sequence_responsivity"] <= 0.05
+    assert abs(payload["rmse_vs_sequence_responsivity"] - given["rmse_vs_sequence_responsivity"]) <= 0.01
+    first, second = payload["layouts"]
+    assert first["origin_xy"] == pytest.approx([36.5, 33.5], abs=0.5) and first["corner"] == "top-left"
+    assert second["rotation_deg"] == pytest.approx(-5.0, abs=1.0) and second["pitch_px"] == pytest.approx([13, 13], abs=0.3)
+
+
+def test_evaluate_finds_the_chart_itself(placed, tmp_path, capsys):
+    path, _ = placed["rotated-rggb"]
+    capsys.readouterr()
+    assert cli.main(["evaluate", str(path), "--chart", "macbeth", "--out", str(tmp_path / "ev"), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["layout_parameters"]["detected"] and result["layout_parameters"]["corner"] == "top-left"
+    assert "chart detected" in result["layout"]
+    assert result["delta_e"]["ambient"]["mean"] > 0
+
+
+def _two_charts() -> Scene:
+    chart = _chart()
+    return Scene(chart.reflectances, np.hstack([chart.labels, chart.labels]), specular=np.hstack([chart.specular] * 2))
+
+
+@pytest.mark.parametrize(("scene", "message"), [
+    (lambda: uniform_scene(datasets.macbeth().select([6]), 60, 80), "no 4×6 chart found: fewer than 18 uniform"),
+    (lambda: placed_scene(_chart(patch_px=1), (60, 80)), "no 4×6 chart found"),  # 1-pixel patches
+    (lambda: placed_scene(_chart(patch_px=2), (60, 80)), "--margin-px 1 leaves nothing of the 2.0-pixel patches"),
+    (_two_charts, "2 4×6 charts found"),
+])
+def test_no_single_chart_is_refused_naming_the_sequence_and_the_options(tmp_path, capsys, scene, message):
+    path = _record(tmp_path / "scene", scene())
+    capsys.readouterr()
+    argv = ["calibrate", "camera", "--sequence", str(path), "--prior-exclude", "NikonD100", "--out", str(tmp_path / "c")]
+    assert cli.main(argv) == 2
+    error = capsys.readouterr().err.strip().splitlines()[-1]
+    assert error.startswith("msflash: error:") and message in error
+    assert str(path) in error
+    if "margin" not in message:
+        assert "--patch-px/--border-px" in error
+        with pytest.raises(ChartDetectionError, match=message):
+            _detect(path)
+
+
+@pytest.mark.skipif(not SAMPLES_DIR.exists(), reason="shared samples not present")
+@pytest.mark.parametrize("sample", ["sample-rgb-tungsten", "sample-bayer-fluorescent-12bit"])
+def test_the_shared_samples_show_no_macbeth_chart(sample):
+    # Their scene is the Natural-100 set on an edge-to-edge grid: an 8×8 grid is found, no 4×6 window of it
+    # has the Macbeth chart's colours.
+    with pytest.raises(ChartDetectionError, match="a grid of 8×8 uniform patches whose colours .* do not match"):
+        _detect(SAMPLES_DIR / sample)
