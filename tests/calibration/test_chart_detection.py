@@ -140,13 +140,16 @@ def test_a_mirrored_chart_in_noise_free_frames():
     _assert_labels_inside_true_patches(grid.labels(mirrored.shape), mirrored, min_pixels=16)
 
 
-@pytest.mark.parametrize(("sigma_px", "found"), [(1.0, True), (3.0, False)])
-def test_a_blurred_chart_is_found_until_its_patches_have_no_flat_centre(sigma_px, found):
-    # 12-px patches on a 2-px border, LED signals ~30 % of the ambient, noise 0.2 % of full scale.
+def _detect_synthetic(sigma_px: float = 0.0, shading_low: float = 1.0, where: str = "frames"):
+    """Detection on noisy linear frames of a 12-px chart (2-px border) at 4°: blurred by a Gaussian of
+    ``sigma_px``, lit with a left-to-right falloff to ``shading_low``; LED signals ~30 % of the
+    ambient, noise 0.2 % of full scale. Returns the scene and the grid."""
     from scipy.ndimage import gaussian_filter
 
-    scene = placed_scene(chart_scene("macbeth", patch_px=12), (100, 130), centre_yx=(50.0, 63.0), angle_deg=4.0)
-    scene = Scene(scene.reflectances.resample(GRID), scene.labels)
+    placed = placed_scene(chart_scene("macbeth", patch_px=12), (100, 130), centre_yx=(50.0, 63.0), angle_deg=4.0)
+    columns = np.arange(placed.shape[1], dtype=float)
+    falloff = np.clip(1 - (1 - shading_low) * (columns - 20) / 90, shading_low, 1)
+    scene = Scene(placed.reflectances.resample(GRID), placed.labels, shading=np.tile(falloff, (placed.shape[0], 1)))
     ambient_frame, led_frames, spec = linear_frames(ambient("tungsten"), scene=scene)
     led_frames = [ambient_frame + 100 * (frame - ambient_frame) for frame in led_frames]
     rng = np.random.default_rng(7)
@@ -155,13 +158,24 @@ def test_a_blurred_chart_is_found_until_its_patches_have_no_flat_centre(sigma_px
     lights = leds_photons().replace(values=leds_photons().values @ spec.led_levels.T)
     colour = ColourFrames(0, tuple(range(1, len(frames))), lights)
     chart = datasets.macbeth().resample(GRID, outside="edge")
-    excluded = np.zeros(scene.shape, dtype=bool)
+    return scene, detect_chart(frames, np.zeros(scene.shape, dtype=bool), None, colour, chart, *MACBETH_GRID, where)
+
+
+@pytest.mark.parametrize(("sigma_px", "found"), [(1.0, True), (3.0, False)])
+def test_a_blurred_chart_is_found_until_its_patches_have_no_flat_centre(sigma_px, found):
     if found:
-        grid = detect_chart(frames, excluded, None, colour, chart, *MACBETH_GRID)
+        scene, grid = _detect_synthetic(sigma_px)
         assert np.abs(grid.patch_centres() - _true_centres(scene)).max() <= 1.0
     else:
-        with pytest.raises(ChartDetectionError, match="fewer than 18 uniform, equally sized, rectangular regions"):
-            detect_chart(frames, excluded, None, colour, chart, *MACBETH_GRID, where="blurred")
+        with pytest.raises(ChartDetectionError, match="blurred: no 4×6 chart found: fewer than 18 uniform"):
+            _detect_synthetic(sigma_px, where="blurred")
+
+
+def test_uneven_light_across_the_chart():
+    # Half the light at the chart's right edge: patches still uniform enough, colours still the chart's.
+    scene, grid = _detect_synthetic(shading_low=0.5)
+    assert np.abs(grid.patch_centres() - _true_centres(scene)).max() <= 1.0
+    assert grid.misfit < 0.1 < grid.runner_up_misfit
 
 
 def _calibrate(sequences: list[Path], out: Path, capsys, *extra: str) -> dict:
