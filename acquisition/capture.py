@@ -53,11 +53,12 @@ Whatever happens the LEDs go off (``OFF`` also aborts a running table) and the c
 from __future__ import annotations
 
 import dataclasses
+import gc
 import logging
 import math
 import time
-from collections.abc import Callable, Sequence
-from contextlib import nullcontext
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager, nullcontext
 from typing import Any, Protocol
 
 from acquisition.camera import Camera, RawFrame
@@ -158,11 +159,31 @@ def run_capture_with_flash(
             exposure_us = longest
         return dataclasses.replace(placeholder, led_levels=levels, exposure_us=exposure_us)
 
-    if plan.trigger == "software":
-        return _host_paced(camera, booth, full, writer, on_frame, flash_step)
-    if plan.trigger in ("booth", "camera"):
+    if plan.trigger not in ("software", "booth", "camera"):
+        raise ValueError(f"run_capture_with_flash: plan trigger {plan.trigger!r}; expected software, booth or camera")
+    with collector_paused():
+        if plan.trigger == "software":
+            return _host_paced(camera, booth, full, writer, on_frame, flash_step)
         return _table_paced(camera, booth, full, writer, on_frame, flash_step)  # type: ignore[arg-type]
-    raise ValueError(f"run_capture_with_flash: plan trigger {plan.trigger!r}; expected software, booth or camera")
+
+
+@contextmanager
+def collector_paused() -> Iterator[None]:
+    """Pause Python's automatic (cyclic) garbage collection while a flash sequence streams.
+
+    A collection stops every thread of the process; on the capture bench one came about 30 times
+    per sequence, 0.2 ms (young objects) to 6 ms (older generations) each, and one landing
+    between the last LED frame and the flash trigger doubled that latency. A sequence lasts
+    k + 2 frame periods and leaves almost no cyclic garbage (reference counting frees the rest),
+    so collection waits until it is over. The previous state is restored on every exit path.
+    """
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
 
 
 def _replan(camera: Camera, plan: CapturePlan, index: int) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import threading
 from pathlib import Path
 
@@ -103,6 +104,7 @@ def test_flash_in_the_same_stream(sim_rig, tmp_path: Path, trigger: str) -> None
 
         def decide(frames):
             seen.append(len(frames))
+            assert not gc.isenabled()  # no collection pause between the last LED frame and the flash
             # The booth holds the flash step: nothing exposed with stale levels meanwhile.
             if trigger != "software":
                 assert sim_rig.emulator.levels == (0.0,) * 4 or sim_rig.emulator.holding is None
@@ -112,7 +114,7 @@ def test_flash_in_the_same_stream(sim_rig, tmp_path: Path, trigger: str) -> None
 
         entries = run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, decide, on_frame=keep)
         writer.finish()
-    assert seen == [5]
+    assert seen == [5] and gc.isenabled()
     assert [e.role for e in entries] == ["ambient"] + ["led"] * 4 + ["flash"]
     sequence = read_sequence(tmp_path / "s")
     assert sequence.complete and sequence.frames[-1].role == "flash"
@@ -354,3 +356,23 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim
     assert session.flash_exposure(weights) == flash_exposure(
         recorded_frames[0], sequence.frames[0].exposure_us, recorded_frames[1:],
         [f.exposure_us for f in sequence.frames[1:]], weights, info.black_level, info.white_level, (1.0, 1e6))
+
+
+def test_collection_resumes_after_a_failed_flash_decision(sim_rig, tmp_path: Path) -> None:
+    """The collector is paused only while the sequence streams: a decision that fails restores it
+    (and a collector the caller had disabled stays disabled)."""
+    plan = CapturePlan.ambient_then_each_led(4, 10_000.0, trigger="booth")
+
+    def decide(frames):
+        raise RuntimeError("no decision")
+
+    for enabled in (True, False):
+        (gc.enable if enabled else gc.disable)()
+        try:
+            with AsyncSequenceWriter(_writer(sim_rig, tmp_path / f"s{enabled}")) as writer, \
+                    pytest.raises(RuntimeError, match="no decision"):
+                run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, decide)
+            assert gc.isenabled() == enabled
+        finally:
+            gc.enable()
+    assert sim_rig.emulator.levels == (0.0,) * 4
