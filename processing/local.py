@@ -46,6 +46,7 @@ from processing.ambient import AMBIENT_METHODS, AmbientEstimate, AmbientModel, g
 from processing.errors import SolverError, SpectralDataError
 from processing.spectra import Spectra, require_unit
 from processing.statistics import (
+    DEFAULT_WORKERS,
     GATHER_ROWS,
     FrameStackSpec,
     SequenceStatistics,
@@ -53,6 +54,7 @@ from processing.statistics import (
     cfa_planes,
     gather_matrix,
     saturated_blocks,
+    thread_pool,
 )
 from processing.synthesis import frame_coefficients
 
@@ -140,9 +142,9 @@ class Cells:
     """(N, 1 + k) sums over the channels of ``a_b`` and of every LED image."""
     spec: FrameStackSpec | None = field(default=None, repr=False)
     """The block-level spec that maps raw moments to statistics (for :meth:`denoised_statistics`)."""
-    noise: np.ndarray | None = field(default=None, repr=False)
-    """(N, R·R) raw moments ``d dᵀ`` of every cell's half difference (the noise probe of
-    :attr:`TiledStatistics.denoised`); None when the blocks carry none."""
+    differences: np.ndarray | None = field(default=None, repr=False)
+    """(R, N, C) every cell's half difference (the noise probe of :attr:`TiledStatistics.denoised`) in
+    the rows ``[F_1 … F_n, A, 1]``; None when the blocks carry none."""
 
     @classmethod
     def of(cls, blocks: BlockData, group: int | None = None) -> Cells:
@@ -161,25 +163,24 @@ class Cells:
 
         def cell_samples(values: np.ndarray) -> np.ndarray:
             values = values[:, :rows * group, :columns * group]
-            if group > 1:
-                values = np.stack([block_sums(row, group) for row in values])
+            if group > 1:  # the rows' sums on the image threads (numpy releases the GIL)
+                values = np.stack(list(thread_pool(DEFAULT_WORKERS).map(lambda row: block_sums(row, group), values)))
             return values[:, valid]  # (R, N, C)
 
         samples = cell_samples(blocks.raw)
-        moments = np.einsum("rnc,snc->nrs", samples, samples, optimize=True)[:, None]
-        cells = _tiled_from_moments(moments, np.ones((samples.shape[1], 1)), blocks.spec, np.zeros(2, dtype=int),
-                                    np.zeros(2, dtype=int))
-        noise = None
-        if blocks.differences is not None:
-            differences = cell_samples(blocks.differences)
-            noise = np.einsum("rnc,snc->nrs", differences, differences, optimize=True).reshape(differences.shape[1], -1)
-        k = cells.n_leds
+        # The raw rows of every sample mapped to [f_1 … f_k, a] first (one product), then each cell's
+        # products summed over its channels: the same statistics as the tiles' map of raw moments.
+        # Channels before cells, so that the sums over the channels add whole rows of cells.
+        linear = np.tensordot(_projection(blocks.spec), samples.transpose(0, 2, 1), axes=1)  # (k + 1, C, N)
+        leds, ambient = linear[:-1], linear[-1]
+        k = leds.shape[0]
+        gram = (leds[:, None] * leds[None]).sum(axis=2).reshape(k * k, -1).T
+        differences = None if blocks.differences is None else cell_samples(blocks.differences)
         return cls(valid=valid, size=blocks.pixel * group, channels=int(samples.shape[2]),
-                   gram=cells.gram.reshape(-1, k * k), cross=cells.cross.reshape(-1, k),
-                   energy=cells.ambient_energy.reshape(-1),
-                   # The sums are products with the ones row, which counts a cell's group² blocks.
-                   sums=np.column_stack([cells.ambient_sum.reshape(-1), cells.led_sums.reshape(-1, k)]) / group ** 2,
-                   spec=blocks.spec, noise=noise)
+                   gram=np.ascontiguousarray(gram), cross=np.ascontiguousarray((leds * ambient).sum(axis=1).T),
+                   energy=(ambient * ambient).sum(axis=0),
+                   sums=np.column_stack([ambient.sum(axis=0), leds.sum(axis=1).T]),
+                   spec=blocks.spec, differences=differences)
 
     def errors(self, weights: np.ndarray) -> np.ndarray:
         """``‖a_b − F_b w‖²`` of every cell for each row of ``weights`` (R, k): (R, N)."""
@@ -198,13 +199,13 @@ class Cells:
     def denoised_statistics(self, member: np.ndarray) -> SequenceStatistics | None:
         """:meth:`statistics` with the noise's contribution removed (:attr:`TiledStatistics.denoised`), or None.
 
-        The cells' raw noise moments are pooled first and mapped once (the map is linear).
+        The member cells' raw noise moments ``Σ d dᵀ`` are summed first and mapped once (the map is linear).
         """
-        if self.noise is None or self.spec is None:
+        if self.differences is None or self.spec is None:
             return None
         observed = self.statistics(member)
-        size = int(round(np.sqrt(self.noise.shape[1])))
-        pooled = (np.asarray(member, dtype=float) @ self.noise).reshape(1, 1, size, size)
+        probe = self.differences[:, np.asarray(member, dtype=bool)].reshape(self.differences.shape[0], -1)
+        pooled = (probe @ probe.T)[None, None]
         noise = _tiled_from_moments(pooled, np.ones((1, 1)), self.spec, np.zeros(2, dtype=int), np.zeros(2, dtype=int))
         return replace(observed, gram=observed.gram - noise.gram[0, 0], cross=observed.cross - noise.cross[0, 0],
                        ambient_energy=observed.ambient_energy - float(noise.ambient_energy[0, 0]))
@@ -370,6 +371,7 @@ def tile_statistics(
     *,
     bin_factor: int = 1,
     cfa_period: int = 1,
+    workers: int = DEFAULT_WORKERS,
 ) -> TiledStatistics:
     """The statistics of eq. 4–6 of every tile of a ``tiles`` grid, in one pass over the frames.
 
@@ -385,6 +387,9 @@ def tile_statistics(
         Tiles per side, or (rows, columns).
     bin_factor, cfa_period
         Block size, and 2 for Bayer mosaics.
+    workers
+        Threads sharing the frames' block sums and the tiles' moments (1: the calling thread). The
+        statistics do not depend on it.
     """
     rows_tiles, columns_tiles = (tiles, tiles) if isinstance(tiles, int) else tiles
     if bin_factor < 1 or cfa_period not in (1, 2):
@@ -403,20 +408,31 @@ def tile_statistics(
     n_rows = len(frames) + 1
     data = np.empty((n_rows, height, width, channels))
     # Even bin factors also give every block's half difference, the noise probe of ``denoised``.
-    differences = np.zeros_like(data) if bin_factor % 2 == 0 else None
-    for row, plane in enumerate(planes):
+    differences = np.empty_like(data) if bin_factor % 2 == 0 else None
+    if differences is not None:
+        differences[-1] = 0.0  # the ones row has no noise
+
+    def add_frame(row: int) -> np.ndarray | None:
+        """Frame ``row``'s block sums (and half differences) into the arrays; its saturated blocks, if any."""
+        plane = planes[row]
         if differences is None:
             _block_sums(plane, bin_factor, data[row])
         else:
             _block_sums_and_differences(plane, bin_factor, data[row], differences[row])
+        if plane.size and plane.max() >= spec.white_level:
+            return saturated_blocks(plane, bin_factor, spec.white_level)
+        return None
+
+    # The frames are independent: numpy releases the GIL in the sums (as in the global statistics' pass).
+    rows_done = thread_pool(workers).map(add_frame, range(len(planes))) if workers > 1 else map(add_frame, range(len(planes)))
+    saturated = [mask for mask in rows_done if mask is not None]
     floating = any(np.issubdtype(plane.dtype, np.floating) for plane in planes)
     if floating and not np.isfinite(data[:-1].sum()):
         raise SpectralDataError("frame stack: a frame holds non-finite values (NaN or inf); expected finite pixels")
     data[-1] = 1.0
     invalid = np.zeros((height, width), dtype=bool)
-    for plane in planes:
-        if plane.size and plane.max() >= spec.white_level:
-            invalid |= saturated_blocks(plane, bin_factor, spec.white_level)
+    for mask in saturated:
+        invalid |= mask
     if invalid.any():
         data[:, invalid] = 0.0
         if differences is not None:
@@ -425,7 +441,8 @@ def tile_statistics(
     moments = np.empty((rows_tiles, columns_tiles, n_rows, n_rows))
     noise = np.empty_like(moments) if differences is not None else None
     totals = np.empty((rows_tiles, columns_tiles))
-    for i in range(rows_tiles):
+
+    def add_tile_row(i: int) -> None:
         rows = slice(row_blocks[i], row_blocks[i + 1])
         for j in range(columns_tiles):
             columns = slice(column_blocks[j], column_blocks[j + 1])
@@ -435,6 +452,8 @@ def tile_statistics(
             if noise is not None:
                 probe = differences[:, rows, columns].reshape(n_rows, -1)  # type: ignore[index]
                 noise[i, j] = probe @ probe.T
+
+    list(thread_pool(workers).map(add_tile_row, range(rows_tiles)) if workers > 1 else map(add_tile_row, range(rows_tiles)))
     block_spec = FrameStackSpec(black_level=spec.black_level * bin_factor * bin_factor, white_level=np.inf,
                                 ambient_scale=spec.ambient_scale, led_scales=spec.led_scales, led_levels=spec.led_levels)
     pixel = bin_factor * cfa_period
@@ -450,10 +469,9 @@ def tile_statistics(
                               if name not in ("blocks", "denoised")}, blocks=blocks, denoised=denoised)
 
 
-def _tiled_from_moments(moments: np.ndarray, totals: np.ndarray, spec: FrameStackSpec, row_edges: np.ndarray,
-                        column_edges: np.ndarray) -> TiledStatistics:
-    """Tiled statistics from raw moments of the rows [F_1 … F_n, A, 1] (one (R, R) matrix per tile)."""
-    n_led_frames = moments.shape[-1] - 2
+def _projection(spec: FrameStackSpec) -> np.ndarray:
+    """(k + 1, R) linear map of the raw rows [F_1 … F_n, A, 1] to [f_1 … f_k, a] (LED images at full drive, ambient)."""
+    n_led_frames = len(spec.led_scales)
     scales = np.asarray(spec.led_scales, dtype=float)
     black = float(spec.black_level)
     # d_j = s_j (F_j − b) − s_a (A − b), a = s_a (A − b): a linear map of the raw rows.
@@ -464,9 +482,14 @@ def _tiled_from_moments(moments: np.ndarray, totals: np.ndarray, spec: FrameStac
     transform[n_led_frames, n_led_frames] = spec.ambient_scale
     transform[n_led_frames, n_led_frames + 1] = -spec.ambient_scale * black
     # Unmixed LED images at full drive (pinv of the levels) and the ambient: one (k + 1, R) map.
-    unmixing = spec.unmixing
-    k = unmixing.shape[0]
-    projection = np.vstack([unmixing @ transform[:n_led_frames], transform[n_led_frames:]])
+    return np.vstack([spec.unmixing @ transform[:n_led_frames], transform[n_led_frames:]])
+
+
+def _tiled_from_moments(moments: np.ndarray, totals: np.ndarray, spec: FrameStackSpec, row_edges: np.ndarray,
+                        column_edges: np.ndarray) -> TiledStatistics:
+    """Tiled statistics from raw moments of the rows [F_1 … F_n, A, 1] (one (R, R) matrix per tile)."""
+    projection = _projection(spec)
+    k = projection.shape[0] - 1
     linear = np.matmul(np.matmul(projection, moments), projection.T)  # (…, k + 1, k + 1)
     sums = moments[..., :, -1] @ projection.T
     return TiledStatistics(
