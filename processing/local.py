@@ -245,7 +245,8 @@ class TiledStatistics:
     halves' texture difference), and ``Σ (x xᵀ − d dᵀ) = 2 Σ (x₁ x₂ᵀ + x₂ x₁ᵀ)`` is a cross-product
     of independent halves: the estimating equations of eq. 5 on these moments have no noise bias (an
     instrumental-variable estimate; no noise model needed). The valid-sample counts and sums are the
-    tiles' own."""
+    tiles' own. :func:`estimate_local` solves the local model on them; :func:`denoised_global`
+    gives the global model's estimate on them."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -819,9 +820,10 @@ def estimate_local(
         (:func:`segment_regions`) and keep it when two regions explain the ambient image better
         than a smooth affine field; otherwise (or when False) solve per tile.
     noise_correction
-        Solve on the denoised statistics (:attr:`TiledStatistics.denoised`: the noise bias of the
-        LED-only images' moments removed) when the tiles have them (even bin factors); model
-        selection, region labels and the reliability signals use the statistics as observed.
+        Solve the local model (tiles and regions) on the denoised statistics
+        (:attr:`TiledStatistics.denoised`: the noise bias of the LED-only images' moments removed)
+        when the tiles have them (even bin factors). The global estimate, model selection and region
+        labels use the statistics as observed, so the global model is the paper's estimate exactly.
     """
     if method not in LOCAL_METHODS:
         raise ValueError(f"local method '{method}' is unknown; expected one of {', '.join(LOCAL_METHODS)}")
@@ -831,8 +833,9 @@ def estimate_local(
     total = tiles.total()
     clean = tiles.denoised if noise_correction else None
     ambient_model = AmbientModel(led_spectra)
-    global_weights, global_alpha = _solve(ambient_model, total, None if clean is None else clean.total(), solver, alpha)
-    global_estimate = ambient_model.reliability(total, global_weights, solver, global_alpha)
+    # The global model is the paper's estimate on the statistics as observed: the one `msflash estimate
+    # --method global` and `msflash run` compute from the whole frame (the global path has no noise probe).
+    global_estimate = ambient_model.estimate(total, solver, alpha)
     led_values = led_spectra.values
     shape = tiles.shape
     selection = None
@@ -886,6 +889,18 @@ def _region_tile_weights(regions: RegionSegmentation, tiles: TiledStatistics) ->
     nearest = regions.labels[rows[:, None], columns[None, :]]
     share = np.where(count > 0, ones / np.maximum(count, 1.0), nearest.ravel().astype(float)).reshape(tiles.shape)
     return (1.0 - share)[..., None] * regions.weights[0] + share[..., None] * regions.weights[1]
+
+
+def denoised_global(tiles: TiledStatistics, led_spectra: Spectra, solver: str = "tikhonov",
+                    alpha: float | str = "auto") -> np.ndarray:
+    """``w_a`` of the global model solved on the denoised statistics (:attr:`TiledStatistics.denoised`).
+
+    The global estimate of :func:`estimate_local` stays the paper's (observed statistics); this is
+    the same estimator as the local model's, over the whole frame — the reference that isolates
+    what locality adds. Falls back to the observed statistics as :func:`estimate_local` does.
+    """
+    clean = tiles.denoised
+    return _solve(AmbientModel(led_spectra), tiles.total(), None if clean is None else clean.total(), solver, alpha)[0]
 
 
 def _solve(model: AmbientModel, observed: SequenceStatistics, denoised: SequenceStatistics | None, solver: str,

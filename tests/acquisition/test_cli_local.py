@@ -9,13 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import analysis, cli_local
+from acquisition import cli_local
 from acquisition.cli import build_parser, main
 from acquisition.image_io import read_image
-from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter, read_sequence
+from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
 from processing import datasets
 from processing.local_study import Scenario, make_scenario
-from processing.metrics import spectrum_rmse
 from processing.spectra import DEFAULT_GRID
 
 SHAPE = (96, 128)
@@ -69,17 +68,9 @@ def test_estimate_auto_uniform_is_the_global_estimate(sequences: dict[str, Path]
     assert payload["method"] == "global" and payload["method_requested"] == "auto"
     assert payload["model_selection"]["chosen"] == "global"
     assert payload["model_selection"]["scores"]["global"] == 1.0
+    # Same estimate up to the summation order of the statistics (tiles first).
+    np.testing.assert_allclose(payload["spectrum"], global_payload["spectrum"], rtol=1e-8, atol=1e-10)
     assert "tiles" not in payload
-    # auto's global model is the tiles' global estimate, solved on the denoised statistics (the noise
-    # bias of the LED-only images removed, processing.local.TiledStatistics.denoised): the same as
-    # forcing the global model through the local path. --method global is the paper's estimate on the
-    # statistics as observed; both are accurate on this (underwater) scene.
-    sequence = read_sequence(sequences["uniform"])
-    forced = analysis.local_estimate_payload(sequence, analysis.estimate_sequence_local(sequence, "global"))
-    np.testing.assert_allclose(payload["spectrum"], forced["spectrum"], rtol=1e-12)
-    truth = make_scenario("uniform", 11, SHAPE).illumination.spectra.to_unit("energy").values[:, 0]
-    for estimate in (payload, global_payload):
-        assert spectrum_rmse(np.array(estimate["spectrum"]), truth) < 0.2
 
 
 def test_estimate_auto_two_illuminants_goes_local(sequences: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:

@@ -17,6 +17,7 @@ from processing.local import (
     SELECTION_MARGIN,
     Cells,
     _block_sums_and_differences,
+    denoised_global,
     segment_regions,
     TiledStatistics,
     estimate_local,
@@ -129,13 +130,16 @@ def test_denoised_statistics_remove_the_noise_bias_of_the_led_only_images() -> N
     error_observed = np.abs(np.linalg.solve(observed.gram, observed.cross) - weights).max()
     error_denoised = np.abs(np.linalg.solve(denoised.gram, denoised.cross) - weights).max()
     assert error_observed > 0.07 and error_denoised < 0.4 * error_observed, (error_observed, error_denoised)
-    # estimate_local solves on the denoised statistics (the reliability signals stay the observed ones).
+    # The global model of estimate_local stays the paper's (observed statistics); denoised_global
+    # and the local model solve on the denoised ones.
     leds = leds_photons()
-    corrected = estimate_local(t, leds, "global", solver="lstsq")
-    plain = estimate_local(t, leds, "global", solver="lstsq", noise_correction=False)
-    assert np.abs(corrected.global_estimate.ambient_weights - weights).max() < 0.4 * error_observed
-    np.testing.assert_allclose(plain.global_estimate.ambient_weights, np.linalg.solve(observed.gram, observed.cross), rtol=1e-6)
-    assert corrected.global_estimate.n_samples == observed.n_samples
+    assert np.abs(denoised_global(t, leds, "lstsq") - weights).max() < 0.4 * error_observed
+    paper = estimate_local(t, leds, "global", solver="lstsq").global_estimate.ambient_weights
+    np.testing.assert_allclose(paper, np.linalg.solve(observed.gram, observed.cross), rtol=1e-6)
+    local = estimate_local(t, leds, "local", solver="lstsq", smoothing=1e6, regions_allowed=False)  # every tile sees all
+    assert np.abs(local.tile_weights - weights).max() < 0.4 * error_observed
+    plain = estimate_local(t, leds, "local", solver="lstsq", smoothing=1e6, regions_allowed=False, noise_correction=False)
+    np.testing.assert_allclose(plain.tile_weights[0, 0], paper, rtol=1e-6)
     # The cells carry the same correction (single blocks: exactly the tiles'); odd bin factors have none.
     cells = Cells.of(t.blocks, 1)  # type: ignore[arg-type]
     everything = cells.denoised_statistics(np.ones(cells.gram.shape[0], dtype=bool))
@@ -354,8 +358,8 @@ def test_acceptance_study() -> None:
     """Issue 9 acceptance, the parts that are met: ≥ 95 % global on uniform scenes with no loss, ≤ 3× cost.
 
     On boundary scenes the local estimate must reach most of the cut that perfect locality gives
-    (each ambient estimated alone over the whole scene): what is left is the paper's estimator's
-    own error. Measured numbers: docs/local-estimation.md.
+    (each ambient estimated alone over the whole scene): what is left is the estimator's own
+    error. Measured numbers: docs/local-estimation.md.
     """
     summary = _study()
     assert summary["uniform"]["global_rate"] >= 0.95
@@ -368,8 +372,15 @@ def test_acceptance_study() -> None:
 
 
 @pytest.mark.study
-@pytest.mark.xfail(strict=True, reason="not met: boundary raw cut 26 % (seeds from 1000); perfect locality with the "
-                                       "paper's estimator gives 28 % (docs/local-estimation.md)")
 def test_issue_target_thirty_percent_cut_on_boundary_scenes() -> None:
-    """The issue's figure as it states it: raw spectrum RMSE, local (auto) against global, on two-illuminant (boundary) scenes."""
-    assert _study()["boundary"]["auto_cut"] >= 0.30
+    """The issue's figure as it states it: raw spectrum RMSE, local (auto) against global, on two-illuminant (boundary) scenes.
+
+    Global is the paper's estimate (what ``msflash estimate --method global`` gives); the local model
+    is solved on denoised statistics. Seeds from 1000 (not used in development): 35.7 %; other
+    fresh sets: 34.3 % (500 000), 30.2 % (300 000). Against the global model solved on denoised
+    statistics too (what locality alone adds): 35.0 %, 32.3 %, 29.3 %; docs/local-estimation.md.
+    """
+    boundary = _study()["boundary"]
+    assert boundary["auto_cut"] >= 0.30
+    # Most of it is locality's: against the global model with the same (denoised) estimator.
+    assert boundary["locality_cut"] >= 0.9 * boundary["auto_cut"]
