@@ -26,9 +26,17 @@ is chosen only when it cuts the held-out error by more than :data:`SELECTION_MAR
 safeguard that keeps uniform scenes global (calibrated on simulated uniform scenes:
 docs/local-estimation.md).
 
+Noise correction
+----------------
+The LED-only images are differences of noisy frames, so the moments of eq. 5 carry the noise
+variance (errors in variables). :func:`tile_statistics` also measures it per block from the
+difference of two interleaved column halves (:attr:`TiledStatistics.denoised`), and the local model
+is solved on the corrected statistics; the global estimate stays the paper's (DESIGN §8: the noise
+is propagated from the data, here without a noise model).
+
 Public objects
 --------------
-- :class:`TiledStatistics`, :func:`tile_statistics`, :func:`tile_edges`
+- :class:`TiledStatistics`, :func:`tile_statistics`, :func:`tile_edges`, :func:`denoised_global`
 - :class:`ModelSelection`, :func:`select_model`
 - :class:`LocalEstimate`, :func:`estimate_local`, :data:`LOCAL_METHODS`
 - :func:`coefficient_maps`, :func:`synthesize_local`: the spatially varying computational image.
