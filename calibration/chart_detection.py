@@ -214,7 +214,8 @@ class ChartGrid:
         """One line for reports."""
         return (f"{self.rows}×{self.columns} chart detected: patch 1 at ({self.origin_xy[0]:.1f}, "
                 f"{self.origin_xy[1]:.1f}) px, {self.corner} corner, pitch {self.pitch_px[0]:.1f}×{self.pitch_px[1]:.1f} "
-                f"px, rotated {self.rotation_deg:.1f}°" + (", mirrored" if self.mirrored else ""))
+                f"px, rotated {round(self.rotation_deg, 1) + 0.0:.1f}°"  # + 0.0: no "-0.0°" for round-off
+                + (", mirrored" if self.mirrored else ""))
 
 
 # -- detection planes -------------------------------------------------------------------------
