@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import argparse
 import time
-from collections.abc import Callable
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -386,11 +386,11 @@ def _run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposureP
         estimate.ambient_weights, args.mode)
     levels = np.clip(solutions[args.mode].flash_weights, 0.0, 1.0)
     frames = captured.frames
-    pixels = [metering_view(f.pixels, mosaic=rig.camera.info.cfa is not None) for f in frames]
+    info = rig.camera.info  # read once: on a real camera each read is several feature round trips
+    pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
     flash_us = _flash_exposure(rig, exposure, levels, lambda weights: flash_exposure(
         pixels[0], frames[0].exposure_us, pixels[1:], [f.exposure_us for f in frames[1:]],
-        weights, rig.camera.info.black_level, rig.camera.info.white_level, exposure.exposure_range_us,
-        exposure.policy))
+        weights, info.black_level, info.white_level, exposure.exposure_range_us, exposure.policy))
     flash_plan = CapturePlan.single(levels, flash_us, trigger=SYNC_MODES[args.sync])
     decided = time.perf_counter()
     run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=_report_frame)
