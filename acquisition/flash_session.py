@@ -141,11 +141,10 @@ class FlashSession:
             # A mono camera: the writer records (H, W) as three identical channels; one plane has
             # their statistics divided by 3 (see :meth:`statistics`) at a third of the work.
             self._copies = 3
-        if role == "ambient" and role in self._roles[:-1]:
-            return  # the estimate uses the first ambient frame only
-        if role in ("ambient", "led"):
-            self._add_rows(_plane(frame.pixels), role)
-        if self._exposure is not None and role in ("ambient", "led"):
+        if role not in ("ambient", "led") or (role == "ambient" and role in self._roles[:-1]):
+            return  # the estimate uses the first ambient frame only (and no flash or dark frame)
+        self._add_rows(_plane(frame.pixels), role)
+        if self._exposure is not None:
             metered = metering_view(frame.pixels, mosaic=self.header.camera.cfa is not None)
             if role == "ambient":
                 self._exposure.add_ambient(metered, frame.exposure_us)
