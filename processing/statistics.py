@@ -471,6 +471,10 @@ class BlockRows:
         else:
             self._drop(blocks)
 
+    def _columns(self, blocks: np.ndarray) -> np.ndarray:
+        """The row columns of the (H/f, W/f) block mask ``blocks`` (every channel of each block)."""
+        return np.broadcast_to(blocks[:, None, :], self.block_shape).reshape(-1)
+
     def _drop(self, blocks: np.ndarray) -> None:
         """Incremental mode: zero the columns of the (H/f, W/f) mask ``blocks`` in every row and take
         the products of the filled rows over the newly left-out columns back out of the moments.
@@ -479,7 +483,7 @@ class BlockRows:
         anew instead (subtracting most of a sum loses precision), as :meth:`statistics` does.
         """
         assert self._moments is not None
-        columns = np.broadcast_to(blocks[:, None, :], self.block_shape).reshape(-1)
+        columns = self._columns(blocks)
         new = columns if self._excluded is None else columns & ~self._excluded
         fresh = np.flatnonzero(new)
         if not fresh.size:
@@ -516,7 +520,7 @@ class BlockRows:
                 invalid = mask if invalid is None else invalid | mask
             chunk = chunk_pixels * self.block_shape[1]
             if invalid is not None and invalid.any():
-                columns = np.broadcast_to(invalid[:, None, :], self.block_shape).reshape(-1)
+                columns = self._columns(invalid)
                 kept = rows.copy()
                 kept[:, columns] = 0.0
                 moments = _gram(kept, chunk, workers)
