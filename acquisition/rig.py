@@ -95,8 +95,9 @@ class Rig:
     camera_extra: dict = field(default_factory=dict)
     """Extra keys for the sequence's ``camera`` entry (e.g. how a mono camera is recorded)."""
     mono: bool = False
-    """The camera is monochrome: frames come as (H, W) with ``cfa`` None, and the writer
-    (:meth:`sequence_writer`) records them as three identical channels."""
+    """The camera is monochrome: frames come as (H, W) with ``cfa`` None, the writer
+    (:meth:`sequence_writer`) records them as three identical channels, and the header's
+    ``camera.extra["channels"]`` says so."""
 
     def sequence_header(self) -> tuple[np.ndarray, SequenceCamera, tuple[SequenceLed, ...]]:
         """Wavelengths, camera and LED entries for a format-v1 sequence written from this rig (energy units)."""
@@ -109,7 +110,8 @@ class Rig:
         camera = SequenceCamera(
             model=info.model, serial=info.serial, pixel_format=info.pixel_format, cfa=info.cfa,
             black_level=info.black_level, white_level=info.white_level, responsivity=responsivity,
-            extra=dict(self.camera_extra),
+            extra={**({"channels": f"{info.pixel_format} replicated to R, G, B"} if self.mono else {}),
+                   **self.camera_extra},
         )
         entries = tuple(SequenceLed(name, leds.values[:, i]) for i, name in enumerate(leds.names))
         return leds.wavelengths_nm, camera, entries
@@ -375,7 +377,7 @@ def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int = 64, 
     camera = WiredFakeCamera(aravis, emulator, fake, line_errors)
     closers.insert(2, camera.stop)  # before the AravisCamera and the fake are released
     emulator.on_trigger_out = _line(line_errors, "aravis-fake trigger line", camera.trigger_line)
-    extra = {"channels": f"{pixel_format} replicated to R, G, B", "responsivity_note":
+    extra = {"responsivity_note":
              f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning"}
     return Rig("aravis-fake", camera, booth, leds, responsivities, None, closers, emulator=emulator,
                line_errors=line_errors, camera_extra=extra, mono=True)
@@ -643,8 +645,6 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     info = aravis.info
     extra: dict = {}
     mono = info.cfa is None and info.pixel_format.startswith("Mono")
-    if mono:
-        extra["channels"] = f"{info.pixel_format} replicated to R, G, B"
     if responsivities is None:
         extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
     return Rig("hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono)
