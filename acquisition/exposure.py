@@ -228,8 +228,21 @@ def _sample(pixels: np.ndarray, stride: int) -> np.ndarray:
 
 
 def _brightest(pixels: np.ndarray, stride: int) -> np.ndarray:
-    sub = _sample(pixels, stride)
-    return sub.max(axis=2) if sub.ndim == 3 else sub
+    return _brightest_channel(_sample(pixels, stride))
+
+
+def _brightest_channel(values: np.ndarray) -> np.ndarray:
+    """The per-pixel maximum over the channels of (h, w, c) values (a new array); (h, w) values as they are.
+
+    A running ``np.maximum`` over the channel planes: numpy's ``max`` over a short last axis is
+    several times slower, and this runs for the flash exposure on the capture's latency path.
+    """
+    if values.ndim != 3:
+        return values
+    brightest = values[:, :, 0].copy()
+    for channel in range(1, values.shape[2]):
+        np.maximum(brightest, values[:, :, channel], out=brightest)
+    return brightest
 
 
 def meter(pixels: np.ndarray, black: float, white: float, policy: ExposurePolicy, exposure_us: float = 0.0) -> Levels:
@@ -364,7 +377,7 @@ def plan_exposures(capture: Callable[[Sequence[float], float], np.ndarray], n_le
                 break
             preview_us = _clamp(preview_us / 4.0, limits)
         led_rate = _rates(pixels, preview_us, black, stride)
-        combined = led_rate.max(axis=2) if led_rate.ndim == 3 else led_rate
+        combined = _brightest_channel(led_rate)
         bright_rate = linear_quantile(combined, 1.0 - policy.max_saturated_fraction)
         if bright_rate > 0:
             exposure = _clamp(policy.headroom_fraction * full / bright_rate, limits)
@@ -524,13 +537,7 @@ class FlashExposure:
         for led_only, weight in zip(self._led_only, weights, strict=True):
             if weight > 0:
                 total += weight * led_only
-        if total.ndim == 3:  # brightest channel; numpy's max over a short last axis is slow
-            brightest = total[:, :, 0].copy()
-            for channel in range(1, total.shape[2]):
-                np.maximum(brightest, total[:, :, channel], out=brightest)
-        else:
-            brightest = total
-        rate = linear_quantile(brightest, 1.0 - self.policy.max_saturated_fraction, overwrite=True)
+        rate = linear_quantile(_brightest_channel(total), 1.0 - self.policy.max_saturated_fraction, overwrite=True)
         if not rate > 0:
             return _clamp(self._ambient_us, self.limits)
         return _clamp(self.policy.target_fraction * (self.white - self.black) / rate, self.limits)
