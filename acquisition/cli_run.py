@@ -351,7 +351,7 @@ def _run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePla
             else:
                 decision = session.decide(args.mode)
                 levels = decision.levels
-                result.update(estimate=lambda: decision.estimate, chosen=decision.solution, stack=decision.stack)
+                result.update(estimate=lambda: decision.estimate, chosen=decision.solution)
         flash_us = _flash_exposure(rig, exposure, levels, session.flash_exposure)
         result.update(caught=list(caught), flash_us=flash_us)
         stamp["decided"] = time.perf_counter()
@@ -360,6 +360,10 @@ def _run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePla
     plan = CapturePlan.ambient_then_each_led(n_leds, exposure.ambient_exposure_us,
                                              led_exposures_us=exposure.led_exposures_us, trigger=SYNC_MODES[args.sync])
     entries = run_capture_with_flash(rig.camera, rig.booth, plan, writer, decide, on_frame=keep)
+    if "stack" not in result:
+        # The report's frames as the sequence records them (a mono camera's as three identical
+        # channels), as for two captures; the session's own stack holds a mono frame's one plane.
+        result["stack"] = analysis.load_frame_stack(_InMemorySequence(writer.flush(), frames))  # type: ignore[arg-type]
     estimate = result["estimate"]()
     other = "matching" if args.mode == "complementary" else "complementary"
     with warnings.catch_warnings(record=True) as caught:

@@ -350,6 +350,15 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim
     np.testing.assert_allclose(ours.led_sums, reference.led_sums, rtol=1e-9)
     np.testing.assert_allclose(session.estimate(session.stack()).ambient_weights,
                                analysis.estimate_sequence(sequence).ambient_weights, rtol=1e-7, atol=1e-12)
+    # msflash run's report reads the frames in memory as the sequence records them (RGB).
+    from acquisition.cli_run import _InMemorySequence
+
+    in_memory = analysis.load_frame_stack(_InMemorySequence(sequence, [RawFrame(v, i, 0, 1.0, 1.0)
+                                                                       for i, v in enumerate(written)]))
+    on_disk = analysis.load_frame_stack(sequence)
+    assert in_memory.ambient.shape == on_disk.ambient.shape == (info.height, info.width, 3)
+    assert np.array_equal(in_memory.ambient, on_disk.ambient)
+    assert all(np.array_equal(a, b) for a, b in zip(in_memory.led_frames, on_disk.led_frames, strict=True))
     # The flash exposure is metered pixel by pixel, as on the recorded RGB frames.
     recorded_frames = [sequence.load_frame(i) for i in range(len(written))]
     weights = [0.3] * len(levels)
