@@ -46,13 +46,10 @@ class FlashDecision:
     :attr:`estimate` computes them on first access (after the flash is triggered).
     """
 
-    def __init__(self, solution: FlashSolution, levels: np.ndarray, stack: analysis.FrameStack,
-                 estimate: Callable[[], AmbientEstimate]) -> None:
+    def __init__(self, solution: FlashSolution, levels: np.ndarray, estimate: Callable[[], AmbientEstimate]) -> None:
         self.solution = solution
         self.levels = levels
         """The flash weights clipped to [0, 1]: the LED levels to drive."""
-        self.stack = stack
-        """The in-memory frame stack the estimate used (indices as in the sequence)."""
         self._estimate = estimate
         self._estimated: AmbientEstimate | None = None
 
@@ -259,8 +256,7 @@ class FlashSession:
         # NaN → 0, ±inf → the bounds: what clip(nan_to_num(w), 0, 1) gives.
         flash = np.minimum(np.maximum(np.where(np.isnan(flash_weights), 0.0, flash_weights), 0.0), 1.0)
         model, method = self.ambient_model, self.method
-        return FlashDecision(solution, flash, stack,
-                             lambda: model.reliability(statistics, raw_weights, method, alpha_used))
+        return FlashDecision(solution, flash, lambda: model.reliability(statistics, raw_weights, method, alpha_used))
 
 
 def _plane(pixels: np.ndarray) -> np.ndarray:
