@@ -28,16 +28,18 @@ from calibration.chart_sequence import (
 )
 from calibration.dark import measure_dark, measure_linearity
 from calibration.errors import CalibrationError
-from calibration.files import load_or_new, save_calibration
-from calibration.led_spectra import characterise_led
+from calibration.files import CalibrationSet, load_or_new, save_calibration
+from calibration.led_spectra import characterise_led, relative_power_through_camera
 from calibration.spectrometer import (
     measurement_to_spectra,
     read_spectrometer_file,
     subtract_dark,
 )
 from calibration.validation import calibration_lights, simulate_chart_responses
+from calibration.white_reference import parse_roi, white_led_responses
 from processing import datasets
-from processing.spectra import DEFAULT_GRID
+from processing.errors import SpectralDataError
+from processing.spectra import DEFAULT_GRID, Spectra
 
 
 def _bad_input(handler: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -67,7 +69,8 @@ def _plot_leds(path: Path, spectra, characterisations) -> None:
     pyplot.close(figure)
 
 
-def _leds(args: argparse.Namespace) -> int:
+def _measured_leds(args: argparse.Namespace) -> tuple[Spectra, list, dict]:
+    """Spectra, characterisations and the ``leds`` section from the spectrometer exports."""
     dark = read_spectrometer_file(args.dark, args.unit, args.column) if args.dark else None
     measurements, characterisations = [], []
     for file in args.files:
@@ -80,8 +83,7 @@ def _leds(args: argparse.Namespace) -> int:
         measurements.append(measurement)
         characterisations.append(item)
     spectra = measurement_to_spectra(measurements, DEFAULT_GRID).to_unit("energy")
-    calibration = load_or_new(args.out)
-    calibration = calibration.updated(led_spectra=spectra, leds={
+    section = {
         "peaks_nm": [c.peak_nm for c in characterisations], "fwhm_nm": [c.fwhm_nm for c in characterisations],
         "centroids_nm": [c.centroid_nm for c in characterisations],
         "models": [{"model": "Ohno2005 asymmetric", **c.model, "relative_rms_residual": c.model_residual}
@@ -89,20 +91,87 @@ def _leds(args: argparse.Namespace) -> int:
         "sources": [str(f) for f in args.files], "dark": str(args.dark) if args.dark else None,
         "relative_power": None,
         "relative_power_note": "ratios as measured by the spectrometer; measure them through the camera on a white "
-                               "reference (calibration.led_spectra.relative_power_through_camera) when the probe moved",
+                               "reference with --white SEQ when the probe moved between LEDs",
         "warnings": [w for c in characterisations for w in c.warnings],
-    })
+    }
+    return spectra, characterisations, section
+
+
+def _white_power(args: argparse.Namespace, shapes: Spectra, calibration: CalibrationSet) -> tuple[Spectra, dict]:
+    """``shapes`` scaled to the power ratios the camera sees on the white reference of ``--white``."""
+    sequence = read_sequence(args.white)
+    if sequence.leds and len(sequence.leds) != shapes.count:
+        raise UsageError(f"--white {args.white}: the sequence has {len(sequence.leds)} LEDs but {shapes.count} LED "
+                         "spectra were given; expected one spectrum per LED, in the sequence's order")
+    if calibration.camera_responsivities is not None:
+        camera, camera_from = calibration.camera_responsivities, f"calibration {args.out}"
+    elif sequence.camera_responsivities() is not None:
+        camera, camera_from = sequence.camera_responsivities(), f"sequence {sequence.path}"
+    else:
+        raise UsageError(f"--white {args.white}: no camera responsivities, neither in {args.out} nor in the sequence; "
+                         "expected 'msflash calibrate camera … --out' first (or a sequence that records them)")
+    roi = parse_roi(args.white_roi) if args.white_roi else None
+    white = white_led_responses(sequence, roi)
+    for warning in white.warnings:
+        progress(f"warning: {warning}")
+    reflectance = None
+    if args.white_reflectance:
+        try:
+            reflectance = datasets.load_spectra_csv(args.white_reflectance, kind="reflectance", unit="none").select(
+                [0]).resample(shapes.grid, outside="error")
+        except (SpectralDataError, ValueError, OSError) as err:
+            raise UsageError(f"--white-reflectance {args.white_reflectance}: {err}; expected a CSV "
+                             "'wavelength_nm, reflectance' covering the LEDs") from err
+    peaks = shapes.values.max(axis=0)
+    if not np.all(peaks > 0):
+        raise UsageError(f"LED spectra {', '.join(n for n, p in zip(shapes.names, peaks, strict=True) if not p > 0)}: "
+                         "no positive value; expected an emission peak")
+    shapes = shapes.replace(values=shapes.values / peaks)  # each LED's peak 1: `power` is then its peak's ratio
+    power = relative_power_through_camera(shapes, white.responses, camera.resample(shapes.grid, outside="zero"),
+                                          reflectance)
+    scaled = shapes.replace(values=shapes.values * power)
+    report = {"relative_power": power.tolist(), "relative_power_note": None,
+              "relative_power_source": {"white_sequence": str(sequence.path), "camera_responsivities": camera_from,
+                                        "white_reflectance": args.white_reflectance, **white.report()}}
+    return scaled, report
+
+
+def _leds(args: argparse.Namespace) -> int:
+    if not args.files and not args.white:
+        raise UsageError("calibrate leds: expected spectrometer exports FILES…, --white SEQ, or both")
+    calibration = load_or_new(args.out)
+    characterisations: list = []
+    if args.files:
+        spectra, characterisations, section = _measured_leds(args)
+    elif calibration.led_spectra is not None:
+        spectra, section = calibration.led_spectra, dict(calibration.leds)
+        progress(f"LED shapes from {args.out}")
+    else:
+        sequence = read_sequence(args.white)
+        spectra, section = sequence.led_spectra().resample(DEFAULT_GRID, outside="zero").to_unit("energy"), {
+            "sources": [f"{sequence.path} (led spectra as recorded)"]}
+        progress(f"LED shapes from {sequence.path} (no spectrometer exports, no LED section in {args.out})")
+    if args.white:
+        spectra, power = _white_power(args, spectra, calibration)
+        section = {**section, **power}
+    calibration = calibration.updated(led_spectra=spectra, leds=section)
     path = save_calibration(calibration, args.out)
-    _plot_leds(Path(args.out) / "leds.png", spectra, characterisations)
+    if characterisations:
+        _plot_leds(Path(args.out) / "leds.png", spectra, characterisations)
     payload = {"calibration": str(path), "id": calibration.id,
                "leds": [{"name": c.name, "peak_nm": c.peak_nm, "fwhm_nm": c.fwhm_nm, "model_residual": c.model_residual,
-                         "saturated": c.saturated, "snr": c.snr} for c in characterisations]}
+                         "saturated": c.saturated, "snr": c.snr} for c in characterisations],
+               "relative_power": dict(zip(spectra.names, section["relative_power"], strict=True))
+               if section.get("relative_power") else None}
     if args.json:
         print_json(payload)
     else:
         for c in characterisations:
             print(f"{c.name}: peak {c.peak_nm:.1f} nm, FWHM {c.fwhm_nm:.1f} nm, model residual {c.model_residual:.3f}"
                   + (" SATURATED" if c.saturated else ""))
+        if payload["relative_power"]:
+            print("relative power through the camera: " + ", ".join(
+                f"{name} {value:.3f}" for name, value in payload["relative_power"].items()))
         print(f"wrote {path} (id {calibration.id})")
     return 0
 
@@ -247,11 +316,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     calibrate.set_defaults(handler=lambda args: (_ for _ in ()).throw(
         UsageError("calibrate: expected one of leds, camera, dark, linearity")))
 
-    leds = commands.add_parser("leds", help="LED spectra from spectrometer exports")
-    leds.add_argument("files", nargs="+", help="spectrometer exports (CSV or text: wavelength, value), one per LED")
+    leds = commands.add_parser("leds", help="LED spectra from spectrometer exports; their power ratios through the camera")
+    leds.add_argument("files", nargs="*", help="spectrometer exports (CSV or text: wavelength, value), one per LED")
     leds.add_argument("--unit", default="energy", choices=("energy", "photons"), help="what the value column holds")
     leds.add_argument("--column", type=positive_int, default=None, help="value column when there are more than two")
     leds.add_argument("--dark", help="a dark export (shutter closed) to subtract")
+    leds.add_argument("--white", metavar="SEQ",
+                      help="a sequence of a white reference (ambient + one frame per LED): the LEDs' power ratios as "
+                           "the camera sees them (shapes from FILES, else the calibration's, else the sequence's)")
+    leds.add_argument("--white-roi", metavar="X,Y,W,H", help="where the white reference is (default: the central half)")
+    leds.add_argument("--white-reflectance", metavar="CSV",
+                      help="the reference's reflectance, 'wavelength_nm, reflectance' (default: spectrally flat)")
     leds.add_argument("--out", required=True, help="calibration directory (created or updated)")
     leds.add_argument("--json", action="store_true")
     leds.set_defaults(handler=_bad_input(_leds))

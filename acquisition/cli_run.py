@@ -453,7 +453,8 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
                              "exposure-active line advances the booth's pattern table)")
     parser.add_argument("--ambient", default="tungsten",
                         help="sim ambient: tungsten, fluorescent, daylight, underwater, green, orange")
-    parser.add_argument("--scene", default="chart110", choices=("chart110", "macbeth"), help="sim scene")
+    parser.add_argument("--scene", default="chart110", choices=("chart110", "macbeth", "white"),
+                        help="sim scene (white: a white reference for calibrate leds --white)")
     parser.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="sim: raw Bayer mosaic frames with this layout")
     parser.add_argument("--seed", type=int, default=0, help="sim noise seed")
     parser.add_argument("--exposure", "--exposure-us", dest="exposure", type=_exposure_value, default="auto",

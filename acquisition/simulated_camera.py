@@ -42,6 +42,7 @@ from processing.image_formation import (
     exposure_for_peak,
     render_frame,
     total_illumination,
+    white_reference_scene,
 )
 from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid, require_same_grid
 
@@ -274,7 +275,7 @@ class SimulatedCamera(TriggeredFrames):
     @classmethod
     def default(
         cls,
-        scene: Literal["chart110", "macbeth"] | Scene = "chart110",
+        scene: Literal["chart110", "macbeth", "white"] | Scene = "chart110",
         ambient: str | Spectra = "tungsten",
         cfa: str | None = None,
         seed: int = 0,
@@ -297,7 +298,9 @@ class SimulatedCamera(TriggeredFrames):
         Parameters
         ----------
         scene
-            ``"chart110"`` (the paper's 110 surfaces), ``"macbeth"`` or a :class:`Scene`.
+            ``"chart110"`` (the paper's 110 surfaces), ``"macbeth"``, ``"white"`` (a white reference
+            filling the frame, :func:`processing.image_formation.white_reference_scene`, for
+            ``msflash calibrate leds --white``) or a :class:`Scene`.
         ambient
             A name of :func:`processing.datasets.ambient_spectrum` or a spectrum on ``grid``.
         cfa
@@ -329,7 +332,9 @@ class SimulatedCamera(TriggeredFrames):
             pixel of the scene (see the constructor); LED power and exposure are then set on
             the mixed ambient.
         """
-        if isinstance(scene, str):
+        if scene == "white":
+            scene = white_reference_scene()
+        elif isinstance(scene, str):
             scene = chart_scene(scene, patch_px=patch_px, specular_strip_px=specular_strip_px)
         scene = Scene(scene.reflectances.resample(grid), scene.labels, scene.shading, scene.specular, scene.specular_gain)
         ambient_spd = datasets.ambient_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)

@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from processing.errors import SpectralDataError
-from processing.spectra import Spectra, require_same_grid
+from processing.spectra import DEFAULT_GRID, Spectra, require_same_grid
 
 if TYPE_CHECKING:
     from numpy.random import Generator
@@ -191,6 +191,30 @@ def chart_scene(
         specular = np.zeros(labels.shape, dtype=bool)
         specular[height:, :] = True
     return Scene(surfaces, labels, specular=specular, specular_gain=specular_gain)
+
+
+def white_reference_scene(height: int = 96, width: int = 128, reflectance: float = 0.95,
+                          corner_shading: float = 0.8) -> Scene:
+    """A uniform, spectrally flat white reference filling the frame, with a smooth radial falloff.
+
+    What a lab puts in the booth to measure the LEDs' power ratios through the camera
+    (:mod:`calibration.white_reference`): one surface of constant ``reflectance`` (a pressed-PTFE
+    or matte white card), shaded from 1 at the centre to ``corner_shading`` in the corners.
+
+    >>> scene = white_reference_scene(4, 6)
+    >>> scene.labels.shape, scene.reflectances.names, round(float(scene.shading.min()), 2)
+    ((4, 6), ('white',), 0.8)
+    """
+    if height < 2 or width < 2 or not 0 < reflectance <= 1 or not 0 < corner_shading <= 1:
+        raise SpectralDataError(f"white_reference_scene: {height}×{width}, reflectance {reflectance}, corner shading "
+                                f"{corner_shading}; expected a frame of at least 2×2 and both in (0, 1]")
+    surface = Spectra(DEFAULT_GRID, np.full((DEFAULT_GRID.size, 1), float(reflectance)), ("white",),
+                      kind="reflectance", unit="none", source=f"flat white reference {reflectance:g}")
+    rows = (np.arange(height) - (height - 1) / 2) / ((height - 1) / 2)
+    columns = (np.arange(width) - (width - 1) / 2) / ((width - 1) / 2)
+    radius2 = (rows[:, None] ** 2 + columns[None, :] ** 2) / 2
+    shading = 1.0 - (1.0 - corner_shading) * radius2
+    return Scene(surface, np.zeros((height, width), dtype=np.int32), shading=shading)
 
 
 def placed_scene(
