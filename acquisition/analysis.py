@@ -107,7 +107,8 @@ def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -
     ``directory`` is a ``msflash calibrate`` output; without it, the sequence's own
     ``"calibration": {"file": …}`` reference is used if present (relative to the sequence
     directory). LEDs are matched by name; spectra are resampled onto the sequence's grid and
-    converted to its unit. Without either, the sequence is returned unchanged.
+    converted to its unit. Without either, the sequence is returned unchanged. A note says so
+    when the calibration's id is not the one the sequence recorded (re-calibrated since).
 
     Raises
     ------
@@ -129,6 +130,11 @@ def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -
     except CalibrationError as err:
         raise RecordingError(str(err)) from err
     notes: list[str] = []
+    reference = sequence.extra.get("calibration")
+    recorded_id = reference.get("id") if isinstance(reference, dict) else None
+    if recorded_id and recorded_id != calibration.id:
+        notes.append(f"the sequence was captured with calibration {recorded_id}; {directory} now holds "
+                     f"{calibration.id}, which is used")
     grid = sequence.grid
     leds = sequence.leds
     if calibration.led_spectra is not None:

@@ -40,6 +40,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
+import os
 import queue
 import threading
 import time
@@ -98,6 +99,9 @@ class Rig:
     """The camera is monochrome: frames come as (H, W) with ``cfa`` None, the writer
     (:meth:`sequence_writer`) records them as three identical channels, and the header's
     ``camera.extra["channels"]`` says so."""
+    calibration: tuple[str, Path] | None = None
+    """(id, directory) of the ``msflash calibrate`` output the LED spectra and responsivities came
+    from: every sequence written by :meth:`sequence_writer` refers to it."""
 
     def sequence_header(self) -> tuple[np.ndarray, SequenceCamera, tuple[SequenceLed, ...]]:
         """Wavelengths, camera and LED entries for a format-v1 sequence written from this rig (energy units)."""
@@ -119,9 +123,15 @@ class Rig:
     def sequence_writer(self, directory: str | Path, extra: dict | None = None) -> SequenceWriter:
         """A :class:`SequenceWriter` for a sequence from this rig (header of :meth:`sequence_header`).
 
-        A mono camera's (H, W) frames are recorded as three identical channels (:attr:`mono`).
+        A mono camera's (H, W) frames are recorded as three identical channels (:attr:`mono`); a
+        rig opened from a calibration (:attr:`calibration`) writes the sequence's
+        ``"calibration": {"id", "file"}`` reference (``file`` relative to the sequence directory).
         """
         wavelengths, camera, leds = self.sequence_header()
+        if self.calibration is not None:
+            calibration_id, calibration_directory = self.calibration
+            file = os.path.relpath(Path(calibration_directory).resolve(), Path(directory).resolve())
+            extra = {**(extra or {}), "calibration": {"id": calibration_id, "file": file}}
         return SequenceWriter(directory, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
                               leds=leds, extra=extra, mono=self.mono)
 
@@ -453,7 +463,7 @@ def load_hw_spectra(calibration: str | Path | None = None, led_spectra: str | Pa
             raise UsageError(f"--calibration {directory}: not a directory; expected a calibration directory "
                              "(calibration.json from 'msflash calibrate', or led_spectra.csv)")
         if (directory / "calibration.json").is_file():
-            leds, camera = _load_calibration_set(directory)
+            leds, camera, _ = _load_calibration_set(directory)
         else:
             if led_path is None:
                 led_path = next((directory / n for n in CALIBRATION_LED_FILES if (directory / n).is_file()), None)
@@ -488,8 +498,8 @@ def _read_spectra_csv(path: Path, kind: str) -> Spectra:
         raise UsageError(str(err)) from err
 
 
-def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | None]:
-    """LED spectra and responsivities of a ``msflash calibrate`` directory (``calibration.json``)."""
+def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | None, str]:
+    """LED spectra, responsivities and id of a ``msflash calibrate`` directory (``calibration.json``)."""
     try:
         from calibration.files import load_calibration
     except ImportError as err:
@@ -502,7 +512,14 @@ def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | No
         raise UsageError(str(err)) from err
     leds = found.led_spectra.to_unit("energy") if found.led_spectra is not None else None
     camera = found.camera_responsivities.to_unit("energy") if found.camera_responsivities is not None else None
-    return leds, camera
+    return leds, camera, found.id
+
+
+def calibration_reference(calibration: str | Path | None) -> tuple[str, Path] | None:
+    """(id, directory) of ``--calibration DIR`` when it is a ``msflash calibrate`` output, else None."""
+    if calibration is None or not (Path(calibration) / "calibration.json").is_file():
+        return None
+    return _load_calibration_set(Path(calibration))[2], Path(calibration)
 
 
 class HardwareCamera:
@@ -647,4 +664,5 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     mono = info.cfa is None and info.pixel_format.startswith("Mono")
     if responsivities is None:
         extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
-    return Rig("hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono)
+    return Rig("hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono,
+               calibration=calibration_reference(calibration))

@@ -1,0 +1,70 @@
+"""Sequences captured with ``--calibration DIR`` (a ``msflash calibrate`` output) refer to it.
+
+The hardware rig as a user opens it, without hardware: the Aravis in-process ``Fake_1`` camera on
+the ``fake`` interface (nothing is broadcast) and the booth emulator on a pty as ``--port``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+from acquisition import analysis
+from acquisition.cli import main
+from acquisition.rig import _emulator_for, calibration_reference
+from acquisition.sequence_format import read_sequence
+from calibration.files import CalibrationSet, load_calibration, save_calibration
+from led_controller import serve_on_pty
+from processing import datasets
+from processing.spectra import DEFAULT_GRID
+
+
+@pytest.fixture
+def calibration(tmp_path: Path) -> Path:
+    """A calibration directory as ``msflash calibrate`` writes it: the paper's 7 LEDs, a NikonD100."""
+    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
+    camera = datasets.isetcam_camera("NikonD100").resample(DEFAULT_GRID, outside="zero").to_unit("energy")
+    save_calibration(CalibrationSet(led_spectra=leds, camera_responsivities=camera), tmp_path / "lab" / "cal")
+    return tmp_path / "lab" / "cal"
+
+
+@pytest.fixture
+def booth_port(calibration: Path) -> Iterator[str]:
+    server = serve_on_pty(_emulator_for(load_calibration(calibration).led_spectra))
+    try:
+        yield server.port
+    finally:
+        server.close()
+
+
+@pytest.mark.aravis
+def test_a_sequence_refers_to_the_calibration_it_was_captured_with(aravis: ModuleType, calibration: Path,
+                                                                   booth_port: str, tmp_path: Path) -> None:
+    aravis.use_fake_genicam(None)
+    out = tmp_path / "runs" / "c"
+    assert main(["capture", "--camera", "Fake_1", "--interfaces", "fake", "--port", booth_port,
+                 "--calibration", str(calibration), "--exposure", "10000", "--out", str(out)]) == 0
+    sequence = read_sequence(out / "sequence")
+    captured_with = load_calibration(calibration).id
+    assert sequence.extra["calibration"] == {"id": captured_with,
+                                             "file": os.path.relpath(calibration, out / "sequence")}
+    assert (sequence.directory / sequence.extra["calibration"]["file"]).resolve() == calibration.resolve()
+
+    _, notes = analysis.apply_calibration(sequence)  # what estimate/flash do without --calibration
+    assert any(captured_with in note and "LED spectra" in note for note in notes)
+    assert not any("captured with" in note for note in notes)
+
+    recalibrated = load_calibration(calibration).updated()  # re-calibrated since: a new id at the same place
+    save_calibration(recalibrated, calibration)
+    _, notes = analysis.apply_calibration(read_sequence(out / "sequence"))
+    assert any(f"captured with calibration {captured_with}" in note and recalibrated.id in note for note in notes)
+
+
+def test_only_msflash_calibrations_are_referenced(calibration: Path, tmp_path: Path) -> None:
+    assert calibration_reference(calibration) == (load_calibration(calibration).id, calibration)
+    assert calibration_reference(None) is None
+    assert calibration_reference(tmp_path) is None  # led_spectra.csv folders carry no id
