@@ -104,7 +104,12 @@ class Rig:
     from: every sequence written by :meth:`sequence_writer` refers to it."""
 
     def sequence_header(self) -> tuple[np.ndarray, SequenceCamera, tuple[SequenceLed, ...]]:
-        """Wavelengths, camera and LED entries for a format-v1 sequence written from this rig (energy units)."""
+        """Wavelengths, camera and LED entries for a format-v1 sequence written from this rig (energy units).
+
+        A camera reporting an empty serial (a replayed sequence recorded without one, a camera whose
+        DeviceSerialNumber is blank) is recorded without ``camera.serial``: format v1 makes it optional
+        but never empty.
+        """
         leds = self.led_spectra.to_unit("energy")
         info = self.camera.info
         responsivity = None
@@ -112,7 +117,7 @@ class Rig:
             values = self.camera_responsivities.to_unit("energy").values
             responsivity = {channel: values[:, i] for i, channel in enumerate("RGB")}
         camera = SequenceCamera(
-            model=info.model, serial=info.serial, pixel_format=info.pixel_format, cfa=info.cfa,
+            model=info.model, serial=info.serial or None, pixel_format=info.pixel_format, cfa=info.cfa,
             black_level=info.black_level, white_level=info.white_level, responsivity=responsivity,
             extra={**({"channels": f"{info.pixel_format} replicated to R, G, B"} if self.mono else {}),
                    **self.camera_extra},

@@ -120,3 +120,22 @@ def test_a_booth_that_fails_to_open_is_named_and_the_rig_is_closed(monkeypatch: 
     with pytest.raises(RigOpenError, match=r"rig 'replay:.*': booth emulator on /dev/pts/\d+: cannot open /dev/pts/\d+"):
         rig.open_replay_rig(RECORDED)
     assert threading.active_count() <= threads  # the pty server's thread is gone
+
+
+def test_a_shared_sample_without_a_camera_serial_is_replayed_as_is(tmp_path: Path) -> None:
+    """The independent sample has no ``camera.serial``: the replayed capture records none (the writer
+    refuses an empty serial, which the replay camera's identity used to pass on) and every frame
+    equals the sample's."""
+    from tests.helpers import SAMPLES_DIR
+
+    sample = SAMPLES_DIR / "sample-rgb-tungsten"
+    if not sample.is_dir():
+        pytest.skip(f"shared sample missing: {sample}")
+    assert read_sequence(sample).camera.serial is None
+    out = tmp_path / "replayed"
+    assert main(["capture", "--rig", f"replay:{sample}", "--out", str(out)]) == 0
+    replayed, recorded = read_sequence(out / "sequence"), read_sequence(sample)
+    assert replayed.complete and replayed.camera.serial is None
+    assert [f.role for f in replayed.frames] == [f.role for f in recorded.frames]
+    for index in range(len(recorded.frames)):
+        np.testing.assert_array_equal(replayed.load_frame(index), recorded.load_frame(index))
