@@ -46,8 +46,15 @@ The writer may be a :class:`~acquisition.sequence_format.SequenceWriter` or an
 :class:`~acquisition.async_writer.AsyncSequenceWriter` (frames handed to a writer thread: the
 loop never waits for the disk).
 
-Whatever happens the LEDs go off (``OFF`` also aborts a running table) and the camera stops in
-``finally``.
+Whatever happens the LEDs go off (``OFF`` also aborts a running table) and the camera stops
+(:func:`_leds_off_at_exit`); when the run ends in an error, a failure of that cleanup (the booth's
+link is what failed) is logged and the original error is raised, not the cleanup's.
+
+The booth's watchdog (``docs/booth-protocol.md`` §7) switches the LEDs off when the host has been
+silent for its period, but a capture is silent on purpose for a whole booth- or camera-master
+table or a whole host-paced exposure (:func:`host_silence_s`). When the watchdog is shorter, it is
+raised for the sequence and set back afterwards (:meth:`led_controller.LedBooth.watchdog_covering`);
+otherwise a long sequence was aborted half way, or a long LED exposure silently lit only in part.
 """
 
 from __future__ import annotations
@@ -58,7 +65,7 @@ import logging
 import math
 import time
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager, nullcontext
+from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
 from typing import Any, Protocol
 
 from acquisition.camera import Camera, RawFrame
@@ -77,6 +84,10 @@ TRIGGER_PULSE_US = 100
 READOUT_US = 2_000
 """Camera readout / host slack added to each booth-master period beyond exposure and deadtime."""
 
+WATCHDOG_SLACK_S = 0.5
+"""Host pauses on top of a plan's scheduled silence towards the booth (writing a frame, the flash
+decision, the OS scheduler), in seconds: see :func:`host_silence_s`."""
+
 
 class LedControl(Protocol):
     """What the host-paced runner needs of the booth (``led_controller.LedBooth`` provides it)."""
@@ -88,6 +99,9 @@ class LedControl(Protocol):
     def all_off(self) -> None:
         """Switch every channel off."""
         ...
+
+    # Optional: ``watchdog_covering(silence_s)``, a context manager keeping the booth's watchdog
+    # from firing while the host is silent on purpose (``LedBooth`` offers it; see _watchdog_covering).
 
 
 class SequencedLedControl(LedControl, Protocol):
@@ -122,6 +136,36 @@ def booth_period_us(plan: CapturePlan) -> int:
     """Booth-master step period: settle + pulse + longest exposure + deadtime + readout, in µs."""
     longest = max((s.exposure_us for s in plan.steps), default=0.0)
     return int(math.ceil(plan.settle_s * 1e6 + TRIGGER_PULSE_US + longest + plan.deadtime_s * 1e6 + READOUT_US))
+
+
+def host_silence_s(plan: CapturePlan) -> float:
+    """The longest the host may send the booth nothing while it runs ``plan``, in seconds.
+
+    The booth's watchdog must not fire meanwhile (``docs/booth-protocol.md`` §7: it switches the
+    LEDs off and aborts the table). Host paced: one step — the ``SET``, the exposure and the wait
+    for its frame, at most ``plan.frame_timeout_s`` before the host gives up and sends ``OFF``.
+    Booth and camera master: the whole table runs without a command — one
+    :func:`booth_period_us` per step, one more period and the frame timeout for the last frame
+    (the wait of :func:`run_capture`). Both plus :data:`WATCHDOG_SLACK_S`.
+
+    Examples
+    --------
+    >>> from acquisition.plan import CapturePlan
+    >>> round(host_silence_s(CapturePlan.ambient_then_each_led(7, 10_000.0)), 3)
+    1.513
+    >>> round(host_silence_s(CapturePlan.ambient_then_each_led(7, 500_000.0, trigger="booth")), 3)
+    6.076
+    """
+    if plan.trigger == "software":
+        return plan.frame_timeout_s + WATCHDOG_SLACK_S
+    return (len(plan.steps) + 1) * booth_period_us(plan) * 1e-6 + plan.frame_timeout_s + WATCHDOG_SLACK_S
+
+
+def _watchdog_covering(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
+    """The booth's watchdog kept from firing while ``plan`` runs (:meth:`LedBooth.watchdog_covering`),
+    or nothing for a booth without one."""
+    cover = getattr(booth, "watchdog_covering", None)
+    return cover(host_silence_s(plan)) if cover is not None else nullcontext()
 
 
 FlashDecide = Callable[[list[RawFrame]], tuple[Sequence[float], float]]
@@ -184,6 +228,33 @@ def collector_paused() -> Iterator[None]:
     finally:
         if was_enabled:
             gc.enable()
+
+
+@contextmanager
+def _leds_off_at_exit(camera: Camera, booth: LedControl) -> Iterator[None]:
+    """LEDs off (``OFF`` also aborts a running table), then the camera stopped, on every exit path.
+
+    Leaving through an error, a failure to switch off or to stop (when the booth's link is what
+    failed, ``OFF`` cannot get through either) is logged, and the original error goes on: it is
+    the one that says what went wrong (and the booth's watchdog switches off a silent host's LEDs).
+    """
+    try:
+        yield
+    except BaseException:
+        try:
+            booth.all_off()
+        except Exception as off_err:  # noqa: BLE001 - the original error matters more
+            log.warning("LEDs not confirmed off after the error: %s; the booth's watchdog switches them off "
+                        "once the host has been silent for its period", off_err)
+        try:
+            camera.stop()
+        except Exception as stop_err:  # noqa: BLE001 - the original error matters more
+            log.warning("stopping the camera after the error failed: %s", stop_err)
+        raise
+    try:
+        booth.all_off()
+    finally:
+        camera.stop()
 
 
 def _replan(camera: Camera, plan: CapturePlan, index: int) -> None:
@@ -258,20 +329,25 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Se
     written: list[SequenceFrame] = []
     frames: list[RawFrame] = []
     previous_id: int | None = None
-    try:
+    with _watchdog_covering(booth, plan), _leds_off_at_exit(camera, booth):
         camera.prepare(plan)
         camera.start()
         for step in plan.steps:
+            cover: AbstractContextManager[None] = nullcontext()
             if flash is not None and step.index == len(plan.steps) - 1:
                 step = flash(frames)
                 plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
                 _replan(camera, plan, step.index)
-            booth.set_levels(step.led_levels)
-            camera.trigger()
-            try:
-                frame = camera.next_frame(plan.frame_timeout_s)
-            except FrameTimeoutError as err:
-                raise FrameTimeoutError(f"step {step.index} ({step.label}): {err}; {_saved(writer, written)}") from err
+                # The flash exposure is decided now and may be longer than any planned step.
+                cover = _watchdog_covering(booth, dataclasses.replace(plan, steps=(step,)))
+            with cover:
+                booth.set_levels(step.led_levels)
+                camera.trigger()
+                try:
+                    frame = camera.next_frame(plan.frame_timeout_s)
+                except FrameTimeoutError as err:
+                    raise FrameTimeoutError(f"step {step.index} ({step.label}): {err}; "
+                                            f"{_saved(writer, written)}") from err
             if previous_id is not None and (frame.frame_id - previous_id) % FRAME_ID_MODULUS != 1:
                 raise DroppedFrameError(
                     f"step {step.index} ({step.label}): camera frame id {frame.frame_id} follows {previous_id}; "
@@ -280,11 +356,6 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Se
             previous_id = frame.frame_id
             frames.append(frame)
             _write(writer, step, frame, written, on_frame)
-    finally:
-        try:
-            booth.all_off()
-        finally:
-            camera.stop()
     return written
 
 
@@ -300,79 +371,83 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
     # Booth master: frames come one period apart, so waiting for any one frame may take a period
     # on top of the usual timeout.
     frame_timeout_s = plan.frame_timeout_s + period_us * 1e-6
+    longest_us = max(step.exposure_us for step in plan.steps)
     first_id: int | None = None
     pause, resume = getattr(writer, "pause", None), getattr(writer, "resume", None)
-    try:
-        booth.all_off()  # idle the booth (a previous table may be DONE) before editing the table
-        drain = getattr(booth, "pending_events", None)
-        if drain is not None:
-            drain()  # events of an earlier, aborted table must not pair with this one's frames
-        if flash is not None:  # the flash step is held until its levels are known (PSET)
-            booth.load_pattern([step.led_levels for step in plan.steps], held=(last,))
-        else:
-            booth.load_pattern([step.led_levels for step in plan.steps])
-        booth.arm(mode, settle_us=settle_us, pulse_us=TRIGGER_PULSE_US, period_us=period_us)
-        camera.prepare(plan)
-        camera.start()
-        booth.start()
-        for number, step in enumerate(plan.steps, start=1):
-            if flash is not None and step.index == last - 1 and pause is not None:
-                pause()  # the writer thread waits from the last LED frame until the flash frame is in
-            if flash is not None and step.index == last:
-                step = flash(frames)
-                plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
-                _replan(camera, plan, step.index)
-                # The last LED frame is in, so its exposure is over: the flash step need not
-                # wait for its scheduled slot (booth master, PSET … NOW).
-                # (A booth firmware without NOW refuses it; LedBooth.set_step then falls back to plain PSET.)
-                booth.set_step(step.index, step.led_levels, now=mode == "booth")
-            if mode == "camera":
-                if number > 1:
-                    time.sleep(plan.settle_s)  # the next step's LEDs settle between exposures
-                camera.trigger()
-            try:
-                frame = camera.next_frame(frame_timeout_s)
-            except FrameTimeoutError as err:
-                counted = booth.trigger_count()
-                if counted >= number:
-                    raise DroppedFrameError(
-                        f"step {step.index} ({step.label}): the booth counted trigger {number} but no frame "
-                        f"arrived within {frame_timeout_s:.3g} s; the frame was lost. {_saved(writer, written)}"
-                    ) from err
-                raise FrameTimeoutError(
-                    f"step {step.index} ({step.label}): {err}; the booth counted {counted} trigger(s) "
-                    f"({mode} master); {_saved(writer, written)}"
-                ) from err
-            if first_id is None:
-                first_id = frame.frame_id
-            trigger = 1 + (frame.frame_id - first_id) % FRAME_ID_MODULUS
-            if trigger != number:
-                missing = plan.steps[number - 1]
-                raise DroppedFrameError(
-                    f"step {missing.index} ({missing.label}): no frame for trigger {number}; the next frame "
-                    f"(id {frame.frame_id}) is trigger {trigger}. {_saved(writer, written)}"
-                )
-            paired = plan.steps[_booth_step_of(booth, trigger, frame_timeout_s, step)]
-            if paired.index != step.index:
-                raise DroppedFrameError(
-                    f"step {step.index} ({step.label}): the booth exposed table step {paired.index} on trigger "
-                    f"{trigger}; expected step {step.index} — a trigger was missed or doubled. {_saved(writer, written)}"
-                )
-            frames.append(frame)
-            if flash is not None and step.index == last and resume is not None:
-                # Only now: a writer resumed at the PSET took the GIL for its queued frames while
-                # the booth's thread was due to pulse the flash trigger (seen up to ~8 ms late).
-                resume()
-            _write(writer, paired, frame, written, on_frame, trigger=trigger)
-        done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
-        log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))
-    finally:
-        if resume is not None:
-            resume()
+    with ExitStack() as watchdog:
+        watchdog.enter_context(_watchdog_covering(booth, plan))
+        watchdog.enter_context(_leds_off_at_exit(camera, booth))
         try:
-            booth.all_off()
+            booth.all_off()  # idle the booth (a previous table may be DONE) before editing the table
+            drain = getattr(booth, "pending_events", None)
+            if drain is not None:
+                drain()  # events of an earlier, aborted table must not pair with this one's frames
+            if flash is not None:  # the flash step is held until its levels are known (PSET)
+                booth.load_pattern([step.led_levels for step in plan.steps], held=(last,))
+            else:
+                booth.load_pattern([step.led_levels for step in plan.steps])
+            booth.arm(mode, settle_us=settle_us, pulse_us=TRIGGER_PULSE_US, period_us=period_us)
+            camera.prepare(plan)
+            camera.start()
+            booth.start()
+            for number, step in enumerate(plan.steps, start=1):
+                if flash is not None and step.index == last - 1 and pause is not None:
+                    pause()  # the writer thread waits from the last LED frame until the flash frame is in
+                if flash is not None and step.index == last:
+                    step = flash(frames)
+                    plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
+                    _replan(camera, plan, step.index)
+                    if step.exposure_us > longest_us:  # camera master: the flash exposure is not capped
+                        flash_plan = dataclasses.replace(plan, steps=(step,))
+                        frame_timeout_s = max(frame_timeout_s, flash_plan.frame_timeout_s)
+                        watchdog.enter_context(_watchdog_covering(booth, flash_plan))
+                    # The last LED frame is in, so its exposure is over: the flash step need not
+                    # wait for its scheduled slot (booth master, PSET … NOW).
+                    # (A booth firmware without NOW refuses it; LedBooth.set_step then falls back to plain PSET.)
+                    booth.set_step(step.index, step.led_levels, now=mode == "booth")
+                if mode == "camera":
+                    if number > 1:
+                        time.sleep(plan.settle_s)  # the next step's LEDs settle between exposures
+                    camera.trigger()
+                try:
+                    frame = camera.next_frame(frame_timeout_s)
+                except FrameTimeoutError as err:
+                    counted = booth.trigger_count()
+                    if counted >= number:
+                        raise DroppedFrameError(
+                            f"step {step.index} ({step.label}): the booth counted trigger {number} but no frame "
+                            f"arrived within {frame_timeout_s:.3g} s; the frame was lost. {_saved(writer, written)}"
+                        ) from err
+                    raise FrameTimeoutError(
+                        f"step {step.index} ({step.label}): {err}; the booth counted {counted} trigger(s) "
+                        f"({mode} master); {_saved(writer, written)}"
+                    ) from err
+                if first_id is None:
+                    first_id = frame.frame_id
+                trigger = 1 + (frame.frame_id - first_id) % FRAME_ID_MODULUS
+                if trigger != number:
+                    missing = plan.steps[number - 1]
+                    raise DroppedFrameError(
+                        f"step {missing.index} ({missing.label}): no frame for trigger {number}; the next frame "
+                        f"(id {frame.frame_id}) is trigger {trigger}. {_saved(writer, written)}"
+                    )
+                paired = plan.steps[_booth_step_of(booth, trigger, frame_timeout_s, step)]
+                if paired.index != step.index:
+                    raise DroppedFrameError(
+                        f"step {step.index} ({step.label}): the booth exposed table step {paired.index} on trigger "
+                        f"{trigger}; expected step {step.index} — a trigger was missed or doubled. {_saved(writer, written)}"
+                    )
+                frames.append(frame)
+                if flash is not None and step.index == last and resume is not None:
+                    # Only now: a writer resumed at the PSET took the GIL for its queued frames while
+                    # the booth's thread was due to pulse the flash trigger (seen up to ~8 ms late).
+                    resume()
+                _write(writer, paired, frame, written, on_frame, trigger=trigger)
+            done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
+            log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))
         finally:
-            camera.stop()
+            if resume is not None:
+                resume()
     return written
 
 
@@ -402,7 +477,7 @@ def preview_frames(camera: Camera, booth: LedControl, plan: CapturePlan) -> list
     :class:`DroppedFrameError`. LEDs off and camera stopped at the end, as for :func:`run_capture`.
     """
     frames: list[RawFrame] = []
-    try:
+    with _watchdog_covering(booth, plan), _leds_off_at_exit(camera, booth):
         camera.prepare(plan)
         camera.start()
         for step in plan.steps:
@@ -416,9 +491,4 @@ def preview_frames(camera: Camera, booth: LedControl, plan: CapturePlan) -> list
                 raise DroppedFrameError(f"preview step {step.index} ({step.label}): camera frame id "
                                         f"{frame.frame_id} follows {frames[-1].frame_id}; a frame was lost")
             frames.append(frame)
-    finally:
-        try:
-            booth.all_off()
-        finally:
-            camera.stop()
     return frames

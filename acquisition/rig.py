@@ -141,7 +141,10 @@ class Rig:
                               leds=leds, extra=extra, mono=self.mono)
 
     def close(self) -> None:
-        """Switch the LEDs off, close the booth link, the emulator and the camera (each attempted)."""
+        """Switch the LEDs off, close the booth link, the emulator and the camera (each attempted).
+
+        Raises the first failure once every device has had its chance to close.
+        """
         errors = []
         for closer in reversed(self._closers):
             try:
@@ -155,8 +158,19 @@ class Rig:
     def __enter__(self) -> Rig:
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, traceback: object) -> None:
+        """Close the rig; leaving through an error, a failure to close is logged, not raised over it.
+
+        When the booth's link is what failed, switching the LEDs off at close fails the same way;
+        raising that would replace the error that says what happened (and where) with one about ``OFF``.
+        """
+        if exc is None:
+            self.close()
+            return
+        try:
+            self.close()
+        except Exception as close_err:  # noqa: BLE001 - the error in flight is the one to report
+            log.warning("rig '%s': closing after the error failed too: %s", self.name, close_err)
 
 
 def _line(rig_errors: list[BaseException], what: str, action: Callable[[], None]) -> Callable[..., None]:

@@ -44,6 +44,9 @@ PSET_NOW_FLAG = "NOW"
 _READ_POLL_S = 0.02
 """Read timeout of the port: how quickly the reader thread notices ``close``."""
 
+WATCHDOG_MAX_S = 600.0
+"""Longest watchdog period the protocol allows (``WDOG`` takes 50..600000 ms, ``docs/booth-protocol.md``)."""
+
 
 class _LinkLost:
     """Queue item: the serial link failed (carries the cause)."""
@@ -103,6 +106,7 @@ class LedBooth:
         self._closed = False
         self._info: BoothInfo | None = None
         self._pset_now = True
+        self._watchdog_s: float | None = None  # the booth's watchdog period once known (STAT, WDOG)
         self._transcript: IO[str] | None = (
             open(log_serial, "w", encoding="ascii", newline="\n") if log_serial else None  # noqa: SIM115
         )
@@ -251,6 +255,46 @@ class LedBooth:
         if ms != 0 and not 50 <= ms <= 600_000:
             raise ValueError(f"set_watchdog: {timeout_s!r} s out of range; expected 0 or 0.05..600 s")
         self._command(Command.WATCHDOG, ms)
+        self._watchdog_s = ms / 1000.0
+
+    @property
+    def watchdog_s(self) -> float:
+        """Get the booth's watchdog period in seconds (0: disabled); asked once (``STAT``), then kept by
+        :meth:`set_watchdog` and :meth:`status`."""
+        if self._watchdog_s is None:
+            self.status()
+        assert self._watchdog_s is not None
+        return self._watchdog_s
+
+    @contextlib.contextmanager
+    def watchdog_covering(self, silence_s: float) -> Iterator[None]:
+        """Keep the booth's watchdog from firing while the host is silent on purpose for up to ``silence_s``.
+
+        A capture sends nothing while a booth- or camera-master table runs, or while a long exposure
+        is under way (host paced); a watchdog shorter than that switches the LEDs off in the middle
+        of a frame — an aborted sequence, or worse, an LED frame exposed partly dark. When the
+        watchdog is on and shorter than ``silence_s``, it is raised to ``silence_s`` (at most
+        :data:`WATCHDOG_MAX_S`) for the block and set back afterwards, so a host that dies still
+        has its LEDs switched off, only later. A watchdog that is off or long enough is left alone
+        (no traffic). Setting it back is skipped when the link is lost and otherwise only logged
+        if it fails: the block's own error is what the caller needs to see.
+        """
+        previous = self.watchdog_s
+        if previous == 0 or previous >= silence_s:
+            yield
+            return
+        if silence_s > WATCHDOG_MAX_S:
+            log.warning("%s: the host stays silent up to %.0f s, longer than the longest watchdog (%.0f s); "
+                        "the booth may switch the LEDs off before the end", self._name, silence_s, WATCHDOG_MAX_S)
+        self.set_watchdog(min(math.ceil(silence_s * 1000) / 1000.0, WATCHDOG_MAX_S))
+        try:
+            yield
+        finally:
+            if self._link_error is None and not self._closed:
+                try:
+                    self.set_watchdog(previous)
+                except BoothError as err:
+                    log.warning("%s: setting the watchdog back to %g s failed: %s", self._name, previous, err)
 
     def load_pattern(self, steps: Sequence[Sequence[float]], *, held: Sequence[int] = ()) -> None:
         """Replace the booth's pattern table (each step: one level per channel, in [0, 1]).
@@ -378,7 +422,9 @@ class LedBooth:
     def status(self) -> BoothStatus:
         """Get a snapshot of the booth's state (:class:`BoothStatus`)."""
         reply, raw = self._command(Command.STATUS)
-        return protocol.parse_status(reply, raw, where=self._name)
+        status = protocol.parse_status(reply, raw, where=self._name)
+        self._watchdog_s = status.watchdog_s
+        return status
 
     def wait_event(self, kind: str | None = None, *, timeout_s: float | None = None) -> BoothEvent:
         """Wait for the next event (of ``kind`` if given: ``TRIG``, ``DONE``, ``WDOG``).
