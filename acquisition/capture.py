@@ -154,7 +154,7 @@ def host_silence_s(plan: CapturePlan) -> float:
     >>> round(host_silence_s(CapturePlan.ambient_then_each_led(7, 10_000.0)), 3)
     1.513
     >>> round(host_silence_s(CapturePlan.ambient_then_each_led(7, 500_000.0, trigger="booth")), 3)
-    6.076
+    6.549
     """
     if plan.trigger == "software":
         return plan.frame_timeout_s + WATCHDOG_SLACK_S
