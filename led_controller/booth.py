@@ -221,9 +221,24 @@ class LedBooth:
         return self._name
 
     def identify(self) -> BoothInfo:
-        """Ask the booth for its firmware, channels, channel names and peak wavelengths."""
+        """Ask the booth for its firmware, channels, channel names and peak wavelengths.
+
+        Raises
+        ------
+        BoothError
+            If the booth speaks another protocol version than this driver (``PROTO=``; a version
+            is raised by any change that is not additive, ``docs/booth-protocol.md`` §9).
+        """
         reply, raw = self._command(Command.IDENTIFY)
-        self._info = protocol.parse_identify(reply, raw, where=self._name)
+        info = protocol.parse_identify(reply, raw, where=self._name)
+        if info.protocol != protocol.PROTOCOL_VERSION:
+            newer = info.protocol > protocol.PROTOCOL_VERSION
+            raise BoothError(
+                f"{self._name}: booth firmware {info.firmware} speaks booth protocol {info.protocol}; expected "
+                f"protocol {protocol.PROTOCOL_VERSION} (docs/booth-protocol.md) — "
+                + ("update msflash for this firmware" if newer else "update the booth's firmware")
+            )
+        self._info = info
         log.info(
             "%s: booth %s, %d channels %s", self._name, self._info.firmware,
             self._info.channels, ",".join(self._info.names),

@@ -121,6 +121,9 @@ class BoothEmulator:
         Pattern table capacity.
     level_bits : int
         Reported drive resolution (12..16); levels are quantised to it.
+    protocol : int
+        Protocol version reported by ``ID`` (``PROTO=``); another than this emulator's own
+        (:data:`~led_controller.protocol.PROTOCOL_VERSION`) plays a firmware the host must refuse.
 
     Attributes
     ----------
@@ -140,6 +143,7 @@ class BoothEmulator:
         firmware: str = "msflash-emulator-0.1",
         max_steps: int = 256,
         level_bits: int = 16,
+        protocol: int = PROTOCOL_VERSION,
     ) -> None:
         if len(names) != len(peaks_nm) or not 1 <= len(names) <= 64:
             raise ValueError(
@@ -155,6 +159,7 @@ class BoothEmulator:
         self.firmware = firmware
         self.max_steps = max_steps
         self.level_bits = level_bits
+        self.protocol = int(protocol)
         self.on_trigger_out: Callable[[int], None] | None = None
         self._clock = clock
         self._lock = threading.RLock()
@@ -446,7 +451,7 @@ class BoothEmulator:
         self._no_args(args)
         peaks = ",".join(f"{p:g}" for p in self.peaks_nm)
         return (
-            f"FW={self.firmware} PROTO={PROTOCOL_VERSION} CH={self.channels} "
+            f"FW={self.firmware} PROTO={self.protocol} CH={self.channels} "
             f"NAMES={','.join(self.names)} PEAKS={peaks} BITS={self.level_bits} STEPS={self.max_steps}"
         )
 

@@ -137,6 +137,22 @@ def test_booth_channel_count_must_match_the_spectra(aravis: ModuleType, calibrat
         server.close()
 
 
+def test_a_booth_of_another_protocol_version_is_one_error_line(aravis: ModuleType, calibration: Path, tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture) -> None:
+    from led_controller import BoothEmulator
+
+    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
+    default = _emulator_for(leds)
+    newer = BoothEmulator(names=default.names, peaks_nm=default.peaks_nm, firmware="booth-2.0", protocol=2)
+    with serve_on_pty(newer) as server:
+        status = main(["capture", "--camera", "Fake_1", "--interfaces", "fake", "--port", server.port,
+                       "--calibration", str(calibration), "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 1 and len(err) == 1
+    assert err[0].startswith(f"msflash: error: rig 'hw': booth: {server.port}: booth firmware booth-2.0 speaks "
+                             "booth protocol 2; expected protocol 1")
+
+
 def test_spectra_are_required_before_any_device_opens(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     with pytest.raises(UsageError, match="--calibration DIR or --led-spectra"):
         load_hw_spectra()

@@ -41,6 +41,20 @@ def test_configurable_channels() -> None:
             booth.load_pattern([[0, 0]] * 5)
 
 
+@pytest.mark.parametrize(("version", "remedy"), [(2, "update msflash"), (0, "update the booth's firmware")])
+def test_a_booth_of_another_protocol_version_is_refused(version: int, remedy: str) -> None:
+    """PROTO= is raised by every change that is not additive (docs/booth-protocol.md §9): a driver
+    that took such a booth for its own would send it commands it reads differently."""
+    emulator = BoothEmulator(firmware="booth-9.0", protocol=version)
+    with serve_on_pty(emulator) as server:
+        with pytest.raises(BoothError) as caught:
+            LedBooth.open(server.port)
+        message = str(caught.value)
+        assert message.startswith(f"{server.port}: booth firmware booth-9.0 speaks booth protocol {version}; "
+                                  "expected protocol 1")
+        assert remedy in message
+
+
 def test_set_levels_reach_the_emulator_with_16_bit_precision(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
     levels = [0.0, 1.0, 0.5, 1 / 65535, 0.123456, 0.999, 0.25]
     booth.set_levels(levels)
