@@ -19,9 +19,11 @@ Guarantees
 - **SIGKILL / power loss**: what is on disk is still a readable sequence (the wrapped writer's
   guarantee), but the frames still in the queue — at most ``max_queued`` plus the one being
   written — are lost.
-- **Write errors**: the first error of the writer thread (disk full, a frame the format refuses)
-  is raised by the next ``add_frame``, :meth:`flush`, :meth:`finish` or by leaving the ``with``
-  block normally; frames after it are not written (the sequence stays consistent and incomplete).
+- **Write errors**: the first error of the writer thread is raised by the next ``add_frame``,
+  :meth:`flush`, :meth:`finish` or by leaving the ``with`` block normally; frames after it are not
+  written (the sequence stays consistent and incomplete). The disk failing (full, gone, I/O error:
+  an ``OSError``) is :class:`~acquisition.errors.SequenceWriteError`, a runtime failure naming the
+  frame, the cause and what is saved; a frame the format refuses stays a ``RecordingError``.
 
 Pixels are not copied: the caller must not modify an array after handing it over (camera frames,
 :class:`~acquisition.camera.RawFrame`, are read-only).
@@ -38,7 +40,7 @@ from types import TracebackType
 
 import numpy as np
 
-from acquisition.errors import RecordingError
+from acquisition.errors import RecordingError, SequenceWriteError
 from acquisition.image_io import image_suffix
 from acquisition.sequence_format import FRAME_ROLES, FRAMES_DIR, Sequence, SequenceFrame, SequenceWriter
 
@@ -67,6 +69,7 @@ class AsyncSequenceWriter:
         self._writer = writer
         self._queue: queue.Queue = queue.Queue(maxsize=max_queued)
         self._error: BaseException | None = None
+        self._failed_file: str | None = None  # the frame file whose writing failed
         self._added = len(writer.sequence.frames)
         self._written = self._added
         self._closed = False
@@ -113,7 +116,7 @@ class AsyncSequenceWriter:
         entry = SequenceFrame(f"{FRAMES_DIR}/{self._added:03d}-{name_role}{image_suffix(pixels)}", role,  # type: ignore[arg-type]
                               tuple(led_levels), exposure_us, gain, dict(extra or {}))
         self._added += 1
-        item = (pixels, role, entry.led_levels, exposure_us, gain, dict(extra or {}))
+        item = (pixels, role, entry.led_levels, exposure_us, gain, dict(extra or {}), entry.file)
         with self._held_lock:
             # Paused: keep the frame here rather than wake the writer thread only for it to wait
             # (each wake-up takes the GIL from the latency-critical capture thread).
@@ -184,14 +187,25 @@ class AsyncSequenceWriter:
         self.close()  # drain first, whatever happened: nothing captured is lost
         if exc_type is None:
             self._raise_error()
-        elif self._error is not None:
+        elif self._error is not None and not _caused_by(exc, self._error):
             log.error("%s: writing failed as well: %s", self.path, self._error)
 
     # -- the writer thread -------------------------------------------------------------------
     def _raise_error(self) -> None:
-        if self._error is not None:
-            error = self._error
+        if self._error is None:
+            return
+        error = self._error
+        if not isinstance(error, OSError):
             raise RecordingError(f"{self.path}: writing a frame failed: {error}") from error
+        saved = len(self._writer.sequence.frames)
+        lost = self._added - saved - 1
+        cause = error.strerror or str(error)
+        where = f" ({error.filename})" if error.filename else ""
+        raise SequenceWriteError(
+            f"{self.path.parent}: writing {self._failed_file} failed: {cause}{where}; expected a writable "
+            f"disk with room for the frames. {saved} frame(s) saved and readable (complete: false)"
+            + (f"; {lost} later frame(s) captured but not written" if lost > 0 else "")
+        ) from error
 
     def _run(self) -> None:
         while True:
@@ -201,15 +215,25 @@ class AsyncSequenceWriter:
                 if item is _STOP:
                     return
                 if self._error is None:  # after an error nothing more is written: the sequence stays consistent
-                    pixels, role, levels, exposure_us, gain, extra = item
+                    pixels, role, levels, exposure_us, gain, extra, file = item
+                    self._failed_file = file
                     self._writer.add_frame(pixels, role, levels, exposure_us, gain, extra=extra)
-            except BaseException as err:  # noqa: BLE001 - handed to the capture thread
+            except BaseException as err:  # noqa: BLE001 - handed to the capture thread, which reports it
                 self._error = err
-                log.error("%s: writing a frame failed: %s", self.path, err)
+                log.debug("%s: writing a frame failed: %s", self.path, err)
             finally:
                 if item is not _STOP:
                     self._written += 1
                 self._queue.task_done()
+
+
+def _caused_by(error: BaseException | None, cause: BaseException) -> bool:
+    """Whether ``error`` is ``cause`` or was raised from it (the writer's own error coming back)."""
+    while error is not None:
+        if error is cause:
+            return True
+        error = error.__cause__
+    return False
 
 
 __all__ = ["DEFAULT_MAX_QUEUED", "AsyncSequenceWriter"]

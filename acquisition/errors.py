@@ -31,6 +31,14 @@ class ReplayMismatchError(CaptureError):
     """The plan differs from the recording being replayed; names the first differing step and field."""
 
 
+class SequenceWriteError(CaptureError):
+    """Writing a frame of a sequence being captured failed (disk full, directory gone, I/O error).
+
+    A runtime failure, not bad input: the message names the sequence, the frame and the cause,
+    and says how many frames are saved (the sequence on disk stays readable, ``complete: false``).
+    """
+
+
 class RigOpenError(CaptureError):
     """One or more devices of a rig failed to open; every device's failure is listed."""
 
