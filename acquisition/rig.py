@@ -131,14 +131,25 @@ class Rig:
         A mono camera's (H, W) frames are recorded as three identical channels (:attr:`mono`); a
         rig opened from a calibration (:attr:`calibration`) writes the sequence's
         ``"calibration": {"id", "file"}`` reference (``file`` relative to the sequence directory).
+
+        Raises
+        ------
+        UsageError
+            The directory cannot be made or written (read-only, a file in the way): a bad output
+            path, named with the system's reason, before any frame is captured.
         """
         wavelengths, camera, leds = self.sequence_header()
         if self.calibration is not None:
             calibration_id, calibration_directory = self.calibration
             file = os.path.relpath(Path(calibration_directory).resolve(), Path(directory).resolve())
             extra = {**(extra or {}), "calibration": {"id": calibration_id, "file": file}}
-        return SequenceWriter(directory, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
-                              leds=leds, extra=extra, mono=self.mono)
+        try:
+            return SequenceWriter(directory, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
+                                  leds=leds, extra=extra, mono=self.mono)
+        except OSError as err:
+            where = err.filename or directory
+            raise UsageError(f"{where}: cannot write the sequence there ({err.strerror or err}); expected a "
+                             "writable directory (or a path where one can be made)") from err
 
     def close(self) -> None:
         """Switch the LEDs off, close the booth link, the emulator and the camera (each attempted).

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -128,3 +129,17 @@ def test_run_decides_the_flash_before_the_reliability_signals(tmp_path, monkeypa
     summary = json.loads((tmp_path / "r" / "run.json").read_text())
     assert read_sequence(tmp_path / "r" / "sequence").frames[-1].exposure_us == pytest.approx(
         summary["exposure"]["flash_exposure_us"])
+
+
+def test_an_output_path_where_the_sequence_cannot_be_written_is_one_error_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """OUT/sequence is a file: bad output path (exit 2, one line naming it), nothing captured, no traceback."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "sequence").write_text("not a directory\n")
+    status = main(["capture", "--exposure-us", "5000", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2
+    assert err[-1].startswith(f"msflash: error: {out / 'sequence'}: cannot write the sequence there (")
+    assert "expected a writable directory" in err[-1] and not any("captured step" in line for line in err)
+    assert (out / "sequence").read_text() == "not a directory\n"
