@@ -97,10 +97,7 @@ class ReplayCamera(TriggeredFrames):
             index = self._cursor + offset
             name = f"step {step.index} ({step.label})"
             if index >= len(self.sequence.frames):
-                raise ReplayMismatchError(
-                    f"{where}: {name}: the recording has no frame {index} (it holds {len(self.sequence.frames)}); "
-                    "expected the plan to ask for the frames that were recorded"
-                )
+                raise ReplayMismatchError(f"{where}: {name}: {self._nothing_left(index, step.role)}")
             frame = self.sequence.frames[index]
             recorded = f"frames[{index}]"
             if frame.role != step.role:
@@ -152,6 +149,18 @@ class ReplayCamera(TriggeredFrames):
         self._release(self._require_started())
 
     # -- internals ------------------------------------------------------------------------
+    def _nothing_left(self, index: int, role: str) -> str:
+        """Why a step at recorded frame ``index`` cannot be served (the recording is used up)."""
+        roles = [frame.role for frame in self.sequence.frames]
+        held = ", ".join(f"{roles.count(r)} {r}" for r in dict.fromkeys(roles))
+        text = (f"the recording has no frame {index}: its {len(roles)} frames ({held}) are all served; "
+                "expected the plan to ask only for the frames that were recorded")
+        if role == "flash" and "flash" not in roles:
+            text += (" — this recording has no flash frame, so 'run' cannot replay its flash (record with "
+                     "'msflash run'; for a sequence from 'msflash capture' use 'msflash estimate', 'flash' or "
+                     "'synthesize' on it)")
+        return text
+
     def _timeout_message(self, timeout_s: float, why: str) -> str:
         return (f"replay camera: no frame within {timeout_s:g} s for recorded frame {self._cursor}: {why}; "
                 "expected trigger() (or the booth's trigger line) before next_frame()")

@@ -139,3 +139,19 @@ def test_a_shared_sample_without_a_camera_serial_is_replayed_as_is(tmp_path: Pat
     assert [f.role for f in replayed.frames] == [f.role for f in recorded.frames]
     for index in range(len(recorded.frames)):
         np.testing.assert_array_equal(replayed.load_frame(index), recorded.load_frame(index))
+
+
+def test_run_on_a_recording_without_a_flash_frame_says_so(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """The shared sample holds ambient + 7 LED frames (as 'msflash capture' records): 'run' replays them,
+    then cannot replay a flash the recording lacks; the one error line says why and what to use."""
+    from tests.helpers import SAMPLES_DIR
+
+    sample = SAMPLES_DIR / "sample-rgb-tungsten"
+    if not sample.is_dir():
+        pytest.skip(f"shared sample missing: {sample}")
+    status = main(["run", "--rig", f"replay:{sample}", "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 1
+    assert err[-1].startswith(f"msflash: error: {sample / 'sequence.json'}: step 0 (flash): the recording has "
+                              "no frame 8: its 8 frames (1 ambient, 7 led) are all served")
+    assert "this recording has no flash frame" in err[-1] and "'msflash estimate'" in err[-1]
