@@ -1497,6 +1497,12 @@ class AravisCamera:
             item = self._queue.get(timeout=max(0.0, timeout_s))
         except queue.Empty:
             stats = self.stats
+            silent = self._silence()
+            if silent is not None:
+                raise FrameTimeoutError(
+                    f"{self._name}: no frame for {where} within {timeout_s:.3g} s, and the camera no longer "
+                    f"answers ({silent}); expected a connected camera — check its power and cable, then "
+                    f"reopen it ({stats.frames_good} good frame(s) before)") from None
             raise FrameTimeoutError(
                 f"{self._name}: no frame for {where} within {timeout_s:.3g} s; expected one frame per "
                 f"{'trigger' if self._trigger.mode != 'free' else 'frame period'} "
@@ -1533,6 +1539,27 @@ class AravisCamera:
         frame = RawFrame(item.pixels, item.frame_id, item.timestamp_ns, exposure_us, gain)
         self._last_timing = FrameTiming(item.timestamp_ns, item.received_ns, item.popped_ns, time.time_ns())
         return frame
+
+    def _silence(self) -> str | None:
+        """Why the camera no longer answers, or None when it does (asked after a frame timeout).
+
+        A GigE Vision camera that is switched off or unplugged raises ``control-lost`` only when its
+        heartbeat fails, seconds later: a frame timeout then read as a trigger problem. One read of
+        a bootstrap register (GigE Vision ``Version``, 0x0000, which every device has) tells them
+        apart: an answer in milliseconds, or a timeout after Aravis's retries (about 4 s) — after
+        which the control writes of stopping are skipped (each would wait its retries again).
+        Other transports report a lost device themselves.
+        """
+        if self._control_lost.is_set():
+            return "control lost"
+        if self._protocol != "gige" or self._device is None:
+            return None
+        try:
+            self._device.read_register(0x0000)
+        except GLib.Error as err:
+            self._unreachable = True
+            return "control lost" if self._control_lost.is_set() else err.message
+        return None
 
     @property
     def last_frame_timing(self) -> FrameTiming | None:

@@ -8,7 +8,8 @@ Why a child: Aravis 0.8.26 has crashed (SIGSEGV) a few times while tearing down 
 control was lost — inside Aravis, after msflash had already reported the error. In-process, that
 crash took the whole pytest worker down with it; here it is seen, and reported, as what it is.
 
-Scenarios: ``camera`` (AravisCamera alone: the error names the step) and ``capture`` (through
+Scenarios: ``camera`` (AravisCamera alone: the error names the step), ``silent`` (no frame after
+the kill: the timeout says the camera no longer answers, not to check the trigger wiring) and ``capture`` (through
 ``run_capture`` with a SequenceWriter and the booth emulator: frames so far on disk, the sequence
 incomplete, the LEDs off).
 """
@@ -47,6 +48,35 @@ def camera_scenario() -> dict:
             camera.next_frame(1.0)
         except (CameraDisconnectedError, FrameTimeoutError) as err:
             result = {"error": type(err).__name__, "message": str(err)}
+    return result
+
+
+def silent_scenario() -> dict:
+    """No frame comes after the kill (nothing triggered): the timeout must say the camera is gone.
+
+    The parent starts a fresh fake on the port (so releasing the device is quick) only once this
+    side has asked the dead one and printed ``PROBED``.
+    """
+    from acquisition import aravis_camera
+    from acquisition.errors import FrameTimeoutError
+    from acquisition.plan import CapturePlan
+
+    plan = CapturePlan.ambient_then_each_led(3, 1000.0)
+    result: dict = {}
+    with aravis_camera.AravisCamera("127.0.0.1", interfaces="gige", roi=(0, 0, 32, 32)) as camera:
+        camera.prepare(plan)
+        camera.start()
+        for _ in range(2):
+            camera.trigger()
+            camera.next_frame(plan.frame_timeout_s + 2.0)  # the process fake polls triggers slowly
+        _wait_for_kill()
+        try:
+            camera.next_frame(0.3)
+        except FrameTimeoutError as err:
+            result = {"error": type(err).__name__, "message": str(err)}
+        print("PROBED", flush=True)
+        if sys.stdin.readline().strip() != "ANSWERING":
+            raise SystemExit("camera-loss child: the parent did not start the answering fake")
     return result
 
 
@@ -90,7 +120,8 @@ def capture_scenario(out_dir: Path) -> dict:
 
 def main() -> int:
     scenario, out_dir = sys.argv[1], Path(sys.argv[2])
-    result = camera_scenario() if scenario == "camera" else capture_scenario(out_dir)
+    scenarios = {"camera": camera_scenario, "silent": silent_scenario}
+    result = scenarios[scenario]() if scenario in scenarios else capture_scenario(out_dir)
     print("RESULT " + json.dumps(result), flush=True)
     return 0
 

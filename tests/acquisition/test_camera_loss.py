@@ -27,7 +27,8 @@ ATTEMPTS = 2
 """A child killed by a signal (the Aravis teardown crash) is run once more; twice is a failure."""
 
 
-def _run_scenario(scenario: str, out_dir: Path, gv_fake_process: Callable[..., Any], serial: str) -> dict:
+def _run_scenario(scenario: str, out_dir: Path, gv_fake_process: Callable[..., Any], serial: str,
+                  probe_dead: bool = False) -> dict:
     crashes = []
     for attempt in range(ATTEMPTS):
         work = out_dir / f"attempt{attempt}"
@@ -40,10 +41,15 @@ def _run_scenario(scenario: str, out_dir: Path, gv_fake_process: Callable[..., A
         assert line == "READY", f"child did not reach the kill point: {line!r} {child.stderr.read() if child.stderr else ''}"
         fake.send_signal(signal.SIGKILL)
         fake.wait(timeout=10)
+        if probe_dead:  # the child asks the dead device first, then carries on with the answering fake
+            child.stdin.write("KILLED\n")
+            child.stdin.flush()
+            probed = child.stdout.readline().strip()
+            assert probed == "PROBED", f"child did not probe: {probed!r}"
         # Releasing the dead device waits out GVCP retries (5 × 500 ms per write); a fresh fake on
         # the port answers them at once, which keeps the test short.
         answering = gv_fake_process(serial=f"{serial}{attempt}R")
-        child.stdin.write("KILLED\n")
+        child.stdin.write("ANSWERING\n" if probe_dead else "KILLED\n")
         child.stdin.flush()
         out, err = child.communicate(timeout=120)
         answering.send_signal(signal.SIGKILL)  # free the port for a further attempt
@@ -76,3 +82,28 @@ def test_killed_camera_mid_capture_keeps_the_frames_and_marks_the_sequence_incom
     assert not sequence.complete
     assert [frame.role for frame in sequence.frames] == ["ambient", "led"]
     assert all(sequence.load_frame(i).shape[:2] == (32, 32) for i in range(2))
+
+
+def test_a_frame_timeout_after_the_camera_died_says_it_no_longer_answers(
+        aravis: ModuleType, gv_fake_process: Callable[..., Any], tmp_path: Path) -> None:
+    """The camera dies between frames and control-lost has not come yet: the timeout says the camera no
+    longer answers (one bootstrap-register read, ~4 s of Aravis retries), not to check the trigger wiring."""
+    result = _run_scenario("silent", tmp_path, gv_fake_process, "MSFSILENT", probe_dead=True)
+    assert result["error"] == "FrameTimeoutError"
+    message = result["message"]
+    assert message.startswith("camera Fake (serial MSFSILENT") and "step 2 'led:2'" in message
+    assert "the camera no longer answers" in message and "check its power and cable" in message
+    assert "trigger source and wiring" not in message
+
+
+def test_a_frame_timeout_from_a_live_camera_still_points_at_the_trigger(gv_camera: Any) -> None:
+    """The counterpart: a camera that answers but was never triggered keeps the wiring advice."""
+    from acquisition.errors import FrameTimeoutError
+    from acquisition.plan import CapturePlan
+
+    gv_camera.prepare(CapturePlan.ambient_then_each_led(2, 1000.0))
+    gv_camera.start()
+    with pytest.raises(FrameTimeoutError) as caught:
+        gv_camera.next_frame(0.2)  # nothing triggered
+    assert "check the trigger source and wiring" in str(caught.value)
+    assert "no longer answers" not in str(caught.value)
