@@ -69,9 +69,10 @@ from contextlib import AbstractContextManager, ExitStack, contextmanager, nullco
 from typing import Any, Protocol
 
 from acquisition.camera import Camera, RawFrame
-from acquisition.errors import DroppedFrameError, FrameTimeoutError
+from acquisition.errors import CaptureError, DroppedFrameError, FrameTimeoutError
 from acquisition.plan import CapturePlan, CaptureStep
 from acquisition.sequence_format import SequenceFrame, SequenceWriter
+from led_controller.booth import ARM_TIME_MAX_US
 
 log = logging.getLogger(__name__)
 
@@ -372,6 +373,13 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
     # on top of the usual timeout.
     frame_timeout_s = plan.frame_timeout_s + period_us * 1e-6
     longest_us = max(step.exposure_us for step in plan.steps)
+    if period_us > ARM_TIME_MAX_US:
+        longest_allowed_us = longest_us - (period_us - ARM_TIME_MAX_US)
+        raise CaptureError(
+            f"booth master: step period {period_us * 1e-6:.4g} s (settle, trigger pulse, longest exposure "
+            f"{longest_us * 1e-6:.4g} s, deadtime and readout) is longer than the booth's longest period "
+            f"{ARM_TIME_MAX_US * 1e-6:g} s; expected exposures up to {longest_allowed_us * 1e-6:.4g} s "
+            "when the booth paces the frames (or host pacing)")
     first_id: int | None = None
     pause, resume = getattr(writer, "pause", None), getattr(writer, "resume", None)
     with ExitStack() as watchdog:

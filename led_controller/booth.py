@@ -44,6 +44,9 @@ PSET_NOW_FLAG = "NOW"
 _READ_POLL_S = 0.02
 """Read timeout of the port: how quickly the reader thread notices ``close``."""
 
+ARM_TIME_MAX_US = 10_000_000
+"""Longest settle, pulse or step period :meth:`LedBooth.arm` sends, in µs (10 s)."""
+
 WATCHDOG_MAX_S = 600.0
 """Longest watchdog period the protocol allows (``WDOG`` takes 50..600000 ms, ``docs/booth-protocol.md``)."""
 
@@ -406,8 +409,8 @@ class LedBooth:
             raise ValueError(f"arm: mode {mode!r} unknown; expected one of {', '.join(modes)}")
         values = {"settle_us": settle_us, "pulse_us": pulse_us, "period_us": period_us}
         for key, value in values.items():
-            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 10_000_000:
-                raise ValueError(f"arm: {key} {value!r} invalid; expected an integer in 0..10000000")
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= ARM_TIME_MAX_US:
+                raise ValueError(f"arm: {key} {value!r} invalid; expected an integer in 0..{ARM_TIME_MAX_US}")
         if mode == "booth" and period_us < settle_us + pulse_us:
             raise ValueError(
                 f"arm: period_us {period_us} shorter than settle_us + pulse_us ({settle_us + pulse_us}); "
