@@ -162,6 +162,21 @@ def host_silence_s(plan: CapturePlan) -> float:
     return (len(plan.steps) + 1) * booth_period_us(plan) * 1e-6 + plan.frame_timeout_s + WATCHDOG_SLACK_S
 
 
+def _check_watchdog(booth: LedControl, where: str, saved: str = "") -> None:
+    """Refuse the frame of ``where`` (a step) if the booth's watchdog switched the LEDs off meanwhile.
+
+    The host was silent for longer than the booth's watchdog (a stall beyond
+    :func:`host_silence_s`): the frame may have been exposed partly or wholly dark, and a host-paced
+    sequence would not notice otherwise. ``saved`` says what is on disk.
+    """
+    fired = getattr(booth, "watchdog_fired", None)
+    if fired is not None and fired():
+        raise CaptureError(
+            f"{where}: the booth's watchdog switched the LEDs off during this frame (the host was silent for "
+            f"longer than its period); expected the LEDs on until the frame was in — the frame is not kept"
+            + (f". {saved}" if saved else ""))
+
+
 def _watchdog_covering(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
     """The booth's watchdog kept from firing while ``plan`` runs (:meth:`LedBooth.watchdog_covering`),
     or nothing for a booth without one."""
@@ -354,6 +369,7 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Se
                     f"step {step.index} ({step.label}): camera frame id {frame.frame_id} follows {previous_id}; "
                     f"a frame was lost. {_saved(writer, written)}"
                 )
+            _check_watchdog(booth, f"step {step.index} ({step.label})", _saved(writer, written))
             previous_id = frame.frame_id
             frames.append(frame)
             _write(writer, step, frame, written, on_frame)
@@ -420,6 +436,8 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
                 try:
                     frame = camera.next_frame(frame_timeout_s)
                 except FrameTimeoutError as err:
+                    # The booth stops the table when its watchdog fires: say so rather than 'no frame'.
+                    _check_watchdog(booth, f"step {step.index} ({step.label})", _saved(writer, written))
                     counted = booth.trigger_count()
                     if counted >= number:
                         raise DroppedFrameError(
@@ -498,5 +516,6 @@ def preview_frames(camera: Camera, booth: LedControl, plan: CapturePlan) -> list
             if frames and (frame.frame_id - frames[-1].frame_id) % FRAME_ID_MODULUS != 1:
                 raise DroppedFrameError(f"preview step {step.index} ({step.label}): camera frame id "
                                         f"{frame.frame_id} follows {frames[-1].frame_id}; a frame was lost")
+            _check_watchdog(booth, f"preview step {step.index} ({step.label})")
             frames.append(frame)
     return frames

@@ -487,6 +487,19 @@ class LedBooth:
                     )
                 self._events_cv.wait(remaining)
 
+    def watchdog_fired(self) -> bool:
+        """Whether the booth reported its watchdog switching the LEDs off (``WDOG``) since the last call.
+
+        Takes the ``WDOG`` events out of the queue and leaves the others (no serial traffic): a
+        capture asks after each frame, since a frame exposed while the watchdog had switched the
+        LEDs off is wrong without anything else noticing (host paced: the next ``SET`` just works).
+        """
+        with self._events_cv:
+            fired = [e for e in self._events if isinstance(e, BoothEvent) and e.kind == protocol.Event.WATCHDOG]
+            for event in fired:
+                self._events.remove(event)
+            return bool(fired)
+
     def pending_events(self) -> list[BoothEvent]:
         """Remove and return the events received but not yet waited for."""
         with self._events_cv:

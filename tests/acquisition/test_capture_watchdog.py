@@ -126,3 +126,21 @@ def test_a_lost_link_mid_sequence_is_the_error_reported(tmp_path: Path) -> None:
             run_capture(camera, rig.booth, CapturePlan.ambient_then_each_led(4, 40_000.0), writer)
     assert "serial link lost during SET" in str(caught.value)
     assert len(read_sequence(tmp_path / "sequence").frames) == 2
+
+
+def test_a_frame_the_watchdog_darkened_is_refused_not_kept(
+        sim_rig: Rig, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A host that stalls beyond its planned silence (here: the plan's silence taken as nil, so the
+    watchdog is not raised) lets the watchdog switch the LED off mid-exposure: host paced, the next
+    SET would just work, so the dark LED frame must be refused by name, not written as good data."""
+    from acquisition import capture
+    from acquisition.errors import CaptureError
+
+    monkeypatch.setattr(capture, "host_silence_s", lambda plan: 0.0)
+    plan = CapturePlan(CapturePlan.ambient_then_each_led(4, 300_000.0).steps[:3])
+    with pytest.raises(CaptureError) as caught, sim_rig.sequence_writer(tmp_path / "sequence") as writer:
+        run_capture(_ExposingCamera(sim_rig.camera), sim_rig.booth, plan, writer)
+    assert str(caught.value).startswith("step 1 (led:1): the booth's watchdog switched the LEDs off during this "
+                                        "frame")
+    assert sim_rig.camera.rendered_levels[1] == (0.0,) * 4  # it was indeed exposed dark
+    assert [f.role for f in read_sequence(tmp_path / "sequence").frames] == ["ambient"]
