@@ -310,6 +310,11 @@ class WiredFakeCamera:
         """The fake's identity; mono frames are delivered as RGB."""
         return dataclasses.replace(self.aravis.info, cfa=None)
 
+    @property
+    def exposure_range_us(self) -> tuple[float, float] | None:
+        """The fake's exposure limits in microseconds (what ``--exposure`` is checked against)."""
+        return self.aravis.exposure_range_us
+
     def prepare(self, plan: CapturePlan) -> None:
         """Prepare the fake for ``plan`` with software triggering whatever the sync mode."""
         self._mode = plan.trigger

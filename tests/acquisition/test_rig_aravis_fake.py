@@ -87,3 +87,12 @@ def test_rig_leds_off_and_fake_released_after_close(aravis: ModuleType) -> None:
         rig.close()
     assert rig.emulator.levels == (0.0,) * 7
     _assert_released(aravis)
+
+
+def test_an_exposure_below_the_fakes_range_is_bad_input(aravis: ModuleType, tmp_path, capsys) -> None:
+    """The fake's ExposureTime starts at 10 µs: --exposure-us 2 is refused up front, naming the camera's
+    own range (it passed the default range and failed later at the camera, exit 1)."""
+    status = main(["capture", "--rig", "aravis-fake", "--exposure-us", "2", "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2
+    assert err[-1].startswith("msflash: error: --exposure 2: outside the camera's range 10–")
