@@ -309,7 +309,9 @@ def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:
     payload["model_selection"] = None if local.selection is None else {
         "chosen": local.selection.model, "scores": local.selection.scores, "margin": local.selection.margin,
         "best_local_smoothing_tiles": local.selection.best_local,
-        "criterion": "leave-one-tile-out prediction error relative to the global model's",
+        "explained_gain": local.selection.explained_gain, "min_explained_gain": local.selection.min_explained_gain,
+        "criterion": "leave-one-tile-out prediction error relative to the global model's, and its cut relative "
+                     "to the ambient image's energy",
     }
     payload["warnings"] = payload["warnings"] + list(local.warnings)
     if local.model == "local":
