@@ -46,6 +46,11 @@ TIE_BREAK_CHANGE = 1e-8
 keeps the rank-3 camera problems strictly convex."""
 UNREACHABLE_RELATIVE_ERROR = 0.02
 """Relative camera-space error ``‖A(w_a + w_f) − s t‖ / ‖s t‖`` above which the target counts as not reached."""
+MATCHING_ROUND_OFF = 1e-7
+"""Matching weights (goal normalised to ``max |w_a| = 1``) below this are the QP's round-off (its
+feasibility tolerance) and become 0 before ``max(w_f) = 1`` rescales them; otherwise an ambient
+whose best non-negative match is no light at all (weights ~1e-10 of either sign) would be blown
+up into a full-drive mix with negative weights."""
 
 
 @dataclass(frozen=True)
@@ -183,7 +188,7 @@ class FlashModel:
         if bounds not in self._matching_problems:
             _box_rows(self.n_leds, bounds)  # raises the unknown-bounds error
         weights = self._matching_problems[bounds].minimise(self._matching_hessian @ goal).x
-        weights[abs(weights) < 1e-12] = 0.0
+        weights[abs(weights) < MATCHING_ROUND_OFF] = 0.0
         top = float(weights.max())
         if top <= 0:
             raise SolverError(

@@ -9,7 +9,7 @@ import pytest
 
 from processing import datasets
 from processing.errors import SolverError, SpectralDataError, TargetUnreachableWarning
-from processing.flash import UNREACHABLE_RELATIVE_ERROR, camera_led_matrix, solve_complementary, solve_matching
+from processing.flash import MATCHING_ROUND_OFF, UNREACHABLE_RELATIVE_ERROR, camera_led_matrix, solve_complementary, solve_matching
 from tests.helpers import GRID, SOLVER, WEIGHTS_EXACT, camera, led_mix, leds_photons
 
 BOUNDS = ("physical", "nonnegative", "free")
@@ -60,6 +60,20 @@ def test_matching_with_negative_ambient_weights_stays_in_bounds() -> None:
 def test_matching_zero_ambient_raises() -> None:
     with pytest.raises(SolverError, match="all zero"):
         solve_matching(np.zeros(7), leds_photons(), camera())
+
+
+@pytest.mark.parametrize("bounds", ["physical", "nonnegative"])
+@pytest.mark.parametrize("ambient", [
+    -AMBIENT_WEIGHTS,  # every camera channel negative: no light matches it better than none
+    # A dark tile's noise-only estimate (sim rig, ambient frame at the black level): same situation.
+    np.array([-1.67, -1.22, 5.56, -9.52, 2.34, -4.74, 2.05]) * 1e-12,
+])
+def test_matching_whose_best_mix_is_no_light_raises_instead_of_rescaling_round_off(
+        ambient: np.ndarray, bounds: str) -> None:
+    """The QP's answer is w_f = 0 up to ~1e-9 round-off of either sign; rescaling that round-off to
+    max 1 used to return a 'full-drive' mix with weights down to -0.5 under physical bounds."""
+    with pytest.raises(SolverError, match="no non-negative LED mix matches"):
+        solve_matching(ambient, leds_photons(), camera(), bounds=bounds)  # type: ignore[arg-type]
 
 
 # -- complementary ----------------------------------------------------------------------------
@@ -148,7 +162,7 @@ def test_prepared_matching_problem_is_the_plain_quadratic(bounds: str) -> None:
         goal = ambient / abs(ambient).max()
         hessian = model._matching_hessian
         plain = minimise_quadratic(hessian, hessian @ goal, *_box(7, bounds)).x
-        plain[abs(plain) < 1e-12] = 0.0
+        plain[abs(plain) < MATCHING_ROUND_OFF] = 0.0
         if plain.max() <= 0:
             continue
         with warnings.catch_warnings():
