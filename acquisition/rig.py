@@ -173,7 +173,9 @@ class Rig:
         """Close the rig; leaving through an error, a failure to close is logged, not raised over it.
 
         When the booth's link is what failed, switching the LEDs off at close fails the same way;
-        raising that would replace the error that says what happened (and where) with one about ``OFF``.
+        raising that would replace the error that says what happened (and where) with one about
+        ``OFF``. Logged at info level: the capture that had the LEDs on has already warned when it
+        could not switch them off (``acquisition.capture``), so by default the user reads it once.
         """
         if exc is None:
             self.close()
@@ -181,7 +183,7 @@ class Rig:
         try:
             self.close()
         except Exception as close_err:  # noqa: BLE001 - the error in flight is the one to report
-            log.warning("rig '%s': closing after the error failed too: %s", self.name, close_err)
+            log.info("rig '%s': closing after the error failed too: %s", self.name, close_err)
 
 
 def _line(rig_errors: list[BaseException], what: str, action: Callable[[], None]) -> Callable[..., None]:

@@ -10,6 +10,7 @@ watchdog set short through the driver, as a user may set it.
 
 from __future__ import annotations
 
+import logging
 import time
 from pathlib import Path
 
@@ -144,3 +145,40 @@ def test_a_frame_the_watchdog_darkened_is_refused_not_kept(
                                         "frame")
     assert sim_rig.camera.rendered_levels[1] == (0.0,) * 4  # it was indeed exposed dark
     assert [f.role for f in read_sequence(tmp_path / "sequence").frames] == ["ambient"]
+
+
+def test_an_unplugged_booth_through_the_cli_says_it_once_plus_the_leds_warning(
+        tmp_path: Path, capsys: pytest.CaptureFixture, caplog: pytest.LogCaptureFixture,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """msflash capture with the booth's pty closed after two frames: exit 1, the error line is the lost link
+    during SET, and the only diagnostics shown by default are the driver noticing it and the warning that
+    the LEDs could not be confirmed off — not a second failure about OFF from closing the rig."""
+    from acquisition import cli_run
+    from acquisition.cli import main
+    from led_controller import PtyBoothServer
+
+    real_open = cli_run.open_rig
+
+    def open_then_unplug_at_frame_3(spec, **options):  # noqa: ANN001, ANN003 - open_rig's signature
+        rig = real_open(spec, **options)
+        server = next(c.__self__ for c in rig._closers if isinstance(getattr(c, "__self__", None), PtyBoothServer))
+        real_next, count = rig.camera.next_frame, [0]
+
+        def next_frame(timeout_s: float):  # noqa: ANN202 - the camera's
+            count[0] += 1
+            if count[0] == 3:
+                server.hangup()
+            return real_next(timeout_s)
+
+        rig.camera.next_frame = next_frame
+        return rig
+
+    monkeypatch.setattr(cli_run, "open_rig", open_then_unplug_at_frame_3)
+    status = main(["capture", "--exposure-us", "5000", "--out", str(tmp_path / "x")])
+    errors = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
+    assert status == 1
+    assert len(errors) == 1 and errors[0].startswith("msflash: error: ") and "serial link lost during SET" in errors[0]
+    shown = [record.getMessage() for record in caplog.records if record.levelno >= logging.WARNING]
+    assert len(shown) == 2  # in either order: the driver's reader thread notices the closed pty on its own
+    assert sum(m.startswith("LEDs not confirmed off") for m in shown) == 1
+    assert sum(": serial link lost: " in m for m in shown) == 1
