@@ -110,9 +110,13 @@ class LedBooth:
         self._info: BoothInfo | None = None
         self._pset_now = True
         self._watchdog_s: float | None = None  # the booth's watchdog period once known (STAT, WDOG)
-        self._transcript: IO[str] | None = (
-            open(log_serial, "w", encoding="ascii", newline="\n") if log_serial else None  # noqa: SIM115
-        )
+        try:
+            self._transcript: IO[str] | None = (
+                open(log_serial, "w", encoding="ascii", newline="\n") if log_serial else None  # noqa: SIM115
+            )
+        except OSError as err:
+            raise BoothError(f"{self._name}: cannot record the serial transcript in {log_serial} "
+                             f"({err.strerror or err}); expected a writable file path") from err
         if self._transcript is not None:
             self._transcript.write(f"# msflash booth transcript, port {self._name}, {time.strftime('%Y-%m-%d')}\n")
         self._reader = threading.Thread(target=self._read_loop, name=f"booth-reader {self._name}", daemon=True)
@@ -163,7 +167,11 @@ class LedBooth:
             raise _open_error(url, err) from err
         except ValueError as err:
             raise BoothError(f"booth {url}: cannot open ({err}); expected a device path or pyserial URL") from err
-        booth = cls(port, timeout_s=timeout_s, log_serial=log_serial, name=url)
+        try:
+            booth = cls(port, timeout_s=timeout_s, log_serial=log_serial, name=url)
+        except BaseException:
+            port.close()  # the driver never took the port: release it here
+            raise
         try:
             booth.identify()
         except BaseException:

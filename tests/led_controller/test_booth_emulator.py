@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 
 import pytest
@@ -202,3 +203,16 @@ def test_transcript_is_recorded(booth_on_pty: PtyBoothServer, tmp_path) -> None:
     assert lines[0].startswith("# msflash booth transcript")
     assert [line[:5] for line in lines[1:]] == ["> ?01", "< =01", "> ?02", "< =02", "> ?03", "< =03"]
     assert "SET 0000" in lines[3] and "OFF" in lines[5]
+
+
+def test_an_unwritable_transcript_is_a_booth_error_and_the_port_is_released(booth_on_pty: PtyBoothServer,
+                                                                            tmp_path) -> None:
+    fds = len(os.listdir("/proc/self/fd"))
+    missing = tmp_path / "no-such-dir" / "booth.txt"
+    with pytest.raises(BoothError) as caught:
+        LedBooth.open(booth_on_pty.port, log_serial=missing)
+    assert str(caught.value) == (f"{booth_on_pty.port}: cannot record the serial transcript in {missing} "
+                                 "(No such file or directory); expected a writable file path")
+    assert len(os.listdir("/proc/self/fd")) == fds  # the serial port opened for it is closed again
+    with LedBooth.open(booth_on_pty.port) as booth:  # and the booth is still usable
+        booth.ping()
