@@ -16,6 +16,13 @@ from acquisition.errors import CameraError, FrameTimeoutError
 from acquisition.plan import CapturePlan
 
 
+class _Failed:
+    """Queue item: making the frame of a trigger failed; ``next_frame`` raises ``error`` in its place."""
+
+    def __init__(self, error: BaseException) -> None:
+        self.error = error
+
+
 class TriggeredFrames:
     """The queue, state and waiting rules of a camera whose frames follow its triggers.
 
@@ -28,7 +35,7 @@ class TriggeredFrames:
 
     def __init__(self) -> None:
         self._condition = threading.Condition()
-        self._queue: deque[RawFrame] = deque()
+        self._queue: deque[RawFrame | _Failed] = deque()
         self._plan: CapturePlan | None = None
         self._started = False
         self._closed = False
@@ -39,7 +46,9 @@ class TriggeredFrames:
         """The oldest queued frame; ``FrameTimeoutError`` if none arrives within ``timeout_s``.
 
         Without a pending trigger (and when the booth does not pace the plan) nothing can arrive,
-        so the error is raised at once rather than after ``timeout_s``.
+        so the error is raised at once rather than after ``timeout_s``. A frame that could not be
+        made (:meth:`_fail_frame`) raises its error here, in its place: on the booth's trigger line
+        nobody else would see it, and the capture would report a lost frame instead of the cause.
         """
         with self._condition:
             while not self._queue:
@@ -50,7 +59,10 @@ class TriggeredFrames:
                     raise FrameTimeoutError(self._timeout_message(timeout_s, "no trigger was issued"))
                 if not self._condition.wait_for(lambda: bool(self._queue) or self._closed, timeout=timeout_s):
                     raise FrameTimeoutError(self._timeout_message(timeout_s, "the trigger did not arrive"))
-            return self._queue.popleft()
+            item = self._queue.popleft()
+        if isinstance(item, _Failed):
+            raise item.error
+        return item
 
     def stop(self) -> None:
         """Stop acquisition; idempotent. Queued frames stay readable until the next start."""
@@ -83,6 +95,13 @@ class TriggeredFrames:
     def _begin_frame(self) -> None:
         """A trigger was accepted: ``next_frame`` now waits for its frame (call under ``_condition``)."""
         self._producing += 1
+
+    def _fail_frame(self, error: BaseException) -> None:
+        """Making the frame of a trigger failed: ``next_frame`` raises ``error`` where the frame would be."""
+        with self._condition:
+            self._queue.append(_Failed(error))
+            self._producing -= 1
+            self._condition.notify_all()
 
     def _end_frame(self, frame: RawFrame | None) -> None:
         """The frame of a trigger is made (``None`` if making it failed): queue it and wake waiters."""

@@ -174,15 +174,16 @@ class ReplayCamera(TriggeredFrames):
             self._cursor += 1
             self._released += 1
             self._begin_frame()
-        frame = None
         try:
             recorded = self.sequence.frames[index]
             pixels = self.sequence.load_frame(index)
             timestamp = recorded.extra.get("timestamp_ns", 0)
             frame = RawFrame(np.asarray(pixels), index + 1, int(timestamp) if isinstance(timestamp, int) else 0,
                              recorded.exposure_us, recorded.gain)
-        finally:
-            self._end_frame(frame)
+        except BaseException as err:
+            self._fail_frame(err)  # next_frame raises it in this frame's place (booth's trigger line)
+            raise
+        self._end_frame(frame)
 
 
 def _fmt(levels: tuple[float, ...] | list[float]) -> str:

@@ -155,3 +155,23 @@ def test_run_on_a_recording_without_a_flash_frame_says_so(tmp_path: Path, capsys
     assert err[-1].startswith(f"msflash: error: {sample / 'sequence.json'}: step 0 (flash): the recording has "
                               "no frame 8: its 8 frames (1 ambient, 7 led) are all served")
     assert "this recording has no flash frame" in err[-1] and "'msflash estimate'" in err[-1]
+
+
+@pytest.mark.parametrize("sync", ["host", "booth", "camera"])
+def test_a_damaged_recorded_frame_is_the_error_in_every_sync_mode(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                                  sync: str) -> None:
+    """Frame 3 of the recording is truncated: the replay names that file whoever paces the frames. Booth
+    master made the frame on the emulator's trigger-line thread, and the capture reported 'no frame for
+    trigger 4' instead (the cause only in a log line)."""
+    import shutil
+
+    recording = tmp_path / "recording"
+    shutil.copytree(RECORDED, recording)
+    damaged = recording / read_sequence(RECORDED).frames[3].file
+    damaged.write_bytes(damaged.read_bytes()[:1000])
+    out = tmp_path / "replayed"
+    status = main(["capture", "--rig", f"replay:{recording}", "--sync", sync, "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2
+    assert err[-1].startswith(f"msflash: error: {damaged}: pixels cannot be decoded")
+    assert len(read_sequence(out / "sequence").frames) == 3
