@@ -28,6 +28,7 @@ root for ``roughness``), so one value means the same for any image size, exposur
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -155,6 +156,9 @@ def _scaled_condition(gram: np.ndarray) -> float:
 def _solve_penalised(statistics: SequenceStatistics, terms: LedTerms, weight: float, nonnegative: bool,
                      where: str) -> np.ndarray:
     """argmin ‖a − F w‖² + weight ‖L w‖² (subject to I w ≥ 0 when ``nonnegative``)."""
+    if not math.isfinite(weight):
+        raise SpectralDataError(f"{where}: the roughness penalty overflows; expected a smaller alpha (auto searches "
+                                f"{ALPHA_GRID[0]:g}…{ALPHA_GRID[-1]:g})")
     hessian = statistics.gram + weight * terms.penalty_gram if weight else statistics.gram
     scale = max(_trace(hessian) / hessian.shape[0], 1e-300)
     hessian = hessian / scale
@@ -253,7 +257,7 @@ def _weights_roughness(statistics: SequenceStatistics, terms: LedTerms, alpha: f
     """
     roughness = terms.roughness
     alpha_value = 0.01 if alpha == "auto" else float(alpha)
-    alpha_scaled = alpha_value * np.sqrt(terms.penalty_scale(statistics))
+    alpha_scaled = alpha_value * math.sqrt(terms.penalty_scale(statistics))
     weights = _solve_penalised(statistics, terms, 0.0, True, "roughness estimate")
 
     def objective(w: np.ndarray) -> float:
@@ -316,14 +320,24 @@ class AmbientModel:
     """The LED-only terms of the problems."""
 
     def __post_init__(self) -> None:
-        require_unit(self.led_spectra, "photons")
-        object.__setattr__(self, "terms", LedTerms.of(self.led_spectra.values))
+        led_spectra = require_unit(self.led_spectra, "photons")
+        # An LED with no emission on the grid contributes nothing to I w: its weight would be solved
+        # for, then silently dropped from the spectrum (a calibration on a grid that misses it, say).
+        empty = [name for name, column in zip(led_spectra.names, led_spectra.values.T) if not np.any(column > 0)]
+        if empty:
+            raise SpectralDataError(
+                f"{led_spectra.source or 'LED spectra'}: the spectrum of LED {', '.join(empty)} has no positive "
+                f"value on {led_spectra.grid}; expected each LED's emission at full drive on the sequence's grid"
+            )
+        object.__setattr__(self, "terms", LedTerms.of(led_spectra.values))
 
     def weights(self, statistics: SequenceStatistics, method: str = "tikhonov",
                 alpha: float | str = "auto") -> tuple[np.ndarray, float]:
         """``(w_a, α used)`` for the statistics (see :func:`estimate_ambient`; same errors)."""
         if method not in _METHODS:
             raise ValueError(f"ambient method '{method}' is unknown; expected one of {', '.join(_METHODS)}")
+        if alpha != "auto" and (isinstance(alpha, str) or not float(alpha) >= 0 or not math.isfinite(float(alpha))):
+            raise SpectralDataError(f"ambient estimate: alpha {alpha!r}; expected a finite number ≥ 0 or 'auto'")
         led_spectra = self.led_spectra
         if led_spectra.count != statistics.n_leds:
             raise SpectralDataError(
@@ -331,9 +345,11 @@ class AmbientModel:
                 f"{statistics.n_leds} LED images; expected one spectrum per LED"
             )
         if statistics.n_samples <= statistics.n_leds:
+            saturated = statistics.saturated_fraction
+            remedy = "lower the exposure" if saturated > 0.5 else "the frames are too small"
             raise SpectralDataError(
-                f"frame stack: only {statistics.n_samples} valid samples ({statistics.saturated_fraction:.0%} "
-                "saturated); expected many more than the number of LEDs — lower the exposure"
+                f"frame stack: only {statistics.n_samples} valid samples of {statistics.n_total} ({saturated:.0%} "
+                f"saturated); expected many more than the {statistics.n_leds} LEDs — {remedy}"
             )
         diagonal = statistics.gram.diagonal()
         if not np.minimum.reduce(diagonal) > 0:

@@ -211,6 +211,37 @@ def test_bad_input_is_refused(tungsten_frames) -> None:
         estimate_ambient(statistics, leds_photons(), "bogus")
 
 
+def test_led_with_no_emission_on_the_grid_is_refused(tungsten_frames) -> None:
+    """A zero LED column (say, a calibration whose grid misses that LED) would have its weight solved
+    for and then dropped from the spectrum without a word."""
+    values = leds_photons().values.copy()
+    values[:, 2] = 0.0
+    spectra = leds_photons().replace(values=values, source="cal.csv")
+    statistics = accumulate_statistics(*tungsten_frames)
+    with pytest.raises(SpectralDataError, match=r"cal.csv: the spectrum of LED led500 has no positive value on 400–700 nm"):
+        estimate_ambient(statistics, spectra)
+
+
+@pytest.mark.parametrize("alpha", [-1.0, float("nan"), float("inf"), "bogus"])
+def test_bad_alpha_is_refused(tungsten_frames, alpha) -> None:
+    statistics = accumulate_statistics(*tungsten_frames)
+    with pytest.raises(SpectralDataError, match="expected a finite number ≥ 0 or 'auto'"):
+        estimate_ambient(statistics, leds_photons(), "tikhonov", alpha)
+
+
+@pytest.mark.parametrize("method", ["tikhonov", "roughness"])
+def test_overflowing_alpha_is_refused_naming_alpha(tungsten_frames, method: str) -> None:
+    statistics = accumulate_statistics(*tungsten_frames)
+    with pytest.raises(SpectralDataError, match=f"{method} estimate: the roughness penalty overflows; expected a smaller alpha"):
+        estimate_ambient(statistics, leds_photons(), method, 1e308)
+
+
+def test_too_few_samples_names_the_cause(tungsten_frames) -> None:
+    a, f, spec = tungsten_frames
+    with pytest.raises(SpectralDataError, match=r"only 3 valid samples of 3 \(0% saturated\).*— the frames are too small"):
+        estimate(a[:1, :1], [frame[:1, :1] for frame in f], spec)
+
+
 def test_dark_led_raises_solver_error(tungsten_frames) -> None:
     a, f, spec = tungsten_frames
     frames = list(f)
