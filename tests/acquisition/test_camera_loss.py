@@ -60,7 +60,7 @@ def _run_scenario(scenario: str, out_dir: Path, gv_fake_process: Callable[..., A
         assert child.returncode == 0, err
         result_lines = [line for line in out.splitlines() if line.startswith("RESULT ")]
         assert result_lines, out
-        return {**json.loads(result_lines[-1][len("RESULT "):]), "work": str(work), "crashes": crashes}
+        return {**json.loads(result_lines[-1][len("RESULT "):]), "work": str(work), "crashes": crashes, "stderr": err}
     pytest.fail("the camera side crashed in every attempt: " + " | ".join(crashes))
 
 
@@ -94,6 +94,8 @@ def test_a_frame_timeout_after_the_camera_died_says_it_no_longer_answers(
     assert message.startswith("camera Fake (serial MSFSILENT") and "step 2 'led:2'" in message
     assert "the camera no longer answers" in message and "check its power and cable" in message
     assert "trigger source and wiring" not in message
+    # Releasing it then waits out Aravis's retries: the user is told, rather than left at a silent pause.
+    assert "releasing a camera that no longer answers" in result["stderr"]
 
 
 def test_a_frame_timeout_from_a_live_camera_still_points_at_the_trigger(gv_camera: Any) -> None:
