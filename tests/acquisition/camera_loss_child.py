@@ -16,9 +16,12 @@ incomplete, the LEDs off).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -29,13 +32,13 @@ def _wait_for_kill() -> None:
         raise SystemExit("camera-loss child: the parent did not confirm the kill")
 
 
-def camera_scenario() -> dict:
+@contextlib.contextmanager
+def _camera_after_kill() -> Iterator[Any]:
+    """AravisCamera on the process fake at 127.0.0.1: two frames taken, then the fake killed by the parent."""
     from acquisition import aravis_camera
-    from acquisition.errors import CameraDisconnectedError, FrameTimeoutError
     from acquisition.plan import CapturePlan
 
     plan = CapturePlan.ambient_then_each_led(3, 1000.0)
-    result: dict = {}
     with aravis_camera.AravisCamera("127.0.0.1", interfaces="gige", roi=(0, 0, 32, 32)) as camera:
         camera.prepare(plan)
         camera.start()
@@ -43,6 +46,14 @@ def camera_scenario() -> dict:
             camera.trigger()
             camera.next_frame(plan.frame_timeout_s + 2.0)  # the process fake polls triggers slowly
         _wait_for_kill()
+        yield camera
+
+
+def camera_scenario() -> dict:
+    from acquisition.errors import CameraDisconnectedError, FrameTimeoutError
+
+    result: dict = {}
+    with _camera_after_kill() as camera:
         try:
             camera.trigger()
             camera.next_frame(1.0)
@@ -57,19 +68,10 @@ def silent_scenario() -> dict:
     The parent starts a fresh fake on the port (so releasing the device is quick) only once this
     side has asked the dead one and printed ``PROBED``.
     """
-    from acquisition import aravis_camera
     from acquisition.errors import FrameTimeoutError
-    from acquisition.plan import CapturePlan
 
-    plan = CapturePlan.ambient_then_each_led(3, 1000.0)
     result: dict = {}
-    with aravis_camera.AravisCamera("127.0.0.1", interfaces="gige", roi=(0, 0, 32, 32)) as camera:
-        camera.prepare(plan)
-        camera.start()
-        for _ in range(2):
-            camera.trigger()
-            camera.next_frame(plan.frame_timeout_s + 2.0)  # the process fake polls triggers slowly
-        _wait_for_kill()
+    with _camera_after_kill() as camera:
         try:
             camera.next_frame(0.3)
         except FrameTimeoutError as err:
