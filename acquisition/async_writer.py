@@ -22,7 +22,7 @@ Guarantees
 - **Write errors**: the first error of the writer thread is raised by the next ``add_frame``,
   :meth:`flush`, :meth:`finish` or by leaving the ``with`` block normally; frames after it are not
   written (the sequence stays consistent and incomplete). The disk failing (full, gone, I/O error:
-  an ``OSError``) is :class:`~acquisition.errors.SequenceWriteError`, a runtime failure naming the
+  an ``OSError``) is :class:`~acquisition.errors.OutputWriteError`, a runtime failure naming the
   frame, the cause and what is saved; a frame the format refuses stays a ``RecordingError``.
 
 Pixels are not copied: the caller must not modify an array after handing it over (camera frames,
@@ -40,7 +40,7 @@ from types import TracebackType
 
 import numpy as np
 
-from acquisition.errors import RecordingError, SequenceWriteError
+from acquisition.errors import RecordingError, OutputWriteError
 from acquisition.image_io import image_suffix
 from acquisition.sequence_format import FRAME_ROLES, FRAMES_DIR, Sequence, SequenceFrame, SequenceWriter
 
@@ -201,7 +201,7 @@ class AsyncSequenceWriter:
         lost = self._added - saved - 1
         cause = error.strerror or str(error)
         where = f" ({error.filename})" if error.filename else ""
-        raise SequenceWriteError(
+        raise OutputWriteError(
             f"{self.path.parent}: writing {self._failed_file} failed: {cause}{where}; expected a writable "
             f"disk with room for the frames. {saved} frame(s) saved and readable (complete: false)"
             + (f"; {lost} later frame(s) captured but not written" if lost > 0 else "")

@@ -31,11 +31,12 @@ class ReplayMismatchError(CaptureError):
     """The plan differs from the recording being replayed; names the first differing step and field."""
 
 
-class SequenceWriteError(CaptureError):
-    """Writing a frame of a sequence being captured failed (disk full, directory gone, I/O error).
+class OutputWriteError(CaptureError):
+    """Writing what msflash produces failed (disk full, directory gone, I/O error).
 
-    A runtime failure, not bad input: the message names the sequence, the frame and the cause,
-    and says how many frames are saved (the sequence on disk stays readable, ``complete: false``).
+    A runtime failure, not bad input: the message names what was being written and the cause, and
+    says what is safe on disk (a sequence's frames so far stay readable with ``complete: false``;
+    a run's report fails after its sequence is complete).
     """
 
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from acquisition import analysis
 from acquisition.cli_common import dumps_json
+from acquisition.errors import OutputWriteError
 from acquisition.image_io import write_image
 from acquisition.sequence_format import Sequence
 from processing import datasets
@@ -110,8 +111,27 @@ def plot_spectra(path: Path, sequence: Sequence, estimate: AmbientEstimate, solu
 
 def write_run_report(out: Path, sequence: Sequence, estimate: AmbientEstimate, solutions: dict[str, FlashSolution],
                      mode: str, true_ambient: Spectra | None, stack: analysis.FrameStack, target_name: str) -> dict[str, Any]:
-    """Write everything a run shows a person; return the summary (also written as run.json)."""
+    """Write everything a run shows a person; return the summary (also written as run.json).
+
+    Raises
+    ------
+    OutputWriteError
+        A file of the report could not be written (disk full, directory gone): names it and says
+        that the sequence, written before the report, is complete.
+    """
     out = Path(out)
+    try:
+        return _write_run_report(out, sequence, estimate, solutions, mode, true_ambient, stack, target_name)
+    except OSError as err:
+        raise OutputWriteError(
+            f"{out}: the run report could not be written ({err}); expected a writable disk with room for it. "
+            f"The sequence is complete in {sequence.directory} ('msflash estimate', 'flash' and 'synthesize' "
+            "read it)") from err
+
+
+def _write_run_report(out: Path, sequence: Sequence, estimate: AmbientEstimate, solutions: dict[str, FlashSolution],
+                      mode: str, true_ambient: Spectra | None, stack: analysis.FrameStack,
+                      target_name: str) -> dict[str, Any]:
     estimate_payload = analysis.estimate_payload(sequence, estimate)
     (out / "estimate.json").write_text(dumps_json(estimate_payload) + "\n")
     for name, solution in solutions.items():
