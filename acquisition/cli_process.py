@@ -13,7 +13,7 @@ from acquisition import analysis
 from acquisition.cli_common import UsageError, positive_int, print_json, progress
 from acquisition.image_io import write_image
 from acquisition.sequence_format import read_sequence
-from processing.ambient import AMBIENT_METHODS
+from processing.ambient import AMBIENT_METHODS, LED_SIGNAL_Z
 from processing.errors import TargetUnreachableWarning
 from processing.local import DEFAULT_TILES, LOCAL_METHODS
 from processing.synthesis import to_raw_values
@@ -71,6 +71,28 @@ def _read_calibrated(args: argparse.Namespace):
     return sequence
 
 
+_FLASH_GOAL = {"matching": "match", "complementary": "complement"}
+"""What each flash mode does to the ambient (for the dark-ambient refusal)."""
+
+
+def _refuse_dark_ambient(sequence, estimate, what: str) -> None:  # type: ignore[no-untyped-def]
+    """A UsageError naming the ambient frame when it holds no light: there is no ambient to ``what``.
+
+    The estimate is then noise (or zero): estimate would plot it normalised to full height, matching
+    would rescale it to a full-drive mix, and complementary (scale-free, least power) returns a
+    flash of ~1e-6 drive that "reaches" the target on the noise.
+    """
+    if not estimate.ambient_is_dark:
+        return
+    index = sequence.indices("ambient")[0]
+    raise UsageError(
+        f"{sequence.path}: frames[{index}].file '{sequence.frames[index].file}': the ambient image holds no light "
+        f"(z-score {estimate.ambient_z:.2g} < {LED_SIGNAL_Z:g}: no signal above the black level "
+        f"{sequence.camera.black_level:g}); expected an ambient illuminant to {what} — was the light off, the lens "
+        "capped or the exposure far too short?"
+    )
+
+
 def _estimate(args: argparse.Namespace) -> int:
     sequence = _read_calibrated(args)
     if sequence.partial:
@@ -78,6 +100,7 @@ def _estimate(args: argparse.Namespace) -> int:
     if args.method != "global":
         return _estimate_local(args, sequence)
     estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
+    _refuse_dark_ambient(sequence, estimate, "estimate")
     payload = analysis.estimate_payload(sequence, estimate)
     for warning in estimate.warnings:
         progress(f"warning: {warning}")
@@ -100,6 +123,7 @@ def _flash(args: argparse.Namespace) -> int:
     if args.method != "global" or args.out is not None:
         return _flash_local(args, sequence)
     estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
+    _refuse_dark_ambient(sequence, estimate, _FLASH_GOAL[args.mode])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
         solution = analysis.solve_sequence_flash(sequence, args.mode, estimate.ambient_weights, args.target, args.bounds)
@@ -160,6 +184,7 @@ def add_local_options(parser: argparse.ArgumentParser) -> None:
 def _estimate_local(args: argparse.Namespace, sequence: object) -> int:
     local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,  # type: ignore[arg-type]
                                              bin_factor=args.bin)
+    _refuse_dark_ambient(sequence, local.global_estimate, "estimate")
     payload = analysis.local_estimate_payload(sequence, local)  # type: ignore[arg-type]
     for warning in payload["warnings"]:
         progress(f"warning: {warning}")
@@ -186,6 +211,7 @@ def _flash_local(args: argparse.Namespace, sequence: object) -> int:
     stack = analysis.load_frame_stack(sequence)  # type: ignore[arg-type]
     local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,  # type: ignore[arg-type]
                                              stack=stack, bin_factor=args.bin)
+    _refuse_dark_ambient(sequence, local.global_estimate, _FLASH_GOAL[args.mode])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
         solution, tile_weights, _ = analysis.solve_sequence_flash_local(sequence, args.mode, local, args.target,  # type: ignore[arg-type]

@@ -87,6 +87,14 @@ class AmbientEstimate:
     """Fraction of samples excluded as saturated."""
     warnings: tuple[str, ...] = field(default=())
     """Human-readable reliability warnings (empty when all signals are fine)."""
+    ambient_z: float = math.inf
+    """z-score of the ambient image, ``Σ a / ‖a‖`` (as :data:`LED_SIGNAL_Z` for the LED images; 0 for
+    an all-zero image): below :data:`LED_SIGNAL_Z` it holds noise, not light (:attr:`ambient_is_dark`)."""
+
+    @property
+    def ambient_is_dark(self) -> bool:
+        """Whether the ambient image holds no light: the weights and spectrum are then noise (or zero)."""
+        return not self.ambient_z >= LED_SIGNAL_Z
 
     @property
     def band(self) -> tuple[np.ndarray, np.ndarray]:
@@ -384,13 +392,19 @@ class AmbientModel:
 
         condition = _scaled_condition(statistics.gram)
         relative_residual = float(np.sqrt(rss / statistics.ambient_energy)) if statistics.ambient_energy > 0 else 0.0
+        ambient_z = statistics.ambient_sum / math.sqrt(statistics.ambient_energy) if statistics.ambient_energy > 0 else 0.0
         warnings = []
+        if not ambient_z >= LED_SIGNAL_Z:
+            warnings.append(
+                f"the ambient image holds noise, not light (z-score {ambient_z:.2g} below {LED_SIGNAL_Z:g}): there is "
+                "no ambient light to estimate and the spectrum is noise — was the ambient light off or the lens capped?"
+            )
         if condition > CONDITION_WARNING:
             warnings.append(
                 f"the LED-only images are nearly dependent (condition number {condition:.3g}); "
                 "the weights are poorly determined — more surfaces or more distinct LEDs would help"
             )
-        if relative_residual > RESIDUAL_WARNING:
+        if relative_residual > RESIDUAL_WARNING and ambient_z >= LED_SIGNAL_Z:
             warnings.append(
                 f"the LEDs explain the ambient image poorly (relative residual {relative_residual:.3f}); "
                 "the ambient may lie outside the LEDs' span, vary across the scene, or the scene moved"
@@ -423,6 +437,7 @@ class AmbientModel:
             n_samples=statistics.n_samples,
             saturated_fraction=statistics.saturated_fraction,
             warnings=tuple(warnings),
+            ambient_z=float(ambient_z),
         )
 
 

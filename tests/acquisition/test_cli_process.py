@@ -129,6 +129,24 @@ def test_flash_without_responsivity(capsys, sequence_copy: Path) -> None:
     assert_bad_input(*run(capsys, "flash", str(sequence_copy), "--mode", "matching"), "camera.responsivity")
 
 
+@pytest.mark.parametrize("method", ["global", "auto"])
+def test_dark_ambient_is_refused_by_estimate_and_flash(capsys, sequence_copy: Path, method: str) -> None:
+    """An ambient frame of read noise about the black level (light off, lens capped): estimate printed
+    a noise 'spectrum' normalised to a full-height plot (exit 0), matching blew its ~1e-10 weights up
+    to a full-drive mix, and complementary returned a ~5e-6 drive flash that 'reached' D65."""
+    document = json.loads((sequence_copy / "sequence.json").read_text())
+    black = document["camera"]["black_level"]
+    path = sequence_copy / "frames" / "000-ambient.tiff"
+    shape = read_image(path).shape
+    noise = np.random.default_rng(0).normal(0.0, 2.0, shape)
+    write_image(path, np.rint(black + noise).astype(np.uint16))
+    dark = ("frames[0].file", "000-ambient.tiff", "the ambient image holds no light", "black level")
+    assert_bad_input(*run(capsys, "estimate", str(sequence_copy), "--method", method), *dark, "to estimate")
+    assert_bad_input(*run(capsys, "estimate", str(sequence_copy), "--method", method, "--json"), *dark)
+    for mode, goal in (("matching", "to match"), ("complementary", "to complement")):
+        assert_bad_input(*run(capsys, "flash", str(sequence_copy), "--mode", mode, "--method", method), *dark, goal)
+
+
 # -- happy paths -------------------------------------------------------------------------------
 def test_estimate_json(capsys, base_sequence: Path) -> None:
     status, out, err = run(capsys, "estimate", str(base_sequence), "--json")

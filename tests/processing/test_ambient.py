@@ -236,6 +236,22 @@ def test_overflowing_alpha_is_refused_naming_alpha(tungsten_frames, method: str)
         estimate_ambient(statistics, leds_photons(), method, 1e308)
 
 
+@pytest.mark.parametrize("method", sorted(AMBIENT_METHODS))
+@pytest.mark.parametrize("ambient_noise", [0.0, 1e-3])
+def test_dark_ambient_is_flagged_not_presented_as_a_spectrum(tungsten_frames, method: str, ambient_noise: float) -> None:
+    """An ambient frame at the black level (zero, or read noise only) gave a zero (or noise) spectrum
+    with no warning at all (zero) or only 'residual' / 'band' warnings that named the wrong cause."""
+    a, f, spec = tungsten_frames
+    dark = np.random.default_rng(1).normal(0.0, ambient_noise, a.shape) if ambient_noise else np.zeros_like(a)
+    result = estimate(dark, [frame - a + dark for frame in f], spec, method=method)
+    assert result.ambient_is_dark
+    assert result.ambient_z < 4
+    assert any("the ambient image holds noise, not light" in w for w in result.warnings)
+    assert not any("explain the ambient image poorly" in w for w in result.warnings)
+    lit = estimate(a, f, spec, method=method)
+    assert not lit.ambient_is_dark and lit.ambient_z > 40
+
+
 def test_too_few_samples_names_the_cause(tungsten_frames) -> None:
     a, f, spec = tungsten_frames
     with pytest.raises(SpectralDataError, match=r"only 3 valid samples of 3 \(0% saturated\).*— the frames are too small"):
