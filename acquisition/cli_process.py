@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import warnings
 from pathlib import Path
 
@@ -25,14 +26,16 @@ with the identical estimate (docs/local-estimation.md)."""
 
 
 def _alpha(text: str) -> float | str:
+    # argparse.ArgumentTypeError: argparse prints its message; for a ValueError (UsageError is one)
+    # it prints "invalid _alpha value: '-1'" instead, naming this function and not what is expected.
     if text == "auto":
         return text
     try:
         value = float(text)
     except ValueError:
-        raise UsageError(f"--alpha '{text}': expected a non-negative number or 'auto'") from None
-    if not value >= 0:
-        raise UsageError(f"--alpha {text}: expected a non-negative number or 'auto'")
+        value = math.nan
+    if not (value >= 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"'{text}': expected a finite number ≥ 0 or 'auto'")
     return value
 
 

@@ -124,6 +124,16 @@ def test_non_numeric_weights(capsys, base_sequence: Path, tmp_path: Path) -> Non
                      "--weights")
 
 
+@pytest.mark.parametrize("alpha", ["-1", "nan", "inf", "1e400", "smooth"])
+@pytest.mark.parametrize("command", [["estimate"], ["flash", "--mode", "complementary"]], ids=["estimate", "flash"])
+def test_bad_alpha_names_the_option_and_what_is_expected(capsys, base_sequence: Path, alpha: str, command) -> None:
+    """'--alpha -1' printed "invalid _alpha value" (a Python function name); 'inf' reached the solver
+    (exit 1, 'the normal matrix has non-finite entries; expected finite data')."""
+    status, out, err = run(capsys, command[0], str(base_sequence), *command[1:], f"--alpha={alpha}")
+    assert_bad_input(status, out, err, "--alpha", f"'{alpha}'", "expected a finite number ≥ 0 or 'auto'")
+    assert "_alpha" not in err
+
+
 def test_flash_without_responsivity(capsys, sequence_copy: Path) -> None:
     edit_document(sequence_copy, lambda d: d["camera"].pop("responsivity"))
     assert_bad_input(*run(capsys, "flash", str(sequence_copy), "--mode", "matching"), "camera.responsivity")
