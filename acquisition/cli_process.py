@@ -122,6 +122,8 @@ def _estimate(args: argparse.Namespace) -> int:
 
 
 def _flash(args: argparse.Namespace) -> int:
+    if args.out is not None:
+        _check_output_type(Path(args.out))
     sequence = _read_calibrated(args)
     if args.method != "global" or args.out is not None:
         return _flash_local(args, sequence)
@@ -151,18 +153,9 @@ def _synthesize(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
     weights = _weights(args.weights, len(sequence.leds))
     output = Path(args.out)
+    _check_output_type(output)
     image, saturated, stack = analysis.synthesize_sequence(sequence, weights)
-    suffix = output.suffix.lower()
-    if suffix == ".exr":
-        write_image(output, image, {"msflash:flash_weights": weights.tolist(), "msflash:units": "value per us*gain"})
-    elif suffix in (".tif", ".tiff"):
-        ambient = sequence.frames[stack.ambient_index]
-        raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level,
-                            sequence.camera.white_level)
-        write_image(output, raw, {"msflash:flash_weights": weights.tolist(),
-                                  "msflash:exposure_us": ambient.exposure_us, "msflash:gain": ambient.gain})
-    else:
-        raise UsageError(f"--out {output}: unsupported image type; expected .exr (linear float) or .tiff (16-bit raw)")
+    _write_flash_image(output, image, stack, sequence, {"msflash:flash_weights": weights.tolist()})
     clipped = float(saturated.mean())
     if clipped > 0:
         progress(f"warning: {clipped:.1%} of the pixels were saturated in some input frame")
@@ -254,18 +247,38 @@ def _flash_local(args: argparse.Namespace, sequence: object) -> int:
     return 0
 
 
+_OUTPUT_TYPES = {".exr": "exr", ".tif": "tiff", ".tiff": "tiff"}
+"""``--out`` suffixes: linear float EXR, or 16-bit raw TIFF at the ambient frame's exposure and gain."""
+
+
+def _check_output_type(output: Path) -> str:
+    """``exr`` or ``tiff`` for ``--out``; refused before any work is done."""
+    kind = _OUTPUT_TYPES.get(output.suffix.lower())
+    if kind is None:
+        raise UsageError(f"--out {output}: unsupported image type; expected .exr (linear float) or .tiff (16-bit raw)")
+    return kind
+
+
 def _write_flash_image(output: Path, image: np.ndarray, stack: analysis.FrameStack, sequence: object,
                        metadata: dict) -> None:
-    suffix = output.suffix.lower()
-    if suffix == ".exr":
-        write_image(output, image, {**metadata, "msflash:units": "value per us*gain"})
-    elif suffix in (".tif", ".tiff"):
+    kind = _check_output_type(output)
+    try:
+        if kind == "exr":
+            write_image(output, image, {**metadata, "msflash:units": "value per us*gain"})
+            return
         ambient = sequence.frames[stack.ambient_index]  # type: ignore[attr-defined]
-        raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level,  # type: ignore[attr-defined]
-                            sequence.camera.white_level)  # type: ignore[attr-defined]
+        white = sequence.camera.white_level  # type: ignore[attr-defined]
+        raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level, white)  # type: ignore[attr-defined]
         write_image(output, raw, {**metadata, "msflash:exposure_us": ambient.exposure_us, "msflash:gain": ambient.gain})
-    else:
-        raise UsageError(f"--out {output}: unsupported image type; expected .exr (linear float) or .tiff (16-bit raw)")
+    except OSError as err:
+        blocking = next((parent for parent in output.parents if parent.exists()), None)
+        reason = (f"{blocking} is not a directory" if blocking is not None and not blocking.is_dir()
+                  else err.strerror or str(err))
+        raise UsageError(f"--out {output}: cannot be written ({reason}); expected a writable file path") from None
+    clipped = float(np.mean((raw >= white) | (raw <= 0)))
+    if clipped > 0:
+        progress(f"warning: {clipped:.1%} of the samples of {output} are clipped to the raw range 0…{white:g} at the "
+                 "ambient frame's exposure; .exr keeps the linear values")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -134,6 +134,44 @@ def test_bad_alpha_names_the_option_and_what_is_expected(capsys, base_sequence: 
     assert "_alpha" not in err
 
 
+@pytest.mark.parametrize("suffix", [".exr", ".tiff"])
+@pytest.mark.parametrize("command", [["synthesize", "--weights", "1,0,0,0,0,0,0"], ["flash", "--mode", "matching"]],
+                         ids=["synthesize", "flash"])
+def test_unwritable_out_is_bad_input_naming_out(capsys, base_sequence: Path, tmp_path: Path, suffix: str, command) -> None:
+    """--out under a regular file: a FileExistsError traceback from mkdir (or, where the directory
+    exists but cannot be written, an error naming write_image's hidden temporary file)."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    out = blocker / "deeper" / f"x{suffix}"
+    status, stdout, err = run(capsys, command[0], str(base_sequence), *command[1:], "--out", str(out))
+    assert_bad_input(status, stdout, err, f"--out {out}", f"{blocker} is not a directory", "expected a writable file path")
+    assert ".tmp" not in err
+
+
+@pytest.mark.parametrize("command", [["synthesize", "--weights", "1,0,0,0,0,0,0"], ["flash", "--mode", "matching"]],
+                         ids=["synthesize", "flash"])
+def test_unknown_out_type_is_refused(capsys, base_sequence: Path, tmp_path: Path, command) -> None:
+    out = tmp_path / "x.jpg"
+    assert_bad_input(*run(capsys, command[0], str(base_sequence), *command[1:], "--out", str(out)),
+                     f"--out {out}", "expected .exr (linear float) or .tiff (16-bit raw)")
+    assert not out.exists()
+
+
+def test_clipped_raw_tiff_output_is_reported(capsys, base_sequence: Path, tmp_path: Path) -> None:
+    """Large weights clip the 16-bit raw output at the white level; that was silent."""
+    out = tmp_path / "bright.tiff"
+    status, stdout, err = run(capsys, "synthesize", str(base_sequence), "--weights", "1000,0,0,0,0,0,0", "--out", str(out))
+    assert status == 0, err
+    raw = read_image(out)
+    white = json.loads((base_sequence / "sequence.json").read_text())["camera"]["white_level"]
+    fraction = float(np.mean((raw >= white) | (raw <= 0)))
+    assert fraction > 0.1
+    assert f"warning: {fraction:.1%} of the samples of {out} are clipped to the raw range" in err
+    status, stdout, err = run(capsys, "synthesize", str(base_sequence), "--weights", "0.1,0,0,0,0,0,0",
+                              "--out", str(tmp_path / "fine.tiff"))
+    assert status == 0 and "clipped" not in err
+
+
 def test_flash_without_responsivity(capsys, sequence_copy: Path) -> None:
     edit_document(sequence_copy, lambda d: d["camera"].pop("responsivity"))
     assert_bad_input(*run(capsys, "flash", str(sequence_copy), "--mode", "matching"), "camera.responsivity")
