@@ -319,7 +319,7 @@ class LedBooth:
             if self._link_error is None and not self._closed:
                 try:
                     self.set_watchdog(previous)
-                except BoothError as err:
+                except (BoothError, ValueError) as err:  # ValueError: a period the protocol does not allow
                     log.warning("%s: setting the watchdog back to %g s failed: %s", self._name, previous, err)
 
     def load_pattern(self, steps: Sequence[Sequence[float]], *, held: Sequence[int] = ()) -> None:

@@ -153,6 +153,9 @@ class BoothEmulator:
             raise ValueError(f"BoothEmulator: names {list(names)!r}; expected words without spaces, commas or '*'")
         if not 12 <= level_bits <= 16:
             raise ValueError(f"BoothEmulator: level_bits {level_bits}; expected 12..16")
+        watchdog_ms = int(round(watchdog_s * 1000))
+        if watchdog_ms != 0 and not 50 <= watchdog_ms <= 600_000:  # what its own WDOG command accepts
+            raise ValueError(f"BoothEmulator: watchdog_s {watchdog_s:g}; expected 0 (off) or 0.05..600 s")
         self.names = tuple(names)
         self.peaks_nm = tuple(float(p) for p in peaks_nm)
         self.channels = len(self.names)
@@ -176,7 +179,7 @@ class BoothEmulator:
         self._step = -1
         self._triggers = 0
         self._event_seq = 0
-        self._watchdog_ms = int(round(watchdog_s * 1000))
+        self._watchdog_ms = watchdog_ms
         self._last_host = clock()
         self._watchdog_tripped = False
         self._last_error: str | None = None

@@ -51,6 +51,14 @@ def test_booth_emulator_rejects_mismatched_peaks() -> None:
         booth_emulator(_parse("booth-emulator", "--names", "a,b", "--peaks-nm", "450"))
 
 
+@pytest.mark.parametrize("watchdog", ["0.01", "601"])
+def test_booth_emulator_refuses_a_watchdog_its_firmware_would_refuse(watchdog: str) -> None:
+    """The firmware's WDOG takes 0 or 50..600000 ms; a power-up period outside it could never be set back
+    by a host (msflash raises the watchdog for long sequences and restores it)."""
+    with pytest.raises(UsageError, match=rf"watchdog_s {watchdog}; expected 0 \(off\) or 0.05..600 s"):
+        booth_emulator(_parse("booth-emulator", "--watchdog-s", watchdog))
+
+
 def test_booth_emulator_process_prints_its_port_and_stops_on_ctrl_c() -> None:
     code = "import argparse,sys; from acquisition.cli_booth import register; p=argparse.ArgumentParser(); " \
            "register(p.add_subparsers()); a=p.parse_args(sys.argv[1:]); sys.exit(a.handler(a))"
