@@ -37,8 +37,9 @@ def frame_coefficients(spec: FrameStackSpec, flash_weights: np.ndarray) -> tuple
         raise SpectralDataError(f"synthesis: {weights.size} flash weights; expected {spec.n_leds} (one per LED)")
     if not np.all(np.isfinite(weights)):
         raise SpectralDataError("synthesis: flash weights must be finite numbers")
-    coefficients = spec.unmixing.T @ weights
-    return float(1.0 - coefficients.sum()), coefficients
+    with np.errstate(over="ignore", invalid="ignore"):  # huge weights: synthesize refuses what overflows
+        coefficients = spec.unmixing.T @ weights
+        return float(1.0 - coefficients.sum()), coefficients
 
 
 def synthesize(
@@ -82,8 +83,9 @@ def synthesize(
                 f"synthesis: frame {index} has shape {frame.shape} but the ambient frame {ambient.shape}"
             )
     # Per-frame factors on raw values, and one constant absorbing every black-level offset.
-    factors = np.concatenate([[ambient_coefficient * spec.ambient_scale],
-                              coefficients * np.asarray(spec.led_scales)]).astype(np.float32)
+    factors64 = np.concatenate([[ambient_coefficient * spec.ambient_scale], coefficients * np.asarray(spec.led_scales)])
+    _check_range(factors64, frames, spec, flash_weights)
+    factors = factors64.astype(np.float32)
     offset = np.float32(-spec.black_level * float(factors.astype(float).sum()))
     output = np.empty(ambient.shape, dtype=np.float32)
     saturated = np.zeros(ambient.shape[:2], dtype=bool)
@@ -133,6 +135,29 @@ def synthesize(
         for start in starts:
             synthesize_chunk(start)
     return output, saturated
+
+
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def _check_range(factors: np.ndarray, frames: Sequence[np.ndarray], spec: FrameStackSpec,
+                 flash_weights: np.ndarray) -> None:
+    """Refuse weights whose image would overflow float32 (to inf, then NaN), bounded from the factors.
+
+    A sample is at most ``Σ |factor_j| · peak + |offset|`` with ``peak`` the largest raw value a frame
+    can hold (its integer type's maximum; the white level for float frames): no pass over the pixels.
+    """
+    peak = max([float(np.iinfo(frame.dtype).max) for frame in frames if np.issubdtype(frame.dtype, np.integer)]
+               + [abs(spec.white_level), abs(spec.black_level)])
+    with np.errstate(over="ignore", invalid="ignore"):  # an infinite bound is the answer, not a warning
+        total = float(np.abs(factors).sum())
+    bound = total * peak + abs(spec.black_level) * total
+    if not bound < _FLOAT32_MAX:
+        largest = float(np.max(np.abs(np.asarray(flash_weights, dtype=float))))
+        raise SpectralDataError(
+            f"synthesis: flash weights up to {largest:.3g} overflow the float32 image (samples up to {bound:.3g}); "
+            f"expected weights that keep it below {_FLOAT32_MAX:.3g}"
+        )
 
 
 def _any_channel(bright: np.ndarray) -> np.ndarray:

@@ -88,3 +88,21 @@ def test_bad_weights_and_shapes() -> None:
         synthesize(a, [a, a], spec, np.array([np.inf, 0.0]))
     with pytest.raises(SpectralDataError, match="frame 2 has shape"):
         synthesize(a, [a, a[:2]], spec, np.ones(2))
+
+
+@pytest.mark.parametrize("weights", [[1e308, 1e308], [1e300, 0.0], [0.0, -1e36]])
+def test_weights_that_overflow_the_float32_image_are_refused(weights: list[float]) -> None:
+    """1e308 gave a NaN image (plus numpy overflow warnings on stderr); 1e36 × 100 exceeds float32."""
+    spec = FrameStackSpec(0, 100, 1.0, (1.0, 1.0), np.eye(2))
+    a = np.full((4, 4, 3), 50, dtype=np.uint16)
+    with pytest.raises(SpectralDataError, match="overflow the float32 image"):
+        synthesize(a, [a + 10, a + 20], spec, np.array(weights))
+
+
+def test_large_weights_that_fit_float32_give_a_finite_image() -> None:
+    """Weights outside [0, 1] (computational mode) are allowed as long as the image holds them."""
+    spec = FrameStackSpec(0, 100, 1.0, (1.0, 1.0), np.eye(2))
+    a = np.full((4, 4, 3), 50, dtype=np.uint16)
+    image, _ = synthesize(a, [a + 10, a + 20], spec, np.array([1e30, -3.0]))
+    assert np.all(np.isfinite(image))
+    np.testing.assert_allclose(image, 50 + 1e30 * 10 - 3.0 * 20, rtol=1e-6)
