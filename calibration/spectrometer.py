@@ -13,7 +13,11 @@ Comment lines start with ``#``, ``%``, ``//`` or ``;``. Any non-numeric lines *b
 are a header (instrument exports carry a few: ``Wavelength (nm)\tIrradiance``, Ocean Optics'
 ``>>>>>Begin Spectral Data<<<<<`` block); the last of them names the columns if it has as many
 cells as the data. After the data starts, every line must be numeric, except an end marker
-(``>>>>>End Spectral Data<<<<<``). Decimal commas are not guessed: ``1,5`` is two cells.
+(``>>>>>End Spectral Data<<<<<``). Decimal commas are read where they are unambiguous: on a line
+whose cells are separated by semicolons or tabs and each read as a number once its one comma is a
+point (``380,5;0,25`` — the European CSV convention, what a spectrometer program writes in a
+locale with a decimal comma). Elsewhere ``1,5`` is two cells. UTF-8, UTF-16 (with its byte-order
+mark, as Windows programs write it) and Latin-1 files are read.
 
 Spectrometers sample on their own, often non-uniform, grids (a CCD's pixel-to-wavelength
 polynomial). :func:`measurement_to_spectra` integrates the piecewise-linear curve through the
@@ -39,6 +43,8 @@ from processing.spectra import Spectra, SpectralUnit, WavelengthGrid
 _COMMENT_PREFIXES = ("#", "%", "//", ";")
 _END_MARKERS = ("end", ">>>>>end")
 _SEPARATORS = re.compile(r"[,\t; ]+")
+_DECIMAL_COMMA_SEPARATORS = re.compile(r"[\t;]+")
+_DECIMAL_COMMA_NUMBER = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$|^[+-]?\d+(?:[eE][+-]?\d+)?$")
 NEGATIVE_TOLERANCE = 0.05
 """Negative values down to this fraction of the peak are measurement noise (clipped to 0 later by
 the models); anything more negative is refused: a spectral power cannot be negative."""
@@ -75,6 +81,11 @@ def _is_comment(line: str) -> bool:
 
 
 def _cells(line: str) -> list[str]:
+    """The cells of a line; decimal commas become points where the separators make them unambiguous."""
+    if "," in line and _DECIMAL_COMMA_SEPARATORS.search(line):
+        cells = [cell.strip() for cell in _DECIMAL_COMMA_SEPARATORS.split(line.strip()) if cell.strip() != ""]
+        if len(cells) >= 2 and any("," in cell for cell in cells) and all(_DECIMAL_COMMA_NUMBER.match(c) for c in cells):
+            return [cell.replace(",", ".") for cell in cells]
     return [cell for cell in _SEPARATORS.split(line.strip()) if cell != ""]
 
 
@@ -149,9 +160,12 @@ def parse_spectrometer_text(
                     f"{source}:{number}: 1 column; expected at least 2 (wavelength_nm, value)"
                 )
             if width > 2 and column is None:
+                # "380,5,0,25": decimal commas between comma separators cannot be told apart from cells.
+                hint = ("; if the numbers have decimal commas, export with ';' or tab separators"
+                        if not re.search(r"[\t; ]", line) else "")
                 raise CalibrationError(
                     f"{source}:{number}: {width} columns; expected 2 (wavelength_nm, value), or choose the "
-                    "value column (column=N / --column N)"
+                    f"value column (column=N / --column N){hint}"
                 )
             if column is not None and not 1 <= column < width:
                 raise CalibrationError(
@@ -217,6 +231,13 @@ def read_spectrometer_file(
         data = path.read_bytes()
     except OSError as err:
         raise CalibrationError(f"{path}: cannot be read ({err.strerror or err}); expected a spectrometer text file") from err
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16 with its byte-order mark (Windows "Unicode")
+        try:
+            text = data.decode("utf-16")
+        except UnicodeDecodeError as err:
+            raise CalibrationError(f"{path}: not valid UTF-16 text ({err.reason} at byte {err.start}); "
+                                   "expected a text export") from err
+        return parse_spectrometer_text(text, str(path), unit, column, name)
     if b"\x00" in data[:4096]:
         raise CalibrationError(f"{path}: binary data; expected a text export (CSV or tab/space separated)")
     try:
@@ -275,8 +296,9 @@ def measurement_to_spectra(
         try:
             native = Spectra.from_samples(measurement.wavelengths_nm, measurement.values, (measurement.name,),
                                           kind="spd", unit=measurement.unit, source=measurement.source)
-            columns.append(native.to_unit(unit).resample(grid, outside="zero").values[:, 0])
+            column = native.to_unit(unit).resample(grid, outside="zero").values[:, 0]
         except SpectralDataError as err:
             raise CalibrationError(f"{measurement.source}: {err}") from err
+        columns.append(column)
     return Spectra(grid, np.column_stack(columns), tuple(m.name for m in measurements), kind="spd", unit=unit,
                    source=", ".join(m.source for m in measurements))

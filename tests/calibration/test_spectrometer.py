@@ -41,6 +41,36 @@ class TestParse:
         m = parse_spectrometer_text(export(w, gaussian(w), separator, header="Wavelength (nm)\tIrradiance"), "x.txt")
         np.testing.assert_allclose(m.values, gaussian(w), rtol=1e-8)
 
+    @pytest.mark.parametrize("separator", [";", "\t"])
+    def test_decimal_commas_with_semicolon_or_tab_separators(self, separator):
+        """'380,0;2,1699' (a spectrometer program in a decimal-comma locale) was split at every comma:
+        '4 columns', and --column 2 then read the integer parts (2.0, 5.0, 45.0…) without a word."""
+        w = np.arange(400.0, 701.0, 1.0)
+        v = 1000 * gaussian(w) + 2.1699
+        text = "Wellenlänge;Wert\n".replace(";", separator) + "".join(
+            f"{a:.1f}{separator}{b:.4f}\n".replace(".", ",") for a, b in zip(w, v))
+        m = parse_spectrometer_text(text, "de.csv")
+        np.testing.assert_allclose(m.wavelengths_nm, w)
+        np.testing.assert_allclose(m.values, np.round(v, 4), rtol=1e-12)
+
+    def test_decimal_commas_between_comma_separators_are_refused_with_a_hint(self):
+        text = "nm,W\n400,0,2,5\n410,0,3,5\n420,0,2,5\n"
+        with pytest.raises(CalibrationError, match=r"ambig\.csv:2: 4 columns; .*export with ';' or tab separators"):
+            parse_spectrometer_text(text, "ambig.csv")
+
+    @pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be", "utf-8-sig"])
+    def test_utf16_and_bom_files_with_windows_line_endings(self, tmp_path, encoding):
+        """A UTF-16 export (Windows 'Unicode') was refused as 'binary data'."""
+        w = np.arange(380.0, 781.0, 4.0)
+        text = export(w, gaussian(w), header="Wavelength (nm),µW/cm²/nm").replace("\n", "\r\n")
+        data = text.encode(encoding)
+        if encoding == "utf-16-be":
+            data = b"\xfe\xff" + data
+        path = tmp_path / "win.csv"
+        path.write_bytes(data)
+        m = read_spectrometer_file(path)
+        np.testing.assert_allclose(m.values, gaussian(w), rtol=1e-8)
+
     def test_ocean_optics_block(self):
         w = np.arange(400.0, 500.0, 0.5)
         text = ("Data from x.txt Node\nIntegration Time (sec): 0.1\n>>>>>Begin Spectral Data<<<<<\n"
