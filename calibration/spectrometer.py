@@ -299,6 +299,14 @@ def measurement_to_spectra(
             column = native.to_unit(unit).resample(grid, outside="zero").values[:, 0]
         except SpectralDataError as err:
             raise CalibrationError(f"{measurement.source}: {err}") from err
+        if not np.any(column > 0):
+            # Resampled with zeros outside the measured range: an export that misses the grid (an IR
+            # LED, a misread unit) would become an LED with no emission, silently dropped downstream.
+            peak = float(measurement.wavelengths_nm[int(np.argmax(measurement.values))])
+            raise CalibrationError(
+                f"{measurement.source}: no emission on {grid} (measured {measurement.wavelengths_nm[0]:g}–"
+                f"{measurement.wavelengths_nm[-1]:g} nm, peak at {peak:g} nm); expected an LED emitting within the grid"
+            )
         columns.append(column)
     return Spectra(grid, np.column_stack(columns), tuple(m.name for m in measurements), kind="spd", unit=unit,
                    source=", ".join(m.source for m in measurements))

@@ -154,6 +154,13 @@ class TestBadFiles:
         with pytest.raises(CalibrationError, match="expected nanometres"):
             parse_spectrometer_text("0.4,1\n0.41,2\n0.42,1\n", "um.csv")
 
+    def test_emission_outside_the_grid_is_refused(self):
+        """An export that misses the grid (an IR LED at 2450 nm) became an all-zero LED column."""
+        w = np.arange(2380.0, 2781.0, 1.0)
+        m = parse_spectrometer_text(export(w, gaussian(w, 2450, 12)), "ir.csv")
+        with pytest.raises(CalibrationError, match=r"ir\.csv: no emission on 400–700 nm .*peak at 2450 nm"):
+            measurement_to_spectra(m, DEFAULT_GRID)
+
     def test_no_signal(self):
         with pytest.raises(CalibrationError, match="no positive value"):
             parse_spectrometer_text("400,0\n410,0\n420,0\n", "zero.csv")
