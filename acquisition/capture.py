@@ -179,7 +179,14 @@ def _check_watchdog(booth: LedControl, where: str, saved: str = "") -> None:
 
 def _watchdog_covering(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
     """The booth's watchdog kept from firing while ``plan`` runs (:meth:`LedBooth.watchdog_covering`),
-    or nothing for a booth without one."""
+    or nothing for a booth without one.
+
+    A ``WDOG`` event from before the sequence (LEDs left on by earlier code, then forgotten) is
+    dropped first: it says nothing of this sequence's frames, which :func:`_check_watchdog` judges.
+    """
+    fired = getattr(booth, "watchdog_fired", None)
+    if fired is not None and fired():
+        log.info("the booth's watchdog had switched the LEDs off before this sequence")
     cover = getattr(booth, "watchdog_covering", None)
     return cover(host_silence_s(plan)) if cover is not None else nullcontext()
 

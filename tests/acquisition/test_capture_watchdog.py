@@ -182,3 +182,16 @@ def test_an_unplugged_booth_through_the_cli_says_it_once_plus_the_leds_warning(
     assert len(shown) == 2  # in either order: the driver's reader thread notices the closed pty on its own
     assert sum(m.startswith("LEDs not confirmed off") for m in shown) == 1
     assert sum(": serial link lost: " in m for m in shown) == 1
+
+
+def test_a_watchdog_event_from_before_the_sequence_does_not_refuse_its_frames(sim_rig: Rig, tmp_path: Path) -> None:
+    """LEDs left on and forgotten before the capture: the watchdog switched them off (its WDOG event is
+    queued); the sequence that follows is not blamed for it."""
+    sim_rig.booth.set_levels((0.5, 0.0, 0.0, 0.0))
+    deadline = time.monotonic() + 5.0
+    while sim_rig.emulator.levels != (0.0,) * 4 and time.monotonic() < deadline:
+        time.sleep(0.01)  # the 0.2 s watchdog fires
+    time.sleep(0.1)  # its event reaches the driver
+    plan = CapturePlan.ambient_then_each_led(4, 10_000.0)
+    with sim_rig.sequence_writer(tmp_path / "sequence") as writer:
+        assert len(run_capture(sim_rig.camera, sim_rig.booth, plan, writer)) == len(plan.steps)
