@@ -101,8 +101,9 @@ class LedControl(Protocol):
         """Switch every channel off."""
         ...
 
-    # Optional: ``watchdog_covering(silence_s)``, a context manager keeping the booth's watchdog
-    # from firing while the host is silent on purpose (``LedBooth`` offers it; see _watchdog_covering).
+    # Optional (``LedBooth`` offers both): ``watchdog_covering(silence_s)``, a context manager keeping
+    # the booth's watchdog from firing while the host is silent on purpose (see _watchdog_covering),
+    # and ``watchdog_fired()``, whether it fired since last asked (see _check_watchdog).
 
 
 class SequencedLedControl(LedControl, Protocol):
