@@ -24,7 +24,7 @@ import numpy as np
 from acquisition.camera import CameraInfo, RawFrame
 from acquisition.errors import CameraError, ReplayMismatchError
 from acquisition.frame_queue import TriggeredFrames
-from acquisition.plan import CapturePlan
+from acquisition.plan import CapturePlan, CaptureStep
 from acquisition.sequence_format import Sequence, read_sequence
 
 LEVEL_TOLERANCE = 2.0 / 0xFFFF
@@ -94,28 +94,12 @@ class ReplayCamera(TriggeredFrames):
         self._check_open()
         where = self.sequence.directory / "sequence.json"
         for offset, step in enumerate(plan.steps):
-            index = self._cursor + offset
-            name = f"step {step.index} ({step.label})"
-            if index >= len(self.sequence.frames):
-                raise ReplayMismatchError(f"{where}: {name}: {self._nothing_left(index, step.role)}")
-            frame = self.sequence.frames[index]
-            recorded = f"frames[{index}]"
-            if frame.role != step.role:
-                raise ReplayMismatchError(f"{where}: {name}: role '{step.role}' but {recorded}.role is "
-                                          f"'{frame.role}'; expected the recorded role")
-            if len(frame.led_levels) != len(step.led_levels) or not all(
-                    math.isclose(a, b, abs_tol=LEVEL_TOLERANCE) for a, b in zip(frame.led_levels, step.led_levels)):
-                raise ReplayMismatchError(
-                    f"{where}: {name}: led_levels {_fmt(step.led_levels)} but {recorded}.led_levels is "
-                    f"{_fmt(frame.led_levels)}; expected them within {LEVEL_TOLERANCE:.1e}")
-            if not math.isclose(frame.exposure_us, step.exposure_us, rel_tol=EXPOSURE_RTOL):
-                raise ReplayMismatchError(
-                    f"{where}: {name}: exposure_us {step.exposure_us:g} but {recorded}.exposure_us is "
-                    f"{frame.exposure_us:g}; expected it within {EXPOSURE_RTOL:.0%}")
-            if not math.isclose(frame.gain, step.gain, rel_tol=EXPOSURE_RTOL):
-                raise ReplayMismatchError(
-                    f"{where}: {name}: gain {step.gain:g} but {recorded}.gain is {frame.gain:g}; "
-                    f"expected it within {EXPOSURE_RTOL:.0%}")
+            mismatch = self._mismatch(self._cursor + offset, step)
+            if mismatch is not None:
+                if not self.sequence.complete:  # the likely reason: a capture that was cut short
+                    mismatch += (f" (the recording is incomplete: complete: false, {len(self.sequence.frames)} "
+                                 "frame(s), as a capture that was interrupted leaves it)")
+                raise ReplayMismatchError(f"{where}: step {step.index} ({step.label}): {mismatch}")
         with self._condition:
             self._plan = plan
             self._plan_start = self._cursor
@@ -149,6 +133,25 @@ class ReplayCamera(TriggeredFrames):
         self._release(self._require_started())
 
     # -- internals ------------------------------------------------------------------------
+    def _mismatch(self, index: int, step: CaptureStep) -> str | None:
+        """How ``step`` differs from recorded frame ``index`` (the first differing field), or None."""
+        if index >= len(self.sequence.frames):
+            return self._nothing_left(index, step.role)
+        frame = self.sequence.frames[index]
+        recorded = f"frames[{index}]"
+        if frame.role != step.role:
+            return f"role '{step.role}' but {recorded}.role is '{frame.role}'; expected the recorded role"
+        if len(frame.led_levels) != len(step.led_levels) or not all(
+                math.isclose(a, b, abs_tol=LEVEL_TOLERANCE) for a, b in zip(frame.led_levels, step.led_levels)):
+            return (f"led_levels {_fmt(step.led_levels)} but {recorded}.led_levels is {_fmt(frame.led_levels)}; "
+                    f"expected them within {LEVEL_TOLERANCE:.1e}")
+        if not math.isclose(frame.exposure_us, step.exposure_us, rel_tol=EXPOSURE_RTOL):
+            return (f"exposure_us {step.exposure_us:g} but {recorded}.exposure_us is {frame.exposure_us:g}; "
+                    f"expected it within {EXPOSURE_RTOL:.0%}")
+        if not math.isclose(frame.gain, step.gain, rel_tol=EXPOSURE_RTOL):
+            return f"gain {step.gain:g} but {recorded}.gain is {frame.gain:g}; expected it within {EXPOSURE_RTOL:.0%}"
+        return None
+
     def _nothing_left(self, index: int, role: str) -> str:
         """Why a step at recorded frame ``index`` cannot be served (the recording is used up)."""
         roles = [frame.role for frame in self.sequence.frames]

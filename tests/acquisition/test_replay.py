@@ -175,3 +175,21 @@ def test_a_damaged_recorded_frame_is_the_error_in_every_sync_mode(tmp_path: Path
     assert status == 2
     assert err[-1].startswith(f"msflash: error: {damaged}: pixels cannot be decoded")
     assert len(read_sequence(out / "sequence").frames) == 3
+
+
+def test_replaying_an_interrupted_recording_says_it_is_incomplete(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A capture interrupted after two frames (complete: false) cannot be replayed as a whole one; the
+    mismatch says the recording is incomplete, the likely reason (it read as a role mismatch alone)."""
+    import shutil
+
+    recording = tmp_path / "interrupted"
+    shutil.copytree(RECORDED, recording)
+    document = json.loads((recording / "sequence.json").read_text())
+    document.update(complete=False, frames=document["frames"][:2])
+    (recording / "sequence.json").write_text(json.dumps(document))
+    status = main(["capture", "--rig", f"replay:{recording}", "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 1
+    assert err[-1].startswith(f"msflash: error: {recording / 'sequence.json'}: step ")
+    assert err[-1].endswith("(the recording is incomplete: complete: false, 2 frame(s), as a capture that was "
+                            "interrupted leaves it)")
