@@ -157,11 +157,14 @@ class LedBooth:
         BoothNotFoundError
             If the port does not exist.
         BoothError
-            If the port cannot be opened (permissions, busy) or does not answer as a booth.
+            If the port cannot be opened (permissions, busy — another program holds it: the port is
+            opened exclusively) or does not answer as a booth.
         """
         try:
+            # exclusive: a second host on the same booth (another msflash) would take replies meant
+            # for this one and drive the LEDs under its frames; it is refused as a busy port instead.
             port = serial.serial_for_url(
-                url, baudrate=baudrate, timeout=_READ_POLL_S, write_timeout=timeout_s
+                url, baudrate=baudrate, timeout=_READ_POLL_S, write_timeout=timeout_s, exclusive=True
             )
         except serial.SerialException as err:
             raise _open_error(url, err) from err

@@ -216,3 +216,12 @@ def test_an_unwritable_transcript_is_a_booth_error_and_the_port_is_released(boot
     assert len(os.listdir("/proc/self/fd")) == fds  # the serial port opened for it is closed again
     with LedBooth.open(booth_on_pty.port) as booth:  # and the booth is still usable
         booth.ping()
+
+
+def test_a_second_host_on_the_same_booth_is_refused_as_busy(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+    """Two programs on one booth took each other's replies (both failed with 'no reply') and could drive
+    the LEDs under each other's frames; the port is opened exclusively, so the second is told it is busy."""
+    with pytest.raises(BoothError, match=rf"booth {booth_on_pty.port}: port busy; expected it free"):
+        LedBooth.open(booth_on_pty.port)
+    booth.set_levels([0.5] * 7)  # the first host is undisturbed
+    assert levels_close(booth_on_pty.emulator.levels, [0.5] * 7)
