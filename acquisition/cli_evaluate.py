@@ -48,6 +48,7 @@ import numpy as np
 
 from acquisition import analysis
 from acquisition.cli_common import UsageError, dumps_json, print_json, progress
+from acquisition.cli_study import output_directory
 from acquisition.html_report import HtmlReport
 from acquisition.image_io import write_image
 from acquisition.sequence_format import Sequence, read_sequence
@@ -691,7 +692,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     if not (directory / "sequence.json").exists() and (directory / "sequence" / "sequence.json").exists():
         directory = directory / "sequence"  # a run directory
     sequence = read_sequence(directory)
-    out = Path(args.out) if args.out else _default_out(directory)
+    out = output_directory(args.out if args.out else _default_out(directory))
     result = evaluate_sequence(sequence, out, args.chart, args.patch_px, args.border_px, args.margin_px, args.bounds,
                                args.target)
     result = _public(result)
@@ -709,7 +710,7 @@ def _study(args: argparse.Namespace) -> int:
     unknown = [a for a in ambients if a not in datasets.AMBIENTS]
     if unknown or not ambients:
         raise UsageError(f"--ambients '{args.ambients}': expected a comma-separated list of {', '.join(datasets.AMBIENTS)}")
-    out = Path(args.out) if args.out else (None if args.json else Path("colour-study"))
+    out = output_directory(args.out if args.out else (None if args.json else Path("colour-study")))
     payload = colour_study(out, ambients, args.seed, args.patch_px, args.cfa, args.bounds, depth_m=args.depth_m,
                            distance_m=args.distance_m, water_type=args.water)
     if args.json:

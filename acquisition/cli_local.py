@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from acquisition.cli_common import positive_int, print_json, progress
+from acquisition.cli_study import output_directory
 from processing.local import DEFAULT_TILES
 
 
@@ -14,8 +15,9 @@ def _local_study(args: argparse.Namespace) -> int:
 
     progress(f"local study: {args.uniform} uniform scenes, {args.mixed} boundary + {args.mixed} gradient scenes, "
              f"{args.tiles}x{args.tiles} tiles, seeds from {args.seed0}")
+    out = output_directory(args.out)
     summary = run_study(n_uniform=args.uniform, n_mixed=args.mixed, tiles=args.tiles, seed0=args.seed0,
-                        out=Path(args.out) if args.out else None, timing=not args.no_timing, sweep=not args.no_timing)
+                        out=out, timing=not args.no_timing, sweep=not args.no_timing)
     scenarios = summary.pop("scenarios")
     if args.json:
         print_json(summary)

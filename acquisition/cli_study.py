@@ -98,6 +98,25 @@ def _mapper(scheduler: str, workers: int | None) -> Iterator[Callable[[Callable[
             cluster.close()
 
 
+def output_directory(path: str | os.PathLike | None) -> Path | None:
+    """``--out DIR`` created before any work, or a UsageError naming it (None stays None).
+
+    Studies and evaluations write their folder at the end: a path that cannot be a folder (a file
+    there, or under it) must fail before minutes of computing, as one line, not a traceback.
+    """
+    if path is None or path == "":
+        return None
+    out = Path(path)
+    blocking = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), None)
+    if blocking is not None:
+        raise UsageError(f"--out {out}: {blocking} is a file; expected a folder (or a path where one can be made)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise UsageError(f"--out {out}: cannot create the folder ({err.strerror or err}); expected a writable path") from None
+    return out
+
+
 def _run(args: argparse.Namespace) -> int:
     if args.name not in STUDIES:
         raise UsageError(f"study '{args.name}': unknown; expected one of {', '.join(STUDIES)}")
@@ -115,12 +134,7 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError("--alpha: a sweep is only for table1; expected one value")
     if alpha_units == "paper" and args.solver != "roughness":
         raise UsageError("--alpha-units paper is the authors' eq. 6; expected --solver roughness")
-    out = Path(args.out) if args.out else None
-    if out is not None:
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise UsageError(f"--out {out}: cannot create the folder ({err})") from None
+    out = output_directory(args.out)
 
     with _mapper(args.scheduler, args.workers) as mapper:
         if args.name == "table1":

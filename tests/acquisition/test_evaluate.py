@@ -214,3 +214,25 @@ class TestHtmlReport:
         assert "<script>" not in text and "a &lt;b&gt; &amp; c" in text
         with pytest.raises(ValueError, match="not a PNG"):
             report.add_images([("x", b"GIF89a")])
+
+
+@pytest.mark.parametrize("argv", [
+    ["evaluate", "{seq}", "--chart", "macbeth"],
+    ["colour-study", "--ambients", "tungsten"],
+    ["local-study", "--uniform", "1", "--mixed", "1", "--no-timing"],
+    ["study", "table1"],
+], ids=["evaluate", "colour-study", "local-study", "study"])
+def test_out_under_a_file_is_refused_before_any_work(capsys, tmp_path: Path, argv: list[str]) -> None:
+    """--out below a regular file: evaluate and colour-study ended in a NotADirectoryError/FileExistsError
+    traceback, local-study too after running its whole study (20 s for two scenes); study was already right."""
+    from tests.helpers import write_test_sequence
+
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    sequence = write_test_sequence(tmp_path / "seq") if "{seq}" in argv else None
+    argv = [str(sequence) if item == "{seq}" else item for item in argv]
+    out = blocker / "results"
+    assert msflash_main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == f"msflash: error: --out {out}: {blocker} is a file; expected a folder (or a path where one can be made)"
+    assert not any("Traceback" in line for line in err)
