@@ -423,7 +423,10 @@ def tile_statistics(
     planes = [cfa_planes(frame, cfa_period) for frame in frames]
     height, width, channels = planes[0].shape[0] // bin_factor, planes[0].shape[1] // bin_factor, planes[0].shape[2]
     if height == 0 or width == 0:
-        raise SpectralDataError(f"frame of shape {ambient.shape} is smaller than one {bin_factor}×{bin_factor} block")
+        side = bin_factor * cfa_period
+        quads = f" ({bin_factor}×{bin_factor} of the mosaic's 2×2 quads)" if cfa_period == 2 else ""
+        raise SpectralDataError(f"frame of shape {ambient.shape} is smaller than one {side}×{side}-pixel block{quads}; "
+                                "expected a larger frame")
     n_rows = len(frames) + 1
     data = np.empty((n_rows, height, width, channels))
     # Even bin factors also give every block's half difference, the noise probe of ``denoised``.

@@ -7,6 +7,7 @@ was calibrated on the study's scenes, not on these.
 
 from __future__ import annotations
 
+import re
 from functools import cache
 
 import numpy as np
@@ -147,6 +148,21 @@ def test_denoised_statistics_remove_the_noise_bias_of_the_led_only_images() -> N
     np.testing.assert_allclose(everything.gram, denoised.gram, rtol=1e-9)
     np.testing.assert_allclose(everything.cross, denoised.cross, rtol=1e-9)
     assert tile_statistics(ambient_frame, led_frames, spec, 3, bin_factor=3).denoised is None
+
+
+@pytest.mark.parametrize(("shape", "bin_factor", "period", "block"), [
+    ((1, 1), 1, 2, "2×2-pixel block (1×1 of the mosaic's 2×2 quads)"),
+    ((3, 7), 2, 2, "4×4-pixel block (2×2 of the mosaic's 2×2 quads)"),
+    ((3, 7, 3), 4, 1, "4×4-pixel block; expected a larger frame"),
+])
+def test_a_frame_smaller_than_one_block_names_the_block_in_pixels(shape, bin_factor: int, period: int, block: str) -> None:
+    """A 1×1 Bayer frame was 'smaller than one 1×1 block' (the block counted in quads, not pixels)."""
+    from processing.errors import SpectralDataError
+
+    frame = np.ones(shape)
+    spec = FrameStackSpec(0.0, 1e9, 1.0, (1.0,), np.eye(1))
+    with pytest.raises(SpectralDataError, match=re.escape(f"frame of shape {shape} is smaller than one {block}")):
+        tile_statistics(frame, [frame], spec, 2, bin_factor=bin_factor, cfa_period=period)
 
 
 def test_tile_geometry_covers_the_frame() -> None:
