@@ -115,6 +115,14 @@ def measure_dark(frames: Sequence[np.ndarray], cfa: str | None = None) -> DarkRe
     else:
         noise = [float(np.std(p)) for p in mean_planes]
     pattern = [float(np.std(p)) for p in mean_planes]
+    flat = [c for c in range(len(black)) if noise[c] == 0 and pattern[c] == 0]
+    if flat:
+        value = black[flat[0]]
+        raise CalibrationError(
+            f"dark frames: channel {flat[0]} holds the one value {value:g} in every pixel of every frame; expected "
+            "the sensor's noise about its black level — the frames are clipped (at 0 or at saturation) or not the "
+            "camera's raw output"
+        )
     hot = sum(int(np.count_nonzero(p > b + 10 * max(n, 0.5))) for p, b, n in zip(mean_planes, black, noise))
     return DarkResult(tuple(black), tuple(noise), tuple(pattern), hot / mean_frame.size, int(stack.shape[0]))
 

@@ -106,3 +106,13 @@ def test_bad_frames():
         channel_planes(np.zeros(5))
     with pytest.raises(CalibrationError, match="cfa 'XYZW'"):
         channel_planes(np.zeros((4, 4)), "XYZW")
+
+
+@pytest.mark.parametrize("value", [0, 64, 4095])
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_constant_dark_frames_are_refused(value: int, cfa):
+    """Dark frames clipped at saturation (every pixel 65535 on the CLI) were stored as black level
+    65535 with read noise 0; any frame series of one value has no noise to measure."""
+    shape = (8, 8) if cfa else (8, 8, 3)
+    with pytest.raises(CalibrationError, match=f"holds the one value {value} in every pixel of every frame"):
+        measure_dark([np.full(shape, value, dtype=np.uint16)] * 3, cfa)
