@@ -228,6 +228,13 @@ def measure_linearity(
             f"linearity: {np.count_nonzero(usable)} unsaturated frames with signal; expected at least 2 — "
             "shorten the longest exposures or dim the target"
         )
+    distinct = np.unique(exposures_array[usable])
+    if distinct.size < 2:
+        # One abscissa: the slope fit is degenerate (numpy RankWarnings, 'deviation 2.0, linear up to 0 DN').
+        raise CalibrationError(
+            f"linearity: every unsaturated frame has exposure·gain {distinct[0]:g}; expected at least 2 different "
+            "exposures of the same target"
+        )
     slopes, deviations, polys = [], np.full_like(signals, np.nan), []
     limit = math.inf
     emva = 0.0
@@ -235,7 +242,7 @@ def measure_linearity(
         x, y = exposures_array[usable], signals[usable, c]
         # Small-signal slope: the linear term of a polynomial through the origin (black level),
         # so a smooth compression of the highlights does not bend the reference line.
-        degree = min(3, x.size - 1)
+        degree = min(3, distinct.size - 1)
         powers = np.column_stack([x ** (p + 1) for p in range(degree)]) / x.max() ** np.arange(1, degree + 1)
         slope = float(np.linalg.lstsq(powers, y, rcond=None)[0][0] / x.max())
         slopes.append(slope)

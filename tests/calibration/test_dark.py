@@ -116,3 +116,15 @@ def test_constant_dark_frames_are_refused(value: int, cfa):
     shape = (8, 8) if cfa else (8, 8, 3)
     with pytest.raises(CalibrationError, match=f"holds the one value {value} in every pixel of every frame"):
         measure_dark([np.full(shape, value, dtype=np.uint16)] * 3, cfa)
+
+
+@pytest.mark.parametrize("frames,exposures,message", [
+    ([np.full((4, 4), 564.0)] * 4, [2756.9] * 4, r"every unsaturated frame has exposure·gain 2756\.9; expected at least 2"),
+    ([np.full((4, 4), 564.0)] * 3 + [np.full((4, 4), 4095.0)] * 2, [5, 5, 5, 9, 10],
+     "every unsaturated frame has exposure·gain 5;"),
+])
+def test_series_at_one_exposure_is_refused(frames, exposures, message):
+    """All frames at one exposure (msflash calibrate linearity on such a sequence): numpy RankWarnings,
+    then 'max deviation 2.0, linear up to 0 DN' stored in the calibration."""
+    with pytest.raises(CalibrationError, match=message):
+        measure_linearity(frames, exposures, 64.0, white_level=4095.0)
