@@ -129,7 +129,8 @@ def load_spectra_csv(
     path = Path(path)
     where = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is dropped instead of becoming part of the header.
+        text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as err:
         raise SpectralDataError(f"{where}: cannot read spectral table ({err}); expected a UTF-8 CSV file") from err
 

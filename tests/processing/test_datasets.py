@@ -142,6 +142,14 @@ class TestCsvReader:
         with pytest.raises(SpectralDataError, match=match):
             datasets.load_spectra_csv(self.write(tmp_path, text), "spd", "energy")
 
+    def test_byte_order_mark_and_windows_line_ends(self, tmp_path: Path) -> None:
+        """Excel's 'CSV UTF-8' starts with a BOM: the header read '\\ufeffwavelength…' and was refused
+        (msflash flash --target table.csv: "header is 'wavelength,value'" with the BOM invisible)."""
+        path = tmp_path / "table.csv"
+        path.write_bytes("\ufeffwavelength_nm,a\r\n400,1\r\n410,3\r\n".encode())
+        spectra = datasets.load_spectra_csv(path, "spd", "energy")
+        assert spectra.names == ("a",) and spectra.values[:, 0].tolist() == [1, 3]
+
     def test_missing_file(self, tmp_path: Path) -> None:
         with pytest.raises(SpectralDataError, match="missing.csv: cannot read"):
             datasets.load_spectra_csv(tmp_path / "missing.csv", "spd", "energy")
