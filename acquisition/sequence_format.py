@@ -497,6 +497,14 @@ def _parse_document(file: Path, directory: Path, document: Any, *, check_files: 
     frames = tuple(
         _parse_frame(file, directory, i, item, len(leds), must_exist=check_files) for i, item in enumerate(raw_frames)
     )
+    # One file per frame: an entry repeating another's file (an edit gone wrong) gives two LEDs the
+    # same image, which estimation cannot tell from two real frames (no error, skewed weights).
+    seen_files: dict[str, int] = {}
+    for i, frame in enumerate(frames):
+        key = os.path.normpath(frame.file)
+        if key in seen_files:
+            top.fail(f"frames[{i}].file", f"{frame.file!r} is also frames[{seen_files[key]}].file", "one file per frame")
+        seen_files[key] = i
     # A partial sequence may stop before its first frame; a complete one must be usable.
     if complete and not any(f.role == "ambient" for f in frames):
         top.fail("frames", "has no frame with role 'ambient'", "at least one ambient frame in a complete sequence")

@@ -329,6 +329,9 @@ INVALID = {
     "frame absolute": (_set("frames.1.file", "/etc/passwd"), "frames[1].file '/etc/passwd' is absolute; expected a path relative"),
     "frame file type": (_set("frames.1.file", 3), "frames[1].file is a number; expected a relative file path"),
     "frame directory": (_set("frames.1.file", "frames"), "frames[1].file 'frames' is not a regular file"),
+    # Two LEDs given one image (an edit gone wrong) was read, and estimated from, without a word.
+    "frame file repeated": (_set("frames.3.file", "frames/./001-led.tiff"),
+                            "frames[3].file 'frames/./001-led.tiff' is also frames[1].file; expected one file per frame"),
     "levels count": (_set("frames.2.led_levels", [0, 1]), "frames[2].led_levels has 2 values; expected 3 (one per LED)"),
     "level above 1": (_set("frames.2.led_levels", [0, 1.5, 0]), "frames[2].led_levels[1] is 1.5; expected a level in [0, 1]"),
     "level negative": (_set("frames.2.led_levels", [0, -0.1, 0]), "frames[2].led_levels[1] is -0.1; expected a level in [0, 1]"),
