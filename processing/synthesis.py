@@ -134,6 +134,13 @@ def synthesize(
     else:
         for start in starts:
             synthesize_chunk(start)
+    # Integer frames are finite and _check_range bounds the sum; float frames (EXR) may hold NaN or
+    # inf, which would reach the image: one sum flags them (the exact search runs only then).
+    if any(np.issubdtype(frame.dtype, np.floating) for frame in frames) and not np.isfinite(output.sum(dtype=np.float64)):
+        bad = [index for index, frame in enumerate(frames) if not np.isfinite(frame).all()]
+        names = ", ".join("the ambient frame" if index == 0 else f"LED frame {index}" for index in bad)
+        raise SpectralDataError(f"synthesis: {names or 'a frame'} holds non-finite values (NaN or inf); "
+                                "expected finite pixels")
     return output, saturated
 
 

@@ -106,3 +106,15 @@ def test_large_weights_that_fit_float32_give_a_finite_image() -> None:
     image, _ = synthesize(a, [a + 10, a + 20], spec, np.array([1e30, -3.0]))
     assert np.all(np.isfinite(image))
     np.testing.assert_allclose(image, 50 + 1e30 * 10 - 3.0 * 20, rtol=1e-6)
+
+
+@pytest.mark.parametrize(("frame", "name"), [(0, "the ambient frame"), (2, "LED frame 2")])
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_float_frames_are_refused_naming_the_frame(frame: int, name: str, bad: float) -> None:
+    """A NaN/inf pixel in a float (EXR) frame went into the synthesised image (msflash synthesize: exit 0,
+    NaN in the EXR; garbage in the 16-bit TIFF)."""
+    spec = FrameStackSpec(0, 100, 1.0, (1.0, 1.0), np.eye(2))
+    frames = [np.full((4, 4, 3), 50.0, dtype=np.float32) for _ in range(3)]
+    frames[frame][1, 2, 0] = bad
+    with pytest.raises(SpectralDataError, match=f"synthesis: {name} holds non-finite values"):
+        synthesize(frames[0], frames[1:], spec, np.array([0.5, 0.5]))
