@@ -275,10 +275,10 @@ def _write_flash_image(output: Path, image: np.ndarray, stack: analysis.FrameSta
         reason = (f"{blocking} is not a directory" if blocking is not None and not blocking.is_dir()
                   else err.strerror or str(err))
         raise UsageError(f"--out {output}: cannot be written ({reason}); expected a writable file path") from None
-    clipped = float(np.mean((raw >= white) | (raw <= 0)))
-    if clipped > 0:
-        progress(f"warning: {clipped:.1%} of the samples of {output} are clipped to the raw range 0…{white:g} at the "
-                 "ambient frame's exposure; .exr keeps the linear values")
+    clipped = int(np.count_nonzero((raw >= white) | (raw <= 0)))
+    if clipped:
+        progress(f"warning: {clipped} of the {raw.size} samples of {output} ({clipped / raw.size:.2%}) are clipped to the "
+                 f"raw range 0…{white:g} at the ambient frame's exposure; .exr keeps the linear values")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
