@@ -39,7 +39,8 @@ from acquisition.async_writer import AsyncSequenceWriter
 from acquisition.capture import preview_frames, run_capture, run_capture_with_flash
 from acquisition.cli_common import UsageError, dumps_json, progress
 from acquisition.cli_process import add_estimation_options
-from acquisition.errors import CaptureError
+from acquisition.cli_study import output_directory
+from acquisition.errors import CaptureError, OutputWriteError
 from acquisition.flash_session import FlashSession
 from acquisition.exposure import (
     ExposurePlan,
@@ -125,8 +126,21 @@ def _policy(args: argparse.Namespace) -> ExposurePolicy:
                          f"--max-lost {args.max_lost}: {err}") from err
 
 
-def _recorded_exposures(rig: Rig) -> tuple[float, tuple[float, ...], float | None] | None:
-    """A replay rig's recorded exposures (ambient, LEDs, flash): replay must ask for exactly those."""
+@dataclass(frozen=True)
+class _Recorded:
+    """A replay rig's recorded exposures and gains: replay must ask for exactly those."""
+
+    ambient_us: float
+    led_us: tuple[float, ...]
+    flash_us: float | None
+    """None when the recording has no flash frame (a sequence from ``msflash capture``)."""
+    ambient_gain: float
+    led_gains: tuple[float, ...]
+    flash_gain: float
+
+
+def _recorded(rig: Rig) -> _Recorded | None:
+    """What a replay rig's recording holds (None for other rigs)."""
     sequence = getattr(rig.camera, "sequence", None)
     if sequence is None or not rig.name.startswith("replay:"):
         return None
@@ -135,8 +149,10 @@ def _recorded_exposures(rig: Rig) -> tuple[float, tuple[float, ...], float | Non
     flash = sequence.indices("flash")
     if not ambient:
         return None
-    return (sequence.frames[ambient[0]].exposure_us, tuple(sequence.frames[i].exposure_us for i in leds),
-            sequence.frames[flash[0]].exposure_us if flash else None)
+    frames = sequence.frames
+    return _Recorded(frames[ambient[0]].exposure_us, tuple(frames[i].exposure_us for i in leds),
+                     frames[flash[0]].exposure_us if flash else None, frames[ambient[0]].gain,
+                     tuple(frames[i].gain for i in leds), frames[flash[0]].gain if flash else 1.0)
 
 
 def _plan_exposure(rig: Rig, args: argparse.Namespace) -> ExposurePlan:
@@ -152,9 +168,10 @@ def _plan_exposure(rig: Rig, args: argparse.Namespace) -> ExposurePlan:
         if not limits[0] <= exposure <= limits[1]:
             raise UsageError(f"--exposure {exposure:g}: outside the camera's range {limits[0]:g}–{limits[1]:g} µs")
         return ExposurePlan(exposure, (exposure,) * n_leds, nan, method, limits, policy, mode="fixed")
-    recorded = _recorded_exposures(rig)
-    if recorded is not None and len(recorded[1]) == n_leds:
-        return ExposurePlan(recorded[0], recorded[1], nan, method, limits, policy, mode="recorded")
+    recorded = _recorded(rig)
+    if recorded is not None and len(recorded.led_us) == n_leds:
+        return ExposurePlan(recorded.ambient_us, recorded.led_us, nan, method, limits, policy, mode="recorded",
+                            ambient_gain=recorded.ambient_gain, led_gains=recorded.led_gains)
     suggested = float(getattr(rig.camera, "suggested_exposure_us", None) or 10_000.0)
     if rig.name == "aravis-fake":  # test patterns: nothing to meter
         return ExposurePlan(suggested, (suggested,) * n_leds, nan, method, limits, policy, mode="suggested",
@@ -205,7 +222,8 @@ def _capture_led_sequence(rig: Rig, writer: SequenceWriter, plan: ExposurePlan, 
         _report_frame(step, frame, entry)
 
     capture_plan = CapturePlan.ambient_then_each_led(len(writer.sequence.leds), plan.ambient_exposure_us,
-                                                    led_exposures_us=plan.led_exposures_us, trigger=SYNC_MODES[sync])
+                                                    gain=plan.ambient_gain, led_exposures_us=plan.led_exposures_us,
+                                                    led_gains=plan.led_gains, trigger=SYNC_MODES[sync])
     entries = run_capture(rig.camera, rig.booth, capture_plan, writer, on_frame=keep)
     return _led_capture(rig, writer, plan, frames, entries, stamp["t"])
 
@@ -259,7 +277,7 @@ def _run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else _default_out()
     if (out / "sequence" / "sequence.json").exists():
         raise UsageError(f"--out {out}: already holds a run; expected a new directory")
-    out.mkdir(parents=True, exist_ok=True)
+    output_directory(out)  # a file in the way or no write access: one line before any device is opened
     spec = _rig_spec(args)
     progress(f"opening rig '{spec}'" + (f" (ambient {args.ambient}, scene {args.scene})" if spec == "sim" else ""))
     # SIGTERM unwinds like Ctrl-C, so the LEDs go off and the partial sequence stays readable.
@@ -286,8 +304,8 @@ def _run(args: argparse.Namespace) -> int:
         progress(f"warning: {note}")
     for warning in caught:
         progress(f"warning: {warning.message}")
-    progress(f"re-captured with the {args.mode} flash at {flash_us:.0f} µs: "
-             + ", ".join(f"{w:.3f}" for w in chosen.flash_weights))
+    progress((f"re-captured with the {args.mode} flash at {flash_us:.0f} µs: " if flash_us is not None
+              else f"the {args.mode} flash (synthesised only): ") + ", ".join(f"{w:.3f}" for w in chosen.flash_weights))
     if degenerate is not None:
         raise CaptureError(
             f"rig '{spec}': the ambient estimate is degenerate ({degenerate}): the LED-only images do not "
@@ -301,7 +319,11 @@ def _run(args: argparse.Namespace) -> int:
                            "led_snr_method": captured.snr_method}
     summary["decision_ms"] = round(decision_ms, 3)
     summary["elapsed_s"] = round(time.perf_counter() - started, 3)
-    (out / "run.json").write_text(dumps_json(summary) + "\n")
+    try:
+        (out / "run.json").write_text(dumps_json(summary) + "\n")
+    except OSError as err:
+        raise OutputWriteError(f"{out / 'run.json'}: could not be written ({err}); expected a writable disk with room "
+                               f"for it. The sequence is complete in {out / 'sequence'} and the report beside it") from err
     progress(f"done in {summary['elapsed_s']:.1f} s: {out}")
     print(out)
     return 0
@@ -389,13 +411,19 @@ def _run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposureP
         lambda mode, weights: analysis.solve_sequence_flash(sequence, mode, weights, args.target),
         estimate.ambient_weights, args.mode)
     levels = np.clip(solutions[args.mode].flash_weights, 0.0, 1.0)
+    recorded = _recorded(rig)
+    if exposure.mode == "recorded" and recorded is not None and recorded.flash_us is None:
+        progress("the recording has no flash frame (a sequence from 'msflash capture'): the flash is synthesised "
+                 "from the frames, not re-captured")
+        return estimate, solutions, caught, captured, None, stack, time.perf_counter()
     frames = captured.frames
     info = rig.camera.info  # read once: on a real camera each read is several feature round trips
     pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
     flash_us = _flash_exposure(rig, exposure, levels, lambda weights: flash_exposure(
         pixels[0], frames[0].exposure_us, pixels[1:], [f.exposure_us for f in frames[1:]],
         weights, info.black_level, info.white_level, exposure.exposure_range_us, exposure.policy))
-    flash_plan = CapturePlan.single(levels, flash_us, trigger=SYNC_MODES[args.sync])
+    flash_gain = recorded.flash_gain if exposure.mode == "recorded" and recorded is not None else 1.0
+    flash_plan = CapturePlan.single(levels, flash_us, gain=flash_gain, trigger=SYNC_MODES[args.sync])
     decided = time.perf_counter()
     run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=_report_frame)
     return estimate, solutions, caught, captured, flash_us, stack, decided
@@ -404,9 +432,9 @@ def _run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposureP
 def _flash_exposure(rig: Rig, plan: ExposurePlan, levels: np.ndarray, predict: Callable[[np.ndarray], float]) -> float:
     """The flash frame's exposure: fixed, recorded (replay), or ``predict(levels)`` from the frames in memory."""
     if plan.mode != "auto":
-        recorded = _recorded_exposures(rig)
-        if plan.mode == "recorded" and recorded is not None and recorded[2] is not None:
-            return recorded[2]
+        recorded = _recorded(rig)
+        if plan.mode == "recorded" and recorded is not None and recorded.flash_us is not None:
+            return recorded.flash_us
         return plan.ambient_exposure_us
     return predict(levels)
 
@@ -415,7 +443,7 @@ def _capture(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if (out / "sequence" / "sequence.json").exists():
         raise UsageError(f"--out {out}: already holds a sequence; expected a new directory")
-    out.mkdir(parents=True, exist_ok=True)
+    output_directory(out)
     with sigterm_as_exit(), _open(args) as rig:
         exposure = _plan_exposure(rig, args)
         _report_exposure(exposure, list(rig.led_spectra.names))

@@ -140,6 +140,10 @@ class ExposurePlan:
     mode: str = "auto"
     lost_block_fraction: float | None = None
     """Information criterion: the predicted fraction of the estimator's blocks saturated in some frame."""
+    ambient_gain: float = 1.0
+    """Analogue gain of the ambient frame (a replay's recorded gain; 1 otherwise)."""
+    led_gains: tuple[float, ...] | None = None
+    """Analogue gain of each LED frame (a replay's recorded gains), or None for ``ambient_gain``."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (for the sequence's ``extra`` and run.json)."""

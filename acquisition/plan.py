@@ -67,14 +67,19 @@ class CapturePlan:
     @classmethod
     def ambient_then_each_led(
         cls, n_leds: int, exposure_us: float, level: float = 1.0, gain: float = 1.0,
-        led_exposures_us: Sequence[float] | None = None, **timing: float | str,
+        led_exposures_us: Sequence[float] | None = None, led_gains: Sequence[float] | None = None,
+        **timing: float | str,
     ) -> CapturePlan:
-        """The paper's sequence: one ambient frame, then ambient + each LED alone."""
+        """The paper's sequence: one ambient frame, then ambient + each LED alone.
+
+        ``gain`` is the ambient frame's (and every LED frame's unless ``led_gains`` gives each its own).
+        """
         steps = [CaptureStep(0, "ambient", (0.0,) * n_leds, float(exposure_us), gain)]
         for led in range(n_leds):
             levels = tuple(level if i == led else 0.0 for i in range(n_leds))
             exposure = float(led_exposures_us[led]) if led_exposures_us is not None else float(exposure_us)
-            steps.append(CaptureStep(led + 1, "led", levels, exposure, gain))
+            steps.append(CaptureStep(led + 1, "led", levels, exposure,
+                                     float(led_gains[led]) if led_gains is not None else gain))
         return cls(tuple(steps), **timing)  # type: ignore[arg-type]
 
     @classmethod

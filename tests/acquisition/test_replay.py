@@ -141,20 +141,28 @@ def test_a_shared_sample_without_a_camera_serial_is_replayed_as_is(tmp_path: Pat
         np.testing.assert_array_equal(replayed.load_frame(index), recorded.load_frame(index))
 
 
-def test_run_on_a_recording_without_a_flash_frame_says_so(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    """The shared sample holds ambient + 7 LED frames (as 'msflash capture' records): 'run' replays them,
-    then cannot replay a flash the recording lacks; the one error line says why and what to use."""
+@pytest.mark.parametrize("name", ["sample-rgb-tungsten", "sample-bayer-fluorescent-12bit"])
+def test_run_replays_a_recording_without_a_flash_frame_and_synthesises_the_flash(
+        tmp_path: Path, capsys: pytest.CaptureFixture, name: str) -> None:
+    """The shared samples hold ambient + 7 LED frames (as 'msflash capture' records; the Bayer one
+    with gains 1.5 and 1): 'run' replays them at their recorded exposures *and gains*, estimates,
+    solves, says that the flash is synthesised only, and writes the whole report."""
     from tests.helpers import SAMPLES_DIR
 
-    sample = SAMPLES_DIR / "sample-rgb-tungsten"
+    sample = SAMPLES_DIR / name
     if not sample.is_dir():
         pytest.skip(f"shared sample missing: {sample}")
-    status = main(["run", "--rig", f"replay:{sample}", "--out", str(tmp_path / "run")])
-    err = capsys.readouterr().err.strip().splitlines()
-    assert status == 1
-    assert err[-1].startswith(f"msflash: error: {sample / 'sequence.json'}: step 0 (flash): the recording has "
-                              "no frame 8: its 8 frames (1 ambient, 7 led) are all served")
-    assert "this recording has no flash frame" in err[-1] and "'msflash estimate'" in err[-1]
+    out = tmp_path / "run"
+    assert main(["run", "--rig", f"replay:{sample}", "--out", str(out)]) == 0
+    assert "the recording has no flash frame" in capsys.readouterr().err
+    replayed, recorded = read_sequence(out / "sequence"), read_sequence(sample)
+    assert replayed.complete and not replayed.indices("flash")
+    assert [(f.role, f.exposure_us, f.gain) for f in replayed.frames] == [
+        (f.role, f.exposure_us, f.gain) for f in recorded.frames]
+    summary = json.loads((out / "run.json").read_text())
+    assert summary["exposure"]["flash_exposure_us"] is None and summary["exposure"]["mode"] == "recorded"
+    assert (out / "complementary.exr").is_file() and (out / "matching.exr").is_file()
+    assert "flash-capture" not in summary["previews"]
 
 
 @pytest.mark.parametrize("sync", ["host", "booth", "camera"])
