@@ -19,6 +19,7 @@ from importlib.metadata import PackageNotFoundError, version
 from acquisition.cli_common import UsageError
 from acquisition.errors import CameraError, CaptureError, RecordingError
 from processing.errors import SolverError, SpectralDataError
+from led_controller.booth import Terminated
 
 COMMAND_MODULES = (
     "acquisition.cli_process",
@@ -104,8 +105,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         return int(args.handler(args))
     except KeyboardInterrupt:
-        sys.stderr.write("msflash: interrupted; LEDs off, partial data kept\n")
+        sys.stderr.write("msflash: interrupted; LEDs off; frames captured so far are kept (marked incomplete)\n")
         return 130
+    except Terminated as stop:
+        sys.stderr.write("msflash: terminated (SIGTERM); LEDs off; frames captured so far are kept (marked "
+                         "incomplete)\n")
+        return int(stop.code) if isinstance(stop.code, int) else 143
     except BrokenPipeError:
         # The reader of stdout went away (``msflash estimate SEQ | head``): stop quietly, and keep
         # Python from complaining again when it flushes stdout at exit.

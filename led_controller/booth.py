@@ -726,9 +726,13 @@ def _open_error(url: str, err: serial.SerialException) -> BoothError:
     return BoothError(f"booth {url}: cannot open ({text}); expected a serial device or pyserial URL")
 
 
+class Terminated(SystemExit):
+    """SIGTERM, raised by :func:`sigterm_as_exit` (exit status 128 + 15): the CLI says so in one line."""
+
+
 @contextlib.contextmanager
 def sigterm_as_exit() -> Iterator[None]:
-    """Turn SIGTERM into ``SystemExit`` while active, so ``with LedBooth…`` blocks clean up.
+    """Turn SIGTERM into ``SystemExit`` (:class:`Terminated`) while active, so ``with LedBooth…`` blocks clean up.
 
     Only effective in the main thread (elsewhere it does nothing): Python's default SIGTERM
     action kills the process without running ``__exit__``, which would leave LEDs on until
@@ -739,7 +743,7 @@ def sigterm_as_exit() -> Iterator[None]:
         return
 
     def _raise(signum: int, _frame: object) -> None:
-        raise SystemExit(128 + signum)
+        raise Terminated(128 + signum)
 
     previous = signal.signal(signal.SIGTERM, _raise)
     try:
