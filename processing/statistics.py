@@ -246,6 +246,26 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
     return sums, maxima
 
 
+def non_finite_frames_error(rows: Sequence[np.ndarray] | np.ndarray) -> SpectralDataError:
+    """The error for frame rows ``[F_1 … F_n, A]`` (the statistics' layout) of which some hold NaN or inf.
+
+    Names the frames (the ambient frame, LED frame k counted from 1 in sequence order); searched
+    only once a cheap check has failed.
+    """
+    bad = [row for row in range(len(rows)) if not np.isfinite(rows[row]).all()]
+    return _non_finite_error([_frame_name(row, len(rows) - 1) for row in bad])
+
+
+def _frame_name(row: int, n_led_frames: int) -> str:
+    """Row ``row`` of ``[F_1 … F_n, A]`` in words: ``LED frame k`` (from 1) or ``the ambient frame``."""
+    return "the ambient frame" if row == n_led_frames else f"LED frame {row + 1}"
+
+
+def _non_finite_error(names: list[str]) -> SpectralDataError:
+    return SpectralDataError(f"frame stack: {', '.join(names) or 'a frame'} holds non-finite values (NaN or inf); "
+                             "expected finite pixels")
+
+
 def accumulate_statistics(
     ambient: np.ndarray,
     led_frames: Sequence[np.ndarray],
@@ -337,9 +357,7 @@ def accumulate_statistics(
         view[n_led_frames + 1] = 1.0
         brightest = np.maximum.reduce(view[:n_rows - 1], axis=0)
         if not np.isfinite(brightest).all():
-            raise SpectralDataError(
-                "frame stack: a frame holds non-finite values (NaN or inf); expected finite pixels"
-            )
+            raise non_finite_frames_error(view[:n_rows - 1])
         saturated = brightest[:, 0] >= white
         for channel in range(1, n_channels):
             saturated |= brightest[:, channel] >= white
@@ -445,9 +463,12 @@ class BlockRows:
         if row in self._filled or not 0 <= row <= self.n_led_frames:
             raise SpectralDataError(f"frame stack: row {row} is taken or out of range; expected each of "
                                     f"0…{self.n_led_frames} once")
-        _block_sums_into(plane, self.factor, self.rows[row].reshape(self.block_shape))
         if np.issubdtype(plane.dtype, np.floating):
+            # NaN/inf refused before the block sums, whose gather products would warn about them first.
+            if not np.isfinite(plane.sum()):
+                raise _non_finite_error([_frame_name(row, self.n_led_frames)])
             self._floating = True  # only ever set: safe when worker threads add frames
+        _block_sums_into(plane, self.factor, self.rows[row].reshape(self.block_shape))
         # One contiguous max per frame finds the frames that saturate at all; only those build masks.
         saturated = saturated_blocks(plane, self.factor, self.white_level) \
             if _may_saturate(plane, self.white_level) else None
@@ -514,7 +535,7 @@ class BlockRows:
             )
         # Integer sums are always finite; for float frames one sum flags NaN/inf (exact check only then).
         if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
-            raise SpectralDataError("frame stack: a frame holds non-finite values (NaN or inf); expected finite pixels")
+            raise non_finite_frames_error(rows[:-1])
         if self._moments is not None:
             moments = self._moments  # incremental: saturated blocks were left out as they came (_drop)
         else:

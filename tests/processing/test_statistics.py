@@ -143,3 +143,20 @@ def test_rejects_bad_input() -> None:
         FrameStackSpec(0, 10, 1.0, (1.0, 1.0), np.array([[1.0, 1.0], [0.5, 0.5]]))
     with pytest.raises(SpectralDataError, match="white_level"):
         FrameStackSpec(10, 10, 1.0, (1.0,), np.eye(1))
+
+
+@pytest.mark.parametrize("bin_factor", [1, 2])
+@pytest.mark.parametrize(("frame", "name"), [(0, "the ambient frame"), (2, "LED frame 2")])
+def test_non_finite_frame_is_named(bin_factor: int, frame: int, name: str) -> None:
+    """'a frame holds non-finite values' did not say which: the ambient, or which LED frame."""
+    from processing.local import tile_statistics
+
+    rng = np.random.default_rng(9)
+    ambient, leds, spec = random_stack(rng, (8, 8, 3), np.eye(3), white=1e9)
+    frames = [ambient.astype(float), *(led.astype(float) for led in leds)]
+    frames[frame][3, 4, 1] = np.inf if frame else np.nan
+    message = f"frame stack: {name} holds non-finite values"
+    with pytest.raises(SpectralDataError, match=message):
+        accumulate_statistics(frames[0], frames[1:], spec, bin_factor=bin_factor)
+    with pytest.raises(SpectralDataError, match=message):
+        tile_statistics(frames[0], frames[1:], spec, 2, bin_factor=bin_factor)
