@@ -252,7 +252,7 @@ def test_noise_free_uniform_scene_stays_global_though_a_local_fit_cuts_its_tiny_
     """Without noise the global model's held-out error is only the misfit of an ambient outside the
     LEDs' span (relative residual ~1 %); neighbours' fits cut it by 20–30 %, which the ratio alone
     would take for a second ambient. The cut is ~10⁻⁵ of the ambient image's energy, far below
-    the 2.5·10⁻³ a local model must explain."""
+    the 10⁻³ a local model must explain."""
     s = make_scenario("uniform", seed, SHAPE, camera=camera_name, noise=False)
     t = tile_statistics(s.ambient, s.led_frames, s.spec, TILES, bin_factor=4)
     selection = select_model(t, s.led_spectra)
