@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -27,15 +28,17 @@ STUDIES = ("table1", "surfaces", "cameras", "xy", "failure", "pareto")
 """Study names accepted by ``msflash study``."""
 
 
+# The option types raise argparse.ArgumentTypeError, whose message argparse prints after the option's
+# name; a ValueError (UsageError is one) would print "invalid _counts value: '0'" instead.
 def _alpha(text: str) -> float | str | list[float]:
     if text in ("auto", "paper"):
         return text
     try:
         values = [float(part) for part in text.split(",")]
     except ValueError:
-        raise UsageError(f"--alpha '{text}': expected a number ≥ 0, a comma-separated list, 'auto' or 'paper'") from None
-    if not all(value >= 0 for value in values):
-        raise UsageError(f"--alpha {text}: expected values ≥ 0")
+        raise argparse.ArgumentTypeError(f"'{text}': expected a number ≥ 0, a comma-separated list, 'auto' or 'paper'") from None
+    if not all(value >= 0 and math.isfinite(value) for value in values):
+        raise argparse.ArgumentTypeError(f"'{text}': expected finite values ≥ 0")
     return values[0] if len(values) == 1 else values
 
 
@@ -43,16 +46,16 @@ def _counts(text: str) -> list[int]:
     try:
         values = [int(part) for part in text.split(",")]
     except ValueError:
-        raise UsageError(f"'{text}': expected comma-separated whole numbers") from None
+        raise argparse.ArgumentTypeError(f"'{text}': expected comma-separated whole numbers") from None
     if not values or min(values) < 1:
-        raise UsageError(f"'{text}': expected whole numbers ≥ 1")
+        raise argparse.ArgumentTypeError(f"'{text}': expected whole numbers ≥ 1")
     return values
 
 
 def _names(text: str) -> list[str]:
     values = [part.strip() for part in text.split(",") if part.strip()]
     if not values:
-        raise UsageError(f"'{text}': expected comma-separated names")
+        raise argparse.ArgumentTypeError(f"'{text}': expected comma-separated names")
     return values
 
 
@@ -81,8 +84,9 @@ def _mapper(scheduler: str, workers: int | None) -> Iterator[Callable[[Callable[
     else:
         try:
             client = Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError) as err:
-            raise UsageError(f"--scheduler {scheduler}: cannot connect ({err}); expected a dask scheduler address") from None
+        except (OSError, TimeoutError, ValueError) as err:  # ValueError: not an address at all
+            raise UsageError(f"--scheduler {scheduler}: cannot connect ({err}); expected 'local', 'none' or a dask "
+                             "scheduler address (tcp://HOST:PORT)") from None
         progress(f"dask: scheduler {scheduler}")
 
     def mapper(function: Callable[..., Any], items: Sequence[Any]) -> Iterator[Any]:

@@ -139,6 +139,32 @@ def test_cli_rejects_bad_input():
         args.handler(args)
 
 
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--leds", "0"], "argument --leds: '0': expected whole numbers ≥ 1"),
+    (["--leds", "3,x"], "argument --leds: '3,x': expected comma-separated whole numbers"),
+    (["--alpha", "-1"], "argument --alpha: '-1': expected finite values ≥ 0"),
+    (["--alpha", "inf"], "argument --alpha: 'inf': expected finite values ≥ 0"),
+    (["--ambients", ","], "argument --ambients: ',': expected comma-separated names"),
+])
+def test_cli_option_errors_say_what_is_expected(argv, message):
+    """They read "invalid _counts value: '0'" (the Python function's name, nothing expected); inf was accepted."""
+    from acquisition.cli_common import UsageError
+
+    with pytest.raises(UsageError) as caught:
+        _parser().parse_args(["study", "table1", *argv])
+    assert str(caught.value) == message
+
+
+def test_cli_scheduler_that_is_not_an_address_is_bad_input():
+    """'--scheduler bogus' ended in a ValueError traceback from dask's address parser."""
+    pytest.importorskip("distributed")
+    from acquisition.cli_common import UsageError
+
+    args = _parser().parse_args(["study", "table1", "--scheduler", "bogus", "--cameras", "1", "--illuminants", "1"])
+    with pytest.raises(UsageError, match="--scheduler bogus: cannot connect .*expected 'local', 'none' or a dask"):
+        args.handler(args)
+
+
 def test_cli_runs_on_a_loopback_dask_scheduler(capsys):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", host="127.0.0.1",
