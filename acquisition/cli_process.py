@@ -308,7 +308,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     synth = subparsers.add_parser("synthesize", help="synthesise the computational flash image from a sequence")
     synth.add_argument("sequence", help="sequence directory (format v1)")
-    synth.add_argument("--weights", required=True, help="flash weights W1,W2,… (one per LED, full-drive units)")
+    synth.add_argument("--weights", required=True,
+                       help="flash weights W1,W2,… (one per LED, full-drive units; a negative first weight needs "
+                            "the = form, --weights=-0.5,…, or argparse reads it as an option)")
     synth.add_argument("--out", required=True, help="output image: .exr (linear float) or .tiff (16-bit raw at the ambient exposure)")
     synth.add_argument("--json", action="store_true", help="print one JSON object")
     synth.set_defaults(handler=_synthesize)
