@@ -80,7 +80,9 @@ def resolve_light(spec: str, grid: WavelengthGrid) -> Spectra:
             spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
             light = spectra.select([0]).resample(grid, outside="error")
         except (SpectralDataError, ValueError) as err:
-            raise CalibrationError(f"{spec}: {err}") from err
+            # The table's errors start with its path already ("x.csv:3: …"); only others get it prefixed.
+            text = str(err)
+            raise CalibrationError(text if text.startswith(str(path)) else f"{spec}: {text}") from err
     else:
         try:
             light = (datasets.ambient_spectrum(spec, grid) if spec in datasets.AMBIENTS

@@ -115,8 +115,15 @@ def test_bad_command_lines_exit_2_with_one_line(rgb_sequences, tmp_path, capsys,
 def test_bad_light_csv_names_the_file(tmp_path):
     bad = tmp_path / "lamp.csv"
     bad.write_text("wavelength_nm,value\n400,1\n410,nan\n")
-    with pytest.raises(CalibrationError, match="lamp.csv"):
+    with pytest.raises(CalibrationError, match="lamp.csv") as caught:
         resolve_light(str(bad), datasets.macbeth().grid)
+    # Named once, with the line: it read "…/lamp.csv: …/lamp.csv:3: …" (prefixed twice).
+    assert str(caught.value).startswith(f"{bad}:3: column 'value' is missing")
+    narrow = tmp_path / "narrow.csv"
+    narrow.write_text("wavelength_nm,value\n440,1\n450,2\n460,1\n")
+    with pytest.raises(CalibrationError) as caught:
+        resolve_light(str(narrow), datasets.macbeth().grid)
+    assert str(caught.value).count(str(narrow)) == 1 and "cannot resample" in str(caught.value)
 
 
 def test_unusable_frames_are_refused(rgb_sequences):
