@@ -291,6 +291,11 @@ def _dark(args: argparse.Namespace) -> int:
 def _linearity(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
     indices = [i for i, f in enumerate(sequence.frames) if f.role != "dark"]
+    lights = sorted({sequence.frames[i].led_levels for i in indices})
+    if len(lights) > 1:  # e.g. a chart sequence: each frame under other LEDs, so no common response curve
+        raise UsageError(f"{sequence.path}: the lit frames are under {len(lights)} different illuminations (LED levels "
+                         f"{', '.join(str(list(levels)) for levels in lights[:3])}{', …' if len(lights) > 3 else ''}); "
+                         "expected one illumination at several exposures of a uniform target")
     if len(indices) < 3:
         raise UsageError(f"{sequence.path}: {len(indices)} lit frames; expected at least 3 exposures of a uniform target")
     calibration = load_or_new(args.out)

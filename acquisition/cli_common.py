@@ -8,6 +8,8 @@ failures raise the package error roots (exit 1). ``--json`` output goes through 
 
 from __future__ import annotations
 
+import argparse
+
 import json
 import math
 import sys
@@ -23,13 +25,17 @@ class UsageError(ValueError):
 
 
 def positive_int(text: str) -> int:
-    """argparse type: a whole number ≥ 1 (bad input is a UsageError, exit 2)."""
+    """argparse type: a whole number ≥ 1 (argparse names the option and exits 2).
+
+    >>> positive_int("3")
+    3
+    """
     try:
         value = int(text)
     except ValueError:
-        raise UsageError(f"'{text}': expected a whole number ≥ 1") from None
+        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ 1") from None
     if value < 1:
-        raise UsageError(f"{value}: expected a whole number ≥ 1")
+        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ 1")
     return value
 
 
