@@ -138,6 +138,8 @@ def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -
     grid = sequence.grid
     leds = sequence.leds
     if calibration.led_spectra is not None:
+        _require_coverage(directory, calibration.id, "LED spectra", calibration.led_spectra.wavelengths_nm,
+                          sequence.led_spectra())
         spectra = calibration.led_spectra.resample(grid, outside="zero").to_unit(sequence.spectral_unit)
         missing = [led.name for led in leds if led.name not in spectra.names]
         if missing:
@@ -147,10 +149,34 @@ def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -
         notes.append(f"LED spectra from calibration {calibration.id} ({directory}) replace the sequence's")
     camera = sequence.camera
     if calibration.camera_responsivities is not None:
+        lights = replace(sequence, leds=leds).led_spectra()  # the LEDs the responsivities will meet
+        _require_coverage(directory, calibration.id, "camera responsivities",
+                          calibration.camera_responsivities.wavelengths_nm, lights)
         curves = calibration.camera_responsivities.resample(grid, outside="zero").to_unit(sequence.spectral_unit)
         camera = replace(camera, responsivity={name: curves.column(name) for name in curves.names})
         notes.append(f"camera responsivities from calibration {calibration.id} ({directory}) replace the sequence's")
     return replace(sequence, leds=leds, camera=camera), notes
+
+
+COVERAGE_TOLERANCE = 0.01
+"""Largest share of the LEDs' energy a calibration's wavelength range may leave out."""
+
+
+def _require_coverage(directory: str | Path, calibration_id: str, what: str, calibrated_nm: np.ndarray,
+                      leds: Spectra) -> None:
+    """Refuse a calibration whose range misses more than 1 % of an LED's energy (it would be zero-filled there)."""
+    low, high = float(calibrated_nm[0]), float(calibrated_nm[-1])
+    wavelengths = leds.wavelengths_nm
+    outside = (wavelengths < low - 1e-9) | (wavelengths > high + 1e-9)
+    energy = np.abs(leds.values)
+    totals = energy.sum(axis=0)
+    shares = np.divide(energy[outside].sum(axis=0), totals, out=np.zeros_like(totals), where=totals > 0)
+    worst = int(np.argmax(shares)) if shares.size else 0
+    if shares.size and shares[worst] > COVERAGE_TOLERANCE:
+        raise RecordingError(
+            f"{directory}: calibration {calibration_id} has {what} from {low:g} to {high:g} nm, but LED "
+            f"'{leds.names[worst]}' puts {100 * shares[worst]:.0f} % of its light outside that range; expected a "
+            f"calibration covering the sequence's LEDs ({float(wavelengths[0]):g}–{float(wavelengths[-1]):g} nm)")
 
 
 def led_spectra_photons(sequence: Sequence) -> Spectra:

@@ -16,6 +16,7 @@ import pytest
 from acquisition import analysis
 from acquisition.cli import main
 from acquisition.rig import _emulator_for, calibration_reference
+from acquisition.errors import RecordingError
 from acquisition.sequence_format import read_sequence
 from calibration.files import CalibrationSet, load_calibration, save_calibration
 from led_controller import serve_on_pty
@@ -68,3 +69,25 @@ def test_only_msflash_calibrations_are_referenced(calibration: Path, tmp_path: P
     assert calibration_reference(calibration) == (load_calibration(calibration).id, calibration)
     assert calibration_reference(None) is None
     assert calibration_reference(tmp_path) is None  # led_spectra.csv folders carry no id
+
+
+@pytest.mark.parametrize(("section", "start_nm", "message"), [
+    ("led_spectra", 500, "has LED spectra from 500 to 700 nm, but LED 'led440' puts"),
+    ("camera_responsivities", 550, "has camera responsivities from 550 to 700 nm, but LED 'led4[48]0' puts"),
+])
+def test_a_calibration_that_misses_the_leds_light_is_refused(tmp_path: Path, section: str, start_nm: int,
+                                                             message: str) -> None:
+    """It used to be zero-filled outside its range: a 500–700 nm LED calibration gave led440 a
+    spectrum of 0 below 490 nm, and estimate exited 0."""
+    sequence = read_sequence(Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent")
+    leds = sequence.led_spectra().to_unit("energy")
+    camera = sequence.camera_responsivities().to_unit("energy")  # type: ignore[union-attr]
+    spectra = {"led_spectra": leds, "camera_responsivities": camera}[section]
+    from processing.spectra import WavelengthGrid
+
+    narrow = spectra.resample(WavelengthGrid(start_nm, 700, 10), outside="zero")
+    save_calibration(CalibrationSet(**{section: narrow}), tmp_path / "cal")
+    with pytest.raises(RecordingError, match=message):
+        analysis.apply_calibration(sequence, tmp_path / "cal")
+    save_calibration(CalibrationSet(**{section: spectra}), tmp_path / "full")  # covering: accepted
+    assert analysis.apply_calibration(sequence, tmp_path / "full")[1]
