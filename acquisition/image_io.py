@@ -26,6 +26,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from acquisition.errors import RecordingError
+from processing.file_modes import default_file_mode
 
 INTEGER_SUFFIX = ".tiff"
 """Suffix of integer frames (16-bit TIFF, uncompressed)."""
@@ -279,6 +280,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | 
     # The temporary name keeps the real suffix and starts with a dot, so a crash leaves an
     # obviously stray file that no sequence lists, never a truncated frame under the real name.
     handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    os.fchmod(handle, default_file_mode())  # mkstemp's 0600 would keep other lab users out
     os.close(handle)
     try:
         output = oiio.ImageOutput.create(format_name)

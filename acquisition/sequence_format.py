@@ -39,6 +39,7 @@ import numpy as np
 from acquisition.errors import RecordingError
 from acquisition.image_io import image_suffix, read_image, read_image_header, write_image
 from processing.errors import SpectralDataError
+from processing.file_modes import default_file_mode
 from processing.spectra import Spectra, WavelengthGrid
 
 SEQUENCE_FORMAT = "msflash-sequence"
@@ -599,6 +600,7 @@ def _json_text(path: Path, document: dict) -> str:
 def _replace_json(path: Path, document: dict | str) -> None:
     text = document if isinstance(document, str) else _json_text(path, document)
     handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.fchmod(handle, default_file_mode())  # mkstemp's 0600 would keep other lab users out
     try:
         with os.fdopen(handle, "w", encoding="utf-8") as stream:
             stream.write(text)

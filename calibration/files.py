@@ -36,6 +36,7 @@ import numpy as np
 from calibration.errors import CalibrationError
 from processing.datasets import load_spectra_csv
 from processing.errors import SpectralDataError
+from processing.file_modes import default_file_mode
 from processing.spectra import Spectra
 
 FORMAT = "msflash-calibration"
@@ -97,6 +98,7 @@ def _plain(value: Any) -> Any:
 def _write_text(path: Path, text: str) -> None:
     """Write atomically (temporary file in the same directory, then rename)."""
     handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.fchmod(handle, default_file_mode())  # mkstemp's 0600 would keep other lab users out
     try:
         with os.fdopen(handle, "w", encoding="utf-8") as stream:
             stream.write(text)
