@@ -9,10 +9,11 @@ failures raise the package error roots (exit 1). ``--json`` output goes through 
 from __future__ import annotations
 
 import argparse
-
 import json
 import math
+import os
 import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -71,3 +72,22 @@ def progress(message: str) -> None:
     """A progress or diagnostic line on stderr (stdout stays for data)."""
     sys.stderr.write(f"msflash: {message}\n")
     sys.stderr.flush()
+
+
+def output_directory(path: str | os.PathLike | None) -> Path | None:
+    """``--out DIR`` created before any work, or a UsageError naming it (None stays None).
+
+    Studies and evaluations write their folder at the end: a path that cannot be a folder (a file
+    there, or under it) must fail before minutes of computing, as one line, not a traceback.
+    """
+    if path is None or path == "":
+        return None
+    out = Path(path)
+    blocking = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), None)
+    if blocking is not None:
+        raise UsageError(f"--out {out}: {blocking} is a file; expected a folder (or a path where one can be made)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise UsageError(f"--out {out}: cannot create the folder ({err.strerror or err}); expected a writable path") from None
+    return out

@@ -47,8 +47,7 @@ from typing import Any
 import numpy as np
 
 from acquisition import analysis
-from acquisition.cli_common import UsageError, dumps_json, print_json, progress
-from acquisition.cli_study import output_directory
+from acquisition.cli_common import UsageError, dumps_json, output_directory, print_json, progress
 from acquisition.html_report import HtmlReport
 from acquisition.image_io import write_image
 from acquisition.sequence_format import Sequence, read_sequence

@@ -5,8 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from acquisition.cli_common import positive_int, print_json, progress
-from acquisition.cli_study import output_directory
+from acquisition.cli_common import output_directory, positive_int, print_json, progress
 from processing.local import DEFAULT_TILES
 
 

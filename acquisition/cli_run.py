@@ -37,9 +37,8 @@ from acquisition import analysis, report
 from acquisition.camera import RawFrame
 from acquisition.async_writer import AsyncSequenceWriter
 from acquisition.capture import preview_frames, run_capture, run_capture_with_flash
-from acquisition.cli_common import UsageError, dumps_json, progress
+from acquisition.cli_common import UsageError, dumps_json, output_directory, progress
 from acquisition.cli_process import add_estimation_options
-from acquisition.cli_study import output_directory
 from acquisition.errors import CaptureError, OutputWriteError
 from acquisition.flash_session import FlashSession
 from acquisition.exposure import (

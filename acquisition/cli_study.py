@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from acquisition.cli_common import UsageError, dumps_json, positive_int, print_json, progress
+from acquisition.cli_common import UsageError, dumps_json, output_directory, positive_int, print_json, progress
 from processing.ambient import AMBIENT_METHODS
 
 STUDIES = ("table1", "surfaces", "cameras", "xy", "failure", "pareto")
@@ -100,25 +100,6 @@ def _mapper(scheduler: str, workers: int | None) -> Iterator[Callable[[Callable[
         client.close()
         if cluster is not None:
             cluster.close()
-
-
-def output_directory(path: str | os.PathLike | None) -> Path | None:
-    """``--out DIR`` created before any work, or a UsageError naming it (None stays None).
-
-    Studies and evaluations write their folder at the end: a path that cannot be a folder (a file
-    there, or under it) must fail before minutes of computing, as one line, not a traceback.
-    """
-    if path is None or path == "":
-        return None
-    out = Path(path)
-    blocking = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), None)
-    if blocking is not None:
-        raise UsageError(f"--out {out}: {blocking} is a file; expected a folder (or a path where one can be made)")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise UsageError(f"--out {out}: cannot create the folder ({err.strerror or err}); expected a writable path") from None
-    return out
 
 
 def _run(args: argparse.Namespace) -> int:
