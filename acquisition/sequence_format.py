@@ -682,6 +682,11 @@ class SequenceWriter:
         self._path = self._directory / SEQUENCE_FILE
         if self._path.exists():
             raise RecordingError(f"{self._path}: already exists; expected a new or empty directory for the sequence")
+        frames_dir = self._directory / FRAMES_DIR
+        if frames_dir.is_dir() and any(frames_dir.iterdir()):
+            # Frame files are named by index: they would be overwritten without a word.
+            raise RecordingError(f"{frames_dir}: holds files but there is no {SEQUENCE_FILE}; expected a new or empty "
+                                 "directory for the sequence (move those files away first)")
         self._sequence = Sequence(
             self._directory, False, np.asarray(list(wavelengths_nm), dtype=float), spectral_unit, camera,
             tuple(leds), (), dict(extra or {}),

@@ -565,6 +565,20 @@ def test_writer_refuses_an_existing_sequence_and_writes_after_finish(valid: Path
         writer.add_frame(_pixels(), "led", (1, 0, 0), 1000)
 
 
+def test_writer_refuses_frame_files_without_a_sequence(tmp_path: Path) -> None:
+    """Frame files are named by index: a frames/ folder left without its sequence.json (copied,
+    half deleted) would have been overwritten without a word."""
+    stray = tmp_path / "s" / "frames" / "000-ambient.tiff"
+    stray.parent.mkdir(parents=True)
+    stray.write_bytes(b"someone's frame")
+    with pytest.raises(RecordingError, match=rf"^{stray.parent}: holds files but there is no sequence.json; "
+                                             "expected a new or empty directory"):
+        _writer(tmp_path / "s")
+    assert stray.read_bytes() == b"someone's frame" and not (tmp_path / "s" / "sequence.json").exists()
+    (tmp_path / "t" / "frames").mkdir(parents=True)  # an empty frames/ folder is fine
+    _writer(tmp_path / "t").add_frame(_pixels(), "ambient", (0, 0, 0), 1000)
+
+
 def test_finish_without_ambient_keeps_the_sequence_partial(tmp_path: Path) -> None:
     directory = tmp_path / "noamb"
     writer = _writer(directory)
