@@ -60,7 +60,7 @@ from processing.image_formation import chart_scene
 from processing.render import camera_to_srgb_linear, camera_to_xyz_matrix, demosaic_bilinear, encode_srgb
 from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from processing.statistics import FrameStackSpec, accumulate_statistics
-from processing.synthesis import linearise, synthesize
+from processing.synthesis import synthesize
 
 CHARTS = ("macbeth",)
 """Charts ``evaluate`` knows the layout and reference of."""
@@ -322,12 +322,6 @@ def write_outputs(out: Path, name: str, image: np.ndarray, context: ColourContex
 
 
 # -- evaluate a sequence ----------------------------------------------------------------------
-def _linear_frame(sequence: Sequence, index: int) -> tuple[np.ndarray, np.ndarray]:
-    frame = sequence.frames[index]
-    return linearise(sequence.load_frame(index), sequence.camera.black_level, sequence.camera.white_level,
-                     frame.exposure_us, frame.gain)
-
-
 def _solve_both(ambient_weights: np.ndarray, leds: Spectra, camera: Spectra, target: Spectra, bounds: str
                 ) -> tuple[dict[str, FlashSolution], list[str]]:
     with warnings.catch_warnings(record=True) as caught:
@@ -349,7 +343,7 @@ def evaluate_sequence(sequence: Sequence, out: Path, chart: str = "macbeth", pat
     leds = analysis.led_spectra_photons(sequence)
     stack = analysis.load_frame_stack(sequence)
     cfa = sequence.camera.cfa
-    ambient, saturated = _linear_frame(sequence, stack.ambient_index)
+    ambient, saturated = sequence.load_linear_frame(stack.ambient_index)
     # Find and check the layout before any processing, so a wrong --patch-px fails at once.
     found = sequence_layout(sequence, chart, patch_px, border_px, margin_px)
     check_layout(ambient, found.build(ambient.shape[:2], saturated), cfa)
@@ -366,7 +360,7 @@ def evaluate_sequence(sequence: Sequence, out: Path, chart: str = "macbeth", pat
         saturated |= synth_saturated
     for index in sequence.indices("flash"):
         # A re-captured flash frame: named after the solved mix its LED levels are closest to.
-        image, flash_saturated = _linear_frame(sequence, index)
+        image, flash_saturated = sequence.load_linear_frame(index)
         levels = np.asarray(sequence.frames[index].led_levels, dtype=float)
         closest = min(solutions, key=lambda m: float(np.linalg.norm(np.clip(solutions[m].flash_weights, 0, 1) - levels)))
         name = f"{closest}-capture" if f"{closest}-capture" not in images else f"flash-{index}"

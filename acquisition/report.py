@@ -22,7 +22,7 @@ from processing.flash import FlashSolution
 from processing.metrics import spectrum_rmse
 from processing.render import camera_to_xyz_matrix, demosaic_superpixel, srgb_preview
 from processing.spectra import Spectra
-from processing.synthesis import linearise, synthesize
+from processing.synthesis import synthesize
 
 
 def _pyplot():  # noqa: ANN202 - matplotlib is imported lazily, with the non-interactive backend
@@ -57,13 +57,6 @@ def _camera_to_xyz(sequence: Sequence) -> np.ndarray | None:
     chart = datasets.macbeth().resample(grid, outside="edge")
     return camera_to_xyz_matrix(responsivities.to_unit("photons"), chart,
                                 datasets.illuminant("D65", grid).to_unit("photons"))
-
-
-def _linearise(sequence: Sequence, index: int) -> np.ndarray:
-    frame = sequence.frames[index]
-    linear, _ = linearise(sequence.load_frame(index), sequence.camera.black_level, sequence.camera.white_level,
-                          frame.exposure_us, frame.gain)
-    return linear
 
 
 def plot_spectra(path: Path, sequence: Sequence, estimate: AmbientEstimate, solutions: dict[str, FlashSolution],
@@ -138,7 +131,7 @@ def _write_run_report(out: Path, sequence: Sequence, estimate: AmbientEstimate, 
         (out / f"flash-{name}.json").write_text(dumps_json(analysis.flash_payload(sequence, solution, target_name)) + "\n")
 
     matrix = _camera_to_xyz(sequence)
-    ambient_linear = _linearise(sequence, stack.ambient_index)
+    ambient_linear, _ = sequence.load_linear_frame(stack.ambient_index)
     previews = {"ambient": write_png(out / "ambient.png", srgb_preview(linear_rgb(sequence, ambient_linear), matrix))}
     for name, solution in solutions.items():
         image, _ = synthesize(stack.ambient, stack.led_frames, stack.spec, solution.flash_weights)
@@ -146,7 +139,7 @@ def _write_run_report(out: Path, sequence: Sequence, estimate: AmbientEstimate, 
         previews[name] = write_png(out / f"{name}.png", srgb_preview(linear_rgb(sequence, image), matrix))
     flash_indices = sequence.indices("flash")
     if flash_indices:
-        captured = _linearise(sequence, flash_indices[-1])
+        captured, _ = sequence.load_linear_frame(flash_indices[-1])
         previews["flash-capture"] = write_png(out / "flash-capture.png", srgb_preview(linear_rgb(sequence, captured), matrix))
 
     target = None

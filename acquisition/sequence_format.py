@@ -41,6 +41,7 @@ from acquisition.image_io import image_suffix, read_image, read_image_header, wr
 from processing.errors import SpectralDataError
 from processing.file_modes import default_file_mode
 from processing.spectra import Spectra, WavelengthGrid
+from processing.synthesis import linearise
 
 SEQUENCE_FORMAT = "msflash-sequence"
 """The value of the ``format`` key."""
@@ -277,6 +278,19 @@ class Sequence(_ArrayEquality):
                     f"'{self.frames[0].file}' is {first.width}×{first.height}; expected one size for all frames"
                 )
         return pixels
+
+    def load_linear_frame(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Frame ``index`` in processing units, ``(raw − black) / (exposure_us · gain)``, and its
+        saturated pixels (:func:`processing.synthesis.linearise`).
+
+        Raises
+        ------
+        RecordingError
+            As :meth:`load_frame`.
+        """
+        frame = self.frames[index]
+        return linearise(self.load_frame(index), self.camera.black_level, self.camera.white_level,
+                         frame.exposure_us, frame.gain)
 
 
 # -- reading ---------------------------------------------------------------------------------------

@@ -63,7 +63,6 @@ from calibration.errors import CalibrationError
 from processing.colour_metrics import usable_labels
 from processing.image_formation import CFA_PATTERNS
 from processing.spectra import Spectra
-from processing.synthesis import linearise
 
 MACBETH_GRID = (4, 6)
 """Rows × columns of the Macbeth chart, patches numbered column by column (ISET order, as
@@ -813,8 +812,7 @@ def detect_in_sequence(sequence: Any, reflectances: Spectra, rows: int, columns:
     images, excluded, quanta = [], None, []
     for index in indices:
         frame = sequence.frames[index]
-        image, saturated = linearise(sequence.load_frame(index), sequence.camera.black_level,
-                                     sequence.camera.white_level, frame.exposure_us, frame.gain)
+        image, saturated = sequence.load_linear_frame(index)
         images.append(image)
         quanta.append(1.0 / (frame.exposure_us * frame.gain))
         excluded = saturated if excluded is None else excluded | saturated

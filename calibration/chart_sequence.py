@@ -49,7 +49,6 @@ from processing import datasets
 from processing.colour_metrics import patch_pixels
 from processing.errors import SpectralDataError
 from processing.spectra import Spectra, WavelengthGrid
-from processing.synthesis import linearise
 
 LabelBuilder = Callable[[tuple[int, int], np.ndarray], np.ndarray]
 """``(image shape, excluded mask) → label map`` (patch index, −1 for unusable pixels)."""
@@ -114,12 +113,6 @@ class ChartMeasurements:
     """Name of each unknown-power group (``sequence index: light`` or ``sequence index: LEDs``)."""
     frames: tuple[dict[str, Any], ...] = field(default=())
     """Per used frame: sequence, file, light, patches used."""
-
-
-def _linear(sequence: Any, index: int) -> tuple[np.ndarray, np.ndarray]:
-    frame = sequence.frames[index]
-    return linearise(sequence.load_frame(index), sequence.camera.black_level, sequence.camera.white_level,
-                     frame.exposure_us, frame.gain)
 
 
 def _patch_stats(image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str | None
@@ -206,7 +199,7 @@ def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | N
         if any(level > 0 for level in sequence.frames[a].led_levels):
             raise CalibrationError(f"{where}: frames[{a}] has role 'ambient' but LED levels "
                                    f"{list(sequence.frames[a].led_levels)}; expected all zero")
-        ambient, ambient_saturated = _linear(sequence, a)
+        ambient, ambient_saturated = sequence.load_linear_frame(a)
         if ambient.ndim != 3 and cfa is None:
             raise CalibrationError(f"{where}: frames are one-channel without a cfa; expected RGB or a Bayer mosaic")
         leds = sequence.led_spectra()
@@ -222,7 +215,7 @@ def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | N
             if not levels.any():
                 raise CalibrationError(f"{where}: frames[{i}] ('{frame.file}') has role 'led' but all LED levels are "
                                        "0; expected at least one LED on")
-            image, saturated = _linear(sequence, i)
+            image, saturated = sequence.load_linear_frame(i)
             spectrum = leds.replace(values=leds.values @ levels[:, None],
                                     names=("+".join(n for n, v in zip(leds.names, levels) if v > 0),))
             add(image - ambient, saturated | ambient_saturated, spectrum, led_group, f"{where}: {frame.file}", cfa,

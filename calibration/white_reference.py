@@ -35,7 +35,6 @@ import numpy as np
 
 from calibration.errors import CalibrationError
 from processing.colour_metrics import patch_pixels
-from processing.synthesis import linearise
 
 SUB_BLOCKS = 8
 """The region is split into ``SUB_BLOCKS × SUB_BLOCKS`` sub-blocks for the uniformity checks."""
@@ -146,13 +145,7 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
         raise CalibrationError(f"{where}: the 'led' frames' led_levels (rank {np.linalg.matrix_rank(levels)}) do "
                                f"not separate the {len(names)} LEDs; expected a frame per LED")
     cfa = sequence.camera.cfa
-
-    def linear(index: int) -> tuple[np.ndarray, np.ndarray]:
-        frame = sequence.frames[index]
-        return linearise(sequence.load_frame(index), sequence.camera.black_level, sequence.camera.white_level,
-                         frame.exposure_us, frame.gain)
-
-    ambient, ambient_saturated = linear(ambient_indices[0])
+    ambient, ambient_saturated = sequence.load_linear_frame(ambient_indices[0])
     height, width = ambient.shape[:2]
     roi = roi if roi is not None else _default_roi(height, width)
     x, y, w, h = roi
@@ -165,7 +158,7 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
 
     frame_means, frame_errors, block_means, smallest = [], [], [], roi_mask.sum()
     for i in led_indices:
-        image, saturated = linear(i)
+        image, saturated = sequence.load_linear_frame(i)
         usable = roi_mask & ~saturated & ~ambient_saturated
         if usable.sum() < 0.5 * roi_mask.sum():
             raise CalibrationError(f"{where}: {sequence.frames[i].file}: {100 * (1 - usable.sum() / roi_mask.sum()):.0f} % "
