@@ -115,18 +115,24 @@ class ChartMeasurements:
     """Per used frame: sequence, file, light, patches used."""
 
 
-def _patch_stats(image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str | None
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Means and standard errors per patch and channel; NaN where a patch has < MIN_PIXELS samples."""
+def patch_statistics(image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str | None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Means and standard errors per patch and channel, and each patch's smallest channel sample count.
+
+    Means and errors are NaN where a patch has < MIN_PIXELS samples in some channel; labels outside
+    ``0 … n_patches − 1`` (e.g. −1) belong to no patch.
+    """
     means = np.full((n_patches, 3), np.nan)
     errors = np.full((n_patches, 3), np.nan)
+    counts = np.zeros(n_patches, dtype=int)
     for patch in range(n_patches):
         samples = patch_pixels(image, labels, patch, cfa)
-        if len(samples) != 3 or min(s.size for s in samples) < MIN_PIXELS:
+        counts[patch] = min(s.size for s in samples)
+        if len(samples) != 3 or counts[patch] < MIN_PIXELS:
             continue
         means[patch] = [s.mean() for s in samples]
         errors[patch] = [s.std(ddof=1) / np.sqrt(s.size) for s in samples]
-    return means, errors
+    return means, errors, counts
 
 
 def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | None], reflectances: Spectra,
@@ -168,7 +174,7 @@ def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | N
     def add(image: np.ndarray, excluded: np.ndarray, light: Spectra, group: int, where: str, cfa: str | None,
             labels_of: LabelBuilder) -> None:
         labels = labels_of(image.shape[:2], excluded)
-        means, errors = _patch_stats(image, labels, n_patches, cfa)
+        means, errors, _ = patch_statistics(image, labels, n_patches, cfa)
         valid = np.all(np.isfinite(means), axis=1)
         if valid.sum() < max(3, n_patches // 2):
             raise CalibrationError(f"{where}: only {int(valid.sum())} of {n_patches} chart patches have {MIN_PIXELS} "

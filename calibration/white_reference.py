@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from calibration.chart_sequence import patch_statistics
 from calibration.errors import CalibrationError
-from processing.colour_metrics import patch_pixels
 
 SUB_BLOCKS = 8
 """The region is split into ``SUB_BLOCKS × SUB_BLOCKS`` sub-blocks for the uniformity checks."""
@@ -93,27 +93,14 @@ def _default_roi(height: int, width: int) -> tuple[int, int, int, int]:
     return width // 4, height // 4, max(width // 2, 2), max(height // 2, 2)
 
 
-def _region_means(image: np.ndarray, usable: np.ndarray, cfa: str | None) -> tuple[np.ndarray, np.ndarray, int]:
-    """Per-channel means, standard errors and the smallest channel's sample count over ``usable``."""
-    labels = np.where(usable, 0, 1)
-    samples = patch_pixels(image, labels, 0, cfa)
-    counts = [s.size for s in samples]
-    if min(counts) < 2:
-        return np.full(len(samples), np.nan), np.full(len(samples), np.nan), min(counts)
-    means = np.array([s.mean() for s in samples])
-    errors = np.array([s.std(ddof=1) / np.sqrt(s.size) for s in samples])
-    return means, errors, min(counts)
-
-
-def _sub_block_masks(roi_mask: np.ndarray, roi: tuple[int, int, int, int]) -> list[np.ndarray]:
+def _sub_block_labels(shape: tuple[int, int], roi: tuple[int, int, int, int]) -> np.ndarray:
+    """(H, W) labels: ``SUB_BLOCKS × SUB_BLOCKS`` sub-blocks of the region numbered row by row, −1 outside it."""
     x, y, w, h = roi
-    masks = []
-    for rows in np.array_split(np.arange(y, y + h), SUB_BLOCKS):
-        for columns in np.array_split(np.arange(x, x + w), SUB_BLOCKS):
-            mask = np.zeros_like(roi_mask)
-            mask[np.ix_(rows, columns)] = True
-            masks.append(mask & roi_mask)
-    return masks
+    labels = np.full(shape, -1, dtype=int)
+    for i, rows in enumerate(np.array_split(np.arange(y, y + h), SUB_BLOCKS)):
+        for j, columns in enumerate(np.array_split(np.arange(x, x + w), SUB_BLOCKS)):
+            labels[np.ix_(rows, columns)] = i * SUB_BLOCKS + j
+    return labels
 
 
 def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = None) -> WhiteResponses:
@@ -154,7 +141,8 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
                                "expected X+W ≤ width and Y+H ≤ height")
     roi_mask = np.zeros((height, width), dtype=bool)
     roi_mask[y:y + h, x:x + w] = True
-    blocks = _sub_block_masks(roi_mask, roi)
+    block_labels = _sub_block_labels((height, width), roi)
+    n_blocks = SUB_BLOCKS * SUB_BLOCKS
 
     frame_means, frame_errors, block_means, smallest = [], [], [], roi_mask.sum()
     for i in led_indices:
@@ -165,11 +153,11 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
                                    "of the white reference's region is saturated; expected a shorter exposure or a "
                                    "lower LED level")
         difference = image - ambient
-        means, errors, count = _region_means(difference, usable, cfa)
-        smallest = min(smallest, count)
-        frame_means.append(means)
-        frame_errors.append(errors)
-        block_means.append([_region_means(difference, usable & block, cfa)[0] for block in blocks])
+        means, errors, counts = patch_statistics(difference, np.where(usable, 0, -1), 1, cfa)
+        smallest = min(smallest, int(counts[0]))
+        frame_means.append(means[0])
+        frame_errors.append(errors[0])
+        block_means.append(patch_statistics(difference, np.where(usable, block_labels, -1), n_blocks, cfa)[0])
     frame_means_array, frame_errors_array = np.array(frame_means), np.array(frame_errors)
     unmixing = np.linalg.pinv(levels)  # (k, frames)
     responses = unmixing @ frame_means_array
@@ -181,7 +169,7 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
                                    f"expected a response above {MIN_SIGNIFICANCE:g} standard errors (is it on? "
                                    "is the exposure long enough?)")
     per_block = np.einsum("kf,fbc->kbc", unmixing, np.array(block_means))  # (k, blocks, channels)
-    spread = _share_spread(per_block, std, len(blocks))
+    spread = _share_spread(per_block, std, n_blocks)
     worst = int(np.argmax(spread))
     if spread[worst] > MAX_SHARE_SPREAD:
         raise CalibrationError(f"{where}: in the region {x},{y},{w},{h} LED '{names[worst]}''s share of the light "
