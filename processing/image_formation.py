@@ -117,9 +117,10 @@ class Scene:
         return mask & ~self.specular if self.specular is not None else mask
 
 
-def uniform_scene(reflectance: Spectra, height: int, width: int) -> Scene:
-    """A scene showing the first surface of ``reflectance`` everywhere (for tests and noise studies)."""
-    return Scene(reflectance.select([0]), np.zeros((height, width), dtype=np.int32))
+def uniform_scene(reflectance: Spectra, height: int, width: int, shading: np.ndarray | None = None) -> Scene:
+    """A scene showing the first surface of ``reflectance`` everywhere (for tests and noise studies),
+    optionally with a :attr:`Scene.shading` map."""
+    return Scene(reflectance.select([0]), np.zeros((height, width), dtype=np.int32), shading=shading)
 
 
 def chart_scene(
@@ -213,8 +214,7 @@ def white_reference_scene(height: int = 96, width: int = 128, reflectance: float
     rows = (np.arange(height) - (height - 1) / 2) / ((height - 1) / 2)
     columns = (np.arange(width) - (width - 1) / 2) / ((width - 1) / 2)
     radius2 = (rows[:, None] ** 2 + columns[None, :] ** 2) / 2
-    shading = 1.0 - (1.0 - corner_shading) * radius2
-    return Scene(surface, np.zeros((height, width), dtype=np.int32), shading=shading)
+    return uniform_scene(surface, height, width, shading=1.0 - (1.0 - corner_shading) * radius2)
 
 
 def placed_scene(
