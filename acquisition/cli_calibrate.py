@@ -15,7 +15,7 @@ import numpy as np
 
 from acquisition.cli_common import UsageError, positive_int, print_json, progress
 from acquisition.cli_evaluate import check_layout, layout_options, sequence_layout  # the layouts of `msflash evaluate`
-from acquisition.sequence_format import read_sequence
+from acquisition.sequence_format import Sequence, read_sequence
 from calibration.camera_response import (
     estimate_responsivities,
     learn_prior,
@@ -97,9 +97,9 @@ def _measured_leds(args: argparse.Namespace) -> tuple[Spectra, list, dict]:
     return spectra, characterisations, section
 
 
-def _white_power(args: argparse.Namespace, shapes: Spectra, calibration: CalibrationSet) -> tuple[Spectra, dict]:
-    """``shapes`` scaled to the power ratios the camera sees on the white reference of ``--white``."""
-    sequence = read_sequence(args.white)
+def _white_power(args: argparse.Namespace, sequence: Sequence, shapes: Spectra, calibration: CalibrationSet
+                 ) -> tuple[Spectra, dict]:
+    """``shapes`` scaled to the power ratios the camera sees on the white reference ``sequence`` (``--white``)."""
     if sequence.leds and len(sequence.leds) != shapes.count:
         raise UsageError(f"--white {args.white}: the sequence has {len(sequence.leds)} LEDs but {shapes.count} LED "
                          "spectra were given; expected one spectrum per LED, in the sequence's order")
@@ -140,6 +140,7 @@ def _leds(args: argparse.Namespace) -> int:
     if not args.files and not args.white:
         raise UsageError("calibrate leds: expected spectrometer exports FILES…, --white SEQ, or both")
     calibration = load_or_new(args.out)
+    white = read_sequence(args.white) if args.white else None
     characterisations: list = []
     if args.files:
         spectra, characterisations, section = _measured_leds(args)
@@ -147,12 +148,12 @@ def _leds(args: argparse.Namespace) -> int:
         spectra, section = calibration.led_spectra, dict(calibration.leds)
         progress(f"LED shapes from {args.out}")
     else:
-        sequence = read_sequence(args.white)
-        spectra, section = sequence.led_spectra().resample(DEFAULT_GRID, outside="zero").to_unit("energy"), {
-            "sources": [f"{sequence.path} (led spectra as recorded)"]}
-        progress(f"LED shapes from {sequence.path} (no spectrometer exports, no LED section in {args.out})")
-    if args.white:
-        spectra, power = _white_power(args, spectra, calibration)
+        assert white is not None  # FILES or --white was required above
+        spectra, section = white.led_spectra().resample(DEFAULT_GRID, outside="zero").to_unit("energy"), {
+            "sources": [f"{white.path} (led spectra as recorded)"]}
+        progress(f"LED shapes from {white.path} (no spectrometer exports, no LED section in {args.out})")
+    if white is not None:
+        spectra, power = _white_power(args, white, spectra, calibration)
         section = {**section, **power}
     calibration = calibration.updated(led_spectra=spectra, leds=section)
     path = save_calibration(calibration, args.out)
