@@ -474,7 +474,15 @@ CALIBRATION_RESPONSIVITY_FILES = ("camera_responsivity.csv", "responsivity.csv",
 
 def load_hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | None = None,
                     responsivity: str | Path | None = None) -> tuple[Spectra, Spectra | None]:
-    """LED spectra and camera responsivities for the hardware rig, on :data:`DEFAULT_GRID`.
+    """LED spectra and camera responsivities for the hardware rig, on :data:`DEFAULT_GRID`
+    (:func:`hw_spectra` without the calibration reference)."""
+    leds, camera, _ = hw_spectra(calibration, led_spectra, responsivity)
+    return leds, camera
+
+
+def hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | None = None,
+               responsivity: str | Path | None = None) -> tuple[Spectra, Spectra | None, tuple[str, Path] | None]:
+    """LED spectra, camera responsivities (on :data:`DEFAULT_GRID`) and the calibration they came from.
 
     ``calibration`` is a ``msflash calibrate`` directory (``calibration.json``, read by
     :func:`calibration.files.load_calibration`), or a directory holding ``led_spectra.csv`` (or
@@ -485,6 +493,9 @@ def load_hw_spectra(calibration: str | Path | None = None, led_spectra: str | Pa
     (in booth channel order) or per camera channel (R, G, B), energy units, each LED at full drive
     with the true ratios between LEDs. Values outside a file's range are taken as zero.
 
+    The third item is (id, directory) when ``calibration`` is a ``msflash calibrate`` output (every
+    sequence of the rig refers to it, :attr:`Rig.calibration`), else None.
+
     Raises
     ------
     UsageError
@@ -494,13 +505,15 @@ def load_hw_spectra(calibration: str | Path | None = None, led_spectra: str | Pa
     resp_path = Path(responsivity) if responsivity else None
     leds: Spectra | None = None
     camera: Spectra | None = None
+    reference: tuple[str, Path] | None = None
     if calibration is not None:
         directory = Path(calibration)
         if not directory.is_dir():
             raise UsageError(f"--calibration {directory}: not a directory; expected a calibration directory "
                              "(calibration.json from 'msflash calibrate', or led_spectra.csv)")
         if (directory / "calibration.json").is_file():
-            leds, camera, _ = _load_calibration_set(directory)
+            leds, camera, calibration_id = _load_calibration_set(directory)
+            reference = (calibration_id, directory)
         else:
             if led_path is None:
                 led_path = next((directory / n for n in CALIBRATION_LED_FILES if (directory / n).is_file()), None)
@@ -523,7 +536,7 @@ def load_hw_spectra(calibration: str | Path | None = None, led_spectra: str | Pa
         if camera.count != 3:
             raise UsageError(f"{resp_path or calibration}: {camera.count} responsivity columns; expected 3 (R, G, B)")
         camera = camera.resample(DEFAULT_GRID, outside="zero")
-    return leds, camera
+    return leds, camera, reference
 
 
 def _read_spectra_csv(path: Path, kind: str) -> Spectra:
@@ -550,13 +563,6 @@ def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | No
     leds = found.led_spectra.to_unit("energy") if found.led_spectra is not None else None
     camera = found.camera_responsivities.to_unit("energy") if found.camera_responsivities is not None else None
     return leds, camera, found.id
-
-
-def calibration_reference(calibration: str | Path | None) -> tuple[str, Path] | None:
-    """(id, directory) of ``--calibration DIR`` when it is a ``msflash calibrate`` output, else None."""
-    if calibration is None or not (Path(calibration) / "calibration.json").is_file():
-        return None
-    return _load_calibration_set(Path(calibration))[2], Path(calibration)
 
 
 class HardwareCamera:
@@ -648,7 +654,7 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
         Aravis interfaces to enable (``usb3`` by default; ``gige`` broadcasts discovery unless
         ``camera`` is an IP address; ``fake`` is Aravis's in-process test camera).
     calibration, led_spectra, responsivity
-        Where the LED spectra and camera responsivities come from (:func:`load_hw_spectra`).
+        Where the LED spectra and camera responsivities come from (:func:`hw_spectra`).
     sync
         ``host``, ``booth`` or ``camera``: camera master configures a strobe output on Line1.
     pixel_format
@@ -663,7 +669,7 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     """
     from led_controller.discovery import find_booth
 
-    leds, responsivities = load_hw_spectra(calibration, led_spectra, responsivity)
+    leds, responsivities, reference = hw_spectra(calibration, led_spectra, responsivity)
     closers: list = []
     failures: list[str] = []
     errors: list[BaseException] = []
@@ -702,4 +708,4 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     if responsivities is None:
         extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
     return Rig("hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono,
-               calibration=calibration_reference(calibration))
+               calibration=reference)

@@ -15,7 +15,7 @@ import pytest
 
 from acquisition import analysis
 from acquisition.cli import main
-from acquisition.rig import _emulator_for, calibration_reference
+from acquisition.rig import _emulator_for, hw_spectra
 from acquisition.errors import RecordingError
 from acquisition.sequence_format import read_sequence
 from calibration.files import CalibrationSet, load_calibration, save_calibration
@@ -66,9 +66,12 @@ def test_a_sequence_refers_to_the_calibration_it_was_captured_with(aravis: Modul
 
 
 def test_only_msflash_calibrations_are_referenced(calibration: Path, tmp_path: Path) -> None:
-    assert calibration_reference(calibration) == (load_calibration(calibration).id, calibration)
-    assert calibration_reference(None) is None
-    assert calibration_reference(tmp_path) is None  # led_spectra.csv folders carry no id
+    assert hw_spectra(calibration)[2] == (load_calibration(calibration).id, calibration)
+    leds_csv = tmp_path / "csv" / "led_spectra.csv"
+    leds_csv.parent.mkdir()
+    leds_csv.write_text("wavelength_nm,led440\n400,0\n440,1\n480,0\n")
+    assert hw_spectra(led_spectra=leds_csv)[2] is None  # no --calibration
+    assert hw_spectra(leds_csv.parent)[2] is None  # led_spectra.csv folders carry no id
 
 
 @pytest.mark.parametrize(("section", "start_nm", "message"), [
