@@ -178,16 +178,20 @@ def _check_watchdog(booth: LedControl, where: str, saved: str = "") -> None:
             + (f". {saved}" if saved else ""))
 
 
-def _watchdog_covering(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
-    """The booth's watchdog kept from firing while ``plan`` runs (:meth:`LedBooth.watchdog_covering`),
-    or nothing for a booth without one.
-
-    A ``WDOG`` event from before the sequence (LEDs left on by earlier code, then forgotten) is
-    dropped first: it says nothing of this sequence's frames, which :func:`_check_watchdog` judges.
-    """
+def _sequence_watchdog(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
+    """At the start of a sequence: a ``WDOG`` event from before it (LEDs left on by earlier code,
+    then forgotten) is dropped — it says nothing of this sequence's frames, which
+    :func:`_check_watchdog` judges — and the watchdog is covered for ``plan`` (:func:`_watchdog_covering`)."""
     fired = getattr(booth, "watchdog_fired", None)
     if fired is not None and fired():
         log.info("the booth's watchdog had switched the LEDs off before this sequence")
+    return _watchdog_covering(booth, plan)
+
+
+def _watchdog_covering(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
+    """The booth's watchdog kept from firing while ``plan`` runs (:meth:`LedBooth.watchdog_covering`),
+    or nothing for a booth without one. Leaves the ``WDOG`` events alone: within a sequence (the
+    flash step) they are this sequence's, for :func:`_check_watchdog`."""
     cover = getattr(booth, "watchdog_covering", None)
     return cover(host_silence_s(plan)) if cover is not None else nullcontext()
 
@@ -353,7 +357,7 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Se
     written: list[SequenceFrame] = []
     frames: list[RawFrame] = []
     previous_id: int | None = None
-    with _watchdog_covering(booth, plan), _leds_off_at_exit(camera, booth):
+    with _sequence_watchdog(booth, plan), _leds_off_at_exit(camera, booth):
         camera.prepare(plan)
         camera.start()
         for step in plan.steps:
@@ -407,7 +411,7 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
     first_id: int | None = None
     pause, resume = getattr(writer, "pause", None), getattr(writer, "resume", None)
     with ExitStack() as watchdog:
-        watchdog.enter_context(_watchdog_covering(booth, plan))
+        watchdog.enter_context(_sequence_watchdog(booth, plan))
         watchdog.enter_context(_leds_off_at_exit(camera, booth))
         try:
             booth.all_off()  # idle the booth (a previous table may be DONE) before editing the table
@@ -511,7 +515,7 @@ def preview_frames(camera: Camera, booth: LedControl, plan: CapturePlan) -> list
     :class:`DroppedFrameError`. LEDs off and camera stopped at the end, as for :func:`run_capture`.
     """
     frames: list[RawFrame] = []
-    with _watchdog_covering(booth, plan), _leds_off_at_exit(camera, booth):
+    with _sequence_watchdog(booth, plan), _leds_off_at_exit(camera, booth):
         camera.prepare(plan)
         camera.start()
         for step in plan.steps:
