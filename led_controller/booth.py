@@ -47,8 +47,8 @@ _READ_POLL_S = 0.02
 ARM_TIME_MAX_US = 10_000_000
 """Longest settle, pulse or step period :meth:`LedBooth.arm` sends, in µs (10 s)."""
 
-WATCHDOG_MAX_S = 600.0
-"""Longest watchdog period the protocol allows (``WDOG`` takes 50..600000 ms, ``docs/booth-protocol.md``)."""
+WATCHDOG_MAX_S = protocol.WATCHDOG_MAX_MS / 1000.0
+"""Longest watchdog period the protocol allows, in seconds (:data:`led_controller.protocol.WATCHDOG_MAX_MS`)."""
 
 
 class _LinkLost:
@@ -281,7 +281,7 @@ class LedBooth:
     def set_watchdog(self, timeout_s: float) -> None:
         """Set the booth's watchdog: LEDs go off after ``timeout_s`` of host silence (0 disables)."""
         ms = int(round(float(timeout_s) * 1000))
-        if ms != 0 and not 50 <= ms <= 600_000:
+        if not protocol.watchdog_ms_allowed(ms):
             raise ValueError(f"set_watchdog: {timeout_s!r} s out of range; expected 0 or 0.05..600 s")
         self._command(Command.WATCHDOG, ms)
         self._watchdog_s = ms / 1000.0

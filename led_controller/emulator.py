@@ -26,11 +26,14 @@ from led_controller.protocol import (
     MAX_BODY,
     MAX_LINE,
     PROTOCOL_VERSION,
+    WATCHDOG_MAX_MS,
+    WATCHDOG_MIN_MS,
     Command,
     HOLD_FLAG,
     ErrorCode,
     Event,
     Mode,
+    watchdog_ms_allowed,
 )
 
 log = logging.getLogger(__name__)
@@ -154,7 +157,7 @@ class BoothEmulator:
         if not 12 <= level_bits <= 16:
             raise ValueError(f"BoothEmulator: level_bits {level_bits}; expected 12..16")
         watchdog_ms = int(round(watchdog_s * 1000))
-        if watchdog_ms != 0 and not 50 <= watchdog_ms <= 600_000:  # what its own WDOG command accepts
+        if not watchdog_ms_allowed(watchdog_ms):  # what its own WDOG command accepts
             raise ValueError(f"BoothEmulator: watchdog_s {watchdog_s:g}; expected 0 (off) or 0.05..600 s")
         self.names = tuple(names)
         self.peaks_nm = tuple(float(p) for p in peaks_nm)
@@ -575,8 +578,8 @@ class BoothEmulator:
         if len(args) != 1 or not args[0].isdigit() or len(args[0]) > 7:
             raise _Refused(ErrorCode.ARGUMENT, "WDOG <milliseconds>")
         ms = int(args[0])
-        if ms != 0 and not 50 <= ms <= 600_000:
-            raise _Refused(ErrorCode.RANGE, "0 or 50..600000 ms")
+        if not watchdog_ms_allowed(ms):
+            raise _Refused(ErrorCode.RANGE, f"0 or {WATCHDOG_MIN_MS}..{WATCHDOG_MAX_MS} ms")
         self._watchdog_ms = ms
         return str(ms)
 

@@ -44,6 +44,18 @@ LEVEL_BITS = 16
 
 LEVEL_MAX = (1 << LEVEL_BITS) - 1
 
+WATCHDOG_MIN_MS, WATCHDOG_MAX_MS = 50, 600_000
+"""``WDOG`` periods the protocol allows besides 0 (off), in ms (``docs/booth-protocol.md``)."""
+
+
+def watchdog_ms_allowed(ms: int) -> bool:
+    """Whether ``WDOG ms`` is a period the protocol allows: 0 (off) or ``WATCHDOG_MIN_MS..WATCHDOG_MAX_MS``.
+
+    >>> [watchdog_ms_allowed(ms) for ms in (0, 49, 50, 600_000, 600_001)]
+    [True, False, True, True, False]
+    """
+    return ms == 0 or WATCHDOG_MIN_MS <= ms <= WATCHDOG_MAX_MS
+
 TERMINATOR = b"\n"
 
 
