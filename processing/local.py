@@ -872,12 +872,11 @@ def estimate_local(
     led_values = led_spectra.values
     shape = tiles.shape
     selection = None
-    # The scoring fits' roughness weight: GCV on the statistics as observed (the denoised ones carry
-    # no noise, and GCV's α there would be near 0), or the given α.
+    # The scoring fits' roughness weight: the global estimate's (GCV on the statistics as observed,
+    # or the given α) — already computed there.
     scoring_alpha = None
     if solver == "tikhonov":
-        scoring_alpha = gcv_alpha(total, np.diff(led_values, axis=0)) if alpha == "auto" else float(alpha)
-        scoring_alpha = scoring_alpha if scoring_alpha > 0 else None
+        scoring_alpha = global_estimate.alpha if global_estimate.alpha > 0 else None
     if method == "auto" or (method == "local" and smoothing is None):
         selection = select_model(tiles, led_spectra, scoring_alpha, margin=margin)
     model = selection.model if method == "auto" else method  # type: ignore[union-attr]
@@ -886,7 +885,7 @@ def estimate_local(
     if model == "local":
         used_sigma = float(smoothing if smoothing is not None else selection.best_local)  # type: ignore[union-attr]
         if smoothing is None and regions_allowed:
-            labelling_alpha = scoring_alpha if scoring_alpha is not None else gcv_alpha(total, np.diff(led_values, axis=0))
+            labelling_alpha = scoring_alpha if scoring_alpha is not None else gcv_alpha(total, ambient_model.terms.roughness)
             regions = segment_regions(tiles, led_spectra, labelling_alpha, solver, alpha,
                                       noise_correction=noise_correction)
             if regions is not None and not regions.chosen:
