@@ -63,6 +63,7 @@ from calibration.errors import CalibrationError
 from processing.colour_metrics import usable_labels
 from processing.image_formation import CFA_PATTERNS
 from processing.spectra import Spectra
+from processing.statistics import cfa_planes
 
 MACBETH_GRID = (4, 6)
 """Rows × columns of the Macbeth chart, patches numbered column by column (ISET order, as
@@ -246,13 +247,11 @@ def _detection_planes(images: Sequence[np.ndarray], excluded: np.ndarray, cfa: s
             raise ChartDetectionError(f"cfa '{cfa}': unknown; expected one of {', '.join(CFA_PATTERNS)}")
         # One pixel per 2 × 2 quad, its four sites as four planes (no demosaicking).
         h, w = images[0].shape[0] // 2 * 2, images[0].shape[1] // 2 * 2
-        stack = np.stack([np.stack([image[dy:h:2, dx:w:2] for dy in (0, 1) for dx in (0, 1)], axis=-1)
-                          for image in images], axis=2)
         mask = _bin(excluded[:h, :w], 2)
         quad = 2
     else:
-        stack = np.stack([image if image.ndim == 3 else image[..., None] for image in images], axis=2)
         mask, quad = excluded, 1
+    stack = np.stack([cfa_planes(image, quad) for image in images], axis=2)
     factor = max(1, math.ceil(max(stack.shape[:2]) / DETECTION_MAX_SIDE))
     scale = quad * factor
     steps = np.zeros(len(images)) if quanta is None else np.asarray(quanta, dtype=float)
