@@ -246,14 +246,14 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
     return sums, maxima
 
 
-def non_finite_frames_error(rows: Sequence[np.ndarray] | np.ndarray) -> SpectralDataError:
+def non_finite_frames_error(rows: Sequence[np.ndarray] | np.ndarray, where: str = "frame stack") -> SpectralDataError:
     """The error for frame rows ``[F_1 … F_n, A]`` (the statistics' layout) of which some hold NaN or inf.
 
-    Names the frames (the ambient frame, LED frame k counted from 1 in sequence order); searched
-    only once a cheap check has failed.
+    Names the frames (the ambient frame, LED frame k counted from 1 in sequence order) after
+    ``where``; searched only once a cheap check has failed.
     """
     bad = [row for row in range(len(rows)) if not np.isfinite(rows[row]).all()]
-    return _non_finite_error([_frame_name(row, len(rows) - 1) for row in bad])
+    return _non_finite_error([_frame_name(row, len(rows) - 1) for row in bad], where)
 
 
 def _frame_name(row: int, n_led_frames: int) -> str:
@@ -261,8 +261,8 @@ def _frame_name(row: int, n_led_frames: int) -> str:
     return "the ambient frame" if row == n_led_frames else f"LED frame {row + 1}"
 
 
-def _non_finite_error(names: list[str]) -> SpectralDataError:
-    return SpectralDataError(f"frame stack: {', '.join(names) or 'a frame'} holds non-finite values (NaN or inf); "
+def _non_finite_error(names: list[str], where: str = "frame stack") -> SpectralDataError:
+    return SpectralDataError(f"{where}: {', '.join(names) or 'a frame'} holds non-finite values (NaN or inf); "
                              "expected finite pixels")
 
 

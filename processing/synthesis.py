@@ -14,7 +14,13 @@ from collections.abc import Sequence
 import numpy as np
 
 from processing.errors import SpectralDataError
-from processing.statistics import DEFAULT_CHUNK_PIXELS, DEFAULT_WORKERS, FrameStackSpec, thread_pool
+from processing.statistics import (
+    DEFAULT_CHUNK_PIXELS,
+    DEFAULT_WORKERS,
+    FrameStackSpec,
+    non_finite_frames_error,
+    thread_pool,
+)
 
 
 def frame_coefficients(spec: FrameStackSpec, flash_weights: np.ndarray) -> tuple[float, np.ndarray]:
@@ -137,10 +143,7 @@ def synthesize(
     # Integer frames are finite and _check_range bounds the sum; float frames (EXR) may hold NaN or
     # inf, which would reach the image: one sum flags them (the exact search runs only then).
     if any(np.issubdtype(frame.dtype, np.floating) for frame in frames) and not np.isfinite(output.sum(dtype=np.float64)):
-        bad = [index for index, frame in enumerate(frames) if not np.isfinite(frame).all()]
-        names = ", ".join("the ambient frame" if index == 0 else f"LED frame {index}" for index in bad)
-        raise SpectralDataError(f"synthesis: {names or 'a frame'} holds non-finite values (NaN or inf); "
-                                "expected finite pixels")
+        raise non_finite_frames_error([*frames[1:], frames[0]], "synthesis")  # its layout: LED frames, ambient
     return output, saturated
 
 
