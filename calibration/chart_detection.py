@@ -52,6 +52,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -186,18 +187,8 @@ class ChartGrid:
         ``margin_px`` of another patch, the border or an ``excluded`` pixel are dropped
         (:func:`processing.colour_metrics.usable_labels`).
         """
-        n_patches = self.rows * self.columns
-        y, x = np.mgrid[0:shape[0], 0:shape[1]]
-        offsets = np.stack([x.ravel() - self.origin_xy[0], y.ravel() - self.origin_xy[1]])
-        column, row = np.linalg.solve(self._basis(), offsets)
-        nearest_column, nearest_row = np.rint(column), np.rint(row)
-        inside = ((np.abs(column - nearest_column) < self.patch_fraction[0] / 2)
-                  & (np.abs(row - nearest_row) < self.patch_fraction[1] / 2)
-                  & (nearest_column >= 0) & (nearest_column < self.columns)
-                  & (nearest_row >= 0) & (nearest_row < self.rows))
-        full = np.where(inside, nearest_column * self.rows + nearest_row, n_patches).astype(np.int64)
-        usable = usable_labels(full.reshape(shape), margin_px, excluded)
-        usable[usable >= n_patches] = -1
+        usable = usable_labels(_patch_map(self, (int(shape[0]), int(shape[1]))), margin_px, excluded)
+        usable[usable >= self.rows * self.columns] = -1
         return usable
 
     def as_dict(self) -> dict[str, Any]:
@@ -216,6 +207,25 @@ class ChartGrid:
                 f"{self.origin_xy[1]:.1f}) px, {self.corner} corner, pitch {self.pitch_px[0]:.1f}×{self.pitch_px[1]:.1f} "
                 f"px, rotated {round(self.rotation_deg, 1) + 0.0:.1f}°"  # + 0.0: no "-0.0°" for round-off
                 + (", mirrored" if self.mirrored else ""))
+
+
+@lru_cache(maxsize=8)
+def _patch_map(grid: ChartGrid, shape: tuple[int, int]) -> np.ndarray:
+    """(H, W) patch index of every pixel within its patch's size around the centre (rows·columns
+    elsewhere), before margins and exclusions; read-only and kept, since a sequence's label
+    maps (one per frame) differ only in their excluded pixels."""
+    n_patches = grid.rows * grid.columns
+    y, x = np.mgrid[0:shape[0], 0:shape[1]]
+    offsets = np.stack([x.ravel() - grid.origin_xy[0], y.ravel() - grid.origin_xy[1]])
+    column, row = np.linalg.solve(grid._basis(), offsets)
+    nearest_column, nearest_row = np.rint(column), np.rint(row)
+    inside = ((np.abs(column - nearest_column) < grid.patch_fraction[0] / 2)
+              & (np.abs(row - nearest_row) < grid.patch_fraction[1] / 2)
+              & (nearest_column >= 0) & (nearest_column < grid.columns)
+              & (nearest_row >= 0) & (nearest_row < grid.rows))
+    full = np.where(inside, nearest_column * grid.rows + nearest_row, n_patches).astype(np.int64).reshape(shape)
+    full.flags.writeable = False
+    return full
 
 
 # -- detection planes -------------------------------------------------------------------------
