@@ -1484,7 +1484,9 @@ class AravisCamera:
             The frame arrived incomplete or frame ids were skipped; names the step and frame id.
             Incomplete frames are counted in :attr:`stats` and never returned.
         CameraDisconnectedError
-            Aravis reported ``control-lost``.
+            Aravis reported ``control-lost``, or nothing arrived within ``timeout_s`` and the camera
+            no longer answers a register read (:meth:`_silence`): a camera switched off or
+            unplugged, told apart from a trigger problem before its heartbeat fails.
         """
         if not self._acquiring:
             raise CameraError(f"{self._name}: next_frame() before start(); expected a started acquisition")
@@ -1499,7 +1501,7 @@ class AravisCamera:
             stats = self.stats
             silent = self._silence()
             if silent is not None:
-                raise FrameTimeoutError(
+                raise CameraDisconnectedError(
                     f"{self._name}: no frame for {where} within {timeout_s:.3g} s, and the camera no longer "
                     f"answers ({silent}); expected a connected camera — check its power and cable, then "
                     f"reopen it ({stats.frames_good} good frame(s) before)") from None

@@ -9,7 +9,7 @@ control was lost — inside Aravis, after msflash had already reported the error
 crash took the whole pytest worker down with it; here it is seen, and reported, as what it is.
 
 Scenarios: ``camera`` (AravisCamera alone: the error names the step), ``silent`` (no frame after
-the kill: the timeout says the camera no longer answers, not to check the trigger wiring) and ``capture`` (through
+the kill: the error says the camera no longer answers (CameraDisconnectedError), not to check the trigger wiring) and ``capture`` (through
 ``run_capture`` with a SequenceWriter and the booth emulator: frames so far on disk, the sequence
 incomplete, the LEDs off).
 """
@@ -68,13 +68,13 @@ def silent_scenario() -> dict:
     The parent starts a fresh fake on the port (so releasing the device is quick) only once this
     side has asked the dead one and printed ``PROBED``.
     """
-    from acquisition.errors import FrameTimeoutError
+    from acquisition.errors import CameraDisconnectedError
 
     result: dict = {}
     with _camera_after_kill() as camera:
         try:
             camera.next_frame(0.3)
-        except FrameTimeoutError as err:
+        except CameraDisconnectedError as err:
             result = {"error": type(err).__name__, "message": str(err)}
         print("PROBED", flush=True)
         if sys.stdin.readline().strip() != "ANSWERING":
