@@ -258,6 +258,9 @@ class _InMemorySequence:
         # A mono camera's (H, W) frame is on disk as three identical channels: serve what is read back.
         return mono_as_rgb(pixels) if pixels.ndim == 2 and self._sequence.camera.cfa is None else pixels
 
+    # Sequence's own linearisation, over the frames in memory (through __getattr__ it would read the disk).
+    load_linear_frame = Sequence.load_linear_frame
+
 
 def _degenerate(estimate) -> str | None:
     """Why the estimate cannot be reported (non-finite numbers), or None."""
