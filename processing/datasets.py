@@ -7,8 +7,10 @@ Public objects
   :func:`natural100`, :func:`chart110`, :func:`macbeth`, :func:`paper_cameras`.
 - Other shipped sets: :func:`isetcam_camera`, :func:`isetcam_leds`, :func:`vrhel`,
   :func:`water_absorption`, :func:`water_transmittance`.
-- Illuminants: :func:`illuminant` (colour-science's CIE tables and black bodies) and
-  :func:`ambient_spectrum` (the ambients of the simulated rig).
+- Any shipped camera by name: :func:`camera_names`, :func:`camera_responsivities`.
+- Illuminants: :func:`illuminant` (colour-science's CIE tables and black bodies),
+  :func:`ambient_spectrum` (the ambients of the simulated rig) and :func:`light_spectrum` (either,
+  by name).
 
 Files live in ``processing/data`` with their provenance and licences in
 ``processing/data/SOURCES.md``. Loaders return spectra on the file's own grid; callers resample
@@ -320,6 +322,46 @@ def paper_cameras(include_noncommercial: bool = True) -> dict[str, Spectra]:
     return cameras
 
 
+def _camera_key(name: str) -> str:
+    """A camera name as it is matched: case, spaces, hyphens and underscores ignored."""
+    return "".join(c for c in name.lower() if c not in " -_")
+
+
+def camera_names(include_noncommercial: bool = True) -> tuple[str, ...]:
+    """Every shipped camera: the ISETCam files (:data:`ISETCAM_CAMERAS`), then the paper's other
+    cameras (:func:`paper_cameras`; the 28 Jiang et al. ones are non-commercial)."""
+    names = list(ISETCAM_CAMERAS)
+    keys = {_camera_key(n) for n in names}
+    names += [n for n in paper_cameras(include_noncommercial) if _camera_key(n) not in keys]
+    return tuple(names)
+
+
+def camera_responsivities(name: str, include_noncommercial: bool = True) -> Spectra:
+    """Any shipped camera's R, G, B responsivities (photons) by name, on the file's grid.
+
+    An ISETCam camera comes from its own file (:func:`isetcam_camera`), any other from the paper's
+    34-camera table (:func:`paper_cameras`). Names match ignoring case, spaces, ``-`` and ``_``
+    (``canon5dmarkii`` is ``Canon 5DMarkII``).
+
+    Raises
+    ------
+    SpectralDataError
+        For an unknown name; the message lists every camera.
+
+    Examples
+    --------
+    >>> camera_responsivities("canon_5dmarkii").metadata["camera"]
+    'Canon 5DMarkII'
+    """
+    names = camera_names(include_noncommercial)
+    found = next((n for n in names if _camera_key(n) == _camera_key(name)), None)
+    if found is None:
+        raise SpectralDataError(f"camera '{name}': unknown; expected one of {', '.join(names)}")
+    if found in ISETCAM_CAMERAS:
+        return isetcam_camera(found)
+    return paper_cameras(include_noncommercial)[found]
+
+
 # -- other shipped sets -----------------------------------------------------------------------
 def isetcam_camera(name: str) -> Spectra:
     """ISETCam RGB responsivities (photons) of one camera, on the file's grid, channels ``R, G, B``.
@@ -527,3 +569,42 @@ def ambient_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID, water_path_
         values = base.values * _smooth_filter(grid.wavelengths_nm, key)[:, None]
         source = f"ambient '{key}' (CIE A through a {key} gel)"
     return base.replace(values=values, names=(key,), source=source).normalised("max")
+
+
+def light_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """A light by name, energy units, peak 1, on ``grid``: a sim ambient or a CIE/colour-science illuminant.
+
+    Parameters
+    ----------
+    name
+        One of :data:`AMBIENTS` (:func:`ambient_spectrum`), a key of ``colour.SDS_ILLUMINANTS``
+        (``A``, ``D50``, ``D65``, ``FL2``, ``LED-B1``…; ``F2`` is read as ``FL2``), or
+        ``blackbody:<kelvin>`` (:func:`illuminant`). Case is ignored.
+    grid
+        The wavelength grid.
+
+    Raises
+    ------
+    SpectralDataError
+        For an unknown name; the message lists every accepted one.
+
+    Examples
+    --------
+    >>> light_spectrum("f11").names, light_spectrum("Tungsten").names
+    (('FL11',), ('tungsten',))
+    """
+    if any(name.lower() == ambient for ambient in AMBIENTS):
+        return ambient_spectrum(name, grid)
+    if name.lower().startswith("blackbody:"):
+        return illuminant(name, grid)
+    import colour  # imported here: loading colour-science takes a second and only these helpers need it
+
+    keys = tuple(colour.SDS_ILLUMINANTS.keys())
+    wanted = name.lower()
+    if len(wanted) > 1 and wanted[0] == "f" and wanted[1:].replace(".", "").isdigit():
+        wanted = "fl" + wanted[1:]  # CIE's F2 is colour-science's FL2
+    key = next((k for k in keys if k.lower() == wanted), None)
+    if key is None:
+        raise SpectralDataError(f"light '{name}': unknown; expected one of {', '.join(AMBIENTS + keys)}, "
+                                "blackbody:<kelvin>")
+    return illuminant(key, grid)

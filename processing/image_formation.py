@@ -3,8 +3,8 @@
 Public objects
 --------------
 - :class:`Scene`: surfaces (reflectances) laid out by a label image, with optional shading and
-  a specular area; :func:`chart_scene` and :func:`uniform_scene` build common ones, and
-  :func:`placed_scene` puts a scene anywhere in a larger frame (scaled, rotated).
+  a specular area; :func:`chart_scene`, :func:`mosaic_scene` and :func:`uniform_scene` build
+  common ones, and :func:`placed_scene` puts a scene anywhere in a larger frame (scaled, rotated).
 - :class:`SensorModel`: black and white level, bit depth, conversion gain, read noise, full well,
   colour filter array.
 - :func:`total_illumination`: ``i = i_a + I w`` (eq. 2 with the flash as weighted LEDs).
@@ -192,6 +192,42 @@ def chart_scene(
         specular = np.zeros(labels.shape, dtype=bool)
         specular[height:, :] = True
     return Scene(surfaces, labels, specular=specular, specular_gain=specular_gain)
+
+
+def mosaic_scene(reflectances: Spectra, seed: int = 0, min_patches: int = 24, patch_px: int = 8,
+                 specular_strip_px: int = 0) -> Scene:
+    """A chart of any surfaces in random order: every surface at least once, repeated to ``min_patches``.
+
+    The layout is :func:`chart_scene`'s (square patches on a dark border, a highlight strip if
+    asked); which surface each patch shows is drawn with ``seed``. Fewer surfaces than
+    ``min_patches`` are repeated (each as often as the others, ±1), so a scene of three surfaces
+    still has a chart's area. The estimator's accuracy depends on the number of *distinct* surfaces
+    (the paper's Fig. 5), not on the repeats.
+
+    Returns
+    -------
+    Scene
+        Surfaces are ``reflectances`` (once each, in their order) then ``"border"``.
+
+    Examples
+    --------
+    >>> from processing.spectra import Spectra, WavelengthGrid
+    >>> two = Spectra(WavelengthGrid(400, 700, 300), [[0.2, 0.8], [0.3, 0.7]], ("a", "b"), kind="reflectance", unit="none")
+    >>> scene = mosaic_scene(two, patch_px=2)
+    >>> sorted(np.unique(scene.labels).tolist()), scene.reflectances.names
+    ([0, 1, 2], ('a', 'b', 'border'))
+    """
+    n = reflectances.count
+    if min_patches < 1:
+        raise SpectralDataError(f"mosaic_scene: min_patches {min_patches}; expected ≥ 1")
+    patches = max(n, min_patches)
+    order = np.random.default_rng(seed).permutation(np.resize(np.arange(n), patches))
+    chart = chart_scene(reflectances.select(order.tolist()), patch_px=patch_px, specular_strip_px=specular_strip_px)
+    # chart_scene's patch k shows column k of the selection, i.e. surface order[k]; the border follows.
+    surface_of = np.append(order, n)
+    surfaces = reflectances.replace(values=np.hstack([reflectances.values, chart.reflectances.values[:, -1:]]),
+                                    names=reflectances.names + ("border",))
+    return Scene(surfaces, surface_of[chart.labels], specular=chart.specular, specular_gain=chart.specular_gain)
 
 
 def white_reference_scene(height: int = 96, width: int = 128, reflectance: float = 0.95,
