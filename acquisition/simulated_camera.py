@@ -17,7 +17,10 @@ queued it raises :class:`~acquisition.errors.FrameTimeoutError` at once when no 
 on its way (software/camera triggering, nothing rendering), and waits at most ``timeout_s`` only
 when the trigger comes from another thread (booth triggering) or a render is in progress.
 A trigger that fails (bad LED levels, more triggers than steps) raises ``CameraError`` and, in
-the first case, still consumes its step: the capture is broken at that point anyway.
+the first case, still consumes its step: the capture is broken at that point anyway. A frame
+that cannot be made (bad LED levels, a render error) is also queued as its error
+(:meth:`~acquisition.frame_queue.TriggeredFrames._fail_frame`): :meth:`next_frame` raises it in
+the frame's place, whoever triggered (on the booth's trigger line nobody else sees it).
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from processing.image_formation import (
     chart_scene,
     expected_response,
     exposure_for_peak,
+    mosaic_scene,
     render_frame,
     total_illumination,
     white_reference_scene,
@@ -246,9 +250,8 @@ class SimulatedCamera(TriggeredFrames):
             step = plan.steps[self._next_step]
             self._next_step += 1
             self._begin_frame()
-        delivered = False
-        try:
-            with self._render_lock:  # one render at a time keeps the noise stream in trigger order
+        with self._render_lock:  # one render at a time keeps the noise stream in trigger order
+            try:
                 levels = self._levels_for(step)
                 illumination = total_illumination(self.ambient, self.led_spectra, levels)
                 if self.ambient_illumination is not None:
@@ -264,23 +267,25 @@ class SimulatedCamera(TriggeredFrames):
                     self._clock_ns += int(step.exposure_us * 1000) + self._frame_interval_ns
                     frame = RawFrame(pixels, self._frame_id, self._clock_ns, step.exposure_us, step.gain)
                     self._rendered_levels.append(levels)
-                # Delivered under the render lock, so frames queue in trigger order.
-                self._end_frame(frame)
-                delivered = True
-        finally:
-            if not delivered:
-                self._end_frame(None)
+            except BaseException as err:
+                # next_frame raises it in this frame's place: on the booth's trigger line nobody else
+                # would see it, and the capture would report a lost frame instead of the cause.
+                self._fail_frame(err)
+                raise
+            # Delivered under the render lock, so frames queue in trigger order.
+            self._end_frame(frame)
 
     # -- a ready-made world -------------------------------------------------------------------
     @classmethod
     def default(
         cls,
-        scene: Literal["chart110", "macbeth", "white"] | Scene = "chart110",
+        scene: Literal["chart110", "macbeth", "white"] | Scene | Spectra = "chart110",
         ambient: str | Spectra = "tungsten",
         cfa: str | None = None,
         seed: int = 0,
-        camera: str = "NikonD100",
+        camera: str | Spectra = "NikonD100",
         n_leds: int = 7,
+        led_spectra: Spectra | None = None,
         flash_to_ambient: float = 2.0,
         reference_exposure_us: float = 10_000.0,
         ambient_peak_fraction: float = 0.25,
@@ -293,24 +298,31 @@ class SimulatedCamera(TriggeredFrames):
         second_ambient: str | Spectra | None = None,
         ambient_map: np.ndarray | None = None,
     ) -> SimulatedCamera:
-        """The ``sim`` rig's world: a chart, a named ambient, the paper's LEDs, an ISETCam camera.
+        """The ``sim`` rig's world: a chart, an ambient, an LED set and a camera (by default the paper's
+        110-surface chart, tungsten, the paper's 7 LEDs and ISETCam's NikonD100).
 
         Parameters
         ----------
         scene
             ``"chart110"`` (the paper's 110 surfaces), ``"macbeth"``, ``"white"`` (a white reference
             filling the frame, :func:`processing.image_formation.white_reference_scene`, for
-            ``msflash calibrate leds --white``) or a :class:`Scene`.
+            ``msflash calibrate leds --white``), a :class:`Scene`, or reflectances (a random mosaic
+            of those surfaces drawn with ``seed``, :func:`processing.image_formation.mosaic_scene`).
         ambient
-            A name of :func:`processing.datasets.ambient_spectrum` or a spectrum on ``grid``.
+            A name of :func:`processing.datasets.light_spectrum` (the sim ambients, CIE
+            illuminants) or a spectrum covering ``grid``.
         cfa
             None for RGB frames, or a Bayer layout.
         seed
-            Noise seed.
+            Noise seed (and the mosaic's layout).
         camera
-            An ISETCam camera (MIT licensed, :func:`processing.datasets.isetcam_camera`).
+            A shipped camera's name (:func:`processing.datasets.camera_responsivities`) or R, G, B
+            responsivities covering ``grid``.
         n_leds
-            The paper's LED subset (3–7).
+            The paper's LED subset (3–7), unless ``led_spectra`` is given.
+        led_spectra
+            The booth's LEDs (one spectrum per channel, covering ``grid``) instead of the paper's:
+            their ratios are kept, their total power is set by ``flash_to_ambient``.
         flash_to_ambient
             All LEDs at full drive give this many times the ambient's mean camera signal; with 7
             LEDs each LED-only image is then about 0.3× the ambient image — well above the noise,
@@ -336,18 +348,20 @@ class SimulatedCamera(TriggeredFrames):
             scene = white_reference_scene()
         elif isinstance(scene, str):
             scene = chart_scene(scene, patch_px=patch_px, specular_strip_px=specular_strip_px)
+        elif isinstance(scene, Spectra):
+            scene = mosaic_scene(scene, seed=seed, patch_px=patch_px, specular_strip_px=specular_strip_px)
         scene = Scene(scene.reflectances.resample(grid), scene.labels, scene.shading, scene.specular, scene.specular_gain)
-        ambient_spd = datasets.ambient_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)
+        ambient_spd = datasets.light_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)
         second_spd = None
         if second_ambient is not None:
-            second_spd = (datasets.ambient_spectrum(second_ambient, grid) if isinstance(second_ambient, str)
+            second_spd = (datasets.light_spectrum(second_ambient, grid) if isinstance(second_ambient, str)
                           else second_ambient.resample(grid)).to_unit(ambient_spd.unit)
         if (second_spd is None) != (ambient_map is None):
             raise CameraError("simulated camera: second_ambient and ambient_map go together; expected both or neither")
         metered_ambient = (ambient_spd if second_spd is None
                            else MixedIllumination.two_ambients(ambient_spd, second_spd, ambient_map))  # type: ignore[arg-type]
-        leds = datasets.paper_led_subset(n_leds).resample(grid)
-        responsivities = datasets.isetcam_camera(camera).resample(grid)
+        leds = (datasets.paper_led_subset(n_leds) if led_spectra is None else led_spectra).resample(grid)
+        responsivities = (datasets.camera_responsivities(camera) if isinstance(camera, str) else camera).resample(grid)
         sensor = sensor if sensor is not None else SensorModel(cfa=cfa)
         if cfa is not None and sensor.cfa != cfa:
             raise CameraError(f"simulated camera: cfa '{cfa}' but the sensor model has '{sensor.cfa}'; expected one")
@@ -363,12 +377,13 @@ class SimulatedCamera(TriggeredFrames):
             raise CameraError("simulated camera: the ambient or the LEDs give no signal in this camera; "
                               "expected light within the camera's sensitivity")
         led_spectra = leds.replace(values=leds.values * (flash_to_ambient * ambient_signal / flash_signal))
+        camera_name = responsivities.metadata.get("camera") or (camera if isinstance(camera, str) else responsivities.source)
         exposure_at_unit_scale = exposure_for_peak(scene, metered_ambient, responsivities, sensor,  # type: ignore[arg-type]
                                                    ambient_peak_fraction)
         simulated = cls(
             scene, ambient_spd, led_spectra, responsivities, sensor,
             scale=exposure_at_unit_scale / reference_exposure_us, led_levels_source=led_levels_source, seed=seed,
-            noise=noise, name=f"SimulatedCamera ({camera})", second_ambient=second_spd, ambient_map=ambient_map,
+            noise=noise, name=f"SimulatedCamera ({camera_name})", second_ambient=second_spd, ambient_map=ambient_map,
         )
         simulated.suggested_exposure_us = reference_exposure_us
         return simulated
