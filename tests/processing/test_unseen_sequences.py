@@ -1,0 +1,54 @@
+"""Sequences msflash has never seen, written by an independent generator (tests/processing/unseen_sequences.py).
+
+Each case is read as written, estimated, given both flashes and synthesised through the CLI
+(``acquisition.cli.main`` in-process): no traceback, no Python warning, flash weights in [0, 1],
+the synthesised image equal to ``m_a + Σ w_k m_f,k`` computed by the generator's own code, and
+the estimate within :data:`~tests.processing.unseen_sequences.MARGIN` of the best non-negative LED
+fit of the truth (or flagged by a warning). The whole sweep (~90 cases) is the ``study`` test at the
+end; its table is in the module docstring of ``unseen_sequences``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from tests.processing.unseen_sequences import MARGIN, Case, check_case, sweep_cases
+
+BASE = Case("base")
+
+FAST_CASES = [
+    replace(BASE, name="png-bayer-bggr-10bit", container="png", cfa="BGGR", bits=10, black=64, seed=1),
+    replace(BASE, name="exr-grbg-12bit-varying", container="exr", cfa="GRBG", bits=12, black=256,
+            exposures="varying", seed=2),
+    replace(BASE, name="tiff-gbrg-14bit-specular", cfa="GBRG", bits=14, black=256, specular=True, seed=3),
+    replace(BASE, name="grid380-780-5-photons-leds-first", grid=(380, 780, 5), unit="photons", order="leds_first",
+            seed=4),
+    replace(BASE, name="grid1nm-pairs-dark-frame", grid=(400, 700, 1), levels="pairs", order="extra_dark",
+            camera="isetcam:NikonD200IR", seed=5),
+    replace(BASE, name="grid4nm-half-levels-flash-frame", grid=(400, 720, 4), levels="half", order="extra_flash",
+            camera="isetcam:AptinaMT9M031", leds="paper:0,2,3,5,6", light="F11", seed=6),
+    replace(BASE, name="luxeon8-underwater-unknown-keys", leds="luxeon8", light="underwater", order="unknown_keys",
+            camera="gaussian", seed=7),
+    replace(BASE, name="three-leds-low-signal-ambient-heavy", leds="paper:0,3,5", peak=0.05, ratio=5.0,
+            bits=12, black=256, light="warmLED", seed=8),
+]
+
+
+@pytest.mark.parametrize("case", FAST_CASES, ids=lambda case: case.name)
+def test_unseen_sequence_reads_estimates_flashes_and_synthesises(case: Case, tmp_path: Path) -> None:
+    outcome = check_case(case, tmp_path)
+    assert outcome.defects == ()
+    assert outcome.estimate_rmse <= outcome.bound + MARGIN or outcome.warnings
+
+
+@pytest.mark.study
+def test_sweep_of_unseen_sequences(tmp_path: Path) -> None:
+    """The whole sweep: no case may crash, misread, mis-synthesise or be far off the LED bound unflagged."""
+    outcomes = [check_case(case, tmp_path) for case in sweep_cases()]
+    for outcome in outcomes:
+        print(f"{outcome.case.name:40s} {outcome.estimate_rmse:.3f} {outcome.bound:.3f} {outcome.ratio:.2f} "
+              f"{len(outcome.warnings)}")
+    assert [(o.case.name, o.defects) for o in outcomes if o.defects] == []
