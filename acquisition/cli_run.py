@@ -53,6 +53,7 @@ from acquisition.exposure import (
 )
 from acquisition.plan import CapturePlan, TriggerSource
 from acquisition.rig import Rig, open_rig
+from acquisition.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from acquisition.sequence_format import (
     Sequence,
     SequenceFrame,
@@ -61,6 +62,7 @@ from acquisition.sequence_format import (
     read_sequence,
 )
 from led_controller.booth import sigterm_as_exit
+from processing.datasets import AMBIENTS, PAPER_LED_SUBSETS
 from processing.errors import TargetUnreachableWarning
 
 CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG")
@@ -97,18 +99,30 @@ def _rig_spec(args: argparse.Namespace) -> str:
 
 def _open(args: argparse.Namespace) -> Rig:
     spec = _rig_spec(args)
+    sim_only = [option for option, value in (("--sim-camera", args.sim_camera), ("--leds", args.leds))
+                if value is not None]
+    if sim_only and spec != "sim":
+        raise UsageError(f"{sim_only[0]}: describes the simulated rig, but the rig is '{spec}'; expected --rig sim "
+                         "(or no --rig and no --camera/--port)")
     if spec == "hw":
         return open_rig("hw", camera=args.camera, port=args.port, interfaces=args.interfaces,
                         calibration=args.calibration, led_spectra=args.led_spectra, responsivity=args.responsivity,
                         log_serial=args.log_serial, sync=args.sync, pixel_format=args.pixel_format)
-    return open_rig(spec, ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
-                    log_serial=args.log_serial)
+    if spec == "sim":
+        return open_rig("sim", ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
+                        camera=args.sim_camera, n_leds=args.leds, led_spectra=args.led_spectra,
+                        log_serial=args.log_serial)
+    return open_rig(spec, log_serial=args.log_serial)
 
 
 def _writer(rig: Rig, out: Path, exposure: ExposurePlan | None = None) -> SequenceWriter:
-    msflash = {"rig": rig.name, "booth": rig.booth.info.firmware}
+    msflash: dict = {"rig": rig.name, "booth": rig.booth.info.firmware}
     if exposure is not None:
         msflash["exposure"] = exposure.to_dict()
+    if rig.true_ambient is not None:
+        # Ground truth of a simulated rig, on the sequence's grid and in its unit, for later scoring.
+        truth = rig.true_ambient.resample(rig.led_spectra.grid).to_unit("energy")
+        msflash["true_ambient"] = {"name": truth.names[0], "source": truth.source, "spd": truth.values[:, 0].tolist()}
     return rig.sequence_writer(out / "sequence", extra={"msflash": msflash})
 
 
@@ -281,7 +295,9 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f"--out {out}: already holds a run; expected a new directory")
     output_directory(out)  # a file in the way or no write access: one line before any device is opened
     spec = _rig_spec(args)
-    progress(f"opening rig '{spec}'" + (f" (ambient {args.ambient}, scene {args.scene})" if spec == "sim" else ""))
+    progress(f"opening rig '{spec}'" + (f" (ambient {args.ambient}, scene {args.scene}, camera "
+                                        f"{args.sim_camera or SIM_DEFAULT_CAMERA}, LEDs "
+                                        f"{args.led_spectra or f'paper {args.leds or 7}'})" if spec == "sim" else ""))
     # SIGTERM unwinds like Ctrl-C, so the LEDs go off and the partial sequence stays readable.
     with sigterm_as_exit(), _open(args) as rig:
         if rig.camera_responsivities is None:
@@ -471,8 +487,6 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
                                "broadcasts discovery on every network interface unless --camera is an IP address")
     hardware.add_argument("--calibration", default=None, metavar="DIR",
                           help="calibration directory with led_spectra.csv (and camera_responsivity.csv)")
-    hardware.add_argument("--led-spectra", default=None, metavar="FILE.csv",
-                          help="LED spectra: first column wavelength_nm, one column per booth channel (energy)")
     hardware.add_argument("--responsivity", default=None, metavar="FILE.csv",
                           help="camera responsivities: wavelength_nm, R, G, B (energy); needed by the flash solvers")
     hardware.add_argument("--pixel-format", default=None,
@@ -481,12 +495,26 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
                         help="who paces the frames: host (serial command, then software trigger; default), "
                              "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "
                              "exposure-active line advances the booth's pattern table)")
-    parser.add_argument("--ambient", default="tungsten",
-                        help="sim ambient: tungsten, fluorescent, daylight, underwater, green, orange")
-    parser.add_argument("--scene", default="chart110", choices=("chart110", "macbeth", "white"),
-                        help="sim scene (white: a white reference for calibrate leds --white)")
-    parser.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="sim: raw Bayer mosaic frames with this layout")
-    parser.add_argument("--seed", type=int, default=0, help="sim noise seed")
+    parser.add_argument("--led-spectra", default=None, metavar="FILE.csv",
+                        help="LED spectra: first column wavelength_nm, one column per booth channel at full drive "
+                             "(energy); hw: the real booth's channels; sim: the emulated booth gets these channels "
+                             "(names and peaks from the columns; the file must cover 400-700 nm)")
+    sim = parser.add_argument_group("simulated rig (--rig sim)")
+    sim.add_argument("--sim-camera", default=None, metavar="NAME|FILE.csv",
+                     help=f"camera: a shipped camera ({SIM_DEFAULT_CAMERA} by default; ISETCam's, the paper's 34 — an "
+                          "unknown name lists them) or responsivities wavelength_nm, R, G, B (energy) covering "
+                          "400-700 nm, as --responsivity reads them")
+    sim.add_argument("--leds", type=int, default=None, choices=tuple(PAPER_LED_SUBSETS),
+                     help="the paper's subset of N LEDs (3: 440, 520, 660 nm … 7: all; default 7); or --led-spectra")
+    sim.add_argument("--ambient", default="tungsten", metavar="NAME|FILE.csv",
+                     help=f"ambient: {', '.join(AMBIENTS)}, a CIE/colour-science illuminant (A, D50, D65, F2, "
+                          "F11, LED-B1, blackbody:3200 …) or a CSV wavelength_nm, value (energy) covering 400-700 nm")
+    sim.add_argument("--scene", default="chart110", metavar="NAME|FILE.csv",
+                     help=f"scene: {', '.join(SIM_SCENES)} (white: a white reference for calibrate leds --white), or "
+                          "reflectances wavelength_nm + one column per surface (0-1, covering 400-700 nm) shown as a "
+                          "random mosaic of those surfaces (--seed)")
+    sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
+    sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
     parser.add_argument("--exposure", "--exposure-us", dest="exposure", type=_exposure_value, default="auto",
                         metavar="auto|MICROSECONDS",
                         help="auto (default: meter an ambient preview, then choose each LED frame's exposure for "

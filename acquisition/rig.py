@@ -56,10 +56,13 @@ from acquisition.cli_common import UsageError
 from acquisition.errors import RigOpenError
 from acquisition.plan import CapturePlan
 from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
+from acquisition.sim_world import read_responsivity_file, read_spectra_file, sim_ambient, sim_camera, sim_leds, sim_scene
 from acquisition.simulated_camera import SimulatedCamera
 from led_controller import BoothEmulator, LedBooth, serve_on_pty
+from led_controller.errors import BoothProtocolError
+from led_controller.protocol import MAX_BODY, Command, encode_request, parse_frame, parse_identify, parse_reply
 from processing import datasets
-from processing.datasets import AMBIENTS
+from processing.image_formation import Scene
 from processing.spectra import DEFAULT_GRID, Spectra
 
 log = logging.getLogger(__name__)
@@ -235,15 +238,78 @@ def _close_all(closers: list) -> None:
             closer()
 
 
-def open_sim_rig(ambient: str = "tungsten", scene: str = "chart110", cfa: str | None = None, seed: int = 0,
-                 camera: str = "NikonD100", n_leds: int = 7, log_serial: str | Path | None = None) -> Rig:
-    """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver."""
-    if ambient not in AMBIENTS:
-        raise UsageError(f"--ambient '{ambient}': unknown; expected one of {', '.join(AMBIENTS)}")
+def check_emulated_booth(leds: Spectra, where: str) -> None:
+    """Whether the booth emulator can serve one channel per LED of ``leds``; a one-line error if not.
+
+    The emulator is built for ``leds`` as the rig would build it and asked to identify itself (its
+    reply parsed by the driver's parser), so every limit of the firmware and the wire format is
+    checked as it applies: 1–64 channels, names that are plain words (spaces become ``_``; no
+    commas, ``*`` or non-ASCII), and an identify reply that fits one frame.
+
+    Raises
+    ------
+    UsageError
+        Naming ``where`` (the option or file the LEDs came from), the channels and the limit.
+    """
+    names = leds.names if leds.count <= 8 else (*leds.names[:3], "…", leds.names[-1])
+    channels = f"{leds.count} LED channel(s) ({', '.join(names)})"
+    try:
+        emulator = _emulator_for(leds)
+        replies: list[bytes] = []
+        emulator.connect_output(replies.append)
+        emulator.receive(encode_request(1, Command.IDENTIFY))
+        raw = b"".join(replies).rstrip(b"\r\n")
+        frame = parse_frame(raw, where="booth emulator", command=Command.IDENTIFY)
+        if len(frame.body) > MAX_BODY:  # the protocol's limit; neither end enforces it on this reply today
+            raise ValueError(f"its identify reply would be {len(frame.body)} bytes, over the protocol's {MAX_BODY}: "
+                             "shorter names")
+        info = parse_identify(parse_reply(frame, Command.IDENTIFY, where="booth emulator"), raw, where="booth emulator")
+    except (ValueError, BoothProtocolError) as err:
+        raise UsageError(f"{where}: {channels}: the booth emulator cannot serve them ({err}); expected 1–64 "
+                         "channels named by plain ASCII words whose identify reply fits one frame") from err
+    if info.channels != leds.count:
+        raise UsageError(f"{where}: {channels}: the booth emulator reports {info.channels}; expected one per LED")
+
+
+def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spectra = "chart110", cfa: str | None = None,
+                 seed: int = 0, camera: str | Spectra | None = None, n_leds: int | None = None,
+                 led_spectra: str | Path | Spectra | None = None, log_serial: str | Path | None = None) -> Rig:
+    """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver.
+
+    Parameters
+    ----------
+    ambient, scene, camera
+        As the CLI's ``--ambient``, ``--scene``, ``--sim-camera`` (a name or a CSV file, resolved
+        by :mod:`acquisition.sim_world`), or spectra / a :class:`Scene` already on the sim grid.
+        ``camera`` None is :data:`acquisition.sim_world.SIM_DEFAULT_CAMERA`.
+    n_leds, led_spectra
+        The paper's subset of ``n_leds`` LEDs or the booth's LEDs (a CSV file, one column per
+        channel, or spectra); neither gives the paper's 7. The emulated booth gets one channel
+        per LED, named and peaked as they are (:func:`check_emulated_booth`).
+    cfa, seed, log_serial
+        Raw mosaic layout, noise (and mosaic) seed, serial transcript file.
+
+    Raises
+    ------
+    UsageError
+        A bad name or file, with the option or file named (before anything is opened).
+    RigOpenError
+        The world or the emulated booth failed to open.
+    """
+    ambient_spd = sim_ambient(ambient) if isinstance(ambient, str) else ambient
+    scene_spec = sim_scene(scene) if isinstance(scene, str) else scene
+    responsivities = camera if isinstance(camera, Spectra) else sim_camera(camera)
+    if isinstance(led_spectra, Spectra):
+        leds, where = led_spectra, "LED spectra"
+    else:
+        leds = sim_leds(led_spectra, n_leds)
+        where = f"--led-spectra {led_spectra}" if led_spectra is not None else f"--leds {n_leds or 7}"
+    check_emulated_booth(leds, where)
     closers: list = []
     line_errors: list[BaseException] = []
     try:
-        world = SimulatedCamera.default(scene=scene, ambient=ambient, cfa=cfa, seed=seed, camera=camera, n_leds=n_leds)  # type: ignore[arg-type]
+        world = SimulatedCamera.default(scene=scene_spec, ambient=ambient_spd, cfa=cfa, seed=seed,  # type: ignore[arg-type]
+                                        camera=responsivities, led_spectra=leds)
         closers.append(world.close)
         emulator, booth = _open_emulated_booth(world.led_spectra, log_serial, closers)
 
@@ -524,9 +590,9 @@ def hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | 
                 resp_path = next((directory / n for n in CALIBRATION_RESPONSIVITY_FILES
                                   if (directory / n).is_file()), None)
     if led_path is not None:
-        leds = _read_spectra_csv(led_path, "spd")
+        leds = read_spectra_file(led_path, "spd")
     if resp_path is not None:
-        camera = _read_spectra_csv(resp_path, "responsivity")
+        camera = read_responsivity_file(resp_path)
     if leds is None:
         raise UsageError("rig 'hw': the LED spectra are needed for the sequence header; expected --calibration DIR "
                          "or --led-spectra FILE.csv (first column wavelength_nm, one column per LED at full drive, "
@@ -537,15 +603,6 @@ def hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | 
             raise UsageError(f"{resp_path or calibration}: {camera.count} responsivity columns; expected 3 (R, G, B)")
         camera = camera.resample(DEFAULT_GRID, outside="zero")
     return leds, camera, reference
-
-
-def _read_spectra_csv(path: Path, kind: str) -> Spectra:
-    from processing.errors import SpectralDataError
-
-    try:
-        return datasets.load_spectra_csv(path, kind=kind, unit="energy")  # type: ignore[arg-type]
-    except (SpectralDataError, OSError) as err:
-        raise UsageError(str(err)) from err
 
 
 def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | None, str]:
