@@ -340,8 +340,15 @@ class AmbientModel:
         object.__setattr__(self, "terms", LedTerms.of(led_spectra.values))
 
     def weights(self, statistics: SequenceStatistics, method: str = "tikhonov",
-                alpha: float | str = "auto") -> tuple[np.ndarray, float]:
-        """``(w_a, α used)`` for the statistics (see :func:`estimate_ambient`; same errors)."""
+                alpha: float | str = "auto", denoised: SequenceStatistics | None = None) -> tuple[np.ndarray, float]:
+        """``(w_a, α used)`` for the statistics (see :func:`estimate_ambient`; same errors).
+
+        The problem is solved on the denoised statistics — ``denoised``, else
+        :meth:`~processing.statistics.SequenceStatistics.denoised` when the noise was measured —
+        which carry no errors-in-variables bias (:mod:`processing.statistics`); on the statistics as
+        observed when there are none or their Gram matrix is not positive definite (a noise probe
+        larger than the signal).
+        """
         if method not in _METHODS:
             raise ValueError(f"ambient method '{method}' is unknown; expected one of {', '.join(_METHODS)}")
         if alpha != "auto" and (isinstance(alpha, str) or not float(alpha) >= 0 or not math.isfinite(float(alpha))):
@@ -366,6 +373,13 @@ class AmbientModel:
                 f"ambient estimate: the LED-only image of {', '.join(dark)} is empty; expected every LED to add light "
                 "(is it connected, and its level above 0?)"
             )
+        clean = statistics.denoised() if denoised is None else denoised
+        if clean is not None:
+            try:
+                np.linalg.cholesky(clean.gram)
+                return _METHODS[method](clean, self.terms, alpha)
+            except (np.linalg.LinAlgError, SolverError):
+                pass
         return _METHODS[method](statistics, self.terms, alpha)
 
     def estimate(self, statistics: SequenceStatistics, method: str = "tikhonov",

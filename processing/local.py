@@ -35,8 +35,9 @@ Noise correction
 The LED-only images are differences of noisy frames, so the moments of eq. 5 carry the noise
 variance (errors in variables). :func:`tile_statistics` also measures it per block from the
 difference of two interleaved column halves (:attr:`TiledStatistics.denoised`), and the local model
-is solved on the corrected statistics; the global estimate stays the paper's (DESIGN §8: the noise
-is propagated from the data, here without a noise model).
+is solved on the corrected statistics, as the global estimate is (:mod:`processing.statistics` measures
+the same probe for the whole frame; DESIGN §8: the noise is propagated from the data, here without a
+noise model).
 
 Public objects
 --------------
@@ -59,12 +60,12 @@ from processing.errors import SolverError, SpectralDataError
 from processing.spectra import Spectra, require_unit
 from processing.statistics import (
     DEFAULT_WORKERS,
-    GATHER_ROWS,
     FrameStackSpec,
+    NoiseMoments,
     SequenceStatistics,
     block_sums,
+    block_sums_and_differences,
     cfa_planes,
-    gather_matrix,
     non_finite_frames_error,
     saturated_blocks,
     thread_pool,
@@ -304,12 +305,18 @@ class TiledStatistics:
         )
 
     def total(self) -> SequenceStatistics:
-        """The statistics of the whole frame: the sum of the tiles'."""
+        """The statistics of the whole frame: the sum of the tiles', with the noise the probe measured
+        (:attr:`denoised`) as their :attr:`~processing.statistics.SequenceStatistics.noise` — what
+        :func:`processing.statistics.accumulate_statistics` gives for the same blocks."""
+        gram, cross, energy = self.gram.sum(axis=(0, 1)), self.cross.sum(axis=(0, 1)), float(self.ambient_energy.sum())
+        clean = self.denoised
+        noise = None if clean is None else NoiseMoments(
+            gram - clean.gram.sum(axis=(0, 1)), cross - clean.cross.sum(axis=(0, 1)),
+            energy - float(clean.ambient_energy.sum()))
         return SequenceStatistics(
-            gram=self.gram.sum(axis=(0, 1)), cross=self.cross.sum(axis=(0, 1)),
-            ambient_energy=float(self.ambient_energy.sum()), n_samples=int(round(float(self.n_samples.sum()))),
+            gram=gram, cross=cross, ambient_energy=energy, n_samples=int(round(float(self.n_samples.sum()))),
             n_total=int(round(float(self.n_total.sum()))), ambient_sum=float(self.ambient_sum.sum()),
-            led_sums=self.led_sums.sum(axis=(0, 1)),
+            led_sums=self.led_sums.sum(axis=(0, 1)), noise=noise,
         )
 
     def smoothed(self, sigma: float, leave_out: bool = False) -> TiledStatistics:
@@ -355,33 +362,11 @@ def _block_sums(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
     np.copyto(out, block_sums(plane, factor)[:height, :width])
 
 
-@lru_cache(maxsize=16)
-def _difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
-    """(factor·channels, channels) ±1 matrix: per channel, a row group's even pixels minus its odd ones."""
-    gather = np.zeros((factor, channels, channels), dtype=dtype)
-    for member in range(factor):
-        gather[member] = np.eye(channels, dtype=dtype) * (1.0 if member % 2 == 0 else -1.0)
-    gather = gather.reshape(factor * channels, channels)
-    gather.flags.writeable = False
-    return gather
-
-
 def _block_sums_and_differences(plane: np.ndarray, factor: int, sums: np.ndarray, differences: np.ndarray) -> None:
-    """Block sums of an (H, W, C) plane and their even-column minus odd-column parts, into (H/f, W/f, C) arrays.
-
-    The rows of each block are summed once; products with the 0/1 and ±1 gather matrices then give
-    both parts per channel (exact: integers below 2²⁴ in float32 for ≤ 16-bit data and blocks ≤ 16×16).
-    """
-    height, width, channels = sums.shape
-    sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
-    rows = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
-    groups = rows.sum(axis=1, dtype=sum_type).reshape(height * width, factor * channels)
-    for gather, out in ((gather_matrix(factor, channels, sum_type), sums),
-                        (_difference_gather(factor, channels, sum_type), differences)):
-        part = np.empty((height * width, channels), dtype=sum_type)
-        for start in range(0, groups.shape[0], GATHER_ROWS):  # below OpenBLAS's threading threshold (see block_sums)
-            np.matmul(groups[start:start + GATHER_ROWS], gather, out=part[start:start + GATHER_ROWS])
-        np.copyto(out, part.reshape(height, width, channels))
+    """:func:`processing.statistics.block_sums_and_differences` of an (H, W, C) plane into (H/f, W/f, C) arrays."""
+    block_sums_part, difference_part = block_sums_and_differences(plane, factor)
+    np.copyto(sums, block_sums_part[:sums.shape[0], :sums.shape[1]])
+    np.copyto(differences, difference_part[:differences.shape[0], :differences.shape[1]])
 
 
 def tile_statistics(
@@ -772,7 +757,8 @@ class LocalEstimate:
     smoothing: float | None
     """Gaussian width in tiles of the local fit (None for global)."""
     global_estimate: AmbientEstimate
-    """The paper's single estimate (always computed: it is the sum of the tiles)."""
+    """The single (global) estimate, eq. 4–6 on the whole frame's denoised statistics (always computed: it is the
+    sum of the tiles)."""
     tile_weights: np.ndarray
     """Ambient weights of every tile, (ty, tx, k); all equal to the global weights for the global model."""
     tile_residuals: np.ndarray
@@ -855,19 +841,21 @@ def estimate_local(
     noise_correction
         Solve the local model (tiles and regions) on the denoised statistics
         (:attr:`TiledStatistics.denoised`: the noise bias of the LED-only images' moments removed)
-        when the tiles have them (even bin factors). The global estimate, model selection and region
-        labels use the statistics as observed, so the global model is the paper's estimate exactly.
+        when the tiles have them (even bin factors). The global estimate is solved on them too (as
+        :func:`processing.ambient.estimate_ambient` does on any statistics that carry their noise), so it is
+        the whole-frame estimate of ``msflash estimate --method global``; model selection and region
+        labels use the statistics as observed. False: everything on the statistics as observed.
     """
     if method not in LOCAL_METHODS:
         raise ValueError(f"local method '{method}' is unknown; expected one of {', '.join(LOCAL_METHODS)}")
     if solver not in AMBIENT_METHODS:
         raise ValueError(f"ambient method '{solver}' is unknown; expected one of {', '.join(AMBIENT_METHODS)}")
     require_unit(led_spectra, "photons")
-    total = tiles.total()
+    total = tiles.total() if noise_correction else replace(tiles.total(), noise=None)
     clean = tiles.denoised if noise_correction else None
     ambient_model = AmbientModel(led_spectra)
-    # The global model is the paper's estimate on the statistics as observed: the one `msflash estimate
-    # --method global` and `msflash run` compute from the whole frame (the global path has no noise probe).
+    # The global model is the one `msflash estimate --method global` and `msflash run` compute from the
+    # whole frame: solved on the denoised statistics when the blocks carry the noise probe.
     global_estimate = ambient_model.estimate(total, solver, alpha)
     led_values = led_spectra.values
     shape = tiles.shape
@@ -927,9 +915,9 @@ def denoised_global(tiles: TiledStatistics, led_spectra: Spectra, solver: str = 
                     alpha: float | str = "auto") -> np.ndarray:
     """``w_a`` of the global model solved on the denoised statistics (:attr:`TiledStatistics.denoised`).
 
-    The global estimate of :func:`estimate_local` stays the paper's (observed statistics); this is
-    the same estimator as the local model's, over the whole frame — the reference that isolates
-    what locality adds. Falls back to the observed statistics as :func:`estimate_local` does.
+    The same estimator as the local model's, over the whole frame — the reference that isolates
+    what locality adds; the global estimate of :func:`estimate_local` (with ``noise_correction``) is
+    this one. Falls back to the observed statistics as :func:`estimate_local` does.
     """
     clean = tiles.denoised
     return _solve(AmbientModel(led_spectra), tiles.total(), None if clean is None else clean.total(), solver, alpha)[0]
@@ -938,14 +926,8 @@ def denoised_global(tiles: TiledStatistics, led_spectra: Spectra, solver: str = 
 def _solve(model: AmbientModel, observed: SequenceStatistics, denoised: SequenceStatistics | None, solver: str,
            alpha: float | str) -> tuple[np.ndarray, float]:
     """``(w_a, α used)`` from the denoised statistics, or from the observed ones when there are none or
-    denoising left a Gram matrix that is not positive definite (noise probe larger than the signal)."""
-    if denoised is not None:
-        try:
-            np.linalg.cholesky(denoised.gram)
-            return model.weights(denoised, solver, alpha)
-        except (np.linalg.LinAlgError, SolverError):
-            pass
-    return model.weights(observed, solver, alpha)
+    denoising left a Gram matrix that is not positive definite (:meth:`AmbientModel.weights`)."""
+    return model.weights(observed, solver, alpha, denoised=denoised)
 
 
 def _solve_tiles(smoothed: TiledStatistics, denoised: TiledStatistics | None, own: TiledStatistics, model: AmbientModel,

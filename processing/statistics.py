@@ -10,6 +10,19 @@ float copy of the stack ever exists.
 Frames need not light one LED each: any LED frame may drive several LEDs at any levels (a
 multiplexed sequence). With ``L`` the (n_led_frames, k) matrix of levels, the per-LED images at
 full drive are ``pinv(L) · (frames − ambient)``, applied to the statistics after accumulation.
+
+Noise (errors in variables)
+---------------------------
+The LED-only images are differences of noisy frames, so their Gram matrix carries the noise
+variance of every frame and their products with the ambient image lose the ambient frame's
+(eq. 5 regresses on noisy regressors: the weights shrink towards zero, most for the LEDs the
+camera sees least). Binned statistics with an even block size also measure that noise, from
+every block's *half difference* (its even pixel columns minus its odd ones, :func:`block_sums_and_differences`):
+the two halves see the same surfaces and have independent noise, so with ``x`` a block's row of
+sums and ``d`` its half difference, ``x xᵀ − d dᵀ = 2 (x₁ x₂ᵀ + x₂ x₁ᵀ)`` is a product of
+independent halves — moments without the noise bias, whatever the texture inside a block (an
+instrumental-variable estimate; no noise model needed). :attr:`SequenceStatistics.noise` holds
+``d dᵀ`` mapped like the moments, :meth:`SequenceStatistics.denoised` the corrected statistics.
 """
 
 from __future__ import annotations
@@ -97,6 +110,22 @@ def _is_invertible_diagonal(levels: np.ndarray) -> bool:
 
 
 @dataclass(frozen=True)
+class NoiseMoments:
+    """The noise's share of a :class:`SequenceStatistics`' moments, measured by the half-difference probe."""
+
+    gram: np.ndarray
+    """Noise part of :attr:`SequenceStatistics.gram`, shape (k, k)."""
+    cross: np.ndarray
+    """Noise part of :attr:`SequenceStatistics.cross`, shape (k,) (the ambient frame's noise, negated)."""
+    ambient_energy: float
+    """Noise part of :attr:`SequenceStatistics.ambient_energy`."""
+
+    def __add__(self, other: NoiseMoments) -> NoiseMoments:
+        """The noise of the union of two disjoint sets of samples."""
+        return NoiseMoments(self.gram + other.gram, self.cross + other.cross, self.ambient_energy + other.ambient_energy)
+
+
+@dataclass(frozen=True)
 class SequenceStatistics:
     """Sufficient statistics for ambient estimation (eq. 4–6) over the unsaturated samples.
 
@@ -119,6 +148,9 @@ class SequenceStatistics:
     """Sum of the ambient image (mean level = ambient_sum / n_samples)."""
     led_sums: np.ndarray
     """Sum of each LED-only image, shape (k,)."""
+    noise: NoiseMoments | None = None
+    """The noise's share of ``gram``, ``cross`` and ``ambient_energy`` (binned statistics with an even
+    block size; see the module notes), or None when it was not measured."""
 
     @property
     def n_leds(self) -> int:
@@ -129,6 +161,27 @@ class SequenceStatistics:
     def saturated_fraction(self) -> float:
         """Fraction of samples excluded because some frame saturated there."""
         return 1.0 - self.n_samples / self.n_total if self.n_total else 0.0
+
+    def denoised(self) -> SequenceStatistics | None:
+        """The statistics with the noise's share of the moments removed (no noise bias in eq. 5), or None
+        when the noise was not measured. Sums and counts are unchanged; the result has no :attr:`noise`.
+
+        Examples
+        --------
+        >>> noisy = SequenceStatistics(np.eye(2) * 3, np.ones(2), 4.0, 10, 10, 5.0, np.ones(2),
+        ...                            NoiseMoments(np.eye(2), -np.ones(2), 1.0))
+        >>> clean = noisy.denoised()
+        >>> clean.gram.diagonal().tolist(), clean.cross.tolist(), clean.ambient_energy, clean.noise
+        ([2.0, 2.0], [2.0, 2.0], 3.0, None)
+        """
+        noise = self.noise
+        if noise is None:
+            return None
+        return SequenceStatistics(
+            gram=self.gram - noise.gram, cross=self.cross - noise.cross,
+            ambient_energy=self.ambient_energy - noise.ambient_energy, n_samples=self.n_samples,
+            n_total=self.n_total, ambient_sum=self.ambient_sum, led_sums=self.led_sums,
+        )
 
     def residual_energy(self, weights: np.ndarray) -> float:
         """``‖a − Σ wᵢ fᵢ‖²`` for ambient weights ``w``, from the statistics alone."""
@@ -155,6 +208,8 @@ class SequenceStatistics:
             gram=self.gram * copies, cross=self.cross * copies, ambient_energy=self.ambient_energy * copies,
             n_samples=self.n_samples * copies, n_total=self.n_total * copies,
             ambient_sum=self.ambient_sum * copies, led_sums=self.led_sums * copies,
+            noise=None if self.noise is None else NoiseMoments(
+                self.noise.gram * copies, self.noise.cross * copies, self.noise.ambient_energy * copies),
         )
 
     def select_leds(self, which: Sequence[int]) -> SequenceStatistics:
@@ -164,6 +219,8 @@ class SequenceStatistics:
             gram=self.gram[np.ix_(idx, idx)], cross=self.cross[idx], ambient_energy=self.ambient_energy,
             n_samples=self.n_samples, n_total=self.n_total, ambient_sum=self.ambient_sum,
             led_sums=self.led_sums[idx],
+            noise=None if self.noise is None else NoiseMoments(
+                self.noise.gram[np.ix_(idx, idx)], self.noise.cross[idx], self.noise.ambient_energy),
         )
 
     def permuted(self, order: Sequence[int]) -> SequenceStatistics:
@@ -177,6 +234,7 @@ class SequenceStatistics:
             ambient_energy=self.ambient_energy + other.ambient_energy,
             n_samples=self.n_samples + other.n_samples, n_total=self.n_total + other.n_total,
             ambient_sum=self.ambient_sum + other.ambient_sum, led_sums=self.led_sums + other.led_sums,
+            noise=None if self.noise is None or other.noise is None else self.noise + other.noise,
         )
 
 
@@ -447,14 +505,25 @@ class BlockRows:
         shape = (n_rows, height * plane_shape[2] * width)
         self.rows = np.zeros(shape) if incremental else np.empty(shape)
         self.rows[n_led_frames + 1] = 1.0
+        # Even blocks also give every block's half difference: the noise probe (module notes). The
+        # ones row has no noise; rows not filled yet are zeros in incremental mode, as above. Laid
+        # out (block row, block column, channel): the block sums' own order, copied without a transpose.
+        self.difference_shape = (height, width, plane_shape[2])
+        self.differences = (np.zeros(shape) if incremental else np.empty(shape)) if factor % 2 == 0 else None
+        if self.differences is not None:
+            self.differences[n_led_frames + 1] = 0.0
+        self._noise: np.ndarray | None = None  # incremental mode: the probe's moments so far
         self._invalid: list[np.ndarray] = []
         self._filled = [n_led_frames + 1]
         self._floating = False
         self._moments: np.ndarray | None = None
         self._excluded: np.ndarray | None = None  # incremental mode: columns already left out
+        self._excluded_differences: np.ndarray | None = None  # the same blocks' columns of the differences
         if incremental:
             self._moments = np.zeros((n_rows, n_rows))
             self._moments[-1, -1] = self.rows.shape[1]
+            if self.differences is not None:
+                self._noise = np.zeros((n_rows, n_rows))
 
     def add(self, row: int, plane: np.ndarray) -> None:
         """Block-sum one (H, W, C) plane into ``row`` (LED frame j → j, ambient → n) and note its saturated blocks."""
@@ -468,7 +537,12 @@ class BlockRows:
             if not np.isfinite(plane.sum()):
                 raise _non_finite_error([_frame_name(row, self.n_led_frames)])
             self._floating = True  # only ever set: safe when worker threads add frames
-        _block_sums_into(plane, self.factor, self.rows[row].reshape(self.block_shape))
+        if self.differences is None:
+            _block_sums_into(plane, self.factor, self.rows[row].reshape(self.block_shape))
+        else:
+            sums, differences = block_sums_and_differences(plane, self.factor)
+            np.copyto(self.rows[row].reshape(self.block_shape), sums.transpose(0, 2, 1))
+            np.copyto(self.differences[row].reshape(self.difference_shape), differences)
         # One contiguous max per frame finds the frames that saturate at all; only those build masks.
         saturated = saturated_blocks(plane, self.factor, self.white_level) \
             if _may_saturate(plane, self.white_level) else None
@@ -480,12 +554,16 @@ class BlockRows:
                 self._drop(saturated)  # the new row is not in the moments yet: its columns are only zeroed
             if self._excluded is not None:
                 self.rows[row, self._excluded] = 0.0
+                if self.differences is not None:
+                    self.differences[row, self._excluded_differences] = 0.0
             # One matrix–vector product with every row (rows not filled yet are zeros; their
             # products are set when they arrive): cheaper than gathering the filled rows first.
             filled = [*self._filled, row]
-            products = _row_products(self.rows, row)
-            self._moments[row, filled] = products[filled]
-            self._moments[filled, row] = products[filled]
+            for rows, moments in ((self.rows, self._moments), (self.differences, self._noise)):
+                if rows is not None and moments is not None:
+                    products = _row_products(rows, row)
+                    moments[row, filled] = products[filled]
+                    moments[filled, row] = products[filled]
         self._filled.append(row)
 
     def exclude(self, blocks: np.ndarray) -> None:
@@ -498,6 +576,10 @@ class BlockRows:
     def _columns(self, blocks: np.ndarray) -> np.ndarray:
         """The row columns of the (H/f, W/f) block mask ``blocks`` (every channel of each block)."""
         return np.broadcast_to(blocks[:, None, :], self.block_shape).reshape(-1)
+
+    def _difference_columns(self, blocks: np.ndarray) -> np.ndarray:
+        """The columns of :attr:`differences` of the (H/f, W/f) block mask ``blocks``."""
+        return np.broadcast_to(blocks[:, :, None], self.difference_shape).reshape(-1)
 
     def _drop(self, blocks: np.ndarray) -> None:
         """Incremental mode: zero the columns of the (H/f, W/f) mask ``blocks`` in every row and take
@@ -514,13 +596,21 @@ class BlockRows:
             return
         self._excluded = new if self._excluded is None else self._excluded | new
         filled = self._filled
-        if np.count_nonzero(self._excluded) * 4 < columns.size:
-            dropped = self.rows[np.ix_(filled, fresh)]
-            self.rows[:, fresh] = 0.0
-            self._moments[np.ix_(filled, filled)] -= dropped @ dropped.T
-        else:
-            self.rows[:, fresh] = 0.0
-            self._moments[np.ix_(filled, filled)] = _gram(self.rows[filled], DEFAULT_CHUNK_PIXELS * self.block_shape[1])
+        few = np.count_nonzero(self._excluded) * 4 < columns.size
+        parts = [(self.rows, self._moments, fresh)]
+        if self.differences is not None and self._noise is not None:
+            columns = self._difference_columns(blocks)
+            new = columns if self._excluded_differences is None else columns & ~self._excluded_differences
+            self._excluded_differences = new if self._excluded_differences is None else self._excluded_differences | new
+            parts.append((self.differences, self._noise, np.flatnonzero(new)))
+        for rows, moments, fresh in parts:
+            if few:
+                dropped = rows[np.ix_(filled, fresh)]
+                rows[:, fresh] = 0.0
+                moments[np.ix_(filled, filled)] -= dropped @ dropped.T
+            else:
+                rows[:, fresh] = 0.0
+                moments[np.ix_(filled, filled)] = _gram(rows[filled], DEFAULT_CHUNK_PIXELS * self.block_shape[1])
 
     def statistics(self, spec: FrameStackSpec, chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
                    workers: int = 1) -> SequenceStatistics:
@@ -538,28 +628,37 @@ class BlockRows:
             raise non_finite_frames_error(rows[:-1])
         if self._moments is not None:
             moments = self._moments  # incremental: saturated blocks were left out as they came (_drop)
+            noise = self._noise
         else:
             invalid = None
             for mask in self._invalid:
                 invalid = mask if invalid is None else invalid | mask
             chunk = chunk_pixels * self.block_shape[1]
-            if invalid is not None and invalid.any():
-                columns = self._columns(invalid)
-                kept = rows.copy()
-                kept[:, columns] = 0.0
-                moments = _gram(kept, chunk, workers)
-            else:
-                moments = _gram(rows, chunk, workers)
+            masked = invalid is not None and invalid.any()
+
+            def moments_of(values: np.ndarray, columns: np.ndarray | None) -> np.ndarray:
+                if columns is not None:
+                    values = values.copy()
+                    values[:, columns] = 0.0
+                return _gram(values, chunk, workers)
+
+            moments = moments_of(rows, self._columns(invalid) if masked else None)
+            noise = None if self.differences is None else \
+                moments_of(self.differences, self._difference_columns(invalid) if masked else None)
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
         factor = self.factor
-        return _statistics_from_moments(moments, spec, rows.shape[1], black_level=spec.black_level * factor * factor)
+        return _statistics_from_moments(moments, spec, rows.shape[1], black_level=spec.black_level * factor * factor,
+                                        noise_moments=noise)
 
 
 def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total: int,
-                             black_level: float | None = None) -> SequenceStatistics:
+                             black_level: float | None = None,
+                             noise_moments: np.ndarray | None = None) -> SequenceStatistics:
     """Statistics from the raw second moments of the rows [F_1 … F_n, A, 1].
 
     ``black_level`` replaces the spec's (block sums: the black level times the block area).
+    ``noise_moments`` are the half differences' moments in the same row layout (the noise probe),
+    mapped the same way into :attr:`SequenceStatistics.noise`.
     """
     n_led_frames = moments.shape[0] - 2
     n_rows = n_led_frames + 2
@@ -575,6 +674,12 @@ def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total:
     linear_moments = transform @ moments @ transform.T
     linear_sums = transform @ moments[:, -1]
     unmixing = spec.unmixing
+    noise = None
+    if noise_moments is not None:
+        linear_noise = transform @ noise_moments @ transform.T
+        noise = NoiseMoments(gram=unmixing @ linear_noise[:n_led_frames, :n_led_frames] @ unmixing.T,
+                             cross=unmixing @ linear_noise[:n_led_frames, n_led_frames],
+                             ambient_energy=float(linear_noise[n_led_frames, n_led_frames]))
     return SequenceStatistics(
         gram=unmixing @ linear_moments[:n_led_frames, :n_led_frames] @ unmixing.T,
         cross=unmixing @ linear_moments[:n_led_frames, n_led_frames],
@@ -583,6 +688,7 @@ def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total:
         n_total=n_total,
         ambient_sum=float(linear_sums[n_led_frames]),
         led_sums=unmixing @ linear_sums[:n_led_frames],
+        noise=noise,
     )
 
 
@@ -660,6 +766,51 @@ def block_sums(plane: np.ndarray, factor: int) -> np.ndarray:
     for start in range(0, groups.shape[0], GATHER_ROWS):
         np.matmul(groups[start:start + GATHER_ROWS], gather, out=grouped[start:start + GATHER_ROWS])
     return grouped.reshape(height, width, channels)
+
+
+@lru_cache(maxsize=16)
+def _difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
+    """(factor·channels, channels) ±1 matrix: per channel, a row group's even pixels minus its odd ones."""
+    gather = np.zeros((factor, channels, channels), dtype=dtype)
+    for member in range(factor):
+        gather[member] = np.eye(channels, dtype=dtype) * (1.0 if member % 2 == 0 else -1.0)
+    gather = gather.reshape(factor * channels, channels)
+    gather.flags.writeable = False
+    return gather
+
+
+@lru_cache(maxsize=16)
+def _sum_and_difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
+    """(factor·channels, 2·channels): :func:`gather_matrix` and :func:`_difference_gather` side by side."""
+    gather = np.concatenate([gather_matrix(factor, channels, dtype), _difference_gather(factor, channels, dtype)], axis=1)
+    gather.flags.writeable = False
+    return gather
+
+
+def block_sums_and_differences(plane: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
+    """Block sums of an (H, W, C) plane and their even-column minus odd-column parts, each (H/f, W/f, C).
+
+    The rows of each block are summed once; products with the 0/1 and ±1 gather matrices then give
+    both parts per channel (exact: integers below 2²⁴ in float32 for ≤ 16-bit data and blocks ≤ 16×16).
+    The difference is the noise probe of the module notes (even ``factor``).
+
+    Examples
+    --------
+    >>> sums, differences = block_sums_and_differences(np.arange(16.0).reshape(4, 4, 1), 2)
+    >>> sums[:, :, 0].tolist(), differences[:, :, 0].tolist()
+    ([[10.0, 18.0], [42.0, 50.0]], [[-2.0, -2.0], [-2.0, -2.0]])
+    """
+    height, width, channels = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
+    sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
+    rows = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
+    groups = rows.sum(axis=1, dtype=sum_type).reshape(height * width, factor * channels)
+    # One product with both gather matrices side by side: the row sums are read once.
+    gather = _sum_and_difference_gather(factor, channels, sum_type)
+    both = np.empty((height * width, 2 * channels), dtype=sum_type)
+    for start in range(0, groups.shape[0], GATHER_ROWS):  # below OpenBLAS's threading threshold (see block_sums)
+        np.matmul(groups[start:start + GATHER_ROWS], gather, out=both[start:start + GATHER_ROWS])
+    both = both.reshape(height, width, 2 * channels)
+    return both[:, :, :channels], both[:, :, channels:]
 
 
 def _row_products(rows: np.ndarray, row: int) -> np.ndarray:

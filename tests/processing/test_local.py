@@ -131,11 +131,13 @@ def test_denoised_statistics_remove_the_noise_bias_of_the_led_only_images() -> N
     error_observed = np.abs(np.linalg.solve(observed.gram, observed.cross) - weights).max()
     error_denoised = np.abs(np.linalg.solve(denoised.gram, denoised.cross) - weights).max()
     assert error_observed > 0.07 and error_denoised < 0.4 * error_observed, (error_observed, error_denoised)
-    # The global model of estimate_local stays the paper's (observed statistics); denoised_global
-    # and the local model solve on the denoised ones.
+    # The global model of estimate_local, denoised_global and the local model solve on the denoised
+    # statistics; without the noise correction everything is solved as observed (the paper's estimate).
     leds = leds_photons()
     assert np.abs(denoised_global(t, leds, "lstsq") - weights).max() < 0.4 * error_observed
-    paper = estimate_local(t, leds, "global", solver="lstsq").global_estimate.ambient_weights
+    corrected = estimate_local(t, leds, "global", solver="lstsq").global_estimate.ambient_weights
+    np.testing.assert_allclose(corrected, denoised_global(t, leds, "lstsq"), rtol=1e-9)
+    paper = estimate_local(t, leds, "global", solver="lstsq", noise_correction=False).global_estimate.ambient_weights
     np.testing.assert_allclose(paper, np.linalg.solve(observed.gram, observed.cross), rtol=1e-6)
     local = estimate_local(t, leds, "local", solver="lstsq", smoothing=1e6, regions_allowed=False)  # every tile sees all
     assert np.abs(local.tile_weights - weights).max() < 0.4 * error_observed
