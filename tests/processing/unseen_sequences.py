@@ -173,7 +173,8 @@ class Case:
     name: str
     camera: str = "Canon 5DMarkII"
     container: str = "tiff"
-    """``tiff`` (16-bit), ``png`` (16-bit) or ``exr`` (float, normalised to white 1.0)."""
+    """``tiff`` (16-bit), ``tiff-lzw`` (16-bit, LZW, ``.TIF``), ``png`` (16-bit), ``exr`` (float, normalised to
+    white 1.0) or ``exr-half`` (the same in half floats)."""
     cfa: str | None = None
     bits: int = 16
     black: int = 0
@@ -195,6 +196,12 @@ class Case:
     """``ambient_first``, ``leds_first``, ``extra_dark``, ``extra_flash``, ``unknown_keys``."""
     seed: int = 0
     patch_px: int = 8
+    crop: int = 0
+    """Rows and columns cut off the bottom right (odd frame sizes)."""
+    quirks: tuple[str, ...] = ()
+    """``windows_paths`` (frame paths with ``\\`` separators, as ``str(WindowsPath)`` gives), ``measured_spectra``
+    (LED spectra and responsivities as a spectrometer gives them: ±0.3 % of the peak of noise, negative in
+    the tails)."""
 
 
 @dataclass(frozen=True)
@@ -224,6 +231,9 @@ def _led_set(case: Case, wavelengths: np.ndarray) -> tuple[list[str], np.ndarray
         return booth8_energy(wavelengths)
     if case.leds == "luxeon8":
         return luxeon8_energy(wavelengths)
+    if case.leds.startswith("gauss:"):  # N narrow LEDs spread evenly over 410–680 nm
+        peaks = np.linspace(410, 680, int(case.leds[6:]))
+        return [f"g{p:.0f}" for p in peaks], np.column_stack([_gauss(wavelengths, p, 22) for p in peaks])
     raise ValueError(case.leds)
 
 
@@ -311,30 +321,34 @@ def render_case(case: Case, directory: Path) -> Rendered:
         else:
             gain, exposure = 1.0, base_exposure
         mean_dn = response * counts_per_response * exposure * gain  # (surfaces+1, 3)
-        image = mean_dn[labels]  # (H, W, 3)
+        image = mean_dn[labels[:height - case.crop, :width - case.crop]]  # (H, W, 3)
         if case.cfa is not None:
-            sites = np.tile(_cfa_index(case.cfa), (height // 2 + 1, width // 2 + 1))[:height, :width]
+            sites = np.tile(_cfa_index(case.cfa), (height // 2 + 1, width // 2 + 1))[:image.shape[0], :image.shape[1]]
             image = np.take_along_axis(image, sites[:, :, None], axis=2)[:, :, 0]
         electrons = image * electrons_per_dn / gain
         noisy = rng.poisson(np.maximum(electrons, 0)) * gain / electrons_per_dn
         noisy = noisy + rng.normal(0.0, READ_NOISE_DN, noisy.shape) + case.black
-        if case.container == "exr":
+        if case.container.startswith("exr"):
             data = (np.clip(noisy, 0, code_max) / code_max).astype(np.float32)
         else:
             data = np.clip(np.rint(noisy), 0, code_max).astype(np.uint16)
-        suffix = {"tiff": ".tif", "png": ".png", "exr": ".exr"}[case.container]
+        suffix = {"tiff": ".tif", "tiff-lzw": ".TIF", "png": ".png", "exr": ".exr", "exr-half": ".exr"}[case.container]
         file = f"img/{index:02d}_{role}{suffix}"
-        entry: dict = {"file": file, "role": role, "led_levels": [float(v) for v in row],
+        entry: dict = {"file": file.replace("/", "\\") if "windows_paths" in case.quirks else file, "role": role,
+                       "led_levels": [float(v) for v in row],
                        "exposure_us": exposure, "gain": gain}
         if case.order == "unknown_keys":
             entry["vendor_timestamp"] = 1700000000 + index
         entries.append(entry)
-        pixels_list.append((directory / file, data))
+        pixels_list.append((directory / file, data))  # on disk with '/' separators
 
-    scale = 1.0 if case.container != "exr" else 1.0 / code_max
+    scale = 1.0 / code_max if case.container.startswith("exr") else 1.0
     unit_factor = photons if case.unit == "photons" else np.ones_like(nm)
     led_written = led_e * unit_factor[:, None]
     cam_written = cam_q if case.unit == "photons" else cam_q * photons[:, None]
+    if "measured_spectra" in case.quirks:  # what the frames saw is the clean spectra; what is written is measured
+        led_written = led_written + rng.normal(0, 0.003, led_written.shape) * led_written.max(axis=0)
+        cam_written = cam_written + rng.normal(0, 0.003, cam_written.shape) * cam_written.max(axis=0)
     document: dict = {
         "format": "msflash-sequence", "version": 1, "complete": True,
         "wavelengths_nm": [float(w) for w in nm], "spectral_unit": case.unit,
@@ -360,8 +374,10 @@ def render_case(case: Case, directory: Path) -> Rendered:
 def _write(path: Path, data: np.ndarray, container: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     channels = 1 if data.ndim == 2 else data.shape[2]
-    kind = "float" if container == "exr" else "uint16"
+    kind = {"exr": "float", "exr-half": "half"}.get(container, "uint16")
     spec = oiio.ImageSpec(data.shape[1], data.shape[0], channels, kind)
+    if container == "tiff-lzw":
+        spec.attribute("compression", "lzw")
     output = oiio.ImageOutput.create(str(path))
     if output is None or not output.open(str(path), spec):
         raise OSError(f"cannot write {path}: {oiio.geterror()}")
@@ -414,7 +430,7 @@ def run_cli(args: list[str]) -> tuple[int, str, str, list[str]]:
 def expected_synthesis(rendered: Rendered, weights: np.ndarray) -> np.ndarray:
     """``m_a + Σ_k w_k m_f,k`` computed here: LED-only images unmixed from the frames by the levels."""
     def linear(entry: dict) -> np.ndarray:
-        pixels = _read(rendered.directory / entry["file"])
+        pixels = _read(rendered.directory / entry["file"].replace("\\", "/"))
         return (pixels - rendered.black) / (entry["exposure_us"] * entry["gain"])
 
     ambient = linear(next(e for e in rendered.frames if e["role"] == "ambient"))
@@ -532,4 +548,16 @@ def sweep_cases() -> list[Case]:
     add("low-signal-12bit", peak=0.05, bits=12, black=256)
     for order in ("leds_first", "extra_dark", "extra_flash", "unknown_keys"):
         add(f"order-{order}", order=order)
+    add("container-tiff-lzw", container="tiff-lzw")
+    add("container-exr-half", container="exr-half", cfa="RGGB")
+    add("odd-size-bayer", cfa="GBRG", crop=3)
+    add("odd-size-rgb", crop=5, bits=12, black=256)
+    add("grid380-1000-5-D200IR", grid=(380, 1000, 5), camera="isetcam:NikonD200IR")
+    add("grid360-830-2-photons", grid=(360, 830, 2), unit="photons", camera="isetcam:NikonD200IR", light="D65")
+    add("grid402-698-4", grid=(402, 698, 4))
+    add("grid400-700-2.5", grid=(400, 700, 2.5))
+    add("leds-gauss12", leds="gauss:12", light="D50")
+    add("leds-gauss16-pairs", leds="gauss:16", levels="pairs", light="warmLED")
+    add("windows-paths", quirks=("windows_paths",))
+    add("measured-spectra", quirks=("measured_spectra",), leds="booth8", unit="photons")
     return cases
