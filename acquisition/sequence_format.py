@@ -446,6 +446,8 @@ def _parse_leds(file: Path, value: Any, size: int) -> tuple[SequenceLed, ...]:
 def _check_file(file: Path, directory: Path, where: str, value: Any, *, must_exist: bool) -> str:
     if not isinstance(value, str) or not value:
         raise RecordingError(f"{file}: {where} is {_describe(value)}; expected a relative file path")
+    if "\\" in value and must_exist and not (directory / value).exists() and (directory / value.replace("\\", "/")).exists():
+        value = value.replace("\\", "/")  # written on Windows (str of a WindowsPath): '\' separators
     relative = PurePosixPath(value)
     if relative.is_absolute() or Path(value).is_absolute():
         raise RecordingError(f"{file}: {where} {value!r} is absolute; expected a path relative to the sequence directory")
