@@ -38,6 +38,7 @@ import numpy as np
 
 from acquisition.errors import RecordingError
 from acquisition.image_io import image_suffix, read_image, read_image_header, write_image
+from calibration.spectrometer import NEGATIVE_TOLERANCE
 from processing.errors import SpectralDataError
 from processing.file_modes import default_file_mode
 from processing.spectra import Spectra, WavelengthGrid
@@ -368,10 +369,23 @@ def _number_list(file: Path, field_name: str, value: Any, length: int | None, wh
 
 
 def _spectrum(file: Path, field_name: str, value: Any, size: int) -> np.ndarray:
+    """A spectrum's values; negatives within measurement noise become 0, larger ones are refused.
+
+    Measured spectra (dark-subtracted spectrometer readings of LEDs, monochromator sweeps of a
+    camera) carry small negative values in their tails. They are clipped as the spectrometer
+    reader clips them (:data:`calibration.spectrometer.NEGATIVE_TOLERANCE` of the peak); a value
+    below that is no noise and the sequence is refused.
+    """
     values = _number_list(file, field_name, value, size, "one per wavelength")
     if np.any(values < 0):
-        i = int(np.argmax(values < 0))
-        raise RecordingError(f"{file}: {field_name}[{i}] is {values[i]:g}; expected a non-negative value")
+        too_negative = values < -NEGATIVE_TOLERANCE * max(float(values.max()), 0.0)
+        if np.any(too_negative):
+            i = int(np.argmax(too_negative))
+            raise RecordingError(
+                f"{file}: {field_name}[{i}] is {values[i]:g}; expected a non-negative value (or measurement noise down "
+                f"to {NEGATIVE_TOLERANCE:.0%} of the peak {max(float(values.max()), 0.0):g})"
+            )
+        values = np.maximum(values, 0.0)
     return values
 
 
