@@ -49,6 +49,7 @@ def test_sweep_of_unseen_sequences(tmp_path: Path) -> None:
     """The whole sweep: no case may crash, misread, mis-synthesise or be far off the LED bound unflagged."""
     outcomes = [check_case(case, tmp_path) for case in sweep_cases()]
     for outcome in outcomes:
-        print(f"{outcome.case.name:40s} {outcome.estimate_rmse:.3f} {outcome.bound:.3f} {outcome.ratio:.2f} "
-              f"{len(outcome.warnings)}")
+        print(f"{outcome.case.name:32s} RMSE {outcome.estimate_rmse:.3f} bound {outcome.bound:.3f} ratio {outcome.ratio:.2f} "
+              f"warnings {len(outcome.warnings)} flash vs truth {outcome.flash_error_deg[0]:.2f}° "
+              f"{outcome.flash_error_deg[1]:.2f}°")
     assert [(o.case.name, o.defects) for o in outcomes if o.defects] == []

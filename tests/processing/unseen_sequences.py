@@ -214,6 +214,10 @@ class Rendered:
     """The true ambient SPD in the sequence's spectral unit."""
     led_spd: np.ndarray
     """The LEDs as written (sequence unit), (n, k)."""
+    responsivity: np.ndarray
+    """The camera's R, G, B responsivities as written (sequence unit), (n, 3)."""
+    d65: np.ndarray
+    """CIE D65 in the sequence unit (the complementary flash's default target)."""
     levels: np.ndarray
     """LED frames' levels, (n_led_frames, k), in sequence order of the LED frames."""
     frames: list[dict] = field(default_factory=list)
@@ -367,8 +371,8 @@ def render_case(case: Case, directory: Path) -> Rendered:
         _write(path, data, case.container)
     (directory / "sequence.json").write_text(json.dumps(document, indent=2))
     led_levels = np.array([row for role, row in plan if role == "led"])
-    return Rendered(directory, nm, truth_e * unit_factor, led_written, led_levels, entries,
-                    case.black * scale, white_dn * scale)
+    return Rendered(directory, nm, truth_e * unit_factor, led_written, cam_written, light_energy("D65", nm) * unit_factor,
+                    led_levels, entries, case.black * scale, white_dn * scale)
 
 
 def _write(path: Path, data: np.ndarray, container: str) -> None:
@@ -427,6 +431,17 @@ def run_cli(args: list[str]) -> tuple[int, str, str, list[str]]:
     return status, out.getvalue(), err.getvalue(), [f"{w.category.__name__}: {w.message}" for w in caught]
 
 
+def camera_angle_deg(rendered: Rendered, spd: np.ndarray, target: np.ndarray) -> float:
+    """Angle between the camera's R, G, B responses to two lights (the flash solvers' camera-space goal)."""
+    a, b = rendered.responsivity.T @ spd, rendered.responsivity.T @ target
+    cosine = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
+    return math.degrees(math.acos(min(1.0, max(-1.0, cosine))))
+
+
+ANGLE_REACHED_DEG = 1.0
+"""A flash that says it reached its target must be this close to it in camera space (computed here)."""
+
+
 def expected_synthesis(rendered: Rendered, weights: np.ndarray) -> np.ndarray:
     """``m_a + Σ_k w_k m_f,k`` computed here: LED-only images unmixed from the frames by the levels."""
     def linear(entry: dict) -> np.ndarray:
@@ -449,6 +464,9 @@ class Outcome:
     bound: float = math.nan
     warnings: tuple[str, ...] = ()
     defects: tuple[str, ...] = ()
+    flash_error_deg: tuple[float, float] = (math.nan, math.nan)
+    """Against the *true* ambient, in camera space: the matching flash's angle to it, and the complementary
+    flash plus it to D65 (what a user sees; includes the estimate's error)."""
 
     @property
     def ratio(self) -> float:
@@ -478,7 +496,7 @@ def check_case(case: Case, root: Path) -> Outcome:
     estimate_warnings = tuple(payload["warnings"])
     if error > bound + MARGIN and not estimate_warnings:
         defects.append(f"estimate: RMSE {error:.3f} vs LED bound {bound:.3f} without a warning")
-    weights_by_mode = {}
+    weights_by_mode, truth_angles = {}, {}
     for mode in ("complementary", "matching"):
         status, out, err, caught = run_cli(["flash", sequence, "--mode", mode, "--json"])
         if status != 0 or caught or "Traceback" in err:
@@ -490,6 +508,16 @@ def check_case(case: Case, root: Path) -> Outcome:
             defects.append(f"flash {mode}: weights {weights.round(4).tolist()} outside [0, 1]")
         if mode == "complementary" and not (isinstance(flash.get("scale"), float | int) and flash["scale"] >= 0):
             defects.append(f"flash {mode}: scale {flash.get('scale')!r}")
+        # The solvers' goals recomputed here from the written spectra: matching, the flash looks like the
+        # estimated ambient; complementary, ambient + flash looks like D65.
+        estimated = rendered.led_spd @ np.asarray(flash["ambient_weights"], float)
+        flash_spd = rendered.led_spd @ weights
+        angle = (camera_angle_deg(rendered, flash_spd, estimated) if mode == "matching"
+                 else camera_angle_deg(rendered, estimated + flash_spd, rendered.d65))
+        truth_angles[mode] = (camera_angle_deg(rendered, flash_spd, rendered.truth) if mode == "matching"
+                              else camera_angle_deg(rendered, rendered.truth + flash_spd, rendered.d65))
+        if flash["target_reached"] and angle > ANGLE_REACHED_DEG:
+            defects.append(f"flash {mode}: says the target is reached but is {angle:.2f}° from it in camera space")
         weights_by_mode[mode] = weights
     weights = weights_by_mode.get("matching", np.full(rendered.led_spd.shape[1], 0.5))
     output = rendered.directory.parent / f"{case.name}-synth.exr"
@@ -504,7 +532,8 @@ def check_case(case: Case, root: Path) -> Outcome:
         worst = float(np.max(np.abs(written - expected)) / np.max(np.abs(expected)))
         if worst > 1e-5:
             defects.append(f"synthesize: differs from ambient + Σ w·LED-only by {worst:.2g} of the peak")
-    return Outcome(case, error, bound, estimate_warnings, tuple(defects))
+    return Outcome(case, error, bound, estimate_warnings, tuple(defects),
+                   (truth_angles.get("matching", math.nan), truth_angles.get("complementary", math.nan)))
 
 
 def sweep_cases() -> list[Case]:
