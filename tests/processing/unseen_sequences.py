@@ -248,6 +248,10 @@ def _levels(kind: str, k: int) -> np.ndarray:
         return np.diag([0.5 if i % 2 else 1.0 for i in range(k)])
     if kind == "pairs":
         return np.eye(k) + np.eye(k, k=1)  # frame j lights LEDs j and j+1 (the last one alone)
+    if kind == "shuffled":  # one LED per frame, not in the order of ``leds``
+        return np.eye(k)[np.random.default_rng(k).permutation(k)]
+    if kind == "twice":  # every LED at full and at half drive: more frames than LEDs
+        return np.vstack([np.eye(k), 0.5 * np.eye(k)])
     raise ValueError(kind)
 
 
@@ -564,6 +568,8 @@ def sweep_cases() -> list[Case]:
     add("levels-half", levels="half")
     add("levels-pairs", levels="pairs")
     add("levels-pairs-booth8", levels="pairs", leds="booth8")
+    add("levels-shuffled", levels="shuffled", exposures="varying")
+    add("levels-twice", levels="twice", cfa="RGGB")
     for light in ("A", "D50", "D65", "D75", "F2", "F7", "F11", "warmLED", "green", "orange", "underwater"):
         add(f"light-{light}", light=light)
         add(f"light-{light}-booth8", light=light, leds="booth8")
