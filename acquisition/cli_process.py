@@ -12,8 +12,8 @@ import numpy as np
 
 from acquisition import analysis
 from acquisition.cli_common import UsageError, positive_int, print_json, progress
-from acquisition.image_io import write_image
-from acquisition.sequence_format import read_sequence
+from acquisition.image_io import read_image_header, write_image
+from acquisition.sequence_format import Sequence, read_sequence
 from processing.ambient import AMBIENT_METHODS, LED_SIGNAL_Z
 from processing.errors import TargetUnreachableWarning
 from processing.local import DEFAULT_TILES, LOCAL_METHODS
@@ -125,6 +125,8 @@ def _flash(args: argparse.Namespace) -> int:
     if args.out is not None:
         _check_output_type(Path(args.out))
     sequence = _read_calibrated(args)
+    if args.out is not None:
+        _check_raw_output(Path(args.out), sequence)
     if args.method != "global" or args.out is not None:
         return _flash_local(args, sequence)
     estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
@@ -154,6 +156,7 @@ def _synthesize(args: argparse.Namespace) -> int:
     weights = _weights(args.weights, len(sequence.leds))
     output = Path(args.out)
     _check_output_type(output)
+    _check_raw_output(output, sequence)
     image, saturated, stack = analysis.synthesize_sequence(sequence, weights)
     _write_flash_image(output, image, stack, sequence, {"msflash:flash_weights": weights.tolist()})
     clipped = float(saturated.mean())
@@ -257,6 +260,21 @@ def _check_output_type(output: Path) -> str:
     if kind is None:
         raise UsageError(f"--out {output}: unsupported image type; expected .exr (linear float) or .tiff (16-bit raw)")
     return kind
+
+
+def _check_raw_output(output: Path, sequence: Sequence) -> None:
+    """Refuse a raw ``.tiff`` for a sequence whose frames are float (EXR): raw TIFF values are whole counts
+    in the frames' own encoding, and float frames have none (normalised ones, white level 1, would
+    all round to 0 or 1)."""
+    ambient = sequence.indices("ambient")
+    if _check_output_type(output) != "tiff" or not ambient:
+        return
+    header = read_image_header(sequence.frame_path(ambient[0]))
+    if np.issubdtype(header.dtype, np.floating):
+        raise UsageError(
+            f"--out {output}: the frames of {sequence.path} are float ({sequence.frames[ambient[0]].file}, white level "
+            f"{sequence.camera.white_level:g}), so a 16-bit raw TIFF cannot hold them in their encoding; expected .exr "
+            "(linear float)")
 
 
 def _write_flash_image(output: Path, image: np.ndarray, stack: analysis.FrameStack, sequence: object,

@@ -6,6 +6,8 @@
   small negative values in the tails. The reader refused any negative value, so a sequence with
   measured spectra could not be read at all; they are clipped now, as the spectrometer reader
   clips them (down to 5 % of the peak), and a value beyond that is still refused.
+- Float frames (EXR, normalised to white 1): ``--out x.tiff`` wrote a 16-bit raw TIFF whose every
+  sample was 0 or 1, with exit 0; refused now before any work.
 """
 
 from __future__ import annotations
@@ -17,8 +19,9 @@ import numpy as np
 import pytest
 
 from acquisition.errors import RecordingError
+from acquisition.image_io import read_image
 from acquisition.sequence_format import read_sequence
-from tests.processing.unseen_sequences import Case, check_case, render_case
+from tests.processing.unseen_sequences import Case, check_case, expected_synthesis, render_case, run_cli
 
 
 def test_windows_separators_in_frame_paths_are_read(tmp_path: Path) -> None:
@@ -62,3 +65,30 @@ def test_a_negative_value_beyond_noise_is_refused_naming_the_tolerance(tmp_path:
     with pytest.raises(RecordingError, match=r"leds\[2\]\.spd\[4\] is -.*; expected a non-negative value \(or "
                                              r"measurement noise down to 5% of the peak"):
         read_sequence(rendered.directory)
+
+
+def test_a_raw_tiff_of_a_float_sequence_is_refused_before_any_work(tmp_path: Path) -> None:
+    """Float (EXR) frames normalised to a white level of 1: the 16-bit raw TIFF rounded every sample to 0
+    or 1 (100 % reported clipped, exit 0). It is refused now, naming the frame; the EXR output works."""
+    rendered = render_case(Case("float", container="exr", cfa="RGGB"), tmp_path / "float")
+    weights = ",".join(["0.5"] * rendered.led_spd.shape[1])
+    for args in (["synthesize", str(rendered.directory), "--weights", weights],
+                 ["flash", str(rendered.directory), "--mode", "matching"]):
+        status, out, err, caught = run_cli([*args, "--out", str(tmp_path / "raw.tiff")])
+        assert (status, out, caught) == (2, "", [])
+        assert err.count("\n") == 1 and err.startswith("msflash: error: --out ")
+        assert "img/00_ambient.exr" in err and "expected .exr" in err
+        assert not (tmp_path / "raw.tiff").exists()
+    assert run_cli(["synthesize", str(rendered.directory), "--weights", weights, "--out", str(tmp_path / "x.exr")])[0] == 0
+
+
+def test_a_raw_tiff_of_an_integer_sequence_holds_the_frames_encoding(tmp_path: Path) -> None:
+    rendered = render_case(Case("counts", cfa="GRBG", bits=12, black=256, exposures="varying"), tmp_path / "counts")
+    weights = np.full(rendered.led_spd.shape[1], 0.3)
+    out = tmp_path / "raw.tiff"
+    assert run_cli(["synthesize", str(rendered.directory), "--weights", ",".join(["0.3"] * weights.size),
+                    "--out", str(out)])[0] == 0
+    ambient = next(entry for entry in rendered.frames if entry["role"] == "ambient")
+    expected = np.clip(np.rint(rendered.black + expected_synthesis(rendered, weights) * ambient["exposure_us"]
+                               * ambient["gain"]), 0, rendered.white)
+    np.testing.assert_array_equal(read_image(out), expected)
