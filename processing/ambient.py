@@ -373,12 +373,11 @@ class AmbientModel:
                 f"ambient estimate: the LED-only image of {', '.join(dark)} is empty; expected every LED to add light "
                 "(is it connected, and its level above 0?)"
             )
-        clean = statistics.denoised() if denoised is None else denoised
-        if clean is not None:
+        solved = _solved_statistics(statistics, denoised)
+        if solved is not statistics:
             try:
-                np.linalg.cholesky(clean.gram)
-                return _METHODS[method](clean, self.terms, alpha)
-            except (np.linalg.LinAlgError, SolverError):
+                return _METHODS[method](solved, self.terms, alpha)
+            except SolverError:
                 pass
         return _METHODS[method](statistics, self.terms, alpha)
 
@@ -396,9 +395,12 @@ class AmbientModel:
         rss = statistics.residual_energy(weights)
         dof = max(statistics.n_samples - statistics.n_leds, 1)
         noise_variance = rss / dof
-        penalty_weight = alpha_used * terms.penalty_scale(statistics) if method == "tikhonov" else 0.0
+        # The band is the solved system's (the denoised one when it was used): w = (G_s + λP)⁻¹ c, with the
+        # observed G in the middle of the sandwich as the products' covariance.
+        solved = _solved_statistics(statistics)
+        penalty_weight = alpha_used * terms.penalty_scale(solved) if method == "tikhonov" else 0.0
         try:
-            system_inverse = np.linalg.pinv(statistics.gram + penalty_weight * terms.penalty_gram)
+            system_inverse = np.linalg.pinv(solved.gram + penalty_weight * terms.penalty_gram)
             weights_cov = noise_variance * system_inverse @ statistics.gram @ system_inverse
         except np.linalg.LinAlgError:
             weights_cov = np.full((statistics.n_leds,) * 2, np.inf)
@@ -453,6 +455,19 @@ class AmbientModel:
             warnings=tuple(warnings),
             ambient_z=float(ambient_z),
         )
+
+
+def _solved_statistics(statistics: SequenceStatistics, denoised: SequenceStatistics | None = None) -> SequenceStatistics:
+    """The statistics eq. 5 is solved on: the denoised ones (``denoised``, else the statistics' own) when
+    their Gram matrix is positive definite, else the statistics as observed (:meth:`AmbientModel.weights`)."""
+    clean = statistics.denoised() if denoised is None else denoised
+    if clean is not None:
+        try:
+            np.linalg.cholesky(clean.gram)
+            return clean
+        except np.linalg.LinAlgError:
+            pass
+    return statistics
 
 
 def estimate_ambient(
