@@ -314,7 +314,11 @@ def render_case(case: Case, directory: Path) -> Rendered:
     span = white_dn - case.black
     diffuse_rows = slice(0, n_surfaces)
     # Response (photon units) of every planned frame at unit exposure and gain.
-    frame_resp = [ambient_resp * (role != "dark") + np.tensordot(row, led_response, axes=1) for role, row in plan]
+    # ``flicker:a``: the ambient's intensity differs frame to frame by up to ±a (mains-driven lamps, short exposures).
+    flicker = next((float(q[8:]) for q in case.quirks if q.startswith("flicker:")), 0.0)
+    drift = 1.0 + flicker * rng.uniform(-1.0, 1.0, len(plan))
+    frame_resp = [ambient_resp * (role != "dark") * (1.0 if role == "ambient" else drift[j])
+                  + np.tensordot(row, led_response, axes=1) for j, (role, row) in enumerate(plan)]
     brightest = max(float(r[diffuse_rows].max()) for r in frame_resp)
     base_exposure = 10000.0
     counts_per_response = case.peak * span / (brightest * base_exposure)  # DN per (response · µs) at gain 1
@@ -595,4 +599,7 @@ def sweep_cases() -> list[Case]:
     add("leds-gauss16-pairs", leds="gauss:16", levels="pairs", light="warmLED")
     add("windows-paths", quirks=("windows_paths",))
     add("measured-spectra", quirks=("measured_spectra",), leds="booth8", unit="photons")
+    for amplitude in (0.01, 0.03, 0.1):
+        add(f"flicker-{amplitude:g}", quirks=(f"flicker:{amplitude:g}",), light="F2")
+        add(f"flicker-{amplitude:g}-ratio5", quirks=(f"flicker:{amplitude:g}",), light="F2", ratio=5.0)
     return cases
