@@ -198,6 +198,8 @@ class Case:
     patch_px: int = 8
     crop: int = 0
     """Rows and columns cut off the bottom right (odd frame sizes)."""
+    texture: float = 0.0
+    """Pixel-scale texture: every pixel's reflectance times 1 ± this (uniform, the same in every frame)."""
     quirks: tuple[str, ...] = ()
     """``windows_paths`` (frame paths with ``\\`` separators, as ``str(WindowsPath)`` gives), ``measured_spectra``
     (LED spectra and responsivities as a spectrometer gives them: ±0.3 % of the peak of noise, negative in
@@ -324,6 +326,7 @@ def render_case(case: Case, directory: Path) -> Rendered:
     counts_per_response = case.peak * span / (brightest * base_exposure)  # DN per (response · µs) at gain 1
     electrons_per_dn = FULL_WELL_E / span
     entries, pixels_list = [], []
+    shading = 1.0 + case.texture * np.random.default_rng(case.seed + 1).uniform(-1.0, 1.0, (height, width))
     for index, ((role, row), response) in enumerate(zip(plan, frame_resp)):
         if case.exposures == "varying":
             gain = float(rng.choice([1.0, 1.5, 2.0]))
@@ -334,6 +337,8 @@ def render_case(case: Case, directory: Path) -> Rendered:
             gain, exposure = 1.0, base_exposure
         mean_dn = response * counts_per_response * exposure * gain  # (surfaces+1, 3)
         image = mean_dn[labels[:height - case.crop, :width - case.crop]]  # (H, W, 3)
+        if case.texture:
+            image = image * shading[:image.shape[0], :image.shape[1], None]
         if case.cfa is not None:
             sites = np.tile(_cfa_index(case.cfa), (height // 2 + 1, width // 2 + 1))[:image.shape[0], :image.shape[1]]
             image = np.take_along_axis(image, sites[:, :, None], axis=2)[:, :, 0]
@@ -599,6 +604,11 @@ def sweep_cases() -> list[Case]:
     add("leds-gauss16-pairs", leds="gauss:16", levels="pairs", light="warmLED")
     add("windows-paths", quirks=("windows_paths",))
     add("measured-spectra", quirks=("measured_spectra",), leds="booth8", unit="photons")
+    for texture in (0.1, 0.3):
+        add(f"texture-{texture:g}", texture=texture)
+        add(f"texture-{texture:g}-booth8-D65", texture=texture, leds="booth8", light="D65")
+        add(f"texture-{texture:g}-bayer-7px", texture=texture, cfa="RGGB", patch_px=7)
+    add("patches-7px", patch_px=7)
     for amplitude in (0.01, 0.03, 0.1):
         add(f"flicker-{amplitude:g}", quirks=(f"flicker:{amplitude:g}",), light="F2")
         add(f"flicker-{amplitude:g}-ratio5", quirks=(f"flicker:{amplitude:g}",), light="F2", ratio=5.0)
