@@ -51,6 +51,8 @@ def test_a_render_error_is_raised_in_its_frames_place(tmp_path: Path, monkeypatc
         assert rig.emulator is not None and rig.emulator.levels == (0.0,) * 3  # LEDs off after the failure
     assert type(caught.value) is RenderBroke, caught.value
     assert not isinstance(caught.value, (FrameTimeoutError, DroppedFrameError))
-    assert calls["n"] == FAILING_RENDER
+    # Booth master: the booth paces its table on its own, so it may pulse the next frame before the
+    # host has taken the failed one (render call 4 then starts); host- and camera-paced stop at it.
+    assert calls["n"] == FAILING_RENDER if trigger != "booth" else calls["n"] >= FAILING_RENDER
     # The frames before the failure were written and stay readable.
     assert [f.role for f in read_sequence(path).frames] == ["ambient", "led"]
