@@ -307,7 +307,8 @@ class TiledStatistics:
     def total(self) -> SequenceStatistics:
         """The statistics of the whole frame: the sum of the tiles', with the noise the probe measured
         (:attr:`denoised`) as their :attr:`~processing.statistics.SequenceStatistics.noise` — what
-        :func:`processing.statistics.accumulate_statistics` gives for the same blocks."""
+        :func:`processing.statistics.accumulate_statistics` gives for the same blocks (exactly below
+        ``4 · PROBE_BLOCKS`` blocks; above, it probes a stride of block rows, the tiles every block)."""
         gram, cross, energy = self.gram.sum(axis=(0, 1)), self.cross.sum(axis=(0, 1)), float(self.ambient_energy.sum())
         clean = self.denoised
         noise = None if clean is None else NoiseMoments(

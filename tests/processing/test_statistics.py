@@ -160,3 +160,46 @@ def test_non_finite_frame_is_named(bin_factor: int, frame: int, name: str) -> No
         accumulate_statistics(frames[0], frames[1:], spec, bin_factor=bin_factor)
     with pytest.raises(SpectralDataError, match=message):
         tile_statistics(frames[0], frames[1:], spec, 2, bin_factor=bin_factor)
+
+
+@pytest.mark.parametrize("incremental", [False, True])
+def test_large_frames_probe_a_stride_of_block_rows_and_scale_it(monkeypatch: pytest.MonkeyPatch, incremental: bool) -> None:
+    """Above 4 × PROBE_BLOCKS blocks the noise probe reads every 4th block row, scaled by the valid blocks:
+    its noise moments stay within a few per cent of the full probe's (sampling error ~1 %), saturated
+    blocks included, and so do the denoised weights."""
+    from processing import statistics as module
+
+    rng = np.random.default_rng(7)
+    shape, k = (1024, 1024, 3), 3
+    # Surfaces as 8-px tiles (their colour differs per LED), so blocks differ and the LEDs are distinct.
+    leds = [np.kron(rng.uniform(100, 2000, (128, 128, 3)), np.ones((8, 8, 1))) for _ in range(k)]
+    truth = np.array([0.5, 0.3, 0.8])
+    ambient_light = sum(w * f for w, f in zip(truth, leds, strict=True))
+
+    def noisy(light: np.ndarray) -> np.ndarray:
+        return np.clip(rng.normal(light, np.sqrt(light) * 4), 0, 65535).astype(np.uint16)
+
+    ambient = noisy(ambient_light)
+    ambient[:64, :64] = 65535  # a saturated corner: blocks left out of both the moments and the probe
+    frames = [noisy(ambient_light + f) for f in leds]
+    spec = FrameStackSpec(0.0, 65535.0, 1.0, (1.0,) * k, np.eye(k))
+
+    def statistics() -> SequenceStatistics:
+        if not incremental:
+            return accumulate_statistics(ambient, frames, spec, bin_factor=4)
+        rows = module.BlockRows(k, shape, 4, 65535.0, incremental=True)
+        for row, frame in [(k, ambient), *enumerate(frames)]:
+            rows.add(row, frame)
+        return rows.statistics(spec)
+
+    strided = statistics()
+    monkeypatch.setattr(module, "PROBE_BLOCKS", 10 ** 9)  # every block row
+    full = statistics()
+    assert strided.noise is not None and full.noise is not None
+    assert strided.n_samples == full.n_samples < strided.n_total
+    np.testing.assert_array_equal(strided.gram, full.gram)
+    np.testing.assert_allclose(np.diag(strided.noise.gram), np.diag(full.noise.gram), rtol=0.03)
+    np.testing.assert_allclose(strided.noise.ambient_energy, full.noise.ambient_energy, rtol=0.03)
+    solve = lambda stats: np.linalg.solve(stats.denoised().gram, stats.denoised().cross)  # noqa: E731
+    np.testing.assert_allclose(solve(strided), solve(full), atol=0.01)
+    np.testing.assert_allclose(solve(full), truth, atol=0.02)
