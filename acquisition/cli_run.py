@@ -24,6 +24,7 @@ report is written from it (its numbers are not finite); ``run`` then exits 1 wit
 from __future__ import annotations
 
 import argparse
+import math
 import time
 import warnings
 from collections.abc import Callable
@@ -52,6 +53,7 @@ from acquisition.exposure import (
     plan_exposures,
 )
 from acquisition.plan import CapturePlan, TriggerSource
+from acquisition.replay_camera import LEVEL_TOLERANCE
 from acquisition.rig import Rig, open_rig
 from acquisition.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from acquisition.sequence_format import (
@@ -150,6 +152,12 @@ class _Recorded:
     ambient_gain: float
     led_gains: tuple[float, ...]
     flash_gain: float
+    flash_levels: tuple[float, ...] | None = None
+    """The recorded flash frame's LED levels (None without one)."""
+
+
+def _levels_text(levels) -> str:
+    return "[" + ", ".join(f"{float(level):.3f}" for level in levels) + "]"
 
 
 def _recorded(rig: Rig) -> _Recorded | None:
@@ -165,7 +173,8 @@ def _recorded(rig: Rig) -> _Recorded | None:
     frames = sequence.frames
     return _Recorded(frames[ambient[0]].exposure_us, tuple(frames[i].exposure_us for i in leds),
                      frames[flash[0]].exposure_us if flash else None, frames[ambient[0]].gain,
-                     tuple(frames[i].gain for i in leds), frames[flash[0]].gain if flash else 1.0)
+                     tuple(frames[i].gain for i in leds), frames[flash[0]].gain if flash else 1.0,
+                     tuple(frames[flash[0]].led_levels) if flash else None)
 
 
 def _plan_exposure(rig: Rig, args: argparse.Namespace) -> ExposurePlan:
@@ -433,6 +442,14 @@ def _run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposureP
     if exposure.mode == "recorded" and recorded is not None and recorded.flash_us is None:
         progress("the recording has no flash frame (a sequence from 'msflash capture'): the flash is synthesised "
                  "from the frames, not re-captured")
+        return estimate, solutions, caught, captured, None, stack, time.perf_counter()
+    if exposure.mode == "recorded" and recorded is not None and recorded.flash_levels is not None and not all(
+            math.isclose(a, b, abs_tol=LEVEL_TOLERANCE) for a, b in zip(levels, recorded.flash_levels, strict=True)):
+        # A recording made by another msflash version or with other options (--mode, --solver, --target…):
+        # its flash frame is not this flash, and replay cannot capture another one.
+        progress(f"the recording's flash frame has LED levels {_levels_text(recorded.flash_levels)}, this run's "
+                 f"{args.mode} flash asks for {_levels_text(levels)} (recorded with other options or another "
+                 "msflash version): the flash is synthesised from the frames, not replayed")
         return estimate, solutions, caught, captured, None, stack, time.perf_counter()
     frames = captured.frames
     info = rig.camera.info  # read once: on a real camera each read is several feature round trips
