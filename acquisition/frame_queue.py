@@ -103,10 +103,9 @@ class TriggeredFrames:
             self._producing -= 1
             self._condition.notify_all()
 
-    def _end_frame(self, frame: RawFrame | None) -> None:
-        """The frame of a trigger is made (``None`` if making it failed): queue it and wake waiters."""
+    def _end_frame(self, frame: RawFrame) -> None:
+        """The frame of a trigger is made: queue it and wake waiters (a failure goes to :meth:`_fail_frame`)."""
         with self._condition:
-            if frame is not None:
-                self._queue.append(frame)
+            self._queue.append(frame)
             self._producing -= 1
             self._condition.notify_all()
