@@ -248,8 +248,32 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
             spectra = spectra.select([0])
         resampled = spectra.resample(sequence.grid, outside="error")
     else:
-        resampled = datasets.illuminant(target, sequence.grid)
+        try:
+            resampled = datasets.illuminant(target, sequence.grid)
+        except SpectralDataError as err:
+            # A table narrower than the sequence's grid (e.g. FL2's 380–780 nm on 360–830 nm): zero beyond
+            # it is harmless only where the camera sees (almost) nothing.
+            resampled = datasets.illuminant(target, sequence.grid, outside="zero")
+            _require_camera_coverage(sequence, resampled.values[:, 0] > 0, f"target illuminant '{target}'", err)
     return resampled.to_unit("photons")
+
+
+def _require_camera_coverage(sequence: Sequence, covered: np.ndarray, what: str, cause: Exception) -> None:
+    """Refuse zero beyond ``covered`` if the camera puts more than COVERAGE_TOLERANCE of its response there."""
+    curves = sequence.camera.responsivity
+    if curves is None:
+        raise RecordingError(f"{what}: {cause}") from cause
+    response = np.abs(np.stack([np.asarray(curve, dtype=float) for curve in curves.values()])).sum(axis=0)
+    total = float(response.sum())
+    share = float(response[~covered].sum()) / total if total > 0 else 1.0
+    if share > COVERAGE_TOLERANCE:
+        grid = sequence.wavelengths_nm
+        known = grid[covered] if covered.any() else grid[:0]
+        span = f"{float(known[0]):g}–{float(known[-1]):g} nm" if known.size else "none"
+        raise RecordingError(
+            f"{what}: its data cover {span} of the sequence's {float(grid[0]):g}–{float(grid[-1]):g} nm, and the "
+            f"camera puts {100 * share:.1f} % of its response outside that; expected a target covering the camera's "
+            "range (give --target FILE.csv)") from cause
 
 
 def solve_sequence_flash(sequence: Sequence, mode: str, ambient_weights: np.ndarray, target: str = "D65",

@@ -197,3 +197,20 @@ class TestIlluminants:
         assert ratio[-1] < 0.1 * ratio[4]  # red is absorbed first
         with pytest.raises(SpectralDataError, match="expected one of tungsten"):
             datasets.ambient_spectrum("moonlight")
+
+
+def test_a_and_the_d_series_extend_beyond_the_780_nm_tables() -> None:
+    """CIE A (Planck) and D65 (the D-series basis, 300–830 nm) on the CIE's own 360–830 nm grid; D65 computed
+    agrees with its table where both exist; FL2 (a table only) is refused, or zero beyond it on request."""
+    wide = WavelengthGrid(360.0, 830.0, 5.0)
+    d65_wide, d65 = datasets.illuminant("D65", wide), datasets.illuminant("D65", WavelengthGrid(380.0, 780.0, 5.0))
+    overlap = d65_wide.values[4:85, 0]
+    np.testing.assert_allclose(overlap / overlap.max(), d65.values[:, 0] / d65.values[:, 0].max(), atol=0.01)
+    assert np.all(d65_wide.values > 0)
+    a = datasets.illuminant("A", WavelengthGrid(360.0, 1000.0, 5.0))
+    assert np.all(np.diff(a.values[:, 0]) > 0)  # 2856 K: rising through the near infrared
+    with pytest.raises(SpectralDataError):
+        datasets.illuminant("FL2", wide)
+    fl2 = datasets.illuminant("FL2", wide, outside="zero").values[:, 0]
+    inside = (wide.wavelengths_nm >= 380) & (wide.wavelengths_nm <= 780)  # FL2's table
+    assert fl2[~inside].max() == 0 and fl2[inside].min() > 0

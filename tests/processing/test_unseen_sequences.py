@@ -32,6 +32,8 @@ FAST_CASES = [
             camera="isetcam:AptinaMT9M031", leds="paper:0,2,3,5,6", light="F11", seed=6),
     replace(BASE, name="luxeon8-underwater-unknown-keys", leds="luxeon8", light="underwater", order="unknown_keys",
             camera="gaussian", seed=7),
+    # The CIE's 360–830 nm grid: the complementary flash's D65 comes from the D-series basis beyond 780 nm.
+    replace(BASE, name="grid360-830-2-photons", grid=(360, 830, 2), unit="photons", seed=9),
     replace(BASE, name="three-leds-low-signal-ambient-heavy", leds="paper:0,3,5", peak=0.05, ratio=5.0,
             bits=12, black=256, light="warmLED", seed=8),
 ]
@@ -53,3 +55,17 @@ def test_sweep_of_unseen_sequences(tmp_path: Path) -> None:
               f"warnings {len(outcome.warnings)} flash vs truth {outcome.flash_error_deg[0]:.2f}° "
               f"{outcome.flash_error_deg[1]:.2f}°")
     assert [(o.case.name, o.defects) for o in outcomes if o.defects] == []
+
+
+def test_d65_beyond_830_nm_for_an_infrared_camera_is_refused_in_one_line(tmp_path: Path) -> None:
+    """380–1000 nm with an IR camera: D65 is not defined where the camera still sees, so the complementary
+    flash asks for a target file (exit 2, one line); matching needs no target and works."""
+    from tests.processing.unseen_sequences import render_case, run_cli
+
+    rendered = render_case(replace(BASE, name="ir", grid=(380, 1000, 5), camera="isetcam:NikonD200IR", seed=10),
+                           tmp_path / "ir")
+    status, _, err, caught = run_cli(["flash", str(rendered.directory), "--mode", "complementary"])
+    assert status == 2 and not caught and err.count("\n") == 1
+    assert "target illuminant 'D65': its data cover 380–830 nm of the sequence's 380–1000 nm" in err
+    assert "--target FILE.csv" in err
+    assert run_cli(["flash", str(rendered.directory), "--mode", "matching"])[0] == 0

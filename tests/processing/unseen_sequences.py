@@ -512,6 +512,8 @@ def check_case(case: Case, root: Path) -> Outcome:
     weights_by_mode, truth_angles = {}, {}
     for mode in ("complementary", "matching"):
         status, out, err, caught = run_cli(["flash", sequence, "--mode", mode, "--json"])
+        if status == 2 and "expected a target covering the camera's range" in err and not caught:
+            continue  # D65 is not defined where this camera still sees (an IR camera beyond 830 nm): refused, clearly
         if status != 0 or caught or "Traceback" in err:
             defects.append(f"flash {mode}: status {status}: {err.strip()[-600:]} {caught}")
             continue
