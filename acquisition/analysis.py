@@ -246,7 +246,13 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
         spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
         if spectra.count != 1:
             spectra = spectra.select([0])
-        resampled = spectra.resample(sequence.grid, outside="error")
+        try:
+            resampled = spectra.resample(sequence.grid, outside="error")
+        except SpectralDataError as err:
+            resampled = spectra.resample(sequence.grid, outside="zero")
+            inside = (sequence.wavelengths_nm >= spectra.wavelengths_nm[0]) & \
+                (sequence.wavelengths_nm <= spectra.wavelengths_nm[-1])
+            _require_camera_coverage(sequence, inside, f"target illuminant {target}", err)
     else:
         try:
             resampled = datasets.illuminant(target, sequence.grid)
@@ -254,11 +260,13 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
             # A table narrower than the sequence's grid (e.g. FL2's 380–780 nm on 360–830 nm): zero beyond
             # it is harmless only where the camera sees (almost) nothing.
             resampled = datasets.illuminant(target, sequence.grid, outside="zero")
-            _require_camera_coverage(sequence, resampled.values[:, 0] > 0, f"target illuminant '{target}'", err)
+            _require_camera_coverage(sequence, resampled.values[:, 0] > 0, f"target illuminant '{target}'", err,
+                                     " (give --target FILE.csv)")
     return resampled.to_unit("photons")
 
 
-def _require_camera_coverage(sequence: Sequence, covered: np.ndarray, what: str, cause: Exception) -> None:
+def _require_camera_coverage(sequence: Sequence, covered: np.ndarray, what: str, cause: Exception,
+                             hint: str = "") -> None:
     """Refuse zero beyond ``covered`` if the camera puts more than COVERAGE_TOLERANCE of its response there."""
     curves = sequence.camera.responsivity
     if curves is None:
@@ -273,7 +281,7 @@ def _require_camera_coverage(sequence: Sequence, covered: np.ndarray, what: str,
         raise RecordingError(
             f"{what}: its data cover {span} of the sequence's {float(grid[0]):g}–{float(grid[-1]):g} nm, and the "
             f"camera puts {100 * share:.1f} % of its response outside that; expected a target covering the camera's "
-            "range (give --target FILE.csv)") from cause
+            f"range{hint}") from cause
 
 
 def solve_sequence_flash(sequence: Sequence, mode: str, ambient_weights: np.ndarray, target: str = "D65",

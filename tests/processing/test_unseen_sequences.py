@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.processing.unseen_sequences import MARGIN, Case, check_case, sweep_cases
@@ -69,3 +70,19 @@ def test_d65_beyond_830_nm_for_an_infrared_camera_is_refused_in_one_line(tmp_pat
     assert "target illuminant 'D65': its data cover 380–830 nm of the sequence's 380–1000 nm" in err
     assert "--target FILE.csv" in err
     assert run_cli(["flash", str(rendered.directory), "--mode", "matching"])[0] == 0
+
+
+def test_a_target_file_narrower_than_the_grid_is_zero_filled_only_where_the_camera_is_blind(tmp_path: Path) -> None:
+    from tests.processing.unseen_sequences import render_case, run_cli
+
+    rendered = render_case(replace(BASE, name="wide", grid=(360, 830, 5), seed=11), tmp_path / "wide")
+    for low, expected in ((380, 0), (500, 2)):
+        wavelengths = np.arange(low, 781, 5)
+        target = tmp_path / f"target{low}.csv"
+        np.savetxt(target, np.column_stack([wavelengths, np.ones_like(wavelengths)]), delimiter=",",
+                   header="wavelength_nm,value", comments="")
+        status, _, err, caught = run_cli(["flash", str(rendered.directory), "--mode", "complementary",
+                                          "--target", str(target)])
+        assert status == expected and not caught, err
+        if expected:  # 500–780 nm leaves the camera's blue out
+            assert f"its data cover {low}–780 nm of the sequence's 360–830 nm" in err and err.count("\n") == 1
