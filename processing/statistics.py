@@ -28,7 +28,6 @@ instrumental-variable estimate; no noise model needed). :attr:`SequenceStatistic
 from __future__ import annotations
 
 import math
-
 import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -804,15 +803,16 @@ def _gathered(row_sums: np.ndarray, factor: int, channels: int, matrix) -> np.nd
     with a gather matrix combines them per channel — far faster than strided slicing, and exact
     (±1/0 weights, integer sums below 2²⁴ in float32). The product runs in slices of GATHER_ROWS
     groups: OpenBLAS splits larger ones across threads, whose wake-up and spinning cost more than
-    the product on a busy 2-core machine (measured 4× slower under load). Returns (H/f, W/f, C).
+    the product on a busy 2-core machine (measured 4× slower under load). Returns (H/f, W/f, m) for
+    a (factor·channels, m) matrix.
     """
     height, width = row_sums.shape[0], row_sums.shape[1] // (factor * channels)
     groups = row_sums.reshape(height * width, factor * channels)
     gather = matrix(factor, channels, row_sums.dtype.type)
-    grouped = np.empty((height * width, channels), dtype=row_sums.dtype)
+    grouped = np.empty((height * width, gather.shape[1]), dtype=row_sums.dtype)
     for start in range(0, groups.shape[0], GATHER_ROWS):
         np.matmul(groups[start:start + GATHER_ROWS], gather, out=grouped[start:start + GATHER_ROWS])
-    return grouped.reshape(height, width, channels)
+    return grouped.reshape(height, width, gather.shape[1])
 
 
 @lru_cache(maxsize=16)
@@ -847,16 +847,9 @@ def block_sums_and_differences(plane: np.ndarray, factor: int) -> tuple[np.ndarr
     >>> sums[:, :, 0].tolist(), differences[:, :, 0].tolist()
     ([[10.0, 18.0], [42.0, 50.0]], [[-2.0, -2.0], [-2.0, -2.0]])
     """
-    height, width, channels = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
-    sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
-    rows = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
-    groups = rows.sum(axis=1, dtype=sum_type).reshape(height * width, factor * channels)
+    channels = plane.shape[2]
     # One product with both gather matrices side by side: the row sums are read once.
-    gather = _sum_and_difference_gather(factor, channels, sum_type)
-    both = np.empty((height * width, 2 * channels), dtype=sum_type)
-    for start in range(0, groups.shape[0], GATHER_ROWS):  # below OpenBLAS's threading threshold (see block_sums)
-        np.matmul(groups[start:start + GATHER_ROWS], gather, out=both[start:start + GATHER_ROWS])
-    both = both.reshape(height, width, 2 * channels)
+    both = _gathered(_block_row_sums(plane, factor), factor, channels, _sum_and_difference_gather)
     return both[:, :, :channels], both[:, :, channels:]
 
 
