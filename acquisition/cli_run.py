@@ -24,7 +24,6 @@ report is written from it (its numbers are not finite); ``run`` then exits 1 wit
 from __future__ import annotations
 
 import argparse
-import math
 import time
 import warnings
 from collections.abc import Callable
@@ -53,7 +52,7 @@ from acquisition.exposure import (
     plan_exposures,
 )
 from acquisition.plan import CapturePlan, TriggerSource
-from acquisition.replay_camera import LEVEL_TOLERANCE
+from acquisition.replay_camera import format_levels, levels_match
 from acquisition.rig import Rig, open_rig
 from acquisition.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from acquisition.sequence_format import (
@@ -154,10 +153,6 @@ class _Recorded:
     flash_gain: float
     flash_levels: tuple[float, ...] | None = None
     """The recorded flash frame's LED levels (None without one)."""
-
-
-def _levels_text(levels) -> str:
-    return "[" + ", ".join(f"{float(level):.3f}" for level in levels) + "]"
 
 
 def _recorded(rig: Rig) -> _Recorded | None:
@@ -443,12 +438,12 @@ def _run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposureP
         progress("the recording has no flash frame (a sequence from 'msflash capture'): the flash is synthesised "
                  "from the frames, not re-captured")
         return estimate, solutions, caught, captured, None, stack, time.perf_counter()
-    if exposure.mode == "recorded" and recorded is not None and recorded.flash_levels is not None and not all(
-            math.isclose(a, b, abs_tol=LEVEL_TOLERANCE) for a, b in zip(levels, recorded.flash_levels, strict=True)):
+    if exposure.mode == "recorded" and recorded is not None and recorded.flash_levels is not None and \
+            not levels_match(recorded.flash_levels, levels):
         # A recording made by another msflash version or with other options (--mode, --solver, --target…):
         # its flash frame is not this flash, and replay cannot capture another one.
-        progress(f"the recording's flash frame has LED levels {_levels_text(recorded.flash_levels)}, this run's "
-                 f"{args.mode} flash asks for {_levels_text(levels)} (recorded with other options or another "
+        progress(f"the recording's flash frame has LED levels {format_levels(recorded.flash_levels)}, this run's "
+                 f"{args.mode} flash asks for {format_levels(levels)} (recorded with other options or another "
                  "msflash version): the flash is synthesised from the frames, not replayed")
         return estimate, solutions, caught, captured, None, stack, time.perf_counter()
     frames = captured.frames

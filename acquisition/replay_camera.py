@@ -29,6 +29,8 @@ from acquisition.sequence_format import Sequence, read_sequence
 
 LEVEL_TOLERANCE = 2.0 / 0xFFFF
 """LED levels match when within two 16-bit wire steps."""
+Levels = tuple[float, ...] | list[float] | np.ndarray
+"""LED levels as plans, recorded frames and solvers hold them."""
 EXPOSURE_RTOL = 0.01
 """Exposures (and gains) match within 1 % (cameras round exposure to their own steps)."""
 
@@ -141,9 +143,9 @@ class ReplayCamera(TriggeredFrames):
         recorded = f"frames[{index}]"
         if frame.role != step.role:
             return f"role '{step.role}' but {recorded}.role is '{frame.role}'; expected the recorded role"
-        if len(frame.led_levels) != len(step.led_levels) or not all(
-                math.isclose(a, b, abs_tol=LEVEL_TOLERANCE) for a, b in zip(frame.led_levels, step.led_levels)):
-            return (f"led_levels {_fmt(step.led_levels)} but {recorded}.led_levels is {_fmt(frame.led_levels)}; "
+        if not levels_match(frame.led_levels, step.led_levels):
+            return (f"led_levels {format_levels(step.led_levels)} but {recorded}.led_levels is "
+                    f"{format_levels(frame.led_levels)}; "
                     f"expected them within {LEVEL_TOLERANCE:.1e}")
         if not math.isclose(frame.exposure_us, step.exposure_us, rel_tol=EXPOSURE_RTOL):
             return (f"exposure_us {step.exposure_us:g} but {recorded}.exposure_us is {frame.exposure_us:g}; "
@@ -189,5 +191,12 @@ class ReplayCamera(TriggeredFrames):
         self._end_frame(frame)
 
 
-def _fmt(levels: tuple[float, ...] | list[float]) -> str:
-    return "[" + ", ".join(f"{v:.4g}" for v in levels) + "]"
+def levels_match(recorded: Levels, asked: Levels) -> bool:
+    """Whether LED levels asked for are the recorded ones (same count, each within :data:`LEVEL_TOLERANCE`)."""
+    return len(recorded) == len(asked) and all(
+        math.isclose(a, b, abs_tol=LEVEL_TOLERANCE) for a, b in zip(recorded, asked, strict=True))
+
+
+def format_levels(levels: Levels) -> str:
+    """LED levels as replay's messages show them, e.g. ``[0, 0.6467, 0.3736]``."""
+    return "[" + ", ".join(f"{float(v):.4g}" for v in levels) + "]"
