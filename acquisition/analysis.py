@@ -162,15 +162,19 @@ COVERAGE_TOLERANCE = 0.01
 """Largest share of the LEDs' energy a calibration's wavelength range may leave out."""
 
 
+def _shares_outside(values: np.ndarray, covered: np.ndarray, empty: float = 0.0) -> np.ndarray:
+    """Each column's share of its absolute sum on the wavelengths outside ``covered`` (``empty`` for a zero column)."""
+    energy = np.abs(values)
+    totals = energy.sum(axis=0)
+    return np.divide(energy[~covered].sum(axis=0), totals, out=np.full_like(totals, empty), where=totals > 0)
+
+
 def _require_coverage(directory: str | Path, calibration_id: str, what: str, calibrated_nm: np.ndarray,
                       leds: Spectra) -> None:
     """Refuse a calibration whose range misses more than 1 % of an LED's energy (it would be zero-filled there)."""
     low, high = float(calibrated_nm[0]), float(calibrated_nm[-1])
     wavelengths = leds.wavelengths_nm
-    outside = (wavelengths < low - 1e-9) | (wavelengths > high + 1e-9)
-    energy = np.abs(leds.values)
-    totals = energy.sum(axis=0)
-    shares = np.divide(energy[outside].sum(axis=0), totals, out=np.zeros_like(totals), where=totals > 0)
+    shares = _shares_outside(leds.values, (wavelengths >= low - 1e-9) & (wavelengths <= high + 1e-9))
     worst = int(np.argmax(shares)) if shares.size else 0
     if shares.size and shares[worst] > COVERAGE_TOLERANCE:
         raise RecordingError(
@@ -271,9 +275,8 @@ def _require_camera_coverage(sequence: Sequence, covered: np.ndarray, what: str,
     curves = sequence.camera.responsivity
     if curves is None:
         raise RecordingError(f"{what}: {cause}") from cause
-    response = np.abs(np.stack([np.asarray(curve, dtype=float) for curve in curves.values()])).sum(axis=0)
-    total = float(response.sum())
-    share = float(response[~covered].sum()) / total if total > 0 else 1.0
+    response = np.abs(np.stack([np.asarray(curve, dtype=float) for curve in curves.values()], axis=1))
+    share = float(_shares_outside(response.sum(axis=1, keepdims=True), covered, empty=1.0)[0])
     if share > COVERAGE_TOLERANCE:
         grid = sequence.wavelengths_nm
         known = grid[covered] if covered.any() else grid[:0]
