@@ -122,11 +122,10 @@ def _estimate(args: argparse.Namespace) -> int:
 
 
 def _flash(args: argparse.Namespace) -> int:
-    if args.out is not None:
-        _check_output_type(Path(args.out))
+    kind = None if args.out is None else _check_output_type(Path(args.out))
     sequence = _read_calibrated(args)
     if args.out is not None:
-        _check_raw_output(Path(args.out), sequence)
+        _check_raw_output(kind, Path(args.out), sequence)
     if args.method != "global" or args.out is not None:
         return _flash_local(args, sequence)
     estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
@@ -155,8 +154,7 @@ def _synthesize(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
     weights = _weights(args.weights, len(sequence.leds))
     output = Path(args.out)
-    _check_output_type(output)
-    _check_raw_output(output, sequence)
+    _check_raw_output(_check_output_type(output), output, sequence)
     image, saturated, stack = analysis.synthesize_sequence(sequence, weights)
     _write_flash_image(output, image, stack, sequence, {"msflash:flash_weights": weights.tolist()})
     clipped = float(saturated.mean())
@@ -262,12 +260,12 @@ def _check_output_type(output: Path) -> str:
     return kind
 
 
-def _check_raw_output(output: Path, sequence: Sequence) -> None:
-    """Refuse a raw ``.tiff`` for a sequence whose frames are float (EXR): raw TIFF values are whole counts
+def _check_raw_output(kind: str | None, output: Path, sequence: Sequence) -> None:
+    """Refuse a raw ``.tiff`` (``kind`` from :func:`_check_output_type`) for a sequence whose frames are float (EXR): raw TIFF values are whole counts
     in the frames' own encoding, and float frames have none (normalised ones, white level 1, would
     all round to 0 or 1)."""
     ambient = sequence.indices("ambient")
-    if _check_output_type(output) != "tiff" or not ambient:
+    if kind != "tiff" or not ambient:
         return
     header = read_image_header(sequence.frame_path(ambient[0]))
     if np.issubdtype(header.dtype, np.floating):
