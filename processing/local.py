@@ -736,8 +736,8 @@ def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, 
             interior = _interior(region)[valid]
             mask = interior if interior.any() else region[valid]
             try:
-                final[index] = _solve(model, cells.statistics(mask),
-                                      cells.denoised_statistics(mask) if noise_correction else None, solver, solver_alpha)[0]
+                final[index] = model.weights(cells.statistics(mask), solver, solver_alpha,
+                                             denoised=cells.denoised_statistics(mask) if noise_correction else None)[0]
             except SolverError:
                 pass
     errors = cells.errors(final)
@@ -921,14 +921,8 @@ def denoised_global(tiles: TiledStatistics, led_spectra: Spectra, solver: str = 
     this one. Falls back to the observed statistics as :func:`estimate_local` does.
     """
     clean = tiles.denoised
-    return _solve(AmbientModel(led_spectra), tiles.total(), None if clean is None else clean.total(), solver, alpha)[0]
-
-
-def _solve(model: AmbientModel, observed: SequenceStatistics, denoised: SequenceStatistics | None, solver: str,
-           alpha: float | str) -> tuple[np.ndarray, float]:
-    """``(w_a, α used)`` from the denoised statistics, or from the observed ones when there are none or
-    denoising left a Gram matrix that is not positive definite (:meth:`AmbientModel.weights`)."""
-    return model.weights(observed, solver, alpha, denoised=denoised)
+    return AmbientModel(led_spectra).weights(tiles.total(), solver, alpha,
+                                             denoised=None if clean is None else clean.total())[0]
 
 
 def _solve_tiles(smoothed: TiledStatistics, denoised: TiledStatistics | None, own: TiledStatistics, model: AmbientModel,
@@ -944,7 +938,8 @@ def _solve_tiles(smoothed: TiledStatistics, denoised: TiledStatistics | None, ow
                 fallback += 1
                 continue
             try:
-                weights[i, j] = _solve(model, statistics, None if denoised is None else denoised.tile(i, j), solver, alpha)[0]
+                weights[i, j] = model.weights(statistics, solver, alpha,
+                                              denoised=None if denoised is None else denoised.tile(i, j))[0]
             except SolverError:
                 weights[i, j] = global_estimate.ambient_weights
                 fallback += 1
