@@ -90,15 +90,20 @@ independent samples it brought the spectrum RMSE from 0.233/0.283 (every pixel) 
 against 0.192/0.165 for the best non-negative LED fit of the true spectrum."""
 
 
+SAMPLE_WEIGHTING = True
+"""The estimate's statistics weigh each sample by its inverse noise variance (processing.statistics, module
+notes): unweighted, a bright highlight's noisy samples dominate eq. 5."""
+
+
 def sequence_statistics(stack: FrameStack, cfa: str | None = None, bin_factor: int = DEFAULT_BIN_FACTOR) -> SequenceStatistics:
-    """The sufficient statistics of eq. 4–6 for a loaded frame stack."""
+    """The sufficient statistics of eq. 4–6 for a loaded frame stack (inverse-variance weighted, :data:`SAMPLE_WEIGHTING`)."""
     period = 2 if cfa is not None else 1
     height, width = stack.ambient.shape[:2]
     # Keep at least 8 blocks per side, so that tiny frames still give enough samples.
     while bin_factor > 1 and min(height, width) // (bin_factor * period) < 8:
         bin_factor //= 2
     return accumulate_statistics(stack.ambient, stack.led_frames, stack.spec, bin_factor=max(bin_factor, 1),
-                                 cfa_period=period)
+                                 cfa_period=period, weighting=SAMPLE_WEIGHTING)
 
 
 def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -> tuple[Sequence, list[str]]:
@@ -233,6 +238,8 @@ def estimate_payload(sequence: Sequence, estimate: AmbientEstimate) -> dict:
         "n_samples": estimate.n_samples,
         "saturated_fraction": estimate.saturated_fraction,
         "warnings": list(estimate.warnings),
+        "noise_correction": estimate.noise_correction,
+        "sample_weights": "inverse noise variance" if estimate.weighted else "uniform",
         "complete": sequence.complete,
     }
 
@@ -346,7 +353,7 @@ def estimate_sequence_local(sequence: Sequence, method: str = "auto", solver: st
     stack = stack or load_frame_stack(sequence)
     factor, rows, columns = _local_grid(stack, sequence.camera.cfa, tiles, bin_factor)
     tiled = tile_statistics(stack.ambient, stack.led_frames, stack.spec, (rows, columns), bin_factor=factor,
-                            cfa_period=2 if sequence.camera.cfa is not None else 1)
+                            cfa_period=2 if sequence.camera.cfa is not None else 1, weighting=SAMPLE_WEIGHTING)
     return estimate_local(tiled, led_spectra_photons(sequence), method, solver, alpha)
 
 

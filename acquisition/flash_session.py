@@ -161,7 +161,8 @@ class FlashSession:
         plane = cfa_planes(pixels, period)
         n_leds = self.leds.count  # one row per LED frame of a plain plan; more frames use the general path
         if self._rows is None:
-            self._rows = BlockRows(n_leds, plane.shape, self._factor, camera.white_level, incremental=True)
+            self._rows = BlockRows(n_leds, plane.shape, self._factor, camera.white_level, incremental=True,
+                                   black_level=camera.black_level, weighting=analysis.SAMPLE_WEIGHTING)
         row = n_leds if role == "ambient" else self._n_led_rows
         if role == "led":
             self._n_led_rows += 1

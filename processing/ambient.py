@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from typing import Literal
 
@@ -90,6 +90,10 @@ class AmbientEstimate:
     ambient_z: float = math.inf
     """z-score of the ambient image, ``Σ a / ‖a‖`` (as :data:`LED_SIGNAL_Z` for the LED images; 0 for
     an all-zero image): below :data:`LED_SIGNAL_Z` it holds noise, not light (:attr:`ambient_is_dark`)."""
+    noise_correction: str = ""
+    """What was done about the LED images' noise (:attr:`SolvedStatistics.description`)."""
+    weighted: bool = False
+    """Whether the samples carried inverse-variance weights (:mod:`processing.statistics`)."""
 
     @property
     def ambient_is_dark(self) -> bool:
@@ -343,11 +347,11 @@ class AmbientModel:
                 alpha: float | str = "auto", denoised: SequenceStatistics | None = None) -> tuple[np.ndarray, float]:
         """``(w_a, α used)`` for the statistics (see :func:`estimate_ambient`; same errors).
 
-        The problem is solved on the denoised statistics — ``denoised``, else
-        :meth:`~processing.statistics.SequenceStatistics.denoised` when the noise was measured —
-        which carry no errors-in-variables bias (:mod:`processing.statistics`); on the statistics as
-        observed when there are none or their Gram matrix is not positive definite (a noise probe
-        larger than the signal).
+        The problem is solved on :func:`solved_statistics`: the denoised statistics — ``denoised``,
+        else :meth:`~processing.statistics.SequenceStatistics.denoised` when the noise was measured —
+        which carry no errors-in-variables bias (:mod:`processing.statistics`), with any direction
+        whose signal the noise probe exceeds clipped; the statistics as observed when no noise was
+        measured.
         """
         if method not in _METHODS:
             raise ValueError(f"ambient method '{method}' is unknown; expected one of {', '.join(_METHODS)}")
@@ -373,13 +377,7 @@ class AmbientModel:
                 f"ambient estimate: the LED-only image of {', '.join(dark)} is empty; expected every LED to add light "
                 "(is it connected, and its level above 0?)"
             )
-        solved = _solved_statistics(statistics, denoised)
-        if solved is not statistics:
-            try:
-                return _METHODS[method](solved, self.terms, alpha)
-            except SolverError:
-                pass
-        return _METHODS[method](statistics, self.terms, alpha)
+        return _METHODS[method](solved_statistics(statistics, denoised).statistics, self.terms, alpha)
 
     def estimate(self, statistics: SequenceStatistics, method: str = "tikhonov",
                  alpha: float | str = "auto") -> AmbientEstimate:
@@ -397,7 +395,8 @@ class AmbientModel:
         noise_variance = rss / dof
         # The band is the solved system's (the denoised one when it was used): w = (G_s + λP)⁻¹ c, with the
         # observed G in the middle of the sandwich as the products' covariance.
-        solved = _solved_statistics(statistics)
+        solution = solved_statistics(statistics)
+        solved = solution.statistics
         penalty_weight = alpha_used * terms.penalty_scale(solved) if method == "tikhonov" else 0.0
         try:
             system_inverse = np.linalg.pinv(solved.gram + penalty_weight * terms.penalty_gram)
@@ -454,20 +453,62 @@ class AmbientModel:
             saturated_fraction=statistics.saturated_fraction,
             warnings=tuple(warnings),
             ambient_z=float(ambient_z),
+            noise_correction=solution.description,
+            weighted=statistics.weighted,
         )
 
 
-def _solved_statistics(statistics: SequenceStatistics, denoised: SequenceStatistics | None = None) -> SequenceStatistics:
-    """The statistics eq. 5 is solved on: the denoised ones (``denoised``, else the statistics' own) when
-    their Gram matrix is positive definite, else the statistics as observed (:meth:`AmbientModel.weights`)."""
+NOISE_FLOOR_SHARE = 0.1
+"""A direction of the denoised Gram matrix whose eigenvalue falls below this share of the noise's along
+it (the LED images hold less signal than noise there) is clipped up to it (:func:`solved_statistics`)."""
+
+
+@dataclass(frozen=True)
+class SolvedStatistics:
+    """The statistics eq. 5 is solved on, and what was done to get them."""
+
+    statistics: SequenceStatistics
+    correction: Literal["denoised", "clipped", "observed"]
+    """``denoised``: the noise's share removed; ``clipped``: removed, and the directions where the noise
+    exceeded the signal clipped (:data:`NOISE_FLOOR_SHARE`); ``observed``: no noise was measured."""
+    clipped_directions: int = 0
+    """How many of the k directions were clipped."""
+
+    @property
+    def description(self) -> str:
+        """One line for reports and the JSON."""
+        if self.correction == "observed":
+            return "none: no noise measured (statistics as observed, biased towards zero weights)"
+        if self.correction == "denoised":
+            return "denoised: the noise's share of the moments removed"
+        return (f"denoised and clipped: in {self.clipped_directions} of {self.statistics.n_leds} directions the "
+                f"LED images hold less signal than noise; their eigenvalues were raised to {NOISE_FLOOR_SHARE:g} "
+                "of the noise's, and the band is wide there")
+
+
+def solved_statistics(statistics: SequenceStatistics, denoised: SequenceStatistics | None = None) -> SolvedStatistics:
+    """The statistics eq. 5 is solved on (:meth:`AmbientModel.weights`) and its band computed from.
+
+    The denoised statistics (``denoised``, else the statistics' own) when their Gram matrix
+    ``G − N`` is positive definite. Otherwise the noise probe exceeds the signal in some direction
+    (a weak LED, two nearly collinear LEDs): each eigenvalue of ``G − N`` below
+    :data:`NOISE_FLOOR_SHARE` of the noise's own along that eigenvector, ``vᵀ N v``, is raised to it,
+    so the solve stays defined, the estimate is not thrown back to the biased observed statistics,
+    and the band (which inverts that matrix) widens in those directions. Without a noise
+    measurement, the statistics as observed.
+    """
     clean = statistics.denoised() if denoised is None else denoised
-    if clean is not None:
-        try:
-            np.linalg.cholesky(clean.gram)
-            return clean
-        except np.linalg.LinAlgError:
-            pass
-    return statistics
+    if clean is None:
+        return SolvedStatistics(statistics, "observed")
+    eigenvalues, vectors = np.linalg.eigh(clean.gram)
+    if eigenvalues[0] > 0 and eigenvalues[0] > 1e-12 * eigenvalues[-1]:
+        return SolvedStatistics(clean, "denoised")
+    noise_gram = statistics.gram - clean.gram
+    noise_along = np.einsum("ji,jk,ki->i", vectors, noise_gram, vectors)
+    floor = np.maximum(NOISE_FLOOR_SHARE * noise_along, 1e-12 * max(float(eigenvalues[-1]), 1e-300))
+    low = eigenvalues < floor
+    raised = (vectors * np.where(low, floor, eigenvalues)) @ vectors.T
+    return SolvedStatistics(replace(clean, gram=(raised + raised.T) / 2), "clipped", int(np.count_nonzero(low)))
 
 
 def estimate_ambient(

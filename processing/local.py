@@ -63,10 +63,12 @@ from processing.statistics import (
     FrameStackSpec,
     NoiseMoments,
     SequenceStatistics,
+    ambient_root_weights,
     block_sums,
     block_sums_and_differences,
     cfa_planes,
     non_finite_frames_error,
+    probe_stride,
     saturated_blocks,
     thread_pool,
 )
@@ -379,6 +381,7 @@ def tile_statistics(
     bin_factor: int = 1,
     cfa_period: int = 1,
     workers: int = DEFAULT_WORKERS,
+    weighting: bool = False,
 ) -> TiledStatistics:
     """The statistics of eq. 4–6 of every tile of a ``tiles`` grid, in one pass over the frames.
 
@@ -397,6 +400,10 @@ def tile_statistics(
     workers
         Threads sharing the frames' block sums and the tiles' moments (1: the calling thread). The
         statistics do not depend on it.
+    weighting
+        Inverse-variance sample weights, the global statistics' (:mod:`processing.statistics`, module
+        notes; even bin factors only): the tiles then sum to the weighted global statistics, and
+        :attr:`TiledStatistics.blocks` holds the weighted samples.
     """
     rows_tiles, columns_tiles = (tiles, tiles) if isinstance(tiles, int) else tiles
     if bin_factor < 1 or cfa_period not in (1, 2):
@@ -439,8 +446,16 @@ def tile_statistics(
 
     # The frames are independent: numpy releases the GIL in the sums (as in the global statistics' pass).
     rows_done = thread_pool(workers).map(add_frame, range(len(planes))) if workers > 1 else map(add_frame, range(len(planes)))
-    saturated = [mask for mask in rows_done if mask is not None]
+    masks = list(rows_done)
+    saturated = [mask for mask in masks if mask is not None]
     data[-1] = 1.0
+    if weighting and differences is not None:
+        ambient_row = len(frames) - 1
+        stride = probe_stride(height, width)
+        root = ambient_root_weights(data[ambient_row], differences[ambient_row][::stride],
+                                    spec.black_level * bin_factor * bin_factor, masks[ambient_row], stride)
+        data *= root
+        differences *= root
     invalid = np.zeros((height, width), dtype=bool)
     for mask in saturated:
         invalid |= mask

@@ -23,6 +23,20 @@ sums and ``d`` its half difference, ``x xᵀ − d dᵀ = 2 (x₁ x₂ᵀ + x₂
 independent halves — moments without the noise bias, whatever the texture inside a block (an
 instrumental-variable estimate; no noise model needed). :attr:`SequenceStatistics.noise` holds
 ``d dᵀ`` mapped like the moments, :meth:`SequenceStatistics.denoised` the corrected statistics.
+
+Inverse-variance weights
+------------------------
+Unweighted moments count every sample alike, so the brightest samples — a specular highlight
+at ten times the white, say — dominate the Gram matrix though their photon noise is the largest.
+With ``weighting=True`` (:class:`BlockRows`, :func:`accumulate_statistics`) each sample (block ×
+channel) enters the moments with weight ``1 / var``, its noise variance predicted from the ambient
+frame: ``var = gain · level + read`` (a photon-transfer line fitted to the half differences' squares
+against the ambient block sums, :func:`inverse_variance_weights`). The weights depend on the
+ambient frame alone, so a capture can apply them to every LED frame as it arrives; the half
+differences are weighted alike, so the noise correction still holds. Weighted least squares is the
+best linear unbiased estimate of eq. 5 when the residual's noise is that of the ambient frame; the
+weights are normalised to mean 1 over all samples, and :attr:`SequenceStatistics.n_samples` stays the
+count of valid samples.
 """
 
 from __future__ import annotations
@@ -158,6 +172,9 @@ class SequenceStatistics:
     noise: NoiseMoments | None = None
     """The noise's share of ``gram``, ``cross`` and ``ambient_energy`` (binned statistics with an even
     block size; see the module notes), or None when it was not measured."""
+    weighted: bool = False
+    """Whether the samples carry inverse-variance weights (module notes): the moments and sums are then
+    weighted ones, normalised to mean weight 1 over all samples."""
 
     @property
     def n_leds(self) -> int:
@@ -187,7 +204,7 @@ class SequenceStatistics:
         return SequenceStatistics(
             gram=self.gram - noise.gram, cross=self.cross - noise.cross,
             ambient_energy=self.ambient_energy - noise.ambient_energy, n_samples=self.n_samples,
-            n_total=self.n_total, ambient_sum=self.ambient_sum, led_sums=self.led_sums,
+            n_total=self.n_total, ambient_sum=self.ambient_sum, led_sums=self.led_sums, weighted=self.weighted,
         )
 
     def residual_energy(self, weights: np.ndarray) -> float:
@@ -217,6 +234,7 @@ class SequenceStatistics:
             ambient_sum=self.ambient_sum * copies, led_sums=self.led_sums * copies,
             noise=None if self.noise is None else NoiseMoments(
                 self.noise.gram * copies, self.noise.cross * copies, self.noise.ambient_energy * copies),
+            weighted=self.weighted,
         )
 
     def select_leds(self, which: Sequence[int]) -> SequenceStatistics:
@@ -228,6 +246,7 @@ class SequenceStatistics:
             led_sums=self.led_sums[idx],
             noise=None if self.noise is None else NoiseMoments(
                 self.noise.gram[np.ix_(idx, idx)], self.noise.cross[idx], self.noise.ambient_energy),
+            weighted=self.weighted,
         )
 
     def permuted(self, order: Sequence[int]) -> SequenceStatistics:
@@ -242,6 +261,7 @@ class SequenceStatistics:
             n_samples=self.n_samples + other.n_samples, n_total=self.n_total + other.n_total,
             ambient_sum=self.ambient_sum + other.ambient_sum, led_sums=self.led_sums + other.led_sums,
             noise=None if self.noise is None or other.noise is None else self.noise + other.noise,
+            weighted=self.weighted and other.weighted,
         )
 
 
@@ -341,6 +361,7 @@ def accumulate_statistics(
     bin_factor: int = 1,
     cfa_period: int = 1,
     workers: int = DEFAULT_WORKERS,
+    weighting: bool = False,
 ) -> SequenceStatistics:
     """Accumulate the sufficient statistics of eq. 4–6 in one pass over raw frames.
 
@@ -363,6 +384,9 @@ def accumulate_statistics(
     workers
         Threads sharing the frames of the binned pass (numpy releases the GIL while it sums); 1
         runs on the calling thread. The statistics do not depend on it.
+    weighting
+        Inverse-variance sample weights (module notes); binned statistics with an even block size only
+        (elsewhere there is no noise probe to fit them to, and the samples stay unweighted).
 
     Returns
     -------
@@ -383,7 +407,7 @@ def accumulate_statistics(
         raise SpectralDataError(f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2")
     if bin_factor > 1:
         return _accumulate_binned(ambient, led_frames, spec, sample_mask, chunk_pixels, bin_factor, cfa_period,
-                                  workers)
+                                  workers, weighting)
     frames = [ambient, *led_frames]
     if len(led_frames) != spec.led_levels.shape[0]:
         raise SpectralDataError(
@@ -438,7 +462,7 @@ def accumulate_statistics(
 
 def _accumulate_binned(ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec,
                        sample_mask: np.ndarray | None, chunk_pixels: int, factor: int,
-                       cfa_period: int, workers: int) -> SequenceStatistics:
+                       cfa_period: int, workers: int, weighting: bool = False) -> SequenceStatistics:
     """Statistics of block sums: a block is valid when no member is saturated (or masked out)."""
     frames = [ambient, *led_frames]
     if len(led_frames) != spec.led_levels.shape[0]:
@@ -455,7 +479,8 @@ def _accumulate_binned(ambient: np.ndarray, led_frames: Sequence[np.ndarray], sp
         raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {ambient.shape[:2]}")
     planes = [cfa_planes(frame, cfa_period) for frame in frames]
     n_led_frames = len(led_frames)
-    rows = BlockRows(n_led_frames, planes[0].shape, factor, spec.white_level)
+    rows = BlockRows(n_led_frames, planes[0].shape, factor, spec.white_level, black_level=spec.black_level,
+                     weighting=weighting)
     # Rows [F_1 … F_n, A, 1]: the ambient frame is row n. Each frame is one independent pass
     # (block sums, saturation), so ``workers`` threads share the frames: numpy releases the GIL
     # inside each pass.
@@ -495,7 +520,7 @@ class BlockRows:
     """
 
     def __init__(self, n_led_frames: int, plane_shape: tuple[int, ...], factor: int, white_level: float,
-                 incremental: bool = False) -> None:
+                 incremental: bool = False, black_level: float = 0.0, weighting: bool = False) -> None:
         height, width = plane_shape[0] // factor, plane_shape[1] // factor
         if height == 0 or width == 0:
             raise SpectralDataError(
@@ -516,7 +541,7 @@ class BlockRows:
         # ones row has no noise; rows not filled yet are zeros in incremental mode, as above. Laid
         # out (block row, block column, channel): the block sums' own order, copied without a transpose.
         # Large frames probe every ``probe_stride``-th block row only (PROBE_BLOCKS).
-        self.probe_stride = max(1, min(4, height * width // PROBE_BLOCKS))
+        self.probe_stride = probe_stride(height, width)
         self.difference_shape = (len(range(0, height, self.probe_stride)), width, plane_shape[2])
         probe_shape = (n_rows, math.prod(self.difference_shape))
         self.differences = (np.zeros(probe_shape) if incremental else np.empty(probe_shape)) \
@@ -527,6 +552,13 @@ class BlockRows:
         self._invalid: list[np.ndarray] = []
         self._filled = [n_led_frames + 1]
         self._floating = False
+        # Inverse-variance weights (module notes): their square roots per row column, once the ambient
+        # frame is in (and its probe: without one there is no noise to fit). ``_ambient_saturated`` are
+        # the blocks the ambient frame itself saturates (left out of the fit).
+        self.black_level = black_level
+        self.weighting = weighting and self.differences is not None
+        self.root_weights: np.ndarray | None = None
+        self._ambient_saturated: np.ndarray | None = None
         self._moments: np.ndarray | None = None
         self._excluded: np.ndarray | None = None  # incremental mode: columns already left out
         self._excluded_differences: np.ndarray | None = None  # the same blocks' columns of the differences
@@ -562,6 +594,13 @@ class BlockRows:
         # One contiguous max per frame finds the frames that saturate at all; only those build masks.
         saturated = saturated_blocks(plane, self.factor, self.white_level) \
             if _may_saturate(plane, self.white_level) else None
+        if row == self.n_led_frames:
+            self._ambient_saturated = saturated
+        if self._moments is not None and self.weighting:
+            if row == self.n_led_frames:
+                self._weigh_filled()  # the ambient frame sets the weights: weigh it and any row in before it
+            elif self.root_weights is not None:
+                self._weigh_row(row)
         if self._moments is None:
             if saturated is not None:
                 self._invalid.append(saturated)
@@ -581,6 +620,47 @@ class BlockRows:
                     moments[row, filled] = products[filled]
                     moments[filled, row] = products[filled]
         self._filled.append(row)
+
+    def _sample_weights(self) -> np.ndarray:
+        """Square roots of the inverse-variance weights of every row column, from the ambient row and its probe."""
+        ambient = self.n_led_frames
+        assert self.differences is not None
+        # rows layout (block row, channel, block column); the probe's (probed block row, block column, channel)
+        levels = self.rows[ambient].reshape(self.block_shape).transpose(0, 2, 1)
+        root = ambient_root_weights(levels, self.differences[ambient].reshape(self.difference_shape),
+                                    self.black_level * self.factor * self.factor, self._ambient_saturated,
+                                    self.probe_stride)
+        return np.ascontiguousarray(root.transpose(0, 2, 1)).reshape(-1)
+
+    def _weigh_row(self, row: int) -> None:
+        """Scale one row (and its probe) by the root weights (incremental mode, weights known)."""
+        assert self.root_weights is not None
+        self.rows[row] *= self.root_weights
+        if self.differences is not None:
+            self.differences[row] *= self._probe_root_weights
+
+    @property
+    def _probe_root_weights(self) -> np.ndarray:
+        """:attr:`root_weights` at the probed blocks, in the probe's layout."""
+        assert self.root_weights is not None
+        return self.root_weights.reshape(self.block_shape)[::self.probe_stride].transpose(0, 2, 1).reshape(-1)
+
+    def _weigh_filled(self) -> None:
+        """Incremental mode, the ambient row just in: weigh every filled row and retake their moments."""
+        assert self._moments is not None
+        self.root_weights = self._sample_weights()
+        filled = [row for row in self._filled if row != self.n_led_frames + 1]
+        for row in [*filled, self.n_led_frames]:
+            self._weigh_row(row)
+        ones = self.n_led_frames + 1
+        self.rows[ones] = self.root_weights
+        if self._excluded is not None:
+            self.rows[ones, self._excluded] = 0.0
+        every = self._filled  # the ambient row's own products are taken by add() right after
+        self._moments[np.ix_(every, every)] = _gram(self.rows[every], DEFAULT_CHUNK_PIXELS * self.block_shape[1])
+        if self._noise is not None and self.differences is not None:
+            self._noise[np.ix_(every, every)] = _gram(self.differences[every],
+                                                      DEFAULT_CHUNK_PIXELS * self.block_shape[1])
 
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
@@ -650,9 +730,16 @@ class BlockRows:
         if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
             raise non_finite_frames_error(rows[:-1])
         channels = self.block_shape[1]
+        if self.weighting and self.root_weights is None:
+            # Batch mode: every row is in; weigh them all once (incremental mode weighs as frames come).
+            self.root_weights = self._sample_weights()
+            rows *= self.root_weights
+            if self.differences is not None:
+                self.differences *= self._probe_root_weights
         if self._moments is not None:
             moments = self._moments  # incremental: saturated blocks were left out as they came (_drop)
             noise = self._noise
+            excluded_columns = 0 if self._excluded is None else int(np.count_nonzero(self._excluded))
             scale = self._probe_scale(
                 0 if self._excluded is None else int(np.count_nonzero(self._excluded)) // channels,
                 0 if self._excluded_differences is None else int(np.count_nonzero(self._excluded_differences)) // channels)
@@ -670,6 +757,7 @@ class BlockRows:
                 return _gram(values, chunk, workers)
 
             moments = moments_of(rows, self._columns(invalid) if masked else None)
+            excluded_columns = int(np.count_nonzero(invalid)) * channels if masked else 0
             noise = None if self.differences is None else \
                 moments_of(self.differences, self._difference_columns(invalid) if masked else None)
             scale = self._probe_scale(int(np.count_nonzero(invalid)) if masked else 0,
@@ -679,13 +767,19 @@ class BlockRows:
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
         factor = self.factor
         return _statistics_from_moments(moments, spec, rows.shape[1], black_level=spec.black_level * factor * factor,
-                                        noise_moments=noise)
+                                        noise_moments=noise, n_samples=rows.shape[1] - excluded_columns,
+                                        weighted=self.root_weights is not None)
 
 
 def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total: int,
                              black_level: float | None = None,
-                             noise_moments: np.ndarray | None = None) -> SequenceStatistics:
+                             noise_moments: np.ndarray | None = None, n_samples: int | None = None,
+                             weighted: bool = False) -> SequenceStatistics:
     """Statistics from the raw second moments of the rows [F_1 … F_n, A, 1].
+
+    With inverse-variance weights (``weighted``) the rows are ``√wt·x`` and the last one ``√wt``, so the
+    same map gives the weighted moments; ``n_samples`` is then the count of valid samples (the
+    moments' last entry is their total weight).
 
     ``black_level`` replaces the spec's (block sums: the black level times the block area).
     ``noise_moments`` are the half differences' moments in the same row layout (the noise probe),
@@ -715,12 +809,73 @@ def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total:
         gram=unmixing @ linear_moments[:n_led_frames, :n_led_frames] @ unmixing.T,
         cross=unmixing @ linear_moments[:n_led_frames, n_led_frames],
         ambient_energy=float(linear_moments[n_led_frames, n_led_frames]),
-        n_samples=int(round(moments[-1, -1])),
+        n_samples=int(round(moments[-1, -1])) if n_samples is None else n_samples,
         n_total=n_total,
         ambient_sum=float(linear_sums[n_led_frames]),
         led_sums=unmixing @ linear_sums[:n_led_frames],
         noise=noise,
+        weighted=weighted,
     )
+
+
+def probe_stride(height: int, width: int) -> int:
+    """Every how many block rows the noise probe of ``height × width`` blocks is taken (:data:`PROBE_BLOCKS`)."""
+    return max(1, min(4, height * width // PROBE_BLOCKS))
+
+
+def ambient_root_weights(ambient: np.ndarray, probe: np.ndarray, black: float,
+                         saturated: np.ndarray | None, stride: int) -> np.ndarray:
+    """Square roots of :func:`inverse_variance_weights` for (h, w, C) ambient block sums.
+
+    ``probe`` holds the half differences of the block rows ``0, stride, 2·stride…`` (h', w, C); the
+    blocks the ambient frame saturates (``saturated``, (h, w)) are left out of the fit. Layout as
+    ``ambient``. Used alike by :class:`BlockRows` and the tiled statistics of :mod:`processing.local`.
+    """
+    levels = ambient - black
+    probed = levels[::stride]
+    usable = np.ones(probed.shape[:2], dtype=bool) if saturated is None else ~saturated[::stride]
+    weights = inverse_variance_weights(levels.reshape(-1), probed[usable].reshape(-1), probe[usable].reshape(-1))
+    return np.sqrt(weights).reshape(levels.shape)
+
+
+def inverse_variance_weights(levels: np.ndarray, probed_levels: np.ndarray, probe: np.ndarray) -> np.ndarray:
+    """Inverse-variance weights of samples at raw ``levels`` (black removed), normalised to mean 1.
+
+    The noise variance of a sample is modelled as ``gain · level + read`` (photon and read noise; a
+    photon-transfer line). Its two parameters are fitted by least squares to the squared half
+    differences ``probe`` (a half difference has the variance of its block sum, module notes) against
+    the levels of the same samples, ``probed_levels``; a negative read term is refitted as zero, a
+    negative gain as noise alike everywhere. No variance is taken below the fit's at the 5th
+    percentile of the probed levels; with no usable fit the weights are uniform.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> levels = rng.uniform(100, 10000, 20000)
+    >>> probe = rng.normal(0, np.sqrt(2 * levels + 50))
+    >>> weights = inverse_variance_weights(levels, levels, probe)
+    >>> round(float(weights.mean()), 6), bool(weights[np.argmin(levels)] > 10 * weights[np.argmax(levels)])
+    (1.0, True)
+    """
+    levels = np.asarray(levels, dtype=float)
+    x = np.maximum(np.asarray(probed_levels, dtype=float), 0.0)
+    y = np.square(np.asarray(probe, dtype=float))
+    if x.size < 3 or not np.isfinite(y).all():
+        return np.ones_like(levels)
+    design = np.column_stack([x, np.ones_like(x)])
+    (gain, read), *_ = np.linalg.lstsq(design, y, rcond=None)
+    if read < 0:  # read noise below what the fit resolves: a line through the origin
+        gain, read = float(x @ y) / max(float(x @ x), 1e-300), 0.0
+    if gain < 0:  # no photon noise resolved: the noise is the same everywhere
+        gain, read = 0.0, float(y.mean())
+    # The darkest samples are weighed as the 5th percentile of the probed levels at most: a fitted
+    # read noise near zero would give black samples unbounded weight.
+    floor = gain * float(np.percentile(x, 5.0)) + read
+    if not floor > 0:
+        return np.ones_like(levels)
+    variance = np.maximum(gain * np.maximum(levels, 0.0) + read, floor)
+    weights = 1.0 / variance
+    return weights / weights.mean()
 
 
 def cfa_planes(frame: np.ndarray, cfa_period: int) -> np.ndarray:

@@ -84,9 +84,12 @@ def test_odd_blocks_and_every_pixel_carry_no_noise_probe() -> None:
     assert accumulate_statistics(ambient, leds, spec, bin_factor=3).noise is None
 
 
-def test_a_probe_larger_than_the_signal_falls_back_to_the_observed_statistics() -> None:
-    """A denoised Gram matrix that is not positive definite: the weights are the observed statistics'."""
-    from processing.ambient import AmbientModel
+def test_a_probe_larger_than_the_signal_is_clipped_said_and_widens_the_band() -> None:
+    """A denoised Gram matrix that is not positive definite (a noise probe larger than the signal in some
+    direction) used to throw the solve back to the biased observed statistics, silently and with a
+    narrow band. Now the directions where the noise exceeds the signal are raised to a tenth of the
+    noise's eigenvalue, the estimate says so, and its band is wider than the observed statistics' band."""
+    from processing.ambient import NOISE_FLOOR_SHARE, AmbientModel, solved_statistics
     from processing.statistics import NoiseMoments
     from tests.helpers import leds_photons
 
@@ -96,11 +99,24 @@ def test_a_probe_larger_than_the_signal_falls_back_to_the_observed_statistics() 
     gram = np.eye(k) * 10.0 + 1.0
     statistics = replace(observed, gram=gram, cross=np.ones(k), led_sums=np.ones(k) * 100.0)
     model = AmbientModel(leds_photons())
-    plain = model.weights(statistics, "lstsq")[0]
-    huge = replace(statistics, noise=NoiseMoments(np.eye(k) * 20.0, np.zeros(k), 0.0))
-    np.testing.assert_allclose(model.weights(huge, "lstsq")[0], plain)
+    assert solved_statistics(statistics).correction == "observed"
     small = replace(statistics, noise=NoiseMoments(np.eye(k) * 5.0, np.zeros(k), 0.0))
+    assert solved_statistics(small).correction == "denoised"
     np.testing.assert_allclose(model.weights(small, "lstsq")[0], np.linalg.solve(gram - np.eye(k) * 5.0, np.ones(k)))
+    # The noise exceeds the signal along the all-ones direction only (eigenvalue 10 + 7 of G against 20 of N).
+    noise = np.eye(k) * 4.0 + np.ones((k, k)) * (20.0 - 4.0) / k
+    large = replace(statistics, noise=NoiseMoments(noise, np.zeros(k), 0.0))
+    solved = solved_statistics(large)
+    assert solved.correction == "clipped" and solved.clipped_directions == 1
+    eigenvalues = np.linalg.eigvalsh(solved.statistics.gram)
+    np.testing.assert_allclose(eigenvalues[0], NOISE_FLOOR_SHARE * 20.0, rtol=1e-9)
+    np.testing.assert_allclose(eigenvalues[1:], 6.0, rtol=1e-9)  # the other directions keep G − N (10 − 4)
+    weights = model.weights(large, "lstsq")[0]
+    np.testing.assert_allclose(weights, np.linalg.solve(solved.statistics.gram, np.ones(k)))
+    estimate = model.reliability(large, weights, "lstsq", 0.0)
+    assert "clipped" in estimate.noise_correction and "1 of 7" in estimate.noise_correction
+    plain = model.reliability(statistics, model.weights(statistics, "lstsq")[0], "lstsq", 0.0)
+    assert np.all(estimate.spectrum_std > plain.spectrum_std)
 
 
 def test_the_uncertainty_band_is_that_of_the_system_solved(tmp_path: Path) -> None:
