@@ -30,6 +30,10 @@ from tests.processing.unseen_sequences import _cfa_index, _read
 AUTHORS_ALPHA = 100.0
 """The authors' roughness weight on full real frames (max-normalised data)."""
 AUTHORS_DOWNSAMPLE = 4
+AUTHORS_PIXELS = (1280 // 4) * (1024 // 4)
+"""Pixels the authors' α = 100 was set for: their camera's full 1280 × 1024 frames downsampled by 4.
+The data term is a sum over pixels, so :func:`authors_estimate_scaled` scales α by the pixel count
+relative to this (the paper's own reason for α from 1 on 24 patches to 100 on full frames)."""
 SATURATION = 0.95
 """Samples above this fraction of full scale (in any frame) are dropped."""
 
@@ -148,16 +152,26 @@ def authors_weights(ambient: np.ndarray, led_only: np.ndarray, led_photons: np.n
     return np.asarray(w.value, float)
 
 
-def authors_estimate(directory: Path, alpha: float = AUTHORS_ALPHA) -> np.ndarray:
-    """The authors' ambient spectrum of a sequence on disk, in the sequence's unit."""
+def authors_estimate(directory: Path, alpha: float = AUTHORS_ALPHA, scale_alpha: bool = False) -> np.ndarray:
+    """The authors' ambient spectrum of a sequence on disk, in the sequence's unit.
+
+    ``scale_alpha``: α times the used pixel count over :data:`AUTHORS_PIXELS`.
+    """
     frames = read_frames(directory)
     ambient, led_only, valid = downsampled(frames)
+    if scale_alpha:
+        alpha = alpha * int(valid.sum()) / AUTHORS_PIXELS
     ambient, led_only = ambient[valid], np.clip(led_only[:, valid], 0.0, None)
     scale = max(float(np.max(ambient)), float(np.max(led_only)))
     led_photons = to_photons(frames.led_spd, frames.wavelengths_nm, frames.unit)
     led_photons = led_photons / np.max(led_photons)
     w = authors_weights(ambient / scale, led_only / scale, led_photons, alpha)
     return _spectrum(frames, led_photons @ w)
+
+
+def authors_estimate_scaled(directory: Path) -> np.ndarray:
+    """:func:`authors_estimate` with α scaled to the pixel count (:data:`AUTHORS_PIXELS`)."""
+    return authors_estimate(directory, scale_alpha=True)
 
 
 def _spectrum(frames: Frames, photons: np.ndarray) -> np.ndarray:

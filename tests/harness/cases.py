@@ -18,7 +18,7 @@ import numpy as np
 from tests.harness import splits, tables
 from tests.harness.render import HarnessCase
 
-CASES_PER_SPLIT = 120
+CASES_PER_SPLIT = 150
 MOSAICS: tuple[str | None, ...] = (None, "RGGB", None, "BGGR", None, "GRBG", None, "GBRG")
 """RGB half the time, each Bayer CFA an eighth."""
 BITS_AND_BLACK = ((10, 64), (12, 256), (14, 512), (16, 0), (16, 2048))

@@ -24,10 +24,10 @@ import numpy as np
 from tests.harness import tables
 from tests.processing.unseen_sequences import _cfa_index, _write
 
-PATCH_PX = 12
+PATCH_PX = 16
 """Side of one surface patch in pixels."""
 PATCH_ROWS, PATCH_COLUMNS = 8, 10
-"""Patches per column and per row: frames are 96 × 120 pixels (+ a 6-pixel specular strip)."""
+"""Patches per column and per row: frames are 128 × 160 pixels (+ a 6-pixel specular strip)."""
 SPECULAR_GAIN = 2.5
 """The specular strip reflects the light itself at this multiple of a white surface (it clips)."""
 TEXTURE = 0.05

@@ -25,6 +25,7 @@ FAMILIES: dict[str, Callable[[CaseResult], object]] = {
     "LED count": lambda r: r.case.led_count,
     "light type": lambda r: r.case.light_type,
     "bit depth": lambda r: r.case.bits,
+    "spectral unit": lambda r: r.case.unit,
 }
 """Family dimensions the report breaks results down by."""
 
@@ -154,8 +155,8 @@ simulator**, from measured spectra the simulated rig does not use by default. Ge
 writers; it reuses the independent generator `tests/processing/unseen_sequences.py`'s CSV reader,
 interpolation and OpenImageIO writer). Reflectance × light × camera are integrated on a 1-nm grid
 (380–780 nm); the sequence carries its LED spectra and camera responsivities *sampled* on the
-case's grid ({grids}), in energy or photon units. Per case: 96 × 120 pixels of 20–60 surfaces in
-12-pixel patches (plus one white patch) with a ±5 % fixed texture; RGB or raw Bayer (RGGB, BGGR,
+case's grid ({grids}), in energy or photon units. Per case: 128 × 160 pixels of 20–60 surfaces in
+16-pixel patches (plus one white patch) with a ±5 % fixed texture; RGB or raw Bayer (RGGB, BGGR,
 GRBG, GBRG); 10/12/14/16-bit data with black levels; photon (Poisson, 5 000–20 000 e⁻ full
 well) and read noise (2–10 e⁻); in half of the cases cos⁴ vignetting (corners at 0.50–0.85) and
 in half unequal exposures and gains per frame; a clipping specular strip in a quarter; an ambient
@@ -191,6 +192,19 @@ and Sigma SDMerill; surfaces — Vrhel Munsell and Objects, Macbeth, Gretag SG 1
 - Band coverage: share of wavelengths where the (scaled) truth lies within ±1σ / ±2σ of the
   estimate, the band scaled like the estimate; mean over cases. Targets 55–80 % and ≥ 90 %.
   Variants without a band show —.
+
+## Limits of the harness
+- The ambient is uniform and the flash lights the scene with the same geometry (no shading
+  difference between ambient and flash, no motion, no flicker); the LED spectra and
+  responsivities written are the ones rendered with (no calibration error beyond the grid's
+  sampling).
+- The light library stops at 780 nm: cameras with infrared response (NikonD200IR) see nothing
+  beyond it.
+- Light types are msflash's keyword classification of the labels; a few LED lamps named by their
+  CCT ("… LED … 2700K") are classed as incandescent.
+- `authors` uses α = 100 as the authors did on full frames (320 × 256 pixels after their 4×
+  downsampling); these frames have far fewer pixels, so the roughness term weighs more.
+  `authors-alpha-scaled` scales α by the pixel count (the paper's own rationale), untuned.
 
 ## Reproduce
 ```
@@ -231,8 +245,10 @@ def write_csv(results: Sequence[CaseResult], path: Path) -> None:
                 row = {**base, "variant": m.variant,
                        "rmse": _round(m.rmse), "ratio": _round(m.ratio), "bound": _round(result.bound),
                        "coverage_1": _round(m.coverage_1), "coverage_2": _round(m.coverage_2),
+                       "miss": "" if math.isnan(m.ratio) else int(m.ratio > metrics.MISS_FACTOR),
                        "warnings": "" if m.warnings is None else len(m.warnings),
-                       "first_warning": (m.warnings[0][:60] if m.warnings else ""), "error": m.error[:80]}
+                       "first_warning": (m.warnings[0][:60] if m.warnings else ""), "error": m.error[:80],
+                       "flags": "; ".join(note[:60] for note in m.notes)}
                 if writer is None:
                     writer = csv.DictWriter(handle, list(row))
                     writer.writeheader()

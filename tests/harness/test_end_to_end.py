@@ -18,7 +18,7 @@ SMALL = [replace(case, n_surfaces=20) for case in (cases.cases_of("tuning")[1], 
 
 def test_every_variant_measures_every_case(tmp_path: Path) -> None:
     chosen = variants.select(None)
-    assert [v.name for v in chosen][:4] == ["default", "msflash-lstsq", "authors", "lstsq-pixels"]
+    assert {"default", "msflash-lstsq", "authors", "lstsq-pixels"} <= {v.name for v in chosen}
     results = run_cases(SMALL, chosen, jobs=1)
     assert [r.case for r in results] == SMALL
     for result in results:

@@ -83,6 +83,7 @@ _REGISTRY: Mapping[str, Callable[[str], Variant]] = {
     "default": msflash(),
     "msflash-lstsq": msflash("--solver", "lstsq"),
     "authors": python(baselines.authors_estimate),
+    "authors-alpha-scaled": python(baselines.authors_estimate_scaled),
     "lstsq-pixels": python(baselines.lstsq_estimate),
 }
 """Every registered variant, in report order (add one line per new msflash option)."""
