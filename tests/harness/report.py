@@ -212,7 +212,8 @@ cd /path/to/msflash && python -m tests.harness.ambient --out docs/ambient-harnes
 ```
 Options: `--split tuning|held_out|both`, `--variant NAME` (restrict) or `--variant NAME="ARGS"`
 (add `msflash estimate SEQ --json ARGS`), `--quick` (every {quick}th case). The per-case
-results are in `{csv_name}` beside this file.
+results (one row per case: its conditions, LED bound, and every variant's ratio, band coverage,
+warning count) are in `{csv_name}` beside this file.
 """
 
 
@@ -236,23 +237,23 @@ def markdown(results: Sequence[CaseResult], variants: Sequence[Variant], *, comm
 
 
 def write_csv(results: Sequence[CaseResult], path: Path) -> None:
-    """One row per case and variant: the case's conditions, its bound, the variant's numbers."""
+    """One row per case: its conditions and LED bound, then per variant ``VARIANT:ratio`` (RMSE ÷ bound),
+    ``:coverage_1``, ``:coverage_2``, ``:warnings`` (count; empty: cannot warn), ``:error`` and ``:flags``
+    (Python warnings seen)."""
     with path.open("w", newline="", encoding="utf-8") as handle:
         writer = None
         for result in results:
-            base = case_record(result)
+            row = {**case_record(result), "bound": _round(result.bound)}
             for m in result.measured:
-                row = {**base, "variant": m.variant,
-                       "rmse": _round(m.rmse), "ratio": _round(m.ratio), "bound": _round(result.bound),
-                       "coverage_1": _round(m.coverage_1), "coverage_2": _round(m.coverage_2),
-                       "miss": "" if math.isnan(m.ratio) else int(m.ratio > metrics.MISS_FACTOR),
-                       "warnings": "" if m.warnings is None else len(m.warnings),
-                       "first_warning": (m.warnings[0][:60] if m.warnings else ""), "error": m.error[:80],
-                       "flags": "; ".join(note[:60] for note in m.notes)}
-                if writer is None:
-                    writer = csv.DictWriter(handle, list(row))
-                    writer.writeheader()
-                writer.writerow(row)
+                row.update({f"{m.variant}:ratio": _round(m.ratio), f"{m.variant}:coverage_1": _round(m.coverage_1),
+                            f"{m.variant}:coverage_2": _round(m.coverage_2),
+                            f"{m.variant}:warnings": "" if m.warnings is None else len(m.warnings),
+                            f"{m.variant}:error": m.error[:80],
+                            f"{m.variant}:flags": "; ".join(note[:60] for note in m.notes)})
+            if writer is None:
+                writer = csv.DictWriter(handle, list(row))
+                writer.writeheader()
+            writer.writerow(row)
 
 
 def _round(value: float | None) -> str:

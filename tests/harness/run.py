@@ -108,7 +108,7 @@ def run_cases(cases: list[HarnessCase], variants: list[Variant], jobs: int = 1,
 
 def case_record(result: CaseResult) -> dict:
     """A case's conditions and its LED bound, flat (for the per-case CSV)."""
-    record = {key: value for key, value in asdict(result.case).items() if key not in ("surface_sets", "ratio")}
+    record = {key: value for key, value in asdict(result.case).items() if key not in ("surface_sets", "ratio", "seed")}
     record = {key: f"{value:.4g}" if isinstance(value, float) else value for key, value in record.items()}
     record["ambient_flash_ratio"] = f"{result.case.ratio:.3g}"
     record["grid"] = result.case.grid_label

@@ -56,7 +56,9 @@ def test_the_command_writes_the_report_and_the_per_case_csv(tmp_path: Path, caps
     assert "| tuning |" not in text and "msflash-lstsq" not in text
     with out.with_suffix(".csv").open() as handle:
         rows = list(csv.DictReader(handle))
-    assert len(rows) == 2 * count and {row["variant"] for row in rows} == {"default", "authors"}
-    assert all(float(row["ratio"]) > 0 for row in rows)
+    assert len(rows) == count
+    assert all(float(row["default:ratio"]) > 0 and float(row["authors:ratio"]) > 0 for row in rows)
+    assert all(row["default:warnings"].isdigit() and row["authors:warnings"] == "" for row in rows)
+    assert all(0 <= float(row["default:coverage_1"]) <= 1 and row["authors:coverage_1"] == "" for row in rows)
     assert ambient.main(["--out", str(out), "--variant", "nope"]) == 2
     assert "unknown variant 'nope'" in capsys.readouterr().err
