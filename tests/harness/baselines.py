@@ -12,15 +12,15 @@ The authors' estimator (hblasins/compMultispFlash, MATLAB + CVX; eq. 4–6 as th
 
 a sum over pixels of the *unsquared* 3-channel residual norm, R the first difference over
 wavelength, I the LED spectra in photons divided by their global maximum, the images divided by
-their global maximum, LED-only images clipped at 0, pixels above 0.95 of full scale in any frame
-dropped, and the images downsampled by 4. Raw (Bayer) frames are demosaicked as 2 × 2 superpixels
+their global maximum, LED-only images clipped at 0 (at full resolution, before downsampling), pixels
+above 0.95 of full scale in any frame dropped, and the images downsampled by 4. Raw (Bayer) frames are demosaicked as 2 × 2 superpixels
 (R, mean G, B) then downsampled by 2 more, so every case loses the same factor of 4 per side.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -158,10 +158,11 @@ def authors_estimate(directory: Path, alpha: float = AUTHORS_ALPHA, scale_alpha:
     ``scale_alpha``: α times the used pixel count over :data:`AUTHORS_PIXELS`.
     """
     frames = read_frames(directory)
+    frames = replace(frames, led_only=np.clip(frames.led_only, 0.0, None))  # clipped before downsampling, as theirs
     ambient, led_only, valid = downsampled(frames)
     if scale_alpha:
         alpha = alpha * int(valid.sum()) / AUTHORS_PIXELS
-    ambient, led_only = ambient[valid], np.clip(led_only[:, valid], 0.0, None)
+    ambient, led_only = ambient[valid], led_only[:, valid]
     scale = max(float(np.max(ambient)), float(np.max(led_only)))
     led_photons = to_photons(frames.led_spd, frames.wavelengths_nm, frames.unit)
     led_photons = led_photons / np.max(led_photons)
