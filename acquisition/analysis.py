@@ -7,7 +7,7 @@ spectra to the processing unit (photons) and converts results back to the sequen
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +18,7 @@ from processing import datasets
 from processing.ambient import AmbientEstimate, estimate_ambient
 from processing.errors import SpectralDataError
 from processing.flash import FlashSolution, solve_complementary, solve_matching
+from processing.model_error import reference_for, with_model_error
 from processing.local import DEFAULT_TILES, LocalEstimate, estimate_local, synthesize_local, tile_statistics
 from processing.spectra import Spectra
 from processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
@@ -209,7 +210,16 @@ def estimate_sequence(sequence: Sequence, method: str = "tikhonov", alpha: float
     """Estimate the ambient illuminant of a sequence (eq. 4–6)."""
     stack = stack or load_frame_stack(sequence)
     statistics = sequence_statistics(stack, sequence.camera.cfa, bin_factor)
-    return estimate_ambient(statistics, led_spectra_photons(sequence), method=method, alpha=alpha)
+    return with_model_band(estimate_ambient(statistics, led_spectra_photons(sequence), method=method, alpha=alpha),
+                           sequence)
+
+
+def with_model_band(estimate: AmbientEstimate, sequence: Sequence) -> AmbientEstimate:
+    """The estimate with the LED model's error in its band and miss risk in its warnings
+    (:mod:`processing.model_error`); as it is when the sequence carries no camera responsivities."""
+    if sequence.camera_responsivities() is None:
+        return estimate
+    return with_model_error(estimate, reference_for(led_spectra_photons(sequence), camera_responsivities_photons(sequence)))
 
 
 def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarray:
@@ -220,13 +230,21 @@ def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarr
 def estimate_payload(sequence: Sequence, estimate: AmbientEstimate) -> dict:
     """The ``msflash estimate --json`` object (DESIGN §7)."""
     spectrum = spectrum_in_sequence_unit(sequence, estimate.spectrum)
-    std = estimate.spectrum.replace(values=estimate.spectrum_std[:, None]).to_unit(sequence.spectral_unit).values[:, 0]
+    def in_unit(values: np.ndarray) -> np.ndarray:
+        return estimate.spectrum.replace(values=np.asarray(values)[:, None]).to_unit(sequence.spectral_unit).values[:, 0]
+
+    std = in_unit(estimate.spectrum_std)
     return {
         "sequence": str(sequence.directory),
         "wavelengths_nm": sequence.wavelengths_nm,
         "spectral_unit": sequence.spectral_unit,
         "spectrum": spectrum,
         "spectrum_std": std,
+        "spectrum_std_noise": in_unit(estimate.noise_std if estimate.noise_std is not None else estimate.spectrum_std),
+        "band": estimate.band_meaning,
+        "miss_risk": estimate.miss_risk,
+        "expected_ratio_to_led_bound": estimate.expected_ratio,
+        "model_misfit": estimate.model_misfit,
         "ambient_weights": estimate.ambient_weights,
         "led_names": [led.name for led in sequence.leds],
         "method": "global",
@@ -354,7 +372,8 @@ def estimate_sequence_local(sequence: Sequence, method: str = "auto", solver: st
     factor, rows, columns = _local_grid(stack, sequence.camera.cfa, tiles, bin_factor)
     tiled = tile_statistics(stack.ambient, stack.led_frames, stack.spec, (rows, columns), bin_factor=factor,
                             cfa_period=2 if sequence.camera.cfa is not None else 1, weighting=SAMPLE_WEIGHTING)
-    return estimate_local(tiled, led_spectra_photons(sequence), method, solver, alpha)
+    local = estimate_local(tiled, led_spectra_photons(sequence), method, solver, alpha)
+    return replace(local, global_estimate=with_model_band(local.global_estimate, sequence))
 
 
 def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:

@@ -213,7 +213,8 @@ class FlashSession:
 
     def estimate(self, stack: analysis.FrameStack) -> AmbientEstimate:
         """The ambient estimate of :func:`analysis.estimate_sequence` for the frames taken."""
-        return self.ambient_model.estimate(self.statistics(stack), self.method, self.alpha)
+        return analysis.with_model_band(self.ambient_model.estimate(self.statistics(stack), self.method, self.alpha),
+                                        self.header)
 
     def solve(self, mode: str, ambient_weights: np.ndarray, bounds: str = "physical") -> FlashSolution:
         """The matching or complementary flash (as :func:`analysis.solve_sequence_flash`)."""
@@ -256,8 +257,9 @@ class FlashSession:
         flash_weights = np.asarray(solution.flash_weights, dtype=float)
         # NaN → 0, ±inf → the bounds: what clip(nan_to_num(w), 0, 1) gives.
         flash = np.minimum(np.maximum(np.where(np.isnan(flash_weights), 0.0, flash_weights), 0.0), 1.0)
-        model, method = self.ambient_model, self.method
-        return FlashDecision(solution, flash, lambda: model.reliability(statistics, raw_weights, method, alpha_used))
+        model, method, header = self.ambient_model, self.method, self.header
+        return FlashDecision(solution, flash, lambda: analysis.with_model_band(
+            model.reliability(statistics, raw_weights, method, alpha_used), header))
 
 
 def _plane(pixels: np.ndarray) -> np.ndarray:

@@ -40,6 +40,7 @@ from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from processing.statistics import accumulate_statistics
 from processing.study.noisy import (
     World,
+    app_estimate,
     make_world,
     refused_record,
     reliability,
@@ -103,11 +104,9 @@ def led_fill(statistics) -> float:  # noqa: ANN001
 def _one(world: World, rng: np.random.Generator, truth: np.ndarray, method: str, alpha: float | str,
          bin_factor: int, motion_px: int = 0, dead_led: int | None = None) -> dict[str, Any]:
     ambient, frames, spec = render_stack(world, rng, motion_px=motion_px, dead_led=dead_led)
-    statistics = accumulate_statistics(ambient, frames, spec, bin_factor=bin_factor)
-    from processing.ambient import estimate_ambient
-
+    statistics = accumulate_statistics(ambient, frames, spec, bin_factor=bin_factor, weighting=True)
     try:
-        estimate = estimate_ambient(statistics, world.leds, method, alpha)
+        estimate = app_estimate(statistics, world, method, alpha)
     except (SolverError, SpectralDataError) as err:
         record = refused_record(str(err), statistics.saturated_fraction)
     else:
@@ -197,7 +196,7 @@ def summarise(records: list[dict[str, Any]], factors: dict[str, list[Any]], thre
                 "warned_rate": float(np.mean([r["warned"] for r in group])),
                 "refused": int(sum(r["refused"] for r in group)),
                 "flag_rates": {flag: float(np.mean([r["flags"][flag] for r in group]))
-                               for flag in ("condition", "residual", "saturation", "band")},
+                               for flag in ("condition", "residual", "saturation", "risk")},
                 "relative_residual_median": median("relative_residual"),
                 "condition_number_median": median("condition_number"),
                 "band_ratio_median": median("band_ratio"),

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from processing.ambient import CONDITION_WARNING, RESIDUAL_WARNING, SATURATION_WARNING, AmbientEstimate, estimate_ambient
+from processing.model_error import EXPECTED_RATIO_WARNING, reference_for, with_model_error
 from processing.errors import SolverError, SpectralDataError
 from processing.image_formation import (
     Scene,
@@ -176,12 +177,13 @@ def reliability(estimate: AmbientEstimate, truth: np.ndarray) -> dict[str, Any]:
         "condition_number": estimate.condition_number,
         "band_ratio": band_ratio,
         "band_coverage_2sigma": coverage,
+        "expected_ratio": estimate.expected_ratio,
         "saturated_fraction": estimate.saturated_fraction,
         "flags": {
             "condition": bool(estimate.condition_number > CONDITION_WARNING),
-            "residual": bool(estimate.relative_residual > RESIDUAL_WARNING),
+            "residual": bool(estimate.model_misfit > RESIDUAL_WARNING),
             "saturation": bool(estimate.saturated_fraction > SATURATION_WARNING),
-            "band": bool(np.any(estimate.spectrum_std > 0.5 * peak)),
+            "risk": bool(estimate.expected_ratio is not None and estimate.expected_ratio >= EXPECTED_RATIO_WARNING),
         },
     }
 
@@ -191,7 +193,7 @@ def refused_record(reason: str, saturated_fraction: float = float("nan")) -> dic
     return {"error": float("nan"), "refused": True, "warned": True, "n_warnings": 1, "reason": reason,
             "relative_residual": float("nan"), "condition_number": float("nan"), "band_ratio": float("nan"),
             "band_coverage_2sigma": float("nan"), "saturated_fraction": saturated_fraction,
-            "flags": {"condition": False, "residual": False, "saturation": False, "band": False}}
+            "flags": {"condition": False, "residual": False, "saturation": False, "risk": False}}
 
 
 def estimate(statistics: SequenceStatistics, leds: Spectra, method: str = "tikhonov",
@@ -200,13 +202,21 @@ def estimate(statistics: SequenceStatistics, leds: Spectra, method: str = "tikho
     return estimate_ambient(statistics, leds, method, alpha)
 
 
+def app_estimate(statistics: SequenceStatistics, world: World, method: str = "tikhonov",
+                 alpha: float | str = "auto") -> AmbientEstimate:
+    """The estimate as the app makes it (acquisition.analysis.estimate_sequence): eq. 4–6 on the
+    (inverse-variance weighted) statistics, with the LED model's error in the band and the miss risk in
+    the warnings (:mod:`processing.model_error`)."""
+    return with_model_error(estimate_ambient(statistics, world.leds, method, alpha), reference_for(world.leds, world.camera))
+
+
 def estimate_record(world: World, ambient: np.ndarray, frames: list[np.ndarray], spec: FrameStackSpec,
                     method: str = "tikhonov", alpha: float | str = "auto", bin_factor: int = 4) -> dict[str, Any]:
     """Statistics (binned as the app does), estimate, and :func:`reliability`; refusals recorded, not raised."""
     started = time.perf_counter()
-    statistics = accumulate_statistics(ambient, frames, spec, bin_factor=bin_factor)
+    statistics = accumulate_statistics(ambient, frames, spec, bin_factor=bin_factor, weighting=True)
     try:
-        result = estimate_ambient(statistics, world.leds, method, alpha)
+        result = app_estimate(statistics, world, method, alpha)
     except (SolverError, SpectralDataError) as err:
         return refused_record(str(err), statistics.saturated_fraction)
     record = reliability(result, world.ambient.values[:, 0])

@@ -1,11 +1,12 @@
 """Tests of the failure, Pareto and Figs. 6–7 studies (processing.study.failure/pareto/cameras).
 
 Fast reduced versions (one camera, one ambient, one noise seed, a few levels) run in seconds and
-pin the trends and whether the estimator's warnings fire in the clear failure cases. Where the
-estimator does *not* warn in a clear failure (a dead LED, a line outside the LEDs' span that the
-camera sees little of), the test is a strict xfail that records the finding: it starts passing —
-and so fails the suite, prompting an update — once ``processing.ambient`` warns there. Full runs
-are behind ``-m study``.
+pin the trends and whether the estimator's specific warnings (saturation, misfit) fire in the clear
+failure cases. The miss-risk warning (processing.model_error) is judged on the harness instead
+(docs/ambient-harness.md): in this study's world it also fires on the daylight baseline (expected
+ratio 1.09–1.12 against a real 0.95), a false alarm. Where the estimator does *not* warn in a clear
+failure, the test is a strict xfail that records the finding: it starts passing — and so fails the
+suite, prompting an update — once the estimator warns there. Full runs are behind ``-m study``.
 """
 
 from __future__ import annotations
@@ -35,30 +36,26 @@ def _by_level(result: dict, factor: str) -> dict:
 
 def test_heavy_saturation_warns():
     rows = _by_level(_failure({"saturation": [1.0, 16.0]}), "saturation")
-    assert rows[1.0]["warned_rate"] == 0
+    assert rows[1.0]["flag_rates"]["saturation"] == 0
     assert rows[16.0]["warned_rate"] == 1 and rows[16.0]["flag_rates"]["saturation"] == 1
     assert rows[16.0]["saturated_fraction_median"] > 0.5
 
 
 def test_large_motion_warns_through_the_residual():
     rows = _by_level(_failure({"motion": [0, 8]}), "motion")
-    assert rows[0]["warned_rate"] == 0
+    assert rows[0]["flag_rates"]["residual"] == 0
     assert rows[8]["warned_rate"] == 1 and rows[8]["flag_rates"]["residual"] == 1
     assert rows[8]["relative_residual_median"] > 0.5
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "finding: a 570 nm line between the LEDs carrying 95 % of the light: RMSE 0.48 against an LED bound of "
+    "0.37 (1.31x), unwarned. The misfit (beyond the noise) stays below 0.2 and the reference lights whose "
+    "estimates look like this one came out 0.79x their bound: none of them is a line light"))
 def test_ambient_in_the_gap_between_leds_warns_when_it_dominates():
     rows = _by_level(_failure({"line_570nm": [0.0, 0.95]}), "line_570nm")
     assert rows[0.95]["error_mean"] > rows[0.0]["error_mean"] + 0.1
-    assert rows[0.95]["warned_rate"] == 1 and rows[0.95]["flag_rates"]["residual"] == 1
-
-
-@pytest.mark.xfail(strict=True, reason="finding: a 700 nm line (beyond the LEDs, weakly seen by the camera) "
-                                       "doubles the error without raising the relative residual")
-def test_ambient_far_outside_the_leds_warns():
-    rows = _by_level(_failure({"line_700nm": [0.0, 0.5]}), "line_700nm")
-    assert rows[0.5]["error_mean"] > rows[0.0]["error_mean"] + 0.2  # the failure is real …
-    assert rows[0.5]["warned_rate"] == 1  # … but nothing warns
+    assert rows[0.95]["warned_rate"] == 1
 
 
 def test_ambient_far_outside_the_leds_is_a_silent_failure():
