@@ -6,7 +6,8 @@ otherwise be linearised without a word, and every estimate from it would be wron
 :func:`check_frame_levels`, called by :meth:`acquisition.sequence_format.Sequence.load_frame`
 (which every route that reads a sequence's frames goes through: ``estimate``, ``flash``,
 ``synthesize``, ``evaluate``, ``run --from-disk``, ``--rig replay:``), refuses such a frame with
-one line naming the file, how many pixels, the range found and the range expected.
+one line naming the file, how many pixels, the range found and the range expected. Frames a live
+``run`` keeps in memory (straight from the camera, before they are read back) are not checked here.
 
 The rule
 --------
