@@ -276,7 +276,8 @@ def _dark(args: argparse.Namespace) -> int:
     indices = sequence.indices("dark")
     if not indices:
         raise UsageError(f"{sequence.path}: frames has no 'dark' frame; expected frames with role 'dark'")
-    result = measure_dark([sequence.load_frame(i) for i in indices], sequence.camera.cfa)
+    # Dark frames measure the black level, so the declared one is not held against them.
+    result = measure_dark([sequence.load_frame(i, check_levels=False) for i in indices], sequence.camera.cfa)
     calibration = load_or_new(args.out).updated(dark={**result.as_dict(), "cfa": sequence.camera.cfa,
                                                       "sequence": str(sequence.directory)})
     path = save_calibration(calibration, args.out)

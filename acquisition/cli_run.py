@@ -100,8 +100,8 @@ def _rig_spec(args: argparse.Namespace) -> str:
 
 def _open(args: argparse.Namespace) -> Rig:
     spec = _rig_spec(args)
-    sim_only = [option for option, value in (("--sim-camera", args.sim_camera), ("--leds", args.leds))
-                if value is not None]
+    sim_only = [option for option, value in (("--sim-camera", args.sim_camera), ("--leds", args.leds),
+                                             ("--flash-power", args.flash_power)) if value is not None]
     if sim_only and spec != "sim":
         raise UsageError(f"{sim_only[0]}: describes the simulated rig, but the rig is '{spec}'; expected --rig sim "
                          "(or no --rig and no --camera/--port)")
@@ -112,7 +112,7 @@ def _open(args: argparse.Namespace) -> Rig:
     if spec == "sim":
         return open_rig("sim", ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
                         camera=args.sim_camera, n_leds=args.leds, led_spectra=args.led_spectra,
-                        log_serial=args.log_serial)
+                        flash_power=args.flash_power, log_serial=args.log_serial)
     return open_rig(spec, log_serial=args.log_serial)
 
 
@@ -337,6 +337,9 @@ def _run(args: argparse.Namespace) -> int:
     sequence = read_sequence(out / "sequence")
     progress("synthesising the computational images, previews and report")
     summary = report.write_run_report(out, sequence, estimate, solutions, args.mode, true_ambient, stack, args.target)
+    if "spectrum_rmse_vs_truth" in summary:
+        progress(f"spectrum RMSE against the true ambient {summary['spectrum_rmse_vs_truth']:.4f}; the best "
+                 f"non-negative LED fit of it {summary['spectrum_rmse_led_bound']:.4f} (what the LEDs allow)")
     summary["exposure"] = {**exposure.to_dict(), "flash_exposure_us": flash_us, "led_snr": captured.snr,
                            "led_snr_method": captured.snr_method}
     summary["decision_ms"] = round(decision_ms, 3)
@@ -484,6 +487,18 @@ def _capture(args: argparse.Namespace) -> int:
     return 0
 
 
+def _flash_power(text: str) -> float:
+    """``--flash-power``: a positive number (each LED's signal in units of the ambient's)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (np.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"'{text}': expected a positive number (each LED's signal in units of the "
+                                         "ambient's, e.g. 1)")
+    return value
+
+
 def _rig_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rig", default=None,
                         help="rig: sim (default; simulated camera + booth emulator on a pty), aravis-fake (Aravis "
@@ -525,6 +540,9 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
                      help=f"scene: {', '.join(SIM_SCENES)} (white: a white reference for calibrate leds --white), or "
                           "reflectances wavelength_nm + one column per surface (0-1, covering 400-700 nm) shown as a "
                           "random mosaic of those surfaces (--seed)")
+    sim.add_argument("--flash-power", type=_flash_power, default=None, metavar="P",
+                     help="how bright the booth is: every LED at full drive gives at least P times the ambient's "
+                          "mean camera signal (the weakest LED exactly P; the LEDs keep their ratios; default 1)")
     sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
     parser.add_argument("--exposure", "--exposure-us", dest="exposure", type=_exposure_value, default="auto",

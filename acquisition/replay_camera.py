@@ -53,8 +53,11 @@ class ReplayCamera(TriggeredFrames):
         self._cursor = 0
         self._plan_start = 0
         self._released = 0
-        first = sequence.load_frame(0)
-        self._shape = first.shape
+        # Every frame is read (and its values checked against the recorded levels) before the
+        # rig opens, so a corrupt recording is refused before anything is captured or written;
+        # the frames are then served from memory.
+        self._pixels = tuple(sequence.load_frame(index) for index in range(len(sequence.frames)))
+        self._shape = self._pixels[0].shape
 
     @classmethod
     def open(cls, directory: str | Path) -> ReplayCamera:
@@ -181,7 +184,7 @@ class ReplayCamera(TriggeredFrames):
             self._begin_frame()
         try:
             recorded = self.sequence.frames[index]
-            pixels = self.sequence.load_frame(index)
+            pixels = self._pixels[index]
             timestamp = recorded.extra.get("timestamp_ns", 0)
             frame = RawFrame(np.asarray(pixels), index + 1, int(timestamp) if isinstance(timestamp, int) else 0,
                              recorded.exposure_us, recorded.gain)

@@ -273,7 +273,8 @@ def check_emulated_booth(leds: Spectra, where: str) -> None:
 
 def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spectra = "chart110", cfa: str | None = None,
                  seed: int = 0, camera: str | Spectra | None = None, n_leds: int | None = None,
-                 led_spectra: str | Path | Spectra | None = None, log_serial: str | Path | None = None) -> Rig:
+                 led_spectra: str | Path | Spectra | None = None, log_serial: str | Path | None = None,
+                 flash_power: float | None = None) -> Rig:
     """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver.
 
     Parameters
@@ -288,6 +289,9 @@ def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spect
         per LED, named and peaked as they are (:func:`check_emulated_booth`).
     cfa, seed, log_serial
         Raw mosaic layout, noise (and mosaic) seed, serial transcript file.
+    flash_power
+        ``--flash-power``: every LED at full drive gives at least this many times the ambient's
+        mean camera signal (:meth:`SimulatedCamera.default`); None is its default, 1.
 
     Raises
     ------
@@ -308,8 +312,9 @@ def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spect
     closers: list = []
     line_errors: list[BaseException] = []
     try:
+        power = {} if flash_power is None else {"flash_power": flash_power}
         world = SimulatedCamera.default(scene=scene_spec, ambient=ambient_spd, cfa=cfa, seed=seed,  # type: ignore[arg-type]
-                                        camera=responsivities, led_spectra=leds)
+                                        camera=responsivities, led_spectra=leds, **power)
         closers.append(world.close)
         emulator, booth = _open_emulated_booth(world.led_spectra, log_serial, closers)
 

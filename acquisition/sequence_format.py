@@ -37,6 +37,7 @@ from typing import Any, Literal
 import numpy as np
 
 from acquisition.errors import RecordingError
+from acquisition.frame_integrity import check_frame_levels
 from acquisition.image_io import image_suffix, read_image, read_image_header, write_image
 from calibration.spectrometer import NEGATIVE_TOLERANCE
 from processing.errors import SpectralDataError
@@ -247,14 +248,20 @@ class Sequence(_ArrayEquality):
             raise RecordingError(f"{self.path}: role '{role}' is unknown; expected one of {', '.join(FRAME_ROLES)}")
         return tuple(i for i, frame in enumerate(self.frames) if frame.role == role)
 
-    def load_frame(self, index: int) -> np.ndarray:
+    def load_frame(self, index: int, *, check_levels: bool = True) -> np.ndarray:
         """The pixels of frame ``index``: (H, W) for a raw mosaic (``cfa`` set), (H, W, 3) for RGB.
+
+        Every route that reads a sequence's frames comes through here, so this is where a frame's
+        values are checked against ``camera.black_level`` and ``camera.white_level``
+        (:func:`acquisition.frame_integrity.check_frame_levels`). ``check_levels=False`` is for
+        the one reader that measures the black level instead of trusting it (``calibrate dark``).
 
         Raises
         ------
         RecordingError
-            If the file is unreadable, its channel count does not match ``camera.cfa``, or its
-            size differs from frame 0's (both files are named).
+            If the file is unreadable, its channel count does not match ``camera.cfa``, its
+            size differs from frame 0's (both files are named), or it holds values above white or
+            below black by more than read noise allows (the count and range are named).
         """
         path = self.frame_path(index)
         pixels = read_image(path)
@@ -278,6 +285,8 @@ class Sequence(_ArrayEquality):
                     f"{where} is {pixels.shape[1]}×{pixels.shape[0]} pixels but frames[0].file "
                     f"'{self.frames[0].file}' is {first.width}×{first.height}; expected one size for all frames"
                 )
+        if check_levels:
+            check_frame_levels(pixels, self.camera.black_level, self.camera.white_level, self.frames[index].gain, where)
         return pixels
 
     def load_linear_frame(self, index: int) -> tuple[np.ndarray, np.ndarray]:

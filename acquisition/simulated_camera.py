@@ -286,7 +286,7 @@ class SimulatedCamera(TriggeredFrames):
         camera: str | Spectra = "NikonD100",
         n_leds: int = 7,
         led_spectra: Spectra | None = None,
-        flash_to_ambient: float = 2.0,
+        flash_power: float = 1.0,
         reference_exposure_us: float = 10_000.0,
         ambient_peak_fraction: float = 0.25,
         sensor: SensorModel | None = None,
@@ -322,14 +322,20 @@ class SimulatedCamera(TriggeredFrames):
             The paper's LED subset (3–7), unless ``led_spectra`` is given.
         led_spectra
             The booth's LEDs (one spectrum per channel, covering ``grid``) instead of the paper's:
-            their ratios are kept, their total power is set by ``flash_to_ambient``.
-        flash_to_ambient
-            All LEDs at full drive give this many times the ambient's mean camera signal; with 7
-            LEDs each LED-only image is then about 0.3× the ambient image — well above the noise,
-            and ambient + a full flash still fits the sensor.
+            their ratios are kept, their power is set by ``flash_power``.
+        flash_power
+            How bright the booth is, as a flash is: every LED at full drive gives at least this
+            many times the ambient's mean camera signal over the diffuse scene (all channels). The
+            booth is scaled as a whole, so the LEDs keep their ratios, and the weakest LED the
+            camera sees (:data:`VISIBLE_LED_FRACTION`) gives exactly ``flash_power`` × the
+            ambient (:func:`flash_power_scale`). With the default 1, the paper's 7 LEDs and the
+            NikonD100 give 1.0–3.7× the ambient each, whatever the LED count; it used to be all
+            LEDs together 2× (each 0.1–0.4×, LED SNR 0.6–3 in ``msflash run``).
         reference_exposure_us, ambient_peak_fraction
             At ``reference_exposure_us`` and gain 1 the brightest diffuse pixel under the ambient
-            alone reads ``ambient_peak_fraction`` of full scale (room for the flash on top).
+            alone reads ``ambient_peak_fraction`` of full scale, or less if the ambient plus the
+            brightest LED at full drive would then read more than :data:`FLASH_PEAK_FRACTION`
+            (room for the flash on top, for captures at one exposure).
             ``suggested_exposure_us`` is set to ``reference_exposure_us``.
         sensor
             Default: 16-bit, black 256, 0.5 e⁻/DN, 2 e⁻ read noise, 40 000 e⁻ full well.
@@ -367,19 +373,16 @@ class SimulatedCamera(TriggeredFrames):
             raise CameraError(f"simulated camera: cfa '{cfa}' but the sensor model has '{sensor.cfa}'; expected one")
 
         # LED power relative to the ambient, measured the way the camera sees it (mean signal over
-        # the diffuse scene), so "a decent fraction" holds whatever the ambient's spectrum.
+        # the diffuse scene), so it holds whatever the ambient's spectrum.
         diffuse = Scene(scene.reflectances, scene.labels, scene.shading)
-        ambient_signal = float(np.mean(expected_response(diffuse, metered_ambient, responsivities, 1.0)))
-        dark = ambient_spd.replace(values=np.zeros_like(ambient_spd.values))
-        flash_signal = float(np.mean(expected_response(
-            diffuse, total_illumination(dark, leds, np.ones(leds.count)), responsivities, 1.0)))
-        if ambient_signal <= 0 or flash_signal <= 0:
-            raise CameraError("simulated camera: the ambient or the LEDs give no signal in this camera; "
-                              "expected light within the camera's sensitivity")
-        led_spectra = leds.replace(values=leds.values * (flash_to_ambient * ambient_signal / flash_signal))
+        led_spectra = leds.replace(values=leds.values * flash_power_scale(diffuse, metered_ambient, leds, responsivities,
+                                                                          flash_power))
         camera_name = responsivities.metadata.get("camera") or (camera if isinstance(camera, str) else responsivities.source)
-        exposure_at_unit_scale = exposure_for_peak(scene, metered_ambient, responsivities, sensor,  # type: ignore[arg-type]
-                                                   ambient_peak_fraction)
+        dark = ambient_spd.replace(values=np.zeros_like(ambient_spd.values))
+        exposure_at_unit_scale = min(
+            exposure_for_peak(scene, metered_ambient, responsivities, sensor, ambient_peak_fraction),  # type: ignore[arg-type]
+            *(exposure_for_peak(scene, _plus(metered_ambient, total_illumination(dark, led_spectra, on)),  # type: ignore[arg-type]
+                                responsivities, sensor, FLASH_PEAK_FRACTION) for on in np.eye(led_spectra.count)))
         simulated = cls(
             scene, ambient_spd, led_spectra, responsivities, sensor,
             scale=exposure_at_unit_scale / reference_exposure_us, led_levels_source=led_levels_source, seed=seed,
@@ -387,3 +390,64 @@ class SimulatedCamera(TriggeredFrames):
         )
         simulated.suggested_exposure_us = reference_exposure_us
         return simulated
+
+
+VISIBLE_LED_FRACTION = 0.01
+"""An LED giving less than this share of the strongest LED's camera signal is one the camera hardly
+sees: it does not set the booth's power (raising the booth until it matched the ambient would blind
+the camera in every other LED's frame)."""
+FLASH_PEAK_FRACTION = 0.9
+"""At the sim's reference exposure, the ambient plus any one LED at full drive reads at most this share of full scale."""
+
+
+def _plus(ambient: Spectra | MixedIllumination, light: Spectra) -> Spectra | MixedIllumination:
+    """An ambient (uniform or spatially varying) plus a uniform light."""
+    if isinstance(ambient, MixedIllumination):
+        return ambient.plus(light)
+    return ambient.replace(values=ambient.values + light.to_unit(ambient.unit).values)
+
+
+def led_signals(scene: Scene, ambient: Spectra | MixedIllumination, led_spectra: Spectra,
+                camera_responsivities: Spectra) -> np.ndarray:
+    """Each LED's mean camera signal at full drive over ``scene`` (all pixels and channels), in units of the ambient's.
+
+    Raises
+    ------
+    CameraError
+        If the ambient gives no signal in this camera.
+    """
+    ambient_signal = float(np.mean(expected_response(scene, ambient, camera_responsivities, 1.0)))
+    if ambient_signal <= 0:
+        raise CameraError("simulated camera: the ambient gives no signal in this camera; expected light within the "
+                          "camera's sensitivity")
+    spd = led_spectra.to_unit("photons")
+    dark = spd.replace(values=np.zeros((spd.grid.size, 1)), names=("dark",))
+    return np.array([float(np.mean(expected_response(scene, total_illumination(dark, spd, on), camera_responsivities,
+                                                     1.0))) for on in np.eye(spd.count)]) / ambient_signal
+
+
+def flash_power_scale(scene: Scene, ambient: Spectra | MixedIllumination, led_spectra: Spectra,
+                      camera_responsivities: Spectra, flash_power: float = 1.0) -> float:
+    """The factor on ``led_spectra`` making the weakest LED the camera sees give ``flash_power`` × the ambient.
+
+    Signals are :func:`led_signals` (mean over ``scene``, all channels); LEDs below
+    :data:`VISIBLE_LED_FRACTION` of the strongest do not count. One factor for the whole booth,
+    so the LEDs keep their ratios and every LED the camera sees gives at least ``flash_power`` ×
+    the ambient.
+
+    Raises
+    ------
+    CameraError
+        If ``flash_power`` is not a positive finite number, or the ambient or every LED gives no
+        signal in this camera.
+    """
+    if not (np.isfinite(flash_power) and flash_power > 0):
+        raise CameraError(f"simulated camera: flash power {flash_power}; expected a positive number (each LED's "
+                          "signal in units of the ambient's)")
+    signals = led_signals(scene, ambient, led_spectra, camera_responsivities)
+    strongest = float(np.max(signals)) if signals.size else 0.0
+    if strongest <= 0:
+        raise CameraError("simulated camera: the LEDs give no signal in this camera; expected light within the "
+                          "camera's sensitivity")
+    weakest = float(np.min(signals[signals >= VISIBLE_LED_FRACTION * strongest]))
+    return flash_power / weakest

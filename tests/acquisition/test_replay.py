@@ -190,7 +190,8 @@ def test_a_damaged_recorded_frame_is_the_error_in_every_sync_mode(tmp_path: Path
                                                                   sync: str) -> None:
     """Frame 3 of the recording is truncated: the replay names that file whoever paces the frames. Booth
     master made the frame on the emulator's trigger-line thread, and the capture reported 'no frame for
-    trigger 4' instead (the cause only in a log line)."""
+    trigger 4' instead (the cause only in a log line). The replay camera now reads (and checks) every
+    recorded frame when the rig opens, so the damaged file is refused before anything is captured."""
     import shutil
 
     recording = tmp_path / "recording"
@@ -202,7 +203,7 @@ def test_a_damaged_recorded_frame_is_the_error_in_every_sync_mode(tmp_path: Path
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2
     assert err[-1].startswith(f"msflash: error: {damaged}: pixels cannot be decoded")
-    assert len(read_sequence(out / "sequence").frames) == 3
+    assert not (out / "sequence" / "sequence.json").exists()
 
 
 def test_replaying_an_interrupted_recording_says_it_is_incomplete(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

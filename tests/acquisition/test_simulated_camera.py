@@ -184,10 +184,15 @@ class TestDefaultWorld:
         ambient = frames[0].pixels.astype(float) - camera.sensor.black_level
         assert ambient[diffuse].max() < 0.5 * white  # room for the flash
         assert np.all(frames[0].pixels[camera.scene.specular].max(axis=-1) == white)  # the highlight saturates
+        ratios = []
         for frame in frames[1:]:
-            assert not np.any(frame.pixels[diffuse] >= white)
-            ratio = (frame.pixels[diffuse].astype(float) - camera.sensor.black_level).mean() / ambient[diffuse].mean() - 1
-            assert 0.05 < ratio < 1.0  # each LED-only image is a decent fraction of the ambient
+            assert not np.any(frame.pixels[diffuse] >= white)  # ambient + any one LED fits at this exposure
+            ratios.append((frame.pixels[diffuse].astype(float) - camera.sensor.black_level).mean()
+                          / ambient[diffuse].mean() - 1)
+        # As a flash: every LED-only image at least the ambient's (flash_power 1: the weakest LED
+        # equal to it, the others in the paper's ratios, up to 3.7× with this camera).
+        assert min(ratios) == pytest.approx(1.0, abs=0.05)
+        assert max(ratios) < 4.0
 
     def test_default_world_with_a_mosaic(self) -> None:
         camera = SimulatedCamera.default(scene="macbeth", ambient="daylight", cfa="BGGR", seed=1, patch_px=4)

@@ -116,13 +116,17 @@ def test_uneven_led_is_warned_about(white, tmp_path):
     copy.mkdir()
     (copy / "sequence.json").write_text(sequence.path.read_text())
     (copy / "frames").mkdir()
-    ambient = sequence.load_frame(sequence.indices("ambient")[0]).astype(float)
+    ambient_index = sequence.indices("ambient")[0]
     led = sequence.indices("led")[2]
+    black = sequence.camera.black_level
+    # The ambient's part of the LED frame, at that frame's exposure (auto exposure gives them different ones).
+    ambient = black + (sequence.load_frame(ambient_index).astype(float) - black) * (
+        sequence.frames[led].exposure_us / sequence.frames[ambient_index].exposure_us)
     for index, frame in enumerate(sequence.frames):
         pixels = sequence.load_frame(index)
         if index == led:
             ramp = np.linspace(0.8, 1.2, pixels.shape[1])[None, :, None]
-            pixels = np.clip(ambient + (pixels - ambient) * ramp, 0, 65535).astype(np.uint16)
+            pixels = np.clip(np.rint(ambient + (pixels - ambient) * ramp), 0, sequence.camera.white_level).astype(np.uint16)
         write_image(copy / frame.file, pixels)
     result = white_led_responses(read_sequence(copy))
     name = sequence.leds[2].name
