@@ -71,9 +71,11 @@ def plot_spectra(path: Path, sequence: Sequence, estimate: AmbientEstimate, solu
     peak = float(np.max(estimate_values)) or 1.0
     figure, axes = plt.subplots(1, 2, figsize=(12, 4.5))
     left, right = axes
-    # The band is the estimate's own uncertainty (AmbientEstimate.spectrum_std), one standard deviation each side.
+    # The band is the estimate's own uncertainty (AmbientEstimate.spectrum_std), one standard deviation each side;
+    # the legend says what it covers (pixel noise, and the model's error when the camera is known).
+    covers = "pixel noise + model error" if estimate.miss_risk is not None else "pixel noise only"
     left.fill_between(wavelengths, (estimate_values - std) / peak, (estimate_values + std) / peak,
-                      color="tab:blue", alpha=0.25, lw=0, label="estimate ± 1σ (its spectrum_std)")
+                      color="tab:blue", alpha=0.25, lw=0, label=f"estimate ± 1σ ({covers})")
     left.plot(wavelengths, estimate_values / peak, color="tab:blue", lw=2, label=f"estimate ({estimate.method})")
     if true_ambient is not None:
         # Truth and the LEDs' best fit of it, each least-squares scaled onto the estimate (the metric's scaling).
