@@ -48,10 +48,10 @@ _TYPE_PATTERNS: tuple[tuple[LightType, str], ...] = (
     ("discharge", r"metal halide|mercury|hps|son\b|cdm|mhc|mh100|h38|c100s54|sdw|\bhid\b"),
     ("fluorescent", r"\bfl\b|fl\d|fluoresc|f\d+t\d+|t12|t8|\bcie f\d|f40|f34|tl\d|\bf3\.\d|tri-?phosphor|cool white|"
                     r"warm white fl|triband|tri-band"),
+    ("led", r"led|phosphor|rgb|cree|lumileds|xicato|vio|soraa|ngl|m\d-\d|m\d\.\d|hp\d|fortimo|w[a-z]*\dk|wgarc|"
+            r"true white|yag|luxeon|ssl|booth|b-y|peak|broad|3-led|4-led"),
     ("incandescent", r"incandescent|halogen|halogena|60wa19|softer white|rough house|reveal|krypton|\bhalo\b|"
                      r"illum\. a|\ba\b$|neodimium|\d+ ?k$|\d,\d+ k$"),
-    ("led", r"led|phosphor|rgb|cree|lumileds|xicato|vio|soraa|ngl|m\d-\d|m\d\.\d|hp\d|fortimo|w[a-z]*\dk|"
-            r"true white|yag|luxeon|ssl|booth|b-y|peak|broad|3-led|4-led"),
 )
 
 

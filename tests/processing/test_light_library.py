@@ -55,3 +55,5 @@ def test_light_type_reads_labels():
     assert light_type("NIST 35: CIE F2*") == "fluorescent"
     assert light_type("Slide 15: Cree LLS") == "led"
     assert light_type("NIST 8: Mercury") == "discharge"
+    assert light_type("MCRI-58: WGR4k") == light_type("MCRI-51: CRI(WGARC)3k") == "led"  # LED mixes named by CCT
+    assert light_type("Houser: 3000 K") == light_type("MCRI-44: Halogen3k") == "incandescent"
