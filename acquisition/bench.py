@@ -25,12 +25,13 @@ from typing import Any
 
 import numpy as np
 
-from acquisition.analysis import DEFAULT_BIN_FACTOR
+from acquisition.analysis import DEFAULT_BIN_FACTOR, SAMPLE_WEIGHTING
 from processing import datasets
 from processing.ambient import AmbientModel, estimate_ambient
 from processing.flash import FlashModel
 from processing.image_formation import SensorModel, chart_scene, exposure_for_peak, render_frame
 from processing.least_squares import minimise_quadratic, recording_problems
+from processing.model_error import light_reference, reference_for, with_model_error
 from processing.spectra import DEFAULT_GRID, Spectra
 from processing.statistics import DEFAULT_WORKERS, FrameStackSpec, accumulate_statistics
 from processing.synthesis import synthesize
@@ -113,8 +114,10 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
     statistics = accumulate_statistics(frames[0], frames[1:], spec)
 
     def estimate(bin_factor: int, workers: int = DEFAULT_WORKERS) -> Callable[[], None]:
+        # As msflash estimate: the weighted statistics (acquisition.analysis.sequence_statistics) and the default solve.
         return lambda: estimate_ambient(
-            accumulate_statistics(frames[0], frames[1:], spec, bin_factor=bin_factor, workers=workers), world["leds"])
+            accumulate_statistics(frames[0], frames[1:], spec, bin_factor=bin_factor, workers=workers,
+                                  weighting=SAMPLE_WEIGHTING), world["leds"])
 
     weights = estimate_ambient(statistics, world["leds"]).ambient_weights
     flash_weights = np.clip(weights, 0, 1)
@@ -162,4 +165,9 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
         warnings.simplefilter("ignore")
         result["solvers"] = [_compare_with_cvxpy(name, run, 50) for name, run in solvers.items()]
     result["reliability_signals_s"] = _best_time(lambda: estimate_ambient(statistics, leds, "tikhonov", 1e-3), 20)
+    # The LED model's error (processing.model_error): its reference lights once per LED set and camera,
+    # then the band and miss risk of each estimate.
+    result["model_reference_s"] = _best_time(lambda: light_reference(leds, camera), 3)
+    reference, estimated = reference_for(leds, camera), estimate_ambient(statistics, leds)
+    result["model_band_s"] = _best_time(lambda: with_model_error(estimated, reference), 20)
     return result

@@ -63,7 +63,7 @@ from processing.statistics import (
     FrameStackSpec,
     NoiseMoments,
     SequenceStatistics,
-    ambient_root_weights,
+    ambient_noise_line,
     block_sums,
     block_sums_and_differences,
     cfa_planes,
@@ -452,8 +452,9 @@ def tile_statistics(
     if weighting and differences is not None:
         ambient_row = len(frames) - 1
         stride = probe_stride(height, width)
-        root = ambient_root_weights(data[ambient_row], differences[ambient_row][::stride],
-                                    spec.black_level * bin_factor * bin_factor, masks[ambient_row], stride)
+        black = spec.black_level * bin_factor * bin_factor
+        root = ambient_noise_line(data[ambient_row], differences[ambient_row][::stride], black, masks[ambient_row],
+                                  stride).root_weights(data[ambient_row], black)
         data *= root
         differences *= root
     invalid = np.zeros((height, width), dtype=bool)

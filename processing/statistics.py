@@ -626,11 +626,11 @@ class BlockRows:
         ambient = self.n_led_frames
         assert self.differences is not None
         # rows layout (block row, channel, block column); the probe's (probed block row, block column, channel)
-        levels = self.rows[ambient].reshape(self.block_shape).transpose(0, 2, 1)
-        root = ambient_root_weights(levels, self.differences[ambient].reshape(self.difference_shape),
-                                    self.black_level * self.factor * self.factor, self._ambient_saturated,
-                                    self.probe_stride)
-        return np.ascontiguousarray(root.transpose(0, 2, 1)).reshape(-1)
+        black = self.black_level * self.factor * self.factor
+        line = ambient_noise_line(self.rows[ambient].reshape(self.block_shape).transpose(0, 2, 1),
+                                  self.differences[ambient].reshape(self.difference_shape), black,
+                                  self._ambient_saturated, self.probe_stride)
+        return line.root_weights(self.rows[ambient], black)
 
     def _weigh_row(self, row: int) -> None:
         """Scale one row (and its probe) by the root weights (incremental mode, weights known)."""
@@ -823,30 +823,86 @@ def probe_stride(height: int, width: int) -> int:
     return max(1, min(4, height * width // PROBE_BLOCKS))
 
 
-def ambient_root_weights(ambient: np.ndarray, probe: np.ndarray, black: float,
-                         saturated: np.ndarray | None, stride: int) -> np.ndarray:
-    """Square roots of :func:`inverse_variance_weights` for (h, w, C) ambient block sums.
+@dataclass(frozen=True)
+class NoiseLine:
+    """A photon-transfer line: the noise variance of a sample at raw level ``x`` (black removed) is
+    ``max(gain · x + read, floor)`` (:func:`fit_noise_line`)."""
 
-    ``probe`` holds the half differences of the block rows ``0, stride, 2·stride…`` (h', w, C); the
-    blocks the ambient frame saturates (``saturated``, (h, w)) are left out of the fit. Layout as
-    ``ambient``. Used alike by :class:`BlockRows` and the tiled statistics of :mod:`processing.local`.
+    gain: float
+    read: float
+    floor: float
+
+    def root_weights(self, levels: np.ndarray, black: float = 0.0) -> np.ndarray:
+        """``√(1/var)`` of samples at raw ``levels`` (less ``black``), normalised so the weights average 1, in
+        the layout of ``levels``."""
+        variance = np.subtract(levels, black, dtype=float)
+        np.maximum(variance, 0.0, out=variance)
+        variance *= self.gain
+        variance += self.read
+        np.maximum(variance, self.floor, out=variance)
+        np.reciprocal(variance, out=variance)
+        variance *= 1.0 / float(variance.mean())
+        return np.sqrt(variance, out=variance)
+
+
+UNIFORM_NOISE = NoiseLine(0.0, 1.0, 1.0)
+"""Noise alike everywhere: uniform weights."""
+
+
+def fit_noise_line(probed_levels: np.ndarray, probe: np.ndarray) -> NoiseLine:
+    """The photon-transfer line of samples at raw ``probed_levels`` (black removed) whose half differences
+    are ``probe`` (a half difference has the variance of its block sum, module notes).
+
+    ``gain`` and ``read`` are fitted by least squares to the squared half differences; a negative read
+    term is refitted as zero (a line through the origin), a negative gain as noise alike everywhere.
+    The floor is the line's variance at the 5th percentile of the probed levels: a fitted read noise
+    near zero would give black samples unbounded weight. Too few samples, or no positive floor:
+    :data:`UNIFORM_NOISE`.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> levels = rng.uniform(100, 10000, 20000)
+    >>> line = fit_noise_line(levels, rng.normal(0, np.sqrt(2 * levels + 5000)))
+    >>> bool(1.9 < line.gain < 2.1), bool(4000 < line.read < 6000)
+    (True, True)
     """
-    levels = ambient - black
-    probed = levels[::stride]
-    usable = np.ones(probed.shape[:2], dtype=bool) if saturated is None else ~saturated[::stride]
-    weights = inverse_variance_weights(levels.reshape(-1), probed[usable].reshape(-1), probe[usable].reshape(-1))
-    return np.sqrt(weights).reshape(levels.shape)
+    x = np.maximum(np.asarray(probed_levels, dtype=float).reshape(-1), 0.0)
+    y = np.square(np.asarray(probe, dtype=float).reshape(-1))
+    n = x.size
+    if n < 3 or not np.isfinite(y.sum()):
+        return UNIFORM_NOISE
+    # The normal equations of y ≈ gain · x + read, from five sums.
+    sx, sy, sxx, sxy = float(x.sum()), float(y.sum()), float(x @ x), float(x @ y)
+    determinant = n * sxx - sx * sx
+    if not determinant > 0:
+        return UNIFORM_NOISE
+    gain, read = (n * sxy - sx * sy) / determinant, (sxx * sy - sx * sxy) / determinant
+    if read < 0:
+        gain, read = sxy / max(sxx, 1e-300), 0.0
+    if gain < 0:
+        gain, read = 0.0, sy / n
+    floor = gain * float(np.partition(x, n // 20)[n // 20]) + read
+    return NoiseLine(gain, read, floor) if floor > 0 else UNIFORM_NOISE
+
+
+def ambient_noise_line(ambient: np.ndarray, probe: np.ndarray, black: float, saturated: np.ndarray | None,
+                       stride: int) -> NoiseLine:
+    """:func:`fit_noise_line` of (h, w, C) ambient block sums, whose block rows ``0, stride, 2·stride…``
+    have the half differences ``probe`` (h', w, C); blocks the ambient frame saturates (``saturated``,
+    (h, w)) are left out. Used alike by :class:`BlockRows` and the tiled statistics of
+    :mod:`processing.local`, so that both weigh the samples alike.
+    """
+    probed = ambient[::stride]
+    if saturated is not None:
+        usable = ~saturated[::stride]
+        probed, probe = probed[usable], probe[usable]
+    return fit_noise_line(np.subtract(probed, black, dtype=float), probe)
 
 
 def inverse_variance_weights(levels: np.ndarray, probed_levels: np.ndarray, probe: np.ndarray) -> np.ndarray:
-    """Inverse-variance weights of samples at raw ``levels`` (black removed), normalised to mean 1.
-
-    The noise variance of a sample is modelled as ``gain · level + read`` (photon and read noise; a
-    photon-transfer line). Its two parameters are fitted by least squares to the squared half
-    differences ``probe`` (a half difference has the variance of its block sum, module notes) against
-    the levels of the same samples, ``probed_levels``; a negative read term is refitted as zero, a
-    negative gain as noise alike everywhere. No variance is taken below the fit's at the 5th
-    percentile of the probed levels; with no usable fit the weights are uniform.
+    """Inverse-variance weights (mean 1) of samples at raw ``levels`` (black removed), by the noise line
+    fitted to the ``probe`` at ``probed_levels`` (:func:`fit_noise_line`).
 
     Examples
     --------
@@ -857,25 +913,7 @@ def inverse_variance_weights(levels: np.ndarray, probed_levels: np.ndarray, prob
     >>> round(float(weights.mean()), 6), bool(weights[np.argmin(levels)] > 10 * weights[np.argmax(levels)])
     (1.0, True)
     """
-    levels = np.asarray(levels, dtype=float)
-    x = np.maximum(np.asarray(probed_levels, dtype=float), 0.0)
-    y = np.square(np.asarray(probe, dtype=float))
-    if x.size < 3 or not np.isfinite(y).all():
-        return np.ones_like(levels)
-    design = np.column_stack([x, np.ones_like(x)])
-    (gain, read), *_ = np.linalg.lstsq(design, y, rcond=None)
-    if read < 0:  # read noise below what the fit resolves: a line through the origin
-        gain, read = float(x @ y) / max(float(x @ x), 1e-300), 0.0
-    if gain < 0:  # no photon noise resolved: the noise is the same everywhere
-        gain, read = 0.0, float(y.mean())
-    # The darkest samples are weighed as the 5th percentile of the probed levels at most: a fitted
-    # read noise near zero would give black samples unbounded weight.
-    floor = gain * float(np.percentile(x, 5.0)) + read
-    if not floor > 0:
-        return np.ones_like(levels)
-    variance = np.maximum(gain * np.maximum(levels, 0.0) + read, floor)
-    weights = 1.0 / variance
-    return weights / weights.mean()
+    return np.square(fit_noise_line(probed_levels, probe).root_weights(np.asarray(levels, dtype=float)))
 
 
 def cfa_planes(frame: np.ndarray, cfa_period: int) -> np.ndarray:
