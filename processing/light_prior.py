@@ -71,10 +71,10 @@ RIDGE = 1e-3
 """Dimensionless ridge ρ of the reflectance estimate (chosen on the tuning split)."""
 KAPPA = 100.0
 """Prior strength κ: λ = κ σ²/s² (chosen on the tuning split)."""
-CHOICE_MARGIN = 0.05
+CHOICE_MARGIN = 0.02
 """``auto`` takes the prior model only when its held-out RMS error is below (1 − margin) × the LED model's."""
-EB_ITERATIONS = 6
-"""Empirical-Bayes passes re-estimating σ² and s."""
+EB_ITERATIONS = 30
+"""Most empirical-Bayes passes re-estimating σ² and s (they stop once λ changes by less than 10⁻⁴ of itself)."""
 DAYLIGHT_CCT_K = tuple(range(4000, 24001, 1000))
 """CIE daylight chromaticities (correlated colour temperatures) added to the light prior's training set."""
 BLACKBODY_K = tuple(range(1800, 10001, 400))
@@ -317,7 +317,7 @@ class PriorModel:
         shape = np.concatenate([[1.0], prior.mean])
         s = float(linear @ shape / max(shape @ hessian @ shape, 1e-300))
         phi = s * shape
-        weight = 0.0
+        weight = previous = 0.0
         for _ in range(EB_ITERATIONS):
             rss = max(energy - 2 * linear @ phi + phi @ hessian @ phi, 1e-300 * max(energy, 1e-300))
             sigma2 = rss / n
@@ -329,6 +329,9 @@ class PriorModel:
             except np.linalg.LinAlgError as err:
                 raise SolverError(f"prior model: the normal equations are singular ({err}); expected LED images "
                                   "with light") from err
+            if abs(weight - previous) <= 1e-4 * weight:
+                break
+            previous = weight
         system = hessian + weight * penalty
         if nonnegative:
             phi = _nonnegative(system, linear, prior.basis.values)

@@ -51,7 +51,7 @@ LED_SETS = ("paper7", "paper:0,3,6", "paper:0,2,3,6", "paper:0,2,3,4,6")
 TUNING_FOLDS = 3
 
 
-def test_surfaces(wavelengths: np.ndarray) -> np.ndarray:
+def study_surfaces(wavelengths: np.ndarray) -> np.ndarray:
     """Macbeth 24 + Munsell 64 + 12 Vrhel objects (none in Natural-100) + the generator's 10 greys: (n, 110)."""
     grid = WavelengthGrid.from_wavelengths(wavelengths)
     parts = [datasets.macbeth().resample(WavelengthGrid(400, 700, 4)), datasets.vrhel("munsell"),
@@ -63,7 +63,7 @@ def test_surfaces(wavelengths: np.ndarray) -> np.ndarray:
 
 @contextmanager
 def rendering_with(light: np.ndarray, light_nm: np.ndarray):
-    """The generator with its ``light_energy("lib")`` a library light and its surfaces :func:`test_surfaces`."""
+    """The generator with its ``light_energy("lib")`` a library light and its surfaces :func:`study_surfaces`."""
     saved = us.light_energy, us.reflectances
 
     def light_energy(name: str, wavelengths: np.ndarray) -> np.ndarray:
@@ -71,7 +71,7 @@ def rendering_with(light: np.ndarray, light_nm: np.ndarray):
             return np.interp(wavelengths, light_nm, light, left=0.0, right=0.0)
         return saved[0](name, wavelengths)
 
-    us.light_energy, us.reflectances = light_energy, test_surfaces
+    us.light_energy, us.reflectances = light_energy, study_surfaces
     try:
         yield
     finally:
