@@ -212,40 +212,83 @@ def accumulate_channel_statistics(ambient: np.ndarray, led_frames: Sequence[np.n
         raise SpectralDataError(f"channel statistics: {height}×{width} blocks of {bin_factor}×{bin_factor}; expected at "
                                 f"least {n_folds} rows of blocks (a larger frame or smaller blocks)")
     probe = bin_factor % 2 == 0
-    sums, differences, invalid = [], [], np.zeros((height, width), dtype=bool)
-    for plane in planes:
-        if probe:
-            s, d = block_sums_and_differences(plane, bin_factor)
-            differences.append(d.astype(float))
+    n_frames, n_channels = len(frames), planes[0].shape[2]
+    n_blocks = height * width
+    # Raw block sums of every frame side by side, [F_1 … F_n, A] × channels, then a ones column: every
+    # moment of the linearised, differenced and unmixed responses is a linear map of these rows' moments
+    # (as in processing.statistics), so the pixels see no arithmetic beyond the block sums.
+    raw = np.empty((n_blocks, n_frames * n_channels + 1))
+    raw[:, -1] = 1.0
+    probes = np.empty((n_blocks, n_frames * n_channels + 1)) if probe else None
+    if probes is not None:
+        probes[:, -1] = 0.0
+    invalid = np.zeros((height, width), dtype=bool)
+    order = [*range(1, n_frames), 0]  # LED frames first, the ambient frame last
+    for column, index in enumerate(order):
+        plane = planes[index]
+        where = slice(column * n_channels, (column + 1) * n_channels)
+        if probes is not None:
+            block, half = block_sums_and_differences(plane, bin_factor)
+            probes[:, where] = half.reshape(n_blocks, n_channels)
         else:
-            s = plane[:height * bin_factor, :width * bin_factor].astype(float).reshape(
-                height, bin_factor, width, bin_factor, plane.shape[2]).sum(axis=(1, 3))
-        sums.append(s.astype(float))
-        invalid |= saturated_blocks(plane, bin_factor, spec.white_level)
-    black = spec.black_level * bin_factor * bin_factor
-    valid = ~invalid
-    fold_of_row = (np.arange(height) * n_folds) // height
-    fold = np.broadcast_to(fold_of_row[:, None], (height, width))[valid]
+            block = plane[:height * bin_factor, :width * bin_factor].astype(float).reshape(
+                height, bin_factor, width, bin_factor, n_channels).sum(axis=(1, 3))
+        raw[:, where] = block.reshape(n_blocks, n_channels)
+        if np.issubdtype(plane.dtype, np.floating) or np.iinfo(plane.dtype).max >= spec.white_level:
+            if plane.max() >= spec.white_level:
+                invalid |= saturated_blocks(plane, bin_factor, spec.white_level)
+    if invalid.any():
+        raw[invalid.reshape(-1)] = 0.0  # out of every moment, the count included
+        if probes is not None:
+            probes[invalid.reshape(-1)] = 0.0
+    transform = _response_transform(spec, n_channels, spec.black_level * bin_factor * bin_factor)
+    width_f = spec.n_leds * n_channels
+    # Folds are bands of block rows: contiguous slices of the row-major blocks.
+    bounds = ((np.arange(n_folds + 1) * height + n_folds - 1) // n_folds) * width
 
-    def responses(values: list[np.ndarray], offset: float) -> tuple[np.ndarray, np.ndarray]:
-        ambient_linear = spec.ambient_scale * (values[0][valid] - offset)  # (n, C)
-        led = np.stack([scale * (v[valid] - offset) - ambient_linear for scale, v in zip(spec.led_scales, values[1:])])
-        only = np.tensordot(spec.unmixing, led, axes=1)  # (k, n, C)
-        return only.transpose(1, 2, 0).reshape(ambient_linear.shape[0], -1), ambient_linear  # f: (n, C·k), c·k + i
+    def moments_of(rows: np.ndarray) -> tuple[Moments, np.ndarray]:
+        products = np.stack([_gram(rows[bounds[j]:bounds[j + 1]]) for j in range(n_folds)])
+        mapped = transform @ products @ transform.T
+        return Moments(mapped[:, :width_f, :width_f], mapped[:, :width_f, width_f:], mapped[:, width_f:, width_f:]), \
+            products
 
-    f, a = responses(sums, black)
-
-    def moments_of(f: np.ndarray, a: np.ndarray) -> Moments:
-        ff = np.stack([f[fold == j].T @ f[fold == j] for j in range(n_folds)])
-        fa = np.stack([f[fold == j].T @ a[fold == j] for j in range(n_folds)])
-        aa = np.stack([a[fold == j].T @ a[fold == j] for j in range(n_folds)])
-        return Moments(ff, fa, aa)
-
-    noise = moments_of(*responses(differences, 0.0)) if probe else None
+    moments, products = moments_of(raw)
+    sums = products[:, :, -1] @ transform.T  # (folds, Ck + C): Σ f, Σ a
     return ChannelStatistics(
-        moments=moments_of(f, a), noise=noise,
-        counts=np.bincount(fold, minlength=n_folds),
-        led_sums=np.stack([f[fold == j].sum(0) for j in range(n_folds)]),
-        ambient_sums=np.stack([a[fold == j].sum(0) for j in range(n_folds)]),
+        moments=moments, noise=None if probes is None else moments_of(probes)[0],
+        counts=np.rint(products[:, -1, -1]).astype(int),
+        led_sums=sums[:, :width_f], ambient_sums=sums[:, width_f:],
         n_blocks_total=height * width, n_leds=spec.n_leds, channels=channels,
     )
+
+
+def _response_transform(spec: FrameStackSpec, channels: int, black: float) -> np.ndarray:
+    """(C·k + C, n·C + C + 1) map from raw block sums ``[F_1 … F_n, A] × C, 1`` to ``[f (c·k + i), a (c)]``.
+
+    ``d_j = s_j (F_j − b) − s_a (A − b)``, ``f_i = Σ_j U_ij d_j`` (U = pinv(levels)), ``a = s_a (A − b)``.
+    """
+    unmixing, scales = spec.unmixing, np.asarray(spec.led_scales, dtype=float)
+    k, n = unmixing.shape
+    transform = np.zeros((channels * k + channels, n * channels + channels + 1))
+    for c in range(channels):
+        rows = slice(c * k, (c + 1) * k)
+        transform[rows, [j * channels + c for j in range(n)]] = unmixing * scales
+        transform[rows, n * channels + c] = -spec.ambient_scale * unmixing.sum(axis=1)
+        transform[rows, -1] = unmixing @ ((spec.ambient_scale - scales) * black)
+        transform[channels * k + c, n * channels + c] = spec.ambient_scale
+        transform[channels * k + c, -1] = -spec.ambient_scale * black
+    return transform
+
+
+GRAM_ROWS = 256
+"""Rows per product in :func:`_gram`: below OpenBLAS's threading threshold (its threads' wake-up on a busy
+2-core machine cost far more than these thin products; see :mod:`processing.statistics`)."""
+
+
+def _gram(values: np.ndarray) -> np.ndarray:
+    """``valuesᵀ values`` summed over slices of :data:`GRAM_ROWS` rows."""
+    product = np.zeros((values.shape[1], values.shape[1]))
+    for start in range(0, values.shape[0], GRAM_ROWS):
+        part = values[start:start + GRAM_ROWS]
+        product += part.T @ part
+    return product

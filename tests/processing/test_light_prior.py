@@ -101,7 +101,7 @@ def test_noise_free_estimate_is_exact_when_light_and_surfaces_are_in_the_model()
     statistics = accumulate_channel_statistics(ambient, frames, spec)
     estimate = estimate_ambient_prior(statistics, leds, camera, ridge=0.0)  # the exact Wiener limit
     # in the LEDs' units: the frames were normalised by one peak, ambient and LEDs alike
-    np.testing.assert_allclose(estimate.spectrum.values[:, 0], light, rtol=0, atol=1e-5 * light.max())
+    np.testing.assert_allclose(estimate.spectrum.values[:, 0], light, rtol=0, atol=1e-4 * light.max())  # H: condition ~1e8
     assert estimate.relative_residual < 1e-6
     # the LED span cannot do it
     led = estimate_ambient(statistics.led_statistics(), leds)
