@@ -36,14 +36,17 @@ The model (:class:`PriorModel`)
    ``λ ‖Σ^{-1/2} (φ_rest − φ_0 μ_rest)‖²`` with ``λ = κ σ² / s²`` (σ² the residual variance per sample,
    s the scale, both re-estimated a few times: empirical Bayes; κ > 1 discounts the blocks'
    correlated model error). The spectrum is constrained non-negative, ``B_e φ ≥ 0``.
-4. *Band.* The Gaussian posterior ``Cov φ = σ² (H + λ DᵀΣ⁻¹D)⁻¹``, mapped to the spectrum: pixel noise
-   and model error both enter through the residual σ², and directions the data leave open keep the
-   prior's spread.
+4. *Band.* The Gaussian posterior ``Cov φ = κσ² (H + λ DᵀΣ⁻¹D)⁻¹``, mapped to the spectrum. The
+   estimate is the posterior mode of a *tempered* likelihood — errors of variance κσ², one
+   effective sample per κ blocks, which is what λ = κσ²/s² says — and this is its covariance: pixel
+   noise and model error both enter through the residual σ², and directions the data leave open keep
+   the prior's spread (s²Σ). On the tuning split (κ = 100) the truth lay within 1σ at 77 % of the
+   wavelengths and within 2σ at 95 % (nominal 68 %, 95 %); with κ left out, at 11 % and 23 %.
 
 Model choice (:func:`choose_model`): both models predict the ambient image from the LED-only
 images, linearly; each is trained on all folds of blocks but one and predicts the pixels of the fold
-left out. ``auto`` uses the prior model only when its held-out error is below the LED model's by
-more than :data:`CHOICE_MARGIN` — no more model than the scene needs.
+left out. ``auto`` uses the prior model only when its held-out error (on the pixels as observed) is below the
+LED model's by more than :data:`CHOICE_MARGIN` — no more model than the scene needs.
 """
 
 from __future__ import annotations
@@ -337,7 +340,8 @@ class PriorModel:
             phi = _nonnegative(system, linear, prior.basis.values)
         rss = max(energy - 2 * linear @ phi + phi @ hessian @ phi, 0.0)
         sigma2 = rss / n
-        covariance = sigma2 * np.linalg.pinv(system)
+        # The tempered likelihood whose posterior mode this is: errors of variance κσ² (module notes, step 4).
+        covariance = self.kappa * sigma2 * np.linalg.pinv(system)
         return phi, covariance, weight, sigma2
 
     def prediction_error(self, phi: np.ndarray, moments: Moments) -> float:
@@ -458,7 +462,7 @@ class ModelChoice:
     model: ModelName
     """``"led"`` (eq. 4–6, the LEDs' span) or ``"prior"`` (the light prior)."""
     led_error: float
-    """Held-out RMS error of the LED model's prediction of the ambient image (noise share removed), relative to
+    """Held-out RMS error of the LED model's prediction of the ambient image (pixels as observed), relative to
     the image's RMS."""
     prior_error: float
     """The same for the prior model."""
@@ -517,13 +521,14 @@ def choose_model(statistics: ChannelStatistics, model: PriorModel, margin: float
     """``auto``: the prior model only where it predicts held-out pixels better than the LED model by ``margin``.
 
     Both models predict each fold of blocks' ambient pixels from its LED-only pixels, trained on the
-    other folds (:func:`held_out_errors`); the errors compared are the signal's (the noise share,
-    which no model can predict, removed). The LED model is the simpler (k weights, exact for any
+    other folds (:func:`held_out_errors`); the errors compared are those on the pixels as observed
+    (noise amplified by a model counts against it). On the tuning split they agreed with the better
+    spectrum in 89 % of the cases, the noise-corrected ones in 87 %. The LED model is the simpler (k weights, exact for any
     surface when the ambient is in the LEDs' span); it is kept unless the prior model's relative
     held-out RMS error is below ``(1 − margin)`` times its own.
     """
     errors = held_out_errors(statistics, model)
-    led_error, prior_error = errors.led, errors.prior
+    led_error, prior_error = errors.led_observed, errors.prior_observed
     if prior_error < (1.0 - margin) * led_error:
         model_name: ModelName = "prior"
         reason = (f"the light prior predicts held-out pixels better: relative error {prior_error:.4f} against "

@@ -148,7 +148,7 @@ def test_choice_keeps_the_leds_when_the_ambient_is_in_their_span():
     statistics = accumulate_channel_statistics(ambient, frames, spec)
     choice = choose_model(statistics, prior_model(statistics.channels, leds, camera))
     assert choice.model == "led", choice.reason
-    assert choice.led_error < 0.01 and choice.errors.led_observed <= choice.errors.prior_observed
+    assert choice.errors.led < 0.01 and choice.led_error <= choice.prior_error
 
 
 def test_choice_takes_the_prior_when_the_ambient_is_outside_the_span():
