@@ -11,6 +11,8 @@ Surfaces are *not* the reflectance basis's (Natural-100): Macbeth 24, Vrhel's 64
 - ``--split held_out``: the held-out lights (run once, after tuning); the prior is the shipped one
   (:func:`processing.light_library.prior_training_lights` + CIE daylight/blackbodies, no near copy of
   a held-out light).
+- ``--split family``: a stress test on tuning lights: for each family (LED, fluorescent, incandescent,
+  discharge) the prior learns without *any* light of that family (nor a near copy).
 
 Run: ``PYTHONPATH=$PWD /work/main/.venv/bin/python tests/processing/light_prior_study.py --split tuning``.
 The default estimate is :func:`acquisition.analysis.estimate_sequence` (what ``msflash estimate`` runs).
@@ -96,14 +98,21 @@ class Sample:
     default_rmse: float
 
 
+FAMILIES = ("led", "fluorescent", "incandescent", "discharge")
+
+
 def light_cases(split: str, per_fold: int, seed: int = 0) -> list[tuple[str, str, int]]:
-    """(label, type, fold) of the lights evaluated: a fixed sample of the split (fold by near-copy group)."""
-    lights = [light for light in library_lights() if light.split == split]
+    """(label, type, fold) of the lights evaluated: a fixed sample of the split (fold by near-copy group, or by
+    family for ``family``: tuning lights, fold = index in :data:`FAMILIES`)."""
+    lights = [light for light in library_lights() if light.split == ("held_out" if split == "held_out" else "tuning")]
     rng = np.random.default_rng(seed)
     chosen = []
-    folds = TUNING_FOLDS if split == "tuning" else 1
+    folds = {"tuning": TUNING_FOLDS, "family": len(FAMILIES)}.get(split, 1)
     for fold in range(folds):
-        members = [light for light in lights if folds == 1 or zlib.crc32(str(light.group).encode()) % folds == fold]
+        if split == "family":
+            members = [light for light in lights if light.light_type == FAMILIES[fold]]
+        else:
+            members = [light for light in lights if folds == 1 or zlib.crc32(str(light.group).encode()) % folds == fold]
         picks = rng.choice(len(members), size=min(per_fold, len(members)), replace=False)
         chosen += [(members[i].label, members[i].light_type, fold) for i in sorted(picks)]
     return chosen
@@ -136,13 +145,17 @@ def _configurations(n: int) -> list[tuple[str, str | None, str]]:
 
 def evaluate(samples: list[Sample], *, light_dims: int, reflectance_dims: int, ridge: float, kappa: float,
              split_span: bool = True, exclude_folds: bool = True, margin: float = CHOICE_MARGIN,
-             with_auto: bool = True) -> dict[str, np.ndarray]:
-    """Ratios (RMSE ÷ LED bound) of the prior model, the default estimate and auto, per sample."""
-    prior_ratio, default_ratio, auto_ratio, chose_prior = [], [], [], []
+             with_auto: bool = True, exclusions: dict[int, tuple[str, ...]] | None = None) -> dict[str, np.ndarray]:
+    """Ratios (RMSE ÷ LED bound) of the prior model, the default estimate and auto, per sample; the band's coverage.
+
+    ``exclude_folds``: the prior for a fold's samples learns without their lights (and near copies);
+    ``exclusions`` (fold → labels) replaces that list.
+    """
+    prior_ratio, default_ratio, auto_ratio, chose_prior, coverage = [], [], [], [], []
     grid = samples[0].led_spectra.grid
-    exclusions: dict[int, tuple[str, ...]] = {}
-    if exclude_folds:
-        for sample in samples:
+    if exclusions is None:
+        exclusions = {}
+        for sample in samples if exclude_folds else ():
             exclusions.setdefault(sample.fold, ())
             if sample.label not in exclusions[sample.fold]:
                 exclusions[sample.fold] += (sample.label,)
@@ -155,15 +168,21 @@ def evaluate(samples: list[Sample], *, light_dims: int, reflectance_dims: int, r
                                      learn_reflectance_basis(grid, reflectance_dims), ridge, kappa, split_span)
         model = models[key]
         estimate = model.estimate(sample.statistics)
-        prior_rmse = us.rmse(estimate.spectrum.values[:, 0], sample.truth)
+        spectrum = estimate.spectrum.values[:, 0]
+        prior_rmse = us.rmse(spectrum, sample.truth)
         prior_ratio.append(prior_rmse / sample.bound)
+        # Band coverage in the RMSE's frame: estimate max-normalised, truth least-squares scaled onto it.
+        peak = np.max(np.abs(spectrum))
+        truth = sample.truth * (sample.truth @ spectrum) / (sample.truth @ sample.truth)
+        z = np.abs(spectrum - truth) / np.maximum(estimate.spectrum_std, 1e-12 * peak)
+        coverage.append([np.mean(z <= 1), np.mean(z <= 2), np.median(estimate.spectrum_std) / peak])
         default_ratio.append(sample.default_rmse / sample.bound)
         if with_auto:
             choice = choose_model(sample.statistics, model, margin)
             chose_prior.append(choice.model == "prior")
             auto_ratio.append(prior_ratio[-1] if choice.model == "prior" else default_ratio[-1])
     return {"prior": np.array(prior_ratio), "default": np.array(default_ratio), "auto": np.array(auto_ratio),
-            "chose_prior": np.array(chose_prior)}
+            "chose_prior": np.array(chose_prior), "coverage": np.array(coverage)}
 
 
 def summary(name: str, ratios: np.ndarray) -> str:
@@ -176,7 +195,12 @@ def report(samples: list[Sample], results: dict[str, np.ndarray]) -> None:
         if results[name].size:
             print(summary(name, results[name]))
     if results["chose_prior"].size:
-        print(f"auto chose the prior in {results['chose_prior'].mean():.0%} of the cases")
+        chose = results["chose_prior"]
+        better = results["prior"] < results["default"]
+        print(f"auto chose the prior in {chose.mean():.0%} of the cases; its choice had the lower RMSE in "
+              f"{np.mean(chose == better):.0%}")
+    one, two, width = results["coverage"].mean(axis=0)
+    print(f"band: truth within 1σ at {one:.0%} and within 2σ at {two:.0%} of wavelengths; median 1σ {width:.3f} of the peak")
     for attribute, values in (("light_type", None), ("cfa", None), ("leds", None), ("camera", None)):
         groups = sorted({str(getattr(s, attribute)) for s in samples})
         for group in groups:
@@ -191,7 +215,8 @@ def report(samples: list[Sample], results: dict[str, np.ndarray]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--split", choices=("tuning", "held_out"), default="tuning")
+    parser.add_argument("--split", choices=("tuning", "held_out", "family"), default="tuning",
+                        help="family: tuning lights of one family, the prior learnt without any light of it")
     parser.add_argument("--per-fold", type=int, default=12, help="lights per fold (tuning) or in all (held_out)")
     parser.add_argument("--sweep", action="store_true", help="tuning: sweep dimensions and regularisation")
     args = parser.parse_args()
@@ -209,7 +234,12 @@ def main() -> None:
                         print(f"q={light_dims:2d} p={reflectance_dims:2d} ridge={ridge:g} kappa={kappa:g}: "
                               f"{summary('prior', ratios)}", flush=True)
         return
-    results = evaluate(samples, exclude_folds=args.split == "tuning", **defaults)
+    exclusions = None
+    if args.split == "family":
+        exclusions = {fold: tuple(light.label for light in library_lights()
+                                  if light.split == "tuning" and light.light_type == family)
+                      for fold, family in enumerate(FAMILIES)}
+    results = evaluate(samples, exclude_folds=args.split == "tuning", exclusions=exclusions, **defaults)
     report(samples, results)
 
 
