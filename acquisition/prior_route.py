@@ -16,6 +16,7 @@ from acquisition.analysis import (
     camera_responsivities_photons,
     led_spectra_photons,
     load_frame_stack,
+    spectrum_in_sequence_unit,
 )
 from acquisition.sequence_format import Sequence
 from processing.ambient import AmbientEstimate, estimate_ambient
@@ -65,3 +66,39 @@ def estimate_sequence_prior(sequence: Sequence, stack: FrameStack | None = None)
     model = prior_model(statistics.channels, leds, camera_responsivities_photons(sequence))
     return SequencePriorResult(model.estimate(statistics), estimate_ambient(statistics.led_statistics(), leds),
                                choose_model(statistics, model))
+
+
+def prior_payload(sequence: Sequence, result: SequencePriorResult) -> dict:
+    """The JSON fields for ``msflash estimate --model prior|auto``: the chosen model, why, and both spectra.
+
+    ``spectrum``/``spectrum_std`` are the chosen model's (sequence unit); ``model_choice`` holds the
+    held-out errors behind the choice; ``prior`` the light-prior estimate whichever model was chosen.
+    """
+    prior = result.prior
+    chosen = result.choice.model
+    std = prior.spectrum_std if chosen == "prior" else result.led.spectrum_std
+    spectrum = result.chosen_spectrum
+    errors = result.choice.errors
+    return {
+        "sequence": str(sequence.directory),
+        "wavelengths_nm": sequence.wavelengths_nm,
+        "spectral_unit": sequence.spectral_unit,
+        "model": chosen,
+        "spectrum": spectrum_in_sequence_unit(sequence, spectrum),
+        "spectrum_std": spectrum_in_sequence_unit(sequence, spectrum.replace(values=std[:, None])),
+        "model_choice": {
+            "model": chosen, "reason": result.choice.reason, "margin": result.choice.margin,
+            "held_out_relative_error": {"led": errors.led_observed, "prior": errors.prior_observed},
+            "held_out_relative_error_noise_removed": {"led": errors.led, "prior": errors.prior},
+        },
+        "prior": {
+            "spectrum": spectrum_in_sequence_unit(sequence, prior.spectrum),
+            "spectrum_std": spectrum_in_sequence_unit(sequence, prior.spectrum.replace(values=prior.spectrum_std[:, None])),
+            "coefficients": prior.coefficients, "prior_weight": prior.prior_weight,
+            "relative_residual": prior.relative_residual, "warnings": list(prior.warnings),
+        },
+        "led": {"spectrum": spectrum_in_sequence_unit(sequence, result.led.spectrum),
+                "ambient_weights": result.led.ambient_weights, "relative_residual": result.led.relative_residual,
+                "warnings": list(result.led.warnings)},
+        "n_samples": prior.n_samples,
+    }
