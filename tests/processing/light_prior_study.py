@@ -186,7 +186,8 @@ def evaluate(samples: list[Sample], *, light_dims: int, reflectance_dims: int, r
 
 
 def summary(name: str, ratios: np.ndarray) -> str:
-    return f"{name:8s} mean {ratios.mean():.3f}  median {np.median(ratios):.3f}  worst {ratios.max():.3f}"
+    return f"{name:8s} mean {ratios.mean():.3f}  median {np.median(ratios):.3f}  worst {ratios.max():.3f}  " \
+           f"above 1: {np.mean(ratios > 1):.0%}"
 
 
 def report(samples: list[Sample], results: dict[str, np.ndarray]) -> None:
