@@ -260,16 +260,25 @@ class PriorModel:
     """
 
     led_spectra: Spectra
+    """The k LED spectra at full drive, photons."""
     responsivities: Spectra
+    """The camera's R, G, B responsivities, photons, on the LEDs' grid."""
     channels: tuple[str, ...]
+    """The channel letter of each plane of the statistics (``R G B`` or a CFA's four)."""
     prior: LightPrior
+    """The light basis and its Gaussian prior."""
     reflectance: ReflectanceBasis
+    """The reflectance basis of the Wiener estimate."""
     ridge: float = RIDGE
+    """ρ, dimensionless (module notes, step 1)."""
     kappa: float = KAPPA
+    """κ, the prior strength and the likelihood's tempering (steps 3–4)."""
     split: bool = True
     """Whether the LED-span part of each basis light bypasses the reflectance estimate (module notes)."""
     predictors: np.ndarray = field(init=False, repr=False)
     """K_m, shape (q, C, C·k)."""
+    penalty: np.ndarray = field(init=False, repr=False)
+    """``DᵀΣ⁻¹D`` (q × q): the prior's quadratic form per unit λ."""
 
     def __post_init__(self) -> None:
         led = require_unit(self.led_spectra, "photons")
@@ -302,6 +311,10 @@ class PriorModel:
         predictors = direct + through_surface
         predictors.flags.writeable = False
         object.__setattr__(self, "predictors", predictors)
+        difference = np.hstack([-self.prior.mean[:, None], np.eye(self.prior.dims - 1)])  # D φ = φ_rest − φ_0 μ
+        penalty = difference.T @ np.linalg.pinv(self.prior.covariance) @ difference
+        penalty.flags.writeable = False
+        object.__setattr__(self, "penalty", penalty)
 
     def normal_equations(self, moments: Moments) -> tuple[np.ndarray, np.ndarray, float]:
         """``(H, g, Σ‖a‖²)`` of the data term for moments with one fold (module notes, step 3)."""
@@ -311,10 +324,7 @@ class PriorModel:
         """``(φ, posterior covariance of φ, λ, σ²)`` from one fold's (denoised) moments."""
         hessian, linear, energy = self.normal_equations(moments)
         q = hessian.shape[0]
-        prior = self.prior
-        difference = np.hstack([-prior.mean[:, None], np.eye(q - 1)])  # D φ = φ_rest − φ_0 μ
-        precision = np.linalg.pinv(prior.covariance)
-        penalty = difference.T @ precision @ difference
+        prior, penalty = self.prior, self.penalty
         n = max(n_samples, q + 1)
         # Start: the mean light alone (φ = s (1, μ)), its scale fitted — well determined.
         shape = np.concatenate([[1.0], prior.mean])

@@ -163,6 +163,16 @@ def test_choice_takes_the_prior_when_the_ambient_is_outside_the_span():
     assert choice.model == "prior" and choice.prior_error < 0.98 * choice.led_error, choice.reason
 
 
+def test_dark_ambient_gives_no_light_a_warning_and_the_led_model():
+    leds, camera = _leds(), _camera()
+    ambient, frames, spec = _scene(np.zeros(GRID.size), leds, camera, study_surfaces(GRID.wavelengths_nm), patch=12)
+    statistics = accumulate_channel_statistics(ambient, frames, spec)
+    model = prior_model(statistics.channels, leds, camera)
+    estimate = model.estimate(statistics)
+    assert np.all(estimate.spectrum.values == 0) and "no ambient light" in estimate.warnings[0]
+    assert choose_model(statistics, model).model == "led"
+
+
 def test_prior_never_learns_a_held_out_light_or_a_near_copy_of_one():
     held = lights_of("held_out")
     prior = learn_light_prior(GRID)
