@@ -85,6 +85,31 @@ def test_channel_statistics_sum_to_the_eq5_statistics_rgb_and_bayer():
         assert channel.n_folds == 5 and channel.counts.sum() == channel.n_blocks > 0
 
 
+def test_channel_statistics_unmix_any_levels_and_bin_any_size():
+    leds, camera = _leds((0, 2, 3, 6)), _camera()
+    light = datasets.illuminant("A", GRID).to_unit("photons").values[:, 0]
+    surfaces = datasets.macbeth().resample(WavelengthGrid(400, 700, 4)).resample(GRID).values
+    ambient, frames, one_hot = _scene(light, leds, camera, surfaces, patch=12)
+    only = [frame - ambient for frame in frames]
+    # six frames for four LEDs: pairs, then two at half drive, with their own exposures
+    levels = np.vstack([np.eye(4) + np.eye(4, k=1), 0.5 * np.eye(4)[:2]])
+    scales = (1.0, 0.5, 2.0, 1.0, 1.0, 0.25)
+    mixed = [(ambient + sum(level * image for level, image in zip(row, only))) / scale
+             for row, scale in zip(levels, scales)]
+    spec = FrameStackSpec(0.0, 10.0, 1.0, scales, levels)
+    reference = accumulate_channel_statistics(ambient, frames, one_hot)
+    unmixed = accumulate_channel_statistics(ambient, mixed, spec)
+    # the raw moments are mapped after summing: cancellation costs ~1e-8 of the small LED-only moments
+    np.testing.assert_allclose(unmixed.moments.ff, reference.moments.ff, rtol=1e-6, atol=1e-9 * reference.moments.ff.max())
+    np.testing.assert_allclose(unmixed.moments.fa, reference.moments.fa, rtol=1e-6, atol=1e-9 * reference.moments.fa.max())
+    for factor in (1, 3):  # no noise probe for odd blocks
+        channel = accumulate_channel_statistics(ambient, mixed, spec, bin_factor=factor)
+        direct = accumulate_statistics(ambient, mixed, spec, bin_factor=factor, workers=1)
+        assert channel.noise is None
+        np.testing.assert_allclose(channel.led_statistics().gram, direct.gram, rtol=1e-7)
+        np.testing.assert_allclose(channel.led_statistics().cross, direct.cross, rtol=1e-7)
+
+
 def test_noise_free_estimate_is_exact_when_light_and_surfaces_are_in_the_model():
     leds, camera = _leds((0, 1, 2, 3, 4, 5, 6)), _camera()
     prior = learn_light_prior(GRID)
