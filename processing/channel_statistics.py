@@ -1,0 +1,296 @@
+"""Channel-resolved block statistics of a flash sequence, for models that need more than eq. 5's sums.
+
+:mod:`processing.statistics` sums every product over the camera channels: eq. 5 predicts each
+channel of the ambient image by the *same* weighted sum of the LED-only images, so the channels
+need not be told apart. A model that reads a surface from its colour — a reflectance recovered
+from its k LED responses in C channels, then lit by a light outside the LEDs' span
+(:mod:`processing.light_prior`) — needs, per block ``b``, the vector of all its LED-only responses
+``f_b ∈ R^{C·k}`` (index ``c·k + i``: channel c, LED i) and its ambient response ``a_b ∈ R^C``, and
+their second moments
+
+    S_ff = Σ_b f_b f_bᵀ  (Ck × Ck),   S_fa = Σ_b f_b a_bᵀ  (Ck × C),   S_aa = Σ_b a_b a_bᵀ  (C × C)
+
+over the unsaturated blocks. They are kept per *fold* — contiguous bands of block rows — so that
+a model can be trained on all folds but one and judged on the pixels of the one left out
+(:func:`processing.light_prior.choose_model`); the totals are the sums over folds.
+
+Frames are linearised as :mod:`processing.statistics` does (``(value − black) / (exposure · gain)``,
+LED-only images unmixed by ``pinv(levels)``), binned in ``factor × factor`` blocks per CFA plane
+(C = 4 planes for a Bayer mosaic, two of them green), and blocks with any saturated member in any
+frame are dropped. With an even block size every block's half difference (even minus odd columns)
+measures the noise (errors in variables; see :mod:`processing.statistics`): its moments, mapped
+like the signal's, are :attr:`ChannelStatistics.noise` and :meth:`ChannelStatistics.denoised`
+subtracts them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from processing.errors import SpectralDataError
+from processing.statistics import (
+    FrameStackSpec,
+    NoiseMoments,
+    SequenceStatistics,
+    block_sums_and_differences,
+    cfa_planes,
+    saturated_blocks,
+)
+
+DEFAULT_FOLDS = 5
+"""Bands of block rows kept apart for held-out prediction (:func:`processing.light_prior.choose_model`)."""
+
+
+@dataclass(frozen=True)
+class Moments:
+    """Second moments of (f, a) over a set of blocks, per fold: arrays with a leading fold axis."""
+
+    ff: np.ndarray
+    """``Σ f fᵀ``, shape (n_folds, C·k, C·k)."""
+    fa: np.ndarray
+    """``Σ f aᵀ``, shape (n_folds, C·k, C)."""
+    aa: np.ndarray
+    """``Σ a aᵀ``, shape (n_folds, C, C)."""
+
+    def __sub__(self, other: Moments) -> Moments:
+        return Moments(self.ff - other.ff, self.fa - other.fa, self.aa - other.aa)
+
+    def total(self) -> Moments:
+        """The moments of all folds together (a leading axis of length 1)."""
+        return Moments(self.ff.sum(0, keepdims=True), self.fa.sum(0, keepdims=True), self.aa.sum(0, keepdims=True))
+
+    def without(self, fold: int) -> Moments:
+        """Every fold but ``fold``, summed (length-1 leading axis)."""
+        keep = [j for j in range(self.ff.shape[0]) if j != fold]
+        return Moments(self.ff[keep].sum(0, keepdims=True), self.fa[keep].sum(0, keepdims=True),
+                       self.aa[keep].sum(0, keepdims=True))
+
+    def fold(self, fold: int) -> Moments:
+        """One fold alone (length-1 leading axis)."""
+        return Moments(self.ff[fold:fold + 1], self.fa[fold:fold + 1], self.aa[fold:fold + 1])
+
+
+@dataclass(frozen=True)
+class ChannelStatistics:
+    """Channel-resolved second moments of a sequence's LED-only and ambient block images (module notes)."""
+
+    moments: Moments
+    """Moments as observed, per fold."""
+    noise: Moments | None
+    """The noise's share of :attr:`moments` (half-difference probe), or None when not measured."""
+    counts: np.ndarray
+    """Valid blocks per fold, shape (n_folds,)."""
+    led_sums: np.ndarray
+    """``Σ f`` per fold, shape (n_folds, C·k)."""
+    ambient_sums: np.ndarray
+    """``Σ a`` per fold, shape (n_folds, C)."""
+    n_blocks_total: int
+    """Blocks in a frame, valid or not."""
+    n_leds: int
+    """k."""
+    channels: tuple[str, ...]
+    """What each of the C channels is: ``"R"``, ``"G"``, ``"B"`` (a Bayer mosaic's planes in CFA order)."""
+
+    @property
+    def n_channels(self) -> int:
+        """C."""
+        return len(self.channels)
+
+    @property
+    def n_folds(self) -> int:
+        """Number of folds."""
+        return int(self.counts.size)
+
+    @property
+    def n_blocks(self) -> int:
+        """Valid blocks in all folds."""
+        return int(self.counts.sum())
+
+    def denoised(self, moments: Moments | None = None) -> Moments:
+        """``moments`` (default: the observed ones) less the noise's share, fold by fold (unchanged without a probe)."""
+        moments = self.moments if moments is None else moments
+        return moments if self.noise is None else moments - self.noise
+
+    def led_statistics(self, folds: Sequence[int] | None = None) -> SequenceStatistics:
+        """The channel-summed statistics of eq. 4–6 (:class:`~processing.statistics.SequenceStatistics`) of some folds.
+
+        ``gram[i, j] = Σ_c S_ff[(c,i),(c,j)]``, ``cross[i] = Σ_c S_fa[(c,i), c]``, ``ambient_energy = tr S_aa``:
+        what the LED-span estimator sees, with the noise moments mapped the same way.
+        """
+        chosen = list(range(self.n_folds)) if folds is None else list(folds)
+        k, channels = self.n_leds, self.n_channels
+
+        def summed(moments: Moments) -> tuple[np.ndarray, np.ndarray, float]:
+            ff = moments.ff[chosen].sum(0).reshape(channels, k, channels, k)
+            fa = moments.fa[chosen].sum(0).reshape(channels, k, channels)
+            gram = np.einsum("cicj->ij", ff)
+            cross = np.einsum("cic->i", fa)
+            return gram, cross, float(np.trace(moments.aa[chosen].sum(0)))
+
+        gram, cross, energy = summed(self.moments)
+        noise = None
+        if self.noise is not None:
+            noise = NoiseMoments(*summed(self.noise))
+        n = int(self.counts[chosen].sum())
+        return SequenceStatistics(
+            gram=gram, cross=cross, ambient_energy=energy, n_samples=n * channels,
+            n_total=self.n_blocks_total * channels, ambient_sum=float(self.ambient_sums[chosen].sum()),
+            led_sums=self.led_sums[chosen].sum(0).reshape(channels, k).sum(0), noise=noise,
+        )
+
+
+def plane_channels(cfa: str | None, n_channels: int = 3) -> tuple[str, ...]:
+    """The channel of each plane: ``("R", "G", "B")`` for RGB frames, the CFA letters (e.g. ``RGGB``) for a mosaic.
+
+    Examples
+    --------
+    >>> plane_channels("BGGR"), plane_channels(None)
+    (('B', 'G', 'G', 'R'), ('R', 'G', 'B'))
+    """
+    if cfa is None:
+        if n_channels != 3:
+            raise SpectralDataError(f"channel statistics: {n_channels} channels without a CFA; expected RGB frames")
+        return ("R", "G", "B")
+    letters = tuple(cfa.upper())
+    if len(letters) != 4 or any(letter not in "RGB" for letter in letters):
+        raise SpectralDataError(f"channel statistics: CFA '{cfa}'; expected four letters of R, G, B such as RGGB")
+    return letters
+
+
+def accumulate_channel_statistics(ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec, *,
+                                  cfa: str | None = None, bin_factor: int = 4,
+                                  n_folds: int = DEFAULT_FOLDS) -> ChannelStatistics:
+    """Channel-resolved block moments of a raw frame stack (module notes).
+
+    Parameters
+    ----------
+    ambient
+        Raw ambient frame, (H, W, 3) RGB or (H, W) Bayer mosaic (``cfa`` set).
+    led_frames
+        Raw frames ambient + LEDs, each like ``ambient``; frame j lights the LEDs at ``spec.led_levels[j]``.
+    spec
+        Black/white levels, exposure·gain scales, LED levels (as for :mod:`processing.statistics`).
+    cfa
+        The mosaic's 2×2 pattern (``"RGGB"``…), or None for RGB frames.
+    bin_factor
+        Block size per plane (4, like ``msflash estimate``); even sizes measure the noise too.
+    n_folds
+        Bands of block rows kept apart (at least 2).
+
+    Returns
+    -------
+    ChannelStatistics
+        With f laid out ``c·k + i`` and the LEDs at full drive: ``f = pinv(L) · (s_j (F_j − b) − s_a (A − b))``.
+
+    Raises
+    ------
+    SpectralDataError
+        Frames of different shapes, the wrong number of LED frames, non-finite values, too few blocks.
+    """
+    frames = [np.asarray(ambient), *[np.asarray(f) for f in led_frames]]
+    if len(led_frames) != spec.led_levels.shape[0]:
+        raise SpectralDataError(f"channel statistics: {len(led_frames)} LED frames but levels for "
+                                f"{spec.led_levels.shape[0]}; expected one row of levels per LED frame")
+    if bin_factor < 1 or n_folds < 2:
+        raise SpectralDataError(f"channel statistics: bin_factor {bin_factor}, n_folds {n_folds}; expected ≥ 1 and ≥ 2")
+    for index, frame in enumerate(frames):
+        if frame.shape != frames[0].shape:
+            raise SpectralDataError(f"channel statistics: frame {index} has shape {frame.shape} but the ambient frame "
+                                    f"{frames[0].shape}; expected frames of one size")
+        if np.issubdtype(frame.dtype, np.floating) and not np.isfinite(frame.sum()):
+            raise SpectralDataError(f"channel statistics: frame {index} holds non-finite values; expected finite pixels")
+    period = 2 if cfa is not None else 1
+    if cfa is not None and frames[0].ndim != 2:
+        raise SpectralDataError(f"channel statistics: CFA '{cfa}' but frames of shape {frames[0].shape}; expected (H, W)")
+    planes = [cfa_planes(frame, period) for frame in frames]
+    channels = plane_channels(cfa, planes[0].shape[2])
+    height, width = planes[0].shape[0] // bin_factor, planes[0].shape[1] // bin_factor
+    if height < n_folds or width < 1:
+        raise SpectralDataError(f"channel statistics: {height}×{width} blocks of {bin_factor}×{bin_factor}; expected at "
+                                f"least {n_folds} rows of blocks (a larger frame or smaller blocks)")
+    probe = bin_factor % 2 == 0
+    n_frames, n_channels = len(frames), planes[0].shape[2]
+    n_blocks = height * width
+    # Raw block sums of every frame side by side, [F_1 … F_n, A] × channels, then a ones column: every
+    # moment of the linearised, differenced and unmixed responses is a linear map of these rows' moments
+    # (as in processing.statistics), so the pixels see no arithmetic beyond the block sums.
+    # Column-major: each frame's block sums are written into contiguous columns (row-major writes of
+    # C values per row cost 10× more).
+    raw = np.empty((n_blocks, n_frames * n_channels + 1), order="F")
+    raw[:, -1] = 1.0
+    probes = np.empty((n_blocks, n_frames * n_channels + 1), order="F") if probe else None
+    if probes is not None:
+        probes[:, -1] = 0.0
+    invalid = np.zeros((height, width), dtype=bool)
+    order = [*range(1, n_frames), 0]  # LED frames first, the ambient frame last
+    for column, index in enumerate(order):
+        plane = planes[index]
+        where = slice(column * n_channels, (column + 1) * n_channels)
+        if probes is not None:
+            block, half = block_sums_and_differences(plane, bin_factor)
+            probes[:, where] = half.reshape(n_blocks, n_channels)
+        else:
+            block = plane[:height * bin_factor, :width * bin_factor].astype(float).reshape(
+                height, bin_factor, width, bin_factor, n_channels).sum(axis=(1, 3))
+        raw[:, where] = block.reshape(n_blocks, n_channels)
+        if np.issubdtype(plane.dtype, np.floating) or np.iinfo(plane.dtype).max >= spec.white_level:
+            if plane.max() >= spec.white_level:
+                invalid |= saturated_blocks(plane, bin_factor, spec.white_level)
+    if invalid.any():
+        raw[invalid.reshape(-1)] = 0.0  # out of every moment, the count included
+        if probes is not None:
+            probes[invalid.reshape(-1)] = 0.0
+    transform = _response_transform(spec, n_channels, spec.black_level * bin_factor * bin_factor)
+    width_f = spec.n_leds * n_channels
+    # Folds are bands of block rows: contiguous slices of the row-major blocks.
+    bounds = ((np.arange(n_folds + 1) * height + n_folds - 1) // n_folds) * width
+
+    def moments_of(rows: np.ndarray) -> tuple[Moments, np.ndarray]:
+        products = np.stack([_gram(rows[bounds[j]:bounds[j + 1]]) for j in range(n_folds)])
+        mapped = transform @ products @ transform.T
+        return Moments(mapped[:, :width_f, :width_f], mapped[:, :width_f, width_f:], mapped[:, width_f:, width_f:]), \
+            products
+
+    moments, products = moments_of(raw)
+    sums = products[:, :, -1] @ transform.T  # (folds, Ck + C): Σ f, Σ a
+    return ChannelStatistics(
+        moments=moments, noise=None if probes is None else moments_of(probes)[0],
+        counts=np.rint(products[:, -1, -1]).astype(int),
+        led_sums=sums[:, :width_f], ambient_sums=sums[:, width_f:],
+        n_blocks_total=height * width, n_leds=spec.n_leds, channels=channels,
+    )
+
+
+def _response_transform(spec: FrameStackSpec, channels: int, black: float) -> np.ndarray:
+    """(C·k + C, n·C + C + 1) map from raw block sums ``[F_1 … F_n, A] × C, 1`` to ``[f (c·k + i), a (c)]``.
+
+    ``d_j = s_j (F_j − b) − s_a (A − b)``, ``f_i = Σ_j U_ij d_j`` (U = pinv(levels)), ``a = s_a (A − b)``.
+    """
+    unmixing, scales = spec.unmixing, np.asarray(spec.led_scales, dtype=float)
+    k, n = unmixing.shape
+    transform = np.zeros((channels * k + channels, n * channels + channels + 1))
+    for c in range(channels):
+        rows = slice(c * k, (c + 1) * k)
+        transform[rows, [j * channels + c for j in range(n)]] = unmixing * scales
+        transform[rows, n * channels + c] = -spec.ambient_scale * unmixing.sum(axis=1)
+        transform[rows, -1] = unmixing @ ((spec.ambient_scale - scales) * black)
+        transform[channels * k + c, n * channels + c] = spec.ambient_scale
+        transform[channels * k + c, -1] = -spec.ambient_scale * black
+    return transform
+
+
+GRAM_ROWS = 256
+"""Rows per product in :func:`_gram`: below OpenBLAS's threading threshold (its threads' wake-up on a busy
+2-core machine cost far more than these thin products; see :mod:`processing.statistics`)."""
+
+
+def _gram(values: np.ndarray) -> np.ndarray:
+    """``valuesᵀ values`` summed over slices of :data:`GRAM_ROWS` rows."""
+    product = np.zeros((values.shape[1], values.shape[1]))
+    for start in range(0, values.shape[0], GRAM_ROWS):
+        part = values[start:start + GRAM_ROWS]
+        product += part.T @ part
+    return product
