@@ -96,10 +96,27 @@ def _refuse_dark_ambient(sequence, estimate, what: str) -> None:  # type: ignore
     )
 
 
+AMBIENT_MODELS = ("led", "prior", "auto")
+DEFAULT_AMBIENT_MODEL = "led"
+"""Default of ``--model``: the LED-span estimate (eq. 4–6), the one ``run`` and ``flash`` solve their flash from.
+``auto`` beats it on the harness's mean (docs/ambient-harness.md) but not yet on the worst scenes, and ``run``
+and ``flash`` do not use it yet."""
+
+
+def add_model_option(parser: argparse.ArgumentParser) -> None:
+    """``--model led|prior|auto`` (docs/light-prior.md)."""
+    parser.add_argument("--model", default=DEFAULT_AMBIENT_MODEL, choices=AMBIENT_MODELS,
+                        help="ambient model: led (a mix of the LED spectra, eq. 4-6; default), prior (a basis learnt "
+                             "from measured lights, read through the surfaces' colours; needs the camera's "
+                             "responsivities), auto (prior only where it predicts held-out pixels better)")
+
+
 def _estimate(args: argparse.Namespace) -> int:
     sequence = _read_calibrated(args)
     if sequence.partial:
         progress(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
+    if args.model != "led":
+        return _estimate_with_prior(args, sequence)
     if args.method != "global":
         return _estimate_local(args, sequence)
     estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
@@ -115,6 +132,56 @@ def _estimate(args: argparse.Namespace) -> int:
         print("ambient weights: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, estimate.ambient_weights)))
         print(f"relative residual {estimate.relative_residual:.4f}, condition {estimate.condition_number:.3g}, "
               f"{estimate.n_samples} samples, {estimate.saturated_fraction:.1%} saturated")
+        peak = float(np.max(payload["spectrum"])) or 1.0
+        for wavelength, value in zip(sequence.wavelengths_nm, payload["spectrum"]):
+            print(f"  {wavelength:6.1f} nm  {value / peak:7.4f}  {'#' * int(round(max(value, 0) / peak * 40))}")
+    return 0
+
+
+def _estimate_with_prior(args: argparse.Namespace, sequence: Sequence) -> int:
+    """``estimate --model prior|auto``: the light-prior estimate, or ``auto``'s choice between it and eq. 4–6.
+
+    The LED side is what ``--model led`` gives (global, or local when ``--method`` finds the illuminant
+    varying across the scene: the light prior is one global spectrum, so a local estimate stays).
+    """
+    from acquisition.prior_route import estimate_sequence_prior, prior_payload
+
+    stack = analysis.load_frame_stack(sequence)
+    if args.method != "global":
+        local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,
+                                                 stack=stack, bin_factor=args.bin)
+        led, payload = local.global_estimate, analysis.local_estimate_payload(sequence, local)
+        varies = local.model == "local"
+    else:
+        led = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
+        payload, varies = analysis.estimate_payload(sequence, led), False
+    _refuse_dark_ambient(sequence, led, "estimate")
+    result = estimate_sequence_prior(sequence, stack)
+    prior = prior_payload(sequence, result)
+    choice = prior["model_choice"]
+    if args.model == "prior":
+        chosen, reason = "prior", "asked for the light prior (--model prior)"
+    elif varies:
+        chosen, reason = "led", ("the illuminant varies across the scene (the local LED model was chosen); "
+                                 "the light prior is one global spectrum")
+    else:
+        chosen, reason = choice["model"], choice["reason"]
+    payload["model"] = chosen
+    payload["model_choice"] = {**choice, "model": chosen, "reason": reason, "requested": args.model}
+    payload["prior"] = prior["prior"]
+    if chosen == "prior":
+        payload["led"] = {key: payload[key] for key in ("spectrum", "spectrum_std", "ambient_weights", "warnings")}
+        payload["spectrum"] = prior["prior"]["spectrum"]
+        payload["spectrum_std"] = payload["spectrum_std_noise"] = prior["prior"]["spectrum_std"]
+        payload["band"] = "±1σ posterior of the light prior (pixel noise and the model's misfit)"
+        payload["miss_risk"] = payload["expected_ratio_to_led_bound"] = None
+        payload["warnings"] = list(result.prior.warnings)
+    for warning in payload["warnings"]:
+        progress(f"warning: {warning}")
+    if args.json:
+        print_json(payload)
+    else:
+        print(f"ambient estimate of {sequence.directory} ({chosen} model; asked {args.model}): {reason}")
         peak = float(np.max(payload["spectrum"])) or 1.0
         for wavelength, value in zip(sequence.wavelengths_nm, payload["spectrum"]):
             print(f"  {wavelength:6.1f} nm  {value / peak:7.4f}  {'#' * int(round(max(value, 0) / peak * 40))}")
@@ -304,6 +371,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_estimation_options(estimate)
     _add_calibration_option(estimate)
     add_local_options(estimate)
+    add_model_option(estimate)
     estimate.add_argument("--json", action="store_true", help="print one JSON object")
     estimate.set_defaults(handler=_estimate)
 

@@ -371,10 +371,11 @@ class PriorModel:
         energy = float(np.trace(observed.aa[0]))
         relative = math.sqrt(self.prediction_error(phi, observed) / energy) if energy > 0 else 0.0
         warnings = []
+        # The posterior band says how far the spectrum may be off at each wavelength (docs/light-prior.md);
+        # a band wider than half the peak somewhere flagged 83 % of good estimates on the harness's tuning
+        # scenes, so it is shown, not warned about.
         if not np.max(spectrum) > 0:
             warnings.append("the estimated spectrum is zero: no ambient light was found")
-        elif np.any(std > 0.5 * np.max(spectrum)):
-            warnings.append("the uncertainty band is wider than half the spectrum's peak")
         return PriorEstimate(
             spectrum=self.led_spectra.replace(values=spectrum[:, None], names=("ambient",),
                                               source="ambient estimate (light prior)", metadata={}),

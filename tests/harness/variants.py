@@ -81,7 +81,10 @@ def python(function: Callable[[Path], np.ndarray]) -> Callable[[str], Variant]:
 
 _REGISTRY: Mapping[str, Callable[[str], Variant]] = {
     "default": msflash(),
+    "led": msflash("--model", "led"),
     "msflash-lstsq": msflash("--solver", "lstsq"),
+    "prior": msflash("--model", "prior"),
+    "auto": msflash("--model", "auto"),
     "authors": python(baselines.authors_estimate),
     "authors-alpha-scaled": python(baselines.authors_estimate_scaled),
     "lstsq-pixels": python(baselines.lstsq_estimate),
