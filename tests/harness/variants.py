@@ -81,7 +81,6 @@ def python(function: Callable[[Path], np.ndarray]) -> Callable[[str], Variant]:
 
 _REGISTRY: Mapping[str, Callable[[str], Variant]] = {
     "default": msflash(),
-    "led": msflash("--model", "led"),
     "msflash-lstsq": msflash("--solver", "lstsq"),
     "prior": msflash("--model", "prior"),
     "auto": msflash("--model", "auto"),
