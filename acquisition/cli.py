@@ -19,7 +19,6 @@ import logging
 import os
 import sys
 from collections.abc import Sequence
-from importlib.metadata import PackageNotFoundError, version
 from types import ModuleType
 
 from acquisition.cli_common import UsageError
@@ -84,10 +83,21 @@ def _loaded(module_name: str, class_name: str) -> tuple[type[BaseException], ...
 
 def msflash_version() -> str:
     """The installed msflash version."""
+    from importlib.metadata import PackageNotFoundError, version
+
     try:
         return version("msflash")
     except PackageNotFoundError:
         return "0+unknown"
+
+
+class _VersionAction(argparse._VersionAction):
+    """``--version``: the installed version, looked up only when asked (importlib.metadata takes a while to import)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        self.version = f"msflash {msflash_version()}"
+        super().__call__(parser, namespace, values, option_string)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -139,7 +149,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
         A parser whose subcommands set ``handler``.
     """
     parser = _Parser(prog="msflash", description="Computational multispectral flash: capture, estimate, flash, synthesise.")
-    parser.add_argument("--version", action="version", version=f"msflash {msflash_version()}")
+    parser.add_argument("--version", action=_VersionAction)
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more diagnostics on stderr (-vv: serial byte trace)")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     wanted = None if argv is None else _command_module(argv)
