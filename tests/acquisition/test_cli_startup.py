@@ -51,6 +51,14 @@ def test_a_commands_help_imports_only_its_own_module() -> None:
     assert heavy_among(modules) == []
 
 
+@pytest.mark.parametrize("name", list(cli.COMMANDS))
+def test_no_commands_help_imports_plotting_colour_statistics_or_dask(name: str) -> None:
+    """A command's handler imports what it needs when it runs; its options are known without."""
+    modules = imported_after([name, "--help"])
+    assert cli.COMMANDS[name][0] in modules
+    assert sorted(m for m in modules if m.split(".")[0] in ("matplotlib", "colour", "dask") or m.startswith("scipy.stats")) == []
+
+
 def test_estimate_imports_no_plotting_colour_or_scipy_package(tmp_path) -> None:
     """``estimate`` reads frames (OpenImageIO) and calls scipy's LAPACK and NNLS cores only (processing.scipy_cores)."""
     modules = imported_after(["estimate", str(tmp_path / "absent"), "--json"])
