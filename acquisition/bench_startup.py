@@ -18,6 +18,7 @@ by about one.
 
 from __future__ import annotations
 
+import importlib.util
 import statistics
 import subprocess
 import sys
@@ -49,32 +50,30 @@ def msflash_command(arguments: Sequence[str]) -> list[str]:
     return [sys.executable, "-c", _MSFLASH, *arguments]
 
 
-def _run(command: Sequence[str]) -> float:
-    """Wall time of one run of ``command``; raises :class:`StartupBenchError` when it fails."""
+def _run(command: Sequence[str], name: str) -> float:
+    """Wall time of one run of ``command`` (called ``name`` in errors); raises :class:`StartupBenchError` when it fails."""
     start = time.perf_counter()
     result = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, check=False)
     elapsed = time.perf_counter() - start
     if result.returncode != 0:
         last = (result.stderr.strip().splitlines() or ["(no output)"])[-1]
-        raise StartupBenchError(f"{' '.join(command[3:]) or command[-1]}: exit {result.returncode}: {last}")
+        raise StartupBenchError(f"{name}: exit {result.returncode}: {last}")
     return elapsed
 
 
 def bytecode_cached() -> bool:
     """Whether the bytecode of msflash's command line and estimator is cached (else each run compiles them)."""
-    import importlib.util
-
     sources = [importlib.util.find_spec(name) for name in ("acquisition.cli", "acquisition.analysis", "processing.ambient")]
     return all(spec is not None and spec.cached is not None and Path(spec.cached).exists() for spec in sources)
 
 
 def capture_demo_sequence(out: Path) -> Path:
     """Record the demo's sequence (``msflash capture --rig sim``, defaults) under ``out``; returns its folder."""
-    _run(msflash_command(["capture", "--rig", "sim", "--out", str(out)]))
+    _run(msflash_command(["capture", "--rig", "sim", "--out", str(out)]), "msflash capture --rig sim")
     return out / "sequence"
 
 
-def interleaved_medians(commands: dict[str, list[str]], rounds: int) -> dict[str, list[float]]:
+def interleaved_times(commands: dict[str, list[str]], rounds: int) -> dict[str, list[float]]:
     """Wall times of each command over ``rounds`` rounds, one run of each per round in the given order.
 
     One untimed run of each comes first (files into the page cache, bytecode written if allowed).
@@ -91,12 +90,12 @@ def interleaved_medians(commands: dict[str, list[str]], rounds: int) -> dict[str
     dict
         Name → the times in seconds, in run order.
     """
-    for command in commands.values():
-        _run(command)
+    for name, command in commands.items():
+        _run(command, name)
     times: dict[str, list[float]] = {name: [] for name in commands}
     for _ in range(rounds):
         for name, command in commands.items():
-            times[name].append(_run(command))
+            times[name].append(_run(command, name))
     return times
 
 
@@ -120,11 +119,11 @@ def startup_bench(rounds: int = 9, sequence: str | Path | None = None) -> dict[s
         try:
             seq = Path(sequence) if sequence is not None else capture_demo_sequence(Path(scratch))
             commands = {
-                "numpy": [sys.executable, "-c", "import numpy"],
-                "help": msflash_command(["--help"]),
-                "estimate": msflash_command(["estimate", str(seq), "--json"]),
+                'python -c "import numpy"': [sys.executable, "-c", "import numpy"],
+                "msflash --help": msflash_command(["--help"]),
+                "msflash estimate SEQ --json": msflash_command(["estimate", str(seq), "--json"]),
             }
-            times = interleaved_medians(commands, rounds)
+            times = dict(zip(("numpy", "help", "estimate"), interleaved_times(commands, rounds).values()))
         except StartupBenchError as err:
             return {"failed": str(err)}
     medians = {name: statistics.median(values) for name, values in times.items()}

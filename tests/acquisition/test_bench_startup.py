@@ -22,4 +22,4 @@ def test_startup_bench_reports_both_ratios_from_interleaved_runs() -> None:
 def test_a_failing_command_is_named_with_its_exit_status(tmp_path: Path) -> None:
     report = startup_bench(rounds=1, sequence=tmp_path / "absent")
     assert set(report) == {"failed"}
-    assert report["failed"].startswith("estimate ") and "exit 2: msflash: error:" in report["failed"]
+    assert report["failed"].startswith("msflash estimate SEQ --json: exit 2: msflash: error:")
