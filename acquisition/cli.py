@@ -4,34 +4,50 @@ Subcommands live in small modules that each expose ``register(subparsers)``; thi
 the parser, dispatches, and turns errors into exit statuses: bad input → 2 with one line
 ``msflash: error: …``; a device or runtime failure → 1; Ctrl-C → 130 (LEDs are switched off by
 the code that switched them on, in ``finally``). Anything else is a bug and keeps its traceback.
+
+Start-up is kept short: only the module of the command being run is imported (it imports its
+numerical and hardware libraries); the others are listed by name and one-line help from
+:data:`COMMANDS`, so ``msflash --help`` and ``--version`` import none of them.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
 import logging
 import os
 import sys
 from collections.abc import Sequence
-from importlib.metadata import PackageNotFoundError, version
+from types import ModuleType
 
 from acquisition.cli_common import UsageError
 from acquisition.errors import CameraError, CaptureError, RecordingError
 from processing.errors import SolverError, SpectralDataError
-from led_controller.booth import Terminated
 
-COMMAND_MODULES = (
-    "acquisition.cli_process",
-    "acquisition.cli_run",
-    "acquisition.cli_bench",
-    "acquisition.cli_devices",
-    "acquisition.cli_booth",
-    "acquisition.cli_study",
-    "acquisition.cli_evaluate",
-    "acquisition.cli_calibrate",
-    "acquisition.cli_local",
-)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "estimate": ("acquisition.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
+    "flash": ("acquisition.cli_process", "solve the matching or complementary flash for a sequence"),
+    "synthesize": ("acquisition.cli_process", "synthesise the computational flash image from a sequence"),
+    "run": ("acquisition.cli_run", "the main job: capture, estimate, flash, re-capture, synthesise, report"),
+    "capture": ("acquisition.cli_run", "capture an ambient + each-LED sequence on a rig"),
+    "bench": ("acquisition.cli_bench", "measure speed as ratios in one run (processing, camera, booth)"),
+    "devices": ("acquisition.cli_devices", "list cameras (Aravis) on the given interfaces, and booths among the serial ports"),
+    "booth-emulator": ("acquisition.cli_booth", "serve the booth firmware emulator on a pseudo-terminal"),
+    "doctor": ("acquisition.cli_booth", "check USB3 Vision, GigE and serial setup"),
+    "study": ("acquisition.cli_study", "simulation studies (table1: Table 1; surfaces: Fig. 5; cameras: Fig. 6; xy: Fig. 7; "
+                                       "failure: where estimates fail and whether they warn; pareto: accuracy vs time)"),
+    "evaluate": ("acquisition.cli_evaluate", "ΔE00 against the chart under D65 and noise, for a chart sequence"),
+    "colour-study": ("acquisition.cli_evaluate", "simulated Fig. 9 (ΔE per ambient) and Fig. 3 (noise) study"),
+    "calibrate": ("acquisition.cli_calibrate", "measure LED spectra, camera responsivities, dark and linearity"),
+    "local-study": ("acquisition.cli_local", "study local vs global ambient estimation on simulated scenes"),
+}
+"""Subcommands in help order: name → (module whose ``register`` adds it, the help line it gives it).
+
+The help line is what ``msflash --help`` lists without importing the module; a test checks it
+against the module's own registration."""
+
+COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in COMMANDS.values()))
 """Modules contributing subcommands, in help order."""
 
 _BAD_INPUT = (UsageError, RecordingError, SpectralDataError, FileNotFoundError)
@@ -49,22 +65,39 @@ def _bad_input_errors() -> tuple[type[BaseException], ...]:
 
 
 def _runtime_errors() -> tuple[type[BaseException], ...]:
-    errors: list[type[BaseException]] = [CameraError, CaptureError, SolverError]
-    try:
-        from led_controller.errors import BoothError
-    except ImportError:  # the booth package is optional for processing-only use
-        pass
-    else:
-        errors.append(BoothError)
-    return tuple(errors)
+    return (CameraError, CaptureError, SolverError, *_loaded("led_controller.errors", "BoothError"))
+
+
+def _terminated() -> tuple[type[BaseException], ...]:
+    return _loaded("led_controller.booth", "Terminated")
+
+
+def _loaded(module_name: str, class_name: str) -> tuple[type[BaseException], ...]:
+    """``(class,)`` when its module is imported, else ``()``: an exception of a module never imported cannot be raised.
+
+    The booth package is not imported for this (the commands that talk to a booth import it).
+    """
+    module = sys.modules.get(module_name)
+    return (getattr(module, class_name),) if module is not None else ()
 
 
 def msflash_version() -> str:
     """The installed msflash version."""
+    from importlib.metadata import PackageNotFoundError, version
+
     try:
         return version("msflash")
     except PackageNotFoundError:
         return "0+unknown"
+
+
+class _VersionAction(argparse._VersionAction):
+    """``--version``: the installed version, looked up only when asked (importlib.metadata takes a while to import)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        self.version = f"msflash {msflash_version()}"
+        super().__call__(parser, namespace, values, option_string)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -74,27 +107,70 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full parser with every available subcommand."""
+def _command_module(argv: Sequence[str]) -> str | None:
+    """The module of the command named in ``argv`` (its first word not starting with ``-``), if it is one.
+
+    >>> _command_module(["-v", "estimate", "SEQ", "--json"])
+    'acquisition.cli_process'
+    >>> _command_module(["--help"]) is None
+    True
+    """
+    word = next((item for item in argv if not item.startswith("-")), None)
+    return COMMANDS[word][0] if word in COMMANDS else None
+
+
+def _present(module_name: str) -> bool:
+    """Whether a command module is part of this build (found without importing it)."""
+    return importlib.util.find_spec(module_name) is not None
+
+
+def _command_module_or_none(name: str) -> ModuleType | None:
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as err:
+        if err.name == name:
+            return None  # a command module not present in this build
+        raise
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The parser; with ``argv``, only the module of the command named there is imported.
+
+    Parameters
+    ----------
+    argv
+        The arguments to be parsed. The module owning their command registers its subcommands
+        (all their options); every other command is listed by name and help line only. None (or
+        no command in ``argv``): without it, every module registers its subcommands.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        A parser whose subcommands set ``handler``.
+    """
     parser = _Parser(prog="msflash", description="Computational multispectral flash: capture, estimate, flash, synthesise.")
-    parser.add_argument("--version", action="version", version=f"msflash {msflash_version()}")
+    parser.add_argument("--version", action=_VersionAction)
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more diagnostics on stderr (-vv: serial byte trace)")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as err:
-            if err.name == name:
-                continue  # a command module not present in this build
-            raise
-        module.register(subparsers)
+    wanted = None if argv is None else _command_module(argv)
+    registered: set[str] = set()
+    for command, (module_name, summary) in COMMANDS.items():
+        if module_name in registered:
+            continue
+        if argv is None or module_name == wanted:
+            registered.add(module_name)
+            module = _command_module_or_none(module_name)
+            if module is not None:
+                module.register(subparsers)
+        elif _present(module_name):
+            subparsers.add_parser(command, help=summary)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``msflash``; returns the exit status (tests call this directly)."""
     try:
-        parser = build_parser()
+        parser = build_parser(argv if argv is not None else sys.argv[1:])
         args = parser.parse_args(argv)
         logging.basicConfig(
             level=logging.WARNING - 10 * min(args.verbose, 2), format="msflash: %(name)s: %(message)s",
@@ -107,7 +183,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         sys.stderr.write("msflash: interrupted; LEDs off; frames captured so far are kept (marked incomplete)\n")
         return 130
-    except Terminated as stop:
+    except _terminated() as stop:
         sys.stderr.write("msflash: terminated (SIGTERM); LEDs off; frames captured so far are kept (marked "
                          "incomplete)\n")
         return int(stop.code) if isinstance(stop.code, int) else 143

@@ -6,7 +6,7 @@ import argparse
 import importlib
 from typing import Any
 
-from acquisition.cli_common import print_json, progress
+from acquisition.cli_common import positive_int, print_json, progress
 
 _OPTIONAL_PARTS = {
     "camera": ("acquisition.bench_camera", "camera_bench"),
@@ -20,10 +20,15 @@ def _bench(args: argparse.Namespace) -> int:
     from acquisition.bench import processing_bench
 
     report: dict[str, Any] = {}
-    parts = args.part or ["processing", *_OPTIONAL_PARTS]
+    parts = args.part or ["processing", "startup", *_OPTIONAL_PARTS]
     if "processing" in parts:
         progress("bench: processing (1280×1024 RGB, 7 LEDs)…")
         report["processing"] = processing_bench(args.height, args.width, repeats=args.repeats)
+    if "startup" in parts:
+        from acquisition.bench_startup import startup_bench
+
+        progress(f"bench: start-up (msflash --help, msflash estimate, import numpy; {args.rounds} interleaved rounds)…")
+        report["startup"] = startup_bench(args.rounds, args.sequence)
     for part, (module_name, function_name) in _OPTIONAL_PARTS.items():
         if part not in parts:
             continue
@@ -65,10 +70,15 @@ def _fmt(value: Any) -> str:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``bench``."""
     bench = subparsers.add_parser("bench", help="measure speed as ratios in one run (processing, camera, booth)")
-    bench.add_argument("--part", action="append", choices=("processing", *_OPTIONAL_PARTS),
+    bench.add_argument("--part", action="append", choices=("processing", "startup", *_OPTIONAL_PARTS),
                        help="run only this part (repeatable); default all")
     bench.add_argument("--height", type=int, default=1024, help="frame height for the processing part")
     bench.add_argument("--width", type=int, default=1280, help="frame width for the processing part")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (the best is kept)")
+    bench.add_argument("--rounds", type=positive_int, default=9,
+                       help="start-up part: interleaved runs of each command (the medians are compared)")
+    bench.add_argument("--sequence", metavar="DIR", default=None,
+                       help="start-up part: the sequence 'estimate' reads (default: the demo's, captured on the "
+                            "simulated rig into a temporary folder)")
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.set_defaults(handler=_bench)

@@ -16,10 +16,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from acquisition.image_io import json_default
-
 
 class UsageError(ValueError):
     """Bad input from the user (a file, field or option); the CLI exits with status 2."""
@@ -45,12 +41,16 @@ def _strict(value: Any) -> Any:
 
     JSON has no NaN or infinity; a reader would choke on Python's ``NaN``/``Infinity`` tokens,
     so an undefined figure (say, the condition number of a degenerate fit) is written as null.
+    numpy is not imported here: when it is not loaded yet, no value can be a numpy object.
     """
     if isinstance(value, dict):
         return {key: _strict(item) for key, item in value.items()}
     if isinstance(value, list | tuple):
         return [_strict(item) for item in value]
-    if isinstance(value, np.ndarray | np.generic):
+    numpy = sys.modules.get("numpy")
+    if numpy is not None and isinstance(value, numpy.ndarray | numpy.generic):
+        from acquisition.image_io import json_default
+
         return _strict(json_default(value))
     if isinstance(value, float) and not math.isfinite(value):
         return None

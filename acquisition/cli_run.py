@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition import analysis, report
+from acquisition import analysis
 from acquisition.camera import RawFrame
 from acquisition.async_writer import AsyncSequenceWriter
 from acquisition.capture import preview_frames, run_capture, run_capture_with_flash
@@ -334,6 +334,8 @@ def _run(args: argparse.Namespace) -> int:
             f"determine the ambient (test patterns, or LEDs that do not reach the scene?); no report written. "
             f"The sequence is complete in {out / 'sequence'}"
         )
+    from acquisition import report  # colour and matplotlib: only a run that reports needs them
+
     sequence = read_sequence(out / "sequence")
     progress("synthesising the computational images, previews and report")
     summary = report.write_run_report(out, sequence, estimate, solutions, args.mode, true_ambient, stack, args.target)

@@ -56,9 +56,6 @@ from functools import lru_cache
 from typing import Any
 
 import numpy as np
-from scipy import sparse
-from scipy.sparse.csgraph import connected_components
-from scipy.stats import chi2
 
 from calibration.errors import CalibrationError
 from processing.colour_metrics import usable_labels
@@ -273,6 +270,8 @@ def _detection_planes(images: Sequence[np.ndarray], excluded: np.ndarray, cfa: s
 def _noise_model(difference: np.ndarray, level: np.ndarray, estimate: str, correction: float
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Variance of one channel's neighbour differences against the signal: bin centres and values."""
+    from scipy.stats import chi2
+
     n_bins = min(NOISE_BINS, max(1, level.size // 32))
     size = level.size // n_bins
     bins = np.argsort(level)[:n_bins * size].reshape(n_bins, size)  # equal counts, by signal
@@ -300,6 +299,8 @@ def _link_chi2(planes: np.ndarray, excluded: np.ndarray, floor: np.ndarray) -> t
     once, drop out of the kept pairs. ``floor`` (per channel) bounds the variance below: the
     quantisation of the raw values (a difference of two roundings: step²/6).
     """
+    from scipy.stats import chi2
+
     h, w = planes.shape[:2]
     channels = planes.reshape(h, w, -1)
     n_channels = channels.shape[2]
@@ -343,6 +344,10 @@ def uniform_regions(planes: np.ndarray, excluded: np.ndarray, floor: np.ndarray 
     Excluded pixels get −1; ``floor`` is the least noise variance of a neighbour difference per
     channel (default 0). See the module docstring (step 1).
     """
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
+    from scipy.stats import chi2
+
     h, w = planes.shape[:2]
     n = int(np.prod(planes.shape[2:]))
     floor = np.zeros(n) if floor is None else np.broadcast_to(np.asarray(floor, dtype=float), (n,))
@@ -545,6 +550,9 @@ def _coarsest(sites: np.ndarray, minimum: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _largest_block(sites: np.ndarray) -> np.ndarray:
     """Indices of the largest group of sites connected through gaps of at most one missing site."""
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
+
     near = np.abs(sites[:, None] - sites[None]).max(axis=2) <= 2
     _, component = connected_components(sparse.csr_matrix(near), directed=False)
     return np.flatnonzero(component == np.bincount(component).argmax())

@@ -35,10 +35,10 @@ from functools import lru_cache
 from typing import Literal
 
 import numpy as np
-from scipy.linalg import lapack
 
 from processing.errors import SolverError, SpectralDataError
 from processing.least_squares import FactoredQuadratic
+from processing.scipy_cores import lapack
 from processing.spectra import Spectra, require_unit
 from processing.statistics import SequenceStatistics
 

@@ -14,16 +14,16 @@ ambient image), never from the pixels.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 
 import numpy as np
-from scipy.linalg import lapack
-from scipy.optimize import nnls
 
 from processing.errors import SolverError, SpectralDataError
+from processing.scipy_cores import NNLS_CORE as _NNLS_CORE
+from processing.scipy_cores import lapack
 
 _FEASIBILITY_TOLERANCE = 1e-9
 _recorders: list[list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = []
@@ -94,31 +94,11 @@ def _inverse_factor(hessian: np.ndarray, where: str) -> np.ndarray:
     return inverse
 
 
-def _checked_nnls_core() -> Callable[[np.ndarray, np.ndarray, int], tuple] | None:
-    """The routine behind :func:`scipy.optimize.nnls`, if it is there and answers as expected.
-
-    The public function re-validates its (already finite, float64, C-ordered) inputs, which costs
-    more than the solve at these sizes. The core is private to scipy, so it is used only after it
-    solves a known problem correctly; otherwise the public function is.
-    """
-    try:
-        from scipy.optimize._slsqplib import nnls as core
-    except ImportError:
-        return None
-    try:
-        x, _, info = core(np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), np.array([2.0, 1.0, -1.0]), 6)
-        expected = np.allclose(x, [1.5, 0.0], rtol=0, atol=1e-12) and info == 1
-    except Exception:  # noqa: BLE001 - any surprise means: do not use it
-        return None
-    return core if expected else None
-
-
-_NNLS_CORE = _checked_nnls_core()
-
-
 def _nnls(matrix: np.ndarray, target: np.ndarray, maxiter: int) -> np.ndarray:
     """``argmin ‖A u − b‖, u ≥ 0`` (as :func:`scipy.optimize.nnls`) for finite float64 inputs."""
     if _NNLS_CORE is None:
+        from scipy.optimize import nnls
+
         return nnls(matrix, target, maxiter=maxiter)[0]
     multipliers, _, info = _NNLS_CORE(matrix, target, maxiter)
     if info == 3:

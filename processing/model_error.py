@@ -24,12 +24,12 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
-from scipy.optimize import nnls
 
 from processing.ambient import AmbientEstimate, AmbientModel
 from processing.datasets import natural100
 from processing.errors import SpectralDataError
 from processing.light_library import prior_training_lights
+from processing.scipy_cores import nnls
 from processing.spectra import Spectra, WavelengthGrid, require_unit
 from processing.statistics import SequenceStatistics
 

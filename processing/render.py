@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import warnings
 
-import colour
 import numpy as np
 
 from processing.errors import SpectralDataError
@@ -175,6 +174,8 @@ def camera_to_srgb_linear(linear_rgb: np.ndarray, camera_to_xyz: np.ndarray | No
         rgb = rgb * gains
     if camera_to_xyz is None:
         return rgb, rgb @ np.array([0.2126, 0.7152, 0.0722])
+    import colour
+
     xyz = rgb @ np.asarray(camera_to_xyz, dtype=np.float64).T
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # colour's domain-range notes; the conversion is a plain 3×3 product
@@ -184,6 +185,8 @@ def camera_to_srgb_linear(linear_rgb: np.ndarray, camera_to_xyz: np.ndarray | No
 
 def encode_srgb(srgb_linear: np.ndarray, white_value: float) -> np.ndarray:
     """Linear sRGB scaled so ``white_value`` is display white, clipped and sRGB-encoded, float in [0, 1]."""
+    import colour
+
     white_value = white_value if (np.isfinite(white_value) and white_value > 0) else 1.0
     return colour.cctf_encoding(np.clip(srgb_linear / white_value, 0.0, 1.0), function="sRGB")
 

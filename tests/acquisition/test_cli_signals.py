@@ -31,6 +31,6 @@ def test_the_cli_says_how_it_was_stopped(monkeypatch: pytest.MonkeyPatch, capsys
 
     parser = cli.build_parser()
     monkeypatch.setattr(parser, "parse_args", lambda argv: argparse.Namespace(verbose=0, handler=stopped))
-    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    monkeypatch.setattr(cli, "build_parser", lambda argv=None: parser)
     assert cli.main(["capture"]) == status
     assert capsys.readouterr().err.strip().splitlines()[-1] == line
