@@ -5,13 +5,17 @@ Processing part (issue: foundation), on a 1280×1024 RGB sequence with 7 LEDs:
 - ``estimate_over_copy``: ambient estimation as ``msflash estimate`` does it (4×4 block sums, one-pass
   statistics, the default solver, the image passes on ``DEFAULT_WORKERS`` threads) ÷ the time to
   read those frames once (a numpy copy, one thread) — target ≤ 3; ``estimate_over_copy_by_threads``
-  the same on 1 and on 2 threads; ``estimate_all_pixels_over_copy`` without binning;
+  the same on 1 and on 2 threads; ``estimate_unweighted_over_copy`` without the inverse-variance sample
+  weights (what they cost); ``estimate_all_pixels_over_copy`` without binning;
 - ``solver_speedup``: each estimation and flash solver ÷ cvxpy on exactly the same problems
   (recorded from our solver), with the objectives' relative difference — target ≥ 50×, ≤ 1e-6;
   the LED/camera part of each problem is prepared once per sequence (:class:`AmbientModel`,
   :class:`FlashModel`), as cvxpy is handed the finished problem matrices;
 - ``synthesis_over_copy``: synthesis ÷ the same memory copy — target ≤ 2 (``DEFAULT_WORKERS``
-  threads; ``synthesis_over_copy_by_threads`` on 1 and 2).
+  threads; ``synthesis_over_copy_by_threads`` on 1 and 2);
+- ``prior_estimate_over_copy``: the light prior's estimate (channel-resolved statistics and solve,
+  ``msflash estimate --model prior``) ÷ the same copy; ``auto_choice_s`` the held-out comparison
+  ``--model auto`` adds; ``model_reference_s``/``model_band_s`` the default estimate's model band.
 
 Camera and booth parts are added by their modules when present.
 """
@@ -113,11 +117,11 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
     copy_time = _best_time(lambda: [f.copy() for f in frames], repeats)
     statistics = accumulate_statistics(frames[0], frames[1:], spec)
 
-    def estimate(bin_factor: int, workers: int = DEFAULT_WORKERS) -> Callable[[], None]:
+    def estimate(bin_factor: int, workers: int = DEFAULT_WORKERS, weighting: bool = SAMPLE_WEIGHTING) -> Callable[[], None]:
         # As msflash estimate: the weighted statistics (acquisition.analysis.sequence_statistics) and the default solve.
         return lambda: estimate_ambient(
             accumulate_statistics(frames[0], frames[1:], spec, bin_factor=bin_factor, workers=workers,
-                                  weighting=SAMPLE_WEIGHTING), world["leds"])
+                                  weighting=weighting), world["leds"])
 
     weights = estimate_ambient(statistics, world["leds"]).ambient_weights
     flash_weights = np.clip(weights, 0, 1)
@@ -136,6 +140,7 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
         "estimate_over_copy": estimate_time / copy_time,
         "estimate_over_copy_by_threads": {
             str(n): _best_time(estimate(DEFAULT_BIN_FACTOR, n), repeats) / copy_time for n in (1, 2)},
+        "estimate_unweighted_over_copy": _best_time(estimate(DEFAULT_BIN_FACTOR, weighting=False), repeats) / copy_time,
         "estimate_bin": DEFAULT_BIN_FACTOR,
         "estimate_all_pixels_over_copy": estimate_all_pixels_time / copy_time,
         "synthesis_s": synthesis_time,
@@ -170,4 +175,26 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
     result["model_reference_s"] = _best_time(lambda: light_reference(leds, camera), 3)
     reference, estimated = reference_for(leds, camera), estimate_ambient(statistics, leds)
     result["model_band_s"] = _best_time(lambda: with_model_error(estimated, reference), 20)
+    result.update(prior_bench(frames, spec, leds, camera, copy_time, repeats))
     return result
+
+
+def prior_bench(frames: list[np.ndarray], spec: FrameStackSpec, leds: Spectra, camera: Spectra, copy_time: float,
+                repeats: int) -> dict[str, float]:
+    """The light prior's figures (``msflash estimate --model prior|auto``): its channel-resolved statistics and
+    estimate ÷ the copy, as ``estimate_over_copy``; ``auto``'s held-out comparison; the model's preparation."""
+    from processing.channel_statistics import accumulate_channel_statistics
+    from processing.light_prior import choose_model, prior_model
+
+    def statistics() -> object:
+        return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=DEFAULT_BIN_FACTOR)
+
+    channels = statistics()
+    model = prior_model(channels.channels, leds, camera)  # type: ignore[attr-defined]
+    prior_time = _best_time(lambda: model.estimate(statistics()), repeats)  # type: ignore[arg-type]
+    return {
+        "prior_estimate_s": prior_time,
+        "prior_estimate_over_copy": prior_time / copy_time,
+        "prior_model_prepare_s": _best_time(lambda: prior_model(channels.channels, leds, camera), repeats),  # type: ignore[attr-defined]
+        "auto_choice_s": _best_time(lambda: choose_model(channels, model), repeats),  # type: ignore[arg-type]
+    }

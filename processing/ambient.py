@@ -549,8 +549,11 @@ def _constrained_band(solved: SequenceStatistics, terms: LedTerms, penalty_weigh
     except (np.linalg.LinAlgError, SolverError):
         return np.sqrt(np.clip(np.einsum("ij,jk,ik->i", terms.values, weights_cov, terms.values), 0, None))
     draws = centre[:, None] + factor @ np.random.default_rng(0).standard_normal((len(centre), BAND_DRAWS))
-    projected = np.column_stack([problem.minimise(hessian @ draw / scale).x for draw in draws.T])
-    return np.std(terms.values @ projected, axis=1, ddof=1)
+    # A draw that already meets I w ≥ 0 is its own projection: only the others are solved.
+    spectra = terms.values @ draws
+    for column in np.flatnonzero(np.any(terms.emitting @ draws < 0, axis=0)):
+        spectra[:, column] = terms.values @ problem.minimise(hessian @ draws[:, column] / scale).x
+    return np.std(spectra, axis=1, ddof=1)
 
 
 NOISE_FLOOR_SHARE = 0.1

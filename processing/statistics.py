@@ -730,12 +730,13 @@ class BlockRows:
         if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
             raise non_finite_frames_error(rows[:-1])
         channels = self.block_shape[1]
-        if self.weighting and self.root_weights is None:
-            # Batch mode: every row is in; weigh them all once (incremental mode weighs as frames come).
-            self.root_weights = self._sample_weights()
-            rows *= self.root_weights
-            if self.differences is not None:
-                self.differences *= self._probe_root_weights
+        weights = probe_weights = None
+        if self.weighting and self._moments is None:
+            # Batch mode: the weights enter each chunk's product (incremental mode weighs rows as frames come).
+            if self.root_weights is None:
+                self.root_weights = self._sample_weights()
+            weights = np.square(self.root_weights)
+            probe_weights = np.square(self._probe_root_weights)
         if self._moments is not None:
             moments = self._moments  # incremental: saturated blocks were left out as they came (_drop)
             noise = self._noise
@@ -750,16 +751,19 @@ class BlockRows:
             chunk = chunk_pixels * self.block_shape[1]
             masked = invalid is not None and invalid.any()
 
-            def moments_of(values: np.ndarray, columns: np.ndarray | None) -> np.ndarray:
+            def moments_of(values: np.ndarray, columns: np.ndarray | None, column_weights: np.ndarray | None) -> np.ndarray:
                 if columns is not None:
-                    values = values.copy()
-                    values[:, columns] = 0.0
-                return _gram(values, chunk, workers)
+                    if column_weights is not None:  # weighted: left-out columns weigh 0, no copy of the rows
+                        column_weights = np.where(columns, 0.0, column_weights)
+                    else:
+                        values = values.copy()
+                        values[:, columns] = 0.0
+                return _gram(values, chunk, workers, column_weights)
 
-            moments = moments_of(rows, self._columns(invalid) if masked else None)
+            moments = moments_of(rows, self._columns(invalid) if masked else None, weights)
             excluded_columns = int(np.count_nonzero(invalid)) * channels if masked else 0
             noise = None if self.differences is None else \
-                moments_of(self.differences, self._difference_columns(invalid) if masked else None)
+                moments_of(self.differences, self._difference_columns(invalid) if masked else None, probe_weights)
             scale = self._probe_scale(int(np.count_nonzero(invalid)) if masked else 0,
                                       int(np.count_nonzero(invalid[::self.probe_stride])) if masked else 0)
         if noise is not None:
@@ -823,6 +827,10 @@ def probe_stride(height: int, width: int) -> int:
     return max(1, min(4, height * width // PROBE_BLOCKS))
 
 
+NOISE_FIT_SAMPLES = 32768
+"""Probed samples the noise line is fitted to at most (:func:`fit_noise_line`)."""
+
+
 @dataclass(frozen=True)
 class NoiseLine:
     """A photon-transfer line: the noise variance of a sample at raw level ``x`` (black removed) is
@@ -867,8 +875,11 @@ def fit_noise_line(probed_levels: np.ndarray, probe: np.ndarray) -> NoiseLine:
     >>> bool(1.9 < line.gain < 2.1), bool(4000 < line.read < 6000)
     (True, True)
     """
-    x = np.maximum(np.asarray(probed_levels, dtype=float).reshape(-1), 0.0)
-    y = np.square(np.asarray(probe, dtype=float).reshape(-1))
+    levels, differences = np.asarray(probed_levels).reshape(-1), np.asarray(probe).reshape(-1)
+    # Two parameters need far fewer samples than a frame has: at most NOISE_FIT_SAMPLES, evenly strided.
+    step = max(1, levels.size // NOISE_FIT_SAMPLES)
+    x = np.maximum(levels[::step].astype(float), 0.0)
+    y = np.square(differences[::step].astype(float))
     n = x.size
     if n < 3 or not np.isfinite(y.sum()):
         return UNIFORM_NOISE
@@ -1065,8 +1076,9 @@ def _block_sums_into(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
     np.copyto(out, block_sums(plane, factor).transpose(0, 2, 1))
 
 
-def _gram(rows: np.ndarray, chunk: int, workers: int = 1) -> np.ndarray:
-    """``rows @ rows.T`` in float64, accumulated over column chunks (``workers`` threads share them).
+def _gram(rows: np.ndarray, chunk: int, workers: int = 1, weights: np.ndarray | None = None) -> np.ndarray:
+    """``rows @ rows.T`` (with ``weights``, ``rows @ diag(weights) @ rows.T``) in float64, accumulated over
+    column chunks (``workers`` threads share them); each chunk is weighted while it is in cache.
 
     The chunks' products are added in chunk order whatever the number of workers, so the result
     does not depend on it.
@@ -1075,7 +1087,15 @@ def _gram(rows: np.ndarray, chunk: int, workers: int = 1) -> np.ndarray:
 
     def product(start: int) -> np.ndarray:
         block = rows[:, start:start + chunk]
-        return block @ block.T
+        if weights is None:
+            return block @ block.T
+        # Weighted in slices of PRODUCT_COLUMNS, so that each weighted copy is still in cache for its product.
+        result = np.zeros((rows.shape[0], rows.shape[0]))
+        column_weights = weights[start:start + chunk]
+        for offset in range(0, block.shape[1], PRODUCT_COLUMNS):
+            part = block[:, offset:offset + PRODUCT_COLUMNS]
+            result += (part * column_weights[offset:offset + PRODUCT_COLUMNS]) @ part.T
+        return result
 
     starts = range(0, rows.shape[1], chunk)
     products = thread_pool(workers).map(product, starts) if workers > 1 and len(starts) > 1 else map(product, starts)
