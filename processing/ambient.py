@@ -52,8 +52,8 @@ CONDITION_WARNING = 1e6
 RESIDUAL_WARNING = 0.2
 """Model misfit (:attr:`AmbientEstimate.model_misfit`: the relative residual with the pixel noise's share
 removed) above which the estimate is flagged. The LEDs explain the ambient image of the lights they
-span to within a few per cent; measured lights outside their span leave 2–12 % (90th percentile of
-150 unseen-generator scenes on the tuning lights: 0.115), a scene that moved far more."""
+span to within a few per cent and measured lights outside their span up to about a tenth; a scene
+that moved leaves far more (docs/ambient-estimate.md)."""
 SATURATION_WARNING = 0.5
 """Fraction of saturated samples above which the estimate is flagged."""
 LED_SIGNAL_Z = 4.0
