@@ -26,7 +26,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from acquisition.errors import RecordingError
-from processing.file_modes import default_file_mode
+from calibration.file_modes import default_file_mode
 
 INTEGER_SUFFIX = ".tiff"
 """Suffix of integer frames (16-bit TIFF, uncompressed)."""

@@ -39,9 +39,9 @@ import numpy as np
 from acquisition.errors import RecordingError
 from acquisition.frame_integrity import check_frame_levels
 from acquisition.image_io import image_suffix, read_image, read_image_header, write_image
+from calibration.file_modes import default_file_mode
 from calibration.spectrometer import NEGATIVE_TOLERANCE
 from processing.errors import SpectralDataError
-from processing.file_modes import default_file_mode
 from processing.spectra import Spectra, WavelengthGrid
 from processing.synthesis import linearise
 

@@ -34,9 +34,9 @@ from typing import Any
 import numpy as np
 
 from calibration.errors import CalibrationError
+from calibration.file_modes import default_file_mode
 from processing.datasets import load_spectra_csv
 from processing.errors import SpectralDataError
-from processing.file_modes import default_file_mode
 from processing.spectra import Spectra
 
 FORMAT = "msflash-calibration"

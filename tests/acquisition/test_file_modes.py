@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from acquisition.image_io import write_image
+from calibration.file_modes import _read_umask, default_file_mode
 from calibration.files import CalibrationSet, save_calibration
 from processing import datasets
-from processing.file_modes import _read_umask, default_file_mode
 from processing.spectra import DEFAULT_GRID
 
 
