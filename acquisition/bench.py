@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from acquisition.analysis import DEFAULT_BIN_FACTOR, SAMPLE_WEIGHTING
-from processing import datasets
+from processing import datasets, lights
 from processing.ambient import AmbientModel, estimate_ambient
 from processing.flash import FlashModel
 from processing.image_formation import SensorModel, chart_scene, exposure_for_peak, render_frame
@@ -56,7 +56,7 @@ def benchmark_world(height: int = 1024, width: int = 1280, seed: int = 0) -> dic
     grid = DEFAULT_GRID
     leds = datasets.paper_leds().resample(grid, outside="zero").to_unit("photons")
     camera = datasets.isetcam_camera("NikonD100").resample(grid, outside="zero").to_unit("photons")
-    ambient = datasets.ambient_spectrum("tungsten", grid).to_unit("photons")
+    ambient = lights.ambient_spectrum("tungsten", grid).to_unit("photons")
     reflectances = datasets.chart110().resample(grid)
     patch = max(4, min(height, width) // 12)
     scene = chart_scene(reflectances, patch_px=patch)

@@ -52,7 +52,7 @@ from acquisition.html_report import HtmlReport
 from acquisition.image_io import write_image
 from acquisition.sequence_format import Sequence, read_sequence
 from calibration import chart_detection
-from processing import colour_metrics, datasets, water
+from processing import colour_metrics, datasets, lights, water
 from processing.ambient import estimate_ambient
 from processing.errors import TargetUnreachableWarning
 from processing.flash import FlashSolution, solve_complementary, solve_matching
@@ -486,7 +486,7 @@ def simulated_world(ambient: str, seed: int = 0, patch_px: int = 12, cfa: str | 
     if ambient == "underwater":
         spd = water.underwater_ambient(depth_m, distance_m, water=water_type, grid=grid)
     else:
-        spd = datasets.ambient_spectrum(ambient, grid)
+        spd = lights.ambient_spectrum(ambient, grid)
     world = SimulatedCamera.default(scene=scene, ambient=spd, cfa=cfa, seed=seed, grid=grid)
     if ambient == "underwater":
         path = water.flash_path_transmittance(distance_m, water_type, grid).values
@@ -700,9 +700,9 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 def _study(args: argparse.Namespace) -> int:
     ambients = tuple(a.strip() for a in args.ambients.split(",") if a.strip())
-    unknown = [a for a in ambients if a not in datasets.AMBIENTS]
+    unknown = [a for a in ambients if a not in lights.AMBIENTS]
     if unknown or not ambients:
-        raise UsageError(f"--ambients '{args.ambients}': expected a comma-separated list of {', '.join(datasets.AMBIENTS)}")
+        raise UsageError(f"--ambients '{args.ambients}': expected a comma-separated list of {', '.join(lights.AMBIENTS)}")
     out = output_directory(args.out if args.out else (None if args.json else Path("colour-study")))
     payload = colour_study(out, ambients, args.seed, args.patch_px, args.cfa, args.bounds, depth_m=args.depth_m,
                            distance_m=args.distance_m, water_type=args.water)

@@ -63,8 +63,9 @@ from acquisition.sequence_format import (
     read_sequence,
 )
 from led_controller.booth import sigterm_as_exit
-from processing.datasets import AMBIENTS, PAPER_LED_SUBSETS
+from processing.datasets import PAPER_LED_SUBSETS
 from processing.errors import TargetUnreachableWarning
+from processing.lights import AMBIENTS
 
 CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG")
 SYNC_MODES: dict[str, TriggerSource] = {"host": "software", "booth": "booth", "camera": "camera"}

@@ -9,7 +9,7 @@ grid (:data:`processing.spectra.DEFAULT_GRID`, 400–700 nm):
 - ``--led-spectra FILE.csv`` (one column per booth channel, energy) or ``--leds N`` (the paper's
   subset of N LEDs, 3–7);
 - ``--ambient NAME|FILE.csv``: a sim ambient or a CIE illuminant
-  (:func:`processing.datasets.light_spectrum`), or ``wavelength_nm, value`` (energy);
+  (:func:`processing.lights.light_spectrum`), or ``wavelength_nm, value`` (energy);
 - ``--scene NAME|FILE.csv``: ``chart110``, ``macbeth``, ``white``, or reflectances
   (``wavelength_nm`` + one column per surface, 0–1) shown as a random mosaic of those surfaces
   (:func:`processing.image_formation.mosaic_scene`).
@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from acquisition.cli_common import UsageError
-from processing import datasets
+from processing import datasets, lights
 from processing.errors import SpectralDataError
 from processing.spectra import DEFAULT_GRID, SpectralKind, Spectra, WavelengthGrid
 
@@ -148,7 +148,7 @@ def sim_leds(led_spectra: str | Path | None, n_leds: int | None, grid: Wavelengt
 
 
 def sim_ambient(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
-    """``--ambient``: a light by name (:func:`processing.datasets.light_spectrum`) or a CSV ``wavelength_nm, value``.
+    """``--ambient``: a light by name (:func:`processing.lights.light_spectrum`) or a CSV ``wavelength_nm, value``.
 
     Raises
     ------
@@ -158,7 +158,7 @@ def sim_ambient(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
     """
     if not is_file(spec):
         try:
-            return datasets.light_spectrum(spec, grid)
+            return lights.light_spectrum(spec, grid)
         except SpectralDataError as err:
             raise UsageError(f"--ambient: {err}") from err
     where = f"--ambient {spec}"

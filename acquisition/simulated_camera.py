@@ -35,7 +35,7 @@ from acquisition.camera import CameraInfo, RawFrame
 from acquisition.errors import CameraError
 from acquisition.frame_queue import TriggeredFrames
 from acquisition.plan import CapturePlan, CaptureStep
-from processing import datasets
+from processing import datasets, lights
 from processing.image_formation import (
     MixedIllumination,
     Scene,
@@ -309,7 +309,7 @@ class SimulatedCamera(TriggeredFrames):
             ``msflash calibrate leds --white``), a :class:`Scene`, or reflectances (a random mosaic
             of those surfaces drawn with ``seed``, :func:`processing.image_formation.mosaic_scene`).
         ambient
-            A name of :func:`processing.datasets.light_spectrum` (the sim ambients, CIE
+            A name of :func:`processing.lights.light_spectrum` (the sim ambients, CIE
             illuminants) or a spectrum covering ``grid``.
         cfa
             None for RGB frames, or a Bayer layout.
@@ -357,10 +357,10 @@ class SimulatedCamera(TriggeredFrames):
         elif isinstance(scene, Spectra):
             scene = mosaic_scene(scene, seed=seed, patch_px=patch_px, specular_strip_px=specular_strip_px)
         scene = Scene(scene.reflectances.resample(grid), scene.labels, scene.shading, scene.specular, scene.specular_gain)
-        ambient_spd = datasets.light_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)
+        ambient_spd = lights.light_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)
         second_spd = None
         if second_ambient is not None:
-            second_spd = (datasets.light_spectrum(second_ambient, grid) if isinstance(second_ambient, str)
+            second_spd = (lights.light_spectrum(second_ambient, grid) if isinstance(second_ambient, str)
                           else second_ambient.resample(grid)).to_unit(ambient_spd.unit)
         if (second_spd is None) != (ambient_map is None):
             raise CameraError("simulated camera: second_ambient and ambient_map go together; expected both or neither")

@@ -45,7 +45,7 @@ from calibration.camera_response import (
     measurement_matrix,
 )
 from calibration.errors import CalibrationError
-from processing import datasets
+from processing import datasets, lights
 from processing.colour_metrics import patch_pixels
 from processing.errors import SpectralDataError
 from processing.spectra import Spectra, WavelengthGrid
@@ -67,7 +67,7 @@ SCALE_TOLERANCE = 1e-3
 def resolve_light(spec: str, grid: WavelengthGrid) -> Spectra:
     """A broadband light (energy, one column) on ``grid``: a CSV ``wavelength_nm, value`` (energy) or a name.
 
-    Names: the sim rig's ambients (:data:`processing.datasets.AMBIENTS`: tungsten, daylight, …)
+    Names: the sim rig's ambients (:data:`processing.lights.AMBIENTS`: tungsten, daylight, …)
     or CIE illuminants (:func:`processing.datasets.illuminant`: A, D65, FL2, …).
     """
     path = Path(spec)
@@ -84,11 +84,11 @@ def resolve_light(spec: str, grid: WavelengthGrid) -> Spectra:
             raise CalibrationError(text if text.startswith(str(path)) else f"{spec}: {text}") from err
     else:
         try:
-            light = (datasets.ambient_spectrum(spec, grid) if spec in datasets.AMBIENTS
+            light = (lights.ambient_spectrum(spec, grid) if spec in lights.AMBIENTS
                      else datasets.illuminant(spec, grid))
         except (SpectralDataError, ValueError, KeyError) as err:
             raise CalibrationError(f"--light '{spec}': not a known light ({err}); expected a CSV file or one of "
-                                   f"{', '.join(datasets.AMBIENTS)}, A, D65, …") from err
+                                   f"{', '.join(lights.AMBIENTS)}, A, D65, …") from err
     if not np.all(np.isfinite(light.values)) or np.any(light.values < 0) or not light.values.max() > 0:
         raise CalibrationError(f"{spec}: light spectrum is not finite, non-negative and non-zero on "
                                f"{grid}; expected a measured broadband light")

@@ -25,7 +25,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from calibration.camera_response import estimate_responsivities, learn_prior, responsivity_rmse
-from processing import datasets
+from processing import datasets, lights
 from processing.colour_metrics import chart_delta_e, delta_e_2000, patch_pixels, reference_chart, usable_labels
 from processing.errors import TargetUnreachableWarning
 from processing.flash import solve_complementary
@@ -102,7 +102,7 @@ def flash_delta_e(true_camera: Spectra, recovered: Spectra, chart: Spectra, ambi
     """ΔE00 (mean, max over patches) between the complementary-flash charts of two responsivity sets."""
     grid = true_camera.grid
     leds = datasets.paper_leds().resample(grid, outside="zero").to_unit("photons")
-    ambient_spd = datasets.ambient_spectrum(ambient, grid).to_unit("photons")
+    ambient_spd = lights.ambient_spectrum(ambient, grid).to_unit("photons")
     ambient_weights = nnls(leds.values, ambient_spd.values[:, 0])[0]
     target = datasets.illuminant("D65", grid).to_unit("photons")
     d65 = datasets.illuminant("D65", grid)

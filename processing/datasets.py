@@ -8,14 +8,13 @@ Public objects
 - Other shipped sets: :func:`isetcam_camera`, :func:`isetcam_leds`, :func:`vrhel`,
   :func:`water_absorption`, :func:`water_transmittance`.
 - Any shipped camera by name: :func:`camera_names`, :func:`camera_responsivities`.
-- Illuminants: :func:`illuminant` (colour-science's CIE tables and black bodies),
-  :func:`ambient_spectrum` (the ambients of the simulated rig) and :func:`light_spectrum` (either,
-  by name).
+- Illuminants: :func:`illuminant` (colour-science's CIE tables and black bodies). The ambients
+  of the simulated rig and lights by name are :mod:`processing.lights`.
 
 Files live in ``processing/data`` with their provenance and licences in
 ``processing/data/SOURCES.md``. Loaders return spectra on the file's own grid; callers resample
-with :meth:`Spectra.resample`. Only :func:`illuminant` and :func:`ambient_spectrum` take a grid,
-because they compute or convert rather than read a file.
+with :meth:`Spectra.resample`. Only :func:`illuminant`, :func:`cie1931_cmfs` and
+:func:`water_transmittance` take a grid, because they compute or convert rather than read a file.
 
 This module is the only place that converts colour-science objects into ``Spectra``.
 
@@ -80,9 +79,6 @@ VRHEL_SETS = {
     "skin_east_indian": "EastIndian_Vhrel.csv",
 }
 """Vrhel et al. (1994) reflectance sets by short name; ``"skin"`` joins the four skin sets."""
-
-AMBIENTS = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange", "underwater_ocean")
-"""Names accepted by :func:`ambient_spectrum`."""
 
 _ISETCAM_LICENCE = "MIT (ISETCam, © 2020 Stanford SCIEN); see processing/data/LICENSE-ISETCam-MIT.txt"
 _PAPER_LICENCE = "no licence stated by the authors (hblasins/compMultispFlash); cite Blasinski & Farrell 2017"
@@ -531,93 +527,3 @@ def illuminant(name: str, grid: WavelengthGrid = DEFAULT_GRID, outside: str = "e
         elif key in ("D50", "D55", "D65", "D75") and key in observer:
             sd = colour.sd_CIE_illuminant_D_series(observer[key])
     return _from_colour(sd.wavelengths, sd.values, key, grid, outside)
-
-
-def _smooth_filter(wavelengths_nm: np.ndarray, kind: str) -> np.ndarray:
-    """Transmittance of a plausible gel filter: a band-pass for green, a long-pass for orange.
-
-    Real gels never block completely, hence the small floor.
-    """
-    if kind == "green":
-        return 0.04 + 0.96 * np.exp(-0.5 * ((wavelengths_nm - 530.0) / 35.0) ** 2)
-    return 0.03 + 0.97 / (1.0 + np.exp(-(wavelengths_nm - 585.0) / 12.0))
-
-
-def ambient_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID, water_path_m: float = 5.0) -> Spectra:
-    """An ambient light of the simulated rig, energy units, peak 1, on ``grid``.
-
-    Parameters
-    ----------
-    name
-        ``tungsten`` (CIE A), ``fluorescent`` (FL2), ``daylight`` (D65), ``underwater`` (D65
-        through ``water_path_m`` of pure water, ``exp(-a_w(λ)·d)``), ``green`` (A through a
-        band-pass gel near 530 nm) or ``orange`` (A through a long-pass gel from ~585 nm) — the
-        paper's booth and pool ambients (Section 6) — or ``underwater_ocean`` (daylight at 5 m
-        depth in mesotrophic ocean water, seen over 1 m: :func:`processing.water.underwater_ambient`
-        with chlorophyll, CDOM and particles).
-    grid
-        The wavelength grid.
-    water_path_m
-        Light path through water for ``underwater`` (the paper dived to 5 m).
-
-    Examples
-    --------
-    >>> ambient_spectrum("orange").unit
-    'energy'
-    """
-    key = _choose("ambient", name, AMBIENTS)
-    if key in ("tungsten", "fluorescent", "daylight"):
-        base = illuminant({"tungsten": "A", "fluorescent": "FL2", "daylight": "D65"}[key], grid)
-        return base.replace(names=(key,), source=f"ambient '{key}' ({base.source})")
-    if key == "underwater_ocean":
-        from processing.water import underwater_ambient  # processing.water builds on this module
-
-        return underwater_ambient(5.0, 1.0, grid=grid, water="ocean").replace(names=(key,))
-    if key == "underwater":
-        base = illuminant("D65", grid)
-        values = base.values * water_transmittance(water_path_m, grid).values
-        source = f"ambient 'underwater' (D65 through {water_path_m:g} m of pure water)"
-    else:
-        base = illuminant("A", grid)
-        values = base.values * _smooth_filter(grid.wavelengths_nm, key)[:, None]
-        source = f"ambient '{key}' (CIE A through a {key} gel)"
-    return base.replace(values=values, names=(key,), source=source).normalised("max")
-
-
-def light_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
-    """A light by name, energy units, peak 1, on ``grid``: a sim ambient or a CIE/colour-science illuminant.
-
-    Parameters
-    ----------
-    name
-        One of :data:`AMBIENTS` (:func:`ambient_spectrum`), a key of ``colour.SDS_ILLUMINANTS``
-        (``A``, ``D50``, ``D65``, ``FL2``, ``LED-B1``…; ``F2`` is read as ``FL2``), or
-        ``blackbody:<kelvin>`` (:func:`illuminant`). Case is ignored.
-    grid
-        The wavelength grid.
-
-    Raises
-    ------
-    SpectralDataError
-        For an unknown name; the message lists every accepted one.
-
-    Examples
-    --------
-    >>> light_spectrum("f11").names, light_spectrum("Tungsten").names
-    (('FL11',), ('tungsten',))
-    """
-    if any(name.lower() == ambient for ambient in AMBIENTS):
-        return ambient_spectrum(name, grid)
-    if name.lower().startswith("blackbody:"):
-        return illuminant(name, grid)
-    import colour  # imported here: loading colour-science takes a second and only these helpers need it
-
-    keys = tuple(colour.SDS_ILLUMINANTS.keys())
-    wanted = name.lower()
-    if len(wanted) > 1 and wanted[0] == "f" and wanted[1:].replace(".", "").isdigit():
-        wanted = "fl" + wanted[1:]  # CIE's F2 is colour-science's FL2
-    key = next((k for k in keys if k.lower() == wanted), None)
-    if key is None:
-        raise SpectralDataError(f"light '{name}': unknown; expected one of {', '.join(AMBIENTS + keys)}, "
-                                "blackbody:<kelvin>")
-    return illuminant(key, grid)

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from processing import datasets
+from processing import datasets, lights
 from processing.ambient import estimate_ambient
 from processing.image_formation import (
     MixedIllumination,
@@ -120,7 +120,7 @@ def make_scenario(kind: str, seed: int, shape: tuple[int, int] = (240, 320), cam
     scene = random_mosaic(rng, shape, grid)
     first, second = rng.choice(len(AMBIENT_POOL), size=2, replace=False)
     names = (AMBIENT_POOL[first],) if kind == "uniform" else (AMBIENT_POOL[first], AMBIENT_POOL[second])
-    spectra = [datasets.ambient_spectrum(name, grid).to_unit("photons") for name in names]
+    spectra = [lights.ambient_spectrum(name, grid).to_unit("photons") for name in names]
     spectra = [s.replace(values=s.values / s.values.max()) for s in spectra]
     if kind != "uniform":
         spectra[1] = spectra[1].replace(values=spectra[1].values * rng.uniform(0.5, 2.0))

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
-from processing import datasets
+from processing import datasets, lights
 from processing.image_formation import Scene, SensorModel, chart_scene, expected_response, exposure_for_peak, mosaic, render_frame
 from processing.spectra import DEFAULT_GRID, Spectra
 from processing.statistics import FrameStackSpec
@@ -77,7 +77,7 @@ def led_mix(weights: Sequence[float], led_spectra: Spectra | None = None) -> Spe
 
 def ambient(name: str = "tungsten") -> Spectra:
     """A shipped ambient in photons, peak-normalised in photons."""
-    spd = datasets.ambient_spectrum(name, GRID).to_unit("photons")
+    spd = lights.ambient_spectrum(name, GRID).to_unit("photons")
     return spd.replace(values=spd.values / spd.values.max())
 
 

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from processing import datasets
+from processing import lights
 from processing.errors import SolverError, SpectralDataError
 from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from processing.statistics import accumulate_statistics
@@ -253,7 +253,7 @@ def run_failure(
             chosen[name] = FACTORS[name]["levels"]
     seed_list = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
     camera_set = select_cameras(list(cameras) if isinstance(cameras, (list, tuple)) else cameras)
-    jobs = [(cam, camera_set[cam], amb, datasets.ambient_spectrum(amb, grid), chosen, seed_list, method, alpha,
+    jobs = [(cam, camera_set[cam], amb, lights.ambient_spectrum(amb, grid), chosen, seed_list, method, alpha,
              bin_factor, grid) for cam in camera_set for amb in ambients]
     mapper = map_function or (lambda function, items: map(function, items))
     records: list[dict[str, Any]] = []

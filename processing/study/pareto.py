@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from processing import datasets
+from processing import lights
 from processing.ambient import estimate_ambient
 from processing.errors import SolverError, SpectralDataError
 from processing.image_formation import chart_scene
@@ -173,7 +173,7 @@ def run_pareto(
             raise SpectralDataError(f"pareto: sampling '{label}'; expected one of {', '.join(SAMPLINGS)}")
     seed_list = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
     camera_set = select_cameras(list(cameras) if isinstance(cameras, (list, tuple)) else cameras)
-    jobs = [(camera_set[cam], datasets.ambient_spectrum(amb, grid), seed_list, list(samplings), list(solvers),
+    jobs = [(camera_set[cam], lights.ambient_spectrum(amb, grid), seed_list, list(samplings), list(solvers),
              patch_px, ambient_to_flash, repeats, grid) for cam in camera_set for amb in ambients]
     mapper = map_function or (lambda function, items: map(function, items))
     results = []

@@ -16,7 +16,7 @@ from acquisition import simulated_camera
 from acquisition.cli import main
 from acquisition.rig import open_sim_rig
 from acquisition.sequence_format import read_sequence
-from processing import datasets
+from processing import datasets, lights
 from processing.local_study import led_bound
 from processing.metrics import spectrum_rmse
 from processing.spectra import DEFAULT_GRID
@@ -79,7 +79,7 @@ def test_eight_gaussian_leds_and_an_isetcam_camera_estimate_d50_near_the_led_bou
     assert bound == pytest.approx(0.044, abs=0.002)
     assert summary["spectrum_rmse_vs_truth"] <= bound + NOISY_MARGIN
     estimate = np.asarray(json.loads((out / "estimate.json").read_text())["spectrum"])
-    tungsten = datasets.light_spectrum("A").values[:, 0]
+    tungsten = lights.light_spectrum("A").values[:, 0]
     assert summary["spectrum_rmse_vs_truth"] < spectrum_rmse(estimate, tungsten)
 
 
@@ -93,7 +93,7 @@ def test_the_sequence_records_the_rig_that_was_simulated(d50_run) -> None:
     np.testing.assert_allclose(sequence.camera_responsivities().to_unit("energy").values, expected_camera, rtol=1e-9)
     truth = sequence.extra["msflash"]["true_ambient"]
     assert truth["name"] == "D50"
-    np.testing.assert_allclose(truth["spd"], datasets.light_spectrum("D50").values[:, 0], rtol=1e-9)
+    np.testing.assert_allclose(truth["spd"], lights.light_spectrum("D50").values[:, 0], rtol=1e-9)
 
 
 def test_without_noise_the_run_reaches_the_led_bound(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -130,7 +130,7 @@ def test_a_camera_file_is_read_as_the_hardware_rigs_responsivity(tmp_path: Path)
 
 
 def test_an_ambient_file_and_a_reflectance_mosaic(tmp_path: Path) -> None:
-    light = datasets.light_spectrum("FL11", DEFAULT_GRID)
+    light = lights.light_spectrum("FL11", DEFAULT_GRID)
     ambient = _write_csv(tmp_path / "lamp.csv", light.wavelengths_nm, {"lamp": light.values[:, 0]})
     surfaces = datasets.vrhel("food").select([0, 5, 9]).resample(DEFAULT_GRID)
     scene = _write_csv(tmp_path / "three.csv", surfaces.wavelengths_nm, dict(zip(("a", "b", "c"), surfaces.values.T)))

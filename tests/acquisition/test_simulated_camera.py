@@ -11,7 +11,7 @@ from acquisition.camera import Camera
 from acquisition.errors import CameraError, FrameTimeoutError
 from acquisition.plan import CapturePlan
 from acquisition.simulated_camera import SimulatedCamera
-from processing import datasets
+from processing import datasets, lights
 from processing.image_formation import SensorModel, chart_scene, expected_response, total_illumination
 from processing.spectra import DEFAULT_GRID, Spectra
 
@@ -176,7 +176,7 @@ class TestDefaultWorld:
     def test_default_world_is_sensible(self, default_world: SimulatedCamera) -> None:
         camera = default_world
         assert camera.led_spectra.names == datasets.paper_leds().names
-        np.testing.assert_allclose(camera.true_ambient.values, datasets.ambient_spectrum("tungsten").values)
+        np.testing.assert_allclose(camera.true_ambient.values, lights.ambient_spectrum("tungsten").values)
         assert camera.suggested_exposure_us is not None
         frames = capture(camera, CapturePlan.ambient_then_each_led(N_LEDS, camera.suggested_exposure_us))
         diffuse = ~camera.scene.specular

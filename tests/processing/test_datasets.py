@@ -180,24 +180,6 @@ class TestIlluminants:
         with pytest.raises(SpectralDataError, match="bad temperature"):
             datasets.illuminant("blackbody:hot")
 
-    @pytest.mark.parametrize("name", datasets.AMBIENTS)
-    def test_ambients(self, name: str) -> None:
-        spectrum = datasets.ambient_spectrum(name)
-        assert (spectrum.names, spectrum.unit, spectrum.grid) == ((name,), "energy", DEFAULT_GRID)
-        assert np.all(spectrum.values >= 0) and spectrum.values.max() == pytest.approx(1.0)
-
-    def test_ambient_shapes_are_plausible(self) -> None:
-        wavelengths = DEFAULT_GRID.wavelengths_nm
-        assert 500 <= wavelengths[np.argmax(datasets.ambient_spectrum("green").values)] <= 560
-        orange = datasets.ambient_spectrum("orange").values[:, 0]
-        assert orange[wavelengths >= 620].min() > 10 * orange[wavelengths <= 520].max()
-        daylight = datasets.ambient_spectrum("daylight").values[:, 0]
-        underwater = datasets.ambient_spectrum("underwater", water_path_m=5.0).values[:, 0]
-        ratio = underwater / daylight
-        assert ratio[-1] < 0.1 * ratio[4]  # red is absorbed first
-        with pytest.raises(SpectralDataError, match="expected one of tungsten"):
-            datasets.ambient_spectrum("moonlight")
-
 
 def test_a_and_the_d_series_extend_beyond_the_780_nm_tables() -> None:
     """CIE A (Planck) and D65 (the D-series basis, 300–830 nm) on the CIE's own 360–830 nm grid; D65 computed

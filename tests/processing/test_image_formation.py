@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing import datasets
+from processing import datasets, lights
 from processing.errors import SpectralDataError
 from processing.image_formation import (
     CFA_PATTERNS,
@@ -38,7 +38,7 @@ def leds() -> Spectra:
 
 @pytest.fixture(scope="module")
 def ambient() -> Spectra:
-    return datasets.ambient_spectrum("tungsten")
+    return lights.ambient_spectrum("tungsten")
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ import json
 import numpy as np
 import pytest
 
-from processing import datasets
+from processing import datasets, lights
 from processing.study.cameras import camera_spread, run_cameras, run_xy
 from processing.study.failure import FACTORS, led_fill, run_failure, with_line
 from processing.study.noisy import make_world, render_stack
@@ -72,7 +72,7 @@ def test_dead_led_warns():
 
 
 def test_the_proposed_led_fill_signal_flags_a_dead_led():
-    world = make_world(datasets.paper_cameras()[CAMERA], datasets.ambient_spectrum("tungsten"))
+    world = make_world(datasets.paper_cameras()[CAMERA], lights.ambient_spectrum("tungsten"))
     fills = {}
     for dead in (None, 0, 3, 6):
         ambient, frames, spec = render_stack(world, np.random.default_rng(5), dead_led=dead)
@@ -112,7 +112,7 @@ def test_failure_result_is_json_ready_with_a_confusion_summary():
 
 
 def test_with_line_moves_the_requested_fraction_of_photons():
-    line = with_line(datasets.ambient_spectrum("daylight"), 700.0, 0.5)
+    line = with_line(lights.ambient_spectrum("daylight"), 700.0, 0.5)
     values = line.values[:, 0]
     assert values.sum() == pytest.approx(1.0)
     assert values[-1] > 0.35  # the 700 nm sample holds most of the line

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing import datasets, water
+from processing import datasets, lights, water
 from processing.errors import SpectralDataError
 from processing.spectra import DEFAULT_GRID, WavelengthGrid
 
@@ -94,7 +94,7 @@ class TestUnderwaterAmbient:
             water.WATER_TYPES["ocean"].transmittance(1.5).values)
 
     def test_the_sim_rig_ambient(self) -> None:
-        rig = datasets.ambient_spectrum("underwater_ocean")
+        rig = lights.ambient_spectrum("underwater_ocean")
         assert rig.names == ("underwater_ocean",)
         assert rig.values == pytest.approx(water.underwater_ambient(5.0, 1.0, water="ocean").values)
 
