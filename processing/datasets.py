@@ -6,15 +6,15 @@ Public objects
 - Paper data (Blasinski & Farrell 2017): :func:`paper_leds`, :func:`paper_led_subset`,
   :func:`natural100`, :func:`chart110`, :func:`macbeth`, :func:`paper_cameras`.
 - Other shipped sets: :func:`isetcam_camera`, :func:`isetcam_leds`, :func:`vrhel`,
-  :func:`water_absorption`, :func:`water_transmittance`.
+  :func:`water_absorption` (a path's transmittance is :func:`processing.water.water_transmittance`).
 - Any shipped camera by name: :func:`camera_names`, :func:`camera_responsivities`.
 - Illuminants: :func:`illuminant` (colour-science's CIE tables and black bodies). The ambients
   of the simulated rig and lights by name are :mod:`processing.lights`.
 
 Files live in ``processing/data`` with their provenance and licences in
 ``processing/data/SOURCES.md``. Loaders return spectra on the file's own grid; callers resample
-with :meth:`Spectra.resample`. Only :func:`illuminant`, :func:`cie1931_cmfs` and
-:func:`water_transmittance` take a grid, because they compute or convert rather than read a file.
+with :meth:`Spectra.resample`. Only :func:`illuminant` and :func:`cie1931_cmfs` take a
+grid, because they compute or convert rather than read a file.
 
 This module is the only place that converts colour-science objects into ``Spectra``.
 
@@ -405,8 +405,8 @@ def water_absorption(source: Literal["pope_fry", "paper"] = "pope_fry") -> Spect
 
     ``Spectra`` has no kind for absorption coefficients, so the result is returned as a unitless
     per-wavelength coefficient (``kind="reflectance"``, ``unit="none"``) with
-    ``metadata["quantity"]`` saying what it really is. Use :func:`water_transmittance` for the
-    attenuation factor of a path.
+    ``metadata["quantity"]`` saying what it really is. Use
+    :func:`processing.water.water_transmittance` for the attenuation factor of a path.
     """
     if source == "pope_fry":
         spectra = _shipped("water/pope_fry_1997_380_700_2p5nm.csv", "reflectance", "none",
@@ -417,25 +417,6 @@ def water_absorption(source: Literal["pope_fry", "paper"] = "pope_fry") -> Spect
     else:
         raise SpectralDataError(f"water_absorption: unknown source '{source}'; expected pope_fry or paper")
     return spectra.replace(metadata={**spectra.metadata, "quantity": "absorption coefficient a_w", "unit": "1/m"})
-
-
-def water_transmittance(path_m: float, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
-    """Transmittance ``exp(-a_w(λ) · path_m)`` of ``path_m`` metres of pure water, on ``grid``.
-
-    Examples
-    --------
-    >>> t = water_transmittance(5.0)
-    >>> bool(t.column("water_5m")[0] > t.column("water_5m")[-1])
-    True
-    """
-    if not (math.isfinite(path_m) and path_m >= 0):
-        raise SpectralDataError(f"water_transmittance: path_m is {path_m}; expected a finite length ≥ 0 m")
-    absorption = water_absorption().resample(grid)
-    return absorption.replace(
-        values=np.exp(-absorption.values * path_m), names=(f"water_{path_m:g}m",),
-        source=f"pure-water transmittance over {path_m:g} m (Pope & Fry 1997)",
-        metadata={"quantity": "transmittance", "path_m": path_m},
-    )
 
 
 # -- illuminants ------------------------------------------------------------------------------

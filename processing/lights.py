@@ -18,7 +18,7 @@ import numpy as np
 from processing import datasets
 from processing.errors import SpectralDataError
 from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from processing.water import underwater_ambient
+from processing.water import underwater_ambient, water_transmittance
 
 AMBIENTS = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange", "underwater_ocean")
 """Names accepted by :func:`ambient_spectrum`."""
@@ -72,7 +72,7 @@ def ambient_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID, water_path_
         return underwater_ambient(5.0, 1.0, grid=grid, water="ocean").replace(names=(key,))
     if key == "underwater":
         base = datasets.illuminant("D65", grid)
-        values = base.values * datasets.water_transmittance(water_path_m, grid).values
+        values = base.values * water_transmittance(water_path_m, grid).values
         source = f"ambient 'underwater' (D65 through {water_path_m:g} m of pure water)"
     else:
         base = datasets.illuminant("A", grid)

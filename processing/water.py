@@ -10,6 +10,7 @@ Public objects
   ambient of the simulated underwater rig.
 - :func:`flash_path_transmittance`: what a flash at the camera loses on its way to the subject
   and back.
+- :func:`water_transmittance`: a path of pure water, ``exp(−a_w(λ) · d)`` (the paper's pool).
 
 The model
 ---------
@@ -90,6 +91,25 @@ def bricaud_1998(grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
 def pure_water_scattering(grid: WavelengthGrid = DEFAULT_GRID) -> np.ndarray:
     """Pure-water scattering coefficient ``b_w(λ)`` in 1/m (Smith & Baker 1981), shape (n_wavelengths,)."""
     return _table("water/smith_baker_1981_bw_380_700_1nm.csv", ("b_w_per_m",)).resample(grid).values[:, 0]
+
+
+def water_transmittance(path_m: float, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """Transmittance ``exp(-a_w(λ) · path_m)`` of ``path_m`` metres of pure water, on ``grid``.
+
+    Examples
+    --------
+    >>> t = water_transmittance(5.0)
+    >>> bool(t.column("water_5m")[0] > t.column("water_5m")[-1])
+    True
+    """
+    if not (math.isfinite(path_m) and path_m >= 0):
+        raise SpectralDataError(f"water_transmittance: path_m is {path_m}; expected a finite length ≥ 0 m")
+    absorption = datasets.water_absorption().resample(grid)
+    return absorption.replace(
+        values=np.exp(-absorption.values * path_m), names=(f"water_{path_m:g}m",),
+        source=f"pure-water transmittance over {path_m:g} m (Pope & Fry 1997)",
+        metadata={"quantity": "transmittance", "path_m": path_m},
+    )
 
 
 @dataclass(frozen=True)

@@ -104,8 +104,6 @@ class TestOtherSets:
         assert absorption.metadata["unit"] == "1/m"
         # pure water absorbs red far more than blue (Pope & Fry 1997)
         assert absorption.column("a_w")[-1] > 10 * absorption.column("a_w")[5]
-        transmittance = datasets.water_transmittance(2.0).values[:, 0]
-        np.testing.assert_allclose(transmittance, np.exp(-2.0 * absorption.values[:, 0]))
 
 
 class TestCsvReader:

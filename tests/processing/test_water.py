@@ -24,6 +24,11 @@ class TestAbsorption:
         assert at(a.column("water"), 440) == pytest.approx(0.00635, rel=0.02)
         assert np.all(a.values[:, 1:] == 0)  # nothing else in a pool
 
+    def test_pure_water_transmittance_is_beer_lambert(self) -> None:
+        absorption = datasets.water_absorption().resample(DEFAULT_GRID)
+        transmittance = water.water_transmittance(2.0).values[:, 0]
+        np.testing.assert_allclose(transmittance, np.exp(-2.0 * absorption.values[:, 0]))
+
     def test_phytoplankton_is_bricaud_1998(self) -> None:
         body = water.WaterBody(chlorophyll_mg_m3=2.0, cdom_440_per_m=0.0, nap_440_per_m=0.0)
         phytoplankton = body.absorption(DEFAULT_GRID).column("phytoplankton")
