@@ -10,7 +10,7 @@ from processing.local import DEFAULT_TILES
 
 
 def _local_study(args: argparse.Namespace) -> int:
-    from processing.local_study import run_study  # matplotlib and scipy only when asked
+    from processing.study.local import run_study  # matplotlib and scipy only when asked
 
     progress(f"local study: {args.uniform} uniform scenes, {args.mixed} boundary + {args.mixed} gradient scenes, "
              f"{args.tiles}x{args.tiles} tiles, seeds from {args.seed0}")

@@ -9,7 +9,9 @@
 - :mod:`processing.study.noisy`: noisy rendered frame stacks through the app's estimation path.
 - :mod:`processing.study.failure`: where estimates fail and whether their reliability signals warn.
 - :mod:`processing.study.pareto`: accuracy against time per solver × pixel subsampling.
+- :mod:`processing.study.local`: local against global ambient estimation (issue 9, ``msflash local-study``).
 
-Nothing here reads or writes files beyond the shipped data loaders; the CLI
-(``acquisition.cli_study``) writes the results.
+Nothing here reads or writes files beyond the shipped data loaders, except
+:func:`processing.study.local.run_study`, which writes its summary and plots when given a folder;
+the CLI (``acquisition.cli_study``) writes the other results.
 """

@@ -14,8 +14,8 @@ from acquisition.cli import build_parser, main
 from acquisition.image_io import read_image
 from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
 from processing import datasets
-from processing.local_study import Scenario, make_scenario
 from processing.spectra import DEFAULT_GRID
+from processing.study.local import Scenario, make_scenario
 
 SHAPE = (96, 128)
 

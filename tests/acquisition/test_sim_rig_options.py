@@ -17,9 +17,9 @@ from acquisition.cli import main
 from acquisition.rig import open_sim_rig
 from acquisition.sequence_format import read_sequence
 from processing import datasets, lights
-from processing.local_study import led_bound
 from processing.metrics import spectrum_rmse
 from processing.spectra import DEFAULT_GRID
+from processing.study.local import led_bound
 
 GAUSSIAN_PEAKS_NM = (410, 450, 490, 530, 570, 610, 650, 690)
 """An 8-channel booth of Gaussian LEDs (σ 18 nm) spanning the grid: its best non-negative fit of

@@ -1,6 +1,6 @@
 """Local ambient estimation (issue 9): tiled statistics, smoothing, model selection, local synthesis.
 
-Scenes come from :func:`processing.local_study.make_scenario` (random surface mosaics, the sim rig's
+Scenes come from :func:`processing.study.local.make_scenario` (random surface mosaics, the sim rig's
 sensor with noise); the seeds here (< 100) are not the study's (≥ 1000), and the selection margin
 was calibrated on the study's scenes, not on these.
 """
@@ -27,7 +27,9 @@ from processing.local import (
     tile_statistics,
     upsample_tiles,
 )
-from processing.local_study import (
+from processing.metrics import spectrum_rmse
+from processing.statistics import FrameStackSpec, accumulate_statistics
+from processing.study.local import (
     Scenario,
     alone_rmse,
     led_bound,
@@ -38,8 +40,6 @@ from processing.local_study import (
     run_study,
     tiled_rmse,
 )
-from processing.metrics import spectrum_rmse
-from processing.statistics import FrameStackSpec, accumulate_statistics
 from processing.synthesis import synthesize
 from tests.helpers import EXACT, FLOAT32, ambient, camera, chart, leds_photons, linear_frames, rendered_frames, spec_for
 
