@@ -11,6 +11,8 @@
 - :mod:`processing.study.pareto`: accuracy against time per solver × pixel subsampling.
 - :mod:`processing.study.local`: local against global ambient estimation (issue 9, ``msflash local-study``).
 
+The processing core never imports this package (an import-linter contract in ``pyproject.toml``).
+
 Nothing here reads or writes files beyond the shipped data loaders, except
 :func:`processing.study.local.run_study`, which writes its summary and plots when given a folder;
 the CLI (``acquisition.cli_study``) writes the other results.
