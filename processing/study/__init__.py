@@ -13,7 +13,6 @@
 
 The processing core never imports this package (an import-linter contract in ``pyproject.toml``).
 
-Nothing here reads or writes files beyond the shipped data loaders, except
-:func:`processing.study.local.run_study`, which writes its summary and plots when given a folder;
-the CLI (``acquisition.cli_study``) writes the other results.
+Nothing here reads or writes files beyond the shipped data loaders; the CLIs
+(``acquisition.cli_study``, ``acquisition.cli_local``) write the results.
 """

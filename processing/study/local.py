@@ -33,10 +33,8 @@ Protocol
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -354,12 +352,12 @@ def tiles_sweep(seeds: range, tile_counts: tuple[int, ...] = (4, 6, 8, 12, 16), 
 
 
 def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILES, seed0: int = 1000,
-              out: Path | None = None, timing: bool = True, sweep: bool = True) -> dict:
+              timing: bool = True, sweep: bool = True) -> dict:
     """The acceptance study: auto → global rate on uniform scenes, RMSE cut on two-illuminant ones, cost.
 
     Seeds: uniform scenes ``seed0 + s``; boundary and gradient scenes ``seed0 + 10 000 + s`` (the same
     surfaces and ambient pair, mixed two ways); the tiles sweep ``seed0 + 20 000 + s``. The tests
-    use seeds below 100. Writes ``local-study.json`` and plots to ``out`` when given.
+    use seeds below 100. ``msflash local-study --out`` writes the summary and plots (:mod:`acquisition.cli_local`).
     """
     results = [evaluate_scenario("uniform", seed0 + s, tiles) for s in range(n_uniform)]
     for kind in ("boundary", "gradient"):
@@ -405,66 +403,4 @@ def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILE
     if sweep:
         summary["tiles_sweep"] = tiles_sweep(range(seed0 + 20_000, seed0 + 20_000 + min(n_mixed, 10)))
     summary["scenarios"] = results
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "local-study.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
-        summary["plots"] = _plots(summary, results, out)
     return summary
-
-
-def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
-    """Per-scenario auto vs global RMSE, the selection scores, where the error stays, and accuracy vs tiles/time."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from processing.local import SELECTION_MARGIN
-
-    paths = []
-    figure, axes = plt.subplots(1, 4, figsize=(20, 4.5))
-    colours = {"uniform": "tab:blue", "boundary": "tab:red", "gradient": "tab:orange"}
-    for kind in KINDS:
-        rows = [r for r in results if r["kind"] == kind]
-        axes[0].scatter([r["rmse_global"] for r in rows], [r["rmse_auto"] for r in rows], s=10, c=colours[kind], label=kind)
-        best = [min(v for key, v in r["scores"].items() if key != "global") for r in rows]
-        axes[1].hist(best, bins=30, alpha=0.6, color=colours[kind], label=kind)
-    top = max(max(r["rmse_global"] for r in results), max(r["rmse_auto"] for r in results))
-    axes[0].plot([0, top], [0, top], "k:", lw=1)
-    axes[0].plot([0, top], [0, 0.7 * top], "k--", lw=1, label="30 % cut")
-    axes[0].set(xlabel="global spectrum RMSE (per pixel)", ylabel="auto spectrum RMSE (per pixel)", title="per scenario")
-    axes[0].legend()
-    axes[1].axvline(1.0, color="k", lw=1)
-    axes[1].axvline(1.0 - SELECTION_MARGIN, color="k", ls="--", lw=1, label="decision threshold")
-    axes[1].set(xlabel="best local held-out error / global's", ylabel="scenarios", title="model selection")
-    axes[1].legend()
-    # Where the error stays: mean RMSE of every estimate and of the two references, per scene kind.
-    names = (("rmse_global", "global"), ("rmse_tiles", "tiles"), ("rmse_auto", "auto"),
-             ("rmse_alone", "each ambient alone"), ("rmse_bound", "LED bound"))
-    kinds = [kind for kind in KINDS if kind in summary]
-    width = 0.8 / len(names)
-    for index, (key, label) in enumerate(names):
-        axes[2].bar(np.arange(len(kinds)) + (index - (len(names) - 1) / 2) * width, [summary[k][key] for k in kinds],
-                    width, label=label)
-    axes[2].set_xticks(np.arange(len(kinds)), kinds)
-    axes[2].set(ylabel="mean spectrum RMSE (per pixel)", title="estimates and references")
-    axes[2].set_ylim(0.12, None)
-    axes[2].legend(fontsize=8)
-    sweep = summary.get("tiles_sweep")
-    if sweep:
-        times = [r["time_s"] * 1e3 for r in sweep]
-        axes[3].plot(times, [r["rmse_local"] for r in sweep], "o-", label="local (regions)")
-        axes[3].plot(times, [r["rmse_tiles"] for r in sweep], "s--", label="tiles only")
-        for r, elapsed in zip(sweep, times):
-            axes[3].annotate(f"{r['tiles']}²", (elapsed, r["rmse_local"]))
-        axes[3].axhline(float(np.mean([r["rmse_global"] for r in sweep])), color="k", ls=":", label="global")
-        axes[3].set(xlabel="time per estimate, 240×320 frame (ms)", ylabel="spectrum RMSE (boundary scenes)",
-                    title="accuracy vs time (tiles per side)")
-        axes[3].legend()
-    figure.tight_layout()
-    path = out / "local-study.png"
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    paths.append(str(path))
-    return paths
