@@ -1,6 +1,6 @@
 """From a recorded sequence to processing inputs and back: estimate, flash and synthesise.
 
-``processing`` never sees a file or a sequence (DESIGN §1). This module is the thin layer that
+``processing`` never sees a file or a sequence (docs/architecture.md §2.1). This module is the thin layer that
 reads a :class:`~acquisition.sequence_format.Sequence`, builds the frame stack description, converts
 spectra to the processing unit (photons) and converts results back to the sequence's unit.
 """
@@ -228,7 +228,7 @@ def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarr
 
 
 def estimate_payload(sequence: Sequence, estimate: AmbientEstimate) -> dict:
-    """The ``msflash estimate --json`` object (DESIGN §7)."""
+    """The ``msflash estimate --json`` object (docs/architecture.md §7)."""
     spectrum = spectrum_in_sequence_unit(sequence, estimate.spectrum)
     def in_unit(values: np.ndarray) -> np.ndarray:
         return estimate.spectrum.replace(values=np.asarray(values)[:, None]).to_unit(sequence.spectral_unit).values[:, 0]
@@ -326,7 +326,7 @@ def solve_sequence_flash(sequence: Sequence, mode: str, ambient_weights: np.ndar
 
 
 def flash_payload(sequence: Sequence, solution: FlashSolution, target: str | None) -> dict:
-    """The ``msflash flash --json`` object (DESIGN §7)."""
+    """The ``msflash flash --json`` object (docs/architecture.md §7)."""
     payload = {
         "sequence": str(sequence.directory),
         "mode": solution.mode,
@@ -377,7 +377,7 @@ def estimate_sequence_local(sequence: Sequence, method: str = "auto", solver: st
 
 
 def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:
-    """The ``msflash estimate --method … --json`` object: DESIGN §7 keys plus the model and the tiles.
+    """The ``msflash estimate --method … --json`` object: docs/architecture.md §7 keys plus the model and the tiles.
 
     ``spectrum`` and ``ambient_weights`` are the global estimate for the global model and the
     area-weighted mean over the tiles for the local one; the tiles are under ``tiles``.

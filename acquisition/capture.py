@@ -1,6 +1,6 @@
 """Run a capture plan: pair every frame with its step and write it to disk at once.
 
-Three synchronisation modes (DESIGN §4), chosen by ``plan.trigger``:
+Three synchronisation modes (docs/architecture.md §4), chosen by ``plan.trigger``:
 
 ``"software"`` — *host paced* (the fallback)
     For each step the booth is set to the step's levels (``SET``, which replies once applied),

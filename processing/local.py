@@ -1,9 +1,10 @@
 """Spatially varying ambient light: tiled statistics, local estimates and model selection (issue 9).
 
 The paper assumes one ambient over the whole scene and names patch-based local estimation as
-future work (PAPER.md, "Limits the authors name"). Here the frame is cut into a grid of tiles and
-the sufficient statistics of eq. 4–6 (:class:`~processing.statistics.SequenceStatistics`) are
-accumulated per tile in one pass. Statistics of disjoint samples add, so
+future work (Blasinski & Farrell 2017, among the limits the authors name). Here the frame is cut
+into a grid of tiles and the sufficient statistics of eq. 4–6
+(:class:`~processing.statistics.SequenceStatistics`) are accumulated per tile in one pass.
+Statistics of disjoint samples add, so
 
 - the global statistics are the sum of the tiles' (:meth:`TiledStatistics.total`),
 - a Gaussian-weighted sum of neighbouring tiles' statistics is a *local weighted least squares*
@@ -36,8 +37,8 @@ The LED-only images are differences of noisy frames, so the moments of eq. 5 car
 variance (errors in variables). :func:`tile_statistics` also measures it per block from the
 difference of two interleaved column halves (:attr:`TiledStatistics.denoised`), and the local model
 is solved on the corrected statistics, as the global estimate is (:mod:`processing.statistics` measures
-the same probe for the whole frame; DESIGN §8: the noise is propagated from the data, here without a
-noise model).
+the same probe for the whole frame; docs/architecture.md §8: the noise is measured from the data,
+without a noise model).
 
 Public objects
 --------------

@@ -2,7 +2,7 @@
 
 Ambient estimation (eq. 4–6) needs only the k×k Gram matrix of the LED-only images, their
 k products with the ambient image, the ambient image's squared norm and the sample count
-(DESIGN §8). They are accumulated chunk by chunk straight from the raw frames: each chunk is
+(docs/architecture.md §8). They are accumulated chunk by chunk straight from the raw frames: each chunk is
 linearised (``(value − black_level) / (exposure_us · gain)``), saturated pixels are masked, the
 LED frames are differenced against the ambient frame and the products are added up. No full-size
 float copy of the stack ever exists.
@@ -279,8 +279,8 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
 
     The image formation model is linear, so block sums obey it exactly — whatever the texture
     inside a block — while their noise variance relative to the signal drops by ``factor²``. That
-    shrinks the errors-in-variables bias of regressing on noisy LED-only images (PAPER.md: the
-    authors downsample by 4 too). Edges that do not fill a block are dropped.
+    shrinks the errors-in-variables bias of regressing on noisy LED-only images (the authors'
+    code, hblasins/compMultispFlash, downsamples by 4 too). Edges that do not fill a block are dropped.
 
     Parameters
     ----------
@@ -401,7 +401,7 @@ def accumulate_statistics(
     Notes
     -----
     A pixel is excluded when any channel of it, in any frame, is at or above the white level
-    (DESIGN §6). Moments are accumulated in float64.
+    (docs/architecture.md §6). Moments are accumulated in float64.
     """
     if bin_factor < 1 or cfa_period not in (1, 2):
         raise SpectralDataError(f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2")
