@@ -86,9 +86,8 @@ def load_frame_stack(sequence: Sequence) -> FrameStack:
 DEFAULT_BIN_FACTOR = 4
 """Block size summed before estimation: the model is linear so block sums obey it exactly, and the
 noise of the LED-only images (which biases the weights) drops by its square; the authors'
-code downsamples by 4 as well. Frames too small for it fall back to smaller blocks. On the two
-independent samples it brought the spectrum RMSE from 0.233/0.283 (every pixel) to 0.178/0.191,
-against 0.192/0.165 for the best non-negative LED fit of the true spectrum."""
+code downsamples by 4 as well. Frames too small for it fall back to smaller blocks. What it gained
+on the independent samples: docs/architecture.md §10."""
 
 
 SAMPLE_WEIGHTING = True

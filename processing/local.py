@@ -88,10 +88,8 @@ global model's; otherwise the global model is kept (calibrated on uniform scenes
 MIN_EXPLAINED_GAIN = 1e-3
 """A local model must also cut the held-out squared error by more than this fraction of the ambient
 image's energy ``Σ_t ‖a_t‖²`` (a global model that predicts the ambient image within √0.001 ≈ 3 %
-RMS stays). Simulated, 12–16 scenes per setting over 8 cameras, exposures from 5 % to 90 % of full
-scale, flash 0.25–8× the ambient, noise-free too: uniform scenes ≤ 7.3·10⁻⁴ (that one with 60 % of
-the blocks saturated), gradients ≥ 1.6·10⁻³ (tungsten blended into fluorescent, whose camera
-images are alike), boundaries ≥ 2.7·10⁻²."""
+RMS stays). It lies between the largest cut simulated uniform scenes gave and the smallest of the
+gradients, whose two ambients can look alike to the camera (docs/local-estimation.md, how it works)."""
 REGION_RADIUS = 2
 """Half-width in blocks of the box over which block residuals are pooled before labelling (5 × 5 blocks)."""
 REGION_ITERATIONS = 20

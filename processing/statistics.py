@@ -64,8 +64,8 @@ PROBE_BLOCKS = 16384
 """Blocks the noise probe needs at least (:class:`BlockRows`): frames with several times more use
 every ``stride``-th block row only, ``stride = min(4, blocks // PROBE_BLOCKS)``. Its moments are then
 scaled by valid blocks ÷ probed valid blocks; with ≥ 16 384 probed blocks their sampling error is
-below 1.1 % of the noise's share (√(2/n)), against about 40 % more estimation time for a full probe
-of a 1280 × 1024 stack."""
+below 1.1 % of the noise's share (√(2/n)), while a full probe of a large stack costs markedly more
+estimation time (docs/architecture.md §10)."""
 PRODUCT_COLUMNS = 4096
 """Columns per slice of the incremental moments' matrix–vector products (:func:`_row_products`):
 one thread each (OpenBLAS threads a product only above about 10⁵ elements)."""
@@ -1007,7 +1007,7 @@ def _gathered(row_sums: np.ndarray, factor: int, channels: int, matrix) -> np.nd
     with a gather matrix combines them per channel — far faster than strided slicing, and exact
     (±1/0 weights, integer sums below 2²⁴ in float32). The product runs in slices of GATHER_ROWS
     groups: OpenBLAS splits larger ones across threads, whose wake-up and spinning cost more than
-    the product on a busy 2-core machine (measured 4× slower under load). Returns (H/f, W/f, m) for
+    the product on a busy 2-core machine (docs/architecture.md §10). Returns (H/f, W/f, m) for
     a (factor·channels, m) matrix.
     """
     height, width = row_sums.shape[0], row_sums.shape[1] // (factor * channels)
@@ -1061,8 +1061,8 @@ def _row_products(rows: np.ndarray, row: int) -> np.ndarray:
     """``rows @ rows[row]``, summed over slices of :data:`PRODUCT_COLUMNS` columns.
 
     OpenBLAS splits one large matrix–vector product across its threads; on a busy 2-core machine
-    (the capture's stream and writer threads) their wake-up made the product of a 1280 × 1024
-    frame's rows take 4–12 ms instead of 0.3 ms. Slices stay below its threading threshold.
+    (the capture's stream and writer threads) their wake-up costs many times the product itself
+    (docs/architecture.md §10). Slices stay below its threading threshold.
     """
     products = np.zeros(rows.shape[0])
     vector = rows[row]
