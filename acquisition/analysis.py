@@ -1,6 +1,6 @@
 """From a recorded sequence to processing inputs and back: estimate, flash and synthesise.
 
-``processing`` never sees a file or a sequence (DESIGN §1). This module is the thin layer that
+``processing`` never sees a file or a sequence (docs/architecture.md §2.1). This module is the thin layer that
 reads a :class:`~acquisition.sequence_format.Sequence`, builds the frame stack description, converts
 spectra to the processing unit (photons) and converts results back to the sequence's unit.
 """
@@ -86,9 +86,8 @@ def load_frame_stack(sequence: Sequence) -> FrameStack:
 DEFAULT_BIN_FACTOR = 4
 """Block size summed before estimation: the model is linear so block sums obey it exactly, and the
 noise of the LED-only images (which biases the weights) drops by its square; the authors'
-code downsamples by 4 as well. Frames too small for it fall back to smaller blocks. On the two
-independent samples it brought the spectrum RMSE from 0.233/0.283 (every pixel) to 0.178/0.191,
-against 0.192/0.165 for the best non-negative LED fit of the true spectrum."""
+code downsamples by 4 as well. Frames too small for it fall back to smaller blocks. What it gained
+on the independent samples: docs/architecture.md §10."""
 
 
 SAMPLE_WEIGHTING = True
@@ -228,7 +227,7 @@ def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarr
 
 
 def estimate_payload(sequence: Sequence, estimate: AmbientEstimate) -> dict:
-    """The ``msflash estimate --json`` object (DESIGN §7)."""
+    """The ``msflash estimate --json`` object (docs/architecture.md §7)."""
     spectrum = spectrum_in_sequence_unit(sequence, estimate.spectrum)
     def in_unit(values: np.ndarray) -> np.ndarray:
         return estimate.spectrum.replace(values=np.asarray(values)[:, None]).to_unit(sequence.spectral_unit).values[:, 0]
@@ -326,7 +325,7 @@ def solve_sequence_flash(sequence: Sequence, mode: str, ambient_weights: np.ndar
 
 
 def flash_payload(sequence: Sequence, solution: FlashSolution, target: str | None) -> dict:
-    """The ``msflash flash --json`` object (DESIGN §7)."""
+    """The ``msflash flash --json`` object (docs/architecture.md §7)."""
     payload = {
         "sequence": str(sequence.directory),
         "mode": solution.mode,
@@ -377,7 +376,7 @@ def estimate_sequence_local(sequence: Sequence, method: str = "auto", solver: st
 
 
 def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:
-    """The ``msflash estimate --method … --json`` object: DESIGN §7 keys plus the model and the tiles.
+    """The ``msflash estimate --method … --json`` object: docs/architecture.md §7 keys plus the model and the tiles.
 
     ``spectrum`` and ``ambient_weights`` are the global estimate for the global model and the
     area-weighted mean over the tiles for the local one; the tiles are under ``tiles``.

@@ -16,11 +16,10 @@ thread of the fake polls its sockets and, at each tick of a grid aligned to the 
 period 1 / trigger frequency (1 ms here), starts a frame if a software trigger was latched since
 the last tick: it stamps the frame start (``g_get_real_time``, the host clock) into the GVSP
 leader, fills the test pattern and sends the packets. Until its first frame of an acquisition it
-ticks only every 100 ms, so that first trigger waits up to 100 ms (110 ms measured); after it the
-thread spins between ticks (0.4 CPU-second per second measured on the loaded machine). The old
-bench compared end-to-end means over four short blocks per side and got −3.0, +2.8, +5.1 ms in
-three runs: each block's first frame (up to 100 ms) and the transfer's own jitter decided the
-sign.
+ticks only every 100 ms, so that first trigger waits up to 100 ms; after it the thread spins
+between ticks. An end-to-end comparison of means over a few short blocks per side therefore
+measures the fake, not our layer: each block's first frame and the transfer's own jitter decided
+even the sign of the old bench's figure (its results: docs/architecture.md §10).
 
 So each trigger's latency is split, on the host clock, into
 
@@ -49,11 +48,7 @@ timed; bare and AravisCamera run in alternating blocks (ABBA) so drift favours n
 ``latency_stages_ms`` has every stage's median per side; ``latency_ms_*`` are the end-to-end
 medians, which include the tick wait and the transfer.
 
-Measured on the loaded, shared two-core machine, 5 runs of each version: with the copy
-out of the Aravis buffer the excess was 0.87–0.94 ms (median 0.89; handoff 0.88 ms against the
-bare loop's 0.05); with zero-copy frames 0.21–0.29 ms (median 0.26; handoff 0.26 ms). The upper
-end of the interval stays under 0.33 ms except in runs where the caller's thread was stalled
-(one run: 1.15 ms).
+What it measured, with and without the copy out of the Aravis buffer: docs/architecture.md §10.
 """
 
 from __future__ import annotations

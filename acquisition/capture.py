@@ -1,6 +1,6 @@
 """Run a capture plan: pair every frame with its step and write it to disk at once.
 
-Three synchronisation modes (DESIGN §4), chosen by ``plan.trigger``:
+Three synchronisation modes (docs/architecture.md §4), chosen by ``plan.trigger``:
 
 ``"software"`` — *host paced* (the fallback)
     For each step the booth is set to the step's levels (``SET``, which replies once applied),
@@ -243,9 +243,9 @@ def run_capture_with_flash(
 def collector_paused() -> Iterator[None]:
     """Pause Python's automatic (cyclic) garbage collection while a flash sequence streams.
 
-    A collection stops every thread of the process; on the capture bench one came about 30 times
-    per sequence, 0.2 ms (young objects) to 6 ms (older generations) each, and one landing
-    between the last LED frame and the flash trigger doubled that latency. A sequence lasts
+    A collection stops every thread of the process; on the capture bench collections came many
+    times per sequence, and one landing between the last LED frame and the flash trigger doubled
+    that latency (docs/architecture.md §10). A sequence lasts
     k + 2 frame periods and leaves almost no cyclic garbage (reference counting frees the rest),
     so collection waits until it is over. The previous state is restored on every exit path.
     """

@@ -1,4 +1,4 @@
-"""The ``msflash`` command line (DESIGN §7).
+"""The ``msflash`` command line (docs/architecture.md §7).
 
 Subcommands live in small modules that each expose ``register(subparsers)``; this module builds
 the parser, dispatches, and turns errors into exit statuses: bad input → 2 with one line

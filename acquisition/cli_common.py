@@ -63,7 +63,7 @@ def dumps_json(payload: dict[str, Any]) -> str:
 
 
 def print_json(payload: dict[str, Any]) -> None:
-    """Print one JSON object on stdout (the ``--json`` contract of DESIGN §7)."""
+    """Print one JSON object on stdout (the ``--json`` contract of docs/architecture.md §7)."""
     sys.stdout.write(dumps_json(payload) + "\n")
     sys.stdout.flush()
 

@@ -21,8 +21,8 @@ from processing.synthesis import to_raw_values
 
 
 DEFAULT_LOCAL_METHOD = "auto"
-"""Default of ``--method``: ``auto`` chose global on 100/100 simulated uniform scenes and on both shared samples,
-with the identical estimate (docs/local-estimation.md)."""
+"""Default of ``--method``: ``auto`` keeps the global estimate unless a local model predicts held-out tiles
+clearly better, so a uniform scene costs nothing (its acceptance results: docs/local-estimation.md)."""
 
 
 def _alpha(text: str) -> float | str:

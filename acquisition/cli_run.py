@@ -4,7 +4,7 @@
 matching and complementary flashes → re-capture with the chosen one (same sequence, role
 ``flash``) → synthesise both computational images → previews, a spectra plot and a report.
 
-``--sync host|booth|camera`` picks who paces the frames (DESIGN §4; :mod:`acquisition.capture`).
+``--sync host|booth|camera`` picks who paces the frames (docs/architecture.md §4; :mod:`acquisition.capture`).
 
 The flash is captured in the same stream as the LED frames
 (:func:`acquisition.capture.run_capture_with_flash`): the estimate and the flash are computed

@@ -17,9 +17,9 @@ The rule
 - **Below black**: read noise puts dark pixels a little below black, so values down to
   ``black − margin`` are accepted, with ``margin = BLACK_MARGIN_FRACTION × (white − black) ×
   max(gain, 1)``: a stated bound, since a frame alone cannot tell its read noise from an offset.
-  Read noise is well under 0.5 % of full scale at unity gain on the sensors msflash knows (the
-  sim: 4 DN of 65 279; the shared 16-bit sample: 15 DN below black of 65 471 at worst), so 2 %
-  is ≥ 4σ of even a noisy sensor, and it grows with the frame's gain as read noise in DN does.
+  Read noise is well under 0.5 % of full scale at unity gain on the sensors msflash knows
+  (docs/architecture.md §10), so 2 % is ≥ 4σ of even a noisy sensor, and it grows with the
+  frame's gain as read noise in DN does.
   What it catches is an offset: a black level declared for another bit depth or another camera
   mode (black 256 declared for data whose black is 0, or 4096 for a 12-bit black of 256 in a
   16-bit container).

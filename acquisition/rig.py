@@ -1,4 +1,4 @@
-"""Rigs: a camera and a booth wired together (DESIGN §4).
+"""Rigs: a camera and a booth wired together (docs/architecture.md §4).
 
 ``sim`` (the default): a :class:`SimulatedCamera` rendering a spectral scene with the LED levels
 the booth *emulator* holds at exposure time, and the real :class:`led_controller.LedBooth`
@@ -21,7 +21,7 @@ IP address opens one GigE camera without discovery), and :class:`led_controller.
 tried; :class:`RigOpenError` lists each one's failure. LED spectra (and optionally the camera's
 responsivities) come from a calibration directory or CSV files (:func:`load_hw_spectra`).
 
-The trigger wires (DESIGN §4, three sync modes) are modelled in every rig:
+The trigger wires (docs/architecture.md §4, three sync modes) are modelled in every rig:
 
 - *booth master*: the emulator's trigger output (``on_trigger_out``) drives the camera's trigger
   input — :meth:`SimulatedCamera.trigger_line` on ``sim``; on ``aravis-fake`` (the fake has no

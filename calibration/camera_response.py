@@ -118,8 +118,8 @@ def learn_prior(cameras: Mapping[str, Spectra], exclude: Sequence[str] = ()) -> 
     Each training channel is scaled to unit norm before the moment is taken: a channel's gain is
     a nuisance the fit estimates from the data anyway (α is chosen per channel), so every camera
     weighs the same in the shape prior instead of in proportion to its channel's share of the
-    peak. (Leave-one-camera-out over the 34 cameras, 5 noise seeds: mean RMSE 0.0138 against
-    0.0141 with max-normalised curves, lower on every seed; ``docs/calibration.md``.)
+    peak. (Leave-one-camera-out it does better than max-normalised curves on every noise seed:
+    ``docs/calibration.md``, camera responsivities.)
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Errors of the calibration package (STYLE §6.6).
+"""Errors of the calibration package (docs/architecture.md §7).
 
 ``CalibrationError`` is a ``ValueError``: every calibration failure is bad input (a file, a
 field, a measurement) and the message names where, what and what was expected:

@@ -10,8 +10,8 @@ between the two resulting chart renderings (true camera, D65-fitted camera → X
 
 :func:`simulate_chart_responses` is also what ``msflash calibrate camera --simulate`` runs.
 :func:`leave_one_camera_out_seeds` repeats the study over several noise seeds: one seed is one
-draw of the sensor noise, and the mean RMSE of a single draw moves by ±0.0006 between seeds
-(about ±4 % of the figure), as much as the differences between the priors compared.
+draw of the sensor noise, and the mean RMSE of a single draw moves between seeds as much as the
+priors compared differ (``docs/calibration.md``, camera responsivities).
 """
 
 from __future__ import annotations

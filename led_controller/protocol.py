@@ -91,7 +91,7 @@ class Event(StrEnum):
 
 
 class Mode(StrEnum):
-    """Synchronisation modes of ``ARM`` (DESIGN §4)."""
+    """Synchronisation modes of ``ARM`` (docs/architecture.md §4)."""
 
     HOST = "HOST"
     BOOTH = "BOOTH"

@@ -7,7 +7,7 @@ solved exactly, in microseconds, by Lawson & Hanson's reduction to *least distan
 Problems*, 1974, ch. 23), followed by a polish of the active set through its KKT system.
 
 Because the data enter only through H and f, the problems can be built from the sufficient
-statistics of DESIGN §8 (the Gram matrix of the LED-only images and their products with the
+statistics of docs/architecture.md §8 (the Gram matrix of the LED-only images and their products with the
 ambient image), never from the pixels.
 """
 

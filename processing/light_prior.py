@@ -40,8 +40,8 @@ The model (:class:`PriorModel`)
    estimate is the posterior mode of a *tempered* likelihood — errors of variance κσ², one
    effective sample per κ blocks, which is what λ = κσ²/s² says — and this is its covariance: pixel
    noise and model error both enter through the residual σ², and directions the data leave open keep
-   the prior's spread (s²Σ). On the tuning split (κ = 100) the truth lay within 1σ at 77 % of the
-   wavelengths and within 2σ at 95 % (nominal 68 %, 95 %); with κ left out, at 11 % and 23 %.
+   the prior's spread (s²Σ). Without κ in the covariance the band is far too narrow; with it, it
+   covers the truth about as often as nominal on the tuning split (docs/light-prior.md, validation).
 
 Model choice (:func:`choose_model`): both models predict the ambient image from the LED-only
 images, linearly; each is trained on all folds of blocks but one and predicts the pixels of the fold
@@ -372,8 +372,8 @@ class PriorModel:
         relative = math.sqrt(self.prediction_error(phi, observed) / energy) if energy > 0 else 0.0
         warnings = []
         # The posterior band says how far the spectrum may be off at each wavelength (docs/light-prior.md);
-        # a band wider than half the peak somewhere flagged 83 % of good estimates on the harness's tuning
-        # scenes, so it is shown, not warned about.
+        # a warning on a wide band flagged mostly good estimates (docs/light-prior.md, validation), so the
+        # band is shown, not warned about.
         if not np.max(spectrum) > 0:
             warnings.append("the estimated spectrum is zero: no ambient light was found")
         return PriorEstimate(
@@ -533,10 +533,11 @@ def choose_model(statistics: ChannelStatistics, model: PriorModel, margin: float
 
     Both models predict each fold of blocks' ambient pixels from its LED-only pixels, trained on the
     other folds (:func:`held_out_errors`); the errors compared are those on the pixels as observed
-    (noise amplified by a model counts against it). On the tuning split they agreed with the better
-    spectrum in 89 % of the cases, the noise-corrected ones in 87 %. The LED model is the simpler (k weights, exact for any
-    surface when the ambient is in the LEDs' span); it is kept unless the prior model's relative
-    held-out RMS error is below ``(1 − margin)`` times its own.
+    (noise amplified by a model counts against it): on the tuning split they picked the better
+    spectrum more often than the noise-corrected ones (docs/light-prior.md, validation). The LED
+    model is the simpler (k weights, exact for any surface when the ambient is in the LEDs' span);
+    it is kept unless the prior model's relative held-out RMS error is below ``(1 − margin)`` times
+    its own.
     """
     errors = held_out_errors(statistics, model)
     led_error, prior_error = errors.led_observed, errors.prior_observed

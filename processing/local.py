@@ -1,9 +1,10 @@
 """Spatially varying ambient light: tiled statistics, local estimates and model selection (issue 9).
 
 The paper assumes one ambient over the whole scene and names patch-based local estimation as
-future work (PAPER.md, "Limits the authors name"). Here the frame is cut into a grid of tiles and
-the sufficient statistics of eq. 4–6 (:class:`~processing.statistics.SequenceStatistics`) are
-accumulated per tile in one pass. Statistics of disjoint samples add, so
+future work (Blasinski & Farrell 2017, among the limits the authors name). Here the frame is cut
+into a grid of tiles and the sufficient statistics of eq. 4–6
+(:class:`~processing.statistics.SequenceStatistics`) are accumulated per tile in one pass.
+Statistics of disjoint samples add, so
 
 - the global statistics are the sum of the tiles' (:meth:`TiledStatistics.total`),
 - a Gaussian-weighted sum of neighbouring tiles' statistics is a *local weighted least squares*
@@ -36,8 +37,8 @@ The LED-only images are differences of noisy frames, so the moments of eq. 5 car
 variance (errors in variables). :func:`tile_statistics` also measures it per block from the
 difference of two interleaved column halves (:attr:`TiledStatistics.denoised`), and the local model
 is solved on the corrected statistics, as the global estimate is (:mod:`processing.statistics` measures
-the same probe for the whole frame; DESIGN §8: the noise is propagated from the data, here without a
-noise model).
+the same probe for the whole frame; docs/architecture.md §8: the noise is measured from the data,
+without a noise model).
 
 Public objects
 --------------
@@ -87,10 +88,8 @@ global model's; otherwise the global model is kept (calibrated on uniform scenes
 MIN_EXPLAINED_GAIN = 1e-3
 """A local model must also cut the held-out squared error by more than this fraction of the ambient
 image's energy ``Σ_t ‖a_t‖²`` (a global model that predicts the ambient image within √0.001 ≈ 3 %
-RMS stays). Simulated, 12–16 scenes per setting over 8 cameras, exposures from 5 % to 90 % of full
-scale, flash 0.25–8× the ambient, noise-free too: uniform scenes ≤ 7.3·10⁻⁴ (that one with 60 % of
-the blocks saturated), gradients ≥ 1.6·10⁻³ (tungsten blended into fluorescent, whose camera
-images are alike), boundaries ≥ 2.7·10⁻²."""
+RMS stays). It lies between the largest cut simulated uniform scenes gave and the smallest of the
+gradients, whose two ambients can look alike to the camera (docs/local-estimation.md, how it works)."""
 REGION_RADIUS = 2
 """Half-width in blocks of the box over which block residuals are pooled before labelling (5 × 5 blocks)."""
 REGION_ITERATIONS = 20

@@ -10,7 +10,7 @@ Public objects
 - :func:`srgb_preview`: an 8-bit sRGB image.
 
 The paper's figures are rendered without white balance: a 3×3 camera → XYZ matrix fitted on a
-Macbeth chart under D65, then sRGB (PAPER.md). That keeps the ambient's colour cast visible,
+Macbeth chart under D65, then sRGB (the authors' code, hblasins/compMultispFlash). That keeps the ambient's colour cast visible,
 which is the point of comparing ambient-only, matching and complementary images. Conversion to
 colour-science objects happens here and in :mod:`processing.datasets` only.
 """

@@ -2,7 +2,7 @@
 
 Ambient estimation (eq. 4–6) needs only the k×k Gram matrix of the LED-only images, their
 k products with the ambient image, the ambient image's squared norm and the sample count
-(DESIGN §8). They are accumulated chunk by chunk straight from the raw frames: each chunk is
+(docs/architecture.md §8). They are accumulated chunk by chunk straight from the raw frames: each chunk is
 linearised (``(value − black_level) / (exposure_us · gain)``), saturated pixels are masked, the
 LED frames are differenced against the ambient frame and the products are added up. No full-size
 float copy of the stack ever exists.
@@ -64,8 +64,8 @@ PROBE_BLOCKS = 16384
 """Blocks the noise probe needs at least (:class:`BlockRows`): frames with several times more use
 every ``stride``-th block row only, ``stride = min(4, blocks // PROBE_BLOCKS)``. Its moments are then
 scaled by valid blocks ÷ probed valid blocks; with ≥ 16 384 probed blocks their sampling error is
-below 1.1 % of the noise's share (√(2/n)), against about 40 % more estimation time for a full probe
-of a 1280 × 1024 stack."""
+below 1.1 % of the noise's share (√(2/n)), while a full probe of a large stack costs markedly more
+estimation time (docs/architecture.md §10)."""
 PRODUCT_COLUMNS = 4096
 """Columns per slice of the incremental moments' matrix–vector products (:func:`_row_products`):
 one thread each (OpenBLAS threads a product only above about 10⁵ elements)."""
@@ -279,8 +279,8 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
 
     The image formation model is linear, so block sums obey it exactly — whatever the texture
     inside a block — while their noise variance relative to the signal drops by ``factor²``. That
-    shrinks the errors-in-variables bias of regressing on noisy LED-only images (PAPER.md: the
-    authors downsample by 4 too). Edges that do not fill a block are dropped.
+    shrinks the errors-in-variables bias of regressing on noisy LED-only images (the authors'
+    code, hblasins/compMultispFlash, downsamples by 4 too). Edges that do not fill a block are dropped.
 
     Parameters
     ----------
@@ -401,7 +401,7 @@ def accumulate_statistics(
     Notes
     -----
     A pixel is excluded when any channel of it, in any frame, is at or above the white level
-    (DESIGN §6). Moments are accumulated in float64.
+    (docs/architecture.md §6). Moments are accumulated in float64.
     """
     if bin_factor < 1 or cfa_period not in (1, 2):
         raise SpectralDataError(f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2")
@@ -1007,7 +1007,7 @@ def _gathered(row_sums: np.ndarray, factor: int, channels: int, matrix) -> np.nd
     with a gather matrix combines them per channel — far faster than strided slicing, and exact
     (±1/0 weights, integer sums below 2²⁴ in float32). The product runs in slices of GATHER_ROWS
     groups: OpenBLAS splits larger ones across threads, whose wake-up and spinning cost more than
-    the product on a busy 2-core machine (measured 4× slower under load). Returns (H/f, W/f, m) for
+    the product on a busy 2-core machine (docs/architecture.md §10). Returns (H/f, W/f, m) for
     a (factor·channels, m) matrix.
     """
     height, width = row_sums.shape[0], row_sums.shape[1] // (factor * channels)
@@ -1061,8 +1061,8 @@ def _row_products(rows: np.ndarray, row: int) -> np.ndarray:
     """``rows @ rows[row]``, summed over slices of :data:`PRODUCT_COLUMNS` columns.
 
     OpenBLAS splits one large matrix–vector product across its threads; on a busy 2-core machine
-    (the capture's stream and writer threads) their wake-up made the product of a 1280 × 1024
-    frame's rows take 4–12 ms instead of 0.3 ms. Slices stay below its threading threshold.
+    (the capture's stream and writer threads) their wake-up costs many times the product itself
+    (docs/architecture.md §10). Slices stay below its threading threshold.
     """
     products = np.zeros(rows.shape[0])
     vector = rows[row]

@@ -82,7 +82,7 @@ def test_estimate_auto_two_illuminants_goes_local(sequences: dict[str, Path], ca
     assert weights.shape == (6, 6, 7)
     assert np.array(tiles["spectra"]).shape == (6, 6, len(payload["wavelengths_nm"]))
     assert len(tiles["row_edges"]) == 7 and tiles["row_edges"][-1] == SHAPE[0]
-    # The DESIGN §7 keys hold the area-weighted mean over the tiles; the global estimate is kept.
+    # The docs/architecture.md §7 keys hold the area-weighted mean over the tiles; the global estimate is kept.
     areas = np.outer(np.diff(tiles["row_edges"]), np.diff(tiles["column_edges"]))
     np.testing.assert_allclose(payload["ambient_weights"], np.einsum("ts,tsk->k", areas, weights) / areas.sum(), rtol=1e-9)
     assert len(payload["spectrum_global"]) == len(payload["spectrum"])

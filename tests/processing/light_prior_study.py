@@ -14,7 +14,7 @@ Surfaces are *not* the reflectance basis's (Natural-100): Macbeth 24, Vrhel's 64
 - ``--split family``: a stress test on tuning lights: for each family (LED, fluorescent, incandescent,
   discharge) the prior learns without *any* light of that family (nor a near copy).
 
-Run: ``PYTHONPATH=$PWD /work/main/.venv/bin/python tests/processing/light_prior_study.py --split tuning``.
+Run: ``PYTHONPATH=$PWD .venv/bin/python tests/processing/light_prior_study.py --split tuning``.
 The default estimate is :func:`acquisition.analysis.estimate_sequence` (what ``msflash estimate`` runs).
 """
 

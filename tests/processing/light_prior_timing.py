@@ -1,6 +1,6 @@
 """Timing of the light prior on 8 synthetic 1280×1024 frames (Bayer and RGB), against the eq. 5 statistics.
 
-Run: ``PYTHONPATH=$PWD /work/main/.venv/bin/python tests/processing/light_prior_timing.py`` (wall times;
+Run: ``PYTHONPATH=$PWD .venv/bin/python tests/processing/light_prior_timing.py`` (wall times;
 the shared 2-core machine makes them vary by 2× from run to run).
 """
 

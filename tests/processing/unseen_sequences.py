@@ -1,4 +1,4 @@
-"""An independent sequence generator: what another lab's tool would write in format v1 (DESIGN §6).
+"""An independent sequence generator: what another lab's tool would write in format v1 (docs/architecture.md §6).
 
 Deliberately shares no code with msflash: its own spectral tables (read from the shared CSV files
 with its own reader, resampled with ``np.interp``), its own renderer (reflectance × light ×
