@@ -60,10 +60,11 @@ def booth_emulator(args: argparse.Namespace, *, stop: threading.Event | None = N
     emulator = _emulator_from_args(args)
     stop = stop or threading.Event()
     with sigterm_as_exit(), serve_on_pty(emulator) as server:
-        sys.stdout.write(server.port + "\n")
-        sys.stdout.flush()
-        progress(f"booth emulator on {server.port} ({len(emulator.names)} channels); Ctrl-C to stop")
+        # From the moment the port is printed a client may connect and press Ctrl-C: the handler covers it.
         try:
+            sys.stdout.write(server.port + "\n")
+            sys.stdout.flush()
+            progress(f"booth emulator on {server.port} ({len(emulator.names)} channels); Ctrl-C to stop")
             while not stop.wait(0.2):
                 pass
         except (KeyboardInterrupt, SystemExit):
