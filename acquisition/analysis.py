@@ -7,6 +7,7 @@ spectra to the processing unit (photons) and converts results back to the sequen
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -268,8 +269,8 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
     two-column CSV ``wavelength_nm, value`` in energy units.
     """
     path = Path(target)
-    if path.suffix.lower() in (".csv", ".txt") or path.exists():
-        if not path.exists():
+    if path.suffix.lower() in (".csv", ".txt") or os.path.lexists(path):
+        if not os.path.lexists(path):
             raise RecordingError(f"{target}: target illuminant file not found; expected a CSV file or a name like D65")
         spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
         if spectra.count != 1:

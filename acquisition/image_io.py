@@ -27,6 +27,7 @@ import OpenImageIO as oiio
 
 from acquisition.errors import RecordingError
 from calibration.file_modes import default_file_mode
+from processing.user_files import IMAGE_MAX_BYTES, check_user_file, shown_path
 
 INTEGER_SUFFIX = ".tiff"
 """Suffix of integer frames (16-bit TIFF, uncompressed)."""
@@ -80,10 +81,10 @@ def _oiio_error() -> str:
 
 @contextlib.contextmanager
 def _open_input(path: Path):
-    if not path.exists():
-        raise RecordingError(f"{path}: image file is missing; expected a frame image")
-    if not path.is_file():
-        raise RecordingError(f"{path}: is not a regular file; expected a frame image")
+    if not os.path.lexists(path):
+        raise RecordingError(f"{shown_path(path)}: image file is missing; expected a frame image")
+    # Before OpenImageIO opens it: a FIFO would block it, a device or a directory has no image.
+    check_user_file(path, "a frame image", IMAGE_MAX_BYTES, RecordingError)
     image = oiio.ImageInput.open(str(path))
     if image is None:
         raise RecordingError(f"{path}: cannot be read as an image ({_oiio_error()}); expected a TIFF, PNG or EXR")

@@ -582,18 +582,19 @@ def hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | 
         if not directory.is_dir():
             raise UsageError(f"--calibration {directory}: not a directory; expected a calibration directory "
                              "(calibration.json from 'msflash calibrate', or led_spectra.csv)")
-        if (directory / "calibration.json").is_file():
+        # lexists, not is_file: a calibration.json that is a FIFO or a device is refused by its reader.
+        if os.path.lexists(directory / "calibration.json"):
             leds, camera, calibration_id = _load_calibration_set(directory)
             reference = (calibration_id, directory)
         else:
             if led_path is None:
-                led_path = next((directory / n for n in CALIBRATION_LED_FILES if (directory / n).is_file()), None)
+                led_path = next((directory / n for n in CALIBRATION_LED_FILES if os.path.lexists(directory / n)), None)
                 if led_path is None:
                     raise UsageError(f"--calibration {directory}: no calibration.json or "
                                      f"{' or '.join(CALIBRATION_LED_FILES)}; expected the LED spectra")
             if resp_path is None:
                 resp_path = next((directory / n for n in CALIBRATION_RESPONSIVITY_FILES
-                                  if (directory / n).is_file()), None)
+                                  if os.path.lexists(directory / n)), None)
     if led_path is not None:
         leds = read_spectra_file(led_path, "spd")
     if resp_path is not None:

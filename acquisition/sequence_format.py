@@ -44,6 +44,7 @@ from calibration.spectrometer import NEGATIVE_TOLERANCE
 from processing.errors import SpectralDataError
 from processing.spectra import Spectra, WavelengthGrid
 from processing.synthesis import linearise
+from processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 SEQUENCE_FORMAT = "msflash-sequence"
 """The value of the ``format`` key."""
@@ -407,14 +408,9 @@ def _load_json(path: Path) -> Any:
             result[key] = value
         return result
 
-    if not path.is_file():
-        raise RecordingError(f"{path}: file is missing; expected a sequence directory holding {SEQUENCE_FILE}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as err:
-        raise RecordingError(f"{path}: is not UTF-8 text ({err.reason} at byte {err.start}); expected JSON") from err
-    except OSError as err:
-        raise RecordingError(f"{path}: cannot be read ({err.strerror}); expected a readable file") from err
+    if not os.path.lexists(path):
+        raise RecordingError(f"{shown_path(path)}: file is missing; expected a sequence directory holding {SEQUENCE_FILE}")
+    text = read_user_text(path, f"a sequence's {SEQUENCE_FILE} (UTF-8 JSON)", JSON_MAX_BYTES, RecordingError)
     try:
         return json.loads(text, object_pairs_hook=no_duplicates)
     except json.JSONDecodeError as err:

@@ -22,6 +22,7 @@ says which range the file covers and which is needed. Every problem is a one-lin
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -41,9 +42,13 @@ _TABLE_SUFFIXES = (".csv", ".txt")
 
 
 def is_file(spec: str) -> bool:
-    """Whether an option's text names a file (a table suffix, or an existing path) rather than a name."""
+    """Whether an option's text names a file (a table suffix, or an existing path) rather than a name.
+
+    Any existing path but a directory counts (a FIFO, a device, a symlink loop), so the file reader
+    refuses it by what it is instead of it being looked up as a name.
+    """
     path = Path(spec)
-    return path.suffix.lower() in _TABLE_SUFFIXES or path.is_file()
+    return path.suffix.lower() in _TABLE_SUFFIXES or (os.path.lexists(path) and not path.is_dir())
 
 
 def read_spectra_file(path: str | Path, kind: SpectralKind) -> Spectra:

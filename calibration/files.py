@@ -38,6 +38,7 @@ from calibration.file_modes import default_file_mode
 from processing.datasets import load_spectra_csv
 from processing.errors import SpectralDataError
 from processing.spectra import Spectra
+from processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 FORMAT = "msflash-calibration"
 VERSION = 1
@@ -199,11 +200,11 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
     """
     directory = Path(directory)
     path = directory if directory.suffix == ".json" else directory / CALIBRATION_FILE
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as err:
-        raise CalibrationError(f"{path}: cannot be read ({err.strerror or err}); expected a calibration directory "
-                               "written by 'msflash calibrate'") from err
+    if not os.path.lexists(path):
+        raise CalibrationError(f"{shown_path(path)}: cannot be read (No such file or directory); expected a "
+                               "calibration directory written by 'msflash calibrate'")
+    text = read_user_text(path, f"a calibration's {CALIBRATION_FILE} (UTF-8 JSON) written by 'msflash calibrate'",
+                          JSON_MAX_BYTES, CalibrationError)
     try:
         document = json.loads(text)
     except json.JSONDecodeError as err:

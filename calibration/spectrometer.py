@@ -39,6 +39,7 @@ import numpy as np
 from calibration.errors import CalibrationError
 from processing.errors import SpectralDataError
 from processing.spectra import Spectra, SpectralUnit, WavelengthGrid
+from processing.user_files import TEXT_EXPORT_MAX_BYTES, read_user_bytes
 
 _COMMENT_PREFIXES = ("#", "%", "//", ";")
 _END_MARKERS = ("end", ">>>>>end")
@@ -227,10 +228,7 @@ def read_spectrometer_file(
 ) -> SpectrometerMeasurement:
     """Read a spectrometer export from a file (UTF-8 or Latin-1 text; see :func:`parse_spectrometer_text`)."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as err:
-        raise CalibrationError(f"{path}: cannot be read ({err.strerror or err}); expected a spectrometer text file") from err
+    data = read_user_bytes(path, "a spectrometer text file", TEXT_EXPORT_MAX_BYTES, CalibrationError)
     if data.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16 with its byte-order mark (Windows "Unicode")
         try:
             text = data.decode("utf-16")

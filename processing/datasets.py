@@ -35,6 +35,7 @@ import numpy as np
 
 from processing.errors import SpectralDataError
 from processing.spectra import DEFAULT_GRID, SpectralKind, SpectralUnit, Spectra, WavelengthGrid, require_same_grid
+from processing.user_files import SPECTRAL_TABLE_MAX_BYTES, read_user_text, shown_path
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 """Folder of the shipped data files (see ``SOURCES.md`` there)."""
@@ -121,16 +122,15 @@ def load_spectra_csv(
     Raises
     ------
     SpectralDataError
-        On an unreadable file, a bad header, a ragged row, a non-number or (with
+        On a missing or unreadable file, one that is not a regular file (FIFO, device,
+        directory, symlink loop) or is above 16 MiB (checked before reading), a bad header, a ragged row, a non-number or (with
         ``nan="error"``) a missing value; the message names the file, line and column.
     """
     path = Path(path)
-    where = str(path)
-    try:
-        # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is dropped instead of becoming part of the header.
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as err:
-        raise SpectralDataError(f"{where}: cannot read spectral table ({err}); expected a UTF-8 CSV file") from err
+    where = shown_path(path)
+    # The one safe way to open a user's file: regular files only, at most 16 MiB, read with a cap.
+    # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is dropped instead of becoming part of the header.
+    text = read_user_text(path, "a spectral table (UTF-8 CSV file)", SPECTRAL_TABLE_MAX_BYTES, encoding="utf-8-sig")
 
     comments: list[str] = []
     header: list[str] | None = None

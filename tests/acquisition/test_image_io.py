@@ -105,7 +105,7 @@ def test_unreadable_file_is_named(tmp_path: Path) -> None:
     bad.write_bytes(b"not an image at all")
     with pytest.raises(RecordingError, match=r"garbage.tiff: cannot be read as an image .*; expected"):
         read_image(bad)
-    with pytest.raises(RecordingError, match="is not a regular file"):
+    with pytest.raises(RecordingError, match="is a directory; expected a frame image, a regular file"):
         read_image(tmp_path)
 
 

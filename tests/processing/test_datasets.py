@@ -149,7 +149,7 @@ class TestCsvReader:
         assert spectra.names == ("a",) and spectra.values[:, 0].tolist() == [1, 3]
 
     def test_missing_file(self, tmp_path: Path) -> None:
-        with pytest.raises(SpectralDataError, match="missing.csv: cannot read"):
+        with pytest.raises(SpectralDataError, match="missing.csv: cannot be read"):
             datasets.load_spectra_csv(tmp_path / "missing.csv", "spd", "energy")
 
     def test_names_must_match_columns(self, tmp_path: Path) -> None:

@@ -1,0 +1,154 @@
+"""The one safe way to open a file a user named.
+
+Every path option and every file a sequence or a calibration names is read through here:
+
+- :func:`check_user_file` refuses, *before anything opens the file*, what is not a regular file
+  (a FIFO would block the open or the read for ever, ``/dev/zero`` would fill memory, a directory
+  or a symlink loop gives an obscure error) and a file larger than the cap for its kind;
+- :func:`read_user_bytes` and :func:`read_user_text` then read at most ``cap + 1`` bytes from a
+  descriptor opened non-blocking and checked again with ``fstat``, so a file swapped after the
+  check, or one whose size ``stat`` under-reports, still cannot block or grow memory past the cap;
+- :func:`shown_path` prints any file name on one line, whatever bytes it holds (undecodable
+  bytes as ``\\xNN``, control characters escaped).
+
+Readers that open files themselves (OpenImageIO) call :func:`check_user_file` first. Errors are
+``SpectralDataError`` unless the caller passes its own error type; messages follow
+``"<file>: <what is wrong>; expected <what>"``, one line, which the CLI maps to exit status 2.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import stat
+
+from processing.errors import SpectralDataError
+
+MiB = 1 << 20
+
+#: Caps per kind of file, in bytes. Spectral tables and spectrometer exports are a few hundred
+#: lines; a sequence or calibration document a few thousand; a frame image at most some hundred MB.
+SPECTRAL_TABLE_MAX_BYTES = 16 * MiB
+TEXT_EXPORT_MAX_BYTES = 16 * MiB
+JSON_MAX_BYTES = 16 * MiB
+IMAGE_MAX_BYTES = 4096 * MiB
+
+_TYPES = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def shown_path(path: str | bytes | os.PathLike) -> str:
+    """``path`` as one printable line: undecodable bytes as ``\\xNN``, control characters escaped.
+
+    >>> shown_path(b"spectra\\xff.csv")
+    'spectra\\\\xff.csv'
+    >>> shown_path("a\\nb.csv")
+    'a\\\\nb.csv'
+    """
+    text = os.fsencode(path).decode("utf-8", "backslashreplace")
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
+def _size(n: int) -> str:
+    return f"{n / MiB:.1f} MiB" if n >= MiB else f"{n} bytes"
+
+
+def _file_type(mode: int) -> str | None:
+    for test, name in _TYPES:
+        if test(mode):
+            return name
+    return None if stat.S_ISREG(mode) else "not a regular file"
+
+
+def check_user_file(
+    path: str | bytes | os.PathLike, kind: str, max_bytes: int, error: type[Exception] = SpectralDataError,
+) -> os.stat_result:
+    """Check, without opening it, that ``path`` is a regular file of at most ``max_bytes``.
+
+    Symbolic links are followed; a loop of them is refused. ``kind`` says what was expected
+    ("a spectral table (CSV)", …) and ends every message.
+
+    Raises
+    ------
+    error
+        (``SpectralDataError`` by default) naming the file: missing, unreadable, a symlink loop,
+        a directory, FIFO, device or socket, or larger than ``max_bytes``.
+    """
+    shown = shown_path(path)
+    try:
+        info = os.stat(path)
+    except FileNotFoundError as err:
+        raise error(f"{shown}: cannot be read (no such file); expected {kind}") from err
+    except OSError as err:
+        if err.errno == errno.ELOOP:
+            raise error(f"{shown}: is a loop of symbolic links; expected {kind}") from err
+        raise error(f"{shown}: cannot be read ({err.strerror or err}); expected {kind}") from err
+    return _check_stat(shown, info, kind, max_bytes, error)
+
+
+def _check_stat(shown: str, info: os.stat_result, kind: str, max_bytes: int, error: type[Exception]) -> os.stat_result:
+    what = _file_type(info.st_mode)
+    if what is not None:
+        raise error(f"{shown}: is {what}; expected {kind}, a regular file")
+    if info.st_size > max_bytes:
+        raise error(f"{shown}: is {_size(info.st_size)}; expected {kind} of at most {_size(max_bytes)}")
+    return info
+
+
+def read_user_bytes(
+    path: str | bytes | os.PathLike, kind: str, max_bytes: int, error: type[Exception] = SpectralDataError,
+) -> bytes:
+    """The bytes of the user's file ``path``, checked as :func:`check_user_file` checks it.
+
+    The file is opened non-blocking (a FIFO swapped in after the check cannot block the open),
+    checked again on its descriptor, and read for at most ``max_bytes + 1`` bytes.
+    """
+    shown = shown_path(path)
+    check_user_file(path, kind, max_bytes, error)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        handle = os.open(path, flags)
+    except OSError as err:
+        raise error(f"{shown}: cannot be read ({err.strerror or err}); expected {kind}") from err
+    try:
+        _check_stat(shown, os.fstat(handle), kind, max_bytes, error)
+        chunks: list[bytes] = []
+        left = max_bytes + 1
+        while left > 0:
+            chunk = os.read(handle, min(left, 1 << 20))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            left -= len(chunk)
+    except OSError as err:
+        raise error(f"{shown}: cannot be read ({err.strerror or err}); expected {kind}") from err
+    finally:
+        os.close(handle)
+    data = b"".join(chunks)
+    if len(data) > max_bytes:
+        raise error(f"{shown}: is larger than {_size(max_bytes)}; expected {kind} of at most {_size(max_bytes)}")
+    return data
+
+
+def read_user_text(
+    path: str | bytes | os.PathLike, kind: str, max_bytes: int, error: type[Exception] = SpectralDataError,
+    encoding: str = "utf-8",
+) -> str:
+    """The text of the user's file ``path`` (see :func:`read_user_bytes`), decoded strictly."""
+    data = read_user_bytes(path, kind, max_bytes, error)
+    try:
+        return data.decode(encoding)
+    except UnicodeDecodeError as err:
+        raise error(f"{shown_path(path)}: is not UTF-8 text ({err.reason} at byte {err.start}); "
+                    f"expected {kind}") from err
+
+
+__all__ = [
+    "IMAGE_MAX_BYTES", "JSON_MAX_BYTES", "SPECTRAL_TABLE_MAX_BYTES", "TEXT_EXPORT_MAX_BYTES",
+    "check_user_file", "read_user_bytes", "read_user_text", "shown_path",
+]
