@@ -66,6 +66,7 @@ from led_controller.booth import sigterm_as_exit
 from processing.datasets import PAPER_LED_SUBSETS
 from processing.errors import TargetUnreachableWarning
 from processing.lights import AMBIENTS
+from processing.user_files import printable
 
 CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG")
 SYNC_MODES: dict[str, TriggerSource] = {"host": "software", "booth": "booth", "camera": "camera"}
@@ -300,9 +301,11 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f"--out {out}: already holds a run; expected a new directory")
     output_directory(out)  # a file in the way or no write access: one line before any device is opened
     spec = _rig_spec(args)
-    progress(f"opening rig '{spec}'" + (f" (ambient {args.ambient}, scene {args.scene}, camera "
-                                        f"{args.sim_camera or SIM_DEFAULT_CAMERA}, LEDs "
-                                        f"{args.led_spectra or f'paper {args.leds or 7}'})" if spec == "sim" else ""))
+    # printable: a file name given to an option may hold any bytes, the line stays one line.
+    progress(printable(f"opening rig '{spec}'" + (f" (ambient {args.ambient}, scene {args.scene}, camera "
+                                                  f"{args.sim_camera or SIM_DEFAULT_CAMERA}, LEDs "
+                                                  f"{args.led_spectra or f'paper {args.leds or 7}'})"
+                                                  if spec == "sim" else "")))
     # SIGTERM unwinds like Ctrl-C, so the LEDs go off and the partial sequence stays readable.
     with sigterm_as_exit(), _open(args) as rig:
         if rig.camera_responsivities is None:

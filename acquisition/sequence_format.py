@@ -44,7 +44,7 @@ from calibration.spectrometer import NEGATIVE_TOLERANCE
 from processing.errors import SpectralDataError
 from processing.spectra import Spectra, WavelengthGrid
 from processing.synthesis import linearise
-from processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
+from processing.user_files import IMAGE_MAX_BYTES, JSON_MAX_BYTES, check_user_file, read_user_text, shown_path
 
 SEQUENCE_FORMAT = "msflash-sequence"
 """The value of the ``format`` key."""
@@ -470,15 +470,18 @@ def _check_file(file: Path, directory: Path, where: str, value: Any, *, must_exi
     relative = PurePosixPath(value)
     if relative.is_absolute() or Path(value).is_absolute():
         raise RecordingError(f"{file}: {where} {value!r} is absolute; expected a path relative to the sequence directory")
-    root = directory.resolve()
-    target = (directory / value).resolve()
+    try:
+        root = directory.resolve()
+        target = (directory / value).resolve()
+    except (OSError, RuntimeError) as err:  # RuntimeError: a loop of symbolic links (Python < 3.13)
+        raise RecordingError(f"{file}: {where} {value!r} cannot be resolved ({err}); expected a frame file") from err
     if target == root or not target.is_relative_to(root):
         raise RecordingError(f"{file}: {where} {value!r} points outside the sequence directory; expected a path inside it")
     if must_exist:
         if not target.exists():
             raise RecordingError(f"{file}: {where} {value!r} is missing; expected the frame file on disk")
-        if not target.is_file():
-            raise RecordingError(f"{file}: {where} {value!r} is not a regular file; expected a frame image")
+        # A FIFO, a device or a directory is refused by what it is, before anything opens it.
+        check_user_file(target, "a frame image", IMAGE_MAX_BYTES, RecordingError, name=f"{file}: {where} {value!r}")
     return value
 
 

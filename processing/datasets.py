@@ -35,7 +35,7 @@ import numpy as np
 
 from processing.errors import SpectralDataError
 from processing.spectra import DEFAULT_GRID, SpectralKind, SpectralUnit, Spectra, WavelengthGrid, require_same_grid
-from processing.user_files import SPECTRAL_TABLE_MAX_BYTES, read_user_text, shown_path
+from processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_text, shown_path
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 """Folder of the shipped data files (see ``SOURCES.md`` there)."""
@@ -147,7 +147,7 @@ def load_spectra_csv(
         if header is None:
             if not cells[0].lower().startswith("wavelength") or len(cells) < 2:
                 raise SpectralDataError(
-                    f"{where}:{line_number}: header is '{line[:60]}'; expected 'wavelength_nm,<name>,…'"
+                    f"{where}:{line_number}: header is '{printable(line[:60])}'; expected 'wavelength_nm,<name>,…'"
                 )
             header = cells
             continue
@@ -170,11 +170,11 @@ def load_spectra_csv(
                 value = float(cell)
             except ValueError as err:
                 raise SpectralDataError(
-                    f"{where}:{line_number}: column '{header[column]}' holds '{cell}'; expected a number"
+                    f"{where}:{line_number}: column '{header[column]}' holds '{printable(cell)}'; expected a number"
                 ) from err
             if not math.isfinite(value):
                 raise SpectralDataError(
-                    f"{where}:{line_number}: column '{header[column]}' holds '{cell}'; expected a finite number"
+                    f"{where}:{line_number}: column '{header[column]}' holds '{printable(cell)}'; expected a finite number"
                 )
             row.append(value)
         rows.append(row)

@@ -50,8 +50,18 @@ def shown_path(path: str | bytes | os.PathLike) -> str:
     >>> shown_path("a\\nb.csv")
     'a\\\\nb.csv'
     """
-    text = os.fsencode(path).decode("utf-8", "backslashreplace")
-    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+    return printable(os.fsencode(path).decode("utf-8", "backslashreplace"))
+
+
+def printable(text: str) -> str:
+    """``text`` with its non-printable characters (controls, NUL, lone surrogates) escaped, for a
+    one-line message quoting a user's file name or contents.
+
+    >>> printable("a\\x00b\\tc µm")
+    'a\\\\x00b\\\\tc µm'
+    """
+    return "".join(c if c.isprintable() else c.encode("unicode_escape", "backslashreplace").decode("ascii")
+                   for c in text)
 
 
 def _size(n: int) -> str:
@@ -67,11 +77,13 @@ def _file_type(mode: int) -> str | None:
 
 def check_user_file(
     path: str | bytes | os.PathLike, kind: str, max_bytes: int, error: type[Exception] = SpectralDataError,
+    name: str | None = None,
 ) -> os.stat_result:
     """Check, without opening it, that ``path`` is a regular file of at most ``max_bytes``.
 
     Symbolic links are followed; a loop of them is refused. ``kind`` says what was expected
-    ("a spectral table (CSV)", …) and ends every message.
+    ("a spectral table (CSV)", …) and ends every message; ``name`` replaces the path at its start
+    (a file named by a document: ``"<document>: <field> '<value>'"``).
 
     Raises
     ------
@@ -79,7 +91,7 @@ def check_user_file(
         (``SpectralDataError`` by default) naming the file: missing, unreadable, a symlink loop,
         a directory, FIFO, device or socket, or larger than ``max_bytes``.
     """
-    shown = shown_path(path)
+    shown = shown_path(path) if name is None else printable(name)
     try:
         info = os.stat(path)
     except FileNotFoundError as err:
@@ -150,5 +162,5 @@ def read_user_text(
 
 __all__ = [
     "IMAGE_MAX_BYTES", "JSON_MAX_BYTES", "SPECTRAL_TABLE_MAX_BYTES", "TEXT_EXPORT_MAX_BYTES",
-    "check_user_file", "read_user_bytes", "read_user_text", "shown_path",
+    "check_user_file", "printable", "read_user_bytes", "read_user_text", "shown_path",
 ]

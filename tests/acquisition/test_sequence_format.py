@@ -328,7 +328,7 @@ INVALID = {
     "frame outside": (_set("frames.1.file", "../x.tiff"), "frames[1].file '../x.tiff' points outside the sequence directory"),
     "frame absolute": (_set("frames.1.file", "/etc/passwd"), "frames[1].file '/etc/passwd' is absolute; expected a path relative"),
     "frame file type": (_set("frames.1.file", 3), "frames[1].file is a number; expected a relative file path"),
-    "frame directory": (_set("frames.1.file", "frames"), "frames[1].file 'frames' is not a regular file"),
+    "frame directory": (_set("frames.1.file", "frames"), "frames[1].file 'frames': is a directory; expected a frame image, a regular file"),
     # Two LEDs given one image (an edit gone wrong) was read, and estimated from, without a word.
     "frame file repeated": (_set("frames.3.file", "frames/./001-led.tiff"),
                             "frames[3].file 'frames/./001-led.tiff' is also frames[1].file; expected one file per frame"),
