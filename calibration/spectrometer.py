@@ -39,7 +39,7 @@ import numpy as np
 from calibration.errors import CalibrationError
 from processing.errors import SpectralDataError
 from processing.spectra import Spectra, SpectralUnit, WavelengthGrid
-from processing.user_files import TEXT_EXPORT_MAX_BYTES, read_user_bytes
+from processing.user_files import TEXT_EXPORT_MAX_BYTES, read_user_bytes, shown_path
 
 _COMMENT_PREFIXES = ("#", "%", "//", ";")
 _END_MARKERS = ("end", ">>>>>end")
@@ -228,21 +228,22 @@ def read_spectrometer_file(
 ) -> SpectrometerMeasurement:
     """Read a spectrometer export from a file (UTF-8 or Latin-1 text; see :func:`parse_spectrometer_text`)."""
     path = Path(path)
+    shown = shown_path(path)  # any bytes in the name: one printable line, in messages and as the source
     data = read_user_bytes(path, "a spectrometer text file", TEXT_EXPORT_MAX_BYTES, CalibrationError)
     if data.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16 with its byte-order mark (Windows "Unicode")
         try:
             text = data.decode("utf-16")
         except UnicodeDecodeError as err:
-            raise CalibrationError(f"{path}: not valid UTF-16 text ({err.reason} at byte {err.start}); "
+            raise CalibrationError(f"{shown}: not valid UTF-16 text ({err.reason} at byte {err.start}); "
                                    "expected a text export") from err
-        return parse_spectrometer_text(text, str(path), unit, column, name)
+        return parse_spectrometer_text(text, shown, unit, column, name)
     if b"\x00" in data[:4096]:
-        raise CalibrationError(f"{path}: binary data; expected a text export (CSV or tab/space separated)")
+        raise CalibrationError(f"{shown}: binary data; expected a text export (CSV or tab/space separated)")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError:
         text = data.decode("latin-1")  # instrument software often writes µ or ° in Latin-1
-    return parse_spectrometer_text(text, str(path), unit, column, name)
+    return parse_spectrometer_text(text, shown, unit, column, name)
 
 
 def subtract_dark(measurement: SpectrometerMeasurement, dark: SpectrometerMeasurement) -> SpectrometerMeasurement:

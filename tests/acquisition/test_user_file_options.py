@@ -93,6 +93,10 @@ def cases(kind: str, place: Path, sequence: Path) -> dict[str, tuple[list[str], 
             [*sim, "--out", str(f / "out"), o, str(p := make_bad(kind, f))], p))
     case("capture --led-spectra", lambda f: (
         ["capture", "--rig", "sim", "--out", str(f / "out"), "--led-spectra", str(p := make_bad(kind, f))], p))
+    case("calibrate leds FILE", lambda f: (
+        ["calibrate", "leds", str(p := make_bad(kind, f)), "--out", str(f / "cal")], p))
+    case("calibrate leds --dark", lambda f: (
+        ["calibrate", "leds", str(f / "led.csv"), "--dark", str(p := make_bad(kind, f)), "--out", str(f / "cal")], p))
     if kind != "odd-name":  # the names below are fixed by the formats
         case("estimate sequence.json", lambda f: (
             ["estimate", str(s := _sequence_json(kind, f, sequence))], s / "sequence.json"))
@@ -152,7 +156,7 @@ def test_fifos_are_refused_without_blocking(sequence: Path, tmp_path: Path) -> N
         pytest.fail(f"a FIFO blocked msflash; finished before it: {err.stdout!r}")
     assert child.returncode == 0, child.stderr
     results = [json.loads(line) for line in child.stdout.splitlines()]
-    assert len(results) == 9, child.stdout
+    assert len(results) == 11, child.stdout
     for result in results:
         assert "FIFO" in result["err"], result
         assert_refused(result["option"], result["status"], result["err"], result["named"])
