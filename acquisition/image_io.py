@@ -80,6 +80,11 @@ def _oiio_error() -> str:
 
 @contextlib.contextmanager
 def _open_input(path: Path):
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:  # OpenImageIO takes UTF-8 names only
+        raise RecordingError(f"{path!s}: is not a UTF-8 file name; expected a file name in UTF-8 "
+                             "(rename the file)") from None
     if not path.exists():
         raise RecordingError(f"{path}: image file is missing; expected a frame image")
     if not path.is_file():

@@ -27,6 +27,7 @@ import copy
 import json
 import math
 import os
+import sys
 import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
@@ -68,6 +69,11 @@ _TOP_KEYS = ("format", "version", "complete", "wavelengths_nm", "spectral_unit",
 _CAMERA_KEYS = ("model", "serial", "pixel_format", "cfa", "black_level", "white_level", "responsivity")
 _LED_KEYS = ("name", "spd")
 _FRAME_KEYS = ("file", "role", "led_levels", "exposure_us", "gain")
+MAX_NESTING = 100
+"""The deepest nesting of objects and lists ``sequence.json`` may have (format v1 itself needs 4).
+
+Deeper documents are refused with the field named: copying or writing back unknown keys nested
+hundreds deep would exhaust Python's recursion limit."""
 
 
 # -- data model ----------------------------------------------------------------------------------
@@ -344,7 +350,26 @@ class _Fields:
         return _number(self.file, self.name(key), value, expected)
 
 
+class _HugeInteger:
+    """Stands for a JSON integer too long for Python to convert (``sys.get_int_max_str_digits``):
+    kept so the field holding it can be named when it is checked."""
+
+    def __init__(self, digits: int) -> None:
+        self.digits = digits
+
+    def __repr__(self) -> str:
+        return f"<an integer of {self.digits} digits>"
+
+
+def _json_integer(text: str) -> int | _HugeInteger:
+    limit = sys.get_int_max_str_digits()
+    digits = len(text.lstrip("-"))
+    return _HugeInteger(digits) if limit and digits > limit else int(text)
+
+
 def _json_type(value: Any) -> str:
+    if isinstance(value, _HugeInteger):
+        return f"an integer of {value.digits} digits"
     return {
         dict: "an object", list: "a list", str: "a string", bool: "a boolean", int: "a number",
         float: "a number", type(None): "null",
@@ -358,7 +383,11 @@ def _describe(value: Any) -> str:
 def _number(file: Path, field_name: str, value: Any, expected: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise RecordingError(f"{file}: {field_name} is {_describe(value)}; expected {expected}")
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:
+        raise RecordingError(f"{file}: {field_name} is an integer of {len(str(abs(value)))} digits; expected {expected} "
+                             "(finite)") from None
     if not math.isfinite(number):
         raise RecordingError(f"{file}: {field_name} is {value}; expected {expected} (finite)")
     return number
@@ -372,7 +401,12 @@ def _number_list(file: Path, field_name: str, value: Any, length: int | None, wh
     for i, item in enumerate(value):
         if isinstance(item, bool) or not isinstance(item, int | float):
             raise RecordingError(f"{file}: {field_name}[{i}] is {_describe(item)}; expected a number")
-        if not math.isfinite(item):
+        try:
+            finite = math.isfinite(item)
+        except OverflowError:
+            raise RecordingError(f"{file}: {field_name}[{i}] is an integer of {len(str(abs(item)))} digits; expected a "
+                                 "finite number") from None
+        if not finite:
             raise RecordingError(f"{file}: {field_name}[{i}] is {item}; expected a finite number")
     return np.array(value, dtype=float)
 
@@ -416,9 +450,29 @@ def _load_json(path: Path) -> Any:
     except OSError as err:
         raise RecordingError(f"{path}: cannot be read ({err.strerror}); expected a readable file") from err
     try:
-        return json.loads(text, object_pairs_hook=no_duplicates)
+        document = json.loads(text, object_pairs_hook=no_duplicates, parse_int=_json_integer)
     except json.JSONDecodeError as err:
         raise RecordingError(f"{path}: line {err.lineno} column {err.colno}: {err.msg}; expected valid JSON") from err
+    except RecursionError:
+        raise RecordingError(f"{path}: objects or lists are nested too deep to read; expected at most {MAX_NESTING} "
+                             "levels (format v1 needs 4)") from None
+    _check_nesting(path, document)
+    return document
+
+
+def _check_nesting(path: Path, document: Any) -> None:
+    """Refuse a document nested deeper than :data:`MAX_NESTING`, naming the field (without recursion)."""
+    stack: list[tuple[Any, str, int]] = [(document, "", 0)]
+    while stack:
+        value, where, depth = stack.pop()
+        if depth > MAX_NESTING:
+            field_name = where if len(where) <= 80 else where[:80] + "…"
+            raise RecordingError(f"{path}: {field_name} is nested more than {MAX_NESTING} levels deep; expected at most "
+                                 f"{MAX_NESTING} levels (format v1 needs 4)")
+        if isinstance(value, dict):
+            stack.extend((v, f"{where}.{k}" if where else str(k), depth + 1) for k, v in value.items())
+        elif isinstance(value, list):
+            stack.extend((v, f"{where}[{i}]", depth + 1) for i, v in enumerate(value))
 
 
 def _parse_camera(file: Path, value: Any, size: int) -> SequenceCamera:
@@ -469,13 +523,22 @@ def _parse_leds(file: Path, value: Any, size: int) -> tuple[SequenceLed, ...]:
 def _check_file(file: Path, directory: Path, where: str, value: Any, *, must_exist: bool) -> str:
     if not isinstance(value, str) or not value:
         raise RecordingError(f"{file}: {where} is {_describe(value)}; expected a relative file path")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        raise RecordingError(f"{file}: {where} {value!r} is not a UTF-8 file name; expected a file name in UTF-8 "
+                             "(rename the file and its entry)") from None
     if "\\" in value and must_exist and not (directory / value).exists() and (directory / value.replace("\\", "/")).exists():
         value = value.replace("\\", "/")  # written on Windows (str of a WindowsPath): '\' separators
     relative = PurePosixPath(value)
     if relative.is_absolute() or Path(value).is_absolute():
         raise RecordingError(f"{file}: {where} {value!r} is absolute; expected a path relative to the sequence directory")
-    root = directory.resolve()
-    target = (directory / value).resolve()
+    try:
+        root = directory.resolve()
+        target = (directory / value).resolve()
+    except (RuntimeError, OSError) as err:  # a symlink loop: RuntimeError before Python 3.13, OSError after
+        raise RecordingError(f"{file}: {where} {value!r} cannot be resolved ({err}); expected a frame file, not a "
+                             "symlink loop") from None
     if target == root or not target.is_relative_to(root):
         raise RecordingError(f"{file}: {where} {value!r} points outside the sequence directory; expected a path inside it")
     if must_exist:
@@ -632,7 +695,7 @@ def _fsync_directory(directory: Path) -> None:
 def _json_text(path: Path, document: dict) -> str:
     try:
         return json.dumps(document, indent=1, allow_nan=False) + "\n"
-    except (TypeError, ValueError) as err:
+    except (TypeError, ValueError, RecursionError) as err:
         raise RecordingError(f"{path}: cannot be written ({err}); expected JSON-compatible extra values") from err
 
 
