@@ -38,6 +38,7 @@ from typing import Any, Literal
 import numpy as np
 
 from acquisition.errors import RecordingError
+from acquisition.folder_claim import FolderClaim, claim_folder
 from acquisition.frame_integrity import check_frame_levels
 from acquisition.image_io import image_suffix, read_image, read_image_header, write_image
 from calibration.file_modes import default_file_mode
@@ -764,7 +765,9 @@ class SequenceWriter:
     ------
     RecordingError
         If the header is invalid (same checks as :func:`read_sequence`) or the directory already
-        holds a sequence.
+        holds a sequence; :class:`~acquisition.errors.FolderInUseError` if another process is
+        writing there (the directory is claimed for the writer's life, :mod:`acquisition.folder_claim`;
+        temporary files a killed writer left are removed).
 
     Examples
     --------
@@ -781,13 +784,7 @@ class SequenceWriter:
         self._directory = Path(directory)
         self._mono = bool(mono)
         self._path = self._directory / SEQUENCE_FILE
-        if self._path.exists():
-            raise RecordingError(f"{self._path}: already exists; expected a new or empty directory for the sequence")
-        frames_dir = self._directory / FRAMES_DIR
-        if frames_dir.is_dir() and any(frames_dir.iterdir()):
-            # Frame files are named by index: they would be overwritten without a word.
-            raise RecordingError(f"{frames_dir}: holds files but there is no {SEQUENCE_FILE}; expected a new or empty "
-                                 "directory for the sequence (move those files away first)")
+        self._claim: FolderClaim | None = None
         self._sequence = Sequence(
             self._directory, False, np.asarray(list(wavelengths_nm), dtype=float), spectral_unit, camera,
             tuple(leds), (), dict(extra or {}),
@@ -797,8 +794,26 @@ class SequenceWriter:
         self._finished = False
         # Validate through the reader's own parser so a writer can never produce what the reader refuses.
         _parse_document(self._path, self._directory, _document(self._sequence), check_files=False)
-        self._directory.mkdir(parents=True, exist_ok=True)
-        _replace_json(self._path, _document(self._sequence))
+        # The folder is claimed before it is checked: two writers started together cannot both find
+        # it empty (a check-then-act race that left one's sequence.json over the other's frames).
+        self._claim = claim_folder(self._directory, "msflash sequence writer")
+        try:
+            if self._path.exists():
+                raise RecordingError(f"{self._path}: already exists; expected a new or empty directory for the sequence")
+            self._claim.clean_stale_temporaries(FRAMES_DIR)
+            frames_dir = self._directory / FRAMES_DIR
+            if frames_dir.is_dir() and any(frames_dir.iterdir()):
+                # Frame files are named by index: they would be overwritten without a word.
+                raise RecordingError(f"{frames_dir}: holds files but there is no {SEQUENCE_FILE}; expected a new or "
+                                     "empty directory for the sequence (move those files away first)")
+            _replace_json(self._path, _document(self._sequence))
+        except BaseException:
+            self._release()
+            raise
+
+    def _release(self) -> None:
+        if self._claim is not None:
+            self._claim.release()
 
     @property
     def sequence(self) -> Sequence:
@@ -907,6 +922,7 @@ class SequenceWriter:
             _replace_json(self._path, _document(completed))
             self._sequence = completed
             self._finished = True
+            self._release()
         return read_sequence(self._directory)
 
     def __enter__(self) -> SequenceWriter:
@@ -917,8 +933,11 @@ class SequenceWriter:
     ) -> None:
         # On an exception the sequence on disk is already consistent (complete: false, every
         # written frame listed), so nothing is written: the original error propagates untouched.
-        if exc_type is None:
-            self.finish()
+        try:
+            if exc_type is None:
+                self.finish()
+        finally:
+            self._release()
 
 
 def _as_float(value: Any) -> Any:
