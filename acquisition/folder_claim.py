@@ -87,6 +87,36 @@ class FolderClaim:
         return removed
 
 
+def _holder_alive(folder: Path) -> bool:
+    """Whether the lock file names a live process (read only: a reader must never take the lock,
+    which would make a writer starting at that moment see the folder in use)."""
+    try:
+        pid = int((folder / LOCK_FILE).read_text(encoding="utf-8", errors="replace").partition("\n")[0])
+    except (OSError, ValueError):
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # alive, another user's
+    return True
+
+
+def stale_temporaries(folder: str | os.PathLike, *subfolders: str) -> list[Path]:
+    """Temporary files a stopped writer left in ``folder`` and ``subfolders`` ([] while a live
+    process holds the folder: its temporary files are work in progress). Nothing is removed."""
+    folder = Path(folder)
+    if _holder_alive(folder):
+        return []
+    found = []
+    for directory in (folder, *(folder / s for s in subfolders)):
+        with contextlib.suppress(OSError):
+            found.extend(Path(e.path) for e in os.scandir(directory)
+                         if _is_stale_temporary(e.name) and e.is_file(follow_symlinks=False))
+    return sorted(found)
+
+
 def claim_folder(folder: str | os.PathLike, what: str = "writing") -> FolderClaim:
     """Claim ``folder`` (created if needed) for this process.
 

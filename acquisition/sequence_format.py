@@ -18,6 +18,8 @@ file atomically, then replaces ``sequence.json`` atomically (temporary file, fsy
 ``os.replace``). So at every instant the directory holds a readable sequence listing only frames
 that are fully on disk; a crash (exception, Ctrl-C, SIGKILL) leaves ``complete: false``.
 The reader accepts such partial sequences and reports them through :attr:`Sequence.partial`.
+Reading a partial sequence notes (logging, never deleting) the temporary files a killed writer
+left, unless the process named in its ``.msflash-lock`` still runs (:mod:`acquisition.folder_claim`).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import json
+import logging
 import math
 import os
 import sys
@@ -38,7 +41,7 @@ from typing import Any, Literal
 import numpy as np
 
 from acquisition.errors import RecordingError
-from acquisition.folder_claim import FolderClaim, claim_folder
+from acquisition.folder_claim import FolderClaim, claim_folder, stale_temporaries
 from acquisition.frame_integrity import check_frame_levels
 from acquisition.image_io import image_suffix, read_image, read_image_header, write_image
 from calibration.file_modes import default_file_mode
@@ -63,6 +66,8 @@ SPECTRAL_UNITS = ("energy", "photons")
 """Allowed ``spectral_unit`` values."""
 RESPONSIVITY_CHANNELS = ("R", "G", "B")
 """Channels ``camera.responsivity`` must hold."""
+
+_log = logging.getLogger(__name__)
 
 FrameRole = Literal["ambient", "led", "flash", "dark"]
 
@@ -641,7 +646,19 @@ def read_sequence(directory: str | os.PathLike) -> Sequence:
     if directory.name == SEQUENCE_FILE and directory.is_file():
         directory = directory.parent
     file = directory / SEQUENCE_FILE
-    return _parse_document(file, directory, _load_json(file))
+    sequence = _parse_document(file, directory, _load_json(file))
+    if sequence.partial:
+        _report_stale_temporaries(directory)
+    return sequence
+
+
+def _report_stale_temporaries(directory: Path) -> None:
+    """One note for the temporary files a killed writer left (reading never deletes them)."""
+    stale = stale_temporaries(directory, FRAMES_DIR)
+    if stale:
+        _log.warning("%s: %d temporary file(s) left by a writer that was stopped (%s%s); not part of the sequence, "
+                     "safe to delete", directory, len(stale), stale[0].relative_to(directory),
+                     ", …" if len(stale) > 1 else "")
 
 
 # -- writing ---------------------------------------------------------------------------------------

@@ -138,3 +138,31 @@ def test_run_into_a_busy_folder_exits_2_in_process(tmp_path: Path, capsys: pytes
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"in use by msflash process {os.getpid()} (msflash run" in err
     assert not (tmp_path / "out" / "sequence").exists()
+
+
+def _partial_with_a_stale_temporary(seq: Path) -> Path:
+    write_test_sequence(seq)
+    document = json.loads((seq / "sequence.json").read_text())
+    document["complete"] = False  # as a killed writer leaves it
+    (seq / "sequence.json").write_text(json.dumps(document))
+    stale = seq / "frames" / ".008-led.tiff.q1w2e3.tmp.tiff"
+    stale.write_bytes(b"half a frame")
+    return stale
+
+
+def test_reading_a_killed_writers_sequence_reports_its_temporary_files(tmp_path: Path,
+                                                                       caplog: pytest.LogCaptureFixture) -> None:
+    stale = _partial_with_a_stale_temporary(tmp_path / "seq")
+    (tmp_path / "seq" / LOCK_FILE).write_text("4194304\nmsflash capture, since 2026-01-01 00:00:00 UTC\n")
+    with caplog.at_level(logging.WARNING):
+        assert read_sequence(tmp_path / "seq").partial
+    assert "1 temporary file(s) left by a writer that was stopped (frames/.008-led.tiff" in caplog.text
+    assert stale.exists()  # reported, never deleted by a reader
+
+
+def test_reading_a_sequence_a_live_writer_holds_reports_nothing(tmp_path: Path,
+                                                                caplog: pytest.LogCaptureFixture) -> None:
+    _partial_with_a_stale_temporary(tmp_path / "seq")
+    with claimed(tmp_path / "seq"), caplog.at_level(logging.WARNING):
+        assert read_sequence(tmp_path / "seq").partial
+    assert "temporary file" not in caplog.text
