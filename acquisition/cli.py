@@ -3,7 +3,9 @@
 Subcommands live in small modules that each expose ``register(subparsers)``; this module builds
 the parser, dispatches, and turns errors into exit statuses: bad input → 2 with one line
 ``msflash: error: …``; a device or runtime failure → 1; Ctrl-C → 130 (LEDs are switched off by
-the code that switched them on, in ``finally``). Anything else is a bug and keeps its traceback.
+the code that switched them on, in ``finally``). Anything else is a bug: the last line of defence
+(:func:`_crashed`) prints one line naming the command and what failed, writes the full traceback
+to a crash log (:func:`crash_log_directory`) whose path that line gives, and exits 1.
 
 Start-up is kept short: only the module of the command being run is imported (it imports its
 numerical and hardware libraries); the others are listed by name and one-line help from
@@ -18,7 +20,9 @@ import importlib.util
 import logging
 import os
 import sys
+import warnings
 from collections.abc import Sequence
+from pathlib import Path
 from types import ModuleType
 
 from acquisition.cli_common import UsageError
@@ -169,9 +173,10 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``msflash``; returns the exit status (tests call this directly)."""
+    words = list(argv if argv is not None else sys.argv[1:])
     try:
-        parser = build_parser(argv if argv is not None else sys.argv[1:])
-        args = parser.parse_args(argv)
+        parser = build_parser(words)
+        args = parser.parse_args(words)
         logging.basicConfig(
             level=logging.WARNING - 10 * min(args.verbose, 2), format="msflash: %(name)s: %(message)s",
             stream=sys.stderr,
@@ -179,7 +184,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not getattr(args, "handler", None):
             parser.print_help(sys.stderr)
             return 2
-        return int(args.handler(args))
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return int(args.handler(args))
     except KeyboardInterrupt:
         sys.stderr.write("msflash: interrupted; LEDs off; frames captured so far are kept (marked incomplete)\n")
         return 130
@@ -198,6 +205,68 @@ def main(argv: Sequence[str] | None = None) -> int:
     except _runtime_errors() as err:
         sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
         return 1
+    except Exception as err:  # the last line of defence: a bug, not bad input (KeyboardInterrupt/SystemExit pass)
+        return _crashed(words, err)
+
+
+CRASH_LOG_ENV = "MSFLASH_CRASH_DIR"
+"""Environment variable naming the crash-log directory (overrides :func:`crash_log_directory`'s default)."""
+
+
+def crash_log_directory() -> Path:
+    """Where crash logs go: ``$MSFLASH_CRASH_DIR``, else ``$XDG_STATE_HOME/msflash`` (default
+    ``~/.local/state/msflash``)."""
+    if os.environ.get(CRASH_LOG_ENV):
+        return Path(os.environ[CRASH_LOG_ENV])
+    state = os.environ.get("XDG_STATE_HOME") or os.path.join(os.path.expanduser("~"), ".local", "state")
+    return Path(state) / "msflash"
+
+
+def _command_name(words: Sequence[str]) -> str:
+    return next((w for w in words if not w.startswith("-")), "msflash")
+
+
+def _crashed(words: Sequence[str], err: Exception) -> int:
+    """One line on stderr naming the command and what failed, the traceback in a crash log; status 1."""
+    import time
+    import traceback
+
+    command = _command_name(words)
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    text = (f"msflash {msflash_version()} crashed\ncommand: msflash {' '.join(map(repr, words))}\n"
+            f"python: {sys.version.split()[0]}\n\n" + "".join(traceback.format_exception(err)))
+    where = "nowhere (the crash log could not be written)"
+    for directory in (crash_log_directory(), Path(os.environ.get("TMPDIR") or "/tmp")):
+        path = directory / f"crash-{stamp}-{os.getpid()}.log"
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            with open(path, "x", encoding="utf-8", errors="backslashreplace") as stream:
+                stream.write(text)
+        except OSError:
+            continue
+        where = str(path)
+        break
+    message = " ".join((str(err) or "").split())
+    if len(message) > 300:
+        message = message[:300] + "…"
+    sys.stderr.write(f"msflash: {command}: unexpected {type(err).__name__}"
+                     f"{': ' + message if message else ''} — a bug; details in {where}\n")
+    return 1
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: object = None, line: str | None = None) -> None:
+    """A warning as one line saying what it means, not a source line the user cannot act on.
+
+    numpy's RuntimeWarnings (invalid value, divide by zero, overflow) mean a computation met
+    NaN, infinity or zero where the code did not expect it: the result it printed may hold NaN.
+    """
+    text = " ".join(str(message).split())
+    if issubclass(category, RuntimeWarning) and " encountered in " in text:  # numpy's floating-point errors
+        sys.stderr.write(f"msflash: warning: a numerical step met {text!r} (numpy); results computed from it "
+                         "may hold NaN or infinity — check the input for empty, saturated or constant frames\n")
+        return
+    sys.stderr.write(f"msflash: warning: {text} ({category.__name__})\n")
 
 
 def _one_line(err: BaseException) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import threading
 from pathlib import Path
@@ -47,8 +48,9 @@ def _emulator_from_args(args: argparse.Namespace) -> BoothEmulator:
         raise UsageError(f"--peaks-nm {args.peaks_nm!r}: not numbers; expected e.g. 440,480,500") from err
     if len(names) != len(peaks):
         raise UsageError(f"--names/--peaks-nm: {len(names)} names but {len(peaks)} peaks; expected one peak per name")
-    if args.watchdog_s < 0:
-        raise UsageError(f"--watchdog-s {args.watchdog_s}: negative; expected 0 (off) or a positive time")
+    if not 0 <= args.watchdog_s < math.inf:
+        raise UsageError(f"--watchdog-s {args.watchdog_s}: not a finite time ≥ 0; expected 0 (off) or a positive "
+                         "number of seconds")
     try:
         return BoothEmulator(names=names, peaks_nm=peaks, watchdog_s=args.watchdog_s)
     except ValueError as err:

@@ -36,6 +36,7 @@ import numpy as np
 from acquisition import analysis
 from acquisition.camera import RawFrame
 from acquisition.async_writer import AsyncSequenceWriter
+from acquisition.folder_claim import FolderClaim, claim_folder
 from acquisition.capture import preview_frames, run_capture, run_capture_with_flash
 from acquisition.cli_common import UsageError, dumps_json, output_directory, progress
 from acquisition.cli_process import add_estimation_options
@@ -294,12 +295,29 @@ def _degenerate(estimate) -> str | None:
     return f"not finite: {', '.join(bad)}; condition number {float(estimate.condition_number):.3g}"
 
 
+def _claimed(out: Path, what: str) -> FolderClaim:
+    """``out`` claimed for this process (:mod:`acquisition.folder_claim`; a ``with`` block releases it), a
+    folder that cannot hold the lock file being a bad output path (exit 2)."""
+    try:
+        return claim_folder(out, what)
+    except OSError as err:
+        raise UsageError(f"--out {out}: cannot write there ({err.strerror or err}); expected a writable "
+                         "directory") from err
+
+
 def _run(args: argparse.Namespace) -> int:
-    started = time.perf_counter()
     out = Path(args.out) if args.out else _default_out()
-    if (out / "sequence" / "sequence.json").exists():
-        raise UsageError(f"--out {out}: already holds a run; expected a new directory")
     output_directory(out)  # a file in the way or no write access: one line before any device is opened
+    # One owner per run folder, claimed before it is checked (two runs started together must not
+    # both find it empty); held until the report is written.
+    with _claimed(out, "msflash run"):
+        if (out / "sequence" / "sequence.json").exists():
+            raise UsageError(f"--out {out}: already holds a run; expected a new directory")
+        return _run_claimed(args, out)
+
+
+def _run_claimed(args: argparse.Namespace, out: Path) -> int:
+    started = time.perf_counter()
     spec = _rig_spec(args)
     # printable: a file name given to an option may hold any bytes, the line stays one line.
     progress(printable(f"opening rig '{spec}'" + (f" (ambient {args.ambient}, scene {args.scene}, camera "
@@ -480,9 +498,14 @@ def _flash_exposure(rig: Rig, plan: ExposurePlan, levels: np.ndarray, predict: C
 
 def _capture(args: argparse.Namespace) -> int:
     out = Path(args.out)
-    if (out / "sequence" / "sequence.json").exists():
-        raise UsageError(f"--out {out}: already holds a sequence; expected a new directory")
     output_directory(out)
+    with _claimed(out, "msflash capture"):
+        if (out / "sequence" / "sequence.json").exists():
+            raise UsageError(f"--out {out}: already holds a sequence; expected a new directory")
+        return _capture_claimed(args, out)
+
+
+def _capture_claimed(args: argparse.Namespace, out: Path) -> int:
     with sigterm_as_exit(), _open(args) as rig:
         exposure = _plan_exposure(rig, args)
         _report_exposure(exposure, list(rig.led_spectra.names))

@@ -58,3 +58,10 @@ class FrameLostError(CameraError, DroppedFrameError):
     It is both a camera failure and a dropped frame, so a capture runner catching
     :class:`DroppedFrameError` handles it as it handles any other lost frame.
     """
+
+
+class FolderInUseError(RecordingError):
+    """An output folder is being written by another msflash process; names the folder and its PID.
+
+    Bad input (exit 2): the user pointed two runs at one folder.
+    """

@@ -81,6 +81,11 @@ def _oiio_error() -> str:
 
 @contextlib.contextmanager
 def _open_input(path: Path):
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:  # OpenImageIO takes UTF-8 names only
+        raise RecordingError(f"{shown_path(path)}: is not a UTF-8 file name; expected a file name in UTF-8 "
+                             "(rename the file)") from None
     if not os.path.lexists(path):
         raise RecordingError(f"{shown_path(path)}: image file is missing; expected a frame image")
     # Before OpenImageIO opens it: a FIFO would block it, a device or a directory has no image.

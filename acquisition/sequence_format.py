@@ -18,6 +18,8 @@ file atomically, then replaces ``sequence.json`` atomically (temporary file, fsy
 ``os.replace``). So at every instant the directory holds a readable sequence listing only frames
 that are fully on disk; a crash (exception, Ctrl-C, SIGKILL) leaves ``complete: false``.
 The reader accepts such partial sequences and reports them through :attr:`Sequence.partial`.
+Reading a partial sequence notes (logging, never deleting) the temporary files a killed writer
+left, unless the process named in its ``.msflash-lock`` still runs (:mod:`acquisition.folder_claim`).
 """
 
 from __future__ import annotations
@@ -25,8 +27,10 @@ from __future__ import annotations
 import contextlib
 import copy
 import json
+import logging
 import math
 import os
+import sys
 import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
@@ -37,6 +41,7 @@ from typing import Any, Literal
 import numpy as np
 
 from acquisition.errors import RecordingError
+from acquisition.folder_claim import FolderClaim, claim_folder, stale_temporaries
 from acquisition.frame_integrity import check_frame_levels
 from acquisition.image_io import image_suffix, read_image, read_image_header, write_image
 from calibration.file_modes import default_file_mode
@@ -63,12 +68,19 @@ SPECTRAL_UNITS = ("energy", "photons")
 RESPONSIVITY_CHANNELS = ("R", "G", "B")
 """Channels ``camera.responsivity`` must hold."""
 
+_log = logging.getLogger(__name__)
+
 FrameRole = Literal["ambient", "led", "flash", "dark"]
 
 _TOP_KEYS = ("format", "version", "complete", "wavelengths_nm", "spectral_unit", "camera", "leds", "frames")
 _CAMERA_KEYS = ("model", "serial", "pixel_format", "cfa", "black_level", "white_level", "responsivity")
 _LED_KEYS = ("name", "spd")
 _FRAME_KEYS = ("file", "role", "led_levels", "exposure_us", "gain")
+MAX_NESTING = 100
+"""The deepest nesting of objects and lists ``sequence.json`` may have (format v1 itself needs 4).
+
+Deeper documents are refused with the field named: copying or writing back unknown keys nested
+hundreds deep would exhaust Python's recursion limit."""
 
 
 # -- data model ----------------------------------------------------------------------------------
@@ -345,7 +357,26 @@ class _Fields:
         return _number(self.file, self.name(key), value, expected)
 
 
+class _HugeInteger:
+    """Stands for a JSON integer too long for Python to convert (``sys.get_int_max_str_digits``):
+    kept so the field holding it can be named when it is checked."""
+
+    def __init__(self, digits: int) -> None:
+        self.digits = digits
+
+    def __repr__(self) -> str:
+        return f"<an integer of {self.digits} digits>"
+
+
+def _json_integer(text: str) -> int | _HugeInteger:
+    limit = sys.get_int_max_str_digits()
+    digits = len(text.lstrip("-"))
+    return _HugeInteger(digits) if limit and digits > limit else int(text)
+
+
 def _json_type(value: Any) -> str:
+    if isinstance(value, _HugeInteger):
+        return f"an integer of {value.digits} digits"
     return {
         dict: "an object", list: "a list", str: "a string", bool: "a boolean", int: "a number",
         float: "a number", type(None): "null",
@@ -359,7 +390,11 @@ def _describe(value: Any) -> str:
 def _number(file: Path, field_name: str, value: Any, expected: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise RecordingError(f"{file}: {field_name} is {_describe(value)}; expected {expected}")
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:
+        raise RecordingError(f"{file}: {field_name} is an integer of {len(str(abs(value)))} digits; expected {expected} "
+                             "(finite)") from None
     if not math.isfinite(number):
         raise RecordingError(f"{file}: {field_name} is {value}; expected {expected} (finite)")
     return number
@@ -373,7 +408,12 @@ def _number_list(file: Path, field_name: str, value: Any, length: int | None, wh
     for i, item in enumerate(value):
         if isinstance(item, bool) or not isinstance(item, int | float):
             raise RecordingError(f"{file}: {field_name}[{i}] is {_describe(item)}; expected a number")
-        if not math.isfinite(item):
+        try:
+            finite = math.isfinite(item)
+        except OverflowError:
+            raise RecordingError(f"{file}: {field_name}[{i}] is an integer of {len(str(abs(item)))} digits; expected a "
+                                 "finite number") from None
+        if not finite:
             raise RecordingError(f"{file}: {field_name}[{i}] is {item}; expected a finite number")
     return np.array(value, dtype=float)
 
@@ -412,9 +452,29 @@ def _load_json(path: Path) -> Any:
         raise RecordingError(f"{shown_path(path)}: file is missing; expected a sequence directory holding {SEQUENCE_FILE}")
     text = read_user_text(path, f"a sequence's {SEQUENCE_FILE} (UTF-8 JSON)", JSON_MAX_BYTES, RecordingError)
     try:
-        return json.loads(text, object_pairs_hook=no_duplicates)
+        document = json.loads(text, object_pairs_hook=no_duplicates, parse_int=_json_integer)
     except json.JSONDecodeError as err:
         raise RecordingError(f"{path}: line {err.lineno} column {err.colno}: {err.msg}; expected valid JSON") from err
+    except RecursionError:
+        raise RecordingError(f"{path}: objects or lists are nested too deep to read; expected at most {MAX_NESTING} "
+                             "levels (format v1 needs 4)") from None
+    _check_nesting(path, document)
+    return document
+
+
+def _check_nesting(path: Path, document: Any) -> None:
+    """Refuse a document nested deeper than :data:`MAX_NESTING`, naming the field (without recursion)."""
+    stack: list[tuple[Any, str, int]] = [(document, "", 0)]
+    while stack:
+        value, where, depth = stack.pop()
+        if depth > MAX_NESTING:
+            field_name = where if len(where) <= 80 else where[:80] + "…"
+            raise RecordingError(f"{path}: {field_name} is nested more than {MAX_NESTING} levels deep; expected at most "
+                                 f"{MAX_NESTING} levels (format v1 needs 4)")
+        if isinstance(value, dict):
+            stack.extend((v, f"{where}.{k}" if where else str(k), depth + 1) for k, v in value.items())
+        elif isinstance(value, list):
+            stack.extend((v, f"{where}[{i}]", depth + 1) for i, v in enumerate(value))
 
 
 def _parse_camera(file: Path, value: Any, size: int) -> SequenceCamera:
@@ -465,6 +525,11 @@ def _parse_leds(file: Path, value: Any, size: int) -> tuple[SequenceLed, ...]:
 def _check_file(file: Path, directory: Path, where: str, value: Any, *, must_exist: bool) -> str:
     if not isinstance(value, str) or not value:
         raise RecordingError(f"{file}: {where} is {_describe(value)}; expected a relative file path")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        raise RecordingError(f"{file}: {where} {value!r} is not a UTF-8 file name; expected a file name in UTF-8 "
+                             "(rename the file and its entry)") from None
     if "\\" in value and must_exist and not (directory / value).exists() and (directory / value.replace("\\", "/")).exists():
         value = value.replace("\\", "/")  # written on Windows (str of a WindowsPath): '\' separators
     relative = PurePosixPath(value)
@@ -473,8 +538,9 @@ def _check_file(file: Path, directory: Path, where: str, value: Any, *, must_exi
     try:
         root = directory.resolve()
         target = (directory / value).resolve()
-    except (OSError, RuntimeError) as err:  # RuntimeError: a loop of symbolic links (Python < 3.13)
-        raise RecordingError(f"{file}: {where} {value!r} cannot be resolved ({err}); expected a frame file") from err
+    except (RuntimeError, OSError) as err:  # a symlink loop: RuntimeError before Python 3.13, OSError after
+        raise RecordingError(f"{file}: {where} {value!r} cannot be resolved ({err}); expected a frame file, not a "
+                             "symlink loop") from None
     if target == root or not target.is_relative_to(root):
         raise RecordingError(f"{file}: {where} {value!r} points outside the sequence directory; expected a path inside it")
     if must_exist:
@@ -576,7 +642,19 @@ def read_sequence(directory: str | os.PathLike) -> Sequence:
     if directory.name == SEQUENCE_FILE and directory.is_file():
         directory = directory.parent
     file = directory / SEQUENCE_FILE
-    return _parse_document(file, directory, _load_json(file))
+    sequence = _parse_document(file, directory, _load_json(file))
+    if sequence.partial:
+        _report_stale_temporaries(directory)
+    return sequence
+
+
+def _report_stale_temporaries(directory: Path) -> None:
+    """One note for the temporary files a killed writer left (reading never deletes them)."""
+    stale = stale_temporaries(directory, FRAMES_DIR)
+    if stale:
+        _log.warning("%s: %d temporary file(s) left by a writer that was stopped (%s%s); not part of the sequence, "
+                     "safe to delete", directory, len(stale), stale[0].relative_to(directory),
+                     ", …" if len(stale) > 1 else "")
 
 
 # -- writing ---------------------------------------------------------------------------------------
@@ -631,7 +709,7 @@ def _fsync_directory(directory: Path) -> None:
 def _json_text(path: Path, document: dict) -> str:
     try:
         return json.dumps(document, indent=1, allow_nan=False) + "\n"
-    except (TypeError, ValueError) as err:
+    except (TypeError, ValueError, RecursionError) as err:
         raise RecordingError(f"{path}: cannot be written ({err}); expected JSON-compatible extra values") from err
 
 
@@ -700,7 +778,9 @@ class SequenceWriter:
     ------
     RecordingError
         If the header is invalid (same checks as :func:`read_sequence`) or the directory already
-        holds a sequence.
+        holds a sequence; :class:`~acquisition.errors.FolderInUseError` if another process is
+        writing there (the directory is claimed for the writer's life, :mod:`acquisition.folder_claim`;
+        temporary files a killed writer left are removed).
 
     Examples
     --------
@@ -717,13 +797,7 @@ class SequenceWriter:
         self._directory = Path(directory)
         self._mono = bool(mono)
         self._path = self._directory / SEQUENCE_FILE
-        if self._path.exists():
-            raise RecordingError(f"{self._path}: already exists; expected a new or empty directory for the sequence")
-        frames_dir = self._directory / FRAMES_DIR
-        if frames_dir.is_dir() and any(frames_dir.iterdir()):
-            # Frame files are named by index: they would be overwritten without a word.
-            raise RecordingError(f"{frames_dir}: holds files but there is no {SEQUENCE_FILE}; expected a new or empty "
-                                 "directory for the sequence (move those files away first)")
+        self._claim: FolderClaim | None = None
         self._sequence = Sequence(
             self._directory, False, np.asarray(list(wavelengths_nm), dtype=float), spectral_unit, camera,
             tuple(leds), (), dict(extra or {}),
@@ -733,8 +807,26 @@ class SequenceWriter:
         self._finished = False
         # Validate through the reader's own parser so a writer can never produce what the reader refuses.
         _parse_document(self._path, self._directory, _document(self._sequence), check_files=False)
-        self._directory.mkdir(parents=True, exist_ok=True)
-        _replace_json(self._path, _document(self._sequence))
+        # The folder is claimed before it is checked: two writers started together cannot both find
+        # it empty (a check-then-act race that left one's sequence.json over the other's frames).
+        self._claim = claim_folder(self._directory, "msflash sequence writer")
+        try:
+            if self._path.exists():
+                raise RecordingError(f"{self._path}: already exists; expected a new or empty directory for the sequence")
+            self._claim.clean_stale_temporaries(FRAMES_DIR)
+            frames_dir = self._directory / FRAMES_DIR
+            if frames_dir.is_dir() and any(frames_dir.iterdir()):
+                # Frame files are named by index: they would be overwritten without a word.
+                raise RecordingError(f"{frames_dir}: holds files but there is no {SEQUENCE_FILE}; expected a new or "
+                                     "empty directory for the sequence (move those files away first)")
+            _replace_json(self._path, _document(self._sequence))
+        except BaseException:
+            self._release()
+            raise
+
+    def _release(self) -> None:
+        if self._claim is not None:
+            self._claim.release()
 
     @property
     def sequence(self) -> Sequence:
@@ -843,6 +935,7 @@ class SequenceWriter:
             _replace_json(self._path, _document(completed))
             self._sequence = completed
             self._finished = True
+            self._release()
         return read_sequence(self._directory)
 
     def __enter__(self) -> SequenceWriter:
@@ -853,8 +946,11 @@ class SequenceWriter:
     ) -> None:
         # On an exception the sequence on disk is already consistent (complete: false, every
         # written frame listed), so nothing is written: the original error propagates untouched.
-        if exc_type is None:
-            self.finish()
+        try:
+            if exc_type is None:
+                self.finish()
+        finally:
+            self._release()
 
 
 def _as_float(value: Any) -> Any:
