@@ -104,10 +104,17 @@ def _rig_spec(args: argparse.Namespace) -> str:
 def _open(args: argparse.Namespace) -> Rig:
     spec = _rig_spec(args)
     sim_only = [option for option, value in (("--sim-camera", args.sim_camera), ("--leds", args.leds),
-                                             ("--flash-power", args.flash_power)) if value is not None]
+                                             ("--flash-power", args.flash_power), ("--cfa", args.cfa))
+                if value is not None]
     if sim_only and spec != "sim":
         raise UsageError(f"{sim_only[0]}: describes the simulated rig, but the rig is '{spec}'; expected --rig sim "
                          "(or no --rig and no --camera/--port)")
+    hw_only = [option for option, value in (("--responsivity", args.responsivity), ("--calibration", args.calibration),
+                                            ("--pixel-format", args.pixel_format)) if value is not None]
+    if hw_only and spec != "hw":
+        hint = " (the simulated camera is --sim-camera NAME|FILE.csv)" if spec == "sim" else ""
+        raise UsageError(f"{hw_only[0]}: describes a hardware rig's camera or booth, but the rig is '{spec}' and would "
+                         f"ignore it{hint}; expected --rig hw (or --camera/--port)")
     if spec == "hw":
         return open_rig("hw", camera=args.camera, port=args.port, interfaces=args.interfaces,
                         calibration=args.calibration, led_spectra=args.led_spectra, responsivity=args.responsivity,

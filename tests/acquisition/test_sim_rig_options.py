@@ -177,6 +177,13 @@ def _bad_files(tmp_path: Path) -> dict[str, Path]:
     (["--leds", "8"], "argument --leds: invalid choice: 8 (choose from 3, 4, 5, 6, 7)"),
     (["--rig", "aravis-fake", "--sim-camera", "NikonD70"], "--sim-camera: describes the simulated rig, but the rig "
                                                            "is 'aravis-fake'; expected --rig sim"),
+    (["--rig", "aravis-fake", "--cfa", "RGGB"], "--cfa: describes the simulated rig, but the rig is 'aravis-fake'"),
+    # Hardware options the simulated rig used to ignore without a word (it read no --responsivity file at all).
+    (["--responsivity", "{percent}"], "--responsivity: describes a hardware rig's camera or booth, but the rig is "
+                                      "'sim' and would ignore it (the simulated camera is --sim-camera"),
+    (["--calibration", "{percent}"], "--calibration: describes a hardware rig's camera or booth, but the rig is 'sim'"),
+    (["--rig", "aravis-fake", "--pixel-format", "Mono8"], "--pixel-format: describes a hardware rig's camera or "
+                                                          "booth, but the rig is 'aravis-fake'"),
 ])
 def test_bad_sim_options_give_one_line(tmp_path: Path, capsys: pytest.CaptureFixture, options: list[str],
                                        expected: str) -> None:
