@@ -6,11 +6,16 @@ runs in a fraction of a second.
 
 from __future__ import annotations
 
+import json
+import subprocess
+import time
+
 from collections.abc import Sequence
 from functools import cache
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
 from processing import datasets, lights
@@ -216,3 +221,19 @@ def spectrum_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
     truth = np.asarray(truth, float)
     scaled = truth * (truth @ estimate) / (truth @ truth)
     return float(np.sqrt(np.mean((estimate - scaled) ** 2)))
+
+
+def wait_for_frames(process: subprocess.Popen[bytes], sequence_json: Path, n: int, timeout_s: float = 120.0) -> None:
+    """Wait until a capture child has written ``n`` frames into ``sequence_json`` (fails the test if it ends first or times out)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            pytest.fail(f"capture ended (status {process.returncode}) before {n} frames: {process.stderr.read().decode()}")
+        try:
+            if len(json.loads(sequence_json.read_text())["frames"]) >= n:
+                return
+        except (FileNotFoundError, json.JSONDecodeError, KeyError):
+            pass
+        time.sleep(0.01)
+    process.kill()
+    pytest.fail(f"no {n} frames in {sequence_json} within {timeout_s} s")

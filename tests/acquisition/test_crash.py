@@ -7,7 +7,6 @@ the sequence file, it never sleeps for a set time.
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
@@ -18,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from acquisition.sequence_format import read_sequence
+from tests.helpers import wait_for_frames
 
 REPO = Path(__file__).resolve().parents[2]
 SLOW_CAPTURE = ["capture", "--sync", "booth", "--exposure-us", "300000", "--scene", "macbeth"]
@@ -28,26 +28,11 @@ def _start(out: Path, *extra: str) -> subprocess.Popen[bytes]:
     return subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 
-def _wait_for_frames(process: subprocess.Popen[bytes], sequence_json: Path, n: int, timeout_s: float = 120.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if process.poll() is not None:
-            pytest.fail(f"capture ended (status {process.returncode}) before {n} frames: {process.stderr.read().decode()}")
-        try:
-            if len(json.loads(sequence_json.read_text())["frames"]) >= n:
-                return
-        except (FileNotFoundError, json.JSONDecodeError, KeyError):
-            pass
-        time.sleep(0.01)
-    process.kill()
-    pytest.fail(f"no {n} frames in {sequence_json} within {timeout_s} s")
-
-
 def test_sigkill_leaves_a_readable_partial_sequence(tmp_path: Path) -> None:
     out = tmp_path / "killed"
     process = _start(out)
     try:
-        _wait_for_frames(process, out / "sequence" / "sequence.json", 2)
+        wait_for_frames(process, out / "sequence" / "sequence.json", 2)
         process.send_signal(signal.SIGKILL)
         assert process.wait(timeout=30) == -signal.SIGKILL
     finally:
@@ -66,7 +51,7 @@ def test_sigint_exits_130_with_the_leds_off(tmp_path: Path) -> None:
     transcript = tmp_path / "booth.txt"
     process = _start(out, "--log-serial", str(transcript))
     try:
-        _wait_for_frames(process, out / "sequence" / "sequence.json", 2)
+        wait_for_frames(process, out / "sequence" / "sequence.json", 2)
         os.kill(process.pid, signal.SIGINT)
         _, err = process.communicate(timeout=60)
     finally:

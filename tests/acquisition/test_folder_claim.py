@@ -12,7 +12,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -21,7 +20,7 @@ from acquisition.cli import main
 from acquisition.errors import FolderInUseError
 from acquisition.folder_claim import LOCK_FILE, claim_folder, claimed
 from acquisition.sequence_format import read_sequence
-from tests.helpers import write_test_sequence
+from tests.helpers import wait_for_frames, write_test_sequence
 
 REPO = Path(__file__).resolve().parents[2]
 SLOW_CAPTURE = ["capture", "--sync", "booth", "--exposure-us", "300000", "--scene", "macbeth"]
@@ -40,21 +39,6 @@ def _finish(process: subprocess.Popen[bytes], timeout_s: float = 240.0) -> tuple
         process.communicate()
         pytest.fail(f"msflash did not finish within {timeout_s} s")
     return process.returncode, err.decode()
-
-
-def _wait_for_frames(process: subprocess.Popen[bytes], sequence_json: Path, n: int, timeout_s: float = 120.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if process.poll() is not None:
-            pytest.fail(f"capture ended (status {process.returncode}) before {n} frames: {process.stderr.read().decode()}")
-        try:
-            if len(json.loads(sequence_json.read_text())["frames"]) >= n:
-                return
-        except (FileNotFoundError, json.JSONDecodeError, KeyError):
-            pass
-        time.sleep(0.01)
-    process.kill()
-    pytest.fail(f"no {n} frames in {sequence_json} within {timeout_s} s")
 
 
 def test_two_runs_started_together_into_one_folder_one_wins(tmp_path: Path) -> None:
@@ -83,7 +67,7 @@ def test_a_second_capture_into_a_busy_folder_names_the_holder(tmp_path: Path) ->
     out = tmp_path / "busy"
     first = _msflash(*SLOW_CAPTURE, "--out", str(out))
     try:
-        _wait_for_frames(first, out / "sequence" / "sequence.json", 1)
+        wait_for_frames(first, out / "sequence" / "sequence.json", 1)
         status, err = _finish(_msflash("capture", "--out", str(out)))
         assert status == 2, err
         assert err.count("\n") == 1
