@@ -622,7 +622,7 @@ class BlockRows:
         self._filled.append(row)
 
     def _sample_weights(self) -> np.ndarray:
-        """Square roots of the inverse-variance weights of every row column, from the ambient row and its probe."""
+        """The inverse-variance weights of every row column, from the ambient row and its probe."""
         ambient = self.n_led_frames
         assert self.differences is not None
         # rows layout (block row, channel, block column); the probe's (probed block row, block column, channel)
@@ -630,25 +630,23 @@ class BlockRows:
         line = ambient_noise_line(self.rows[ambient].reshape(self.block_shape).transpose(0, 2, 1),
                                   self.differences[ambient].reshape(self.difference_shape), black,
                                   self._ambient_saturated, self.probe_stride)
-        return line.root_weights(self.rows[ambient], black)
+        return line.weights(self.rows[ambient], black)
 
     def _weigh_row(self, row: int) -> None:
         """Scale one row (and its probe) by the root weights (incremental mode, weights known)."""
         assert self.root_weights is not None
         self.rows[row] *= self.root_weights
         if self.differences is not None:
-            self.differences[row] *= self._probe_root_weights
+            self.differences[row] *= self._at_probe(self.root_weights)
 
-    @property
-    def _probe_root_weights(self) -> np.ndarray:
-        """:attr:`root_weights` at the probed blocks, in the probe's layout."""
-        assert self.root_weights is not None
-        return self.root_weights.reshape(self.block_shape)[::self.probe_stride].transpose(0, 2, 1).reshape(-1)
+    def _at_probe(self, values: np.ndarray) -> np.ndarray:
+        """Per-column ``values`` of the rows at the probed blocks, in the probe's layout."""
+        return values.reshape(self.block_shape)[::self.probe_stride].transpose(0, 2, 1).reshape(-1)
 
     def _weigh_filled(self) -> None:
         """Incremental mode, the ambient row just in: weigh every filled row and retake their moments."""
         assert self._moments is not None
-        self.root_weights = self._sample_weights()
+        self.root_weights = np.sqrt(self._sample_weights())
         filled = [row for row in self._filled if row != self.n_led_frames + 1]
         for row in [*filled, self.n_led_frames]:
             self._weigh_row(row)
@@ -733,10 +731,8 @@ class BlockRows:
         weights = probe_weights = None
         if self.weighting and self._moments is None:
             # Batch mode: the weights enter each chunk's product (incremental mode weighs rows as frames come).
-            if self.root_weights is None:
-                self.root_weights = self._sample_weights()
-            weights = np.square(self.root_weights)
-            probe_weights = np.square(self._probe_root_weights)
+            weights = self._sample_weights()
+            probe_weights = self._at_probe(weights)
         if self._moments is not None:
             moments = self._moments  # incremental: saturated blocks were left out as they came (_drop)
             noise = self._noise
@@ -772,7 +768,7 @@ class BlockRows:
         factor = self.factor
         return _statistics_from_moments(moments, spec, rows.shape[1], black_level=spec.black_level * factor * factor,
                                         noise_moments=noise, n_samples=rows.shape[1] - excluded_columns,
-                                        weighted=self.root_weights is not None)
+                                        weighted=self.root_weights is not None or weights is not None)
 
 
 def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total: int,
@@ -840,9 +836,9 @@ class NoiseLine:
     read: float
     floor: float
 
-    def root_weights(self, levels: np.ndarray, black: float = 0.0) -> np.ndarray:
-        """``√(1/var)`` of samples at raw ``levels`` (less ``black``), normalised so the weights average 1, in
-        the layout of ``levels``."""
+    def weights(self, levels: np.ndarray, black: float = 0.0) -> np.ndarray:
+        """``1/var`` of samples at raw ``levels`` (less ``black``), normalised to average 1, in the layout of
+        ``levels``."""
         variance = np.subtract(levels, black, dtype=float)
         np.maximum(variance, 0.0, out=variance)
         variance *= self.gain
@@ -850,7 +846,12 @@ class NoiseLine:
         np.maximum(variance, self.floor, out=variance)
         np.reciprocal(variance, out=variance)
         variance *= 1.0 / float(variance.mean())
-        return np.sqrt(variance, out=variance)
+        return variance
+
+    def root_weights(self, levels: np.ndarray, black: float = 0.0) -> np.ndarray:
+        """``√`` of :meth:`weights`: the factor each sample's row entry is scaled by."""
+        weights = self.weights(levels, black)
+        return np.sqrt(weights, out=weights)
 
 
 UNIFORM_NOISE = NoiseLine(0.0, 1.0, 1.0)
@@ -924,7 +925,7 @@ def inverse_variance_weights(levels: np.ndarray, probed_levels: np.ndarray, prob
     >>> round(float(weights.mean()), 6), bool(weights[np.argmin(levels)] > 10 * weights[np.argmax(levels)])
     (1.0, True)
     """
-    return np.square(fit_noise_line(probed_levels, probe).root_weights(np.asarray(levels, dtype=float)))
+    return fit_noise_line(probed_levels, probe).weights(np.asarray(levels, dtype=float))
 
 
 def cfa_planes(frame: np.ndarray, cfa_period: int) -> np.ndarray:
