@@ -230,8 +230,9 @@ def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarr
 def estimate_payload(sequence: Sequence, estimate: AmbientEstimate) -> dict:
     """The ``msflash estimate --json`` object (docs/architecture.md §7)."""
     spectrum = spectrum_in_sequence_unit(sequence, estimate.spectrum)
+
     def in_unit(values: np.ndarray) -> np.ndarray:
-        return estimate.spectrum.replace(values=np.asarray(values)[:, None]).to_unit(sequence.spectral_unit).values[:, 0]
+        return spectrum_in_sequence_unit(sequence, estimate.spectrum.replace(values=np.asarray(values)[:, None]))
 
     std = in_unit(estimate.spectrum_std)
     return {

@@ -262,10 +262,10 @@ def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, 
     With ``r(α)`` the residual energy of the fit on the ``solved`` (denoised) statistics — what the
     solve minimises, so it grows with α — and ``σ² = r_obs(α₀) / (n − k)`` the noise per sample left
     by the least-penalised fit on the ``observed`` ones, α is the largest with
-    ``r(α) ≤ r(α₀) + DISCREPANCY_SIGMAS · k σ²``: a penalty the data cannot tell from noise. It regularises as much as the pixels allow, where generalised cross-validation (which
-    minimises the predicted pixel error, :func:`gcv_alpha`) often takes the smallest α of its grid and
-    lets nearly collinear LEDs trade false lobes the camera cannot see. The grid is bisected (about
-    6 solves).
+    ``r(α) ≤ r(α₀) + DISCREPANCY_SIGMAS · k σ²``: a penalty the data cannot tell from noise. It
+    regularises as much as the pixels allow, where generalised cross-validation (which minimises the
+    predicted pixel error, :func:`gcv_alpha`) often takes the smallest α of its grid and lets nearly
+    collinear LEDs trade false lobes the camera cannot see. The grid is bisected (about 6 solves).
 
     Measured against GCV on scenes of tuning lights in docs/ambient-harness.md.
     """
@@ -466,7 +466,7 @@ class AmbientModel:
         except np.linalg.LinAlgError:
             weights_cov = np.full((statistics.n_leds,) * 2, np.inf)
         if method == "lstsq" or not np.all(np.isfinite(weights_cov)):
-            spectrum_std = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", led_values, weights_cov, led_values), 0, None))
+            spectrum_std = _sandwich_band(led_values, weights_cov)
         else:
             spectrum_std = _constrained_band(solved, terms, penalty_weight, weights_cov)
 
@@ -525,6 +525,11 @@ class AmbientModel:
         )
 
 
+def _sandwich_band(led_values: np.ndarray, weights_cov: np.ndarray) -> np.ndarray:
+    """``√diag(I Cov(w) Iᵀ)``: the spectrum's standard deviation for weights of covariance ``weights_cov``."""
+    return np.sqrt(np.clip(np.einsum("ij,jk,ik->i", led_values, weights_cov, led_values), 0, None))
+
+
 BAND_DRAWS = 64
 """Draws of the unconstrained weights behind the band of a constrained estimate (:func:`_constrained_band`)."""
 
@@ -547,7 +552,7 @@ def _constrained_band(solved: SequenceStatistics, terms: LedTerms, penalty_weigh
         centre = np.linalg.solve(hessian, solved.cross)
         factor = np.linalg.cholesky(weights_cov + 1e-12 * max(float(np.trace(weights_cov)), 1e-300) * np.eye(len(centre)))
     except (np.linalg.LinAlgError, SolverError):
-        return np.sqrt(np.clip(np.einsum("ij,jk,ik->i", terms.values, weights_cov, terms.values), 0, None))
+        return _sandwich_band(terms.values, weights_cov)
     draws = centre[:, None] + factor @ np.random.default_rng(0).standard_normal((len(centre), BAND_DRAWS))
     # A draw that already meets I w ≥ 0 is its own projection: only the others are solved.
     spectra = terms.values @ draws
