@@ -56,8 +56,6 @@ class LightReference:
     """(T,) RMSE of the best non-negative LED fit of each light (the LED bound)."""
     rmse: np.ndarray
     """(T,) RMSE of each noise-free estimate."""
-    covered: np.ndarray
-    """(n_wl,) wavelengths the reference lights cover (elsewhere they say nothing)."""
 
 
 @dataclass(frozen=True)
@@ -102,8 +100,6 @@ def light_reference(led_spectra: Spectra, responsivities: Spectra, lights: Spect
         raise SpectralDataError(f"model error: responsivities on {camera.grid} but LEDs on {grid}; expected one grid")
     lights = (prior_training_lights() if lights is None else lights)
     light_values = lights.to_unit("photons").resample(grid, outside="zero").values
-    low, high = lights.wavelengths_nm[0], lights.wavelengths_nm[-1]
-    covered = (grid.wavelengths_nm >= low) & (grid.wavelengths_nm <= high)
     reflectances = (natural100() if surfaces is None else surfaces).resample(grid, outside="edge").values
     # Camera responses of every surface (× channel) to each LED and each light: eq. 2 on the generic scene.
     channels = camera.values  # (n_wl, C)
@@ -125,7 +121,7 @@ def light_reference(led_spectra: Spectra, responsivities: Spectra, lights: Spect
     _, best_errors = _paper_rmse_parts(best, light_values)
     return LightReference(estimates=estimates, errors=errors,
                           bounds=np.sqrt(np.mean(best_errors ** 2, axis=0)),
-                          rmse=np.sqrt(np.mean(errors ** 2, axis=0)), covered=covered)
+                          rmse=np.sqrt(np.mean(errors ** 2, axis=0)))
 
 
 @lru_cache(maxsize=8)
