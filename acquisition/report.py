@@ -11,18 +11,18 @@ from typing import Any
 
 import numpy as np
 
-from acquisition import analysis
-from acquisition.cli_common import dumps_json
-from acquisition.errors import OutputWriteError
-from acquisition.image_io import write_image
-from acquisition.sequence_format import Sequence
-from processing import datasets
-from processing.ambient import AmbientEstimate
-from processing.flash import FlashSolution
-from processing.metrics import led_fit, led_fit_rmse, spectrum_rmse
-from processing.render import camera_to_xyz_matrix, demosaic_superpixel, srgb_preview
-from processing.spectra import Spectra
-from processing.synthesis import synthesize
+from msflash.acquisition import analysis
+from msflash.acquisition.cli_common import dumps_json
+from msflash.acquisition.errors import OutputWriteError
+from msflash.acquisition.image_io import write_image
+from msflash.acquisition.sequence_format import Sequence
+from msflash.processing import datasets
+from msflash.processing.ambient import AmbientEstimate
+from msflash.processing.flash import FlashSolution
+from msflash.processing.metrics import led_fit, led_fit_rmse, spectrum_rmse
+from msflash.processing.render import camera_to_xyz_matrix, demosaic_superpixel, srgb_preview
+from msflash.processing.spectra import Spectra
+from msflash.processing.synthesis import synthesize
 
 
 def _pyplot():  # noqa: ANN202 - matplotlib is imported lazily, with the non-interactive backend
@@ -47,6 +47,11 @@ def linear_rgb(sequence: Sequence, image: np.ndarray) -> np.ndarray:
             return np.repeat(image[:, :, None], 3, axis=2)
         return demosaic_superpixel(image, sequence.camera.cfa)
     return image
+
+
+def preview_image(sequence: Sequence, image: np.ndarray) -> np.ndarray:
+    """An 8-bit sRGB preview of a linear frame of the sequence, as the run report draws its previews."""
+    return srgb_preview(linear_rgb(sequence, image), _camera_to_xyz(sequence))
 
 
 def _camera_to_xyz(sequence: Sequence) -> np.ndarray | None:

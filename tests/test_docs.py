@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import doctest
 import re
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("acquisition", "processing", "calibration", "led_controller")
@@ -64,3 +67,29 @@ def test_every_cited_architecture_section_exists() -> None:
                for number in sorted(set(SECTION_CITE.findall(path.read_text(encoding="utf-8"))))
                if number not in sections]
     assert not missing, f"cited sections absent from docs/architecture.md (it has {sorted(sections)}):\n" + "\n".join(missing)
+
+
+def test_the_python_api_page_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """docs/python-api.md's worked example runs as written, in a fresh folder (issue 18, item 1)."""
+    monkeypatch.chdir(tmp_path)
+    result = doctest.testfile(str(ROOT / "docs" / "python-api.md"), module_relative=False, verbose=False,
+                              optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted >= 15
+    assert result.failed == 0, capsys.readouterr().out
+
+
+def test_help_msflash_shows_the_public_face() -> None:
+    """``help(msflash)`` documents the five steps of the method and nothing else at the top."""
+    import pydoc
+
+    import msflash
+
+    text = pydoc.render_doc(msflash, renderer=pydoc.plaintext)
+    for name in msflash.__all__:
+        assert name.strip("_") in text.lower(), name
+    assert sorted(n for n in msflash.__all__ if not n.startswith("_")) == sorted(
+        ["estimate_ambient", "read_sequence", "render_preview", "solve_flash", "synthesize_flash"])
+    for name in msflash.__all__:
+        if not name.startswith("_"):
+            assert (getattr(msflash, name).__doc__ or "").strip(), name

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -51,3 +52,22 @@ def test_serial_only_in_led_controller() -> None:
     offenders = [p.relative_to(ROOT).as_posix() for p in source_files() if "serial" in imported_top_level(p)]
     assert offenders, "expected the booth driver to import pyserial"
     assert all(path.startswith("led_controller/") for path in offenders), offenders
+
+
+def test_code_imports_the_packages_only_under_msflash() -> None:
+    """Every import of our own packages goes through the ``msflash`` namespace (issue 18, item 1):
+    a bare ``processing`` would be a user's folder of that name, or nothing."""
+    files = source_files() + sorted((ROOT / "tests").rglob("*.py")) + sorted((ROOT / "msflash").glob("*.py"))
+    offenders = [p.relative_to(ROOT).as_posix() for p in files if imported_top_level(p) & set(PACKAGES)]
+    assert offenders == []
+
+
+def test_the_install_provides_msflash_and_no_bare_package(tmp_path: Path) -> None:
+    """Outside the checkout, ``msflash.processing`` imports and ``processing`` does not: nothing installs
+    the four generic names (the subpackages live in the four top-level folders, linked under msflash/)."""
+    code = ("import importlib.util, json, msflash.processing.ambient as ambient\n"
+            "print(json.dumps([ambient.__name__] + [importlib.util.find_spec(n) is None for n in "
+            f"{list(PACKAGES)!r}]))")
+    result = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=120, check=True)
+    assert result.stdout.strip() == '["msflash.processing.ambient", true, true, true, true]'

@@ -21,11 +21,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import cli_evaluate
-from acquisition.cli import main as msflash_main
-from acquisition.cli_common import UsageError
-from acquisition.html_report import PNG_SIGNATURE, HtmlReport
-from acquisition.image_io import read_image, read_image_header
+from msflash.acquisition import cli_evaluate
+from msflash.acquisition.cli import main as msflash_main
+from msflash.acquisition.cli_common import UsageError
+from msflash.acquisition.html_report import PNG_SIGNATURE, HtmlReport
+from msflash.acquisition.image_io import read_image, read_image_header
 
 ACCEPTANCE_AMBIENTS = ("tungsten", "fluorescent", "underwater")
 

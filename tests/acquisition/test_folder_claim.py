@@ -16,18 +16,18 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.cli import main
-from acquisition.errors import FolderInUseError
-from acquisition.folder_claim import LOCK_FILE, claim_folder, claimed
-from acquisition.sequence_format import read_sequence
+from msflash.acquisition.cli import main
+from msflash.acquisition.errors import FolderInUseError
+from msflash.acquisition.folder_claim import LOCK_FILE, claim_folder, claimed
+from msflash.acquisition.sequence_format import read_sequence
 from tests.helpers import wait_for_frames, write_test_sequence
 
 REPO = Path(__file__).resolve().parents[2]
-SLOW_CAPTURE = ["capture", "--sync", "booth", "--exposure-us", "300000", "--scene", "macbeth"]
+SLOW_CAPTURE = ["capture", "--sync", "booth", "--exposure-us", "1500000", "--scene", "macbeth"]
 
 
 def _msflash(*args: str) -> subprocess.Popen[bytes]:
-    return subprocess.Popen([sys.executable, "-m", "acquisition.cli", *args], cwd=REPO,
+    return subprocess.Popen([sys.executable, "-m", "msflash.acquisition.cli", *args], cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 

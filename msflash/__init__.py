@@ -1,0 +1,140 @@
+"""msflash — the computational multispectral flash (Blasinski & Farrell, ICCP 2017), for notebooks.
+
+A recorded sequence (an ambient frame, then ambient + each LED; docs/architecture.md §6) goes
+through five steps, each one function here::
+
+    >>> import msflash
+    >>> sequence = msflash.read_sequence("runs/demo/sequence")          # doctest: +SKIP
+    >>> estimate = msflash.estimate_ambient(sequence)                    # eq. 4-6  # doctest: +SKIP
+    >>> flash = msflash.solve_flash(sequence, estimate, "complementary")  # eq. 8-9  # doctest: +SKIP
+    >>> image = msflash.synthesize_flash(sequence, flash)                # doctest: +SKIP
+    >>> preview = msflash.render_preview(sequence, image)                # doctest: +SKIP
+
+``docs/python-api.md`` has a worked example that runs as a doctest. The code lives in four
+subpackages, all importable under this name: ``msflash.acquisition`` (cameras, booth sessions,
+sequence files, the command line), ``msflash.calibration``, ``msflash.processing`` (the maths)
+and ``msflash.led_controller`` (the booth driver and emulator); docs/architecture.md §2.
+
+Importing ``msflash`` is cheap: each function imports what it needs when it is called, so the
+command line (which starts under this package) pays nothing for the public face.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # pragma: no cover - names for the annotations only
+    import numpy as np
+
+    from msflash.acquisition.sequence_format import Sequence
+    from msflash.processing.ambient import AmbientEstimate
+    from msflash.processing.flash import FlashSolution
+
+__version__ = "0.1.0"
+__all__ = ["read_sequence", "estimate_ambient", "solve_flash", "synthesize_flash", "render_preview",
+           "__version__"]
+
+_log = logging.getLogger("msflash")
+
+
+def read_sequence(path: str | Path, calibration: str | Path | None = None) -> Sequence:
+    """Read a recorded sequence (a folder holding ``sequence.json``, or that file).
+
+    Parameters
+    ----------
+    path
+        The sequence folder or its ``sequence.json`` (docs/architecture.md §6).
+    calibration
+        A calibration folder written by ``msflash calibrate``; its LED spectra and camera
+        responsivities replace the sequence's. ``None`` uses the calibration the sequence names,
+        if any. What was applied is logged on the ``msflash`` logger.
+
+    Returns
+    -------
+    Sequence
+        The sequence's metadata; frames are read when a step needs them.
+
+    Raises
+    ------
+    msflash.acquisition.errors.RecordingError
+        The file is missing, malformed or names frames or calibrations that are not usable; the
+        message names the file and the field.
+    """
+    from msflash.acquisition.analysis import apply_calibration
+    from msflash.acquisition.sequence_format import read_sequence as read
+
+    sequence, notes = apply_calibration(read(path), calibration)
+    for note in notes:
+        _log.info(note)
+    return sequence
+
+
+def estimate_ambient(sequence: Sequence, solver: str = "tikhonov", alpha: float | str = "auto") -> AmbientEstimate:
+    """The ambient illuminant's spectrum as a mix of the LED spectra, from the pixels (eq. 4–6).
+
+    Exactly what ``msflash estimate`` computes by default: inverse-variance weighted statistics
+    of the ambient and LED-only frames, a non-negative Tikhonov solve (α by the discrepancy
+    principle when ``alpha="auto"``), and a band holding pixel noise and the LED model's own error
+    (docs/ambient-estimate.md).
+
+    Returns
+    -------
+    AmbientEstimate
+        ``.spectrum`` (photons, relative to the LEDs at full drive), ``.ambient_weights`` (w_a),
+        ``.spectrum_std`` (±1σ; ``.band_meaning`` says what it covers) and ``.warnings``.
+    """
+    from msflash.acquisition.analysis import estimate_sequence
+
+    return estimate_sequence(sequence, solver, alpha)
+
+
+def solve_flash(sequence: Sequence, estimate: AmbientEstimate, mode: str = "matching",
+                target: str = "D65") -> FlashSolution:
+    """The LED mix that matches the ambient (eq. 7) or complements it towards ``target`` (eq. 8–9).
+
+    Parameters
+    ----------
+    mode
+        ``"matching"`` or ``"complementary"``.
+    target
+        For ``complementary``: an illuminant name (D65, A, FL2, …) or a CSV file
+        ``wavelength_nm, value`` in energy units.
+
+    Returns
+    -------
+    FlashSolution
+        ``.flash_weights`` (one drive level per LED, 0–1), ``.relative_error``, ``.warnings``.
+    """
+    from msflash.acquisition.analysis import solve_sequence_flash
+
+    return solve_sequence_flash(sequence, mode, estimate.ambient_weights, target)
+
+
+def synthesize_flash(sequence: Sequence, flash: FlashSolution | np.ndarray) -> np.ndarray:
+    """The image under ambient + flash, synthesised from the frames already taken: ``m_a + Σ w_k m_f,k``.
+
+    Returns
+    -------
+    numpy.ndarray
+        Linear values per µs·gain, the frames' shape (a mosaic stays a mosaic).
+    """
+    import numpy as np
+
+    from msflash.acquisition.analysis import synthesize_sequence
+
+    weights = flash.flash_weights if hasattr(flash, "flash_weights") else np.asarray(flash, dtype=float)
+    image, _saturated, _stack = synthesize_sequence(sequence, weights)
+    return image
+
+
+def render_preview(sequence: Sequence, image: np.ndarray) -> np.ndarray:
+    """An 8-bit sRGB preview of a linear image of the sequence (demosaiced if the camera has a CFA).
+
+    The camera's colours go to sRGB through a matrix fitted on a chart when the sequence carries
+    the camera's responsivities; otherwise the camera's channels are shown as they are.
+    """
+    from msflash.acquisition.report import preview_image
+
+    return preview_image(sequence, image)
