@@ -7,6 +7,10 @@ Each class also inherits the matching built-in exception. Messages follow
 from __future__ import annotations
 
 
+class UsageError(ValueError):
+    """Bad input from the user (a file, field or option); the CLI exits with status 2."""
+
+
 class CameraError(OSError):
     """A camera failed or refused a setting; the message names the camera and the feature."""
 

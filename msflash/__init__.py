@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # pragma: no cover - names for the annotations only
     import numpy as np
 
-    from msflash.acquisition.sequence_format import Sequence
+    from msflash.acquisition.sequence.format import Sequence
     from msflash.processing.ambient import AmbientEstimate
     from msflash.processing.flash import FlashSolution
 
@@ -62,8 +62,8 @@ def read_sequence(path: str | Path, calibration: str | Path | None = None) -> Se
         The file is missing, malformed or names frames or calibrations that are not usable; the
         message names the file and the field.
     """
-    from msflash.acquisition.analysis import apply_calibration
-    from msflash.acquisition.sequence_format import read_sequence as read
+    from msflash.acquisition.session.analysis import apply_calibration
+    from msflash.acquisition.sequence.format import read_sequence as read
 
     sequence, notes = apply_calibration(read(path), calibration)
     for note in notes:
@@ -85,7 +85,7 @@ def estimate_ambient(sequence: Sequence, solver: str = "tikhonov", alpha: float 
         ``.spectrum`` (photons, relative to the LEDs at full drive), ``.ambient_weights`` (w_a),
         ``.spectrum_std`` (±1σ; ``.band_meaning`` says what it covers) and ``.warnings``.
     """
-    from msflash.acquisition.analysis import estimate_sequence
+    from msflash.acquisition.session.analysis import estimate_sequence
 
     return estimate_sequence(sequence, solver, alpha)
 
@@ -107,7 +107,7 @@ def solve_flash(sequence: Sequence, estimate: AmbientEstimate, mode: str = "matc
     FlashSolution
         ``.flash_weights`` (one drive level per LED, 0–1), ``.relative_error``, ``.warnings``.
     """
-    from msflash.acquisition.analysis import solve_sequence_flash
+    from msflash.acquisition.session.analysis import solve_sequence_flash
 
     return solve_sequence_flash(sequence, mode, estimate.ambient_weights, target)
 
@@ -122,7 +122,7 @@ def synthesize_flash(sequence: Sequence, flash: FlashSolution | np.ndarray) -> n
     """
     import numpy as np
 
-    from msflash.acquisition.analysis import synthesize_sequence
+    from msflash.acquisition.session.analysis import synthesize_sequence
 
     weights = flash.flash_weights if hasattr(flash, "flash_weights") else np.asarray(flash, dtype=float)
     image, _saturated, _stack = synthesize_sequence(sequence, weights)
@@ -135,6 +135,6 @@ def render_preview(sequence: Sequence, image: np.ndarray) -> np.ndarray:
     The camera's colours go to sRGB through a matrix fitted on a chart when the sequence carries
     the camera's responsivities; otherwise the camera's channels are shown as they are.
     """
-    from msflash.acquisition.report import preview_image
+    from msflash.acquisition.app.report import preview_image
 
     return preview_image(sequence, image)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
 from msflash.processing import datasets, lights
 from msflash.processing.image_formation import Scene, SensorModel, chart_scene, expected_response, exposure_for_peak, mosaic, render_frame
 from msflash.processing.spectra import DEFAULT_GRID, Spectra

@@ -35,7 +35,7 @@ def _wait_for_kill() -> None:
 @contextlib.contextmanager
 def _camera_after_kill() -> Iterator[Any]:
     """AravisCamera on the process fake at 127.0.0.1: two frames taken, then the fake killed by the parent."""
-    from msflash.acquisition import aravis_camera
+    from msflash.acquisition.devices.aravis import camera as aravis_camera
     from msflash.acquisition.plan import CapturePlan
 
     plan = CapturePlan.ambient_then_each_led(3, 1000.0)
@@ -83,11 +83,11 @@ def silent_scenario() -> dict:
 
 
 def capture_scenario(out_dir: Path) -> dict:
-    from msflash.acquisition import aravis_camera
-    from msflash.acquisition.capture import run_capture
+    from msflash.acquisition.devices.aravis import camera as aravis_camera
+    from msflash.acquisition.session.capture import run_capture
     from msflash.acquisition.errors import CameraError
     from msflash.acquisition.plan import CapturePlan
-    from msflash.acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
+    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
     from msflash.led_controller import LedBooth, serve_on_pty
 
     peaks = (450.0, 550.0, 650.0)

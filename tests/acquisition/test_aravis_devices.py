@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from msflash.acquisition.cli import main
+from msflash.acquisition.app.cli import main
 
 pytestmark = pytest.mark.aravis
 

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from msflash.acquisition.camera import Camera
+from msflash.acquisition.devices.camera import Camera
 from msflash.acquisition.errors import CameraError, CameraNotFoundError, DroppedFrameError
 from msflash.acquisition.plan import CapturePlan
 

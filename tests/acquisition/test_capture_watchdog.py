@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 
-from msflash.acquisition.capture import host_silence_s, preview_frames, run_capture
+from msflash.acquisition.session.capture import host_silence_s, preview_frames, run_capture
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.rig import Rig, open_sim_rig
-from msflash.acquisition.sequence_format import read_sequence
+from msflash.acquisition.session.rig import Rig, open_sim_rig
+from msflash.acquisition.sequence.format import read_sequence
 from msflash.led_controller.booth import levels_close
 
 SHORT_WATCHDOG_S = 0.2
@@ -134,7 +134,7 @@ def test_a_frame_the_watchdog_darkened_is_refused_not_kept(
     """A host that stalls beyond its planned silence (here: the plan's silence taken as nil, so the
     watchdog is not raised) lets the watchdog switch the LED off mid-exposure: host paced, the next
     SET would just work, so the dark LED frame must be refused by name, not written as good data."""
-    from msflash.acquisition import capture
+    from msflash.acquisition.session import capture
     from msflash.acquisition.errors import CaptureError
 
     monkeypatch.setattr(capture, "host_silence_s", lambda plan: 0.0)
@@ -153,8 +153,8 @@ def test_an_unplugged_booth_through_the_cli_says_it_once_plus_the_leds_warning(
     """msflash capture with the booth's pty closed after two frames: exit 1, the error line is the lost link
     during SET, and the only diagnostics shown by default are the driver noticing it and the warning that
     the LEDs could not be confirmed off — not a second failure about OFF from closing the rig."""
-    from msflash.acquisition import cli_run
-    from msflash.acquisition.cli import main
+    from msflash.acquisition.app import cli_run
+    from msflash.acquisition.app.cli import main
     from msflash.led_controller import PtyBoothServer
 
     real_open = cli_run.open_rig

@@ -8,7 +8,7 @@ import signal
 
 import pytest
 
-from msflash.acquisition import cli
+from msflash.acquisition.app import cli
 from msflash.led_controller.booth import Terminated, sigterm_as_exit
 
 

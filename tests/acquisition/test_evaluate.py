@@ -21,18 +21,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition import cli_evaluate
-from msflash.acquisition.cli import main as msflash_main
-from msflash.acquisition.cli_common import UsageError
-from msflash.acquisition.html_report import PNG_SIGNATURE, HtmlReport
-from msflash.acquisition.image_io import read_image, read_image_header
+from msflash.acquisition.app import cli_evaluate, evaluation
+from msflash.acquisition.app.cli import main as msflash_main
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.acquisition.app.html_report import PNG_SIGNATURE, HtmlReport
+from msflash.acquisition.sequence.image_files import read_image, read_image_header
 
 ACCEPTANCE_AMBIENTS = ("tungsten", "fluorescent", "underwater")
 
 
 @cache
 def study(ambient: str) -> dict:
-    return cli_evaluate.study_ambient(ambient, seed=3, patch_px=10)
+    return evaluation.study_ambient(ambient, seed=3, patch_px=10)
 
 
 def parser() -> argparse.ArgumentParser:
@@ -98,7 +98,7 @@ class TestAcceptance:
         # The re-captured complementary image agrees with the synthesised one.
         assert delta_e["complementary-capture"]["mean"] == pytest.approx(after, abs=0.5)
 
-    @pytest.mark.parametrize("ambient", cli_evaluate.STUDY_AMBIENTS)
+    @pytest.mark.parametrize("ambient", evaluation.STUDY_AMBIENTS)
     def test_matching_keeps_the_cast(self, ambient: str) -> None:
         delta_e = study(ambient)["delta_e"]
         assert abs(delta_e["matching"]["mean"] - delta_e["ambient"]["mean"]) <= 1.0
@@ -112,7 +112,7 @@ class TestAcceptance:
         assert noise["von_kries_gains"][0] > 1.5  # the balance amplified red
 
     def test_summary(self) -> None:
-        summary = cli_evaluate.delta_e_summary({name: study(name) for name in ACCEPTANCE_AMBIENTS})
+        summary = evaluation.delta_e_summary({name: study(name) for name in ACCEPTANCE_AMBIENTS})
         for values in summary.values():
             assert values["complementary_cut"] >= 0.3
             assert abs(values["matching_change"]) <= 1.0
@@ -201,7 +201,7 @@ class TestColourStudyCommand:
             run_cli(["colour-study", "--ambients", "moon", "--json"])
 
     def test_cfa_frames_give_the_same_picture(self) -> None:
-        result = cli_evaluate.study_ambient("underwater", seed=1, patch_px=10, cfa="GRBG")
+        result = evaluation.study_ambient("underwater", seed=1, patch_px=10, cfa="GRBG")
         assert result["delta_e"]["complementary"]["mean"] <= 0.3 * result["delta_e"]["ambient"]["mean"]
         assert result["noise"]["complementary"]["mean_snr"]["R"] > result["noise"]["von_kries"]["mean_snr"]["R"]
 

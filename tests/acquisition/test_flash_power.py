@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from msflash.acquisition.cli import main
-from msflash.acquisition.rig import open_sim_rig
-from msflash.acquisition.sequence_format import read_sequence
-from msflash.acquisition.simulated_camera import SimulatedCamera, led_signals
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.session.rig import open_sim_rig
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera, led_signals
 from msflash.processing.image_formation import Scene
 from msflash.processing.metrics import spectrum_rmse
 

@@ -9,7 +9,7 @@ import OpenImageIO as oiio
 import pytest
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.image_io import image_suffix, read_image, read_image_header, write_image
+from msflash.acquisition.sequence.image_files import image_suffix, read_image, read_image_header, write_image
 
 RNG = np.random.default_rng(7)
 

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition import rig as rig_module
-from msflash.acquisition.cli import main
-from msflash.acquisition.sequence_format import read_sequence
+from msflash.acquisition.session import rig as rig_module
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.sequence.format import read_sequence
 
 # The sim world's spectrum RMSE is ~0.15–0.26 (the best LED fit of its ambients is 0.16–0.21);
 # 0.35 catches a broken estimator without pinning noise.
@@ -101,8 +101,8 @@ def test_leds_off_and_partial_sequence_kept_when_capture_fails(tmp_path, monkeyp
 def test_run_decides_the_flash_before_the_reliability_signals(tmp_path, monkeypatch) -> None:
     """`msflash run` drives the flash from FlashSession.decide (weights, flash, exposure predicted from the
     frames as they arrived); the estimate's reliability signals are computed only after the capture."""
-    from msflash.acquisition import cli_run
-    from msflash.acquisition.flash_session import FlashSession
+    from msflash.acquisition.app import cli_run
+    from msflash.acquisition.session.flash_session import FlashSession
     from msflash.processing.ambient import AmbientModel
 
     order: list[str] = []

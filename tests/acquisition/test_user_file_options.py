@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from msflash.acquisition.cli import main
+from msflash.acquisition.app.cli import main
 from msflash.processing.user_files import shown_path
 from tests.helpers import write_test_sequence
 

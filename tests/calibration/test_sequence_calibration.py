@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition import cli
-from msflash.acquisition.sequence_format import read_sequence
+from msflash.acquisition.app import cli
+from msflash.acquisition.sequence.format import read_sequence
 from msflash.calibration.camera_response import responsivity_rmse
 from msflash.calibration.chart_sequence import resolve_light, sequence_measurements
 from msflash.calibration.errors import CalibrationError
@@ -24,8 +24,8 @@ from msflash.processing import datasets
 
 @pytest.fixture(autouse=True)
 def with_calibrate(monkeypatch):
-    if "msflash.acquisition.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.cli_calibrate",))
+    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
+        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
 
 
 def _record(root: Path, ambient: str, seed: int, cfa: str | None = None) -> Path:

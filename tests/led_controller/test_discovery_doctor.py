@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from msflash.acquisition.cli_booth import register
+from msflash.acquisition.app.cli_booth import register
 from msflash.led_controller import BoothNotFoundError
 from msflash.led_controller.discovery import SerialPortInfo, find_booth, find_booths
 from msflash.led_controller.doctor import Identity, UsbDevice, run_doctor

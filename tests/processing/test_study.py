@@ -96,8 +96,8 @@ def test_tiny_surfaces_study_runs():
 
 
 def _parser() -> argparse.ArgumentParser:
-    from msflash.acquisition import cli_study
-    from msflash.acquisition.cli_common import UsageError
+    from msflash.acquisition.app import cli_study
+    from msflash.acquisition.app.cli_common import UsageError
 
     class Parser(argparse.ArgumentParser):
         def error(self, message):  # like acquisition.cli: usage errors raise
@@ -129,7 +129,7 @@ def test_cli_surfaces_plot_survives_a_refused_count(tmp_path, capsys):
 
 
 def test_cli_rejects_bad_input():
-    from msflash.acquisition.cli_common import UsageError
+    from msflash.acquisition.app.cli_common import UsageError
 
     parser = _parser()
     with pytest.raises(UsageError):
@@ -151,7 +151,7 @@ def test_cli_rejects_bad_input():
 ])
 def test_cli_option_errors_say_what_is_expected(argv, message):
     """They read "invalid _counts value: '0'" (the Python function's name, nothing expected); inf was accepted."""
-    from msflash.acquisition.cli_common import UsageError
+    from msflash.acquisition.app.cli_common import UsageError
 
     with pytest.raises(UsageError) as caught:
         _parser().parse_args(["study", "table1", *argv])
@@ -161,7 +161,7 @@ def test_cli_option_errors_say_what_is_expected(argv, message):
 def test_cli_scheduler_that_is_not_an_address_is_bad_input():
     """'--scheduler bogus' ended in a ValueError traceback from dask's address parser."""
     pytest.importorskip("distributed")
-    from msflash.acquisition.cli_common import UsageError
+    from msflash.acquisition.app.cli_common import UsageError
 
     args = _parser().parse_args(["study", "table1", "--scheduler", "bogus", "--cameras", "1", "--illuminants", "1"])
     with pytest.raises(UsageError, match="--scheduler bogus: cannot connect .*expected 'local', 'none' or a dask"):
@@ -171,7 +171,7 @@ def test_cli_scheduler_that_is_not_an_address_is_bad_input():
 _LOOPBACK_CLUSTER = """
 import sys
 import distributed
-from msflash.acquisition.cli import main
+from msflash.acquisition.app.cli import main
 with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", host="127.0.0.1",
                               dashboard_address=":0") as cluster:
     status = main(["study", "table1", "--json", "--cameras", "2", "--illuminants", "1", "--leds", "3",

@@ -180,7 +180,7 @@ def test_cli_new_studies_write_json_and_png(tmp_path, capsys, argv, key):
 
 
 def test_cli_failure_rejects_an_unknown_factor():
-    from msflash.acquisition.cli_common import UsageError
+    from msflash.acquisition.app.cli_common import UsageError
     from msflash.processing.errors import SpectralDataError
 
     args = _parser().parse_args(["study", "failure", "--factors", "nonsense", "--scheduler", "none"])

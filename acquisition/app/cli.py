@@ -1,0 +1,280 @@
+"""The ``msflash`` command line (docs/architecture.md §7).
+
+Subcommands live in small modules that each expose ``register(subparsers)``; this module builds
+the parser, dispatches, and turns errors into exit statuses: bad input → 2 with one line
+``msflash: error: …``; a device or runtime failure → 1; Ctrl-C → 130 (LEDs are switched off by
+the code that switched them on, in ``finally``). Anything else is a bug: the last line of defence
+(:func:`_crashed`) prints one line naming the command and what failed, writes the full traceback
+to a crash log (:func:`crash_log_directory`) whose path that line gives, and exits 1.
+
+Start-up is kept short: only the module of the command being run is imported (it imports its
+numerical and hardware libraries); the others are listed by name and one-line help from
+:data:`COMMANDS`, so ``msflash --help`` and ``--version`` import none of them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import logging
+import os
+import sys
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from types import ModuleType
+
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.acquisition.errors import CameraError, CaptureError, RecordingError
+from msflash.processing.errors import SolverError, SpectralDataError
+
+COMMANDS: dict[str, tuple[str, str]] = {
+    "estimate": ("msflash.acquisition.app.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
+    "flash": ("msflash.acquisition.app.cli_process", "solve the matching or complementary flash for a sequence"),
+    "synthesize": ("msflash.acquisition.app.cli_process", "synthesise the computational flash image from a sequence"),
+    "run": ("msflash.acquisition.app.cli_run", "the main job: capture, estimate, flash, re-capture, synthesise, report"),
+    "capture": ("msflash.acquisition.app.cli_run", "capture an ambient + each-LED sequence on a rig"),
+    "bench": ("msflash.acquisition.app.cli_bench", "measure speed as ratios in one run (processing, camera, booth)"),
+    "devices": ("msflash.acquisition.app.cli_devices", "list cameras (Aravis) on the given interfaces, and booths among the serial ports"),
+    "booth-emulator": ("msflash.acquisition.app.cli_booth", "serve the booth firmware emulator on a pseudo-terminal"),
+    "doctor": ("msflash.acquisition.app.cli_booth", "check USB3 Vision, GigE and serial setup"),
+    "study": ("msflash.acquisition.app.cli_study", "simulation studies (table1: Table 1; surfaces: Fig. 5; cameras: Fig. 6; xy: Fig. 7; "
+                                       "failure: where estimates fail and whether they warn; pareto: accuracy vs time)"),
+    "evaluate": ("msflash.acquisition.app.cli_evaluate", "ΔE00 against the chart under D65 and noise, for a chart sequence"),
+    "colour-study": ("msflash.acquisition.app.cli_evaluate", "simulated Fig. 9 (ΔE per ambient) and Fig. 3 (noise) study"),
+    "calibrate": ("msflash.acquisition.app.cli_calibrate", "measure LED spectra, camera responsivities, dark and linearity"),
+    "local-study": ("msflash.acquisition.app.cli_local", "study local vs global ambient estimation on simulated scenes"),
+}
+"""Subcommands in help order: name → (module whose ``register`` adds it, the help line it gives it).
+
+The help line is what ``msflash --help`` lists without importing the module; a test checks it
+against the module's own registration."""
+
+COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in COMMANDS.values()))
+"""Modules contributing subcommands, in help order."""
+
+_BAD_INPUT = (UsageError, RecordingError, SpectralDataError, FileNotFoundError)
+
+
+def _bad_input_errors() -> tuple[type[BaseException], ...]:
+    errors: list[type[BaseException]] = list(_BAD_INPUT)
+    try:
+        from msflash.calibration.errors import CalibrationError
+    except ImportError:  # the calibration package is optional for processing-only use
+        pass
+    else:
+        errors.append(CalibrationError)
+    return tuple(errors)
+
+
+def _runtime_errors() -> tuple[type[BaseException], ...]:
+    return (CameraError, CaptureError, SolverError, *_loaded("msflash.led_controller.errors", "BoothError"))
+
+
+def _terminated() -> tuple[type[BaseException], ...]:
+    return _loaded("msflash.led_controller.booth", "Terminated")
+
+
+def _loaded(module_name: str, class_name: str) -> tuple[type[BaseException], ...]:
+    """``(class,)`` when its module is imported, else ``()``: an exception of a module never imported cannot be raised.
+
+    The booth package is not imported for this (the commands that talk to a booth import it).
+    """
+    module = sys.modules.get(module_name)
+    return (getattr(module, class_name),) if module is not None else ()
+
+
+def msflash_version() -> str:
+    """The installed msflash version."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("msflash")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+class _VersionAction(argparse._VersionAction):
+    """``--version``: the installed version, looked up only when asked (importlib.metadata takes a while to import)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        self.version = f"msflash {msflash_version()}"
+        super().__call__(parser, namespace, values, option_string)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse whose usage errors exit with status 2 and one ``msflash: error:`` line."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise UsageError(message)
+
+
+def _command_module(argv: Sequence[str]) -> str | None:
+    """The module of the command named in ``argv`` (its first word not starting with ``-``), if it is one.
+
+    >>> _command_module(["-v", "estimate", "SEQ", "--json"])
+    'msflash.acquisition.app.cli_process'
+    >>> _command_module(["--help"]) is None
+    True
+    """
+    word = next((item for item in argv if not item.startswith("-")), None)
+    return COMMANDS[word][0] if word in COMMANDS else None
+
+
+def _present(module_name: str) -> bool:
+    """Whether a command module is part of this build (found without importing it)."""
+    return importlib.util.find_spec(module_name) is not None
+
+
+def _command_module_or_none(name: str) -> ModuleType | None:
+    try:
+        return importlib.import_module(name)
+    except ModuleNotFoundError as err:
+        if err.name == name:
+            return None  # a command module not present in this build
+        raise
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The parser; with ``argv``, only the module of the command named there is imported.
+
+    Parameters
+    ----------
+    argv
+        The arguments to be parsed. The module owning their command registers its subcommands
+        (all their options); every other command is listed by name and help line only. None (or
+        no command in ``argv``): without it, every module registers its subcommands.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        A parser whose subcommands set ``handler``.
+    """
+    parser = _Parser(prog="msflash", description="Computational multispectral flash: capture, estimate, flash, synthesise.")
+    parser.add_argument("--version", action=_VersionAction)
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more diagnostics on stderr (-vv: serial byte trace)")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    wanted = None if argv is None else _command_module(argv)
+    registered: set[str] = set()
+    for command, (module_name, summary) in COMMANDS.items():
+        if module_name in registered:
+            continue
+        if argv is None or module_name == wanted:
+            registered.add(module_name)
+            module = _command_module_or_none(module_name)
+            if module is not None:
+                module.register(subparsers)
+        elif _present(module_name):
+            subparsers.add_parser(command, help=summary)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``msflash``; returns the exit status (tests call this directly)."""
+    words = list(argv if argv is not None else sys.argv[1:])
+    try:
+        parser = build_parser(words)
+        args = parser.parse_args(words)
+        logging.basicConfig(
+            level=logging.WARNING - 10 * min(args.verbose, 2), format="msflash: %(name)s: %(message)s",
+            stream=sys.stderr,
+        )
+        if not getattr(args, "handler", None):
+            parser.print_help(sys.stderr)
+            return 2
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return int(args.handler(args))
+    except KeyboardInterrupt:
+        sys.stderr.write("msflash: interrupted; LEDs off; frames captured so far are kept (marked incomplete)\n")
+        return 130
+    except _terminated() as stop:
+        sys.stderr.write("msflash: terminated (SIGTERM); LEDs off; frames captured so far are kept (marked "
+                         "incomplete)\n")
+        return int(stop.code) if isinstance(stop.code, int) else 143
+    except BrokenPipeError:
+        # The reader of stdout went away (``msflash estimate SEQ | head``): stop quietly, and keep
+        # Python from complaining again when it flushes stdout at exit.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except _bad_input_errors() as err:
+        sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
+        return 2
+    except _runtime_errors() as err:
+        sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
+        return 1
+    except Exception as err:  # the last line of defence: a bug, not bad input (KeyboardInterrupt/SystemExit pass)
+        return _crashed(words, err)
+
+
+CRASH_LOG_ENV = "MSFLASH_CRASH_DIR"
+"""Environment variable naming the crash-log directory (overrides :func:`crash_log_directory`'s default)."""
+
+
+def crash_log_directory() -> Path:
+    """Where crash logs go: ``$MSFLASH_CRASH_DIR``, else ``$XDG_STATE_HOME/msflash`` (default
+    ``~/.local/state/msflash``)."""
+    if os.environ.get(CRASH_LOG_ENV):
+        return Path(os.environ[CRASH_LOG_ENV])
+    state = os.environ.get("XDG_STATE_HOME") or os.path.join(os.path.expanduser("~"), ".local", "state")
+    return Path(state) / "msflash"
+
+
+def _command_name(words: Sequence[str]) -> str:
+    return next((w for w in words if not w.startswith("-")), "msflash")
+
+
+def _crashed(words: Sequence[str], err: Exception) -> int:
+    """One line on stderr naming the command and what failed, the traceback in a crash log; status 1."""
+    import time
+    import traceback
+
+    command = _command_name(words)
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    text = (f"msflash {msflash_version()} crashed\ncommand: msflash {' '.join(map(repr, words))}\n"
+            f"python: {sys.version.split()[0]}\n\n" + "".join(traceback.format_exception(err)))
+    where = "nowhere (the crash log could not be written)"
+    for directory in (crash_log_directory(), Path(os.environ.get("TMPDIR") or "/tmp")):
+        path = directory / f"crash-{stamp}-{os.getpid()}.log"
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            with open(path, "x", encoding="utf-8", errors="backslashreplace") as stream:
+                stream.write(text)
+        except OSError:
+            continue
+        where = str(path)
+        break
+    message = " ".join((str(err) or "").split())
+    if len(message) > 300:
+        message = message[:300] + "…"
+    sys.stderr.write(f"msflash: {command}: unexpected {type(err).__name__}"
+                     f"{': ' + message if message else ''} — a bug; details in {where}\n")
+    return 1
+
+
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: object = None, line: str | None = None) -> None:
+    """A warning as one line saying what it means, not a source line the user cannot act on.
+
+    numpy's RuntimeWarnings (invalid value, divide by zero, overflow) mean a computation met
+    NaN, infinity or zero where the code did not expect it: the result it printed may hold NaN.
+    """
+    text = " ".join(str(message).split())
+    if issubclass(category, RuntimeWarning) and " encountered in " in text:  # numpy's floating-point errors
+        sys.stderr.write(f"msflash: warning: a numerical step met {text!r} (numpy); results computed from it "
+                         "may hold NaN or infinity — check the input for empty, saturated or constant frames\n")
+        return
+    sys.stderr.write(f"msflash: warning: {text} ({category.__name__})\n")
+
+
+def _one_line(err: BaseException) -> str:
+    text = str(err) or type(err).__name__
+    if isinstance(err, FileNotFoundError) and err.filename:
+        text = f"{err.filename}: not found"
+    return " ".join(text.split())
+
+
+if __name__ == "__main__":
+    sys.exit(main())

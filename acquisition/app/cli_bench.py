@@ -1,0 +1,84 @@
+"""``msflash bench``: speed figures as ratios measured in one run."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from typing import Any
+
+from msflash.acquisition.app.cli_common import positive_int, print_json, progress
+
+_OPTIONAL_PARTS = {
+    "camera": ("msflash.acquisition.app.bench_camera", "camera_bench"),
+    "booth": ("msflash.led_controller.bench", "run_bench"),
+    "capture": ("msflash.acquisition.app.bench_capture", "capture_bench"),
+}
+"""Bench parts contributed by other modules: part name → (module, function returning a dict)."""
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from msflash.acquisition.app.bench import processing_bench
+
+    report: dict[str, Any] = {}
+    parts = args.part or ["processing", "startup", *_OPTIONAL_PARTS]
+    if "processing" in parts:
+        progress("bench: processing (1280×1024 RGB, 7 LEDs)…")
+        report["processing"] = processing_bench(args.height, args.width, repeats=args.repeats)
+    if "startup" in parts:
+        from msflash.acquisition.app.bench_startup import startup_bench
+
+        progress(f"bench: start-up (msflash --help, msflash estimate, import numpy; {args.rounds} interleaved rounds)…")
+        report["startup"] = startup_bench(args.rounds, args.sequence)
+    for part, (module_name, function_name) in _OPTIONAL_PARTS.items():
+        if part not in parts:
+            continue
+        try:
+            module = importlib.import_module(module_name)
+            function = getattr(module, function_name)
+        except (ImportError, AttributeError) as err:
+            report[part] = {"skipped": f"{module_name}.{function_name} unavailable ({err})"}
+            continue
+        progress(f"bench: {part}…")
+        report[part] = function()
+    if args.json:
+        print_json(report)
+    else:
+        _print_human(report)
+    return 0
+
+
+def _print_human(report: dict[str, Any], indent: str = "") -> None:
+    for key, value in report.items():
+        if isinstance(value, dict):
+            print(f"{indent}{key}:")
+            _print_human(value, indent + "  ")
+        elif isinstance(value, list):
+            print(f"{indent}{key}:")
+            for item in value:
+                if isinstance(item, dict):
+                    print(indent + "  - " + ", ".join(f"{k}={_fmt(v)}" for k, v in item.items()))
+                else:
+                    print(f"{indent}  - {_fmt(item)}")
+        else:
+            print(f"{indent}{key}: {_fmt(value)}")
+
+
+def _fmt(value: Any) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``bench``."""
+    bench = subparsers.add_parser("bench", help="measure speed as ratios in one run (processing, camera, booth)")
+    bench.add_argument("--part", action="append", choices=("processing", "startup", *_OPTIONAL_PARTS),
+                       help="run only this part (repeatable); default all")
+    bench.add_argument("--height", type=int, default=1024, help="frame height for the processing part")
+    bench.add_argument("--width", type=int, default=1280, help="frame width for the processing part")
+    bench.add_argument("--repeats", type=int, default=5, help="timing repeats (the best is kept)")
+    bench.add_argument("--rounds", type=positive_int, default=9,
+                       help="start-up part: interleaved runs of each command (the medians are compared)")
+    bench.add_argument("--sequence", metavar="DIR", default=None,
+                       help="start-up part: the sequence 'estimate' reads (default: the demo's, captured on the "
+                            "simulated rig into a temporary folder)")
+    bench.add_argument("--json", action="store_true", help="print one JSON object")
+    bench.set_defaults(handler=_bench)

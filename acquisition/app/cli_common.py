@@ -1,0 +1,91 @@
+"""Conventions shared by every ``msflash`` subcommand module.
+
+Each command module exposes ``register(subparsers)``; each subparser it adds calls
+``set_defaults(handler=function)`` where ``function(args) -> int`` returns the exit status.
+Bad input raises :class:`UsageError` (exit 2, one line ``msflash: error: …``); device and runtime
+failures raise the package error roots (exit 1). ``--json`` output goes through :func:`print_json`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from msflash.acquisition.errors import UsageError  # re-exported: every command raises it
+
+
+def positive_int(text: str) -> int:
+    """argparse type: a whole number ≥ 1 (argparse names the option and exits 2).
+
+    >>> positive_int("3")
+    3
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ 1") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ 1")
+    return value
+
+
+def _strict(value: Any) -> Any:
+    """``value`` with numpy arrays/scalars made plain and non-finite numbers made ``None``.
+
+    JSON has no NaN or infinity; a reader would choke on Python's ``NaN``/``Infinity`` tokens,
+    so an undefined figure (say, the condition number of a degenerate fit) is written as null.
+    numpy is not imported here: when it is not loaded yet, no value can be a numpy object.
+    """
+    if isinstance(value, dict):
+        return {key: _strict(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_strict(item) for item in value]
+    numpy = sys.modules.get("numpy")
+    if numpy is not None and isinstance(value, numpy.ndarray | numpy.generic):
+        from msflash.acquisition.sequence.image_files import json_default
+
+        return _strict(json_default(value))
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def dumps_json(payload: dict[str, Any]) -> str:
+    """One JSON object as text (numpy converted; NaN and infinities written as null)."""
+    return json.dumps(_strict(payload), allow_nan=False)
+
+
+def print_json(payload: dict[str, Any]) -> None:
+    """Print one JSON object on stdout (the ``--json`` contract of docs/architecture.md §7)."""
+    sys.stdout.write(dumps_json(payload) + "\n")
+    sys.stdout.flush()
+
+
+def progress(message: str) -> None:
+    """A progress or diagnostic line on stderr (stdout stays for data)."""
+    sys.stderr.write(f"msflash: {message}\n")
+    sys.stderr.flush()
+
+
+def output_directory(path: str | os.PathLike | None) -> Path | None:
+    """``--out DIR`` created before any work, or a UsageError naming it (None stays None).
+
+    Studies and evaluations write their folder at the end: a path that cannot be a folder (a file
+    there, or under it) must fail before minutes of computing, as one line, not a traceback.
+    """
+    if path is None or path == "":
+        return None
+    out = Path(path)
+    blocking = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), None)
+    if blocking is not None:
+        raise UsageError(f"--out {out}: {blocking} is a file; expected a folder (or a path where one can be made)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise UsageError(f"--out {out}: cannot create the folder ({err.strerror or err}); expected a writable path") from None
+    return out

@@ -1,0 +1,89 @@
+"""``msflash devices``: the cameras Aravis finds on the interfaces the user names, and the booths.
+
+GigE Vision discovery broadcasts on every network interface, so it runs only when ``gige`` is in
+``--interfaces``. ``--address IP`` queries one GigE Vision camera directly, without discovery.
+Booths are the serial ports that look like one (USB id or product string,
+:func:`led_controller.discovery.find_booths`; the system's port list, nothing is opened):
+``msflash run`` takes the single one found, and ``msflash doctor`` says why none is.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from msflash.acquisition.app.cli_common import UsageError, print_json, progress
+from msflash.acquisition.errors import CameraError
+from msflash.led_controller.discovery import SerialPortInfo, find_booths
+
+DEFAULT_INTERFACES = "usb3"
+"""What ``devices`` searches without ``--interfaces``: never GigE Vision discovery by default."""
+
+
+def _camera_at(address: str) -> dict[str, Any]:
+    from msflash.acquisition.devices.aravis.camera import AravisCamera
+
+    with AravisCamera(address, interfaces="gige") as camera:
+        info = camera.info
+        return {"device_id": info.extra.get("device_id", ""), "interface": "gige", "vendor": info.vendor,
+                "model": info.model, "serial": info.serial, "address": address, "physical_id": "",
+                "pixel_format": info.pixel_format, "width": info.width, "height": info.height}
+
+
+def _devices(args: argparse.Namespace) -> int:
+    try:
+        from msflash.acquisition.devices.aravis import camera as aravis_camera
+    except ImportError as err:
+        raise CameraError(f"devices: {err}") from err
+    try:
+        interfaces = aravis_camera.parse_interfaces(args.interfaces)
+    except ValueError as err:
+        raise UsageError(f"--interfaces: {err}") from err
+    if "gige" in interfaces:
+        progress("devices: GigE Vision discovery broadcasts on every network interface")
+    cameras = [entry.to_dict() for entry in aravis_camera.list_devices(interfaces)]
+    for address in args.address or ():
+        if not aravis_camera.is_ipv4_address(address):
+            raise UsageError(f"--address {address!r}: not an IPv4 address; expected e.g. 192.168.1.20")
+        cameras.append(_camera_at(address))
+    booths = [_booth_entry(port) for port in find_booths()]
+    if args.json:
+        print_json({"interfaces": list(interfaces), "aravis": aravis_camera.Aravis._version,
+                    "cameras": cameras, "booths": booths})
+        return 0
+    if not cameras:
+        print(f"no camera found on {','.join(interfaces)}")
+        if "gige" not in interfaces:
+            progress("devices: GigE Vision not searched; add --interfaces gige (broadcasts) "
+                     "or --address IP (one camera, no broadcast)")
+    for camera in cameras:
+        where = camera["address"] or camera["physical_id"]
+        print(f"{camera['device_id']}\t{camera['interface']}\t{camera['vendor']} {camera['model']}\t"
+              f"serial {camera['serial']}\t{where}")
+    if not booths:
+        print("no booth found among the serial ports")
+        progress("devices: 'msflash doctor' says why a booth is not found (USB id, permissions, ModemManager)")
+    for booth in booths:
+        print(f"booth\t{booth['device']}\t{booth['usb_id']}\t{booth['product'] or booth['description']}\t"
+              f"serial {booth['serial_number'] or '-'}")
+    return 0
+
+
+def _booth_entry(port: SerialPortInfo) -> dict[str, Any]:
+    return {"device": port.device, "usb_id": port.usb_id, "product": port.product,
+            "serial_number": port.serial_number, "description": port.description}
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``devices``."""
+    devices = subparsers.add_parser(
+        "devices", help="list cameras (Aravis) on the given interfaces, and booths among the serial ports",
+        description="List cameras found by Aravis, and the serial ports that are msflash booths (by USB "
+                    "id or product string). GigE Vision discovery broadcasts on every network "
+                    "interface and runs only with --interfaces gige.")
+    devices.add_argument("--interfaces", default=DEFAULT_INTERFACES,
+                         help="comma-separated subset of fake,gige,usb3 (default: %(default)s)")
+    devices.add_argument("--address", action="append", metavar="IP",
+                         help="also query the GigE Vision camera at IP directly, without discovery (repeatable)")
+    devices.add_argument("--json", action="store_true", help="print one JSON object")
+    devices.set_defaults(handler=_devices)

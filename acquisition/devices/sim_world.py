@@ -1,0 +1,196 @@
+"""What the ``sim`` rig simulates, as the command line names it: camera, LEDs, ambient and scene.
+
+Each option is a shipped name or a CSV file, resolved here into spectra on the sim's wavelength
+grid (:data:`processing.spectra.DEFAULT_GRID`, 400–700 nm):
+
+- ``--sim-camera NAME|FILE.csv``: any shipped camera (:func:`processing.datasets.camera_names`)
+  or ``wavelength_nm, R, G, B`` responsivities (energy) — read by :func:`read_responsivity_file`,
+  the reader of the hardware rig's ``--responsivity``;
+- ``--led-spectra FILE.csv`` (one column per booth channel, energy) or ``--leds N`` (the paper's
+  subset of N LEDs, 3–7);
+- ``--ambient NAME|FILE.csv``: a sim ambient or a CIE illuminant
+  (:func:`processing.lights.light_spectrum`), or ``wavelength_nm, value`` (energy);
+- ``--scene NAME|FILE.csv``: ``chart110``, ``macbeth``, ``white``, or reflectances
+  (``wavelength_nm`` + one column per surface, 0–1) shown as a random mosaic of those surfaces
+  (:func:`processing.image_formation.mosaic_scene`).
+
+Files are read by the one spectral table reader (:func:`processing.datasets.load_spectra_csv`) and
+put on the grid only by :meth:`Spectra.resample`. A sim file must cover the whole grid: the error
+says which range the file covers and which is needed. Every problem is a one-line
+:class:`~acquisition.errors.UsageError` naming the option or the file and what was expected.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from msflash.acquisition.errors import UsageError
+from msflash.processing import datasets, lights
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, SpectralKind, Spectra, WavelengthGrid
+
+SIM_SCENES = ("chart110", "macbeth", "white")
+"""Scene names of the sim rig (a reflectance CSV is the other choice)."""
+
+SIM_DEFAULT_CAMERA = "NikonD100"
+"""The sim rig's camera unless ``--sim-camera`` names another."""
+
+_TABLE_SUFFIXES = (".csv", ".txt")
+
+
+def is_file(spec: str) -> bool:
+    """Whether an option's text names a file (a table suffix, or an existing path) rather than a name.
+
+    Any existing path but a directory counts (a FIFO, a device, a symlink loop), so the file reader
+    refuses it by what it is instead of it being looked up as a name.
+    """
+    path = Path(spec)
+    return path.suffix.lower() in _TABLE_SUFFIXES or (os.path.lexists(path) and not path.is_dir())
+
+
+def read_spectra_file(path: str | Path, kind: SpectralKind) -> Spectra:
+    """A spectral table (energy units, reflectances unitless; :func:`processing.datasets.load_spectra_csv`)
+    on its own grid.
+
+    Raises
+    ------
+    UsageError
+        The file is missing, unreadable or malformed (the reader's message: file, line, column).
+    """
+    try:
+        return datasets.load_spectra_csv(path, kind=kind, unit="none" if kind == "reflectance" else "energy")
+    except (SpectralDataError, OSError) as err:
+        raise UsageError(str(err)) from err
+
+
+def read_responsivity_file(path: str | Path) -> Spectra:
+    """Camera responsivities from a CSV ``wavelength_nm, R, G, B`` (energy), on the file's grid.
+
+    Raises
+    ------
+    UsageError
+        As :func:`read_spectra_file`, or the table does not hold exactly three channels.
+    """
+    camera = read_spectra_file(path, "responsivity")
+    if camera.count != 3:
+        raise UsageError(f"{path}: {camera.count} responsivity columns ({', '.join(camera.names)}); "
+                         "expected 3 (R, G, B)")
+    return camera.replace(names=("R", "G", "B"), metadata={**camera.metadata, "camera": Path(path).stem})
+
+
+def on_grid(spectra: Spectra, where: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """``spectra`` resampled onto ``grid``, which its range must cover (no extrapolation, no zero fill).
+
+    Raises
+    ------
+    UsageError
+        Naming ``where``, the range the spectra cover and the range needed.
+    """
+    start, stop = spectra.grid.wavelengths_nm[[0, -1]]
+    try:
+        return spectra.resample(grid, outside="error")
+    except SpectralDataError as err:
+        raise UsageError(f"{where}: covers {start:g}–{stop:g} nm; expected at least {grid.start_nm:g}–"
+                         f"{grid.stop_nm:g} nm (the sim's wavelength grid)") from err
+
+
+def _nonnegative_light(spectra: Spectra, where: str, what: str) -> Spectra:
+    """Refuse negative values and spectra without light on the grid."""
+    for index, name in enumerate(spectra.names):
+        column = spectra.values[:, index]
+        if np.any(column < 0) or not column.max() > 0:
+            raise UsageError(f"{where}: {what} '{name}' has {'negative values' if np.any(column < 0) else 'no light'} "
+                             f"on {spectra.grid}; expected a non-negative spectrum with some light there")
+    return spectra
+
+
+def sim_camera(spec: str | None, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """``--sim-camera``: a shipped camera by name (default :data:`SIM_DEFAULT_CAMERA`) or a responsivity CSV.
+
+    Raises
+    ------
+    UsageError
+        An unknown name (every shipped camera is listed), or a bad or too narrow file.
+    """
+    spec = SIM_DEFAULT_CAMERA if spec is None else spec
+    where = f"--sim-camera {spec}"
+    if is_file(spec):
+        return _nonnegative_light(on_grid(read_responsivity_file(spec), where, grid), where, "channel")
+    try:
+        return datasets.camera_responsivities(spec).resample(grid)
+    except SpectralDataError as err:
+        raise UsageError(f"--sim-camera: {err}") from err
+
+
+def sim_leds(led_spectra: str | Path | None, n_leds: int | None, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """The sim booth's LEDs: ``--led-spectra FILE.csv`` (one column per channel) or the paper's ``--leds N``.
+
+    Neither: the paper's 7 LEDs. Channel names and count are checked against what the booth
+    emulator can serve by :func:`acquisition.rig.check_emulated_booth` when the rig opens.
+
+    Raises
+    ------
+    UsageError
+        Both given, a count the paper does not define, or a bad or too narrow file.
+    """
+    if led_spectra is not None and n_leds is not None:
+        raise UsageError(f"--leds {n_leds} and --led-spectra {led_spectra}: two LED sets; expected one of them")
+    if led_spectra is not None:
+        where = f"--led-spectra {led_spectra}"
+        leds = on_grid(read_spectra_file(led_spectra, "spd"), where, grid)
+        duplicated = sorted({n for n in leds.names if leds.names.count(n) > 1})
+        if duplicated:
+            raise UsageError(f"{where}: LED column(s) {', '.join(duplicated)} appear more than once; expected one "
+                             "named column per booth channel")
+        return _nonnegative_light(leds, where, "LED")
+    try:
+        return datasets.paper_led_subset(7 if n_leds is None else n_leds).resample(grid)
+    except SpectralDataError as err:
+        raise UsageError(f"--leds {n_leds}: {err}") from err
+
+
+def sim_ambient(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """``--ambient``: a light by name (:func:`processing.lights.light_spectrum`) or a CSV ``wavelength_nm, value``.
+
+    Raises
+    ------
+    UsageError
+        An unknown name (every accepted one is listed), or a file that is bad, too narrow, holds
+        more than one spectrum or no light.
+    """
+    if not is_file(spec):
+        try:
+            return lights.light_spectrum(spec, grid)
+        except SpectralDataError as err:
+            raise UsageError(f"--ambient: {err}") from err
+    where = f"--ambient {spec}"
+    light = on_grid(read_spectra_file(spec, "spd"), where, grid)
+    if light.count != 1:
+        raise UsageError(f"{where}: {light.count} spectra ({', '.join(light.names)}); expected one ambient "
+                         "(wavelength_nm, value)")
+    return _nonnegative_light(light, where, "ambient").replace(names=(Path(spec).stem,))
+
+
+def sim_scene(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> str | Spectra:
+    """``--scene``: a name of :data:`SIM_SCENES`, or the reflectances of a CSV (one column per surface).
+
+    Raises
+    ------
+    UsageError
+        An unknown name, or a file that is bad, too narrow or not reflectances in 0–1.
+    """
+    if not is_file(spec):
+        if spec not in SIM_SCENES:
+            raise UsageError(f"--scene '{spec}': unknown; expected one of {', '.join(SIM_SCENES)} or a reflectance "
+                             "CSV (wavelength_nm, one column per surface)")
+        return spec
+    where = f"--scene {spec}"
+    surfaces = on_grid(read_spectra_file(spec, "reflectance"), where, grid)
+    low, high = float(surfaces.values.min()), float(surfaces.values.max())
+    if low < 0 or high > 1:
+        hint = " (a table in percent? divide by 100)" if high > 1 else ""
+        raise UsageError(f"{where}: reflectances span {low:g}–{high:g}{hint}; expected values in 0–1")
+    return surfaces

@@ -1,0 +1,453 @@
+"""A camera that renders a spectral scene: the ``sim`` rig's camera, with known ground truth.
+
+:class:`SimulatedCamera` implements the :class:`~acquisition.camera.Camera` protocol. Each frame
+is rendered through :mod:`processing.image_formation` (eq. 1–3 of the paper, photon and read
+noise, black level, saturation, optional Bayer mosaic) under the true ambient plus the LEDs at the
+levels in force *at exposure time* — read from an injected ``led_levels_source`` (the booth
+emulator in the ``sim`` rig) when the frame is triggered.
+
+Triggering
+----------
+- ``plan.trigger == "software"`` or ``"camera"``: :meth:`SimulatedCamera.trigger` renders one frame.
+- ``plan.trigger == "booth"``: :meth:`trigger` is a no-op, as the protocol says for cameras paced
+  by a hardware line; the booth (emulator) pulses :meth:`SimulatedCamera.trigger_line` instead.
+
+Frames are rendered synchronously and queued. :meth:`next_frame` pops the oldest; with nothing
+queued it raises :class:`~acquisition.errors.FrameTimeoutError` at once when no trigger can be
+on its way (software/camera triggering, nothing rendering), and waits at most ``timeout_s`` only
+when the trigger comes from another thread (booth triggering) or a render is in progress.
+A trigger that fails (bad LED levels, more triggers than steps) raises ``CameraError`` and, in
+the first case, still consumes its step: the capture is broken at that point anyway. A frame
+that cannot be made (bad LED levels, a render error) is also queued as its error
+(:meth:`~acquisition.frame_queue.TriggeredFrames._fail_frame`): :meth:`next_frame` raises it in
+the frame's place, whoever triggered (on the booth's trigger line nobody else sees it).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Sequence
+from typing import Literal
+
+import numpy as np
+
+from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.errors import CameraError
+from msflash.acquisition.devices.frame_queue import TriggeredFrames
+from msflash.acquisition.plan import CapturePlan, CaptureStep
+from msflash.processing import datasets, lights
+from msflash.processing.image_formation import (
+    MixedIllumination,
+    Scene,
+    SensorModel,
+    chart_scene,
+    expected_response,
+    exposure_for_peak,
+    mosaic_scene,
+    render_frame,
+    total_illumination,
+    white_reference_scene,
+)
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid, require_same_grid
+
+LedLevelsSource = Callable[[], Sequence[float]]
+"""Returns the drive level (0–1) of every LED channel at the moment it is called."""
+
+_GENICAM_BAYER = {"RGGB": "BayerRG", "BGGR": "BayerBG", "GRBG": "BayerGR", "GBRG": "BayerGB"}
+
+
+class SimulatedCamera(TriggeredFrames):
+    """Renders ``scene`` under ``ambient`` + LEDs at the levels of ``led_levels_source``.
+
+    Parameters
+    ----------
+    scene
+        Surfaces and layout (:class:`processing.image_formation.Scene`).
+    ambient
+        The true ambient spectrum ``i_a`` (one spectrum; its scale is the ambient's power).
+    led_spectra
+        ``I``, (n_wavelengths, k): each LED at full drive, with the true ratios between LEDs.
+    camera_responsivities
+        ``C``, (n_wavelengths, 3).
+    sensor
+        The sensor model (bit depth, levels, noise, CFA).
+    scale
+        Electrons per unit ``Σ r c i Δλ`` per microsecond (see :mod:`processing.image_formation`).
+    led_levels_source
+        Called at each exposure for the LED levels; None uses each plan step's own levels.
+    seed
+        Seed of the noise generator (frames are reproducible for a given seed and trigger order).
+    noise
+        False renders noise-free frames, as the paper's simulations.
+    name
+        Model name reported in :attr:`info`.
+    frame_interval_ns
+        Extra simulated time between frames, for timestamps (no real waiting happens).
+    second_ambient, ambient_map
+        A spatially varying ambient (issue 9): pixel ``x`` sees ``(1 − m(x)) · ambient +
+        m(x) · second_ambient`` with ``m = ambient_map`` (H, W) in [0, 1] (a boundary, a
+        gradient). Both None (the default) keep the single uniform ambient.
+
+    All spectra must share one grid (resample first); mismatches raise ``SpectralDataError``.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        ambient: Spectra,
+        led_spectra: Spectra,
+        camera_responsivities: Spectra,
+        sensor: SensorModel,
+        scale: float = 1.0,
+        led_levels_source: LedLevelsSource | None = None,
+        seed: int = 0,
+        noise: bool = True,
+        name: str = "SimulatedCamera",
+        frame_interval_ns: int = 2_000_000,
+        second_ambient: Spectra | None = None,
+        ambient_map: np.ndarray | None = None,
+    ) -> None:
+        require_same_grid(scene.reflectances, ambient, led_spectra, camera_responsivities)
+        self.ambient_illumination: MixedIllumination | None = None
+        """The spatially varying ambient, or None for a uniform one."""
+        if (second_ambient is None) != (ambient_map is None):
+            raise CameraError(f"simulated camera '{name}': second_ambient and ambient_map go together; expected both or neither")
+        if second_ambient is not None and ambient_map is not None:
+            require_same_grid(ambient, second_ambient)
+            if np.shape(ambient_map) != scene.shape:
+                raise CameraError(f"simulated camera '{name}': ambient_map has shape {np.shape(ambient_map)}; "
+                                  f"expected the scene's {scene.shape}")
+            self.ambient_illumination = MixedIllumination.two_ambients(ambient, second_ambient, ambient_map)
+        if camera_responsivities.count != 3:
+            raise CameraError(f"simulated camera '{name}': {camera_responsivities.count} channels; expected R, G, B")
+        self.scene = scene
+        self.ambient = ambient
+        self.led_spectra = led_spectra
+        self.camera_responsivities = camera_responsivities
+        self.sensor = sensor
+        self.scale = float(scale)
+        self.led_levels_source = led_levels_source
+        """Called at exposure time for the LED levels; may be set after construction (rig wiring)."""
+        self.noise = noise
+        self.seed = seed
+        self.suggested_exposure_us: float | None = None
+        """An exposure that suits this world (set by :meth:`default`), or None."""
+        super().__init__()
+        self._name = name
+        self._label = f"simulated camera '{name}'"
+        self._rng = np.random.default_rng(seed)
+        self._frame_interval_ns = int(frame_interval_ns)
+        self._render_lock = threading.Lock()
+        self._next_step = 0
+        self._frame_id = 0
+        self._clock_ns = 0
+        self._rendered_levels: list[tuple[float, ...]] = []
+
+    # -- ground truth and identity ------------------------------------------------------------
+    @property
+    def true_ambient(self) -> Spectra:
+        """The ambient spectrum the frames are rendered under (ground truth for reports)."""
+        return self.ambient
+
+    @property
+    def rendered_levels(self) -> tuple[tuple[float, ...], ...]:
+        """The LED levels used for each frame rendered so far, in order."""
+        with self._condition:
+            return tuple(self._rendered_levels)
+
+    @property
+    def info(self) -> CameraInfo:
+        """Identity and pixel encoding; ``extra`` names the ground-truth spectra."""
+        bits = 8 if self.sensor.bit_depth <= 8 else 16
+        pixel_format = f"RGB{bits}" if self.sensor.cfa is None else f"{_GENICAM_BAYER[self.sensor.cfa]}{bits}"
+        height, width = self.scene.shape
+        return CameraInfo(
+            vendor="msflash", model=self._name, serial=f"SIM-{self.seed}", pixel_format=pixel_format,
+            cfa=self.sensor.cfa, black_level=self.sensor.black_level, white_level=self.sensor.white_level,
+            width=width, height=height,
+            extra={"simulated": True, "bit_depth": self.sensor.bit_depth, "ambient": self.ambient.source,
+                   "leds": self.led_spectra.names, "responsivity": self.camera_responsivities.source},
+        )
+
+    # -- the Camera protocol ------------------------------------------------------------------
+    def prepare(self, plan: CapturePlan) -> None:
+        """Take the steps' exposures and gains from ``plan``; the next trigger renders step 0."""
+        self._check_open()
+        if not plan.steps:
+            raise CameraError(f"simulated camera '{self._name}': empty capture plan; expected at least one step")
+        if plan.n_leds != self.led_spectra.count:
+            raise CameraError(
+                f"simulated camera '{self._name}': plan drives {plan.n_leds} LEDs but the world has "
+                f"{self.led_spectra.count} ({', '.join(self.led_spectra.names)}); expected the same count"
+            )
+        for step in plan.steps:
+            if not (step.exposure_us >= 0 and step.gain > 0):
+                raise CameraError(
+                    f"simulated camera '{self._name}': step {step.index} ({step.label}) has exposure "
+                    f"{step.exposure_us} µs and gain {step.gain}; expected exposure ≥ 0 and gain > 0"
+                )
+        with self._condition:
+            self._plan = plan
+            self._next_step = 0
+            self._queue.clear()
+
+    def start(self) -> None:
+        """Start acquisition; frames queued before are dropped."""
+        self._check_open()
+        if self._plan is None:
+            raise CameraError(f"simulated camera '{self._name}': start() before prepare(plan); expected a plan")
+        with self._condition:
+            self._queue.clear()
+            self._started = True
+
+    def trigger(self) -> None:
+        """Render the next step's frame (software/camera triggering); a no-op when the booth triggers."""
+        plan = self._require_started()
+        if plan.trigger == "booth":
+            return
+        self._render_next(plan)
+
+    def trigger_line(self) -> None:
+        """The hardware trigger input: render the next step's frame whatever the trigger mode.
+
+        The booth emulator calls this when it pulses the camera's trigger line (booth master).
+        """
+        self._render_next(self._require_started())
+
+    # -- internals ----------------------------------------------------------------------------
+    def _timeout_message(self, timeout_s: float, why: str) -> str:
+        plan = self._plan
+        if plan is not None and self._next_step < len(plan.steps):
+            step = plan.steps[self._next_step]
+            where = f"step {step.index} ({step.label})"
+        else:
+            where = "after the last step"
+        return (f"simulated camera '{self._name}': no frame within {timeout_s:g} s for {where}: {why}; "
+                "expected trigger() (or the booth's trigger line) before next_frame()")
+
+    def _levels_for(self, step: CaptureStep) -> tuple[float, ...]:
+        """The LED levels at exposure time: from the injected source, else the plan step."""
+        raw = self.led_levels_source() if self.led_levels_source is not None else step.led_levels
+        try:
+            levels = tuple(float(v) for v in raw)
+        except (TypeError, ValueError) as err:
+            raise CameraError(f"simulated camera '{self._name}': LED levels {raw!r} are not numbers; "
+                              "expected a tuple of floats in [0, 1]") from err
+        if len(levels) != self.led_spectra.count or not all(0.0 <= v <= 1.0 for v in levels):
+            raise CameraError(
+                f"simulated camera '{self._name}': LED levels {levels} at step {step.index} ({step.label}); "
+                f"expected {self.led_spectra.count} values in [0, 1]"
+            )
+        return levels
+
+    def _render_next(self, plan: CapturePlan) -> None:
+        with self._condition:
+            if self._next_step >= len(plan.steps):
+                raise CameraError(
+                    f"simulated camera '{self._name}': trigger {self._next_step + 1} but the plan has "
+                    f"{len(plan.steps)} steps; expected one trigger per step"
+                )
+            step = plan.steps[self._next_step]
+            self._next_step += 1
+            self._begin_frame()
+        with self._render_lock:  # one render at a time keeps the noise stream in trigger order
+            try:
+                levels = self._levels_for(step)
+                illumination = total_illumination(self.ambient, self.led_spectra, levels)
+                if self.ambient_illumination is not None:
+                    dark = self.ambient.replace(values=np.zeros_like(self.ambient.values))
+                    illumination = self.ambient_illumination.plus(
+                        total_illumination(dark, self.led_spectra, levels))  # type: ignore[assignment]
+                pixels = render_frame(
+                    self.scene, illumination, self.camera_responsivities, self.sensor, step.exposure_us,
+                    step.gain, self.scale, rng=self._rng, noise=self.noise,
+                )
+                with self._condition:
+                    self._frame_id += 1
+                    self._clock_ns += int(step.exposure_us * 1000) + self._frame_interval_ns
+                    frame = RawFrame(pixels, self._frame_id, self._clock_ns, step.exposure_us, step.gain)
+                    self._rendered_levels.append(levels)
+            except BaseException as err:
+                # next_frame raises it in this frame's place: on the booth's trigger line nobody else
+                # would see it, and the capture would report a lost frame instead of the cause.
+                self._fail_frame(err)
+                raise
+            # Delivered under the render lock, so frames queue in trigger order.
+            self._end_frame(frame)
+
+    # -- a ready-made world -------------------------------------------------------------------
+    @classmethod
+    def default(
+        cls,
+        scene: Literal["chart110", "macbeth", "white"] | Scene | Spectra = "chart110",
+        ambient: str | Spectra = "tungsten",
+        cfa: str | None = None,
+        seed: int = 0,
+        camera: str | Spectra = "NikonD100",
+        n_leds: int = 7,
+        led_spectra: Spectra | None = None,
+        flash_power: float = 1.0,
+        reference_exposure_us: float = 10_000.0,
+        ambient_peak_fraction: float = 0.25,
+        sensor: SensorModel | None = None,
+        led_levels_source: LedLevelsSource | None = None,
+        patch_px: int = 8,
+        specular_strip_px: int = 4,
+        grid: WavelengthGrid = DEFAULT_GRID,
+        noise: bool = True,
+        second_ambient: str | Spectra | None = None,
+        ambient_map: np.ndarray | None = None,
+    ) -> SimulatedCamera:
+        """The ``sim`` rig's world: a chart, an ambient, an LED set and a camera (by default the paper's
+        110-surface chart, tungsten, the paper's 7 LEDs and ISETCam's NikonD100).
+
+        Parameters
+        ----------
+        scene
+            ``"chart110"`` (the paper's 110 surfaces), ``"macbeth"``, ``"white"`` (a white reference
+            filling the frame, :func:`processing.image_formation.white_reference_scene`, for
+            ``msflash calibrate leds --white``), a :class:`Scene`, or reflectances (a random mosaic
+            of those surfaces drawn with ``seed``, :func:`processing.image_formation.mosaic_scene`).
+        ambient
+            A name of :func:`processing.lights.light_spectrum` (the sim ambients, CIE
+            illuminants) or a spectrum covering ``grid``.
+        cfa
+            None for RGB frames, or a Bayer layout.
+        seed
+            Noise seed (and the mosaic's layout).
+        camera
+            A shipped camera's name (:func:`processing.datasets.camera_responsivities`) or R, G, B
+            responsivities covering ``grid``.
+        n_leds
+            The paper's LED subset (3–7), unless ``led_spectra`` is given.
+        led_spectra
+            The booth's LEDs (one spectrum per channel, covering ``grid``) instead of the paper's:
+            their ratios are kept, their power is set by ``flash_power``.
+        flash_power
+            How bright the booth is, as a flash is: every LED at full drive gives at least this
+            many times the ambient's mean camera signal over the diffuse scene (all channels). The
+            booth is scaled as a whole, so the LEDs keep their ratios, and the weakest LED the
+            camera sees (:data:`VISIBLE_LED_FRACTION`) gives exactly ``flash_power`` × the
+            ambient (:func:`flash_power_scale`). With the default 1, the paper's 7 LEDs and the
+            NikonD100 give 1.0–3.7× the ambient each, whatever the LED count; it used to be all
+            LEDs together 2× (each 0.1–0.4×, LED SNR 0.6–3 in ``msflash run``).
+        reference_exposure_us, ambient_peak_fraction
+            At ``reference_exposure_us`` and gain 1 the brightest diffuse pixel under the ambient
+            alone reads ``ambient_peak_fraction`` of full scale, or less if the ambient plus the
+            brightest LED at full drive would then read more than :data:`FLASH_PEAK_FRACTION`
+            (room for the flash on top, for captures at one exposure).
+            ``suggested_exposure_us`` is set to ``reference_exposure_us``.
+        sensor
+            Default: 16-bit, black 256, 0.5 e⁻/DN, 2 e⁻ read noise, 40 000 e⁻ full well.
+        led_levels_source, noise
+            As for the constructor.
+        patch_px, specular_strip_px
+            Chart patch size and the height of a saturating highlight strip under it (0: none).
+        grid
+            The wavelength grid of the world.
+        second_ambient, ambient_map
+            A second ambient (name or spectrum) and the (H, W) map in [0, 1] of its share at each
+            pixel of the scene (see the constructor); LED power and exposure are then set on
+            the mixed ambient.
+        """
+        if scene == "white":
+            scene = white_reference_scene()
+        elif isinstance(scene, str):
+            scene = chart_scene(scene, patch_px=patch_px, specular_strip_px=specular_strip_px)
+        elif isinstance(scene, Spectra):
+            scene = mosaic_scene(scene, seed=seed, patch_px=patch_px, specular_strip_px=specular_strip_px)
+        scene = Scene(scene.reflectances.resample(grid), scene.labels, scene.shading, scene.specular, scene.specular_gain)
+        ambient_spd = lights.light_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)
+        second_spd = None
+        if second_ambient is not None:
+            second_spd = (lights.light_spectrum(second_ambient, grid) if isinstance(second_ambient, str)
+                          else second_ambient.resample(grid)).to_unit(ambient_spd.unit)
+        if (second_spd is None) != (ambient_map is None):
+            raise CameraError("simulated camera: second_ambient and ambient_map go together; expected both or neither")
+        metered_ambient = (ambient_spd if second_spd is None
+                           else MixedIllumination.two_ambients(ambient_spd, second_spd, ambient_map))  # type: ignore[arg-type]
+        leds = (datasets.paper_led_subset(n_leds) if led_spectra is None else led_spectra).resample(grid)
+        responsivities = (datasets.camera_responsivities(camera) if isinstance(camera, str) else camera).resample(grid)
+        sensor = sensor if sensor is not None else SensorModel(cfa=cfa)
+        if cfa is not None and sensor.cfa != cfa:
+            raise CameraError(f"simulated camera: cfa '{cfa}' but the sensor model has '{sensor.cfa}'; expected one")
+
+        # LED power relative to the ambient, measured the way the camera sees it (mean signal over
+        # the diffuse scene), so it holds whatever the ambient's spectrum.
+        diffuse = Scene(scene.reflectances, scene.labels, scene.shading)
+        led_spectra = leds.replace(values=leds.values * flash_power_scale(diffuse, metered_ambient, leds, responsivities,
+                                                                          flash_power))
+        camera_name = responsivities.metadata.get("camera") or (camera if isinstance(camera, str) else responsivities.source)
+        dark = ambient_spd.replace(values=np.zeros_like(ambient_spd.values))
+        exposure_at_unit_scale = min(
+            exposure_for_peak(scene, metered_ambient, responsivities, sensor, ambient_peak_fraction),  # type: ignore[arg-type]
+            *(exposure_for_peak(scene, _plus(metered_ambient, total_illumination(dark, led_spectra, on)),  # type: ignore[arg-type]
+                                responsivities, sensor, FLASH_PEAK_FRACTION) for on in np.eye(led_spectra.count)))
+        simulated = cls(
+            scene, ambient_spd, led_spectra, responsivities, sensor,
+            scale=exposure_at_unit_scale / reference_exposure_us, led_levels_source=led_levels_source, seed=seed,
+            noise=noise, name=f"SimulatedCamera ({camera_name})", second_ambient=second_spd, ambient_map=ambient_map,
+        )
+        simulated.suggested_exposure_us = reference_exposure_us
+        return simulated
+
+
+VISIBLE_LED_FRACTION = 0.01
+"""An LED giving less than this share of the strongest LED's camera signal is one the camera hardly
+sees: it does not set the booth's power (raising the booth until it matched the ambient would blind
+the camera in every other LED's frame)."""
+FLASH_PEAK_FRACTION = 0.9
+"""At the sim's reference exposure, the ambient plus any one LED at full drive reads at most this share of full scale."""
+
+
+def _plus(ambient: Spectra | MixedIllumination, light: Spectra) -> Spectra | MixedIllumination:
+    """An ambient (uniform or spatially varying) plus a uniform light."""
+    if isinstance(ambient, MixedIllumination):
+        return ambient.plus(light)
+    return ambient.replace(values=ambient.values + light.to_unit(ambient.unit).values)
+
+
+def led_signals(scene: Scene, ambient: Spectra | MixedIllumination, led_spectra: Spectra,
+                camera_responsivities: Spectra) -> np.ndarray:
+    """Each LED's mean camera signal at full drive over ``scene`` (all pixels and channels), in units of the ambient's.
+
+    Raises
+    ------
+    CameraError
+        If the ambient gives no signal in this camera.
+    """
+    ambient_signal = float(np.mean(expected_response(scene, ambient, camera_responsivities, 1.0)))
+    if ambient_signal <= 0:
+        raise CameraError("simulated camera: the ambient gives no signal in this camera; expected light within the "
+                          "camera's sensitivity")
+    spd = led_spectra.to_unit("photons")
+    dark = spd.replace(values=np.zeros((spd.grid.size, 1)), names=("dark",))
+    return np.array([float(np.mean(expected_response(scene, total_illumination(dark, spd, on), camera_responsivities,
+                                                     1.0))) for on in np.eye(spd.count)]) / ambient_signal
+
+
+def flash_power_scale(scene: Scene, ambient: Spectra | MixedIllumination, led_spectra: Spectra,
+                      camera_responsivities: Spectra, flash_power: float = 1.0) -> float:
+    """The factor on ``led_spectra`` making the weakest LED the camera sees give ``flash_power`` × the ambient.
+
+    Signals are :func:`led_signals` (mean over ``scene``, all channels); LEDs below
+    :data:`VISIBLE_LED_FRACTION` of the strongest do not count. One factor for the whole booth,
+    so the LEDs keep their ratios and every LED the camera sees gives at least ``flash_power`` ×
+    the ambient.
+
+    Raises
+    ------
+    CameraError
+        If ``flash_power`` is not a positive finite number, or the ambient or every LED gives no
+        signal in this camera.
+    """
+    if not (np.isfinite(flash_power) and flash_power > 0):
+        raise CameraError(f"simulated camera: flash power {flash_power}; expected a positive number (each LED's "
+                          "signal in units of the ambient's)")
+    signals = led_signals(scene, ambient, led_spectra, camera_responsivities)
+    strongest = float(np.max(signals)) if signals.size else 0.0
+    if strongest <= 0:
+        raise CameraError("simulated camera: the LEDs give no signal in this camera; expected light within the "
+                          "camera's sensitivity")
+    weakest = float(np.min(signals[signals >= VISIBLE_LED_FRACTION * strongest]))
+    return flash_power / weakest

@@ -1,0 +1,533 @@
+"""Run a capture plan: pair every frame with its step and write it to disk at once.
+
+Three synchronisation modes (docs/architecture.md §4), chosen by ``plan.trigger``:
+
+``"software"`` — *host paced* (the fallback)
+    For each step the booth is set to the step's levels (``SET``, which replies once applied),
+    then the camera is software-triggered and the frame awaited. Frames pair with steps in
+    order; the camera's frame ids must be consecutive.
+
+``"booth"`` — *booth master*
+    The plan's levels are loaded as the booth's pattern table and armed in ``BOOTH`` mode with
+    the plan's settle time and a period covering settle + trigger pulse + the longest exposure +
+    deadtime; ``START`` runs it. The booth applies each step, waits ``settle``, pulses the
+    camera's trigger input and reports ``TRIG <count> <step>``.
+
+``"camera"`` — *camera master*
+    The table is armed in ``CAMERA`` mode; the host triggers the camera (software trigger) and
+    the camera's ExposureActive output advances the table: each exposure start counts a trigger
+    (``TRIG <count> <step>``), each exposure end applies the next step. The host leaves at least
+    ``settle_s`` between exposures.
+
+Pairing (booth and camera master): a frame's trigger number comes from its frame id — the
+first frame of the run is trigger 1 and later ones count on from its id (modulo 2^16, the
+GigE Vision block-id wrap) — and its step is the one the booth reported for that trigger
+(``TRIG`` event), never its position in the arrival order. A skipped frame id, a booth trigger
+count ahead of the frames received when a frame times out, or a ``TRIG`` whose step is not the
+plan's raises :class:`DroppedFrameError` naming the missing step. Frames already written stay on
+disk (the writer keeps the sequence readable with ``complete: false``).
+
+The flash in the same run (:func:`run_capture_with_flash`): the plan gets one more step, a
+placeholder ``flash`` step, and the camera keeps streaming from the ambient frame to the flash
+frame. When the last LED frame arrives, ``decide(frames)`` computes the flash levels and
+exposure; the camera's plan takes them and the booth gets them — host paced: ``SET`` then the
+software trigger as for any step; booth and camera master: the table was loaded with the flash
+step *held* (``PADD … HOLD``), and one ``PSET`` (one serial round trip) releases it with its
+levels. A held step is never exposed with stale levels: the booth waits at it with the LEDs off
+and no trigger (booth master) or reports an exposure during it as ``TRIG <n> HOLD`` (camera
+master), which the pairing refuses (``docs/booth-protocol.md`` §5).
+Booth master sends ``PSET … NOW``: the last LED frame is in, so its exposure is over and the flash
+step starts at once (settle, pulse) instead of waiting for its scheduled slot. An
+:class:`~acquisition.async_writer.AsyncSequenceWriter` is paused from the wait for the last LED
+frame until the flash frame is in (frames stay queued, in order; nothing is dropped), so the disk
+writes compete neither with the decision nor with the flash trigger for the CPU and the GIL.
+
+The writer may be a :class:`~acquisition.sequence_format.SequenceWriter` or an
+:class:`~acquisition.async_writer.AsyncSequenceWriter` (frames handed to a writer thread: the
+loop never waits for the disk).
+
+Whatever happens the LEDs go off (``OFF`` also aborts a running table) and the camera stops
+(:func:`_leds_off_at_exit`); when the run ends in an error, a failure of that cleanup (the booth's
+link is what failed) is logged and the original error is raised, not the cleanup's.
+
+The booth's watchdog (``docs/booth-protocol.md`` §7) switches the LEDs off when the host has been
+silent for its period, but a capture is silent on purpose for a whole booth- or camera-master
+table or a whole host-paced exposure (:func:`host_silence_s`). When the watchdog is shorter, it is
+raised for the sequence and set back afterwards (:meth:`led_controller.LedBooth.watchdog_covering`);
+otherwise a long sequence was aborted half way, or a long LED exposure silently lit only in part.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import gc
+import logging
+import math
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
+from typing import Any, Protocol
+
+from msflash.acquisition.devices.camera import Camera, RawFrame
+from msflash.acquisition.errors import CaptureError, DroppedFrameError, FrameTimeoutError
+from msflash.acquisition.plan import CapturePlan, CaptureStep
+from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter
+from msflash.led_controller.booth import ARM_TIME_MAX_US
+
+log = logging.getLogger(__name__)
+
+FRAME_ID_MODULUS = 1 << 16
+"""GigE Vision block ids wrap at 16 bits; continuity is checked modulo this."""
+
+TRIGGER_PULSE_US = 100
+"""Width of the booth's trigger pulse in booth-master mode."""
+
+READOUT_US = 2_000
+"""Camera readout / host slack added to each booth-master period beyond exposure and deadtime."""
+
+WATCHDOG_SLACK_S = 0.5
+"""Host pauses on top of a plan's scheduled silence towards the booth (writing a frame, the flash
+decision, the OS scheduler), in seconds: see :func:`host_silence_s`."""
+
+
+class LedControl(Protocol):
+    """What the host-paced runner needs of the booth (``led_controller.LedBooth`` provides it)."""
+
+    def set_levels(self, levels: Sequence[float]) -> None:
+        """Drive every channel to ``levels`` (0–1)."""
+        ...
+
+    def all_off(self) -> None:
+        """Switch every channel off."""
+        ...
+
+    # Optional (``LedBooth`` offers both): ``watchdog_covering(silence_s)``, a context manager keeping
+    # the booth's watchdog from firing while the host is silent on purpose (see _watchdog_covering),
+    # and ``watchdog_fired()``, whether it fired since last asked (see _check_watchdog).
+
+
+class SequencedLedControl(LedControl, Protocol):
+    """What booth- and camera-master capture need: the pattern table and its events."""
+
+    def load_pattern(self, steps: Sequence[Sequence[float]], *, held: Sequence[int] = ()) -> None:
+        """Replace the pattern table; ``held`` steps wait for :meth:`set_step` (never exposed before)."""
+        ...
+
+    def set_step(self, index: int, levels: Sequence[float], *, now: bool = False) -> None:
+        """Set one step's levels (also while running) and release it if held; ``now``: start it at once."""
+        ...
+
+    def arm(self, mode: str, *, settle_us: int = ..., pulse_us: int = ..., period_us: int = ...) -> None:
+        """Arm the table in a sync mode."""
+        ...
+
+    def start(self) -> None:
+        """Start the armed table."""
+        ...
+
+    def trigger_count(self) -> int:
+        """Triggers counted since ``arm``."""
+        ...
+
+    def wait_event(self, kind: str | None = None, *, timeout_s: float | None = None):  # noqa: ANN201
+        """Next event (``TRIG``, ``DONE``…) with ``.args``."""
+        ...
+
+
+def booth_period_us(plan: CapturePlan) -> int:
+    """Booth-master step period: settle + pulse + longest exposure + deadtime + readout, in µs."""
+    longest = max((s.exposure_us for s in plan.steps), default=0.0)
+    return int(math.ceil(plan.settle_s * 1e6 + TRIGGER_PULSE_US + longest + plan.deadtime_s * 1e6 + READOUT_US))
+
+
+def host_silence_s(plan: CapturePlan) -> float:
+    """The longest the host may send the booth nothing while it runs ``plan``, in seconds.
+
+    The booth's watchdog must not fire meanwhile (``docs/booth-protocol.md`` §7: it switches the
+    LEDs off and aborts the table). Host paced: one step — the ``SET``, the exposure and the wait
+    for its frame, at most ``plan.frame_timeout_s`` before the host gives up and sends ``OFF``.
+    Booth and camera master: the whole table runs without a command — one
+    :func:`booth_period_us` per step, one more period and the frame timeout for the last frame
+    (the wait of :func:`run_capture`). Both plus :data:`WATCHDOG_SLACK_S`.
+
+    Examples
+    --------
+    >>> from msflash.acquisition.plan import CapturePlan
+    >>> round(host_silence_s(CapturePlan.ambient_then_each_led(7, 10_000.0)), 3)
+    1.513
+    >>> round(host_silence_s(CapturePlan.ambient_then_each_led(7, 500_000.0, trigger="booth")), 3)
+    6.549
+    """
+    if plan.trigger == "software":
+        return plan.frame_timeout_s + WATCHDOG_SLACK_S
+    return (len(plan.steps) + 1) * booth_period_us(plan) * 1e-6 + plan.frame_timeout_s + WATCHDOG_SLACK_S
+
+
+def _check_watchdog(booth: LedControl, where: str, saved: str = "") -> None:
+    """Refuse the frame of ``where`` (a step) if the booth's watchdog switched the LEDs off meanwhile.
+
+    The host was silent for longer than the booth's watchdog (a stall beyond
+    :func:`host_silence_s`): the frame may have been exposed partly or wholly dark, and a host-paced
+    sequence would not notice otherwise. ``saved`` says what is on disk.
+    """
+    fired = getattr(booth, "watchdog_fired", None)
+    if fired is not None and fired():
+        raise CaptureError(
+            f"{where}: the booth's watchdog switched the LEDs off during this frame (the host was silent for "
+            f"longer than its period); expected the LEDs on until the frame was in — the frame is not kept"
+            + (f". {saved}" if saved else ""))
+
+
+def _sequence_watchdog(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
+    """At the start of a sequence: a ``WDOG`` event from before it (LEDs left on by earlier code,
+    then forgotten) is dropped — it says nothing of this sequence's frames, which
+    :func:`_check_watchdog` judges — and the watchdog is covered for ``plan`` (:func:`_watchdog_covering`)."""
+    fired = getattr(booth, "watchdog_fired", None)
+    if fired is not None and fired():
+        log.info("the booth's watchdog had switched the LEDs off before this sequence")
+    return _watchdog_covering(booth, plan)
+
+
+def _watchdog_covering(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
+    """The booth's watchdog kept from firing while ``plan`` runs (:meth:`LedBooth.watchdog_covering`),
+    or nothing for a booth without one. Leaves the ``WDOG`` events alone: within a sequence (the
+    flash step) they are this sequence's, for :func:`_check_watchdog`."""
+    cover = getattr(booth, "watchdog_covering", None)
+    return cover(host_silence_s(plan)) if cover is not None else nullcontext()
+
+
+FlashDecide = Callable[[list[RawFrame]], tuple[Sequence[float], float]]
+"""``decide(frames) -> (levels, exposure_us)``: the flash step from the frames captured so far."""
+
+
+def run_capture_with_flash(
+    camera: Camera,
+    booth: LedControl,
+    plan: CapturePlan,
+    writer: Any,
+    decide: FlashDecide,
+    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
+) -> list[SequenceFrame]:
+    """Capture ``plan`` and then a flash frame whose levels ``decide`` computes, in one stream.
+
+    ``decide`` runs on the capturing thread right after the last frame of ``plan`` arrived; it
+    returns the flash levels and exposure. Booth master: the step period is fixed when the table
+    is armed, so the flash exposure is capped at the plan's longest exposure (logged). Returns the
+    entries of every frame, the flash last. Errors as :func:`run_capture`.
+    """
+    if not plan.steps:
+        raise ValueError("run_capture_with_flash: the plan has no steps; expected ambient + LED steps")
+    longest = max(s.exposure_us for s in plan.steps)
+    placeholder = CaptureStep(len(plan.steps), "flash", (0.0,) * plan.n_leds, longest, plan.steps[0].gain)
+    full = dataclasses.replace(plan, steps=(*plan.steps, placeholder))
+
+    def flash_step(frames: list[RawFrame]) -> CaptureStep:
+        levels, exposure_us = decide(frames)
+        levels = tuple(float(v) for v in levels)
+        exposure_us = float(exposure_us)
+        if plan.trigger == "booth" and exposure_us > longest:
+            log.warning("flash exposure %.0f µs capped at %.0f µs: the booth's period was fixed for the "
+                        "longest step when the table was armed", exposure_us, longest)
+            exposure_us = longest
+        return dataclasses.replace(placeholder, led_levels=levels, exposure_us=exposure_us)
+
+    if plan.trigger not in ("software", "booth", "camera"):
+        raise ValueError(f"run_capture_with_flash: plan trigger {plan.trigger!r}; expected software, booth or camera")
+    with collector_paused():
+        if plan.trigger == "software":
+            return _host_paced(camera, booth, full, writer, on_frame, flash_step)
+        return _table_paced(camera, booth, full, writer, on_frame, flash_step)  # type: ignore[arg-type]
+
+
+@contextmanager
+def collector_paused() -> Iterator[None]:
+    """Pause Python's automatic (cyclic) garbage collection while a flash sequence streams.
+
+    A collection stops every thread of the process; on the capture bench collections came many
+    times per sequence, and one landing between the last LED frame and the flash trigger doubled
+    that latency (docs/architecture.md §10). A sequence lasts
+    k + 2 frame periods and leaves almost no cyclic garbage (reference counting frees the rest),
+    so collection waits until it is over. The previous state is restored on every exit path.
+    """
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
+
+
+@contextmanager
+def _leds_off_at_exit(camera: Camera, booth: LedControl) -> Iterator[None]:
+    """LEDs off (``OFF`` also aborts a running table), then the camera stopped, on every exit path.
+
+    Leaving through an error, a failure to switch off or to stop (when the booth's link is what
+    failed, ``OFF`` cannot get through either) is logged, and the original error goes on: it is
+    the one that says what went wrong (and the booth's watchdog switches off a silent host's LEDs).
+    """
+    try:
+        yield
+    except BaseException:
+        try:
+            booth.all_off()
+        except Exception as off_err:  # noqa: BLE001 - the original error matters more
+            log.warning("LEDs not confirmed off after the error: %s; the booth's watchdog switches them off "
+                        "once the host has been silent for its period", off_err)
+        try:
+            camera.stop()
+        except Exception as stop_err:  # noqa: BLE001 - the original error matters more
+            log.warning("stopping the camera after the error failed: %s", stop_err)
+        raise
+    try:
+        booth.all_off()
+    finally:
+        camera.stop()
+
+
+def _replan(camera: Camera, plan: CapturePlan, index: int) -> None:
+    """Give a streaming camera its plan with step ``index`` filled in, before that step's trigger.
+
+    The Camera protocol has no call for it yet: the implementations read their prepared plan
+    (``_plan``) when a step is triggered (Aravis with software trigger, the simulated camera) or,
+    with a hardware trigger line, right after the previous frame (Aravis): that step is then
+    re-applied here. ``WiredFakeCamera`` (the aravis-fake rig) wraps an ``AravisCamera`` as
+    ``.aravis``. A camera offering ``update_plan(plan, index)`` is asked instead.
+    """
+    update = getattr(camera, "update_plan", None)
+    if update is not None:
+        update(plan, index)
+        return
+    targets = [t for t in (camera, getattr(camera, "aravis", None)) if t is not None and hasattr(t, "_plan")]
+    if not targets:
+        raise TypeError(f"{type(camera).__name__}: cannot change a step of a prepared plan; expected a camera "
+                        "with update_plan(plan, index) (or use two captures for the flash)")
+    for target in targets:
+        with getattr(target, "_condition", None) or nullcontext():
+            target._plan = plan
+        trigger = getattr(target, "_trigger", None)
+        if (trigger is not None and getattr(trigger, "mode", "software") != "software"
+                and getattr(target, "_n_consumed", None) == index and hasattr(target, "_apply_step")):
+            target._apply_step(index, plan)  # the line-triggered step was set up after the previous frame
+
+
+def run_capture(
+    camera: Camera,
+    booth: LedControl,
+    plan: CapturePlan,
+    writer: SequenceWriter,
+    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
+) -> list[SequenceFrame]:
+    """Capture every step of ``plan`` in its sync mode, writing each frame as it arrives.
+
+    Raises
+    ------
+    FrameTimeoutError
+        No frame within the frame timeout (and the booth counted no trigger for it); names the step.
+    DroppedFrameError
+        A frame was lost (frame ids skipped, or the booth triggered a frame that never came);
+        names the step. Frames already written stay on disk.
+    """
+    if plan.trigger == "software":
+        return _host_paced(camera, booth, plan, writer, on_frame)
+    if plan.trigger in ("booth", "camera"):
+        return _table_paced(camera, booth, plan, writer, on_frame)  # type: ignore[arg-type]
+    raise ValueError(f"run_capture: plan trigger {plan.trigger!r}; expected software, booth or camera")
+
+
+def _saved(writer: SequenceWriter, written: list[SequenceFrame]) -> str:
+    return f"{len(written)} frame(s) already saved in {writer.path.parent}"
+
+
+def _write(writer: SequenceWriter, step: CaptureStep, frame: RawFrame, written: list[SequenceFrame],
+           on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None, trigger: int | None = None) -> None:
+    extra: dict = {"frame_id": frame.frame_id, "timestamp_ns": frame.timestamp_ns}
+    if trigger is not None:
+        extra["trigger"] = trigger
+    entry = writer.add_frame(frame.pixels, step.role, step.led_levels, frame.exposure_us, frame.gain, extra=extra)
+    written.append(entry)
+    log.info("step %d (%s): frame %d saved as %s", step.index, step.label, frame.frame_id, entry.file)
+    if on_frame is not None:
+        on_frame(step, frame, entry)
+
+
+def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: SequenceWriter,
+                on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
+                flash: Callable[[list[RawFrame]], CaptureStep] | None = None) -> list[SequenceFrame]:
+    written: list[SequenceFrame] = []
+    frames: list[RawFrame] = []
+    previous_id: int | None = None
+    with _sequence_watchdog(booth, plan), _leds_off_at_exit(camera, booth):
+        camera.prepare(plan)
+        camera.start()
+        for step in plan.steps:
+            cover: AbstractContextManager[None] = nullcontext()
+            if flash is not None and step.index == len(plan.steps) - 1:
+                step = flash(frames)
+                plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
+                _replan(camera, plan, step.index)
+                # The flash exposure is decided now and may be longer than any planned step.
+                cover = _watchdog_covering(booth, dataclasses.replace(plan, steps=(step,)))
+            with cover:
+                booth.set_levels(step.led_levels)
+                camera.trigger()
+                try:
+                    frame = camera.next_frame(plan.frame_timeout_s)
+                except FrameTimeoutError as err:
+                    raise FrameTimeoutError(f"step {step.index} ({step.label}): {err}; "
+                                            f"{_saved(writer, written)}") from err
+            if previous_id is not None and (frame.frame_id - previous_id) % FRAME_ID_MODULUS != 1:
+                raise DroppedFrameError(
+                    f"step {step.index} ({step.label}): camera frame id {frame.frame_id} follows {previous_id}; "
+                    f"a frame was lost. {_saved(writer, written)}"
+                )
+            _check_watchdog(booth, f"step {step.index} ({step.label})", _saved(writer, written))
+            previous_id = frame.frame_id
+            frames.append(frame)
+            _write(writer, step, frame, written, on_frame)
+    return written
+
+
+def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, writer: SequenceWriter,
+                 on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
+                 flash: Callable[[list[RawFrame]], CaptureStep] | None = None) -> list[SequenceFrame]:
+    written: list[SequenceFrame] = []
+    frames: list[RawFrame] = []
+    last = len(plan.steps) - 1
+    mode = plan.trigger
+    settle_us = int(round(plan.settle_s * 1e6))
+    period_us = booth_period_us(plan) if mode == "booth" else 0
+    # Booth master: frames come one period apart, so waiting for any one frame may take a period
+    # on top of the usual timeout.
+    frame_timeout_s = plan.frame_timeout_s + period_us * 1e-6
+    longest_us = max(step.exposure_us for step in plan.steps)
+    if period_us > ARM_TIME_MAX_US:
+        longest_allowed_us = longest_us - (period_us - ARM_TIME_MAX_US)
+        raise CaptureError(
+            f"booth master: step period {period_us * 1e-6:.4g} s (settle, trigger pulse, longest exposure "
+            f"{longest_us * 1e-6:.4g} s, deadtime and readout) is longer than the booth's longest period "
+            f"{ARM_TIME_MAX_US * 1e-6:g} s; expected exposures up to {longest_allowed_us * 1e-6:.4g} s "
+            "when the booth paces the frames (or host pacing)")
+    first_id: int | None = None
+    pause, resume = getattr(writer, "pause", None), getattr(writer, "resume", None)
+    with ExitStack() as watchdog:
+        watchdog.enter_context(_sequence_watchdog(booth, plan))
+        watchdog.enter_context(_leds_off_at_exit(camera, booth))
+        try:
+            booth.all_off()  # idle the booth (a previous table may be DONE) before editing the table
+            drain = getattr(booth, "pending_events", None)
+            if drain is not None:
+                drain()  # events of an earlier, aborted table must not pair with this one's frames
+            if flash is not None:  # the flash step is held until its levels are known (PSET)
+                booth.load_pattern([step.led_levels for step in plan.steps], held=(last,))
+            else:
+                booth.load_pattern([step.led_levels for step in plan.steps])
+            booth.arm(mode, settle_us=settle_us, pulse_us=TRIGGER_PULSE_US, period_us=period_us)
+            camera.prepare(plan)
+            camera.start()
+            booth.start()
+            for number, step in enumerate(plan.steps, start=1):
+                if flash is not None and step.index == last - 1 and pause is not None:
+                    pause()  # the writer thread waits from the last LED frame until the flash frame is in
+                if flash is not None and step.index == last:
+                    step = flash(frames)
+                    plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
+                    _replan(camera, plan, step.index)
+                    if step.exposure_us > longest_us:  # camera master: the flash exposure is not capped
+                        flash_plan = dataclasses.replace(plan, steps=(step,))
+                        frame_timeout_s = max(frame_timeout_s, flash_plan.frame_timeout_s)
+                        watchdog.enter_context(_watchdog_covering(booth, flash_plan))
+                    # The last LED frame is in, so its exposure is over: the flash step need not
+                    # wait for its scheduled slot (booth master, PSET … NOW).
+                    # (A booth firmware without NOW refuses it; LedBooth.set_step then falls back to plain PSET.)
+                    booth.set_step(step.index, step.led_levels, now=mode == "booth")
+                if mode == "camera":
+                    if number > 1:
+                        time.sleep(plan.settle_s)  # the next step's LEDs settle between exposures
+                    camera.trigger()
+                try:
+                    frame = camera.next_frame(frame_timeout_s)
+                except FrameTimeoutError as err:
+                    # The booth stops the table when its watchdog fires: say so rather than 'no frame'.
+                    _check_watchdog(booth, f"step {step.index} ({step.label})", _saved(writer, written))
+                    counted = booth.trigger_count()
+                    if counted >= number:
+                        raise DroppedFrameError(
+                            f"step {step.index} ({step.label}): the booth counted trigger {number} but no frame "
+                            f"arrived within {frame_timeout_s:.3g} s; the frame was lost. {_saved(writer, written)}"
+                        ) from err
+                    raise FrameTimeoutError(
+                        f"step {step.index} ({step.label}): {err}; the booth counted {counted} trigger(s) "
+                        f"({mode} master); {_saved(writer, written)}"
+                    ) from err
+                if first_id is None:
+                    first_id = frame.frame_id
+                trigger = 1 + (frame.frame_id - first_id) % FRAME_ID_MODULUS
+                if trigger != number:
+                    missing = plan.steps[number - 1]
+                    raise DroppedFrameError(
+                        f"step {missing.index} ({missing.label}): no frame for trigger {number}; the next frame "
+                        f"(id {frame.frame_id}) is trigger {trigger}. {_saved(writer, written)}"
+                    )
+                paired = plan.steps[_booth_step_of(booth, trigger, frame_timeout_s, step)]
+                if paired.index != step.index:
+                    raise DroppedFrameError(
+                        f"step {step.index} ({step.label}): the booth exposed table step {paired.index} on trigger "
+                        f"{trigger}; expected step {step.index} — a trigger was missed or doubled. {_saved(writer, written)}"
+                    )
+                frames.append(frame)
+                if flash is not None and step.index == last and resume is not None:
+                    # Only now: a writer resumed at the PSET took the GIL for its queued frames while
+                    # the booth's thread was due to pulse the flash trigger (seen up to ~8 ms late).
+                    resume()
+                _write(writer, paired, frame, written, on_frame, trigger=trigger)
+            done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
+            log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))
+        finally:
+            if resume is not None:
+                resume()
+    return written
+
+
+def _booth_step_of(booth: SequencedLedControl, trigger: int, timeout_s: float, step: CaptureStep) -> int:
+    """The table step the booth reported for ``trigger`` (``TRIG <count> <step>`` events arrive in order)."""
+    while True:
+        event = booth.wait_event("TRIG", timeout_s=timeout_s)
+        try:
+            count, index = int(event.args[0]), int(event.args[1])
+        except (IndexError, ValueError) as err:
+            raise DroppedFrameError(f"step {step.index} ({step.label}): booth event {event.args!r}; "
+                                    "expected 'TRIG <count> <step>'") from err
+        if count == trigger:
+            return index
+        if count > trigger:
+            raise DroppedFrameError(
+                f"step {step.index} ({step.label}): the booth reported trigger {count} before {trigger}; "
+                "expected one TRIG event per trigger"
+            )
+        # count < trigger: an event of an earlier trigger left over; skip it.
+
+
+def preview_frames(camera: Camera, booth: LedControl, plan: CapturePlan) -> list[RawFrame]:
+    """Capture ``plan`` host paced and return the frames in memory, writing nothing (exposure previews).
+
+    Frames pair with steps in order (host pacing); a skipped frame id raises
+    :class:`DroppedFrameError`. LEDs off and camera stopped at the end, as for :func:`run_capture`.
+    """
+    frames: list[RawFrame] = []
+    with _sequence_watchdog(booth, plan), _leds_off_at_exit(camera, booth):
+        camera.prepare(plan)
+        camera.start()
+        for step in plan.steps:
+            booth.set_levels(step.led_levels)
+            camera.trigger()
+            try:
+                frame = camera.next_frame(plan.frame_timeout_s)
+            except FrameTimeoutError as err:
+                raise FrameTimeoutError(f"preview step {step.index} ({step.label}): {err}") from err
+            if frames and (frame.frame_id - frames[-1].frame_id) % FRAME_ID_MODULUS != 1:
+                raise DroppedFrameError(f"preview step {step.index} ({step.label}): camera frame id "
+                                        f"{frame.frame_id} follows {frames[-1].frame_id}; a frame was lost")
+            _check_watchdog(booth, f"preview step {step.index} ({step.label})")
+            frames.append(frame)
+    return frames

@@ -1,0 +1,269 @@
+"""The estimate → flash decision of one capture, prepared before the sequence starts.
+
+Between the last LED frame and the flash trigger only the per-frame work may run. Everything
+that depends on the rig and the plan alone — LED spectra and camera responsivities in photons,
+the :class:`~processing.flash.FlashModel` (``A = Cᵀ I``, the tie-break matrices, the factored
+matching problem), the :class:`~processing.ambient.AmbientModel` (roughness operator and
+non-negativity rows), the target's camera response ``Cᵀ i_d`` (a colour-science lookup and unit
+conversion), the frame stack's black/white levels and block size — is computed once by
+:meth:`FlashSession.prepare`. Each frame's block sums, saturated blocks and products with the
+frames before it are taken by :meth:`FlashSession.add` as the frame arrives (between frames).
+:meth:`FlashSession.decide` then costs the statistics from those moments, one ambient solve and
+one small quadratic programme; the estimate's reliability signals wait until they are read.
+Prepared with exposure limits, the session also takes each frame's rates for the flash exposure
+(:class:`~acquisition.exposure.FlashExposure`) as it arrives, and :meth:`FlashSession.flash_exposure`
+only sums them.
+
+The results are those of :func:`acquisition.analysis.estimate_sequence` and
+:func:`acquisition.analysis.solve_sequence_flash` on the same frames (same statistics code,
+same solvers; only the order of the moment sums differs); ``tests/acquisition/test_flash_stream.py``
+checks it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from collections.abc import Sequence as Seq
+
+import numpy as np
+
+from msflash.acquisition.session import analysis
+from msflash.acquisition.devices.camera import RawFrame
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
+from msflash.acquisition.sequence.format import Sequence
+from msflash.processing.ambient import AmbientEstimate, AmbientModel
+from msflash.processing.flash import FlashModel, FlashSolution
+from msflash.processing.spectra import Spectra
+from msflash.processing.statistics import BlockRows, FrameStackSpec, SequenceStatistics, cfa_planes
+
+
+class FlashDecision:
+    """What the flash step needs, and how it was reached.
+
+    The ambient estimate's reliability signals (band, conditioning, warnings) are not needed to
+    drive the flash, so :meth:`FlashSession.decide` leaves them out of the latency-critical path:
+    :attr:`estimate` computes them on first access (after the flash is triggered).
+    """
+
+    def __init__(self, solution: FlashSolution, levels: np.ndarray, estimate: Callable[[], AmbientEstimate]) -> None:
+        self.solution = solution
+        self.levels = levels
+        """The flash weights clipped to [0, 1]: the LED levels to drive."""
+        self._estimate = estimate
+        self._estimated: AmbientEstimate | None = None
+
+    @property
+    def estimate(self) -> AmbientEstimate:
+        """The full ambient estimate (as :meth:`FlashSession.estimate`), computed once on first access."""
+        if self._estimated is None:
+            self._estimated = self._estimate()
+        return self._estimated
+
+
+class FlashSession:
+    """A rig's estimate + flash problem, prepared once (see the module notes).
+
+    Build it with :meth:`prepare` from the sequence header (``SequenceWriter.sequence`` before
+    any frame), then call :meth:`decide` with the ambient + LED frames as captured.
+    """
+
+    def __init__(self, header: Sequence, leds: Spectra, model: FlashModel, target_response: np.ndarray | None,
+                 method: str, alpha: float | str, bin_factor: int,
+                 exposure_limits_us: tuple[float, float] | None = None,
+                 exposure_policy: ExposurePolicy = ExposurePolicy()) -> None:
+        self.header = header
+        self.leds = leds
+        self.model = model
+        self.ambient_model = AmbientModel(leds)
+        self.target_response = target_response
+        self.method = method
+        self.alpha = alpha
+        self.bin_factor = bin_factor
+        self.exposure_limits_us = exposure_limits_us
+        self.exposure_policy = exposure_policy
+        self.begin()
+
+    @classmethod
+    def prepare(cls, header: Sequence, target: str = "D65", method: str = "tikhonov", alpha: float | str = "auto",
+                bin_factor: int = analysis.DEFAULT_BIN_FACTOR, exposure_limits_us: tuple[float, float] | None = None,
+                exposure_policy: ExposurePolicy = ExposurePolicy()) -> FlashSession:
+        """Prepare from a sequence header (LEDs, camera, grid); ``target`` for the complementary flash.
+
+        With ``exposure_limits_us`` (the camera's range) the flash exposure is predicted too
+        (:meth:`flash_exposure`, aiming as ``exposure_policy`` says).
+
+        Raises
+        ------
+        RecordingError
+            If the header has no camera responsivities, or the target cannot be read.
+        """
+        leds = analysis.led_spectra_photons(header)
+        camera = analysis.camera_responsivities_photons(header)
+        model = FlashModel(leds, camera)
+        response = model.target_response(analysis.target_illuminant(target, header)) if target else None
+        return cls(header, leds, model, response, method, alpha, bin_factor, exposure_limits_us, exposure_policy)
+
+    # -- per capture -------------------------------------------------------------------------
+    def begin(self) -> None:
+        """Forget the frames of an earlier capture."""
+        self._frames: list[RawFrame] = []
+        self._roles: list[str] = []
+        self._levels: list[tuple[float, ...]] = []
+        self._factor: int | None = None
+        self._rows: BlockRows | None = None
+        self._n_led_rows = 0
+        self._rows_complete = True  # False when a frame did not fit the prepared rows
+        self._stack: analysis.FrameStack | None = None
+        self._copies = 1  # 3 for a mono camera's (H, W) frames, recorded as three identical channels
+        camera = self.header.camera
+        self._exposure = None if self.exposure_limits_us is None else FlashExposure(
+            camera.black_level, camera.white_level, self.exposure_limits_us, self.exposure_policy)
+
+    def add(self, frame: RawFrame, role: str, levels: Seq[float]) -> None:
+        """Take one captured frame; ambient and LED frames are block-summed now (between frames).
+
+        The block sums, the per-block saturation and the frame's products with the frames before
+        it are what the binned statistics of :func:`processing.statistics.accumulate_statistics`
+        compute (:class:`~processing.statistics.BlockRows`); doing it as each frame arrives leaves
+        :meth:`decide` only the small solves.
+        """
+        if not hasattr(self, "_frames"):
+            self.begin()
+        self._frames.append(frame)
+        self._roles.append(role)
+        self._levels.append(tuple(float(v) for v in levels))
+        self._stack = None
+        if frame.pixels.ndim == 2 and self.header.camera.cfa is None:
+            # A mono camera: the writer records (H, W) as three identical channels; one plane has
+            # their statistics divided by 3 (see :meth:`statistics`) at a third of the work.
+            self._copies = 3
+        if role not in ("ambient", "led") or (role == "ambient" and role in self._roles[:-1]):
+            return  # the estimate uses the first ambient frame only (and no flash or dark frame)
+        self._add_rows(_plane(frame.pixels), role)
+        if self._exposure is not None:
+            metered = metering_view(frame.pixels, mosaic=self.header.camera.cfa is not None)
+            if role == "ambient":
+                self._exposure.add_ambient(metered, frame.exposure_us)
+            else:
+                self._exposure.add_led(metered, frame.exposure_us)
+
+    def _add_rows(self, pixels: np.ndarray, role: str) -> None:
+        camera = self.header.camera
+        period = 2 if camera.cfa is not None else 1
+        if self._factor is None:
+            factor = self.bin_factor
+            while factor > 1 and min(pixels.shape[:2]) // (factor * period) < 8:  # as analysis.sequence_statistics
+                factor //= 2
+            self._factor = max(factor, 1)
+        if self._factor == 1 or not self._rows_complete:
+            return
+        plane = cfa_planes(pixels, period)
+        n_leds = self.leds.count  # one row per LED frame of a plain plan; more frames use the general path
+        if self._rows is None:
+            self._rows = BlockRows(n_leds, plane.shape, self._factor, camera.white_level, incremental=True,
+                                   black_level=camera.black_level, weighting=analysis.SAMPLE_WEIGHTING)
+        row = n_leds if role == "ambient" else self._n_led_rows
+        if role == "led":
+            self._n_led_rows += 1
+        if row > n_leds or (role == "led" and row == n_leds) or plane.shape != self._rows.plane_shape:
+            self._rows_complete = False
+            return
+        self._rows.add(row, plane)
+
+    def stack(self) -> analysis.FrameStack:
+        """The frame stack of the frames taken so far (first ``ambient`` and every ``led`` frame), in memory."""
+        if self._stack is not None:
+            return self._stack
+        roles, frames = self._roles, self._frames
+        ambient = [i for i, role in enumerate(roles) if role == "ambient"]
+        leds = tuple(i for i, role in enumerate(roles) if role == "led")
+        if not ambient or not leds:
+            raise RecordingError(f"{self.header.path}: the captured frames have no ambient or no LED frame; "
+                                 "expected ambient + one frame per LED")
+        camera = self.header.camera
+
+        def scale(index: int) -> float:
+            return 1.0 / (frames[index].exposure_us * frames[index].gain)
+
+        spec = FrameStackSpec(black_level=camera.black_level, white_level=camera.white_level,
+                              ambient_scale=scale(ambient[0]), led_scales=tuple(scale(i) for i in leds),
+                              led_levels=np.array([self._levels[i] for i in leds], dtype=float))
+        self._stack = analysis.FrameStack(_plane(frames[ambient[0]].pixels),
+                                          tuple(_plane(frames[i].pixels) for i in leds), spec, ambient[0], leds)
+        return self._stack
+
+    def statistics(self, stack: analysis.FrameStack) -> SequenceStatistics:
+        """The statistics of :func:`analysis.sequence_statistics` from the block sums taken in :meth:`add`.
+
+        Block sums with the black level scaled by the block area, no white level and the
+        saturated blocks left out are exactly what the binned pass feeds its moments (only the
+        summation order differs). Frames that did not fit the rows prepared for one frame per LED
+        (a multiplexed plan with more LED frames) take the general path. A mono camera's frames
+        are taken as one plane, and the statistics of the three identical channels the sequence
+        records are those of that plane replicated.
+        """
+        rows = self._rows
+        if (self._factor or 1) == 1 or rows is None or not self._rows_complete \
+                or self._n_led_rows != len(stack.led_indices) or self._n_led_rows != self.leds.count:
+            statistics = analysis.sequence_statistics(stack, self.header.camera.cfa, self.bin_factor)
+        else:
+            statistics = rows.statistics(stack.spec)
+        return statistics.replicated(self._copies) if self._copies > 1 else statistics
+
+    def estimate(self, stack: analysis.FrameStack) -> AmbientEstimate:
+        """The ambient estimate of :func:`analysis.estimate_sequence` for the frames taken."""
+        return analysis.with_model_band(self.ambient_model.estimate(self.statistics(stack), self.method, self.alpha),
+                                        self.header)
+
+    def solve(self, mode: str, ambient_weights: np.ndarray, bounds: str = "physical") -> FlashSolution:
+        """The matching or complementary flash (as :func:`analysis.solve_sequence_flash`)."""
+        if mode == "matching":
+            return self.model.matching(ambient_weights, bounds=bounds)  # type: ignore[arg-type]
+        if mode == "complementary":
+            if self.target_response is None:
+                raise RecordingError("complementary flash: the session was prepared without a target")
+            return self.model.complementary(ambient_weights, self.target_response, bounds=bounds)  # type: ignore[arg-type]
+        raise RecordingError(f"flash mode '{mode}' is unknown; expected matching or complementary")
+
+    def flash_exposure(self, levels: Seq[float]) -> float:
+        """The flash frame's exposure (µs) for LED ``levels``, from the frames taken (see :class:`FlashExposure`).
+
+        Raises
+        ------
+        RecordingError
+            If the session was prepared without exposure limits.
+        """
+        if self._exposure is None:
+            raise RecordingError("flash exposure: the session was prepared without exposure_limits_us; "
+                                 "expected FlashSession.prepare(…, exposure_limits_us=(shortest, longest))")
+        return self._exposure.predict(levels)
+
+    def decide(self, mode: str = "complementary", sanitise: bool = False) -> FlashDecision:
+        """Estimate the ambient from the frames taken and solve the ``mode`` flash.
+
+        Only the weights are estimated here; the estimate's reliability signals are computed when
+        :attr:`FlashDecision.estimate` is first read. ``sanitise`` replaces non-finite ambient
+        weights by 0 before solving (a degenerate estimate still yields a flash to capture, e.g. on
+        the test patterns of the aravis fake).
+        """
+        stack = self.stack()
+        statistics = self.statistics(stack)
+        raw_weights, alpha_used = self.ambient_model.weights(statistics, self.method, self.alpha)
+        weights = np.asarray(raw_weights, dtype=float)
+        if sanitise:
+            weights = np.where(np.isfinite(weights), weights, 0.0)  # as nan_to_num(…, 0, 0, 0), at a tenth of its cost
+        solution = self.solve(mode, weights)
+        flash_weights = np.asarray(solution.flash_weights, dtype=float)
+        # NaN → 0, ±inf → the bounds: what clip(nan_to_num(w), 0, 1) gives.
+        flash = np.minimum(np.maximum(np.where(np.isnan(flash_weights), 0.0, flash_weights), 0.0), 1.0)
+        model, method, header = self.ambient_model, self.method, self.header
+        return FlashDecision(solution, flash, lambda: analysis.with_model_band(
+            model.reliability(statistics, raw_weights, method, alpha_used), header))
+
+
+def _plane(pixels: np.ndarray) -> np.ndarray:
+    return pixels[:, :, 0] if pixels.ndim == 3 and pixels.shape[2] == 1 else pixels
+
+
+__all__ = ["FlashDecision", "FlashSession"]

@@ -1,0 +1,104 @@
+"""From a recorded sequence to the light-prior estimate and the ``auto`` model choice (issue 17, build 3).
+
+The thin layer between a :class:`~acquisition.sequence_format.Sequence` and
+:mod:`processing.light_prior`, as :mod:`acquisition.analysis` is for eq. 4–6: frames are read with
+:func:`~acquisition.analysis.load_frame_stack`, binned like ``msflash estimate`` and reduced to
+channel-resolved statistics; the LED spectra and responsivities go to photons.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from msflash.acquisition.session.analysis import (
+    DEFAULT_BIN_FACTOR,
+    FrameStack,
+    camera_responsivities_photons,
+    led_spectra_photons,
+    load_frame_stack,
+    spectrum_in_sequence_unit,
+)
+from msflash.acquisition.sequence.format import Sequence
+from msflash.processing.ambient import AmbientEstimate, estimate_ambient
+from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
+from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
+
+
+@dataclass(frozen=True)
+class SequencePriorResult:
+    """Both models' estimates of a sequence and which one ``auto`` picks."""
+
+    prior: PriorEstimate
+    """The light-prior estimate."""
+    led: AmbientEstimate
+    """The LED-span estimate (eq. 4–6, tikhonov), from the same channel statistics."""
+    choice: ModelChoice
+    """``auto``'s choice and its reason."""
+
+    @property
+    def chosen_spectrum(self):  # noqa: ANN201 — a Spectra
+        """The spectrum of the chosen model (photons, the LEDs' units)."""
+        return self.prior.spectrum if self.choice.model == "prior" else self.led.spectrum
+
+
+def sequence_channel_statistics(sequence: Sequence, stack: FrameStack | None = None,
+                                bin_factor: int = DEFAULT_BIN_FACTOR) -> ChannelStatistics:
+    """The channel statistics of a sequence, binned like :func:`acquisition.analysis.sequence_statistics`."""
+    stack = stack or load_frame_stack(sequence)
+    period = 2 if sequence.camera.cfa is not None else 1
+    height, width = stack.ambient.shape[:2]
+    while bin_factor > 1 and min(height, width) // (bin_factor * period) < 8:
+        bin_factor //= 2
+    return accumulate_channel_statistics(stack.ambient, stack.led_frames, stack.spec, cfa=sequence.camera.cfa,
+                                         bin_factor=max(bin_factor, 1))
+
+
+def estimate_sequence_prior(sequence: Sequence, stack: FrameStack | None = None) -> SequencePriorResult:
+    """The light-prior estimate of a sequence, the LED-span one and ``auto``'s choice between them.
+
+    Raises
+    ------
+    RecordingError
+        If the sequence has no camera responsivities or unusable frames.
+    """
+    statistics = sequence_channel_statistics(sequence, stack)
+    leds = led_spectra_photons(sequence)
+    model = prior_model(statistics.channels, leds, camera_responsivities_photons(sequence))
+    return SequencePriorResult(model.estimate(statistics), estimate_ambient(statistics.led_statistics(), leds),
+                               choose_model(statistics, model))
+
+
+def prior_payload(sequence: Sequence, result: SequencePriorResult) -> dict:
+    """The JSON fields for ``msflash estimate --model prior|auto``: the chosen model, why, and both spectra.
+
+    ``spectrum``/``spectrum_std`` are the chosen model's (sequence unit); ``model_choice`` holds the
+    held-out errors behind the choice; ``prior`` the light-prior estimate whichever model was chosen.
+    """
+    prior = result.prior
+    chosen = result.choice.model
+    std = prior.spectrum_std if chosen == "prior" else result.led.spectrum_std
+    spectrum = result.chosen_spectrum
+    errors = result.choice.errors
+    return {
+        "sequence": str(sequence.directory),
+        "wavelengths_nm": sequence.wavelengths_nm,
+        "spectral_unit": sequence.spectral_unit,
+        "model": chosen,
+        "spectrum": spectrum_in_sequence_unit(sequence, spectrum),
+        "spectrum_std": spectrum_in_sequence_unit(sequence, spectrum.replace(values=std[:, None])),
+        "model_choice": {
+            "model": chosen, "reason": result.choice.reason, "margin": result.choice.margin,
+            "held_out_relative_error": {"led": errors.led_observed, "prior": errors.prior_observed},
+            "held_out_relative_error_noise_removed": {"led": errors.led, "prior": errors.prior},
+        },
+        "prior": {
+            "spectrum": spectrum_in_sequence_unit(sequence, prior.spectrum),
+            "spectrum_std": spectrum_in_sequence_unit(sequence, prior.spectrum.replace(values=prior.spectrum_std[:, None])),
+            "coefficients": prior.coefficients, "prior_weight": prior.prior_weight,
+            "relative_residual": prior.relative_residual, "warnings": list(prior.warnings),
+        },
+        "led": {"spectrum": spectrum_in_sequence_unit(sequence, result.led.spectrum),
+                "ambient_weights": result.led.ambient_weights, "relative_residual": result.led.relative_residual,
+                "warnings": list(result.led.warnings)},
+        "n_samples": prior.n_samples,
+    }

@@ -1,0 +1,774 @@
+"""Rigs: a camera and a booth wired together (docs/architecture.md §4).
+
+``sim`` (the default): a :class:`SimulatedCamera` rendering a spectral scene with the LED levels
+the booth *emulator* holds at exposure time, and the real :class:`led_controller.LedBooth`
+driver talking to that emulator over a real pseudo-terminal. The whole pipeline runs, with a
+known ground-truth ambient, through the same driver code a real booth uses.
+
+``aravis-fake``: :class:`~acquisition.aravis_camera.AravisCamera` on the Aravis GigE Vision fake
+served in this process on 127.0.0.1 (opened by address: no discovery broadcast), the emulator on a
+pty and ``LedBooth``. Frames are the fake's test patterns, so spectra estimated from them mean
+nothing; the rig proves the Aravis path (features, triggers, buffers) inside the whole pipeline.
+
+``replay:DIR``: :class:`~acquisition.replay_camera.ReplayCamera` serving a recorded sequence, with
+the emulator on a pty; re-runs estimation, flash solving and synthesis on recorded frames.
+
+``hw`` (real use; also implied by ``--camera`` / ``--port``): :class:`HardwareCamera` around an
+:class:`~acquisition.aravis_camera.AravisCamera` opened by device id, serial or IP on the given
+interfaces (default ``usb3``: GigE Vision discovery broadcasts, so ``gige`` only when named, and an
+IP address opens one GigE camera without discovery), and :class:`led_controller.LedBooth` on
+``port`` or on the single booth :func:`led_controller.discovery.find_booth` finds. Every device is
+tried; :class:`RigOpenError` lists each one's failure. LED spectra (and optionally the camera's
+responsivities) come from a calibration directory or CSV files (:func:`load_hw_spectra`).
+
+The trigger wires (docs/architecture.md §4, three sync modes) are modelled in every rig:
+
+- *booth master*: the emulator's trigger output (``on_trigger_out``) drives the camera's trigger
+  input — :meth:`SimulatedCamera.trigger_line` on ``sim``; on ``aravis-fake`` (the fake has no
+  input lines) the callback issues the camera's software trigger;
+- *camera master*: the camera's ExposureActive output drives the emulator's input — on ``sim``
+  a rising edge just before the frame reads the LED levels and a falling edge right after; on
+  ``aravis-fake`` a rising edge before ``TriggerSoftware`` and a falling edge when the frame
+  arrives. The booth ignores the line outside a running camera-master sequence, as firmware does.
+
+A callback that fails on the emulator's thread is logged and kept in :attr:`Rig.line_errors`
+(it must not kill the emulator); the capture then sees the missing frame.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import os
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.errors import UsageError
+from msflash.acquisition.errors import RigOpenError
+from msflash.acquisition.plan import CapturePlan
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.devices.sim_world import read_responsivity_file, read_spectra_file, sim_ambient, sim_camera, sim_leds, sim_scene
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera
+from msflash.led_controller import BoothEmulator, LedBooth, serve_on_pty
+from msflash.led_controller.errors import BoothProtocolError
+from msflash.led_controller.protocol import MAX_BODY, Command, encode_request, parse_frame, parse_identify, parse_reply
+from msflash.processing import datasets
+from msflash.processing.image_formation import Scene
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
+
+log = logging.getLogger(__name__)
+
+RIG_SPECS = ("sim", "aravis-fake", "replay:DIR", "hw")
+"""What ``--rig`` accepts."""
+
+AravisFakeNominalCamera = "NikonD100"
+"""ISETCam camera whose responsivities the ``aravis-fake`` rig records as *nominal* (the fake's
+test patterns have no spectral meaning; the flash solvers need some camera model)."""
+
+
+@dataclass
+class Rig:
+    """An open camera + booth pair; close it (or use ``with``) to switch LEDs off and release both."""
+
+    name: str
+    """The rig spec (``sim``, ``aravis-fake``, ``replay:DIR``)."""
+    camera: Any
+    """The camera (a :class:`~acquisition.camera.Camera`; may offer ``suggested_exposure_us``)."""
+    booth: LedBooth
+    """The booth driver."""
+    led_spectra: Spectra
+    """The LED spectra at full drive (what a calibration would have measured)."""
+    camera_responsivities: Spectra | None
+    """The camera's responsivities, if known."""
+    true_ambient: Spectra | None = None
+    """Ground truth, for simulated rigs."""
+    _closers: list = field(default_factory=list, repr=False)
+    emulator: BoothEmulator | None = None
+    """The booth emulator at the far end of the pty (emulated rigs), for tests and diagnostics."""
+    line_errors: list[BaseException] = field(default_factory=list)
+    """Failures of trigger-line callbacks on the emulator's thread (logged, kept here)."""
+    camera_extra: dict = field(default_factory=dict)
+    """Extra keys for the sequence's ``camera`` entry (e.g. how a mono camera is recorded)."""
+    mono: bool = False
+    """The camera is monochrome: frames come as (H, W) with ``cfa`` None, the writer
+    (:meth:`sequence_writer`) records them as three identical channels, and the header's
+    ``camera.extra["channels"]`` says so."""
+    calibration: tuple[str, Path] | None = None
+    """(id, directory) of the ``msflash calibrate`` output the LED spectra and responsivities came
+    from: every sequence written by :meth:`sequence_writer` refers to it."""
+
+    def sequence_header(self) -> tuple[np.ndarray, SequenceCamera, tuple[SequenceLed, ...]]:
+        """Wavelengths, camera and LED entries for a format-v1 sequence written from this rig (energy units).
+
+        A camera reporting an empty serial (a replayed sequence recorded without one, a camera whose
+        DeviceSerialNumber is blank) is recorded without ``camera.serial``: format v1 makes it optional
+        but never empty.
+        """
+        leds = self.led_spectra.to_unit("energy")
+        info = self.camera.info
+        responsivity = None
+        if self.camera_responsivities is not None:
+            values = self.camera_responsivities.to_unit("energy").values
+            responsivity = {channel: values[:, i] for i, channel in enumerate("RGB")}
+        camera = SequenceCamera(
+            model=info.model, serial=info.serial or None, pixel_format=info.pixel_format, cfa=info.cfa,
+            black_level=info.black_level, white_level=info.white_level, responsivity=responsivity,
+            extra={**({"channels": f"{info.pixel_format} replicated to R, G, B"} if self.mono else {}),
+                   **self.camera_extra},
+        )
+        entries = tuple(SequenceLed(name, leds.values[:, i]) for i, name in enumerate(leds.names))
+        return leds.wavelengths_nm, camera, entries
+
+    def sequence_writer(self, directory: str | Path, extra: dict | None = None) -> SequenceWriter:
+        """A :class:`SequenceWriter` for a sequence from this rig (header of :meth:`sequence_header`).
+
+        A mono camera's (H, W) frames are recorded as three identical channels (:attr:`mono`); a
+        rig opened from a calibration (:attr:`calibration`) writes the sequence's
+        ``"calibration": {"id", "file"}`` reference (``file`` relative to the sequence directory).
+
+        Raises
+        ------
+        UsageError
+            The directory cannot be made or written (read-only, a file in the way): a bad output
+            path, named with the system's reason, before any frame is captured.
+        """
+        wavelengths, camera, leds = self.sequence_header()
+        if self.calibration is not None:
+            calibration_id, calibration_directory = self.calibration
+            file = os.path.relpath(Path(calibration_directory).resolve(), Path(directory).resolve())
+            extra = {**(extra or {}), "calibration": {"id": calibration_id, "file": file}}
+        try:
+            return SequenceWriter(directory, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
+                                  leds=leds, extra=extra, mono=self.mono)
+        except OSError as err:
+            where = err.filename or directory
+            raise UsageError(f"{where}: cannot write the sequence there ({err.strerror or err}); expected a "
+                             "writable directory (or a path where one can be made)") from err
+
+    def close(self) -> None:
+        """Switch the LEDs off, close the booth link, the emulator and the camera (each attempted).
+
+        Raises the first failure once every device has had its chance to close.
+        """
+        errors = []
+        for closer in reversed(self._closers):
+            try:
+                closer()
+            except Exception as err:  # noqa: BLE001 - every device gets its chance to close
+                errors.append(err)
+        self._closers.clear()
+        if errors:
+            raise errors[0]
+
+    def __enter__(self) -> Rig:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, traceback: object) -> None:
+        """Close the rig; leaving through an error, a failure to close is logged, not raised over it.
+
+        When the booth's link is what failed, switching the LEDs off at close fails the same way;
+        raising that would replace the error that says what happened (and where) with one about
+        ``OFF``. Logged at info level: the capture that had the LEDs on has already warned when it
+        could not switch them off (``acquisition.capture``), so by default the user reads it once.
+        """
+        if exc is None:
+            self.close()
+            return
+        try:
+            self.close()
+        except Exception as close_err:  # noqa: BLE001 - the error in flight is the one to report
+            log.info("rig '%s': closing after the error failed too: %s", self.name, close_err)
+
+
+def _line(rig_errors: list[BaseException], what: str, action: Callable[[], None]) -> Callable[..., None]:
+    """A trigger-line callback for the emulator's thread: failures are logged and kept, never raised there."""
+
+    def fire(*_args: object) -> None:
+        try:
+            action()
+        except Exception as err:  # noqa: BLE001 - raising would kill the emulator's thread
+            log.error("%s failed: %s", what, err)
+            rig_errors.append(err)
+
+    return fire
+
+
+def _emulator_for(leds: Spectra) -> BoothEmulator:
+    peaks = [float(leds.wavelengths_nm[np.argmax(leds.values[:, i])]) for i in range(leds.count)]
+    return BoothEmulator(names=[n.replace(" ", "_") for n in leds.names], peaks_nm=peaks)
+
+
+def _open_emulated_booth(leds: Spectra, log_serial: str | Path | None, closers: list) -> tuple[BoothEmulator, LedBooth]:
+    """The booth emulator for ``leds`` served on a new pty, and the ``LedBooth`` driver on that pty.
+
+    Each part's closer is appended to ``closers`` as soon as the part is open, so the caller's
+    :func:`_close_all` undoes a partial open.
+
+    Raises
+    ------
+    RigOpenError
+        Naming the pty (``booth emulator on /dev/pts/N: …``) when any part fails.
+    """
+    port = "a new pty"
+    try:
+        emulator = _emulator_for(leds)
+        server = serve_on_pty(emulator)
+        closers.append(server.close)
+        port = server.port
+        booth = LedBooth.open(server.port, log_serial=log_serial)
+        closers.append(booth.close)
+        closers.append(booth.all_off)
+    except Exception as err:
+        raise RigOpenError(f"booth emulator on {port}: {err}") from err
+    return emulator, booth
+
+
+def _close_all(closers: list) -> None:
+    for closer in reversed(closers):
+        with contextlib.suppress(Exception):
+            closer()
+
+
+def check_emulated_booth(leds: Spectra, where: str) -> None:
+    """Whether the booth emulator can serve one channel per LED of ``leds``; a one-line error if not.
+
+    The emulator is built for ``leds`` as the rig would build it and asked to identify itself (its
+    reply parsed by the driver's parser), so every limit of the firmware and the wire format is
+    checked as it applies: 1–64 channels, names that are plain words (spaces become ``_``; no
+    commas, ``*`` or non-ASCII), and an identify reply that fits one frame.
+
+    Raises
+    ------
+    UsageError
+        Naming ``where`` (the option or file the LEDs came from), the channels and the limit.
+    """
+    names = leds.names if leds.count <= 8 else (*leds.names[:3], "…", leds.names[-1])
+    channels = f"{leds.count} LED channel(s) ({', '.join(names)})"
+    try:
+        emulator = _emulator_for(leds)
+        replies: list[bytes] = []
+        emulator.connect_output(replies.append)
+        emulator.receive(encode_request(1, Command.IDENTIFY))
+        raw = b"".join(replies).rstrip(b"\r\n")
+        frame = parse_frame(raw, where="booth emulator", command=Command.IDENTIFY)
+        if len(frame.body) > MAX_BODY:  # the protocol's limit; neither end enforces it on this reply today
+            raise ValueError(f"its identify reply would be {len(frame.body)} bytes, over the protocol's {MAX_BODY}: "
+                             "shorter names")
+        info = parse_identify(parse_reply(frame, Command.IDENTIFY, where="booth emulator"), raw, where="booth emulator")
+    except (ValueError, BoothProtocolError) as err:
+        raise UsageError(f"{where}: {channels}: the booth emulator cannot serve them ({err}); expected 1–64 "
+                         "channels named by plain ASCII words whose identify reply fits one frame") from err
+    if info.channels != leds.count:
+        raise UsageError(f"{where}: {channels}: the booth emulator reports {info.channels}; expected one per LED")
+
+
+def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spectra = "chart110", cfa: str | None = None,
+                 seed: int = 0, camera: str | Spectra | None = None, n_leds: int | None = None,
+                 led_spectra: str | Path | Spectra | None = None, log_serial: str | Path | None = None,
+                 flash_power: float | None = None) -> Rig:
+    """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver.
+
+    Parameters
+    ----------
+    ambient, scene, camera
+        As the CLI's ``--ambient``, ``--scene``, ``--sim-camera`` (a name or a CSV file, resolved
+        by :mod:`acquisition.sim_world`), or spectra / a :class:`Scene` already on the sim grid.
+        ``camera`` None is :data:`acquisition.sim_world.SIM_DEFAULT_CAMERA`.
+    n_leds, led_spectra
+        The paper's subset of ``n_leds`` LEDs or the booth's LEDs (a CSV file, one column per
+        channel, or spectra); neither gives the paper's 7. The emulated booth gets one channel
+        per LED, named and peaked as they are (:func:`check_emulated_booth`).
+    cfa, seed, log_serial
+        Raw mosaic layout, noise (and mosaic) seed, serial transcript file.
+    flash_power
+        ``--flash-power``: every LED at full drive gives at least this many times the ambient's
+        mean camera signal (:meth:`SimulatedCamera.default`); None is its default, 1.
+
+    Raises
+    ------
+    UsageError
+        A bad name or file, with the option or file named (before anything is opened).
+    RigOpenError
+        The world or the emulated booth failed to open.
+    """
+    ambient_spd = sim_ambient(ambient) if isinstance(ambient, str) else ambient
+    scene_spec = sim_scene(scene) if isinstance(scene, str) else scene
+    responsivities = camera if isinstance(camera, Spectra) else sim_camera(camera)
+    if isinstance(led_spectra, Spectra):
+        leds, where = led_spectra, "LED spectra"
+    else:
+        leds = sim_leds(led_spectra, n_leds)
+        where = f"--led-spectra {led_spectra}" if led_spectra is not None else f"--leds {n_leds or 7}"
+    check_emulated_booth(leds, where)
+    closers: list = []
+    line_errors: list[BaseException] = []
+    try:
+        power = {} if flash_power is None else {"flash_power": flash_power}
+        world = SimulatedCamera.default(scene=scene_spec, ambient=ambient_spd, cfa=cfa, seed=seed,  # type: ignore[arg-type]
+                                        camera=responsivities, led_spectra=leds, **power)
+        closers.append(world.close)
+        emulator, booth = _open_emulated_booth(world.led_spectra, log_serial, closers)
+
+        # Exposure-time coupling: the camera renders with what the emulator's LEDs are doing. The
+        # ExposureActive line is high while the levels are read (the exposure) — camera master.
+        def levels_during_exposure() -> tuple[float, ...]:
+            emulator.exposure_active(True)
+            try:
+                return emulator.levels
+            finally:
+                emulator.exposure_active(False)
+
+        world.led_levels_source = levels_during_exposure
+        # Booth master: the booth's trigger output is the camera's trigger input.
+        emulator.on_trigger_out = _line(line_errors, "sim camera trigger line", world.trigger_line)
+    except Exception as err:
+        _close_all(closers)
+        if isinstance(err, UsageError):
+            raise
+        raise RigOpenError(f"rig 'sim': {err}") from err
+    return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers,
+               emulator=emulator, line_errors=line_errors)
+
+
+class WiredFakeCamera:
+    """An ``AravisCamera`` on the GigE fake with the trigger wires the fake lacks, emulated.
+
+    The fake honours only software triggers and has no ExposureActive output, so:
+
+    - every plan is prepared on the fake with software triggering;
+    - booth master (``plan.trigger == "booth"``): :meth:`trigger` is a no-op and the emulator's
+      trigger output calls :meth:`trigger_line`, which issues the software trigger;
+    - camera master (``"camera"``): :meth:`trigger` raises the emulator's ExposureActive line and
+      issues the software trigger; the frame's arrival lowers it (exposure over).
+
+    The fake latches a software trigger in a register that its stream thread polls and clears
+    (``TriggerSoftware`` at 0x30c, about 1 kHz): two triggers between polls make one frame. A real
+    trigger input takes every edge, so booth pulses go through a queue and a thread that issues
+    each software trigger only once the fake has acknowledged the previous one.
+
+    Mono frames are delivered as (H, W) and recorded as three identical channels by the writer
+    (:attr:`Rig.mono`; format v1 holds RGB or raw mosaics); the sequence's ``camera.extra`` says
+    so. The fake's frames carry no
+    light: its Mono16 test pattern (``arv_fake_camera_diagonal_ramp`` in Aravis 0.8.26) is
+    ``256 (x + y + frame_id) mod 65535`` scaled by gain and exposure, blind to the LED levels, so no
+    ambient estimate from it means anything with one channel or three.
+    """
+
+    suggested_exposure_us = 10_000.0
+    TRIGGER_REGISTER = 0x30C
+    """The fake's TriggerSoftware register (see ``genicam/fake_sfnc.xml``): 1 until the fake takes the trigger."""
+
+    def __init__(self, camera: Any, emulator: BoothEmulator, fake: Any = None,
+                 errors: list[BaseException] | None = None) -> None:
+        self.aravis = camera
+        self._emulator = emulator
+        self._fake = fake
+        self._errors = errors if errors is not None else []
+        self._mode = "software"
+        self._exposing = False
+        self._pulses: queue.Queue[bool] = queue.Queue()
+        self._pulse_thread: threading.Thread | None = None
+
+    @property
+    def info(self) -> CameraInfo:
+        """The fake's identity; mono frames are delivered as RGB."""
+        return dataclasses.replace(self.aravis.info, cfa=None)
+
+    @property
+    def exposure_range_us(self) -> tuple[float, float] | None:
+        """The fake's exposure limits in microseconds (what ``--exposure`` is checked against)."""
+        return self.aravis.exposure_range_us
+
+    def prepare(self, plan: CapturePlan) -> None:
+        """Prepare the fake for ``plan`` with software triggering whatever the sync mode."""
+        self._mode = plan.trigger
+        self.aravis.prepare(dataclasses.replace(plan, trigger="software"))
+
+    def start(self) -> None:
+        """Start acquisition (and, for booth-paced plans, the thread that turns pulses into triggers)."""
+        self._exposing = False
+        self.aravis.start()
+        if self._mode == "booth":
+            self._pulses = queue.Queue()
+            self._pulse_thread = threading.Thread(target=self._issue_pulses, name="aravis-fake trigger line",
+                                                  daemon=True)
+            self._pulse_thread.start()
+
+    def _issue_pulses(self) -> None:
+        while self._pulses.get():
+            try:
+                self._wait_trigger_taken()
+                self.aravis.trigger()
+            except Exception as err:  # noqa: BLE001 - the capture sees the missing frame
+                log.error("aravis-fake trigger line: %s", err)
+                self._errors.append(err)
+
+    def _wait_trigger_taken(self, timeout_s: float = 1.0) -> None:
+        if self._fake is None:
+            return
+        deadline = time.monotonic() + timeout_s
+        while self._fake.read_register(self.TRIGGER_REGISTER) != 0 and time.monotonic() < deadline:
+            time.sleep(0.0005)
+
+    def trigger(self) -> None:
+        """Host-paced: software trigger; camera master: ExposureActive high, then software trigger."""
+        if self._mode == "booth":
+            return
+        if self._mode == "camera":
+            self._emulator.exposure_active(True)
+            self._exposing = True
+        self.aravis.trigger()
+
+    def trigger_line(self) -> None:
+        """The booth pulsed the trigger input: queue a software trigger (see the class notes)."""
+        self._pulses.put(True)
+
+    def next_frame(self, timeout_s: float) -> RawFrame:
+        """The next frame, (H, W) for mono; in camera master the exposure line falls when it arrives."""
+        try:
+            return self.aravis.next_frame(timeout_s)
+        finally:
+            if self._exposing:
+                self._exposing = False
+                self._emulator.exposure_active(False)
+
+    def stop(self) -> None:
+        """Stop acquisition and the trigger-line thread."""
+        if self._pulse_thread is not None:
+            self._pulses.put(False)
+            self._pulse_thread.join(timeout=5.0)
+            self._pulse_thread = None
+        self.aravis.stop()
+
+    def close(self) -> None:
+        """Release the fake camera."""
+        self.aravis.close()
+
+
+def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int = 64, height: int = 48,
+                         pixel_format: str = "Mono16", serial: str = "MSFRIG01", **_ignored: object) -> Rig:
+    """The ``aravis-fake`` rig: AravisCamera on the GigE fake at 127.0.0.1 + emulator on a pty + LedBooth.
+
+    Holds the machine-wide GVCP port lock (:func:`~acquisition.aravis_camera.gvcp_port_lock`)
+    until closed. LED spectra: the paper's seven LEDs on :data:`DEFAULT_GRID` (zero outside their
+    measured range). Responsivity: ISETCam's :data:`AravisFakeNominalCamera`, recorded as nominal.
+    Sim-only options (``ambient``, ``scene``…) are ignored.
+    """
+    try:
+        from msflash.acquisition.devices.aravis import camera as aravis_camera
+    except ImportError as err:
+        raise RigOpenError(f"rig 'aravis-fake': {err}") from err
+    closers: list = []
+    line_errors: list[BaseException] = []
+    failures: dict[str, BaseException] = {}
+    camera = booth = emulator = None
+    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
+    responsivities = datasets.isetcam_camera(AravisFakeNominalCamera).resample(DEFAULT_GRID, outside="zero")
+    try:
+        fake = aravis_camera.AravisGvFake(serial=serial)
+        fake.start()
+        closers.append(fake.close)
+        aravis = aravis_camera.AravisCamera(fake.address, interfaces="gige", pixel_format=pixel_format,
+                                            roi=(0, 0, width, height))
+        closers.append(aravis.close)
+    except Exception as err:  # noqa: BLE001 - reported with the booth's failure, if any
+        failures[f"camera GigE fake {serial} at 127.0.0.1"] = err
+        aravis = None
+    try:
+        emulator, booth = _open_emulated_booth(leds, log_serial, closers)
+    except RigOpenError as err:
+        failures["booth"] = err
+    if failures:
+        _close_all(closers)
+        listing = "; ".join(f"{device}: {err}" for device, err in failures.items())
+        raise RigOpenError(f"rig 'aravis-fake': {listing}") from next(iter(failures.values()))
+    assert aravis is not None and emulator is not None and booth is not None
+    camera = WiredFakeCamera(aravis, emulator, fake, line_errors)
+    closers.insert(2, camera.stop)  # before the AravisCamera and the fake are released
+    emulator.on_trigger_out = _line(line_errors, "aravis-fake trigger line", camera.trigger_line)
+    extra = {"responsivity_note":
+             f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning"}
+    return Rig("aravis-fake", camera, booth, leds, responsivities, None, closers, emulator=emulator,
+               line_errors=line_errors, camera_extra=extra, mono=True)
+
+
+def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None, **_ignored: object) -> Rig:
+    """The ``replay:DIR`` rig: ReplayCamera on a recorded sequence + emulator on a pty + LedBooth."""
+    from msflash.acquisition.devices.replay_camera import ReplayCamera
+
+    camera = ReplayCamera.open(directory)  # RecordingError for a missing or malformed sequence
+    sequence = camera.sequence
+    leds = sequence.led_spectra()
+    responsivities = sequence.camera_responsivities()
+    closers: list = [camera.close]
+    try:
+        emulator, booth = _open_emulated_booth(leds, log_serial, closers)
+    except RigOpenError as err:
+        _close_all(closers)
+        raise RigOpenError(f"rig 'replay:{directory}': {err}") from err
+    line_errors: list[BaseException] = []
+    emulator.on_trigger_out = _line(line_errors, "replay trigger line", camera.trigger_line)
+    camera.exposure_line = emulator.exposure_active
+    return Rig(f"replay:{directory}", camera, booth, leds, responsivities, None, closers, emulator=emulator,
+               line_errors=line_errors, camera_extra=dict(sequence.camera.extra))
+
+
+def open_rig(spec: str, **options: object) -> Rig:
+    """Open a rig by its ``--rig`` spec: ``sim``, ``aravis-fake``, ``replay:DIR`` or ``hw``."""
+    if spec == "hw":
+        return open_hw_rig(**options)  # type: ignore[arg-type]
+    if spec == "sim":
+        return open_sim_rig(**options)  # type: ignore[arg-type]
+    if spec == "aravis-fake":
+        return open_aravis_fake_rig(log_serial=options.get("log_serial"))  # type: ignore[arg-type]
+    if spec.startswith("replay:") and len(spec) > len("replay:"):
+        return open_replay_rig(spec[len("replay:"):], log_serial=options.get("log_serial"))  # type: ignore[arg-type]
+    raise UsageError(f"--rig '{spec}': unknown; expected one of {', '.join(RIG_SPECS)}")
+
+
+# -- the hardware rig --------------------------------------------------------------------------
+
+CALIBRATION_LED_FILES = ("led_spectra.csv", "leds.csv")
+"""File names looked for in ``--calibration DIR`` for the LED spectra (first found wins)."""
+CALIBRATION_RESPONSIVITY_FILES = ("camera_responsivity.csv", "responsivity.csv", "camera.csv")
+"""File names looked for in ``--calibration DIR`` for the camera's responsivities."""
+
+
+def load_hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | None = None,
+                    responsivity: str | Path | None = None) -> tuple[Spectra, Spectra | None]:
+    """LED spectra and camera responsivities for the hardware rig, on :data:`DEFAULT_GRID`
+    (:func:`hw_spectra` without the calibration reference)."""
+    leds, camera, _ = hw_spectra(calibration, led_spectra, responsivity)
+    return leds, camera
+
+
+def hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | None = None,
+               responsivity: str | Path | None = None) -> tuple[Spectra, Spectra | None, tuple[str, Path] | None]:
+    """LED spectra, camera responsivities (on :data:`DEFAULT_GRID`) and the calibration they came from.
+
+    ``calibration`` is a ``msflash calibrate`` directory (``calibration.json``, read by
+    :func:`calibration.files.load_calibration`), or a directory holding ``led_spectra.csv`` (or
+    ``leds.csv``) and optionally ``camera_responsivity.csv`` (or ``responsivity.csv``,
+    ``camera.csv``); ``led_spectra`` / ``responsivity`` name
+    the files directly and win over the directory. Files are CSV tables read by
+    :func:`processing.datasets.load_spectra_csv`: first column ``wavelength_nm``, one column per LED
+    (in booth channel order) or per camera channel (R, G, B), energy units, each LED at full drive
+    with the true ratios between LEDs. Values outside a file's range are taken as zero.
+
+    The third item is (id, directory) when ``calibration`` is a ``msflash calibrate`` output (every
+    sequence of the rig refers to it, :attr:`Rig.calibration`), else None.
+
+    Raises
+    ------
+    UsageError
+        Nothing gives the LED spectra, a named file or directory is missing, or a file is malformed.
+    """
+    led_path = Path(led_spectra) if led_spectra else None
+    resp_path = Path(responsivity) if responsivity else None
+    leds: Spectra | None = None
+    camera: Spectra | None = None
+    reference: tuple[str, Path] | None = None
+    if calibration is not None:
+        directory = Path(calibration)
+        if not directory.is_dir():
+            raise UsageError(f"--calibration {directory}: not a directory; expected a calibration directory "
+                             "(calibration.json from 'msflash calibrate', or led_spectra.csv)")
+        # lexists, not is_file: a calibration.json that is a FIFO or a device is refused by its reader.
+        if os.path.lexists(directory / "calibration.json"):
+            leds, camera, calibration_id = _load_calibration_set(directory)
+            reference = (calibration_id, directory)
+        else:
+            if led_path is None:
+                led_path = next((directory / n for n in CALIBRATION_LED_FILES if os.path.lexists(directory / n)), None)
+                if led_path is None:
+                    raise UsageError(f"--calibration {directory}: no calibration.json or "
+                                     f"{' or '.join(CALIBRATION_LED_FILES)}; expected the LED spectra")
+            if resp_path is None:
+                resp_path = next((directory / n for n in CALIBRATION_RESPONSIVITY_FILES
+                                  if os.path.lexists(directory / n)), None)
+    if led_path is not None:
+        leds = read_spectra_file(led_path, "spd")
+    if resp_path is not None:
+        camera = read_responsivity_file(resp_path)
+    if leds is None:
+        raise UsageError("rig 'hw': the LED spectra are needed for the sequence header; expected --calibration DIR "
+                         "or --led-spectra FILE.csv (first column wavelength_nm, one column per LED at full drive, "
+                         "energy units), and --responsivity FILE.csv for the flash solvers")
+    leds = leds.resample(DEFAULT_GRID, outside="zero")
+    if camera is not None:
+        if camera.count != 3:
+            raise UsageError(f"{resp_path or calibration}: {camera.count} responsivity columns; expected 3 (R, G, B)")
+        camera = camera.resample(DEFAULT_GRID, outside="zero")
+    return leds, camera, reference
+
+
+def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | None, str]:
+    """LED spectra, responsivities and id of a ``msflash calibrate`` directory (``calibration.json``)."""
+    try:
+        from msflash.calibration.files import load_calibration
+    except ImportError as err:
+        raise UsageError(f"--calibration {directory}: calibration files unreadable here ({err})") from err
+    try:
+        found = load_calibration(directory)
+    except (OSError, ValueError) as err:
+        raise UsageError(str(err)) from err
+    except Exception as err:  # CalibrationError's base is the calibration package's choice
+        raise UsageError(str(err)) from err
+    leds = found.led_spectra.to_unit("energy") if found.led_spectra is not None else None
+    camera = found.camera_responsivities.to_unit("energy") if found.camera_responsivities is not None else None
+    return leds, camera, found.id
+
+
+class HardwareCamera:
+    """An :class:`~acquisition.aravis_camera.AravisCamera` as the hardware rig's camera.
+
+    Forwards the :class:`~acquisition.camera.Camera` protocol; mono frames come as (H, W) and
+    the writer records them as three identical channels (:attr:`Rig.mono`; format v1 holds RGB
+    or raw mosaics, and the sequence's ``camera.extra`` says so). Offers what exposure planning
+    asks of a camera: :attr:`exposure_range_us` and :attr:`noise_model` (from the camera's
+    profile, when it knows the conversion gain).
+    """
+
+    suggested_exposure_us = 10_000.0
+
+    def __init__(self, camera: Any) -> None:
+        self.aravis = camera
+
+    @property
+    def info(self) -> CameraInfo:
+        """The camera's identity (a mono camera has ``cfa`` None and (H, W) frames)."""
+        return self.aravis.info
+
+    @property
+    def exposure_range_us(self) -> tuple[float, float] | None:
+        """The camera's exposure limits in microseconds, if it reports them."""
+        return getattr(self.aravis, "exposure_range_us", None)
+
+    @property
+    def noise_model(self) -> Any:
+        """Conversion gain and read noise from the camera profile, or None."""
+        return getattr(self.aravis, "noise_model", None)
+
+    def prepare(self, plan: CapturePlan) -> None:
+        """Prepare the camera for ``plan``."""
+        self.aravis.prepare(plan)
+
+    def start(self) -> None:
+        """Start acquisition."""
+        self.aravis.start()
+
+    def trigger(self) -> None:
+        """Software trigger (a no-op when a line paces the camera)."""
+        self.aravis.trigger()
+
+    def next_frame(self, timeout_s: float) -> RawFrame:
+        """The next frame as the camera delivers it ((H, W) for mono and mosaics)."""
+        return self.aravis.next_frame(timeout_s)
+
+    def stop(self) -> None:
+        """Stop acquisition."""
+        self.aravis.stop()
+
+    def close(self) -> None:
+        """Release the camera."""
+        self.aravis.close()
+
+
+def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format: str | None) -> Any:
+    from msflash.acquisition.devices.aravis import camera as aravis_camera
+
+    names = aravis_camera.parse_interfaces(interfaces)
+    if camera is None:
+        found = aravis_camera.list_devices(names)
+        if len(found) != 1:
+            listing = ", ".join(f"{e.device_id} (serial {e.serial})" for e in found) or "none"
+            raise aravis_camera.CameraNotFoundError(
+                f"camera: {'no camera' if not found else f'{len(found)} cameras'} on {','.join(names)} "
+                f"(found: {listing}); expected one — pass --camera ID (device id, serial or IP) "
+                "or --interfaces")
+        camera = found[0].device_id
+    strobe = aravis_camera.StrobeConfig(line="Line1") if sync == "camera" else None
+    return aravis_camera.AravisCamera(camera, interfaces=names, pixel_format=pixel_format, strobe=strobe)
+
+
+def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: str = "usb3",
+                calibration: str | Path | None = None, led_spectra: str | Path | None = None,
+                responsivity: str | Path | None = None, log_serial: str | Path | None = None,
+                sync: str = "host", pixel_format: str | None = None, **_ignored: object) -> Rig:
+    """The hardware rig: a GenICam camera by id/serial/IP + a booth on ``port`` (or the one discovered).
+
+    Parameters
+    ----------
+    camera
+        Aravis device id, serial number or IPv4 address; None takes the single camera found on
+        ``interfaces``.
+    port
+        The booth's serial port (``/dev/ttyACM0``, a pty path, a pyserial URL); None discovers it.
+    interfaces
+        Aravis interfaces to enable (``usb3`` by default; ``gige`` broadcasts discovery unless
+        ``camera`` is an IP address; ``fake`` is Aravis's in-process test camera).
+    calibration, led_spectra, responsivity
+        Where the LED spectra and camera responsivities come from (:func:`hw_spectra`).
+    sync
+        ``host``, ``booth`` or ``camera``: camera master configures a strobe output on Line1.
+    pixel_format
+        PixelFormat to set, or None to keep the camera's.
+
+    Raises
+    ------
+    UsageError
+        No LED spectra given (checked before any device is opened).
+    RigOpenError
+        One or both devices failed to open; the message lists each device's failure.
+    """
+    from msflash.led_controller.discovery import find_booth
+
+    leds, responsivities, reference = hw_spectra(calibration, led_spectra, responsivity)
+    closers: list = []
+    failures: list[str] = []
+    errors: list[BaseException] = []
+    aravis = booth = None
+    try:
+        aravis = _open_hw_camera(camera, interfaces, sync, pixel_format)
+        closers.append(aravis.close)
+    except ImportError as err:
+        failures.append(f"camera{f' {camera!r}' if camera else ''}: Aravis unavailable ({err}); run setup.sh")
+        errors.append(err)
+    except (OSError, ValueError) as err:  # CameraError is an OSError; bad interface names ValueError
+        message = str(err)
+        failures.append(message if message.startswith("camera") else f"camera {camera!r}: {message}")
+        errors.append(err)
+    try:
+        booth_port = port if port is not None else find_booth().device
+        booth = LedBooth.open(booth_port, log_serial=log_serial)
+        closers.append(booth.close)
+        closers.append(booth.all_off)
+        if booth.info.channels != leds.count:
+            raise RigOpenError(
+                f"booth {booth_port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the LED "
+                f"spectra have {leds.count} ({', '.join(leds.names)}); expected one spectrum per channel")
+    except Exception as err:  # noqa: BLE001 - reported with the camera's failure, if any
+        message = str(err)
+        failures.append(message if message.startswith("booth") else f"booth: {message}")
+        errors.append(err)
+    if failures:
+        _close_all(closers)
+        raise RigOpenError(f"rig 'hw': {'; '.join(failures)}") from errors[0]
+    assert aravis is not None and booth is not None
+    hardware = HardwareCamera(aravis)
+    info = aravis.info
+    extra: dict = {}
+    mono = info.cfa is None and info.pixel_format.startswith("Mono")
+    if responsivities is None:
+        extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
+    return Rig("hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono,
+               calibration=reference)
