@@ -57,10 +57,8 @@ from msflash.acquisition.devices.replay_camera import format_levels, levels_matc
 from msflash.acquisition.session.rig import Rig, open_rig
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.sequence.format import (
-    Sequence,
     SequenceFrame,
     SequenceWriter,
-    mono_as_rgb,
     read_sequence,
 )
 from msflash.led_controller.booth import sigterm_as_exit
@@ -269,27 +267,6 @@ def _led_capture(rig: Rig, writer, plan: ExposurePlan, frames: list[RawFrame], e
     return _LedCapture(plan, frames, entries, last_frame_at, snr, method)
 
 
-class _InMemorySequence:
-    """A sequence being written whose frames are served from memory (what ``load_frame_stack`` reads)."""
-
-    def __init__(self, sequence: Sequence, frames: list[RawFrame]) -> None:
-        self._sequence = sequence
-        self._frames = frames
-
-    def __getattr__(self, name: str):
-        return getattr(self._sequence, name)
-
-    def load_frame(self, index: int) -> np.ndarray:
-        pixels = self._frames[index].pixels
-        if pixels.ndim == 3 and pixels.shape[2] == 1:
-            return pixels[:, :, 0]
-        # A mono camera's (H, W) frame is on disk as three identical channels: serve what is read back.
-        return mono_as_rgb(pixels) if pixels.ndim == 2 and self._sequence.camera.cfa is None else pixels
-
-    # Sequence's own linearisation, over the frames in memory (through __getattr__ it would read the disk).
-    load_linear_frame = Sequence.load_linear_frame
-
-
 def _degenerate(estimate) -> str | None:
     """Why the estimate cannot be reported (non-finite numbers), or None."""
     checks = {"condition number": np.asarray(estimate.condition_number, dtype=float),
@@ -441,7 +418,7 @@ def _run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePla
     if "stack" not in result:
         # The report's frames as the sequence records them (a mono camera's as three identical
         # channels), as for two captures; the session's own stack holds a mono frame's one plane.
-        result["stack"] = analysis.load_frame_stack(_InMemorySequence(writer.flush(), frames))  # type: ignore[arg-type]
+        result["stack"] = analysis.load_frame_stack(writer.flush(), [frame.pixels for frame in frames])
     estimate = result["estimate"]()
     other = "matching" if args.mode == "complementary" else "complementary"
     with warnings.catch_warnings(record=True) as caught:
@@ -461,7 +438,7 @@ def _run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposureP
         sequence = read_sequence(writer.path.parent)
         stack = analysis.load_frame_stack(sequence)
     else:
-        stack = analysis.load_frame_stack(_InMemorySequence(sequence, captured.frames))  # type: ignore[arg-type]
+        stack = analysis.load_frame_stack(sequence, [frame.pixels for frame in captured.frames])
     estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
     solutions, caught = _solve_both(
         lambda mode, weights: analysis.solve_sequence_flash(sequence, mode, weights, args.target),

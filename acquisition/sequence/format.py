@@ -730,6 +730,18 @@ def _replace_json(path: Path, document: dict | str) -> None:
     _fsync_directory(path.parent)
 
 
+def as_recorded(pixels: np.ndarray, cfa: str | None) -> np.ndarray:
+    """A frame as a camera gave it, as :meth:`Sequence.load_frame` returns it once written.
+
+    A (H, W, 1) frame is read back as (H, W); a mono camera's (H, W) frame without a CFA as three
+    identical channels (:func:`mono_as_rgb`); anything else as it is. Frames kept in memory (a live
+    run, a replay) go through it, so the estimate sees the same arrays whichever way it is fed.
+    """
+    if pixels.ndim == 3 and pixels.shape[2] == 1:
+        return pixels[:, :, 0]
+    return mono_as_rgb(pixels) if pixels.ndim == 2 and cfa is None else pixels
+
+
 def mono_as_rgb(pixels: np.ndarray) -> np.ndarray:
     """A mono frame (H, W) as (H, W, 3) with its value in every channel; other shapes unchanged.
 

@@ -1,22 +1,24 @@
 """From a recorded sequence to processing inputs and back: estimate, flash and synthesise.
 
 ``processing`` never sees a file or a sequence (docs/architecture.md §2.1). This module is the thin layer that
-reads a :class:`~acquisition.sequence_format.Sequence`, builds the frame stack description, converts
+reads a :class:`~acquisition.sequence.format.Sequence`, builds the frame stack description, converts
 spectra to the processing unit (photons) and converts results back to the sequence's unit.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from collections.abc import Sequence as SequenceOf
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.sequence.format import Sequence, as_recorded
 from msflash.processing import datasets
-from msflash.processing.ambient import AmbientEstimate, estimate_ambient
+from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flash import FlashSolution, solve_complementary, solve_matching
 from msflash.processing.model_error import reference_for, with_model_error
@@ -42,8 +44,22 @@ class FrameStack:
     """Indices of the LED frames in the sequence."""
 
 
-def load_frame_stack(sequence: Sequence) -> FrameStack:
-    """Load the first ambient frame and every ``led`` frame of a sequence.
+def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None = None) -> FrameStack:
+    """The first ambient frame and every ``led`` frame of a sequence, with how to linearise them.
+
+    The one way from frames to a :class:`FrameStack` (docs/architecture.md §5): a sequence read
+    from disk, a live capture and a replay all come through here, and the statistics, the
+    estimate and the flash are computed from what it returns.
+
+    Parameters
+    ----------
+    sequence
+        The sequence (read from disk, or the header a writer holds while capturing).
+    frames
+        The sequence's frames already in memory, as the camera gave them, indexed like
+        ``sequence.frames`` (frames after the last LED frame may be missing): a live run's or a
+        replay's. They are taken as the reader would return them from the files
+        (:func:`~acquisition.sequence.format.as_recorded`). ``None`` reads the files.
 
     Raises
     ------
@@ -51,37 +67,48 @@ def load_frame_stack(sequence: Sequence) -> FrameStack:
         If there is no ambient frame, no LED frame, or the LED frames do not light every LED
         independently.
     """
-    ambient_indices = sequence.indices("ambient")
-    led_indices = sequence.indices("led")
+    entries = sequence.frames
+    cfa = sequence.camera.cfa
+
+    def pixels(index: int) -> np.ndarray:
+        return sequence.load_frame(index) if frames is None else as_recorded(frames[index], cfa)
+
+    return frame_stack(sequence, [e.role for e in entries], [e.led_levels for e in entries],
+                       [e.exposure_us * e.gain for e in entries], pixels)
+
+
+def frame_stack(sequence: Sequence, roles: SequenceOf[str], led_levels: SequenceOf[SequenceOf[float]],
+                exposure_gain: SequenceOf[float], pixels: Callable[[int], np.ndarray]) -> FrameStack:
+    """A :class:`FrameStack` from the frames' roles, LED levels, exposure × gain and pixels.
+
+    What :func:`load_frame_stack` and a :class:`~acquisition.session.flash_session.FlashSession`
+    (which knows its frames before the sequence file does) share: which frames are used (the
+    first ambient frame, every LED frame) and the linearisation (black and white levels, 1 /
+    (exposure · gain)).
+    """
+    ambient_indices = [i for i, role in enumerate(roles) if role == "ambient"]
+    led_indices = tuple(i for i, role in enumerate(roles) if role == "led")
     if not ambient_indices:
         raise RecordingError(f"{sequence.path}: frames has no 'ambient' frame; expected one")
     if not led_indices:
         raise RecordingError(f"{sequence.path}: frames has no 'led' frame; expected one per LED")
     ambient_index = ambient_indices[0]
-
-    def scale(index: int) -> float:
-        frame = sequence.frames[index]
-        return 1.0 / (frame.exposure_us * frame.gain)
-
-    levels = np.array([sequence.frames[i].led_levels for i in led_indices], dtype=float)
-    if any(level > 0 for level in sequence.frames[ambient_index].led_levels):
+    if any(level > 0 for level in led_levels[ambient_index]):
         raise RecordingError(
             f"{sequence.path}: frames[{ambient_index}] has role 'ambient' but LED levels "
-            f"{list(sequence.frames[ambient_index].led_levels)}; expected all zero"
+            f"{list(led_levels[ambient_index])}; expected all zero"
         )
     try:
         spec = FrameStackSpec(
             black_level=sequence.camera.black_level,
             white_level=sequence.camera.white_level,
-            ambient_scale=scale(ambient_index),
-            led_scales=tuple(scale(i) for i in led_indices),
-            led_levels=levels,
+            ambient_scale=1.0 / exposure_gain[ambient_index],
+            led_scales=tuple(1.0 / exposure_gain[i] for i in led_indices),
+            led_levels=np.array([led_levels[i] for i in led_indices], dtype=float),
         )
     except SpectralDataError as err:
         raise RecordingError(f"{sequence.path}: frames: {err}") from err
-    ambient = sequence.load_frame(ambient_index)
-    led_frames = tuple(sequence.load_frame(i) for i in led_indices)
-    return FrameStack(ambient, led_frames, spec, ambient_index, led_indices)
+    return FrameStack(pixels(ambient_index), tuple(pixels(i) for i in led_indices), spec, ambient_index, led_indices)
 
 
 DEFAULT_BIN_FACTOR = 4
@@ -99,12 +126,18 @@ notes): unweighted, a bright highlight's noisy samples dominate eq. 5."""
 def sequence_statistics(stack: FrameStack, cfa: str | None = None, bin_factor: int = DEFAULT_BIN_FACTOR) -> SequenceStatistics:
     """The sufficient statistics of eq. 4–6 for a loaded frame stack (inverse-variance weighted, :data:`SAMPLE_WEIGHTING`)."""
     period = 2 if cfa is not None else 1
-    height, width = stack.ambient.shape[:2]
-    # Keep at least 8 blocks per side, so that tiny frames still give enough samples.
-    while bin_factor > 1 and min(height, width) // (bin_factor * period) < 8:
-        bin_factor //= 2
-    return accumulate_statistics(stack.ambient, stack.led_frames, stack.spec, bin_factor=max(bin_factor, 1),
+    return accumulate_statistics(stack.ambient, stack.led_frames, stack.spec,
+                                 bin_factor=block_factor(stack.ambient.shape, cfa, bin_factor),
                                  cfa_period=period, weighting=SAMPLE_WEIGHTING)
+
+
+def block_factor(shape: tuple[int, ...], cfa: str | None, bin_factor: int = DEFAULT_BIN_FACTOR) -> int:
+    """The block side the statistics sum: ``bin_factor`` halved until a frame of ``shape`` keeps at least
+    8 blocks per side (of its CFA planes), so that tiny frames still give enough samples; at least 1."""
+    period = 2 if cfa is not None else 1
+    while bin_factor > 1 and min(shape[:2]) // (bin_factor * period) < 8:
+        bin_factor //= 2
+    return max(bin_factor, 1)
 
 
 def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -> tuple[Sequence, list[str]]:
@@ -209,9 +242,17 @@ def estimate_sequence(sequence: Sequence, method: str = "tikhonov", alpha: float
                       stack: FrameStack | None = None, bin_factor: int = DEFAULT_BIN_FACTOR) -> AmbientEstimate:
     """Estimate the ambient illuminant of a sequence (eq. 4–6)."""
     stack = stack or load_frame_stack(sequence)
-    statistics = sequence_statistics(stack, sequence.camera.cfa, bin_factor)
-    return with_model_band(estimate_ambient(statistics, led_spectra_photons(sequence), method=method, alpha=alpha),
-                           sequence)
+    return estimate_from_statistics(sequence, sequence_statistics(stack, sequence.camera.cfa, bin_factor), method, alpha)
+
+
+def estimate_from_statistics(sequence: Sequence, statistics: SequenceStatistics, method: str = "tikhonov",
+                             alpha: float | str = "auto", model: AmbientModel | None = None) -> AmbientEstimate:
+    """The ambient estimate of a sequence's statistics (eq. 4–6) with the LED model's band: the one place
+    every route (from disk, live, replay) estimates. ``model``: one prepared for the sequence's LEDs (a
+    live session prepares it before the first frame), else made here."""
+    if model is None:
+        return with_model_band(estimate_ambient(statistics, led_spectra_photons(sequence), method, alpha), sequence)
+    return with_model_band(model.estimate(statistics, method, alpha), sequence)
 
 
 def with_model_band(estimate: AmbientEstimate, sequence: Sequence) -> AmbientEstimate:

@@ -35,7 +35,7 @@ from msflash.acquisition.sequence.format import Sequence
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.flash import FlashModel, FlashSolution
 from msflash.processing.spectra import Spectra
-from msflash.processing.statistics import BlockRows, FrameStackSpec, SequenceStatistics, cfa_planes
+from msflash.processing.statistics import BlockRows, SequenceStatistics, cfa_planes
 
 
 class FlashDecision:
@@ -152,10 +152,7 @@ class FlashSession:
         camera = self.header.camera
         period = 2 if camera.cfa is not None else 1
         if self._factor is None:
-            factor = self.bin_factor
-            while factor > 1 and min(pixels.shape[:2]) // (factor * period) < 8:  # as analysis.sequence_statistics
-                factor //= 2
-            self._factor = max(factor, 1)
+            self._factor = analysis.block_factor(pixels.shape, camera.cfa, self.bin_factor)
         if self._factor == 1 or not self._rows_complete:
             return
         plane = cfa_planes(pixels, period)
@@ -172,25 +169,17 @@ class FlashSession:
         self._rows.add(row, plane)
 
     def stack(self) -> analysis.FrameStack:
-        """The frame stack of the frames taken so far (first ``ambient`` and every ``led`` frame), in memory."""
-        if self._stack is not None:
-            return self._stack
-        roles, frames = self._roles, self._frames
-        ambient = [i for i, role in enumerate(roles) if role == "ambient"]
-        leds = tuple(i for i, role in enumerate(roles) if role == "led")
-        if not ambient or not leds:
-            raise RecordingError(f"{self.header.path}: the captured frames have no ambient or no LED frame; "
-                                 "expected ambient + one frame per LED")
-        camera = self.header.camera
+        """The frame stack of the frames taken so far (first ``ambient`` and every ``led`` frame), in memory.
 
-        def scale(index: int) -> float:
-            return 1.0 / (frames[index].exposure_us * frames[index].gain)
-
-        spec = FrameStackSpec(black_level=camera.black_level, white_level=camera.white_level,
-                              ambient_scale=scale(ambient[0]), led_scales=tuple(scale(i) for i in leds),
-                              led_levels=np.array([self._levels[i] for i in leds], dtype=float))
-        self._stack = analysis.FrameStack(_plane(frames[ambient[0]].pixels),
-                                          tuple(_plane(frames[i].pixels) for i in leds), spec, ambient[0], leds)
+        Built by :func:`analysis.frame_stack`, as a sequence's is, from what the session was given
+        (the sequence file is still being written); a mono camera's frames stay one plane here
+        (:meth:`statistics` replicates their statistics).
+        """
+        if self._stack is None:
+            frames = self._frames
+            self._stack = analysis.frame_stack(self.header, self._roles, self._levels,
+                                               [f.exposure_us * f.gain for f in frames],
+                                               lambda index: _plane(frames[index].pixels))
         return self._stack
 
     def statistics(self, stack: analysis.FrameStack) -> SequenceStatistics:
@@ -213,8 +202,8 @@ class FlashSession:
 
     def estimate(self, stack: analysis.FrameStack) -> AmbientEstimate:
         """The ambient estimate of :func:`analysis.estimate_sequence` for the frames taken."""
-        return analysis.with_model_band(self.ambient_model.estimate(self.statistics(stack), self.method, self.alpha),
-                                        self.header)
+        return analysis.estimate_from_statistics(self.header, self.statistics(stack), self.method, self.alpha,
+                                                 self.ambient_model)
 
     def solve(self, mode: str, ambient_weights: np.ndarray, bounds: str = "physical") -> FlashSolution:
         """The matching or complementary flash (as :func:`analysis.solve_sequence_flash`)."""

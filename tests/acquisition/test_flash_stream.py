@@ -351,20 +351,16 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim
     np.testing.assert_allclose(session.estimate(session.stack()).ambient_weights,
                                analysis.estimate_sequence(sequence).ambient_weights, rtol=1e-7, atol=1e-12)
     # msflash run's report reads the frames in memory as the sequence records them (RGB).
-    from msflash.acquisition.app.cli_run import _InMemorySequence
-
-    in_memory = analysis.load_frame_stack(_InMemorySequence(sequence, [RawFrame(v, i, 0, 1.0, 1.0)
-                                                                       for i, v in enumerate(written)]))
+    in_memory = analysis.load_frame_stack(sequence, written)
     on_disk = analysis.load_frame_stack(sequence)
     assert in_memory.ambient.shape == on_disk.ambient.shape == (info.height, info.width, 3)
     assert np.array_equal(in_memory.ambient, on_disk.ambient)
     assert all(np.array_equal(a, b) for a, b in zip(in_memory.led_frames, on_disk.led_frames, strict=True))
-    # Linear frames come from memory too (the disk's would equal them: poison memory to tell them apart).
-    poisoned = _InMemorySequence(sequence, [RawFrame(np.zeros_like(v), i, 0, 1.0, 1.0) for i, v in enumerate(written)])
-    linear, _ = poisoned.load_linear_frame(1)
-    assert linear.shape == (info.height, info.width, 3) and not np.any(linear > 0)
-    assert np.array_equal(_InMemorySequence(sequence, [RawFrame(v, i, 0, 1.0, 1.0) for i, v in enumerate(written)])
-                          .load_linear_frame(1)[0], sequence.load_linear_frame(1)[0])
+    assert (in_memory.spec.ambient_scale, in_memory.spec.led_scales) == (on_disk.spec.ambient_scale, on_disk.spec.led_scales)
+    assert np.array_equal(in_memory.spec.led_levels, on_disk.spec.led_levels)
+    # The frames do come from memory (the disk's would equal them: poison memory to tell them apart).
+    poisoned = analysis.load_frame_stack(sequence, [np.zeros_like(v) for v in written])
+    assert not np.any(poisoned.ambient) and not any(np.any(frame) for frame in poisoned.led_frames)
     # The flash exposure is metered pixel by pixel, as on the recorded RGB frames.
     recorded_frames = [sequence.load_frame(i) for i in range(len(written))]
     weights = [0.3] * len(levels)
