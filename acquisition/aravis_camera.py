@@ -55,6 +55,7 @@ from acquisition.errors import (
     FrameLostError,
     FrameTimeoutError,
 )
+from acquisition.pixel_formats import PACKED_FORMATS, unpack_pixels
 from acquisition.plan import CapturePlan
 
 try:
@@ -251,6 +252,8 @@ class PixelLayout:
     """Mosaic layout for Bayer formats."""
     bgr: bool = False
     """Channels are stored B, G, R (reversed to R, G, B on decoding)."""
+    packed: bool = False
+    """Samples are bit-packed (:mod:`acquisition.pixel_formats` decodes them to ``uint16``)."""
 
 
 def _pixel_formats() -> dict[str, PixelLayout]:
@@ -266,11 +269,14 @@ def _pixel_formats() -> dict[str, PixelLayout]:
         table[f"Bayer{cfa}8"] = PixelLayout("u1", 1, 8, pattern)
         for bits in (10, 12, 16):
             table[f"Bayer{cfa}{bits}"] = PixelLayout("<u2", 1, bits, pattern)
+    for name, packed in PACKED_FORMATS.items():
+        table[name] = PixelLayout("<u2", 1, packed.bits, packed.cfa, packed=True)
     return table
 
 
 PIXEL_FORMATS: dict[str, PixelLayout] = _pixel_formats()
-"""Pixel formats msflash decodes (unpacked only; packed 10/12-bit formats are refused)."""
+"""Pixel formats msflash decodes: unpacked ones, and the packed 10/12-bit formats of
+:data:`acquisition.pixel_formats.PACKED_FORMATS` (decoded to ``uint16``)."""
 
 
 def _frame_shape(pixel_format: str, width: int, height: int, n_bytes: int,
@@ -318,6 +324,8 @@ def decode_pixels(data: bytes | memoryview, pixel_format: str, width: int, heigh
     CameraError
         Unknown pixel format or a payload shorter than the image.
     """
+    if pixel_format in PACKED_FORMATS:
+        return unpack_pixels(data, pixel_format, width, height, where=where)
     layout, n, shape = _frame_shape(pixel_format, width, height, len(data), where)
     flat = np.frombuffer(data, dtype=layout.dtype, count=n)
     native = np.dtype(layout.dtype).newbyteorder("=")
@@ -335,15 +343,17 @@ def is_zero_copy_format(pixel_format: str) -> bool:
     """Whether a payload of ``pixel_format`` already is its frame, so :func:`view_pixels` applies.
 
     True for the formats of :data:`PIXEL_FORMATS` stored in this host's byte order and in R, G, B
-    order (mono, Bayer, RGB8, RGB16); False for BGR8 (reordered) and unknown formats.
+    order (mono, Bayer, RGB8, RGB16); False for BGR8 (reordered), packed and unknown formats.
 
     Examples
     --------
     >>> is_zero_copy_format("Mono16"), is_zero_copy_format("BayerRG8"), is_zero_copy_format("BGR8")
     (True, True, False)
+    >>> is_zero_copy_format("Mono12p")
+    False
     """
     layout = PIXEL_FORMATS.get(pixel_format)
-    return layout is not None and not layout.bgr and np.dtype(layout.dtype).isnative
+    return layout is not None and not layout.bgr and not layout.packed and np.dtype(layout.dtype).isnative
 
 
 def view_pixels(payload: np.ndarray, pixel_format: str, width: int, height: int,
