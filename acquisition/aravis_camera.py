@@ -48,6 +48,7 @@ from typing import Any, Literal
 import numpy as np
 
 from acquisition.camera import CameraInfo, RawFrame
+from acquisition.camera_features import CameraOptions, FeatureInfo, options_from_json
 from acquisition.errors import (
     CameraDisconnectedError,
     CameraError,
@@ -437,6 +438,9 @@ class CameraProfile:
     """Read noise in electrons, when known (with ``electrons_per_dn`` it lets exposure planning predict SNR)."""
     notes: str = ""
     """Where the quirks come from."""
+    options: CameraOptions = CameraOptions()
+    """Settings applied whenever this model is opened by the hardware rig (trigger/strobe lines, gain,
+    ROI, binning, features); command-line options override them (:mod:`acquisition.camera_features`)."""
 
 
 def load_profiles(path: Path = PROFILES_JSON) -> tuple[tuple[str, str, CameraProfile], ...]:
@@ -449,6 +453,8 @@ def load_profiles(path: Path = PROFILES_JSON) -> tuple[tuple[str, str, CameraPro
         for key in ("exposure_features", "gain_features", "user_outputs"):
             if key in item:
                 item[key] = tuple(item[key])
+        if "options" in item:
+            item["options"] = options_from_json(item["options"], f"{path} profile {item.get('name', '?')!r}")
         profiles.append((vendor, model, CameraProfile(**item)))
     return tuple(profiles)
 
@@ -1001,6 +1007,61 @@ class AravisCamera:
                 raise self._fail("setting", feature, err) from err
         return self.get_feature(feature)
 
+    _KINDS = (("enumeration", Aravis.GcEnumeration), ("boolean", Aravis.GcBoolean), ("float", Aravis.GcFloat),
+              ("integer", Aravis.GcInteger), ("string", Aravis.GcString), ("command", Aravis.GcCommand))
+    _ACCESS = {Aravis.GcAccessMode.RO: "RO", Aravis.GcAccessMode.RW: "RW", Aravis.GcAccessMode.WO: "WO"}
+
+    def feature_names(self) -> tuple[tuple[str, str], ...]:
+        """Every implemented, available feature under the GenICam ``Root`` category, with its category."""
+        genicam = self._live().get_genicam()
+        found: dict[str, str] = {}
+
+        def walk(name: str, category: str) -> None:
+            node = genicam.get_node(name)
+            if isinstance(node, Aravis.GcCategory):
+                for child in node.get_features() or ():
+                    walk(child, name)
+            elif node is not None and name not in found and self._has(name):
+                found[name] = category
+
+        walk("Root", "Root")
+        return tuple(found.items())
+
+    def describe_feature(self, feature: str, category: str = "") -> FeatureInfo:
+        """One feature as the camera describes it now: type, access, value, range or entries."""
+        device = self._live()
+        node = device.get_feature(feature)
+        if node is None:
+            raise CameraError(f"{self._name}: has no feature {feature}; expected it to describe it")
+        kind = next((name for name, cls in self._KINDS if isinstance(node, cls)), "other")
+        try:
+            access = self._ACCESS.get(node.get_actual_access_mode(), "NA")
+        except (AttributeError, GLib.Error):
+            access = "NA"
+        value = None
+        if kind not in ("command", "other") and access != "WO":
+            try:
+                value = self.get_feature(feature)
+            except CameraError:
+                value = None
+        info = FeatureInfo(feature, kind, access, value, category=category)  # type: ignore[arg-type]
+        if kind == "enumeration":
+            return replace(info, entries=self.enum_entries(feature))
+        if kind in ("integer", "float"):
+            interface = Aravis.GcInteger if kind == "integer" else Aravis.GcFloat
+            limits: dict[str, Any] = {}
+            for key, getter in (("minimum", "get_min"), ("maximum", "get_max"), ("increment", "get_inc"),
+                                ("unit", "get_unit")):
+                try:
+                    limits[key] = getattr(interface, getter)(node)
+                except (AttributeError, GLib.Error, TypeError):
+                    pass
+            limits["unit"] = limits.get("unit") or ""
+            if kind == "float" and "increment" in limits:
+                limits.pop("increment")  # a float increment is optional and often absent
+            return replace(info, **limits)
+        return info
+
     def _read_string(self, feature: str, default: str = "") -> str:
         try:
             return str(self.get_feature(feature)) if self._has(feature) else default
@@ -1146,6 +1207,11 @@ class AravisCamera:
         return self.gain
 
     @property
+    def gain_feature(self) -> str | None:
+        """The feature :meth:`set_gain` writes (``Gain`` in dB, or ``GainRaw``), None when there is none."""
+        return self._gain_feature
+
+    @property
     def gain_db(self) -> float:
         """Gain read back from the camera, dB."""
         if self._gain_feature is None:
@@ -1230,6 +1296,17 @@ class AravisCamera:
             raise CameraError(f"{self._name}: has no feature LineInverter; expected it to invert {strobe.line}")
         self._strobe = replace(strobe, source=str(self.get_feature("LineSource")))
         return self._strobe
+
+    def set_sync_lines(self, trigger_line: str | None = None, strobe_line: str | None = None) -> None:
+        """Use ``trigger_line`` for booth-paced plans and drive ``strobe_line`` in later :meth:`prepare` calls.
+
+        None keeps the line in use. A strobe line given when none was configured sets one up (source
+        ExposureActive); entries are checked when :meth:`prepare` writes them.
+        """
+        if trigger_line is not None:
+            self._line_trigger = replace(self._line_trigger, line=trigger_line)
+        if strobe_line is not None:
+            self._strobe_request = replace(self._strobe_request or StrobeConfig(), line=strobe_line)
 
     def user_outputs(self) -> tuple[str, ...]:
         """The camera's user outputs (UserOutputSelector entries; FLIR counts from 1, others from 0)."""

@@ -38,6 +38,7 @@ from acquisition.camera import RawFrame
 from acquisition.async_writer import AsyncSequenceWriter
 from acquisition.folder_claim import FolderClaim, claim_folder
 from acquisition.capture import preview_frames, run_capture, run_capture_with_flash
+from acquisition.cli_camera_options import add_camera_options, camera_options_from_args, given_camera_options
 from acquisition.cli_common import UsageError, dumps_json, output_directory, progress
 from acquisition.cli_process import add_estimation_options
 from acquisition.errors import CaptureError, OutputWriteError
@@ -111,6 +112,7 @@ def _open(args: argparse.Namespace) -> Rig:
                          "(or no --rig and no --camera/--port)")
     hw_only = [option for option, value in (("--responsivity", args.responsivity), ("--calibration", args.calibration),
                                             ("--pixel-format", args.pixel_format)) if value is not None]
+    hw_only += given_camera_options(args)
     if hw_only and spec != "hw":
         hint = " (the simulated camera is --sim-camera NAME|FILE.csv)" if spec == "sim" else ""
         raise UsageError(f"{hw_only[0]}: describes a hardware rig's camera or booth, but the rig is '{spec}' and would "
@@ -118,7 +120,8 @@ def _open(args: argparse.Namespace) -> Rig:
     if spec == "hw":
         return open_rig("hw", camera=args.camera, port=args.port, interfaces=args.interfaces,
                         calibration=args.calibration, led_spectra=args.led_spectra, responsivity=args.responsivity,
-                        log_serial=args.log_serial, sync=args.sync, pixel_format=args.pixel_format)
+                        log_serial=args.log_serial, sync=args.sync, pixel_format=args.pixel_format,
+                        camera_options=camera_options_from_args(args))
     if spec == "sim":
         return open_rig("sim", ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
                         camera=args.sim_camera, n_leds=args.leds, led_spectra=args.led_spectra,
@@ -553,7 +556,9 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
     hardware.add_argument("--responsivity", default=None, metavar="FILE.csv",
                           help="camera responsivities: wavelength_nm, R, G, B (energy); needed by the flash solvers")
     hardware.add_argument("--pixel-format", default=None,
-                          help="camera PixelFormat to set (default: keep the camera's)")
+                          help="camera PixelFormat to set (default: keep the camera's); packed Mono10p, Mono12p, "
+                               "Bayer*10p/12p, Mono12Packed, Bayer*12Packed … are decoded")
+    add_camera_options(hardware)
     parser.add_argument("--sync", default="host", choices=tuple(SYNC_MODES),
                         help="who paces the frames: host (serial command, then software trigger; default), "
                              "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "

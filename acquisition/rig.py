@@ -53,7 +53,7 @@ import numpy as np
 
 from acquisition.camera import CameraInfo, RawFrame
 from acquisition.cli_common import UsageError
-from acquisition.errors import RigOpenError
+from acquisition.errors import CameraSettingError, RigOpenError
 from acquisition.plan import CapturePlan
 from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
 from acquisition.sim_world import read_responsivity_file, read_spectra_file, sim_ambient, sim_camera, sim_leds, sim_scene
@@ -640,8 +640,10 @@ class HardwareCamera:
 
     suggested_exposure_us = 10_000.0
 
-    def __init__(self, camera: Any) -> None:
+    def __init__(self, camera: Any, setup: Any = None) -> None:
         self.aravis = camera
+        self.setup = setup
+        """The :class:`~acquisition.camera_features.CameraSetup` applied when the rig opened, or None."""
 
     @property
     def info(self) -> CameraInfo:
@@ -659,7 +661,11 @@ class HardwareCamera:
         return getattr(self.aravis, "noise_model", None)
 
     def prepare(self, plan: CapturePlan) -> None:
-        """Prepare the camera for ``plan``."""
+        """Prepare the camera for ``plan`` (each step's gain times ``--gain``'s factor, if given)."""
+        if self.setup is not None:
+            from acquisition.camera_features import with_gain
+
+            plan = with_gain(plan, self.setup.gain_factor)
         self.aravis.prepare(plan)
 
     def start(self) -> None:
@@ -683,8 +689,11 @@ class HardwareCamera:
         self.aravis.close()
 
 
-def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format: str | None) -> Any:
+def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format: str | None,
+                    options: Any = None) -> tuple[Any, Any]:
+    """The camera, opened and configured (profile options overridden by ``options``), and its setup."""
     from acquisition import aravis_camera
+    from acquisition.camera_features import CameraOptions, configure_camera
 
     names = aravis_camera.parse_interfaces(interfaces)
     if camera is None:
@@ -696,14 +705,20 @@ def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format
                 f"(found: {listing}); expected one — pass --camera ID (device id, serial or IP) "
                 "or --interfaces")
         camera = found[0].device_id
-    strobe = aravis_camera.StrobeConfig(line="Line1") if sync == "camera" else None
-    return aravis_camera.AravisCamera(camera, interfaces=names, pixel_format=pixel_format, strobe=strobe)
+    opened = aravis_camera.AravisCamera(camera, interfaces=names, pixel_format=pixel_format)
+    try:
+        setup = configure_camera(opened, options or CameraOptions(), strobe=sync == "camera")
+    except BaseException:
+        opened.close()
+        raise
+    return opened, setup
 
 
 def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: str = "usb3",
                 calibration: str | Path | None = None, led_spectra: str | Path | None = None,
                 responsivity: str | Path | None = None, log_serial: str | Path | None = None,
-                sync: str = "host", pixel_format: str | None = None, **_ignored: object) -> Rig:
+                sync: str = "host", pixel_format: str | None = None, camera_options: Any = None,
+                **_ignored: object) -> Rig:
     """The hardware rig: a GenICam camera by id/serial/IP + a booth on ``port`` (or the one discovered).
 
     Parameters
@@ -719,14 +734,20 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     calibration, led_spectra, responsivity
         Where the LED spectra and camera responsivities come from (:func:`hw_spectra`).
     sync
-        ``host``, ``booth`` or ``camera``: camera master configures a strobe output on Line1.
+        ``host``, ``booth`` or ``camera``: camera master configures a strobe output (Line1 unless
+        ``camera_options`` or the camera profile name another line).
     pixel_format
         PixelFormat to set, or None to keep the camera's.
+    camera_options
+        :class:`~acquisition.camera_features.CameraOptions` (trigger/strobe lines, gain, ROI, binning,
+        features), overriding the camera profile's.
 
     Raises
     ------
     UsageError
         No LED spectra given (checked before any device is opened).
+    CameraSettingError
+        A camera option the camera cannot take (bad input; the booth is not opened).
     RigOpenError
         One or both devices failed to open; the message lists each device's failure.
     """
@@ -736,10 +757,12 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     closers: list = []
     failures: list[str] = []
     errors: list[BaseException] = []
-    aravis = booth = None
+    aravis = booth = setup = None
     try:
-        aravis = _open_hw_camera(camera, interfaces, sync, pixel_format)
+        aravis, setup = _open_hw_camera(camera, interfaces, sync, pixel_format, camera_options)
         closers.append(aravis.close)
+    except CameraSettingError:
+        raise  # bad input, not a device failure: one line, exit 2
     except ImportError as err:
         failures.append(f"camera{f' {camera!r}' if camera else ''}: Aravis unavailable ({err}); run setup.sh")
         errors.append(err)
@@ -764,9 +787,11 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
         _close_all(closers)
         raise RigOpenError(f"rig 'hw': {'; '.join(failures)}") from errors[0]
     assert aravis is not None and booth is not None
-    hardware = HardwareCamera(aravis)
+    hardware = HardwareCamera(aravis, setup)
     info = aravis.info
     extra: dict = {}
+    if setup is not None and not setup.options.empty:
+        extra["camera_options"] = setup.to_dict()  # what was asked (profile + options) and read back
     mono = info.cfa is None and info.pixel_format.startswith("Mono")
     if responsivities is None:
         extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
