@@ -119,26 +119,37 @@ def packed_size(pixel_format: str, width: int, height: int, where: str = "packed
 
 
 def _unpack_pfnc(groups: np.ndarray, layout: PackedLayout) -> np.ndarray:
-    """(n, group_bytes) bytes → (n, group_pixels) samples of an LSB-first bit stream."""
-    word = np.zeros(groups.shape[0], dtype=np.uint64)
-    for j in range(layout.group_bytes):  # a group (≤ 5 bytes) as one little-endian integer
-        word |= groups[:, j].astype(np.uint64) << np.uint64(8 * j)
-    mask = np.uint64((1 << layout.bits) - 1)
+    """(n, group_bytes) bytes → (n, group_pixels) samples of an LSB-first bit stream.
+
+    Sample ``i`` starts at stream bit ``s = i·bits``: byte ``s // 8``, bit ``s % 8``. For 10 and
+    12 bits it ends within the next byte, so two bytes read as a little-endian ``uint16``,
+    shifted right by ``s % 8`` and masked, are the sample.
+    """
     samples = np.empty((groups.shape[0], layout.group_pixels), dtype=np.uint16)
+    mask = np.uint16((1 << layout.bits) - 1)
     for i in range(layout.group_pixels):
-        samples[:, i] = (word >> np.uint64(i * layout.bits)) & mask
+        byte, shift = divmod(i * layout.bits, 8)
+        assert shift + layout.bits <= 16, "a sample spans at most two bytes"
+        pair = groups[:, byte].astype(np.uint16)
+        if shift + layout.bits > 8:
+            pair |= groups[:, byte + 1].astype(np.uint16) << np.uint16(8)
+        if shift:
+            pair >>= np.uint16(shift)
+        np.bitwise_and(pair, mask, out=samples[:, i])
     return samples
 
 
 def _unpack_gev(groups: np.ndarray, layout: PackedLayout) -> np.ndarray:
     """(n, 3) bytes → (n, 2) samples of the GigE Vision Packed layout."""
-    high = groups[:, (0, 2)].astype(np.uint16)
-    middle = groups[:, 1].astype(np.uint16)
     low_bits = layout.bits - 8
-    low_mask = (1 << low_bits) - 1
-    samples = high << low_bits
-    samples[:, 0] |= middle & low_mask
-    samples[:, 1] |= (middle >> 4) & low_mask
+    low_mask = np.uint16((1 << low_bits) - 1)
+    middle = groups[:, 1].astype(np.uint16)
+    samples = np.empty((groups.shape[0], 2), dtype=np.uint16)
+    for i, (byte, shift) in enumerate(((0, 0), (2, 4))):  # p0: byte 0 + middle bits 0…; p1: byte 2 + bits 4…
+        sample = samples[:, i]
+        sample[...] = groups[:, byte]
+        sample <<= np.uint16(low_bits)
+        sample |= (middle >> np.uint16(shift)) & low_mask
     return samples
 
 
