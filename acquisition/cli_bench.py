@@ -12,6 +12,7 @@ _OPTIONAL_PARTS = {
     "camera": ("acquisition.bench_camera", "camera_bench"),
     "booth": ("led_controller.bench", "run_bench"),
     "capture": ("acquisition.bench_capture", "capture_bench"),
+    "decode": ("acquisition.bench_decode", "decode_bench"),
 }
 """Bench parts contributed by other modules: part name → (module, function returning a dict)."""
 
