@@ -53,6 +53,7 @@ from acquisition.errors import (
     CameraDisconnectedError,
     CameraError,
     CameraNotFoundError,
+    CameraSettingError,
     FrameLostError,
     FrameTimeoutError,
 )
@@ -1111,14 +1112,14 @@ class AravisCamera:
     # -- image format, exposure, gain ----------------------------------------------------------
 
     def set_pixel_format(self, pixel_format: str) -> str:
-        """Set PixelFormat; refuses formats the camera lacks or msflash cannot decode."""
+        """Set PixelFormat; refuses formats the camera lacks or msflash cannot decode (``CameraSettingError``)."""
         if pixel_format not in PIXEL_FORMATS:
-            raise CameraError(f"{self._name}: pixel format {pixel_format!r} cannot be decoded by msflash; "
-                              f"expected one of {', '.join(PIXEL_FORMATS)}")
+            raise CameraSettingError(f"{self._name}: pixel format {pixel_format!r} cannot be decoded by msflash; "
+                                     f"expected one of {', '.join(PIXEL_FORMATS)}")
         offered = self.enum_entries("PixelFormat")
         if pixel_format not in offered:
-            raise CameraError(f"{self._name}: PixelFormat {pixel_format!r} is not offered by this camera; "
-                              f"expected one of {', '.join(offered)}")
+            raise CameraSettingError(f"{self._name}: PixelFormat {pixel_format!r} is not offered by this camera; "
+                                     f"expected one of {', '.join(offered)}")
         self._set_enum("PixelFormat", pixel_format)
         return str(self.get_feature("PixelFormat"))
 

@@ -242,3 +242,15 @@ def test_cli_capture_applies_the_options_and_records_them(sfnc_fake_xml: None, t
                                      "features": {"BlackLevel": "16", "TriggerActivation": "FallingEdge"}}
     assert recorded["read_back"] == {"roi": [0, 0, 64, 48], "binning": [2, 2],
                                      "features": {"BlackLevel": 16, "TriggerActivation": "FallingEdge"}}
+
+
+def test_a_pixel_format_the_camera_does_not_offer_is_bad_input(sfnc_fake_xml: None, tmp_path: Path,
+                                                              led_spectra_csv: Path,
+                                                              capsys: pytest.CaptureFixture) -> None:
+    status = main(["capture", "--camera", "Fake_1", "--interfaces", "fake", "--port", str(tmp_path / "no-booth"),
+                   "--led-spectra", str(led_spectra_csv), "--pixel-format", "BayerGR12Packed",
+                   "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1
+    assert "PixelFormat 'BayerGR12Packed' is not offered by this camera; expected one of BayerBG8" in err[0]
+    assert "Mono12p, Mono12Packed, BayerRG12p, Mono10p" in err[0]
