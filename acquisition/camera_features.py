@@ -337,9 +337,12 @@ def _convert(info: FeatureInfo, text: str) -> FeatureValue | None:
         return text
     if info.kind == "integer":
         try:
-            value: float = int(text, 0)
+            value: float = int(text, 0)  # 64, 0x40, 0b1000000
         except ValueError:
-            return None
+            try:
+                value = int(text, 10)  # 064: a leading zero base 0 refuses
+            except ValueError:
+                return None
     elif info.kind == "float":
         try:
             value = float(text)

@@ -81,6 +81,7 @@ def test_binning_roi_and_features_are_applied_and_read_back(sfnc_fake_camera: An
                                 "TriggerDelay": 12.0}
     assert camera.get_feature("BinningHorizontal") == 2 and camera.roi == (8, 4, 64, 48)
     assert camera.get_feature("BlackLevel") == 64 and camera.info.black_level == 64
+    assert [apply_feature(camera, "BlackLevel", text) for text in ("0x20", "016", "7")] == [32, 16, 7]
 
 
 @pytest.mark.parametrize(("feature", "value", "message"), [
