@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from acquisition.pixel_formats import packed_size, unpack_pixels
+from msflash.acquisition.devices.aravis.pixel_formats import packed_size, unpack_pixels
 
 FORMATS = ("Mono12p", "Mono10p", "Mono12Packed", "Mono10Packed")
 """One packed format per decoding path and bit depth."""

@@ -33,7 +33,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal, Protocol
 
-from acquisition.errors import CameraError, CameraSettingError
+from msflash.acquisition.errors import CameraError, CameraSettingError
 
 log = logging.getLogger(__name__)
 

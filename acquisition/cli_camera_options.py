@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from acquisition.camera_features import CameraOptions, parse_binning, parse_feature, parse_roi
+from msflash.acquisition.devices.aravis.camera_features import CameraOptions, parse_binning, parse_feature, parse_roi
 
 OPTION_NAMES = ("--trigger-line", "--strobe-line", "--gain", "--roi", "--binning", "--feature")
 """The options this module adds (all describe a hardware rig's camera)."""

@@ -33,7 +33,7 @@ from typing import Literal
 
 import numpy as np
 
-from acquisition.errors import CameraError
+from msflash.acquisition.errors import CameraError
 
 Packing = Literal["pfnc", "gev"]
 

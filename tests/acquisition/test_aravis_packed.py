@@ -17,8 +17,8 @@ from types import ModuleType
 import numpy as np
 import pytest
 
-from acquisition.errors import CameraError
-from acquisition.plan import CapturePlan
+from msflash.acquisition.errors import CameraError
+from msflash.acquisition.plan import CapturePlan
 
 pytestmark = pytest.mark.aravis
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from acquisition.camera_features import (
+from msflash.acquisition.devices.aravis.camera_features import (
     CameraOptions,
     apply_camera_options,
     apply_feature,
@@ -27,14 +27,14 @@ from acquisition.camera_features import (
     parse_feature,
     parse_roi,
 )
-from acquisition.cli import main
-from acquisition.errors import CameraSettingError
-from acquisition.plan import CapturePlan
-from acquisition.rig import HardwareCamera, _emulator_for
-from acquisition.sequence_format import read_sequence
-from led_controller import serve_on_pty
-from processing import datasets
-from processing.spectra import DEFAULT_GRID
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.errors import CameraSettingError
+from msflash.acquisition.plan import CapturePlan
+from msflash.acquisition.session.rig import HardwareCamera, _emulator_for
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.led_controller import serve_on_pty
+from msflash.processing import datasets
+from msflash.processing.spectra import DEFAULT_GRID
 
 pytestmark = pytest.mark.aravis
 
