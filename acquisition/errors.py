@@ -15,6 +15,14 @@ class CameraError(OSError):
     """A camera failed or refused a setting; the message names the camera and the feature."""
 
 
+class CameraSettingError(CameraError, ValueError):
+    """A camera option or feature value the camera cannot take (bad input, exit 2).
+
+    The message names the camera, the option or feature, and what the camera allows (entries,
+    range, type).
+    """
+
+
 class CameraNotFoundError(CameraError, LookupError):
     """No camera matched; the message lists what was found."""
 

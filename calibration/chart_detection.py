@@ -817,7 +817,7 @@ def _grid(planes: _Planes, lattice: _Lattice, fraction: np.ndarray, placement: _
 def detect_in_sequence(sequence: Any, reflectances: Spectra, rows: int, columns: int) -> ChartGrid:
     """:func:`detect_chart` on a format-v1 sequence's ambient and LED frames (linearised).
 
-    ``sequence`` is an :class:`acquisition.sequence_format.Sequence` (its ``frames``,
+    ``sequence`` is an :class:`acquisition.sequence.format.Sequence` (its ``frames``,
     ``load_frame``, ``camera``, ``indices``, ``led_spectra`` and ``path``).
     """
     where = str(sequence.path)

@@ -142,7 +142,7 @@ def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | N
     Parameters
     ----------
     sequences
-        Format-v1 sequences (:class:`acquisition.sequence_format.Sequence`) of the same chart.
+        Format-v1 sequences (:class:`acquisition.sequence.format.Sequence`) of the same chart.
     lights
         Per sequence, its ambient's known broadband light (energy, on the sequence's grid), or None
         when the ambient is not a known light (then only its LED frames are used).

@@ -109,7 +109,7 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
     Parameters
     ----------
     sequence
-        An :class:`acquisition.sequence_format.Sequence` with an ``ambient`` frame and ``led``
+        An :class:`acquisition.sequence.format.Sequence` with an ``ambient`` frame and ``led``
         frames whose levels separate the LEDs (one LED per frame is the usual case; any levels of
         full column rank are unmixed by least squares).
     roi

@@ -118,7 +118,7 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
     statistics = accumulate_statistics(frames[0], frames[1:], spec)
 
     def estimate(bin_factor: int, workers: int = DEFAULT_WORKERS, weighting: bool = SAMPLE_WEIGHTING) -> Callable[[], None]:
-        # As msflash estimate: the weighted statistics (acquisition.analysis.sequence_statistics) and the default solve.
+        # As msflash estimate: the weighted statistics (acquisition.session.analysis.sequence_statistics) and the default solve.
         return lambda: estimate_ambient(
             accumulate_statistics(frames[0], frames[1:], spec, bin_factor=bin_factor, workers=workers,
                                   weighting=weighting), world["leds"])

@@ -83,7 +83,7 @@ def _plan(n: int, exposure_us: float, trigger: str) -> CapturePlan:
 
 
 def stage_ms(timings: Sequence[Any]) -> dict[str, np.ndarray]:
-    """Per-trigger stage durations in milliseconds from :class:`~acquisition.aravis_camera.TriggerTiming` rows.
+    """Per-trigger stage durations in milliseconds from :class:`~acquisition.devices.aravis.camera.TriggerTiming` rows.
 
     Returns
     -------

@@ -3,12 +3,12 @@
 The ``aravis-fake`` rig (AravisCamera on the fake at 127.0.0.1, booth emulator on a pty, the real
 ``LedBooth`` driver) runs booth master: the booth pulses the trigger once per period, so the
 camera runs at a fixed frame rate (``frame_rate_hz``; the exposure is what fills the rest of the
-period, :func:`acquisition.capture.booth_period_us`). Each run is one stream of ambient + k LEDs
-+ flash (:func:`acquisition.capture.run_capture_with_flash`): the table is armed with the flash
+period, :func:`acquisition.session.capture.booth_period_us`). Each run is one stream of ambient + k LEDs
++ flash (:func:`acquisition.session.capture.run_capture_with_flash`): the table is armed with the flash
 step held; when the last LED frame arrives the ambient is estimated from the frames in memory
-(:class:`acquisition.flash_session.FlashSession`, prepared once per rig), the complementary flash
+(:class:`acquisition.session.flash_session.FlashSession`, prepared once per rig), the complementary flash
 solved, its exposure predicted, and one ``PSET`` releases the held step — what ``msflash run``
-does. Frames are written by a writer thread (:mod:`acquisition.async_writer`).
+does. Frames are written by a writer thread (:mod:`acquisition.sequence.async_writer`).
 
 Figures (one run of the bench, :func:`capture_bench`):
 

@@ -9,7 +9,7 @@ alike, and their median wall times are compared:
   ``msflash capture`` records on the default simulated rig; captured into a temporary folder
   unless one is given) ÷ the same — target ≤ 4.
 
-``msflash`` is run as its entry point does (``acquisition.cli.main`` on the arguments), by the
+``msflash`` is run as its entry point does (``acquisition.app.cli.main`` on the arguments), by the
 same interpreter, so the figures do not depend on where the script is installed. Whether msflash's
 own bytecode is cached (``__pycache__``; not with ``PYTHONDONTWRITEBYTECODE`` set, then every run
 compiles msflash's sources) is reported as ``bytecode_cached``: it moves ``estimate_over_numpy``

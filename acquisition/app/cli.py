@@ -26,7 +26,7 @@ from pathlib import Path
 from types import ModuleType
 
 from msflash.acquisition.app.cli_common import UsageError
-from msflash.acquisition.errors import CameraError, CaptureError, RecordingError
+from msflash.acquisition.errors import CameraError, CameraSettingError, CaptureError, RecordingError
 from msflash.processing.errors import SolverError, SpectralDataError
 
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -54,7 +54,7 @@ against the module's own registration."""
 COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in COMMANDS.values()))
 """Modules contributing subcommands, in help order."""
 
-_BAD_INPUT = (UsageError, RecordingError, SpectralDataError, FileNotFoundError)
+_BAD_INPUT = (UsageError, RecordingError, CameraSettingError, SpectralDataError, FileNotFoundError)
 
 
 def _bad_input_errors() -> tuple[type[BaseException], ...]:

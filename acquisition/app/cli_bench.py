@@ -12,6 +12,7 @@ _OPTIONAL_PARTS = {
     "camera": ("msflash.acquisition.app.bench_camera", "camera_bench"),
     "booth": ("msflash.led_controller.bench", "run_bench"),
     "capture": ("msflash.acquisition.app.bench_capture", "capture_bench"),
+    "decode": ("msflash.acquisition.app.bench_decode", "decode_bench"),
 }
 """Bench parts contributed by other modules: part name → (module, function returning a dict)."""
 

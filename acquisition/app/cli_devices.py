@@ -2,6 +2,8 @@
 
 GigE Vision discovery broadcasts on every network interface, so it runs only when ``gige`` is in
 ``--interfaces``. ``--address IP`` queries one GigE Vision camera directly, without discovery.
+``--features ID`` lists what one camera offers (each feature's type, access, value, range or
+entries; :meth:`AravisCamera.describe_feature`) — the names ``--feature NAME=VALUE`` takes.
 Booths are the serial ports that look like one (USB id or product string,
 :func:`led_controller.discovery.find_booths`; the system's port list, nothing is opened):
 ``msflash run`` takes the single one found, and ``msflash doctor`` says why none is.
@@ -39,6 +41,8 @@ def _devices(args: argparse.Namespace) -> int:
         interfaces = aravis_camera.parse_interfaces(args.interfaces)
     except ValueError as err:
         raise UsageError(f"--interfaces: {err}") from err
+    if args.features is not None:
+        return _features(aravis_camera, args.features, interfaces, args.json)
     if "gige" in interfaces:
         progress("devices: GigE Vision discovery broadcasts on every network interface")
     cameras = [entry.to_dict() for entry in aravis_camera.list_devices(interfaces)]
@@ -69,6 +73,23 @@ def _devices(args: argparse.Namespace) -> int:
     return 0
 
 
+def _features(aravis_camera: Any, device: str, interfaces: tuple[str, ...], as_json: bool) -> int:
+    """``devices --features ID``: every feature the camera offers, with type, value and what it accepts."""
+    if aravis_camera.is_ipv4_address(device) and "gige" not in interfaces:
+        interfaces = (*interfaces, "gige")  # by address: that one camera, no discovery broadcast
+    with aravis_camera.AravisCamera(device, interfaces=interfaces) as camera:
+        features = [camera.describe_feature(name, category) for name, category in camera.feature_names()]
+        if as_json:
+            print_json({"camera": camera.name, "features": [info.to_dict() for info in features]})
+            return 0
+        print(f"# {camera.name}: {len(features)} features (name, type, access, value, accepts)")
+        for info in features:
+            value = "-" if info.value is None else str(info.value)
+            accepts = info.allowed() if info.writable else ""
+            print(f"{info.name}\t{info.kind}\t{info.access}\t{value}\t{accepts}".rstrip("\t"))
+    return 0
+
+
 def _booth_entry(port: SerialPortInfo) -> dict[str, Any]:
     return {"device": port.device, "usb_id": port.usb_id, "product": port.product,
             "serial_number": port.serial_number, "description": port.description}
@@ -85,5 +106,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                          help="comma-separated subset of fake,gige,usb3 (default: %(default)s)")
     devices.add_argument("--address", action="append", metavar="IP",
                          help="also query the GigE Vision camera at IP directly, without discovery (repeatable)")
+    devices.add_argument("--features", default=None, metavar="ID",
+                         help="list every GenICam feature of camera ID (device id, serial or IP on --interfaces): "
+                              "type, access, value, and its range or entries; no booth search")
     devices.add_argument("--json", action="store_true", help="print one JSON object")
     devices.set_defaults(handler=_devices)

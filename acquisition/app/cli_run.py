@@ -4,13 +4,13 @@
 matching and complementary flashes → re-capture with the chosen one (same sequence, role
 ``flash``) → synthesise both computational images → previews, a spectra plot and a report.
 
-``--sync host|booth|camera`` picks who paces the frames (docs/architecture.md §4; :mod:`acquisition.capture`).
+``--sync host|booth|camera`` picks who paces the frames (docs/architecture.md §4; :mod:`acquisition.session.capture`).
 
 The flash is captured in the same stream as the LED frames
-(:func:`acquisition.capture.run_capture_with_flash`): the estimate and the flash are computed
-from the frames in memory by a :class:`acquisition.flash_session.FlashSession` prepared before
+(:func:`acquisition.session.capture.run_capture_with_flash`): the estimate and the flash are computed
+from the frames in memory by a :class:`acquisition.session.flash_session.FlashSession` prepared before
 the sequence starts, as soon as the last LED frame arrives, and frames are written by a writer
-thread (:class:`acquisition.async_writer.AsyncSequenceWriter`; all queued frames are written
+thread (:class:`acquisition.sequence.async_writer.AsyncSequenceWriter`; all queued frames are written
 before an error or Ctrl-C ends the command). A replay rig checks every plan against its
 recording up front, so there the flash stays a second capture.
 
@@ -38,6 +38,7 @@ from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.folder_claim import FolderClaim, claim_folder
 from msflash.acquisition.session.capture import preview_frames, run_capture, run_capture_with_flash
+from msflash.acquisition.app.camera_options import add_camera_options, camera_options_from_args, given_camera_options
 from msflash.acquisition.app.cli_common import UsageError, dumps_json, output_directory, progress
 from msflash.acquisition.app.options import add_estimation_options
 from msflash.acquisition.errors import CaptureError, OutputWriteError
@@ -109,6 +110,7 @@ def _open(args: argparse.Namespace) -> Rig:
                          "(or no --rig and no --camera/--port)")
     hw_only = [option for option, value in (("--responsivity", args.responsivity), ("--calibration", args.calibration),
                                             ("--pixel-format", args.pixel_format)) if value is not None]
+    hw_only += given_camera_options(args)
     if hw_only and spec != "hw":
         hint = " (the simulated camera is --sim-camera NAME|FILE.csv)" if spec == "sim" else ""
         raise UsageError(f"{hw_only[0]}: describes a hardware rig's camera or booth, but the rig is '{spec}' and would "
@@ -116,7 +118,8 @@ def _open(args: argparse.Namespace) -> Rig:
     if spec == "hw":
         return open_rig("hw", camera=args.camera, port=args.port, interfaces=args.interfaces,
                         calibration=args.calibration, led_spectra=args.led_spectra, responsivity=args.responsivity,
-                        log_serial=args.log_serial, sync=args.sync, pixel_format=args.pixel_format)
+                        log_serial=args.log_serial, sync=args.sync, pixel_format=args.pixel_format,
+                        camera_options=camera_options_from_args(args))
     if spec == "sim":
         return open_rig("sim", ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
                         camera=args.sim_camera, n_leds=args.leds, led_spectra=args.led_spectra,
@@ -280,7 +283,7 @@ def _degenerate(estimate) -> str | None:
 
 
 def _claimed(out: Path, what: str) -> FolderClaim:
-    """``out`` claimed for this process (:mod:`acquisition.folder_claim`; a ``with`` block releases it), a
+    """``out`` claimed for this process (:mod:`acquisition.sequence.folder_claim`; a ``with`` block releases it), a
     folder that cannot hold the lock file being a bad output path (exit 2)."""
     try:
         return claim_folder(out, what)
@@ -530,7 +533,9 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
     hardware.add_argument("--responsivity", default=None, metavar="FILE.csv",
                           help="camera responsivities: wavelength_nm, R, G, B (energy); needed by the flash solvers")
     hardware.add_argument("--pixel-format", default=None,
-                          help="camera PixelFormat to set (default: keep the camera's)")
+                          help="camera PixelFormat to set (default: keep the camera's); packed Mono10p, Mono12p, "
+                               "Bayer*10p/12p, Mono12Packed, Bayer*12Packed … are decoded")
+    add_camera_options(hardware)
     parser.add_argument("--sync", default="host", choices=tuple(SYNC_MODES),
                         help="who paces the frames: host (serial command, then software trigger; default), "
                              "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "

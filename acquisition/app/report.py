@@ -1,7 +1,7 @@
 """What ``msflash run`` leaves next to the sequence: JSON results, images, a plot and a report.
 
 Matplotlib (Agg) draws the spectra plot and writes the 8-bit PNG previews; linear results go
-through :mod:`acquisition.image_io` as float EXR.
+through :mod:`acquisition.sequence.image_files` as float EXR.
 """
 
 from __future__ import annotations

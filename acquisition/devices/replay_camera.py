@@ -7,7 +7,7 @@ differing step and field; :meth:`ReplayCamera.next_frame` then serves those fram
 the exposure and gain recorded for them. Successive plans consume the recording in order (``run``:
 the ambient + LED plan, then the one-frame flash plan).
 
-Triggering follows :class:`~acquisition.simulated_camera.SimulatedCamera`: ``trigger()`` releases
+Triggering follows :class:`~acquisition.devices.simulated_camera.SimulatedCamera`: ``trigger()`` releases
 the next frame for software- and camera-paced plans (and drives :attr:`exposure_line` high then
 low around it, so a booth in camera-master mode advances); booth-paced plans are released by
 :meth:`trigger_line` (the booth emulator's trigger output).

@@ -1,6 +1,6 @@
 """A camera that renders a spectral scene: the ``sim`` rig's camera, with known ground truth.
 
-:class:`SimulatedCamera` implements the :class:`~acquisition.camera.Camera` protocol. Each frame
+:class:`SimulatedCamera` implements the :class:`~acquisition.devices.camera.Camera` protocol. Each frame
 is rendered through :mod:`processing.image_formation` (eq. 1–3 of the paper, photon and read
 noise, black level, saturation, optional Bayer mosaic) under the true ambient plus the LEDs at the
 levels in force *at exposure time* — read from an injected ``led_levels_source`` (the booth
@@ -19,7 +19,7 @@ when the trigger comes from another thread (booth triggering) or a render is in 
 A trigger that fails (bad LED levels, more triggers than steps) raises ``CameraError`` and, in
 the first case, still consumes its step: the capture is broken at that point anyway. A frame
 that cannot be made (bad LED levels, a render error) is also queued as its error
-(:meth:`~acquisition.frame_queue.TriggeredFrames._fail_frame`): :meth:`next_frame` raises it in
+(:meth:`~acquisition.devices.frame_queue.TriggeredFrames._fail_frame`): :meth:`next_frame` raises it in
 the frame's place, whoever triggered (on the booth's trigger line nobody else sees it).
 """
 

@@ -1,6 +1,6 @@
 """Write a sequence from a background thread so the capture loop never waits for the disk.
 
-:class:`AsyncSequenceWriter` wraps a :class:`~acquisition.sequence_format.SequenceWriter` (the
+:class:`AsyncSequenceWriter` wraps a :class:`~acquisition.sequence.format.SequenceWriter` (the
 format and its crash-safety contract are unchanged: each frame file is written, then
 ``sequence.json`` replaced atomically, in capture order). :meth:`AsyncSequenceWriter.add_frame`
 only queues the frame and returns at once with the entry it *will* have; one writer thread
@@ -26,7 +26,7 @@ Guarantees
   frame, the cause and what is saved; a frame the format refuses stays a ``RecordingError``.
 
 Pixels are not copied: the caller must not modify an array after handing it over (camera frames,
-:class:`~acquisition.camera.RawFrame`, are read-only).
+:class:`~acquisition.devices.camera.RawFrame`, are read-only).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ leaves a folder locked). The file holds the holder's PID and command, so a secon
 who has the folder: :class:`~acquisition.errors.FolderInUseError`, exit 2. A lock file left by a
 dead process (it is removed on release, so one left means the holder was killed) is taken over
 with a note on stderr. While holding the claim, the temporary files a killed writer left
-(``.NAME.XXXX.tmp…``, from :func:`acquisition.image_io.write_image` and the ``sequence.json``
+(``.NAME.XXXX.tmp…``, from :func:`acquisition.sequence.image_files.write_image` and the ``sequence.json``
 replacement) are removed with a note: no other process can be writing them.
 """
 

@@ -19,7 +19,7 @@ file atomically, then replaces ``sequence.json`` atomically (temporary file, fsy
 that are fully on disk; a crash (exception, Ctrl-C, SIGKILL) leaves ``complete: false``.
 The reader accepts such partial sequences and reports them through :attr:`Sequence.partial`.
 Reading a partial sequence notes (logging, never deleting) the temporary files a killed writer
-left, unless the process named in its ``.msflash-lock`` still runs (:mod:`acquisition.folder_claim`).
+left, unless the process named in its ``.msflash-lock`` still runs (:mod:`acquisition.sequence.folder_claim`).
 """
 
 from __future__ import annotations
@@ -266,7 +266,7 @@ class Sequence(_ArrayEquality):
 
         Every route that reads a sequence's frames comes through here, so this is where a frame's
         values are checked against ``camera.black_level`` and ``camera.white_level``
-        (:func:`acquisition.frame_integrity.check_frame_levels`). ``check_levels=False`` is for
+        (:func:`acquisition.sequence.frame_integrity.check_frame_levels`). ``check_levels=False`` is for
         the one reader that measures the black level instead of trusting it (``calibrate dark``).
 
         Raises
@@ -791,7 +791,7 @@ class SequenceWriter:
     RecordingError
         If the header is invalid (same checks as :func:`read_sequence`) or the directory already
         holds a sequence; :class:`~acquisition.errors.FolderInUseError` if another process is
-        writing there (the directory is claimed for the writer's life, :mod:`acquisition.folder_claim`;
+        writing there (the directory is claimed for the writer's life, :mod:`acquisition.sequence.folder_claim`;
         temporary files a killed writer left are removed).
 
     Examples

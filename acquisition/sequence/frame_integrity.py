@@ -3,7 +3,7 @@
 A frame holding values above ``camera.white_level`` — a 16-bit file of 12-bit data declared with
 the wrong white level, a corrupt or mis-scaled file — or far below ``camera.black_level`` would
 otherwise be linearised without a word, and every estimate from it would be wrong. One function,
-:func:`check_frame_levels`, called by :meth:`acquisition.sequence_format.Sequence.load_frame`
+:func:`check_frame_levels`, called by :meth:`acquisition.sequence.format.Sequence.load_frame`
 (which every route that reads a sequence's frames goes through: ``estimate``, ``flash``,
 ``synthesize``, ``evaluate``, ``run --from-disk``, ``--rig replay:``), refuses such a frame with
 one line naming the file, how many pixels, the range found and the range expected. Frames a live

@@ -38,12 +38,12 @@ and no trigger (booth master) or reports an exposure during it as ``TRIG <n> HOL
 master), which the pairing refuses (``docs/booth-protocol.md`` §5).
 Booth master sends ``PSET … NOW``: the last LED frame is in, so its exposure is over and the flash
 step starts at once (settle, pulse) instead of waiting for its scheduled slot. An
-:class:`~acquisition.async_writer.AsyncSequenceWriter` is paused from the wait for the last LED
+:class:`~acquisition.sequence.async_writer.AsyncSequenceWriter` is paused from the wait for the last LED
 frame until the flash frame is in (frames stay queued, in order; nothing is dropped), so the disk
 writes compete neither with the decision nor with the flash trigger for the CPU and the GIL.
 
-The writer may be a :class:`~acquisition.sequence_format.SequenceWriter` or an
-:class:`~acquisition.async_writer.AsyncSequenceWriter` (frames handed to a writer thread: the
+The writer may be a :class:`~acquisition.sequence.format.SequenceWriter` or an
+:class:`~acquisition.sequence.async_writer.AsyncSequenceWriter` (frames handed to a writer thread: the
 loop never waits for the disk).
 
 Whatever happens the LEDs go off (``OFF`` also aborts a running table) and the camera stops

@@ -75,7 +75,7 @@ class ExposurePolicy:
     LED frame's at ``headroom_fraction``; at most ``max_saturated_fraction`` saturated per frame) or
     ``"information"`` (starting from the bright-end plan, the ambient and LED exposures that maximise the
     information the unsaturated blocks carry about the LED-only signals; see
-    :mod:`acquisition.exposure_information`). Not the default: it lowers the sim's mean spectrum RMSE
+    :mod:`acquisition.session.exposure_information`). Not the default: it lowers the sim's mean spectrum RMSE
     by 12 % but raises it under the underwater ambient, and the blocks it gives up (up to
     ``max_lost_fraction``: the chart's white patches) are missing from the synthesised images too."""
     max_lost_fraction: float = 0.25

@@ -11,11 +11,11 @@ frames before it are taken by :meth:`FlashSession.add` as the frame arrives (bet
 :meth:`FlashSession.decide` then costs the statistics from those moments, one ambient solve and
 one small quadratic programme; the estimate's reliability signals wait until they are read.
 Prepared with exposure limits, the session also takes each frame's rates for the flash exposure
-(:class:`~acquisition.exposure.FlashExposure`) as it arrives, and :meth:`FlashSession.flash_exposure`
+(:class:`~acquisition.session.exposure.FlashExposure`) as it arrives, and :meth:`FlashSession.flash_exposure`
 only sums them.
 
-The results are those of :func:`acquisition.analysis.estimate_sequence` and
-:func:`acquisition.analysis.solve_sequence_flash` on the same frames (same statistics code,
+The results are those of :func:`acquisition.session.analysis.estimate_sequence` and
+:func:`acquisition.session.analysis.solve_sequence_flash` on the same frames (same statistics code,
 same solvers; only the order of the moment sums differs); ``tests/acquisition/test_flash_stream.py``
 checks it.
 """

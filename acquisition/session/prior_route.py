@@ -1,8 +1,8 @@
 """From a recorded sequence to the light-prior estimate and the ``auto`` model choice (issue 17, build 3).
 
-The thin layer between a :class:`~acquisition.sequence_format.Sequence` and
-:mod:`processing.light_prior`, as :mod:`acquisition.analysis` is for eq. 4–6: frames are read with
-:func:`~acquisition.analysis.load_frame_stack`, binned like ``msflash estimate`` and reduced to
+The thin layer between a :class:`~acquisition.sequence.format.Sequence` and
+:mod:`processing.light_prior`, as :mod:`acquisition.session.analysis` is for eq. 4–6: frames are read with
+:func:`~acquisition.session.analysis.load_frame_stack`, binned like ``msflash estimate`` and reduced to
 channel-resolved statistics; the LED spectra and responsivities go to photons.
 """
 
@@ -43,7 +43,7 @@ class SequencePriorResult:
 
 def sequence_channel_statistics(sequence: Sequence, stack: FrameStack | None = None,
                                 bin_factor: int = DEFAULT_BIN_FACTOR) -> ChannelStatistics:
-    """The channel statistics of a sequence, binned like :func:`acquisition.analysis.sequence_statistics`."""
+    """The channel statistics of a sequence, binned like :func:`acquisition.session.analysis.sequence_statistics`."""
     stack = stack or load_frame_stack(sequence)
     period = 2 if sequence.camera.cfa is not None else 1
     height, width = stack.ambient.shape[:2]

@@ -5,16 +5,16 @@ the booth *emulator* holds at exposure time, and the real :class:`led_controller
 driver talking to that emulator over a real pseudo-terminal. The whole pipeline runs, with a
 known ground-truth ambient, through the same driver code a real booth uses.
 
-``aravis-fake``: :class:`~acquisition.aravis_camera.AravisCamera` on the Aravis GigE Vision fake
+``aravis-fake``: :class:`~acquisition.devices.aravis.camera.AravisCamera` on the Aravis GigE Vision fake
 served in this process on 127.0.0.1 (opened by address: no discovery broadcast), the emulator on a
 pty and ``LedBooth``. Frames are the fake's test patterns, so spectra estimated from them mean
 nothing; the rig proves the Aravis path (features, triggers, buffers) inside the whole pipeline.
 
-``replay:DIR``: :class:`~acquisition.replay_camera.ReplayCamera` serving a recorded sequence, with
+``replay:DIR``: :class:`~acquisition.devices.replay_camera.ReplayCamera` serving a recorded sequence, with
 the emulator on a pty; re-runs estimation, flash solving and synthesis on recorded frames.
 
 ``hw`` (real use; also implied by ``--camera`` / ``--port``): :class:`HardwareCamera` around an
-:class:`~acquisition.aravis_camera.AravisCamera` opened by device id, serial or IP on the given
+:class:`~acquisition.devices.aravis.camera.AravisCamera` opened by device id, serial or IP on the given
 interfaces (default ``usb3``: GigE Vision discovery broadcasts, so ``gige`` only when named, and an
 IP address opens one GigE camera without discovery), and :class:`led_controller.LedBooth` on
 ``port`` or on the single booth :func:`led_controller.discovery.find_booth` finds. Every device is
@@ -52,8 +52,7 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
-from msflash.acquisition.errors import UsageError
-from msflash.acquisition.errors import RigOpenError
+from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
 from msflash.acquisition.devices.sim_world import read_responsivity_file, read_spectra_file, sim_ambient, sim_camera, sim_leds, sim_scene
@@ -82,7 +81,7 @@ class Rig:
     name: str
     """The rig spec (``sim``, ``aravis-fake``, ``replay:DIR``)."""
     camera: Any
-    """The camera (a :class:`~acquisition.camera.Camera`; may offer ``suggested_exposure_us``)."""
+    """The camera (a :class:`~acquisition.devices.camera.Camera`; may offer ``suggested_exposure_us``)."""
     booth: LedBooth
     """The booth driver."""
     led_spectra: Spectra
@@ -178,7 +177,7 @@ class Rig:
         When the booth's link is what failed, switching the LEDs off at close fails the same way;
         raising that would replace the error that says what happened (and where) with one about
         ``OFF``. Logged at info level: the capture that had the LEDs on has already warned when it
-        could not switch them off (``acquisition.capture``), so by default the user reads it once.
+        could not switch them off (``acquisition.session.capture``), so by default the user reads it once.
         """
         if exc is None:
             self.close()
@@ -281,8 +280,8 @@ def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spect
     ----------
     ambient, scene, camera
         As the CLI's ``--ambient``, ``--scene``, ``--sim-camera`` (a name or a CSV file, resolved
-        by :mod:`acquisition.sim_world`), or spectra / a :class:`Scene` already on the sim grid.
-        ``camera`` None is :data:`acquisition.sim_world.SIM_DEFAULT_CAMERA`.
+        by :mod:`acquisition.devices.sim_world`), or spectra / a :class:`Scene` already on the sim grid.
+        ``camera`` None is :data:`acquisition.devices.sim_world.SIM_DEFAULT_CAMERA`.
     n_leds, led_spectra
         The paper's subset of ``n_leds`` LEDs or the booth's LEDs (a CSV file, one column per
         channel, or spectra); neither gives the paper's 7. The emulated booth gets one channel
@@ -458,7 +457,7 @@ def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int = 64, 
                          pixel_format: str = "Mono16", serial: str = "MSFRIG01", **_ignored: object) -> Rig:
     """The ``aravis-fake`` rig: AravisCamera on the GigE fake at 127.0.0.1 + emulator on a pty + LedBooth.
 
-    Holds the machine-wide GVCP port lock (:func:`~acquisition.aravis_camera.gvcp_port_lock`)
+    Holds the machine-wide GVCP port lock (:func:`~acquisition.devices.aravis.camera.gvcp_port_lock`)
     until closed. LED spectra: the paper's seven LEDs on :data:`DEFAULT_GRID` (zero outside their
     measured range). Responsivity: ISETCam's :data:`AravisFakeNominalCamera`, recorded as nominal.
     Sim-only options (``ambient``, ``scene``…) are ignored.
@@ -629,9 +628,9 @@ def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | No
 
 
 class HardwareCamera:
-    """An :class:`~acquisition.aravis_camera.AravisCamera` as the hardware rig's camera.
+    """An :class:`~acquisition.devices.aravis.camera.AravisCamera` as the hardware rig's camera.
 
-    Forwards the :class:`~acquisition.camera.Camera` protocol; mono frames come as (H, W) and
+    Forwards the :class:`~acquisition.devices.camera.Camera` protocol; mono frames come as (H, W) and
     the writer records them as three identical channels (:attr:`Rig.mono`; format v1 holds RGB
     or raw mosaics, and the sequence's ``camera.extra`` says so). Offers what exposure planning
     asks of a camera: :attr:`exposure_range_us` and :attr:`noise_model` (from the camera's
@@ -640,8 +639,10 @@ class HardwareCamera:
 
     suggested_exposure_us = 10_000.0
 
-    def __init__(self, camera: Any) -> None:
+    def __init__(self, camera: Any, setup: Any = None) -> None:
         self.aravis = camera
+        self.setup = setup
+        """The :class:`~acquisition.devices.aravis.camera_features.CameraSetup` applied when the rig opened, or None."""
 
     @property
     def info(self) -> CameraInfo:
@@ -659,7 +660,11 @@ class HardwareCamera:
         return getattr(self.aravis, "noise_model", None)
 
     def prepare(self, plan: CapturePlan) -> None:
-        """Prepare the camera for ``plan``."""
+        """Prepare the camera for ``plan`` (each step's gain times ``--gain``'s factor, if given)."""
+        if self.setup is not None:
+            from msflash.acquisition.devices.aravis.camera_features import with_gain
+
+            plan = with_gain(plan, self.setup.gain_factor)
         self.aravis.prepare(plan)
 
     def start(self) -> None:
@@ -683,8 +688,11 @@ class HardwareCamera:
         self.aravis.close()
 
 
-def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format: str | None) -> Any:
+def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format: str | None,
+                    options: Any = None) -> tuple[Any, Any]:
+    """The camera, opened and configured (profile options overridden by ``options``), and its setup."""
     from msflash.acquisition.devices.aravis import camera as aravis_camera
+    from msflash.acquisition.devices.aravis.camera_features import CameraOptions, configure_camera
 
     names = aravis_camera.parse_interfaces(interfaces)
     if camera is None:
@@ -696,14 +704,20 @@ def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format
                 f"(found: {listing}); expected one — pass --camera ID (device id, serial or IP) "
                 "or --interfaces")
         camera = found[0].device_id
-    strobe = aravis_camera.StrobeConfig(line="Line1") if sync == "camera" else None
-    return aravis_camera.AravisCamera(camera, interfaces=names, pixel_format=pixel_format, strobe=strobe)
+    opened = aravis_camera.AravisCamera(camera, interfaces=names, pixel_format=pixel_format)
+    try:
+        setup = configure_camera(opened, options or CameraOptions(), strobe=sync == "camera")
+    except BaseException:
+        opened.close()
+        raise
+    return opened, setup
 
 
 def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: str = "usb3",
                 calibration: str | Path | None = None, led_spectra: str | Path | None = None,
                 responsivity: str | Path | None = None, log_serial: str | Path | None = None,
-                sync: str = "host", pixel_format: str | None = None, **_ignored: object) -> Rig:
+                sync: str = "host", pixel_format: str | None = None, camera_options: Any = None,
+                **_ignored: object) -> Rig:
     """The hardware rig: a GenICam camera by id/serial/IP + a booth on ``port`` (or the one discovered).
 
     Parameters
@@ -719,14 +733,20 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     calibration, led_spectra, responsivity
         Where the LED spectra and camera responsivities come from (:func:`hw_spectra`).
     sync
-        ``host``, ``booth`` or ``camera``: camera master configures a strobe output on Line1.
+        ``host``, ``booth`` or ``camera``: camera master configures a strobe output (Line1 unless
+        ``camera_options`` or the camera profile name another line).
     pixel_format
         PixelFormat to set, or None to keep the camera's.
+    camera_options
+        :class:`~acquisition.devices.aravis.camera_features.CameraOptions` (trigger/strobe lines, gain, ROI, binning,
+        features), overriding the camera profile's.
 
     Raises
     ------
     UsageError
         No LED spectra given (checked before any device is opened).
+    CameraSettingError
+        A camera option the camera cannot take (bad input; the booth is not opened).
     RigOpenError
         One or both devices failed to open; the message lists each device's failure.
     """
@@ -736,10 +756,12 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     closers: list = []
     failures: list[str] = []
     errors: list[BaseException] = []
-    aravis = booth = None
+    aravis = booth = setup = None
     try:
-        aravis = _open_hw_camera(camera, interfaces, sync, pixel_format)
+        aravis, setup = _open_hw_camera(camera, interfaces, sync, pixel_format, camera_options)
         closers.append(aravis.close)
+    except CameraSettingError:
+        raise  # bad input, not a device failure: one line, exit 2
     except ImportError as err:
         failures.append(f"camera{f' {camera!r}' if camera else ''}: Aravis unavailable ({err}); run setup.sh")
         errors.append(err)
@@ -764,9 +786,11 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
         _close_all(closers)
         raise RigOpenError(f"rig 'hw': {'; '.join(failures)}") from errors[0]
     assert aravis is not None and booth is not None
-    hardware = HardwareCamera(aravis)
+    hardware = HardwareCamera(aravis, setup)
     info = aravis.info
     extra: dict = {}
+    if setup is not None and not setup.options.empty:
+        extra["camera_options"] = setup.to_dict()  # what was asked (profile + options) and read back
     mono = info.cfa is None and info.pixel_format.startswith("Mono")
     if responsivities is None:
         extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"

@@ -14,5 +14,5 @@
 The processing core never imports this package (an import-linter contract in ``pyproject.toml``).
 
 Nothing here reads or writes files beyond the shipped data loaders; the CLIs
-(``acquisition.cli_study``, ``acquisition.cli_local``) write the results.
+(``acquisition.app.cli_study``, ``acquisition.app.cli_local``) write the results.
 """

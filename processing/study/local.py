@@ -12,7 +12,7 @@ Protocol
 - Camera: the NikonD100 (ISETCam), the 7 paper LEDs, the default 16-bit sensor with photon and read
   noise. All LEDs together give ``flash_to_ambient`` × the ambient's mean signal; one exposure for
   every frame, the brightest ambient pixel at ``ambient_peak_fraction`` of full scale (the sim
-  rig's conventions, :meth:`acquisition.simulated_camera.SimulatedCamera.default`).
+  rig's conventions, :meth:`acquisition.devices.simulated_camera.SimulatedCamera.default`).
 - Estimation: blocks of ``bin_factor`` × ``bin_factor`` (the CLI's default 4), ``tiles`` × ``tiles``
   tiles, Tikhonov solver with GCV; the local model on the denoised statistics
   (:attr:`processing.local.TiledStatistics.denoised`), the global model on the observed ones (the
@@ -357,7 +357,7 @@ def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILE
 
     Seeds: uniform scenes ``seed0 + s``; boundary and gradient scenes ``seed0 + 10 000 + s`` (the same
     surfaces and ambient pair, mixed two ways); the tiles sweep ``seed0 + 20 000 + s``. The tests
-    use seeds below 100. ``msflash local-study --out`` writes the summary and plots (:mod:`acquisition.cli_local`).
+    use seeds below 100. ``msflash local-study --out`` writes the summary and plots (:mod:`acquisition.app.cli_local`).
     """
     results = [evaluate_scenario("uniform", seed0 + s, tiles) for s in range(n_uniform)]
     for kind in ("boundary", "gradient"):

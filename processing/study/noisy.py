@@ -204,7 +204,7 @@ def estimate(statistics: SequenceStatistics, leds: Spectra, method: str = "tikho
 
 def app_estimate(statistics: SequenceStatistics, world: World, method: str = "tikhonov",
                  alpha: float | str = "auto") -> AmbientEstimate:
-    """The estimate as the app makes it (acquisition.analysis.estimate_sequence): eq. 4–6 on the
+    """The estimate as the app makes it (acquisition.session.analysis.estimate_sequence): eq. 4–6 on the
     (inverse-variance weighted) statistics, with the LED model's error in the band and the miss risk in
     the warnings (:mod:`processing.model_error`)."""
     return with_model_error(estimate_ambient(statistics, world.leds, method, alpha), reference_for(world.leds, world.camera))

@@ -3,7 +3,7 @@
 Aravis fixtures
 ---------------
 ``aravis``
-    The :mod:`acquisition.aravis_camera` module; skips the test (with the reason) when the Aravis
+    The :mod:`acquisition.devices.aravis.camera` module; skips the test (with the reason) when the Aravis
     typelib is missing.
 ``fake_camera``
     :class:`AravisCamera` on the in-process ``Fake_1`` (Fake interface only, so nothing is

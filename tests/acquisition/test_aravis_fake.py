@@ -51,8 +51,17 @@ def test_decode_bgr8_is_returned_as_rgb(aravis: ModuleType) -> None:
 def test_decode_refuses_short_payload_and_unknown_format(aravis: ModuleType) -> None:
     with pytest.raises(CameraError, match="too short.*expected 8 bytes"):
         aravis.decode_pixels(bytes(7), "Mono16", 2, 2, where="camera X")
-    with pytest.raises(CameraError, match="Mono12Packed.*not supported"):
-        aravis.decode_pixels(bytes(8), "Mono12Packed", 2, 2)
+    with pytest.raises(CameraError, match="YUV422_8.*not supported"):
+        aravis.decode_pixels(bytes(8), "YUV422_8", 2, 2)
+
+
+def test_decode_and_view_route_packed_formats(aravis: ModuleType) -> None:
+    # Mono12p 0x321, 0x654 (the packing itself is tested in test_pixel_formats.py)
+    np.testing.assert_array_equal(aravis.decode_pixels(bytes([0x21, 0x43, 0x65]), "Mono12p", 2, 1), [[0x321, 0x654]])
+    assert aravis.PIXEL_FORMATS["BayerRG12p"].cfa == "RGGB" and aravis.PIXEL_FORMATS["Mono10p"].bits == 10
+    assert not aravis.is_zero_copy_format("Mono12Packed")
+    with pytest.raises(CameraError, match="needs decoding"):
+        aravis.view_pixels(np.zeros(3, np.uint8), "Mono12p", 2, 1)
 
 
 def test_bayer_formats_carry_their_mosaic(aravis: ModuleType) -> None:
@@ -134,8 +143,8 @@ def test_wrong_pixel_format_names_camera_and_feature(fake_camera: Any) -> None:
     with pytest.raises(CameraError, match=r"camera Fake \(serial 1\): PixelFormat 'BayerRG16' is not "
                                           r"offered.*expected one of .*Mono16"):
         fake_camera.set_pixel_format("BayerRG16")
-    with pytest.raises(CameraError, match="'Mono12Packed' cannot be decoded"):
-        fake_camera.set_pixel_format("Mono12Packed")
+    with pytest.raises(CameraError, match="'YUV422_8' cannot be decoded"):
+        fake_camera.set_pixel_format("YUV422_8")
 
 
 def test_missing_line_features_name_camera_and_feature(aravis: ModuleType, fake_camera: Any) -> None:

@@ -1,4 +1,4 @@
-"""``msflash estimate|flash|synthesize`` through ``acquisition.cli.main`` (docs/architecture.md §7)."""
+"""``msflash estimate|flash|synthesize`` through ``acquisition.app.cli.main`` (docs/architecture.md §7)."""
 
 from __future__ import annotations
 

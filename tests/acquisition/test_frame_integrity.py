@@ -1,7 +1,7 @@
 """Frame values the declared black and white levels cannot produce are refused, on every route.
 
 Real files throughout: sequences written to a temporary directory as 16-bit TIFF (OpenImageIO,
-through :func:`acquisition.sequence_format.write_sequence`) or float EXR, read back by the CLI.
+through :func:`acquisition.sequence.format.write_sequence`) or float EXR, read back by the CLI.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``msflash calibrate`` end to end through ``acquisition.cli.main``, and ``--calibration`` in estimate/flash."""
+"""``msflash calibrate`` end to end through ``acquisition.app.cli.main``, and ``--calibration`` in estimate/flash."""
 
 from __future__ import annotations
 

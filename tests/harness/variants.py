@@ -5,7 +5,7 @@ A variant that is ``msflash estimate`` with extra arguments is one line here::
     "prior": msflash("--model", "prior"),
 
 or, without editing, one option of the harness: ``--variant prior="--model prior"``. msflash
-variants run the real command in-process (``acquisition.cli.main``) on the sequence on disk, so
+variants run the real command in-process (``acquisition.app.cli.main``) on the sequence on disk, so
 whatever the estimator does today is what is measured; the baselines
 (:mod:`tests.harness.baselines`) read the same files.
 """

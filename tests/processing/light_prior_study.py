@@ -15,7 +15,7 @@ Surfaces are *not* the reflectance basis's (Natural-100): Macbeth 24, Vrhel's 64
   discharge) the prior learns without *any* light of that family (nor a near copy).
 
 Run: ``PYTHONPATH=$PWD .venv/bin/python tests/processing/light_prior_study.py --split tuning``.
-The default estimate is :func:`acquisition.analysis.estimate_sequence` (what ``msflash estimate`` runs).
+The default estimate is :func:`acquisition.session.analysis.estimate_sequence` (what ``msflash estimate`` runs).
 """
 
 from __future__ import annotations

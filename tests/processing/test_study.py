@@ -100,7 +100,7 @@ def _parser() -> argparse.ArgumentParser:
     from msflash.acquisition.app.cli_common import UsageError
 
     class Parser(argparse.ArgumentParser):
-        def error(self, message):  # like acquisition.cli: usage errors raise
+        def error(self, message):  # like acquisition.app.cli: usage errors raise
             raise UsageError(message)
 
     parser = Parser(prog="msflash")

@@ -1,7 +1,7 @@
 """Sequences msflash has never seen, written by an independent generator (tests/processing/unseen_sequences.py).
 
 Each case is read as written, estimated, given both flashes and synthesised through the CLI
-(``acquisition.cli.main`` in-process): no traceback, no Python warning, flash weights in [0, 1],
+(``acquisition.app.cli.main`` in-process): no traceback, no Python warning, flash weights in [0, 1],
 the synthesised image equal to ``m_a + Σ w_k m_f,k`` computed by the generator's own code, and
 the estimate within :data:`~tests.processing.unseen_sequences.MARGIN` of the best non-negative LED
 fit of the truth (or flagged by a warning). The whole sweep (~90 cases) is the ``study`` test at the

@@ -9,7 +9,7 @@ with the truth it keeps (:class:`Rendered`).
 A :class:`Case` names one choice of camera, container, bit depth, wavelength grid, spectral unit,
 LED set and levels, light, ambient-to-flash ratio, exposures, frame order. :func:`render_case`
 writes it and returns the truth; :func:`check_case` runs ``msflash estimate``, ``flash`` (both
-modes) and ``synthesize`` on it in-process (``acquisition.cli.main``) and measures the estimate
+modes) and ``synthesize`` on it in-process (``acquisition.app.cli.main``) and measures the estimate
 against the best non-negative LED fit of the truth.
 """
 

@@ -48,13 +48,16 @@ from typing import Any, Literal
 import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.devices.aravis.camera_features import CameraOptions, FeatureInfo, options_from_json
 from msflash.acquisition.errors import (
     CameraDisconnectedError,
     CameraError,
     CameraNotFoundError,
+    CameraSettingError,
     FrameLostError,
     FrameTimeoutError,
 )
+from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
 from msflash.acquisition.plan import CapturePlan
 
 try:
@@ -251,6 +254,8 @@ class PixelLayout:
     """Mosaic layout for Bayer formats."""
     bgr: bool = False
     """Channels are stored B, G, R (reversed to R, G, B on decoding)."""
+    packed: bool = False
+    """Samples are bit-packed (:mod:`acquisition.devices.aravis.pixel_formats` decodes them to ``uint16``)."""
 
 
 def _pixel_formats() -> dict[str, PixelLayout]:
@@ -266,11 +271,14 @@ def _pixel_formats() -> dict[str, PixelLayout]:
         table[f"Bayer{cfa}8"] = PixelLayout("u1", 1, 8, pattern)
         for bits in (10, 12, 16):
             table[f"Bayer{cfa}{bits}"] = PixelLayout("<u2", 1, bits, pattern)
+    for name, packed in PACKED_FORMATS.items():
+        table[name] = PixelLayout("<u2", 1, packed.bits, packed.cfa, packed=True)
     return table
 
 
 PIXEL_FORMATS: dict[str, PixelLayout] = _pixel_formats()
-"""Pixel formats msflash decodes (unpacked only; packed 10/12-bit formats are refused)."""
+"""Pixel formats msflash decodes: unpacked ones, and the packed 10/12-bit formats of
+:data:`acquisition.devices.aravis.pixel_formats.PACKED_FORMATS` (decoded to ``uint16``)."""
 
 
 def _frame_shape(pixel_format: str, width: int, height: int, n_bytes: int,
@@ -318,6 +326,8 @@ def decode_pixels(data: bytes | memoryview, pixel_format: str, width: int, heigh
     CameraError
         Unknown pixel format or a payload shorter than the image.
     """
+    if pixel_format in PACKED_FORMATS:
+        return unpack_pixels(data, pixel_format, width, height, where=where)
     layout, n, shape = _frame_shape(pixel_format, width, height, len(data), where)
     flat = np.frombuffer(data, dtype=layout.dtype, count=n)
     native = np.dtype(layout.dtype).newbyteorder("=")
@@ -335,15 +345,17 @@ def is_zero_copy_format(pixel_format: str) -> bool:
     """Whether a payload of ``pixel_format`` already is its frame, so :func:`view_pixels` applies.
 
     True for the formats of :data:`PIXEL_FORMATS` stored in this host's byte order and in R, G, B
-    order (mono, Bayer, RGB8, RGB16); False for BGR8 (reordered) and unknown formats.
+    order (mono, Bayer, RGB8, RGB16); False for BGR8 (reordered), packed and unknown formats.
 
     Examples
     --------
     >>> is_zero_copy_format("Mono16"), is_zero_copy_format("BayerRG8"), is_zero_copy_format("BGR8")
     (True, True, False)
+    >>> is_zero_copy_format("Mono12p")
+    False
     """
     layout = PIXEL_FORMATS.get(pixel_format)
-    return layout is not None and not layout.bgr and np.dtype(layout.dtype).isnative
+    return layout is not None and not layout.bgr and not layout.packed and np.dtype(layout.dtype).isnative
 
 
 def view_pixels(payload: np.ndarray, pixel_format: str, width: int, height: int,
@@ -427,6 +439,9 @@ class CameraProfile:
     """Read noise in electrons, when known (with ``electrons_per_dn`` it lets exposure planning predict SNR)."""
     notes: str = ""
     """Where the quirks come from."""
+    options: CameraOptions = CameraOptions()
+    """Settings applied whenever this model is opened by the hardware rig (trigger/strobe lines, gain,
+    ROI, binning, features); command-line options override them (:mod:`acquisition.devices.aravis.camera_features`)."""
 
 
 def load_profiles(path: Path = PROFILES_JSON) -> tuple[tuple[str, str, CameraProfile], ...]:
@@ -439,6 +454,8 @@ def load_profiles(path: Path = PROFILES_JSON) -> tuple[tuple[str, str, CameraPro
         for key in ("exposure_features", "gain_features", "user_outputs"):
             if key in item:
                 item[key] = tuple(item[key])
+        if "options" in item:
+            item["options"] = options_from_json(item["options"], f"{path} profile {item.get('name', '?')!r}")
         profiles.append((vendor, model, CameraProfile(**item)))
     return tuple(profiles)
 
@@ -991,6 +1008,61 @@ class AravisCamera:
                 raise self._fail("setting", feature, err) from err
         return self.get_feature(feature)
 
+    _KINDS = (("enumeration", Aravis.GcEnumeration), ("boolean", Aravis.GcBoolean), ("float", Aravis.GcFloat),
+              ("integer", Aravis.GcInteger), ("string", Aravis.GcString), ("command", Aravis.GcCommand))
+    _ACCESS = {Aravis.GcAccessMode.RO: "RO", Aravis.GcAccessMode.RW: "RW", Aravis.GcAccessMode.WO: "WO"}
+
+    def feature_names(self) -> tuple[tuple[str, str], ...]:
+        """Every implemented, available feature under the GenICam ``Root`` category, with its category."""
+        genicam = self._live().get_genicam()
+        found: dict[str, str] = {}
+
+        def walk(name: str, category: str) -> None:
+            node = genicam.get_node(name)
+            if isinstance(node, Aravis.GcCategory):
+                for child in node.get_features() or ():
+                    walk(child, name)
+            elif node is not None and name not in found and self._has(name):
+                found[name] = category
+
+        walk("Root", "Root")
+        return tuple(found.items())
+
+    def describe_feature(self, feature: str, category: str = "") -> FeatureInfo:
+        """One feature as the camera describes it now: type, access, value, range or entries."""
+        device = self._live()
+        node = device.get_feature(feature)
+        if node is None:
+            raise CameraError(f"{self._name}: has no feature {feature}; expected it to describe it")
+        kind = next((name for name, cls in self._KINDS if isinstance(node, cls)), "other")
+        try:
+            access = self._ACCESS.get(node.get_actual_access_mode(), "NA")
+        except (AttributeError, GLib.Error):
+            access = "NA"
+        value = None
+        if kind not in ("command", "other") and access != "WO":
+            try:
+                value = self.get_feature(feature)
+            except CameraError:
+                value = None
+        info = FeatureInfo(feature, kind, access, value, category=category)  # type: ignore[arg-type]
+        if kind == "enumeration":
+            return replace(info, entries=self.enum_entries(feature))
+        if kind in ("integer", "float"):
+            interface = Aravis.GcInteger if kind == "integer" else Aravis.GcFloat
+            limits: dict[str, Any] = {}
+            for key, getter in (("minimum", "get_min"), ("maximum", "get_max"), ("increment", "get_inc"),
+                                ("unit", "get_unit")):
+                try:
+                    limits[key] = getattr(interface, getter)(node)
+                except (AttributeError, GLib.Error, TypeError):
+                    pass
+            limits["unit"] = limits.get("unit") or ""
+            if kind == "float" and "increment" in limits:
+                limits.pop("increment")  # a float increment is optional and often absent
+            return replace(info, **limits)
+        return info
+
     def _read_string(self, feature: str, default: str = "") -> str:
         try:
             return str(self.get_feature(feature)) if self._has(feature) else default
@@ -1040,14 +1112,14 @@ class AravisCamera:
     # -- image format, exposure, gain ----------------------------------------------------------
 
     def set_pixel_format(self, pixel_format: str) -> str:
-        """Set PixelFormat; refuses formats the camera lacks or msflash cannot decode."""
+        """Set PixelFormat; refuses formats the camera lacks or msflash cannot decode (``CameraSettingError``)."""
         if pixel_format not in PIXEL_FORMATS:
-            raise CameraError(f"{self._name}: pixel format {pixel_format!r} cannot be decoded by msflash; "
-                              f"expected one of {', '.join(PIXEL_FORMATS)}")
+            raise CameraSettingError(f"{self._name}: pixel format {pixel_format!r} cannot be decoded by msflash; "
+                                     f"expected one of {', '.join(PIXEL_FORMATS)}")
         offered = self.enum_entries("PixelFormat")
         if pixel_format not in offered:
-            raise CameraError(f"{self._name}: PixelFormat {pixel_format!r} is not offered by this camera; "
-                              f"expected one of {', '.join(offered)}")
+            raise CameraSettingError(f"{self._name}: PixelFormat {pixel_format!r} is not offered by this camera; "
+                                     f"expected one of {', '.join(offered)}")
         self._set_enum("PixelFormat", pixel_format)
         return str(self.get_feature("PixelFormat"))
 
@@ -1136,6 +1208,11 @@ class AravisCamera:
         return self.gain
 
     @property
+    def gain_feature(self) -> str | None:
+        """The feature :meth:`set_gain` writes (``Gain`` in dB, or ``GainRaw``), None when there is none."""
+        return self._gain_feature
+
+    @property
     def gain_db(self) -> float:
         """Gain read back from the camera, dB."""
         if self._gain_feature is None:
@@ -1220,6 +1297,17 @@ class AravisCamera:
             raise CameraError(f"{self._name}: has no feature LineInverter; expected it to invert {strobe.line}")
         self._strobe = replace(strobe, source=str(self.get_feature("LineSource")))
         return self._strobe
+
+    def set_sync_lines(self, trigger_line: str | None = None, strobe_line: str | None = None) -> None:
+        """Use ``trigger_line`` for booth-paced plans and drive ``strobe_line`` in later :meth:`prepare` calls.
+
+        None keeps the line in use. A strobe line given when none was configured sets one up (source
+        ExposureActive); entries are checked when :meth:`prepare` writes them.
+        """
+        if trigger_line is not None:
+            self._line_trigger = replace(self._line_trigger, line=trigger_line)
+        if strobe_line is not None:
+            self._strobe_request = replace(self._strobe_request or StrobeConfig(), line=strobe_line)
 
     def user_outputs(self) -> tuple[str, ...]:
         """The camera's user outputs (UserOutputSelector entries; FLIR counts from 1, others from 0)."""

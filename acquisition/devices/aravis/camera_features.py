@@ -1,0 +1,546 @@
+"""Camera options a user or a camera profile sets: lines, gain, ROI, binning, any GenICam feature.
+
+The hardware rig used to hard-code its trigger input (Line0) and strobe output (Line1) and could
+set no other feature. :class:`CameraOptions` carries what ``--trigger-line``, ``--strobe-line``,
+``--gain``, ``--roi``, ``--binning`` and ``--feature NAME=VALUE`` ask for (or a profile's
+``"options"`` in ``genicam/profiles.json``; the command line wins), and
+:func:`apply_camera_options` writes them to an opened camera and reads each one back.
+
+A value the camera cannot take raises :class:`~acquisition.errors.CameraSettingError` (bad
+input, exit 2) whose one line names the camera, the option or feature, and what the camera
+allows: its enumeration entries, its range and increment, or its type. The checks use what the
+camera reports at run time (:class:`FeatureInfo`, from ``AravisCamera.describe_feature``), never a
+table of models.
+
+No ``gi`` here: the camera object does the GenICam access (``describe_feature``, ``set_feature``,
+``set_roi``), so everything but that access is testable without Aravis.
+
+Public objects
+--------------
+- :class:`CameraOptions`, :func:`options_from_json`: what to set, from the CLI or a profile.
+- :func:`parse_feature`, :func:`parse_roi`, :func:`parse_binning`: argparse types of the options.
+- :class:`FeatureInfo`: one feature as the camera describes it (``msflash devices --features``).
+- :func:`apply_camera_options`, :func:`apply_feature`, :class:`AppliedOptions`: writing and reading back.
+- :func:`gain_factor`: the linear factor ``--gain`` puts on every step of a capture plan.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal, Protocol
+
+from msflash.acquisition.errors import CameraError, CameraSettingError
+
+log = logging.getLogger(__name__)
+
+FeatureKind = Literal["enumeration", "boolean", "integer", "float", "string", "command", "other"]
+FeatureValue = str | int | float | bool
+
+_BINNING_FEATURES = ("BinningHorizontal", "BinningVertical")
+
+
+@dataclass(frozen=True)
+class FeatureInfo:
+    """One GenICam feature as the camera describes it now."""
+
+    name: str
+    """Feature name (``Gain``, ``PixelFormat`` …)."""
+    kind: FeatureKind
+    """Its GenICam interface."""
+    access: str
+    """``RO``, ``RW`` or ``WO`` (``NA`` when the camera does not say)."""
+    value: FeatureValue | None = None
+    """Current value (None for commands, write-only or unreadable features)."""
+    minimum: float | None = None
+    """Lower bound of an integer or float feature, when the camera gives one."""
+    maximum: float | None = None
+    """Upper bound of an integer or float feature, when the camera gives one."""
+    increment: float | None = None
+    """Step of an integer feature (1 when unconstrained), when the camera gives one."""
+    unit: str = ""
+    """Unit of a float or integer feature (``us``, ``dB``), when the camera gives one."""
+    entries: tuple[str, ...] = ()
+    """Available entries of an enumeration."""
+    category: str = ""
+    """The GenICam category the feature was found under."""
+
+    @property
+    def writable(self) -> bool:
+        """Whether the camera accepts writes to it now."""
+        return self.access in ("RW", "WO") and self.kind != "command"
+
+    def allowed(self) -> str:
+        """What the feature accepts, for messages: entries, range and step, or type.
+
+        Examples
+        --------
+        >>> FeatureInfo("Gain", "float", "RW", 0.0, 0.0, 24.0, unit="dB").allowed()
+        'a number in 0 … 24 dB'
+        >>> FeatureInfo("TriggerMode", "enumeration", "RW", "Off", entries=("Off", "On")).allowed()
+        'one of Off, On'
+        """
+        if self.kind == "enumeration":
+            return f"one of {', '.join(self.entries)}" if self.entries else "an entry (none available now)"
+        if self.kind == "boolean":
+            return "true or false"
+        if self.kind in ("integer", "float"):
+            what = "a whole number" if self.kind == "integer" else "a number"
+            if self.minimum is None or self.maximum is None:
+                return what
+            step = f" in steps of {self.increment:g}" if self.kind == "integer" and self.increment not in (None, 1) else ""
+            unit = f" {self.unit}" if self.unit else ""
+            return f"{what} in {self.minimum:g} … {self.maximum:g}{unit}{step}"
+        if self.kind == "string":
+            return "text"
+        return "nothing msflash can write (a command or an unsupported node type)"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (``msflash devices --features --json``)."""
+        out: dict[str, Any] = {"name": self.name, "type": self.kind, "access": self.access, "value": self.value}
+        if self.kind in ("integer", "float"):
+            out.update(minimum=self.minimum, maximum=self.maximum, increment=self.increment, unit=self.unit)
+        if self.kind == "enumeration":
+            out["entries"] = list(self.entries)
+        if self.category:
+            out["category"] = self.category
+        return out
+
+
+class FeatureCamera(Protocol):
+    """What :func:`apply_camera_options` needs of a camera (``AravisCamera`` offers it)."""
+
+    @property
+    def name(self) -> str: ...  # noqa: D102
+
+    def has_feature(self, feature: str) -> bool: ...  # noqa: D102
+
+    def describe_feature(self, feature: str) -> FeatureInfo: ...  # noqa: D102
+
+    def set_feature(self, feature: str, value: FeatureValue) -> FeatureValue: ...  # noqa: D102
+
+    def set_roi(self, offset_x: int, offset_y: int, width: int, height: int) -> tuple[int, int, int, int]: ...  # noqa: D102
+
+
+@dataclass(frozen=True)
+class CameraOptions:
+    """Camera settings asked for by the user or a profile; None leaves the camera's own."""
+
+    trigger_line: str | None = None
+    """TriggerSource entry the booth's trigger wire is on (booth-paced plans); default Line0."""
+    strobe_line: str | None = None
+    """LineSelector entry driven by ExposureActive (camera-paced plans); default Line1."""
+    gain_db: float | None = None
+    """Analogue gain in dB applied to every frame (multiplies each plan step's own gain)."""
+    roi: tuple[int, int, int, int] | None = None
+    """(offset_x, offset_y, width, height) in pixels, after binning."""
+    binning: tuple[int, int] | None = None
+    """(horizontal, vertical) binning factors."""
+    features: tuple[tuple[str, str], ...] = ()
+    """Any other features, as (name, value text), applied in order after binning and ROI."""
+
+    def overridden_by(self, other: CameraOptions) -> CameraOptions:
+        """These options with every one ``other`` sets taken from ``other`` (features merged by name).
+
+        Examples
+        --------
+        >>> profile = CameraOptions(trigger_line="Line2", features=(("BlackLevel", "64"), ("Gamma", "1")))
+        >>> merged = profile.overridden_by(CameraOptions(gain_db=6.0, features=(("BlackLevel", "0"),)))
+        >>> merged.trigger_line, merged.gain_db, merged.features
+        ('Line2', 6.0, (('BlackLevel', '0'), ('Gamma', '1')))
+        """
+        asked = dict(other.features)
+        features = tuple((name, asked.pop(name, value)) for name, value in self.features) + tuple(asked.items())
+        merged = {name: getattr(other, name) if getattr(other, name) is not None else getattr(self, name)
+                  for name in ("trigger_line", "strobe_line", "gain_db", "roi", "binning")}
+        return CameraOptions(**merged, features=features)
+
+    @property
+    def empty(self) -> bool:
+        """Whether nothing is asked for."""
+        return self == CameraOptions()
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form, as a profile's ``"options"`` holds it (only what is set)."""
+        out: dict[str, Any] = {}
+        for name in ("trigger_line", "strobe_line", "gain_db"):
+            if getattr(self, name) is not None:
+                out[name] = getattr(self, name)
+        if self.roi is not None:
+            out["roi"] = list(self.roi)
+        if self.binning is not None:
+            out["binning"] = list(self.binning)
+        if self.features:
+            out["features"] = dict(self.features)
+        return out
+
+
+# -- parsing ----------------------------------------------------------------------------------
+
+
+def parse_feature(text: str) -> tuple[str, str]:
+    """argparse type of ``--feature NAME=VALUE``.
+
+    Examples
+    --------
+    >>> parse_feature("BlackLevel=64"), parse_feature("DeviceUserID=a=b")
+    (('BlackLevel', '64'), ('DeviceUserID', 'a=b'))
+    """
+    name, sep, value = text.partition("=")
+    name = name.strip()
+    if not sep or not name or not name.replace("_", "").isalnum() or not name[0].isalpha():
+        raise argparse.ArgumentTypeError(f"'{text}': expected NAME=VALUE with a GenICam feature name "
+                                         "(letters, digits, _), e.g. BlackLevel=64")
+    return name, value.strip()
+
+
+def parse_roi(text: str) -> tuple[int, int, int, int]:
+    """argparse type of ``--roi X,Y,W,H`` (offsets ≥ 0, sizes ≥ 1, pixels).
+
+    Examples
+    --------
+    >>> parse_roi("0, 8, 640,480")
+    (0, 8, 640, 480)
+    """
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        x, y, w, h = (int(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}': expected X,Y,W,H as four whole numbers, e.g. 0,0,640,480") from None
+    if x < 0 or y < 0 or w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"'{text}': expected offsets X,Y ≥ 0 and sizes W,H ≥ 1, e.g. 0,0,640,480")
+    return x, y, w, h
+
+
+def parse_binning(text: str) -> tuple[int, int]:
+    """argparse type of ``--binning N`` or ``--binning HxV`` (factors ≥ 1).
+
+    Examples
+    --------
+    >>> parse_binning("2"), parse_binning("2x1")
+    ((2, 2), (2, 1))
+    """
+    parts = text.lower().split("x")
+    try:
+        factors = tuple(int(p) for p in parts)
+    except ValueError:
+        factors = ()
+    if len(factors) not in (1, 2) or min(factors) < 1:
+        raise argparse.ArgumentTypeError(f"'{text}': expected a binning factor N or HxV (whole numbers ≥ 1), e.g. 2 or 2x2")
+    return (factors[0], factors[-1])
+
+
+def options_from_json(data: Any, where: str) -> CameraOptions:
+    """A profile's ``"options"`` object as :class:`CameraOptions`; ``where`` names it in errors.
+
+    Keys: ``trigger_line``, ``strobe_line`` (strings), ``gain_db`` (number), ``roi`` ([x, y, w, h]),
+    ``binning`` (n or [h, v]), ``features`` ({name: value}).
+
+    Raises
+    ------
+    CameraSettingError
+        An unknown key or a value of the wrong form; names ``where`` and the key.
+    """
+    if not isinstance(data, Mapping):
+        raise CameraSettingError(f"{where}: options is {type(data).__name__}; expected an object")
+    known = ("trigger_line", "strobe_line", "gain_db", "roi", "binning", "features")
+    unknown = sorted(set(data) - set(known))
+    if unknown:
+        raise CameraSettingError(f"{where}: options has unknown key {unknown[0]!r}; expected some of {', '.join(known)}")
+
+    def convert(key: str, parse: Any, text: str) -> Any:
+        try:
+            return parse(text)
+        except argparse.ArgumentTypeError as err:
+            raise CameraSettingError(f"{where}: options.{key} {err}") from None
+
+    values: dict[str, Any] = {}
+    for key in ("trigger_line", "strobe_line"):
+        if key in data:
+            if not isinstance(data[key], str) or not data[key]:
+                raise CameraSettingError(f"{where}: options.{key} is {data[key]!r}; expected a line name such as Line0")
+            values[key] = data[key]
+    if "gain_db" in data:
+        gain = data["gain_db"]
+        if isinstance(gain, bool) or not isinstance(gain, int | float) or not math.isfinite(gain):
+            raise CameraSettingError(f"{where}: options.gain_db is {gain!r}; expected a number of dB")
+        values["gain_db"] = float(gain)
+    if "roi" in data:
+        roi = data["roi"]
+        text = ",".join(str(v) for v in roi) if isinstance(roi, list) else str(roi)
+        values["roi"] = convert("roi", parse_roi, text)
+    if "binning" in data:
+        binning = data["binning"]
+        text = "x".join(str(v) for v in binning) if isinstance(binning, list) else str(binning)
+        values["binning"] = convert("binning", parse_binning, text)
+    if "features" in data:
+        features = data["features"]
+        if not isinstance(features, Mapping):
+            raise CameraSettingError(f"{where}: options.features is {type(features).__name__}; expected an "
+                                     'object {"Name": value}')
+        values["features"] = tuple(convert("features", parse_feature, f"{name}={_json_text(value)}")
+                                   for name, value in features.items())
+    return CameraOptions(**values)
+
+
+def _json_text(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:g}" if value == float(f"{value:g}") else repr(value)
+    return str(value)
+
+
+# -- applying -----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class AppliedOptions:
+    """What the camera reports after :func:`apply_camera_options`."""
+
+    roi: tuple[int, int, int, int] | None = None
+    """ROI read back, when one was asked for."""
+    binning: tuple[int, int] | None = None
+    """Binning read back, when asked for."""
+    features: dict[str, FeatureValue] = field(default_factory=dict)
+    """Each ``--feature`` read back, by name."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (recorded in the sequence's ``camera.extra``)."""
+        out: dict[str, Any] = {}
+        if self.roi is not None:
+            out["roi"] = list(self.roi)
+        if self.binning is not None:
+            out["binning"] = list(self.binning)
+        if self.features:
+            out["features"] = dict(self.features)
+        return out
+
+
+def _describe(camera: FeatureCamera, feature: str, option: str) -> FeatureInfo:
+    if not camera.has_feature(feature):
+        raise CameraSettingError(f"{camera.name}: {option}: no feature {feature}; expected one the camera offers — "
+                                 "`msflash devices --features ID` lists them")
+    return camera.describe_feature(feature)
+
+
+def _convert(info: FeatureInfo, text: str) -> FeatureValue | None:
+    """``text`` as a value of ``info``'s type within what it allows, or None when it is not."""
+    if info.kind == "enumeration":
+        return text if text in info.entries else None
+    if info.kind == "boolean":
+        return {"true": True, "1": True, "on": True, "false": False, "0": False, "off": False}.get(text.lower())
+    if info.kind == "string":
+        return text
+    if info.kind == "integer":
+        try:
+            value: float = int(text, 0)  # 64, 0x40, 0b1000000
+        except ValueError:
+            try:
+                value = int(text, 10)  # 064: a leading zero base 0 refuses
+            except ValueError:
+                return None
+    elif info.kind == "float":
+        try:
+            value = float(text)
+        except ValueError:
+            return None
+        if not math.isfinite(value):
+            return None
+    else:
+        return None
+    if info.minimum is not None and value < info.minimum or info.maximum is not None and value > info.maximum:
+        return None
+    if info.kind == "integer" and info.increment and info.increment > 1 and info.minimum is not None:
+        if (value - info.minimum) % info.increment:
+            return None
+    return value
+
+
+def apply_feature(camera: FeatureCamera, feature: str, text: str, option: str | None = None) -> FeatureValue:
+    """Write ``feature`` from its text value, checked against what the camera allows; returns the read-back.
+
+    Raises
+    ------
+    CameraSettingError
+        No such feature, not writable, or a value outside its entries/range/type: the message names
+        the camera, ``option`` (``--feature NAME=VALUE`` by default) and what the feature allows.
+    """
+    option = option or f"--feature {feature}={text}"
+    info = _describe(camera, feature, option)
+    if not info.writable:
+        raise CameraSettingError(f"{camera.name}: {option}: {feature} is {info.kind}, access {info.access}; "
+                                 "expected a writable feature")
+    value = _convert(info, text)
+    if value is None:
+        current = "" if info.value is None else f" (now {_json_text(info.value)})"
+        raise CameraSettingError(f"{camera.name}: {option}: {feature} cannot be {text!r}{current}; "
+                                 f"expected {info.allowed()}")
+    try:
+        read_back = camera.set_feature(feature, value)
+    except CameraSettingError:
+        raise
+    except CameraError as err:
+        raise CameraSettingError(f"{camera.name}: {option}: the camera refused it "
+                                 f"({str(err).removeprefix(camera.name + ': ')}); expected {info.allowed()}") from err
+    if read_back != value:  # the camera rounded it (a register of whole units, an increment): keep its value
+        log.warning("%s: %s: %s reads back %s", camera.name, option, feature, _json_text(read_back))
+    return read_back
+
+
+def _check_entry(camera: FeatureCamera, feature: str, entry: str, option: str) -> None:
+    info = _describe(camera, feature, option)
+    if entry not in info.entries:
+        raise CameraSettingError(f"{camera.name}: {option}: {feature} has no entry {entry!r}; expected {info.allowed()}")
+
+
+def check_lines(camera: FeatureCamera, options: CameraOptions) -> None:
+    """Refuse a ``trigger_line``/``strobe_line`` the camera has no such entry for, before any capture.
+
+    Raises
+    ------
+    CameraSettingError
+        Names the option, the feature (TriggerSource, LineSelector) and its entries.
+    """
+    if options.trigger_line is not None:
+        _check_entry(camera, "TriggerSource", options.trigger_line, f"--trigger-line {options.trigger_line}")
+    if options.strobe_line is not None:
+        _check_entry(camera, "LineSelector", options.strobe_line, f"--strobe-line {options.strobe_line}")
+
+
+def check_gain(camera: FeatureCamera, gain_db: float, feature: str = "Gain") -> None:
+    """Refuse a ``--gain`` outside the camera's Gain range (dB), before any capture.
+
+    Raises
+    ------
+    CameraSettingError
+        Names the option, the feature and its range.
+    """
+    option = f"--gain {gain_db:g}"
+    info = _describe(camera, feature, option)
+    if info.kind not in ("float", "integer") or _convert(info, repr(float(gain_db)) if info.kind == "float"
+                                                           else str(round(gain_db))) is None:
+        raise CameraSettingError(f"{camera.name}: {option}: {feature} cannot be {gain_db:g} dB; expected {info.allowed()}")
+
+
+def apply_camera_options(camera: FeatureCamera, options: CameraOptions) -> AppliedOptions:
+    """Write binning, then the ROI, then each feature in order; check the lines and the gain.
+
+    Binning comes first because it changes the sensor size the ROI is checked against. Lines and
+    gain are only checked here: the camera sets them per plan (trigger source, strobe output,
+    each step's gain).
+
+    Raises
+    ------
+    CameraSettingError
+        The first option the camera cannot take, named with what it allows.
+    """
+    check_lines(camera, options)
+    gain_feature = getattr(camera, "gain_feature", "Gain")
+    if options.gain_db is not None and gain_feature == "Gain":  # GainRaw's units are per profile: set_gain checks
+        check_gain(camera, options.gain_db, gain_feature)
+    binning = None
+    if options.binning is not None:
+        text = "x".join(str(v) for v in options.binning)
+        read = [apply_feature(camera, feature, str(factor), option=f"--binning {text}")
+                for feature, factor in zip(_BINNING_FEATURES, options.binning)]
+        binning = (int(read[0]), int(read[1]))
+    roi = None
+    if options.roi is not None:
+        roi = _apply_roi(camera, options.roi)
+    features = {name: apply_feature(camera, name, text) for name, text in options.features}
+    return AppliedOptions(roi=roi, binning=binning, features=features)
+
+
+def _apply_roi(camera: FeatureCamera, roi: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+    option = f"--roi {','.join(str(v) for v in roi)}"
+    limits = []
+    for feature, value in zip(("OffsetX", "OffsetY", "Width", "Height"), roi):
+        if camera.has_feature(feature):
+            info = camera.describe_feature(feature)
+            limits.append(f"{feature} {info.allowed().removeprefix('a whole number in ')}")
+    x, y, width, height = roi
+    try:
+        read = camera.set_roi(x, y, width, height)
+    except CameraError as err:
+        raise CameraSettingError(f"{camera.name}: {option}: the camera refused it "
+                                 f"({str(err).removeprefix(camera.name + ': ')}); expected "
+                                 f"{'; '.join(limits) or 'a region inside the sensor'} (offset + size within "
+                                 "the sensor, after binning)") from err
+    return read
+
+
+def gain_factor(options: CameraOptions) -> float:
+    """Linear factor ``options.gain_db`` puts on each plan step's gain (1 when none is asked).
+
+    Examples
+    --------
+    >>> round(gain_factor(CameraOptions(gain_db=6.0)), 4), gain_factor(CameraOptions())
+    (1.9953, 1.0)
+    """
+    return 1.0 if options.gain_db is None else float(10.0 ** (options.gain_db / 20.0))
+
+
+def with_gain(plan: Any, factor: float) -> Any:
+    """``plan`` with every step's gain multiplied by ``factor`` (the plan itself when it is 1)."""
+    if factor == 1.0:
+        return plan
+    return replace(plan, steps=tuple(replace(step, gain=step.gain * factor) for step in plan.steps))
+
+
+class ConfigurableCamera(FeatureCamera, Protocol):
+    """A :class:`FeatureCamera` with a profile and sync lines (``AravisCamera``)."""
+
+    @property
+    def profile(self) -> Any: ...  # noqa: D102
+
+    def set_sync_lines(self, trigger_line: str | None = None, strobe_line: str | None = None) -> None: ...  # noqa: D102
+
+
+@dataclass(frozen=True)
+class CameraSetup:
+    """Options in effect on an opened camera: as merged, as read back, and the plan gain factor."""
+
+    options: CameraOptions
+    """The profile's options overridden by the command line's."""
+    applied: AppliedOptions
+    """What the camera read back."""
+    gain_factor: float
+    """Linear factor on each plan step's gain (:func:`gain_factor`)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form recorded in the sequence (``camera.extra.camera_options``)."""
+        return {"requested": self.options.to_dict(), "read_back": self.applied.to_dict()}
+
+
+def configure_camera(camera: ConfigurableCamera, asked: CameraOptions, strobe: bool,
+                     profile_options: CameraOptions | None = None) -> CameraSetup:
+    """Apply the camera profile's options overridden by ``asked`` to an opened camera.
+
+    Parameters
+    ----------
+    camera
+        An opened camera (``AravisCamera``).
+    asked
+        The command line's options.
+    strobe
+        Whether plans drive a strobe output (camera-paced sync): then the strobe line is set up,
+        Line1 unless an option names another.
+    profile_options
+        The options ``asked`` overrides; the camera profile's (``camera.profile.options``) when None.
+
+    Raises
+    ------
+    CameraSettingError
+        The first option the camera cannot take, named with what it allows.
+    """
+    if profile_options is None:
+        profile_options = getattr(camera.profile, "options", CameraOptions())
+    options = profile_options.overridden_by(asked)
+    applied = apply_camera_options(camera, options)
+    strobe_line = (options.strobe_line or "Line1") if strobe else None
+    camera.set_sync_lines(trigger_line=options.trigger_line, strobe_line=strobe_line)
+    return CameraSetup(options, applied, gain_factor(options))
