@@ -33,6 +33,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": ("acquisition.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
     "flash": ("acquisition.cli_process", "solve the matching or complementary flash for a sequence"),
     "synthesize": ("acquisition.cli_process", "synthesise the computational flash image from a sequence"),
+    "check": ("acquisition.cli_check", "check every frame file of a sequence against the SHA-256 recorded when it was "
+                                       "written"),
     "run": ("acquisition.cli_run", "the main job: capture, estimate, flash, re-capture, synthesise, report"),
     "capture": ("acquisition.cli_run", "capture an ambient + each-LED sequence on a rig"),
     "bench": ("acquisition.cli_bench", "measure speed as ratios in one run (processing, camera, booth)"),

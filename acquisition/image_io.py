@@ -5,6 +5,8 @@ Public objects
 - :func:`read_image`: pixels of a frame file in their native type, (H, W) or (H, W, 3).
 - :func:`read_image_header`: size, channel count, type and msflash attributes, without the pixels.
 - :func:`write_image`: a 16-bit TIFF (integer data) or float EXR (float data), atomically.
+- :func:`write_image_digest`: the same, returning the written file's SHA-256 and length
+  (:class:`~acquisition.frame_digest.FileDigest`), taken from the file renamed into place.
 - :func:`image_suffix`: the file suffix :func:`write_image` needs for some pixels.
 
 Frames describe themselves: :func:`write_image` stores its ``attributes`` (``msflash:role``,
@@ -26,6 +28,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from acquisition.errors import RecordingError
+from acquisition.frame_digest import FileDigest, digest_open_file
 from calibration.file_modes import default_file_mode
 from processing.user_files import IMAGE_MAX_BYTES, check_user_file, shown_path
 
@@ -240,6 +243,23 @@ def _set_native_attribute(spec: oiio.ImageSpec, name: str, value: object) -> Non
 def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | None = None) -> Path:
     """Write a frame image atomically: a temporary file in the same directory, then ``os.replace``.
 
+    As :func:`write_image_digest`, returning the written file's path.
+    """
+    path = Path(path)
+    write_image_digest(path, pixels, attributes)
+    return path
+
+
+def write_image_digest(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | None = None) -> FileDigest:
+    """Write a frame image atomically and return the SHA-256 and length of the bytes written.
+
+    The file is written to a temporary file in the same directory, then moved into place with
+    ``os.replace``. The digest is taken in the pass that flushes the temporary file to disk
+    (``fsync``), from the bytes the kernel holds for it, before the rename: it is the digest of
+    exactly the file renamed into place. (OpenImageIO's Python binding cannot write to memory, and
+    libtiff seeks back to patch offsets, so the bytes cannot be hashed as they are produced; they
+    are read back once, from the page cache they were just written to.)
+
     Parameters
     ----------
     path
@@ -253,8 +273,8 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | 
 
     Returns
     -------
-    pathlib.Path
-        The written file.
+    FileDigest
+        SHA-256 and length in bytes of the written file.
 
     Raises
     ------
@@ -301,10 +321,11 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | 
         finally:
             output.close()
         with open(temporary, "rb+") as written:
+            digest = digest_open_file(written)
             os.fsync(written.fileno())
         os.replace(temporary, path)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(temporary)
         raise
-    return path
+    return digest
