@@ -51,6 +51,12 @@ _NATIVE_TYPES = {
     oiio.DOUBLE: ("float", np.float32),
 }
 
+_TYPE_NAMES = {
+    oiio.INT8: "int8", oiio.INT16: "int16", oiio.UINT32: "uint32", oiio.INT32: "int32",
+    oiio.UINT64: "uint64", oiio.INT64: "int64",
+}
+"""Names of the refused pixel types, as numpy calls them (OpenImageIO prints uint32 as 'uint')."""
+
 
 @dataclass(frozen=True)
 class ImageHeader:
@@ -112,9 +118,16 @@ def _header(path: Path, image: oiio.ImageInput) -> tuple[ImageHeader, str]:
         raise RecordingError(f"{path}: image is a volume (depth {spec.depth}); expected a 2-D image")
     basetype = spec.format.basetype
     if basetype not in _NATIVE_TYPES:
+        name = _TYPE_NAMES.get(basetype, str(spec.format))
         raise RecordingError(
-            f"{path}: pixel type '{spec.format}' is not supported; expected uint8, uint16 or float (EXR)"
+            f"{path}: pixel type '{name}' is not supported; expected uint8 or uint16 counts, or floats "
+            "(16-, 32- or 64-bit)"
         )
+    if image.seek_subimage(1, 0):
+        # A multi-page TIFF (or multi-part file): which page is the frame is not for msflash to guess.
+        raise RecordingError(f"{path}: holds more than one image (a multi-page TIFF?); expected one image per "
+                             "frame file")
+    image.seek_subimage(0, 0)
     request, dtype = _NATIVE_TYPES[basetype]
     header = ImageHeader(path, spec.width, spec.height, spec.nchannels, np.dtype(dtype), _attributes(spec))
     return header, request
@@ -141,7 +154,7 @@ def read_image_header(path: str | os.PathLike) -> ImageHeader:
     Raises
     ------
     RecordingError
-        Naming the file, if it is missing, unreadable, or has a channel count other than 1 or 3.
+        Naming the file, as :func:`read_image` does.
     """
     path = Path(path)
     with _open_input(path) as image:
@@ -165,8 +178,9 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     Raises
     ------
     RecordingError
-        Naming the file, if it is missing, unreadable, of an unsupported pixel type, or has a
-        channel count other than 1 or 3.
+        Naming the file, if it is missing, unreadable, of an unsupported pixel type (uint32,
+        signed integers), holds more than one image (a multi-page TIFF), or has a channel count
+        other than 1 or 3. The encodings read and refused: docs/architecture.md §6.
     """
     path = Path(path)
     with _open_input(path) as image:
