@@ -5,15 +5,15 @@ from __future__ import annotations
 import argparse
 import sys
 
-from acquisition.cli_common import dumps_json, print_json
-from acquisition.errors import RecordingError
-from processing.user_files import shown_path
+from msflash.acquisition.app.cli_common import dumps_json, print_json
+from msflash.acquisition.errors import RecordingError
+from msflash.processing.user_files import shown_path
 
 CHECK_HELP = "check every frame file of a sequence against the SHA-256 recorded when it was written"
 
 
 def _check(args: argparse.Namespace) -> int:
-    from acquisition.sequence_check import check_sequence
+    from msflash.acquisition.sequence.check import check_sequence
 
     result = check_sequence(args.sequence)
     if args.json:

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO, Literal
 
-from acquisition.errors import RecordingError
-from processing.user_files import shown_path
+from msflash.acquisition.errors import RecordingError
+from msflash.processing.user_files import shown_path
 
 SHA256_PATTERN = re.compile(r"[0-9a-f]{64}")
 """What ``frames[].sha256`` holds: 64 lowercase hexadecimal digits."""

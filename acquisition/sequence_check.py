@@ -32,12 +32,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from acquisition.errors import RecordingError
-from acquisition.folder_claim import LOCK_FILE
-from acquisition.frame_digest import digest_problem, frame_state
-from acquisition.image_io import read_image
-from acquisition.sequence_format import SEQUENCE_FILE, Sequence, read_sequence
-from processing.user_files import shown_path
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.folder_claim import LOCK_FILE
+from msflash.acquisition.sequence.frame_digest import digest_problem, frame_state
+from msflash.acquisition.sequence.image_files import read_image
+from msflash.acquisition.sequence.format import SEQUENCE_FILE, Sequence, read_sequence
+from msflash.processing.user_files import shown_path
 
 FileState = Literal["intact", "changed", "truncated", "missing", "unreadable", "unverified", "undeclared"]
 FILE_STATES: tuple[FileState, ...] = ("intact", "changed", "truncated", "missing", "unreadable", "unverified",

@@ -15,9 +15,9 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from acquisition.cli import main
-from acquisition.errors import RecordingError
-from acquisition.image_io import read_image, read_image_header
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.image_files import read_image, read_image_header
 from tests.acquisition.tiff_files import write_baseline_tiff
 from tests.helpers import forget_digests, write_test_sequence
 

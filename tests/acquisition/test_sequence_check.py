@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import sequence_format
-from acquisition.cli import main
-from acquisition.errors import RecordingError
-from acquisition.sequence_check import FILE_STATES, check_sequence
-from acquisition.sequence_format import read_sequence
+from msflash.acquisition.sequence import format as sequence_format
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.check import FILE_STATES, check_sequence
+from msflash.acquisition.sequence.format import read_sequence
 from tests.helpers import forget_digests, write_test_sequence
 
 REPOSITORY = Path(__file__).resolve().parents[2]
@@ -182,7 +182,7 @@ def test_the_independent_samples_still_read_and_check_as_unverified(name: str, c
 
 def test_check_as_a_process(sequence: Path) -> None:
     change_one_byte(sequence / FRAME)
-    done = subprocess.run([sys.executable, "-m", "acquisition.cli", "check", str(sequence)],
+    done = subprocess.run([sys.executable, "-m", "msflash.acquisition.app.cli", "check", str(sequence)],
                           capture_output=True, text=True, timeout=120, check=False,
                           env={**os.environ, "PYTHONPATH": str(REPOSITORY)})
     assert done.returncode == 2
