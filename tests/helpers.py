@@ -237,3 +237,17 @@ def wait_for_frames(process: subprocess.Popen[bytes], sequence_json: Path, n: in
         time.sleep(0.01)
     process.kill()
     pytest.fail(f"no {n} frames in {sequence_json} within {timeout_s} s")
+
+
+def forget_digests(directory: Path) -> None:
+    """Drop every frame's ``sha256`` and ``file_bytes`` from ``directory``'s ``sequence.json``.
+
+    The sequence then reads as one recorded before frame digests existed (or by another tool), so a
+    test can replace a frame file to exercise the checks behind the digest (size, channels, levels).
+    """
+    path = directory / "sequence.json"
+    document = json.loads(path.read_text())
+    for frame in document["frames"]:
+        frame.pop("sha256", None)
+        frame.pop("file_bytes", None)
+    path.write_text(json.dumps(document, indent=1))

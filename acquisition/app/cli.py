@@ -33,6 +33,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": ("msflash.acquisition.app.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
     "flash": ("msflash.acquisition.app.cli_process", "solve the matching or complementary flash for a sequence"),
     "synthesize": ("msflash.acquisition.app.cli_process", "synthesise the computational flash image from a sequence"),
+    "check": ("msflash.acquisition.app.cli_check", "check every frame file of a sequence against the SHA-256 recorded when it was "
+                                       "written"),
     "run": ("msflash.acquisition.app.cli_run", "the main job: capture, estimate, flash, re-capture, synthesise, report"),
     "capture": ("msflash.acquisition.app.cli_run", "capture an ambient + each-LED sequence on a rig"),
     "bench": ("msflash.acquisition.app.cli_bench", "measure speed as ratios in one run (processing, camera, booth)"),

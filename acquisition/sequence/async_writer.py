@@ -107,6 +107,8 @@ class AsyncSequenceWriter:
         """Queue one frame for :meth:`SequenceWriter.add_frame`; returns the entry it will be written as.
 
         Blocks only while the queue is full (back-pressure). Raises the writer thread's error, if any.
+        The entry returned has no ``digest`` yet: the file's SHA-256 is taken when the thread writes
+        it (:attr:`sequence`, after :meth:`flush`, has it).
         """
         self._raise_error()
         if self._closed:

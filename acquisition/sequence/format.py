@@ -42,8 +42,9 @@ import numpy as np
 
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.folder_claim import FolderClaim, claim_folder, stale_temporaries
+from msflash.acquisition.sequence.frame_digest import SHA256_PATTERN, FileDigest, check_frame_digest
 from msflash.acquisition.sequence.frame_integrity import check_frame_levels
-from msflash.acquisition.sequence.image_files import image_suffix, read_image, read_image_header, write_image
+from msflash.acquisition.sequence.image_files import image_suffix, read_image, read_image_header, write_image_digest
 from msflash.calibration.file_modes import default_file_mode
 from msflash.calibration.spectrometer import NEGATIVE_TOLERANCE
 from msflash.processing.errors import SpectralDataError
@@ -75,7 +76,7 @@ FrameRole = Literal["ambient", "led", "flash", "dark"]
 _TOP_KEYS = ("format", "version", "complete", "wavelengths_nm", "spectral_unit", "camera", "leds", "frames")
 _CAMERA_KEYS = ("model", "serial", "pixel_format", "cfa", "black_level", "white_level", "responsivity")
 _LED_KEYS = ("name", "spd")
-_FRAME_KEYS = ("file", "role", "led_levels", "exposure_us", "gain")
+_FRAME_KEYS = ("file", "role", "led_levels", "exposure_us", "gain", "sha256", "file_bytes")
 MAX_NESTING = 100
 """The deepest nesting of objects and lists ``sequence.json`` may have (format v1 itself needs 4).
 
@@ -101,12 +102,14 @@ def _values_equal(a: Any, b: Any) -> bool:
 
 
 class _ArrayEquality:
-    """Field-wise equality that compares arrays by value (dataclass ``eq`` cannot)."""
+    """Field-wise equality that compares arrays by value (dataclass ``eq`` cannot); fields with
+    ``compare=False`` are left out."""
 
     def __eq__(self, other: object) -> bool:
         if type(other) is not type(self):
             return NotImplemented
-        return all(_values_equal(getattr(self, f.name), getattr(other, f.name)) for f in fields(self))  # type: ignore[arg-type]
+        return all(_values_equal(getattr(self, f.name), getattr(other, f.name))
+                   for f in fields(self) if f.compare)  # type: ignore[arg-type]
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -181,6 +184,11 @@ class SequenceFrame(_ArrayEquality):
     """Linear gain (> 0); processing works in ``(value − black) / (exposure_us · gain)``."""
     extra: dict = field(default_factory=dict)
     """Unknown keys of this frame entry, kept and written back."""
+    digest: FileDigest | None = field(default=None, compare=False)
+    """The file's SHA-256 and length as written (``sha256``, ``file_bytes``; optional, docs/architecture.md §6),
+    or None for a frame recorded without them: then the file is read unchecked. Not compared: it
+    describes the file's bytes, not the frame (the same frame written a second later has other bytes:
+    the TIFF's time stamp)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "led_levels", tuple(float(v) for v in self.led_levels))
@@ -272,14 +280,18 @@ class Sequence(_ArrayEquality):
         Raises
         ------
         RecordingError
-            If the file is unreadable, its channel count does not match ``camera.cfa``, its
+            If the file is not the one written (its recorded SHA-256 or length differ: changed,
+            truncated or missing), unreadable, its channel count does not match ``camera.cfa``, its
             size differs from frame 0's (both files are named), or it holds values above white or
             below black by more than read noise allows (the count and range are named).
         """
         path = self.frame_path(index)
+        where = f"{self.path}: frames[{index}].file '{self.frames[index].file}'"
+        recorded = self.frames[index].digest
+        if recorded is not None:
+            check_frame_digest(path, recorded, where)
         pixels = read_image(path)
         channels = 1 if pixels.ndim == 2 else pixels.shape[2]
-        where = f"{self.path}: frames[{index}].file '{self.frames[index].file}'"
         if self.camera.cfa is not None and channels != 1:
             raise RecordingError(
                 f"{where} has {channels} channels but camera.cfa is '{self.camera.cfa}'; "
@@ -568,7 +580,25 @@ def _parse_frame(file: Path, directory: Path, index: int, value: Any, n_leds: in
     gain = frame.number("gain", "a number > 0")
     if gain <= 0:
         frame.fail(name("gain"), f"is {gain:g}", "a number > 0")
-    return SequenceFrame(path, role, tuple(levels.tolist()), exposure, gain, frame.extra)  # type: ignore[arg-type]
+    digest = _parse_digest(frame)
+    return SequenceFrame(path, role, tuple(levels.tolist()), exposure, gain, frame.extra, digest)  # type: ignore[arg-type]
+
+
+def _parse_digest(frame: _Fields) -> FileDigest | None:
+    """``sha256`` and ``file_bytes``: both or neither (optional fields of format v1, docs/architecture.md §6)."""
+    sha256 = frame.get("sha256", "", optional=True)
+    size = frame.get("file_bytes", "", optional=True)
+    if sha256 is None and size is None:
+        return None
+    if sha256 is None or size is None:
+        present, absent = ("sha256", "file_bytes") if size is None else ("file_bytes", "sha256")
+        frame.fail(frame.name(absent), f"is missing but {present} is given", "both or neither (the file's digest)")
+    if not isinstance(sha256, str) or not SHA256_PATTERN.fullmatch(sha256):
+        frame.fail(frame.name("sha256"), f"is {_describe(sha256)}", "64 lowercase hexadecimal digits (the file's "
+                   "SHA-256)")
+    if isinstance(size, bool) or not isinstance(size, int) or size < 0:
+        frame.fail(frame.name("file_bytes"), f"is {_describe(size)}", "an integer ≥ 0 (the file's length in bytes)")
+    return FileDigest(sha256, size)
 
 
 def _parse_document(file: Path, directory: Path, document: Any, *, check_files: bool = True) -> Sequence:
@@ -616,13 +646,16 @@ def _parse_document(file: Path, directory: Path, document: Any, *, check_files: 
     return Sequence(directory, complete, wavelengths, unit, camera, leds, frames, top.extra)  # type: ignore[arg-type]
 
 
-def read_sequence(directory: str | os.PathLike) -> Sequence:
+def read_sequence(directory: str | os.PathLike, *, require_files: bool = True) -> Sequence:
     """Read and validate a sequence directory (format v1), complete or partial.
 
     Parameters
     ----------
     directory
         The sequence directory, or its ``sequence.json``.
+    require_files
+        Refuse a sequence whose frame files are missing or not regular files (the default). False
+        for ``msflash check``, which reports each frame's file itself.
 
     Returns
     -------
@@ -642,7 +675,7 @@ def read_sequence(directory: str | os.PathLike) -> Sequence:
     if directory.name == SEQUENCE_FILE and directory.is_file():
         directory = directory.parent
     file = directory / SEQUENCE_FILE
-    sequence = _parse_document(file, directory, _load_json(file))
+    sequence = _parse_document(file, directory, _load_json(file), check_files=require_files)
     if sequence.partial:
         _report_stale_temporaries(directory)
     return sequence
@@ -678,10 +711,14 @@ def _camera_json(camera: SequenceCamera) -> dict:
 
 
 def _frame_json(frame: SequenceFrame) -> dict:
-    return {
+    document = {
         "file": frame.file, "role": frame.role, "led_levels": list(frame.led_levels),
-        "exposure_us": _plain(frame.exposure_us), "gain": frame.gain, **frame.extra,
+        "exposure_us": _plain(frame.exposure_us), "gain": frame.gain,
     }
+    if frame.digest is not None:
+        document.update(sha256=frame.digest.sha256, file_bytes=frame.digest.file_bytes)
+    document.update(frame.extra)
+    return document
 
 
 def _document(sequence: Sequence) -> dict:
@@ -902,13 +939,16 @@ class SequenceWriter:
         self._check_pixels(where, relative, pixels)
         updated = _replace(self._sequence, frames=(*self._sequence.frames, frame))
         # Serialised before the frame file is written, so unstorable extras fail with nothing on disk.
-        text = _json_text(self._path, _document(updated))
-        write_image(self._directory / relative, pixels, {
+        _json_text(self._path, _document(updated))
+        digest = write_image_digest(self._directory / relative, pixels, {
             "msflash:role": frame.role, "msflash:index": index, "msflash:led_levels": list(frame.led_levels),
             "msflash:exposure_us": frame.exposure_us, "msflash:gain": frame.gain,
             "msflash:led_names": [led.name for led in self._sequence.leds],
         })
-        _replace_json(self._path, text)
+        # The digest of the bytes written, recorded with the frame (read back and checked on loading).
+        frame = _replace_frame(frame, digest=digest)
+        updated = _replace(self._sequence, frames=(*self._sequence.frames, frame))
+        _replace_json(self._path, _json_text(self._path, _document(updated)))
         self._sequence = updated
         return frame
 
@@ -969,6 +1009,12 @@ def _as_float(value: Any) -> Any:
     # Numpy scalars become plain floats so the reader's JSON type checks apply; anything else is
     # passed through unchanged for those checks to refuse with the field named.
     return float(value) if isinstance(value, np.generic) and np.issubdtype(type(value), np.number) else value
+
+
+def _replace_frame(frame: SequenceFrame, **changes: Any) -> SequenceFrame:
+    values = {f.name: getattr(frame, f.name) for f in fields(frame)}
+    values.update(changes)
+    return SequenceFrame(**values)
 
 
 def _replace(sequence: Sequence, **changes: Any) -> Sequence:

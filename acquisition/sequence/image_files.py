@@ -5,6 +5,8 @@ Public objects
 - :func:`read_image`: pixels of a frame file in their native type, (H, W) or (H, W, 3).
 - :func:`read_image_header`: size, channel count, type and msflash attributes, without the pixels.
 - :func:`write_image`: a 16-bit TIFF (integer data) or float EXR (float data), atomically.
+- :func:`write_image_digest`: the same, returning the written file's SHA-256 and length
+  (:class:`~acquisition.sequence.frame_digest.FileDigest`), taken from the file renamed into place.
 - :func:`image_suffix`: the file suffix :func:`write_image` needs for some pixels.
 
 Frames describe themselves: :func:`write_image` stores its ``attributes`` (``msflash:role``,
@@ -26,6 +28,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.frame_digest import FileDigest, digest_open_file
 from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.user_files import IMAGE_MAX_BYTES, check_user_file, shown_path
 
@@ -47,6 +50,12 @@ _NATIVE_TYPES = {
     oiio.FLOAT: ("float", np.float32),
     oiio.DOUBLE: ("float", np.float32),
 }
+
+_TYPE_NAMES = {
+    oiio.INT8: "int8", oiio.INT16: "int16", oiio.UINT32: "uint32", oiio.INT32: "int32",
+    oiio.UINT64: "uint64", oiio.INT64: "int64",
+}
+"""Names of the refused pixel types, as numpy calls them (OpenImageIO prints uint32 as 'uint')."""
 
 
 @dataclass(frozen=True)
@@ -109,9 +118,16 @@ def _header(path: Path, image: oiio.ImageInput) -> tuple[ImageHeader, str]:
         raise RecordingError(f"{path}: image is a volume (depth {spec.depth}); expected a 2-D image")
     basetype = spec.format.basetype
     if basetype not in _NATIVE_TYPES:
+        name = _TYPE_NAMES.get(basetype, str(spec.format))
         raise RecordingError(
-            f"{path}: pixel type '{spec.format}' is not supported; expected uint8, uint16 or float (EXR)"
+            f"{path}: pixel type '{name}' is not supported; expected uint8 or uint16 counts, or floats "
+            "(16-, 32- or 64-bit)"
         )
+    if image.seek_subimage(1, 0):
+        # A multi-page TIFF (or multi-part file): which page is the frame is not for msflash to guess.
+        raise RecordingError(f"{path}: holds more than one image (a multi-page TIFF?); expected one image per "
+                             "frame file")
+    image.seek_subimage(0, 0)
     request, dtype = _NATIVE_TYPES[basetype]
     header = ImageHeader(path, spec.width, spec.height, spec.nchannels, np.dtype(dtype), _attributes(spec))
     return header, request
@@ -138,7 +154,7 @@ def read_image_header(path: str | os.PathLike) -> ImageHeader:
     Raises
     ------
     RecordingError
-        Naming the file, if it is missing, unreadable, or has a channel count other than 1 or 3.
+        Naming the file, as :func:`read_image` does.
     """
     path = Path(path)
     with _open_input(path) as image:
@@ -162,8 +178,9 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     Raises
     ------
     RecordingError
-        Naming the file, if it is missing, unreadable, of an unsupported pixel type, or has a
-        channel count other than 1 or 3.
+        Naming the file, if it is missing, unreadable, of an unsupported pixel type (uint32,
+        signed integers), holds more than one image (a multi-page TIFF), or has a channel count
+        other than 1 or 3. The encodings read and refused: docs/architecture.md §6.
     """
     path = Path(path)
     with _open_input(path) as image:
@@ -240,6 +257,23 @@ def _set_native_attribute(spec: oiio.ImageSpec, name: str, value: object) -> Non
 def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | None = None) -> Path:
     """Write a frame image atomically: a temporary file in the same directory, then ``os.replace``.
 
+    As :func:`write_image_digest`, returning the written file's path.
+    """
+    path = Path(path)
+    write_image_digest(path, pixels, attributes)
+    return path
+
+
+def write_image_digest(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | None = None) -> FileDigest:
+    """Write a frame image atomically and return the SHA-256 and length of the bytes written.
+
+    The file is written to a temporary file in the same directory, then moved into place with
+    ``os.replace``. The digest is taken in the pass that flushes the temporary file to disk
+    (``fsync``), from the bytes the kernel holds for it, before the rename: it is the digest of
+    exactly the file renamed into place. (OpenImageIO's Python binding cannot write to memory, and
+    libtiff seeks back to patch offsets, so the bytes cannot be hashed as they are produced; they
+    are read back once, from the page cache they were just written to.)
+
     Parameters
     ----------
     path
@@ -253,8 +287,8 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | 
 
     Returns
     -------
-    pathlib.Path
-        The written file.
+    FileDigest
+        SHA-256 and length in bytes of the written file.
 
     Raises
     ------
@@ -301,10 +335,11 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | 
         finally:
             output.close()
         with open(temporary, "rb+") as written:
+            digest = digest_open_file(written)
             os.fsync(written.fileno())
         os.replace(temporary, path)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(temporary)
         raise
-    return path
+    return digest

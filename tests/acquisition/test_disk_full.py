@@ -24,7 +24,7 @@ FULL_AT = 3
 
 @pytest.fixture
 def disk_full_at_frame(monkeypatch: pytest.MonkeyPatch) -> None:
-    real_write = sequence_format.write_image
+    real_write = sequence_format.write_image_digest
     calls = {"n": 0}
 
     def write_image(path, pixels, metadata):  # noqa: ANN001 - the image_io signature
@@ -33,7 +33,7 @@ def disk_full_at_frame(monkeypatch: pytest.MonkeyPatch) -> None:
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
         return real_write(path, pixels, metadata)
 
-    monkeypatch.setattr(sequence_format, "write_image", write_image)
+    monkeypatch.setattr(sequence_format, "write_image_digest", write_image)
 
 
 def test_a_full_disk_mid_capture_is_one_runtime_error_and_keeps_the_frames(

@@ -28,6 +28,7 @@ from msflash.acquisition.sequence.format import (
     read_sequence,
     write_sequence,
 )
+from tests.helpers import forget_digests
 
 REPOSITORY = Path(__file__).resolve().parents[2]
 SAMPLES = REPOSITORY.parent / "shared" / "samples"
@@ -406,6 +407,7 @@ def test_symlink_escaping_the_directory_is_refused(valid: Path, tmp_path: Path) 
 
 # -- frame checks at load time -----------------------------------------------------------------------
 def test_frames_of_different_sizes_name_both_files(valid: Path) -> None:
+    forget_digests(valid)  # replaced behind the writer's back: a digest would refuse it first
     write_image(valid / "frames" / "002-led.tiff", _pixels(shape=(HEIGHT + 2, WIDTH)))
     sequence = read_sequence(valid)  # sizes are checked lazily, when a frame is loaded
     sequence.load_frame(1)
@@ -418,17 +420,20 @@ def test_frames_of_different_sizes_name_both_files(valid: Path) -> None:
 
 
 def test_channel_count_must_match_cfa(valid: Path, tmp_path: Path) -> None:
+    forget_digests(valid)
     write_image(valid / "frames" / "001-led.tiff", _pixels(cfa="RGGB"))
     with pytest.raises(RecordingError, match=r"frames\[1\].file 'frames/001-led.tiff' has 1 channel but camera.cfa is null"):
         read_sequence(valid).load_frame(1)
     mosaic = tmp_path / "mosaic"
     _paper_sequence(mosaic, cfa="RGGB")
+    forget_digests(mosaic)
     write_image(mosaic / "frames" / "003-led.tiff", _pixels())
     with pytest.raises(RecordingError, match=r"frames\[3\].file 'frames/003-led.tiff' has 3 channels but camera.cfa is 'RGGB'"):
         read_sequence(mosaic).load_frame(3)
 
 
 def test_unreadable_frame_file_is_named(valid: Path) -> None:
+    forget_digests(valid)
     (valid / "frames" / "001-led.tiff").write_bytes(b"broken")
     with pytest.raises(RecordingError, match=r"001-led.tiff: cannot be read as an image"):
         read_sequence(valid).load_frame(1)
