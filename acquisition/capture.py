@@ -69,10 +69,11 @@ from contextlib import AbstractContextManager, ExitStack, contextmanager, nullco
 from typing import Any, Protocol
 
 from acquisition.camera import Camera, RawFrame
-from acquisition.errors import CaptureError, DroppedFrameError, FrameTimeoutError
+from acquisition.errors import BoothStepError, CaptureError, DroppedFrameError, FrameTimeoutError
 from acquisition.plan import CapturePlan, CaptureStep
 from acquisition.sequence_format import SequenceFrame, SequenceWriter
 from led_controller.booth import ARM_TIME_MAX_US
+from led_controller.errors import BoothError
 
 log = logging.getLogger(__name__)
 
@@ -285,6 +286,19 @@ def _leds_off_at_exit(camera: Camera, booth: LedControl) -> Iterator[None]:
         camera.stop()
 
 
+@contextmanager
+def _booth_errors_at(where: str, saved: str = "") -> Iterator[None]:
+    """A booth failure within the block raised as :class:`BoothStepError` naming ``where`` (a step).
+
+    The driver's message names the port and the command, not what the capture was doing; the user
+    needs both. ``saved`` says what is on disk.
+    """
+    try:
+        yield
+    except BoothError as err:
+        raise BoothStepError(f"{where}: {err}" + (f". {saved}" if saved else "")) from err
+
+
 def _replan(camera: Camera, plan: CapturePlan, index: int) -> None:
     """Give a streaming camera its plan with step ``index`` filled in, before that step's trigger.
 
@@ -368,7 +382,7 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Se
                 _replan(camera, plan, step.index)
                 # The flash exposure is decided now and may be longer than any planned step.
                 cover = _watchdog_covering(booth, dataclasses.replace(plan, steps=(step,)))
-            with cover:
+            with cover, _booth_errors_at(f"step {step.index} ({step.label})", _saved(writer, written)):
                 booth.set_levels(step.led_levels)
                 camera.trigger()
                 try:
@@ -519,8 +533,9 @@ def preview_frames(camera: Camera, booth: LedControl, plan: CapturePlan) -> list
         camera.prepare(plan)
         camera.start()
         for step in plan.steps:
-            booth.set_levels(step.led_levels)
-            camera.trigger()
+            with _booth_errors_at(f"preview step {step.index} ({step.label})"):
+                booth.set_levels(step.led_levels)
+                camera.trigger()
             try:
                 frame = camera.next_frame(plan.frame_timeout_s)
             except FrameTimeoutError as err:

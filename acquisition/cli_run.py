@@ -42,6 +42,7 @@ from acquisition.cli_common import UsageError, dumps_json, output_directory, pro
 from acquisition.cli_process import add_estimation_options
 from acquisition.errors import CaptureError, OutputWriteError
 from acquisition.flash_session import FlashSession
+from acquisition.external_booth import check_booth_port
 from acquisition.exposure import (
     ExposurePlan,
     ExposurePolicy,
@@ -119,10 +120,12 @@ def _open(args: argparse.Namespace) -> Rig:
         return open_rig("hw", camera=args.camera, port=args.port, interfaces=args.interfaces,
                         calibration=args.calibration, led_spectra=args.led_spectra, responsivity=args.responsivity,
                         log_serial=args.log_serial, sync=args.sync, pixel_format=args.pixel_format)
+    if args.booth_port is not None:
+        check_booth_port(spec, args.sync)
     if spec == "sim":
         return open_rig("sim", ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
                         camera=args.sim_camera, n_leds=args.leds, led_spectra=args.led_spectra,
-                        flash_power=args.flash_power, log_serial=args.log_serial)
+                        flash_power=args.flash_power, log_serial=args.log_serial, booth_port=args.booth_port)
     return open_rig(spec, log_serial=args.log_serial)
 
 
@@ -579,6 +582,9 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
     sim.add_argument("--flash-power", type=_flash_power, default=None, metavar="P",
                      help="how bright the booth is: every LED at full drive gives at least P times the ambient's "
                           "mean camera signal (the weakest LED exactly P; the LEDs keep their ratios; default 1)")
+    sim.add_argument("--booth-port", default=None, metavar="PATH",
+                     help="drive the booth at this port (msflash booth-emulator's pty, or a real booth) instead of "
+                          "an emulator in this process; --sync host only")
     sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
     parser.add_argument("--exposure", "--exposure-us", dest="exposure", type=_exposure_value, default="auto",

@@ -630,6 +630,7 @@ class LedBooth:
 
     def _read_loop(self) -> None:
         buffer = bytearray()
+        discarding = False  # within an over-long line, already reported: dropped up to its terminator
         while not self._stop.is_set():
             try:
                 waiting = self._port.in_waiting
@@ -650,6 +651,13 @@ class LedBooth:
             buffer += data
             while True:
                 end = buffer.find(protocol.TERMINATOR)
+                if discarding:
+                    if end < 0:
+                        buffer.clear()
+                        break
+                    del buffer[: end + 1]
+                    discarding = False
+                    continue
                 if end < 0:
                     break
                 line = bytes(buffer[:end])
@@ -657,8 +665,11 @@ class LedBooth:
                 self._wire("<", line + protocol.TERMINATOR)
                 self._dispatch(line)
             if len(buffer) > protocol.MAX_LINE:
-                line = bytes(buffer)
+                # No frame is this long (docs/booth-protocol.md §2): one framing error for the line's
+                # first MAX_LINE + 1 bytes, the rest dropped up to its terminator, never buffered.
+                line = bytes(buffer[: protocol.MAX_LINE + 1])
                 buffer.clear()
+                discarding = True
                 self._wire("<", line)
                 self._dispatch(line)
 
