@@ -34,6 +34,13 @@ from led_controller.errors import (
 )
 from led_controller.protocol import BoothEvent, BoothInfo, BoothStatus, Command, Mode
 
+try:
+    import termios
+
+    _TERMIOS_ERRORS: tuple[type[Exception], ...] = (termios.error,)
+except ImportError:  # not a POSIX host: pyserial raises no termios errors there
+    _TERMIOS_ERRORS = ()
+
 log = logging.getLogger(__name__)
 
 SyncMode = Literal["host", "booth", "camera"]
@@ -603,7 +610,8 @@ class LedBooth:
                 f"{self._name}: writing {command} blocked for {timeout:g} s; expected the booth to read its input",
                 command=command, timeout_s=timeout,
             ) from err
-        except (serial.SerialException, OSError) as err:
+        except (serial.SerialException, OSError, *_TERMIOS_ERRORS) as err:
+            # termios.error: pyserial's flush (tcdrain) on a pty or USB port that was just hung up.
             self._link_error = err
             raise self._link_lost_error(command, err) from err
 

@@ -89,3 +89,4 @@ def test_the_emulator_refuses_channel_names_whose_identify_reply_would_not_fit()
     names = [f"led{i:02d}_{'x' * 20}" for i in range(40)]
     with pytest.raises(ValueError, match=f"ID reply would be .* bytes, over the protocol's {MAX_BODY}"):
         BoothEmulator(names=names, peaks_nm=[400.0 + i for i in range(40)])
+
