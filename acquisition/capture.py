@@ -427,6 +427,7 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
     with ExitStack() as watchdog:
         watchdog.enter_context(_sequence_watchdog(booth, plan))
         watchdog.enter_context(_leds_off_at_exit(camera, booth))
+        doing = "loading the booth's table"  # what a booth failure is reported at
         try:
             booth.all_off()  # idle the booth (a previous table may be DONE) before editing the table
             drain = getattr(booth, "pending_events", None)
@@ -441,6 +442,7 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
             camera.start()
             booth.start()
             for number, step in enumerate(plan.steps, start=1):
+                doing = f"step {step.index} ({step.label})"
                 if flash is not None and step.index == last - 1 and pause is not None:
                     pause()  # the writer thread waits from the last LED frame until the flash frame is in
                 if flash is not None and step.index == last:
@@ -495,8 +497,13 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
                     # the booth's thread was due to pulse the flash trigger (seen up to ~8 ms late).
                     resume()
                 _write(writer, paired, frame, written, on_frame, trigger=trigger)
+            doing = "after the last step (waiting for DONE)"
             done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
             log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))
+        except BoothError as err:
+            if isinstance(err, BoothStepError):
+                raise
+            raise BoothStepError(f"{doing}: {err}. {_saved(writer, written)}") from err
         finally:
             if resume is not None:
                 resume()
