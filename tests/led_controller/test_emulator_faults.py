@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from led_controller import BoothEmulator
@@ -64,3 +66,15 @@ def test_a_bad_item_is_named(spec: str, says: str) -> None:
     with pytest.raises(ValueError, match=f"^--fault {says}".replace("(", r"\(").replace(")", r"\)")
                        .replace("[", r"\[").replace("]", r"\]")):
         parse_fault_spec(spec)
+
+
+def test_a_stall_with_seconds_ends_by_itself() -> None:
+    emulator = BoothEmulator()
+    emulator.connect_output(lambda _data: None)
+    FaultInjector(emulator, parse_fault_spec("stall:1:0.05"))
+    emulator.receive(encode_request(1, "PING"))
+    assert emulator.snapshot()["stalled"] is True
+    deadline = time.monotonic() + 30.0
+    while emulator.snapshot()["stalled"] and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert emulator.snapshot()["stalled"] is False
