@@ -6,7 +6,7 @@ Each class also inherits the matching built-in exception. Messages follow
 
 from __future__ import annotations
 
-from led_controller.errors import BoothError
+from msflash.led_controller.errors import BoothError
 
 class CameraError(OSError):
     """A camera failed or refused a setting; the message names the camera and the feature."""

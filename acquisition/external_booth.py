@@ -12,11 +12,11 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
-from acquisition.cli_common import UsageError
-from acquisition.errors import RigOpenError
-from led_controller import LedBooth
-from led_controller.recovery import reset_leftovers
-from processing.spectra import Spectra
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.acquisition.errors import RigOpenError
+from msflash.led_controller import LedBooth
+from msflash.led_controller.recovery import reset_leftovers
+from msflash.processing.spectra import Spectra
 
 log = logging.getLogger(__name__)
 

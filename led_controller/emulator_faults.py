@@ -26,7 +26,7 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-from led_controller.emulator import BoothEmulator
+from msflash.led_controller.emulator import BoothEmulator
 
 FAULT_SPEC_KINDS = ("drop", "flip", "garble", "stall", "close")
 """Fault kinds ``--fault`` accepts."""

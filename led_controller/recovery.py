@@ -9,8 +9,8 @@ and sets a period longer than the protocol's power-up default back to it, saying
 
 from __future__ import annotations
 
-from led_controller.booth import LedBooth
-from led_controller.protocol import WATCHDOG_POWER_UP_MS
+from msflash.led_controller.booth import LedBooth
+from msflash.led_controller.protocol import WATCHDOG_POWER_UP_MS
 
 
 def reset_leftovers(booth: LedBooth) -> tuple[str, ...]:

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.cli import main
-from led_controller import LedBooth
+from msflash.acquisition.app.cli import main
+from msflash.led_controller import LedBooth
 
 ROOT = Path(__file__).resolve().parents[2]
 EMULATOR = ("booth-emulator", "--names", "led440,led520,led660", "--peaks-nm", "440,520,660")
@@ -35,7 +35,7 @@ STEP_2 = "step 2 (led:2): "
 
 
 def _msflash(*argv: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "acquisition.cli", *argv], cwd=ROOT, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "msflash.acquisition.app.cli", *argv], cwd=ROOT, capture_output=True,
                           text=True, timeout=timeout_s, check=False)
 
 
@@ -67,7 +67,7 @@ class Booth:
 @contextmanager
 def booth_process(tmp_path: Path, *options: str) -> Iterator[Booth]:
     state_file = tmp_path / "booth-state.json"
-    process = subprocess.Popen([sys.executable, "-m", "acquisition.cli", *EMULATOR, "--state-file", str(state_file),
+    process = subprocess.Popen([sys.executable, "-m", "msflash.acquisition.app.cli", *EMULATOR, "--state-file", str(state_file),
                                 *options], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         port = process.stdout.readline().strip()

@@ -9,7 +9,7 @@ from collections.abc import Callable
 import pytest
 import serial
 
-from led_controller import (
+from msflash.led_controller import (
     BoothError,
     BoothProtocolError,
     BoothTimeoutError,
@@ -17,7 +17,7 @@ from led_controller import (
     ManualClock,
     PtyBoothServer,
 )
-from led_controller.booth import levels_close
+from msflash.led_controller.booth import levels_close
 
 OFF = (0.0,) * 7
 

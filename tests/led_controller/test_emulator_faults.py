@@ -6,9 +6,9 @@ import time
 
 import pytest
 
-from led_controller import BoothEmulator
-from led_controller.emulator_faults import FaultInjector, FaultRate, parse_fault_spec
-from led_controller.protocol import encode_request, frame_problem
+from msflash.led_controller import BoothEmulator
+from msflash.led_controller.emulator_faults import FaultInjector, FaultRate, parse_fault_spec
+from msflash.led_controller.protocol import encode_request, frame_problem
 
 
 def _replies(rates: tuple[FaultRate, ...], seed: int, requests: int = 40, after: int = 0) -> list[bytes]:

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 import serial
 
-from led_controller import BoothEmulator, BoothProtocolError, BoothTimeoutError, LedBooth
-from led_controller.protocol import MAX_BODY, MAX_LINE, crc16, encode_frame, encode_request, frame_problem
+from msflash.led_controller import BoothEmulator, BoothProtocolError, BoothTimeoutError, LedBooth
+from msflash.led_controller.protocol import MAX_BODY, MAX_LINE, crc16, encode_frame, encode_request, frame_problem
 
 
 def _frame_with_body(mark: bytes, body: bytes) -> bytes:
