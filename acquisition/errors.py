@@ -6,6 +6,7 @@ Each class also inherits the matching built-in exception. Messages follow
 
 from __future__ import annotations
 
+from msflash.led_controller.errors import BoothError
 
 class UsageError(ValueError):
     """Bad input from the user (a file, field or option); the CLI exits with status 2."""
@@ -49,6 +50,13 @@ class OutputWriteError(CaptureError):
     A runtime failure, not bad input: the message names what was being written and the cause, and
     says what is safe on disk (a sequence's frames so far stay readable with ``complete: false``;
     a run's report fails after its sequence is complete).
+    """
+
+
+class BoothStepError(CaptureError, BoothError):
+    """The booth failed (no reply, a damaged frame, a lost link) during a capture step; names the step.
+
+    Also a :class:`led_controller.errors.BoothError`: callers catching the driver's errors still do.
     """
 
 

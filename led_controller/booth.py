@@ -34,6 +34,13 @@ from msflash.led_controller.errors import (
 )
 from msflash.led_controller.protocol import BoothEvent, BoothInfo, BoothStatus, Command, Mode
 
+try:
+    import termios
+
+    _TERMIOS_ERRORS: tuple[type[Exception], ...] = (termios.error,)
+except ImportError:  # not a POSIX host: pyserial raises no termios errors there
+    _TERMIOS_ERRORS = ()
+
 log = logging.getLogger(__name__)
 
 SyncMode = Literal["host", "booth", "camera"]
@@ -603,7 +610,8 @@ class LedBooth:
                 f"{self._name}: writing {command} blocked for {timeout:g} s; expected the booth to read its input",
                 command=command, timeout_s=timeout,
             ) from err
-        except (serial.SerialException, OSError) as err:
+        except (serial.SerialException, OSError, *_TERMIOS_ERRORS) as err:
+            # termios.error: pyserial's flush (tcdrain) on a pty or USB port that was just hung up.
             self._link_error = err
             raise self._link_lost_error(command, err) from err
 
@@ -630,6 +638,7 @@ class LedBooth:
 
     def _read_loop(self) -> None:
         buffer = bytearray()
+        discarding = False  # within an over-long line, already reported: dropped up to its terminator
         while not self._stop.is_set():
             try:
                 waiting = self._port.in_waiting
@@ -650,6 +659,13 @@ class LedBooth:
             buffer += data
             while True:
                 end = buffer.find(protocol.TERMINATOR)
+                if discarding:
+                    if end < 0:
+                        buffer.clear()
+                        break
+                    del buffer[: end + 1]
+                    discarding = False
+                    continue
                 if end < 0:
                     break
                 line = bytes(buffer[:end])
@@ -657,8 +673,11 @@ class LedBooth:
                 self._wire("<", line + protocol.TERMINATOR)
                 self._dispatch(line)
             if len(buffer) > protocol.MAX_LINE:
-                line = bytes(buffer)
+                # No frame is this long (docs/booth-protocol.md §2): one framing error for the line's
+                # first MAX_LINE + 1 bytes, the rest dropped up to its terminator, never buffered.
+                line = bytes(buffer[: protocol.MAX_LINE + 1])
                 buffer.clear()
+                discarding = True
                 self._wire("<", line)
                 self._dispatch(line)
 

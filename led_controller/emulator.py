@@ -192,7 +192,17 @@ class BoothEmulator:
         self._deferred: list[tuple[float, int, str]] = []
         self._faults: list[EmulatorFault] = []
         self._stalled = False
+        self._discarding = False
+        self._watchdog_fires = 0
         self.hangup_requested = threading.Event()
+        self.fault_hook: Callable[[str], None] | None = None
+        """Called with ``"request"`` for each line from the host (before it is read) and ``"send"``
+        before each outgoing frame, on the emulator's thread with its lock held; it may call
+        :meth:`inject_fault` (``led_controller.emulator_faults`` draws random faults this way)."""
+        identify = self._cmd_identify([])
+        if len(f"OK {Command.IDENTIFY} {identify}") > MAX_BODY:
+            raise ValueError(f"BoothEmulator: its ID reply would be {len(identify) + 6} bytes, over the protocol's "
+                             f"{MAX_BODY}; expected shorter or fewer names")
 
     # -- the camera side and observers ------------------------------------------------------
 
@@ -225,6 +235,23 @@ class BoothEmulator:
         """Get the table steps still held (loaded with ``PADD … HOLD`` and not yet ``PSET``)."""
         with self._lock:
             return tuple(i for i, held in enumerate(self._held) if held)
+
+    def snapshot(self) -> dict:
+        """The booth's state for an observer outside the link (``msflash booth-emulator --state-file``).
+
+        Keys: ``state``, ``levels`` (in [0, 1]), ``leds_on``, ``watchdog_ms``, ``watchdog_fired`` (times
+        the watchdog switched the LEDs off), ``bad_frames``, ``stalled``.
+        """
+        with self._lock:
+            return {
+                "state": self._state,
+                "levels": [c / FULL_SCALE for c in self._codes],
+                "leds_on": any(self._codes),
+                "watchdog_ms": self._watchdog_ms,
+                "watchdog_fired": self._watchdog_fires,
+                "bad_frames": self._bad_frames,
+                "stalled": self._stalled,
+            }
 
     def next_due_s(self) -> float | None:
         """Seconds until the next timed action (booth-master step, delayed reply, watchdog), or None."""
@@ -320,12 +347,25 @@ class BoothEmulator:
                     break
                 line = bytes(self._inbuf[:end])
                 del self._inbuf[: end + 1]
+                if self._discarding:  # the end of an over-long line, already answered
+                    self._discarding = False
+                    continue
+                if len(line) > MAX_LINE:
+                    self._reject(ErrorCode.LENGTH, "line too long")
+                    continue
+                if self.fault_hook is not None:
+                    self.fault_hook("request")
+                    if self._stalled or self.hangup_requested.is_set():
+                        self._inbuf.clear()  # the firmware hung or the link went with this request
+                        return
                 line = self._apply_input_fault(line)
                 self._handle_line(line)
             if len(self._inbuf) > MAX_LINE:
-                # Too long to be a frame: throw it away and say so once.
+                # Too long to be a frame: throw it away up to its terminator and say so once.
                 self._inbuf.clear()
-                self._reject(ErrorCode.LENGTH, "line too long")
+                if not self._discarding:
+                    self._discarding = True
+                    self._reject(ErrorCode.LENGTH, "line too long")
             self.tick()
 
     def tick(self) -> None:
@@ -345,6 +385,7 @@ class BoothEmulator:
                 self._watchdog_tripped = True
                 if any(self._codes) or self._state in ("ARMED", "RUNNING"):
                     self._all_off()
+                    self._watchdog_fires += 1
                     self._event(str(Event.WATCHDOG))
 
     # -- parsing (the firmware's own) --------------------------------------------------
@@ -663,6 +704,8 @@ class BoothEmulator:
         self._send(_frame(MARK_REPLY, seq, body))
 
     def _send(self, frame: bytes) -> None:
+        if self.fault_hook is not None:
+            self.fault_hook("send")
         if self._stalled:
             return
         for fault in self._faults:
@@ -689,6 +732,8 @@ def _is_hex(text: bytes) -> bool:
 
 def _frame(mark: str, seq: int, body: str) -> bytes:
     payload = body.encode("ascii")
+    if len(payload) > MAX_BODY:  # the firmware's buffer: never a longer frame than the protocol allows
+        payload = b"ERR - %s reply longer than %d bytes" % (ErrorCode.LENGTH.value.encode(), MAX_BODY)
     head = b"%s%02X:%03X:%s" % (mark.encode("ascii"), seq, len(payload), payload)
     return head + b"*%04X\n" % firmware_crc(head)
 

@@ -37,7 +37,12 @@ MAX_BODY = 1024
 """Largest body in bytes; longer frames are refused by both sides."""
 
 MAX_LINE = MAX_BODY + 16
-"""Largest frame in bytes including the terminator."""
+"""Longest line a receiver keeps, in bytes (a frame with the longest body is 1037 plus its
+terminator; ``docs/booth-protocol.md`` §2): anything longer is a framing error, thrown away up to
+the next terminator."""
+
+WATCHDOG_POWER_UP_MS = 3000
+"""The booth's watchdog period at power-up, in ms (``docs/booth-protocol.md`` §7)."""
 
 LEVEL_BITS = 16
 """Bits per LED level on the wire (firmware may drive fewer, reported as ``BITS=``)."""
@@ -249,6 +254,9 @@ def frame_problem(line: bytes) -> str | None:
         return "not in frame form"
     if int(match.group(3), 16) != len(match.group(4)):
         return f"length field {int(match.group(3), 16)} but body has {len(match.group(4))} bytes"
+    if len(match.group(4)) > MAX_BODY:
+        # Three hex digits could say up to 4095: the protocol's limit is what counts.
+        return f"body of {len(match.group(4))} bytes is longer than {MAX_BODY}"
     crc_sent = int(match.group(5), 16)
     crc_calc = crc16(line[: match.start(5) - 1])
     if crc_sent != crc_calc:

@@ -12,6 +12,7 @@ from msflash.acquisition.app.cli_common import UsageError, print_json, progress
 from msflash.led_controller.booth import sigterm_as_exit
 from msflash.led_controller.doctor import run_doctor
 from msflash.led_controller.emulator import DEFAULT_NAMES, DEFAULT_PEAKS_NM, BoothEmulator, serve_on_pty
+from msflash.led_controller.emulator_faults import FaultInjector, emulator_state, parse_fault_spec, write_state_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -28,6 +29,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="comma-separated peak wavelengths in nm, one per name",
     )
     emu.add_argument("--watchdog-s", type=float, default=3.0, help="host-silence timeout (0 disables)")
+    emu.add_argument("--fault", default=None, metavar="KIND:P,…",
+                     help="random link faults, each KIND at most once: drop:P / flip:P (a byte lost / a bit flipped "
+                          "in an outgoing frame), garble:P (a bit flipped in a request), stall:P[:SECONDS] (stop "
+                          "answering, for good without SECONDS), close:P (hang up); P per frame, e.g. "
+                          "drop:0.01,flip:0.001")
+    emu.add_argument("--seed", type=int, default=0, help="seed of the fault draws (default 0)")
+    emu.add_argument("--fault-after", type=int, default=0, metavar="N",
+                     help="let the first N requests through unfaulted (default 0)")
+    emu.add_argument("--state-file", type=Path, default=None, metavar="FILE.json",
+                     help="keep the booth's state (LEDs, sequencer, watchdog, faults injected) in this JSON file, "
+                          "rewritten when it changes and at exit")
     emu.set_defaults(handler=booth_emulator)
 
     doc = subparsers.add_parser(
@@ -57,20 +69,59 @@ def _emulator_from_args(args: argparse.Namespace) -> BoothEmulator:
         raise UsageError(f"booth-emulator: {err}") from err
 
 
+def _faults_from_args(args: argparse.Namespace, emulator: BoothEmulator) -> FaultInjector | None:
+    if getattr(args, "fault_after", 0) < 0:
+        raise UsageError(f"--fault-after {args.fault_after}: negative; expected a number of requests ≥ 0")
+    if getattr(args, "fault", None) is None:
+        return None
+    try:
+        rates = parse_fault_spec(args.fault)
+    except ValueError as err:
+        raise UsageError(str(err)) from err
+    return FaultInjector(emulator, rates, seed=args.seed, after=args.fault_after)
+
+
 def booth_emulator(args: argparse.Namespace, *, stop: threading.Event | None = None) -> int:
-    """Serve the emulator; print its port path on stdout; run until Ctrl-C/SIGTERM (or ``stop``)."""
+    """Serve the emulator; print its port path on stdout; run until Ctrl-C/SIGTERM (or ``stop``).
+
+    A ``close`` fault ends the command (exit 0) once the link is hung up; ``--state-file`` is
+    written last, before the emulator is stopped (stopping switches its LEDs off).
+    """
     emulator = _emulator_from_args(args)
+    injector = _faults_from_args(args, emulator)
+    state_file: Path | None = getattr(args, "state_file", None)
     stop = stop or threading.Event()
     with sigterm_as_exit(), serve_on_pty(emulator) as server:
+        last: dict | None = None
+
+        def record() -> None:
+            nonlocal last
+            state = emulator_state(emulator, injector, port=server.port, link="closed" if server.closed else "open")
+            if state_file is not None and state != last:
+                write_state_file(state_file, state)
+                last = state
+
         # From the moment the port is printed a client may connect and press Ctrl-C: the handler covers it.
+        try:
+            record()
+        except OSError as err:
+            raise UsageError(f"--state-file {state_file}: cannot write it ({err.strerror or err}); expected a file "
+                             "path in a writable directory") from err
         try:
             sys.stdout.write(server.port + "\n")
             sys.stdout.flush()
-            progress(f"booth emulator on {server.port} ({len(emulator.names)} channels); Ctrl-C to stop")
-            while not stop.wait(0.2):
-                pass
+            progress(f"booth emulator on {server.port} ({len(emulator.names)} channels)"
+                     + (f", faults {args.fault} (seed {args.seed})" if injector is not None else "") + "; Ctrl-C to stop")
+            while not stop.wait(0.05 if state_file is not None else 0.2):
+                record()
+                if server.closed:
+                    progress("booth emulator: the link was hung up (fault close); stopped")
+                    break
         except (KeyboardInterrupt, SystemExit):
             progress("booth emulator stopped")
+        finally:
+            if state_file is not None:
+                record()
     return 0
 
 

@@ -43,6 +43,7 @@ from msflash.acquisition.app.cli_common import UsageError, dumps_json, output_di
 from msflash.acquisition.app.options import add_estimation_options
 from msflash.acquisition.errors import CaptureError, OutputWriteError
 from msflash.acquisition.session.flash_session import FlashSession
+from msflash.acquisition.session.external_booth import check_booth_port
 from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,
@@ -115,6 +116,8 @@ def _open(args: argparse.Namespace) -> Rig:
         hint = " (the simulated camera is --sim-camera NAME|FILE.csv)" if spec == "sim" else ""
         raise UsageError(f"{hw_only[0]}: describes a hardware rig's camera or booth, but the rig is '{spec}' and would "
                          f"ignore it{hint}; expected --rig hw (or --camera/--port)")
+    if args.booth_port is not None:
+        check_booth_port(spec, args.sync)
     if spec == "hw":
         return open_rig("hw", camera=args.camera, port=args.port, interfaces=args.interfaces,
                         calibration=args.calibration, led_spectra=args.led_spectra, responsivity=args.responsivity,
@@ -123,7 +126,7 @@ def _open(args: argparse.Namespace) -> Rig:
     if spec == "sim":
         return open_rig("sim", ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
                         camera=args.sim_camera, n_leds=args.leds, led_spectra=args.led_spectra,
-                        flash_power=args.flash_power, log_serial=args.log_serial)
+                        flash_power=args.flash_power, log_serial=args.log_serial, booth_port=args.booth_port)
     return open_rig(spec, log_serial=args.log_serial)
 
 
@@ -561,6 +564,9 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
     sim.add_argument("--flash-power", type=_flash_power, default=None, metavar="P",
                      help="how bright the booth is: every LED at full drive gives at least P times the ambient's "
                           "mean camera signal (the weakest LED exactly P; the LEDs keep their ratios; default 1)")
+    sim.add_argument("--booth-port", default=None, metavar="PATH",
+                     help="drive the booth at this port (msflash booth-emulator's pty, or a real booth) instead of "
+                          "an emulator in this process; --sync host only")
     sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
     parser.add_argument("--exposure", "--exposure-us", dest="exposure", type=_exposure_value, default="auto",

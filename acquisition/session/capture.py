@@ -69,10 +69,11 @@ from contextlib import AbstractContextManager, ExitStack, contextmanager, nullco
 from typing import Any, Protocol
 
 from msflash.acquisition.devices.camera import Camera, RawFrame
-from msflash.acquisition.errors import CaptureError, DroppedFrameError, FrameTimeoutError
+from msflash.acquisition.errors import BoothStepError, CaptureError, DroppedFrameError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter
 from msflash.led_controller.booth import ARM_TIME_MAX_US
+from msflash.led_controller.errors import BoothError
 
 log = logging.getLogger(__name__)
 
@@ -285,6 +286,19 @@ def _leds_off_at_exit(camera: Camera, booth: LedControl) -> Iterator[None]:
         camera.stop()
 
 
+@contextmanager
+def _booth_errors_at(where: str, saved: str = "") -> Iterator[None]:
+    """A booth failure within the block raised as :class:`BoothStepError` naming ``where`` (a step).
+
+    The driver's message names the port and the command, not what the capture was doing; the user
+    needs both. ``saved`` says what is on disk.
+    """
+    try:
+        yield
+    except BoothError as err:
+        raise BoothStepError(f"{where}: {err}" + (f". {saved}" if saved else "")) from err
+
+
 def _replan(camera: Camera, plan: CapturePlan, index: int) -> None:
     """Give a streaming camera its plan with step ``index`` filled in, before that step's trigger.
 
@@ -368,7 +382,7 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Se
                 _replan(camera, plan, step.index)
                 # The flash exposure is decided now and may be longer than any planned step.
                 cover = _watchdog_covering(booth, dataclasses.replace(plan, steps=(step,)))
-            with cover:
+            with cover, _booth_errors_at(f"step {step.index} ({step.label})", _saved(writer, written)):
                 booth.set_levels(step.led_levels)
                 camera.trigger()
                 try:
@@ -413,6 +427,7 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
     with ExitStack() as watchdog:
         watchdog.enter_context(_sequence_watchdog(booth, plan))
         watchdog.enter_context(_leds_off_at_exit(camera, booth))
+        doing = "loading the booth's table"  # what a booth failure is reported at
         try:
             booth.all_off()  # idle the booth (a previous table may be DONE) before editing the table
             drain = getattr(booth, "pending_events", None)
@@ -427,6 +442,7 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
             camera.start()
             booth.start()
             for number, step in enumerate(plan.steps, start=1):
+                doing = f"step {step.index} ({step.label})"
                 if flash is not None and step.index == last - 1 and pause is not None:
                     pause()  # the writer thread waits from the last LED frame until the flash frame is in
                 if flash is not None and step.index == last:
@@ -481,8 +497,13 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
                     # the booth's thread was due to pulse the flash trigger (seen up to ~8 ms late).
                     resume()
                 _write(writer, paired, frame, written, on_frame, trigger=trigger)
+            doing = "after the last step (waiting for DONE)"
             done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
             log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))
+        except BoothError as err:
+            if isinstance(err, BoothStepError):
+                raise
+            raise BoothStepError(f"{doing}: {err}. {_saved(writer, written)}") from err
         finally:
             if resume is not None:
                 resume()
@@ -519,8 +540,9 @@ def preview_frames(camera: Camera, booth: LedControl, plan: CapturePlan) -> list
         camera.prepare(plan)
         camera.start()
         for step in plan.steps:
-            booth.set_levels(step.led_levels)
-            camera.trigger()
+            with _booth_errors_at(f"preview step {step.index} ({step.label})"):
+                booth.set_levels(step.led_levels)
+                camera.trigger()
             try:
                 frame = camera.next_frame(plan.frame_timeout_s)
             except FrameTimeoutError as err:

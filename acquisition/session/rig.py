@@ -53,13 +53,15 @@ import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
 from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
+from msflash.acquisition.session.external_booth import levels_reported_by, open_external_booth
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
 from msflash.acquisition.devices.sim_world import read_responsivity_file, read_spectra_file, sim_ambient, sim_camera, sim_leds, sim_scene
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.led_controller import BoothEmulator, LedBooth, serve_on_pty
 from msflash.led_controller.errors import BoothProtocolError
-from msflash.led_controller.protocol import MAX_BODY, Command, encode_request, parse_frame, parse_identify, parse_reply
+from msflash.led_controller.recovery import reset_leftovers
+from msflash.led_controller.protocol import Command, encode_request, parse_frame, parse_identify, parse_reply
 from msflash.processing import datasets
 from msflash.processing.image_formation import Scene
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
@@ -258,10 +260,8 @@ def check_emulated_booth(leds: Spectra, where: str) -> None:
         emulator.connect_output(replies.append)
         emulator.receive(encode_request(1, Command.IDENTIFY))
         raw = b"".join(replies).rstrip(b"\r\n")
+        # The emulator refuses names whose identify reply would pass the protocol's 1024 bytes.
         frame = parse_frame(raw, where="booth emulator", command=Command.IDENTIFY)
-        if len(frame.body) > MAX_BODY:  # the protocol's limit; neither end enforces it on this reply today
-            raise ValueError(f"its identify reply would be {len(frame.body)} bytes, over the protocol's {MAX_BODY}: "
-                             "shorter names")
         info = parse_identify(parse_reply(frame, Command.IDENTIFY, where="booth emulator"), raw, where="booth emulator")
     except (ValueError, BoothProtocolError) as err:
         raise UsageError(f"{where}: {channels}: the booth emulator cannot serve them ({err}); expected 1–64 "
@@ -273,7 +273,7 @@ def check_emulated_booth(leds: Spectra, where: str) -> None:
 def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spectra = "chart110", cfa: str | None = None,
                  seed: int = 0, camera: str | Spectra | None = None, n_leds: int | None = None,
                  led_spectra: str | Path | Spectra | None = None, log_serial: str | Path | None = None,
-                 flash_power: float | None = None) -> Rig:
+                 flash_power: float | None = None, booth_port: str | None = None) -> Rig:
     """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver.
 
     Parameters
@@ -291,6 +291,10 @@ def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spect
     flash_power
         ``--flash-power``: every LED at full drive gives at least this many times the ambient's
         mean camera signal (:meth:`SimulatedCamera.default`); None is its default, 1.
+    booth_port
+        ``--booth-port``: drive the booth at this port (``msflash booth-emulator`` on a pty, or a
+        real booth) instead of an emulator in this process (:mod:`acquisition.external_booth`; host
+        pacing only, :attr:`Rig.emulator` None).
 
     Raises
     ------
@@ -315,6 +319,11 @@ def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spect
         world = SimulatedCamera.default(scene=scene_spec, ambient=ambient_spd, cfa=cfa, seed=seed,  # type: ignore[arg-type]
                                         camera=responsivities, led_spectra=leds, **power)
         closers.append(world.close)
+        if booth_port is not None:
+            booth = open_external_booth(booth_port, world.led_spectra, log_serial, closers)
+            world.led_levels_source = levels_reported_by(booth)
+            return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient,
+                       closers)
         emulator, booth = _open_emulated_booth(world.led_spectra, log_serial, closers)
 
         # Exposure-time coupling: the camera renders with what the emulator's LEDs are doing. The
@@ -778,6 +787,8 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
             raise RigOpenError(
                 f"booth {booth_port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the LED "
                 f"spectra have {leds.count} ({', '.join(leds.names)}); expected one spectrum per channel")
+        for note in reset_leftovers(booth):  # a killed run's LEDs and raised watchdog
+            log.warning("%s", note)
     except Exception as err:  # noqa: BLE001 - reported with the camera's failure, if any
         message = str(err)
         failures.append(message if message.startswith("booth") else f"booth: {message}")

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import tty
 from collections.abc import Callable
 
 import pytest
+import serial
 
 from msflash.led_controller import (
     BoothError,
@@ -102,3 +105,24 @@ def test_commands_after_close_are_refused(booth: LedBooth) -> None:
     booth.close()
     with pytest.raises(BoothError, match="PING on a closed booth"):
         booth.ping()
+
+
+def test_a_hang_up_between_write_and_flush_is_a_lost_link() -> None:
+    """pyserial's flush (``tcdrain``) on a pty hung up right after the write raises ``termios.error``,
+    neither an ``OSError`` nor a ``SerialException``: it is the lost link, not a crash."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+
+    class HungUpAfterWrite(serial.Serial):
+        def write(self, data: bytes) -> int | None:
+            written = super().write(data)
+            os.close(master)  # the far end goes away between the write and its drain
+            return written
+
+    booth = LedBooth(HungUpAfterWrite(os.ttyname(slave), timeout=0.02), timeout_s=0.2)
+    try:
+        with pytest.raises(BoothError, match="serial link lost during PING"):
+            booth.ping()
+    finally:
+        booth.close()
+        os.close(slave)
