@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from acquisition.camera import CameraInfo, RawFrame
-from acquisition.cli_common import UsageError
+from acquisition.cli_common import UsageError, progress
 from acquisition.errors import RigOpenError
 from acquisition.plan import CapturePlan
 from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
@@ -623,6 +623,8 @@ def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | No
         raise UsageError(str(err)) from err
     except Exception as err:  # CalibrationError's base is the calibration package's choice
         raise UsageError(str(err)) from err
+    for note in found.notes:  # negative noise clipped on reading
+        progress(note)
     leds = found.led_spectra.to_unit("energy") if found.led_spectra is not None else None
     camera = found.camera_responsivities.to_unit("energy") if found.camera_responsivities is not None else None
     return leds, camera, found.id
