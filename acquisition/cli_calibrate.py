@@ -103,9 +103,8 @@ def _measured_leds(args: argparse.Namespace) -> tuple[Spectra, list, dict]:
         "warnings": [w for c in characterisations for w in c.warnings],
         "clipped_negatives": spectra.metadata.get("clipped_negatives", []),
     }
-    for item in section["clipped_negatives"]:
-        progress(f"{item['source']}: {item['count']} negative value(s) down to {item['most_negative']:.3g} "
-                 f"(at {item['at_nm']:g} nm) clipped to 0 as noise (within −{item['tolerance']:.3g})")
+    for note in spectra.metadata.get("clipped_notes", []):
+        progress(note)
     return spectra, characterisations, section
 
 

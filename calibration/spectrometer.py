@@ -285,7 +285,8 @@ def measurement_to_spectra(
 
     Negative noise is clipped to 0 on each instrument grid before resampling (the one rule,
     :func:`processing.negative_values.clip_negative_noise`; a value beyond it is refused), so the
-    result is ≥ 0; what was clipped is in ``metadata["clipped_negatives"]`` (one dict per LED).
+    result is ≥ 0; what was clipped is in ``metadata["clipped_negatives"]`` (one dict per LED that had any) and
+    ``metadata["clipped_notes"]`` (one line each, for stderr).
 
     Parameters
     ----------
@@ -303,10 +304,12 @@ def measurement_to_spectra(
     unit = unit or measurements[0].unit
     columns = []
     clipped: list[dict] = []
+    notes: list[str] = []
     for measurement in measurements:
         values, report = _check_negatives(measurement.wavelengths_nm, measurement.values, measurement.name,
                                           measurement.source)
         clipped.extend({**item.as_dict(), "column": measurement.name, "source": measurement.source} for item in report)
+        notes.extend(item.note(measurement.source) for item in report)
         try:
             native = Spectra.from_samples(measurement.wavelengths_nm, values, (measurement.name,),
                                           kind="spd", unit=measurement.unit, source=measurement.source)
@@ -323,4 +326,4 @@ def measurement_to_spectra(
             )
         columns.append(column)
     return Spectra(grid, np.column_stack(columns), tuple(m.name for m in measurements), kind="spd", unit=unit,
-                   source=", ".join(m.source for m in measurements), metadata={"clipped_negatives": clipped})
+                   source=", ".join(m.source for m in measurements), metadata={"clipped_negatives": clipped, "clipped_notes": notes})

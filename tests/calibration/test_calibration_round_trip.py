@@ -103,7 +103,7 @@ def booth_exports(draw: st.DrawFn) -> dict:
         exports[f"led{int(peak)}"] = export_text(wavelengths, values, style)
     dark = export_text(wavelengths, baseline + rng.normal(0.0, noise * scale, wavelengths.size), style) \
         if separate_dark else None
-    return {"exports": exports, "dark": dark}
+    return {"exports": exports, "dark": dark, "unit": draw(st.sampled_from(["energy", "photons"]))}
 
 
 @settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -120,7 +120,7 @@ def test_what_calibrate_writes_every_calibration_reader_accepts(booth: dict, tmp
         dark = ["--dark", str(work / "dark.txt")]
     cal = str(work / "cal")
 
-    status, out, err = run(["calibrate", "leds", *files, *dark, "--out", cal, "--json"])
+    status, out, err = run(["calibrate", "leds", *files, *dark, "--unit", booth["unit"], "--out", cal, "--json"])
     assert status == 0, err
     payload = json.loads(out)
     written = load_calibration(cal)
@@ -129,8 +129,9 @@ def test_what_calibrate_writes_every_calibration_reader_accepts(booth: dict, tmp
     for item in payload["clipped_negatives"]:  # what was clipped is reported, per LED, as noise
         assert item["count"] > 0 and -item["tolerance"] <= item["most_negative"] < 0
     assert payload["clipped_negatives"] == written.leds["clipped_negatives"]
-    # The exports carry negatives (about half of the tails): the report must show them.
+    # The exports carry negatives (about half of the tails): the report must show them, on stderr too.
     assert len(payload["clipped_negatives"]) == len(LED_PEAKS_NM)
+    assert err.count("clipped to 0 as noise") == len(LED_PEAKS_NM)
 
     status, _, err = run(["calibrate", "camera", "--simulate", "--method", "smoothness", "--out", cal, "--json"])
     assert status == 0, err
