@@ -27,12 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition.cli_common import UsageError, progress
-from processing import datasets, lights
-from processing.errors import SpectralDataError
-from processing.negative_values import clip_negative_noise
-from processing.spectra import DEFAULT_GRID, SpectralKind, Spectra, WavelengthGrid
-from processing.user_files import shown_path
+from msflash.acquisition.app.cli_common import UsageError, progress
+from msflash.processing import datasets, lights
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.negative_values import clip_negative_noise
+from msflash.processing.spectra import DEFAULT_GRID, SpectralKind, Spectra, WavelengthGrid
+from msflash.processing.user_files import shown_path
 
 SIM_SCENES = ("chart110", "macbeth", "white")
 """Scene names of the sim rig (a reflectance CSV is the other choice)."""

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from processing.errors import SpectralDataError
+from msflash.processing.errors import SpectralDataError
 
 PEAK_FRACTION = 0.05
 """Negative values down to this fraction of the column's peak are noise."""

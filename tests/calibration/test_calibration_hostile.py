@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from acquisition import cli
+from msflash.acquisition.app import cli
 
 SEQUENCE = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
 BASE = {"format": "msflash-calibration", "version": 1, "id": "cal-x", "dark": {"black_level": [64.0, 64.0, 64.0]}}

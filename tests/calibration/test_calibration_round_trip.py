@@ -22,16 +22,16 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from acquisition import cli
-from acquisition.sequence_format import (
+from msflash.acquisition.app import cli
+from msflash.acquisition.sequence.format import (
     SequenceCamera,
     SequenceLed,
     SequenceWriter,
 )
-from calibration.files import load_calibration
-from processing import datasets
-from processing.negative_values import PEAK_FRACTION
-from processing.spectra import DEFAULT_GRID
+from msflash.calibration.files import load_calibration
+from msflash.processing import datasets
+from msflash.processing.negative_values import PEAK_FRACTION
+from msflash.processing.spectra import DEFAULT_GRID
 
 SEQUENCE = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
 LED_PEAKS_NM = (440.0, 480.0, 500.0, 520.0, 596.0, 636.0, 660.0)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing.errors import SpectralDataError
-from processing.negative_values import (
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.negative_values import (
     NOISE_SIGMAS,
     PEAK_FRACTION,
     clip_negative_noise,
