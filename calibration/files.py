@@ -7,12 +7,17 @@ Layout (format ``msflash-calibration``, version 1)::
                                     "models", "relative_power", "sources", "warnings"}
                          "camera": {"file": "camera.csv", "unit", "channels", "method", "validation"}
                          "dark":   {"black_level": [per channel], "read_noise_dn": [...], "cfa"}
-                         "linearity": {"slope_dn_per_us": [...], "max_relative_deviation",
-                                       "saturation_level", "linear_limit"}
+                         "linearity": {"slope_dn_per_exposure": [...], "max_relative_deviation",
+                                       "emva_nonlinearity", "saturation_level", "linear_limit_dn", …}
     leds.csv           wavelength_nm, one column per LED (full-drive spectra, true ratios)
     camera.csv         wavelength_nm, R, G, B (responsivities)
 
-Unknown keys are kept and written back; a newer ``version`` is refused. A sequence refers to a
+Unknown keys are kept and written back; a newer ``version`` is refused. The CSV tables hold
+values ≥ 0: negative noise is clipped on writing and on reading by the one rule of
+:mod:`processing.negative_values` (reported in the section's ``clipped_negatives`` when written,
+in :attr:`CalibrationSet.notes` when read), and a value beyond it is refused naming the file,
+column, wavelength and value. Hostile JSON (NaN, huge numbers, deep nesting, wrong types) is
+refused naming the file and field (:mod:`processing.json_input`). A sequence refers to a
 calibration with ``"calibration": {"id": …, "file": "<dir>"}`` (a path relative to the sequence
 directory or absolute). Each calibrate command updates the sections it measures and keeps the
 others, so ``leds``, ``camera`` and ``dark`` can be run one after another into one directory;
@@ -37,6 +42,8 @@ from msflash.calibration.errors import CalibrationError
 from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.datasets import load_spectra_csv
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.json_input import parse_json_document
+from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import Spectra
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
@@ -75,11 +82,13 @@ class CalibrationSet:
     """Linearity and saturation level."""
     extra: dict = field(default_factory=dict)
     """Unknown top-level keys, kept."""
+    notes: tuple[str, ...] = field(default=(), compare=False)
+    """What reading it changed (negative noise clipped to 0), one line each, for stderr."""
 
     def updated(self, **changes: Any) -> CalibrationSet:
         """A copy with some sections changed and a new id and time."""
         return replace(self, id=new_calibration_id(),
-                       created_utc=datetime.now(UTC).isoformat(timespec="seconds"), **changes)
+                       created_utc=datetime.now(UTC).isoformat(timespec="seconds"), notes=(), **changes)
 
 
 def _plain(value: Any) -> Any:
@@ -117,9 +126,37 @@ def _csv_text(spectra: Spectra, calibration_id: str, what: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _without_negative_noise(spectra: Spectra, what: str, section: dict) -> tuple[Spectra, dict]:
+    """``spectra`` with negative noise clipped (what :func:`load_calibration` reads back is what was written).
+
+    The clipped columns are added to the section's ``clipped_negatives``; a value beyond noise is
+    refused before anything is written.
+    """
+    try:
+        values, report = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, what)
+    except SpectralDataError as err:
+        raise CalibrationError(f"{err} (not written)") from None
+    if not report:
+        return spectra, section
+    clipped = [*(section.get("clipped_negatives") or []), *(item.as_dict() for item in report)]
+    return spectra.replace(values=values), {**section, "clipped_negatives": clipped}
+
+
 def save_calibration(calibration: CalibrationSet, directory: str | Path) -> Path:
-    """Write a calibration directory (created if needed); returns the ``calibration.json`` path."""
+    """Write a calibration directory (created if needed); returns the ``calibration.json`` path.
+
+    Spectra are written ≥ 0: negative noise is clipped by the rule every reader applies
+    (:func:`processing.negative_values.clip_negative_noise`) and recorded in the section's
+    ``clipped_negatives``; a value beyond noise raises :class:`CalibrationError` and nothing is written.
+    """
     directory = Path(directory)
+    leds, led_section = (_without_negative_noise(calibration.led_spectra, "LED spectra", calibration.leds)
+                         if calibration.led_spectra is not None else (None, calibration.leds))
+    camera, camera_section = (
+        _without_negative_noise(calibration.camera_responsivities, "camera responsivities", calibration.camera)
+        if calibration.camera_responsivities is not None else (None, calibration.camera))
+    calibration = replace(calibration, led_spectra=leds, leds=led_section, camera_responsivities=camera,
+                          camera=camera_section)
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -155,7 +192,7 @@ def _section(path: Path, document: dict, key: str) -> dict | None:
     return value
 
 
-def _spectra(path: Path, section: dict, key: str, kind: str, names_key: str) -> Spectra:
+def _spectra(path: Path, section: dict, key: str, kind: str, names_key: str) -> tuple[Spectra, tuple[str, ...]]:
     file_name = section.get("file")
     if not isinstance(file_name, str) or not file_name:
         raise CalibrationError(f"{path}: field '{key}.file' is {file_name!r}; expected a CSV file name")
@@ -173,20 +210,46 @@ def _spectra(path: Path, section: dict, key: str, kind: str, names_key: str) -> 
     except SpectralDataError as err:
         raise CalibrationError(f"{path}: field '{key}.file': {err}") from err
     names = section.get(names_key)
-    if names is not None and list(names) != list(spectra.names):
-        raise CalibrationError(f"{path}: field '{key}.{names_key}' is {names}; expected the columns of {table.name}: "
-                               f"{list(spectra.names)}")
-    if np.any(spectra.values < 0):
-        raise CalibrationError(f"{table}: negative values; expected {key} spectra ≥ 0")
-    return spectra
+    if names is not None and (not isinstance(names, list) or names != list(spectra.names)):
+        raise CalibrationError(f"{path}: field '{key}.{names_key}' is {_shown(names)}; expected the columns of "
+                               f"{table.name}: {list(spectra.names)}")
+    try:
+        values, report = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names,
+                                             shown_path(table))
+    except SpectralDataError as err:
+        raise CalibrationError(str(err)) from None
+    return spectra.replace(values=values), tuple(item.note(shown_path(table)) for item in report)
 
 
-def _number_list(path: Path, section: dict, key: str, field_name: str) -> None:
+def _shown(value: Any) -> str:
+    """A JSON value for a message: its repr, cut to one short line."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _number_list(path: Path, section: dict, key: str, field_name: str, *, minimum: float | None = None,
+                 sizes: tuple[int, int] = (0, 10_000)) -> None:
     value = section.get(field_name)
     if value is None:
         return
-    if not isinstance(value, list) or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
-        raise CalibrationError(f"{path}: field '{key}.{field_name}' is {value!r}; expected a list of numbers")
+    if not isinstance(value, list) or not all(_is_number(v) for v in value):
+        raise CalibrationError(f"{path}: field '{key}.{field_name}' is {_shown(value)}; expected a list of numbers")
+    if not sizes[0] <= len(value) <= sizes[1]:
+        raise CalibrationError(f"{path}: field '{key}.{field_name}' has {len(value)} values; expected "
+                               f"{sizes[0]}–{sizes[1]}")
+    if minimum is not None and any(v < minimum for v in value):
+        bad = next(v for v in value if v < minimum)
+        raise CalibrationError(f"{path}: field '{key}.{field_name}' holds {bad!r}; expected numbers ≥ {minimum:g}")
+
+
+def _optional_number(path: Path, section: dict, key: str, field_name: str) -> None:
+    value = section.get(field_name)
+    if value is not None and not _is_number(value):
+        raise CalibrationError(f"{path}: field '{key}.{field_name}' is {_shown(value)}; expected a number or null")
 
 
 def load_calibration(directory: str | Path) -> CalibrationSet:
@@ -205,10 +268,7 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
                                "calibration directory written by 'msflash calibrate'")
     text = read_user_text(path, f"a calibration's {CALIBRATION_FILE} (UTF-8 JSON) written by 'msflash calibrate'",
                           JSON_MAX_BYTES, CalibrationError)
-    try:
-        document = json.loads(text)
-    except json.JSONDecodeError as err:
-        raise CalibrationError(f"{path}:{err.lineno}: not valid JSON ({err.msg})") from err
+    document = parse_json_document(text, shown_path(path), CalibrationError)  # NaN, huge numbers, deep nesting named
     if not isinstance(document, dict):
         raise CalibrationError(f"{path}: top level is a {type(document).__name__}; expected an object")
     if document.get("format") != FORMAT:
@@ -223,23 +283,37 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
     if not isinstance(calibration_id, str) or not calibration_id:
         raise CalibrationError(f"{path}: field 'id' is {calibration_id!r}; expected a non-empty string")
     created = document.get("created_utc", "")
+    if not isinstance(created, str):
+        raise CalibrationError(f"{path}: field 'created_utc' is {_shown(created)}; expected an ISO 8601 time string")
     led_section = _section(path, document, "leds")
     camera_section = _section(path, document, "camera")
     dark = _section(path, document, "dark")
     linearity = _section(path, document, "linearity")
     led_spectra = camera = None
+    notes: tuple[str, ...] = ()
     if led_section is not None:
-        led_spectra = _spectra(path, led_section, "leds", "spd", "names")
-        for name in ("peaks_nm", "fwhm_nm", "relative_power"):
+        led_spectra, clipped = _spectra(path, led_section, "leds", "spd", "names")
+        notes += clipped
+        for name in ("peaks_nm", "fwhm_nm", "centroids_nm"):
             _number_list(path, led_section, "leds", name)
+        _number_list(path, led_section, "leds", "relative_power", minimum=0.0)
     if camera_section is not None:
-        camera = _spectra(path, camera_section, "camera", "responsivity", "channels")
+        camera, clipped = _spectra(path, camera_section, "camera", "responsivity", "channels")
+        notes += clipped
         if camera.count != 3:
             raise CalibrationError(f"{path}: field 'camera.file' holds {camera.count} channels; expected R, G, B")
     if dark is not None:
         if "black_level" not in dark:
             raise CalibrationError(f"{path}: field 'dark.black_level' is missing; expected one number per channel")
-        _number_list(path, dark, "dark", "black_level")
+        _number_list(path, dark, "dark", "black_level", sizes=(1, 4))
+        _number_list(path, dark, "dark", "read_noise_dn", minimum=0.0, sizes=(1, 4))
+        cfa = dark.get("cfa")
+        if cfa is not None and not isinstance(cfa, str):
+            raise CalibrationError(f"{path}: field 'dark.cfa' is {_shown(cfa)}; expected null or a Bayer layout name")
+    if linearity is not None:
+        _number_list(path, linearity, "linearity", "slope_dn_per_exposure", sizes=(1, 4))
+        for name in ("max_relative_deviation", "emva_nonlinearity", "saturation_level", "linear_limit_dn"):
+            _optional_number(path, linearity, "linearity", name)
     strip = ("file", "unit", "names", "channels")
     return CalibrationSet(
         id=calibration_id, created_utc=str(created),
@@ -248,7 +322,7 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
         camera_responsivities=camera.replace(source=f"calibration {calibration_id} ({camera.source})") if camera else None,
         camera={k: v for k, v in (camera_section or {}).items() if k not in strip},
         dark=dark, linearity=linearity,
-        extra={k: v for k, v in document.items() if k not in _KNOWN},
+        extra={k: v for k, v in document.items() if k not in _KNOWN}, notes=notes,
     )
 
 

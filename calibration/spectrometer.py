@@ -38,6 +38,7 @@ import numpy as np
 
 from msflash.calibration.errors import CalibrationError
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.negative_values import ClippedNegatives, clip_negative_noise
 from msflash.processing.spectra import Spectra, SpectralUnit, WavelengthGrid
 from msflash.processing.user_files import TEXT_EXPORT_MAX_BYTES, read_user_bytes, shown_path
 
@@ -46,9 +47,6 @@ _END_MARKERS = ("end", ">>>>>end")
 _SEPARATORS = re.compile(r"[,\t; ]+")
 _DECIMAL_COMMA_SEPARATORS = re.compile(r"[\t;]+")
 _DECIMAL_COMMA_NUMBER = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$|^[+-]?\d+(?:[eE][+-]?\d+)?$")
-NEGATIVE_TOLERANCE = 0.05
-"""Negative values down to this fraction of the peak are measurement noise (clipped to 0 later by
-the models); anything more negative is refused: a spectral power cannot be negative."""
 
 
 @dataclass(frozen=True)
@@ -121,7 +119,8 @@ def parse_spectrometer_text(
     ------
     CalibrationError
         Naming the file and line: no data, a non-numeric or ragged data line, wrong column
-        count, NaN/infinite values, non-increasing wavelengths, a negative power, no signal.
+        count, NaN/infinite values, non-increasing wavelengths, a value below the negative-noise
+        bound (:mod:`processing.negative_values`), no signal.
 
     Examples
     --------
@@ -205,22 +204,27 @@ def parse_spectrometer_text(
     peak = float(np.max(values))
     if peak <= 0:
         raise CalibrationError(f"{source}: no positive value in the value column; expected a measured emission")
-    too_negative = values < -NEGATIVE_TOLERANCE * peak
-    if np.any(too_negative):
-        k = int(np.argmax(too_negative))
-        raise CalibrationError(
-            f"{source}:{lines[k]}: value {values[k]:g} at {wavelengths[k]:g} nm is negative beyond noise "
-            f"(peak {peak:g}); expected spectral power ≥ 0 (was the dark subtracted twice?)"
-        )
     column_name = ""
     if header:
-        header_cells = _cells(header[-1])
+        # "Wavelength (nm)\tIrradiance": names may hold spaces when another separator is used.
+        header_cells = [c.strip() for c in re.split(r"[,\t;]", header[-1]) if c.strip()] \
+            if re.search(r"[,\t;]", header[-1]) else _cells(header[-1])
         if width is not None and len(header_cells) >= width:
             column_name = header_cells[column if column is not None else 1]
+    _check_negatives(wavelengths, values, column_name or "value", source, lines)
     return SpectrometerMeasurement(
         wavelengths, values, unit, source, name or Path(source).stem, tuple(header),
         {"column": column_name, "lines": tuple(lines)},
     )
+
+
+def _check_negatives(wavelengths_nm: np.ndarray, values: np.ndarray, column: str, source: str,
+                     lines: tuple[int, ...] | list[int] | None = None) -> tuple[np.ndarray, tuple[ClippedNegatives, ...]]:
+    """The values with negative noise clipped (:mod:`processing.negative_values`); beyond it, a CalibrationError."""
+    try:
+        return clip_negative_noise(wavelengths_nm, values, [column], source, lines)
+    except SpectralDataError as err:
+        raise CalibrationError(str(err)) from None
 
 
 def read_spectrometer_file(
@@ -264,8 +268,11 @@ def subtract_dark(measurement: SpectrometerMeasurement, dark: SpectrometerMeasur
             "expected the same instrument grid"
         )
     metadata = {**measurement.metadata, "dark": dark.source}
+    values = measurement.values - dark.values
+    _check_negatives(measurement.wavelengths_nm, values, measurement.metadata.get("column") or "value",
+                     f"{measurement.source} minus the dark {dark.source}")
     return SpectrometerMeasurement(
-        measurement.wavelengths_nm, measurement.values - dark.values, measurement.unit, measurement.source,
+        measurement.wavelengths_nm, values, measurement.unit, measurement.source,
         measurement.name, measurement.header, metadata,
     )
 
@@ -275,6 +282,11 @@ def measurement_to_spectra(
     unit: SpectralUnit | None = None,
 ) -> Spectra:
     """Measurements as one ``Spectra`` (one column each) on ``grid``, zero outside their range.
+
+    Negative noise is clipped to 0 on each instrument grid before resampling (the one rule,
+    :func:`processing.negative_values.clip_negative_noise`; a value beyond it is refused), so the
+    result is ≥ 0; what was clipped is in ``metadata["clipped_negatives"]`` (one dict per LED that had any) and
+    ``metadata["clipped_notes"]`` (one line each, for stderr).
 
     Parameters
     ----------
@@ -291,9 +303,15 @@ def measurement_to_spectra(
         raise CalibrationError("LED spectra: no measurement given; expected at least one spectrometer file")
     unit = unit or measurements[0].unit
     columns = []
+    clipped: list[dict] = []
+    notes: list[str] = []
     for measurement in measurements:
+        values, report = _check_negatives(measurement.wavelengths_nm, measurement.values, measurement.name,
+                                          measurement.source)
+        clipped.extend({**item.as_dict(), "column": measurement.name, "source": measurement.source} for item in report)
+        notes.extend(item.note(measurement.source) for item in report)
         try:
-            native = Spectra.from_samples(measurement.wavelengths_nm, measurement.values, (measurement.name,),
+            native = Spectra.from_samples(measurement.wavelengths_nm, values, (measurement.name,),
                                           kind="spd", unit=measurement.unit, source=measurement.source)
             column = native.to_unit(unit).resample(grid, outside="zero").values[:, 0]
         except SpectralDataError as err:
@@ -308,4 +326,4 @@ def measurement_to_spectra(
             )
         columns.append(column)
     return Spectra(grid, np.column_stack(columns), tuple(m.name for m in measurements), kind="spd", unit=unit,
-                   source=", ".join(m.source for m in measurements))
+                   source=", ".join(m.source for m in measurements), metadata={"clipped_negatives": clipped, "clipped_notes": notes})

@@ -87,6 +87,11 @@ _JIANG_LICENCE = "CC BY-NC-SA 4.0 (Jiang et al. 2013, © RIT); non-commercial; s
 
 
 # -- the CSV reader ---------------------------------------------------------------------------
+def _cut(cell: str) -> str:
+    """A cell quoted in a message: at most 40 characters (a 5000-digit number stays readable)."""
+    return cell if len(cell) <= 40 else f"{cell[:37]}... ({len(cell)} characters)"
+
+
 def load_spectra_csv(
     path: str | Path,
     kind: SpectralKind,
@@ -170,11 +175,11 @@ def load_spectra_csv(
                 value = float(cell)
             except ValueError as err:
                 raise SpectralDataError(
-                    f"{where}:{line_number}: column '{header[column]}' holds '{printable(cell)}'; expected a number"
+                    f"{where}:{line_number}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a number"
                 ) from err
             if not math.isfinite(value):
                 raise SpectralDataError(
-                    f"{where}:{line_number}: column '{header[column]}' holds '{printable(cell)}'; expected a finite number"
+                    f"{where}:{line_number}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a finite number"
                 )
             row.append(value)
         rows.append(row)

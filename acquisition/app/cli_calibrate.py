@@ -53,6 +53,14 @@ def _bad_input(handler: Callable[[argparse.Namespace], int]) -> Callable[[argpar
     return run
 
 
+def _existing(directory: str) -> CalibrationSet:
+    """The calibration in ``directory`` to update (or a new one); what reading it clipped on stderr."""
+    calibration = load_or_new(directory)
+    for note in calibration.notes:
+        progress(note)
+    return calibration
+
+
 def _plot_leds(path: Path, spectra, characterisations) -> None:
     import matplotlib
 
@@ -94,7 +102,10 @@ def _measured_leds(args: argparse.Namespace) -> tuple[Spectra, list, dict]:
         "relative_power_note": "ratios as measured by the spectrometer; measure them through the camera on a white "
                                "reference with --white SEQ when the probe moved between LEDs",
         "warnings": [w for c in characterisations for w in c.warnings],
+        "clipped_negatives": spectra.metadata.get("clipped_negatives", []),
     }
+    for note in spectra.metadata.get("clipped_notes", []):
+        progress(note)
     return spectra, characterisations, section
 
 
@@ -140,7 +151,7 @@ def _white_power(args: argparse.Namespace, sequence: Sequence, shapes: Spectra, 
 def _leds(args: argparse.Namespace) -> int:
     if not args.files and not args.white:
         raise UsageError("calibrate leds: expected spectrometer exports FILES…, --white SEQ, or both")
-    calibration = load_or_new(args.out)
+    calibration = _existing(args.out)
     white = read_sequence(args.white) if args.white else None
     characterisations: list = []
     if args.files:
@@ -164,7 +175,8 @@ def _leds(args: argparse.Namespace) -> int:
                "leds": [{"name": c.name, "peak_nm": c.peak_nm, "fwhm_nm": c.fwhm_nm, "model_residual": c.model_residual,
                          "saturated": c.saturated, "snr": c.snr} for c in characterisations],
                "relative_power": dict(zip(spectra.names, section["relative_power"], strict=True))
-               if section.get("relative_power") else None}
+               if section.get("relative_power") else None,
+               "clipped_negatives": section.get("clipped_negatives", [])}
     if args.json:
         print_json(payload)
     else:
@@ -213,7 +225,7 @@ def _camera_from_sequences(args: argparse.Namespace) -> int:
     estimate = result.estimate
     recorded = sequences[0].camera_responsivities()
     rmse = responsivity_rmse(estimate.responsivities, recorded.to_unit("photons")) if recorded is not None else None
-    calibration = load_or_new(args.out).updated(
+    calibration = _existing(args.out).updated(
         camera_responsivities=estimate.responsivities,
         camera={"method": estimate.method, "alphas": list(estimate.alphas), "shrinkages": list(estimate.shrinkages),
                 "relative_residual": list(estimate.relative_residual), "chart": args.chart,
@@ -256,7 +268,7 @@ def _camera(args: argparse.Namespace) -> int:
     estimate = estimate_responsivities(responses, chart, lights, args.method,
                                        prior if args.method != "smoothness" else None, std)
     rmse = responsivity_rmse(estimate.responsivities, truth)
-    calibration = load_or_new(args.out).updated(
+    calibration = _existing(args.out).updated(
         camera_responsivities=estimate.responsivities,
         camera={"method": estimate.method, "alphas": list(estimate.alphas), "shrinkages": list(estimate.shrinkages),
                 "relative_residual": list(estimate.relative_residual), "chart": args.chart,
@@ -279,7 +291,7 @@ def _dark(args: argparse.Namespace) -> int:
         raise UsageError(f"{sequence.path}: frames has no 'dark' frame; expected frames with role 'dark'")
     # Dark frames measure the black level, so the declared one is not held against them.
     result = measure_dark([sequence.load_frame(i, check_levels=False) for i in indices], sequence.camera.cfa)
-    calibration = load_or_new(args.out).updated(dark={**result.as_dict(), "cfa": sequence.camera.cfa,
+    calibration = _existing(args.out).updated(dark={**result.as_dict(), "cfa": sequence.camera.cfa,
                                                       "sequence": str(sequence.directory)})
     path = save_calibration(calibration, args.out)
     if args.json:
@@ -301,7 +313,7 @@ def _linearity(args: argparse.Namespace) -> int:
                          "expected one illumination at several exposures of a uniform target")
     if len(indices) < 3:
         raise UsageError(f"{sequence.path}: {len(indices)} lit frames; expected at least 3 exposures of a uniform target")
-    calibration = load_or_new(args.out)
+    calibration = _existing(args.out)
     black = calibration.dark["black_level"] if calibration.dark else sequence.camera.black_level
     frames = [sequence.load_frame(i) for i in indices]
     exposures = [sequence.frames[i].exposure_us * sequence.frames[i].gain for i in indices]

@@ -16,7 +16,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.errors import UsageError  # re-exported: every command raises it
+from msflash.acquisition.errors import UsageError as UsageError  # re-exported: every command raises it
+from msflash.acquisition.progress import progress as progress  # re-exported: every command reports with it
 
 
 def positive_int(text: str) -> int:
@@ -64,12 +65,6 @@ def print_json(payload: dict[str, Any]) -> None:
     """Print one JSON object on stdout (the ``--json`` contract of docs/architecture.md §7)."""
     sys.stdout.write(dumps_json(payload) + "\n")
     sys.stdout.flush()
-
-
-def progress(message: str) -> None:
-    """A progress or diagnostic line on stderr (stdout stays for data)."""
-    sys.stderr.write(f"msflash: {message}\n")
-    sys.stderr.flush()
 
 
 def output_directory(path: str | os.PathLike | None) -> Path | None:

@@ -28,9 +28,12 @@ from pathlib import Path
 import numpy as np
 
 from msflash.acquisition.errors import UsageError
+from msflash.acquisition.progress import progress
 from msflash.processing import datasets, lights
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import DEFAULT_GRID, SpectralKind, Spectra, WavelengthGrid
+from msflash.processing.user_files import shown_path
 
 SIM_SCENES = ("chart110", "macbeth", "white")
 """Scene names of the sim rig (a reflectance CSV is the other choice)."""
@@ -53,7 +56,8 @@ def is_file(spec: str) -> bool:
 
 def read_spectra_file(path: str | Path, kind: SpectralKind) -> Spectra:
     """A spectral table (energy units, reflectances unitless; :func:`processing.datasets.load_spectra_csv`)
-    on its own grid.
+    on its own grid; in a light or responsivity table, negative noise is clipped to 0 (a note on
+    stderr) and a value beyond it refused (:func:`processing.negative_values.clip_negative_noise`).
 
     Raises
     ------
@@ -61,9 +65,16 @@ def read_spectra_file(path: str | Path, kind: SpectralKind) -> Spectra:
         The file is missing, unreadable or malformed (the reader's message: file, line, column).
     """
     try:
-        return datasets.load_spectra_csv(path, kind=kind, unit="none" if kind == "reflectance" else "energy")
+        table = datasets.load_spectra_csv(path, kind=kind, unit="none" if kind == "reflectance" else "energy")
+        if kind == "reflectance":
+            return table
+        # Measured lights and responsivities: negative noise clipped, as every reader of measured spectra does.
+        values, clipped = clip_negative_noise(table.wavelengths_nm, table.values, table.names, shown_path(Path(path)))
     except (SpectralDataError, OSError) as err:
         raise UsageError(str(err)) from err
+    for item in clipped:
+        progress(item.note(shown_path(Path(path))))
+    return table.replace(values=values) if clipped else table
 
 
 def read_responsivity_file(path: str | Path) -> Spectra:

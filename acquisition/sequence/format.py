@@ -46,8 +46,8 @@ from msflash.acquisition.sequence.frame_digest import SHA256_PATTERN, FileDigest
 from msflash.acquisition.sequence.frame_integrity import check_frame_levels
 from msflash.acquisition.sequence.image_files import image_suffix, read_image, read_image_header, write_image_digest
 from msflash.calibration.file_modes import default_file_mode
-from msflash.calibration.spectrometer import NEGATIVE_TOLERANCE
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import Spectra, WavelengthGrid
 from msflash.processing.synthesis import linearise
 from msflash.processing.user_files import IMAGE_MAX_BYTES, JSON_MAX_BYTES, check_user_file, read_user_text, shown_path
@@ -430,25 +430,21 @@ def _number_list(file: Path, field_name: str, value: Any, length: int | None, wh
     return np.array(value, dtype=float)
 
 
-def _spectrum(file: Path, field_name: str, value: Any, size: int) -> np.ndarray:
+def _spectrum(file: Path, field_name: str, value: Any, wavelengths_nm: np.ndarray) -> np.ndarray:
     """A spectrum's values; negatives within measurement noise become 0, larger ones are refused.
 
     Measured spectra (dark-subtracted spectrometer readings of LEDs, monochromator sweeps of a
-    camera) carry small negative values in their tails. They are clipped as the spectrometer
-    reader clips them (:data:`calibration.spectrometer.NEGATIVE_TOLERANCE` of the peak); a value
-    below that is no noise and the sequence is refused.
+    camera) carry small negative values in their tails. They are clipped by the one rule every
+    reader of measured spectra applies (:func:`processing.negative_values.clip_negative_noise`);
+    a value below it is no noise and the sequence is refused.
     """
-    values = _number_list(file, field_name, value, size, "one per wavelength")
-    if np.any(values < 0):
-        too_negative = values < -NEGATIVE_TOLERANCE * max(float(values.max()), 0.0)
-        if np.any(too_negative):
-            i = int(np.argmax(too_negative))
-            raise RecordingError(
-                f"{file}: {field_name}[{i}] is {values[i]:g}; expected a non-negative value (or measurement noise down "
-                f"to {NEGATIVE_TOLERANCE:.0%} of the peak {max(float(values.max()), 0.0):g})"
-            )
-        values = np.maximum(values, 0.0)
-    return values
+    values = _number_list(file, field_name, value, wavelengths_nm.size, "one per wavelength")
+    try:
+        clipped, _ = clip_negative_noise(wavelengths_nm, values, [field_name], str(file),
+                                         place=lambda row, _column: f"{field_name}[{row}]")
+    except SpectralDataError as err:
+        raise RecordingError(str(err)) from None
+    return clipped
 
 
 def _load_json(path: Path) -> Any:
@@ -489,7 +485,7 @@ def _check_nesting(path: Path, document: Any) -> None:
             stack.extend((v, f"{where}[{i}]", depth + 1) for i, v in enumerate(value))
 
 
-def _parse_camera(file: Path, value: Any, size: int) -> SequenceCamera:
+def _parse_camera(file: Path, value: Any, wavelengths_nm: np.ndarray) -> SequenceCamera:
     camera = _Fields(file, "camera", value, _CAMERA_KEYS)
     model = camera.string("model")
     serial = camera.string("serial", optional=True)
@@ -513,12 +509,12 @@ def _parse_camera(file: Path, value: Any, size: int) -> SequenceCamera:
             camera.fail("camera.responsivity", f"lacks {', '.join(missing)}", "R, G and B spectra")
         # Channels beyond R, G, B are kept (and validated) rather than refused: unknown keys survive.
         responsivity = {
-            str(c): _spectrum(file, f"camera.responsivity.{c}", v, size) for c, v in raw.items()
+            str(c): _spectrum(file, f"camera.responsivity.{c}", v, wavelengths_nm) for c, v in raw.items()
         }
     return SequenceCamera(model, serial, pixel_format, cfa, black, white, responsivity, camera.extra)  # type: ignore[arg-type]
 
 
-def _parse_leds(file: Path, value: Any, size: int) -> tuple[SequenceLed, ...]:
+def _parse_leds(file: Path, value: Any, wavelengths_nm: np.ndarray) -> tuple[SequenceLed, ...]:
     if not isinstance(value, list):
         raise RecordingError(f"{file}: leds is {_json_type(value)}; expected a list of LED objects")
     leds = []
@@ -529,7 +525,7 @@ def _parse_leds(file: Path, value: Any, size: int) -> tuple[SequenceLed, ...]:
         if name in seen:
             led.fail(f"leds[{i}].name", f"{name!r} repeats leds[{seen[name]}].name", "unique LED names")
         seen[name] = i  # type: ignore[index]
-        spd = _spectrum(file, f"leds[{i}].spd", led.get("spd", "a list of numbers"), size)
+        spd = _spectrum(file, f"leds[{i}].spd", led.get("spd", "a list of numbers"), wavelengths_nm)
         leds.append(SequenceLed(name, spd, led.extra))  # type: ignore[arg-type]
     return tuple(leds)
 
@@ -624,8 +620,8 @@ def _parse_document(file: Path, directory: Path, document: Any, *, check_files: 
     except SpectralDataError as err:
         raise RecordingError(f"{file}: {err}") from err
     unit = top.string("spectral_unit", choices=SPECTRAL_UNITS)
-    camera = _parse_camera(file, top.get("camera", "an object"), grid.size)
-    leds = _parse_leds(file, top.get("leds", "a list of LED objects"), grid.size)
+    camera = _parse_camera(file, top.get("camera", "an object"), grid.wavelengths_nm)
+    leds = _parse_leds(file, top.get("leds", "a list of LED objects"), grid.wavelengths_nm)
     raw_frames = top.get("frames", "a list of frame objects")
     if not isinstance(raw_frames, list):
         top.fail("frames", f"is {_json_type(raw_frames)}", "a list of frame objects")

@@ -168,7 +168,7 @@ def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -
         calibration = load_calibration(directory)
     except CalibrationError as err:
         raise RecordingError(str(err)) from err
-    notes: list[str] = []
+    notes: list[str] = list(calibration.notes)  # negative noise clipped on reading
     reference = sequence.extra.get("calibration")
     recorded_id = reference.get("id") if isinstance(reference, dict) else None
     if recorded_id and recorded_id != calibration.id:

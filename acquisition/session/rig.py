@@ -54,6 +54,7 @@ import numpy as np
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
 from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
 from msflash.acquisition.session.external_booth import levels_reported_by, open_external_booth
+from msflash.acquisition.progress import progress
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
 from msflash.acquisition.devices.sim_world import read_responsivity_file, read_spectra_file, sim_ambient, sim_camera, sim_leds, sim_scene
@@ -631,6 +632,8 @@ def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | No
         raise UsageError(str(err)) from err
     except Exception as err:  # CalibrationError's base is the calibration package's choice
         raise UsageError(str(err)) from err
+    for note in found.notes:  # negative noise clipped on reading
+        progress(note)
     leds = found.led_spectra.to_unit("energy") if found.led_spectra is not None else None
     camera = found.camera_responsivities.to_unit("energy") if found.camera_responsivities is not None else None
     return leds, camera, found.id

@@ -134,7 +134,8 @@ class TestBadFiles:
             parse_spectrometer_text("nm,v\n400,1\n410,nan\n420,0\n", "nan.csv")
 
     def test_negative(self):
-        with pytest.raises(CalibrationError, match=r"neg\.csv:4: value -0\.5 .*expected spectral power ≥ 0"):
+        with pytest.raises(CalibrationError, match=r"neg\.csv:4: column 'v' at 420 nm is -0\.5; expected a non-negative value, "
+                                                      r"or measurement noise down to −0\.1 .*dark subtracted twice"):
             parse_spectrometer_text("nm,v\n400,1\n410,2\n420,-0.5\n", "neg.csv")
 
     def test_small_negative_noise_kept(self):

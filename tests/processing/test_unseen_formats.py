@@ -5,7 +5,7 @@
 - LED spectra and camera responsivities as measured (a spectrometer's dark-subtracted readings):
   small negative values in the tails. The reader refused any negative value, so a sequence with
   measured spectra could not be read at all; they are clipped now, as the spectrometer reader
-  clips them (down to 5 % of the peak), and a value beyond that is still refused.
+  clips them (down to 5 % of the peak or 5 noise σ, processing/negative_values.py), and a value beyond that is still refused.
 - Float frames (EXR, normalised to white 1): ``--out x.tiff`` wrote a 16-bit raw TIFF whose every
   sample was 0 or 1, with exit 0; refused now before any work.
 """
@@ -62,8 +62,8 @@ def test_a_negative_value_beyond_noise_is_refused_naming_the_tolerance(tmp_path:
     peak = max(document["leds"][2]["spd"])
     document["leds"][2]["spd"][4] = -0.06 * peak
     (rendered.directory / "sequence.json").write_text(json.dumps(document))
-    with pytest.raises(RecordingError, match=r"leds\[2\]\.spd\[4\] is -.*; expected a non-negative value \(or "
-                                             r"measurement noise down to 5% of the peak"):
+    with pytest.raises(RecordingError, match=r"leds\[2\]\.spd\[4\] is -.*; expected a non-negative value, or "
+                                             r"measurement noise down to −.* \(the larger of 5% of the peak"):
         read_sequence(rendered.directory)
 
 
