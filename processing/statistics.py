@@ -69,6 +69,10 @@ estimation time (docs/architecture.md §10)."""
 PRODUCT_COLUMNS = 4096
 """Columns per slice of the incremental moments' matrix–vector products (:func:`_row_products`):
 one thread each (OpenBLAS threads a product only above about 10⁵ elements)."""
+GRAM_SLICE_WORK = 1 << 18
+"""OpenBLAS threads a matrix product of m·n·k ≥ 2¹⁸ multiply–adds (65 536 × its multithreading threshold 4):
+the moment products (:func:`_grams`) run in slices of columns below it, each on the thread that calls
+it (docs/architecture.md §10, moment product slices)."""
 
 
 @dataclass(frozen=True)
@@ -560,6 +564,7 @@ class BlockRows:
         self.root_weights: np.ndarray | None = None
         self._ambient_saturated: np.ndarray | None = None
         self._moments: np.ndarray | None = None
+        self._batch_weights: np.ndarray | None = None  # batch mode: the weights, taken once the ambient row is in
         self._excluded: np.ndarray | None = None  # incremental mode: columns already left out
         self._excluded_differences: np.ndarray | None = None  # the same blocks' columns of the differences
         if incremental:
@@ -587,15 +592,18 @@ class BlockRows:
             # product's strided half cost more to copy than the product itself).
             row_sums = _block_row_sums(plane, self.factor)
             channels = self.plane_shape[2]
-            sums = _gathered(row_sums, self.factor, channels, gather_matrix)
+            _gathered_by_channel(row_sums, self.factor, channels, self.rows[row].reshape(self.block_shape))
             differences = _gathered(row_sums[::self.probe_stride], self.factor, channels, _difference_gather)
-            np.copyto(self.rows[row].reshape(self.block_shape), sums.transpose(0, 2, 1))
             np.copyto(self.differences[row].reshape(self.difference_shape), differences)
         # One contiguous max per frame finds the frames that saturate at all; only those build masks.
         saturated = saturated_blocks(plane, self.factor, self.white_level) \
             if _may_saturate(plane, self.white_level) else None
         if row == self.n_led_frames:
             self._ambient_saturated = saturated
+            if self._moments is None and self.weighting:
+                # Batch mode: the weights depend on the ambient row alone, so the thread that added it
+                # takes them while others still add LED frames (off the serial path of statistics()).
+                self._batch_weights = self._sample_weights()
         if self._moments is not None and self.weighting:
             if row == self.n_led_frames:
                 self._weigh_filled()  # the ambient frame sets the weights: weigh it and any row in before it
@@ -731,7 +739,7 @@ class BlockRows:
         weights = probe_weights = None
         if self.weighting and self._moments is None:
             # Batch mode: the weights enter each chunk's product (incremental mode weighs rows as frames come).
-            weights = self._sample_weights()
+            weights = self._sample_weights() if self._batch_weights is None else self._batch_weights
             probe_weights = self._at_probe(weights)
         if self._moments is not None:
             moments = self._moments  # incremental: saturated blocks were left out as they came (_drop)
@@ -747,19 +755,24 @@ class BlockRows:
             chunk = chunk_pixels * self.block_shape[1]
             masked = invalid is not None and invalid.any()
 
-            def moments_of(values: np.ndarray, columns: np.ndarray | None, column_weights: np.ndarray | None) -> np.ndarray:
+            def masked_part(values: np.ndarray, columns: np.ndarray | None,
+                            column_weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
                 if columns is not None:
                     if column_weights is not None:  # weighted: left-out columns weigh 0, no copy of the rows
                         column_weights = np.where(columns, 0.0, column_weights)
                     else:
                         values = values.copy()
                         values[:, columns] = 0.0
-                return _gram(values, chunk, workers, column_weights)
+                return values, column_weights
 
-            moments = moments_of(rows, self._columns(invalid) if masked else None, weights)
+            parts = [masked_part(rows, self._columns(invalid) if masked else None, weights)]
+            if self.differences is not None:
+                parts.append(masked_part(self.differences, self._difference_columns(invalid) if masked else None,
+                                         probe_weights))
+            # The rows' and the probe's moments in one map: the probe's single chunk shares the threads.
+            moments, *probed = _grams(parts, chunk, workers)
+            noise = probed[0] if probed else None
             excluded_columns = int(np.count_nonzero(invalid)) * channels if masked else 0
-            noise = None if self.differences is None else \
-                moments_of(self.differences, self._difference_columns(invalid) if masked else None, probe_weights)
             scale = self._probe_scale(int(np.count_nonzero(invalid)) if masked else 0,
                                       int(np.count_nonzero(invalid[::self.probe_stride])) if masked else 0)
         if noise is not None:
@@ -885,7 +898,9 @@ def fit_noise_line(probed_levels: np.ndarray, probe: np.ndarray) -> NoiseLine:
     if n < 3 or not np.isfinite(y.sum()):
         return UNIFORM_NOISE
     # The normal equations of y ≈ gain · x + read, from five sums.
-    sx, sy, sxx, sxy = float(x.sum()), float(y.sum()), float(x @ x), float(x @ y)
+    # einsum's own loop, not OpenBLAS's dot (threaded above 10 000 elements: see GRAM_SLICE_WORK).
+    sx, sy = float(x.sum()), float(y.sum())
+    sxx, sxy = float(np.einsum("i,i->", x, x)), float(np.einsum("i,i->", x, y))
     determinant = n * sxx - sx * sx
     if not determinant > 0:
         return UNIFORM_NOISE
@@ -1074,33 +1089,70 @@ def _row_products(rows: np.ndarray, row: int) -> np.ndarray:
 
 def _block_sums_into(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
     """Write the block sums of an (H, W, C) plane into ``out`` (H/f, C, W/f), float64 (moment-row order)."""
-    np.copyto(out, block_sums(plane, factor).transpose(0, 2, 1))
+    _gathered_by_channel(_block_row_sums(plane, factor), factor, plane.shape[2], out)
+
+
+def _gathered_by_channel(row_sums: np.ndarray, factor: int, channels: int, out: np.ndarray) -> None:
+    """Block sums from block rows' sums (:func:`_block_row_sums`) into ``out`` (H/f, C, W/f): moment-row order.
+
+    Per block row, the transposed gather matrix times the transposed row groups gives the channels as
+    rows directly — one batched product instead of a product and a transposing copy (exact as
+    :func:`_gathered`: 0/1 weights, integer sums below 2²⁴ in float32).
+    """
+    height, width = row_sums.shape[0], row_sums.shape[1] // (factor * channels)
+    gather = gather_matrix(factor, channels, row_sums.dtype.type)
+    groups = row_sums.reshape(height, width, factor * channels).transpose(0, 2, 1)
+    if out.dtype == row_sums.dtype:
+        np.matmul(gather.T, groups, out=out)
+    else:
+        np.copyto(out, np.matmul(gather.T, groups))
+
+
+def gram_slice_columns(n_rows: int) -> int:
+    """Columns per slice of an ``n_rows``-row moment product: a power of two, m·n·k below :data:`GRAM_SLICE_WORK`.
+
+    Examples
+    --------
+    >>> gram_slice_columns(9), gram_slice_columns(18)
+    (2048, 512)
+    """
+    return max(64, 1 << int(math.log2(max(GRAM_SLICE_WORK // max(n_rows * n_rows, 1), 1))))
 
 
 def _gram(rows: np.ndarray, chunk: int, workers: int = 1, weights: np.ndarray | None = None) -> np.ndarray:
-    """``rows @ rows.T`` (with ``weights``, ``rows @ diag(weights) @ rows.T``) in float64, accumulated over
-    column chunks (``workers`` threads share them); each chunk is weighted while it is in cache.
+    """``rows @ rows.T`` (with ``weights``, ``rows @ diag(weights) @ rows.T``) in float64 (:func:`_grams`)."""
+    return _grams([(rows, weights)], chunk, workers)[0]
+
+
+def _grams(parts: Sequence[tuple[np.ndarray, np.ndarray | None]], chunk: int, workers: int = 1) -> list[np.ndarray]:
+    """:func:`_gram` of several ``(rows, weights)`` at once, accumulated over column chunks; ``workers``
+    threads share the chunks of all of them (one map: a part with a single chunk does not run alone after
+    the others). Each chunk is weighted while it is in cache.
 
     The chunks' products are added in chunk order whatever the number of workers, so the result
     does not depend on it.
     """
     chunk = max(chunk, 1)
 
-    def product(start: int) -> np.ndarray:
+    def product(task: tuple[int, int]) -> np.ndarray:
+        rows, weights = parts[task[0]]
+        start = task[1]
         block = rows[:, start:start + chunk]
-        if weights is None:
-            return block @ block.T
-        # Weighted in slices of PRODUCT_COLUMNS, so that each weighted copy is still in cache for its product.
+        # In slices below OpenBLAS's threading threshold (GRAM_SLICE_WORK): its threads, woken for every
+        # product while our workers and the capture's threads hold the two cores, cost more than the
+        # products; a weighted slice is still in cache for its product.
+        step = gram_slice_columns(rows.shape[0])
         result = np.zeros((rows.shape[0], rows.shape[0]))
-        column_weights = weights[start:start + chunk]
-        for offset in range(0, block.shape[1], PRODUCT_COLUMNS):
-            part = block[:, offset:offset + PRODUCT_COLUMNS]
-            result += (part * column_weights[offset:offset + PRODUCT_COLUMNS]) @ part.T
+        column_weights = None if weights is None else weights[start:start + chunk]
+        for offset in range(0, block.shape[1], step):
+            part = block[:, offset:offset + step]
+            weighted = part if column_weights is None else part * column_weights[offset:offset + step]
+            result += weighted @ part.T
         return result
 
-    starts = range(0, rows.shape[1], chunk)
-    products = thread_pool(workers).map(product, starts) if workers > 1 and len(starts) > 1 else map(product, starts)
-    moments = np.zeros((rows.shape[0], rows.shape[0]))
-    for part in products:
-        moments += part
+    tasks = [(index, start) for index, (rows, _) in enumerate(parts) for start in range(0, rows.shape[1], chunk)]
+    products = thread_pool(workers).map(product, tasks) if workers > 1 and len(tasks) > 1 else map(product, tasks)
+    moments = [np.zeros((rows.shape[0], rows.shape[0])) for rows, _ in parts]
+    for (index, _), part in zip(tasks, products):
+        moments[index] += part
     return moments
