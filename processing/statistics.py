@@ -69,6 +69,9 @@ estimation time (docs/architecture.md §10)."""
 PRODUCT_COLUMNS = 4096
 """Columns per slice of the incremental moments' matrix–vector products (:func:`_row_products`):
 one thread each (OpenBLAS threads a product only above about 10⁵ elements)."""
+ROW_SUM_BAND_BYTES = 1 << 18
+"""Raw bytes per band of the block rows' sums (:func:`_block_row_sums_and_peak`): a band stays in a core's
+cache for its saturation max."""
 GRAM_SLICE_WORK = 1 << 18
 """OpenBLAS threads a matrix product of m·n·k ≥ 2¹⁸ multiply–adds (65 536 × its multithreading threshold 4):
 the moment products (:func:`_grams`) run in slices of columns below it, each on the thread that calls
@@ -587,17 +590,17 @@ class BlockRows:
             self._floating = True  # only ever set: safe when worker threads add frames
         if self.differences is None:
             _block_sums_into(plane, self.factor, self.rows[row].reshape(self.block_shape))
+            may_saturate = _may_saturate(plane, self.white_level)
         else:
             # Both from one pass of row sums, each product into its own contiguous array (a fused
             # product's strided half cost more to copy than the product itself).
-            row_sums = _block_row_sums(plane, self.factor)
+            row_sums, may_saturate = _block_row_sums_and_peak(plane, self.factor, self.white_level)
             channels = self.plane_shape[2]
             _gathered_by_channel(row_sums, self.factor, channels, self.rows[row].reshape(self.block_shape))
             differences = _gathered(row_sums[::self.probe_stride], self.factor, channels, _difference_gather)
             np.copyto(self.differences[row].reshape(self.difference_shape), differences)
-        # One contiguous max per frame finds the frames that saturate at all; only those build masks.
-        saturated = saturated_blocks(plane, self.factor, self.white_level) \
-            if _may_saturate(plane, self.white_level) else None
+        # One max per frame finds the frames that saturate at all; only those build masks.
+        saturated = saturated_blocks(plane, self.factor, self.white_level) if may_saturate else None
         if row == self.n_led_frames:
             self._ambient_saturated = saturated
             if self._moments is None and self.weighting:
@@ -1014,6 +1017,27 @@ def _block_row_sums(plane: np.ndarray, factor: int) -> np.ndarray:
     sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
     cropped = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
     return cropped.sum(axis=1, dtype=sum_type)
+
+
+def _block_row_sums_and_peak(plane: np.ndarray, factor: int, white: float) -> tuple[np.ndarray, bool]:
+    """:func:`_block_row_sums`, and whether any sample of the blocks reaches ``white`` (as :func:`_may_saturate`).
+
+    Taken in bands of block rows of about :data:`ROW_SUM_BAND_BYTES`: each band's max reads it while the
+    sums have just brought it into cache, where a separate max of the whole frame reads it from memory again.
+    """
+    height, width, channels = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
+    sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
+    cropped = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
+    if np.issubdtype(plane.dtype, np.integer) and np.iinfo(plane.dtype).max < white:
+        return cropped.sum(axis=1, dtype=sum_type), False  # the type cannot reach the white level
+    sums = np.empty((height, cropped.shape[2]), dtype=sum_type)
+    band = max(1, ROW_SUM_BAND_BYTES // max(cropped[0].nbytes, 1))
+    peak = False
+    for start in range(0, height, band):
+        part = cropped[start:start + band]
+        np.add.reduce(part, axis=1, dtype=sum_type, out=sums[start:start + band])
+        peak = peak or bool(part.max() >= white)
+    return sums, peak
 
 
 def _gathered(row_sums: np.ndarray, factor: int, channels: int, matrix) -> np.ndarray:
