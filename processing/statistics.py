@@ -72,10 +72,6 @@ one thread each (OpenBLAS threads a product only above about 10⁵ elements)."""
 ROW_SUM_BAND_BYTES = 1 << 18
 """Raw bytes per band of the block rows' sums (:func:`_block_row_sums_and_peak`): a band stays in a core's
 cache for its saturation max."""
-GRAM_SLICE_WORK = 1 << 18
-"""OpenBLAS threads a matrix product of m·n·k ≥ 2¹⁸ multiply–adds (65 536 × its multithreading threshold 4):
-the moment products (:func:`_grams`) run in slices of columns below it, each on the thread that calls
-it (docs/architecture.md §10, moment product slices)."""
 
 
 @dataclass(frozen=True)
@@ -901,7 +897,8 @@ def fit_noise_line(probed_levels: np.ndarray, probe: np.ndarray) -> NoiseLine:
     if n < 3 or not np.isfinite(y.sum()):
         return UNIFORM_NOISE
     # The normal equations of y ≈ gain · x + read, from five sums.
-    # einsum's own loop, not OpenBLAS's dot (threaded above 10 000 elements: see GRAM_SLICE_WORK).
+    # einsum's own loop, not OpenBLAS's dot: that one splits vectors this long across its threads, and
+    # on a busy 2-core machine the calling thread spins waiting for a helper (docs/architecture.md §10).
     sx, sy = float(x.sum()), float(y.sum())
     sxx, sxy = float(np.einsum("i,i->", x, x)), float(np.einsum("i,i->", x, y))
     determinant = n * sxx - sx * sx
@@ -1132,17 +1129,6 @@ def _gathered_by_channel(row_sums: np.ndarray, factor: int, channels: int, out: 
         np.copyto(out, np.matmul(gather.T, groups))
 
 
-def gram_slice_columns(n_rows: int) -> int:
-    """Columns per slice of an ``n_rows``-row moment product: a power of two, m·n·k below :data:`GRAM_SLICE_WORK`.
-
-    Examples
-    --------
-    >>> gram_slice_columns(9), gram_slice_columns(18)
-    (2048, 512)
-    """
-    return max(64, 1 << int(math.log2(max(GRAM_SLICE_WORK // max(n_rows * n_rows, 1), 1))))
-
-
 def _gram(rows: np.ndarray, chunk: int, workers: int = 1, weights: np.ndarray | None = None) -> np.ndarray:
     """``rows @ rows.T`` (with ``weights``, ``rows @ diag(weights) @ rows.T``) in float64 (:func:`_grams`)."""
     return _grams([(rows, weights)], chunk, workers)[0]
@@ -1162,16 +1148,14 @@ def _grams(parts: Sequence[tuple[np.ndarray, np.ndarray | None]], chunk: int, wo
         rows, weights = parts[task[0]]
         start = task[1]
         block = rows[:, start:start + chunk]
-        # In slices below OpenBLAS's threading threshold (GRAM_SLICE_WORK): its threads, woken for every
-        # product while our workers and the capture's threads hold the two cores, cost more than the
-        # products; a weighted slice is still in cache for its product.
-        step = gram_slice_columns(rows.shape[0])
+        if weights is None:
+            return block @ block.T
+        # Weighted in slices of PRODUCT_COLUMNS, so that each weighted copy is still in cache for its product.
         result = np.zeros((rows.shape[0], rows.shape[0]))
-        column_weights = None if weights is None else weights[start:start + chunk]
-        for offset in range(0, block.shape[1], step):
-            part = block[:, offset:offset + step]
-            weighted = part if column_weights is None else part * column_weights[offset:offset + step]
-            result += weighted @ part.T
+        column_weights = weights[start:start + chunk]
+        for offset in range(0, block.shape[1], PRODUCT_COLUMNS):
+            part = block[:, offset:offset + PRODUCT_COLUMNS]
+            result += (part * column_weights[offset:offset + PRODUCT_COLUMNS]) @ part.T
         return result
 
     tasks = [(index, start) for index, (rows, _) in enumerate(parts) for start in range(0, rows.shape[1], chunk)]
