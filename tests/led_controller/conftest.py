@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from led_controller import LedBooth, ManualClock, PtyBoothServer, serve_on_pty
+from msflash.led_controller import LedBooth, ManualClock, PtyBoothServer, serve_on_pty
 
 TRANSCRIPTS = Path(__file__).resolve().parents[1] / "data" / "transcripts"
 

@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 import pytest
 
-from led_controller import (
+from msflash.led_controller import (
     BoothEmulator,
     BoothError,
     BoothNotFoundError,
@@ -17,7 +17,7 @@ from led_controller import (
     PtyBoothServer,
     serve_on_pty,
 )
-from led_controller.booth import levels_close
+from msflash.led_controller.booth import levels_close
 
 Wait = Callable[..., None]
 

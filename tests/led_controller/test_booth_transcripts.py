@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from led_controller import BoothError, BoothProtocolError, BoothTimeoutError, LedBooth
-from led_controller.booth import levels_close
-from led_controller.protocol import encode_frame, encode_request
+from msflash.led_controller import BoothError, BoothProtocolError, BoothTimeoutError, LedBooth
+from msflash.led_controller.booth import levels_close
+from msflash.led_controller.protocol import encode_frame, encode_request
 
 
 def test_camera_master_transcript(replay_port, transcripts_dir: Path) -> None:

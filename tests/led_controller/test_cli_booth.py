@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.cli_booth import booth_emulator, register
-from acquisition.cli_common import UsageError
-from led_controller import LedBooth
-from led_controller.bench import run_bench
+from msflash.acquisition.app.cli_booth import booth_emulator, register
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.led_controller import LedBooth
+from msflash.led_controller.bench import run_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -60,7 +60,7 @@ def test_booth_emulator_refuses_a_watchdog_its_firmware_would_refuse(watchdog: s
 
 
 def test_booth_emulator_process_prints_its_port_and_stops_on_ctrl_c() -> None:
-    code = "import argparse,sys; from acquisition.cli_booth import register; p=argparse.ArgumentParser(); " \
+    code = "import argparse,sys; from msflash.acquisition.app.cli_booth import register; p=argparse.ArgumentParser(); " \
            "register(p.add_subparsers()); a=p.parse_args(sys.argv[1:]); sys.exit(a.handler(a))"
     proc = subprocess.Popen(
         [sys.executable, "-c", code, "booth-emulator"], cwd=ROOT, stdout=subprocess.PIPE,
