@@ -69,6 +69,9 @@ estimation time (docs/architecture.md §10)."""
 PRODUCT_COLUMNS = 4096
 """Columns per slice of the incremental moments' matrix–vector products (:func:`_row_products`):
 one thread each (OpenBLAS threads a product only above about 10⁵ elements)."""
+ROW_SUM_BAND_BYTES = 1 << 18
+"""Raw bytes per band of the block rows' sums (:func:`_block_row_sums_and_peak`): a band stays in a core's
+cache for its saturation max."""
 
 
 @dataclass(frozen=True)
@@ -560,6 +563,7 @@ class BlockRows:
         self.root_weights: np.ndarray | None = None
         self._ambient_saturated: np.ndarray | None = None
         self._moments: np.ndarray | None = None
+        self._batch_weights: np.ndarray | None = None  # batch mode: the weights, taken once the ambient row is in
         self._excluded: np.ndarray | None = None  # incremental mode: columns already left out
         self._excluded_differences: np.ndarray | None = None  # the same blocks' columns of the differences
         if incremental:
@@ -582,20 +586,23 @@ class BlockRows:
             self._floating = True  # only ever set: safe when worker threads add frames
         if self.differences is None:
             _block_sums_into(plane, self.factor, self.rows[row].reshape(self.block_shape))
+            may_saturate = _may_saturate(plane, self.white_level)
         else:
             # Both from one pass of row sums, each product into its own contiguous array (a fused
             # product's strided half cost more to copy than the product itself).
-            row_sums = _block_row_sums(plane, self.factor)
+            row_sums, may_saturate = _block_row_sums_and_peak(plane, self.factor, self.white_level)
             channels = self.plane_shape[2]
-            sums = _gathered(row_sums, self.factor, channels, gather_matrix)
+            _gathered_by_channel(row_sums, self.factor, channels, self.rows[row].reshape(self.block_shape))
             differences = _gathered(row_sums[::self.probe_stride], self.factor, channels, _difference_gather)
-            np.copyto(self.rows[row].reshape(self.block_shape), sums.transpose(0, 2, 1))
             np.copyto(self.differences[row].reshape(self.difference_shape), differences)
-        # One contiguous max per frame finds the frames that saturate at all; only those build masks.
-        saturated = saturated_blocks(plane, self.factor, self.white_level) \
-            if _may_saturate(plane, self.white_level) else None
+        # One max per frame finds the frames that saturate at all; only those build masks.
+        saturated = saturated_blocks(plane, self.factor, self.white_level) if may_saturate else None
         if row == self.n_led_frames:
             self._ambient_saturated = saturated
+            if self._moments is None and self.weighting:
+                # Batch mode: the weights depend on the ambient row alone, so the thread that added it
+                # takes them while others still add LED frames (off the serial path of statistics()).
+                self._batch_weights = self._sample_weights()
         if self._moments is not None and self.weighting:
             if row == self.n_led_frames:
                 self._weigh_filled()  # the ambient frame sets the weights: weigh it and any row in before it
@@ -731,7 +738,7 @@ class BlockRows:
         weights = probe_weights = None
         if self.weighting and self._moments is None:
             # Batch mode: the weights enter each chunk's product (incremental mode weighs rows as frames come).
-            weights = self._sample_weights()
+            weights = self._sample_weights() if self._batch_weights is None else self._batch_weights
             probe_weights = self._at_probe(weights)
         if self._moments is not None:
             moments = self._moments  # incremental: saturated blocks were left out as they came (_drop)
@@ -747,19 +754,24 @@ class BlockRows:
             chunk = chunk_pixels * self.block_shape[1]
             masked = invalid is not None and invalid.any()
 
-            def moments_of(values: np.ndarray, columns: np.ndarray | None, column_weights: np.ndarray | None) -> np.ndarray:
+            def masked_part(values: np.ndarray, columns: np.ndarray | None,
+                            column_weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
                 if columns is not None:
                     if column_weights is not None:  # weighted: left-out columns weigh 0, no copy of the rows
                         column_weights = np.where(columns, 0.0, column_weights)
                     else:
                         values = values.copy()
                         values[:, columns] = 0.0
-                return _gram(values, chunk, workers, column_weights)
+                return values, column_weights
 
-            moments = moments_of(rows, self._columns(invalid) if masked else None, weights)
+            parts = [masked_part(rows, self._columns(invalid) if masked else None, weights)]
+            if self.differences is not None:
+                parts.append(masked_part(self.differences, self._difference_columns(invalid) if masked else None,
+                                         probe_weights))
+            # The rows' and the probe's moments in one map: the probe's single chunk shares the threads.
+            moments, *probed = _grams(parts, chunk, workers)
+            noise = probed[0] if probed else None
             excluded_columns = int(np.count_nonzero(invalid)) * channels if masked else 0
-            noise = None if self.differences is None else \
-                moments_of(self.differences, self._difference_columns(invalid) if masked else None, probe_weights)
             scale = self._probe_scale(int(np.count_nonzero(invalid)) if masked else 0,
                                       int(np.count_nonzero(invalid[::self.probe_stride])) if masked else 0)
         if noise is not None:
@@ -885,7 +897,10 @@ def fit_noise_line(probed_levels: np.ndarray, probe: np.ndarray) -> NoiseLine:
     if n < 3 or not np.isfinite(y.sum()):
         return UNIFORM_NOISE
     # The normal equations of y ≈ gain · x + read, from five sums.
-    sx, sy, sxx, sxy = float(x.sum()), float(y.sum()), float(x @ x), float(x @ y)
+    # einsum's own loop, not OpenBLAS's dot: that one splits vectors this long across its threads, and
+    # on a busy 2-core machine the calling thread spins waiting for a helper (docs/architecture.md §10).
+    sx, sy = float(x.sum()), float(y.sum())
+    sxx, sxy = float(np.einsum("i,i->", x, x)), float(np.einsum("i,i->", x, y))
     determinant = n * sxx - sx * sx
     if not determinant > 0:
         return UNIFORM_NOISE
@@ -1001,6 +1016,27 @@ def _block_row_sums(plane: np.ndarray, factor: int) -> np.ndarray:
     return cropped.sum(axis=1, dtype=sum_type)
 
 
+def _block_row_sums_and_peak(plane: np.ndarray, factor: int, white: float) -> tuple[np.ndarray, bool]:
+    """:func:`_block_row_sums`, and whether any sample of the blocks reaches ``white`` (as :func:`_may_saturate`).
+
+    Taken in bands of block rows of about :data:`ROW_SUM_BAND_BYTES`: each band's max reads it while the
+    sums have just brought it into cache, where a separate max of the whole frame reads it from memory again.
+    """
+    height, width, channels = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
+    sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
+    cropped = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
+    if np.issubdtype(plane.dtype, np.integer) and np.iinfo(plane.dtype).max < white:
+        return cropped.sum(axis=1, dtype=sum_type), False  # the type cannot reach the white level
+    sums = np.empty((height, cropped.shape[2]), dtype=sum_type)
+    band = max(1, ROW_SUM_BAND_BYTES // max(cropped[0].nbytes, 1))
+    peak = False
+    for start in range(0, height, band):
+        part = cropped[start:start + band]
+        np.add.reduce(part, axis=1, dtype=sum_type, out=sums[start:start + band])
+        peak = peak or bool(part.max() >= white)
+    return sums, peak
+
+
 def _gathered(row_sums: np.ndarray, factor: int, channels: int, matrix) -> np.ndarray:
     """Block rows' sums (:func:`_block_row_sums`) gathered per block by ``matrix(factor, channels, dtype)``.
 
@@ -1074,19 +1110,43 @@ def _row_products(rows: np.ndarray, row: int) -> np.ndarray:
 
 def _block_sums_into(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
     """Write the block sums of an (H, W, C) plane into ``out`` (H/f, C, W/f), float64 (moment-row order)."""
-    np.copyto(out, block_sums(plane, factor).transpose(0, 2, 1))
+    _gathered_by_channel(_block_row_sums(plane, factor), factor, plane.shape[2], out)
+
+
+def _gathered_by_channel(row_sums: np.ndarray, factor: int, channels: int, out: np.ndarray) -> None:
+    """Block sums from block rows' sums (:func:`_block_row_sums`) into ``out`` (H/f, C, W/f): moment-row order.
+
+    Per block row, the transposed gather matrix times the transposed row groups gives the channels as
+    rows directly — one batched product instead of a product and a transposing copy (exact as
+    :func:`_gathered`: 0/1 weights, integer sums below 2²⁴ in float32).
+    """
+    height, width = row_sums.shape[0], row_sums.shape[1] // (factor * channels)
+    gather = gather_matrix(factor, channels, row_sums.dtype.type)
+    groups = row_sums.reshape(height, width, factor * channels).transpose(0, 2, 1)
+    if out.dtype == row_sums.dtype:
+        np.matmul(gather.T, groups, out=out)
+    else:
+        np.copyto(out, np.matmul(gather.T, groups))
 
 
 def _gram(rows: np.ndarray, chunk: int, workers: int = 1, weights: np.ndarray | None = None) -> np.ndarray:
-    """``rows @ rows.T`` (with ``weights``, ``rows @ diag(weights) @ rows.T``) in float64, accumulated over
-    column chunks (``workers`` threads share them); each chunk is weighted while it is in cache.
+    """``rows @ rows.T`` (with ``weights``, ``rows @ diag(weights) @ rows.T``) in float64 (:func:`_grams`)."""
+    return _grams([(rows, weights)], chunk, workers)[0]
+
+
+def _grams(parts: Sequence[tuple[np.ndarray, np.ndarray | None]], chunk: int, workers: int = 1) -> list[np.ndarray]:
+    """:func:`_gram` of several ``(rows, weights)`` at once, accumulated over column chunks; ``workers``
+    threads share the chunks of all of them (one map: a part with a single chunk does not run alone after
+    the others). Each chunk is weighted while it is in cache.
 
     The chunks' products are added in chunk order whatever the number of workers, so the result
     does not depend on it.
     """
     chunk = max(chunk, 1)
 
-    def product(start: int) -> np.ndarray:
+    def product(task: tuple[int, int]) -> np.ndarray:
+        rows, weights = parts[task[0]]
+        start = task[1]
         block = rows[:, start:start + chunk]
         if weights is None:
             return block @ block.T
@@ -1098,9 +1158,9 @@ def _gram(rows: np.ndarray, chunk: int, workers: int = 1, weights: np.ndarray | 
             result += (part * column_weights[offset:offset + PRODUCT_COLUMNS]) @ part.T
         return result
 
-    starts = range(0, rows.shape[1], chunk)
-    products = thread_pool(workers).map(product, starts) if workers > 1 and len(starts) > 1 else map(product, starts)
-    moments = np.zeros((rows.shape[0], rows.shape[0]))
-    for part in products:
-        moments += part
+    tasks = [(index, start) for index, (rows, _) in enumerate(parts) for start in range(0, rows.shape[1], chunk)]
+    products = thread_pool(workers).map(product, tasks) if workers > 1 and len(tasks) > 1 else map(product, tasks)
+    moments = [np.zeros((rows.shape[0], rows.shape[0])) for rows, _ in parts]
+    for (index, _), part in zip(tasks, products):
+        moments[index] += part
     return moments

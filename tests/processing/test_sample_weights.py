@@ -15,6 +15,7 @@ import pytest
 from msflash.acquisition.session import analysis
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.processing.local import tile_statistics
+from msflash.processing import statistics
 from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, cfa_planes, inverse_variance_weights
 from tests.processing.unseen_sequences import Case, led_bound, render_case, rmse
 
@@ -100,3 +101,77 @@ def test_a_specular_strip_no_longer_dominates_the_estimate(tmp_path: Path, monke
             error = rmse(analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum), rendered.truth)
             ratios[weighting].append(error / led_bound(rendered))
     assert np.mean(ratios[True]) < np.mean(ratios[False]), ratios
+
+
+def _direct_weighted_statistics(ambient: np.ndarray, leds: list[np.ndarray], spec: FrameStackSpec, factor: int,
+                                stride: int) -> dict[str, object]:
+    """Eq. 4–6's weighted statistics computed plainly in float64, sample by sample (module notes of
+    processing.statistics): block sums by reshaping, the half differences, a least-squares photon-transfer
+    line, then every sum written out."""
+    frames = [ambient, *leds]
+    height, width = ambient.shape[0] // factor, ambient.shape[1] // factor
+    blocks = [f[:height * factor, :width * factor].astype(float).reshape(height, factor, width, factor, -1)
+              for f in frames]
+    sums = [b.sum(axis=(1, 3)) for b in blocks]
+    halves = [b[:, :, :, 0::2].sum(axis=(1, 3)) - b[:, :, :, 1::2].sum(axis=(1, 3)) for b in blocks]
+    saturated_in = [(b >= spec.white_level).any(axis=(1, 3, 4)) for b in blocks]
+    saturated = np.logical_or.reduce(saturated_in)
+    black = spec.black_level * factor * factor
+    # The line var = gain · level + read, fitted to the squared half differences of the probed blocks that the
+    # ambient frame does not saturate.
+    probed = ~saturated_in[0][::stride]
+    x = np.maximum(sums[0][::stride][probed] - black, 0.0).reshape(-1)
+    y = np.square(halves[0][::stride][probed]).reshape(-1)
+    (gain, read), *_ = np.linalg.lstsq(np.stack([x, np.ones_like(x)], axis=1), y, rcond=None)
+    assert gain > 0 and read > 0  # the plain fit, without the fallbacks
+    floor = gain * np.sort(x)[x.size // 20] + read
+    weights = 1.0 / np.maximum(gain * np.maximum(sums[0] - black, 0.0) + read, floor)
+    weights /= weights.mean()  # mean 1 over every sample, valid or not
+    weights[saturated] = 0.0
+    scales = np.asarray(spec.led_scales)
+    a = spec.ambient_scale * (sums[0] - black)
+    d = [s * (f - black) - a for s, f in zip(scales, sums[1:])]
+    e_a = spec.ambient_scale * halves[0][::stride]
+    e = [s * h[::stride] - e_a for s, h in zip(scales, halves[1:])]
+    probe_weights = weights[::stride]  # zero where any frame saturates
+    probe_scale = np.count_nonzero(~saturated) / np.count_nonzero(~saturated[::stride])
+    return {
+        "gram": np.array([[np.sum(weights * di * dj) for dj in d] for di in d]),
+        "cross": np.array([np.sum(weights * di * a) for di in d]),
+        "ambient_energy": np.sum(weights * a * a),
+        "ambient_sum": np.sum(weights * a),
+        "led_sums": np.array([np.sum(weights * di) for di in d]),
+        "n_samples": int(np.count_nonzero(~saturated)) * ambient.shape[2],
+        "noise_gram": probe_scale * np.array([[np.sum(probe_weights * ei * ej) for ej in e] for ei in e]),
+        "noise_cross": probe_scale * np.array([np.sum(probe_weights * ei * e_a) for ei in e]),
+        "noise_ambient_energy": probe_scale * np.sum(probe_weights * e_a * e_a),
+    }
+
+
+@pytest.mark.parametrize("probe_blocks", [16384, 100])
+@pytest.mark.parametrize("workers", [1, 2])
+def test_weighted_statistics_equal_a_direct_computation(monkeypatch: pytest.MonkeyPatch, probe_blocks: int,
+                                                        workers: int) -> None:
+    """The batch pass (threads, chunked moment products, the ambient frame's weights taken while LED frames
+    are added) and the frame-by-frame pass give the plainly written-out weighted statistics to rounding;
+    with few PROBE_BLOCKS the probe takes every second block row."""
+    monkeypatch.setattr(statistics, "PROBE_BLOCKS", probe_blocks)
+    ambient, leds, spec = _photon_stack(seed=3)
+    stride = statistics.probe_stride(ambient.shape[0] // 4, ambient.shape[1] // 4)
+    assert stride == (1 if probe_blocks > 1000 else 3)
+    expected = _direct_weighted_statistics(ambient, leds, spec, 4, stride)
+    batch = accumulate_statistics(ambient, leds, spec, bin_factor=4, weighting=True, workers=workers,
+                                  chunk_pixels=50)
+    rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level, incremental=True, black_level=spec.black_level,
+                     weighting=True)
+    for row in (1, 3, 0, 2):
+        rows.add(row, cfa_planes(ambient if row == 3 else leds[row], 1))
+    for ours in (batch, rows.statistics(spec)):
+        assert ours.weighted and ours.noise is not None
+        assert ours.n_samples == expected["n_samples"] < ours.n_total
+        for name in ("gram", "cross", "ambient_energy", "ambient_sum", "led_sums"):
+            np.testing.assert_allclose(getattr(ours, name), expected[name], rtol=1e-10, err_msg=name)
+        np.testing.assert_allclose(ours.noise.gram, expected["noise_gram"], rtol=1e-10)
+        np.testing.assert_allclose(ours.noise.cross, expected["noise_cross"], rtol=1e-10,
+                                   atol=1e-10 * float(np.abs(expected["noise_gram"]).max()))
+        np.testing.assert_allclose(ours.noise.ambient_energy, expected["noise_ambient_energy"], rtol=1e-10)
