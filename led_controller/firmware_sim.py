@@ -22,6 +22,8 @@ from types import TracebackType
 
 FIRMWARE_DIR = Path(__file__).resolve().parent / "firmware"
 ELF = FIRMWARE_DIR / "build" / "booth.elf"
+SMALL_ELF = FIRMWARE_DIR / "build" / "booth_small.elf"
+"""The test build: 2 channels (uv, ir), 12-bit drive, 4 steps (``make sim``)."""
 HARNESS = FIRMWARE_DIR / "build" / "booth_sim"
 _TOOLS = ("avr-gcc", "avr-size", "make", "gcc")
 _HEADERS = (Path("/usr/lib/avr/include/avr/io.h"), Path("/usr/include/simavr/parts/uart_pty.h"))
@@ -80,12 +82,15 @@ class SimulatedBooth:
     ----------
     elf : Path
         The firmware image (built by :func:`build`).
+    channels : int
+        The image's channel count (``CH=``).
     top : int
         PWM TOP of the image's drive resolution (``(1 << BITS) - 1``).
     """
 
-    def __init__(self, elf: Path = ELF, *, top: int = 0xFFFF) -> None:
+    def __init__(self, elf: Path = ELF, *, channels: int = 7, top: int = 0xFFFF) -> None:
         self._top = top
+        self._channels = channels
         self._process = subprocess.Popen(
             [str(HARNESS), str(elf)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL, text=True, bufsize=1,
@@ -114,7 +119,7 @@ class SimulatedBooth:
             if not words:
                 continue
             if words[0] == "pulse":
-                pulse = TriggerPulse(int(words[1]), int(words[2]), tuple(int(w) / self._top for w in words[3:]))
+                pulse = TriggerPulse(int(words[1]), int(words[2]), tuple(int(w) / self._top for w in words[3:3 + self._channels]))
                 with self._lock:
                     self._pulses.append(pulse)
             elif words[0] in ("ok", "error"):
@@ -137,7 +142,7 @@ class SimulatedBooth:
     def levels(self) -> tuple[float, ...]:
         """Get the LED levels now: each PWM channel's duty / TOP (0 when its pin is disconnected)."""
         words = self._ask("levels")
-        return tuple(int(w) / self._top for w in words[2:])
+        return tuple(int(w) / self._top for w in words[2:2 + self._channels])
 
     def now_us(self) -> int:
         """Simulated time in µs."""

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from led_controller import LedBooth, ManualClock, PtyBoothServer, serve_on_pty
-from led_controller.firmware_sim import ELF, SimulatedBooth, TriggerPulse, build, toolchain_missing
+from led_controller.firmware_sim import ELF, SMALL_ELF, SimulatedBooth, TriggerPulse, build, toolchain_missing
 
 TRANSCRIPTS = Path(__file__).resolve().parents[1] / "data" / "transcripts"
 
@@ -192,6 +192,16 @@ def firmware_image() -> Path:
         pytest.skip(reason)
     build()
     return ELF
+
+
+SMALL_TOP = (1 << 12) - 1
+"""PWM TOP of the small test image (12-bit drive)."""
+
+
+@pytest.fixture(scope="session")
+def small_image(firmware_image: Path) -> Path:
+    """The 2-channel, 12-bit, 4-step test image (built with ``firmware_image``)."""
+    return SMALL_ELF
 
 
 @pytest.fixture(params=["emulator", "firmware"])

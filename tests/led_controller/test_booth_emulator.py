@@ -24,7 +24,9 @@ from led_controller import (
 )
 from led_controller.booth import levels_close
 
-from .conftest import FarEnd
+from led_controller.firmware_sim import SimulatedBooth
+
+from .conftest import SMALL_TOP, FarEnd
 
 Wait = Callable[..., None]
 
@@ -37,14 +39,22 @@ def test_identify_reports_the_default_channels(far_booth: LedBooth) -> None:
     assert info.protocol == 1 and info.level_bits == 16
 
 
-def test_configurable_channels() -> None:
-    emulator = BoothEmulator(names=("uv", "ir"), peaks_nm=(365, 850), level_bits=12, max_steps=4)
-    with serve_on_pty(emulator) as server, LedBooth.open(server.port) as booth:
+@pytest.mark.parametrize("far", ["emulator", "firmware"])
+def test_configurable_channels(far: str, request: pytest.FixtureRequest) -> None:
+    """The firmware's channels, resolution and table size are build settings (its small test image)."""
+    if far == "emulator":
+        emulator = BoothEmulator(names=("uv", "ir"), peaks_nm=(365, 850), level_bits=12, max_steps=4)
+        far_end: PtyBoothServer | SimulatedBooth = serve_on_pty(emulator)
+        levels = lambda: emulator.levels  # noqa: E731
+    else:
+        sim = SimulatedBooth(request.getfixturevalue("small_image"), channels=2, top=SMALL_TOP)
+        far_end, levels = sim, lambda: sim.levels
+    with far_end, LedBooth.open(far_end.port) as booth:
         assert booth.info.names == ("uv", "ir") and booth.info.peaks_nm == (365.0, 850.0)
         assert booth.info.level_bits == 12 and booth.info.max_steps == 4
         booth.set_levels([1.0, 0.5])
         # 12-bit drive: 0.5 lands on the nearest lower 12-bit step.
-        assert emulator.levels[0] == 1.0 and abs(emulator.levels[1] - 0.5) < 1 / 4095
+        assert levels()[0] == 1.0 and abs(levels()[1] - 0.5) < 1 / 4095
         with pytest.raises(ValueError, match="expected 1..4"):
             booth.load_pattern([[0, 0]] * 5)
 
