@@ -212,7 +212,7 @@ def far_end(request: pytest.FixtureRequest, clock: ManualClock) -> Iterator[FarE
         pulses: list[TriggerPulse] = []
         emulator = server.emulator
         emulator.on_trigger_out = lambda count: pulses.append(
-            TriggerPulse(int(clock() * 1e6), None, emulator.levels))  # type: ignore[arg-type]
+            TriggerPulse(int(clock() * 1e6), None, emulator.levels))
         try:
             yield FarEnd("emulator", server.port, lambda: emulator.levels, emulator.exposure_active,
                          clock.advance, lambda: list(pulses))

@@ -11,7 +11,9 @@
 
 #define BOOTH_MAX_BODY 1024u
 #define BOOTH_MAX_LINE (BOOTH_MAX_BODY + 16u) /* a frame with its terminator */
-#define BOOTH_MAX_WORDS 12u                   /* PSET <step> <7 levels> NOW is 10 */
+/* Words after the command name kept for parsing: PSET <step> <levels> NOW is CH + 2; one more
+ * word only tells "too many" (the count is capped at BOOTH_MAX_WORDS + 1, never an expected count). */
+#define BOOTH_MAX_WORDS (BOOTH_CHANNELS + 3u)
 #define BOOTH_OUT_MAX 320u                    /* longest frame the booth sends */
 
 /* ---- hooks the board layer implements ------------------------------------------------ */
