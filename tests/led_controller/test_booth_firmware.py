@@ -13,13 +13,15 @@ from pathlib import Path
 
 import pytest
 import serial
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from led_controller import LedBooth, ManualClock, serve_on_pty
 from led_controller.emulator import BoothEmulator, firmware_crc
 from led_controller.firmware_sim import SimulatedBooth
 
 from .conftest import SMALL_TOP
-from led_controller.protocol import MAX_LINE, encode_request
+from led_controller.protocol import MAX_LINE, encode_levels, encode_request
 
 FIRMWARE = "msflash-avr-0.1"
 L7 = ["1234"] * 7
@@ -117,3 +119,32 @@ def test_the_pattern_table_holds_its_capacity_and_refuses_one_more(small_image: 
         replies = _exchange(sim.port, requests)
     assert [r.split(b"*")[0][8:] for r in replies] == [
         b"OK PADD 0", b"OK PADD 1", b"OK PADD 2", b"OK PADD 3", b"ERR PADD E_FULL pattern table full"]
+
+
+@pytest.fixture(scope="module")
+def firmware_link(firmware_image: Path) -> Iterator[tuple[SimulatedBooth, serial.Serial]]:
+    """One simulated booth for many examples, its watchdog off and its LEDs at 0.25."""
+    with SimulatedBooth(firmware_image) as sim, serial.Serial(sim.port, 115200, timeout=10.0, exclusive=True) as link:
+        for frame in (encode_request(1, "WDOG", 0), encode_request(2, "SET", *["4000"] * 7)):
+            link.write(frame)
+            assert link.readline().startswith(b"=0")
+        yield sim, link
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.floats(0.0, 1.0), min_size=7, max_size=7), st.data())
+def test_firmware_never_acts_on_a_damaged_set(firmware_link: tuple[SimulatedBooth, serial.Serial],
+                                              levels: list[float], data: st.DataObject) -> None:
+    """The emulator's property (test_fuzz.py) on the firmware: one flipped bit or dropped byte
+    anywhere in a SET frame is refused as a frame error and never changes the LEDs."""
+    sim, link = firmware_link
+    frame = encode_request(3, "SET", *encode_levels(levels, 7))[:-1]
+    index = data.draw(st.integers(0, len(frame) - 1), label="index")
+    if data.draw(st.booleans(), label="drop"):
+        damaged = frame[:index] + frame[index + 1:]
+    else:
+        damaged = frame[:index] + bytes([frame[index] ^ (1 << data.draw(st.integers(0, 7), label="bit"))]) + frame[index + 1:]
+    link.write(damaged + b"\n")
+    replies = [link.readline() for _ in range(damaged.count(b"\n") + 1)]
+    assert all(r.startswith(b"=00:") and b":ERR - E_" in r for r in replies), replies
+    assert sim.levels == (0x4000 / 0xFFFF,) * 7
