@@ -281,8 +281,10 @@ int main(int argc, char **argv)
     exposure_irq = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 0);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('A'), 0), trigger_out_hook, NULL);
 
-    /* Pace simulated time to the wall clock: simavr's own sleep callback usleeps every
-     * idle stretch and ran the firmware ~4x slower than real time. */
+    /* Keep simulated time from running ahead of the wall clock (the driver's timeouts are wall
+     * time); simavr's own raw sleep callback usleeps for every idle stretch whether or not the
+     * simulation is behind. In practice the simulation is behind: simavr steps the PWM timers
+     * nearly cycle by cycle (docs/booth-firmware.md, section 5). */
     clock_gettime(CLOCK_MONOTONIC, &wall_start);
     avr->sleep = pace_sleep;
 
