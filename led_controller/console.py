@@ -143,8 +143,8 @@ class BoothConsole:
         self._info = info
         leds = ", ".join(f"{n} ({p:g} nm)" for n, p in zip(info.names, info.peaks_nm))
         return [f"firmware {info.firmware}, protocol {info.protocol}; {info.channels} channels: {leds}",
-                f"drive {info.level_bits} bits (the wire carries 16; the booth keeps the top {info.level_bits}); "
-                f"pattern table of {info.max_steps} steps"]
+                (f"drive {info.level_bits} bits (the wire carries 16; the booth keeps the top {info.level_bits}); "
+                 f"pattern table of {info.max_steps} steps")]
 
     def _levels(self, args: list[str]) -> list[str]:
         levels = self._level_list(args)
@@ -192,8 +192,8 @@ class BoothConsole:
             raise ConsoleInputError(f"times {' '.join(args[1:])!r} are not whole microseconds") from None
         settle, pulse, period = (times + [1000, 100, 0][len(times):])[:3]
         self._booth.arm(mode, settle_us=settle, pulse_us=pulse, period_us=period)  # type: ignore[arg-type]
-        return [f"armed {mode}: settle {settle} µs, pulse {pulse} µs, period {period} µs; trigger count reset; "
-                "send start"]
+        return [(f"armed {mode}: settle {settle} µs, pulse {pulse} µs, period {period} µs; trigger count reset; "
+                 "send start")]
 
     def _start(self, args: list[str]) -> list[str]:
         if args:
@@ -219,8 +219,8 @@ class BoothConsole:
             raise ConsoleInputError("status takes no arguments")
         s = self._booth.status()
         watchdog = "off" if s.watchdog_s == 0 else f"{s.watchdog_s:g} s"
-        return [f"state {s.state}, mode {s.mode or '-'}, step {s.step} of {s.steps}, {s.trigger_count} triggers, "
-                f"watchdog {watchdog}, last error {s.last_error or '-'}, {s.bad_frames} unreadable frames",
+        return [(f"state {s.state}, mode {s.mode or '-'}, step {s.step} of {s.steps}, {s.trigger_count} triggers, "
+                 f"watchdog {watchdog}, last error {s.last_error or '-'}, {s.bad_frames} unreadable frames"),
                 f"LEDs: {self._describe(s.levels)}"]
 
     def _ping(self, args: list[str]) -> list[str]:

@@ -12,7 +12,14 @@ from pathlib import Path
 import pytest
 
 from led_controller import LedBooth, ManualClock, PtyBoothServer, serve_on_pty
-from led_controller.firmware_sim import ELF, SMALL_ELF, SimulatedBooth, TriggerPulse, build, toolchain_missing
+from led_controller.firmware_sim import (
+    ELF,
+    SMALL_ELF,
+    SimulatedBooth,
+    TriggerPulse,
+    build,
+    toolchain_missing,
+)
 
 TRANSCRIPTS = Path(__file__).resolve().parents[1] / "data" / "transcripts"
 

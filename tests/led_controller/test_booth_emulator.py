@@ -23,7 +23,6 @@ from led_controller import (
     serve_on_pty,
 )
 from led_controller.booth import levels_close
-
 from led_controller.firmware_sim import SimulatedBooth
 
 from .conftest import SMALL_TOP, FarEnd
@@ -45,7 +44,7 @@ def test_configurable_channels(far: str, request: pytest.FixtureRequest) -> None
     if far == "emulator":
         emulator = BoothEmulator(names=("uv", "ir"), peaks_nm=(365, 850), level_bits=12, max_steps=4)
         far_end: PtyBoothServer | SimulatedBooth = serve_on_pty(emulator)
-        levels = lambda: emulator.levels  # noqa: E731
+        levels = lambda: emulator.levels
     else:
         sim = SimulatedBooth(request.getfixturevalue("small_image"), channels=2, top=SMALL_TOP)
         far_end, levels = sim, lambda: sim.levels

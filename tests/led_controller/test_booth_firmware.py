@@ -19,9 +19,9 @@ from hypothesis import strategies as st
 from led_controller import LedBooth, ManualClock, serve_on_pty
 from led_controller.emulator import BoothEmulator, firmware_crc
 from led_controller.firmware_sim import SimulatedBooth
+from led_controller.protocol import MAX_LINE, encode_levels, encode_request
 
 from .conftest import SMALL_TOP
-from led_controller.protocol import MAX_LINE, encode_levels, encode_request
 
 FIRMWARE = "msflash-avr-0.1"
 L7 = ["1234"] * 7
