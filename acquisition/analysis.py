@@ -13,17 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition.errors import RecordingError
-from acquisition.sequence_format import Sequence
-from processing import datasets
-from processing.ambient import AmbientEstimate, estimate_ambient
-from processing.errors import SpectralDataError
-from processing.flash import FlashSolution, solve_complementary, solve_matching
-from processing.model_error import reference_for, with_model_error
-from processing.local import DEFAULT_TILES, LocalEstimate, estimate_local, synthesize_local, tile_statistics
-from processing.spectra import Spectra
-from processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
-from processing.synthesis import synthesize
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.format import Sequence
+from msflash.processing import datasets
+from msflash.processing.ambient import AmbientEstimate, estimate_ambient
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.flash import FlashSolution, solve_complementary, solve_matching
+from msflash.processing.model_error import reference_for, with_model_error
+from msflash.processing.local import DEFAULT_TILES, LocalEstimate, estimate_local, synthesize_local, tile_statistics
+from msflash.processing.spectra import Spectra
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing.synthesis import synthesize
 
 
 @dataclass(frozen=True)
@@ -123,8 +123,8 @@ def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -
     """
     from dataclasses import replace
 
-    from calibration.errors import CalibrationError
-    from calibration.files import load_calibration
+    from msflash.calibration.errors import CalibrationError
+    from msflash.calibration.files import load_calibration
 
     if directory is None:
         reference = sequence.extra.get("calibration")

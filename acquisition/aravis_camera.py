@@ -47,15 +47,15 @@ from typing import Any, Literal
 
 import numpy as np
 
-from acquisition.camera import CameraInfo, RawFrame
-from acquisition.errors import (
+from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.errors import (
     CameraDisconnectedError,
     CameraError,
     CameraNotFoundError,
     FrameLostError,
     FrameTimeoutError,
 )
-from acquisition.plan import CapturePlan
+from msflash.acquisition.plan import CapturePlan
 
 try:
     import gi
@@ -64,7 +64,7 @@ try:
     from gi.repository import Aravis, GLib  # noqa: E402
 except (ImportError, ValueError) as _err:  # ValueError: gi present but typelib Aravis-0.8 missing
     raise ImportError(
-        "acquisition.aravis_camera: the Aravis 0.8 GObject typelib is not available "
+        "msflash.acquisition.devices.aravis.camera: the Aravis 0.8 GObject typelib is not available "
         f"({_err}); expected PyGObject and the Debian package gir1.2-aravis-0.8 — run setup.sh"
     ) from _err
 

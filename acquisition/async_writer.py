@@ -40,9 +40,9 @@ from types import TracebackType
 
 import numpy as np
 
-from acquisition.errors import RecordingError, OutputWriteError
-from acquisition.image_io import image_suffix
-from acquisition.sequence_format import FRAME_ROLES, FRAMES_DIR, Sequence, SequenceFrame, SequenceWriter
+from msflash.acquisition.errors import RecordingError, OutputWriteError
+from msflash.acquisition.sequence.image_files import image_suffix
+from msflash.acquisition.sequence.format import FRAME_ROLES, FRAMES_DIR, Sequence, SequenceFrame, SequenceWriter
 
 log = logging.getLogger(__name__)
 

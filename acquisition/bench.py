@@ -29,16 +29,16 @@ from typing import Any
 
 import numpy as np
 
-from acquisition.analysis import DEFAULT_BIN_FACTOR, SAMPLE_WEIGHTING
-from processing import datasets, lights
-from processing.ambient import AmbientModel, estimate_ambient
-from processing.flash import FlashModel
-from processing.image_formation import SensorModel, chart_scene, exposure_for_peak, render_frame
-from processing.least_squares import minimise_quadratic, recording_problems
-from processing.model_error import light_reference, reference_for, with_model_error
-from processing.spectra import DEFAULT_GRID, Spectra
-from processing.statistics import DEFAULT_WORKERS, FrameStackSpec, accumulate_statistics
-from processing.synthesis import synthesize
+from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, SAMPLE_WEIGHTING
+from msflash.processing import datasets, lights
+from msflash.processing.ambient import AmbientModel, estimate_ambient
+from msflash.processing.flash import FlashModel
+from msflash.processing.image_formation import SensorModel, chart_scene, exposure_for_peak, render_frame
+from msflash.processing.least_squares import minimise_quadratic, recording_problems
+from msflash.processing.model_error import light_reference, reference_for, with_model_error
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
+from msflash.processing.statistics import DEFAULT_WORKERS, FrameStackSpec, accumulate_statistics
+from msflash.processing.synthesis import synthesize
 
 
 def _best_time(function: Callable[[], Any], repeats: int) -> float:
@@ -183,8 +183,8 @@ def prior_bench(frames: list[np.ndarray], spec: FrameStackSpec, leds: Spectra, c
                 repeats: int) -> dict[str, float]:
     """The light prior's figures (``msflash estimate --model prior|auto``): its channel-resolved statistics and
     estimate ÷ the copy, as ``estimate_over_copy``; ``auto``'s held-out comparison; the model's preparation."""
-    from processing.channel_statistics import accumulate_channel_statistics
-    from processing.light_prior import choose_model, prior_model
+    from msflash.processing.channel_statistics import accumulate_channel_statistics
+    from msflash.processing.light_prior import choose_model, prior_model
 
     def statistics() -> object:
         return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=DEFAULT_BIN_FACTOR)

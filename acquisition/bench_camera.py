@@ -62,8 +62,8 @@ from typing import Any
 
 import numpy as np
 
-from acquisition.errors import FrameLostError
-from acquisition.plan import CapturePlan, CaptureStep
+from msflash.acquisition.errors import FrameLostError
+from msflash.acquisition.plan import CapturePlan, CaptureStep
 
 log = logging.getLogger(__name__)
 
@@ -181,7 +181,7 @@ def camera_bench(n_frames: int = 150, n_triggers: int = 200, repeats: int = 5, w
         (``latency_stages_ms``), end-to-end medians ``latency_ms_msflash`` / ``latency_ms_bare``,
         the targets and whether they are met.
     """
-    from acquisition.aravis_camera import (
+    from msflash.acquisition.devices.aravis.camera import (
         AravisCamera,
         AravisGvFake,
         StrobeConfig,

@@ -46,8 +46,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from acquisition.capture import READOUT_US, TRIGGER_PULSE_US
-from acquisition.plan import CapturePlan
+from msflash.acquisition.session.capture import READOUT_US, TRIGGER_PULSE_US
+from msflash.acquisition.plan import CapturePlan
 
 WALL_RATIO_TARGET = 1.15
 LATENCY_MEDIAN_TARGET_MS = 5.0
@@ -68,11 +68,11 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
     """
     import warnings
 
-    from acquisition.async_writer import AsyncSequenceWriter
-    from acquisition.capture import run_capture_with_flash
-    from acquisition.exposure import ExposurePolicy
-    from acquisition.flash_session import FlashSession
-    from acquisition.rig import open_aravis_fake_rig
+    from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
+    from msflash.acquisition.session.capture import run_capture_with_flash
+    from msflash.acquisition.session.exposure import ExposurePolicy
+    from msflash.acquisition.session.flash_session import FlashSession
+    from msflash.acquisition.session.rig import open_aravis_fake_rig
 
     period_us = 1e6 / frame_rate_hz
     settle_s, deadtime_s = 0.001, 0.001

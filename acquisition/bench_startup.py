@@ -33,7 +33,7 @@ HELP_TARGET = 2.0
 ESTIMATE_TARGET = 4.0
 """``msflash estimate`` on the demo's sequence ÷ ``import numpy``: at most this."""
 
-_MSFLASH = "import sys; from acquisition.cli import main; sys.exit(main(sys.argv[1:]))"
+_MSFLASH = "import sys; from msflash.acquisition.app.cli import main; sys.exit(main(sys.argv[1:]))"
 """What the ``msflash`` entry point runs."""
 
 
@@ -63,7 +63,7 @@ def _run(command: Sequence[str], name: str) -> float:
 
 def bytecode_cached() -> bool:
     """Whether the bytecode of msflash's command line and estimator is cached (else each run compiles them)."""
-    sources = [importlib.util.find_spec(name) for name in ("acquisition.cli", "acquisition.analysis", "processing.ambient")]
+    sources = [importlib.util.find_spec(name) for name in ("msflash.acquisition.app.cli", "msflash.acquisition.session.analysis", "msflash.processing.ambient")]
     return all(spec is not None and spec.cached is not None and Path(spec.cached).exists() for spec in sources)
 
 

@@ -7,7 +7,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from acquisition.plan import CapturePlan
+from msflash.acquisition.plan import CapturePlan
 
 
 @dataclass(frozen=True)

@@ -68,11 +68,11 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
 from typing import Any, Protocol
 
-from acquisition.camera import Camera, RawFrame
-from acquisition.errors import CaptureError, DroppedFrameError, FrameTimeoutError
-from acquisition.plan import CapturePlan, CaptureStep
-from acquisition.sequence_format import SequenceFrame, SequenceWriter
-from led_controller.booth import ARM_TIME_MAX_US
+from msflash.acquisition.devices.camera import Camera, RawFrame
+from msflash.acquisition.errors import CaptureError, DroppedFrameError, FrameTimeoutError
+from msflash.acquisition.plan import CapturePlan, CaptureStep
+from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter
+from msflash.led_controller.booth import ARM_TIME_MAX_US
 
 log = logging.getLogger(__name__)
 
@@ -152,7 +152,7 @@ def host_silence_s(plan: CapturePlan) -> float:
 
     Examples
     --------
-    >>> from acquisition.plan import CapturePlan
+    >>> from msflash.acquisition.plan import CapturePlan
     >>> round(host_silence_s(CapturePlan.ambient_then_each_led(7, 10_000.0)), 3)
     1.513
     >>> round(host_silence_s(CapturePlan.ambient_then_each_led(7, 500_000.0, trigger="booth")), 3)

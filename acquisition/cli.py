@@ -25,27 +25,27 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
 
-from acquisition.cli_common import UsageError
-from acquisition.errors import CameraError, CaptureError, RecordingError
-from processing.errors import SolverError, SpectralDataError
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.acquisition.errors import CameraError, CaptureError, RecordingError
+from msflash.processing.errors import SolverError, SpectralDataError
 
 COMMANDS: dict[str, tuple[str, str]] = {
-    "estimate": ("acquisition.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
-    "flash": ("acquisition.cli_process", "solve the matching or complementary flash for a sequence"),
-    "synthesize": ("acquisition.cli_process", "synthesise the computational flash image from a sequence"),
-    "run": ("acquisition.cli_run", "the main job: capture, estimate, flash, re-capture, synthesise, report"),
-    "capture": ("acquisition.cli_run", "capture an ambient + each-LED sequence on a rig"),
-    "bench": ("acquisition.cli_bench", "measure speed as ratios in one run (processing, camera, booth)"),
-    "devices": ("acquisition.cli_devices", "list cameras (Aravis) on the given interfaces, and booths among the serial ports"),
-    "booth-emulator": ("acquisition.cli_booth", "serve the booth firmware emulator on a pseudo-terminal"),
-    "doctor": ("acquisition.cli_booth", "check USB3 Vision, GigE and serial setup"),
-    "booth": ("acquisition.cli_booth_console", "booth bring-up: 'booth console PORT' is an interactive prompt"),
-    "study": ("acquisition.cli_study", "simulation studies (table1: Table 1; surfaces: Fig. 5; cameras: Fig. 6; xy: Fig. 7; "
+    "estimate": ("msflash.acquisition.app.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
+    "flash": ("msflash.acquisition.app.cli_process", "solve the matching or complementary flash for a sequence"),
+    "synthesize": ("msflash.acquisition.app.cli_process", "synthesise the computational flash image from a sequence"),
+    "run": ("msflash.acquisition.app.cli_run", "the main job: capture, estimate, flash, re-capture, synthesise, report"),
+    "capture": ("msflash.acquisition.app.cli_run", "capture an ambient + each-LED sequence on a rig"),
+    "bench": ("msflash.acquisition.app.cli_bench", "measure speed as ratios in one run (processing, camera, booth)"),
+    "devices": ("msflash.acquisition.app.cli_devices", "list cameras (Aravis) on the given interfaces, and booths among the serial ports"),
+    "booth-emulator": ("msflash.acquisition.app.cli_booth", "serve the booth firmware emulator on a pseudo-terminal"),
+    "doctor": ("msflash.acquisition.app.cli_booth", "check USB3 Vision, GigE and serial setup"),
+    "booth": ("msflash.acquisition.app.cli_booth_console", "booth bring-up: 'booth console PORT' is an interactive prompt"),
+    "study": ("msflash.acquisition.app.cli_study", "simulation studies (table1: Table 1; surfaces: Fig. 5; cameras: Fig. 6; xy: Fig. 7; "
                                        "failure: where estimates fail and whether they warn; pareto: accuracy vs time)"),
-    "evaluate": ("acquisition.cli_evaluate", "ΔE00 against the chart under D65 and noise, for a chart sequence"),
-    "colour-study": ("acquisition.cli_evaluate", "simulated Fig. 9 (ΔE per ambient) and Fig. 3 (noise) study"),
-    "calibrate": ("acquisition.cli_calibrate", "measure LED spectra, camera responsivities, dark and linearity"),
-    "local-study": ("acquisition.cli_local", "study local vs global ambient estimation on simulated scenes"),
+    "evaluate": ("msflash.acquisition.app.cli_evaluate", "ΔE00 against the chart under D65 and noise, for a chart sequence"),
+    "colour-study": ("msflash.acquisition.app.cli_evaluate", "simulated Fig. 9 (ΔE per ambient) and Fig. 3 (noise) study"),
+    "calibrate": ("msflash.acquisition.app.cli_calibrate", "measure LED spectra, camera responsivities, dark and linearity"),
+    "local-study": ("msflash.acquisition.app.cli_local", "study local vs global ambient estimation on simulated scenes"),
 }
 """Subcommands in help order: name → (module whose ``register`` adds it, the help line it gives it).
 
@@ -61,7 +61,7 @@ _BAD_INPUT = (UsageError, RecordingError, SpectralDataError, FileNotFoundError)
 def _bad_input_errors() -> tuple[type[BaseException], ...]:
     errors: list[type[BaseException]] = list(_BAD_INPUT)
     try:
-        from calibration.errors import CalibrationError
+        from msflash.calibration.errors import CalibrationError
     except ImportError:  # the calibration package is optional for processing-only use
         pass
     else:
@@ -70,11 +70,11 @@ def _bad_input_errors() -> tuple[type[BaseException], ...]:
 
 
 def _runtime_errors() -> tuple[type[BaseException], ...]:
-    return (CameraError, CaptureError, SolverError, *_loaded("led_controller.errors", "BoothError"))
+    return (CameraError, CaptureError, SolverError, *_loaded("msflash.led_controller.errors", "BoothError"))
 
 
 def _terminated() -> tuple[type[BaseException], ...]:
-    return _loaded("led_controller.booth", "Terminated")
+    return _loaded("msflash.led_controller.booth", "Terminated")
 
 
 def _loaded(module_name: str, class_name: str) -> tuple[type[BaseException], ...]:
@@ -116,7 +116,7 @@ def _command_module(argv: Sequence[str]) -> str | None:
     """The module of the command named in ``argv`` (its first word not starting with ``-``), if it is one.
 
     >>> _command_module(["-v", "estimate", "SEQ", "--json"])
-    'acquisition.cli_process'
+    'msflash.acquisition.app.cli_process'
     >>> _command_module(["--help"]) is None
     True
     """

@@ -6,18 +6,18 @@ import argparse
 import importlib
 from typing import Any
 
-from acquisition.cli_common import positive_int, print_json, progress
+from msflash.acquisition.app.cli_common import positive_int, print_json, progress
 
 _OPTIONAL_PARTS = {
-    "camera": ("acquisition.bench_camera", "camera_bench"),
-    "booth": ("led_controller.bench", "run_bench"),
-    "capture": ("acquisition.bench_capture", "capture_bench"),
+    "camera": ("msflash.acquisition.app.bench_camera", "camera_bench"),
+    "booth": ("msflash.led_controller.bench", "run_bench"),
+    "capture": ("msflash.acquisition.app.bench_capture", "capture_bench"),
 }
 """Bench parts contributed by other modules: part name → (module, function returning a dict)."""
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from acquisition.bench import processing_bench
+    from msflash.acquisition.app.bench import processing_bench
 
     report: dict[str, Any] = {}
     parts = args.part or ["processing", "startup", *_OPTIONAL_PARTS]
@@ -25,7 +25,7 @@ def _bench(args: argparse.Namespace) -> int:
         progress("bench: processing (1280×1024 RGB, 7 LEDs)…")
         report["processing"] = processing_bench(args.height, args.width, repeats=args.repeats)
     if "startup" in parts:
-        from acquisition.bench_startup import startup_bench
+        from msflash.acquisition.app.bench_startup import startup_bench
 
         progress(f"bench: start-up (msflash --help, msflash estimate, import numpy; {args.rounds} interleaved rounds)…")
         report["startup"] = startup_bench(args.rounds, args.sequence)

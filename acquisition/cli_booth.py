@@ -8,10 +8,10 @@ import sys
 import threading
 from pathlib import Path
 
-from acquisition.cli_common import UsageError, print_json, progress
-from led_controller.booth import sigterm_as_exit
-from led_controller.doctor import run_doctor
-from led_controller.emulator import DEFAULT_NAMES, DEFAULT_PEAKS_NM, BoothEmulator, serve_on_pty
+from msflash.acquisition.app.cli_common import UsageError, print_json, progress
+from msflash.led_controller.booth import sigterm_as_exit
+from msflash.led_controller.doctor import run_doctor
+from msflash.led_controller.emulator import DEFAULT_NAMES, DEFAULT_PEAKS_NM, BoothEmulator, serve_on_pty
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -12,9 +12,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-from acquisition.cli_common import UsageError
-from led_controller.booth import LedBooth, sigterm_as_exit
-from led_controller.console import BoothConsole, ConsoleQuit
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.led_controller.booth import LedBooth, sigterm_as_exit
+from msflash.led_controller.console import BoothConsole, ConsoleQuit
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -13,33 +13,33 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition.cli_common import UsageError, positive_int, print_json, progress
-from acquisition.cli_evaluate import check_layout, layout_options, sequence_layout  # the layouts of `msflash evaluate`
-from acquisition.sequence_format import Sequence, read_sequence
-from calibration.camera_response import (
+from msflash.acquisition.app.cli_common import UsageError, positive_int, print_json, progress
+from msflash.acquisition.app.cli_evaluate import check_layout, layout_options, sequence_layout  # the layouts of `msflash evaluate`
+from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.calibration.camera_response import (
     estimate_responsivities,
     learn_prior,
     responsivity_rmse,
 )
-from calibration.chart_sequence import (
+from msflash.calibration.chart_sequence import (
     estimate_from_measurements,
     resolve_light,
     sequence_measurements,
 )
-from calibration.dark import measure_dark, measure_linearity
-from calibration.errors import CalibrationError
-from calibration.files import CalibrationSet, load_or_new, save_calibration
-from calibration.led_spectra import characterise_led, relative_power_through_camera
-from calibration.spectrometer import (
+from msflash.calibration.dark import measure_dark, measure_linearity
+from msflash.calibration.errors import CalibrationError
+from msflash.calibration.files import CalibrationSet, load_or_new, save_calibration
+from msflash.calibration.led_spectra import characterise_led, relative_power_through_camera
+from msflash.calibration.spectrometer import (
     measurement_to_spectra,
     read_spectrometer_file,
     subtract_dark,
 )
-from calibration.validation import calibration_lights, simulate_chart_responses
-from calibration.white_reference import parse_roi, white_led_responses
-from processing import datasets
-from processing.errors import SpectralDataError
-from processing.spectra import DEFAULT_GRID, Spectra
+from msflash.calibration.validation import calibration_lights, simulate_chart_responses
+from msflash.calibration.white_reference import parse_roi, white_led_responses
+from msflash.processing import datasets
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
 
 
 def _bad_input(handler: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:

@@ -49,7 +49,7 @@ def _strict(value: Any) -> Any:
         return [_strict(item) for item in value]
     numpy = sys.modules.get("numpy")
     if numpy is not None and isinstance(value, numpy.ndarray | numpy.generic):
-        from acquisition.image_io import json_default
+        from msflash.acquisition.sequence.image_files import json_default
 
         return _strict(json_default(value))
     if isinstance(value, float) and not math.isfinite(value):

@@ -12,16 +12,16 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from acquisition.cli_common import UsageError, print_json, progress
-from acquisition.errors import CameraError
-from led_controller.discovery import SerialPortInfo, find_booths
+from msflash.acquisition.app.cli_common import UsageError, print_json, progress
+from msflash.acquisition.errors import CameraError
+from msflash.led_controller.discovery import SerialPortInfo, find_booths
 
 DEFAULT_INTERFACES = "usb3"
 """What ``devices`` searches without ``--interfaces``: never GigE Vision discovery by default."""
 
 
 def _camera_at(address: str) -> dict[str, Any]:
-    from acquisition.aravis_camera import AravisCamera
+    from msflash.acquisition.devices.aravis.camera import AravisCamera
 
     with AravisCamera(address, interfaces="gige") as camera:
         info = camera.info
@@ -32,7 +32,7 @@ def _camera_at(address: str) -> dict[str, Any]:
 
 def _devices(args: argparse.Namespace) -> int:
     try:
-        from acquisition import aravis_camera
+        from msflash.acquisition.devices.aravis import camera as aravis_camera
     except ImportError as err:
         raise CameraError(f"devices: {err}") from err
     try:

@@ -46,21 +46,21 @@ from typing import Any
 
 import numpy as np
 
-from acquisition import analysis
-from acquisition.cli_common import UsageError, dumps_json, output_directory, print_json, progress
-from acquisition.html_report import HtmlReport
-from acquisition.image_io import write_image
-from acquisition.sequence_format import Sequence, read_sequence
-from calibration import chart_detection
-from processing import colour_metrics, datasets, lights, water
-from processing.ambient import estimate_ambient
-from processing.errors import TargetUnreachableWarning
-from processing.flash import FlashSolution, solve_complementary, solve_matching
-from processing.image_formation import chart_scene
-from processing.render import camera_to_srgb_linear, camera_to_xyz_matrix, demosaic_bilinear, encode_srgb
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from processing.statistics import FrameStackSpec, accumulate_statistics
-from processing.synthesis import synthesize
+from msflash.acquisition.session import analysis
+from msflash.acquisition.app.cli_common import UsageError, dumps_json, output_directory, print_json, progress
+from msflash.acquisition.app.html_report import HtmlReport
+from msflash.acquisition.sequence.image_files import write_image
+from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.calibration import chart_detection
+from msflash.processing import colour_metrics, datasets, lights, water
+from msflash.processing.ambient import estimate_ambient
+from msflash.processing.errors import TargetUnreachableWarning
+from msflash.processing.flash import FlashSolution, solve_complementary, solve_matching
+from msflash.processing.image_formation import chart_scene
+from msflash.processing.render import camera_to_srgb_linear, camera_to_xyz_matrix, demosaic_bilinear, encode_srgb
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.synthesis import synthesize
 
 CHARTS = ("macbeth",)
 """Charts ``evaluate`` knows the layout and reference of."""
@@ -480,7 +480,7 @@ def _capture(camera: Any, plan: Any) -> list[np.ndarray]:
 def simulated_world(ambient: str, seed: int = 0, patch_px: int = 12, cfa: str | None = None, depth_m: float = 5.0,
                     distance_m: float = 1.0, water_type: str = "ocean", grid: WavelengthGrid = DEFAULT_GRID) -> Any:
     """The sim rig's camera on a Macbeth chart under a named ambient (underwater: :mod:`processing.water`)."""
-    from acquisition.simulated_camera import SimulatedCamera
+    from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 
     scene = chart_scene("macbeth", patch_px=patch_px, border_px=2)
     if ambient == "underwater":
@@ -501,7 +501,7 @@ def simulated_world(ambient: str, seed: int = 0, patch_px: int = 12, cfa: str | 
 def study_ambient(name: str, seed: int = 0, patch_px: int = 12, cfa: str | None = None, bounds: str = "physical",
                   out: Path | None = None, **world_options: Any) -> dict[str, Any]:
     """One ambient of the study: capture, estimate, flash, synthesise/re-capture, ΔE and noise."""
-    from acquisition.plan import CapturePlan
+    from msflash.acquisition.plan import CapturePlan
 
     world = simulated_world(name, seed, patch_px, cfa, **world_options)
     grid = world.ambient.grid

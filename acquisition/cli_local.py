@@ -8,12 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition.cli_common import output_directory, positive_int, print_json, progress
-from processing.local import DEFAULT_TILES
+from msflash.acquisition.app.cli_common import output_directory, positive_int, print_json, progress
+from msflash.processing.local import DEFAULT_TILES
 
 
 def _local_study(args: argparse.Namespace) -> int:
-    from processing.study.local import run_study  # matplotlib and scipy only when asked
+    from msflash.processing.study.local import run_study  # matplotlib and scipy only when asked
 
     progress(f"local study: {args.uniform} uniform scenes, {args.mixed} boundary + {args.mixed} gradient scenes, "
              f"{args.tiles}x{args.tiles} tiles, seeds from {args.seed0}")
@@ -65,8 +65,8 @@ def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from processing.local import SELECTION_MARGIN
-    from processing.study.local import KINDS
+    from msflash.processing.local import SELECTION_MARGIN
+    from msflash.processing.study.local import KINDS
 
     paths = []
     figure, axes = plt.subplots(1, 4, figsize=(20, 4.5))

@@ -10,14 +10,14 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition import analysis
-from acquisition.cli_common import UsageError, positive_int, print_json, progress
-from acquisition.image_io import read_image_header, write_image
-from acquisition.sequence_format import Sequence, read_sequence
-from processing.ambient import AMBIENT_METHODS, LED_SIGNAL_Z
-from processing.errors import TargetUnreachableWarning
-from processing.local import DEFAULT_TILES, LOCAL_METHODS
-from processing.synthesis import to_raw_values
+from msflash.acquisition.session import analysis
+from msflash.acquisition.app.cli_common import UsageError, positive_int, print_json, progress
+from msflash.acquisition.sequence.image_files import read_image_header, write_image
+from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.processing.ambient import AMBIENT_METHODS, LED_SIGNAL_Z
+from msflash.processing.errors import TargetUnreachableWarning
+from msflash.processing.local import DEFAULT_TILES, LOCAL_METHODS
+from msflash.processing.synthesis import to_raw_values
 
 
 DEFAULT_LOCAL_METHOD = "auto"
@@ -144,7 +144,7 @@ def _estimate_with_prior(args: argparse.Namespace, sequence: Sequence) -> int:
     The LED side is what ``--model led`` gives (global, or local when ``--method`` finds the illuminant
     varying across the scene: the light prior is one global spectrum, so a local estimate stays).
     """
-    from acquisition.prior_route import estimate_sequence_prior, prior_payload
+    from msflash.acquisition.session.prior_route import estimate_sequence_prior, prior_payload
 
     stack = analysis.load_frame_stack(sequence)
     if args.method != "global":

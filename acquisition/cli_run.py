@@ -33,16 +33,16 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition import analysis
-from acquisition.camera import RawFrame
-from acquisition.async_writer import AsyncSequenceWriter
-from acquisition.folder_claim import FolderClaim, claim_folder
-from acquisition.capture import preview_frames, run_capture, run_capture_with_flash
-from acquisition.cli_common import UsageError, dumps_json, output_directory, progress
-from acquisition.cli_process import add_estimation_options
-from acquisition.errors import CaptureError, OutputWriteError
-from acquisition.flash_session import FlashSession
-from acquisition.exposure import (
+from msflash.acquisition.session import analysis
+from msflash.acquisition.devices.camera import RawFrame
+from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
+from msflash.acquisition.sequence.folder_claim import FolderClaim, claim_folder
+from msflash.acquisition.session.capture import preview_frames, run_capture, run_capture_with_flash
+from msflash.acquisition.app.cli_common import UsageError, dumps_json, output_directory, progress
+from msflash.acquisition.app.cli_process import add_estimation_options
+from msflash.acquisition.errors import CaptureError, OutputWriteError
+from msflash.acquisition.session.flash_session import FlashSession
+from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,
     camera_exposure_range,
@@ -52,22 +52,22 @@ from acquisition.exposure import (
     metering_view,
     plan_exposures,
 )
-from acquisition.plan import CapturePlan, TriggerSource
-from acquisition.replay_camera import format_levels, levels_match
-from acquisition.rig import Rig, open_rig
-from acquisition.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
-from acquisition.sequence_format import (
+from msflash.acquisition.plan import CapturePlan, TriggerSource
+from msflash.acquisition.devices.replay_camera import format_levels, levels_match
+from msflash.acquisition.session.rig import Rig, open_rig
+from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
+from msflash.acquisition.sequence.format import (
     Sequence,
     SequenceFrame,
     SequenceWriter,
     mono_as_rgb,
     read_sequence,
 )
-from led_controller.booth import sigterm_as_exit
-from processing.datasets import PAPER_LED_SUBSETS
-from processing.errors import TargetUnreachableWarning
-from processing.lights import AMBIENTS
-from processing.user_files import printable
+from msflash.led_controller.booth import sigterm_as_exit
+from msflash.processing.datasets import PAPER_LED_SUBSETS
+from msflash.processing.errors import TargetUnreachableWarning
+from msflash.processing.lights import AMBIENTS
+from msflash.processing.user_files import printable
 
 CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG")
 SYNC_MODES: dict[str, TriggerSource] = {"host": "software", "booth": "booth", "camera": "camera"}
@@ -363,7 +363,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
             f"determine the ambient (test patterns, or LEDs that do not reach the scene?); no report written. "
             f"The sequence is complete in {out / 'sequence'}"
         )
-    from acquisition import report  # colour and matplotlib: only a run that reports needs them
+    from msflash.acquisition.app import report  # colour and matplotlib: only a run that reports needs them
 
     sequence = read_sequence(out / "sequence")
     progress("synthesising the computational images, previews and report")

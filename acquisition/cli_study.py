@@ -21,8 +21,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from acquisition.cli_common import UsageError, dumps_json, output_directory, positive_int, print_json, progress
-from processing.ambient import AMBIENT_METHODS
+from msflash.acquisition.app.cli_common import UsageError, dumps_json, output_directory, positive_int, print_json, progress
+from msflash.processing.ambient import AMBIENT_METHODS
 
 STUDIES = ("table1", "surfaces", "cameras", "xy", "failure", "pareto")
 """Study names accepted by ``msflash study``."""
@@ -110,7 +110,7 @@ def _run(args: argparse.Namespace) -> int:
     if alpha == "paper":
         if args.solver != "roughness":
             raise UsageError("--alpha paper is the authors' sweep of eq. 6; expected --solver roughness")
-        from processing.study.table1 import PAPER_ALPHAS
+        from msflash.processing.study.table1 import PAPER_ALPHAS
 
         alpha, alpha_units = (list(PAPER_ALPHAS) if args.name == "table1" else 0.06), "paper"
     if args.name in ("failure", "pareto") and (alpha_units == "paper" or isinstance(alpha, list)):
@@ -123,13 +123,13 @@ def _run(args: argparse.Namespace) -> int:
 
     with _mapper(args.scheduler, args.workers) as mapper:
         if args.name == "table1":
-            from processing.study.table1 import run_table1
+            from msflash.processing.study.table1 import run_table1
 
             result = run_table1(n_leds_list=args.leds, method=args.solver, alpha=alpha, cameras=args.cameras,
                                 illuminants=args.illuminants, alpha_units=alpha_units, progress=progress,
                                 map_function=mapper)
         elif args.name == "surfaces":
-            from processing.study.surfaces import run_surfaces
+            from msflash.processing.study.surfaces import run_surfaces
 
             result = run_surfaces(draws=args.draws, method=args.solver, alpha=alpha, cameras=args.cameras,
                                   illuminants=args.illuminants, alpha_units=alpha_units, seed=args.seed,
@@ -137,20 +137,20 @@ def _run(args: argparse.Namespace) -> int:
         elif args.name in ("cameras", "xy"):
             if alpha_units == "paper":
                 raise UsageError(f"--alpha-units paper: not for {args.name}; expected a dimensionless alpha")
-            from processing.study.cameras import run_cameras, run_xy
+            from msflash.processing.study.cameras import run_cameras, run_xy
 
             run = run_cameras if args.name == "cameras" else run_xy
             result = run(n_leds_list=args.leds, method=args.solver, alpha=alpha, cameras=args.cameras,
                          illuminants=args.illuminants, progress=progress, map_function=mapper)
         elif args.name == "failure":
-            from processing.study.failure import DEFAULT_CAMERAS, run_failure
+            from msflash.processing.study.failure import DEFAULT_CAMERAS, run_failure
 
             result = run_failure(factors=args.factors, cameras=args.cameras or DEFAULT_CAMERAS,
                                  seeds=args.seeds, method=args.solver, alpha=alpha, threshold=args.threshold,
                                  keep_records=args.records, progress=progress, map_function=mapper,
                                  **({"ambients": args.ambients} if args.ambients else {}))
         else:
-            from processing.study.pareto import DEFAULT_CAMERAS, run_pareto
+            from msflash.processing.study.pareto import DEFAULT_CAMERAS, run_pareto
 
             result = run_pareto(cameras=args.cameras or DEFAULT_CAMERAS, seeds=args.seeds,
                                 ambient_to_flash=args.ambient_to_flash, patch_px=args.patch_px,
@@ -405,7 +405,7 @@ def _plot_xy(result: dict[str, Any], path: Path) -> None:
     plt = _pyplot()
     import numpy as np
 
-    from processing.study.illuminants import cmfs_photons
+    from msflash.processing.study.illuminants import cmfs_photons
 
     counts = result["n_leds"]
     figure, axes = plt.subplots(1, len(counts), figsize=(3.2 * len(counts), 3.4), squeeze=False)

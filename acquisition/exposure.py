@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from acquisition import exposure_information as info
+from msflash.acquisition.session import exposure_information as info
 
 DEFAULT_EXPOSURE_RANGE_US = (1.0, 10_000_000.0)
 """Exposure limits assumed for a camera that does not report its own."""

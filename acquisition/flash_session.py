@@ -27,15 +27,15 @@ from collections.abc import Sequence as Seq
 
 import numpy as np
 
-from acquisition import analysis
-from acquisition.camera import RawFrame
-from acquisition.errors import RecordingError
-from acquisition.exposure import ExposurePolicy, FlashExposure, metering_view
-from acquisition.sequence_format import Sequence
-from processing.ambient import AmbientEstimate, AmbientModel
-from processing.flash import FlashModel, FlashSolution
-from processing.spectra import Spectra
-from processing.statistics import BlockRows, FrameStackSpec, SequenceStatistics, cfa_planes
+from msflash.acquisition.session import analysis
+from msflash.acquisition.devices.camera import RawFrame
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
+from msflash.acquisition.sequence.format import Sequence
+from msflash.processing.ambient import AmbientEstimate, AmbientModel
+from msflash.processing.flash import FlashModel, FlashSolution
+from msflash.processing.spectra import Spectra
+from msflash.processing.statistics import BlockRows, FrameStackSpec, SequenceStatistics, cfa_planes
 
 
 class FlashDecision:

@@ -20,7 +20,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from acquisition.errors import FolderInUseError
+from msflash.acquisition.errors import FolderInUseError
 
 LOCK_FILE = ".msflash-lock"
 """Name of the lock file inside a claimed folder."""

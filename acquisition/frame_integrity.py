@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from acquisition.errors import RecordingError
+from msflash.acquisition.errors import RecordingError
 
 BLACK_MARGIN_FRACTION = 0.02
 """How far below black (a share of ``white − black``, times the frame's gain if above 1) read noise may reach."""

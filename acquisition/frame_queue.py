@@ -11,9 +11,9 @@ from __future__ import annotations
 import threading
 from collections import deque
 
-from acquisition.camera import RawFrame
-from acquisition.errors import CameraError, FrameTimeoutError
-from acquisition.plan import CapturePlan
+from msflash.acquisition.devices.camera import RawFrame
+from msflash.acquisition.errors import CameraError, FrameTimeoutError
+from msflash.acquisition.plan import CapturePlan
 
 
 class _Failed:

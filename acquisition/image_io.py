@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from acquisition.errors import RecordingError
-from calibration.file_modes import default_file_mode
-from processing.user_files import IMAGE_MAX_BYTES, check_user_file, shown_path
+from msflash.acquisition.errors import RecordingError
+from msflash.calibration.file_modes import default_file_mode
+from msflash.processing.user_files import IMAGE_MAX_BYTES, check_user_file, shown_path
 
 INTEGER_SUFFIX = ".tiff"
 """Suffix of integer frames (16-bit TIFF, uncompressed)."""

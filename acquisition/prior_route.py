@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from acquisition.analysis import (
+from msflash.acquisition.session.analysis import (
     DEFAULT_BIN_FACTOR,
     FrameStack,
     camera_responsivities_photons,
@@ -18,10 +18,10 @@ from acquisition.analysis import (
     load_frame_stack,
     spectrum_in_sequence_unit,
 )
-from acquisition.sequence_format import Sequence
-from processing.ambient import AmbientEstimate, estimate_ambient
-from processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
-from processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
+from msflash.acquisition.sequence.format import Sequence
+from msflash.processing.ambient import AmbientEstimate, estimate_ambient
+from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
+from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
 
 
 @dataclass(frozen=True)

@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition.camera import CameraInfo, RawFrame
-from acquisition.errors import CameraError, ReplayMismatchError
-from acquisition.frame_queue import TriggeredFrames
-from acquisition.plan import CapturePlan, CaptureStep
-from acquisition.sequence_format import Sequence, read_sequence
+from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.errors import CameraError, ReplayMismatchError
+from msflash.acquisition.devices.frame_queue import TriggeredFrames
+from msflash.acquisition.plan import CapturePlan, CaptureStep
+from msflash.acquisition.sequence.format import Sequence, read_sequence
 
 LEVEL_TOLERANCE = 2.0 / 0xFFFF
 """LED levels match when within two 16-bit wire steps."""

@@ -11,18 +11,18 @@ from typing import Any
 
 import numpy as np
 
-from acquisition import analysis
-from acquisition.cli_common import dumps_json
-from acquisition.errors import OutputWriteError
-from acquisition.image_io import write_image
-from acquisition.sequence_format import Sequence
-from processing import datasets
-from processing.ambient import AmbientEstimate
-from processing.flash import FlashSolution
-from processing.metrics import led_fit, led_fit_rmse, spectrum_rmse
-from processing.render import camera_to_xyz_matrix, demosaic_superpixel, srgb_preview
-from processing.spectra import Spectra
-from processing.synthesis import synthesize
+from msflash.acquisition.session import analysis
+from msflash.acquisition.app.cli_common import dumps_json
+from msflash.acquisition.errors import OutputWriteError
+from msflash.acquisition.sequence.image_files import write_image
+from msflash.acquisition.sequence.format import Sequence
+from msflash.processing import datasets
+from msflash.processing.ambient import AmbientEstimate
+from msflash.processing.flash import FlashSolution
+from msflash.processing.metrics import led_fit, led_fit_rmse, spectrum_rmse
+from msflash.processing.render import camera_to_xyz_matrix, demosaic_superpixel, srgb_preview
+from msflash.processing.spectra import Spectra
+from msflash.processing.synthesis import synthesize
 
 
 def _pyplot():  # noqa: ANN202 - matplotlib is imported lazily, with the non-interactive backend

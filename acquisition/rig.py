@@ -51,19 +51,19 @@ from typing import Any
 
 import numpy as np
 
-from acquisition.camera import CameraInfo, RawFrame
-from acquisition.cli_common import UsageError
-from acquisition.errors import RigOpenError
-from acquisition.plan import CapturePlan
-from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
-from acquisition.sim_world import read_responsivity_file, read_spectra_file, sim_ambient, sim_camera, sim_leds, sim_scene
-from acquisition.simulated_camera import SimulatedCamera
-from led_controller import BoothEmulator, LedBooth, serve_on_pty
-from led_controller.errors import BoothProtocolError
-from led_controller.protocol import MAX_BODY, Command, encode_request, parse_frame, parse_identify, parse_reply
-from processing import datasets
-from processing.image_formation import Scene
-from processing.spectra import DEFAULT_GRID, Spectra
+from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.acquisition.errors import RigOpenError
+from msflash.acquisition.plan import CapturePlan
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.devices.sim_world import read_responsivity_file, read_spectra_file, sim_ambient, sim_camera, sim_leds, sim_scene
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera
+from msflash.led_controller import BoothEmulator, LedBooth, serve_on_pty
+from msflash.led_controller.errors import BoothProtocolError
+from msflash.led_controller.protocol import MAX_BODY, Command, encode_request, parse_frame, parse_identify, parse_reply
+from msflash.processing import datasets
+from msflash.processing.image_formation import Scene
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
 
 log = logging.getLogger(__name__)
 
@@ -464,7 +464,7 @@ def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int = 64, 
     Sim-only options (``ambient``, ``scene``…) are ignored.
     """
     try:
-        from acquisition import aravis_camera
+        from msflash.acquisition.devices.aravis import camera as aravis_camera
     except ImportError as err:
         raise RigOpenError(f"rig 'aravis-fake': {err}") from err
     closers: list = []
@@ -503,7 +503,7 @@ def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int = 64, 
 
 def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None, **_ignored: object) -> Rig:
     """The ``replay:DIR`` rig: ReplayCamera on a recorded sequence + emulator on a pty + LedBooth."""
-    from acquisition.replay_camera import ReplayCamera
+    from msflash.acquisition.devices.replay_camera import ReplayCamera
 
     camera = ReplayCamera.open(directory)  # RecordingError for a missing or malformed sequence
     sequence = camera.sequence
@@ -614,7 +614,7 @@ def hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | 
 def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | None, str]:
     """LED spectra, responsivities and id of a ``msflash calibrate`` directory (``calibration.json``)."""
     try:
-        from calibration.files import load_calibration
+        from msflash.calibration.files import load_calibration
     except ImportError as err:
         raise UsageError(f"--calibration {directory}: calibration files unreadable here ({err})") from err
     try:
@@ -684,7 +684,7 @@ class HardwareCamera:
 
 
 def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format: str | None) -> Any:
-    from acquisition import aravis_camera
+    from msflash.acquisition.devices.aravis import camera as aravis_camera
 
     names = aravis_camera.parse_interfaces(interfaces)
     if camera is None:
@@ -730,7 +730,7 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     RigOpenError
         One or both devices failed to open; the message lists each device's failure.
     """
-    from led_controller.discovery import find_booth
+    from msflash.led_controller.discovery import find_booth
 
     leds, responsivities, reference = hw_spectra(calibration, led_spectra, responsivity)
     closers: list = []

@@ -40,16 +40,16 @@ from typing import Any, Literal
 
 import numpy as np
 
-from acquisition.errors import RecordingError
-from acquisition.folder_claim import FolderClaim, claim_folder, stale_temporaries
-from acquisition.frame_integrity import check_frame_levels
-from acquisition.image_io import image_suffix, read_image, read_image_header, write_image
-from calibration.file_modes import default_file_mode
-from calibration.spectrometer import NEGATIVE_TOLERANCE
-from processing.errors import SpectralDataError
-from processing.spectra import Spectra, WavelengthGrid
-from processing.synthesis import linearise
-from processing.user_files import IMAGE_MAX_BYTES, JSON_MAX_BYTES, check_user_file, read_user_text, shown_path
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.folder_claim import FolderClaim, claim_folder, stale_temporaries
+from msflash.acquisition.sequence.frame_integrity import check_frame_levels
+from msflash.acquisition.sequence.image_files import image_suffix, read_image, read_image_header, write_image
+from msflash.calibration.file_modes import default_file_mode
+from msflash.calibration.spectrometer import NEGATIVE_TOLERANCE
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import Spectra, WavelengthGrid
+from msflash.processing.synthesis import linearise
+from msflash.processing.user_files import IMAGE_MAX_BYTES, JSON_MAX_BYTES, check_user_file, read_user_text, shown_path
 
 SEQUENCE_FORMAT = "msflash-sequence"
 """The value of the ``format`` key."""

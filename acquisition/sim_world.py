@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition.cli_common import UsageError
-from processing import datasets, lights
-from processing.errors import SpectralDataError
-from processing.spectra import DEFAULT_GRID, SpectralKind, Spectra, WavelengthGrid
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.processing import datasets, lights
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, SpectralKind, Spectra, WavelengthGrid
 
 SIM_SCENES = ("chart110", "macbeth", "white")
 """Scene names of the sim rig (a reflectance CSV is the other choice)."""

@@ -31,12 +31,12 @@ from typing import Literal
 
 import numpy as np
 
-from acquisition.camera import CameraInfo, RawFrame
-from acquisition.errors import CameraError
-from acquisition.frame_queue import TriggeredFrames
-from acquisition.plan import CapturePlan, CaptureStep
-from processing import datasets, lights
-from processing.image_formation import (
+from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.errors import CameraError
+from msflash.acquisition.devices.frame_queue import TriggeredFrames
+from msflash.acquisition.plan import CapturePlan, CaptureStep
+from msflash.processing import datasets, lights
+from msflash.processing.image_formation import (
     MixedIllumination,
     Scene,
     SensorModel,
@@ -48,7 +48,7 @@ from processing.image_formation import (
     total_illumination,
     white_reference_scene,
 )
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid, require_same_grid
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid, require_same_grid
 
 LedLevelsSource = Callable[[], Sequence[float]]
 """Returns the drive level (0–1) of every LED channel at the moment it is called."""

@@ -6,6 +6,6 @@ calibration owns (with the permissions of :mod:`calibration.file_modes`, which a
 use too). Imports only :mod:`processing`.
 """
 
-from calibration.errors import CalibrationError, CalibrationWarning
+from msflash.calibration.errors import CalibrationError, CalibrationWarning
 
 __all__ = ["CalibrationError", "CalibrationWarning"]

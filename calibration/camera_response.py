@@ -44,10 +44,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.errors import CalibrationError
-from processing.errors import SolverError
-from processing.least_squares import minimise_quadratic
-from processing.spectra import Spectra, WavelengthGrid, require_same_grid
+from msflash.calibration.errors import CalibrationError
+from msflash.processing.errors import SolverError
+from msflash.processing.least_squares import minimise_quadratic
+from msflash.processing.spectra import Spectra, WavelengthGrid, require_same_grid
 
 CHANNELS = ("R", "G", "B")
 ALPHAS = np.logspace(-10, 4, 57)

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from calibration.camera_response import (
+from msflash.calibration.camera_response import (
     CHANNELS,
     ChannelFit,
     ResponsivityEstimate,
@@ -44,11 +44,11 @@ from calibration.camera_response import (
     fit_channels,
     measurement_matrix,
 )
-from calibration.errors import CalibrationError
-from processing import datasets, lights
-from processing.colour_metrics import patch_pixels
-from processing.errors import SpectralDataError
-from processing.spectra import Spectra, WavelengthGrid
+from msflash.calibration.errors import CalibrationError
+from msflash.processing import datasets, lights
+from msflash.processing.colour_metrics import patch_pixels
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import Spectra, WavelengthGrid
 
 LabelBuilder = Callable[[tuple[int, int], np.ndarray], np.ndarray]
 """``(image shape, excluded mask) → label map`` (patch index, −1 for unusable pixels)."""

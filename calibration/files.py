@@ -33,12 +33,12 @@ from typing import Any
 
 import numpy as np
 
-from calibration.errors import CalibrationError
-from calibration.file_modes import default_file_mode
-from processing.datasets import load_spectra_csv
-from processing.errors import SpectralDataError
-from processing.spectra import Spectra
-from processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
+from msflash.calibration.errors import CalibrationError
+from msflash.calibration.file_modes import default_file_mode
+from msflash.processing.datasets import load_spectra_csv
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import Spectra
+from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 FORMAT = "msflash-calibration"
 VERSION = 1

@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
-from calibration.errors import CalibrationError
-from calibration.spectrometer import SpectrometerMeasurement
-from processing.spectra import Spectra, require_same_grid
+from msflash.calibration.errors import CalibrationError
+from msflash.calibration.spectrometer import SpectrometerMeasurement
+from msflash.processing.spectra import Spectra, require_same_grid
 
 SATURATION_RUN = 3
 """Consecutive samples at the maximum (within :data:`SATURATION_TOLERANCE`) that mark a clipped peak."""

@@ -36,10 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.errors import CalibrationError
-from processing.errors import SpectralDataError
-from processing.spectra import Spectra, SpectralUnit, WavelengthGrid
-from processing.user_files import TEXT_EXPORT_MAX_BYTES, read_user_bytes, shown_path
+from msflash.calibration.errors import CalibrationError
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import Spectra, SpectralUnit, WavelengthGrid
+from msflash.processing.user_files import TEXT_EXPORT_MAX_BYTES, read_user_bytes, shown_path
 
 _COMMENT_PREFIXES = ("#", "%", "//", ";")
 _END_MARKERS = ("end", ">>>>>end")

@@ -24,14 +24,14 @@ from typing import Any
 import numpy as np
 from scipy.optimize import nnls
 
-from calibration.camera_response import estimate_responsivities, learn_prior, responsivity_rmse
-from processing import datasets, lights
-from processing.colour_metrics import chart_delta_e, delta_e_2000, patch_pixels, reference_chart, usable_labels
-from processing.errors import TargetUnreachableWarning
-from processing.flash import solve_complementary
-from processing.image_formation import SensorModel, chart_scene, exposure_for_peak, render_frame, surface_responses
-from processing.render import camera_to_xyz_matrix
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.calibration.camera_response import estimate_responsivities, learn_prior, responsivity_rmse
+from msflash.processing import datasets, lights
+from msflash.processing.colour_metrics import chart_delta_e, delta_e_2000, patch_pixels, reference_chart, usable_labels
+from msflash.processing.errors import TargetUnreachableWarning
+from msflash.processing.flash import solve_complementary
+from msflash.processing.image_formation import SensorModel, chart_scene, exposure_for_peak, render_frame, surface_responses
+from msflash.processing.render import camera_to_xyz_matrix
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 
 STUDY_SEEDS = (0, 1, 2, 3, 4)
 """Noise seeds of :func:`leave_one_camera_out_seeds` (seed 0 is the single-seed study)."""
@@ -206,7 +206,7 @@ def regime_study(
     patch mean (and multiplies the standard error by ``k``), i.e. ``k`` times the noise of the
     study's sensor. Light subsets drop rows; nothing is tuned on the camera under test.
     """
-    from calibration.camera_response import fit_channels, measurement_matrix
+    from msflash.calibration.camera_response import fit_channels, measurement_matrix
 
     grid = DEFAULT_GRID
     cameras, names, reflectances, lights, rng = _study_world(camera_names, chart, seed, grid)

@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from calibration.chart_sequence import patch_statistics
-from calibration.errors import CalibrationError
+from msflash.calibration.chart_sequence import patch_statistics
+from msflash.calibration.errors import CalibrationError
 
 SUB_BLOCKS = 8
 """The region is split into ``SUB_BLOCKS × SUB_BLOCKS`` sub-blocks for the uniformity checks."""

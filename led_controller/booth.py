@@ -25,14 +25,14 @@ from typing import IO, Any, Literal
 
 import serial
 
-from led_controller import protocol
-from led_controller.errors import (
+from msflash.led_controller import protocol
+from msflash.led_controller.errors import (
     BoothError,
     BoothNotFoundError,
     BoothProtocolError,
     BoothTimeoutError,
 )
-from led_controller.protocol import BoothEvent, BoothInfo, BoothStatus, Command, Mode
+from msflash.led_controller.protocol import BoothEvent, BoothInfo, BoothStatus, Command, Mode
 
 log = logging.getLogger(__name__)
 

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from led_controller.booth import LedBooth
-from led_controller.errors import BoothError
-from led_controller.protocol import BoothInfo, level_to_code
+from msflash.led_controller.booth import LedBooth
+from msflash.led_controller.errors import BoothError
+from msflash.led_controller.protocol import BoothInfo, level_to_code
 
 HELP = """commands (levels are 0..1, one per channel; times in µs):
   id                              what the booth is

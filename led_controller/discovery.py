@@ -7,7 +7,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from led_controller.errors import BoothNotFoundError
+from msflash.led_controller.errors import BoothNotFoundError
 
 log = logging.getLogger(__name__)
 

@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from led_controller.discovery import SerialPortInfo, find_booths, list_serial_ports
+from msflash.led_controller.discovery import SerialPortInfo, find_booths, list_serial_ports
 
 log = logging.getLogger(__name__)
 

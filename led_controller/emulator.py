@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
 
-from led_controller.protocol import (
+from msflash.led_controller.protocol import (
     MARK_EVENT,
     MARK_REPLY,
     MARK_REQUEST,

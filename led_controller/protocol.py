@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 
-from led_controller.errors import BoothProtocolError
+from msflash.led_controller.errors import BoothProtocolError
 
 PROTOCOL_VERSION = 1
 """Version number the booth reports in its identify reply (``PROTO=``)."""

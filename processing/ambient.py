@@ -36,11 +36,11 @@ from typing import Literal
 
 import numpy as np
 
-from processing.errors import SolverError, SpectralDataError
-from processing.least_squares import FactoredQuadratic
-from processing.scipy_cores import lapack
-from processing.spectra import Spectra, require_unit
-from processing.statistics import SequenceStatistics
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.least_squares import FactoredQuadratic
+from msflash.processing.scipy_cores import lapack
+from msflash.processing.spectra import Spectra, require_unit
+from msflash.processing.statistics import SequenceStatistics
 
 AmbientMethod = Literal["lstsq", "nonneg", "tikhonov", "roughness"]
 

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from processing.errors import SpectralDataError
-from processing.statistics import (
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.statistics import (
     FrameStackSpec,
     NoiseMoments,
     SequenceStatistics,

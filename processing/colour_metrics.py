@@ -42,10 +42,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from processing.errors import SpectralDataError
-from processing.image_formation import cfa_channel_map
-from processing.render import reflectances_to_xyz
-from processing.spectra import Spectra
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.image_formation import cfa_channel_map
+from msflash.processing.render import reflectances_to_xyz
+from msflash.processing.spectra import Spectra
 
 
 def _colour():  # noqa: ANN202 - colour-science takes a second to import; only these helpers need it

@@ -33,9 +33,9 @@ from typing import Literal
 
 import numpy as np
 
-from processing.errors import SpectralDataError
-from processing.spectra import DEFAULT_GRID, SpectralKind, SpectralUnit, Spectra, WavelengthGrid, require_same_grid
-from processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_text, shown_path
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, SpectralKind, SpectralUnit, Spectra, WavelengthGrid, require_same_grid
+from msflash.processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_text, shown_path
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 """Folder of the shipped data files (see ``SOURCES.md`` there)."""

@@ -32,9 +32,9 @@ from typing import Literal
 
 import numpy as np
 
-from processing.errors import SolverError, SpectralDataError, TargetUnreachableWarning
-from processing.least_squares import FactoredQuadratic, minimise_quadratic
-from processing.spectra import Spectra, require_same_grid, require_unit
+from msflash.processing.errors import SolverError, SpectralDataError, TargetUnreachableWarning
+from msflash.processing.least_squares import FactoredQuadratic, minimise_quadratic
+from msflash.processing.spectra import Spectra, require_same_grid, require_unit
 
 FlashMode = Literal["matching", "complementary"]
 FlashBounds = Literal["physical", "nonnegative", "free"]
@@ -289,7 +289,7 @@ def solve_matching(
 
     Examples
     --------
-    >>> from processing.spectra import WavelengthGrid
+    >>> from msflash.processing.spectra import WavelengthGrid
     >>> g = WavelengthGrid(400, 700, 100)
     >>> leds = Spectra(g, np.eye(4), ("a", "b", "c", "d"), unit="photons")
     >>> cam = Spectra(g, np.ones((4, 3)), ("R", "G", "B"), kind="responsivity", unit="photons")

@@ -42,8 +42,8 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from processing.errors import SpectralDataError
-from processing.spectra import DEFAULT_GRID, Spectra, require_same_grid
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, require_same_grid
 
 if TYPE_CHECKING:
     from numpy.random import Generator
@@ -161,7 +161,7 @@ def chart_scene(
     """
     if isinstance(reflectances, str):
         # Resolved here so callers can name a chart; the data loaders are the only file readers.
-        from processing import datasets
+        from msflash.processing import datasets
 
         loaders = {"chart110": datasets.chart110, "macbeth": datasets.macbeth}
         if reflectances not in loaders:
@@ -211,7 +211,7 @@ def mosaic_scene(reflectances: Spectra, seed: int = 0, min_patches: int = 24, pa
 
     Examples
     --------
-    >>> from processing.spectra import Spectra, WavelengthGrid
+    >>> from msflash.processing.spectra import Spectra, WavelengthGrid
     >>> two = Spectra(WavelengthGrid(400, 700, 300), [[0.2, 0.8], [0.3, 0.7]], ("a", "b"), kind="reflectance", unit="none")
     >>> scene = mosaic_scene(two, patch_px=2)
     >>> sorted(np.unique(scene.labels).tolist()), scene.reflectances.names

@@ -21,9 +21,9 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 
-from processing.errors import SolverError, SpectralDataError
-from processing.scipy_cores import NNLS_CORE as _NNLS_CORE
-from processing.scipy_cores import lapack
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.scipy_cores import NNLS_CORE as _NNLS_CORE
+from msflash.processing.scipy_cores import lapack
 
 _FEASIBILITY_TOLERANCE = 1e-9
 _recorders: list[list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = []

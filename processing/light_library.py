@@ -23,8 +23,8 @@ from typing import Literal
 
 import numpy as np
 
-from processing.datasets import DATA_DIR, load_spectra_csv
-from processing.spectra import Spectra
+from msflash.processing.datasets import DATA_DIR, load_spectra_csv
+from msflash.processing.spectra import Spectra
 
 LIBRARY_FILE = "lights/houser2013_401_lights_380_780_5nm.csv"
 """The library as shipped (see processing/data/SOURCES.md)."""

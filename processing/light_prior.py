@@ -58,13 +58,13 @@ from typing import Literal
 
 import numpy as np
 
-from processing import datasets
-from processing.ambient import AmbientModel
-from processing.channel_statistics import ChannelStatistics, Moments
-from processing.errors import SolverError, SpectralDataError
-from processing.least_squares import FactoredQuadratic
-from processing.light_library import light_library, prior_training_lights, without_near_copies
-from processing.spectra import Spectra, WavelengthGrid, require_unit
+from msflash.processing import datasets
+from msflash.processing.ambient import AmbientModel
+from msflash.processing.channel_statistics import ChannelStatistics, Moments
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.least_squares import FactoredQuadratic
+from msflash.processing.light_library import light_library, prior_training_lights, without_near_copies
+from msflash.processing.spectra import Spectra, WavelengthGrid, require_unit
 
 LIGHT_DIMS = 16
 """Light basis size q (the mean light and 15 principal components; chosen on the tuning split)."""

@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from processing import datasets
-from processing.errors import SpectralDataError
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from processing.water import underwater_ambient, water_transmittance
+from msflash.processing import datasets
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.processing.water import underwater_ambient, water_transmittance
 
 AMBIENTS = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange", "underwater_ocean")
 """Names accepted by :func:`ambient_spectrum`."""

@@ -56,10 +56,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from processing.ambient import AMBIENT_METHODS, AmbientEstimate, AmbientModel, gcv_alpha
-from processing.errors import SolverError, SpectralDataError
-from processing.spectra import Spectra, require_unit
-from processing.statistics import (
+from msflash.processing.ambient import AMBIENT_METHODS, AmbientEstimate, AmbientModel, gcv_alpha
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.spectra import Spectra, require_unit
+from msflash.processing.statistics import (
     DEFAULT_WORKERS,
     FrameStackSpec,
     NoiseMoments,
@@ -73,7 +73,7 @@ from processing.statistics import (
     saturated_blocks,
     thread_pool,
 )
-from processing.synthesis import frame_coefficients
+from msflash.processing.synthesis import frame_coefficients
 
 LOCAL_METHODS = ("auto", "global", "local")
 """``auto`` selects the model from the data; ``global`` is the paper's; ``local`` forces tiles."""

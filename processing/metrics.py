@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from processing.errors import SpectralDataError
+from msflash.processing.errors import SpectralDataError
 
 
 def spectrum_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:

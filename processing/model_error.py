@@ -25,13 +25,13 @@ from functools import lru_cache
 
 import numpy as np
 
-from processing.ambient import AmbientEstimate, AmbientModel
-from processing.datasets import natural100
-from processing.errors import SpectralDataError
-from processing.light_library import prior_training_lights
-from processing.scipy_cores import nnls
-from processing.spectra import Spectra, WavelengthGrid, require_unit
-from processing.statistics import SequenceStatistics
+from msflash.processing.ambient import AmbientEstimate, AmbientModel
+from msflash.processing.datasets import natural100
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.light_library import prior_training_lights
+from msflash.processing.scipy_cores import nnls
+from msflash.processing.spectra import Spectra, WavelengthGrid, require_unit
+from msflash.processing.statistics import SequenceStatistics
 
 NEIGHBOURS = 12
 """Reference lights whose noise-free estimates are nearest a scene's estimate, that describe its error band."""

@@ -21,10 +21,10 @@ import warnings
 
 import numpy as np
 
-from processing.errors import SpectralDataError
-from processing.image_formation import surface_responses
-from processing import datasets
-from processing.spectra import Spectra, WavelengthGrid, require_same_grid
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.image_formation import surface_responses
+from msflash.processing import datasets
+from msflash.processing.spectra import Spectra, WavelengthGrid, require_same_grid
 
 CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 
@@ -75,7 +75,7 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str) -> np.ndarray:
     """
     from scipy.ndimage import convolve
 
-    from processing.image_formation import cfa_channel_map
+    from msflash.processing.image_formation import cfa_channel_map
 
     if cfa not in CFA_PATTERNS:
         raise SpectralDataError(f"demosaic: CFA '{cfa}'; expected one of {', '.join(CFA_PATTERNS)}")
@@ -119,7 +119,7 @@ def reflectances_to_xyz(reflectances: Spectra, illuminant: Spectra) -> np.ndarra
 
     Examples
     --------
-    >>> from processing import datasets
+    >>> from msflash.processing import datasets
     >>> white = Spectra(datasets.DEFAULT_GRID, np.ones(31), ("white",), kind="reflectance", unit="none")
     >>> xyz = reflectances_to_xyz(white, datasets.illuminant("D65"))
     >>> [round(float(v), 3) for v in xyz[0]]  # D65 white point on a 10 nm grid

@@ -29,7 +29,7 @@ from typing import Literal
 
 import numpy as np
 
-from processing.errors import SpectralDataError
+from msflash.processing.errors import SpectralDataError
 
 SpectralKind = Literal["spd", "responsivity", "reflectance"]
 SpectralUnit = Literal["energy", "photons", "none"]

@@ -50,7 +50,7 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 
-from processing.errors import SpectralDataError
+from msflash.processing.errors import SpectralDataError
 
 DEFAULT_CHUNK_PIXELS = 1 << 15
 """Pixels per chunk: small enough to stay in cache for k ≈ 8 frames, large enough to amortise numpy calls."""

@@ -13,8 +13,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from processing.errors import SpectralDataError
-from processing.statistics import (
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.statistics import (
     DEFAULT_CHUNK_PIXELS,
     DEFAULT_WORKERS,
     FrameStackSpec,

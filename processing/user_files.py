@@ -22,7 +22,7 @@ import errno
 import os
 import stat
 
-from processing.errors import SpectralDataError
+from msflash.processing.errors import SpectralDataError
 
 MiB = 1 << 20
 

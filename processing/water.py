@@ -54,9 +54,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from processing import datasets
-from processing.errors import SpectralDataError
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.processing import datasets
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 
 CDOM_SLOPE_PER_NM = 0.014
 """Spectral slope of CDOM absorption, ``exp(−S (λ − 440))`` (uwSim; Bricaud et al. 1981)."""

@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
-from processing import datasets, lights
-from processing.image_formation import Scene, SensorModel, chart_scene, expected_response, exposure_for_peak, mosaic, render_frame
-from processing.spectra import DEFAULT_GRID, Spectra
-from processing.statistics import FrameStackSpec
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.processing import datasets, lights
+from msflash.processing.image_formation import Scene, SensorModel, chart_scene, expected_response, exposure_for_peak, mosaic, render_frame
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
+from msflash.processing.statistics import FrameStackSpec
 
 GRID = DEFAULT_GRID
 CAMERA_NAME = "NikonD100"

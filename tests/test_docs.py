@@ -26,7 +26,7 @@ def citing_files() -> list[Path]:
 
 def test_the_scan_sees_the_code() -> None:
     files = {p.relative_to(ROOT).as_posix() for p in python_files(*PACKAGES)}
-    assert "acquisition/sequence_format.py" in files
+    assert "acquisition/sequence/format.py" in files
     assert ARCHITECTURE.is_file()
 
 

@@ -44,7 +44,7 @@ def test_scanner_sees_the_packages() -> None:
 
 def test_gi_only_in_aravis_camera() -> None:
     offenders = [p.relative_to(ROOT).as_posix() for p in source_files() if "gi" in imported_top_level(p)]
-    assert offenders == ["acquisition/aravis_camera.py"]
+    assert offenders == ["acquisition/devices/aravis/camera.py"]
 
 
 def test_serial_only_in_led_controller() -> None:

@@ -23,10 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from processing.metrics import spectrum_rmse
-from processing.spectra import DEFAULT_GRID, WavelengthGrid
-from processing.study.illuminants import SmoothIlluminant
-from processing.study.table1 import (
+from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
+from msflash.processing.study.illuminants import SmoothIlluminant
+from msflash.processing.study.table1 import (
     MapFunction,
     Progress,
     direct_fit,
@@ -102,7 +102,7 @@ def run_cameras(
         "definitions": {
             "camera_spread": "RMS over wavelengths of the standard deviation across cameras of the max-normalised "
                              "estimates, mean over illuminants (camera_spread_max: worst illuminant)",
-            "spectrum_rmse": "processing.metrics.spectrum_rmse, mean over cameras and illuminants",
+            "spectrum_rmse": "msflash.processing.metrics.spectrum_rmse, mean over cameras and illuminants",
             "spectrum_rmse_worst_camera": "the worst camera's spectrum RMSE per illuminant, mean over illuminants",
         },
         "config": {"method": method, "alpha": alpha, "cameras": data["names"], "n_cameras": len(data["names"]),

@@ -34,11 +34,11 @@ from typing import Any
 
 import numpy as np
 
-from processing import lights
-from processing.errors import SolverError, SpectralDataError
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from processing.statistics import accumulate_statistics
-from processing.study.noisy import (
+from msflash.processing import lights
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.processing.statistics import accumulate_statistics
+from msflash.processing.study.noisy import (
     World,
     app_estimate,
     make_world,
@@ -46,7 +46,7 @@ from processing.study.noisy import (
     reliability,
     render_stack,
 )
-from processing.study.table1 import MapFunction, Progress, direct_fit, flash_norm, led_subset_indices, select_cameras
+from msflash.processing.study.table1 import MapFunction, Progress, direct_fit, flash_norm, led_subset_indices, select_cameras
 
 FACTORS: dict[str, dict[str, Any]] = {
     "n_leds": {"levels": [7, 6, 5, 4, 3], "label": "number of LEDs (paper subsets)"},
@@ -87,7 +87,7 @@ def with_line(ambient: Spectra, centre_nm: float, fraction: float, grid: Wavelen
 
 def relabelled(world_scene, n_surfaces: int, rng: np.random.Generator):  # noqa: ANN001, ANN201
     """The chart with every patch showing one of ``n_surfaces`` surfaces drawn without repetition."""
-    from processing.image_formation import Scene
+    from msflash.processing.image_formation import Scene
 
     n_patches = world_scene.reflectances.count - 1  # the last surface is the (unused) border
     chosen = rng.choice(n_patches, size=n_surfaces, replace=False)
@@ -117,7 +117,7 @@ def _one(world: World, rng: np.random.Generator, truth: np.ndarray, method: str,
 
 
 def _bound(truth: np.ndarray, leds: np.ndarray) -> float:
-    from processing.metrics import spectrum_rmse
+    from msflash.processing.metrics import spectrum_rmse
 
     return spectrum_rmse(direct_fit(truth, leds, "nonneg"), truth)
 
@@ -283,7 +283,7 @@ def run_failure(
 
 
 DEFINITIONS = {
-    "error": "processing.metrics.spectrum_rmse of the estimate against the true ambient (photons)",
+    "error": "msflash.processing.metrics.spectrum_rmse of the estimate against the true ambient (photons)",
     "excess": "error minus the baseline error of the same camera, ambient and noise seed",
     "bound": "spectrum_rmse of the best I w >= 0 fit of the true ambient with the LEDs in use",
     "warned": "AmbientEstimate.warnings non-empty, or estimate_ambient refused the input",

@@ -36,10 +36,10 @@ from typing import Literal
 
 import numpy as np
 
-from processing import datasets
-from processing.errors import SolverError, SpectralDataError
-from processing.least_squares import minimise_quadratic
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.processing import datasets
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.least_squares import minimise_quadratic
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 
 Convention = Literal["exact", "authors"]
 
@@ -71,7 +71,7 @@ def xy_of(spectra: np.ndarray, grid: WavelengthGrid = DEFAULT_GRID) -> np.ndarra
 
     Examples
     --------
-    >>> from processing.spectra import energy_to_photons
+    >>> from msflash.processing.spectra import energy_to_photons
     >>> equal_energy = energy_to_photons(np.ones(31), DEFAULT_GRID.wavelengths_nm)
     >>> np.round(xy_of(equal_energy), 2).tolist()  # illuminant E on a 10 nm grid
     [0.33, 0.33]

@@ -38,9 +38,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from processing import datasets, lights
-from processing.ambient import estimate_ambient
-from processing.image_formation import (
+from msflash.processing import datasets, lights
+from msflash.processing.ambient import estimate_ambient
+from msflash.processing.image_formation import (
     MixedIllumination,
     Scene,
     SensorModel,
@@ -49,10 +49,10 @@ from processing.image_formation import (
     render_frame,
     total_illumination,
 )
-from processing.local import DEFAULT_TILES, LocalEstimate, denoised_global, estimate_local, tile_statistics
-from processing.metrics import spectrum_rmse
-from processing.spectra import DEFAULT_GRID, Spectra
-from processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.local import DEFAULT_TILES, LocalEstimate, denoised_global, estimate_local, tile_statistics
+from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
+from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 
 AMBIENT_POOL = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange")
 """Ambients the scenarios draw from."""

@@ -32,10 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from processing.ambient import CONDITION_WARNING, RESIDUAL_WARNING, SATURATION_WARNING, AmbientEstimate, estimate_ambient
-from processing.model_error import EXPECTED_RATIO_WARNING, reference_for, with_model_error
-from processing.errors import SolverError, SpectralDataError
-from processing.image_formation import (
+from msflash.processing.ambient import CONDITION_WARNING, RESIDUAL_WARNING, SATURATION_WARNING, AmbientEstimate, estimate_ambient
+from msflash.processing.model_error import EXPECTED_RATIO_WARNING, reference_for, with_model_error
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.image_formation import (
     Scene,
     SensorModel,
     chart_scene,
@@ -44,10 +44,10 @@ from processing.image_formation import (
     render_frame,
     total_illumination,
 )
-from processing.metrics import spectrum_rmse
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
-from processing.study.table1 import flash_norm, led_subset_indices
+from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing.study.table1 import flash_norm, led_subset_indices
 
 PEAK_FRACTION = 0.8
 """Metered peak of the brightest frame, as a fraction of full scale."""

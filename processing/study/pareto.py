@@ -31,15 +31,15 @@ from typing import Any
 
 import numpy as np
 
-from processing import lights
-from processing.ambient import estimate_ambient
-from processing.errors import SolverError, SpectralDataError
-from processing.image_formation import chart_scene
-from processing.metrics import spectrum_rmse
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from processing.statistics import accumulate_statistics
-from processing.study.noisy import make_world, patch_mean_frames, render_stack
-from processing.study.table1 import MapFunction, Progress, select_cameras
+from msflash.processing import lights
+from msflash.processing.ambient import estimate_ambient
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.image_formation import chart_scene
+from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.processing.statistics import accumulate_statistics
+from msflash.processing.study.noisy import make_world, patch_mean_frames, render_stack
+from msflash.processing.study.table1 import MapFunction, Progress, select_cameras
 
 SOLVERS: dict[str, tuple[str, float | str]] = {
     "lstsq": ("lstsq", 0.0),

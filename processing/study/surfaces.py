@@ -21,12 +21,12 @@ from typing import Any
 
 import numpy as np
 
-from processing import datasets
-from processing.errors import SpectralDataError
-from processing.metrics import spectrum_rmse
-from processing.spectra import DEFAULT_GRID, WavelengthGrid
-from processing.study.illuminants import SmoothIlluminant
-from processing.study.table1 import (
+from msflash.processing import datasets
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
+from msflash.processing.study.illuminants import SmoothIlluminant
+from msflash.processing.study.table1 import (
     MapFunction,
     Progress,
     direct_fit,
@@ -123,7 +123,7 @@ def run_surfaces(
         "failures": failed.sum(axis=(1, 2)).astype(int).tolist(),
         "estimates_per_count": int(failed.shape[1] * failed.shape[2]),
         "definitions": {
-            "spectrum_rmse": "processing.metrics.spectrum_rmse, mean over cameras × illuminants per draw, "
+            "spectrum_rmse": "msflash.processing.metrics.spectrum_rmse, mean over cameras × illuminants per draw, "
                              "then mean (and std) over draws",
             "pixel_rmse": "100 × RMSE of a − Σ w f over the drawn surfaces (images divided by the stack maximum "
                           "of the whole chart)",

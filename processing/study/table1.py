@@ -58,14 +58,14 @@ from typing import Any
 
 import numpy as np
 
-from processing import datasets
-from processing.ambient import AMBIENT_METHODS, estimate_ambient
-from processing.errors import SolverError, SpectralDataError
-from processing.least_squares import minimise_quadratic
-from processing.metrics import spectrum_rmse
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from processing.statistics import SequenceStatistics
-from processing.study.illuminants import SmoothIlluminant, cmfs_photons, feasible_grid
+from msflash.processing import datasets
+from msflash.processing.ambient import AMBIENT_METHODS, estimate_ambient
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.least_squares import minimise_quadratic
+from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.processing.statistics import SequenceStatistics
+from msflash.processing.study.illuminants import SmoothIlluminant, cmfs_photons, feasible_grid
 
 PAPER_TABLE1: dict[str, list[float]] = {
     "n_leds": [3, 4, 5, 6, 7],
@@ -490,7 +490,7 @@ DEFINITIONS = {
     "pixel_rmse_ambient095": "as pixel_rmse with the ambient image's maximum at 0.95",
     "xy_error": "100 × mean over x and y of (xy_est − xy_true)² = 100 × |Δxy|²/2 (authors' code), CIE 1931 2°",
     "xy_squared_distance": "100 × |Δxy|² (squared Euclidean distance in CIE 1931 xy)",
-    "spectrum_rmse": "processing.metrics.spectrum_rmse per camera (estimate max-normalised, truth "
+    "spectrum_rmse": "msflash.processing.metrics.spectrum_rmse per camera (estimate max-normalised, truth "
                      "least-squares scaled onto it), averaged",
     "spectrum_rmse_shared_scale": "authors' code: truth scaled onto the camera-mean estimate, RMSE per camera, averaged",
     "multispectral_rmse": "spectrum_rmse of argmin ‖t − I w‖ s.t. I w ≥ 0 (direct LED fit of the truth)",

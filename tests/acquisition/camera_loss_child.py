@@ -35,8 +35,8 @@ def _wait_for_kill() -> None:
 @contextlib.contextmanager
 def _camera_after_kill() -> Iterator[Any]:
     """AravisCamera on the process fake at 127.0.0.1: two frames taken, then the fake killed by the parent."""
-    from acquisition import aravis_camera
-    from acquisition.plan import CapturePlan
+    from msflash.acquisition.devices.aravis import camera as aravis_camera
+    from msflash.acquisition.plan import CapturePlan
 
     plan = CapturePlan.ambient_then_each_led(3, 1000.0)
     with aravis_camera.AravisCamera("127.0.0.1", interfaces="gige", roi=(0, 0, 32, 32)) as camera:
@@ -50,7 +50,7 @@ def _camera_after_kill() -> Iterator[Any]:
 
 
 def camera_scenario() -> dict:
-    from acquisition.errors import CameraDisconnectedError, FrameTimeoutError
+    from msflash.acquisition.errors import CameraDisconnectedError, FrameTimeoutError
 
     result: dict = {}
     with _camera_after_kill() as camera:
@@ -68,7 +68,7 @@ def silent_scenario() -> dict:
     The parent starts a fresh fake on the port (so releasing the device is quick) only once this
     side has asked the dead one and printed ``PROBED``.
     """
-    from acquisition.errors import CameraDisconnectedError
+    from msflash.acquisition.errors import CameraDisconnectedError
 
     result: dict = {}
     with _camera_after_kill() as camera:
@@ -83,12 +83,12 @@ def silent_scenario() -> dict:
 
 
 def capture_scenario(out_dir: Path) -> dict:
-    from acquisition import aravis_camera
-    from acquisition.capture import run_capture
-    from acquisition.errors import CameraError
-    from acquisition.plan import CapturePlan
-    from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
-    from led_controller import LedBooth, serve_on_pty
+    from msflash.acquisition.devices.aravis import camera as aravis_camera
+    from msflash.acquisition.session.capture import run_capture
+    from msflash.acquisition.errors import CameraError
+    from msflash.acquisition.plan import CapturePlan
+    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+    from msflash.led_controller import LedBooth, serve_on_pty
 
     peaks = (450.0, 550.0, 650.0)
     server = serve_on_pty(names=[f"led{i}" for i in range(3)], peaks_nm=list(peaks))

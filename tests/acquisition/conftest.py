@@ -46,7 +46,7 @@ FAKE_GV_TOOL = "arv-fake-gv-camera-0.8"
 def aravis() -> ModuleType:
     """The Aravis camera module, or a skip naming what is missing."""
     try:
-        import acquisition.aravis_camera as module
+        import msflash.acquisition.devices.aravis.camera as module
     except ImportError as err:
         pytest.skip(f"Aravis unavailable: {err}")
     return module

@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from acquisition.cli import main
+from msflash.acquisition.app.cli import main
 
 pytestmark = pytest.mark.aravis
 
@@ -49,8 +49,8 @@ def test_devices_lists_the_booths_among_the_serial_ports(aravis: ModuleType, cap
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     """The system's serial port list is injected (no USB booth can be plugged in here: pyserial reads it
     from sysfs): the booth by its USB id is listed, the plain UART is not, and none found says so."""
-    from led_controller import discovery
-    from led_controller.discovery import SerialPortInfo
+    from msflash.led_controller import discovery
+    from msflash.led_controller.discovery import SerialPortInfo
 
     ports = [SerialPortInfo("/dev/ttyS0", None, None, None, None, "ttyS0"),
              SerialPortInfo("/dev/ttyACM0", 0x1209, 0x4D53, "msflash booth", "B0042", "msflash booth")]

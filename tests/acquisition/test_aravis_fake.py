@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from acquisition.camera import Camera
-from acquisition.errors import CameraError, CameraNotFoundError, DroppedFrameError
-from acquisition.plan import CapturePlan
+from msflash.acquisition.devices.camera import Camera
+from msflash.acquisition.errors import CameraError, CameraNotFoundError, DroppedFrameError
+from msflash.acquisition.plan import CapturePlan
 
 pytestmark = pytest.mark.aravis
 
@@ -221,7 +221,7 @@ def test_start_before_prepare_is_an_error(fake_camera: Any) -> None:
 
 
 def test_control_lost_signal_becomes_a_clear_error_naming_the_step(fake_camera: Any) -> None:
-    from acquisition.errors import CameraDisconnectedError
+    from msflash.acquisition.errors import CameraDisconnectedError
 
     plan = CapturePlan.ambient_then_each_led(2, 1000.0)
     fake_camera.prepare(plan)

@@ -12,8 +12,8 @@ from typing import Any
 
 import pytest
 
-from acquisition.errors import CameraError, FrameLostError, FrameTimeoutError
-from acquisition.plan import CapturePlan
+from msflash.acquisition.errors import CameraError, FrameLostError, FrameTimeoutError
+from msflash.acquisition.plan import CapturePlan
 
 pytestmark = pytest.mark.aravis
 

@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from acquisition.errors import CameraDisconnectedError, CameraError
-from acquisition.plan import CapturePlan
+from msflash.acquisition.errors import CameraDisconnectedError, CameraError
+from msflash.acquisition.plan import CapturePlan
 
 pytestmark = pytest.mark.aravis
 

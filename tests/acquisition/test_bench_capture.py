@@ -7,13 +7,13 @@ from types import ModuleType
 
 import pytest
 
-from acquisition.cli_bench import _OPTIONAL_PARTS
+from msflash.acquisition.app.cli_bench import _OPTIONAL_PARTS
 
 pytestmark = pytest.mark.aravis
 
 
 def test_capture_bench_returns_every_figure(aravis: ModuleType) -> None:
-    from acquisition.bench_capture import capture_bench
+    from msflash.acquisition.app.bench_capture import capture_bench
 
     report = capture_bench(runs=1, width=64, height=48)
     for key in ("wall_ratio", "latency_ms_median", "latency_ms_max", "compute_ms_median", "frame_period_ms",
@@ -36,4 +36,4 @@ def test_capture_bench_returns_every_figure(aravis: ModuleType) -> None:
         assert per_run["pset_to_release_ms"][run] < per_run["pset_to_trigger_ms"][run]
     assert report["host_latency_ms_median"] == pytest.approx(report["host_latencies_ms"][0])
     assert isinstance(report["wall_target_met"], bool) and isinstance(report["latency_target_met"], bool)
-    assert _OPTIONAL_PARTS["capture"] == ("acquisition.bench_capture", "capture_bench")
+    assert _OPTIONAL_PARTS["capture"] == ("msflash.acquisition.app.bench_capture", "capture_bench")

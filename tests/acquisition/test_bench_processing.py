@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from acquisition.bench import processing_bench
+from msflash.acquisition.app.bench import processing_bench
 
 
 def test_processing_bench_reports_every_ratio_and_both_thread_counts() -> None:

@@ -13,15 +13,15 @@ from types import ModuleType
 
 import pytest
 
-from acquisition import analysis
-from acquisition.cli import main
-from acquisition.rig import _emulator_for, hw_spectra
-from acquisition.errors import RecordingError
-from acquisition.sequence_format import read_sequence
-from calibration.files import CalibrationSet, load_calibration, save_calibration
-from led_controller import serve_on_pty
-from processing import datasets
-from processing.spectra import DEFAULT_GRID
+from msflash.acquisition.session import analysis
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.session.rig import _emulator_for, hw_spectra
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.calibration.files import CalibrationSet, load_calibration, save_calibration
+from msflash.led_controller import serve_on_pty
+from msflash.processing import datasets
+from msflash.processing.spectra import DEFAULT_GRID
 
 
 @pytest.fixture
@@ -86,7 +86,7 @@ def test_a_calibration_that_misses_the_leds_light_is_refused(tmp_path: Path, sec
     leds = sequence.led_spectra().to_unit("energy")
     camera = sequence.camera_responsivities().to_unit("energy")  # type: ignore[union-attr]
     spectra = {"led_spectra": leds, "camera_responsivities": camera}[section]
-    from processing.spectra import WavelengthGrid
+    from msflash.processing.spectra import WavelengthGrid
 
     narrow = spectra.resample(WavelengthGrid(start_nm, 700, 10), outside="zero")
     save_calibration(CalibrationSet(**{section: narrow}), tmp_path / "cal")

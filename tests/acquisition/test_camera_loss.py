@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from acquisition.sequence_format import read_sequence
+from msflash.acquisition.sequence.format import read_sequence
 
 pytestmark = pytest.mark.aravis
 
@@ -100,8 +100,8 @@ def test_a_frame_timeout_after_the_camera_died_says_it_no_longer_answers(
 
 def test_a_frame_timeout_from_a_live_camera_still_points_at_the_trigger(gv_camera: Any) -> None:
     """The counterpart: a camera that answers but was never triggered keeps the wiring advice."""
-    from acquisition.errors import FrameTimeoutError
-    from acquisition.plan import CapturePlan
+    from msflash.acquisition.errors import FrameTimeoutError
+    from msflash.acquisition.plan import CapturePlan
 
     gv_camera.prepare(CapturePlan.ambient_then_each_led(2, 1000.0))
     gv_camera.start()

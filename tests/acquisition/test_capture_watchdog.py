@@ -16,11 +16,11 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.capture import host_silence_s, preview_frames, run_capture
-from acquisition.plan import CapturePlan
-from acquisition.rig import Rig, open_sim_rig
-from acquisition.sequence_format import read_sequence
-from led_controller.booth import levels_close
+from msflash.acquisition.session.capture import host_silence_s, preview_frames, run_capture
+from msflash.acquisition.plan import CapturePlan
+from msflash.acquisition.session.rig import Rig, open_sim_rig
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.led_controller.booth import levels_close
 
 SHORT_WATCHDOG_S = 0.2
 
@@ -108,7 +108,7 @@ def test_a_lost_link_mid_sequence_is_the_error_reported(tmp_path: Path) -> None:
     """The pty closes mid-sequence (the booth unplugged): the error is the lost link during the ``SET``
     that failed — not a second one from switching off (``OFF``) or setting the watchdog back on the
     dead port while leaving the capture and the rig — and the frames before stay on disk."""
-    from led_controller import BoothError, PtyBoothServer
+    from msflash.led_controller import BoothError, PtyBoothServer
 
     with pytest.raises(BoothError) as caught, open_sim_rig(n_leds=4, seed=5) as rig:
         rig.booth.set_watchdog(SHORT_WATCHDOG_S)
@@ -134,8 +134,8 @@ def test_a_frame_the_watchdog_darkened_is_refused_not_kept(
     """A host that stalls beyond its planned silence (here: the plan's silence taken as nil, so the
     watchdog is not raised) lets the watchdog switch the LED off mid-exposure: host paced, the next
     SET would just work, so the dark LED frame must be refused by name, not written as good data."""
-    from acquisition import capture
-    from acquisition.errors import CaptureError
+    from msflash.acquisition.session import capture
+    from msflash.acquisition.errors import CaptureError
 
     monkeypatch.setattr(capture, "host_silence_s", lambda plan: 0.0)
     plan = CapturePlan(CapturePlan.ambient_then_each_led(4, 300_000.0).steps[:3])
@@ -153,9 +153,9 @@ def test_an_unplugged_booth_through_the_cli_says_it_once_plus_the_leds_warning(
     """msflash capture with the booth's pty closed after two frames: exit 1, the error line is the lost link
     during SET, and the only diagnostics shown by default are the driver noticing it and the warning that
     the LEDs could not be confirmed off — not a second failure about OFF from closing the rig."""
-    from acquisition import cli_run
-    from acquisition.cli import main
-    from led_controller import PtyBoothServer
+    from msflash.acquisition.app import cli_run
+    from msflash.acquisition.app.cli import main
+    from msflash.led_controller import PtyBoothServer
 
     real_open = cli_run.open_rig
 

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import cli_process
-from acquisition.cli import CRASH_LOG_ENV, main
+from msflash.acquisition.app import cli_process
+from msflash.acquisition.app.cli import CRASH_LOG_ENV, main
 from tests.helpers import write_test_sequence
 
 

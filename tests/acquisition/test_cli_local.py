@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import cli_local
-from acquisition.cli import build_parser, main
-from acquisition.image_io import read_image
-from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
-from processing import datasets
-from processing.spectra import DEFAULT_GRID
-from processing.study.local import Scenario, make_scenario
+from msflash.acquisition.app import cli_local
+from msflash.acquisition.app.cli import build_parser, main
+from msflash.acquisition.sequence.image_files import read_image
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.processing import datasets
+from msflash.processing.spectra import DEFAULT_GRID
+from msflash.processing.study.local import Scenario, make_scenario
 
 SHAPE = (96, 128)
 

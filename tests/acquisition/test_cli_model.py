@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition.cli import main
+from msflash.acquisition.app.cli import main
 from tests.processing.unseen_sequences import Case, led_bound, render_case, rmse
 
 

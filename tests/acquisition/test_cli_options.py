@@ -6,15 +6,15 @@ from pathlib import Path
 
 import pytest
 
-from acquisition import cli
+from msflash.acquisition.app import cli
 
 SIM_SEQUENCE = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
 
 
 @pytest.fixture(autouse=True)
 def with_calibrate(monkeypatch):
-    if "acquisition.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("acquisition.cli_calibrate",))
+    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
+        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
 
 
 @pytest.mark.parametrize("value", ["0", "-3", "two"])

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition.cli import main
-from acquisition.image_io import read_image, write_image
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.sequence.image_files import read_image, write_image
 from tests.helpers import led_mix, write_test_sequence
 
 N_LEDS = 7
@@ -269,7 +269,7 @@ def test_a_closed_stdout_pipe_ends_quietly(tmp_path: Path) -> None:
     if not (sequence / "sequence.json").exists():
         pytest.skip(f"shared sample {sequence} is absent (CI puts shared/ beside the clone)")
     reader = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.readline()"], stdin=subprocess.PIPE)
-    writer = subprocess.run([sys.executable, "-m", "acquisition.cli", "estimate", str(sequence)],
+    writer = subprocess.run([sys.executable, "-m", "msflash.acquisition.app.cli", "estimate", str(sequence)],
                             stdout=reader.stdin, stderr=subprocess.PIPE, text=True, timeout=120)
     reader.stdin.close()
     reader.wait(timeout=10)

@@ -13,7 +13,7 @@ import sys
 
 import pytest
 
-from acquisition import cli
+from msflash.acquisition.app import cli
 
 HEAVY = ("matplotlib", "colour", "scipy.stats", "dask", "gi", "OpenImageIO", "cvxpy", "scipy.linalg", "scipy.optimize")
 """Libraries ``msflash --help`` must not import (their packages or anything under them)."""
@@ -22,7 +22,7 @@ HEAVY = ("matplotlib", "colour", "scipy.stats", "dask", "gi", "OpenImageIO", "cv
 def imported_after(argv: list[str]) -> set[str]:
     """The modules a fresh interpreter holds after ``main(argv)`` (its SystemExit caught)."""
     code = ("import json, sys\n"
-            "from acquisition.cli import main\n"
+            "from msflash.acquisition.app.cli import main\n"
             "try:\n"
             f"    main({argv!r})\n"
             "except SystemExit:\n"
@@ -39,15 +39,15 @@ def heavy_among(modules: set[str]) -> list[str]:
 @pytest.mark.parametrize("argv", [["--help"], ["--version"], []])
 def test_top_level_help_and_version_import_no_heavy_library(argv: list[str]) -> None:
     modules = imported_after(argv)
-    assert "acquisition.cli" in modules
+    assert "msflash.acquisition.app.cli" in modules
     assert heavy_among(modules) == []
     assert "numpy" not in modules
-    assert not {m for m in modules if m.startswith("acquisition.cli_")} - {"acquisition.cli_common"}
+    assert not {m for m in modules if m.startswith("msflash.acquisition.cli_")} - {"msflash.acquisition.app.cli_common"}
 
 
 def test_a_commands_help_imports_only_its_own_module() -> None:
     modules = imported_after(["bench", "--help"])
-    assert {m for m in modules if m.startswith("acquisition.cli_")} == {"acquisition.cli_common", "acquisition.cli_bench"}
+    assert {m for m in modules if m.startswith("msflash.acquisition.cli_")} == {"msflash.acquisition.app.cli_common", "msflash.acquisition.app.cli_bench"}
     assert heavy_among(modules) == []
 
 
@@ -62,7 +62,7 @@ def test_no_commands_help_imports_plotting_colour_statistics_or_dask(name: str) 
 def test_estimate_imports_no_plotting_colour_or_scipy_package(tmp_path) -> None:
     """``estimate`` reads frames (OpenImageIO) and calls scipy's LAPACK and NNLS cores only (processing.scipy_cores)."""
     modules = imported_after(["estimate", str(tmp_path / "absent"), "--json"])
-    assert "acquisition.analysis" in modules
+    assert "msflash.acquisition.session.analysis" in modules
     assert {"scipy.linalg", "scipy.optimize"} & modules == set()
     assert [m for m in heavy_among(modules) if not m.startswith(("OpenImageIO", "scipy."))] == []
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.sequence_format import read_sequence
+from msflash.acquisition.sequence.format import read_sequence
 from tests.helpers import wait_for_frames
 
 REPO = Path(__file__).resolve().parents[2]
@@ -24,7 +24,7 @@ SLOW_CAPTURE = ["capture", "--sync", "booth", "--exposure-us", "300000", "--scen
 
 
 def _start(out: Path, *extra: str) -> subprocess.Popen[bytes]:
-    command = [sys.executable, "-m", "acquisition.cli", *SLOW_CAPTURE, "--out", str(out), *extra]
+    command = [sys.executable, "-m", "msflash.acquisition.app.cli", *SLOW_CAPTURE, "--out", str(out), *extra]
     return subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 

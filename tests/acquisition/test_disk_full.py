@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from acquisition import sequence_format
-from acquisition.cli import main
-from acquisition.sequence_format import read_sequence
+from msflash.acquisition.sequence import format as sequence_format
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.sequence.format import read_sequence
 
 FULL_AT = 3
 """The frame whose file finds the disk full (0-based)."""
@@ -59,7 +59,7 @@ def test_a_full_disk_while_writing_the_run_report_is_one_runtime_error(
     """The sequence (flash included) is on disk; the report's first EXR finds the disk full (injected at
     the report's write_image, as above): exit 1, one line naming it and saying the sequence is complete
     — it was an OSError traceback (checked by hand on a 760 kB tmpfs: same line)."""
-    from acquisition import report
+    from msflash.acquisition.app import report
 
     def full(path, pixels, metadata):  # noqa: ANN001 - the image_io signature
         raise OSError(errno.ENOSPC, "No space left on device", str(path))

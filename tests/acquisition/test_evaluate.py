@@ -21,11 +21,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import cli_evaluate
-from acquisition.cli import main as msflash_main
-from acquisition.cli_common import UsageError
-from acquisition.html_report import PNG_SIGNATURE, HtmlReport
-from acquisition.image_io import read_image, read_image_header
+from msflash.acquisition.app import cli_evaluate
+from msflash.acquisition.app.cli import main as msflash_main
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.acquisition.app.html_report import PNG_SIGNATURE, HtmlReport
+from msflash.acquisition.sequence.image_files import read_image, read_image_header
 
 ACCEPTANCE_AMBIENTS = ("tungsten", "fluorescent", "underwater")
 

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition.image_io import write_image
-from calibration.file_modes import _read_umask, default_file_mode
-from calibration.files import CalibrationSet, save_calibration
-from processing import datasets
-from processing.spectra import DEFAULT_GRID
+from msflash.acquisition.sequence.image_files import write_image
+from msflash.calibration.file_modes import _read_umask, default_file_mode
+from msflash.calibration.files import CalibrationSet, save_calibration
+from msflash.processing import datasets
+from msflash.processing.spectra import DEFAULT_GRID
 
 
 def _mode(path: Path) -> int:
@@ -37,7 +37,7 @@ def test_frames_sequences_and_calibrations_are_readable_as_the_umask_allows(tmp_
 
 
 def test_a_captured_sequence_is_readable_as_the_umask_allows(tmp_path: Path) -> None:
-    from acquisition.cli import main
+    from msflash.acquisition.app.cli import main
 
     assert main(["capture", "--rig", "sim", "--out", str(tmp_path / "c")]) == 0
     sequence = tmp_path / "c" / "sequence"

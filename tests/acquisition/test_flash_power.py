@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from acquisition.cli import main
-from acquisition.rig import open_sim_rig
-from acquisition.sequence_format import read_sequence
-from acquisition.simulated_camera import SimulatedCamera, led_signals
-from processing.image_formation import Scene
-from processing.metrics import spectrum_rmse
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.session.rig import open_sim_rig
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera, led_signals
+from msflash.processing.image_formation import Scene
+from msflash.processing.metrics import spectrum_rmse
 
 
 def _signals(camera: SimulatedCamera) -> np.ndarray:

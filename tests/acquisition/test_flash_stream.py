@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition.async_writer import AsyncSequenceWriter
-from acquisition.capture import run_capture_with_flash
-from acquisition.flash_session import FlashSession
-from acquisition.plan import CapturePlan
-from acquisition.rig import open_sim_rig
-from acquisition.errors import RecordingError
-from acquisition.sequence_format import SequenceWriter, read_sequence
+from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
+from msflash.acquisition.session.capture import run_capture_with_flash
+from msflash.acquisition.session.flash_session import FlashSession
+from msflash.acquisition.plan import CapturePlan
+from msflash.acquisition.session.rig import open_sim_rig
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
 
 
 def _writer(rig, path: Path) -> SequenceWriter:
@@ -81,7 +81,7 @@ def test_async_writer_applies_back_pressure_instead_of_dropping(sim_rig, tmp_pat
 
 
 def test_async_writer_reports_a_write_error(sim_rig, tmp_path: Path) -> None:
-    from acquisition.errors import RecordingError
+    from msflash.acquisition.errors import RecordingError
 
     with _writer(sim_rig, tmp_path / "s") as inner, pytest.raises(RecordingError, match="writing a frame failed"):
         writer = AsyncSequenceWriter(inner)
@@ -126,8 +126,8 @@ def test_flash_in_the_same_stream(sim_rig, tmp_path: Path, trigger: str) -> None
 
 
 def test_flash_session_matches_the_sequence_path(sim_rig, tmp_path: Path) -> None:
-    from acquisition import analysis
-    from acquisition.capture import run_capture
+    from msflash.acquisition.session import analysis
+    from msflash.acquisition.session.capture import run_capture
 
     plan = CapturePlan.ambient_then_each_led(4, 10_000.0)
     with _writer(sim_rig, tmp_path / "s") as writer:
@@ -199,7 +199,7 @@ def test_flash_stream_pauses_the_writer_only_around_the_decision(sim_rig, tmp_pa
 def _session_and_frames(sim_rig, tmp_path: Path, levels: list[tuple[float, ...]], saturate: float = 0.0,
                         exposure_limits_us: tuple[float, float] | None = None):
     """A FlashSession fed synthetic frames (ambient + one frame per entry of ``levels``)."""
-    from acquisition.camera import RawFrame
+    from msflash.acquisition.devices.camera import RawFrame
 
     info = sim_rig.camera.info
     rng = np.random.default_rng(len(levels))
@@ -222,7 +222,7 @@ def _session_and_frames(sim_rig, tmp_path: Path, levels: list[tuple[float, ...]]
 ], ids=["one-led-per-frame", "saturated-blocks", "multiplexed-more-frames"])
 def test_flash_session_statistics_are_the_sequence_statistics(sim_rig, tmp_path: Path, levels, saturate) -> None:
     """Frame-by-frame moments (or, for more frames than LEDs, the general path) = the sequence path."""
-    from acquisition import analysis
+    from msflash.acquisition.session import analysis
 
     session = _session_and_frames(sim_rig, tmp_path, levels, saturate)
     stack = session.stack()
@@ -237,7 +237,7 @@ def test_flash_decision_reads_the_full_estimate_only_when_asked(sim_rig, tmp_pat
     """decide() solves with the weights alone; the reliability signals are computed on first access."""
     import warnings
 
-    from processing.ambient import AmbientModel
+    from msflash.processing.ambient import AmbientModel
 
     session = _session_and_frames(sim_rig, tmp_path, [tuple(float(i == j) for i in range(4)) for j in range(4)])
     calls: list[int] = []
@@ -262,9 +262,9 @@ def test_flash_decision_reads_the_full_estimate_only_when_asked(sim_rig, tmp_pat
 
 def test_flash_session_predicts_the_flash_exposure_of_the_frames_taken(sim_rig, tmp_path: Path) -> None:
     """The rates taken frame by frame give flash_exposure's answer on the same frames (first ambient only)."""
-    from acquisition.camera import RawFrame
-    from acquisition.errors import RecordingError
-    from acquisition.exposure import flash_exposure
+    from msflash.acquisition.devices.camera import RawFrame
+    from msflash.acquisition.errors import RecordingError
+    from msflash.acquisition.session.exposure import flash_exposure
 
     levels = [tuple(float(i == j) for i in range(4)) for j in range(4)]
     limits = (10.0, 1e6)
@@ -312,9 +312,9 @@ def test_flash_step_released_with_now_only_in_booth_master(sim_rig, tmp_path: Pa
 def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim_rig, tmp_path: Path, levels) -> None:
     """A mono camera's (H, W) frames: the writer records three identical channels; the session
     block-sums the one plane and gives the statistics (and estimate) of the recorded sequence."""
-    from acquisition import analysis
-    from acquisition.camera import RawFrame
-    from acquisition.exposure import flash_exposure
+    from msflash.acquisition.session import analysis
+    from msflash.acquisition.devices.camera import RawFrame
+    from msflash.acquisition.session.exposure import flash_exposure
 
     info = sim_rig.camera.info
     rng = np.random.default_rng(7)
@@ -351,7 +351,7 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim
     np.testing.assert_allclose(session.estimate(session.stack()).ambient_weights,
                                analysis.estimate_sequence(sequence).ambient_weights, rtol=1e-7, atol=1e-12)
     # msflash run's report reads the frames in memory as the sequence records them (RGB).
-    from acquisition.cli_run import _InMemorySequence
+    from msflash.acquisition.app.cli_run import _InMemorySequence
 
     in_memory = analysis.load_frame_stack(_InMemorySequence(sequence, [RawFrame(v, i, 0, 1.0, 1.0)
                                                                        for i, v in enumerate(written)]))

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.cli import main
-from acquisition.errors import FolderInUseError
-from acquisition.folder_claim import LOCK_FILE, claim_folder, claimed
-from acquisition.sequence_format import read_sequence
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.errors import FolderInUseError
+from msflash.acquisition.sequence.folder_claim import LOCK_FILE, claim_folder, claimed
+from msflash.acquisition.sequence.format import read_sequence
 from tests.helpers import wait_for_frames, write_test_sequence
 
 REPO = Path(__file__).resolve().parents[2]
@@ -27,7 +27,7 @@ SLOW_CAPTURE = ["capture", "--sync", "booth", "--exposure-us", "300000", "--scen
 
 
 def _msflash(*args: str) -> subprocess.Popen[bytes]:
-    return subprocess.Popen([sys.executable, "-m", "acquisition.cli", *args], cwd=REPO,
+    return subprocess.Popen([sys.executable, "-m", "msflash.acquisition.app.cli", *args], cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 

@@ -8,8 +8,8 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from acquisition.errors import RecordingError
-from acquisition.image_io import image_suffix, read_image, read_image_header, write_image
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.image_files import image_suffix, read_image, read_image_header, write_image
 
 RNG = np.random.default_rng(7)
 

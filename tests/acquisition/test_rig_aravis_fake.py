@@ -12,9 +12,9 @@ from types import ModuleType
 import numpy as np
 import pytest
 
-from acquisition.cli import main
-from acquisition.rig import open_rig
-from acquisition.sequence_format import read_sequence
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.session.rig import open_rig
+from msflash.acquisition.sequence.format import read_sequence
 
 pytestmark = pytest.mark.aravis
 

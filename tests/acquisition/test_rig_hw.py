@@ -16,14 +16,14 @@ from types import ModuleType
 import numpy as np
 import pytest
 
-from acquisition.cli import main
-from acquisition.cli_common import UsageError
-from acquisition.errors import RigOpenError
-from acquisition.rig import _emulator_for, load_hw_spectra, open_rig
-from acquisition.sequence_format import read_sequence
-from led_controller import serve_on_pty
-from processing import datasets
-from processing.spectra import DEFAULT_GRID, Spectra
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.acquisition.errors import RigOpenError
+from msflash.acquisition.session.rig import _emulator_for, load_hw_spectra, open_rig
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.led_controller import serve_on_pty
+from msflash.processing import datasets
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
 
 pytestmark = pytest.mark.aravis
 
@@ -139,7 +139,7 @@ def test_booth_channel_count_must_match_the_spectra(aravis: ModuleType, calibrat
 
 def test_a_booth_of_another_protocol_version_is_one_error_line(aravis: ModuleType, calibration: Path, tmp_path: Path,
                                                              capsys: pytest.CaptureFixture) -> None:
-    from led_controller import BoothEmulator
+    from msflash.led_controller import BoothEmulator
 
     leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
     default = _emulator_for(leds)
@@ -169,7 +169,7 @@ def test_rig_sim_with_a_camera_is_refused(tmp_path: Path, capsys: pytest.Capture
 
 def test_calibration_directory_from_msflash_calibrate(tmp_path: Path) -> None:
     """A ``calibration.json`` directory (the calibration package's format) gives both spectra."""
-    files = pytest.importorskip("calibration.files")
+    files = pytest.importorskip("msflash.calibration.files")
     leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
     camera = datasets.isetcam_camera("NikonD100").resample(DEFAULT_GRID, outside="zero")
     files.save_calibration(files.CalibrationSet(led_spectra=leds, camera_responsivities=camera), tmp_path / "cal")

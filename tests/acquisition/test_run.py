@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import rig as rig_module
-from acquisition.cli import main
-from acquisition.sequence_format import read_sequence
+from msflash.acquisition.session import rig as rig_module
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.sequence.format import read_sequence
 
 # The sim world's spectrum RMSE is ~0.15–0.26 (the best LED fit of its ambients is 0.16–0.21);
 # 0.35 catches a broken estimator without pinning noise.
@@ -80,7 +80,7 @@ def test_leds_off_and_partial_sequence_kept_when_capture_fails(tmp_path, monkeyp
         def failing_next(timeout_s: float):
             calls["n"] += 1
             if calls["n"] == 4:
-                from acquisition.errors import FrameTimeoutError
+                from msflash.acquisition.errors import FrameTimeoutError
                 raise FrameTimeoutError("simulated camera: injected timeout")
             return real_next(timeout_s)
 
@@ -101,9 +101,9 @@ def test_leds_off_and_partial_sequence_kept_when_capture_fails(tmp_path, monkeyp
 def test_run_decides_the_flash_before_the_reliability_signals(tmp_path, monkeypatch) -> None:
     """`msflash run` drives the flash from FlashSession.decide (weights, flash, exposure predicted from the
     frames as they arrived); the estimate's reliability signals are computed only after the capture."""
-    from acquisition import cli_run
-    from acquisition.flash_session import FlashSession
-    from processing.ambient import AmbientModel
+    from msflash.acquisition.app import cli_run
+    from msflash.acquisition.session.flash_session import FlashSession
+    from msflash.processing.ambient import AmbientModel
 
     order: list[str] = []
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.cli import main
-from acquisition.sequence_format import read_sequence
+from msflash.acquisition.app.cli import main
+from msflash.acquisition.sequence.format import read_sequence
 
 
 @pytest.mark.parametrize("command", ["run", "capture"])

@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition.errors import RecordingError
-from acquisition.image_io import read_image, read_image_header, write_image
-from acquisition.sequence_format import (
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.image_files import read_image, read_image_header, write_image
+from msflash.acquisition.sequence.format import (
     SequenceCamera,
     SequenceFrame,
     SequenceLed,
@@ -468,7 +468,7 @@ _CHILD = textwrap.dedent(
     """
     import sys
     import numpy as np
-    from acquisition.sequence_format import SequenceCamera, SequenceLed, SequenceWriter
+    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
 
     wavelengths = np.arange(400.0, 701.0, 10.0)
     camera = SequenceCamera("Kill", "0", "RGB16", None, 0, 65535)

@@ -11,13 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from acquisition import simulated_camera
-from acquisition.capture import run_capture
-from acquisition.errors import DroppedFrameError, FrameTimeoutError
-from acquisition.plan import CapturePlan
-from acquisition.rig import open_sim_rig
-from acquisition.sequence_format import SequenceWriter, read_sequence
-from processing.errors import SpectralDataError
+from msflash.acquisition.devices import simulated_camera
+from msflash.acquisition.session.capture import run_capture
+from msflash.acquisition.errors import DroppedFrameError, FrameTimeoutError
+from msflash.acquisition.plan import CapturePlan
+from msflash.acquisition.session.rig import open_sim_rig
+from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
+from msflash.processing.errors import SpectralDataError
 
 FAILING_RENDER = 3
 """The render call (1-based) that fails: step 2, the second LED frame."""

@@ -7,13 +7,13 @@ import threading
 import numpy as np
 import pytest
 
-from acquisition.camera import Camera
-from acquisition.errors import CameraError, FrameTimeoutError
-from acquisition.plan import CapturePlan
-from acquisition.simulated_camera import SimulatedCamera
-from processing import datasets, lights
-from processing.image_formation import SensorModel, chart_scene, expected_response, total_illumination
-from processing.spectra import DEFAULT_GRID, Spectra
+from msflash.acquisition.devices.camera import Camera
+from msflash.acquisition.errors import CameraError, FrameTimeoutError
+from msflash.acquisition.plan import CapturePlan
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera
+from msflash.processing import datasets, lights
+from msflash.processing.image_formation import SensorModel, chart_scene, expected_response, total_illumination
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
 
 N_LEDS = 7
 

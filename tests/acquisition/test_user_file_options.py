@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.cli import main
-from processing.user_files import shown_path
+from msflash.acquisition.app.cli import main
+from msflash.processing.user_files import shown_path
 from tests.helpers import write_test_sequence
 
 REPO = Path(__file__).resolve().parents[2]

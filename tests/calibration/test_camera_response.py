@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.camera_response import estimate_responsivities, learn_prior, measurement_matrix, responsivity_rmse
-from calibration.errors import CalibrationError
-from calibration.validation import calibration_lights, leave_one_camera_out, summarise
-from processing import datasets
-from processing.image_formation import surface_responses
-from processing.spectra import DEFAULT_GRID
+from msflash.calibration.camera_response import estimate_responsivities, learn_prior, measurement_matrix, responsivity_rmse
+from msflash.calibration.errors import CalibrationError
+from msflash.calibration.validation import calibration_lights, leave_one_camera_out, summarise
+from msflash.processing import datasets
+from msflash.processing.image_formation import surface_responses
+from msflash.processing.spectra import DEFAULT_GRID
 
 FAST_CAMERAS = ("NikonD100", "Canon 40D", "Nikon D700", "Pentax K-5")
 

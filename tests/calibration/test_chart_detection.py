@@ -12,19 +12,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import cli
-from acquisition import rig as rig_module
-from acquisition.sequence_format import read_sequence
-from acquisition.simulated_camera import SimulatedCamera
-from calibration.chart_detection import (
+from msflash.acquisition.app import cli
+from msflash.acquisition.session import rig as rig_module
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera
+from msflash.calibration.chart_detection import (
     MACBETH_GRID,
     ChartDetectionError,
     ColourFrames,
     detect_chart,
     detect_in_sequence,
 )
-from processing import datasets
-from processing.image_formation import Scene, chart_scene, placed_scene, uniform_scene
+from msflash.processing import datasets
+from msflash.processing.image_formation import Scene, chart_scene, placed_scene, uniform_scene
 from tests.helpers import GRID, SAMPLES_DIR, ambient, leds_photons, linear_frames
 
 N_PATCHES = MACBETH_GRID[0] * MACBETH_GRID[1]
@@ -32,8 +32,8 @@ N_PATCHES = MACBETH_GRID[0] * MACBETH_GRID[1]
 
 @pytest.fixture(autouse=True)
 def with_calibrate(monkeypatch):
-    if "acquisition.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("acquisition.cli_calibrate",))
+    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
+        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
 
 
 def _chart(patch_px: int = 8) -> Scene:
@@ -120,7 +120,7 @@ def test_the_sim_rigs_own_layout_is_found_exactly(tmp_path):
     sequence, grid = _detect(path)
     scene = _chart()
     assert np.allclose(grid.patch_centres(), _true_centres(scene), atol=0.05)
-    from acquisition.cli_evaluate import chart_layout
+    from msflash.acquisition.app.cli_evaluate import chart_layout
 
     given = chart_layout(sequence.load_frame(0).shape[:2], "macbeth", 8, 2, 1).labels
     assert np.array_equal(grid.labels(given.shape), given)  # the same label map as --patch-px 8 --border-px 2

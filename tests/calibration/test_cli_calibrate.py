@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import cli
-from calibration.files import load_calibration
-from processing import datasets
+from msflash.acquisition.app import cli
+from msflash.calibration.files import load_calibration
+from msflash.processing import datasets
 
 SEQUENCE = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
 
@@ -19,8 +19,8 @@ SEQUENCE = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-mac
 @pytest.fixture(autouse=True)
 def with_calibrate(monkeypatch):
     """The lead adds the module to COMMAND_MODULES; until then the tests add it."""
-    if "acquisition.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("acquisition.cli_calibrate",))
+    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
+        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
 
 
 def write_leds(directory: Path) -> list[str]:

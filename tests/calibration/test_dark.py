@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.dark import channel_planes, measure_dark, measure_linearity
-from calibration.errors import CalibrationError
-from processing.image_formation import mosaic
+from msflash.calibration.dark import channel_planes, measure_dark, measure_linearity
+from msflash.calibration.errors import CalibrationError
+from msflash.processing.image_formation import mosaic
 
 BLACK = np.array([64.0, 66.0, 61.0])
 READ_NOISE = 3.0

@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from calibration.errors import CalibrationError
-from calibration.files import CalibrationSet, load_calibration, load_or_new, save_calibration
-from processing import datasets
-from processing.spectra import DEFAULT_GRID
+from msflash.calibration.errors import CalibrationError
+from msflash.calibration.files import CalibrationSet, load_calibration, load_or_new, save_calibration
+from msflash.processing import datasets
+from msflash.processing.spectra import DEFAULT_GRID
 
 
 def full_set():

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from calibration.errors import CalibrationError
-from calibration.led_spectra import characterise_led, emission_model_Ohno2005, relative_power_through_camera
-from calibration.spectrometer import SpectrometerMeasurement
-from processing import datasets
-from processing.spectra import DEFAULT_GRID
+from msflash.calibration.errors import CalibrationError
+from msflash.calibration.led_spectra import characterise_led, emission_model_Ohno2005, relative_power_through_camera
+from msflash.calibration.spectrometer import SpectrometerMeasurement
+from msflash.processing import datasets
+from msflash.processing.spectra import DEFAULT_GRID
 
 W = np.arange(380.0, 781.0, 1.0)
 

@@ -12,20 +12,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import cli
-from acquisition.sequence_format import read_sequence
-from calibration.camera_response import responsivity_rmse
-from calibration.chart_sequence import resolve_light, sequence_measurements
-from calibration.errors import CalibrationError
-from calibration.files import load_calibration
-from calibration.validation import flash_delta_e
-from processing import datasets
+from msflash.acquisition.app import cli
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.calibration.camera_response import responsivity_rmse
+from msflash.calibration.chart_sequence import resolve_light, sequence_measurements
+from msflash.calibration.errors import CalibrationError
+from msflash.calibration.files import load_calibration
+from msflash.calibration.validation import flash_delta_e
+from msflash.processing import datasets
 
 
 @pytest.fixture(autouse=True)
 def with_calibrate(monkeypatch):
-    if "acquisition.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("acquisition.cli_calibrate",))
+    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
+        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
 
 
 def _record(root: Path, ambient: str, seed: int, cfa: str | None = None) -> Path:

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.errors import CalibrationError
-from calibration.spectrometer import (
+from msflash.calibration.errors import CalibrationError
+from msflash.calibration.spectrometer import (
     measurement_to_spectra,
     parse_spectrometer_text,
     read_spectrometer_file,
     subtract_dark,
 )
-from processing.spectra import DEFAULT_GRID, PHOTON_REFERENCE_NM
+from msflash.processing.spectra import DEFAULT_GRID, PHOTON_REFERENCE_NM
 
 
 def gaussian(w, peak=520.0, sigma=10.0):

@@ -6,7 +6,7 @@ from functools import cache
 
 import pytest
 
-from calibration.validation import STUDY_SEEDS, leave_one_camera_out_seeds, summarise
+from msflash.calibration.validation import STUDY_SEEDS, leave_one_camera_out_seeds, summarise
 
 
 @cache

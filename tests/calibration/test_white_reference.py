@@ -13,18 +13,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import cli
-from acquisition.image_io import write_image
-from acquisition.sequence_format import read_sequence
-from calibration.errors import CalibrationError
-from calibration.files import load_calibration
-from calibration.white_reference import parse_roi, white_led_responses
+from msflash.acquisition.app import cli
+from msflash.acquisition.sequence.image_files import write_image
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.calibration.errors import CalibrationError
+from msflash.calibration.files import load_calibration
+from msflash.calibration.white_reference import parse_roi, white_led_responses
 
 
 @pytest.fixture(autouse=True)
 def with_calibrate(monkeypatch):
-    if "acquisition.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("acquisition.cli_calibrate",))
+    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
+        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
 
 
 def _capture(root: Path, scene: str, cfa: str | None = None) -> Path:

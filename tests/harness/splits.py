@@ -15,7 +15,7 @@ import zlib
 from functools import cache
 from typing import Literal
 
-from processing.light_library import library_lights
+from msflash.processing.light_library import library_lights
 from tests.harness import tables
 
 Split = Literal["tuning", "held_out"]

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from processing.light_library import library_lights
+from msflash.processing.light_library import library_lights
 from tests.harness import cases, splits, tables
 
 
 def test_the_shared_light_file_maps_onto_msflash_labels_and_values() -> None:
-    from processing.light_library import light_library
+    from msflash.processing.light_library import light_library
 
     ours, theirs = tables.lights(), light_library()
     assert ours.names == theirs.names

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from led_controller import LedBooth, ManualClock, PtyBoothServer, serve_on_pty
-from led_controller.firmware_sim import (
+from msflash.led_controller import LedBooth, ManualClock, PtyBoothServer, serve_on_pty
+from msflash.led_controller.firmware_sim import (
     ELF,
     SMALL_ELF,
     SimulatedBooth,

@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 import pytest
 
-from led_controller import (
+from msflash.led_controller import (
     BoothEmulator,
     BoothError,
     BoothNotFoundError,
@@ -22,8 +22,8 @@ from led_controller import (
     PtyBoothServer,
     serve_on_pty,
 )
-from led_controller.booth import levels_close
-from led_controller.firmware_sim import SimulatedBooth
+from msflash.led_controller.booth import levels_close
+from msflash.led_controller.firmware_sim import SimulatedBooth
 
 from .conftest import SMALL_TOP, FarEnd
 

@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 import pytest
 
-from led_controller import (
+from msflash.led_controller import (
     BoothError,
     BoothProtocolError,
     BoothTimeoutError,
@@ -14,7 +14,7 @@ from led_controller import (
     ManualClock,
     PtyBoothServer,
 )
-from led_controller.booth import levels_close
+from msflash.led_controller.booth import levels_close
 
 OFF = (0.0,) * 7
 

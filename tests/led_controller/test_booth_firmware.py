@@ -16,10 +16,10 @@ import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from led_controller import LedBooth, ManualClock, serve_on_pty
-from led_controller.emulator import BoothEmulator, firmware_crc
-from led_controller.firmware_sim import SimulatedBooth
-from led_controller.protocol import MAX_LINE, encode_levels, encode_request
+from msflash.led_controller import LedBooth, ManualClock, serve_on_pty
+from msflash.led_controller.emulator import BoothEmulator, firmware_crc
+from msflash.led_controller.firmware_sim import SimulatedBooth
+from msflash.led_controller.protocol import MAX_LINE, encode_levels, encode_request
 
 from .conftest import SMALL_TOP
 

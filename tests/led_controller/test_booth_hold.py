@@ -11,10 +11,10 @@ from collections.abc import Callable
 
 import pytest
 
-from led_controller.booth import LedBooth, levels_close
-from led_controller.emulator import BoothEmulator, ManualClock, PtyBoothServer
-from led_controller.errors import BoothError
-from led_controller.protocol import Command, encode_request
+from msflash.led_controller.booth import LedBooth, levels_close
+from msflash.led_controller.emulator import BoothEmulator, ManualClock, PtyBoothServer
+from msflash.led_controller.errors import BoothError
+from msflash.led_controller.protocol import Command, encode_request
 
 from .conftest import FarEnd
 

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from led_controller import BoothError, BoothProtocolError, BoothTimeoutError, LedBooth
-from led_controller.booth import levels_close
-from led_controller.protocol import encode_frame, encode_request
+from msflash.led_controller import BoothError, BoothProtocolError, BoothTimeoutError, LedBooth
+from msflash.led_controller.booth import levels_close
+from msflash.led_controller.protocol import encode_frame, encode_request
 
 
 @pytest.mark.parametrize("recording", ["emulator-camera-master.txt", "simavr-firmware-camera-master.txt"])

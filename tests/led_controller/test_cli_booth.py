@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.cli_booth import booth_emulator, register
-from acquisition.cli_common import UsageError
-from led_controller import LedBooth
-from led_controller.bench import run_bench
+from msflash.acquisition.app.cli_booth import booth_emulator, register
+from msflash.acquisition.app.cli_common import UsageError
+from msflash.led_controller import LedBooth
+from msflash.led_controller.bench import run_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -60,7 +60,7 @@ def test_booth_emulator_refuses_a_watchdog_its_firmware_would_refuse(watchdog: s
 
 
 def test_booth_emulator_process_prints_its_port_and_stops_on_ctrl_c() -> None:
-    code = "import argparse,sys; from acquisition.cli_booth import register; p=argparse.ArgumentParser(); " \
+    code = "import argparse,sys; from msflash.acquisition.app.cli_booth import register; p=argparse.ArgumentParser(); " \
            "register(p.add_subparsers()); a=p.parse_args(sys.argv[1:]); sys.exit(a.handler(a))"
     proc = subprocess.Popen(
         [sys.executable, "-c", code, "booth-emulator"], cwd=ROOT, stdout=subprocess.PIPE,
@@ -92,7 +92,7 @@ def test_booth_console_reads_commands_from_stdin_and_switches_off_at_the_end(boo
                                                                               capsys: pytest.CaptureFixture[str]) -> None:
     """``msflash booth console PORT`` with piped input: each line echoed, framed and explained; LEDs off
     at the end of input even though the last command switched them on."""
-    from acquisition.cli import main
+    from msflash.acquisition.app.cli import main
 
     monkeypatch.setattr(sys, "stdin", _Lines("levels 1 0 0 0 0 0 0.5\nlevels 3\n"))
     assert main(["booth", "console", booth_on_pty.port]) == 0
@@ -107,7 +107,7 @@ def test_booth_console_reads_commands_from_stdin_and_switches_off_at_the_end(boo
 
 
 def test_booth_without_an_action_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
-    from acquisition.cli import main
+    from msflash.acquisition.app.cli import main
 
     assert main(["booth"]) == 2
     assert capsys.readouterr().err.strip() == "msflash: error: booth: no action given; expected 'msflash booth console PORT'"

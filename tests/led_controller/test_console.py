@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from led_controller import LedBooth
-from led_controller.booth import levels_close
-from led_controller.console import BoothConsole, ConsoleQuit
-from led_controller.protocol import encode_request
+from msflash.led_controller import LedBooth
+from msflash.led_controller.booth import levels_close
+from msflash.led_controller.console import BoothConsole, ConsoleQuit
+from msflash.led_controller.protocol import encode_request
 
 from .conftest import FarEnd
 

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.cli_booth import register
-from led_controller import BoothNotFoundError
-from led_controller.discovery import SerialPortInfo, find_booth, find_booths
-from led_controller.doctor import Identity, UsbDevice, run_doctor
+from msflash.acquisition.app.cli_booth import register
+from msflash.led_controller import BoothNotFoundError
+from msflash.led_controller.discovery import SerialPortInfo, find_booth, find_booths
+from msflash.led_controller.doctor import Identity, UsbDevice, run_doctor
 
 USER = Identity(uid=1000, gids=frozenset({1000}))
 

@@ -10,10 +10,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from led_controller import BoothProtocolError, BoothTimeoutError, LedBooth, PtyBoothServer, serve_on_pty
-from led_controller import protocol
-from led_controller.booth import levels_close
-from led_controller.emulator import BoothEmulator
+from msflash.led_controller import BoothProtocolError, BoothTimeoutError, LedBooth, PtyBoothServer, serve_on_pty
+from msflash.led_controller import protocol
+from msflash.led_controller.booth import levels_close
+from msflash.led_controller.emulator import BoothEmulator
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

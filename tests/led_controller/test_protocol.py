@@ -6,10 +6,10 @@ import math
 
 import pytest
 
-from led_controller import protocol
-from led_controller.emulator import firmware_crc
-from led_controller.errors import BoothProtocolError
-from led_controller.protocol import Command
+from msflash.led_controller import protocol
+from msflash.led_controller.emulator import firmware_crc
+from msflash.led_controller.errors import BoothProtocolError
+from msflash.led_controller.protocol import Command
 
 
 def test_crc_matches_the_standard_check_value_and_the_firmware_table() -> None:

@@ -32,20 +32,20 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from acquisition.analysis import camera_responsivities_photons, estimate_sequence, led_spectra_photons  # noqa: E402
-from acquisition.prior_route import sequence_channel_statistics  # noqa: E402
-from acquisition.sequence_format import read_sequence  # noqa: E402
-from processing import datasets  # noqa: E402
-from processing.channel_statistics import ChannelStatistics  # noqa: E402
-from processing.light_library import library_lights, light_library  # noqa: E402
-from processing.light_prior import (  # noqa: E402
+from msflash.acquisition.session.analysis import camera_responsivities_photons, estimate_sequence, led_spectra_photons  # noqa: E402
+from msflash.acquisition.session.prior_route import sequence_channel_statistics  # noqa: E402
+from msflash.acquisition.sequence.format import read_sequence  # noqa: E402
+from msflash.processing import datasets  # noqa: E402
+from msflash.processing.channel_statistics import ChannelStatistics  # noqa: E402
+from msflash.processing.light_library import library_lights, light_library  # noqa: E402
+from msflash.processing.light_prior import (  # noqa: E402
     CHOICE_MARGIN,
     PriorModel,
     choose_model,
     learn_light_prior,
     learn_reflectance_basis,
 )
-from processing.spectra import Spectra, WavelengthGrid  # noqa: E402
+from msflash.processing.spectra import Spectra, WavelengthGrid  # noqa: E402
 from tests.processing import unseen_sequences as us  # noqa: E402
 
 CAMERAS = ("Canon 5DMarkII", "Nikon D40", "isetcam:AptinaMT9M031", "Nokia N900", "Point Grey Grasshopper 50S5C")
@@ -223,7 +223,7 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as root:
         samples = render_samples(args.split, args.per_fold, Path(root))
-    from processing import light_prior as lp
+    from msflash.processing import light_prior as lp
     defaults = dict(light_dims=lp.LIGHT_DIMS, reflectance_dims=lp.REFLECTANCE_DIMS, ridge=lp.RIDGE, kappa=lp.KAPPA)
     if args.sweep:
         for light_dims in (8, 12, 16, 24):

@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from processing.ambient import AMBIENT_METHODS, CONDITION_WARNING, RESIDUAL_WARNING, estimate_ambient
-from processing.errors import SolverError, SpectralDataError
-from processing.image_formation import CFA_PATTERNS, Scene, SensorModel
-from processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.ambient import AMBIENT_METHODS, CONDITION_WARNING, RESIDUAL_WARNING, estimate_ambient
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.image_formation import CFA_PATTERNS, Scene, SensorModel
+from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 from tests.helpers import (
     EXACT,
     WEIGHTS_EXACT,
@@ -297,7 +297,7 @@ def test_binned_statistics_exclude_saturated_blocks() -> None:
 # -- prepared model (the capture's latency path) ----------------------------------------------
 def reference_gcv_alpha(statistics, roughness) -> float:
     """GCV written plainly with numpy.linalg: the prepared path must pick exactly the same α."""
-    from processing.ambient import ALPHA_GRID
+    from msflash.processing.ambient import ALPHA_GRID
 
     gram, cross = statistics.gram, statistics.cross
     n = max(statistics.n_samples, statistics.n_leds + 1)
@@ -317,8 +317,8 @@ def reference_gcv_alpha(statistics, roughness) -> float:
 @given(seed=st.integers(0, 2**31 - 1), dependent=st.booleans())
 def test_gcv_alpha_is_the_plain_computation(seed: int, dependent: bool) -> None:
     """Bit for bit: GCV scores are flat at small α, so any round-off change could move the minimum."""
-    from processing.ambient import gcv_alpha
-    from processing.statistics import SequenceStatistics
+    from msflash.processing.ambient import gcv_alpha
+    from msflash.processing.statistics import SequenceStatistics
 
     rng = np.random.default_rng(seed)
     leds = leds_photons().values
@@ -334,7 +334,7 @@ def test_gcv_alpha_is_the_plain_computation(seed: int, dependent: bool) -> None:
 
 @pytest.mark.parametrize("method", sorted(AMBIENT_METHODS))
 def test_prepared_model_equals_the_one_shot_estimate(tungsten_frames, method: str) -> None:
-    from processing.ambient import AmbientModel
+    from msflash.processing.ambient import AmbientModel
 
     a, f, spec = tungsten_frames
     statistics = accumulate_statistics(a, f, spec)
@@ -360,8 +360,8 @@ def test_prepared_constraint_rows_solve_as_the_one_shot_quadratic(tungsten_frame
 
     (Roughness is left out: its last problem may be a majorise–minimise step it rejects.)
     """
-    from processing.ambient import AmbientModel
-    from processing.least_squares import minimise_quadratic, recording_problems
+    from msflash.processing.ambient import AmbientModel
+    from msflash.processing.least_squares import minimise_quadratic, recording_problems
 
     a, f, spec = tungsten_frames
     statistics = accumulate_statistics(a, f, spec)

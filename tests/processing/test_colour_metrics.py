@@ -7,11 +7,11 @@ from functools import cache
 import numpy as np
 import pytest
 
-from processing import colour_metrics as cm
-from processing import datasets
-from processing.errors import SpectralDataError
-from processing.image_formation import chart_scene, expected_response, mosaic, surface_responses
-from processing.render import (
+from msflash.processing import colour_metrics as cm
+from msflash.processing import datasets
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.image_formation import chart_scene, expected_response, mosaic, surface_responses
+from msflash.processing.render import (
     camera_to_xyz_matrix,
     demosaic,
     demosaic_bilinear,
@@ -19,7 +19,7 @@ from processing.render import (
     reflectances_to_xyz,
     srgb_preview,
 )
-from processing.spectra import DEFAULT_GRID
+from msflash.processing.spectra import DEFAULT_GRID
 
 GRID = DEFAULT_GRID
 

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from processing import datasets
-from processing.errors import SpectralDataError
-from processing.spectra import DEFAULT_GRID, WavelengthGrid
+from msflash.processing import datasets
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
 
 
 class TestShippedFiles:

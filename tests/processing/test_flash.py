@@ -7,9 +7,9 @@ import warnings
 import numpy as np
 import pytest
 
-from processing import datasets
-from processing.errors import SolverError, SpectralDataError, TargetUnreachableWarning
-from processing.flash import MATCHING_ROUND_OFF, UNREACHABLE_RELATIVE_ERROR, camera_led_matrix, solve_complementary, solve_matching
+from msflash.processing import datasets
+from msflash.processing.errors import SolverError, SpectralDataError, TargetUnreachableWarning
+from msflash.processing.flash import MATCHING_ROUND_OFF, UNREACHABLE_RELATIVE_ERROR, camera_led_matrix, solve_complementary, solve_matching
 from tests.helpers import GRID, SOLVER, WEIGHTS_EXACT, camera, led_mix, leds_photons
 
 BOUNDS = ("physical", "nonnegative", "free")
@@ -153,8 +153,8 @@ def test_flash_bad_input() -> None:
 @pytest.mark.parametrize("bounds", BOUNDS)
 def test_prepared_matching_problem_is_the_plain_quadratic(bounds: str) -> None:
     """FlashModel factors the matching problem once; each solve equals the one-shot QP on it."""
-    from processing.flash import FlashModel, _box
-    from processing.least_squares import minimise_quadratic
+    from msflash.processing.flash import FlashModel, _box
+    from msflash.processing.least_squares import minimise_quadratic
 
     model = FlashModel(leds_photons(), camera())
     rng = np.random.default_rng(3)
@@ -178,8 +178,8 @@ def test_complementary_weights_are_the_rounded_clipped_qp_solution(bounds: str) 
     the fused form against the two-step definition, bit for bit, with ambients inside and outside
     the LEDs' gamut (negative weights, upper bounds active).
     """
-    from processing.flash import FlashModel
-    from processing.least_squares import minimise_quadratic, recording_problems
+    from msflash.processing.flash import FlashModel
+    from msflash.processing.least_squares import minimise_quadratic, recording_problems
 
     model = FlashModel(leds_photons(), camera())
     target = model.target_response(datasets.illuminant("D65", GRID).to_unit("photons"))

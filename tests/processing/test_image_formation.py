@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing import datasets, lights
-from processing.errors import SpectralDataError
-from processing.image_formation import (
+from msflash.processing import datasets, lights
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.image_formation import (
     CFA_PATTERNS,
     Scene,
     SensorModel,
@@ -21,7 +21,7 @@ from processing.image_formation import (
     total_illumination,
     uniform_scene,
 )
-from processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 
 TOLERANCE = 1e-9
 

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
 
-from processing.errors import SolverError
-from processing.least_squares import minimise_quadratic, recording_problems
+from msflash.processing.errors import SolverError
+from msflash.processing.least_squares import minimise_quadratic, recording_problems
 from tests.helpers import SOLVER
 
 PROPERTY = settings(max_examples=25, deadline=None)
@@ -113,7 +113,7 @@ def test_factored_problem_solves_as_the_one_shot_call(seed: int, n: int, m: int,
     Includes box constraints (the flash problems, many bounds active) and duplicated rows active
     at the same point (degenerate active sets).
     """
-    from processing.least_squares import FactoredQuadratic
+    from msflash.processing.least_squares import FactoredQuadratic
 
     hessian, _, constraints, bounds, x0 = random_problem(seed, n, m)
     if kind == "box":
@@ -133,7 +133,7 @@ def test_factored_problem_solves_as_the_one_shot_call(seed: int, n: int, m: int,
 
 
 def test_factored_problem_refuses_what_the_one_shot_call_refuses() -> None:
-    from processing.least_squares import FactoredQuadratic
+    from msflash.processing.least_squares import FactoredQuadratic
 
     with pytest.raises(SolverError, match="flash: the normal matrix is not positive definite"):
         FactoredQuadratic.prepare(np.zeros((2, 2)), np.eye(2), np.zeros(2), where="flash")
@@ -146,7 +146,7 @@ def test_factored_problem_refuses_what_the_one_shot_call_refuses() -> None:
 
 def test_public_nnls_fallback_gives_the_same_solutions(monkeypatch) -> None:
     """Without scipy's NNLS core (private, checked at import) the public nnls is used: same answers."""
-    import processing.least_squares as least_squares
+    import msflash.processing.least_squares as least_squares
 
     problems = [random_problem(seed, 1 + seed % 6, seed % 9) for seed in range(40)]
     fast = [minimise_quadratic(h, f, g, b).x for h, f, g, b, _ in problems]
@@ -156,7 +156,7 @@ def test_public_nnls_fallback_gives_the_same_solutions(monkeypatch) -> None:
 
 
 def test_non_finite_constraints_are_refused() -> None:
-    from processing.errors import SpectralDataError
+    from msflash.processing.errors import SpectralDataError
 
     with pytest.raises(SpectralDataError, match="flash: the constraints or the linear term are not finite"):
         minimise_quadratic(np.eye(2), np.zeros(2), np.eye(2), np.array([1.0, np.inf]), where="flash")
@@ -169,7 +169,7 @@ def test_non_finite_constraints_are_refused() -> None:
 
 def test_refactored_hessian_solves_as_the_one_shot_call_and_names_its_caller() -> None:
     """with_hessian keeps the prepared rows and factors a new H: same bits as preparing anew."""
-    from processing.least_squares import FactoredQuadratic
+    from msflash.processing.least_squares import FactoredQuadratic
 
     rng = np.random.default_rng(11)
     n = 6

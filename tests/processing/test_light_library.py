@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from processing.light_library import (NEAR_COPY_COSINE, library_lights, light_library, light_type, lights_of,
+from msflash.processing.light_library import (NEAR_COPY_COSINE, library_lights, light_library, light_type, lights_of,
                                       near_copy_groups, prior_training_lights, without_near_copies)
 
 

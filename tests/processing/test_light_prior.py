@@ -7,15 +7,15 @@ import json
 import numpy as np
 import pytest
 
-from acquisition.analysis import camera_responsivities_photons, estimate_sequence, led_spectra_photons
-from acquisition.prior_route import estimate_sequence_prior, prior_payload, sequence_channel_statistics
-from acquisition.sequence_format import read_sequence
-from processing import datasets
-from processing.ambient import estimate_ambient
-from processing.channel_statistics import accumulate_channel_statistics, plane_channels
-from processing.errors import SpectralDataError
-from processing.light_library import NEAR_COPY_COSINE, lights_of
-from processing.light_prior import (
+from msflash.acquisition.session.analysis import camera_responsivities_photons, estimate_sequence, led_spectra_photons
+from msflash.acquisition.session.prior_route import estimate_sequence_prior, prior_payload, sequence_channel_statistics
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.processing import datasets
+from msflash.processing.ambient import estimate_ambient
+from msflash.processing.channel_statistics import accumulate_channel_statistics, plane_channels
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.light_library import NEAR_COPY_COSINE, lights_of
+from msflash.processing.light_prior import (
     PriorModel,
     choose_model,
     estimate_ambient_prior,
@@ -24,8 +24,8 @@ from processing.light_prior import (
     prior_candidate_lights,
     prior_model,
 )
-from processing.spectra import Spectra, WavelengthGrid
-from processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.spectra import Spectra, WavelengthGrid
+from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 from tests.processing import unseen_sequences as us
 from tests.processing.light_prior_study import rendering_with, study_surfaces
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing import lights
-from processing.errors import SpectralDataError
-from processing.spectra import DEFAULT_GRID
+from msflash.processing import lights
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID
 
 
 class TestAmbients:

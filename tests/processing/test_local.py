@@ -13,8 +13,8 @@ from functools import cache
 import numpy as np
 import pytest
 
-from processing.image_formation import MixedIllumination, expected_response
-from processing.local import (
+from msflash.processing.image_formation import MixedIllumination, expected_response
+from msflash.processing.local import (
     SELECTION_MARGIN,
     Cells,
     _block_sums_and_differences,
@@ -27,9 +27,9 @@ from processing.local import (
     tile_statistics,
     upsample_tiles,
 )
-from processing.metrics import spectrum_rmse
-from processing.statistics import FrameStackSpec, accumulate_statistics
-from processing.study.local import (
+from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.study.local import (
     Scenario,
     alone_rmse,
     led_bound,
@@ -40,7 +40,7 @@ from processing.study.local import (
     run_study,
     tiled_rmse,
 )
-from processing.synthesis import synthesize
+from msflash.processing.synthesis import synthesize
 from tests.helpers import EXACT, FLOAT32, ambient, camera, chart, leds_photons, linear_frames, rendered_frames, spec_for
 
 SHAPE = (160, 192)
@@ -61,7 +61,7 @@ def tiled(kind: str, seed: int) -> TiledStatistics:
 # -- tiled statistics ---------------------------------------------------------------------------
 @pytest.mark.parametrize(("bin_factor", "cfa", "tiles"), [(1, None, 5), (2, None, (3, 4)), (4, None, 2), (2, "GRBG", 3)])
 def test_tiles_sum_to_the_global_statistics(bin_factor: int, cfa: str | None, tiles: int | tuple[int, int]) -> None:
-    from processing.image_formation import SensorModel
+    from msflash.processing.image_formation import SensorModel
 
     sensor = SensorModel(cfa=cfa)
     frames = rendered_frames(ambient("tungsten"), sensor=sensor, noise=True, scene=chart(specular_strip_px=5))
@@ -159,7 +159,7 @@ def test_denoised_statistics_remove_the_noise_bias_of_the_led_only_images() -> N
 ])
 def test_a_frame_smaller_than_one_block_names_the_block_in_pixels(shape, bin_factor: int, period: int, block: str) -> None:
     """A 1×1 Bayer frame was 'smaller than one 1×1 block' (the block counted in quads, not pixels)."""
-    from processing.errors import SpectralDataError
+    from msflash.processing.errors import SpectralDataError
 
     frame = np.ones(shape)
     spec = FrameStackSpec(0.0, 1e9, 1.0, (1.0,), np.eye(1))

@@ -6,11 +6,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from processing.ambient import ALPHA_GRID, AmbientModel, _solve_penalised, discrepancy_alpha, estimate_ambient
-from processing.light_library import lights_of
-from processing.model_error import (EXPECTED_RATIO_WARNING, MISS_RATIO, light_reference, model_error, reference_for,
+from msflash.processing.ambient import ALPHA_GRID, AmbientModel, _solve_penalised, discrepancy_alpha, estimate_ambient
+from msflash.processing.light_library import lights_of
+from msflash.processing.model_error import (EXPECTED_RATIO_WARNING, MISS_RATIO, light_reference, model_error, reference_for,
                                     with_model_error)
-from processing.statistics import accumulate_statistics
+from msflash.processing.statistics import accumulate_statistics
 from tests.helpers import ambient, camera, leds_photons, linear_frames, spectrum_rmse
 
 

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import analysis
-from acquisition.sequence_format import read_sequence
-from processing.local import tile_statistics
-from processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, cfa_planes, inverse_variance_weights
+from msflash.acquisition.session import analysis
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.processing.local import tile_statistics
+from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, cfa_planes, inverse_variance_weights
 from tests.processing.unseen_sequences import Case, led_bound, render_case, rmse
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing.errors import SpectralDataError
-from processing.spectra import (
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import (
     DEFAULT_GRID,
     Spectra,
     WavelengthGrid,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing.errors import SpectralDataError
-from processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
 from tests.helpers import EXACT
 
 
@@ -149,7 +149,7 @@ def test_rejects_bad_input() -> None:
 @pytest.mark.parametrize(("frame", "name"), [(0, "the ambient frame"), (2, "LED frame 2")])
 def test_non_finite_frame_is_named(bin_factor: int, frame: int, name: str) -> None:
     """'a frame holds non-finite values' did not say which: the ambient, or which LED frame."""
-    from processing.local import tile_statistics
+    from msflash.processing.local import tile_statistics
 
     rng = np.random.default_rng(9)
     ambient, leds, spec = random_stack(rng, (8, 8, 3), np.eye(3), white=1e9)
@@ -167,7 +167,7 @@ def test_large_frames_probe_a_stride_of_block_rows_and_scale_it(monkeypatch: pyt
     """Above 4 × PROBE_BLOCKS blocks the noise probe reads every 4th block row, scaled by the valid blocks:
     its noise moments stay within a few per cent of the full probe's (sampling error ~1 %), saturated
     blocks included, and so do the denoised weights."""
-    from processing import statistics as module
+    from msflash.processing import statistics as module
 
     rng = np.random.default_rng(7)
     shape, k = (1024, 1024, 3), 3

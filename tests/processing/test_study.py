@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from processing.study.illuminants import feasible_grid, smoothest_spectrum, xy_of
-from processing.study.surfaces import run_surfaces
-from processing.study.table1 import PAPER_TABLE1, direct_fit, flash_norm, led_subset_indices, run_table1
+from msflash.processing.study.illuminants import feasible_grid, smoothest_spectrum, xy_of
+from msflash.processing.study.surfaces import run_surfaces
+from msflash.processing.study.table1 import PAPER_TABLE1, direct_fit, flash_norm, led_subset_indices, run_table1
 
 
 @pytest.mark.parametrize("xy", [(1 / 3, 1 / 3), (0.2, 0.5), (0.5, 0.35), (0.15, 0.08)])
@@ -34,7 +34,7 @@ def test_smoothest_spectrum_is_smoother_than_another_with_the_same_xy():
     smooth = smoothest_spectrum(1 / 3, 1 / 3).spectrum.values[:, 0]
     # Any non-negative spectrum with the same xy is at least as rough (after the same scaling of XYZ).
     rng = np.random.default_rng(1)
-    from processing.study.illuminants import cmfs_photons
+    from msflash.processing.study.illuminants import cmfs_photons
 
     cmf = cmfs_photons()
     for _ in range(5):
@@ -96,8 +96,8 @@ def test_tiny_surfaces_study_runs():
 
 
 def _parser() -> argparse.ArgumentParser:
-    from acquisition import cli_study
-    from acquisition.cli_common import UsageError
+    from msflash.acquisition.app import cli_study
+    from msflash.acquisition.app.cli_common import UsageError
 
     class Parser(argparse.ArgumentParser):
         def error(self, message):  # like acquisition.cli: usage errors raise
@@ -129,7 +129,7 @@ def test_cli_surfaces_plot_survives_a_refused_count(tmp_path, capsys):
 
 
 def test_cli_rejects_bad_input():
-    from acquisition.cli_common import UsageError
+    from msflash.acquisition.app.cli_common import UsageError
 
     parser = _parser()
     with pytest.raises(UsageError):
@@ -151,7 +151,7 @@ def test_cli_rejects_bad_input():
 ])
 def test_cli_option_errors_say_what_is_expected(argv, message):
     """They read "invalid _counts value: '0'" (the Python function's name, nothing expected); inf was accepted."""
-    from acquisition.cli_common import UsageError
+    from msflash.acquisition.app.cli_common import UsageError
 
     with pytest.raises(UsageError) as caught:
         _parser().parse_args(["study", "table1", *argv])
@@ -161,7 +161,7 @@ def test_cli_option_errors_say_what_is_expected(argv, message):
 def test_cli_scheduler_that_is_not_an_address_is_bad_input():
     """'--scheduler bogus' ended in a ValueError traceback from dask's address parser."""
     pytest.importorskip("distributed")
-    from acquisition.cli_common import UsageError
+    from msflash.acquisition.app.cli_common import UsageError
 
     args = _parser().parse_args(["study", "table1", "--scheduler", "bogus", "--cameras", "1", "--illuminants", "1"])
     with pytest.raises(UsageError, match="--scheduler bogus: cannot connect .*expected 'local', 'none' or a dask"):
@@ -171,7 +171,7 @@ def test_cli_scheduler_that_is_not_an_address_is_bad_input():
 _LOOPBACK_CLUSTER = """
 import sys
 import distributed
-from acquisition.cli import main
+from msflash.acquisition.app.cli import main
 with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", host="127.0.0.1",
                               dashboard_address=":0") as cluster:
     status = main(["study", "table1", "--json", "--cameras", "2", "--illuminants", "1", "--leds", "3",

@@ -16,12 +16,12 @@ import json
 import numpy as np
 import pytest
 
-from processing import datasets, lights
-from processing.study.cameras import camera_spread, run_cameras, run_xy
-from processing.study.failure import FACTORS, led_fill, run_failure, with_line
-from processing.study.noisy import make_world, render_stack
-from processing.study.pareto import pareto_front, run_pareto
-from processing.statistics import accumulate_statistics
+from msflash.processing import datasets, lights
+from msflash.processing.study.cameras import camera_spread, run_cameras, run_xy
+from msflash.processing.study.failure import FACTORS, led_fill, run_failure, with_line
+from msflash.processing.study.noisy import make_world, render_stack
+from msflash.processing.study.pareto import pareto_front, run_pareto
+from msflash.processing.statistics import accumulate_statistics
 
 CAMERA = "Canon 50D"
 
@@ -180,8 +180,8 @@ def test_cli_new_studies_write_json_and_png(tmp_path, capsys, argv, key):
 
 
 def test_cli_failure_rejects_an_unknown_factor():
-    from acquisition.cli_common import UsageError
-    from processing.errors import SpectralDataError
+    from msflash.acquisition.app.cli_common import UsageError
+    from msflash.processing.errors import SpectralDataError
 
     args = _parser().parse_args(["study", "failure", "--factors", "nonsense", "--scheduler", "none"])
     with pytest.raises((UsageError, SpectralDataError)):

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing.errors import SpectralDataError
-from processing.image_formation import SensorModel
-from processing.statistics import FrameStackSpec
-from processing.synthesis import frame_coefficients, synthesize, to_raw_values
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.image_formation import SensorModel
+from msflash.processing.statistics import FrameStackSpec
+from msflash.processing.synthesis import frame_coefficients, synthesize, to_raw_values
 from tests.helpers import EXACT, FLOAT32, ambient, chart, one_hot_levels, rendered_frames, spec_for
 
 WEIGHTS = np.array([0.5, 0.0, 1.0, 0.25, 2.0, -0.3, 0.8])

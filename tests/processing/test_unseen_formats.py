@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition.errors import RecordingError
-from acquisition.image_io import read_image
-from acquisition.sequence_format import read_sequence
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.image_files import read_image
+from msflash.acquisition.sequence.format import read_sequence
 from tests.processing.unseen_sequences import Case, check_case, expected_synthesis, render_case, run_cli
 
 

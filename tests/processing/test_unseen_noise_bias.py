@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition import analysis
-from acquisition.sequence_format import read_sequence
-from processing.local import tile_statistics
-from processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, cfa_planes
+from msflash.acquisition.session import analysis
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.processing.local import tile_statistics
+from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, cfa_planes
 from tests.processing.unseen_sequences import MARGIN, Case, led_bound, render_case, rmse
 
 
@@ -89,8 +89,8 @@ def test_a_probe_larger_than_the_signal_is_clipped_said_and_widens_the_band() ->
     direction) used to throw the solve back to the biased observed statistics, silently and with a
     narrow band. Now the directions where the noise exceeds the signal are raised to a tenth of the
     noise's eigenvalue, the estimate says so, and its band is wider than the observed statistics' band."""
-    from processing.ambient import NOISE_FLOOR_SHARE, AmbientModel, solved_statistics
-    from processing.statistics import NoiseMoments
+    from msflash.processing.ambient import NOISE_FLOOR_SHARE, AmbientModel, solved_statistics
+    from msflash.processing.statistics import NoiseMoments
     from tests.helpers import leds_photons
 
     ambient, leds, spec = _noisy_stack()
@@ -124,7 +124,7 @@ def test_the_uncertainty_band_is_that_of_the_system_solved(tmp_path: Path) -> No
     denoised one: on the 8 narrow LEDs under F2 it said ±5 % of the peak where the estimate scattered
     by ±25 % (RMSE 0.13–0.25 over noise draws). It is the solved system's sandwich now (for the
     unconstrained solver; a constrained one projects draws from it, :func:`processing.ambient._constrained_band`)."""
-    from processing.ambient import AmbientModel
+    from msflash.processing.ambient import AmbientModel
 
     rendered = render_case(Case("band", leds="booth8", light="F2", seed=1), tmp_path / "band")
     sequence = read_sequence(rendered.directory)

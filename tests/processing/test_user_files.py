@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from calibration.errors import CalibrationError
-from processing.errors import SpectralDataError
-from processing.user_files import check_user_file, printable, read_user_bytes, read_user_text, shown_path
+from msflash.calibration.errors import CalibrationError
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.user_files import check_user_file, printable, read_user_bytes, read_user_text, shown_path
 
 KIND = "a test table"
 REPO = Path(__file__).resolve().parents[2]
@@ -92,7 +92,7 @@ def test_any_bytes_in_a_name_are_shown_on_one_line(tmp_path: Path) -> None:
 
 _READ_ZERO = """
 from unittest import mock
-import processing.user_files as user_files
+import msflash.processing.user_files as user_files
 # A size stat under-reports (a /proc-like file, a file growing): the read still stops at cap + 1 bytes.
 with mock.patch.object(user_files, "_check_stat", lambda shown, info, kind, cap, error: info):
     try:
@@ -112,7 +112,7 @@ def test_the_read_stops_past_the_cap_even_if_stat_lies() -> None:
 _OPEN_FIFO = """
 import os, sys
 from unittest import mock
-import processing.user_files as user_files
+import msflash.processing.user_files as user_files
 # A FIFO swapped in after the check: the non-blocking open returns at once, fstat refuses it.
 os.mkfifo(sys.argv[1])
 with mock.patch.object(user_files, "check_user_file", lambda *args: None):

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing import datasets, lights, water
-from processing.errors import SpectralDataError
-from processing.spectra import DEFAULT_GRID, WavelengthGrid
+from msflash.processing import datasets, lights, water
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
 
 WAVELENGTHS = DEFAULT_GRID.wavelengths_nm
 

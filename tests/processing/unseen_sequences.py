@@ -431,7 +431,7 @@ def led_bound(rendered: Rendered) -> float:
 
 def run_cli(args: list[str]) -> tuple[int, str, str, list[str]]:
     """``msflash ARGS`` in-process: (status, stdout, stderr, Python warnings); a traceback is stderr."""
-    from acquisition.cli import main
+    from msflash.acquisition.app.cli import main
 
     out, err = io.StringIO(), io.StringIO()
     with warnings.catch_warnings(record=True) as caught, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
