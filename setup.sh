@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs everything msflash needs on a Debian 12 machine into .venv/ (idempotent; safe to re-run).
-#   1. apt packages for Aravis and GObject introspection (only those missing; needs root or sudo)
+#   1. apt packages for Aravis, GObject introspection and the booth firmware's AVR toolchain and
+#      simulator (only those missing; needs root or sudo)
 #   2. a Python virtual environment in .venv/ at the repository root
 #   3. msflash itself (editable) with its test extras; the command lands at .venv/bin/msflash
 set -euo pipefail
@@ -8,7 +9,8 @@ cd "$(dirname "$0")"
 
 say() { printf 'setup: %s\n' "$*" >&2; }
 
-APT_PACKAGES=(gir1.2-aravis-0.8 aravis-tools aravis-tools-cli libgirepository1.0-dev libcairo2-dev pkg-config)
+APT_PACKAGES=(gir1.2-aravis-0.8 aravis-tools aravis-tools-cli libgirepository1.0-dev libcairo2-dev pkg-config
+              gcc-avr avr-libc binutils-avr simavr libsimavr-dev make gcc)  # booth firmware + its simavr tests
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

@@ -41,6 +41,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "devices": ("msflash.acquisition.app.cli_devices", "list cameras (Aravis) on the given interfaces, and booths among the serial ports"),
     "booth-emulator": ("msflash.acquisition.app.cli_booth", "serve the booth firmware emulator on a pseudo-terminal"),
     "doctor": ("msflash.acquisition.app.cli_booth", "check USB3 Vision, GigE and serial setup"),
+    "booth": ("msflash.acquisition.app.cli_booth_console", "booth bring-up: 'booth console PORT' is an interactive prompt"),
     "study": ("msflash.acquisition.app.cli_study", "simulation studies (table1: Table 1; surfaces: Fig. 5; cameras: Fig. 6; xy: Fig. 7; "
                                        "failure: where estimates fail and whether they warn; pareto: accuracy vs time)"),
     "evaluate": ("msflash.acquisition.app.cli_evaluate", "ΔE00 against the chart under D65 and noise, for a chart sequence"),

@@ -6,11 +6,20 @@ import collections
 import threading
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
 from msflash.led_controller import LedBooth, ManualClock, PtyBoothServer, serve_on_pty
+from msflash.led_controller.firmware_sim import (
+    ELF,
+    SMALL_ELF,
+    SimulatedBooth,
+    TriggerPulse,
+    build,
+    toolchain_missing,
+)
 
 TRANSCRIPTS = Path(__file__).resolve().parents[1] / "data" / "transcripts"
 
@@ -146,3 +155,88 @@ def replay_port() -> type[ReplayPort]:
 def transcripts_dir() -> Path:
     """Directory of the recorded transcripts."""
     return TRANSCRIPTS
+
+
+# -- one protocol suite, two far ends: the Python emulator and the firmware in simavr --------
+
+
+@dataclass
+class FarEnd:
+    """What a protocol test needs of the booth at the far end of the pty, whichever it is.
+
+    ``kind`` is ``"emulator"`` (BoothEmulator on a manual clock) or ``"firmware"`` (the AVR
+    image in simavr, on simulated time paced to the wall clock). ``pulses`` lists trigger-output
+    pulses as :class:`~led_controller.firmware_sim.TriggerPulse`; the emulator has no notion of
+    when its levels changed, so its ``settled_us`` is None (its settle is tested on the manual
+    clock in test_booth_emulator.py).
+    """
+
+    kind: str
+    port: str
+    levels_now: Callable[[], tuple[float, ...]]
+    exposure_active: Callable[[bool], None]
+    advance: Callable[[float], None]
+    pulses_now: Callable[[], list[TriggerPulse]]
+
+    @property
+    def levels(self) -> tuple[float, ...]:
+        return self.levels_now()
+
+    @property
+    def pulses(self) -> list[TriggerPulse]:
+        return self.pulses_now()
+
+    def camera_strobe(self) -> None:
+        self.exposure_active(True)
+        self.exposure_active(False)
+
+
+@pytest.fixture(scope="session")
+def firmware_image() -> Path:
+    """The firmware built with make (skips when the AVR toolchain is not installed)."""
+    reason = toolchain_missing()
+    if reason:
+        pytest.skip(reason)
+    build()
+    return ELF
+
+
+SMALL_TOP = (1 << 12) - 1
+"""PWM TOP of the small test image (12-bit drive)."""
+
+
+@pytest.fixture(scope="session")
+def small_image(firmware_image: Path) -> Path:
+    """The 2-channel, 12-bit, 4-step test image (built with ``firmware_image``)."""
+    return SMALL_ELF
+
+
+@pytest.fixture(params=["emulator", "firmware"])
+def far_end(request: pytest.FixtureRequest, clock: ManualClock) -> Iterator[FarEnd]:
+    """The booth at the far end of a real pty: the emulator, then the firmware in simavr."""
+    if request.param == "emulator":
+        server = serve_on_pty(clock=clock)
+        pulses: list[TriggerPulse] = []
+        emulator = server.emulator
+        emulator.on_trigger_out = lambda count: pulses.append(
+            TriggerPulse(int(clock() * 1e6), None, emulator.levels))
+        try:
+            yield FarEnd("emulator", server.port, lambda: emulator.levels, emulator.exposure_active,
+                         clock.advance, lambda: list(pulses))
+        finally:
+            server.close()
+    else:
+        request.getfixturevalue("firmware_image")
+        with SimulatedBooth() as sim:
+            yield FarEnd("firmware", sim.port, lambda: sim.levels, sim.exposure_active, sim.advance,
+                         lambda: sim.pulses)
+
+
+@pytest.fixture
+def far_booth(far_end: FarEnd) -> Iterator[LedBooth]:
+    """A driver connected to ``far_end`` (closed, not switched off, at teardown)."""
+    driver = LedBooth.open(far_end.port, timeout_s=2.0)
+    try:
+        yield driver
+    finally:
+        driver.close()

@@ -1,4 +1,9 @@
-"""The driver against the emulator over a real pseudo-terminal."""
+"""The driver against the booth over a real pseudo-terminal.
+
+Tests taking ``far_end``/``far_booth`` run twice: against the Python emulator and against the
+firmware image in simavr (conftest.py); the others use emulator-only features (manual clock,
+fault injection, other channel counts).
+"""
 
 from __future__ import annotations
 
@@ -18,26 +23,37 @@ from msflash.led_controller import (
     serve_on_pty,
 )
 from msflash.led_controller.booth import levels_close
+from msflash.led_controller.firmware_sim import SimulatedBooth
+
+from .conftest import SMALL_TOP, FarEnd
 
 Wait = Callable[..., None]
 
 
-def test_identify_reports_the_default_channels(booth: LedBooth) -> None:
-    info = booth.info
+def test_identify_reports_the_default_channels(far_booth: LedBooth) -> None:
+    info = far_booth.info
     assert info.channels == 7
     assert info.names == ("led440", "led480", "led500", "led520", "led596", "led636", "led660")
     assert info.peaks_nm == (440.0, 480.0, 500.0, 520.0, 596.0, 636.0, 660.0)
     assert info.protocol == 1 and info.level_bits == 16
 
 
-def test_configurable_channels() -> None:
-    emulator = BoothEmulator(names=("uv", "ir"), peaks_nm=(365, 850), level_bits=12, max_steps=4)
-    with serve_on_pty(emulator) as server, LedBooth.open(server.port) as booth:
+@pytest.mark.parametrize("far", ["emulator", "firmware"])
+def test_configurable_channels(far: str, request: pytest.FixtureRequest) -> None:
+    """The firmware's channels, resolution and table size are build settings (its small test image)."""
+    if far == "emulator":
+        emulator = BoothEmulator(names=("uv", "ir"), peaks_nm=(365, 850), level_bits=12, max_steps=4)
+        far_end: PtyBoothServer | SimulatedBooth = serve_on_pty(emulator)
+        levels = lambda: emulator.levels
+    else:
+        sim = SimulatedBooth(request.getfixturevalue("small_image"), channels=2, top=SMALL_TOP)
+        far_end, levels = sim, lambda: sim.levels
+    with far_end, LedBooth.open(far_end.port) as booth:
         assert booth.info.names == ("uv", "ir") and booth.info.peaks_nm == (365.0, 850.0)
         assert booth.info.level_bits == 12 and booth.info.max_steps == 4
         booth.set_levels([1.0, 0.5])
         # 12-bit drive: 0.5 lands on the nearest lower 12-bit step.
-        assert emulator.levels[0] == 1.0 and abs(emulator.levels[1] - 0.5) < 1 / 4095
+        assert levels()[0] == 1.0 and abs(levels()[1] - 0.5) < 1 / 4095
         with pytest.raises(ValueError, match="expected 1..4"):
             booth.load_pattern([[0, 0]] * 5)
 
@@ -56,31 +72,34 @@ def test_a_booth_of_another_protocol_version_is_refused(version: int, remedy: st
         assert remedy in message
 
 
-def test_set_levels_reach_the_emulator_with_16_bit_precision(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+def test_set_levels_reach_the_booth_with_16_bit_precision(far_booth: LedBooth, far_end: FarEnd) -> None:
+    """On the firmware the levels are read back from the PWM compare registers."""
+    booth = far_booth
     levels = [0.0, 1.0, 0.5, 1 / 65535, 0.123456, 0.999, 0.25]
     booth.set_levels(levels)
-    assert levels_close(booth_on_pty.emulator.levels, levels)
+    assert levels_close(far_end.levels, levels)
     assert levels_close(booth.status().levels, levels)
     booth.all_off()
-    assert booth_on_pty.emulator.levels == (0.0,) * 7
+    assert far_end.levels == (0.0,) * 7
 
 
-def test_bad_levels_are_refused_before_anything_is_sent(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+def test_bad_levels_are_refused_before_anything_is_sent(far_booth: LedBooth, far_end: FarEnd) -> None:
+    booth = far_booth
     booth.set_levels([0.5] * 7)
     with pytest.raises(ValueError, match="LED level 2"):
         booth.set_levels([0.1, 0.1, 1.5, 0.1, 0.1, 0.1, 0.1])
     with pytest.raises(ValueError, match="step 1: LED levels: got 6 values"):
         booth.load_pattern([[0] * 7, [0] * 6])
-    assert levels_close(booth_on_pty.emulator.levels, [0.5] * 7)
-    assert booth_on_pty.emulator.pattern == ()
+    assert levels_close(far_end.levels, [0.5] * 7)
+    assert booth.status().steps == 0
 
 
-def test_context_manager_switches_off_on_exception(booth_on_pty: PtyBoothServer) -> None:
-    with pytest.raises(RuntimeError, match="boom"), LedBooth.open(booth_on_pty.port) as booth:
+def test_context_manager_switches_off_on_exception(far_end: FarEnd) -> None:
+    with pytest.raises(RuntimeError, match="boom"), LedBooth.open(far_end.port) as booth:
         booth.set_levels([1.0] * 7)
-        assert booth_on_pty.emulator.levels == (1.0,) * 7
+        assert far_end.levels == (1.0,) * 7
         raise RuntimeError("boom")
-    assert booth_on_pty.emulator.levels == (0.0,) * 7
+    assert far_end.levels == (0.0,) * 7
 
 
 def test_context_manager_switches_off_on_keyboard_interrupt(booth_on_pty: PtyBoothServer) -> None:
@@ -90,7 +109,8 @@ def test_context_manager_switches_off_on_keyboard_interrupt(booth_on_pty: PtyBoo
     assert booth_on_pty.emulator.levels == (0.0,) * 7
 
 
-def test_booth_refusal_names_command_and_code(booth: LedBooth) -> None:
+def test_booth_refusal_names_command_and_code(far_booth: LedBooth) -> None:
+    booth = far_booth
     with pytest.raises(BoothError, match=r"booth refused START \(E_STATE: not armed\)"):
         booth.start()
     with pytest.raises(BoothError, match="pattern table empty"):
@@ -98,8 +118,8 @@ def test_booth_refusal_names_command_and_code(booth: LedBooth) -> None:
     assert booth.status().last_error == "E_STATE"
 
 
-def test_camera_master_advances_on_exposure_active(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
-    emulator = booth_on_pty.emulator
+def test_camera_master_advances_on_exposure_active(far_booth: LedBooth, far_end: FarEnd) -> None:
+    booth, emulator = far_booth, far_end
     steps = [[i / 10] * 7 for i in range(1, 4)]
     booth.load_pattern(steps)
     booth.arm("camera", settle_us=200)
@@ -116,6 +136,27 @@ def test_camera_master_advances_on_exposure_active(booth: LedBooth, booth_on_pty
     assert emulator.levels == (0.0,) * 7
     assert booth.trigger_count() == 3
     assert booth.status().state == "DONE"
+
+
+def test_booth_master_sequence_over_the_trigger_output(far_booth: LedBooth, far_end: FarEnd, wait_until: Wait) -> None:
+    """Each pulse exposes its step's levels, at least settle_us after they were set (the firmware's
+    pulses are timed in simavr's simulated time, so the check is exact and not a wall-clock one)."""
+    booth = far_booth
+    steps = [[0.2] * 7, [0.4] * 7]
+    booth.load_pattern(steps)
+    booth.arm("booth", settle_us=1000, pulse_us=100, period_us=10_000)
+    booth.start()
+    far_end.advance(0.001)
+    wait_until(lambda: len(far_end.pulses) >= 1)
+    far_end.advance(0.010)
+    wait_until(lambda: len(far_end.pulses) == 2)
+    assert [booth.wait_event("TRIG").args for _ in range(2)] == [("1", "0"), ("2", "1")]
+    pulses = far_end.pulses
+    assert all(levels_close(p.levels, s) for p, s in zip(pulses, steps))
+    assert all(p.settled_us is None or p.settled_us >= 1000 for p in pulses)
+    far_end.advance(0.010)
+    assert booth.wait_event("DONE").args == ("2",)
+    assert far_end.levels == (0.0,) * 7
 
 
 def test_booth_master_pulses_the_trigger_after_settling(
@@ -142,18 +183,19 @@ def test_booth_master_pulses_the_trigger_after_settling(
     assert emulator.levels == (0.0,) * 7
 
 
-def test_host_paced_steps_reply_after_settling(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+def test_host_paced_steps_reply_after_settling(far_booth: LedBooth, far_end: FarEnd) -> None:
+    booth = far_booth
     steps = [[0.1] * 7, [0.9] * 7]
     booth.load_pattern(steps)
     booth.arm("host", settle_us=0)
     booth.start()
     assert booth.next_step() == 0
-    assert levels_close(booth_on_pty.emulator.levels, steps[0])
+    assert levels_close(far_end.levels, steps[0])
     assert booth.next_step() == 1
-    assert levels_close(booth_on_pty.emulator.levels, steps[1])
+    assert levels_close(far_end.levels, steps[1])
     assert booth.next_step() is None
     assert booth.wait_event("DONE").args == ("2",)
-    assert booth_on_pty.emulator.levels == (0.0,) * 7
+    assert far_end.levels == (0.0,) * 7
 
 
 def test_watchdog_switches_off_when_the_host_falls_silent(
@@ -171,19 +213,21 @@ def test_watchdog_switches_off_when_the_host_falls_silent(
     assert booth.wait_event("WDOG").kind == "WDOG"
 
 
-def test_watchdog_event_interrupts_a_wait_for_another_event(
-    booth: LedBooth, booth_on_pty: PtyBoothServer, clock: ManualClock
-) -> None:
+def test_watchdog_event_interrupts_a_wait_for_another_event(far_booth: LedBooth, far_end: FarEnd) -> None:
+    booth = far_booth
     booth.load_pattern([[0.5] * 7])
     booth.arm("camera")
+    booth.set_watchdog(0.3)  # the last request before the silence: a slow host cannot trip it early
     booth.start()
-    clock.advance(10.0)
+    far_end.advance(0.5)
     with pytest.raises(BoothError, match="watchdog switched the LEDs off while waiting for DONE"):
         booth.wait_event("DONE")
-    assert booth_on_pty.emulator.state == "IDLE"
+    assert far_end.levels == (0.0,) * 7
+    assert booth.status().state == "IDLE"
 
 
-def test_wait_event_times_out_naming_the_event(booth: LedBooth) -> None:
+def test_wait_event_times_out_naming_the_event(far_booth: LedBooth) -> None:
+    booth = far_booth
     with pytest.raises(BoothTimeoutError, match="no TRIG event within 0.01 s") as info:
         booth.wait_event("TRIG", timeout_s=0.01)
     assert info.value.timeout_s == 0.01

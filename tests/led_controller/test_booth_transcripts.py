@@ -11,8 +11,10 @@ from msflash.led_controller.booth import levels_close
 from msflash.led_controller.protocol import encode_frame, encode_request
 
 
-def test_camera_master_transcript(replay_port, transcripts_dir: Path) -> None:
-    port = replay_port.from_file(transcripts_dir / "emulator-camera-master.txt")
+@pytest.mark.parametrize("recording", ["emulator-camera-master.txt", "simavr-firmware-camera-master.txt"])
+def test_camera_master_transcript(replay_port, transcripts_dir: Path, recording: str) -> None:
+    """Replays a recording of the emulator and one of the reference firmware in simavr."""
+    port = replay_port.from_file(transcripts_dir / recording)
     booth = LedBooth(port, timeout_s=2.0)
     with booth:
         info = booth.identify()

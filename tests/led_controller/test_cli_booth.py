@@ -86,3 +86,41 @@ def test_bench_reports_its_figures() -> None:
     assert figures["booth_round_trip_ms_median"] > 0
     assert figures["booth_pattern_upload_ms_median"] > 0
     assert (figures["booth_pattern_steps"], figures["booth_pattern_channels"]) == (16, 8)
+
+
+def test_booth_console_reads_commands_from_stdin_and_switches_off_at_the_end(booth_on_pty, monkeypatch,
+                                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """``msflash booth console PORT`` with piped input: each line echoed, framed and explained; LEDs off
+    at the end of input even though the last command switched them on."""
+    from msflash.acquisition.app.cli import main
+
+    monkeypatch.setattr(sys, "stdin", _Lines("levels 1 0 0 0 0 0 0.5\nlevels 3\n"))
+    assert main(["booth", "console", booth_on_pty.port]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[2].startswith("firmware msflash-emulator-0.1, protocol 1; 7 channels")
+    start = out.index("booth> levels 1 0 0 0 0 0 0.5")
+    assert out[start + 1].startswith("  > ?03:026:SET FFFF 0000 0000 0000 0000 0000 8000*")
+    assert out[start + 3].startswith("LEDs now: led440 1.0000 (FFFF)")
+    assert out[start + 5].startswith("error: 1 levels for 7 channels")
+    assert out[-1] == "LEDs off"
+    assert booth_on_pty.emulator.levels == (0.0,) * 7
+
+
+def test_booth_without_an_action_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
+    from msflash.acquisition.app.cli import main
+
+    assert main(["booth"]) == 2
+    assert capsys.readouterr().err.strip() == "msflash: error: booth: no action given; expected 'msflash booth console PORT'"
+
+
+class _Lines:
+    """A non-interactive stdin holding ``text``."""
+
+    def __init__(self, text: str) -> None:
+        self._lines = text.splitlines(keepends=True)
+
+    def isatty(self) -> bool:
+        return False
+
+    def readline(self) -> str:
+        return self._lines.pop(0) if self._lines else ""

@@ -1,0 +1,42 @@
+/* Build-time description of one booth: channels, table size, drive resolution.
+ * Portable C (no AVR headers); the Makefile may override any of these with -D. */
+#ifndef BOOTH_CONFIG_H
+#define BOOTH_CONFIG_H
+
+#ifndef BOOTH_FIRMWARE
+#define BOOTH_FIRMWARE "msflash-avr-0.1"
+#endif
+#ifndef BOOTH_CHANNELS
+#define BOOTH_CHANNELS 7
+#endif
+#define BOOTH_STR_(x) #x
+#define BOOTH_STR(x) BOOTH_STR_(x)
+#define BOOTH_CHANNELS_TEXT BOOTH_STR(BOOTH_CHANNELS)
+/* Channel names and peak wavelengths (nm), comma-separated, BOOTH_CHANNELS of each. */
+#ifndef BOOTH_NAMES
+#define BOOTH_NAMES "led440,led480,led500,led520,led596,led636,led660"
+#endif
+#ifndef BOOTH_PEAKS
+#define BOOTH_PEAKS "440,480,500,520,596,636,660"
+#endif
+/* Pattern table capacity (STEPS=): BOOTH_CHANNELS * 2 bytes per step of RAM. */
+#ifndef BOOTH_MAX_STEPS
+#define BOOTH_MAX_STEPS 256
+#endif
+/* Drive resolution reported as BITS= (12..16); the PWM TOP is (1 << BITS) - 1. */
+#ifndef BOOTH_LEVEL_BITS
+#define BOOTH_LEVEL_BITS 16
+#endif
+/* Power-up watchdog period in ms (booth-protocol.md section 7). */
+#ifndef BOOTH_WATCHDOG_MS
+#define BOOTH_WATCHDOG_MS 3000u
+#endif
+
+#if BOOTH_LEVEL_BITS < 12 || BOOTH_LEVEL_BITS > 16
+#error "BOOTH_LEVEL_BITS must be 12..16"
+#endif
+#if BOOTH_MAX_STEPS < 1 || BOOTH_MAX_STEPS > 65535
+#error "BOOTH_MAX_STEPS must be 1..65535"
+#endif
+
+#endif

@@ -1,0 +1,86 @@
+/* The booth firmware's portable core: frame parsing, CRC, commands and the sequencer
+ * (docs/booth-protocol.md). Plain C99, no AVR headers: the board layer feeds it bytes,
+ * trigger-input edges and the time, and implements the board_* hooks below. */
+#ifndef BOOTH_CORE_H
+#define BOOTH_CORE_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "booth_config.h"
+
+#define BOOTH_MAX_BODY 1024u
+#define BOOTH_MAX_LINE (BOOTH_MAX_BODY + 16u) /* a frame with its terminator */
+/* Words after the command name kept for parsing: PSET <step> <levels> NOW is CH + 2; one more
+ * word only tells "too many" (the count is capped at BOOTH_MAX_WORDS + 1, never an expected count). */
+#define BOOTH_MAX_WORDS (BOOTH_CHANNELS + 3u)
+#define BOOTH_OUT_MAX 320u                    /* longest frame the booth sends */
+
+/* ---- hooks the board layer implements ------------------------------------------------ */
+
+/* Drive the LEDs: one duty value per channel, 0 (off, pin disconnected) .. (1 << BITS) - 1. */
+void board_set_levels(const uint16_t duty[BOOTH_CHANNELS]);
+/* The camera trigger output (booth-master mode): high or low. */
+void board_trigger_out(bool high);
+/* Queue bytes for the host (may wait for room; never drops). */
+void board_write(const char *data, uint16_t len);
+/* Microseconds now (wrapping). The core stamps LED changes with it: handling a frame takes
+ * the AVR a few hundred us, so the time a frame arrived is too early to settle from. */
+uint32_t board_micros(void);
+
+/* ---- the core ---------------------------------------------------------------------- */
+
+typedef enum { STATE_IDLE, STATE_ARMED, STATE_RUNNING, STATE_DONE } booth_state_t;
+typedef enum { MODE_NONE, MODE_HOST, MODE_BOOTH, MODE_CAMERA } booth_mode_t;
+typedef enum { ACTION_NONE, ACTION_APPLY, ACTION_PULSE } booth_action_t;
+
+typedef struct {
+    /* the line being received */
+    char line[BOOTH_MAX_LINE + 1];
+    uint16_t line_len;
+    bool discarding;             /* an overlong line: drop bytes up to its '\n' */
+    /* LEDs and table (duty values, BITS wide) */
+    uint16_t duty[BOOTH_CHANNELS];
+    uint16_t table[BOOTH_MAX_STEPS][BOOTH_CHANNELS];
+    uint8_t held[(BOOTH_MAX_STEPS + 7) / 8];
+    uint16_t steps;
+    /* sequencer */
+    booth_state_t state;
+    booth_mode_t mode;
+    uint32_t settle_us, pulse_us, period_us;
+    int32_t step;
+    bool holding;
+    uint32_t triggers;
+    uint32_t t0_us;              /* start of step 0's slot (BOOTH), wrapping */
+    booth_action_t action;
+    uint32_t action_due_us;
+    bool pulse_high;
+    uint32_t pulse_end_us;
+    /* a reply sent once the LEDs have settled (NEXT) */
+    bool deferred;
+    uint8_t deferred_seq;
+    uint32_t deferred_due_us;
+    char deferred_body[24];
+    /* link bookkeeping */
+    uint8_t event_seq;
+    uint32_t watchdog_ms;
+    uint32_t last_host_us;
+    bool watchdog_tripped;
+    const char *last_error;      /* NULL: none */
+    uint16_t bad_frames;
+} booth_t;
+
+/* CRC-16/CCITT-FALSE over len bytes (poly 0x1021, init 0xFFFF). */
+uint16_t booth_crc16(const uint8_t *data, uint16_t len);
+
+void booth_init(booth_t *b, uint32_t now_us);
+/* One byte from the host; a complete line is answered at once (through board_write). */
+void booth_feed(booth_t *b, uint8_t byte, uint32_t now_us);
+/* An edge of the camera's ExposureActive line (true: rising, exposure starts). */
+void booth_exposure(booth_t *b, bool active, uint32_t now_us);
+/* Run what is due: deferred replies, booth-master steps and pulses, the watchdog. */
+void booth_poll(booth_t *b, uint32_t now_us);
+/* All LEDs off and any sequence aborted (the host link is gone, a fault). */
+void booth_all_off(booth_t *b);
+
+#endif

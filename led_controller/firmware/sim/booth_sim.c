@@ -1,0 +1,318 @@
+/* booth_sim: runs the booth firmware ELF in simavr (ATmega2560, 16 MHz) with UART0 bridged
+ * to a pseudo-terminal, for the tests' far end.
+ *
+ * The bridge is our own rather than simavr's uart_pty part: uart_pty raises the UART's input
+ * IRQ from its own thread while avr_run() runs in this one, which races on simavr's UART state
+ * (requests were lost now and then under load). Here one thread does everything: the pty is
+ * polled every 100 us of simulated time and bytes are fed to the UART while it signals XON.
+ *
+ * stdout, one line each:  "pty <path>" once ready; "pulse <t_us> <since_us> <d0> .. <dN>" on
+ * each rising edge of the trigger output (PA0), with the PWM duty of every channel at that
+ * moment and the time since the duties last changed; "pulse_end <t_us>" on its falling edge;
+ * "ok <command> ..." answering a command.
+ * stdin commands: "exp 0|1" drive the ExposureActive input (PD0/INT0) and run 2 ms of
+ * simulated time so the firmware has served the edge before "ok exp" (simavr compromise:
+ * the emulator's exposure_active is synchronous); "levels" -> "ok levels <t_us> <top> <d0> ..";
+ * "quit".
+ *
+ * Time is simavr's simulated time; simavr sleeps in real time while the firmware sleeps, so
+ * it runs close to real time (never faster while the CPU idles). */
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "avr_ioport.h"
+#include "sim_avr.h"
+#include "sim_elf.h"
+#include "sim_time.h"
+#include "avr_uart.h"
+#include <errno.h>
+#include <pty.h>
+#include <termios.h>
+
+#define CHANNELS 7
+/* Data-space addresses of the PWM registers (ATmega2560 datasheet, register summary),
+ * in the firmware's channel order: OC3A OC3B OC3C OC4A OC4B OC4C OC5A. */
+static const uint16_t ocr_addr[CHANNELS] = {0x98, 0x9A, 0x9C, 0xA8, 0xAA, 0xAC, 0x128};
+static const uint16_t tccra_addr[CHANNELS] = {0x90, 0x90, 0x90, 0xA0, 0xA0, 0xA0, 0x120};
+static const uint8_t com1_bit[CHANNELS] = {7, 5, 3, 7, 5, 3, 7};
+#define ICR3_ADDR 0x96
+
+static avr_t *avr;
+static int pty_master = -1, pty_slave = -1;
+static char pty_name[128];
+static uint8_t to_avr[4096];   /* host -> firmware, a ring */
+static size_t to_head, to_tail;
+static uint8_t from_avr[8192]; /* firmware -> host, waiting for the pty */
+static size_t from_len;
+static int uart_xon = 1;
+static avr_irq_t *uart_input;
+static uint16_t duty[CHANNELS];
+static avr_cycle_count_t changed_at;
+static avr_irq_t *exposure_irq;
+static int trace; /* BOOTH_SIM_TRACE=1: print every duty change */
+
+static uint32_t now_us(void) { return (uint32_t)avr_cycles_to_usec(avr, avr->cycle); }
+
+static uint16_t read16(uint16_t addr) { return (uint16_t)(avr->data[addr] | (avr->data[addr + 1] << 8)); }
+
+/* The duty each pin is driven with: 0 when its compare output is disconnected. */
+static void sample_levels(void)
+{
+    for (int c = 0; c < CHANNELS; c++) {
+        uint16_t d = (avr->data[tccra_addr[c]] & (1u << com1_bit[c])) ? read16(ocr_addr[c]) : 0;
+        if (d != duty[c]) {
+            duty[c] = d;
+            changed_at = avr->cycle;
+            if (trace)
+                fprintf(stderr, "trace %u duty %d = %u\n", now_us(), c, d);
+        }
+    }
+}
+
+static void print_duties(void)
+{
+    for (int c = 0; c < CHANNELS; c++)
+        printf(" %u", duty[c]);
+    printf("\n");
+    fflush(stdout);
+}
+
+static void trigger_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    (void)param;
+    sample_levels();
+    if (value) {
+        printf("pulse %u %u", now_us(), (uint32_t)avr_cycles_to_usec(avr, avr->cycle - changed_at));
+        print_duties();
+    } else {
+        printf("pulse_end %u\n", now_us());
+        fflush(stdout);
+    }
+}
+
+static int run_for_us(uint32_t us)
+{
+    avr_cycle_count_t until = avr->cycle + avr_usec_to_cycles(avr, us);
+    while (avr->cycle < until) {
+        int state = avr_run(avr);
+        if (state == cpu_Done || state == cpu_Crashed)
+            return state;
+        sample_levels();
+    }
+    return cpu_Running;
+}
+
+static struct timespec wall_start;
+
+static void pace_sleep(avr_t *a, avr_cycle_count_t how_long)
+{
+    (void)how_long;
+    struct timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    int64_t wall_us = (int64_t)(now.tv_sec - wall_start.tv_sec) * 1000000 + (now.tv_nsec - wall_start.tv_nsec) / 1000;
+    int64_t sim_us = (int64_t)avr_cycles_to_usec(a, a->cycle);
+    if (sim_us > wall_us + 500)
+        usleep((useconds_t)(sim_us - wall_us));
+}
+
+/* ---- the UART <-> pty bridge (all on the simulation thread) ---- */
+
+static void uart_feed(void)
+{
+    while (uart_xon && to_tail != to_head) {
+        uint8_t byte = to_avr[to_tail];
+        to_tail = (to_tail + 1) % sizeof to_avr;
+        avr_raise_irq(uart_input, byte); /* may call uart_xoff_hook at once */
+    }
+}
+
+static void uart_xon_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq, (void)value, (void)param;
+    uart_xon = 1;
+    uart_feed();
+}
+
+static void uart_xoff_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq, (void)value, (void)param;
+    uart_xon = 0;
+}
+
+static void pty_flush_out(void)
+{
+    while (from_len) {
+        ssize_t n = write(pty_master, from_avr, from_len);
+        if (n <= 0)
+            return; /* EAGAIN: nobody reads yet; keep the bytes */
+        memmove(from_avr, from_avr + n, from_len - (size_t)n);
+        from_len -= (size_t)n;
+    }
+}
+
+static void uart_output_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq, (void)param;
+    if (from_len == sizeof from_avr)
+        pty_flush_out();
+    if (from_len < sizeof from_avr)
+        from_avr[from_len++] = (uint8_t)value;
+}
+
+static void pty_service(void)
+{
+    size_t room = (to_tail + sizeof to_avr - to_head - 1) % sizeof to_avr;
+    if (room) {
+        uint8_t chunk[512];
+        ssize_t n = read(pty_master, chunk, room < sizeof chunk ? room : sizeof chunk);
+        for (ssize_t i = 0; i < n; i++) {
+            to_avr[to_head] = chunk[i];
+            to_head = (to_head + 1) % sizeof to_avr;
+        }
+    }
+    pty_flush_out();
+    uart_feed();
+}
+
+static int pty_open(void)
+{
+    struct termios tio;
+    if (openpty(&pty_master, &pty_slave, pty_name, NULL, NULL) < 0)
+        return -1;
+    /* Raw on both ends before anyone opens the slave: no echo, no line editing. The slave
+     * stays open here so the master never sees a hang-up between two hosts. */
+    tcgetattr(pty_slave, &tio);
+    cfmakeraw(&tio);
+    tcsetattr(pty_slave, TCSANOW, &tio);
+    fcntl(pty_master, F_SETFL, fcntl(pty_master, F_GETFL) | O_NONBLOCK);
+    return 0;
+}
+
+static char cmd[256];
+static size_t cmd_len;
+
+/* Read what is on stdin; returns -1 on quit or EOF. */
+static int serve_stdin(void)
+{
+    char chunk[256];
+    ssize_t n = read(0, chunk, sizeof chunk);
+    if (n <= 0)
+        return -1;
+    for (ssize_t i = 0; i < n; i++) {
+        if (chunk[i] != '\n') {
+            if (cmd_len < sizeof cmd - 1)
+                cmd[cmd_len++] = chunk[i];
+            continue;
+        }
+        cmd[cmd_len] = '\0';
+        cmd_len = 0;
+        if (strcmp(cmd, "quit") == 0)
+            return -1;
+        if (strcmp(cmd, "exp 0") == 0 || strcmp(cmd, "exp 1") == 0) {
+            avr_raise_irq(exposure_irq, cmd[4] == '1');
+            run_for_us(2000);
+            printf("ok exp %c %u\n", cmd[4], now_us());
+        } else if (strcmp(cmd, "levels") == 0) {
+            sample_levels();
+            printf("ok levels %u %u", now_us(), read16(ICR3_ADDR));
+            print_duties();
+        } else if (strncmp(cmd, "peek ", 5) == 0) {
+            /* "peek <addr> <n>": n bytes of data space (SRAM, I/O) in hex, for debugging */
+            unsigned addr = 0, count = 0;
+            if (sscanf(cmd + 5, "%x %u", &addr, &count) == 2 && addr + count <= avr->ramend + 1u) {
+                printf("ok peek %u", now_us());
+                for (unsigned i = 0; i < count; i++)
+                    printf(" %02X", avr->data[addr + i]);
+                printf("\n");
+            } else {
+                printf("error peek expects <hex address> <count> within RAM\n");
+            }
+        } else {
+            printf("error unknown command %s\n", cmd);
+        }
+        fflush(stdout);
+    }
+    return 0;
+}
+
+int main(int argc, char **argv)
+{
+    elf_firmware_t fw;
+    if (argc != 2) {
+        fprintf(stderr, "usage: booth_sim FIRMWARE.elf\n");
+        return 2;
+    }
+    memset(&fw, 0, sizeof fw);
+    if (elf_read_firmware(argv[1], &fw) != 0) {
+        fprintf(stderr, "booth_sim: cannot read %s; expected an AVR ELF file\n", argv[1]);
+        return 2;
+    }
+    avr = avr_make_mcu_by_name("atmega2560");
+    if (!avr) {
+        fprintf(stderr, "booth_sim: simavr has no atmega2560 core\n");
+        return 2;
+    }
+    avr_init(avr);
+    avr->frequency = 16000000;
+    avr_load_firmware(avr, &fw);
+    avr->frequency = 16000000;
+    avr->log = LOG_ERROR;
+    trace = getenv("BOOTH_SIM_TRACE") != NULL;
+
+    uint32_t flags = 0; /* no stdio dump of the UART: it carries frames */
+    avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+    flags &= ~AVR_UART_FLAG_STDIO;
+    avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    if (pty_open() < 0) {
+        fprintf(stderr, "booth_sim: cannot open a pseudo-terminal: %s\n", strerror(errno));
+        return 2;
+    }
+    uart_input = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), uart_output_hook, NULL);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), uart_xon_hook, NULL);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), uart_xoff_hook, NULL);
+    exposure_irq = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 0);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('A'), 0), trigger_out_hook, NULL);
+
+    /* Keep simulated time from running ahead of the wall clock (the driver's timeouts are wall
+     * time); simavr's own raw sleep callback usleeps for every idle stretch whether or not the
+     * simulation is behind. In practice the simulation is behind: simavr steps the PWM timers
+     * nearly cycle by cycle (docs/booth-firmware.md, section 5). */
+    clock_gettime(CLOCK_MONOTONIC, &wall_start);
+    avr->sleep = pace_sleep;
+
+    /* Boot before announcing the port: simavr's UART drops bytes that arrive before the
+     * firmware enables its receiver (a real board, too, is deaf while it boots). */
+    run_for_us(20000);
+
+    printf("pty %s\n", pty_name);
+    fflush(stdout);
+
+    struct pollfd in = {.fd = 0, .events = POLLIN};
+    avr_cycle_count_t next_poll = 0;
+    for (;;) {
+        int state = avr_run(avr);
+        if (state == cpu_Done || state == cpu_Crashed) {
+            fprintf(stderr, "booth_sim: firmware stopped (state %d) at %u us\n", state, now_us());
+            break;
+        }
+        sample_levels();
+        if (avr->cycle >= next_poll) { /* pty and stdin every 100 us of simulated time */
+            next_poll = avr->cycle + avr_usec_to_cycles(avr, 100);
+            pty_service();
+            if (poll(&in, 1, 0) > 0 && serve_stdin() < 0)
+                break;
+        }
+    }
+    pty_flush_out();
+    close(pty_master);
+    close(pty_slave);
+    return 0;
+}

@@ -1,0 +1,199 @@
+"""The booth firmware (``led_controller/firmware/``) running in simavr, on a pseudo-terminal.
+
+:class:`SimulatedBooth` builds the AVR image and the simavr harness with ``make`` (gcc-avr,
+avr-libc, libsimavr-dev), starts ``booth_sim`` on the image and offers what the tests need of
+a far end: the slave :attr:`~SimulatedBooth.port` for :meth:`LedBooth.open`, the PWM
+:attr:`~SimulatedBooth.levels` read from the timer registers, the camera's ExposureActive line
+(:meth:`~SimulatedBooth.exposure_active`) and the trigger-output :attr:`~SimulatedBooth.pulses`.
+Time is simavr's simulated time, paced to the wall clock (docs/booth-firmware.md, *simavr*).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import queue
+import shutil
+import subprocess
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+
+FIRMWARE_DIR = Path(__file__).resolve().parent / "firmware"
+ELF = FIRMWARE_DIR / "build" / "booth.elf"
+SMALL_ELF = FIRMWARE_DIR / "build" / "booth_small.elf"
+"""The test build: 2 channels (uv, ir), 12-bit drive, 4 steps (``make sim``)."""
+HARNESS = FIRMWARE_DIR / "build" / "booth_sim"
+_TOOLS = ("avr-gcc", "avr-size", "make", "gcc")
+_HEADERS = (Path("/usr/lib/avr/include/avr/io.h"), Path("/usr/include/simavr/parts/uart_pty.h"))
+
+
+class FirmwareSimError(RuntimeError):
+    """The firmware could not be built or the simulator failed."""
+
+
+@dataclass(frozen=True)
+class TriggerPulse:
+    """A rising edge of the booth's trigger output, as simavr saw it.
+
+    Attributes
+    ----------
+    time_us : int
+        Simulated time of the edge.
+    settled_us : int
+        Simulated time since the LED duties last changed (the settle the camera got).
+    levels : tuple of float
+        LED levels (PWM duty / TOP) during the pulse, one per channel.
+    """
+
+    time_us: int
+    settled_us: int | None
+    levels: tuple[float, ...]
+
+
+def toolchain_missing() -> str | None:
+    """Why the firmware cannot be built here (one line), or None if it can."""
+    missing = [tool for tool in _TOOLS if shutil.which(tool) is None]
+    missing += [str(h) for h in _HEADERS if not h.exists()]
+    if missing:
+        return ("AVR toolchain not installed (missing " + ", ".join(missing) + "); expected "
+                "gcc-avr avr-libc binutils-avr simavr libsimavr-dev (setup.sh installs them)")
+    return None
+
+
+def build() -> None:
+    """Build the firmware image and the simavr harness (``make``; serialised across processes)."""
+    reason = toolchain_missing()
+    if reason:
+        raise FirmwareSimError(reason)
+    (FIRMWARE_DIR / "build").mkdir(exist_ok=True)
+    with open(FIRMWARE_DIR / "build" / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        done = subprocess.run(["make", "-s", "-C", str(FIRMWARE_DIR), "all"], capture_output=True, text=True,
+                              check=False)
+    if done.returncode != 0:
+        raise FirmwareSimError(f"make -C {FIRMWARE_DIR} failed: {done.stderr.strip().splitlines()[-1:]}")
+
+
+class SimulatedBooth:
+    """``booth_sim`` running the firmware image; use as a context manager or call :meth:`close`.
+
+    Parameters
+    ----------
+    elf : Path
+        The firmware image (built by :func:`build`).
+    channels : int
+        The image's channel count (``CH=``).
+    top : int
+        PWM TOP of the image's drive resolution (``(1 << BITS) - 1``).
+    """
+
+    def __init__(self, elf: Path = ELF, *, channels: int = 7, top: int = 0xFFFF) -> None:
+        self._top = top
+        self._channels = channels
+        self._process = subprocess.Popen(
+            [str(HARNESS), str(elf)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL, text=True, bufsize=1,
+        )
+        self._answers: queue.Queue[str] = queue.Queue()
+        self._pulses: list[TriggerPulse] = []
+        self._lock = threading.Lock()
+        self._command_lock = threading.Lock()
+        assert self._process.stdout is not None
+        port = None
+        for line in self._process.stdout:
+            if line.startswith("pty "):
+                port = line.split()[1]
+                break
+        if port is None:
+            self.close()
+            raise FirmwareSimError(f"booth_sim on {elf}: no pseudo-terminal announced; expected 'pty <path>'")
+        self.port: str = port
+        self._reader = threading.Thread(target=self._read, name=f"booth_sim {port}", daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self._process.stdout is not None
+        for line in self._process.stdout:
+            words = line.split()
+            if not words:
+                continue
+            if words[0] == "pulse":
+                pulse = TriggerPulse(int(words[1]), int(words[2]), tuple(int(w) / self._top for w in words[3:3 + self._channels]))
+                with self._lock:
+                    self._pulses.append(pulse)
+            elif words[0] in ("ok", "error"):
+                self._answers.put(line.strip())
+
+    def _ask(self, command: str) -> list[str]:
+        with self._command_lock:
+            assert self._process.stdin is not None
+            self._process.stdin.write(command + "\n")
+            self._process.stdin.flush()
+            try:
+                answer = self._answers.get(timeout=10.0)
+            except queue.Empty:
+                raise FirmwareSimError(f"booth_sim: no answer to {command!r} within 10 s") from None
+        if not answer.startswith("ok "):
+            raise FirmwareSimError(f"booth_sim: {command!r} answered {answer!r}")
+        return answer.split()[2:]
+
+    @property
+    def levels(self) -> tuple[float, ...]:
+        """Get the LED levels now: each PWM channel's duty / TOP (0 when its pin is disconnected)."""
+        words = self._ask("levels")
+        return tuple(int(w) / self._top for w in words[2:2 + self._channels])
+
+    def now_us(self) -> int:
+        """Simulated time in µs."""
+        return int(self._ask("levels")[0])
+
+    @property
+    def pulses(self) -> list[TriggerPulse]:
+        """Get the trigger-output pulses seen so far (a copy)."""
+        with self._lock:
+            return list(self._pulses)
+
+    def exposure_active(self, edge: bool) -> None:
+        """Drive the camera's ExposureActive input; returns once 2 ms of simulated time served it."""
+        self._ask(f"exp {int(edge)}")
+
+    def camera_strobe(self) -> None:
+        """One whole exposure: a rising then a falling edge."""
+        self.exposure_active(True)
+        self.exposure_active(False)
+
+    def advance(self, seconds: float) -> None:
+        """Wait until ``seconds`` of simulated time have passed (paced to the wall clock)."""
+        target = self.now_us() + int(seconds * 1e6)
+        while self.now_us() < target:
+            time.sleep(0.002)
+
+    def close(self) -> None:
+        """Stop the simulator (the pty goes away, as an unplugged board)."""
+        if self._process.poll() is None:
+            try:
+                assert self._process.stdin is not None
+                self._process.stdin.write("quit\n")
+                self._process.stdin.flush()
+                self._process.wait(timeout=5.0)
+            except (OSError, subprocess.TimeoutExpired):
+                self._process.kill()
+                self._process.wait()
+        if hasattr(self, "_reader"):
+            self._reader.join(timeout=5.0)  # stdout reached its end with the process
+        for stream in (self._process.stdin, self._process.stdout):
+            if stream is not None:
+                try:
+                    stream.close()
+                except OSError:
+                    pass
+
+    def __enter__(self) -> SimulatedBooth:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
