@@ -25,53 +25,43 @@ from __future__ import annotations
 
 import argparse
 import time
-import warnings
-from collections.abc import Callable
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.session import analysis
-from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.folder_claim import FolderClaim, claim_folder
-from msflash.acquisition.session.capture import preview_frames, run_capture, run_capture_with_flash
 from msflash.acquisition.app.camera_options import add_camera_options, camera_options_from_args, given_camera_options
 from msflash.acquisition.app.cli_common import UsageError, dumps_json, output_directory, progress
 from msflash.acquisition.app.options import add_estimation_options
 from msflash.acquisition.errors import CaptureError, OutputWriteError
-from msflash.acquisition.session.flash_session import FlashSession
 from msflash.acquisition.session.external_booth import check_booth_port
 from msflash.acquisition.session.exposure import (
-    ExposurePlan,
     ExposurePolicy,
-    camera_exposure_range,
-    camera_noise_model,
-    flash_exposure,
-    measure_led_snr,
-    metering_view,
-    plan_exposures,
 )
-from msflash.acquisition.plan import CapturePlan, TriggerSource
-from msflash.acquisition.devices.replay_camera import format_levels, levels_match
 from msflash.acquisition.session.rig import Rig, open_rig
+from msflash.acquisition.session.run import (
+    SYNC_MODES,
+    RunOptions,
+    capture_sequence,
+    degenerate,
+    plan_exposure,
+    report_exposure,
+    run_one_stream,
+    run_two_captures,
+    sequence_writer,
+)
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.sequence.format import (
-    SequenceFrame,
-    SequenceWriter,
     read_sequence,
 )
 from msflash.led_controller.booth import sigterm_as_exit
 from msflash.processing.datasets import PAPER_LED_SUBSETS
-from msflash.processing.errors import TargetUnreachableWarning
 from msflash.processing.lights import AMBIENTS
 from msflash.processing.user_files import printable
 
 CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG")
-SYNC_MODES: dict[str, TriggerSource] = {"host": "software", "booth": "booth", "camera": "camera"}
-"""``--sync`` names and the plan trigger each stands for."""
 
 
 def _exposure_value(text: str) -> str | float:
@@ -130,19 +120,9 @@ def _open(args: argparse.Namespace) -> Rig:
     return open_rig(spec, log_serial=args.log_serial)
 
 
-def _writer(rig: Rig, out: Path, exposure: ExposurePlan | None = None) -> SequenceWriter:
-    msflash: dict = {"rig": rig.name, "booth": rig.booth.info.firmware}
-    if exposure is not None:
-        msflash["exposure"] = exposure.to_dict()
-    if rig.true_ambient is not None:
-        # Ground truth of a simulated rig, on the sequence's grid and in its unit, for later scoring.
-        truth = rig.true_ambient.resample(rig.led_spectra.grid).to_unit("energy")
-        msflash["true_ambient"] = {"name": truth.names[0], "source": truth.source, "spd": truth.values[:, 0].tolist()}
-    return rig.sequence_writer(out / "sequence", extra={"msflash": msflash})
-
-
-def _report_frame(step, frame, entry) -> None:
-    progress(f"captured step {step.index} ({step.label}) → {entry.file}")
+def _run_options(args: argparse.Namespace) -> RunOptions:
+    return RunOptions(mode=args.mode, target=args.target, solver=args.solver, alpha=args.alpha, bin_factor=args.bin,
+                      sync=args.sync, from_disk=args.from_disk)
 
 
 def _policy(args: argparse.Namespace) -> ExposurePolicy:
@@ -152,137 +132,6 @@ def _policy(args: argparse.Namespace) -> ExposurePolicy:
     except ValueError as err:
         raise UsageError(f"--max-saturated {args.max_saturated} / --exposure-criterion {args.exposure_criterion} / "
                          f"--max-lost {args.max_lost}: {err}") from err
-
-
-@dataclass(frozen=True)
-class _Recorded:
-    """A replay rig's recorded exposures and gains: replay must ask for exactly those."""
-
-    ambient_us: float
-    led_us: tuple[float, ...]
-    flash_us: float | None
-    """None when the recording has no flash frame (a sequence from ``msflash capture``)."""
-    ambient_gain: float
-    led_gains: tuple[float, ...]
-    flash_gain: float
-    flash_levels: tuple[float, ...] | None = None
-    """The recorded flash frame's LED levels (None without one)."""
-
-
-def _recorded(rig: Rig) -> _Recorded | None:
-    """What a replay rig's recording holds (None for other rigs)."""
-    sequence = getattr(rig.camera, "sequence", None)
-    if sequence is None or not rig.name.startswith("replay:"):
-        return None
-    ambient = sequence.indices("ambient")
-    leds = sequence.indices("led")
-    flash = sequence.indices("flash")
-    if not ambient:
-        return None
-    frames = sequence.frames
-    return _Recorded(frames[ambient[0]].exposure_us, tuple(frames[i].exposure_us for i in leds),
-                     frames[flash[0]].exposure_us if flash else None, frames[ambient[0]].gain,
-                     tuple(frames[i].gain for i in leds), frames[flash[0]].gain if flash else 1.0,
-                     tuple(frames[flash[0]].led_levels) if flash else None)
-
-
-def _plan_exposure(rig: Rig, args: argparse.Namespace) -> ExposurePlan:
-    """``--exposure``: fixed, the replay's recording, the fake's suggestion, or metered previews (auto)."""
-    n_leds = rig.led_spectra.count
-    limits = camera_exposure_range(rig.camera)
-    policy = _policy(args)
-    noise = camera_noise_model(rig.camera)
-    method = "photon+read noise" if noise is not None else "difference image"
-    nan = (float("nan"),) * n_leds
-    if args.exposure != "auto":
-        exposure = float(args.exposure)
-        if not limits[0] <= exposure <= limits[1]:
-            raise UsageError(f"--exposure {exposure:g}: outside the camera's range {limits[0]:g}–{limits[1]:g} µs")
-        return ExposurePlan(exposure, (exposure,) * n_leds, nan, method, limits, policy, mode="fixed")
-    recorded = _recorded(rig)
-    if recorded is not None and len(recorded.led_us) == n_leds:
-        return ExposurePlan(recorded.ambient_us, recorded.led_us, nan, method, limits, policy, mode="recorded",
-                            ambient_gain=recorded.ambient_gain, led_gains=recorded.led_gains)
-    suggested = float(getattr(rig.camera, "suggested_exposure_us", None) or 10_000.0)
-    if rig.name == "aravis-fake":  # test patterns: nothing to meter
-        return ExposurePlan(suggested, (suggested,) * n_leds, nan, method, limits, policy, mode="suggested",
-                            warnings=["aravis-fake: test patterns carry no light to meter; the rig's exposure is used"])
-    progress(f"auto exposure: metering ambient previews (≤ {policy.max_saturated_fraction:.2%} saturated, "
-             f"bright end at {policy.target_fraction:.0%} of full scale)")
-    info = rig.camera.info
-
-    def capture(levels, exposure_us: float):
-        role = "led" if any(level > 0 for level in levels) else "ambient"
-        preview = CapturePlan.single(levels, exposure_us, role=role)
-        return metering_view(preview_frames(rig.camera, rig.booth, preview)[0].pixels, mosaic=info.cfa is not None)
-
-    return plan_exposures(capture, n_leds, info.black_level, info.white_level, limits, noise, policy,
-                          start_us=suggested, cfa=info.cfa is not None)
-
-
-def _report_exposure(plan: ExposurePlan, names: list[str]) -> None:
-    progress(f"exposure ({plan.mode}): ambient {plan.ambient_exposure_us:.0f} µs; LEDs "
-             + ", ".join(f"{n} {e:.0f}" for n, e in zip(names, plan.led_exposures_us)) + " µs")
-    if plan.mode == "auto":
-        progress(f"planned LED SNR ({plan.snr_method}, median pixel): "
-                 + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, plan.predicted_snr)))
-    for note in plan.warnings:
-        progress(f"warning: {note}")
-
-
-@dataclass
-class _LedCapture:
-    """The ambient + LED frames as captured, kept in memory for estimation (no re-read from disk)."""
-
-    plan: ExposurePlan
-    frames: list[RawFrame]
-    entries: list[SequenceFrame]
-    last_frame_at: float
-    """``time.perf_counter()`` when the last LED frame was handed over (written)."""
-    snr: list[float]
-    snr_method: str
-
-
-def _capture_led_sequence(rig: Rig, writer: SequenceWriter, plan: ExposurePlan, sync: str = "host") -> _LedCapture:
-    frames: list[RawFrame] = []
-    stamp = {"t": 0.0}
-
-    def keep(step, frame, entry) -> None:
-        frames.append(frame)
-        stamp["t"] = time.perf_counter()
-        _report_frame(step, frame, entry)
-
-    capture_plan = CapturePlan.ambient_then_each_led(len(writer.sequence.leds), plan.ambient_exposure_us,
-                                                    gain=plan.ambient_gain, led_exposures_us=plan.led_exposures_us,
-                                                    led_gains=plan.led_gains, trigger=SYNC_MODES[sync])
-    entries = run_capture(rig.camera, rig.booth, capture_plan, writer, on_frame=keep)
-    return _led_capture(rig, writer, plan, frames, entries, stamp["t"])
-
-
-def _led_capture(rig: Rig, writer, plan: ExposurePlan, frames: list[RawFrame], entries: list[SequenceFrame],
-                 last_frame_at: float) -> _LedCapture:
-    """The LED frames with their measured SNR (reported)."""
-    info = rig.camera.info
-    pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
-    snr, method = measure_led_snr(pixels[0], frames[0].exposure_us, pixels[1:],
-                                  [f.exposure_us for f in frames[1:]], info.black_level, info.white_level,
-                                  camera_noise_model(rig.camera), cfa=info.cfa is not None,
-                                  gain=frames[0].gain)
-    names = [led.name for led in writer.sequence.leds]
-    progress(f"LED SNR ({method}, median pixel): " + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, snr)))
-    return _LedCapture(plan, frames, entries, last_frame_at, snr, method)
-
-
-def _degenerate(estimate) -> str | None:
-    """Why the estimate cannot be reported (non-finite numbers), or None."""
-    checks = {"condition number": np.asarray(estimate.condition_number, dtype=float),
-              "spectrum": np.asarray(estimate.spectrum.values, dtype=float),
-              "ambient weights": np.asarray(estimate.ambient_weights, dtype=float),
-              "spectrum uncertainty": np.asarray(estimate.spectrum_std, dtype=float)}
-    bad = [name for name, values in checks.items() if not np.all(np.isfinite(values))]
-    if not bad:
-        return None
-    return f"not finite: {', '.join(bad)}; condition number {float(estimate.condition_number):.3g}"
 
 
 def _claimed(out: Path, what: str) -> FolderClaim:
@@ -319,17 +168,17 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
         if rig.camera_responsivities is None:
             raise UsageError(f"rig '{spec}': the flash solvers need the camera's responsivities; expected "
                              "--responsivity FILE.csv (wavelength_nm, R, G, B) or a calibration with a camera section")
-        exposure = _plan_exposure(rig, args)
-        _report_exposure(exposure, list(rig.led_spectra.names))
-        with _writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
+        exposure = plan_exposure(rig, args.exposure, _policy(args))
+        report_exposure(exposure, list(rig.led_spectra.names))
+        with sequence_writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
             if rig.name.startswith("replay:"):
-                estimate, solutions, caught, captured, flash_us, stack, decided = _run_two_captures(
-                    rig, writer, exposure, args)
+                estimate, solutions, caught, captured, flash_us, stack, decided = run_two_captures(
+                    rig, writer, exposure, _run_options(args))
             else:
-                estimate, solutions, caught, captured, flash_us, stack, decided = _run_one_stream(
-                    rig, writer, exposure, args)
+                estimate, solutions, caught, captured, flash_us, stack, decided = run_one_stream(
+                    rig, writer, exposure, _run_options(args))
             chosen = solutions[args.mode]
-            degenerate = _degenerate(estimate)
+            why_degenerate = degenerate(estimate)
             writer.finish()
             true_ambient = rig.true_ambient
     decision_ms = (decided - captured.last_frame_at) * 1e3
@@ -340,9 +189,9 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
         progress(f"warning: {warning.message}")
     progress((f"re-captured with the {args.mode} flash at {flash_us:.0f} µs: " if flash_us is not None
               else f"the {args.mode} flash (synthesised only): ") + ", ".join(f"{w:.3f}" for w in chosen.flash_weights))
-    if degenerate is not None:
+    if why_degenerate is not None:
         raise CaptureError(
-            f"rig '{spec}': the ambient estimate is degenerate ({degenerate}): the LED-only images do not "
+            f"rig '{spec}': the ambient estimate is degenerate ({why_degenerate}): the LED-only images do not "
             f"determine the ambient (test patterns, or LEDs that do not reach the scene?); no report written. "
             f"The sequence is complete in {out / 'sequence'}"
         )
@@ -368,124 +217,6 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
     return 0
 
 
-def _solve_both(solve, weights: np.ndarray, first: str) -> tuple[dict, list]:
-    """Both flashes (``first`` solved first), with the TargetUnreachable warnings recorded."""
-    solutions = {}
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", TargetUnreachableWarning)
-        for mode in (first, *(m for m in ("matching", "complementary") if m != first)):
-            solutions[mode] = solve(mode, weights)
-    return solutions, list(caught)
-
-
-def _run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, args: argparse.Namespace):
-    """Ambient + LEDs + flash in one stream, the flash decided from the frames in memory."""
-    auto = exposure.mode == "auto"  # then the session predicts the flash exposure from the frames as they arrive
-    session = FlashSession.prepare(writer.sequence, args.target, args.solver, args.alpha, args.bin,
-                                   exposure_limits_us=exposure.exposure_range_us if auto else None,
-                                   exposure_policy=exposure.policy)
-    n_leds = len(writer.sequence.leds)
-    frames: list[RawFrame] = []
-    stamp = {"t": 0.0, "decided": 0.0}
-    result: dict = {}
-
-    def keep(step, frame, entry) -> None:
-        if step.role != "flash":
-            session.add(frame, step.role, step.led_levels)
-            frames.append(frame)
-            stamp["t"] = time.perf_counter()
-        _report_frame(step, frame, entry)
-
-    def decide(_frames):
-        # As the capture bench: FlashSession.decide, the estimate's reliability signals left for
-        # after the flash trigger (``decision.estimate`` is read once the capture is over).
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", TargetUnreachableWarning)
-            if args.from_disk:
-                sequence = read_sequence(writer.flush().directory)
-                stack = analysis.load_frame_stack(sequence)
-                estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack,
-                                                      bin_factor=args.bin)
-                chosen = session.solve(args.mode, estimate.ambient_weights)
-                levels = np.clip(chosen.flash_weights, 0.0, 1.0)
-                result.update(estimate=lambda: estimate, chosen=chosen, stack=stack)
-            else:
-                decision = session.decide(args.mode)
-                levels = decision.levels
-                result.update(estimate=lambda: decision.estimate, chosen=decision.solution)
-        flash_us = _flash_exposure(rig, exposure, levels, session.flash_exposure)
-        result.update(caught=list(caught), flash_us=flash_us)
-        stamp["decided"] = time.perf_counter()
-        return levels, flash_us
-
-    plan = CapturePlan.ambient_then_each_led(n_leds, exposure.ambient_exposure_us,
-                                             led_exposures_us=exposure.led_exposures_us, trigger=SYNC_MODES[args.sync])
-    entries = run_capture_with_flash(rig.camera, rig.booth, plan, writer, decide, on_frame=keep)
-    if "stack" not in result:
-        # The report's frames as the sequence records them (a mono camera's as three identical
-        # channels), as for two captures; the session's own stack holds a mono frame's one plane.
-        result["stack"] = analysis.load_frame_stack(writer.flush(), [frame.pixels for frame in frames])
-    estimate = result["estimate"]()
-    other = "matching" if args.mode == "complementary" else "complementary"
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", TargetUnreachableWarning)
-        solutions = {args.mode: result["chosen"], other: session.solve(other, estimate.ambient_weights)}
-    captured = _led_capture(rig, writer, exposure, frames, list(entries[:-1]), stamp["t"])
-    flash_entry = entries[-1]
-    return (estimate, solutions, result["caught"] + list(caught),
-            captured, flash_entry.exposure_us, result["stack"], stamp["decided"])
-
-
-def _run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, args: argparse.Namespace):
-    """LED sequence, then the flash as a second capture (replay rigs: plans are checked up front)."""
-    captured = _capture_led_sequence(rig, writer, exposure, args.sync)
-    sequence = writer.flush()
-    if args.from_disk:
-        sequence = read_sequence(writer.path.parent)
-        stack = analysis.load_frame_stack(sequence)
-    else:
-        stack = analysis.load_frame_stack(sequence, [frame.pixels for frame in captured.frames])
-    estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
-    solutions, caught = _solve_both(
-        lambda mode, weights: analysis.solve_sequence_flash(sequence, mode, weights, args.target),
-        estimate.ambient_weights, args.mode)
-    levels = np.clip(solutions[args.mode].flash_weights, 0.0, 1.0)
-    recorded = _recorded(rig)
-    if exposure.mode == "recorded" and recorded is not None and recorded.flash_us is None:
-        progress("the recording has no flash frame (a sequence from 'msflash capture'): the flash is synthesised "
-                 "from the frames, not re-captured")
-        return estimate, solutions, caught, captured, None, stack, time.perf_counter()
-    if exposure.mode == "recorded" and recorded is not None and recorded.flash_levels is not None and \
-            not levels_match(recorded.flash_levels, levels):
-        # A recording made by another msflash version or with other options (--mode, --solver, --target…):
-        # its flash frame is not this flash, and replay cannot capture another one.
-        progress(f"the recording's flash frame has LED levels {format_levels(recorded.flash_levels)}, this run's "
-                 f"{args.mode} flash asks for {format_levels(levels)} (recorded with other options or another "
-                 "msflash version): the flash is synthesised from the frames, not replayed")
-        return estimate, solutions, caught, captured, None, stack, time.perf_counter()
-    frames = captured.frames
-    info = rig.camera.info  # read once: on a real camera each read is several feature round trips
-    pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
-    flash_us = _flash_exposure(rig, exposure, levels, lambda weights: flash_exposure(
-        pixels[0], frames[0].exposure_us, pixels[1:], [f.exposure_us for f in frames[1:]],
-        weights, info.black_level, info.white_level, exposure.exposure_range_us, exposure.policy))
-    flash_gain = recorded.flash_gain if exposure.mode == "recorded" and recorded is not None else 1.0
-    flash_plan = CapturePlan.single(levels, flash_us, gain=flash_gain, trigger=SYNC_MODES[args.sync])
-    decided = time.perf_counter()
-    run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=_report_frame)
-    return estimate, solutions, caught, captured, flash_us, stack, decided
-
-
-def _flash_exposure(rig: Rig, plan: ExposurePlan, levels: np.ndarray, predict: Callable[[np.ndarray], float]) -> float:
-    """The flash frame's exposure: fixed, recorded (replay), or ``predict(levels)`` from the frames in memory."""
-    if plan.mode != "auto":
-        recorded = _recorded(rig)
-        if plan.mode == "recorded" and recorded is not None and recorded.flash_us is not None:
-            return recorded.flash_us
-        return plan.ambient_exposure_us
-    return predict(levels)
-
-
 def _capture(args: argparse.Namespace) -> int:
     out = Path(args.out)
     output_directory(out)
@@ -497,12 +228,8 @@ def _capture(args: argparse.Namespace) -> int:
 
 def _capture_claimed(args: argparse.Namespace, out: Path) -> int:
     with sigterm_as_exit(), _open(args) as rig:
-        exposure = _plan_exposure(rig, args)
-        _report_exposure(exposure, list(rig.led_spectra.names))
-        with _writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
-            _capture_led_sequence(rig, writer, exposure, args.sync)
-            writer.finish()
-    print(out / "sequence")
+        path = capture_sequence(rig, out, args.exposure, _policy(args), args.sync)
+    print(path)
     return 0
 
 

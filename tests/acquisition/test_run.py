@@ -101,7 +101,7 @@ def test_leds_off_and_partial_sequence_kept_when_capture_fails(tmp_path, monkeyp
 def test_run_decides_the_flash_before_the_reliability_signals(tmp_path, monkeypatch) -> None:
     """`msflash run` drives the flash from FlashSession.decide (weights, flash, exposure predicted from the
     frames as they arrived); the estimate's reliability signals are computed only after the capture."""
-    from msflash.acquisition.app import cli_run
+    from msflash.acquisition.session import run as run_session
     from msflash.acquisition.session.flash_session import FlashSession
     from msflash.processing.ambient import AmbientModel
 
@@ -116,14 +116,14 @@ def test_run_decides_the_flash_before_the_reliability_signals(tmp_path, monkeypa
     monkeypatch.setattr(FlashSession, "decide", recorded("decide", FlashSession.decide))
     monkeypatch.setattr(FlashSession, "flash_exposure", recorded("exposure", FlashSession.flash_exposure))
     monkeypatch.setattr(AmbientModel, "reliability", recorded("reliability", AmbientModel.reliability))
-    real_capture = cli_run.run_capture_with_flash
+    real_capture = run_session.run_capture_with_flash
 
     def capture(*args, **kwargs):
         entries = real_capture(*args, **kwargs)
         order.append("captured")
         return entries
 
-    monkeypatch.setattr(cli_run, "run_capture_with_flash", capture)
+    monkeypatch.setattr(run_session, "run_capture_with_flash", capture)
     assert main(["run", "--out", str(tmp_path / "r"), "--ambient", "daylight"]) == 0
     assert order[:4] == ["decide", "exposure", "captured", "reliability"]
     summary = json.loads((tmp_path / "r" / "run.json").read_text())

@@ -1,0 +1,335 @@
+"""The capture and run sessions behind ``msflash capture`` and ``msflash run`` (docs/architecture.md §5.1).
+
+``capture``: exposures planned for the rig, then ambient + each LED in one plan. ``run``: the same,
+with the flash decided from the frames in memory and re-captured in the same stream
+(:func:`run_one_stream`), or — on a replay rig, which checks every plan against its recording up
+front — as a second capture (:func:`run_two_captures`). The command line (``app/cli_run.py``)
+parses options into a :class:`RunOptions`, opens the rig and reports; everything between is here.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from msflash.acquisition.devices.camera import RawFrame
+from msflash.acquisition.devices.replay_camera import format_levels, levels_match
+from msflash.acquisition.errors import UsageError
+from msflash.acquisition.plan import CapturePlan, TriggerSource
+from msflash.acquisition.progress import progress
+from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
+from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter, read_sequence
+from msflash.acquisition.session import analysis
+from msflash.acquisition.session.capture import preview_frames, run_capture, run_capture_with_flash
+from msflash.acquisition.session.exposure import (
+    ExposurePlan,
+    ExposurePolicy,
+    camera_exposure_range,
+    camera_noise_model,
+    flash_exposure,
+    measure_led_snr,
+    metering_view,
+    plan_exposures,
+)
+from msflash.acquisition.session.flash_session import FlashSession
+from msflash.acquisition.session.rig import Rig
+from msflash.processing.errors import TargetUnreachableWarning
+
+SYNC_MODES: dict[str, TriggerSource] = {"host": "software", "booth": "booth", "camera": "camera"}
+"""``--sync`` names and the plan trigger each stands for."""
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """What ``msflash run`` decides with: the flash mode and target, the estimator, the pacing."""
+
+    mode: str = "complementary"
+    """The flash re-captured: ``matching`` (eq. 7) or ``complementary`` (eq. 8-9)."""
+    target: str = "D65"
+    """The complementary target: an illuminant name or a CSV file."""
+    solver: str = "tikhonov"
+    alpha: float | str = "auto"
+    bin_factor: int = analysis.DEFAULT_BIN_FACTOR
+    sync: str = "host"
+    """``host``, ``booth`` or ``camera`` (docs/architecture.md §4)."""
+    from_disk: bool = False
+    """Re-read the frames from disk before deciding the flash (a check of the in-memory route)."""
+
+
+def capture_sequence(rig: Rig, out: Path, exposure_option: str | float, policy: ExposurePolicy,
+                     sync: str = "host") -> Path:
+    """``msflash capture``: plan the exposures, capture ambient + each LED into ``out/sequence``; its path."""
+    exposure = plan_exposure(rig, exposure_option, policy)
+    report_exposure(exposure, list(rig.led_spectra.names))
+    with sequence_writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
+        capture_led_sequence(rig, writer, exposure, sync)
+        writer.finish()
+    return out / "sequence"
+
+
+def sequence_writer(rig: Rig, out: Path, exposure: ExposurePlan | None = None) -> SequenceWriter:
+    msflash: dict = {"rig": rig.name, "booth": rig.booth.info.firmware}
+    if exposure is not None:
+        msflash["exposure"] = exposure.to_dict()
+    if rig.true_ambient is not None:
+        # Ground truth of a simulated rig, on the sequence's grid and in its unit, for later scoring.
+        truth = rig.true_ambient.resample(rig.led_spectra.grid).to_unit("energy")
+        msflash["true_ambient"] = {"name": truth.names[0], "source": truth.source, "spd": truth.values[:, 0].tolist()}
+    return rig.sequence_writer(out / "sequence", extra={"msflash": msflash})
+
+
+def report_frame(step, frame, entry) -> None:
+    progress(f"captured step {step.index} ({step.label}) → {entry.file}")
+
+
+@dataclass(frozen=True)
+class Recorded:
+    """A replay rig's recorded exposures and gains: replay must ask for exactly those."""
+
+    ambient_us: float
+    led_us: tuple[float, ...]
+    flash_us: float | None
+    """None when the recording has no flash frame (a sequence from ``msflash capture``)."""
+    ambient_gain: float
+    led_gains: tuple[float, ...]
+    flash_gain: float
+    flash_levels: tuple[float, ...] | None = None
+    """The recorded flash frame's LED levels (None without one)."""
+
+
+def recording_of(rig: Rig) -> Recorded | None:
+    """What a replay rig's recording holds (None for other rigs)."""
+    sequence = getattr(rig.camera, "sequence", None)
+    if sequence is None or not rig.name.startswith("replay:"):
+        return None
+    ambient = sequence.indices("ambient")
+    leds = sequence.indices("led")
+    flash = sequence.indices("flash")
+    if not ambient:
+        return None
+    frames = sequence.frames
+    return Recorded(frames[ambient[0]].exposure_us, tuple(frames[i].exposure_us for i in leds),
+                     frames[flash[0]].exposure_us if flash else None, frames[ambient[0]].gain,
+                     tuple(frames[i].gain for i in leds), frames[flash[0]].gain if flash else 1.0,
+                     tuple(frames[flash[0]].led_levels) if flash else None)
+
+
+def plan_exposure(rig: Rig, exposure_option: str | float, policy: ExposurePolicy) -> ExposurePlan:
+    """``--exposure``: fixed, the replay's recording, the fake's suggestion, or metered previews (auto)."""
+    n_leds = rig.led_spectra.count
+    limits = camera_exposure_range(rig.camera)
+    noise = camera_noise_model(rig.camera)
+    method = "photon+read noise" if noise is not None else "difference image"
+    nan = (float("nan"),) * n_leds
+    if exposure_option != "auto":
+        exposure = float(exposure_option)
+        if not limits[0] <= exposure <= limits[1]:
+            raise UsageError(f"--exposure {exposure:g}: outside the camera's range {limits[0]:g}–{limits[1]:g} µs")
+        return ExposurePlan(exposure, (exposure,) * n_leds, nan, method, limits, policy, mode="fixed")
+    recorded = recording_of(rig)
+    if recorded is not None and len(recorded.led_us) == n_leds:
+        return ExposurePlan(recorded.ambient_us, recorded.led_us, nan, method, limits, policy, mode="recorded",
+                            ambient_gain=recorded.ambient_gain, led_gains=recorded.led_gains)
+    suggested = float(getattr(rig.camera, "suggested_exposure_us", None) or 10_000.0)
+    if rig.name == "aravis-fake":  # test patterns: nothing to meter
+        return ExposurePlan(suggested, (suggested,) * n_leds, nan, method, limits, policy, mode="suggested",
+                            warnings=["aravis-fake: test patterns carry no light to meter; the rig's exposure is used"])
+    progress(f"auto exposure: metering ambient previews (≤ {policy.max_saturated_fraction:.2%} saturated, "
+             f"bright end at {policy.target_fraction:.0%} of full scale)")
+    info = rig.camera.info
+
+    def capture(levels, exposure_us: float):
+        role = "led" if any(level > 0 for level in levels) else "ambient"
+        preview = CapturePlan.single(levels, exposure_us, role=role)
+        return metering_view(preview_frames(rig.camera, rig.booth, preview)[0].pixels, mosaic=info.cfa is not None)
+
+    return plan_exposures(capture, n_leds, info.black_level, info.white_level, limits, noise, policy,
+                          start_us=suggested, cfa=info.cfa is not None)
+
+
+def report_exposure(plan: ExposurePlan, names: list[str]) -> None:
+    progress(f"exposure ({plan.mode}): ambient {plan.ambient_exposure_us:.0f} µs; LEDs "
+             + ", ".join(f"{n} {e:.0f}" for n, e in zip(names, plan.led_exposures_us)) + " µs")
+    if plan.mode == "auto":
+        progress(f"planned LED SNR ({plan.snr_method}, median pixel): "
+                 + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, plan.predicted_snr)))
+    for note in plan.warnings:
+        progress(f"warning: {note}")
+
+
+@dataclass
+class LedCapture:
+    """The ambient + LED frames as captured, kept in memory for estimation (no re-read from disk)."""
+
+    plan: ExposurePlan
+    frames: list[RawFrame]
+    entries: list[SequenceFrame]
+    last_frame_at: float
+    """``time.perf_counter()`` when the last LED frame was handed over (written)."""
+    snr: list[float]
+    snr_method: str
+
+
+def capture_led_sequence(rig: Rig, writer: SequenceWriter, plan: ExposurePlan, sync: str = "host") -> LedCapture:
+    frames: list[RawFrame] = []
+    stamp = {"t": 0.0}
+
+    def keep(step, frame, entry) -> None:
+        frames.append(frame)
+        stamp["t"] = time.perf_counter()
+        report_frame(step, frame, entry)
+
+    capture_plan = CapturePlan.ambient_then_each_led(len(writer.sequence.leds), plan.ambient_exposure_us,
+                                                    gain=plan.ambient_gain, led_exposures_us=plan.led_exposures_us,
+                                                    led_gains=plan.led_gains, trigger=SYNC_MODES[sync])
+    entries = run_capture(rig.camera, rig.booth, capture_plan, writer, on_frame=keep)
+    return led_capture(rig, writer, plan, frames, entries, stamp["t"])
+
+
+def led_capture(rig: Rig, writer, plan: ExposurePlan, frames: list[RawFrame], entries: list[SequenceFrame],
+                 last_frame_at: float) -> LedCapture:
+    """The LED frames with their measured SNR (reported)."""
+    info = rig.camera.info
+    pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
+    snr, method = measure_led_snr(pixels[0], frames[0].exposure_us, pixels[1:],
+                                  [f.exposure_us for f in frames[1:]], info.black_level, info.white_level,
+                                  camera_noise_model(rig.camera), cfa=info.cfa is not None,
+                                  gain=frames[0].gain)
+    names = [led.name for led in writer.sequence.leds]
+    progress(f"LED SNR ({method}, median pixel): " + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, snr)))
+    return LedCapture(plan, frames, entries, last_frame_at, snr, method)
+
+
+def degenerate(estimate) -> str | None:
+    """Why the estimate cannot be reported (non-finite numbers), or None."""
+    checks = {"condition number": np.asarray(estimate.condition_number, dtype=float),
+              "spectrum": np.asarray(estimate.spectrum.values, dtype=float),
+              "ambient weights": np.asarray(estimate.ambient_weights, dtype=float),
+              "spectrum uncertainty": np.asarray(estimate.spectrum_std, dtype=float)}
+    bad = [name for name, values in checks.items() if not np.all(np.isfinite(values))]
+    if not bad:
+        return None
+    return f"not finite: {', '.join(bad)}; condition number {float(estimate.condition_number):.3g}"
+
+
+def solve_both(solve, weights: np.ndarray, first: str) -> tuple[dict, list]:
+    """Both flashes (``first`` solved first), with the TargetUnreachable warnings recorded."""
+    solutions = {}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", TargetUnreachableWarning)
+        for mode in (first, *(m for m in ("matching", "complementary") if m != first)):
+            solutions[mode] = solve(mode, weights)
+    return solutions, list(caught)
+
+
+def run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, options: RunOptions):
+    """Ambient + LEDs + flash in one stream, the flash decided from the frames in memory."""
+    auto = exposure.mode == "auto"  # then the session predicts the flash exposure from the frames as they arrive
+    session = FlashSession.prepare(writer.sequence, options.target, options.solver, options.alpha, options.bin_factor,
+                                   exposure_limits_us=exposure.exposure_range_us if auto else None,
+                                   exposure_policy=exposure.policy)
+    n_leds = len(writer.sequence.leds)
+    frames: list[RawFrame] = []
+    stamp = {"t": 0.0, "decided": 0.0}
+    result: dict = {}
+
+    def keep(step, frame, entry) -> None:
+        if step.role != "flash":
+            session.add(frame, step.role, step.led_levels)
+            frames.append(frame)
+            stamp["t"] = time.perf_counter()
+        report_frame(step, frame, entry)
+
+    def decide(_frames):
+        # As the capture bench: FlashSession.decide, the estimate's reliability signals left for
+        # after the flash trigger (``decision.estimate`` is read once the capture is over).
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", TargetUnreachableWarning)
+            if options.from_disk:
+                sequence = read_sequence(writer.flush().directory)
+                stack = analysis.load_frame_stack(sequence)
+                estimate = analysis.estimate_sequence(sequence, options.solver, options.alpha, stack=stack,
+                                                      bin_factor=options.bin_factor)
+                chosen = session.solve(options.mode, estimate.ambient_weights)
+                levels = np.clip(chosen.flash_weights, 0.0, 1.0)
+                result.update(estimate=lambda: estimate, chosen=chosen, stack=stack)
+            else:
+                decision = session.decide(options.mode)
+                levels = decision.levels
+                result.update(estimate=lambda: decision.estimate, chosen=decision.solution)
+        flash_us = flash_exposure_for(rig, exposure, levels, session.flash_exposure)
+        result.update(caught=list(caught), flash_us=flash_us)
+        stamp["decided"] = time.perf_counter()
+        return levels, flash_us
+
+    plan = CapturePlan.ambient_then_each_led(n_leds, exposure.ambient_exposure_us,
+                                             led_exposures_us=exposure.led_exposures_us, trigger=SYNC_MODES[options.sync])
+    entries = run_capture_with_flash(rig.camera, rig.booth, plan, writer, decide, on_frame=keep)
+    if "stack" not in result:
+        # The report's frames as the sequence records them (a mono camera's as three identical
+        # channels), as for two captures; the session's own stack holds a mono frame's one plane.
+        result["stack"] = analysis.load_frame_stack(writer.flush(), [frame.pixels for frame in frames])
+    estimate = result["estimate"]()
+    other = "matching" if options.mode == "complementary" else "complementary"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", TargetUnreachableWarning)
+        solutions = {options.mode: result["chosen"], other: session.solve(other, estimate.ambient_weights)}
+    captured = led_capture(rig, writer, exposure, frames, list(entries[:-1]), stamp["t"])
+    flash_entry = entries[-1]
+    return (estimate, solutions, result["caught"] + list(caught),
+            captured, flash_entry.exposure_us, result["stack"], stamp["decided"])
+
+
+def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, options: RunOptions):
+    """LED sequence, then the flash as a second capture (replay rigs: plans are checked up front)."""
+    captured = capture_led_sequence(rig, writer, exposure, options.sync)
+    sequence = writer.flush()
+    if options.from_disk:
+        sequence = read_sequence(writer.path.parent)
+        stack = analysis.load_frame_stack(sequence)
+    else:
+        stack = analysis.load_frame_stack(sequence, [frame.pixels for frame in captured.frames])
+    estimate = analysis.estimate_sequence(sequence, options.solver, options.alpha, stack=stack, bin_factor=options.bin_factor)
+    solutions, caught = solve_both(
+        lambda mode, weights: analysis.solve_sequence_flash(sequence, mode, weights, options.target),
+        estimate.ambient_weights, options.mode)
+    levels = np.clip(solutions[options.mode].flash_weights, 0.0, 1.0)
+    recorded = recording_of(rig)
+    if exposure.mode == "recorded" and recorded is not None and recorded.flash_us is None:
+        progress("the recording has no flash frame (a sequence from 'msflash capture'): the flash is synthesised "
+                 "from the frames, not re-captured")
+        return estimate, solutions, caught, captured, None, stack, time.perf_counter()
+    if exposure.mode == "recorded" and recorded is not None and recorded.flash_levels is not None and \
+            not levels_match(recorded.flash_levels, levels):
+        # A recording made by another msflash version or with other options (--mode, --solver, --target…):
+        # its flash frame is not this flash, and replay cannot capture another one.
+        progress(f"the recording's flash frame has LED levels {format_levels(recorded.flash_levels)}, this run's "
+                 f"{options.mode} flash asks for {format_levels(levels)} (recorded with other options or another "
+                 "msflash version): the flash is synthesised from the frames, not replayed")
+        return estimate, solutions, caught, captured, None, stack, time.perf_counter()
+    frames = captured.frames
+    info = rig.camera.info  # read once: on a real camera each read is several feature round trips
+    pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
+    flash_us = flash_exposure_for(rig, exposure, levels, lambda weights: flash_exposure(
+        pixels[0], frames[0].exposure_us, pixels[1:], [f.exposure_us for f in frames[1:]],
+        weights, info.black_level, info.white_level, exposure.exposure_range_us, exposure.policy))
+    flash_gain = recorded.flash_gain if exposure.mode == "recorded" and recorded is not None else 1.0
+    flash_plan = CapturePlan.single(levels, flash_us, gain=flash_gain, trigger=SYNC_MODES[options.sync])
+    decided = time.perf_counter()
+    run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=report_frame)
+    return estimate, solutions, caught, captured, flash_us, stack, decided
+
+
+def flash_exposure_for(rig: Rig, plan: ExposurePlan, levels: np.ndarray, predict: Callable[[np.ndarray], float]) -> float:
+    """The flash frame's exposure: fixed, recorded (replay), or ``predict(levels)`` from the frames in memory."""
+    if plan.mode != "auto":
+        recorded = recording_of(rig)
+        if plan.mode == "recorded" and recorded is not None and recorded.flash_us is not None:
+            return recorded.flash_us
+        return plan.ambient_exposure_us
+    return predict(levels)
