@@ -189,7 +189,7 @@ def parse_spectrometer_text(
         )
     table = np.asarray(rows, dtype=float)
     wavelengths = table[:, 0]
-    values = table[:, column if column is not None else 1]
+    readings = table[:, column if column is not None else 1]
     steps = np.diff(wavelengths)
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0)) + 1
@@ -202,14 +202,14 @@ def parse_spectrometer_text(
             f"{source}:{lines[0]}: wavelengths span {wavelengths[0]:g}–{wavelengths[-1]:g}; expected nanometres "
             "(100–3000)"
         )
-    peak = float(np.max(values))
+    peak = float(np.max(readings))
     if peak <= 0:
         raise CalibrationError(f"{source}: no positive value in the value column; expected a measured emission")
-    too_negative = values < -NEGATIVE_TOLERANCE * peak
+    too_negative = readings < -NEGATIVE_TOLERANCE * peak
     if np.any(too_negative):
         k = int(np.argmax(too_negative))
         raise CalibrationError(
-            f"{source}:{lines[k]}: value {values[k]:g} at {wavelengths[k]:g} nm is negative beyond noise "
+            f"{source}:{lines[k]}: value {readings[k]:g} at {wavelengths[k]:g} nm is negative beyond noise "
             f"(peak {peak:g}); expected spectral power ≥ 0 (was the dark subtracted twice?)"
         )
     column_name = ""
@@ -218,7 +218,7 @@ def parse_spectrometer_text(
         if width is not None and len(header_cells) >= width:
             column_name = header_cells[column if column is not None else 1]
     return SpectrometerMeasurement(
-        wavelengths, values, unit, source, name or Path(source).stem, tuple(header),
+        wavelengths, readings, unit, source, name or Path(source).stem, tuple(header),
         {"column": column_name, "lines": tuple(lines)},
     )
 

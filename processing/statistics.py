@@ -318,12 +318,12 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
     cropped = frame[:height, :width]
     # Strided slices summed one offset at a time: each pass streams through memory, where a
     # reshape-and-sum over two strided axes would crawl.
-    row_sums = cropped[0::factor].astype(sum_type)
+    row_sums: np.ndarray = cropped[0::factor].astype(sum_type)
     row_max = cropped[0::factor].copy()
     for offset in range(1, factor):
         row_sums += cropped[offset::factor]
         np.maximum(row_max, cropped[offset::factor], out=row_max)
-    sums = row_sums[:, 0::factor].copy()
+    sums: np.ndarray = row_sums[:, 0::factor].copy()
     maxima = row_max[:, 0::factor].copy()
     for offset in range(1, factor):
         sums += row_sums[:, offset::factor]
@@ -696,7 +696,7 @@ class BlockRows:
         if not fresh.size:
             return
         self._excluded = new if self._excluded is None else self._excluded | new
-        filled = self._filled
+        filled = np.asarray(self._filled, dtype=np.intp)
         few = np.count_nonzero(self._excluded) * 4 < columns.size
         parts = [(self.rows, self._moments, fresh)]
         if self.differences is not None and self._noise is not None:
@@ -745,7 +745,7 @@ class BlockRows:
             for mask in self._invalid:
                 invalid = mask if invalid is None else invalid | mask
             chunk = chunk_pixels * self.block_shape[1]
-            masked = invalid is not None and invalid.any()
+            invalid = invalid if invalid is not None and invalid.any() else None
 
             def moments_of(values: np.ndarray, columns: np.ndarray | None, column_weights: np.ndarray | None) -> np.ndarray:
                 if columns is not None:
@@ -756,12 +756,13 @@ class BlockRows:
                         values[:, columns] = 0.0
                 return _gram(values, chunk, workers, column_weights)
 
-            moments = moments_of(rows, self._columns(invalid) if masked else None, weights)
-            excluded_columns = int(np.count_nonzero(invalid)) * channels if masked else 0
+            moments = moments_of(rows, self._columns(invalid) if invalid is not None else None, weights)
+            excluded_columns = int(np.count_nonzero(invalid)) * channels if invalid is not None else 0
             noise = None if self.differences is None else \
-                moments_of(self.differences, self._difference_columns(invalid) if masked else None, probe_weights)
-            scale = self._probe_scale(int(np.count_nonzero(invalid)) if masked else 0,
-                                      int(np.count_nonzero(invalid[::self.probe_stride])) if masked else 0)
+                moments_of(self.differences, self._difference_columns(invalid) if invalid is not None else None,
+                           probe_weights)
+            scale = self._probe_scale(int(np.count_nonzero(invalid)) if invalid is not None else 0,
+                                      int(np.count_nonzero(invalid[::self.probe_stride])) if invalid is not None else 0)
         if noise is not None:
             noise = None if scale is None else noise * scale
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
@@ -968,7 +969,7 @@ def saturated_blocks(plane: np.ndarray, factor: int, white: float) -> np.ndarray
 @lru_cache(maxsize=32)
 def gather_matrix(factor: int, channels: int, dtype: type) -> np.ndarray:
     """(factor·channels, channels) 0/1 matrix summing the ``factor`` pixels of a row group per channel."""
-    gather = np.zeros((factor * channels, channels), dtype=dtype)
+    gather: np.ndarray = np.zeros((factor * channels, channels), dtype=dtype)
     for member in range(factor):
         gather[member * channels:(member + 1) * channels] = np.eye(channels, dtype=dtype)
     gather.flags.writeable = False
@@ -1023,7 +1024,7 @@ def _gathered(row_sums: np.ndarray, factor: int, channels: int, matrix) -> np.nd
 @lru_cache(maxsize=16)
 def _difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
     """(factor·channels, channels) ±1 matrix: per channel, a row group's even pixels minus its odd ones."""
-    gather = np.zeros((factor, channels, channels), dtype=dtype)
+    gather: np.ndarray = np.zeros((factor, channels, channels), dtype=dtype)
     for member in range(factor):
         gather[member] = np.eye(channels, dtype=dtype) * (1.0 if member % 2 == 0 else -1.0)
     gather = gather.reshape(factor * channels, channels)

@@ -54,7 +54,7 @@ _FLASH_GOAL = {"matching": "match", "complementary": "complement"}
 """What each flash mode does to the ambient (for the dark-ambient refusal)."""
 
 
-def _refuse_dark_ambient(sequence, estimate, what: str) -> None:  # type: ignore[no-untyped-def]
+def _refuse_dark_ambient(sequence, estimate, what: str) -> None:
     """A UsageError naming the ambient frame when it holds no light: there is no ambient to ``what``.
 
     The estimate is then noise (or zero): estimate would plot it normalised to full height, matching

@@ -52,7 +52,7 @@ from msflash.acquisition.session.exposure import (
     metering_view,
     plan_exposures,
 )
-from msflash.acquisition.plan import CapturePlan, TriggerSource
+from msflash.acquisition.plan import CapturePlan, StepRole, TriggerSource
 from msflash.acquisition.devices.replay_camera import format_levels, levels_match
 from msflash.acquisition.session.rig import Rig, open_rig
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
@@ -208,7 +208,7 @@ def _plan_exposure(rig: Rig, args: argparse.Namespace) -> ExposurePlan:
     info = rig.camera.info
 
     def capture(levels, exposure_us: float):
-        role = "led" if any(level > 0 for level in levels) else "ambient"
+        role: StepRole = "led" if any(level > 0 for level in levels) else "ambient"
         preview = CapturePlan.single(levels, exposure_us, role=role)
         return metering_view(preview_frames(rig.camera, rig.booth, preview)[0].pixels, mosaic=info.cfa is not None)
 
@@ -239,7 +239,7 @@ class _LedCapture:
     snr_method: str
 
 
-def _capture_led_sequence(rig: Rig, writer: SequenceWriter, plan: ExposurePlan, sync: str = "host") -> _LedCapture:
+def _capture_led_sequence(rig: Rig, writer: SequenceWriter | AsyncSequenceWriter, plan: ExposurePlan, sync: str = "host") -> _LedCapture:
     frames: list[RawFrame] = []
     stamp = {"t": 0.0}
 

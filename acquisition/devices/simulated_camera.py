@@ -380,8 +380,8 @@ class SimulatedCamera(TriggeredFrames):
         camera_name = responsivities.metadata.get("camera") or (camera if isinstance(camera, str) else responsivities.source)
         dark = ambient_spd.replace(values=np.zeros_like(ambient_spd.values))
         exposure_at_unit_scale = min(
-            exposure_for_peak(scene, metered_ambient, responsivities, sensor, ambient_peak_fraction),  # type: ignore[arg-type]
-            *(exposure_for_peak(scene, _plus(metered_ambient, total_illumination(dark, led_spectra, on)),  # type: ignore[arg-type]
+            exposure_for_peak(scene, metered_ambient, responsivities, sensor, ambient_peak_fraction),
+            *(exposure_for_peak(scene, _plus(metered_ambient, total_illumination(dark, led_spectra, on)),
                                 responsivities, sensor, FLASH_PEAK_FRACTION) for on in np.eye(led_spectra.count)))
         simulated = cls(
             scene, ambient_spd, led_spectra, responsivities, sensor,

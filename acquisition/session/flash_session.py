@@ -226,7 +226,7 @@ class FlashSession:
             return self.model.complementary(ambient_weights, self.target_response, bounds=bounds)  # type: ignore[arg-type]
         raise RecordingError(f"flash mode '{mode}' is unknown; expected matching or complementary")
 
-    def flash_exposure(self, levels: Seq[float]) -> float:
+    def flash_exposure(self, levels: Seq[float] | np.ndarray) -> float:
         """The flash frame's exposure (µs) for LED ``levels``, from the frames taken (see :class:`FlashExposure`).
 
         Raises
