@@ -54,7 +54,7 @@ from msflash.calibration import chart_detection
 from msflash.processing import colour_metrics, datasets, lights, water
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.errors import TargetUnreachableWarning
-from msflash.processing.flash import FlashSolution, solve_complementary, solve_matching
+from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
 from msflash.processing.image_formation import chart_scene
 from msflash.processing.render import camera_to_srgb_linear, camera_to_xyz_matrix, demosaic_bilinear, encode_srgb
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
@@ -323,17 +323,17 @@ def write_outputs(out: Path, name: str, image: np.ndarray, context: ColourContex
 
 
 # -- evaluate a sequence ----------------------------------------------------------------------
-def _solve_both(ambient_weights: np.ndarray, leds: Spectra, camera: Spectra, target: Spectra, bounds: str
+def _solve_both(ambient_weights: np.ndarray, leds: Spectra, camera: Spectra, target: Spectra, bounds: FlashBounds
                 ) -> tuple[dict[str, FlashSolution], list[str]]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
-        solutions = {"matching": solve_matching(ambient_weights, leds, camera, bounds=bounds),  # type: ignore[arg-type]
-                     "complementary": solve_complementary(ambient_weights, leds, camera, target, bounds=bounds)}  # type: ignore[arg-type]
+        solutions = {"matching": solve_matching(ambient_weights, leds, camera, bounds=bounds),
+                     "complementary": solve_complementary(ambient_weights, leds, camera, target, bounds=bounds)}
     return solutions, [str(w.message) for w in caught]
 
 
 def evaluate_sequence(sequence: Sequence, out: Path, chart: ChartName = "macbeth", patch_px: int | None = None,
-                      border_px: int | None = None, margin_px: int = 1, bounds: str = "physical",
+                      border_px: int | None = None, margin_px: int = 1, bounds: FlashBounds = "physical",
                       target: str = "D65") -> dict[str, Any]:
     """Evaluate a sequence of a chart; writes images, ``evaluation.json`` and ``report.html`` to ``out``.
 
@@ -500,7 +500,7 @@ def simulated_world(ambient: str, seed: int = 0, patch_px: int = 12, cfa: str | 
     return world
 
 
-def study_ambient(name: str, seed: int = 0, patch_px: int = 12, cfa: str | None = None, bounds: str = "physical",
+def study_ambient(name: str, seed: int = 0, patch_px: int = 12, cfa: str | None = None, bounds: FlashBounds = "physical",
                   out: Path | None = None, **world_options: Any) -> dict[str, Any]:
     """One ambient of the study: capture, estimate, flash, synthesise/re-capture, ΔE and noise."""
     from msflash.acquisition.plan import CapturePlan
@@ -609,7 +609,7 @@ def _snr_png(noise: dict[str, Any]) -> bytes:
 
 
 def colour_study(out: Path | None, ambients: tuple[str, ...] = STUDY_AMBIENTS, seed: int = 0, patch_px: int = 12,
-                 cfa: str | None = None, bounds: str = "physical", **world_options: Any) -> dict[str, Any]:
+                 cfa: str | None = None, bounds: FlashBounds = "physical", **world_options: Any) -> dict[str, Any]:
     """Fig. 9 (ΔE per ambient: ambient / + matching / + complementary) and Fig. 3 (noise under water)."""
     results = {}
     for name in ambients:
