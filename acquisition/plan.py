@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, TypedDict, Unpack
 
 StepRole = Literal["ambient", "led", "flash", "dark"]
 TriggerSource = Literal["software", "booth", "camera"]
@@ -36,6 +36,15 @@ class CaptureStep:
             lit = [i + 1 for i, level in enumerate(self.led_levels) if level > 0]
             return "led:" + "+".join(str(i) for i in lit) if lit else "led:none"
         return self.role
+
+
+class PlanTiming(TypedDict, total=False):
+    """The timing fields of a :class:`CapturePlan`, as its constructors pass them through."""
+
+    trigger: TriggerSource
+    settle_s: float
+    deadtime_s: float
+    timeout_margin_s: float
 
 
 @dataclass(frozen=True)
@@ -68,7 +77,7 @@ class CapturePlan:
     def ambient_then_each_led(
         cls, n_leds: int, exposure_us: float, level: float = 1.0, gain: float = 1.0,
         led_exposures_us: Sequence[float] | None = None, led_gains: Sequence[float] | None = None,
-        **timing: float | str,
+        **timing: Unpack[PlanTiming],
     ) -> CapturePlan:
         """The paper's sequence: one ambient frame, then ambient + each LED alone.
 
@@ -80,10 +89,10 @@ class CapturePlan:
             exposure = float(led_exposures_us[led]) if led_exposures_us is not None else float(exposure_us)
             steps.append(CaptureStep(led + 1, "led", levels, exposure,
                                      float(led_gains[led]) if led_gains is not None else gain))
-        return cls(tuple(steps), **timing)  # type: ignore[arg-type]
+        return cls(tuple(steps), **timing)
 
     @classmethod
     def single(cls, levels: Sequence[float], exposure_us: float, role: StepRole = "flash", gain: float = 1.0,
-               **timing: float | str) -> CapturePlan:
+               **timing: Unpack[PlanTiming]) -> CapturePlan:
         """One frame with the LEDs at ``levels`` (the flash re-capture)."""
-        return cls((CaptureStep(0, role, tuple(float(v) for v in levels), float(exposure_us), gain),), **timing)  # type: ignore[arg-type]
+        return cls((CaptureStep(0, role, tuple(float(v) for v in levels), float(exposure_us), gain),), **timing)

@@ -313,7 +313,11 @@ def fit_channels(design: np.ndarray, data: np.ndarray, std: np.ndarray, method: 
     n_wl = design.shape[1]
     # Work with curves of peak ~1: scale the design so a max-normalised curve predicts the data.
     smooth = _smooth_covariance(n_wl)
-    curves, alphas, shrinks, residuals, noise = [], [], [], [], []
+    curves: list[np.ndarray] = []
+    alphas: list[float] = []
+    shrinks: list[float] = []
+    residuals: list[float] = []
+    noise: list[float] = []
     for c, channel in enumerate(CHANNELS):
         weights = 1.0 / std[:, c]
         weighted = design * weights[:, None]
@@ -327,7 +331,7 @@ def fit_channels(design: np.ndarray, data: np.ndarray, std: np.ndarray, method: 
         rhs = weighted.T @ target
         data_norm2 = float(target @ target)
         options = _prior_options(method, prior, channel, smooth)
-        best = (-np.inf, 1.0, 0.0, None)
+        best: tuple[float, float, float, tuple[np.ndarray, float] | None] = (-np.inf, 1.0, 0.0, None)
         for shrinkage, covariance in options:
             covariance = covariance / np.trace(covariance) * n_wl
             base_precision = np.linalg.inv(covariance + 1e-9 * np.eye(n_wl))
@@ -348,7 +352,7 @@ def fit_channels(design: np.ndarray, data: np.ndarray, std: np.ndarray, method: 
         except SolverError as err:
             raise CalibrationError(f"responsivity {channel}: {err}") from err
         solution = np.clip(solution, 0.0, None) * scale
-        residuals.append(float(np.linalg.norm(design @ solution - data[:, c]) / max(np.linalg.norm(data[:, c]), 1e-300)))
+        residuals.append(float(np.linalg.norm(design @ solution - data[:, c]) / max(float(np.linalg.norm(data[:, c])), 1e-300)))
         curves.append(solution)
         alphas.append(alpha)
         shrinks.append(shrinkage)

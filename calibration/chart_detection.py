@@ -244,7 +244,7 @@ def _bin(values: np.ndarray, factor: int) -> np.ndarray:
         return values
     h, w = values.shape[0] // factor * factor, values.shape[1] // factor * factor
     blocks = values[:h, :w].reshape(h // factor, factor, w // factor, factor, *values.shape[2:])
-    return blocks.mean(axis=(1, 3)) if values.dtype != bool else blocks.any(axis=(1, 3))
+    return blocks.mean(axis=(1, 3)) if values.dtype != bool else np.any(blocks, axis=(1, 3))
 
 
 def _detection_planes(images: Sequence[np.ndarray], excluded: np.ndarray, cfa: str | None,
@@ -734,15 +734,15 @@ def detect_chart(images: Sequence[np.ndarray], excluded: np.ndarray, cfa: str | 
         which = int(np.argmin(misfits))
         extent = "×".join(map(str, extents[which]))
         if math.isfinite(misfits[which]):
-            found = (f"a grid of {extent} uniform patches whose colours under the LEDs do not match the chart's in "
+            seen = (f"a grid of {extent} uniform patches whose colours under the LEDs do not match the chart's in "
                      f"any placement (misfit {misfits[which]:.2f} > {COLOUR_MISFIT})")
         elif math.isfinite(weak):
-            found = (f"a grid of {extent} uniform patches, but the LED frames minus the ambient are too noisy to tell "
+            seen = (f"a grid of {extent} uniform patches, but the LED frames minus the ambient are too noisy to tell "
                      f"its colours (signal {weak:.1f}× the noise, expected ≥ {MIN_COLOUR_SNR:g}×: dim the ambient or "
                      "lengthen the LED exposures)")
         else:
-            found = f"a grid of {extent} uniform patches that does not hold the whole chart inside the frames"
-        raise ChartDetectionError(f"{where}: no {rows}×{columns} chart found: {found}{advice}")
+            seen = f"a grid of {extent} uniform patches that does not hold the whole chart inside the frames"
+        raise ChartDetectionError(f"{where}: no {rows}×{columns} chart found: {seen}{advice}")
     grid = grids[0]
     if not grid.runner_up_misfit >= AMBIGUITY_RATIO * grid.misfit:
         raise ChartDetectionError(f"{where}: the chart's orientation is ambiguous: two placements fit its colours "
@@ -833,6 +833,7 @@ def detect_in_sequence(sequence: Any, reflectances: Spectra, rows: int, columns:
         images.append(image)
         quanta.append(1.0 / (frame.exposure_us * frame.gain))
         excluded = saturated if excluded is None else excluded | saturated
+    assert excluded is not None  # the ambient frame's mask at least
     leds = sequence.led_spectra()
     levels = np.array([sequence.frames[i].led_levels for i in led_indices], dtype=float).reshape(len(led_indices), -1)
     lights = leds.replace(values=leds.values @ levels.T, names=tuple(str(sequence.frames[i].file) for i in led_indices))

@@ -205,7 +205,7 @@ def measure_linearity(
     stack, exposures_array = stack[order], exposures_array[order]
     n_channels = len(channel_planes(stack[0], cfa))
     blacks = np.broadcast_to(np.asarray(black_level, dtype=float), (n_channels,)) if np.ndim(black_level) else \
-        np.full(n_channels, float(black_level))  # type: ignore[arg-type]
+        np.full(n_channels, float(np.asarray(black_level)))
     if blacks.shape != (n_channels,):
         raise CalibrationError(f"linearity: {blacks.size} black levels for {n_channels} channels")
 

@@ -44,7 +44,7 @@ from msflash.processing.datasets import load_spectra_csv
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.negative_values import clip_negative_noise
-from msflash.processing.spectra import Spectra
+from msflash.processing.spectra import SpectralKind, Spectra
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 FORMAT = "msflash-calibration"
@@ -192,7 +192,7 @@ def _section(path: Path, document: dict, key: str) -> dict | None:
     return value
 
 
-def _spectra(path: Path, section: dict, key: str, kind: str, names_key: str) -> tuple[Spectra, tuple[str, ...]]:
+def _spectra(path: Path, section: dict, key: str, kind: SpectralKind, names_key: str) -> tuple[Spectra, tuple[str, ...]]:
     file_name = section.get("file")
     if not isinstance(file_name, str) or not file_name:
         raise CalibrationError(f"{path}: field '{key}.file' is {file_name!r}; expected a CSV file name")
@@ -206,7 +206,7 @@ def _spectra(path: Path, section: dict, key: str, kind: str, names_key: str) -> 
     if not table.is_file():
         raise CalibrationError(f"{path}: field '{key}.file': {table} is missing; expected the CSV table beside it")
     try:
-        spectra = load_spectra_csv(table, kind=kind, unit=unit)  # type: ignore[arg-type]
+        spectra = load_spectra_csv(table, kind=kind, unit=unit)
     except SpectralDataError as err:
         raise CalibrationError(f"{path}: field '{key}.file': {err}") from err
     names = section.get(names_key)

@@ -188,7 +188,7 @@ def parse_spectrometer_text(
         )
     table = np.asarray(rows, dtype=float)
     wavelengths = table[:, 0]
-    values = table[:, column if column is not None else 1]
+    readings = table[:, column if column is not None else 1]
     steps = np.diff(wavelengths)
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0)) + 1
@@ -201,7 +201,7 @@ def parse_spectrometer_text(
             f"{source}:{lines[0]}: wavelengths span {wavelengths[0]:g}–{wavelengths[-1]:g}; expected nanometres "
             "(100–3000)"
         )
-    peak = float(np.max(values))
+    peak = float(np.max(readings))
     if peak <= 0:
         raise CalibrationError(f"{source}: no positive value in the value column; expected a measured emission")
     column_name = ""
@@ -211,9 +211,9 @@ def parse_spectrometer_text(
             if re.search(r"[,\t;]", header[-1]) else _cells(header[-1])
         if width is not None and len(header_cells) >= width:
             column_name = header_cells[column if column is not None else 1]
-    _check_negatives(wavelengths, values, column_name or "value", source, lines)
+    _check_negatives(wavelengths, readings, column_name or "value", source, lines)
     return SpectrometerMeasurement(
-        wavelengths, values, unit, source, name or Path(source).stem, tuple(header),
+        wavelengths, readings, unit, source, name or Path(source).stem, tuple(header),
         {"column": column_name, "lines": tuple(lines)},
     )
 

@@ -85,7 +85,7 @@ def parse_roi(text: str) -> tuple[int, int, int, int]:
         values = ()
     if len(values) != 4 or values[0] < 0 or values[1] < 0 or values[2] < 2 or values[3] < 2:
         raise CalibrationError(f"--white-roi '{text}': expected X,Y,W,H in pixels (X, Y ≥ 0; W, H ≥ 2)")
-    return values  # type: ignore[return-value]
+    return values
 
 
 def _default_roi(height: int, width: int) -> tuple[int, int, int, int]:

@@ -118,7 +118,7 @@ def list_usb_devices(
         find = usb.core.find
     devices = []
     for dev in find(find_all=True):
-        interfaces = []
+        interfaces: list[tuple[int, int]] = []
         try:
             for cfg in dev:
                 interfaces.extend((intf.bInterfaceClass, intf.bInterfaceSubClass) for intf in cfg)

@@ -18,6 +18,7 @@ import tty
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
+from typing import Any
 
 from msflash.led_controller.protocol import (
     MARK_EVENT,
@@ -836,7 +837,7 @@ class PtyBoothServer:
         self.close()
 
 
-def serve_on_pty(emulator: BoothEmulator | None = None, **kwargs: object) -> PtyBoothServer:
+def serve_on_pty(emulator: BoothEmulator | None = None, **kwargs: Any) -> PtyBoothServer:
     """Serve a booth emulator on a new pseudo-terminal.
 
     Parameters
@@ -852,7 +853,7 @@ def serve_on_pty(emulator: BoothEmulator | None = None, **kwargs: object) -> Pty
         Has ``.port`` (the path to open), ``.emulator`` and ``.close()``.
     """
     if emulator is None:
-        emulator = BoothEmulator(**kwargs)  # type: ignore[arg-type]
+        emulator = BoothEmulator(**kwargs)
     elif kwargs:
         raise ValueError("serve_on_pty: got an emulator and emulator arguments; expected one or the other")
     return PtyBoothServer(emulator)

@@ -29,7 +29,7 @@ import math
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -199,9 +199,9 @@ def load_spectra_csv(
     return Spectra(grid, table[:, 1:], spectrum_names, kind=kind, unit=unit, source=source or where, metadata=metadata)
 
 
-def _shipped(relative: str, kind: SpectralKind, unit: SpectralUnit, licence: str, **options: object) -> Spectra:
+def _shipped(relative: str, kind: SpectralKind, unit: SpectralUnit, licence: str, **options: Any) -> Spectra:
     """Load a shipped file and record its licence."""
-    spectra = load_spectra_csv(DATA_DIR / relative, kind, unit, source=f"msflash data {relative}", **options)  # type: ignore[arg-type]
+    spectra = load_spectra_csv(DATA_DIR / relative, kind, unit, source=f"msflash data {relative}", **options)
     return spectra.replace(metadata={**spectra.metadata, "licence": licence})
 
 
@@ -426,13 +426,13 @@ def water_absorption(source: Literal["pope_fry", "paper"] = "pope_fry") -> Spect
 
 # -- illuminants ------------------------------------------------------------------------------
 def _from_colour(wavelengths_nm: np.ndarray, values: np.ndarray, name: str, grid: WavelengthGrid,
-                 outside: str = "error") -> Spectra:
+                 outside: Literal["error", "zero", "edge"] = "error") -> Spectra:
     """A colour-science spectral distribution as energy ``Spectra`` on ``grid``, peak 1."""
     native = Spectra(
         WavelengthGrid.from_wavelengths(wavelengths_nm, where=f"colour-science '{name}'"),
         np.asarray(values, dtype=float), (name,), kind="spd", unit="energy", source=f"colour-science {name}",
     )
-    return native.resample(grid, outside).normalised("max")  # type: ignore[arg-type]
+    return native.resample(grid, outside).normalised("max")
 
 
 def cie1931_cmfs(grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
@@ -455,7 +455,8 @@ def cie1931_cmfs(grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
     return native.resample(grid, outside="zero")
 
 
-def illuminant(name: str, grid: WavelengthGrid = DEFAULT_GRID, outside: str = "error") -> Spectra:
+def illuminant(name: str, grid: WavelengthGrid = DEFAULT_GRID, outside: Literal["error", "zero", "edge"] = "error"
+               ) -> Spectra:
     """A standard illuminant from colour-science, as energy ``Spectra`` on ``grid`` scaled to peak 1.
 
     Parameters

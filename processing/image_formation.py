@@ -402,7 +402,7 @@ def mosaic(rgb: np.ndarray, cfa: str) -> np.ndarray:
 
 
 # -- image formation (eq. 1–3) ----------------------------------------------------------------
-def total_illumination(ambient: Spectra, led_spectra: Spectra, led_levels: Sequence[float]) -> Spectra:
+def total_illumination(ambient: Spectra, led_spectra: Spectra, led_levels: Sequence[float] | np.ndarray) -> Spectra:
     """``i = i_a + I w``: the ambient plus the LEDs at their drive levels (eq. 2).
 
     Parameters
@@ -505,7 +505,7 @@ def expected_response(
 
 def render_frame(
     scene: Scene,
-    illuminant: Spectra,
+    illuminant: Spectra | MixedIllumination,
     camera_responsivities: Spectra,
     sensor: SensorModel,
     exposure_us: float,
@@ -547,12 +547,12 @@ def render_frame(
         if electrons.shape[2] != 3:
             raise SpectralDataError(f"render frame: a {sensor.cfa} mosaic needs 3 channels; the camera has {electrons.shape[2]}")
         electrons = mosaic(electrons, sensor.cfa)
+    rng = rng if rng is not None else np.random.default_rng()
     if noise:
-        rng = rng if rng is not None else np.random.default_rng()
         electrons = rng.poisson(electrons).astype(float)
     full_well = electrons >= sensor.full_well_e
     if noise and sensor.read_noise_e > 0:
-        electrons = electrons + rng.normal(0.0, sensor.read_noise_e, electrons.shape)  # type: ignore[union-attr]
+        electrons = electrons + rng.normal(0.0, sensor.read_noise_e, electrons.shape)
     values = np.rint(sensor.black_level + electrons * (gain / sensor.electrons_per_dn))
     values = np.clip(values, 0, sensor.white_level)
     values[full_well] = sensor.white_level
@@ -561,7 +561,7 @@ def render_frame(
 
 def exposure_for_peak(
     scene: Scene,
-    illuminant: Spectra,
+    illuminant: Spectra | MixedIllumination,
     camera_responsivities: Spectra,
     sensor: SensorModel,
     fraction: float = 0.95,

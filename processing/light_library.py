@@ -113,7 +113,7 @@ def library_lights() -> tuple[LibraryLight, ...]:
     """Every light of the library with its group, type and split (fixed by the labels; see the module notes)."""
     library = light_library()
     groups = near_copy_groups(library.values[_visible(library)])
-    first_label = {}
+    first_label: dict[int, str] = {}
     for label, group in zip(library.names, groups):
         first_label.setdefault(int(group), label)
     lights = []

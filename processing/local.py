@@ -181,7 +181,7 @@ class Cells:
         rows, columns = blocks.shape[0] // group, blocks.shape[1] // group
         valid = blocks.valid[:rows * group, :columns * group]
         if group > 1:
-            valid = valid.reshape(rows, group, columns, group).all(axis=(1, 3))
+            valid = np.all(valid.reshape(rows, group, columns, group), axis=(1, 3))
 
         def cell_samples(values: np.ndarray) -> np.ndarray:
             values = values[:, :rows * group, :columns * group]
@@ -475,8 +475,8 @@ def tile_statistics(
             samples = data[:, rows, columns].reshape(n_rows, -1)
             moments[i, j] = samples @ samples.T
             totals[i, j] = samples.shape[1]
-            if noise is not None:
-                probe = differences[:, rows, columns].reshape(n_rows, -1)  # type: ignore[index]
+            if noise is not None and differences is not None:
+                probe = differences[:, rows, columns].reshape(n_rows, -1)
                 noise[i, j] = probe @ probe.T
 
     list(thread_pool(workers).map(add_tile_row, range(rows_tiles)) if workers > 1 else map(add_tile_row, range(rows_tiles)))
@@ -883,11 +883,16 @@ def estimate_local(
         scoring_alpha = global_estimate.alpha if global_estimate.alpha > 0 else None
     if method == "auto" or (method == "local" and smoothing is None):
         selection = select_model(tiles, led_spectra, scoring_alpha, margin=margin)
-    model = selection.model if method == "auto" else method  # type: ignore[union-attr]
+    model = selection.model if method == "auto" and selection is not None else method
     weights = np.broadcast_to(global_estimate.ambient_weights, shape + (tiles.n_leds,)).copy()
-    used_sigma, structure, regions, warnings = None, None, None, []
+    used_sigma, structure, regions = None, None, None
+    warnings: list[str] = []
     if model == "local":
-        used_sigma = float(smoothing if smoothing is not None else selection.best_local)  # type: ignore[union-attr]
+        if smoothing is not None:
+            used_sigma = float(smoothing)
+        else:
+            assert selection is not None  # chosen above whenever no smoothing is given
+            used_sigma = float(selection.best_local)
         if smoothing is None and regions_allowed:
             labelling_alpha = scoring_alpha if scoring_alpha is not None else gcv_alpha(total, ambient_model.terms.roughness)
             regions = segment_regions(tiles, led_spectra, labelling_alpha, solver, alpha,
@@ -997,7 +1002,7 @@ def coefficient_maps(spec: FrameStackSpec, tile_flash_weights: np.ndarray, tiles
     Each tile's flash weights give frame coefficients (:func:`processing.synthesis.frame_coefficients`);
     they are linear in the weights, so interpolating coefficients = interpolating weights.
     """
-    per_tile = np.empty(tile_flash_weights.shape[:2] + (1 + len(spec.led_scales),))
+    per_tile: np.ndarray = np.empty(tile_flash_weights.shape[:2] + (1 + len(spec.led_scales),))
     for i in range(per_tile.shape[0]):
         for j in range(per_tile.shape[1]):
             ambient_coefficient, coefficients = frame_coefficients(spec, tile_flash_weights[i, j])

@@ -49,9 +49,11 @@ def _checked_lapack() -> Any:
     """``scipy.linalg._flapack`` if it solves a 2×2 system and factors a 2×2 matrix; else :mod:`scipy.linalg.lapack`."""
     module = _extension("scipy.linalg._flapack")
     try:
+        if module is None:
+            raise ImportError("scipy.linalg._flapack does not load on its own")
         matrix = np.array([[4.0, 2.0], [2.0, 3.0]])
-        *_, solution, info = module.dgesv(matrix, np.array([[2.0], [1.0]]))  # type: ignore[union-attr]
-        factor, info_factor = module.dpotrf(matrix, lower=0, clean=1)  # type: ignore[union-attr]
+        *_, solution, info = module.dgesv(matrix, np.array([[2.0], [1.0]]))
+        factor, info_factor = module.dpotrf(matrix, lower=0, clean=1)
         expected = (info == 0 and info_factor == 0 and np.allclose(solution.ravel(), [0.5, 0.0], rtol=0, atol=1e-12)
                     and np.allclose(factor, [[2.0, 1.0], [0.0, np.sqrt(2.0)]], rtol=0, atol=1e-12))
     except Exception:  # noqa: BLE001 - any surprise means: use the public module
@@ -66,8 +68,10 @@ def _checked_lapack() -> Any:
 def _checked_nnls_core() -> Callable[[np.ndarray, np.ndarray, int], tuple] | None:
     """The routine behind :func:`scipy.optimize.nnls` if it answers a known problem correctly, else None."""
     module = _extension("scipy.optimize._slsqplib")
+    if module is None:
+        return None
     try:
-        core = module.nnls  # type: ignore[union-attr]
+        core = module.nnls
         x, _, info = core(np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), np.array([2.0, 1.0, -1.0]), 6)
         expected = np.allclose(x, [1.5, 0.0], rtol=0, atol=1e-12) and info == 1
     except Exception:  # noqa: BLE001 - any surprise means: do not use it

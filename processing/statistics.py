@@ -321,12 +321,12 @@ def bin_frame(frame: np.ndarray, factor: int, cfa_period: int = 1) -> tuple[np.n
     cropped = frame[:height, :width]
     # Strided slices summed one offset at a time: each pass streams through memory, where a
     # reshape-and-sum over two strided axes would crawl.
-    row_sums = cropped[0::factor].astype(sum_type)
+    row_sums: np.ndarray = cropped[0::factor].astype(sum_type)
     row_max = cropped[0::factor].copy()
     for offset in range(1, factor):
         row_sums += cropped[offset::factor]
         np.maximum(row_max, cropped[offset::factor], out=row_max)
-    sums = row_sums[:, 0::factor].copy()
+    sums: np.ndarray = row_sums[:, 0::factor].copy()
     maxima = row_max[:, 0::factor].copy()
     for offset in range(1, factor):
         sums += row_sums[:, offset::factor]
@@ -703,7 +703,7 @@ class BlockRows:
         if not fresh.size:
             return
         self._excluded = new if self._excluded is None else self._excluded | new
-        filled = self._filled
+        filled = np.asarray(self._filled, dtype=np.intp)
         few = np.count_nonzero(self._excluded) * 4 < columns.size
         parts = [(self.rows, self._moments, fresh)]
         if self.differences is not None and self._noise is not None:
@@ -752,7 +752,7 @@ class BlockRows:
             for mask in self._invalid:
                 invalid = mask if invalid is None else invalid | mask
             chunk = chunk_pixels * self.block_shape[1]
-            masked = invalid is not None and invalid.any()
+            invalid = invalid if invalid is not None and invalid.any() else None
 
             def masked_part(values: np.ndarray, columns: np.ndarray | None,
                             column_weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -764,16 +764,16 @@ class BlockRows:
                         values[:, columns] = 0.0
                 return values, column_weights
 
-            parts = [masked_part(rows, self._columns(invalid) if masked else None, weights)]
+            parts = [masked_part(rows, self._columns(invalid) if invalid is not None else None, weights)]
             if self.differences is not None:
-                parts.append(masked_part(self.differences, self._difference_columns(invalid) if masked else None,
+                parts.append(masked_part(self.differences, self._difference_columns(invalid) if invalid is not None else None,
                                          probe_weights))
             # The rows' and the probe's moments in one map: the probe's single chunk shares the threads.
             moments, *probed = _grams(parts, chunk, workers)
             noise = probed[0] if probed else None
-            excluded_columns = int(np.count_nonzero(invalid)) * channels if masked else 0
-            scale = self._probe_scale(int(np.count_nonzero(invalid)) if masked else 0,
-                                      int(np.count_nonzero(invalid[::self.probe_stride])) if masked else 0)
+            excluded_columns = int(np.count_nonzero(invalid)) * channels if invalid is not None else 0
+            scale = self._probe_scale(int(np.count_nonzero(invalid)) if invalid is not None else 0,
+                                      int(np.count_nonzero(invalid[::self.probe_stride])) if invalid is not None else 0)
         if noise is not None:
             noise = None if scale is None else noise * scale
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
@@ -983,7 +983,7 @@ def saturated_blocks(plane: np.ndarray, factor: int, white: float) -> np.ndarray
 @lru_cache(maxsize=32)
 def gather_matrix(factor: int, channels: int, dtype: type) -> np.ndarray:
     """(factor·channels, channels) 0/1 matrix summing the ``factor`` pixels of a row group per channel."""
-    gather = np.zeros((factor * channels, channels), dtype=dtype)
+    gather: np.ndarray = np.zeros((factor * channels, channels), dtype=dtype)
     for member in range(factor):
         gather[member * channels:(member + 1) * channels] = np.eye(channels, dtype=dtype)
     gather.flags.writeable = False
@@ -1059,7 +1059,7 @@ def _gathered(row_sums: np.ndarray, factor: int, channels: int, matrix) -> np.nd
 @lru_cache(maxsize=16)
 def _difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
     """(factor·channels, channels) ±1 matrix: per channel, a row group's even pixels minus its odd ones."""
-    gather = np.zeros((factor, channels, channels), dtype=dtype)
+    gather: np.ndarray = np.zeros((factor, channels, channels), dtype=dtype)
     for member in range(factor):
         gather[member] = np.eye(channels, dtype=dtype) * (1.0 if member % 2 == 0 else -1.0)
     gather = gather.reshape(factor * channels, channels)
@@ -1121,7 +1121,8 @@ def _gathered_by_channel(row_sums: np.ndarray, factor: int, channels: int, out: 
     :func:`_gathered`: 0/1 weights, integer sums below 2²⁴ in float32).
     """
     height, width = row_sums.shape[0], row_sums.shape[1] // (factor * channels)
-    gather = gather_matrix(factor, channels, row_sums.dtype.type)
+    dtype: type = row_sums.dtype.type
+    gather = gather_matrix(factor, channels, dtype)
     groups = row_sums.reshape(height, width, factor * channels).transpose(0, 2, 1)
     if out.dtype == row_sums.dtype:
         np.matmul(gather.T, groups, out=out)

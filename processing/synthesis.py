@@ -197,7 +197,7 @@ def linearise(raw: np.ndarray, black_level: float, white_level: float, exposure_
     ([[0.0, 100.0]], [[False, True]])
     """
     saturated = raw >= white_level
-    saturated = saturated.any(axis=2) if saturated.ndim == 3 else saturated
+    saturated = np.any(saturated, axis=2) if saturated.ndim == 3 else saturated
     return (raw.astype(np.float64) - black_level) / (exposure_us * gain), saturated
 
 

@@ -108,6 +108,7 @@ def _cvxpy_solve(problem: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray])
     cp.Problem(objective, cons).solve(solver=cp.CLARABEL, tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
     elapsed = time.perf_counter() - start
     value = x.value
+    assert value is not None, "cvxpy (CLARABEL) found no solution"
     return elapsed, float(0.5 * value @ hessian @ value - linear @ value)
 
 
@@ -138,7 +139,7 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
     copy_time = _best_time(copy, repeats)
     statistics = accumulate_statistics(frames[0], frames[1:], spec)
 
-    def estimate(bin_factor: int, workers: int = DEFAULT_WORKERS, weighting: bool = SAMPLE_WEIGHTING) -> Callable[[], None]:
+    def estimate(bin_factor: int, workers: int = DEFAULT_WORKERS, weighting: bool = SAMPLE_WEIGHTING) -> Callable[[], object]:
         # As msflash estimate: the weighted statistics (acquisition.session.analysis.sequence_statistics) and the default solve.
         return lambda: estimate_ambient(
             accumulate_statistics(frames[0], frames[1:], spec, bin_factor=bin_factor, workers=workers,
@@ -206,16 +207,17 @@ def prior_bench(frames: list[np.ndarray], spec: FrameStackSpec, leds: Spectra, c
     """The light prior's figures (``msflash estimate --model prior|auto``): its channel-resolved statistics and
     estimate ÷ the copy, as ``estimate_over_copy`` (and interleaved with ``copy``, when given);
     ``auto``'s held-out comparison; the model's preparation."""
-    from msflash.processing.channel_statistics import accumulate_channel_statistics
+    from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
     from msflash.processing.light_prior import choose_model, prior_model
 
-    def statistics() -> object:
+    def statistics() -> ChannelStatistics:
         return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=DEFAULT_BIN_FACTOR)
 
     channels = statistics()
-    model = prior_model(channels.channels, leds, camera)  # type: ignore[attr-defined]
+    model = prior_model(channels.channels, leds, camera)
+
     def estimate() -> object:
-        return model.estimate(statistics())  # type: ignore[arg-type]
+        return model.estimate(statistics())
 
     prior_time = _best_time(estimate, repeats)
     interleaved = {} if copy is None else {
@@ -224,6 +226,6 @@ def prior_bench(frames: list[np.ndarray], spec: FrameStackSpec, leds: Spectra, c
         "prior_estimate_s": prior_time,
         "prior_estimate_over_copy": prior_time / copy_time,
         **interleaved,
-        "prior_model_prepare_s": _best_time(lambda: prior_model(channels.channels, leds, camera), repeats),  # type: ignore[attr-defined]
-        "auto_choice_s": _best_time(lambda: choose_model(channels, model), repeats),  # type: ignore[arg-type]
+        "prior_model_prepare_s": _best_time(lambda: prior_model(channels.channels, leds, camera), repeats),
+        "auto_choice_s": _best_time(lambda: choose_model(channels, model), repeats),
     }

@@ -57,13 +57,13 @@ import logging
 import math
 import random
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from msflash.acquisition.errors import FrameLostError
-from msflash.acquisition.plan import CapturePlan, CaptureStep
+from msflash.acquisition.plan import CapturePlan, CaptureStep, TriggerSource
 
 log = logging.getLogger(__name__)
 
@@ -77,9 +77,9 @@ _EXTRA_BUFFERS = 4
 """Buffers beyond one per frame in each latency block's pool, on both sides."""
 
 
-def _plan(n: int, exposure_us: float, trigger: str) -> CapturePlan:
+def _plan(n: int, exposure_us: float, trigger: TriggerSource) -> CapturePlan:
     step = CaptureStep(0, "ambient", (0.0,), exposure_us)
-    return CapturePlan(tuple(step for _ in range(n)), trigger=trigger)  # type: ignore[arg-type]
+    return CapturePlan(tuple(step for _ in range(n)), trigger=trigger)
 
 
 def stage_ms(timings: Sequence[Any]) -> dict[str, np.ndarray]:
@@ -130,7 +130,8 @@ def excess_ci(ours: dict[str, np.ndarray], theirs: dict[str, np.ndarray], stages
     >>> d, bool(low <= 0.75 <= high)
     (0.75, True)
     """
-    reduce = {"median": np.median, "mean": np.mean}[statistic]
+    reducers: dict[str, Callable[..., Any]] = {"median": np.median, "mean": np.mean}
+    reduce = reducers[statistic]
     n_ours, n_theirs = len(ours[stages[0]]), len(theirs[stages[0]])
     if n_ours == 0 or n_theirs == 0:
         return math.nan, math.nan, math.nan

@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.session.capture import READOUT_US, TRIGGER_PULSE_US
-from msflash.acquisition.plan import CapturePlan
+from msflash.acquisition.plan import CapturePlan, PlanTiming
 
 WALL_RATIO_TARGET = 1.15
 LATENCY_MEDIAN_TARGET_MS = 5.0
@@ -79,7 +79,7 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
     exposure_us = period_us - settle_s * 1e6 - TRIGGER_PULSE_US - deadtime_s * 1e6 - READOUT_US
     if exposure_us <= 0:
         raise ValueError(f"capture bench: {frame_rate_hz} fps leaves no time for an exposure; expected ≤ 200 fps")
-    timing = {"settle_s": settle_s, "deadtime_s": deadtime_s, "trigger": "booth"}
+    timing: PlanTiming = {"settle_s": settle_s, "deadtime_s": deadtime_s, "trigger": "booth"}
     ratios: list[float] = []
     latencies: list[float] = []
     host_latencies: list[float] = []
@@ -101,7 +101,7 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
             arrivals.append(time.perf_counter())
             return frame
 
-        def timed_pulse(*args: object) -> None:
+        def timed_pulse(*args: Any) -> None:
             pulses.append(time.perf_counter())
             if real_pulse is not None:
                 real_pulse(*args)
@@ -115,7 +115,7 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
             releases.append(time.perf_counter())
             real_release()
 
-        camera.next_frame = timed_next  # type: ignore[method-assign]
+        camera.next_frame = timed_next
         emulator._release_hold = timed_release  # type: ignore[method-assign]
         emulator.on_trigger_out = timed_pulse
         rig.booth.set_step = timed_set_step  # type: ignore[method-assign]
@@ -134,7 +134,7 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
                 session = FlashSession.prepare(writer.sequence, exposure_limits_us=(1.0, exposure_us),
                                                exposure_policy=policy)
             session.begin()
-            plan = CapturePlan.ambient_then_each_led(n_leds, exposure_us, **timing)  # type: ignore[arg-type]
+            plan = CapturePlan.ambient_then_each_led(n_leds, exposure_us, **timing)
             mark: dict[str, float] = {}
 
             def decide(frames, session=session, mark=mark):

@@ -24,6 +24,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
+from typing import Any, NoReturn
 
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import CameraError, CameraSettingError, CaptureError, RecordingError
@@ -101,7 +102,7 @@ def msflash_version() -> str:
 class _VersionAction(argparse._VersionAction):
     """``--version``: the installed version, looked up only when asked (importlib.metadata takes a while to import)."""
 
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: str | Sequence[Any] | None,
                  option_string: str | None = None) -> None:
         self.version = f"msflash {msflash_version()}"
         super().__call__(parser, namespace, values, option_string)
@@ -110,7 +111,7 @@ class _VersionAction(argparse._VersionAction):
 class _Parser(argparse.ArgumentParser):
     """argparse whose usage errors exit with status 2 and one ``msflash: error:`` line."""
 
-    def error(self, message: str) -> None:  # type: ignore[override]
+    def error(self, message: str) -> NoReturn:
         raise UsageError(message)
 
 
@@ -196,7 +197,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except _terminated() as stop:
         sys.stderr.write("msflash: terminated (SIGTERM); LEDs off; frames captured so far are kept (marked "
                          "incomplete)\n")
-        return int(stop.code) if isinstance(stop.code, int) else 143
+        code = getattr(stop, "code", None)  # Terminated is a SystemExit
+        return int(code) if isinstance(code, int) else 143
     except BrokenPipeError:
         # The reader of stdout went away (``msflash estimate SEQ | head``): stop quietly, and keep
         # Python from complaining again when it flushes stdout at exit.

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -117,8 +118,8 @@ def _white_power(args: argparse.Namespace, sequence: Sequence, shapes: Spectra, 
                          "spectra were given; expected one spectrum per LED, in the sequence's order")
     if calibration.camera_responsivities is not None:
         camera, camera_from = calibration.camera_responsivities, f"calibration {args.out}"
-    elif sequence.camera_responsivities() is not None:
-        camera, camera_from = sequence.camera_responsivities(), f"sequence {sequence.path}"
+    elif (from_sequence := sequence.camera_responsivities()) is not None:
+        camera, camera_from = from_sequence, f"sequence {sequence.path}"
     else:
         raise UsageError(f"--white {args.white}: no camera responsivities, neither in {args.out} nor in the sequence; "
                          "expected 'msflash calibrate camera … --out' first (or a sequence that records them)")
@@ -171,7 +172,7 @@ def _leds(args: argparse.Namespace) -> int:
     path = save_calibration(calibration, args.out)
     if characterisations:
         _plot_leds(Path(args.out) / "leds.png", spectra, characterisations)
-    payload = {"calibration": str(path), "id": calibration.id,
+    payload: dict[str, Any] = {"calibration": str(path), "id": calibration.id,
                "leds": [{"name": c.name, "peak_nm": c.peak_nm, "fwhm_nm": c.fwhm_nm, "model_residual": c.model_residual,
                          "saturated": c.saturated, "snr": c.snr} for c in characterisations],
                "relative_power": dict(zip(spectra.names, section["relative_power"], strict=True))

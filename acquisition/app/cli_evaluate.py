@@ -24,6 +24,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         directory = directory / "sequence"  # a run directory
     sequence = read_sequence(directory)
     out = output_directory(args.out if args.out else _default_out(directory))
+    assert out is not None  # a path was given
     result = evaluate_sequence(sequence, out, args.chart, args.patch_px, args.border_px, args.margin_px, args.bounds,
                                args.target)
     result = public_result(result)

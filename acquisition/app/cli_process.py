@@ -54,7 +54,7 @@ _FLASH_GOAL = {"matching": "match", "complementary": "complement"}
 """What each flash mode does to the ambient (for the dark-ambient refusal)."""
 
 
-def _refuse_dark_ambient(sequence, estimate, what: str) -> None:  # type: ignore[no-untyped-def]
+def _refuse_dark_ambient(sequence, estimate, what: str) -> None:
     """A UsageError naming the ambient frame when it holds no light: there is no ambient to ``what``.
 
     The estimate is then noise (or zero): estimate would plot it normalised to full height, matching
@@ -221,11 +221,11 @@ def add_local_options(parser: argparse.ArgumentParser) -> None:
                         help=f"tiles per side for local estimation (default {DEFAULT_TILES})")
 
 
-def _estimate_local(args: argparse.Namespace, sequence: object) -> int:
-    local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,  # type: ignore[arg-type]
+def _estimate_local(args: argparse.Namespace, sequence: Sequence) -> int:
+    local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,
                                              bin_factor=args.bin)
     _refuse_dark_ambient(sequence, local.global_estimate, "estimate")
-    payload = analysis.local_estimate_payload(sequence, local)  # type: ignore[arg-type]
+    payload = analysis.local_estimate_payload(sequence, local)
     for warning in payload["warnings"]:
         progress(f"warning: {warning}")
     if args.json:
@@ -247,18 +247,18 @@ def _estimate_local(args: argparse.Namespace, sequence: object) -> int:
     return 0
 
 
-def _flash_local(args: argparse.Namespace, sequence: object) -> int:
-    stack = analysis.load_frame_stack(sequence)  # type: ignore[arg-type]
-    local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,  # type: ignore[arg-type]
+def _flash_local(args: argparse.Namespace, sequence: Sequence) -> int:
+    stack = analysis.load_frame_stack(sequence)
+    local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,
                                              stack=stack, bin_factor=args.bin)
     _refuse_dark_ambient(sequence, local.global_estimate, _FLASH_GOAL[args.mode])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
-        solution, tile_weights, _ = analysis.solve_sequence_flash_local(sequence, args.mode, local, args.target,  # type: ignore[arg-type]
+        solution, tile_weights, _ = analysis.solve_sequence_flash_local(sequence, args.mode, local, args.target,
                                                                         args.bounds)
     for message in dict.fromkeys(str(warning.message) for warning in caught):
         progress(f"warning: {message}")
-    payload = analysis.flash_payload(sequence, solution, args.target)  # type: ignore[arg-type]
+    payload = analysis.flash_payload(sequence, solution, args.target)
     payload["estimate_warnings"] = list(local.global_estimate.warnings) + list(local.warnings)
     payload["method"] = local.model
     payload["method_requested"] = local.method
@@ -269,9 +269,9 @@ def _flash_local(args: argparse.Namespace, sequence: object) -> int:
     if args.out is not None:
         output = Path(args.out)
         if local.model == "local":
-            image, saturated, _ = analysis.synthesize_sequence_local(sequence, tile_weights, local, stack)  # type: ignore[arg-type]
+            image, saturated, _ = analysis.synthesize_sequence_local(sequence, tile_weights, local, stack)
         else:
-            image, saturated, _ = analysis.synthesize_sequence(sequence, solution.flash_weights, stack)  # type: ignore[arg-type]
+            image, saturated, _ = analysis.synthesize_sequence(sequence, solution.flash_weights, stack)
         metadata = {"msflash:flash_weights": solution.flash_weights.tolist(), "msflash:method": local.model,
                     "msflash:mode": solution.mode}
         if local.model == "local":
@@ -318,16 +318,16 @@ def _check_raw_output(kind: str | None, output: Path, sequence: Sequence) -> Non
             "(linear float)")
 
 
-def _write_flash_image(output: Path, image: np.ndarray, stack: analysis.FrameStack, sequence: object,
+def _write_flash_image(output: Path, image: np.ndarray, stack: analysis.FrameStack, sequence: Sequence,
                        metadata: dict) -> None:
     kind = _check_output_type(output)
     try:
         if kind == "exr":
             write_image(output, image, {**metadata, "msflash:units": "value per us*gain"})
             return
-        ambient = sequence.frames[stack.ambient_index]  # type: ignore[attr-defined]
-        white = sequence.camera.white_level  # type: ignore[attr-defined]
-        raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level, white)  # type: ignore[attr-defined]
+        ambient = sequence.frames[stack.ambient_index]
+        white = sequence.camera.white_level
+        raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level, white)
         write_image(output, raw, {**metadata, "msflash:exposure_us": ambient.exposure_us, "msflash:gain": ambient.gain})
     except OSError as err:
         blocking = next((parent for parent in output.parents if parent.exists()), None)

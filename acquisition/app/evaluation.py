@@ -41,7 +41,7 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -54,7 +54,7 @@ from msflash.calibration import chart_detection
 from msflash.processing import colour_metrics, datasets, lights, water
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.errors import TargetUnreachableWarning
-from msflash.processing.flash import FlashSolution, solve_complementary, solve_matching
+from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
 from msflash.processing.image_formation import chart_scene
 from msflash.processing.render import camera_to_srgb_linear, camera_to_xyz_matrix, demosaic_bilinear, encode_srgb
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
@@ -63,6 +63,8 @@ from msflash.processing.synthesis import synthesize
 
 CHARTS = ("macbeth",)
 """Charts ``evaluate`` knows the layout and reference of."""
+ChartName = Literal["chart110", "macbeth"]
+"""The chart layouts of :func:`processing.image_formation.chart_scene`."""
 MACBETH_NEUTRALS = (3, 7, 11, 15, 19, 23)
 """The gray series of the Macbeth chart in ISET order (white … black), 0-based."""
 STUDY_AMBIENTS = ("tungsten", "fluorescent", "green", "orange", "underwater")
@@ -87,7 +89,7 @@ class ChartLayout:
     """How the layout was obtained."""
 
 
-def chart_layout(shape: tuple[int, int], chart: str = "macbeth", patch_px: int = 8, border_px: int = 2,
+def chart_layout(shape: tuple[int, int], chart: ChartName = "macbeth", patch_px: int = 8, border_px: int = 2,
                  margin_px: int = 1, excluded: np.ndarray | None = None) -> ChartLayout:
     """The label map of a simulated chart of ``chart_scene(chart, patch_px, border_px)`` at the top left."""
     if chart not in CHARTS:
@@ -126,7 +128,7 @@ class SequenceLayout:
     """For JSON output: ``detected`` and the layout's parameters."""
 
 
-def sequence_layout(sequence: Sequence, chart: str = "macbeth", patch_px: int | None = None,
+def sequence_layout(sequence: Sequence, chart: ChartName = "macbeth", patch_px: int | None = None,
                     border_px: int | None = None, margin_px: int = 1) -> SequenceLayout:
     """The chart layout of ``sequence``: detected when neither ``patch_px`` nor ``border_px`` is given.
 
@@ -321,17 +323,17 @@ def write_outputs(out: Path, name: str, image: np.ndarray, context: ColourContex
 
 
 # -- evaluate a sequence ----------------------------------------------------------------------
-def _solve_both(ambient_weights: np.ndarray, leds: Spectra, camera: Spectra, target: Spectra, bounds: str
+def _solve_both(ambient_weights: np.ndarray, leds: Spectra, camera: Spectra, target: Spectra, bounds: FlashBounds
                 ) -> tuple[dict[str, FlashSolution], list[str]]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
-        solutions = {"matching": solve_matching(ambient_weights, leds, camera, bounds=bounds),  # type: ignore[arg-type]
-                     "complementary": solve_complementary(ambient_weights, leds, camera, target, bounds=bounds)}  # type: ignore[arg-type]
+        solutions = {"matching": solve_matching(ambient_weights, leds, camera, bounds=bounds),
+                     "complementary": solve_complementary(ambient_weights, leds, camera, target, bounds=bounds)}
     return solutions, [str(w.message) for w in caught]
 
 
-def evaluate_sequence(sequence: Sequence, out: Path, chart: str = "macbeth", patch_px: int | None = None,
-                      border_px: int | None = None, margin_px: int = 1, bounds: str = "physical",
+def evaluate_sequence(sequence: Sequence, out: Path, chart: ChartName = "macbeth", patch_px: int | None = None,
+                      border_px: int | None = None, margin_px: int = 1, bounds: FlashBounds = "physical",
                       target: str = "D65") -> dict[str, Any]:
     """Evaluate a sequence of a chart; writes images, ``evaluation.json`` and ``report.html`` to ``out``.
 
@@ -401,7 +403,8 @@ def _measure(out: Path, images: dict[str, np.ndarray], context: ColourContext, g
                                        {"image": name, "flash_weights": weights.get(name, np.zeros(0)).tolist(),
                                         "white_balance": None if balance is None else balance.tolist(),
                                         "mean_delta_e00": result.mean})
-    noise = {"von_kries": noise_of(images["ambient"], context, gains), "complementary": noise_of(flash_image, context)}
+    noise: dict[str, Any] = {"von_kries": noise_of(images["ambient"], context, gains),
+                             "complementary": noise_of(flash_image, context)}
     noise["von_kries_gains"] = gains
     return {"delta_e": delta_e, "noise": noise, "previews": {name: f"{name}.png" for name in previews},
             "_png": previews}
@@ -497,7 +500,7 @@ def simulated_world(ambient: str, seed: int = 0, patch_px: int = 12, cfa: str | 
     return world
 
 
-def study_ambient(name: str, seed: int = 0, patch_px: int = 12, cfa: str | None = None, bounds: str = "physical",
+def study_ambient(name: str, seed: int = 0, patch_px: int = 12, cfa: str | None = None, bounds: FlashBounds = "physical",
                   out: Path | None = None, **world_options: Any) -> dict[str, Any]:
     """One ambient of the study: capture, estimate, flash, synthesise/re-capture, ΔE and noise."""
     from msflash.acquisition.plan import CapturePlan
@@ -606,7 +609,7 @@ def _snr_png(noise: dict[str, Any]) -> bytes:
 
 
 def colour_study(out: Path | None, ambients: tuple[str, ...] = STUDY_AMBIENTS, seed: int = 0, patch_px: int = 12,
-                 cfa: str | None = None, bounds: str = "physical", **world_options: Any) -> dict[str, Any]:
+                 cfa: str | None = None, bounds: FlashBounds = "physical", **world_options: Any) -> dict[str, Any]:
     """Fig. 9 (ΔE per ambient: ambient / + matching / + complementary) and Fig. 3 (noise under water)."""
     results = {}
     for name in ambients:

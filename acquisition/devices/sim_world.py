@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -35,7 +36,8 @@ from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import DEFAULT_GRID, SpectralKind, Spectra, WavelengthGrid
 from msflash.processing.user_files import shown_path
 
-SIM_SCENES = ("chart110", "macbeth", "white")
+SimSceneName = Literal["chart110", "macbeth", "white"]
+SIM_SCENES: tuple[SimSceneName, ...] = ("chart110", "macbeth", "white")
 """Scene names of the sim rig (a reflectance CSV is the other choice)."""
 
 SIM_DEFAULT_CAMERA = "NikonD100"
@@ -185,7 +187,7 @@ def sim_ambient(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
     return _nonnegative_light(light, where, "ambient").replace(names=(Path(spec).stem,))
 
 
-def sim_scene(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> str | Spectra:
+def sim_scene(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> SimSceneName | Spectra:
     """``--scene``: a name of :data:`SIM_SCENES`, or the reflectances of a CSV (one column per surface).
 
     Raises
@@ -194,10 +196,11 @@ def sim_scene(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> str | Spectra:
         An unknown name, or a file that is bad, too narrow or not reflectances in 0–1.
     """
     if not is_file(spec):
-        if spec not in SIM_SCENES:
+        name = next((n for n in SIM_SCENES if n == spec), None)
+        if name is None:
             raise UsageError(f"--scene '{spec}': unknown; expected one of {', '.join(SIM_SCENES)} or a reflectance "
                              "CSV (wavelength_nm, one column per surface)")
-        return spec
+        return name
     where = f"--scene {spec}"
     surfaces = on_grid(read_spectra_file(spec, "reflectance"), where, grid)
     low, high = float(surfaces.values.min()), float(surfaces.values.max())

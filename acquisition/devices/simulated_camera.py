@@ -253,11 +253,11 @@ class SimulatedCamera(TriggeredFrames):
         with self._render_lock:  # one render at a time keeps the noise stream in trigger order
             try:
                 levels = self._levels_for(step)
-                illumination = total_illumination(self.ambient, self.led_spectra, levels)
+                illumination: Spectra | MixedIllumination = total_illumination(self.ambient, self.led_spectra, levels)
                 if self.ambient_illumination is not None:
                     dark = self.ambient.replace(values=np.zeros_like(self.ambient.values))
                     illumination = self.ambient_illumination.plus(
-                        total_illumination(dark, self.led_spectra, levels))  # type: ignore[assignment]
+                        total_illumination(dark, self.led_spectra, levels))
                 pixels = render_frame(
                     self.scene, illumination, self.camera_responsivities, self.sensor, step.exposure_us,
                     step.gain, self.scale, rng=self._rng, noise=self.noise,
@@ -364,8 +364,8 @@ class SimulatedCamera(TriggeredFrames):
                           else second_ambient.resample(grid)).to_unit(ambient_spd.unit)
         if (second_spd is None) != (ambient_map is None):
             raise CameraError("simulated camera: second_ambient and ambient_map go together; expected both or neither")
-        metered_ambient = (ambient_spd if second_spd is None
-                           else MixedIllumination.two_ambients(ambient_spd, second_spd, ambient_map))  # type: ignore[arg-type]
+        metered_ambient = (ambient_spd if second_spd is None or ambient_map is None
+                           else MixedIllumination.two_ambients(ambient_spd, second_spd, ambient_map))
         leds = (datasets.paper_led_subset(n_leds) if led_spectra is None else led_spectra).resample(grid)
         responsivities = (datasets.camera_responsivities(camera) if isinstance(camera, str) else camera).resample(grid)
         sensor = sensor if sensor is not None else SensorModel(cfa=cfa)
@@ -380,8 +380,8 @@ class SimulatedCamera(TriggeredFrames):
         camera_name = responsivities.metadata.get("camera") or (camera if isinstance(camera, str) else responsivities.source)
         dark = ambient_spd.replace(values=np.zeros_like(ambient_spd.values))
         exposure_at_unit_scale = min(
-            exposure_for_peak(scene, metered_ambient, responsivities, sensor, ambient_peak_fraction),  # type: ignore[arg-type]
-            *(exposure_for_peak(scene, _plus(metered_ambient, total_illumination(dark, led_spectra, on)),  # type: ignore[arg-type]
+            exposure_for_peak(scene, metered_ambient, responsivities, sensor, ambient_peak_fraction),
+            *(exposure_for_peak(scene, _plus(metered_ambient, total_illumination(dark, led_spectra, on)),
                                 responsivities, sensor, FLASH_PEAK_FRACTION) for on in np.eye(led_spectra.count)))
         simulated = cls(
             scene, ambient_spd, led_spectra, responsivities, sensor,

@@ -42,7 +42,7 @@ import numpy as np
 
 from msflash.acquisition.errors import RecordingError, OutputWriteError
 from msflash.acquisition.sequence.image_files import image_suffix
-from msflash.acquisition.sequence.format import FRAME_ROLES, FRAMES_DIR, Sequence, SequenceFrame, SequenceWriter
+from msflash.acquisition.sequence.format import FRAME_ROLES, FRAMES_DIR, FrameRole, Sequence, SequenceFrame, SequenceWriter
 
 log = logging.getLogger(__name__)
 
@@ -102,7 +102,7 @@ class AsyncSequenceWriter:
         """Frames handed over but not yet on disk."""
         return self._added - self._written
 
-    def add_frame(self, pixels: np.ndarray, role: str, led_levels: Iterable[float], exposure_us: float,
+    def add_frame(self, pixels: np.ndarray, role: FrameRole, led_levels: Iterable[float], exposure_us: float,
                   gain: float = 1.0, extra: Mapping | None = None) -> SequenceFrame:
         """Queue one frame for :meth:`SequenceWriter.add_frame`; returns the entry it will be written as.
 
@@ -115,7 +115,7 @@ class AsyncSequenceWriter:
             raise RecordingError(f"{self.path}: the asynchronous writer is closed; expected add_frame before close()")
         pixels = np.asarray(pixels)
         name_role = role if role in FRAME_ROLES else "frame"
-        entry = SequenceFrame(f"{FRAMES_DIR}/{self._added:03d}-{name_role}{image_suffix(pixels)}", role,  # type: ignore[arg-type]
+        entry = SequenceFrame(f"{FRAMES_DIR}/{self._added:03d}-{name_role}{image_suffix(pixels)}", role,
                               tuple(led_levels), exposure_us, gain, dict(extra or {}))
         self._added += 1
         item = (pixels, role, entry.led_levels, exposure_us, gain, dict(extra or {}), entry.file)

@@ -109,7 +109,7 @@ def stale_temporaries(folder: str | os.PathLike, *subfolders: str) -> list[Path]
     folder = Path(folder)
     if _holder_alive(folder):
         return []
-    found = []
+    found: list[Path] = []
     for directory in (folder, *(folder / s for s in subfolders)):
         with contextlib.suppress(OSError):
             found.extend(Path(e.path) for e in os.scandir(directory)

@@ -36,7 +36,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path, PurePosixPath
 from types import TracebackType
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal, NoReturn, TypeVar, overload
 
 import numpy as np
 
@@ -60,11 +60,11 @@ SEQUENCE_FILE = "sequence.json"
 """Name of the description file inside a sequence directory."""
 FRAMES_DIR = "frames"
 """Sub-directory the writer puts frame files in."""
-FRAME_ROLES = ("ambient", "led", "flash", "dark")
+FRAME_ROLES: tuple[FrameRole, ...] = ("ambient", "led", "flash", "dark")
 """Allowed ``frames[].role`` values."""
 CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 """Allowed ``camera.cfa`` values besides null."""
-SPECTRAL_UNITS = ("energy", "photons")
+SPECTRAL_UNITS: tuple[Literal["energy", "photons"], ...] = ("energy", "photons")
 """Allowed ``spectral_unit`` values."""
 RESPONSIVITY_CHANNELS = ("R", "G", "B")
 """Channels ``camera.responsivity`` must hold."""
@@ -105,11 +105,13 @@ class _ArrayEquality:
     """Field-wise equality that compares arrays by value (dataclass ``eq`` cannot); fields with
     ``compare=False`` are left out."""
 
+    __dataclass_fields__: ClassVar[dict[str, Any]]  # the classes mixing this in are dataclasses
+
     def __eq__(self, other: object) -> bool:
         if type(other) is not type(self):
             return NotImplemented
         return all(_values_equal(getattr(self, f.name), getattr(other, f.name))
-                   for f in fields(self) if f.compare)  # type: ignore[arg-type]
+                   for f in fields(self) if f.compare)
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -329,6 +331,9 @@ class Sequence(_ArrayEquality):
 
 
 # -- reading ---------------------------------------------------------------------------------------
+_Choice = TypeVar("_Choice", bound=str)
+
+
 class _Fields:
     """Typed access to one JSON object, with errors naming the file and the dotted field."""
 
@@ -343,7 +348,7 @@ class _Fields:
     def name(self, key: str) -> str:
         return f"{self.where}.{key}" if self.where else key
 
-    def fail(self, field_name: str, what: str, expected: str) -> None:
+    def fail(self, field_name: str, what: str, expected: str) -> NoReturn:
         raise RecordingError(f"{self.file}: {field_name} {what}; expected {expected}")
 
     def get(self, key: str, expected: str, *, optional: bool = False) -> Any:
@@ -353,6 +358,10 @@ class _Fields:
             self.fail(self.name(key), "is missing", expected)
         return self.value[key]
 
+    @overload
+    def string(self, key: str, *, optional: Literal[False] = False, choices: tuple[str, ...] = ()) -> str: ...
+    @overload
+    def string(self, key: str, *, optional: bool, choices: tuple[str, ...] = ()) -> str | None: ...
     def string(self, key: str, *, optional: bool = False, choices: tuple[str, ...] = ()) -> str | None:
         expected = f"one of {', '.join(repr(c) for c in choices)}" if choices else "a non-empty string"
         value = self.get(key, expected, optional=optional)
@@ -363,6 +372,10 @@ class _Fields:
         if choices and value not in choices:
             self.fail(self.name(key), f"is {value!r}", expected)
         return value
+
+    def choice(self, key: str, choices: tuple[_Choice, ...]) -> _Choice:
+        """The member of ``choices`` the field holds (a failure naming them otherwise)."""
+        return choices[choices.index(self.string(key, choices=choices))]
 
     def number(self, key: str, expected: str = "a number") -> float:
         value = self.get(key, expected)
@@ -511,7 +524,7 @@ def _parse_camera(file: Path, value: Any, wavelengths_nm: np.ndarray) -> Sequenc
         responsivity = {
             str(c): _spectrum(file, f"camera.responsivity.{c}", v, wavelengths_nm) for c, v in raw.items()
         }
-    return SequenceCamera(model, serial, pixel_format, cfa, black, white, responsivity, camera.extra)  # type: ignore[arg-type]
+    return SequenceCamera(model, serial, pixel_format, cfa, black, white, responsivity, camera.extra)
 
 
 def _parse_leds(file: Path, value: Any, wavelengths_nm: np.ndarray) -> tuple[SequenceLed, ...]:
@@ -524,9 +537,9 @@ def _parse_leds(file: Path, value: Any, wavelengths_nm: np.ndarray) -> tuple[Seq
         name = led.string("name")
         if name in seen:
             led.fail(f"leds[{i}].name", f"{name!r} repeats leds[{seen[name]}].name", "unique LED names")
-        seen[name] = i  # type: ignore[index]
+        seen[name] = i
         spd = _spectrum(file, f"leds[{i}].spd", led.get("spd", "a list of numbers"), wavelengths_nm)
-        leds.append(SequenceLed(name, spd, led.extra))  # type: ignore[arg-type]
+        leds.append(SequenceLed(name, spd, led.extra))
     return tuple(leds)
 
 
@@ -563,7 +576,7 @@ def _parse_frame(file: Path, directory: Path, index: int, value: Any, n_leds: in
     frame = _Fields(file, f"frames[{index}]", value, _FRAME_KEYS)
     name = frame.name
     path = _check_file(file, directory, name("file"), frame.get("file", "a relative file path"), must_exist=must_exist)
-    role = frame.string("role", choices=FRAME_ROLES)
+    role = frame.choice("role", FRAME_ROLES)
     levels = _number_list(file, name("led_levels"), frame.get("led_levels", "a list of numbers"), n_leds, "one per LED")
     for i, level in enumerate(levels):
         if not 0.0 <= level <= 1.0:
@@ -577,7 +590,7 @@ def _parse_frame(file: Path, directory: Path, index: int, value: Any, n_leds: in
     if gain <= 0:
         frame.fail(name("gain"), f"is {gain:g}", "a number > 0")
     digest = _parse_digest(frame)
-    return SequenceFrame(path, role, tuple(levels.tolist()), exposure, gain, frame.extra, digest)  # type: ignore[arg-type]
+    return SequenceFrame(path, role, tuple(levels.tolist()), exposure, gain, frame.extra, digest)
 
 
 def _parse_digest(frame: _Fields) -> FileDigest | None:
@@ -619,7 +632,7 @@ def _parse_document(file: Path, directory: Path, document: Any, *, check_files: 
         grid = WavelengthGrid.from_wavelengths(wavelengths, where="wavelengths_nm")
     except SpectralDataError as err:
         raise RecordingError(f"{file}: {err}") from err
-    unit = top.string("spectral_unit", choices=SPECTRAL_UNITS)
+    unit = top.choice("spectral_unit", SPECTRAL_UNITS)
     camera = _parse_camera(file, top.get("camera", "an object"), grid.wavelengths_nm)
     leds = _parse_leds(file, top.get("leds", "a list of LED objects"), grid.wavelengths_nm)
     raw_frames = top.get("frames", "a list of frame objects")
@@ -639,7 +652,7 @@ def _parse_document(file: Path, directory: Path, document: Any, *, check_files: 
     # A partial sequence may stop before its first frame; a complete one must be usable.
     if complete and not any(f.role == "ambient" for f in frames):
         top.fail("frames", "has no frame with role 'ambient'", "at least one ambient frame in a complete sequence")
-    return Sequence(directory, complete, wavelengths, unit, camera, leds, frames, top.extra)  # type: ignore[arg-type]
+    return Sequence(directory, complete, wavelengths, unit, camera, leds, frames, top.extra)
 
 
 def read_sequence(directory: str | os.PathLike, *, require_files: bool = True) -> Sequence:

@@ -20,7 +20,7 @@ from msflash.acquisition.sequence.format import Sequence, as_recorded
 from msflash.processing import datasets
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.flash import FlashSolution, solve_complementary, solve_matching
+from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
 from msflash.processing.model_error import reference_for, with_model_error
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, estimate_local, synthesize_local, tile_statistics
 from msflash.processing.spectra import Spectra
@@ -355,15 +355,15 @@ def _require_camera_coverage(sequence: Sequence, covered: np.ndarray, what: str,
 
 
 def solve_sequence_flash(sequence: Sequence, mode: str, ambient_weights: np.ndarray, target: str = "D65",
-                         bounds: str = "physical") -> FlashSolution:
+                         bounds: FlashBounds = "physical") -> FlashSolution:
     """The matching or complementary flash for a sequence's estimated ambient weights."""
     leds = led_spectra_photons(sequence)
     camera = camera_responsivities_photons(sequence)
     if mode == "matching":
-        return solve_matching(ambient_weights, leds, camera, bounds=bounds)  # type: ignore[arg-type]
+        return solve_matching(ambient_weights, leds, camera, bounds=bounds)
     if mode == "complementary":
         return solve_complementary(ambient_weights, leds, camera, target_illuminant(target, sequence),
-                                   bounds=bounds)  # type: ignore[arg-type]
+                                   bounds=bounds)
     raise RecordingError(f"flash mode '{mode}' is unknown; expected matching or complementary")
 
 
@@ -461,7 +461,7 @@ def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:
 
 
 def solve_sequence_flash_local(sequence: Sequence, mode: str, local: LocalEstimate, target: str = "D65",
-                               bounds: str = "physical") -> tuple[FlashSolution, np.ndarray, list[FlashSolution]]:
+                               bounds: FlashBounds = "physical") -> tuple[FlashSolution, np.ndarray, list[FlashSolution]]:
     """Per-tile flash solutions for a local estimate.
 
     Returns

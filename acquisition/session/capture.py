@@ -66,16 +66,20 @@ import math
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
-from typing import Any, Protocol
+from typing import Protocol
 
 from msflash.acquisition.devices.camera import Camera, RawFrame
 from msflash.acquisition.errors import BoothStepError, CaptureError, DroppedFrameError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
+from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter
 from msflash.led_controller.booth import ARM_TIME_MAX_US
 from msflash.led_controller.errors import BoothError
 
 log = logging.getLogger(__name__)
+
+FrameWriter = SequenceWriter | AsyncSequenceWriter
+"""Where captured frames go: written as they come, or handed to a writer thread."""
 
 FRAME_ID_MODULUS = 1 << 16
 """GigE Vision block ids wrap at 16 bits; continuity is checked modulo this."""
@@ -205,7 +209,7 @@ def run_capture_with_flash(
     camera: Camera,
     booth: LedControl,
     plan: CapturePlan,
-    writer: Any,
+    writer: FrameWriter,
     decide: FlashDecide,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
 ) -> list[SequenceFrame]:
@@ -329,7 +333,7 @@ def run_capture(
     camera: Camera,
     booth: LedControl,
     plan: CapturePlan,
-    writer: SequenceWriter,
+    writer: FrameWriter,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
 ) -> list[SequenceFrame]:
     """Capture every step of ``plan`` in its sync mode, writing each frame as it arrives.
@@ -349,11 +353,11 @@ def run_capture(
     raise ValueError(f"run_capture: plan trigger {plan.trigger!r}; expected software, booth or camera")
 
 
-def _saved(writer: SequenceWriter, written: list[SequenceFrame]) -> str:
+def _saved(writer: FrameWriter, written: list[SequenceFrame]) -> str:
     return f"{len(written)} frame(s) already saved in {writer.path.parent}"
 
 
-def _write(writer: SequenceWriter, step: CaptureStep, frame: RawFrame, written: list[SequenceFrame],
+def _write(writer: FrameWriter, step: CaptureStep, frame: RawFrame, written: list[SequenceFrame],
            on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None, trigger: int | None = None) -> None:
     extra: dict = {"frame_id": frame.frame_id, "timestamp_ns": frame.timestamp_ns}
     if trigger is not None:
@@ -365,7 +369,7 @@ def _write(writer: SequenceWriter, step: CaptureStep, frame: RawFrame, written: 
         on_frame(step, frame, entry)
 
 
-def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: SequenceWriter,
+def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: FrameWriter,
                 on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
                 flash: Callable[[list[RawFrame]], CaptureStep] | None = None) -> list[SequenceFrame]:
     written: list[SequenceFrame] = []
@@ -402,7 +406,7 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Se
     return written
 
 
-def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, writer: SequenceWriter,
+def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, writer: FrameWriter,
                  on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
                  flash: Callable[[list[RawFrame]], CaptureStep] | None = None) -> list[SequenceFrame]:
     written: list[SequenceFrame] = []

@@ -431,7 +431,7 @@ def _most_informative(ambient_px: np.ndarray, ambient_px_us: float, led_previews
 
     def grouped(pixels: np.ndarray, exposure_us: float) -> tuple[np.ndarray, np.ndarray]:
         rate = info.group_blocks(_rates(pixels, exposure_us, black, 1), block)
-        clipped = info.group_blocks(np.asarray(pixels) >= white, block).any(axis=1)
+        clipped = np.any(info.group_blocks(np.asarray(pixels) >= white, block), axis=1)
         if rate.shape[0] > MAX_INFORMATION_BLOCKS:  # an even sample of the blocks estimates the sums and fractions
             keep = np.linspace(0, rate.shape[0] - 1, MAX_INFORMATION_BLOCKS).astype(int)
             rate, clipped = rate[keep], clipped[keep]
@@ -533,7 +533,7 @@ class FlashExposure:
         led_only -= self._ambient_rate
         self._led_only.append(led_only)
 
-    def predict(self, weights: Sequence[float]) -> float:
+    def predict(self, weights: Sequence[float] | np.ndarray) -> float:
         """The flash exposure (µs) for LED weights ``weights`` (one per LED frame added)."""
         if self._ambient_rate is None or self._ambient_us is None:
             raise ValueError("flash exposure: no ambient frame; expected the ambient and LED frames first")
@@ -548,7 +548,7 @@ class FlashExposure:
 
 
 def flash_exposure(ambient: np.ndarray, ambient_us: float, led_frames: Sequence[np.ndarray],
-                   led_us: Sequence[float], weights: Sequence[float], black: float, white: float,
+                   led_us: Sequence[float], weights: Sequence[float] | np.ndarray, black: float, white: float,
                    limits: tuple[float, float], policy: ExposurePolicy = ExposurePolicy()) -> float:
     """Exposure for the flash frame: ambient + Σ wₖ·LEDₖ with its bright end at the target fraction.
 

@@ -78,7 +78,7 @@ def crossings(rate_blocks: np.ndarray, clipped: np.ndarray, preview_us: float, l
     return np.where(clipped, np.minimum(crossing, preview_us), crossing)
 
 
-def information(led: np.ndarray, ambient: np.ndarray, led_us: np.ndarray, ambient_us: np.ndarray,
+def information(led: np.ndarray, ambient: np.ndarray, led_us: np.ndarray | float, ambient_us: np.ndarray | float,
                 dn_per_e: float, read_dn: float) -> np.ndarray:
     """Per-block information d²/Var(d̂) summed over the block's members, at exposures broadcast in front.
 
@@ -154,8 +154,8 @@ def most_informative(blocks: Blocks, start_ambient_us: float, start_led_us: Sequ
 
             def joint_score(values: np.ndarray) -> np.ndarray:
                 scale = values[:, None, None]
-                return sum(information(r, blocks.ambient, scale * led_us[k], scale * ambient_us, dn_per_e, read_dn)
-                           for k, r in enumerate(leds))
+                return sum((information(r, blocks.ambient, scale * led_us[k], scale * ambient_us, dn_per_e, read_dn)
+                            for k, r in enumerate(leds)), np.zeros(()))
 
             if scale_limits[0] <= 1.0 <= scale_limits[1]:
                 factor = _optimise(joint, np.zeros(n_blocks, dtype=bool), 1.0, scale_limits, max_lost, joint_score)
@@ -164,8 +164,8 @@ def most_informative(blocks: Blocks, start_ambient_us: float, start_led_us: Sequ
 
             def ambient_score(values: np.ndarray) -> np.ndarray:
                 shape = values[:, None, None]
-                return sum(information(r, blocks.ambient, np.float64(led_us[k]), shape, dn_per_e, read_dn)
-                           for k, r in enumerate(leds))
+                return sum((information(r, blocks.ambient, np.float64(led_us[k]), shape, dn_per_e, read_dn)
+                            for k, r in enumerate(leds)), np.zeros(()))
 
             ambient_us = _optimise(blocks.ambient_crossing, elsewhere, ambient_us, limits, max_lost, ambient_score)
         for k, rate in enumerate(leds):

@@ -33,7 +33,7 @@ from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
 from msflash.acquisition.sequence.format import Sequence
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
-from msflash.processing.flash import FlashModel, FlashSolution
+from msflash.processing.flash import FlashBounds, FlashModel, FlashSolution
 from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import BlockRows, SequenceStatistics, cfa_planes
 
@@ -205,17 +205,17 @@ class FlashSession:
         return analysis.estimate_from_statistics(self.header, self.statistics(stack), self.method, self.alpha,
                                                  self.ambient_model)
 
-    def solve(self, mode: str, ambient_weights: np.ndarray, bounds: str = "physical") -> FlashSolution:
+    def solve(self, mode: str, ambient_weights: np.ndarray, bounds: FlashBounds = "physical") -> FlashSolution:
         """The matching or complementary flash (as :func:`analysis.solve_sequence_flash`)."""
         if mode == "matching":
-            return self.model.matching(ambient_weights, bounds=bounds)  # type: ignore[arg-type]
+            return self.model.matching(ambient_weights, bounds=bounds)
         if mode == "complementary":
             if self.target_response is None:
                 raise RecordingError("complementary flash: the session was prepared without a target")
-            return self.model.complementary(ambient_weights, self.target_response, bounds=bounds)  # type: ignore[arg-type]
+            return self.model.complementary(ambient_weights, self.target_response, bounds=bounds)
         raise RecordingError(f"flash mode '{mode}' is unknown; expected matching or complementary")
 
-    def flash_exposure(self, levels: Seq[float]) -> float:
+    def flash_exposure(self, levels: Seq[float] | np.ndarray) -> float:
         """The flash frame's exposure (µs) for LED ``levels``, from the frames taken (see :class:`FlashExposure`).
 
         Raises

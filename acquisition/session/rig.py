@@ -316,8 +316,8 @@ def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spect
     closers: list = []
     line_errors: list[BaseException] = []
     try:
-        power = {} if flash_power is None else {"flash_power": flash_power}
-        world = SimulatedCamera.default(scene=scene_spec, ambient=ambient_spd, cfa=cfa, seed=seed,  # type: ignore[arg-type]
+        power: dict[str, Any] = {} if flash_power is None else {"flash_power": flash_power}
+        world = SimulatedCamera.default(scene=scene_spec, ambient=ambient_spd, cfa=cfa, seed=seed,
                                         camera=responsivities, led_spectra=leds, **power)
         closers.append(world.close)
         if booth_port is not None:
@@ -531,16 +531,16 @@ def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None,
                line_errors=line_errors, camera_extra=dict(sequence.camera.extra))
 
 
-def open_rig(spec: str, **options: object) -> Rig:
+def open_rig(spec: str, **options: Any) -> Rig:
     """Open a rig by its ``--rig`` spec: ``sim``, ``aravis-fake``, ``replay:DIR`` or ``hw``."""
     if spec == "hw":
-        return open_hw_rig(**options)  # type: ignore[arg-type]
+        return open_hw_rig(**options)
     if spec == "sim":
-        return open_sim_rig(**options)  # type: ignore[arg-type]
+        return open_sim_rig(**options)
     if spec == "aravis-fake":
-        return open_aravis_fake_rig(log_serial=options.get("log_serial"))  # type: ignore[arg-type]
+        return open_aravis_fake_rig(log_serial=options.get("log_serial"))
     if spec.startswith("replay:") and len(spec) > len("replay:"):
-        return open_replay_rig(spec[len("replay:"):], log_serial=options.get("log_serial"))  # type: ignore[arg-type]
+        return open_replay_rig(spec[len("replay:"):], log_serial=options.get("log_serial"))
     raise UsageError(f"--rig '{spec}': unknown; expected one of {', '.join(RIG_SPECS)}")
 
 

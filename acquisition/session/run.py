@@ -20,12 +20,12 @@ import numpy as np
 from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.devices.replay_camera import format_levels, levels_match
 from msflash.acquisition.errors import UsageError
-from msflash.acquisition.plan import CapturePlan, TriggerSource
+from msflash.acquisition.plan import CapturePlan, StepRole, TriggerSource
 from msflash.acquisition.progress import progress
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter, read_sequence
 from msflash.acquisition.session import analysis
-from msflash.acquisition.session.capture import preview_frames, run_capture, run_capture_with_flash
+from msflash.acquisition.session.capture import FrameWriter, preview_frames, run_capture, run_capture_with_flash
 from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,
@@ -144,7 +144,7 @@ def plan_exposure(rig: Rig, exposure_option: str | float, policy: ExposurePolicy
     info = rig.camera.info
 
     def capture(levels, exposure_us: float):
-        role = "led" if any(level > 0 for level in levels) else "ambient"
+        role: StepRole = "led" if any(level > 0 for level in levels) else "ambient"
         preview = CapturePlan.single(levels, exposure_us, role=role)
         return metering_view(preview_frames(rig.camera, rig.booth, preview)[0].pixels, mosaic=info.cfa is not None)
 
@@ -175,7 +175,7 @@ class LedCapture:
     snr_method: str
 
 
-def capture_led_sequence(rig: Rig, writer: SequenceWriter, plan: ExposurePlan, sync: str = "host") -> LedCapture:
+def capture_led_sequence(rig: Rig, writer: FrameWriter, plan: ExposurePlan, sync: str = "host") -> LedCapture:
     frames: list[RawFrame] = []
     stamp = {"t": 0.0}
 

@@ -137,7 +137,8 @@ def run_world(camera_name: str, camera: Spectra, ambient_name: str, ambient: Spe
         for level_index, level in enumerate(levels):
             for seed in seeds:
                 rng = np.random.default_rng([seed, 1 + level_index, 7919 * (1 + list(FACTORS).index(factor))])
-                world, truth, kw = base_world, base_truth, {}
+                world, truth = base_world, base_truth
+                kw: dict[str, Any] = {}
                 if factor == "n_leds":
                     world = make_world(camera, ambient, n_leds=int(level), grid=grid)
                 elif factor == "surfaces":

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -134,12 +135,12 @@ def make_scenario(kind: str, seed: int, shape: tuple[int, int] = (240, 320), cam
     flash_signal = float(np.mean(expected_response(scene, total_illumination(dark, leds, np.ones(leds.count)),
                                                    responsivities, 1.0)))
     leds = leds.replace(values=leds.values * (flash_to_ambient * ambient_signal / flash_signal))
-    exposure = exposure_for_peak(scene, illumination, responsivities, sensor, ambient_peak_fraction)  # type: ignore[arg-type]
+    exposure = exposure_for_peak(scene, illumination, responsivities, sensor, ambient_peak_fraction)
     levels = np.eye(leds.count)
     frames = []
     for row in [np.zeros(leds.count), *levels]:
         lit = illumination.plus(total_illumination(dark, leds, row))
-        frames.append(render_frame(scene, lit, responsivities, sensor, exposure, rng=rng, noise=noise))  # type: ignore[arg-type]
+        frames.append(render_frame(scene, lit, responsivities, sensor, exposure, rng=rng, noise=noise))
     spec = FrameStackSpec(black_level=sensor.black_level, white_level=sensor.white_level, ambient_scale=1.0 / exposure,
                           led_scales=(1.0 / exposure,) * leds.count, led_levels=levels)
     return Scenario(kind, frames[0], frames[1:], spec, leds, illumination, names)
@@ -273,10 +274,11 @@ def evaluate_scenario(kind: str, seed: int, tiles: int = DEFAULT_TILES, bin_fact
         labels = local.regions.label_map(shape)
         side = scenario.illumination.weights[..., 1] > 0.5
         label_accuracy = float(max(np.mean(labels == side), np.mean(labels != side)))
+    assert auto.selection is not None  # the auto method always selects
     return {
         "kind": kind, "seed": seed, "ambients": list(scenario.names),
         "chosen": auto.model, "structure": auto.structure, "local_structure": local.structure,
-        "smoothing": auto.smoothing, "scores": auto.selection.scores,  # type: ignore[union-attr]
+        "smoothing": auto.smoothing, "scores": auto.selection.scores,
         "rmse_global": rmse_global,
         # The global model with the local model's estimator (denoised statistics), and auto without
         # the noise correction.
@@ -319,7 +321,7 @@ def time_estimates(shape: tuple[int, int] = (1024, 1280), tiles: int = DEFAULT_T
             start = time.perf_counter()
             run()
             times[name].append(time.perf_counter() - start)
-    timing = {"shape": list(shape), "tiles": tiles, "bin_factor": bin_factor, "repeats": repeats,
+    timing: dict[str, Any] = {"shape": list(shape), "tiles": tiles, "bin_factor": bin_factor, "repeats": repeats,
               **{name: float(min(values)) for name, values in times.items()}}
     timing["auto_ratio"] = timing["auto_s"] / timing["global_s"]
     timing["local_ratio"] = timing["local_s"] / timing["global_s"]
@@ -367,7 +369,7 @@ def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILE
         rows = [r for r in results if r["kind"] == kind]
         if not rows:
             continue
-        entry = {name: float(np.mean([r[name] for r in rows]))
+        entry: dict[str, Any] = {name: float(np.mean([r[name] for r in rows]))
                  for name in ("rmse_global", "rmse_local", "rmse_tiles", "rmse_auto", "rmse_alone", "rmse_bound",
                               "rmse_global_denoised", "rmse_auto_observed", "tile_rmse_global", "tile_rmse_auto",
                               "tile_rmse_bound")}

@@ -187,7 +187,7 @@ def run_pareto(
     mean_error = np.nanmean(errors, axis=0)
     total = np.nanmedian(stats_s, axis=0)[:, None] + np.nanmedian(solve_s, axis=0)
     front = pareto_front(mean_error, total)
-    points = []
+    points: list[dict[str, Any]] = []
     for j, sampling in enumerate(samplings):
         for s, solver in enumerate(solvers):
             column = errors[:, j, s]

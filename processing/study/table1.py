@@ -315,7 +315,7 @@ class CameraRuns:
     """The paper's LED subsets (0-based indices) for each count."""
     names: list[str]
     """Camera names, in the order of ``results``."""
-    illuminants: list[Any]
+    illuminants: tuple[SmoothIlluminant, ...]
     """The illuminants (smoothest spectra of the feasible xy grid)."""
     truths: np.ndarray
     """True spectra, (n_wavelengths, n_illuminants)."""
