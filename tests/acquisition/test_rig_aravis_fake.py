@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app.cli import main
+from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.session.capture import run_capture
 from msflash.acquisition.session.rig import ARAVIS_FAKE_PIXEL_FORMAT, open_aravis_fake_rig, open_rig
@@ -159,7 +160,8 @@ def test_the_test_pattern_form_keeps_mono_frames(aravis: ModuleType) -> None:
 
 
 def test_a_roi_other_than_the_scene_is_refused(aravis: ModuleType) -> None:
-    with pytest.raises(Exception, match=r"ROI 64x48 but the scene is 200x186"):
+    """Checked before the fake is served: the rendered mosaic fills the ROI."""
+    with pytest.raises(UsageError, match=r"ROI 64x48 but the scene is 200x186; expected the scene's size"):
         open_aravis_fake_rig(width=64, height=48)
 
 
