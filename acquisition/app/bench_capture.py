@@ -1,7 +1,8 @@
 """Capture bench: the whole capture → estimate → flash → re-capture loop on the GigE Vision fake.
 
 The ``aravis-fake`` rig (AravisCamera on the fake at 127.0.0.1, booth emulator on a pty, the real
-``LedBooth`` driver) runs booth master: the booth pulses the trigger once per period, so the
+``LedBooth`` driver; in its test-pattern form, ``rendered=False``, so the figures are the transport's
+without the scene renderer's cost) runs booth master: the booth pulses the trigger once per period, so the
 camera runs at a fixed frame rate (``frame_rate_hz``; the exposure is what fills the rest of the
 period, :func:`acquisition.session.capture.booth_period_us`). Each run is one stream of ambient + k LEDs
 + flash (:func:`acquisition.session.capture.run_capture_with_flash`): the table is armed with the flash
@@ -85,7 +86,7 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
     host_latencies: list[float] = []
     computes: list[float] = []
     with tempfile.TemporaryDirectory(prefix="msflash-bench-capture-") as scratch, \
-            open_aravis_fake_rig(width=width, height=height, pixel_format=pixel_format) as rig:
+            open_aravis_fake_rig(width=width, height=height, pixel_format=pixel_format, rendered=False) as rig:
         n_leds = rig.led_spectra.count
         camera, emulator = rig.camera, rig.emulator
         assert emulator is not None

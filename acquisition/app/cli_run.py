@@ -15,7 +15,7 @@ before an error or Ctrl-C ends the command). A replay rig checks every plan agai
 recording up front, so there the flash stays a second capture.
 
 A degenerate estimate (the LED-only images do not determine the ambient: a non-finite condition
-number, spectrum or weight — e.g. the ``aravis-fake`` rig's test patterns) does not stop the
+number, spectrum or weight — e.g. test patterns, or LEDs that do not reach the scene) does not stop the
 capture: the flash the solvers return is still re-captured, so the sequence is complete. No
 report is written from it (its numbers are not finite); ``run`` then exits 1 with one
 ``msflash: error:`` line saying so and where the sequence is.
@@ -93,12 +93,15 @@ def _rig_spec(args: argparse.Namespace) -> str:
 
 def _open(args: argparse.Namespace) -> Rig:
     spec = _rig_spec(args)
-    sim_only = [option for option, value in (("--sim-camera", args.sim_camera), ("--leds", args.leds),
-                                             ("--flash-power", args.flash_power), ("--cfa", args.cfa))
-                if value is not None]
-    if sim_only and spec != "sim":
-        raise UsageError(f"{sim_only[0]}: describes the simulated rig, but the rig is '{spec}'; expected --rig sim "
-                         "(or no --rig and no --camera/--port)")
+    world_options = [option for option, value in (("--sim-camera", args.sim_camera), ("--leds", args.leds),
+                                                  ("--flash-power", args.flash_power)) if value is not None]
+    if world_options and spec not in ("sim", "aravis-fake"):
+        raise UsageError(f"{world_options[0]}: describes the simulated world, but the rig is '{spec}'; expected "
+                         "--rig sim or aravis-fake (or no --rig and no --camera/--port)")
+    if args.cfa is not None and spec != "sim":
+        fixed = " (its frames are BayerRG16, an RGGB mosaic)" if spec == "aravis-fake" else ""
+        raise UsageError(f"--cfa: describes the simulated rig's camera, but the rig is '{spec}'{fixed}; expected "
+                         "--rig sim (or no --rig and no --camera/--port)")
     hw_only = [option for option, value in (("--responsivity", args.responsivity), ("--calibration", args.calibration),
                                             ("--pixel-format", args.pixel_format)) if value is not None]
     hw_only += given_camera_options(args)
@@ -117,6 +120,10 @@ def _open(args: argparse.Namespace) -> Rig:
         return open_rig("sim", ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
                         camera=args.sim_camera, n_leds=args.leds, led_spectra=args.led_spectra,
                         flash_power=args.flash_power, log_serial=args.log_serial, booth_port=args.booth_port)
+    if spec == "aravis-fake":
+        return open_rig("aravis-fake", ambient=args.ambient, scene=args.scene, seed=args.seed, camera=args.sim_camera,
+                        n_leds=args.leds, led_spectra=args.led_spectra, flash_power=args.flash_power,
+                        log_serial=args.log_serial)
     return open_rig(spec, log_serial=args.log_serial)
 
 
@@ -162,7 +169,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
     progress(printable(f"opening rig '{spec}'" + (f" (ambient {args.ambient}, scene {args.scene}, camera "
                                                   f"{args.sim_camera or SIM_DEFAULT_CAMERA}, LEDs "
                                                   f"{args.led_spectra or f'paper {args.leds or 7}'})"
-                                                  if spec == "sim" else "")))
+                                                  if spec in ("sim", "aravis-fake") else "")))
     # SIGTERM unwinds like Ctrl-C, so the LEDs go off and the partial sequence stays readable.
     with sigterm_as_exit(), _open(args) as rig:
         if rig.camera_responsivities is None:
@@ -248,7 +255,7 @@ def _flash_power(text: str) -> float:
 def _rig_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rig", default=None,
                         help="rig: sim (default; simulated camera + booth emulator on a pty), aravis-fake (Aravis "
-                             "GigE Vision fake on 127.0.0.1 + emulator), replay:DIR (a recorded sequence + emulator), "
+                             "GigE Vision fake on 127.0.0.1 streaming the simulated scene, + emulator), replay:DIR (a recorded sequence + emulator), "
                              "hw (a real camera and booth; implied by --camera/--port)")
     hardware = parser.add_argument_group("hardware rig (--rig hw)")
     hardware.add_argument("--camera", default=None, metavar="ID",
@@ -274,7 +281,7 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
                         help="LED spectra: first column wavelength_nm, one column per booth channel at full drive "
                              "(energy); hw: the real booth's channels; sim: the emulated booth gets these channels "
                              "(names and peaks from the columns; the file must cover 400-700 nm)")
-    sim = parser.add_argument_group("simulated rig (--rig sim)")
+    sim = parser.add_argument_group("simulated world (--rig sim; --rig aravis-fake renders it too, except --cfa)")
     sim.add_argument("--sim-camera", default=None, metavar="NAME|FILE.csv",
                      help=f"camera: a shipped camera ({SIM_DEFAULT_CAMERA} by default; ISETCam's, the paper's 34 — an "
                           "unknown name lists them) or responsivities wavelength_nm, R, G, B (energy) covering "

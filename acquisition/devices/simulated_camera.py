@@ -228,17 +228,64 @@ class SimulatedCamera(TriggeredFrames):
     def _levels_for(self, step: CaptureStep) -> tuple[float, ...]:
         """The LED levels at exposure time: from the injected source, else the plan step."""
         raw = self.led_levels_source() if self.led_levels_source is not None else step.led_levels
+        return self._checked_levels(raw, f"step {step.index} ({step.label})")
+
+    def _checked_levels(self, raw: object, where: str) -> tuple[float, ...]:
+        """``raw`` as one float per LED in [0, 1]; a ``CameraError`` naming ``where`` otherwise."""
         try:
-            levels = tuple(float(v) for v in raw)
+            levels = tuple(float(v) for v in raw)  # type: ignore[attr-defined]
         except (TypeError, ValueError) as err:
             raise CameraError(f"simulated camera '{self._name}': LED levels {raw!r} are not numbers; "
                               "expected a tuple of floats in [0, 1]") from err
         if len(levels) != self.led_spectra.count or not all(0.0 <= v <= 1.0 for v in levels):
             raise CameraError(
-                f"simulated camera '{self._name}': LED levels {levels} at step {step.index} ({step.label}); "
+                f"simulated camera '{self._name}': LED levels {levels} at {where}; "
                 f"expected {self.led_spectra.count} values in [0, 1]"
             )
         return levels
+
+    def render(self, levels: Sequence[float], exposure_us: float, gain: float) -> np.ndarray:
+        """One frame of this world under the LEDs at ``levels``, exposed ``exposure_us`` at linear ``gain``.
+
+        The one renderer of the simulated world: :meth:`trigger` renders each plan step with it,
+        and the ``aravis-fake`` rig (:class:`acquisition.session.rig.WiredFakeCamera`) paints each
+        frame the Aravis fake delivers with it. Noise is drawn from this camera's generator, one
+        render at a time, so frames are reproducible for a given seed and render order.
+
+        Parameters
+        ----------
+        levels
+            Drive level (0–1) of each LED channel during the exposure.
+        exposure_us, gain
+            The exposure and the linear gain of the frame.
+
+        Returns
+        -------
+        numpy.ndarray
+            Raw values (``sensor.dtype``) as the sensor model delivers them: (H, W) for a mosaic, else
+            (H, W, 3).
+
+        Raises
+        ------
+        CameraError
+            Levels that are not one number in [0, 1] per LED, or an exposure < 0 or gain ≤ 0.
+        """
+        checked = self._checked_levels(levels, f"exposure {exposure_us:g} µs")
+        if not (exposure_us >= 0 and gain > 0):
+            raise CameraError(f"simulated camera '{self._name}': exposure {exposure_us} µs and gain {gain}; "
+                              "expected exposure ≥ 0 and gain > 0")
+        with self._render_lock:
+            return self._render(checked, float(exposure_us), float(gain))
+
+    def _render(self, levels: tuple[float, ...], exposure_us: float, gain: float) -> np.ndarray:
+        """The frame under ``levels`` (checked); the caller holds the render lock."""
+        illumination = total_illumination(self.ambient, self.led_spectra, levels)
+        if self.ambient_illumination is not None:
+            dark = self.ambient.replace(values=np.zeros_like(self.ambient.values))
+            illumination = self.ambient_illumination.plus(
+                total_illumination(dark, self.led_spectra, levels))  # type: ignore[assignment]
+        return render_frame(self.scene, illumination, self.camera_responsivities, self.sensor, exposure_us, gain,
+                            self.scale, rng=self._rng, noise=self.noise)
 
     def _render_next(self, plan: CapturePlan) -> None:
         with self._condition:
@@ -253,15 +300,7 @@ class SimulatedCamera(TriggeredFrames):
         with self._render_lock:  # one render at a time keeps the noise stream in trigger order
             try:
                 levels = self._levels_for(step)
-                illumination: Spectra | MixedIllumination = total_illumination(self.ambient, self.led_spectra, levels)
-                if self.ambient_illumination is not None:
-                    dark = self.ambient.replace(values=np.zeros_like(self.ambient.values))
-                    illumination = self.ambient_illumination.plus(
-                        total_illumination(dark, self.led_spectra, levels))
-                pixels = render_frame(
-                    self.scene, illumination, self.camera_responsivities, self.sensor, step.exposure_us,
-                    step.gain, self.scale, rng=self._rng, noise=self.noise,
-                )
+                pixels = self._render(levels, step.exposure_us, step.gain)
                 with self._condition:
                     self._frame_id += 1
                     self._clock_ns += int(step.exposure_us * 1000) + self._frame_interval_ns

@@ -7,8 +7,10 @@ known ground-truth ambient, through the same driver code a real booth uses.
 
 ``aravis-fake``: :class:`~acquisition.devices.aravis.camera.AravisCamera` on the Aravis GigE Vision fake
 served in this process on 127.0.0.1 (opened by address: no discovery broadcast), the emulator on a
-pty and ``LedBooth``. Frames are the fake's test patterns, so spectra estimated from them mean
-nothing; the rig proves the Aravis path (features, triggers, buffers) inside the whole pipeline.
+pty and ``LedBooth``. Aravis streams (buffers, frame ids, timestamps, exposure and gain features,
+software triggers) in BayerRG16; :class:`WiredFakeCamera` paints each frame with the ``sim`` rig's
+world rendered under the LED levels of that frame's trigger, so the Aravis path runs inside the
+whole pipeline with a known ground truth.
 
 ``replay:DIR``: :class:`~acquisition.devices.replay_camera.ReplayCamera` serving a recorded sequence, with
 the emulator on a pty; re-runs estimation, flash solving and synthesis on recorded frames.
@@ -37,6 +39,7 @@ A callback that fails on the emulator's thread is logged and kept in :attr:`Rig.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import logging
@@ -52,9 +55,9 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
-from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
-from msflash.acquisition.session.external_booth import levels_reported_by, open_external_booth
+from msflash.acquisition.errors import CameraError, CameraSettingError, FrameLostError, RigOpenError, UsageError
 from msflash.acquisition.progress import progress
+from msflash.acquisition.session.external_booth import levels_reported_by, open_external_booth
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
 from msflash.acquisition.devices.sim_world import read_responsivity_file, read_spectra_file, sim_ambient, sim_camera, sim_leds, sim_scene
@@ -73,8 +76,9 @@ RIG_SPECS = ("sim", "aravis-fake", "replay:DIR", "hw")
 """What ``--rig`` accepts."""
 
 AravisFakeNominalCamera = "NikonD100"
-"""ISETCam camera whose responsivities the ``aravis-fake`` rig records as *nominal* (the fake's
-test patterns have no spectral meaning; the flash solvers need some camera model)."""
+"""ISETCam camera whose responsivities the ``aravis-fake`` rig's test-pattern form (``rendered=False``,
+the capture bench's) records as *nominal* (test patterns have no spectral meaning; the flash solvers
+need some camera model). The rendered form records the world's own responsivities."""
 
 
 @dataclass
@@ -271,6 +275,41 @@ def check_emulated_booth(leds: Spectra, where: str) -> None:
         raise UsageError(f"{where}: {channels}: the booth emulator reports {info.channels}; expected one per LED")
 
 
+def _sim_world(rig: str, ambient: str | Spectra, scene: str | Scene | Spectra, cfa: str | None, seed: int,
+               camera: str | Spectra | None, n_leds: int | None, led_spectra: str | Path | Spectra | None,
+               flash_power: float | None, patch_px: int | None = None) -> SimulatedCamera:
+    """The simulated world of :func:`open_sim_rig` (names and files resolved, the booth's LEDs checked).
+
+    Raises
+    ------
+    UsageError
+        A bad name or file, with the option or file named.
+    RigOpenError
+        The world could not be made (named ``rig '{rig}'``).
+    """
+    ambient_spd = sim_ambient(ambient) if isinstance(ambient, str) else ambient
+    scene_spec = sim_scene(scene) if isinstance(scene, str) else scene
+    responsivities = camera if isinstance(camera, Spectra) else sim_camera(camera)
+    if isinstance(led_spectra, Spectra):
+        leds, where = led_spectra, "LED spectra"
+    else:
+        leds = sim_leds(led_spectra, n_leds)
+        where = f"--led-spectra {led_spectra}" if led_spectra is not None else f"--leds {n_leds or 7}"
+    check_emulated_booth(leds, where)
+    try:
+        optional: dict[str, Any] = {}
+        if patch_px is not None:
+            optional["patch_px"] = patch_px
+        if flash_power is not None:
+            optional["flash_power"] = flash_power
+        return SimulatedCamera.default(scene=scene_spec, ambient=ambient_spd, cfa=cfa, seed=seed,
+                                       camera=responsivities, led_spectra=leds, **optional)
+    except UsageError:
+        raise
+    except Exception as err:
+        raise RigOpenError(f"rig '{rig}': {err}") from err
+
+
 def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spectra = "chart110", cfa: str | None = None,
                  seed: int = 0, camera: str | Spectra | None = None, n_leds: int | None = None,
                  led_spectra: str | Path | Spectra | None = None, log_serial: str | Path | None = None,
@@ -304,21 +343,10 @@ def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spect
     RigOpenError
         The world or the emulated booth failed to open.
     """
-    ambient_spd = sim_ambient(ambient) if isinstance(ambient, str) else ambient
-    scene_spec = sim_scene(scene) if isinstance(scene, str) else scene
-    responsivities = camera if isinstance(camera, Spectra) else sim_camera(camera)
-    if isinstance(led_spectra, Spectra):
-        leds, where = led_spectra, "LED spectra"
-    else:
-        leds = sim_leds(led_spectra, n_leds)
-        where = f"--led-spectra {led_spectra}" if led_spectra is not None else f"--leds {n_leds or 7}"
-    check_emulated_booth(leds, where)
     closers: list = []
     line_errors: list[BaseException] = []
+    world = _sim_world("sim", ambient, scene, cfa, seed, camera, n_leds, led_spectra, flash_power)
     try:
-        power: dict[str, Any] = {} if flash_power is None else {"flash_power": flash_power}
-        world = SimulatedCamera.default(scene=scene_spec, ambient=ambient_spd, cfa=cfa, seed=seed,
-                                        camera=responsivities, led_spectra=leds, **power)
         closers.append(world.close)
         if booth_port is not None:
             booth = open_external_booth(booth_port, world.led_spectra, log_serial, closers)
@@ -349,7 +377,7 @@ def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spect
 
 
 class WiredFakeCamera:
-    """An ``AravisCamera`` on the GigE fake with the trigger wires the fake lacks, emulated.
+    """An ``AravisCamera`` on the GigE fake with the trigger wires the fake lacks, emulated, and a scene.
 
     The fake honours only software triggers and has no ExposureActive output, so:
 
@@ -364,33 +392,73 @@ class WiredFakeCamera:
     trigger input takes every edge, so booth pulses go through a queue and a thread that issues
     each software trigger only once the fake has acknowledged the previous one.
 
-    Mono frames are delivered as (H, W) and recorded as three identical channels by the writer
-    (:attr:`Rig.mono`; format v1 holds RGB or raw mosaics); the sequence's ``camera.extra`` says
-    so. The fake's frames carry no
-    light: its Mono16 test pattern (``arv_fake_camera_diagonal_ramp`` in Aravis 0.8.26) is
-    ``256 (x + y + frame_id) mod 65535`` scaled by gain and exposure, blind to the LED levels, so no
-    ambient estimate from it means anything with one channel or three.
+    **The scene** (``world`` given, the ``aravis-fake`` rig's default): Aravis does the streaming
+    (buffers, frame ids, timestamps), the exposure and gain features and the triggering; the
+    pixels of each frame it delivers are replaced by ``world``'s rendering
+    (:meth:`SimulatedCamera.render`) under the booth's LED levels *at the moment that frame was
+    triggered* — read from the emulator when the software trigger is issued (host-paced), when
+    the booth pulses the trigger line (booth master; the levels travel with the pulse through the
+    queue) or after ExposureActive is raised (camera master) — with the exposure and gain the
+    camera read back for that frame. Levels wait in a first-in first-out queue, one per issued
+    trigger, and are taken in frame order. The fake's own pixel generator cannot be given the
+    scene: ``arv_fake_camera_set_fill_pattern`` takes a C callback whose closure argument has
+    scope ``call`` and no destroy notify in Aravis 0.8's typelib
+    (``GIRepository``: ``fill_pattern_callback`` scope ``GI_SCOPE_TYPE_CALL``, closure 1, destroy
+    -1), so PyGObject frees the Python callback when ``set_fill_pattern`` returns, while the fake
+    calls it for every later frame from its stream thread.
+
+    Without ``world`` (the capture bench's transport figures) frames are the fake's test pattern,
+    blind to the LED levels (Mono16: ``256 (x + y + frame_id) mod 65535`` scaled by gain and exposure,
+    ``arv_fake_camera_diagonal_ramp`` in Aravis 0.8.26); mono frames come as (H, W) and the writer
+    records them as three identical channels (:attr:`Rig.mono`).
     """
 
-    suggested_exposure_us = 10_000.0
     TRIGGER_REGISTER = 0x30C
     """The fake's TriggerSoftware register (see ``genicam/fake_sfnc.xml``): 1 until the fake takes the trigger."""
 
     def __init__(self, camera: Any, emulator: BoothEmulator, fake: Any = None,
-                 errors: list[BaseException] | None = None) -> None:
+                 errors: list[BaseException] | None = None, world: SimulatedCamera | None = None) -> None:
         self.aravis = camera
+        self.world = world
+        """The scene's renderer, or None to keep the fake's test patterns."""
         self._emulator = emulator
         self._fake = fake
         self._errors = errors if errors is not None else []
         self._mode = "software"
         self._exposing = False
-        self._pulses: queue.Queue[bool] = queue.Queue()
+        self._pulses: queue.Queue[tuple[float, ...] | None] = queue.Queue()
         self._pulse_thread: threading.Thread | None = None
+        self._pending: collections.deque[tuple[float, ...]] = collections.deque()
+        self._pending_lock = threading.Lock()
+        self._rendered_levels: list[tuple[float, ...]] = []
+
+    @property
+    def suggested_exposure_us(self) -> float:
+        """An exposure that suits the scene (the world's reference exposure), 10 ms for test patterns."""
+        suggested = self.world.suggested_exposure_us if self.world is not None else None
+        return float(suggested or 10_000.0)
+
+    @property
+    def sensor(self) -> Any:
+        """The rendered sensor's model (noise, levels), or None for test patterns."""
+        return self.world.sensor if self.world is not None else None
+
+    @property
+    def rendered_levels(self) -> tuple[tuple[float, ...], ...]:
+        """The LED levels each frame delivered so far was rendered under, in order."""
+        with self._pending_lock:
+            return tuple(self._rendered_levels)
 
     @property
     def info(self) -> CameraInfo:
-        """The fake's identity; mono frames are delivered as RGB."""
-        return dataclasses.replace(self.aravis.info, cfa=None)
+        """The fake's identity and pixel format; with a scene, the rendered sensor's black and white levels,
+        else mono frames delivered as RGB."""
+        info = self.aravis.info
+        if self.world is None:
+            return dataclasses.replace(info, cfa=None)
+        return dataclasses.replace(info, black_level=self.world.sensor.black_level,
+                                   white_level=self.world.sensor.white_level,
+                                   extra={**info.extra, "pixels": f"rendered scene ({self.world.info.model})"})
 
     @property
     def exposure_range_us(self) -> tuple[float, float] | None:
@@ -405,6 +473,8 @@ class WiredFakeCamera:
     def start(self) -> None:
         """Start acquisition (and, for booth-paced plans, the thread that turns pulses into triggers)."""
         self._exposing = False
+        with self._pending_lock:
+            self._pending.clear()
         self.aravis.start()
         if self._mode == "booth":
             self._pulses = queue.Queue()
@@ -413,10 +483,10 @@ class WiredFakeCamera:
             self._pulse_thread.start()
 
     def _issue_pulses(self) -> None:
-        while self._pulses.get():
+        while (levels := self._pulses.get()) is not None:
             try:
                 self._wait_trigger_taken()
-                self.aravis.trigger()
+                self._software_trigger(levels)
             except Exception as err:  # noqa: BLE001 - the capture sees the missing frame
                 log.error("aravis-fake trigger line: %s", err)
                 self._errors.append(err)
@@ -428,6 +498,21 @@ class WiredFakeCamera:
         while self._fake.read_register(self.TRIGGER_REGISTER) != 0 and time.monotonic() < deadline:
             time.sleep(0.0005)
 
+    def _software_trigger(self, levels: tuple[float, ...]) -> None:
+        """Issue the fake's software trigger for a frame to be rendered under ``levels``.
+
+        The levels are queued first: the frame may arrive (on another thread) before the trigger
+        call returns. A trigger that fails takes its levels back (only one thread triggers at a time).
+        """
+        with self._pending_lock:
+            self._pending.append(levels)
+        try:
+            self.aravis.trigger()
+        except BaseException:
+            with self._pending_lock:
+                self._pending.pop()
+            raise
+
     def trigger(self) -> None:
         """Host-paced: software trigger; camera master: ExposureActive high, then software trigger."""
         if self._mode == "booth":
@@ -435,25 +520,46 @@ class WiredFakeCamera:
         if self._mode == "camera":
             self._emulator.exposure_active(True)
             self._exposing = True
-        self.aravis.trigger()
+        self._software_trigger(self._emulator.levels)
 
     def trigger_line(self) -> None:
-        """The booth pulsed the trigger input: queue a software trigger (see the class notes)."""
-        self._pulses.put(True)
+        """The booth pulsed the trigger input: queue a software trigger with the levels it exposes."""
+        self._pulses.put(self._emulator.levels)
 
     def next_frame(self, timeout_s: float) -> RawFrame:
-        """The next frame, (H, W) for mono; in camera master the exposure line falls when it arrives."""
+        """The next frame, (H, W); in camera master the exposure line falls when it arrives.
+
+        With a scene, its pixels are the scene rendered under the levels of its trigger, at the
+        exposure and gain the camera reports for it.
+        """
         try:
-            return self.aravis.next_frame(timeout_s)
+            frame = self.aravis.next_frame(timeout_s)
+        except FrameLostError:
+            self._take_levels()  # that trigger's frame is gone
+            raise
         finally:
             if self._exposing:
                 self._exposing = False
                 self._emulator.exposure_active(False)
+        levels = self._take_levels()
+        if self.world is None or levels is None:
+            return frame
+        pixels = self.world.render(levels, frame.exposure_us, frame.gain)
+        if pixels.shape != frame.pixels.shape:
+            raise CameraError(f"aravis-fake: the scene renders {pixels.shape} but the fake delivers "
+                              f"{frame.pixels.shape}; expected the ROI to be the scene's size")
+        with self._pending_lock:
+            self._rendered_levels.append(levels)
+        return dataclasses.replace(frame, pixels=pixels)
+
+    def _take_levels(self) -> tuple[float, ...] | None:
+        with self._pending_lock:
+            return self._pending.popleft() if self._pending else None
 
     def stop(self) -> None:
         """Stop acquisition and the trigger-line thread."""
         if self._pulse_thread is not None:
-            self._pulses.put(False)
+            self._pulses.put(None)
             self._pulse_thread.join(timeout=5.0)
             self._pulse_thread = None
         self.aravis.stop()
@@ -463,32 +569,81 @@ class WiredFakeCamera:
         self.aravis.close()
 
 
-def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int = 64, height: int = 48,
-                         pixel_format: str = "Mono16", serial: str = "MSFRIG01", **_ignored: object) -> Rig:
+ARAVIS_FAKE_PIXEL_FORMAT = "BayerRG16"
+"""The ``aravis-fake`` rig's pixel format with a scene (added to msflash's fake XML): a 16-bit RGGB mosaic."""
+ARAVIS_FAKE_PATCH_PX = 16
+"""Chart patch size of the ``aravis-fake`` rig's scene: the default chart is then 200 × 186 pixels, each
+patch 8 × 8 quads of the mosaic (the ``sim`` rig's 8-pixel patches give a noisier estimate from a mosaic;
+docs/architecture.md §4 has the figures)."""
+
+
+def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int | None = None, height: int | None = None,
+                         pixel_format: str | None = None, serial: str = "MSFRIG01", rendered: bool = True,
+                         ambient: str | Spectra = "tungsten", scene: str | Scene | Spectra = "chart110",
+                         seed: int = 0, camera: str | Spectra | None = None, n_leds: int | None = None,
+                         led_spectra: str | Path | Spectra | None = None, flash_power: float | None = None,
+                         patch_px: int | None = None, **_ignored: object) -> Rig:
     """The ``aravis-fake`` rig: AravisCamera on the GigE fake at 127.0.0.1 + emulator on a pty + LedBooth.
 
     Holds the machine-wide GVCP port lock (:func:`~acquisition.devices.aravis.camera.gvcp_port_lock`)
-    until closed. LED spectra: the paper's seven LEDs on :data:`DEFAULT_GRID` (zero outside their
-    measured range). Responsivity: ISETCam's :data:`AravisFakeNominalCamera`, recorded as nominal.
-    Sim-only options (``ambient``, ``scene``…) are ignored.
+    until closed.
+
+    ``rendered`` (the default): the frames are the ``sim`` rig's world (``ambient``,
+    ``scene``, ``seed``, ``camera``, ``n_leds``, ``led_spectra``, ``flash_power`` as for
+    :func:`open_sim_rig`; a chart's patches ``patch_px`` wide, default :data:`ARAVIS_FAKE_PATCH_PX`)
+    rendered by :class:`WiredFakeCamera` into the fake's frames, in :data:`ARAVIS_FAKE_PIXEL_FORMAT`
+    (RGGB) with the ROI the scene's size (``width``/``height`` None or equal to it; the default
+    chart is 200 × 186). The rig records the world's LED spectra, responsivities and true
+    ambient, as the ``sim`` rig does.
+
+    ``rendered`` False: the frames are the fake's test patterns (``pixel_format`` default Mono16,
+    ``width`` × ``height`` default 64 × 48): the paper's seven LEDs, ISETCam's
+    :data:`AravisFakeNominalCamera` recorded as nominal — the capture bench's transport figures.
+
+    Raises
+    ------
+    UsageError
+        A bad world option (named), or a ``width``/``height`` other than the scene's.
+    RigOpenError
+        The fake, the emulated booth or the world failed to open.
     """
     try:
         from msflash.acquisition.devices.aravis import camera as aravis_camera
     except ImportError as err:
         raise RigOpenError(f"rig 'aravis-fake': {err}") from err
+    world = None
+    if rendered:
+        world = _sim_world("aravis-fake", ambient, scene, "RGGB", seed, camera, n_leds, led_spectra, flash_power,
+                           ARAVIS_FAKE_PATCH_PX if patch_px is None else patch_px)
+        scene_height, scene_width = world.scene.shape
+        if (width or scene_width, height or scene_height) != (scene_width, scene_height):
+            raise UsageError(f"rig 'aravis-fake': ROI {width}x{height} but the scene is {scene_width}x{scene_height}; "
+                             "expected the scene's size (the rendered mosaic fills the ROI)")
+        width, height = scene_width, scene_height
+        pixel_format = pixel_format or ARAVIS_FAKE_PIXEL_FORMAT
+        leds, responsivities = world.led_spectra, world.camera_responsivities
+    else:
+        width, height, pixel_format = width or 64, height or 48, pixel_format or "Mono16"
+        leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
+        responsivities = datasets.isetcam_camera(AravisFakeNominalCamera).resample(DEFAULT_GRID, outside="zero")
     closers: list = []
     line_errors: list[BaseException] = []
     failures: dict[str, BaseException] = {}
-    camera = booth = emulator = None
-    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
-    responsivities = datasets.isetcam_camera(AravisFakeNominalCamera).resample(DEFAULT_GRID, outside="zero")
+    emulator = booth = None
     try:
+        if world is not None:
+            from msflash.acquisition.devices.aravis.fake_log import mute_unfilled_format_warning
+
+            closers.append(mute_unfilled_format_warning())  # the pixels are rendered: its lines say nothing
         fake = aravis_camera.AravisGvFake(serial=serial)
         fake.start()
         closers.append(fake.close)
         aravis = aravis_camera.AravisCamera(fake.address, interfaces="gige", pixel_format=pixel_format,
                                             roi=(0, 0, width, height))
         closers.append(aravis.close)
+        if world is not None and aravis.info.cfa != world.sensor.cfa:
+            raise RigOpenError(f"pixel format {pixel_format} has CFA {aravis.info.cfa}; expected "
+                               f"{world.sensor.cfa}, the rendered mosaic's")
     except Exception as err:  # noqa: BLE001 - reported with the booth's failure, if any
         failures[f"camera GigE fake {serial} at 127.0.0.1"] = err
         aravis = None
@@ -501,13 +656,18 @@ def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int = 64, 
         listing = "; ".join(f"{device}: {err}" for device, err in failures.items())
         raise RigOpenError(f"rig 'aravis-fake': {listing}") from next(iter(failures.values()))
     assert aravis is not None and emulator is not None and booth is not None
-    camera = WiredFakeCamera(aravis, emulator, fake, line_errors)
-    closers.insert(2, camera.stop)  # before the AravisCamera and the fake are released
-    emulator.on_trigger_out = _line(line_errors, "aravis-fake trigger line", camera.trigger_line)
-    extra = {"responsivity_note":
-             f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning"}
-    return Rig("aravis-fake", camera, booth, leds, responsivities, None, closers, emulator=emulator,
-               line_errors=line_errors, camera_extra=extra, mono=True)
+    wired = WiredFakeCamera(aravis, emulator, fake, line_errors, world=world)
+    closers.insert(closers.index(aravis.close) + 1, wired.stop)  # before the AravisCamera and the fake are released
+    emulator.on_trigger_out = _line(line_errors, "aravis-fake trigger line", wired.trigger_line)
+    if world is None:
+        extra = {"responsivity_note":
+                 f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning"}
+        return Rig("aravis-fake", wired, booth, leds, responsivities, None, closers, emulator=emulator,
+                   line_errors=line_errors, camera_extra=extra, mono=pixel_format.startswith("Mono"))
+    extra = {"pixels": f"the Aravis fake's frames, pixels rendered by {world.info.model} under the booth's LEDs "
+                       "at each frame's trigger"}
+    return Rig("aravis-fake", wired, booth, leds, responsivities, world.true_ambient, closers, emulator=emulator,
+               line_errors=line_errors, camera_extra=extra)
 
 
 def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None, **_ignored: object) -> Rig:
@@ -538,7 +698,7 @@ def open_rig(spec: str, **options: Any) -> Rig:
     if spec == "sim":
         return open_sim_rig(**options)
     if spec == "aravis-fake":
-        return open_aravis_fake_rig(log_serial=options.get("log_serial"))
+        return open_aravis_fake_rig(**options)
     if spec.startswith("replay:") and len(spec) > len("replay:"):
         return open_replay_rig(spec[len("replay:"):], log_serial=options.get("log_serial"))
     raise UsageError(f"--rig '{spec}': unknown; expected one of {', '.join(RIG_SPECS)}")

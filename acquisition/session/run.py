@@ -136,9 +136,6 @@ def plan_exposure(rig: Rig, exposure_option: str | float, policy: ExposurePolicy
         return ExposurePlan(recorded.ambient_us, recorded.led_us, nan, method, limits, policy, mode="recorded",
                             ambient_gain=recorded.ambient_gain, led_gains=recorded.led_gains)
     suggested = float(getattr(rig.camera, "suggested_exposure_us", None) or 10_000.0)
-    if rig.name == "aravis-fake":  # test patterns: nothing to meter
-        return ExposurePlan(suggested, (suggested,) * n_leds, nan, method, limits, policy, mode="suggested",
-                            warnings=["aravis-fake: test patterns carry no light to meter; the rig's exposure is used"])
     progress(f"auto exposure: metering ambient previews (≤ {policy.max_saturated_fraction:.2%} saturated, "
              f"bright end at {policy.target_fraction:.0%} of full scale)")
     info = rig.camera.info

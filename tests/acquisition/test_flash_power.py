@@ -84,7 +84,8 @@ def test_the_report_prints_the_led_bound_beside_the_estimate(demo: tuple[Path, s
 @pytest.mark.parametrize(("argv", "message"), [
     (["--flash-power", "0"], "argument --flash-power: '0': expected a positive number"),
     (["--flash-power", "nan"], "argument --flash-power: 'nan': expected a positive number"),
-    (["--flash-power", "2", "--rig", "aravis-fake"], "--flash-power: describes the simulated rig, but the rig is 'aravis-fake'"),
+    (["--flash-power", "2", "--rig", "replay:nowhere"], "--flash-power: describes the simulated world, but the rig is "
+                                                        "'replay:nowhere'"),
 ])
 def test_bad_flash_power(tmp_path: Path, capsys: pytest.CaptureFixture, argv: list[str], message: str) -> None:
     assert main(["capture", "--out", str(tmp_path / "c"), *argv]) == 2

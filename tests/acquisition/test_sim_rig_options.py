@@ -175,9 +175,14 @@ def _bad_files(tmp_path: Path) -> dict[str, Path]:
     (["--led-spectra", "{star}"], "--led-spectra {star}: 1 LED channel(s) (a*b): the booth emulator cannot serve"),
     (["--leds", "3", "--led-spectra", "{dark}"], "--leds 3 and --led-spectra {dark}: two LED sets; expected one"),
     (["--leds", "8"], "argument --leds: invalid choice: 8 (choose from 3, 4, 5, 6, 7)"),
-    (["--rig", "aravis-fake", "--sim-camera", "NikonD70"], "--sim-camera: describes the simulated rig, but the rig "
-                                                           "is 'aravis-fake'; expected --rig sim"),
-    (["--rig", "aravis-fake", "--cfa", "RGGB"], "--cfa: describes the simulated rig, but the rig is 'aravis-fake'"),
+    (["--rig", "replay:{percent}", "--sim-camera", "NikonD70"], "--sim-camera: describes the simulated world, but the "
+                                                                "rig is 'replay:{percent}'; expected --rig sim or "
+                                                                "aravis-fake"),
+    # aravis-fake renders the same world: its options are checked the same way, before the fake opens.
+    (["--rig", "aravis-fake", "--ambient", "moonlight"], "--ambient: light 'moonlight': unknown; expected one of "),
+    (["--rig", "aravis-fake", "--scene", "{percent}"], "--scene {percent}: reflectances span 40–40"),
+    (["--rig", "aravis-fake", "--cfa", "RGGB"], "--cfa: describes the simulated rig's camera, but the rig is "
+                                                "'aravis-fake' (its frames are BayerRG16, an RGGB mosaic)"),
     # Hardware options the simulated rig used to ignore without a word (it read no --responsivity file at all).
     (["--responsivity", "{percent}"], "--responsivity: describes a hardware rig's camera or booth, but the rig is "
                                       "'sim' and would ignore it (the simulated camera is --sim-camera"),

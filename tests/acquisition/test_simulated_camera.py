@@ -199,3 +199,28 @@ class TestDefaultWorld:
         assert camera.info.pixel_format == "BayerBG16" and camera.info.cfa == "BGGR"
         frames = capture(camera, CapturePlan.ambient_then_each_led(N_LEDS, 10_000.0))
         assert len(frames) == N_LEDS + 1 and frames[0].pixels.shape == camera.scene.shape
+
+
+def test_render_is_the_renderer_triggers_use() -> None:
+    """One renderer: ``render`` under a step's levels, exposure and gain gives the frame ``trigger`` gives
+    (same seed, same order), noise included; the aravis-fake rig paints the fake's frames with it."""
+    plan = CapturePlan.ambient_then_each_led(N_LEDS, 4_000.0, gain=2.0, led_exposures_us=[3_000.0] * N_LEDS)
+    triggered = capture(small_world(), plan)
+    world = small_world()
+    rendered = [world.render(step.led_levels, step.exposure_us, step.gain) for step in plan.steps]
+    for frame, pixels in zip(triggered, rendered):
+        assert np.array_equal(frame.pixels, pixels)
+    assert not np.array_equal(rendered[0], rendered[1])  # the LED's light is in the frame
+
+
+@pytest.mark.parametrize(("levels", "exposure_us", "gain", "message"), [
+    ((0.5,) * (N_LEDS - 1), 1_000.0, 1.0, "expected 7 values in \\[0, 1\\]"),
+    ((1.5,) + (0.0,) * (N_LEDS - 1), 1_000.0, 1.0, "expected 7 values in \\[0, 1\\]"),
+    (("x",) * N_LEDS, 1_000.0, 1.0, "are not numbers"),
+    ((0.0,) * N_LEDS, -1.0, 1.0, "expected exposure ≥ 0 and gain > 0"),
+    ((0.0,) * N_LEDS, 1_000.0, 0.0, "expected exposure ≥ 0 and gain > 0"),
+])
+def test_render_refuses_bad_levels_exposure_or_gain(levels: tuple, exposure_us: float, gain: float,
+                                                    message: str) -> None:
+    with pytest.raises(CameraError, match=message):
+        small_world().render(levels, exposure_us, gain)
