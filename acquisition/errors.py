@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from msflash.led_controller.errors import BoothError
 
+
 class UsageError(ValueError):
     """Bad input from the user (a file, field or option); the CLI exits with status 2."""
 

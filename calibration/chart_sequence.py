@@ -270,7 +270,7 @@ def estimate_from_measurements(measurements: ChartMeasurements, method: str = "p
     fit: ChannelFit = fit_channels(m.design[known], m.data[known], m.std[known], method, prior)
     scales = np.ones(len(m.group_names))
     iterations = 0
-    for iterations in range(1, SCALE_ITERATIONS + 1):
+    for iterations in range(1, SCALE_ITERATIONS + 1):  # noqa: B007 - read after the loop (how many it took)
         if not m.group_names:
             break
         new = scales.copy()

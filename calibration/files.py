@@ -44,7 +44,7 @@ from msflash.processing.datasets import load_spectra_csv
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.negative_values import clip_negative_noise
-from msflash.processing.spectra import SpectralKind, Spectra
+from msflash.processing.spectra import Spectra, SpectralKind
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 FORMAT = "msflash-calibration"

@@ -21,6 +21,7 @@ from types import TracebackType
 from typing import Any
 
 from msflash.led_controller.protocol import (
+    HOLD_FLAG,
     MARK_EVENT,
     MARK_REPLY,
     MARK_REQUEST,
@@ -30,7 +31,6 @@ from msflash.led_controller.protocol import (
     WATCHDOG_MAX_MS,
     WATCHDOG_MIN_MS,
     Command,
-    HOLD_FLAG,
     ErrorCode,
     Event,
     Mode,

@@ -62,8 +62,8 @@ def read_sequence(path: str | Path, calibration: str | Path | None = None) -> Se
         The file is missing, malformed or names frames or calibrations that are not usable; the
         message names the file and the field.
     """
-    from msflash.acquisition.session.analysis import apply_calibration
     from msflash.acquisition.sequence.format import read_sequence as read
+    from msflash.acquisition.session.analysis import apply_calibration
 
     sequence, notes = apply_calibration(read(path), calibration)
     for note in notes:

@@ -34,7 +34,14 @@ from typing import Any, Literal
 import numpy as np
 
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.spectra import DEFAULT_GRID, SpectralKind, SpectralUnit, Spectra, WavelengthGrid, require_same_grid
+from msflash.processing.spectra import (
+    DEFAULT_GRID,
+    Spectra,
+    SpectralKind,
+    SpectralUnit,
+    WavelengthGrid,
+    require_same_grid,
+)
 from msflash.processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_text, shown_path
 
 DATA_DIR = Path(__file__).resolve().parent / "data"

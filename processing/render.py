@@ -21,9 +21,9 @@ import warnings
 
 import numpy as np
 
+from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.image_formation import surface_responses
-from msflash.processing import datasets
 from msflash.processing.spectra import Spectra, WavelengthGrid, require_same_grid
 
 CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")

@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import subprocess
 import time
-
 from collections.abc import Sequence
 from functools import cache
 from pathlib import Path
@@ -19,7 +18,15 @@ import pytest
 
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
 from msflash.processing import datasets, lights
-from msflash.processing.image_formation import Scene, SensorModel, chart_scene, expected_response, exposure_for_peak, mosaic, render_frame
+from msflash.processing.image_formation import (
+    Scene,
+    SensorModel,
+    chart_scene,
+    expected_response,
+    exposure_for_peak,
+    mosaic,
+    render_frame,
+)
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 from msflash.processing.statistics import FrameStackSpec
 

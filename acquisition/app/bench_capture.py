@@ -47,8 +47,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.session.capture import READOUT_US, TRIGGER_PULSE_US
 from msflash.acquisition.plan import CapturePlan, PlanTiming
+from msflash.acquisition.session.capture import READOUT_US, TRIGGER_PULSE_US
 
 WALL_RATIO_TARGET = 1.15
 LATENCY_MEDIAN_TARGET_MS = 5.0

@@ -9,16 +9,15 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.session import analysis
-from msflash.acquisition.app.options import add_estimation_options
 from msflash.acquisition.app.cli_common import UsageError, positive_int, print_json, progress
-from msflash.acquisition.sequence.image_files import read_image_header, write_image
+from msflash.acquisition.app.options import add_estimation_options
 from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.acquisition.sequence.image_files import read_image_header, write_image
+from msflash.acquisition.session import analysis
 from msflash.processing.ambient import LED_SIGNAL_Z
 from msflash.processing.errors import TargetUnreachableWarning
 from msflash.processing.local import DEFAULT_TILES, LOCAL_METHODS
 from msflash.processing.synthesis import to_raw_values
-
 
 DEFAULT_LOCAL_METHOD = "auto"
 """Default of ``--method``: ``auto`` keeps the global estimate unless a local model predicts held-out tiles

@@ -30,16 +30,20 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.folder_claim import FolderClaim, claim_folder
 from msflash.acquisition.app.camera_options import add_camera_options, camera_options_from_args, given_camera_options
 from msflash.acquisition.app.cli_common import UsageError, dumps_json, output_directory, progress
 from msflash.acquisition.app.options import add_estimation_options
+from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.errors import CaptureError, OutputWriteError
-from msflash.acquisition.session.external_booth import check_booth_port
+from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
+from msflash.acquisition.sequence.folder_claim import FolderClaim, claim_folder
+from msflash.acquisition.sequence.format import (
+    read_sequence,
+)
 from msflash.acquisition.session.exposure import (
     ExposurePolicy,
 )
+from msflash.acquisition.session.external_booth import check_booth_port
 from msflash.acquisition.session.rig import Rig, open_rig
 from msflash.acquisition.session.run import (
     SYNC_MODES,
@@ -51,10 +55,6 @@ from msflash.acquisition.session.run import (
     run_one_stream,
     run_two_captures,
     sequence_writer,
-)
-from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
-from msflash.acquisition.sequence.format import (
-    read_sequence,
 )
 from msflash.led_controller.booth import sigterm_as_exit
 from msflash.processing.datasets import PAPER_LED_SUBSETS

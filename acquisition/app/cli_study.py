@@ -21,7 +21,14 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.app.cli_common import UsageError, dumps_json, output_directory, positive_int, print_json, progress
+from msflash.acquisition.app.cli_common import (
+    UsageError,
+    dumps_json,
+    output_directory,
+    positive_int,
+    print_json,
+    progress,
+)
 from msflash.processing.ambient import AMBIENT_METHODS
 
 STUDIES = ("table1", "surfaces", "cameras", "xy", "failure", "pareto")

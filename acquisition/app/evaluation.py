@@ -45,11 +45,11 @@ from typing import Any, Literal
 
 import numpy as np
 
-from msflash.acquisition.session import analysis
 from msflash.acquisition.app.cli_common import UsageError, dumps_json, progress
 from msflash.acquisition.app.html_report import HtmlReport
-from msflash.acquisition.sequence.image_files import write_image
 from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.sequence.image_files import write_image
+from msflash.acquisition.session import analysis
 from msflash.calibration import chart_detection
 from msflash.processing import colour_metrics, datasets, lights, water
 from msflash.processing.ambient import estimate_ambient

@@ -11,11 +11,11 @@ from typing import Any
 
 import numpy as np
 
-from msflash.acquisition.session import analysis
 from msflash.acquisition.app.cli_common import dumps_json
 from msflash.acquisition.errors import OutputWriteError
-from msflash.acquisition.sequence.image_files import write_image
 from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.sequence.image_files import write_image
+from msflash.acquisition.session import analysis
 from msflash.processing import datasets
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.flash import FlashSolution

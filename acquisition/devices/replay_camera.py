@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
-from msflash.acquisition.errors import CameraError, ReplayMismatchError
 from msflash.acquisition.devices.frame_queue import TriggeredFrames
+from msflash.acquisition.errors import CameraError, ReplayMismatchError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.sequence.format import Sequence, read_sequence
 

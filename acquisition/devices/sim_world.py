@@ -33,7 +33,7 @@ from msflash.acquisition.progress import progress
 from msflash.processing import datasets, lights
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.negative_values import clip_negative_noise
-from msflash.processing.spectra import DEFAULT_GRID, SpectralKind, Spectra, WavelengthGrid
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, SpectralKind, WavelengthGrid
 from msflash.processing.user_files import shown_path
 
 SimSceneName = Literal["chart110", "macbeth", "white"]

@@ -32,8 +32,8 @@ from typing import Literal
 import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
-from msflash.acquisition.errors import CameraError
 from msflash.acquisition.devices.frame_queue import TriggeredFrames
+from msflash.acquisition.errors import CameraError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.processing import datasets, lights
 from msflash.processing.image_formation import (

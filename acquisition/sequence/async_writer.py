@@ -40,9 +40,16 @@ from types import TracebackType
 
 import numpy as np
 
-from msflash.acquisition.errors import RecordingError, OutputWriteError
+from msflash.acquisition.errors import OutputWriteError, RecordingError
+from msflash.acquisition.sequence.format import (
+    FRAME_ROLES,
+    FRAMES_DIR,
+    FrameRole,
+    Sequence,
+    SequenceFrame,
+    SequenceWriter,
+)
 from msflash.acquisition.sequence.image_files import image_suffix
-from msflash.acquisition.sequence.format import FRAME_ROLES, FRAMES_DIR, FrameRole, Sequence, SequenceFrame, SequenceWriter
 
 log = logging.getLogger(__name__)
 

@@ -21,8 +21,8 @@ from msflash.processing import datasets
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
-from msflash.processing.model_error import reference_for, with_model_error
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, estimate_local, synthesize_local, tile_statistics
+from msflash.processing.model_error import reference_for, with_model_error
 from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
 from msflash.processing.synthesis import synthesize

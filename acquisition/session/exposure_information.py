@@ -152,7 +152,7 @@ def most_informative(blocks: Blocks, start_ambient_us: float, start_led_us: Sequ
             joint = np.min(np.stack((blocks.ambient_crossing, *blocks.led_crossings)) / exposures[:, None], axis=0)
             scale_limits = (float(np.max(limits[0] / exposures)), float(np.min(limits[1] / exposures)))
 
-            def joint_score(values: np.ndarray) -> np.ndarray:
+            def joint_score(values: np.ndarray, led_us: list[float] = led_us, ambient_us: float = ambient_us) -> np.ndarray:
                 scale = values[:, None, None]
                 return sum((information(r, blocks.ambient, scale * led_us[k], scale * ambient_us, dn_per_e, read_dn)
                             for k, r in enumerate(leds)), np.zeros(()))
@@ -162,7 +162,7 @@ def most_informative(blocks: Blocks, start_ambient_us: float, start_led_us: Sequ
                 ambient_us, led_us = ambient_us * factor, [t * factor for t in led_us]
             elsewhere = lost_by(-1)
 
-            def ambient_score(values: np.ndarray) -> np.ndarray:
+            def ambient_score(values: np.ndarray, led_us: list[float] = led_us) -> np.ndarray:
                 shape = values[:, None, None]
                 return sum((information(r, blocks.ambient, np.float64(led_us[k]), shape, dn_per_e, read_dn)
                             for k, r in enumerate(leds)), np.zeros(()))
@@ -173,7 +173,8 @@ def most_informative(blocks: Blocks, start_ambient_us: float, start_led_us: Sequ
             others = sum((information(r, blocks.ambient, np.float64(led_us[j]), np.float64(ambient_us), dn_per_e,
                                       read_dn) for j, r in enumerate(leds) if j != k), np.zeros(n_blocks))
 
-            def led_score(values: np.ndarray, rate: np.ndarray = rate, others: np.ndarray = others) -> np.ndarray:
+            def led_score(values: np.ndarray, rate: np.ndarray = rate, others: np.ndarray = others,
+                          ambient_us: float = ambient_us) -> np.ndarray:
                 own = information(rate, blocks.ambient, values[:, None, None], np.float64(ambient_us), dn_per_e, read_dn)
                 return own + others[None, :]
 

@@ -12,8 +12,7 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
-from msflash.acquisition.errors import UsageError
-from msflash.acquisition.errors import RigOpenError
+from msflash.acquisition.errors import RigOpenError, UsageError
 from msflash.led_controller import LedBooth
 from msflash.led_controller.recovery import reset_leftovers
 from msflash.processing.spectra import Spectra

@@ -27,15 +27,18 @@ from collections.abc import Sequence as Seq
 
 import numpy as np
 
-from msflash.acquisition.session import analysis
 from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
 from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.session import analysis
+from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.flash import FlashBounds, FlashModel, FlashSolution
 from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import BlockRows, SequenceStatistics, cfa_planes
+
+DEFAULT_EXPOSURE_POLICY = ExposurePolicy()
+"""The policy a session predicts the flash exposure with unless given one (frozen: one instance serves all)."""
 
 
 class FlashDecision:
@@ -71,7 +74,7 @@ class FlashSession:
     def __init__(self, header: Sequence, leds: Spectra, model: FlashModel, target_response: np.ndarray | None,
                  method: str, alpha: float | str, bin_factor: int,
                  exposure_limits_us: tuple[float, float] | None = None,
-                 exposure_policy: ExposurePolicy = ExposurePolicy()) -> None:
+                 exposure_policy: ExposurePolicy = DEFAULT_EXPOSURE_POLICY) -> None:
         self.header = header
         self.leds = leds
         self.model = model
@@ -87,7 +90,7 @@ class FlashSession:
     @classmethod
     def prepare(cls, header: Sequence, target: str = "D65", method: str = "tikhonov", alpha: float | str = "auto",
                 bin_factor: int = analysis.DEFAULT_BIN_FACTOR, exposure_limits_us: tuple[float, float] | None = None,
-                exposure_policy: ExposurePolicy = ExposurePolicy()) -> FlashSession:
+                exposure_policy: ExposurePolicy = DEFAULT_EXPOSURE_POLICY) -> FlashSession:
         """Prepare from a sequence header (LEDs, camera, grid); ``target`` for the complementary flash.
 
         With ``exposure_limits_us`` (the camera's range) the flash exposure is predicted too

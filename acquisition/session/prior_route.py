@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session.analysis import (
     DEFAULT_BIN_FACTOR,
     FrameStack,
@@ -18,7 +19,6 @@ from msflash.acquisition.session.analysis import (
     load_frame_stack,
     spectrum_in_sequence_unit,
 )
-from msflash.acquisition.sequence.format import Sequence
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
 from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model

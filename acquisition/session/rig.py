@@ -55,17 +55,24 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
-from msflash.acquisition.errors import CameraError, CameraSettingError, FrameLostError, RigOpenError, UsageError
-from msflash.acquisition.progress import progress
-from msflash.acquisition.session.external_booth import levels_reported_by, open_external_booth
-from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
-from msflash.acquisition.devices.sim_world import read_responsivity_file, read_spectra_file, sim_ambient, sim_camera, sim_leds, sim_scene
+from msflash.acquisition.devices.sim_world import (
+    read_responsivity_file,
+    read_spectra_file,
+    sim_ambient,
+    sim_camera,
+    sim_leds,
+    sim_scene,
+)
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera
+from msflash.acquisition.errors import CameraError, CameraSettingError, FrameLostError, RigOpenError, UsageError
+from msflash.acquisition.plan import CapturePlan
+from msflash.acquisition.progress import progress
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.session.external_booth import levels_reported_by, open_external_booth
 from msflash.led_controller import BoothEmulator, LedBooth, serve_on_pty
 from msflash.led_controller.errors import BoothProtocolError
-from msflash.led_controller.recovery import reset_leftovers
 from msflash.led_controller.protocol import Command, encode_request, parse_frame, parse_identify, parse_reply
+from msflash.led_controller.recovery import reset_leftovers
 from msflash.processing import datasets
 from msflash.processing.image_formation import Scene
 from msflash.processing.spectra import DEFAULT_GRID, Spectra

@@ -30,8 +30,8 @@ from msflash.processing.study.table1 import (
     MapFunction,
     Progress,
     direct_fit,
-    evaluate_camera,
     evaluate_all_cameras,
+    evaluate_camera,
 )
 
 

@@ -46,7 +46,14 @@ from msflash.processing.study.noisy import (
     reliability,
     render_stack,
 )
-from msflash.processing.study.table1 import MapFunction, Progress, direct_fit, flash_norm, led_subset_indices, select_cameras
+from msflash.processing.study.table1 import (
+    MapFunction,
+    Progress,
+    direct_fit,
+    flash_norm,
+    led_subset_indices,
+    select_cameras,
+)
 
 FACTORS: dict[str, dict[str, Any]] = {
     "n_leds": {"levels": [7, 6, 5, 4, 3], "label": "number of LEDs (paper subsets)"},

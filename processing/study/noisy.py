@@ -32,8 +32,13 @@ from typing import Any
 
 import numpy as np
 
-from msflash.processing.ambient import CONDITION_WARNING, RESIDUAL_WARNING, SATURATION_WARNING, AmbientEstimate, estimate_ambient
-from msflash.processing.model_error import EXPECTED_RATIO_WARNING, reference_for, with_model_error
+from msflash.processing.ambient import (
+    CONDITION_WARNING,
+    RESIDUAL_WARNING,
+    SATURATION_WARNING,
+    AmbientEstimate,
+    estimate_ambient,
+)
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.image_formation import (
     Scene,
@@ -45,6 +50,7 @@ from msflash.processing.image_formation import (
     total_illumination,
 )
 from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.model_error import EXPECTED_RATIO_WARNING, reference_for, with_model_error
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
 from msflash.processing.study.table1 import flash_norm, led_subset_indices

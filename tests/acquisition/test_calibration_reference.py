@@ -13,11 +13,11 @@ from types import ModuleType
 
 import pytest
 
-from msflash.acquisition.session import analysis
 from msflash.acquisition.app.cli import main
-from msflash.acquisition.session.rig import _emulator_for, hw_spectra
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session import analysis
+from msflash.acquisition.session.rig import _emulator_for, hw_spectra
 from msflash.calibration.files import CalibrationSet, load_calibration, save_calibration
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets

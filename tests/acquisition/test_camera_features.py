@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 
+from msflash.acquisition.app.cli import main
 from msflash.acquisition.devices.aravis.camera_features import (
     CameraOptions,
     apply_camera_options,
@@ -27,11 +28,10 @@ from msflash.acquisition.devices.aravis.camera_features import (
     parse_feature,
     parse_roi,
 )
-from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import CameraSettingError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.session.rig import HardwareCamera, _emulator_for
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session.rig import HardwareCamera, _emulator_for
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID

@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.session.capture import run_capture
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import DroppedFrameError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.session.rig import Rig, open_sim_rig
 from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
+from msflash.acquisition.session.capture import run_capture
+from msflash.acquisition.session.rig import Rig, open_sim_rig
 
 MODES = ("software", "booth", "camera")
 

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 
-from msflash.acquisition.session.capture import host_silence_s, preview_frames, run_capture
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.session.rig import Rig, open_sim_rig
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session.capture import host_silence_s, preview_frames, run_capture
+from msflash.acquisition.session.rig import Rig, open_sim_rig
 from msflash.led_controller.booth import levels_close
 
 SHORT_WATCHDOG_S = 0.2
@@ -134,8 +134,8 @@ def test_a_frame_the_watchdog_darkened_is_refused_not_kept(
     """A host that stalls beyond its planned silence (here: the plan's silence taken as nil, so the
     watchdog is not raised) lets the watchdog switch the LED off mid-exposure: host paced, the next
     SET would just work, so the dark LED frame must be refused by name, not written as good data."""
-    from msflash.acquisition.session import capture
     from msflash.acquisition.errors import CaptureError
+    from msflash.acquisition.session import capture
 
     monkeypatch.setattr(capture, "host_silence_s", lambda plan: 0.0)
     plan = CapturePlan(CapturePlan.ambient_then_each_led(4, 300_000.0).steps[:3])

@@ -11,10 +11,7 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
-
-import pytest
 
 from msflash.acquisition.sequence.format import read_sequence
 from tests.helpers import wait_for_frames

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from msflash.acquisition.sequence import format as sequence_format
 from msflash.acquisition.app.cli import main
+from msflash.acquisition.sequence import format as sequence_format
 from msflash.acquisition.sequence.format import read_sequence
 
 FULL_AT = 3

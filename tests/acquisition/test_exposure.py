@@ -14,12 +14,12 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from msflash.acquisition.session import exposure as ex
-from msflash.acquisition.session.capture import preview_frames
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.session.rig import Rig, open_sim_rig
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session import exposure as ex
+from msflash.acquisition.session.capture import preview_frames
+from msflash.acquisition.session.rig import Rig, open_sim_rig
 
 N_LEDS = 4
 POLICY = ex.ExposurePolicy()

@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
+from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
 from msflash.acquisition.session.capture import run_capture_with_flash
 from msflash.acquisition.session.flash_session import FlashSession
-from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.session.rig import open_sim_rig
-from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
 
 
 def _writer(rig, path: Path) -> SequenceWriter:
@@ -312,8 +312,8 @@ def test_flash_step_released_with_now_only_in_booth_master(sim_rig, tmp_path: Pa
 def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim_rig, tmp_path: Path, levels) -> None:
     """A mono camera's (H, W) frames: the writer records three identical channels; the session
     block-sums the one plane and gives the statistics (and estimate) of the recorded sequence."""
-    from msflash.acquisition.session import analysis
     from msflash.acquisition.devices.camera import RawFrame
+    from msflash.acquisition.session import analysis
     from msflash.acquisition.session.exposure import flash_exposure
 
     info = sim_rig.camera.info

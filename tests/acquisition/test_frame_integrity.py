@@ -17,8 +17,8 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.frame_integrity import black_margin, check_frame_levels
 from msflash.acquisition.sequence.format import read_sequence, write_sequence
+from msflash.acquisition.sequence.frame_integrity import black_margin, check_frame_levels
 from tests.helpers import SAMPLES_DIR
 
 BAYER_12BIT = SAMPLES_DIR / "sample-bayer-fluorescent-12bit"

@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from msflash.acquisition.errors import CameraError
 from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, packed_size, unpack_pixels
+from msflash.acquisition.errors import CameraError
 
 
 def _bit(value: int, k: int) -> int:

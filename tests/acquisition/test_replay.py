@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app.cli import main
+from msflash.acquisition.devices.replay_camera import ReplayCamera
 from msflash.acquisition.errors import ReplayMismatchError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.devices.replay_camera import ReplayCamera
 from msflash.acquisition.sequence.format import read_sequence
 
 RECORDED = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
@@ -129,8 +129,8 @@ def test_a_booth_that_fails_to_open_is_named_and_the_rig_is_closed(monkeypatch: 
     rig and the pty, and what was already open (camera, pty server) is closed again."""
     import threading
 
-    from msflash.acquisition.session import rig
     from msflash.acquisition.errors import RigOpenError
+    from msflash.acquisition.session import rig
 
     def refuse(port, **_kwargs):
         raise OSError(f"cannot open {port}")

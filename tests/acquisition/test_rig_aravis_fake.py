@@ -18,9 +18,9 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
+from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.capture import run_capture
 from msflash.acquisition.session.rig import ARAVIS_FAKE_PIXEL_FORMAT, open_aravis_fake_rig, open_rig
-from msflash.acquisition.sequence.format import read_sequence
 from msflash.processing import datasets
 
 pytestmark = pytest.mark.aravis

@@ -19,8 +19,8 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import RigOpenError
-from msflash.acquisition.session.rig import _emulator_for, load_hw_spectra, open_rig
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session.rig import _emulator_for, load_hw_spectra, open_rig
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID, Spectra

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.sequence import format as sequence_format
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence import format as sequence_format
 from msflash.acquisition.sequence.check import FILE_STATES, check_sequence
 from msflash.acquisition.sequence.format import read_sequence
 from tests.helpers import forget_digests, write_test_sequence

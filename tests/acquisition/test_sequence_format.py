@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.image_files import read_image, read_image_header, write_image
 from msflash.acquisition.sequence.format import (
     SequenceCamera,
     SequenceFrame,
@@ -28,6 +27,7 @@ from msflash.acquisition.sequence.format import (
     read_sequence,
     write_sequence,
 )
+from msflash.acquisition.sequence.image_files import read_image, read_image_header, write_image
 from tests.helpers import forget_digests
 
 REPOSITORY = Path(__file__).resolve().parents[2]

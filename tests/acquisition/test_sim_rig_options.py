@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.devices import simulated_camera
 from msflash.acquisition.app.cli import main
-from msflash.acquisition.session.rig import open_sim_rig
+from msflash.acquisition.devices import simulated_camera
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session.rig import open_sim_rig
 from msflash.processing import datasets, lights
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.spectra import DEFAULT_GRID

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.devices.camera import Camera
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.errors import CameraError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.processing import datasets, lights
 from msflash.processing.image_formation import SensorModel, chart_scene, expected_response, total_illumination
 from msflash.processing.spectra import DEFAULT_GRID, Spectra

@@ -44,7 +44,7 @@ def write_baseline_tiff(path: Path, pixels: np.ndarray, *, big_endian: bool = Fa
     strip_offset = extra_start + len(extra)
     ifd = bytearray(struct.pack(f"{order}H", len(entries)))
     offset = extra_start
-    for tag, kind, values, code, payload in packed_entries:
+    for tag, kind, values, _code, payload in packed_entries:
         if tag == 273:
             payload = struct.pack(f"{order}I", strip_offset)
         if len(payload) > 4:

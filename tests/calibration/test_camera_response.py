@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from msflash.calibration.camera_response import estimate_responsivities, learn_prior, measurement_matrix, responsivity_rmse
+from msflash.calibration.camera_response import (
+    estimate_responsivities,
+    learn_prior,
+    measurement_matrix,
+    responsivity_rmse,
+)
 from msflash.calibration.errors import CalibrationError
 from msflash.calibration.validation import calibration_lights, leave_one_camera_out, summarise
 from msflash.processing import datasets

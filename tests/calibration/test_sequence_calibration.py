@@ -132,7 +132,8 @@ def test_bad_light_csv_names_the_file(tmp_path):
 def test_unusable_frames_are_refused(rgb_sequences):
     sequence = read_sequence(rgb_sequences[0])
     chart = datasets.macbeth().resample(sequence.grid, outside="edge")
-    nothing = lambda shape, excluded: np.full(shape, -1, dtype=np.int64)
+    def nothing(shape, excluded):
+        return np.full(shape, -1, dtype=np.int64)
     with pytest.raises(CalibrationError, match=r"001-led.tiff: only 0 of 24 chart patches"):
         sequence_measurements([sequence], [None], chart, nothing)
     with pytest.raises(CalibrationError, match="1 lights for 2 sequences"):

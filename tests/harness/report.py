@@ -118,7 +118,7 @@ def confusion_table(results: Sequence[CaseResult], variants: Sequence[Variant]) 
 
 def worst_cases(results: Sequence[CaseResult], variant: str, count: int = 5) -> list[str]:
     """The ``count`` worst cases of one variant per split, with their conditions."""
-    lines = [f"| split | case | ratio | RMSE | bound | warned | conditions |", "|---|---|---|---|---|---|---|"]
+    lines = ["| split | case | ratio | RMSE | bound | warned | conditions |", "|---|---|---|---|---|---|---|"]
     for split, subset in _by_split(results):
         scored = [(m.ratio, r, m) for r in subset if (m := r.of(variant)) is not None and math.isfinite(m.ratio)]
         for ratio, result, measured in sorted(scored, key=lambda t: -t[0])[:count]:

@@ -35,7 +35,7 @@ class Table:
         """All columns on ``wavelengths`` (linear interpolation; zero or edge value outside)."""
         return _on(wavelengths, self.wavelengths_nm, self.values, outside=outside)
 
-    def column(self, name: str) -> "Table":
+    def column(self, name: str) -> Table:
         """One column as a table."""
         index = self.names.index(name)
         return Table(self.wavelengths_nm, (name,), self.values[:, [index]])

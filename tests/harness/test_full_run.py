@@ -7,7 +7,6 @@ one ``python -m tests.harness.ambient --out docs/ambient-harness.md --jobs 2`` w
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import pytest
 

@@ -44,7 +44,8 @@ def test_configurable_channels(far: str, request: pytest.FixtureRequest) -> None
     if far == "emulator":
         emulator = BoothEmulator(names=("uv", "ir"), peaks_nm=(365, 850), level_bits=12, max_steps=4)
         far_end: PtyBoothServer | SimulatedBooth = serve_on_pty(emulator)
-        levels = lambda: emulator.levels
+        def levels():
+            return emulator.levels
     else:
         sim = SimulatedBooth(request.getfixturevalue("small_image"), channels=2, top=SMALL_TOP)
         far_end, levels = sim, lambda: sim.levels

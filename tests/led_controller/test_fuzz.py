@@ -10,8 +10,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from msflash.led_controller import BoothProtocolError, BoothTimeoutError, LedBooth, PtyBoothServer, serve_on_pty
-from msflash.led_controller import protocol
+from msflash.led_controller import (
+    BoothProtocolError,
+    BoothTimeoutError,
+    LedBooth,
+    PtyBoothServer,
+    protocol,
+    serve_on_pty,
+)
 from msflash.led_controller.booth import levels_close
 from msflash.led_controller.emulator import BoothEmulator
 

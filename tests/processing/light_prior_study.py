@@ -32,9 +32,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from msflash.acquisition.sequence.format import read_sequence  # noqa: E402
 from msflash.acquisition.session.analysis import camera_responsivities_photons, estimate_sequence, led_spectra_photons  # noqa: E402
 from msflash.acquisition.session.prior_route import sequence_channel_statistics  # noqa: E402
-from msflash.acquisition.sequence.format import read_sequence  # noqa: E402
 from msflash.processing import datasets  # noqa: E402
 from msflash.processing.channel_statistics import ChannelStatistics  # noqa: E402
 from msflash.processing.light_library import library_lights, light_library  # noqa: E402
@@ -202,7 +202,7 @@ def report(samples: list[Sample], results: dict[str, np.ndarray]) -> None:
               f"{np.mean(chose == better):.0%}")
     one, two, width = results["coverage"].mean(axis=0)
     print(f"band: truth within 1σ at {one:.0%} and within 2σ at {two:.0%} of wavelengths; median 1σ {width:.3f} of the peak")
-    for attribute, values in (("light_type", None), ("cfa", None), ("leds", None), ("camera", None)):
+    for attribute, _values in (("light_type", None), ("cfa", None), ("leds", None), ("camera", None)):
         groups = sorted({str(getattr(s, attribute)) for s in samples})
         for group in groups:
             index = np.array([str(getattr(s, attribute)) == group for s in samples])

@@ -9,7 +9,13 @@ import pytest
 
 from msflash.processing import datasets
 from msflash.processing.errors import SolverError, SpectralDataError, TargetUnreachableWarning
-from msflash.processing.flash import MATCHING_ROUND_OFF, UNREACHABLE_RELATIVE_ERROR, camera_led_matrix, solve_complementary, solve_matching
+from msflash.processing.flash import (
+    MATCHING_ROUND_OFF,
+    UNREACHABLE_RELATIVE_ERROR,
+    camera_led_matrix,
+    solve_complementary,
+    solve_matching,
+)
 from tests.helpers import GRID, SOLVER, WEIGHTS_EXACT, camera, led_mix, leds_photons
 
 BOUNDS = ("physical", "nonnegative", "free")

@@ -2,8 +2,16 @@
 
 import numpy as np
 
-from msflash.processing.light_library import (NEAR_COPY_COSINE, library_lights, light_library, light_type, lights_of,
-                                      near_copy_groups, prior_training_lights, without_near_copies)
+from msflash.processing.light_library import (
+    NEAR_COPY_COSINE,
+    library_lights,
+    light_library,
+    light_type,
+    lights_of,
+    near_copy_groups,
+    prior_training_lights,
+    without_near_copies,
+)
 
 
 def _unit(values: np.ndarray) -> np.ndarray:

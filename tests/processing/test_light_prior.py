@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
+from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.analysis import camera_responsivities_photons, estimate_sequence, led_spectra_photons
 from msflash.acquisition.session.prior_route import estimate_sequence_prior, prior_payload, sequence_channel_statistics
-from msflash.acquisition.sequence.format import read_sequence
 from msflash.processing import datasets
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.channel_statistics import accumulate_channel_statistics, plane_channels
@@ -42,7 +42,8 @@ def _scene(light: np.ndarray, leds: Spectra, camera: Spectra, surfaces: np.ndarr
     columns = 8
     rows = -(-surfaces.shape[1] // columns)
     labels = np.repeat(np.repeat(np.arange(rows * columns).reshape(rows, columns) % surfaces.shape[1], patch, 0), patch, 1)
-    responses = lambda spd: (surfaces * spd[:, None]).T @ camera.values  # (S, 3)
+    def responses(spd):
+        return (surfaces * spd[:, None]).T @ camera.values  # (S, 3)
     ambient = responses(light)[labels]
     frames = [ambient + responses(leds.values[:, i])[labels] for i in range(leds.count)]
     rng = np.random.default_rng(seed)

@@ -17,11 +17,11 @@ from msflash.processing.image_formation import MixedIllumination, expected_respo
 from msflash.processing.local import (
     SELECTION_MARGIN,
     Cells,
+    TiledStatistics,
     _block_sums_and_differences,
     denoised_global,
-    segment_regions,
-    TiledStatistics,
     estimate_local,
+    segment_regions,
     select_model,
     synthesize_local,
     tile_statistics,

@@ -8,8 +8,14 @@ import numpy as np
 
 from msflash.processing.ambient import ALPHA_GRID, AmbientModel, _solve_penalised, discrepancy_alpha, estimate_ambient
 from msflash.processing.light_library import lights_of
-from msflash.processing.model_error import (EXPECTED_RATIO_WARNING, MISS_RATIO, light_reference, model_error, reference_for,
-                                    with_model_error)
+from msflash.processing.model_error import (
+    EXPECTED_RATIO_WARNING,
+    MISS_RATIO,
+    light_reference,
+    model_error,
+    reference_for,
+    with_model_error,
+)
 from msflash.processing.statistics import accumulate_statistics
 from tests.helpers import ambient, camera, leds_photons, linear_frames, spectrum_rmse
 

@@ -12,11 +12,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.session import analysis
 from msflash.acquisition.sequence.format import read_sequence
-from msflash.processing.local import tile_statistics
+from msflash.acquisition.session import analysis
 from msflash.processing import statistics
-from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, cfa_planes, inverse_variance_weights
+from msflash.processing.local import tile_statistics
+from msflash.processing.statistics import (
+    BlockRows,
+    FrameStackSpec,
+    accumulate_statistics,
+    cfa_planes,
+    inverse_variance_weights,
+)
 from tests.processing.unseen_sequences import Case, led_bound, render_case, rmse
 
 

@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from msflash.acquisition.session import analysis
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session import analysis
 from tests.helpers import SAMPLES_DIR, spectrum_rmse
 
 MARGIN = 0.1

@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 from msflash.processing import datasets, lights
+from msflash.processing.statistics import accumulate_statistics
 from msflash.processing.study.cameras import camera_spread, run_cameras, run_xy
 from msflash.processing.study.failure import FACTORS, led_fill, run_failure, with_line
 from msflash.processing.study.noisy import make_world, render_stack
 from msflash.processing.study.pareto import pareto_front, run_pareto
-from msflash.processing.statistics import accumulate_statistics
 
 CAMERA = "Canon 50D"
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.session import analysis
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session import analysis
 from msflash.processing.local import tile_statistics
 from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, cfa_planes
 from tests.processing.unseen_sequences import MARGIN, Case, led_bound, render_case, rmse

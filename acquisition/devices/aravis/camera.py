@@ -47,8 +47,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from msflash.acquisition.devices.camera import CameraInfo, RawFrame
 from msflash.acquisition.devices.aravis.camera_features import CameraOptions, FeatureInfo, options_from_json
+from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
+from msflash.acquisition.devices.camera import CameraInfo, RawFrame
 from msflash.acquisition.errors import (
     CameraDisconnectedError,
     CameraError,
@@ -57,7 +58,6 @@ from msflash.acquisition.errors import (
     FrameLostError,
     FrameTimeoutError,
 )
-from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
 from msflash.acquisition.plan import CapturePlan
 
 try:
@@ -1741,7 +1741,7 @@ def gvcp_port_lock(timeout_s: float = 120.0) -> Iterator[None]:
             except BlockingIOError:
                 if time.monotonic() > deadline:
                     raise CameraError(f"GigE Vision fake: port 127.0.0.1:3956 busy for {timeout_s:g} s "
-                                      f"(lock {GVCP_LOCK_PATH}); expected it free — another fake is running")
+                                      f"(lock {GVCP_LOCK_PATH}); expected it free — another fake is running") from None
                 time.sleep(0.02)
         try:
             yield

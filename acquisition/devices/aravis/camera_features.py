@@ -458,7 +458,7 @@ def apply_camera_options(camera: FeatureCamera, options: CameraOptions) -> Appli
 def _apply_roi(camera: FeatureCamera, roi: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
     option = f"--roi {','.join(str(v) for v in roi)}"
     limits = []
-    for feature, value in zip(("OffsetX", "OffsetY", "Width", "Height"), roi):
+    for feature, _value in zip(("OffsetX", "OffsetY", "Width", "Height"), roi):
         if camera.has_feature(feature):
             info = camera.describe_feature(feature)
             limits.append(f"{feature} {info.allowed().removeprefix('a whole number in ')}")
