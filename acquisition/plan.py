@@ -75,8 +75,13 @@ class CapturePlan:
 
     @classmethod
     def ambient_then_each_led(
-        cls, n_leds: int, exposure_us: float, level: float = 1.0, gain: float = 1.0,
-        led_exposures_us: Sequence[float] | None = None, led_gains: Sequence[float] | None = None,
+        cls,
+        n_leds: int,
+        exposure_us: float,
+        level: float = 1.0,
+        gain: float = 1.0,
+        led_exposures_us: Sequence[float] | None = None,
+        led_gains: Sequence[float] | None = None,
         **timing: Unpack[PlanTiming],
     ) -> CapturePlan:
         """The paper's sequence: one ambient frame, then ambient + each LED alone.
@@ -87,12 +92,19 @@ class CapturePlan:
         for led in range(n_leds):
             levels = tuple(level if i == led else 0.0 for i in range(n_leds))
             exposure = float(led_exposures_us[led]) if led_exposures_us is not None else float(exposure_us)
-            steps.append(CaptureStep(led + 1, "led", levels, exposure,
-                                     float(led_gains[led]) if led_gains is not None else gain))
+            steps.append(
+                CaptureStep(led + 1, "led", levels, exposure, float(led_gains[led]) if led_gains is not None else gain)
+            )
         return cls(tuple(steps), **timing)
 
     @classmethod
-    def single(cls, levels: Sequence[float], exposure_us: float, role: StepRole = "flash", gain: float = 1.0,
-               **timing: Unpack[PlanTiming]) -> CapturePlan:
+    def single(
+        cls,
+        levels: Sequence[float],
+        exposure_us: float,
+        role: StepRole = "flash",
+        gain: float = 1.0,
+        **timing: Unpack[PlanTiming],
+    ) -> CapturePlan:
         """One frame with the LEDs at ``levels`` (the flash re-capture)."""
         return cls((CaptureStep(0, role, tuple(float(v) for v in levels), float(exposure_us), gain),), **timing)

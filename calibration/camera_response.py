@@ -58,7 +58,7 @@ def second_differences(n: int) -> np.ndarray:
     """The (n − 2) × n second-difference matrix D₂."""
     matrix = np.zeros((n - 2, n))
     for i in range(n - 2):
-        matrix[i, i:i + 3] = (1.0, -2.0, 1.0)
+        matrix[i, i : i + 3] = (1.0, -2.0, 1.0)
     return matrix
 
 
@@ -144,8 +144,10 @@ def learn_prior(cameras: Mapping[str, Spectra], exclude: Sequence[str] = ()) -> 
         norms = np.linalg.norm(values, axis=0)
         if not np.all(norms > 0):
             empty = [CHANNELS[c] for c in np.flatnonzero(~(norms > 0))]
-            raise CalibrationError(f"responsivity prior: camera '{name}' channel {', '.join(empty)} is zero everywhere; "
-                                   "expected a responsivity curve per channel")
+            raise CalibrationError(
+                f"responsivity prior: camera '{name}' channel {', '.join(empty)} is zero everywhere; "
+                "expected a responsivity curve per channel"
+            )
         shapes.append(values / norms)
     moments = {}
     for c, channel in enumerate(CHANNELS):
@@ -178,8 +180,9 @@ class ResponsivityEstimate:
     """Estimated noise relative to the given ``response_std`` per channel (≈ 1 when the std is right)."""
 
 
-def _log_evidence(normal: np.ndarray, rhs: np.ndarray, data_norm2: float, n: int, precision: np.ndarray
-                  ) -> tuple[float, float]:
+def _log_evidence(
+    normal: np.ndarray, rhs: np.ndarray, data_norm2: float, n: int, precision: np.ndarray
+) -> tuple[float, float]:
     """Profile log evidence of ``m = A c + e``, ``c ~ N(0, τ² P)``, ``e ~ N(0, τ² I)`` (whitened), over τ.
 
     With ``P⁻¹ = precision``: ``mᵀ C⁻¹ m = mᵀm − bᵀ (P⁻¹ + AᵀA)⁻¹ b`` and
@@ -200,8 +203,12 @@ def _log_evidence(normal: np.ndarray, rhs: np.ndarray, data_norm2: float, n: int
 
 
 def estimate_responsivities(
-    responses: np.ndarray, reflectances: Spectra, illuminants: Spectra, method: str = "pca_prior",
-    prior: ResponsivityPrior | None = None, response_std: np.ndarray | None = None,
+    responses: np.ndarray,
+    reflectances: Spectra,
+    illuminants: Spectra,
+    method: str = "pca_prior",
+    prior: ResponsivityPrior | None = None,
+    response_std: np.ndarray | None = None,
 ) -> ResponsivityEstimate:
     """Responsivities from linear camera responses of a chart under known lights.
 
@@ -237,13 +244,16 @@ def estimate_responsivities(
     is the MAP with ``c ≥ 0``, solved exactly by :func:`processing.least_squares.minimise_quadratic`.
     """
     if method not in RESPONSIVITY_METHODS:
-        raise CalibrationError(f"responsivity method '{method}' is unknown; expected one of {', '.join(RESPONSIVITY_METHODS)}")
+        raise CalibrationError(
+            f"responsivity method '{method}' is unknown; expected one of {', '.join(RESPONSIVITY_METHODS)}"
+        )
     grid = require_same_grid(reflectances, illuminants)
     responses = np.asarray(responses, dtype=float)
     expected = (illuminants.count, reflectances.count, 3)
     if responses.shape != expected:
-        raise CalibrationError(f"camera responses have shape {responses.shape}; expected {expected} "
-                               "(lights, patches, channels)")
+        raise CalibrationError(
+            f"camera responses have shape {responses.shape}; expected {expected} (lights, patches, channels)"
+        )
     if not np.all(np.isfinite(responses)):
         raise CalibrationError("camera responses are not finite; expected linear patch means")
     if method == "pca_prior":
@@ -257,7 +267,9 @@ def estimate_responsivities(
     else:
         std = np.asarray(response_std, dtype=float).reshape(-1, 3)
         if std.shape != data.shape or not np.all(np.isfinite(std)) or np.any(std <= 0):
-            raise CalibrationError(f"response_std has shape {np.shape(response_std)}; expected {expected} positive values")
+            raise CalibrationError(
+                f"response_std has shape {np.shape(response_std)}; expected {expected} positive values"
+            )
     design = measurement_matrix(reflectances, illuminants)
     fit = fit_channels(design, data, std, method, prior)
     return fit.normalised(grid, f"estimated from {reflectances.count} patches × {illuminants.count} lights ({method})")
@@ -281,8 +293,9 @@ class ChannelFit:
         if not peak > 0:
             raise CalibrationError("recovered responsivities are all zero; expected a camera that sees the chart")
         spectra = Spectra(grid, self.curves / peak, CHANNELS, kind="responsivity", unit="photons", source=source)
-        return ResponsivityEstimate(spectra, self.method, self.alphas, self.shrinkages, self.relative_residual,
-                                    self.noise_scale)
+        return ResponsivityEstimate(
+            spectra, self.method, self.alphas, self.shrinkages, self.relative_residual, self.noise_scale
+        )
 
 
 SUBSPACE_DIMENSIONS = (1, 2, 3, 4, 6, 8, 12)
@@ -290,8 +303,9 @@ SUBSPACE_DIMENSIONS = (1, 2, 3, 4, 6, 8, 12)
 smooth share; the full second moment is a candidate too)."""
 
 
-def _prior_options(method: str, prior: ResponsivityPrior | None, channel: str, smooth: np.ndarray
-                   ) -> list[tuple[float, np.ndarray]]:
+def _prior_options(
+    method: str, prior: ResponsivityPrior | None, channel: str, smooth: np.ndarray
+) -> list[tuple[float, np.ndarray]]:
     """(smooth share, prior covariance) candidates of a method, compared by the evidence."""
     if method == "smoothness":
         return [(0.0, smooth)]
@@ -307,8 +321,9 @@ def _prior_options(method: str, prior: ResponsivityPrior | None, channel: str, s
     return options
 
 
-def fit_channels(design: np.ndarray, data: np.ndarray, std: np.ndarray, method: str,
-                 prior: ResponsivityPrior | None) -> ChannelFit:
+def fit_channels(
+    design: np.ndarray, data: np.ndarray, std: np.ndarray, method: str, prior: ResponsivityPrior | None
+) -> ChannelFit:
     """Per-channel evidence-weighted MAP with ``c ≥ 0`` for rows ``design`` (photons · Δλ), data and std (rows, 3)."""
     n_wl = design.shape[1]
     # Work with curves of peak ~1: scale the design so a max-normalised curve predicts the data.
@@ -324,8 +339,9 @@ def fit_channels(design: np.ndarray, data: np.ndarray, std: np.ndarray, method: 
         target = data[:, c] * weights
         scale = float(np.linalg.norm(target)) / max(float(np.linalg.norm(weighted.sum(axis=1))), 1e-300) * n_wl
         if not scale > 0:
-            raise CalibrationError(f"responsivity {channel}: the chart gives no signal in this channel; expected "
-                                   "responses above zero")
+            raise CalibrationError(
+                f"responsivity {channel}: the chart gives no signal in this channel; expected responses above zero"
+            )
         weighted = weighted * scale  # now c ≈ O(1) when its samples are O(1)
         normal = weighted.T @ weighted
         rhs = weighted.T @ target
@@ -342,17 +358,20 @@ def fit_channels(design: np.ndarray, data: np.ndarray, std: np.ndarray, method: 
                     best = (evidence, float(alpha), shrinkage, (alpha * base_precision, tau2))
         _, alpha, shrinkage, chosen = best
         if chosen is None:
-            raise CalibrationError(f"responsivity {channel}: no regularisation weight gives a valid model; "
-                                   "expected responses that depend on the lights")
+            raise CalibrationError(
+                f"responsivity {channel}: no regularisation weight gives a valid model; "
+                "expected responses that depend on the lights"
+            )
         precision, tau2 = chosen
         hessian = normal + precision
         try:
-            solution = minimise_quadratic(hessian, rhs, np.eye(n_wl), np.zeros(n_wl),
-                                          where=f"responsivity {channel}").x
+            solution = minimise_quadratic(hessian, rhs, np.eye(n_wl), np.zeros(n_wl), where=f"responsivity {channel}").x
         except SolverError as err:
             raise CalibrationError(f"responsivity {channel}: {err}") from err
         solution = np.clip(solution, 0.0, None) * scale
-        residuals.append(float(np.linalg.norm(design @ solution - data[:, c]) / max(float(np.linalg.norm(data[:, c])), 1e-300)))
+        residuals.append(
+            float(np.linalg.norm(design @ solution - data[:, c]) / max(float(np.linalg.norm(data[:, c])), 1e-300))
+        )
         curves.append(solution)
         alphas.append(alpha)
         shrinks.append(shrinkage)

@@ -190,20 +190,30 @@ class ChartGrid:
 
     def as_dict(self) -> dict[str, Any]:
         """The layout as reported in JSON output."""
-        return {"rows": self.rows, "columns": self.columns, "origin_xy": list(self.origin_xy),
-                "column_step_xy": list(self.column_step_xy), "row_step_xy": list(self.row_step_xy),
-                "pitch_px": list(self.pitch_px),
-                "patch_px": [f * p for f, p in zip(self.patch_fraction, self.pitch_px, strict=True)],
-                "rotation_deg": self.rotation_deg, "mirrored": self.mirrored, "corner": self.corner,
-                "found_patches": self.found_patches, "colour_misfit": self.misfit,
-                "runner_up_misfit": self.runner_up_misfit if math.isfinite(self.runner_up_misfit) else None}
+        return {
+            "rows": self.rows,
+            "columns": self.columns,
+            "origin_xy": list(self.origin_xy),
+            "column_step_xy": list(self.column_step_xy),
+            "row_step_xy": list(self.row_step_xy),
+            "pitch_px": list(self.pitch_px),
+            "patch_px": [f * p for f, p in zip(self.patch_fraction, self.pitch_px, strict=True)],
+            "rotation_deg": self.rotation_deg,
+            "mirrored": self.mirrored,
+            "corner": self.corner,
+            "found_patches": self.found_patches,
+            "colour_misfit": self.misfit,
+            "runner_up_misfit": self.runner_up_misfit if math.isfinite(self.runner_up_misfit) else None,
+        }
 
     def describe(self) -> str:
         """One line for reports."""
-        return (f"{self.rows}×{self.columns} chart detected: patch 1 at ({self.origin_xy[0]:.1f}, "
-                f"{self.origin_xy[1]:.1f}) px, {self.corner} corner, pitch {self.pitch_px[0]:.1f}×{self.pitch_px[1]:.1f} "
-                f"px, rotated {round(self.rotation_deg, 1) + 0.0:.1f}°"  # + 0.0: no "-0.0°" for round-off
-                + (", mirrored" if self.mirrored else ""))
+        return (
+            f"{self.rows}×{self.columns} chart detected: patch 1 at ({self.origin_xy[0]:.1f}, "
+            f"{self.origin_xy[1]:.1f}) px, {self.corner} corner, pitch {self.pitch_px[0]:.1f}×{self.pitch_px[1]:.1f} "
+            f"px, rotated {round(self.rotation_deg, 1) + 0.0:.1f}°"  # + 0.0: no "-0.0°" for round-off
+            + (", mirrored" if self.mirrored else "")
+        )
 
 
 @lru_cache(maxsize=8)
@@ -212,14 +222,18 @@ def _patch_map(grid: ChartGrid, shape: tuple[int, int]) -> np.ndarray:
     elsewhere), before margins and exclusions; read-only and kept, since a sequence's label
     maps (one per frame) differ only in their excluded pixels."""
     n_patches = grid.rows * grid.columns
-    y, x = np.mgrid[0:shape[0], 0:shape[1]]
+    y, x = np.mgrid[0 : shape[0], 0 : shape[1]]
     offsets = np.stack([x.ravel() - grid.origin_xy[0], y.ravel() - grid.origin_xy[1]])
     column, row = np.linalg.solve(grid._basis(), offsets)
     nearest_column, nearest_row = np.rint(column), np.rint(row)
-    inside = ((np.abs(column - nearest_column) < grid.patch_fraction[0] / 2)
-              & (np.abs(row - nearest_row) < grid.patch_fraction[1] / 2)
-              & (nearest_column >= 0) & (nearest_column < grid.columns)
-              & (nearest_row >= 0) & (nearest_row < grid.rows))
+    inside = (
+        (np.abs(column - nearest_column) < grid.patch_fraction[0] / 2)
+        & (np.abs(row - nearest_row) < grid.patch_fraction[1] / 2)
+        & (nearest_column >= 0)
+        & (nearest_column < grid.columns)
+        & (nearest_row >= 0)
+        & (nearest_row < grid.rows)
+    )
     full = np.where(inside, nearest_column * grid.rows + nearest_row, n_patches).astype(np.int64).reshape(shape)
     full.flags.writeable = False
     return full
@@ -247,8 +261,9 @@ def _bin(values: np.ndarray, factor: int) -> np.ndarray:
     return blocks.mean(axis=(1, 3)) if values.dtype != bool else np.any(blocks, axis=(1, 3))
 
 
-def _detection_planes(images: Sequence[np.ndarray], excluded: np.ndarray, cfa: str | None,
-                      quanta: Sequence[float] | None) -> _Planes:
+def _detection_planes(
+    images: Sequence[np.ndarray], excluded: np.ndarray, cfa: str | None, quanta: Sequence[float] | None
+) -> _Planes:
     if cfa is not None:
         if cfa not in CFA_PATTERNS:
             raise ChartDetectionError(f"cfa '{cfa}': unknown; expected one of {', '.join(CFA_PATTERNS)}")
@@ -262,19 +277,20 @@ def _detection_planes(images: Sequence[np.ndarray], excluded: np.ndarray, cfa: s
     factor = max(1, math.ceil(max(stack.shape[:2]) / DETECTION_MAX_SIDE))
     scale = quad * factor
     steps = np.zeros(len(images)) if quanta is None else np.asarray(quanta, dtype=float)
-    floor = np.repeat(steps ** 2 / 6 / factor ** 2, stack.shape[3])  # a difference of two roundings, binned
+    floor = np.repeat(steps**2 / 6 / factor**2, stack.shape[3])  # a difference of two roundings, binned
     return _Planes(_bin(stack.astype(np.float64), factor), _bin(mask, factor), floor, scale, (scale - 1) / 2)
 
 
 # -- 1. uniform regions -----------------------------------------------------------------------
-def _noise_model(difference: np.ndarray, level: np.ndarray, estimate: str, correction: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def _noise_model(
+    difference: np.ndarray, level: np.ndarray, estimate: str, correction: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Variance of one channel's neighbour differences against the signal: bin centres and values."""
     from scipy.stats import chi2
 
     n_bins = min(NOISE_BINS, max(1, level.size // 32))
     size = level.size // n_bins
-    bins = np.argsort(level)[:n_bins * size].reshape(n_bins, size)  # equal counts, by signal
+    bins = np.argsort(level)[: n_bins * size].reshape(n_bins, size)  # equal counts, by signal
     centres = np.median(level[bins], axis=1)
     squares = difference[bins] ** 2
     if estimate == "median":  # an overestimate where many pairs straddle edges
@@ -284,8 +300,10 @@ def _noise_model(difference: np.ndarray, level: np.ndarray, estimate: str, corre
 
 def _link_pairs(channels: np.ndarray, excluded: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Horizontal, then vertical neighbour pairs: first pixels, second pixels, excluded links."""
-    return [(channels[:, :-1], channels[:, 1:], excluded[:, :-1] | excluded[:, 1:]),
-            (channels[:-1], channels[1:], excluded[:-1] | excluded[1:])]
+    return [
+        (channels[:, :-1], channels[:, 1:], excluded[:, :-1] | excluded[:, 1:]),
+        (channels[:-1], channels[1:], excluded[:-1] | excluded[1:]),
+    ]
 
 
 def _link_chi2(planes: np.ndarray, excluded: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -318,10 +336,13 @@ def _link_chi2(planes: np.ndarray, excluded: np.ndarray, floor: np.ndarray) -> t
     clean = chi2.ppf(0.5, n_channels)
     correction = chi2.cdf(clean, n_channels + 2) / chi2.cdf(clean, n_channels)
     for iteration in range(NOISE_ITERATIONS if len(difference) >= 64 else 0):
-        models = [_noise_model(difference[kept, c], level[kept, c], "median" if iteration == 0 else "mean",
-                               correction) for c in range(n_channels)]
-        sample_chi = sum(difference[:, c] ** 2 / np.maximum(np.interp(level[:, c], *models[c]), floor[c])
-                         for c in range(n_channels))
+        models = [
+            _noise_model(difference[kept, c], level[kept, c], "median" if iteration == 0 else "mean", correction)
+            for c in range(n_channels)
+        ]
+        sample_chi = sum(
+            difference[:, c] ** 2 / np.maximum(np.interp(level[:, c], *models[c]), floor[c]) for c in range(n_channels)
+        )
         kept = sample_chi < clean
         if kept.sum() < 64:
             break
@@ -333,7 +354,7 @@ def _link_chi2(planes: np.ndarray, excluded: np.ndarray, floor: np.ndarray) -> t
         chi = np.zeros(out.shape)
         for c in range(n_channels):
             d, m = a[..., c] - b[..., c], (a[..., c] + b[..., c]) / 2
-            chi += d ** 2 / np.maximum(np.interp(m, *models[c]), floor[c])
+            chi += d**2 / np.maximum(np.interp(m, *models[c]), floor[c])
         results.append(np.where(out, np.inf, chi))
     return results[0], results[1], n_channels
 
@@ -384,8 +405,8 @@ def _rectangular_regions(regions: np.ndarray) -> _Candidates:
     keep = area >= MIN_REGION_PX
     safe = np.maximum(area, 1)
     mx, my = np.bincount(ids, x, n) / safe, np.bincount(ids, y, n) / safe
-    sxx = np.bincount(ids, x * x, n) / safe - mx ** 2
-    syy = np.bincount(ids, y * y, n) / safe - my ** 2
+    sxx = np.bincount(ids, x * x, n) / safe - mx**2
+    syy = np.bincount(ids, y * y, n) / safe - my**2
     sxy = np.bincount(ids, x * y, n) / safe - mx * my
     covariances = np.stack([np.stack([sxx, sxy], -1), np.stack([sxy, syy], -1)], -2)
     eigen = np.linalg.eigvalsh(covariances)  # ascending
@@ -584,18 +605,29 @@ def placement_misfit(measured: np.ndarray, predicted: np.ndarray, variance: np.n
     >>> placement_misfit(5 * q, q), placement_misfit(5 * q[::-1], q) > 0.2
     (0.0, True)
     """
-    gains = np.maximum(np.sum(measured * predicted, axis=0) / np.maximum(np.sum(predicted ** 2, axis=0), 1e-300), 0)
+    gains = np.maximum(np.sum(measured * predicted, axis=0) / np.maximum(np.sum(predicted**2, axis=0), 1e-300), 0)
     residual = measured - gains * predicted
     noise = 0.0 if variance is None else float(np.sum(variance))
-    signal = float(np.sum(measured ** 2)) - noise
+    signal = float(np.sum(measured**2)) - noise
     if not signal > 0:
         return 1.0
     n = measured.shape[0]
-    return float(np.clip((float(np.sum(residual ** 2)) - noise * (n - 1) / n) / signal, 0.0, 1.0))
+    return float(np.clip((float(np.sum(residual**2)) - noise * (n - 1) / n) / signal, 0.0, 1.0))
 
 
-_SYMMETRIES = tuple(np.array(m) for m in (((1, 0), (0, 1)), ((0, -1), (1, 0)), ((-1, 0), (0, -1)), ((0, 1), (-1, 0)),
-                                          ((-1, 0), (0, 1)), ((1, 0), (0, -1)), ((0, 1), (1, 0)), ((0, -1), (-1, 0))))
+_SYMMETRIES = tuple(
+    np.array(m)
+    for m in (
+        ((1, 0), (0, 1)),
+        ((0, -1), (1, 0)),
+        ((-1, 0), (0, -1)),
+        ((0, 1), (-1, 0)),
+        ((-1, 0), (0, 1)),
+        ((1, 0), (0, -1)),
+        ((0, 1), (1, 0)),
+        ((0, -1), (-1, 0)),
+    )
+)
 """The 8 maps of chart (column, row) steps onto lattice (i, j) steps: 4 rotations, then mirrored."""
 
 
@@ -607,13 +639,16 @@ class _Placement:
     sites: frozenset[tuple[int, int]]
 
 
-def _site_means(planes: _Planes, lattice: _Lattice, fraction: np.ndarray, frames: np.ndarray
-                ) -> dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]:
+def _site_means(
+    planes: _Planes, lattice: _Lattice, fraction: np.ndarray, frames: np.ndarray
+) -> dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]:
     """Mean of each plane of ``frames`` over the centre of every lattice site with ≥ 2 usable pixels,
     and the variance of that mean (from the pixels' spread)."""
     h, w = planes.values.shape[:2]
     y, x = np.mgrid[0:h, 0:w]
-    coordinates = np.linalg.solve(lattice.basis, np.stack([x.ravel() - lattice.origin[0], y.ravel() - lattice.origin[1]]))
+    coordinates = np.linalg.solve(
+        lattice.basis, np.stack([x.ravel() - lattice.origin[0], y.ravel() - lattice.origin[1]])
+    )
     nearest = np.rint(coordinates)
     central = np.all(np.abs(coordinates - nearest) < (SAMPLE_FRACTION / 2) * fraction[:, None], axis=0)
     central &= ~planes.excluded.ravel()
@@ -626,8 +661,10 @@ def _site_means(planes: _Planes, lattice: _Lattice, fraction: np.ndarray, frames
     counts = np.bincount(inverse, minlength=len(sites)).astype(float)
     sums = np.stack([np.bincount(inverse, values[:, c], len(sites)) for c in range(values.shape[1])], axis=1)
     means = sums / counts[:, None]
-    squares = np.stack([np.bincount(inverse, (values[:, c] - means[inverse, c]) ** 2, len(sites))
-                        for c in range(values.shape[1])], axis=1)
+    squares = np.stack(
+        [np.bincount(inverse, (values[:, c] - means[inverse, c]) ** 2, len(sites)) for c in range(values.shape[1])],
+        axis=1,
+    )
     spread = squares / np.maximum(counts - 1, 1)[:, None] / counts[:, None]
     return {(int(site[0]), int(site[1])): (means[s], spread[s]) for s, site in enumerate(sites) if counts[s] >= 2}
 
@@ -651,7 +688,7 @@ def _patch_fraction(candidates: _Candidates, members: np.ndarray, basis: np.ndar
     """Median patch size of the lattice's regions along each lattice vector, as a fraction of it."""
     inverse = np.linalg.inv(basis)
     lattice_covariance = inverse @ candidates.covariances[members] @ inverse.T
-    pixel = np.sum(inverse ** 2, axis=1)  # one pixel, in lattice units², per coordinate
+    pixel = np.sum(inverse**2, axis=1)  # one pixel, in lattice units², per coordinate
     sides = np.sqrt(12 * np.diagonal(lattice_covariance, axis1=1, axis2=2) + pixel)
     return np.minimum(np.median(sides, axis=0), 0.95)
 
@@ -669,9 +706,17 @@ class ColourFrames:
     """Each LED frame's illumination (LED spectra · levels), one column per LED frame."""
 
 
-def detect_chart(images: Sequence[np.ndarray], excluded: np.ndarray, cfa: str | None, colour: ColourFrames,
-                 reflectances: Spectra, rows: int, columns: int, where: str = "frames",
-                 quanta: Sequence[float] | None = None) -> ChartGrid:
+def detect_chart(
+    images: Sequence[np.ndarray],
+    excluded: np.ndarray,
+    cfa: str | None,
+    colour: ColourFrames,
+    reflectances: Spectra,
+    rows: int,
+    columns: int,
+    where: str = "frames",
+    quanta: Sequence[float] | None = None,
+) -> ChartGrid:
     """The single rows × columns chart of ``reflectances`` in linear frames of one geometry.
 
     Parameters
@@ -702,51 +747,74 @@ def detect_chart(images: Sequence[np.ndarray], excluded: np.ndarray, cfa: str | 
     """
     n_patches = rows * columns
     if reflectances.count != n_patches:
-        raise ChartDetectionError(f"{where}: the chart has {reflectances.count} patches; expected rows × columns = "
-                                  f"{rows}×{columns}")
+        raise ChartDetectionError(
+            f"{where}: the chart has {reflectances.count} patches; expected rows × columns = {rows}×{columns}"
+        )
     if not colour.leds:
-        raise ChartDetectionError(f"{where}: no LED frame; chart detection needs LED frames to tell the chart's "
-                                  "orientation (give --patch-px/--border-px)")
-    advice = ("; expected one chart in view, in focus, with patches of ≥ 4 pixels (8 on a Bayer mosaic) — or give "
-              "its layout with --patch-px/--border-px (chart at the top-left)")
+        raise ChartDetectionError(
+            f"{where}: no LED frame; chart detection needs LED frames to tell the chart's "
+            "orientation (give --patch-px/--border-px)"
+        )
+    advice = (
+        "; expected one chart in view, in focus, with patches of ≥ 4 pixels (8 on a Bayer mosaic) — or give "
+        "its layout with --patch-px/--border-px (chart at the top-left)"
+    )
     planes = _detection_planes(images, excluded, cfa, quanta)
     regions = uniform_regions(planes.values, planes.excluded, planes.floor)
     candidates = _rectangular_regions(regions)
     minimum = math.ceil(MIN_OCCUPANCY * n_patches)
     lattices = _lattices(candidates, minimum)
     if not lattices:
-        raise ChartDetectionError(f"{where}: no {rows}×{columns} chart found: fewer than {minimum} uniform, equally "
-                                  f"sized, rectangular regions on a lattice{advice}")
+        raise ChartDetectionError(
+            f"{where}: no {rows}×{columns} chart found: fewer than {minimum} uniform, equally "
+            f"sized, rectangular regions on a lattice{advice}"
+        )
     predicted = reflectances.values.T @ colour.lights.to_unit("photons").values  # (patches, LED frames)
     grids, misfits, extents, weak = [], [], [], math.inf
     for lattice, members in lattices:
-        found, best, noisy = _charts_on(planes, lattice, _patch_fraction(candidates, members, lattice.basis), colour,
-                                        predicted, rows, columns, minimum)
+        found, best, noisy = _charts_on(
+            planes,
+            lattice,
+            _patch_fraction(candidates, members, lattice.basis),
+            colour,
+            predicted,
+            rows,
+            columns,
+            minimum,
+        )
         grids += found
         misfits.append(best)
         weak = min(weak, noisy)
         extents.append(lattice.sites.max(axis=0)[::-1] + 1)
     if len(grids) > 1:
         places = " and ".join(f"({g.origin_xy[0]:.0f}, {g.origin_xy[1]:.0f})" for g in grids)
-        raise ChartDetectionError(f"{where}: {len(grids)} {rows}×{columns} charts found, patch 1 at {places}; "
-                                  "expected one chart in view (or give the layout with --patch-px/--border-px)")
+        raise ChartDetectionError(
+            f"{where}: {len(grids)} {rows}×{columns} charts found, patch 1 at {places}; "
+            "expected one chart in view (or give the layout with --patch-px/--border-px)"
+        )
     if not grids:
         which = int(np.argmin(misfits))
         extent = "×".join(map(str, extents[which]))
         if math.isfinite(misfits[which]):
-            seen = (f"a grid of {extent} uniform patches whose colours under the LEDs do not match the chart's in "
-                     f"any placement (misfit {misfits[which]:.2f} > {COLOUR_MISFIT})")
+            seen = (
+                f"a grid of {extent} uniform patches whose colours under the LEDs do not match the chart's in "
+                f"any placement (misfit {misfits[which]:.2f} > {COLOUR_MISFIT})"
+            )
         elif math.isfinite(weak):
-            seen = (f"a grid of {extent} uniform patches, but the LED frames minus the ambient are too noisy to tell "
-                     f"its colours (signal {weak:.1f}× the noise, expected ≥ {MIN_COLOUR_SNR:g}×: dim the ambient or "
-                     "lengthen the LED exposures)")
+            seen = (
+                f"a grid of {extent} uniform patches, but the LED frames minus the ambient are too noisy to tell "
+                f"its colours (signal {weak:.1f}× the noise, expected ≥ {MIN_COLOUR_SNR:g}×: dim the ambient or "
+                "lengthen the LED exposures)"
+            )
         else:
             seen = f"a grid of {extent} uniform patches that does not hold the whole chart inside the frames"
         raise ChartDetectionError(f"{where}: no {rows}×{columns} chart found: {seen}{advice}")
     grid = grids[0]
     if not grid.runner_up_misfit >= AMBIGUITY_RATIO * grid.misfit:
-        raise ChartDetectionError(f"{where}: the chart's orientation is ambiguous: two placements fit its colours "
-                                  f"(misfit {grid.misfit:.3f} and {grid.runner_up_misfit:.3f}){advice}")
+        raise ChartDetectionError(
+            f"{where}: the chart's orientation is ambiguous: two placements fit its colours "
+            f"(misfit {grid.misfit:.3f} and {grid.runner_up_misfit:.3f}){advice}"
+        )
     return grid
 
 
@@ -766,8 +834,16 @@ def _lattices(candidates: _Candidates, minimum: int) -> list[tuple[_Lattice, np.
     return lattices
 
 
-def _charts_on(planes: _Planes, lattice: _Lattice, fraction: np.ndarray, colour: ColourFrames, predicted: np.ndarray,
-               rows: int, columns: int, minimum: int) -> tuple[list[ChartGrid], float, float]:
+def _charts_on(
+    planes: _Planes,
+    lattice: _Lattice,
+    fraction: np.ndarray,
+    colour: ColourFrames,
+    predicted: np.ndarray,
+    rows: int,
+    columns: int,
+    minimum: int,
+) -> tuple[list[ChartGrid], float, float]:
     """Non-overlapping placements of the chart on ``lattice`` that fit its colours, the best misfit, and
     the lowest signal-to-noise of placements too noisy to test (inf if none)."""
     n_patches = rows * columns
@@ -776,15 +852,17 @@ def _charts_on(planes: _Planes, lattice: _Lattice, fraction: np.ndarray, colour:
     found = {(int(i), int(j)) for i, j in lattice.sites}
     results, weak = [], math.inf
     for symmetry, base in _placements(lattice, rows, columns):
-        sites = [(int(i), int(j)) for i, j in base + np.array([[c, r] for c in range(columns) for r in range(rows)])
-                 @ symmetry.T]
+        sites = [
+            (int(i), int(j))
+            for i, j in base + np.array([[c, r] for c in range(columns) for r in range(rows)]) @ symmetry.T
+        ]
         if not all(site in means for site in sites) or len(found.intersection(sites)) < minimum:
             continue
         per_frame = np.array([means[site][0] for site in sites]).reshape(n_patches, len(frames), -1)
         spread = np.array([means[site][1] for site in sites]).reshape(n_patches, len(frames), -1)
         measured = (per_frame[:, 1:] - per_frame[:, :1]).reshape(n_patches, -1)
         variance = (spread[:, 1:] + spread[:, :1]).reshape(n_patches, -1)
-        snr = float(np.sum(measured ** 2) / max(np.sum(variance), 1e-300))
+        snr = float(np.sum(measured**2) / max(np.sum(variance), 1e-300))
         if snr < MIN_COLOUR_SNR:
             weak = min(weak, snr)
             continue
@@ -797,21 +875,41 @@ def _charts_on(planes: _Planes, lattice: _Lattice, fraction: np.ndarray, colour:
             accepted.append(placement)
     grids = []
     for placement in accepted:
-        runner_up = min((q.misfit for q in results if q is not placement and q.sites & placement.sites), default=math.inf)
-        grids.append(_grid(planes, lattice, fraction, placement, runner_up, len(found & placement.sites), rows, columns))
+        runner_up = min(
+            (q.misfit for q in results if q is not placement and q.sites & placement.sites), default=math.inf
+        )
+        grids.append(
+            _grid(planes, lattice, fraction, placement, runner_up, len(found & placement.sites), rows, columns)
+        )
     return grids, (results[0].misfit if results else math.inf), weak
 
 
-def _grid(planes: _Planes, lattice: _Lattice, fraction: np.ndarray, placement: _Placement, runner_up: float,
-          found: int, rows: int, columns: int) -> ChartGrid:
+def _grid(
+    planes: _Planes,
+    lattice: _Lattice,
+    fraction: np.ndarray,
+    placement: _Placement,
+    runner_up: float,
+    found: int,
+    rows: int,
+    columns: int,
+) -> ChartGrid:
     basis = lattice.basis @ placement.symmetry  # columns: the chart's column and row steps (detection pixels)
     origin = lattice.origin + lattice.basis @ placement.base
     chart_fraction = np.abs(placement.symmetry.T) @ fraction  # a swap of axes swaps the fractions
     full_origin = planes.scale * origin + planes.offset
     full_basis = planes.scale * basis
-    return ChartGrid(rows, columns, (float(full_origin[0]), float(full_origin[1])),
-                     (float(full_basis[0, 0]), float(full_basis[1, 0])), (float(full_basis[0, 1]), float(full_basis[1, 1])),
-                     (float(chart_fraction[0]), float(chart_fraction[1])), placement.misfit, runner_up, found)
+    return ChartGrid(
+        rows,
+        columns,
+        (float(full_origin[0]), float(full_origin[1])),
+        (float(full_basis[0, 0]), float(full_basis[1, 0])),
+        (float(full_basis[0, 1]), float(full_basis[1, 1])),
+        (float(chart_fraction[0]), float(chart_fraction[1])),
+        placement.misfit,
+        runner_up,
+        found,
+    )
 
 
 def detect_in_sequence(sequence: Any, reflectances: Spectra, rows: int, columns: int) -> ChartGrid:
@@ -823,8 +921,10 @@ def detect_in_sequence(sequence: Any, reflectances: Spectra, rows: int, columns:
     where = str(sequence.path)
     ambient_indices, led_indices = sequence.indices("ambient"), sequence.indices("led")
     if not ambient_indices:
-        raise ChartDetectionError(f"{where}: no 'ambient' frame; chart detection compares the LED frames with it "
-                                  "(or give the layout with --patch-px/--border-px)")
+        raise ChartDetectionError(
+            f"{where}: no 'ambient' frame; chart detection compares the LED frames with it "
+            "(or give the layout with --patch-px/--border-px)"
+        )
     indices = [ambient_indices[0], *led_indices]
     images, excluded, quanta = [], None, []
     for index in indices:
@@ -841,5 +941,13 @@ def detect_in_sequence(sequence: Any, reflectances: Spectra, rows: int, columns:
     return detect_chart(images, excluded, sequence.camera.cfa, colour, reflectances, rows, columns, where, quanta)
 
 
-__all__ = ["MACBETH_GRID", "ChartDetectionError", "ChartGrid", "ColourFrames", "detect_chart", "detect_in_sequence",
-           "placement_misfit", "uniform_regions"]
+__all__ = [
+    "MACBETH_GRID",
+    "ChartDetectionError",
+    "ChartGrid",
+    "ColourFrames",
+    "detect_chart",
+    "detect_in_sequence",
+    "placement_misfit",
+    "uniform_regions",
+]

@@ -73,8 +73,10 @@ def resolve_light(spec: str, grid: WavelengthGrid) -> Spectra:
     path = Path(spec)
     if path.suffix.lower() in (".csv", ".txt") or path.exists():
         if not path.exists():
-            raise CalibrationError(f"{spec}: light file not found; expected a CSV file 'wavelength_nm, value' or a "
-                                   "name like tungsten or D65")
+            raise CalibrationError(
+                f"{spec}: light file not found; expected a CSV file 'wavelength_nm, value' or a "
+                "name like tungsten or D65"
+            )
         try:
             spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
             light = spectra.select([0]).resample(grid, outside="error")
@@ -84,14 +86,17 @@ def resolve_light(spec: str, grid: WavelengthGrid) -> Spectra:
             raise CalibrationError(text if text.startswith(str(path)) else f"{spec}: {text}") from err
     else:
         try:
-            light = (lights.ambient_spectrum(spec, grid) if spec in lights.AMBIENTS
-                     else datasets.illuminant(spec, grid))
+            light = lights.ambient_spectrum(spec, grid) if spec in lights.AMBIENTS else datasets.illuminant(spec, grid)
         except (SpectralDataError, ValueError, KeyError) as err:
-            raise CalibrationError(f"--light '{spec}': not a known light ({err}); expected a CSV file or one of "
-                                   f"{', '.join(lights.AMBIENTS)}, A, D65, …") from err
+            raise CalibrationError(
+                f"--light '{spec}': not a known light ({err}); expected a CSV file or one of "
+                f"{', '.join(lights.AMBIENTS)}, A, D65, …"
+            ) from err
     if not np.all(np.isfinite(light.values)) or np.any(light.values < 0) or not light.values.max() > 0:
-        raise CalibrationError(f"{spec}: light spectrum is not finite, non-negative and non-zero on "
-                               f"{grid}; expected a measured broadband light")
+        raise CalibrationError(
+            f"{spec}: light spectrum is not finite, non-negative and non-zero on "
+            f"{grid}; expected a measured broadband light"
+        )
     return light.replace(names=(Path(spec).stem if path.suffix else spec,))
 
 
@@ -115,8 +120,9 @@ class ChartMeasurements:
     """Per used frame: sequence, file, light, patches used."""
 
 
-def patch_statistics(image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str | None
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def patch_statistics(
+    image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Means and standard errors per patch and channel, and each patch's smallest channel sample count.
 
     Means and errors are NaN where a patch has < MIN_PIXELS samples in some channel; labels outside
@@ -135,8 +141,12 @@ def patch_statistics(image: np.ndarray, labels: np.ndarray, n_patches: int, cfa:
     return means, errors, counts
 
 
-def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | None], reflectances: Spectra,
-                          labels_for: LabelBuilder | Sequence[LabelBuilder]) -> ChartMeasurements:
+def sequence_measurements(
+    sequences: Sequence[Any],
+    lights: Sequence[Spectra | None],
+    reflectances: Spectra,
+    labels_for: LabelBuilder | Sequence[LabelBuilder],
+) -> ChartMeasurements:
     """Patch means of every LED frame (minus the ambient) and of each ambient with a known light.
 
     Parameters
@@ -167,19 +177,30 @@ def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | N
         raise CalibrationError(f"{len(builders)} label maps for {len(sequences)} sequences; expected one per sequence")
     grid = sequences[0].grid
     if not reflectances.grid.same_as(grid):
-        raise CalibrationError(f"chart reflectances on {reflectances.grid} but the sequence on {grid}; expected one grid")
+        raise CalibrationError(
+            f"chart reflectances on {reflectances.grid} but the sequence on {grid}; expected one grid"
+        )
     n_patches = reflectances.count
     design_rows, data_rows, std_rows, groups, names, used = [], [], [], [], [], []
 
-    def add(image: np.ndarray, excluded: np.ndarray, light: Spectra, group: int, where: str, cfa: str | None,
-            labels_of: LabelBuilder) -> None:
+    def add(
+        image: np.ndarray,
+        excluded: np.ndarray,
+        light: Spectra,
+        group: int,
+        where: str,
+        cfa: str | None,
+        labels_of: LabelBuilder,
+    ) -> None:
         labels = labels_of(image.shape[:2], excluded)
         means, errors, _ = patch_statistics(image, labels, n_patches, cfa)
         valid = np.all(np.isfinite(means), axis=1)
         if valid.sum() < max(3, n_patches // 2):
-            raise CalibrationError(f"{where}: only {int(valid.sum())} of {n_patches} chart patches have {MIN_PIXELS} "
-                                   "unsaturated pixels; expected most of the chart usable (check exposure and "
-                                   "--patch-px/--border-px)")
+            raise CalibrationError(
+                f"{where}: only {int(valid.sum())} of {n_patches} chart patches have {MIN_PIXELS} "
+                "unsaturated pixels; expected most of the chart usable (check exposure and "
+                "--patch-px/--border-px)"
+            )
         rows = measurement_matrix(reflectances, light.to_unit("photons"))
         design_rows.append(rows[valid])
         data_rows.append(means[valid])
@@ -190,21 +211,27 @@ def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | N
     for s, (sequence, light) in enumerate(zip(sequences, lights, strict=True)):
         where = str(sequence.path)
         if not sequence.grid.same_as(grid):
-            raise CalibrationError(f"{where}: wavelengths_nm {sequence.grid} differ from {grid} of the first "
-                                   "sequence; expected one grid")
+            raise CalibrationError(
+                f"{where}: wavelengths_nm {sequence.grid} differ from {grid} of the first sequence; expected one grid"
+            )
         cfa = sequence.camera.cfa
         ambient_indices = sequence.indices("ambient")
         if not ambient_indices:
-            raise CalibrationError(f"{where}: frames has no 'ambient' frame; expected one (the LED frames are "
-                                   "measured against it)")
+            raise CalibrationError(
+                f"{where}: frames has no 'ambient' frame; expected one (the LED frames are measured against it)"
+            )
         led_indices = sequence.indices("led")
         if not led_indices and light is None:
-            raise CalibrationError(f"{where}: no 'led' frame and no --light for its ambient; expected LED frames "
-                                   "or a known broadband light")
+            raise CalibrationError(
+                f"{where}: no 'led' frame and no --light for its ambient; expected LED frames "
+                "or a known broadband light"
+            )
         a = ambient_indices[0]
         if any(level > 0 for level in sequence.frames[a].led_levels):
-            raise CalibrationError(f"{where}: frames[{a}] has role 'ambient' but LED levels "
-                                   f"{list(sequence.frames[a].led_levels)}; expected all zero")
+            raise CalibrationError(
+                f"{where}: frames[{a}] has role 'ambient' but LED levels "
+                f"{list(sequence.frames[a].led_levels)}; expected all zero"
+            )
         ambient, ambient_saturated = sequence.load_linear_frame(a)
         if ambient.ndim != 3 and cfa is None:
             raise CalibrationError(f"{where}: frames are one-channel without a cfa; expected RGB or a Bayer mosaic")
@@ -219,21 +246,39 @@ def sequence_measurements(sequences: Sequence[Any], lights: Sequence[Spectra | N
             frame = sequence.frames[i]
             levels = np.asarray(frame.led_levels, dtype=float)
             if not levels.any():
-                raise CalibrationError(f"{where}: frames[{i}] ('{frame.file}') has role 'led' but all LED levels are "
-                                       "0; expected at least one LED on")
+                raise CalibrationError(
+                    f"{where}: frames[{i}] ('{frame.file}') has role 'led' but all LED levels are "
+                    "0; expected at least one LED on"
+                )
             image, saturated = sequence.load_linear_frame(i)
-            spectrum = leds.replace(values=leds.values @ levels[:, None],
-                                    names=("+".join(n for n, v in zip(leds.names, levels) if v > 0),))
-            add(image - ambient, saturated | ambient_saturated, spectrum, led_group, f"{where}: {frame.file}", cfa,
-                builders[s])
+            spectrum = leds.replace(
+                values=leds.values @ levels[:, None], names=("+".join(n for n, v in zip(leds.names, levels) if v > 0),)
+            )
+            add(
+                image - ambient,
+                saturated | ambient_saturated,
+                spectrum,
+                led_group,
+                f"{where}: {frame.file}",
+                cfa,
+                builders[s],
+            )
         if light is not None:
             names.append(f"{s}: {light.names[0]}")
-            add(ambient, ambient_saturated, light, len(names) - 1, f"{where}: {sequence.frames[a].file}", cfa,
-                builders[s])
+            add(
+                ambient,
+                ambient_saturated,
+                light,
+                len(names) - 1,
+                f"{where}: {sequence.frames[a].file}",
+                cfa,
+                builders[s],
+            )
     group = np.concatenate(groups)
     if not np.any(group < 0):
-        raise CalibrationError("no LED frame in any sequence; expected LED frames (they fix the scale of the "
-                               "broadband lights)")
+        raise CalibrationError(
+            "no LED frame in any sequence; expected LED frames (they fix the scale of the broadband lights)"
+        )
     data = np.vstack(data_rows)
     std = np.vstack(std_rows)
     # A floor on the standard error: flat (noise-free or quantised) patches must not get infinite weight.
@@ -252,8 +297,9 @@ class SequenceCalibration:
     iterations: int
 
 
-def estimate_from_measurements(measurements: ChartMeasurements, method: str = "pca_prior",
-                               prior: ResponsivityPrior | None = None) -> SequenceCalibration:
+def estimate_from_measurements(
+    measurements: ChartMeasurements, method: str = "pca_prior", prior: ResponsivityPrior | None = None
+) -> SequenceCalibration:
     """Responsivities from :class:`ChartMeasurements`, the broadband lights' powers estimated jointly.
 
     Starts from the LED rows alone, then alternates: each broadband power by weighted least
@@ -280,8 +326,10 @@ def estimate_from_measurements(measurements: ChartMeasurements, method: str = "p
             observed = m.data[rows] / m.std[rows]
             denominator = float(np.sum(predicted * predicted))
             if not denominator > 0:
-                raise CalibrationError(f"broadband light {m.group_names[g]}: the LED-only curves predict no signal; "
-                                       "expected LEDs that cover the camera's channels")
+                raise CalibrationError(
+                    f"broadband light {m.group_names[g]}: the LED-only curves predict no signal; "
+                    "expected LEDs that cover the camera's channels"
+                )
             new[g] = max(float(np.sum(predicted * observed)) / denominator, 1e-12)
         row_scale = np.where(known, 1.0, new[np.maximum(m.group, 0)])
         fit = fit_channels(m.design * row_scale[:, None], m.data, m.std, method, prior)
@@ -295,11 +343,18 @@ def estimate_from_measurements(measurements: ChartMeasurements, method: str = "p
                 f"chart frames: the model does not fit the patch means (channel {channel}: residual "
                 f"{100 * fit.relative_residual[c]:.0f} % of the signal, {fit.noise_scale[c]:.1f}× the measurement noise); "
                 "expected the right --light for each sequence's ambient and the chart layout of the frames "
-                "(--patch-px/--border-px)")
+                "(--patch-px/--border-px)"
+            )
     source = f"estimated from {len(m.frames)} chart frames ({method})"
     estimate = fit.normalised(m.grid, source)
     return SequenceCalibration(estimate, dict(zip(m.group_names, map(float, scales), strict=True)), iterations)
 
 
-__all__ = ["CHANNELS", "ChartMeasurements", "SequenceCalibration", "estimate_from_measurements", "resolve_light",
-           "sequence_measurements"]
+__all__ = [
+    "CHANNELS",
+    "ChartMeasurements",
+    "SequenceCalibration",
+    "estimate_from_measurements",
+    "resolve_light",
+    "sequence_measurements",
+]

@@ -89,9 +89,13 @@ class DarkResult:
 
     def as_dict(self) -> dict:
         """The ``dark`` section of a calibration file."""
-        return {"black_level": list(self.black_level), "read_noise_dn": list(self.read_noise_dn),
-                "fixed_pattern_dn": list(self.fixed_pattern_dn), "hot_pixel_fraction": self.hot_pixel_fraction,
-                "n_frames": self.n_frames}
+        return {
+            "black_level": list(self.black_level),
+            "read_noise_dn": list(self.read_noise_dn),
+            "fixed_pattern_dn": list(self.fixed_pattern_dn),
+            "hot_pixel_fraction": self.hot_pixel_fraction,
+            "n_frames": self.n_frames,
+        }
 
 
 def measure_dark(frames: Sequence[np.ndarray], cfa: str | None = None) -> DarkResult:
@@ -168,8 +172,11 @@ class LinearityResult:
 
 
 def measure_linearity(
-    frames: Sequence[np.ndarray], exposures: Sequence[float], black_level: Sequence[float] | float,
-    cfa: str | None = None, white_level: float | None = None,
+    frames: Sequence[np.ndarray],
+    exposures: Sequence[float],
+    black_level: Sequence[float] | float,
+    cfa: str | None = None,
+    white_level: float | None = None,
 ) -> LinearityResult:
     """Linearity and saturation of a sensor from frames of a uniform target at several exposures.
 
@@ -195,8 +202,9 @@ def measure_linearity(
     stack = _stack(frames, "linearity frames")
     exposures_array = np.asarray(exposures, dtype=float)
     if exposures_array.shape != (stack.shape[0],):
-        raise CalibrationError(f"linearity: {exposures_array.size} exposures for {stack.shape[0]} frames; "
-                               "expected one exposure per frame")
+        raise CalibrationError(
+            f"linearity: {exposures_array.size} exposures for {stack.shape[0]} frames; expected one exposure per frame"
+        )
     if stack.shape[0] < 3:
         raise CalibrationError(f"linearity: {stack.shape[0]} frames; expected at least 3 exposures")
     if not np.all(np.isfinite(exposures_array)) or np.any(exposures_array <= 0):
@@ -204,8 +212,11 @@ def measure_linearity(
     order = np.argsort(exposures_array, kind="stable")
     stack, exposures_array = stack[order], exposures_array[order]
     n_channels = len(channel_planes(stack[0], cfa))
-    blacks = np.broadcast_to(np.asarray(black_level, dtype=float), (n_channels,)) if np.ndim(black_level) else \
-        np.full(n_channels, float(np.asarray(black_level)))
+    blacks = (
+        np.broadcast_to(np.asarray(black_level, dtype=float), (n_channels,))
+        if np.ndim(black_level)
+        else np.full(n_channels, float(np.asarray(black_level)))
+    )
     if blacks.shape != (n_channels,):
         raise CalibrationError(f"linearity: {blacks.size} black levels for {n_channels} channels")
 

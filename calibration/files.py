@@ -87,8 +87,13 @@ class CalibrationSet:
 
     def updated(self, **changes: Any) -> CalibrationSet:
         """A copy with some sections changed and a new id and time."""
-        return replace(self, id=new_calibration_id(),
-                       created_utc=datetime.now(UTC).isoformat(timespec="seconds"), notes=(), **changes)
+        return replace(
+            self,
+            id=new_calibration_id(),
+            created_utc=datetime.now(UTC).isoformat(timespec="seconds"),
+            notes=(),
+            **changes,
+        )
 
 
 def _plain(value: Any) -> Any:
@@ -119,8 +124,10 @@ def _write_text(path: Path, text: str) -> None:
 
 
 def _csv_text(spectra: Spectra, calibration_id: str, what: str) -> str:
-    lines = [f"# msflash calibration {calibration_id}: {what}, unit {spectra.unit}",
-             "wavelength_nm," + ",".join(spectra.names)]
+    lines = [
+        f"# msflash calibration {calibration_id}: {what}, unit {spectra.unit}",
+        "wavelength_nm," + ",".join(spectra.names),
+    ]
     for wavelength, row in zip(spectra.wavelengths_nm, spectra.values):
         lines.append(f"{wavelength:g}," + ",".join(repr(float(v)) for v in row))
     return "\n".join(lines) + "\n"
@@ -150,29 +157,48 @@ def save_calibration(calibration: CalibrationSet, directory: str | Path) -> Path
     ``clipped_negatives``; a value beyond noise raises :class:`CalibrationError` and nothing is written.
     """
     directory = Path(directory)
-    leds, led_section = (_without_negative_noise(calibration.led_spectra, "LED spectra", calibration.leds)
-                         if calibration.led_spectra is not None else (None, calibration.leds))
+    leds, led_section = (
+        _without_negative_noise(calibration.led_spectra, "LED spectra", calibration.leds)
+        if calibration.led_spectra is not None
+        else (None, calibration.leds)
+    )
     camera, camera_section = (
         _without_negative_noise(calibration.camera_responsivities, "camera responsivities", calibration.camera)
-        if calibration.camera_responsivities is not None else (None, calibration.camera))
-    calibration = replace(calibration, led_spectra=leds, leds=led_section, camera_responsivities=camera,
-                          camera=camera_section)
+        if calibration.camera_responsivities is not None
+        else (None, calibration.camera)
+    )
+    calibration = replace(
+        calibration, led_spectra=leds, leds=led_section, camera_responsivities=camera, camera=camera_section
+    )
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise CalibrationError(f"{directory}: cannot create the calibration directory ({err.strerror or err})") from err
-    document: dict[str, Any] = {"format": FORMAT, "version": VERSION, "id": calibration.id,
-                                "created_utc": calibration.created_utc}
+    document: dict[str, Any] = {
+        "format": FORMAT,
+        "version": VERSION,
+        "id": calibration.id,
+        "created_utc": calibration.created_utc,
+    }
     if calibration.led_spectra is not None:
         _write_text(directory / LED_FILE, _csv_text(calibration.led_spectra, calibration.id, "LED spectra"))
-        document["leds"] = {**calibration.leds, "file": LED_FILE, "unit": calibration.led_spectra.unit,
-                            "names": list(calibration.led_spectra.names)}
+        document["leds"] = {
+            **calibration.leds,
+            "file": LED_FILE,
+            "unit": calibration.led_spectra.unit,
+            "names": list(calibration.led_spectra.names),
+        }
     if calibration.camera_responsivities is not None:
-        _write_text(directory / CAMERA_FILE,
-                    _csv_text(calibration.camera_responsivities, calibration.id, "camera responsivities"))
-        document["camera"] = {**calibration.camera, "file": CAMERA_FILE,
-                              "unit": calibration.camera_responsivities.unit,
-                              "channels": list(calibration.camera_responsivities.names)}
+        _write_text(
+            directory / CAMERA_FILE,
+            _csv_text(calibration.camera_responsivities, calibration.id, "camera responsivities"),
+        )
+        document["camera"] = {
+            **calibration.camera,
+            "file": CAMERA_FILE,
+            "unit": calibration.camera_responsivities.unit,
+            "channels": list(calibration.camera_responsivities.names),
+        }
     if calibration.dark is not None:
         document["dark"] = calibration.dark
     if calibration.linearity is not None:
@@ -192,14 +218,17 @@ def _section(path: Path, document: dict, key: str) -> dict | None:
     return value
 
 
-def _spectra(path: Path, section: dict, key: str, kind: SpectralKind, names_key: str) -> tuple[Spectra, tuple[str, ...]]:
+def _spectra(
+    path: Path, section: dict, key: str, kind: SpectralKind, names_key: str
+) -> tuple[Spectra, tuple[str, ...]]:
     file_name = section.get("file")
     if not isinstance(file_name, str) or not file_name:
         raise CalibrationError(f"{path}: field '{key}.file' is {file_name!r}; expected a CSV file name")
     table = path.parent / file_name
     if Path(file_name).is_absolute() or ".." in Path(file_name).parts:
-        raise CalibrationError(f"{path}: field '{key}.file' '{file_name}' leaves the calibration directory; "
-                               "expected a file name inside it")
+        raise CalibrationError(
+            f"{path}: field '{key}.file' '{file_name}' leaves the calibration directory; expected a file name inside it"
+        )
     unit = section.get("unit")
     if unit not in ("energy", "photons"):
         raise CalibrationError(f"{path}: field '{key}.unit' is {unit!r}; expected 'energy' or 'photons'")
@@ -211,11 +240,12 @@ def _spectra(path: Path, section: dict, key: str, kind: SpectralKind, names_key:
         raise CalibrationError(f"{path}: field '{key}.file': {err}") from err
     names = section.get(names_key)
     if names is not None and (not isinstance(names, list) or names != list(spectra.names)):
-        raise CalibrationError(f"{path}: field '{key}.{names_key}' is {_shown(names)}; expected the columns of "
-                               f"{table.name}: {list(spectra.names)}")
+        raise CalibrationError(
+            f"{path}: field '{key}.{names_key}' is {_shown(names)}; expected the columns of "
+            f"{table.name}: {list(spectra.names)}"
+        )
     try:
-        values, report = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names,
-                                             shown_path(table))
+        values, report = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, shown_path(table))
     except SpectralDataError as err:
         raise CalibrationError(str(err)) from None
     return spectra.replace(values=values), tuple(item.note(shown_path(table)) for item in report)
@@ -231,16 +261,24 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
-def _number_list(path: Path, section: dict, key: str, field_name: str, *, minimum: float | None = None,
-                 sizes: tuple[int, int] = (0, 10_000)) -> None:
+def _number_list(
+    path: Path,
+    section: dict,
+    key: str,
+    field_name: str,
+    *,
+    minimum: float | None = None,
+    sizes: tuple[int, int] = (0, 10_000),
+) -> None:
     value = section.get(field_name)
     if value is None:
         return
     if not isinstance(value, list) or not all(_is_number(v) for v in value):
         raise CalibrationError(f"{path}: field '{key}.{field_name}' is {_shown(value)}; expected a list of numbers")
     if not sizes[0] <= len(value) <= sizes[1]:
-        raise CalibrationError(f"{path}: field '{key}.{field_name}' has {len(value)} values; expected "
-                               f"{sizes[0]}–{sizes[1]}")
+        raise CalibrationError(
+            f"{path}: field '{key}.{field_name}' has {len(value)} values; expected {sizes[0]}–{sizes[1]}"
+        )
     if minimum is not None and any(v < minimum for v in value):
         bad = next(v for v in value if v < minimum)
         raise CalibrationError(f"{path}: field '{key}.{field_name}' holds {bad!r}; expected numbers ≥ {minimum:g}")
@@ -264,10 +302,16 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
     directory = Path(directory)
     path = directory if directory.suffix == ".json" else directory / CALIBRATION_FILE
     if not os.path.lexists(path):
-        raise CalibrationError(f"{shown_path(path)}: cannot be read (No such file or directory); expected a "
-                               "calibration directory written by 'msflash calibrate'")
-    text = read_user_text(path, f"a calibration's {CALIBRATION_FILE} (UTF-8 JSON) written by 'msflash calibrate'",
-                          JSON_MAX_BYTES, CalibrationError)
+        raise CalibrationError(
+            f"{shown_path(path)}: cannot be read (No such file or directory); expected a "
+            "calibration directory written by 'msflash calibrate'"
+        )
+    text = read_user_text(
+        path,
+        f"a calibration's {CALIBRATION_FILE} (UTF-8 JSON) written by 'msflash calibrate'",
+        JSON_MAX_BYTES,
+        CalibrationError,
+    )
     document = parse_json_document(text, shown_path(path), CalibrationError)  # NaN, huge numbers, deep nesting named
     if not isinstance(document, dict):
         raise CalibrationError(f"{path}: top level is a {type(document).__name__}; expected an object")
@@ -277,8 +321,9 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
     if not isinstance(version, int) or isinstance(version, bool) or version < 1:
         raise CalibrationError(f"{path}: field 'version' is {version!r}; expected a whole number ≥ 1")
     if version > VERSION:
-        raise CalibrationError(f"{path}: field 'version' is {version}; this msflash reads version {VERSION} — "
-                               "upgrade msflash to read it")
+        raise CalibrationError(
+            f"{path}: field 'version' is {version}; this msflash reads version {VERSION} — upgrade msflash to read it"
+        )
     calibration_id = document.get("id")
     if not isinstance(calibration_id, str) or not calibration_id:
         raise CalibrationError(f"{path}: field 'id' is {calibration_id!r}; expected a non-empty string")
@@ -316,13 +361,20 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
             _optional_number(path, linearity, "linearity", name)
     strip = ("file", "unit", "names", "channels")
     return CalibrationSet(
-        id=calibration_id, created_utc=str(created),
-        led_spectra=led_spectra.replace(source=f"calibration {calibration_id} ({led_spectra.source})") if led_spectra else None,
+        id=calibration_id,
+        created_utc=str(created),
+        led_spectra=led_spectra.replace(source=f"calibration {calibration_id} ({led_spectra.source})")
+        if led_spectra
+        else None,
         leds={k: v for k, v in (led_section or {}).items() if k not in strip},
-        camera_responsivities=camera.replace(source=f"calibration {calibration_id} ({camera.source})") if camera else None,
+        camera_responsivities=camera.replace(source=f"calibration {calibration_id} ({camera.source})")
+        if camera
+        else None,
         camera={k: v for k, v in (camera_section or {}).items() if k not in strip},
-        dark=dark, linearity=linearity,
-        extra={k: v for k, v in document.items() if k not in _KNOWN}, notes=notes,
+        dark=dark,
+        linearity=linearity,
+        extra={k: v for k, v in document.items() if k not in _KNOWN},
+        notes=notes,
     )
 
 

@@ -48,7 +48,11 @@ HALF_WIDTH_FACTOR = _half_width_factor()
 
 
 def emission_model_Ohno2005(
-    wavelengths_nm: np.ndarray, amplitude: float, peak_nm: float, width_left_nm: float, width_right_nm: float,
+    wavelengths_nm: np.ndarray,
+    amplitude: float,
+    peak_nm: float,
+    width_left_nm: float,
+    width_right_nm: float,
 ) -> np.ndarray:
     """Ohno's (2005) LED emission model with a different width on each side of the peak.
 
@@ -144,8 +148,9 @@ def characterise_led(measurement: SpectrometerMeasurement) -> LedCharacterisatio
             offset = 0.5 * (y0 - y2) / denominator
             peak_nm = float(np.interp(top + offset, np.arange(values.size), wavelengths))
     else:
-        notes.append(f"{where}: the peak lies at the edge of the measured range ({peak_nm:g} nm); "
-                     "the LED may extend beyond it")
+        notes.append(
+            f"{where}: the peak lies at the edge of the measured range ({peak_nm:g} nm); the LED may extend beyond it"
+        )
     fwhm, low, high = _fwhm(wavelengths, values, top)
     positive = np.clip(values, 0, None)
     centroid = float(np.sum(wavelengths * positive) / np.sum(positive))
@@ -158,8 +163,10 @@ def characterise_led(measurement: SpectrometerMeasurement) -> LedCharacterisatio
         longest = max(longest, run)
     saturated = longest >= SATURATION_RUN
     if saturated:
-        notes.append(f"{where}: {longest} samples at the maximum {peak_value:g} (flat top): the spectrometer "
-                     "saturated; re-measure with a shorter integration time")
+        notes.append(
+            f"{where}: {longest} samples at the maximum {peak_value:g} (flat top): the spectrometer "
+            "saturated; re-measure with a shorter integration time"
+        )
 
     # Noise: samples far from the emission band.
     band = max(fwhm, 5.0)
@@ -169,8 +176,10 @@ def characterise_led(measurement: SpectrometerMeasurement) -> LedCharacterisatio
         noise = float(np.std(values[out_of_band]))
         snr = peak_value / noise if noise > 0 else math.inf
         if snr < MIN_SNR:
-            notes.append(f"{where}: noisy measurement (peak/noise {snr:.0f} < {MIN_SNR:.0f}); average more "
-                         "scans or lengthen the integration time")
+            notes.append(
+                f"{where}: noisy measurement (peak/noise {snr:.0f} < {MIN_SNR:.0f}); average more "
+                "scans or lengthen the integration time"
+            )
 
     # Ohno 2005 model, asymmetric, fitted on the samples above 2 % of the peak plus a margin.
     half_left = max(peak_nm - low, 1.0)
@@ -186,25 +195,41 @@ def characterise_led(measurement: SpectrometerMeasurement) -> LedCharacterisatio
 
     span = wavelengths[-1] - wavelengths[0]
     fit = least_squares(
-        residual, start,
+        residual,
+        start,
         bounds=([0, wavelengths[0] - 50, 0.1, 0.1], [10 * peak_value, wavelengths[-1] + 50, span, span]),
     )
     amplitude, fitted_peak, width_left, width_right = (float(v) for v in fit.x)
     model_values = emission_model_Ohno2005(wavelengths, *fit.x)
     model_residual = float(np.sqrt(np.mean(((values - model_values) / peak_value)[fit_mask] ** 2)))
     if model_residual > MAX_MODEL_RESIDUAL:
-        notes.append(f"{where}: the single-peak emission model fits poorly (RMS residual {model_residual:.3f} of "
-                     "the peak): a phosphor-converted or multi-die LED? The measured spectrum is used, not the model")
+        notes.append(
+            f"{where}: the single-peak emission model fits poorly (RMS residual {model_residual:.3f} of "
+            "the peak): a phosphor-converted or multi-die LED? The measured spectrum is used, not the model"
+        )
     return LedCharacterisation(
-        name=measurement.name, source=where, peak_nm=peak_nm, centroid_nm=centroid, fwhm_nm=fwhm,
-        model={"amplitude": amplitude, "peak_nm": fitted_peak, "width_left_nm": width_left,
-               "width_right_nm": width_right},
-        model_residual=model_residual, snr=snr, saturated=saturated, warnings=tuple(notes),
+        name=measurement.name,
+        source=where,
+        peak_nm=peak_nm,
+        centroid_nm=centroid,
+        fwhm_nm=fwhm,
+        model={
+            "amplitude": amplitude,
+            "peak_nm": fitted_peak,
+            "width_left_nm": width_left,
+            "width_right_nm": width_right,
+        },
+        model_residual=model_residual,
+        snr=snr,
+        saturated=saturated,
+        warnings=tuple(notes),
     )
 
 
 def relative_power_through_camera(
-    led_spectra: Spectra, white_responses: np.ndarray, camera_responsivities: Spectra,
+    led_spectra: Spectra,
+    white_responses: np.ndarray,
+    camera_responsivities: Spectra,
     white_reflectance: Spectra | None = None,
 ) -> np.ndarray:
     """Each LED's power scale, relative to the strongest, from the camera's view of a white reference.

@@ -83,7 +83,11 @@ def _cells(line: str) -> list[str]:
     """The cells of a line; decimal commas become points where the separators make them unambiguous."""
     if "," in line and _DECIMAL_COMMA_SEPARATORS.search(line):
         cells = [cell.strip() for cell in _DECIMAL_COMMA_SEPARATORS.split(line.strip()) if cell.strip() != ""]
-        if len(cells) >= 2 and any("," in cell for cell in cells) and all(_DECIMAL_COMMA_NUMBER.match(c) for c in cells):
+        if (
+            len(cells) >= 2
+            and any("," in cell for cell in cells)
+            and all(_DECIMAL_COMMA_NUMBER.match(c) for c in cells)
+        ):
             return [cell.replace(",", ".") for cell in cells]
     return [cell for cell in _SEPARATORS.split(line.strip()) if cell != ""]
 
@@ -96,7 +100,10 @@ def _numbers(cells: list[str]) -> list[float] | None:
 
 
 def parse_spectrometer_text(
-    text: str, source: str = "<text>", unit: SpectralUnit = "energy", column: int | None = None,
+    text: str,
+    source: str = "<text>",
+    unit: SpectralUnit = "energy",
+    column: int | None = None,
     name: str | None = None,
 ) -> SpectrometerMeasurement:
     """Parse a spectrometer export (see the module notes for the layout).
@@ -156,13 +163,14 @@ def parse_spectrometer_text(
         if width is None:
             width = len(values)
             if width < 2:
-                raise CalibrationError(
-                    f"{source}:{number}: 1 column; expected at least 2 (wavelength_nm, value)"
-                )
+                raise CalibrationError(f"{source}:{number}: 1 column; expected at least 2 (wavelength_nm, value)")
             if width > 2 and column is None:
                 # "380,5,0,25": decimal commas between comma separators cannot be told apart from cells.
-                hint = ("; if the numbers have decimal commas, export with ';' or tab separators"
-                        if not re.search(r"[\t; ]", line) else "")
+                hint = (
+                    "; if the numbers have decimal commas, export with ';' or tab separators"
+                    if not re.search(r"[\t; ]", line)
+                    else ""
+                )
                 raise CalibrationError(
                     f"{source}:{number}: {width} columns; expected 2 (wavelength_nm, value), or choose the "
                     f"value column (column=N / --column N){hint}"
@@ -183,9 +191,7 @@ def parse_spectrometer_text(
         rows.append(values)
         lines.append(number)
     if len(rows) < 3:
-        raise CalibrationError(
-            f"{source}: {len(rows)} data lines; expected at least 3 lines of 'wavelength_nm, value'"
-        )
+        raise CalibrationError(f"{source}: {len(rows)} data lines; expected at least 3 lines of 'wavelength_nm, value'")
     table = np.asarray(rows, dtype=float)
     wavelengths = table[:, 0]
     readings = table[:, column if column is not None else 1]
@@ -207,19 +213,32 @@ def parse_spectrometer_text(
     column_name = ""
     if header:
         # "Wavelength (nm)\tIrradiance": names may hold spaces when another separator is used.
-        header_cells = [c.strip() for c in re.split(r"[,\t;]", header[-1]) if c.strip()] \
-            if re.search(r"[,\t;]", header[-1]) else _cells(header[-1])
+        header_cells = (
+            [c.strip() for c in re.split(r"[,\t;]", header[-1]) if c.strip()]
+            if re.search(r"[,\t;]", header[-1])
+            else _cells(header[-1])
+        )
         if width is not None and len(header_cells) >= width:
             column_name = header_cells[column if column is not None else 1]
     _check_negatives(wavelengths, readings, column_name or "value", source, lines)
     return SpectrometerMeasurement(
-        wavelengths, readings, unit, source, name or Path(source).stem, tuple(header),
+        wavelengths,
+        readings,
+        unit,
+        source,
+        name or Path(source).stem,
+        tuple(header),
         {"column": column_name, "lines": tuple(lines)},
     )
 
 
-def _check_negatives(wavelengths_nm: np.ndarray, values: np.ndarray, column: str, source: str,
-                     lines: tuple[int, ...] | list[int] | None = None) -> tuple[np.ndarray, tuple[ClippedNegatives, ...]]:
+def _check_negatives(
+    wavelengths_nm: np.ndarray,
+    values: np.ndarray,
+    column: str,
+    source: str,
+    lines: tuple[int, ...] | list[int] | None = None,
+) -> tuple[np.ndarray, tuple[ClippedNegatives, ...]]:
     """The values with negative noise clipped (:mod:`processing.negative_values`); beyond it, a CalibrationError."""
     try:
         return clip_negative_noise(wavelengths_nm, values, [column], source, lines)
@@ -228,7 +247,10 @@ def _check_negatives(wavelengths_nm: np.ndarray, values: np.ndarray, column: str
 
 
 def read_spectrometer_file(
-    path: str | Path, unit: SpectralUnit = "energy", column: int | None = None, name: str | None = None,
+    path: str | Path,
+    unit: SpectralUnit = "energy",
+    column: int | None = None,
+    name: str | None = None,
 ) -> SpectrometerMeasurement:
     """Read a spectrometer export from a file (UTF-8 or Latin-1 text; see :func:`parse_spectrometer_text`)."""
     path = Path(path)
@@ -238,8 +260,9 @@ def read_spectrometer_file(
         try:
             text = data.decode("utf-16")
         except UnicodeDecodeError as err:
-            raise CalibrationError(f"{shown}: not valid UTF-16 text ({err.reason} at byte {err.start}); "
-                                   "expected a text export") from err
+            raise CalibrationError(
+                f"{shown}: not valid UTF-16 text ({err.reason} at byte {err.start}); expected a text export"
+            ) from err
         return parse_spectrometer_text(text, shown, unit, column, name)
     if b"\x00" in data[:4096]:
         raise CalibrationError(f"{shown}: binary data; expected a text export (CSV or tab/space separated)")
@@ -269,16 +292,26 @@ def subtract_dark(measurement: SpectrometerMeasurement, dark: SpectrometerMeasur
         )
     metadata = {**measurement.metadata, "dark": dark.source}
     values = measurement.values - dark.values
-    _check_negatives(measurement.wavelengths_nm, values, measurement.metadata.get("column") or "value",
-                     f"{measurement.source} minus the dark {dark.source}")
+    _check_negatives(
+        measurement.wavelengths_nm,
+        values,
+        measurement.metadata.get("column") or "value",
+        f"{measurement.source} minus the dark {dark.source}",
+    )
     return SpectrometerMeasurement(
-        measurement.wavelengths_nm, values, measurement.unit, measurement.source,
-        measurement.name, measurement.header, metadata,
+        measurement.wavelengths_nm,
+        values,
+        measurement.unit,
+        measurement.source,
+        measurement.name,
+        measurement.header,
+        metadata,
     )
 
 
 def measurement_to_spectra(
-    measurements: list[SpectrometerMeasurement] | SpectrometerMeasurement, grid: WavelengthGrid,
+    measurements: list[SpectrometerMeasurement] | SpectrometerMeasurement,
+    grid: WavelengthGrid,
     unit: SpectralUnit | None = None,
 ) -> Spectra:
     """Measurements as one ``Spectra`` (one column each) on ``grid``, zero outside their range.
@@ -306,13 +339,20 @@ def measurement_to_spectra(
     clipped: list[dict] = []
     notes: list[str] = []
     for measurement in measurements:
-        values, report = _check_negatives(measurement.wavelengths_nm, measurement.values, measurement.name,
-                                          measurement.source)
+        values, report = _check_negatives(
+            measurement.wavelengths_nm, measurement.values, measurement.name, measurement.source
+        )
         clipped.extend({**item.as_dict(), "column": measurement.name, "source": measurement.source} for item in report)
         notes.extend(item.note(measurement.source) for item in report)
         try:
-            native = Spectra.from_samples(measurement.wavelengths_nm, values, (measurement.name,),
-                                          kind="spd", unit=measurement.unit, source=measurement.source)
+            native = Spectra.from_samples(
+                measurement.wavelengths_nm,
+                values,
+                (measurement.name,),
+                kind="spd",
+                unit=measurement.unit,
+                source=measurement.source,
+            )
             column = native.to_unit(unit).resample(grid, outside="zero").values[:, 0]
         except SpectralDataError as err:
             raise CalibrationError(f"{measurement.source}: {err}") from err
@@ -325,5 +365,12 @@ def measurement_to_spectra(
                 f"{measurement.wavelengths_nm[-1]:g} nm, peak at {peak:g} nm); expected an LED emitting within the grid"
             )
         columns.append(column)
-    return Spectra(grid, np.column_stack(columns), tuple(m.name for m in measurements), kind="spd", unit=unit,
-                   source=", ".join(m.source for m in measurements), metadata={"clipped_negatives": clipped, "clipped_notes": notes})
+    return Spectra(
+        grid,
+        np.column_stack(columns),
+        tuple(m.name for m in measurements),
+        kind="spd",
+        unit=unit,
+        source=", ".join(m.source for m in measurements),
+        metadata={"clipped_negatives": clipped, "clipped_notes": notes},
+    )

@@ -50,12 +50,17 @@ def calibration_lights(grid: WavelengthGrid = DEFAULT_GRID, broadband: Sequence[
     leds = datasets.paper_leds().resample(grid, outside="zero")
     peak = float(leds.values.max())
     columns = [leds.values] + [datasets.illuminant(name, grid).values * peak for name in broadband]
-    return leds.replace(values=np.hstack(columns), names=leds.names + tuple(broadband),
-                        source="paper LEDs + " + " + ".join(broadband))
+    return leds.replace(
+        values=np.hstack(columns), names=leds.names + tuple(broadband), source="paper LEDs + " + " + ".join(broadband)
+    )
 
 
 def simulate_chart_responses(
-    camera: Spectra, chart: Spectra, lights: Spectra, sensor: SensorModel | None = None, patch_px: int = 12,
+    camera: Spectra,
+    chart: Spectra,
+    lights: Spectra,
+    sensor: SensorModel | None = None,
+    patch_px: int = 12,
     rng: np.random.Generator | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Render the chart under each light alone and return linear patch means and standard errors.
@@ -104,7 +109,9 @@ class CameraCalibrationResult:
     """Largest such ΔE00."""
 
 
-def flash_delta_e(true_camera: Spectra, recovered: Spectra, chart: Spectra, ambient: str = "tungsten") -> tuple[float, float]:
+def flash_delta_e(
+    true_camera: Spectra, recovered: Spectra, chart: Spectra, ambient: str = "tungsten"
+) -> tuple[float, float]:
     """ΔE00 (mean, max over patches) between the complementary-flash charts of two responsivity sets."""
     grid = true_camera.grid
     leds = datasets.paper_leds().resample(grid, outside="zero").to_unit("photons")
@@ -126,8 +133,9 @@ def flash_delta_e(true_camera: Spectra, recovered: Spectra, chart: Spectra, ambi
     return float(delta.mean()), float(delta.max())
 
 
-def _study_world(camera_names: Sequence[str] | None, chart: str, seed: int, grid: WavelengthGrid) -> tuple[
-        dict[str, Spectra], list[str], Spectra, Any, np.random.Generator]:
+def _study_world(
+    camera_names: Sequence[str] | None, chart: str, seed: int, grid: WavelengthGrid
+) -> tuple[dict[str, Spectra], list[str], Spectra, Any, np.random.Generator]:
     """The 34 cameras on ``grid``, the cameras to study, the chart, the lights and the noise generator."""
     cameras = {name: spectra.resample(grid, outside="zero") for name, spectra in datasets.paper_cameras().items()}
     names = list(cameras) if camera_names is None else list(camera_names)
@@ -136,7 +144,9 @@ def _study_world(camera_names: Sequence[str] | None, chart: str, seed: int, grid
 
 
 def leave_one_camera_out(
-    camera_names: Sequence[str] | None = None, chart: str = "macbeth", seed: int = 0,
+    camera_names: Sequence[str] | None = None,
+    chart: str = "macbeth",
+    seed: int = 0,
 ) -> list[CameraCalibrationResult]:
     """Run the study over ``camera_names`` (default: all 34), each against a prior learned without it."""
     grid = DEFAULT_GRID
@@ -149,15 +159,24 @@ def leave_one_camera_out(
         with_prior = estimate_responsivities(responses, reflectances, lights, "pca_prior", prior, std)
         smooth_only = estimate_responsivities(responses, reflectances, lights, "smoothness", None, std)
         mean_de, max_de = flash_delta_e(truth, with_prior.responsivities, datasets.macbeth().resample(grid))
-        results.append(CameraCalibrationResult(
-            name, camera_family(name), seed, responsivity_rmse(with_prior.responsivities, truth),
-            responsivity_rmse(smooth_only.responsivities, truth), mean_de, max_de,
-        ))
+        results.append(
+            CameraCalibrationResult(
+                name,
+                camera_family(name),
+                seed,
+                responsivity_rmse(with_prior.responsivities, truth),
+                responsivity_rmse(smooth_only.responsivities, truth),
+                mean_de,
+                max_de,
+            )
+        )
     return results
 
 
 def leave_one_camera_out_seeds(
-    seeds: Sequence[int] = STUDY_SEEDS, camera_names: Sequence[str] | None = None, chart: str = "macbeth",
+    seeds: Sequence[int] = STUDY_SEEDS,
+    camera_names: Sequence[str] | None = None,
+    chart: str = "macbeth",
 ) -> list[CameraCalibrationResult]:
     """:func:`leave_one_camera_out` once per noise seed, all results in one list (seed by seed)."""
     return [result for seed in seeds for result in leave_one_camera_out(camera_names, chart, seed)]
@@ -179,15 +198,20 @@ def summarise(results: Sequence[CameraCalibrationResult]) -> dict:
 
     def means(subset: list[CameraCalibrationResult]) -> dict:
         a, b = float(np.mean([r.rmse_prior for r in subset])), float(np.mean([r.rmse_smoothness for r in subset]))
-        return {"cameras": len({r.camera for r in subset}), "mean_rmse_prior": a, "mean_rmse_smoothness": b,
-                "improvement": 1 - a / b}
+        return {
+            "cameras": len({r.camera for r in subset}),
+            "mean_rmse_prior": a,
+            "mean_rmse_smoothness": b,
+            "improvement": 1 - a / b,
+        }
 
     return {
         "cameras": len({r.camera for r in results}),
         "seeds": sorted({r.seed for r in results}),
         "per_seed": {seed: means([r for r in results if r.seed == seed]) for seed in sorted({r.seed for r in results})},
-        "families": {family: means([r for r in results if r.family == family])
-                     for family in sorted({r.family for r in results})},
+        "families": {
+            family: means([r for r in results if r.family == family]) for family in sorted({r.family for r in results})
+        },
         "mean_rmse_prior": prior,
         "mean_rmse_smoothness": smooth,
         "improvement": 1 - prior / smooth,
@@ -202,8 +226,11 @@ LIGHT_SETS = {"LEDs": (), "LEDs+A": ("A",), "LEDs+A+D65": ("A", "D65")}
 
 
 def regime_study(
-    noise_factors: Sequence[float] = (1.0, 4.0, 16.0), methods: Sequence[str] = ("smoothness", "pca_prior", "pca_subspace"),
-    camera_names: Sequence[str] | None = None, chart: str = "macbeth", seed: int = 0,
+    noise_factors: Sequence[float] = (1.0, 4.0, 16.0),
+    methods: Sequence[str] = ("smoothness", "pca_prior", "pca_subspace"),
+    camera_names: Sequence[str] | None = None,
+    chart: str = "macbeth",
+    seed: int = 0,
 ) -> dict[tuple[float, str, str], list[float]]:
     """Leave-one-camera-out RMSE per (noise factor, light set, method), one value per camera.
 
@@ -222,10 +249,9 @@ def regime_study(
         responses, std = simulate_chart_responses(truth, reflectances, lights, rng=rng)
         prior = learn_prior(cameras, exclude=[name])
         for factor in noise_factors:
-            noisy = responses + rng.normal(size=responses.shape) * std * np.sqrt(max(factor ** 2 - 1, 0.0))
+            noisy = responses + rng.normal(size=responses.shape) * std * np.sqrt(max(factor**2 - 1, 0.0))
             for set_name, broadband in LIGHT_SETS.items():
-                index = list(range(lights.count - len(BROADBAND_LIGHTS))) + [
-                    lights.names.index(b) for b in broadband]
+                index = list(range(lights.count - len(BROADBAND_LIGHTS))) + [lights.names.index(b) for b in broadband]
                 design = measurement_matrix(reflectances, lights.select(index))
                 data, errors = noisy[index].reshape(-1, 3), (std[index] * factor).reshape(-1, 3)
                 for method in methods:

@@ -67,9 +67,13 @@ class WhiteResponses:
 
     def report(self) -> dict[str, Any]:
         """A JSON-ready summary."""
-        return {"roi_xywh": list(self.roi), "pixels": self.pixels,
-                "share_spread": dict(zip(self.led_names, self.share_spread, strict=True)),
-                "responses": self.responses.tolist(), "warnings": list(self.warnings)}
+        return {
+            "roi_xywh": list(self.roi),
+            "pixels": self.pixels,
+            "share_spread": dict(zip(self.led_names, self.share_spread, strict=True)),
+            "responses": self.responses.tolist(),
+            "warnings": list(self.warnings),
+        }
 
 
 def parse_roi(text: str) -> tuple[int, int, int, int]:
@@ -124,23 +128,29 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
     ambient_indices = sequence.indices("ambient")
     led_indices = sequence.indices("led")
     if not ambient_indices or not led_indices:
-        raise CalibrationError(f"{where}: the white reference needs an 'ambient' frame and 'led' frames; found "
-                               f"{len(ambient_indices)} and {len(led_indices)}")
+        raise CalibrationError(
+            f"{where}: the white reference needs an 'ambient' frame and 'led' frames; found "
+            f"{len(ambient_indices)} and {len(led_indices)}"
+        )
     names = tuple(led.name for led in sequence.leds)
     levels = np.array([sequence.frames[i].led_levels for i in led_indices], dtype=float)
     if np.linalg.matrix_rank(levels) < len(names):
-        raise CalibrationError(f"{where}: the 'led' frames' led_levels (rank {np.linalg.matrix_rank(levels)}) do "
-                               f"not separate the {len(names)} LEDs; expected a frame per LED")
+        raise CalibrationError(
+            f"{where}: the 'led' frames' led_levels (rank {np.linalg.matrix_rank(levels)}) do "
+            f"not separate the {len(names)} LEDs; expected a frame per LED"
+        )
     cfa = sequence.camera.cfa
     ambient, ambient_saturated = sequence.load_linear_frame(ambient_indices[0])
     height, width = ambient.shape[:2]
     roi = roi if roi is not None else _default_roi(height, width)
     x, y, w, h = roi
     if x + w > width or y + h > height:
-        raise CalibrationError(f"{where}: --white-roi {x},{y},{w},{h} reaches outside the {width}×{height} frame; "
-                               "expected X+W ≤ width and Y+H ≤ height")
+        raise CalibrationError(
+            f"{where}: --white-roi {x},{y},{w},{h} reaches outside the {width}×{height} frame; "
+            "expected X+W ≤ width and Y+H ≤ height"
+        )
     roi_mask = np.zeros((height, width), dtype=bool)
-    roi_mask[y:y + h, x:x + w] = True
+    roi_mask[y : y + h, x : x + w] = True
     block_labels = _sub_block_labels((height, width), roi)
     n_blocks = SUB_BLOCKS * SUB_BLOCKS
 
@@ -149,9 +159,11 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
         image, saturated = sequence.load_linear_frame(i)
         usable = roi_mask & ~saturated & ~ambient_saturated
         if usable.sum() < 0.5 * roi_mask.sum():
-            raise CalibrationError(f"{where}: {sequence.frames[i].file}: {100 * (1 - usable.sum() / roi_mask.sum()):.0f} % "
-                                   "of the white reference's region is saturated; expected a shorter exposure or a "
-                                   "lower LED level")
+            raise CalibrationError(
+                f"{where}: {sequence.frames[i].file}: {100 * (1 - usable.sum() / roi_mask.sum()):.0f} % "
+                "of the white reference's region is saturated; expected a shorter exposure or a "
+                "lower LED level"
+            )
         difference = image - ambient
         means, errors, counts = patch_statistics(difference, np.where(usable, 0, -1), 1, cfa)
         smallest = min(smallest, int(counts[0]))
@@ -161,23 +173,30 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
     frame_means_array, frame_errors_array = np.array(frame_means), np.array(frame_errors)
     unmixing = np.linalg.pinv(levels)  # (k, frames)
     responses = unmixing @ frame_means_array
-    std = np.sqrt((unmixing ** 2) @ frame_errors_array ** 2)
+    std = np.sqrt((unmixing**2) @ frame_errors_array**2)
     for k, name in enumerate(names):
         total, total_std = responses[k].sum(), np.sqrt(np.sum(std[k] ** 2))
         if not total > MIN_SIGNIFICANCE * total_std:
-            raise CalibrationError(f"{where}: LED '{name}' adds {total:.3g} ± {total_std:.2g} on the white reference; "
-                                   f"expected a response above {MIN_SIGNIFICANCE:g} standard errors (is it on? "
-                                   "is the exposure long enough?)")
+            raise CalibrationError(
+                f"{where}: LED '{name}' adds {total:.3g} ± {total_std:.2g} on the white reference; "
+                f"expected a response above {MIN_SIGNIFICANCE:g} standard errors (is it on? "
+                "is the exposure long enough?)"
+            )
     per_block = np.einsum("kf,fbc->kbc", unmixing, np.array(block_means))  # (k, blocks, channels)
     spread = _share_spread(per_block, std, n_blocks)
     worst = int(np.argmax(spread))
     if spread[worst] > MAX_SHARE_SPREAD:
-        raise CalibrationError(f"{where}: in the region {x},{y},{w},{h} LED '{names[worst]}''s share of the light "
-                               f"varies {100 * spread[worst]:.0f} % (> {100 * MAX_SHARE_SPREAD:.0f} %); expected a "
-                               "uniform, neutral white reference there (choose it with --white-roi X,Y,W,H)")
-    warnings = tuple(f"{where}: LED '{name}' lights the reference unevenly relative to the others (its share varies "
-                     f"{100 * value:.1f} % over the region): its ratio holds for this position only"
-                     for name, value in zip(names, spread, strict=True) if value > SHARE_WARNING)
+        raise CalibrationError(
+            f"{where}: in the region {x},{y},{w},{h} LED '{names[worst]}''s share of the light "
+            f"varies {100 * spread[worst]:.0f} % (> {100 * MAX_SHARE_SPREAD:.0f} %); expected a "
+            "uniform, neutral white reference there (choose it with --white-roi X,Y,W,H)"
+        )
+    warnings = tuple(
+        f"{where}: LED '{name}' lights the reference unevenly relative to the others (its share varies "
+        f"{100 * value:.1f} % over the region): its ratio holds for this position only"
+        for name, value in zip(names, spread, strict=True)
+        if value > SHARE_WARNING
+    )
     return WhiteResponses(responses, std, names, (x, y, w, h), int(smallest), spread, warnings)
 
 
@@ -193,6 +212,6 @@ def _share_spread(per_block: np.ndarray, std: np.ndarray, n_blocks: int) -> tupl
         return tuple(0.0 for _ in range(per_block.shape[0]))
     totals = totals[:, valid]
     share = totals / totals.sum(axis=0)
-    relative_noise = np.sqrt(n_blocks) * np.sqrt(np.sum(std ** 2, axis=1)) / totals.mean(axis=1)
+    relative_noise = np.sqrt(n_blocks) * np.sqrt(np.sum(std**2, axis=1)) / totals.mean(axis=1)
     relative_spread = share.std(axis=1, ddof=1) / share.mean(axis=1)
-    return tuple(float(v) for v in np.sqrt(np.clip(relative_spread ** 2 - relative_noise ** 2, 0, None)))
+    return tuple(float(v) for v in np.sqrt(np.clip(relative_spread**2 - relative_noise**2, 0, None)))

@@ -122,8 +122,10 @@ class LedBooth:
                 open(log_serial, "w", encoding="ascii", newline="\n") if log_serial else None  # noqa: SIM115
             )
         except OSError as err:
-            raise BoothError(f"{self._name}: cannot record the serial transcript in {log_serial} "
-                             f"({err.strerror or err}); expected a writable file path") from err
+            raise BoothError(
+                f"{self._name}: cannot record the serial transcript in {log_serial} "
+                f"({err.strerror or err}); expected a writable file path"
+            ) from err
         if self._transcript is not None:
             self._transcript.write(f"# msflash booth transcript, port {self._name}, {time.strftime('%Y-%m-%d')}\n")
         self._reader = threading.Thread(target=self._read_loop, name=f"booth-reader {self._name}", daemon=True)
@@ -261,8 +263,11 @@ class LedBooth:
             )
         self._info = info
         log.info(
-            "%s: booth %s, %d channels %s", self._name, self._info.firmware,
-            self._info.channels, ",".join(self._info.names),
+            "%s: booth %s, %d channels %s",
+            self._name,
+            self._info.firmware,
+            self._info.channels,
+            ",".join(self._info.names),
         )
         return self._info
 
@@ -320,8 +325,13 @@ class LedBooth:
             yield
             return
         if silence_s > WATCHDOG_MAX_S:
-            log.warning("%s: the host stays silent up to %.0f s, longer than the longest watchdog (%.0f s); "
-                        "the booth may switch the LEDs off before the end", self._name, silence_s, WATCHDOG_MAX_S)
+            log.warning(
+                "%s: the host stays silent up to %.0f s, longer than the longest watchdog (%.0f s); "
+                "the booth may switch the LEDs off before the end",
+                self._name,
+                silence_s,
+                WATCHDOG_MAX_S,
+            )
         self.set_watchdog(min(math.ceil(silence_s * 1000) / 1000.0, WATCHDOG_MAX_S))
         try:
             yield
@@ -350,9 +360,7 @@ class LedBooth:
         if any(not 0 <= i < len(steps) for i in held):
             raise ValueError(f"load_pattern: held steps {list(held)}; expected indices in 0..{len(steps) - 1}")
         if not 1 <= len(steps) <= info.max_steps:
-            raise ValueError(
-                f"load_pattern: {len(steps)} steps; expected 1..{info.max_steps} (the booth's table size)"
-            )
+            raise ValueError(f"load_pattern: {len(steps)} steps; expected 1..{info.max_steps} (the booth's table size)")
         encoded = []
         for i, step in enumerate(steps):
             try:
@@ -367,7 +375,9 @@ class LedBooth:
             if index != i:
                 raise BoothProtocolError(
                     f"{self._name}: PADD stored step {i} at index {index}; expected index {i}",
-                    command=Command.PATTERN_ADD, expected=f"'OK PADD {i}'", raw=raw,
+                    command=Command.PATTERN_ADD,
+                    expected=f"'OK PADD {i}'",
+                    raw=raw,
                 )
 
     def set_step(self, index: int, levels: Sequence[float], *, now: bool = False) -> None:
@@ -527,9 +537,7 @@ class LedBooth:
 
     # -- the exchange ---------------------------------------------------------------------
 
-    def _command(
-        self, command: str, *args: object, timeout_s: float | None = None
-    ) -> tuple[protocol.Reply, bytes]:
+    def _command(self, command: str, *args: object, timeout_s: float | None = None) -> tuple[protocol.Reply, bytes]:
         timeout = self.timeout_s if timeout_s is None else timeout_s
         name = str(command)
         with self._command_lock:
@@ -561,14 +569,18 @@ class LedBooth:
                     raise BoothProtocolError(
                         f"{self._name}: bad reply to {name}: {err.raw[:80]!r}; expected "
                         f"{protocol.FRAME_FORM} (line noise? check the cable and baud rate)",
-                        command=name, expected=err.expected, raw=err.raw,
+                        command=name,
+                        expected=err.expected,
+                        raw=err.raw,
                     ) from err
                 if item.seq == protocol.SEQ_FRAME_ERROR:
                     reply = protocol.parse_reply(item, name, where=self._name)
                     raise BoothProtocolError(
                         f"{self._name}: the booth could not read the {name} request "
                         f"({reply.code} {reply.text}); expected a clean link (check the cable)",
-                        command=name, expected=f"'={seq:02X}:…'", raw=item.raw,
+                        command=name,
+                        expected=f"'={seq:02X}:…'",
+                        raw=item.raw,
                     )
                 if item.seq != seq:
                     # A late reply to an earlier command that timed out: not ours.
@@ -580,11 +592,12 @@ class LedBooth:
                         raise BoothProtocolError(
                             f"{self._name}: the booth could not read the {name} request "
                             f"({reply.code} {reply.text}); expected a clean link (check the cable)",
-                            command=name, expected=f"'={seq:02X}:…'", raw=item.raw,
+                            command=name,
+                            expected=f"'={seq:02X}:…'",
+                            raw=item.raw,
                         )
                     raise BoothError(
-                        f"{self._name}: booth refused {name} ({reply.code}: {reply.text}); "
-                        f"expected 'OK {name}'"
+                        f"{self._name}: booth refused {name} ({reply.code}: {reply.text}); expected 'OK {name}'"
                     )
                 return reply, item.raw
 
@@ -608,7 +621,8 @@ class LedBooth:
         except serial.SerialTimeoutException as err:
             raise BoothTimeoutError(
                 f"{self._name}: writing {command} blocked for {timeout:g} s; expected the booth to read its input",
-                command=command, timeout_s=timeout,
+                command=command,
+                timeout_s=timeout,
             ) from err
         except (serial.SerialException, OSError, *_TERMIOS_ERRORS) as err:
             # termios.error: pyserial's flush (tcdrain) on a pty or USB port that was just hung up.
@@ -701,11 +715,17 @@ class LedBooth:
             self._check_event_seq(event)
             self._push_event(event)
         else:
-            self._replies.put(_Garbled(BoothProtocolError(
-                f"{self._name}: received a request frame {line[:80]!r}; expected replies and events "
-                "only (is echo on, or is another host on this port?)",
-                command=None, expected="'=…' or '!…' frames", raw=line,
-            )))
+            self._replies.put(
+                _Garbled(
+                    BoothProtocolError(
+                        f"{self._name}: received a request frame {line[:80]!r}; expected replies and events "
+                        "only (is echo on, or is another host on this port?)",
+                        command=None,
+                        expected="'=…' or '!…' frames",
+                        raw=line,
+                    )
+                )
+            )
 
     def _check_event_seq(self, event: BoothEvent) -> None:
         last = self._last_event_seq
@@ -714,11 +734,17 @@ class LedBooth:
             return
         expected = last % 255 + 1
         if event.seq != expected:
-            self._push_event(_Garbled(BoothProtocolError(
-                f"{self._name}: event sequence jumped from {last} to {event.seq}; expected {expected} "
-                "(events were lost on the link)",
-                command=None, expected=f"event seq {expected}", raw=event.raw,
-            )))
+            self._push_event(
+                _Garbled(
+                    BoothProtocolError(
+                        f"{self._name}: event sequence jumped from {last} to {event.seq}; expected {expected} "
+                        "(events were lost on the link)",
+                        command=None,
+                        expected=f"event seq {expected}",
+                        raw=event.raw,
+                    )
+                )
+            )
 
     def _push_event(self, item: BoothEvent | _Garbled) -> None:
         with self._events_cv:

@@ -131,8 +131,9 @@ class BoothConsole:
         return levels
 
     def _describe(self, levels: list[float] | tuple[float, ...]) -> str:
-        return ", ".join(f"{n} {x:.4f} ({level_to_code(x, index=i):04X})"
-                         for i, (n, x) in enumerate(zip(self._info.names, levels)))
+        return ", ".join(
+            f"{n} {x:.4f} ({level_to_code(x, index=i):04X})" for i, (n, x) in enumerate(zip(self._info.names, levels))
+        )
 
     # -- the commands ------------------------------------------------------------------------
 
@@ -142,9 +143,13 @@ class BoothConsole:
         info = self._booth.identify()
         self._info = info
         leds = ", ".join(f"{n} ({p:g} nm)" for n, p in zip(info.names, info.peaks_nm))
-        return [f"firmware {info.firmware}, protocol {info.protocol}; {info.channels} channels: {leds}",
-                (f"drive {info.level_bits} bits (the wire carries 16; the booth keeps the top {info.level_bits}); "
-                 f"pattern table of {info.max_steps} steps")]
+        return [
+            f"firmware {info.firmware}, protocol {info.protocol}; {info.channels} channels: {leds}",
+            (
+                f"drive {info.level_bits} bits (the wire carries 16; the booth keeps the top {info.level_bits}); "
+                f"pattern table of {info.max_steps} steps"
+            ),
+        ]
 
     def _levels(self, args: list[str]) -> list[str]:
         levels = self._level_list(args)
@@ -168,8 +173,10 @@ class BoothConsole:
             steps.append(self._level_list([w for w in word.split(",")]))
         self._booth.load_pattern(steps, held=held)
         lines = [f"table loaded: {len(steps)} steps (PCLR, then one PADD each)"]
-        lines += [f"  step {i}{' (held: never shown until pset)' if i in held else ''}: {self._describe(s)}"
-                  for i, s in enumerate(steps)]
+        lines += [
+            f"  step {i}{' (held: never shown until pset)' if i in held else ''}: {self._describe(s)}"
+            for i, s in enumerate(steps)
+        ]
         return lines
 
     def _pset(self, args: list[str]) -> list[str]:
@@ -190,10 +197,11 @@ class BoothConsole:
             times = [int(w) for w in args[1:]]
         except ValueError:
             raise ConsoleInputError(f"times {' '.join(args[1:])!r} are not whole microseconds") from None
-        settle, pulse, period = (times + [1000, 100, 0][len(times):])[:3]
+        settle, pulse, period = (times + [1000, 100, 0][len(times) :])[:3]
         self._booth.arm(mode, settle_us=settle, pulse_us=pulse, period_us=period)  # type: ignore[arg-type]
-        return [(f"armed {mode}: settle {settle} µs, pulse {pulse} µs, period {period} µs; trigger count reset; "
-                 "send start")]
+        return [
+            (f"armed {mode}: settle {settle} µs, pulse {pulse} µs, period {period} µs; trigger count reset; send start")
+        ]
 
     def _start(self, args: list[str]) -> list[str]:
         if args:
@@ -219,9 +227,13 @@ class BoothConsole:
             raise ConsoleInputError("status takes no arguments")
         s = self._booth.status()
         watchdog = "off" if s.watchdog_s == 0 else f"{s.watchdog_s:g} s"
-        return [(f"state {s.state}, mode {s.mode or '-'}, step {s.step} of {s.steps}, {s.trigger_count} triggers, "
-                 f"watchdog {watchdog}, last error {s.last_error or '-'}, {s.bad_frames} unreadable frames"),
-                f"LEDs: {self._describe(s.levels)}"]
+        return [
+            (
+                f"state {s.state}, mode {s.mode or '-'}, step {s.step} of {s.steps}, {s.trigger_count} triggers, "
+                f"watchdog {watchdog}, last error {s.last_error or '-'}, {s.bad_frames} unreadable frames"
+            ),
+            f"LEDs: {self._describe(s.levels)}",
+        ]
 
     def _ping(self, args: list[str]) -> list[str]:
         if args:
@@ -237,12 +249,14 @@ class BoothConsole:
         except ValueError:
             raise ConsoleInputError(f"{args[0]!r} is not a number of seconds") from None
         self._booth.set_watchdog(seconds)
-        return ["watchdog off" if seconds == 0 else
-                f"watchdog {seconds:g} s: LEDs go off if no command arrives for that long"]
+        return [
+            "watchdog off"
+            if seconds == 0
+            else f"watchdog {seconds:g} s: LEDs go off if no command arrives for that long"
+        ]
 
     def _events(self, args: list[str]) -> list[str]:
         if args:
             raise ConsoleInputError("events takes no arguments")
         events = self._booth.pending_events()
         return [f"event {e.kind} {' '.join(e.args)}" for e in events] or ["no events waiting"]
-

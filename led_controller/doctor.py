@@ -150,11 +150,14 @@ def check_usb3vision(
         devices = list_devices()
     except Exception as err:
         if type(err).__name__ == "NoBackendError":
-            return [Finding(
-                "usb3vision.backend", "fail",
-                f"pyusb has no backend ({err}); USB3 Vision cameras cannot be listed",
-                "install libusb 1.0 (Debian: sudo apt install libusb-1.0-0)",
-            )]
+            return [
+                Finding(
+                    "usb3vision.backend",
+                    "fail",
+                    f"pyusb has no backend ({err}); USB3 Vision cameras cannot be listed",
+                    "install libusb 1.0 (Debian: sudo apt install libusb-1.0-0)",
+                )
+            ]
         raise
     cameras = [d for d in devices if d.is_usb3vision]
     if not cameras:
@@ -165,22 +168,29 @@ def check_usb3vision(
         if cam.speed_mbps is None:
             findings.append(Finding("usb3vision.speed", "warn", f"{where}: link speed unknown"))
         elif cam.speed_mbps < SUPERSPEED_MBPS:
-            findings.append(Finding(
-                "usb3vision.speed", "warn",
-                f"{where}: link runs at {cam.speed_mbps:g} Mb/s; expected SuperSpeed ({SUPERSPEED_MBPS:g} Mb/s or more)",
-                "plug the camera into a USB 3 port with a USB 3 cable, without a USB 2 hub in between",
-            ))
+            findings.append(
+                Finding(
+                    "usb3vision.speed",
+                    "warn",
+                    f"{where}: link runs at {cam.speed_mbps:g} Mb/s; expected SuperSpeed ({SUPERSPEED_MBPS:g} Mb/s or more)",
+                    "plug the camera into a USB 3 port with a USB 3 cable, without a USB 2 hub in between",
+                )
+            )
         else:
             findings.append(Finding("usb3vision.speed", "ok", f"{where}: {cam.speed_mbps:g} Mb/s"))
         node = dev_root / "bus" / "usb" / f"{cam.bus:03d}" / f"{cam.address:03d}"
         if not node.exists():
             findings.append(Finding("usb3vision.access", "warn", f"{where}: device node {node} missing"))
         elif not can_read_write(node, identity):
-            findings.append(Finding(
-                "usb3vision.access", "fail", f"{where}: no read/write access to {node}",
-                f'add a udev rule: SUBSYSTEM=="usb", ATTR{{idVendor}}=="{cam.vid:04x}", MODE="0660", '
-                'GROUP="plugdev" (then add yourself to plugdev and replug)',
-            ))
+            findings.append(
+                Finding(
+                    "usb3vision.access",
+                    "fail",
+                    f"{where}: no read/write access to {node}",
+                    f'add a udev rule: SUBSYSTEM=="usb", ATTR{{idVendor}}=="{cam.vid:04x}", MODE="0660", '
+                    'GROUP="plugdev" (then add yourself to plugdev and replug)',
+                )
+            )
         else:
             findings.append(Finding("usb3vision.access", "ok", f"{where}: {node} is readable and writable"))
     return findings
@@ -194,17 +204,20 @@ def check_usbfs_memory(sysfs_root: Path) -> list[Finding]:
         return [Finding("usb.usbfs_memory_mb", "info", f"{path} not readable; usbfs limit unknown")]
     value = int(text)
     if value != 0 and value < USBFS_MEMORY_MB_MIN:
-        return [Finding(
-            "usb.usbfs_memory_mb", "warn",
-            f"usbfs_memory_mb is {value}; expected {USBFS_MEMORY_MB_MIN} or more for USB3 Vision streaming",
-            f"echo {USBFS_MEMORY_MB_MIN} | sudo tee {path} (persist with the kernel parameter "
-            f"usbcore.usbfs_memory_mb={USBFS_MEMORY_MB_MIN})",
-        )]
+        return [
+            Finding(
+                "usb.usbfs_memory_mb",
+                "warn",
+                f"usbfs_memory_mb is {value}; expected {USBFS_MEMORY_MB_MIN} or more for USB3 Vision streaming",
+                f"echo {USBFS_MEMORY_MB_MIN} | sudo tee {path} (persist with the kernel parameter "
+                f"usbcore.usbfs_memory_mb={USBFS_MEMORY_MB_MIN})",
+            )
+        ]
     return [Finding("usb.usbfs_memory_mb", "ok", f"usbfs_memory_mb is {value} (0 means unlimited)")]
 
 
 def _dev_path(device: str, dev_root: Path) -> Path:
-    return dev_root / device[len("/dev/"):] if device.startswith("/dev/") else Path(device)
+    return dev_root / device[len("/dev/") :] if device.startswith("/dev/") else Path(device)
 
 
 def check_serial_ports(ports: Sequence[SerialPortInfo], dev_root: Path, identity: Identity) -> list[Finding]:
@@ -212,20 +225,28 @@ def check_serial_ports(ports: Sequence[SerialPortInfo], dev_root: Path, identity
     booths = find_booths(ports)
     if not booths:
         listing = ", ".join(f"{p.device} ({p.usb_id})" for p in ports) or "none"
-        return [Finding(
-            "booth.ports", "warn", f"no booth among the serial ports (found: {listing})",
-            "plug the booth in; if it uses another USB id, pass --port",
-        )]
+        return [
+            Finding(
+                "booth.ports",
+                "warn",
+                f"no booth among the serial ports (found: {listing})",
+                "plug the booth in; if it uses another USB id, pass --port",
+            )
+        ]
     findings = []
     for port in booths:
         path = _dev_path(port.device, dev_root)
         if not path.exists():
             findings.append(Finding("booth.access", "fail", f"booth {port.device}: {path} missing"))
         elif not can_read_write(path, identity):
-            findings.append(Finding(
-                "booth.access", "fail", f"booth {port.device}: no read/write access",
-                "sudo usermod -aG dialout $USER, then log out and in again",
-            ))
+            findings.append(
+                Finding(
+                    "booth.access",
+                    "fail",
+                    f"booth {port.device}: no read/write access",
+                    "sudo usermod -aG dialout $USER, then log out and in again",
+                )
+            )
         else:
             findings.append(Finding("booth.access", "ok", f"booth {port.device} ({port.usb_id}) is accessible"))
     return findings
@@ -235,13 +256,16 @@ def check_modemmanager(proc_root: Path) -> list[Finding]:
     """ModemManager probes new serial ports with AT commands, which a booth must not receive."""
     for comm in proc_root.glob("[0-9]*/comm"):
         if _read(comm) == "ModemManager":
-            return [Finding(
-                "booth.modemmanager", "warn",
-                f"ModemManager is running (pid {comm.parent.name}); it probes new serial ports and "
-                "can hold the booth's port or send it AT commands",
-                "sudo systemctl disable --now ModemManager, or a udev rule setting "
-                'ENV{ID_MM_DEVICE_IGNORE}="1" for the booth',
-            )]
+            return [
+                Finding(
+                    "booth.modemmanager",
+                    "warn",
+                    f"ModemManager is running (pid {comm.parent.name}); it probes new serial ports and "
+                    "can hold the booth's port or send it AT commands",
+                    "sudo systemctl disable --now ModemManager, or a udev rule setting "
+                    'ENV{ID_MM_DEVICE_IGNORE}="1" for the booth',
+                )
+            ]
     return [Finding("booth.modemmanager", "ok", "ModemManager is not running")]
 
 
@@ -253,11 +277,14 @@ def check_rmem_max(proc_root: Path) -> list[Finding]:
         return [Finding("gige.rmem_max", "info", f"{path} not readable")]
     value = int(text)
     if value < RMEM_MAX_MIN:
-        return [Finding(
-            "gige.rmem_max", "warn",
-            f"net.core.rmem_max is {value} bytes; expected {RMEM_MAX_MIN} or more for GigE Vision streams",
-            f"sudo sysctl -w net.core.rmem_max={RMEM_MAX_MIN} (persist in /etc/sysctl.d/)",
-        )]
+        return [
+            Finding(
+                "gige.rmem_max",
+                "warn",
+                f"net.core.rmem_max is {value} bytes; expected {RMEM_MAX_MIN} or more for GigE Vision streams",
+                f"sudo sysctl -w net.core.rmem_max={RMEM_MAX_MIN} (persist in /etc/sysctl.d/)",
+            )
+        ]
     return [Finding("gige.rmem_max", "ok", f"net.core.rmem_max is {value} bytes")]
 
 
@@ -272,11 +299,14 @@ def check_mtu(sysfs_root: Path) -> list[Finding]:
             continue
         mtu = int(text)
         if mtu < JUMBO_MTU:
-            findings.append(Finding(
-                "gige.mtu", "info",
-                f"{iface.name}: MTU {mtu}; expected {JUMBO_MTU} if a GigE camera is on this interface",
-                f"sudo ip link set {iface.name} mtu {JUMBO_MTU} (and enable jumbo frames on the camera)",
-            ))
+            findings.append(
+                Finding(
+                    "gige.mtu",
+                    "info",
+                    f"{iface.name}: MTU {mtu}; expected {JUMBO_MTU} if a GigE camera is on this interface",
+                    f"sudo ip link set {iface.name} mtu {JUMBO_MTU} (and enable jumbo frames on the camera)",
+                )
+            )
         else:
             findings.append(Finding("gige.mtu", "ok", f"{iface.name}: MTU {mtu}"))
     return findings or [Finding("gige.mtu", "info", "no wired network interface is up")]

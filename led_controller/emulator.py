@@ -202,8 +202,10 @@ class BoothEmulator:
         :meth:`inject_fault` (``led_controller.emulator_faults`` draws random faults this way)."""
         identify = self._cmd_identify([])
         if len(f"OK {Command.IDENTIFY} {identify}") > MAX_BODY:
-            raise ValueError(f"BoothEmulator: its ID reply would be {len(identify) + 6} bytes, over the protocol's "
-                             f"{MAX_BODY}; expected shorter or fewer names")
+            raise ValueError(
+                f"BoothEmulator: its ID reply would be {len(identify) + 6} bytes, over the protocol's "
+                f"{MAX_BODY}; expected shorter or fewer names"
+            )
 
     # -- the camera side and observers ------------------------------------------------------
 
@@ -415,7 +417,7 @@ class BoothEmulator:
         if line[star] != ord("*"):
             self._reject(ErrorCode.FRAME, "no checksum field")
             return
-        head, crc_text = line[:star], line[star + 1:]
+        head, crc_text = line[:star], line[star + 1 :]
         if not _is_hex(crc_text):
             self._reject(ErrorCode.FRAME, "checksum not hex")
             return
@@ -549,8 +551,14 @@ class BoothEmulator:
         self._held[index] = False
         if running and self._holding and index == self._step:
             self._release_hold()
-        elif (now and running and self._mode == Mode.BOOTH and index == self._step + 1
-              and self._next_action is not None and self._next_action[1] == "apply"):
+        elif (
+            now
+            and running
+            and self._mode == Mode.BOOTH
+            and index == self._step + 1
+            and self._next_action is not None
+            and self._next_action[1] == "apply"
+        ):
             # NOW: the previous step has been triggered and the host has its frame (its exposure
             # is over): this step's slot starts at once rather than at its scheduled time.
             self._apply_step(index)

@@ -92,8 +92,10 @@ def parse_fault_spec(text: str) -> tuple[FaultRate, ...]:
         if len(fields) == 3:
             seconds = _number(item, "stall seconds", fields[2])
             if seconds <= 0:
-                raise ValueError(f"--fault item {item!r}: stall seconds {fields[2]} not positive; expected "
-                                 "stall:P[:SECONDS] with SECONDS > 0 (omitted: the booth never recovers)")
+                raise ValueError(
+                    f"--fault item {item!r}: stall seconds {fields[2]} not positive; expected "
+                    "stall:P[:SECONDS] with SECONDS > 0 (omitted: the booth never recovers)"
+                )
         rates.append(FaultRate(kind, probability, seconds))
     return tuple(rates)
 
@@ -113,8 +115,7 @@ class FaultInjector:
         Request lines passed through before any fault is drawn.
     """
 
-    def __init__(self, emulator: BoothEmulator, rates: tuple[FaultRate, ...], *, seed: int = 0,
-                 after: int = 0) -> None:
+    def __init__(self, emulator: BoothEmulator, rates: tuple[FaultRate, ...], *, seed: int = 0, after: int = 0) -> None:
         if after < 0:
             raise ValueError(f"FaultInjector: after {after}; expected a count ≥ 0")
         self._emulator = emulator

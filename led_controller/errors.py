@@ -55,9 +55,7 @@ class BoothProtocolError(BoothError):
         The raw line as received (without its terminator).
     """
 
-    def __init__(
-        self, message: str, *, command: str | None, expected: str, raw: bytes
-    ) -> None:
+    def __init__(self, message: str, *, command: str | None, expected: str, raw: bytes) -> None:
         super().__init__(message)
         self.command = command
         self.expected = expected

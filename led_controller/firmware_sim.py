@@ -57,8 +57,10 @@ def toolchain_missing() -> str | None:
     missing = [tool for tool in _TOOLS if shutil.which(tool) is None]
     missing += [str(h) for h in _HEADERS if not h.exists()]
     if missing:
-        return ("AVR toolchain not installed (missing " + ", ".join(missing) + "); expected "
-                "gcc-avr avr-libc binutils-avr simavr libsimavr-dev (setup.sh installs them)")
+        return (
+            "AVR toolchain not installed (missing " + ", ".join(missing) + "); expected "
+            "gcc-avr avr-libc binutils-avr simavr libsimavr-dev (setup.sh installs them)"
+        )
     return None
 
 
@@ -70,8 +72,9 @@ def build() -> None:
     (FIRMWARE_DIR / "build").mkdir(exist_ok=True)
     with open(FIRMWARE_DIR / "build" / ".lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        done = subprocess.run(["make", "-s", "-C", str(FIRMWARE_DIR), "all"], capture_output=True, text=True,
-                              check=False)
+        done = subprocess.run(
+            ["make", "-s", "-C", str(FIRMWARE_DIR), "all"], capture_output=True, text=True, check=False
+        )
     if done.returncode != 0:
         raise FirmwareSimError(f"make -C {FIRMWARE_DIR} failed: {done.stderr.strip().splitlines()[-1:]}")
 
@@ -93,8 +96,12 @@ class SimulatedBooth:
         self._top = top
         self._channels = channels
         self._process = subprocess.Popen(
-            [str(HARNESS), str(elf)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL, text=True, bufsize=1,
+            [str(HARNESS), str(elf)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+            bufsize=1,
         )
         self._answers: queue.Queue[str] = queue.Queue()
         self._pulses: list[TriggerPulse] = []
@@ -120,7 +127,9 @@ class SimulatedBooth:
             if not words:
                 continue
             if words[0] == "pulse":
-                pulse = TriggerPulse(int(words[1]), int(words[2]), tuple(int(w) / self._top for w in words[3:3 + self._channels]))
+                pulse = TriggerPulse(
+                    int(words[1]), int(words[2]), tuple(int(w) / self._top for w in words[3 : 3 + self._channels])
+                )
                 with self._lock:
                     self._pulses.append(pulse)
             elif words[0] in ("ok", "error"):
@@ -143,7 +152,7 @@ class SimulatedBooth:
     def levels(self) -> tuple[float, ...]:
         """Get the LED levels now: each PWM channel's duty / TOP (0 when its pin is disconnected)."""
         words = self._ask("levels")
-        return tuple(int(w) / self._top for w in words[2:2 + self._channels])
+        return tuple(int(w) / self._top for w in words[2 : 2 + self._channels])
 
     def now_us(self) -> int:
         """Simulated time in µs."""

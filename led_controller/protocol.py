@@ -61,6 +61,7 @@ def watchdog_ms_allowed(ms: int) -> bool:
     """
     return ms == 0 or WATCHDOG_MIN_MS <= ms <= WATCHDOG_MAX_MS
 
+
 TERMINATOR = b"\n"
 
 
@@ -322,9 +323,7 @@ def parse_reply(frame: Frame, command: str, *, where: str = "booth") -> Reply:
     if len(words) >= 2 and words[0] == "OK" and words[1] == command:
         return Reply(ok=True, command=command, args=tuple(words[2:]), code=None, text="")
     if len(words) >= 3 and words[0] == "ERR" and words[1] in (command, "-"):
-        return Reply(
-            ok=False, command=words[1], args=(), code=words[2], text=" ".join(words[3:])
-        )
+        return Reply(ok=False, command=words[1], args=(), code=words[2], text=" ".join(words[3:]))
     raise _bad_reply(where, command, expected, frame.raw, "has the wrong form")
 
 
@@ -380,9 +379,7 @@ def encode_levels(levels: Sequence[float], channels: int) -> list[str]:
         If the count differs from ``channels`` or a level is outside [0, 1].
     """
     if isinstance(levels, (str, bytes)) or len(levels) != channels:
-        raise ValueError(
-            f"LED levels: got {len(levels)} values; expected one per channel ({channels})"
-        )
+        raise ValueError(f"LED levels: got {len(levels)} values; expected one per channel ({channels})")
     return [f"{level_to_code(x, index=i):04X}" for i, x in enumerate(levels)]
 
 
@@ -432,7 +429,10 @@ def parse_identify(reply: Reply, raw: bytes, *, where: str = "booth") -> BoothIn
         raise _bad_reply(where, cmd, "integer CH/PROTO/BITS/STEPS and numeric PEAKS", raw, "has a bad number") from err
     if not 1 <= channels <= 64 or len(names) != channels or len(peaks) != channels:
         raise _bad_reply(
-            where, cmd, "1..64 channels with one name and one peak each", raw,
+            where,
+            cmd,
+            "1..64 channels with one name and one peak each",
+            raw,
             f"is inconsistent ({channels} channels, {len(names)} names, {len(peaks)} peaks)",
         )
     if not 12 <= info.level_bits <= LEVEL_BITS or info.max_steps < 1:

@@ -32,11 +32,15 @@ def reset_leftovers(booth: LedBooth) -> tuple[str, ...]:
     notes = []
     if any(status.levels) or status.state in ("ARMED", "RUNNING"):
         booth.all_off()
-        notes.append(f"{booth.name}: found the LEDs on (sequence {status.state}), as a run that did not finish "
-                     "leaves them; switched off")
+        notes.append(
+            f"{booth.name}: found the LEDs on (sequence {status.state}), as a run that did not finish "
+            "leaves them; switched off"
+        )
     power_up_s = WATCHDOG_POWER_UP_MS / 1000.0
     if status.watchdog_s > power_up_s:
         booth.set_watchdog(power_up_s)
-        notes.append(f"{booth.name}: found the watchdog at {status.watchdog_s:g} s, longer than the power-up "
-                     f"{power_up_s:g} s (raised by a run that did not finish?); set back to {power_up_s:g} s")
+        notes.append(
+            f"{booth.name}: found the watchdog at {status.watchdog_s:g} s, longer than the power-up "
+            f"{power_up_s:g} s (raised by a run that did not finish?); set back to {power_up_s:g} s"
+        )
     return tuple(notes)

@@ -33,8 +33,7 @@ if TYPE_CHECKING:  # pragma: no cover - names for the annotations only
     from msflash.processing.flash import FlashSolution
 
 __version__ = "0.1.0"
-__all__ = ["read_sequence", "estimate_ambient", "solve_flash", "synthesize_flash", "render_preview",
-           "__version__"]
+__all__ = ["read_sequence", "estimate_ambient", "solve_flash", "synthesize_flash", "render_preview", "__version__"]
 
 _log = logging.getLogger("msflash")
 
@@ -90,8 +89,9 @@ def estimate_ambient(sequence: Sequence, solver: str = "tikhonov", alpha: float 
     return estimate_sequence(sequence, solver, alpha)
 
 
-def solve_flash(sequence: Sequence, estimate: AmbientEstimate, mode: str = "matching",
-                target: str = "D65") -> FlashSolution:
+def solve_flash(
+    sequence: Sequence, estimate: AmbientEstimate, mode: str = "matching", target: str = "D65"
+) -> FlashSolution:
     """The LED mix that matches the ambient (eq. 7) or complements it towards ``target`` (eq. 8–9).
 
     Parameters

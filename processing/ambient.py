@@ -161,9 +161,16 @@ class LedTerms:
         penalty_gram = roughness.T @ roughness
         k = values.shape[1]
         emitting = values[np.any(values != 0, axis=1)]
-        terms = cls(values, roughness, penalty_gram, float(np.trace(penalty_gram)), emitting, 1e-12 * np.eye(k),
-                    FactoredQuadratic.prepare(np.eye(k), emitting, np.zeros(emitting.shape[0]), "ambient estimate"),
-                    FactoredQuadratic.prepare(np.eye(k), where="ambient estimate"))
+        terms = cls(
+            values,
+            roughness,
+            penalty_gram,
+            float(np.trace(penalty_gram)),
+            emitting,
+            1e-12 * np.eye(k),
+            FactoredQuadratic.prepare(np.eye(k), emitting, np.zeros(emitting.shape[0]), "ambient estimate"),
+            FactoredQuadratic.prepare(np.eye(k), where="ambient estimate"),
+        )
         for array in (terms.roughness, terms.penalty_gram, terms.emitting, terms.ridge):
             array.flags.writeable = False
         return terms
@@ -180,12 +187,15 @@ def _scaled_condition(gram: np.ndarray) -> float:
     return float(eigenvalues[-1] / eigenvalues[0]) if eigenvalues[0] > 0 else float("inf")
 
 
-def _solve_penalised(statistics: SequenceStatistics, terms: LedTerms, weight: float, nonnegative: bool,
-                     where: str) -> np.ndarray:
+def _solve_penalised(
+    statistics: SequenceStatistics, terms: LedTerms, weight: float, nonnegative: bool, where: str
+) -> np.ndarray:
     """argmin ‖a − F w‖² + weight ‖L w‖² (subject to I w ≥ 0 when ``nonnegative``)."""
     if not math.isfinite(weight):
-        raise SpectralDataError(f"{where}: the roughness penalty overflows; expected a smaller alpha (auto searches "
-                                f"{ALPHA_GRID[0]:g}…{ALPHA_GRID[-1]:g})")
+        raise SpectralDataError(
+            f"{where}: the roughness penalty overflows; expected a smaller alpha (auto searches "
+            f"{ALPHA_GRID[0]:g}…{ALPHA_GRID[-1]:g})"
+        )
     hessian = statistics.gram + weight * terms.penalty_gram if weight else statistics.gram
     scale = max(_trace(hessian) / hessian.shape[0], 1e-300)
     hessian = hessian / scale
@@ -318,8 +328,9 @@ def _weights_tikhonov(statistics: SequenceStatistics, terms: LedTerms, alpha: fl
     return _solve_penalised(statistics, terms, weight, True, "tikhonov estimate"), alpha_value
 
 
-def _weights_roughness(statistics: SequenceStatistics, terms: LedTerms, alpha: float | str,
-                       iterations: int = 100) -> tuple[np.ndarray, float]:
+def _weights_roughness(
+    statistics: SequenceStatistics, terms: LedTerms, alpha: float | str, iterations: int = 100
+) -> tuple[np.ndarray, float]:
     """Paper eq. 6 (unsquared norms) by majorise–minimise.
 
     ``√x ≤ √x₀ + (x − x₀)/(2√x₀)`` bounds both norms by quadratics touching at the current
@@ -359,8 +370,9 @@ _METHODS: dict[str, Callable[[SequenceStatistics, LedTerms, float | str], tuple[
 }
 
 
-def _on_values(method: Callable[[SequenceStatistics, LedTerms, float | str], tuple[np.ndarray, float]],
-               ) -> Callable[[SequenceStatistics, np.ndarray, float | str], tuple[np.ndarray, float]]:
+def _on_values(
+    method: Callable[[SequenceStatistics, LedTerms, float | str], tuple[np.ndarray, float]],
+) -> Callable[[SequenceStatistics, np.ndarray, float | str], tuple[np.ndarray, float]]:
     def solve(statistics: SequenceStatistics, led_values: np.ndarray, alpha: float | str) -> tuple[np.ndarray, float]:
         return method(statistics, LedTerms.of(led_values), alpha)
 
@@ -402,8 +414,13 @@ class AmbientModel:
             )
         object.__setattr__(self, "terms", LedTerms.of(led_spectra.values))
 
-    def weights(self, statistics: SequenceStatistics, method: str = "tikhonov",
-                alpha: float | str = "auto", denoised: SequenceStatistics | None = None) -> tuple[np.ndarray, float]:
+    def weights(
+        self,
+        statistics: SequenceStatistics,
+        method: str = "tikhonov",
+        alpha: float | str = "auto",
+        denoised: SequenceStatistics | None = None,
+    ) -> tuple[np.ndarray, float]:
         """``(w_a, α used)`` for the statistics (see :func:`estimate_ambient`; same errors).
 
         The problem is solved on :func:`solved_statistics`: the denoised statistics — ``denoised``,
@@ -441,14 +458,16 @@ class AmbientModel:
             alpha = discrepancy_alpha(solved, statistics, self.terms)
         return _METHODS[method](solved, self.terms, alpha)
 
-    def estimate(self, statistics: SequenceStatistics, method: str = "tikhonov",
-                 alpha: float | str = "auto") -> AmbientEstimate:
+    def estimate(
+        self, statistics: SequenceStatistics, method: str = "tikhonov", alpha: float | str = "auto"
+    ) -> AmbientEstimate:
         """The full estimate of :func:`estimate_ambient`."""
         weights, alpha_used = self.weights(statistics, method, alpha)
         return self.reliability(statistics, weights, method, alpha_used)
 
-    def reliability(self, statistics: SequenceStatistics, weights: np.ndarray, method: str,
-                    alpha_used: float) -> AmbientEstimate:
+    def reliability(
+        self, statistics: SequenceStatistics, weights: np.ndarray, method: str, alpha_used: float
+    ) -> AmbientEstimate:
         """The :class:`AmbientEstimate` of weights found by :meth:`weights`: spectrum and reliability signals."""
         led_spectra, terms = self.led_spectra, self.terms
         led_values = terms.values
@@ -472,7 +491,9 @@ class AmbientModel:
 
         condition = _scaled_condition(statistics.gram)
         relative_residual = float(np.sqrt(rss / statistics.ambient_energy)) if statistics.ambient_energy > 0 else 0.0
-        ambient_z = statistics.ambient_sum / math.sqrt(statistics.ambient_energy) if statistics.ambient_energy > 0 else 0.0
+        ambient_z = (
+            statistics.ambient_sum / math.sqrt(statistics.ambient_energy) if statistics.ambient_energy > 0 else 0.0
+        )
         warnings = []
         if not ambient_z >= LED_SIGNAL_Z:
             warnings.append(
@@ -484,8 +505,15 @@ class AmbientModel:
                 f"the LED-only images are nearly dependent (condition number {condition:.3g}); "
                 "the weights are poorly determined — more surfaces or more distinct LEDs would help"
             )
-        misfit = relative_residual if solved is statistics else (
-            float(np.sqrt(solved.residual_energy(weights) / solved.ambient_energy)) if solved.ambient_energy > 0 else 0.0)
+        misfit = (
+            relative_residual
+            if solved is statistics
+            else (
+                float(np.sqrt(solved.residual_energy(weights) / solved.ambient_energy))
+                if solved.ambient_energy > 0
+                else 0.0
+            )
+        )
         if misfit > RESIDUAL_WARNING and ambient_z >= LED_SIGNAL_Z:
             warnings.append(
                 f"the LEDs explain the ambient image poorly (misfit {misfit:.3f} beyond the noise); "
@@ -534,8 +562,9 @@ BAND_DRAWS = 64
 """Draws of the unconstrained weights behind the band of a constrained estimate (:func:`_constrained_band`)."""
 
 
-def _constrained_band(solved: SequenceStatistics, terms: LedTerms, penalty_weight: float,
-                      weights_cov: np.ndarray) -> np.ndarray:
+def _constrained_band(
+    solved: SequenceStatistics, terms: LedTerms, penalty_weight: float, weights_cov: np.ndarray
+) -> np.ndarray:
     """The pixel-noise band of an estimate solved with ``I w ≥ 0``: the spectrum's standard deviation
     over :data:`BAND_DRAWS` draws of the unconstrained estimate ``(G_s + λP)⁻¹ c`` from its sandwich
     covariance, each projected onto the constraint in the problem's metric.
@@ -550,7 +579,9 @@ def _constrained_band(solved: SequenceStatistics, terms: LedTerms, penalty_weigh
     try:
         problem = terms.nonnegative.with_hessian(hessian / scale + terms.ridge, "ambient band")
         centre = np.linalg.solve(hessian, solved.cross)
-        factor = np.linalg.cholesky(weights_cov + 1e-12 * max(float(np.trace(weights_cov)), 1e-300) * np.eye(len(centre)))
+        factor = np.linalg.cholesky(
+            weights_cov + 1e-12 * max(float(np.trace(weights_cov)), 1e-300) * np.eye(len(centre))
+        )
     except (np.linalg.LinAlgError, SolverError):
         return _sandwich_band(terms.values, weights_cov)
     draws = centre[:, None] + factor @ np.random.default_rng(0).standard_normal((len(centre), BAND_DRAWS))
@@ -584,9 +615,11 @@ class SolvedStatistics:
             return "none: no noise measured (statistics as observed, biased towards zero weights)"
         if self.correction == "denoised":
             return "denoised: the noise's share of the moments removed"
-        return (f"denoised and clipped: in {self.clipped_directions} of {self.statistics.n_leds} directions the "
-                f"LED images hold less signal than noise; their eigenvalues were raised to {NOISE_FLOOR_SHARE:g} "
-                "of the noise's, and the band is wide there")
+        return (
+            f"denoised and clipped: in {self.clipped_directions} of {self.statistics.n_leds} directions the "
+            f"LED images hold less signal than noise; their eigenvalues were raised to {NOISE_FLOOR_SHARE:g} "
+            "of the noise's, and the band is wide there"
+        )
 
 
 def solved_statistics(statistics: SequenceStatistics, denoised: SequenceStatistics | None = None) -> SolvedStatistics:

@@ -65,12 +65,15 @@ class Moments:
     def without(self, fold: int) -> Moments:
         """Every fold but ``fold``, summed (length-1 leading axis)."""
         keep = [j for j in range(self.ff.shape[0]) if j != fold]
-        return Moments(self.ff[keep].sum(0, keepdims=True), self.fa[keep].sum(0, keepdims=True),
-                       self.aa[keep].sum(0, keepdims=True))
+        return Moments(
+            self.ff[keep].sum(0, keepdims=True),
+            self.fa[keep].sum(0, keepdims=True),
+            self.aa[keep].sum(0, keepdims=True),
+        )
 
     def fold(self, fold: int) -> Moments:
         """One fold alone (length-1 leading axis)."""
-        return Moments(self.ff[fold:fold + 1], self.fa[fold:fold + 1], self.aa[fold:fold + 1])
+        return Moments(self.ff[fold : fold + 1], self.fa[fold : fold + 1], self.aa[fold : fold + 1])
 
 
 @dataclass(frozen=True)
@@ -136,9 +139,14 @@ class ChannelStatistics:
             noise = NoiseMoments(*summed(self.noise))
         n = int(self.counts[chosen].sum())
         return SequenceStatistics(
-            gram=gram, cross=cross, ambient_energy=energy, n_samples=n * channels,
-            n_total=self.n_blocks_total * channels, ambient_sum=float(self.ambient_sums[chosen].sum()),
-            led_sums=self.led_sums[chosen].sum(0).reshape(channels, k).sum(0), noise=noise,
+            gram=gram,
+            cross=cross,
+            ambient_energy=energy,
+            n_samples=n * channels,
+            n_total=self.n_blocks_total * channels,
+            ambient_sum=float(self.ambient_sums[chosen].sum()),
+            led_sums=self.led_sums[chosen].sum(0).reshape(channels, k).sum(0),
+            noise=noise,
         )
 
 
@@ -160,9 +168,15 @@ def plane_channels(cfa: str | None, n_channels: int = 3) -> tuple[str, ...]:
     return letters
 
 
-def accumulate_channel_statistics(ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec, *,
-                                  cfa: str | None = None, bin_factor: int = 4,
-                                  n_folds: int = DEFAULT_FOLDS) -> ChannelStatistics:
+def accumulate_channel_statistics(
+    ambient: np.ndarray,
+    led_frames: Sequence[np.ndarray],
+    spec: FrameStackSpec,
+    *,
+    cfa: str | None = None,
+    bin_factor: int = 4,
+    n_folds: int = DEFAULT_FOLDS,
+) -> ChannelStatistics:
     """Channel-resolved block moments of a raw frame stack (module notes).
 
     Parameters
@@ -192,25 +206,35 @@ def accumulate_channel_statistics(ambient: np.ndarray, led_frames: Sequence[np.n
     """
     frames = [np.asarray(ambient), *[np.asarray(f) for f in led_frames]]
     if len(led_frames) != spec.led_levels.shape[0]:
-        raise SpectralDataError(f"channel statistics: {len(led_frames)} LED frames but levels for "
-                                f"{spec.led_levels.shape[0]}; expected one row of levels per LED frame")
+        raise SpectralDataError(
+            f"channel statistics: {len(led_frames)} LED frames but levels for "
+            f"{spec.led_levels.shape[0]}; expected one row of levels per LED frame"
+        )
     if bin_factor < 1 or n_folds < 2:
         raise SpectralDataError(f"channel statistics: bin_factor {bin_factor}, n_folds {n_folds}; expected ≥ 1 and ≥ 2")
     for index, frame in enumerate(frames):
         if frame.shape != frames[0].shape:
-            raise SpectralDataError(f"channel statistics: frame {index} has shape {frame.shape} but the ambient frame "
-                                    f"{frames[0].shape}; expected frames of one size")
+            raise SpectralDataError(
+                f"channel statistics: frame {index} has shape {frame.shape} but the ambient frame "
+                f"{frames[0].shape}; expected frames of one size"
+            )
         if np.issubdtype(frame.dtype, np.floating) and not np.isfinite(frame.sum()):
-            raise SpectralDataError(f"channel statistics: frame {index} holds non-finite values; expected finite pixels")
+            raise SpectralDataError(
+                f"channel statistics: frame {index} holds non-finite values; expected finite pixels"
+            )
     period = 2 if cfa is not None else 1
     if cfa is not None and frames[0].ndim != 2:
-        raise SpectralDataError(f"channel statistics: CFA '{cfa}' but frames of shape {frames[0].shape}; expected (H, W)")
+        raise SpectralDataError(
+            f"channel statistics: CFA '{cfa}' but frames of shape {frames[0].shape}; expected (H, W)"
+        )
     planes = [cfa_planes(frame, period) for frame in frames]
     channels = plane_channels(cfa, planes[0].shape[2])
     height, width = planes[0].shape[0] // bin_factor, planes[0].shape[1] // bin_factor
     if height < n_folds or width < 1:
-        raise SpectralDataError(f"channel statistics: {height}×{width} blocks of {bin_factor}×{bin_factor}; expected at "
-                                f"least {n_folds} rows of blocks (a larger frame or smaller blocks)")
+        raise SpectralDataError(
+            f"channel statistics: {height}×{width} blocks of {bin_factor}×{bin_factor}; expected at "
+            f"least {n_folds} rows of blocks (a larger frame or smaller blocks)"
+        )
     probe = bin_factor % 2 == 0
     n_frames, n_channels = len(frames), planes[0].shape[2]
     n_blocks = height * width
@@ -233,8 +257,12 @@ def accumulate_channel_statistics(ambient: np.ndarray, led_frames: Sequence[np.n
             block, half = block_sums_and_differences(plane, bin_factor)
             probes[:, where] = half.reshape(n_blocks, n_channels)
         else:
-            block = plane[:height * bin_factor, :width * bin_factor].astype(float).reshape(
-                height, bin_factor, width, bin_factor, n_channels).sum(axis=(1, 3))
+            block = (
+                plane[: height * bin_factor, : width * bin_factor]
+                .astype(float)
+                .reshape(height, bin_factor, width, bin_factor, n_channels)
+                .sum(axis=(1, 3))
+            )
         raw[:, where] = block.reshape(n_blocks, n_channels)
         if np.issubdtype(plane.dtype, np.floating) or np.iinfo(plane.dtype).max >= spec.white_level:
             if plane.max() >= spec.white_level:
@@ -249,18 +277,23 @@ def accumulate_channel_statistics(ambient: np.ndarray, led_frames: Sequence[np.n
     bounds = ((np.arange(n_folds + 1) * height + n_folds - 1) // n_folds) * width
 
     def moments_of(rows: np.ndarray) -> tuple[Moments, np.ndarray]:
-        products = np.stack([_gram(rows[bounds[j]:bounds[j + 1]]) for j in range(n_folds)])
+        products = np.stack([_gram(rows[bounds[j] : bounds[j + 1]]) for j in range(n_folds)])
         mapped = transform @ products @ transform.T
-        return Moments(mapped[:, :width_f, :width_f], mapped[:, :width_f, width_f:], mapped[:, width_f:, width_f:]), \
-            products
+        return Moments(
+            mapped[:, :width_f, :width_f], mapped[:, :width_f, width_f:], mapped[:, width_f:, width_f:]
+        ), products
 
     moments, products = moments_of(raw)
     sums = products[:, :, -1] @ transform.T  # (folds, Ck + C): Σ f, Σ a
     return ChannelStatistics(
-        moments=moments, noise=None if probes is None else moments_of(probes)[0],
+        moments=moments,
+        noise=None if probes is None else moments_of(probes)[0],
         counts=np.rint(products[:, -1, -1]).astype(int),
-        led_sums=sums[:, :width_f], ambient_sums=sums[:, width_f:],
-        n_blocks_total=height * width, n_leds=spec.n_leds, channels=channels,
+        led_sums=sums[:, :width_f],
+        ambient_sums=sums[:, width_f:],
+        n_blocks_total=height * width,
+        n_leds=spec.n_leds,
+        channels=channels,
     )
 
 
@@ -291,6 +324,6 @@ def _gram(values: np.ndarray) -> np.ndarray:
     """``valuesᵀ values`` summed over slices of :data:`GRAM_ROWS` rows."""
     product = np.zeros((values.shape[1], values.shape[1]))
     for start in range(0, values.shape[0], GRAM_ROWS):
-        part = values[start:start + GRAM_ROWS]
+        part = values[start : start + GRAM_ROWS]
         product += part.T @ part
     return product

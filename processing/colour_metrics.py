@@ -71,7 +71,9 @@ def usable_labels(labels: np.ndarray, margin_px: int = 1, excluded: np.ndarray |
 
     labels = np.asarray(labels)
     if labels.ndim != 2 or not np.issubdtype(labels.dtype, np.integer):
-        raise SpectralDataError(f"patch labels: shape {labels.shape}, type {labels.dtype}; expected an integer (H, W) array")
+        raise SpectralDataError(
+            f"patch labels: shape {labels.shape}, type {labels.dtype}; expected an integer (H, W) array"
+        )
     result = labels.astype(np.int64, copy=True)
     if excluded is not None:
         result[np.asarray(excluded, dtype=bool)] = -1
@@ -85,8 +87,10 @@ def usable_labels(labels: np.ndarray, margin_px: int = 1, excluded: np.ndarray |
 
 def _labels_for(image: np.ndarray, labels: np.ndarray) -> np.ndarray:
     if image.shape[:2] != labels.shape:
-        raise SpectralDataError(f"patch statistics: image {image.shape[:2]} and labels {labels.shape} differ in size; "
-                                "expected the label map of this image")
+        raise SpectralDataError(
+            f"patch statistics: image {image.shape[:2]} and labels {labels.shape} differ in size; "
+            "expected the label map of this image"
+        )
     return labels
 
 
@@ -106,8 +110,9 @@ def patch_pixels(image: np.ndarray, labels: np.ndarray, patch: int, cfa: str | N
     return [image[..., c][inside].astype(np.float64) for c in range(image.shape[2])]
 
 
-def patch_means(image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str | None = None,
-                min_pixels: int = 1) -> np.ndarray:
+def patch_means(
+    image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str | None = None, min_pixels: int = 1
+) -> np.ndarray:
     """Mean of every channel over every patch ``0 … n_patches − 1``, shape (n_patches, n_channels).
 
     Raises
@@ -126,8 +131,10 @@ def patch_means(image: np.ndarray, labels: np.ndarray, n_patches: int, cfa: str 
         samples = patch_pixels(image, labels, patch, cfa)
         counts = [s.size for s in samples]
         if min(counts) < min_pixels:
-            raise SpectralDataError(f"patch {patch}: {min(counts)} usable pixels; expected at least {min_pixels} "
-                                    "(check the chart layout: --patch-px/--border-px)")
+            raise SpectralDataError(
+                f"patch {patch}: {min(counts)} usable pixels; expected at least {min_pixels} "
+                "(check the chart layout: --patch-px/--border-px)"
+            )
         means.append([float(s.mean()) for s in samples])
     return np.asarray(means)
 
@@ -173,8 +180,9 @@ class ReferenceChart:
 def reference_chart(reflectances: Spectra, illuminant: Spectra) -> ReferenceChart:
     """XYZ and Lab of surfaces under ``illuminant`` (D65 for Fig. 9), relative to a perfect white."""
     xyz = reflectances_to_xyz(reflectances, illuminant)
-    white = reflectances_to_xyz(reflectances.replace(values=np.ones((reflectances.grid.size, 1)), names=("white",)),
-                                illuminant)[0]
+    white = reflectances_to_xyz(
+        reflectances.replace(values=np.ones((reflectances.grid.size, 1)), names=("white",)), illuminant
+    )[0]
     return ReferenceChart(xyz, xyz_to_lab(xyz, white), white, illuminant.source or illuminant.names[0])
 
 
@@ -217,8 +225,12 @@ class ChartDeltaE:
         return float(np.max(self.delta_e))
 
 
-def chart_delta_e(camera_means: np.ndarray, camera_to_xyz: np.ndarray, reference: ReferenceChart,
-                  white_balance: np.ndarray | None = None) -> ChartDeltaE:
+def chart_delta_e(
+    camera_means: np.ndarray,
+    camera_to_xyz: np.ndarray,
+    reference: ReferenceChart,
+    white_balance: np.ndarray | None = None,
+) -> ChartDeltaE:
     """Fig. 9: per-patch ΔE00 of an image's patch means against the ideal chart.
 
     Parameters
@@ -234,8 +246,10 @@ def chart_delta_e(camera_means: np.ndarray, camera_to_xyz: np.ndarray, reference
     """
     camera_means = np.asarray(camera_means, dtype=np.float64)
     if camera_means.shape != reference.xyz.shape:
-        raise SpectralDataError(f"chart ΔE: {camera_means.shape} patch means for a {reference.xyz.shape} reference; "
-                                "expected one RGB triple per reference patch")
+        raise SpectralDataError(
+            f"chart ΔE: {camera_means.shape} patch means for a {reference.xyz.shape} reference; "
+            "expected one RGB triple per reference patch"
+        )
     rgb = camera_means * (np.asarray(white_balance, dtype=np.float64) if white_balance is not None else 1.0)
     xyz = rgb @ np.asarray(camera_to_xyz, dtype=np.float64).T
     scale = luminance_scale(xyz, reference.xyz)
@@ -263,7 +277,12 @@ def von_kries_gains(ambient_white: np.ndarray, target_white: np.ndarray) -> np.n
     """
     ambient_white = np.asarray(ambient_white, dtype=np.float64)
     target_white = np.asarray(target_white, dtype=np.float64)
-    if ambient_white.shape != (3,) or target_white.shape != (3,) or np.any(ambient_white <= 0) or np.any(target_white <= 0):
+    if (
+        ambient_white.shape != (3,)
+        or target_white.shape != (3,)
+        or np.any(ambient_white <= 0)
+        or np.any(target_white <= 0)
+    ):
         raise SpectralDataError(f"von Kries: whites {ambient_white} and {target_white}; expected two RGB triples > 0")
     gains = target_white / ambient_white
     return gains / gains[1]
@@ -281,8 +300,9 @@ def von_kries_balance(image: np.ndarray, gains: np.ndarray, cfa: str | None = No
 
 
 # -- noise ------------------------------------------------------------------------------------
-def channel_snr(image: np.ndarray, labels: np.ndarray, patches: list[int] | np.ndarray, cfa: str | None = None
-                ) -> np.ndarray:
+def channel_snr(
+    image: np.ndarray, labels: np.ndarray, patches: list[int] | np.ndarray, cfa: str | None = None
+) -> np.ndarray:
     """Per-patch, per-channel SNR ``mean / std`` over uniform patches, shape (n_patches, n_channels).
 
     ``image`` is linear with its black level removed; for a raw mosaic give ``cfa``. The SNR of
@@ -297,9 +317,15 @@ def channel_snr(image: np.ndarray, labels: np.ndarray, patches: list[int] | np.n
     return np.asarray(result)
 
 
-def chroma_noise(camera_rgb: np.ndarray, labels: np.ndarray, patches: list[int] | np.ndarray,
-                 camera_to_xyz: np.ndarray, reference: ReferenceChart, n_patches: int,
-                 white_balance: np.ndarray | None = None) -> np.ndarray:
+def chroma_noise(
+    camera_rgb: np.ndarray,
+    labels: np.ndarray,
+    patches: list[int] | np.ndarray,
+    camera_to_xyz: np.ndarray,
+    reference: ReferenceChart,
+    n_patches: int,
+    white_balance: np.ndarray | None = None,
+) -> np.ndarray:
     """Chroma noise ``sqrt(σ_a*² + σ_b*²)`` within each of ``patches``, shape (len(patches),).
 
     The image (H, W, 3, demosaicked, linear) is rendered like :func:`chart_delta_e` — optional

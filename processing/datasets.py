@@ -60,7 +60,13 @@ PAPER_LED_SUBSETS: dict[int, tuple[int, ...]] = {
 """The paper's LED subsets by count, as 1-based indices into :func:`paper_leds` (Section 5)."""
 
 ISETCAM_CAMERAS = (
-    "AptinaMT9M031", "AptinaMT9M131", "NikonD1", "NikonD70", "NikonD100", "NikonD200IR", "NikonD2xsNikon50mm",
+    "AptinaMT9M031",
+    "AptinaMT9M131",
+    "NikonD1",
+    "NikonD70",
+    "NikonD100",
+    "NikonD200IR",
+    "NikonD2xsNikon50mm",
 )
 """Cameras whose ISETCam responsivities are shipped (MIT licence)."""
 
@@ -90,7 +96,9 @@ VRHEL_SETS = {
 
 _ISETCAM_LICENCE = "MIT (ISETCam, © 2020 Stanford SCIEN); see processing/data/LICENSE-ISETCam-MIT.txt"
 _PAPER_LICENCE = "no licence stated by the authors (hblasins/compMultispFlash); cite Blasinski & Farrell 2017"
-_JIANG_LICENCE = "CC BY-NC-SA 4.0 (Jiang et al. 2013, © RIT); non-commercial; see processing/data/noncommercial/LICENSE.md"
+_JIANG_LICENCE = (
+    "CC BY-NC-SA 4.0 (Jiang et al. 2013, © RIT); non-commercial; see processing/data/noncommercial/LICENSE.md"
+)
 
 
 # -- the CSV reader ---------------------------------------------------------------------------
@@ -264,7 +272,9 @@ def natural100() -> Spectra:
 
 def chart110() -> Spectra:
     """The paper's 110-patch simulation chart: Natural-100 then a 10-step gray strip, 400–700/10."""
-    return _shipped("paper/natural110_chart_reflectance_400_700_10nm_DERIVED.csv", "reflectance", "none", _PAPER_LICENCE)
+    return _shipped(
+        "paper/natural110_chart_reflectance_400_700_10nm_DERIVED.csv", "reflectance", "none", _PAPER_LICENCE
+    )
 
 
 def macbeth(source: Literal["isetcam", "paper"] = "isetcam") -> Spectra:
@@ -293,9 +303,12 @@ def _split_cameras(spectra: Spectra, licence: str) -> dict[str, Spectra]:
     result = {}
     for camera, columns in cameras.items():
         if len(columns) != 3:
-            raise SpectralDataError(f"{spectra.source}: camera '{camera}' has {len(columns)} channels; expected R, G, B")
+            raise SpectralDataError(
+                f"{spectra.source}: camera '{camera}' has {len(columns)} channels; expected R, G, B"
+            )
         result[camera] = spectra.select(columns).replace(
-            names=("R", "G", "B"), source=f"{spectra.source} [{camera}]",
+            names=("R", "G", "B"),
+            source=f"{spectra.source} [{camera}]",
             metadata={"camera": camera, "licence": licence, "path": spectra.metadata.get("path", "")},
         )
     return result
@@ -323,10 +336,17 @@ def paper_cameras(include_noncommercial: bool = True) -> dict[str, Spectra]:
         _ISETCAM_LICENCE,
     )
     if include_noncommercial:
-        cameras.update(_split_cameras(
-            _shipped("noncommercial/jiang2013_paper28_cameras_400_700_10nm.csv", "responsivity", "photons", _JIANG_LICENCE),
-            _JIANG_LICENCE,
-        ))
+        cameras.update(
+            _split_cameras(
+                _shipped(
+                    "noncommercial/jiang2013_paper28_cameras_400_700_10nm.csv",
+                    "responsivity",
+                    "photons",
+                    _JIANG_LICENCE,
+                ),
+                _JIANG_LICENCE,
+            )
+        )
     return cameras
 
 
@@ -383,8 +403,9 @@ def isetcam_camera(name: str) -> Spectra:
     ('R', 'G', 'B')
     """
     camera = _choose("isetcam camera", name, ISETCAM_CAMERAS)
-    spectra = _shipped(f"cameras/isetcam/{camera}.csv", "responsivity", "photons", _ISETCAM_LICENCE,
-                       names=("R", "G", "B"), nan="zero")
+    spectra = _shipped(
+        f"cameras/isetcam/{camera}.csv", "responsivity", "photons", _ISETCAM_LICENCE, names=("R", "G", "B"), nan="zero"
+    )
     return spectra.replace(metadata={**spectra.metadata, "camera": camera})
 
 
@@ -421,23 +442,38 @@ def water_absorption(source: Literal["pope_fry", "paper"] = "pope_fry") -> Spect
     :func:`processing.water.water_transmittance` for the attenuation factor of a path.
     """
     if source == "pope_fry":
-        spectra = _shipped("water/pope_fry_1997_380_700_2p5nm.csv", "reflectance", "none",
-                           "published table, Pope & Fry, Appl. Opt. 36, 8710 (1997)", names=("a_w",))
+        spectra = _shipped(
+            "water/pope_fry_1997_380_700_2p5nm.csv",
+            "reflectance",
+            "none",
+            "published table, Pope & Fry, Appl. Opt. 36, 8710 (1997)",
+            names=("a_w",),
+        )
     elif source == "paper":
-        spectra = _shipped("paper/water_pure_absorption_400_700_5nm.csv", "reflectance", "none", _PAPER_LICENCE,
-                           names=("a_w",))
+        spectra = _shipped(
+            "paper/water_pure_absorption_400_700_5nm.csv", "reflectance", "none", _PAPER_LICENCE, names=("a_w",)
+        )
     else:
         raise SpectralDataError(f"water_absorption: unknown source '{source}'; expected pope_fry or paper")
     return spectra.replace(metadata={**spectra.metadata, "quantity": "absorption coefficient a_w", "unit": "1/m"})
 
 
 # -- illuminants ------------------------------------------------------------------------------
-def _from_colour(wavelengths_nm: np.ndarray, values: np.ndarray, name: str, grid: WavelengthGrid,
-                 outside: Literal["error", "zero", "edge"] = "error") -> Spectra:
+def _from_colour(
+    wavelengths_nm: np.ndarray,
+    values: np.ndarray,
+    name: str,
+    grid: WavelengthGrid,
+    outside: Literal["error", "zero", "edge"] = "error",
+) -> Spectra:
     """A colour-science spectral distribution as energy ``Spectra`` on ``grid``, peak 1."""
     native = Spectra(
         WavelengthGrid.from_wavelengths(wavelengths_nm, where=f"colour-science '{name}'"),
-        np.asarray(values, dtype=float), (name,), kind="spd", unit="energy", source=f"colour-science {name}",
+        np.asarray(values, dtype=float),
+        (name,),
+        kind="spd",
+        unit="energy",
+        source=f"colour-science {name}",
     )
     return native.resample(grid, outside).normalised("max")
 
@@ -455,15 +491,19 @@ def cie1931_cmfs(grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
         cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
         wavelengths, values = np.asarray(cmfs.wavelengths, dtype=float), np.asarray(cmfs.values, dtype=float)
     native = Spectra(
-        WavelengthGrid.from_wavelengths(wavelengths, where="colour-science CIE 1931 CMFs"), values,
-        ("x_bar", "y_bar", "z_bar"), kind="responsivity", unit="energy",
+        WavelengthGrid.from_wavelengths(wavelengths, where="colour-science CIE 1931 CMFs"),
+        values,
+        ("x_bar", "y_bar", "z_bar"),
+        kind="responsivity",
+        unit="energy",
         source="colour-science CIE 1931 2 Degree Standard Observer",
     )
     return native.resample(grid, outside="zero")
 
 
-def illuminant(name: str, grid: WavelengthGrid = DEFAULT_GRID, outside: Literal["error", "zero", "edge"] = "error"
-               ) -> Spectra:
+def illuminant(
+    name: str, grid: WavelengthGrid = DEFAULT_GRID, outside: Literal["error", "zero", "edge"] = "error"
+) -> Spectra:
     """A standard illuminant from colour-science, as energy ``Spectra`` on ``grid`` scaled to peak 1.
 
     Parameters
@@ -517,7 +557,9 @@ def illuminant(name: str, grid: WavelengthGrid = DEFAULT_GRID, outside: Literal[
     if wavelengths[0] < sd.wavelengths[0] or wavelengths[-1] > sd.wavelengths[-1]:
         observer = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]
         if key == "A":
-            sd = colour.sd_CIE_standard_illuminant_A(colour.SpectralShape(wavelengths[0], wavelengths[-1], grid.step_nm))
+            sd = colour.sd_CIE_standard_illuminant_A(
+                colour.SpectralShape(wavelengths[0], wavelengths[-1], grid.step_nm)
+            )
         elif key in ("D50", "D55", "D65", "D75") and key in observer:
             sd = colour.sd_CIE_illuminant_D_series(observer[key])
     return _from_colour(sd.wavelengths, sd.values, key, grid, outside)

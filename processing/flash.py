@@ -138,14 +138,21 @@ class FlashModel:
         norm = max(float((matrix * matrix).sum()), 1e-300)
         spectral_norm = max(float((spectra * spectra).sum()), 1e-300)
         # ½‖A(g − w)‖² + ½ε‖I(g − w)‖², scaled so the camera term has unit size.
-        hessian = matrix.T @ matrix / norm + TIE_BREAK * spectra.T @ spectra / spectral_norm + TIE_BREAK_CHANGE * np.eye(k)
+        hessian = (
+            matrix.T @ matrix / norm + TIE_BREAK * spectra.T @ spectra / spectral_norm + TIE_BREAK_CHANGE * np.eye(k)
+        )
         object.__setattr__(self, "matrix", matrix)
         object.__setattr__(self, "_matching_hessian", hessian)
         # The matching problem's Hessian and bound rows depend on the LEDs and camera alone: factor
         # them once per bound set, so a solve pays only for its ambient-dependent linear term.
-        object.__setattr__(self, "_matching_problems", {
-            name: FactoredQuadratic.prepare(hessian, *_box(k, name), where="matching flash")
-            for name in ("physical", "nonnegative", "free")})
+        object.__setattr__(
+            self,
+            "_matching_problems",
+            {
+                name: FactoredQuadratic.prepare(hessian, *_box(k, name), where="matching flash")
+                for name in ("physical", "nonnegative", "free")
+            },
+        )
         object.__setattr__(self, "_full_flash_norm", _norm(matrix.sum(axis=1)))
         # Complementary: [A, ·] (the last column is the target's, set per solve) and the least-power
         # tie-break on [w_f, s] — per-solve work is then only what depends on the ambient.
@@ -157,9 +164,14 @@ class FlashModel:
             value.flags.writeable = False
             object.__setattr__(self, name, value)
         # Its bound rows on [w_f, s] (and their tolerances) are fixed too; only H changes per solve.
-        object.__setattr__(self, "_complementary_rows", {
-            name: FactoredQuadratic.prepare(np.eye(k + 1), *_with_scale(k, name), where="complementary flash")
-            for name in ("physical", "nonnegative")})
+        object.__setattr__(
+            self,
+            "_complementary_rows",
+            {
+                name: FactoredQuadratic.prepare(np.eye(k + 1), *_with_scale(k, name), where="complementary flash")
+                for name in ("physical", "nonnegative")
+            },
+        )
 
     @property
     def n_leds(self) -> int:
@@ -171,7 +183,9 @@ class FlashModel:
         require_same_grid(self.led_spectra, target)
         require_unit(target, "photons")
         if target.count != 1:
-            raise SpectralDataError(f"{target.source or 'target'}: {target.count} spectra; expected one target illuminant")
+            raise SpectralDataError(
+                f"{target.source or 'target'}: {target.count} spectra; expected one target illuminant"
+            )
         response = self.camera_responsivities.values.T @ target.values[:, 0]
         if _norm(response) == 0:
             raise SpectralDataError(f"{target.source or 'target'}: the camera sees nothing of the target illuminant")
@@ -199,12 +213,19 @@ class FlashModel:
         relative_error = _chromatic_error(self.matrix @ weights, self.matrix @ goal)
         return _finish("matching", ambient_weights, weights, None, relative_error, bounds)
 
-    def complementary(self, ambient_weights: np.ndarray, target: Spectra | np.ndarray,
-                      bounds: FlashBounds = "physical", previous_weights: np.ndarray | None = None) -> FlashSolution:
+    def complementary(
+        self,
+        ambient_weights: np.ndarray,
+        target: Spectra | np.ndarray,
+        bounds: FlashBounds = "physical",
+        previous_weights: np.ndarray | None = None,
+    ) -> FlashSolution:
         """Complementary flash, eq. 8–9 (see :func:`solve_complementary`); ``target`` may be ``Cᵀ i_d``."""
         ambient_weights = np.asarray(ambient_weights, dtype=float)
         _check_count(ambient_weights, self.matrix, self.led_spectra)
-        target_response = self.target_response(target) if isinstance(target, Spectra) else np.asarray(target, dtype=float)
+        target_response = (
+            self.target_response(target) if isinstance(target, Spectra) else np.asarray(target, dtype=float)
+        )
         matrix, k = self.matrix, self.n_leds
         ambient_response = matrix.dot(ambient_weights)
         target_norm = _norm(target_response)
@@ -279,7 +300,9 @@ def _with_scale(k: int, bounds: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def solve_matching(
-    ambient_weights: np.ndarray, led_spectra: Spectra, camera_responsivities: Spectra,
+    ambient_weights: np.ndarray,
+    led_spectra: Spectra,
+    camera_responsivities: Spectra,
     bounds: FlashBounds = "physical",
 ) -> FlashSolution:
     """Matching flash, eq. 7: ``min ‖Cᵀ I (w_a − w_f)‖`` subject to the bounds, then ``max(w_f) = 1``.
@@ -300,8 +323,12 @@ def solve_matching(
 
 
 def solve_complementary(
-    ambient_weights: np.ndarray, led_spectra: Spectra, camera_responsivities: Spectra, target: Spectra,
-    bounds: FlashBounds = "physical", previous_weights: np.ndarray | None = None,
+    ambient_weights: np.ndarray,
+    led_spectra: Spectra,
+    camera_responsivities: Spectra,
+    target: Spectra,
+    bounds: FlashBounds = "physical",
+    previous_weights: np.ndarray | None = None,
 ) -> FlashSolution:
     """Complementary flash, eq. 8–9: ``min ‖Cᵀ I (w_a + w_f) − s Cᵀ i_d‖`` over ``w_f`` and ``s ≥ 0``.
 
@@ -323,7 +350,9 @@ def solve_complementary(
     TargetUnreachableWarning
         When ambient + flash cannot be brought to the target's colour within the bounds.
     """
-    return FlashModel(led_spectra, camera_responsivities).complementary(ambient_weights, target, bounds, previous_weights)
+    return FlashModel(led_spectra, camera_responsivities).complementary(
+        ambient_weights, target, bounds, previous_weights
+    )
 
 
 def _chromatic_error(response: np.ndarray, wanted: np.ndarray) -> float:
@@ -349,8 +378,9 @@ def _check_count(ambient_weights: np.ndarray, matrix: np.ndarray, led_spectra: S
         raise SpectralDataError("flash: the ambient weights are not finite; expected numbers")
 
 
-def _finish(mode: str, ambient_weights: np.ndarray, weights: np.ndarray, scale: float | None,
-            relative_error: float, bounds: str) -> FlashSolution:
+def _finish(
+    mode: str, ambient_weights: np.ndarray, weights: np.ndarray, scale: float | None, relative_error: float, bounds: str
+) -> FlashSolution:
     reached = relative_error <= UNREACHABLE_RELATIVE_ERROR
     notes: list[str] = []
     if not reached:
@@ -362,8 +392,14 @@ def _finish(mode: str, ambient_weights: np.ndarray, weights: np.ndarray, scale: 
         notes.append(message)
         warnings.warn(message, TargetUnreachableWarning, stacklevel=3)
     return FlashSolution(
-        mode=mode, ambient_weights=ambient_weights, flash_weights=weights, scale=scale,
-        relative_error=relative_error, bounds=bounds, target_reached=reached, warnings=tuple(notes),
+        mode=mode,
+        ambient_weights=ambient_weights,
+        flash_weights=weights,
+        scale=scale,
+        relative_error=relative_error,
+        bounds=bounds,
+        target_reached=reached,
+        warnings=tuple(notes),
     )
 
 

@@ -82,18 +82,23 @@ class Scene:
             raise SpectralDataError(f"{where}: reflectances have kind '{self.reflectances.kind}'; expected reflectance")
         labels = np.array(self.labels, copy=True)
         if labels.ndim != 2 or labels.size == 0 or not np.issubdtype(labels.dtype, np.integer):
-            raise SpectralDataError(f"{where}: labels have shape {labels.shape} and type {labels.dtype}; "
-                                    "expected a non-empty integer array (H, W)")
+            raise SpectralDataError(
+                f"{where}: labels have shape {labels.shape} and type {labels.dtype}; "
+                "expected a non-empty integer array (H, W)"
+            )
         if labels.min() < 0 or labels.max() >= self.reflectances.count:
-            raise SpectralDataError(f"{where}: labels span {labels.min()}…{labels.max()}; expected "
-                                    f"0…{self.reflectances.count - 1} (one per surface)")
+            raise SpectralDataError(
+                f"{where}: labels span {labels.min()}…{labels.max()}; expected "
+                f"0…{self.reflectances.count - 1} (one per surface)"
+            )
         labels.flags.writeable = False
         object.__setattr__(self, "labels", labels)
         if self.shading is not None:
             shading = np.array(self.shading, dtype=float, copy=True)
             if shading.shape != labels.shape or not np.all(np.isfinite(shading)) or np.any(shading < 0):
-                raise SpectralDataError(f"{where}: shading has shape {shading.shape}; expected finite values ≥ 0 "
-                                        f"of shape {labels.shape}")
+                raise SpectralDataError(
+                    f"{where}: shading has shape {shading.shape}; expected finite values ≥ 0 of shape {labels.shape}"
+                )
             shading.flags.writeable = False
             object.__setattr__(self, "shading", shading)
         if self.specular is not None:
@@ -169,8 +174,10 @@ def chart_scene(
         reflectances = loaders[reflectances]()
     n = reflectances.count
     if patch_px < 1 or border_px < 0 or specular_strip_px < 0:
-        raise SpectralDataError(f"chart_scene: patch_px {patch_px}, border_px {border_px}, specular_strip_px "
-                                f"{specular_strip_px}; expected patch_px ≥ 1 and the others ≥ 0")
+        raise SpectralDataError(
+            f"chart_scene: patch_px {patch_px}, border_px {border_px}, specular_strip_px "
+            f"{specular_strip_px}; expected patch_px ≥ 1 and the others ≥ 0"
+        )
     if columns is None:
         columns = 6 if n == 24 else math.ceil(math.sqrt(n))
     rows = math.ceil(n / columns)
@@ -182,7 +189,7 @@ def chart_scene(
         row, column = k % rows, k // rows  # column-major, as ISET lays out its charts
         top = border_px + row * (patch_px + border_px)
         left = border_px + column * (patch_px + border_px)
-        labels[top:top + patch_px, left:left + patch_px] = k
+        labels[top : top + patch_px, left : left + patch_px] = k
     surfaces = reflectances.replace(
         values=np.hstack([reflectances.values, np.full((reflectances.grid.size, 1), float(border_reflectance))]),
         names=reflectances.names + ("border",),
@@ -194,8 +201,9 @@ def chart_scene(
     return Scene(surfaces, labels, specular=specular, specular_gain=specular_gain)
 
 
-def mosaic_scene(reflectances: Spectra, seed: int = 0, min_patches: int = 24, patch_px: int = 8,
-                 specular_strip_px: int = 0) -> Scene:
+def mosaic_scene(
+    reflectances: Spectra, seed: int = 0, min_patches: int = 24, patch_px: int = 8, specular_strip_px: int = 0
+) -> Scene:
     """A chart of any surfaces in random order: every surface at least once, repeated to ``min_patches``.
 
     The layout is :func:`chart_scene`'s (square patches on a dark border, a highlight strip if
@@ -225,13 +233,16 @@ def mosaic_scene(reflectances: Spectra, seed: int = 0, min_patches: int = 24, pa
     chart = chart_scene(reflectances.select(order.tolist()), patch_px=patch_px, specular_strip_px=specular_strip_px)
     # chart_scene's patch k shows column k of the selection, i.e. surface order[k]; the border follows.
     surface_of = np.append(order, n)
-    surfaces = reflectances.replace(values=np.hstack([reflectances.values, chart.reflectances.values[:, -1:]]),
-                                    names=reflectances.names + ("border",))
+    surfaces = reflectances.replace(
+        values=np.hstack([reflectances.values, chart.reflectances.values[:, -1:]]),
+        names=reflectances.names + ("border",),
+    )
     return Scene(surfaces, surface_of[chart.labels], specular=chart.specular, specular_gain=chart.specular_gain)
 
 
-def white_reference_scene(height: int = 96, width: int = 128, reflectance: float = 0.95,
-                          corner_shading: float = 0.8) -> Scene:
+def white_reference_scene(
+    height: int = 96, width: int = 128, reflectance: float = 0.95, corner_shading: float = 0.8
+) -> Scene:
     """A uniform, spectrally flat white reference filling the frame, with a smooth radial falloff.
 
     What a lab puts in the booth to measure the LEDs' power ratios through the camera
@@ -243,10 +254,18 @@ def white_reference_scene(height: int = 96, width: int = 128, reflectance: float
     ((4, 6), ('white',), 0.8)
     """
     if height < 2 or width < 2 or not 0 < reflectance <= 1 or not 0 < corner_shading <= 1:
-        raise SpectralDataError(f"white_reference_scene: {height}×{width}, reflectance {reflectance}, corner shading "
-                                f"{corner_shading}; expected a frame of at least 2×2 and both in (0, 1]")
-    surface = Spectra(DEFAULT_GRID, np.full((DEFAULT_GRID.size, 1), float(reflectance)), ("white",),
-                      kind="reflectance", unit="none", source=f"flat white reference {reflectance:g}")
+        raise SpectralDataError(
+            f"white_reference_scene: {height}×{width}, reflectance {reflectance}, corner shading "
+            f"{corner_shading}; expected a frame of at least 2×2 and both in (0, 1]"
+        )
+    surface = Spectra(
+        DEFAULT_GRID,
+        np.full((DEFAULT_GRID.size, 1), float(reflectance)),
+        ("white",),
+        kind="reflectance",
+        unit="none",
+        source=f"flat white reference {reflectance:g}",
+    )
     rows = (np.arange(height) - (height - 1) / 2) / ((height - 1) / 2)
     columns = (np.arange(width) - (width - 1) / 2) / ((width - 1) / 2)
     radius2 = (rows[:, None] ** 2 + columns[None, :] ** 2) / 2
@@ -296,8 +315,10 @@ def placed_scene(
     """
     height, width = int(shape[0]), int(shape[1])
     if height < 1 or width < 1 or not (math.isfinite(scale) and scale > 0) or not math.isfinite(angle_deg):
-        raise SpectralDataError(f"placed_scene: shape {shape}, scale {scale}, angle {angle_deg}; expected a positive "
-                                "shape and scale and a finite angle")
+        raise SpectralDataError(
+            f"placed_scene: shape {shape}, scale {scale}, angle {angle_deg}; expected a positive "
+            "shape and scale and a finite angle"
+        )
     centre = ((height - 1) / 2, (width - 1) / 2) if centre_yx is None else centre_yx
     source_centre = ((scene.shape[0] - 1) / 2, (scene.shape[1] - 1) / 2)
     rows, columns = np.mgrid[0:height, 0:width].astype(float)
@@ -345,10 +366,10 @@ class SensorModel:
     def __post_init__(self) -> None:
         if not 1 <= self.bit_depth <= 32:
             raise SpectralDataError(f"sensor model: bit_depth {self.bit_depth}; expected 1–32")
-        if not 0 <= self.black_level < self.white_level <= 2 ** self.bit_depth - 1:
+        if not 0 <= self.black_level < self.white_level <= 2**self.bit_depth - 1:
             raise SpectralDataError(
                 f"sensor model: black_level {self.black_level}, white_level {self.white_level}; expected "
-                f"0 ≤ black < white ≤ {2 ** self.bit_depth - 1} ({self.bit_depth} bits)"
+                f"0 ≤ black < white ≤ {2**self.bit_depth - 1} ({self.bit_depth} bits)"
             )
         for name in ("electrons_per_dn", "full_well_e"):
             value = getattr(self, name)
@@ -357,7 +378,9 @@ class SensorModel:
         if not (math.isfinite(self.read_noise_e) and self.read_noise_e >= 0):
             raise SpectralDataError(f"sensor model: read_noise_e is {self.read_noise_e}; expected ≥ 0")
         if self.cfa is not None and self.cfa not in CFA_PATTERNS:
-            raise SpectralDataError(f"sensor model: cfa '{self.cfa}'; expected None or one of {', '.join(CFA_PATTERNS)}")
+            raise SpectralDataError(
+                f"sensor model: cfa '{self.cfa}'; expected None or one of {', '.join(CFA_PATTERNS)}"
+            )
 
     @property
     def dtype(self) -> np.dtype:
@@ -429,8 +452,14 @@ def total_illumination(ambient: Spectra, led_spectra: Spectra, led_levels: Seque
     if ambient.count != 1 or ambient.kind != "spd" or led_spectra.kind != "spd":
         raise SpectralDataError("total illumination: expected one ambient spectrum and LED spectra of kind 'spd'")
     flash = led_spectra.to_unit(ambient.unit).values @ levels
-    return Spectra(grid, ambient.values[:, 0] + flash, ("illumination",), kind="spd", unit=ambient.unit,
-                   source=f"{ambient.source or 'ambient'} + LEDs at {tuple(round(float(v), 4) for v in levels)}")
+    return Spectra(
+        grid,
+        ambient.values[:, 0] + flash,
+        ("illumination",),
+        kind="spd",
+        unit=ambient.unit,
+        source=f"{ambient.source or 'ambient'} + LEDs at {tuple(round(float(v), 4) for v in levels)}",
+    )
 
 
 def surface_responses(reflectances: Spectra, illuminant: Spectra, camera_responsivities: Spectra) -> np.ndarray:
@@ -545,7 +574,9 @@ def render_frame(
     electrons = expected_response(scene, illuminant, camera_responsivities, exposure_us, 1.0, scale)
     if sensor.cfa is not None:
         if electrons.shape[2] != 3:
-            raise SpectralDataError(f"render frame: a {sensor.cfa} mosaic needs 3 channels; the camera has {electrons.shape[2]}")
+            raise SpectralDataError(
+                f"render frame: a {sensor.cfa} mosaic needs 3 channels; the camera has {electrons.shape[2]}"
+            )
         electrons = mosaic(electrons, sensor.cfa)
     rng = rng if rng is not None else np.random.default_rng()
     if noise:
@@ -590,8 +621,10 @@ def exposure_for_peak(
         response = response[~scene.specular]
     peak = float(np.max(response)) if response.size else 0.0
     if peak <= 0:
-        raise SpectralDataError("exposure for peak: the scene gives no signal under this illuminant; "
-                                "expected some light reaching the camera")
+        raise SpectralDataError(
+            "exposure for peak: the scene gives no signal under this illuminant; "
+            "expected some light reaching the camera"
+        )
     return fraction * sensor.saturation_electrons(gain) / peak
 
 
@@ -616,8 +649,10 @@ class MixedIllumination:
             raise SpectralDataError(f"mixed illumination: spectra of kind '{self.spectra.kind}'; expected spd")
         weights = np.array(self.weights, dtype=float, copy=True)
         if weights.ndim != 3 or weights.shape[2] != self.spectra.count:
-            raise SpectralDataError(f"mixed illumination: weights have shape {weights.shape}; expected (H, W, "
-                                    f"{self.spectra.count}) (one map per component)")
+            raise SpectralDataError(
+                f"mixed illumination: weights have shape {weights.shape}; expected (H, W, "
+                f"{self.spectra.count}) (one map per component)"
+            )
         if not np.all(np.isfinite(weights)) or np.any(weights < 0):
             raise SpectralDataError("mixed illumination: weights must be finite and ≥ 0")
         weights.flags.writeable = False
@@ -630,20 +665,32 @@ class MixedIllumination:
         grid = require_same_grid(first, second)
         mixing = np.asarray(mixing_map, dtype=float)
         if mixing.ndim != 2 or np.any(mixing < 0) or np.any(mixing > 1) or not np.all(np.isfinite(mixing)):
-            raise SpectralDataError(f"mixed illumination: mixing map of shape {mixing.shape}; expected (H, W) "
-                                    "values in [0, 1]")
+            raise SpectralDataError(
+                f"mixed illumination: mixing map of shape {mixing.shape}; expected (H, W) values in [0, 1]"
+            )
         values = np.column_stack([first.to_unit("photons").values[:, 0], second.to_unit("photons").values[:, 0]])
-        spectra = Spectra(grid, values, ("first", "second"), kind="spd", unit="photons",
-                          source=f"{first.source or 'first'} | {second.source or 'second'}")
+        spectra = Spectra(
+            grid,
+            values,
+            ("first", "second"),
+            kind="spd",
+            unit="photons",
+            source=f"{first.source or 'first'} | {second.source or 'second'}",
+        )
         return cls(spectra, np.stack([1.0 - mixing, mixing], axis=-1))
 
     def plus(self, uniform: Spectra) -> MixedIllumination:
         """This illumination plus a spatially uniform one (the flash: ``total_illumination`` of a dark ambient)."""
         require_same_grid(self.spectra, uniform)
         extra = uniform.to_unit("photons").values[:, :1]
-        spectra = Spectra(self.spectra.grid, np.hstack([self.spectra.values, extra]),
-                          self.spectra.names + (f"uniform {self.spectra.count}",), kind="spd", unit="photons",
-                          source=self.spectra.source)
+        spectra = Spectra(
+            self.spectra.grid,
+            np.hstack([self.spectra.values, extra]),
+            self.spectra.names + (f"uniform {self.spectra.count}",),
+            kind="spd",
+            unit="photons",
+            source=self.spectra.source,
+        )
         ones = np.ones(self.weights.shape[:2] + (1,))
         return MixedIllumination(spectra, np.concatenate([self.weights, ones], axis=-1))
 
@@ -668,11 +715,15 @@ def expected_response_mixed(
     illuminant.
     """
     if illumination.weights.shape[:2] != scene.shape:
-        raise SpectralDataError(f"mixed illumination: weights cover {illumination.weights.shape[:2]} pixels but the "
-                                f"scene has {scene.shape}; expected one weight map per scene pixel")
+        raise SpectralDataError(
+            f"mixed illumination: weights cover {illumination.weights.shape[:2]} pixels but the "
+            f"scene has {scene.shape}; expected one weight map per scene pixel"
+        )
     image = np.zeros(scene.shape + (camera_responsivities.count,))
     for index in range(illumination.spectra.count):
         component = illumination.spectra.select([index])
-        image += expected_response(scene, component, camera_responsivities, exposure_us, gain, scale) \
-            * illumination.weights[:, :, index:index + 1]
+        image += (
+            expected_response(scene, component, camera_responsivities, exposure_us, gain, scale)
+            * illumination.weights[:, :, index : index + 1]
+        )
     return image

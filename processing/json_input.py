@@ -76,6 +76,7 @@ def parse_json_document(text: str, source: str, error: Callable[[str], Exception
     ...
     ValueError: x.json: field 'a.b[1]' is NaN; expected a finite number
     """
+
     def unique(pairs: list[tuple[str, Any]]) -> dict:
         result: dict = {}
         for key, value in pairs:
@@ -85,12 +86,15 @@ def parse_json_document(text: str, source: str, error: Callable[[str], Exception
         return result
 
     try:
-        document = json.loads(text, object_pairs_hook=unique, parse_int=_integer, parse_float=_float,
-                              parse_constant=_Unreadable)
+        document = json.loads(
+            text, object_pairs_hook=unique, parse_int=_integer, parse_float=_float, parse_constant=_Unreadable
+        )
     except json.JSONDecodeError as err:
         raise error(f"{source}:{err.lineno}: not valid JSON ({err.msg})") from None
     except RecursionError:
-        raise error(f"{source}: objects or lists nested too deep to read; expected at most {MAX_NESTING} levels") from None
+        raise error(
+            f"{source}: objects or lists nested too deep to read; expected at most {MAX_NESTING} levels"
+        ) from None
     stack: list[tuple[Any, str, int]] = [(document, "", 0)]
     while stack:
         value, where, depth = stack.pop()
@@ -98,8 +102,9 @@ def parse_json_document(text: str, source: str, error: Callable[[str], Exception
             raise error(f"{source}: field '{where or '(top level)'}' is {value.text}; expected a finite number")
         if isinstance(value, dict | list):
             if depth >= MAX_NESTING:
-                raise error(f"{source}: field '{where}' is nested {depth + 1} levels deep; expected at most "
-                            f"{MAX_NESTING}")
+                raise error(
+                    f"{source}: field '{where}' is nested {depth + 1} levels deep; expected at most {MAX_NESTING}"
+                )
             items = value.items() if isinstance(value, dict) else enumerate(value)
             stack.extend((item, _field(where, key), depth + 1) for key, item in reversed(list(items)))
     return document

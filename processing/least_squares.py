@@ -153,8 +153,9 @@ def _last_unit(size: int) -> np.ndarray:
     return unit
 
 
-def _polish(constraints: np.ndarray, bounds: np.ndarray, z: np.ndarray, active: np.ndarray,
-            bound_peak: float) -> np.ndarray:
+def _polish(
+    constraints: np.ndarray, bounds: np.ndarray, z: np.ndarray, active: np.ndarray, bound_peak: float
+) -> np.ndarray:
     """Re-solve the LDP exactly on its active set; keep the result if it is feasible and optimal.
 
     NNLS finds the right active set but the point only to its own tolerance. On the active set
@@ -241,8 +242,13 @@ class FactoredQuadratic:
     """Names the caller in error messages."""
 
     @classmethod
-    def prepare(cls, hessian: np.ndarray, constraints: np.ndarray | None = None, bounds: np.ndarray | None = None,
-                where: str = "quadratic solver") -> FactoredQuadratic:
+    def prepare(
+        cls,
+        hessian: np.ndarray,
+        constraints: np.ndarray | None = None,
+        bounds: np.ndarray | None = None,
+        where: str = "quadratic solver",
+    ) -> FactoredQuadratic:
         """Factor H and transform G (see :func:`minimise_quadratic` for the arguments).
 
         Raises
@@ -258,8 +264,16 @@ class FactoredQuadratic:
         bounds = np.asarray(bounds, dtype=float)
         inverse_factor = _inverse_factor(hessian, where)
         scale = np.maximum(1.0, abs(bounds))
-        return cls(hessian, constraints, bounds, inverse_factor, constraints.dot(inverse_factor),
-                   -1e-7 * scale, _FEASIBILITY_TOLERANCE * scale, where)
+        return cls(
+            hessian,
+            constraints,
+            bounds,
+            inverse_factor,
+            constraints.dot(inverse_factor),
+            -1e-7 * scale,
+            _FEASIBILITY_TOLERANCE * scale,
+            where,
+        )
 
     def with_hessian(self, hessian: np.ndarray, where: str | None = None) -> FactoredQuadratic:
         """The same constraints with another H, factored (for problems whose H changes per solve).
@@ -274,9 +288,16 @@ class FactoredQuadratic:
         where = self.where if where is None else where
         hessian = np.asarray(hessian, dtype=float)
         inverse_factor = _inverse_factor(hessian, where)
-        return FactoredQuadratic(hessian, self.constraints, self.bounds, inverse_factor,
-                                 self.constraints.dot(inverse_factor), self.violation_limit, self.active_limit,
-                                 where)
+        return FactoredQuadratic(
+            hessian,
+            self.constraints,
+            self.bounds,
+            inverse_factor,
+            self.constraints.dot(inverse_factor),
+            self.violation_limit,
+            self.active_limit,
+            where,
+        )
 
     def minimise(self, linear: np.ndarray) -> QuadraticSolution:
         """The minimiser for the linear term f, shape (n,).

@@ -46,12 +46,21 @@ LightType = Literal["incandescent", "fluorescent", "led", "discharge", "daylight
 _TYPE_PATTERNS: tuple[tuple[LightType, str], ...] = (
     ("daylight", r"d65|daylight(?! fl)|eew|plasma|sun"),
     ("discharge", r"metal halide|mercury|hps|son\b|cdm|mhc|mh100|h38|c100s54|sdw|\bhid\b"),
-    ("fluorescent", r"\bfl\b|fl\d|fluoresc|f\d+t\d+|t12|t8|\bcie f\d|f40|f34|tl\d|\bf3\.\d|tri-?phosphor|cool white|"
-                    r"warm white fl|triband|tri-band"),
-    ("led", r"led|phosphor|rgb|cree|lumileds|xicato|vio|soraa|ngl|m\d-\d|m\d\.\d|hp\d|fortimo|w[a-z]*\dk|wgarc|"
-            r"true white|yag|luxeon|ssl|booth|b-y|peak|broad|3-led|4-led"),
-    ("incandescent", r"incandescent|halogen|halogena|60wa19|softer white|rough house|reveal|krypton|\bhalo\b|"
-                     r"illum\. a|\ba\b$|neodimium|\d+ ?k$|\d,\d+ k$"),
+    (
+        "fluorescent",
+        r"\bfl\b|fl\d|fluoresc|f\d+t\d+|t12|t8|\bcie f\d|f40|f34|tl\d|\bf3\.\d|tri-?phosphor|cool white|"
+        r"warm white fl|triband|tri-band",
+    ),
+    (
+        "led",
+        r"led|phosphor|rgb|cree|lumileds|xicato|vio|soraa|ngl|m\d-\d|m\d\.\d|hp\d|fortimo|w[a-z]*\dk|wgarc|"
+        r"true white|yag|luxeon|ssl|booth|b-y|peak|broad|3-led|4-led",
+    ),
+    (
+        "incandescent",
+        r"incandescent|halogen|halogena|60wa19|softer white|rough house|reveal|krypton|\bhalo\b|"
+        r"illum\. a|\ba\b$|neodimium|\d+ ?k$|\d,\d+ k$",
+    ),
 )
 
 
@@ -69,8 +78,9 @@ class LibraryLight:
 @cache
 def light_library() -> Spectra:
     """The 401 light spectra, energy units, 380–780/5 nm, one column per light (its label)."""
-    return load_spectra_csv(DATA_DIR / LIBRARY_FILE, "spd", "energy",
-                            source=f"msflash data {LIBRARY_FILE} (Houser et al. 2013)")
+    return load_spectra_csv(
+        DATA_DIR / LIBRARY_FILE, "spd", "energy", source=f"msflash data {LIBRARY_FILE} (Houser et al. 2013)"
+    )
 
 
 def light_type(label: str) -> LightType:
@@ -127,8 +137,11 @@ def lights_of(split: Split) -> Spectra:
     """The library's lights on one side of the split, as one :class:`Spectra` (energy, 380–780/5)."""
     library = light_library()
     keep = [i for i, light in enumerate(library_lights()) if light.split == split]
-    return library.replace(values=library.values[:, keep], names=tuple(library.names[i] for i in keep),
-                           source=f"{library.source}, {split} split")
+    return library.replace(
+        values=library.values[:, keep],
+        names=tuple(library.names[i] for i in keep),
+        source=f"{library.source}, {split} split",
+    )
 
 
 def _visible(spectra: Spectra) -> np.ndarray:
@@ -136,8 +149,9 @@ def _visible(spectra: Spectra) -> np.ndarray:
     return (wavelengths >= 400) & (wavelengths <= 700)
 
 
-def without_near_copies(candidates: Spectra, held_out: Spectra | None = None,
-                        threshold: float = NEAR_COPY_COSINE) -> Spectra:
+def without_near_copies(
+    candidates: Spectra, held_out: Spectra | None = None, threshold: float = NEAR_COPY_COSINE
+) -> Spectra:
     """``candidates`` less every spectrum that is a near copy of a held-out light (cosine ≥ ``threshold``
     over 400–700 nm, compared on the held-out lights' grid in energy units).
 
@@ -147,8 +161,9 @@ def without_near_copies(candidates: Spectra, held_out: Spectra | None = None,
     reference = held_out.values[_visible(held_out)]
     wavelengths = held_out.wavelengths_nm[_visible(held_out)]
     energy = candidates if candidates.unit == "energy" else candidates.to_unit("energy")
-    values = np.column_stack([np.interp(wavelengths, energy.wavelengths_nm, column, left=0.0, right=0.0)
-                              for column in energy.values.T])
+    values = np.column_stack(
+        [np.interp(wavelengths, energy.wavelengths_nm, column, left=0.0, right=0.0) for column in energy.values.T]
+    )
 
     def unit(columns: np.ndarray) -> np.ndarray:
         norms = np.linalg.norm(columns, axis=0)

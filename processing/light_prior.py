@@ -136,14 +136,20 @@ def prior_candidate_lights(grid: WavelengthGrid, exclude: tuple[str, ...] = ()) 
     for kelvin in BLACKBODY_K:
         extra.append(datasets.illuminant(f"blackbody:{kelvin}", fine).values[:, 0])
         names.append(f"blackbody {kelvin} K")
-    added = without_near_copies(Spectra(fine, np.column_stack(extra), tuple(names), "spd", "energy",
-                                        source="CIE daylight and blackbody spectra"))
+    added = without_near_copies(
+        Spectra(
+            fine, np.column_stack(extra), tuple(names), "spd", "energy", source="CIE daylight and blackbody spectra"
+        )
+    )
     library = prior_training_lights()
     if exclude:
         excluded = light_library().select(list(exclude))
         library, added = without_near_copies(library, excluded), without_near_copies(added, excluded)
-    both = library.replace(values=np.hstack([library.values, added.resample(library.grid).values]),
-                           names=library.names + added.names, source="light prior training set")
+    both = library.replace(
+        values=np.hstack([library.values, added.resample(library.grid).values]),
+        names=library.names + added.names,
+        source="light prior training set",
+    )
     return both.resample(grid, outside="zero")
 
 
@@ -178,15 +184,21 @@ def learn_light_prior(grid: WavelengthGrid, dims: int = LIGHT_DIMS, exclude: tup
     rest = scaled - np.outer(first, first @ scaled)
     centred = rest - rest.mean(axis=1, keepdims=True)
     vectors, _, _ = np.linalg.svd(centred, full_matrices=False)
-    basis = np.column_stack([first, vectors[:, :dims - 1]])
+    basis = np.column_stack([first, vectors[:, : dims - 1]])
     coefficients = basis[:, 1:].T @ scaled
     outside = unit - basis @ (basis.T @ unit)
     names = tuple(n for n, k in zip(lights.names, keep) if k)
     return LightPrior(
-        basis=lights.replace(values=basis, names=tuple(f"light_basis_{m}" for m in range(dims)),
-                             source=f"light prior basis ({len(names)} training lights)", metadata={}),
-        mean=coefficients.mean(axis=1), covariance=np.cov(coefficients),
-        training=names, representation_error=float(np.sqrt(np.mean(outside ** 2)) * math.sqrt(grid.size)),
+        basis=lights.replace(
+            values=basis,
+            names=tuple(f"light_basis_{m}" for m in range(dims)),
+            source=f"light prior basis ({len(names)} training lights)",
+            metadata={},
+        ),
+        mean=coefficients.mean(axis=1),
+        covariance=np.cov(coefficients),
+        training=names,
+        representation_error=float(np.sqrt(np.mean(outside**2)) * math.sqrt(grid.size)),
     )
 
 
@@ -208,8 +220,11 @@ def learn_reflectance_basis(grid: WavelengthGrid, dims: int = REFLECTANCE_DIMS) 
         raise SpectralDataError(f"reflectance basis: {dims} dimensions; expected 1…{min(surfaces.count, grid.size)}")
     vectors, singular, _ = np.linalg.svd(surfaces.values, full_matrices=False)
     return ReflectanceBasis(
-        basis=surfaces.replace(values=vectors[:, :dims], names=tuple(f"reflectance_basis_{j}" for j in range(dims)),
-                               source="Natural-100 principal components"),
+        basis=surfaces.replace(
+            values=vectors[:, :dims],
+            names=tuple(f"reflectance_basis_{j}" for j in range(dims)),
+            source="Natural-100 principal components",
+        ),
         weights=singular[:dims] ** 2 / surfaces.count,
     )
 
@@ -246,8 +261,10 @@ def plane_responsivities(responsivities: Spectra, channels: tuple[str, ...]) -> 
     names = [n.upper() for n in responsivities.names]
     missing = [c for c in channels if c not in names]
     if missing:
-        raise SpectralDataError(f"camera responsivities: no channel named {', '.join(missing)} among "
-                                f"{', '.join(responsivities.names)}; expected R, G, B")
+        raise SpectralDataError(
+            f"camera responsivities: no channel named {', '.join(missing)} among "
+            f"{', '.join(responsivities.names)}; expected R, G, B"
+        )
     return np.column_stack([responsivities.values[:, names.index(c)] for c in channels])
 
 
@@ -283,13 +300,19 @@ class PriorModel:
     def __post_init__(self) -> None:
         led = require_unit(self.led_spectra, "photons")
         camera = require_unit(self.responsivities, "photons")
-        for what, spectra in (("camera responsivities", camera), ("light prior", self.prior.basis),
-                              ("reflectance basis", self.reflectance.basis)):
+        for what, spectra in (
+            ("camera responsivities", camera),
+            ("light prior", self.prior.basis),
+            ("reflectance basis", self.reflectance.basis),
+        ):
             if not spectra.grid.same_as(led.grid):
-                raise SpectralDataError(f"prior model: {what} on {spectra.grid} but the LEDs on {led.grid}; "
-                                        "expected one grid")
+                raise SpectralDataError(
+                    f"prior model: {what} on {spectra.grid} but the LEDs on {led.grid}; expected one grid"
+                )
         if not (self.ridge >= 0 and self.kappa > 0 and math.isfinite(self.ridge) and math.isfinite(self.kappa)):
-            raise SpectralDataError(f"prior model: ridge {self.ridge}, kappa {self.kappa}; expected ridge ≥ 0, kappa > 0")
+            raise SpectralDataError(
+                f"prior model: ridge {self.ridge}, kappa {self.kappa}; expected ridge ≥ 0, kappa > 0"
+            )
         planes = plane_responsivities(camera, self.channels)  # (n, C)
         leds = led.values  # (n, k)
         n_wl, channels, k = leds.shape[0], planes.shape[1], leds.shape[1]
@@ -298,8 +321,9 @@ class PriorModel:
         second = (basis_r * self.reflectance.weights) @ basis_r.T  # R (n, n)
         gram = sensing @ second @ sensing.T
         ridge = self.ridge * np.trace(gram) / gram.shape[0]
-        wiener = np.linalg.solve(gram + ridge * np.eye(gram.shape[0]) + 1e-12 * np.trace(gram) * np.eye(gram.shape[0]),
-                                 sensing @ second).T  # W: (n, Ck)
+        wiener = np.linalg.solve(
+            gram + ridge * np.eye(gram.shape[0]) + 1e-12 * np.trace(gram) * np.eye(gram.shape[0]), sensing @ second
+        ).T  # W: (n, Ck)
         lights = self.prior.basis.values  # (n, q)
         if self.split:
             in_span = np.linalg.lstsq(leds, lights, rcond=None)[0]  # u: (k, q)
@@ -320,7 +344,9 @@ class PriorModel:
         """``(H, g, Σ‖a‖²)`` of the data term for moments with one fold (module notes, step 3)."""
         return normal_equations(self.predictors, moments)
 
-    def solve(self, moments: Moments, n_samples: int, nonnegative: bool = True) -> tuple[np.ndarray, np.ndarray, float, float]:
+    def solve(
+        self, moments: Moments, n_samples: int, nonnegative: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, float, float]:
         """``(φ, posterior covariance of φ, λ, σ²)`` from one fold's (denoised) moments."""
         hessian, linear, energy = self.normal_equations(moments)
         q = hessian.shape[0]
@@ -340,8 +366,9 @@ class PriorModel:
             try:
                 phi = np.linalg.solve(system, linear)
             except np.linalg.LinAlgError as err:
-                raise SolverError(f"prior model: the normal equations are singular ({err}); expected LED images "
-                                  "with light") from err
+                raise SolverError(
+                    f"prior model: the normal equations are singular ({err}); expected LED images with light"
+                ) from err
             if abs(weight - previous) <= 1e-4 * weight:
                 break
             previous = weight
@@ -377,10 +404,15 @@ class PriorModel:
         if not np.max(spectrum) > 0:
             warnings.append("the estimated spectrum is zero: no ambient light was found")
         return PriorEstimate(
-            spectrum=self.led_spectra.replace(values=spectrum[:, None], names=("ambient",),
-                                              source="ambient estimate (light prior)", metadata={}),
-            coefficients=phi, spectrum_std=std, prior_weight=float(weight), relative_residual=relative,
-            n_samples=n, warnings=tuple(warnings),
+            spectrum=self.led_spectra.replace(
+                values=spectrum[:, None], names=("ambient",), source="ambient estimate (light prior)", metadata={}
+            ),
+            coefficients=phi,
+            spectrum_std=std,
+            prior_weight=float(weight),
+            relative_residual=relative,
+            n_samples=n,
+            warnings=tuple(warnings),
         )
 
 
@@ -411,19 +443,30 @@ def _nonnegative(hessian: np.ndarray, linear: np.ndarray, basis: np.ndarray) -> 
 
 def _check_statistics(statistics: ChannelStatistics, model: PriorModel) -> None:
     if statistics.n_leds != model.led_spectra.count:
-        raise SpectralDataError(f"prior estimate: {model.led_spectra.count} LED spectra but the statistics have "
-                                f"{statistics.n_leds} LED images; expected one spectrum per LED")
+        raise SpectralDataError(
+            f"prior estimate: {model.led_spectra.count} LED spectra but the statistics have "
+            f"{statistics.n_leds} LED images; expected one spectrum per LED"
+        )
     if statistics.channels != model.channels:
-        raise SpectralDataError(f"prior estimate: statistics of channels {''.join(statistics.channels)} but a model "
-                                f"for {''.join(model.channels)}; expected the same channel layout")
+        raise SpectralDataError(
+            f"prior estimate: statistics of channels {''.join(statistics.channels)} but a model "
+            f"for {''.join(model.channels)}; expected the same channel layout"
+        )
     if statistics.n_blocks <= model.prior.dims:
-        raise SpectralDataError(f"prior estimate: {statistics.n_blocks} valid blocks; expected more than the "
-                                f"{model.prior.dims} light coefficients (lower the exposure, or larger frames)")
+        raise SpectralDataError(
+            f"prior estimate: {statistics.n_blocks} valid blocks; expected more than the "
+            f"{model.prior.dims} light coefficients (lower the exposure, or larger frames)"
+        )
 
 
-def estimate_ambient_prior(statistics: ChannelStatistics, led_spectra: Spectra, responsivities: Spectra,
-                           prior: LightPrior | None = None, reflectance: ReflectanceBasis | None = None,
-                           **options: float | bool) -> PriorEstimate:
+def estimate_ambient_prior(
+    statistics: ChannelStatistics,
+    led_spectra: Spectra,
+    responsivities: Spectra,
+    prior: LightPrior | None = None,
+    reflectance: ReflectanceBasis | None = None,
+    **options: float | bool,
+) -> PriorEstimate:
     """Estimate the ambient in the light prior's basis from a sequence's channel statistics.
 
     Parameters
@@ -449,17 +492,29 @@ def estimate_ambient_prior(statistics: ChannelStatistics, led_spectra: Spectra, 
     SpectralDataError
         Grids, units, LED count or channel layout that do not match; too few valid blocks.
     """
-    return prior_model(statistics.channels, led_spectra, responsivities, prior, reflectance, **options).estimate(statistics)
+    return prior_model(statistics.channels, led_spectra, responsivities, prior, reflectance, **options).estimate(
+        statistics
+    )
 
 
-def prior_model(channels: tuple[str, ...], led_spectra: Spectra, responsivities: Spectra,
-                prior: LightPrior | None = None, reflectance: ReflectanceBasis | None = None,
-                **options: float | bool) -> PriorModel:
+def prior_model(
+    channels: tuple[str, ...],
+    led_spectra: Spectra,
+    responsivities: Spectra,
+    prior: LightPrior | None = None,
+    reflectance: ReflectanceBasis | None = None,
+    **options: float | bool,
+) -> PriorModel:
     """A :class:`PriorModel` with the default light prior and reflectance basis on the LEDs' grid."""
     grid = led_spectra.grid
-    return PriorModel(led_spectra, responsivities, tuple(channels),
-                      learn_light_prior(grid) if prior is None else prior,
-                      learn_reflectance_basis(grid) if reflectance is None else reflectance, **options)  # type: ignore[arg-type]
+    return PriorModel(
+        led_spectra,
+        responsivities,
+        tuple(channels),
+        learn_light_prior(grid) if prior is None else prior,
+        learn_reflectance_basis(grid) if reflectance is None else reflectance,
+        **options,  # type: ignore[arg-type]
+    )
 
 
 # -- model choice ------------------------------------------------------------------------------------
@@ -521,8 +576,12 @@ def held_out_errors(statistics: ChannelStatistics, model: PriorModel, led_method
         direct = np.einsum("cd,i->cdi", np.eye(channels), weights).reshape(1, channels, channels * k)
         held = statistics.moments.fold(fold)
         clean = held if statistics.noise is None else held - statistics.noise.fold(fold)
-        sums += [prediction_error(direct, np.ones(1), clean), prediction_error(model.predictors, phi, clean),
-                 prediction_error(direct, np.ones(1), held), prediction_error(model.predictors, phi, held)]
+        sums += [
+            prediction_error(direct, np.ones(1), clean),
+            prediction_error(model.predictors, phi, clean),
+            prediction_error(direct, np.ones(1), held),
+            prediction_error(model.predictors, phi, held),
+        ]
     energy = float(np.trace(statistics.moments.total().aa[0]))
     relative = np.sqrt(sums / energy) if energy > 0 else np.zeros(4)
     return HeldOutErrors(*(float(v) for v in relative))
@@ -543,10 +602,14 @@ def choose_model(statistics: ChannelStatistics, model: PriorModel, margin: float
     led_error, prior_error = errors.led_observed, errors.prior_observed
     if prior_error < (1.0 - margin) * led_error:
         model_name: ModelName = "prior"
-        reason = (f"the light prior predicts held-out pixels better: relative error {prior_error:.4f} against "
-                  f"{led_error:.4f} for the LEDs' span (more than {margin:.0%} lower)")
+        reason = (
+            f"the light prior predicts held-out pixels better: relative error {prior_error:.4f} against "
+            f"{led_error:.4f} for the LEDs' span (more than {margin:.0%} lower)"
+        )
     else:
         model_name = "led"
-        reason = (f"the LEDs' span predicts held-out pixels as well or better: relative error {led_error:.4f} against "
-                  f"{prior_error:.4f} for the light prior (which must be more than {margin:.0%} lower)")
+        reason = (
+            f"the LEDs' span predicts held-out pixels as well or better: relative error {led_error:.4f} against "
+            f"{prior_error:.4f} for the light prior (which must be more than {margin:.0%} lower)"
+        )
     return ModelChoice(model_name, led_error, prior_error, margin, reason, errors)

@@ -115,6 +115,7 @@ def light_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
         wanted = "fl" + wanted[1:]  # CIE's F2 is colour-science's FL2
     key = next((k for k in keys if k.lower() == wanted), None)
     if key is None:
-        raise SpectralDataError(f"light '{name}': unknown; expected one of {', '.join(AMBIENTS + keys)}, "
-                                "blackbody:<kelvin>")
+        raise SpectralDataError(
+            f"light '{name}': unknown; expected one of {', '.join(AMBIENTS + keys)}, blackbody:<kelvin>"
+        )
     return datasets.illuminant(key, grid)

@@ -112,8 +112,10 @@ def tile_edges(n_blocks: int, n_tiles: int) -> np.ndarray:
     [0, 2, 5, 8, 10]
     """
     if n_tiles < 1 or n_blocks < n_tiles:
-        raise SpectralDataError(f"tiles: {n_tiles} tiles over {n_blocks} blocks; expected 1 ≤ tiles ≤ blocks "
-                                "(fewer tiles, or a smaller bin factor)")
+        raise SpectralDataError(
+            f"tiles: {n_tiles} tiles over {n_blocks} blocks; expected 1 ≤ tiles ≤ blocks "
+            "(fewer tiles, or a smaller bin factor)"
+        )
     return np.rint(np.linspace(0, n_blocks, n_tiles + 1)).astype(int)
 
 
@@ -179,12 +181,12 @@ class Cells:
         if group is None:
             group = max(1, int(np.ceil(np.sqrt(blocks.valid.size / MAX_REGION_CELLS))))
         rows, columns = blocks.shape[0] // group, blocks.shape[1] // group
-        valid = blocks.valid[:rows * group, :columns * group]
+        valid = blocks.valid[: rows * group, : columns * group]
         if group > 1:
             valid = np.all(valid.reshape(rows, group, columns, group), axis=(1, 3))
 
         def cell_samples(values: np.ndarray) -> np.ndarray:
-            values = values[:, :rows * group, :columns * group]
+            values = values[:, : rows * group, : columns * group]
             if group > 1:  # the rows' sums on the image threads (numpy releases the GIL)
                 values = np.stack(list(thread_pool(DEFAULT_WORKERS).map(lambda row: block_sums(row, group), values)))
             return values[:, valid]  # (R, N, C)
@@ -198,11 +200,17 @@ class Cells:
         k = leds.shape[0]
         gram = (leds[:, None] * leds[None]).sum(axis=2).reshape(k * k, -1).T
         differences = None if blocks.differences is None else cell_samples(blocks.differences)
-        return cls(valid=valid, size=blocks.pixel * group, channels=int(samples.shape[2]),
-                   gram=np.ascontiguousarray(gram), cross=np.ascontiguousarray((leds * ambient).sum(axis=1).T),
-                   energy=(ambient * ambient).sum(axis=0),
-                   sums=np.column_stack([ambient.sum(axis=0), leds.sum(axis=1).T]),
-                   spec=blocks.spec, differences=differences)
+        return cls(
+            valid=valid,
+            size=blocks.pixel * group,
+            channels=int(samples.shape[2]),
+            gram=np.ascontiguousarray(gram),
+            cross=np.ascontiguousarray((leds * ambient).sum(axis=1).T),
+            energy=(ambient * ambient).sum(axis=0),
+            sums=np.column_stack([ambient.sum(axis=0), leds.sum(axis=1).T]),
+            spec=blocks.spec,
+            differences=differences,
+        )
 
     def errors(self, weights: np.ndarray) -> np.ndarray:
         """``‖a_b − F_b w‖²`` of every cell for each row of ``weights`` (R, k): (R, N)."""
@@ -214,9 +222,15 @@ class Cells:
         k = self.cross.shape[1]
         select = np.asarray(member, dtype=float)
         n = int(select.sum()) * self.channels
-        return SequenceStatistics(gram=(select @ self.gram).reshape(k, k), cross=select @ self.cross,
-                                  ambient_energy=float(select @ self.energy), n_samples=n, n_total=n,
-                                  ambient_sum=float(select @ self.sums[:, 0]), led_sums=select @ self.sums[:, 1:])
+        return SequenceStatistics(
+            gram=(select @ self.gram).reshape(k, k),
+            cross=select @ self.cross,
+            ambient_energy=float(select @ self.energy),
+            n_samples=n,
+            n_total=n,
+            ambient_sum=float(select @ self.sums[:, 0]),
+            led_sums=select @ self.sums[:, 1:],
+        )
 
     def denoised_statistics(self, member: np.ndarray) -> SequenceStatistics | None:
         """:meth:`statistics` with the noise's contribution removed (:attr:`TiledStatistics.denoised`), or None.
@@ -229,8 +243,12 @@ class Cells:
         probe = self.differences[:, np.asarray(member, dtype=bool)].reshape(self.differences.shape[0], -1)
         pooled = (probe @ probe.T)[None, None]
         noise = _tiled_from_moments(pooled, np.ones((1, 1)), self.spec, np.zeros(2, dtype=int), np.zeros(2, dtype=int))
-        return replace(observed, gram=observed.gram - noise.gram[0, 0], cross=observed.cross - noise.cross[0, 0],
-                       ambient_energy=observed.ambient_energy - float(noise.ambient_energy[0, 0]))
+        return replace(
+            observed,
+            gram=observed.gram - noise.gram[0, 0],
+            cross=observed.cross - noise.cross[0, 0],
+            ambient_energy=observed.ambient_energy - float(noise.ambient_energy[0, 0]),
+        )
 
 
 @dataclass(frozen=True)
@@ -288,8 +306,10 @@ class TiledStatistics:
     @property
     def centres(self) -> tuple[np.ndarray, np.ndarray]:
         """Pixel coordinates of the tile centres: (rows (ty,), columns (tx,))."""
-        return ((self.row_edges[:-1] + self.row_edges[1:] - 1) / 2.0,
-                (self.column_edges[:-1] + self.column_edges[1:] - 1) / 2.0)
+        return (
+            (self.row_edges[:-1] + self.row_edges[1:] - 1) / 2.0,
+            (self.column_edges[:-1] + self.column_edges[1:] - 1) / 2.0,
+        )
 
     @property
     def areas(self) -> np.ndarray:
@@ -299,10 +319,13 @@ class TiledStatistics:
     def tile(self, row: int, column: int) -> SequenceStatistics:
         """The statistics of one tile."""
         return SequenceStatistics(
-            gram=self.gram[row, column].copy(), cross=self.cross[row, column].copy(),
+            gram=self.gram[row, column].copy(),
+            cross=self.cross[row, column].copy(),
             ambient_energy=float(self.ambient_energy[row, column]),
-            n_samples=int(round(float(self.n_samples[row, column]))), n_total=int(round(float(self.n_total[row, column]))),
-            ambient_sum=float(self.ambient_sum[row, column]), led_sums=self.led_sums[row, column].copy(),
+            n_samples=int(round(float(self.n_samples[row, column]))),
+            n_total=int(round(float(self.n_total[row, column]))),
+            ambient_sum=float(self.ambient_sum[row, column]),
+            led_sums=self.led_sums[row, column].copy(),
         )
 
     def total(self) -> SequenceStatistics:
@@ -312,13 +335,24 @@ class TiledStatistics:
         ``4 · PROBE_BLOCKS`` blocks; above, it probes a stride of block rows, the tiles every block)."""
         gram, cross, energy = self.gram.sum(axis=(0, 1)), self.cross.sum(axis=(0, 1)), float(self.ambient_energy.sum())
         clean = self.denoised
-        noise = None if clean is None else NoiseMoments(
-            gram - clean.gram.sum(axis=(0, 1)), cross - clean.cross.sum(axis=(0, 1)),
-            energy - float(clean.ambient_energy.sum()))
+        noise = (
+            None
+            if clean is None
+            else NoiseMoments(
+                gram - clean.gram.sum(axis=(0, 1)),
+                cross - clean.cross.sum(axis=(0, 1)),
+                energy - float(clean.ambient_energy.sum()),
+            )
+        )
         return SequenceStatistics(
-            gram=gram, cross=cross, ambient_energy=energy, n_samples=int(round(float(self.n_samples.sum()))),
-            n_total=int(round(float(self.n_total.sum()))), ambient_sum=float(self.ambient_sum.sum()),
-            led_sums=self.led_sums.sum(axis=(0, 1)), noise=noise,
+            gram=gram,
+            cross=cross,
+            ambient_energy=energy,
+            n_samples=int(round(float(self.n_samples.sum()))),
+            n_total=int(round(float(self.n_total.sum()))),
+            ambient_sum=float(self.ambient_sum.sum()),
+            led_sums=self.led_sums.sum(axis=(0, 1)),
+            noise=noise,
         )
 
     def smoothed(self, sigma: float, leave_out: bool = False) -> TiledStatistics:
@@ -338,9 +372,15 @@ class TiledStatistics:
             return result - values if leave_out else result
 
         return TiledStatistics(
-            gram=smooth(self.gram), cross=smooth(self.cross), ambient_energy=smooth(self.ambient_energy),
-            n_samples=smooth(self.n_samples), n_total=smooth(self.n_total), ambient_sum=smooth(self.ambient_sum),
-            led_sums=smooth(self.led_sums), row_edges=self.row_edges, column_edges=self.column_edges,
+            gram=smooth(self.gram),
+            cross=smooth(self.cross),
+            ambient_energy=smooth(self.ambient_energy),
+            n_samples=smooth(self.n_samples),
+            n_total=smooth(self.n_total),
+            ambient_sum=smooth(self.ambient_sum),
+            led_sums=smooth(self.led_sums),
+            row_edges=self.row_edges,
+            column_edges=self.column_edges,
             blocks=self.blocks,
         )
 
@@ -367,8 +407,8 @@ def _block_sums(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
 def _block_sums_and_differences(plane: np.ndarray, factor: int, sums: np.ndarray, differences: np.ndarray) -> None:
     """:func:`processing.statistics.block_sums_and_differences` of an (H, W, C) plane into (H/f, W/f, C) arrays."""
     block_sums_part, difference_part = block_sums_and_differences(plane, factor)
-    np.copyto(sums, block_sums_part[:sums.shape[0], :sums.shape[1]])
-    np.copyto(differences, difference_part[:differences.shape[0], :differences.shape[1]])
+    np.copyto(sums, block_sums_part[: sums.shape[0], : sums.shape[1]])
+    np.copyto(differences, difference_part[: differences.shape[0], : differences.shape[1]])
 
 
 def tile_statistics(
@@ -406,14 +446,18 @@ def tile_statistics(
     """
     rows_tiles, columns_tiles = (tiles, tiles) if isinstance(tiles, int) else tiles
     if bin_factor < 1 or cfa_period not in (1, 2):
-        raise SpectralDataError(f"tiled statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2")
+        raise SpectralDataError(
+            f"tiled statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2"
+        )
     if len(led_frames) != spec.led_levels.shape[0]:
         raise SpectralDataError(f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}")
     frames = [*led_frames, ambient]
     for index, frame in enumerate(frames):
         if frame.shape != ambient.shape:
-            raise SpectralDataError(f"frame stack: frame {index} has shape {frame.shape} but the ambient frame "
-                                    f"{ambient.shape}; expected frames of one size")
+            raise SpectralDataError(
+                f"frame stack: frame {index} has shape {frame.shape} but the ambient frame "
+                f"{ambient.shape}; expected frames of one size"
+            )
     planes = [cfa_planes(frame, cfa_period) for frame in frames]
     # Float frames (EXR) may hold NaN/inf: refused before the block sums, whose gather products would
     # warn about them first. One sum per float frame; integer frames are finite.
@@ -423,8 +467,10 @@ def tile_statistics(
     if height == 0 or width == 0:
         side = bin_factor * cfa_period
         quads = f" ({bin_factor}×{bin_factor} of the mosaic's 2×2 quads)" if cfa_period == 2 else ""
-        raise SpectralDataError(f"frame of shape {ambient.shape} is smaller than one {side}×{side}-pixel block{quads}; "
-                                "expected a larger frame")
+        raise SpectralDataError(
+            f"frame of shape {ambient.shape} is smaller than one {side}×{side}-pixel block{quads}; "
+            "expected a larger frame"
+        )
     n_rows = len(frames) + 1
     data = np.empty((n_rows, height, width, channels))
     # Even bin factors also give every block's half difference, the noise probe of ``denoised``.
@@ -444,7 +490,9 @@ def tile_statistics(
         return None
 
     # The frames are independent: numpy releases the GIL in the sums (as in the global statistics' pass).
-    rows_done = thread_pool(workers).map(add_frame, range(len(planes))) if workers > 1 else map(add_frame, range(len(planes)))
+    rows_done = (
+        thread_pool(workers).map(add_frame, range(len(planes))) if workers > 1 else map(add_frame, range(len(planes)))
+    )
     masks = list(rows_done)
     saturated = [mask for mask in masks if mask is not None]
     data[-1] = 1.0
@@ -452,8 +500,9 @@ def tile_statistics(
         ambient_row = len(frames) - 1
         stride = probe_stride(height, width)
         black = spec.black_level * bin_factor * bin_factor
-        root = ambient_noise_line(data[ambient_row], differences[ambient_row][::stride], black, masks[ambient_row],
-                                  stride).root_weights(data[ambient_row], black)
+        root = ambient_noise_line(
+            data[ambient_row], differences[ambient_row][::stride], black, masks[ambient_row], stride
+        ).root_weights(data[ambient_row], black)
         data *= root
         differences *= root
     invalid = np.zeros((height, width), dtype=bool)
@@ -479,9 +528,18 @@ def tile_statistics(
                 probe = differences[:, rows, columns].reshape(n_rows, -1)
                 noise[i, j] = probe @ probe.T
 
-    list(thread_pool(workers).map(add_tile_row, range(rows_tiles)) if workers > 1 else map(add_tile_row, range(rows_tiles)))
-    block_spec = FrameStackSpec(black_level=spec.black_level * bin_factor * bin_factor, white_level=np.inf,
-                                ambient_scale=spec.ambient_scale, led_scales=spec.led_scales, led_levels=spec.led_levels)
+    list(
+        thread_pool(workers).map(add_tile_row, range(rows_tiles))
+        if workers > 1
+        else map(add_tile_row, range(rows_tiles))
+    )
+    block_spec = FrameStackSpec(
+        black_level=spec.black_level * bin_factor * bin_factor,
+        white_level=np.inf,
+        ambient_scale=spec.ambient_scale,
+        led_scales=spec.led_scales,
+        led_levels=spec.led_levels,
+    )
     pixel = bin_factor * cfa_period
     row_edges = row_blocks * pixel
     column_edges = column_blocks * pixel
@@ -491,8 +549,11 @@ def tile_statistics(
     denoised = None
     if noise is not None:
         denoised = _tiled_from_moments(moments - noise, totals, block_spec, row_edges, column_edges)
-    return TiledStatistics(**{name: getattr(tiled, name) for name in tiled.__dataclass_fields__
-                              if name not in ("blocks", "denoised")}, blocks=blocks, denoised=denoised)
+    return TiledStatistics(
+        **{name: getattr(tiled, name) for name in tiled.__dataclass_fields__ if name not in ("blocks", "denoised")},
+        blocks=blocks,
+        denoised=denoised,
+    )
 
 
 def _projection(spec: FrameStackSpec) -> np.ndarray:
@@ -511,8 +572,9 @@ def _projection(spec: FrameStackSpec) -> np.ndarray:
     return np.vstack([spec.unmixing @ transform[:n_led_frames], transform[n_led_frames:]])
 
 
-def _tiled_from_moments(moments: np.ndarray, totals: np.ndarray, spec: FrameStackSpec, row_edges: np.ndarray,
-                        column_edges: np.ndarray) -> TiledStatistics:
+def _tiled_from_moments(
+    moments: np.ndarray, totals: np.ndarray, spec: FrameStackSpec, row_edges: np.ndarray, column_edges: np.ndarray
+) -> TiledStatistics:
     """Tiled statistics from raw moments of the rows [F_1 … F_n, A, 1] (one (R, R) matrix per tile)."""
     projection = _projection(spec)
     k = projection.shape[0] - 1
@@ -526,7 +588,8 @@ def _tiled_from_moments(moments: np.ndarray, totals: np.ndarray, spec: FrameStac
         n_total=totals.astype(float),
         ambient_sum=sums[..., k].copy(),
         led_sums=sums[..., :k].copy(),
-        row_edges=np.asarray(row_edges, dtype=int), column_edges=np.asarray(column_edges, dtype=int),
+        row_edges=np.asarray(row_edges, dtype=int),
+        column_edges=np.asarray(column_edges, dtype=int),
     )
 
 
@@ -556,7 +619,9 @@ def _batched_ridge(gram: np.ndarray, cross: np.ndarray, penalty: np.ndarray, alp
     k = gram.shape[-1]
     trace = np.trace(gram, axis1=-2, axis2=-1)
     weight = alpha * trace / max(float(np.trace(penalty)), 1e-300)
-    system = gram + weight[..., None, None] * penalty + (1e-12 * np.maximum(trace, 1e-300) / k)[..., None, None] * np.eye(k)
+    system = (
+        gram + weight[..., None, None] * penalty + (1e-12 * np.maximum(trace, 1e-300) / k)[..., None, None] * np.eye(k)
+    )
     return np.linalg.solve(system, cross[..., None])[..., 0]
 
 
@@ -566,9 +631,14 @@ def _held_out_error(tiles: TiledStatistics, weights: np.ndarray) -> np.ndarray:
     return np.clip(tiles.ambient_energy - 2.0 * np.einsum("tsi,tsi->ts", tiles.cross, weights) + quadratic, 0.0, None)
 
 
-def select_model(tiles: TiledStatistics, led_spectra: Spectra, alpha: float | None = None,
-                 smoothing_grid: Sequence[float] = SMOOTHING_GRID, margin: float = SELECTION_MARGIN,
-                 min_explained_gain: float = MIN_EXPLAINED_GAIN) -> ModelSelection:
+def select_model(
+    tiles: TiledStatistics,
+    led_spectra: Spectra,
+    alpha: float | None = None,
+    smoothing_grid: Sequence[float] = SMOOTHING_GRID,
+    margin: float = SELECTION_MARGIN,
+    min_explained_gain: float = MIN_EXPLAINED_GAIN,
+) -> ModelSelection:
     """Choose between the global and local models by leave-one-tile-out prediction error.
 
     Parameters
@@ -614,9 +684,15 @@ def select_model(tiles: TiledStatistics, led_spectra: Spectra, alpha: float | No
             best_sigma, best_score = float(sigma), score
     explained_gain = (1.0 - best_score) * global_error / max(float(tiles.ambient_energy.sum()), 1e-300)
     chosen = "local" if best_score < 1.0 - margin and explained_gain > min_explained_gain else "global"
-    return ModelSelection(model=chosen, smoothing=best_sigma if chosen == "local" else None, scores=scores,
-                          best_local=best_sigma, margin=margin, explained_gain=float(explained_gain),
-                          min_explained_gain=min_explained_gain)
+    return ModelSelection(
+        model=chosen,
+        smoothing=best_sigma if chosen == "local" else None,
+        scores=scores,
+        best_local=best_sigma,
+        margin=margin,
+        explained_gain=float(explained_gain),
+        min_explained_gain=min_explained_gain,
+    )
 
 
 # -- two illuminant regions ---------------------------------------------------------------------
@@ -649,6 +725,7 @@ class RegionSegmentation:
 
 def _box(values: np.ndarray, radius: int) -> np.ndarray:
     """Sums over (2r + 1)² windows of an (h, w) map, truncated at the border (cumulative sums)."""
+
     def along(x: np.ndarray, axis: int) -> np.ndarray:
         n = x.shape[axis]
         padded = np.concatenate([np.zeros_like(np.take(x, [0], axis=axis)), np.cumsum(x, axis=axis)], axis=axis)
@@ -685,10 +762,17 @@ def _affine_residual(tiles: TiledStatistics, penalty: np.ndarray, alpha: float) 
     return float(max(tiles.ambient_energy.sum() - 2.0 * cross @ theta + theta @ gram @ theta, 0.0))
 
 
-def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, solver: str = "tikhonov",
-                    solver_alpha: float | str = "auto", radius: int = REGION_RADIUS,
-                    iterations: int = REGION_ITERATIONS, cells: Cells | None = None,
-                    noise_correction: bool = True) -> RegionSegmentation | None:
+def segment_regions(
+    tiles: TiledStatistics,
+    led_spectra: Spectra,
+    alpha: float,
+    solver: str = "tikhonov",
+    solver_alpha: float | str = "auto",
+    radius: int = REGION_RADIUS,
+    iterations: int = REGION_ITERATIONS,
+    cells: Cells | None = None,
+    noise_correction: bool = True,
+) -> RegionSegmentation | None:
     """Split the frame into two ambient regions and estimate each from all of its blocks.
 
     1. Tile estimates (ridge on the σ = 0.5 smoothed statistics) seed two clusters: the two tiles
@@ -724,8 +808,12 @@ def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, 
     in_second = distances[second] < distances[first]
     gram = tiles.gram.reshape(-1, tiles.n_leds, tiles.n_leds)
     cross = tiles.cross.reshape(-1, tiles.n_leds)
-    weights = np.stack([_batched_ridge(gram[~in_second].sum(axis=0), cross[~in_second].sum(axis=0), penalty, alpha),
-                        _batched_ridge(gram[in_second].sum(axis=0), cross[in_second].sum(axis=0), penalty, alpha)])
+    weights = np.stack(
+        [
+            _batched_ridge(gram[~in_second].sum(axis=0), cross[~in_second].sum(axis=0), penalty, alpha),
+            _batched_ridge(gram[in_second].sum(axis=0), cross[in_second].sum(axis=0), penalty, alpha),
+        ]
+    )
     valid = cells.valid
     difference = np.zeros(valid.shape)
     labels = np.zeros(valid.shape, dtype=bool)
@@ -751,14 +839,23 @@ def segment_regions(tiles: TiledStatistics, led_spectra: Spectra, alpha: float, 
             interior = _interior(region)[valid]
             mask = interior if interior.any() else region[valid]
             try:
-                final[index] = model.weights(cells.statistics(mask), solver, solver_alpha,
-                                             denoised=cells.denoised_statistics(mask) if noise_correction else None)[0]
+                final[index] = model.weights(
+                    cells.statistics(mask),
+                    solver,
+                    solver_alpha,
+                    denoised=cells.denoised_statistics(mask) if noise_correction else None,
+                )[0]
             except SolverError:
                 pass
     errors = cells.errors(final)
     residual = float(np.where(member, errors[1], errors[0]).sum())
-    return RegionSegmentation(labels=labels, weights=final, residual=residual,
-                              affine_residual=_affine_residual(tiles, penalty, alpha), pixel=cells.size)
+    return RegionSegmentation(
+        labels=labels,
+        weights=final,
+        residual=residual,
+        affine_residual=_affine_residual(tiles, penalty, alpha),
+        pixel=cells.size,
+    )
 
 
 # -- local estimates --------------------------------------------------------------------------
@@ -894,9 +991,12 @@ def estimate_local(
             assert selection is not None  # chosen above whenever no smoothing is given
             used_sigma = float(selection.best_local)
         if smoothing is None and regions_allowed:
-            labelling_alpha = scoring_alpha if scoring_alpha is not None else gcv_alpha(total, ambient_model.terms.roughness)
-            regions = segment_regions(tiles, led_spectra, labelling_alpha, solver, alpha,
-                                      noise_correction=noise_correction)
+            labelling_alpha = (
+                scoring_alpha if scoring_alpha is not None else gcv_alpha(total, ambient_model.terms.roughness)
+            )
+            regions = segment_regions(
+                tiles, led_spectra, labelling_alpha, solver, alpha, noise_correction=noise_correction
+            )
             if regions is not None and not regions.chosen:
                 regions = None
         if regions is not None:
@@ -904,13 +1004,30 @@ def estimate_local(
             weights = _region_tile_weights(regions, tiles)
         else:
             structure = "tiles"
-            weights, warnings = _solve_tiles(tiles.smoothed(used_sigma), None if clean is None else clean.smoothed(used_sigma),
-                                             tiles, ambient_model, solver, alpha, global_estimate)
+            weights, warnings = _solve_tiles(
+                tiles.smoothed(used_sigma),
+                None if clean is None else clean.smoothed(used_sigma),
+                tiles,
+                ambient_model,
+                solver,
+                alpha,
+                global_estimate,
+            )
     residual = np.sqrt(_held_out_error(tiles, weights) / np.maximum(tiles.ambient_energy, 1e-300))
     return LocalEstimate(
-        model=model, method=method, smoothing=used_sigma, global_estimate=global_estimate, tile_weights=weights,
-        tile_residuals=residual, tile_samples=tiles.n_samples.copy(), tiles=tiles, selection=selection,
-        led_values=led_values, warnings=tuple(warnings), structure=structure, regions=regions,
+        model=model,
+        method=method,
+        smoothing=used_sigma,
+        global_estimate=global_estimate,
+        tile_weights=weights,
+        tile_residuals=residual,
+        tile_samples=tiles.n_samples.copy(),
+        tiles=tiles,
+        selection=selection,
+        led_values=led_values,
+        warnings=tuple(warnings),
+        structure=structure,
+        regions=regions,
     )
 
 
@@ -932,8 +1049,9 @@ def _region_tile_weights(regions: RegionSegmentation, tiles: TiledStatistics) ->
     return (1.0 - share)[..., None] * regions.weights[0] + share[..., None] * regions.weights[1]
 
 
-def denoised_global(tiles: TiledStatistics, led_spectra: Spectra, solver: str = "tikhonov",
-                    alpha: float | str = "auto") -> np.ndarray:
+def denoised_global(
+    tiles: TiledStatistics, led_spectra: Spectra, solver: str = "tikhonov", alpha: float | str = "auto"
+) -> np.ndarray:
     """``w_a`` of the global model solved on the denoised statistics (:attr:`TiledStatistics.denoised`).
 
     The same estimator as the local model's, over the whole frame — the reference that isolates
@@ -941,32 +1059,44 @@ def denoised_global(tiles: TiledStatistics, led_spectra: Spectra, solver: str = 
     this one. Falls back to the observed statistics as :func:`estimate_local` does.
     """
     clean = tiles.denoised
-    return AmbientModel(led_spectra).weights(tiles.total(), solver, alpha,
-                                             denoised=None if clean is None else clean.total())[0]
+    return AmbientModel(led_spectra).weights(
+        tiles.total(), solver, alpha, denoised=None if clean is None else clean.total()
+    )[0]
 
 
-def _solve_tiles(smoothed: TiledStatistics, denoised: TiledStatistics | None, own: TiledStatistics, model: AmbientModel,
-                 solver: str, alpha: float | str, global_estimate: AmbientEstimate) -> tuple[np.ndarray, list[str]]:
+def _solve_tiles(
+    smoothed: TiledStatistics,
+    denoised: TiledStatistics | None,
+    own: TiledStatistics,
+    model: AmbientModel,
+    solver: str,
+    alpha: float | str,
+    global_estimate: AmbientEstimate,
+) -> tuple[np.ndarray, list[str]]:
     """The chosen solver on every tile's smoothed (denoised when given) statistics; empty tiles take the global weights."""
     weights = np.empty(smoothed.shape + (smoothed.n_leds,))
     fallback = 0
     for i in range(smoothed.shape[0]):
         for j in range(smoothed.shape[1]):
             statistics = smoothed.tile(i, j)
-            if statistics.n_samples < MIN_TILE_SAMPLES_PER_LED * statistics.n_leds or not np.all(np.diag(statistics.gram) > 0):
+            if statistics.n_samples < MIN_TILE_SAMPLES_PER_LED * statistics.n_leds or not np.all(
+                np.diag(statistics.gram) > 0
+            ):
                 weights[i, j] = global_estimate.ambient_weights
                 fallback += 1
                 continue
             try:
-                weights[i, j] = model.weights(statistics, solver, alpha,
-                                              denoised=None if denoised is None else denoised.tile(i, j))[0]
+                weights[i, j] = model.weights(
+                    statistics, solver, alpha, denoised=None if denoised is None else denoised.tile(i, j)
+                )[0]
             except SolverError:
                 weights[i, j] = global_estimate.ambient_weights
                 fallback += 1
     warnings = []
     if fallback:
-        warnings.append(f"{fallback} of {own.shape[0] * own.shape[1]} tiles had too few valid samples and "
-                        "took the global estimate")
+        warnings.append(
+            f"{fallback} of {own.shape[0] * own.shape[1]} tiles had too few valid samples and took the global estimate"
+        )
     return weights, warnings
 
 
@@ -995,8 +1125,9 @@ def upsample_tiles(values: np.ndarray, tiles: TiledStatistics, shape: tuple[int,
     return np.einsum("hi,ij...,wj->hw...", rows, values, columns, optimize=True)
 
 
-def coefficient_maps(spec: FrameStackSpec, tile_flash_weights: np.ndarray, tiles: TiledStatistics,
-                     shape: tuple[int, int]) -> np.ndarray:
+def coefficient_maps(
+    spec: FrameStackSpec, tile_flash_weights: np.ndarray, tiles: TiledStatistics, shape: tuple[int, int]
+) -> np.ndarray:
     """Per-pixel coefficients of the linearised frames [ambient, LED frames…], (H, W, 1 + n_frames).
 
     Each tile's flash weights give frame coefficients (:func:`processing.synthesis.frame_coefficients`);
@@ -1010,8 +1141,13 @@ def coefficient_maps(spec: FrameStackSpec, tile_flash_weights: np.ndarray, tiles
     return upsample_tiles(per_tile, tiles, shape)
 
 
-def synthesize_local(ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec,
-                     tile_flash_weights: np.ndarray, tiles: TiledStatistics) -> tuple[np.ndarray, np.ndarray]:
+def synthesize_local(
+    ambient: np.ndarray,
+    led_frames: Sequence[np.ndarray],
+    spec: FrameStackSpec,
+    tile_flash_weights: np.ndarray,
+    tiles: TiledStatistics,
+) -> tuple[np.ndarray, np.ndarray]:
     """The spatially varying computational flash image ``m_a + Σ_k w_k(x) m_f,k``.
 
     Per-tile flash weights (e.g. complementary to each tile's ambient) are blended bilinearly
@@ -1028,10 +1164,14 @@ def synthesize_local(ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec
     frames = [ambient, *led_frames]
     for index, frame in enumerate(frames):
         if frame.shape != ambient.shape:
-            raise SpectralDataError(f"synthesis: frame {index} has shape {frame.shape} but the ambient frame {ambient.shape}")
+            raise SpectralDataError(
+                f"synthesis: frame {index} has shape {frame.shape} but the ambient frame {ambient.shape}"
+            )
     if tile_flash_weights.shape != tiles.shape + (spec.n_leds,):
-        raise SpectralDataError(f"synthesis: tile flash weights of shape {tile_flash_weights.shape}; expected "
-                                f"{tiles.shape + (spec.n_leds,)}")
+        raise SpectralDataError(
+            f"synthesis: tile flash weights of shape {tile_flash_weights.shape}; expected "
+            f"{tiles.shape + (spec.n_leds,)}"
+        )
     shape = ambient.shape[:2]
     maps = coefficient_maps(spec, tile_flash_weights, tiles, shape)
     scales = np.concatenate([[spec.ambient_scale], np.asarray(spec.led_scales, dtype=float)])

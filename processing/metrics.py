@@ -21,7 +21,9 @@ def spectrum_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
     estimate = np.asarray(estimate, dtype=float)
     truth = np.asarray(truth, dtype=float)
     if estimate.shape != truth.shape or estimate.ndim != 1:
-        raise SpectralDataError(f"spectrum RMSE: shapes {estimate.shape} and {truth.shape}; expected two equal 1-D spectra")
+        raise SpectralDataError(
+            f"spectrum RMSE: shapes {estimate.shape} and {truth.shape}; expected two equal 1-D spectra"
+        )
     peak = np.max(np.abs(estimate))
     if peak == 0 or not np.any(truth):
         raise SpectralDataError("spectrum RMSE: an all-zero spectrum; expected light")
@@ -53,8 +55,10 @@ def led_fit(led_spectra: np.ndarray, truth: np.ndarray) -> np.ndarray:
     led_spectra = np.asarray(led_spectra, dtype=float)
     truth = np.asarray(truth, dtype=float)
     if led_spectra.ndim != 2 or truth.ndim != 1 or led_spectra.shape[0] != truth.shape[0]:
-        raise SpectralDataError(f"LED fit: LED spectra of shape {led_spectra.shape} and a truth of shape "
-                                f"{truth.shape}; expected (n, k) and (n,)")
+        raise SpectralDataError(
+            f"LED fit: LED spectra of shape {led_spectra.shape} and a truth of shape "
+            f"{truth.shape}; expected (n, k) and (n,)"
+        )
     weights, _ = nnls(led_spectra, truth)
     return led_spectra @ weights
 
@@ -77,5 +81,7 @@ def led_fit_rmse(led_spectra: np.ndarray, truth: np.ndarray) -> float:
     """
     fit = led_fit(led_spectra, truth)
     if not np.any(fit):
-        raise SpectralDataError("LED fit RMSE: the LEDs cannot make any of the true spectrum; expected LEDs within its range")
+        raise SpectralDataError(
+            "LED fit RMSE: the LEDs cannot make any of the true spectrum; expected LEDs within its range"
+        )
     return spectrum_rmse(fit, truth)

@@ -80,8 +80,9 @@ def _paper_rmse_parts(estimate: np.ndarray, truth: np.ndarray) -> tuple[np.ndarr
     return normalised, normalised - truth * scale
 
 
-def light_reference(led_spectra: Spectra, responsivities: Spectra, lights: Spectra | None = None,
-                    surfaces: Spectra | None = None) -> LightReference:
+def light_reference(
+    led_spectra: Spectra, responsivities: Spectra, lights: Spectra | None = None, surfaces: Spectra | None = None
+) -> LightReference:
     """The LED model's noise-free estimates of ``lights`` (default: the light prior's training lights).
 
     Parameters
@@ -98,7 +99,7 @@ def light_reference(led_spectra: Spectra, responsivities: Spectra, lights: Spect
     grid = leds.grid
     if camera.grid != grid:
         raise SpectralDataError(f"model error: responsivities on {camera.grid} but LEDs on {grid}; expected one grid")
-    lights = (prior_training_lights() if lights is None else lights)
+    lights = prior_training_lights() if lights is None else lights
     light_values = lights.to_unit("photons").resample(grid, outside="zero").values
     reflectances = (natural100() if surfaces is None else surfaces).resample(grid, outside="edge").values
     # Camera responses of every surface (× channel) to each LED and each light: eq. 2 on the generic scene.
@@ -109,27 +110,48 @@ def light_reference(led_spectra: Spectra, responsivities: Spectra, lights: Spect
     gram = led_responses.T @ led_responses
     model = AmbientModel(leds)
     n = led_responses.shape[0]
-    weights = np.column_stack([
-        model.weights(SequenceStatistics(gram, led_responses.T @ light_responses[:, t],
-                                         float(light_responses[:, t] @ light_responses[:, t]), n, n,
-                                         float(light_responses[:, t].sum()), led_responses.sum(axis=0)),
-                      "nonneg")[0]
-        for t in range(light_values.shape[1])])
+    weights = np.column_stack(
+        [
+            model.weights(
+                SequenceStatistics(
+                    gram,
+                    led_responses.T @ light_responses[:, t],
+                    float(light_responses[:, t] @ light_responses[:, t]),
+                    n,
+                    n,
+                    float(light_responses[:, t].sum()),
+                    led_responses.sum(axis=0),
+                ),
+                "nonneg",
+            )[0]
+            for t in range(light_values.shape[1])
+        ]
+    )
     estimates, errors = _paper_rmse_parts(leds.values @ weights, light_values)
-    best = np.column_stack([leds.values @ nnls(leds.values, light_values[:, t])[0]
-                            for t in range(light_values.shape[1])])
+    best = np.column_stack(
+        [leds.values @ nnls(leds.values, light_values[:, t])[0] for t in range(light_values.shape[1])]
+    )
     _, best_errors = _paper_rmse_parts(best, light_values)
-    return LightReference(estimates=estimates, errors=errors,
-                          bounds=np.sqrt(np.mean(best_errors ** 2, axis=0)),
-                          rmse=np.sqrt(np.mean(errors ** 2, axis=0)))
+    return LightReference(
+        estimates=estimates,
+        errors=errors,
+        bounds=np.sqrt(np.mean(best_errors**2, axis=0)),
+        rmse=np.sqrt(np.mean(errors**2, axis=0)),
+    )
 
 
 @lru_cache(maxsize=8)
 def _cached_reference(led_key: bytes, camera_key: bytes, grid: WavelengthGrid, k: int, c: int) -> LightReference:
-    leds = Spectra(grid, np.frombuffer(led_key).reshape(grid.size, k), tuple(f"led{i}" for i in range(k)),
-                   unit="photons")
-    camera = Spectra(grid, np.frombuffer(camera_key).reshape(grid.size, c), tuple(f"c{i}" for i in range(c)),
-                     kind="responsivity", unit="photons")
+    leds = Spectra(
+        grid, np.frombuffer(led_key).reshape(grid.size, k), tuple(f"led{i}" for i in range(k)), unit="photons"
+    )
+    camera = Spectra(
+        grid,
+        np.frombuffer(camera_key).reshape(grid.size, c),
+        tuple(f"c{i}" for i in range(c)),
+        kind="responsivity",
+        unit="photons",
+    )
     return light_reference(leds, camera)
 
 
@@ -137,13 +159,18 @@ def reference_for(led_spectra: Spectra, responsivities: Spectra) -> LightReferen
     """:func:`light_reference` on the default lights and surfaces, computed once per LED set and camera."""
     leds = require_unit(led_spectra, "photons")
     camera = require_unit(responsivities, "photons").resample(leds.grid, outside="zero")
-    return _cached_reference(np.ascontiguousarray(leds.values, dtype=float).tobytes(),
-                             np.ascontiguousarray(camera.values, dtype=float).tobytes(),
-                             leds.grid, leds.count, camera.count)
+    return _cached_reference(
+        np.ascontiguousarray(leds.values, dtype=float).tobytes(),
+        np.ascontiguousarray(camera.values, dtype=float).tobytes(),
+        leds.grid,
+        leds.count,
+        camera.count,
+    )
 
 
-def model_error(reference: LightReference, spectrum: np.ndarray, noise_std: np.ndarray,
-                neighbours: int = NEIGHBOURS) -> ModelError:
+def model_error(
+    reference: LightReference, spectrum: np.ndarray, noise_std: np.ndarray, neighbours: int = NEIGHBOURS
+) -> ModelError:
     """The model error of an estimate ``spectrum`` (n_wl, any scale) with pixel-noise band ``noise_std``.
 
     The neighbours are the reference lights whose noise-free estimates are nearest the estimate (both
@@ -156,10 +183,10 @@ def model_error(reference: LightReference, spectrum: np.ndarray, noise_std: np.n
     if not peak > 0 or not np.isfinite(peak):
         return ModelError(np.zeros_like(values), 1.0, float("inf"))
     distances = np.linalg.norm(reference.estimates - (values / peak)[:, None], axis=0)
-    nearest = np.argsort(distances)[:max(1, min(neighbours, distances.size))]
+    nearest = np.argsort(distances)[: max(1, min(neighbours, distances.size))]
     band = np.sqrt(np.mean(reference.errors[:, nearest] ** 2, axis=1)) * peak
     noise = float(np.sqrt(np.mean(np.square(np.asarray(noise_std, dtype=float) / peak))))
-    ratios = np.sqrt(reference.rmse[nearest] ** 2 + noise ** 2) / np.maximum(reference.bounds[nearest], 1e-12)
+    ratios = np.sqrt(reference.rmse[nearest] ** 2 + noise**2) / np.maximum(reference.bounds[nearest], 1e-12)
     return ModelError(band, float(np.mean(ratios > MISS_RATIO)), float(np.median(ratios[:RISK_NEIGHBOURS])))
 
 
@@ -178,7 +205,15 @@ def with_model_error(estimate: AmbientEstimate, reference: LightReference) -> Am
             f"measured lights whose estimates look most like this one came out {error.expected_ratio:.2f}× their "
             f"LED bound (median, with this estimate's noise) — see the band"
         )
-    return replace(estimate, spectrum_std=np.sqrt(noise ** 2 + error.spectrum_std ** 2), noise_std=noise,
-                   band_meaning=(f"±1σ of the pixel noise and the model's error (RMS error of the {NEIGHBOURS} "
-                                 "measured lights whose noise-free estimates look most like this one)"),
-                   miss_risk=error.miss_risk, expected_ratio=error.expected_ratio, warnings=tuple(warnings))
+    return replace(
+        estimate,
+        spectrum_std=np.sqrt(noise**2 + error.spectrum_std**2),
+        noise_std=noise,
+        band_meaning=(
+            f"±1σ of the pixel noise and the model's error (RMS error of the {NEIGHBOURS} "
+            "measured lights whose noise-free estimates look most like this one)"
+        ),
+        miss_risk=error.miss_risk,
+        expected_ratio=error.expected_ratio,
+        warnings=tuple(warnings),
+    )

@@ -93,13 +93,20 @@ class ClippedNegatives:
 
     def as_dict(self) -> dict:
         """JSON form."""
-        return {"column": self.column, "count": self.count, "most_negative": self.most_negative,
-                "at_nm": self.at_nm, "tolerance": self.tolerance}
+        return {
+            "column": self.column,
+            "count": self.count,
+            "most_negative": self.most_negative,
+            "at_nm": self.at_nm,
+            "tolerance": self.tolerance,
+        }
 
     def note(self, source: str) -> str:
         """One line for stderr."""
-        return (f"{source}: column '{self.column}': {self.count} negative value(s) down to {self.most_negative:.3g} "
-                f"(at {self.at_nm:g} nm) clipped to 0 as noise (within −{self.tolerance:.3g})")
+        return (
+            f"{source}: column '{self.column}': {self.count} negative value(s) down to {self.most_negative:.3g} "
+            f"(at {self.at_nm:g} nm) clipped to 0 as noise (within −{self.tolerance:.3g})"
+        )
 
 
 def tolerance(values: np.ndarray) -> float:
@@ -110,8 +117,12 @@ def tolerance(values: np.ndarray) -> float:
 
 
 def clip_negative_noise(
-    wavelengths_nm: np.ndarray, values: np.ndarray, names: Sequence[str], source: str,
-    lines: Sequence[int] | None = None, place: Callable[[int, int], str] | None = None,
+    wavelengths_nm: np.ndarray,
+    values: np.ndarray,
+    names: Sequence[str],
+    source: str,
+    lines: Sequence[int] | None = None,
+    place: Callable[[int, int], str] | None = None,
 ) -> tuple[np.ndarray, tuple[ClippedNegatives, ...]]:
     """``values`` with negative noise clipped to 0, and what was clipped per column.
 
@@ -165,15 +176,21 @@ def clip_negative_noise(
             row = int(np.argmax(beyond))
             where = f"{source}:{lines[row]}" if lines is not None else source
             peak = max(float(column_values.max()), 0.0)
-            what = place(row, column) if place is not None else \
-                f"column '{name}' at {float(wavelengths_nm[row]):g} nm"
+            what = place(row, column) if place is not None else f"column '{name}' at {float(wavelengths_nm[row]):g} nm"
             raise SpectralDataError(
                 f"{where}: {what} is {column_values[row]:.6g}; expected a non-negative value, or measurement noise "
                 f"down to −{bound:.3g} (the larger of {PEAK_FRACTION:.0%} of the peak {peak:.3g} and {NOISE_SIGMAS:g} × "
                 f"the noise {noise_sigma(column_values):.3g}) — was the dark subtracted twice, or the baseline offset?"
             )
         lowest = int(np.argmin(column_values))
-        report.append(ClippedNegatives(name, int(np.count_nonzero(negative)), float(column_values[lowest]),
-                                       float(wavelengths_nm[lowest]), bound))
+        report.append(
+            ClippedNegatives(
+                name,
+                int(np.count_nonzero(negative)),
+                float(column_values[lowest]),
+                float(wavelengths_nm[lowest]),
+                bound,
+            )
+        )
         clipped[:, column] = np.maximum(column_values, 0.0)
     return clipped.reshape(array.shape), tuple(report)

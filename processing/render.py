@@ -45,10 +45,18 @@ def demosaic_superpixel(mosaic: np.ndarray, cfa: str) -> np.ndarray:
     if mosaic.ndim != 2:
         raise SpectralDataError(f"demosaic: mosaic has shape {mosaic.shape}; expected (H, W)")
     height, width = (mosaic.shape[0] // 2) * 2, (mosaic.shape[1] // 2) * 2
-    cells = {(0, 0): mosaic[0:height:2, 0:width:2], (0, 1): mosaic[0:height:2, 1:width:2],
-             (1, 0): mosaic[1:height:2, 0:width:2], (1, 1): mosaic[1:height:2, 1:width:2]}
-    positions = {"RGGB": ((0, 0), ((0, 1), (1, 0)), (1, 1)), "BGGR": ((1, 1), ((0, 1), (1, 0)), (0, 0)),
-                 "GRBG": ((0, 1), ((0, 0), (1, 1)), (1, 0)), "GBRG": ((1, 0), ((0, 0), (1, 1)), (0, 1))}[cfa]
+    cells = {
+        (0, 0): mosaic[0:height:2, 0:width:2],
+        (0, 1): mosaic[0:height:2, 1:width:2],
+        (1, 0): mosaic[1:height:2, 0:width:2],
+        (1, 1): mosaic[1:height:2, 1:width:2],
+    }
+    positions = {
+        "RGGB": ((0, 0), ((0, 1), (1, 0)), (1, 1)),
+        "BGGR": ((1, 1), ((0, 1), (1, 0)), (0, 0)),
+        "GRBG": ((0, 1), ((0, 0), (1, 1)), (1, 0)),
+        "GBRG": ((1, 0), ((0, 0), (1, 1)), (0, 1)),
+    }[cfa]
     red = cells[positions[0]].astype(np.float64)
     green = 0.5 * (cells[positions[1][0]].astype(np.float64) + cells[positions[1][1]])
     blue = cells[positions[2]].astype(np.float64)
@@ -150,8 +158,9 @@ def camera_to_xyz_matrix(camera_responsivities: Spectra, chart: Spectra, illumin
     return matrix.T
 
 
-def camera_to_srgb_linear(linear_rgb: np.ndarray, camera_to_xyz: np.ndarray | None = None,
-                          white_balance: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def camera_to_srgb_linear(
+    linear_rgb: np.ndarray, camera_to_xyz: np.ndarray | None = None, white_balance: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Linear camera RGB → (linear sRGB, luminance Y), both unclipped.
 
     Parameters
@@ -191,8 +200,13 @@ def encode_srgb(srgb_linear: np.ndarray, white_value: float) -> np.ndarray:
     return colour.cctf_encoding(np.clip(srgb_linear / white_value, 0.0, 1.0), function="sRGB")
 
 
-def srgb_preview(linear_rgb: np.ndarray, camera_to_xyz: np.ndarray | None = None, white_value: float | None = None,
-                 percentile: float = 99.5, white_balance: np.ndarray | None = None) -> np.ndarray:
+def srgb_preview(
+    linear_rgb: np.ndarray,
+    camera_to_xyz: np.ndarray | None = None,
+    white_value: float | None = None,
+    percentile: float = 99.5,
+    white_balance: np.ndarray | None = None,
+) -> np.ndarray:
     """An 8-bit sRGB preview of a linear camera RGB image (no white balance).
 
     Parameters

@@ -54,8 +54,12 @@ def _checked_lapack() -> Any:
         matrix = np.array([[4.0, 2.0], [2.0, 3.0]])
         *_, solution, info = module.dgesv(matrix, np.array([[2.0], [1.0]]))
         factor, info_factor = module.dpotrf(matrix, lower=0, clean=1)
-        expected = (info == 0 and info_factor == 0 and np.allclose(solution.ravel(), [0.5, 0.0], rtol=0, atol=1e-12)
-                    and np.allclose(factor, [[2.0, 1.0], [0.0, np.sqrt(2.0)]], rtol=0, atol=1e-12))
+        expected = (
+            info == 0
+            and info_factor == 0
+            and np.allclose(solution.ravel(), [0.5, 0.0], rtol=0, atol=1e-12)
+            and np.allclose(factor, [[2.0, 1.0], [0.0, np.sqrt(2.0)]], rtol=0, atol=1e-12)
+        )
     except Exception:  # noqa: BLE001 - any surprise means: use the public module
         expected = False
     if expected:

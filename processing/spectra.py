@@ -63,9 +63,7 @@ class WavelengthGrid:
         if self.step_nm <= 0:
             raise SpectralDataError(f"wavelength grid: step_nm is {self.step_nm}; expected > 0")
         if self.stop_nm < self.start_nm:
-            raise SpectralDataError(
-                f"wavelength grid: stop_nm {self.stop_nm} is below start_nm {self.start_nm}"
-            )
+            raise SpectralDataError(f"wavelength grid: stop_nm {self.stop_nm} is below start_nm {self.start_nm}")
         count = (self.stop_nm - self.start_nm) / self.step_nm
         if abs(count - round(count)) > 1e-6:
             raise SpectralDataError(
@@ -87,7 +85,9 @@ class WavelengthGrid:
         return f"{self.start_nm:g}–{self.stop_nm:g} nm step {self.step_nm:g} nm"
 
     @classmethod
-    def from_wavelengths(cls, wavelengths_nm: Sequence[float] | np.ndarray, where: str = "wavelengths") -> WavelengthGrid:
+    def from_wavelengths(
+        cls, wavelengths_nm: Sequence[float] | np.ndarray, where: str = "wavelengths"
+    ) -> WavelengthGrid:
         """The grid of a list of wavelengths, which must be uniform and increasing.
 
         Parameters
@@ -252,16 +252,26 @@ class Spectra:
     def replace(self, **changes: object) -> Spectra:
         """A copy with some fields changed (``dataclasses.replace`` that re-validates)."""
         fields = dict(
-            grid=self.grid, values=self.values, names=self.names, kind=self.kind, unit=self.unit,
-            source=self.source, metadata=dict(self.metadata),
+            grid=self.grid,
+            values=self.values,
+            names=self.names,
+            kind=self.kind,
+            unit=self.unit,
+            source=self.source,
+            metadata=dict(self.metadata),
         )
         fields.update(changes)
         return Spectra(**fields)  # type: ignore[arg-type]
 
     @classmethod
     def from_samples(
-        cls, wavelengths_nm: Sequence[float] | np.ndarray, values: np.ndarray, names: Sequence[str],
-        kind: SpectralKind = "spd", unit: SpectralUnit = "energy", source: str = "",
+        cls,
+        wavelengths_nm: Sequence[float] | np.ndarray,
+        values: np.ndarray,
+        names: Sequence[str],
+        kind: SpectralKind = "spd",
+        unit: SpectralUnit = "energy",
+        source: str = "",
     ) -> Spectra:
         """Spectra from samples on any increasing wavelengths (an instrument's own grid).
 
@@ -307,7 +317,9 @@ class Spectra:
         stop = float(np.floor(wavelengths[-1] / bin_nm) * bin_nm)
         grid = WavelengthGrid(start, stop, bin_nm)
         centres = grid.wavelengths_nm
-        edges = np.clip(np.concatenate([[centres[0] - bin_nm / 2], centres + bin_nm / 2]), wavelengths[0], wavelengths[-1])
+        edges = np.clip(
+            np.concatenate([[centres[0] - bin_nm / 2], centres + bin_nm / 2]), wavelengths[0], wavelengths[-1]
+        )
         binned = np.empty((grid.size, data.shape[1]))
         for column in range(data.shape[1]):
             running = np.concatenate([[0.0], np.cumsum(steps * (data[1:, column] + data[:-1, column]) / 2)])

@@ -129,8 +129,9 @@ def _is_invertible_diagonal(levels: np.ndarray) -> bool:
     if levels.shape[0] != levels.shape[1]:
         return False
     diagonal = np.diag(levels)
-    return bool(np.count_nonzero(levels) == np.count_nonzero(diagonal) == levels.shape[0]) and \
-        bool(np.isfinite(diagonal).all())
+    return bool(np.count_nonzero(levels) == np.count_nonzero(diagonal) == levels.shape[0]) and bool(
+        np.isfinite(diagonal).all()
+    )
 
 
 @dataclass(frozen=True)
@@ -146,7 +147,9 @@ class NoiseMoments:
 
     def __add__(self, other: NoiseMoments) -> NoiseMoments:
         """The noise of the union of two disjoint sets of samples."""
-        return NoiseMoments(self.gram + other.gram, self.cross + other.cross, self.ambient_energy + other.ambient_energy)
+        return NoiseMoments(
+            self.gram + other.gram, self.cross + other.cross, self.ambient_energy + other.ambient_energy
+        )
 
 
 @dataclass(frozen=True)
@@ -205,9 +208,14 @@ class SequenceStatistics:
         if noise is None:
             return None
         return SequenceStatistics(
-            gram=self.gram - noise.gram, cross=self.cross - noise.cross,
-            ambient_energy=self.ambient_energy - noise.ambient_energy, n_samples=self.n_samples,
-            n_total=self.n_total, ambient_sum=self.ambient_sum, led_sums=self.led_sums, weighted=self.weighted,
+            gram=self.gram - noise.gram,
+            cross=self.cross - noise.cross,
+            ambient_energy=self.ambient_energy - noise.ambient_energy,
+            n_samples=self.n_samples,
+            n_total=self.n_total,
+            ambient_sum=self.ambient_sum,
+            led_sums=self.led_sums,
+            weighted=self.weighted,
         )
 
     def residual_energy(self, weights: np.ndarray) -> float:
@@ -232,11 +240,16 @@ class SequenceStatistics:
         if copies < 1:
             raise SpectralDataError(f"replicated statistics: {copies} copies; expected at least 1")
         return SequenceStatistics(
-            gram=self.gram * copies, cross=self.cross * copies, ambient_energy=self.ambient_energy * copies,
-            n_samples=self.n_samples * copies, n_total=self.n_total * copies,
-            ambient_sum=self.ambient_sum * copies, led_sums=self.led_sums * copies,
-            noise=None if self.noise is None else NoiseMoments(
-                self.noise.gram * copies, self.noise.cross * copies, self.noise.ambient_energy * copies),
+            gram=self.gram * copies,
+            cross=self.cross * copies,
+            ambient_energy=self.ambient_energy * copies,
+            n_samples=self.n_samples * copies,
+            n_total=self.n_total * copies,
+            ambient_sum=self.ambient_sum * copies,
+            led_sums=self.led_sums * copies,
+            noise=None
+            if self.noise is None
+            else NoiseMoments(self.noise.gram * copies, self.noise.cross * copies, self.noise.ambient_energy * copies),
             weighted=self.weighted,
         )
 
@@ -244,11 +257,16 @@ class SequenceStatistics:
         """Statistics restricted to a subset of the LEDs (for leave-one-out and LED-count studies)."""
         idx = np.asarray(which, dtype=int)
         return SequenceStatistics(
-            gram=self.gram[np.ix_(idx, idx)], cross=self.cross[idx], ambient_energy=self.ambient_energy,
-            n_samples=self.n_samples, n_total=self.n_total, ambient_sum=self.ambient_sum,
+            gram=self.gram[np.ix_(idx, idx)],
+            cross=self.cross[idx],
+            ambient_energy=self.ambient_energy,
+            n_samples=self.n_samples,
+            n_total=self.n_total,
+            ambient_sum=self.ambient_sum,
             led_sums=self.led_sums[idx],
-            noise=None if self.noise is None else NoiseMoments(
-                self.noise.gram[np.ix_(idx, idx)], self.noise.cross[idx], self.noise.ambient_energy),
+            noise=None
+            if self.noise is None
+            else NoiseMoments(self.noise.gram[np.ix_(idx, idx)], self.noise.cross[idx], self.noise.ambient_energy),
             weighted=self.weighted,
         )
 
@@ -259,10 +277,13 @@ class SequenceStatistics:
     def __add__(self, other: SequenceStatistics) -> SequenceStatistics:
         """Statistics of the union of two disjoint sets of samples (for tiles, chunks, workers)."""
         return SequenceStatistics(
-            gram=self.gram + other.gram, cross=self.cross + other.cross,
+            gram=self.gram + other.gram,
+            cross=self.cross + other.cross,
             ambient_energy=self.ambient_energy + other.ambient_energy,
-            n_samples=self.n_samples + other.n_samples, n_total=self.n_total + other.n_total,
-            ambient_sum=self.ambient_sum + other.ambient_sum, led_sums=self.led_sums + other.led_sums,
+            n_samples=self.n_samples + other.n_samples,
+            n_total=self.n_total + other.n_total,
+            ambient_sum=self.ambient_sum + other.ambient_sum,
+            led_sums=self.led_sums + other.led_sums,
             noise=None if self.noise is None or other.noise is None else self.noise + other.noise,
             weighted=self.weighted and other.weighted,
         )
@@ -350,8 +371,9 @@ def _frame_name(row: int, n_led_frames: int) -> str:
 
 
 def _non_finite_error(names: list[str], where: str = "frame stack") -> SpectralDataError:
-    return SpectralDataError(f"{where}: {', '.join(names) or 'a frame'} holds non-finite values (NaN or inf); "
-                             "expected finite pixels")
+    return SpectralDataError(
+        f"{where}: {', '.join(names) or 'a frame'} holds non-finite values (NaN or inf); expected finite pixels"
+    )
 
 
 def accumulate_statistics(
@@ -407,15 +429,16 @@ def accumulate_statistics(
     (docs/architecture.md §6). Moments are accumulated in float64.
     """
     if bin_factor < 1 or cfa_period not in (1, 2):
-        raise SpectralDataError(f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2")
+        raise SpectralDataError(
+            f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2"
+        )
     if bin_factor > 1:
-        return _accumulate_binned(ambient, led_frames, spec, sample_mask, chunk_pixels, bin_factor, cfa_period,
-                                  workers, weighting)
+        return _accumulate_binned(
+            ambient, led_frames, spec, sample_mask, chunk_pixels, bin_factor, cfa_period, workers, weighting
+        )
     frames = [ambient, *led_frames]
     if len(led_frames) != spec.led_levels.shape[0]:
-        raise SpectralDataError(
-            f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}"
-        )
+        raise SpectralDataError(f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}")
     shape = ambient.shape
     for index, frame in enumerate(frames):
         if frame.shape != shape:
@@ -447,9 +470,9 @@ def accumulate_statistics(
             view[j] = samples[j + 1][start:stop]
         view[n_led_frames] = samples[0][start:stop]
         view[n_led_frames + 1] = 1.0
-        brightest = np.maximum.reduce(view[:n_rows - 1], axis=0)
+        brightest = np.maximum.reduce(view[: n_rows - 1], axis=0)
         if not np.isfinite(brightest).all():
-            raise non_finite_frames_error(view[:n_rows - 1])
+            raise non_finite_frames_error(view[: n_rows - 1])
         saturated = brightest[:, 0] >= white
         for channel in range(1, n_channels):
             saturated |= brightest[:, channel] >= white
@@ -463,15 +486,21 @@ def accumulate_statistics(
     return _statistics_from_moments(moments, spec, n_pixels * n_channels)
 
 
-def _accumulate_binned(ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec,
-                       sample_mask: np.ndarray | None, chunk_pixels: int, factor: int,
-                       cfa_period: int, workers: int, weighting: bool = False) -> SequenceStatistics:
+def _accumulate_binned(
+    ambient: np.ndarray,
+    led_frames: Sequence[np.ndarray],
+    spec: FrameStackSpec,
+    sample_mask: np.ndarray | None,
+    chunk_pixels: int,
+    factor: int,
+    cfa_period: int,
+    workers: int,
+    weighting: bool = False,
+) -> SequenceStatistics:
     """Statistics of block sums: a block is valid when no member is saturated (or masked out)."""
     frames = [ambient, *led_frames]
     if len(led_frames) != spec.led_levels.shape[0]:
-        raise SpectralDataError(
-            f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}"
-        )
+        raise SpectralDataError(f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}")
     for index, frame in enumerate(frames):
         if frame.shape != ambient.shape:
             raise SpectralDataError(
@@ -482,8 +511,9 @@ def _accumulate_binned(ambient: np.ndarray, led_frames: Sequence[np.ndarray], sp
         raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {ambient.shape[:2]}")
     planes = [cfa_planes(frame, cfa_period) for frame in frames]
     n_led_frames = len(led_frames)
-    rows = BlockRows(n_led_frames, planes[0].shape, factor, spec.white_level, black_level=spec.black_level,
-                     weighting=weighting)
+    rows = BlockRows(
+        n_led_frames, planes[0].shape, factor, spec.white_level, black_level=spec.black_level, weighting=weighting
+    )
     # Rows [F_1 … F_n, A, 1]: the ambient frame is row n. Each frame is one independent pass
     # (block sums, saturation), so ``workers`` threads share the frames: numpy releases the GIL
     # inside each pass.
@@ -522,8 +552,16 @@ class BlockRows:
     Frames may be added from several threads (distinct rows), but not in incremental mode.
     """
 
-    def __init__(self, n_led_frames: int, plane_shape: tuple[int, ...], factor: int, white_level: float,
-                 incremental: bool = False, black_level: float = 0.0, weighting: bool = False) -> None:
+    def __init__(
+        self,
+        n_led_frames: int,
+        plane_shape: tuple[int, ...],
+        factor: int,
+        white_level: float,
+        incremental: bool = False,
+        black_level: float = 0.0,
+        weighting: bool = False,
+    ) -> None:
         height, width = plane_shape[0] // factor, plane_shape[1] // factor
         if height == 0 or width == 0:
             raise SpectralDataError(
@@ -547,8 +585,9 @@ class BlockRows:
         self.probe_stride = probe_stride(height, width)
         self.difference_shape = (len(range(0, height, self.probe_stride)), width, plane_shape[2])
         probe_shape = (n_rows, math.prod(self.difference_shape))
-        self.differences = (np.zeros(probe_shape) if incremental else np.empty(probe_shape)) \
-            if factor % 2 == 0 else None
+        self.differences = (
+            (np.zeros(probe_shape) if incremental else np.empty(probe_shape)) if factor % 2 == 0 else None
+        )
         if self.differences is not None:
             self.differences[n_led_frames + 1] = 0.0
         self._noise: np.ndarray | None = None  # incremental mode: the probe's moments so far
@@ -577,8 +616,9 @@ class BlockRows:
         if plane.shape != self.plane_shape:
             raise SpectralDataError(f"frame stack: a frame has shape {plane.shape}; expected {self.plane_shape}")
         if row in self._filled or not 0 <= row <= self.n_led_frames:
-            raise SpectralDataError(f"frame stack: row {row} is taken or out of range; expected each of "
-                                    f"0…{self.n_led_frames} once")
+            raise SpectralDataError(
+                f"frame stack: row {row} is taken or out of range; expected each of 0…{self.n_led_frames} once"
+            )
         if np.issubdtype(plane.dtype, np.floating):
             # NaN/inf refused before the block sums, whose gather products would warn about them first.
             if not np.isfinite(plane.sum()):
@@ -593,7 +633,7 @@ class BlockRows:
             row_sums, may_saturate = _block_row_sums_and_peak(plane, self.factor, self.white_level)
             channels = self.plane_shape[2]
             _gathered_by_channel(row_sums, self.factor, channels, self.rows[row].reshape(self.block_shape))
-            differences = _gathered(row_sums[::self.probe_stride], self.factor, channels, _difference_gather)
+            differences = _gathered(row_sums[:: self.probe_stride], self.factor, channels, _difference_gather)
             np.copyto(self.differences[row].reshape(self.difference_shape), differences)
         # One max per frame finds the frames that saturate at all; only those build masks.
         saturated = saturated_blocks(plane, self.factor, self.white_level) if may_saturate else None
@@ -634,9 +674,13 @@ class BlockRows:
         assert self.differences is not None
         # rows layout (block row, channel, block column); the probe's (probed block row, block column, channel)
         black = self.black_level * self.factor * self.factor
-        line = ambient_noise_line(self.rows[ambient].reshape(self.block_shape).transpose(0, 2, 1),
-                                  self.differences[ambient].reshape(self.difference_shape), black,
-                                  self._ambient_saturated, self.probe_stride)
+        line = ambient_noise_line(
+            self.rows[ambient].reshape(self.block_shape).transpose(0, 2, 1),
+            self.differences[ambient].reshape(self.difference_shape),
+            black,
+            self._ambient_saturated,
+            self.probe_stride,
+        )
         return line.weights(self.rows[ambient], black)
 
     def _weigh_row(self, row: int) -> None:
@@ -648,7 +692,7 @@ class BlockRows:
 
     def _at_probe(self, values: np.ndarray) -> np.ndarray:
         """Per-column ``values`` of the rows at the probed blocks, in the probe's layout."""
-        return values.reshape(self.block_shape)[::self.probe_stride].transpose(0, 2, 1).reshape(-1)
+        return values.reshape(self.block_shape)[:: self.probe_stride].transpose(0, 2, 1).reshape(-1)
 
     def _weigh_filled(self) -> None:
         """Incremental mode, the ambient row just in: weigh every filled row and retake their moments."""
@@ -664,8 +708,9 @@ class BlockRows:
         every = self._filled  # the ambient row's own products are taken by add() right after
         self._moments[np.ix_(every, every)] = _gram(self.rows[every], DEFAULT_CHUNK_PIXELS * self.block_shape[1])
         if self._noise is not None and self.differences is not None:
-            self._noise[np.ix_(every, every)] = _gram(self.differences[every],
-                                                      DEFAULT_CHUNK_PIXELS * self.block_shape[1])
+            self._noise[np.ix_(every, every)] = _gram(
+                self.differences[every], DEFAULT_CHUNK_PIXELS * self.block_shape[1]
+            )
 
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
@@ -680,7 +725,7 @@ class BlockRows:
 
     def _difference_columns(self, blocks: np.ndarray) -> np.ndarray:
         """The columns of :attr:`differences` of the (H/f, W/f) block mask ``blocks``."""
-        return np.broadcast_to(blocks[::self.probe_stride, :, None], self.difference_shape).reshape(-1)
+        return np.broadcast_to(blocks[:: self.probe_stride, :, None], self.difference_shape).reshape(-1)
 
     def _probe_scale(self, excluded_blocks: int, excluded_probed: int) -> float | None:
         """Valid blocks ÷ probed valid blocks (1 without a stride), or None when no probed block is valid."""
@@ -720,8 +765,9 @@ class BlockRows:
                 rows[:, fresh] = 0.0
                 moments[np.ix_(filled, filled)] = _gram(rows[filled], DEFAULT_CHUNK_PIXELS * self.block_shape[1])
 
-    def statistics(self, spec: FrameStackSpec, chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
-                   workers: int = 1) -> SequenceStatistics:
+    def statistics(
+        self, spec: FrameStackSpec, chunk_pixels: int = DEFAULT_CHUNK_PIXELS, workers: int = 1
+    ) -> SequenceStatistics:
         """The statistics of the rows added so far (every row must be in); ``spec`` as for the raw frames.
 
         ``workers`` threads share the moment product (when it is not already accumulated).
@@ -746,7 +792,10 @@ class BlockRows:
             excluded_columns = 0 if self._excluded is None else int(np.count_nonzero(self._excluded))
             scale = self._probe_scale(
                 0 if self._excluded is None else int(np.count_nonzero(self._excluded)) // channels,
-                0 if self._excluded_differences is None else int(np.count_nonzero(self._excluded_differences)) // channels)
+                0
+                if self._excluded_differences is None
+                else int(np.count_nonzero(self._excluded_differences)) // channels,
+            )
         else:
             invalid = None
             for mask in self._invalid:
@@ -754,8 +803,9 @@ class BlockRows:
             chunk = chunk_pixels * self.block_shape[1]
             invalid = invalid if invalid is not None and invalid.any() else None
 
-            def masked_part(values: np.ndarray, columns: np.ndarray | None,
-                            column_weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+            def masked_part(
+                values: np.ndarray, columns: np.ndarray | None, column_weights: np.ndarray | None
+            ) -> tuple[np.ndarray, np.ndarray | None]:
                 if columns is not None:
                     if column_weights is not None:  # weighted: left-out columns weigh 0, no copy of the rows
                         column_weights = np.where(columns, 0.0, column_weights)
@@ -766,27 +816,45 @@ class BlockRows:
 
             parts = [masked_part(rows, self._columns(invalid) if invalid is not None else None, weights)]
             if self.differences is not None:
-                parts.append(masked_part(self.differences, self._difference_columns(invalid) if invalid is not None else None,
-                                         probe_weights))
+                parts.append(
+                    masked_part(
+                        self.differences,
+                        self._difference_columns(invalid) if invalid is not None else None,
+                        probe_weights,
+                    )
+                )
             # The rows' and the probe's moments in one map: the probe's single chunk shares the threads.
             moments, *probed = _grams(parts, chunk, workers)
             noise = probed[0] if probed else None
             excluded_columns = int(np.count_nonzero(invalid)) * channels if invalid is not None else 0
-            scale = self._probe_scale(int(np.count_nonzero(invalid)) if invalid is not None else 0,
-                                      int(np.count_nonzero(invalid[::self.probe_stride])) if invalid is not None else 0)
+            scale = self._probe_scale(
+                int(np.count_nonzero(invalid)) if invalid is not None else 0,
+                int(np.count_nonzero(invalid[:: self.probe_stride])) if invalid is not None else 0,
+            )
         if noise is not None:
             noise = None if scale is None else noise * scale
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
         factor = self.factor
-        return _statistics_from_moments(moments, spec, rows.shape[1], black_level=spec.black_level * factor * factor,
-                                        noise_moments=noise, n_samples=rows.shape[1] - excluded_columns,
-                                        weighted=self.root_weights is not None or weights is not None)
+        return _statistics_from_moments(
+            moments,
+            spec,
+            rows.shape[1],
+            black_level=spec.black_level * factor * factor,
+            noise_moments=noise,
+            n_samples=rows.shape[1] - excluded_columns,
+            weighted=self.root_weights is not None or weights is not None,
+        )
 
 
-def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total: int,
-                             black_level: float | None = None,
-                             noise_moments: np.ndarray | None = None, n_samples: int | None = None,
-                             weighted: bool = False) -> SequenceStatistics:
+def _statistics_from_moments(
+    moments: np.ndarray,
+    spec: FrameStackSpec,
+    n_total: int,
+    black_level: float | None = None,
+    noise_moments: np.ndarray | None = None,
+    n_samples: int | None = None,
+    weighted: bool = False,
+) -> SequenceStatistics:
     """Statistics from the raw second moments of the rows [F_1 … F_n, A, 1].
 
     With inverse-variance weights (``weighted``) the rows are ``√wt·x`` and the last one ``√wt``, so the
@@ -814,9 +882,11 @@ def _statistics_from_moments(moments: np.ndarray, spec: FrameStackSpec, n_total:
     noise = None
     if noise_moments is not None:
         linear_noise = transform @ noise_moments @ transform.T
-        noise = NoiseMoments(gram=unmixing @ linear_noise[:n_led_frames, :n_led_frames] @ unmixing.T,
-                             cross=unmixing @ linear_noise[:n_led_frames, n_led_frames],
-                             ambient_energy=float(linear_noise[n_led_frames, n_led_frames]))
+        noise = NoiseMoments(
+            gram=unmixing @ linear_noise[:n_led_frames, :n_led_frames] @ unmixing.T,
+            cross=unmixing @ linear_noise[:n_led_frames, n_led_frames],
+            ambient_energy=float(linear_noise[n_led_frames, n_led_frames]),
+        )
     return SequenceStatistics(
         gram=unmixing @ linear_moments[:n_led_frames, :n_led_frames] @ unmixing.T,
         cross=unmixing @ linear_moments[:n_led_frames, n_led_frames],
@@ -913,8 +983,9 @@ def fit_noise_line(probed_levels: np.ndarray, probe: np.ndarray) -> NoiseLine:
     return NoiseLine(gain, read, floor) if floor > 0 else UNIFORM_NOISE
 
 
-def ambient_noise_line(ambient: np.ndarray, probe: np.ndarray, black: float, saturated: np.ndarray | None,
-                       stride: int) -> NoiseLine:
+def ambient_noise_line(
+    ambient: np.ndarray, probe: np.ndarray, black: float, saturated: np.ndarray | None, stride: int
+) -> NoiseLine:
     """:func:`fit_noise_line` of (h, w, C) ambient block sums, whose block rows ``0, stride, 2·stride…``
     have the half differences ``probe`` (h', w, C); blocks the ambient frame saturates (``saturated``,
     (h, w)) are left out. Used alike by :class:`BlockRows` and the tiled statistics of
@@ -947,7 +1018,7 @@ def cfa_planes(frame: np.ndarray, cfa_period: int) -> np.ndarray:
     """(H, W, C) view of a frame; a Bayer mosaic becomes its four CFA planes as channels."""
     if cfa_period == 2:
         rows, columns = frame.shape[0] // 2, frame.shape[1] // 2
-        return np.stack([frame[p:2 * rows:2, q:2 * columns:2] for p in (0, 1) for q in (0, 1)], axis=-1)
+        return np.stack([frame[p : 2 * rows : 2, q : 2 * columns : 2] for p in (0, 1) for q in (0, 1)], axis=-1)
     return frame if frame.ndim == 3 else frame[:, :, None]
 
 
@@ -968,7 +1039,7 @@ def saturated_blocks(plane: np.ndarray, factor: int, white: float) -> np.ndarray
     NaN as the comparison does.
     """
     height, width, channels = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
-    groups = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
+    groups = plane[: height * factor, : width * factor].reshape(height, factor, width * factor * channels)
     peak = np.fmax if np.issubdtype(plane.dtype, np.floating) else np.maximum
     row_maxima = groups[:, 0].copy()
     for member in range(1, factor):
@@ -985,7 +1056,7 @@ def gather_matrix(factor: int, channels: int, dtype: type) -> np.ndarray:
     """(factor·channels, channels) 0/1 matrix summing the ``factor`` pixels of a row group per channel."""
     gather: np.ndarray = np.zeros((factor * channels, channels), dtype=dtype)
     for member in range(factor):
-        gather[member * channels:(member + 1) * channels] = np.eye(channels, dtype=dtype)
+        gather[member * channels : (member + 1) * channels] = np.eye(channels, dtype=dtype)
     gather.flags.writeable = False
     return gather
 
@@ -1012,7 +1083,7 @@ def _block_row_sums(plane: np.ndarray, factor: int) -> np.ndarray:
     """
     height, width, channels = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
     sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
-    cropped = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
+    cropped = plane[: height * factor, : width * factor].reshape(height, factor, width * factor * channels)
     return cropped.sum(axis=1, dtype=sum_type)
 
 
@@ -1024,15 +1095,15 @@ def _block_row_sums_and_peak(plane: np.ndarray, factor: int, white: float) -> tu
     """
     height, width, channels = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
     sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
-    cropped = plane[:height * factor, :width * factor].reshape(height, factor, width * factor * channels)
+    cropped = plane[: height * factor, : width * factor].reshape(height, factor, width * factor * channels)
     if np.issubdtype(plane.dtype, np.integer) and np.iinfo(plane.dtype).max < white:
         return cropped.sum(axis=1, dtype=sum_type), False  # the type cannot reach the white level
     sums = np.empty((height, cropped.shape[2]), dtype=sum_type)
     band = max(1, ROW_SUM_BAND_BYTES // max(cropped[0].nbytes, 1))
     peak = False
     for start in range(0, height, band):
-        part = cropped[start:start + band]
-        np.add.reduce(part, axis=1, dtype=sum_type, out=sums[start:start + band])
+        part = cropped[start : start + band]
+        np.add.reduce(part, axis=1, dtype=sum_type, out=sums[start : start + band])
         peak = peak or bool(part.max() >= white)
     return sums, peak
 
@@ -1052,7 +1123,7 @@ def _gathered(row_sums: np.ndarray, factor: int, channels: int, matrix) -> np.nd
     gather = matrix(factor, channels, row_sums.dtype.type)
     grouped = np.empty((height * width, gather.shape[1]), dtype=row_sums.dtype)
     for start in range(0, groups.shape[0], GATHER_ROWS):
-        np.matmul(groups[start:start + GATHER_ROWS], gather, out=grouped[start:start + GATHER_ROWS])
+        np.matmul(groups[start : start + GATHER_ROWS], gather, out=grouped[start : start + GATHER_ROWS])
     return grouped.reshape(height, width, gather.shape[1])
 
 
@@ -1070,7 +1141,9 @@ def _difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
 @lru_cache(maxsize=16)
 def _sum_and_difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
     """(factor·channels, 2·channels): :func:`gather_matrix` and :func:`_difference_gather` side by side."""
-    gather = np.concatenate([gather_matrix(factor, channels, dtype), _difference_gather(factor, channels, dtype)], axis=1)
+    gather = np.concatenate(
+        [gather_matrix(factor, channels, dtype), _difference_gather(factor, channels, dtype)], axis=1
+    )
     gather.flags.writeable = False
     return gather
 
@@ -1104,7 +1177,7 @@ def _row_products(rows: np.ndarray, row: int) -> np.ndarray:
     products = np.zeros(rows.shape[0])
     vector = rows[row]
     for start in range(0, rows.shape[1], PRODUCT_COLUMNS):
-        products += rows[:, start:start + PRODUCT_COLUMNS] @ vector[start:start + PRODUCT_COLUMNS]
+        products += rows[:, start : start + PRODUCT_COLUMNS] @ vector[start : start + PRODUCT_COLUMNS]
     return products
 
 
@@ -1148,15 +1221,15 @@ def _grams(parts: Sequence[tuple[np.ndarray, np.ndarray | None]], chunk: int, wo
     def product(task: tuple[int, int]) -> np.ndarray:
         rows, weights = parts[task[0]]
         start = task[1]
-        block = rows[:, start:start + chunk]
+        block = rows[:, start : start + chunk]
         if weights is None:
             return block @ block.T
         # Weighted in slices of PRODUCT_COLUMNS, so that each weighted copy is still in cache for its product.
         result = np.zeros((rows.shape[0], rows.shape[0]))
-        column_weights = weights[start:start + chunk]
+        column_weights = weights[start : start + chunk]
         for offset in range(0, block.shape[1], PRODUCT_COLUMNS):
-            part = block[:, offset:offset + PRODUCT_COLUMNS]
-            result += (part * column_weights[offset:offset + PRODUCT_COLUMNS]) @ part.T
+            part = block[:, offset : offset + PRODUCT_COLUMNS]
+            result += (part * column_weights[offset : offset + PRODUCT_COLUMNS]) @ part.T
         return result
 
     tasks = [(index, start) for index, (rows, _) in enumerate(parts) for start in range(0, rows.shape[1], chunk)]

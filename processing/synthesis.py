@@ -104,8 +104,9 @@ def synthesize(
     # Frames whose type cannot reach the white level never saturate; the others are checked chunk
     # by chunk right after the chunk is cast, while it is in cache (a whole-frame max first would be
     # one more pass over every frame in memory, on one thread).
-    saturating = [not (np.issubdtype(frame.dtype, np.integer) and np.iinfo(frame.dtype).max < white)
-                  for frame in flat_frames]
+    saturating = [
+        not (np.issubdtype(frame.dtype, np.integer) and np.iinfo(frame.dtype).max < white) for frame in flat_frames
+    ]
     chunk_samples = max(1, chunk_pixels) * channels
     buffers = threading.local()
 
@@ -115,7 +116,7 @@ def synthesize(
         stack = getattr(buffers, "stack", None)
         if stack is None:
             stack = buffers.stack = np.empty((len(frames), min(chunk_samples, flat_output.size)), dtype=np.float32)
-        rows = stack[:, :stop - start]
+        rows = stack[:, : stop - start]
         bright = None
         for index, frame in enumerate(flat_frames):
             chunk = frame[start:stop]
@@ -131,7 +132,7 @@ def synthesize(
         np.einsum("i,in->n", factors, rows, out=target)
         target += offset
         if bright is not None:
-            flat_saturated[start // channels:stop // channels] = _any_channel(bright.reshape(-1, channels))
+            flat_saturated[start // channels : stop // channels] = _any_channel(bright.reshape(-1, channels))
 
     starts = range(0, flat_output.size, chunk_samples)
     if workers > 1 and len(starts) > 1:
@@ -142,7 +143,9 @@ def synthesize(
             synthesize_chunk(start)
     # Integer frames are finite and _check_range bounds the sum; float frames (EXR) may hold NaN or
     # inf, which would reach the image: one sum flags them (the exact search runs only then).
-    if any(np.issubdtype(frame.dtype, np.floating) for frame in frames) and not np.isfinite(output.sum(dtype=np.float64)):
+    if any(np.issubdtype(frame.dtype, np.floating) for frame in frames) and not np.isfinite(
+        output.sum(dtype=np.float64)
+    ):
         raise non_finite_frames_error([*frames[1:], frames[0]], "synthesis")  # its layout: LED frames, ambient
     return output, saturated
 
@@ -150,15 +153,18 @@ def synthesize(
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
-def _check_range(factors: np.ndarray, frames: Sequence[np.ndarray], spec: FrameStackSpec,
-                 flash_weights: np.ndarray) -> None:
+def _check_range(
+    factors: np.ndarray, frames: Sequence[np.ndarray], spec: FrameStackSpec, flash_weights: np.ndarray
+) -> None:
     """Refuse weights whose image would overflow float32 (to inf, then NaN), bounded from the factors.
 
     A sample is at most ``Σ |factor_j| · peak + |offset|`` with ``peak`` the largest raw value a frame
     can hold (its integer type's maximum; the white level for float frames): no pass over the pixels.
     """
-    peak = max([float(np.iinfo(frame.dtype).max) for frame in frames if np.issubdtype(frame.dtype, np.integer)]
-               + [abs(spec.white_level), abs(spec.black_level)])
+    peak = max(
+        [float(np.iinfo(frame.dtype).max) for frame in frames if np.issubdtype(frame.dtype, np.integer)]
+        + [abs(spec.white_level), abs(spec.black_level)]
+    )
     with np.errstate(over="ignore", invalid="ignore"):  # an infinite bound is the answer, not a warning
         total = float(np.abs(factors).sum())
     bound = total * peak + abs(spec.black_level) * total
@@ -179,8 +185,9 @@ def _any_channel(bright: np.ndarray) -> np.ndarray:
     return result
 
 
-def linearise(raw: np.ndarray, black_level: float, white_level: float, exposure_us: float,
-              gain: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def linearise(
+    raw: np.ndarray, black_level: float, white_level: float, exposure_us: float, gain: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     """A raw frame in processing units, ``(raw − black) / (exposure_us · gain)``, and its saturation.
 
     Returns
@@ -201,8 +208,9 @@ def linearise(raw: np.ndarray, black_level: float, white_level: float, exposure_
     return (raw.astype(np.float64) - black_level) / (exposure_us * gain), saturated
 
 
-def to_raw_values(image: np.ndarray, exposure_us: float, gain: float, black_level: float,
-                  white_level: float, dtype: type = np.uint16) -> np.ndarray:
+def to_raw_values(
+    image: np.ndarray, exposure_us: float, gain: float, black_level: float, white_level: float, dtype: type = np.uint16
+) -> np.ndarray:
     """Encode a linear image as raw values at a given exposure and gain (clipped to the white level)."""
     values = image.astype(np.float64) * (exposure_us * gain) + black_level
     values = np.clip(np.rint(values), 0, white_level)

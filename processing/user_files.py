@@ -60,8 +60,9 @@ def printable(text: str) -> str:
     >>> printable("a\\x00b\\tc µm")
     'a\\\\x00b\\\\tc µm'
     """
-    return "".join(c if c.isprintable() else c.encode("unicode_escape", "backslashreplace").decode("ascii")
-                   for c in text)
+    return "".join(
+        c if c.isprintable() else c.encode("unicode_escape", "backslashreplace").decode("ascii") for c in text
+    )
 
 
 def _size(n: int) -> str:
@@ -76,7 +77,10 @@ def _file_type(mode: int) -> str | None:
 
 
 def check_user_file(
-    path: str | bytes | os.PathLike, kind: str, max_bytes: int, error: type[Exception] = SpectralDataError,
+    path: str | bytes | os.PathLike,
+    kind: str,
+    max_bytes: int,
+    error: type[Exception] = SpectralDataError,
     name: str | None = None,
 ) -> os.stat_result:
     """Check, without opening it, that ``path`` is a regular file of at most ``max_bytes``.
@@ -113,7 +117,10 @@ def _check_stat(shown: str, info: os.stat_result, kind: str, max_bytes: int, err
 
 
 def read_user_bytes(
-    path: str | bytes | os.PathLike, kind: str, max_bytes: int, error: type[Exception] = SpectralDataError,
+    path: str | bytes | os.PathLike,
+    kind: str,
+    max_bytes: int,
+    error: type[Exception] = SpectralDataError,
 ) -> bytes:
     """The bytes of the user's file ``path``, checked as :func:`check_user_file` checks it.
 
@@ -148,7 +155,10 @@ def read_user_bytes(
 
 
 def read_user_text(
-    path: str | bytes | os.PathLike, kind: str, max_bytes: int, error: type[Exception] = SpectralDataError,
+    path: str | bytes | os.PathLike,
+    kind: str,
+    max_bytes: int,
+    error: type[Exception] = SpectralDataError,
     encoding: str = "utf-8",
 ) -> str:
     """The text of the user's file ``path`` (see :func:`read_user_bytes`), decoded strictly."""
@@ -156,11 +166,19 @@ def read_user_text(
     try:
         return data.decode(encoding)
     except UnicodeDecodeError as err:
-        raise error(f"{shown_path(path)}: is not UTF-8 text ({err.reason} at byte {err.start}); "
-                    f"expected {kind}") from err
+        raise error(
+            f"{shown_path(path)}: is not UTF-8 text ({err.reason} at byte {err.start}); expected {kind}"
+        ) from err
 
 
 __all__ = [
-    "IMAGE_MAX_BYTES", "JSON_MAX_BYTES", "SPECTRAL_TABLE_MAX_BYTES", "TEXT_EXPORT_MAX_BYTES",
-    "check_user_file", "printable", "read_user_bytes", "read_user_text", "shown_path",
+    "IMAGE_MAX_BYTES",
+    "JSON_MAX_BYTES",
+    "SPECTRAL_TABLE_MAX_BYTES",
+    "TEXT_EXPORT_MAX_BYTES",
+    "check_user_file",
+    "printable",
+    "read_user_bytes",
+    "read_user_text",
+    "shown_path",
 ]

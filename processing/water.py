@@ -65,21 +65,26 @@ NAP_SLOPE_PER_NM = 0.011
 ABSORPTION_COMPONENTS = ("water", "phytoplankton", "cdom", "nap")
 """Names of the absorption components, in the order :meth:`WaterBody.absorption` returns them."""
 
-_LICENCE = ("Pope & Fry 1997 (published table); Bricaud 1998 via ocpy (BSD-3, processing/data/water/"
-            "LICENSE-ocpy-BSD-3.txt); Smith & Baker 1981 via NASA OBPG (US government work)")
+_LICENCE = (
+    "Pope & Fry 1997 (published table); Bricaud 1998 via ocpy (BSD-3, processing/data/water/"
+    "LICENSE-ocpy-BSD-3.txt); Smith & Baker 1981 via NASA OBPG (US government work)"
+)
 
 
 def _check(name: str, value: float, minimum: float = 0.0, strict: bool = False) -> float:
     value = float(value)
     ok = math.isfinite(value) and (value > minimum if strict else value >= minimum)
     if not ok:
-        raise SpectralDataError(f"water: {name} is {value}; expected a finite value {'>' if strict else '≥'} {minimum:g}")
+        raise SpectralDataError(
+            f"water: {name} is {value}; expected a finite value {'>' if strict else '≥'} {minimum:g}"
+        )
     return value
 
 
 def _table(relative: str, columns: tuple[str, ...]) -> Spectra:
-    return datasets.load_spectra_csv(datasets.DATA_DIR / relative, "reflectance", "none",
-                                     source=f"msflash data {relative}").select(list(columns))
+    return datasets.load_spectra_csv(
+        datasets.DATA_DIR / relative, "reflectance", "none", source=f"msflash data {relative}"
+    ).select(list(columns))
 
 
 def bricaud_1998(grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
@@ -106,7 +111,8 @@ def water_transmittance(path_m: float, grid: WavelengthGrid = DEFAULT_GRID) -> S
         raise SpectralDataError(f"water_transmittance: path_m is {path_m}; expected a finite length ≥ 0 m")
     absorption = datasets.water_absorption().resample(grid)
     return absorption.replace(
-        values=np.exp(-absorption.values * path_m), names=(f"water_{path_m:g}m",),
+        values=np.exp(-absorption.values * path_m),
+        names=(f"water_{path_m:g}m",),
         source=f"pure-water transmittance over {path_m:g} m (Pope & Fry 1997)",
         metadata={"quantity": "transmittance", "path_m": path_m},
     )
@@ -150,7 +156,7 @@ class WaterBody:
         """``a_NAP(440)`` in 1/m: the given value or ``0.0124 · Chl^0.724`` (Bricaud et al. 1998)."""
         if self.nap_440_per_m is not None:
             return float(self.nap_440_per_m)
-        return 0.0124 * self.chlorophyll_mg_m3 ** 0.724
+        return 0.0124 * self.chlorophyll_mg_m3**0.724
 
     def absorption(self, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
         """Absorption by component, 1/m, columns :data:`ABSORPTION_COMPONENTS`, shape (n_wavelengths, 4).
@@ -165,9 +171,15 @@ class WaterBody:
         phytoplankton = bricaud.column("Aphi") * chl ** bricaud.column("Ephi") if chl > 0 else np.zeros_like(water)
         cdom = self.cdom_440_per_m * np.exp(-CDOM_SLOPE_PER_NM * (wavelengths - 440.0))
         nap = self.nap_440 * np.exp(-NAP_SLOPE_PER_NM * (wavelengths - 440.0))
-        return Spectra(grid, np.stack([water, phytoplankton, cdom, nap], axis=1), ABSORPTION_COMPONENTS,
-                       kind="reflectance", unit="none", source=f"absorption of {self.describe()}",
-                       metadata={"quantity": "absorption coefficient", "unit": "1/m", "licence": _LICENCE})
+        return Spectra(
+            grid,
+            np.stack([water, phytoplankton, cdom, nap], axis=1),
+            ABSORPTION_COMPONENTS,
+            kind="reflectance",
+            unit="none",
+            source=f"absorption of {self.describe()}",
+            metadata={"quantity": "absorption coefficient", "unit": "1/m", "licence": _LICENCE},
+        )
 
     def total_absorption(self, grid: WavelengthGrid = DEFAULT_GRID) -> np.ndarray:
         """``a(λ)``, the sum of the components, 1/m, shape (n_wavelengths,)."""
@@ -175,7 +187,7 @@ class WaterBody:
 
     def backscattering(self, grid: WavelengthGrid = DEFAULT_GRID) -> np.ndarray:
         """``b_b(λ) = b_w/2 + ratio · 0.416 Chl^0.766 · 550/λ``, 1/m, shape (n_wavelengths,)."""
-        particles = 0.416 * self.chlorophyll_mg_m3 ** 0.766 * (550.0 / grid.wavelengths_nm)
+        particles = 0.416 * self.chlorophyll_mg_m3**0.766 * (550.0 / grid.wavelengths_nm)
         return 0.5 * pure_water_scattering(grid) + self.particle_backscatter_ratio * particles
 
     def path_attenuation(self, grid: WavelengthGrid = DEFAULT_GRID) -> np.ndarray:
@@ -189,14 +201,22 @@ class WaterBody:
     def transmittance(self, path_m: float, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
         """``exp(−(a + b_b) · path_m)``: a horizontal path of water (subject → camera), one spectrum."""
         path_m = _check("path_m", path_m)
-        return Spectra(grid, np.exp(-self.path_attenuation(grid) * path_m), (f"path_{path_m:g}m",),
-                       kind="reflectance", unit="none", source=f"{path_m:g} m of {self.describe()}",
-                       metadata={"quantity": "transmittance", "path_m": path_m})
+        return Spectra(
+            grid,
+            np.exp(-self.path_attenuation(grid) * path_m),
+            (f"path_{path_m:g}m",),
+            kind="reflectance",
+            unit="none",
+            source=f"{path_m:g} m of {self.describe()}",
+            metadata={"quantity": "transmittance", "path_m": path_m},
+        )
 
     def describe(self) -> str:
         """A one-line description for ``Spectra.source`` and reports."""
-        return (f"water (Chl {self.chlorophyll_mg_m3:g} mg/m³, a_CDOM(440) {self.cdom_440_per_m:g}/m, "
-                f"a_NAP(440) {self.nap_440:.3g}/m)")
+        return (
+            f"water (Chl {self.chlorophyll_mg_m3:g} mg/m³, a_CDOM(440) {self.cdom_440_per_m:g}/m, "
+            f"a_NAP(440) {self.nap_440:.3g}/m)"
+        )
 
 
 WATER_TYPES: dict[str, WaterBody] = {
@@ -260,21 +280,26 @@ def underwater_ambient(
     True
     """
     body = water_body(water)
-    changes = {key: value for key, value in (("chlorophyll_mg_m3", chlorophyll), ("cdom_440_per_m", cdom_440),
-                                             ("nap_440_per_m", nap_440)) if value is not None}
+    changes = {
+        key: value
+        for key, value in (("chlorophyll_mg_m3", chlorophyll), ("cdom_440_per_m", cdom_440), ("nap_440_per_m", nap_440))
+        if value is not None
+    }
     body = replace(body, **changes) if changes else body
     depth_m = _check("depth_m", depth_m)
     distance_m = _check("distance_m", distance_m)
     surface = datasets.illuminant(surface_illuminant, grid)
     factor = np.exp(-body.diffuse_attenuation(grid) * depth_m - body.path_attenuation(grid) * distance_m)
     return surface.replace(
-        values=surface.values * factor[:, None], names=("underwater",),
+        values=surface.values * factor[:, None],
+        names=("underwater",),
         source=f"{surface_illuminant} at {depth_m:g} m depth, seen over {distance_m:g} m, in {body.describe()}",
         metadata={"depth_m": depth_m, "distance_m": distance_m, "water": body.describe()},
     ).normalised("max")
 
 
-def flash_path_transmittance(distance_m: float, water: WaterBody | str = "ocean",
-                             grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+def flash_path_transmittance(
+    distance_m: float, water: WaterBody | str = "ocean", grid: WavelengthGrid = DEFAULT_GRID
+) -> Spectra:
     """``exp(−(a + b_b) · 2 · distance_m)``: a flash at the camera, to the subject and back."""
     return water_body(water).transmittance(2.0 * _check("distance_m", distance_m), grid)

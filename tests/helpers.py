@@ -100,8 +100,9 @@ def one_hot_levels(k: int) -> np.ndarray:
 
 def illumination(ambient_spd: Spectra, led_spectra: Spectra, levels: Sequence[float]) -> Spectra:
     """Ambient plus LEDs at ``levels``, photons."""
-    return photons_spd(ambient_spd.to_unit("photons").values[:, 0] + led_spectra.values @ np.asarray(levels, float),
-                       "illumination")
+    return photons_spd(
+        ambient_spd.to_unit("photons").values[:, 0] + led_spectra.values @ np.asarray(levels, float), "illumination"
+    )
 
 
 def linear_frames(
@@ -135,8 +136,11 @@ def linear_frames(
         frame = expected_response(scene, spd, cam, exposure_us=exposure, gain=gain) + black
         frames.append(mosaic(frame, cfa) if cfa else frame)
     spec = FrameStackSpec(
-        black_level=black, white_level=1e30, ambient_scale=1.0 / (exposures[0] * gains[0]),
-        led_scales=tuple(1.0 / (e * g) for e, g in zip(exposures[1:], gains[1:])), led_levels=levels,
+        black_level=black,
+        white_level=1e30,
+        ambient_scale=1.0 / (exposures[0] * gains[0]),
+        led_scales=tuple(1.0 / (e * g) for e, g in zip(exposures[1:], gains[1:])),
+        led_levels=levels,
     )
     return frames[0], frames[1:], spec
 
@@ -174,12 +178,16 @@ def rendered_frames(
     return frames[0], frames[1:], exposures, gains
 
 
-def spec_for(sensor: SensorModel, exposures: Sequence[float], gains: Sequence[float], levels: np.ndarray) -> FrameStackSpec:
+def spec_for(
+    sensor: SensorModel, exposures: Sequence[float], gains: Sequence[float], levels: np.ndarray
+) -> FrameStackSpec:
     """The frame stack spec of rendered frames."""
     return FrameStackSpec(
-        black_level=sensor.black_level, white_level=sensor.white_level,
+        black_level=sensor.black_level,
+        white_level=sensor.white_level,
         ambient_scale=1.0 / (exposures[0] * gains[0]),
-        led_scales=tuple(1.0 / (e * g) for e, g in zip(exposures[1:], gains[1:])), led_levels=levels,
+        led_scales=tuple(1.0 / (e * g) for e, g in zip(exposures[1:], gains[1:])),
+        led_levels=levels,
     )
 
 
@@ -198,22 +206,30 @@ def write_test_sequence(
     ambient_frame, led_frames, exposures, gains = rendered_frames(ambient_spd, sensor=sensor, noise=noise, gains=gains)
     cam_energy = camera().to_unit("energy")
     seq_camera = SequenceCamera(
-        model="test-render", serial=None, pixel_format="BayerRG16" if cfa else "RGB16", cfa=cfa,
-        black_level=sensor.black_level, white_level=sensor.white_level,
+        model="test-render",
+        serial=None,
+        pixel_format="BayerRG16" if cfa else "RGB16",
+        cfa=cfa,
+        black_level=sensor.black_level,
+        white_level=sensor.white_level,
         responsivity={c: cam_energy.column(c) for c in ("R", "G", "B")} if responsivity else None,
     )
     led_entries = [SequenceLed(name, leds().column(name)) for name in leds().names]
     k = len(led_entries)
-    with SequenceWriter(directory, wavelengths_nm=GRID.wavelengths_nm, spectral_unit="energy",
-                        camera=seq_camera, leds=led_entries) as writer:
+    with SequenceWriter(
+        directory, wavelengths_nm=GRID.wavelengths_nm, spectral_unit="energy", camera=seq_camera, leds=led_entries
+    ) as writer:
         writer.add_frame(ambient_frame, "ambient", [0.0] * k, exposure_us=exposures[0], gain=gains[0])
         for index, frame in enumerate(led_frames):
-            writer.add_frame(frame, "led", one_hot_levels(k)[index], exposure_us=exposures[index + 1],
-                             gain=gains[index + 1])
+            writer.add_frame(
+                frame, "led", one_hot_levels(k)[index], exposure_us=exposures[index + 1], gain=gains[index + 1]
+            )
     return directory
 
 
-def direct_lstsq_weights(ambient_frame: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec) -> np.ndarray:
+def direct_lstsq_weights(
+    ambient_frame: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec
+) -> np.ndarray:
     """Least-squares fit of the linear ambient image by the linear LED-only images (all samples)."""
     a = (ambient_frame.astype(float) - spec.black_level) * spec.ambient_scale
     diffs = [(f.astype(float) - spec.black_level) * s - a for f, s in zip(led_frames, spec.led_scales)]
@@ -235,7 +251,9 @@ def wait_for_frames(process: subprocess.Popen[bytes], sequence_json: Path, n: in
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if process.poll() is not None:
-            pytest.fail(f"capture ended (status {process.returncode}) before {n} frames: {process.stderr.read().decode()}")
+            pytest.fail(
+                f"capture ended (status {process.returncode}) before {n} frames: {process.stderr.read().decode()}"
+            )
         try:
             if len(json.loads(sequence_json.read_text())["frames"]) >= n:
                 return

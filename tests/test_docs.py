@@ -34,18 +34,23 @@ def test_the_scan_sees_the_code() -> None:
 
 
 def test_no_package_cites_a_document_outside_the_repository() -> None:
-    offenders = [f"{path.relative_to(ROOT)}:{number}: {line.strip()}"
-                 for path in python_files(*PACKAGES, "tests") if path != Path(__file__).resolve()
-                 for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
-                 if OUTSIDE_DOCUMENTS.search(line)]
+    offenders = [
+        f"{path.relative_to(ROOT)}:{number}: {line.strip()}"
+        for path in python_files(*PACKAGES, "tests")
+        if path != Path(__file__).resolve()
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+        if OUTSIDE_DOCUMENTS.search(line)
+    ]
     assert not offenders, "cite docs/architecture.md §N instead:\n" + "\n".join(offenders)
 
 
 def test_every_cited_docs_page_exists() -> None:
-    missing = [f"{path.relative_to(ROOT)}: {cited}"
-               for path in citing_files()
-               for cited in sorted(set(DOCS_PATH.findall(path.read_text(encoding="utf-8"))))
-               if not (ROOT / cited).is_file()]
+    missing = [
+        f"{path.relative_to(ROOT)}: {cited}"
+        for path in citing_files()
+        for cited in sorted(set(DOCS_PATH.findall(path.read_text(encoding="utf-8"))))
+        if not (ROOT / cited).is_file()
+    ]
     assert not missing, "cited docs pages that do not exist:\n" + "\n".join(missing)
 
 
@@ -62,19 +67,28 @@ def test_architecture_sections_are_numbered() -> None:
 
 def test_every_cited_architecture_section_exists() -> None:
     sections = architecture_sections()
-    missing = [f"{path.relative_to(ROOT)}: §{number}"
-               for path in citing_files()
-               for number in sorted(set(SECTION_CITE.findall(path.read_text(encoding="utf-8"))))
-               if number not in sections]
-    assert not missing, f"cited sections absent from docs/architecture.md (it has {sorted(sections)}):\n" + "\n".join(missing)
+    missing = [
+        f"{path.relative_to(ROOT)}: §{number}"
+        for path in citing_files()
+        for number in sorted(set(SECTION_CITE.findall(path.read_text(encoding="utf-8"))))
+        if number not in sections
+    ]
+    assert not missing, f"cited sections absent from docs/architecture.md (it has {sorted(sections)}):\n" + "\n".join(
+        missing
+    )
 
 
-def test_the_python_api_page_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                  capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_python_api_page_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     """docs/python-api.md's worked example runs as written, in a fresh folder (issue 18, item 1)."""
     monkeypatch.chdir(tmp_path)
-    result = doctest.testfile(str(ROOT / "docs" / "python-api.md"), module_relative=False, verbose=False,
-                              optionflags=doctest.NORMALIZE_WHITESPACE)
+    result = doctest.testfile(
+        str(ROOT / "docs" / "python-api.md"),
+        module_relative=False,
+        verbose=False,
+        optionflags=doctest.NORMALIZE_WHITESPACE,
+    )
     assert result.attempted >= 15
     assert result.failed == 0, capsys.readouterr().out
 
@@ -89,7 +103,8 @@ def test_help_msflash_shows_the_public_face() -> None:
     for name in msflash.__all__:
         assert name.strip("_") in text.lower(), name
     assert sorted(n for n in msflash.__all__ if not n.startswith("_")) == sorted(
-        ["estimate_ambient", "read_sequence", "render_preview", "solve_flash", "synthesize_flash"])
+        ["estimate_ambient", "read_sequence", "render_preview", "solve_flash", "synthesize_flash"]
+    )
     for name in msflash.__all__:
         if not name.startswith("_"):
             assert (getattr(msflash, name).__doc__ or "").strip(), name

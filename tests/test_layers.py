@@ -68,9 +68,12 @@ def test_code_imports_the_packages_only_under_msflash() -> None:
 def test_the_install_provides_msflash_and_no_bare_package(tmp_path: Path) -> None:
     """Outside the checkout, ``msflash.processing`` imports and ``processing`` does not: nothing installs
     the four generic names (the subpackages live in the four top-level folders, linked under msflash/)."""
-    code = ("import importlib.util, json, msflash.processing.ambient as ambient\n"
-            "print(json.dumps([ambient.__name__] + [importlib.util.find_spec(n) is None for n in "
-            f"{list(PACKAGES)!r}]))")
-    result = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
-                            timeout=120, check=True)
+    code = (
+        "import importlib.util, json, msflash.processing.ambient as ambient\n"
+        "print(json.dumps([ambient.__name__] + [importlib.util.find_spec(n) is None for n in "
+        f"{list(PACKAGES)!r}]))"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120, check=True
+    )
     assert result.stdout.strip() == '["msflash.processing.ambient", true, true, true, true]'

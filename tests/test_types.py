@@ -18,7 +18,14 @@ def test_mypy_finds_no_type_error() -> None:
         pytest.skip("mypy is not installed (pip install -e '.[test]')")
     # The project's own cache (.mypy_cache): a warm run takes seconds, a cold one a minute or two.
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    result = subprocess.run([sys.executable, "-m", "mypy", "--no-color-output", "--no-error-summary"], check=False, cwd=ROOT,
-                            env=env, capture_output=True, text=True, timeout=280)
+    result = subprocess.run(
+        [sys.executable, "-m", "mypy", "--no-color-output", "--no-error-summary"],
+        check=False,
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=280,
+    )
     assert result.returncode == 0, result.stdout + result.stderr
     assert result.stdout.strip() == "", result.stdout

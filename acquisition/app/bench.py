@@ -90,10 +90,16 @@ def benchmark_world(height: int = 1024, width: int = 1280, seed: int = 0) -> dic
     for k in range(leds.count):
         lit = Spectra(grid, ambient.values[:, 0] + led_scale * leds.values[:, k], ("lit",), unit="photons")
         frames.append(render_frame(scene, lit, camera, sensor, exposure, rng=rng))
-    spec = FrameStackSpec(sensor.black_level, sensor.white_level, 1.0 / exposure, (1.0 / exposure,) * leds.count,
-                          np.eye(leds.count))
-    return {"frames": frames, "spec": spec, "leds": leds, "camera": camera,
-            "target": datasets.illuminant("D65", grid).to_unit("photons")}
+    spec = FrameStackSpec(
+        sensor.black_level, sensor.white_level, 1.0 / exposure, (1.0 / exposure,) * leds.count, np.eye(leds.count)
+    )
+    return {
+        "frames": frames,
+        "spec": spec,
+        "leds": leds,
+        "camera": camera,
+        "target": datasets.illuminant("D65", grid).to_unit("photons"),
+    }
 
 
 def _cvxpy_solve(problem: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> tuple[float, float]:
@@ -124,26 +130,37 @@ def _compare_with_cvxpy(name: str, run: Callable[[], Any], repeats: int) -> dict
         scale = max(abs(value), abs(ours_value), 1e-300)
         # Positive when ours is worse (higher) than cvxpy's.
         worst_difference = max(worst_difference, (ours_value - value) / scale)
-    return {"solver": name, "problems": len(problems), "ours_s": ours, "cvxpy_s": total_cvxpy,
-            "speedup": total_cvxpy / ours if ours > 0 else None,
-            "objective_relative_excess": worst_difference}
+    return {
+        "solver": name,
+        "problems": len(problems),
+        "ours_s": ours,
+        "cvxpy_s": total_cvxpy,
+        "speedup": total_cvxpy / ours if ours > 0 else None,
+        "objective_relative_excess": worst_difference,
+    }
 
 
 def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) -> dict[str, Any]:
     """The three processing figures (see the module notes)."""
     world = benchmark_world(height, width)
     frames, spec = world["frames"], world["spec"]
+
     def copy() -> list[np.ndarray]:
         return [f.copy() for f in frames]
 
     copy_time = _best_time(copy, repeats)
     statistics = accumulate_statistics(frames[0], frames[1:], spec)
 
-    def estimate(bin_factor: int, workers: int = DEFAULT_WORKERS, weighting: bool = SAMPLE_WEIGHTING) -> Callable[[], object]:
+    def estimate(
+        bin_factor: int, workers: int = DEFAULT_WORKERS, weighting: bool = SAMPLE_WEIGHTING
+    ) -> Callable[[], object]:
         # As msflash estimate: the weighted statistics (acquisition.session.analysis.sequence_statistics) and the default solve.
         return lambda: estimate_ambient(
-            accumulate_statistics(frames[0], frames[1:], spec, bin_factor=bin_factor, workers=workers,
-                                  weighting=weighting), world["leds"])
+            accumulate_statistics(
+                frames[0], frames[1:], spec, bin_factor=bin_factor, workers=workers, weighting=weighting
+            ),
+            world["leds"],
+        )
 
     weights = estimate_ambient(statistics, world["leds"]).ambient_weights
     flash_weights = np.clip(weights, 0, 1)
@@ -162,7 +179,8 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
         "estimate_over_copy": estimate_time / copy_time,
         "estimate_over_copy_interleaved": _interleaved_ratio(estimate(DEFAULT_BIN_FACTOR), copy, 4 * repeats + 1),
         "estimate_over_copy_by_threads": {
-            str(n): _best_time(estimate(DEFAULT_BIN_FACTOR, n), repeats) / copy_time for n in (1, 2)},
+            str(n): _best_time(estimate(DEFAULT_BIN_FACTOR, n), repeats) / copy_time for n in (1, 2)
+        },
         "estimate_unweighted_over_copy": _best_time(estimate(DEFAULT_BIN_FACTOR, weighting=False), repeats) / copy_time,
         "estimate_bin": DEFAULT_BIN_FACTOR,
         "estimate_all_pixels_over_copy": estimate_all_pixels_time / copy_time,
@@ -202,8 +220,15 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
     return result
 
 
-def prior_bench(frames: list[np.ndarray], spec: FrameStackSpec, leds: Spectra, camera: Spectra, copy_time: float,
-                repeats: int, copy: Callable[[], Any] | None = None) -> dict[str, float]:
+def prior_bench(
+    frames: list[np.ndarray],
+    spec: FrameStackSpec,
+    leds: Spectra,
+    camera: Spectra,
+    copy_time: float,
+    repeats: int,
+    copy: Callable[[], Any] | None = None,
+) -> dict[str, float]:
     """The light prior's figures (``msflash estimate --model prior|auto``): its channel-resolved statistics and
     estimate ÷ the copy, as ``estimate_over_copy`` (and interleaved with ``copy``, when given);
     ``auto``'s held-out comparison; the model's preparation."""
@@ -220,8 +245,11 @@ def prior_bench(frames: list[np.ndarray], spec: FrameStackSpec, leds: Spectra, c
         return model.estimate(statistics())
 
     prior_time = _best_time(estimate, repeats)
-    interleaved = {} if copy is None else {
-        "prior_estimate_over_copy_interleaved": _interleaved_ratio(estimate, copy, 4 * repeats + 1)}
+    interleaved = (
+        {}
+        if copy is None
+        else {"prior_estimate_over_copy_interleaved": _interleaved_ratio(estimate, copy, 4 * repeats + 1)}
+    )
     return {
         "prior_estimate_s": prior_time,
         "prior_estimate_over_copy": prior_time / copy_time,

@@ -92,11 +92,18 @@ def stage_ms(timings: Sequence[Any]) -> dict[str, np.ndarray]:
         ``transit`` (frame start to buffer popped), ``handoff`` (popped to in hand) and ``total``
         (sent to in hand), one value per trigger.
     """
-    rows = np.array([(t.sent_ns, t.triggered_ns, t.frame.device_ns, t.frame.popped_ns, t.frame.delivered_ns)
-                     for t in timings], dtype=np.int64).reshape(-1, 5)
+    rows = np.array(
+        [(t.sent_ns, t.triggered_ns, t.frame.device_ns, t.frame.popped_ns, t.frame.delivered_ns) for t in timings],
+        dtype=np.int64,
+    ).reshape(-1, 5)
     sent, triggered, device, popped, delivered = (rows[:, i] for i in range(5))
-    stages = {"issue": triggered - sent, "wait": device - sent, "transit": popped - device,
-              "handoff": delivered - popped, "total": delivered - sent}
+    stages = {
+        "issue": triggered - sent,
+        "wait": device - sent,
+        "transit": popped - device,
+        "handoff": delivered - popped,
+        "total": delivered - sent,
+    }
     return {name: values.astype(float) / 1e6 for name, values in stages.items()}
 
 
@@ -104,9 +111,14 @@ OWN_STAGES = ("issue", "handoff")
 """The stages where AravisCamera and the bare loop run different code (see the module notes)."""
 
 
-def excess_ci(ours: dict[str, np.ndarray], theirs: dict[str, np.ndarray], stages: Sequence[str] = OWN_STAGES,
-              statistic: str = "median", resamples: int = BOOTSTRAP_RESAMPLES,
-              seed: int = 0) -> tuple[float, float, float]:
+def excess_ci(
+    ours: dict[str, np.ndarray],
+    theirs: dict[str, np.ndarray],
+    stages: Sequence[str] = OWN_STAGES,
+    statistic: str = "median",
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = 0,
+) -> tuple[float, float, float]:
     """Summed per-stage excess of ``ours`` over ``theirs`` and its 95 % percentile-bootstrap interval.
 
     The excess is ``sum(statistic(ours[s]) - statistic(theirs[s]) for s in stages)``. Each side's
@@ -147,10 +159,18 @@ def excess_ci(ours: dict[str, np.ndarray], theirs: dict[str, np.ndarray], stages
     return estimate, float(low), float(high)
 
 
-def camera_bench(n_frames: int = 150, n_triggers: int = 200, repeats: int = 5, width: int = 1280, height: int = 1024,
-                 pixel_format: str = "Mono16", frame_rate_hz: float = 1000.0,
-                 exposure_us: float = 100.0, latency_blocks: int = 4,
-                 trigger_frequency_hz: float = 1000.0) -> dict[str, Any]:
+def camera_bench(
+    n_frames: int = 150,
+    n_triggers: int = 200,
+    repeats: int = 5,
+    width: int = 1280,
+    height: int = 1024,
+    pixel_format: str = "Mono16",
+    frame_rate_hz: float = 1000.0,
+    exposure_us: float = 100.0,
+    latency_blocks: int = 4,
+    trigger_frequency_hz: float = 1000.0,
+) -> dict[str, Any]:
     """Measure AravisCamera against a bare Aravis loop on the in-process GigE Vision fake.
 
     Parameters
@@ -196,8 +216,9 @@ def camera_bench(n_frames: int = 150, n_triggers: int = 200, repeats: int = 5, w
     tick_s = 1.0 / trigger_frequency_hz
 
     def msflash_throughput(address: str) -> tuple[float, int]:
-        with AravisCamera(address, interfaces="gige", pixel_format=pixel_format, roi=roi,
-                          strobe=StrobeConfig(line="Line1")) as camera:
+        with AravisCamera(
+            address, interfaces="gige", pixel_format=pixel_format, roi=roi, strobe=StrobeConfig(line="Line1")
+        ) as camera:
             plan = _plan(n_frames, exposure_us, "camera")
             camera.prepare(plan)
             camera.configure_trigger(free_run)
@@ -218,8 +239,9 @@ def camera_bench(n_frames: int = 150, n_triggers: int = 200, repeats: int = 5, w
 
     def msflash_latency(address: str, n: int) -> list[TriggerTiming]:
         timings: list[TriggerTiming] = []
-        with AravisCamera(address, interfaces="gige", pixel_format=pixel_format, roi=roi,
-                          extra_buffers=_EXTRA_BUFFERS) as camera:
+        with AravisCamera(
+            address, interfaces="gige", pixel_format=pixel_format, roi=roi, extra_buffers=_EXTRA_BUFFERS
+        ) as camera:
             plan = _plan(n + _WARM_UP_FRAMES, exposure_us, "software")
             camera.prepare(plan)
             camera.start()
@@ -235,9 +257,17 @@ def camera_bench(n_frames: int = 150, n_triggers: int = 200, repeats: int = 5, w
         return timings
 
     def bare_latency(address: str, n: int) -> list[TriggerTiming]:
-        run = bare_aravis_run(address, width=width, height=height, pixel_format=pixel_format, n_frames=n,
-                              software_trigger=True, dither_s=tick_s, warm_up_frames=_WARM_UP_FRAMES,
-                              n_buffers=n + _WARM_UP_FRAMES + _EXTRA_BUFFERS)
+        run = bare_aravis_run(
+            address,
+            width=width,
+            height=height,
+            pixel_format=pixel_format,
+            n_frames=n,
+            software_trigger=True,
+            dither_s=tick_s,
+            warm_up_frames=_WARM_UP_FRAMES,
+            n_buffers=n + _WARM_UP_FRAMES + _EXTRA_BUFFERS,
+        )
         return list(run.timings)
 
     with AravisGvFake(serial="MSFBENCH", trigger_frequency_hz=trigger_frequency_hz) as fake:
@@ -245,8 +275,15 @@ def camera_bench(n_frames: int = 150, n_triggers: int = 200, repeats: int = 5, w
         # and drift on a shared machine do not favour either side.
         fps_bare, fps_msflash, drops_bare, drops_msflash = 0.0, 0.0, 0, 0
         for _ in range(repeats):
-            bare = bare_aravis_run(fake.address, width=width, height=height, pixel_format=pixel_format,
-                                   n_frames=n_frames, software_trigger=False, frame_rate_hz=frame_rate_hz)
+            bare = bare_aravis_run(
+                fake.address,
+                width=width,
+                height=height,
+                pixel_format=pixel_format,
+                n_frames=n_frames,
+                software_trigger=False,
+                frame_rate_hz=frame_rate_hz,
+            )
             fps_bare = max(fps_bare, (bare.frames + bare.bad - 1) / bare.seconds)
             drops_bare += bare.bad + bare.missing
             fps, drops = msflash_throughput(fake.address)

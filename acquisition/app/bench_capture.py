@@ -54,8 +54,9 @@ WALL_RATIO_TARGET = 1.15
 LATENCY_MEDIAN_TARGET_MS = 5.0
 
 
-def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320, height: int = 240,
-                  pixel_format: str = "Mono16") -> dict[str, Any]:
+def capture_bench(
+    runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320, height: int = 240, pixel_format: str = "Mono16"
+) -> dict[str, Any]:
     """Time the capture loop on the GigE Vision fake; see the module notes for the figures.
 
     Parameters
@@ -85,8 +86,10 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
     latencies: list[float] = []
     host_latencies: list[float] = []
     computes: list[float] = []
-    with tempfile.TemporaryDirectory(prefix="msflash-bench-capture-") as scratch, \
-            open_aravis_fake_rig(width=width, height=height, pixel_format=pixel_format, rendered=False) as rig:
+    with (
+        tempfile.TemporaryDirectory(prefix="msflash-bench-capture-") as scratch,
+        open_aravis_fake_rig(width=width, height=height, pixel_format=pixel_format, rendered=False) as rig,
+    ):
         n_leds = rig.led_spectra.count
         camera, emulator = rig.camera, rig.emulator
         assert emulator is not None
@@ -122,9 +125,18 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
         rig.booth.set_step = timed_set_step  # type: ignore[method-assign]
         policy = ExposurePolicy()
         session: FlashSession | None = None
-        parts: dict[str, list[float]] = {name: [] for name in
-                                          ("handoff_ms", "compute_ms", "exposure_ms", "replan_ms",
-                                           "pset_to_trigger_ms", "pset_to_release_ms", "pset_ms")}
+        parts: dict[str, list[float]] = {
+            name: []
+            for name in (
+                "handoff_ms",
+                "compute_ms",
+                "exposure_ms",
+                "replan_ms",
+                "pset_to_trigger_ms",
+                "pset_to_release_ms",
+                "pset_ms",
+            )
+        }
         for run in range(runs + 1):  # run 0 warms up (imports, first stream) and is not counted
             arrivals.clear()
             pulses.clear()
@@ -132,8 +144,9 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
             releases.clear()
             writer = rig.sequence_writer(Path(scratch) / f"run{run}")
             if session is None:  # once per rig: LED/camera model, target response
-                session = FlashSession.prepare(writer.sequence, exposure_limits_us=(1.0, exposure_us),
-                                               exposure_policy=policy)
+                session = FlashSession.prepare(
+                    writer.sequence, exposure_limits_us=(1.0, exposure_us), exposure_policy=policy
+                )
             session.begin()
             plan = CapturePlan.ambient_then_each_led(n_leds, exposure_us, **timing)
             mark: dict[str, float] = {}
@@ -169,10 +182,15 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
             host_latencies.append((releases[-1] - mark["last_arrival"]) * 1e3)
             computes.append(mark["compute"] * 1e3)
             sent, replied = psets[-1]
-            for name, value in (("handoff_ms", mark["began"] - mark["last_arrival"]), ("compute_ms", mark["compute"]),
-                                ("exposure_ms", mark["exposure"]), ("replan_ms", sent - mark["decided"]),
-                                ("pset_to_trigger_ms", pulse - sent), ("pset_to_release_ms", releases[-1] - sent),
-                                ("pset_ms", replied - sent)):
+            for name, value in (
+                ("handoff_ms", mark["began"] - mark["last_arrival"]),
+                ("compute_ms", mark["compute"]),
+                ("exposure_ms", mark["exposure"]),
+                ("replan_ms", sent - mark["decided"]),
+                ("pset_to_trigger_ms", pulse - sent),
+                ("pset_to_release_ms", releases[-1] - sent),
+                ("pset_ms", replied - sent),
+            ):
                 parts[name].append(value * 1e3)
     period_ms = period_us * 1e-3
     report: dict[str, Any] = {
@@ -196,8 +214,9 @@ def capture_bench(runs: int = 11, frame_rate_hz: float = 60.0, width: int = 320,
         "frame_period_ms": period_ms,
     }
     report["wall_target_met"] = bool(report["wall_ratio"] <= WALL_RATIO_TARGET)
-    report["latency_target_met"] = bool(report["latency_ms_median"] <= LATENCY_MEDIAN_TARGET_MS
-                                        and report["latency_ms_max"] < 1e3 / 60.0)
+    report["latency_target_met"] = bool(
+        report["latency_ms_median"] <= LATENCY_MEDIAN_TARGET_MS and report["latency_ms_max"] < 1e3 / 60.0
+    )
     return report
 
 

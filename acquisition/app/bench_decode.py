@@ -39,8 +39,9 @@ def decode_bench(width: int = 2448, height: int = 2048, rounds: int = 11, seed: 
         ``frame`` (size), ``rounds``, ``mono16_copy_ms`` and per format ``{ms, ratio_to_mono16_copy}``.
     """
     rng = np.random.default_rng(seed)
-    payloads = {name: rng.integers(0, 256, packed_size(name, width, height), dtype=np.uint8).tobytes()
-                for name in FORMATS}
+    payloads = {
+        name: rng.integers(0, 256, packed_size(name, width, height), dtype=np.uint8).tobytes() for name in FORMATS
+    }
     mono16 = bytearray(rng.integers(0, 256, 2 * width * height, dtype=np.uint8).tobytes())
     times: dict[str, list[float]] = {name: [] for name in (*FORMATS, "Mono16")}
     for _ in range(rounds):

@@ -63,7 +63,14 @@ def _run(command: Sequence[str], name: str) -> float:
 
 def bytecode_cached() -> bool:
     """Whether the bytecode of msflash's command line and estimator is cached (else each run compiles them)."""
-    sources = [importlib.util.find_spec(name) for name in ("msflash.acquisition.app.cli", "msflash.acquisition.session.analysis", "msflash.processing.ambient")]
+    sources = [
+        importlib.util.find_spec(name)
+        for name in (
+            "msflash.acquisition.app.cli",
+            "msflash.acquisition.session.analysis",
+            "msflash.processing.ambient",
+        )
+    ]
     return all(spec is not None and spec.cached is not None and Path(spec.cached).exists() for spec in sources)
 
 

@@ -27,27 +27,58 @@ def _gain_db(text: str) -> float:
 
 def add_camera_options(group: argparse._ArgumentGroup) -> None:
     """Add the camera options to ``group`` (the hardware rig's)."""
-    group.add_argument("--trigger-line", default=None, metavar="LINE",
-                       help="camera TriggerSource the booth's trigger wire is on, for --sync booth (default: the "
-                            "camera profile's, else Line0)")
-    group.add_argument("--strobe-line", default=None, metavar="LINE",
-                       help="camera output line driven by ExposureActive, for --sync camera (default: the camera "
-                            "profile's, else Line1)")
-    group.add_argument("--gain", type=_gain_db, default=None, metavar="DB",
-                       help="analogue gain in dB for every frame (SFNC Gain; checked against the camera's range)")
-    group.add_argument("--roi", type=parse_roi, default=None, metavar="X,Y,W,H",
-                       help="region of interest in pixels (after binning)")
-    group.add_argument("--binning", type=parse_binning, default=None, metavar="N|HxV",
-                       help="binning factors (BinningHorizontal, BinningVertical), e.g. 2 or 2x1")
-    group.add_argument("--feature", type=parse_feature, action="append", default=None, metavar="NAME=VALUE",
-                       help="set any GenICam feature after binning and ROI, read back (repeatable); "
-                            "`msflash devices --features ID` lists them")
+    group.add_argument(
+        "--trigger-line",
+        default=None,
+        metavar="LINE",
+        help="camera TriggerSource the booth's trigger wire is on, for --sync booth (default: the "
+        "camera profile's, else Line0)",
+    )
+    group.add_argument(
+        "--strobe-line",
+        default=None,
+        metavar="LINE",
+        help="camera output line driven by ExposureActive, for --sync camera (default: the camera "
+        "profile's, else Line1)",
+    )
+    group.add_argument(
+        "--gain",
+        type=_gain_db,
+        default=None,
+        metavar="DB",
+        help="analogue gain in dB for every frame (SFNC Gain; checked against the camera's range)",
+    )
+    group.add_argument(
+        "--roi", type=parse_roi, default=None, metavar="X,Y,W,H", help="region of interest in pixels (after binning)"
+    )
+    group.add_argument(
+        "--binning",
+        type=parse_binning,
+        default=None,
+        metavar="N|HxV",
+        help="binning factors (BinningHorizontal, BinningVertical), e.g. 2 or 2x1",
+    )
+    group.add_argument(
+        "--feature",
+        type=parse_feature,
+        action="append",
+        default=None,
+        metavar="NAME=VALUE",
+        help="set any GenICam feature after binning and ROI, read back (repeatable); "
+        "`msflash devices --features ID` lists them",
+    )
 
 
 def camera_options_from_args(args: argparse.Namespace) -> CameraOptions:
     """The options :func:`add_camera_options` parsed."""
-    return CameraOptions(trigger_line=args.trigger_line, strobe_line=args.strobe_line, gain_db=args.gain,
-                         roi=args.roi, binning=args.binning, features=tuple(args.feature or ()))
+    return CameraOptions(
+        trigger_line=args.trigger_line,
+        strobe_line=args.strobe_line,
+        gain_db=args.gain,
+        roi=args.roi,
+        binning=args.binning,
+        features=tuple(args.feature or ()),
+    )
 
 
 def given_camera_options(args: argparse.Namespace) -> list[str]:

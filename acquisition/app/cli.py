@@ -34,21 +34,47 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": ("msflash.acquisition.app.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
     "flash": ("msflash.acquisition.app.cli_process", "solve the matching or complementary flash for a sequence"),
     "synthesize": ("msflash.acquisition.app.cli_process", "synthesise the computational flash image from a sequence"),
-    "check": ("msflash.acquisition.app.cli_check", "check every frame file of a sequence against the SHA-256 recorded when it was "
-                                       "written"),
-    "run": ("msflash.acquisition.app.cli_run", "the main job: capture, estimate, flash, re-capture, synthesise, report"),
+    "check": (
+        "msflash.acquisition.app.cli_check",
+        "check every frame file of a sequence against the SHA-256 recorded when it was written",
+    ),
+    "run": (
+        "msflash.acquisition.app.cli_run",
+        "the main job: capture, estimate, flash, re-capture, synthesise, report",
+    ),
     "capture": ("msflash.acquisition.app.cli_run", "capture an ambient + each-LED sequence on a rig"),
     "bench": ("msflash.acquisition.app.cli_bench", "measure speed as ratios in one run (processing, camera, booth)"),
-    "devices": ("msflash.acquisition.app.cli_devices", "list cameras (Aravis) on the given interfaces, and booths among the serial ports"),
+    "devices": (
+        "msflash.acquisition.app.cli_devices",
+        "list cameras (Aravis) on the given interfaces, and booths among the serial ports",
+    ),
     "booth-emulator": ("msflash.acquisition.app.cli_booth", "serve the booth firmware emulator on a pseudo-terminal"),
     "doctor": ("msflash.acquisition.app.cli_booth", "check USB3 Vision, GigE and serial setup"),
-    "booth": ("msflash.acquisition.app.cli_booth_console", "booth bring-up: 'booth console PORT' is an interactive prompt"),
-    "study": ("msflash.acquisition.app.cli_study", "simulation studies (table1: Table 1; surfaces: Fig. 5; cameras: Fig. 6; xy: Fig. 7; "
-                                       "failure: where estimates fail and whether they warn; pareto: accuracy vs time)"),
-    "evaluate": ("msflash.acquisition.app.cli_evaluate", "ΔE00 against the chart under D65 and noise, for a chart sequence"),
-    "colour-study": ("msflash.acquisition.app.cli_evaluate", "simulated Fig. 9 (ΔE per ambient) and Fig. 3 (noise) study"),
-    "calibrate": ("msflash.acquisition.app.cli_calibrate", "measure LED spectra, camera responsivities, dark and linearity"),
-    "local-study": ("msflash.acquisition.app.cli_local", "study local vs global ambient estimation on simulated scenes"),
+    "booth": (
+        "msflash.acquisition.app.cli_booth_console",
+        "booth bring-up: 'booth console PORT' is an interactive prompt",
+    ),
+    "study": (
+        "msflash.acquisition.app.cli_study",
+        "simulation studies (table1: Table 1; surfaces: Fig. 5; cameras: Fig. 6; xy: Fig. 7; "
+        "failure: where estimates fail and whether they warn; pareto: accuracy vs time)",
+    ),
+    "evaluate": (
+        "msflash.acquisition.app.cli_evaluate",
+        "ΔE00 against the chart under D65 and noise, for a chart sequence",
+    ),
+    "colour-study": (
+        "msflash.acquisition.app.cli_evaluate",
+        "simulated Fig. 9 (ΔE per ambient) and Fig. 3 (noise) study",
+    ),
+    "calibrate": (
+        "msflash.acquisition.app.cli_calibrate",
+        "measure LED spectra, camera responsivities, dark and linearity",
+    ),
+    "local-study": (
+        "msflash.acquisition.app.cli_local",
+        "study local vs global ambient estimation on simulated scenes",
+    ),
 }
 """Subcommands in help order: name → (module whose ``register`` adds it, the help line it gives it).
 
@@ -102,8 +128,13 @@ def msflash_version() -> str:
 class _VersionAction(argparse._VersionAction):
     """``--version``: the installed version, looked up only when asked (importlib.metadata takes a while to import)."""
 
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: str | Sequence[Any] | None,
-                 option_string: str | None = None) -> None:
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: str | Sequence[Any] | None,
+        option_string: str | None = None,
+    ) -> None:
         self.version = f"msflash {msflash_version()}"
         super().__call__(parser, namespace, values, option_string)
 
@@ -156,9 +187,13 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     argparse.ArgumentParser
         A parser whose subcommands set ``handler``.
     """
-    parser = _Parser(prog="msflash", description="Computational multispectral flash: capture, estimate, flash, synthesise.")
+    parser = _Parser(
+        prog="msflash", description="Computational multispectral flash: capture, estimate, flash, synthesise."
+    )
     parser.add_argument("--version", action=_VersionAction)
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more diagnostics on stderr (-vv: serial byte trace)")
+    parser.add_argument(
+        "-v", "--verbose", action="count", default=0, help="more diagnostics on stderr (-vv: serial byte trace)"
+    )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     wanted = None if argv is None else _command_module(argv)
     registered: set[str] = set()
@@ -182,7 +217,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser = build_parser(words)
         args = parser.parse_args(words)
         logging.basicConfig(
-            level=logging.WARNING - 10 * min(args.verbose, 2), format="msflash: %(name)s: %(message)s",
+            level=logging.WARNING - 10 * min(args.verbose, 2),
+            format="msflash: %(name)s: %(message)s",
             stream=sys.stderr,
         )
         if not getattr(args, "handler", None):
@@ -195,8 +231,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write("msflash: interrupted; LEDs off; frames captured so far are kept (marked incomplete)\n")
         return 130
     except _terminated() as stop:
-        sys.stderr.write("msflash: terminated (SIGTERM); LEDs off; frames captured so far are kept (marked "
-                         "incomplete)\n")
+        sys.stderr.write(
+            "msflash: terminated (SIGTERM); LEDs off; frames captured so far are kept (marked incomplete)\n"
+        )
         code = getattr(stop, "code", None)  # Terminated is a SystemExit
         return int(code) if isinstance(code, int) else 143
     except BrokenPipeError:
@@ -238,8 +275,10 @@ def _crashed(words: Sequence[str], err: Exception) -> int:
 
     command = _command_name(words)
     stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
-    text = (f"msflash {msflash_version()} crashed\ncommand: msflash {' '.join(map(repr, words))}\n"
-            f"python: {sys.version.split()[0]}\n\n" + "".join(traceback.format_exception(err)))
+    text = (
+        f"msflash {msflash_version()} crashed\ncommand: msflash {' '.join(map(repr, words))}\n"
+        f"python: {sys.version.split()[0]}\n\n" + "".join(traceback.format_exception(err))
+    )
     where = "nowhere (the crash log could not be written)"
     for directory in (crash_log_directory(), Path(os.environ.get("TMPDIR") or "/tmp")):
         path = directory / f"crash-{stamp}-{os.getpid()}.log"
@@ -254,13 +293,21 @@ def _crashed(words: Sequence[str], err: Exception) -> int:
     message = " ".join((str(err) or "").split())
     if len(message) > 300:
         message = message[:300] + "…"
-    sys.stderr.write(f"msflash: {command}: unexpected {type(err).__name__}"
-                     f"{': ' + message if message else ''} — a bug; details in {where}\n")
+    sys.stderr.write(
+        f"msflash: {command}: unexpected {type(err).__name__}"
+        f"{': ' + message if message else ''} — a bug; details in {where}\n"
+    )
     return 1
 
 
-def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
-                  file: object = None, line: str | None = None) -> None:
+def _show_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: object = None,
+    line: str | None = None,
+) -> None:
     """A warning as one line saying what it means, not a source line the user cannot act on.
 
     numpy's RuntimeWarnings (invalid value, divide by zero, overflow) mean a computation met
@@ -268,8 +315,10 @@ def _show_warning(message: Warning | str, category: type[Warning], filename: str
     """
     text = " ".join(str(message).split())
     if issubclass(category, RuntimeWarning) and " encountered in " in text:  # numpy's floating-point errors
-        sys.stderr.write(f"msflash: warning: a numerical step met {text!r} (numpy); results computed from it "
-                         "may hold NaN or infinity — check the input for empty, saturated or constant frames\n")
+        sys.stderr.write(
+            f"msflash: warning: a numerical step met {text!r} (numpy); results computed from it "
+            "may hold NaN or infinity — check the input for empty, saturated or constant frames\n"
+        )
         return
     sys.stderr.write(f"msflash: warning: {text} ({category.__name__})\n")
 

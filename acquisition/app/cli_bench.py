@@ -71,15 +71,27 @@ def _fmt(value: Any) -> str:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``bench``."""
     bench = subparsers.add_parser("bench", help="measure speed as ratios in one run (processing, camera, booth)")
-    bench.add_argument("--part", action="append", choices=("processing", "startup", *_OPTIONAL_PARTS),
-                       help="run only this part (repeatable); default all")
+    bench.add_argument(
+        "--part",
+        action="append",
+        choices=("processing", "startup", *_OPTIONAL_PARTS),
+        help="run only this part (repeatable); default all",
+    )
     bench.add_argument("--height", type=int, default=1024, help="frame height for the processing part")
     bench.add_argument("--width", type=int, default=1280, help="frame width for the processing part")
     bench.add_argument("--repeats", type=int, default=5, help="timing repeats (the best is kept)")
-    bench.add_argument("--rounds", type=positive_int, default=9,
-                       help="start-up part: interleaved runs of each command (the medians are compared)")
-    bench.add_argument("--sequence", metavar="DIR", default=None,
-                       help="start-up part: the sequence 'estimate' reads (default: the demo's, captured on the "
-                            "simulated rig into a temporary folder)")
+    bench.add_argument(
+        "--rounds",
+        type=positive_int,
+        default=9,
+        help="start-up part: interleaved runs of each command (the medians are compared)",
+    )
+    bench.add_argument(
+        "--sequence",
+        metavar="DIR",
+        default=None,
+        help="start-up part: the sequence 'estimate' reads (default: the demo's, captured on the "
+        "simulated rig into a temporary folder)",
+    )
     bench.add_argument("--json", action="store_true", help="print one JSON object")
     bench.set_defaults(handler=_bench)

@@ -25,21 +25,32 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     emu.add_argument("--names", default=",".join(DEFAULT_NAMES), help="comma-separated channel names")
     emu.add_argument(
-        "--peaks-nm", default=",".join(f"{p:g}" for p in DEFAULT_PEAKS_NM),
+        "--peaks-nm",
+        default=",".join(f"{p:g}" for p in DEFAULT_PEAKS_NM),
         help="comma-separated peak wavelengths in nm, one per name",
     )
     emu.add_argument("--watchdog-s", type=float, default=3.0, help="host-silence timeout (0 disables)")
-    emu.add_argument("--fault", default=None, metavar="KIND:P,…",
-                     help="random link faults, each KIND at most once: drop:P / flip:P (a byte lost / a bit flipped "
-                          "in an outgoing frame), garble:P (a bit flipped in a request), stall:P[:SECONDS] (stop "
-                          "answering, for good without SECONDS), close:P (hang up); P per frame, e.g. "
-                          "drop:0.01,flip:0.001")
+    emu.add_argument(
+        "--fault",
+        default=None,
+        metavar="KIND:P,…",
+        help="random link faults, each KIND at most once: drop:P / flip:P (a byte lost / a bit flipped "
+        "in an outgoing frame), garble:P (a bit flipped in a request), stall:P[:SECONDS] (stop "
+        "answering, for good without SECONDS), close:P (hang up); P per frame, e.g. "
+        "drop:0.01,flip:0.001",
+    )
     emu.add_argument("--seed", type=int, default=0, help="seed of the fault draws (default 0)")
-    emu.add_argument("--fault-after", type=int, default=0, metavar="N",
-                     help="let the first N requests through unfaulted (default 0)")
-    emu.add_argument("--state-file", type=Path, default=None, metavar="FILE.json",
-                     help="keep the booth's state (LEDs, sequencer, watchdog, faults injected) in this JSON file, "
-                          "rewritten when it changes and at exit")
+    emu.add_argument(
+        "--fault-after", type=int, default=0, metavar="N", help="let the first N requests through unfaulted (default 0)"
+    )
+    emu.add_argument(
+        "--state-file",
+        type=Path,
+        default=None,
+        metavar="FILE.json",
+        help="keep the booth's state (LEDs, sequencer, watchdog, faults injected) in this JSON file, "
+        "rewritten when it changes and at exit",
+    )
     emu.set_defaults(handler=booth_emulator)
 
     doc = subparsers.add_parser(
@@ -61,8 +72,9 @@ def _emulator_from_args(args: argparse.Namespace) -> BoothEmulator:
     if len(names) != len(peaks):
         raise UsageError(f"--names/--peaks-nm: {len(names)} names but {len(peaks)} peaks; expected one peak per name")
     if not 0 <= args.watchdog_s < math.inf:
-        raise UsageError(f"--watchdog-s {args.watchdog_s}: not a finite time ≥ 0; expected 0 (off) or a positive "
-                         "number of seconds")
+        raise UsageError(
+            f"--watchdog-s {args.watchdog_s}: not a finite time ≥ 0; expected 0 (off) or a positive number of seconds"
+        )
     try:
         return BoothEmulator(names=names, peaks_nm=peaks, watchdog_s=args.watchdog_s)
     except ValueError as err:
@@ -105,13 +117,18 @@ def booth_emulator(args: argparse.Namespace, *, stop: threading.Event | None = N
         try:
             record()
         except OSError as err:
-            raise UsageError(f"--state-file {state_file}: cannot write it ({err.strerror or err}); expected a file "
-                             "path in a writable directory") from err
+            raise UsageError(
+                f"--state-file {state_file}: cannot write it ({err.strerror or err}); expected a file "
+                "path in a writable directory"
+            ) from err
         try:
             sys.stdout.write(server.port + "\n")
             sys.stdout.flush()
-            progress(f"booth emulator on {server.port} ({len(emulator.names)} channels)"
-                     + (f", faults {args.fault} (seed {args.seed})" if injector is not None else "") + "; Ctrl-C to stop")
+            progress(
+                f"booth emulator on {server.port} ({len(emulator.names)} channels)"
+                + (f", faults {args.fault} (seed {args.seed})" if injector is not None else "")
+                + "; Ctrl-C to stop"
+            )
             while not stop.wait(0.05 if state_file is not None else 0.2):
                 record()
                 if server.closed:

@@ -20,12 +20,14 @@ from msflash.led_controller.console import BoothConsole, ConsoleQuit
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``booth`` command with its ``console`` subcommand."""
     booth = subparsers.add_parser(
-        "booth", help="booth bring-up: 'booth console PORT' is an interactive prompt",
+        "booth",
+        help="booth bring-up: 'booth console PORT' is an interactive prompt",
         description="Tools for one booth on a serial port.",
     )
     actions = booth.add_subparsers(dest="booth_command", metavar="ACTION")
     console = actions.add_parser(
-        "console", help="type booth commands; see each frame and what it means",
+        "console",
+        help="type booth commands; see each frame and what it means",
         description="Open the booth on PORT and read commands (levels 0.5 0 1 …, table …, status, help) "
         "from stdin; each is checked, framed, sent, and its reply explained. LEDs off on exit.",
     )

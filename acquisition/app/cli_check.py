@@ -35,6 +35,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``check``."""
     check = subparsers.add_parser("check", help=CHECK_HELP)
     check.add_argument("sequence", help="sequence directory (format v1)")
-    check.add_argument("--json", action="store_true",
-                       help="print one JSON object (the summary and every file's state) instead of the lines")
+    check.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object (the summary and every file's state) instead of the lines",
+    )
     check.set_defaults(handler=_check)

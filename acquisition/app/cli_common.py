@@ -82,5 +82,7 @@ def output_directory(path: str | os.PathLike | None) -> Path | None:
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
-        raise UsageError(f"--out {out}: cannot create the folder ({err.strerror or err}); expected a writable path") from None
+        raise UsageError(
+            f"--out {out}: cannot create the folder ({err.strerror or err}); expected a writable path"
+        ) from None
     return out

@@ -27,9 +27,18 @@ def _camera_at(address: str) -> dict[str, Any]:
 
     with AravisCamera(address, interfaces="gige") as camera:
         info = camera.info
-        return {"device_id": info.extra.get("device_id", ""), "interface": "gige", "vendor": info.vendor,
-                "model": info.model, "serial": info.serial, "address": address, "physical_id": "",
-                "pixel_format": info.pixel_format, "width": info.width, "height": info.height}
+        return {
+            "device_id": info.extra.get("device_id", ""),
+            "interface": "gige",
+            "vendor": info.vendor,
+            "model": info.model,
+            "serial": info.serial,
+            "address": address,
+            "physical_id": "",
+            "pixel_format": info.pixel_format,
+            "width": info.width,
+            "height": info.height,
+        }
 
 
 def _devices(args: argparse.Namespace) -> int:
@@ -52,24 +61,36 @@ def _devices(args: argparse.Namespace) -> int:
         cameras.append(_camera_at(address))
     booths = [_booth_entry(port) for port in find_booths()]
     if args.json:
-        print_json({"interfaces": list(interfaces), "aravis": aravis_camera.Aravis._version,
-                    "cameras": cameras, "booths": booths})
+        print_json(
+            {
+                "interfaces": list(interfaces),
+                "aravis": aravis_camera.Aravis._version,
+                "cameras": cameras,
+                "booths": booths,
+            }
+        )
         return 0
     if not cameras:
         print(f"no camera found on {','.join(interfaces)}")
         if "gige" not in interfaces:
-            progress("devices: GigE Vision not searched; add --interfaces gige (broadcasts) "
-                     "or --address IP (one camera, no broadcast)")
+            progress(
+                "devices: GigE Vision not searched; add --interfaces gige (broadcasts) "
+                "or --address IP (one camera, no broadcast)"
+            )
     for camera in cameras:
         where = camera["address"] or camera["physical_id"]
-        print(f"{camera['device_id']}\t{camera['interface']}\t{camera['vendor']} {camera['model']}\t"
-              f"serial {camera['serial']}\t{where}")
+        print(
+            f"{camera['device_id']}\t{camera['interface']}\t{camera['vendor']} {camera['model']}\t"
+            f"serial {camera['serial']}\t{where}"
+        )
     if not booths:
         print("no booth found among the serial ports")
         progress("devices: 'msflash doctor' says why a booth is not found (USB id, permissions, ModemManager)")
     for booth in booths:
-        print(f"booth\t{booth['device']}\t{booth['usb_id']}\t{booth['product'] or booth['description']}\t"
-              f"serial {booth['serial_number'] or '-'}")
+        print(
+            f"booth\t{booth['device']}\t{booth['usb_id']}\t{booth['product'] or booth['description']}\t"
+            f"serial {booth['serial_number'] or '-'}"
+        )
     return 0
 
 
@@ -91,23 +112,41 @@ def _features(aravis_camera: Any, device: str, interfaces: tuple[str, ...], as_j
 
 
 def _booth_entry(port: SerialPortInfo) -> dict[str, Any]:
-    return {"device": port.device, "usb_id": port.usb_id, "product": port.product,
-            "serial_number": port.serial_number, "description": port.description}
+    return {
+        "device": port.device,
+        "usb_id": port.usb_id,
+        "product": port.product,
+        "serial_number": port.serial_number,
+        "description": port.description,
+    }
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``devices``."""
     devices = subparsers.add_parser(
-        "devices", help="list cameras (Aravis) on the given interfaces, and booths among the serial ports",
+        "devices",
+        help="list cameras (Aravis) on the given interfaces, and booths among the serial ports",
         description="List cameras found by Aravis, and the serial ports that are msflash booths (by USB "
-                    "id or product string). GigE Vision discovery broadcasts on every network "
-                    "interface and runs only with --interfaces gige.")
-    devices.add_argument("--interfaces", default=DEFAULT_INTERFACES,
-                         help="comma-separated subset of fake,gige,usb3 (default: %(default)s)")
-    devices.add_argument("--address", action="append", metavar="IP",
-                         help="also query the GigE Vision camera at IP directly, without discovery (repeatable)")
-    devices.add_argument("--features", default=None, metavar="ID",
-                         help="list every GenICam feature of camera ID (device id, serial or IP on --interfaces): "
-                              "type, access, value, and its range or entries; no booth search")
+        "id or product string). GigE Vision discovery broadcasts on every network "
+        "interface and runs only with --interfaces gige.",
+    )
+    devices.add_argument(
+        "--interfaces",
+        default=DEFAULT_INTERFACES,
+        help="comma-separated subset of fake,gige,usb3 (default: %(default)s)",
+    )
+    devices.add_argument(
+        "--address",
+        action="append",
+        metavar="IP",
+        help="also query the GigE Vision camera at IP directly, without discovery (repeatable)",
+    )
+    devices.add_argument(
+        "--features",
+        default=None,
+        metavar="ID",
+        help="list every GenICam feature of camera ID (device id, serial or IP on --interfaces): "
+        "type, access, value, and its range or entries; no booth search",
+    )
     devices.add_argument("--json", action="store_true", help="print one JSON object")
     devices.set_defaults(handler=_devices)

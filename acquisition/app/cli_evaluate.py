@@ -25,8 +25,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     sequence = read_sequence(directory)
     out = output_directory(args.out if args.out else _default_out(directory))
     assert out is not None  # a path was given
-    result = evaluate_sequence(sequence, out, args.chart, args.patch_px, args.border_px, args.margin_px, args.bounds,
-                               args.target)
+    result = evaluate_sequence(
+        sequence, out, args.chart, args.patch_px, args.border_px, args.margin_px, args.bounds, args.target
+    )
     result = public_result(result)
     if args.json:
         print_json(result)
@@ -41,28 +42,47 @@ def _study(args: argparse.Namespace) -> int:
     ambients = tuple(a.strip() for a in args.ambients.split(",") if a.strip())
     unknown = [a for a in ambients if a not in lights.AMBIENTS]
     if unknown or not ambients:
-        raise UsageError(f"--ambients '{args.ambients}': expected a comma-separated list of {', '.join(lights.AMBIENTS)}")
+        raise UsageError(
+            f"--ambients '{args.ambients}': expected a comma-separated list of {', '.join(lights.AMBIENTS)}"
+        )
     out = output_directory(args.out if args.out else (None if args.json else Path("colour-study")))
-    payload = colour_study(out, ambients, args.seed, args.patch_px, args.cfa, args.bounds, depth_m=args.depth_m,
-                           distance_m=args.distance_m, water_type=args.water)
+    payload = colour_study(
+        out,
+        ambients,
+        args.seed,
+        args.patch_px,
+        args.cfa,
+        args.bounds,
+        depth_m=args.depth_m,
+        distance_m=args.distance_m,
+        water_type=args.water,
+    )
     if args.json:
         print_json(payload)
     else:
         for name, s in payload["delta_e"].items():
-            progress(f"{name}: ΔE00 ambient {s['ambient']:.2f}, matching {s['matching']:.2f}, "
-                     f"complementary {s['complementary']:.2f} ({100 * s['complementary_cut']:.0f}% cut)")
+            progress(
+                f"{name}: ΔE00 ambient {s['ambient']:.2f}, matching {s['matching']:.2f}, "
+                f"complementary {s['complementary']:.2f} ({100 * s['complementary_cut']:.0f}% cut)"
+            )
         print(out)
     return 0
 
 
 def _bounds_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--bounds", default="physical", choices=("physical", "nonnegative"),
-                        help="flash weights in [0, 1] (physical, default: re-capturable) or ≥ 0 (computational)")
+    parser.add_argument(
+        "--bounds",
+        default="physical",
+        choices=("physical", "nonnegative"),
+        help="flash weights in [0, 1] (physical, default: re-capturable) or ≥ 0 (computational)",
+    )
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``evaluate`` and ``colour-study``."""
-    evaluate = subparsers.add_parser("evaluate", help="ΔE00 against the chart under D65 and noise, for a chart sequence")
+    evaluate = subparsers.add_parser(
+        "evaluate", help="ΔE00 against the chart under D65 and noise, for a chart sequence"
+    )
     evaluate.add_argument("sequence", metavar="SEQ", help="sequence directory (or a run directory holding 'sequence')")
     evaluate.add_argument("--chart", required=True, choices=CHARTS, help="the chart in the scene")
     layout_options(evaluate)

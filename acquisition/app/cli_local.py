@@ -15,11 +15,19 @@ from msflash.processing.local import DEFAULT_TILES
 def _local_study(args: argparse.Namespace) -> int:
     from msflash.processing.study.local import run_study  # matplotlib and scipy only when asked
 
-    progress(f"local study: {args.uniform} uniform scenes, {args.mixed} boundary + {args.mixed} gradient scenes, "
-             f"{args.tiles}x{args.tiles} tiles, seeds from {args.seed0}")
+    progress(
+        f"local study: {args.uniform} uniform scenes, {args.mixed} boundary + {args.mixed} gradient scenes, "
+        f"{args.tiles}x{args.tiles} tiles, seeds from {args.seed0}"
+    )
     out = output_directory(args.out)
-    summary = run_study(n_uniform=args.uniform, n_mixed=args.mixed, tiles=args.tiles, seed0=args.seed0,
-                        timing=not args.no_timing, sweep=not args.no_timing)
+    summary = run_study(
+        n_uniform=args.uniform,
+        n_mixed=args.mixed,
+        tiles=args.tiles,
+        seed0=args.seed0,
+        timing=not args.no_timing,
+        sweep=not args.no_timing,
+    )
     if out is not None:
         _write(summary, out)
     scenarios = summary.pop("scenarios")
@@ -29,23 +37,29 @@ def _local_study(args: argparse.Namespace) -> int:
     for kind in ("uniform", "boundary", "gradient"):
         entry = summary.get(kind)
         if entry:
-            print(f"{kind:9s} n={entry['n']:4d}  auto→global {entry['global_rate']:6.1%}  spectrum RMSE global "
-                  f"{entry['rmse_global']:.4f} auto {entry['rmse_auto']:.4f} (cut {entry['auto_cut']:+.1%}, of the excess "
-                  f"over the LED bound {entry['excess_cut']:+.1%}), each ambient alone {entry['rmse_alone']:.4f} "
-                  f"(cut {entry['alone_cut']:+.1%}), LED bound {entry['rmse_bound']:.4f}, two regions {entry['regions_rate']:.0%}; "
-                  f"global on denoised statistics {entry['rmse_global_denoised']:.4f} (cut {entry['locality_cut']:+.1%}), "
-                  f"auto without the noise correction {entry['rmse_auto_observed']:.4f}")
+            print(
+                f"{kind:9s} n={entry['n']:4d}  auto→global {entry['global_rate']:6.1%}  spectrum RMSE global "
+                f"{entry['rmse_global']:.4f} auto {entry['rmse_auto']:.4f} (cut {entry['auto_cut']:+.1%}, of the excess "
+                f"over the LED bound {entry['excess_cut']:+.1%}), each ambient alone {entry['rmse_alone']:.4f} "
+                f"(cut {entry['alone_cut']:+.1%}), LED bound {entry['rmse_bound']:.4f}, two regions {entry['regions_rate']:.0%}; "
+                f"global on denoised statistics {entry['rmse_global_denoised']:.4f} (cut {entry['locality_cut']:+.1%}), "
+                f"auto without the noise correction {entry['rmse_auto_observed']:.4f}"
+            )
     both = summary.get("two_illuminant")
     if both:
-        print(f"two-illuminant (boundary + gradient) n={both['n']}: global {both['rmse_global']:.4f} auto "
-              f"{both['rmse_auto']:.4f} (cut {both['auto_cut']:+.1%}), each ambient alone {both['rmse_alone']:.4f} "
-              f"(cut {both['alone_cut']:+.1%}); against the global model on denoised statistics "
-              f"{both['rmse_global_denoised']:.4f}: cut {both['locality_cut']:+.1%}")
+        print(
+            f"two-illuminant (boundary + gradient) n={both['n']}: global {both['rmse_global']:.4f} auto "
+            f"{both['rmse_auto']:.4f} (cut {both['auto_cut']:+.1%}), each ambient alone {both['rmse_alone']:.4f} "
+            f"(cut {both['alone_cut']:+.1%}); against the global model on denoised statistics "
+            f"{both['rmse_global_denoised']:.4f}: cut {both['locality_cut']:+.1%}"
+        )
     timing = summary.get("timing")
     if timing:
-        print(f"cost on {timing['shape'][0]}x{timing['shape'][1]}: global {timing['global_s'] * 1e3:.1f} ms, auto "
-              f"{timing['auto_s'] * 1e3:.1f} ms ({timing['auto_ratio']:.2f}x), local {timing['local_s'] * 1e3:.1f} ms "
-              f"({timing['local_ratio']:.2f}x)")
+        print(
+            f"cost on {timing['shape'][0]}x{timing['shape'][1]}: global {timing['global_s'] * 1e3:.1f} ms, auto "
+            f"{timing['auto_s'] * 1e3:.1f} ms ({timing['auto_ratio']:.2f}x), local {timing['local_s'] * 1e3:.1f} ms "
+            f"({timing['local_ratio']:.2f}x)"
+        )
     if args.out:
         print(f"wrote {Path(args.out) / 'local-study.json'} ({len(scenarios)} scenarios) and plots")
     return 0
@@ -73,26 +87,39 @@ def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
     colours = {"uniform": "tab:blue", "boundary": "tab:red", "gradient": "tab:orange"}
     for kind in KINDS:
         rows = [r for r in results if r["kind"] == kind]
-        axes[0].scatter([r["rmse_global"] for r in rows], [r["rmse_auto"] for r in rows], s=10, c=colours[kind], label=kind)
+        axes[0].scatter(
+            [r["rmse_global"] for r in rows], [r["rmse_auto"] for r in rows], s=10, c=colours[kind], label=kind
+        )
         best = [min(v for key, v in r["scores"].items() if key != "global") for r in rows]
         axes[1].hist(best, bins=30, alpha=0.6, color=colours[kind], label=kind)
     top = max(max(r["rmse_global"] for r in results), max(r["rmse_auto"] for r in results))
     axes[0].plot([0, top], [0, top], "k:", lw=1)
     axes[0].plot([0, top], [0, 0.7 * top], "k--", lw=1, label="30 % cut")
-    axes[0].set(xlabel="global spectrum RMSE (per pixel)", ylabel="auto spectrum RMSE (per pixel)", title="per scenario")
+    axes[0].set(
+        xlabel="global spectrum RMSE (per pixel)", ylabel="auto spectrum RMSE (per pixel)", title="per scenario"
+    )
     axes[0].legend()
     axes[1].axvline(1.0, color="k", lw=1)
     axes[1].axvline(1.0 - SELECTION_MARGIN, color="k", ls="--", lw=1, label="decision threshold")
     axes[1].set(xlabel="best local held-out error / global's", ylabel="scenarios", title="model selection")
     axes[1].legend()
     # Where the error stays: mean RMSE of every estimate and of the two references, per scene kind.
-    names = (("rmse_global", "global"), ("rmse_tiles", "tiles"), ("rmse_auto", "auto"),
-             ("rmse_alone", "each ambient alone"), ("rmse_bound", "LED bound"))
+    names = (
+        ("rmse_global", "global"),
+        ("rmse_tiles", "tiles"),
+        ("rmse_auto", "auto"),
+        ("rmse_alone", "each ambient alone"),
+        ("rmse_bound", "LED bound"),
+    )
     kinds = [kind for kind in KINDS if kind in summary]
     width = 0.8 / len(names)
     for index, (key, label) in enumerate(names):
-        axes[2].bar(np.arange(len(kinds)) + (index - (len(names) - 1) / 2) * width, [summary[k][key] for k in kinds],
-                    width, label=label)
+        axes[2].bar(
+            np.arange(len(kinds)) + (index - (len(names) - 1) / 2) * width,
+            [summary[k][key] for k in kinds],
+            width,
+            label=label,
+        )
     axes[2].set_xticks(np.arange(len(kinds)), kinds)
     axes[2].set(ylabel="mean spectrum RMSE (per pixel)", title="estimates and references")
     axes[2].set_ylim(0.12, None)
@@ -105,8 +132,11 @@ def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
         for r, elapsed in zip(sweep, times):
             axes[3].annotate(f"{r['tiles']}²", (elapsed, r["rmse_local"]))
         axes[3].axhline(float(np.mean([r["rmse_global"] for r in sweep])), color="k", ls=":", label="global")
-        axes[3].set(xlabel="time per estimate, 240×320 frame (ms)", ylabel="spectrum RMSE (boundary scenes)",
-                    title="accuracy vs time (tiles per side)")
+        axes[3].set(
+            xlabel="time per estimate, 240×320 frame (ms)",
+            ylabel="spectrum RMSE (boundary scenes)",
+            title="accuracy vs time (tiles per side)",
+        )
         axes[3].legend()
     figure.tight_layout()
     path = out / "local-study.png"
@@ -120,11 +150,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``local-study``."""
     study = subparsers.add_parser("local-study", help="study local vs global ambient estimation on simulated scenes")
     study.add_argument("--uniform", type=positive_int, default=100, help="uniform-ambient scenes (default 100)")
-    study.add_argument("--mixed", type=positive_int, default=30,
-                       help="two-illuminant scenes of each kind, boundary and gradient (default 30)")
-    study.add_argument("--tiles", type=positive_int, default=DEFAULT_TILES, help=f"tiles per side (default {DEFAULT_TILES})")
-    study.add_argument("--seed0", type=positive_int, default=1000,
-                       help="first seed: uniform scenes seed0+i, mixed seed0+10000+i, tiles sweep seed0+20000+i (default 1000)")
+    study.add_argument(
+        "--mixed",
+        type=positive_int,
+        default=30,
+        help="two-illuminant scenes of each kind, boundary and gradient (default 30)",
+    )
+    study.add_argument(
+        "--tiles", type=positive_int, default=DEFAULT_TILES, help=f"tiles per side (default {DEFAULT_TILES})"
+    )
+    study.add_argument(
+        "--seed0",
+        type=positive_int,
+        default=1000,
+        help="first seed: uniform scenes seed0+i, mixed seed0+10000+i, tiles sweep seed0+20000+i (default 1000)",
+    )
     study.add_argument("--no-timing", action="store_true", help="skip the full-size timing and the tiles sweep")
     study.add_argument("--out", default=None, help="directory for local-study.json and local-study.png")
     study.add_argument("--json", action="store_true", help="print the summary as one JSON object")

@@ -37,8 +37,12 @@ def _weights(text: str, n_leds: int) -> np.ndarray:
 
 
 def _add_calibration_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--calibration", metavar="DIR", default=None,
-                        help="LED spectra / responsivities from this calibration (msflash calibrate) override the sequence's")
+    parser.add_argument(
+        "--calibration",
+        metavar="DIR",
+        default=None,
+        help="LED spectra / responsivities from this calibration (msflash calibrate) override the sequence's",
+    )
 
 
 def _read_calibrated(args: argparse.Namespace):
@@ -80,10 +84,14 @@ and ``flash`` do not use it yet."""
 
 def add_model_option(parser: argparse.ArgumentParser) -> None:
     """``--model led|prior|auto`` (docs/light-prior.md)."""
-    parser.add_argument("--model", default=DEFAULT_AMBIENT_MODEL, choices=AMBIENT_MODELS,
-                        help="ambient model: led (a mix of the LED spectra, eq. 4-6; default), prior (a basis learnt "
-                             "from measured lights, read through the surfaces' colours; needs the camera's "
-                             "responsivities), auto (prior only where it predicts held-out pixels better)")
+    parser.add_argument(
+        "--model",
+        default=DEFAULT_AMBIENT_MODEL,
+        choices=AMBIENT_MODELS,
+        help="ambient model: led (a mix of the LED spectra, eq. 4-6; default), prior (a basis learnt "
+        "from measured lights, read through the surfaces' colours; needs the camera's "
+        "responsivities), auto (prior only where it predicts held-out pixels better)",
+    )
 
 
 def _estimate(args: argparse.Namespace) -> int:
@@ -105,8 +113,10 @@ def _estimate(args: argparse.Namespace) -> int:
         names = payload["led_names"]
         print(f"ambient estimate of {sequence.directory} ({estimate.method}, alpha {estimate.alpha:.3g})")
         print("ambient weights: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, estimate.ambient_weights)))
-        print(f"relative residual {estimate.relative_residual:.4f}, condition {estimate.condition_number:.3g}, "
-              f"{estimate.n_samples} samples, {estimate.saturated_fraction:.1%} saturated")
+        print(
+            f"relative residual {estimate.relative_residual:.4f}, condition {estimate.condition_number:.3g}, "
+            f"{estimate.n_samples} samples, {estimate.saturated_fraction:.1%} saturated"
+        )
         peak = float(np.max(payload["spectrum"])) or 1.0
         for wavelength, value in zip(sequence.wavelengths_nm, payload["spectrum"]):
             print(f"  {wavelength:6.1f} nm  {value / peak:7.4f}  {'#' * int(round(max(value, 0) / peak * 40))}")
@@ -123,8 +133,9 @@ def _estimate_with_prior(args: argparse.Namespace, sequence: Sequence) -> int:
 
     stack = analysis.load_frame_stack(sequence)
     if args.method != "global":
-        local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,
-                                                 stack=stack, bin_factor=args.bin)
+        local = analysis.estimate_sequence_local(
+            sequence, args.method, args.solver, args.alpha, args.tiles, stack=stack, bin_factor=args.bin
+        )
         led, payload = local.global_estimate, analysis.local_estimate_payload(sequence, local)
         varies = local.model == "local"
     else:
@@ -137,8 +148,13 @@ def _estimate_with_prior(args: argparse.Namespace, sequence: Sequence) -> int:
     if args.model == "prior":
         chosen, reason = "prior", "asked for the light prior (--model prior)"
     elif varies:
-        chosen, reason = "led", ("the illuminant varies across the scene (the local LED model was chosen); "
-                                 "the light prior is one global spectrum")
+        chosen, reason = (
+            "led",
+            (
+                "the illuminant varies across the scene (the local LED model was chosen); "
+                "the light prior is one global spectrum"
+            ),
+        )
     else:
         chosen, reason = choice["model"], choice["reason"]
     payload["model"] = chosen
@@ -174,7 +190,9 @@ def _flash(args: argparse.Namespace) -> int:
     _refuse_dark_ambient(sequence, estimate, _FLASH_GOAL[args.mode])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
-        solution = analysis.solve_sequence_flash(sequence, args.mode, estimate.ambient_weights, args.target, args.bounds)
+        solution = analysis.solve_sequence_flash(
+            sequence, args.mode, estimate.ambient_weights, args.target, args.bounds
+        )
     for warning in caught:
         progress(f"warning: {warning.message}")
     payload = analysis.flash_payload(sequence, solution, args.target)
@@ -187,8 +205,10 @@ def _flash(args: argparse.Namespace) -> int:
         print("flash weights: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, solution.flash_weights)))
         if solution.scale is not None:
             print(f"scale s = {solution.scale:.4g} (target {args.target})")
-        print(f"camera-space chromatic error {solution.relative_error:.4f}"
-              + ("" if solution.target_reached else " (target NOT reached)"))
+        print(
+            f"camera-space chromatic error {solution.relative_error:.4f}"
+            + ("" if solution.target_reached else " (target NOT reached)")
+        )
     return 0
 
 
@@ -212,17 +232,26 @@ def _synthesize(args: argparse.Namespace) -> int:
 # -- spatially varying ambient (issue 9) -------------------------------------------------------
 def add_local_options(parser: argparse.ArgumentParser) -> None:
     """``--method auto|global|local`` and ``--tiles N`` (docs/local-estimation.md)."""
-    parser.add_argument("--method", default=DEFAULT_LOCAL_METHOD, choices=LOCAL_METHODS,
-                        help="ambient model: global (one spectrum, the paper), local (per tile, smoothed across "
-                             "neighbours) or auto (chosen by leave-one-tile-out prediction error; uniform scenes "
-                             f"stay global) (default: {DEFAULT_LOCAL_METHOD})")
-    parser.add_argument("--tiles", type=positive_int, default=DEFAULT_TILES,
-                        help=f"tiles per side for local estimation (default {DEFAULT_TILES})")
+    parser.add_argument(
+        "--method",
+        default=DEFAULT_LOCAL_METHOD,
+        choices=LOCAL_METHODS,
+        help="ambient model: global (one spectrum, the paper), local (per tile, smoothed across "
+        "neighbours) or auto (chosen by leave-one-tile-out prediction error; uniform scenes "
+        f"stay global) (default: {DEFAULT_LOCAL_METHOD})",
+    )
+    parser.add_argument(
+        "--tiles",
+        type=positive_int,
+        default=DEFAULT_TILES,
+        help=f"tiles per side for local estimation (default {DEFAULT_TILES})",
+    )
 
 
 def _estimate_local(args: argparse.Namespace, sequence: Sequence) -> int:
-    local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,
-                                             bin_factor=args.bin)
+    local = analysis.estimate_sequence_local(
+        sequence, args.method, args.solver, args.alpha, args.tiles, bin_factor=args.bin
+    )
     _refuse_dark_ambient(sequence, local.global_estimate, "estimate")
     payload = analysis.local_estimate_payload(sequence, local)
     for warning in payload["warnings"]:
@@ -231,15 +260,24 @@ def _estimate_local(args: argparse.Namespace, sequence: Sequence) -> int:
         print_json(payload)
         return 0
     names = payload["led_names"]
-    chosen = f"{local.model} model" + (f", {local.tiles.shape[0]}x{local.tiles.shape[1]} tiles, smoothing "
-                                       f"{local.smoothing:g} tiles" if local.model == "local" else "")
-    print(f"ambient estimate of {payload['sequence']} ({chosen}; asked {local.method}; solver {local.global_estimate.method})")
+    chosen = f"{local.model} model" + (
+        f", {local.tiles.shape[0]}x{local.tiles.shape[1]} tiles, smoothing {local.smoothing:g} tiles"
+        if local.model == "local"
+        else ""
+    )
+    print(
+        f"ambient estimate of {payload['sequence']} ({chosen}; asked {local.method}; solver {local.global_estimate.method})"
+    )
     if local.selection is not None:
-        print("held-out error relative to global: " + ", ".join(f"{k} {v:.3f}" for k, v in local.selection.scores.items()))
+        print(
+            "held-out error relative to global: " + ", ".join(f"{k} {v:.3f}" for k, v in local.selection.scores.items())
+        )
     label = "area-weighted mean ambient weights" if local.model == "local" else "ambient weights"
     print(f"{label}: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, payload["ambient_weights"])))
     if local.model == "local":
-        print(f"tile relative residuals: median {np.median(local.tile_residuals):.4f}, max {local.tile_residuals.max():.4f}")
+        print(
+            f"tile relative residuals: median {np.median(local.tile_residuals):.4f}, max {local.tile_residuals.max():.4f}"
+        )
     peak = float(np.max(payload["spectrum"])) or 1.0
     for wavelength, value in zip(payload["wavelengths_nm"], payload["spectrum"]):
         print(f"  {wavelength:6.1f} nm  {value / peak:7.4f}  {'#' * int(round(max(value, 0) / peak * 40))}")
@@ -248,13 +286,15 @@ def _estimate_local(args: argparse.Namespace, sequence: Sequence) -> int:
 
 def _flash_local(args: argparse.Namespace, sequence: Sequence) -> int:
     stack = analysis.load_frame_stack(sequence)
-    local = analysis.estimate_sequence_local(sequence, args.method, args.solver, args.alpha, args.tiles,
-                                             stack=stack, bin_factor=args.bin)
+    local = analysis.estimate_sequence_local(
+        sequence, args.method, args.solver, args.alpha, args.tiles, stack=stack, bin_factor=args.bin
+    )
     _refuse_dark_ambient(sequence, local.global_estimate, _FLASH_GOAL[args.mode])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
-        solution, tile_weights, _ = analysis.solve_sequence_flash_local(sequence, args.mode, local, args.target,
-                                                                        args.bounds)
+        solution, tile_weights, _ = analysis.solve_sequence_flash_local(
+            sequence, args.mode, local, args.target, args.bounds
+        )
     for message in dict.fromkeys(str(warning.message) for warning in caught):
         progress(f"warning: {message}")
     payload = analysis.flash_payload(sequence, solution, args.target)
@@ -262,17 +302,25 @@ def _flash_local(args: argparse.Namespace, sequence: Sequence) -> int:
     payload["method"] = local.model
     payload["method_requested"] = local.method
     if local.model == "local":
-        payload["tiles"] = {"grid": list(local.tiles.shape), "row_edges": local.tiles.row_edges,
-                            "column_edges": local.tiles.column_edges, "smoothing_tiles": local.smoothing,
-                            "ambient_weights": local.tile_weights, "flash_weights": tile_weights}
+        payload["tiles"] = {
+            "grid": list(local.tiles.shape),
+            "row_edges": local.tiles.row_edges,
+            "column_edges": local.tiles.column_edges,
+            "smoothing_tiles": local.smoothing,
+            "ambient_weights": local.tile_weights,
+            "flash_weights": tile_weights,
+        }
     if args.out is not None:
         output = Path(args.out)
         if local.model == "local":
             image, saturated, _ = analysis.synthesize_sequence_local(sequence, tile_weights, local, stack)
         else:
             image, saturated, _ = analysis.synthesize_sequence(sequence, solution.flash_weights, stack)
-        metadata = {"msflash:flash_weights": solution.flash_weights.tolist(), "msflash:method": local.model,
-                    "msflash:mode": solution.mode}
+        metadata = {
+            "msflash:flash_weights": solution.flash_weights.tolist(),
+            "msflash:method": local.model,
+            "msflash:mode": solution.mode,
+        }
         if local.model == "local":
             metadata["msflash:tile_flash_weights"] = json.dumps(np.round(tile_weights, 6).tolist())
         _write_flash_image(output, image, stack, sequence, metadata)
@@ -314,11 +362,13 @@ def _check_raw_output(kind: str | None, output: Path, sequence: Sequence) -> Non
         raise UsageError(
             f"--out {output}: the frames of {sequence.path} are float ({sequence.frames[ambient[0]].file}, white level "
             f"{sequence.camera.white_level:g}), so a 16-bit raw TIFF cannot hold them in their encoding; expected .exr "
-            "(linear float)")
+            "(linear float)"
+        )
 
 
-def _write_flash_image(output: Path, image: np.ndarray, stack: analysis.FrameStack, sequence: Sequence,
-                       metadata: dict) -> None:
+def _write_flash_image(
+    output: Path, image: np.ndarray, stack: analysis.FrameStack, sequence: Sequence, metadata: dict
+) -> None:
     kind = _check_output_type(output)
     try:
         if kind == "exr":
@@ -330,13 +380,18 @@ def _write_flash_image(output: Path, image: np.ndarray, stack: analysis.FrameSta
         write_image(output, raw, {**metadata, "msflash:exposure_us": ambient.exposure_us, "msflash:gain": ambient.gain})
     except OSError as err:
         blocking = next((parent for parent in output.parents if parent.exists()), None)
-        reason = (f"{blocking} is not a directory" if blocking is not None and not blocking.is_dir()
-                  else err.strerror or str(err))
+        reason = (
+            f"{blocking} is not a directory"
+            if blocking is not None and not blocking.is_dir()
+            else err.strerror or str(err)
+        )
         raise UsageError(f"--out {output}: cannot be written ({reason}); expected a writable file path") from None
     clipped = int(np.count_nonzero((raw >= white) | (raw <= 0)))
     if clipped:
-        progress(f"warning: {clipped} of the {raw.size} samples of {output} ({clipped / raw.size:.2%}) are clipped to the "
-                 f"raw range 0…{white:g} at the ambient frame's exposure; .exr keeps the linear values")
+        progress(
+            f"warning: {clipped} of the {raw.size} samples of {output} ({clipped / raw.size:.2%}) are clipped to the "
+            f"raw range 0…{white:g} at the ambient frame's exposure; .exr keeps the linear values"
+        )
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -353,25 +408,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     flash = subparsers.add_parser("flash", help="solve the matching or complementary flash for a sequence")
     flash.add_argument("sequence", help="sequence directory (format v1)")
     flash.add_argument("--mode", required=True, choices=("complementary", "matching"))
-    flash.add_argument("--target", default="D65", help="complementary target: an illuminant name (D65, A, FL2…) or a CSV file")
-    flash.add_argument("--bounds", default="physical", choices=("physical", "nonnegative", "free"),
-                       help="physical: 0..1 (re-capture); nonnegative/free: computational synthesis")
+    flash.add_argument(
+        "--target", default="D65", help="complementary target: an illuminant name (D65, A, FL2…) or a CSV file"
+    )
+    flash.add_argument(
+        "--bounds",
+        default="physical",
+        choices=("physical", "nonnegative", "free"),
+        help="physical: 0..1 (re-capture); nonnegative/free: computational synthesis",
+    )
     add_estimation_options(flash)
     _add_calibration_option(flash)
     add_local_options(flash)
-    flash.add_argument("--out", default=None,
-                       help="also write the computational flash image (.exr linear float, .tiff 16-bit raw); "
-                            "with a local estimate the flash weights vary across the frame")
+    flash.add_argument(
+        "--out",
+        default=None,
+        help="also write the computational flash image (.exr linear float, .tiff 16-bit raw); "
+        "with a local estimate the flash weights vary across the frame",
+    )
     flash.add_argument("--json", action="store_true", help="print one JSON object")
     flash.set_defaults(handler=_flash)
 
     synth = subparsers.add_parser("synthesize", help="synthesise the computational flash image from a sequence")
     synth.add_argument("sequence", help="sequence directory (format v1)")
-    synth.add_argument("--weights", required=True,
-                       help="flash weights W1,W2,… (one per LED, full-drive units; a negative first weight needs "
-                            "the = form, --weights=-0.5,…, or argparse reads it as an option)")
-    synth.add_argument("--out", required=True, help="output image: .exr (linear float) or .tiff (16-bit raw at the ambient exposure)")
+    synth.add_argument(
+        "--weights",
+        required=True,
+        help="flash weights W1,W2,… (one per LED, full-drive units; a negative first weight needs "
+        "the = form, --weights=-0.5,…, or argparse reads it as an option)",
+    )
+    synth.add_argument(
+        "--out", required=True, help="output image: .exr (linear float) or .tiff (16-bit raw at the ambient exposure)"
+    )
     synth.add_argument("--json", action="store_true", help="print one JSON object")
     synth.set_defaults(handler=_synthesize)
-
-

@@ -93,52 +93,111 @@ def _rig_spec(args: argparse.Namespace) -> str:
 
 def _open(args: argparse.Namespace) -> Rig:
     spec = _rig_spec(args)
-    world_options = [option for option, value in (("--sim-camera", args.sim_camera), ("--leds", args.leds),
-                                                  ("--flash-power", args.flash_power)) if value is not None]
+    world_options = [
+        option
+        for option, value in (
+            ("--sim-camera", args.sim_camera),
+            ("--leds", args.leds),
+            ("--flash-power", args.flash_power),
+        )
+        if value is not None
+    ]
     if world_options and spec not in ("sim", "aravis-fake"):
-        raise UsageError(f"{world_options[0]}: describes the simulated world, but the rig is '{spec}'; expected "
-                         "--rig sim or aravis-fake (or no --rig and no --camera/--port)")
+        raise UsageError(
+            f"{world_options[0]}: describes the simulated world, but the rig is '{spec}'; expected "
+            "--rig sim or aravis-fake (or no --rig and no --camera/--port)"
+        )
     if args.cfa is not None and spec != "sim":
         fixed = " (its frames are BayerRG16, an RGGB mosaic)" if spec == "aravis-fake" else ""
-        raise UsageError(f"--cfa: describes the simulated rig's camera, but the rig is '{spec}'{fixed}; expected "
-                         "--rig sim (or no --rig and no --camera/--port)")
-    hw_only = [option for option, value in (("--responsivity", args.responsivity), ("--calibration", args.calibration),
-                                            ("--pixel-format", args.pixel_format)) if value is not None]
+        raise UsageError(
+            f"--cfa: describes the simulated rig's camera, but the rig is '{spec}'{fixed}; expected "
+            "--rig sim (or no --rig and no --camera/--port)"
+        )
+    hw_only = [
+        option
+        for option, value in (
+            ("--responsivity", args.responsivity),
+            ("--calibration", args.calibration),
+            ("--pixel-format", args.pixel_format),
+        )
+        if value is not None
+    ]
     hw_only += given_camera_options(args)
     if hw_only and spec != "hw":
         hint = " (the simulated camera is --sim-camera NAME|FILE.csv)" if spec == "sim" else ""
-        raise UsageError(f"{hw_only[0]}: describes a hardware rig's camera or booth, but the rig is '{spec}' and would "
-                         f"ignore it{hint}; expected --rig hw (or --camera/--port)")
+        raise UsageError(
+            f"{hw_only[0]}: describes a hardware rig's camera or booth, but the rig is '{spec}' and would "
+            f"ignore it{hint}; expected --rig hw (or --camera/--port)"
+        )
     if args.booth_port is not None:
         check_booth_port(spec, args.sync)
     if spec == "hw":
-        return open_rig("hw", camera=args.camera, port=args.port, interfaces=args.interfaces,
-                        calibration=args.calibration, led_spectra=args.led_spectra, responsivity=args.responsivity,
-                        log_serial=args.log_serial, sync=args.sync, pixel_format=args.pixel_format,
-                        camera_options=camera_options_from_args(args))
+        return open_rig(
+            "hw",
+            camera=args.camera,
+            port=args.port,
+            interfaces=args.interfaces,
+            calibration=args.calibration,
+            led_spectra=args.led_spectra,
+            responsivity=args.responsivity,
+            log_serial=args.log_serial,
+            sync=args.sync,
+            pixel_format=args.pixel_format,
+            camera_options=camera_options_from_args(args),
+        )
     if spec == "sim":
-        return open_rig("sim", ambient=args.ambient, scene=args.scene, cfa=args.cfa, seed=args.seed,
-                        camera=args.sim_camera, n_leds=args.leds, led_spectra=args.led_spectra,
-                        flash_power=args.flash_power, log_serial=args.log_serial, booth_port=args.booth_port)
+        return open_rig(
+            "sim",
+            ambient=args.ambient,
+            scene=args.scene,
+            cfa=args.cfa,
+            seed=args.seed,
+            camera=args.sim_camera,
+            n_leds=args.leds,
+            led_spectra=args.led_spectra,
+            flash_power=args.flash_power,
+            log_serial=args.log_serial,
+            booth_port=args.booth_port,
+        )
     if spec == "aravis-fake":
-        return open_rig("aravis-fake", ambient=args.ambient, scene=args.scene, seed=args.seed, camera=args.sim_camera,
-                        n_leds=args.leds, led_spectra=args.led_spectra, flash_power=args.flash_power,
-                        log_serial=args.log_serial)
+        return open_rig(
+            "aravis-fake",
+            ambient=args.ambient,
+            scene=args.scene,
+            seed=args.seed,
+            camera=args.sim_camera,
+            n_leds=args.leds,
+            led_spectra=args.led_spectra,
+            flash_power=args.flash_power,
+            log_serial=args.log_serial,
+        )
     return open_rig(spec, log_serial=args.log_serial)
 
 
 def _run_options(args: argparse.Namespace) -> RunOptions:
-    return RunOptions(mode=args.mode, target=args.target, solver=args.solver, alpha=args.alpha, bin_factor=args.bin,
-                      sync=args.sync, from_disk=args.from_disk)
+    return RunOptions(
+        mode=args.mode,
+        target=args.target,
+        solver=args.solver,
+        alpha=args.alpha,
+        bin_factor=args.bin,
+        sync=args.sync,
+        from_disk=args.from_disk,
+    )
 
 
 def _policy(args: argparse.Namespace) -> ExposurePolicy:
     try:
-        return ExposurePolicy(max_saturated_fraction=args.max_saturated / 100.0, criterion=args.exposure_criterion,
-                              max_lost_fraction=args.max_lost / 100.0)
+        return ExposurePolicy(
+            max_saturated_fraction=args.max_saturated / 100.0,
+            criterion=args.exposure_criterion,
+            max_lost_fraction=args.max_lost / 100.0,
+        )
     except ValueError as err:
-        raise UsageError(f"--max-saturated {args.max_saturated} / --exposure-criterion {args.exposure_criterion} / "
-                         f"--max-lost {args.max_lost}: {err}") from err
+        raise UsageError(
+            f"--max-saturated {args.max_saturated} / --exposure-criterion {args.exposure_criterion} / "
+            f"--max-lost {args.max_lost}: {err}"
+        ) from err
 
 
 def _claimed(out: Path, what: str) -> FolderClaim:
@@ -147,8 +206,9 @@ def _claimed(out: Path, what: str) -> FolderClaim:
     try:
         return claim_folder(out, what)
     except OSError as err:
-        raise UsageError(f"--out {out}: cannot write there ({err.strerror or err}); expected a writable "
-                         "directory") from err
+        raise UsageError(
+            f"--out {out}: cannot write there ({err.strerror or err}); expected a writable directory"
+        ) from err
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -166,24 +226,36 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
     started = time.perf_counter()
     spec = _rig_spec(args)
     # printable: a file name given to an option may hold any bytes, the line stays one line.
-    progress(printable(f"opening rig '{spec}'" + (f" (ambient {args.ambient}, scene {args.scene}, camera "
-                                                  f"{args.sim_camera or SIM_DEFAULT_CAMERA}, LEDs "
-                                                  f"{args.led_spectra or f'paper {args.leds or 7}'})"
-                                                  if spec in ("sim", "aravis-fake") else "")))
+    progress(
+        printable(
+            f"opening rig '{spec}'"
+            + (
+                f" (ambient {args.ambient}, scene {args.scene}, camera "
+                f"{args.sim_camera or SIM_DEFAULT_CAMERA}, LEDs "
+                f"{args.led_spectra or f'paper {args.leds or 7}'})"
+                if spec in ("sim", "aravis-fake")
+                else ""
+            )
+        )
+    )
     # SIGTERM unwinds like Ctrl-C, so the LEDs go off and the partial sequence stays readable.
     with sigterm_as_exit(), _open(args) as rig:
         if rig.camera_responsivities is None:
-            raise UsageError(f"rig '{spec}': the flash solvers need the camera's responsivities; expected "
-                             "--responsivity FILE.csv (wavelength_nm, R, G, B) or a calibration with a camera section")
+            raise UsageError(
+                f"rig '{spec}': the flash solvers need the camera's responsivities; expected "
+                "--responsivity FILE.csv (wavelength_nm, R, G, B) or a calibration with a camera section"
+            )
         exposure = plan_exposure(rig, args.exposure, _policy(args))
         report_exposure(exposure, list(rig.led_spectra.names))
         with sequence_writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
             if rig.name.startswith("replay:"):
                 estimate, solutions, caught, captured, flash_us, stack, decided = run_two_captures(
-                    rig, writer, exposure, _run_options(args))
+                    rig, writer, exposure, _run_options(args)
+                )
             else:
                 estimate, solutions, caught, captured, flash_us, stack, decided = run_one_stream(
-                    rig, writer, exposure, _run_options(args))
+                    rig, writer, exposure, _run_options(args)
+                )
             chosen = solutions[args.mode]
             why_degenerate = degenerate(estimate)
             writer.finish()
@@ -194,8 +266,14 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
         progress(f"warning: {note}")
     for warning in caught:
         progress(f"warning: {warning.message}")
-    progress((f"re-captured with the {args.mode} flash at {flash_us:.0f} µs: " if flash_us is not None
-              else f"the {args.mode} flash (synthesised only): ") + ", ".join(f"{w:.3f}" for w in chosen.flash_weights))
+    progress(
+        (
+            f"re-captured with the {args.mode} flash at {flash_us:.0f} µs: "
+            if flash_us is not None
+            else f"the {args.mode} flash (synthesised only): "
+        )
+        + ", ".join(f"{w:.3f}" for w in chosen.flash_weights)
+    )
     if why_degenerate is not None:
         raise CaptureError(
             f"rig '{spec}': the ambient estimate is degenerate ({why_degenerate}): the LED-only images do not "
@@ -208,17 +286,25 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
     progress("synthesising the computational images, previews and report")
     summary = report.write_run_report(out, sequence, estimate, solutions, args.mode, true_ambient, stack, args.target)
     if "spectrum_rmse_vs_truth" in summary:
-        progress(f"spectrum RMSE against the true ambient {summary['spectrum_rmse_vs_truth']:.4f}; the best "
-                 f"non-negative LED fit of it {summary['spectrum_rmse_led_bound']:.4f} (what the LEDs allow)")
-    summary["exposure"] = {**exposure.to_dict(), "flash_exposure_us": flash_us, "led_snr": captured.snr,
-                           "led_snr_method": captured.snr_method}
+        progress(
+            f"spectrum RMSE against the true ambient {summary['spectrum_rmse_vs_truth']:.4f}; the best "
+            f"non-negative LED fit of it {summary['spectrum_rmse_led_bound']:.4f} (what the LEDs allow)"
+        )
+    summary["exposure"] = {
+        **exposure.to_dict(),
+        "flash_exposure_us": flash_us,
+        "led_snr": captured.snr,
+        "led_snr_method": captured.snr_method,
+    }
     summary["decision_ms"] = round(decision_ms, 3)
     summary["elapsed_s"] = round(time.perf_counter() - started, 3)
     try:
         (out / "run.json").write_text(dumps_json(summary) + "\n")
     except OSError as err:
-        raise OutputWriteError(f"{out / 'run.json'}: could not be written ({err}); expected a writable disk with room "
-                               f"for it. The sequence is complete in {out / 'sequence'} and the report beside it") from err
+        raise OutputWriteError(
+            f"{out / 'run.json'}: could not be written ({err}); expected a writable disk with room "
+            f"for it. The sequence is complete in {out / 'sequence'} and the report beside it"
+        ) from err
     progress(f"done in {summary['elapsed_s']:.1f} s: {out}")
     print(out)
     return 0
@@ -247,76 +333,156 @@ def _flash_power(text: str) -> float:
     except ValueError:
         value = float("nan")
     if not (np.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"'{text}': expected a positive number (each LED's signal in units of the "
-                                         "ambient's, e.g. 1)")
+        raise argparse.ArgumentTypeError(
+            f"'{text}': expected a positive number (each LED's signal in units of the ambient's, e.g. 1)"
+        )
     return value
 
 
 def _rig_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--rig", default=None,
-                        help="rig: sim (default; simulated camera + booth emulator on a pty), aravis-fake (Aravis "
-                             "GigE Vision fake on 127.0.0.1 streaming the simulated scene, + emulator), replay:DIR (a recorded sequence + emulator), "
-                             "hw (a real camera and booth; implied by --camera/--port)")
+    parser.add_argument(
+        "--rig",
+        default=None,
+        help="rig: sim (default; simulated camera + booth emulator on a pty), aravis-fake (Aravis "
+        "GigE Vision fake on 127.0.0.1 streaming the simulated scene, + emulator), replay:DIR (a recorded sequence + emulator), "
+        "hw (a real camera and booth; implied by --camera/--port)",
+    )
     hardware = parser.add_argument_group("hardware rig (--rig hw)")
-    hardware.add_argument("--camera", default=None, metavar="ID",
-                          help="camera device id, serial number or IP address (default: the single camera found)")
-    hardware.add_argument("--port", default=None, metavar="PATH",
-                          help="booth serial port, e.g. /dev/ttyACM0 (default: the single booth found)")
-    hardware.add_argument("--interfaces", default="usb3",
-                          help="Aravis interfaces to search: usb3 (default), gige, fake, comma-separated; gige "
-                               "broadcasts discovery on every network interface unless --camera is an IP address")
-    hardware.add_argument("--calibration", default=None, metavar="DIR",
-                          help="calibration directory with led_spectra.csv (and camera_responsivity.csv)")
-    hardware.add_argument("--responsivity", default=None, metavar="FILE.csv",
-                          help="camera responsivities: wavelength_nm, R, G, B (energy); needed by the flash solvers")
-    hardware.add_argument("--pixel-format", default=None,
-                          help="camera PixelFormat to set (default: keep the camera's); packed Mono10p, Mono12p, "
-                               "Bayer*10p/12p, Mono12Packed, Bayer*12Packed … are decoded")
+    hardware.add_argument(
+        "--camera",
+        default=None,
+        metavar="ID",
+        help="camera device id, serial number or IP address (default: the single camera found)",
+    )
+    hardware.add_argument(
+        "--port",
+        default=None,
+        metavar="PATH",
+        help="booth serial port, e.g. /dev/ttyACM0 (default: the single booth found)",
+    )
+    hardware.add_argument(
+        "--interfaces",
+        default="usb3",
+        help="Aravis interfaces to search: usb3 (default), gige, fake, comma-separated; gige "
+        "broadcasts discovery on every network interface unless --camera is an IP address",
+    )
+    hardware.add_argument(
+        "--calibration",
+        default=None,
+        metavar="DIR",
+        help="calibration directory with led_spectra.csv (and camera_responsivity.csv)",
+    )
+    hardware.add_argument(
+        "--responsivity",
+        default=None,
+        metavar="FILE.csv",
+        help="camera responsivities: wavelength_nm, R, G, B (energy); needed by the flash solvers",
+    )
+    hardware.add_argument(
+        "--pixel-format",
+        default=None,
+        help="camera PixelFormat to set (default: keep the camera's); packed Mono10p, Mono12p, "
+        "Bayer*10p/12p, Mono12Packed, Bayer*12Packed … are decoded",
+    )
     add_camera_options(hardware)
-    parser.add_argument("--sync", default="host", choices=tuple(SYNC_MODES),
-                        help="who paces the frames: host (serial command, then software trigger; default), "
-                             "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "
-                             "exposure-active line advances the booth's pattern table)")
-    parser.add_argument("--led-spectra", default=None, metavar="FILE.csv",
-                        help="LED spectra: first column wavelength_nm, one column per booth channel at full drive "
-                             "(energy); hw: the real booth's channels; sim: the emulated booth gets these channels "
-                             "(names and peaks from the columns; the file must cover 400-700 nm)")
+    parser.add_argument(
+        "--sync",
+        default="host",
+        choices=tuple(SYNC_MODES),
+        help="who paces the frames: host (serial command, then software trigger; default), "
+        "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "
+        "exposure-active line advances the booth's pattern table)",
+    )
+    parser.add_argument(
+        "--led-spectra",
+        default=None,
+        metavar="FILE.csv",
+        help="LED spectra: first column wavelength_nm, one column per booth channel at full drive "
+        "(energy); hw: the real booth's channels; sim: the emulated booth gets these channels "
+        "(names and peaks from the columns; the file must cover 400-700 nm)",
+    )
     sim = parser.add_argument_group("simulated world (--rig sim; --rig aravis-fake renders it too, except --cfa)")
-    sim.add_argument("--sim-camera", default=None, metavar="NAME|FILE.csv",
-                     help=f"camera: a shipped camera ({SIM_DEFAULT_CAMERA} by default; ISETCam's, the paper's 34 — an "
-                          "unknown name lists them) or responsivities wavelength_nm, R, G, B (energy) covering "
-                          "400-700 nm, as --responsivity reads them")
-    sim.add_argument("--leds", type=int, default=None, choices=tuple(PAPER_LED_SUBSETS),
-                     help="the paper's subset of N LEDs (3: 440, 520, 660 nm … 7: all; default 7); or --led-spectra")
-    sim.add_argument("--ambient", default="tungsten", metavar="NAME|FILE.csv",
-                     help=f"ambient: {', '.join(AMBIENTS)}, a CIE/colour-science illuminant (A, D50, D65, F2, "
-                          "F11, LED-B1, blackbody:3200 …) or a CSV wavelength_nm, value (energy) covering 400-700 nm")
-    sim.add_argument("--scene", default="chart110", metavar="NAME|FILE.csv",
-                     help=f"scene: {', '.join(SIM_SCENES)} (white: a white reference for calibrate leds --white), or "
-                          "reflectances wavelength_nm + one column per surface (0-1, covering 400-700 nm) shown as a "
-                          "random mosaic of those surfaces (--seed)")
-    sim.add_argument("--flash-power", type=_flash_power, default=None, metavar="P",
-                     help="how bright the booth is: every LED at full drive gives at least P times the ambient's "
-                          "mean camera signal (the weakest LED exactly P; the LEDs keep their ratios; default 1)")
-    sim.add_argument("--booth-port", default=None, metavar="PATH",
-                     help="drive the booth at this port (msflash booth-emulator's pty, or a real booth) instead of "
-                          "an emulator in this process; --sync host only")
+    sim.add_argument(
+        "--sim-camera",
+        default=None,
+        metavar="NAME|FILE.csv",
+        help=f"camera: a shipped camera ({SIM_DEFAULT_CAMERA} by default; ISETCam's, the paper's 34 — an "
+        "unknown name lists them) or responsivities wavelength_nm, R, G, B (energy) covering "
+        "400-700 nm, as --responsivity reads them",
+    )
+    sim.add_argument(
+        "--leds",
+        type=int,
+        default=None,
+        choices=tuple(PAPER_LED_SUBSETS),
+        help="the paper's subset of N LEDs (3: 440, 520, 660 nm … 7: all; default 7); or --led-spectra",
+    )
+    sim.add_argument(
+        "--ambient",
+        default="tungsten",
+        metavar="NAME|FILE.csv",
+        help=f"ambient: {', '.join(AMBIENTS)}, a CIE/colour-science illuminant (A, D50, D65, F2, "
+        "F11, LED-B1, blackbody:3200 …) or a CSV wavelength_nm, value (energy) covering 400-700 nm",
+    )
+    sim.add_argument(
+        "--scene",
+        default="chart110",
+        metavar="NAME|FILE.csv",
+        help=f"scene: {', '.join(SIM_SCENES)} (white: a white reference for calibrate leds --white), or "
+        "reflectances wavelength_nm + one column per surface (0-1, covering 400-700 nm) shown as a "
+        "random mosaic of those surfaces (--seed)",
+    )
+    sim.add_argument(
+        "--flash-power",
+        type=_flash_power,
+        default=None,
+        metavar="P",
+        help="how bright the booth is: every LED at full drive gives at least P times the ambient's "
+        "mean camera signal (the weakest LED exactly P; the LEDs keep their ratios; default 1)",
+    )
+    sim.add_argument(
+        "--booth-port",
+        default=None,
+        metavar="PATH",
+        help="drive the booth at this port (msflash booth-emulator's pty, or a real booth) instead of "
+        "an emulator in this process; --sync host only",
+    )
     sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
-    parser.add_argument("--exposure", "--exposure-us", dest="exposure", type=_exposure_value, default="auto",
-                        metavar="auto|MICROSECONDS",
-                        help="auto (default: meter an ambient preview, then choose each LED frame's exposure for "
-                             "SNR below saturation) or one exposure in microseconds for every frame")
+    parser.add_argument(
+        "--exposure",
+        "--exposure-us",
+        dest="exposure",
+        type=_exposure_value,
+        default="auto",
+        metavar="auto|MICROSECONDS",
+        help="auto (default: meter an ambient preview, then choose each LED frame's exposure for "
+        "SNR below saturation) or one exposure in microseconds for every frame",
+    )
     parser.add_argument("--log-serial", default=None, help="write the booth serial transcript to this file")
-    parser.add_argument("--max-saturated", type=float, default=0.1, metavar="PERCENT",
-                        help="auto exposure: at most this percentage of pixels may saturate in a frame (default 0.1)")
-    parser.add_argument("--exposure-criterion", choices=("bright_end", "information"), default="bright_end",
-                        help="auto exposure: bright_end (default: the brightest pixels just below saturation, so "
-                             "every chart patch stays usable) or information (longest exposures whose unsaturated "
-                             "blocks carry the most LED-only information; highlights may clip — see README)")
-    parser.add_argument("--max-lost", type=float, default=25.0, metavar="PERCENT",
-                        help="information criterion: at most this percentage of the estimator's blocks may be lost "
-                             "to saturation over all frames (default 25)")
+    parser.add_argument(
+        "--max-saturated",
+        type=float,
+        default=0.1,
+        metavar="PERCENT",
+        help="auto exposure: at most this percentage of pixels may saturate in a frame (default 0.1)",
+    )
+    parser.add_argument(
+        "--exposure-criterion",
+        choices=("bright_end", "information"),
+        default="bright_end",
+        help="auto exposure: bright_end (default: the brightest pixels just below saturation, so "
+        "every chart patch stays usable) or information (longest exposures whose unsaturated "
+        "blocks carry the most LED-only information; highlights may clip — see README)",
+    )
+    parser.add_argument(
+        "--max-lost",
+        type=float,
+        default=25.0,
+        metavar="PERCENT",
+        help="information criterion: at most this percentage of the estimator's blocks may be lost "
+        "to saturation over all frames (default 25)",
+    )
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -324,12 +490,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run = subparsers.add_parser("run", help="the main job: capture, estimate, flash, re-capture, synthesise, report")
     _rig_options(run)
     run.add_argument("--out", default=None, help="output directory (default runs/<UTC time>)")
-    run.add_argument("--mode", default="complementary", choices=("complementary", "matching"),
-                     help="flash to re-capture with (both are synthesised)")
+    run.add_argument(
+        "--mode",
+        default="complementary",
+        choices=("complementary", "matching"),
+        help="flash to re-capture with (both are synthesised)",
+    )
     run.add_argument("--target", default="D65", help="complementary target illuminant (name or CSV file)")
     add_estimation_options(run)
-    run.add_argument("--from-disk", action="store_true",
-                     help="estimate from the frames re-read from disk instead of those in memory (slower; a check)")
+    run.add_argument(
+        "--from-disk",
+        action="store_true",
+        help="estimate from the frames re-read from disk instead of those in memory (slower; a check)",
+    )
     run.set_defaults(handler=_run)
 
     capture = subparsers.add_parser("capture", help="capture an ambient + each-LED sequence on a rig")

@@ -43,7 +43,9 @@ def _alpha(text: str) -> float | str | list[float]:
     try:
         values = [float(part) for part in text.split(",")]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}': expected a number ≥ 0, a comma-separated list, 'auto' or 'paper'") from None
+        raise argparse.ArgumentTypeError(
+            f"'{text}': expected a number ≥ 0, a comma-separated list, 'auto' or 'paper'"
+        ) from None
     if not all(value >= 0 and math.isfinite(value) for value in values):
         raise argparse.ArgumentTypeError(f"'{text}': expected finite values ≥ 0")
     return values[0] if len(values) == 1 else values
@@ -79,21 +81,26 @@ def _mapper(scheduler: str, workers: int | None) -> Iterator[Callable[[Callable[
             progress("dask.distributed is not installed; running serially")
             yield None
             return
-        raise UsageError(f"--scheduler {scheduler}: dask.distributed is not installed (pip install msflash[study])") from None
+        raise UsageError(
+            f"--scheduler {scheduler}: dask.distributed is not installed (pip install msflash[study])"
+        ) from None
     cluster = None
     if scheduler == "local":
         n = workers or os.cpu_count() or 1
         # Loopback only: the scheduler, workers and dashboard never listen on other interfaces.
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0")
+        cluster = LocalCluster(
+            n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address="127.0.0.1:0"
+        )
         client = Client(cluster)
         progress(f"dask: local cluster with {n} workers")
     else:
         try:
             client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError, ValueError) as err:  # ValueError: not an address at all
-            raise UsageError(f"--scheduler {scheduler}: cannot connect ({err}); expected 'local', 'none' or a dask "
-                             "scheduler address (tcp://HOST:PORT)") from None
+            raise UsageError(
+                f"--scheduler {scheduler}: cannot connect ({err}); expected 'local', 'none' or a dask "
+                "scheduler address (tcp://HOST:PORT)"
+            ) from None
         progress(f"dask: scheduler {scheduler}")
 
     def mapper(function: Callable[..., Any], items: Sequence[Any]) -> Iterator[Any]:
@@ -132,38 +139,74 @@ def _run(args: argparse.Namespace) -> int:
         if args.name == "table1":
             from msflash.processing.study.table1 import run_table1
 
-            result = run_table1(n_leds_list=args.leds, method=args.solver, alpha=alpha, cameras=args.cameras,
-                                illuminants=args.illuminants, alpha_units=alpha_units, progress=progress,
-                                map_function=mapper)
+            result = run_table1(
+                n_leds_list=args.leds,
+                method=args.solver,
+                alpha=alpha,
+                cameras=args.cameras,
+                illuminants=args.illuminants,
+                alpha_units=alpha_units,
+                progress=progress,
+                map_function=mapper,
+            )
         elif args.name == "surfaces":
             from msflash.processing.study.surfaces import run_surfaces
 
-            result = run_surfaces(draws=args.draws, method=args.solver, alpha=alpha, cameras=args.cameras,
-                                  illuminants=args.illuminants, alpha_units=alpha_units, seed=args.seed,
-                                  progress=progress, map_function=mapper)
+            result = run_surfaces(
+                draws=args.draws,
+                method=args.solver,
+                alpha=alpha,
+                cameras=args.cameras,
+                illuminants=args.illuminants,
+                alpha_units=alpha_units,
+                seed=args.seed,
+                progress=progress,
+                map_function=mapper,
+            )
         elif args.name in ("cameras", "xy"):
             if alpha_units == "paper":
                 raise UsageError(f"--alpha-units paper: not for {args.name}; expected a dimensionless alpha")
             from msflash.processing.study.cameras import run_cameras, run_xy
 
             run = run_cameras if args.name == "cameras" else run_xy
-            result = run(n_leds_list=args.leds, method=args.solver, alpha=alpha, cameras=args.cameras,
-                         illuminants=args.illuminants, progress=progress, map_function=mapper)
+            result = run(
+                n_leds_list=args.leds,
+                method=args.solver,
+                alpha=alpha,
+                cameras=args.cameras,
+                illuminants=args.illuminants,
+                progress=progress,
+                map_function=mapper,
+            )
         elif args.name == "failure":
             from msflash.processing.study.failure import DEFAULT_CAMERAS, run_failure
 
-            result = run_failure(factors=args.factors, cameras=args.cameras or DEFAULT_CAMERAS,
-                                 seeds=args.seeds, method=args.solver, alpha=alpha, threshold=args.threshold,
-                                 keep_records=args.records, progress=progress, map_function=mapper,
-                                 **({"ambients": args.ambients} if args.ambients else {}))
+            result = run_failure(
+                factors=args.factors,
+                cameras=args.cameras or DEFAULT_CAMERAS,
+                seeds=args.seeds,
+                method=args.solver,
+                alpha=alpha,
+                threshold=args.threshold,
+                keep_records=args.records,
+                progress=progress,
+                map_function=mapper,
+                **({"ambients": args.ambients} if args.ambients else {}),
+            )
         else:
             from msflash.processing.study.pareto import DEFAULT_CAMERAS, run_pareto
 
-            result = run_pareto(cameras=args.cameras or DEFAULT_CAMERAS, seeds=args.seeds,
-                                ambient_to_flash=args.ambient_to_flash, patch_px=args.patch_px,
-                                repeats=args.repeats, progress=progress, map_function=mapper,
-                                **({"samplings": args.samplings} if args.samplings else {}),
-                                **({"ambients": args.ambients} if args.ambients else {}))
+            result = run_pareto(
+                cameras=args.cameras or DEFAULT_CAMERAS,
+                seeds=args.seeds,
+                ambient_to_flash=args.ambient_to_flash,
+                patch_px=args.patch_px,
+                repeats=args.repeats,
+                progress=progress,
+                map_function=mapper,
+                **({"samplings": args.samplings} if args.samplings else {}),
+                **({"ambients": args.ambients} if args.ambients else {}),
+            )
     result = json.loads(dumps_json(result))  # plain JSON types (numpy scalars, tuples) from here on
     if out is not None:
         json_path = out / f"{args.name}.json"
@@ -189,9 +232,11 @@ _ROWS = (
 
 def _table1_text(result: dict[str, Any]) -> str:
     config = result["config"]
-    lines = [f"Table 1: {config['method']} alpha={config['alpha']} ({config['alpha_units']}), "
-             f"{config['n_cameras']} cameras x {config['n_illuminants']} illuminants, {result['elapsed_s']:.1f} s",
-             f"{'# LEDs':26s}" + "".join(f"{n:>15d}" for n in result["n_leds"])]
+    lines = [
+        f"Table 1: {config['method']} alpha={config['alpha']} ({config['alpha_units']}), "
+        f"{config['n_cameras']} cameras x {config['n_illuminants']} illuminants, {result['elapsed_s']:.1f} s",
+        f"{'# LEDs':26s}" + "".join(f"{n:>15d}" for n in result["n_leds"]),
+    ]
     for key, label in _ROWS:
         paper = result["paper"].get(key, [])
         cells = "".join(f"{ours:>8.3f} ({p:<4g})" for ours, p in zip(result[key], paper, strict=False))
@@ -204,12 +249,15 @@ def _table1_text(result: dict[str, Any]) -> str:
 
 def _surfaces_text(result: dict[str, Any]) -> str:
     config = result["config"]
-    lines = [f"Fig. 5: {config['n_leds']} LEDs, {config['method']} alpha={config['alpha']}, {config['n_cameras']} "
-             f"cameras x {len(config['illuminants_xy'])} illuminants, {config['draws']} draws, "
-             f"{result['elapsed_s']:.1f} s",
-             f"{'surfaces':>9s} {'spectrum RMSE':>14s} {'std':>7s} {'pixel RMSE x1e-2':>17s}"]
-    for count, mean, std, pixel in zip(result["counts"], result["spectrum_rmse"], result["spectrum_rmse_std"],
-                                       result["pixel_rmse"], strict=True):
+    lines = [
+        f"Fig. 5: {config['n_leds']} LEDs, {config['method']} alpha={config['alpha']}, {config['n_cameras']} "
+        f"cameras x {len(config['illuminants_xy'])} illuminants, {config['draws']} draws, "
+        f"{result['elapsed_s']:.1f} s",
+        f"{'surfaces':>9s} {'spectrum RMSE':>14s} {'std':>7s} {'pixel RMSE x1e-2':>17s}",
+    ]
+    for count, mean, std, pixel in zip(
+        result["counts"], result["spectrum_rmse"], result["spectrum_rmse_std"], result["pixel_rmse"], strict=True
+    ):
         if mean is None:
             lines.append(f"{count:>9d} {'failed':>14s}   (estimate_ambient refused or failed for every draw)")
             continue
@@ -235,7 +283,7 @@ def _plot_table1(result: dict[str, Any], path: Path) -> None:
         axis.plot(counts, result[key], "o-", label="msflash")
         paper = result["paper"].get(key)
         if paper:
-            axis.plot(counts[:len(paper)], paper, "s--", label="paper")
+            axis.plot(counts[: len(paper)], paper, "s--", label="paper")
         axis.set_title(label, fontsize=10)
         axis.set_xlabel("# LEDs")
         axis.set_xticks(counts)
@@ -251,11 +299,18 @@ def _plot_table1(result: dict[str, Any], path: Path) -> None:
 def _plot_surfaces(result: dict[str, Any], path: Path) -> None:
     plt = _pyplot()
     figure, axis = plt.subplots(figsize=(5, 3.6))
+
     def numbers(values: list[Any]) -> list[float]:  # JSON null (all estimates failed) → NaN, not drawn
         return [float("nan") if value is None else value for value in values]
 
-    axis.errorbar(result["counts"], numbers(result["spectrum_rmse"]), yerr=numbers(result["spectrum_rmse_std"]), fmt="o-",
-                  capsize=3, label="estimate (mean ± std over draws)")
+    axis.errorbar(
+        result["counts"],
+        numbers(result["spectrum_rmse"]),
+        yerr=numbers(result["spectrum_rmse_std"]),
+        fmt="o-",
+        capsize=3,
+        label="estimate (mean ± std over draws)",
+    )
     axis.axhline(result["bound"], color="k", linestyle="--", label="direct LED fit")
     axis.set_xlabel("distinct surfaces")
     axis.set_ylabel("spectrum RMSE")
@@ -268,46 +323,99 @@ def _plot_surfaces(result: dict[str, Any], path: Path) -> None:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``msflash study``."""
-    study = subparsers.add_parser("study", help="simulation studies (table1: Table 1; surfaces: Fig. 5; cameras: Fig. 6; "
-                                                "xy: Fig. 7; failure: where estimates fail and whether they warn; "
-                                                "pareto: accuracy vs time)")
+    study = subparsers.add_parser(
+        "study",
+        help="simulation studies (table1: Table 1; surfaces: Fig. 5; cameras: Fig. 6; "
+        "xy: Fig. 7; failure: where estimates fail and whether they warn; "
+        "pareto: accuracy vs time)",
+    )
     study.add_argument("name", metavar="NAME", help=f"the study: {', '.join(STUDIES)}")
     study.add_argument("--out", metavar="DIR", help="write NAME.json and NAME.png to this folder")
     study.add_argument("--json", action="store_true", help="print the result as one JSON object")
-    study.add_argument("--solver", default="tikhonov", choices=sorted(AMBIENT_METHODS),
-                       help="ambient estimator (default: tikhonov, the app's default)")
-    study.add_argument("--alpha", default="auto", type=_alpha,
-                       help="roughness weight: a number, a comma-separated sweep (table1: best per metric), 'auto', "
-                            "or 'paper' (the authors' logspace(-3,1,10) sweep of eq. 6; --solver roughness)")
-    study.add_argument("--alpha-units", default="dimensionless", choices=("dimensionless", "paper"),
-                       help="'paper': alpha is the authors' eq.-6 weight (--solver roughness)")
-    study.add_argument("--leds", type=_counts, default=[3, 4, 5, 6, 7],
-                       help="table1/cameras/xy: LED counts (default 3,4,5,6,7)")
-    study.add_argument("--cameras", type=positive_int, default=None,
-                       help="use the first N of the 34 cameras (failure/pareto default: 3 chosen cameras)")
-    study.add_argument("--ambients", type=_names, default=None,
-                       help="failure/pareto: comma-separated ambients (default tungsten,fluorescent,daylight)")
-    study.add_argument("--factors", type=_names, default=None,
-                       help="failure: comma-separated factors (default all: n_leds, surfaces, ambient_to_flash, "
-                            "exposure, saturation, dead_led, line_400nm, line_570nm, line_700nm, motion)")
-    study.add_argument("--seeds", type=positive_int, default=2, help="failure/pareto: noise seeds per world (default 2)")
-    study.add_argument("--threshold", type=float, default=0.1,
-                       help="failure: excess spectrum RMSE over the baseline counted as a failure (default 0.1)")
+    study.add_argument(
+        "--solver",
+        default="tikhonov",
+        choices=sorted(AMBIENT_METHODS),
+        help="ambient estimator (default: tikhonov, the app's default)",
+    )
+    study.add_argument(
+        "--alpha",
+        default="auto",
+        type=_alpha,
+        help="roughness weight: a number, a comma-separated sweep (table1: best per metric), 'auto', "
+        "or 'paper' (the authors' logspace(-3,1,10) sweep of eq. 6; --solver roughness)",
+    )
+    study.add_argument(
+        "--alpha-units",
+        default="dimensionless",
+        choices=("dimensionless", "paper"),
+        help="'paper': alpha is the authors' eq.-6 weight (--solver roughness)",
+    )
+    study.add_argument(
+        "--leds", type=_counts, default=[3, 4, 5, 6, 7], help="table1/cameras/xy: LED counts (default 3,4,5,6,7)"
+    )
+    study.add_argument(
+        "--cameras",
+        type=positive_int,
+        default=None,
+        help="use the first N of the 34 cameras (failure/pareto default: 3 chosen cameras)",
+    )
+    study.add_argument(
+        "--ambients",
+        type=_names,
+        default=None,
+        help="failure/pareto: comma-separated ambients (default tungsten,fluorescent,daylight)",
+    )
+    study.add_argument(
+        "--factors",
+        type=_names,
+        default=None,
+        help="failure: comma-separated factors (default all: n_leds, surfaces, ambient_to_flash, "
+        "exposure, saturation, dead_led, line_400nm, line_570nm, line_700nm, motion)",
+    )
+    study.add_argument(
+        "--seeds", type=positive_int, default=2, help="failure/pareto: noise seeds per world (default 2)"
+    )
+    study.add_argument(
+        "--threshold",
+        type=float,
+        default=0.1,
+        help="failure: excess spectrum RMSE over the baseline counted as a failure (default 0.1)",
+    )
     study.add_argument("--records", action="store_true", help="failure: keep every estimate's record in the JSON")
-    study.add_argument("--ambient-to-flash", type=float, default=0.5,
-                       help="pareto: ambient-to-flash signal ratio (default 0.5, the sim rig's)")
-    study.add_argument("--patch-px", type=positive_int, default=40, help="pareto: chart patch size in pixels (default 40)")
-    study.add_argument("--samplings", type=_names, default=None,
-                       help="pareto: comma-separated sampling levels (default all: all, mask_1e5, mask_1e4, mask_1e3, "
-                            "gather_1e4, gather_1e3, bin2, bin4, bin8, patch_means)")
+    study.add_argument(
+        "--ambient-to-flash",
+        type=float,
+        default=0.5,
+        help="pareto: ambient-to-flash signal ratio (default 0.5, the sim rig's)",
+    )
+    study.add_argument(
+        "--patch-px", type=positive_int, default=40, help="pareto: chart patch size in pixels (default 40)"
+    )
+    study.add_argument(
+        "--samplings",
+        type=_names,
+        default=None,
+        help="pareto: comma-separated sampling levels (default all: all, mask_1e5, mask_1e4, mask_1e3, "
+        "gather_1e4, gather_1e3, bin2, bin4, bin8, patch_means)",
+    )
     study.add_argument("--repeats", type=positive_int, default=3, help="pareto: timing repeats (median; default 3)")
-    study.add_argument("--illuminants", type=positive_int, default=None,
-                       help="use N of the 23 feasible illuminants, spread over the grid")
+    study.add_argument(
+        "--illuminants",
+        type=positive_int,
+        default=None,
+        help="use N of the 23 feasible illuminants, spread over the grid",
+    )
     study.add_argument("--draws", type=positive_int, default=10, help="surfaces: draws per count (default 10)")
     study.add_argument("--seed", type=int, default=0, help="surfaces: random seed of the draws")
-    study.add_argument("--scheduler", default="local",
-                       help="'local' (a local dask cluster, default), 'none' (serial, in this process) or a dask scheduler ADDRESS")
-    study.add_argument("--workers", type=positive_int, default=None, help="workers of --scheduler local (default: CPUs)")
+    study.add_argument(
+        "--scheduler",
+        default="local",
+        help="'local' (a local dask cluster, default), 'none' (serial, in this process) or a dask scheduler ADDRESS",
+    )
+    study.add_argument(
+        "--workers", type=positive_int, default=None, help="workers of --scheduler local (default: CPUs)"
+    )
     study.set_defaults(handler=_run)
 
 
@@ -318,58 +426,84 @@ def _num(value: Any) -> float:
 
 def _cameras_text(result: dict[str, Any]) -> str:
     config = result["config"]
-    lines = [f"Fig. 6: {config['method']} alpha={config['alpha']}, {config['n_cameras']} cameras x "
-             f"{len(config['illuminants_xy'])} illuminants, {result['elapsed_s']:.1f} s",
-             f"{'# LEDs':>7s} {'camera spread':>14s} {'worst illum.':>13s} {'spectrum RMSE':>14s} {'worst camera':>13s}"]
-    for row in zip(result["n_leds"], result["camera_spread"], result["camera_spread_max"], result["spectrum_rmse"],
-                   result["spectrum_rmse_worst_camera"], strict=True):
-        lines.append(f"{row[0]:>7d} {_num(row[1]):>14.4f} {_num(row[2]):>13.4f} {_num(row[3]):>14.4f} {_num(row[4]):>13.4f}")
+    lines = [
+        f"Fig. 6: {config['method']} alpha={config['alpha']}, {config['n_cameras']} cameras x "
+        f"{len(config['illuminants_xy'])} illuminants, {result['elapsed_s']:.1f} s",
+        f"{'# LEDs':>7s} {'camera spread':>14s} {'worst illum.':>13s} {'spectrum RMSE':>14s} {'worst camera':>13s}",
+    ]
+    for row in zip(
+        result["n_leds"],
+        result["camera_spread"],
+        result["camera_spread_max"],
+        result["spectrum_rmse"],
+        result["spectrum_rmse_worst_camera"],
+        strict=True,
+    ):
+        lines.append(
+            f"{row[0]:>7d} {_num(row[1]):>14.4f} {_num(row[2]):>13.4f} {_num(row[3]):>14.4f} {_num(row[4]):>13.4f}"
+        )
     lines.append("camera spread: RMS over wavelengths of the std across cameras of max-normalised estimates")
     return "\n".join(lines)
 
 
 def _xy_text(result: dict[str, Any]) -> str:
     counts = result["n_leds"]
-    lines = [f"Fig. 7: spectrum RMSE (mean over {result['config']['n_cameras']} cameras) at each feasible xy, "
-             f"{result['elapsed_s']:.1f} s",
-             f"{'x':>6s} {'y':>6s}" + "".join(f"{n:>7d}" for n in counts) + "   bound(7)"]
+    lines = [
+        f"Fig. 7: spectrum RMSE (mean over {result['config']['n_cameras']} cameras) at each feasible xy, "
+        f"{result['elapsed_s']:.1f} s",
+        f"{'x':>6s} {'y':>6s}" + "".join(f"{n:>7d}" for n in counts) + "   bound(7)",
+    ]
     for xy, values, bound in zip(result["xy"], result["spectrum_rmse"], result["bound"], strict=True):
-        lines.append(f"{xy[0]:>6.3f} {xy[1]:>6.3f}" + "".join(f"{_num(v):>7.3f}" for v in values) + f"   {bound[-1]:.3f}")
+        lines.append(
+            f"{xy[0]:>6.3f} {xy[1]:>6.3f}" + "".join(f"{_num(v):>7.3f}" for v in values) + f"   {bound[-1]:.3f}"
+        )
     return "\n".join(lines)
 
 
 def _failure_text(result: dict[str, Any]) -> str:
     config = result["config"]
-    lines = [f"Failure map: {config['method']} alpha={config['alpha']}, bin {config['bin_factor']}, "
-             f"{len(config['cameras'])} cameras x {len(config['ambients'])} ambients x {len(config['seeds'])} seeds, "
-             f"{result['elapsed_s']:.1f} s",
-             f"{'factor':>17s} {'level':>9s} {'error':>7s} {'std':>6s} {'excess':>7s} {'warned':>7s} "
-             f"{'resid':>6s} {'cond':>8s} {'band':>6s} {'fill':>5s}"]
+    lines = [
+        f"Failure map: {config['method']} alpha={config['alpha']}, bin {config['bin_factor']}, "
+        f"{len(config['cameras'])} cameras x {len(config['ambients'])} ambients x {len(config['seeds'])} seeds, "
+        f"{result['elapsed_s']:.1f} s",
+        f"{'factor':>17s} {'level':>9s} {'error':>7s} {'std':>6s} {'excess':>7s} {'warned':>7s} "
+        f"{'resid':>6s} {'cond':>8s} {'band':>6s} {'fill':>5s}",
+    ]
     for factor, rows in result["summary"].items():
         for row in rows:
-            lines.append(f"{factor:>17s} {row['level']:>9.4g} {_num(row['error_mean']):>7.3f} {_num(row['error_std']):>6.3f} "
-                         f"{_num(row['excess_mean']):>7.3f} {row['warned_rate']:>7.0%} "
-                         f"{_num(row['relative_residual_median']):>6.3f} {_num(row['condition_number_median']):>8.2g} "
-                         f"{_num(row['band_ratio_median']):>6.2f} {_num(row['led_fill_median']):>5.2f}")
+            lines.append(
+                f"{factor:>17s} {row['level']:>9.4g} {_num(row['error_mean']):>7.3f} {_num(row['error_std']):>6.3f} "
+                f"{_num(row['excess_mean']):>7.3f} {row['warned_rate']:>7.0%} "
+                f"{_num(row['relative_residual_median']):>6.3f} {_num(row['condition_number_median']):>8.2g} "
+                f"{_num(row['band_ratio_median']):>6.2f} {_num(row['led_fill_median']):>5.2f}"
+            )
     for key, title in (("confusion", "excess > threshold"), ("confusion_absolute", "error > threshold")):
         table = result[key]["all"]
-        lines.append(f"{title} ({result[key]['threshold']}): bad & warned {table['bad_warned']}, bad & silent "
-                     f"{table['bad_silent']}, good & warned {table['good_warned']}, good & silent {table['good_silent']}")
+        lines.append(
+            f"{title} ({result[key]['threshold']}): bad & warned {table['bad_warned']}, bad & silent "
+            f"{table['bad_silent']}, good & warned {table['good_warned']}, good & silent {table['good_silent']}"
+        )
     return "\n".join(lines)
 
 
 def _pareto_text(result: dict[str, Any]) -> str:
     config = result["config"]
-    lines = [f"Pareto: {len(config['cameras'])} cameras x {len(config['ambients'])} ambients x {len(config['seeds'])} "
-             f"seeds, {config['pixels']} px, ambient/flash {config['ambient_to_flash']}, {result['elapsed_s']:.1f} s",
-             f"{'solver':>15s} {'sampling':>12s} {'error':>7s} {'std':>6s} {'time ms':>9s} front"]
+    lines = [
+        f"Pareto: {len(config['cameras'])} cameras x {len(config['ambients'])} ambients x {len(config['seeds'])} "
+        f"seeds, {config['pixels']} px, ambient/flash {config['ambient_to_flash']}, {result['elapsed_s']:.1f} s",
+        f"{'solver':>15s} {'sampling':>12s} {'error':>7s} {'std':>6s} {'time ms':>9s} front",
+    ]
     for point in sorted(result["points"], key=lambda p: p["time_s"]):
-        lines.append(f"{point['solver']:>15s} {point['sampling']:>12s} {_num(point['error_mean']):>7.3f} "
-                     f"{_num(point['error_std']):>6.3f} {1000 * _num(point['time_s']):>9.2f} {'*' if point['on_front'] else ''}")
+        lines.append(
+            f"{point['solver']:>15s} {point['sampling']:>12s} {_num(point['error_mean']):>7.3f} "
+            f"{_num(point['error_std']):>6.3f} {1000 * _num(point['time_s']):>9.2f} {'*' if point['on_front'] else ''}"
+        )
     default = result.get("default")
     if default:
-        lines.append(f"default {default['solver']} {default['sampling']}: error {_num(default['error_mean']):.3f}, "
-                     f"{1000 * _num(default['time_s']):.2f} ms, {'on' if default['on_front'] else 'off'} the front")
+        lines.append(
+            f"default {default['solver']} {default['sampling']}: error {_num(default['error_mean']):.3f}, "
+            f"{1000 * _num(default['time_s']):.2f} ms, {'on' if default['on_front'] else 'off'} the front"
+        )
     return "\n".join(lines)
 
 
@@ -377,8 +511,9 @@ def _plot_cameras(result: dict[str, Any], path: Path) -> None:
     plt = _pyplot()
     examples = result["examples"]
     counts = result["n_leds"]
-    figure, axes = plt.subplots(len(examples) + 1, len(counts), figsize=(3 * len(counts), 2.4 * (len(examples) + 1)),
-                                squeeze=False)
+    figure, axes = plt.subplots(
+        len(examples) + 1, len(counts), figsize=(3 * len(counts), 2.4 * (len(examples) + 1)), squeeze=False
+    )
     wavelengths = result["wavelengths_nm"]
     for row, example in enumerate(examples):
         for column, n in enumerate(counts):
@@ -426,8 +561,9 @@ def _plot_xy(result: dict[str, Any], path: Path) -> None:
         axis.plot(np.append(locus[:, 0], locus[0, 0]), np.append(locus[:, 1], locus[0, 1]), "k-", linewidth=0.8)
         points = axis.scatter(xy[:, 0], xy[:, 1], c=values[:, column], s=90, vmin=0, vmax=top, cmap="viridis")
         for (x, y), value in zip(xy, values[:, column], strict=True):
-            axis.annotate(f"{value:.2f}", (x, y), fontsize=6, ha="center", va="bottom", xytext=(0, 5),
-                          textcoords="offset points")
+            axis.annotate(
+                f"{value:.2f}", (x, y), fontsize=6, ha="center", va="bottom", xytext=(0, 5), textcoords="offset points"
+            )
         axis.set_title(f"{n} LEDs", fontsize=9)
         axis.set_xlim(0, 0.8)
         axis.set_ylim(0, 0.9)
@@ -449,8 +585,14 @@ def _plot_failure(result: dict[str, Any], path: Path) -> None:
         axis = axes[index // columns][index % columns]
         table = result["summary"][factor]
         positions = list(range(len(table)))
-        axis.errorbar(positions, [_num(r["error_mean"]) for r in table], yerr=[_num(r["error_std"]) for r in table],
-                      fmt="o-", capsize=3, label="spectrum RMSE")
+        axis.errorbar(
+            positions,
+            [_num(r["error_mean"]) for r in table],
+            yerr=[_num(r["error_std"]) for r in table],
+            fmt="o-",
+            capsize=3,
+            label="spectrum RMSE",
+        )
         axis.plot(positions, [_num(r["bound_mean"]) for r in table], "k:", label="LED-fit bound")
         twin = axis.twinx()
         twin.bar(positions, [r["warned_rate"] for r in table], alpha=0.25, color="tab:red", label="warned")
@@ -466,8 +608,10 @@ def _plot_failure(result: dict[str, Any], path: Path) -> None:
             twin.legend(fontsize=6, loc="upper right")
     for index in range(len(factors), rows * columns):
         axes[index // columns][index % columns].axis("off")
-    figure.suptitle("Failure map: error (mean ± std, left axis) and warning rate (red bars, right axis); "
-                    "first level = baseline", fontsize=10)
+    figure.suptitle(
+        "Failure map: error (mean ± std, left axis) and warning rate (red bars, right axis); first level = baseline",
+        fontsize=10,
+    )
     figure.tight_layout()
     figure.savefig(path, dpi=90)
     plt.close(figure)
@@ -480,17 +624,35 @@ def _plot_pareto(result: dict[str, Any], path: Path) -> None:
     markers = "osD^v<>"
     for index, solver in enumerate(solvers):
         points = [p for p in result["points"] if p["solver"] == solver and p["error_mean"] is not None]
-        axis.scatter([1000 * p["time_s"] for p in points], [p["error_mean"] for p in points], marker=markers[index % 7],
-                     label=solver, alpha=0.8)
+        axis.scatter(
+            [1000 * p["time_s"] for p in points],
+            [p["error_mean"] for p in points],
+            marker=markers[index % 7],
+            label=solver,
+            alpha=0.8,
+        )
         for p in points:
-            axis.annotate(p["sampling"], (1000 * p["time_s"], p["error_mean"]), fontsize=5, alpha=0.7,
-                          xytext=(2, 2), textcoords="offset points")
+            axis.annotate(
+                p["sampling"],
+                (1000 * p["time_s"], p["error_mean"]),
+                fontsize=5,
+                alpha=0.7,
+                xytext=(2, 2),
+                textcoords="offset points",
+            )
     front = result["front"]
     axis.plot([1000 * p["time_s"] for p in front], [p["error_mean"] for p in front], "k-", linewidth=1, label="front")
     default = result.get("default")
     if default:
-        axis.scatter([1000 * default["time_s"]], [default["error_mean"]], s=200, facecolors="none", edgecolors="red",
-                     linewidths=2, label="app default")
+        axis.scatter(
+            [1000 * default["time_s"]],
+            [default["error_mean"]],
+            s=200,
+            facecolors="none",
+            edgecolors="red",
+            linewidths=2,
+            label="app default",
+        )
     axis.set_xscale("log")
     axis.set_xlabel("time per frame stack (ms, statistics + solver)")
     axis.set_ylabel("spectrum RMSE (mean)")
@@ -501,7 +663,19 @@ def _plot_pareto(result: dict[str, Any], path: Path) -> None:
     plt.close(figure)
 
 
-PLOTS = {"table1": _plot_table1, "surfaces": _plot_surfaces, "cameras": _plot_cameras, "xy": _plot_xy,
-         "failure": _plot_failure, "pareto": _plot_pareto}
-TEXTS = {"table1": _table1_text, "surfaces": _surfaces_text, "cameras": _cameras_text, "xy": _xy_text,
-         "failure": _failure_text, "pareto": _pareto_text}
+PLOTS = {
+    "table1": _plot_table1,
+    "surfaces": _plot_surfaces,
+    "cameras": _plot_cameras,
+    "xy": _plot_xy,
+    "failure": _plot_failure,
+    "pareto": _plot_pareto,
+}
+TEXTS = {
+    "table1": _table1_text,
+    "surfaces": _surfaces_text,
+    "cameras": _cameras_text,
+    "xy": _xy_text,
+    "failure": _failure_text,
+    "pareto": _pareto_text,
+}

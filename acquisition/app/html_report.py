@@ -30,7 +30,9 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 def _png_bytes(image: bytes | Path | str) -> bytes:
     data = image if isinstance(image, bytes) else Path(image).read_bytes()
     if not data.startswith(PNG_SIGNATURE):
-        raise ValueError(f"HTML report: {'image bytes' if isinstance(image, bytes) else image} is not a PNG; expected PNG data")
+        raise ValueError(
+            f"HTML report: {'image bytes' if isinstance(image, bytes) else image} is not a PNG; expected PNG data"
+        )
     return data
 
 
@@ -67,8 +69,14 @@ class HtmlReport:
         css = ' class="note"' if note else ""
         self.blocks.append(f"<p{css}>{html.escape(text)}</p>")
 
-    def add_table(self, headers: Sequence[str], rows: Sequence[Sequence[object]], caption: str | None = None,
-                  table_id: str | None = None, digits: int = 2) -> None:
+    def add_table(
+        self,
+        headers: Sequence[str],
+        rows: Sequence[Sequence[object]],
+        caption: str | None = None,
+        table_id: str | None = None,
+        digits: int = 2,
+    ) -> None:
         """A table; floats are printed with ``digits`` decimals, everything else as text."""
         attributes = f' id="{html.escape(table_id, quote=True)}"' if table_id else ""
         parts = [f"<table{attributes}>"]
@@ -87,16 +95,20 @@ class HtmlReport:
             encoded = base64.b64encode(_png_bytes(image)).decode("ascii")
             size = f' width="{int(width_px)}"' if width_px else ""
             alt = html.escape(caption, quote=True)
-            figures.append(f'<figure><img src="data:image/png;base64,{encoded}" alt="{alt}"{size}>'
-                           f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+            figures.append(
+                f'<figure><img src="data:image/png;base64,{encoded}" alt="{alt}"{size}>'
+                f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+            )
         self.blocks.append("<div>" + "".join(figures) + "</div>")
 
     def to_html(self) -> str:
         """The whole document."""
         title = html.escape(self.title)
         body = "\n".join(self.blocks)
-        return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n<title>{title}</title>\n'
-                f"<style>{_STYLE}</style>\n</head>\n<body>\n<h1>{title}</h1>\n{body}\n</body>\n</html>\n")
+        return (
+            f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n<title>{title}</title>\n'
+            f"<style>{_STYLE}</style>\n</head>\n<body>\n<h1>{title}</h1>\n{body}\n</body>\n</html>\n"
+        )
 
     def write(self, path: str | Path) -> Path:
         """Write the document (UTF-8) and return its path."""

@@ -28,19 +28,39 @@ def alpha_value(text: str) -> float | str:
 
 def add_estimation_options(parser: argparse.ArgumentParser) -> None:
     """The options every command that estimates the ambient shares."""
-    parser.add_argument("--solver", default="tikhonov", choices=sorted(AMBIENT_METHODS),
-                        help="ambient estimator (default: tikhonov, non-negative with roughness penalty)")
-    parser.add_argument("--alpha", default="auto", type=alpha_value,
-                        help="dimensionless roughness weight, or 'auto' (generalised cross-validation)")
-    parser.add_argument("--bin", type=positive_int, default=analysis.DEFAULT_BIN_FACTOR,
-                        help=f"sum BIN×BIN pixel blocks before estimating (default {analysis.DEFAULT_BIN_FACTOR}; 1 = every pixel)")
+    parser.add_argument(
+        "--solver",
+        default="tikhonov",
+        choices=sorted(AMBIENT_METHODS),
+        help="ambient estimator (default: tikhonov, non-negative with roughness penalty)",
+    )
+    parser.add_argument(
+        "--alpha",
+        default="auto",
+        type=alpha_value,
+        help="dimensionless roughness weight, or 'auto' (generalised cross-validation)",
+    )
+    parser.add_argument(
+        "--bin",
+        type=positive_int,
+        default=analysis.DEFAULT_BIN_FACTOR,
+        help=f"sum BIN×BIN pixel blocks before estimating (default {analysis.DEFAULT_BIN_FACTOR}; 1 = every pixel)",
+    )
 
 
 def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], int] = int) -> None:
     """``--patch-px``, ``--border-px``, ``--margin-px``: a given chart layout, or none (detect the chart)."""
-    parser.add_argument("--patch-px", type=patch_type, default=None,
-                        help="patch side in pixels of a chart at the top left (sim rig 8); without it and "
-                             "--border-px the chart is detected in each sequence")
-    parser.add_argument("--border-px", type=int, default=None,
-                        help="gap between patches in pixels (sim rig 2; default 2 with --patch-px)")
+    parser.add_argument(
+        "--patch-px",
+        type=patch_type,
+        default=None,
+        help="patch side in pixels of a chart at the top left (sim rig 8); without it and "
+        "--border-px the chart is detected in each sequence",
+    )
+    parser.add_argument(
+        "--border-px",
+        type=int,
+        default=None,
+        help="gap between patches in pixels (sim rig 2; default 2 with --patch-px)",
+    )
     parser.add_argument("--margin-px", type=int, default=1, help="pixels ignored inside each patch edge")

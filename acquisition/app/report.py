@@ -60,12 +60,19 @@ def _camera_to_xyz(sequence: Sequence) -> np.ndarray | None:
         return None
     grid = sequence.grid
     chart = datasets.macbeth().resample(grid, outside="edge")
-    return camera_to_xyz_matrix(responsivities.to_unit("photons"), chart,
-                                datasets.illuminant("D65", grid).to_unit("photons"))
+    return camera_to_xyz_matrix(
+        responsivities.to_unit("photons"), chart, datasets.illuminant("D65", grid).to_unit("photons")
+    )
 
 
-def plot_spectra(path: Path, sequence: Sequence, estimate: AmbientEstimate, solutions: dict[str, FlashSolution],
-                 true_ambient: Spectra | None, target: Spectra | None) -> Path:
+def plot_spectra(
+    path: Path,
+    sequence: Sequence,
+    estimate: AmbientEstimate,
+    solutions: dict[str, FlashSolution],
+    true_ambient: Spectra | None,
+    target: Spectra | None,
+) -> Path:
     """The spectra plot: estimate ± 1σ, true ambient and the LEDs' best fit of it (simulation), flash mixes,
     ambient + complementary flash."""
     plt = _pyplot()
@@ -79,15 +86,26 @@ def plot_spectra(path: Path, sequence: Sequence, estimate: AmbientEstimate, solu
     # The band is the estimate's own uncertainty (AmbientEstimate.spectrum_std), one standard deviation each side;
     # the legend says what it covers (pixel noise, and the model's error when the camera is known).
     covers = "pixel noise + model error" if estimate.miss_risk is not None else "pixel noise only"
-    left.fill_between(wavelengths, (estimate_values - std) / peak, (estimate_values + std) / peak,
-                      color="tab:blue", alpha=0.25, lw=0, label=f"estimate ± 1σ ({covers})")
+    left.fill_between(
+        wavelengths,
+        (estimate_values - std) / peak,
+        (estimate_values + std) / peak,
+        color="tab:blue",
+        alpha=0.25,
+        lw=0,
+        label=f"estimate ± 1σ ({covers})",
+    )
     left.plot(wavelengths, estimate_values / peak, color="tab:blue", lw=2, label=f"estimate ({estimate.method})")
     if true_ambient is not None:
         # Truth and the LEDs' best fit of it, each least-squares scaled onto the estimate (the metric's scaling).
         truth = true_ambient.resample(sequence.grid).to_unit(sequence.spectral_unit).values[:, 0]
-        for curve, style in ((truth, dict(color="black", ls="--", lw=1.5, label="true ambient (scaled)")),
-                             (led_fit(leds.values, truth), dict(color="gray", ls=":", lw=1.5,
-                                                                label="best non-negative LED fit of the truth"))):
+        for curve, style in (
+            (truth, dict(color="black", ls="--", lw=1.5, label="true ambient (scaled)")),
+            (
+                led_fit(leds.values, truth),
+                dict(color="gray", ls=":", lw=1.5, label="best non-negative LED fit of the truth"),
+            ),
+        ):
             if np.any(curve):
                 left.plot(wavelengths, curve * float(estimate_values @ curve) / float(curve @ curve) / peak, **style)
     left.set_title("Ambient illuminant")
@@ -115,8 +133,16 @@ def plot_spectra(path: Path, sequence: Sequence, estimate: AmbientEstimate, solu
     return path
 
 
-def write_run_report(out: Path, sequence: Sequence, estimate: AmbientEstimate, solutions: dict[str, FlashSolution],
-                     mode: str, true_ambient: Spectra | None, stack: analysis.FrameStack, target_name: str) -> dict[str, Any]:
+def write_run_report(
+    out: Path,
+    sequence: Sequence,
+    estimate: AmbientEstimate,
+    solutions: dict[str, FlashSolution],
+    mode: str,
+    true_ambient: Spectra | None,
+    stack: analysis.FrameStack,
+    target_name: str,
+) -> dict[str, Any]:
     """Write everything a run shows a person; return the summary (also written as run.json).
 
     Raises
@@ -132,16 +158,26 @@ def write_run_report(out: Path, sequence: Sequence, estimate: AmbientEstimate, s
         raise OutputWriteError(
             f"{out}: the run report could not be written ({err}); expected a writable disk with room for it. "
             f"The sequence is complete in {sequence.directory} ('msflash estimate', 'flash' and 'synthesize' "
-            "read it)") from err
+            "read it)"
+        ) from err
 
 
-def _write_run_report(out: Path, sequence: Sequence, estimate: AmbientEstimate, solutions: dict[str, FlashSolution],
-                      mode: str, true_ambient: Spectra | None, stack: analysis.FrameStack,
-                      target_name: str) -> dict[str, Any]:
+def _write_run_report(
+    out: Path,
+    sequence: Sequence,
+    estimate: AmbientEstimate,
+    solutions: dict[str, FlashSolution],
+    mode: str,
+    true_ambient: Spectra | None,
+    stack: analysis.FrameStack,
+    target_name: str,
+) -> dict[str, Any]:
     estimate_payload = analysis.estimate_payload(sequence, estimate)
     (out / "estimate.json").write_text(dumps_json(estimate_payload) + "\n")
     for name, solution in solutions.items():
-        (out / f"flash-{name}.json").write_text(dumps_json(analysis.flash_payload(sequence, solution, target_name)) + "\n")
+        (out / f"flash-{name}.json").write_text(
+            dumps_json(analysis.flash_payload(sequence, solution, target_name)) + "\n"
+        )
 
     matrix = _camera_to_xyz(sequence)
     ambient_linear, _ = sequence.load_linear_frame(stack.ambient_index)
@@ -153,7 +189,9 @@ def _write_run_report(out: Path, sequence: Sequence, estimate: AmbientEstimate, 
     flash_indices = sequence.indices("flash")
     if flash_indices:
         captured, _ = sequence.load_linear_frame(flash_indices[-1])
-        previews["flash-capture"] = write_png(out / "flash-capture.png", srgb_preview(linear_rgb(sequence, captured), matrix))
+        previews["flash-capture"] = write_png(
+            out / "flash-capture.png", srgb_preview(linear_rgb(sequence, captured), matrix)
+        )
 
     target = None
     if "complementary" in solutions:
@@ -165,8 +203,10 @@ def _write_run_report(out: Path, sequence: Sequence, estimate: AmbientEstimate, 
         "ambient_weights": estimate.ambient_weights,
         "relative_residual": estimate.relative_residual,
         "estimate_warnings": list(estimate.warnings),
-        "flash": {name: {"flash_weights": s.flash_weights, "scale": s.scale, "target_reached": s.target_reached}
-                  for name, s in solutions.items()},
+        "flash": {
+            name: {"flash_weights": s.flash_weights, "scale": s.scale, "target_reached": s.target_reached}
+            for name, s in solutions.items()
+        },
         "recaptured_mode": mode,
         "previews": {name: str(path) for name, path in previews.items()},
         "plot": str(plot),
@@ -197,22 +237,34 @@ def score_against_truth(sequence: Sequence, estimate: AmbientEstimate, true_ambi
 def _write_markdown(path: Path, summary: dict[str, Any], sequence: Sequence) -> None:
     names = [led.name for led in sequence.leds]
     lines = [
-        "# msflash run", "",
-        f"Sequence: `{summary['sequence']}` ({summary['frames']} frames, camera {sequence.camera.model}).", "",
-        "![spectra](spectra.png)", "",
-        "| LED | " + " | ".join(names) + " |", "|---|" + "---|" * len(names),
+        "# msflash run",
+        "",
+        f"Sequence: `{summary['sequence']}` ({summary['frames']} frames, camera {sequence.camera.model}).",
+        "",
+        "![spectra](spectra.png)",
+        "",
+        "| LED | " + " | ".join(names) + " |",
+        "|---|" + "---|" * len(names),
         "| ambient weights | " + " | ".join(f"{w:.3g}" for w in summary["ambient_weights"]) + " |",
     ]
     for mode, flash in summary["flash"].items():
         lines.append(f"| {mode} flash | " + " | ".join(f"{w:.3g}" for w in flash["flash_weights"]) + " |")
     lines += ["", f"Relative residual of the ambient fit: {summary['relative_residual']:.4f}."]
     if "spectrum_rmse_vs_truth" in summary:
-        lines.append(f"Spectrum RMSE against the true ambient (paper's Table 1 metric): {summary['spectrum_rmse_vs_truth']:.4f}; "
-                     f"the best non-negative fit of the truth by the LED spectra (what the LEDs allow): "
-                     f"{summary['spectrum_rmse_led_bound']:.4f}.")
+        lines.append(
+            f"Spectrum RMSE against the true ambient (paper's Table 1 metric): {summary['spectrum_rmse_vs_truth']:.4f}; "
+            f"the best non-negative fit of the truth by the LED spectra (what the LEDs allow): "
+            f"{summary['spectrum_rmse_led_bound']:.4f}."
+        )
     for note in summary["estimate_warnings"]:
         lines.append(f"- warning: {note}")
-    lines += ["", "| ambient | matching (synthesised) | complementary (synthesised) | flash re-capture |", "|---|---|---|---|",
-              "| ![](ambient.png) | ![](matching.png) | ![](complementary.png) | "
-              + ("![](flash-capture.png)" if "flash-capture" in summary["previews"] else "—") + " |", ""]
+    lines += [
+        "",
+        "| ambient | matching (synthesised) | complementary (synthesised) | flash re-capture |",
+        "|---|---|---|---|",
+        "| ![](ambient.png) | ![](matching.png) | ![](complementary.png) | "
+        + ("![](flash-capture.png)" if "flash-capture" in summary["previews"] else "—")
+        + " |",
+        "",
+    ]
     path.write_text("\n".join(lines))

@@ -89,8 +89,10 @@ class TriggeredFrames:
         return self._plan
 
     def _timeout_message(self, timeout_s: float, why: str) -> str:
-        return (f"{self._label}: no frame within {timeout_s:g} s: {why}; expected trigger() (or the booth's "
-                "trigger line) before next_frame()")
+        return (
+            f"{self._label}: no frame within {timeout_s:g} s: {why}; expected trigger() (or the booth's "
+            "trigger line) before next_frame()"
+        )
 
     def _begin_frame(self) -> None:
         """A trigger was accepted: ``next_frame`` now waits for its frame (call under ``_condition``)."""

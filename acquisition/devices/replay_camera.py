@@ -70,9 +70,15 @@ class ReplayCamera(TriggeredFrames):
         """The recorded camera."""
         camera = self.sequence.camera
         return CameraInfo(
-            vendor="replay", model=camera.model, serial=camera.serial or "", pixel_format=camera.pixel_format,
-            cfa=camera.cfa, black_level=camera.black_level, white_level=camera.white_level,
-            width=int(self._shape[1]), height=int(self._shape[0]),
+            vendor="replay",
+            model=camera.model,
+            serial=camera.serial or "",
+            pixel_format=camera.pixel_format,
+            cfa=camera.cfa,
+            black_level=camera.black_level,
+            white_level=camera.white_level,
+            width=int(self._shape[1]),
+            height=int(self._shape[0]),
             extra={"replay": str(self.sequence.directory)},
         )
 
@@ -102,8 +108,10 @@ class ReplayCamera(TriggeredFrames):
             mismatch = self._mismatch(self._cursor + offset, step)
             if mismatch is not None:
                 if not self.sequence.complete:  # the likely reason: a capture that was cut short
-                    mismatch += (f" (the recording is incomplete: complete: false, {len(self.sequence.frames)} "
-                                 "frame(s), as a capture that was interrupted leaves it)")
+                    mismatch += (
+                        f" (the recording is incomplete: complete: false, {len(self.sequence.frames)} "
+                        "frame(s), as a capture that was interrupted leaves it)"
+                    )
                 raise ReplayMismatchError(f"{where}: step {step.index} ({step.label}): {mismatch}")
         with self._condition:
             self._plan = plan
@@ -147,12 +155,16 @@ class ReplayCamera(TriggeredFrames):
         if frame.role != step.role:
             return f"role '{step.role}' but {recorded}.role is '{frame.role}'; expected the recorded role"
         if not levels_match(frame.led_levels, step.led_levels):
-            return (f"led_levels {format_levels(step.led_levels)} but {recorded}.led_levels is "
-                    f"{format_levels(frame.led_levels)}; "
-                    f"expected them within {LEVEL_TOLERANCE:.1e}")
+            return (
+                f"led_levels {format_levels(step.led_levels)} but {recorded}.led_levels is "
+                f"{format_levels(frame.led_levels)}; "
+                f"expected them within {LEVEL_TOLERANCE:.1e}"
+            )
         if not math.isclose(frame.exposure_us, step.exposure_us, rel_tol=EXPOSURE_RTOL):
-            return (f"exposure_us {step.exposure_us:g} but {recorded}.exposure_us is {frame.exposure_us:g}; "
-                    f"expected it within {EXPOSURE_RTOL:.0%}")
+            return (
+                f"exposure_us {step.exposure_us:g} but {recorded}.exposure_us is {frame.exposure_us:g}; "
+                f"expected it within {EXPOSURE_RTOL:.0%}"
+            )
         if not math.isclose(frame.gain, step.gain, rel_tol=EXPOSURE_RTOL):
             return f"gain {step.gain:g} but {recorded}.gain is {frame.gain:g}; expected it within {EXPOSURE_RTOL:.0%}"
         return None
@@ -161,23 +173,31 @@ class ReplayCamera(TriggeredFrames):
         """Why a step at recorded frame ``index`` cannot be served (the recording is used up)."""
         roles = [frame.role for frame in self.sequence.frames]
         held = ", ".join(f"{roles.count(r)} {r}" for r in dict.fromkeys(roles))
-        text = (f"the recording has no frame {index}: its {len(roles)} frames ({held}) are all served; "
-                "expected the plan to ask only for the frames that were recorded")
+        text = (
+            f"the recording has no frame {index}: its {len(roles)} frames ({held}) are all served; "
+            "expected the plan to ask only for the frames that were recorded"
+        )
         if role == "flash" and "flash" not in roles:
-            text += (" — this recording has no flash frame, so 'run' cannot replay its flash (record with "
-                     "'msflash run'; for a sequence from 'msflash capture' use 'msflash estimate', 'flash' or "
-                     "'synthesize' on it)")
+            text += (
+                " — this recording has no flash frame, so 'run' cannot replay its flash (record with "
+                "'msflash run'; for a sequence from 'msflash capture' use 'msflash estimate', 'flash' or "
+                "'synthesize' on it)"
+            )
         return text
 
     def _timeout_message(self, timeout_s: float, why: str) -> str:
-        return (f"replay camera: no frame within {timeout_s:g} s for recorded frame {self._cursor}: {why}; "
-                "expected trigger() (or the booth's trigger line) before next_frame()")
+        return (
+            f"replay camera: no frame within {timeout_s:g} s for recorded frame {self._cursor}: {why}; "
+            "expected trigger() (or the booth's trigger line) before next_frame()"
+        )
 
     def _release(self, plan: CapturePlan) -> None:
         with self._condition:
             if self._released >= len(plan.steps):
-                raise CameraError(f"replay camera: trigger {self._released + 1} but the plan has {len(plan.steps)} "
-                                  "steps; expected one trigger per step")
+                raise CameraError(
+                    f"replay camera: trigger {self._released + 1} but the plan has {len(plan.steps)} "
+                    "steps; expected one trigger per step"
+                )
             index = self._cursor
             self._cursor += 1
             self._released += 1
@@ -186,8 +206,13 @@ class ReplayCamera(TriggeredFrames):
             recorded = self.sequence.frames[index]
             pixels = self._pixels[index]
             timestamp = recorded.extra.get("timestamp_ns", 0)
-            frame = RawFrame(np.asarray(pixels), index + 1, int(timestamp) if isinstance(timestamp, int) else 0,
-                             recorded.exposure_us, recorded.gain)
+            frame = RawFrame(
+                np.asarray(pixels),
+                index + 1,
+                int(timestamp) if isinstance(timestamp, int) else 0,
+                recorded.exposure_us,
+                recorded.gain,
+            )
         except BaseException as err:
             self._fail_frame(err)  # next_frame raises it in this frame's place (booth's trigger line)
             raise
@@ -197,7 +222,8 @@ class ReplayCamera(TriggeredFrames):
 def levels_match(recorded: Levels, asked: Levels) -> bool:
     """Whether LED levels asked for are the recorded ones (same count, each within :data:`LEVEL_TOLERANCE`)."""
     return len(recorded) == len(asked) and all(
-        math.isclose(a, b, abs_tol=LEVEL_TOLERANCE) for a, b in zip(recorded, asked, strict=True))
+        math.isclose(a, b, abs_tol=LEVEL_TOLERANCE) for a, b in zip(recorded, asked, strict=True)
+    )
 
 
 def format_levels(levels: Levels) -> str:

@@ -89,8 +89,9 @@ def read_responsivity_file(path: str | Path) -> Spectra:
     """
     camera = read_spectra_file(path, "responsivity")
     if camera.count != 3:
-        raise UsageError(f"{path}: {camera.count} responsivity columns ({', '.join(camera.names)}); "
-                         "expected 3 (R, G, B)")
+        raise UsageError(
+            f"{path}: {camera.count} responsivity columns ({', '.join(camera.names)}); expected 3 (R, G, B)"
+        )
     return camera.replace(names=("R", "G", "B"), metadata={**camera.metadata, "camera": Path(path).stem})
 
 
@@ -106,8 +107,10 @@ def on_grid(spectra: Spectra, where: str, grid: WavelengthGrid = DEFAULT_GRID) -
     try:
         return spectra.resample(grid, outside="error")
     except SpectralDataError as err:
-        raise UsageError(f"{where}: covers {start:g}–{stop:g} nm; expected at least {grid.start_nm:g}–"
-                         f"{grid.stop_nm:g} nm (the sim's wavelength grid)") from err
+        raise UsageError(
+            f"{where}: covers {start:g}–{stop:g} nm; expected at least {grid.start_nm:g}–"
+            f"{grid.stop_nm:g} nm (the sim's wavelength grid)"
+        ) from err
 
 
 def _nonnegative_light(spectra: Spectra, where: str, what: str) -> Spectra:
@@ -115,8 +118,10 @@ def _nonnegative_light(spectra: Spectra, where: str, what: str) -> Spectra:
     for index, name in enumerate(spectra.names):
         column = spectra.values[:, index]
         if np.any(column < 0) or not column.max() > 0:
-            raise UsageError(f"{where}: {what} '{name}' has {'negative values' if np.any(column < 0) else 'no light'} "
-                             f"on {spectra.grid}; expected a non-negative spectrum with some light there")
+            raise UsageError(
+                f"{where}: {what} '{name}' has {'negative values' if np.any(column < 0) else 'no light'} "
+                f"on {spectra.grid}; expected a non-negative spectrum with some light there"
+            )
     return spectra
 
 
@@ -156,8 +161,10 @@ def sim_leds(led_spectra: str | Path | None, n_leds: int | None, grid: Wavelengt
         leds = on_grid(read_spectra_file(led_spectra, "spd"), where, grid)
         duplicated = sorted({n for n in leds.names if leds.names.count(n) > 1})
         if duplicated:
-            raise UsageError(f"{where}: LED column(s) {', '.join(duplicated)} appear more than once; expected one "
-                             "named column per booth channel")
+            raise UsageError(
+                f"{where}: LED column(s) {', '.join(duplicated)} appear more than once; expected one "
+                "named column per booth channel"
+            )
         return _nonnegative_light(leds, where, "LED")
     try:
         return datasets.paper_led_subset(7 if n_leds is None else n_leds).resample(grid)
@@ -182,8 +189,9 @@ def sim_ambient(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
     where = f"--ambient {spec}"
     light = on_grid(read_spectra_file(spec, "spd"), where, grid)
     if light.count != 1:
-        raise UsageError(f"{where}: {light.count} spectra ({', '.join(light.names)}); expected one ambient "
-                         "(wavelength_nm, value)")
+        raise UsageError(
+            f"{where}: {light.count} spectra ({', '.join(light.names)}); expected one ambient (wavelength_nm, value)"
+        )
     return _nonnegative_light(light, where, "ambient").replace(names=(Path(spec).stem,))
 
 
@@ -198,8 +206,10 @@ def sim_scene(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> SimSceneName | 
     if not is_file(spec):
         name = next((n for n in SIM_SCENES if n == spec), None)
         if name is None:
-            raise UsageError(f"--scene '{spec}': unknown; expected one of {', '.join(SIM_SCENES)} or a reflectance "
-                             "CSV (wavelength_nm, one column per surface)")
+            raise UsageError(
+                f"--scene '{spec}': unknown; expected one of {', '.join(SIM_SCENES)} or a reflectance "
+                "CSV (wavelength_nm, one column per surface)"
+            )
         return name
     where = f"--scene {spec}"
     surfaces = on_grid(read_spectra_file(spec, "reflectance"), where, grid)

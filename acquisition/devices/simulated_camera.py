@@ -111,12 +111,16 @@ class SimulatedCamera(TriggeredFrames):
         self.ambient_illumination: MixedIllumination | None = None
         """The spatially varying ambient, or None for a uniform one."""
         if (second_ambient is None) != (ambient_map is None):
-            raise CameraError(f"simulated camera '{name}': second_ambient and ambient_map go together; expected both or neither")
+            raise CameraError(
+                f"simulated camera '{name}': second_ambient and ambient_map go together; expected both or neither"
+            )
         if second_ambient is not None and ambient_map is not None:
             require_same_grid(ambient, second_ambient)
             if np.shape(ambient_map) != scene.shape:
-                raise CameraError(f"simulated camera '{name}': ambient_map has shape {np.shape(ambient_map)}; "
-                                  f"expected the scene's {scene.shape}")
+                raise CameraError(
+                    f"simulated camera '{name}': ambient_map has shape {np.shape(ambient_map)}; "
+                    f"expected the scene's {scene.shape}"
+                )
             self.ambient_illumination = MixedIllumination.two_ambients(ambient, second_ambient, ambient_map)
         if camera_responsivities.count != 3:
             raise CameraError(f"simulated camera '{name}': {camera_responsivities.count} channels; expected R, G, B")
@@ -162,11 +166,22 @@ class SimulatedCamera(TriggeredFrames):
         pixel_format = f"RGB{bits}" if self.sensor.cfa is None else f"{_GENICAM_BAYER[self.sensor.cfa]}{bits}"
         height, width = self.scene.shape
         return CameraInfo(
-            vendor="msflash", model=self._name, serial=f"SIM-{self.seed}", pixel_format=pixel_format,
-            cfa=self.sensor.cfa, black_level=self.sensor.black_level, white_level=self.sensor.white_level,
-            width=width, height=height,
-            extra={"simulated": True, "bit_depth": self.sensor.bit_depth, "ambient": self.ambient.source,
-                   "leds": self.led_spectra.names, "responsivity": self.camera_responsivities.source},
+            vendor="msflash",
+            model=self._name,
+            serial=f"SIM-{self.seed}",
+            pixel_format=pixel_format,
+            cfa=self.sensor.cfa,
+            black_level=self.sensor.black_level,
+            white_level=self.sensor.white_level,
+            width=width,
+            height=height,
+            extra={
+                "simulated": True,
+                "bit_depth": self.sensor.bit_depth,
+                "ambient": self.ambient.source,
+                "leds": self.led_spectra.names,
+                "responsivity": self.camera_responsivities.source,
+            },
         )
 
     # -- the Camera protocol ------------------------------------------------------------------
@@ -222,8 +237,10 @@ class SimulatedCamera(TriggeredFrames):
             where = f"step {step.index} ({step.label})"
         else:
             where = "after the last step"
-        return (f"simulated camera '{self._name}': no frame within {timeout_s:g} s for {where}: {why}; "
-                "expected trigger() (or the booth's trigger line) before next_frame()")
+        return (
+            f"simulated camera '{self._name}': no frame within {timeout_s:g} s for {where}: {why}; "
+            "expected trigger() (or the booth's trigger line) before next_frame()"
+        )
 
     def _levels_for(self, step: CaptureStep) -> tuple[float, ...]:
         """The LED levels at exposure time: from the injected source, else the plan step."""
@@ -235,8 +252,10 @@ class SimulatedCamera(TriggeredFrames):
         try:
             levels = tuple(float(v) for v in raw)  # type: ignore[attr-defined]
         except (TypeError, ValueError) as err:
-            raise CameraError(f"simulated camera '{self._name}': LED levels {raw!r} are not numbers; "
-                              "expected a tuple of floats in [0, 1]") from err
+            raise CameraError(
+                f"simulated camera '{self._name}': LED levels {raw!r} are not numbers; "
+                "expected a tuple of floats in [0, 1]"
+            ) from err
         if len(levels) != self.led_spectra.count or not all(0.0 <= v <= 1.0 for v in levels):
             raise CameraError(
                 f"simulated camera '{self._name}': LED levels {levels} at {where}; "
@@ -272,8 +291,10 @@ class SimulatedCamera(TriggeredFrames):
         """
         checked = self._checked_levels(levels, f"exposure {exposure_us:g} µs")
         if not (exposure_us >= 0 and gain > 0):
-            raise CameraError(f"simulated camera '{self._name}': exposure {exposure_us} µs and gain {gain}; "
-                              "expected exposure ≥ 0 and gain > 0")
+            raise CameraError(
+                f"simulated camera '{self._name}': exposure {exposure_us} µs and gain {gain}; "
+                "expected exposure ≥ 0 and gain > 0"
+            )
         with self._render_lock:
             return self._render(checked, float(exposure_us), float(gain))
 
@@ -282,10 +303,18 @@ class SimulatedCamera(TriggeredFrames):
         illumination = total_illumination(self.ambient, self.led_spectra, levels)
         if self.ambient_illumination is not None:
             dark = self.ambient.replace(values=np.zeros_like(self.ambient.values))
-            illumination = self.ambient_illumination.plus(
-                total_illumination(dark, self.led_spectra, levels))  # type: ignore[assignment]
-        return render_frame(self.scene, illumination, self.camera_responsivities, self.sensor, exposure_us, gain,
-                            self.scale, rng=self._rng, noise=self.noise)
+            illumination = self.ambient_illumination.plus(total_illumination(dark, self.led_spectra, levels))  # type: ignore[assignment]
+        return render_frame(
+            self.scene,
+            illumination,
+            self.camera_responsivities,
+            self.sensor,
+            exposure_us,
+            gain,
+            self.scale,
+            rng=self._rng,
+            noise=self.noise,
+        )
 
     def _render_next(self, plan: CapturePlan) -> None:
         with self._condition:
@@ -395,16 +424,24 @@ class SimulatedCamera(TriggeredFrames):
             scene = chart_scene(scene, patch_px=patch_px, specular_strip_px=specular_strip_px)
         elif isinstance(scene, Spectra):
             scene = mosaic_scene(scene, seed=seed, patch_px=patch_px, specular_strip_px=specular_strip_px)
-        scene = Scene(scene.reflectances.resample(grid), scene.labels, scene.shading, scene.specular, scene.specular_gain)
+        scene = Scene(
+            scene.reflectances.resample(grid), scene.labels, scene.shading, scene.specular, scene.specular_gain
+        )
         ambient_spd = lights.light_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)
         second_spd = None
         if second_ambient is not None:
-            second_spd = (lights.light_spectrum(second_ambient, grid) if isinstance(second_ambient, str)
-                          else second_ambient.resample(grid)).to_unit(ambient_spd.unit)
+            second_spd = (
+                lights.light_spectrum(second_ambient, grid)
+                if isinstance(second_ambient, str)
+                else second_ambient.resample(grid)
+            ).to_unit(ambient_spd.unit)
         if (second_spd is None) != (ambient_map is None):
             raise CameraError("simulated camera: second_ambient and ambient_map go together; expected both or neither")
-        metered_ambient = (ambient_spd if second_spd is None or ambient_map is None
-                           else MixedIllumination.two_ambients(ambient_spd, second_spd, ambient_map))
+        metered_ambient = (
+            ambient_spd
+            if second_spd is None or ambient_map is None
+            else MixedIllumination.two_ambients(ambient_spd, second_spd, ambient_map)
+        )
         leds = (datasets.paper_led_subset(n_leds) if led_spectra is None else led_spectra).resample(grid)
         responsivities = (datasets.camera_responsivities(camera) if isinstance(camera, str) else camera).resample(grid)
         sensor = sensor if sensor is not None else SensorModel(cfa=cfa)
@@ -414,18 +451,39 @@ class SimulatedCamera(TriggeredFrames):
         # LED power relative to the ambient, measured the way the camera sees it (mean signal over
         # the diffuse scene), so it holds whatever the ambient's spectrum.
         diffuse = Scene(scene.reflectances, scene.labels, scene.shading)
-        led_spectra = leds.replace(values=leds.values * flash_power_scale(diffuse, metered_ambient, leds, responsivities,
-                                                                          flash_power))
-        camera_name = responsivities.metadata.get("camera") or (camera if isinstance(camera, str) else responsivities.source)
+        led_spectra = leds.replace(
+            values=leds.values * flash_power_scale(diffuse, metered_ambient, leds, responsivities, flash_power)
+        )
+        camera_name = responsivities.metadata.get("camera") or (
+            camera if isinstance(camera, str) else responsivities.source
+        )
         dark = ambient_spd.replace(values=np.zeros_like(ambient_spd.values))
         exposure_at_unit_scale = min(
             exposure_for_peak(scene, metered_ambient, responsivities, sensor, ambient_peak_fraction),
-            *(exposure_for_peak(scene, _plus(metered_ambient, total_illumination(dark, led_spectra, on)),
-                                responsivities, sensor, FLASH_PEAK_FRACTION) for on in np.eye(led_spectra.count)))
+            *(
+                exposure_for_peak(
+                    scene,
+                    _plus(metered_ambient, total_illumination(dark, led_spectra, on)),
+                    responsivities,
+                    sensor,
+                    FLASH_PEAK_FRACTION,
+                )
+                for on in np.eye(led_spectra.count)
+            ),
+        )
         simulated = cls(
-            scene, ambient_spd, led_spectra, responsivities, sensor,
-            scale=exposure_at_unit_scale / reference_exposure_us, led_levels_source=led_levels_source, seed=seed,
-            noise=noise, name=f"SimulatedCamera ({camera_name})", second_ambient=second_spd, ambient_map=ambient_map,
+            scene,
+            ambient_spd,
+            led_spectra,
+            responsivities,
+            sensor,
+            scale=exposure_at_unit_scale / reference_exposure_us,
+            led_levels_source=led_levels_source,
+            seed=seed,
+            noise=noise,
+            name=f"SimulatedCamera ({camera_name})",
+            second_ambient=second_spd,
+            ambient_map=ambient_map,
         )
         simulated.suggested_exposure_us = reference_exposure_us
         return simulated
@@ -446,8 +504,9 @@ def _plus(ambient: Spectra | MixedIllumination, light: Spectra) -> Spectra | Mix
     return ambient.replace(values=ambient.values + light.to_unit(ambient.unit).values)
 
 
-def led_signals(scene: Scene, ambient: Spectra | MixedIllumination, led_spectra: Spectra,
-                camera_responsivities: Spectra) -> np.ndarray:
+def led_signals(
+    scene: Scene, ambient: Spectra | MixedIllumination, led_spectra: Spectra, camera_responsivities: Spectra
+) -> np.ndarray:
     """Each LED's mean camera signal at full drive over ``scene`` (all pixels and channels), in units of the ambient's.
 
     Raises
@@ -457,16 +516,30 @@ def led_signals(scene: Scene, ambient: Spectra | MixedIllumination, led_spectra:
     """
     ambient_signal = float(np.mean(expected_response(scene, ambient, camera_responsivities, 1.0)))
     if ambient_signal <= 0:
-        raise CameraError("simulated camera: the ambient gives no signal in this camera; expected light within the "
-                          "camera's sensitivity")
+        raise CameraError(
+            "simulated camera: the ambient gives no signal in this camera; expected light within the "
+            "camera's sensitivity"
+        )
     spd = led_spectra.to_unit("photons")
     dark = spd.replace(values=np.zeros((spd.grid.size, 1)), names=("dark",))
-    return np.array([float(np.mean(expected_response(scene, total_illumination(dark, spd, on), camera_responsivities,
-                                                     1.0))) for on in np.eye(spd.count)]) / ambient_signal
+    return (
+        np.array(
+            [
+                float(np.mean(expected_response(scene, total_illumination(dark, spd, on), camera_responsivities, 1.0)))
+                for on in np.eye(spd.count)
+            ]
+        )
+        / ambient_signal
+    )
 
 
-def flash_power_scale(scene: Scene, ambient: Spectra | MixedIllumination, led_spectra: Spectra,
-                      camera_responsivities: Spectra, flash_power: float = 1.0) -> float:
+def flash_power_scale(
+    scene: Scene,
+    ambient: Spectra | MixedIllumination,
+    led_spectra: Spectra,
+    camera_responsivities: Spectra,
+    flash_power: float = 1.0,
+) -> float:
     """The factor on ``led_spectra`` making the weakest LED the camera sees give ``flash_power`` × the ambient.
 
     Signals are :func:`led_signals` (mean over ``scene``, all channels); LEDs below
@@ -481,12 +554,15 @@ def flash_power_scale(scene: Scene, ambient: Spectra | MixedIllumination, led_sp
         signal in this camera.
     """
     if not (np.isfinite(flash_power) and flash_power > 0):
-        raise CameraError(f"simulated camera: flash power {flash_power}; expected a positive number (each LED's "
-                          "signal in units of the ambient's)")
+        raise CameraError(
+            f"simulated camera: flash power {flash_power}; expected a positive number (each LED's "
+            "signal in units of the ambient's)"
+        )
     signals = led_signals(scene, ambient, led_spectra, camera_responsivities)
     strongest = float(np.max(signals)) if signals.size else 0.0
     if strongest <= 0:
-        raise CameraError("simulated camera: the LEDs give no signal in this camera; expected light within the "
-                          "camera's sensitivity")
+        raise CameraError(
+            "simulated camera: the LEDs give no signal in this camera; expected light within the camera's sensitivity"
+        )
     weakest = float(np.min(signals[signals >= VISIBLE_LED_FRACTION * strongest]))
     return flash_power / weakest

@@ -109,8 +109,15 @@ class AsyncSequenceWriter:
         """Frames handed over but not yet on disk."""
         return self._added - self._written
 
-    def add_frame(self, pixels: np.ndarray, role: FrameRole, led_levels: Iterable[float], exposure_us: float,
-                  gain: float = 1.0, extra: Mapping | None = None) -> SequenceFrame:
+    def add_frame(
+        self,
+        pixels: np.ndarray,
+        role: FrameRole,
+        led_levels: Iterable[float],
+        exposure_us: float,
+        gain: float = 1.0,
+        extra: Mapping | None = None,
+    ) -> SequenceFrame:
         """Queue one frame for :meth:`SequenceWriter.add_frame`; returns the entry it will be written as.
 
         Blocks only while the queue is full (back-pressure). Raises the writer thread's error, if any.
@@ -122,8 +129,14 @@ class AsyncSequenceWriter:
             raise RecordingError(f"{self.path}: the asynchronous writer is closed; expected add_frame before close()")
         pixels = np.asarray(pixels)
         name_role = role if role in FRAME_ROLES else "frame"
-        entry = SequenceFrame(f"{FRAMES_DIR}/{self._added:03d}-{name_role}{image_suffix(pixels)}", role,
-                              tuple(led_levels), exposure_us, gain, dict(extra or {}))
+        entry = SequenceFrame(
+            f"{FRAMES_DIR}/{self._added:03d}-{name_role}{image_suffix(pixels)}",
+            role,
+            tuple(led_levels),
+            exposure_us,
+            gain,
+            dict(extra or {}),
+        )
         self._added += 1
         item = (pixels, role, entry.led_levels, exposure_us, gain, dict(extra or {}), entry.file)
         with self._held_lock:
@@ -191,8 +204,9 @@ class AsyncSequenceWriter:
     def __enter__(self) -> AsyncSequenceWriter:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 traceback: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, traceback: TracebackType | None
+    ) -> None:
         self.close()  # drain first, whatever happened: nothing captured is lost
         if exc_type is None:
             self._raise_error()

@@ -39,8 +39,15 @@ from msflash.acquisition.sequence.image_files import read_image
 from msflash.processing.user_files import shown_path
 
 FileState = Literal["intact", "changed", "truncated", "missing", "unreadable", "unverified", "undeclared"]
-FILE_STATES: tuple[FileState, ...] = ("intact", "changed", "truncated", "missing", "unreadable", "unverified",
-                                      "undeclared")
+FILE_STATES: tuple[FileState, ...] = (
+    "intact",
+    "changed",
+    "truncated",
+    "missing",
+    "unreadable",
+    "unverified",
+    "undeclared",
+)
 """Every state :func:`check_sequence` reports, in the order the summary counts them."""
 
 
@@ -87,8 +94,13 @@ class SequenceCheck:
 
     def summary(self) -> dict[str, Any]:
         """The one-line JSON summary: the sequence, its frame count, the counts per state, ``intact``."""
-        return {"sequence": str(self.sequence.directory), "complete": self.sequence.complete,
-                "frames": len(self.sequence.frames), **self.counts(), "intact_sequence": self.intact}
+        return {
+            "sequence": str(self.sequence.directory),
+            "complete": self.sequence.complete,
+            "frames": len(self.sequence.frames),
+            **self.counts(),
+            "intact_sequence": self.intact,
+        }
 
 
 def check_sequence(directory: str | os.PathLike) -> SequenceCheck:
@@ -137,9 +149,13 @@ def _check_frame(sequence: Sequence, index: int) -> FileCheck:
         read_image(path)
     except RecordingError as err:
         return FileCheck(frame.file, "unreadable", index, f"{where}: {err}")
-    return FileCheck(frame.file, "unverified", index,
-                     f"{where} has no recorded SHA-256 (recorded before frame digests, or by another tool): it "
-                     "reads, but cannot be proven to be the file written; expected frames[].sha256 and file_bytes")
+    return FileCheck(
+        frame.file,
+        "unverified",
+        index,
+        f"{where} has no recorded SHA-256 (recorded before frame digests, or by another tool): it "
+        "reads, but cannot be proven to be the file written; expected frames[].sha256 and file_bytes",
+    )
 
 
 def _undeclared(sequence: Sequence) -> list[FileCheck]:
@@ -154,11 +170,17 @@ def _undeclared(sequence: Sequence) -> list[FileCheck]:
             if relative in ignored or os.path.normpath(relative) in listed:
                 continue
             found.append(relative.replace(os.sep, "/"))
-    return [FileCheck(relative, "undeclared", None,
-                      f"{shown_path(root / relative)}: is not listed in {SEQUENCE_FILE}"
-                      f"{' (a temporary file a stopped writer left)' if _temporary(relative) else ''}; expected only "
-                      "the frames the sequence lists (move it out, or restore its entry)")
-            for relative in sorted(found)]
+    return [
+        FileCheck(
+            relative,
+            "undeclared",
+            None,
+            f"{shown_path(root / relative)}: is not listed in {SEQUENCE_FILE}"
+            f"{' (a temporary file a stopped writer left)' if _temporary(relative) else ''}; expected only "
+            "the frames the sequence lists (move it out, or restore its entry)",
+        )
+        for relative in sorted(found)
+    ]
 
 
 def _temporary(relative: str) -> bool:

@@ -83,7 +83,9 @@ class FolderClaim:
                             os.unlink(entry.path)
                             removed.append(Path(entry.path))
         for path in removed:
-            _log.warning("%s: removed a temporary file left by a writer that was stopped (not part of any sequence)", path)
+            _log.warning(
+                "%s: removed a temporary file left by a writer that was stopped (not part of any sequence)", path
+            )
         return removed
 
 
@@ -112,8 +114,11 @@ def stale_temporaries(folder: str | os.PathLike, *subfolders: str) -> list[Path]
     found: list[Path] = []
     for directory in (folder, *(folder / s for s in subfolders)):
         with contextlib.suppress(OSError):
-            found.extend(Path(e.path) for e in os.scandir(directory)
-                         if _is_stale_temporary(e.name) and e.is_file(follow_symlinks=False))
+            found.extend(
+                Path(e.path)
+                for e in os.scandir(directory)
+                if _is_stale_temporary(e.name) and e.is_file(follow_symlinks=False)
+            )
     return sorted(found)
 
 
@@ -143,8 +148,10 @@ def claim_folder(folder: str | os.PathLike, what: str = "writing") -> FolderClai
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(handle)
-            raise FolderInUseError(f"{folder}: in use by {_holder(lock)}; expected a folder no other run is "
-                                   "writing (wait for it, or choose another --out)") from None
+            raise FolderInUseError(
+                f"{folder}: in use by {_holder(lock)}; expected a folder no other run is "
+                "writing (wait for it, or choose another --out)"
+            ) from None
         # The holder before us may have removed the file between our open and our lock: then we
         # hold a lock on a file no one else can see, and must lock the one now at that path.
         try:
@@ -157,7 +164,9 @@ def claim_folder(folder: str | os.PathLike, what: str = "writing") -> FolderClai
     previous = os.read(handle, 4096).decode("utf-8", errors="replace")
     if previous.strip():
         pid = previous.partition("\n")[0]
-        _log.warning("%s: taking over from msflash process %s, which stopped without releasing it (killed?)", folder, pid)
+        _log.warning(
+            "%s: taking over from msflash process %s, which stopped without releasing it (killed?)", folder, pid
+        )
     os.ftruncate(handle, 0)
     started = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
     os.pwrite(handle, f"{os.getpid()}\n{what}, since {started}\n".encode("utf-8", errors="replace"), 0)

@@ -110,8 +110,7 @@ class _ArrayEquality:
     def __eq__(self, other: object) -> bool:
         if type(other) is not type(self):
             return NotImplemented
-        return all(_values_equal(getattr(self, f.name), getattr(other, f.name))
-                   for f in fields(self) if f.compare)
+        return all(_values_equal(getattr(self, f.name), getattr(other, f.name)) for f in fields(self) if f.compare)
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -146,9 +145,7 @@ class SequenceCamera(_ArrayEquality):
 
     def __post_init__(self) -> None:
         if self.responsivity is not None:
-            object.__setattr__(
-                self, "responsivity", {str(k): _frozen_array(v) for k, v in self.responsivity.items()}
-            )
+            object.__setattr__(self, "responsivity", {str(k): _frozen_array(v) for k, v in self.responsivity.items()})
         object.__setattr__(self, "black_level", float(self.black_level))
         object.__setattr__(self, "white_level", float(self.white_level))
         object.__setattr__(self, "extra", _check_extra("camera", self.extra, _CAMERA_KEYS))
@@ -246,8 +243,12 @@ class Sequence(_ArrayEquality):
         """The LED spectra at full drive, shape (n_wavelengths, n_leds), in :attr:`spectral_unit`."""
         values = np.column_stack([led.spd for led in self.leds]) if self.leds else np.empty((self.grid.size, 0))
         return Spectra(
-            self.grid, values, tuple(led.name for led in self.leds), kind="spd",
-            unit=self.spectral_unit, source=str(self.path),
+            self.grid,
+            values,
+            tuple(led.name for led in self.leds),
+            kind="spd",
+            unit=self.spectral_unit,
+            source=str(self.path),
         )
 
     def camera_responsivities(self) -> Spectra | None:
@@ -257,8 +258,12 @@ class Sequence(_ArrayEquality):
             return None
         values = np.column_stack([responsivity[c] for c in RESPONSIVITY_CHANNELS])
         return Spectra(
-            self.grid, values, RESPONSIVITY_CHANNELS, kind="responsivity",
-            unit=self.spectral_unit, source=str(self.path),
+            self.grid,
+            values,
+            RESPONSIVITY_CHANNELS,
+            kind="responsivity",
+            unit=self.spectral_unit,
+            source=str(self.path),
         )
 
     def frame_path(self, index: int) -> Path:
@@ -326,8 +331,9 @@ class Sequence(_ArrayEquality):
             As :meth:`load_frame`.
         """
         frame = self.frames[index]
-        return linearise(self.load_frame(index), self.camera.black_level, self.camera.white_level,
-                         frame.exposure_us, frame.gain)
+        return linearise(
+            self.load_frame(index), self.camera.black_level, self.camera.white_level, frame.exposure_us, frame.gain
+        )
 
 
 # -- reading ---------------------------------------------------------------------------------------
@@ -403,8 +409,13 @@ def _json_type(value: Any) -> str:
     if isinstance(value, _HugeInteger):
         return f"an integer of {value.digits} digits"
     return {
-        dict: "an object", list: "a list", str: "a string", bool: "a boolean", int: "a number",
-        float: "a number", type(None): "null",
+        dict: "an object",
+        list: "a list",
+        str: "a string",
+        bool: "a boolean",
+        int: "a number",
+        float: "a number",
+        type(None): "null",
     }.get(type(value), type(value).__name__)
 
 
@@ -418,8 +429,9 @@ def _number(file: Path, field_name: str, value: Any, expected: str) -> float:
     try:
         number = float(value)
     except OverflowError:
-        raise RecordingError(f"{file}: {field_name} is an integer of {len(str(abs(value)))} digits; expected {expected} "
-                             "(finite)") from None
+        raise RecordingError(
+            f"{file}: {field_name} is an integer of {len(str(abs(value)))} digits; expected {expected} (finite)"
+        ) from None
     if not math.isfinite(number):
         raise RecordingError(f"{file}: {field_name} is {value}; expected {expected} (finite)")
     return number
@@ -436,8 +448,9 @@ def _number_list(file: Path, field_name: str, value: Any, length: int | None, wh
         try:
             finite = math.isfinite(item)
         except OverflowError:
-            raise RecordingError(f"{file}: {field_name}[{i}] is an integer of {len(str(abs(item)))} digits; expected a "
-                                 "finite number") from None
+            raise RecordingError(
+                f"{file}: {field_name}[{i}] is an integer of {len(str(abs(item)))} digits; expected a finite number"
+            ) from None
         if not finite:
             raise RecordingError(f"{file}: {field_name}[{i}] is {item}; expected a finite number")
     return np.array(value, dtype=float)
@@ -453,8 +466,9 @@ def _spectrum(file: Path, field_name: str, value: Any, wavelengths_nm: np.ndarra
     """
     values = _number_list(file, field_name, value, wavelengths_nm.size, "one per wavelength")
     try:
-        clipped, _ = clip_negative_noise(wavelengths_nm, values, [field_name], str(file),
-                                         place=lambda row, _column: f"{field_name}[{row}]")
+        clipped, _ = clip_negative_noise(
+            wavelengths_nm, values, [field_name], str(file), place=lambda row, _column: f"{field_name}[{row}]"
+        )
     except SpectralDataError as err:
         raise RecordingError(str(err)) from None
     return clipped
@@ -470,15 +484,19 @@ def _load_json(path: Path) -> Any:
         return result
 
     if not os.path.lexists(path):
-        raise RecordingError(f"{shown_path(path)}: file is missing; expected a sequence directory holding {SEQUENCE_FILE}")
+        raise RecordingError(
+            f"{shown_path(path)}: file is missing; expected a sequence directory holding {SEQUENCE_FILE}"
+        )
     text = read_user_text(path, f"a sequence's {SEQUENCE_FILE} (UTF-8 JSON)", JSON_MAX_BYTES, RecordingError)
     try:
         document = json.loads(text, object_pairs_hook=no_duplicates, parse_int=_json_integer)
     except json.JSONDecodeError as err:
         raise RecordingError(f"{path}: line {err.lineno} column {err.colno}: {err.msg}; expected valid JSON") from err
     except RecursionError:
-        raise RecordingError(f"{path}: objects or lists are nested too deep to read; expected at most {MAX_NESTING} "
-                             "levels (format v1 needs 4)") from None
+        raise RecordingError(
+            f"{path}: objects or lists are nested too deep to read; expected at most {MAX_NESTING} "
+            "levels (format v1 needs 4)"
+        ) from None
     _check_nesting(path, document)
     return document
 
@@ -490,8 +508,10 @@ def _check_nesting(path: Path, document: Any) -> None:
         value, where, depth = stack.pop()
         if depth > MAX_NESTING:
             field_name = where if len(where) <= 80 else where[:80] + "…"
-            raise RecordingError(f"{path}: {field_name} is nested more than {MAX_NESTING} levels deep; expected at most "
-                                 f"{MAX_NESTING} levels (format v1 needs 4)")
+            raise RecordingError(
+                f"{path}: {field_name} is nested more than {MAX_NESTING} levels deep; expected at most "
+                f"{MAX_NESTING} levels (format v1 needs 4)"
+            )
         if isinstance(value, dict):
             stack.extend((v, f"{where}.{k}" if where else str(k), depth + 1) for k, v in value.items())
         elif isinstance(value, list):
@@ -521,9 +541,7 @@ def _parse_camera(file: Path, value: Any, wavelengths_nm: np.ndarray) -> Sequenc
         if missing:
             camera.fail("camera.responsivity", f"lacks {', '.join(missing)}", "R, G and B spectra")
         # Channels beyond R, G, B are kept (and validated) rather than refused: unknown keys survive.
-        responsivity = {
-            str(c): _spectrum(file, f"camera.responsivity.{c}", v, wavelengths_nm) for c, v in raw.items()
-        }
+        responsivity = {str(c): _spectrum(file, f"camera.responsivity.{c}", v, wavelengths_nm) for c, v in raw.items()}
     return SequenceCamera(model, serial, pixel_format, cfa, black, white, responsivity, camera.extra)
 
 
@@ -549,21 +567,33 @@ def _check_file(file: Path, directory: Path, where: str, value: Any, *, must_exi
     try:
         value.encode("utf-8")
     except UnicodeEncodeError:
-        raise RecordingError(f"{file}: {where} {value!r} is not a UTF-8 file name; expected a file name in UTF-8 "
-                             "(rename the file and its entry)") from None
-    if "\\" in value and must_exist and not (directory / value).exists() and (directory / value.replace("\\", "/")).exists():
+        raise RecordingError(
+            f"{file}: {where} {value!r} is not a UTF-8 file name; expected a file name in UTF-8 "
+            "(rename the file and its entry)"
+        ) from None
+    if (
+        "\\" in value
+        and must_exist
+        and not (directory / value).exists()
+        and (directory / value.replace("\\", "/")).exists()
+    ):
         value = value.replace("\\", "/")  # written on Windows (str of a WindowsPath): '\' separators
     relative = PurePosixPath(value)
     if relative.is_absolute() or Path(value).is_absolute():
-        raise RecordingError(f"{file}: {where} {value!r} is absolute; expected a path relative to the sequence directory")
+        raise RecordingError(
+            f"{file}: {where} {value!r} is absolute; expected a path relative to the sequence directory"
+        )
     try:
         root = directory.resolve()
         target = (directory / value).resolve()
     except (RuntimeError, OSError) as err:  # a symlink loop: RuntimeError before Python 3.13, OSError after
-        raise RecordingError(f"{file}: {where} {value!r} cannot be resolved ({err}); expected a frame file, not a "
-                             "symlink loop") from None
+        raise RecordingError(
+            f"{file}: {where} {value!r} cannot be resolved ({err}); expected a frame file, not a symlink loop"
+        ) from None
     if target == root or not target.is_relative_to(root):
-        raise RecordingError(f"{file}: {where} {value!r} points outside the sequence directory; expected a path inside it")
+        raise RecordingError(
+            f"{file}: {where} {value!r} points outside the sequence directory; expected a path inside it"
+        )
     if must_exist:
         if not target.exists():
             raise RecordingError(f"{file}: {where} {value!r} is missing; expected the frame file on disk")
@@ -572,7 +602,9 @@ def _check_file(file: Path, directory: Path, where: str, value: Any, *, must_exi
     return value
 
 
-def _parse_frame(file: Path, directory: Path, index: int, value: Any, n_leds: int, *, must_exist: bool = True) -> SequenceFrame:
+def _parse_frame(
+    file: Path, directory: Path, index: int, value: Any, n_leds: int, *, must_exist: bool = True
+) -> SequenceFrame:
     frame = _Fields(file, f"frames[{index}]", value, _FRAME_KEYS)
     name = frame.name
     path = _check_file(file, directory, name("file"), frame.get("file", "a relative file path"), must_exist=must_exist)
@@ -603,8 +635,9 @@ def _parse_digest(frame: _Fields) -> FileDigest | None:
         present, absent = ("sha256", "file_bytes") if size is None else ("file_bytes", "sha256")
         frame.fail(frame.name(absent), f"is missing but {present} is given", "both or neither (the file's digest)")
     if not isinstance(sha256, str) or not SHA256_PATTERN.fullmatch(sha256):
-        frame.fail(frame.name("sha256"), f"is {_describe(sha256)}", "64 lowercase hexadecimal digits (the file's "
-                   "SHA-256)")
+        frame.fail(
+            frame.name("sha256"), f"is {_describe(sha256)}", "64 lowercase hexadecimal digits (the file's SHA-256)"
+        )
     if isinstance(size, bool) or not isinstance(size, int) or size < 0:
         frame.fail(frame.name("file_bytes"), f"is {_describe(size)}", "an integer ≥ 0 (the file's length in bytes)")
     return FileDigest(sha256, size)
@@ -647,7 +680,9 @@ def _parse_document(file: Path, directory: Path, document: Any, *, check_files: 
     for i, frame in enumerate(frames):
         key = os.path.normpath(frame.file)
         if key in seen_files:
-            top.fail(f"frames[{i}].file", f"{frame.file!r} is also frames[{seen_files[key]}].file", "one file per frame")
+            top.fail(
+                f"frames[{i}].file", f"{frame.file!r} is also frames[{seen_files[key]}].file", "one file per frame"
+            )
         seen_files[key] = i
     # A partial sequence may stop before its first frame; a complete one must be usable.
     if complete and not any(f.role == "ambient" for f in frames):
@@ -694,9 +729,14 @@ def _report_stale_temporaries(directory: Path) -> None:
     """One note for the temporary files a killed writer left (reading never deletes them)."""
     stale = stale_temporaries(directory, FRAMES_DIR)
     if stale:
-        _log.warning("%s: %d temporary file(s) left by a writer that was stopped (%s%s); not part of the sequence, "
-                     "safe to delete", directory, len(stale), stale[0].relative_to(directory),
-                     ", …" if len(stale) > 1 else "")
+        _log.warning(
+            "%s: %d temporary file(s) left by a writer that was stopped (%s%s); not part of the sequence, "
+            "safe to delete",
+            directory,
+            len(stale),
+            stale[0].relative_to(directory),
+            ", …" if len(stale) > 1 else "",
+        )
 
 
 # -- writing ---------------------------------------------------------------------------------------
@@ -711,8 +751,10 @@ def _camera_json(camera: SequenceCamera) -> dict:
     if camera.serial is not None:
         document["serial"] = camera.serial
     document.update(
-        pixel_format=camera.pixel_format, cfa=camera.cfa,
-        black_level=_plain(camera.black_level), white_level=_plain(camera.white_level),
+        pixel_format=camera.pixel_format,
+        cfa=camera.cfa,
+        black_level=_plain(camera.black_level),
+        white_level=_plain(camera.white_level),
         responsivity=None if camera.responsivity is None else {k: v.tolist() for k, v in camera.responsivity.items()},
     )
     document.update(camera.extra)
@@ -721,8 +763,11 @@ def _camera_json(camera: SequenceCamera) -> dict:
 
 def _frame_json(frame: SequenceFrame) -> dict:
     document = {
-        "file": frame.file, "role": frame.role, "led_levels": list(frame.led_levels),
-        "exposure_us": _plain(frame.exposure_us), "gain": frame.gain,
+        "file": frame.file,
+        "role": frame.role,
+        "led_levels": list(frame.led_levels),
+        "exposure_us": _plain(frame.exposure_us),
+        "gain": frame.gain,
     }
     if frame.digest is not None:
         document.update(sha256=frame.digest.sha256, file_bytes=frame.digest.file_bytes)
@@ -732,7 +777,9 @@ def _frame_json(frame: SequenceFrame) -> dict:
 
 def _document(sequence: Sequence) -> dict:
     return {
-        "format": SEQUENCE_FORMAT, "version": SEQUENCE_VERSION, "complete": sequence.complete,
+        "format": SEQUENCE_FORMAT,
+        "version": SEQUENCE_VERSION,
+        "complete": sequence.complete,
         "wavelengths_nm": [_plain(float(w)) for w in sequence.wavelengths_nm],
         "spectral_unit": sequence.spectral_unit,
         "camera": _camera_json(sequence.camera),
@@ -848,17 +895,29 @@ class SequenceWriter:
     """
 
     def __init__(
-        self, directory: str | os.PathLike, *, wavelengths_nm: Iterable[float] | np.ndarray,
-        spectral_unit: Literal["energy", "photons"], camera: SequenceCamera,
-        leds: Iterable[SequenceLed], extra: Mapping | None = None, mono: bool = False,
+        self,
+        directory: str | os.PathLike,
+        *,
+        wavelengths_nm: Iterable[float] | np.ndarray,
+        spectral_unit: Literal["energy", "photons"],
+        camera: SequenceCamera,
+        leds: Iterable[SequenceLed],
+        extra: Mapping | None = None,
+        mono: bool = False,
     ) -> None:
         self._directory = Path(directory)
         self._mono = bool(mono)
         self._path = self._directory / SEQUENCE_FILE
         self._claim: FolderClaim | None = None
         self._sequence = Sequence(
-            self._directory, False, np.asarray(list(wavelengths_nm), dtype=float), spectral_unit, camera,
-            tuple(leds), (), dict(extra or {}),
+            self._directory,
+            False,
+            np.asarray(list(wavelengths_nm), dtype=float),
+            spectral_unit,
+            camera,
+            tuple(leds),
+            (),
+            dict(extra or {}),
         )
         self._shape: tuple[int, ...] | None = None
         self._first_file: str | None = None
@@ -870,13 +929,17 @@ class SequenceWriter:
         self._claim = claim_folder(self._directory, "msflash sequence writer")
         try:
             if self._path.exists():
-                raise RecordingError(f"{self._path}: already exists; expected a new or empty directory for the sequence")
+                raise RecordingError(
+                    f"{self._path}: already exists; expected a new or empty directory for the sequence"
+                )
             self._claim.clean_stale_temporaries(FRAMES_DIR)
             frames_dir = self._directory / FRAMES_DIR
             if frames_dir.is_dir() and any(frames_dir.iterdir()):
                 # Frame files are named by index: they would be overwritten without a word.
-                raise RecordingError(f"{frames_dir}: holds files but there is no {SEQUENCE_FILE}; expected a new or "
-                                     "empty directory for the sequence (move those files away first)")
+                raise RecordingError(
+                    f"{frames_dir}: holds files but there is no {SEQUENCE_FILE}; expected a new or "
+                    "empty directory for the sequence (move those files away first)"
+                )
             _replace_json(self._path, _document(self._sequence))
         except BaseException:
             self._release()
@@ -897,8 +960,13 @@ class SequenceWriter:
         return self._path
 
     def add_frame(
-        self, pixels: np.ndarray, role: FrameRole, led_levels: Iterable[float], exposure_us: float,
-        gain: float = 1.0, extra: Mapping | None = None,
+        self,
+        pixels: np.ndarray,
+        role: FrameRole,
+        led_levels: Iterable[float],
+        exposure_us: float,
+        gain: float = 1.0,
+        extra: Mapping | None = None,
     ) -> SequenceFrame:
         """Write one frame file, then list it in ``sequence.json``.
 
@@ -941,19 +1009,30 @@ class SequenceWriter:
         if clash:
             raise RecordingError(f"{where}: extra keys {clash} clash with format keys; expected only unknown keys")
         entry = {
-            "file": relative, "role": role, "led_levels": [_as_float(v) for v in led_levels],
-            "exposure_us": _as_float(exposure_us), "gain": _as_float(gain), **dict(extra or {}),
+            "file": relative,
+            "role": role,
+            "led_levels": [_as_float(v) for v in led_levels],
+            "exposure_us": _as_float(exposure_us),
+            "gain": _as_float(gain),
+            **dict(extra or {}),
         }
         frame = _parse_frame(self._path, self._directory, index, entry, len(self._sequence.leds), must_exist=False)
         self._check_pixels(where, relative, pixels)
         updated = _replace(self._sequence, frames=(*self._sequence.frames, frame))
         # Serialised before the frame file is written, so unstorable extras fail with nothing on disk.
         _json_text(self._path, _document(updated))
-        digest = write_image_digest(self._directory / relative, pixels, {
-            "msflash:role": frame.role, "msflash:index": index, "msflash:led_levels": list(frame.led_levels),
-            "msflash:exposure_us": frame.exposure_us, "msflash:gain": frame.gain,
-            "msflash:led_names": [led.name for led in self._sequence.leds],
-        })
+        digest = write_image_digest(
+            self._directory / relative,
+            pixels,
+            {
+                "msflash:role": frame.role,
+                "msflash:index": index,
+                "msflash:led_levels": list(frame.led_levels),
+                "msflash:exposure_us": frame.exposure_us,
+                "msflash:gain": frame.gain,
+                "msflash:led_names": [led.name for led in self._sequence.leds],
+            },
+        )
         # The digest of the bytes written, recorded with the frame (read back and checked on loading).
         frame = _replace_frame(frame, digest=digest)
         updated = _replace(self._sequence, frames=(*self._sequence.frames, frame))
@@ -967,10 +1046,14 @@ class SequenceWriter:
             raise RecordingError(f"{where}: pixels have shape {pixels.shape}; expected (H, W) or (H, W, 3)")
         channels = 1 if pixels.ndim == 2 else 3
         if cfa is not None and channels != 1:
-            raise RecordingError(f"{where}: pixels have 3 channels but camera.cfa is '{cfa}'; expected (H, W) raw mosaic")
+            raise RecordingError(
+                f"{where}: pixels have 3 channels but camera.cfa is '{cfa}'; expected (H, W) raw mosaic"
+            )
         if cfa is None and channels != 3:
-            raise RecordingError(f"{where}: pixels have 1 channel but camera.cfa is null; expected (H, W, 3) RGB "
-                                 "(or a writer made with mono=True for a monochrome camera)")
+            raise RecordingError(
+                f"{where}: pixels have 1 channel but camera.cfa is null; expected (H, W, 3) RGB "
+                "(or a writer made with mono=True for a monochrome camera)"
+            )
         if self._shape is None:
             self._shape, self._first_file = pixels.shape, relative
         elif pixels.shape != self._shape:
@@ -1003,7 +1086,10 @@ class SequenceWriter:
         return self
 
     def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, traceback: TracebackType | None,
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
     ) -> None:
         # On an exception the sequence on disk is already consistent (complete: false, every
         # written frame listed), so nothing is written: the original error propagates untouched.
@@ -1053,8 +1139,12 @@ def write_sequence(directory: str | os.PathLike, sequence: Sequence, frames: Ite
         The written sequence, as :func:`read_sequence` reads it.
     """
     writer = SequenceWriter(
-        directory, wavelengths_nm=sequence.wavelengths_nm, spectral_unit=sequence.spectral_unit,
-        camera=sequence.camera, leds=sequence.leds, extra=sequence.extra,
+        directory,
+        wavelengths_nm=sequence.wavelengths_nm,
+        spectral_unit=sequence.spectral_unit,
+        camera=sequence.camera,
+        leds=sequence.leds,
+        extra=sequence.extra,
     )
     pixels_list = list(frames)
     if len(pixels_list) != len(sequence.frames):

@@ -102,16 +102,18 @@ def frame_state(path: Path, recorded: FileDigest) -> tuple[FrameState, FileDiges
     except FileNotFoundError:
         return "missing", None
     except OSError as err:
-        raise RecordingError(f"{shown_path(path)}: cannot be opened ({err.strerror}); expected a readable frame "
-                             "image") from None
+        raise RecordingError(
+            f"{shown_path(path)}: cannot be opened ({err.strerror}); expected a readable frame image"
+        ) from None
     with os.fdopen(handle, "rb") as stream:
         if not stat.S_ISREG(os.fstat(handle).st_mode):
             raise RecordingError(f"{shown_path(path)}: is not a regular file; expected a frame image")
         try:
             found = digest_open_file(stream)
         except OSError as err:
-            raise RecordingError(f"{shown_path(path)}: cannot be read ({err.strerror}); expected a readable frame "
-                                 "image") from None
+            raise RecordingError(
+                f"{shown_path(path)}: cannot be read ({err.strerror}); expected a readable frame image"
+            ) from None
     if found == recorded:
         return "intact", found
     if found.file_bytes < recorded.file_bytes:
@@ -130,11 +132,15 @@ def digest_problem(where: str, state: FrameState, found: FileDigest | None, reco
     if state == "missing" or found is None:
         return f"{where} is missing; expected the frame file written with SHA-256 {recorded.short()}…"
     if state == "truncated":
-        return (f"{where} is truncated: {found.file_bytes} bytes of the {recorded.file_bytes} written; "
-                "expected the frame file as written (restore it from a copy)")
-    return (f"{where} has changed since it was written: SHA-256 {found.short()}… ({found.file_bytes} bytes), "
-            f"recorded {recorded.short()}… ({recorded.file_bytes} bytes); expected the frame file as written "
-            "(restore it from a copy)")
+        return (
+            f"{where} is truncated: {found.file_bytes} bytes of the {recorded.file_bytes} written; "
+            "expected the frame file as written (restore it from a copy)"
+        )
+    return (
+        f"{where} has changed since it was written: SHA-256 {found.short()}… ({found.file_bytes} bytes), "
+        f"recorded {recorded.short()}… ({recorded.file_bytes} bytes); expected the frame file as written "
+        "(restore it from a copy)"
+    )
 
 
 def check_frame_digest(path: Path, recorded: FileDigest, where: str) -> None:

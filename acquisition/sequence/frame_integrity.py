@@ -51,8 +51,9 @@ def black_margin(black_level: float, white_level: float, gain: float = 1.0) -> f
     return BLACK_MARGIN_FRACTION * (white_level - black_level) * max(float(gain), 1.0)
 
 
-def check_frame_levels(pixels: np.ndarray, black_level: float, white_level: float, gain: float = 1.0,
-                       where: str = "frame") -> None:
+def check_frame_levels(
+    pixels: np.ndarray, black_level: float, white_level: float, gain: float = 1.0, where: str = "frame"
+) -> None:
     """Refuse a frame whose values the declared levels cannot produce.
 
     Parameters
@@ -94,7 +95,9 @@ a white level declared for another bit depth (12-bit data in a 16-bit file?) or 
     if floating:
         finite = np.isfinite(pixels)
         if not finite.all():
-            problems.append(f"{int(pixels.size - np.count_nonzero(finite))} of {pixels.size} pixels not finite (NaN or ±inf)")
+            problems.append(
+                f"{int(pixels.size - np.count_nonzero(finite))} of {pixels.size} pixels not finite (NaN or ±inf)"
+            )
             values = pixels[finite]
             low, high = (values.min(), values.max()) if values.size else (np.nan, np.nan)
     above = int(np.count_nonzero(pixels > high_bound)) if high > high_bound else 0
@@ -102,7 +105,9 @@ a white level declared for another bit depth (12-bit data in a 16-bit file?) or 
     if above:
         problems.append(f"{above} of {pixels.size} pixels above camera.white_level {white_level:g}")
     if below:
-        problems.append(f"{below} of {pixels.size} pixels below camera.black_level {black_level:g} by more than read noise allows")
+        problems.append(
+            f"{below} of {pixels.size} pixels below camera.black_level {black_level:g} by more than read noise allows"
+        )
     causes = []
     if above:
         causes.append("a white level declared for another bit depth (12-bit data in a 16-bit file?)")
@@ -112,7 +117,8 @@ a white level declared for another bit depth (12-bit data in a 16-bit file?) or 
     raise RecordingError(
         f"{where}: {' and '.join(problems)} (values {_value(low)}…{_value(high)}); expected "
         f"values in {low_bound:.4g}…{white_level:g} (black_level {black_level:g} minus a read-noise margin of "
-        f"{black_margin(black_level, white_level, gain):.4g}, up to white_level {white_level:g}): {' or '.join(causes)}")
+        f"{black_margin(black_level, white_level, gain):.4g}, up to white_level {white_level:g}): {' or '.join(causes)}"
+    )
 
 
 def _value(value: float) -> str:

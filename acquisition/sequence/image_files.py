@@ -52,8 +52,12 @@ _NATIVE_TYPES = {
 }
 
 _TYPE_NAMES = {
-    oiio.INT8: "int8", oiio.INT16: "int16", oiio.UINT32: "uint32", oiio.INT32: "int32",
-    oiio.UINT64: "uint64", oiio.INT64: "int64",
+    oiio.INT8: "int8",
+    oiio.INT16: "int16",
+    oiio.UINT32: "uint32",
+    oiio.INT32: "int32",
+    oiio.UINT64: "uint64",
+    oiio.INT64: "int64",
 }
 """Names of the refused pixel types, as numpy calls them (OpenImageIO prints uint32 as 'uint')."""
 
@@ -93,8 +97,9 @@ def _open_input(path: Path):
     try:
         str(path).encode("utf-8")
     except UnicodeEncodeError:  # OpenImageIO takes UTF-8 names only
-        raise RecordingError(f"{shown_path(path)}: is not a UTF-8 file name; expected a file name in UTF-8 "
-                             "(rename the file)") from None
+        raise RecordingError(
+            f"{shown_path(path)}: is not a UTF-8 file name; expected a file name in UTF-8 (rename the file)"
+        ) from None
     if not os.path.lexists(path):
         raise RecordingError(f"{shown_path(path)}: image file is missing; expected a frame image")
     # Before OpenImageIO opens it: a FIFO would block it, a device or a directory has no image.
@@ -111,9 +116,7 @@ def _open_input(path: Path):
 def _header(path: Path, image: oiio.ImageInput) -> tuple[ImageHeader, str]:
     spec = image.spec()
     if spec.nchannels not in (1, 3):
-        raise RecordingError(
-            f"{path}: image has {spec.nchannels} channels; expected 1 (raw mosaic or mono) or 3 (RGB)"
-        )
+        raise RecordingError(f"{path}: image has {spec.nchannels} channels; expected 1 (raw mosaic or mono) or 3 (RGB)")
     if spec.depth > 1:
         raise RecordingError(f"{path}: image is a volume (depth {spec.depth}); expected a 2-D image")
     basetype = spec.format.basetype
@@ -125,8 +128,9 @@ def _header(path: Path, image: oiio.ImageInput) -> tuple[ImageHeader, str]:
         )
     if image.seek_subimage(1, 0):
         # A multi-page TIFF (or multi-part file): which page is the frame is not for msflash to guess.
-        raise RecordingError(f"{path}: holds more than one image (a multi-page TIFF?); expected one image per "
-                             "frame file")
+        raise RecordingError(
+            f"{path}: holds more than one image (a multi-page TIFF?); expected one image per frame file"
+        )
     image.seek_subimage(0, 0)
     request, dtype = _NATIVE_TYPES[basetype]
     header = ImageHeader(path, spec.width, spec.height, spec.nchannels, np.dtype(dtype), _attributes(spec))
@@ -212,9 +216,7 @@ def _prepare_pixels(path: Path, pixels: np.ndarray) -> tuple[np.ndarray, str]:
             raise RecordingError(f"{path}: integer pixels are stored as 16-bit TIFF; expected a {INTEGER_SUFFIX} file")
         low, high = int(pixels.min()), int(pixels.max())
         if low < 0 or high > 65535:
-            raise RecordingError(
-                f"{path}: integer pixels span {low}…{high}; expected counts in 0…65535 (16-bit TIFF)"
-            )
+            raise RecordingError(f"{path}: integer pixels span {low}…{high}; expected counts in 0…65535 (16-bit TIFF)")
         # Cast in numpy rather than letting OpenImageIO convert: its conversion rescales
         # normalised integers (uint8 255 would become 65535), and counts must stay counts.
         return np.ascontiguousarray(pixels, dtype=np.uint16), "uint16"
@@ -224,7 +226,9 @@ def _prepare_pixels(path: Path, pixels: np.ndarray) -> tuple[np.ndarray, str]:
 def _attribute_json(path: Path, attributes: dict) -> str:
     for name in attributes:
         if not isinstance(name, str) or not name.startswith(_ATTRIBUTE_PREFIX):
-            raise RecordingError(f"{path}: attribute name {name!r}; expected a name starting with '{_ATTRIBUTE_PREFIX}'")
+            raise RecordingError(
+                f"{path}: attribute name {name!r}; expected a name starting with '{_ATTRIBUTE_PREFIX}'"
+            )
     try:
         return json.dumps(attributes, allow_nan=False, default=json_default)
     except (TypeError, ValueError) as err:
@@ -248,8 +252,10 @@ def _set_native_attribute(spec: oiio.ImageSpec, name: str, value: object) -> Non
         spec.attribute(name, int(value))
     elif isinstance(value, str | int | float):
         spec.attribute(name, value)
-    elif isinstance(value, list | tuple) and value and all(
-        isinstance(v, int | float) and not isinstance(v, bool) for v in value
+    elif (
+        isinstance(value, list | tuple)
+        and value
+        and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
     ):
         spec.attribute(name, oiio.TypeDesc(f"float[{len(value)}]"), tuple(float(v) for v in value))
 

@@ -73,12 +73,22 @@ def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None =
     def pixels(index: int) -> np.ndarray:
         return sequence.load_frame(index) if frames is None else as_recorded(frames[index], cfa)
 
-    return frame_stack(sequence, [e.role for e in entries], [e.led_levels for e in entries],
-                       [e.exposure_us * e.gain for e in entries], pixels)
+    return frame_stack(
+        sequence,
+        [e.role for e in entries],
+        [e.led_levels for e in entries],
+        [e.exposure_us * e.gain for e in entries],
+        pixels,
+    )
 
 
-def frame_stack(sequence: Sequence, roles: SequenceOf[str], led_levels: SequenceOf[SequenceOf[float]],
-                exposure_gain: SequenceOf[float], pixels: Callable[[int], np.ndarray]) -> FrameStack:
+def frame_stack(
+    sequence: Sequence,
+    roles: SequenceOf[str],
+    led_levels: SequenceOf[SequenceOf[float]],
+    exposure_gain: SequenceOf[float],
+    pixels: Callable[[int], np.ndarray],
+) -> FrameStack:
     """A :class:`FrameStack` from the frames' roles, LED levels, exposure × gain and pixels.
 
     What :func:`load_frame_stack` and a :class:`~acquisition.session.flash_session.FlashSession`
@@ -123,12 +133,19 @@ SAMPLE_WEIGHTING = True
 notes): unweighted, a bright highlight's noisy samples dominate eq. 5."""
 
 
-def sequence_statistics(stack: FrameStack, cfa: str | None = None, bin_factor: int = DEFAULT_BIN_FACTOR) -> SequenceStatistics:
+def sequence_statistics(
+    stack: FrameStack, cfa: str | None = None, bin_factor: int = DEFAULT_BIN_FACTOR
+) -> SequenceStatistics:
     """The sufficient statistics of eq. 4–6 for a loaded frame stack (inverse-variance weighted, :data:`SAMPLE_WEIGHTING`)."""
     period = 2 if cfa is not None else 1
-    return accumulate_statistics(stack.ambient, stack.led_frames, stack.spec,
-                                 bin_factor=block_factor(stack.ambient.shape, cfa, bin_factor),
-                                 cfa_period=period, weighting=SAMPLE_WEIGHTING)
+    return accumulate_statistics(
+        stack.ambient,
+        stack.led_frames,
+        stack.spec,
+        bin_factor=block_factor(stack.ambient.shape, cfa, bin_factor),
+        cfa_period=period,
+        weighting=SAMPLE_WEIGHTING,
+    )
 
 
 def block_factor(shape: tuple[int, ...], cfa: str | None, bin_factor: int = DEFAULT_BIN_FACTOR) -> int:
@@ -172,25 +189,31 @@ def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -
     reference = sequence.extra.get("calibration")
     recorded_id = reference.get("id") if isinstance(reference, dict) else None
     if recorded_id and recorded_id != calibration.id:
-        notes.append(f"the sequence was captured with calibration {recorded_id}; {directory} now holds "
-                     f"{calibration.id}, which is used")
+        notes.append(
+            f"the sequence was captured with calibration {recorded_id}; {directory} now holds "
+            f"{calibration.id}, which is used"
+        )
     grid = sequence.grid
     leds = sequence.leds
     if calibration.led_spectra is not None:
-        _require_coverage(directory, calibration.id, "LED spectra", calibration.led_spectra.wavelengths_nm,
-                          sequence.led_spectra())
+        _require_coverage(
+            directory, calibration.id, "LED spectra", calibration.led_spectra.wavelengths_nm, sequence.led_spectra()
+        )
         spectra = calibration.led_spectra.resample(grid, outside="zero").to_unit(sequence.spectral_unit)
         missing = [led.name for led in leds if led.name not in spectra.names]
         if missing:
-            raise RecordingError(f"{directory}: calibration {calibration.id} has no LED named {', '.join(missing)}; "
-                                 f"expected the sequence's LEDs ({', '.join(led.name for led in leds)})")
+            raise RecordingError(
+                f"{directory}: calibration {calibration.id} has no LED named {', '.join(missing)}; "
+                f"expected the sequence's LEDs ({', '.join(led.name for led in leds)})"
+            )
         leds = tuple(replace(led, spd=spectra.column(led.name)) for led in leds)
         notes.append(f"LED spectra from calibration {calibration.id} ({directory}) replace the sequence's")
     camera = sequence.camera
     if calibration.camera_responsivities is not None:
         lights = replace(sequence, leds=leds).led_spectra()  # the LEDs the responsivities will meet
-        _require_coverage(directory, calibration.id, "camera responsivities",
-                          calibration.camera_responsivities.wavelengths_nm, lights)
+        _require_coverage(
+            directory, calibration.id, "camera responsivities", calibration.camera_responsivities.wavelengths_nm, lights
+        )
         curves = calibration.camera_responsivities.resample(grid, outside="zero").to_unit(sequence.spectral_unit)
         camera = replace(camera, responsivity={name: curves.column(name) for name in curves.names})
         notes.append(f"camera responsivities from calibration {calibration.id} ({directory}) replace the sequence's")
@@ -208,8 +231,9 @@ def _shares_outside(values: np.ndarray, covered: np.ndarray, empty: float = 0.0)
     return np.divide(energy[~covered].sum(axis=0), totals, out=np.full_like(totals, empty), where=totals > 0)
 
 
-def _require_coverage(directory: str | Path, calibration_id: str, what: str, calibrated_nm: np.ndarray,
-                      leds: Spectra) -> None:
+def _require_coverage(
+    directory: str | Path, calibration_id: str, what: str, calibrated_nm: np.ndarray, leds: Spectra
+) -> None:
     """Refuse a calibration whose range misses more than 1 % of an LED's energy (it would be zero-filled there)."""
     low, high = float(calibrated_nm[0]), float(calibrated_nm[-1])
     wavelengths = leds.wavelengths_nm
@@ -219,7 +243,8 @@ def _require_coverage(directory: str | Path, calibration_id: str, what: str, cal
         raise RecordingError(
             f"{directory}: calibration {calibration_id} has {what} from {low:g} to {high:g} nm, but LED "
             f"'{leds.names[worst]}' puts {100 * shares[worst]:.0f} % of its light outside that range; expected a "
-            f"calibration covering the sequence's LEDs ({float(wavelengths[0]):g}–{float(wavelengths[-1]):g} nm)")
+            f"calibration covering the sequence's LEDs ({float(wavelengths[0]):g}–{float(wavelengths[-1]):g} nm)"
+        )
 
 
 def led_spectra_photons(sequence: Sequence) -> Spectra:
@@ -238,15 +263,27 @@ def camera_responsivities_photons(sequence: Sequence) -> Spectra:
     return responsivities.to_unit("photons")
 
 
-def estimate_sequence(sequence: Sequence, method: str = "tikhonov", alpha: float | str = "auto",
-                      stack: FrameStack | None = None, bin_factor: int = DEFAULT_BIN_FACTOR) -> AmbientEstimate:
+def estimate_sequence(
+    sequence: Sequence,
+    method: str = "tikhonov",
+    alpha: float | str = "auto",
+    stack: FrameStack | None = None,
+    bin_factor: int = DEFAULT_BIN_FACTOR,
+) -> AmbientEstimate:
     """Estimate the ambient illuminant of a sequence (eq. 4–6)."""
     stack = stack or load_frame_stack(sequence)
-    return estimate_from_statistics(sequence, sequence_statistics(stack, sequence.camera.cfa, bin_factor), method, alpha)
+    return estimate_from_statistics(
+        sequence, sequence_statistics(stack, sequence.camera.cfa, bin_factor), method, alpha
+    )
 
 
-def estimate_from_statistics(sequence: Sequence, statistics: SequenceStatistics, method: str = "tikhonov",
-                             alpha: float | str = "auto", model: AmbientModel | None = None) -> AmbientEstimate:
+def estimate_from_statistics(
+    sequence: Sequence,
+    statistics: SequenceStatistics,
+    method: str = "tikhonov",
+    alpha: float | str = "auto",
+    model: AmbientModel | None = None,
+) -> AmbientEstimate:
     """The ambient estimate of a sequence's statistics (eq. 4–6) with the LED model's band: the one place
     every route (from disk, live, replay) estimates. ``model``: one prepared for the sequence's LEDs (a
     live session prepares it before the first frame), else made here."""
@@ -260,7 +297,9 @@ def with_model_band(estimate: AmbientEstimate, sequence: Sequence) -> AmbientEst
     (:mod:`processing.model_error`); as it is when the sequence carries no camera responsivities."""
     if sequence.camera_responsivities() is None:
         return estimate
-    return with_model_error(estimate, reference_for(led_spectra_photons(sequence), camera_responsivities_photons(sequence)))
+    return with_model_error(
+        estimate, reference_for(led_spectra_photons(sequence), camera_responsivities_photons(sequence))
+    )
 
 
 def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarray:
@@ -321,8 +360,9 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
             resampled = spectra.resample(sequence.grid, outside="error")
         except SpectralDataError as err:
             resampled = spectra.resample(sequence.grid, outside="zero")
-            inside = (sequence.wavelengths_nm >= spectra.wavelengths_nm[0]) & \
-                (sequence.wavelengths_nm <= spectra.wavelengths_nm[-1])
+            inside = (sequence.wavelengths_nm >= spectra.wavelengths_nm[0]) & (
+                sequence.wavelengths_nm <= spectra.wavelengths_nm[-1]
+            )
             _require_camera_coverage(sequence, inside, f"target illuminant {target}", err)
     else:
         try:
@@ -331,13 +371,15 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
             # A table narrower than the sequence's grid (e.g. FL2's 380–780 nm on 360–830 nm): zero beyond
             # it is harmless only where the camera sees (almost) nothing.
             resampled = datasets.illuminant(target, sequence.grid, outside="zero")
-            _require_camera_coverage(sequence, resampled.values[:, 0] > 0, f"target illuminant '{target}'", err,
-                                     " (give --target FILE.csv)")
+            _require_camera_coverage(
+                sequence, resampled.values[:, 0] > 0, f"target illuminant '{target}'", err, " (give --target FILE.csv)"
+            )
     return resampled.to_unit("photons")
 
 
-def _require_camera_coverage(sequence: Sequence, covered: np.ndarray, what: str, cause: Exception,
-                             hint: str = "") -> None:
+def _require_camera_coverage(
+    sequence: Sequence, covered: np.ndarray, what: str, cause: Exception, hint: str = ""
+) -> None:
     """Refuse zero beyond ``covered`` if the camera puts more than COVERAGE_TOLERANCE of its response there."""
     curves = sequence.camera.responsivity
     if curves is None:
@@ -351,19 +393,20 @@ def _require_camera_coverage(sequence: Sequence, covered: np.ndarray, what: str,
         raise RecordingError(
             f"{what}: its data cover {span} of the sequence's {float(grid[0]):g}–{float(grid[-1]):g} nm, and the "
             f"camera puts {100 * share:.1f} % of its response outside that; expected a target covering the camera's "
-            f"range{hint}") from cause
+            f"range{hint}"
+        ) from cause
 
 
-def solve_sequence_flash(sequence: Sequence, mode: str, ambient_weights: np.ndarray, target: str = "D65",
-                         bounds: FlashBounds = "physical") -> FlashSolution:
+def solve_sequence_flash(
+    sequence: Sequence, mode: str, ambient_weights: np.ndarray, target: str = "D65", bounds: FlashBounds = "physical"
+) -> FlashSolution:
     """The matching or complementary flash for a sequence's estimated ambient weights."""
     leds = led_spectra_photons(sequence)
     camera = camera_responsivities_photons(sequence)
     if mode == "matching":
         return solve_matching(ambient_weights, leds, camera, bounds=bounds)
     if mode == "complementary":
-        return solve_complementary(ambient_weights, leds, camera, target_illuminant(target, sequence),
-                                   bounds=bounds)
+        return solve_complementary(ambient_weights, leds, camera, target_illuminant(target, sequence), bounds=bounds)
     raise RecordingError(f"flash mode '{mode}' is unknown; expected matching or complementary")
 
 
@@ -386,8 +429,9 @@ def flash_payload(sequence: Sequence, solution: FlashSolution, target: str | Non
     return payload
 
 
-def synthesize_sequence(sequence: Sequence, flash_weights: np.ndarray, stack: FrameStack | None = None
-                        ) -> tuple[np.ndarray, np.ndarray, FrameStack]:
+def synthesize_sequence(
+    sequence: Sequence, flash_weights: np.ndarray, stack: FrameStack | None = None
+) -> tuple[np.ndarray, np.ndarray, FrameStack]:
     """The computational flash image ``m_a + Σ w_k m_f,k`` of a sequence (linear, per µs·gain)."""
     stack = stack or load_frame_stack(sequence)
     image, saturated = synthesize(stack.ambient, stack.led_frames, stack.spec, flash_weights)
@@ -406,14 +450,27 @@ def _local_grid(stack: FrameStack, cfa: str | None, tiles: int, bin_factor: int)
     return bin_factor, max(1, min(tiles, blocks[0] // 2)), max(1, min(tiles, blocks[1] // 2))
 
 
-def estimate_sequence_local(sequence: Sequence, method: str = "auto", solver: str = "tikhonov",
-                            alpha: float | str = "auto", tiles: int = DEFAULT_TILES, stack: FrameStack | None = None,
-                            bin_factor: int = DEFAULT_BIN_FACTOR) -> LocalEstimate:
+def estimate_sequence_local(
+    sequence: Sequence,
+    method: str = "auto",
+    solver: str = "tikhonov",
+    alpha: float | str = "auto",
+    tiles: int = DEFAULT_TILES,
+    stack: FrameStack | None = None,
+    bin_factor: int = DEFAULT_BIN_FACTOR,
+) -> LocalEstimate:
     """Estimate the ambient of a sequence globally or per tile (``method`` auto|global|local, issue 9)."""
     stack = stack or load_frame_stack(sequence)
     factor, rows, columns = _local_grid(stack, sequence.camera.cfa, tiles, bin_factor)
-    tiled = tile_statistics(stack.ambient, stack.led_frames, stack.spec, (rows, columns), bin_factor=factor,
-                            cfa_period=2 if sequence.camera.cfa is not None else 1, weighting=SAMPLE_WEIGHTING)
+    tiled = tile_statistics(
+        stack.ambient,
+        stack.led_frames,
+        stack.spec,
+        (rows, columns),
+        bin_factor=factor,
+        cfa_period=2 if sequence.camera.cfa is not None else 1,
+        weighting=SAMPLE_WEIGHTING,
+    )
     local = estimate_local(tiled, led_spectra_photons(sequence), method, solver, alpha)
     return replace(local, global_estimate=with_model_band(local.global_estimate, sequence))
 
@@ -435,13 +492,20 @@ def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:
 
     payload["method"] = local.model
     payload["method_requested"] = local.method
-    payload["model_selection"] = None if local.selection is None else {
-        "chosen": local.selection.model, "scores": local.selection.scores, "margin": local.selection.margin,
-        "best_local_smoothing_tiles": local.selection.best_local,
-        "explained_gain": local.selection.explained_gain, "min_explained_gain": local.selection.min_explained_gain,
-        "criterion": "leave-one-tile-out prediction error relative to the global model's, and its cut relative "
-                     "to the ambient image's energy",
-    }
+    payload["model_selection"] = (
+        None
+        if local.selection is None
+        else {
+            "chosen": local.selection.model,
+            "scores": local.selection.scores,
+            "margin": local.selection.margin,
+            "best_local_smoothing_tiles": local.selection.best_local,
+            "explained_gain": local.selection.explained_gain,
+            "min_explained_gain": local.selection.min_explained_gain,
+            "criterion": "leave-one-tile-out prediction error relative to the global model's, and its cut relative "
+            "to the ambient image's energy",
+        }
+    )
     payload["warnings"] = payload["warnings"] + list(local.warnings)
     if local.model == "local":
         payload["spectrum"] = to_unit(local.mean_spectrum)
@@ -450,7 +514,8 @@ def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:
         payload["ambient_weights_global"] = local.global_estimate.ambient_weights
         payload["tiles"] = {
             "grid": list(local.tiles.shape),
-            "row_edges": local.tiles.row_edges, "column_edges": local.tiles.column_edges,
+            "row_edges": local.tiles.row_edges,
+            "column_edges": local.tiles.column_edges,
             "smoothing_tiles": local.smoothing,
             "ambient_weights": local.tile_weights,
             "spectra": to_unit(local.tile_spectra),
@@ -460,8 +525,9 @@ def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:
     return payload
 
 
-def solve_sequence_flash_local(sequence: Sequence, mode: str, local: LocalEstimate, target: str = "D65",
-                               bounds: FlashBounds = "physical") -> tuple[FlashSolution, np.ndarray, list[FlashSolution]]:
+def solve_sequence_flash_local(
+    sequence: Sequence, mode: str, local: LocalEstimate, target: str = "D65", bounds: FlashBounds = "physical"
+) -> tuple[FlashSolution, np.ndarray, list[FlashSolution]]:
     """Per-tile flash solutions for a local estimate.
 
     Returns
@@ -475,23 +541,30 @@ def solve_sequence_flash_local(sequence: Sequence, mode: str, local: LocalEstima
         solution = solve_sequence_flash(sequence, mode, local.global_estimate.ambient_weights, target, bounds)
         weights = np.broadcast_to(solution.flash_weights, local.tiles.shape + (solution.flash_weights.size,)).copy()
         return solution, weights, [solution]
-    solutions = [solve_sequence_flash(sequence, mode, local.tile_weights[index], target, bounds)
-                 for index in np.ndindex(local.tiles.shape)]
+    solutions = [
+        solve_sequence_flash(sequence, mode, local.tile_weights[index], target, bounds)
+        for index in np.ndindex(local.tiles.shape)
+    ]
     weights = np.array([solution.flash_weights for solution in solutions]).reshape(local.tiles.shape + (-1,))
     areas = local.tiles.areas
     mean_weights = np.einsum("ts,tsk->k", areas, weights) / areas.sum()
     mean_solution = solve_sequence_flash(sequence, mode, local.mean_weights, target, bounds)
     mean = FlashSolution(
-        mode=mean_solution.mode, ambient_weights=local.mean_weights, flash_weights=mean_weights,
-        scale=mean_solution.scale, relative_error=max(s.relative_error for s in solutions), bounds=bounds,
+        mode=mean_solution.mode,
+        ambient_weights=local.mean_weights,
+        flash_weights=mean_weights,
+        scale=mean_solution.scale,
+        relative_error=max(s.relative_error for s in solutions),
+        bounds=bounds,
         target_reached=all(s.target_reached for s in solutions),
         warnings=tuple(dict.fromkeys(w for s in solutions for w in s.warnings)),
     )
     return mean, weights, solutions
 
 
-def synthesize_sequence_local(sequence: Sequence, tile_flash_weights: np.ndarray, local: LocalEstimate,
-                              stack: FrameStack | None = None) -> tuple[np.ndarray, np.ndarray, FrameStack]:
+def synthesize_sequence_local(
+    sequence: Sequence, tile_flash_weights: np.ndarray, local: LocalEstimate, stack: FrameStack | None = None
+) -> tuple[np.ndarray, np.ndarray, FrameStack]:
     """The spatially varying computational flash image (per-tile weights blended between tile centres)."""
     stack = stack or load_frame_stack(sequence)
     image, saturated = synthesize_local(stack.ambient, stack.led_frames, stack.spec, tile_flash_weights, local.tiles)

@@ -180,7 +180,8 @@ def _check_watchdog(booth: LedControl, where: str, saved: str = "") -> None:
         raise CaptureError(
             f"{where}: the booth's watchdog switched the LEDs off during this frame (the host was silent for "
             f"longer than its period); expected the LEDs on until the frame was in — the frame is not kept"
-            + (f". {saved}" if saved else ""))
+            + (f". {saved}" if saved else "")
+        )
 
 
 def _sequence_watchdog(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
@@ -231,8 +232,12 @@ def run_capture_with_flash(
         levels = tuple(float(v) for v in levels)
         exposure_us = float(exposure_us)
         if plan.trigger == "booth" and exposure_us > longest:
-            log.warning("flash exposure %.0f µs capped at %.0f µs: the booth's period was fixed for the "
-                        "longest step when the table was armed", exposure_us, longest)
+            log.warning(
+                "flash exposure %.0f µs capped at %.0f µs: the booth's period was fixed for the "
+                "longest step when the table was armed",
+                exposure_us,
+                longest,
+            )
             exposure_us = longest
         return dataclasses.replace(placeholder, led_levels=levels, exposure_us=exposure_us)
 
@@ -277,8 +282,11 @@ def _leds_off_at_exit(camera: Camera, booth: LedControl) -> Iterator[None]:
         try:
             booth.all_off()
         except Exception as off_err:  # noqa: BLE001 - the original error matters more
-            log.warning("LEDs not confirmed off after the error: %s; the booth's watchdog switches them off "
-                        "once the host has been silent for its period", off_err)
+            log.warning(
+                "LEDs not confirmed off after the error: %s; the booth's watchdog switches them off "
+                "once the host has been silent for its period",
+                off_err,
+            )
         try:
             camera.stop()
         except Exception as stop_err:  # noqa: BLE001 - the original error matters more
@@ -318,14 +326,20 @@ def _replan(camera: Camera, plan: CapturePlan, index: int) -> None:
         return
     targets = [t for t in (camera, getattr(camera, "aravis", None)) if t is not None and hasattr(t, "_plan")]
     if not targets:
-        raise TypeError(f"{type(camera).__name__}: cannot change a step of a prepared plan; expected a camera "
-                        "with update_plan(plan, index) (or use two captures for the flash)")
+        raise TypeError(
+            f"{type(camera).__name__}: cannot change a step of a prepared plan; expected a camera "
+            "with update_plan(plan, index) (or use two captures for the flash)"
+        )
     for target in targets:
         with getattr(target, "_condition", None) or nullcontext():
             target._plan = plan
         trigger = getattr(target, "_trigger", None)
-        if (trigger is not None and getattr(trigger, "mode", "software") != "software"
-                and getattr(target, "_n_consumed", None) == index and hasattr(target, "_apply_step")):
+        if (
+            trigger is not None
+            and getattr(trigger, "mode", "software") != "software"
+            and getattr(target, "_n_consumed", None) == index
+            and hasattr(target, "_apply_step")
+        ):
             target._apply_step(index, plan)  # the line-triggered step was set up after the previous frame
 
 
@@ -357,8 +371,14 @@ def _saved(writer: FrameWriter, written: list[SequenceFrame]) -> str:
     return f"{len(written)} frame(s) already saved in {writer.path.parent}"
 
 
-def _write(writer: FrameWriter, step: CaptureStep, frame: RawFrame, written: list[SequenceFrame],
-           on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None, trigger: int | None = None) -> None:
+def _write(
+    writer: FrameWriter,
+    step: CaptureStep,
+    frame: RawFrame,
+    written: list[SequenceFrame],
+    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
+    trigger: int | None = None,
+) -> None:
     extra: dict = {"frame_id": frame.frame_id, "timestamp_ns": frame.timestamp_ns}
     if trigger is not None:
         extra["trigger"] = trigger
@@ -369,9 +389,14 @@ def _write(writer: FrameWriter, step: CaptureStep, frame: RawFrame, written: lis
         on_frame(step, frame, entry)
 
 
-def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: FrameWriter,
-                on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
-                flash: Callable[[list[RawFrame]], CaptureStep] | None = None) -> list[SequenceFrame]:
+def _host_paced(
+    camera: Camera,
+    booth: LedControl,
+    plan: CapturePlan,
+    writer: FrameWriter,
+    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
+    flash: Callable[[list[RawFrame]], CaptureStep] | None = None,
+) -> list[SequenceFrame]:
     written: list[SequenceFrame] = []
     frames: list[RawFrame] = []
     previous_id: int | None = None
@@ -392,8 +417,9 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Fr
                 try:
                     frame = camera.next_frame(plan.frame_timeout_s)
                 except FrameTimeoutError as err:
-                    raise FrameTimeoutError(f"step {step.index} ({step.label}): {err}; "
-                                            f"{_saved(writer, written)}") from err
+                    raise FrameTimeoutError(
+                        f"step {step.index} ({step.label}): {err}; {_saved(writer, written)}"
+                    ) from err
             if previous_id is not None and (frame.frame_id - previous_id) % FRAME_ID_MODULUS != 1:
                 raise DroppedFrameError(
                     f"step {step.index} ({step.label}): camera frame id {frame.frame_id} follows {previous_id}; "
@@ -406,9 +432,14 @@ def _host_paced(camera: Camera, booth: LedControl, plan: CapturePlan, writer: Fr
     return written
 
 
-def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, writer: FrameWriter,
-                 on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
-                 flash: Callable[[list[RawFrame]], CaptureStep] | None = None) -> list[SequenceFrame]:
+def _table_paced(
+    camera: Camera,
+    booth: SequencedLedControl,
+    plan: CapturePlan,
+    writer: FrameWriter,
+    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
+    flash: Callable[[list[RawFrame]], CaptureStep] | None = None,
+) -> list[SequenceFrame]:
     written: list[SequenceFrame] = []
     frames: list[RawFrame] = []
     last = len(plan.steps) - 1
@@ -425,7 +456,8 @@ def _table_paced(camera: Camera, booth: SequencedLedControl, plan: CapturePlan, 
             f"booth master: step period {period_us * 1e-6:.4g} s (settle, trigger pulse, longest exposure "
             f"{longest_us * 1e-6:.4g} s, deadtime and readout) is longer than the booth's longest period "
             f"{ARM_TIME_MAX_US * 1e-6:g} s; expected exposures up to {longest_allowed_us * 1e-6:.4g} s "
-            "when the booth paces the frames (or host pacing)")
+            "when the booth paces the frames (or host pacing)"
+        )
     first_id: int | None = None
     pause, resume = getattr(writer, "pause", None), getattr(writer, "resume", None)
     with ExitStack() as watchdog:
@@ -521,8 +553,9 @@ def _booth_step_of(booth: SequencedLedControl, trigger: int, timeout_s: float, s
         try:
             count, index = int(event.args[0]), int(event.args[1])
         except (IndexError, ValueError) as err:
-            raise DroppedFrameError(f"step {step.index} ({step.label}): booth event {event.args!r}; "
-                                    "expected 'TRIG <count> <step>'") from err
+            raise DroppedFrameError(
+                f"step {step.index} ({step.label}): booth event {event.args!r}; expected 'TRIG <count> <step>'"
+            ) from err
         if count == trigger:
             return index
         if count > trigger:
@@ -552,8 +585,10 @@ def preview_frames(camera: Camera, booth: LedControl, plan: CapturePlan) -> list
             except FrameTimeoutError as err:
                 raise FrameTimeoutError(f"preview step {step.index} ({step.label}): {err}") from err
             if frames and (frame.frame_id - frames[-1].frame_id) % FRAME_ID_MODULUS != 1:
-                raise DroppedFrameError(f"preview step {step.index} ({step.label}): camera frame id "
-                                        f"{frame.frame_id} follows {frames[-1].frame_id}; a frame was lost")
+                raise DroppedFrameError(
+                    f"preview step {step.index} ({step.label}): camera frame id "
+                    f"{frame.frame_id} follows {frames[-1].frame_id}; a frame was lost"
+                )
             _check_watchdog(booth, f"preview step {step.index} ({step.label})")
             frames.append(frame)
     return frames

@@ -95,8 +95,9 @@ class ExposurePolicy:
         if not 0 <= self.max_saturated_fraction < 0.5:
             raise ValueError(f"max_saturated_fraction {self.max_saturated_fraction}; expected 0 ≤ f < 0.5")
         if not 0 < self.target_fraction <= self.headroom_fraction <= 1:
-            raise ValueError(f"target {self.target_fraction}, headroom {self.headroom_fraction}; "
-                             "expected 0 < target ≤ headroom ≤ 1")
+            raise ValueError(
+                f"target {self.target_fraction}, headroom {self.headroom_fraction}; expected 0 < target ≤ headroom ≤ 1"
+            )
 
 
 @dataclass(frozen=True)
@@ -163,6 +164,7 @@ class ExposurePlan:
 
 # -- what a camera offers ----------------------------------------------------------------------
 
+
 def camera_exposure_range(camera: Any) -> tuple[float, float]:
     """The camera's exposure range (µs), or :data:`DEFAULT_EXPOSURE_RANGE_US`."""
     found = getattr(camera, "exposure_range_us", None)
@@ -187,6 +189,7 @@ def camera_noise_model(camera: Any) -> NoiseModel | None:
 
 
 # -- metering ----------------------------------------------------------------------------------
+
 
 def metering_view(pixels: np.ndarray, mosaic: bool) -> np.ndarray:
     """A frame as the metering functions here should read it.
@@ -263,9 +266,14 @@ def _clamp(value: float, limits: tuple[float, float]) -> float:
     return float(min(max(value, limits[0]), limits[1]))
 
 
-def auto_ambient_exposure(capture: Callable[[float], np.ndarray], start_us: float, black: float, white: float,
-                          limits: tuple[float, float], policy: ExposurePolicy
-                          ) -> tuple[float, np.ndarray, float, list[Levels], list[str]]:
+def auto_ambient_exposure(
+    capture: Callable[[float], np.ndarray],
+    start_us: float,
+    black: float,
+    white: float,
+    limits: tuple[float, float],
+    policy: ExposurePolicy,
+) -> tuple[float, np.ndarray, float, list[Levels], list[str]]:
     """Meter ambient previews until the bright end sits at the target.
 
     ``capture(exposure_us)`` returns an ambient frame. Returns the chosen exposure, the last
@@ -281,8 +289,10 @@ def auto_ambient_exposure(capture: Callable[[float], np.ndarray], start_us: floa
         metered.append(levels)
         if levels.saturated_fraction > policy.max_saturated_fraction:
             if exposure <= limits[0]:
-                notes.append(f"ambient too bright: {levels.saturated_fraction:.2%} of pixels saturate at the "
-                             f"camera's shortest exposure {limits[0]:g} µs; reduce the light or the aperture")
+                notes.append(
+                    f"ambient too bright: {levels.saturated_fraction:.2%} of pixels saturate at the "
+                    f"camera's shortest exposure {limits[0]:g} µs; reduce the light or the aperture"
+                )
                 good = (pixels, exposure)
                 break
             exposure = _clamp(exposure / 4.0, limits)
@@ -294,9 +304,11 @@ def auto_ambient_exposure(capture: Callable[[float], np.ndarray], start_us: floa
         proposed = _clamp(exposure * min(max(factor, 1 / 16), 16.0), limits)
         if proposed == exposure:
             if factor > 1:
-                notes.append(f"ambient too dark: at the camera's longest exposure {limits[1]:g} µs the bright end "
-                             f"is {levels.bright_end:.1%} of full scale (target {policy.target_fraction:.0%}); "
-                             "add light, open the aperture or raise the gain")
+                notes.append(
+                    f"ambient too dark: at the camera's longest exposure {limits[1]:g} µs the bright end "
+                    f"is {levels.bright_end:.1%} of full scale (target {policy.target_fraction:.0%}); "
+                    "add light, open the aperture or raise the gain"
+                )
             break
         exposure = proposed
         if 1 / 16 < factor < 16.0 and levels.bright_end >= 0.02:
@@ -310,7 +322,9 @@ def auto_ambient_exposure(capture: Callable[[float], np.ndarray], start_us: floa
 
 def _rates(pixels: np.ndarray, exposure_us: float, black: float, stride: int) -> np.ndarray:
     rates = _sample(pixels, stride).astype(np.float64)
-    rates -= black  # in place: (sub − black) / exposure without two temporaries (the last frame's is on the latency path)
+    rates -= (
+        black  # in place: (sub − black) / exposure without two temporaries (the last frame's is on the latency path)
+    )
     rates /= exposure_us
     return rates
 
@@ -319,20 +333,36 @@ def _valid(pixels: np.ndarray, white: float, stride: int) -> np.ndarray:
     return _brightest(pixels, stride) < white
 
 
-def snr_with_model(ambient_rate: np.ndarray, led_rate: np.ndarray, ambient_us: float, led_us: float,
-                   noise: NoiseModel, valid: np.ndarray, gain: float = 1.0) -> float:
+def snr_with_model(
+    ambient_rate: np.ndarray,
+    led_rate: np.ndarray,
+    ambient_us: float,
+    led_us: float,
+    noise: NoiseModel,
+    valid: np.ndarray,
+    gain: float = 1.0,
+) -> float:
     """Median SNR of the LED-only rate image for frames at these exposures, from expected values."""
     signal = led_rate - ambient_rate
-    variance = (noise.variance_dn(led_rate * led_us, gain) / led_us ** 2
-                + noise.variance_dn(ambient_rate * ambient_us, gain) / ambient_us ** 2)
+    variance = (
+        noise.variance_dn(led_rate * led_us, gain) / led_us**2
+        + noise.variance_dn(ambient_rate * ambient_us, gain) / ambient_us**2
+    )
     snr = signal / np.sqrt(np.maximum(variance, 1e-30))
     mask = np.broadcast_to(valid[..., None], snr.shape) if snr.ndim == valid.ndim + 1 else valid
     values = snr[mask]
     return float(np.median(values)) if values.size else math.nan
 
 
-def snr_from_difference(ambient: np.ndarray, led: np.ndarray, ambient_us: float, led_us: float, black: float,
-                        white: float, cfa: bool = False) -> float:
+def snr_from_difference(
+    ambient: np.ndarray,
+    led: np.ndarray,
+    ambient_us: float,
+    led_us: float,
+    black: float,
+    white: float,
+    cfa: bool = False,
+) -> float:
     """Median signal ÷ noise of the LED-only rate image, the noise from the image itself (no sensor model)."""
     diff = (led.astype(np.float64) - black) / led_us - (ambient.astype(np.float64) - black) / ambient_us
     valid = _brightest(led, 1) < white
@@ -352,17 +382,25 @@ def snr_from_difference(ambient: np.ndarray, led: np.ndarray, ambient_us: float,
     return signal / sigma if sigma > 0 else math.inf
 
 
-def plan_exposures(capture: Callable[[Sequence[float], float], np.ndarray], n_leds: int, black: float,
-                   white: float, limits: tuple[float, float], noise: NoiseModel | None,
-                   policy: ExposurePolicy = ExposurePolicy(), start_us: float = 10_000.0, cfa: bool = False
-                   ) -> ExposurePlan:
+def plan_exposures(
+    capture: Callable[[Sequence[float], float], np.ndarray],
+    n_leds: int,
+    black: float,
+    white: float,
+    limits: tuple[float, float],
+    noise: NoiseModel | None,
+    policy: ExposurePolicy = ExposurePolicy(),
+    start_us: float = 10_000.0,
+    cfa: bool = False,
+) -> ExposurePlan:
     """Auto-exposure for an ambient + each-LED sequence.
 
     ``capture(levels, exposure_us)`` returns one preview frame with the LEDs at ``levels``.
     """
     dark = (0.0,) * n_leds
     ambient_us, ambient_px, ambient_px_us, metered, notes = auto_ambient_exposure(
-        lambda e: capture(dark, e), start_us, black, white, limits, policy)
+        lambda e: capture(dark, e), start_us, black, white, limits, policy
+    )
     previews = [{"leds": "off", **asdict(m)} for m in metered]
     full = white - black
     stride = policy.stride
@@ -390,14 +428,17 @@ def plan_exposures(capture: Callable[[Sequence[float], float], np.ndarray], n_le
             notes.append(f"LED {led + 1}: no signal in its preview")
         if metered_led.saturated_fraction > policy.max_saturated_fraction:
             exposure = limits[0]
-            notes.append(f"LED {led + 1}: saturates {metered_led.saturated_fraction:.2%} of pixels at the shortest "
-                         f"exposure {limits[0]:g} µs; dim the LED")
+            notes.append(
+                f"LED {led + 1}: saturates {metered_led.saturated_fraction:.2%} of pixels at the shortest "
+                f"exposure {limits[0]:g} µs; dim the LED"
+            )
         led_us.append(exposure)
         led_previews.append((pixels, preview_us))
     lost: float | None = None
     if policy.criterion == "information" and n_leds:
-        ambient_us, chosen, lost = _most_informative(ambient_px, ambient_px_us, led_previews, ambient_us, led_us,
-                                                     black, white, limits, noise, policy, cfa)
+        ambient_us, chosen, lost = _most_informative(
+            ambient_px, ambient_px_us, led_previews, ambient_us, led_us, black, white, limits, noise, policy, cfa
+        )
         led_us = list(chosen)
     snrs: list[float] = []
     for led, ((pixels, preview_us), exposure) in enumerate(zip(led_previews, led_us, strict=True)):
@@ -410,17 +451,36 @@ def plan_exposures(capture: Callable[[Sequence[float], float], np.ndarray], n_le
             snr = measured * math.sqrt(exposure / preview_us) if math.isfinite(measured) else measured
         snrs.append(snr)
         if not snr >= policy.min_snr:
-            notes.append(f"LED {led + 1}: planned SNR {snr:.3g} below {policy.min_snr:g} — the LED is weak against "
-                         "the ambient; dim the ambient or move the booth closer")
-    return ExposurePlan(ambient_us, tuple(led_us), tuple(snrs),
-                        "photon+read noise" if noise is not None else "difference image",
-                        limits, policy, previews, notes, lost_block_fraction=lost)
+            notes.append(
+                f"LED {led + 1}: planned SNR {snr:.3g} below {policy.min_snr:g} — the LED is weak against "
+                "the ambient; dim the ambient or move the booth closer"
+            )
+    return ExposurePlan(
+        ambient_us,
+        tuple(led_us),
+        tuple(snrs),
+        "photon+read noise" if noise is not None else "difference image",
+        limits,
+        policy,
+        previews,
+        notes,
+        lost_block_fraction=lost,
+    )
 
 
-def _most_informative(ambient_px: np.ndarray, ambient_px_us: float, led_previews: Sequence[tuple[np.ndarray, float]],
-                      ambient_us: float, led_us: Sequence[float], black: float, white: float,
-                      limits: tuple[float, float], noise: NoiseModel | None, policy: ExposurePolicy, cfa: bool
-                      ) -> tuple[float, tuple[float, ...], float]:
+def _most_informative(
+    ambient_px: np.ndarray,
+    ambient_px_us: float,
+    led_previews: Sequence[tuple[np.ndarray, float]],
+    ambient_us: float,
+    led_us: Sequence[float],
+    black: float,
+    white: float,
+    limits: tuple[float, float],
+    noise: NoiseModel | None,
+    policy: ExposurePolicy,
+    cfa: bool,
+) -> tuple[float, tuple[float, ...], float]:
     """The information criterion on the previews, from the bright-end plan: ambient and LED exposures, lost fraction.
 
     Every pixel of the previews (a mosaic's too: each pixel's own channel), grouped by the
@@ -446,9 +506,18 @@ def _most_informative(ambient_px: np.ndarray, ambient_px_us: float, led_previews
     return info.most_informative(blocks, ambient_us, led_us, limits, dn_per_e, read_dn, policy.max_lost_fraction)
 
 
-def measure_led_snr(ambient: np.ndarray, ambient_us: float, led_frames: Sequence[np.ndarray],
-                    led_us: Sequence[float], black: float, white: float, noise: NoiseModel | None,
-                    cfa: bool = False, gain: float = 1.0, stride: int = 2) -> tuple[list[float], str]:
+def measure_led_snr(
+    ambient: np.ndarray,
+    ambient_us: float,
+    led_frames: Sequence[np.ndarray],
+    led_us: Sequence[float],
+    black: float,
+    white: float,
+    noise: NoiseModel | None,
+    cfa: bool = False,
+    gain: float = 1.0,
+    stride: int = 2,
+) -> tuple[list[float], str]:
     """Per-LED SNR of the LED-only images of captured frames, and the method used."""
     values: list[float] = []
     if noise is None:
@@ -507,8 +576,9 @@ class FlashExposure:
     to ``limits``.
     """
 
-    def __init__(self, black: float, white: float, limits: tuple[float, float],
-                 policy: ExposurePolicy = ExposurePolicy()) -> None:
+    def __init__(
+        self, black: float, white: float, limits: tuple[float, float], policy: ExposurePolicy = ExposurePolicy()
+    ) -> None:
         self.black = float(black)
         self.white = float(white)
         self.limits = limits
@@ -547,9 +617,17 @@ class FlashExposure:
         return _clamp(self.policy.target_fraction * (self.white - self.black) / rate, self.limits)
 
 
-def flash_exposure(ambient: np.ndarray, ambient_us: float, led_frames: Sequence[np.ndarray],
-                   led_us: Sequence[float], weights: Sequence[float] | np.ndarray, black: float, white: float,
-                   limits: tuple[float, float], policy: ExposurePolicy = ExposurePolicy()) -> float:
+def flash_exposure(
+    ambient: np.ndarray,
+    ambient_us: float,
+    led_frames: Sequence[np.ndarray],
+    led_us: Sequence[float],
+    weights: Sequence[float] | np.ndarray,
+    black: float,
+    white: float,
+    limits: tuple[float, float],
+    policy: ExposurePolicy = ExposurePolicy(),
+) -> float:
     """Exposure for the flash frame: ambient + Σ wₖ·LEDₖ with its bright end at the target fraction.
 
     Predicted from the captured frames (the model is linear), so no preview is needed. The

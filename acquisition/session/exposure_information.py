@@ -53,8 +53,10 @@ def group_blocks(rate: np.ndarray, block: int) -> np.ndarray:
         rate = rate[..., None]
     rows, cols = rate.shape[0] // block, rate.shape[1] // block
     if rows == 0 or cols == 0:
-        raise ValueError(f"preview of shape {rate.shape} is smaller than one {block}×{block} block; expected a larger frame")
-    cropped = rate[:rows * block, :cols * block]
+        raise ValueError(
+            f"preview of shape {rate.shape} is smaller than one {block}×{block} block; expected a larger frame"
+        )
+    cropped = rate[: rows * block, : cols * block]
     grouped = cropped.reshape(rows, block, cols, block, rate.shape[2]).transpose(0, 2, 1, 3, 4)
     return grouped.reshape(rows * cols, -1)
 
@@ -78,21 +80,29 @@ def crossings(rate_blocks: np.ndarray, clipped: np.ndarray, preview_us: float, l
     return np.where(clipped, np.minimum(crossing, preview_us), crossing)
 
 
-def information(led: np.ndarray, ambient: np.ndarray, led_us: np.ndarray | float, ambient_us: np.ndarray | float,
-                dn_per_e: float, read_dn: float) -> np.ndarray:
+def information(
+    led: np.ndarray,
+    ambient: np.ndarray,
+    led_us: np.ndarray | float,
+    ambient_us: np.ndarray | float,
+    dn_per_e: float,
+    read_dn: float,
+) -> np.ndarray:
     """Per-block information d²/Var(d̂) summed over the block's members, at exposures broadcast in front.
 
     ``led_us`` and ``ambient_us`` have shape ``(m, 1, 1)`` (or scalars); returns ``(m, n_blocks)``.
     """
     signal = np.maximum(led - ambient, 0.0)
     read = read_dn * read_dn
-    variance = ((np.maximum(led, 0.0) * led_us * dn_per_e + read) / (led_us * led_us)
-                + (np.maximum(ambient, 0.0) * ambient_us * dn_per_e + read) / (ambient_us * ambient_us))
+    variance = (np.maximum(led, 0.0) * led_us * dn_per_e + read) / (led_us * led_us) + (
+        np.maximum(ambient, 0.0) * ambient_us * dn_per_e + read
+    ) / (ambient_us * ambient_us)
     return (signal * signal / np.maximum(variance, 1e-300)).sum(axis=-1)
 
 
-def _candidates(crossing: np.ndarray, lost_elsewhere: np.ndarray, current: float, limits: tuple[float, float],
-                max_lost: int) -> np.ndarray:
+def _candidates(
+    crossing: np.ndarray, lost_elsewhere: np.ndarray, current: float, limits: tuple[float, float], max_lost: int
+) -> np.ndarray:
     """Exposures worth evaluating: crossings at the ladder's lost fractions, the current value, the limits."""
     own = np.sort(crossing[~lost_elsewhere])
     budget = max_lost - int(np.count_nonzero(lost_elsewhere))  # more blocks than this may not be lost
@@ -111,8 +121,9 @@ def _best(values: np.ndarray, score, crossing: np.ndarray, lost_elsewhere: np.nd
     return float(values[int(np.argmax(totals))])
 
 
-def _refine(values: np.ndarray, chosen: float, crossing: np.ndarray, lost_elsewhere: np.ndarray,
-            limits: tuple[float, float]) -> np.ndarray:
+def _refine(
+    values: np.ndarray, chosen: float, crossing: np.ndarray, lost_elsewhere: np.ndarray, limits: tuple[float, float]
+) -> np.ndarray:
     """Every crossing between the neighbours of ``chosen`` among ``values`` (at most 64, evenly picked)."""
     index = int(np.searchsorted(values, chosen))
     low = values[max(index - 1, 0)]
@@ -124,9 +135,17 @@ def _refine(values: np.ndarray, chosen: float, crossing: np.ndarray, lost_elsewh
     return np.unique(np.clip(np.concatenate((inside, [chosen])), limits[0], limits[1]))
 
 
-def most_informative(blocks: Blocks, start_ambient_us: float, start_led_us: Sequence[float],
-                     limits: tuple[float, float], dn_per_e: float, read_dn: float, max_lost_fraction: float,
-                     sweeps: int = 3, optimise_ambient: bool = True) -> tuple[float, tuple[float, ...], float]:
+def most_informative(
+    blocks: Blocks,
+    start_ambient_us: float,
+    start_led_us: Sequence[float],
+    limits: tuple[float, float],
+    dn_per_e: float,
+    read_dn: float,
+    max_lost_fraction: float,
+    sweeps: int = 3,
+    optimise_ambient: bool = True,
+) -> tuple[float, tuple[float, ...], float]:
     """Coordinate ascent on ``F``: the ambient exposure, each LED exposure, and the union's lost fraction.
 
     Starts from ``start_*`` (any feasible plan, e.g. the bright-end rule's); the result's ``F`` is at
@@ -152,10 +171,17 @@ def most_informative(blocks: Blocks, start_ambient_us: float, start_led_us: Sequ
             joint = np.min(np.stack((blocks.ambient_crossing, *blocks.led_crossings)) / exposures[:, None], axis=0)
             scale_limits = (float(np.max(limits[0] / exposures)), float(np.min(limits[1] / exposures)))
 
-            def joint_score(values: np.ndarray, led_us: list[float] = led_us, ambient_us: float = ambient_us) -> np.ndarray:
+            def joint_score(
+                values: np.ndarray, led_us: list[float] = led_us, ambient_us: float = ambient_us
+            ) -> np.ndarray:
                 scale = values[:, None, None]
-                return sum((information(r, blocks.ambient, scale * led_us[k], scale * ambient_us, dn_per_e, read_dn)
-                            for k, r in enumerate(leds)), np.zeros(()))
+                return sum(
+                    (
+                        information(r, blocks.ambient, scale * led_us[k], scale * ambient_us, dn_per_e, read_dn)
+                        for k, r in enumerate(leds)
+                    ),
+                    np.zeros(()),
+                )
 
             if scale_limits[0] <= 1.0 <= scale_limits[1]:
                 factor = _optimise(joint, np.zeros(n_blocks, dtype=bool), 1.0, scale_limits, max_lost, joint_score)
@@ -164,18 +190,32 @@ def most_informative(blocks: Blocks, start_ambient_us: float, start_led_us: Sequ
 
             def ambient_score(values: np.ndarray, led_us: list[float] = led_us) -> np.ndarray:
                 shape = values[:, None, None]
-                return sum((information(r, blocks.ambient, np.float64(led_us[k]), shape, dn_per_e, read_dn)
-                            for k, r in enumerate(leds)), np.zeros(()))
+                return sum(
+                    (
+                        information(r, blocks.ambient, np.float64(led_us[k]), shape, dn_per_e, read_dn)
+                        for k, r in enumerate(leds)
+                    ),
+                    np.zeros(()),
+                )
 
             ambient_us = _optimise(blocks.ambient_crossing, elsewhere, ambient_us, limits, max_lost, ambient_score)
         for k, rate in enumerate(leds):
             elsewhere = lost_by(k)
-            others = sum((information(r, blocks.ambient, np.float64(led_us[j]), np.float64(ambient_us), dn_per_e,
-                                      read_dn) for j, r in enumerate(leds) if j != k), np.zeros(n_blocks))
+            others = sum(
+                (
+                    information(r, blocks.ambient, np.float64(led_us[j]), np.float64(ambient_us), dn_per_e, read_dn)
+                    for j, r in enumerate(leds)
+                    if j != k
+                ),
+                np.zeros(n_blocks),
+            )
 
-            def led_score(values: np.ndarray, rate: np.ndarray = rate, others: np.ndarray = others,
-                          ambient_us: float = ambient_us) -> np.ndarray:
-                own = information(rate, blocks.ambient, values[:, None, None], np.float64(ambient_us), dn_per_e, read_dn)
+            def led_score(
+                values: np.ndarray, rate: np.ndarray = rate, others: np.ndarray = others, ambient_us: float = ambient_us
+            ) -> np.ndarray:
+                own = information(
+                    rate, blocks.ambient, values[:, None, None], np.float64(ambient_us), dn_per_e, read_dn
+                )
                 return own + others[None, :]
 
             led_us[k] = _optimise(blocks.led_crossings[k], elsewhere, led_us[k], limits, max_lost, led_score)
@@ -185,8 +225,9 @@ def most_informative(blocks: Blocks, start_ambient_us: float, start_led_us: Sequ
     return ambient_us, tuple(led_us), float(np.count_nonzero(lost)) / n_blocks
 
 
-def _optimise(crossing: np.ndarray, elsewhere: np.ndarray, current: float, limits: tuple[float, float],
-              max_lost: int, score) -> float:
+def _optimise(
+    crossing: np.ndarray, elsewhere: np.ndarray, current: float, limits: tuple[float, float], max_lost: int, score
+) -> float:
     """One coordinate: the best crossing on the ladder, then the best crossing near it."""
     values = _candidates(crossing, elsewhere, current, limits, max_lost)
     chosen = _best(values, score, crossing, elsewhere, max_lost)

@@ -32,11 +32,15 @@ def check_booth_port(rig: str, sync: str) -> None:
         Naming the option and what was expected.
     """
     if rig != "sim":
-        raise UsageError(f"--booth-port: gives the simulated rig an outside booth, but the rig is '{rig}'; expected "
-                         "--rig sim (a hardware rig's booth is --port)")
+        raise UsageError(
+            f"--booth-port: gives the simulated rig an outside booth, but the rig is '{rig}'; expected "
+            "--rig sim (a hardware rig's booth is --port)"
+        )
     if sync != SYNC_WITH_EXTERNAL_BOOTH:
-        raise UsageError(f"--booth-port with --sync {sync}: no trigger wire reaches from the simulated camera to a "
-                         f"booth in another process; expected --sync {SYNC_WITH_EXTERNAL_BOOTH}")
+        raise UsageError(
+            f"--booth-port with --sync {sync}: no trigger wire reaches from the simulated camera to a "
+            f"booth in another process; expected --sync {SYNC_WITH_EXTERNAL_BOOTH}"
+        )
 
 
 def open_external_booth(port: str, leds: Spectra, log_serial: str | Path | None, closers: list) -> LedBooth:
@@ -58,7 +62,8 @@ def open_external_booth(port: str, leds: Spectra, log_serial: str | Path | None,
             raise RigOpenError(
                 f"booth {port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the simulated "
                 f"LEDs are {leds.count} ({', '.join(leds.names)}); expected one channel per LED (--leds N or "
-                "--led-spectra FILE.csv)")
+                "--led-spectra FILE.csv)"
+            )
         for note in reset_leftovers(booth):
             log.warning("%s", note)
     except RigOpenError:

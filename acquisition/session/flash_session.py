@@ -71,10 +71,18 @@ class FlashSession:
     any frame), then call :meth:`decide` with the ambient + LED frames as captured.
     """
 
-    def __init__(self, header: Sequence, leds: Spectra, model: FlashModel, target_response: np.ndarray | None,
-                 method: str, alpha: float | str, bin_factor: int,
-                 exposure_limits_us: tuple[float, float] | None = None,
-                 exposure_policy: ExposurePolicy = DEFAULT_EXPOSURE_POLICY) -> None:
+    def __init__(
+        self,
+        header: Sequence,
+        leds: Spectra,
+        model: FlashModel,
+        target_response: np.ndarray | None,
+        method: str,
+        alpha: float | str,
+        bin_factor: int,
+        exposure_limits_us: tuple[float, float] | None = None,
+        exposure_policy: ExposurePolicy = DEFAULT_EXPOSURE_POLICY,
+    ) -> None:
         self.header = header
         self.leds = leds
         self.model = model
@@ -88,9 +96,16 @@ class FlashSession:
         self.begin()
 
     @classmethod
-    def prepare(cls, header: Sequence, target: str = "D65", method: str = "tikhonov", alpha: float | str = "auto",
-                bin_factor: int = analysis.DEFAULT_BIN_FACTOR, exposure_limits_us: tuple[float, float] | None = None,
-                exposure_policy: ExposurePolicy = DEFAULT_EXPOSURE_POLICY) -> FlashSession:
+    def prepare(
+        cls,
+        header: Sequence,
+        target: str = "D65",
+        method: str = "tikhonov",
+        alpha: float | str = "auto",
+        bin_factor: int = analysis.DEFAULT_BIN_FACTOR,
+        exposure_limits_us: tuple[float, float] | None = None,
+        exposure_policy: ExposurePolicy = DEFAULT_EXPOSURE_POLICY,
+    ) -> FlashSession:
         """Prepare from a sequence header (LEDs, camera, grid); ``target`` for the complementary flash.
 
         With ``exposure_limits_us`` (the camera's range) the flash exposure is predicted too
@@ -120,8 +135,11 @@ class FlashSession:
         self._stack: analysis.FrameStack | None = None
         self._copies = 1  # 3 for a mono camera's (H, W) frames, recorded as three identical channels
         camera = self.header.camera
-        self._exposure = None if self.exposure_limits_us is None else FlashExposure(
-            camera.black_level, camera.white_level, self.exposure_limits_us, self.exposure_policy)
+        self._exposure = (
+            None
+            if self.exposure_limits_us is None
+            else FlashExposure(camera.black_level, camera.white_level, self.exposure_limits_us, self.exposure_policy)
+        )
 
     def add(self, frame: RawFrame, role: str, levels: Seq[float]) -> None:
         """Take one captured frame; ambient and LED frames are block-summed now (between frames).
@@ -161,8 +179,15 @@ class FlashSession:
         plane = cfa_planes(pixels, period)
         n_leds = self.leds.count  # one row per LED frame of a plain plan; more frames use the general path
         if self._rows is None:
-            self._rows = BlockRows(n_leds, plane.shape, self._factor, camera.white_level, incremental=True,
-                                   black_level=camera.black_level, weighting=analysis.SAMPLE_WEIGHTING)
+            self._rows = BlockRows(
+                n_leds,
+                plane.shape,
+                self._factor,
+                camera.white_level,
+                incremental=True,
+                black_level=camera.black_level,
+                weighting=analysis.SAMPLE_WEIGHTING,
+            )
         row = n_leds if role == "ambient" else self._n_led_rows
         if role == "led":
             self._n_led_rows += 1
@@ -180,9 +205,13 @@ class FlashSession:
         """
         if self._stack is None:
             frames = self._frames
-            self._stack = analysis.frame_stack(self.header, self._roles, self._levels,
-                                               [f.exposure_us * f.gain for f in frames],
-                                               lambda index: _plane(frames[index].pixels))
+            self._stack = analysis.frame_stack(
+                self.header,
+                self._roles,
+                self._levels,
+                [f.exposure_us * f.gain for f in frames],
+                lambda index: _plane(frames[index].pixels),
+            )
         return self._stack
 
     def statistics(self, stack: analysis.FrameStack) -> SequenceStatistics:
@@ -196,8 +225,13 @@ class FlashSession:
         records are those of that plane replicated.
         """
         rows = self._rows
-        if (self._factor or 1) == 1 or rows is None or not self._rows_complete \
-                or self._n_led_rows != len(stack.led_indices) or self._n_led_rows != self.leds.count:
+        if (
+            (self._factor or 1) == 1
+            or rows is None
+            or not self._rows_complete
+            or self._n_led_rows != len(stack.led_indices)
+            or self._n_led_rows != self.leds.count
+        ):
             statistics = analysis.sequence_statistics(stack, self.header.camera.cfa, self.bin_factor)
         else:
             statistics = rows.statistics(stack.spec)
@@ -205,8 +239,9 @@ class FlashSession:
 
     def estimate(self, stack: analysis.FrameStack) -> AmbientEstimate:
         """The ambient estimate of :func:`analysis.estimate_sequence` for the frames taken."""
-        return analysis.estimate_from_statistics(self.header, self.statistics(stack), self.method, self.alpha,
-                                                 self.ambient_model)
+        return analysis.estimate_from_statistics(
+            self.header, self.statistics(stack), self.method, self.alpha, self.ambient_model
+        )
 
     def solve(self, mode: str, ambient_weights: np.ndarray, bounds: FlashBounds = "physical") -> FlashSolution:
         """The matching or complementary flash (as :func:`analysis.solve_sequence_flash`)."""
@@ -227,8 +262,10 @@ class FlashSession:
             If the session was prepared without exposure limits.
         """
         if self._exposure is None:
-            raise RecordingError("flash exposure: the session was prepared without exposure_limits_us; "
-                                 "expected FlashSession.prepare(…, exposure_limits_us=(shortest, longest))")
+            raise RecordingError(
+                "flash exposure: the session was prepared without exposure_limits_us; "
+                "expected FlashSession.prepare(…, exposure_limits_us=(shortest, longest))"
+            )
         return self._exposure.predict(levels)
 
     def decide(self, mode: str = "complementary", sanitise: bool = False) -> FlashDecision:
@@ -250,8 +287,11 @@ class FlashSession:
         # NaN → 0, ±inf → the bounds: what clip(nan_to_num(w), 0, 1) gives.
         flash = np.minimum(np.maximum(np.where(np.isnan(flash_weights), 0.0, flash_weights), 0.0), 1.0)
         model, method, header = self.ambient_model, self.method, self.header
-        return FlashDecision(solution, flash, lambda: analysis.with_model_band(
-            model.reliability(statistics, raw_weights, method, alpha_used), header))
+        return FlashDecision(
+            solution,
+            flash,
+            lambda: analysis.with_model_band(model.reliability(statistics, raw_weights, method, alpha_used), header),
+        )
 
 
 def _plane(pixels: np.ndarray) -> np.ndarray:

@@ -41,16 +41,18 @@ class SequencePriorResult:
         return self.prior.spectrum if self.choice.model == "prior" else self.led.spectrum
 
 
-def sequence_channel_statistics(sequence: Sequence, stack: FrameStack | None = None,
-                                bin_factor: int = DEFAULT_BIN_FACTOR) -> ChannelStatistics:
+def sequence_channel_statistics(
+    sequence: Sequence, stack: FrameStack | None = None, bin_factor: int = DEFAULT_BIN_FACTOR
+) -> ChannelStatistics:
     """The channel statistics of a sequence, binned like :func:`acquisition.session.analysis.sequence_statistics`."""
     stack = stack or load_frame_stack(sequence)
     period = 2 if sequence.camera.cfa is not None else 1
     height, width = stack.ambient.shape[:2]
     while bin_factor > 1 and min(height, width) // (bin_factor * period) < 8:
         bin_factor //= 2
-    return accumulate_channel_statistics(stack.ambient, stack.led_frames, stack.spec, cfa=sequence.camera.cfa,
-                                         bin_factor=max(bin_factor, 1))
+    return accumulate_channel_statistics(
+        stack.ambient, stack.led_frames, stack.spec, cfa=sequence.camera.cfa, bin_factor=max(bin_factor, 1)
+    )
 
 
 def estimate_sequence_prior(sequence: Sequence, stack: FrameStack | None = None) -> SequencePriorResult:
@@ -64,8 +66,9 @@ def estimate_sequence_prior(sequence: Sequence, stack: FrameStack | None = None)
     statistics = sequence_channel_statistics(sequence, stack)
     leds = led_spectra_photons(sequence)
     model = prior_model(statistics.channels, leds, camera_responsivities_photons(sequence))
-    return SequencePriorResult(model.estimate(statistics), estimate_ambient(statistics.led_statistics(), leds),
-                               choose_model(statistics, model))
+    return SequencePriorResult(
+        model.estimate(statistics), estimate_ambient(statistics.led_statistics(), leds), choose_model(statistics, model)
+    )
 
 
 def prior_payload(sequence: Sequence, result: SequencePriorResult) -> dict:
@@ -87,18 +90,27 @@ def prior_payload(sequence: Sequence, result: SequencePriorResult) -> dict:
         "spectrum": spectrum_in_sequence_unit(sequence, spectrum),
         "spectrum_std": spectrum_in_sequence_unit(sequence, spectrum.replace(values=std[:, None])),
         "model_choice": {
-            "model": chosen, "reason": result.choice.reason, "margin": result.choice.margin,
+            "model": chosen,
+            "reason": result.choice.reason,
+            "margin": result.choice.margin,
             "held_out_relative_error": {"led": errors.led_observed, "prior": errors.prior_observed},
             "held_out_relative_error_noise_removed": {"led": errors.led, "prior": errors.prior},
         },
         "prior": {
             "spectrum": spectrum_in_sequence_unit(sequence, prior.spectrum),
-            "spectrum_std": spectrum_in_sequence_unit(sequence, prior.spectrum.replace(values=prior.spectrum_std[:, None])),
-            "coefficients": prior.coefficients, "prior_weight": prior.prior_weight,
-            "relative_residual": prior.relative_residual, "warnings": list(prior.warnings),
+            "spectrum_std": spectrum_in_sequence_unit(
+                sequence, prior.spectrum.replace(values=prior.spectrum_std[:, None])
+            ),
+            "coefficients": prior.coefficients,
+            "prior_weight": prior.prior_weight,
+            "relative_residual": prior.relative_residual,
+            "warnings": list(prior.warnings),
         },
-        "led": {"spectrum": spectrum_in_sequence_unit(sequence, result.led.spectrum),
-                "ambient_weights": result.led.ambient_weights, "relative_residual": result.led.relative_residual,
-                "warnings": list(result.led.warnings)},
+        "led": {
+            "spectrum": spectrum_in_sequence_unit(sequence, result.led.spectrum),
+            "ambient_weights": result.led.ambient_weights,
+            "relative_residual": result.led.relative_residual,
+            "warnings": list(result.led.warnings),
+        },
         "n_samples": prior.n_samples,
     }

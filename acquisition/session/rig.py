@@ -133,10 +133,17 @@ class Rig:
             values = self.camera_responsivities.to_unit("energy").values
             responsivity = {channel: values[:, i] for i, channel in enumerate("RGB")}
         camera = SequenceCamera(
-            model=info.model, serial=info.serial or None, pixel_format=info.pixel_format, cfa=info.cfa,
-            black_level=info.black_level, white_level=info.white_level, responsivity=responsivity,
-            extra={**({"channels": f"{info.pixel_format} replicated to R, G, B"} if self.mono else {}),
-                   **self.camera_extra},
+            model=info.model,
+            serial=info.serial or None,
+            pixel_format=info.pixel_format,
+            cfa=info.cfa,
+            black_level=info.black_level,
+            white_level=info.white_level,
+            responsivity=responsivity,
+            extra={
+                **({"channels": f"{info.pixel_format} replicated to R, G, B"} if self.mono else {}),
+                **self.camera_extra,
+            },
         )
         entries = tuple(SequenceLed(name, leds.values[:, i]) for i, name in enumerate(leds.names))
         return leds.wavelengths_nm, camera, entries
@@ -160,12 +167,21 @@ class Rig:
             file = os.path.relpath(Path(calibration_directory).resolve(), Path(directory).resolve())
             extra = {**(extra or {}), "calibration": {"id": calibration_id, "file": file}}
         try:
-            return SequenceWriter(directory, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
-                                  leds=leds, extra=extra, mono=self.mono)
+            return SequenceWriter(
+                directory,
+                wavelengths_nm=wavelengths,
+                spectral_unit="energy",
+                camera=camera,
+                leds=leds,
+                extra=extra,
+                mono=self.mono,
+            )
         except OSError as err:
             where = err.filename or directory
-            raise UsageError(f"{where}: cannot write the sequence there ({err.strerror or err}); expected a "
-                             "writable directory (or a path where one can be made)") from err
+            raise UsageError(
+                f"{where}: cannot write the sequence there ({err.strerror or err}); expected a "
+                "writable directory (or a path where one can be made)"
+            ) from err
 
     def close(self) -> None:
         """Switch the LEDs off, close the booth link, the emulator and the camera (each attempted).
@@ -276,15 +292,26 @@ def check_emulated_booth(leds: Spectra, where: str) -> None:
         frame = parse_frame(raw, where="booth emulator", command=Command.IDENTIFY)
         info = parse_identify(parse_reply(frame, Command.IDENTIFY, where="booth emulator"), raw, where="booth emulator")
     except (ValueError, BoothProtocolError) as err:
-        raise UsageError(f"{where}: {channels}: the booth emulator cannot serve them ({err}); expected 1–64 "
-                         "channels named by plain ASCII words whose identify reply fits one frame") from err
+        raise UsageError(
+            f"{where}: {channels}: the booth emulator cannot serve them ({err}); expected 1–64 "
+            "channels named by plain ASCII words whose identify reply fits one frame"
+        ) from err
     if info.channels != leds.count:
         raise UsageError(f"{where}: {channels}: the booth emulator reports {info.channels}; expected one per LED")
 
 
-def _sim_world(rig: str, ambient: str | Spectra, scene: str | Scene | Spectra, cfa: str | None, seed: int,
-               camera: str | Spectra | None, n_leds: int | None, led_spectra: str | Path | Spectra | None,
-               flash_power: float | None, patch_px: int | None = None) -> SimulatedCamera:
+def _sim_world(
+    rig: str,
+    ambient: str | Spectra,
+    scene: str | Scene | Spectra,
+    cfa: str | None,
+    seed: int,
+    camera: str | Spectra | None,
+    n_leds: int | None,
+    led_spectra: str | Path | Spectra | None,
+    flash_power: float | None,
+    patch_px: int | None = None,
+) -> SimulatedCamera:
     """The simulated world of :func:`open_sim_rig` (names and files resolved, the booth's LEDs checked).
 
     Raises
@@ -309,18 +336,33 @@ def _sim_world(rig: str, ambient: str | Spectra, scene: str | Scene | Spectra, c
             optional["patch_px"] = patch_px
         if flash_power is not None:
             optional["flash_power"] = flash_power
-        return SimulatedCamera.default(scene=scene_spec, ambient=ambient_spd, cfa=cfa, seed=seed,
-                                       camera=responsivities, led_spectra=leds, **optional)
+        return SimulatedCamera.default(
+            scene=scene_spec,
+            ambient=ambient_spd,
+            cfa=cfa,
+            seed=seed,
+            camera=responsivities,
+            led_spectra=leds,
+            **optional,
+        )
     except UsageError:
         raise
     except Exception as err:
         raise RigOpenError(f"rig '{rig}': {err}") from err
 
 
-def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spectra = "chart110", cfa: str | None = None,
-                 seed: int = 0, camera: str | Spectra | None = None, n_leds: int | None = None,
-                 led_spectra: str | Path | Spectra | None = None, log_serial: str | Path | None = None,
-                 flash_power: float | None = None, booth_port: str | None = None) -> Rig:
+def open_sim_rig(
+    ambient: str | Spectra = "tungsten",
+    scene: str | Scene | Spectra = "chart110",
+    cfa: str | None = None,
+    seed: int = 0,
+    camera: str | Spectra | None = None,
+    n_leds: int | None = None,
+    led_spectra: str | Path | Spectra | None = None,
+    log_serial: str | Path | None = None,
+    flash_power: float | None = None,
+    booth_port: str | None = None,
+) -> Rig:
     """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver.
 
     Parameters
@@ -358,8 +400,7 @@ def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spect
         if booth_port is not None:
             booth = open_external_booth(booth_port, world.led_spectra, log_serial, closers)
             world.led_levels_source = levels_reported_by(booth)
-            return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient,
-                       closers)
+            return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers)
         emulator, booth = _open_emulated_booth(world.led_spectra, log_serial, closers)
 
         # Exposure-time coupling: the camera renders with what the emulator's LEDs are doing. The
@@ -379,8 +420,17 @@ def open_sim_rig(ambient: str | Spectra = "tungsten", scene: str | Scene | Spect
         if isinstance(err, UsageError):
             raise
         raise RigOpenError(f"rig 'sim': {err}") from err
-    return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers,
-               emulator=emulator, line_errors=line_errors)
+    return Rig(
+        "sim",
+        world,
+        booth,
+        world.led_spectra,
+        world.camera_responsivities,
+        world.true_ambient,
+        closers,
+        emulator=emulator,
+        line_errors=line_errors,
+    )
 
 
 class WiredFakeCamera:
@@ -423,8 +473,14 @@ class WiredFakeCamera:
     TRIGGER_REGISTER = 0x30C
     """The fake's TriggerSoftware register (see ``genicam/fake_sfnc.xml``): 1 until the fake takes the trigger."""
 
-    def __init__(self, camera: Any, emulator: BoothEmulator, fake: Any = None,
-                 errors: list[BaseException] | None = None, world: SimulatedCamera | None = None) -> None:
+    def __init__(
+        self,
+        camera: Any,
+        emulator: BoothEmulator,
+        fake: Any = None,
+        errors: list[BaseException] | None = None,
+        world: SimulatedCamera | None = None,
+    ) -> None:
         self.aravis = camera
         self.world = world
         """The scene's renderer, or None to keep the fake's test patterns."""
@@ -463,9 +519,12 @@ class WiredFakeCamera:
         info = self.aravis.info
         if self.world is None:
             return dataclasses.replace(info, cfa=None)
-        return dataclasses.replace(info, black_level=self.world.sensor.black_level,
-                                   white_level=self.world.sensor.white_level,
-                                   extra={**info.extra, "pixels": f"rendered scene ({self.world.info.model})"})
+        return dataclasses.replace(
+            info,
+            black_level=self.world.sensor.black_level,
+            white_level=self.world.sensor.white_level,
+            extra={**info.extra, "pixels": f"rendered scene ({self.world.info.model})"},
+        )
 
     @property
     def exposure_range_us(self) -> tuple[float, float] | None:
@@ -485,8 +544,9 @@ class WiredFakeCamera:
         self.aravis.start()
         if self._mode == "booth":
             self._pulses = queue.Queue()
-            self._pulse_thread = threading.Thread(target=self._issue_pulses, name="aravis-fake trigger line",
-                                                  daemon=True)
+            self._pulse_thread = threading.Thread(
+                target=self._issue_pulses, name="aravis-fake trigger line", daemon=True
+            )
             self._pulse_thread.start()
 
     def _issue_pulses(self) -> None:
@@ -553,8 +613,10 @@ class WiredFakeCamera:
             return frame
         pixels = self.world.render(levels, frame.exposure_us, frame.gain)
         if pixels.shape != frame.pixels.shape:
-            raise CameraError(f"aravis-fake: the scene renders {pixels.shape} but the fake delivers "
-                              f"{frame.pixels.shape}; expected the ROI to be the scene's size")
+            raise CameraError(
+                f"aravis-fake: the scene renders {pixels.shape} but the fake delivers "
+                f"{frame.pixels.shape}; expected the ROI to be the scene's size"
+            )
         with self._pending_lock:
             self._rendered_levels.append(levels)
         return dataclasses.replace(frame, pixels=pixels)
@@ -584,12 +646,23 @@ patch 8 × 8 quads of the mosaic (the ``sim`` rig's 8-pixel patches give a noisi
 docs/architecture.md §4 has the figures)."""
 
 
-def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int | None = None, height: int | None = None,
-                         pixel_format: str | None = None, serial: str = "MSFRIG01", rendered: bool = True,
-                         ambient: str | Spectra = "tungsten", scene: str | Scene | Spectra = "chart110",
-                         seed: int = 0, camera: str | Spectra | None = None, n_leds: int | None = None,
-                         led_spectra: str | Path | Spectra | None = None, flash_power: float | None = None,
-                         patch_px: int | None = None, **_ignored: object) -> Rig:
+def open_aravis_fake_rig(
+    log_serial: str | Path | None = None,
+    width: int | None = None,
+    height: int | None = None,
+    pixel_format: str | None = None,
+    serial: str = "MSFRIG01",
+    rendered: bool = True,
+    ambient: str | Spectra = "tungsten",
+    scene: str | Scene | Spectra = "chart110",
+    seed: int = 0,
+    camera: str | Spectra | None = None,
+    n_leds: int | None = None,
+    led_spectra: str | Path | Spectra | None = None,
+    flash_power: float | None = None,
+    patch_px: int | None = None,
+    **_ignored: object,
+) -> Rig:
     """The ``aravis-fake`` rig: AravisCamera on the GigE fake at 127.0.0.1 + emulator on a pty + LedBooth.
 
     Holds the machine-wide GVCP port lock (:func:`~acquisition.devices.aravis.camera.gvcp_port_lock`)
@@ -620,12 +693,24 @@ def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int | None
         raise RigOpenError(f"rig 'aravis-fake': {err}") from err
     world = None
     if rendered:
-        world = _sim_world("aravis-fake", ambient, scene, "RGGB", seed, camera, n_leds, led_spectra, flash_power,
-                           ARAVIS_FAKE_PATCH_PX if patch_px is None else patch_px)
+        world = _sim_world(
+            "aravis-fake",
+            ambient,
+            scene,
+            "RGGB",
+            seed,
+            camera,
+            n_leds,
+            led_spectra,
+            flash_power,
+            ARAVIS_FAKE_PATCH_PX if patch_px is None else patch_px,
+        )
         scene_height, scene_width = world.scene.shape
         if (width or scene_width, height or scene_height) != (scene_width, scene_height):
-            raise UsageError(f"rig 'aravis-fake': ROI {width}x{height} but the scene is {scene_width}x{scene_height}; "
-                             "expected the scene's size (the rendered mosaic fills the ROI)")
+            raise UsageError(
+                f"rig 'aravis-fake': ROI {width}x{height} but the scene is {scene_width}x{scene_height}; "
+                "expected the scene's size (the rendered mosaic fills the ROI)"
+            )
         width, height = scene_width, scene_height
         pixel_format = pixel_format or ARAVIS_FAKE_PIXEL_FORMAT
         leds, responsivities = world.led_spectra, world.camera_responsivities
@@ -645,12 +730,15 @@ def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int | None
         fake = aravis_camera.AravisGvFake(serial=serial)
         fake.start()
         closers.append(fake.close)
-        aravis = aravis_camera.AravisCamera(fake.address, interfaces="gige", pixel_format=pixel_format,
-                                            roi=(0, 0, width, height))
+        aravis = aravis_camera.AravisCamera(
+            fake.address, interfaces="gige", pixel_format=pixel_format, roi=(0, 0, width, height)
+        )
         closers.append(aravis.close)
         if world is not None and aravis.info.cfa != world.sensor.cfa:
-            raise RigOpenError(f"pixel format {pixel_format} has CFA {aravis.info.cfa}; expected "
-                               f"{world.sensor.cfa}, the rendered mosaic's")
+            raise RigOpenError(
+                f"pixel format {pixel_format} has CFA {aravis.info.cfa}; expected "
+                f"{world.sensor.cfa}, the rendered mosaic's"
+            )
     except Exception as err:  # noqa: BLE001 - reported with the booth's failure, if any
         failures[f"camera GigE fake {serial} at 127.0.0.1"] = err
         aravis = None
@@ -667,14 +755,38 @@ def open_aravis_fake_rig(log_serial: str | Path | None = None, width: int | None
     closers.insert(closers.index(aravis.close) + 1, wired.stop)  # before the AravisCamera and the fake are released
     emulator.on_trigger_out = _line(line_errors, "aravis-fake trigger line", wired.trigger_line)
     if world is None:
-        extra = {"responsivity_note":
-                 f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning"}
-        return Rig("aravis-fake", wired, booth, leds, responsivities, None, closers, emulator=emulator,
-                   line_errors=line_errors, camera_extra=extra, mono=pixel_format.startswith("Mono"))
-    extra = {"pixels": f"the Aravis fake's frames, pixels rendered by {world.info.model} under the booth's LEDs "
-                       "at each frame's trigger"}
-    return Rig("aravis-fake", wired, booth, leds, responsivities, world.true_ambient, closers, emulator=emulator,
-               line_errors=line_errors, camera_extra=extra)
+        extra = {
+            "responsivity_note": f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning"
+        }
+        return Rig(
+            "aravis-fake",
+            wired,
+            booth,
+            leds,
+            responsivities,
+            None,
+            closers,
+            emulator=emulator,
+            line_errors=line_errors,
+            camera_extra=extra,
+            mono=pixel_format.startswith("Mono"),
+        )
+    extra = {
+        "pixels": f"the Aravis fake's frames, pixels rendered by {world.info.model} under the booth's LEDs "
+        "at each frame's trigger"
+    }
+    return Rig(
+        "aravis-fake",
+        wired,
+        booth,
+        leds,
+        responsivities,
+        world.true_ambient,
+        closers,
+        emulator=emulator,
+        line_errors=line_errors,
+        camera_extra=extra,
+    )
 
 
 def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None, **_ignored: object) -> Rig:
@@ -694,8 +806,18 @@ def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None,
     line_errors: list[BaseException] = []
     emulator.on_trigger_out = _line(line_errors, "replay trigger line", camera.trigger_line)
     camera.exposure_line = emulator.exposure_active
-    return Rig(f"replay:{directory}", camera, booth, leds, responsivities, None, closers, emulator=emulator,
-               line_errors=line_errors, camera_extra=dict(sequence.camera.extra))
+    return Rig(
+        f"replay:{directory}",
+        camera,
+        booth,
+        leds,
+        responsivities,
+        None,
+        closers,
+        emulator=emulator,
+        line_errors=line_errors,
+        camera_extra=dict(sequence.camera.extra),
+    )
 
 
 def open_rig(spec: str, **options: Any) -> Rig:
@@ -707,7 +829,7 @@ def open_rig(spec: str, **options: Any) -> Rig:
     if spec == "aravis-fake":
         return open_aravis_fake_rig(**options)
     if spec.startswith("replay:") and len(spec) > len("replay:"):
-        return open_replay_rig(spec[len("replay:"):], log_serial=options.get("log_serial"))
+        return open_replay_rig(spec[len("replay:") :], log_serial=options.get("log_serial"))
     raise UsageError(f"--rig '{spec}': unknown; expected one of {', '.join(RIG_SPECS)}")
 
 
@@ -719,16 +841,18 @@ CALIBRATION_RESPONSIVITY_FILES = ("camera_responsivity.csv", "responsivity.csv",
 """File names looked for in ``--calibration DIR`` for the camera's responsivities."""
 
 
-def load_hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | None = None,
-                    responsivity: str | Path | None = None) -> tuple[Spectra, Spectra | None]:
+def load_hw_spectra(
+    calibration: str | Path | None = None, led_spectra: str | Path | None = None, responsivity: str | Path | None = None
+) -> tuple[Spectra, Spectra | None]:
     """LED spectra and camera responsivities for the hardware rig, on :data:`DEFAULT_GRID`
     (:func:`hw_spectra` without the calibration reference)."""
     leds, camera, _ = hw_spectra(calibration, led_spectra, responsivity)
     return leds, camera
 
 
-def hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | None = None,
-               responsivity: str | Path | None = None) -> tuple[Spectra, Spectra | None, tuple[str, Path] | None]:
+def hw_spectra(
+    calibration: str | Path | None = None, led_spectra: str | Path | None = None, responsivity: str | Path | None = None
+) -> tuple[Spectra, Spectra | None, tuple[str, Path] | None]:
     """LED spectra, camera responsivities (on :data:`DEFAULT_GRID`) and the calibration they came from.
 
     ``calibration`` is a ``msflash calibrate`` directory (``calibration.json``, read by
@@ -756,8 +880,10 @@ def hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | 
     if calibration is not None:
         directory = Path(calibration)
         if not directory.is_dir():
-            raise UsageError(f"--calibration {directory}: not a directory; expected a calibration directory "
-                             "(calibration.json from 'msflash calibrate', or led_spectra.csv)")
+            raise UsageError(
+                f"--calibration {directory}: not a directory; expected a calibration directory "
+                "(calibration.json from 'msflash calibrate', or led_spectra.csv)"
+            )
         # lexists, not is_file: a calibration.json that is a FIFO or a device is refused by its reader.
         if os.path.lexists(directory / "calibration.json"):
             leds, camera, calibration_id = _load_calibration_set(directory)
@@ -766,19 +892,24 @@ def hw_spectra(calibration: str | Path | None = None, led_spectra: str | Path | 
             if led_path is None:
                 led_path = next((directory / n for n in CALIBRATION_LED_FILES if os.path.lexists(directory / n)), None)
                 if led_path is None:
-                    raise UsageError(f"--calibration {directory}: no calibration.json or "
-                                     f"{' or '.join(CALIBRATION_LED_FILES)}; expected the LED spectra")
+                    raise UsageError(
+                        f"--calibration {directory}: no calibration.json or "
+                        f"{' or '.join(CALIBRATION_LED_FILES)}; expected the LED spectra"
+                    )
             if resp_path is None:
-                resp_path = next((directory / n for n in CALIBRATION_RESPONSIVITY_FILES
-                                  if os.path.lexists(directory / n)), None)
+                resp_path = next(
+                    (directory / n for n in CALIBRATION_RESPONSIVITY_FILES if os.path.lexists(directory / n)), None
+                )
     if led_path is not None:
         leds = read_spectra_file(led_path, "spd")
     if resp_path is not None:
         camera = read_responsivity_file(resp_path)
     if leds is None:
-        raise UsageError("rig 'hw': the LED spectra are needed for the sequence header; expected --calibration DIR "
-                         "or --led-spectra FILE.csv (first column wavelength_nm, one column per LED at full drive, "
-                         "energy units), and --responsivity FILE.csv for the flash solvers")
+        raise UsageError(
+            "rig 'hw': the LED spectra are needed for the sequence header; expected --calibration DIR "
+            "or --led-spectra FILE.csv (first column wavelength_nm, one column per LED at full drive, "
+            "energy units), and --responsivity FILE.csv for the flash solvers"
+        )
     leds = leds.resample(DEFAULT_GRID, outside="zero")
     if camera is not None:
         if camera.count != 3:
@@ -867,8 +998,9 @@ class HardwareCamera:
         self.aravis.close()
 
 
-def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format: str | None,
-                    options: Any = None) -> tuple[Any, Any]:
+def _open_hw_camera(
+    camera: str | None, interfaces: str, sync: str, pixel_format: str | None, options: Any = None
+) -> tuple[Any, Any]:
     """The camera, opened and configured (profile options overridden by ``options``), and its setup."""
     from msflash.acquisition.devices.aravis import camera as aravis_camera
     from msflash.acquisition.devices.aravis.camera_features import CameraOptions, configure_camera
@@ -881,7 +1013,8 @@ def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format
             raise aravis_camera.CameraNotFoundError(
                 f"camera: {'no camera' if not found else f'{len(found)} cameras'} on {','.join(names)} "
                 f"(found: {listing}); expected one — pass --camera ID (device id, serial or IP) "
-                "or --interfaces")
+                "or --interfaces"
+            )
         camera = found[0].device_id
     opened = aravis_camera.AravisCamera(camera, interfaces=names, pixel_format=pixel_format)
     try:
@@ -892,11 +1025,19 @@ def _open_hw_camera(camera: str | None, interfaces: str, sync: str, pixel_format
     return opened, setup
 
 
-def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: str = "usb3",
-                calibration: str | Path | None = None, led_spectra: str | Path | None = None,
-                responsivity: str | Path | None = None, log_serial: str | Path | None = None,
-                sync: str = "host", pixel_format: str | None = None, camera_options: Any = None,
-                **_ignored: object) -> Rig:
+def open_hw_rig(
+    camera: str | None = None,
+    port: str | None = None,
+    interfaces: str = "usb3",
+    calibration: str | Path | None = None,
+    led_spectra: str | Path | None = None,
+    responsivity: str | Path | None = None,
+    log_serial: str | Path | None = None,
+    sync: str = "host",
+    pixel_format: str | None = None,
+    camera_options: Any = None,
+    **_ignored: object,
+) -> Rig:
     """The hardware rig: a GenICam camera by id/serial/IP + a booth on ``port`` (or the one discovered).
 
     Parameters
@@ -956,7 +1097,8 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
         if booth.info.channels != leds.count:
             raise RigOpenError(
                 f"booth {booth_port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the LED "
-                f"spectra have {leds.count} ({', '.join(leds.names)}); expected one spectrum per channel")
+                f"spectra have {leds.count} ({', '.join(leds.names)}); expected one spectrum per channel"
+            )
         for note in reset_leftovers(booth):  # a killed run's LEDs and raised watchdog
             log.warning("%s", note)
     except Exception as err:  # noqa: BLE001 - reported with the camera's failure, if any
@@ -975,5 +1117,6 @@ def open_hw_rig(camera: str | None = None, port: str | None = None, interfaces: 
     mono = info.cfa is None and info.pixel_format.startswith("Mono")
     if responsivities is None:
         extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
-    return Rig("hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono,
-               calibration=reference)
+    return Rig(
+        "hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono, calibration=reference
+    )

@@ -61,8 +61,9 @@ class RunOptions:
     """Re-read the frames from disk before deciding the flash (a check of the in-memory route)."""
 
 
-def capture_sequence(rig: Rig, out: Path, exposure_option: str | float, policy: ExposurePolicy,
-                     sync: str = "host") -> Path:
+def capture_sequence(
+    rig: Rig, out: Path, exposure_option: str | float, policy: ExposurePolicy, sync: str = "host"
+) -> Path:
     """``msflash capture``: plan the exposures, capture ambient + each LED into ``out/sequence``; its path."""
     exposure = plan_exposure(rig, exposure_option, policy)
     report_exposure(exposure, list(rig.led_spectra.names))
@@ -113,10 +114,15 @@ def recording_of(rig: Rig) -> Recorded | None:
     if not ambient:
         return None
     frames = sequence.frames
-    return Recorded(frames[ambient[0]].exposure_us, tuple(frames[i].exposure_us for i in leds),
-                     frames[flash[0]].exposure_us if flash else None, frames[ambient[0]].gain,
-                     tuple(frames[i].gain for i in leds), frames[flash[0]].gain if flash else 1.0,
-                     tuple(frames[flash[0]].led_levels) if flash else None)
+    return Recorded(
+        frames[ambient[0]].exposure_us,
+        tuple(frames[i].exposure_us for i in leds),
+        frames[flash[0]].exposure_us if flash else None,
+        frames[ambient[0]].gain,
+        tuple(frames[i].gain for i in leds),
+        frames[flash[0]].gain if flash else 1.0,
+        tuple(frames[flash[0]].led_levels) if flash else None,
+    )
 
 
 def plan_exposure(rig: Rig, exposure_option: str | float, policy: ExposurePolicy) -> ExposurePlan:
@@ -133,11 +139,22 @@ def plan_exposure(rig: Rig, exposure_option: str | float, policy: ExposurePolicy
         return ExposurePlan(exposure, (exposure,) * n_leds, nan, method, limits, policy, mode="fixed")
     recorded = recording_of(rig)
     if recorded is not None and len(recorded.led_us) == n_leds:
-        return ExposurePlan(recorded.ambient_us, recorded.led_us, nan, method, limits, policy, mode="recorded",
-                            ambient_gain=recorded.ambient_gain, led_gains=recorded.led_gains)
+        return ExposurePlan(
+            recorded.ambient_us,
+            recorded.led_us,
+            nan,
+            method,
+            limits,
+            policy,
+            mode="recorded",
+            ambient_gain=recorded.ambient_gain,
+            led_gains=recorded.led_gains,
+        )
     suggested = float(getattr(rig.camera, "suggested_exposure_us", None) or 10_000.0)
-    progress(f"auto exposure: metering ambient previews (≤ {policy.max_saturated_fraction:.2%} saturated, "
-             f"bright end at {policy.target_fraction:.0%} of full scale)")
+    progress(
+        f"auto exposure: metering ambient previews (≤ {policy.max_saturated_fraction:.2%} saturated, "
+        f"bright end at {policy.target_fraction:.0%} of full scale)"
+    )
     info = rig.camera.info
 
     def capture(levels, exposure_us: float):
@@ -145,16 +162,30 @@ def plan_exposure(rig: Rig, exposure_option: str | float, policy: ExposurePolicy
         preview = CapturePlan.single(levels, exposure_us, role=role)
         return metering_view(preview_frames(rig.camera, rig.booth, preview)[0].pixels, mosaic=info.cfa is not None)
 
-    return plan_exposures(capture, n_leds, info.black_level, info.white_level, limits, noise, policy,
-                          start_us=suggested, cfa=info.cfa is not None)
+    return plan_exposures(
+        capture,
+        n_leds,
+        info.black_level,
+        info.white_level,
+        limits,
+        noise,
+        policy,
+        start_us=suggested,
+        cfa=info.cfa is not None,
+    )
 
 
 def report_exposure(plan: ExposurePlan, names: list[str]) -> None:
-    progress(f"exposure ({plan.mode}): ambient {plan.ambient_exposure_us:.0f} µs; LEDs "
-             + ", ".join(f"{n} {e:.0f}" for n, e in zip(names, plan.led_exposures_us)) + " µs")
+    progress(
+        f"exposure ({plan.mode}): ambient {plan.ambient_exposure_us:.0f} µs; LEDs "
+        + ", ".join(f"{n} {e:.0f}" for n, e in zip(names, plan.led_exposures_us))
+        + " µs"
+    )
     if plan.mode == "auto":
-        progress(f"planned LED SNR ({plan.snr_method}, median pixel): "
-                 + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, plan.predicted_snr)))
+        progress(
+            f"planned LED SNR ({plan.snr_method}, median pixel): "
+            + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, plan.predicted_snr))
+        )
     for note in plan.warnings:
         progress(f"warning: {note}")
 
@@ -181,22 +212,35 @@ def capture_led_sequence(rig: Rig, writer: FrameWriter, plan: ExposurePlan, sync
         stamp["t"] = time.perf_counter()
         report_frame(step, frame, entry)
 
-    capture_plan = CapturePlan.ambient_then_each_led(len(writer.sequence.leds), plan.ambient_exposure_us,
-                                                    gain=plan.ambient_gain, led_exposures_us=plan.led_exposures_us,
-                                                    led_gains=plan.led_gains, trigger=SYNC_MODES[sync])
+    capture_plan = CapturePlan.ambient_then_each_led(
+        len(writer.sequence.leds),
+        plan.ambient_exposure_us,
+        gain=plan.ambient_gain,
+        led_exposures_us=plan.led_exposures_us,
+        led_gains=plan.led_gains,
+        trigger=SYNC_MODES[sync],
+    )
     entries = run_capture(rig.camera, rig.booth, capture_plan, writer, on_frame=keep)
     return led_capture(rig, writer, plan, frames, entries, stamp["t"])
 
 
-def led_capture(rig: Rig, writer, plan: ExposurePlan, frames: list[RawFrame], entries: list[SequenceFrame],
-                 last_frame_at: float) -> LedCapture:
+def led_capture(
+    rig: Rig, writer, plan: ExposurePlan, frames: list[RawFrame], entries: list[SequenceFrame], last_frame_at: float
+) -> LedCapture:
     """The LED frames with their measured SNR (reported)."""
     info = rig.camera.info
     pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
-    snr, method = measure_led_snr(pixels[0], frames[0].exposure_us, pixels[1:],
-                                  [f.exposure_us for f in frames[1:]], info.black_level, info.white_level,
-                                  camera_noise_model(rig.camera), cfa=info.cfa is not None,
-                                  gain=frames[0].gain)
+    snr, method = measure_led_snr(
+        pixels[0],
+        frames[0].exposure_us,
+        pixels[1:],
+        [f.exposure_us for f in frames[1:]],
+        info.black_level,
+        info.white_level,
+        camera_noise_model(rig.camera),
+        cfa=info.cfa is not None,
+        gain=frames[0].gain,
+    )
     names = [led.name for led in writer.sequence.leds]
     progress(f"LED SNR ({method}, median pixel): " + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, snr)))
     return LedCapture(plan, frames, entries, last_frame_at, snr, method)
@@ -204,10 +248,12 @@ def led_capture(rig: Rig, writer, plan: ExposurePlan, frames: list[RawFrame], en
 
 def degenerate(estimate) -> str | None:
     """Why the estimate cannot be reported (non-finite numbers), or None."""
-    checks = {"condition number": np.asarray(estimate.condition_number, dtype=float),
-              "spectrum": np.asarray(estimate.spectrum.values, dtype=float),
-              "ambient weights": np.asarray(estimate.ambient_weights, dtype=float),
-              "spectrum uncertainty": np.asarray(estimate.spectrum_std, dtype=float)}
+    checks = {
+        "condition number": np.asarray(estimate.condition_number, dtype=float),
+        "spectrum": np.asarray(estimate.spectrum.values, dtype=float),
+        "ambient weights": np.asarray(estimate.ambient_weights, dtype=float),
+        "spectrum uncertainty": np.asarray(estimate.spectrum_std, dtype=float),
+    }
     bad = [name for name, values in checks.items() if not np.all(np.isfinite(values))]
     if not bad:
         return None
@@ -227,9 +273,15 @@ def solve_both(solve, weights: np.ndarray, first: str) -> tuple[dict, list]:
 def run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, options: RunOptions):
     """Ambient + LEDs + flash in one stream, the flash decided from the frames in memory."""
     auto = exposure.mode == "auto"  # then the session predicts the flash exposure from the frames as they arrive
-    session = FlashSession.prepare(writer.sequence, options.target, options.solver, options.alpha, options.bin_factor,
-                                   exposure_limits_us=exposure.exposure_range_us if auto else None,
-                                   exposure_policy=exposure.policy)
+    session = FlashSession.prepare(
+        writer.sequence,
+        options.target,
+        options.solver,
+        options.alpha,
+        options.bin_factor,
+        exposure_limits_us=exposure.exposure_range_us if auto else None,
+        exposure_policy=exposure.policy,
+    )
     n_leds = len(writer.sequence.leds)
     frames: list[RawFrame] = []
     stamp = {"t": 0.0, "decided": 0.0}
@@ -250,8 +302,9 @@ def run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan
             if options.from_disk:
                 sequence = read_sequence(writer.flush().directory)
                 stack = analysis.load_frame_stack(sequence)
-                estimate = analysis.estimate_sequence(sequence, options.solver, options.alpha, stack=stack,
-                                                      bin_factor=options.bin_factor)
+                estimate = analysis.estimate_sequence(
+                    sequence, options.solver, options.alpha, stack=stack, bin_factor=options.bin_factor
+                )
                 chosen = session.solve(options.mode, estimate.ambient_weights)
                 levels = np.clip(chosen.flash_weights, 0.0, 1.0)
                 result.update(estimate=lambda: estimate, chosen=chosen, stack=stack)
@@ -264,8 +317,12 @@ def run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan
         stamp["decided"] = time.perf_counter()
         return levels, flash_us
 
-    plan = CapturePlan.ambient_then_each_led(n_leds, exposure.ambient_exposure_us,
-                                             led_exposures_us=exposure.led_exposures_us, trigger=SYNC_MODES[options.sync])
+    plan = CapturePlan.ambient_then_each_led(
+        n_leds,
+        exposure.ambient_exposure_us,
+        led_exposures_us=exposure.led_exposures_us,
+        trigger=SYNC_MODES[options.sync],
+    )
     entries = run_capture_with_flash(rig.camera, rig.booth, plan, writer, decide, on_frame=keep)
     if "stack" not in result:
         # The report's frames as the sequence records them (a mono camera's as three identical
@@ -278,8 +335,15 @@ def run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan
         solutions = {options.mode: result["chosen"], other: session.solve(other, estimate.ambient_weights)}
     captured = led_capture(rig, writer, exposure, frames, list(entries[:-1]), stamp["t"])
     flash_entry = entries[-1]
-    return (estimate, solutions, result["caught"] + list(caught),
-            captured, flash_entry.exposure_us, result["stack"], stamp["decided"])
+    return (
+        estimate,
+        solutions,
+        result["caught"] + list(caught),
+        captured,
+        flash_entry.exposure_us,
+        result["stack"],
+        stamp["decided"],
+    )
 
 
 def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, options: RunOptions):
@@ -291,30 +355,55 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
         stack = analysis.load_frame_stack(sequence)
     else:
         stack = analysis.load_frame_stack(sequence, [frame.pixels for frame in captured.frames])
-    estimate = analysis.estimate_sequence(sequence, options.solver, options.alpha, stack=stack, bin_factor=options.bin_factor)
+    estimate = analysis.estimate_sequence(
+        sequence, options.solver, options.alpha, stack=stack, bin_factor=options.bin_factor
+    )
     solutions, caught = solve_both(
         lambda mode, weights: analysis.solve_sequence_flash(sequence, mode, weights, options.target),
-        estimate.ambient_weights, options.mode)
+        estimate.ambient_weights,
+        options.mode,
+    )
     levels = np.clip(solutions[options.mode].flash_weights, 0.0, 1.0)
     recorded = recording_of(rig)
     if exposure.mode == "recorded" and recorded is not None and recorded.flash_us is None:
-        progress("the recording has no flash frame (a sequence from 'msflash capture'): the flash is synthesised "
-                 "from the frames, not re-captured")
+        progress(
+            "the recording has no flash frame (a sequence from 'msflash capture'): the flash is synthesised "
+            "from the frames, not re-captured"
+        )
         return estimate, solutions, caught, captured, None, stack, time.perf_counter()
-    if exposure.mode == "recorded" and recorded is not None and recorded.flash_levels is not None and \
-            not levels_match(recorded.flash_levels, levels):
+    if (
+        exposure.mode == "recorded"
+        and recorded is not None
+        and recorded.flash_levels is not None
+        and not levels_match(recorded.flash_levels, levels)
+    ):
         # A recording made by another msflash version or with other options (--mode, --solver, --target…):
         # its flash frame is not this flash, and replay cannot capture another one.
-        progress(f"the recording's flash frame has LED levels {format_levels(recorded.flash_levels)}, this run's "
-                 f"{options.mode} flash asks for {format_levels(levels)} (recorded with other options or another "
-                 "msflash version): the flash is synthesised from the frames, not replayed")
+        progress(
+            f"the recording's flash frame has LED levels {format_levels(recorded.flash_levels)}, this run's "
+            f"{options.mode} flash asks for {format_levels(levels)} (recorded with other options or another "
+            "msflash version): the flash is synthesised from the frames, not replayed"
+        )
         return estimate, solutions, caught, captured, None, stack, time.perf_counter()
     frames = captured.frames
     info = rig.camera.info  # read once: on a real camera each read is several feature round trips
     pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
-    flash_us = flash_exposure_for(rig, exposure, levels, lambda weights: flash_exposure(
-        pixels[0], frames[0].exposure_us, pixels[1:], [f.exposure_us for f in frames[1:]],
-        weights, info.black_level, info.white_level, exposure.exposure_range_us, exposure.policy))
+    flash_us = flash_exposure_for(
+        rig,
+        exposure,
+        levels,
+        lambda weights: flash_exposure(
+            pixels[0],
+            frames[0].exposure_us,
+            pixels[1:],
+            [f.exposure_us for f in frames[1:]],
+            weights,
+            info.black_level,
+            info.white_level,
+            exposure.exposure_range_us,
+            exposure.policy,
+        ),
+    )
     flash_gain = recorded.flash_gain if exposure.mode == "recorded" and recorded is not None else 1.0
     flash_plan = CapturePlan.single(levels, flash_us, gain=flash_gain, trigger=SYNC_MODES[options.sync])
     decided = time.perf_counter()
@@ -322,7 +411,9 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
     return estimate, solutions, caught, captured, flash_us, stack, decided
 
 
-def flash_exposure_for(rig: Rig, plan: ExposurePlan, levels: np.ndarray, predict: Callable[[np.ndarray], float]) -> float:
+def flash_exposure_for(
+    rig: Rig, plan: ExposurePlan, levels: np.ndarray, predict: Callable[[np.ndarray], float]
+) -> float:
     """The flash frame's exposure: fixed, recorded (replay), or ``predict(levels)`` from the frames in memory."""
     if plan.mode != "auto":
         recorded = recording_of(rig)

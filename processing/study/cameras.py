@@ -35,17 +35,41 @@ from msflash.processing.study.table1 import (
 )
 
 
-def _per_camera(n_leds_list: Sequence[int], method: str, alpha: float | str, cameras: Sequence[str] | int | None,
-                illuminants: Sequence[SmoothIlluminant] | int | None, progress: Progress | None,
-                map_function: MapFunction | None, grid: WavelengthGrid, label: str) -> dict[str, Any]:
+def _per_camera(
+    n_leds_list: Sequence[int],
+    method: str,
+    alpha: float | str,
+    cameras: Sequence[str] | int | None,
+    illuminants: Sequence[SmoothIlluminant] | int | None,
+    progress: Progress | None,
+    map_function: MapFunction | None,
+    grid: WavelengthGrid,
+    label: str,
+) -> dict[str, Any]:
     started = time.perf_counter()
-    run = evaluate_all_cameras(n_leds_list, method, [alpha], "dimensionless", cameras, illuminants, progress, map_function,
-                               grid, label, started)
+    run = evaluate_all_cameras(
+        n_leds_list,
+        method,
+        [alpha],
+        "dimensionless",
+        cameras,
+        illuminants,
+        progress,
+        map_function,
+        grid,
+        label,
+        started,
+    )
     counts, subsets, names, chosen_illuminants = run.counts, run.subsets, run.names, run.illuminants
     truths, leds, results = run.truths, run.leds, run.results
     return {
-        "counts": counts, "subsets": subsets, "names": names, "illuminants": chosen_illuminants, "truths": truths,
-        "leds": leds, "started": started,
+        "counts": counts,
+        "subsets": subsets,
+        "names": names,
+        "illuminants": chosen_illuminants,
+        "truths": truths,
+        "leds": leds,
+        "started": started,
         # (n_cam, n_ill, n_sets)
         "spectrum_rmse": np.stack([r["spectrum_rmse"][:, :, 0] for r in results]),
         "xy_error": np.stack([r["xy_error"][:, :, 0] for r in results]),
@@ -92,21 +116,30 @@ def run_cameras(
         "spectrum_rmse": np.nanmean(rmse, axis=(0, 1)).tolist(),
         "spectrum_rmse_worst_camera": np.nanmean(worst, axis=0).tolist(),
         "per_illuminant_camera_spread": spread.tolist(),
-        "examples": [{
-            "xy": list(data["illuminants"][i].xy),
-            "truth": (truths[:, i] / truths[:, i].max()).tolist(),
-            "estimates": {str(n): estimates[:, i, s].tolist() for s, n in enumerate(counts)},
-        } for i in picks],
+        "examples": [
+            {
+                "xy": list(data["illuminants"][i].xy),
+                "truth": (truths[:, i] / truths[:, i].max()).tolist(),
+                "estimates": {str(n): estimates[:, i, s].tolist() for s, n in enumerate(counts)},
+            }
+            for i in picks
+        ],
         "wavelengths_nm": grid.wavelengths_nm.tolist(),
         "failures": int(data["failed"].sum()),
         "definitions": {
             "camera_spread": "RMS over wavelengths of the standard deviation across cameras of the max-normalised "
-                             "estimates, mean over illuminants (camera_spread_max: worst illuminant)",
+            "estimates, mean over illuminants (camera_spread_max: worst illuminant)",
             "spectrum_rmse": "msflash.processing.metrics.spectrum_rmse, mean over cameras and illuminants",
             "spectrum_rmse_worst_camera": "the worst camera's spectrum RMSE per illuminant, mean over illuminants",
         },
-        "config": {"method": method, "alpha": alpha, "cameras": data["names"], "n_cameras": len(data["names"]),
-                   "illuminants_xy": [list(ill.xy) for ill in data["illuminants"]], "grid": str(grid)},
+        "config": {
+            "method": method,
+            "alpha": alpha,
+            "cameras": data["names"],
+            "n_cameras": len(data["names"]),
+            "illuminants_xy": [list(ill.xy) for ill in data["illuminants"]],
+            "grid": str(grid),
+        },
         "elapsed_s": time.perf_counter() - data["started"],
     }
 
@@ -124,8 +157,13 @@ def run_xy(
     """Fig. 7: spectrum RMSE, xy error and the LED-fit bound at each feasible xy, per LED count."""
     data = _per_camera(n_leds_list, method, alpha, cameras, illuminants, progress, map_function, grid, "xy")
     truths, leds = data["truths"], data["leds"]
-    bound = [[spectrum_rmse(direct_fit(truths[:, i], leds.values[:, subset], "nonneg"), truths[:, i])
-              for subset in data["subsets"]] for i in range(truths.shape[1])]
+    bound = [
+        [
+            spectrum_rmse(direct_fit(truths[:, i], leds.values[:, subset], "nonneg"), truths[:, i])
+            for subset in data["subsets"]
+        ]
+        for i in range(truths.shape[1])
+    ]
     rmse = np.nanmean(data["spectrum_rmse"], axis=0)  # (n_ill, n_sets)
     return {
         "n_leds": data["counts"],
@@ -135,15 +173,26 @@ def run_xy(
         "spectrum_rmse_camera_std": np.nanstd(data["spectrum_rmse"], axis=0).tolist(),
         "xy_error": (np.nanmean(data["xy_error"], axis=0) * 100).tolist(),
         "bound": bound,
-        "worst": [{"n_leds": n, "xy": list(data["illuminants"][int(np.nanargmax(rmse[:, s]))].xy),
-                   "spectrum_rmse": float(np.nanmax(rmse[:, s]))} for s, n in enumerate(data["counts"])],
+        "worst": [
+            {
+                "n_leds": n,
+                "xy": list(data["illuminants"][int(np.nanargmax(rmse[:, s]))].xy),
+                "spectrum_rmse": float(np.nanmax(rmse[:, s])),
+            }
+            for s, n in enumerate(data["counts"])
+        ],
         "failures": int(data["failed"].sum()),
         "definitions": {
             "spectrum_rmse": "[illuminant][LED count]: processing.metrics.spectrum_rmse, mean over cameras",
             "xy_error": "[illuminant][LED count]: 100 x |Δxy|²/2 (Table 1's definition), mean over cameras",
             "bound": "[illuminant][LED count]: spectrum_rmse of the direct I w >= 0 LED fit of the truth",
         },
-        "config": {"method": method, "alpha": alpha, "cameras": data["names"], "n_cameras": len(data["names"]),
-                   "grid": str(grid)},
+        "config": {
+            "method": method,
+            "alpha": alpha,
+            "cameras": data["names"],
+            "n_cameras": len(data["names"]),
+            "grid": str(grid),
+        },
         "elapsed_s": time.perf_counter() - data["started"],
     }

@@ -58,20 +58,28 @@ from msflash.processing.study.table1 import (
 FACTORS: dict[str, dict[str, Any]] = {
     "n_leds": {"levels": [7, 6, 5, 4, 3], "label": "number of LEDs (paper subsets)"},
     "surfaces": {"levels": [110, 30, 10, 5, 3, 2, 1], "label": "distinct surfaces (drawn, the chart relabelled)"},
-    "ambient_to_flash": {"levels": [0.5, 0.1, 2.0, 5.0, 10.0, 20.0, 50.0],
-                         "label": "ambient-to-flash ratio (mean camera signal, all LEDs at full drive)"},
-    "exposure": {"levels": [1.0, 1 / 4, 1 / 16, 1 / 64, 1 / 256, 1 / 1024],
-                 "label": "exposure relative to the metered one (less light, more noise)"},
-    "saturation": {"levels": [1.0, 1.5, 2.0, 4.0, 8.0, 16.0, 64.0],
-                   "label": "exposure relative to the metered one (over-exposure)"},
-    "dead_led": {"levels": [-1, 0, 1, 2, 3, 4, 5, 6],
-                 "label": "LED that did not fire (index into the 7; -1: none)"},
-    "line_400nm": {"levels": [0.0, 0.25, 0.5, 0.75, 0.95],
-                   "label": "fraction of the ambient's photons in a narrow line at 400 nm (below the LEDs)"},
-    "line_570nm": {"levels": [0.0, 0.25, 0.5, 0.75, 0.95],
-                   "label": "fraction in a line at 570 nm (the gap between the 520 and 596 nm LEDs)"},
-    "line_700nm": {"levels": [0.0, 0.25, 0.5, 0.75, 0.95],
-                   "label": "fraction in a line at 700 nm (above the LEDs)"},
+    "ambient_to_flash": {
+        "levels": [0.5, 0.1, 2.0, 5.0, 10.0, 20.0, 50.0],
+        "label": "ambient-to-flash ratio (mean camera signal, all LEDs at full drive)",
+    },
+    "exposure": {
+        "levels": [1.0, 1 / 4, 1 / 16, 1 / 64, 1 / 256, 1 / 1024],
+        "label": "exposure relative to the metered one (less light, more noise)",
+    },
+    "saturation": {
+        "levels": [1.0, 1.5, 2.0, 4.0, 8.0, 16.0, 64.0],
+        "label": "exposure relative to the metered one (over-exposure)",
+    },
+    "dead_led": {"levels": [-1, 0, 1, 2, 3, 4, 5, 6], "label": "LED that did not fire (index into the 7; -1: none)"},
+    "line_400nm": {
+        "levels": [0.0, 0.25, 0.5, 0.75, 0.95],
+        "label": "fraction of the ambient's photons in a narrow line at 400 nm (below the LEDs)",
+    },
+    "line_570nm": {
+        "levels": [0.0, 0.25, 0.5, 0.75, 0.95],
+        "label": "fraction in a line at 570 nm (the gap between the 520 and 596 nm LEDs)",
+    },
+    "line_700nm": {"levels": [0.0, 0.25, 0.5, 0.75, 0.95], "label": "fraction in a line at 700 nm (above the LEDs)"},
     "motion": {"levels": [0, 1, 2, 4, 8], "label": "ambient frame shifted by this many pixels (patches are 8 px)"},
 }
 """Factors and levels; the first level of each is the baseline."""
@@ -88,8 +96,10 @@ def with_line(ambient: Spectra, centre_nm: float, fraction: float, grid: Wavelen
     values = photons.values[:, 0] / photons.values[:, 0].sum()
     line = np.exp(-0.5 * ((grid.wavelengths_nm - centre_nm) / LINE_WIDTH_NM) ** 2)
     line = line / line.sum()
-    return photons.replace(values=((1 - fraction) * values + fraction * line)[:, None],
-                           source=f"{photons.source} + {fraction:.0%} line at {centre_nm:g} nm")
+    return photons.replace(
+        values=((1 - fraction) * values + fraction * line)[:, None],
+        source=f"{photons.source} + {fraction:.0%} line at {centre_nm:g} nm",
+    )
 
 
 def relabelled(world_scene, n_surfaces: int, rng: np.random.Generator):  # noqa: ANN001, ANN201
@@ -108,8 +118,16 @@ def led_fill(statistics) -> float:  # noqa: ANN001
     return float(np.min(statistics.led_sums / energy))
 
 
-def _one(world: World, rng: np.random.Generator, truth: np.ndarray, method: str, alpha: float | str,
-         bin_factor: int, motion_px: int = 0, dead_led: int | None = None) -> dict[str, Any]:
+def _one(
+    world: World,
+    rng: np.random.Generator,
+    truth: np.ndarray,
+    method: str,
+    alpha: float | str,
+    bin_factor: int,
+    motion_px: int = 0,
+    dead_led: int | None = None,
+) -> dict[str, Any]:
     ambient, frames, spec = render_stack(world, rng, motion_px=motion_px, dead_led=dead_led)
     statistics = accumulate_statistics(ambient, frames, spec, bin_factor=bin_factor, weighting=True)
     try:
@@ -129,9 +147,18 @@ def _bound(truth: np.ndarray, leds: np.ndarray) -> float:
     return spectrum_rmse(direct_fit(truth, leds, "nonneg"), truth)
 
 
-def run_world(camera_name: str, camera: Spectra, ambient_name: str, ambient: Spectra, factors: dict[str, list[Any]],
-              seeds: Sequence[int], method: str, alpha: float | str, bin_factor: int,
-              grid: WavelengthGrid = DEFAULT_GRID) -> list[dict[str, Any]]:
+def run_world(
+    camera_name: str,
+    camera: Spectra,
+    ambient_name: str,
+    ambient: Spectra,
+    factors: dict[str, list[Any]],
+    seeds: Sequence[int],
+    method: str,
+    alpha: float | str,
+    bin_factor: int,
+    grid: WavelengthGrid = DEFAULT_GRID,
+) -> list[dict[str, Any]]:
     """Every factor level × seed for one camera and ambient: a list of records (the unit of parallel work)."""
     records = []
     base_world = make_world(camera, ambient, grid=grid)
@@ -164,10 +191,20 @@ def run_world(camera_name: str, camera: Spectra, ambient_name: str, ambient: Spe
                 elif factor == "motion":
                     kw = {"motion_px": int(level)}
                 else:
-                    raise SpectralDataError(f"failure study: unknown factor '{factor}'; expected one of {', '.join(FACTORS)}")
+                    raise SpectralDataError(
+                        f"failure study: unknown factor '{factor}'; expected one of {', '.join(FACTORS)}"
+                    )
                 record = _one(world, rng, truth, method, alpha, bin_factor, **kw)
-                record.update({"factor": factor, "level": level, "seed": seed, "camera": camera_name,
-                               "ambient": ambient_name, "baseline_error": baseline_error[seed]})
+                record.update(
+                    {
+                        "factor": factor,
+                        "level": level,
+                        "seed": seed,
+                        "camera": camera_name,
+                        "ambient": ambient_name,
+                        "baseline_error": baseline_error[seed],
+                    }
+                )
                 record["excess"] = record["error"] - baseline_error[seed]
                 records.append(record)
     return records
@@ -177,8 +214,9 @@ def _job(job: tuple) -> list[dict[str, Any]]:
     return run_world(*job)
 
 
-def summarise(records: list[dict[str, Any]], factors: dict[str, list[Any]], threshold: float,
-              absolute_threshold: float) -> dict[str, Any]:
+def summarise(
+    records: list[dict[str, Any]], factors: dict[str, list[Any]], threshold: float, absolute_threshold: float
+) -> dict[str, Any]:
     """Per factor and level: error mean/std/p90, warning and flag rates, signal medians."""
     out: dict[str, Any] = {}
     for factor, levels in factors.items():
@@ -194,31 +232,37 @@ def summarise(records: list[dict[str, Any]], factors: dict[str, list[Any]], thre
                 values = values[np.isfinite(values)]
                 return float(np.median(values)) if values.size else float("nan")
 
-            rows.append({
-                "level": level, "n": len(group),
-                "error_mean": float(finite.mean()) if finite.size else float("nan"),
-                "error_std": float(finite.std()) if finite.size else float("nan"),
-                "error_p90": float(np.percentile(finite, 90)) if finite.size else float("nan"),
-                "excess_mean": float(np.nanmean(excess)) if np.isfinite(excess).any() else float("nan"),
-                "bound_mean": float(np.mean([r["bound"] for r in group])),
-                "warned_rate": float(np.mean([r["warned"] for r in group])),
-                "refused": int(sum(r["refused"] for r in group)),
-                "flag_rates": {flag: float(np.mean([r["flags"][flag] for r in group]))
-                               for flag in ("condition", "residual", "saturation", "risk")},
-                "relative_residual_median": median("relative_residual"),
-                "condition_number_median": median("condition_number"),
-                "band_ratio_median": median("band_ratio"),
-                "band_coverage_2sigma_median": median("band_coverage_2sigma"),
-                "saturated_fraction_median": median("saturated_fraction"),
-                "led_fill_median": median("led_fill"),
-                "led_fill_below_0.2_rate": float(np.mean([r["led_fill"] < 0.2 for r in group])),
-            })
+            rows.append(
+                {
+                    "level": level,
+                    "n": len(group),
+                    "error_mean": float(finite.mean()) if finite.size else float("nan"),
+                    "error_std": float(finite.std()) if finite.size else float("nan"),
+                    "error_p90": float(np.percentile(finite, 90)) if finite.size else float("nan"),
+                    "excess_mean": float(np.nanmean(excess)) if np.isfinite(excess).any() else float("nan"),
+                    "bound_mean": float(np.mean([r["bound"] for r in group])),
+                    "warned_rate": float(np.mean([r["warned"] for r in group])),
+                    "refused": int(sum(r["refused"] for r in group)),
+                    "flag_rates": {
+                        flag: float(np.mean([r["flags"][flag] for r in group]))
+                        for flag in ("condition", "residual", "saturation", "risk")
+                    },
+                    "relative_residual_median": median("relative_residual"),
+                    "condition_number_median": median("condition_number"),
+                    "band_ratio_median": median("band_ratio"),
+                    "band_coverage_2sigma_median": median("band_coverage_2sigma"),
+                    "saturated_fraction_median": median("saturated_fraction"),
+                    "led_fill_median": median("led_fill"),
+                    "led_fill_below_0.2_rate": float(np.mean([r["led_fill"] < 0.2 for r in group])),
+                }
+            )
         out[factor] = rows
     return out
 
 
 def confusion(records: list[dict[str, Any]], key: str, threshold: float) -> dict[str, Any]:
     """Bad (``key`` > threshold, or refused) against warned, overall and per factor."""
+
     def table(group: list[dict[str, Any]]) -> dict[str, int]:
         counts = {"bad_warned": 0, "bad_silent": 0, "good_warned": 0, "good_silent": 0}
         for r in group:
@@ -226,8 +270,14 @@ def confusion(records: list[dict[str, Any]], key: str, threshold: float) -> dict
             counts[f"{'bad' if bad else 'good'}_{'warned' if r['warned'] else 'silent'}"] += 1
         return counts
 
-    return {"threshold": threshold, "key": key, "all": table(records),
-            "per_factor": {f: table([r for r in records if r["factor"] == f]) for f in dict.fromkeys(r["factor"] for r in records)}}
+    return {
+        "threshold": threshold,
+        "key": key,
+        "all": table(records),
+        "per_factor": {
+            f: table([r for r in records if r["factor"] == f]) for f in dict.fromkeys(r["factor"] for r in records)
+        },
+    }
 
 
 def run_failure(
@@ -261,31 +311,73 @@ def run_failure(
             chosen[name] = FACTORS[name]["levels"]
     seed_list = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
     camera_set = select_cameras(list(cameras) if isinstance(cameras, (list, tuple)) else cameras)
-    jobs = [(cam, camera_set[cam], amb, lights.ambient_spectrum(amb, grid), chosen, seed_list, method, alpha,
-             bin_factor, grid) for cam in camera_set for amb in ambients]
+    jobs = [
+        (
+            cam,
+            camera_set[cam],
+            amb,
+            lights.ambient_spectrum(amb, grid),
+            chosen,
+            seed_list,
+            method,
+            alpha,
+            bin_factor,
+            grid,
+        )
+        for cam in camera_set
+        for amb in ambients
+    ]
     mapper = map_function or (lambda function, items: map(function, items))
     records: list[dict[str, Any]] = []
     for done, result in enumerate(mapper(_job, jobs), start=1):
         records.extend(result)
         if progress:
             progress(f"failure: world {done}/{len(jobs)} done ({time.perf_counter() - started:.1f} s)")
-    missed = [{k: r[k] for k in ("factor", "level", "camera", "ambient", "seed", "error", "excess",
-                                   "relative_residual", "condition_number", "band_ratio", "led_fill")}
-              for r in records if not r["warned"] and math.isfinite(r["excess"]) and r["excess"] > threshold]
+    missed = [
+        {
+            k: r[k]
+            for k in (
+                "factor",
+                "level",
+                "camera",
+                "ambient",
+                "seed",
+                "error",
+                "excess",
+                "relative_residual",
+                "condition_number",
+                "band_ratio",
+                "led_fill",
+            )
+        }
+        for r in records
+        if not r["warned"] and math.isfinite(r["excess"]) and r["excess"] > threshold
+    ]
     return {
-        "factors": {name: {"levels": levels, "label": FACTORS.get(name, {}).get("label", name)}
-                    for name, levels in chosen.items()},
+        "factors": {
+            name: {"levels": levels, "label": FACTORS.get(name, {}).get("label", name)}
+            for name, levels in chosen.items()
+        },
         "summary": summarise(records, chosen, threshold, absolute_threshold),
         "confusion": confusion(records, "excess", threshold),
         "confusion_absolute": confusion(records, "error", absolute_threshold),
         "missed": missed,
         "records": records if keep_records else None,
         "definitions": DEFINITIONS,
-        "config": {"cameras": list(camera_set), "ambients": list(ambients), "seeds": seed_list, "method": method,
-                   "alpha": alpha, "bin_factor": bin_factor, "threshold": threshold,
-                   "absolute_threshold": absolute_threshold, "grid": str(grid),
-                   "scene": "chart110, 8-px patches, no border (80 x 88 px RGB)",
-                   "leds": list(flash_norm(grid).names), "n_led_subsets": {n: led_subset_indices(n) for n in (3, 4, 5, 6, 7)}},
+        "config": {
+            "cameras": list(camera_set),
+            "ambients": list(ambients),
+            "seeds": seed_list,
+            "method": method,
+            "alpha": alpha,
+            "bin_factor": bin_factor,
+            "threshold": threshold,
+            "absolute_threshold": absolute_threshold,
+            "grid": str(grid),
+            "scene": "chart110, 8-px patches, no border (80 x 88 px RGB)",
+            "leds": list(flash_norm(grid).names),
+            "n_led_subsets": {n: led_subset_indices(n) for n in (3, 4, 5, 6, 7)},
+        },
         "elapsed_s": time.perf_counter() - started,
     }
 
@@ -296,7 +388,7 @@ DEFINITIONS = {
     "bound": "spectrum_rmse of the best I w >= 0 fit of the true ambient with the LEDs in use",
     "warned": "AmbientEstimate.warnings non-empty, or estimate_ambient refused the input",
     "flags": "which of the estimator's warnings fired: condition > 1e6, relative residual > 0.1, "
-             "saturated fraction > 0.5, one-sigma band > half the peak",
+    "saturated fraction > 0.5, one-sigma band > half the peak",
     "band_ratio": "max over wavelengths of spectrum_std / peak of the estimate",
     "band_coverage_2sigma": "fraction of wavelengths where |estimate − scaled truth| <= 2 spectrum_std (both / peak)",
     "led_fill": "proposed signal, not in the estimator: min over LEDs of sum(f_k) / sqrt(n sum(f_k^2))",

@@ -115,8 +115,9 @@ def _smoothest_vector(weights: np.ndarray, x: float, y: float) -> np.ndarray | N
     linear = -null.T @ difference.T @ difference @ particular
     scale = float(np.trace(hessian) / hessian.shape[0])
     try:
-        solution = minimise_quadratic(hessian / scale, linear / scale, null, -particular,
-                                      where=f"smoothest spectrum for xy=({x:.4f}, {y:.4f})")
+        solution = minimise_quadratic(
+            hessian / scale, linear / scale, null, -particular, where=f"smoothest spectrum for xy=({x:.4f}, {y:.4f})"
+        )
     except SolverError:
         return None
     spectrum = particular + null @ solution.x
@@ -168,8 +169,14 @@ def smoothest_spectrum(
         vector = vector / grid.wavelengths_nm  # Quanta2Energy, then used as a photon spectrum
     vector = vector / vector.max()
     xy = xy_of(vector, grid)
-    spectrum = Spectra(grid, vector, (f"smooth_xy_{x:.3f}_{y:.3f}",), kind="spd", unit="photons",
-                       source=f"smoothest spectrum with xy=({x:.4f}, {y:.4f}) [{convention}]")
+    spectrum = Spectra(
+        grid,
+        vector,
+        (f"smooth_xy_{x:.3f}_{y:.3f}",),
+        kind="spd",
+        unit="photons",
+        source=f"smoothest spectrum with xy=({x:.4f}, {y:.4f}) [{convention}]",
+    )
     return SmoothIlluminant(requested_xy=(float(x), float(y)), xy=(float(xy[0]), float(xy[1])), spectrum=spectrum)
 
 

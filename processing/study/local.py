@@ -106,9 +106,16 @@ def mixing_map(kind: str, shape: tuple[int, int], rng: np.random.Generator) -> n
     raise ValueError(f"scenario kind '{kind}' is unknown; expected one of {', '.join(KINDS)}")
 
 
-def make_scenario(kind: str, seed: int, shape: tuple[int, int] = (240, 320), camera: str = "NikonD100",
-                  flash_to_ambient: float = 2.0, ambient_peak_fraction: float = 0.3, noise: bool = True,
-                  alone: int | None = None) -> Scenario:
+def make_scenario(
+    kind: str,
+    seed: int,
+    shape: tuple[int, int] = (240, 320),
+    camera: str = "NikonD100",
+    flash_to_ambient: float = 2.0,
+    ambient_peak_fraction: float = 0.3,
+    noise: bool = True,
+    alone: int | None = None,
+) -> Scenario:
     """Render one scenario (see the module notes).
 
     With ``alone`` = 0 or 1 the same scene (same surfaces, ambients and powers) is rendered lit by
@@ -132,8 +139,9 @@ def make_scenario(kind: str, seed: int, shape: tuple[int, int] = (240, 320), cam
     sensor = SensorModel()
     ambient_signal = float(np.mean(expected_response(scene, illumination, responsivities, 1.0)))
     dark = spectra[0].replace(values=np.zeros_like(spectra[0].values))
-    flash_signal = float(np.mean(expected_response(scene, total_illumination(dark, leds, np.ones(leds.count)),
-                                                   responsivities, 1.0)))
+    flash_signal = float(
+        np.mean(expected_response(scene, total_illumination(dark, leds, np.ones(leds.count)), responsivities, 1.0))
+    )
     leds = leds.replace(values=leds.values * (flash_to_ambient * ambient_signal / flash_signal))
     exposure = exposure_for_peak(scene, illumination, responsivities, sensor, ambient_peak_fraction)
     levels = np.eye(leds.count)
@@ -141,8 +149,13 @@ def make_scenario(kind: str, seed: int, shape: tuple[int, int] = (240, 320), cam
     for row in [np.zeros(leds.count), *levels]:
         lit = illumination.plus(total_illumination(dark, leds, row))
         frames.append(render_frame(scene, lit, responsivities, sensor, exposure, rng=rng, noise=noise))
-    spec = FrameStackSpec(black_level=sensor.black_level, white_level=sensor.white_level, ambient_scale=1.0 / exposure,
-                          led_scales=(1.0 / exposure,) * leds.count, led_levels=levels)
+    spec = FrameStackSpec(
+        black_level=sensor.black_level,
+        white_level=sensor.white_level,
+        ambient_scale=1.0 / exposure,
+        led_scales=(1.0 / exposure,) * leds.count,
+        led_levels=levels,
+    )
     return Scenario(kind, frames[0], frames[1:], spec, leds, illumination, names)
 
 
@@ -153,15 +166,18 @@ def tile_truth(scenario: Scenario, estimate: LocalEstimate) -> np.ndarray:
     truth = np.empty(estimate.tiles.shape + (scenario.illumination.spectra.grid.size,))
     for i in range(truth.shape[0]):
         for j in range(truth.shape[1]):
-            share = weights[rows[i]:rows[i + 1], columns[j]:columns[j + 1]].reshape(-1, weights.shape[2]).mean(axis=0)
+            share = (
+                weights[rows[i] : rows[i + 1], columns[j] : columns[j + 1]].reshape(-1, weights.shape[2]).mean(axis=0)
+            )
             truth[i, j] = scenario.illumination.spectra.values @ share
     return truth
 
 
 def tiled_rmse(spectra: np.ndarray, truth: np.ndarray, areas: np.ndarray) -> float:
     """Area-weighted mean over tiles of the spectrum RMSE of (ty, tx, n) estimates against truths."""
-    errors = np.array([[spectrum_rmse(spectra[i, j], truth[i, j]) for j in range(truth.shape[1])]
-                       for i in range(truth.shape[0])])
+    errors = np.array(
+        [[spectrum_rmse(spectra[i, j], truth[i, j]) for j in range(truth.shape[1])] for i in range(truth.shape[0])]
+    )
     return float((errors * areas).sum() / areas.sum())
 
 
@@ -218,13 +234,20 @@ def pixel_bound(scenario: Scenario, truth: np.ndarray | None = None) -> float:
     scale = np.maximum(weights.max(axis=0), 1e-300)
     distinct, inverse = np.unique(np.round(weights / scale, 3), axis=0, return_inverse=True)
     led_values = scenario.led_spectra.values
-    fits = np.array([led_values @ nnls(led_values, scenario.illumination.spectra.values @ (row * scale))[0]
-                     for row in distinct])
+    fits = np.array(
+        [led_values @ nnls(led_values, scenario.illumination.spectra.values @ (row * scale))[0] for row in distinct]
+    )
     return float(pixel_rmses(fits[np.ravel(inverse)], truth).mean())
 
 
-def alone_rmse(kind: str, seed: int, shape: tuple[int, int] = (240, 320), bin_factor: int = 4,
-               truth: np.ndarray | None = None, noise_correction: bool = True) -> float:
+def alone_rmse(
+    kind: str,
+    seed: int,
+    shape: tuple[int, int] = (240, 320),
+    bin_factor: int = 4,
+    truth: np.ndarray | None = None,
+    noise_correction: bool = True,
+) -> float:
     """Reference for local estimates: each ambient estimated globally from a capture where it lights the whole scene alone.
 
     The estimator is the local model's (:func:`processing.local.denoised_global`: the paper's
@@ -239,15 +262,19 @@ def alone_rmse(kind: str, seed: int, shape: tuple[int, int] = (240, 320), bin_fa
     for index in (0, 1):
         single = make_scenario(kind, seed, shape, alone=index)
         tiled = tile_statistics(single.ambient, single.led_frames, single.spec, 1, bin_factor=bin_factor)
-        weights = (denoised_global(tiled, single.led_spectra) if noise_correction
-                   else estimate_local(tiled, single.led_spectra, "global").global_estimate.ambient_weights)
+        weights = (
+            denoised_global(tiled, single.led_spectra)
+            if noise_correction
+            else estimate_local(tiled, single.led_spectra, "global").global_estimate.ambient_weights
+        )
         spectra.append(single.led_spectra.values @ weights)
     mixing = scenario.illumination.weights[..., 1].reshape(-1, 1)
     return float(pixel_rmses((1.0 - mixing) * spectra[0] + mixing * spectra[1], truth).mean())
 
 
-def evaluate_scenario(kind: str, seed: int, tiles: int = DEFAULT_TILES, bin_factor: int = 4,
-                      shape: tuple[int, int] = (240, 320)) -> dict:
+def evaluate_scenario(
+    kind: str, seed: int, tiles: int = DEFAULT_TILES, bin_factor: int = 4, shape: tuple[int, int] = (240, 320)
+) -> dict:
     """Global, forced-local, tiles-only and auto estimates of one scenario, with their spectrum RMSEs.
 
     ``rmse_*`` is the per-pixel metric (:func:`pixel_rmse`); ``tile_rmse_*`` the earlier per-tile
@@ -267,8 +294,9 @@ def evaluate_scenario(kind: str, seed: int, tiles: int = DEFAULT_TILES, bin_fact
     tile_truths = tile_truth(scenario, auto)
     areas = tiled.areas
     rmse_global = pixel_rmse(global_spectrum, scenario, truth)
-    rmse_global_denoised = pixel_rmse(scenario.led_spectra.values @ denoised_global(tiled, scenario.led_spectra),
-                                      scenario, truth)
+    rmse_global_denoised = pixel_rmse(
+        scenario.led_spectra.values @ denoised_global(tiled, scenario.led_spectra), scenario, truth
+    )
     label_accuracy = None
     if kind == "boundary" and local.regions is not None:
         labels = local.regions.label_map(shape)
@@ -276,9 +304,14 @@ def evaluate_scenario(kind: str, seed: int, tiles: int = DEFAULT_TILES, bin_fact
         label_accuracy = float(max(np.mean(labels == side), np.mean(labels != side)))
     assert auto.selection is not None  # the auto method always selects
     return {
-        "kind": kind, "seed": seed, "ambients": list(scenario.names),
-        "chosen": auto.model, "structure": auto.structure, "local_structure": local.structure,
-        "smoothing": auto.smoothing, "scores": auto.selection.scores,
+        "kind": kind,
+        "seed": seed,
+        "ambients": list(scenario.names),
+        "chosen": auto.model,
+        "structure": auto.structure,
+        "local_structure": local.structure,
+        "smoothing": auto.smoothing,
+        "scores": auto.selection.scores,
         "rmse_global": rmse_global,
         # The global model with the local model's estimator (denoised statistics), and auto without
         # the noise correction.
@@ -297,8 +330,13 @@ def evaluate_scenario(kind: str, seed: int, tiles: int = DEFAULT_TILES, bin_fact
     }
 
 
-def time_estimates(shape: tuple[int, int] = (1024, 1280), tiles: int = DEFAULT_TILES, bin_factor: int = 4,
-                   repeats: int = 5, seed: int = 0) -> dict:
+def time_estimates(
+    shape: tuple[int, int] = (1024, 1280),
+    tiles: int = DEFAULT_TILES,
+    bin_factor: int = 4,
+    repeats: int = 5,
+    seed: int = 0,
+) -> dict:
     """Best-of-``repeats`` wall times of the global estimate and of ``auto`` / ``local`` on full-size frames (in memory)."""
     scenario = make_scenario("boundary", seed, shape)
     leds = scenario.led_spectra
@@ -321,14 +359,21 @@ def time_estimates(shape: tuple[int, int] = (1024, 1280), tiles: int = DEFAULT_T
             start = time.perf_counter()
             run()
             times[name].append(time.perf_counter() - start)
-    timing: dict[str, Any] = {"shape": list(shape), "tiles": tiles, "bin_factor": bin_factor, "repeats": repeats,
-              **{name: float(min(values)) for name, values in times.items()}}
+    timing: dict[str, Any] = {
+        "shape": list(shape),
+        "tiles": tiles,
+        "bin_factor": bin_factor,
+        "repeats": repeats,
+        **{name: float(min(values)) for name, values in times.items()},
+    }
     timing["auto_ratio"] = timing["auto_s"] / timing["global_s"]
     timing["local_ratio"] = timing["local_s"] / timing["global_s"]
     return timing
 
 
-def tiles_sweep(seeds: range, tile_counts: tuple[int, ...] = (4, 6, 8, 12, 16), shape: tuple[int, int] = (240, 320)) -> list[dict]:
+def tiles_sweep(
+    seeds: range, tile_counts: tuple[int, ...] = (4, 6, 8, 12, 16), shape: tuple[int, int] = (240, 320)
+) -> list[dict]:
     """Per-pixel accuracy and time of forced-local estimates against the tile count on boundary scenes.
 
     ``rmse_local`` is the default local estimate (two regions where they fit), ``rmse_tiles`` the
@@ -345,16 +390,30 @@ def tiles_sweep(seeds: range, tile_counts: tuple[int, ...] = (4, 6, 8, 12, 16), 
             local = estimate_local(tiled, scenario.led_spectra, "local")
             elapsed.append(time.perf_counter() - start)
             errors_local.append(pixel_rmse(local, scenario, truth))
-            errors_tiles.append(pixel_rmse(estimate_local(tiled, scenario.led_spectra, "local", regions_allowed=False),
-                                           scenario, truth))
+            errors_tiles.append(
+                pixel_rmse(estimate_local(tiled, scenario.led_spectra, "local", regions_allowed=False), scenario, truth)
+            )
             errors_global.append(pixel_rmse(local.global_estimate.spectrum.values[:, 0], scenario, truth))
-        rows.append({"tiles": tiles, "rmse_local": float(np.mean(errors_local)), "rmse_tiles": float(np.mean(errors_tiles)),
-                     "rmse_global": float(np.mean(errors_global)), "time_s": float(np.median(elapsed))})
+        rows.append(
+            {
+                "tiles": tiles,
+                "rmse_local": float(np.mean(errors_local)),
+                "rmse_tiles": float(np.mean(errors_tiles)),
+                "rmse_global": float(np.mean(errors_global)),
+                "time_s": float(np.median(elapsed)),
+            }
+        )
     return rows
 
 
-def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILES, seed0: int = 1000,
-              timing: bool = True, sweep: bool = True) -> dict:
+def run_study(
+    n_uniform: int = 100,
+    n_mixed: int = 40,
+    tiles: int = DEFAULT_TILES,
+    seed0: int = 1000,
+    timing: bool = True,
+    sweep: bool = True,
+) -> dict:
     """The acceptance study: auto → global rate on uniform scenes, RMSE cut on two-illuminant ones, cost.
 
     Seeds: uniform scenes ``seed0 + s``; boundary and gradient scenes ``seed0 + 10 000 + s`` (the same
@@ -369,12 +428,26 @@ def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILE
         rows = [r for r in results if r["kind"] == kind]
         if not rows:
             continue
-        entry: dict[str, Any] = {name: float(np.mean([r[name] for r in rows]))
-                 for name in ("rmse_global", "rmse_local", "rmse_tiles", "rmse_auto", "rmse_alone", "rmse_bound",
-                              "rmse_global_denoised", "rmse_auto_observed", "tile_rmse_global", "tile_rmse_auto",
-                              "tile_rmse_bound")}
+        entry: dict[str, Any] = {
+            name: float(np.mean([r[name] for r in rows]))
+            for name in (
+                "rmse_global",
+                "rmse_local",
+                "rmse_tiles",
+                "rmse_auto",
+                "rmse_alone",
+                "rmse_bound",
+                "rmse_global_denoised",
+                "rmse_auto_observed",
+                "tile_rmse_global",
+                "tile_rmse_auto",
+                "tile_rmse_bound",
+            )
+        }
         # The LED bound is common to every estimate: the excess over it is what estimation controls.
-        entry["excess_cut"] = 1.0 - (entry["rmse_auto"] - entry["rmse_bound"]) / (entry["rmse_global"] - entry["rmse_bound"])
+        entry["excess_cut"] = 1.0 - (entry["rmse_auto"] - entry["rmse_bound"]) / (
+            entry["rmse_global"] - entry["rmse_bound"]
+        )
         entry["global_rate"] = float(np.mean([r["chosen"] == "global" for r in rows]))
         entry["auto_cut"] = 1.0 - entry["rmse_auto"] / entry["rmse_global"]
         entry["local_cut"] = 1.0 - entry["rmse_local"] / entry["rmse_global"]
@@ -390,9 +463,18 @@ def run_study(n_uniform: int = 100, n_mixed: int = 40, tiles: int = DEFAULT_TILE
         summary[kind] = entry
     mixed = [r for r in results if r["kind"] != "uniform"]
     if mixed:
-        summary["two_illuminant"] = {name: float(np.mean([r[name] for r in mixed]))
-                                     for name in ("rmse_global", "rmse_auto", "rmse_local", "rmse_alone", "rmse_bound",
-                                                  "rmse_global_denoised", "rmse_auto_observed")}
+        summary["two_illuminant"] = {
+            name: float(np.mean([r[name] for r in mixed]))
+            for name in (
+                "rmse_global",
+                "rmse_auto",
+                "rmse_local",
+                "rmse_alone",
+                "rmse_bound",
+                "rmse_global_denoised",
+                "rmse_auto_observed",
+            )
+        }
         both = summary["two_illuminant"]
         both["n"] = len(mixed)
         both["auto_cut"] = 1.0 - both["rmse_auto"] / both["rmse_global"]

@@ -88,8 +88,9 @@ def make_world(
 ) -> World:
     """A :class:`World`; see the module notes for the meaning of each knob."""
     if ambient_to_flash <= 0 or exposure_factor <= 0:
-        raise SpectralDataError(f"noisy world: ambient_to_flash {ambient_to_flash}, exposure_factor "
-                                f"{exposure_factor}; expected both > 0")
+        raise SpectralDataError(
+            f"noisy world: ambient_to_flash {ambient_to_flash}, exposure_factor {exposure_factor}; expected both > 0"
+        )
     if scene is None:
         scene = chart_scene("chart110", patch_px=patch_px, border_px=border_px)
     scene = Scene(scene.reflectances.resample(grid), scene.labels, scene.shading, scene.specular, scene.specular_gain)
@@ -100,16 +101,18 @@ def make_world(
     sensor = sensor or SensorModel()
     ambient_signal = float(np.mean(expected_response(scene, ambient, camera, 1.0)))
     dark = ambient.replace(values=np.zeros_like(ambient.values))
-    flash_signal = float(np.mean(expected_response(scene, total_illumination(dark, leds, np.ones(leds.count)),
-                                                   camera, 1.0)))
+    flash_signal = float(
+        np.mean(expected_response(scene, total_illumination(dark, leds, np.ones(leds.count)), camera, 1.0))
+    )
     if ambient_signal <= 0 or flash_signal <= 0:
         raise SpectralDataError("noisy world: the ambient or the LEDs give no signal in this camera")
     leds = leds.replace(values=leds.values * (ambient_signal / (ambient_to_flash * flash_signal)))
     exposures = [exposure_for_peak(scene, ambient, camera, sensor, PEAK_FRACTION)]
     for k in range(leds.count):
         levels = np.eye(leds.count)[k]
-        exposures.append(exposure_for_peak(scene, total_illumination(ambient, leds, levels), camera, sensor,
-                                           PEAK_FRACTION))
+        exposures.append(
+            exposure_for_peak(scene, total_illumination(ambient, leds, levels), camera, sensor, PEAK_FRACTION)
+        )
     return World(scene, ambient, leds, camera, sensor, min(exposures) * exposure_factor)
 
 
@@ -117,30 +120,53 @@ def shifted(scene: Scene, pixels: int) -> Scene:
     """The scene moved ``pixels`` to the right (wrapping around): motion between frames."""
     if pixels == 0:
         return scene
-    return Scene(scene.reflectances, np.roll(scene.labels, pixels, axis=1),
-                 None if scene.shading is None else np.roll(scene.shading, pixels, axis=1),
-                 None if scene.specular is None else np.roll(scene.specular, pixels, axis=1), scene.specular_gain)
+    return Scene(
+        scene.reflectances,
+        np.roll(scene.labels, pixels, axis=1),
+        None if scene.shading is None else np.roll(scene.shading, pixels, axis=1),
+        None if scene.specular is None else np.roll(scene.specular, pixels, axis=1),
+        scene.specular_gain,
+    )
 
 
-def render_stack(world: World, rng: np.random.Generator, motion_px: int = 0,
-                 dead_led: int | None = None) -> tuple[np.ndarray, list[np.ndarray], FrameStackSpec]:
+def render_stack(
+    world: World, rng: np.random.Generator, motion_px: int = 0, dead_led: int | None = None
+) -> tuple[np.ndarray, list[np.ndarray], FrameStackSpec]:
     """Raw ambient frame, raw LED frames and their :class:`FrameStackSpec` (one LED per frame)."""
     k = world.leds.count
-    ambient_frame = render_frame(shifted(world.scene, motion_px), world.ambient, world.camera, world.sensor,
-                                 world.exposure_us, rng=rng)
+    ambient_frame = render_frame(
+        shifted(world.scene, motion_px), world.ambient, world.camera, world.sensor, world.exposure_us, rng=rng
+    )
     frames = []
     for index in range(k):
         levels = np.zeros(k) if index == dead_led else np.eye(k)[index]
-        frames.append(render_frame(world.scene, total_illumination(world.ambient, world.leds, levels), world.camera,
-                                   world.sensor, world.exposure_us, rng=rng))
+        frames.append(
+            render_frame(
+                world.scene,
+                total_illumination(world.ambient, world.leds, levels),
+                world.camera,
+                world.sensor,
+                world.exposure_us,
+                rng=rng,
+            )
+        )
     scale = 1.0 / world.exposure_us
-    spec = FrameStackSpec(black_level=world.sensor.black_level, white_level=world.sensor.white_level,
-                          ambient_scale=scale, led_scales=(scale,) * k, led_levels=np.eye(k))
+    spec = FrameStackSpec(
+        black_level=world.sensor.black_level,
+        white_level=world.sensor.white_level,
+        ambient_scale=scale,
+        led_scales=(scale,) * k,
+        led_levels=np.eye(k),
+    )
     return ambient_frame, frames, spec
 
 
-def patch_mean_frames(scene: Scene, ambient: np.ndarray, frames: list[np.ndarray], white_level: float,
-                      ) -> tuple[np.ndarray, list[np.ndarray]]:
+def patch_mean_frames(
+    scene: Scene,
+    ambient: np.ndarray,
+    frames: list[np.ndarray],
+    white_level: float,
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """Per-surface mean raw values as (n_surfaces, 1, C) float frames (a surface with any saturated pixel
     in any frame reads ``white_level``, so the statistics drop it)."""
     labels = scene.labels.ravel()
@@ -152,8 +178,12 @@ def patch_mean_frames(scene: Scene, ambient: np.ndarray, frames: list[np.ndarray
     for frame in (ambient, *frames):
         samples = frame.reshape(labels.size, -1)
         saturated |= np.bincount(labels, weights=np.any(samples >= white_level, axis=1), minlength=n) > 0
-        means.append(np.column_stack([np.bincount(labels, weights=samples[:, c].astype(float), minlength=n)
-                                      for c in range(samples.shape[1])]) / np.maximum(counts, 1)[:, None])
+        means.append(
+            np.column_stack(
+                [np.bincount(labels, weights=samples[:, c].astype(float), minlength=n) for c in range(samples.shape[1])]
+            )
+            / np.maximum(counts, 1)[:, None]
+        )
     out = []
     for values in means:
         values = values[present]
@@ -196,28 +226,48 @@ def reliability(estimate: AmbientEstimate, truth: np.ndarray) -> dict[str, Any]:
 
 def refused_record(reason: str, saturated_fraction: float = float("nan")) -> dict[str, Any]:
     """The record of an estimate :func:`estimate_ambient` refused (counts as a warning)."""
-    return {"error": float("nan"), "refused": True, "warned": True, "n_warnings": 1, "reason": reason,
-            "relative_residual": float("nan"), "condition_number": float("nan"), "band_ratio": float("nan"),
-            "band_coverage_2sigma": float("nan"), "saturated_fraction": saturated_fraction,
-            "flags": {"condition": False, "residual": False, "saturation": False, "risk": False}}
+    return {
+        "error": float("nan"),
+        "refused": True,
+        "warned": True,
+        "n_warnings": 1,
+        "reason": reason,
+        "relative_residual": float("nan"),
+        "condition_number": float("nan"),
+        "band_ratio": float("nan"),
+        "band_coverage_2sigma": float("nan"),
+        "saturated_fraction": saturated_fraction,
+        "flags": {"condition": False, "residual": False, "saturation": False, "risk": False},
+    }
 
 
-def estimate(statistics: SequenceStatistics, leds: Spectra, method: str = "tikhonov",
-             alpha: float | str = "auto") -> AmbientEstimate:
+def estimate(
+    statistics: SequenceStatistics, leds: Spectra, method: str = "tikhonov", alpha: float | str = "auto"
+) -> AmbientEstimate:
     """:func:`estimate_ambient` (re-exported so studies time exactly one call)."""
     return estimate_ambient(statistics, leds, method, alpha)
 
 
-def app_estimate(statistics: SequenceStatistics, world: World, method: str = "tikhonov",
-                 alpha: float | str = "auto") -> AmbientEstimate:
+def app_estimate(
+    statistics: SequenceStatistics, world: World, method: str = "tikhonov", alpha: float | str = "auto"
+) -> AmbientEstimate:
     """The estimate as the app makes it (acquisition.session.analysis.estimate_sequence): eq. 4–6 on the
     (inverse-variance weighted) statistics, with the LED model's error in the band and the miss risk in
     the warnings (:mod:`processing.model_error`)."""
-    return with_model_error(estimate_ambient(statistics, world.leds, method, alpha), reference_for(world.leds, world.camera))
+    return with_model_error(
+        estimate_ambient(statistics, world.leds, method, alpha), reference_for(world.leds, world.camera)
+    )
 
 
-def estimate_record(world: World, ambient: np.ndarray, frames: list[np.ndarray], spec: FrameStackSpec,
-                    method: str = "tikhonov", alpha: float | str = "auto", bin_factor: int = 4) -> dict[str, Any]:
+def estimate_record(
+    world: World,
+    ambient: np.ndarray,
+    frames: list[np.ndarray],
+    spec: FrameStackSpec,
+    method: str = "tikhonov",
+    alpha: float | str = "auto",
+    bin_factor: int = 4,
+) -> dict[str, Any]:
     """Statistics (binned as the app does), estimate, and :func:`reliability`; refusals recorded, not raised."""
     started = time.perf_counter()
     statistics = accumulate_statistics(ambient, frames, spec, bin_factor=bin_factor, weighting=True)

@@ -50,8 +50,18 @@ SOLVERS: dict[str, tuple[str, float | str]] = {
 }
 """Solver labels → (method, alpha)."""
 
-SAMPLINGS = ("all", "mask_1e5", "mask_1e4", "mask_1e3", "gather_1e4", "gather_1e3", "bin2", "bin4", "bin8",
-             "patch_means")
+SAMPLINGS = (
+    "all",
+    "mask_1e5",
+    "mask_1e4",
+    "mask_1e3",
+    "gather_1e4",
+    "gather_1e3",
+    "bin2",
+    "bin4",
+    "bin8",
+    "patch_means",
+)
 """Pixel-subsampling levels."""
 
 DEFAULT_CHOICE = ("tikhonov_auto", "bin4")
@@ -96,9 +106,17 @@ def _statistics(sampling: str, ambient: np.ndarray, frames: list[np.ndarray], sp
     raise SpectralDataError(f"pareto: sampling '{sampling}'; expected one of {', '.join(SAMPLINGS)}")
 
 
-def run_pareto_world(camera: Spectra, ambient: Spectra, seeds: Sequence[int], samplings: Sequence[str],
-                     solvers: Sequence[str], patch_px: int, ambient_to_flash: float, repeats: int,
-                     grid: WavelengthGrid = DEFAULT_GRID) -> dict[str, Any]:
+def run_pareto_world(
+    camera: Spectra,
+    ambient: Spectra,
+    seeds: Sequence[int],
+    samplings: Sequence[str],
+    solvers: Sequence[str],
+    patch_px: int,
+    ambient_to_flash: float,
+    repeats: int,
+    grid: WavelengthGrid = DEFAULT_GRID,
+) -> dict[str, Any]:
     """Errors (n_seeds, n_samplings, n_solvers) and times (statistics, solver) for one camera and ambient."""
     scene = chart_scene("chart110", patch_px=patch_px, border_px=4)
     world = make_world(camera, ambient, scene=scene, ambient_to_flash=ambient_to_flash, grid=grid)
@@ -112,8 +130,9 @@ def run_pareto_world(camera: Spectra, ambient: Spectra, seeds: Sequence[int], sa
         for j, sampling in enumerate(samplings):
             timings = []
             for _ in range(max(repeats, 1)):
-                statistics, seconds = _statistics(sampling, ambient_frame, frames, spec, world.scene,
-                                                  np.random.default_rng([seed, 23, j]))
+                statistics, seconds = _statistics(
+                    sampling, ambient_frame, frames, spec, world.scene, np.random.default_rng([seed, 23, j])
+                )
                 timings.append(seconds)
             stats_s[i, j] = float(np.median(timings))
             for s, label in enumerate(solvers):
@@ -128,8 +147,7 @@ def run_pareto_world(camera: Spectra, ambient: Spectra, seeds: Sequence[int], sa
                     continue
                 solve_s[i, j, s] = float(np.median(timings))
                 errors[i, j, s] = spectrum_rmse(estimate.spectrum.values[:, 0], truth)
-    return {"errors": errors, "solve_s": solve_s, "stats_s": stats_s,
-            "pixels": int(scene.labels.size)}
+    return {"errors": errors, "solve_s": solve_s, "stats_s": stats_s, "pixels": int(scene.labels.size)}
 
 
 def _job(job: tuple) -> dict[str, Any]:
@@ -143,8 +161,12 @@ def pareto_front(errors: np.ndarray, times: np.ndarray) -> np.ndarray:
     ok = np.isfinite(errors) & np.isfinite(times)
     front = np.zeros(errors.shape, dtype=bool)
     for index in np.flatnonzero(ok):
-        dominated = ok & (errors <= errors[index]) & (times <= times[index]) & (
-            (errors < errors[index]) | (times < times[index]))
+        dominated = (
+            ok
+            & (errors <= errors[index])
+            & (times <= times[index])
+            & ((errors < errors[index]) | (times < times[index]))
+        )
         front[index] = not dominated.any()
     return front.reshape(shape)
 
@@ -173,8 +195,21 @@ def run_pareto(
             raise SpectralDataError(f"pareto: sampling '{label}'; expected one of {', '.join(SAMPLINGS)}")
     seed_list = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
     camera_set = select_cameras(list(cameras) if isinstance(cameras, (list, tuple)) else cameras)
-    jobs = [(camera_set[cam], lights.ambient_spectrum(amb, grid), seed_list, list(samplings), list(solvers),
-             patch_px, ambient_to_flash, repeats, grid) for cam in camera_set for amb in ambients]
+    jobs = [
+        (
+            camera_set[cam],
+            lights.ambient_spectrum(amb, grid),
+            seed_list,
+            list(samplings),
+            list(solvers),
+            patch_px,
+            ambient_to_flash,
+            repeats,
+            grid,
+        )
+        for cam in camera_set
+        for amb in ambients
+    ]
     mapper = map_function or (lambda function, items: map(function, items))
     results = []
     for done, result in enumerate(mapper(_job, jobs), start=1):
@@ -191,13 +226,19 @@ def run_pareto(
     for j, sampling in enumerate(samplings):
         for s, solver in enumerate(solvers):
             column = errors[:, j, s]
-            points.append({
-                "solver": solver, "sampling": sampling,
-                "error_mean": float(mean_error[j, s]), "error_std": float(np.nanstd(column)),
-                "time_s": float(total[j, s]), "statistics_s": float(np.nanmedian(stats_s[:, j])),
-                "solver_s": float(np.nanmedian(solve_s[:, j, s])),
-                "failed": int(np.isnan(column).sum()), "on_front": bool(front[j, s]),
-            })
+            points.append(
+                {
+                    "solver": solver,
+                    "sampling": sampling,
+                    "error_mean": float(mean_error[j, s]),
+                    "error_std": float(np.nanstd(column)),
+                    "time_s": float(total[j, s]),
+                    "statistics_s": float(np.nanmedian(stats_s[:, j])),
+                    "solver_s": float(np.nanmedian(solve_s[:, j, s])),
+                    "failed": int(np.isnan(column).sum()),
+                    "on_front": bool(front[j, s]),
+                }
+            )
     default = next((p for p in points if (p["solver"], p["sampling"]) == DEFAULT_CHOICE), None)
     on_front = sorted((p for p in points if p["on_front"]), key=lambda p: p["time_s"])
     if default is not None and not default["on_front"]:
@@ -207,17 +248,27 @@ def run_pareto(
         better = [p for p in on_front if p["error_mean"] <= default["error_mean"]]
         default["front_time_at_its_error"] = min((p["time_s"] for p in better), default=None)
     return {
-        "points": points, "front": on_front, "default": default,
+        "points": points,
+        "front": on_front,
+        "default": default,
         "definitions": {
             "error_mean": "mean processing.metrics.spectrum_rmse over cameras x ambients x seeds",
             "time_s": "median wall time of accumulate_statistics (or the patch means / pixel gather) plus median "
-                      "estimate_ambient time, per frame stack, in the worker",
+            "estimate_ambient time, per frame stack, in the worker",
             "on_front": "no other point has both lower-or-equal error and time (one strictly lower)",
         },
-        "config": {"cameras": list(camera_set), "ambients": list(ambients), "seeds": seed_list,
-                   "samplings": list(samplings), "solvers": {s: list(SOLVERS[s]) for s in solvers},
-                   "patch_px": patch_px, "pixels": results[0]["pixels"] if results else None,
-                   "ambient_to_flash": ambient_to_flash, "repeats": repeats, "grid": str(grid),
-                   "default": list(DEFAULT_CHOICE)},
+        "config": {
+            "cameras": list(camera_set),
+            "ambients": list(ambients),
+            "seeds": seed_list,
+            "samplings": list(samplings),
+            "solvers": {s: list(SOLVERS[s]) for s in solvers},
+            "patch_px": patch_px,
+            "pixels": results[0]["pixels"] if results else None,
+            "ambient_to_flash": ambient_to_flash,
+            "repeats": repeats,
+            "grid": str(grid),
+            "default": list(DEFAULT_CHOICE),
+        },
         "elapsed_s": time.perf_counter() - started,
     }

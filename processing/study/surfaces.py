@@ -93,8 +93,20 @@ def run_surfaces(
     flat = [indices for per_count in drawn for indices in per_count]  # count-major
 
     names = list(chosen_cameras)
-    jobs = [(transfer_matrix(chart, chosen_cameras[name]), leds.values, truths, [subset], method, [alpha],
-             alpha_units, grid, flat) for name in names]
+    jobs = [
+        (
+            transfer_matrix(chart, chosen_cameras[name]),
+            leds.values,
+            truths,
+            [subset],
+            method,
+            [alpha],
+            alpha_units,
+            grid,
+            flat,
+        )
+        for name in names
+    ]
     mapper = map_function or (lambda function, items: map(function, items))
     results = []
     for done, result in enumerate(mapper(_evaluate_job, jobs), start=1):
@@ -111,8 +123,14 @@ def run_surfaces(
     pixel = arrange("pixel_rmse")
     failed = arrange("failed")
     per_draw = _nanmean(spectrum, axis=2)  # (n_counts, draws)
-    bound = float(np.mean([spectrum_rmse(direct_fit(truths[:, i], leds.values[:, subset], "nonneg"), truths[:, i])
-                           for i in range(truths.shape[1])]))
+    bound = float(
+        np.mean(
+            [
+                spectrum_rmse(direct_fit(truths[:, i], leds.values[:, subset], "nonneg"), truths[:, i])
+                for i in range(truths.shape[1])
+            ]
+        )
+    )
     return {
         "counts": counts,
         "spectrum_rmse": _nanmean(per_draw, axis=1).tolist(),
@@ -124,17 +142,24 @@ def run_surfaces(
         "estimates_per_count": int(failed.shape[1] * failed.shape[2]),
         "definitions": {
             "spectrum_rmse": "msflash.processing.metrics.spectrum_rmse, mean over cameras × illuminants per draw, "
-                             "then mean (and std) over draws",
+            "then mean (and std) over draws",
             "pixel_rmse": "100 × RMSE of a − Σ w f over the drawn surfaces (images divided by the stack maximum "
-                          "of the whole chart)",
+            "of the whole chart)",
             "bound": "spectrum_rmse of the direct I w ≥ 0 LED fit of the true spectrum, mean over illuminants",
             "failures": "estimates refused or failed (e.g. one surface gives 3 values for 7 LEDs, which "
-                        "estimate_ambient refuses); left out of the means, NaN when all failed",
+            "estimate_ambient refuses); left out of the means, NaN when all failed",
         },
         "config": {
-            "n_leds": n_leds, "draws": draws, "seed": seed, "method": method, "alpha": alpha,
-            "alpha_units": alpha_units, "cameras": names, "n_cameras": len(names),
-            "illuminants_xy": [list(ill.xy) for ill in chosen_illuminants], "grid": str(grid),
+            "n_leds": n_leds,
+            "draws": draws,
+            "seed": seed,
+            "method": method,
+            "alpha": alpha,
+            "alpha_units": alpha_units,
+            "cameras": names,
+            "n_cameras": len(names),
+            "illuminants_xy": [list(ill.xy) for ill in chosen_illuminants],
+            "grid": str(grid),
         },
         "elapsed_s": time.perf_counter() - started,
     }

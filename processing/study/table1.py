@@ -122,8 +122,9 @@ def select_cameras(cameras: Sequence[str] | int | None) -> dict[str, Spectra]:
     return chosen
 
 
-def select_illuminants(illuminants: Sequence[SmoothIlluminant] | int | None,
-                       grid: WavelengthGrid = DEFAULT_GRID) -> tuple[SmoothIlluminant, ...]:
+def select_illuminants(
+    illuminants: Sequence[SmoothIlluminant] | int | None, grid: WavelengthGrid = DEFAULT_GRID
+) -> tuple[SmoothIlluminant, ...]:
     """The feasible-grid illuminants: all (None), ``n`` spread evenly over them (an int), or given."""
     if illuminants is None or isinstance(illuminants, int):
         everything = feasible_grid(grid=grid)
@@ -144,7 +145,9 @@ def transfer_matrix(chart: Spectra, camera: Spectra) -> np.ndarray:
     """
     responsivities = camera.to_unit("photons").values
     n_wl = chart.grid.size
-    return (chart.values[:, :, None] * responsivities[:, None, :]).transpose(1, 2, 0).reshape(-1, n_wl) * chart.grid.step_nm
+    return (chart.values[:, :, None] * responsivities[:, None, :]).transpose(1, 2, 0).reshape(
+        -1, n_wl
+    ) * chart.grid.step_nm
 
 
 def direct_fit(truth: np.ndarray, led_values: np.ndarray, how: str = "nonneg") -> np.ndarray:
@@ -155,8 +158,9 @@ def direct_fit(truth: np.ndarray, led_values: np.ndarray, how: str = "nonneg") -
         hessian = led_values.T @ led_values
         scale = float(np.trace(hessian) / hessian.shape[0])
         emitting = led_values[np.any(led_values != 0, axis=1)]
-        weights = minimise_quadratic(hessian / scale, led_values.T @ truth / scale, emitting,
-                                     np.zeros(emitting.shape[0]), where="direct LED fit").x
+        weights = minimise_quadratic(
+            hessian / scale, led_values.T @ truth / scale, emitting, np.zeros(emitting.shape[0]), where="direct LED fit"
+        ).x
     else:
         raise SpectralDataError(f"direct fit: '{how}'; expected nonneg or lstsq")
     return led_values @ weights
@@ -165,14 +169,17 @@ def direct_fit(truth: np.ndarray, led_values: np.ndarray, how: str = "nonneg") -
 def statistics_from_images(ambient: np.ndarray, led_images: np.ndarray) -> SequenceStatistics:
     """Sufficient statistics of noise-free flattened images: ``a`` (n,), LED-only ``F`` (n, k)."""
     return SequenceStatistics(
-        gram=led_images.T @ led_images, cross=led_images.T @ ambient, ambient_energy=float(ambient @ ambient),
-        n_samples=int(ambient.size), n_total=int(ambient.size), ambient_sum=float(ambient.sum()),
+        gram=led_images.T @ led_images,
+        cross=led_images.T @ ambient,
+        ambient_energy=float(ambient @ ambient),
+        n_samples=int(ambient.size),
+        n_total=int(ambient.size),
+        ambient_sum=float(ambient.sum()),
         led_sums=led_images.sum(axis=0),
     )
 
 
-def dimensionless_alpha(alpha: float, statistics: SequenceStatistics, led_values: np.ndarray,
-                        step_nm: float) -> float:
+def dimensionless_alpha(alpha: float, statistics: SequenceStatistics, led_values: np.ndarray, step_nm: float) -> float:
     """Convert the authors' eq.-6 weight to :mod:`processing.ambient`'s dimensionless ``alpha`` (``roughness``).
 
     The authors minimise ``‖a − F w‖ + α ‖R I w‖`` with images divided by the stack maximum, ``I``
@@ -251,8 +258,14 @@ def evaluate_camera(
             for s, subset in enumerate(subsets):
                 images = led_images[:, list(subset)]
                 statistics = statistics_from_images(ambient, images)
-                spectra = Spectra(grid, led_values[:, list(subset)], tuple(f"led{k}" for k in subset),
-                                  kind="spd", unit="photons", source="flashNorm")
+                spectra = Spectra(
+                    grid,
+                    led_values[:, list(subset)],
+                    tuple(f"led{k}" for k in subset),
+                    kind="spd",
+                    unit="photons",
+                    source="flashNorm",
+                )
                 for a, alpha in enumerate(alphas):
                     value: float | str = alpha
                     if alpha_units == "paper" and alpha != "auto":
@@ -265,7 +278,7 @@ def evaluate_camera(
                         continue
                     weights = estimate.ambient_weights
                     residual = ambient - images @ weights
-                    rmse = float(np.sqrt(np.mean(residual ** 2)))
+                    rmse = float(np.sqrt(np.mean(residual**2)))
                     spectrum = estimate.spectrum.values[:, 0]
                     peak = float(np.max(np.abs(spectrum)))
                     if peak == 0:
@@ -274,8 +287,8 @@ def evaluate_camera(
                     delta = _xy(cmf, spectrum) - truth_xy
                     out["pixel_rmse"][i, s, a, d] = rmse
                     out["pixel_rmse_ambient095"][i, s, a, d] = rmse * to_095
-                    out["xy_error"][i, s, a, d] = float(np.mean(delta ** 2))
-                    out["xy_squared_distance"][i, s, a, d] = float(np.sum(delta ** 2))
+                    out["xy_error"][i, s, a, d] = float(np.mean(delta**2))
+                    out["xy_squared_distance"][i, s, a, d] = float(np.sum(delta**2))
                     out["spectrum_rmse"][i, s, a, d] = spectrum_rmse(spectrum, truth)
                     out["alpha_used"][i, s, a, d] = estimate.alpha
                     out["estimates"][i, s, a, d] = spectrum / peak
@@ -325,10 +338,19 @@ class CameraRuns:
     """One :func:`_evaluate_job` result per camera."""
 
 
-def evaluate_all_cameras(n_leds_list: Sequence[int], method: str, alphas: Sequence[float | str], alpha_units: str,
-                cameras: Sequence[str] | int | None, illuminants: Sequence[Any] | int | None,
-                progress: Progress | None, map_function: MapFunction | None, grid: WavelengthGrid, label: str,
-                started: float) -> CameraRuns:
+def evaluate_all_cameras(
+    n_leds_list: Sequence[int],
+    method: str,
+    alphas: Sequence[float | str],
+    alpha_units: str,
+    cameras: Sequence[str] | int | None,
+    illuminants: Sequence[Any] | int | None,
+    progress: Progress | None,
+    map_function: MapFunction | None,
+    grid: WavelengthGrid,
+    label: str,
+    started: float,
+) -> CameraRuns:
     """Evaluate every camera × illuminant × LED subset (in parallel through ``map_function``)."""
     counts = [int(n) for n in n_leds_list]
     if not counts:
@@ -340,8 +362,19 @@ def evaluate_all_cameras(n_leds_list: Sequence[int], method: str, alphas: Sequen
     chart = datasets.chart110().resample(grid)
     truths = np.column_stack([ill.spectrum.values[:, 0] for ill in chosen_illuminants])
     names = list(chosen_cameras)
-    jobs = [(transfer_matrix(chart, chosen_cameras[name]), leds.values, truths, subsets, method, list(alphas),
-             alpha_units, grid) for name in names]
+    jobs = [
+        (
+            transfer_matrix(chart, chosen_cameras[name]),
+            leds.values,
+            truths,
+            subsets,
+            method,
+            list(alphas),
+            alpha_units,
+            grid,
+        )
+        for name in names
+    ]
     mapper = map_function or (lambda function, items: map(function, items))
     results = []
     for done, result in enumerate(mapper(_evaluate_job, jobs), start=1):
@@ -405,8 +438,9 @@ def run_table1(
     alphas: list[float | str] = [alpha] if isinstance(alpha, (str, int, float)) else list(alpha)
     if not alphas:
         raise SpectralDataError("table 1: an empty alpha sweep; expected at least one value")
-    run = evaluate_all_cameras(n_leds_list, method, alphas, alpha_units, cameras, illuminants, progress, map_function, grid,
-                      "table1", started)
+    run = evaluate_all_cameras(
+        n_leds_list, method, alphas, alpha_units, cameras, illuminants, progress, map_function, grid, "table1", started
+    )
     counts, subsets, names, chosen_illuminants = run.counts, run.subsets, run.names, run.illuminants
     truths, leds, results = run.truths, run.leds, run.results
 
@@ -414,13 +448,23 @@ def run_table1(
     stacked = {name: np.stack([r[name] for r in results]) for name in (*METRICS, "alpha_used", "failed")}
     estimates = np.stack([r["estimates"] for r in results])  # (n_cam, n_ill, n_sets, n_alpha, n_wl)
     n_ill, n_sets, n_alpha = truths.shape[1], len(subsets), len(alphas)
-    shared = np.array([[[shared_scale_rmse(estimates[:, i, s, a], truths[:, i]) for a in range(n_alpha)]
-                        for s in range(n_sets)] for i in range(n_ill)])
+    shared = np.array(
+        [
+            [[shared_scale_rmse(estimates[:, i, s, a], truths[:, i]) for a in range(n_alpha)] for s in range(n_sets)]
+            for i in range(n_ill)
+        ]
+    )
 
     per_alpha = {name: np.nanmean(stacked[name], axis=(0, 1)) for name in METRICS}  # (n_sets, n_alpha)
     per_alpha["spectrum_rmse_shared_scale"] = np.nanmean(shared, axis=0)
-    scale = {"pixel_rmse": 100.0, "pixel_rmse_ambient095": 100.0, "xy_error": 100.0, "xy_squared_distance": 100.0,
-             "spectrum_rmse": 1.0, "spectrum_rmse_shared_scale": 1.0}
+    scale = {
+        "pixel_rmse": 100.0,
+        "pixel_rmse_ambient095": 100.0,
+        "xy_error": 100.0,
+        "xy_squared_distance": 100.0,
+        "spectrum_rmse": 1.0,
+        "spectrum_rmse_shared_scale": 1.0,
+    }
     table: dict[str, Any] = {"n_leds": counts}
     alpha_selected: dict[str, list[Any]] = {}
     for name, values in per_alpha.items():
@@ -430,8 +474,17 @@ def run_table1(
 
     for how in ("nonneg", "lstsq"):
         key = "multispectral_rmse" if how == "nonneg" else "multispectral_rmse_lstsq"
-        table[key] = [float(np.mean([spectrum_rmse(direct_fit(truths[:, i], leds.values[:, subset], how), truths[:, i])
-                                     for i in range(n_ill)])) for subset in subsets]
+        table[key] = [
+            float(
+                np.mean(
+                    [
+                        spectrum_rmse(direct_fit(truths[:, i], leds.values[:, subset], how), truths[:, i])
+                        for i in range(n_ill)
+                    ]
+                )
+            )
+            for subset in subsets
+        ]
 
     # The authors' Table-1 bound: the truth scaled onto the camera-mean estimate (gf), then the
     # RMSE of its direct fit, not renormalised — at the alpha chosen for spectrum_rmse.
@@ -452,31 +505,43 @@ def run_table1(
     table["multispectral_rmse_authors"] = authors_bound
 
     failures = int(stacked["failed"].sum())
-    paper = {key: [value for n, value in zip(PAPER_TABLE1["n_leds"], values, strict=True) if n in counts]
-             for key, values in PAPER_TABLE1.items()}
-    table.update({
-        "alpha_selected": alpha_selected if len(alphas) > 1 else None,
-        "alpha_used_mean": [float(np.nanmean(stacked["alpha_used"][:, :, s, :])) for s in range(n_sets)]
-        if len(alphas) == 1 else None,
-        "per_alpha": {
-            "alphas": alphas,
-            **{name: (values * scale[name]).tolist() for name, values in per_alpha.items()},
-        } if len(alphas) > 1 else None,
-        "per_illuminant_spectrum_rmse": {
-            "xy": [list(ill.xy) for ill in chosen_illuminants],
-            "values": np.nanmean(stacked["spectrum_rmse"], axis=0).min(axis=-1).tolist(),
-        },
-        "paper": paper,
-        "failures": failures,
-        "definitions": DEFINITIONS,
-        "config": {
-            "method": method, "alpha": alphas if len(alphas) > 1 else alphas[0], "alpha_units": alpha_units,
-            "cameras": names, "n_cameras": len(names),
-            "illuminants_xy": [list(ill.xy) for ill in chosen_illuminants], "n_illuminants": n_ill,
-            "grid": str(grid), "units": "photons; LEDs divided by one global maximum",
-        },
-        "elapsed_s": time.perf_counter() - started,
-    })
+    paper = {
+        key: [value for n, value in zip(PAPER_TABLE1["n_leds"], values, strict=True) if n in counts]
+        for key, values in PAPER_TABLE1.items()
+    }
+    table.update(
+        {
+            "alpha_selected": alpha_selected if len(alphas) > 1 else None,
+            "alpha_used_mean": [float(np.nanmean(stacked["alpha_used"][:, :, s, :])) for s in range(n_sets)]
+            if len(alphas) == 1
+            else None,
+            "per_alpha": {
+                "alphas": alphas,
+                **{name: (values * scale[name]).tolist() for name, values in per_alpha.items()},
+            }
+            if len(alphas) > 1
+            else None,
+            "per_illuminant_spectrum_rmse": {
+                "xy": [list(ill.xy) for ill in chosen_illuminants],
+                "values": np.nanmean(stacked["spectrum_rmse"], axis=0).min(axis=-1).tolist(),
+            },
+            "paper": paper,
+            "failures": failures,
+            "definitions": DEFINITIONS,
+            "config": {
+                "method": method,
+                "alpha": alphas if len(alphas) > 1 else alphas[0],
+                "alpha_units": alpha_units,
+                "cameras": names,
+                "n_cameras": len(names),
+                "illuminants_xy": [list(ill.xy) for ill in chosen_illuminants],
+                "n_illuminants": n_ill,
+                "grid": str(grid),
+                "units": "photons; LEDs divided by one global maximum",
+            },
+            "elapsed_s": time.perf_counter() - started,
+        }
+    )
     return table
 
 
@@ -486,18 +551,18 @@ def _evaluate_job(job: tuple) -> dict[str, np.ndarray]:
 
 DEFINITIONS = {
     "pixel_rmse": "100 × sqrt(mean over 110 surfaces × 3 channels of (a − Σ w f)²), images divided by the "
-                  "maximum of the ambient and all 7 LED-only images (authors' rawLin/max)",
+    "maximum of the ambient and all 7 LED-only images (authors' rawLin/max)",
     "pixel_rmse_ambient095": "as pixel_rmse with the ambient image's maximum at 0.95",
     "xy_error": "100 × mean over x and y of (xy_est − xy_true)² = 100 × |Δxy|²/2 (authors' code), CIE 1931 2°",
     "xy_squared_distance": "100 × |Δxy|² (squared Euclidean distance in CIE 1931 xy)",
     "spectrum_rmse": "msflash.processing.metrics.spectrum_rmse per camera (estimate max-normalised, truth "
-                     "least-squares scaled onto it), averaged",
+    "least-squares scaled onto it), averaged",
     "spectrum_rmse_shared_scale": "authors' code: truth scaled onto the camera-mean estimate, RMSE per camera, averaged",
     "multispectral_rmse": "spectrum_rmse of argmin ‖t − I w‖ s.t. I w ≥ 0 (direct LED fit of the truth)",
     "multispectral_rmse_lstsq": "spectrum_rmse of the plain least-squares LED fit of the truth",
     "multispectral_rmse_authors": "authors' code: truth (peak 1) × gf, gf fitted onto the camera-mean normalised "
-                                  "estimate; RMSE of its I w ≥ 0 LED fit, not renormalised",
+    "estimate; RMSE of its I w ≥ 0 LED fit, not renormalised",
     "averaging": "mean over illuminants × cameras; with an alpha sweep each metric takes its best mean over "
-                 "the sweep per LED count (authors' min(mean(...)))",
+    "the sweep per LED count (authors' min(mean(...)))",
 }
 """What each reported number is."""

@@ -95,8 +95,9 @@ def capture_scenario(out_dir: Path) -> dict:
     wavelengths = np.arange(400.0, 701.0, 10.0)
     leds = [SequenceLed(f"led{i}", np.exp(-0.5 * ((wavelengths - peak) / 15) ** 2)) for i, peak in enumerate(peaks)]
     # One-channel frames need a CFA in format v1; the fake streams Mono16 test patterns.
-    entry = SequenceCamera(model="Fake", serial="MSFLOSS", pixel_format="Mono16", cfa="RGGB",
-                           black_level=0, white_level=65535)
+    entry = SequenceCamera(
+        model="Fake", serial="MSFLOSS", pixel_format="Mono16", cfa="RGGB", black_level=0, white_level=65535
+    )
     plan = CapturePlan.ambient_then_each_led(3, 1000.0, timeout_margin_s=3.0)  # the process fake polls slowly
 
     def on_frame(step, frame, written) -> None:  # noqa: ANN001 - capture callback
@@ -105,10 +106,13 @@ def capture_scenario(out_dir: Path) -> dict:
 
     result: dict = {}
     try:
-        with LedBooth.open(server.port) as booth, \
-                aravis_camera.AravisCamera("127.0.0.1", interfaces="gige", roi=(0, 0, 32, 32)) as camera:
-            writer = SequenceWriter(out_dir / "seq", wavelengths_nm=wavelengths, spectral_unit="energy",
-                                    camera=entry, leds=leds)
+        with (
+            LedBooth.open(server.port) as booth,
+            aravis_camera.AravisCamera("127.0.0.1", interfaces="gige", roi=(0, 0, 32, 32)) as camera,
+        ):
+            writer = SequenceWriter(
+                out_dir / "seq", wavelengths_nm=wavelengths, spectral_unit="energy", camera=entry, leds=leds
+            )
             try:
                 with writer:
                     run_capture(camera, booth, plan, writer, on_frame=on_frame)

@@ -123,14 +123,14 @@ def gv_fake_process(aravis: ModuleType) -> Iterator[Callable[..., subprocess.Pop
             command += ["-r", str(lost_per_thousand)]
         # PR_SET_PDEATHSIG: the fake dies with this worker even if the worker crashes, so no
         # orphan keeps 127.0.0.1:3956 after the lock is gone.
-        process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                   preexec_fn=_die_with_parent)
+        process = subprocess.Popen(
+            command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, preexec_fn=_die_with_parent
+        )
         processes.append(process)
         deadline = time.monotonic() + 10.0
         while not _port_in_use():  # wait until the fake has bound its control port
             if process.poll() is not None or time.monotonic() > deadline:
-                pytest.fail(f"{FAKE_GV_TOOL} did not start listening on 127.0.0.1:3956 "
-                            f"(exit status {process.poll()})")
+                pytest.fail(f"{FAKE_GV_TOOL} did not start listening on 127.0.0.1:3956 (exit status {process.poll()})")
             time.sleep(0.01)
         return process
 
@@ -142,4 +142,3 @@ def gv_fake_process(aravis: ModuleType) -> Iterator[Callable[..., subprocess.Pop
                 process.send_signal(signal.SIGKILL)
             process.wait(timeout=10)
         stack.close()
-

@@ -21,11 +21,19 @@ pytestmark = pytest.mark.aravis
 # -- pure helpers ---------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("previous", "current", "gap"), [
-    (1, 2, 0), (10, 13, 2), (65534, 65535, 0), (65535, 1, 0), (65534, 1, 1), (65535, 2, 1), (7, 7, -1),
-])
-def test_frame_id_gap_wraps_at_16_bits_skipping_zero(aravis: ModuleType, previous: int, current: int,
-                                                      gap: int) -> None:
+@pytest.mark.parametrize(
+    ("previous", "current", "gap"),
+    [
+        (1, 2, 0),
+        (10, 13, 2),
+        (65534, 65535, 0),
+        (65535, 1, 0),
+        (65534, 1, 1),
+        (65535, 2, 1),
+        (7, 7, -1),
+    ],
+)
+def test_frame_id_gap_wraps_at_16_bits_skipping_zero(aravis: ModuleType, previous: int, current: int, gap: int) -> None:
     assert aravis.frame_id_gap(previous, current) == gap
 
 
@@ -80,7 +88,10 @@ def test_parse_interfaces_names_the_valid_ones(aravis: ModuleType) -> None:
 
 def test_profiles_are_data_and_the_last_is_the_default(aravis: ModuleType) -> None:
     assert aravis.match_profile("FLIR", "Blackfly S BFS-U3-16S2M").user_outputs == (
-        "UserOutput1", "UserOutput2", "UserOutput3")
+        "UserOutput1",
+        "UserOutput2",
+        "UserOutput3",
+    )
     assert aravis.match_profile("Acme", "X1").name == "generic"
 
 
@@ -140,8 +151,11 @@ def test_roi_is_read_back(fake_camera: Any) -> None:
 
 
 def test_wrong_pixel_format_names_camera_and_feature(fake_camera: Any) -> None:
-    with pytest.raises(CameraError, match=r"camera Fake \(serial 1\): PixelFormat 'BayerRG16' is not "
-                                          r"offered.*expected one of .*Mono16"):
+    with pytest.raises(
+        CameraError,
+        match=r"camera Fake \(serial 1\): PixelFormat 'BayerRG16' is not "
+        r"offered.*expected one of .*Mono16",
+    ):
         fake_camera.set_pixel_format("BayerRG16")
     with pytest.raises(CameraError, match="'YUV422_8' cannot be decoded"):
         fake_camera.set_pixel_format("YUV422_8")
@@ -179,14 +193,18 @@ def test_sfnc_xml_gives_sfnc_names_and_integer_exposure_is_recorded(sfnc_fake_ca
 # -- acquisition ----------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("pixel_format", "shape", "dtype", "cfa", "white"), [
-    ("Mono8", (48, 64), np.uint8, None, 255.0),
-    ("Mono16", (48, 64), np.uint16, None, 65535.0),
-    ("RGB8", (48, 64, 3), np.uint8, None, 255.0),
-    ("BayerRG8", (48, 64), np.uint8, "RGGB", 255.0),
-])
-def test_pixel_formats_arrive_as_arrays(aravis: ModuleType, pixel_format: str, shape: tuple[int, ...],
-                                        dtype: type, cfa: str | None, white: float) -> None:
+@pytest.mark.parametrize(
+    ("pixel_format", "shape", "dtype", "cfa", "white"),
+    [
+        ("Mono8", (48, 64), np.uint8, None, 255.0),
+        ("Mono16", (48, 64), np.uint16, None, 65535.0),
+        ("RGB8", (48, 64, 3), np.uint8, None, 255.0),
+        ("BayerRG8", (48, 64), np.uint8, "RGGB", 255.0),
+    ],
+)
+def test_pixel_formats_arrive_as_arrays(
+    aravis: ModuleType, pixel_format: str, shape: tuple[int, ...], dtype: type, cfa: str | None, white: float
+) -> None:
     aravis.use_fake_genicam(None)
     with aravis.AravisCamera("Fake_1", interfaces="fake", pixel_format=pixel_format, roi=(0, 0, 64, 48)) as cam:
         assert (cam.info.cfa, cam.info.white_level) == (cfa, white)
@@ -237,8 +255,11 @@ def test_control_lost_signal_becomes_a_clear_error_naming_the_step(fake_camera: 
     fake_camera.start()
     fake_camera.next_frame(5.0)
     fake_camera._on_control_lost(None)  # what Aravis's "control-lost" signal calls (Fake_1 never emits it)
-    with pytest.raises(CameraDisconnectedError, match=r"camera Fake \(serial 1\): control lost before "
-                                                      r"step 1 'led:1'.*check power and cable"):
+    with pytest.raises(
+        CameraDisconnectedError,
+        match=r"camera Fake \(serial 1\): control lost before "
+        r"step 1 'led:1'.*check power and cable",
+    ):
         fake_camera.next_frame(5.0)
     with pytest.raises(CameraDisconnectedError, match="control of the device was lost"):
         fake_camera.set_exposure_us(2000.0)

@@ -51,8 +51,9 @@ def test_opens_by_address_and_identifies_the_fake(gv_camera: Any) -> None:
 def test_software_plan_writes_trigger_exposure_gain_and_strobe(aravis: ModuleType, gv_fake: Any) -> None:
     strobe = aravis.StrobeConfig(line="Line1", source="ExposureActive")
     plan = CapturePlan.ambient_then_each_led(2, 2500.4, gain=2.0)
-    with aravis.AravisCamera(gv_fake.address, interfaces="gige", pixel_format="Mono16",
-                             roi=(0, 0, 64, 48), strobe=strobe) as camera:
+    with aravis.AravisCamera(
+        gv_fake.address, interfaces="gige", pixel_format="Mono16", roi=(0, 0, 64, 48), strobe=strobe
+    ) as camera:
         frames = _run(camera, plan)
         assert camera.settings.strobe == strobe
     assert gv_fake.read_register(REG_TRIGGER_MODE) == 1  # On
@@ -86,8 +87,11 @@ def test_line_trigger_with_activation_and_delay(aravis: ModuleType, gv_fake: Any
         camera.start()
         camera.trigger()  # no-op: the booth pulses the line
         # Nobody pulses Line1 here: the wait ends with an error naming the step.
-        with pytest.raises(FrameTimeoutError, match=r"camera Fake \(serial MSFTEST1\): no frame for step 0 "
-                                                    r"'flash' within 0.2 s"):
+        with pytest.raises(
+            FrameTimeoutError,
+            match=r"camera Fake \(serial MSFTEST1\): no frame for step 0 "
+            r"'flash' within 0.2 s",
+        ):
             camera.next_frame(0.2)
     assert gv_fake.read_register(REG_TRIGGER_MODE) == 1
     assert gv_fake.read_register(REG_TRIGGER_SOURCE) == 2  # Line1
@@ -137,7 +141,8 @@ def test_frame_ids_continue_across_the_16_bit_wrap(aravis: ModuleType, gv_camera
 
 
 def test_lossy_link_reports_incomplete_frames_and_never_returns_them(
-        aravis: ModuleType, gv_fake_process: Callable[..., Any]) -> None:
+    aravis: ModuleType, gv_fake_process: Callable[..., Any]
+) -> None:
     gv_fake_process(serial="MSFLOSSY", lost_per_thousand=20)  # 2 % of GVSP packets dropped
     n = 24
     plan = CapturePlan(tuple(CapturePlan.single([0.0], 100.0).steps) * n)

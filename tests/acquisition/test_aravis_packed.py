@@ -33,20 +33,24 @@ def _one_frame(camera) -> np.ndarray:
         camera.stop()
 
 
-@pytest.mark.parametrize(("pixel_format", "bits", "cfa"), [("Mono12p", 12, None), ("Mono12Packed", 12, None),
-                                                           ("BayerRG12p", 12, "RGGB"), ("Mono10p", 10, None)])
-def test_gige_fake_streams_packed_frames_of_the_right_size(aravis: ModuleType, pixel_format: str, bits: int,
-                                                          cfa: str | None) -> None:
-    with aravis.AravisGvFake(serial="MSFPACK1") as fake, \
-            aravis.AravisCamera(fake.address, interfaces="gige", pixel_format=pixel_format,
-                                roi=(0, 0, 128, 96)) as camera:
+@pytest.mark.parametrize(
+    ("pixel_format", "bits", "cfa"),
+    [("Mono12p", 12, None), ("Mono12Packed", 12, None), ("BayerRG12p", 12, "RGGB"), ("Mono10p", 10, None)],
+)
+def test_gige_fake_streams_packed_frames_of_the_right_size(
+    aravis: ModuleType, pixel_format: str, bits: int, cfa: str | None
+) -> None:
+    with (
+        aravis.AravisGvFake(serial="MSFPACK1") as fake,
+        aravis.AravisCamera(fake.address, interfaces="gige", pixel_format=pixel_format, roi=(0, 0, 128, 96)) as camera,
+    ):
         assert camera.get_feature("PixelFormat") == pixel_format
         assert camera.get_feature("PayloadSize") == 128 * 96 * bits // 8
         info = camera.info
-        assert (info.cfa, info.white_level) == (cfa, float(2 ** bits - 1))
+        assert (info.cfa, info.white_level) == (cfa, float(2**bits - 1))
         pixels = _one_frame(camera)
         assert pixels.shape == (96, 128) and pixels.dtype == np.uint16
-        assert int(pixels.max()) <= 2 ** bits - 1
+        assert int(pixels.max()) <= 2**bits - 1
         assert camera.stats.frames_good == 1
 
 
@@ -57,6 +61,12 @@ def test_in_process_fake_sends_no_packed_pixels_and_the_frame_is_refused(aravis:
         camera = aravis.AravisCamera("Fake_1", interfaces="fake", pixel_format="Mono12p", roi=(0, 0, 128, 96))
     finally:
         aravis.use_fake_genicam(None)
-    with camera, pytest.raises(CameraError, match=r"payload of 0 bytes is too short for 128x96 Mono12p; "
-                                                  r"expected 18432 bytes"):
+    with (
+        camera,
+        pytest.raises(
+            CameraError,
+            match=r"payload of 0 bytes is too short for 128x96 Mono12p; "
+            r"expected 18432 bytes",
+        ),
+    ):
         _one_frame(camera)

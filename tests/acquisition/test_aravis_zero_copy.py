@@ -47,8 +47,9 @@ def _payload_array(pixels: np.ndarray) -> np.ndarray | None:
 
 def _gv_camera(aravis: ModuleType, gv_fake: Any, **options: Any) -> Any:
     """AravisCamera on the GigE Vision fake by address, Mono16 64x48."""
-    return aravis.AravisCamera(gv_fake.address, interfaces="gige", pixel_format="Mono16",
-                               roi=(0, 0, WIDTH, HEIGHT), **options)
+    return aravis.AravisCamera(
+        gv_fake.address, interfaces="gige", pixel_format="Mono16", roi=(0, 0, WIDTH, HEIGHT), **options
+    )
 
 
 def _frames(camera: Any, n: int, timeout_s: float = 5.0) -> list[Any]:
@@ -115,7 +116,7 @@ def test_successive_frames_never_share_memory_nor_change(aravis: ModuleType, gv_
     assert len(set(ids)) == len(ids)
     for i, a in enumerate(frames):
         np.testing.assert_array_equal(a.pixels, _pattern("Mono16", a.frame_id))
-        for b in frames[i + 1:]:
+        for b in frames[i + 1 :]:
             assert not np.shares_memory(a.pixels, b.pixels)
 
 

@@ -16,8 +16,14 @@ def test_capture_bench_returns_every_figure(aravis: ModuleType) -> None:
     from msflash.acquisition.app.bench_capture import capture_bench
 
     report = capture_bench(runs=1, width=64, height=48)
-    for key in ("wall_ratio", "latency_ms_median", "latency_ms_max", "compute_ms_median", "frame_period_ms",
-                "exposure_us"):
+    for key in (
+        "wall_ratio",
+        "latency_ms_median",
+        "latency_ms_max",
+        "compute_ms_median",
+        "frame_period_ms",
+        "exposure_us",
+    ):
         assert math.isfinite(report[key]) and report[key] > 0, key
     assert len(report["wall_ratios"]) == len(report["latencies_ms"]) == 1
     parts = report["latency_parts_ms_median"]

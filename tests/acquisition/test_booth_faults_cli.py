@@ -35,8 +35,14 @@ STEP_2 = "step 2 (led:2): "
 
 
 def _msflash(*argv: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "msflash.acquisition.app.cli", *argv], cwd=ROOT, capture_output=True,
-                          text=True, timeout=timeout_s, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "msflash.acquisition.app.cli", *argv],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        check=False,
+    )
 
 
 class Booth:
@@ -67,8 +73,13 @@ class Booth:
 @contextmanager
 def booth_process(tmp_path: Path, *options: str) -> Iterator[Booth]:
     state_file = tmp_path / "booth-state.json"
-    process = subprocess.Popen([sys.executable, "-m", "msflash.acquisition.app.cli", *EMULATOR, "--state-file", str(state_file),
-                                *options], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "msflash.acquisition.app.cli", *EMULATOR, "--state-file", str(state_file), *options],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         port = process.stdout.readline().strip()
         assert port.startswith("/dev/pts/"), process.stderr.read() if process.poll() is not None else port
@@ -103,13 +114,17 @@ def test_a_run_through_the_emulator_process_completes_with_the_leds_off(tmp_path
     assert state["faults"] == {} and state["requests"] is None
 
 
-@pytest.mark.parametrize(("command", "fault", "says"), [
-    ("run", "drop:1", "bad reply to SET"),
-    ("capture", "flip:1", "bad reply to SET"),
-    ("capture", "close:1", "serial link lost during SET"),
-])
-def test_a_link_fault_fails_the_step_it_hits_with_the_leds_off(tmp_path: Path, command: str, fault: str,
-                                                               says: str) -> None:
+@pytest.mark.parametrize(
+    ("command", "fault", "says"),
+    [
+        ("run", "drop:1", "bad reply to SET"),
+        ("capture", "flip:1", "bad reply to SET"),
+        ("capture", "close:1", "serial link lost during SET"),
+    ],
+)
+def test_a_link_fault_fails_the_step_it_hits_with_the_leds_off(
+    tmp_path: Path, command: str, fault: str, says: str
+) -> None:
     out = tmp_path / "out"
     with booth_process(tmp_path, "--fault", fault, "--seed", "3", "--fault-after", "6") as booth:
         done = _msflash(command, *SIM, "--booth-port", booth.port, "--out", str(out))
@@ -163,20 +178,28 @@ def test_the_next_run_resets_what_a_killed_run_left_on_the_booth(tmp_path: Path)
     assert state["watchdog_ms"] == 3000 and state["leds_on"] is False
 
 
-@pytest.mark.parametrize(("argv", "names"), [
-    (("booth-emulator", "--fault", "drop:0.01,flip:2"), "--fault item 'flip:2': probability 2 outside [0, 1]"),
-    (("booth-emulator", "--fault", "stall:0.1:x"), "--fault item 'stall:0.1:x': stall seconds 'x'"),
-    (("booth-emulator", "--fault", "drop:0.1,,close:0.1"), "--fault item '': kind '' unknown"),
-    (("booth-emulator", "--fault", "drop:0.1,drop:0.2"), "--fault item 'drop:0.2': drop given twice"),
-    (("booth-emulator", "--fault-after", "-1"), "--fault-after -1: negative"),
-    (("run", "--rig", "sim", "--booth-port", "/dev/null", "--sync", "booth", "--out", "OUT"),
-     "--booth-port with --sync booth"),
-    (("capture", "--rig", "aravis-fake", "--booth-port", "/dev/null", "--out", "OUT"),
-     "--booth-port: gives the simulated rig an outside booth, but the rig is 'aravis-fake'"),
-])
-def test_bad_fault_and_port_options_exit_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                         argv: tuple[str, ...], names: str) -> None:
+@pytest.mark.parametrize(
+    ("argv", "names"),
+    [
+        (("booth-emulator", "--fault", "drop:0.01,flip:2"), "--fault item 'flip:2': probability 2 outside [0, 1]"),
+        (("booth-emulator", "--fault", "stall:0.1:x"), "--fault item 'stall:0.1:x': stall seconds 'x'"),
+        (("booth-emulator", "--fault", "drop:0.1,,close:0.1"), "--fault item '': kind '' unknown"),
+        (("booth-emulator", "--fault", "drop:0.1,drop:0.2"), "--fault item 'drop:0.2': drop given twice"),
+        (("booth-emulator", "--fault-after", "-1"), "--fault-after -1: negative"),
+        (
+            ("run", "--rig", "sim", "--booth-port", "/dev/null", "--sync", "booth", "--out", "OUT"),
+            "--booth-port with --sync booth",
+        ),
+        (
+            ("capture", "--rig", "aravis-fake", "--booth-port", "/dev/null", "--out", "OUT"),
+            "--booth-port: gives the simulated rig an outside booth, but the rig is 'aravis-fake'",
+        ),
+    ],
+)
+def test_bad_fault_and_port_options_exit_2_with_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: tuple[str, ...], names: str
+) -> None:
     assert main([str(tmp_path / "out") if a == "OUT" else a for a in argv]) == 2
     err = capsys.readouterr().err
-    assert [line[len("msflash: error: "):][:len(names)] for line in _error_lines(err)] == [names], err
+    assert [line[len("msflash: error: ") :][: len(names)] for line in _error_lines(err)] == [names], err
     assert "Traceback" not in err and len(err.splitlines()) <= 2, err  # 'run' says which rig it opens first

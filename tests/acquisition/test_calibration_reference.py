@@ -43,16 +43,37 @@ def booth_port(calibration: Path) -> Iterator[str]:
 
 
 @pytest.mark.aravis
-def test_a_sequence_refers_to_the_calibration_it_was_captured_with(aravis: ModuleType, calibration: Path,
-                                                                   booth_port: str, tmp_path: Path) -> None:
+def test_a_sequence_refers_to_the_calibration_it_was_captured_with(
+    aravis: ModuleType, calibration: Path, booth_port: str, tmp_path: Path
+) -> None:
     aravis.use_fake_genicam(None)
     out = tmp_path / "runs" / "c"
-    assert main(["capture", "--camera", "Fake_1", "--interfaces", "fake", "--port", booth_port,
-                 "--calibration", str(calibration), "--exposure", "10000", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "capture",
+                "--camera",
+                "Fake_1",
+                "--interfaces",
+                "fake",
+                "--port",
+                booth_port,
+                "--calibration",
+                str(calibration),
+                "--exposure",
+                "10000",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     sequence = read_sequence(out / "sequence")
     captured_with = load_calibration(calibration).id
-    assert sequence.extra["calibration"] == {"id": captured_with,
-                                             "file": os.path.relpath(calibration, out / "sequence")}
+    assert sequence.extra["calibration"] == {
+        "id": captured_with,
+        "file": os.path.relpath(calibration, out / "sequence"),
+    }
     assert (sequence.directory / sequence.extra["calibration"]["file"]).resolve() == calibration.resolve()
 
     _, notes = analysis.apply_calibration(sequence)  # what estimate/flash do without --calibration
@@ -74,12 +95,16 @@ def test_only_msflash_calibrations_are_referenced(calibration: Path, tmp_path: P
     assert hw_spectra(leds_csv.parent)[2] is None  # led_spectra.csv folders carry no id
 
 
-@pytest.mark.parametrize(("section", "start_nm", "message"), [
-    ("led_spectra", 500, "has LED spectra from 500 to 700 nm, but LED 'led440' puts"),
-    ("camera_responsivities", 550, "has camera responsivities from 550 to 700 nm, but LED 'led4[48]0' puts"),
-])
-def test_a_calibration_that_misses_the_leds_light_is_refused(tmp_path: Path, section: str, start_nm: int,
-                                                             message: str) -> None:
+@pytest.mark.parametrize(
+    ("section", "start_nm", "message"),
+    [
+        ("led_spectra", 500, "has LED spectra from 500 to 700 nm, but LED 'led440' puts"),
+        ("camera_responsivities", 550, "has camera responsivities from 550 to 700 nm, but LED 'led4[48]0' puts"),
+    ],
+)
+def test_a_calibration_that_misses_the_leds_light_is_refused(
+    tmp_path: Path, section: str, start_nm: int, message: str
+) -> None:
     """It used to be zero-filled outside its range: a 500–700 nm LED calibration gave led440 a
     spectrum of 0 below 490 nm, and estimate exited 0."""
     sequence = read_sequence(Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent")

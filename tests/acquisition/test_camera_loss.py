@@ -27,18 +27,27 @@ ATTEMPTS = 2
 """A child killed by a signal (the Aravis teardown crash) is run once more; twice is a failure."""
 
 
-def _run_scenario(scenario: str, out_dir: Path, gv_fake_process: Callable[..., Any], serial: str,
-                  probe_dead: bool = False) -> dict:
+def _run_scenario(
+    scenario: str, out_dir: Path, gv_fake_process: Callable[..., Any], serial: str, probe_dead: bool = False
+) -> dict:
     crashes = []
     for attempt in range(ATTEMPTS):
         work = out_dir / f"attempt{attempt}"
         work.mkdir()
         fake = gv_fake_process(serial=f"{serial}{attempt}")
-        child = subprocess.Popen([sys.executable, str(CHILD), scenario, str(work)], cwd=REPO, text=True,
-                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        child = subprocess.Popen(
+            [sys.executable, str(CHILD), scenario, str(work)],
+            cwd=REPO,
+            text=True,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
         assert child.stdout is not None and child.stdin is not None
         line = child.stdout.readline().strip()
-        assert line == "READY", f"child did not reach the kill point: {line!r} {child.stderr.read() if child.stderr else ''}"
+        assert line == "READY", (
+            f"child did not reach the kill point: {line!r} {child.stderr.read() if child.stderr else ''}"
+        )
         fake.send_signal(signal.SIGKILL)
         fake.wait(timeout=10)
         if probe_dead:  # the child asks the dead device first, then carries on with the answering fake
@@ -60,12 +69,13 @@ def _run_scenario(scenario: str, out_dir: Path, gv_fake_process: Callable[..., A
         assert child.returncode == 0, err
         result_lines = [line for line in out.splitlines() if line.startswith("RESULT ")]
         assert result_lines, out
-        return {**json.loads(result_lines[-1][len("RESULT "):]), "work": str(work), "crashes": crashes, "stderr": err}
+        return {**json.loads(result_lines[-1][len("RESULT ") :]), "work": str(work), "crashes": crashes, "stderr": err}
     pytest.fail("the camera side crashed in every attempt: " + " | ".join(crashes))
 
 
 def test_killed_camera_process_gives_a_clear_error_naming_the_step(
-        aravis: ModuleType, gv_fake_process: Callable[..., Any], tmp_path: Path) -> None:
+    aravis: ModuleType, gv_fake_process: Callable[..., Any], tmp_path: Path
+) -> None:
     result = _run_scenario("camera", tmp_path, gv_fake_process, "MSFKILL")
     assert result["error"] in ("CameraDisconnectedError", "FrameTimeoutError")
     assert "camera Fake (serial MSFKILL" in result["message"]
@@ -73,7 +83,8 @@ def test_killed_camera_process_gives_a_clear_error_naming_the_step(
 
 
 def test_killed_camera_mid_capture_keeps_the_frames_and_marks_the_sequence_incomplete(
-        aravis: ModuleType, gv_fake_process: Callable[..., Any], tmp_path: Path) -> None:
+    aravis: ModuleType, gv_fake_process: Callable[..., Any], tmp_path: Path
+) -> None:
     result = _run_scenario("capture", tmp_path, gv_fake_process, "MSFLOSS")
     assert result["error"] in ("CameraDisconnectedError", "FrameTimeoutError")
     assert "step 2" in result["message"]
@@ -85,7 +96,8 @@ def test_killed_camera_mid_capture_keeps_the_frames_and_marks_the_sequence_incom
 
 
 def test_a_frame_timeout_after_the_camera_died_says_it_no_longer_answers(
-        aravis: ModuleType, gv_fake_process: Callable[..., Any], tmp_path: Path) -> None:
+    aravis: ModuleType, gv_fake_process: Callable[..., Any], tmp_path: Path
+) -> None:
     """The camera dies between frames and control-lost has not come yet: the timeout says the camera no
     longer answers (one bootstrap-register read, ~4 s of Aravis retries), not to check the trigger wiring."""
     result = _run_scenario("silent", tmp_path, gv_fake_process, "MSFSILENT", probe_dead=True)

@@ -74,8 +74,12 @@ def test_modes_follow_each_other_on_one_rig(sim_rig: Rig, tmp_path: Path) -> Non
     with _writer(sim_rig, tmp_path / "sequence") as writer:
         for trigger in MODES:
             run_capture(sim_rig.camera, sim_rig.booth, _plan(trigger), writer)
-            run_capture(sim_rig.camera, sim_rig.booth,
-                        CapturePlan.single([0.25, 0.5, 0.0, 1.0], 10_000.0, trigger=trigger), writer)
+            run_capture(
+                sim_rig.camera,
+                sim_rig.booth,
+                CapturePlan.single([0.25, 0.5, 0.0, 1.0], 10_000.0, trigger=trigger),
+                writer,
+            )
         writer.finish()
     flash = (0.25, 0.5, 0.0, 1.0)  # within one 16-bit wire step
     assert np.allclose(sim_rig.camera.rendered_levels[5::6], [flash] * 3, atol=1 / 65535)
@@ -141,13 +145,17 @@ def test_cli_capture_sync(tmp_path: Path, sync: str) -> None:
     assert f"ARM {sync.upper()} " in transcript and "DONE 8" in transcript
 
 
-def test_a_booth_master_period_beyond_the_booth_is_one_error_line(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_a_booth_master_period_beyond_the_booth_is_one_error_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     """Exposures of ~10 s with the booth pacing: its step period would exceed what ARM takes (10 s); the
     capture says so and what would fit, before anything is sent — it was a ValueError traceback."""
     status = main(["capture", "--sync", "booth", "--exposure-us", "9999000", "--out", str(tmp_path / "x")])
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 1
-    assert err[-1].startswith("msflash: error: booth master: step period 10 s (settle, trigger pulse, longest "
-                              "exposure 9.999 s, deadtime and readout) is longer than the booth's longest period 10 s")
+    assert err[-1].startswith(
+        "msflash: error: booth master: step period 10 s (settle, trigger pulse, longest "
+        "exposure 9.999 s, deadtime and readout) is longer than the booth's longest period 10 s"
+    )
     assert "expected exposures up to 9.995 s" in err[-1]
     assert not list((tmp_path / "x" / "sequence" / "frames").glob("*"))

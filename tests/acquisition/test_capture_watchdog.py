@@ -112,8 +112,7 @@ def test_a_lost_link_mid_sequence_is_the_error_reported(tmp_path: Path) -> None:
 
     with pytest.raises(BoothError) as caught, open_sim_rig(n_leds=4, seed=5) as rig:
         rig.booth.set_watchdog(SHORT_WATCHDOG_S)
-        server = next(c.__self__ for c in rig._closers
-                      if isinstance(getattr(c, "__self__", None), PtyBoothServer))
+        server = next(c.__self__ for c in rig._closers if isinstance(getattr(c, "__self__", None), PtyBoothServer))
         camera = _ExposingCamera(rig.camera)
         original = camera.trigger
 
@@ -130,7 +129,8 @@ def test_a_lost_link_mid_sequence_is_the_error_reported(tmp_path: Path) -> None:
 
 
 def test_a_frame_the_watchdog_darkened_is_refused_not_kept(
-        sim_rig: Rig, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    sim_rig: Rig, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A host that stalls beyond its planned silence (here: the plan's silence taken as nil, so the
     watchdog is not raised) lets the watchdog switch the LED off mid-exposure: host paced, the next
     SET would just work, so the dark LED frame must be refused by name, not written as good data."""
@@ -141,15 +141,14 @@ def test_a_frame_the_watchdog_darkened_is_refused_not_kept(
     plan = CapturePlan(CapturePlan.ambient_then_each_led(4, 300_000.0).steps[:3])
     with pytest.raises(CaptureError) as caught, sim_rig.sequence_writer(tmp_path / "sequence") as writer:
         run_capture(_ExposingCamera(sim_rig.camera), sim_rig.booth, plan, writer)
-    assert str(caught.value).startswith("step 1 (led:1): the booth's watchdog switched the LEDs off during this "
-                                        "frame")
+    assert str(caught.value).startswith("step 1 (led:1): the booth's watchdog switched the LEDs off during this frame")
     assert sim_rig.camera.rendered_levels[1] == (0.0,) * 4  # it was indeed exposed dark
     assert [f.role for f in read_sequence(tmp_path / "sequence").frames] == ["ambient"]
 
 
 def test_an_unplugged_booth_through_the_cli_says_it_once_plus_the_leds_warning(
-        tmp_path: Path, capsys: pytest.CaptureFixture, caplog: pytest.LogCaptureFixture,
-        monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, capsys: pytest.CaptureFixture, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """msflash capture with the booth's pty closed after two frames: exit 1, the error line is the lost link
     during SET, and the only diagnostics shown by default are the driver noticing it and the warning that
     the LEDs could not be confirmed off — not a second failure about OFF from closing the rig."""

@@ -72,17 +72,28 @@ def _too_big_for_a_float(seq: Path) -> str:
     return text.replace('"gain": ', '"gain": ' + "9" * 400 + ', "was": ', 1)
 
 
-@pytest.mark.parametrize(("make", "field"), [
-    (_huge_integer, "frames[0].exposure_us is an integer of 5000 digits"),
-    (_nested_100k, "nested too deep"),
-    (_unknown_key_900_deep, "x_vendor.k.k"),
-    (_non_utf8_frame_name, "frames[1].file"),
-    (_symlink_loop_frame, "frames[1].file"),
-    (_too_big_for_a_float, "frames[0].gain is an integer of 400 digits"),
-], ids=["5000-digit-integer", "nested-100k", "unknown-key-900-deep", "non-utf8-frame-name", "symlink-loop",
-        "400-digit-integer"])
-def test_hostile_sequence_exits_2_with_one_line(sequence: Path, make: Callable[[Path], str], field: str,
-                                                capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize(
+    ("make", "field"),
+    [
+        (_huge_integer, "frames[0].exposure_us is an integer of 5000 digits"),
+        (_nested_100k, "nested too deep"),
+        (_unknown_key_900_deep, "x_vendor.k.k"),
+        (_non_utf8_frame_name, "frames[1].file"),
+        (_symlink_loop_frame, "frames[1].file"),
+        (_too_big_for_a_float, "frames[0].gain is an integer of 400 digits"),
+    ],
+    ids=[
+        "5000-digit-integer",
+        "nested-100k",
+        "unknown-key-900-deep",
+        "non-utf8-frame-name",
+        "symlink-loop",
+        "400-digit-integer",
+    ],
+)
+def test_hostile_sequence_exits_2_with_one_line(
+    sequence: Path, make: Callable[[Path], str], field: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     (sequence / "sequence.json").write_text(make(sequence))
     assert main(["estimate", str(sequence)]) == 2
     err = capsys.readouterr().err
@@ -98,7 +109,8 @@ def test_booth_emulator_refuses_a_non_finite_watchdog(value: str, capsys: pytest
 
 
 def test_unexpected_exception_exits_1_with_one_line_and_a_crash_log(
-        sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     def broken(directory: object) -> None:
         raise ZeroDivisionError("a bug deep inside")
 
@@ -116,7 +128,8 @@ def test_unexpected_exception_exits_1_with_one_line_and_a_crash_log(
 
 
 def test_crash_log_falls_back_when_its_directory_cannot_be_made(
-        sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     blocker = tmp_path / "a-file"
     blocker.write_text("")
     monkeypatch.setattr(cli_process, "read_sequence", lambda directory: {}[directory])
@@ -129,8 +142,9 @@ def test_crash_log_falls_back_when_its_directory_cannot_be_made(
     assert len(logs) == 1 and str(logs[0]) in err
 
 
-def test_numpy_warnings_are_explained_in_one_line(sequence: Path, monkeypatch: pytest.MonkeyPatch,
-                                                  capsys: pytest.CaptureFixture[str]) -> None:
+def test_numpy_warnings_are_explained_in_one_line(
+    sequence: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     real = cli_process.read_sequence
 
     def warns(directory: object) -> object:

@@ -24,12 +24,23 @@ def write_scenario(directory: Path, scenario: Scenario) -> Path:
     """A complete sequence (energy units, NikonD100 responsivities) holding a simulated scenario's frames."""
     leds = scenario.led_spectra.to_unit("energy")
     responsivity = datasets.isetcam_camera("NikonD100").resample(DEFAULT_GRID)
-    camera = SequenceCamera(model="test-local", serial=None, pixel_format="RGB16", cfa=None,
-                            black_level=scenario.spec.black_level, white_level=scenario.spec.white_level,
-                            responsivity={c: responsivity.column(c) for c in ("R", "G", "B")})
+    camera = SequenceCamera(
+        model="test-local",
+        serial=None,
+        pixel_format="RGB16",
+        cfa=None,
+        black_level=scenario.spec.black_level,
+        white_level=scenario.spec.white_level,
+        responsivity={c: responsivity.column(c) for c in ("R", "G", "B")},
+    )
     exposure = 1.0 / scenario.spec.ambient_scale
-    with SequenceWriter(directory, wavelengths_nm=DEFAULT_GRID.wavelengths_nm, spectral_unit="energy",
-                        camera=camera, leds=[SequenceLed(name, leds.column(name)) for name in leds.names]) as writer:
+    with SequenceWriter(
+        directory,
+        wavelengths_nm=DEFAULT_GRID.wavelengths_nm,
+        spectral_unit="energy",
+        camera=camera,
+        leds=[SequenceLed(name, leds.column(name)) for name in leds.names],
+    ) as writer:
         writer.add_frame(scenario.ambient, "ambient", [0.0] * leds.count, exposure_us=exposure, gain=1.0)
         for index, frame in enumerate(scenario.led_frames):
             writer.add_frame(frame, "led", list(scenario.spec.led_levels[index]), exposure_us=exposure, gain=1.0)
@@ -39,8 +50,10 @@ def write_scenario(directory: Path, scenario: Scenario) -> Path:
 @cache
 def _sequences(root: str) -> dict[str, Path]:
     base = Path(root)
-    return {kind: write_scenario(base / kind, make_scenario(kind, seed, SHAPE))
-            for kind, seed in (("uniform", 11), ("boundary", 12))}
+    return {
+        kind: write_scenario(base / kind, make_scenario(kind, seed, SHAPE))
+        for kind, seed in (("uniform", 11), ("boundary", 12))
+    }
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +75,9 @@ def test_estimate_global_keeps_the_contract(sequences: dict[str, Path], capsys: 
     assert "tiles" not in payload
 
 
-def test_estimate_auto_uniform_is_the_global_estimate(sequences: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+def test_estimate_auto_uniform_is_the_global_estimate(
+    sequences: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     global_payload = run_json(capsys, "estimate", str(sequences["uniform"]), "--method", "global", "--json")
     payload = run_json(capsys, "estimate", str(sequences["uniform"]), "--json")  # auto is the default
     assert payload["method"] == "global" and payload["method_requested"] == "auto"
@@ -73,7 +88,9 @@ def test_estimate_auto_uniform_is_the_global_estimate(sequences: dict[str, Path]
     assert "tiles" not in payload
 
 
-def test_estimate_auto_two_illuminants_goes_local(sequences: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+def test_estimate_auto_two_illuminants_goes_local(
+    sequences: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     payload = run_json(capsys, "estimate", str(sequences["boundary"]), "--method", "auto", "--tiles", "6", "--json")
     assert payload["method"] == "local"
     tiles = payload["tiles"]
@@ -84,7 +101,9 @@ def test_estimate_auto_two_illuminants_goes_local(sequences: dict[str, Path], ca
     assert len(tiles["row_edges"]) == 7 and tiles["row_edges"][-1] == SHAPE[0]
     # The docs/architecture.md §7 keys hold the area-weighted mean over the tiles; the global estimate is kept.
     areas = np.outer(np.diff(tiles["row_edges"]), np.diff(tiles["column_edges"]))
-    np.testing.assert_allclose(payload["ambient_weights"], np.einsum("ts,tsk->k", areas, weights) / areas.sum(), rtol=1e-9)
+    np.testing.assert_allclose(
+        payload["ambient_weights"], np.einsum("ts,tsk->k", areas, weights) / areas.sum(), rtol=1e-9
+    )
     assert len(payload["spectrum_global"]) == len(payload["spectrum"])
     assert min(v for k, v in payload["model_selection"]["scores"].items() if k != "global") < 0.9
 
@@ -95,11 +114,26 @@ def test_estimate_local_text_output(sequences: dict[str, Path], capsys: pytest.C
     assert "local model, 4x4 tiles" in out and "nm" in out
 
 
-def test_flash_local_writes_a_spatially_varying_image(sequences: dict[str, Path], tmp_path: Path,
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_flash_local_writes_a_spatially_varying_image(
+    sequences: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "local.exr"
-    payload = run_json(capsys, "flash", str(sequences["boundary"]), "--mode", "complementary", "--method", "local",
-                       "--tiles", "4", "--bounds", "nonnegative", "--out", str(out), "--json")
+    payload = run_json(
+        capsys,
+        "flash",
+        str(sequences["boundary"]),
+        "--mode",
+        "complementary",
+        "--method",
+        "local",
+        "--tiles",
+        "4",
+        "--bounds",
+        "nonnegative",
+        "--out",
+        str(out),
+        "--json",
+    )
     assert payload["method"] == "local" and payload["mode"] == "complementary" and payload["scale"] > 0
     tile_weights = np.array(payload["tiles"]["flash_weights"])
     assert tile_weights.shape == (4, 4, 7) and np.all(tile_weights >= 0)
@@ -110,10 +144,22 @@ def test_flash_local_writes_a_spatially_varying_image(sequences: dict[str, Path]
 
 
 def test_flash_physical_weights_stay_in_bounds(sequences: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
-    payload = run_json(capsys, "flash", str(sequences["boundary"]), "--mode", "complementary", "--method", "local",
-                       "--tiles", "4", "--json")
+    payload = run_json(
+        capsys,
+        "flash",
+        str(sequences["boundary"]),
+        "--mode",
+        "complementary",
+        "--method",
+        "local",
+        "--tiles",
+        "4",
+        "--json",
+    )
     assert all(0.0 <= w <= 1.0 for w in payload["flash_weights"])
-    assert np.all((np.array(payload["tiles"]["flash_weights"]) >= 0) & (np.array(payload["tiles"]["flash_weights"]) <= 1))
+    assert np.all(
+        (np.array(payload["tiles"]["flash_weights"]) >= 0) & (np.array(payload["tiles"]["flash_weights"]) <= 1)
+    )
 
 
 def test_bad_method_is_a_usage_error(sequences: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
@@ -127,8 +173,21 @@ def test_local_study_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     subparsers = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
     if "local-study" not in subparsers.choices:
         cli_local.register(subparsers)
-    args = parser.parse_args(["local-study", "--uniform", "2", "--mixed", "1", "--no-timing", "--out", str(tmp_path),
-                              "--json", "--seed0", "7"])
+    args = parser.parse_args(
+        [
+            "local-study",
+            "--uniform",
+            "2",
+            "--mixed",
+            "1",
+            "--no-timing",
+            "--out",
+            str(tmp_path),
+            "--json",
+            "--seed0",
+            "7",
+        ]
+    )
     assert args.handler(args) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["uniform"]["n"] == 2 and summary["boundary"]["n"] == 1 and summary["seed0"] == 7

@@ -36,10 +36,14 @@ def test_auto_says_which_model_it_chose_and_why(tmp_path: Path, capsys: pytest.C
     assert rmse(np.asarray(auto["spectrum"]), rendered.truth) < 0.7 * led_bound(rendered)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "finding: under CIE F11 the held-out pixel errors of the two models are within 1 % (0.0205 and 0.0204, noise "
-    "dominates), so auto keeps the LEDs (RMSE 0.434, bound 0.405) though the prior is far closer (0.181): held-out "
-    "pixels cannot see what the camera cannot"))
+@pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "finding: under CIE F11 the held-out pixel errors of the two models are within 1 % (0.0205 and 0.0204, noise "
+        "dominates), so auto keeps the LEDs (RMSE 0.434, bound 0.405) though the prior is far closer (0.181): held-out "
+        "pixels cannot see what the camera cannot"
+    ),
+)
 def test_auto_takes_the_prior_where_it_is_far_better(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rendered = render_case(Case("f11", light="F11", seed=3), tmp_path / "f11")
     assert _estimate(capsys, str(rendered.directory), "--model", "auto")["model"] == "prior"

@@ -20,8 +20,10 @@ def with_calibrate(monkeypatch):
 @pytest.mark.parametrize("value", ["0", "-3", "two"])
 def test_whole_number_options_name_themselves(capsys: pytest.CaptureFixture, value: str) -> None:
     assert cli.main(["local-study", "--tiles", value]) == 2
-    assert capsys.readouterr().err.strip().splitlines()[-1] == \
-        f"msflash: error: argument --tiles: '{value}': expected a whole number ≥ 1"
+    assert (
+        capsys.readouterr().err.strip().splitlines()[-1]
+        == f"msflash: error: argument --tiles: '{value}': expected a whole number ≥ 1"
+    )
 
 
 def test_linearity_refuses_frames_under_different_lights(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

@@ -33,8 +33,12 @@ def mix_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def bayer_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_test_sequence(tmp_path_factory.mktemp("seq") / "bayer", led_mix(MIX), cfa="GRBG",
-                               gains=[1.0, 2.0, 1.0, 1.0, 1.5, 1.0, 1.0, 3.0])
+    return write_test_sequence(
+        tmp_path_factory.mktemp("seq") / "bayer",
+        led_mix(MIX),
+        cfa="GRBG",
+        gains=[1.0, 2.0, 1.0, 1.0, 1.5, 1.0, 1.0, 3.0],
+    )
 
 
 @pytest.fixture
@@ -84,12 +88,16 @@ def _newer(document: dict) -> None:
     document["version"] = 2
 
 
-@pytest.mark.parametrize(("change", "names"), [
-    (_truncate_led, ("leds[2].spd", "sequence.json")),
-    (_nan_led, ("leds[1].spd", "sequence.json")),
-    (_outside, ("frames[3].file", "outside the sequence directory")),
-    (_newer, ("version", "sequence.json")),
-], ids=["led-grid-mismatch", "nan-in-spectrum", "frame-outside-directory", "newer-version"])
+@pytest.mark.parametrize(
+    ("change", "names"),
+    [
+        (_truncate_led, ("leds[2].spd", "sequence.json")),
+        (_nan_led, ("leds[1].spd", "sequence.json")),
+        (_outside, ("frames[3].file", "outside the sequence directory")),
+        (_newer, ("version", "sequence.json")),
+    ],
+    ids=["led-grid-mismatch", "nan-in-spectrum", "frame-outside-directory", "newer-version"],
+)
 @pytest.mark.parametrize("command", [["estimate"], ["flash", "--mode", "complementary"]], ids=["estimate", "flash"])
 def test_bad_sequence_document(capsys, sequence_copy: Path, change, names, command) -> None:
     edit_document(sequence_copy, change)
@@ -115,14 +123,19 @@ def test_missing_sequence_directory(capsys, tmp_path: Path) -> None:
 @pytest.mark.parametrize("weights", ["1,2,3", ",".join(["0.5"] * (N_LEDS + 1))])
 def test_wrong_weights_count(capsys, base_sequence: Path, tmp_path: Path, weights: str) -> None:
     out = tmp_path / "x.exr"
-    assert_bad_input(*run(capsys, "synthesize", str(base_sequence), "--weights", weights, "--out", str(out)),
-                     "--weights", f"expected {N_LEDS}")
+    assert_bad_input(
+        *run(capsys, "synthesize", str(base_sequence), "--weights", weights, "--out", str(out)),
+        "--weights",
+        f"expected {N_LEDS}",
+    )
     assert not out.exists()
 
 
 def test_non_numeric_weights(capsys, base_sequence: Path, tmp_path: Path) -> None:
-    assert_bad_input(*run(capsys, "synthesize", str(base_sequence), "--weights", "a,b", "--out", str(tmp_path / "x.exr")),
-                     "--weights")
+    assert_bad_input(
+        *run(capsys, "synthesize", str(base_sequence), "--weights", "a,b", "--out", str(tmp_path / "x.exr")),
+        "--weights",
+    )
 
 
 @pytest.mark.parametrize("alpha", ["-1", "nan", "inf", "1e400", "smooth"])
@@ -136,40 +149,56 @@ def test_bad_alpha_names_the_option_and_what_is_expected(capsys, base_sequence: 
 
 
 @pytest.mark.parametrize("suffix", [".exr", ".tiff"])
-@pytest.mark.parametrize("command", [["synthesize", "--weights", "1,0,0,0,0,0,0"], ["flash", "--mode", "matching"]],
-                         ids=["synthesize", "flash"])
-def test_unwritable_out_is_bad_input_naming_out(capsys, base_sequence: Path, tmp_path: Path, suffix: str, command) -> None:
+@pytest.mark.parametrize(
+    "command",
+    [["synthesize", "--weights", "1,0,0,0,0,0,0"], ["flash", "--mode", "matching"]],
+    ids=["synthesize", "flash"],
+)
+def test_unwritable_out_is_bad_input_naming_out(
+    capsys, base_sequence: Path, tmp_path: Path, suffix: str, command
+) -> None:
     """--out under a regular file: a FileExistsError traceback from mkdir (or, where the directory
     exists but cannot be written, an error naming write_image's hidden temporary file)."""
     blocker = tmp_path / "a-file"
     blocker.write_text("")
     out = blocker / "deeper" / f"x{suffix}"
     status, stdout, err = run(capsys, command[0], str(base_sequence), *command[1:], "--out", str(out))
-    assert_bad_input(status, stdout, err, f"--out {out}", f"{blocker} is not a directory", "expected a writable file path")
+    assert_bad_input(
+        status, stdout, err, f"--out {out}", f"{blocker} is not a directory", "expected a writable file path"
+    )
     assert ".tmp" not in err
 
 
-@pytest.mark.parametrize("command", [["synthesize", "--weights", "1,0,0,0,0,0,0"], ["flash", "--mode", "matching"]],
-                         ids=["synthesize", "flash"])
+@pytest.mark.parametrize(
+    "command",
+    [["synthesize", "--weights", "1,0,0,0,0,0,0"], ["flash", "--mode", "matching"]],
+    ids=["synthesize", "flash"],
+)
 def test_unknown_out_type_is_refused(capsys, base_sequence: Path, tmp_path: Path, command) -> None:
     out = tmp_path / "x.jpg"
-    assert_bad_input(*run(capsys, command[0], str(base_sequence), *command[1:], "--out", str(out)),
-                     f"--out {out}", "expected .exr (linear float) or .tiff (16-bit raw)")
+    assert_bad_input(
+        *run(capsys, command[0], str(base_sequence), *command[1:], "--out", str(out)),
+        f"--out {out}",
+        "expected .exr (linear float) or .tiff (16-bit raw)",
+    )
     assert not out.exists()
 
 
 def test_clipped_raw_tiff_output_is_reported(capsys, base_sequence: Path, tmp_path: Path) -> None:
     """Large weights clip the 16-bit raw output at the white level; that was silent."""
     out = tmp_path / "bright.tiff"
-    status, stdout, err = run(capsys, "synthesize", str(base_sequence), "--weights", "1000,0,0,0,0,0,0", "--out", str(out))
+    status, stdout, err = run(
+        capsys, "synthesize", str(base_sequence), "--weights", "1000,0,0,0,0,0,0", "--out", str(out)
+    )
     assert status == 0, err
     raw = read_image(out)
     white = json.loads((base_sequence / "sequence.json").read_text())["camera"]["white_level"]
     clipped = int(np.count_nonzero((raw >= white) | (raw <= 0)))
     assert clipped > 0.1 * raw.size
     assert f"warning: {clipped} of the {raw.size} samples of {out} ({clipped / raw.size:.2%}) are clipped" in err
-    status, stdout, err = run(capsys, "synthesize", str(base_sequence), "--weights", "0.1,0,0,0,0,0,0",
-                              "--out", str(tmp_path / "fine.tiff"))
+    status, stdout, err = run(
+        capsys, "synthesize", str(base_sequence), "--weights", "0.1,0,0,0,0,0,0", "--out", str(tmp_path / "fine.tiff")
+    )
     assert status == 0 and "clipped" not in err
 
 
@@ -249,14 +278,18 @@ def test_flash_json(capsys, base_sequence: Path, mode: str) -> None:
 
 def test_synthesize_writes_a_readable_exr(capsys, base_sequence: Path, tmp_path: Path) -> None:
     out = tmp_path / "x.exr"
-    status, stdout, err = run(capsys, "synthesize", str(base_sequence), "--weights", "0,0.5,0,1,0,0,0.25", "--out", str(out))
+    status, stdout, err = run(
+        capsys, "synthesize", str(base_sequence), "--weights", "0,0.5,0,1,0,0,0.25", "--out", str(out)
+    )
     assert status == 0, err
     image = read_image(out)
     ambient = read_image(base_sequence / "frames" / "000-ambient.tiff")
     assert image.shape == ambient.shape
     assert np.all(np.isfinite(image)) and image.max() > 0
     zero = tmp_path / "zero.exr"
-    assert run(capsys, "synthesize", str(base_sequence), "--weights", ",".join(["0"] * N_LEDS), "--out", str(zero))[0] == 0
+    assert (
+        run(capsys, "synthesize", str(base_sequence), "--weights", ",".join(["0"] * N_LEDS), "--out", str(zero))[0] == 0
+    )
     assert np.all(read_image(out) >= read_image(zero) - 1e-3 * read_image(zero).max())  # adding light only adds
 
 
@@ -271,8 +304,13 @@ def test_a_closed_stdout_pipe_ends_quietly(tmp_path: Path) -> None:
     if not (sequence / "sequence.json").exists():
         pytest.skip(f"shared sample {sequence} is absent (CI puts shared/ beside the clone)")
     reader = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.readline()"], stdin=subprocess.PIPE)
-    writer = subprocess.run([sys.executable, "-m", "msflash.acquisition.app.cli", "estimate", str(sequence)],
-                            stdout=reader.stdin, stderr=subprocess.PIPE, text=True, timeout=120)
+    writer = subprocess.run(
+        [sys.executable, "-m", "msflash.acquisition.app.cli", "estimate", str(sequence)],
+        stdout=reader.stdin,
+        stderr=subprocess.PIPE,
+        text=True,
+        timeout=120,
+    )
     reader.stdin.close()
     reader.wait(timeout=10)
     assert "Traceback" not in writer.stderr

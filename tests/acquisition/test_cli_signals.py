@@ -19,13 +19,24 @@ def test_a_real_sigterm_inside_the_guard_unwinds_as_terminated() -> None:
     assert signal.getsignal(signal.SIGTERM) is not None  # the previous handler is back
 
 
-@pytest.mark.parametrize(("raised", "status", "line"), [
-    (Terminated(143), 143, "msflash: terminated (SIGTERM); LEDs off; frames captured so far are kept (marked "
-                           "incomplete)"),
-    (KeyboardInterrupt(), 130, "msflash: interrupted; LEDs off; frames captured so far are kept (marked incomplete)"),
-])
-def test_the_cli_says_how_it_was_stopped(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture,
-                                         raised: BaseException, status: int, line: str) -> None:
+@pytest.mark.parametrize(
+    ("raised", "status", "line"),
+    [
+        (
+            Terminated(143),
+            143,
+            "msflash: terminated (SIGTERM); LEDs off; frames captured so far are kept (marked incomplete)",
+        ),
+        (
+            KeyboardInterrupt(),
+            130,
+            "msflash: interrupted; LEDs off; frames captured so far are kept (marked incomplete)",
+        ),
+    ],
+)
+def test_the_cli_says_how_it_was_stopped(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture, raised: BaseException, status: int, line: str
+) -> None:
     def stopped(args) -> int:  # what a capture's handler does when the signal lands
         raise raised
 

@@ -21,13 +21,15 @@ HEAVY = ("matplotlib", "colour", "scipy.stats", "dask", "gi", "OpenImageIO", "cv
 
 def imported_after(argv: list[str]) -> set[str]:
     """The modules a fresh interpreter holds after ``main(argv)`` (its SystemExit caught)."""
-    code = ("import json, sys\n"
-            "from msflash.acquisition.app.cli import main\n"
-            "try:\n"
-            f"    main({argv!r})\n"
-            "except SystemExit:\n"
-            "    pass\n"
-            "sys.stderr.write(json.dumps(sorted(sys.modules)))\n")
+    code = (
+        "import json, sys\n"
+        "from msflash.acquisition.app.cli import main\n"
+        "try:\n"
+        f"    main({argv!r})\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "sys.stderr.write(json.dumps(sorted(sys.modules)))\n"
+    )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
     return set(json.loads(result.stderr.splitlines()[-1]))
 
@@ -42,12 +44,17 @@ def test_top_level_help_and_version_import_no_heavy_library(argv: list[str]) -> 
     assert "msflash.acquisition.app.cli" in modules
     assert heavy_among(modules) == []
     assert "numpy" not in modules
-    assert not {m for m in modules if m.startswith("msflash.acquisition.app.cli_")} - {"msflash.acquisition.app.cli_common"}
+    assert not {m for m in modules if m.startswith("msflash.acquisition.app.cli_")} - {
+        "msflash.acquisition.app.cli_common"
+    }
 
 
 def test_a_commands_help_imports_only_its_own_module() -> None:
     modules = imported_after(["bench", "--help"])
-    assert {m for m in modules if m.startswith("msflash.acquisition.app.cli_")} == {"msflash.acquisition.app.cli_common", "msflash.acquisition.app.cli_bench"}
+    assert {m for m in modules if m.startswith("msflash.acquisition.app.cli_")} == {
+        "msflash.acquisition.app.cli_common",
+        "msflash.acquisition.app.cli_bench",
+    }
     assert heavy_among(modules) == []
 
 
@@ -56,7 +63,10 @@ def test_no_commands_help_imports_plotting_colour_statistics_or_dask(name: str) 
     """A command's handler imports what it needs when it runs; its options are known without."""
     modules = imported_after([name, "--help"])
     assert cli.COMMANDS[name][0] in modules
-    assert sorted(m for m in modules if m.split(".")[0] in ("matplotlib", "colour", "dask") or m.startswith("scipy.stats")) == []
+    assert (
+        sorted(m for m in modules if m.split(".")[0] in ("matplotlib", "colour", "dask") or m.startswith("scipy.stats"))
+        == []
+    )
 
 
 def test_estimate_imports_no_plotting_colour_or_scipy_package(tmp_path) -> None:

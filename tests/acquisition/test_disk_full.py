@@ -37,14 +37,16 @@ def disk_full_at_frame(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_a_full_disk_mid_capture_is_one_runtime_error_and_keeps_the_frames(
-        disk_full_at_frame: None, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    disk_full_at_frame: None, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     out, transcript = tmp_path / "run", tmp_path / "booth.txt"
     status = main(["capture", "--exposure-us", "5000", "--out", str(out), "--log-serial", str(transcript)])
     err = capsys.readouterr().err
     assert status == 1  # the disk failed: a runtime failure, not bad input
     last = err.strip().splitlines()[-1]
-    assert last.startswith(f"msflash: error: {out / 'sequence'}: writing frames/003-led.tiff failed: "
-                           "No space left on device")
+    assert last.startswith(
+        f"msflash: error: {out / 'sequence'}: writing frames/003-led.tiff failed: No space left on device"
+    )
     assert f"{FULL_AT} frame(s) saved and readable (complete: false)" in last
     assert err.count("No space left on device") == 1  # said once, not again by the writer thread
     sequence = read_sequence(out / "sequence")
@@ -55,7 +57,8 @@ def test_a_full_disk_mid_capture_is_one_runtime_error_and_keeps_the_frames(
 
 
 def test_a_full_disk_while_writing_the_run_report_is_one_runtime_error(
-        tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """The sequence (flash included) is on disk; the report's first EXR finds the disk full (injected at
     the report's write_image, as above): exit 1, one line naming it and saying the sequence is complete
     — it was an OSError traceback (checked by hand on a 760 kB tmpfs: same line)."""

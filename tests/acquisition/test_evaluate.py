@@ -61,7 +61,7 @@ class ReportParser(HTMLParser):
         if tag == "img":
             prefix = "data:image/png;base64,"
             assert attributes["src"].startswith(prefix)
-            self.images.append(base64.b64decode(attributes["src"][len(prefix):]))
+            self.images.append(base64.b64decode(attributes["src"][len(prefix) :]))
         elif tag == "table":
             self._table = attributes.get("id", f"table{len(self.tables)}")
             self.tables[self._table] = []
@@ -128,7 +128,9 @@ def macbeth_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 class TestEvaluateSequence:
     def test_json_files_and_report(self, macbeth_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
         out = tmp_path / "evaluation"
-        assert run_cli(["evaluate", str(macbeth_run / "sequence"), "--chart", "macbeth", "--out", str(out), "--json"]) == 0
+        assert (
+            run_cli(["evaluate", str(macbeth_run / "sequence"), "--chart", "macbeth", "--out", str(out), "--json"]) == 0
+        )
         result = json.loads(capsys.readouterr().out)
         delta_e = result["delta_e"]
         assert set(delta_e) == {"ambient", "matching", "complementary", "complementary-capture", "ambient-von-kries"}
@@ -155,25 +157,32 @@ class TestEvaluateSequence:
         assert read_image(out / "ambient.tiff").dtype == np.uint16
         assert (out / "ambient.png").read_bytes().startswith(PNG_SIGNATURE)
 
-    def test_a_run_directory_is_accepted_and_output_defaults_beside_the_sequence(self, macbeth_run: Path,
-                                                                                 capsys: pytest.CaptureFixture) -> None:
+    def test_a_run_directory_is_accepted_and_output_defaults_beside_the_sequence(
+        self, macbeth_run: Path, capsys: pytest.CaptureFixture
+    ) -> None:
         assert run_cli(["evaluate", str(macbeth_run), "--chart", "macbeth"]) == 0
         assert capsys.readouterr().out.strip() == str((macbeth_run / "evaluation").resolve())
         assert (macbeth_run / "evaluation" / "report.html").exists()
 
-    @pytest.mark.parametrize(("options", "message"), [
-        (["--patch-px", "10"], "--patch-px 10 --border-px 2: the macbeth chart is 50×74 pixels"),
-        (["--patch-px", "7", "--border-px", "2"], "patches are not uniform"),
-        (["--patch-px", "5"], r"patch \d+ is not uniform .* expected every patch inside one chart patch"),
-        (["--patch-px", "4", "--border-px", "1"], r"2\d of 24 patches read the same colour as another patch"),
-        (["--margin-px", "4"], "--margin-px 4 leaves nothing"),
-    ])
-    def test_a_wrong_layout_is_refused(self, macbeth_run: Path, tmp_path: Path, options: list[str], message: str) -> None:
+    @pytest.mark.parametrize(
+        ("options", "message"),
+        [
+            (["--patch-px", "10"], "--patch-px 10 --border-px 2: the macbeth chart is 50×74 pixels"),
+            (["--patch-px", "7", "--border-px", "2"], "patches are not uniform"),
+            (["--patch-px", "5"], r"patch \d+ is not uniform .* expected every patch inside one chart patch"),
+            (["--patch-px", "4", "--border-px", "1"], r"2\d of 24 patches read the same colour as another patch"),
+            (["--margin-px", "4"], "--margin-px 4 leaves nothing"),
+        ],
+    )
+    def test_a_wrong_layout_is_refused(
+        self, macbeth_run: Path, tmp_path: Path, options: list[str], message: str
+    ) -> None:
         with pytest.raises(UsageError, match=message):
             run_cli(["evaluate", str(macbeth_run), "--chart", "macbeth", "--out", str(tmp_path), *options])
 
-    def test_an_unknown_chart_is_a_usage_error(self, macbeth_run: Path, tmp_path: Path,
-                                                       capsys: pytest.CaptureFixture) -> None:
+    def test_an_unknown_chart_is_a_usage_error(
+        self, macbeth_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+    ) -> None:
         with pytest.raises(SystemExit) as exit_info:
             run_cli(["evaluate", str(macbeth_run), "--chart", "esser"])
         assert exit_info.value.code == 2
@@ -182,8 +191,12 @@ class TestEvaluateSequence:
 class TestColourStudyCommand:
     def test_report_holds_the_fig9_table_and_noise(self, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
         out = tmp_path / "study"
-        assert run_cli(["colour-study", "--ambients", "underwater,tungsten", "--patch-px", "8", "--out", str(out),
-                        "--json"]) == 0
+        assert (
+            run_cli(
+                ["colour-study", "--ambients", "underwater,tungsten", "--patch-px", "8", "--out", str(out), "--json"]
+            )
+            == 0
+        )
         payload = json.loads(capsys.readouterr().out)
         assert set(payload["delta_e"]) == {"underwater", "tungsten"}
         report = parse_report(out / "report.html")
@@ -216,12 +229,16 @@ class TestHtmlReport:
             report.add_images([("x", b"GIF89a")])
 
 
-@pytest.mark.parametrize("argv", [
-    ["evaluate", "{seq}", "--chart", "macbeth"],
-    ["colour-study", "--ambients", "tungsten"],
-    ["local-study", "--uniform", "1", "--mixed", "1", "--no-timing"],
-    ["study", "table1"],
-], ids=["evaluate", "colour-study", "local-study", "study"])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["evaluate", "{seq}", "--chart", "macbeth"],
+        ["colour-study", "--ambients", "tungsten"],
+        ["local-study", "--uniform", "1", "--mixed", "1", "--no-timing"],
+        ["study", "table1"],
+    ],
+    ids=["evaluate", "colour-study", "local-study", "study"],
+)
 def test_out_under_a_file_is_refused_before_any_work(capsys, tmp_path: Path, argv: list[str]) -> None:
     """--out below a regular file: evaluate and colour-study ended in a NotADirectoryError/FileExistsError
     traceback, local-study too after running its whole study (20 s for two scenes); study was already right."""
@@ -234,5 +251,8 @@ def test_out_under_a_file_is_refused_before_any_work(capsys, tmp_path: Path, arg
     out = blocker / "results"
     assert msflash_main([*argv, "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1] == f"msflash: error: --out {out}: {blocker} is a file; expected a folder (or a path where one can be made)"
+    assert (
+        err[-1]
+        == f"msflash: error: --out {out}: {blocker} is a file; expected a folder (or a path where one can be made)"
+    )
     assert not any("Traceback" in line for line in err)

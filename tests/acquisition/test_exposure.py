@@ -40,14 +40,27 @@ def _scale_ambient(rig: Rig, factor: float) -> None:
 def _capture(rig: Rig):
     def capture(levels, exposure_us: float) -> np.ndarray:
         return preview_frames(rig.camera, rig.booth, CapturePlan.single(levels, exposure_us, role="led"))[0].pixels
+
     return capture
 
 
-def _plan(rig: Rig, limits: tuple[float, float] = ex.DEFAULT_EXPOSURE_RANGE_US, noise: bool = True,
-          policy: ex.ExposurePolicy = POLICY) -> ex.ExposurePlan:
+def _plan(
+    rig: Rig,
+    limits: tuple[float, float] = ex.DEFAULT_EXPOSURE_RANGE_US,
+    noise: bool = True,
+    policy: ex.ExposurePolicy = POLICY,
+) -> ex.ExposurePlan:
     info = rig.camera.info
-    return ex.plan_exposures(_capture(rig), N_LEDS, info.black_level, info.white_level, limits,
-                             ex.camera_noise_model(rig.camera) if noise else None, policy, start_us=10_000.0)
+    return ex.plan_exposures(
+        _capture(rig),
+        N_LEDS,
+        info.black_level,
+        info.white_level,
+        limits,
+        ex.camera_noise_model(rig.camera) if noise else None,
+        policy,
+        start_us=10_000.0,
+    )
 
 
 def _check_frames(rig: Rig, plan: ex.ExposurePlan) -> tuple[ex.Levels, list[float]]:
@@ -64,8 +77,15 @@ def _check_frames(rig: Rig, plan: ex.ExposurePlan) -> tuple[ex.Levels, list[floa
         assert metered.saturated_fraction <= POLICY.max_saturated_fraction, (led, metered)
         assert metered.bright_end <= POLICY.headroom_fraction * 1.05
         leds.append(frame)
-    snr, method = ex.measure_led_snr(ambient, plan.ambient_exposure_us, leds, plan.led_exposures_us,
-                                     info.black_level, info.white_level, ex.camera_noise_model(rig.camera))
+    snr, method = ex.measure_led_snr(
+        ambient,
+        plan.ambient_exposure_us,
+        leds,
+        plan.led_exposures_us,
+        info.black_level,
+        info.white_level,
+        ex.camera_noise_model(rig.camera),
+    )
     assert method == "photon+read noise"
     return levels, snr
 
@@ -79,7 +99,8 @@ def test_normal_ambient_lands_on_target(rig: Rig) -> None:
     np.testing.assert_allclose(snr, plan.predicted_snr, rtol=0.35)
     # ambient + LED gets no more than the headroom over the ambient's target: LED exposures ≤ 1.3× ambient
     assert max(plan.led_exposures_us) <= plan.ambient_exposure_us * POLICY.headroom_fraction / (
-        POLICY.target_fraction * (1 - POLICY.tolerance))
+        POLICY.target_fraction * (1 - POLICY.tolerance)
+    )
     assert plan.to_dict()["led_exposures_us"] == list(plan.led_exposures_us)
 
 
@@ -121,10 +142,20 @@ def test_flash_exposure_keeps_the_flash_frame_below_saturation(rig: Rig) -> None
     info = rig.camera.info
     capture = _capture(rig)
     ambient = capture((0.0,) * N_LEDS, plan.ambient_exposure_us)
-    leds = [capture(tuple(1.0 if i == k else 0.0 for i in range(N_LEDS)), e) for k, e in enumerate(plan.led_exposures_us)]
+    leds = [
+        capture(tuple(1.0 if i == k else 0.0 for i in range(N_LEDS)), e) for k, e in enumerate(plan.led_exposures_us)
+    ]
     weights = np.ones(N_LEDS)
-    exposure = ex.flash_exposure(ambient, plan.ambient_exposure_us, leds, plan.led_exposures_us, weights,
-                                 info.black_level, info.white_level, plan.exposure_range_us)
+    exposure = ex.flash_exposure(
+        ambient,
+        plan.ambient_exposure_us,
+        leds,
+        plan.led_exposures_us,
+        weights,
+        info.black_level,
+        info.white_level,
+        plan.exposure_range_us,
+    )
     flash = capture(tuple(weights), exposure)
     levels = ex.meter(flash, info.black_level, info.white_level, POLICY)
     assert levels.saturated_fraction <= POLICY.max_saturated_fraction
@@ -207,14 +238,15 @@ def test_flash_exposure_from_frames_as_they_arrive(channels: int) -> None:
         # RGB: every step-th pixel; a one-plane (mosaic) frame: every (step/2)-th 2×2 quad, its four sites as channels
         if frame.ndim == 3:
             return frame[::step, ::step]
-        return np.stack([frame[i::2, j::2][::step // 2, ::step // 2] for i in (0, 1) for j in (0, 1)], axis=2)
+        return np.stack([frame[i::2, j::2][:: step // 2, :: step // 2] for i in (0, 1) for j in (0, 1)], axis=2)
 
     rate = (sampled(ambient).astype(float) - black) / ambient_us
     for weights in ([0.3, 0.0, 1.0, 0.2, 0.7], [0.0] * 5, [1.0] * 5):
         one_shot = ex.flash_exposure(ambient, ambient_us, leds, led_us, weights, black, white, limits, POLICY)
         assert predictor.predict(weights) == one_shot
-        total = rate + sum(w * ((sampled(f).astype(float) - black) / e - rate)
-                           for f, e, w in zip(leds, led_us, weights))
+        total = rate + sum(
+            w * ((sampled(f).astype(float) - black) / e - rate) for f, e, w in zip(leds, led_us, weights)
+        )
         brightest = total.max(axis=2)
         bright_end = np.quantile(brightest, 1.0 - POLICY.max_saturated_fraction)
         expected = min(max(POLICY.target_fraction * (white - black) / bright_end, limits[0]), limits[1])
@@ -248,21 +280,24 @@ def _lost_blocks(frames, white: float, block: int = 4) -> float:
         saturated = frame >= white
         saturated = saturated.any(axis=-1) if saturated.ndim == 3 else saturated
         rows, cols = saturated.shape[0] // block, saturated.shape[1] // block
-        blocks = saturated[:rows * block, :cols * block].reshape(rows, block, cols, block).any(axis=(1, 3))
+        blocks = saturated[: rows * block, : cols * block].reshape(rows, block, cols, block).any(axis=(1, 3))
         union = blocks if union is None else union | blocks
     return float(np.mean(union))
 
 
 def _synthetic(ambient: np.ndarray, leds: list[np.ndarray]):
     """A noise-free linear sensor: ``capture(levels, t)`` = clip(black + t·(ambient + Σ level·LED-only))."""
+
     def capture(levels, exposure_us: float) -> np.ndarray:
         rate = ambient + sum(level * led for level, led in zip(levels, leds))
         return np.minimum(BLACK + rate * exposure_us, WHITE)
+
     return capture
 
 
-def _scene(strips: list[tuple[int, int]], n_leds: int = 1, ambient_strips: bool = True
-           ) -> tuple[np.ndarray, list[np.ndarray]]:
+def _scene(
+    strips: list[tuple[int, int]], n_leds: int = 1, ambient_strips: bool = True
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """64×64×3 rates: a textured diffuse scene; LED k's rows ``strips[k]`` 10× brighter (the ambient's too:
     a specular strip; or not: each LED's own glare)."""
     rng = np.random.default_rng(3)
@@ -281,15 +316,17 @@ def _scene(strips: list[tuple[int, int]], n_leds: int = 1, ambient_strips: bool 
 
 def _plan_synthetic(ambient, leds, criterion: str, **policy) -> ex.ExposurePlan:
     chosen = ex.ExposurePolicy(criterion=criterion, **policy)
-    return ex.plan_exposures(_synthetic(ambient, leds), len(leds), BLACK, WHITE, (1.0, 1e6), NOISE, chosen,
-                             start_us=100.0)
+    return ex.plan_exposures(
+        _synthetic(ambient, leds), len(leds), BLACK, WHITE, (1.0, 1e6), NOISE, chosen, start_us=100.0
+    )
 
 
 def _frames(plan: ex.ExposurePlan, ambient, leds) -> list[np.ndarray]:
     capture = _synthetic(ambient, leds)
     n = len(leds)
     return [capture((0.0,) * n, plan.ambient_exposure_us)] + [
-        capture(tuple(1.0 if i == k else 0.0 for i in range(n)), t) for k, t in enumerate(plan.led_exposures_us)]
+        capture(tuple(1.0 if i == k else 0.0 for i in range(n)), t) for k, t in enumerate(plan.led_exposures_us)
+    ]
 
 
 def test_information_lets_a_bright_strip_saturate_and_exposes_the_rest_longer() -> None:
@@ -354,14 +391,24 @@ def test_information_plan_on_the_sim_rig_predicts_its_losses_and_gains_snr(rig: 
     info = rig.camera.info
     capture = _capture(rig)
     frames = [capture((0.0,) * N_LEDS, informed.ambient_exposure_us)] + [
-        capture(tuple(1.0 if i == k else 0.0 for i in range(N_LEDS)), t) for k, t in enumerate(informed.led_exposures_us)]
+        capture(tuple(1.0 if i == k else 0.0 for i in range(N_LEDS)), t)
+        for k, t in enumerate(informed.led_exposures_us)
+    ]
     lost = _lost_blocks(frames, info.white_level)
-    past_headroom = _lost_blocks(frames, info.black_level + INFORMATION.headroom_fraction * (
-        info.white_level - info.black_level))
+    past_headroom = _lost_blocks(
+        frames, info.black_level + INFORMATION.headroom_fraction * (info.white_level - info.black_level)
+    )
     assert 0 < lost <= past_headroom <= INFORMATION.max_lost_fraction
     assert past_headroom == pytest.approx(informed.lost_block_fraction, abs=0.02)
-    snr, _ = ex.measure_led_snr(frames[0], informed.ambient_exposure_us, frames[1:], informed.led_exposures_us,
-                                info.black_level, info.white_level, ex.camera_noise_model(rig.camera))
+    snr, _ = ex.measure_led_snr(
+        frames[0],
+        informed.ambient_exposure_us,
+        frames[1:],
+        informed.led_exposures_us,
+        info.black_level,
+        info.white_level,
+        ex.camera_noise_model(rig.camera),
+    )
     _, before = _check_frames(rig, bright)
     gains = np.array(snr) / np.array(before)
     assert gains.min() > 1.2 and np.median(gains) > 2.0, gains
@@ -378,15 +425,31 @@ def test_capture_with_the_information_criterion_from_the_command_line(tmp_path, 
     """``--exposure-criterion information --max-lost 10`` reaches the plan: longer LED exposures, ≤ 10 % blocks lost."""
     bright, informed = tmp_path / "b", tmp_path / "i"
     assert main(["capture", "--out", str(bright), "--ambient", "tungsten"]) == 0
-    assert main(["capture", "--out", str(informed), "--ambient", "tungsten", "--exposure-criterion", "information",
-                 "--max-lost", "10"]) == 0
+    assert (
+        main(
+            [
+                "capture",
+                "--out",
+                str(informed),
+                "--ambient",
+                "tungsten",
+                "--exposure-criterion",
+                "information",
+                "--max-lost",
+                "10",
+            ]
+        )
+        == 0
+    )
     plans = [read_sequence(out / "sequence").extra["msflash"]["exposure"] for out in (bright, informed)]
     assert plans[1]["policy"]["criterion"] == "information"
     assert plans[1]["policy"]["max_lost_fraction"] == pytest.approx(0.10)
     assert 0 <= plans[1]["lost_block_fraction"] <= 0.10
     assert sum(plans[1]["led_exposures_us"]) > sum(plans[0]["led_exposures_us"])
     capsys.readouterr()
-    assert main(["capture", "--out", str(tmp_path / "x"), "--exposure-criterion", "information", "--max-lost", "150"]) == 2
+    assert (
+        main(["capture", "--out", str(tmp_path / "x"), "--exposure-criterion", "information", "--max-lost", "150"]) == 2
+    )
     assert "--max-lost 150" in capsys.readouterr().err
 
 
@@ -429,8 +492,10 @@ def test_a_mono_camera_meters_as_its_frames_recorded_in_rgb(criterion: str) -> N
         ours = ex.measure_led_snr(frames[0], 500.0, frames[1:], [400.0] * 3, BLACK, WHITE, noise)
         assert ours == ex.measure_led_snr(coloured[0], 500.0, coloured[1:], [400.0] * 3, BLACK, WHITE, noise)
     weights = [0.5, 0.0, 1.0]
-    assert ex.flash_exposure(frames[0], 500.0, frames[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6)) == \
-        ex.flash_exposure(coloured[0], 500.0, coloured[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6))
-    quads = ex.flash_exposure(frames[0][:, :, 0], 500.0, [f[:, :, 0] for f in frames[1:]], [400.0] * 3, weights,
-                              BLACK, WHITE, (1.0, 1e6))
+    assert ex.flash_exposure(
+        frames[0], 500.0, frames[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6)
+    ) == ex.flash_exposure(coloured[0], 500.0, coloured[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6))
+    quads = ex.flash_exposure(
+        frames[0][:, :, 0], 500.0, [f[:, :, 0] for f in frames[1:]], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6)
+    )
     assert quads != ex.flash_exposure(frames[0], 500.0, frames[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6))

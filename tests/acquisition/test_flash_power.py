@@ -75,18 +75,28 @@ def test_the_report_prints_the_led_bound_beside_the_estimate(demo: tuple[Path, s
     estimate = summary["spectrum_rmse_vs_truth"]
     # Measured 0.170–0.189 over seeds 0–9 against a bound of 0.192 (0.174–0.295 before).
     assert estimate <= bound + 0.05
-    line = (f"Spectrum RMSE against the true ambient (paper's Table 1 metric): {estimate:.4f}; the best non-negative "
-            f"fit of the truth by the LED spectra (what the LEDs allow): {bound:.4f}.")
+    line = (
+        f"Spectrum RMSE against the true ambient (paper's Table 1 metric): {estimate:.4f}; the best non-negative "
+        f"fit of the truth by the LED spectra (what the LEDs allow): {bound:.4f}."
+    )
     assert line in (out / "report.md").read_text()
-    assert f"spectrum RMSE against the true ambient {estimate:.4f}; the best non-negative LED fit of it {bound:.4f}" in stderr
+    assert (
+        f"spectrum RMSE against the true ambient {estimate:.4f}; the best non-negative LED fit of it {bound:.4f}"
+        in stderr
+    )
 
 
-@pytest.mark.parametrize(("argv", "message"), [
-    (["--flash-power", "0"], "argument --flash-power: '0': expected a positive number"),
-    (["--flash-power", "nan"], "argument --flash-power: 'nan': expected a positive number"),
-    (["--flash-power", "2", "--rig", "replay:nowhere"], "--flash-power: describes the simulated world, but the rig is "
-                                                        "'replay:nowhere'"),
-])
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--flash-power", "0"], "argument --flash-power: '0': expected a positive number"),
+        (["--flash-power", "nan"], "argument --flash-power: 'nan': expected a positive number"),
+        (
+            ["--flash-power", "2", "--rig", "replay:nowhere"],
+            "--flash-power: describes the simulated world, but the rig is 'replay:nowhere'",
+        ),
+    ],
+)
 def test_bad_flash_power(tmp_path: Path, capsys: pytest.CaptureFixture, argv: list[str], message: str) -> None:
     assert main(["capture", "--out", str(tmp_path / "c"), *argv]) == 2
     lines = capsys.readouterr().err.strip().splitlines()

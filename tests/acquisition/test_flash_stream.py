@@ -36,8 +36,11 @@ def _pixels(rig, value: int) -> np.ndarray:
 
 def test_async_writer_keeps_order_and_drains_on_exception(sim_rig, tmp_path: Path) -> None:
     levels = (0.0,) * 4
-    with pytest.raises(KeyboardInterrupt), _writer(sim_rig, tmp_path / "s") as inner, \
-            AsyncSequenceWriter(inner, max_queued=2) as writer:
+    with (
+        pytest.raises(KeyboardInterrupt),
+        _writer(sim_rig, tmp_path / "s") as inner,
+        AsyncSequenceWriter(inner, max_queued=2) as writer,
+    ):
         for value in range(5):
             entry = writer.add_frame(_pixels(sim_rig, 100 + value), "ambient", levels, 1000.0 + value)
             assert entry.file == f"frames/{value:03d}-ambient.tiff"
@@ -132,16 +135,25 @@ def test_flash_session_matches_the_sequence_path(sim_rig, tmp_path: Path) -> Non
     plan = CapturePlan.ambient_then_each_led(4, 10_000.0)
     with _writer(sim_rig, tmp_path / "s") as writer:
         session = FlashSession.prepare(writer.sequence)
-        run_capture(sim_rig.camera, sim_rig.booth, plan, writer,
-                    on_frame=lambda step, frame, _e: session.add(frame, step.role, step.led_levels))
+        run_capture(
+            sim_rig.camera,
+            sim_rig.booth,
+            plan,
+            writer,
+            on_frame=lambda step, frame, _e: session.add(frame, step.role, step.led_levels),
+        )
         writer.finish()
     sequence = read_sequence(tmp_path / "s")
     reference = analysis.estimate_sequence(sequence)
     estimate = session.estimate(session.stack())
     np.testing.assert_allclose(estimate.ambient_weights, reference.ambient_weights, rtol=1e-9, atol=1e-12)
     expected = analysis.solve_sequence_flash(sequence, "complementary", reference.ambient_weights)
-    np.testing.assert_allclose(session.solve("complementary", estimate.ambient_weights).flash_weights,
-                               expected.flash_weights, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(
+        session.solve("complementary", estimate.ambient_weights).flash_weights,
+        expected.flash_weights,
+        rtol=1e-7,
+        atol=1e-9,
+    )
 
 
 def test_async_writer_pause_holds_frames_then_writes_them_in_order(sim_rig, tmp_path: Path) -> None:
@@ -196,8 +208,13 @@ def test_flash_stream_pauses_the_writer_only_around_the_decision(sim_rig, tmp_pa
     assert len(read_sequence(tmp_path / "s").frames) == 6
 
 
-def _session_and_frames(sim_rig, tmp_path: Path, levels: list[tuple[float, ...]], saturate: float = 0.0,
-                        exposure_limits_us: tuple[float, float] | None = None):
+def _session_and_frames(
+    sim_rig,
+    tmp_path: Path,
+    levels: list[tuple[float, ...]],
+    saturate: float = 0.0,
+    exposure_limits_us: tuple[float, float] | None = None,
+):
     """A FlashSession fed synthetic frames (ambient + one frame per entry of ``levels``)."""
     from msflash.acquisition.devices.camera import RawFrame
 
@@ -215,11 +232,24 @@ def _session_and_frames(sim_rig, tmp_path: Path, levels: list[tuple[float, ...]]
     return session
 
 
-@pytest.mark.parametrize(("levels", "saturate"), [
-    ([tuple(float(i == j) for i in range(4)) for j in range(4)], 0.0),
-    ([tuple(float(i == j) for i in range(4)) for j in range(4)], 0.003),
-    ([(1.0, 0.5, 0.0, 0.0), (0.0, 1.0, 0.5, 0.0), (0.0, 0.0, 1.0, 0.5), (0.5, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0, 1.0)], 0.0),
-], ids=["one-led-per-frame", "saturated-blocks", "multiplexed-more-frames"])
+@pytest.mark.parametrize(
+    ("levels", "saturate"),
+    [
+        ([tuple(float(i == j) for i in range(4)) for j in range(4)], 0.0),
+        ([tuple(float(i == j) for i in range(4)) for j in range(4)], 0.003),
+        (
+            [
+                (1.0, 0.5, 0.0, 0.0),
+                (0.0, 1.0, 0.5, 0.0),
+                (0.0, 0.0, 1.0, 0.5),
+                (0.5, 0.0, 0.0, 1.0),
+                (1.0, 1.0, 1.0, 1.0),
+            ],
+            0.0,
+        ),
+    ],
+    ids=["one-led-per-frame", "saturated-blocks", "multiplexed-more-frames"],
+)
 def test_flash_session_statistics_are_the_sequence_statistics(sim_rig, tmp_path: Path, levels, saturate) -> None:
     """Frame-by-frame moments (or, for more frames than LEDs, the general path) = the sequence path."""
     from msflash.acquisition.session import analysis
@@ -274,9 +304,16 @@ def test_flash_session_predicts_the_flash_exposure_of_the_frames_taken(sim_rig, 
     frames = session._frames[:5]
     camera = session.header.camera
     for weights in ([0.2, 0.9, 0.0, 0.5], [1.0, 1.0, 1.0, 1.0]):
-        expected = flash_exposure(frames[0].pixels, frames[0].exposure_us, [f.pixels for f in frames[1:]],
-                                  [f.exposure_us for f in frames[1:]], weights, camera.black_level,
-                                  camera.white_level, limits)
+        expected = flash_exposure(
+            frames[0].pixels,
+            frames[0].exposure_us,
+            [f.pixels for f in frames[1:]],
+            [f.exposure_us for f in frames[1:]],
+            weights,
+            camera.black_level,
+            camera.white_level,
+            limits,
+        )
         assert session.flash_exposure(weights) == expected
     session.begin()
     with pytest.raises(ValueError, match="no ambient frame"):
@@ -305,10 +342,14 @@ def test_flash_step_released_with_now_only_in_booth_master(sim_rig, tmp_path: Pa
     assert not sim_rig.line_errors
 
 
-@pytest.mark.parametrize("levels", [
-    [tuple(float(i == j) for i in range(4)) for j in range(4)],
-    [(1.0, 0.5, 0.0, 0.0), (0.0, 1.0, 0.5, 0.0), (0.0, 0.0, 1.0, 0.5), (0.5, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0, 1.0)],
-], ids=["one-led-per-frame", "multiplexed-more-frames"])
+@pytest.mark.parametrize(
+    "levels",
+    [
+        [tuple(float(i == j) for i in range(4)) for j in range(4)],
+        [(1.0, 0.5, 0.0, 0.0), (0.0, 1.0, 0.5, 0.0), (0.0, 0.0, 1.0, 0.5), (0.5, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0, 1.0)],
+    ],
+    ids=["one-led-per-frame", "multiplexed-more-frames"],
+)
 def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim_rig, tmp_path: Path, levels) -> None:
     """A mono camera's (H, W) frames: the writer records three identical channels; the session
     block-sums the one plane and gives the statistics (and estimate) of the recorded sequence."""
@@ -326,8 +367,9 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim
         refused.add_frame(pixels[0].astype(np.uint16), "ambient", (0.0,) * 4, 1000.0)
     written = []
     wavelengths, camera, leds = sim_rig.sequence_header()
-    with SequenceWriter(tmp_path / "mono", wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
-                        leds=leds, mono=True) as writer:
+    with SequenceWriter(
+        tmp_path / "mono", wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera, leds=leds, mono=True
+    ) as writer:
         session = FlashSession.prepare(writer.sequence, exposure_limits_us=(1.0, 1e6))
         for index, (values, level) in enumerate(zip(pixels, [(0.0,) * 4, *levels])):
             values = values.astype(np.uint16)
@@ -348,15 +390,22 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim
     np.testing.assert_allclose(ours.gram, reference.gram, rtol=1e-9, atol=1e-9 * abs(reference.gram).max())
     np.testing.assert_allclose(ours.cross, reference.cross, rtol=1e-9, atol=1e-9 * abs(reference.cross).max())
     np.testing.assert_allclose(ours.led_sums, reference.led_sums, rtol=1e-9)
-    np.testing.assert_allclose(session.estimate(session.stack()).ambient_weights,
-                               analysis.estimate_sequence(sequence).ambient_weights, rtol=1e-7, atol=1e-12)
+    np.testing.assert_allclose(
+        session.estimate(session.stack()).ambient_weights,
+        analysis.estimate_sequence(sequence).ambient_weights,
+        rtol=1e-7,
+        atol=1e-12,
+    )
     # msflash run's report reads the frames in memory as the sequence records them (RGB).
     in_memory = analysis.load_frame_stack(sequence, written)
     on_disk = analysis.load_frame_stack(sequence)
     assert in_memory.ambient.shape == on_disk.ambient.shape == (info.height, info.width, 3)
     assert np.array_equal(in_memory.ambient, on_disk.ambient)
     assert all(np.array_equal(a, b) for a, b in zip(in_memory.led_frames, on_disk.led_frames, strict=True))
-    assert (in_memory.spec.ambient_scale, in_memory.spec.led_scales) == (on_disk.spec.ambient_scale, on_disk.spec.led_scales)
+    assert (in_memory.spec.ambient_scale, in_memory.spec.led_scales) == (
+        on_disk.spec.ambient_scale,
+        on_disk.spec.led_scales,
+    )
     assert np.array_equal(in_memory.spec.led_levels, on_disk.spec.led_levels)
     # The frames do come from memory (the disk's would equal them: poison memory to tell them apart).
     poisoned = analysis.load_frame_stack(sequence, [np.zeros_like(v) for v in written])
@@ -365,8 +414,15 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim
     recorded_frames = [sequence.load_frame(i) for i in range(len(written))]
     weights = [0.3] * len(levels)
     assert session.flash_exposure(weights) == flash_exposure(
-        recorded_frames[0], sequence.frames[0].exposure_us, recorded_frames[1:],
-        [f.exposure_us for f in sequence.frames[1:]], weights, info.black_level, info.white_level, (1.0, 1e6))
+        recorded_frames[0],
+        sequence.frames[0].exposure_us,
+        recorded_frames[1:],
+        [f.exposure_us for f in sequence.frames[1:]],
+        weights,
+        info.black_level,
+        info.white_level,
+        (1.0, 1e6),
+    )
 
 
 def test_collection_resumes_after_a_failed_flash_decision(sim_rig, tmp_path: Path) -> None:
@@ -380,8 +436,10 @@ def test_collection_resumes_after_a_failed_flash_decision(sim_rig, tmp_path: Pat
     for enabled in (True, False):
         (gc.enable if enabled else gc.disable)()
         try:
-            with AsyncSequenceWriter(_writer(sim_rig, tmp_path / f"s{enabled}")) as writer, \
-                    pytest.raises(RuntimeError, match="no decision"):
+            with (
+                AsyncSequenceWriter(_writer(sim_rig, tmp_path / f"s{enabled}")) as writer,
+                pytest.raises(RuntimeError, match="no decision"),
+            ):
                 run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, decide)
             assert gc.isenabled() == enabled
         finally:

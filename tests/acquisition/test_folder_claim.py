@@ -27,8 +27,12 @@ SLOW_CAPTURE = ["capture", "--sync", "booth", "--exposure-us", "1500000", "--sce
 
 
 def _msflash(*args: str) -> subprocess.Popen[bytes]:
-    return subprocess.Popen([sys.executable, "-m", "msflash.acquisition.app.cli", *args], cwd=REPO,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    return subprocess.Popen(
+        [sys.executable, "-m", "msflash.acquisition.app.cli", *args],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
 
 
 def _finish(process: subprocess.Popen[bytes], timeout_s: float = 240.0) -> tuple[int, str]:
@@ -102,8 +106,9 @@ def test_a_stale_lock_is_taken_over_with_a_note(tmp_path: Path, caplog: pytest.L
     assert "taking over from msflash process 4194304" in caplog.text
 
 
-def test_temporary_files_of_a_killed_writer_are_removed_with_a_note(tmp_path: Path,
-                                                                    caplog: pytest.LogCaptureFixture) -> None:
+def test_temporary_files_of_a_killed_writer_are_removed_with_a_note(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     seq = tmp_path / "seq"
     (seq / "frames").mkdir(parents=True)
     stale = [seq / "frames" / ".000-ambient.tiff.k3j2_x.tmp.tiff", seq / ".sequence.json.a8f7.tmp"]
@@ -134,8 +139,9 @@ def _partial_with_a_stale_temporary(seq: Path) -> Path:
     return stale
 
 
-def test_reading_a_killed_writers_sequence_reports_its_temporary_files(tmp_path: Path,
-                                                                       caplog: pytest.LogCaptureFixture) -> None:
+def test_reading_a_killed_writers_sequence_reports_its_temporary_files(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     stale = _partial_with_a_stale_temporary(tmp_path / "seq")
     (tmp_path / "seq" / LOCK_FILE).write_text("4194304\nmsflash capture, since 2026-01-01 00:00:00 UTC\n")
     with caplog.at_level(logging.WARNING):
@@ -144,8 +150,9 @@ def test_reading_a_killed_writers_sequence_reports_its_temporary_files(tmp_path:
     assert stale.exists()  # reported, never deleted by a reader
 
 
-def test_reading_a_sequence_a_live_writer_holds_reports_nothing(tmp_path: Path,
-                                                                caplog: pytest.LogCaptureFixture) -> None:
+def test_reading_a_sequence_a_live_writer_holds_reports_nothing(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     _partial_with_a_stale_temporary(tmp_path / "seq")
     with claimed(tmp_path / "seq"), caplog.at_level(logging.WARNING):
         assert read_sequence(tmp_path / "seq").partial

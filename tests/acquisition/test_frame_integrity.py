@@ -60,12 +60,18 @@ def left_aligned(tmp_path: Path) -> Path:
     return _rewritten(tmp_path, BAYER_12BIT, _twelve_bit_times_16)
 
 
-@pytest.mark.parametrize("route", [
-    ("estimate",), ("flash", "--mode", "matching"), ("synthesize", "--weights", "1,0,0,0,0,0,0", "--out", "{tmp}/s.exr"),
-    ("evaluate", "--chart", "macbeth", "--out", "{tmp}/eval"),
-])
-def test_every_processing_route_refuses_values_above_white(left_aligned: Path, tmp_path: Path,
-                                                           capsys: pytest.CaptureFixture, route: tuple[str, ...]) -> None:
+@pytest.mark.parametrize(
+    "route",
+    [
+        ("estimate",),
+        ("flash", "--mode", "matching"),
+        ("synthesize", "--weights", "1,0,0,0,0,0,0", "--out", "{tmp}/s.exr"),
+        ("evaluate", "--chart", "macbeth", "--out", "{tmp}/eval"),
+    ],
+)
+def test_every_processing_route_refuses_values_above_white(
+    left_aligned: Path, tmp_path: Path, capsys: pytest.CaptureFixture, route: tuple[str, ...]
+) -> None:
     argv = [route[0], str(left_aligned), *(a.format(tmp=tmp_path) for a in route[1:])]
     line = _error(capsys, *argv)
     assert f"{left_aligned / 'sequence.json'}: frames[3].file 'frames/003-led.tiff'" in line
@@ -73,8 +79,9 @@ def test_every_processing_route_refuses_values_above_white(left_aligned: Path, t
     assert "expected values in" in line and "12-bit data in a 16-bit file" in line
 
 
-def test_replay_refuses_a_corrupt_recording_before_capturing(left_aligned: Path, tmp_path: Path,
-                                                             capsys: pytest.CaptureFixture) -> None:
+def test_replay_refuses_a_corrupt_recording_before_capturing(
+    left_aligned: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     line = _error(capsys, "run", "--rig", f"replay:{left_aligned}", "--out", str(tmp_path / "run"))
     assert "frames[3].file 'frames/003-led.tiff'" in line and "above camera.white_level 4095" in line
     assert not (tmp_path / "run" / "sequence").exists()
@@ -128,8 +135,10 @@ def _float_sequence(tmp_path: Path, change) -> Path:
     sequence = _sample(RGB_16BIT)
     black, white = sequence.camera.black_level, sequence.camera.white_level
     camera = replace(sequence.camera, black_level=0.0, white_level=1.0)
-    frames = [change(i, ((sequence.load_frame(i).astype(np.float32) - black) / (white - black)))
-              for i in range(len(sequence.frames))]
+    frames = [
+        change(i, ((sequence.load_frame(i).astype(np.float32) - black) / (white - black)))
+        for i in range(len(sequence.frames))
+    ]
     out = tmp_path / "exr"
     write_sequence(out, replace(sequence, camera=camera), frames)
     assert all(frame.file.endswith(".exr") for frame in read_sequence(out).frames)
@@ -153,8 +162,10 @@ def test_float_frames_above_white_or_not_finite_are_refused(tmp_path: Path, caps
         return pixels
 
     line = _error(capsys, "estimate", str(_float_sequence(tmp_path, damaged)))
-    assert "frames[2].file 'frames/002-led.exr': 1 of 36864 pixels not finite (NaN or ±inf) and 1 of 36864 " \
-           "pixels above camera.white_level 1" in line
+    assert (
+        "frames[2].file 'frames/002-led.exr': 1 of 36864 pixels not finite (NaN or ±inf) and 1 of 36864 "
+        "pixels above camera.white_level 1" in line
+    )
     assert "…1.5)" in line
 
 
@@ -174,7 +185,10 @@ def test_a_file_written_by_another_tool_is_checked(tmp_path: Path, capsys: pytes
     assert output.write_image(pixels.reshape(96, 128, 1))  # (H, W, C): a 2-D array would be read transposed
     output.close()
     line = _error(capsys, "flash", str(copy), "--mode", "complementary")
-    assert "frames[5].file 'frames/005-led.tiff': 20 of 12288 pixels above camera.white_level 4095 (values 300…65535)" in line
+    assert (
+        "frames[5].file 'frames/005-led.tiff': 20 of 12288 pixels above camera.white_level 4095 (values 300…65535)"
+        in line
+    )
 
 
 def test_the_margin_grows_with_gain() -> None:
@@ -186,9 +200,11 @@ def test_the_margin_grows_with_gain() -> None:
 
 def test_calibrate_dark_measures_the_black_level_instead_of_trusting_it(tmp_path: Path) -> None:
     sequence = _sample(BAYER_12BIT)
-    dark = replace(sequence, camera=replace(sequence.camera, black_level=2048.0),
-                   frames=tuple(replace(f, role="dark", led_levels=(0.0,) * 7) for f in sequence.frames[:1])
-                   + sequence.frames[:1])
+    dark = replace(
+        sequence,
+        camera=replace(sequence.camera, black_level=2048.0),
+        frames=tuple(replace(f, role="dark", led_levels=(0.0,) * 7) for f in sequence.frames[:1]) + sequence.frames[:1],
+    )
     rng = np.random.default_rng(0)
     frames = [np.rint(rng.normal(256, 3, (96, 128))).astype(np.uint16) for _ in range(2)]  # black 256, 3 DN noise
     out = write_sequence(tmp_path / "dark", dark, frames)

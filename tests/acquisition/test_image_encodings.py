@@ -25,8 +25,9 @@ COUNTS = (np.arange(5 * 7 * 3).reshape(5, 7, 3) * 611 % 65536).astype(np.uint16)
 """An RGB frame of 16-bit counts, every value distinct enough to catch a swapped byte or channel."""
 
 
-def _oiio_write(path: Path, pixels: np.ndarray, type_name: str, format_name: str = "tiff", pages: int = 1,
-                **attributes: object) -> Path:
+def _oiio_write(
+    path: Path, pixels: np.ndarray, type_name: str, format_name: str = "tiff", pages: int = 1, **attributes: object
+) -> Path:
     spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2] if pixels.ndim == 3 else 1, type_name)
     for name, value in attributes.items():
         spec.attribute(name, value)
@@ -55,27 +56,47 @@ READ: dict[str, tuple[Callable[[Path], Path], np.ndarray, tuple[str, object] | N
     # name: (writer, the pixels read_image must return, an attribute proving the file is that encoding)
     "lzw_tiff": (lambda p: _oiio_write(p, COUNTS, "uint16", compression="lzw"), COUNTS, ("tiff:Compression", 5)),
     "deflate_tiff": (lambda p: _oiio_write(p, COUNTS, "uint16", compression="zip"), COUNTS, ("tiff:Compression", 8)),
-    "planar_tiff": (lambda p: _oiio_write(p, COUNTS, "uint16", planarconfig="separate"), COUNTS,
-                    ("tiff:PlanarConfiguration", 2)),
+    "planar_tiff": (
+        lambda p: _oiio_write(p, COUNTS, "uint16", planarconfig="separate"),
+        COUNTS,
+        ("tiff:PlanarConfiguration", 2),
+    ),
     "big_endian_tiff": (lambda p: write_baseline_tiff(p, COUNTS, big_endian=True), COUNTS, None),
-    "big_endian_mosaic_tiff": (lambda p: write_baseline_tiff(p, COUNTS[:, :, 1], big_endian=True), COUNTS[:, :, 1],
-                               None),
-    "float32_tiff": (lambda p: _oiio_write(p, COUNTS.astype(np.float32), "float"), COUNTS.astype(np.float32),
-                     ("oiio:BitsPerSample", 32)),
-    "float64_tiff": (lambda p: _oiio_write(p, COUNTS.astype(np.float64), "double"), COUNTS.astype(np.float32),
-                     ("oiio:BitsPerSample", 64)),
-    "float16_tiff": (lambda p: write_baseline_tiff(p, (COUNTS / 65535).astype(np.float16)),
-                     (COUNTS / 65535).astype(np.float16).astype(np.float32), ("oiio:BitsPerSample", 16)),
-    "uint8_tiff": (lambda p: _oiio_write(p, (COUNTS % 256).astype(np.uint8), "uint8"), (COUNTS % 256).astype(np.uint8),
-                   None),
+    "big_endian_mosaic_tiff": (
+        lambda p: write_baseline_tiff(p, COUNTS[:, :, 1], big_endian=True),
+        COUNTS[:, :, 1],
+        None,
+    ),
+    "float32_tiff": (
+        lambda p: _oiio_write(p, COUNTS.astype(np.float32), "float"),
+        COUNTS.astype(np.float32),
+        ("oiio:BitsPerSample", 32),
+    ),
+    "float64_tiff": (
+        lambda p: _oiio_write(p, COUNTS.astype(np.float64), "double"),
+        COUNTS.astype(np.float32),
+        ("oiio:BitsPerSample", 64),
+    ),
+    "float16_tiff": (
+        lambda p: write_baseline_tiff(p, (COUNTS / 65535).astype(np.float16)),
+        (COUNTS / 65535).astype(np.float16).astype(np.float32),
+        ("oiio:BitsPerSample", 16),
+    ),
+    "uint8_tiff": (
+        lambda p: _oiio_write(p, (COUNTS % 256).astype(np.uint8), "uint8"),
+        (COUNTS % 256).astype(np.uint8),
+        None,
+    ),
     "png16": (lambda p: _oiio_write(p, COUNTS, "uint16", "png"), COUNTS, None),
     "png_named_tiff": (lambda p: _oiio_write(p, COUNTS, "uint16", "png"), COUNTS, None),
 }
 
 REFUSED: dict[str, tuple[Callable[[Path], Path], str]] = {
     "uint32_tiff": (lambda p: write_baseline_tiff(p, COUNTS.astype(np.uint32)), "pixel type 'uint32' is not supported"),
-    "int16_tiff": (lambda p: _oiio_write(p, COUNTS.astype(np.int16) // 2, "int16"),
-                   "pixel type 'int16' is not supported"),
+    "int16_tiff": (
+        lambda p: _oiio_write(p, COUNTS.astype(np.int16) // 2, "int16"),
+        "pixel type 'int16' is not supported",
+    ),
     "multi_page_tiff": (lambda p: _oiio_write(p, COUNTS, "uint16", pages=3), "holds more than one image"),
     "two_channel_tiff": (lambda p: _oiio_write(p, COUNTS[:, :, :2].copy(), "uint16"), "image has 2 channels"),
     "rgba_tiff": (lambda p: _oiio_write(p, np.dstack([COUNTS, COUNTS[:, :, :1]]), "uint16"), "image has 4 channels"),

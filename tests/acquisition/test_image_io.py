@@ -77,7 +77,9 @@ def test_half_exr_and_8bit_png_from_other_tools(tmp_path: Path) -> None:
 def test_attributes_make_a_frame_describe_itself(tmp_path: Path, suffix: str) -> None:
     pixels = np.ones((4, 4, 3), dtype=np.uint16 if suffix == ".tiff" else np.float32)
     attributes = {
-        "msflash:role": "led", "msflash:exposure_us": 1250.5, "msflash:led_levels": [1.0, 0.0, 0.25],
+        "msflash:role": "led",
+        "msflash:exposure_us": 1250.5,
+        "msflash:led_levels": [1.0, 0.0, 0.25],
         "msflash:index": 3,
     }
     path = write_image(tmp_path / f"frame{suffix}", pixels, attributes)

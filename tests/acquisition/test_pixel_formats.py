@@ -39,14 +39,14 @@ def pack_gev(samples: list[int], bits: int) -> bytes:
     low = bits - 8  # 4 for 12-bit, 2 for 10-bit
     out = bytearray()
     for p0, p1 in zip(samples[0::2], samples[1::2]):
-        byte0 = sum(_bit(p0, k + low) << k for k in range(8))       # p0's top 8 bits
+        byte0 = sum(_bit(p0, k + low) << k for k in range(8))  # p0's top 8 bits
         byte1 = 0
         for k in range(8):
             if k < low:
-                byte1 |= _bit(p0, k) << k                            # p0's low bits at 0..low-1
+                byte1 |= _bit(p0, k) << k  # p0's low bits at 0..low-1
             elif 4 <= k < 4 + low:
-                byte1 |= _bit(p1, k - 4) << k                        # p1's low bits at 4..4+low-1
-        byte2 = sum(_bit(p1, k + low) << k for k in range(8))       # p1's top 8 bits
+                byte1 |= _bit(p1, k - 4) << k  # p1's low bits at 4..4+low-1
+        byte2 = sum(_bit(p1, k + low) << k for k in range(8))  # p1's top 8 bits
         out += bytes((byte0, byte1, byte2))
     return bytes(out)
 
@@ -62,8 +62,7 @@ def frames(draw: st.DrawFn) -> tuple[str, int, int, list[int]]:
     layout = PACKED_FORMATS[pixel_format]
     width = layout.group_pixels * draw(st.integers(1, 6))
     height = draw(st.integers(1, 5))
-    samples = draw(st.lists(st.integers(0, 2 ** layout.bits - 1), min_size=width * height,
-                            max_size=width * height))
+    samples = draw(st.lists(st.integers(0, 2**layout.bits - 1), min_size=width * height, max_size=width * height))
     return pixel_format, width, height, samples
 
 
@@ -89,18 +88,24 @@ def test_trailing_bytes_are_ignored(frame: tuple[str, int, int, list[int]], trai
 
 @settings(max_examples=100, deadline=None)
 @given(frames(), st.data())
-def test_a_truncated_payload_is_refused_with_the_sizes(frame: tuple[str, int, int, list[int]],
-                                                       data: st.DataObject) -> None:
+def test_a_truncated_payload_is_refused_with_the_sizes(
+    frame: tuple[str, int, int, list[int]], data: st.DataObject
+) -> None:
     pixel_format, width, height, samples = frame
     packed = pack(samples, pixel_format)
     cut = data.draw(st.integers(0, len(packed) - 1))
-    with pytest.raises(CameraError, match=rf"camera X: payload of {cut} bytes is too short for {width}x{height} "
-                                          rf"{pixel_format}; expected {len(packed)} bytes"):
+    with pytest.raises(
+        CameraError,
+        match=rf"camera X: payload of {cut} bytes is too short for {width}x{height} "
+        rf"{pixel_format}; expected {len(packed)} bytes",
+    ):
         unpack_pixels(packed[:cut], pixel_format, width, height, where="camera X")
 
 
-@pytest.mark.parametrize(("pixel_format", "width"), [("Mono12p", 3), ("Mono10p", 6), ("BayerRG10p", 2),
-                                                     ("Mono12Packed", 5), ("Mono10Packed", 1)])
+@pytest.mark.parametrize(
+    ("pixel_format", "width"),
+    [("Mono12p", 3), ("Mono10p", 6), ("BayerRG10p", 2), ("Mono12Packed", 5), ("Mono10Packed", 1)],
+)
 def test_a_width_the_packing_does_not_divide_is_refused(pixel_format: str, width: int) -> None:
     group = PACKED_FORMATS[pixel_format].group_pixels
     with pytest.raises(CameraError, match=rf"cam: width {width} is not a multiple of {group} for {pixel_format}"):

@@ -32,7 +32,10 @@ def test_recording_is_small_and_complete() -> None:
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        (lambda s: s[3].__class__(3, "led", (0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0), 10_000.0), "step 3 (led:3): led_levels"),
+        (
+            lambda s: s[3].__class__(3, "led", (0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0), 10_000.0),
+            "step 3 (led:3): led_levels",
+        ),
         (lambda s: dataclasses.replace(s[2], exposure_us=12_000.0), "step 2 (led:2): exposure_us 12000"),
         (lambda s: dataclasses.replace(s[5], gain=2.0), "step 5 (led:5): gain 2"),
         (lambda s: dataclasses.replace(s[0], role="dark"), "step 0 (dark): role 'dark'"),
@@ -137,7 +140,9 @@ def test_a_booth_that_fails_to_open_is_named_and_the_rig_is_closed(monkeypatch: 
 
     monkeypatch.setattr(rig.LedBooth, "open", staticmethod(refuse))
     threads = threading.active_count()
-    with pytest.raises(RigOpenError, match=r"rig 'replay:.*': booth emulator on /dev/pts/\d+: cannot open /dev/pts/\d+"):
+    with pytest.raises(
+        RigOpenError, match=r"rig 'replay:.*': booth emulator on /dev/pts/\d+: cannot open /dev/pts/\d+"
+    ):
         rig.open_replay_rig(RECORDED)
     assert threading.active_count() <= threads  # the pty server's thread is gone
 
@@ -163,7 +168,8 @@ def test_a_shared_sample_without_a_camera_serial_is_replayed_as_is(tmp_path: Pat
 
 @pytest.mark.parametrize("name", ["sample-rgb-tungsten", "sample-bayer-fluorescent-12bit"])
 def test_run_replays_a_recording_without_a_flash_frame_and_synthesises_the_flash(
-        tmp_path: Path, capsys: pytest.CaptureFixture, name: str) -> None:
+    tmp_path: Path, capsys: pytest.CaptureFixture, name: str
+) -> None:
     """The shared samples hold ambient + 7 LED frames (as 'msflash capture' records; the Bayer one
     with gains 1.5 and 1): 'run' replays them at their recorded exposures *and gains*, estimates,
     solves, says that the flash is synthesised only, and writes the whole report."""
@@ -178,7 +184,8 @@ def test_run_replays_a_recording_without_a_flash_frame_and_synthesises_the_flash
     replayed, recorded = read_sequence(out / "sequence"), read_sequence(sample)
     assert replayed.complete and not replayed.indices("flash")
     assert [(f.role, f.exposure_us, f.gain) for f in replayed.frames] == [
-        (f.role, f.exposure_us, f.gain) for f in recorded.frames]
+        (f.role, f.exposure_us, f.gain) for f in recorded.frames
+    ]
     summary = json.loads((out / "run.json").read_text())
     assert summary["exposure"]["flash_exposure_us"] is None and summary["exposure"]["mode"] == "recorded"
     assert (out / "complementary.exr").is_file() and (out / "matching.exr").is_file()
@@ -186,8 +193,9 @@ def test_run_replays_a_recording_without_a_flash_frame_and_synthesises_the_flash
 
 
 @pytest.mark.parametrize("sync", ["host", "booth", "camera"])
-def test_a_damaged_recorded_frame_is_the_error_in_every_sync_mode(tmp_path: Path, capsys: pytest.CaptureFixture,
-                                                                  sync: str) -> None:
+def test_a_damaged_recorded_frame_is_the_error_in_every_sync_mode(
+    tmp_path: Path, capsys: pytest.CaptureFixture, sync: str
+) -> None:
     """Frame 3 of the recording is truncated: the replay names that file whoever paces the frames. Booth
     master made the frame on the emulator's trigger-line thread, and the capture reported 'no frame for
     trigger 4' instead (the cause only in a log line). The replay camera now reads (and checks) every
@@ -206,7 +214,9 @@ def test_a_damaged_recorded_frame_is_the_error_in_every_sync_mode(tmp_path: Path
     assert not (out / "sequence" / "sequence.json").exists()
 
 
-def test_replaying_an_interrupted_recording_says_it_is_incomplete(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_replaying_an_interrupted_recording_says_it_is_incomplete(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     """A capture interrupted after two frames (complete: false) cannot be replayed as a whole one; the
     mismatch says the recording is incomplete, the likely reason (it read as a role mismatch alone)."""
     import shutil
@@ -220,5 +230,6 @@ def test_replaying_an_interrupted_recording_says_it_is_incomplete(tmp_path: Path
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 1
     assert err[-1].startswith(f"msflash: error: {recording / 'sequence.json'}: step ")
-    assert err[-1].endswith("(the recording is incomplete: complete: false, 2 frame(s), as a capture that was "
-                            "interrupted leaves it)")
+    assert err[-1].endswith(
+        "(the recording is incomplete: complete: false, 2 frame(s), as a capture that was interrupted leaves it)"
+    )

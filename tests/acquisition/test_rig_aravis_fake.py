@@ -72,8 +72,10 @@ def test_each_frame_is_rendered_under_the_levels_of_its_trigger(aravis: ModuleTy
     the ambient one, by what that LED adds."""
     levels = [(0.0,) * 7, (1.0, 0, 0, 0, 0, 0, 0), (0, 0, 0, 0.5, 0, 0, 0), (0, 0, 0, 0, 0, 0, 1.0)]
     trigger = {"host": "software", "booth": "booth", "camera": "camera"}[sync]
-    plan = CapturePlan(tuple(CaptureStep(i, "led" if any(lv) else "ambient", lv, 8_000.0) for i, lv in enumerate(levels)),
-                       trigger=trigger)  # type: ignore[arg-type]
+    plan = CapturePlan(
+        tuple(CaptureStep(i, "led" if any(lv) else "ambient", lv, 8_000.0) for i, lv in enumerate(levels)),
+        trigger=trigger,
+    )  # type: ignore[arg-type]
     with open_rig("aravis-fake") as rig:
         with rig.sequence_writer(tmp_path / "s") as writer:
             entries = run_capture(rig.camera, rig.booth, plan, writer)
@@ -99,8 +101,7 @@ def test_run_estimates_the_rendered_ambient(aravis: ModuleType, tmp_path, capfd)
 
 
 @pytest.mark.parametrize("sync", ["booth", "camera"])
-def test_run_estimates_the_rendered_ambient_in_each_sync_mode(aravis: ModuleType, tmp_path, capsys,
-                                                              sync: str) -> None:
+def test_run_estimates_the_rendered_ambient_in_each_sync_mode(aravis: ModuleType, tmp_path, capsys, sync: str) -> None:
     out = tmp_path / sync
     assert main(["run", "--rig", "aravis-fake", "--sync", sync, "--out", str(out)]) == 0
     _assert_good_run(out, capsys.readouterr().err)
@@ -114,7 +115,9 @@ def _assert_good_run(out, err: str) -> None:
     estimate, bound = summary["spectrum_rmse_vs_truth"], summary["spectrum_rmse_led_bound"]
     # Measured 0.170–0.181 against a bound of 0.192 (seeds 0–3; docs/architecture.md §4).
     assert estimate <= 1.3 * bound, (estimate, bound)
-    assert f"spectrum RMSE against the true ambient {estimate:.4f}; the best non-negative LED fit of it {bound:.4f}" in err
+    assert (
+        f"spectrum RMSE against the true ambient {estimate:.4f}; the best non-negative LED fit of it {bound:.4f}" in err
+    )
     sequence = read_sequence(out / "sequence")
     assert sequence.complete
     assert [f.role for f in sequence.frames] == ["ambient"] + ["led"] * 7 + ["flash"]
@@ -132,8 +135,28 @@ def _assert_good_run(out, err: str) -> None:
 
 def test_world_options_apply_to_the_rendered_scene(aravis: ModuleType, tmp_path) -> None:
     out = tmp_path / "o"
-    assert main(["capture", "--rig", "aravis-fake", "--ambient", "D65", "--scene", "macbeth", "--leds", "4",
-                 "--seed", "3", "--exposure", "5000", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "capture",
+                "--rig",
+                "aravis-fake",
+                "--ambient",
+                "D65",
+                "--scene",
+                "macbeth",
+                "--leds",
+                "4",
+                "--seed",
+                "3",
+                "--exposure",
+                "5000",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     sequence = read_sequence(out / "sequence")
     assert sequence.extra["msflash"]["true_ambient"]["name"] == "D65"
     assert len(sequence.leds) == 4 and len(sequence.frames) == 5

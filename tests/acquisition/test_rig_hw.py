@@ -69,12 +69,31 @@ def silent_pty() -> Iterator[str]:
         os.close(slave)
 
 
-def test_capture_on_fake_camera_and_emulated_booth(aravis: ModuleType, calibration: Path, booth_port: str,
-                                                  tmp_path: Path) -> None:
+def test_capture_on_fake_camera_and_emulated_booth(
+    aravis: ModuleType, calibration: Path, booth_port: str, tmp_path: Path
+) -> None:
     aravis.use_fake_genicam(None)
     out = tmp_path / "c"
-    assert main(["capture", "--camera", "Fake_1", "--interfaces", "fake", "--port", booth_port,
-                 "--calibration", str(calibration), "--exposure", "10000", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "capture",
+                "--camera",
+                "Fake_1",
+                "--interfaces",
+                "fake",
+                "--port",
+                booth_port,
+                "--calibration",
+                str(calibration),
+                "--exposure",
+                "10000",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     sequence = read_sequence(out / "sequence")
     assert sequence.complete
     assert [f.role for f in sequence.frames] == ["ambient"] + ["led"] * 7
@@ -91,8 +110,9 @@ def test_capture_on_fake_camera_and_emulated_booth(aravis: ModuleType, calibrati
 
 def test_rig_hw_with_csv_files_and_led_off_at_close(aravis: ModuleType, calibration: Path, booth_port: str) -> None:
     aravis.use_fake_genicam(None)
-    with open_rig("hw", camera="Fake_1", interfaces="fake", port=booth_port,
-                  led_spectra=calibration / "led_spectra.csv") as rig:
+    with open_rig(
+        "hw", camera="Fake_1", interfaces="fake", port=booth_port, led_spectra=calibration / "led_spectra.csv"
+    ) as rig:
         assert rig.name == "hw" and rig.booth.info.channels == 7
         assert rig.camera_responsivities is None and "flash solvers" in rig.camera_extra["responsivity_note"]
         low, high = rig.camera.exposure_range_us
@@ -111,10 +131,24 @@ def test_every_device_failure_is_listed(aravis: ModuleType, calibration: Path, s
     assert f"booth: {silent_pty}: no reply" in message
 
 
-def test_cli_failure_exits_1_with_one_line(aravis: ModuleType, calibration: Path, silent_pty: str, tmp_path: Path,
-                                           capsys: pytest.CaptureFixture) -> None:
-    status = main(["capture", "--camera", "SN123", "--interfaces", "fake", "--port", silent_pty,
-                   "--calibration", str(calibration), "--out", str(tmp_path / "x")])
+def test_cli_failure_exits_1_with_one_line(
+    aravis: ModuleType, calibration: Path, silent_pty: str, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    status = main(
+        [
+            "capture",
+            "--camera",
+            "SN123",
+            "--interfaces",
+            "fake",
+            "--port",
+            silent_pty,
+            "--calibration",
+            str(calibration),
+            "--out",
+            str(tmp_path / "x"),
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 1
     assert err[-1].startswith("msflash: error: rig 'hw': camera 'SN123'") and "booth" in err[-1]
@@ -137,20 +171,36 @@ def test_booth_channel_count_must_match_the_spectra(aravis: ModuleType, calibrat
         server.close()
 
 
-def test_a_booth_of_another_protocol_version_is_one_error_line(aravis: ModuleType, calibration: Path, tmp_path: Path,
-                                                             capsys: pytest.CaptureFixture) -> None:
+def test_a_booth_of_another_protocol_version_is_one_error_line(
+    aravis: ModuleType, calibration: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     from msflash.led_controller import BoothEmulator
 
     leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
     default = _emulator_for(leds)
     newer = BoothEmulator(names=default.names, peaks_nm=default.peaks_nm, firmware="booth-2.0", protocol=2)
     with serve_on_pty(newer) as server:
-        status = main(["capture", "--camera", "Fake_1", "--interfaces", "fake", "--port", server.port,
-                       "--calibration", str(calibration), "--out", str(tmp_path / "x")])
+        status = main(
+            [
+                "capture",
+                "--camera",
+                "Fake_1",
+                "--interfaces",
+                "fake",
+                "--port",
+                server.port,
+                "--calibration",
+                str(calibration),
+                "--out",
+                str(tmp_path / "x"),
+            ]
+        )
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 1 and len(err) == 1
-    assert err[0].startswith(f"msflash: error: rig 'hw': booth: {server.port}: booth firmware booth-2.0 speaks "
-                             "booth protocol 2; expected protocol 1")
+    assert err[0].startswith(
+        f"msflash: error: rig 'hw': booth: {server.port}: booth firmware booth-2.0 speaks "
+        "booth protocol 2; expected protocol 1"
+    )
 
 
 def test_spectra_are_required_before_any_device_opens(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

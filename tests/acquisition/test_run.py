@@ -32,16 +32,27 @@ def test_run_writes_a_complete_sequence_with_a_flash_frame(tungsten_run: tuple) 
     assert [f.role for f in sequence.frames] == ["ambient"] + ["led"] * 7 + ["flash"]
     flash = sequence.frames[-1]
     summary = json.loads((out / "run.json").read_text())
-    np.testing.assert_allclose(flash.led_levels, np.clip(summary["flash"]["complementary"]["flash_weights"], 0, 1),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        flash.led_levels, np.clip(summary["flash"]["complementary"]["flash_weights"], 0, 1), atol=1e-9
+    )
     assert any(level > 0 for level in flash.led_levels)
 
 
 def test_run_outputs_and_accuracy(tungsten_run: tuple) -> None:
     _, out = tungsten_run
-    for name in ("estimate.json", "flash-matching.json", "flash-complementary.json", "spectra.png", "ambient.png",
-                 "matching.png", "complementary.png", "flash-capture.png", "matching.exr", "complementary.exr",
-                 "report.md"):
+    for name in (
+        "estimate.json",
+        "flash-matching.json",
+        "flash-complementary.json",
+        "spectra.png",
+        "ambient.png",
+        "matching.png",
+        "complementary.png",
+        "flash-capture.png",
+        "matching.exr",
+        "complementary.exr",
+        "report.md",
+    ):
         assert (out / name).stat().st_size > 0, name
     estimate = json.loads((out / "estimate.json").read_text())
     assert len(estimate["spectrum"]) == len(estimate["wavelengths_nm"]) == 31
@@ -81,6 +92,7 @@ def test_leds_off_and_partial_sequence_kept_when_capture_fails(tmp_path, monkeyp
             calls["n"] += 1
             if calls["n"] == 4:
                 from msflash.acquisition.errors import FrameTimeoutError
+
                 raise FrameTimeoutError("simulated camera: injected timeout")
             return real_next(timeout_s)
 
@@ -111,6 +123,7 @@ def test_run_decides_the_flash_before_the_reliability_signals(tmp_path, monkeypa
         def call(*args, **kwargs):
             order.append(name)
             return real(*args, **kwargs)
+
         return call
 
     monkeypatch.setattr(FlashSession, "decide", recorded("decide", FlashSession.decide))
@@ -128,11 +141,13 @@ def test_run_decides_the_flash_before_the_reliability_signals(tmp_path, monkeypa
     assert order[:4] == ["decide", "exposure", "captured", "reliability"]
     summary = json.loads((tmp_path / "r" / "run.json").read_text())
     assert read_sequence(tmp_path / "r" / "sequence").frames[-1].exposure_us == pytest.approx(
-        summary["exposure"]["flash_exposure_us"])
+        summary["exposure"]["flash_exposure_us"]
+    )
 
 
 def test_an_output_path_where_the_sequence_cannot_be_written_is_one_error_line(
-        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     """OUT/sequence is a file: bad output path (exit 2, one line naming it), nothing captured, no traceback."""
     out = tmp_path / "out"
     out.mkdir()

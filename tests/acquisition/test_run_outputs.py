@@ -12,19 +12,23 @@ from msflash.acquisition.sequence.format import read_sequence
 
 
 @pytest.mark.parametrize("command", ["run", "capture"])
-def test_out_under_a_regular_file_is_refused_before_capturing(tmp_path: Path, capsys: pytest.CaptureFixture,
-                                                              command: str) -> None:
+def test_out_under_a_regular_file_is_refused_before_capturing(
+    tmp_path: Path, capsys: pytest.CaptureFixture, command: str
+) -> None:
     blocker = tmp_path / "notes.txt"
     blocker.write_text("a file, not a folder\n")
     assert main([command, "--rig", "sim", "--out", str(blocker / "run")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1] == f"msflash: error: --out {blocker / 'run'}: {blocker} is a file; expected a folder (or a path " \
-                      "where one can be made)"
+    assert (
+        err[-1] == f"msflash: error: --out {blocker / 'run'}: {blocker} is a file; expected a folder (or a path "
+        "where one can be made)"
+    )
     assert not any("captured step" in line for line in err)  # nothing was captured
 
 
 def test_run_json_that_cannot_be_written_is_one_line_and_the_sequence_stays(
-        tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Disk full when the summary is written (injected: no small file system can be mounted in CI;
     the same line was seen by hand on a full tmpfs for the report's images)."""
     real = Path.write_text

@@ -101,20 +101,36 @@ def test_an_intact_sequence_checks_with_exit_0(sequence: Path, capsys: pytest.Ca
     status, out, err = run(capsys, "check", str(sequence))
     assert status == 0 and err == ""
     lines, summary = states(out)
-    assert lines == [("intact", f"frames[{i}]", f) for i, f in enumerate(sorted(
-        p.relative_to(sequence).as_posix() for p in (sequence / "frames").iterdir()))]
-    assert summary == {"sequence": str(sequence), "complete": True, "frames": 8, "intact": 8, "changed": 0,
-                       "truncated": 0, "missing": 0, "unreadable": 0, "unverified": 0, "undeclared": 0,
-                       "intact_sequence": True}
+    assert lines == [
+        ("intact", f"frames[{i}]", f)
+        for i, f in enumerate(sorted(p.relative_to(sequence).as_posix() for p in (sequence / "frames").iterdir()))
+    ]
+    assert summary == {
+        "sequence": str(sequence),
+        "complete": True,
+        "frames": 8,
+        "intact": 8,
+        "changed": 0,
+        "truncated": 0,
+        "missing": 0,
+        "unreadable": 0,
+        "unverified": 0,
+        "undeclared": 0,
+        "intact_sequence": True,
+    }
 
 
-@pytest.mark.parametrize(("damage", "state", "said"), [
-    (change_one_byte, "changed", "has changed since it was written"),
-    (lambda path: path.unlink(), "missing", "is missing"),
-    (lambda path: os.truncate(path, path.stat().st_size - 10), "truncated", "is truncated"),
-])
-def test_a_damaged_frame_is_named_with_its_state(sequence: Path, capsys: pytest.CaptureFixture,
-                                                 damage: Callable[[Path], None], state: str, said: str) -> None:
+@pytest.mark.parametrize(
+    ("damage", "state", "said"),
+    [
+        (change_one_byte, "changed", "has changed since it was written"),
+        (lambda path: path.unlink(), "missing", "is missing"),
+        (lambda path: os.truncate(path, path.stat().st_size - 10), "truncated", "is truncated"),
+    ],
+)
+def test_a_damaged_frame_is_named_with_its_state(
+    sequence: Path, capsys: pytest.CaptureFixture, damage: Callable[[Path], None], state: str, said: str
+) -> None:
     damage(sequence / FRAME)
     status, out, err = run(capsys, "check", str(sequence))
     assert status == 2
@@ -148,15 +164,31 @@ def test_every_problem_is_counted_and_the_first_is_named(sequence: Path, capsys:
     one_error(err, "frames[1].file", "001-led.tiff", "is truncated: 100 bytes of the")
     report = json.loads(out)
     assert [(f["state"], f["index"]) for f in report["files"]] == [
-        ("intact", 0), ("truncated", 1), ("missing", 2), ("changed", 3), ("intact", 4), ("intact", 5),
-        ("intact", 6), ("intact", 7), ("undeclared", None)]
+        ("intact", 0),
+        ("truncated", 1),
+        ("missing", 2),
+        ("changed", 3),
+        ("intact", 4),
+        ("intact", 5),
+        ("intact", 6),
+        ("intact", 7),
+        ("undeclared", None),
+    ]
     assert {state: report[state] for state in FILE_STATES} == {
-        "intact": 5, "changed": 1, "truncated": 1, "missing": 1, "unreadable": 0, "unverified": 0, "undeclared": 1}
+        "intact": 5,
+        "changed": 1,
+        "truncated": 1,
+        "missing": 1,
+        "unreadable": 0,
+        "unverified": 0,
+        "undeclared": 1,
+    }
     assert report["files"][0]["problem"] is None and "notes.txt" in report["files"][-1]["problem"]
 
 
-def test_a_sequence_without_digests_reads_but_is_not_proven_intact(sequence: Path,
-                                                                     capsys: pytest.CaptureFixture) -> None:
+def test_a_sequence_without_digests_reads_but_is_not_proven_intact(
+    sequence: Path, capsys: pytest.CaptureFixture
+) -> None:
     forget_digests(sequence)
     os.truncate(sequence / "frames" / "005-led.tiff", 300)
     status, out, err = run(capsys, "check", str(sequence))
@@ -182,9 +214,14 @@ def test_the_independent_samples_still_read_and_check_as_unverified(name: str, c
 
 def test_check_as_a_process(sequence: Path) -> None:
     change_one_byte(sequence / FRAME)
-    done = subprocess.run([sys.executable, "-m", "msflash.acquisition.app.cli", "check", str(sequence)],
-                          capture_output=True, text=True, timeout=120, check=False,
-                          env={**os.environ, "PYTHONPATH": str(REPOSITORY)})
+    done = subprocess.run(
+        [sys.executable, "-m", "msflash.acquisition.app.cli", "check", str(sequence)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env={**os.environ, "PYTHONPATH": str(REPOSITORY)},
+    )
     assert done.returncode == 2
     one_error(done.stderr, "frames[3].file", FRAME, "has changed")
     assert json.loads(done.stdout.splitlines()[-1])["changed"] == 1
@@ -222,8 +259,9 @@ def test_replay_refuses_a_changed_recording(sequence: Path, tmp_path: Path, caps
     one_error(err, "frames[3].file", FRAME, "has changed", after_progress=True)
 
 
-def test_run_refuses_its_own_frame_changed_on_disk(tmp_path: Path, capsys: pytest.CaptureFixture,
-                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+def test_run_refuses_its_own_frame_changed_on_disk(
+    tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A frame changed on disk after it was written (a failing disk, another program) is caught when
     ``run`` reads its frames back for the report."""
     real_write = sequence_format.write_image_digest
@@ -241,15 +279,19 @@ def test_run_refuses_its_own_frame_changed_on_disk(tmp_path: Path, capsys: pytes
 
 
 # -- the fields themselves -----------------------------------------------------------------------------
-@pytest.mark.parametrize(("change", "said"), [
-    ({"sha256": "XYZ"}, "frames[2].sha256 is 'XYZ'; expected 64 lowercase hexadecimal digits"),
-    ({"sha256": 7}, "frames[2].sha256 is a number; expected 64 lowercase hexadecimal digits"),
-    ({"file_bytes": -1}, "frames[2].file_bytes is a number; expected an integer ≥ 0"),
-    ({"file_bytes": 1.5}, "frames[2].file_bytes is a number; expected an integer ≥ 0"),
-    ({"file_bytes": None}, "frames[2].file_bytes is missing but sha256 is given"),
-])
-def test_malformed_digest_fields_are_named(sequence: Path, capsys: pytest.CaptureFixture, change: dict,
-                                           said: str) -> None:
+@pytest.mark.parametrize(
+    ("change", "said"),
+    [
+        ({"sha256": "XYZ"}, "frames[2].sha256 is 'XYZ'; expected 64 lowercase hexadecimal digits"),
+        ({"sha256": 7}, "frames[2].sha256 is a number; expected 64 lowercase hexadecimal digits"),
+        ({"file_bytes": -1}, "frames[2].file_bytes is a number; expected an integer ≥ 0"),
+        ({"file_bytes": 1.5}, "frames[2].file_bytes is a number; expected an integer ≥ 0"),
+        ({"file_bytes": None}, "frames[2].file_bytes is missing but sha256 is given"),
+    ],
+)
+def test_malformed_digest_fields_are_named(
+    sequence: Path, capsys: pytest.CaptureFixture, change: dict, said: str
+) -> None:
     path = sequence / "sequence.json"
     document = json.loads(path.read_text())
     document["frames"][2].update(change)
@@ -272,8 +314,9 @@ def test_load_frame_refuses_a_changed_frame_and_reads_it_once_digests_are_droppe
 
 def test_copying_a_sequence_records_the_new_files_digests(sequence: Path, tmp_path: Path) -> None:
     source = read_sequence(sequence)
-    copied = sequence_format.write_sequence(tmp_path / "copied", source,
-                                            [source.load_frame(i) for i in range(len(source.frames))])
+    copied = sequence_format.write_sequence(
+        tmp_path / "copied", source, [source.load_frame(i) for i in range(len(source.frames))]
+    )
     assert check_sequence(copied.directory).intact
     # The same pixels written again may make other bytes (OpenImageIO stamps the TIFF with the time to
     # the second): digests describe files, not frames, so frame equality ignores them.

@@ -43,8 +43,14 @@ def _camera(cfa: str | None = None, responsivity: bool = True, **extra: object) 
     if responsivity:
         curves = {c: np.exp(-(((WAVELENGTHS - p) / 40.0) ** 2)) for c, p in (("R", 600), ("G", 540), ("B", 450))}
     return SequenceCamera(
-        model="TestCam", serial="SN-1", pixel_format="BayerRG16" if cfa else "RGB16", cfa=cfa,
-        black_level=64, white_level=4095, responsivity=curves, extra=dict(extra),
+        model="TestCam",
+        serial="SN-1",
+        pixel_format="BayerRG16" if cfa else "RGB16",
+        cfa=cfa,
+        black_level=64,
+        white_level=4095,
+        responsivity=curves,
+        extra=dict(extra),
     )
 
 
@@ -62,8 +68,12 @@ def _pixels(cfa: str | None = None, shape: tuple[int, int] = (HEIGHT, WIDTH)) ->
 
 def _writer(directory: Path, cfa: str | None = None, **kwargs: object) -> SequenceWriter:
     return SequenceWriter(
-        directory, wavelengths_nm=WAVELENGTHS, spectral_unit=kwargs.pop("spectral_unit", "energy"),
-        camera=kwargs.pop("camera", _camera(cfa)), leds=kwargs.pop("leds", _leds()), **kwargs,  # type: ignore[arg-type]
+        directory,
+        wavelengths_nm=WAVELENGTHS,
+        spectral_unit=kwargs.pop("spectral_unit", "energy"),
+        camera=kwargs.pop("camera", _camera(cfa)),
+        leds=kwargs.pop("leds", _leds()),
+        **kwargs,  # type: ignore[arg-type]
     )
 
 
@@ -129,7 +139,10 @@ def test_round_trip_keeps_every_field_and_pixel(tmp_path: Path, cfa: str | None)
     assert sequence.leds[0].extra == {"peak_nm": 450, "driver": {"channel": 0}}
     assert sequence.extra == {"operator": "ab", "scene": {"id": 7}}
     assert [f.file for f in sequence.frames] == [
-        "frames/000-ambient.tiff", "frames/001-led.tiff", "frames/002-led.tiff", "frames/003-dark.tiff",
+        "frames/000-ambient.tiff",
+        "frames/001-led.tiff",
+        "frames/002-led.tiff",
+        "frames/003-dark.tiff",
     ]
     assert sequence.frames[1] == SequenceFrame("frames/001-led.tiff", "led", (1.0, 0.0, 0.0), 8000.0, 2.0)
     assert sequence.frames[2].led_levels == (0.0, 0.5, 0.0)
@@ -186,7 +199,11 @@ def test_accessors(valid: Path) -> None:
     np.testing.assert_array_equal(spectra.values[:, 1], sequence.leds[1].spd)
     responsivities = sequence.camera_responsivities()
     assert responsivities is not None
-    assert (responsivities.kind, responsivities.unit, responsivities.names) == ("responsivity", "energy", ("R", "G", "B"))
+    assert (responsivities.kind, responsivities.unit, responsivities.names) == (
+        "responsivity",
+        "energy",
+        ("R", "G", "B"),
+    )
     np.testing.assert_array_equal(responsivities.values[:, 0], sequence.camera.responsivity["R"])
 
 
@@ -203,7 +220,11 @@ def test_arrays_are_read_only_and_no_responsivity_is_none(tmp_path: Path) -> Non
 
 def test_photons_unit_and_float_frames(tmp_path: Path) -> None:
     writer = SequenceWriter(
-        tmp_path / "f", wavelengths_nm=WAVELENGTHS, spectral_unit="photons", camera=_camera("BGGR"), leds=_leds(),
+        tmp_path / "f",
+        wavelengths_nm=WAVELENGTHS,
+        spectral_unit="photons",
+        camera=_camera("BGGR"),
+        leds=_leds(),
     )
     pixels = RNG.random((HEIGHT, WIDTH)).astype(np.float32)
     frame = writer.add_frame(pixels, "ambient", (0, 0, 0), 500, gain=np.float64(2.0))
@@ -300,9 +321,13 @@ INVALID = {
     "complete": (_set("complete", "yes"), "complete is 'yes'; expected true or false"),
     "unit": (_set("spectral_unit", "watts"), "spectral_unit is 'watts'; expected one of 'energy', 'photons'"),
     "wavelengths uneven": (
-        _set("wavelengths_nm", [400, 410, 425, *range(430, 701, 10)][:_N]), "wavelengths_nm: wavelengths are not uniformly spaced",
+        _set("wavelengths_nm", [400, 410, 425, *range(430, 701, 10)][:_N]),
+        "wavelengths_nm: wavelengths are not uniformly spaced",
     ),
-    "wavelengths decreasing": (_set("wavelengths_nm", list(range(700, 399, -10))), "wavelengths_nm: wavelengths must increase"),
+    "wavelengths decreasing": (
+        _set("wavelengths_nm", list(range(700, 399, -10))),
+        "wavelengths_nm: wavelengths must increase",
+    ),
     "wavelength string": (_set("wavelengths_nm.3", "430"), "wavelengths_nm[3] is '430'; expected a number"),
     "wavelengths scalar": (_set("wavelengths_nm", 400), "wavelengths_nm is a number; expected a list of numbers"),
     "camera missing": (_set("camera", _DELETE), "camera is missing; expected an object"),
@@ -314,10 +339,17 @@ INVALID = {
     "white below black": (_set("camera.white_level", 64), "camera.white_level is 64, not above black_level 64"),
     "white string": (_set("camera.white_level", "4095"), "camera.white_level is '4095'; expected a number"),
     "responsivity length": (
-        _set("camera.responsivity.G", [0.5] * (_N - 1)), f"camera.responsivity.G has {_N - 1} values; expected {_N} (one per wavelength)",
+        _set("camera.responsivity.G", [0.5] * (_N - 1)),
+        f"camera.responsivity.G has {_N - 1} values; expected {_N} (one per wavelength)",
     ),
-    "responsivity channel": (_set("camera.responsivity.B", _DELETE), "camera.responsivity lacks B; expected R, G and B"),
-    "responsivity negative": (_set("camera.responsivity.R.4", -0.2), "camera.responsivity.R[4] is -0.2; expected a non-negative"),
+    "responsivity channel": (
+        _set("camera.responsivity.B", _DELETE),
+        "camera.responsivity lacks B; expected R, G and B",
+    ),
+    "responsivity negative": (
+        _set("camera.responsivity.R.4", -0.2),
+        "camera.responsivity.R[4] is -0.2; expected a non-negative",
+    ),
     "leds object": (_set("leds", {}), "leds is an object; expected a list of LED objects"),
     "led name": (_set("leds.1.name", ""), "leds[1].name is ''; expected a non-empty string"),
     "led duplicate": (_set("leds.2.name", "led450"), "leds[2].name 'led450' repeats leds[0].name; expected unique"),
@@ -325,19 +357,48 @@ INVALID = {
     "spd negative": (_set("leds.0.spd.5", -0.1), "leds[0].spd[5] is -0.1; expected a non-negative value"),
     "spd missing": (_set("leds.0.spd", _DELETE), "leds[0].spd is missing"),
     "frames object": (_set("frames", {}), "frames is an object; expected a list of frame objects"),
-    "frame file missing": (_set("frames.3.file", "frames/003-gone.tiff"), "frames[3].file 'frames/003-gone.tiff' is missing"),
-    "frame outside": (_set("frames.1.file", "../x.tiff"), "frames[1].file '../x.tiff' points outside the sequence directory"),
-    "frame absolute": (_set("frames.1.file", "/etc/passwd"), "frames[1].file '/etc/passwd' is absolute; expected a path relative"),
+    "frame file missing": (
+        _set("frames.3.file", "frames/003-gone.tiff"),
+        "frames[3].file 'frames/003-gone.tiff' is missing",
+    ),
+    "frame outside": (
+        _set("frames.1.file", "../x.tiff"),
+        "frames[1].file '../x.tiff' points outside the sequence directory",
+    ),
+    "frame absolute": (
+        _set("frames.1.file", "/etc/passwd"),
+        "frames[1].file '/etc/passwd' is absolute; expected a path relative",
+    ),
     "frame file type": (_set("frames.1.file", 3), "frames[1].file is a number; expected a relative file path"),
-    "frame directory": (_set("frames.1.file", "frames"), "frames[1].file 'frames': is a directory; expected a frame image, a regular file"),
+    "frame directory": (
+        _set("frames.1.file", "frames"),
+        "frames[1].file 'frames': is a directory; expected a frame image, a regular file",
+    ),
     # Two LEDs given one image (an edit gone wrong) was read, and estimated from, without a word.
-    "frame file repeated": (_set("frames.3.file", "frames/./001-led.tiff"),
-                            "frames[3].file 'frames/./001-led.tiff' is also frames[1].file; expected one file per frame"),
-    "levels count": (_set("frames.2.led_levels", [0, 1]), "frames[2].led_levels has 2 values; expected 3 (one per LED)"),
-    "level above 1": (_set("frames.2.led_levels", [0, 1.5, 0]), "frames[2].led_levels[1] is 1.5; expected a level in [0, 1]"),
-    "level negative": (_set("frames.2.led_levels", [0, -0.1, 0]), "frames[2].led_levels[1] is -0.1; expected a level in [0, 1]"),
-    "ambient lit": (_set("frames.0.led_levels", [0, 0.2, 0]), "frames[0].led_levels are [0.0, 0.2, 0.0] for role 'ambient'"),
-    "role": (_set("frames.1.role", "flashy"), "frames[1].role is 'flashy'; expected one of 'ambient', 'led', 'flash', 'dark'"),
+    "frame file repeated": (
+        _set("frames.3.file", "frames/./001-led.tiff"),
+        "frames[3].file 'frames/./001-led.tiff' is also frames[1].file; expected one file per frame",
+    ),
+    "levels count": (
+        _set("frames.2.led_levels", [0, 1]),
+        "frames[2].led_levels has 2 values; expected 3 (one per LED)",
+    ),
+    "level above 1": (
+        _set("frames.2.led_levels", [0, 1.5, 0]),
+        "frames[2].led_levels[1] is 1.5; expected a level in [0, 1]",
+    ),
+    "level negative": (
+        _set("frames.2.led_levels", [0, -0.1, 0]),
+        "frames[2].led_levels[1] is -0.1; expected a level in [0, 1]",
+    ),
+    "ambient lit": (
+        _set("frames.0.led_levels", [0, 0.2, 0]),
+        "frames[0].led_levels are [0.0, 0.2, 0.0] for role 'ambient'",
+    ),
+    "role": (
+        _set("frames.1.role", "flashy"),
+        "frames[1].role is 'flashy'; expected one of 'ambient', 'led', 'flash', 'dark'",
+    ),
     "exposure zero": (_set("frames.1.exposure_us", 0), "frames[1].exposure_us is 0; expected a number > 0"),
     "exposure string": (_set("frames.1.exposure_us", "10"), "frames[1].exposure_us is '10'; expected a number > 0"),
     "exposure bool": (_set("frames.1.exposure_us", True), "frames[1].exposure_us is a boolean; expected a number > 0"),
@@ -359,7 +420,8 @@ def test_invalid_sequence_error_names_file_and_field(valid: Path, case: str) -> 
 
 
 @pytest.mark.parametrize(
-    ("literal", "field"), [("NaN", "leds[0].spd[2] is nan"), ("Infinity", "camera.responsivity.G[2] is inf")],
+    ("literal", "field"),
+    [("NaN", "leds[0].spd[2] is nan"), ("Infinity", "camera.responsivity.G[2] is inf")],
 )
 def test_non_finite_values_are_refused(valid: Path, literal: str, field: str) -> None:
     # Python's json writes NaN/Infinity literals (other tools may too); they must not slip through.
@@ -422,13 +484,17 @@ def test_frames_of_different_sizes_name_both_files(valid: Path) -> None:
 def test_channel_count_must_match_cfa(valid: Path, tmp_path: Path) -> None:
     forget_digests(valid)
     write_image(valid / "frames" / "001-led.tiff", _pixels(cfa="RGGB"))
-    with pytest.raises(RecordingError, match=r"frames\[1\].file 'frames/001-led.tiff' has 1 channel but camera.cfa is null"):
+    with pytest.raises(
+        RecordingError, match=r"frames\[1\].file 'frames/001-led.tiff' has 1 channel but camera.cfa is null"
+    ):
         read_sequence(valid).load_frame(1)
     mosaic = tmp_path / "mosaic"
     _paper_sequence(mosaic, cfa="RGGB")
     forget_digests(mosaic)
     write_image(mosaic / "frames" / "003-led.tiff", _pixels())
-    with pytest.raises(RecordingError, match=r"frames\[3\].file 'frames/003-led.tiff' has 3 channels but camera.cfa is 'RGGB'"):
+    with pytest.raises(
+        RecordingError, match=r"frames\[3\].file 'frames/003-led.tiff' has 3 channels but camera.cfa is 'RGGB'"
+    ):
         read_sequence(mosaic).load_frame(3)
 
 
@@ -494,8 +560,12 @@ def test_sigkill_mid_sequence_leaves_a_readable_partial_sequence(tmp_path: Path)
     directory = tmp_path / "killed"
     env = {**os.environ, "PYTHONPATH": str(REPOSITORY)}
     child = subprocess.Popen(
-        [sys.executable, "-c", _CHILD, str(directory)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True, env=env, cwd=REPOSITORY,
+        [sys.executable, "-c", _CHILD, str(directory)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=REPOSITORY,
     )
     try:
         for expected in range(3):
@@ -526,9 +596,15 @@ def test_writer_refuses_invalid_frames_before_writing_anything(tmp_path: Path) -
         (lambda: writer.add_frame(_pixels(), "led", (0, 1), 1000), r"frames\[0\].led_levels has 2 values; expected 3"),
         (lambda: writer.add_frame(_pixels(), "led", (0, 1, 0), -5), r"frames\[0\].exposure_us is -5"),
         (lambda: writer.add_frame(_pixels(), "led", (0, 1, 0), 5, gain=0), r"frames\[0\].gain is 0"),
-        (lambda: writer.add_frame(_pixels("RGGB"), "led", (0, 1, 0), 5), "pixels have 1 channel but camera.cfa is null"),
+        (
+            lambda: writer.add_frame(_pixels("RGGB"), "led", (0, 1, 0), 5),
+            "pixels have 1 channel but camera.cfa is null",
+        ),
         (lambda: writer.add_frame(np.zeros((2, 2, 4), np.uint16), "led", (0, 1, 0), 5), r"shape \(2, 2, 4\)"),
-        (lambda: writer.add_frame(_pixels(), "led", (0, 1, 0), 5, extra={"file": "../x"}), r"extra keys \['file'\] clash"),
+        (
+            lambda: writer.add_frame(_pixels(), "led", (0, 1, 0), 5, extra={"file": "../x"}),
+            r"extra keys \['file'\] clash",
+        ),
         (lambda: writer.add_frame(_pixels(), "ambient", (0, 0, 0), 5, extra={"t": object()}), "cannot be written"),
     ]
     for call, message in cases:
@@ -536,7 +612,10 @@ def test_writer_refuses_invalid_frames_before_writing_anything(tmp_path: Path) -
             call()
     assert not (directory / "frames").exists() or not any((directory / "frames").iterdir())
     writer.add_frame(_pixels(), "ambient", (0, 0, 0), 1000)
-    with pytest.raises(RecordingError, match=r"frames\[1\]: pixels for 'frames/001-led.tiff' have shape \(7, 8, 3\) but 'frames/000-ambient.tiff' has \(6, 8, 3\)"):
+    with pytest.raises(
+        RecordingError,
+        match=r"frames\[1\]: pixels for 'frames/001-led.tiff' have shape \(7, 8, 3\) but 'frames/000-ambient.tiff' has \(6, 8, 3\)",
+    ):
         writer.add_frame(_pixels(shape=(7, 8)), "led", (1, 0, 0), 1000)
     assert read_sequence(directory).frames[0].file == "frames/000-ambient.tiff"
     assert len(read_sequence(directory).frames) == 1
@@ -576,8 +655,11 @@ def test_writer_refuses_frame_files_without_a_sequence(tmp_path: Path) -> None:
     stray = tmp_path / "s" / "frames" / "000-ambient.tiff"
     stray.parent.mkdir(parents=True)
     stray.write_bytes(b"someone's frame")
-    with pytest.raises(RecordingError, match=rf"^{stray.parent}: holds files but there is no sequence.json; "
-                                             "expected a new or empty directory"):
+    with pytest.raises(
+        RecordingError,
+        match=rf"^{stray.parent}: holds files but there is no sequence.json; "
+        "expected a new or empty directory",
+    ):
         _writer(tmp_path / "s")
     assert stray.read_bytes() == b"someone's frame" and not (tmp_path / "s" / "sequence.json").exists()
     (tmp_path / "t" / "frames").mkdir(parents=True)  # an empty frames/ folder is fine
@@ -588,7 +670,9 @@ def test_finish_without_ambient_keeps_the_sequence_partial(tmp_path: Path) -> No
     directory = tmp_path / "noamb"
     writer = _writer(directory)
     writer.add_frame(_pixels(), "led", (1, 0, 0), 1000)
-    with pytest.raises(RecordingError, match="frames has no frame with role 'ambient'; expected at least one before finish"):
+    with pytest.raises(
+        RecordingError, match="frames has no frame with role 'ambient'; expected at least one before finish"
+    ):
         writer.finish()
     assert read_sequence(directory).partial
 

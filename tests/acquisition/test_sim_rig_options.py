@@ -57,8 +57,9 @@ def _error_line(capsys: pytest.CaptureFixture) -> str:
 
 def _d50_run(out: Path, leds: Path, *extra: str) -> tuple[dict, float]:
     """``msflash run`` of the 8-LED booth, the ISETCam camera and CIE D50; (run.json, NNLS bound)."""
-    status = main(["run", "--out", str(out), "--led-spectra", str(leds), "--sim-camera", CAMERA, "--ambient", "D50",
-                   *extra])
+    status = main(
+        ["run", "--out", str(out), "--led-spectra", str(leds), "--sim-camera", CAMERA, "--ambient", "D50", *extra]
+    )
     assert status == 0
     sequence = read_sequence(out / "sequence")
     truth = np.asarray(sequence.extra["msflash"]["true_ambient"]["spd"])
@@ -120,13 +121,16 @@ def test_the_emulated_booth_takes_the_csv_channels(tmp_path: Path) -> None:
 def test_a_camera_file_is_read_as_the_hardware_rigs_responsivity(tmp_path: Path) -> None:
     camera = datasets.camera_responsivities("Canon 5DMarkII").to_unit("energy")
     path = _write_csv(tmp_path / "canon.csv", camera.wavelengths_nm, dict(zip("RGB", camera.values.T)))
-    assert main(["capture", "--out", str(tmp_path / "c"), "--sim-camera", str(path), "--leds", "4",
-                 "--exposure", "10000"]) == 0
+    assert (
+        main(["capture", "--out", str(tmp_path / "c"), "--sim-camera", str(path), "--leds", "4", "--exposure", "10000"])
+        == 0
+    )
     sequence = read_sequence(tmp_path / "c" / "sequence")
     assert [led.name for led in sequence.leds] == ["led440", "led500", "led520", "led660"]
     assert sequence.camera.model == "SimulatedCamera (canon)"
-    np.testing.assert_allclose(sequence.camera_responsivities().to_unit("energy").values,
-                               camera.resample(DEFAULT_GRID).values, rtol=1e-6)
+    np.testing.assert_allclose(
+        sequence.camera_responsivities().to_unit("energy").values, camera.resample(DEFAULT_GRID).values, rtol=1e-6
+    )
 
 
 def test_an_ambient_file_and_a_reflectance_mosaic(tmp_path: Path) -> None:
@@ -141,8 +145,22 @@ def test_an_ambient_file_and_a_reflectance_mosaic(tmp_path: Path) -> None:
         assert world.scene.reflectances.names == ("a", "b", "c", "border")
         patches = [np.count_nonzero(world.scene.labels == k) // 64 for k in range(3)]  # 8 × 8 px patches
         assert sorted(patches) == [8, 8, 8]  # three surfaces repeated to 24 patches
-    assert main(["capture", "--out", str(tmp_path / "c"), "--ambient", str(ambient), "--scene", str(scene),
-                 "--exposure", "10000"]) == 0
+    assert (
+        main(
+            [
+                "capture",
+                "--out",
+                str(tmp_path / "c"),
+                "--ambient",
+                str(ambient),
+                "--scene",
+                str(scene),
+                "--exposure",
+                "10000",
+            ]
+        )
+        == 0
+    )
     assert read_sequence(tmp_path / "c" / "sequence").extra["msflash"]["true_ambient"]["name"] == "lamp"
 
 
@@ -159,39 +177,63 @@ def _bad_files(tmp_path: Path) -> dict[str, Path]:
     }
 
 
-@pytest.mark.parametrize(("options", "expected"), [
-    (["--sim-camera", "Foo"], "--sim-camera: camera 'Foo': unknown; expected one of AptinaMT9M031, "),
-    (["--sim-camera", "{narrow}"], "--sim-camera {narrow}: covers 450–700 nm; expected at least 400–700 nm"),
-    (["--sim-camera", "{two}"], "{two}: 2 responsivity columns (R, G); expected 3 (R, G, B)"),
-    (["--ambient", "moonlight"], "--ambient: light 'moonlight': unknown; expected one of tungsten, "),
-    (["--ambient", "{narrow}"], "--ambient {narrow}: covers 450–700 nm; expected at least 400–700 nm"),
-    (["--ambient", "{two}"], "--ambient {two}: 2 spectra (R, G); expected one ambient"),
-    (["--scene", "forest"], "--scene 'forest': unknown; expected one of chart110, macbeth, white or a reflectance CSV"),
-    (["--scene", "{percent}"], "--scene {percent}: reflectances span 40–40 (a table in percent? divide by 100)"),
-    (["--led-spectra", "{narrow}"], "--led-spectra {narrow}: covers 450–700 nm; expected at least 400–700 nm"),
-    (["--led-spectra", "{dark}"], "--led-spectra {dark}: LED 'off' has no light on 400–700 nm"),
-    (["--led-spectra", "{many}"], "--led-spectra {many}: 65 LED channel(s) (g400.0, g404.7, g409.4, …, g700.0): "
-                                  "the booth emulator cannot serve them (BoothEmulator: 65 names"),
-    (["--led-spectra", "{star}"], "--led-spectra {star}: 1 LED channel(s) (a*b): the booth emulator cannot serve"),
-    (["--leds", "3", "--led-spectra", "{dark}"], "--leds 3 and --led-spectra {dark}: two LED sets; expected one"),
-    (["--leds", "8"], "argument --leds: invalid choice: 8 (choose from 3, 4, 5, 6, 7)"),
-    (["--rig", "replay:{percent}", "--sim-camera", "NikonD70"], "--sim-camera: describes the simulated world, but the "
-                                                                "rig is 'replay:{percent}'; expected --rig sim or "
-                                                                "aravis-fake"),
-    # aravis-fake renders the same world: its options are checked the same way, before the fake opens.
-    (["--rig", "aravis-fake", "--ambient", "moonlight"], "--ambient: light 'moonlight': unknown; expected one of "),
-    (["--rig", "aravis-fake", "--scene", "{percent}"], "--scene {percent}: reflectances span 40–40"),
-    (["--rig", "aravis-fake", "--cfa", "RGGB"], "--cfa: describes the simulated rig's camera, but the rig is "
-                                                "'aravis-fake' (its frames are BayerRG16, an RGGB mosaic)"),
-    # Hardware options the simulated rig used to ignore without a word (it read no --responsivity file at all).
-    (["--responsivity", "{percent}"], "--responsivity: describes a hardware rig's camera or booth, but the rig is "
-                                      "'sim' and would ignore it (the simulated camera is --sim-camera"),
-    (["--calibration", "{percent}"], "--calibration: describes a hardware rig's camera or booth, but the rig is 'sim'"),
-    (["--rig", "aravis-fake", "--pixel-format", "Mono8"], "--pixel-format: describes a hardware rig's camera or "
-                                                          "booth, but the rig is 'aravis-fake'"),
-])
-def test_bad_sim_options_give_one_line(tmp_path: Path, capsys: pytest.CaptureFixture, options: list[str],
-                                       expected: str) -> None:
+@pytest.mark.parametrize(
+    ("options", "expected"),
+    [
+        (["--sim-camera", "Foo"], "--sim-camera: camera 'Foo': unknown; expected one of AptinaMT9M031, "),
+        (["--sim-camera", "{narrow}"], "--sim-camera {narrow}: covers 450–700 nm; expected at least 400–700 nm"),
+        (["--sim-camera", "{two}"], "{two}: 2 responsivity columns (R, G); expected 3 (R, G, B)"),
+        (["--ambient", "moonlight"], "--ambient: light 'moonlight': unknown; expected one of tungsten, "),
+        (["--ambient", "{narrow}"], "--ambient {narrow}: covers 450–700 nm; expected at least 400–700 nm"),
+        (["--ambient", "{two}"], "--ambient {two}: 2 spectra (R, G); expected one ambient"),
+        (
+            ["--scene", "forest"],
+            "--scene 'forest': unknown; expected one of chart110, macbeth, white or a reflectance CSV",
+        ),
+        (["--scene", "{percent}"], "--scene {percent}: reflectances span 40–40 (a table in percent? divide by 100)"),
+        (["--led-spectra", "{narrow}"], "--led-spectra {narrow}: covers 450–700 nm; expected at least 400–700 nm"),
+        (["--led-spectra", "{dark}"], "--led-spectra {dark}: LED 'off' has no light on 400–700 nm"),
+        (
+            ["--led-spectra", "{many}"],
+            "--led-spectra {many}: 65 LED channel(s) (g400.0, g404.7, g409.4, …, g700.0): "
+            "the booth emulator cannot serve them (BoothEmulator: 65 names",
+        ),
+        (["--led-spectra", "{star}"], "--led-spectra {star}: 1 LED channel(s) (a*b): the booth emulator cannot serve"),
+        (["--leds", "3", "--led-spectra", "{dark}"], "--leds 3 and --led-spectra {dark}: two LED sets; expected one"),
+        (["--leds", "8"], "argument --leds: invalid choice: 8 (choose from 3, 4, 5, 6, 7)"),
+        (
+            ["--rig", "replay:{percent}", "--sim-camera", "NikonD70"],
+            "--sim-camera: describes the simulated world, but the "
+            "rig is 'replay:{percent}'; expected --rig sim or "
+            "aravis-fake",
+        ),
+        # aravis-fake renders the same world: its options are checked the same way, before the fake opens.
+        (["--rig", "aravis-fake", "--ambient", "moonlight"], "--ambient: light 'moonlight': unknown; expected one of "),
+        (["--rig", "aravis-fake", "--scene", "{percent}"], "--scene {percent}: reflectances span 40–40"),
+        (
+            ["--rig", "aravis-fake", "--cfa", "RGGB"],
+            "--cfa: describes the simulated rig's camera, but the rig is "
+            "'aravis-fake' (its frames are BayerRG16, an RGGB mosaic)",
+        ),
+        # Hardware options the simulated rig used to ignore without a word (it read no --responsivity file at all).
+        (
+            ["--responsivity", "{percent}"],
+            "--responsivity: describes a hardware rig's camera or booth, but the rig is "
+            "'sim' and would ignore it (the simulated camera is --sim-camera",
+        ),
+        (
+            ["--calibration", "{percent}"],
+            "--calibration: describes a hardware rig's camera or booth, but the rig is 'sim'",
+        ),
+        (
+            ["--rig", "aravis-fake", "--pixel-format", "Mono8"],
+            "--pixel-format: describes a hardware rig's camera or booth, but the rig is 'aravis-fake'",
+        ),
+    ],
+)
+def test_bad_sim_options_give_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture, options: list[str], expected: str
+) -> None:
     files = {name: str(path) for name, path in _bad_files(tmp_path).items()}
     status = main(["capture", "--out", str(tmp_path / "out"), *(o.format(**files) for o in options)])
     line = _error_line(capsys)
@@ -207,8 +249,9 @@ def test_an_unknown_camera_lists_every_shipped_one(capsys: pytest.CaptureFixture
         assert name in line
 
 
-@pytest.mark.parametrize(("name", "key"), [("F2", "FL2"), ("d65", "D65"), ("tungsten", "tungsten"),
-                                           ("blackbody:3200", "blackbody 3200 K")])
+@pytest.mark.parametrize(
+    ("name", "key"), [("F2", "FL2"), ("d65", "D65"), ("tungsten", "tungsten"), ("blackbody:3200", "blackbody 3200 K")]
+)
 def test_ambient_names(name: str, key: str) -> None:
     with open_sim_rig(ambient=name, n_leds=3) as rig:
         assert rig.true_ambient.names == (key,)

@@ -28,8 +28,9 @@ class RenderBroke(SpectralDataError):
 
 
 @pytest.mark.parametrize("trigger", ["software", "booth", "camera"])
-def test_a_render_error_is_raised_in_its_frames_place(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                                      trigger: str) -> None:
+def test_a_render_error_is_raised_in_its_frames_place(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, trigger: str
+) -> None:
     real_render = simulated_camera.render_frame
     calls = {"n": 0}
 
@@ -43,11 +44,13 @@ def test_a_render_error_is_raised_in_its_frames_place(tmp_path: Path, monkeypatc
     path = tmp_path / "sequence"
     with open_sim_rig(n_leds=3, seed=2) as rig:
         wavelengths, camera, leds = rig.sequence_header()
-        with SequenceWriter(path, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera,
-                            leds=leds) as writer:
+        with SequenceWriter(
+            path, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera, leds=leds
+        ) as writer:
             with pytest.raises(SpectralDataError) as caught:
-                run_capture(rig.camera, rig.booth, CapturePlan.ambient_then_each_led(3, 10_000.0, trigger=trigger),
-                            writer)
+                run_capture(
+                    rig.camera, rig.booth, CapturePlan.ambient_then_each_led(3, 10_000.0, trigger=trigger), writer
+                )
         assert rig.emulator is not None and rig.emulator.levels == (0.0,) * 3  # LEDs off after the failure
     assert type(caught.value) is RenderBroke, caught.value
     assert not isinstance(caught.value, (FrameTimeoutError, DroppedFrameError))

@@ -71,10 +71,17 @@ class TestProtocol:
         dark = camera.ambient.replace(values=np.zeros_like(camera.ambient.values))
         for k, frame in enumerate(frames[1:]):
             flash_only = frame.pixels.astype(float) - ambient
-            expected = expected_response(
-                camera.scene, total_illumination(dark, camera.led_spectra, np.eye(N_LEDS)[k]),
-                camera.camera_responsivities, 3000.0, 1.0, camera.scale,
-            ) / camera.sensor.electrons_per_dn
+            expected = (
+                expected_response(
+                    camera.scene,
+                    total_illumination(dark, camera.led_spectra, np.eye(N_LEDS)[k]),
+                    camera.camera_responsivities,
+                    3000.0,
+                    1.0,
+                    camera.scale,
+                )
+                / camera.sensor.electrons_per_dn
+            )
             unclipped = diffuse[..., None] & (frame.pixels < camera.sensor.white_level)
             assert unclipped.sum() > 0.9 * diffuse.sum() * 3
             np.testing.assert_allclose(flash_only[unclipped], expected[unclipped], atol=1.0)  # rounding only
@@ -187,8 +194,9 @@ class TestDefaultWorld:
         ratios = []
         for frame in frames[1:]:
             assert not np.any(frame.pixels[diffuse] >= white)  # ambient + any one LED fits at this exposure
-            ratios.append((frame.pixels[diffuse].astype(float) - camera.sensor.black_level).mean()
-                          / ambient[diffuse].mean() - 1)
+            ratios.append(
+                (frame.pixels[diffuse].astype(float) - camera.sensor.black_level).mean() / ambient[diffuse].mean() - 1
+            )
         # As a flash: every LED-only image at least the ambient's (flash_power 1: the weakest LED
         # equal to it, the others in the paper's ratios, up to 3.7× with this camera).
         assert min(ratios) == pytest.approx(1.0, abs=0.05)
@@ -213,14 +221,18 @@ def test_render_is_the_renderer_triggers_use() -> None:
     assert not np.array_equal(rendered[0], rendered[1])  # the LED's light is in the frame
 
 
-@pytest.mark.parametrize(("levels", "exposure_us", "gain", "message"), [
-    ((0.5,) * (N_LEDS - 1), 1_000.0, 1.0, "expected 7 values in \\[0, 1\\]"),
-    ((1.5,) + (0.0,) * (N_LEDS - 1), 1_000.0, 1.0, "expected 7 values in \\[0, 1\\]"),
-    (("x",) * N_LEDS, 1_000.0, 1.0, "are not numbers"),
-    ((0.0,) * N_LEDS, -1.0, 1.0, "expected exposure ≥ 0 and gain > 0"),
-    ((0.0,) * N_LEDS, 1_000.0, 0.0, "expected exposure ≥ 0 and gain > 0"),
-])
-def test_render_refuses_bad_levels_exposure_or_gain(levels: tuple, exposure_us: float, gain: float,
-                                                    message: str) -> None:
+@pytest.mark.parametrize(
+    ("levels", "exposure_us", "gain", "message"),
+    [
+        ((0.5,) * (N_LEDS - 1), 1_000.0, 1.0, "expected 7 values in \\[0, 1\\]"),
+        ((1.5,) + (0.0,) * (N_LEDS - 1), 1_000.0, 1.0, "expected 7 values in \\[0, 1\\]"),
+        (("x",) * N_LEDS, 1_000.0, 1.0, "are not numbers"),
+        ((0.0,) * N_LEDS, -1.0, 1.0, "expected exposure ≥ 0 and gain > 0"),
+        ((0.0,) * N_LEDS, 1_000.0, 0.0, "expected exposure ≥ 0 and gain > 0"),
+    ],
+)
+def test_render_refuses_bad_levels_exposure_or_gain(
+    levels: tuple, exposure_us: float, gain: float, message: str
+) -> None:
     with pytest.raises(CameraError, match=message):
         small_world().render(levels, exposure_us, gain)

@@ -86,24 +86,43 @@ def cases(kind: str, place: Path, sequence: Path) -> dict[str, tuple[list[str], 
         result[option] = (argv, shown_path(named))
 
     sim = ["run", "--rig", "sim", "--seed", "0"]
-    case("flash --target", lambda f: (
-        ["flash", str(sequence), "--mode", "complementary", "--target", str(p := make_bad(kind, f))], p))
+    case(
+        "flash --target",
+        lambda f: (["flash", str(sequence), "--mode", "complementary", "--target", str(p := make_bad(kind, f))], p),
+    )
     for option in ("--led-spectra", "--sim-camera", "--scene", "--ambient"):
-        case(f"run {option}", lambda f, o=option: (
-            [*sim, "--out", str(f / "out"), o, str(p := make_bad(kind, f))], p))
-    case("capture --led-spectra", lambda f: (
-        ["capture", "--rig", "sim", "--out", str(f / "out"), "--led-spectra", str(p := make_bad(kind, f))], p))
-    case("calibrate leds FILE", lambda f: (
-        ["calibrate", "leds", str(p := make_bad(kind, f)), "--out", str(f / "cal")], p))
-    case("calibrate leds --dark", lambda f: (
-        ["calibrate", "leds", str(f / "led.csv"), "--dark", str(p := make_bad(kind, f)), "--out", str(f / "cal")], p))
+        case(f"run {option}", lambda f, o=option: ([*sim, "--out", str(f / "out"), o, str(p := make_bad(kind, f))], p))
+    case(
+        "capture --led-spectra",
+        lambda f: (
+            ["capture", "--rig", "sim", "--out", str(f / "out"), "--led-spectra", str(p := make_bad(kind, f))],
+            p,
+        ),
+    )
+    case(
+        "calibrate leds FILE",
+        lambda f: (["calibrate", "leds", str(p := make_bad(kind, f)), "--out", str(f / "cal")], p),
+    )
+    case(
+        "calibrate leds --dark",
+        lambda f: (
+            ["calibrate", "leds", str(f / "led.csv"), "--dark", str(p := make_bad(kind, f)), "--out", str(f / "cal")],
+            p,
+        ),
+    )
     if kind != "odd-name":  # the names below are fixed by the formats
-        case("estimate sequence.json", lambda f: (
-            ["estimate", str(s := _sequence_json(kind, f, sequence))], s / "sequence.json"))
+        case(
+            "estimate sequence.json",
+            lambda f: (["estimate", str(s := _sequence_json(kind, f, sequence))], s / "sequence.json"),
+        )
         case("estimate frame", lambda f: (["estimate", str(s := _frame(kind, f, sequence))], s))
-        case("flash --calibration", lambda f: (
-            ["flash", str(sequence), "--mode", "complementary", "--calibration", str(c := _calibration(kind, f))],
-            c / "calibration.json"))
+        case(
+            "flash --calibration",
+            lambda f: (
+                ["flash", str(sequence), "--mode", "complementary", "--calibration", str(c := _calibration(kind, f))],
+                c / "calibration.json",
+            ),
+        )
     return result
 
 
@@ -150,8 +169,14 @@ for option, (argv, named) in cases("fifo", Path(sys.argv[1]), Path(sys.argv[2]))
 def test_fifos_are_refused_without_blocking(sequence: Path, tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     try:
-        child = subprocess.run([sys.executable, "-c", _CHILD, str(tmp_path), str(sequence)], cwd=REPO, env=env,
-                               capture_output=True, text=True, timeout=240)
+        child = subprocess.run(
+            [sys.executable, "-c", _CHILD, str(tmp_path), str(sequence)],
+            cwd=REPO,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=240,
+        )
     except subprocess.TimeoutExpired as err:  # the hang of issue 19: name the cases that finished
         pytest.fail(f"a FIFO blocked msflash; finished before it: {err.stdout!r}")
     assert child.returncode == 0, child.stderr

@@ -26,9 +26,16 @@ def write_baseline_tiff(path: Path, pixels: np.ndarray, *, big_endian: bool = Fa
     bits = pixels.dtype.itemsize * 8
     data = pixels.astype(pixels.dtype.newbyteorder(order)).tobytes()
     entries = [  # (tag, type, values), in ascending tag order as TIFF requires
-        (256, _LONG, [width]), (257, _LONG, [height]), (258, _SHORT, [bits] * samples), (259, _SHORT, [1]),
-        (262, _SHORT, [2 if samples == 3 else 1]), (273, _LONG, [0]), (277, _SHORT, [samples]),
-        (278, _LONG, [height]), (279, _LONG, [len(data)]), (284, _SHORT, [1]),
+        (256, _LONG, [width]),
+        (257, _LONG, [height]),
+        (258, _SHORT, [bits] * samples),
+        (259, _SHORT, [1]),
+        (262, _SHORT, [2 if samples == 3 else 1]),
+        (273, _LONG, [0]),
+        (277, _SHORT, [samples]),
+        (278, _LONG, [height]),
+        (279, _LONG, [len(data)]),
+        (284, _SHORT, [1]),
         (339, _SHORT, [_SAMPLE_FORMATS[pixels.dtype.kind]] * samples),
     ]
     ifd_size = 2 + 12 * len(entries) + 4

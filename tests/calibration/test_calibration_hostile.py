@@ -26,33 +26,59 @@ def _with(text: str, insert: str) -> str:
 
 HOSTILE = {
     "truncated": ('{"format": "msflash-calibration", "version": 1, "id": "c', "calibration.json:1: not valid JSON"),
-    "NaN": (json.dumps({**BASE, "dark": {"black_level": [float("nan"), 1, 2]}}),
-            "field 'dark.black_level[0]' is NaN; expected a finite number"),
-    "Infinity": (json.dumps({**BASE, "linearity": {"saturation_level": float("inf")}}),
-                 "field 'linearity.saturation_level' is Infinity; expected a finite number"),
-    "overflowing float": (_with(json.dumps(BASE), '"site": {"height": -1e999}'),
-                          "field 'site.height' is -1e999; expected a finite number"),
-    "huge integer": (_with(json.dumps(BASE), '"n": ' + "9" * 5000),
-                     "field 'n' is an integer of 5000 digits; expected a finite number"),
-    "huge version": (json.dumps(BASE).replace('"version": 1', '"version": ' + "9" * 400),
-                     "field 'version' is an integer of 400 digits"),
-    "deep nesting": (_with(json.dumps(BASE), '"x": ' + "[" * 150 + "]" * 150),
-                     "field 'x" + "[0]" * 99 + "' is nested 101 levels deep; expected at most 100"),
-    "nesting past the parser": (_with(json.dumps(BASE), '"x": ' + "[" * 100_000 + "]" * 100_000),
-                                "nested too deep to read; expected at most 100 levels"),
-    "names a number": (json.dumps({**BASE, "leds": {"file": "leds.csv", "unit": "energy", "names": 5}}),
-                       "field 'leds.names' is 5; expected the columns of leds.csv"),
-    "black level of booleans": (json.dumps({**BASE, "dark": {"black_level": [True, "a"]}}),
-                                "field 'dark.black_level' is [True, 'a']; expected a list of numbers"),
-    "black level of 40 numbers": (json.dumps({**BASE, "dark": {"black_level": [1.0] * 40}}),
-                                  "field 'dark.black_level' has 40 values; expected 1–4"),
-    "negative read noise": (json.dumps({**BASE, "dark": {"black_level": [1.0], "read_noise_dn": [-2.0]}}),
-                            "field 'dark.read_noise_dn' holds -2.0; expected numbers ≥ 0"),
+    "NaN": (
+        json.dumps({**BASE, "dark": {"black_level": [float("nan"), 1, 2]}}),
+        "field 'dark.black_level[0]' is NaN; expected a finite number",
+    ),
+    "Infinity": (
+        json.dumps({**BASE, "linearity": {"saturation_level": float("inf")}}),
+        "field 'linearity.saturation_level' is Infinity; expected a finite number",
+    ),
+    "overflowing float": (
+        _with(json.dumps(BASE), '"site": {"height": -1e999}'),
+        "field 'site.height' is -1e999; expected a finite number",
+    ),
+    "huge integer": (
+        _with(json.dumps(BASE), '"n": ' + "9" * 5000),
+        "field 'n' is an integer of 5000 digits; expected a finite number",
+    ),
+    "huge version": (
+        json.dumps(BASE).replace('"version": 1', '"version": ' + "9" * 400),
+        "field 'version' is an integer of 400 digits",
+    ),
+    "deep nesting": (
+        _with(json.dumps(BASE), '"x": ' + "[" * 150 + "]" * 150),
+        "field 'x" + "[0]" * 99 + "' is nested 101 levels deep; expected at most 100",
+    ),
+    "nesting past the parser": (
+        _with(json.dumps(BASE), '"x": ' + "[" * 100_000 + "]" * 100_000),
+        "nested too deep to read; expected at most 100 levels",
+    ),
+    "names a number": (
+        json.dumps({**BASE, "leds": {"file": "leds.csv", "unit": "energy", "names": 5}}),
+        "field 'leds.names' is 5; expected the columns of leds.csv",
+    ),
+    "black level of booleans": (
+        json.dumps({**BASE, "dark": {"black_level": [True, "a"]}}),
+        "field 'dark.black_level' is [True, 'a']; expected a list of numbers",
+    ),
+    "black level of 40 numbers": (
+        json.dumps({**BASE, "dark": {"black_level": [1.0] * 40}}),
+        "field 'dark.black_level' has 40 values; expected 1–4",
+    ),
+    "negative read noise": (
+        json.dumps({**BASE, "dark": {"black_level": [1.0], "read_noise_dn": [-2.0]}}),
+        "field 'dark.read_noise_dn' holds -2.0; expected numbers ≥ 0",
+    ),
     "created_utc a number": (json.dumps({**BASE, "created_utc": 5}), "field 'created_utc' is 5; expected an ISO 8601"),
-    "linearity a string": (json.dumps({**BASE, "linearity": {"saturation_level": "high"}}),
-                           "field 'linearity.saturation_level' is 'high'; expected a number or null"),
-    "duplicate key": ('{"format": "msflash-calibration", "format": "x", "version": 1, "id": "a"}',
-                      "key 'format' appears twice in one object"),
+    "linearity a string": (
+        json.dumps({**BASE, "linearity": {"saturation_level": "high"}}),
+        "field 'linearity.saturation_level' is 'high'; expected a number or null",
+    ),
+    "duplicate key": (
+        '{"format": "msflash-calibration", "format": "x", "version": 1, "id": "a"}',
+        "key 'format' appears twice in one object",
+    ),
     "a list": ("[1, 2]", "top level is a list; expected an object"),
 }
 LEDS = "wavelength_nm,led440\n400,1\n410,2\n420,1\n"
@@ -75,8 +101,11 @@ def test_a_hostile_calibration_file_exits_2_naming_file_and_field(tmp_path: Path
     (cal / "leds.csv").write_text(LEDS)
     export = tmp_path / "led.txt"
     export.write_text("400\t0.1\n410\t1\n420\t0.1\n")
-    argv = (["estimate", str(SEQUENCE), "--calibration", str(cal)] if reader.startswith("estimate")
-            else ["calibrate", "leds", str(export), "--out", str(cal)])
+    argv = (
+        ["estimate", str(SEQUENCE), "--calibration", str(cal)]
+        if reader.startswith("estimate")
+        else ["calibrate", "leds", str(export), "--out", str(cal)]
+    )
     status, out, err = run(argv)
     assert (status, out) == (2, ""), err
     assert err.count("\n") == 1 and err.startswith(f"msflash: error: {cal / 'calibration.json'}")
@@ -84,17 +113,23 @@ def test_a_hostile_calibration_file_exits_2_naming_file_and_field(tmp_path: Path
     assert (cal / "calibration.json").read_text() == text  # the update refused before anything was written
 
 
-@pytest.mark.parametrize("cell,needle", [
-    ("1e999", "holds '1e999'; expected a finite number"),
-    ("9" * 5000, "holds '9999999999999999999999999999999999999... (5000 characters)'; expected a finite number"),
-    ("nan", "is missing (NaN)"),
-    ("-0.5", "column 'led440' at 410 nm is -0.5; expected a non-negative value"),
-])
+@pytest.mark.parametrize(
+    "cell,needle",
+    [
+        ("1e999", "holds '1e999'; expected a finite number"),
+        ("9" * 5000, "holds '9999999999999999999999999999999999999... (5000 characters)'; expected a finite number"),
+        ("nan", "is missing (NaN)"),
+        ("-0.5", "column 'led440' at 410 nm is -0.5; expected a non-negative value"),
+    ],
+)
 def test_a_hostile_table_exits_2_naming_table_line_and_column(tmp_path: Path, cell: str, needle: str) -> None:
     cal = tmp_path / "cal"
     cal.mkdir()
-    (cal / "calibration.json").write_text(json.dumps({"format": "msflash-calibration", "version": 1, "id": "c",
-                                                      "leds": {"file": "leds.csv", "unit": "energy"}}))
+    (cal / "calibration.json").write_text(
+        json.dumps(
+            {"format": "msflash-calibration", "version": 1, "id": "c", "leds": {"file": "leds.csv", "unit": "energy"}}
+        )
+    )
     (cal / "leds.csv").write_text(LEDS.replace("410,2", f"410,{cell}").replace("420,1", "420,4"))
     status, out, err = run(["flash", str(SEQUENCE), "--mode", "matching", "--calibration", str(cal)])
     assert (status, out) == (2, "") and err.count("\n") == 1

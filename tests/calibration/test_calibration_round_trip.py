@@ -58,14 +58,18 @@ class ExportStyle:
 
 def export_text(wavelengths: np.ndarray, values: np.ndarray, style: ExportStyle) -> str:
     """A spectrometer export of ``values`` in ``style``."""
+
     def number(v: float) -> str:
         text = f"{v:.9g}"
         return text.replace(".", ",") if style.separator == ";" else text
 
     rows = [f"{number(w)}{style.separator}{number(v)}" for w, v in zip(wavelengths, values, strict=True)]
-    head = {"plain": [], "named": [f"Wavelength (nm){style.separator}Irradiance"],
-            "ocean": ["Spectrometer: USB4000", ">>>>>Begin Spectral Data<<<<<"],
-            "comments": ["# PR-715", "% integration 100 ms", "nm W/sr/m2"]}[style.header]
+    head = {
+        "plain": [],
+        "named": [f"Wavelength (nm){style.separator}Irradiance"],
+        "ocean": ["Spectrometer: USB4000", ">>>>>Begin Spectral Data<<<<<"],
+        "comments": ["# PR-715", "% integration 100 ms", "nm W/sr/m2"],
+    }[style.header]
     tail = [">>>>>End Spectral Data<<<<<"] if style.header == "ocean" else []
     return "\n".join([*head, *rows, *tail]) + "\n"
 
@@ -79,13 +83,14 @@ def booth_exports(draw: st.DrawFn) -> dict:
     n = int((stop - start) / step)
     index = np.arange(n, dtype=float)
     curvature = draw(st.sampled_from([0.0, -2e-5, 3e-5]))  # a CCD's pixel-to-wavelength polynomial
-    wavelengths = start + step * index + curvature * step * index ** 2
+    wavelengths = start + step * index + curvature * step * index**2
     wavelengths = wavelengths[wavelengths <= stop]
-    style = ExportStyle(draw(st.sampled_from(["plain", "named", "ocean", "comments"])),
-                        draw(st.sampled_from(["\t", ",", ";", " "])))
+    style = ExportStyle(
+        draw(st.sampled_from(["plain", "named", "ocean", "comments"])), draw(st.sampled_from(["\t", ",", ";", " "]))
+    )
     noise = draw(st.floats(0.0005, 0.03))  # dark-subtraction noise, relative to the peak
     separate_dark = draw(st.booleans())
-    seed = draw(st.integers(0, 2 ** 32 - 1))
+    seed = draw(st.integers(0, 2**32 - 1))
     rng = np.random.default_rng(seed)
     scale = draw(st.floats(1e-4, 1e4))  # counts, W/m²/nm, µW/cm²/nm: any scale
     baseline = 100.0 * scale
@@ -98,11 +103,17 @@ def booth_exports(draw: st.DrawFn) -> dict:
         if separate_dark:  # raw counts on an offset; the dark file subtracted by --dark
             values = baseline + emission + rng.normal(0.0, noise * scale, wavelengths.size)
         else:  # the instrument software subtracted its dark: noise about 0, half of it negative
-            values = emission + rng.normal(0.0, noise * scale, wavelengths.size) \
+            values = (
+                emission
+                + rng.normal(0.0, noise * scale, wavelengths.size)
                 - rng.normal(0.0, noise * scale, wavelengths.size)
+            )
         exports[f"led{int(peak)}"] = export_text(wavelengths, values, style)
-    dark = export_text(wavelengths, baseline + rng.normal(0.0, noise * scale, wavelengths.size), style) \
-        if separate_dark else None
+    dark = (
+        export_text(wavelengths, baseline + rng.normal(0.0, noise * scale, wavelengths.size), style)
+        if separate_dark
+        else None
+    )
     return {"exports": exports, "dark": dark, "unit": draw(st.sampled_from(["energy", "photons"]))}
 
 
@@ -155,9 +166,16 @@ def test_a_leds_csv_with_negative_noise_from_an_older_msflash_is_read_clipped(tm
     rows += [f"{w:g}," + ",".join(repr(float(v)) for v in row) for w, row in zip(leds.wavelengths_nm, noisy)]
     cal.mkdir()
     (cal / "leds.csv").write_text("\n".join(rows) + "\n")
-    (cal / "calibration.json").write_text(json.dumps({
-        "format": "msflash-calibration", "version": 1, "id": "cal-old",
-        "leds": {"file": "leds.csv", "unit": "energy", "names": list(leds.names)}}))
+    (cal / "calibration.json").write_text(
+        json.dumps(
+            {
+                "format": "msflash-calibration",
+                "version": 1,
+                "id": "cal-old",
+                "leds": {"file": "leds.csv", "unit": "energy", "names": list(leds.names)},
+            }
+        )
+    )
     status, out, err = run(["estimate", str(SEQUENCE), "--json", "--calibration", str(cal)])
     assert status == 0, err
     assert "leds.csv: column 'led500': 1 negative value(s)" in err and "clipped to 0 as noise" in err
@@ -192,8 +210,13 @@ def _dark_and_linearity_sequence(directory: Path) -> Path:
     rng = np.random.default_rng(0)
     leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
     camera = SequenceCamera("test camera", "0001", "RGB16", None, 64.0, 65535.0)
-    writer = SequenceWriter(directory, wavelengths_nm=DEFAULT_GRID.wavelengths_nm, spectral_unit="energy",
-                            camera=camera, leds=[SequenceLed(n, leds.column(n)) for n in leds.names])
+    writer = SequenceWriter(
+        directory,
+        wavelengths_nm=DEFAULT_GRID.wavelengths_nm,
+        spectral_unit="energy",
+        camera=camera,
+        leds=[SequenceLed(n, leds.column(n)) for n in leds.names],
+    )
     off = (0.0,) * leds.count
     for _ in range(3):
         writer.add_frame(np.rint(rng.normal(64.0, 2.0, (24, 32, 3))).astype(np.uint16), "dark", off, 1000.0)

@@ -34,8 +34,14 @@ def test_noise_free_recovery_is_exact():
     cameras = {k: v.resample(DEFAULT_GRID, outside="zero") for k, v in datasets.paper_cameras().items()}
     truth = cameras["Nikon D700"]
     responses = np.stack([surface_responses(chart, lights.select([l]), truth) for l in range(lights.count)])
-    estimate = estimate_responsivities(responses, chart, lights, "pca_prior", learn_prior(cameras, ["Nikon D700"]),
-                                       response_std=1e-6 * responses.max() + 0 * responses)
+    estimate = estimate_responsivities(
+        responses,
+        chart,
+        lights,
+        "pca_prior",
+        learn_prior(cameras, ["Nikon D700"]),
+        response_std=1e-6 * responses.max() + 0 * responses,
+    )
     assert responsivity_rmse(estimate.responsivities, truth) < 2e-3
 
 
@@ -87,6 +93,12 @@ def test_subspace_prior_recovers_noise_free_camera():
     cameras = {k: v.resample(DEFAULT_GRID, outside="zero") for k, v in datasets.paper_cameras().items()}
     truth = cameras["Canon 40D"]
     responses = np.stack([surface_responses(chart, lights.select([l]), truth) for l in range(lights.count)])
-    estimate = estimate_responsivities(responses, chart, lights, "pca_subspace", learn_prior(cameras, ["Canon 40D"]),
-                                       response_std=1e-6 * responses.max() + 0 * responses)
+    estimate = estimate_responsivities(
+        responses,
+        chart,
+        lights,
+        "pca_subspace",
+        learn_prior(cameras, ["Canon 40D"]),
+        response_std=1e-6 * responses.max() + 0 * responses,
+    )
     assert responsivity_rmse(estimate.responsivities, truth) < 2e-3

@@ -40,7 +40,9 @@ def _chart(patch_px: int = 8) -> Scene:
     return chart_scene("macbeth", patch_px=patch_px, specular_strip_px=4)
 
 
-def _record(out: Path, scene: Scene | None, ambient_name: str = "tungsten", seed: int = 1, cfa: str | None = None) -> Path:
+def _record(
+    out: Path, scene: Scene | None, ambient_name: str = "tungsten", seed: int = 1, cfa: str | None = None
+) -> Path:
     """A sim rig capture of ``scene`` (None: the rig's own chart at the top left)."""
     default = SimulatedCamera.default.__func__
 
@@ -51,8 +53,19 @@ def _record(out: Path, scene: Scene | None, ambient_name: str = "tungsten", seed
                 options["scene"] = scene
             return default(cls, **options)
 
-    argv = ["capture", "--rig", "sim", "--scene", "macbeth", "--ambient", ambient_name, "--seed", str(seed),
-            "--out", str(out)]
+    argv = [
+        "capture",
+        "--rig",
+        "sim",
+        "--scene",
+        "macbeth",
+        "--ambient",
+        ambient_name,
+        "--seed",
+        str(seed),
+        "--out",
+        str(out),
+    ]
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(rig_module, "SimulatedCamera", PlacedWorld)
         assert cli.main(argv + (["--cfa", cfa] if cfa else [])) == 0
@@ -89,8 +102,9 @@ def _true_centres(scene: Scene) -> np.ndarray:
 
 def _detect(path: Path):
     sequence = read_sequence(path)
-    return sequence, detect_in_sequence(sequence, datasets.macbeth().resample(sequence.grid, outside="edge"),
-                                        *MACBETH_GRID)
+    return sequence, detect_in_sequence(
+        sequence, datasets.macbeth().resample(sequence.grid, outside="edge"), *MACBETH_GRID
+    )
 
 
 def _assert_labels_inside_true_patches(labels: np.ndarray, scene: Scene, min_pixels: int) -> None:
@@ -133,8 +147,9 @@ def test_a_mirrored_chart_in_noise_free_frames():
     lights = leds_photons().replace(values=leds_photons().values @ spec.led_levels.T)
     colour = ColourFrames(0, tuple(range(1, len(led_frames) + 1)), lights)
     chart = datasets.macbeth().resample(lights.grid, outside="edge")
-    grid = detect_chart([ambient_frame, *led_frames], np.zeros(mirrored.shape, dtype=bool), None, colour, chart,
-                        *MACBETH_GRID)
+    grid = detect_chart(
+        [ambient_frame, *led_frames], np.zeros(mirrored.shape, dtype=bool), None, colour, chart, *MACBETH_GRID
+    )
     assert grid.mirrored and grid.corner == "top-right"
     assert np.abs(grid.patch_centres() - _true_centres(mirrored)).max() <= 1.0
     _assert_labels_inside_true_patches(grid.labels(mirrored.shape), mirrored, min_pixels=16)
@@ -153,8 +168,10 @@ def _detect_synthetic(sigma_px: float = 0.0, shading_low: float = 1.0, where: st
     ambient_frame, led_frames, spec = linear_frames(ambient("tungsten"), scene=scene)
     led_frames = [ambient_frame + 100 * (frame - ambient_frame) for frame in led_frames]
     rng = np.random.default_rng(7)
-    frames = [gaussian_filter(frame, (sigma_px, sigma_px, 0)) + rng.normal(0, 2e-3 * frame.max(), frame.shape)
-              for frame in [ambient_frame, *led_frames]]
+    frames = [
+        gaussian_filter(frame, (sigma_px, sigma_px, 0)) + rng.normal(0, 2e-3 * frame.max(), frame.shape)
+        for frame in [ambient_frame, *led_frames]
+    ]
     lights = leds_photons().replace(values=leds_photons().values @ spec.led_levels.T)
     colour = ColourFrames(0, tuple(range(1, len(frames))), lights)
     chart = datasets.macbeth().resample(GRID, outside="edge")
@@ -179,8 +196,22 @@ def test_uneven_light_across_the_chart():
 
 
 def _calibrate(sequences: list[Path], out: Path, capsys, *extra: str) -> dict:
-    argv = ["calibrate", "camera", "--sequence", *map(str, sequences), "--light", "tungsten", "--light", "daylight",
-            "--prior-exclude", "NikonD100", "--out", str(out), "--json", *extra]
+    argv = [
+        "calibrate",
+        "camera",
+        "--sequence",
+        *map(str, sequences),
+        "--light",
+        "tungsten",
+        "--light",
+        "daylight",
+        "--prior-exclude",
+        "NikonD100",
+        "--out",
+        str(out),
+        "--json",
+        *extra,
+    ]
     capsys.readouterr()
     assert cli.main(argv) == 0
     return json.loads(capsys.readouterr().out)
@@ -193,17 +224,29 @@ def test_calibration_from_detected_layouts_matches_the_given_layout(tmp_path, ca
     assert detected["rmse_vs_sequence_responsivity"] == pytest.approx(given["rmse_vs_sequence_responsivity"], abs=1e-9)
     assert [layout["detected"] for layout in detected["layouts"]] == [True, True]
     assert {key: given["layouts"][0][key] for key in ("detected", "patch_px", "border_px", "margin_px")} == {
-        "detected": False, "patch_px": 8, "border_px": 2, "margin_px": 1}
+        "detected": False,
+        "patch_px": 8,
+        "border_px": 2,
+        "margin_px": 1,
+    }
     # The chart moved between the two sequences (another place, scale and rotation) and one is a mosaic.
-    moved = [_record(tmp_path / "mt", placed_scene(_chart(), (90, 120), centre_yx=(50.3, 61.7)), "tungsten", 1),
-             _record(tmp_path / "md", placed_scene(_chart(), (100, 130), centre_yx=(47.0, 70.0), angle_deg=-5.0,
-                                                   scale=1.3), "daylight", 2)]
+    moved = [
+        _record(tmp_path / "mt", placed_scene(_chart(), (90, 120), centre_yx=(50.3, 61.7)), "tungsten", 1),
+        _record(
+            tmp_path / "md",
+            placed_scene(_chart(), (100, 130), centre_yx=(47.0, 70.0), angle_deg=-5.0, scale=1.3),
+            "daylight",
+            2,
+        ),
+    ]
     payload = _calibrate(moved, tmp_path / "c", capsys)
     assert payload["rmse_vs_sequence_responsivity"] <= 0.05
     assert abs(payload["rmse_vs_sequence_responsivity"] - given["rmse_vs_sequence_responsivity"]) <= 0.01
     first, second = payload["layouts"]
     assert first["origin_xy"] == pytest.approx([36.5, 33.5], abs=0.5) and first["corner"] == "top-left"
-    assert second["rotation_deg"] == pytest.approx(-5.0, abs=1.0) and second["pitch_px"] == pytest.approx([13, 13], abs=0.3)
+    assert second["rotation_deg"] == pytest.approx(-5.0, abs=1.0) and second["pitch_px"] == pytest.approx(
+        [13, 13], abs=0.3
+    )
 
 
 def test_evaluate_finds_the_chart_itself(placed, tmp_path, capsys):
@@ -221,16 +264,28 @@ def _two_charts() -> Scene:
     return Scene(chart.reflectances, np.hstack([chart.labels, chart.labels]), specular=np.hstack([chart.specular] * 2))
 
 
-@pytest.mark.parametrize(("scene", "message"), [
-    (lambda: uniform_scene(datasets.macbeth().select([6]), 60, 80), "no 4×6 chart found: fewer than 18 uniform"),
-    (lambda: placed_scene(_chart(patch_px=1), (60, 80)), "no 4×6 chart found"),  # 1-pixel patches
-    (lambda: placed_scene(_chart(patch_px=2), (60, 80)), "--margin-px 1 leaves nothing of the 2.0-pixel patches"),
-    (_two_charts, "2 4×6 charts found"),
-])
+@pytest.mark.parametrize(
+    ("scene", "message"),
+    [
+        (lambda: uniform_scene(datasets.macbeth().select([6]), 60, 80), "no 4×6 chart found: fewer than 18 uniform"),
+        (lambda: placed_scene(_chart(patch_px=1), (60, 80)), "no 4×6 chart found"),  # 1-pixel patches
+        (lambda: placed_scene(_chart(patch_px=2), (60, 80)), "--margin-px 1 leaves nothing of the 2.0-pixel patches"),
+        (_two_charts, "2 4×6 charts found"),
+    ],
+)
 def test_no_single_chart_is_refused_naming_the_sequence_and_the_options(tmp_path, capsys, scene, message):
     path = _record(tmp_path / "scene", scene())
     capsys.readouterr()
-    argv = ["calibrate", "camera", "--sequence", str(path), "--prior-exclude", "NikonD100", "--out", str(tmp_path / "c")]
+    argv = [
+        "calibrate",
+        "camera",
+        "--sequence",
+        str(path),
+        "--prior-exclude",
+        "NikonD100",
+        "--out",
+        str(tmp_path / "c"),
+    ]
     assert cli.main(argv) == 2
     error = capsys.readouterr().err.strip().splitlines()[-1]
     assert error.startswith("msflash: error:") and message in error

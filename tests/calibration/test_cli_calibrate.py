@@ -70,12 +70,15 @@ def test_bad_spectrometer_file_exits_2_with_one_line(tmp_path, capsys):
     assert len(err) == 1 and err[0].startswith("msflash: error:") and "bad.csv:3" in err[0]
 
 
-@pytest.mark.parametrize("argv,needle", [
-    (["calibrate", "camera", "--out", "X"], "expected --sequence SEQ… (recorded chart sequences) or --simulate"),
-    (["calibrate", "dark", str(SEQUENCE), "--out", "X"], "no 'dark' frame"),
-    (["calibrate", "leds", "missing.csv", "--out", "X"], "missing.csv: cannot be read"),
-    (["calibrate"], "expected one of leds, camera, dark, linearity"),
-])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["calibrate", "camera", "--out", "X"], "expected --sequence SEQ… (recorded chart sequences) or --simulate"),
+        (["calibrate", "dark", str(SEQUENCE), "--out", "X"], "no 'dark' frame"),
+        (["calibrate", "leds", "missing.csv", "--out", "X"], "missing.csv: cannot be read"),
+        (["calibrate"], "expected one of leds, camera, dark, linearity"),
+    ],
+)
 def test_usage_errors(argv, needle, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert cli.main(argv) == 2

@@ -87,13 +87,16 @@ def test_linear_sensor_passes():
     assert result.linear_limit_dn > 0.5 * FULL
 
 
-@pytest.mark.parametrize("frames,exposures,message", [
-    ([np.zeros((4, 4))] * 2, [1, 2], "at least 3 exposures"),
-    ([np.zeros((4, 4))] * 3, [1, 2], "2 exposures for 3 frames"),
-    ([np.zeros((4, 4))] * 3, [1, 0, 2], "exposures must be finite and > 0"),
-    ([np.zeros((4, 4)), np.zeros((4, 5)), np.zeros((4, 4))], [1, 2, 3], "different shapes"),
-    ([np.full((4, 4), 4095.0)] * 3, [1, 2, 3], "unsaturated frames with signal"),
-])
+@pytest.mark.parametrize(
+    "frames,exposures,message",
+    [
+        ([np.zeros((4, 4))] * 2, [1, 2], "at least 3 exposures"),
+        ([np.zeros((4, 4))] * 3, [1, 2], "2 exposures for 3 frames"),
+        ([np.zeros((4, 4))] * 3, [1, 0, 2], "exposures must be finite and > 0"),
+        ([np.zeros((4, 4)), np.zeros((4, 5)), np.zeros((4, 4))], [1, 2, 3], "different shapes"),
+        ([np.full((4, 4), 4095.0)] * 3, [1, 2, 3], "unsaturated frames with signal"),
+    ],
+)
 def test_bad_series(frames, exposures, message):
     with pytest.raises(CalibrationError, match=message):
         measure_linearity(frames, exposures, 64.0)
@@ -118,11 +121,21 @@ def test_constant_dark_frames_are_refused(value: int, cfa):
         measure_dark([np.full(shape, value, dtype=np.uint16)] * 3, cfa)
 
 
-@pytest.mark.parametrize("frames,exposures,message", [
-    ([np.full((4, 4), 564.0)] * 4, [2756.9] * 4, r"every unsaturated frame has exposure·gain 2756\.9; expected at least 2"),
-    ([np.full((4, 4), 564.0)] * 3 + [np.full((4, 4), 4095.0)] * 2, [5, 5, 5, 9, 10],
-     "every unsaturated frame has exposure·gain 5;"),
-])
+@pytest.mark.parametrize(
+    "frames,exposures,message",
+    [
+        (
+            [np.full((4, 4), 564.0)] * 4,
+            [2756.9] * 4,
+            r"every unsaturated frame has exposure·gain 2756\.9; expected at least 2",
+        ),
+        (
+            [np.full((4, 4), 564.0)] * 3 + [np.full((4, 4), 4095.0)] * 2,
+            [5, 5, 5, 9, 10],
+            "every unsaturated frame has exposure·gain 5;",
+        ),
+    ],
+)
 def test_series_at_one_exposure_is_refused(frames, exposures, message):
     """All frames at one exposure (msflash calibrate linearity on such a sequence): numpy RankWarnings,
     then 'max deviation 2.0, linear up to 0 DN' stored in the calibration."""

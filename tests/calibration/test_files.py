@@ -17,8 +17,10 @@ def full_set():
     leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
     camera = datasets.isetcam_camera("NikonD100").resample(DEFAULT_GRID, outside="zero")
     return CalibrationSet(
-        led_spectra=leds, leds={"peaks_nm": [440.0] * 7, "relative_power": [1.0] * 7},
-        camera_responsivities=camera, camera={"method": "pca_prior"},
+        led_spectra=leds,
+        leds={"peaks_nm": [440.0] * 7, "relative_power": [1.0] * 7},
+        camera_responsivities=camera,
+        camera={"method": "pca_prior"},
         dark={"black_level": [64.0, 64.5, 63.9], "read_noise_dn": [2.0, 2.0, 2.0]},
         linearity={"max_relative_deviation": 0.001, "saturation_level": 65535.0},
         extra={"site": "booth A"},
@@ -64,18 +66,21 @@ def test_newer_version_refused(tmp_path):
         load_calibration(tmp_path)
 
 
-@pytest.mark.parametrize("change,message", [
-    (lambda d: d.update(format="other"), r"field 'format' is 'other'"),
-    (lambda d: d.update(version="1"), r"field 'version' is '1'"),
-    (lambda d: d.update(id=""), r"field 'id'"),
-    (lambda d: d.update(leds=[1]), r"field 'leds' is a list; expected an object"),
-    (lambda d: d["leds"].update(unit="watts"), r"field 'leds\.unit' is 'watts'"),
-    (lambda d: d["leds"].update(file="../x.csv"), r"field 'leds\.file' '\.\./x\.csv' leaves"),
-    (lambda d: d["camera"].update(file="gone.csv"), r"field 'camera\.file': .*gone\.csv is missing"),
-    (lambda d: d["leds"].update(names=["a"]), r"field 'leds\.names'"),
-    (lambda d: d["dark"].pop("black_level"), r"field 'dark\.black_level' is missing"),
-    (lambda d: d["leds"].update(relative_power="high"), r"field 'leds\.relative_power' is 'high'"),
-])
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        (lambda d: d.update(format="other"), r"field 'format' is 'other'"),
+        (lambda d: d.update(version="1"), r"field 'version' is '1'"),
+        (lambda d: d.update(id=""), r"field 'id'"),
+        (lambda d: d.update(leds=[1]), r"field 'leds' is a list; expected an object"),
+        (lambda d: d["leds"].update(unit="watts"), r"field 'leds\.unit' is 'watts'"),
+        (lambda d: d["leds"].update(file="../x.csv"), r"field 'leds\.file' '\.\./x\.csv' leaves"),
+        (lambda d: d["camera"].update(file="gone.csv"), r"field 'camera\.file': .*gone\.csv is missing"),
+        (lambda d: d["leds"].update(names=["a"]), r"field 'leds\.names'"),
+        (lambda d: d["dark"].pop("black_level"), r"field 'dark\.black_level' is missing"),
+        (lambda d: d["leds"].update(relative_power="high"), r"field 'leds\.relative_power' is 'high'"),
+    ],
+)
 def test_bad_fields_named(tmp_path, change, message):
     edit(tmp_path, change)
     with pytest.raises(CalibrationError, match=message):

@@ -30,7 +30,19 @@ def with_calibrate(monkeypatch):
 
 def _record(root: Path, ambient: str, seed: int, cfa: str | None = None) -> Path:
     out = root / f"{ambient}-{cfa or 'rgb'}"
-    argv = ["capture", "--rig", "sim", "--scene", "macbeth", "--ambient", ambient, "--seed", str(seed), "--out", str(out)]
+    argv = [
+        "capture",
+        "--rig",
+        "sim",
+        "--scene",
+        "macbeth",
+        "--ambient",
+        ambient,
+        "--seed",
+        str(seed),
+        "--out",
+        str(out),
+    ]
     if cfa:
         argv += ["--cfa", cfa]
     assert cli.main(argv) == 0
@@ -44,8 +56,22 @@ def rgb_sequences(tmp_path_factory) -> list[Path]:
 
 
 def _calibrate(sequences: list[Path], out: Path, capsys, *extra: str) -> dict:
-    argv = ["calibrate", "camera", "--sequence", *map(str, sequences), "--light", "tungsten", "--light", "daylight",
-            "--prior-exclude", "NikonD100", "--out", str(out), "--json", *extra]
+    argv = [
+        "calibrate",
+        "camera",
+        "--sequence",
+        *map(str, sequences),
+        "--light",
+        "tungsten",
+        "--light",
+        "daylight",
+        "--prior-exclude",
+        "NikonD100",
+        "--out",
+        str(out),
+        "--json",
+        *extra,
+    ]
     capsys.readouterr()  # drop what capture printed
     assert cli.main(argv) == 0
     return json.loads(capsys.readouterr().out)
@@ -88,26 +114,46 @@ def test_bayer_sequences(tmp_path_factory, tmp_path, capsys):
 
 
 def test_leds_only_without_lights(rgb_sequences, tmp_path, capsys):
-    argv = ["calibrate", "camera", "--sequence", str(rgb_sequences[0]), "--prior-exclude", "NikonD100",
-            "--out", str(tmp_path / "cal"), "--json"]
+    argv = [
+        "calibrate",
+        "camera",
+        "--sequence",
+        str(rgb_sequences[0]),
+        "--prior-exclude",
+        "NikonD100",
+        "--out",
+        str(tmp_path / "cal"),
+        "--json",
+    ]
     assert cli.main(argv) == 0
     payload = json.loads(capsys.readouterr().out)
     assert payload["light_scales"] == {}
     assert payload["rmse_vs_sequence_responsivity"] <= 0.08
 
 
-@pytest.mark.parametrize(("extra", "message"), [
-    (["--light", "tungsten"], "--light given 1 times for 2 sequences"),
-    (["--light", "tungsten", "--light", "moonlight"], "--light 'moonlight': not a known light"),
-    (["--light", "tungsten", "--light", "missing.csv"], "missing.csv: light file not found"),
-    (["--light", "tungsten", "--light", "daylight", "--patch-px", "5"], "is not uniform in the ambient image"),
-    (["--light", "tungsten", "--light", "daylight", "--patch-px", "4", "--border-px", "1"],
-     "patches read the same colour as another patch"),
-    (["--light", "daylight", "--light", "tungsten"], "expected the right --light"),
-    (["--light", "tungsten", "--light", "daylight", "--patch-px", "30"], "the macbeth chart is 130×194 pixels but the image is 46×62"),
-    (["--light", "tungsten", "--light", "daylight", "--prior-exclude", "NoSuchCam"], "not among the 34 paper cameras"),
-    (["--light", "tungsten", "--light", "daylight", "--simulate"], "exclude each other"),
-])
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--light", "tungsten"], "--light given 1 times for 2 sequences"),
+        (["--light", "tungsten", "--light", "moonlight"], "--light 'moonlight': not a known light"),
+        (["--light", "tungsten", "--light", "missing.csv"], "missing.csv: light file not found"),
+        (["--light", "tungsten", "--light", "daylight", "--patch-px", "5"], "is not uniform in the ambient image"),
+        (
+            ["--light", "tungsten", "--light", "daylight", "--patch-px", "4", "--border-px", "1"],
+            "patches read the same colour as another patch",
+        ),
+        (["--light", "daylight", "--light", "tungsten"], "expected the right --light"),
+        (
+            ["--light", "tungsten", "--light", "daylight", "--patch-px", "30"],
+            "the macbeth chart is 130×194 pixels but the image is 46×62",
+        ),
+        (
+            ["--light", "tungsten", "--light", "daylight", "--prior-exclude", "NoSuchCam"],
+            "not among the 34 paper cameras",
+        ),
+        (["--light", "tungsten", "--light", "daylight", "--simulate"], "exclude each other"),
+    ],
+)
 def test_bad_command_lines_exit_2_with_one_line(rgb_sequences, tmp_path, capsys, extra, message):
     argv = ["calibrate", "camera", "--sequence", *map(str, rgb_sequences), "--out", str(tmp_path / "cal"), *extra]
     assert cli.main(argv) == 2
@@ -132,8 +178,10 @@ def test_bad_light_csv_names_the_file(tmp_path):
 def test_unusable_frames_are_refused(rgb_sequences):
     sequence = read_sequence(rgb_sequences[0])
     chart = datasets.macbeth().resample(sequence.grid, outside="edge")
+
     def nothing(shape, excluded):
         return np.full(shape, -1, dtype=np.int64)
+
     with pytest.raises(CalibrationError, match=r"001-led.tiff: only 0 of 24 chart patches"):
         sequence_measurements([sequence], [None], chart, nothing)
     with pytest.raises(CalibrationError, match="1 lights for 2 sequences"):

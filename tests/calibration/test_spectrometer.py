@@ -48,7 +48,8 @@ class TestParse:
         w = np.arange(400.0, 701.0, 1.0)
         v = 1000 * gaussian(w) + 2.1699
         text = "Wellenlänge;Wert\n".replace(";", separator) + "".join(
-            f"{a:.1f}{separator}{b:.4f}\n".replace(".", ",") for a, b in zip(w, v))
+            f"{a:.1f}{separator}{b:.4f}\n".replace(".", ",") for a, b in zip(w, v)
+        )
         m = parse_spectrometer_text(text, "de.csv")
         np.testing.assert_allclose(m.wavelengths_nm, w)
         np.testing.assert_allclose(m.values, np.round(v, 4), rtol=1e-12)
@@ -73,8 +74,11 @@ class TestParse:
 
     def test_ocean_optics_block(self):
         w = np.arange(400.0, 500.0, 0.5)
-        text = ("Data from x.txt Node\nIntegration Time (sec): 0.1\n>>>>>Begin Spectral Data<<<<<\n"
-                + "\n".join(f"{a:.2f}\t{b:.6f}" for a, b in zip(w, gaussian(w, 450))) + "\n>>>>>End Spectral Data<<<<<\n")
+        text = (
+            "Data from x.txt Node\nIntegration Time (sec): 0.1\n>>>>>Begin Spectral Data<<<<<\n"
+            + "\n".join(f"{a:.2f}\t{b:.6f}" for a, b in zip(w, gaussian(w, 450)))
+            + "\n>>>>>End Spectral Data<<<<<\n"
+        )
         m = parse_spectrometer_text(text, "oo.txt")
         assert m.values.size == w.size and len(m.header) == 3
 
@@ -134,8 +138,11 @@ class TestBadFiles:
             parse_spectrometer_text("nm,v\n400,1\n410,nan\n420,0\n", "nan.csv")
 
     def test_negative(self):
-        with pytest.raises(CalibrationError, match=r"neg\.csv:4: column 'v' at 420 nm is -0\.5; expected a non-negative value, "
-                                                      r"or measurement noise down to −0\.1 .*dark subtracted twice"):
+        with pytest.raises(
+            CalibrationError,
+            match=r"neg\.csv:4: column 'v' at 420 nm is -0\.5; expected a non-negative value, "
+            r"or measurement noise down to −0\.1 .*dark subtracted twice",
+        ):
             parse_spectrometer_text("nm,v\n400,1\n410,2\n420,-0.5\n", "neg.csv")
 
     def test_small_negative_noise_kept(self):

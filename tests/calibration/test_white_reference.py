@@ -52,8 +52,13 @@ def _exports(sequence: Path, folder: Path, seed: int = 3) -> tuple[list[str], np
     for k, name in enumerate(leds.names):
         path = folder / f"{name}.csv"
         values = leds.values[:, k] / leds.values[:, k].max() * scales[k]
-        np.savetxt(path, np.column_stack([leds.wavelengths_nm, values]), delimiter=",", header="wavelength_nm,value",
-                   comments="")
+        np.savetxt(
+            path,
+            np.column_stack([leds.wavelengths_nm, values]),
+            delimiter=",",
+            header="wavelength_nm,value",
+            comments="",
+        )
         files.append(str(path))
     return files, _peak_ratios(leds.values)
 
@@ -123,12 +128,15 @@ def test_uneven_led_is_warned_about(white, tmp_path):
     black = sequence.camera.black_level
     # The ambient's part of the LED frame, at that frame's exposure (auto exposure gives them different ones).
     ambient = black + (sequence.load_frame(ambient_index).astype(float) - black) * (
-        sequence.frames[led].exposure_us / sequence.frames[ambient_index].exposure_us)
+        sequence.frames[led].exposure_us / sequence.frames[ambient_index].exposure_us
+    )
     for index, frame in enumerate(sequence.frames):
         pixels = sequence.load_frame(index)
         if index == led:
             ramp = np.linspace(0.8, 1.2, pixels.shape[1])[None, :, None]
-            pixels = np.clip(np.rint(ambient + (pixels - ambient) * ramp), 0, sequence.camera.white_level).astype(np.uint16)
+            pixels = np.clip(np.rint(ambient + (pixels - ambient) * ramp), 0, sequence.camera.white_level).astype(
+                np.uint16
+            )
         write_image(copy / frame.file, pixels)
     result = white_led_responses(read_sequence(copy))
     name = sequence.leds[2].name

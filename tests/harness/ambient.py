@@ -25,9 +25,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m tests.harness.ambient", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("docs/ambient-harness.md"), help="markdown report to write")
     parser.add_argument("--split", choices=("tuning", "held_out", "both"), default="both")
-    parser.add_argument("--variant", action="append", metavar="NAME[=ARGS]",
-                        help="NAME restricts the run to registered variants; NAME=\"ARGS\" adds `msflash estimate "
-                             "SEQ --json ARGS` (repeatable; default: every registered variant)")
+    parser.add_argument(
+        "--variant",
+        action="append",
+        metavar="NAME[=ARGS]",
+        help='NAME restricts the run to registered variants; NAME="ARGS" adds `msflash estimate '
+        "SEQ --json ARGS` (repeatable; default: every registered variant)",
+    )
     parser.add_argument("--quick", action="store_true", help="a small subset of the cases")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes")
     return parser
@@ -35,10 +39,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _commit() -> str:
     try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True,
-                              cwd=Path(__file__).parent).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
-                               text=True, check=True, cwd=Path(__file__).parent).stdout.strip()
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=Path(__file__).parent,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=Path(__file__).parent,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
     return head + ("+changes" if dirty else "")
@@ -53,16 +67,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"harness: error: {error}", file=sys.stderr)
         return 2
     cases = select_cases(args.split, args.quick)
-    print(f"{len(cases)} cases × {len(variants)} variants ({', '.join(v.name for v in variants)}), {args.jobs} jobs",
-          flush=True)
+    print(
+        f"{len(cases)} cases × {len(variants)} variants ({', '.join(v.name for v in variants)}), {args.jobs} jobs",
+        flush=True,
+    )
     start = time.monotonic()
     results = run_cases(cases, variants, args.jobs, progress=True)
     elapsed = time.monotonic() - start
     args.out.parent.mkdir(parents=True, exist_ok=True)
     csv_path = args.out.with_suffix(".csv")
     command = "python -m tests.harness.ambient " + " ".join(argv if argv is not None else sys.argv[1:])
-    args.out.write_text(report.markdown(results, variants, command=command.strip(), elapsed=elapsed, jobs=args.jobs,
-                                        commit=_commit(), csv_name=csv_path.name), encoding="utf-8")
+    args.out.write_text(
+        report.markdown(
+            results,
+            variants,
+            command=command.strip(),
+            elapsed=elapsed,
+            jobs=args.jobs,
+            commit=_commit(),
+            csv_name=csv_path.name,
+        ),
+        encoding="utf-8",
+    )
     report.write_csv(results, csv_path)
     print(f"wrote {args.out} and {csv_path} ({elapsed:.0f} s)")
     return 0

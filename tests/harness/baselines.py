@@ -75,8 +75,15 @@ def read_frames(directory: Path) -> Frames:
     led_only = np.tensordot(np.linalg.pinv(mix), differences, axes=1)
     saturated = np.any(np.stack(raws) >= black + SATURATION * (white - black), axis=0)
     led_spd = np.column_stack([led["spd"] for led in document["leds"]])
-    return Frames(np.asarray(document["wavelengths_nm"], float), document["spectral_unit"], led_spd, ambient,
-                  led_only, saturated, camera["cfa"])
+    return Frames(
+        np.asarray(document["wavelengths_nm"], float),
+        document["spectral_unit"],
+        led_spd,
+        ambient,
+        led_only,
+        saturated,
+        camera["cfa"],
+    )
 
 
 def _superpixels(image: np.ndarray, cfa: str) -> np.ndarray:
@@ -125,8 +132,9 @@ def to_photons(spd: np.ndarray, wavelengths_nm: np.ndarray, unit: str) -> np.nda
     return spd * (wavelengths_nm / 550.0).reshape((-1,) + (1,) * (spd.ndim - 1)) if unit == "energy" else spd
 
 
-def authors_weights(ambient: np.ndarray, led_only: np.ndarray, led_photons: np.ndarray,
-                    alpha: float = AUTHORS_ALPHA) -> np.ndarray:
+def authors_weights(
+    ambient: np.ndarray, led_only: np.ndarray, led_photons: np.ndarray, alpha: float = AUTHORS_ALPHA
+) -> np.ndarray:
     """The authors' weights: min Σ_p ‖a_p − Σ_k w_k f_k,p‖₂ + α‖R I w‖₂ s.t. I w ≥ 0 (cvxpy).
 
     Parameters

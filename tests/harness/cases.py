@@ -56,20 +56,31 @@ def cases_of(split: splits.Split, count: int = CASES_PER_SPLIT) -> tuple[Harness
         label = str(rng.choice(lights_by_type[kind]))
         light_type = next(t for name, t in splits.lights_of(split) if name == label)
         bits, black = depths[i]
-        out.append(HarnessCase(
-            name=f"{split}-{i:03d}", split=split, seed=seed + i, camera=str(rng.choice(cameras)), light=label,
-            light_type=light_type, leds=led_sets[i], cfa=mosaics[i], bits=bits, black=black, grid=grids[i],
-            unit=str(rng.choice(["energy", "photons"])),
-            ratio=float(math.exp(rng.uniform(*np.log(RATIO_RANGE)))),
-            exposures="unequal" if rng.random() < 0.5 else "equal",
-            vignetting=float(rng.uniform(0.5, 0.85)) if rng.random() < 0.5 else 1.0,
-            specular=bool(rng.random() < 0.25),
-            peak=float(rng.uniform(0.5, 0.9)),
-            full_well_e=float(rng.uniform(5000, 20000)),
-            read_noise_e=float(rng.uniform(2.0, 10.0)),
-            surface_sets=splits.surface_sets_of(split),
-            n_surfaces=int(rng.integers(20, 61)),
-        ))
+        out.append(
+            HarnessCase(
+                name=f"{split}-{i:03d}",
+                split=split,
+                seed=seed + i,
+                camera=str(rng.choice(cameras)),
+                light=label,
+                light_type=light_type,
+                leds=led_sets[i],
+                cfa=mosaics[i],
+                bits=bits,
+                black=black,
+                grid=grids[i],
+                unit=str(rng.choice(["energy", "photons"])),
+                ratio=float(math.exp(rng.uniform(*np.log(RATIO_RANGE)))),
+                exposures="unequal" if rng.random() < 0.5 else "equal",
+                vignetting=float(rng.uniform(0.5, 0.85)) if rng.random() < 0.5 else 1.0,
+                specular=bool(rng.random() < 0.25),
+                peak=float(rng.uniform(0.5, 0.9)),
+                full_well_e=float(rng.uniform(5000, 20000)),
+                read_noise_e=float(rng.uniform(2.0, 10.0)),
+                surface_sets=splits.surface_sets_of(split),
+                n_surfaces=int(rng.integers(20, 61)),
+            )
+        )
     return tuple(out)
 
 

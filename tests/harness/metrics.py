@@ -23,8 +23,17 @@ MISS_FACTOR = 1.3
 COVERAGE_TARGETS = {"1σ": (0.55, 0.80), "2σ": (0.90, 1.0)}
 """Wanted share of wavelengths where the truth lies within ±1σ and ±2σ of the estimate."""
 
-__all__ = ["MISS_FACTOR", "COVERAGE_TARGETS", "rmse", "led_bound", "band_coverage", "Confusion", "confusion",
-           "Summary", "summarise"]
+__all__ = [
+    "MISS_FACTOR",
+    "COVERAGE_TARGETS",
+    "rmse",
+    "led_bound",
+    "band_coverage",
+    "Confusion",
+    "confusion",
+    "Summary",
+    "summarise",
+]
 
 
 def led_bound(led_spd: np.ndarray, truth: np.ndarray) -> float:
@@ -80,8 +89,9 @@ def confusion(ratios: Sequence[float], warned: Sequence[bool], factor: float = M
     """
     miss = np.asarray(ratios, float) > factor
     warn = np.asarray(warned, bool)
-    return Confusion(int(np.sum(miss & warn)), int(np.sum(miss & ~warn)), int(np.sum(~miss & warn)),
-                     int(np.sum(~miss & ~warn)))
+    return Confusion(
+        int(np.sum(miss & warn)), int(np.sum(miss & ~warn)), int(np.sum(~miss & warn)), int(np.sum(~miss & ~warn))
+    )
 
 
 @dataclass(frozen=True)
@@ -105,5 +115,6 @@ def summarise(ratios: Sequence[float]) -> Summary:
     ok = values[np.isfinite(values)]
     if not ok.size:
         return Summary(values.size, values.size, math.nan, math.nan, math.nan)
-    return Summary(values.size, int(values.size - ok.size), float(ok.mean()), float(ok.max()),
-                   float(np.mean(ok > MISS_FACTOR)))
+    return Summary(
+        values.size, int(values.size - ok.size), float(ok.mean()), float(ok.max()), float(np.mean(ok > MISS_FACTOR))
+    )

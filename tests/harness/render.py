@@ -123,7 +123,7 @@ def _vignetting(height: int, width: int, corner: float) -> np.ndarray:
         return np.ones((height, width))
     y, x = np.mgrid[0:height, 0:width]
     radius = np.hypot(y - (height - 1) / 2, x - (width - 1) / 2)
-    focal = radius.max() / math.tan(math.acos(corner ** 0.25))
+    focal = radius.max() / math.tan(math.acos(corner**0.25))
     return np.cos(np.arctan(radius / focal)) ** 4
 
 
@@ -170,9 +170,9 @@ def render(case: HarnessCase, directory: Path) -> Truth:
         gain = rng.choice([1.0, 2.0, 4.0], k + 1)
     else:
         exposure, gain = np.full(k + 1, BASE_EXPOSURE_US), np.ones(k + 1)
-    code_max = 2 ** case.bits - 1
+    code_max = 2**case.bits - 1
     span = code_max - case.black
-    brightest = max(float(f[:white_row + 1].max()) * e * g for f, e, g in zip(frames, exposure, gain))
+    brightest = max(float(f[: white_row + 1].max()) * e * g for f, e, g in zip(frames, exposure, gain))
     dn_per_response = case.peak * span / brightest
     electrons_per_dn = case.full_well_e / span
     read_dn = case.read_noise_e / electrons_per_dn if math.isfinite(case.full_well_e) else 0.0
@@ -197,8 +197,15 @@ def render(case: HarnessCase, directory: Path) -> Truth:
         levels = np.zeros(k)
         if index:
             levels[index - 1] = 1.0
-        entries.append({"file": file, "role": role, "led_levels": levels.tolist(),
-                        "exposure_us": float(exposure[index]), "gain": float(gain[index])})
+        entries.append(
+            {
+                "file": file,
+                "role": role,
+                "led_levels": levels.tolist(),
+                "exposure_us": float(exposure[index]),
+                "gain": float(gain[index]),
+            }
+        )
 
     # What the sequence says: spectra sampled on the case's grid, in its unit.
     nm = grid_nm(case.grid)
@@ -208,11 +215,19 @@ def render(case: HarnessCase, directory: Path) -> Truth:
     cam_written = cam_q if case.unit == "photons" else cam_q * (nm / 550.0)[:, None]
     truth = _light_energy(case, nm, led_table.on(nm)) * scale * to_unit
     document = {
-        "format": "msflash-sequence", "version": 1, "complete": True,
-        "wavelengths_nm": nm.tolist(), "spectral_unit": case.unit,
-        "camera": {"model": f"harness {case.camera}", "pixel_format": "BayerRG16" if case.cfa else "RGB16",
-                   "cfa": case.cfa, "black_level": float(case.black), "white_level": float(code_max),
-                   "responsivity": {c: cam_written[:, i].tolist() for i, c in enumerate("RGB")}},
+        "format": "msflash-sequence",
+        "version": 1,
+        "complete": True,
+        "wavelengths_nm": nm.tolist(),
+        "spectral_unit": case.unit,
+        "camera": {
+            "model": f"harness {case.camera}",
+            "pixel_format": "BayerRG16" if case.cfa else "RGB16",
+            "cfa": case.cfa,
+            "black_level": float(case.black),
+            "white_level": float(code_max),
+            "responsivity": {c: cam_written[:, i].tolist() for i, c in enumerate("RGB")},
+        },
         "leds": [{"name": n, "spd": led_written[:, i].tolist()} for i, n in enumerate(led_table.names)],
         "frames": entries,
     }

@@ -43,8 +43,9 @@ def _ratios(results: Sequence[CaseResult], variant: str) -> list[float]:
 
 
 def _coverage(results: Sequence[CaseResult], variant: str) -> tuple[float | None, float | None]:
-    pairs = [(m.coverage_1, m.coverage_2) for r in results if (m := r.of(variant)) is not None
-             and m.coverage_1 is not None]
+    pairs = [
+        (m.coverage_1, m.coverage_2) for r in results if (m := r.of(variant)) is not None and m.coverage_1 is not None
+    ]
     if not pairs:
         return None, None
     values = np.array(pairs, float)
@@ -52,8 +53,11 @@ def _coverage(results: Sequence[CaseResult], variant: str) -> tuple[float | None
 
 
 def _confusion(results: Sequence[CaseResult], variant: str) -> metrics.Confusion | None:
-    rows = [(m.ratio, bool(m.warnings)) for r in results if (m := r.of(variant)) is not None
-            and m.warnings is not None and math.isfinite(m.ratio)]
+    rows = [
+        (m.ratio, bool(m.warnings))
+        for r in results
+        if (m := r.of(variant)) is not None and m.warnings is not None and math.isfinite(m.ratio)
+    ]
     if not rows:
         return None
     ratios, warned = zip(*rows)
@@ -61,32 +65,41 @@ def _confusion(results: Sequence[CaseResult], variant: str) -> metrics.Confusion
 
 
 def _by_split(results: Sequence[CaseResult]) -> list[tuple[str, list[CaseResult]]]:
-    return [(split, [r for r in results if r.case.split == split]) for split in splits.SPLITS
-            if any(r.case.split == split for r in results)]
+    return [
+        (split, [r for r in results if r.case.split == split])
+        for split in splits.SPLITS
+        if any(r.case.split == split for r in results)
+    ]
 
 
 def summary_table(results: Sequence[CaseResult], variants: Sequence[Variant]) -> list[str]:
     """Per split and variant: cases, failures, mean / worst ratio, misses, coverage, warning recall / false alarms."""
-    lines = ["| split | variant | cases | failed | mean ratio | worst ratio | misses (> 1.3) | ±1σ coverage "
-             "| ±2σ coverage | warning recall | false alarms |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| split | variant | cases | failed | mean ratio | worst ratio | misses (> 1.3) | ±1σ coverage "
+        "| ±2σ coverage | warning recall | false alarms |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for split, subset in _by_split(results):
         for variant in variants:
             summary = metrics.summarise(_ratios(subset, variant.name))
             cover_1, cover_2 = _coverage(subset, variant.name)
             matrix = _confusion(subset, variant.name)
-            lines.append(f"| {split} | {variant.name} | {summary.count} | {summary.failed} | {_number(summary.mean)} "
-                         f"| {_number(summary.worst)} | {_percent(summary.miss_rate)} | {_percent(cover_1)} "
-                         f"| {_percent(cover_2)} | {_percent(matrix.recall if matrix else None)} "
-                         f"| {_percent(matrix.false_alarm_rate if matrix else None)} |")
+            lines.append(
+                f"| {split} | {variant.name} | {summary.count} | {summary.failed} | {_number(summary.mean)} "
+                f"| {_number(summary.worst)} | {_percent(summary.miss_rate)} | {_percent(cover_1)} "
+                f"| {_percent(cover_2)} | {_percent(matrix.recall if matrix else None)} "
+                f"| {_percent(matrix.false_alarm_rate if matrix else None)} |"
+            )
     return lines
 
 
 def family_table(results: Sequence[CaseResult], variants: Sequence[Variant], family: str) -> list[str]:
     """Mean / worst ratio per value of one family dimension, per split, for every variant."""
     key = FAMILIES[family]
-    lines = [f"| {family} | split | cases | " + " | ".join(f"{v.name} mean / worst" for v in variants) + " |",
-             "|---|---|---|" + "---|" * len(variants)]
+    lines = [
+        f"| {family} | split | cases | " + " | ".join(f"{v.name} mean / worst" for v in variants) + " |",
+        "|---|---|---|" + "---|" * len(variants),
+    ]
     values = sorted({key(r) for r in results}, key=str)
     for value in values:
         for split, subset in _by_split(results):
@@ -103,16 +116,21 @@ def family_table(results: Sequence[CaseResult], variants: Sequence[Variant], fam
 
 def confusion_table(results: Sequence[CaseResult], variants: Sequence[Variant]) -> list[str]:
     """Warned / silent misses and non-misses per split for every variant that can warn."""
-    lines = ["| split | variant | warned misses | silent misses | warned non-misses | silent non-misses "
-             "| recall | false-alarm rate |", "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| split | variant | warned misses | silent misses | warned non-misses | silent non-misses "
+        "| recall | false-alarm rate |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for split, subset in _by_split(results):
         for variant in variants:
             matrix = _confusion(subset, variant.name)
             if matrix is None:
                 continue
-            lines.append(f"| {split} | {variant.name} | {matrix.warned_misses} | {matrix.silent_misses} "
-                         f"| {matrix.warned_good} | {matrix.silent_good} | {_percent(matrix.recall)} "
-                         f"| {_percent(matrix.false_alarm_rate)} |")
+            lines.append(
+                f"| {split} | {variant.name} | {matrix.warned_misses} | {matrix.silent_misses} "
+                f"| {matrix.warned_good} | {matrix.silent_good} | {_percent(matrix.recall)} "
+                f"| {_percent(matrix.false_alarm_rate)} |"
+            )
     return lines
 
 
@@ -123,12 +141,16 @@ def worst_cases(results: Sequence[CaseResult], variant: str, count: int = 5) -> 
         scored = [(m.ratio, r, m) for r in subset if (m := r.of(variant)) is not None and math.isfinite(m.ratio)]
         for ratio, result, measured in sorted(scored, key=lambda t: -t[0])[:count]:
             c = result.case
-            conditions = (f"{c.mosaic} {c.cfa or ''} {c.bits}-bit, {c.grid_label} {c.unit}, {c.leds}, "
-                          f"{c.light_type} '{c.light}', {c.camera}, ratio {c.ratio:.2f}, {c.exposures} exposures"
-                          + (f", vignetting {c.vignetting:.2f}" if c.vignetting < 1 else "")
-                          + (", specular" if c.specular else ""))
-            lines.append(f"| {split} | {c.name} | {ratio:.2f} | {measured.rmse:.3f} | {result.bound:.3f} "
-                         f"| {'yes' if measured.warnings else 'no'} | {conditions} |")
+            conditions = (
+                f"{c.mosaic} {c.cfa or ''} {c.bits}-bit, {c.grid_label} {c.unit}, {c.leds}, "
+                f"{c.light_type} '{c.light}', {c.camera}, ratio {c.ratio:.2f}, {c.exposures} exposures"
+                + (f", vignetting {c.vignetting:.2f}" if c.vignetting < 1 else "")
+                + (", specular" if c.specular else "")
+            )
+            lines.append(
+                f"| {split} | {c.name} | {ratio:.2f} | {measured.rmse:.3f} | {result.bound:.3f} "
+                f"| {'yes' if measured.warnings else 'no'} | {conditions} |"
+            )
     return lines
 
 
@@ -217,16 +239,42 @@ warning count) are in `{csv_name}` beside this file.
 """
 
 
-def markdown(results: Sequence[CaseResult], variants: Sequence[Variant], *, command: str, elapsed: float,
-             jobs: int, commit: str, csv_name: str) -> str:
+def markdown(
+    results: Sequence[CaseResult],
+    variants: Sequence[Variant],
+    *,
+    command: str,
+    elapsed: float,
+    jobs: int,
+    commit: str,
+    csv_name: str,
+) -> str:
     """The whole report."""
     variant_lines = "\n".join(f"- `{v.name}`: `{v.command}`" for v in variants)
-    parts = [INTRO.format(command=command, elapsed=elapsed, jobs=jobs, commit=commit,
-                          grids=", ".join(f"{a:g}–{b:g}/{c:g}" for a, b, c in GRIDS),
-                          ratio_low=RATIO_RANGE[0], ratio_high=RATIO_RANGE[1], per_split=CASES_PER_SPLIT,
-                          variants=variant_lines, miss=metrics.MISS_FACTOR, quick=QUICK_EVERY, csv_name=csv_name),
-             "## Summary", "", *summary_table(results, variants), "",
-             "## Warning confusion (miss: ratio > 1.3)", "", *confusion_table(results, variants), ""]
+    parts = [
+        INTRO.format(
+            command=command,
+            elapsed=elapsed,
+            jobs=jobs,
+            commit=commit,
+            grids=", ".join(f"{a:g}–{b:g}/{c:g}" for a, b, c in GRIDS),
+            ratio_low=RATIO_RANGE[0],
+            ratio_high=RATIO_RANGE[1],
+            per_split=CASES_PER_SPLIT,
+            variants=variant_lines,
+            miss=metrics.MISS_FACTOR,
+            quick=QUICK_EVERY,
+            csv_name=csv_name,
+        ),
+        "## Summary",
+        "",
+        *summary_table(results, variants),
+        "",
+        "## Warning confusion (miss: ratio > 1.3)",
+        "",
+        *confusion_table(results, variants),
+        "",
+    ]
     for family in FAMILIES:
         parts += [f"## Per family: {family} (ratio mean / worst)", "", *family_table(results, variants, family), ""]
     if any(v.name == "default" for v in variants):
@@ -245,11 +293,16 @@ def write_csv(results: Sequence[CaseResult], path: Path) -> None:
         for result in results:
             row = {**case_record(result), "bound": _round(result.bound)}
             for m in result.measured:
-                row.update({f"{m.variant}:ratio": _round(m.ratio), f"{m.variant}:coverage_1": _round(m.coverage_1),
-                            f"{m.variant}:coverage_2": _round(m.coverage_2),
-                            f"{m.variant}:warnings": "" if m.warnings is None else len(m.warnings),
-                            f"{m.variant}:error": m.error[:80],
-                            f"{m.variant}:flags": "; ".join(note[:60] for note in m.notes)})
+                row.update(
+                    {
+                        f"{m.variant}:ratio": _round(m.ratio),
+                        f"{m.variant}:coverage_1": _round(m.coverage_1),
+                        f"{m.variant}:coverage_2": _round(m.coverage_2),
+                        f"{m.variant}:warnings": "" if m.warnings is None else len(m.warnings),
+                        f"{m.variant}:error": m.error[:80],
+                        f"{m.variant}:flags": "; ".join(note[:60] for note in m.notes),
+                    }
+                )
             if writer is None:
                 writer = csv.DictWriter(handle, list(row))
                 writer.writeheader()

@@ -55,16 +55,27 @@ def measure(variant: Variant, directory: Path, truth: np.ndarray, bound: float) 
     estimate = variant.estimate(directory)
     if estimate.spectrum is None:
         return Measured(variant.name, error=estimate.error, notes=estimate.notes)
-    if estimate.spectrum.shape != truth.shape or not np.all(np.isfinite(estimate.spectrum)) \
-            or not np.any(estimate.spectrum):
-        return Measured(variant.name, error=f"unusable spectrum (shape {estimate.spectrum.shape})",
-                        notes=estimate.notes)
+    if (
+        estimate.spectrum.shape != truth.shape
+        or not np.all(np.isfinite(estimate.spectrum))
+        or not np.any(estimate.spectrum)
+    ):
+        return Measured(
+            variant.name, error=f"unusable spectrum (shape {estimate.spectrum.shape})", notes=estimate.notes
+        )
     error = metrics.rmse(estimate.spectrum, truth)
     coverage = (None, None)
     if estimate.std is not None and estimate.std.shape == truth.shape:
         coverage = metrics.band_coverage(estimate.spectrum, estimate.std, truth)
-    return Measured(variant.name, error, error / bound if bound > 0 else math.inf, coverage[0], coverage[1],
-                    estimate.warnings, notes=estimate.notes)
+    return Measured(
+        variant.name,
+        error,
+        error / bound if bound > 0 else math.inf,
+        coverage[0],
+        coverage[1],
+        estimate.warnings,
+        notes=estimate.notes,
+    )
 
 
 def run_case(case: HarnessCase, variants: list[Variant], root: Path | None = None) -> CaseResult:
@@ -84,8 +95,9 @@ def _run_one(arguments: tuple[HarnessCase, list[Variant]]) -> CaseResult:
     return run_case(*arguments)
 
 
-def run_cases(cases: list[HarnessCase], variants: list[Variant], jobs: int = 1,
-              progress: bool = False) -> list[CaseResult]:
+def run_cases(
+    cases: list[HarnessCase], variants: list[Variant], jobs: int = 1, progress: bool = False
+) -> list[CaseResult]:
     """Every case with every variant, in case order (``jobs`` worker processes)."""
     work = [(case, variants) for case in cases]
     results: list[CaseResult] = []

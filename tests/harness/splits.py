@@ -24,8 +24,10 @@ SPLITS: tuple[Split, ...] = ("tuning", "held_out")
 CAMERA_HELD_OUT_PER_MILLE = 300
 """A camera is held out when the CRC-32 of its identity, modulo 1000, is below this."""
 
-SURFACE_SETS: dict[Split, tuple[str, ...]] = {"tuning": ("munsell", "objects", "macbeth"),
-                                              "held_out": ("gretag", "esser")}
+SURFACE_SETS: dict[Split, tuple[str, ...]] = {
+    "tuning": ("munsell", "objects", "macbeth"),
+    "held_out": ("gretag", "esser"),
+}
 """Reflectance sets (keys of :data:`tests.harness.tables.REFLECTANCE_FILES`) per split."""
 
 

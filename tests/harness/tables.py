@@ -58,16 +58,24 @@ def lights() -> Table:
     collapsed runs of spaces (:func:`msflash_label`).
     """
     path = _data(LIGHTS_FILE)
-    rows = [row for row in csv.reader(path.read_text(encoding="utf-8-sig").splitlines())
-            if row and not row[0].startswith("#")]
+    rows = [
+        row
+        for row in csv.reader(path.read_text(encoding="utf-8-sig").splitlines())
+        if row and not row[0].startswith("#")
+    ]
     header, body = rows[0], np.array([[float(v) for v in row] for row in rows[1:]])
     names = tuple(msflash_label(label) for label in header[1:])
     return Table(body[:, 0], names, body[:, 1:])
 
 
 # -- LEDs -------------------------------------------------------------------------------------------
-PAPER_SUBSETS: dict[int, tuple[int, ...]] = {3: (0, 3, 6), 4: (0, 2, 3, 6), 5: (0, 2, 3, 4, 6), 6: (0, 1, 2, 3, 4, 6),
-                                             7: tuple(range(7))}
+PAPER_SUBSETS: dict[int, tuple[int, ...]] = {
+    3: (0, 3, 6),
+    4: (0, 2, 3, 6),
+    5: (0, 2, 3, 4, 6),
+    6: (0, 1, 2, 3, 4, 6),
+    7: tuple(range(7)),
+}
 """The paper's LED subsets by count (0-based; the paper's 1-based [1,4,7], [1,3,4,7], …)."""
 
 ISETCAM_LED_FILES = {4: "Luxeon4LEDs.csv", 5: "Luxeon5LEDs.csv", 6: "SixLEDs.csv", 8: "LuxeonLEDSpectra_8LED.csv"}
@@ -82,8 +90,9 @@ def led_set_names() -> tuple[str, ...]:
 def led_set(name: str) -> Table:
     """An LED set (energy), each column one LED."""
     if name.startswith("paper"):
-        nm, names, values = _csv(_data("paper/csv/ximeaLights_energy_380_1068_4nm.csv",
-                                       "paper/ximeaLights_energy_380_1068_4nm.csv"))
+        nm, names, values = _csv(
+            _data("paper/csv/ximeaLights_energy_380_1068_4nm.csv", "paper/ximeaLights_energy_380_1068_4nm.csv")
+        )
         which = list(PAPER_SUBSETS[int(name[5:])])
         return Table(nm, tuple(names[i] for i in which), np.nan_to_num(values[:, which]))
     if name.startswith("isetcam"):
@@ -93,8 +102,15 @@ def led_set(name: str) -> Table:
 
 
 # -- cameras ----------------------------------------------------------------------------------------
-ISETCAM_CAMERAS = ("AptinaMT9M031", "AptinaMT9M131", "NikonD1", "NikonD100", "NikonD200IR", "NikonD2xsNikon50mm",
-                   "NikonD70")
+ISETCAM_CAMERAS = (
+    "AptinaMT9M031",
+    "AptinaMT9M131",
+    "NikonD1",
+    "NikonD100",
+    "NikonD200IR",
+    "NikonD2xsNikon50mm",
+    "NikonD70",
+)
 COLOUR_CAMERAS = {"Nikon 5100 (NPL)": "Nikon D5100", "Sigma SDMerill (NPL)": "Sigma SDMerill"}
 """colour-science's cameras and the identity each is split by (the NPL Nikon 5100 is the D5100)."""
 
@@ -156,8 +172,9 @@ since a light prior's reflectance basis may come from Natural-100."""
 @cache
 def reflectance_set(name: str) -> Table:
     """A surface set (reflectance factors on the file's grid), clipped to [0, 1]."""
-    nm, names, values = _csv(DATA / REFLECTANCE_FILES[name] if (DATA / REFLECTANCE_FILES[name]).is_file()
-                             else _data(REFLECTANCE_FILES[name]))
+    nm, names, values = _csv(
+        DATA / REFLECTANCE_FILES[name] if (DATA / REFLECTANCE_FILES[name]).is_file() else _data(REFLECTANCE_FILES[name])
+    )
     return Table(nm, tuple(f"{name}:{n}" for n in names), np.clip(np.nan_to_num(values), 0.0, 1.0))
 
 

@@ -13,8 +13,18 @@ from tests.harness.metrics import rmse
 from tests.harness.render import HarnessCase, render
 
 WEIGHTS = (0.3, 0.0, 0.8, 0.5, 0.2)
-NOISE_FREE = HarnessCase("noise-free", "tuning", 5, "Canon 5DMarkII", "leds:" + ",".join(map(str, WEIGHTS)), "model",
-                         leds="paper5", full_well_e=float("inf"), ratio=1.0, n_surfaces=30)
+NOISE_FREE = HarnessCase(
+    "noise-free",
+    "tuning",
+    5,
+    "Canon 5DMarkII",
+    "leds:" + ",".join(map(str, WEIGHTS)),
+    "model",
+    leds="paper5",
+    full_well_e=float("inf"),
+    ratio=1.0,
+    n_surfaces=30,
+)
 
 
 def _leds(wavelengths: np.ndarray) -> np.ndarray:
@@ -44,8 +54,9 @@ def test_authors_roughness_term_smooths_and_keeps_the_spectrum_non_negative() ->
 
 @pytest.mark.parametrize("cfa", [None, "GBRG"])
 @pytest.mark.parametrize("unit", ["energy", "photons"])
-def test_baselines_recover_an_ambient_made_of_the_leds_from_frames_on_disk(cfa: str | None, unit: str,
-                                                                           tmp_path: Path) -> None:
+def test_baselines_recover_an_ambient_made_of_the_leds_from_frames_on_disk(
+    cfa: str | None, unit: str, tmp_path: Path
+) -> None:
     """Noise-free 16-bit frames of an ambient that is a mix of the LEDs, unequal exposures and
     vignetting: the authors' port (without roughness) and plain least squares return that mix."""
     case = replace(NOISE_FREE, cfa=cfa, unit=unit, exposures="unequal", vignetting=0.6)

@@ -12,8 +12,10 @@ import pytest
 from tests.harness import ambient, cases, variants
 from tests.harness.run import run_case, run_cases
 
-SMALL = [replace(case, n_surfaces=20) for case in (cases.cases_of("tuning")[1], cases.cases_of("held_out")[2],
-                                                   cases.cases_of("held_out")[7])]
+SMALL = [
+    replace(case, n_surfaces=20)
+    for case in (cases.cases_of("tuning")[1], cases.cases_of("held_out")[2], cases.cases_of("held_out")[7])
+]
 
 
 def test_every_variant_measures_every_case(tmp_path: Path) -> None:
@@ -45,13 +47,24 @@ def test_a_variant_defined_on_the_command_line_reaches_msflash(tmp_path: Path) -
 
 def test_the_command_writes_the_report_and_the_per_case_csv(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "docs" / "harness.md"
-    assert ambient.main(["--out", str(out), "--quick", "--split", "held_out", "--variant", "default",
-                         "--variant", "authors"]) == 0
+    assert (
+        ambient.main(
+            ["--out", str(out), "--quick", "--split", "held_out", "--variant", "default", "--variant", "authors"]
+        )
+        == 0
+    )
     text = out.read_text()
     count = len(cases.select_cases("held_out", quick=True))
     assert f"| held_out | default | {count} | 0 |" in text and f"| held_out | authors | {count} | 0 |" in text
-    for heading in ("## Summary", "## Warning confusion", "## Per family: RGB / Bayer", "## Per family: LED count",
-                    "## Per family: light type", "## Per family: wavelength grid", "## Worst cases of `default`"):
+    for heading in (
+        "## Summary",
+        "## Warning confusion",
+        "## Per family: RGB / Bayer",
+        "## Per family: LED count",
+        "## Per family: light type",
+        "## Per family: wavelength grid",
+        "## Worst cases of `default`",
+    ):
         assert heading in text
     assert "| tuning |" not in text and "msflash-lstsq" not in text
     with out.with_suffix(".csv").open() as handle:

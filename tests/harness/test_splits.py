@@ -37,8 +37,9 @@ def test_surface_pools_are_disjoint_and_hold_no_natural100_surface() -> None:
     assert not set(pools["tuning"].names) & set(pools["held_out"].names)
     reference = tables.natural100()
     for pool in pools.values():
-        visible = np.column_stack([np.interp(reference.wavelengths_nm, pool.wavelengths_nm, column)
-                                   for column in pool.values.T])
+        visible = np.column_stack(
+            [np.interp(reference.wavelengths_nm, pool.wavelengths_nm, column) for column in pool.values.T]
+        )
         distance = np.abs(visible[:, :, None] - reference.values[:, None, :]).max(axis=0)
         assert distance.min() > tables.NATURAL100_TOLERANCE
     # Vrhel Objects holds 82 Natural-100 surfaces verbatim: they are gone, the rest stay.

@@ -65,8 +65,12 @@ class Variant:
             return Estimate(error=f"status {status}: {err.strip().splitlines()[-1] if err.strip() else ''}")
         payload = json.loads(out)
         std = payload.get("spectrum_std")
-        return Estimate(np.asarray(payload["spectrum"], float), None if std is None else np.asarray(std, float),
-                        tuple(payload.get("warnings", ())), notes=tuple(caught))
+        return Estimate(
+            np.asarray(payload["spectrum"], float),
+            None if std is None else np.asarray(std, float),
+            tuple(payload.get("warnings", ())),
+            notes=tuple(caught),
+        )
 
 
 def msflash(*arguments: str) -> Callable[[str], Variant]:
@@ -105,10 +109,10 @@ def parse_variant(text: str) -> Variant:
     name = name.strip()
     if not sep:
         if name not in VARIANTS:
-            raise ValueError(f"unknown variant {name!r}; expected one of {', '.join(VARIANTS)} or NAME=\"ARGS\"")
+            raise ValueError(f'unknown variant {name!r}; expected one of {", ".join(VARIANTS)} or NAME="ARGS"')
         return VARIANTS[name]
     if not name:
-        raise ValueError(f"variant {text!r}: expected NAME=\"ARGS\"")
+        raise ValueError(f'variant {text!r}: expected NAME="ARGS"')
     return Variant(name, tuple(shlex.split(arguments)))
 
 

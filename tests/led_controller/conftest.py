@@ -218,18 +218,22 @@ def far_end(request: pytest.FixtureRequest, clock: ManualClock) -> Iterator[FarE
         server = serve_on_pty(clock=clock)
         pulses: list[TriggerPulse] = []
         emulator = server.emulator
-        emulator.on_trigger_out = lambda count: pulses.append(
-            TriggerPulse(int(clock() * 1e6), None, emulator.levels))
+        emulator.on_trigger_out = lambda count: pulses.append(TriggerPulse(int(clock() * 1e6), None, emulator.levels))
         try:
-            yield FarEnd("emulator", server.port, lambda: emulator.levels, emulator.exposure_active,
-                         clock.advance, lambda: list(pulses))
+            yield FarEnd(
+                "emulator",
+                server.port,
+                lambda: emulator.levels,
+                emulator.exposure_active,
+                clock.advance,
+                lambda: list(pulses),
+            )
         finally:
             server.close()
     else:
         request.getfixturevalue("firmware_image")
         with SimulatedBooth() as sim:
-            yield FarEnd("firmware", sim.port, lambda: sim.levels, sim.exposure_active, sim.advance,
-                         lambda: sim.pulses)
+            yield FarEnd("firmware", sim.port, lambda: sim.levels, sim.exposure_active, sim.advance, lambda: sim.pulses)
 
 
 @pytest.fixture

@@ -44,6 +44,7 @@ def test_configurable_channels(far: str, request: pytest.FixtureRequest) -> None
     if far == "emulator":
         emulator = BoothEmulator(names=("uv", "ir"), peaks_nm=(365, 850), level_bits=12, max_steps=4)
         far_end: PtyBoothServer | SimulatedBooth = serve_on_pty(emulator)
+
         def levels():
             return emulator.levels
     else:
@@ -68,8 +69,9 @@ def test_a_booth_of_another_protocol_version_is_refused(version: int, remedy: st
         with pytest.raises(BoothError) as caught:
             LedBooth.open(server.port)
         message = str(caught.value)
-        assert message.startswith(f"{server.port}: booth firmware booth-9.0 speaks booth protocol {version}; "
-                                  "expected protocol 1")
+        assert message.startswith(
+            f"{server.port}: booth firmware booth-9.0 speaks booth protocol {version}; expected protocol 1"
+        )
         assert remedy in message
 
 
@@ -250,14 +252,17 @@ def test_transcript_is_recorded(booth_on_pty: PtyBoothServer, tmp_path) -> None:
     assert "SET 0000" in lines[3] and "OFF" in lines[5]
 
 
-def test_an_unwritable_transcript_is_a_booth_error_and_the_port_is_released(booth_on_pty: PtyBoothServer,
-                                                                            tmp_path) -> None:
+def test_an_unwritable_transcript_is_a_booth_error_and_the_port_is_released(
+    booth_on_pty: PtyBoothServer, tmp_path
+) -> None:
     fds = len(os.listdir("/proc/self/fd"))
     missing = tmp_path / "no-such-dir" / "booth.txt"
     with pytest.raises(BoothError) as caught:
         LedBooth.open(booth_on_pty.port, log_serial=missing)
-    assert str(caught.value) == (f"{booth_on_pty.port}: cannot record the serial transcript in {missing} "
-                                 "(No such file or directory); expected a writable file path")
+    assert str(caught.value) == (
+        f"{booth_on_pty.port}: cannot record the serial transcript in {missing} "
+        "(No such file or directory); expected a writable file path"
+    )
     assert len(os.listdir("/proc/self/fd")) == fds  # the serial port opened for it is closed again
     with LedBooth.open(booth_on_pty.port) as booth:  # and the booth is still usable
         booth.ping()

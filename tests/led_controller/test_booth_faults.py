@@ -59,9 +59,10 @@ def test_stall_times_out_and_the_watchdog_switches_off(
     booth_on_pty: PtyBoothServer, clock: ManualClock, wait_until: Callable[..., None]
 ) -> None:
     emulator = booth_on_pty.emulator
-    with pytest.raises(BoothTimeoutError, match=r"no reply to STAT within 0.05 s") as info, LedBooth.open(
-        booth_on_pty.port, timeout_s=0.05
-    ) as booth:
+    with (
+        pytest.raises(BoothTimeoutError, match=r"no reply to STAT within 0.05 s") as info,
+        LedBooth.open(booth_on_pty.port, timeout_s=0.05) as booth,
+    ):
         booth.set_levels([1.0] * 7)
         emulator.inject_fault("stall")
         booth.status()
@@ -76,9 +77,10 @@ def test_stall_times_out_and_the_watchdog_switches_off(
 
 def test_unplug_is_a_clear_error_and_the_booth_is_off(booth_on_pty: PtyBoothServer) -> None:
     emulator = booth_on_pty.emulator
-    with pytest.raises(BoothError, match="serial link lost during PING") as info, LedBooth.open(
-        booth_on_pty.port, timeout_s=1.0
-    ) as booth:
+    with (
+        pytest.raises(BoothError, match="serial link lost during PING") as info,
+        LedBooth.open(booth_on_pty.port, timeout_s=1.0) as booth,
+    ):
         booth.set_levels([1.0] * 7)
         booth_on_pty.hangup()
         booth.ping()

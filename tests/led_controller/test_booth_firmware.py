@@ -34,18 +34,59 @@ def _framed(head: bytes) -> bytes:
 
 def _script() -> list[bytes]:
     requests: list[tuple[str, list[object]]] = [
-        ("WDOG", ["600000"]), ("ID", []), ("STAT", []), ("ID", ["x"]),
-        ("SET", L7), ("SET", L7[:6]), ("SET", ["ffff"] * 7), ("SET", ["12345"] + L7[:6]), ("STAT", []),
-        ("START", []), ("NEXT", []), ("ARM", ["CAMERA", "0", "0", "0"]),
-        ("PADD", ["0100"] * 7), ("PADD", ["FFFF"] * 7), ("PADD", L7 + ["HOLD"]), ("PADD", L7 + ["HOLX"]),
-        ("PSET", ["9"] + L7), ("PSET", ["x"] + L7), ("PSET", ["123456"] + L7), ("PSET", ["1"] + L7 + ["NOW"]),
-        ("ARM", ["FOO", "0", "0", "0"]), ("ARM", ["BOOTH", "100", "100", "150"]), ("ARM", ["BOOTH", "0", "0", "0"]),
-        ("ARM", ["CAMERA", "123456789", "0", "0"]), ("ARM", ["HOST", "0", "0"]), ("ARM", ["HOST", "0", "0", "0"]),
-        ("PCLR", []), ("SET", L7), ("START", []), ("START", []), ("SET", ["0000"] * 7),
-        ("NEXT", []), ("CNT", []), ("NEXT", []), ("NEXT", []), ("PSET", ["2"] + ["0800"] * 7), ("PSET", ["0"] + L7),
-        ("NEXT", []), ("STAT", []), ("NEXT", []), ("NEXT", []), ("CNT", []), ("STAT", []),
-        ("WDOG", ["49"]), ("WDOG", ["abc"]), ("WDOG", ["50"]), ("WDOG", ["600001"]), ("WDOG", ["0"]),
-        ("PING", ["x"]), ("FOO", ["1"]), ("OFF", []), ("PCLR", []), ("STAT", []),
+        ("WDOG", ["600000"]),
+        ("ID", []),
+        ("STAT", []),
+        ("ID", ["x"]),
+        ("SET", L7),
+        ("SET", L7[:6]),
+        ("SET", ["ffff"] * 7),
+        ("SET", ["12345"] + L7[:6]),
+        ("STAT", []),
+        ("START", []),
+        ("NEXT", []),
+        ("ARM", ["CAMERA", "0", "0", "0"]),
+        ("PADD", ["0100"] * 7),
+        ("PADD", ["FFFF"] * 7),
+        ("PADD", L7 + ["HOLD"]),
+        ("PADD", L7 + ["HOLX"]),
+        ("PSET", ["9"] + L7),
+        ("PSET", ["x"] + L7),
+        ("PSET", ["123456"] + L7),
+        ("PSET", ["1"] + L7 + ["NOW"]),
+        ("ARM", ["FOO", "0", "0", "0"]),
+        ("ARM", ["BOOTH", "100", "100", "150"]),
+        ("ARM", ["BOOTH", "0", "0", "0"]),
+        ("ARM", ["CAMERA", "123456789", "0", "0"]),
+        ("ARM", ["HOST", "0", "0"]),
+        ("ARM", ["HOST", "0", "0", "0"]),
+        ("PCLR", []),
+        ("SET", L7),
+        ("START", []),
+        ("START", []),
+        ("SET", ["0000"] * 7),
+        ("NEXT", []),
+        ("CNT", []),
+        ("NEXT", []),
+        ("NEXT", []),
+        ("PSET", ["2"] + ["0800"] * 7),
+        ("PSET", ["0"] + L7),
+        ("NEXT", []),
+        ("STAT", []),
+        ("NEXT", []),
+        ("NEXT", []),
+        ("CNT", []),
+        ("STAT", []),
+        ("WDOG", ["49"]),
+        ("WDOG", ["abc"]),
+        ("WDOG", ["50"]),
+        ("WDOG", ["600001"]),
+        ("WDOG", ["0"]),
+        ("PING", ["x"]),
+        ("FOO", ["1"]),
+        ("OFF", []),
+        ("PCLR", []),
+        ("STAT", []),
     ]
     lines = [encode_request(seq, name, *args) for seq, (name, args) in enumerate(requests, 1)]
     lines += [
@@ -118,7 +159,12 @@ def test_the_pattern_table_holds_its_capacity_and_refuses_one_more(small_image: 
         requests = [encode_request(1 + i, "PADD", *[f"{i:04X}"] * 2) for i in range(5)]
         replies = _exchange(sim.port, requests)
     assert [r.split(b"*")[0][8:] for r in replies] == [
-        b"OK PADD 0", b"OK PADD 1", b"OK PADD 2", b"OK PADD 3", b"ERR PADD E_FULL pattern table full"]
+        b"OK PADD 0",
+        b"OK PADD 1",
+        b"OK PADD 2",
+        b"OK PADD 3",
+        b"ERR PADD E_FULL pattern table full",
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -133,17 +179,22 @@ def firmware_link(firmware_image: Path) -> Iterator[tuple[SimulatedBooth, serial
 
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.floats(0.0, 1.0), min_size=7, max_size=7), st.data())
-def test_firmware_never_acts_on_a_damaged_set(firmware_link: tuple[SimulatedBooth, serial.Serial],
-                                              levels: list[float], data: st.DataObject) -> None:
+def test_firmware_never_acts_on_a_damaged_set(
+    firmware_link: tuple[SimulatedBooth, serial.Serial], levels: list[float], data: st.DataObject
+) -> None:
     """The emulator's property (test_fuzz.py) on the firmware: one flipped bit or dropped byte
     anywhere in a SET frame is refused as a frame error and never changes the LEDs."""
     sim, link = firmware_link
     frame = encode_request(3, "SET", *encode_levels(levels, 7))[:-1]
     index = data.draw(st.integers(0, len(frame) - 1), label="index")
     if data.draw(st.booleans(), label="drop"):
-        damaged = frame[:index] + frame[index + 1:]
+        damaged = frame[:index] + frame[index + 1 :]
     else:
-        damaged = frame[:index] + bytes([frame[index] ^ (1 << data.draw(st.integers(0, 7), label="bit"))]) + frame[index + 1:]
+        damaged = (
+            frame[:index]
+            + bytes([frame[index] ^ (1 << data.draw(st.integers(0, 7), label="bit"))])
+            + frame[index + 1 :]
+        )
     link.write(damaged + b"\n")
     replies = [link.readline() for _ in range(damaged.count(b"\n") + 1)]
     assert all(r.startswith(b"=00:") and b":ERR - E_" in r for r in replies), replies

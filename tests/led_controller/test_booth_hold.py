@@ -28,8 +28,9 @@ def test_pset_round_trip_is_framed_like_any_request() -> None:
     assert frame.startswith(b"?05:") and b":PSET 2 FFFF" in frame
 
 
-def test_booth_master_holds_then_exposes_the_pset_levels(far_booth: LedBooth, far_end: FarEnd,
-                                                         wait_until: Wait) -> None:
+def test_booth_master_holds_then_exposes_the_pset_levels(
+    far_booth: LedBooth, far_end: FarEnd, wait_until: Wait
+) -> None:
     booth = far_booth
     booth.load_pattern([[0.2] * 7, STALE], held=(1,))
     booth.arm("booth", settle_us=1000, pulse_us=100, period_us=10_000)
@@ -53,8 +54,7 @@ def test_booth_master_holds_then_exposes_the_pset_levels(far_booth: LedBooth, fa
     assert booth.wait_event("DONE").args == ("2",)
 
 
-def test_pset_before_the_step_fills_it_without_waiting(far_booth: LedBooth, far_end: FarEnd,
-                                                       wait_until: Wait) -> None:
+def test_pset_before_the_step_fills_it_without_waiting(far_booth: LedBooth, far_end: FarEnd, wait_until: Wait) -> None:
     booth = far_booth
     booth.load_pattern([[0.2] * 7, STALE], held=(1,))
     booth.arm("booth", settle_us=1000, pulse_us=100, period_us=1_000_000)
@@ -73,8 +73,7 @@ def test_pset_before_the_step_fills_it_without_waiting(far_booth: LedBooth, far_
         booth.set_step(5, FLASH)
 
 
-def test_camera_master_exposure_during_a_held_step_is_reported_as_hold(far_booth: LedBooth,
-                                                                        far_end: FarEnd) -> None:
+def test_camera_master_exposure_during_a_held_step_is_reported_as_hold(far_booth: LedBooth, far_end: FarEnd) -> None:
     booth, emulator = far_booth, far_end
     booth.load_pattern([[0.2] * 7, STALE], held=(1,))
     booth.arm("camera", settle_us=0, pulse_us=0, period_us=0)
@@ -133,8 +132,9 @@ def test_pset_now_starts_the_next_step_at_once_after_the_previous_trigger(
     assert [booth.wait_event("TRIG").args for _ in range(3)] == [("1", "0"), ("2", "1"), ("3", "2")]
 
 
-def test_pset_now_starts_the_held_step_early_on_both_far_ends(far_booth: LedBooth, far_end: FarEnd,
-                                                              wait_until: Wait) -> None:
+def test_pset_now_starts_the_held_step_early_on_both_far_ends(
+    far_booth: LedBooth, far_end: FarEnd, wait_until: Wait
+) -> None:
     """PSET … NOW after step 0's pulse starts step 1 at once: its pulse comes one settle after the
     PSET, long before its 1 s slot (simulated time on the firmware)."""
     booth = far_booth
@@ -174,9 +174,7 @@ def test_pset_now_before_the_previous_trigger_only_fills_the_step(
     assert levels_close(exposed[1], FLASH)
 
 
-def test_pset_now_on_a_booth_without_it_falls_back_to_plain_pset(
-    booth: LedBooth, booth_on_pty: PtyBoothServer
-) -> None:
+def test_pset_now_on_a_booth_without_it_falls_back_to_plain_pset(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
     emulator = booth_on_pty.emulator
     real = emulator._cmd_pattern_set
 
@@ -186,7 +184,9 @@ def test_pset_now_on_a_booth_without_it_falls_back_to_plain_pset(
         return real(args)
 
     emulator._handlers = lambda real_handlers=emulator._handlers: {  # type: ignore[method-assign]
-        **real_handlers(), Command.PATTERN_SET: old_firmware}
+        **real_handlers(),
+        Command.PATTERN_SET: old_firmware,
+    }
     booth.load_pattern([[0.2] * 7, STALE], held=(1,))
     booth.set_step(1, FLASH, now=True)
     assert emulator.held_steps == ()

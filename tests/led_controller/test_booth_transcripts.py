@@ -67,10 +67,14 @@ def test_replay_fails_on_an_unexpected_request(replay_port) -> None:
 
 
 def test_replay_fails_on_left_over_lines(replay_port) -> None:
-    port = replay_port(_lines(
-        (">", encode_request(1, "PING")), ("<", encode_frame("=", 1, "OK PING")),
-        (">", encode_request(2, "PING")), ("<", encode_frame("=", 2, "OK PING")),
-    ))
+    port = replay_port(
+        _lines(
+            (">", encode_request(1, "PING")),
+            ("<", encode_frame("=", 1, "OK PING")),
+            (">", encode_request(2, "PING")),
+            ("<", encode_frame("=", 2, "OK PING")),
+        )
+    )
     booth = LedBooth(port, timeout_s=0.5)
     booth.ping()
     booth.close()
@@ -92,10 +96,14 @@ def test_stale_reply_is_dropped_and_the_command_times_out(replay_port) -> None:
 
 
 def test_lost_event_is_reported(replay_port) -> None:
-    port = replay_port(_lines(
-        (">", encode_request(1, "START")), ("<", encode_frame("=", 1, "OK START")),
-        ("!", encode_frame("!", 1, "TRIG 1 0")), ("!", encode_frame("!", 3, "DONE 2")),
-    ))
+    port = replay_port(
+        _lines(
+            (">", encode_request(1, "START")),
+            ("<", encode_frame("=", 1, "OK START")),
+            ("!", encode_frame("!", 1, "TRIG 1 0")),
+            ("!", encode_frame("!", 3, "DONE 2")),
+        )
+    )
     booth = LedBooth(port, timeout_s=0.5)
     try:
         booth.start()

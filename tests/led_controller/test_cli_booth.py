@@ -60,11 +60,16 @@ def test_booth_emulator_refuses_a_watchdog_its_firmware_would_refuse(watchdog: s
 
 
 def test_booth_emulator_process_prints_its_port_and_stops_on_ctrl_c() -> None:
-    code = "import argparse,sys; from msflash.acquisition.app.cli_booth import register; p=argparse.ArgumentParser(); " \
-           "register(p.add_subparsers()); a=p.parse_args(sys.argv[1:]); sys.exit(a.handler(a))"
+    code = (
+        "import argparse,sys; from msflash.acquisition.app.cli_booth import register; p=argparse.ArgumentParser(); "
+        "register(p.add_subparsers()); a=p.parse_args(sys.argv[1:]); sys.exit(a.handler(a))"
+    )
     proc = subprocess.Popen(
-        [sys.executable, "-c", code, "booth-emulator"], cwd=ROOT, stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE, text=True,
+        [sys.executable, "-c", code, "booth-emulator"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         port = proc.stdout.readline().strip()
@@ -88,8 +93,9 @@ def test_bench_reports_its_figures() -> None:
     assert (figures["booth_pattern_steps"], figures["booth_pattern_channels"]) == (16, 8)
 
 
-def test_booth_console_reads_commands_from_stdin_and_switches_off_at_the_end(booth_on_pty, monkeypatch,
-                                                                              capsys: pytest.CaptureFixture[str]) -> None:
+def test_booth_console_reads_commands_from_stdin_and_switches_off_at_the_end(
+    booth_on_pty, monkeypatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     """``msflash booth console PORT`` with piped input: each line echoed, framed and explained; LEDs off
     at the end of input even though the last command switched them on."""
     from msflash.acquisition.app.cli import main
@@ -110,7 +116,10 @@ def test_booth_without_an_action_is_a_usage_error(capsys: pytest.CaptureFixture[
     from msflash.acquisition.app.cli import main
 
     assert main(["booth"]) == 2
-    assert capsys.readouterr().err.strip() == "msflash: error: booth: no action given; expected 'msflash booth console PORT'"
+    assert (
+        capsys.readouterr().err.strip()
+        == "msflash: error: booth: no action given; expected 'msflash booth console PORT'"
+    )
 
 
 class _Lines:

@@ -38,7 +38,8 @@ def test_levels_are_framed_sent_and_explained(console: BoothConsole, far_end: Fa
 
 def test_bad_input_is_explained_and_nothing_is_sent(console: BoothConsole, far_end: FarEnd) -> None:
     assert console.execute("levels 2 0 0 0 0 0 0") == [
-        "error: level 0 (led440) is 2, outside 0..1; expected levels L0 L1 … (one per channel) (nothing sent)"]
+        "error: level 0 (led440) is 2, outside 0..1; expected levels L0 L1 … (one per channel) (nothing sent)"
+    ]
     assert console.execute("levels 0.5")[0].startswith("error: 1 levels for 7 channels")
     assert console.execute("frobnicate")[0].startswith("error: unknown command 'frobnicate'")
     assert console.execute("arm camera x")[0].startswith("error: times 'x' are not whole microseconds")
@@ -50,15 +51,20 @@ def test_bad_input_is_explained_and_nothing_is_sent(console: BoothConsole, far_e
 
 def test_a_held_table_in_host_mode_with_a_refusal_on_the_way(console: BoothConsole, far_end: FarEnd) -> None:
     loaded = console.execute("table 0.1,0,0,0,0,0,0 hold:0,0,0,0,0,0,0")
-    assert [line[:10] for line in loaded[:6]] == ["  > ?02:00", "  < =02:00", "  > ?03:02", "  < =03:00",
-                                                  "  > ?04:02", "  < =04:00"]
+    assert [line[:10] for line in loaded[:6]] == [
+        "  > ?02:00",
+        "  < =02:00",
+        "  > ?03:02",
+        "  < =03:00",
+        "  > ?04:02",
+        "  < =04:00",
+    ]
     assert "HOLD" in loaded[4] and loaded[6] == "table loaded: 2 steps (PCLR, then one PADD each)"
     console.execute("arm host 0")
     console.execute("start")
     assert console.execute("next")[-1] == "step 0 applied and settled: trigger the camera now"
     refused = console.execute("next")
-    assert refused[-1].endswith("booth refused NEXT (E_STATE: next step held; expected PSET first); "
-                                "expected 'OK NEXT'")
+    assert refused[-1].endswith("booth refused NEXT (E_STATE: next step held; expected PSET first); expected 'OK NEXT'")
     console.execute("pset 1 0.2 0 0 0 0 0 0")
     assert console.execute("next")[-1] == "step 1 applied and settled: trigger the camera now"
     assert levels_close(far_end.levels, [0.2, 0, 0, 0, 0, 0, 0])

@@ -66,7 +66,10 @@ def test_doctor_reports_each_problem_with_its_remedy(fake_system: dict[str, Path
     checks = _by_check(findings)
     assert checks["usb3vision.speed"].status == "warn" and "480 Mb/s" in checks["usb3vision.speed"].message
     assert checks["usb3vision.access"].status == "fail" and "udev rule" in checks["usb3vision.access"].remedy
-    assert checks["usb.usbfs_memory_mb"].status == "warn" and "usbfs_memory_mb=1000" in checks["usb.usbfs_memory_mb"].remedy
+    assert (
+        checks["usb.usbfs_memory_mb"].status == "warn"
+        and "usbfs_memory_mb=1000" in checks["usb.usbfs_memory_mb"].remedy
+    )
     assert checks["booth.access"].status == "fail" and "dialout" in checks["booth.access"].remedy
     assert checks["booth.modemmanager"].status == "warn" and "pid 812" in checks["booth.modemmanager"].message
     assert checks["gige.rmem_max"].status == "warn" and "sysctl" in checks["gige.rmem_max"].remedy
@@ -84,8 +87,13 @@ def test_doctor_all_good(fake_system: dict[str, Path]) -> None:
     findings = run_doctor(**fake_system, list_usb=lambda: [camera], serial_ports=[BOOTH], identity=USER)
     statuses = {f.check: f.status for f in findings}
     assert statuses == {
-        "usb3vision.speed": "ok", "usb3vision.access": "ok", "usb.usbfs_memory_mb": "ok",
-        "booth.access": "ok", "booth.modemmanager": "ok", "gige.rmem_max": "ok", "gige.mtu": "info",
+        "usb3vision.speed": "ok",
+        "usb3vision.access": "ok",
+        "usb.usbfs_memory_mb": "ok",
+        "booth.access": "ok",
+        "booth.modemmanager": "ok",
+        "gige.rmem_max": "ok",
+        "gige.mtu": "info",
     }
 
 
@@ -105,10 +113,18 @@ def test_doctor_says_when_pyusb_has_no_backend(fake_system: dict[str, Path]) -> 
 def test_doctor_cli_json(fake_system: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
     parser = argparse.ArgumentParser(prog="msflash")
     register(parser.add_subparsers())
-    args = parser.parse_args([
-        "doctor", "--json", "--sysfs-root", str(fake_system["sysfs_root"]),
-        "--dev-root", str(fake_system["dev_root"]), "--proc-root", str(fake_system["proc_root"]),
-    ])
+    args = parser.parse_args(
+        [
+            "doctor",
+            "--json",
+            "--sysfs-root",
+            str(fake_system["sysfs_root"]),
+            "--dev-root",
+            str(fake_system["dev_root"]),
+            "--proc-root",
+            str(fake_system["proc_root"]),
+        ]
+    )
     status = args.handler(args)
     payload = json.loads(capsys.readouterr().out)
     assert status in (0, 1) and payload["ok"] is (status == 0)

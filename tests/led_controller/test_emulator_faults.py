@@ -55,16 +55,21 @@ def test_a_close_hangs_up_before_the_request_is_read() -> None:
     assert emulator.hangup_requested.is_set() and emulator.levels == (0.0,) * 7
 
 
-@pytest.mark.parametrize(("spec", "says"), [
-    ("drop:0.1,flip", "item 'flip': 0 value(s)"),
-    ("flip:-0.1", "item 'flip:-0.1': probability -0.1 outside [0, 1]"),
-    ("stall:0.1:inf", "item 'stall:0.1:inf': stall seconds 'inf' is not a finite number"),
-    ("close:0.1:2", "item 'close:0.1:2': 2 value(s)"),
-    ("drip:0.1", "item 'drip:0.1': kind 'drip' unknown"),
-])
+@pytest.mark.parametrize(
+    ("spec", "says"),
+    [
+        ("drop:0.1,flip", "item 'flip': 0 value(s)"),
+        ("flip:-0.1", "item 'flip:-0.1': probability -0.1 outside [0, 1]"),
+        ("stall:0.1:inf", "item 'stall:0.1:inf': stall seconds 'inf' is not a finite number"),
+        ("close:0.1:2", "item 'close:0.1:2': 2 value(s)"),
+        ("drip:0.1", "item 'drip:0.1': kind 'drip' unknown"),
+    ],
+)
 def test_a_bad_item_is_named(spec: str, says: str) -> None:
-    with pytest.raises(ValueError, match=f"^--fault {says}".replace("(", r"\(").replace(")", r"\)")
-                       .replace("[", r"\[").replace("]", r"\]")):
+    with pytest.raises(
+        ValueError,
+        match=f"^--fault {says}".replace("(", r"\(").replace(")", r"\)").replace("[", r"\[").replace("]", r"\]"),
+    ):
         parse_fault_spec(spec)
 
 

@@ -35,9 +35,9 @@ def _damaged(frame: bytes, data: st.DataObject) -> bytes:
     """``frame`` (without terminator) with one bit flipped or one byte dropped somewhere."""
     index = data.draw(st.integers(0, len(frame) - 1), label="index")
     if data.draw(st.booleans(), label="drop"):
-        return frame[:index] + frame[index + 1:]
+        return frame[:index] + frame[index + 1 :]
     bit = data.draw(st.integers(0, 7), label="bit")
-    return frame[:index] + bytes([frame[index] ^ (1 << bit)]) + frame[index + 1:]
+    return frame[:index] + bytes([frame[index] ^ (1 << bit)]) + frame[index + 1 :]
 
 
 @FUZZ

@@ -126,7 +126,9 @@ def test_parse_reply_checks_the_echoed_command() -> None:
     with pytest.raises(BoothProtocolError, match="reply to SET has the wrong form") as info:
         protocol.parse_reply(frame, "SET")
     assert info.value.expected.startswith("'OK SET")
-    err = protocol.parse_reply(protocol.parse_frame(protocol.encode_frame("=", 0, "ERR - E_CRC bad").rstrip(b"\n")), "SET")
+    err = protocol.parse_reply(
+        protocol.parse_frame(protocol.encode_frame("=", 0, "ERR - E_CRC bad").rstrip(b"\n")), "SET"
+    )
     assert (err.ok, err.code, err.text) == (False, "E_CRC", "bad")
 
 

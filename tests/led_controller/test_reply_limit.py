@@ -33,7 +33,7 @@ def test_a_body_past_1024_bytes_is_a_framing_error_even_with_its_length_and_chec
 def _write_all(fd: int, data: bytes) -> None:
     view = memoryview(data)
     while view:
-        view = view[os.write(fd, view):]
+        view = view[os.write(fd, view) :]
 
 
 @pytest.fixture
@@ -52,7 +52,8 @@ def booth_and_wire(tmp_path: Path) -> Iterator[tuple[LedBooth, int]]:
 
 
 def test_the_driver_reads_an_over_long_line_as_one_error_and_resynchronises(
-        booth_and_wire: tuple[LedBooth, int], tmp_path: Path) -> None:
+    booth_and_wire: tuple[LedBooth, int], tmp_path: Path
+) -> None:
     booth, wire = booth_and_wire
     _write_all(wire, b"!" + b"A" * 20_000 + b"\n")  # several reads' worth (4096 bytes each) before its end
     _write_all(wire, encode_frame("!", 1, "TRIG 1 0"))
@@ -81,7 +82,7 @@ def test_the_emulator_answers_an_over_long_line_once_and_reads_the_next_request(
     emulator.connect_output(out.append)
     data = b"?" + b"A" * (3 * MAX_LINE) + b"\n" + encode_request(2, "PING")
     for start in range(0, len(data), 100):  # as a serial link delivers it, in pieces
-        emulator.receive(data[start:start + 100])
+        emulator.receive(data[start : start + 100])
     assert [line.split(b"*")[0] for line in out] == [b"=00:019:ERR - E_LEN line too long", b"=02:007:OK PING"]
 
 
@@ -89,4 +90,3 @@ def test_the_emulator_refuses_channel_names_whose_identify_reply_would_not_fit()
     names = [f"led{i:02d}_{'x' * 20}" for i in range(40)]
     with pytest.raises(ValueError, match=f"ID reply would be .* bytes, over the protocol's {MAX_BODY}"):
         BoothEmulator(names=names, peaks_nm=[400.0 + i for i in range(40)])
-

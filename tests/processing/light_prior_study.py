@@ -56,8 +56,11 @@ TUNING_FOLDS = 3
 def study_surfaces(wavelengths: np.ndarray) -> np.ndarray:
     """Macbeth 24 + Munsell 64 + 12 Vrhel objects (none in Natural-100) + the generator's 10 greys: (n, 110)."""
     grid = WavelengthGrid.from_wavelengths(wavelengths)
-    parts = [datasets.macbeth().resample(WavelengthGrid(400, 700, 4)), datasets.vrhel("munsell"),
-             datasets.vrhel("objects").select(list(range(0, 168, 14)))]
+    parts = [
+        datasets.macbeth().resample(WavelengthGrid(400, 700, 4)),
+        datasets.vrhel("munsell"),
+        datasets.vrhel("objects").select(list(range(0, 168, 14))),
+    ]
     values = np.hstack([p.resample(WavelengthGrid(400, 700, 10)).resample(grid, outside="edge").values for p in parts])
     greys = np.logspace(0, np.log10(0.05), 10)
     return np.clip(np.hstack([values, np.tile(greys, (grid.size, 1))]), 0.0, 1.0)
@@ -131,21 +134,46 @@ def render_samples(split: str, per_fold: int, root: Path) -> list[Sample]:
             sequence = read_sequence(rendered.directory)
             default = estimate_sequence(sequence)
             statistics = sequence_channel_statistics(sequence)
-            samples.append(Sample(label, kind, camera, cfa, leds, fold, statistics, led_spectra_photons(sequence),
-                                  camera_responsivities_photons(sequence), rendered.truth, us.led_bound(rendered),
-                                  us.rmse(default.spectrum.values[:, 0], rendered.truth)))
+            samples.append(
+                Sample(
+                    label,
+                    kind,
+                    camera,
+                    cfa,
+                    leds,
+                    fold,
+                    statistics,
+                    led_spectra_photons(sequence),
+                    camera_responsivities_photons(sequence),
+                    rendered.truth,
+                    us.led_bound(rendered),
+                    us.rmse(default.spectrum.values[:, 0], rendered.truth),
+                )
+            )
     return samples
 
 
 def _configurations(n: int) -> list[tuple[str, str | None, str]]:
     """Four (camera, CFA, LED set) per light, rotating through cameras and LED sets; RGB and Bayer each twice."""
-    return [(CAMERAS[(n + j) % len(CAMERAS)], None if j % 2 == 0 else "RGGB", LED_SETS[(n + j) % len(LED_SETS)])
-            for j in range(4)]
+    return [
+        (CAMERAS[(n + j) % len(CAMERAS)], None if j % 2 == 0 else "RGGB", LED_SETS[(n + j) % len(LED_SETS)])
+        for j in range(4)
+    ]
 
 
-def evaluate(samples: list[Sample], *, light_dims: int, reflectance_dims: int, ridge: float, kappa: float,
-             split_span: bool = True, exclude_folds: bool = True, margin: float = CHOICE_MARGIN,
-             with_auto: bool = True, exclusions: dict[int, tuple[str, ...]] | None = None) -> dict[str, np.ndarray]:
+def evaluate(
+    samples: list[Sample],
+    *,
+    light_dims: int,
+    reflectance_dims: int,
+    ridge: float,
+    kappa: float,
+    split_span: bool = True,
+    exclude_folds: bool = True,
+    margin: float = CHOICE_MARGIN,
+    with_auto: bool = True,
+    exclusions: dict[int, tuple[str, ...]] | None = None,
+) -> dict[str, np.ndarray]:
     """Ratios (RMSE ÷ LED bound) of the prior model, the default estimate and auto, per sample; the band's coverage.
 
     ``exclude_folds``: the prior for a fold's samples learns without their lights (and near copies);
@@ -164,8 +192,16 @@ def evaluate(samples: list[Sample], *, light_dims: int, reflectance_dims: int, r
         key = (sample.fold, sample.camera, sample.cfa, sample.leds)
         if key not in models:
             prior = learn_light_prior(grid, light_dims, exclusions.get(sample.fold, ()))
-            models[key] = PriorModel(sample.led_spectra, sample.responsivities, sample.statistics.channels, prior,
-                                     learn_reflectance_basis(grid, reflectance_dims), ridge, kappa, split_span)
+            models[key] = PriorModel(
+                sample.led_spectra,
+                sample.responsivities,
+                sample.statistics.channels,
+                prior,
+                learn_reflectance_basis(grid, reflectance_dims),
+                ridge,
+                kappa,
+                split_span,
+            )
         model = models[key]
         estimate = model.estimate(sample.statistics)
         spectrum = estimate.spectrum.values[:, 0]
@@ -181,13 +217,20 @@ def evaluate(samples: list[Sample], *, light_dims: int, reflectance_dims: int, r
             choice = choose_model(sample.statistics, model, margin)
             chose_prior.append(choice.model == "prior")
             auto_ratio.append(prior_ratio[-1] if choice.model == "prior" else default_ratio[-1])
-    return {"prior": np.array(prior_ratio), "default": np.array(default_ratio), "auto": np.array(auto_ratio),
-            "chose_prior": np.array(chose_prior), "coverage": np.array(coverage)}
+    return {
+        "prior": np.array(prior_ratio),
+        "default": np.array(default_ratio),
+        "auto": np.array(auto_ratio),
+        "chose_prior": np.array(chose_prior),
+        "coverage": np.array(coverage),
+    }
 
 
 def summary(name: str, ratios: np.ndarray) -> str:
-    return f"{name:8s} mean {ratios.mean():.3f}  median {np.median(ratios):.3f}  worst {ratios.max():.3f}  " \
-           f"above 1: {np.mean(ratios > 1):.0%}"
+    return (
+        f"{name:8s} mean {ratios.mean():.3f}  median {np.median(ratios):.3f}  worst {ratios.max():.3f}  "
+        f"above 1: {np.mean(ratios > 1):.0%}"
+    )
 
 
 def report(samples: list[Sample], results: dict[str, np.ndarray]) -> None:
@@ -198,17 +241,23 @@ def report(samples: list[Sample], results: dict[str, np.ndarray]) -> None:
     if results["chose_prior"].size:
         chose = results["chose_prior"]
         better = results["prior"] < results["default"]
-        print(f"auto chose the prior in {chose.mean():.0%} of the cases; its choice had the lower RMSE in "
-              f"{np.mean(chose == better):.0%}")
+        print(
+            f"auto chose the prior in {chose.mean():.0%} of the cases; its choice had the lower RMSE in "
+            f"{np.mean(chose == better):.0%}"
+        )
     one, two, width = results["coverage"].mean(axis=0)
-    print(f"band: truth within 1σ at {one:.0%} and within 2σ at {two:.0%} of wavelengths; median 1σ {width:.3f} of the peak")
+    print(
+        f"band: truth within 1σ at {one:.0%} and within 2σ at {two:.0%} of wavelengths; median 1σ {width:.3f} of the peak"
+    )
     for attribute, _values in (("light_type", None), ("cfa", None), ("leds", None), ("camera", None)):
         groups = sorted({str(getattr(s, attribute)) for s in samples})
         for group in groups:
             index = np.array([str(getattr(s, attribute)) == group for s in samples])
-            line = f"  {attribute}={group:32s} n={index.sum():3d}  prior {results['prior'][index].mean():.3f}/" \
-                   f"{results['prior'][index].max():.3f}  default {results['default'][index].mean():.3f}/" \
-                   f"{results['default'][index].max():.3f}"
+            line = (
+                f"  {attribute}={group:32s} n={index.sum():3d}  prior {results['prior'][index].mean():.3f}/"
+                f"{results['prior'][index].max():.3f}  default {results['default'][index].mean():.3f}/"
+                f"{results['default'][index].max():.3f}"
+            )
             if results["auto"].size:
                 line += f"  auto {results['auto'][index].mean():.3f}/{results['auto'][index].max():.3f}"
             print(line)
@@ -216,30 +265,47 @@ def report(samples: list[Sample], results: dict[str, np.ndarray]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--split", choices=("tuning", "held_out", "family"), default="tuning",
-                        help="family: tuning lights of one family, the prior learnt without any light of it")
+    parser.add_argument(
+        "--split",
+        choices=("tuning", "held_out", "family"),
+        default="tuning",
+        help="family: tuning lights of one family, the prior learnt without any light of it",
+    )
     parser.add_argument("--per-fold", type=int, default=12, help="lights per fold (tuning) or in all (held_out)")
     parser.add_argument("--sweep", action="store_true", help="tuning: sweep dimensions and regularisation")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as root:
         samples = render_samples(args.split, args.per_fold, Path(root))
     from msflash.processing import light_prior as lp
+
     defaults = dict(light_dims=lp.LIGHT_DIMS, reflectance_dims=lp.REFLECTANCE_DIMS, ridge=lp.RIDGE, kappa=lp.KAPPA)
     if args.sweep:
         for light_dims in (8, 12, 16, 24):
             for reflectance_dims in (6, 8, 10, 12):
                 for ridge in (1e-4, 1e-3, 1e-2):
                     for kappa in (10.0, 100.0, 1000.0):
-                        ratios = evaluate(samples, light_dims=light_dims, reflectance_dims=reflectance_dims,
-                                          ridge=ridge, kappa=kappa, with_auto=False)["prior"]
-                        print(f"q={light_dims:2d} p={reflectance_dims:2d} ridge={ridge:g} kappa={kappa:g}: "
-                              f"{summary('prior', ratios)}", flush=True)
+                        ratios = evaluate(
+                            samples,
+                            light_dims=light_dims,
+                            reflectance_dims=reflectance_dims,
+                            ridge=ridge,
+                            kappa=kappa,
+                            with_auto=False,
+                        )["prior"]
+                        print(
+                            f"q={light_dims:2d} p={reflectance_dims:2d} ridge={ridge:g} kappa={kappa:g}: "
+                            f"{summary('prior', ratios)}",
+                            flush=True,
+                        )
         return
     exclusions = None
     if args.split == "family":
-        exclusions = {fold: tuple(light.label for light in library_lights()
-                                  if light.split == "tuning" and light.light_type == family)
-                      for fold, family in enumerate(FAMILIES)}
+        exclusions = {
+            fold: tuple(
+                light.label for light in library_lights() if light.split == "tuning" and light.light_type == family
+            )
+            for fold, family in enumerate(FAMILIES)
+        }
     results = evaluate(samples, exclude_folds=args.split == "tuning", exclusions=exclusions, **defaults)
     report(samples, results)
 

@@ -40,14 +40,22 @@ def main() -> None:
     for cfa in ("RGGB", None):
         shape = (1024, 1280) if cfa else (1024, 1280, 3)
         frames = [rng.integers(100, 3000, size=shape, dtype=np.uint16) for _ in range(8)]
-        eq5, _ = best_of(3, lambda frames=frames, cfa=cfa: accumulate_statistics(frames[0], frames[1:], spec, bin_factor=4,
-                                                          cfa_period=2 if cfa else 1))
-        channel, statistics = best_of(3, lambda frames=frames, cfa=cfa: accumulate_channel_statistics(frames[0], frames[1:], spec, cfa=cfa))
+        eq5, _ = best_of(
+            3,
+            lambda frames=frames, cfa=cfa: accumulate_statistics(
+                frames[0], frames[1:], spec, bin_factor=4, cfa_period=2 if cfa else 1
+            ),
+        )
+        channel, statistics = best_of(
+            3, lambda frames=frames, cfa=cfa: accumulate_channel_statistics(frames[0], frames[1:], spec, cfa=cfa)
+        )
         build, model = best_of(3, lambda statistics=statistics: prior_model(statistics.channels, leds, camera))
         estimate, _ = best_of(5, lambda model=model, statistics=statistics: model.estimate(statistics))
         choice, _ = best_of(3, lambda model=model, statistics=statistics: choose_model(statistics, model))
-        print(f"{cfa or 'RGB'}: eq. 5 statistics {eq5:.0f} ms, channel statistics {channel:.0f} ms, model "
-              f"{build:.1f} ms, prior estimate {estimate:.1f} ms, choose_model (5 folds) {choice:.0f} ms")
+        print(
+            f"{cfa or 'RGB'}: eq. 5 statistics {eq5:.0f} ms, channel statistics {channel:.0f} ms, model "
+            f"{build:.1f} ms, prior estimate {estimate:.1f} ms, choose_model (5 folds) {choice:.0f} ms"
+        )
 
 
 if __name__ == "__main__":

@@ -48,8 +48,11 @@ def mix_frames():
 def test_led_mix_recovered_from_float_frames(mix_frames, method: str, alpha) -> None:
     result = estimate(*mix_frames, method=method, alpha=alpha)
     np.testing.assert_allclose(result.ambient_weights, TRUE_WEIGHTS, atol=WEIGHTS_EXACT)
-    np.testing.assert_allclose(result.spectrum.values[:, 0], led_mix(TRUE_WEIGHTS).values[:, 0],
-                               atol=WEIGHTS_EXACT * led_mix(TRUE_WEIGHTS).values.max())
+    np.testing.assert_allclose(
+        result.spectrum.values[:, 0],
+        led_mix(TRUE_WEIGHTS).values[:, 0],
+        atol=WEIGHTS_EXACT * led_mix(TRUE_WEIGHTS).values.max(),
+    )
     assert result.relative_residual < WEIGHTS_EXACT
     assert result.warnings == ()
     assert result.saturated_fraction == 0.0
@@ -68,8 +71,13 @@ def test_led_mix_recovered_from_rendered_frames(method: str) -> None:
     # frames with exposures metered per frame — a relative error of order 10⁻⁴ on the weights.
     sensor = SensorModel()
     a, f, exposures, gains = rendered_frames(led_mix(TRUE_WEIGHTS), sensor=sensor)
-    result = estimate(a, f, spec_for(sensor, exposures, gains, one_hot_levels(7)), method=method,
-                      alpha=0.0 if method in ("tikhonov", "roughness") else "auto")
+    result = estimate(
+        a,
+        f,
+        spec_for(sensor, exposures, gains, one_hot_levels(7)),
+        method=method,
+        alpha=0.0 if method in ("tikhonov", "roughness") else "auto",
+    )
     np.testing.assert_allclose(result.ambient_weights, TRUE_WEIGHTS, atol=WEIGHTS_QUANTISED * TRUE_WEIGHTS.max())
 
 
@@ -80,7 +88,8 @@ def test_ambient_outside_span_gives_best_camera_space_fit() -> None:
     np.testing.assert_allclose(result.ambient_weights, direct, rtol=WEIGHTS_ILL_POSED)
     statistics = accumulate_statistics(*frames)
     assert statistics.residual_energy(result.ambient_weights) == pytest.approx(
-        statistics.residual_energy(direct), rel=WEIGHTS_EXACT)
+        statistics.residual_energy(direct), rel=WEIGHTS_EXACT
+    )
     assert result.relative_residual > 1e-3  # really outside the span
 
 
@@ -90,8 +99,9 @@ def test_exposure_and_gain_normalisation() -> None:
     gains = [1.5, 1.0, 2.0, 1.0, 4.0, 1.0, 1.25, 3.0]
     varied = estimate(*linear_frames(ambient("fluorescent"), exposures=exposures, gains=gains, black=256.0))
     np.testing.assert_allclose(varied.ambient_weights, reference.ambient_weights, rtol=WEIGHTS_ILL_POSED)
-    np.testing.assert_allclose(varied.spectrum.values, reference.spectrum.values,
-                               atol=WEIGHTS_ILL_POSED * reference.spectrum.values.max())
+    np.testing.assert_allclose(
+        varied.spectrum.values, reference.spectrum.values, atol=WEIGHTS_ILL_POSED * reference.spectrum.values.max()
+    )
 
 
 @pytest.mark.parametrize("cfa", sorted(CFA_PATTERNS))
@@ -157,7 +167,9 @@ def test_spectrum_shape_invariant_to_global_gain(tungsten_frames, gain: float, m
     reference = estimate(a, f, spec, method=method)
     scaled = estimate(a * gain, [x * gain for x in f], spec, method=method)
     shape = reference.spectrum.values[:, 0] / reference.spectrum.values.max()
-    np.testing.assert_allclose(scaled.spectrum.values[:, 0] / scaled.spectrum.values.max(), shape, atol=WEIGHTS_ILL_POSED)
+    np.testing.assert_allclose(
+        scaled.spectrum.values[:, 0] / scaled.spectrum.values.max(), shape, atol=WEIGHTS_ILL_POSED
+    )
     np.testing.assert_allclose(scaled.ambient_weights, reference.ambient_weights, rtol=WEIGHTS_ILL_POSED)
 
 
@@ -168,8 +180,9 @@ def test_weights_permute_with_the_leds(tungsten_frames, order: list[int], method
     reference = estimate(a, f, spec, method=method)
     permuted = estimate(a, [f[i] for i in order], spec, led_spectra=leds_photons().select(order), method=method)
     np.testing.assert_allclose(permuted.ambient_weights, reference.ambient_weights[order], rtol=WEIGHTS_ILL_POSED)
-    np.testing.assert_allclose(permuted.spectrum.values, reference.spectrum.values,
-                               atol=WEIGHTS_ILL_POSED * reference.spectrum.values.max())
+    np.testing.assert_allclose(
+        permuted.spectrum.values, reference.spectrum.values, atol=WEIGHTS_ILL_POSED * reference.spectrum.values.max()
+    )
 
 
 # -- reliability signals ----------------------------------------------------------------------
@@ -218,7 +231,9 @@ def test_led_with_no_emission_on_the_grid_is_refused(tungsten_frames) -> None:
     values[:, 2] = 0.0
     spectra = leds_photons().replace(values=values, source="cal.csv")
     statistics = accumulate_statistics(*tungsten_frames)
-    with pytest.raises(SpectralDataError, match=r"cal.csv: the spectrum of LED led500 has no positive value on 400–700 nm"):
+    with pytest.raises(
+        SpectralDataError, match=r"cal.csv: the spectrum of LED led500 has no positive value on 400–700 nm"
+    ):
         estimate_ambient(statistics, spectra)
 
 
@@ -232,13 +247,17 @@ def test_bad_alpha_is_refused(tungsten_frames, alpha) -> None:
 @pytest.mark.parametrize("method", ["tikhonov", "roughness"])
 def test_overflowing_alpha_is_refused_naming_alpha(tungsten_frames, method: str) -> None:
     statistics = accumulate_statistics(*tungsten_frames)
-    with pytest.raises(SpectralDataError, match=f"{method} estimate: the roughness penalty overflows; expected a smaller alpha"):
+    with pytest.raises(
+        SpectralDataError, match=f"{method} estimate: the roughness penalty overflows; expected a smaller alpha"
+    ):
         estimate_ambient(statistics, leds_photons(), method, 1e308)
 
 
 @pytest.mark.parametrize("method", sorted(AMBIENT_METHODS))
 @pytest.mark.parametrize("ambient_noise", [0.0, 1e-3])
-def test_dark_ambient_is_flagged_not_presented_as_a_spectrum(tungsten_frames, method: str, ambient_noise: float) -> None:
+def test_dark_ambient_is_flagged_not_presented_as_a_spectrum(
+    tungsten_frames, method: str, ambient_noise: float
+) -> None:
     """An ambient frame at the black level (zero, or read noise only) gave a zero (or noise) spectrum
     with no warning at all (zero) or only 'residual' / 'band' warnings that named the wrong cause."""
     a, f, spec = tungsten_frames
@@ -254,7 +273,9 @@ def test_dark_ambient_is_flagged_not_presented_as_a_spectrum(tungsten_frames, me
 
 def test_too_few_samples_names_the_cause(tungsten_frames) -> None:
     a, f, spec = tungsten_frames
-    with pytest.raises(SpectralDataError, match=r"only 3 valid samples of 3 \(0% saturated\).*— the frames are too small"):
+    with pytest.raises(
+        SpectralDataError, match=r"only 3 valid samples of 3 \(0% saturated\).*— the frames are too small"
+    ):
         estimate(a[:1, :1], [frame[:1, :1] for frame in f], spec)
 
 
@@ -280,8 +301,14 @@ def test_binned_statistics_recover_the_mix(cfa: str | None, period: int, factor:
     # data (it is documented for ≤ 16-bit frames), so use rendered integer frames.
     sensor = SensorModel(cfa=cfa)
     a, f, exposures, gains = rendered_frames(led_mix(TRUE_WEIGHTS), sensor=sensor)
-    result = estimate(a, f, spec_for(sensor, exposures, gains, one_hot_levels(7)), method="lstsq",
-                      bin_factor=factor, cfa_period=period)
+    result = estimate(
+        a,
+        f,
+        spec_for(sensor, exposures, gains, one_hot_levels(7)),
+        method="lstsq",
+        bin_factor=factor,
+        cfa_period=period,
+    )
     np.testing.assert_allclose(result.ambient_weights, TRUE_WEIGHTS, atol=WEIGHTS_QUANTISED * TRUE_WEIGHTS.max())
 
 
@@ -326,8 +353,15 @@ def test_gcv_alpha_is_the_plain_computation(seed: int, dependent: bool) -> None:
     if dependent:
         images[:, 1] = images[:, 0] * (1 + 1e-6 * rng.normal(size=300))
     target = images @ rng.normal(size=leds.shape[1]) + rng.normal(size=300) * rng.uniform(1e-3, 3)
-    statistics = SequenceStatistics(images.T @ images, images.T @ target, float(target @ target),
-                                    int(rng.integers(20, 10**5)), 300, float(target.sum()), images.sum(axis=0))
+    statistics = SequenceStatistics(
+        images.T @ images,
+        images.T @ target,
+        float(target @ target),
+        int(rng.integers(20, 10**5)),
+        300,
+        float(target.sum()),
+        images.sum(axis=0),
+    )
     roughness = np.diff(leds, axis=0)
     assert gcv_alpha(statistics, roughness) == reference_gcv_alpha(statistics, roughness)
 
@@ -347,7 +381,10 @@ def test_prepared_model_equals_the_one_shot_estimate(tungsten_frames, method: st
     full = model.estimate(statistics, method)
     np.testing.assert_array_equal(full.spectrum_std, reference.spectrum_std)
     assert (full.condition_number, full.relative_residual, full.warnings) == (
-        reference.condition_number, reference.relative_residual, reference.warnings)
+        reference.condition_number,
+        reference.relative_residual,
+        reference.warnings,
+    )
     with pytest.raises(ValueError, match="unknown"):
         model.weights(statistics, "magic")
     with pytest.raises(SpectralDataError, match="expected one spectrum per LED"):

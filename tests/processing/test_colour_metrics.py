@@ -65,14 +65,17 @@ class TestPatches:
 
 
 class TestDeltaE:
-    @pytest.mark.parametrize(("lab_a", "lab_b", "expected"), [
-        # Sharma, Wu & Dalal (2005), Table 1, pairs 1, 2, 3, 7 and 17.
-        ((50.0, 2.6772, -79.7751), (50.0, 0.0, -82.7485), 2.0425),
-        ((50.0, 3.1571, -77.2803), (50.0, 0.0, -82.7485), 2.8615),
-        ((50.0, 2.8361, -74.0200), (50.0, 0.0, -82.7485), 3.4412),
-        ((50.0, 0.0, 0.0), (50.0, -1.0, 2.0), 2.3669),
-        ((50.0, 2.5, 0.0), (73.0, 25.0, -18.0), 27.1492),
-    ])
+    @pytest.mark.parametrize(
+        ("lab_a", "lab_b", "expected"),
+        [
+            # Sharma, Wu & Dalal (2005), Table 1, pairs 1, 2, 3, 7 and 17.
+            ((50.0, 2.6772, -79.7751), (50.0, 0.0, -82.7485), 2.0425),
+            ((50.0, 3.1571, -77.2803), (50.0, 0.0, -82.7485), 2.8615),
+            ((50.0, 2.8361, -74.0200), (50.0, 0.0, -82.7485), 3.4412),
+            ((50.0, 0.0, 0.0), (50.0, -1.0, 2.0), 2.3669),
+            ((50.0, 2.5, 0.0), (73.0, 25.0, -18.0), 27.1492),
+        ],
+    )
     def test_ciede2000_reference_pairs(self, lab_a: tuple, lab_b: tuple, expected: float) -> None:
         assert float(cm.delta_e_2000(np.array(lab_a), np.array(lab_b))) == pytest.approx(expected, abs=1e-4)
 
@@ -103,8 +106,10 @@ class TestDeltaE:
     def test_von_kries_removes_most_of_the_cast(self) -> None:
         _, camera, d65, matrix, reference = world()
         tungsten = datasets.illuminant("A", GRID)
-        gains = cm.von_kries_gains(camera.values.T @ tungsten.to_unit("photons").values[:, 0],
-                                   camera.values.T @ d65.to_unit("photons").values[:, 0])
+        gains = cm.von_kries_gains(
+            camera.values.T @ tungsten.to_unit("photons").values[:, 0],
+            camera.values.T @ d65.to_unit("photons").values[:, 0],
+        )
         balanced = cm.chart_delta_e(camera_means("A"), matrix, reference, white_balance=gains)
         raw = cm.chart_delta_e(camera_means("A"), matrix, reference)
         assert balanced.mean < 0.4 * raw.mean
@@ -132,7 +137,8 @@ class TestWhiteBalance:
         gains = np.array([2.0, 1.0, 0.5])
         for cfa in ("RGGB", "GBRG"):
             assert cm.von_kries_balance(mosaic(rgb, cfa), gains, cfa) == pytest.approx(
-                mosaic(cm.von_kries_balance(rgb, gains), cfa))
+                mosaic(cm.von_kries_balance(rgb, gains), cfa)
+            )
         with pytest.raises(SpectralDataError, match="cfa"):
             cm.von_kries_balance(rgb[..., 0], gains)
 
@@ -173,7 +179,9 @@ class TestNoise:
         # A weak red channel brought up by von Kries brings its noise up with it.
         weak_red = quiet.copy()
         weak_red[..., 0] = quiet[..., 0] / 8 + np.random.default_rng(2).normal(0, 0.5, quiet.shape[:2])
-        balanced = cm.chroma_noise(weak_red, labels, [0, 1], srgb_to_xyz, ref, n, white_balance=np.array([8.0, 1.0, 1.0]))
+        balanced = cm.chroma_noise(
+            weak_red, labels, [0, 1], srgb_to_xyz, ref, n, white_balance=np.array([8.0, 1.0, 1.0])
+        )
         assert np.all(balanced > 3 * noise_quiet)
 
 
@@ -197,12 +205,16 @@ class TestRendering:
 
     def test_superpixel_matches_bilinear_on_smooth_images(self) -> None:
         rgb = np.ones((8, 8, 3)) * np.array([1.0, 2.0, 3.0])
-        assert demosaic_superpixel(mosaic(rgb, "RGGB"), "RGGB") == pytest.approx(demosaic_bilinear(mosaic(rgb, "RGGB"), "RGGB")[::2, ::2])
+        assert demosaic_superpixel(mosaic(rgb, "RGGB"), "RGGB") == pytest.approx(
+            demosaic_bilinear(mosaic(rgb, "RGGB"), "RGGB")[::2, ::2]
+        )
 
     def test_xyz_of_a_perfect_white_is_the_white_point(self) -> None:
         chart, _, d65, *_ = world()
         white = chart.replace(values=np.ones((GRID.size, 1)), names=("white",))
-        assert reflectances_to_xyz(white, d65)[0] == pytest.approx(reflectances_to_xyz(white, d65.to_unit("photons"))[0])
+        assert reflectances_to_xyz(white, d65)[0] == pytest.approx(
+            reflectances_to_xyz(white, d65.to_unit("photons"))[0]
+        )
         assert reflectances_to_xyz(white, d65)[0][1] == pytest.approx(1.0)
 
     def test_preview_white_balance_neutralises_a_gray_under_tungsten(self) -> None:
@@ -211,8 +223,9 @@ class TestRendering:
         gains = cm.von_kries_gains(tungsten_white, camera.values.T @ d65.to_unit("photons").values[:, 0])
         image = np.ones((2, 2, 3)) * tungsten_white
         cast = srgb_preview(image, matrix, white_value=float((tungsten_white @ matrix.T)[1]) * 1.2)
-        balanced = srgb_preview(image, matrix, white_value=float((tungsten_white * gains @ matrix.T)[1]) * 1.2,
-                                white_balance=gains)
+        balanced = srgb_preview(
+            image, matrix, white_value=float((tungsten_white * gains @ matrix.T)[1]) * 1.2, white_balance=gains
+        )
         assert int(cast[0, 0, 0]) - int(cast[0, 0, 2]) > 60  # orange
         assert abs(int(balanced[0, 0, 0]) - int(balanced[0, 0, 2])) <= 3  # gray
         with pytest.raises(SpectralDataError, match="white balance gains"):

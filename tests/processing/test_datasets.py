@@ -41,9 +41,13 @@ class TestPaperData:
 
     @pytest.mark.parametrize(
         ("count", "expected"),
-        [(3, ("led440", "led520", "led660")), (4, ("led440", "led500", "led520", "led660")),
-         (5, ("led440", "led500", "led520", "led596", "led660")),
-         (6, ("led440", "led480", "led500", "led520", "led596", "led660")), (7, None)],
+        [
+            (3, ("led440", "led520", "led660")),
+            (4, ("led440", "led500", "led520", "led660")),
+            (5, ("led440", "led500", "led520", "led596", "led660")),
+            (6, ("led440", "led480", "led500", "led520", "led596", "led660")),
+            (7, None),
+        ],
     )
     def test_led_subsets_follow_the_paper(self, count: int, expected: tuple[str, ...] | None) -> None:
         subset = datasets.paper_led_subset(count)
@@ -169,8 +173,12 @@ class TestIlluminants:
         grid = WavelengthGrid(400, 700, 50)
         wavelengths_m = grid.wavelengths_nm * 1e-9
         # colour uses the ITS-90 second radiation constant, hence the loose tolerance
-        planck = 1.0 / (wavelengths_m**5 * (np.exp(6.62607015e-34 * 299792458.0 / (wavelengths_m * 1.380649e-23 * 3200)) - 1))
-        np.testing.assert_allclose(datasets.illuminant("blackbody:3200", grid).values[:, 0], planck / planck.max(), rtol=2e-4)
+        planck = 1.0 / (
+            wavelengths_m**5 * (np.exp(6.62607015e-34 * 299792458.0 / (wavelengths_m * 1.380649e-23 * 3200)) - 1)
+        )
+        np.testing.assert_allclose(
+            datasets.illuminant("blackbody:3200", grid).values[:, 0], planck / planck.max(), rtol=2e-4
+        )
 
     def test_unknown_illuminant(self) -> None:
         with pytest.raises(SpectralDataError, match="illuminant 'D99'.*expected one of A, D50"):

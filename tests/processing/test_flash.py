@@ -59,8 +59,10 @@ def test_matching_with_negative_ambient_weights_stays_in_bounds() -> None:
     matrix = camera_led_matrix(camera(), leds_photons())
     clipped = np.clip(ambient, 0, None)
     wanted = chroma(matrix @ ambient)
-    assert np.linalg.norm(chroma(matrix @ solution.flash_weights) - wanted) <= np.linalg.norm(
-        chroma(matrix @ clipped) - wanted) + SOLVER
+    assert (
+        np.linalg.norm(chroma(matrix @ solution.flash_weights) - wanted)
+        <= np.linalg.norm(chroma(matrix @ clipped) - wanted) + SOLVER
+    )
 
 
 def test_matching_zero_ambient_raises() -> None:
@@ -69,13 +71,17 @@ def test_matching_zero_ambient_raises() -> None:
 
 
 @pytest.mark.parametrize("bounds", ["physical", "nonnegative"])
-@pytest.mark.parametrize("ambient", [
-    -AMBIENT_WEIGHTS,  # every camera channel negative: no light matches it better than none
-    # A dark tile's noise-only estimate (sim rig, ambient frame at the black level): same situation.
-    np.array([-1.67, -1.22, 5.56, -9.52, 2.34, -4.74, 2.05]) * 1e-12,
-])
+@pytest.mark.parametrize(
+    "ambient",
+    [
+        -AMBIENT_WEIGHTS,  # every camera channel negative: no light matches it better than none
+        # A dark tile's noise-only estimate (sim rig, ambient frame at the black level): same situation.
+        np.array([-1.67, -1.22, 5.56, -9.52, 2.34, -4.74, 2.05]) * 1e-12,
+    ],
+)
 def test_matching_whose_best_mix_is_no_light_raises_instead_of_rescaling_round_off(
-        ambient: np.ndarray, bounds: str) -> None:
+    ambient: np.ndarray, bounds: str
+) -> None:
     """The QP's answer is w_f = 0 up to ~1e-9 round-off of either sign; rescaling that round-off to
     max 1 used to return a 'full-drive' mix with weights down to -0.5 under physical bounds."""
     with pytest.raises(SolverError, match="no non-negative LED mix matches"):

@@ -68,19 +68,27 @@ class TestExpectedResponse:
         levels = [0.3, 0.0, 1.0, 0.2, 0.0, 0.7, 0.1]
         both = expected_response(chart, total_illumination(ambient, leds, levels), camera, 100.0)
         ambient_only = expected_response(chart, ambient, camera, 100.0)
-        flash_only = expected_response(chart, total_illumination(ambient.replace(values=ambient.values * 0), leds, levels),
-                                       camera, 100.0)
+        flash_only = expected_response(
+            chart, total_illumination(ambient.replace(values=ambient.values * 0), leds, levels), camera, 100.0
+        )
         np.testing.assert_allclose(both, ambient_only + flash_only, rtol=1e-12)
-        per_led = sum(expected_response(chart, total_illumination(ambient.replace(values=ambient.values * 0), leds,
-                                                                  np.eye(7)[k] * levels[k]), camera, 100.0)
-                      for k in range(7))
+        per_led = sum(
+            expected_response(
+                chart,
+                total_illumination(ambient.replace(values=ambient.values * 0), leds, np.eye(7)[k] * levels[k]),
+                camera,
+                100.0,
+            )
+            for k in range(7)
+        )
         np.testing.assert_allclose(flash_only, per_led, rtol=1e-12)
 
     def test_linear_in_exposure_gain_and_scale(self, chart: Scene, camera: Spectra, ambient: Spectra) -> None:
         base = expected_response(chart, ambient, camera, 100.0)
         np.testing.assert_allclose(expected_response(chart, ambient, camera, 200.0), 2 * base, rtol=1e-12)
-        np.testing.assert_allclose(expected_response(chart, ambient, camera, 100.0, gain=4.0, scale=0.5), 2 * base,
-                                   rtol=1e-12)
+        np.testing.assert_allclose(
+            expected_response(chart, ambient, camera, 100.0, gain=4.0, scale=0.5), 2 * base, rtol=1e-12
+        )
 
     def test_units_are_converted_to_photons(self, chart: Scene, camera: Spectra, ambient: Spectra) -> None:
         in_energy = expected_response(chart, ambient, camera.to_unit("energy"), 10.0)
@@ -127,9 +135,11 @@ class TestScenes:
 
     @pytest.mark.parametrize(
         ("labels", "shading", "match"),
-        [(np.array([[0, 1]]), None, "labels span 0…1; expected 0…0"),
-         (np.zeros((2, 2), dtype=int), np.ones((3, 3)), "shading has shape"),
-         (np.zeros((2, 2)), None, "expected a non-empty integer array")],
+        [
+            (np.array([[0, 1]]), None, "labels span 0…1; expected 0…0"),
+            (np.zeros((2, 2), dtype=int), np.ones((3, 3)), "shading has shape"),
+            (np.zeros((2, 2)), None, "expected a non-empty integer array"),
+        ],
     )
     def test_bad_scenes(self, labels: np.ndarray, shading: np.ndarray | None, match: str) -> None:
         with pytest.raises(SpectralDataError, match=match):
@@ -142,8 +152,14 @@ class TestScenes:
 
 
 class TestSensor:
-    sensor = SensorModel(black_level=100.0, white_level=4095.0, bit_depth=12, electrons_per_dn=0.5,
-                         read_noise_e=3.0, full_well_e=100000.0)
+    sensor = SensorModel(
+        black_level=100.0,
+        white_level=4095.0,
+        bit_depth=12,
+        electrons_per_dn=0.5,
+        read_noise_e=3.0,
+        full_well_e=100000.0,
+    )
 
     def electrons_scale(self, camera: Spectra, ambient: Spectra, electrons: float) -> float:
         """The scale giving ``electrons`` expected electrons in the green channel of a 50% gray at 1 µs."""
@@ -185,8 +201,9 @@ class TestSensor:
         assert over.any() and np.all(frame[over] == 4095)
 
     def test_full_well_reads_white_level(self, camera: Spectra, ambient: Spectra) -> None:
-        sensor = SensorModel(black_level=0, white_level=65535, bit_depth=16, electrons_per_dn=0.1,
-                             read_noise_e=0.0, full_well_e=1000.0)
+        sensor = SensorModel(
+            black_level=0, white_level=65535, bit_depth=16, electrons_per_dn=0.1, read_noise_e=0.0, full_well_e=1000.0
+        )
         scene = uniform_scene(gray(0.5), 4, 4)
         scale = self.electrons_scale(camera, ambient, 5000.0)
         frame = render_frame(scene, ambient, camera, sensor, 1.0, 1.0, scale, rng=np.random.default_rng(0))
@@ -203,8 +220,9 @@ class TestSensor:
         with pytest.raises(SpectralDataError, match="fraction"):
             exposure_for_peak(scene, ambient, camera, self.sensor, fraction=1.5)
 
-    @pytest.mark.parametrize("bad", [dict(white_level=5000.0), dict(black_level=5000.0), dict(cfa="RGBW"),
-                                     dict(electrons_per_dn=0.0)])
+    @pytest.mark.parametrize(
+        "bad", [dict(white_level=5000.0), dict(black_level=5000.0), dict(cfa="RGBW"), dict(electrons_per_dn=0.0)]
+    )
     def test_bad_sensor_models(self, bad: dict) -> None:
         fields = dict(black_level=100.0, white_level=4095.0, bit_depth=12) | bad
         with pytest.raises(SpectralDataError, match="sensor model"):
@@ -232,8 +250,9 @@ class TestMosaic:
         sensor = SensorModel(black_level=0.0, white_level=65535.0, cfa=cfa)
         scene = uniform_scene(gray(0.5), 5, 7)
         frame = render_frame(scene, ambient, camera, sensor, 100.0, noise=False)
-        rgb = render_frame(scene, ambient, camera, SensorModel(black_level=0.0, white_level=65535.0), 100.0,
-                           noise=False)
+        rgb = render_frame(
+            scene, ambient, camera, SensorModel(black_level=0.0, white_level=65535.0), 100.0, noise=False
+        )
         assert frame.shape == (5, 7)
         np.testing.assert_array_equal(frame, mosaic(rgb, cfa))
         assert cfa_channel_map(cfa, (5, 7)).shape == (5, 7)

@@ -60,7 +60,10 @@ def test_not_worse_than_scipy_or_random_feasible_points(seed: int, n: int, m: in
     hessian, linear, constraints, bounds, x0 = random_problem(seed, n, m)
     best = objective(hessian, linear, minimise_quadratic(hessian, linear, constraints, bounds).x)
     reference = minimize(
-        lambda x: objective(hessian, linear, x), x0, jac=lambda x: hessian @ x - linear, method="SLSQP",
+        lambda x: objective(hessian, linear, x),
+        x0,
+        jac=lambda x: hessian @ x - linear,
+        method="SLSQP",
         constraints=[{"type": "ineq", "fun": lambda x: constraints @ x - bounds, "jac": lambda x: constraints}],
         options={"ftol": 1e-14, "maxiter": 500},
     )
@@ -105,8 +108,12 @@ def test_recording_problems_collects_what_was_solved() -> None:
 
 
 @PROPERTY
-@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 8), m=st.integers(0, 12), kind=st.sampled_from(
-    ["random", "box", "duplicated"]))
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n=st.integers(1, 8),
+    m=st.integers(0, 12),
+    kind=st.sampled_from(["random", "box", "duplicated"]),
+)
 def test_factored_problem_solves_as_the_one_shot_call(seed: int, n: int, m: int, kind: str) -> None:
     """A FactoredQuadratic prepared once gives exactly minimise_quadratic's answer for every linear term.
 

@@ -36,14 +36,26 @@ def _unit(values: np.ndarray) -> np.ndarray:
     return values / np.linalg.norm(values, axis=0)
 
 
-def _scene(light: np.ndarray, leds: Spectra, camera: Spectra, surfaces: np.ndarray, cfa: str | None = None,
-           noise: float = 0.0, patch: int = 8, seed: int = 0) -> tuple[np.ndarray, list[np.ndarray], FrameStackSpec]:
+def _scene(
+    light: np.ndarray,
+    leds: Spectra,
+    camera: Spectra,
+    surfaces: np.ndarray,
+    cfa: str | None = None,
+    noise: float = 0.0,
+    patch: int = 8,
+    seed: int = 0,
+) -> tuple[np.ndarray, list[np.ndarray], FrameStackSpec]:
     """Float frames (ambient, ambient + each LED) of a chart of ``surfaces`` (n_wl × S), photons throughout."""
     columns = 8
     rows = -(-surfaces.shape[1] // columns)
-    labels = np.repeat(np.repeat(np.arange(rows * columns).reshape(rows, columns) % surfaces.shape[1], patch, 0), patch, 1)
+    labels = np.repeat(
+        np.repeat(np.arange(rows * columns).reshape(rows, columns) % surfaces.shape[1], patch, 0), patch, 1
+    )
+
     def responses(spd):
         return (surfaces * spd[:, None]).T @ camera.values  # (S, 3)
+
     ambient = responses(light)[labels]
     frames = [ambient + responses(leds.values[:, i])[labels] for i in range(leds.count)]
     rng = np.random.default_rng(seed)
@@ -95,14 +107,19 @@ def test_channel_statistics_unmix_any_levels_and_bin_any_size():
     # six frames for four LEDs: pairs, then two at half drive, with their own exposures
     levels = np.vstack([np.eye(4) + np.eye(4, k=1), 0.5 * np.eye(4)[:2]])
     scales = (1.0, 0.5, 2.0, 1.0, 1.0, 0.25)
-    mixed = [(ambient + sum(level * image for level, image in zip(row, only))) / scale
-             for row, scale in zip(levels, scales)]
+    mixed = [
+        (ambient + sum(level * image for level, image in zip(row, only))) / scale for row, scale in zip(levels, scales)
+    ]
     spec = FrameStackSpec(0.0, 10.0, 1.0, scales, levels)
     reference = accumulate_channel_statistics(ambient, frames, one_hot)
     unmixed = accumulate_channel_statistics(ambient, mixed, spec)
     # the raw moments are mapped after summing: cancellation costs ~1e-8 of the small LED-only moments
-    np.testing.assert_allclose(unmixed.moments.ff, reference.moments.ff, rtol=1e-6, atol=1e-9 * reference.moments.ff.max())
-    np.testing.assert_allclose(unmixed.moments.fa, reference.moments.fa, rtol=1e-6, atol=1e-9 * reference.moments.fa.max())
+    np.testing.assert_allclose(
+        unmixed.moments.ff, reference.moments.ff, rtol=1e-6, atol=1e-9 * reference.moments.ff.max()
+    )
+    np.testing.assert_allclose(
+        unmixed.moments.fa, reference.moments.fa, rtol=1e-6, atol=1e-9 * reference.moments.fa.max()
+    )
     for factor in (1, 3):  # no noise probe for odd blocks
         channel = accumulate_channel_statistics(ambient, mixed, spec, bin_factor=factor)
         direct = accumulate_statistics(ambient, mixed, spec, bin_factor=factor, workers=1)
@@ -117,17 +134,23 @@ def test_noise_free_estimate_is_exact_when_light_and_surfaces_are_in_the_model()
     reflectance = learn_reflectance_basis(GRID)
     # A light of the prior's basis (the mean light with a tilt), surfaces in the reflectance basis.
     phi = np.zeros(prior.dims)
-    phi[0], phi[1:] = 1.0, prior.mean + 0.3 * np.sqrt(np.diag(prior.covariance)) * np.sign(np.arange(prior.dims - 1) % 2 - 0.5)
+    phi[0], phi[1:] = (
+        1.0,
+        prior.mean + 0.3 * np.sqrt(np.diag(prior.covariance)) * np.sign(np.arange(prior.dims - 1) % 2 - 0.5),
+    )
     light = prior.basis.values @ phi
     assert light.min() > 0
     rng = np.random.default_rng(1)
-    surfaces = reflectance.basis.values @ (rng.normal(size=(reflectance.basis.count, 30)) *
-                                           np.sqrt(reflectance.weights)[:, None])
+    surfaces = reflectance.basis.values @ (
+        rng.normal(size=(reflectance.basis.count, 30)) * np.sqrt(reflectance.weights)[:, None]
+    )
     ambient, frames, spec = _scene(light, leds, camera, surfaces, patch=8)
     statistics = accumulate_channel_statistics(ambient, frames, spec)
     estimate = estimate_ambient_prior(statistics, leds, camera, ridge=0.0)  # the exact Wiener limit
     # in the LEDs' units: the frames were normalised by one peak, ambient and LEDs alike
-    np.testing.assert_allclose(estimate.spectrum.values[:, 0], light, rtol=0, atol=1e-4 * light.max())  # H: condition ~1e8
+    np.testing.assert_allclose(
+        estimate.spectrum.values[:, 0], light, rtol=0, atol=1e-4 * light.max()
+    )  # H: condition ~1e8
     assert estimate.relative_residual < 1e-6
     # the LED span cannot do it
     led = estimate_ambient(statistics.led_statistics(), leds)
@@ -208,7 +231,9 @@ def test_prior_never_learns_a_held_out_light_or_a_near_copy_of_one():
     visible = (held.wavelengths_nm >= 400) & (held.wavelengths_nm <= 700)
     similarity = _unit(candidates.values[visible]).T @ _unit(held.values[visible])
     assert similarity.max() < NEAR_COPY_COSINE
-    assert any(n.startswith("CIE daylight") for n in prior.training) and any(n.startswith("blackbody") for n in prior.training)
+    assert any(n.startswith("CIE daylight") for n in prior.training) and any(
+        n.startswith("blackbody") for n in prior.training
+    )
     # a cross-validation exclusion drops the light and its near copies
     label = lights_of("tuning").names[0]
     assert label not in learn_light_prior(GRID, exclude=(label,)).training
@@ -218,8 +243,9 @@ def test_prior_and_reflectance_basis_are_orthonormal_on_any_grid():
     for grid in (GRID, WavelengthGrid(380, 780, 5), WavelengthGrid(402, 698, 4)):
         prior, reflectance = learn_light_prior(grid), learn_reflectance_basis(grid)
         np.testing.assert_allclose(prior.basis.values.T @ prior.basis.values, np.eye(prior.dims), atol=1e-10)
-        np.testing.assert_allclose(reflectance.basis.values.T @ reflectance.basis.values,
-                                   np.eye(reflectance.basis.count), atol=1e-10)
+        np.testing.assert_allclose(
+            reflectance.basis.values.T @ reflectance.basis.values, np.eye(reflectance.basis.count), atol=1e-10
+        )
         assert prior.basis.unit == "photons" and prior.covariance.shape == (prior.dims - 1,) * 2
 
 
@@ -237,7 +263,9 @@ def test_bad_input_is_one_line_spectral_data_error():
         lambda: accumulate_channel_statistics(ambient[:, :-1], frames, spec),
         lambda: accumulate_channel_statistics(ambient[:, :, 0], [f[:, :, 0] for f in frames], spec, cfa="RGBX"),
         lambda: accumulate_channel_statistics(ambient[:4], [f[:4] for f in frames], spec),
-        lambda: PriorModel(leds, camera, ("R", "G", "B"), learn_light_prior(GRID), learn_reflectance_basis(GRID), kappa=0),
+        lambda: PriorModel(
+            leds, camera, ("R", "G", "B"), learn_light_prior(GRID), learn_reflectance_basis(GRID), kappa=0
+        ),
         lambda: learn_light_prior(GRID, dims=1),
         lambda: estimate_ambient_prior(statistics, leds, camera.replace(names=("X", "Y", "Z"))),
     ]

@@ -59,7 +59,9 @@ def tiled(kind: str, seed: int) -> TiledStatistics:
 
 
 # -- tiled statistics ---------------------------------------------------------------------------
-@pytest.mark.parametrize(("bin_factor", "cfa", "tiles"), [(1, None, 5), (2, None, (3, 4)), (4, None, 2), (2, "GRBG", 3)])
+@pytest.mark.parametrize(
+    ("bin_factor", "cfa", "tiles"), [(1, None, 5), (2, None, (3, 4)), (4, None, 2), (2, "GRBG", 3)]
+)
 def test_tiles_sum_to_the_global_statistics(bin_factor: int, cfa: str | None, tiles: int | tuple[int, int]) -> None:
     from msflash.processing.image_formation import SensorModel
 
@@ -88,12 +90,16 @@ def test_block_sums_and_half_differences_are_exact(dtype: type, factor: int, cha
     plane = rng.integers(0, 65536, size=(5 * factor + 1, 7 * factor + 3, channels)).astype(dtype)
     sums, differences = np.empty((5, 7, channels)), np.empty((5, 7, channels))
     _block_sums_and_differences(plane, factor, sums, differences)
-    blocks = plane[:5 * factor, :7 * factor].astype(float).reshape(5, factor, 7, factor, channels)
+    blocks = plane[: 5 * factor, : 7 * factor].astype(float).reshape(5, factor, 7, factor, channels)
     np.testing.assert_array_equal(sums, blocks.sum(axis=(1, 3)))
-    np.testing.assert_array_equal(differences, blocks[:, :, :, 0::2].sum(axis=(1, 3)) - blocks[:, :, :, 1::2].sum(axis=(1, 3)))
+    np.testing.assert_array_equal(
+        differences, blocks[:, :, :, 0::2].sum(axis=(1, 3)) - blocks[:, :, :, 1::2].sum(axis=(1, 3))
+    )
 
 
-def _in_span_noisy_stack(noise_gain: float, seed: int = 0) -> tuple[np.ndarray, list[np.ndarray], FrameStackSpec, np.ndarray]:
+def _in_span_noisy_stack(
+    noise_gain: float, seed: int = 0
+) -> tuple[np.ndarray, list[np.ndarray], FrameStackSpec, np.ndarray]:
     """Float frames whose ambient is exactly ``Σ w_k`` LED image k, with signal-dependent noise ``σ² = gain · signal``.
 
     The LED images are 8 × 8-pixel patches of random levels per channel with a ±20 % texture inside
@@ -103,14 +109,18 @@ def _in_span_noisy_stack(noise_gain: float, seed: int = 0) -> tuple[np.ndarray, 
     rng = np.random.default_rng(seed)
     k, height, width = 7, 256, 384
     patches = rng.uniform(0.1, 1.0, size=(k, height // 8, width // 8, 3))
-    images = np.repeat(np.repeat(patches, 8, axis=1), 8, axis=2) * rng.uniform(0.8, 1.2, size=(k, height, width, 3)) * 100
+    images = (
+        np.repeat(np.repeat(patches, 8, axis=1), 8, axis=2) * rng.uniform(0.8, 1.2, size=(k, height, width, 3)) * 100
+    )
     weights = rng.uniform(0.2, 1.0, size=k)
     ambient_image = np.tensordot(weights, images, axes=1)
 
     def noisy(x: np.ndarray) -> np.ndarray:
         return x + rng.normal(size=x.shape) * np.sqrt(noise_gain * x)
 
-    spec = FrameStackSpec(black_level=0.0, white_level=1e12, ambient_scale=1.0, led_scales=(1.0,) * k, led_levels=np.eye(k))
+    spec = FrameStackSpec(
+        black_level=0.0, white_level=1e12, ambient_scale=1.0, led_scales=(1.0,) * k, led_levels=np.eye(k)
+    )
     return noisy(ambient_image), [noisy(ambient_image + image) for image in images], spec, weights
 
 
@@ -139,9 +149,13 @@ def test_denoised_statistics_remove_the_noise_bias_of_the_led_only_images() -> N
     np.testing.assert_allclose(corrected, denoised_global(t, leds, "lstsq"), rtol=1e-9)
     paper = estimate_local(t, leds, "global", solver="lstsq", noise_correction=False).global_estimate.ambient_weights
     np.testing.assert_allclose(paper, np.linalg.solve(observed.gram, observed.cross), rtol=1e-6)
-    local = estimate_local(t, leds, "local", solver="lstsq", smoothing=1e6, regions_allowed=False)  # every tile sees all
+    local = estimate_local(
+        t, leds, "local", solver="lstsq", smoothing=1e6, regions_allowed=False
+    )  # every tile sees all
     assert np.abs(local.tile_weights - weights).max() < 0.4 * error_observed
-    plain = estimate_local(t, leds, "local", solver="lstsq", smoothing=1e6, regions_allowed=False, noise_correction=False)
+    plain = estimate_local(
+        t, leds, "local", solver="lstsq", smoothing=1e6, regions_allowed=False, noise_correction=False
+    )
     np.testing.assert_allclose(plain.tile_weights[0, 0], paper, rtol=1e-6)
     # The cells carry the same correction (single blocks: exactly the tiles'); odd bin factors have none.
     cells = Cells.of(t.blocks, 1)  # type: ignore[arg-type]
@@ -152,12 +166,17 @@ def test_denoised_statistics_remove_the_noise_bias_of_the_led_only_images() -> N
     assert tile_statistics(ambient_frame, led_frames, spec, 3, bin_factor=3).denoised is None
 
 
-@pytest.mark.parametrize(("shape", "bin_factor", "period", "block"), [
-    ((1, 1), 1, 2, "2×2-pixel block (1×1 of the mosaic's 2×2 quads)"),
-    ((3, 7), 2, 2, "4×4-pixel block (2×2 of the mosaic's 2×2 quads)"),
-    ((3, 7, 3), 4, 1, "4×4-pixel block; expected a larger frame"),
-])
-def test_a_frame_smaller_than_one_block_names_the_block_in_pixels(shape, bin_factor: int, period: int, block: str) -> None:
+@pytest.mark.parametrize(
+    ("shape", "bin_factor", "period", "block"),
+    [
+        ((1, 1), 1, 2, "2×2-pixel block (1×1 of the mosaic's 2×2 quads)"),
+        ((3, 7), 2, 2, "4×4-pixel block (2×2 of the mosaic's 2×2 quads)"),
+        ((3, 7, 3), 4, 1, "4×4-pixel block; expected a larger frame"),
+    ],
+)
+def test_a_frame_smaller_than_one_block_names_the_block_in_pixels(
+    shape, bin_factor: int, period: int, block: str
+) -> None:
     """A 1×1 Bayer frame was 'smaller than one 1×1 block' (the block counted in quads, not pixels)."""
     from msflash.processing.errors import SpectralDataError
 
@@ -181,14 +200,21 @@ def test_smoothing_is_a_weighted_sum_of_neighbours() -> None:
     narrow = t.smoothed(1e-3)  # only itself
     np.testing.assert_allclose(narrow.gram, t.gram, rtol=1e-12)
     left_out = t.smoothed(1.0, leave_out=True)
-    np.testing.assert_allclose(left_out.cross, t.smoothed(1.0).cross - t.cross, rtol=1e-9, atol=1e-9 * np.abs(t.cross).max())
-    expected = sum(np.exp(-((i - 2) ** 2 + (j - 3) ** 2) / 2.0) * t.cross[i, j] for i in range(TILES) for j in range(TILES))
+    np.testing.assert_allclose(
+        left_out.cross, t.smoothed(1.0).cross - t.cross, rtol=1e-9, atol=1e-9 * np.abs(t.cross).max()
+    )
+    expected = sum(
+        np.exp(-((i - 2) ** 2 + (j - 3) ** 2) / 2.0) * t.cross[i, j] for i in range(TILES) for j in range(TILES)
+    )
     np.testing.assert_allclose(t.smoothed(1.0).cross[2, 3], expected, rtol=1e-9)
 
 
 def test_noise_free_in_span_local_recovers_each_side_exactly() -> None:
     """Two LED-mix ambients split down the middle: tiles entirely on one side recover its weights."""
-    left_mix, right_mix = np.array([0.2, 0.05, 0.4, 0.3, 0.6, 0.1, 0.25]), np.array([0.6, 0.3, 0.1, 0.05, 0.2, 0.4, 0.1])
+    left_mix, right_mix = (
+        np.array([0.2, 0.05, 0.4, 0.3, 0.6, 0.1, 0.25]),
+        np.array([0.6, 0.3, 0.1, 0.05, 0.2, 0.4, 0.1]),
+    )
     leds = leds_photons()
     scene = chart()
     mixing = np.zeros(scene.shape)
@@ -198,8 +224,10 @@ def test_noise_free_in_span_local_recovers_each_side_exactly() -> None:
     illumination = MixedIllumination.two_ambients(left, right, mixing)
     dark = left.replace(values=np.zeros_like(left.values))
     cam = camera()
-    frames = [expected_response(scene, illumination.plus(dark.replace(values=leds.values @ row[:, None])), cam, 1.0)
-              for row in np.vstack([np.zeros(7), np.eye(7)])]
+    frames = [
+        expected_response(scene, illumination.plus(dark.replace(values=leds.values @ row[:, None])), cam, 1.0)
+        for row in np.vstack([np.zeros(7), np.eye(7)])
+    ]
     _, _, spec = linear_frames(left)
     t = tile_statistics(frames[0], frames[1:], spec, (1, 4))
     local = estimate_local(t, leds, "local", solver="lstsq", smoothing=1e-3)
@@ -249,8 +277,9 @@ def test_uniform_scene_auto_chooses_global(seed: int) -> None:
 
 
 @pytest.mark.parametrize(("camera_name", "seed"), [("NikonD200IR", 0), ("AptinaMT9M031", 15)])
-def test_noise_free_uniform_scene_stays_global_though_a_local_fit_cuts_its_tiny_misfit(camera_name: str,
-                                                                                       seed: int) -> None:
+def test_noise_free_uniform_scene_stays_global_though_a_local_fit_cuts_its_tiny_misfit(
+    camera_name: str, seed: int
+) -> None:
     """Without noise the global model's held-out error is only the misfit of an ambient outside the
     LEDs' span (relative residual ~1 %); neighbours' fits cut it by 20–30 %, which the ratio alone
     would take for a second ambient. The cut is ~10⁻⁵ of the ambient image's energy, far below
@@ -287,10 +316,16 @@ def test_local_cuts_the_spectrum_rmse_on_two_illuminant_scenes() -> None:
         labels = auto.regions.label_map(SHAPE)  # type: ignore[union-attr]
         truth = s.illumination.weights[..., 1] > s.illumination.weights[..., 0]
         assert max(np.mean(labels == truth), np.mean(labels != truth)) >= 0.9
-        rows.append([global_rmse, local_rmse,
-                     pixel_rmse(estimate_local(t, s.led_spectra, "local", regions_allowed=False), s),
-                     alone_rmse("boundary", seed, SHAPE), pixel_bound(s),
-                     pixel_rmse(estimate_local(t, s.led_spectra, "auto", noise_correction=False), s)])
+        rows.append(
+            [
+                global_rmse,
+                local_rmse,
+                pixel_rmse(estimate_local(t, s.led_spectra, "local", regions_allowed=False), s),
+                alone_rmse("boundary", seed, SHAPE),
+                pixel_bound(s),
+                pixel_rmse(estimate_local(t, s.led_spectra, "auto", noise_correction=False), s),
+            ]
+        )
     global_rmse, local_rmse, tiles_rmse, alone, bound, observed_rmse = np.mean(rows, axis=0)
     assert local_rmse <= 0.75 * global_rmse, rows
     # Part of either error is the LEDs' inability to reproduce the named ambients (~0.18 here):
@@ -321,10 +356,15 @@ def test_pixel_metric_is_each_pixels_estimate_against_its_own_ambient() -> None:
     second = (s.illumination.weights[..., 1] > 0).ravel()
     sides = [truth[~second][0], truth[second][0]]
     estimate = s.led_spectra.values @ np.full(7, 0.3)
-    expected = (np.mean(~second) * spectrum_rmse(estimate, sides[0]) + np.mean(second) * spectrum_rmse(estimate, sides[1]))
+    expected = np.mean(~second) * spectrum_rmse(estimate, sides[0]) + np.mean(second) * spectrum_rmse(
+        estimate, sides[1]
+    )
     assert pixel_rmse(estimate, s) == pytest.approx(expected, rel=1e-9)
     # The bound is the best LED fit of each side, weighted by the sides' areas.
-    fits = [tiled_rmse(led_bound(s.led_spectra.values, side[None, None]), side[None, None], np.ones((1, 1))) for side in sides]
+    fits = [
+        tiled_rmse(led_bound(s.led_spectra.values, side[None, None]), side[None, None], np.ones((1, 1)))
+        for side in sides
+    ]
     assert pixel_bound(s) == pytest.approx(np.mean(~second) * fits[0] + np.mean(second) * fits[1], rel=1e-6)
 
 
@@ -371,8 +411,8 @@ def test_local_synthesis_equals_global_for_equal_weights_and_blends_between() ->
     np.testing.assert_array_equal(saturated, reference_saturated)
     # Two different mixes left and right: pixels at the tile centres get their own tile's image.
     varying = np.zeros((TILES, TILES, 7))
-    varying[:, :TILES // 2] = weights
-    varying[:, TILES // 2:] = weights[::-1]
+    varying[:, : TILES // 2] = weights
+    varying[:, TILES // 2 :] = weights[::-1]
     image, _ = synthesize_local(s.ambient, s.led_frames, s.spec, varying, t)
     reversed_image, _ = synthesize(s.ambient, s.led_frames, s.spec, weights[::-1])
     rows, columns = t.centres

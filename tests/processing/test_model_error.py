@@ -22,8 +22,10 @@ from tests.helpers import ambient, camera, leds_photons, linear_frames, spectrum
 
 def test_a_light_in_the_leds_span_is_estimated_exactly_and_lights_outside_it_are_not() -> None:
     leds, cam = leds_photons(), camera().to_unit("photons")
-    mixes = leds.replace(values=leds.values @ np.array([[1, 0.2], [0.5, 0.1], [0, 1], [0.3, 0], [1, 0.4], [0.2, 0.9],
-                                                        [0.1, 0.1]]), names=("mix1", "mix2"))
+    mixes = leds.replace(
+        values=leds.values @ np.array([[1, 0.2], [0.5, 0.1], [0, 1], [0.3, 0], [1, 0.4], [0.2, 0.9], [0.1, 0.1]]),
+        names=("mix1", "mix2"),
+    )
     reference = light_reference(leds, cam, lights=mixes)
     np.testing.assert_allclose(reference.rmse, 0.0, atol=1e-6)
     np.testing.assert_allclose(reference.bounds, 0.0, atol=1e-6)
@@ -51,10 +53,13 @@ def test_with_model_error_widens_the_band_says_what_it_means_and_warns_on_a_like
     reference = reference_for(leds, camera().to_unit("photons"))
     widened = with_model_error(estimate, reference)
     np.testing.assert_array_equal(widened.noise_std, estimate.spectrum_std)
-    assert np.all(widened.spectrum_std >= estimate.spectrum_std) and np.any(widened.spectrum_std > estimate.spectrum_std)
+    assert np.all(widened.spectrum_std >= estimate.spectrum_std) and np.any(
+        widened.spectrum_std > estimate.spectrum_std
+    )
     assert "model's error" in widened.band_meaning and "pixel noise only" in estimate.band_meaning
-    swinging = replace(estimate, spectrum_std=np.full_like(estimate.spectrum_std, np.max(estimate.spectrum.values)),
-                       noise_std=None)
+    swinging = replace(
+        estimate, spectrum_std=np.full_like(estimate.spectrum_std, np.max(estimate.spectrum.values)), noise_std=None
+    )
     noisy = with_model_error(swinging, reference)
     assert noisy.expected_ratio >= EXPECTED_RATIO_WARNING
     assert any("may be off by more than" in warning for warning in noisy.warnings)
@@ -67,10 +72,13 @@ def test_discrepancy_alpha_regularises_up_to_the_noise_and_no_further() -> None:
     clean = accumulate_statistics(a, f, spec)
     chosen = discrepancy_alpha(clean, clean, terms)
     scale = terms.penalty_scale(clean)
-    residuals = [clean.residual_energy(_solve_penalised(clean, terms, alpha * scale, True, "t")) for alpha in ALPHA_GRID]
+    residuals = [
+        clean.residual_energy(_solve_penalised(clean, terms, alpha * scale, True, "t")) for alpha in ALPHA_GRID
+    ]
     least = residuals[0]
     allowed = least + clean.n_leds * clean.residual_energy(
-        _solve_penalised(clean, terms, ALPHA_GRID[0] * scale, True, "t")) / (clean.n_samples - clean.n_leds)
+        _solve_penalised(clean, terms, ALPHA_GRID[0] * scale, True, "t")
+    ) / (clean.n_samples - clean.n_leds)
     index = int(np.flatnonzero(ALPHA_GRID == chosen)[0])
     assert residuals[index] <= allowed * (1 + 1e-9)
     if index + 1 < ALPHA_GRID.size:

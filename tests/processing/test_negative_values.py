@@ -44,9 +44,12 @@ def test_an_offset_is_no_noise() -> None:
     """A dark subtracted twice: the tails sit at -10 % of the peak with little noise; differences cancel it."""
     values = led(0.002, offset=-0.1)
     assert noise_sigma(values) < 0.003 and tolerance(values) == pytest.approx(PEAK_FRACTION * values.max())
-    with pytest.raises(SpectralDataError, match=r"^off\.txt:7: column 'led520' at 350 nm is -0\.\d+; expected a "
-                                                r"non-negative value, or measurement noise down to −0\.0[45]\d* .*"
-                                                r"dark subtracted twice"):
+    with pytest.raises(
+        SpectralDataError,
+        match=r"^off\.txt:7: column 'led520' at 350 nm is -0\.\d+; expected a "
+        r"non-negative value, or measurement noise down to −0\.0[45]\d* .*"
+        r"dark subtracted twice",
+    ):
         clip_negative_noise(W, values, ["led520"], "off.txt", lines=list(range(7, 7 + W.size)))
 
 

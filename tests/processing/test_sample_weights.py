@@ -33,11 +33,13 @@ def _photon_stack(seed: int = 0) -> tuple[np.ndarray, list[np.ndarray], FrameSta
     surfaces = rng.uniform(50, 2500, size=(4, 12, 14, 3))
     surfaces[:, :, 6] *= 1.6  # a bright column of surfaces
     images = np.repeat(np.repeat(surfaces, 6, axis=1), 6, axis=2)
-    frames = [np.clip(rng.poisson(image) + rng.normal(64, 3, image.shape), 0, 4095).astype(np.uint16)
-              for image in images]
+    frames = [
+        np.clip(rng.poisson(image) + rng.normal(64, 3, image.shape), 0, 4095).astype(np.uint16) for image in images
+    ]
     frames[3][:, 36:42] = 4095  # saturated in one LED frame only
-    spec = FrameStackSpec(black_level=64.0, white_level=4095.0, ambient_scale=1.0, led_scales=(0.5, 1.0, 0.8),
-                          led_levels=np.eye(3))
+    spec = FrameStackSpec(
+        black_level=64.0, white_level=4095.0, ambient_scale=1.0, led_scales=(0.5, 1.0, 0.8), led_levels=np.eye(3)
+    )
     return frames[0], frames[1:], spec
 
 
@@ -68,8 +70,15 @@ def test_weighted_statistics_agree_across_batch_incremental_and_tiled_passes(ord
     blocks[2:4, 5:9] = True
 
     def filled(incremental: bool) -> BlockRows:
-        rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level, incremental=incremental,
-                         black_level=spec.black_level, weighting=True)
+        rows = BlockRows(
+            len(leds),
+            ambient.shape,
+            4,
+            spec.white_level,
+            incremental=incremental,
+            black_level=spec.black_level,
+            weighting=True,
+        )
         for position, row in enumerate(order):
             rows.add(row, cfa_planes(ambient if row == 3 else leds[row], 1))
             if position == 1 and incremental:
@@ -97,8 +106,9 @@ def test_a_specular_strip_no_longer_dominates_the_estimate(tmp_path: Path, monke
     the weighted estimate is closer to the LED bound than the unweighted one."""
     ratios: dict[bool, list[float]] = {True: [], False: []}
     for seed in range(4):
-        rendered = render_case(Case(f"gloss{seed}", light="A", specular=True, ratio=2.0, peak=0.35, seed=seed),
-                               tmp_path / str(seed))
+        rendered = render_case(
+            Case(f"gloss{seed}", light="A", specular=True, ratio=2.0, peak=0.35, seed=seed), tmp_path / str(seed)
+        )
         sequence = read_sequence(rendered.directory)
         for weighting in (False, True):
             monkeypatch.setattr(analysis, "SAMPLE_WEIGHTING", weighting)
@@ -109,15 +119,17 @@ def test_a_specular_strip_no_longer_dominates_the_estimate(tmp_path: Path, monke
     assert np.mean(ratios[True]) < np.mean(ratios[False]), ratios
 
 
-def _direct_weighted_statistics(ambient: np.ndarray, leds: list[np.ndarray], spec: FrameStackSpec, factor: int,
-                                stride: int) -> dict[str, object]:
+def _direct_weighted_statistics(
+    ambient: np.ndarray, leds: list[np.ndarray], spec: FrameStackSpec, factor: int, stride: int
+) -> dict[str, object]:
     """Eq. 4–6's weighted statistics computed plainly in float64, sample by sample (module notes of
     processing.statistics): block sums by reshaping, the half differences, a least-squares photon-transfer
     line, then every sum written out."""
     frames = [ambient, *leds]
     height, width = ambient.shape[0] // factor, ambient.shape[1] // factor
-    blocks = [f[:height * factor, :width * factor].astype(float).reshape(height, factor, width, factor, -1)
-              for f in frames]
+    blocks = [
+        f[: height * factor, : width * factor].astype(float).reshape(height, factor, width, factor, -1) for f in frames
+    ]
     sums = [b.sum(axis=(1, 3)) for b in blocks]
     halves = [b[:, :, :, 0::2].sum(axis=(1, 3)) - b[:, :, :, 1::2].sum(axis=(1, 3)) for b in blocks]
     saturated_in = [(b >= spec.white_level).any(axis=(1, 3, 4)) for b in blocks]
@@ -156,8 +168,9 @@ def _direct_weighted_statistics(ambient: np.ndarray, leds: list[np.ndarray], spe
 
 @pytest.mark.parametrize("probe_blocks", [16384, 100])
 @pytest.mark.parametrize("workers", [1, 2])
-def test_weighted_statistics_equal_a_direct_computation(monkeypatch: pytest.MonkeyPatch, probe_blocks: int,
-                                                        workers: int) -> None:
+def test_weighted_statistics_equal_a_direct_computation(
+    monkeypatch: pytest.MonkeyPatch, probe_blocks: int, workers: int
+) -> None:
     """The batch pass (threads, chunked moment products, the ambient frame's weights taken while LED frames
     are added) and the frame-by-frame pass give the plainly written-out weighted statistics to rounding;
     with few PROBE_BLOCKS the probe takes every second block row."""
@@ -166,10 +179,10 @@ def test_weighted_statistics_equal_a_direct_computation(monkeypatch: pytest.Monk
     stride = statistics.probe_stride(ambient.shape[0] // 4, ambient.shape[1] // 4)
     assert stride == (1 if probe_blocks > 1000 else 3)
     expected = _direct_weighted_statistics(ambient, leds, spec, 4, stride)
-    batch = accumulate_statistics(ambient, leds, spec, bin_factor=4, weighting=True, workers=workers,
-                                  chunk_pixels=50)
-    rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level, incremental=True, black_level=spec.black_level,
-                     weighting=True)
+    batch = accumulate_statistics(ambient, leds, spec, bin_factor=4, weighting=True, workers=workers, chunk_pixels=50)
+    rows = BlockRows(
+        len(leds), ambient.shape, 4, spec.white_level, incremental=True, black_level=spec.black_level, weighting=True
+    )
     for row in (1, 3, 0, 2):
         rows.add(row, cfa_planes(ambient if row == 3 else leds[row], 1))
     for ours in (batch, rows.statistics(spec)):
@@ -178,6 +191,10 @@ def test_weighted_statistics_equal_a_direct_computation(monkeypatch: pytest.Monk
         for name in ("gram", "cross", "ambient_energy", "ambient_sum", "led_sums"):
             np.testing.assert_allclose(getattr(ours, name), expected[name], rtol=1e-10, err_msg=name)
         np.testing.assert_allclose(ours.noise.gram, expected["noise_gram"], rtol=1e-10)
-        np.testing.assert_allclose(ours.noise.cross, expected["noise_cross"], rtol=1e-10,
-                                   atol=1e-10 * float(np.abs(expected["noise_gram"]).max()))
+        np.testing.assert_allclose(
+            ours.noise.cross,
+            expected["noise_cross"],
+            rtol=1e-10,
+            atol=1e-10 * float(np.abs(expected["noise_gram"]).max()),
+        )
         np.testing.assert_allclose(ours.noise.ambient_energy, expected["noise_ambient_energy"], rtol=1e-10)

@@ -44,20 +44,36 @@ def load(name: str):
     return read_sequence(directory), np.asarray(truth["ambient_spd_energy"], dtype=float)
 
 
-_UNREGULARISED_ON_THE_DARK_BAYER_SAMPLE = pytest.mark.xfail(strict=True, reason=(
-    "finding: plain least squares on the inverse-variance weighted, noise-corrected statistics of the "
-    "Bayer sample (ambient ~10 DN a pixel, black 256) scatters: RMSE 0.340 against the best LED fit's 0.165 "
-    "(0.194 before, when the biased observed statistics acted as a ridge; the regularised solvers stay "
-    "within the margin: tikhonov 0.214, nonneg 0.214)"))
+_UNREGULARISED_ON_THE_DARK_BAYER_SAMPLE = pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "finding: plain least squares on the inverse-variance weighted, noise-corrected statistics of the "
+        "Bayer sample (ambient ~10 DN a pixel, black 256) scatters: RMSE 0.340 against the best LED fit's 0.165 "
+        "(0.194 before, when the biased observed statistics acted as a ridge; the regularised solvers stay "
+        "within the margin: tikhonov 0.214, nonneg 0.214)"
+    ),
+)
 
 
-@pytest.mark.parametrize(("name", "method"), [
-    pytest.param(name, method, marks=_UNREGULARISED_ON_THE_DARK_BAYER_SAMPLE
-                 if (name, method) == ("sample-bayer-fluorescent-12bit", "lstsq") else ())
-    for name in SAMPLES for method in METHODS])
+@pytest.mark.parametrize(
+    ("name", "method"),
+    [
+        pytest.param(
+            name,
+            method,
+            marks=_UNREGULARISED_ON_THE_DARK_BAYER_SAMPLE
+            if (name, method) == ("sample-bayer-fluorescent-12bit", "lstsq")
+            else (),
+        )
+        for name in SAMPLES
+        for method in METHODS
+    ],
+)
 def test_estimate_tracks_truth_within_margin_of_best_led_fit(name: str, method: str) -> None:
     sequence, truth = load(name)
-    assert np.allclose(sequence.wavelengths_nm, json.loads((SAMPLES_DIR / f"{name}.truth.json").read_text())["wavelengths_nm"])
+    assert np.allclose(
+        sequence.wavelengths_nm, json.loads((SAMPLES_DIR / f"{name}.truth.json").read_text())["wavelengths_nm"]
+    )
     leds = sequence.led_spectra().values  # energy, as the truth
     fit, _ = nnls(leds, truth)
     best = spectrum_rmse(leds @ fit, truth)

@@ -14,8 +14,10 @@ from msflash.processing import scipy_cores
 
 
 def test_the_cores_load_without_scipy_linalg_or_optimize() -> None:
-    code = ("import sys; import msflash.processing.scipy_cores as c; "
-            "print(c.NNLS_CORE is not None, c.lapack.__name__, 'scipy.linalg' in sys.modules, 'scipy.optimize' in sys.modules)")
+    code = (
+        "import sys; import msflash.processing.scipy_cores as c; "
+        "print(c.NNLS_CORE is not None, c.lapack.__name__, 'scipy.linalg' in sys.modules, 'scipy.optimize' in sys.modules)"
+    )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert result.stdout.split() == ["True", "scipy.linalg._flapack", "False", "False"]
 

@@ -24,10 +24,15 @@ class TestWavelengthGrid:
         assert DEFAULT_GRID.size == 31
         np.testing.assert_allclose(DEFAULT_GRID.wavelengths_nm[[0, -1]], [400, 700])
 
-    @pytest.mark.parametrize("start, stop, step, message", [
-        (400, 700, 0, "step_nm"), (700, 400, 10, "below start"), (400, 705, 10, "does not divide"),
-        (400, np.inf, 10, "finite"),
-    ])
+    @pytest.mark.parametrize(
+        "start, stop, step, message",
+        [
+            (400, 700, 0, "step_nm"),
+            (700, 400, 10, "below start"),
+            (400, 705, 10, "does not divide"),
+            (400, np.inf, 10, "finite"),
+        ],
+    )
     def test_bad_grids_are_refused(self, start, stop, step, message) -> None:
         with pytest.raises(SpectralDataError, match=message):
             WavelengthGrid(start, stop, step)
@@ -75,8 +80,9 @@ class TestSpectra:
         np.testing.assert_allclose(response_photons, response_energy, rtol=EXACT)
         np.testing.assert_allclose(light.to_unit("photons").to_unit("energy").values, light.values, rtol=EXACT)
         wavelengths = DEFAULT_GRID.wavelengths_nm
-        np.testing.assert_allclose(photons_to_energy(energy_to_photons(light.values, wavelengths), wavelengths),
-                                   light.values, rtol=EXACT)
+        np.testing.assert_allclose(
+            photons_to_energy(energy_to_photons(light.values, wavelengths), wavelengths), light.values, rtol=EXACT
+        )
         with pytest.raises(SpectralDataError, match="expected 'photons'"):
             require_unit(light, "photons")
 

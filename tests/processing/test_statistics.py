@@ -10,8 +10,9 @@ from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, ac
 from tests.helpers import EXACT
 
 
-def naive_statistics(ambient: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec,
-                     mask: np.ndarray | None = None) -> dict:
+def naive_statistics(
+    ambient: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, mask: np.ndarray | None = None
+) -> dict:
     """Linearise, difference, unmix and sum over the valid samples with full arrays."""
     frames = [ambient, *led_frames]
     stack = np.stack([f.astype(float) for f in frames])
@@ -26,13 +27,19 @@ def naive_statistics(ambient: np.ndarray, led_frames: list[np.ndarray], spec: Fr
     a_valid = a[valid_pixel].reshape(-1)
     f_valid = np.stack([o[valid_pixel].reshape(-1) for o in only])
     return {
-        "gram": f_valid @ f_valid.T, "cross": f_valid @ a_valid, "ambient_energy": a_valid @ a_valid,
-        "n_samples": a_valid.size, "n_total": a.size, "ambient_sum": a_valid.sum(), "led_sums": f_valid.sum(axis=1),
+        "gram": f_valid @ f_valid.T,
+        "cross": f_valid @ a_valid,
+        "ambient_energy": a_valid @ a_valid,
+        "n_samples": a_valid.size,
+        "n_total": a.size,
+        "ambient_sum": a_valid.sum(),
+        "led_sums": f_valid.sum(axis=1),
     }
 
 
-def random_stack(rng: np.random.Generator, shape: tuple[int, ...], levels: np.ndarray, white: float,
-                 saturate: float = 0.0) -> tuple[np.ndarray, list[np.ndarray], FrameStackSpec]:
+def random_stack(
+    rng: np.random.Generator, shape: tuple[int, ...], levels: np.ndarray, white: float, saturate: float = 0.0
+) -> tuple[np.ndarray, list[np.ndarray], FrameStackSpec]:
     """Integer frames with random exposures/gains and some saturated samples."""
     n_frames = levels.shape[0]
     ambient = rng.integers(100, 3000, size=shape).astype(np.uint16)
@@ -40,9 +47,13 @@ def random_stack(rng: np.random.Generator, shape: tuple[int, ...], levels: np.nd
     if saturate:
         for frame in leds:
             frame[rng.random(shape) < saturate] = white
-    spec = FrameStackSpec(black_level=64.0, white_level=white, ambient_scale=1 / (rng.uniform(1e3, 1e4) * 1.5),
-                          led_scales=tuple(1 / (rng.uniform(1e3, 1e4) * rng.uniform(1, 4)) for _ in range(n_frames)),
-                          led_levels=levels)
+    spec = FrameStackSpec(
+        black_level=64.0,
+        white_level=white,
+        ambient_scale=1 / (rng.uniform(1e3, 1e4) * 1.5),
+        led_scales=tuple(1 / (rng.uniform(1e3, 1e4) * rng.uniform(1, 4)) for _ in range(n_frames)),
+        led_levels=levels,
+    )
     return ambient, leds, spec
 
 
@@ -99,11 +110,18 @@ def test_add_disjoint_halves_equals_whole() -> None:
     top = accumulate_statistics(ambient[:5], [f[:5] for f in leds], spec)
     bottom = accumulate_statistics(ambient[5:], [f[5:] for f in leds], spec)
     total = top + bottom
-    assert_matches(total, {
-        "gram": whole.gram, "cross": whole.cross, "ambient_energy": whole.ambient_energy,
-        "n_samples": whole.n_samples, "n_total": whole.n_total, "ambient_sum": whole.ambient_sum,
-        "led_sums": whole.led_sums,
-    })
+    assert_matches(
+        total,
+        {
+            "gram": whole.gram,
+            "cross": whole.cross,
+            "ambient_energy": whole.ambient_energy,
+            "n_samples": whole.n_samples,
+            "n_total": whole.n_total,
+            "ambient_sum": whole.ambient_sum,
+            "led_sums": whole.led_sums,
+        },
+    )
 
 
 def test_residual_energy_matches_pixels() -> None:
@@ -163,7 +181,9 @@ def test_non_finite_frame_is_named(bin_factor: int, frame: int, name: str) -> No
 
 
 @pytest.mark.parametrize("incremental", [False, True])
-def test_large_frames_probe_a_stride_of_block_rows_and_scale_it(monkeypatch: pytest.MonkeyPatch, incremental: bool) -> None:
+def test_large_frames_probe_a_stride_of_block_rows_and_scale_it(
+    monkeypatch: pytest.MonkeyPatch, incremental: bool
+) -> None:
     """Above 4 × PROBE_BLOCKS blocks the noise probe reads every 4th block row, scaled by the valid blocks:
     its noise moments stay within a few per cent of the full probe's (sampling error ~1 %), saturated
     blocks included, and so do the denoised weights."""
@@ -193,7 +213,7 @@ def test_large_frames_probe_a_stride_of_block_rows_and_scale_it(monkeypatch: pyt
         return rows.statistics(spec)
 
     strided = statistics()
-    monkeypatch.setattr(module, "PROBE_BLOCKS", 10 ** 9)  # every block row
+    monkeypatch.setattr(module, "PROBE_BLOCKS", 10**9)  # every block row
     full = statistics()
     assert strided.noise is not None and full.noise is not None
     assert strided.n_samples == full.n_samples < strided.n_total

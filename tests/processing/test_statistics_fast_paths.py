@@ -19,14 +19,17 @@ def naive_binned(ambient, leds, spec, factor, cfa_period=1, mask=None):
         sums, _ = bin_frame(mask.astype(np.uint8), factor, cfa_period)
         full = sums == factor * factor
         valid &= full.all(axis=2) if full.ndim == 3 else full
-    block = FrameStackSpec(spec.black_level * factor * factor, np.inf, spec.ambient_scale, spec.led_scales,
-                           spec.led_levels)
+    block = FrameStackSpec(
+        spec.black_level * factor * factor, np.inf, spec.ambient_scale, spec.led_scales, spec.led_levels
+    )
     sums = [s.astype(float) for s, _ in binned]
     return naive_statistics(sums[0], sums[1:], block, valid)
 
 
 @pytest.mark.parametrize("saturate", [0.0, 0.02], ids=["none", "some"])
-@pytest.mark.parametrize(("shape", "cfa"), [((37, 45, 3), 1), ((37, 45), 1), ((38, 46), 2)], ids=["rgb", "mono", "bayer"])
+@pytest.mark.parametrize(
+    ("shape", "cfa"), [((37, 45, 3), 1), ((37, 45), 1), ((38, 46), 2)], ids=["rgb", "mono", "bayer"]
+)
 @pytest.mark.parametrize("factor", [1, 2, 4])
 def test_binned_equals_naive(saturate: float, shape: tuple[int, ...], cfa: int, factor: int) -> None:
     if factor == 1 and cfa == 2:
@@ -63,7 +66,9 @@ def test_float_frames_match_integer_frames(factor: int) -> None:
     ambient, leds, spec = random_stack(rng, (32, 24, 3), MULTIPLEXED, white=4095.0, saturate=0.01)
     as_int = accumulate_statistics(ambient, leds, spec, bin_factor=factor)
     as_float = accumulate_statistics(ambient.astype(float), [f.astype(float) for f in leds], spec, bin_factor=factor)
-    assert_matches(as_float, naive_binned(ambient, leds, spec, factor) if factor > 1 else naive_statistics(ambient, leds, spec))
+    assert_matches(
+        as_float, naive_binned(ambient, leds, spec, factor) if factor > 1 else naive_statistics(ambient, leds, spec)
+    )
     assert as_float.n_samples == as_int.n_samples
 
 
@@ -86,13 +91,16 @@ def test_synthesis_saturation_in_one_chunk_and_float_frames(chunk: int) -> None:
     expected = np.zeros((30, 20), dtype=bool)
     expected[25, 4] = True
     np.testing.assert_array_equal(saturated, expected)
-    float_image, float_saturated = synthesize(ambient.astype(float), [f.astype(float) for f in leds], spec, weights,
-                                              chunk_pixels=chunk)
+    float_image, float_saturated = synthesize(
+        ambient.astype(float), [f.astype(float) for f in leds], spec, weights, chunk_pixels=chunk
+    )
     np.testing.assert_array_equal(float_saturated, expected)
     np.testing.assert_allclose(float_image, image, rtol=0, atol=1e-5 * np.abs(image).max())
 
 
-@pytest.mark.parametrize("saturate", [0.0, 0.0003, 0.002, 0.02], ids=["none", "few-blocks", "many-blocks", "most-blocks"])
+@pytest.mark.parametrize(
+    "saturate", [0.0, 0.0003, 0.002, 0.02], ids=["none", "few-blocks", "many-blocks", "most-blocks"]
+)
 def test_block_rows_frame_by_frame_equals_the_binned_pass(saturate: float) -> None:
     """BlockRows filled one frame at a time (a capture) gives the binned pass's statistics.
 
@@ -112,9 +120,18 @@ def test_block_rows_frame_by_frame_equals_the_binned_pass(saturate: float) -> No
     assert (stats.n_samples < stats.n_total) == (saturate > 0)
     if saturate == 0.02:
         assert stats.n_samples < 0.75 * stats.n_total  # the recomputing branch ran
-    assert_matches(stats, {"gram": reference.gram, "cross": reference.cross, "ambient_energy": reference.ambient_energy,
-                           "n_samples": reference.n_samples, "n_total": reference.n_total,
-                           "ambient_sum": reference.ambient_sum, "led_sums": reference.led_sums})
+    assert_matches(
+        stats,
+        {
+            "gram": reference.gram,
+            "cross": reference.cross,
+            "ambient_energy": reference.ambient_energy,
+            "n_samples": reference.n_samples,
+            "n_total": reference.n_total,
+            "ambient_sum": reference.ambient_sum,
+            "led_sums": reference.led_sums,
+        },
+    )
 
 
 def test_block_rows_refuses_a_missing_frame() -> None:
@@ -175,7 +192,7 @@ def test_saturated_blocks_equal_the_any_of_each_block(dtype: type) -> None:
             plane[0, 0, 0] = np.nan  # NaN never counts as saturated, as with >=
         white = float(rng.choice([120, 240, 249]))
         rows, columns = height // factor, width // factor
-        hit = (plane >= white).any(axis=2)[:rows * factor, :columns * factor]
+        hit = (plane >= white).any(axis=2)[: rows * factor, : columns * factor]
         expected = hit.reshape(rows, factor, columns, factor).any(axis=(1, 3))
         np.testing.assert_array_equal(saturated_blocks(plane, factor, white), expected)
 

@@ -79,8 +79,9 @@ def test_tiny_table1_runs_and_shows_the_trend():
 
 
 def test_an_alpha_sweep_reports_the_best_value_per_metric():
-    result = run_table1(n_leds_list=(5,), method="roughness", alpha=[0.001, 0.1], cameras=1, illuminants=2,
-                        alpha_units="paper")
+    result = run_table1(
+        n_leds_list=(5,), method="roughness", alpha=[0.001, 0.1], cameras=1, illuminants=2, alpha_units="paper"
+    )
     assert set(result["alpha_selected"]) >= {"pixel_rmse", "spectrum_rmse"}
     for key, chosen in result["alpha_selected"].items():
         values = result["per_alpha"][key][0]
@@ -109,8 +110,23 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def test_cli_writes_json_and_png(tmp_path, capsys):
-    args = _parser().parse_args(["study", "table1", "--out", str(tmp_path), "--json", "--cameras", "1",
-                                 "--illuminants", "2", "--leds", "3,7", "--scheduler", "none"])
+    args = _parser().parse_args(
+        [
+            "study",
+            "table1",
+            "--out",
+            str(tmp_path),
+            "--json",
+            "--cameras",
+            "1",
+            "--illuminants",
+            "2",
+            "--leds",
+            "3,7",
+            "--scheduler",
+            "none",
+        ]
+    )
     assert args.handler(args) == 0
     printed = json.loads(capsys.readouterr().out)
     saved = json.loads((tmp_path / "table1.json").read_text())
@@ -119,8 +135,22 @@ def test_cli_writes_json_and_png(tmp_path, capsys):
 
 
 def test_cli_surfaces_plot_survives_a_refused_count(tmp_path, capsys):
-    args = _parser().parse_args(["study", "surfaces", "--out", str(tmp_path), "--cameras", "1", "--illuminants", "1",
-                                 "--draws", "2", "--scheduler", "none"])
+    args = _parser().parse_args(
+        [
+            "study",
+            "surfaces",
+            "--out",
+            str(tmp_path),
+            "--cameras",
+            "1",
+            "--illuminants",
+            "1",
+            "--draws",
+            "2",
+            "--scheduler",
+            "none",
+        ]
+    )
     assert args.handler(args) == 0
     saved = json.loads((tmp_path / "surfaces.json").read_text())
     assert saved["spectrum_rmse"][0] is None and saved["failures"][0] == 2  # one surface: 3 values < 7 LEDs
@@ -142,13 +172,16 @@ def test_cli_rejects_bad_input():
         args.handler(args)
 
 
-@pytest.mark.parametrize(("argv", "message"), [
-    (["--leds", "0"], "argument --leds: '0': expected whole numbers ≥ 1"),
-    (["--leds", "3,x"], "argument --leds: '3,x': expected comma-separated whole numbers"),
-    (["--alpha", "-1"], "argument --alpha: '-1': expected finite values ≥ 0"),
-    (["--alpha", "inf"], "argument --alpha: 'inf': expected finite values ≥ 0"),
-    (["--ambients", ","], "argument --ambients: ',': expected comma-separated names"),
-])
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--leds", "0"], "argument --leds: '0': expected whole numbers ≥ 1"),
+        (["--leds", "3,x"], "argument --leds: '3,x': expected comma-separated whole numbers"),
+        (["--alpha", "-1"], "argument --alpha: '-1': expected finite values ≥ 0"),
+        (["--alpha", "inf"], "argument --alpha: 'inf': expected finite values ≥ 0"),
+        (["--ambients", ","], "argument --ambients: ',': expected comma-separated names"),
+    ],
+)
 def test_cli_option_errors_say_what_is_expected(argv, message):
     """They read "invalid _counts value: '0'" (the Python function's name, nothing expected); inf was accepted."""
     from msflash.acquisition.app.cli_common import UsageError
@@ -185,8 +218,13 @@ def test_cli_runs_on_a_loopback_dask_scheduler():
     had run other tests the cluster's loop runner sometimes refused to start (an assertion inside
     distributed, seen twice in full runs)."""
     pytest.importorskip("distributed")
-    done = subprocess.run([sys.executable, "-c", _LOOPBACK_CLUSTER], capture_output=True, text=True, timeout=240,
-                          cwd=Path(__file__).resolve().parents[2])
+    done = subprocess.run(
+        [sys.executable, "-c", _LOOPBACK_CLUSTER],
+        capture_output=True,
+        text=True,
+        timeout=240,
+        cwd=Path(__file__).resolve().parents[2],
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     result = json.loads(done.stdout)
     assert result["config"]["n_cameras"] == 2

@@ -48,10 +48,14 @@ def test_large_motion_warns_through_the_residual():
     assert rows[8]["relative_residual_median"] > 0.5
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "finding: a 570 nm line between the LEDs carrying 95 % of the light: RMSE 0.48 against an LED bound of "
-    "0.37 (1.31x), unwarned. The misfit (beyond the noise) stays below 0.2 and the reference lights whose "
-    "estimates look like this one came out 0.79x their bound: none of them is a line light"))
+@pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "finding: a 570 nm line between the LEDs carrying 95 % of the light: RMSE 0.48 against an LED bound of "
+        "0.37 (1.31x), unwarned. The misfit (beyond the noise) stays below 0.2 and the reference lights whose "
+        "estimates look like this one came out 0.79x their bound: none of them is a line light"
+    ),
+)
 def test_ambient_in_the_gap_between_leds_warns_when_it_dominates():
     rows = _by_level(_failure({"line_570nm": [0.0, 0.95]}), "line_570nm")
     assert rows[0.95]["error_mean"] > rows[0.0]["error_mean"] + 0.1
@@ -88,8 +92,11 @@ def test_noise_raises_the_residual_and_warns_at_low_light():
     assert residuals[0] < residuals[1] < residuals[2]
     assert exposure[1 / 1024]["warned_rate"] == 1
     ratio = _by_level(result, "ambient_to_flash")
-    assert ratio[0.5]["relative_residual_median"] < ratio[5.0]["relative_residual_median"] < \
-        ratio[50.0]["relative_residual_median"]
+    assert (
+        ratio[0.5]["relative_residual_median"]
+        < ratio[5.0]["relative_residual_median"]
+        < ratio[50.0]["relative_residual_median"]
+    )
     assert ratio[50.0]["warned_rate"] == 1 and ratio[50.0]["error_mean"] > ratio[0.5]["error_mean"]
 
 
@@ -125,9 +132,15 @@ def test_pareto_front_marks_non_dominated_points():
 
 
 def test_tiny_pareto_runs_and_marks_the_default():
-    result = run_pareto(cameras=[CAMERA], ambients=["daylight"], seeds=1, patch_px=12, repeats=1,
-                        samplings=("all", "mask_1e3", "gather_1e3", "bin4", "patch_means"),
-                        solvers=("nonneg", "tikhonov_auto"))
+    result = run_pareto(
+        cameras=[CAMERA],
+        ambients=["daylight"],
+        seeds=1,
+        patch_px=12,
+        repeats=1,
+        samplings=("all", "mask_1e3", "gather_1e3", "bin4", "patch_means"),
+        solvers=("nonneg", "tikhonov_auto"),
+    )
     assert len(result["points"]) == 10
     assert result["front"] and all(p["on_front"] for p in result["front"])
     assert result["default"]["solver"] == "tikhonov_auto" and result["default"]["sampling"] == "bin4"
@@ -162,14 +175,32 @@ def _parser():
     return parser()
 
 
-@pytest.mark.parametrize("argv, key", [
-    (["failure", "--factors", "motion", "--cameras", "1", "--ambients", "daylight", "--seeds", "1"], "summary"),
-    (["pareto", "--cameras", "1", "--ambients", "daylight", "--seeds", "1", "--patch-px", "10", "--repeats", "1",
-      "--samplings", "all,mask_1e3,bin4"],
-     "points"),
-    (["cameras", "--cameras", "2", "--illuminants", "2", "--leds", "3,7"], "camera_spread"),
-    (["xy", "--cameras", "2", "--illuminants", "3", "--leds", "5"], "spectrum_rmse"),
-])
+@pytest.mark.parametrize(
+    "argv, key",
+    [
+        (["failure", "--factors", "motion", "--cameras", "1", "--ambients", "daylight", "--seeds", "1"], "summary"),
+        (
+            [
+                "pareto",
+                "--cameras",
+                "1",
+                "--ambients",
+                "daylight",
+                "--seeds",
+                "1",
+                "--patch-px",
+                "10",
+                "--repeats",
+                "1",
+                "--samplings",
+                "all,mask_1e3,bin4",
+            ],
+            "points",
+        ),
+        (["cameras", "--cameras", "2", "--illuminants", "2", "--leds", "3,7"], "camera_spread"),
+        (["xy", "--cameras", "2", "--illuminants", "3", "--leds", "5"], "spectrum_rmse"),
+    ],
+)
 def test_cli_new_studies_write_json_and_png(tmp_path, capsys, argv, key):
     args = _parser().parse_args(["study", *argv, "--out", str(tmp_path), "--scheduler", "none"])
     assert args.handler(args) == 0

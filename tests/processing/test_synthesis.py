@@ -14,7 +14,9 @@ from tests.helpers import EXACT, FLOAT32, ambient, chart, one_hot_levels, render
 WEIGHTS = np.array([0.5, 0.0, 1.0, 0.25, 2.0, -0.3, 0.8])
 
 
-def naive(ambient_frame: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, weights: np.ndarray) -> np.ndarray:
+def naive(
+    ambient_frame: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, weights: np.ndarray
+) -> np.ndarray:
     a = (ambient_frame.astype(float) - spec.black_level) * spec.ambient_scale
     diffs = np.stack([(f.astype(float) - spec.black_level) * s - a for f, s in zip(led_frames, spec.led_scales)])
     only = np.tensordot(spec.unmixing, diffs, axes=1)
@@ -32,7 +34,9 @@ def test_equals_naive_sum_with_differing_exposures(cfa: str | None, chunk: int) 
     sensor = SensorModel(cfa=cfa)
     scene = chart(specular_strip_px=3)
     gains = [1.0, 2.0, 1.0, 1.5, 1.0, 4.0, 1.0, 1.0]
-    a, f, exposures, gains = rendered_frames(ambient("fluorescent"), sensor=sensor, scene=scene, noise=True, gains=gains)
+    a, f, exposures, gains = rendered_frames(
+        ambient("fluorescent"), sensor=sensor, scene=scene, noise=True, gains=gains
+    )
     assert len(set(exposures)) > 1
     spec = spec_for(sensor, exposures, gains, one_hot_levels(7))
     image, saturated = synthesize(a, f, spec, WEIGHTS, chunk_pixels=chunk)

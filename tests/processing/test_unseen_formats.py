@@ -62,8 +62,11 @@ def test_a_negative_value_beyond_noise_is_refused_naming_the_tolerance(tmp_path:
     peak = max(document["leds"][2]["spd"])
     document["leds"][2]["spd"][4] = -0.06 * peak
     (rendered.directory / "sequence.json").write_text(json.dumps(document))
-    with pytest.raises(RecordingError, match=r"leds\[2\]\.spd\[4\] is -.*; expected a non-negative value, or "
-                                             r"measurement noise down to −.* \(the larger of 5% of the peak"):
+    with pytest.raises(
+        RecordingError,
+        match=r"leds\[2\]\.spd\[4\] is -.*; expected a non-negative value, or "
+        r"measurement noise down to −.* \(the larger of 5% of the peak",
+    ):
         read_sequence(rendered.directory)
 
 
@@ -72,23 +75,34 @@ def test_a_raw_tiff_of_a_float_sequence_is_refused_before_any_work(tmp_path: Pat
     or 1 (100 % reported clipped, exit 0). It is refused now, naming the frame; the EXR output works."""
     rendered = render_case(Case("float", container="exr", cfa="RGGB"), tmp_path / "float")
     weights = ",".join(["0.5"] * rendered.led_spd.shape[1])
-    for args in (["synthesize", str(rendered.directory), "--weights", weights],
-                 ["flash", str(rendered.directory), "--mode", "matching"]):
+    for args in (
+        ["synthesize", str(rendered.directory), "--weights", weights],
+        ["flash", str(rendered.directory), "--mode", "matching"],
+    ):
         status, out, err, caught = run_cli([*args, "--out", str(tmp_path / "raw.tiff")])
         assert (status, out, caught) == (2, "", [])
         assert err.count("\n") == 1 and err.startswith("msflash: error: --out ")
         assert "img/00_ambient.exr" in err and "expected .exr" in err
         assert not (tmp_path / "raw.tiff").exists()
-    assert run_cli(["synthesize", str(rendered.directory), "--weights", weights, "--out", str(tmp_path / "x.exr")])[0] == 0
+    assert (
+        run_cli(["synthesize", str(rendered.directory), "--weights", weights, "--out", str(tmp_path / "x.exr")])[0] == 0
+    )
 
 
 def test_a_raw_tiff_of_an_integer_sequence_holds_the_frames_encoding(tmp_path: Path) -> None:
     rendered = render_case(Case("counts", cfa="GRBG", bits=12, black=256, exposures="varying"), tmp_path / "counts")
     weights = np.full(rendered.led_spd.shape[1], 0.3)
     out = tmp_path / "raw.tiff"
-    assert run_cli(["synthesize", str(rendered.directory), "--weights", ",".join(["0.3"] * weights.size),
-                    "--out", str(out)])[0] == 0
+    assert (
+        run_cli(
+            ["synthesize", str(rendered.directory), "--weights", ",".join(["0.3"] * weights.size), "--out", str(out)]
+        )[0]
+        == 0
+    )
     ambient = next(entry for entry in rendered.frames if entry["role"] == "ambient")
-    expected = np.clip(np.rint(rendered.black + expected_synthesis(rendered, weights) * ambient["exposure_us"]
-                               * ambient["gain"]), 0, rendered.white)
+    expected = np.clip(
+        np.rint(rendered.black + expected_synthesis(rendered, weights) * ambient["exposure_us"] * ambient["gain"]),
+        0,
+        rendered.white,
+    )
     np.testing.assert_array_equal(read_image(out), expected)

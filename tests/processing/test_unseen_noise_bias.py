@@ -37,8 +37,9 @@ def _noisy_stack(seed: int = 0) -> tuple[np.ndarray, list[np.ndarray], FrameStac
     surfaces = rng.uniform(200, 3000, size=(4, 10, 12, 3))
     images = np.repeat(np.repeat(surfaces, 4, axis=1), 4, axis=2)  # (4 frames, 40, 48, 3), ambient first
     frames = [np.clip(np.rint(image + rng.normal(0, 30, image.shape)), 0, 4095).astype(np.uint16) for image in images]
-    spec = FrameStackSpec(black_level=64.0, white_level=4095.0, ambient_scale=1.0, led_scales=(0.5, 1.0, 0.8),
-                          led_levels=np.eye(3))
+    spec = FrameStackSpec(
+        black_level=64.0, white_level=4095.0, ambient_scale=1.0, led_scales=(0.5, 1.0, 0.8), led_levels=np.eye(3)
+    )
     return frames[0], frames[1:], spec
 
 
@@ -150,8 +151,21 @@ def test_a_constrained_band_follows_the_scatter_of_the_constrained_estimate(tmp_
     of 2 of the estimates' actual scatter."""
     spectra, bands = [], []
     for seed in range(8):
-        rendered = render_case(Case(f"dark{seed}", cfa="RGGB", ratio=0.3, bits=12, light="F2", black=256,
-                                    exposures="varying", specular=True, peak=0.5, seed=seed), tmp_path / str(seed))
+        rendered = render_case(
+            Case(
+                f"dark{seed}",
+                cfa="RGGB",
+                ratio=0.3,
+                bits=12,
+                light="F2",
+                black=256,
+                exposures="varying",
+                specular=True,
+                peak=0.5,
+                seed=seed,
+            ),
+            tmp_path / str(seed),
+        )
         sequence = read_sequence(rendered.directory)
         estimate = analysis.estimate_sequence(sequence)
         peak = estimate.spectrum.values[:, 0].max()

@@ -33,19 +33,25 @@ def test_a_symlink_to_a_regular_file_is_followed(tmp_path: Path) -> None:
     assert read_user_text(tmp_path / "link.csv", KIND, 10) == "x"
 
 
-@pytest.mark.parametrize(("make", "what"), [
-    (lambda p: os.mkfifo(p), "is a FIFO"),
-    (lambda p: p.symlink_to("/dev/zero"), "is a character device"),
-    (lambda p: p.mkdir(), "is a directory"),
-    (lambda p: p.symlink_to(p.name), "is a loop of symbolic links"),
-    (lambda p: None, r"cannot be read \(no such file\)"),
-], ids=["fifo", "dev-zero", "directory", "symlink-loop", "missing"])
+@pytest.mark.parametrize(
+    ("make", "what"),
+    [
+        (lambda p: os.mkfifo(p), "is a FIFO"),
+        (lambda p: p.symlink_to("/dev/zero"), "is a character device"),
+        (lambda p: p.mkdir(), "is a directory"),
+        (lambda p: p.symlink_to(p.name), "is a loop of symbolic links"),
+        (lambda p: None, r"cannot be read \(no such file\)"),
+    ],
+    ids=["fifo", "dev-zero", "directory", "symlink-loop", "missing"],
+)
 def test_what_is_not_a_regular_file_is_refused_before_opening(tmp_path: Path, make, what: str) -> None:
     path = tmp_path / "bad.csv"
     make(path)
     # check_user_file only stats; read_user_bytes must refuse before opening (a FIFO would block).
     for call in (check_user_file, read_user_bytes):
-        with pytest.raises(SpectralDataError, match=rf"^{re.escape(str(tmp_path))}/bad\.csv: {what}.*; expected {KIND}"):
+        with pytest.raises(
+            SpectralDataError, match=rf"^{re.escape(str(tmp_path))}/bad\.csv: {what}.*; expected {KIND}"
+        ):
             call(path, KIND, 1 << 20)
 
 
@@ -103,8 +109,14 @@ with mock.patch.object(user_files, "_check_stat", lambda shown, info, kind, cap,
 
 
 def test_the_read_stops_past_the_cap_even_if_stat_lies() -> None:
-    child = subprocess.run([sys.executable, "-c", _READ_ZERO], cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)},
-                           capture_output=True, text=True, timeout=120)
+    child = subprocess.run(
+        [sys.executable, "-c", _READ_ZERO],
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert child.returncode == 0, child.stderr
     assert child.stdout.strip() == "/dev/zero: is larger than 1.0 MiB; expected a table of at most 1.0 MiB"
 
@@ -124,7 +136,13 @@ with mock.patch.object(user_files, "check_user_file", lambda *args: None):
 
 
 def test_a_fifo_swapped_in_after_the_check_does_not_block(tmp_path: Path) -> None:
-    child = subprocess.run([sys.executable, "-c", _OPEN_FIFO, str(tmp_path / "f")], cwd=REPO,
-                           env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True, text=True, timeout=120)
+    child = subprocess.run(
+        [sys.executable, "-c", _OPEN_FIFO, str(tmp_path / "f")],
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert child.returncode == 0, child.stderr
     assert child.stdout.strip() == f"{tmp_path}/f: is a FIFO (named pipe); expected a table, a regular file"

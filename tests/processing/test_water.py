@@ -32,7 +32,7 @@ class TestAbsorption:
     def test_phytoplankton_is_bricaud_1998(self) -> None:
         body = water.WaterBody(chlorophyll_mg_m3=2.0, cdom_440_per_m=0.0, nap_440_per_m=0.0)
         phytoplankton = body.absorption(DEFAULT_GRID).column("phytoplankton")
-        assert at(phytoplankton, 440) == pytest.approx(0.037824 * 2.0 ** 0.626633)  # Aphi, Ephi at 440 nm
+        assert at(phytoplankton, 440) == pytest.approx(0.037824 * 2.0**0.626633)  # Aphi, Ephi at 440 nm
         assert WAVELENGTHS[np.argmax(phytoplankton)] in (430, 440)  # the blue chlorophyll peak
         assert at(phytoplankton, 670) > at(phytoplankton, 600)  # and the red one
 
@@ -45,7 +45,7 @@ class TestAbsorption:
         assert body.total_absorption(DEFAULT_GRID) == pytest.approx(a.values.sum(axis=1))
 
     def test_default_particles_follow_chlorophyll(self) -> None:
-        assert water.WaterBody(chlorophyll_mg_m3=4.0).nap_440 == pytest.approx(0.0124 * 4.0 ** 0.724)
+        assert water.WaterBody(chlorophyll_mg_m3=4.0).nap_440 == pytest.approx(0.0124 * 4.0**0.724)
 
     def test_attenuation_includes_backscatter_and_mean_cosine(self) -> None:
         body = water.WATER_TYPES["coastal"]
@@ -96,7 +96,8 @@ class TestUnderwaterAmbient:
 
     def test_flash_path_is_there_and_back(self) -> None:
         assert water.flash_path_transmittance(0.75, "ocean").values == pytest.approx(
-            water.WATER_TYPES["ocean"].transmittance(1.5).values)
+            water.WATER_TYPES["ocean"].transmittance(1.5).values
+        )
 
     def test_the_sim_rig_ambient(self) -> None:
         rig = lights.ambient_spectrum("underwater_ocean")

@@ -83,8 +83,9 @@ def camera_names() -> list[str]:
 def camera_photons(name: str, wavelengths: np.ndarray) -> np.ndarray:
     """Quantal R, G, B responsivities, (n, 3): one of the 34, ``isetcam:NAME`` (its own grid) or ``gaussian``."""
     if name == "gaussian":
-        return np.column_stack([np.exp(-0.5 * ((wavelengths - peak) / width) ** 2)
-                                for peak, width in ((605, 35), (535, 40), (455, 30))])
+        return np.column_stack(
+            [np.exp(-0.5 * ((wavelengths - peak) / width) ** 2) for peak, width in ((605, 35), (535, 40), (455, 30))]
+        )
     if name.startswith("isetcam:"):
         nm, _, values = _csv(_data(f"cameras/isetcam/{name[8:]}.csv"))
         return _on(wavelengths, nm, values)
@@ -93,9 +94,13 @@ def camera_photons(name: str, wavelengths: np.ndarray) -> np.ndarray:
     return _on(wavelengths, nm, values[:, columns])
 
 
-def paper_leds_energy(wavelengths: np.ndarray, which: tuple[int, ...] = tuple(range(7))) -> tuple[list[str], np.ndarray]:
+def paper_leds_energy(
+    wavelengths: np.ndarray, which: tuple[int, ...] = tuple(range(7))
+) -> tuple[list[str], np.ndarray]:
     """The paper's 7 LEDs (energy), a subset of them."""
-    nm, names, values = _csv(_data("paper/csv/ximeaLights_energy_380_1068_4nm.csv", "paper/ximeaLights_energy_380_1068_4nm.csv"))
+    nm, names, values = _csv(
+        _data("paper/csv/ximeaLights_energy_380_1068_4nm.csv", "paper/ximeaLights_energy_380_1068_4nm.csv")
+    )
     return [names[i] for i in which], _on(wavelengths, nm, values[:, list(which)])
 
 
@@ -105,7 +110,9 @@ def booth8_energy(wavelengths: np.ndarray) -> tuple[list[str], np.ndarray]:
     fwhms = (20, 22, 24, 26, 110, 28, 30, 24)  # channel 5: phosphor-converted amber, broad
     sigmas = np.array(fwhms) / 2.3548
     powers = (0.6, 1.0, 0.8, 0.7, 1.4, 0.9, 1.0, 0.5)
-    values = np.column_stack([p * np.exp(-0.5 * ((wavelengths - c) / s) ** 2) for c, s, p in zip(peaks, sigmas, powers)])
+    values = np.column_stack(
+        [p * np.exp(-0.5 * ((wavelengths - c) / s) ** 2) for c, s, p in zip(peaks, sigmas, powers)]
+    )
     return [f"b{c}" for c in peaks], values
 
 
@@ -117,8 +124,9 @@ def luxeon8_energy(wavelengths: np.ndarray) -> tuple[list[str], np.ndarray]:
 
 @cache
 def _reflectances() -> tuple[np.ndarray, np.ndarray]:
-    nm, _, values = _csv(_data("paper/csv/natural100_reflectance_400_700_10nm.csv",
-                               "paper/natural100_reflectance_400_700_10nm.csv"))
+    nm, _, values = _csv(
+        _data("paper/csv/natural100_reflectance_400_700_10nm.csv", "paper/natural100_reflectance_400_700_10nm.csv")
+    )
     greys = np.logspace(0, math.log10(0.05), 10)
     return nm, np.column_stack([values, np.tile(greys, (nm.size, 1))])
 
@@ -131,7 +139,11 @@ def reflectances(wavelengths: np.ndarray) -> np.ndarray:
 
 def _planck(wavelengths: np.ndarray, kelvin: float) -> np.ndarray:
     c2 = 1.4388e7  # nm·K
-    return (560.0 / wavelengths) ** 5 * (math.exp(c2 / (kelvin * 560.0)) - 1.0) / (np.exp(c2 / (kelvin * wavelengths)) - 1.0)
+    return (
+        (560.0 / wavelengths) ** 5
+        * (math.exp(c2 / (kelvin * 560.0)) - 1.0)
+        / (np.exp(c2 / (kelvin * wavelengths)) - 1.0)
+    )
 
 
 def _gauss(wavelengths: np.ndarray, peak: float, fwhm: float) -> np.ndarray:
@@ -287,6 +299,7 @@ def render_case(case: Case, directory: Path) -> Rendered:
     light_e = light_energy(case.light, nm)
     surfaces = reflectances(nm)
     n_surfaces = surfaces.shape[1]
+
     # Responses per surface (rows) per channel to one unit of each light: photon counts Σ r_q·ρ·E·λ.
     def responses(spd_e: np.ndarray) -> np.ndarray:
         body = (surfaces * (spd_e * photons)[:, None]).T @ cam_q * step
@@ -311,7 +324,7 @@ def render_case(case: Case, directory: Path) -> Rendered:
         plan = plan + [("flash", np.linspace(0.2, 0.9, k))]
 
     labels, height, width = _label_map(case, n_surfaces)
-    code_max = 2 ** case.bits - 1
+    code_max = 2**case.bits - 1
     white_dn = float(code_max)
     span = white_dn - case.black
     diffuse_rows = slice(0, n_surfaces)
@@ -319,8 +332,11 @@ def render_case(case: Case, directory: Path) -> Rendered:
     # ``flicker:a``: the ambient's intensity differs frame to frame by up to ±a (mains-driven lamps, short exposures).
     flicker = next((float(q[8:]) for q in case.quirks if q.startswith("flicker:")), 0.0)
     drift = 1.0 + flicker * rng.uniform(-1.0, 1.0, len(plan))
-    frame_resp = [ambient_resp * (role != "dark") * (1.0 if role == "ambient" else drift[j])
-                  + np.tensordot(row, led_response, axes=1) for j, (role, row) in enumerate(plan)]
+    frame_resp = [
+        ambient_resp * (role != "dark") * (1.0 if role == "ambient" else drift[j])
+        + np.tensordot(row, led_response, axes=1)
+        for j, (role, row) in enumerate(plan)
+    ]
     brightest = max(float(r[diffuse_rows].max()) for r in frame_resp)
     base_exposure = 10000.0
     counts_per_response = case.peak * span / (brightest * base_exposure)  # DN per (response · µs) at gain 1
@@ -336,11 +352,11 @@ def render_case(case: Case, directory: Path) -> Rendered:
         else:
             gain, exposure = 1.0, base_exposure
         mean_dn = response * counts_per_response * exposure * gain  # (surfaces+1, 3)
-        image = mean_dn[labels[:height - case.crop, :width - case.crop]]  # (H, W, 3)
+        image = mean_dn[labels[: height - case.crop, : width - case.crop]]  # (H, W, 3)
         if case.texture:
-            image = image * shading[:image.shape[0], :image.shape[1], None]
+            image = image * shading[: image.shape[0], : image.shape[1], None]
         if case.cfa is not None:
-            sites = np.tile(_cfa_index(case.cfa), (height // 2 + 1, width // 2 + 1))[:image.shape[0], :image.shape[1]]
+            sites = np.tile(_cfa_index(case.cfa), (height // 2 + 1, width // 2 + 1))[: image.shape[0], : image.shape[1]]
             image = np.take_along_axis(image, sites[:, :, None], axis=2)[:, :, 0]
         electrons = image * electrons_per_dn / gain
         noisy = rng.poisson(np.maximum(electrons, 0)) * gain / electrons_per_dn
@@ -351,9 +367,13 @@ def render_case(case: Case, directory: Path) -> Rendered:
             data = np.clip(np.rint(noisy), 0, code_max).astype(np.uint16)
         suffix = {"tiff": ".tif", "tiff-lzw": ".TIF", "png": ".png", "exr": ".exr", "exr-half": ".exr"}[case.container]
         file = f"img/{index:02d}_{role}{suffix}"
-        entry: dict = {"file": file.replace("/", "\\") if "windows_paths" in case.quirks else file, "role": role,
-                       "led_levels": [float(v) for v in row],
-                       "exposure_us": exposure, "gain": gain}
+        entry: dict = {
+            "file": file.replace("/", "\\") if "windows_paths" in case.quirks else file,
+            "role": role,
+            "led_levels": [float(v) for v in row],
+            "exposure_us": exposure,
+            "gain": gain,
+        }
         if case.order == "unknown_keys":
             entry["vendor_timestamp"] = 1700000000 + index
         entries.append(entry)
@@ -367,11 +387,19 @@ def render_case(case: Case, directory: Path) -> Rendered:
         led_written = led_written + rng.normal(0, 0.003, led_written.shape) * led_written.max(axis=0)
         cam_written = cam_written + rng.normal(0, 0.003, cam_written.shape) * cam_written.max(axis=0)
     document: dict = {
-        "format": "msflash-sequence", "version": 1, "complete": True,
-        "wavelengths_nm": [float(w) for w in nm], "spectral_unit": case.unit,
-        "camera": {"model": f"other-lab {case.camera}", "pixel_format": "BayerRG16" if case.cfa else "RGB16",
-                   "cfa": case.cfa, "black_level": case.black * scale, "white_level": white_dn * scale,
-                   "responsivity": {c: cam_written[:, i].tolist() for i, c in enumerate("RGB")}},
+        "format": "msflash-sequence",
+        "version": 1,
+        "complete": True,
+        "wavelengths_nm": [float(w) for w in nm],
+        "spectral_unit": case.unit,
+        "camera": {
+            "model": f"other-lab {case.camera}",
+            "pixel_format": "BayerRG16" if case.cfa else "RGB16",
+            "cfa": case.cfa,
+            "black_level": case.black * scale,
+            "white_level": white_dn * scale,
+            "responsivity": {c: cam_written[:, i].tolist() for i, c in enumerate("RGB")},
+        },
         "leds": [{"name": n, "spd": led_written[:, i].tolist()} for i, n in enumerate(led_names)],
         "frames": entries,
     }
@@ -384,8 +412,18 @@ def render_case(case: Case, directory: Path) -> Rendered:
         _write(path, data, case.container)
     (directory / "sequence.json").write_text(json.dumps(document, indent=2))
     led_levels = np.array([row for role, row in plan if role == "led"])
-    return Rendered(directory, nm, truth_e * unit_factor, led_written, cam_written, light_energy("D65", nm) * unit_factor,
-                    led_levels, entries, case.black * scale, white_dn * scale)
+    return Rendered(
+        directory,
+        nm,
+        truth_e * unit_factor,
+        led_written,
+        cam_written,
+        light_energy("D65", nm) * unit_factor,
+        led_levels,
+        entries,
+        case.black * scale,
+        white_dn * scale,
+    )
 
 
 def _write(path: Path, data: np.ndarray, container: str) -> None:
@@ -434,7 +472,11 @@ def run_cli(args: list[str]) -> tuple[int, str, str, list[str]]:
     from msflash.acquisition.app.cli import main
 
     out, err = io.StringIO(), io.StringIO()
-    with warnings.catch_warnings(record=True) as caught, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+    with (
+        warnings.catch_warnings(record=True) as caught,
+        contextlib.redirect_stdout(out),
+        contextlib.redirect_stderr(err),
+    ):
         warnings.simplefilter("always")
         try:
             status = main(args)
@@ -457,6 +499,7 @@ ANGLE_REACHED_DEG = 1.0
 
 def expected_synthesis(rendered: Rendered, weights: np.ndarray) -> np.ndarray:
     """``m_a + Σ_k w_k m_f,k`` computed here: LED-only images unmixed from the frames by the levels."""
+
     def linear(entry: dict) -> np.ndarray:
         pixels = _read(rendered.directory / entry["file"].replace("\\", "/"))
         return (pixels - rendered.black) / (entry["exposure_us"] * entry["gain"])
@@ -527,17 +570,24 @@ def check_case(case: Case, root: Path) -> Outcome:
         # estimated ambient; complementary, ambient + flash looks like D65.
         estimated = rendered.led_spd @ np.asarray(flash["ambient_weights"], float)
         flash_spd = rendered.led_spd @ weights
-        angle = (camera_angle_deg(rendered, flash_spd, estimated) if mode == "matching"
-                 else camera_angle_deg(rendered, estimated + flash_spd, rendered.d65))
-        truth_angles[mode] = (camera_angle_deg(rendered, flash_spd, rendered.truth) if mode == "matching"
-                              else camera_angle_deg(rendered, rendered.truth + flash_spd, rendered.d65))
+        angle = (
+            camera_angle_deg(rendered, flash_spd, estimated)
+            if mode == "matching"
+            else camera_angle_deg(rendered, estimated + flash_spd, rendered.d65)
+        )
+        truth_angles[mode] = (
+            camera_angle_deg(rendered, flash_spd, rendered.truth)
+            if mode == "matching"
+            else camera_angle_deg(rendered, rendered.truth + flash_spd, rendered.d65)
+        )
         if flash["target_reached"] and angle > ANGLE_REACHED_DEG:
             defects.append(f"flash {mode}: says the target is reached but is {angle:.2f}° from it in camera space")
         weights_by_mode[mode] = weights
     weights = weights_by_mode.get("matching", np.full(rendered.led_spd.shape[1], 0.5))
     output = rendered.directory.parent / f"{case.name}-synth.exr"
-    status, out, err, caught = run_cli(["synthesize", sequence, "--weights", ",".join(f"{w:.6g}" for w in weights),
-                                        "--out", str(output)])
+    status, out, err, caught = run_cli(
+        ["synthesize", sequence, "--weights", ",".join(f"{w:.6g}" for w in weights), "--out", str(output)]
+    )
     if status != 0 or caught or "Traceback" in err:
         defects.append(f"synthesize: status {status}: {err.strip()[-600:]} {caught}")
     else:
@@ -547,8 +597,14 @@ def check_case(case: Case, root: Path) -> Outcome:
         worst = float(np.max(np.abs(written - expected)) / np.max(np.abs(expected)))
         if worst > 1e-5:
             defects.append(f"synthesize: differs from ambient + Σ w·LED-only by {worst:.2g} of the peak")
-    return Outcome(case, error, bound, estimate_warnings, tuple(defects),
-                   (truth_angles.get("matching", math.nan), truth_angles.get("complementary", math.nan)))
+    return Outcome(
+        case,
+        error,
+        bound,
+        estimate_warnings,
+        tuple(defects),
+        (truth_angles.get("matching", math.nan), truth_angles.get("complementary", math.nan)),
+    )
 
 
 def sweep_cases() -> list[Case]:
@@ -559,9 +615,18 @@ def sweep_cases() -> list[Case]:
     def add(name: str, **changes: object) -> None:
         cases.append(replace(base, name=name, seed=len(cases), **changes))
 
-    for camera in ("Canon 5DMarkII", "Nikon D40", "isetcam:NikonD200IR", "isetcam:AptinaMT9M031",
-                   "AptinaMT9M131", "Pentax K-5", "Nokia N900", "Point Grey Grasshopper 50S5C", "gaussian",
-                   "isetcam:NikonD2xsNikon50mm"):
+    for camera in (
+        "Canon 5DMarkII",
+        "Nikon D40",
+        "isetcam:NikonD200IR",
+        "isetcam:AptinaMT9M031",
+        "AptinaMT9M131",
+        "Pentax K-5",
+        "Nokia N900",
+        "Point Grey Grasshopper 50S5C",
+        "gaussian",
+        "isetcam:NikonD2xsNikon50mm",
+    ):
         add(f"camera-{camera.replace(' ', '_').replace(':', '_')}", camera=camera)
     for container in ("png", "exr"):
         add(f"container-{container}", container=container)

@@ -123,12 +123,14 @@ def parse_interfaces(spec: str | Iterable[str]) -> tuple[str, ...]:
     """
     names = [s.strip().lower() for s in (spec.split(",") if isinstance(spec, str) else spec)]
     if not names or any(not n for n in names):
-        raise ValueError(f"interfaces {spec!r}: empty name; expected a comma-separated subset of "
-                         f"{', '.join(INTERFACES)}")
+        raise ValueError(
+            f"interfaces {spec!r}: empty name; expected a comma-separated subset of {', '.join(INTERFACES)}"
+        )
     unknown = [n for n in names if n not in INTERFACES]
     if unknown:
-        raise ValueError(f"interfaces {spec!r}: unknown {', '.join(unknown)}; expected a subset of "
-                         f"{', '.join(INTERFACES)}")
+        raise ValueError(
+            f"interfaces {spec!r}: unknown {', '.join(unknown)}; expected a subset of {', '.join(INTERFACES)}"
+        )
     return tuple(dict.fromkeys(names))
 
 
@@ -187,15 +189,17 @@ def list_devices(interfaces: str | Iterable[str]) -> tuple[DeviceEntry, ...]:
         entries = []
         for i in range(Aravis.get_n_devices()):
             protocol = Aravis.get_device_protocol(i) or ""
-            entries.append(DeviceEntry(
-                device_id=Aravis.get_device_id(i) or "",
-                interface=_PROTOCOL_TO_INTERFACE.get(protocol, protocol.lower()),
-                vendor=Aravis.get_device_vendor(i) or "",
-                model=Aravis.get_device_model(i) or "",
-                serial=Aravis.get_device_serial_nbr(i) or "",
-                address=(Aravis.get_device_address(i) or "") if protocol == "GigEVision" else "",
-                physical_id=Aravis.get_device_physical_id(i) or "",
-            ))
+            entries.append(
+                DeviceEntry(
+                    device_id=Aravis.get_device_id(i) or "",
+                    interface=_PROTOCOL_TO_INTERFACE.get(protocol, protocol.lower()),
+                    vendor=Aravis.get_device_vendor(i) or "",
+                    model=Aravis.get_device_model(i) or "",
+                    serial=Aravis.get_device_serial_nbr(i) or "",
+                    address=(Aravis.get_device_address(i) or "") if protocol == "GigEVision" else "",
+                    physical_id=Aravis.get_device_physical_id(i) or "",
+                )
+            )
     return tuple(entries)
 
 
@@ -260,10 +264,13 @@ class PixelLayout:
 
 def _pixel_formats() -> dict[str, PixelLayout]:
     table = {
-        "Mono8": PixelLayout("u1", 1, 8), "Mono10": PixelLayout("<u2", 1, 10),
-        "Mono12": PixelLayout("<u2", 1, 12), "Mono14": PixelLayout("<u2", 1, 14),
+        "Mono8": PixelLayout("u1", 1, 8),
+        "Mono10": PixelLayout("<u2", 1, 10),
+        "Mono12": PixelLayout("<u2", 1, 12),
+        "Mono14": PixelLayout("<u2", 1, 14),
         "Mono16": PixelLayout("<u2", 1, 16),
-        "RGB8": PixelLayout("u1", 3, 8), "BGR8": PixelLayout("u1", 3, 8, bgr=True),
+        "RGB8": PixelLayout("u1", 3, 8),
+        "BGR8": PixelLayout("u1", 3, 8, bgr=True),
         "RGB16": PixelLayout("<u2", 3, 16),
     }
     for cfa in ("RG", "GR", "GB", "BG"):
@@ -281,27 +288,32 @@ PIXEL_FORMATS: dict[str, PixelLayout] = _pixel_formats()
 :data:`acquisition.devices.aravis.pixel_formats.PACKED_FORMATS` (decoded to ``uint16``)."""
 
 
-def _frame_shape(pixel_format: str, width: int, height: int, n_bytes: int,
-                 where: str) -> tuple[PixelLayout, int, tuple[int, ...]]:
+def _frame_shape(
+    pixel_format: str, width: int, height: int, n_bytes: int, where: str
+) -> tuple[PixelLayout, int, tuple[int, ...]]:
     """The layout of ``pixel_format``, the sample count of one image and the frame's shape.
 
     Raises :class:`CameraError` for an unknown format or a payload of ``n_bytes`` too short.
     """
     layout = PIXEL_FORMATS.get(pixel_format)
     if layout is None:
-        raise CameraError(f"{where}: pixel format {pixel_format!r} is not supported; expected one of "
-                          f"{', '.join(PIXEL_FORMATS)}")
+        raise CameraError(
+            f"{where}: pixel format {pixel_format!r} is not supported; expected one of {', '.join(PIXEL_FORMATS)}"
+        )
     n = width * height * layout.channels
     itemsize = np.dtype(layout.dtype).itemsize
     if n_bytes < n * itemsize:
-        raise CameraError(f"{where}: payload of {n_bytes} bytes is too short for {width}x{height} "
-                          f"{pixel_format}; expected {n * itemsize} bytes")
+        raise CameraError(
+            f"{where}: payload of {n_bytes} bytes is too short for {width}x{height} "
+            f"{pixel_format}; expected {n * itemsize} bytes"
+        )
     shape = (height, width) if layout.channels == 1 else (height, width, layout.channels)
     return layout, n, shape
 
 
-def decode_pixels(data: bytes | memoryview, pixel_format: str, width: int, height: int,
-                  where: str = "decode_pixels") -> np.ndarray:
+def decode_pixels(
+    data: bytes | memoryview, pixel_format: str, width: int, height: int, where: str = "decode_pixels"
+) -> np.ndarray:
     """Turn an image payload into an owned, read-only array of raw linear values.
 
     Parameters
@@ -358,8 +370,9 @@ def is_zero_copy_format(pixel_format: str) -> bool:
     return layout is not None and not layout.bgr and not layout.packed and np.dtype(layout.dtype).isnative
 
 
-def view_pixels(payload: np.ndarray, pixel_format: str, width: int, height: int,
-                where: str = "view_pixels") -> np.ndarray:
+def view_pixels(
+    payload: np.ndarray, pixel_format: str, width: int, height: int, where: str = "view_pixels"
+) -> np.ndarray:
     """The frame inside ``payload`` (a byte array), as a read-only view: no copy.
 
     The result has the shape and dtype :func:`decode_pixels` gives and keeps ``payload`` alive.
@@ -370,17 +383,17 @@ def view_pixels(payload: np.ndarray, pixel_format: str, width: int, height: int,
         A format :func:`is_zero_copy_format` refuses, or a payload shorter than the image.
     """
     if not is_zero_copy_format(pixel_format):
-        raise CameraError(f"{where}: pixel format {pixel_format!r} needs decoding; expected one "
-                          "is_zero_copy_format accepts")
+        raise CameraError(
+            f"{where}: pixel format {pixel_format!r} needs decoding; expected one is_zero_copy_format accepts"
+        )
     layout, n, shape = _frame_shape(pixel_format, width, height, payload.nbytes, where)
     dtype = np.dtype(layout.dtype)
-    pixels = payload[:n * dtype.itemsize].view(dtype).reshape(shape)
+    pixels = payload[: n * dtype.itemsize].view(dtype).reshape(shape)
     pixels.flags.writeable = False
     return pixels
 
 
-def frame_id_gap(previous: int, current: int, wrap: int | None = _GV_FRAME_ID_WRAP,
-                 skip_zero: bool = True) -> int:
+def frame_id_gap(previous: int, current: int, wrap: int | None = _GV_FRAME_ID_WRAP, skip_zero: bool = True) -> int:
     """Number of frame ids missing between two consecutive frames.
 
     Parameters
@@ -757,10 +770,18 @@ class AravisCamera:
     nothing while it runs. :attr:`pool_arrays` counts the arrays the camera holds.
     """
 
-    def __init__(self, device: str, *, interfaces: str | Iterable[str] = ("fake",),
-                 pixel_format: str | None = None, roi: tuple[int, int, int, int] | None = None,
-                 line_trigger: TriggerConfig | None = None, strobe: StrobeConfig | None = None,
-                 extra_buffers: int = 4, zero_copy: bool = True) -> None:
+    def __init__(
+        self,
+        device: str,
+        *,
+        interfaces: str | Iterable[str] = ("fake",),
+        pixel_format: str | None = None,
+        roi: tuple[int, int, int, int] | None = None,
+        line_trigger: TriggerConfig | None = None,
+        strobe: StrobeConfig | None = None,
+        extra_buffers: int = 4,
+        zero_copy: bool = True,
+    ) -> None:
         self._requested = device
         self._interfaces = parse_interfaces(interfaces)
         self._line_trigger = line_trigger or TriggerConfig(mode="line")
@@ -811,7 +832,8 @@ class AravisCamera:
                 if "gige" not in self._interfaces:
                     raise CameraNotFoundError(
                         f"camera {device!r}: an IP address needs the GigE Vision interface; expected "
-                        f"'gige' in the interfaces (got {','.join(self._interfaces)})")
+                        f"'gige' in the interfaces (got {','.join(self._interfaces)})"
+                    )
                 # By address Aravis talks to that device alone (no discovery broadcast).
                 with _aravis_lock:
                     self._camera = Aravis.Camera.new(device)
@@ -823,18 +845,21 @@ class AravisCamera:
                     raise CameraNotFoundError(
                         f"camera {device!r}: not found on {','.join(self._interfaces)} (found: {listing}); "
                         "expected a device id, serial number or IP address — check the cable and "
-                        "`msflash devices --interfaces …`")
+                        "`msflash devices --interfaces …`"
+                    )
                 if len(matches) > 1:
                     raise CameraNotFoundError(
                         f"camera {device!r}: matches {len(matches)} devices "
-                        f"({', '.join(e.device_id for e in matches)}); expected one — give the device id")
+                        f"({', '.join(e.device_id for e in matches)}); expected one — give the device id"
+                    )
                 entry = matches[0]
                 with _aravis_lock:
                     self._camera = Aravis.Camera.new(entry.device_id)
         except GLib.Error as err:
             raise CameraNotFoundError(
                 f"camera {device!r}: cannot open on {','.join(self._interfaces)} ({err.message}); "
-                "expected a reachable device — is another program controlling it?") from err
+                "expected a reachable device — is another program controlling it?"
+            ) from err
         if self._camera is None:
             raise CameraNotFoundError(f"camera {device!r}: Aravis returned no camera; expected a device")
         self._device = self._camera.get_device()
@@ -850,8 +875,9 @@ class AravisCamera:
         self._address = device if is_ipv4_address(device) else (entry.address if entry else "")
         self._name = f"camera {self._model or '?'} (serial {self._serial})"
         self._profile = match_profile(self._vendor, self._model)
-        log.info("%s: opened as %s over %s, profile %s", self._name, self._device_id, self._protocol,
-                 self._profile.name)
+        log.info(
+            "%s: opened as %s over %s, profile %s", self._name, self._device_id, self._protocol, self._profile.name
+        )
 
     def _on_control_lost(self, _device: Any) -> None:
         # Emitted from Aravis's heartbeat thread: only flag it and wake a waiting next_frame.
@@ -918,22 +944,30 @@ class AravisCamera:
         if self._control_lost.is_set():
             raise CameraDisconnectedError(
                 f"{self._name}: control of the device was lost; expected a connected camera — check "
-                "power and cable, then reopen it")
+                "power and cable, then reopen it"
+            )
         return self._device
 
     def _fail(self, action: str, feature: str, err: GLib.Error) -> CameraError:
         if self._control_lost.is_set():
-            return CameraDisconnectedError(f"{self._name}: {action} {feature} failed, control of the "
-                                           f"device was lost ({err.message}); expected a connected camera")
+            return CameraDisconnectedError(
+                f"{self._name}: {action} {feature} failed, control of the "
+                f"device was lost ({err.message}); expected a connected camera"
+            )
         if err.matches(Aravis.DeviceError.quark(), Aravis.DeviceError.FEATURE_NOT_FOUND):
-            return CameraError(f"{self._name}: has no feature {feature}; expected it for {action} — "
-                               "this model lacks it (see genicam/profiles.json)")
+            return CameraError(
+                f"{self._name}: has no feature {feature}; expected it for {action} — "
+                "this model lacks it (see genicam/profiles.json)"
+            )
         if err.matches(Aravis.DeviceError.quark(), Aravis.DeviceError.TIMEOUT) or (
-                err.matches(Aravis.DeviceError.quark(), Aravis.DeviceError.TRANSFER_ERROR)):
+            err.matches(Aravis.DeviceError.quark(), Aravis.DeviceError.TRANSFER_ERROR)
+        ):
             self._unreachable = True  # skip further control writes (each would wait out its retries)
-            return CameraDisconnectedError(f"{self._name}: {action} {feature}: no answer from the "
-                                           f"device ({err.message}); expected a connected camera — check "
-                                           "power and cable, and that no other program controls it")
+            return CameraDisconnectedError(
+                f"{self._name}: {action} {feature}: no answer from the "
+                f"device ({err.message}); expected a connected camera — check "
+                "power and cable, and that no other program controls it"
+            )
         return CameraError(f"{self._name}: {action} {feature} failed: {err.message}")
 
     def has_feature(self, feature: str) -> bool:
@@ -1008,8 +1042,14 @@ class AravisCamera:
                 raise self._fail("setting", feature, err) from err
         return self.get_feature(feature)
 
-    _KINDS = (("enumeration", Aravis.GcEnumeration), ("boolean", Aravis.GcBoolean), ("float", Aravis.GcFloat),
-              ("integer", Aravis.GcInteger), ("string", Aravis.GcString), ("command", Aravis.GcCommand))
+    _KINDS = (
+        ("enumeration", Aravis.GcEnumeration),
+        ("boolean", Aravis.GcBoolean),
+        ("float", Aravis.GcFloat),
+        ("integer", Aravis.GcInteger),
+        ("string", Aravis.GcString),
+        ("command", Aravis.GcCommand),
+    )
     _ACCESS = {Aravis.GcAccessMode.RO: "RO", Aravis.GcAccessMode.RW: "RW", Aravis.GcAccessMode.WO: "WO"}
 
     def feature_names(self) -> tuple[tuple[str, str], ...]:
@@ -1051,8 +1091,12 @@ class AravisCamera:
         if kind in ("integer", "float"):
             interface = Aravis.GcInteger if kind == "integer" else Aravis.GcFloat
             limits: dict[str, Any] = {}
-            for key, getter in (("minimum", "get_min"), ("maximum", "get_max"), ("increment", "get_inc"),
-                                ("unit", "get_unit")):
+            for key, getter in (
+                ("minimum", "get_min"),
+                ("maximum", "get_max"),
+                ("increment", "get_inc"),
+                ("unit", "get_unit"),
+            ):
                 try:
                     limits[key] = getattr(interface, getter)(node)
                 except (AttributeError, GLib.Error, TypeError):
@@ -1072,8 +1116,7 @@ class AravisCamera:
     def _set_enum(self, feature: str, value: str) -> None:
         entries = self.enum_entries(feature)
         if value not in entries:
-            raise CameraError(f"{self._name}: {feature} has no entry {value!r}; expected one of "
-                              f"{', '.join(entries)}")
+            raise CameraError(f"{self._name}: {feature} has no entry {value!r}; expected one of {', '.join(entries)}")
         try:
             self._live().set_string_feature_value(feature, value)
         except GLib.Error as err:
@@ -1114,12 +1157,16 @@ class AravisCamera:
     def set_pixel_format(self, pixel_format: str) -> str:
         """Set PixelFormat; refuses formats the camera lacks or msflash cannot decode (``CameraSettingError``)."""
         if pixel_format not in PIXEL_FORMATS:
-            raise CameraSettingError(f"{self._name}: pixel format {pixel_format!r} cannot be decoded by msflash; "
-                                     f"expected one of {', '.join(PIXEL_FORMATS)}")
+            raise CameraSettingError(
+                f"{self._name}: pixel format {pixel_format!r} cannot be decoded by msflash; "
+                f"expected one of {', '.join(PIXEL_FORMATS)}"
+            )
         offered = self.enum_entries("PixelFormat")
         if pixel_format not in offered:
-            raise CameraSettingError(f"{self._name}: PixelFormat {pixel_format!r} is not offered by this camera; "
-                                     f"expected one of {', '.join(offered)}")
+            raise CameraSettingError(
+                f"{self._name}: PixelFormat {pixel_format!r} is not offered by this camera; "
+                f"expected one of {', '.join(offered)}"
+            )
         self._set_enum("PixelFormat", pixel_format)
         return str(self.get_feature("PixelFormat"))
 
@@ -1193,8 +1240,10 @@ class AravisCamera:
         gain_db = 20.0 * math.log10(gain)
         if self._gain_feature is None:
             if abs(gain_db) > 1e-6:
-                raise CameraError(f"{self._name}: has no feature Gain; expected it to set gain {gain:g} "
-                                  "(GainRaw needs gain_raw_per_db in genicam/profiles.json)")
+                raise CameraError(
+                    f"{self._name}: has no feature Gain; expected it to set gain {gain:g} "
+                    "(GainRaw needs gain_raw_per_db in genicam/profiles.json)"
+                )
             return 1.0
         if self._has("GainSelector") and "All" in self.enum_entries("GainSelector"):
             self._set_enum("GainSelector", "All")
@@ -1243,8 +1292,9 @@ class AravisCamera:
                     self._set_enum("TriggerSelector", other)
                     self._set_enum("TriggerMode", "Off")
             if "FrameStart" not in selectors:
-                raise CameraError(f"{self._name}: TriggerSelector has no entry 'FrameStart'; expected one of "
-                                  f"{', '.join(selectors)}")
+                raise CameraError(
+                    f"{self._name}: TriggerSelector has no entry 'FrameStart'; expected one of {', '.join(selectors)}"
+                )
             self._set_enum("TriggerSelector", "FrameStart")
         if trigger.mode == "free":
             self._set_enum("TriggerMode", "Off")
@@ -1252,8 +1302,10 @@ class AravisCamera:
                 for enable in ("AcquisitionFrameRateEnable", "AcquisitionFrameRateEnabled"):
                     if self._has(enable):
                         self._set_bool(enable, True)
-                self._set_float(self._first_feature(("AcquisitionFrameRate", "AcquisitionFrameRateAbs"),
-                                                    "frame rate"), trigger.frame_rate_hz)
+                self._set_float(
+                    self._first_feature(("AcquisitionFrameRate", "AcquisitionFrameRateAbs"), "frame rate"),
+                    trigger.frame_rate_hz,
+                )
             self._trigger = trigger
             return trigger
         # The trigger source must be chosen before TriggerMode On on some cameras.
@@ -1263,21 +1315,25 @@ class AravisCamera:
             if self._has("TriggerActivation"):
                 self._set_enum("TriggerActivation", trigger.activation)
             elif trigger.activation != "RisingEdge":
-                raise CameraError(f"{self._name}: has no feature TriggerActivation; expected it for "
-                                  f"{trigger.activation}")
+                raise CameraError(
+                    f"{self._name}: has no feature TriggerActivation; expected it for {trigger.activation}"
+                )
             delay_feature = next((f for f in ("TriggerDelay", "TriggerDelayAbs") if self._has(f)), None)
             if delay_feature is not None:
                 self._set_float(delay_feature, float(trigger.delay_us))
             elif trigger.delay_us:
-                raise CameraError(f"{self._name}: has no feature TriggerDelay; expected it for a "
-                                  f"{trigger.delay_us:g} us trigger delay — set the delay in the booth instead")
+                raise CameraError(
+                    f"{self._name}: has no feature TriggerDelay; expected it for a "
+                    f"{trigger.delay_us:g} us trigger delay — set the delay in the booth instead"
+                )
         self._set_enum("TriggerMode", "On")
         actual = trigger
         if trigger.mode == "line":
             delay = next((self._number(f) for f in ("TriggerDelay", "TriggerDelayAbs") if self._has(f)), 0.0)
             activation = str(self.get_feature("TriggerActivation")) if self._has("TriggerActivation") else "RisingEdge"
-            actual = replace(trigger, line=str(self.get_feature("TriggerSource")), activation=activation,
-                             delay_us=delay)
+            actual = replace(
+                trigger, line=str(self.get_feature("TriggerSource")), activation=activation, delay_us=delay
+            )
         self._trigger = actual
         return actual
 
@@ -1285,8 +1341,10 @@ class AravisCamera:
         """Drive an output line from ``strobe.source`` (ExposureActive or a user output)."""
         for feature in ("LineSelector", "LineSource"):
             if not self._has(feature):
-                raise CameraError(f"{self._name}: has no feature {feature}; expected it for a strobe "
-                                  f"output on {strobe.line} — use a host-paced or booth-paced plan")
+                raise CameraError(
+                    f"{self._name}: has no feature {feature}; expected it for a strobe "
+                    f"output on {strobe.line} — use a host-paced or booth-paced plan"
+                )
         self._set_enum("LineSelector", strobe.line)
         if self._has("LineMode") and self._is_writable("LineMode"):
             self._set_enum("LineMode", "Output")
@@ -1319,12 +1377,13 @@ class AravisCamera:
         """Set a user output by position in :meth:`user_outputs` or by name."""
         outputs = self.user_outputs()
         if not outputs or not self._has("UserOutputValue"):
-            raise CameraError(f"{self._name}: has no feature UserOutputSelector/UserOutputValue; "
-                              "expected user outputs")
+            raise CameraError(f"{self._name}: has no feature UserOutputSelector/UserOutputValue; expected user outputs")
         if isinstance(output, int):
             if not 0 <= output < len(outputs):
-                raise CameraError(f"{self._name}: user output {output} out of range; expected 0..{len(outputs) - 1} "
-                                  f"({', '.join(outputs)})")
+                raise CameraError(
+                    f"{self._name}: user output {output} out of range; expected 0..{len(outputs) - 1} "
+                    f"({', '.join(outputs)})"
+                )
             output = outputs[output]
         self._set_enum("UserOutputSelector", output)
         self._set_bool("UserOutputValue", bool(value))
@@ -1338,22 +1397,42 @@ class AravisCamera:
         layout = PIXEL_FORMATS.get(pixel_format)
         _, _, width, height = self.roi
         black = self._number("BlackLevel") if self._has("BlackLevel") else 0.0
-        extra = {"device_id": self._device_id, "interface": self._protocol, "address": self._address,
-                 "profile": self._profile.name, "exposure_feature": self._exposure_feature,
-                 "gain_feature": self._gain_feature, "firmware": self._read_string("DeviceVersion")}
+        extra = {
+            "device_id": self._device_id,
+            "interface": self._protocol,
+            "address": self._address,
+            "profile": self._profile.name,
+            "exposure_feature": self._exposure_feature,
+            "gain_feature": self._gain_feature,
+            "firmware": self._read_string("DeviceVersion"),
+        }
         return CameraInfo(
-            vendor=self._vendor, model=self._model, serial=self._serial, pixel_format=pixel_format,
-            cfa=layout.cfa if layout else None, black_level=black,
-            white_level=float(2 ** layout.bits - 1) if layout else float("nan"),
-            width=width, height=height, extra=extra)
+            vendor=self._vendor,
+            model=self._model,
+            serial=self._serial,
+            pixel_format=pixel_format,
+            cfa=layout.cfa if layout else None,
+            black_level=black,
+            white_level=float(2**layout.bits - 1) if layout else float("nan"),
+            width=width,
+            height=height,
+            extra=extra,
+        )
 
     @property
     def settings(self) -> CameraSettings:
         """The settings in effect, read back from the camera."""
         return CameraSettings(
-            exposure_us=self.exposure_us, gain=self.gain, gain_db=self.gain_db, roi=self.roi,
-            pixel_format=str(self.get_feature("PixelFormat")), trigger=self._trigger, strobe=self._strobe,
-            exposure_feature=self._exposure_feature, gain_feature=self._gain_feature)
+            exposure_us=self.exposure_us,
+            gain=self.gain,
+            gain_db=self.gain_db,
+            roi=self.roi,
+            pixel_format=str(self.get_feature("PixelFormat")),
+            trigger=self._trigger,
+            strobe=self._strobe,
+            exposure_feature=self._exposure_feature,
+            gain_feature=self._gain_feature,
+        )
 
     @property
     def stats(self) -> AcquisitionStats:
@@ -1372,8 +1451,10 @@ class AravisCamera:
             self.configure_trigger(self._line_trigger)
         elif plan.trigger == "camera":
             if self._strobe_request is None:
-                raise CameraError(f"{self._name}: a camera-paced plan needs a strobe output; expected "
-                                  "AravisCamera(strobe=StrobeConfig(line=…))")
+                raise CameraError(
+                    f"{self._name}: a camera-paced plan needs a strobe output; expected "
+                    "AravisCamera(strobe=StrobeConfig(line=…))"
+                )
             self.configure_trigger(TriggerConfig(mode="free"))
         else:
             raise CameraError(f"{self._name}: plan trigger {plan.trigger!r}; expected software, booth or camera")
@@ -1415,8 +1496,11 @@ class AravisCamera:
             except GLib.Error as err:
                 raise self._fail("reading", "PayloadSize", err) from err
             layout = (str(self.get_feature("PixelFormat")),) + self.roi[2:]
-            fits = spare is not None and (spare.pool.payload, spare.layout) == (payload, layout) and (
-                spare.n_buffers >= n_buffers)
+            fits = (
+                spare is not None
+                and (spare.pool.payload, spare.layout) == (payload, layout)
+                and (spare.n_buffers >= n_buffers)
+            )
         finally:
             if spare is not None and not fits:
                 spare.pool.release()
@@ -1432,8 +1516,14 @@ class AravisCamera:
             raise CameraError(f"{self._name}: no stream channel; expected the camera to stream images")
         if n_buffers * payload > _MAX_POOL_BYTES:
             reduced = max(2, _MAX_POOL_BYTES // payload)
-            log.warning("%s: %d buffers of %d bytes exceed %d MiB; using %d", self._name, n_buffers, payload,
-                        _MAX_POOL_BYTES >> 20, reduced)
+            log.warning(
+                "%s: %d buffers of %d bytes exceed %d MiB; using %d",
+                self._name,
+                n_buffers,
+                payload,
+                _MAX_POOL_BYTES >> 20,
+                reduced,
+            )
             n_buffers = reduced
         zero_copy = self._zero_copy and self._protocol in ZERO_COPY_PROTOCOLS and is_zero_copy_format(layout[0])
         pool = _BufferPool(stream, payload, zero_copy)
@@ -1476,8 +1566,9 @@ class AravisCamera:
             while (buffer := pool.stream.try_pop_buffer()) is not None:
                 pool.stream.push_buffer(buffer)
             self._stale_before_ns = time.time_ns()
-        self._pump = threading.Thread(target=self._pump_buffers, args=(pool,),
-                                      name=f"aravis-pump-{self._serial}", daemon=True)
+        self._pump = threading.Thread(
+            target=self._pump_buffers, args=(pool,), name=f"aravis-pump-{self._serial}", daemon=True
+        )
         self._pump.start()
         try:
             self._camera.start_acquisition()
@@ -1512,8 +1603,9 @@ class AravisCamera:
                 try:
                     pool.replace()
                 except Exception as exc:  # noqa: BLE001 - the pool is one buffer short, frames still flow
-                    log.warning("%s: no buffer to replace one handed out (%s); the pool shrinks by one",
-                                self._name, exc)
+                    log.warning(
+                        "%s: no buffer to replace one handed out (%s); the pool shrinks by one", self._name, exc
+                    )
 
     def _take(self, buffer: Any, pool: _BufferPool, popped_ns: int) -> tuple[_Good | _Bad | _Failure, bool]:
         """What the consumer gets for one popped buffer, and whether the buffer's own array went
@@ -1581,8 +1673,10 @@ class AravisCamera:
         index = self._n_consumed
         where = self._step_label(index)
         if self._control_lost.is_set():
-            raise CameraDisconnectedError(f"{self._name}: control lost before {where}; expected a "
-                                          "connected camera — check power and cable, then reopen it")
+            raise CameraDisconnectedError(
+                f"{self._name}: control lost before {where}; expected a "
+                "connected camera — check power and cable, then reopen it"
+            )
         try:
             item = self._queue.get(timeout=max(0.0, timeout_s))
         except queue.Empty:
@@ -1592,15 +1686,19 @@ class AravisCamera:
                 raise CameraDisconnectedError(
                     f"{self._name}: no frame for {where} within {timeout_s:.3g} s, and the camera no longer "
                     f"answers ({silent}); expected a connected camera — check its power and cable, then "
-                    f"reopen it ({stats.frames_good} good frame(s) before)") from None
+                    f"reopen it ({stats.frames_good} good frame(s) before)"
+                ) from None
             raise FrameTimeoutError(
                 f"{self._name}: no frame for {where} within {timeout_s:.3g} s; expected one frame per "
                 f"{'trigger' if self._trigger.mode != 'free' else 'frame period'} "
                 f"({stats.frames_good} good, {stats.frames_incomplete} incomplete so far) — check the "
-                "trigger source and wiring") from None
+                "trigger source and wiring"
+            ) from None
         if item is _CONTROL_LOST:
-            raise CameraDisconnectedError(f"{self._name}: control lost while waiting for {where}; expected a "
-                                          "connected camera — check power and cable, then reopen it")
+            raise CameraDisconnectedError(
+                f"{self._name}: control lost while waiting for {where}; expected a "
+                "connected camera — check power and cable, then reopen it"
+            )
         settings = self._triggered_settings.popleft() if self._triggered_settings else self._current
         self._n_consumed += 1
         if isinstance(item, _Failure):
@@ -1610,15 +1708,20 @@ class AravisCamera:
             with self._stats_lock:
                 statuses = dict(self._stats.statuses)
                 statuses[item.status] = statuses.get(item.status, 0) + 1
-                self._stats = replace(self._stats, frames_incomplete=self._stats.frames_incomplete + 1,
-                                      statuses=statuses)
-            raise FrameLostError(f"{self._name}: frame {item.frame_id} for {where} arrived incomplete "
-                                 f"(buffer status {item.status}); expected a complete frame — check the "
-                                 "link (packet size, MTU, cable, bandwidth)")
+                self._stats = replace(
+                    self._stats, frames_incomplete=self._stats.frames_incomplete + 1, statuses=statuses
+                )
+            raise FrameLostError(
+                f"{self._name}: frame {item.frame_id} for {where} arrived incomplete "
+                f"(buffer status {item.status}); expected a complete frame — check the "
+                "link (packet size, MTU, cable, bandwidth)"
+            )
         if missing:
-            raise FrameLostError(f"{self._name}: {missing} frame(s) lost before frame {item.frame_id} "
-                                 f"({where}); expected consecutive frame ids — enlarge the buffer pool "
-                                 "or lower the frame rate")
+            raise FrameLostError(
+                f"{self._name}: {missing} frame(s) lost before frame {item.frame_id} "
+                f"({where}); expected consecutive frame ids — enlarge the buffer pool "
+                "or lower the frame rate"
+            )
         with self._stats_lock:
             self._stats = replace(self._stats, frames_good=self._stats.frames_good + 1)
         if self._trigger.mode != "software" and self._plan is not None and self._n_consumed < len(self._plan.steps):
@@ -1702,12 +1805,14 @@ class AravisCamera:
             pool.abandon()
         elif self._control_lost.is_set() or self._unreachable:
             # Measured on the GigE fake killed mid-stream: 5 s here and 5 s more at close, in Aravis.
-            log.warning("%s: releasing a camera that no longer answers; Aravis waits out its control "
-                        "retries first (about 10 s)", self._name)
+            log.warning(
+                "%s: releasing a camera that no longer answers; Aravis waits out its control "
+                "retries first (about 10 s)",
+                self._name,
+            )
             pool.release()
         else:
             self._spare = _SpareStream(pool, self._n_buffers, self._layout_key)
-
 
 
 # --------------------------------------------------------------------------------------------
@@ -1740,8 +1845,10 @@ def gvcp_port_lock(timeout_s: float = 120.0) -> Iterator[None]:
                 break
             except BlockingIOError:
                 if time.monotonic() > deadline:
-                    raise CameraError(f"GigE Vision fake: port 127.0.0.1:3956 busy for {timeout_s:g} s "
-                                      f"(lock {GVCP_LOCK_PATH}); expected it free — another fake is running") from None
+                    raise CameraError(
+                        f"GigE Vision fake: port 127.0.0.1:3956 busy for {timeout_s:g} s "
+                        f"(lock {GVCP_LOCK_PATH}); expected it free — another fake is running"
+                    ) from None
                 time.sleep(0.02)
         try:
             yield
@@ -1782,9 +1889,14 @@ class AravisGvFake:
 
     address = "127.0.0.1"
 
-    def __init__(self, serial: str = "MSF0001", genicam_xml: str | os.PathLike[str] | None = FAKE_SFNC_XML,
-                 trigger_frequency_hz: float = 1000.0, lost_packet_ratio: float = 0.0,
-                 lock_timeout_s: float = 120.0) -> None:
+    def __init__(
+        self,
+        serial: str = "MSF0001",
+        genicam_xml: str | os.PathLike[str] | None = FAKE_SFNC_XML,
+        trigger_frequency_hz: float = 1000.0,
+        lost_packet_ratio: float = 0.0,
+        lock_timeout_s: float = 120.0,
+    ) -> None:
         self.serial = serial
         self._xml = str(genicam_xml) if genicam_xml is not None else None
         self._frequency = trigger_frequency_hz
@@ -1807,8 +1919,10 @@ class AravisGvFake:
         try:
             fake = Aravis.GvFakeCamera.new_full(self.address, self.serial, self._xml)
             if not fake.is_running():
-                raise CameraError(f"GigE Vision fake {self.serial}: cannot listen on {self.address}:3956; "
-                                  "expected the port free — is an arv-fake-gv-camera running?")
+                raise CameraError(
+                    f"GigE Vision fake {self.serial}: cannot listen on {self.address}:3956; "
+                    "expected the port free — is an arv-fake-gv-camera running?"
+                )
             fake.set_property("gvsp-lost-ratio", float(self._lost))
             fake.get_fake_camera().set_trigger_frequency(self._frequency)
             self._fake = fake
@@ -1828,8 +1942,9 @@ class AravisGvFake:
         """A 32-bit register of the fake, as the camera side sees it."""
         ok, value = self._fake.get_fake_camera().read_register(address)
         if not ok:
-            raise CameraError(f"GigE Vision fake {self.serial}: register 0x{address:x} unreadable; "
-                              "expected an address below 0x10000")
+            raise CameraError(
+                f"GigE Vision fake {self.serial}: register 0x{address:x} unreadable; expected an address below 0x10000"
+            )
         return int(value)
 
     def write_register(self, address: int, value: int) -> None:
@@ -1870,9 +1985,20 @@ class BareRun:
     """Per trigger, its stage times (software-trigger runs only; warm-up frames excluded)."""
 
 
-def bare_aravis_run(address: str, *, width: int, height: int, pixel_format: str, n_frames: int,
-                    software_trigger: bool, frame_rate_hz: float | None = None, n_buffers: int = 16,
-                    timeout_s: float = 2.0, dither_s: float = 0.0, warm_up_frames: int = 0) -> BareRun:
+def bare_aravis_run(
+    address: str,
+    *,
+    width: int,
+    height: int,
+    pixel_format: str,
+    n_frames: int,
+    software_trigger: bool,
+    frame_rate_hz: float | None = None,
+    n_buffers: int = 16,
+    timeout_s: float = 2.0,
+    dither_s: float = 0.0,
+    warm_up_frames: int = 0,
+) -> BareRun:
     """The smallest correct Aravis loop on the GigE Vision camera at ``address``: pop, check, push.
 
     With ``software_trigger`` each frame is triggered and waited for (latency); otherwise the
@@ -1917,8 +2043,9 @@ def bare_aravis_run(address: str, *, width: int, height: int, pixel_format: str,
                 popped = time.time_ns()
                 now = time.perf_counter()
                 if buffer is None:
-                    raise CameraError(f"bare Aravis loop on {address}: no frame within {timeout_s} s; "
-                                      "expected a streaming camera")
+                    raise CameraError(
+                        f"bare Aravis loop on {address}: no frame within {timeout_s} s; expected a streaming camera"
+                    )
                 try:
                     good = buffer.get_status() == Aravis.BufferStatus.SUCCESS
                     frame_id = int(buffer.get_frame_id())

@@ -91,7 +91,9 @@ class FeatureInfo:
             what = "a whole number" if self.kind == "integer" else "a number"
             if self.minimum is None or self.maximum is None:
                 return what
-            step = f" in steps of {self.increment:g}" if self.kind == "integer" and self.increment not in (None, 1) else ""
+            step = (
+                f" in steps of {self.increment:g}" if self.kind == "integer" and self.increment not in (None, 1) else ""
+            )
             unit = f" {self.unit}" if self.unit else ""
             return f"{what} in {self.minimum:g} … {self.maximum:g}{unit}{step}"
         if self.kind == "string":
@@ -154,8 +156,10 @@ class CameraOptions:
         """
         asked = dict(other.features)
         features = tuple((name, asked.pop(name, value)) for name, value in self.features) + tuple(asked.items())
-        merged = {name: getattr(other, name) if getattr(other, name) is not None else getattr(self, name)
-                  for name in ("trigger_line", "strobe_line", "gain_db", "roi", "binning")}
+        merged = {
+            name: getattr(other, name) if getattr(other, name) is not None else getattr(self, name)
+            for name in ("trigger_line", "strobe_line", "gain_db", "roi", "binning")
+        }
         return CameraOptions(**merged, features=features)
 
     @property
@@ -192,8 +196,9 @@ def parse_feature(text: str) -> tuple[str, str]:
     name, sep, value = text.partition("=")
     name = name.strip()
     if not sep or not name or not name.replace("_", "").isalnum() or not name[0].isalpha():
-        raise argparse.ArgumentTypeError(f"'{text}': expected NAME=VALUE with a GenICam feature name "
-                                         "(letters, digits, _), e.g. BlackLevel=64")
+        raise argparse.ArgumentTypeError(
+            f"'{text}': expected NAME=VALUE with a GenICam feature name (letters, digits, _), e.g. BlackLevel=64"
+        )
     return name, value.strip()
 
 
@@ -209,7 +214,9 @@ def parse_roi(text: str) -> tuple[int, int, int, int]:
     try:
         x, y, w, h = (int(p) for p in parts)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}': expected X,Y,W,H as four whole numbers, e.g. 0,0,640,480") from None
+        raise argparse.ArgumentTypeError(
+            f"'{text}': expected X,Y,W,H as four whole numbers, e.g. 0,0,640,480"
+        ) from None
     if x < 0 or y < 0 or w < 1 or h < 1:
         raise argparse.ArgumentTypeError(f"'{text}': expected offsets X,Y ≥ 0 and sizes W,H ≥ 1, e.g. 0,0,640,480")
     return x, y, w, h
@@ -229,7 +236,9 @@ def parse_binning(text: str) -> tuple[int, int]:
     except ValueError:
         factors = ()
     if len(factors) not in (1, 2) or min(factors) < 1:
-        raise argparse.ArgumentTypeError(f"'{text}': expected a binning factor N or HxV (whole numbers ≥ 1), e.g. 2 or 2x2")
+        raise argparse.ArgumentTypeError(
+            f"'{text}': expected a binning factor N or HxV (whole numbers ≥ 1), e.g. 2 or 2x2"
+        )
     return (factors[0], factors[-1])
 
 
@@ -249,7 +258,9 @@ def options_from_json(data: Any, where: str) -> CameraOptions:
     known = ("trigger_line", "strobe_line", "gain_db", "roi", "binning", "features")
     unknown = sorted(set(data) - set(known))
     if unknown:
-        raise CameraSettingError(f"{where}: options has unknown key {unknown[0]!r}; expected some of {', '.join(known)}")
+        raise CameraSettingError(
+            f"{where}: options has unknown key {unknown[0]!r}; expected some of {', '.join(known)}"
+        )
 
     def convert(key: str, parse: Any, text: str) -> Any:
         try:
@@ -279,10 +290,12 @@ def options_from_json(data: Any, where: str) -> CameraOptions:
     if "features" in data:
         features = data["features"]
         if not isinstance(features, Mapping):
-            raise CameraSettingError(f"{where}: options.features is {type(features).__name__}; expected an "
-                                     'object {"Name": value}')
-        values["features"] = tuple(convert("features", parse_feature, f"{name}={_json_text(value)}")
-                                   for name, value in features.items())
+            raise CameraSettingError(
+                f'{where}: options.features is {type(features).__name__}; expected an object {{"Name": value}}'
+            )
+        values["features"] = tuple(
+            convert("features", parse_feature, f"{name}={_json_text(value)}") for name, value in features.items()
+        )
     return CameraOptions(**values)
 
 
@@ -322,8 +335,10 @@ class AppliedOptions:
 
 def _describe(camera: FeatureCamera, feature: str, option: str) -> FeatureInfo:
     if not camera.has_feature(feature):
-        raise CameraSettingError(f"{camera.name}: {option}: no feature {feature}; expected one the camera offers — "
-                                 "`msflash devices --features ID` lists them")
+        raise CameraSettingError(
+            f"{camera.name}: {option}: no feature {feature}; expected one the camera offers — "
+            "`msflash devices --features ID` lists them"
+        )
     return camera.describe_feature(feature)
 
 
@@ -372,20 +387,24 @@ def apply_feature(camera: FeatureCamera, feature: str, text: str, option: str | 
     option = option or f"--feature {feature}={text}"
     info = _describe(camera, feature, option)
     if not info.writable:
-        raise CameraSettingError(f"{camera.name}: {option}: {feature} is {info.kind}, access {info.access}; "
-                                 "expected a writable feature")
+        raise CameraSettingError(
+            f"{camera.name}: {option}: {feature} is {info.kind}, access {info.access}; expected a writable feature"
+        )
     value = _convert(info, text)
     if value is None:
         current = "" if info.value is None else f" (now {_json_text(info.value)})"
-        raise CameraSettingError(f"{camera.name}: {option}: {feature} cannot be {text!r}{current}; "
-                                 f"expected {info.allowed()}")
+        raise CameraSettingError(
+            f"{camera.name}: {option}: {feature} cannot be {text!r}{current}; expected {info.allowed()}"
+        )
     try:
         read_back = camera.set_feature(feature, value)
     except CameraSettingError:
         raise
     except CameraError as err:
-        raise CameraSettingError(f"{camera.name}: {option}: the camera refused it "
-                                 f"({str(err).removeprefix(camera.name + ': ')}); expected {info.allowed()}") from err
+        raise CameraSettingError(
+            f"{camera.name}: {option}: the camera refused it "
+            f"({str(err).removeprefix(camera.name + ': ')}); expected {info.allowed()}"
+        ) from err
     if read_back != value:  # the camera rounded it (a register of whole units, an increment): keep its value
         log.warning("%s: %s: %s reads back %s", camera.name, option, feature, _json_text(read_back))
     return read_back
@@ -394,7 +413,9 @@ def apply_feature(camera: FeatureCamera, feature: str, text: str, option: str | 
 def _check_entry(camera: FeatureCamera, feature: str, entry: str, option: str) -> None:
     info = _describe(camera, feature, option)
     if entry not in info.entries:
-        raise CameraSettingError(f"{camera.name}: {option}: {feature} has no entry {entry!r}; expected {info.allowed()}")
+        raise CameraSettingError(
+            f"{camera.name}: {option}: {feature} has no entry {entry!r}; expected {info.allowed()}"
+        )
 
 
 def check_lines(camera: FeatureCamera, options: CameraOptions) -> None:
@@ -421,9 +442,13 @@ def check_gain(camera: FeatureCamera, gain_db: float, feature: str = "Gain") -> 
     """
     option = f"--gain {gain_db:g}"
     info = _describe(camera, feature, option)
-    if info.kind not in ("float", "integer") or _convert(info, repr(float(gain_db)) if info.kind == "float"
-                                                           else str(round(gain_db))) is None:
-        raise CameraSettingError(f"{camera.name}: {option}: {feature} cannot be {gain_db:g} dB; expected {info.allowed()}")
+    if (
+        info.kind not in ("float", "integer")
+        or _convert(info, repr(float(gain_db)) if info.kind == "float" else str(round(gain_db))) is None
+    ):
+        raise CameraSettingError(
+            f"{camera.name}: {option}: {feature} cannot be {gain_db:g} dB; expected {info.allowed()}"
+        )
 
 
 def apply_camera_options(camera: FeatureCamera, options: CameraOptions) -> AppliedOptions:
@@ -445,8 +470,10 @@ def apply_camera_options(camera: FeatureCamera, options: CameraOptions) -> Appli
     binning = None
     if options.binning is not None:
         text = "x".join(str(v) for v in options.binning)
-        read = [apply_feature(camera, feature, str(factor), option=f"--binning {text}")
-                for feature, factor in zip(_BINNING_FEATURES, options.binning)]
+        read = [
+            apply_feature(camera, feature, str(factor), option=f"--binning {text}")
+            for feature, factor in zip(_BINNING_FEATURES, options.binning)
+        ]
         binning = (int(read[0]), int(read[1]))
     roi = None
     if options.roi is not None:
@@ -466,10 +493,12 @@ def _apply_roi(camera: FeatureCamera, roi: tuple[int, int, int, int]) -> tuple[i
     try:
         read = camera.set_roi(x, y, width, height)
     except CameraError as err:
-        raise CameraSettingError(f"{camera.name}: {option}: the camera refused it "
-                                 f"({str(err).removeprefix(camera.name + ': ')}); expected "
-                                 f"{'; '.join(limits) or 'a region inside the sensor'} (offset + size within "
-                                 "the sensor, after binning)") from err
+        raise CameraSettingError(
+            f"{camera.name}: {option}: the camera refused it "
+            f"({str(err).removeprefix(camera.name + ': ')}); expected "
+            f"{'; '.join(limits) or 'a region inside the sensor'} (offset + size within "
+            "the sensor, after binning)"
+        ) from err
     return read
 
 
@@ -516,8 +545,9 @@ class CameraSetup:
         return {"requested": self.options.to_dict(), "read_back": self.applied.to_dict()}
 
 
-def configure_camera(camera: ConfigurableCamera, asked: CameraOptions, strobe: bool,
-                     profile_options: CameraOptions | None = None) -> CameraSetup:
+def configure_camera(
+    camera: ConfigurableCamera, asked: CameraOptions, strobe: bool, profile_options: CameraOptions | None = None
+) -> CameraSetup:
     """Apply the camera profile's options overridden by ``asked`` to an opened camera.
 
     Parameters

@@ -68,10 +68,12 @@ def _packed_formats() -> dict[str, PackedLayout]:
         "Mono12Packed": PackedLayout(0x010C0006, 12, "gev", 2, 3),
     }
     # PFNC codes, in the order GR, RG, GB, BG of each family.
-    codes = {"10p": (0x010A0056, 0x010A0058, 0x010A0054, 0x010A0052),
-             "12p": (0x010C0057, 0x010C0059, 0x010C0055, 0x010C0053),
-             "10Packed": (0x010C0026, 0x010C0027, 0x010C0028, 0x010C0029),
-             "12Packed": (0x010C002A, 0x010C002B, 0x010C002C, 0x010C002D)}
+    codes = {
+        "10p": (0x010A0056, 0x010A0058, 0x010A0054, 0x010A0052),
+        "12p": (0x010C0057, 0x010C0059, 0x010C0055, 0x010C0053),
+        "10Packed": (0x010C0026, 0x010C0027, 0x010C0028, 0x010C0029),
+        "12Packed": (0x010C002A, 0x010C002B, 0x010C002C, 0x010C002D),
+    }
     for suffix, family in codes.items():
         bits = int(suffix[:2])
         packing: Packing = "pfnc" if suffix.endswith("p") else "gev"
@@ -89,15 +91,18 @@ PACKED_FORMATS: dict[str, PackedLayout] = _packed_formats()
 def _layout(pixel_format: str, width: int, height: int, where: str) -> PackedLayout:
     layout = PACKED_FORMATS.get(pixel_format)
     if layout is None:
-        raise CameraError(f"{where}: pixel format {pixel_format!r} is not a packed format msflash decodes; "
-                          f"expected one of {', '.join(PACKED_FORMATS)}")
+        raise CameraError(
+            f"{where}: pixel format {pixel_format!r} is not a packed format msflash decodes; "
+            f"expected one of {', '.join(PACKED_FORMATS)}"
+        )
     if width < 1 or height < 1:
         raise CameraError(f"{where}: frame size {width}x{height}; expected a positive width and height")
     if width % layout.group_pixels:
         raise CameraError(
             f"{where}: width {width} is not a multiple of {layout.group_pixels} for {pixel_format} "
             f"({layout.group_pixels} pixels in {layout.group_bytes} bytes, rows unpadded); expected a width "
-            f"the packing divides — set Width in steps of {layout.group_pixels}")
+            f"the packing divides — set Width in steps of {layout.group_pixels}"
+        )
     return layout
 
 
@@ -153,8 +158,9 @@ def _unpack_gev(groups: np.ndarray, layout: PackedLayout) -> np.ndarray:
     return samples
 
 
-def unpack_pixels(data: bytes | memoryview | np.ndarray, pixel_format: str, width: int, height: int,
-                  where: str = "unpack_pixels") -> np.ndarray:
+def unpack_pixels(
+    data: bytes | memoryview | np.ndarray, pixel_format: str, width: int, height: int, where: str = "unpack_pixels"
+) -> np.ndarray:
     """Decode one frame of a packed format into an owned, read-only ``uint16`` array.
 
     Parameters
@@ -189,8 +195,10 @@ def unpack_pixels(data: bytes | memoryview | np.ndarray, pixel_format: str, widt
     n_bytes = width * height // layout.group_pixels * layout.group_bytes
     raw = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data.reshape(-1).view(np.uint8)
     if raw.size < n_bytes:
-        raise CameraError(f"{where}: payload of {raw.size} bytes is too short for {width}x{height} "
-                          f"{pixel_format}; expected {n_bytes} bytes")
+        raise CameraError(
+            f"{where}: payload of {raw.size} bytes is too short for {width}x{height} "
+            f"{pixel_format}; expected {n_bytes} bytes"
+        )
     groups = raw[:n_bytes].reshape(-1, layout.group_bytes)
     unpack = _unpack_pfnc if layout.packing == "pfnc" else _unpack_gev
     pixels = unpack(groups, layout).reshape(height, width)
