@@ -26,6 +26,7 @@ from typing import IO, Any, Literal
 import serial
 
 from msflash.led_controller import protocol
+from msflash.led_controller.booth_interface import BoothCapabilities
 from msflash.led_controller.errors import (
     BoothError,
     BoothNotFoundError,
@@ -176,7 +177,7 @@ class LedBooth:
                 url, baudrate=baudrate, timeout=_READ_POLL_S, write_timeout=timeout_s, exclusive=True
             )
         except serial.SerialException as err:
-            raise _open_error(url, err) from err
+            raise port_open_error(url, err) from err
         except ValueError as err:
             raise BoothError(f"booth {url}: cannot open ({err}); expected a device path or pyserial URL") from err
         try:
@@ -242,6 +243,11 @@ class LedBooth:
     def name(self) -> str:
         """Get the port name used in messages (str)."""
         return self._name
+
+    @property
+    def capabilities(self) -> BoothCapabilities:
+        """Get the sync modes an msflash booth runs: host pacing, booth master and camera master (protocol v1)."""
+        return BoothCapabilities(booth_master=True, camera_master=True)
 
     def identify(self) -> BoothInfo:
         """Ask the booth for its firmware, channels, channel names and peak wavelengths.
@@ -471,6 +477,10 @@ class LedBooth:
         status = protocol.parse_status(reply, raw, where=self._name)
         self._watchdog_s = status.watchdog_s
         return status
+
+    def reported_levels(self) -> tuple[float, ...]:
+        """Get the levels the booth holds now, as its ``STAT`` reports them."""
+        return self.status().levels
 
     def wait_event(self, kind: str | None = None, *, timeout_s: float | None = None) -> BoothEvent:
         """Wait for the next event (of ``kind`` if given: ``TRIG``, ``DONE``, ``WDOG``).
@@ -752,7 +762,8 @@ class LedBooth:
             self._events_cv.notify_all()
 
 
-def _open_error(url: str, err: serial.SerialException) -> BoothError:
+def port_open_error(url: str, err: serial.SerialException) -> BoothError:
+    """The one-line error for a serial port that did not open (missing, no permission, busy), naming ``url``."""
     code = getattr(err, "errno", None)
     text = str(err)
     # pyserial folds the OSError into its message, so match the errno text as well as the code.

@@ -49,6 +49,7 @@ from typing import Any
 
 from msflash.acquisition.plan import CapturePlan, PlanTiming
 from msflash.acquisition.session.capture import READOUT_US, TRIGGER_PULSE_US
+from msflash.led_controller.booth import LedBooth
 
 WALL_RATIO_TARGET = 1.15
 LATENCY_MEDIAN_TARGET_MS = 5.0
@@ -96,7 +97,9 @@ def capture_bench(
         arrivals: list[float] = []
         pulses: list[float] = []
         psets: list[tuple[float, float]] = []
-        real_next, real_pulse, real_set_step = camera.next_frame, emulator.on_trigger_out, rig.booth.set_step
+        booth = rig.booth
+        assert isinstance(booth, LedBooth)  # the sim rig's: a sequenced booth
+        real_next, real_pulse, real_set_step = camera.next_frame, emulator.on_trigger_out, booth.set_step
         real_release = emulator._release_hold  # the booth's side of PSET: the held step's LEDs are set
         releases: list[float] = []
 
@@ -122,7 +125,7 @@ def capture_bench(
         camera.next_frame = timed_next
         emulator._release_hold = timed_release  # type: ignore[method-assign]
         emulator.on_trigger_out = timed_pulse
-        rig.booth.set_step = timed_set_step  # type: ignore[method-assign]
+        booth.set_step = timed_set_step  # type: ignore[method-assign]
         policy = ExposurePolicy()
         session: FlashSession | None = None
         parts: dict[str, list[float]] = {

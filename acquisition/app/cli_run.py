@@ -56,7 +56,9 @@ from msflash.acquisition.session.run import (
     run_two_captures,
     sequence_writer,
 )
+from msflash.led_controller.adapters import BOOTH_PROTOCOLS
 from msflash.led_controller.booth import sigterm_as_exit
+from msflash.led_controller.booth_interface import unsupported_sync
 from msflash.processing.datasets import PAPER_LED_SUBSETS
 from msflash.processing.lights import AMBIENTS
 from msflash.processing.user_files import printable
@@ -131,6 +133,21 @@ def _open(args: argparse.Namespace) -> Rig:
         )
     if args.booth_port is not None:
         check_booth_port(spec, args.sync)
+    if args.booth_protocol != "msflash" and args.port is None and args.booth_port is None:
+        raise UsageError(
+            f"--booth-protocol {args.booth_protocol}: says what the booth at --port or --booth-port "
+            "speaks, but neither is given (discovery and the emulators speak msflash); expected --port "
+            "PATH or --booth-port PATH"
+        )
+    rig = _open_spec(args, spec)
+    why = unsupported_sync(rig.booth, args.sync)
+    if why is not None:  # a host-paced-only adapter asked for booth or camera master
+        rig.close()
+        raise UsageError(why)
+    return rig
+
+
+def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
     if spec == "hw":
         return open_rig(
             "hw",
@@ -144,6 +161,7 @@ def _open(args: argparse.Namespace) -> Rig:
             sync=args.sync,
             pixel_format=args.pixel_format,
             camera_options=camera_options_from_args(args),
+            booth_protocol=args.booth_protocol,
         )
     if spec == "sim":
         return open_rig(
@@ -158,6 +176,7 @@ def _open(args: argparse.Namespace) -> Rig:
             flash_power=args.flash_power,
             log_serial=args.log_serial,
             booth_port=args.booth_port,
+            booth_protocol=args.booth_protocol,
         )
     if spec == "aravis-fake":
         return open_rig(
@@ -392,6 +411,14 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
         help="who paces the frames: host (serial command, then software trigger; default), "
         "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "
         "exposure-active line advances the booth's pattern table)",
+    )
+    parser.add_argument(
+        "--booth-protocol",
+        default="msflash",
+        choices=BOOTH_PROTOCOLS,
+        help="what the booth at --port/--booth-port speaks: msflash (default; docs/booth-protocol.md, "
+        "every --sync) or text (a plain-text line protocol, --sync host only; "
+        "docs/booth-adapters.md)",
     )
     parser.add_argument(
         "--led-spectra",

@@ -66,14 +66,14 @@ import math
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
-from typing import Protocol
 
 from msflash.acquisition.devices.camera import Camera, RawFrame
-from msflash.acquisition.errors import BoothStepError, CaptureError, DroppedFrameError, FrameTimeoutError
+from msflash.acquisition.errors import BoothStepError, CaptureError, DroppedFrameError, FrameTimeoutError, UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter
 from msflash.led_controller.booth import ARM_TIME_MAX_US
+from msflash.led_controller.booth_interface import Booth, SequencedBooth, unsupported_sync
 from msflash.led_controller.errors import BoothError
 
 log = logging.getLogger(__name__)
@@ -95,48 +95,21 @@ WATCHDOG_SLACK_S = 0.5
 decision, the OS scheduler), in seconds: see :func:`host_silence_s`."""
 
 
-class LedControl(Protocol):
-    """What the host-paced runner needs of the booth (``led_controller.LedBooth`` provides it)."""
-
-    def set_levels(self, levels: Sequence[float]) -> None:
-        """Drive every channel to ``levels`` (0–1)."""
-        ...
-
-    def all_off(self) -> None:
-        """Switch every channel off."""
-        ...
-
-    # Optional (``LedBooth`` offers both): ``watchdog_covering(silence_s)``, a context manager keeping
-    # the booth's watchdog from firing while the host is silent on purpose (see _watchdog_covering),
-    # and ``watchdog_fired()``, whether it fired since last asked (see _check_watchdog).
+SYNC_OF_TRIGGER = {"software": "host", "booth": "booth", "camera": "camera"}
+"""The ``--sync`` mode (:mod:`led_controller.booth_interface`) each plan trigger needs of the booth."""
 
 
-class SequencedLedControl(LedControl, Protocol):
-    """What booth- and camera-master capture need: the pattern table and its events."""
+def check_booth_runs(booth: Booth, plan: CapturePlan) -> None:
+    """Refuse a plan whose sync mode ``booth`` cannot run (its :attr:`~Booth.capabilities`).
 
-    def load_pattern(self, steps: Sequence[Sequence[float]], *, held: Sequence[int] = ()) -> None:
-        """Replace the pattern table; ``held`` steps wait for :meth:`set_step` (never exposed before)."""
-        ...
-
-    def set_step(self, index: int, levels: Sequence[float], *, now: bool = False) -> None:
-        """Set one step's levels (also while running) and release it if held; ``now``: start it at once."""
-        ...
-
-    def arm(self, mode: str, *, settle_us: int = ..., pulse_us: int = ..., period_us: int = ...) -> None:
-        """Arm the table in a sync mode."""
-        ...
-
-    def start(self) -> None:
-        """Start the armed table."""
-        ...
-
-    def trigger_count(self) -> int:
-        """Triggers counted since ``arm``."""
-        ...
-
-    def wait_event(self, kind: str | None = None, *, timeout_s: float | None = None):  # noqa: ANN201
-        """Next event (``TRIG``, ``DONE``…) with ``.args``."""
-        ...
+    Raises
+    ------
+    UsageError
+        One line naming the booth and the sync mode (``--sync booth`` on a host-paced-only booth).
+    """
+    why = unsupported_sync(booth, SYNC_OF_TRIGGER.get(plan.trigger, "host"))
+    if why is not None:
+        raise UsageError(why)
 
 
 def booth_period_us(plan: CapturePlan) -> int:
@@ -168,7 +141,7 @@ def host_silence_s(plan: CapturePlan) -> float:
     return (len(plan.steps) + 1) * booth_period_us(plan) * 1e-6 + plan.frame_timeout_s + WATCHDOG_SLACK_S
 
 
-def _check_watchdog(booth: LedControl, where: str, saved: str = "") -> None:
+def _check_watchdog(booth: Booth, where: str, saved: str = "") -> None:
     """Refuse the frame of ``where`` (a step) if the booth's watchdog switched the LEDs off meanwhile.
 
     The host was silent for longer than the booth's watchdog (a stall beyond
@@ -184,7 +157,7 @@ def _check_watchdog(booth: LedControl, where: str, saved: str = "") -> None:
         )
 
 
-def _sequence_watchdog(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
+def _sequence_watchdog(booth: Booth, plan: CapturePlan) -> AbstractContextManager[None]:
     """At the start of a sequence: a ``WDOG`` event from before it (LEDs left on by earlier code,
     then forgotten) is dropped — it says nothing of this sequence's frames, which
     :func:`_check_watchdog` judges — and the watchdog is covered for ``plan`` (:func:`_watchdog_covering`)."""
@@ -194,7 +167,7 @@ def _sequence_watchdog(booth: LedControl, plan: CapturePlan) -> AbstractContextM
     return _watchdog_covering(booth, plan)
 
 
-def _watchdog_covering(booth: LedControl, plan: CapturePlan) -> AbstractContextManager[None]:
+def _watchdog_covering(booth: Booth, plan: CapturePlan) -> AbstractContextManager[None]:
     """The booth's watchdog kept from firing while ``plan`` runs (:meth:`LedBooth.watchdog_covering`),
     or nothing for a booth without one. Leaves the ``WDOG`` events alone: within a sequence (the
     flash step) they are this sequence's, for :func:`_check_watchdog`."""
@@ -208,7 +181,7 @@ FlashDecide = Callable[[list[RawFrame]], tuple[Sequence[float], float]]
 
 def run_capture_with_flash(
     camera: Camera,
-    booth: LedControl,
+    booth: Booth,
     plan: CapturePlan,
     writer: FrameWriter,
     decide: FlashDecide,
@@ -243,6 +216,7 @@ def run_capture_with_flash(
 
     if plan.trigger not in ("software", "booth", "camera"):
         raise ValueError(f"run_capture_with_flash: plan trigger {plan.trigger!r}; expected software, booth or camera")
+    check_booth_runs(booth, plan)
     with collector_paused():
         if plan.trigger == "software":
             return _host_paced(camera, booth, full, writer, on_frame, flash_step)
@@ -269,7 +243,7 @@ def collector_paused() -> Iterator[None]:
 
 
 @contextmanager
-def _leds_off_at_exit(camera: Camera, booth: LedControl) -> Iterator[None]:
+def _leds_off_at_exit(camera: Camera, booth: Booth) -> Iterator[None]:
     """LEDs off (``OFF`` also aborts a running table), then the camera stopped, on every exit path.
 
     Leaving through an error, a failure to switch off or to stop (when the booth's link is what
@@ -345,7 +319,7 @@ def _replan(camera: Camera, plan: CapturePlan, index: int) -> None:
 
 def run_capture(
     camera: Camera,
-    booth: LedControl,
+    booth: Booth,
     plan: CapturePlan,
     writer: FrameWriter,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
@@ -359,7 +333,11 @@ def run_capture(
     DroppedFrameError
         A frame was lost (frame ids skipped, or the booth triggered a frame that never came);
         names the step. Frames already written stay on disk.
+    UsageError
+        The booth cannot run the plan's sync mode (:func:`check_booth_runs`); nothing was captured.
     """
+    if plan.trigger in SYNC_OF_TRIGGER:
+        check_booth_runs(booth, plan)
     if plan.trigger == "software":
         return _host_paced(camera, booth, plan, writer, on_frame)
     if plan.trigger in ("booth", "camera"):
@@ -391,7 +369,7 @@ def _write(
 
 def _host_paced(
     camera: Camera,
-    booth: LedControl,
+    booth: Booth,
     plan: CapturePlan,
     writer: FrameWriter,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
@@ -434,7 +412,7 @@ def _host_paced(
 
 def _table_paced(
     camera: Camera,
-    booth: SequencedLedControl,
+    booth: SequencedBooth,
     plan: CapturePlan,
     writer: FrameWriter,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
@@ -546,7 +524,7 @@ def _table_paced(
     return written
 
 
-def _booth_step_of(booth: SequencedLedControl, trigger: int, timeout_s: float, step: CaptureStep) -> int:
+def _booth_step_of(booth: SequencedBooth, trigger: int, timeout_s: float, step: CaptureStep) -> int:
     """The table step the booth reported for ``trigger`` (``TRIG <count> <step>`` events arrive in order)."""
     while True:
         event = booth.wait_event("TRIG", timeout_s=timeout_s)
@@ -566,7 +544,7 @@ def _booth_step_of(booth: SequencedLedControl, trigger: int, timeout_s: float, s
         # count < trigger: an event of an earlier trigger left over; skip it.
 
 
-def preview_frames(camera: Camera, booth: LedControl, plan: CapturePlan) -> list[RawFrame]:
+def preview_frames(camera: Camera, booth: Booth, plan: CapturePlan) -> list[RawFrame]:
     """Capture ``plan`` host paced and return the frames in memory, writing nothing (exposure previews).
 
     Frames pair with steps in order (host pacing); a skipped frame id raises

@@ -14,6 +14,8 @@ from pathlib import Path
 
 from msflash.acquisition.errors import RigOpenError, UsageError
 from msflash.led_controller import LedBooth
+from msflash.led_controller.adapters import open_booth
+from msflash.led_controller.booth_interface import Booth
 from msflash.led_controller.recovery import reset_leftovers
 from msflash.processing.spectra import Spectra
 
@@ -43,11 +45,15 @@ def check_booth_port(rig: str, sync: str) -> None:
         )
 
 
-def open_external_booth(port: str, leds: Spectra, log_serial: str | Path | None, closers: list) -> LedBooth:
+def open_external_booth(
+    port: str, leds: Spectra, log_serial: str | Path | None, closers: list, protocol: str = "msflash"
+) -> Booth:
     """The booth at ``port``, identified, checked to have one channel per LED and cleared of leftovers.
 
     Its closers are appended to ``closers`` as soon as it is open (LEDs off, then the port).
-    Leftovers of a run that did not finish are switched off and reported (:func:`reset_leftovers`).
+    Leftovers of a run that did not finish are switched off and reported (:func:`reset_leftovers`;
+    an adapter of another ``protocol``, :func:`led_controller.adapters.open_booth`, switches its LEDs
+    off as it opens).
 
     Raises
     ------
@@ -55,7 +61,7 @@ def open_external_booth(port: str, leds: Spectra, log_serial: str | Path | None,
         ``booth PORT: …``: the port did not open or answer as a booth, or its channels differ.
     """
     try:
-        booth = LedBooth.open(port, log_serial=log_serial)
+        booth = open_booth(port, protocol, log_serial=log_serial)
         closers.append(booth.close)
         closers.append(booth.all_off)
         if booth.info.channels != leds.count:
@@ -64,8 +70,9 @@ def open_external_booth(port: str, leds: Spectra, log_serial: str | Path | None,
                 f"LEDs are {leds.count} ({', '.join(leds.names)}); expected one channel per LED (--leds N or "
                 "--led-spectra FILE.csv)"
             )
-        for note in reset_leftovers(booth):
-            log.warning("%s", note)
+        if isinstance(booth, LedBooth):
+            for note in reset_leftovers(booth):
+                log.warning("%s", note)
     except RigOpenError:
         raise
     except Exception as err:  # noqa: BLE001 - every failure to open is the rig's, with the port named
@@ -74,10 +81,7 @@ def open_external_booth(port: str, leds: Spectra, log_serial: str | Path | None,
     return booth
 
 
-def levels_reported_by(booth: LedBooth) -> Callable[[], tuple[float, ...]]:
-    """A ``led_levels_source`` for the simulated camera: the levels the booth reports now (one ``STAT``)."""
-
-    def levels() -> tuple[float, ...]:
-        return booth.status().levels
-
-    return levels
+def levels_reported_by(booth: Booth) -> Callable[[], tuple[float, ...]]:
+    """A ``led_levels_source`` for the simulated camera: the levels the booth reports now
+    (:meth:`~led_controller.booth_interface.Booth.reported_levels`: one ``STAT``, or ``L?`` for a text booth)."""
+    return booth.reported_levels

@@ -70,6 +70,8 @@ from msflash.acquisition.progress import progress
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
 from msflash.acquisition.session.external_booth import levels_reported_by, open_external_booth
 from msflash.led_controller import BoothEmulator, LedBooth, serve_on_pty
+from msflash.led_controller.adapters import open_booth
+from msflash.led_controller.booth_interface import Booth
 from msflash.led_controller.errors import BoothProtocolError
 from msflash.led_controller.protocol import Command, encode_request, parse_frame, parse_identify, parse_reply
 from msflash.led_controller.recovery import reset_leftovers
@@ -96,8 +98,8 @@ class Rig:
     """The rig spec (``sim``, ``aravis-fake``, ``replay:DIR``)."""
     camera: Any
     """The camera (a :class:`~acquisition.devices.camera.Camera`; may offer ``suggested_exposure_us``)."""
-    booth: LedBooth
-    """The booth driver."""
+    booth: Booth
+    """The booth driver (:class:`led_controller.booth_interface.Booth`: ``LedBooth`` or an adapter)."""
     led_spectra: Spectra
     """The LED spectra at full drive (what a calibration would have measured)."""
     camera_responsivities: Spectra | None
@@ -362,6 +364,7 @@ def open_sim_rig(
     log_serial: str | Path | None = None,
     flash_power: float | None = None,
     booth_port: str | None = None,
+    booth_protocol: str = "msflash",
 ) -> Rig:
     """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver.
 
@@ -384,6 +387,9 @@ def open_sim_rig(
         ``--booth-port``: drive the booth at this port (``msflash booth-emulator`` on a pty, or a
         real booth) instead of an emulator in this process (:mod:`acquisition.external_booth`; host
         pacing only, :attr:`Rig.emulator` None).
+    booth_protocol
+        ``--booth-protocol``: what the booth at ``booth_port`` speaks (``msflash`` or ``text``,
+        :data:`led_controller.adapters.BOOTH_PROTOCOLS`).
 
     Raises
     ------
@@ -398,7 +404,7 @@ def open_sim_rig(
     try:
         closers.append(world.close)
         if booth_port is not None:
-            booth = open_external_booth(booth_port, world.led_spectra, log_serial, closers)
+            booth = open_external_booth(booth_port, world.led_spectra, log_serial, closers, booth_protocol)
             world.led_levels_source = levels_reported_by(booth)
             return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers)
         emulator, booth = _open_emulated_booth(world.led_spectra, log_serial, closers)
@@ -1036,6 +1042,7 @@ def open_hw_rig(
     sync: str = "host",
     pixel_format: str | None = None,
     camera_options: Any = None,
+    booth_protocol: str = "msflash",
     **_ignored: object,
 ) -> Rig:
     """The hardware rig: a GenICam camera by id/serial/IP + a booth on ``port`` (or the one discovered).
@@ -1060,6 +1067,9 @@ def open_hw_rig(
     camera_options
         :class:`~acquisition.devices.aravis.camera_features.CameraOptions` (trigger/strobe lines, gain, ROI, binning,
         features), overriding the camera profile's.
+    booth_protocol
+        ``--booth-protocol``: what the booth at ``port`` speaks (``msflash``, the default, or ``text``,
+        :data:`led_controller.adapters.BOOTH_PROTOCOLS`); discovery finds msflash booths only.
 
     Raises
     ------
@@ -1091,7 +1101,7 @@ def open_hw_rig(
         errors.append(err)
     try:
         booth_port = port if port is not None else find_booth().device
-        booth = LedBooth.open(booth_port, log_serial=log_serial)
+        booth = open_booth(booth_port, booth_protocol, log_serial=log_serial)
         closers.append(booth.close)
         closers.append(booth.all_off)
         if booth.info.channels != leds.count:
@@ -1099,8 +1109,9 @@ def open_hw_rig(
                 f"booth {booth_port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the LED "
                 f"spectra have {leds.count} ({', '.join(leds.names)}); expected one spectrum per channel"
             )
-        for note in reset_leftovers(booth):  # a killed run's LEDs and raised watchdog
-            log.warning("%s", note)
+        if isinstance(booth, LedBooth):  # an adapter switches its LEDs off when it opens
+            for note in reset_leftovers(booth):  # a killed run's LEDs and raised watchdog
+                log.warning("%s", note)
     except Exception as err:  # noqa: BLE001 - reported with the camera's failure, if any
         message = str(err)
         failures.append(message if message.startswith("booth") else f"booth: {message}")

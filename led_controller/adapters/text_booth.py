@@ -1,0 +1,321 @@
+"""A host-paced booth speaking a plain-text line protocol, over pyserial (``docs/booth-adapters.md``).
+
+The protocol is one a person can type into a serial terminal: one ASCII command per line
+(``\\n``-terminated; a ``\\r`` before it is ignored), one reply line each::
+
+    ID?              ->  <firmware>,channels=<n>[,names=<name> <name> …]
+    L <v1> … <vn>    ->  OK          (exactly n levels, each a decimal number in [0, 1])
+    L?               ->  L <v1> … <vn>
+    OFF              ->  OK
+    (anything wrong) ->  ERR <reason>
+
+``L`` replies once the levels are applied. There is no pattern table and no trigger line, so the
+booth is host-paced only (:data:`~led_controller.booth_interface.HOST_PACED_ONLY`). The LEDs are
+switched off when the booth is opened (leftovers of a run that did not finish), when it is closed,
+and after every failed command before the error is raised.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import IO, Any, Literal
+
+import serial
+
+from msflash.led_controller.booth import port_open_error
+from msflash.led_controller.booth_interface import HOST_PACED_ONLY, BoothCapabilities
+from msflash.led_controller.errors import BoothError, BoothProtocolError, BoothTimeoutError
+
+log = logging.getLogger(__name__)
+
+PROTOCOL_NAME = "text"
+"""The ``--booth-protocol`` name of this adapter."""
+
+LEVEL_DIGITS = 5
+"""Decimals of each level on the wire (1e-5, finer than a 16-bit drive)."""
+
+
+@dataclass(frozen=True)
+class TextBoothInfo:
+    """What a text booth says it is (its ``ID?`` reply)."""
+
+    firmware: str
+    """The name before the first comma."""
+    channels: int
+    """``channels=``: the number of levels ``L`` takes."""
+    names: tuple[str, ...]
+    """``names=``, or ``ch1`` … ``chN`` when the booth gives none."""
+
+
+def parse_identity(reply: str, where: str) -> TextBoothInfo:
+    """The ``ID?`` reply ``reply`` as a :class:`TextBoothInfo`.
+
+    >>> parse_identity("acme 2,channels=3,names=red green blue", "booth x")
+    TextBoothInfo(firmware='acme 2', channels=3, names=('red', 'green', 'blue'))
+    >>> parse_identity("acme", "booth x")
+    Traceback (most recent call last):
+    ...
+    msflash.led_controller.errors.BoothError: booth x: ID? reply 'acme' has no channels=N; expected '<name>,channels=<n>[,names=…]'
+    """
+    expected = "expected '<name>,channels=<n>[,names=…]'"
+    firmware, *fields = reply.split(",")
+    values = dict(field.split("=", 1) for field in fields if "=" in field)
+    if not firmware.strip() or "channels" not in values:
+        raise BoothError(f"{where}: ID? reply {reply!r} has no channels=N; {expected}")
+    try:
+        channels = int(values["channels"])
+    except ValueError:
+        channels = 0
+    if not 1 <= channels <= 64:
+        raise BoothError(f"{where}: ID? reply {reply!r}: channels={values['channels']}; expected 1–64")
+    names = tuple(values.get("names", "").split()) or tuple(f"ch{i + 1}" for i in range(channels))
+    if len(names) != channels:
+        raise BoothError(
+            f"{where}: ID? reply {reply!r} names {len(names)} channels but says channels={channels}; "
+            "expected one name per channel"
+        )
+    return TextBoothInfo(firmware.strip(), channels, names)
+
+
+def format_levels(levels: Sequence[float], channels: int, where: str) -> str:
+    """The ``L`` command for ``levels``, checked: one finite level in [0, 1] per channel.
+
+    >>> format_levels([0.5, 0, 1], 3, "booth x")
+    'L 0.50000 0.00000 1.00000'
+    """
+    if len(levels) != channels:
+        raise ValueError(f"{where}: {len(levels)} levels; expected one per channel ({channels})")
+    for i, level in enumerate(levels):
+        if not (math.isfinite(level) and 0.0 <= level <= 1.0):
+            raise ValueError(f"{where}: level {level!r} of channel {i + 1}; expected a number in [0, 1]")
+    return "L " + " ".join(f"{float(level):.{LEVEL_DIGITS}f}" for level in levels)
+
+
+def parse_levels(reply: str, channels: int, where: str) -> tuple[float, ...]:
+    """The ``L?`` reply ``reply`` (``L <v1> … <vn>``) as levels.
+
+    >>> parse_levels("L 0.5 0 1", 3, "booth x")
+    (0.5, 0.0, 1.0)
+    """
+    words = reply.split()
+    try:
+        levels = tuple(float(word) for word in words[1:])
+    except ValueError:
+        levels = ()
+    if not words or words[0] != "L" or len(levels) != channels:
+        raise BoothProtocolError(
+            f"{where}: L? reply {reply!r}; expected 'L' and {channels} levels",
+            command="L?",
+            expected=f"L and {channels} levels",
+            raw=reply.encode(),
+        )
+    return levels
+
+
+class TextBooth:
+    """A host-paced booth speaking the plain-text line protocol (see the module docstring).
+
+    Use :meth:`open`; it implements :class:`led_controller.booth_interface.Booth`.
+
+    Parameters
+    ----------
+    port : serial.SerialBase
+        An open port whose read timeout is the reply timeout.
+    name : str
+        The port's name in messages.
+    log_serial : str or Path or None
+        A transcript file of ``> request`` / ``< reply`` lines.
+    """
+
+    def __init__(self, port: Any, *, name: str, log_serial: str | Path | None = None) -> None:
+        self._port = port
+        self._name = name
+        self._closed = False
+        self._info: TextBoothInfo | None = None
+        try:
+            self._transcript: IO[str] | None = (
+                open(log_serial, "w", encoding="ascii", newline="\n") if log_serial else None  # noqa: SIM115
+            )
+        except OSError as err:
+            raise BoothError(
+                f"{name}: cannot record the serial transcript in {log_serial} "
+                f"({err.strerror or err}); expected a writable file path"
+            ) from err
+        if self._transcript is not None:
+            self._transcript.write(f"# msflash text booth transcript, port {name}, {time.strftime('%Y-%m-%d')}\n")
+
+    @classmethod
+    def open(
+        cls, url: str, *, timeout_s: float = 1.0, log_serial: str | Path | None = None, baudrate: int = 115200
+    ) -> TextBooth:
+        """Open the text booth at ``url`` (device path, pty, pyserial URL), identify it, switch its LEDs off.
+
+        Raises
+        ------
+        BoothNotFoundError
+            The port does not exist (:func:`led_controller.booth.port_open_error`).
+        BoothError
+            The port cannot be opened or does not answer as a text booth (its LEDs are sent ``OFF``).
+        """
+        try:
+            port = serial.serial_for_url(
+                url, baudrate=baudrate, timeout=timeout_s, write_timeout=timeout_s, exclusive=True
+            )
+        except serial.SerialException as err:
+            raise port_open_error(url, err) from err  # missing, no permission, busy: as for LedBooth
+        except ValueError as err:
+            raise BoothError(f"booth {url}: cannot open ({err}); expected a device path or pyserial URL") from err
+        try:
+            booth = cls(port, name=url, log_serial=log_serial)
+        except BaseException:
+            port.close()
+            raise
+        try:
+            booth._info = parse_identity(booth._ask("ID?"), f"booth {url}")
+            booth.all_off()  # leftovers of a run that did not finish
+        except BaseException:
+            booth.close()
+            raise
+        log.info(
+            "%s: text booth %s, %d channels %s",
+            url,
+            booth.info.firmware,
+            booth.info.channels,
+            ",".join(booth.info.names),
+        )
+        return booth
+
+    # -- the Booth interface ------------------------------------------------------------------
+
+    @property
+    def name(self) -> str:
+        """Get the port name used in messages."""
+        return self._name
+
+    @property
+    def info(self) -> TextBoothInfo:
+        """Get what the booth said it is (``ID?``)."""
+        if self._info is None:
+            raise BoothError(f"booth {self._name}: not identified; expected TextBooth.open")
+        return self._info
+
+    @property
+    def capabilities(self) -> BoothCapabilities:
+        """Get the sync modes: host pacing only (no pattern table, no trigger line)."""
+        return HOST_PACED_ONLY
+
+    def set_levels(self, levels: Sequence[float]) -> None:
+        """Set every channel's level (``L``); returns once the booth replied ``OK``."""
+        try:
+            line = format_levels(levels, self.info.channels, f"booth {self._name}")
+        except ValueError:
+            self._off_after_error()
+            raise
+        self._expect_ok(line)
+
+    def all_off(self) -> None:
+        """Switch every channel off (``OFF``)."""
+        self._expect_ok("OFF", off_on_error=False)
+
+    def reported_levels(self) -> tuple[float, ...]:
+        """Get the levels the booth holds now (``L?``)."""
+        try:
+            return parse_levels(self._ask("L?"), self.info.channels, f"booth {self._name}")
+        except BoothError:
+            self._off_after_error()
+            raise
+
+    def close(self) -> None:
+        """Switch the LEDs off (best effort) and close the port (idempotent)."""
+        if self._closed:
+            return
+        with contextlib.suppress(BoothError):
+            self.all_off()
+        self._closed = True
+        with contextlib.suppress(OSError, serial.SerialException):
+            self._port.close()
+        if self._transcript is not None:
+            self._transcript.close()
+
+    def __enter__(self) -> TextBooth:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> Literal[False]:
+        self.close()
+        return False
+
+    # -- the wire -------------------------------------------------------------------------------
+
+    def _expect_ok(self, line: str, *, off_on_error: bool = True) -> None:
+        try:
+            reply = self._ask(line)
+            if reply != "OK":
+                raise BoothProtocolError(
+                    f"booth {self._name}: {line.split()[0]} reply {reply!r}; expected 'OK'",
+                    command=line.split()[0],
+                    expected="OK",
+                    raw=reply.encode(),
+                )
+        except BoothError:
+            if off_on_error:
+                self._off_after_error()
+            raise
+
+    def _off_after_error(self) -> None:
+        """After a failed command: ``OFF``, best effort (the error raised is the command's)."""
+        try:
+            self._expect_ok("OFF", off_on_error=False)
+        except BoothError as err:
+            log.warning("booth %s: LEDs not confirmed off after an error: %s", self._name, err)
+
+    def _ask(self, line: str) -> str:
+        """Send ``line``, return the reply line; an ``ERR`` reply, silence or a lost link raise :class:`BoothError`."""
+        command = line.split()[0]
+        if self._closed:
+            raise BoothError(f"booth {self._name}: {command} after close; expected an open booth")
+        try:
+            self._port.reset_input_buffer()  # a late reply to a command that timed out
+            self._port.write(line.encode("ascii") + b"\n")
+            self._port.flush()
+            self._wire(">", line)
+            raw = self._port.read_until(b"\n")
+        except (OSError, serial.SerialException) as err:
+            raise BoothError(
+                f"booth {self._name}: link lost during {command} ({err}); expected the booth connected"
+            ) from err
+        if not raw.endswith(b"\n"):
+            timeout = float(self._port.timeout or 0)
+            raise BoothTimeoutError(
+                f"booth {self._name}: no reply to {command} within {timeout:g} s"
+                f"{f' (got {raw!r})' if raw else ''}; expected a line",
+                command=command,
+                timeout_s=timeout,
+            )
+        try:
+            reply = raw.rstrip(b"\r\n").decode("ascii")
+        except UnicodeDecodeError as err:
+            raise BoothProtocolError(
+                f"booth {self._name}: reply to {command} {raw!r} is not ASCII; expected a text line",
+                command=command,
+                expected="an ASCII line",
+                raw=raw,
+            ) from err
+        self._wire("<", reply)
+        if reply.startswith("ERR"):
+            raise BoothError(f"booth {self._name}: refused {command}: {reply[3:].strip() or 'ERR'}")
+        return reply
+
+    def _wire(self, direction: str, line: str) -> None:
+        log.debug("%s %s %s", self._name, direction, line)
+        if self._transcript is not None:
+            self._transcript.write(f"{direction} {line}\n")
+            self._transcript.flush()
