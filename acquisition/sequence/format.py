@@ -621,6 +621,13 @@ def _parse_frame(
     gain = frame.number("gain", "a number > 0")
     if gain <= 0:
         frame.fail(name("gain"), f"is {gain:g}", "a number > 0")
+    # Processing divides by exposure · gain: a denormal one (5e-324) would make the frame's scale infinite.
+    if exposure * gain == 0 or not math.isfinite(1.0 / (exposure * gain)):
+        frame.fail(
+            name("exposure_us"),
+            f"× gain is {exposure:g} × {gain:g}, too small to divide by",
+            f"exposure_us × gain of at least {1 / sys.float_info.max:.3g}",
+        )
     digest = _parse_digest(frame)
     return SequenceFrame(path, role, tuple(levels.tolist()), exposure, gain, frame.extra, digest)
 

@@ -105,9 +105,11 @@ def frame_state(path: Path, recorded: FileDigest) -> tuple[FrameState, FileDiges
         raise RecordingError(
             f"{shown_path(path)}: cannot be opened ({err.strerror}); expected a readable frame image"
         ) from None
+    # Checked before ``fdopen``, which itself refuses a directory with an IsADirectoryError.
+    if not stat.S_ISREG(os.fstat(handle).st_mode):
+        os.close(handle)
+        raise RecordingError(f"{shown_path(path)}: is not a regular file; expected a frame image")
     with os.fdopen(handle, "rb") as stream:
-        if not stat.S_ISREG(os.fstat(handle).st_mode):
-            raise RecordingError(f"{shown_path(path)}: is not a regular file; expected a frame image")
         try:
             found = digest_open_file(stream)
         except OSError as err:

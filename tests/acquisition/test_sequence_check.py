@@ -236,6 +236,18 @@ def test_a_frame_replaced_by_a_fifo_is_unreadable_not_a_hang(sequence: Path, cap
     assert states(out)[0][3][0] == "unreadable"
 
 
+def test_a_frame_replaced_by_a_directory_is_unreadable_not_a_crash(
+    sequence: Path, capsys: pytest.CaptureFixture
+) -> None:
+    # Found by the sequence fuzzer (issue 19 item 6): fdopen refused the directory with IsADirectoryError.
+    (sequence / FRAME).unlink()
+    (sequence / FRAME).mkdir()
+    status, out, err = run(capsys, "check", str(sequence))
+    assert status == 2
+    one_error(err, FRAME, "not a regular file")
+    assert states(out)[0][3][0] == "unreadable"
+
+
 # -- every reader refuses a changed frame -------------------------------------------------------------
 @pytest.mark.parametrize("command", [["estimate"], ["flash", "--mode", "complementary"]])
 def test_processing_refuses_a_changed_frame(sequence: Path, capsys: pytest.CaptureFixture, command: list[str]) -> None:

@@ -402,6 +402,13 @@ INVALID = {
     "exposure zero": (_set("frames.1.exposure_us", 0), "frames[1].exposure_us is 0; expected a number > 0"),
     "exposure string": (_set("frames.1.exposure_us", "10"), "frames[1].exposure_us is '10'; expected a number > 0"),
     "exposure bool": (_set("frames.1.exposure_us", True), "frames[1].exposure_us is a boolean; expected a number > 0"),
+    # Found by the sequence fuzzer (issue 19 item 6): > 0 but its reciprocal is infinite (estimate exited 1).
+    "exposure denormal": (
+        _set("frames.1.exposure_us", 5e-324),
+        "frames[1].exposure_us × gain is 4.94066e-324 × 1, "
+        "too small to divide by; expected exposure_us × gain of at least 5.56e-309",
+    ),
+    "exposure times gain underflows": (_set("frames.1.gain", 1e-315), "frames[1].exposure_us × gain is "),
     "gain zero": (_set("frames.2.gain", 0), "frames[2].gain is 0; expected a number > 0"),
     "gain missing": (_set("frames.2.gain", _DELETE), "frames[2].gain is missing; expected a number > 0"),
     "frame not object": (_set("frames.2", "x"), "frames[2] is a string; expected an object"),
