@@ -163,33 +163,21 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
             camera_options=camera_options_from_args(args),
             booth_protocol=args.booth_protocol,
         )
+    # The simulated world: the sim rig renders it with its own camera, aravis-fake through Aravis.
+    world = {
+        "ambient": args.ambient,
+        "scene": args.scene,
+        "seed": args.seed,
+        "camera": args.sim_camera,
+        "n_leds": args.leds,
+        "led_spectra": args.led_spectra,
+        "flash_power": args.flash_power,
+        "log_serial": args.log_serial,
+    }
     if spec == "sim":
-        return open_rig(
-            "sim",
-            ambient=args.ambient,
-            scene=args.scene,
-            cfa=args.cfa,
-            seed=args.seed,
-            camera=args.sim_camera,
-            n_leds=args.leds,
-            led_spectra=args.led_spectra,
-            flash_power=args.flash_power,
-            log_serial=args.log_serial,
-            booth_port=args.booth_port,
-            booth_protocol=args.booth_protocol,
-        )
+        return open_rig("sim", cfa=args.cfa, booth_port=args.booth_port, booth_protocol=args.booth_protocol, **world)
     if spec == "aravis-fake":
-        return open_rig(
-            "aravis-fake",
-            ambient=args.ambient,
-            scene=args.scene,
-            seed=args.seed,
-            camera=args.sim_camera,
-            n_leds=args.leds,
-            led_spectra=args.led_spectra,
-            flash_power=args.flash_power,
-            log_serial=args.log_serial,
-        )
+        return open_rig("aravis-fake", **world)
     return open_rig(spec, log_serial=args.log_serial)
 
 
