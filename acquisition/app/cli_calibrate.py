@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from msflash.acquisition.app.cli_common import UsageError, positive_int, print_json, progress
+from msflash.acquisition.app.cli_common import UsageError, claimed_output, positive_int, print_json, progress
 from msflash.acquisition.app.evaluation import check_layout, sequence_layout  # the layouts of `msflash evaluate`
 from msflash.acquisition.app.options import layout_options
 from msflash.acquisition.sequence.format import Sequence, read_sequence
@@ -49,7 +49,9 @@ def _bad_input(handler: Callable[[argparse.Namespace], int]) -> Callable[[argpar
 
     def run(args: argparse.Namespace) -> int:
         try:
-            return handler(args)
+            # One writer per calibration directory at a time (issue 19): a second calibrate gets exit 2.
+            with claimed_output(args.out, f"msflash calibrate {args.calibrate_command}"):
+                return handler(args)
         except CalibrationError as err:
             raise UsageError(str(err)) from err
 

@@ -9,10 +9,12 @@ failures raise the package error roots (exit 1). ``--json`` output goes through 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -86,3 +88,37 @@ def output_directory(path: str | os.PathLike | None) -> Path | None:
             f"--out {out}: cannot create the folder ({err.strerror or err}); expected a writable path"
         ) from None
     return out
+
+
+@contextlib.contextmanager
+def claimed_output(path: str | os.PathLike, what: str) -> Iterator[Path]:
+    """``--out DIR`` created and claimed for this process while the block runs (one owner per folder,
+    :mod:`acquisition.sequence.folder_claim`): a second msflash writing it gets exit 2 naming the holder.
+
+    Raises
+    ------
+    UsageError
+        A file in the way, no write access, or a folder that cannot hold the lock file.
+    """
+    from msflash.acquisition.sequence.folder_claim import claim_folder
+
+    out = output_directory(path)
+    assert out is not None  # a path was given
+    try:
+        claim = claim_folder(out, what)
+    except OSError as err:
+        raise UsageError(
+            f"--out {out}: cannot write there ({err.strerror or err}); expected a writable directory"
+        ) from err
+    with claim:
+        yield out
+
+
+@contextlib.contextmanager
+def optional_claimed_output(path: str | os.PathLike | None, what: str) -> Iterator[Path | None]:
+    """:func:`claimed_output` for an ``--out`` that may be absent (a study printing JSON only): None stays None."""
+    if path is None:
+        yield None
+        return
+    with claimed_output(path, what) as out:
+        yield out

@@ -6,7 +6,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, output_directory, print_json, progress
+from msflash.acquisition.app.cli_common import (
+    UsageError,
+    claimed_output,
+    optional_claimed_output,
+    print_json,
+    progress,
+)
 from msflash.acquisition.app.evaluation import CHARTS, STUDY_AMBIENTS, colour_study, evaluate_sequence, public_result
 from msflash.acquisition.app.options import layout_options
 from msflash.acquisition.sequence.format import read_sequence
@@ -23,11 +29,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     if not (directory / "sequence.json").exists() and (directory / "sequence" / "sequence.json").exists():
         directory = directory / "sequence"  # a run directory
     sequence = read_sequence(directory)
-    out = output_directory(args.out if args.out else _default_out(directory))
-    assert out is not None  # a path was given
-    result = evaluate_sequence(
-        sequence, out, args.chart, args.patch_px, args.border_px, args.margin_px, args.bounds, args.target
-    )
+    with claimed_output(args.out if args.out else _default_out(directory), "msflash evaluate") as out:
+        result = evaluate_sequence(
+            sequence, out, args.chart, args.patch_px, args.border_px, args.margin_px, args.bounds, args.target
+        )
     result = public_result(result)
     if args.json:
         print_json(result)
@@ -45,18 +50,19 @@ def _study(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--ambients '{args.ambients}': expected a comma-separated list of {', '.join(lights.AMBIENTS)}"
         )
-    out = output_directory(args.out if args.out else (None if args.json else Path("colour-study")))
-    payload = colour_study(
-        out,
-        ambients,
-        args.seed,
-        args.patch_px,
-        args.cfa,
-        args.bounds,
-        depth_m=args.depth_m,
-        distance_m=args.distance_m,
-        water_type=args.water,
-    )
+    where = args.out if args.out else (None if args.json else Path("colour-study"))
+    with optional_claimed_output(where, "msflash colour-study") as out:
+        payload = colour_study(
+            out,
+            ambients,
+            args.seed,
+            args.patch_px,
+            args.cfa,
+            args.bounds,
+            depth_m=args.depth_m,
+            distance_m=args.distance_m,
+            water_type=args.water,
+        )
     if args.json:
         print_json(payload)
     else:

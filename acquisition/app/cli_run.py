@@ -31,12 +31,11 @@ from pathlib import Path
 import numpy as np
 
 from msflash.acquisition.app.camera_options import add_camera_options, camera_options_from_args, given_camera_options
-from msflash.acquisition.app.cli_common import UsageError, dumps_json, output_directory, progress
+from msflash.acquisition.app.cli_common import UsageError, claimed_output, dumps_json, progress
 from msflash.acquisition.app.options import add_estimation_options
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.errors import CaptureError, OutputWriteError
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.folder_claim import FolderClaim, claim_folder
 from msflash.acquisition.sequence.format import (
     read_sequence,
 )
@@ -207,23 +206,12 @@ def _policy(args: argparse.Namespace) -> ExposurePolicy:
         ) from err
 
 
-def _claimed(out: Path, what: str) -> FolderClaim:
-    """``out`` claimed for this process (:mod:`acquisition.sequence.folder_claim`; a ``with`` block releases it), a
-    folder that cannot hold the lock file being a bad output path (exit 2)."""
-    try:
-        return claim_folder(out, what)
-    except OSError as err:
-        raise UsageError(
-            f"--out {out}: cannot write there ({err.strerror or err}); expected a writable directory"
-        ) from err
-
-
 def _run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else _default_out()
-    output_directory(out)  # a file in the way or no write access: one line before any device is opened
     # One owner per run folder, claimed before it is checked (two runs started together must not
-    # both find it empty); held until the report is written.
-    with _claimed(out, "msflash run"):
+    # both find it empty); held until the report is written. A file in the way or no write access:
+    # one line before any device is opened.
+    with claimed_output(out, "msflash run"):
         if (out / "sequence" / "sequence.json").exists():
             raise UsageError(f"--out {out}: already holds a run; expected a new directory")
         return _run_claimed(args, out)
@@ -319,8 +307,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
 
 def _capture(args: argparse.Namespace) -> int:
     out = Path(args.out)
-    output_directory(out)
-    with _claimed(out, "msflash capture"):
+    with claimed_output(out, "msflash capture"):
         if (out / "sequence" / "sequence.json").exists():
             raise UsageError(f"--out {out}: already holds a sequence; expected a new directory")
         return _capture_claimed(args, out)

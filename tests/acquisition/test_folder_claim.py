@@ -157,3 +157,17 @@ def test_reading_a_sequence_a_live_writer_holds_reports_nothing(
     with claimed(tmp_path / "seq"), caplog.at_level(logging.WARNING):
         assert read_sequence(tmp_path / "seq").partial
     assert "temporary file" not in caplog.text
+
+
+def test_evaluate_into_a_folder_another_msflash_is_writing_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """msflash evaluate claims its --out like run and capture: a held folder is exit 2 naming the holder."""
+    sequence = write_test_sequence(tmp_path / "seq")
+    out = tmp_path / "evaluation"
+    with claim_folder(out, "msflash evaluate (the other one)"):
+        status = main(["evaluate", str(sequence), "--chart", "macbeth", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err.count("\n") == 1 and f"in use by msflash process {os.getpid()}" in err, err
+    assert not (out / "evaluation.json").exists()

@@ -90,3 +90,24 @@ def test_bad_calibration_dir_for_estimate(tmp_path, capsys):
     assert cli.main(["estimate", str(SEQUENCE), "--calibration", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "calibration.json: cannot be read" in err[0]
+
+
+@pytest.mark.parametrize("what", ["leds", "camera"])
+def test_a_calibration_directory_another_msflash_is_writing_is_refused(
+    what: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One writer per calibration directory (issue 19, build 3): a calibrate into a folder held by another
+    msflash exits 2 naming the holder, and leaves the folder as it was."""
+    import os
+
+    from msflash.acquisition.sequence.folder_claim import claim_folder
+
+    out = tmp_path / "cal"
+    arguments = {"leds": [*write_leds(tmp_path)], "camera": ["--simulate", "--camera", "Nikon D700"]}[what]
+    with claim_folder(out, "msflash calibrate (the other one)"):
+        assert cli.main(["calibrate", what, *arguments, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"in use by msflash process {os.getpid()}" in err, err
+    assert not (out / "calibration.json").exists()
+    # Released, the same command runs.
+    assert cli.main(["calibrate", what, *arguments, "--out", str(out)]) == 0
