@@ -210,9 +210,26 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def _what_was_kept() -> str:
+    """What a stopped command leaves, truthfully: the sequence it wrote, complete or cut short (marked so)."""
+    written = sys.modules.get("msflash.acquisition.sequence.format")  # loaded only if a sequence was touched
+    latest = written.latest_sequence_written() if written is not None else None
+    if latest is None:
+        return "; frames captured so far are kept (marked incomplete)"
+    from msflash.processing.user_files import printable
+
+    directory, complete = printable(str(latest[0])), latest[1]
+    if complete:
+        return f"; the sequence in {directory} was complete before the stop and stays so"
+    return f"; frames captured so far are kept (marked incomplete) in {directory}"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``msflash``; returns the exit status (tests call this directly)."""
     words = list(argv if argv is not None else sys.argv[1:])
+    written = sys.modules.get("msflash.acquisition.sequence.format")
+    if written is not None:  # an earlier command in this process (tests, a notebook) wrote one
+        written.forget_latest_sequence()
     try:
         parser = build_parser(words)
         args = parser.parse_args(words)
@@ -228,12 +245,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             warnings.showwarning = _show_warning
             return int(args.handler(args))
     except KeyboardInterrupt:
-        sys.stderr.write("msflash: interrupted; LEDs off; frames captured so far are kept (marked incomplete)\n")
+        sys.stderr.write(f"msflash: interrupted; LEDs off{_what_was_kept()}\n")
         return 130
     except _terminated() as stop:
-        sys.stderr.write(
-            "msflash: terminated (SIGTERM); LEDs off; frames captured so far are kept (marked incomplete)\n"
-        )
+        sys.stderr.write(f"msflash: terminated (SIGTERM); LEDs off{_what_was_kept()}\n")
         code = getattr(stop, "code", None)  # Terminated is a SystemExit
         return int(code) if isinstance(code, int) else 143
     except BrokenPipeError:

@@ -859,6 +859,27 @@ def mono_as_rgb(pixels: np.ndarray) -> np.ndarray:
     return np.stack((pixels, pixels, pixels), axis=-1) if pixels.ndim == 2 else pixels
 
 
+_LATEST_WRITTEN: dict[str, Any] = {}
+"""The sequence this process's latest :class:`SequenceWriter` writes: its folder and whether it finished."""
+
+
+def latest_sequence_written() -> tuple[Path, bool] | None:
+    """The folder of the sequence this process wrote last and whether it is complete (None: none written).
+
+    What a command stopped by Ctrl-C or SIGTERM reports: a sequence that finished before the signal
+    stays complete, one cut short is marked incomplete.
+    """
+    if not _LATEST_WRITTEN:
+        return None
+    return _LATEST_WRITTEN["directory"], bool(_LATEST_WRITTEN["complete"])
+
+
+def forget_latest_sequence() -> None:
+    """Start afresh (each command run in-process does): :func:`latest_sequence_written` returns None until a
+    writer is made."""
+    _LATEST_WRITTEN.clear()
+
+
 class SequenceWriter:
     """Write a sequence frame by frame, so that a crash at any point leaves a readable sequence.
 
@@ -951,6 +972,8 @@ class SequenceWriter:
         except BaseException:
             self._release()
             raise
+        _LATEST_WRITTEN.clear()
+        _LATEST_WRITTEN.update(writer=self, directory=self._directory, complete=False)
 
     def _release(self) -> None:
         if self._claim is not None:
@@ -1086,6 +1109,8 @@ class SequenceWriter:
             _replace_json(self._path, _document(completed))
             self._sequence = completed
             self._finished = True
+            if _LATEST_WRITTEN.get("writer") is self:
+                _LATEST_WRITTEN["complete"] = True
             self._release()
         return read_sequence(self._directory)
 

@@ -45,3 +45,47 @@ def test_the_cli_says_how_it_was_stopped(
     monkeypatch.setattr(cli, "build_parser", lambda argv=None: parser)
     assert cli.main(["capture"]) == status
     assert capsys.readouterr().err.strip().splitlines()[-1] == line
+
+
+@pytest.mark.parametrize("finished", [False, True])
+def test_the_stop_line_says_whether_the_sequence_was_complete(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture, tmp_path, finished: bool
+) -> None:
+    """Ctrl-C after a sequence finished (say, while the report is drawn) does not claim it was marked
+    incomplete: the line says what the file says, and names the folder."""
+    import numpy as np
+
+    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter, read_sequence
+
+    def stopped(args) -> int:
+        camera = SequenceCamera(
+            model="t", serial=None, pixel_format="RGB16", cfa=None, black_level=0, white_level=65535
+        )
+        writer = SequenceWriter(
+            tmp_path / "seq",
+            wavelengths_nm=np.array([500.0, 600.0]),
+            spectral_unit="energy",
+            camera=camera,
+            leds=[SequenceLed("a", np.array([1.0, 0.0]))],
+        )
+        writer.add_frame(np.ones((4, 4, 3), dtype=np.uint16), "ambient", [0.0], exposure_us=10.0)
+        if finished:
+            writer.finish()
+        raise KeyboardInterrupt
+
+    parser = cli.build_parser()
+    monkeypatch.setattr(parser, "parse_args", lambda argv: argparse.Namespace(verbose=0, handler=stopped))
+    monkeypatch.setattr(cli, "build_parser", lambda argv=None: parser)
+    assert cli.main(["run"]) == 130
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert read_sequence(tmp_path / "seq").complete is finished
+    if finished:
+        assert (
+            line
+            == f"msflash: interrupted; LEDs off; the sequence in {tmp_path / 'seq'} was complete before the stop and stays so"
+        )
+    else:
+        assert (
+            line
+            == f"msflash: interrupted; LEDs off; frames captured so far are kept (marked incomplete) in {tmp_path / 'seq'}"
+        )
