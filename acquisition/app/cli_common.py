@@ -102,6 +102,7 @@ def claimed_output(path: str | os.PathLike, what: str) -> Iterator[Path]:
     """
     from msflash.acquisition.sequence.folder_claim import claim_folder
 
+    created = not os.path.lexists(path)
     out = output_directory(path)
     assert out is not None  # a path was given
     try:
@@ -110,8 +111,15 @@ def claimed_output(path: str | os.PathLike, what: str) -> Iterator[Path]:
         raise UsageError(
             f"--out {out}: cannot write there ({err.strerror or err}); expected a writable directory"
         ) from err
-    with claim:
-        yield out
+    try:
+        with claim:
+            yield out
+    except BaseException:
+        # A command refused before it wrote anything leaves no folder it created (the claim's lock is gone).
+        if created:
+            with contextlib.suppress(OSError):
+                out.rmdir()
+        raise
 
 
 @contextlib.contextmanager
