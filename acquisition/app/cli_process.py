@@ -129,44 +129,12 @@ def _estimate_with_prior(args: argparse.Namespace, sequence: Sequence) -> int:
     The LED side is what ``--model led`` gives (global, or local when ``--method`` finds the illuminant
     varying across the scene: the light prior is one global spectrum, so a local estimate stays).
     """
-    from msflash.acquisition.session.prior_route import estimate_sequence_prior, prior_payload
+    from msflash.acquisition.session.prior_route import led_side, with_model_choice
 
     stack = analysis.load_frame_stack(sequence)
-    if args.method != "global":
-        local = analysis.estimate_sequence_local(
-            sequence, args.method, args.solver, args.alpha, args.tiles, stack=stack, bin_factor=args.bin
-        )
-        led, payload = local.global_estimate, analysis.local_estimate_payload(sequence, local)
-        varies = local.model == "local"
-    else:
-        led = analysis.estimate_sequence(sequence, args.solver, args.alpha, stack=stack, bin_factor=args.bin)
-        payload, varies = analysis.estimate_payload(sequence, led), False
+    led, payload, varies = led_side(sequence, stack, args.method, args.solver, args.alpha, args.tiles, args.bin)
     _refuse_dark_ambient(sequence, led, "estimate")
-    result = estimate_sequence_prior(sequence, stack)
-    prior = prior_payload(sequence, result)
-    choice = prior["model_choice"]
-    if args.model == "prior":
-        chosen, reason = "prior", "asked for the light prior (--model prior)"
-    elif varies:
-        chosen, reason = (
-            "led",
-            (
-                "the illuminant varies across the scene (the local LED model was chosen); "
-                "the light prior is one global spectrum"
-            ),
-        )
-    else:
-        chosen, reason = choice["model"], choice["reason"]
-    payload["model"] = chosen
-    payload["model_choice"] = {**choice, "model": chosen, "reason": reason, "requested": args.model}
-    payload["prior"] = prior["prior"]
-    if chosen == "prior":
-        payload["led"] = {key: payload[key] for key in ("spectrum", "spectrum_std", "ambient_weights", "warnings")}
-        payload["spectrum"] = prior["prior"]["spectrum"]
-        payload["spectrum_std"] = payload["spectrum_std_noise"] = prior["prior"]["spectrum_std"]
-        payload["band"] = "±1σ posterior of the light prior (pixel noise and the model's misfit)"
-        payload["miss_risk"] = payload["expected_ratio_to_led_bound"] = None
-        payload["warnings"] = list(result.prior.warnings)
+    payload, chosen, reason = with_model_choice(sequence, stack, payload, args.model, varies)
     for warning in payload["warnings"]:
         progress(f"warning: {warning}")
     if args.json:
@@ -297,19 +265,7 @@ def _flash_local(args: argparse.Namespace, sequence: Sequence) -> int:
         )
     for message in dict.fromkeys(str(warning.message) for warning in caught):
         progress(f"warning: {message}")
-    payload = analysis.flash_payload(sequence, solution, args.target)
-    payload["estimate_warnings"] = list(local.global_estimate.warnings) + list(local.warnings)
-    payload["method"] = local.model
-    payload["method_requested"] = local.method
-    if local.model == "local":
-        payload["tiles"] = {
-            "grid": list(local.tiles.shape),
-            "row_edges": local.tiles.row_edges,
-            "column_edges": local.tiles.column_edges,
-            "smoothing_tiles": local.smoothing,
-            "ambient_weights": local.tile_weights,
-            "flash_weights": tile_weights,
-        }
+    payload = analysis.local_flash_payload(sequence, solution, local, tile_weights, args.target)
     if args.out is not None:
         output = Path(args.out)
         if local.model == "local":

@@ -562,6 +562,27 @@ def solve_sequence_flash_local(
     return mean, weights, solutions
 
 
+def local_flash_payload(
+    sequence: Sequence, solution: FlashSolution, local: LocalEstimate, tile_weights: np.ndarray, target: str | None
+) -> dict:
+    """The ``msflash flash --method local|auto --json`` object: :func:`flash_payload` with the model used and,
+    for a local model, its tiles and their ambient and flash weights (docs/architecture.md §7)."""
+    payload = flash_payload(sequence, solution, target)
+    payload["estimate_warnings"] = list(local.global_estimate.warnings) + list(local.warnings)
+    payload["method"] = local.model
+    payload["method_requested"] = local.method
+    if local.model == "local":
+        payload["tiles"] = {
+            "grid": list(local.tiles.shape),
+            "row_edges": local.tiles.row_edges,
+            "column_edges": local.tiles.column_edges,
+            "smoothing_tiles": local.smoothing,
+            "ambient_weights": local.tile_weights,
+            "flash_weights": tile_weights,
+        }
+    return payload
+
+
 def synthesize_sequence_local(
     sequence: Sequence, tile_flash_weights: np.ndarray, local: LocalEstimate, stack: FrameStack | None = None
 ) -> tuple[np.ndarray, np.ndarray, FrameStack]:

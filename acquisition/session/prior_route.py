@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.session import analysis
 from msflash.acquisition.session.analysis import (
     DEFAULT_BIN_FACTOR,
     FrameStack,
@@ -114,3 +115,64 @@ def prior_payload(sequence: Sequence, result: SequencePriorResult) -> dict:
         },
         "n_samples": prior.n_samples,
     }
+
+
+def led_side(
+    sequence: Sequence,
+    stack: FrameStack,
+    method: str,
+    solver: str,
+    alpha: float | str,
+    tiles: int,
+    bin_factor: int = DEFAULT_BIN_FACTOR,
+) -> tuple[AmbientEstimate, dict, bool]:
+    """The LED-span side of ``estimate --model prior|auto``: what ``--model led`` gives (global, or local when
+    ``method`` finds the illuminant varying across the scene), its payload, and whether it varies."""
+    if method != "global":
+        local = analysis.estimate_sequence_local(
+            sequence, method, solver, alpha, tiles, stack=stack, bin_factor=bin_factor
+        )
+        return local.global_estimate, analysis.local_estimate_payload(sequence, local), local.model == "local"
+    led = analysis.estimate_sequence(sequence, solver, alpha, stack=stack, bin_factor=bin_factor)
+    return led, analysis.estimate_payload(sequence, led), False
+
+
+def with_model_choice(
+    sequence: Sequence, stack: FrameStack, payload: dict, requested: str, varies: bool
+) -> tuple[dict, str, str]:
+    """The estimate payload of ``--model prior|auto``: the light prior estimated, the model chosen and why.
+
+    ``prior`` takes the light prior; ``auto`` keeps a local LED estimate (the prior is one global
+    spectrum), else takes :func:`~processing.light_prior.choose_model`'s choice. The chosen model's
+    spectrum, band and warnings replace the LED ones, which stay under ``led`` when the prior wins.
+
+    Returns
+    -------
+    dict, str, str
+        The payload (docs/architecture.md §7), the chosen model and the reason.
+    """
+    result = estimate_sequence_prior(sequence, stack)
+    prior = prior_payload(sequence, result)
+    choice = prior["model_choice"]
+    if requested == "prior":
+        chosen, reason = "prior", "asked for the light prior (--model prior)"
+    elif varies:
+        chosen, reason = (
+            "led",
+            "the illuminant varies across the scene (the local LED model was chosen); "
+            "the light prior is one global spectrum",
+        )
+    else:
+        chosen, reason = choice["model"], choice["reason"]
+    payload = dict(payload)
+    payload["model"] = chosen
+    payload["model_choice"] = {**choice, "model": chosen, "reason": reason, "requested": requested}
+    payload["prior"] = prior["prior"]
+    if chosen == "prior":
+        payload["led"] = {key: payload[key] for key in ("spectrum", "spectrum_std", "ambient_weights", "warnings")}
+        payload["spectrum"] = prior["prior"]["spectrum"]
+        payload["spectrum_std"] = payload["spectrum_std_noise"] = prior["prior"]["spectrum_std"]
+        payload["band"] = "±1σ posterior of the light prior (pixel noise and the model's misfit)"
+        payload["miss_risk"] = payload["expected_ratio_to_led_bound"] = None
+        payload["warnings"] = list(result.prior.warnings)
+    return payload, chosen, reason
