@@ -859,8 +859,8 @@ def mono_as_rgb(pixels: np.ndarray) -> np.ndarray:
     return np.stack((pixels, pixels, pixels), axis=-1) if pixels.ndim == 2 else pixels
 
 
-_LATEST_WRITTEN: dict[str, Any] = {}
-"""The sequence this process's latest :class:`SequenceWriter` writes: its folder and whether it finished."""
+_LATEST_WRITER: list[SequenceWriter] = []
+"""This process's latest :class:`SequenceWriter` (at most one): its folder and its finished flag say what it left."""
 
 
 def latest_sequence_written() -> tuple[Path, bool] | None:
@@ -869,15 +869,16 @@ def latest_sequence_written() -> tuple[Path, bool] | None:
     What a command stopped by Ctrl-C or SIGTERM reports: a sequence that finished before the signal
     stays complete, one cut short is marked incomplete.
     """
-    if not _LATEST_WRITTEN:
+    if not _LATEST_WRITER:
         return None
-    return _LATEST_WRITTEN["directory"], bool(_LATEST_WRITTEN["complete"])
+    writer = _LATEST_WRITER[0]
+    return writer._directory, writer._finished
 
 
 def forget_latest_sequence() -> None:
     """Start afresh (each command run in-process does): :func:`latest_sequence_written` returns None until a
     writer is made."""
-    _LATEST_WRITTEN.clear()
+    _LATEST_WRITER.clear()
 
 
 class SequenceWriter:
@@ -972,8 +973,7 @@ class SequenceWriter:
         except BaseException:
             self._release()
             raise
-        _LATEST_WRITTEN.clear()
-        _LATEST_WRITTEN.update(writer=self, directory=self._directory, complete=False)
+        _LATEST_WRITER[:] = [self]
 
     def _release(self) -> None:
         if self._claim is not None:
@@ -1109,8 +1109,6 @@ class SequenceWriter:
             _replace_json(self._path, _document(completed))
             self._sequence = completed
             self._finished = True
-            if _LATEST_WRITTEN.get("writer") is self:
-                _LATEST_WRITTEN["complete"] = True
             self._release()
         return read_sequence(self._directory)
 
