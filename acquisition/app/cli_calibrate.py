@@ -12,36 +12,20 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from msflash.acquisition.app.cli_common import UsageError, claimed_output, positive_int, print_json, progress
-from msflash.acquisition.app.evaluation import check_layout, sequence_layout  # the layouts of `msflash evaluate`
 from msflash.acquisition.app.options import layout_options
-from msflash.acquisition.sequence.format import Sequence, read_sequence
-from msflash.calibration.camera_response import (
-    estimate_responsivities,
-    learn_prior,
-    responsivity_rmse,
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session.calibration_inputs import (
+    camera_from_chart_sequences,
+    dark_of_sequence,
+    led_power_through_camera,
+    linearity_of_sequence,
+    measured_leds,
+    simulated_camera_calibration,
 )
-from msflash.calibration.chart_sequence import (
-    estimate_from_measurements,
-    resolve_light,
-    sequence_measurements,
-)
-from msflash.calibration.dark import measure_dark, measure_linearity
 from msflash.calibration.errors import CalibrationError
 from msflash.calibration.files import CalibrationSet, load_or_new, save_calibration
-from msflash.calibration.led_spectra import characterise_led, relative_power_through_camera
-from msflash.calibration.spectrometer import (
-    measurement_to_spectra,
-    read_spectrometer_file,
-    subtract_dark,
-)
-from msflash.calibration.validation import calibration_lights, simulate_chart_responses
-from msflash.calibration.white_reference import parse_roi, white_led_responses
-from msflash.processing import datasets
-from msflash.processing.errors import SpectralDataError
-from msflash.processing.spectra import DEFAULT_GRID, Spectra
+from msflash.processing.spectra import DEFAULT_GRID
 
 
 def _bad_input(handler: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -87,100 +71,6 @@ def _plot_leds(path: Path, spectra, characterisations) -> None:
     pyplot.close(figure)
 
 
-def _measured_leds(args: argparse.Namespace) -> tuple[Spectra, list, dict]:
-    """Spectra, characterisations and the ``leds`` section from the spectrometer exports."""
-    dark = read_spectrometer_file(args.dark, args.unit, args.column) if args.dark else None
-    measurements, characterisations = [], []
-    for file in args.files:
-        measurement = read_spectrometer_file(file, args.unit, args.column)
-        if dark is not None:
-            measurement = subtract_dark(measurement, dark)
-        item = characterise_led(measurement)
-        for warning in item.warnings:
-            progress(f"warning: {warning}")
-        measurements.append(measurement)
-        characterisations.append(item)
-    spectra = measurement_to_spectra(measurements, DEFAULT_GRID).to_unit("energy")
-    section = {
-        "peaks_nm": [c.peak_nm for c in characterisations],
-        "fwhm_nm": [c.fwhm_nm for c in characterisations],
-        "centroids_nm": [c.centroid_nm for c in characterisations],
-        "models": [
-            {"model": "Ohno2005 asymmetric", **c.model, "relative_rms_residual": c.model_residual}
-            for c in characterisations
-        ],
-        "sources": [str(f) for f in args.files],
-        "dark": str(args.dark) if args.dark else None,
-        "relative_power": None,
-        "relative_power_note": "ratios as measured by the spectrometer; measure them through the camera on a white "
-        "reference with --white SEQ when the probe moved between LEDs",
-        "warnings": [w for c in characterisations for w in c.warnings],
-        "clipped_negatives": spectra.metadata.get("clipped_negatives", []),
-    }
-    for note in spectra.metadata.get("clipped_notes", []):
-        progress(note)
-    return spectra, characterisations, section
-
-
-def _white_power(
-    args: argparse.Namespace, sequence: Sequence, shapes: Spectra, calibration: CalibrationSet
-) -> tuple[Spectra, dict]:
-    """``shapes`` scaled to the power ratios the camera sees on the white reference ``sequence`` (``--white``)."""
-    if sequence.leds and len(sequence.leds) != shapes.count:
-        raise UsageError(
-            f"--white {args.white}: the sequence has {len(sequence.leds)} LEDs but {shapes.count} LED "
-            "spectra were given; expected one spectrum per LED, in the sequence's order"
-        )
-    if calibration.camera_responsivities is not None:
-        camera, camera_from = calibration.camera_responsivities, f"calibration {args.out}"
-    elif (from_sequence := sequence.camera_responsivities()) is not None:
-        camera, camera_from = from_sequence, f"sequence {sequence.path}"
-    else:
-        raise UsageError(
-            f"--white {args.white}: no camera responsivities, neither in {args.out} nor in the sequence; "
-            "expected 'msflash calibrate camera … --out' first (or a sequence that records them)"
-        )
-    roi = parse_roi(args.white_roi) if args.white_roi else None
-    white = white_led_responses(sequence, roi)
-    for warning in white.warnings:
-        progress(f"warning: {warning}")
-    reflectance = None
-    if args.white_reflectance:
-        try:
-            reflectance = (
-                datasets.load_spectra_csv(args.white_reflectance, kind="reflectance", unit="none")
-                .select([0])
-                .resample(shapes.grid, outside="error")
-            )
-        except (SpectralDataError, ValueError, OSError) as err:
-            raise UsageError(
-                f"--white-reflectance {args.white_reflectance}: {err}; expected a CSV "
-                "'wavelength_nm, reflectance' covering the LEDs"
-            ) from err
-    peaks = shapes.values.max(axis=0)
-    if not np.all(peaks > 0):
-        raise UsageError(
-            f"LED spectra {', '.join(n for n, p in zip(shapes.names, peaks, strict=True) if not p > 0)}: "
-            "no positive value; expected an emission peak"
-        )
-    shapes = shapes.replace(values=shapes.values / peaks)  # each LED's peak 1: `power` is then its peak's ratio
-    power = relative_power_through_camera(
-        shapes, white.responses, camera.resample(shapes.grid, outside="zero"), reflectance
-    )
-    scaled = shapes.replace(values=shapes.values * power)
-    report = {
-        "relative_power": power.tolist(),
-        "relative_power_note": None,
-        "relative_power_source": {
-            "white_sequence": str(sequence.path),
-            "camera_responsivities": camera_from,
-            "white_reflectance": args.white_reflectance,
-            **white.report(),
-        },
-    }
-    return scaled, report
-
-
 def _leds(args: argparse.Namespace) -> int:
     if not args.files and not args.white:
         raise UsageError("calibrate leds: expected spectrometer exports FILES…, --white SEQ, or both")
@@ -188,7 +78,8 @@ def _leds(args: argparse.Namespace) -> int:
     white = read_sequence(args.white) if args.white else None
     characterisations: list = []
     if args.files:
-        spectra, characterisations, section = _measured_leds(args)
+        measured = measured_leds(args.files, args.unit, args.column, args.dark)
+        spectra, characterisations, section = measured.spectra, list(measured.characterisations), measured.section
     elif calibration.led_spectra is not None:
         spectra, section = calibration.led_spectra, dict(calibration.leds)
         progress(f"LED shapes from {args.out}")
@@ -200,7 +91,9 @@ def _leds(args: argparse.Namespace) -> int:
         )
         progress(f"LED shapes from {white.path} (no spectrometer exports, no LED section in {args.out})")
     if white is not None:
-        spectra, power = _white_power(args, white, spectra, calibration)
+        spectra, power = led_power_through_camera(
+            white, spectra, calibration, args.out, args.white_roi, args.white_reflectance
+        )
         section = {**section, **power}
     calibration = calibration.updated(led_spectra=spectra, leds=section)
     path = save_calibration(calibration, args.out)
@@ -243,66 +136,19 @@ def _leds(args: argparse.Namespace) -> int:
 
 
 def _camera_from_sequences(args: argparse.Namespace) -> int:
-    if args.chart != "macbeth":
-        raise UsageError(
-            f"--chart {args.chart}: recorded sequences support the macbeth layout only; expected --chart macbeth"
-        )
     sequences = [read_sequence(directory) for directory in args.sequence]
-    if args.light and len(args.light) != len(sequences):
-        raise UsageError(
-            f"--light given {len(args.light)} times for {len(sequences)} sequences; expected one per "
-            "sequence, in order (NAME, CSV file, or 'none' for an unknown ambient)"
-        )
-    grid = sequences[0].grid
-    lights = [
-        None if spec is None or spec.lower() == "none" else resolve_light(spec, grid)
-        for spec in (args.light or [None] * len(sequences))
-    ]
-    chart = datasets.macbeth().resample(grid, outside="edge")
-
-    # Each sequence its own layout (detected unless --patch-px/--border-px): the chart may move.
-    layouts = [
-        sequence_layout(sequence, args.chart, args.patch_px, args.border_px, args.margin_px) for sequence in sequences
-    ]
-    for sequence, layout in zip(sequences, layouts, strict=True):  # the layout must fit before anything is estimated
-        index = sequence.indices("ambient")[0] if sequence.indices("ambient") else 0
-        raw = sequence.load_frame(index).astype(np.float64)
-        layout_map = layout.build(raw.shape[:2])
-        check_layout(raw, layout_map, sequence.camera.cfa)
-        if layout.report["detected"]:
-            progress(f"{sequence.directory}: {layout_map.description}")
-    labels_for = [lambda shape, excluded, layout=layout: layout.build(shape, excluded).labels for layout in layouts]
-    measurements = sequence_measurements(sequences, lights, chart, labels_for)
-    cameras = {name: s.resample(grid, outside="zero") for name, s in datasets.paper_cameras().items()}
-    unknown = [name for name in args.prior_exclude if name not in cameras]
-    if unknown:
-        raise UsageError(f"--prior-exclude {unknown}: not among the 34 paper cameras; expected names like NikonD100")
-    prior = learn_prior(cameras, exclude=args.prior_exclude) if args.method != "smoothness" else None
-    progress(
-        f"{len(measurements.frames)} chart frames, {measurements.data.shape[0]} patch means; "
-        f"prior from {len(prior.cameras) if prior else 0} cameras"
+    result = camera_from_chart_sequences(
+        sequences,
+        args.light,
+        args.method,
+        args.prior_exclude,
+        args.chart,
+        args.patch_px,
+        args.border_px,
+        args.margin_px,
     )
-    result = estimate_from_measurements(measurements, args.method, prior)
-    estimate = result.estimate
-    recorded = sequences[0].camera_responsivities()
-    rmse = responsivity_rmse(estimate.responsivities, recorded.to_unit("photons")) if recorded is not None else None
-    calibration = _existing(args.out).updated(
-        camera_responsivities=estimate.responsivities,
-        camera={
-            "method": estimate.method,
-            "alphas": list(estimate.alphas),
-            "shrinkages": list(estimate.shrinkages),
-            "relative_residual": list(estimate.relative_residual),
-            "chart": args.chart,
-            "sequences": [str(s.directory) for s in sequences],
-            "lights": args.light or [],
-            "light_scales": result.light_scales,
-            "frames": list(measurements.frames),
-            "prior_excluded": list(args.prior_exclude),
-            "layouts": [layout.report for layout in layouts],
-            "rmse_vs_sequence_responsivity": rmse,
-        },
-    )
+    estimate, rmse = result.estimate, result.rmse_vs_recorded
+    calibration = _existing(args.out).updated(camera_responsivities=estimate.responsivities, camera=result.section())
     path = save_calibration(calibration, args.out)
     payload = {
         "calibration": str(path),
@@ -311,7 +157,7 @@ def _camera_from_sequences(args: argparse.Namespace) -> int:
         "light_scales": result.light_scales,
         "relative_residual": list(estimate.relative_residual),
         "layouts": [
-            {"sequence": str(s.directory), **layout.report} for s, layout in zip(sequences, layouts, strict=True)
+            {"sequence": str(s.directory), **layout.report} for s, layout in zip(sequences, result.layouts, strict=True)
         ],
         "rmse_vs_sequence_responsivity": rmse,
     }
@@ -319,7 +165,7 @@ def _camera_from_sequences(args: argparse.Namespace) -> int:
         print_json(payload)
     else:
         print(
-            f"responsivities recovered ({estimate.method}) from {len(measurements.frames)} chart frames"
+            f"responsivities recovered ({estimate.method}) from {len(result.measurements.frames)} chart frames"
             + (f", RMSE vs the sequence's recorded responsivities {rmse:.4f}" if rmse is not None else "")
         )
         print(f"wrote {path} (id {calibration.id})")
@@ -333,32 +179,9 @@ def _camera(args: argparse.Namespace) -> int:
         return _camera_from_sequences(args)
     if not args.simulate:
         raise UsageError("calibrate camera: expected --sequence SEQ… (recorded chart sequences) or --simulate")
-    cameras = {name: s.resample(DEFAULT_GRID, outside="zero") for name, s in datasets.paper_cameras().items()}
-    if args.camera not in cameras:
-        raise UsageError(f"--camera '{args.camera}': not one of the 34 paper cameras; expected e.g. NikonD100")
-    chart = datasets.macbeth().resample(DEFAULT_GRID) if args.chart == "macbeth" else datasets.chart110()
-    lights = calibration_lights(DEFAULT_GRID)
-    progress(f"simulating {args.chart} under {lights.count} lights ({', '.join(lights.names)}) with {args.camera}")
-    truth = cameras[args.camera]
-    responses, std = simulate_chart_responses(truth, chart, lights, rng=np.random.default_rng(args.seed))
-    prior = learn_prior(cameras, exclude=[args.camera])  # never the camera under test
-    estimate = estimate_responsivities(
-        responses, chart, lights, args.method, prior if args.method != "smoothness" else None, std
-    )
-    rmse = responsivity_rmse(estimate.responsivities, truth)
-    calibration = _existing(args.out).updated(
-        camera_responsivities=estimate.responsivities,
-        camera={
-            "method": estimate.method,
-            "alphas": list(estimate.alphas),
-            "shrinkages": list(estimate.shrinkages),
-            "relative_residual": list(estimate.relative_residual),
-            "chart": args.chart,
-            "lights": list(lights.names),
-            "simulated_camera": args.camera,
-            "rmse_vs_truth": rmse,
-        },
-    )
+    simulated = simulated_camera_calibration(args.camera, args.chart, args.method, args.seed)
+    estimate, rmse = simulated.estimate, simulated.rmse_vs_truth
+    calibration = _existing(args.out).updated(camera_responsivities=estimate.responsivities, camera=simulated.section())
     path = save_calibration(calibration, args.out)
     payload = {"calibration": str(path), "id": calibration.id, "method": estimate.method, "rmse_vs_truth": rmse}
     if args.json:
@@ -371,11 +194,7 @@ def _camera(args: argparse.Namespace) -> int:
 
 def _dark(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
-    indices = sequence.indices("dark")
-    if not indices:
-        raise UsageError(f"{sequence.path}: frames has no 'dark' frame; expected frames with role 'dark'")
-    # Dark frames measure the black level, so the declared one is not held against them.
-    result = measure_dark([sequence.load_frame(i, check_levels=False) for i in indices], sequence.camera.cfa)
+    result = dark_of_sequence(sequence)
     calibration = _existing(args.out).updated(
         dark={**result.as_dict(), "cfa": sequence.camera.cfa, "sequence": str(sequence.directory)}
     )
@@ -391,23 +210,9 @@ def _dark(args: argparse.Namespace) -> int:
 
 def _linearity(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
-    indices = [i for i, f in enumerate(sequence.frames) if f.role != "dark"]
-    lights = sorted({sequence.frames[i].led_levels for i in indices})
-    if len(lights) > 1:  # e.g. a chart sequence: each frame under other LEDs, so no common response curve
-        raise UsageError(
-            f"{sequence.path}: the lit frames are under {len(lights)} different illuminations (LED levels "
-            f"{', '.join(str(list(levels)) for levels in lights[:3])}{', …' if len(lights) > 3 else ''}); "
-            "expected one illumination at several exposures of a uniform target"
-        )
-    if len(indices) < 3:
-        raise UsageError(
-            f"{sequence.path}: {len(indices)} lit frames; expected at least 3 exposures of a uniform target"
-        )
     calibration = _existing(args.out)
     black = calibration.dark["black_level"] if calibration.dark else sequence.camera.black_level
-    frames = [sequence.load_frame(i) for i in indices]
-    exposures = [sequence.frames[i].exposure_us * sequence.frames[i].gain for i in indices]
-    result = measure_linearity(frames, exposures, black, sequence.camera.cfa, sequence.camera.white_level)
+    result = linearity_of_sequence(sequence, black)
     calibration = calibration.updated(linearity={**result.as_dict(), "sequence": str(sequence.directory)})
     path = save_calibration(calibration, args.out)
     if args.json:

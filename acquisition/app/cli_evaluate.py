@@ -13,9 +13,10 @@ from msflash.acquisition.app.cli_common import (
     print_json,
     progress,
 )
-from msflash.acquisition.app.evaluation import CHARTS, STUDY_AMBIENTS, colour_study, evaluate_sequence, public_result
+from msflash.acquisition.app.evaluation import STUDY_AMBIENTS, colour_study, evaluate_sequence, public_result
 from msflash.acquisition.app.options import layout_options
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session.chart_layout import CHARTS
 from msflash.processing import lights, water
 
 

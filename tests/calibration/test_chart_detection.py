@@ -134,7 +134,7 @@ def test_the_sim_rigs_own_layout_is_found_exactly(tmp_path):
     sequence, grid = _detect(path)
     scene = _chart()
     assert np.allclose(grid.patch_centres(), _true_centres(scene), atol=0.05)
-    from msflash.acquisition.app.evaluation import chart_layout
+    from msflash.acquisition.session.chart_layout import chart_layout
 
     given = chart_layout(sequence.load_frame(0).shape[:2], "macbeth", 8, 2, 1).labels
     assert np.array_equal(grid.labels(given.shape), given)  # the same label map as --patch-px 8 --border-px 2
