@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -37,6 +38,11 @@ def _integer(text: str) -> int | _Unreadable:
     return _Unreadable(text) if len(text.lstrip("-")) > MAX_DIGITS else int(text)
 
 
+def _convertible_integer(text: str) -> int | _Unreadable:
+    limit = sys.get_int_max_str_digits()  # beyond it Python refuses to convert (and to write back)
+    return _Unreadable(text) if limit and len(text.lstrip("-")) > limit else int(text)
+
+
 def _float(text: str) -> float | _Unreadable:
     value = float(text)
     return value if math.isfinite(value) else _Unreadable(text)
@@ -48,7 +54,9 @@ def _field(where: str, key: str | int) -> str:
     return f"{where}.{key}" if where else key
 
 
-def parse_json_document(text: str, source: str, error: Callable[[str], Exception]) -> Any:
+def parse_json_document(
+    text: str, source: str, error: Callable[[str], Exception], *, finite_numbers: bool = True
+) -> Any:
     """The document in ``text``; ``error(message)`` is raised for anything that is not plain finite JSON.
 
     Parameters
@@ -59,6 +67,11 @@ def parse_json_document(text: str, source: str, error: Callable[[str], Exception
         Names the file in messages.
     error
         The exception type (or factory) the caller raises for bad input.
+    finite_numbers
+        Refuse every non-finite or huge number wherever it is (the default). ``False`` keeps
+        ``NaN``, infinities and integers Python can convert as values, for a format that keeps
+        other tools' unknown keys without interpreting them (``sequence.json``): its reader then
+        checks each field it reads.
 
     Raises
     ------
@@ -86,11 +99,14 @@ def parse_json_document(text: str, source: str, error: Callable[[str], Exception
         return result
 
     try:
-        document = json.loads(
-            text, object_pairs_hook=unique, parse_int=_integer, parse_float=_float, parse_constant=_Unreadable
-        )
+        if finite_numbers:
+            document = json.loads(
+                text, object_pairs_hook=unique, parse_int=_integer, parse_float=_float, parse_constant=_Unreadable
+            )
+        else:
+            document = json.loads(text, object_pairs_hook=unique, parse_int=_convertible_integer)
     except json.JSONDecodeError as err:
-        raise error(f"{source}:{err.lineno}: not valid JSON ({err.msg})") from None
+        raise error(f"{source}: line {err.lineno} column {err.colno}: {err.msg}; expected valid JSON") from None
     except RecursionError:
         raise error(
             f"{source}: objects or lists nested too deep to read; expected at most {MAX_NESTING} levels"

@@ -47,6 +47,8 @@ from msflash.acquisition.sequence.frame_integrity import check_frame_levels
 from msflash.acquisition.sequence.image_files import image_suffix, read_image, read_image_header, write_image_digest
 from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.json_input import MAX_NESTING as MAX_NESTING  # the deepest a sequence.json may nest
+from msflash.processing.json_input import parse_json_document
 from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import Spectra, WavelengthGrid
 from msflash.processing.synthesis import linearise
@@ -77,11 +79,6 @@ _TOP_KEYS = ("format", "version", "complete", "wavelengths_nm", "spectral_unit",
 _CAMERA_KEYS = ("model", "serial", "pixel_format", "cfa", "black_level", "white_level", "responsivity")
 _LED_KEYS = ("name", "spd")
 _FRAME_KEYS = ("file", "role", "led_levels", "exposure_us", "gain", "sha256", "file_bytes")
-MAX_NESTING = 100
-"""The deepest nesting of objects and lists ``sequence.json`` may have (format v1 itself needs 4).
-
-Deeper documents are refused with the field named: copying or writing back unknown keys nested
-hundreds deep would exhaust Python's recursion limit."""
 
 
 # -- data model ----------------------------------------------------------------------------------
@@ -388,26 +385,7 @@ class _Fields:
         return _number(self.file, self.name(key), value, expected)
 
 
-class _HugeInteger:
-    """Stands for a JSON integer too long for Python to convert (``sys.get_int_max_str_digits``):
-    kept so the field holding it can be named when it is checked."""
-
-    def __init__(self, digits: int) -> None:
-        self.digits = digits
-
-    def __repr__(self) -> str:
-        return f"<an integer of {self.digits} digits>"
-
-
-def _json_integer(text: str) -> int | _HugeInteger:
-    limit = sys.get_int_max_str_digits()
-    digits = len(text.lstrip("-"))
-    return _HugeInteger(digits) if limit and digits > limit else int(text)
-
-
 def _json_type(value: Any) -> str:
-    if isinstance(value, _HugeInteger):
-        return f"an integer of {value.digits} digits"
     return {
         dict: "an object",
         list: "a list",
@@ -475,47 +453,20 @@ def _spectrum(file: Path, field_name: str, value: Any, wavelengths_nm: np.ndarra
 
 
 def _load_json(path: Path) -> Any:
-    def no_duplicates(pairs: list[tuple[str, Any]]) -> dict:
-        result: dict = {}
-        for key, value in pairs:
-            if key in result:
-                raise RecordingError(f"{path}: key {key!r} appears twice in one object; expected unique keys")
-            result[key] = value
-        return result
+    """The document in ``sequence.json``, refused naming the field for anything but plain finite JSON.
 
+    One reader for every JSON file a user hands msflash (:func:`msflash.processing.json_input.parse_json_document`):
+    a key twice, an integer of thousands of digits, nesting deeper than :data:`MAX_NESTING`
+    (format v1 needs 4).
+    """
     if not os.path.lexists(path):
         raise RecordingError(
             f"{shown_path(path)}: file is missing; expected a sequence directory holding {SEQUENCE_FILE}"
         )
     text = read_user_text(path, f"a sequence's {SEQUENCE_FILE} (UTF-8 JSON)", JSON_MAX_BYTES, RecordingError)
-    try:
-        document = json.loads(text, object_pairs_hook=no_duplicates, parse_int=_json_integer)
-    except json.JSONDecodeError as err:
-        raise RecordingError(f"{path}: line {err.lineno} column {err.colno}: {err.msg}; expected valid JSON") from err
-    except RecursionError:
-        raise RecordingError(
-            f"{path}: objects or lists are nested too deep to read; expected at most {MAX_NESTING} "
-            "levels (format v1 needs 4)"
-        ) from None
-    _check_nesting(path, document)
-    return document
-
-
-def _check_nesting(path: Path, document: Any) -> None:
-    """Refuse a document nested deeper than :data:`MAX_NESTING`, naming the field (without recursion)."""
-    stack: list[tuple[Any, str, int]] = [(document, "", 0)]
-    while stack:
-        value, where, depth = stack.pop()
-        if depth > MAX_NESTING:
-            field_name = where if len(where) <= 80 else where[:80] + "…"
-            raise RecordingError(
-                f"{path}: {field_name} is nested more than {MAX_NESTING} levels deep; expected at most "
-                f"{MAX_NESTING} levels (format v1 needs 4)"
-            )
-        if isinstance(value, dict):
-            stack.extend((v, f"{where}.{k}" if where else str(k), depth + 1) for k, v in value.items())
-        elif isinstance(value, list):
-            stack.extend((v, f"{where}[{i}]", depth + 1) for i, v in enumerate(value))
+    # Other tools' unknown keys are kept uninterpreted, whatever numbers they hold; each field
+    # format v1 defines is checked as it is read (finite, in range).
+    return parse_json_document(text, shown_path(path), RecordingError, finite_numbers=False)
 
 
 def _parse_camera(file: Path, value: Any, wavelengths_nm: np.ndarray) -> SequenceCamera:

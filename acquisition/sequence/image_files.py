@@ -30,6 +30,7 @@ import OpenImageIO as oiio
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.frame_digest import FileDigest, digest_open_file
 from msflash.calibration.file_modes import default_file_mode
+from msflash.processing.json_input import parse_json_document
 from msflash.processing.user_files import IMAGE_MAX_BYTES, check_user_file, shown_path
 
 INTEGER_SUFFIX = ".tiff"
@@ -141,8 +142,8 @@ def _attributes(spec: oiio.ImageSpec) -> dict:
     attributes: dict = {}
     description = spec.getattribute("ImageDescription")
     if isinstance(description, str) and description.startswith("{"):
-        with contextlib.suppress(ValueError):
-            decoded = json.loads(description)
+        with contextlib.suppress(ValueError):  # someone else's description: ours or nothing
+            decoded = parse_json_document(description, str(spec), ValueError)
             if isinstance(decoded, dict):
                 attributes.update({k: v for k, v in decoded.items() if k.startswith(_ATTRIBUTE_PREFIX)})
     for attribute in spec.extra_attribs:

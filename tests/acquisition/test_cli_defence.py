@@ -75,7 +75,7 @@ def _too_big_for_a_float(seq: Path) -> str:
 @pytest.mark.parametrize(
     ("make", "field"),
     [
-        (_huge_integer, "frames[0].exposure_us is an integer of 5000 digits"),
+        (_huge_integer, "field 'frames[0].exposure_us' is an integer of 5000 digits"),
         (_nested_100k, "nested too deep"),
         (_unknown_key_900_deep, "x_vendor.k.k"),
         (_non_utf8_frame_name, "frames[1].file"),

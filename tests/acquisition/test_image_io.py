@@ -156,3 +156,20 @@ def test_write_replaces_atomically_and_leaves_no_temporary(tmp_path: Path) -> No
         write_image(path, np.full((3, 3), -1, np.int32))
     np.testing.assert_array_equal(read_image(path), np.full((3, 3), 9))
     assert [p.name for p in path.parent.iterdir()] == ["frame.tiff"]
+
+
+@pytest.mark.parametrize(
+    "description",
+    ['{"msflash:x": ' * 50_000 + "1" + "}" * 50_000, '{"msflash:gain": NaN, "msflash:x": 1e999}', "{not json"],
+)
+def test_another_tools_hostile_description_is_ignored_not_a_crash(tmp_path: Path, description: str) -> None:
+    # Another writer's ImageDescription that opens like JSON: nested past the recursion limit, holding
+    # NaN, or malformed. It carries no attributes of ours; the pixels still read.
+    import tifffile
+
+    path = tmp_path / "other.tiff"
+    pixels = np.arange(12, dtype=np.uint16).reshape(3, 4)
+    tifffile.imwrite(path, pixels, description=description, metadata=None)
+    header = read_image_header(path)
+    assert header.attributes == {} and (header.height, header.width) == (3, 4)
+    assert np.array_equal(read_image(path), pixels)

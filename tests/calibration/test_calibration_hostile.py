@@ -25,7 +25,10 @@ def _with(text: str, insert: str) -> str:
 
 
 HOSTILE = {
-    "truncated": ('{"format": "msflash-calibration", "version": 1, "id": "c', "calibration.json:1: not valid JSON"),
+    "truncated": (
+        '{"format": "msflash-calibration", "version": 1, "id": "c',
+        "calibration.json: line 1 column 55: Unterminated string",
+    ),
     "NaN": (
         json.dumps({**BASE, "dark": {"black_level": [float("nan"), 1, 2]}}),
         "field 'dark.black_level[0]' is NaN; expected a finite number",

@@ -98,5 +98,5 @@ def test_missing_and_invalid_json(tmp_path):
     with pytest.raises(CalibrationError, match=r"calibration\.json: cannot be read"):
         load_calibration(tmp_path)
     (tmp_path / "calibration.json").write_text("{\n  oops")
-    with pytest.raises(CalibrationError, match=r"calibration\.json:2: not valid JSON"):
+    with pytest.raises(CalibrationError, match=r"calibration\.json: line 2 column \d+: .*; expected valid JSON"):
         load_calibration(tmp_path)
