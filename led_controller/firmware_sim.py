@@ -11,6 +11,7 @@ Time is simavr's simulated time, paced to the wall clock (docs/booth-firmware.md
 from __future__ import annotations
 
 import fcntl
+import os
 import queue
 import shutil
 import subprocess
@@ -21,10 +22,22 @@ from pathlib import Path
 from types import TracebackType
 
 FIRMWARE_DIR = Path(__file__).resolve().parent / "firmware"
-ELF = FIRMWARE_DIR / "build" / "booth.elf"
-SMALL_ELF = FIRMWARE_DIR / "build" / "booth_small.elf"
+"""The firmware's sources and Makefile (package data: an installed msflash carries them too)."""
+
+
+def _build_directory() -> Path:
+    """``firmware/build`` in a checkout; a user cache folder when the package folder is read-only (an installed wheel)."""
+    if os.access(FIRMWARE_DIR, os.W_OK):
+        return FIRMWARE_DIR / "build"
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return cache / "msflash" / "firmware-build"
+
+
+BUILD_DIR = _build_directory()
+ELF = BUILD_DIR / "booth.elf"
+SMALL_ELF = BUILD_DIR / "booth_small.elf"
 """The test build: 2 channels (uv, ir), 12-bit drive, 4 steps (``make sim``)."""
-HARNESS = FIRMWARE_DIR / "build" / "booth_sim"
+HARNESS = BUILD_DIR / "booth_sim"
 _TOOLS = ("avr-gcc", "avr-size", "make", "gcc")
 _HEADERS = (Path("/usr/lib/avr/include/avr/io.h"), Path("/usr/include/simavr/parts/uart_pty.h"))
 
@@ -69,11 +82,14 @@ def build() -> None:
     reason = toolchain_missing()
     if reason:
         raise FirmwareSimError(reason)
-    (FIRMWARE_DIR / "build").mkdir(exist_ok=True)
-    with open(FIRMWARE_DIR / "build" / ".lock", "w") as lock:
+    BUILD_DIR.mkdir(parents=True, exist_ok=True)
+    with open(BUILD_DIR / ".lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         done = subprocess.run(
-            ["make", "-s", "-C", str(FIRMWARE_DIR), "all"], capture_output=True, text=True, check=False
+            ["make", "-s", "-C", str(FIRMWARE_DIR), f"BUILD={BUILD_DIR}", "all"],
+            capture_output=True,
+            text=True,
+            check=False,
         )
     if done.returncode != 0:
         raise FirmwareSimError(f"make -C {FIRMWARE_DIR} failed: {done.stderr.strip().splitlines()[-1:]}")
