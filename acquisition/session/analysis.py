@@ -121,11 +121,17 @@ def frame_stack(
     return FrameStack(pixels(ambient_index), tuple(pixels(i) for i in led_indices), spec, ambient_index, led_indices)
 
 
-DEFAULT_BIN_FACTOR = 4
+DEFAULT_BIN_FACTOR = 8
 """Block size summed before estimation: the model is linear so block sums obey it exactly, and the
-noise of the LED-only images (which biases the weights) drops by its square; the authors'
-code downsamples by 4 as well. Frames too small for it fall back to smaller blocks. What it gained
-on the independent samples: docs/architecture.md §10."""
+noise of the LED-only images (which biases the weights) drops by its square (the authors' code
+downsamples by 4). Frames that keep fewer
+than :data:`BLOCKS_PER_SIDE` blocks on their short side use smaller ones (:func:`block_factor`).
+Why 8, and what 4 × 4 blocks changed on large frames: docs/block-size.md."""
+
+BLOCKS_PER_SIDE = 32
+"""A frame's short side (of its CFA planes) keeps at least this many blocks, or the blocks are halved,
+down to 4 × 4: on the harness's 128 × 160 frames 8 × 8 blocks cost the light prior accuracy and 4 × 4
+ones agree with the all-pixel estimate as well (docs/block-size.md)."""
 
 
 SAMPLE_WEIGHTING = True
@@ -149,10 +155,28 @@ def sequence_statistics(
 
 
 def block_factor(shape: tuple[int, ...], cfa: str | None, bin_factor: int = DEFAULT_BIN_FACTOR) -> int:
-    """The block side the statistics sum: ``bin_factor`` halved until a frame of ``shape`` keeps at least
-    8 blocks per side (of its CFA planes), so that tiny frames still give enough samples; at least 1."""
+    """The block side the statistics sum for a frame of ``shape`` (docs/block-size.md).
+
+    ``bin_factor`` made even (an odd block has no half-difference noise probe: its estimate is solved
+    on the moments as observed, biased towards zero weights); halved, not below 4, while the frame's
+    short side (of its CFA planes) keeps fewer than :data:`BLOCKS_PER_SIDE` blocks; then halved until it
+    keeps at least 8, so that tiny frames still give enough samples; at least 1. ``1`` (every pixel,
+    no noise probe) is kept when asked for.
+
+    Examples
+    --------
+    >>> block_factor((1024, 1280, 3), None), block_factor((128, 160, 3), None), block_factor((128, 160), "RGGB")
+    (8, 4, 4)
+    >>> block_factor((1024, 1280, 3), None, 5), block_factor((1024, 1280, 3), None, 1)
+    (4, 1)
+    """
     period = 2 if cfa is not None else 1
-    while bin_factor > 1 and min(shape[:2]) // (bin_factor * period) < 8:
+    side = min(shape[:2]) // period
+    if bin_factor > 1 and bin_factor % 2:
+        bin_factor -= 1
+    while bin_factor > 4 and side // bin_factor < BLOCKS_PER_SIDE:
+        bin_factor //= 2
+    while bin_factor > 1 and side // bin_factor < 8:
         bin_factor //= 2
     return max(bin_factor, 1)
 
@@ -443,9 +467,7 @@ def _local_grid(stack: FrameStack, cfa: str | None, tiles: int, bin_factor: int)
     """The bin factor and tiles (rows, columns) that fit a frame: at least 2 blocks per tile side."""
     period = 2 if cfa is not None else 1
     height, width = stack.ambient.shape[:2]
-    while bin_factor > 1 and min(height, width) // (bin_factor * period) < 8:
-        bin_factor //= 2
-    bin_factor = max(bin_factor, 1)
+    bin_factor = block_factor(stack.ambient.shape, cfa, bin_factor)
     blocks = (height // (bin_factor * period), width // (bin_factor * period))
     return bin_factor, max(1, min(tiles, blocks[0] // 2)), max(1, min(tiles, blocks[1] // 2))
 

@@ -47,12 +47,9 @@ def sequence_channel_statistics(
 ) -> ChannelStatistics:
     """The channel statistics of a sequence, binned like :func:`acquisition.session.analysis.sequence_statistics`."""
     stack = stack or load_frame_stack(sequence)
-    period = 2 if sequence.camera.cfa is not None else 1
-    height, width = stack.ambient.shape[:2]
-    while bin_factor > 1 and min(height, width) // (bin_factor * period) < 8:
-        bin_factor //= 2
+    factor = analysis.block_factor(stack.ambient.shape, sequence.camera.cfa, bin_factor)
     return accumulate_channel_statistics(
-        stack.ambient, stack.led_frames, stack.spec, cfa=sequence.camera.cfa, bin_factor=max(bin_factor, 1)
+        stack.ambient, stack.led_frames, stack.spec, cfa=sequence.camera.cfa, bin_factor=factor
     )
 
 
