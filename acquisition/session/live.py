@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from msflash.acquisition.devices.camera import RawFrame
-from msflash.acquisition.errors import UsageError
+from msflash.acquisition.errors import FrameLostError, UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep, StepRole
 from msflash.acquisition.session.exposure import camera_exposure_range
 from msflash.acquisition.session.rig import Rig
@@ -60,6 +60,8 @@ class LiveStream:
         self._streaming = False
         self._booth_levels: tuple[float, ...] = self.settings.levels
         self._read_at = 0.0
+        self.lost_frames = 0
+        """Live frames that arrived incomplete and were taken again."""
 
     # -- settings ---------------------------------------------------------------------------
     def _checked_exposure(self, exposure_us: float) -> float:
@@ -124,16 +126,28 @@ class LiveStream:
         return plan
 
     def grab(self) -> RawFrame:
-        """The next live frame (host paced: one software trigger), at the settings in force."""
+        """The next live frame (host paced: one software trigger), at the settings in force.
+
+        A frame that arrives incomplete (:class:`FrameLostError`) is counted in :attr:`lost_frames` and
+        taken again once on a restarted stream; a second loss is raised.
+        """
+        try:
+            frame = self._trigger_and_wait()
+        except FrameLostError:
+            self.lost_frames += 1
+            self.pause()
+            frame = self._trigger_and_wait()
+        self.booth_levels()
+        return frame
+
+    def _trigger_and_wait(self) -> RawFrame:
         plan = self._plan
         if not self._streaming or plan is None or self._next_step >= len(plan.steps):
             self.pause()
             plan = self._prepare()
         self._next_step += 1
         self.rig.camera.trigger()
-        frame = self.rig.camera.next_frame(plan.frame_timeout_s)
-        self.booth_levels()
-        return frame
+        return self.rig.camera.next_frame(plan.frame_timeout_s)
 
     def pause(self) -> None:
         """Stop streaming (before a sequence takes the camera, or when nobody watches)."""

@@ -320,6 +320,7 @@ class LiveServer:
                 "mode": self.state.mode,
                 "job": self.state.job.to_json(),
                 "frames": self.state.frames,
+                "lost_frames": self.stream.lost_frames,
                 "clients": len(self.clients),
                 "error": self.state.error,
                 "runs": list_runs(self.runs),
@@ -502,7 +503,9 @@ class LiveServer:
                 await self._fail(err)
                 await asyncio.sleep(1.0)
                 continue
-            failed = ""
+            if failed:  # the stream works again: the error it showed is over
+                failed, self.state.error = "", None
+                await self._push_state()
             await self._send_frame(preview, source="live")
             await asyncio.sleep(max(0.0, 1.0 / MAX_FPS - (loop.time() - started)))
 

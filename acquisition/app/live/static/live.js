@@ -65,7 +65,8 @@ function render(next) {
   state = next;
   if (first) buildLeds();
   $("rig").textContent = `rig ${state.rig} · ${state.camera}`;
-  if (state.error) showError(state.error);
+  showError(state.error);
+  $("lost").textContent = state.lost_frames ? `${state.lost_frames} incomplete frame(s) taken again` : "";
   setIfIdle($("exposure"), exposureToSlider(state.exposure_us));
   $("exposure-value").textContent = formatUs(state.exposure_us);
   setIfIdle($("gain"), state.gain);
