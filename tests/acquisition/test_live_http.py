@@ -20,6 +20,7 @@ from yarl import URL
 
 from msflash.acquisition.app import cli
 from msflash.acquisition.app.live.server import LAST_CLIENT_GRACE_S, TOKEN_HEADER, LiveServer, bind, serve_in_thread
+from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.rig import open_rig
 from tests.acquisition.live_support import emulator_levels, live_server, wait_until
 
@@ -210,3 +211,37 @@ def test_msflash_live_serves_the_page_and_ctrl_c_stops_it_with_the_leds_off(tmp_
     last_set = max(i for i, line in enumerate(sent) if ":SET " in line)
     assert ":SET 0000 8000 0000" in sent[last_set]
     assert any(":OFF*" in line for line in sent[last_set + 1 :])
+
+
+def test_a_sequence_at_the_live_exposure_and_a_second_fire_while_it_runs(tmp_path: Path) -> None:
+    runs = tmp_path / "runs"
+    with live_server(runs) as server:
+        base = f"http://127.0.0.1:{server.port}"
+        token = {TOKEN_HEADER: server.token}
+        assert (
+            request("POST", base + "/api/settings", token, {"exposure_us": 4000, "sequence_exposure": "live"})[0] == 200
+        )
+        status, text = request("POST", base + "/api/sequence", token, {"mode": "matching"})
+        assert status == 202
+        run = json.loads(text)["run"]
+        assert request("POST", base + "/api/sequence", token, {})[0] == 409  # one sequence at a time
+
+        def finished() -> dict | None:
+            job = json.loads(request("GET", base + "/api/state")[1])["job"]
+            return job if job["status"] in ("done", "failed") else None
+
+        job = wait_until(finished, "the sequence to finish", timeout_s=240)
+        assert job["status"] == "done" and job["run"] == run and job["landed"] == job["total"] == 9
+        summary = json.loads((runs / run / "run.json").read_text())
+        assert summary["recaptured_mode"] == "matching"
+        assert summary["exposure"]["mode"] == "fixed" and summary["exposure"]["ambient_exposure_us"] == 4000
+        sequence = json.loads((runs / run / "sequence" / "sequence.json").read_text())
+        assert [frame["exposure_us"] for frame in sequence["frames"]] == [4000] * 9
+        assert emulator_levels(server) == (0.0,) * 7  # no page watches: the sequence left the LEDs off
+        info = json.loads(request("GET", f"{base}/api/runs/{run}")[1])
+        assert "report.md" in info["files"] and '<polygon class="band"' in info["charts"]["ambient"]
+
+
+def test_a_wildcard_address_is_refused() -> None:
+    with pytest.raises(UsageError, match="wildcard"):
+        bind("0.0.0.0", 0)

@@ -76,7 +76,19 @@ def _loopback(host: str) -> bool:
 
 
 def bind(host: str, port: int) -> socket.socket:
-    """A listening TCP socket on ``host``:``port`` (0: any free port); a one-line error when it cannot be bound."""
+    """A listening TCP socket on ``host``:``port`` (0: any free port); a one-line error when it cannot be bound.
+
+    A wildcard address (``0.0.0.0``, ``::``) is refused: the ``Host`` check needs the one address the page
+    is reached by.
+    """
+    wildcard = False
+    with contextlib.suppress(ValueError):
+        wildcard = ipaddress.ip_address(host).is_unspecified
+    if wildcard:
+        raise UsageError(
+            f"--host {host}: a wildcard address; expected the one address of this machine the page is "
+            "opened by (the Host header is checked against it)"
+        )
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_STREAM)
     try:
@@ -420,9 +432,12 @@ class LiveServer:
         def work() -> dict[str, Any]:
             self.stream.pause()
             try:
-                return run_sequence(self.rig, folder, request, on_frame, on_phase)
-            finally:
-                self._restore_levels()
+                summary = run_sequence(self.rig, folder, request, on_frame, on_phase)
+            except BaseException:
+                self.stream.all_off()  # the capture switched them off; the live levels say so too
+                raise
+            self._restore_levels()
+            return summary
 
         try:
             summary = await self._on_rig(work)
