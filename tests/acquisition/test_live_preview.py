@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import json
 
 import numpy as np
 import pytest
@@ -64,3 +65,14 @@ def test_the_stream_follows_exposure_and_the_booths_levels() -> None:
             stream.pause()
             stream.all_off()
         assert rig.emulator.levels == (0.0,) * 7
+
+
+def test_the_live_bench_reports_the_preview_paths_rates(capsys) -> None:
+    from msflash.acquisition.app import cli
+
+    assert cli.main(["bench", "--part", "live", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)["live"]
+    assert report["preview_size"] == [PREVIEW_WIDTH, 606] and report["frame_shape"] == [106, 112, 3]
+    assert report["preview_fps"] > 0 and report["grab_fps"] > 0 and report["target_fps"] == 10
+    assert report["preview_fps_over_target"] == pytest.approx(report["preview_fps"] / 10, abs=0.01)
+    assert 0 < report["preview_over_grab"]  # a figure, not a verdict: speed is read from the bench

@@ -36,6 +36,9 @@ OVERLAY_RGB = (255, 0, 255)
 
 JPEG_QUALITY = 85
 
+ENCODE_STEPS = 4095
+"""Linear display values are looked up in a table of this many steps (+1) of the sRGB curve."""
+
 
 @dataclass(frozen=True)
 class Preview:
@@ -77,8 +80,11 @@ class PreviewRenderer:
             )
         # Linear maps: the images of the unit vectors give the 3×3 camera → linear sRGB matrix and the Y row.
         srgb_of_basis, y_of_basis = camera_to_srgb_linear(np.eye(3), to_xyz)
-        self._to_srgb = np.asarray(srgb_of_basis, dtype=np.float32).T
-        self._white_y = float(np.sum(y_of_basis)) or 1.0
+        white_y = float(np.sum(y_of_basis)) or 1.0
+        # Full scale → display white folded into the matrix; the sRGB curve as a table of ENCODE_STEPS + 1
+        # entries made by processing.render.encode_srgb itself (a frame costs a lookup, not the curve).
+        self._to_srgb = (np.asarray(srgb_of_basis, dtype=np.float64).T / white_y * ENCODE_STEPS).astype(np.float32)
+        self._encode = np.round(encode_srgb(np.linspace(0.0, 1.0, ENCODE_STEPS + 1), 1.0) * 255).astype(np.uint8)
 
     def camera_rgb(self, pixels: np.ndarray) -> np.ndarray:
         """(H, W, 3) camera RGB in [0, 1] of full scale, debayered and decimated towards the preview's width."""
@@ -101,19 +107,17 @@ class PreviewRenderer:
         """The preview of one raw frame; ``overlay`` paints the saturated pixels."""
         rgb = self.camera_rgb(pixels)
         saturated = np.any(rgb >= 1.0 - SATURATION_MARGIN, axis=2)
-        clipped = np.clip(rgb, 0.0, 1.0)
+        bins = np.clip(rgb * HISTOGRAM_BINS, 0, HISTOGRAM_BINS - 1).astype(np.intp)
         histogram = tuple(
-            tuple(int(n) for n in np.histogram(clipped[:, :, c], bins=HISTOGRAM_BINS, range=(0.0, 1.0))[0])
-            for c in range(3)
+            tuple(int(n) for n in np.bincount(bins[:, :, c].ravel(), minlength=HISTOGRAM_BINS)) for c in range(3)
         )
-        srgb = encode_srgb(rgb @ self._to_srgb.T, self._white_y)
-        rgb8 = np.round(np.clip(srgb, 0.0, 1.0) * 255).astype(np.uint8)
+        steps = np.clip(rgb @ self._to_srgb.T, 0, ENCODE_STEPS).astype(np.intp)
+        rgb8 = self._encode[steps]
         if overlay:
             rgb8[saturated] = OVERLAY_RGB
-        image = Image.fromarray(rgb8)
-        height = max(1, round(image.height * self.width / image.width))
-        resample = Image.Resampling.NEAREST if self.width >= image.width else Image.Resampling.BOX
-        image = image.resize((self.width, height), resample)
+        height = max(1, round(rgb8.shape[0] * self.width / rgb8.shape[1]))
+        resample = Image.Resampling.NEAREST if self.width >= rgb8.shape[1] else Image.Resampling.BOX
+        image = Image.fromarray(rgb8).resize((self.width, height), resample)
         buffer = io.BytesIO()
         image.save(buffer, "JPEG", quality=JPEG_QUALITY)
         return Preview(buffer.getvalue(), self.width, height, histogram, float(np.mean(saturated)))
