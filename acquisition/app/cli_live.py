@@ -30,6 +30,16 @@ def _port(text: str) -> int:
     return value
 
 
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"'{text}': expected a positive number")
+    return value
+
+
 def _open(args: argparse.Namespace) -> Rig:
     spec = args.rig or ("hw" if args.camera is not None else "sim")
     hw_only = [
@@ -95,8 +105,16 @@ def _live(args: argparse.Namespace) -> int:
             async def serve() -> None:
                 stop = asyncio.Event()
                 loop = asyncio.get_running_loop()
+
+                def stopping() -> None:
+                    if server.state.job.status == "running" and not stop.is_set():
+                        progress(
+                            "stopping once the sequence in progress has its frames (its capture ends with the LEDs off)"
+                        )
+                    stop.set()
+
                 for sig in (signal.SIGINT, signal.SIGTERM):
-                    loop.add_signal_handler(sig, stop.set)
+                    loop.add_signal_handler(sig, stopping)
                 await server.serve(stop)
 
             asyncio.run(serve())
@@ -148,7 +166,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.add_argument("--leds", type=int, default=None, choices=tuple(PAPER_LED_SUBSETS), help="the paper's N LEDs")
     sim.add_argument("--ambient", default="tungsten", metavar="NAME|FILE.csv", help=f"ambient: {', '.join(AMBIENTS)} …")
     sim.add_argument("--scene", default="chart110", metavar="NAME|FILE.csv", help=f"scene: {', '.join(SIM_SCENES)} …")
-    sim.add_argument("--flash-power", type=float, default=None, metavar="P", help="booth brightness (default 1)")
+    sim.add_argument("--flash-power", type=_positive, default=None, metavar="P", help="booth brightness (default 1)")
     sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
     sim.add_argument("--seed", type=int, default=0, help="noise seed")
     live.set_defaults(handler=_live)

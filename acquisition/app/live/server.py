@@ -405,6 +405,11 @@ class LiveServer:
     async def _post_sequence(self, request: web.Request) -> web.Response:
         body = await _json_object(request)
         self._busy()
+        if self.rig.camera_responsivities is None:
+            raise UsageError(
+                f"rig '{self.rig.name}': the flash solvers need the camera's responsivities; expected "
+                "--responsivity FILE.csv or --calibration DIR with a camera section"
+            )
         mode = body.get("mode", self.state.mode)
         if mode not in ("complementary", "matching"):
             raise UsageError(f"mode {mode!r}: expected 'complementary' or 'matching'")
