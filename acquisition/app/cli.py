@@ -43,6 +43,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "the main job: capture, estimate, flash, re-capture, synthesise, report",
     ),
     "capture": ("msflash.acquisition.app.cli_run", "capture an ambient + each-LED sequence on a rig"),
+    "live": (
+        "msflash.acquisition.app.cli_live",
+        "serve a browser page on 127.0.0.1: live image, exposure, gain, LED levels, fire a sequence, its spectrum",
+    ),
     "bench": ("msflash.acquisition.app.cli_bench", "measure speed as ratios in one run (processing, camera, booth)"),
     "devices": (
         "msflash.acquisition.app.cli_devices",

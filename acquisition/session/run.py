@@ -270,8 +270,18 @@ def solve_both(solve, weights: np.ndarray, first: str) -> tuple[dict, list]:
     return solutions, list(caught)
 
 
-def run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, options: RunOptions):
-    """Ambient + LEDs + flash in one stream, the flash decided from the frames in memory."""
+def run_one_stream(
+    rig: Rig,
+    writer: AsyncSequenceWriter,
+    exposure: ExposurePlan,
+    options: RunOptions,
+    on_frame: Callable[..., None] | None = None,
+):
+    """Ambient + LEDs + flash in one stream, the flash decided from the frames in memory.
+
+    ``on_frame(step, frame, entry)`` is called as each frame lands (the flash frame too), after it is
+    queued for writing: ``msflash live`` shows the sequence's progress with it.
+    """
     auto = exposure.mode == "auto"  # then the session predicts the flash exposure from the frames as they arrive
     session = FlashSession.prepare(
         writer.sequence,
@@ -293,6 +303,8 @@ def run_one_stream(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan
             frames.append(frame)
             stamp["t"] = time.perf_counter()
         report_frame(step, frame, entry)
+        if on_frame is not None:
+            on_frame(step, frame, entry)
 
     def decide(_frames):
         # As the capture bench: FlashSession.decide, the estimate's reliability signals left for

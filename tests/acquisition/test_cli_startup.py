@@ -15,7 +15,19 @@ import pytest
 
 from msflash.acquisition.app import cli
 
-HEAVY = ("matplotlib", "colour", "scipy.stats", "dask", "gi", "OpenImageIO", "cvxpy", "scipy.linalg", "scipy.optimize")
+HEAVY = (
+    "matplotlib",
+    "colour",
+    "scipy.stats",
+    "dask",
+    "gi",
+    "OpenImageIO",
+    "cvxpy",
+    "scipy.linalg",
+    "scipy.optimize",
+    "aiohttp",
+    "selenium",
+)
 """Libraries ``msflash --help`` must not import (their packages or anything under them)."""
 
 
@@ -47,6 +59,12 @@ def test_top_level_help_and_version_import_no_heavy_library(argv: list[str]) -> 
     assert not {m for m in modules if m.startswith("msflash.acquisition.app.cli_")} - {
         "msflash.acquisition.app.cli_common"
     }
+
+
+def test_live_help_imports_no_web_server() -> None:
+    modules = imported_after(["live", "--help"])
+    assert "msflash.acquisition.app.cli_live" in modules
+    assert not {m for m in modules if m == "aiohttp" or m.startswith(("aiohttp.", "msflash.acquisition.app.live"))}
 
 
 def test_a_commands_help_imports_only_its_own_module() -> None:

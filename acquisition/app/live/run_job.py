@@ -1,0 +1,108 @@
+"""The live page's sequence: what ``msflash run`` does, into a new run folder, with each frame reported.
+
+The route is ``msflash run``'s (:mod:`acquisition.session.run`): the exposures planned for the rig
+(:func:`~acquisition.session.run.plan_exposure`), ambient + each LED + the flash decided from the frames in
+memory and re-captured in one stream (:func:`~acquisition.session.run.run_one_stream`), then the report of
+:func:`acquisition.app.report.write_run_report` and ``run.json``. The folder therefore holds the same files
+``msflash run --out`` leaves. Called on the live server's rig thread, which owns the camera and the booth.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from msflash.acquisition.app.cli_common import claimed_output, dumps_json
+from msflash.acquisition.errors import CaptureError, OutputWriteError
+from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session.exposure import ExposurePolicy
+from msflash.acquisition.session.rig import Rig
+from msflash.acquisition.session.run import RunOptions, degenerate, plan_exposure, run_one_stream, sequence_writer
+
+FrameHook = Callable[[Any, Any, Any], None]
+"""``on_frame(step, frame, entry)``: a step of the plan, its :class:`RawFrame` and its sequence entry."""
+
+
+@dataclass(frozen=True)
+class SequenceRequest:
+    """What the page's *fire* button asks for."""
+
+    exposure: str | float = "auto"
+    """``auto`` (metered, as ``msflash run``'s default) or one exposure in µs for every frame."""
+    options: RunOptions = RunOptions()
+
+
+def new_run_folder(runs: Path) -> Path:
+    """A new folder under ``runs`` named by the UTC time (``-2``, ``-3``… when the second is taken)."""
+    stem = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
+    folder, n = runs / stem, 1
+    while folder.exists():
+        n += 1
+        folder = runs / f"{stem}-{n}"
+    return folder
+
+
+def run_sequence(
+    rig: Rig,
+    out: Path,
+    request: SequenceRequest,
+    on_frame: FrameHook | None = None,
+    on_phase: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Capture, estimate, flash, re-capture and report into ``out``, as ``msflash run --out out`` does.
+
+    Returns
+    -------
+    dict
+        The run's summary (what ``run.json`` holds).
+
+    Raises
+    ------
+    CaptureError
+        A degenerate estimate (the sequence is kept, no report), or any capture failure.
+    OutputWriteError
+        The report or ``run.json`` could not be written.
+    """
+    phase = on_phase or (lambda _text: None)
+    started = time.perf_counter()
+    options = request.options
+    with claimed_output(out, "msflash live"):
+        phase("metering the exposure" if request.exposure == "auto" else "exposure fixed")
+        exposure = plan_exposure(rig, request.exposure, ExposurePolicy())
+        phase("capturing ambient, each LED and the flash")
+        with sequence_writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
+            estimate, solutions, _caught, captured, flash_us, stack, decided = run_one_stream(
+                rig, writer, exposure, options, on_frame=on_frame
+            )
+            why_degenerate = degenerate(estimate)
+            writer.finish()
+        if why_degenerate is not None:
+            raise CaptureError(
+                f"rig '{rig.name}': the ambient estimate is degenerate ({why_degenerate}); no report written. "
+                f"The sequence is complete in {out / 'sequence'}"
+            )
+        from msflash.acquisition.app import report  # matplotlib: imported when a report is drawn
+
+        phase("writing the report")
+        sequence = read_sequence(out / "sequence")
+        summary = report.write_run_report(
+            out, sequence, estimate, solutions, options.mode, rig.true_ambient, stack, options.target
+        )
+        summary["exposure"] = {
+            **exposure.to_dict(),
+            "flash_exposure_us": flash_us,
+            "led_snr": captured.snr,
+            "led_snr_method": captured.snr_method,
+        }
+        summary["decision_ms"] = round((decided - captured.last_frame_at) * 1e3, 3)
+        summary["elapsed_s"] = round(time.perf_counter() - started, 3)
+        try:
+            (out / "run.json").write_text(dumps_json(summary) + "\n")
+        except OSError as err:
+            raise OutputWriteError(f"{out / 'run.json'}: could not be written ({err})") from err
+    return summary

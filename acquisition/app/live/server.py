@@ -1,0 +1,677 @@
+"""The live server of ``msflash live``: one aiohttp application owning one rig (docs/architecture.md §5.4).
+
+**Threads.** The event loop serves HTTP and WebSockets; every call to the camera or the booth runs on one
+rig thread (a single-worker executor), so the live stream, the sliders and a fired sequence never drive
+the devices at once. Frames go to the page over a WebSocket as binary messages: a little-endian ``uint32``
+length, a JSON header (frame number, histogram, saturated fraction, the booth's levels) and the JPEG.
+
+**Safe by default.** Every request must name this server in ``Host`` (``127.0.0.1``/``localhost``/
+``[::1]`` and the port, or the ``--host`` address): a page on another site that rebinds its DNS name to
+127.0.0.1 is refused. A request carrying an ``Origin`` or ``Sec-Fetch-Site: cross-site`` from anywhere else
+is refused. Every state-changing request (each POST) and the WebSocket need the session token, sent in the
+``X-Msflash-Token`` header (the WebSocket: ``?token=``); the page served on loopback carries it, a page on
+another address (``--host``) is served only to ``?token=`` (then a ``SameSite=Strict`` cookie lets its images
+load). Files are served from the package's own page assets by name and from a run folder by
+:func:`acquisition.app.live.runs.run_file` (no path out of the folder). The LEDs go off when the last page
+has been gone :data:`LAST_CLIENT_GRACE_S` (a reload keeps them), when the server stops (Ctrl-C, SIGTERM),
+and on any error of a request or of the stream.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hmac
+import html
+import ipaddress
+import json
+import logging
+import math
+import secrets
+import socket
+import struct
+import threading
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from aiohttp import WSMsgType, web
+
+from msflash.acquisition.app.live.charts import run_charts
+from msflash.acquisition.app.live.preview import Preview, PreviewRenderer
+from msflash.acquisition.app.live.run_job import SequenceRequest, new_run_folder, run_sequence
+from msflash.acquisition.app.live.runs import list_runs, read_json, run_file, run_files, run_folder
+from msflash.acquisition.app.live.state import LiveState, SequenceJob
+from msflash.acquisition.errors import UsageError
+from msflash.acquisition.session.live import LiveStream
+from msflash.acquisition.session.rig import Rig
+from msflash.acquisition.session.run import RunOptions
+
+log = logging.getLogger(__name__)
+
+TOKEN_HEADER = "X-Msflash-Token"
+TOKEN_COOKIE = "msflash_token"
+LAST_CLIENT_GRACE_S = 2.0
+"""How long the LEDs stay on after the last page went away (a reload reconnects within it)."""
+MAX_FPS = 25.0
+"""The live stream's ceiling: frames are taken no faster (the machine is shared)."""
+ASSETS = {"live.js": "text/javascript", "live.css": "text/css"}
+"""The page's assets, served by name from the package (``static/``)."""
+
+
+def _asset(name: str) -> str:
+    return resources.files("msflash.acquisition.app.live").joinpath("static", name).read_text(encoding="utf-8")
+
+
+def _loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening TCP socket on ``host``:``port`` (0: any free port); a one-line error when it cannot be bound.
+
+    A wildcard address (``0.0.0.0``, ``::``) is refused: the ``Host`` check needs the one address the page
+    is reached by.
+    """
+    wildcard = False
+    with contextlib.suppress(ValueError):
+        wildcard = ipaddress.ip_address(host).is_unspecified
+    if wildcard:
+        raise UsageError(
+            f"--host {host}: a wildcard address; expected the one address of this machine the page is "
+            "opened by (the Host header is checked against it)"
+        )
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((host, port))
+        sock.listen(64)
+    except OSError as err:
+        sock.close()
+        raise UsageError(
+            f"--host {host} --port {port}: cannot listen there ({err.strerror or err}); expected a free port "
+            "on an address of this machine"
+        ) from err
+    sock.setblocking(False)
+    return sock
+
+
+class LiveServer:
+    """The live view of one open rig, served on ``sock``.
+
+    Parameters
+    ----------
+    rig
+        The open rig; the server drives it from its rig thread and switches its LEDs off when it stops.
+    runs
+        The runs directory: fired sequences go to new folders in it, and its runs are listed.
+    sock
+        The listening socket (:func:`bind`); its address decides the allowed ``Host`` names.
+    token
+        The session token (default: a new random one).
+    target
+        The complementary flash's target illuminant.
+    token_for_pages
+        Ask the token for every request, pages and files too; None: when the address is not loopback.
+    """
+
+    def __init__(
+        self,
+        rig: Rig,
+        runs: Path,
+        sock: socket.socket,
+        token: str | None = None,
+        target: str = "D65",
+        token_for_pages: bool | None = None,
+    ) -> None:
+        self.rig = rig
+        self.runs = Path(runs)
+        self.sock = sock
+        self.token = token or secrets.token_urlsafe(24)
+        self.target = target
+        address = sock.getsockname()
+        self.host, self.port = str(address[0]), int(address[1])
+        self.remote = not _loopback(self.host) if token_for_pages is None else token_for_pages
+        names = {"127.0.0.1", "localhost", "[::1]"} if not self.remote else set()
+        names.add(f"[{self.host}]" if ":" in self.host else self.host)
+        self.allowed_hosts = {f"{name}:{self.port}" for name in names}
+        self.allowed_origins = {f"http://{host}" for host in self.allowed_hosts}
+        self.stream = LiveStream(rig)
+        info = rig.camera.info  # read once: on a real camera each read is feature round trips
+        self.camera_model = info.model
+        self.renderer = PreviewRenderer(info, rig.camera_responsivities)
+        self.state = LiveState()
+        self.rig_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="msflash-rig")
+        self.clients: set[web.WebSocketResponse] = set()
+        self._watching = asyncio.Event()
+        self._off_timer: asyncio.TimerHandle | None = None
+        self._tasks: set[asyncio.Task] = set()
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    @property
+    def url(self) -> str:
+        """The page's address, with the token when the server listens beyond loopback."""
+        host = "127.0.0.1" if not self.remote else next(iter(self.allowed_hosts)).rsplit(":", 1)[0]
+        return f"http://{host}:{self.port}/" + (f"?token={self.token}" if self.remote else "")
+
+    # -- the application ----------------------------------------------------------------------
+    def app(self) -> web.Application:
+        """The aiohttp application (its routes, the guard middleware, start-up and shutdown)."""
+        app = web.Application(middlewares=[self._guard], client_max_size=64 * 1024)
+        app.router.add_get("/", self._index)
+        app.router.add_get("/static/{name}", self._static)
+        app.router.add_get("/ws", self._websocket)
+        app.router.add_get("/api/state", self._get_state)
+        app.router.add_get("/api/runs", self._get_runs)
+        app.router.add_get("/api/runs/{name}", self._get_run)
+        app.router.add_get("/runs/{name}/", self._run_page)
+        app.router.add_get("/runs/{name}/files/{path:.+}", self._run_file)
+        app.router.add_post("/api/settings", self._post_settings)
+        app.router.add_post("/api/levels", self._post_levels)
+        app.router.add_post("/api/leds-off", self._post_leds_off)
+        app.router.add_post("/api/sequence", self._post_sequence)
+        app.on_startup.append(self._on_startup)
+        app.on_shutdown.append(self._on_shutdown)
+        app.on_cleanup.append(self._on_cleanup)
+        return app
+
+    async def serve(self, stop: asyncio.Event) -> None:
+        """Serve until ``stop`` is set; then close the pages, switch the LEDs off and stop the rig thread."""
+        runner = web.AppRunner(self.app(), handle_signals=False, access_log=None)
+        await runner.setup()
+        site = web.SockSite(runner, self.sock)
+        await site.start()
+        try:
+            await stop.wait()
+        finally:
+            await runner.cleanup()
+
+    async def _on_startup(self, _app: web.Application) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._spawn(self._frame_loop())
+
+    async def _on_shutdown(self, _app: web.Application) -> None:
+        for ws in list(self.clients):
+            await ws.close(code=1001, message=b"server stopping")
+
+    async def _on_cleanup(self, _app: web.Application) -> None:
+        for task in list(self._tasks):
+            task.cancel()
+        for task in list(self._tasks):
+            with contextlib.suppress(BaseException):
+                await task
+        if self._off_timer is not None:
+            self._off_timer.cancel()
+        # The rig thread finishes what it is doing (a sequence ends with its LEDs off), then LEDs off.
+        await asyncio.get_running_loop().run_in_executor(self.rig_thread, self._stop_rig)
+        self.rig_thread.shutdown(wait=True)
+
+    def _stop_rig(self) -> None:
+        try:
+            self.stream.pause()
+        finally:
+            self.stream.all_off()
+
+    def _spawn(self, coroutine: Any) -> asyncio.Task:
+        task = asyncio.ensure_future(coroutine)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        return task
+
+    async def _on_rig(self, function: Any, *args: Any) -> Any:
+        return await asyncio.get_running_loop().run_in_executor(self.rig_thread, function, *args)
+
+    # -- the guard ------------------------------------------------------------------------------
+    def _token_ok(self, given: str | None) -> bool:
+        return given is not None and hmac.compare_digest(given.encode(), self.token.encode())
+
+    @web.middleware
+    async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:
+        host = request.headers.get("Host", "").lower()
+        if host not in self.allowed_hosts:
+            return _refuse(403, f"Host '{host}': expected {' or '.join(sorted(self.allowed_hosts))}")
+        origin = request.headers.get("Origin")
+        if origin is not None and origin.lower() not in self.allowed_origins:
+            return _refuse(403, f"Origin '{origin}': cross-site requests are refused; expected this page's own")
+        if request.headers.get("Sec-Fetch-Site", "same-origin") == "cross-site":
+            return _refuse(403, "Sec-Fetch-Site cross-site: refused; expected a request from this page")
+        changes_state = request.method not in ("GET", "HEAD") or request.path == "/ws"
+        given = request.headers.get(TOKEN_HEADER) or request.query.get("token")
+        if (changes_state or self.remote) and not self._token_ok(given):
+            cookie_ok = self.remote and not changes_state and self._token_ok(request.cookies.get(TOKEN_COOKIE))
+            if not cookie_ok:
+                return _refuse(403, f"the session token is missing or wrong; expected it in {TOKEN_HEADER}")
+        try:
+            return await handler(request)
+        except web.HTTPException:
+            raise
+        except UsageError as err:
+            return _refuse(400, str(err))
+        except Exception as err:  # noqa: BLE001 - any failure: LEDs off, one line to the page
+            log.error("live: %s %s failed: %s", request.method, request.path, err)
+            await self._fail(err)
+            return _refuse(500, f"{type(err).__name__}: {err} (LEDs switched off)")
+
+    async def _fail(self, err: BaseException) -> None:
+        """After an error: LEDs off (if the booth still answers), the error kept for the page."""
+        self.state.error = f"{err} — LEDs switched off"
+        try:
+            await self._on_rig(self._stop_rig)
+        except Exception as off_err:  # noqa: BLE001 - the booth may be what failed
+            log.error("live: switching the LEDs off after the error failed too: %s", off_err)
+        await self._push_state()
+
+    # -- pages and files ----------------------------------------------------------------------
+    async def _index(self, request: web.Request) -> web.Response:
+        page = _asset("index.html").replace("{{TOKEN}}", html.escape(self.token, quote=True))
+        response = web.Response(text=page, content_type="text/html", headers=_NO_STORE)
+        if self.remote:
+            response.set_cookie(TOKEN_COOKIE, self.token, httponly=True, samesite="Strict")
+        return response
+
+    async def _static(self, request: web.Request) -> web.Response:
+        name = request.match_info["name"]
+        if name not in ASSETS:
+            raise web.HTTPNotFound(text=f"{name}: no such page asset")
+        return web.Response(text=_asset(name), content_type=ASSETS[name], headers=_NO_STORE)
+
+    async def _run_file(self, request: web.Request) -> web.StreamResponse:
+        path = run_file(self.runs, request.match_info["name"], request.match_info["path"])
+        if path is None:
+            raise web.HTTPNotFound(text="no such file in a run folder")
+        return web.FileResponse(path)
+
+    async def _get_runs(self, _request: web.Request) -> web.Response:
+        return web.json_response({"runs": list_runs(self.runs)})
+
+    def _run_info(self, name: str) -> dict[str, Any]:
+        folder = run_folder(self.runs, name)
+        if folder is None:
+            raise web.HTTPNotFound(text=f"{name}: no such run")
+        summary = read_json(folder / "run.json")
+        return {
+            "name": name,
+            "files": run_files(folder),
+            "summary": summary if isinstance(summary, dict) else None,
+            "charts": run_charts(folder),
+        }
+
+    async def _get_run(self, request: web.Request) -> web.Response:
+        return web.json_response(_finite(self._run_info(request.match_info["name"])))
+
+    async def _run_page(self, request: web.Request) -> web.Response:
+        return web.Response(text=run_page(self._run_info(request.match_info["name"])), content_type="text/html")
+
+    # -- state --------------------------------------------------------------------------------
+    def state_json(self) -> dict[str, Any]:
+        """Everything the page draws."""
+        settings = self.stream.settings
+        leds = self.rig.led_spectra
+        peaks = [float(leds.wavelengths_nm[int(np.argmax(leds.values[:, i]))]) for i in range(leds.count)]
+        return _finite(
+            {
+                "rig": self.rig.name,
+                "camera": self.camera_model,
+                "exposure_us": settings.exposure_us,
+                "gain": settings.gain,
+                "exposure_range_us": list(self.stream.exposure_range_us),
+                "levels": list(settings.levels),
+                "booth_levels": list(self.stream.last_booth_levels),
+                "leds": [{"name": name, "peak_nm": peak} for name, peak in zip(leds.names, peaks)],
+                "overlay": self.state.overlay,
+                "sequence_exposure": self.state.sequence_exposure,
+                "mode": self.state.mode,
+                "job": self.state.job.to_json(),
+                "frames": self.state.frames,
+                "lost_frames": self.stream.lost_frames,
+                "clients": len(self.clients),
+                "error": self.state.error,
+                "runs": list_runs(self.runs),
+            }
+        )
+
+    async def _get_state(self, _request: web.Request) -> web.Response:
+        return web.json_response(self.state_json())
+
+    async def _push_state(self) -> None:
+        if not self.clients:
+            return
+        text = json.dumps({"type": "state", "state": self.state_json()})
+        for ws in list(self.clients):
+            with contextlib.suppress(ConnectionError, RuntimeError):
+                await ws.send_str(text)
+
+    def _busy(self) -> None:
+        if self.state.job.status == "running":
+            raise web.HTTPConflict(text="a sequence is running; expected its end first")
+
+    async def _post_settings(self, request: web.Request) -> web.Response:
+        body = await _json_object(request)
+        if "overlay" in body:
+            self.state.overlay = _boolean(body, "overlay")
+        if "sequence_exposure" in body:
+            if body["sequence_exposure"] not in ("auto", "live"):
+                raise UsageError(f"sequence_exposure {body['sequence_exposure']!r}: expected 'auto' or 'live'")
+            self.state.sequence_exposure = body["sequence_exposure"]
+        if "mode" in body:
+            if body["mode"] not in ("complementary", "matching"):
+                raise UsageError(f"mode {body['mode']!r}: expected 'complementary' or 'matching'")
+            self.state.mode = body["mode"]
+        if "exposure_us" in body or "gain" in body:
+            self._busy()
+            settings = self.stream.settings
+            exposure = _number(body, "exposure_us", settings.exposure_us)
+            gain = _number(body, "gain", settings.gain)
+            await self._on_rig(self.stream.set_exposure, exposure, gain)
+        self.state.error = None
+        await self._push_state()
+        return web.json_response(self.state_json())
+
+    async def _post_levels(self, request: web.Request) -> web.Response:
+        body = await _json_object(request)
+        self._busy()
+        levels = list(self.stream.settings.levels)
+        if "levels" in body:
+            given = body["levels"]
+            if not isinstance(given, list):
+                raise UsageError("levels: expected a list of numbers in [0, 1], one per LED")
+            levels = [_number({"levels": v}, "levels", 0.0) for v in given]
+        else:
+            channel = body.get("channel")
+            if not isinstance(channel, int) or isinstance(channel, bool) or not 0 <= channel < len(levels):
+                raise UsageError(f"channel {channel!r}: expected an LED index 0–{len(levels) - 1}")
+            levels[channel] = _number(body, "level", 0.0)
+        await self._on_rig(self.stream.set_levels, levels)
+        self.state.error = None
+        await self._push_state()
+        return web.json_response(self.state_json())
+
+    async def _post_leds_off(self, _request: web.Request) -> web.Response:
+        self._busy()
+        await self._on_rig(self.stream.all_off)
+        await self._push_state()
+        return web.json_response(self.state_json())
+
+    # -- the sequence ---------------------------------------------------------------------------
+    async def _post_sequence(self, request: web.Request) -> web.Response:
+        body = await _json_object(request)
+        self._busy()
+        if self.rig.camera_responsivities is None:
+            raise UsageError(
+                f"rig '{self.rig.name}': the flash solvers need the camera's responsivities; expected "
+                "--responsivity FILE.csv or --calibration DIR with a camera section"
+            )
+        mode = body.get("mode", self.state.mode)
+        if mode not in ("complementary", "matching"):
+            raise UsageError(f"mode {mode!r}: expected 'complementary' or 'matching'")
+        exposure: str | float = "auto" if self.state.sequence_exposure == "auto" else self.stream.settings.exposure_us
+        folder = new_run_folder(self.runs)
+        n_leds = self.rig.led_spectra.count
+        labels = ["ambient", *(f"led:{i + 1}" for i in range(n_leds)), "flash"]
+        self.state.job = SequenceJob("running", folder.name, "starting", [{"label": label} for label in labels])
+        request_ = SequenceRequest(exposure, RunOptions(mode=mode, target=self.target))
+        self._spawn(self._sequence(folder, request_))
+        await self._push_state()
+        return web.json_response({"run": folder.name}, status=202)
+
+    async def _sequence(self, folder: Path, request: SequenceRequest) -> None:
+        loop = asyncio.get_running_loop()
+        job = self.state.job
+
+        def on_phase(text: str) -> None:
+            loop.call_soon_threadsafe(self._phase, job, text)
+
+        def on_frame(step: Any, frame: Any, entry: Any) -> None:
+            preview = self.renderer.render(frame.pixels, self.state.overlay)
+            loop.call_soon_threadsafe(self._landed, job, step.index, entry.file, step.label, preview)
+
+        def work() -> dict[str, Any]:
+            self.stream.pause()
+            try:
+                summary = run_sequence(self.rig, folder, request, on_frame, on_phase)
+            except BaseException:
+                self.stream.all_off()  # the capture switched them off; the live levels say so too
+                raise
+            self._restore_levels()
+            return summary
+
+        try:
+            summary = await self._on_rig(work)
+        except Exception as err:  # noqa: BLE001 - shown on the page; the capture switched the LEDs off
+            log.error("live: the sequence into %s failed: %s", folder, err)
+            job.status, job.message = "failed", str(err)
+            self.state.error = f"sequence: {err}"
+        else:
+            job.status = "done"
+            rmse = summary.get("spectrum_rmse_vs_truth")
+            job.message = f"done in {summary['elapsed_s']:.1f} s" + (
+                f"; spectrum RMSE against the true ambient {rmse:.4f}" if rmse is not None else ""
+            )
+        job.phase = job.status
+        await self._push_state()
+
+    def _restore_levels(self) -> None:
+        """After a sequence (which ends with the LEDs off): the live levels again while a page watches."""
+        levels = self.stream.settings.levels
+        if self.clients and any(levels):
+            self.stream.set_levels(levels)
+        else:
+            self.stream.all_off()
+
+    def _phase(self, job: SequenceJob, text: str) -> None:
+        job.phase = text
+        self._spawn(self._push_state())
+
+    def _landed(self, job: SequenceJob, index: int, file: str, label: str, preview: Preview) -> None:
+        if index < len(job.steps):
+            job.steps[index] = {"label": label, "file": file}
+        self._spawn(self._send_frame(preview, source=f"sequence {label}"))
+        self._spawn(self._push_state())
+
+    # -- the live stream ------------------------------------------------------------------------
+    async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
+        ws = web.WebSocketResponse(heartbeat=10.0)
+        await ws.prepare(request)
+        self.clients.add(ws)
+        if self._off_timer is not None:
+            self._off_timer.cancel()
+            self._off_timer = None
+        self._watching.set()
+        try:
+            await ws.send_str(json.dumps({"type": "state", "state": self.state_json()}))
+            async for message in ws:  # the page sends nothing: commands are token-carrying POSTs
+                if message.type == WSMsgType.ERROR:
+                    break
+        finally:
+            self.clients.discard(ws)
+            if not self.clients:
+                self._watching.clear()
+                loop = asyncio.get_running_loop()
+                self._off_timer = loop.call_later(LAST_CLIENT_GRACE_S, lambda: self._spawn(self._last_client_gone()))
+        return ws
+
+    async def _last_client_gone(self) -> None:
+        self._off_timer = None
+        if self.clients or self.state.job.status == "running":
+            return  # a page came back; or the sequence ends with its LEDs off and restores none
+        await self._on_rig(self._stop_rig)
+
+    async def _frame_loop(self) -> None:
+        loop = asyncio.get_running_loop()
+        failed = ""
+        while True:
+            await self._watching.wait()
+            if self.state.job.status == "running":
+                await asyncio.sleep(0.1)
+                continue
+            started = loop.time()
+            try:
+                preview = await self._on_rig(self._grab)
+            except Exception as err:  # noqa: BLE001 - LEDs off, shown on the page, then try again
+                if str(err) != failed:
+                    log.error("live: the stream failed: %s", err)
+                failed = str(err)
+                await self._fail(err)
+                await asyncio.sleep(1.0)
+                continue
+            if failed:  # the stream works again: the error it showed is over
+                failed, self.state.error = "", None
+                await self._push_state()
+            await self._send_frame(preview, source="live")
+            await asyncio.sleep(max(0.0, 1.0 / MAX_FPS - (loop.time() - started)))
+
+    def _grab(self) -> Preview:
+        frame = self.stream.grab()
+        return self.renderer.render(frame.pixels, self.state.overlay)
+
+    async def _send_frame(self, preview: Preview, source: str) -> None:
+        self.state.frames += 1
+        header = json.dumps(
+            {
+                "type": "frame",
+                "n": self.state.frames,
+                "source": source,
+                "width": preview.width,
+                "height": preview.height,
+                "histogram": preview.histogram,
+                "saturated": preview.saturated_fraction,
+                "booth_levels": list(self.stream.last_booth_levels) if source == "live" else None,
+                "exposure_us": self.stream.settings.exposure_us,
+                "gain": self.stream.settings.gain,
+            }
+        ).encode()
+        message = struct.pack("<I", len(header)) + header + preview.jpeg
+        for ws in list(self.clients):
+            with contextlib.suppress(ConnectionError, RuntimeError):
+                await ws.send_bytes(message)
+
+
+_NO_STORE = {"Cache-Control": "no-store"}
+
+
+def _refuse(status: int, message: str) -> web.Response:
+    return web.json_response({"error": message}, status=status)
+
+
+def _finite(value: Any) -> Any:
+    """``value`` with NaN and infinities as None (JSON has neither) and numpy values as Python's."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+async def _json_object(request: web.Request) -> dict[str, Any]:
+    try:
+        body = await request.json()
+    except (ValueError, UnicodeDecodeError) as err:
+        raise UsageError(f"request body: not JSON ({err}); expected a JSON object") from err
+    if not isinstance(body, dict):
+        raise UsageError("request body: expected a JSON object")
+    return body
+
+
+def _number(body: dict[str, Any], key: str, default: float) -> float:
+    value = body.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise UsageError(f"{key} {value!r}: expected a finite number")
+    return float(value)
+
+
+def _boolean(body: dict[str, Any], key: str) -> bool:
+    value = body[key]
+    if not isinstance(value, bool):
+        raise UsageError(f"{key} {value!r}: expected true or false")
+    return value
+
+
+def run_page(info: dict[str, Any]) -> str:
+    """A run's report as one HTML page: its numbers, spectra, previews and every file of the folder."""
+    name = html.escape(info["name"])
+    summary = info.get("summary") or {}
+    files = info["files"]
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'>",
+        f"<title>msflash run {name}</title><link rel='stylesheet' href='/static/live.css'></head>",
+        f"<body class='report'><h1>Run {name}</h1><p><a href='/'>← live view</a></p>",
+    ]
+    if summary:
+        rows = [("frames", summary.get("frames")), ("relative residual", summary.get("relative_residual"))]
+        if "spectrum_rmse_vs_truth" in summary:
+            rows += [
+                ("spectrum RMSE vs the true ambient", summary["spectrum_rmse_vs_truth"]),
+                ("best LED fit of the truth (RMSE)", summary.get("spectrum_rmse_led_bound")),
+            ]
+        rows.append(("re-captured flash", summary.get("recaptured_mode")))
+        parts.append("<table class='summary'>")
+        for label, value in rows:
+            shown = f"{value:.4g}" if isinstance(value, float) else html.escape(str(value))
+            parts.append(f"<tr><th>{html.escape(label)}</th><td>{shown}</td></tr>")
+        parts.append("</table>")
+    else:
+        parts.append("<p>No report: the run did not finish (its sequence is listed below).</p>")
+    charts = info.get("charts")
+    if charts:
+        parts.append(f"<div class='charts'>{charts['ambient']}{charts['mixes']}</div>")
+    previews = [p for p in ("ambient.png", "matching.png", "complementary.png", "flash-capture.png") if p in files]
+    if previews:
+        parts.append("<div class='previews'>")
+        for preview in previews:
+            src = f"/runs/{name}/files/{html.escape(preview)}"
+            parts.append(f"<figure><img src='{src}' alt='{preview}'><figcaption>{preview}</figcaption></figure>")
+        parts.append("</div>")
+    parts.append("<h2>Files</h2><ul class='files'>")
+    for file in files:
+        parts.append(f"<li><a href='/runs/{name}/files/{html.escape(file)}'>{html.escape(file)}</a></li>")
+    parts.append("</ul></body></html>")
+    return "\n".join(parts)
+
+
+@contextlib.contextmanager
+def serve_in_thread(server: LiveServer) -> Iterator[LiveServer]:
+    """Serve ``server`` on its own event loop in a background thread while the block runs (tests, bench)."""
+    loop = asyncio.new_event_loop()
+    stop = asyncio.Event()
+    started = threading.Event()
+    failure: list[BaseException] = []
+
+    def main() -> None:
+        asyncio.set_event_loop(loop)
+
+        async def run() -> None:
+            started.set()
+            await server.serve(stop)
+
+        try:
+            loop.run_until_complete(run())
+        except BaseException as err:  # noqa: BLE001 - raised again in the caller's thread
+            failure.append(err)
+            started.set()
+        finally:
+            loop.close()
+
+    thread = threading.Thread(target=main, name="msflash-live", daemon=True)
+    thread.start()
+    started.wait()
+    try:
+        yield server
+    finally:
+        if not loop.is_closed():
+            loop.call_soon_threadsafe(stop.set)
+        thread.join(timeout=60)
+        if failure:
+            raise failure[0]
