@@ -15,7 +15,20 @@ import pytest
 
 from msflash.acquisition.app import cli
 
-HEAVY = ("matplotlib", "colour", "scipy.stats", "dask", "gi", "OpenImageIO", "cvxpy", "scipy.linalg", "scipy.optimize")
+HEAVY = (
+    "matplotlib",
+    "colour",
+    "scipy.stats",
+    "dask",
+    "gi",
+    "OpenImageIO",
+    "cvxpy",
+    "scipy.linalg",
+    "scipy.optimize",
+    "tifffile",
+    "rawpy",
+    "ome_types",
+)
 """Libraries ``msflash --help`` must not import (their packages or anything under them)."""
 
 
