@@ -37,7 +37,8 @@ def _default_out(sequence: Path) -> Path:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from msflash.acquisition.export.sequence_export import check_out, export_sequence, parse_formats
+    from msflash.acquisition.export.formats import parse_formats
+    from msflash.acquisition.export.sequence_export import check_out, export_sequence
     from msflash.acquisition.sequence.format import read_sequence
 
     formats = parse_formats(args.to, "--to")

@@ -2,7 +2,6 @@
 
 Public objects
 --------------
-- :data:`EXPORT_FORMATS` and :func:`parse_formats`: the formats, and ``--to dng,csv`` checked.
 - :func:`check_export`: the refusals made before anything is written.
 - :class:`ExportResult` and :func:`export_sequence`: the files written, into a folder that appears
   complete or not at all.
@@ -47,6 +46,7 @@ import numpy as np
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.export.dng import write_dng
 from msflash.acquisition.export.exr_metadata import exr_metadata, led_peaks_nm
+from msflash.acquisition.export.formats import EXPORT_FORMATS
 from msflash.acquisition.export.ome_tiff import OmeLight, OmePlane, write_ome_tiff
 from msflash.acquisition.export.spectra_csv import SpectrumColumn, write_spectra_csv
 from msflash.acquisition.progress import progress
@@ -60,33 +60,7 @@ from msflash.processing.flash import FlashSolution
 from msflash.processing.raw_colour import camera_matrix, camera_neutral
 from msflash.processing.render import demosaic_bilinear
 
-EXPORT_FORMATS = ("dng", "ome-tiff", "csv", "exr")
-"""What ``msflash export --to`` and ``run --export`` write."""
-
 FLASH_MODES = ("matching", "complementary")
-
-
-def parse_formats(text: str, option: str = "--to") -> tuple[str, ...]:
-    """Formats from ``dng`` or ``dng,csv`` (order kept, repeats dropped).
-
-    Raises
-    ------
-    UsageError
-        Naming the option and the unknown name.
-
-    Examples
-    --------
-    >>> parse_formats("dng, csv,dng")
-    ('dng', 'csv')
-    """
-    names = [name.strip().lower() for name in text.split(",")]
-    unknown = [name for name in names if name not in EXPORT_FORMATS]
-    if unknown or not names:
-        raise UsageError(
-            f"{option} {text}: unknown format {unknown[0]!r}; expected one or more of {', '.join(EXPORT_FORMATS)}, "
-            "comma-separated"
-        )
-    return tuple(dict.fromkeys(names))
 
 
 def check_export(sequence: Sequence, formats: tuple[str, ...]) -> None:
@@ -372,7 +346,7 @@ def export_sequence(
     out
         A folder that does not exist yet, in one that does.
     estimate, solutions
-        The ambient estimate and the matching/complementary flash already made (``run``), or
+        The ambient estimate (photons) and the matching/complementary flash already made (``run``), or
         None to make them here through :mod:`acquisition.session.analysis` (the one route).
     target
         The complementary flash's target illuminant.
@@ -387,6 +361,9 @@ def export_sequence(
         From reading the frames or estimating (nothing is left behind).
     """
     out = Path(out)
+    unknown = [name for name in formats if name not in EXPORT_FORMATS]
+    if unknown:
+        raise UsageError(f"export format {unknown[0]!r} is unknown; expected some of {', '.join(EXPORT_FORMATS)}")
     check_out(out, option)
     check_export(sequence, formats)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".export-tmp", dir=out.parent))

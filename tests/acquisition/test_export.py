@@ -338,3 +338,57 @@ def test_a_frame_failing_midway_leaves_nothing(capsys, grbg_sequence: Path, tmp_
     assert status == 2, err
     assert last in err.strip().splitlines()[-1]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["seq"]
+
+
+# -- the EXRs other commands write, and run --export ---------------------------------------------
+def test_flash_out_exr_carries_chromaticities_units_and_led_names(capsys, tmp_path: Path) -> None:
+    out = tmp_path / "flash.exr"
+    status, _, err = run(capsys, "flash", str(RGB_SAMPLE), "--mode", "complementary", "--out", str(out))
+    assert status == 0, err
+    spec, _ = exr_header(out)
+    sequence = read_sequence(RGB_SAMPLE)
+    matrix = camera_matrix(sequence.camera_responsivities()).camera_to_xyz
+    white = matrix.sum(axis=1) / matrix.sum()
+    np.testing.assert_allclose(np.asarray(spec.getattribute("chromaticities"))[6:], white[:2], atol=1e-6)
+    assert "per µs" in spec.getattribute("msflash:units")
+    assert spec.getattribute("msflash:led_names") == ", ".join(led.name for led in sequence.leds)
+
+
+def test_run_export_writes_dngs_whose_neutrals_follow_each_frames_light(capsys, tmp_path: Path) -> None:
+    """A sim run with a Bayer camera: the ambient DNG's neutral is near the true ambient's, and the flash
+    frame's is the estimate plus the re-captured flash levels."""
+    out = tmp_path / "run"
+    status, _, err = run(capsys, "run", "--rig", "sim", "--cfa", "RGGB", "--out", str(out), "--export", "dng,csv")
+    assert status == 0, err
+    summary = json.loads((out / "run.json").read_text())
+    assert summary["export"]["formats"] == ["dng", "csv"]
+    assert sorted(Path(f).name for f in summary["export"]["files"]) == sorted(
+        p.name for p in (out / "export").iterdir()
+    )
+    sequence_dir = out / "sequence"
+    sequence = read_sequence(sequence_dir)
+    document = json.loads((sequence_dir / "sequence.json").read_text())
+    truth = np.asarray(document["msflash"]["true_ambient"]["spd"])  # energy, the sequence's grid
+    estimate = json.loads((out / "estimate.json").read_text())
+    spectrum = np.asarray(estimate["spectrum"])
+    leds = np.column_stack([led.spd for led in sequence.leds])
+    with rawpy.imread(str(out / "export" / "000-ambient.dng")) as raw:
+        multipliers = np.asarray(raw.camera_whitebalance[:3])
+        np.testing.assert_array_equal(raw.raw_image, sequence.load_frame(0))
+    np.testing.assert_allclose(multipliers[1] / multipliers, independent_neutral(sequence_dir, truth), rtol=0.03)
+    flash = sequence.indices("flash")[-1]
+    with rawpy.imread(str(out / "export" / f"{Path(sequence.frames[flash].file).stem}.dng")) as raw:
+        multipliers = np.asarray(raw.camera_whitebalance[:3])
+    light = spectrum + leds @ np.asarray(sequence.frames[flash].led_levels)
+    np.testing.assert_allclose(multipliers[1] / multipliers, independent_neutral(sequence_dir, light), rtol=1e-5)
+    spec, _ = exr_header(out / "complementary.exr")  # run's own EXR: a mosaic, so no chromaticities
+    assert spec.getattribute("msflash:cfa") == "RGGB"
+    assert spec.getattribute("msflash:led_names") == ", ".join(led.name for led in sequence.leds)
+
+
+def test_run_export_dng_of_an_rgb_rig_is_refused_before_capture(capsys, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    status, stdout, err = run(capsys, "run", "--rig", "sim", "--out", str(out), "--export", "dng")
+    assert status == 2
+    assert err.strip().splitlines()[-1].startswith("msflash: error: --export dng")
+    assert not (out / "sequence").exists()
