@@ -392,3 +392,23 @@ def test_run_export_dng_of_an_rgb_rig_is_refused_before_capture(capsys, tmp_path
     assert status == 2
     assert err.strip().splitlines()[-1].startswith("msflash: error: --export dng")
     assert not (out / "sequence").exists()
+
+
+def test_dng_of_float_frames_is_refused(capsys, tmp_path: Path) -> None:
+    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+    from tests.helpers import GRID
+
+    directory = tmp_path / "float"
+    camera = SequenceCamera(
+        model="float", serial=None, pixel_format="BayerRG32f", cfa="RGGB", black_level=0.0, white_level=1.0
+    )
+    led = SequenceLed("led", np.exp(-(((GRID.wavelengths_nm - 550.0) / 20.0) ** 2)))
+    with SequenceWriter(
+        directory, wavelengths_nm=GRID.wavelengths_nm, spectral_unit="energy", camera=camera, leds=[led]
+    ) as writer:
+        writer.add_frame(np.full((16, 16), 0.1, np.float32), "ambient", [0.0], exposure_us=1000.0, gain=1.0)
+        writer.add_frame(np.full((16, 16), 0.3, np.float32), "led", [1.0], exposure_us=1000.0, gain=1.0)
+    out = tmp_path / "out"
+    status, stdout, err = run(capsys, "export", str(directory), "--to", "dng", "--out", str(out))
+    assert_bad_input(status, stdout, err, "float32", "integer counts")
+    assert not out.exists()
