@@ -116,7 +116,17 @@ class _Work:
     def estimate(self) -> AmbientEstimate:
         if self.estimate_given is None:
             progress(f"estimating the ambient of {self.sequence.directory}")
-            self.estimate_given = analysis.estimate_sequence(self.sequence)
+            estimate = analysis.estimate_sequence(self.sequence)
+            if estimate.ambient_is_dark:
+                index = self.sequence.indices("ambient")[0]
+                raise UsageError(
+                    f"{self.sequence.path}: frames[{index}].file '{self.sequence.frames[index].file}': the ambient "
+                    f"image holds no light (z-score {estimate.ambient_z:.2g}); expected an ambient to estimate for "
+                    "the neutral, the spectra and the flash images (--to ome-tiff needs none)"
+                )
+            for warning in estimate.warnings:
+                self.note(f"estimate: {warning}")
+            self.estimate_given = estimate
         return self.estimate_given
 
     def solutions(self) -> dict[str, FlashSolution]:

@@ -412,3 +412,25 @@ def test_dng_of_float_frames_is_refused(capsys, tmp_path: Path) -> None:
     status, stdout, err = run(capsys, "export", str(directory), "--to", "dng", "--out", str(out))
     assert_bad_input(status, stdout, err, "float32", "integer counts")
     assert not out.exists()
+
+
+def test_a_dark_ambient_is_refused_for_what_needs_an_estimate_and_leaves_nothing(
+    capsys, grbg_sequence: Path, tmp_path: Path
+) -> None:
+    import shutil
+
+    from msflash.acquisition.sequence.image_files import write_image
+    from tests.helpers import forget_digests
+
+    copy = tmp_path / "seq"
+    shutil.copytree(grbg_sequence, copy)
+    sequence = read_sequence(copy)
+    ambient = sequence.frame_path(0)
+    write_image(ambient, np.full(sequence.load_frame(0).shape, sequence.camera.black_level, np.uint16))
+    forget_digests(copy)
+    out = tmp_path / "out"
+    status, stdout, err = run(capsys, "export", str(copy), "--to", "csv", "--out", str(out))
+    assert status == 2 and stdout == ""
+    last = err.strip().splitlines()[-1]  # after the progress lines: "exporting csv", "estimating"
+    assert last.startswith("msflash: error: ") and "frames[0].file" in last and "holds no light" in last
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["seq"]
