@@ -8,7 +8,8 @@ Public objects
 What a raw developer needs (Adobe DNG Specification 1.4): ``DNGVersion``, ``UniqueCameraModel``,
 the CFA (``CFARepeatPatternDim``, ``CFAPattern``, ``CFAPlaneColor``, ``CFALayout``), ``BlackLevel``
 and ``WhiteLevel``, ``ColorMatrix1`` (XYZ → camera under ``CalibrationIlluminant1``) and
-``AsShotNeutral`` (the camera RGB of white under the scene's light, which it white-balances to).
+``AsShotNeutral`` (the camera RGB of white under the scene's light, which it white-balances to),
+and EXIF ``ExposureTime``.
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ def write_dng(
     xyz_to_camera: np.ndarray,
     camera_model: str,
     description: str = "",
+    exposure_us: float | None = None,
 ) -> Path:
     """Write one raw mosaic as a DNG (Bayer CFA, uncompressed 16-bit).
 
@@ -69,6 +71,8 @@ def write_dng(
         ``UniqueCameraModel`` and ``Model``.
     description
         ``ImageDescription`` (what the frame is).
+    exposure_us
+        The frame's exposure, written as EXIF ``ExposureTime`` (seconds), or None.
 
     Raises
     ------
@@ -106,6 +110,8 @@ def write_dng(
         (50778, "H", 1, _D65, True),  # CalibrationIlluminant1
         (50728, _RATIONAL, 3, _rationals(neutral_values), True),  # AsShotNeutral
     ]
+    if exposure_us is not None:
+        tags.append((33434, _RATIONAL, 1, (round(exposure_us), 1_000_000), True))  # ExposureTime, s
     path = Path(path)
     with tifffile.TiffWriter(path) as writer:
         writer.write(

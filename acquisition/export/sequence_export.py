@@ -199,6 +199,7 @@ def _write_dng(work: _Work, out: Path) -> None:
             matrix.xyz_to_camera,
             sequence.camera.model,
             json.dumps({"msflash:" + key: value for key, value in _frame_notes(sequence, index).items()}),
+            frame.exposure_us,
         )
         work.files.append(path)
 

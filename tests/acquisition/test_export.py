@@ -131,6 +131,7 @@ def test_dng_colour_matrix_is_the_camera_fit_and_libraw_reads_it(capsys, grbg_se
         assert tuple(tags["DNGVersion"].value) == (1, 4, 0, 0)
         assert tags["UniqueCameraModel"].value == "test-render"
         assert tags["CalibrationIlluminant1"].value == 21  # D65
+        assert tags["ExposureTime"].value == (round(sequence.frames[0].exposure_us), 1_000_000)  # seconds
         pairs = np.asarray(tags["ColorMatrix1"].value, dtype=float).reshape(9, 2)
         np.testing.assert_allclose(pairs[:, 0] / pairs[:, 1], matrix.xyz_to_camera.ravel(), atol=1e-6)
     with rawpy.imread(str(out / "000-ambient.dng")) as raw:
