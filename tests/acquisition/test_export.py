@@ -172,7 +172,7 @@ def test_ome_tiff_holds_every_frame_with_led_wavelengths_exposures_and_gains(
     assert path.name == "sequence.ome.tif"
     sequence = read_sequence(sample)
     peaks = [float(sequence.wavelengths_nm[np.argmax(led.spd)]) for led in sequence.leds]
-    document = ome_types.from_tiff(path)  # validates against the OME schema
+    document = ome_types.from_tiff(path, validate=True)  # against the OME 2016-06 XSD (lxml)
     with tifffile.TiffFile(path) as tiff:
         assert ome_types.from_xml(tiff.ome_metadata) == document
     pixels = document.images[0].pixels
