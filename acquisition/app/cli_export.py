@@ -7,7 +7,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import print_json
+from msflash.acquisition.app.cli_common import print_json, progress
+from msflash.acquisition.app.options import add_estimation_options
 from msflash.acquisition.errors import UsageError
 from msflash.processing.user_files import shown_path
 
@@ -40,13 +41,19 @@ def _export(args: argparse.Namespace) -> int:
     from msflash.acquisition.export.formats import parse_formats
     from msflash.acquisition.export.sequence_export import check_out, export_sequence
     from msflash.acquisition.sequence.format import read_sequence
+    from msflash.acquisition.session.analysis import apply_calibration
 
     formats = parse_formats(args.to, "--to")
     directory = _sequence_directory(args.sequence)
     out = Path(args.out) if args.out is not None else _default_out(directory)
     check_out(out, "--out")
-    sequence = read_sequence(directory)
-    result = export_sequence(sequence, formats, out, target=args.target)
+    # As estimate and flash read it: the calibration given, or the one the sequence references.
+    sequence, notes = apply_calibration(read_sequence(directory), args.calibration)
+    for note in notes:
+        progress(note)
+    result = export_sequence(
+        sequence, formats, out, target=args.target, solver=args.solver, alpha=args.alpha, bin_factor=args.bin
+    )
     if args.json:
         print_json(
             {
@@ -76,6 +83,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     export.add_argument(
         "--target", default="D65", help="complementary flash target (name or CSV file), for csv and exr"
+    )
+    add_estimation_options(export)
+    export.add_argument(
+        "--calibration",
+        metavar="DIR",
+        default=None,
+        help="LED spectra / responsivities from this calibration (msflash calibrate) override the sequence's",
     )
     export.add_argument("--json", action="store_true", help="print one JSON object")
     export.set_defaults(handler=_export)

@@ -109,6 +109,9 @@ class _Work:
     target: str
     estimate_given: AmbientEstimate | None
     solutions_given: dict[str, FlashSolution] | None
+    solver: str = "tikhonov"
+    alpha: float | str = "auto"
+    bin_factor: int = analysis.DEFAULT_BIN_FACTOR
     files: list[Path] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     details: dict = field(default_factory=dict)
@@ -116,7 +119,7 @@ class _Work:
     def estimate(self) -> AmbientEstimate:
         if self.estimate_given is None:
             progress(f"estimating the ambient of {self.sequence.directory}")
-            estimate = analysis.estimate_sequence(self.sequence)
+            estimate = analysis.estimate_sequence(self.sequence, self.solver, self.alpha, bin_factor=self.bin_factor)
             if estimate.ambient_is_dark:
                 index = self.sequence.indices("ambient")[0]
                 raise UsageError(
@@ -341,6 +344,9 @@ def export_sequence(
     estimate: AmbientEstimate | None = None,
     solutions: dict[str, FlashSolution] | None = None,
     target: str = "D65",
+    solver: str = "tikhonov",
+    alpha: float | str = "auto",
+    bin_factor: int = analysis.DEFAULT_BIN_FACTOR,
     option: str = "--out",
 ) -> ExportResult:
     """Write ``formats`` of ``sequence`` into the new folder ``out``.
@@ -361,6 +367,8 @@ def export_sequence(
         None to make them here through :mod:`acquisition.session.analysis` (the one route).
     target
         The complementary flash's target illuminant.
+    solver, alpha, bin_factor
+        How the ambient is estimated when ``estimate`` is None (:func:`acquisition.session.analysis.estimate_sequence`).
     option
         The option ``out`` came from, for messages.
 
@@ -380,7 +388,7 @@ def export_sequence(
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".export-tmp", dir=out.parent))
     mode = default_file_mode()
     staging.chmod(mode | (mode & 0o444) >> 2)  # mkdtemp's 0700 would keep other lab users out: what mkdir gives
-    work = _Work(sequence, target, estimate, solutions)
+    work = _Work(sequence, target, estimate, solutions, solver, alpha, bin_factor)
     try:
         for name in formats:
             progress(f"exporting {name} of {sequence.directory}")

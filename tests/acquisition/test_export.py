@@ -435,3 +435,21 @@ def test_a_dark_ambient_is_refused_for_what_needs_an_estimate_and_leaves_nothing
     last = err.strip().splitlines()[-1]  # after the progress lines: "exporting csv", "estimating"
     assert last.startswith("msflash: error: ") and "frames[0].file" in last and "holds no light" in last
     assert sorted(p.name for p in tmp_path.iterdir()) == ["seq"]
+
+
+def test_the_estimation_options_are_those_of_estimate(capsys, tmp_path: Path) -> None:
+    out = tmp_path / "csv"
+    status, _, err = run(capsys, "export", str(BAYER_SAMPLE), "--to", "csv", "--out", str(out), "--solver", "nonneg")
+    assert status == 0, err
+    header, table = read_table(out / "spectra.csv")
+    status, stdout, err = run(
+        capsys, "estimate", str(BAYER_SAMPLE), "--method", "global", "--solver", "nonneg", "--json"
+    )
+    assert status == 0, err
+    estimate = json.loads(stdout)
+    assert estimate["solver"] == "nonneg"
+    np.testing.assert_allclose(
+        table[:, header.index("ambient estimate [relative energy]")], estimate["spectrum"], rtol=1e-9
+    )
+    _, default = read_table(Path(export(capsys, BAYER_SAMPLE, "csv", tmp_path / "default")["files"][0]))
+    assert not np.allclose(default[:, 1], table[:, 1])  # the option changed the estimate
