@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.errors import UsageError
+from msflash.acquisition.errors import OutputWriteError, UsageError
 from msflash.acquisition.export.dng import write_dng
 from msflash.acquisition.export.exr_metadata import exr_metadata, led_peaks_nm
 from msflash.acquisition.export.formats import EXPORT_FORMATS
@@ -378,6 +378,8 @@ def export_sequence(
         As :func:`check_out` and :func:`check_export`.
     RecordingError, SpectralDataError
         From reading the frames or estimating (nothing is left behind).
+    OutputWriteError
+        If writing fails (disk full…): nothing is left behind.
     """
     out = Path(out)
     unknown = [name for name in formats if name not in EXPORT_FORMATS]
@@ -385,15 +387,27 @@ def export_sequence(
         raise UsageError(f"export format {unknown[0]!r} is unknown; expected some of {', '.join(EXPORT_FORMATS)}")
     check_out(out, option)
     check_export(sequence, formats)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".export-tmp", dir=out.parent))
-    mode = default_file_mode()
-    staging.chmod(mode | (mode & 0o444) >> 2)  # mkdtemp's 0700 would keep other lab users out: what mkdir gives
+    try:
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".export-tmp", dir=out.parent))
+    except OSError as err:
+        raise UsageError(
+            f"{option} {out}: cannot be created in {out.parent} ({err.strerror or err}); expected a writable folder"
+        ) from None
     work = _Work(sequence, target, estimate, solutions, solver, alpha, bin_factor)
     try:
+        mode = default_file_mode()
+        staging.chmod(mode | (mode & 0o444) >> 2)  # mkdtemp's 0700 would keep other lab users out: what mkdir gives
         for name in formats:
             progress(f"exporting {name} of {sequence.directory}")
             _WRITERS[name](work, staging)
         staging.rename(out)
+    except OSError as err:
+        with contextlib.suppress(OSError):
+            shutil.rmtree(staging)
+        raise OutputWriteError(
+            f"{option} {out}: could not be written ({err.strerror or err}); expected a writable disk with room "
+            "for it (nothing was left)"
+        ) from None
     except BaseException:
         with contextlib.suppress(OSError):
             shutil.rmtree(staging)

@@ -453,3 +453,23 @@ def test_the_estimation_options_are_those_of_estimate(capsys, tmp_path: Path) ->
     )
     _, default = read_table(Path(export(capsys, BAYER_SAMPLE, "csv", tmp_path / "default")["files"][0]))
     assert not np.allclose(default[:, 1], table[:, 1])  # the option changed the estimate
+
+
+def test_a_full_disk_midway_is_one_runtime_error_and_leaves_nothing(
+    capsys, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import errno
+
+    from msflash.acquisition.export import sequence_export
+
+    def full(path, wavelengths, columns):  # noqa: ANN001 - write_spectra_csv's signature
+        Path(path).write_text("partial")
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(sequence_export, "write_spectra_csv", full)
+    out = tmp_path / "out"
+    status, stdout, err = run(capsys, "export", str(BAYER_SAMPLE), "--to", "ome-tiff,csv", "--out", str(out))
+    assert status == 1 and stdout == ""
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"msflash: error: --out {out}: could not be written (No space left on device)")
+    assert list(tmp_path.iterdir()) == []
