@@ -38,6 +38,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "msflash.acquisition.app.cli_check",
         "check every frame file of a sequence against the SHA-256 recorded when it was written",
     ),
+    "export": (
+        "msflash.acquisition.app.cli_export",
+        "write a sequence as DNG (raw frames), OME-TIFF (all frames), CSV (spectra) or EXR (linear images)",
+    ),
     "run": (
         "msflash.acquisition.app.cli_run",
         "the main job: capture, estimate, flash, re-capture, synthesise, report",

@@ -11,6 +11,7 @@ import numpy as np
 
 from msflash.acquisition.app.cli_common import UsageError, positive_int, print_json, progress
 from msflash.acquisition.app.options import add_estimation_options
+from msflash.acquisition.export.exr_metadata import exr_metadata
 from msflash.acquisition.sequence.format import Sequence, read_sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
 from msflash.acquisition.session import analysis
@@ -328,7 +329,8 @@ def _write_flash_image(
     kind = _check_output_type(output)
     try:
         if kind == "exr":
-            write_image(output, image, {**metadata, "msflash:units": "value per us*gain"})
+            exr = exr_metadata(sequence, 1 if image.ndim == 2 else image.shape[2])
+            write_image(output, image, {**metadata, **exr.attributes}, exr.chromaticities)
             return
         ambient = sequence.frames[stack.ambient_index]
         white = sequence.camera.white_level

@@ -240,6 +240,11 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
                 f"rig '{spec}': the flash solvers need the camera's responsivities; expected "
                 "--responsivity FILE.csv (wavelength_nm, R, G, B) or a calibration with a camera section"
             )
+        if args.export and "dng" in args.export and rig.camera.info.cfa is None:
+            raise UsageError(
+                f"--export {','.join(args.export)}: rig '{spec}' gives RGB (debayered) frames, and a DNG holds a raw "
+                "mosaic; expected a raw (CFA) camera for dng (--cfa on the sim rig), or ome-tiff/exr for RGB"
+            )
         exposure = plan_exposure(rig, args.exposure, _policy(args))
         report_exposure(exposure, list(rig.led_spectra.names))
         with sequence_writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
@@ -285,6 +290,19 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
             f"spectrum RMSE against the true ambient {summary['spectrum_rmse_vs_truth']:.4f}; the best "
             f"non-negative LED fit of it {summary['spectrum_rmse_led_bound']:.4f} (what the LEDs allow)"
         )
+    if args.export:
+        from msflash.acquisition.export.sequence_export import export_sequence
+
+        exported = export_sequence(
+            sequence, args.export, out / "export", estimate=estimate, solutions=solutions, target=args.target
+        )
+        for note in exported.notes:
+            progress(f"note: {note}")
+        summary["export"] = {
+            "formats": list(args.export),
+            "files": [str(path) for path in exported.files],
+            "notes": list(exported.notes),
+        }
     summary["exposure"] = {
         **exposure.to_dict(),
         "flash_exposure_us": flash_us,
@@ -318,6 +336,15 @@ def _capture_claimed(args: argparse.Namespace, out: Path) -> int:
         path = capture_sequence(rig, out, args.exposure, _policy(args), args.sync)
     print(path)
     return 0
+
+
+def _export_formats(text: str) -> tuple[str, ...]:
+    from msflash.acquisition.export.formats import parse_formats
+
+    try:
+        return parse_formats(text, "--export")
+    except UsageError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def _flash_power(text: str) -> float:
@@ -500,6 +527,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     run.add_argument("--target", default="D65", help="complementary target illuminant (name or CSV file)")
     add_estimation_options(run)
+    run.add_argument(
+        "--export",
+        default=None,
+        type=_export_formats,
+        help="also export into OUT/export: dng, ome-tiff, csv, exr, comma-separated (as msflash export --to)",
+    )
     run.add_argument(
         "--from-disk",
         action="store_true",

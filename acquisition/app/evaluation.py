@@ -40,6 +40,7 @@ import numpy as np
 
 from msflash.acquisition.app.cli_common import dumps_json, progress
 from msflash.acquisition.app.html_report import HtmlReport
+from msflash.acquisition.export.exr_metadata import LINEAR_UNITS
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import write_image
 from msflash.acquisition.session import analysis
@@ -52,9 +53,10 @@ from msflash.acquisition.session.chart_layout import (
 )
 from msflash.processing import colour_metrics, datasets, lights, water
 from msflash.processing.ambient import estimate_ambient
-from msflash.processing.errors import TargetUnreachableWarning
+from msflash.processing.errors import SpectralDataError, TargetUnreachableWarning
 from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
 from msflash.processing.image_formation import chart_scene
+from msflash.processing.raw_colour import rgb_chromaticities
 from msflash.processing.render import camera_to_srgb_linear, camera_to_xyz_matrix, demosaic_bilinear, encode_srgb
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
@@ -74,16 +76,18 @@ class ColourContext:
     camera_to_xyz: np.ndarray
     reference: colour_metrics.ReferenceChart
     cfa: str | None
+    led_names: tuple[str, ...] = ()
+    """The LEDs of the images, named in the EXRs written (:func:`write_outputs`)."""
 
 
 def colour_context(
-    camera_photons: Spectra, grid: WavelengthGrid, layout: ChartLayout, cfa: str | None
+    camera_photons: Spectra, grid: WavelengthGrid, layout: ChartLayout, cfa: str | None, led_names: tuple[str, ...] = ()
 ) -> ColourContext:
     """Camera → XYZ fitted on the Macbeth chart under D65, and the ideal chart under D65 (Fig. 9)."""
     chart = datasets.macbeth().resample(grid, outside="edge")
     d65 = datasets.illuminant("D65", grid)
     matrix = camera_to_xyz_matrix(camera_photons, chart, d65.to_unit("photons"))
-    return ColourContext(layout, matrix, colour_metrics.reference_chart(chart, d65), cfa)
+    return ColourContext(layout, matrix, colour_metrics.reference_chart(chart, d65), cfa, led_names)
 
 
 def full_rgb(image: np.ndarray, cfa: str | None) -> np.ndarray:
@@ -179,10 +183,22 @@ def write_outputs(
     """``name.exr`` (linear camera RGB), ``name.tiff`` (16-bit sRGB) and ``name.png`` (8-bit sRGB), all with metadata."""
     attributes = {f"msflash:{key}": value for key, value in metadata.items()}
     linear = full_rgb(image, context.cfa) * (white_balance if white_balance is not None else 1.0)
+    # What the RGB means to a viewer: the camera's primaries (balanced by the von Kries gains when given).
+    camera_to_xyz = context.camera_to_xyz / (white_balance if white_balance is not None else 1.0)
+    try:
+        chromaticities: tuple[float, ...] | None = rgb_chromaticities(camera_to_xyz)
+    except SpectralDataError:
+        chromaticities = None
     write_image(
         out / f"{name}.exr",
         linear.astype(np.float32),
-        {**attributes, "msflash:content": "linear camera RGB per µs·gain"},
+        {
+            **attributes,
+            "msflash:content": "linear camera RGB per µs·gain",
+            "msflash:units": LINEAR_UNITS,
+            "msflash:led_names": ", ".join(context.led_names),
+        },
+        chromaticities,
     )
     png, encoded = preview_png(image, context, scale, white_balance, metadata)
     write_image(
@@ -253,7 +269,7 @@ def evaluate_sequence(
         saturated |= flash_saturated
     layout = found.build(ambient.shape[:2], saturated)
     uniformity = check_layout(ambient, layout, cfa)
-    context = colour_context(camera, sequence.grid, layout, cfa)
+    context = colour_context(camera, sequence.grid, layout, cfa, tuple(led.name for led in sequence.leds))
     d65_white = camera.values.T @ datasets.illuminant("D65", sequence.grid).to_unit("photons").values[:, 0]
     gains = colour_metrics.von_kries_gains(camera.values.T @ estimate.spectrum.values[:, 0], d65_white)
     noise_image = "complementary-capture" if "complementary-capture" in images else "complementary"
@@ -496,7 +512,7 @@ def study_ambient(
     recapture = _capture(world, CapturePlan.single(recapture_weights, exposure))[0]
     images["complementary-capture"] = linear(recapture)
     layout = chart_layout(frames[0].shape[:2], "macbeth", patch_px, 2, 2 if cfa else 1, excluded=saturated)
-    context = colour_context(camera, grid, layout, cfa)
+    context = colour_context(camera, grid, layout, cfa, world.led_spectra.names)
     gains = colour_metrics.von_kries_gains(
         camera.values.T @ estimate.spectrum.values[:, 0], camera.values.T @ target.values[:, 0]
     )

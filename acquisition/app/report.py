@@ -13,6 +13,7 @@ import numpy as np
 
 from msflash.acquisition.app.cli_common import dumps_json
 from msflash.acquisition.errors import OutputWriteError
+from msflash.acquisition.export.exr_metadata import exr_metadata
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import write_image
 from msflash.acquisition.session import analysis
@@ -184,7 +185,13 @@ def _write_run_report(
     previews = {"ambient": write_png(out / "ambient.png", srgb_preview(linear_rgb(sequence, ambient_linear), matrix))}
     for name, solution in solutions.items():
         image, _ = synthesize(stack.ambient, stack.led_frames, stack.spec, solution.flash_weights)
-        write_image(out / f"{name}.exr", image, {"msflash:flash_weights": solution.flash_weights.tolist()})
+        exr = exr_metadata(sequence, 1 if image.ndim == 2 else image.shape[2])
+        write_image(
+            out / f"{name}.exr",
+            image,
+            {**exr.attributes, "msflash:flash_weights": solution.flash_weights.tolist()},
+            exr.chromaticities,
+        )
         previews[name] = write_png(out / f"{name}.png", srgb_preview(linear_rgb(sequence, image), matrix))
     flash_indices = sequence.indices("flash")
     if flash_indices:

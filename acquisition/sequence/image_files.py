@@ -261,17 +261,27 @@ def _set_native_attribute(spec: oiio.ImageSpec, name: str, value: object) -> Non
         spec.attribute(name, oiio.TypeDesc(f"float[{len(value)}]"), tuple(float(v) for v in value))
 
 
-def write_image(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | None = None) -> Path:
+def write_image(
+    path: str | os.PathLike,
+    pixels: np.ndarray,
+    attributes: dict | None = None,
+    chromaticities: tuple[float, ...] | None = None,
+) -> Path:
     """Write a frame image atomically: a temporary file in the same directory, then ``os.replace``.
 
     As :func:`write_image_digest`, returning the written file's path.
     """
     path = Path(path)
-    write_image_digest(path, pixels, attributes)
+    write_image_digest(path, pixels, attributes, chromaticities)
     return path
 
 
-def write_image_digest(path: str | os.PathLike, pixels: np.ndarray, attributes: dict | None = None) -> FileDigest:
+def write_image_digest(
+    path: str | os.PathLike,
+    pixels: np.ndarray,
+    attributes: dict | None = None,
+    chromaticities: tuple[float, ...] | None = None,
+) -> FileDigest:
     """Write a frame image atomically and return the SHA-256 and length of the bytes written.
 
     The file is written to a temporary file in the same directory, then moved into place with
@@ -291,6 +301,10 @@ def write_image_digest(path: str | os.PathLike, pixels: np.ndarray, attributes: 
     attributes
         ``msflash:``-prefixed metadata (``msflash:role``, ``msflash:exposure_us``,
         ``msflash:led_levels``…) with JSON-compatible values, so the file describes itself.
+    chromaticities
+        EXR only: xy of the R, G, B primaries and of white (8 values), the standard
+        ``chromaticities`` attribute viewers use to interpret the RGB
+        (:func:`processing.raw_colour.rgb_chromaticities`); ignored for TIFF.
 
     Returns
     -------
@@ -322,6 +336,12 @@ def write_image_digest(path: str | os.PathLike, pixels: np.ndarray, attributes: 
         format_name = "openexr"
         for name, value in attributes.items():
             _set_native_attribute(spec, name, value)
+        if chromaticities is not None:
+            if len(chromaticities) != 8:
+                raise RecordingError(
+                    f"{path}: {len(chromaticities)} chromaticities; expected 8 (x, y of R, G, B, white)"
+                )
+            spec.attribute("chromaticities", oiio.TypeDesc("float[8]"), tuple(float(v) for v in chromaticities))
 
     path.parent.mkdir(parents=True, exist_ok=True)
     # The temporary name keeps the real suffix and starts with a dot, so a crash leaves an

@@ -27,6 +27,9 @@ HEAVY = (
     "scipy.optimize",
     "aiohttp",
     "selenium",
+    "tifffile",
+    "rawpy",
+    "ome_types",
 )
 """Libraries ``msflash --help`` must not import (their packages or anything under them)."""
 

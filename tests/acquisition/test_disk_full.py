@@ -64,7 +64,7 @@ def test_a_full_disk_while_writing_the_run_report_is_one_runtime_error(
     — it was an OSError traceback (checked by hand on a 760 kB tmpfs: same line)."""
     from msflash.acquisition.app import report
 
-    def full(path, pixels, metadata):  # noqa: ANN001 - the image_io signature
+    def full(path, pixels, metadata, chromaticities=None):  # noqa: ANN001 - the image_io signature
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
 
     monkeypatch.setattr(report, "write_image", full)

@@ -19,6 +19,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 
 from msflash.acquisition.app import cli_evaluate, evaluation
@@ -154,6 +155,13 @@ class TestEvaluateSequence:
         header = read_image_header(out / "complementary.exr")
         assert header.attributes["msflash:image"] == "complementary"
         assert header.attributes["msflash:flash_weights"] == pytest.approx(result["flash_weights"]["complementary"])
+        assert "per µs" in header.attributes["msflash:units"]
+        assert header.attributes["msflash:led_names"].count(", ") == 6  # the 7 LEDs named
+        exr = oiio.ImageInput.open(str(out / "complementary.exr"))
+        try:
+            assert len(exr.spec().getattribute("chromaticities")) == 8  # xy of the camera's R, G, B and white
+        finally:
+            exr.close()
         assert read_image(out / "ambient.tiff").dtype == np.uint16
         assert (out / "ambient.png").read_bytes().startswith(PNG_SIGNATURE)
 

@@ -1,0 +1,95 @@
+"""``msflash export SEQ --to dng|ome-tiff|csv|exr``: a sequence in other tools' formats
+(:mod:`acquisition.export.sequence_export`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from msflash.acquisition.app.cli_common import print_json, progress
+from msflash.acquisition.app.options import add_estimation_options
+from msflash.acquisition.errors import UsageError
+from msflash.processing.user_files import shown_path
+
+EXPORT_HELP = "write a sequence as DNG (raw frames), OME-TIFF (all frames), CSV (spectra) or EXR (linear images)"
+_FORMATS_HELP = "dng, ome-tiff, csv or exr; several comma-separated (dng,csv)"
+
+
+def _sequence_directory(text: str) -> Path:
+    """The sequence folder of ``text``: a sequence folder, or a run or capture folder holding ``sequence/``.
+
+    Private on purpose: the shared resolver of run, capture and sequence folders replaces it.
+    """
+    path = Path(text)
+    if (path / "sequence.json").is_file():
+        return path
+    if (path / "sequence" / "sequence.json").is_file():
+        return path / "sequence"
+    raise UsageError(
+        f"{shown_path(path)}: not a sequence; expected a sequence folder (with sequence.json) or a run or "
+        "capture folder holding sequence/"
+    )
+
+
+def _default_out(sequence: Path) -> Path:
+    name = sequence.resolve().parent.name if sequence.name == "sequence" else sequence.name
+    return Path(f"{name or 'sequence'}-export")
+
+
+def _export(args: argparse.Namespace) -> int:
+    from msflash.acquisition.export.formats import parse_formats
+    from msflash.acquisition.export.sequence_export import check_out, export_sequence
+    from msflash.acquisition.sequence.format import read_sequence
+    from msflash.acquisition.session.analysis import apply_calibration
+
+    formats = parse_formats(args.to, "--to")
+    directory = _sequence_directory(args.sequence)
+    out = Path(args.out) if args.out is not None else _default_out(directory)
+    check_out(out, "--out")
+    # As estimate and flash read it: the calibration given, or the one the sequence references.
+    sequence, notes = apply_calibration(read_sequence(directory), args.calibration)
+    for note in notes:
+        progress(note)
+    result = export_sequence(
+        sequence, formats, out, target=args.target, solver=args.solver, alpha=args.alpha, bin_factor=args.bin
+    )
+    if args.json:
+        print_json(
+            {
+                "sequence": str(sequence.directory),
+                "formats": list(formats),
+                "out": str(result.directory),
+                "files": [str(path) for path in result.files],
+                "notes": list(result.notes),
+                **result.details,
+            }
+        )
+    else:
+        for note in result.notes:
+            sys.stderr.write(f"msflash: note: {note}\n")
+        for path in result.files:
+            sys.stdout.write(f"{path}\n")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``export``."""
+    export = subparsers.add_parser("export", help=EXPORT_HELP)
+    export.add_argument("sequence", help="sequence folder (format v1), or a run or capture folder holding sequence/")
+    export.add_argument("--to", required=True, help=_FORMATS_HELP)
+    export.add_argument(
+        "--out", default=None, help="new folder for the files (default ./NAME-export; never overwritten)"
+    )
+    export.add_argument(
+        "--target", default="D65", help="complementary flash target (name or CSV file), for csv and exr"
+    )
+    add_estimation_options(export)
+    export.add_argument(
+        "--calibration",
+        metavar="DIR",
+        default=None,
+        help="LED spectra / responsivities from this calibration (msflash calibrate) override the sequence's",
+    )
+    export.add_argument("--json", action="store_true", help="print one JSON object")
+    export.set_defaults(handler=_export)

@@ -1,0 +1,37 @@
+"""The export formats and the option naming them (no heavy import: ``run`` parses ``--export`` with it).
+
+Public objects
+--------------
+- :data:`EXPORT_FORMATS`: what ``msflash export --to`` and ``run --export`` write.
+- :func:`parse_formats`: ``dng`` or ``dng,csv`` checked.
+"""
+
+from __future__ import annotations
+
+from msflash.acquisition.errors import UsageError
+
+EXPORT_FORMATS = ("dng", "ome-tiff", "csv", "exr")
+"""DNG of raw frames, OME-TIFF of every frame, CSV of spectra, EXR of linear images."""
+
+
+def parse_formats(text: str, option: str = "--to") -> tuple[str, ...]:
+    """Formats from ``dng`` or ``dng,csv`` (order kept, repeats dropped).
+
+    Raises
+    ------
+    UsageError
+        Naming the option and the unknown name.
+
+    Examples
+    --------
+    >>> parse_formats("dng, csv,dng")
+    ('dng', 'csv')
+    """
+    names = [name.strip().lower() for name in text.split(",")]
+    unknown = [name for name in names if name not in EXPORT_FORMATS]
+    if unknown:
+        raise UsageError(
+            f"{option} {text}: unknown format {unknown[0]!r}; expected one or more of {', '.join(EXPORT_FORMATS)}, "
+            "comma-separated"
+        )
+    return tuple(dict.fromkeys(names))
