@@ -24,6 +24,9 @@ import numpy as np
 
 PREVIEW_LONG_SIDE_PX = 1024
 """Smallest long side of a written preview (pixels); smaller images are enlarged by an integer factor."""
+PNG_COMPRESS_LEVEL = 1
+"""zlib level of written PNGs: 1 encodes an enlarged 1120 × 1060 preview in about half the time of Pillow's
+default 6 for a file about 20 % larger (blocks of equal pixels compress well at any level)."""
 SRGB_RENDERING_INTENT = 0
 """The ``sRGB`` chunk's rendering intent: 0, perceptual."""
 SRGB_GAMMA = 45455
@@ -66,7 +69,9 @@ def srgb_png_bytes(rgb8: np.ndarray, text: Mapping[str, str] | None = None) -> b
     for key, value in (text or {}).items():
         info.add_text(key, value)
     buffer = io.BytesIO()
-    Image.fromarray(pixels, "RGB" if pixels.shape[2] == 3 else "RGBA").save(buffer, format="PNG", pnginfo=info)
+    Image.fromarray(pixels, "RGB" if pixels.shape[2] == 3 else "RGBA").save(
+        buffer, format="PNG", pnginfo=info, compress_level=PNG_COMPRESS_LEVEL
+    )
     return buffer.getvalue()
 
 
