@@ -135,7 +135,7 @@ def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
             ylabel="spectrum RMSE (boundary scenes)",
             title="accuracy vs time (tiles per side)",
         )
-        axes[3].legend(loc="center right")
+        axes[3].legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncols=3)  # below: no data covered
     figure.tight_layout()
     paths.append(str(save_figure(figure, out / "local-study.png")))
     return paths

@@ -597,7 +597,7 @@ def _sequence_report(path: Path, result: dict[str, Any], spectra_png: bytes) -> 
     report.add_heading("Noise at equal exposure (Fig. 3), neutral patches")
     report.add_table(_NOISE_HEADERS, _noise_rows(result["noise"]), table_id="noise", digits=1)
     for note in result["warnings"]:
-        report.add_paragraph(f"warning: {note}", note=True)
+        report.add_paragraph(f"warning: {note}", warning=True)
     report.write(path)
 
 
@@ -934,7 +934,7 @@ def _study_report(
         if f"{name}/spectra.png" in figures:
             report.add_images([(f"spectra ({name}/spectra.png)", figures[f"{name}/spectra.png"])], plot=True)
         for note in result["warnings"]:
-            report.add_paragraph(f"warning: {note}", note=True)
+            report.add_paragraph(f"warning: {note}", warning=True)
     report.add_heading("Noise at equal exposure (Fig. 3): von Kries-balanced ambient vs complementary flash")
     for name, result in results.items():
         report.add_heading(name, level=3)
