@@ -223,3 +223,24 @@ def test_the_report_renders_in_headless_chromium_with_every_image_loaded(
 
     pixels = np.asarray(Image.open(shot).convert("RGB")).astype(float)
     assert pixels.shape[1] == 1280 and pixels.std() > 20  # the page drew text and pictures, not a blank
+
+
+def test_a_report_that_cannot_be_written_is_one_line_and_run_json_stays(
+    tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Disk full when the HTML is written (injected, as test_run_outputs does for run.json)."""
+    real = Path.write_text
+
+    def full_disk(self: Path, *args, **kwargs):  # noqa: ANN202
+        if self.name == "report.html":
+            raise OSError(28, "No space left on device")
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "write_text", full_disk)
+    out = tmp_path / "run"
+    assert main(["run", "--rig", "sim", "--out", str(out)]) == 1
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert last.startswith(f"msflash: error: {out / 'report.html'}: could not be written ([Errno 28] No space left")
+    assert f"The sequence is complete in {out / 'sequence'} and run.json beside it" in last
+    assert json.loads((out / "run.json").read_text())["report"] == str(out / "report.html")
+    assert read_sequence(out / "sequence").complete
