@@ -7,6 +7,7 @@ Public objects
 - :func:`reflectances_to_xyz`: CIE 1931 XYZ of surfaces under an illuminant (white Y = 1).
 - :func:`camera_to_xyz_matrix`: the 3×3 camera → XYZ matrix fitted on a chart.
 - :func:`camera_to_srgb_linear`: camera RGB → linear sRGB, with optional von Kries white balance.
+- :func:`display_white`: the exposure of a preview (which linear luminance is display white).
 - :func:`srgb_preview`: an 8-bit sRGB image.
 
 The paper's figures are rendered without white balance: a 3×3 camera → XYZ matrix fitted on a
@@ -200,6 +201,40 @@ def encode_srgb(srgb_linear: np.ndarray, white_value: float) -> np.ndarray:
     return colour.cctf_encoding(np.clip(srgb_linear / white_value, 0.0, 1.0), function="sRGB")
 
 
+MEDIAN_LEVEL = 0.25
+"""The display level (linear, white = 1) a preview gives the median of the pixels' brightest channel."""
+
+
+def display_white(srgb_linear: np.ndarray, percentile: float = 99.5, median_level: float = MEDIAN_LEVEL) -> float:
+    """The linear value a preview shows as display white: its exposure.
+
+    Measured on each pixel's brightest linear sRGB channel (so a strong cast, rendered without
+    white balance, does not clip its dominant channel): the ``percentile`` of it, unless that
+    leaves the scene's median darker than ``median_level`` of white; then ``median / median_level``,
+    and the few pixels above white clip. A small bright area — a specular highlight, the sim rig's
+    highlight strip below the chart (3.8 % of its pixels, 12 × brighter than the chart's white
+    patch) — then no longer sets the exposure and darkens everything else.
+
+    Examples
+    --------
+    >>> scene = np.full((1000, 3), 0.05); scene[:40] = 0.9  # a diffuse scene and 4 % highlights
+    >>> round(display_white(scene), 3)  # median 0.05 → white 0.05 / 0.25
+    0.2
+    >>> round(display_white(np.linspace(0.0, 1.0, 101)[:, None] * [1.0, 0.5, 0.2]), 3)  # bright: the percentile
+    0.995
+    """
+    values = np.asarray(srgb_linear, dtype=np.float64)
+    brightest = (values.max(axis=-1) if values.ndim > 1 else values).ravel()
+    brightest = brightest[np.isfinite(brightest)]
+    if brightest.size == 0:
+        return 1.0
+    white = float(np.percentile(brightest, percentile))
+    median = float(np.median(brightest))
+    if median > 0 and median / median_level < white:
+        white = median / median_level
+    return white if white > 0 else 1.0
+
+
 def srgb_preview(
     linear_rgb: np.ndarray,
     camera_to_xyz: np.ndarray | None = None,
@@ -216,14 +251,16 @@ def srgb_preview(
     camera_to_xyz
         The 3×3 camera → XYZ matrix; None treats camera RGB as linear sRGB.
     white_value
-        The linear Y that maps to display white; default: the ``percentile`` of Y, so previews
-        of images with different exposures are comparable only when given one ``white_value``.
+        The linear value that maps to display white; default: :func:`display_white` of the image
+        (the ``percentile`` of each pixel's brightest channel, or its median at :data:`MEDIAN_LEVEL`
+        when that is brighter), so previews of images with different exposures are comparable only
+        when given one ``white_value``.
     white_balance
         Optional von Kries gains on camera RGB (see :func:`camera_to_srgb_linear`).
     """
     if linear_rgb.ndim != 3 or linear_rgb.shape[2] != 3:
         raise SpectralDataError(f"preview: image has shape {linear_rgb.shape}; expected (H, W, 3)")
-    srgb_linear, luminance = camera_to_srgb_linear(linear_rgb, camera_to_xyz, white_balance)
+    srgb_linear, _ = camera_to_srgb_linear(linear_rgb, camera_to_xyz, white_balance)
     if white_value is None:
-        white_value = float(np.percentile(luminance, percentile)) if luminance.size else 1.0
+        white_value = display_white(srgb_linear, percentile)
     return np.round(encode_srgb(srgb_linear, white_value) * 255).astype(np.uint8)

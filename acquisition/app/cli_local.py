@@ -74,17 +74,14 @@ def _write(summary: dict, out: Path) -> None:
 
 def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
     """Per-scenario auto vs global RMSE, the selection scores, where the error stays, and accuracy vs tiles/time."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    from msflash.acquisition.app.plot_style import PALETTE, SERIES, pyplot, save_figure
     from msflash.processing.local import SELECTION_MARGIN
     from msflash.processing.study.local import KINDS
 
+    plt = pyplot()
     paths = []
     figure, axes = plt.subplots(1, 4, figsize=(20, 4.5))
-    colours = {"uniform": "tab:blue", "boundary": "tab:red", "gradient": "tab:orange"}
+    colours = dict(zip(KINDS, SERIES, strict=False))
     for kind in KINDS:
         rows = [r for r in results if r["kind"] == kind]
         axes[0].scatter(
@@ -93,7 +90,7 @@ def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
         best = [min(v for key, v in r["scores"].items() if key != "global") for r in rows]
         axes[1].hist(best, bins=30, alpha=0.6, color=colours[kind], label=kind)
     top = max(max(r["rmse_global"] for r in results), max(r["rmse_auto"] for r in results))
-    axes[0].plot([0, top], [0, top], "k:", lw=1)
+    axes[0].plot([0, top], [0, top], ":", color=PALETTE.led_fit, lw=1)
     axes[0].plot([0, top], [0, 0.7 * top], "k--", lw=1, label="30 % cut")
     axes[0].set(
         xlabel="global spectrum RMSE (per pixel)", ylabel="auto spectrum RMSE (per pixel)", title="per scenario"
@@ -119,6 +116,7 @@ def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
             [summary[k][key] for k in kinds],
             width,
             label=label,
+            color=PALETTE.led_fit if key == "rmse_bound" else SERIES[index],
         )
     axes[2].set_xticks(np.arange(len(kinds)), kinds)
     axes[2].set(ylabel="mean spectrum RMSE (per pixel)", title="estimates and references")
@@ -137,12 +135,9 @@ def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
             ylabel="spectrum RMSE (boundary scenes)",
             title="accuracy vs time (tiles per side)",
         )
-        axes[3].legend()
+        axes[3].legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncols=3)  # below: no data covered
     figure.tight_layout()
-    path = out / "local-study.png"
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    paths.append(str(path))
+    paths.append(str(save_figure(figure, out / "local-study.png")))
     return paths
 
 

@@ -280,7 +280,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
             f"determine the ambient (test patterns, or LEDs that do not reach the scene?); no report written. "
             f"The sequence is complete in {out / 'sequence'}"
         )
-    from msflash.acquisition.app import report  # colour and matplotlib: only a run that reports needs them
+    from msflash.acquisition.app import report, run_html  # colour and matplotlib: only a run that reports needs them
 
     sequence = read_sequence(out / "sequence")
     progress("synthesising the computational images, previews and report")
@@ -313,6 +313,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
     summary["elapsed_s"] = round(time.perf_counter() - started, 3)
     try:
         (out / "run.json").write_text(dumps_json(summary) + "\n")
+        run_html.write_run_html(Path(summary["report"]), summary, sequence)
     except OSError as err:
         raise OutputWriteError(
             f"{out / 'run.json'}: could not be written ({err}); expected a writable disk with room "

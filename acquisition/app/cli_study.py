@@ -29,6 +29,7 @@ from msflash.acquisition.app.cli_common import (
     print_json,
     progress,
 )
+from msflash.acquisition.app.plot_style import PALETTE, pyplot, relative_power, save_figure
 from msflash.processing.ambient import AMBIENT_METHODS
 
 STUDIES = ("table1", "surfaces", "cameras", "xy", "failure", "pareto")
@@ -266,24 +267,15 @@ def _surfaces_text(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _pyplot():  # noqa: ANN202 - matplotlib imported lazily with the non-interactive backend
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _plot_table1(result: dict[str, Any], path: Path) -> None:
-    plt = _pyplot()
-    figure, axes = plt.subplots(1, 4, figsize=(15, 3.6))
+    plt = pyplot()
+    figure, axes = plt.subplots(1, 4, figsize=(16, 4))
     counts = result["n_leds"]
     for axis, (key, label) in zip(axes, _ROWS, strict=True):
-        axis.plot(counts, result[key], "o-", label="msflash")
+        axis.plot(counts, result[key], "o-", color=PALETTE.ambient, label="msflash")
         paper = result["paper"].get(key)
         if paper:
-            axis.plot(counts[: len(paper)], paper, "s--", label="paper")
+            axis.plot(counts[: len(paper)], paper, "s--", color=PALETTE.reference, label="paper")
         axis.set_title(label, fontsize=10)
         axis.set_xlabel("# LEDs")
         axis.set_xticks(counts)
@@ -292,13 +284,12 @@ def _plot_table1(result: dict[str, Any], path: Path) -> None:
     config = result["config"]
     figure.suptitle(f"Table 1 — {config['method']}, alpha {config['alpha']} ({config['alpha_units']})", fontsize=10)
     figure.tight_layout()
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
+    save_figure(figure, path)
 
 
 def _plot_surfaces(result: dict[str, Any], path: Path) -> None:
-    plt = _pyplot()
-    figure, axis = plt.subplots(figsize=(5, 3.6))
+    plt = pyplot()
+    figure, axis = plt.subplots(figsize=(6, 4))
 
     def numbers(values: list[Any]) -> list[float]:  # JSON null (all estimates failed) → NaN, not drawn
         return [float("nan") if value is None else value for value in values]
@@ -309,16 +300,16 @@ def _plot_surfaces(result: dict[str, Any], path: Path) -> None:
         yerr=numbers(result["spectrum_rmse_std"]),
         fmt="o-",
         capsize=3,
+        color=PALETTE.ambient,
         label="estimate (mean ± std over draws)",
     )
-    axis.axhline(result["bound"], color="k", linestyle="--", label="direct LED fit")
+    axis.axhline(result["bound"], color=PALETTE.led_fit, linestyle=":", lw=1.8, label="direct LED fit")
     axis.set_xlabel("distinct surfaces")
     axis.set_ylabel("spectrum RMSE")
     axis.grid(True, alpha=0.3)
     axis.legend(fontsize=8)
     figure.tight_layout()
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
+    save_figure(figure, path)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -508,75 +499,115 @@ def _pareto_text(result: dict[str, Any]) -> str:
 
 
 def _plot_cameras(result: dict[str, Any], path: Path) -> None:
-    plt = _pyplot()
+    """Fig. 6: every camera's estimate against the truth per example illuminant and LED count, then the spread."""
+    plt = pyplot()
     examples = result["examples"]
     counts = result["n_leds"]
-    figure, axes = plt.subplots(
-        len(examples) + 1, len(counts), figsize=(3 * len(counts), 2.4 * (len(examples) + 1)), squeeze=False
-    )
     wavelengths = result["wavelengths_nm"]
+    figure = plt.figure(figsize=(3.2 * len(counts) + 0.8, 2.6 * len(examples) + 3.6), layout="constrained")
+    top, bottom = figure.subfigures(2, 1, height_ratios=[2.6 * len(examples), 3.2])
+    axes = top.subplots(len(examples), len(counts), squeeze=False, sharex=True, sharey=True)
     for row, example in enumerate(examples):
         for column, n in enumerate(counts):
             axis = axes[row][column]
             for estimate in example["estimates"][str(n)]:
-                axis.plot(wavelengths, [_num(v) for v in estimate], color="tab:blue", alpha=0.25, linewidth=0.8)
-            axis.plot(wavelengths, example["truth"], "k--", linewidth=1.2)
-            axis.set_title(f"{n} LEDs, xy ({example['xy'][0]:.2f}, {example['xy'][1]:.2f})", fontsize=8)
-            axis.tick_params(labelsize=7)
-    for column in range(len(counts)):
-        axes[-1][column].axis("off")
-    summary = figure.add_subplot(len(examples) + 1, 2, 2 * len(examples) + 1)
+                axis.plot(
+                    wavelengths,
+                    relative_power(wavelengths, estimate, "photons"),
+                    color=PALETTE.ambient,
+                    alpha=0.35,
+                    linewidth=0.9,
+                )
+            axis.plot(
+                wavelengths,
+                relative_power(wavelengths, example["truth"], "photons"),
+                "--",
+                color=PALETTE.truth,
+                linewidth=1.3,
+            )
+            axis.set_title(f"{n} LEDs, xy ({example['xy'][0]:.2f}, {example['xy'][1]:.2f})", fontsize=9)
+            if row == len(examples) - 1:
+                axis.set_xlabel("wavelength (nm)")
+        axes[row][0].set_ylabel("relative power\n(energy, peak = 1)")
+    top.suptitle("Fig. 6: every camera's estimate (green) against the true ambient (black, dashed)")
+    summary, rmse = bottom.subplots(1, 2)
     summary.plot(counts, [_num(v) for v in result["camera_spread"]], "o-", label="camera spread (mean)")
-    summary.plot(counts, [_num(v) for v in result["camera_spread_max"]], "s--", label="camera spread (worst illum.)")
-    summary.set_xlabel("# LEDs")
-    summary.legend(fontsize=7)
-    summary.grid(True, alpha=0.3)
-    rmse = figure.add_subplot(len(examples) + 1, 2, 2 * len(examples) + 2)
-    rmse.plot(counts, [_num(v) for v in result["spectrum_rmse"]], "o-", label="spectrum RMSE (mean)")
-    rmse.plot(counts, [_num(v) for v in result["spectrum_rmse_worst_camera"]], "s--", label="worst camera")
-    rmse.set_xlabel("# LEDs")
-    rmse.legend(fontsize=7)
-    rmse.grid(True, alpha=0.3)
-    figure.suptitle("Fig. 6 — every camera's estimate (blue) vs the truth (dashed)", fontsize=10)
-    figure.tight_layout()
-    figure.savefig(path, dpi=90)
-    plt.close(figure)
+    summary.plot(
+        counts, [_num(v) for v in result["camera_spread_max"]], "s--", label="camera spread (worst illuminant)"
+    )
+    rmse.plot(
+        counts, [_num(v) for v in result["spectrum_rmse"]], "o-", color=PALETTE.ambient, label="spectrum RMSE (mean)"
+    )
+    rmse.plot(
+        counts,
+        [_num(v) for v in result["spectrum_rmse_worst_camera"]],
+        "s--",
+        color=PALETTE.warning,
+        label="worst camera",
+    )
+    for axis in (summary, rmse):
+        axis.set_xlabel("# LEDs")
+        axis.set_xticks(counts)
+        axis.legend()
+    summary.set_ylabel("spread across cameras")
+    rmse.set_ylabel("spectrum RMSE")
+    save_figure(figure, path)
 
 
 def _plot_xy(result: dict[str, Any], path: Path) -> None:
-    plt = _pyplot()
+    save_figure(xy_figure(result), path)
+
+
+def xy_figure(result: dict[str, Any]) -> Any:
+    """Fig. 7: one chromaticity panel per LED count (at most 3 a row, shared axes, equal aspect), one colour bar."""
+    plt = pyplot()
     import numpy as np
 
     from msflash.processing.study.illuminants import cmfs_photons
 
     counts = result["n_leds"]
-    figure, axes = plt.subplots(1, len(counts), figsize=(3.2 * len(counts), 3.4), squeeze=False)
+    columns = min(len(counts), 3)
+    rows = math.ceil(len(counts) / columns)
+    figure, axes = plt.subplots(
+        rows,
+        columns,
+        figsize=(4.2 * columns + 1.2, 4.4 * rows + 0.6),
+        squeeze=False,
+        sharex=True,
+        sharey=True,
+        layout="constrained",
+    )
     cmf = cmfs_photons()
     locus = cmf / cmf.sum(axis=1, keepdims=True)
     xy = np.array(result["xy"])
     values = np.array([[_num(v) for v in row] for row in result["spectrum_rmse"]])
     top = float(np.nanmax(values))
-    for column, n in enumerate(counts):
-        axis = axes[0][column]
+    for index, n in enumerate(counts):
+        axis = axes[index // columns][index % columns]
         axis.plot(np.append(locus[:, 0], locus[0, 0]), np.append(locus[:, 1], locus[0, 1]), "k-", linewidth=0.8)
-        points = axis.scatter(xy[:, 0], xy[:, 1], c=values[:, column], s=90, vmin=0, vmax=top, cmap="viridis")
-        for (x, y), value in zip(xy, values[:, column], strict=True):
+        points = axis.scatter(xy[:, 0], xy[:, 1], c=values[:, index], s=110, vmin=0, vmax=top, cmap="viridis")
+        for (x, y), value in zip(xy, values[:, index], strict=True):
             axis.annotate(
-                f"{value:.2f}", (x, y), fontsize=6, ha="center", va="bottom", xytext=(0, 5), textcoords="offset points"
+                f"{value:.2f}", (x, y), fontsize=7, ha="center", va="bottom", xytext=(0, 6), textcoords="offset points"
             )
-        axis.set_title(f"{n} LEDs", fontsize=9)
+        axis.set_title(f"{n} LEDs")
         axis.set_xlim(0, 0.8)
         axis.set_ylim(0, 0.9)
-        axis.set_xlabel("x")
-    axes[0][0].set_ylabel("y")
-    figure.colorbar(points, ax=axes[0].tolist(), shrink=0.8, label="spectrum RMSE")
-    figure.suptitle("Fig. 7 — spectrum RMSE over the feasible xy grid (mean over cameras)", fontsize=10)
-    figure.savefig(path, dpi=90)
-    plt.close(figure)
+        axis.set_aspect("equal")
+        if index // columns == rows - 1 or index + columns >= len(counts):
+            axis.set_xlabel("CIE 1931 x")
+            axis.tick_params(labelbottom=True)
+        if index % columns == 0:
+            axis.set_ylabel("CIE 1931 y")
+    for index in range(len(counts), rows * columns):
+        axes[index // columns][index % columns].axis("off")
+    figure.colorbar(points, ax=axes.ravel().tolist(), shrink=0.8, label="spectrum RMSE (mean over cameras)")
+    figure.suptitle("Fig. 7: spectrum RMSE of the estimate over the feasible xy grid")
+    return figure
 
 
 def _plot_failure(result: dict[str, Any], path: Path) -> None:
-    plt = _pyplot()
+    plt = pyplot()
     factors = list(result["summary"])
     columns = min(len(factors), 5)
     rows = (len(factors) + columns - 1) // columns
@@ -591,11 +622,14 @@ def _plot_failure(result: dict[str, Any], path: Path) -> None:
             yerr=[_num(r["error_std"]) for r in table],
             fmt="o-",
             capsize=3,
+            color=PALETTE.ambient,
             label="spectrum RMSE",
         )
-        axis.plot(positions, [_num(r["bound_mean"]) for r in table], "k:", label="LED-fit bound")
+        axis.plot(
+            positions, [_num(r["bound_mean"]) for r in table], ":", color=PALETTE.led_fit, lw=1.8, label="LED-fit bound"
+        )
         twin = axis.twinx()
-        twin.bar(positions, [r["warned_rate"] for r in table], alpha=0.25, color="tab:red", label="warned")
+        twin.bar(positions, [r["warned_rate"] for r in table], alpha=0.3, color=PALETTE.warning, label="warned")
         twin.set_ylim(0, 1.05)
         twin.tick_params(labelsize=7)
         axis.set_xticks(positions)
@@ -613,12 +647,11 @@ def _plot_failure(result: dict[str, Any], path: Path) -> None:
         fontsize=10,
     )
     figure.tight_layout()
-    figure.savefig(path, dpi=90)
-    plt.close(figure)
+    save_figure(figure, path)
 
 
 def _plot_pareto(result: dict[str, Any], path: Path) -> None:
-    plt = _pyplot()
+    plt = pyplot()
     figure, axis = plt.subplots(figsize=(7.5, 5))
     solvers = list(dict.fromkeys(p["solver"] for p in result["points"]))
     markers = "osD^v<>"
@@ -635,8 +668,8 @@ def _plot_pareto(result: dict[str, Any], path: Path) -> None:
             axis.annotate(
                 p["sampling"],
                 (1000 * p["time_s"], p["error_mean"]),
-                fontsize=5,
-                alpha=0.7,
+                fontsize=6.5,
+                alpha=0.8,
                 xytext=(2, 2),
                 textcoords="offset points",
             )
@@ -649,7 +682,7 @@ def _plot_pareto(result: dict[str, Any], path: Path) -> None:
             [default["error_mean"]],
             s=200,
             facecolors="none",
-            edgecolors="red",
+            edgecolors=PALETTE.warning,
             linewidths=2,
             label="app default",
         )
@@ -659,8 +692,7 @@ def _plot_pareto(result: dict[str, Any], path: Path) -> None:
     axis.grid(True, alpha=0.3, which="both")
     axis.legend(fontsize=7)
     figure.tight_layout()
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
+    save_figure(figure, path)
 
 
 PLOTS = {

@@ -29,7 +29,6 @@ calibrated in situ; an in-air calibration would give the solvers the wrong red).
 
 from __future__ import annotations
 
-import io
 import json
 import warnings
 from dataclasses import dataclass
@@ -40,6 +39,8 @@ import numpy as np
 
 from msflash.acquisition.app.cli_common import dumps_json, progress
 from msflash.acquisition.app.html_report import HtmlReport
+from msflash.acquisition.app.plot_style import PALETTE, figure_png, in_plot_unit, pyplot, spectral_axis
+from msflash.acquisition.app.srgb_png import enlarged, srgb_png_bytes
 from msflash.acquisition.export.exr_metadata import LINEAR_UNITS
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import write_image
@@ -138,7 +139,8 @@ def preview_png(
     white_balance: np.ndarray | None = None,
     metadata: dict[str, Any] | None = None,
 ) -> tuple[bytes, np.ndarray]:
-    """PNG bytes and the float sRGB image of a linear image at the ΔE exposure normalisation ``scale``.
+    """PNG bytes (enlarged to ≥ 1024 pixels, sRGB chunk) and the float sRGB image (the image's own size) of a
+    linear image at the ΔE exposure normalisation ``scale``.
 
     Display white is the Y of a perfect white after normalisation, so previews of images with
     different exposures or flash power compare directly.
@@ -146,29 +148,8 @@ def preview_png(
     rgb = full_rgb(image, context.cfa) * scale
     srgb_linear, _ = camera_to_srgb_linear(rgb, context.camera_to_xyz, white_balance)
     encoded = encode_srgb(srgb_linear, float(context.reference.white_xyz[1]))
-    plt = _pyplot()
-    buffer = io.BytesIO()
     text = {"Software": "msflash", "Description": json.dumps(metadata or {}, default=str)}
-    plt.imsave(buffer, np.round(encoded * 255).astype(np.uint8), format="png", metadata=text)
-    return buffer.getvalue(), encoded
-
-
-def _pyplot():  # noqa: ANN202 - matplotlib is imported lazily, with the non-interactive backend
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _figure_png(figure: Any) -> bytes:
-    plt = _pyplot()
-    buffer = io.BytesIO()
-    figure.tight_layout()
-    figure.savefig(buffer, format="png", dpi=100)
-    plt.close(figure)
-    return buffer.getvalue()
+    return srgb_png_bytes(enlarged(np.round(encoded * 255).astype(np.uint8)), text), encoded
 
 
 def write_outputs(
@@ -350,37 +331,60 @@ def _spectra_plot(
     target: Spectra,
     truth: Spectra | None = None,
 ) -> bytes:
-    plt = _pyplot()
+    return figure_png(spectra_figure(grid, leds, estimate, solutions, target, truth))
+
+
+def spectra_figure(
+    grid: WavelengthGrid,
+    leds: Spectra,
+    estimate: Spectra,
+    solutions: dict[str, FlashSolution],
+    target: Spectra,
+    truth: Spectra | None = None,
+) -> Any:
+    """The ambient estimate, the flash mixes and the target, in :data:`plot_style.PLOT_UNIT`."""
+    plt = pyplot()
     wavelengths = grid.wavelengths_nm
-    ambient = estimate.values[:, 0]
+    led_values = in_plot_unit(leds)
+    ambient = in_plot_unit(estimate)[:, 0]
     peak = float(np.max(np.abs(ambient))) or 1.0
-    figure, axis = plt.subplots(figsize=(7, 3.6))
-    axis.plot(wavelengths, ambient / peak, color="tab:blue", lw=2, label="ambient (estimate)")
+    figure, axis = plt.subplots(figsize=(8, 4.2))
+    axis.plot(wavelengths, ambient / peak, color=PALETTE.ambient, lw=2, label="ambient (estimate)")
     if truth is not None:
-        true_values = truth.to_unit("photons").values[:, 0]
+        true_values = in_plot_unit(truth)[:, 0]
         axis.plot(
             wavelengths,
             true_values * float(ambient @ true_values) / float(true_values @ true_values) / peak,
-            color="black",
+            color=PALETTE.truth,
             ls="--",
-            label="ambient (truth)",
+            label="ambient (truth, scaled)",
         )
-    for mode, solution in solutions.items():
-        axis.plot(wavelengths, leds.values @ solution.flash_weights / peak, lw=1.2, label=f"{mode} flash")
-    total = leds.values @ (solutions["complementary"].ambient_weights + solutions["complementary"].flash_weights)
-    axis.plot(wavelengths, total / peak, color="tab:purple", lw=2, label="ambient + complementary")
-    target_values = target.values[:, 0]
+    for mode in ("matching", "complementary"):
+        flash = led_values @ solutions[mode].flash_weights
+        axis.plot(wavelengths, flash / peak, color=PALETTE.of(mode), lw=1.8, label=f"{mode} flash")
+    complementary = solutions["complementary"]
+    total = led_values @ (complementary.ambient_weights + complementary.flash_weights)
+    axis.plot(
+        wavelengths,
+        total / peak,
+        color=PALETTE.ambient_plus_complementary,
+        lw=2,
+        ls="-.",
+        label="ambient + complementary",
+    )
+    target_values = in_plot_unit(target)[:, 0]
     axis.plot(
         wavelengths,
         target_values * float(total @ target_values) / float(target_values @ target_values) / peak,
-        color="gray",
+        color=PALETTE.target,
         ls=":",
+        lw=1.8,
         label="target (scaled)",
     )
-    axis.set_xlabel("wavelength (nm)")
-    axis.set_ylabel("relative power (photons)")
-    axis.legend(fontsize=7)
-    return _figure_png(figure)
+    spectral_axis(axis, "peak of the estimate")
+    axis.legend(loc="upper left")
+    figure.tight_layout()
+    return figure
 
 
 def _delta_e_rows(delta_e: dict[str, Any]) -> list[list[object]]:
@@ -410,15 +414,15 @@ def _sequence_report(path: Path, result: dict[str, Any], spectra_png: bytes) -> 
         f"flash bounds {result['bounds']}; complementary target {result['target']}."
     )
     report.add_heading("Images (camera → XYZ fitted under D65, no white balance, exposure-normalised)")
-    report.add_images(list(result["_png"].items()), width_px=260)
+    report.add_images(list(result["_png"].items()), columns=3)
     report.add_heading("Spectra")
-    report.add_images([("ambient estimate and flash mixes", spectra_png)])
+    report.add_images([("ambient estimate and flash mixes", spectra_png)], plot=True)
     report.add_heading("CIEDE2000 against the ideal chart under D65 (Fig. 9)")
     report.add_table(["image", "mean ΔE00", "max ΔE00"], _delta_e_rows(result["delta_e"]), table_id="delta-e")
     report.add_heading("Noise at equal exposure (Fig. 3), neutral patches")
     report.add_table(_NOISE_HEADERS, _noise_rows(result["noise"]), table_id="noise", digits=1)
     for note in result["warnings"]:
-        report.add_paragraph(f"warning: {note}", note=True)
+        report.add_paragraph(f"warning: {note}", warning=True)
     report.write(path)
 
 
@@ -583,37 +587,53 @@ def delta_e_summary(results: dict[str, dict[str, Any]]) -> dict[str, dict[str, f
 
 
 def _fig9_png(summary: dict[str, dict[str, float]]) -> bytes:
-    plt = _pyplot()
+    return figure_png(fig9_figure(summary))
+
+
+def fig9_figure(summary: dict[str, dict[str, float]]) -> Any:
+    """Fig. 9: mean ΔE00 per ambient for the ambient-only, + matching and + complementary images."""
+    plt = pyplot()
     names = list(summary)
     positions = np.arange(len(names))
-    figure, axis = plt.subplots(figsize=(7.5, 3.6))
-    for offset, (key, label, colour) in zip(
+    figure, axis = plt.subplots(figsize=(8, 4.2))
+    for offset, (key, label) in zip(
         (-0.27, 0.0, 0.27),
-        (
-            ("ambient", "ambient only", "tab:gray"),
-            ("matching", "+ matching flash", "tab:orange"),
-            ("complementary", "+ complementary flash", "tab:blue"),
-        ),
+        (("ambient", "ambient only"), ("matching", "+ matching flash"), ("complementary", "+ complementary flash")),
+        strict=True,
     ):
-        axis.bar(positions + offset, [summary[n][key] for n in names], width=0.26, label=label, color=colour)
+        axis.bar(positions + offset, [summary[n][key] for n in names], width=0.26, label=label, color=PALETTE.of(key))
     axis.set_xticks(positions, names)
-    axis.set_ylabel("mean CIEDE2000 vs chart under D65")
-    axis.legend(fontsize=8)
-    return _figure_png(figure)
+    axis.grid(False, axis="x")
+    axis.set_ylabel("mean CIEDE2000 vs the chart under D65")
+    axis.set_title("Fig. 9: colour error per ambient (simulation)")
+    axis.legend()
+    figure.tight_layout()
+    return figure
 
 
 def _snr_png(noise: dict[str, Any]) -> bytes:
-    plt = _pyplot()
-    figure, axis = plt.subplots(figsize=(5.5, 3.4))
+    """Fig. 3: SNR per channel of the von Kries-balanced ambient and the complementary flash image."""
+    plt = pyplot()
+    figure, axis = plt.subplots(figsize=(6, 4))
     positions = np.arange(3)
-    for offset, (key, label) in zip(
-        (-0.2, 0.2), (("von_kries", "ambient + von Kries"), ("complementary", "complementary flash"))
+    for offset, (key, label, colour) in zip(
+        (-0.2, 0.2),
+        (
+            ("von_kries", "ambient, von Kries balanced", PALETTE.ambient),
+            ("complementary", "complementary flash", PALETTE.complementary),
+        ),
+        strict=True,
     ):
-        axis.bar(positions + offset, [noise[key]["mean_snr"][c] for c in CHANNELS], width=0.38, label=label)
+        axis.bar(
+            positions + offset, [noise[key]["mean_snr"][c] for c in CHANNELS], width=0.38, label=label, color=colour
+        )
     axis.set_xticks(positions, CHANNELS)
-    axis.set_ylabel("SNR on neutral patches (mean/std)")
-    axis.legend(fontsize=8)
-    return _figure_png(figure)
+    axis.grid(False, axis="x")
+    axis.set_xlabel("camera channel")
+    axis.set_ylabel("SNR on neutral patches (mean / std)")
+    axis.legend()
+    figure.tight_layout()
+    return figure_png(figure)
 
 
 def colour_study(
@@ -655,10 +675,28 @@ def colour_study(
     }
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        (out / "colour-study.json").write_text(dumps_json(payload) + "\n")
-        _study_report(out / "report.html", payload, results, summary)
+        figures = _study_figures(out, results, summary)
+        payload["figures"] = {name: str(out / name) for name in figures}
         payload["report"] = str(out / "report.html")
+        (out / "colour-study.json").write_text(dumps_json(payload) + "\n")
+        _study_report(out / "report.html", payload, results, summary, figures)
     return payload
+
+
+def _study_figures(
+    out: Path, results: dict[str, dict[str, Any]], summary: dict[str, dict[str, float]]
+) -> dict[str, bytes]:
+    """The study's figures as PNG files beside its report (``fig9.png``, ``fig3-snr.png``, each ambient's
+    ``spectra.png``), by path relative to ``out``; the report embeds the same bytes."""
+    figures = {"fig9.png": _fig9_png(summary)}
+    if "underwater" in results:
+        figures["fig3-snr.png"] = _snr_png(results["underwater"]["noise"])
+    for name, result in results.items():
+        if result.get("_spectra_png"):
+            figures[f"{name}/spectra.png"] = result["_spectra_png"]
+    for relative, data in figures.items():
+        (out / relative).write_bytes(data)
+    return figures
 
 
 def public_result(result: dict[str, Any]) -> dict[str, Any]:
@@ -666,7 +704,11 @@ def public_result(result: dict[str, Any]) -> dict[str, Any]:
 
 
 def _study_report(
-    path: Path, payload: dict[str, Any], results: dict[str, dict[str, Any]], summary: dict[str, dict[str, float]]
+    path: Path,
+    payload: dict[str, Any],
+    results: dict[str, dict[str, Any]],
+    summary: dict[str, dict[str, float]],
+    figures: dict[str, bytes],
 ) -> None:
     report = HtmlReport("msflash colour study (simulation): Fig. 9 and Fig. 3")
     report.add_paragraph(
@@ -676,7 +718,7 @@ def _study_report(
         "chart under D65."
     )
     report.add_heading("Mean CIEDE2000 per ambient (Fig. 9)")
-    report.add_images([("mean ΔE00", _fig9_png(summary))])
+    report.add_images([("mean ΔE00 (fig9.png)", figures["fig9.png"])], plot=True)
     report.add_table(
         [
             "ambient",
@@ -713,22 +755,25 @@ def _study_report(
             )
             if key in result["_png"]
         ]
-        report.add_images(images, width_px=220)
-        if result.get("_spectra_png"):
-            report.add_images([("spectra", result["_spectra_png"])])
+        report.add_images(images, columns=4)
+        if f"{name}/spectra.png" in figures:
+            report.add_images([(f"spectra ({name}/spectra.png)", figures[f"{name}/spectra.png"])], plot=True)
         for note in result["warnings"]:
-            report.add_paragraph(f"warning: {note}", note=True)
+            report.add_paragraph(f"warning: {note}", warning=True)
     report.add_heading("Noise at equal exposure (Fig. 3): von Kries-balanced ambient vs complementary flash")
     for name, result in results.items():
         report.add_heading(name, level=3)
         report.add_table(_NOISE_HEADERS, _noise_rows(result["noise"]), table_id=f"noise-{name}", digits=1)
-    if "underwater" in results:
+    if "fig3-snr.png" in figures:
+        report.add_images([("underwater: SNR per channel (fig3-snr.png)", figures["fig3-snr.png"])], plot=True)
         report.add_images(
             [
-                ("underwater: SNR per channel", _snr_png(results["underwater"]["noise"])),
-                ("ambient, von Kries", results["underwater"]["_png"]["ambient-von-kries"]),
-                ("complementary flash (re-captured)", results["underwater"]["_png"]["complementary-capture"]),
+                ("underwater: ambient, von Kries", results["underwater"]["_png"]["ambient-von-kries"]),
+                (
+                    "underwater: complementary flash (re-captured)",
+                    results["underwater"]["_png"]["complementary-capture"],
+                ),
             ],
-            width_px=None,
+            columns=2,
         )
     report.write(path)

@@ -1,8 +1,10 @@
-"""Self-contained HTML reports: headings, text, tables and PNG images embedded as base64.
+"""HTML reports: headings, text, tables and PNG images, the one HTML writer of msflash.
 
-One file that opens anywhere (no side files, no scripts, no network): what ``msflash evaluate``
-and ``msflash colour-study`` leave next to their images. Build a :class:`HtmlReport`, add
-blocks in order, then :meth:`HtmlReport.write`.
+``msflash evaluate`` and ``msflash colour-study`` embed their images as base64
+(:meth:`HtmlReport.add_images`: one file that opens anywhere, no side files, no scripts, no
+network); ``msflash run``'s report links the PNG files beside it by relative path
+(:meth:`HtmlReport.add_linked_images`: the full-size previews are on disk already). Build a
+:class:`HtmlReport`, add blocks in order, then :meth:`HtmlReport.write`.
 """
 
 from __future__ import annotations
@@ -18,10 +20,12 @@ body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 72em; co
 table { border-collapse: collapse; margin: 0.6em 0 1.2em; }
 th, td { border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: right; }
 th { background: #eee; } td:first-child, th:first-child { text-align: left; }
-figure { display: inline-block; margin: 0.4em; vertical-align: top; text-align: center; }
-figure img { image-rendering: pixelated; border: 1px solid #ccc; }
+figure { display: inline-block; margin: 0.4em; vertical-align: top; text-align: center; box-sizing: border-box; }
+figure img { image-rendering: pixelated; border: 1px solid #ccc; max-width: 100%; height: auto; }
+figure.plot img { image-rendering: auto; border: none; }
 figcaption { font-size: 0.85em; color: #555; }
 .note { color: #555; font-size: 0.9em; }
+.warning { color: #a33c00; }
 """
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -40,6 +44,23 @@ def _cell(value: object, digits: int) -> str:
     if isinstance(value, float):
         return f"{value:.{digits}f}"
     return html.escape(str(value))
+
+
+def _figures(
+    sources: Sequence[tuple[str, str, str | None]], width_px: int | None, columns: int | None, plot: bool
+) -> str:
+    """``<figure>``s of (caption, src, link or None) in one ``<div>``."""
+    figures = []
+    css = ' class="plot"' if plot else ""
+    share = f' style="width: calc({100 / columns:.3f}% - 0.8em)"' if columns else ""
+    size = f' width="{int(width_px)}"' if width_px else ""
+    for caption, src, link in sources:
+        alt = html.escape(caption, quote=True)
+        image = f'<img src="{html.escape(src, quote=True)}" alt="{alt}"{size}>'
+        if link is not None:
+            image = f'<a href="{html.escape(link, quote=True)}">{image}</a>'
+        figures.append(f"<figure{css}{share}>{image}<figcaption>{html.escape(caption)}</figcaption></figure>")
+    return "<div>" + "".join(figures) + "</div>"
 
 
 @dataclass
@@ -64,9 +85,10 @@ class HtmlReport:
         level = min(max(int(level), 2), 6)
         self.blocks.append(f"<h{level}>{html.escape(text)}</h{level}>")
 
-    def add_paragraph(self, text: str, note: bool = False) -> None:
-        """A paragraph of plain text (escaped); ``note`` sets it in smaller grey type."""
-        css = ' class="note"' if note else ""
+    def add_paragraph(self, text: str, note: bool = False, warning: bool = False) -> None:
+        """A paragraph of plain text (escaped); ``note`` sets it in smaller grey type, ``warning`` in orange."""
+        classes = " ".join(name for name, on in (("note", note), ("warning", warning)) if on)
+        css = f' class="{classes}"' if classes else ""
         self.blocks.append(f"<p{css}>{html.escape(text)}</p>")
 
     def add_table(
@@ -88,18 +110,50 @@ class HtmlReport:
         parts.append("</table>")
         self.blocks.append("\n".join(parts))
 
-    def add_images(self, images: Sequence[tuple[str, bytes | Path | str]], width_px: int | None = None) -> None:
-        """A row of captioned PNG images (bytes or file paths), embedded as base64 data URIs."""
-        figures = []
+    def add_images(
+        self,
+        images: Sequence[tuple[str, bytes | Path | str]],
+        width_px: int | None = None,
+        columns: int | None = None,
+        plot: bool = False,
+    ) -> None:
+        """A row of captioned PNG images (bytes or file paths), embedded as base64 data URIs.
+
+        ``width_px`` fixes the shown width; ``columns`` shares the page's width between that many
+        images per row (each shown at most at its own size); ``plot`` marks drawn figures (smooth
+        scaling, no frame) rather than camera images (pixels kept square).
+        """
+        sources = [
+            (caption, "data:image/png;base64," + base64.b64encode(_png_bytes(image)).decode("ascii"), None)
+            for caption, image in images
+        ]
+        self.blocks.append(_figures(sources, width_px, columns, plot))
+
+    def add_linked_images(
+        self,
+        images: Sequence[tuple[str, Path]],
+        base: Path,
+        columns: int | None = None,
+        plot: bool = False,
+    ) -> None:
+        """A row of captioned PNG files shown by their path relative to ``base`` (the report's folder).
+
+        Each image links to its file (open it at full size). The files must exist, be PNGs and
+        lie under ``base``, so the report never points at nothing.
+        """
+        sources = []
         for caption, image in images:
-            encoded = base64.b64encode(_png_bytes(image)).decode("ascii")
-            size = f' width="{int(width_px)}"' if width_px else ""
-            alt = html.escape(caption, quote=True)
-            figures.append(
-                f'<figure><img src="data:image/png;base64,{encoded}" alt="{alt}"{size}>'
-                f"<figcaption>{html.escape(caption)}</figcaption></figure>"
-            )
-        self.blocks.append("<div>" + "".join(figures) + "</div>")
+            path = Path(image)
+            _png_bytes(path)
+            relative = path.resolve().relative_to(Path(base).resolve()).as_posix()
+            sources.append((caption, relative, relative))
+        self.blocks.append(_figures(sources, None, columns, plot))
+
+    def add_file_links(self, names: Sequence[str], base: Path) -> None:
+        """A list of links to the files ``names`` (paths relative to ``base``, the report's folder) that exist."""
+        present = [name for name in names if (Path(base) / name).is_file()]
+        items = "".join(f'<li><a href="{html.escape(n, quote=True)}">{html.escape(n)}</a></li>' for n in present)
+        self.blocks.append(f"<ul>{items}</ul>")
 
     def to_html(self) -> str:
         """The whole document."""

@@ -1,7 +1,11 @@
 """What ``msflash run`` leaves next to the sequence: JSON results, images, a plot and a report.
 
-Matplotlib (Agg) draws the spectra plot and writes the 8-bit PNG previews; linear results go
-through :mod:`acquisition.sequence.image_files` as float EXR.
+Previews hold every camera pixel (a mosaic: every 2×2 CFA cell, :func:`linear_rgb`), exposed by
+:func:`processing.render.display_white` and written as sRGB PNGs enlarged to at least 1024 pixels
+on the long side (:mod:`acquisition.app.srgb_png`); the spectra plot takes its colours and unit
+from :mod:`acquisition.app.plot_style`; linear results go through
+:mod:`acquisition.sequence.image_files` as float EXR. The HTML report is
+:mod:`acquisition.app.run_html`'s, written once ``run.json``'s summary is complete.
 """
 
 from __future__ import annotations
@@ -12,6 +16,8 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.app.cli_common import dumps_json
+from msflash.acquisition.app.plot_style import PALETTE, in_plot_unit, pyplot, save_figure, spectral_axis
+from msflash.acquisition.app.srgb_png import enlarged, write_srgb_png
 from msflash.acquisition.errors import OutputWriteError
 from msflash.acquisition.export.exr_metadata import exr_metadata
 from msflash.acquisition.sequence.format import Sequence
@@ -25,24 +31,21 @@ from msflash.processing.render import camera_to_xyz_matrix, demosaic_superpixel,
 from msflash.processing.spectra import Spectra
 from msflash.processing.synthesis import synthesize
 
-
-def _pyplot():  # noqa: ANN202 - matplotlib is imported lazily, with the non-interactive backend
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+REPORT_NAME = "report.html"
+"""The run's HTML report, beside ``run.json`` (written by :func:`acquisition.app.run_html.write_run_html`)."""
 
 
-def write_png(path: Path, rgb8: np.ndarray) -> Path:
-    """Write an 8-bit RGB preview as PNG."""
-    _pyplot().imsave(path, rgb8)
-    return path
+def write_preview(path: Path, rgb8: np.ndarray) -> Path:
+    """Write an 8-bit sRGB preview as PNG (sRGB chunk), enlarged to at least 1024 pixels on the long side."""
+    return write_srgb_png(path, enlarged(rgb8), {"Software": "msflash"})
 
 
 def linear_rgb(sequence: Sequence, image: np.ndarray) -> np.ndarray:
-    """An (H, W, 3) linear camera image from a linear frame (demosaicked 2×2 if it is a mosaic)."""
+    """An (H, W, 3) linear camera image from a linear frame; a mosaic is demosaicked 2×2 (one RGB pixel per CFA cell).
+
+    The superpixel keeps only measured colours: bilinear demosaicking of the sim rig's 8-pixel
+    patches drew red/blue fringes on every patch edge, which the enlarged preview made plain.
+    """
     if image.ndim == 2:
         if sequence.camera.cfa is None:
             return np.repeat(image[:, :, None], 3, axis=2)
@@ -74,15 +77,26 @@ def plot_spectra(
     true_ambient: Spectra | None,
     target: Spectra | None,
 ) -> Path:
+    """Write :func:`spectra_figure` as a PNG to ``path``."""
+    return save_figure(spectra_figure(sequence, estimate, solutions, true_ambient, target), path)
+
+
+def spectra_figure(
+    sequence: Sequence,
+    estimate: AmbientEstimate,
+    solutions: dict[str, FlashSolution],
+    true_ambient: Spectra | None,
+    target: Spectra | None,
+) -> Any:
     """The spectra plot: estimate ± 1σ, true ambient and the LEDs' best fit of it (simulation), flash mixes,
-    ambient + complementary flash."""
-    plt = _pyplot()
+    ambient + complementary flash; every curve in :data:`plot_style.PLOT_UNIT`, scaled by the estimate's peak."""
+    plt = pyplot()
     wavelengths = sequence.wavelengths_nm
-    leds = sequence.led_spectra()
-    estimate_values = analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum)
-    std = estimate.spectrum.replace(values=estimate.spectrum_std[:, None]).to_unit(sequence.spectral_unit).values[:, 0]
+    leds = in_plot_unit(sequence.led_spectra())
+    estimate_values = in_plot_unit(estimate.spectrum)[:, 0]
+    std = in_plot_unit(estimate.spectrum.replace(values=estimate.spectrum_std[:, None]))[:, 0]
     peak = float(np.max(estimate_values)) or 1.0
-    figure, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    figure, axes = plt.subplots(1, 2, figsize=(12, 4.8))
     left, right = axes
     # The band is the estimate's own uncertainty (AmbientEstimate.spectrum_std), one standard deviation each side;
     # the legend says what it covers (pixel noise, and the model's error when the camera is known).
@@ -91,47 +105,54 @@ def plot_spectra(
         wavelengths,
         (estimate_values - std) / peak,
         (estimate_values + std) / peak,
-        color="tab:blue",
-        alpha=0.25,
+        color=PALETTE.ambient,
+        alpha=0.2,
         lw=0,
         label=f"estimate ± 1σ ({covers})",
     )
-    left.plot(wavelengths, estimate_values / peak, color="tab:blue", lw=2, label=f"estimate ({estimate.method})")
+    left.plot(wavelengths, estimate_values / peak, color=PALETTE.ambient, lw=2, label=f"estimate ({estimate.method})")
     if true_ambient is not None:
         # Truth and the LEDs' best fit of it, each least-squares scaled onto the estimate (the metric's scaling).
-        truth = true_ambient.resample(sequence.grid).to_unit(sequence.spectral_unit).values[:, 0]
+        truth = in_plot_unit(true_ambient.resample(sequence.grid))[:, 0]
         for curve, style in (
-            (truth, dict(color="black", ls="--", lw=1.5, label="true ambient (scaled)")),
+            (truth, dict(color=PALETTE.truth, ls="--", lw=1.5, label="true ambient (scaled)")),
             (
-                led_fit(leds.values, truth),
-                dict(color="gray", ls=":", lw=1.5, label="best non-negative LED fit of the truth"),
+                led_fit(leds, truth),
+                dict(color=PALETTE.led_fit, ls=":", lw=1.8, label="best non-negative LED fit of the truth"),
             ),
         ):
             if np.any(curve):
                 left.plot(wavelengths, curve * float(estimate_values @ curve) / float(curve @ curve) / peak, **style)
     left.set_title("Ambient illuminant")
-    left.set_xlabel("wavelength (nm)")
-    left.set_ylabel(f"relative spectral power ({sequence.spectral_unit})")
+    spectral_axis(left, "peak of the estimate")
     left.legend()
+    right.plot(wavelengths, estimate_values / peak, color=PALETTE.ambient, lw=1.5, label="ambient (estimate)")
     for mode, solution in solutions.items():
-        flash = leds.values @ solution.flash_weights
-        right.plot(wavelengths, flash / peak, lw=1.5, label=f"{mode} flash")
+        right.plot(
+            wavelengths, leds @ solution.flash_weights / peak, color=PALETTE.of(mode), lw=2, label=f"{mode} flash"
+        )
     complementary = solutions.get("complementary")
     if complementary is not None:
-        total = leds.values @ (complementary.ambient_weights + complementary.flash_weights)
-        right.plot(wavelengths, total / peak, color="tab:purple", lw=2, label="ambient + complementary")
+        total = leds @ (complementary.ambient_weights + complementary.flash_weights)
+        right.plot(
+            wavelengths,
+            total / peak,
+            color=PALETTE.ambient_plus_complementary,
+            lw=2,
+            ls="-.",
+            label="ambient + complementary flash",
+        )
         if target is not None and complementary.scale:
-            target_values = target.to_unit(sequence.spectral_unit).values[:, 0]
+            target_values = in_plot_unit(target)[:, 0]
             target_scale = float(total @ target_values) / float(target_values @ target_values) / peak
-            right.plot(wavelengths, target_values * target_scale, color="gray", ls=":", label="target (scaled)")
-    right.plot(wavelengths, estimate_values / peak, color="tab:blue", lw=1, alpha=0.6, label="ambient (estimate)")
+            right.plot(
+                wavelengths, target_values * target_scale, color=PALETTE.target, ls=":", lw=1.8, label="target (scaled)"
+            )
     right.set_title("Flash mixes")
-    right.set_xlabel("wavelength (nm)")
+    spectral_axis(right, "peak of the estimate")
     right.legend()
     figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
-    return path
+    return figure
 
 
 def write_run_report(
@@ -182,7 +203,9 @@ def _write_run_report(
 
     matrix = _camera_to_xyz(sequence)
     ambient_linear, _ = sequence.load_linear_frame(stack.ambient_index)
-    previews = {"ambient": write_png(out / "ambient.png", srgb_preview(linear_rgb(sequence, ambient_linear), matrix))}
+    previews = {
+        "ambient": write_preview(out / "ambient.png", srgb_preview(linear_rgb(sequence, ambient_linear), matrix))
+    }
     for name, solution in solutions.items():
         image, _ = synthesize(stack.ambient, stack.led_frames, stack.spec, solution.flash_weights)
         exr = exr_metadata(sequence, 1 if image.ndim == 2 else image.shape[2])
@@ -192,11 +215,11 @@ def _write_run_report(
             {**exr.attributes, "msflash:flash_weights": solution.flash_weights.tolist()},
             exr.chromaticities,
         )
-        previews[name] = write_png(out / f"{name}.png", srgb_preview(linear_rgb(sequence, image), matrix))
+        previews[name] = write_preview(out / f"{name}.png", srgb_preview(linear_rgb(sequence, image), matrix))
     flash_indices = sequence.indices("flash")
     if flash_indices:
         captured, _ = sequence.load_linear_frame(flash_indices[-1])
-        previews["flash-capture"] = write_png(
+        previews["flash-capture"] = write_preview(
             out / "flash-capture.png", srgb_preview(linear_rgb(sequence, captured), matrix)
         )
 
@@ -215,12 +238,13 @@ def _write_run_report(
             for name, s in solutions.items()
         },
         "recaptured_mode": mode,
+        "target": target_name,
         "previews": {name: str(path) for name, path in previews.items()},
         "plot": str(plot),
+        "report": str(out / REPORT_NAME),
     }
     if true_ambient is not None:
         summary.update(score_against_truth(sequence, estimate, true_ambient))
-    _write_markdown(out / "report.md", summary, sequence)
     return summary
 
 
@@ -239,39 +263,3 @@ def score_against_truth(sequence: Sequence, estimate: AmbientEstimate, true_ambi
         "spectrum_rmse_vs_truth": spectrum_rmse(analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum), truth),
         "spectrum_rmse_led_bound": led_fit_rmse(sequence.led_spectra().values, truth),
     }
-
-
-def _write_markdown(path: Path, summary: dict[str, Any], sequence: Sequence) -> None:
-    names = [led.name for led in sequence.leds]
-    lines = [
-        "# msflash run",
-        "",
-        f"Sequence: `{summary['sequence']}` ({summary['frames']} frames, camera {sequence.camera.model}).",
-        "",
-        "![spectra](spectra.png)",
-        "",
-        "| LED | " + " | ".join(names) + " |",
-        "|---|" + "---|" * len(names),
-        "| ambient weights | " + " | ".join(f"{w:.3g}" for w in summary["ambient_weights"]) + " |",
-    ]
-    for mode, flash in summary["flash"].items():
-        lines.append(f"| {mode} flash | " + " | ".join(f"{w:.3g}" for w in flash["flash_weights"]) + " |")
-    lines += ["", f"Relative residual of the ambient fit: {summary['relative_residual']:.4f}."]
-    if "spectrum_rmse_vs_truth" in summary:
-        lines.append(
-            f"Spectrum RMSE against the true ambient (paper's Table 1 metric): {summary['spectrum_rmse_vs_truth']:.4f}; "
-            f"the best non-negative fit of the truth by the LED spectra (what the LEDs allow): "
-            f"{summary['spectrum_rmse_led_bound']:.4f}."
-        )
-    for note in summary["estimate_warnings"]:
-        lines.append(f"- warning: {note}")
-    lines += [
-        "",
-        "| ambient | matching (synthesised) | complementary (synthesised) | flash re-capture |",
-        "|---|---|---|---|",
-        "| ![](ambient.png) | ![](matching.png) | ![](complementary.png) | "
-        + ("![](flash-capture.png)" if "flash-capture" in summary["previews"] else "—")
-        + " |",
-        "",
-    ]
-    path.write_text("\n".join(lines))

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import base64
 import json
+import struct
 from functools import cache
 from html.parser import HTMLParser
 from pathlib import Path
@@ -26,6 +27,7 @@ from msflash.acquisition.app import cli_evaluate, evaluation
 from msflash.acquisition.app.cli import main as msflash_main
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.app.html_report import PNG_SIGNATURE, HtmlReport
+from msflash.acquisition.app.srgb_png import png_chunks
 from msflash.acquisition.sequence.image_files import read_image, read_image_header
 
 ACCEPTANCE_AMBIENTS = ("tungsten", "fluorescent", "underwater")
@@ -164,6 +166,14 @@ class TestEvaluateSequence:
             exr.close()
         assert read_image(out / "ambient.tiff").dtype == np.uint16
         assert (out / "ambient.png").read_bytes().startswith(PNG_SIGNATURE)
+        # The previews people look at: ≥ 1024 pixels on the long side (the 62×46-pixel chart image enlarged by
+        # whole pixels, not stretched by the browser), declared sRGB.
+        chunks = png_chunks((out / "ambient.png").read_bytes())
+        width, height = struct.unpack(">2I", chunks["IHDR"][:8])
+        tiff_height, tiff_width = read_image(out / "ambient.tiff").shape[:2]
+        factor = width // tiff_width
+        assert (width, height) == (tiff_width * factor, tiff_height * factor) and max(width, height) >= 1024
+        assert chunks["sRGB"] == b"\x00"
 
     def test_a_run_directory_is_accepted_and_output_defaults_beside_the_sequence(
         self, macbeth_run: Path, capsys: pytest.CaptureFixture
@@ -216,6 +226,12 @@ class TestColourStudyCommand:
         # Fig. 9 chart + 4 previews and a spectra plot per ambient + the Fig. 3 panel (3 images).
         assert len(report.images) == 1 + 2 * 5 + 3
         assert (out / "underwater" / "complementary-capture.exr").exists()
+        # The figures also as PNG files beside the report, named in the JSON, the same bytes the report shows.
+        assert set(payload["figures"]) == {"fig9.png", "fig3-snr.png", "underwater/spectra.png", "tungsten/spectra.png"}
+        for relative, path in payload["figures"].items():
+            data = Path(path).read_bytes()
+            assert Path(path) == out / relative and png_chunks(data)["sRGB"] == b"\x00"
+            assert data in report.images
 
     def test_bad_ambient(self) -> None:
         with pytest.raises(UsageError, match="--ambients 'moon'"):

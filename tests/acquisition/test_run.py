@@ -51,7 +51,7 @@ def test_run_outputs_and_accuracy(tungsten_run: tuple) -> None:
         "flash-capture.png",
         "matching.exr",
         "complementary.exr",
-        "report.md",
+        "report.html",
     ):
         assert (out / name).stat().st_size > 0, name
     estimate = json.loads((out / "estimate.json").read_text())

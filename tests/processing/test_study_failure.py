@@ -202,11 +202,13 @@ def _parser():
     ],
 )
 def test_cli_new_studies_write_json_and_png(tmp_path, capsys, argv, key):
+    from msflash.acquisition.app.srgb_png import png_chunks
+
     args = _parser().parse_args(["study", *argv, "--out", str(tmp_path), "--scheduler", "none"])
     assert args.handler(args) == 0
     saved = json.loads((tmp_path / f"{argv[0]}.json").read_text())
     assert key in saved
-    assert (tmp_path / f"{argv[0]}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png_chunks((tmp_path / f"{argv[0]}.png").read_bytes())["sRGB"] == b"\x00"  # a PNG declared sRGB
     assert capsys.readouterr().out.strip()
 
 
