@@ -31,10 +31,10 @@ from pathlib import Path
 import numpy as np
 
 from msflash.acquisition.app.camera_options import add_camera_options, camera_options_from_args, given_camera_options
-from msflash.acquisition.app.cli_common import UsageError, claimed_output, dumps_json, progress
+from msflash.acquisition.app.cli_common import UsageError, claimed_output, progress
 from msflash.acquisition.app.options import add_estimation_options
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
-from msflash.acquisition.errors import CaptureError, OutputWriteError
+from msflash.acquisition.errors import CaptureError
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import (
     read_sequence,
@@ -311,14 +311,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
     }
     summary["decision_ms"] = round(decision_ms, 3)
     summary["elapsed_s"] = round(time.perf_counter() - started, 3)
-    try:
-        (out / "run.json").write_text(dumps_json(summary) + "\n")
-        run_html.write_run_html(Path(summary["report"]), summary, sequence)
-    except OSError as err:
-        raise OutputWriteError(
-            f"{out / 'run.json'}: could not be written ({err}); expected a writable disk with room "
-            f"for it. The sequence is complete in {out / 'sequence'} and the report beside it"
-        ) from err
+    run_html.write_run_summary(out, summary, sequence)
     progress(f"done in {summary['elapsed_s']:.1f} s: {out}")
     print(out)
     return 0

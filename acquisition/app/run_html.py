@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from msflash.acquisition.app.cli_common import dumps_json
 from msflash.acquisition.app.html_report import HtmlReport
 from msflash.acquisition.errors import OutputWriteError
 from msflash.acquisition.sequence.format import Sequence
@@ -131,3 +132,22 @@ def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
     report.add_heading("Files")
     report.add_file_links(files, base)
     return report.write(path)
+
+
+def write_run_summary(out: Path, summary: dict[str, Any], sequence: Sequence) -> None:
+    """``run.json`` then the ``report.html`` it links: the last files of every run (``msflash run`` and ``live``).
+
+    Raises
+    ------
+    OutputWriteError
+        Either could not be written; the message says the sequence (and the report's pictures) are complete.
+    """
+    out = Path(out)
+    try:
+        (out / "run.json").write_text(dumps_json(summary) + "\n")
+    except OSError as err:
+        raise OutputWriteError(
+            f"{out / 'run.json'}: could not be written ({err}); expected a writable disk with room "
+            f"for it. The sequence is complete in {out / 'sequence'} and the report beside it"
+        ) from err
+    write_run_html(Path(summary["report"]), summary, sequence)

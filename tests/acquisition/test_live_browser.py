@@ -106,7 +106,7 @@ def test_the_fire_button_leaves_a_run_and_shows_its_spectrum(tmp_path: Path, bro
             "complementary.png",
             "flash-capture.png",
             "spectra.png",
-            "report.md",
+            "report.html",
             "run.json",
         ):
             assert (folder / name).is_file(), name
@@ -124,7 +124,9 @@ def test_the_fire_button_leaves_a_run_and_shows_its_spectrum(tmp_path: Path, bro
         assert run in browser.find_element("id", "run-list").text
         browser.save_screenshot(str(tmp_path / "live-sequence.png"))
 
-        browser.get(f"http://127.0.0.1:{server.port}/runs/{run}/")  # the run's report page
-        assert browser.find_elements("css selector", "svg polygon.band")
-        assert "spectrum RMSE vs the true ambient" in browser.page_source
+        browser.get(f"http://127.0.0.1:{server.port}/runs/{run}/")  # the run's report: what `msflash run` writes
+        assert browser.current_url.endswith(f"/runs/{run}/files/report.html")
+        assert "spectrum RMSE against the true ambient" in browser.page_source
+        images = browser.find_elements("css selector", "img")
+        assert images and all(browser.execute_script("return arguments[0].naturalWidth", i) > 0 for i in images)
         browser.save_screenshot(str(tmp_path / "live-report.png"))

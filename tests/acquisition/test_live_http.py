@@ -76,12 +76,14 @@ def test_only_files_inside_a_run_folder_are_served(tmp_path: Path) -> None:
     runs = tmp_path / "runs"
     (runs / "r1" / "sequence").mkdir(parents=True)
     (runs / "r1" / "run.json").write_text('{"frames": 9}\n')
-    (runs / "r1" / "report.md").write_text("# msflash run\n")
+    (runs / "r1" / "report.html").write_text("# msflash run\n")
     (tmp_path / "secret.txt").write_text("SECRET\n")
     (runs / "r1" / "link.txt").symlink_to(tmp_path / "secret.txt")
     with live_server(runs) as server:
         base = f"http://127.0.0.1:{server.port}"
-        status, text = request("GET", base + "/runs/r1/files/report.md")
+        status, text = request("GET", base + "/runs/r1/files/report.html")
+        assert (status, text) == (200, "# msflash run\n")
+        status, text = request("GET", base + "/runs/r1/")  # a run's page is the report `run` wrote
         assert (status, text) == (200, "# msflash run\n")
         for path in (
             "/runs/r1/files/../../secret.txt",
@@ -239,7 +241,7 @@ def test_a_sequence_at_the_live_exposure_and_a_second_fire_while_it_runs(tmp_pat
         assert [frame["exposure_us"] for frame in sequence["frames"]] == [4000] * 9
         assert emulator_levels(server) == (0.0,) * 7  # no page watches: the sequence left the LEDs off
         info = json.loads(request("GET", f"{base}/api/runs/{run}")[1])
-        assert "report.md" in info["files"] and '<polygon class="band"' in info["charts"]["ambient"]
+        assert "report.html" in info["files"] and '<polygon class="band"' in info["charts"]["ambient"]
 
 
 def test_a_wildcard_address_is_refused() -> None:

@@ -3,7 +3,7 @@
 The route is ``msflash run``'s (:mod:`acquisition.session.run`): the exposures planned for the rig
 (:func:`~acquisition.session.run.plan_exposure`), ambient + each LED + the flash decided from the frames in
 memory and re-captured in one stream (:func:`~acquisition.session.run.run_one_stream`), then the report of
-:func:`acquisition.app.report.write_run_report` and ``run.json``. The folder therefore holds the same files
+:func:`acquisition.app.report.write_run_report`, ``run.json`` and ``report.html``. The folder therefore holds the same files
 ``msflash run --out`` leaves. Called on the live server's rig thread, which owns the camera and the booth.
 """
 
@@ -16,8 +16,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.app.cli_common import claimed_output, dumps_json
-from msflash.acquisition.errors import CaptureError, OutputWriteError
+from msflash.acquisition.app.cli_common import claimed_output
+from msflash.acquisition.errors import CaptureError
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.exposure import ExposurePolicy
@@ -86,7 +86,7 @@ def run_sequence(
                 f"rig '{rig.name}': the ambient estimate is degenerate ({why_degenerate}); no report written. "
                 f"The sequence is complete in {out / 'sequence'}"
             )
-        from msflash.acquisition.app import report  # matplotlib: imported when a report is drawn
+        from msflash.acquisition.app import report, run_html  # matplotlib: imported when a report is drawn
 
         phase("writing the report")
         sequence = read_sequence(out / "sequence")
@@ -101,8 +101,5 @@ def run_sequence(
         }
         summary["decision_ms"] = round((decided - captured.last_frame_at) * 1e3, 3)
         summary["elapsed_s"] = round(time.perf_counter() - started, 3)
-        try:
-            (out / "run.json").write_text(dumps_json(summary) + "\n")
-        except OSError as err:
-            raise OutputWriteError(f"{out / 'run.json'}: could not be written ({err})") from err
+        run_html.write_run_summary(out, summary, sequence)
     return summary

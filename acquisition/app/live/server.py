@@ -308,8 +308,12 @@ class LiveServer:
     async def _get_run(self, request: web.Request) -> web.Response:
         return web.json_response(_finite(self._run_info(request.match_info["name"])))
 
-    async def _run_page(self, request: web.Request) -> web.Response:
-        return web.Response(text=run_page(self._run_info(request.match_info["name"])), content_type="text/html")
+    async def _run_page(self, request: web.Request) -> web.StreamResponse:
+        """The run's own ``report.html`` (what ``msflash run`` writes); the page's summary for a run without one."""
+        info = self._run_info(request.match_info["name"])
+        if "report.html" in info["files"]:
+            raise web.HTTPFound(f"/runs/{info['name']}/files/report.html")
+        return web.Response(text=run_page(info), content_type="text/html")
 
     # -- state --------------------------------------------------------------------------------
     def state_json(self) -> dict[str, Any]:
@@ -600,7 +604,7 @@ def _boolean(body: dict[str, Any], key: str) -> bool:
 
 
 def run_page(info: dict[str, Any]) -> str:
-    """A run's report as one HTML page: its numbers, spectra, previews and every file of the folder."""
+    """A page for a run without ``report.html`` (it stopped early): its numbers, spectra, previews and files."""
     name = html.escape(info["name"])
     summary = info.get("summary") or {}
     files = info["files"]
