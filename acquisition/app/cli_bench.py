@@ -13,6 +13,7 @@ _OPTIONAL_PARTS = {
     "booth": ("msflash.led_controller.bench", "run_bench"),
     "capture": ("msflash.acquisition.app.bench_capture", "capture_bench"),
     "decode": ("msflash.acquisition.app.bench_decode", "decode_bench"),
+    "many": ("msflash.acquisition.app.bench_many", "many_bench"),
 }
 """Bench parts contributed by other modules: part name → (module, function returning a dict)."""
 
