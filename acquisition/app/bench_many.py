@@ -2,13 +2,15 @@
 
 Eight sequences of the benchmark world (:func:`acquisition.app.bench.benchmark_world`, 512 × 640 RGB,
 7 LEDs) are written to a temporary folder; two local dask clusters, of one and of two worker processes,
-are started side by side and warmed up on them; then, round after round, the sequences' estimates
-(:func:`acquisition.session.many.estimate_record`, what ``msflash estimate DIR`` runs) are mapped on
-the one-worker cluster and then on the two-worker one. ``speedup_1_to_2_workers`` is the median over
-rounds of the two times' ratio (a pair taken seconds apart, so it holds while other load comes and
-goes), with its spread. The cluster start (about 2 s) is left out: it is paid once per command. Each
-worker's image passes already use two threads (``processing.statistics.DEFAULT_WORKERS``), so on two
-cores the ideal is below 2. The records of the two clusters are checked equal (``identical``).
+are started side by side and warmed up; then, round after round, the sequences' estimates
+(:func:`acquisition.session.many.estimate_record`, what ``msflash estimate DIR`` runs) are mapped
+serially in this process (``--scheduler none``), on the one-worker cluster and on the two-worker one.
+``speedup_1_to_2_workers`` is the median over rounds of the one-worker time ÷ the two-worker time
+(runs seconds apart, so the ratio holds while other load comes and goes), with its spread;
+``two_workers_over_serial`` the two-worker time ÷ the serial time (above 1: dask did not pay). The
+cluster start (2–3 s, more under load) is left out: it is paid once per command. Each worker's image
+passes already use two threads (``processing.statistics.DEFAULT_WORKERS``), so on two cores the ideal
+is below 2. The records of the three are checked equal (``identical``).
 """
 
 from __future__ import annotations
@@ -74,30 +76,41 @@ def many_bench(count: int = 8, height: int = 512, width: int = 640, rounds: int 
         median seconds on each cluster, whether the two clusters' records are identical, and what was run.
     """
     settings = EstimateSettings()
+    arms = ("serial", "one", "two")
     with tempfile.TemporaryDirectory(prefix="msflash-bench-many-") as scratch:
         jobs = [(folder, settings) for folder in write_bench_sequences(Path(scratch), count, height, width)]
         with ExitStack() as stack:
-            one = stack.enter_context(dask_mapper("local", 1))
-            two = stack.enter_context(dask_mapper("local", 2))
-            records = {name: list(mapper(estimate_record, jobs)) for name, mapper in (("one", one), ("two", two))}
-            failed = [record.error for record in records["one"] + records["two"] if record.error is not None]
+            mappers = {
+                "serial": stack.enter_context(dask_mapper("none")),
+                "one": stack.enter_context(dask_mapper("local", 1)),
+                "two": stack.enter_context(dask_mapper("local", 2)),
+            }
+            records = {arm: list(mappers[arm](estimate_record, jobs)) for arm in arms}  # also the warm-up
+            failed = [record.error for arm in arms for record in records[arm] if record.error is not None]
             if failed:
                 return {"failed": failed[0]}
-            times: dict[str, list[float]] = {"one": [], "two": []}
+            times: dict[str, list[float]] = {arm: [] for arm in arms}
             for _ in range(rounds):
-                for name, mapper in (("one", one), ("two", two)):
+                for arm in arms:
                     start = time.perf_counter()
-                    list(mapper(estimate_record, jobs))
-                    times[name].append(time.perf_counter() - start)
-    ratios = np.array(times["one"]) / np.array(times["two"])
-    identical = all(repr(a.payload) == repr(b.payload) for a, b in zip(records["one"], records["two"], strict=True))
+                    list(mappers[arm](estimate_record, jobs))
+                    times[arm].append(time.perf_counter() - start)
+    speedups = np.array(times["one"]) / np.array(times["two"])
+    over_serial = np.array(times["two"]) / np.array(times["serial"])
+    identical = all(
+        repr(a.payload) == repr(b.payload) == repr(c.payload)
+        for a, b, c in zip(records["serial"], records["one"], records["two"], strict=True)
+    )
     return {
-        "speedup_1_to_2_workers": float(np.median(ratios)),
-        "spread": [float(ratios.min()), float(ratios.max())],
+        "speedup_1_to_2_workers": float(np.median(speedups)),
+        "spread": [float(speedups.min()), float(speedups.max())],
+        "two_workers_over_serial": float(np.median(over_serial)),
+        "two_workers_over_serial_spread": [float(over_serial.min()), float(over_serial.max())],
+        "seconds_serial": float(np.median(times["serial"])),
         "seconds_1_worker": float(np.median(times["one"])),
         "seconds_2_workers": float(np.median(times["two"])),
         "identical": identical,
         "what": f"msflash estimate over {count} sequences of {height}x{width} RGB, 7 LEDs, {rounds} interleaved "
-        f"rounds, local dask clusters of 1 and 2 worker processes, {os.cpu_count()} CPUs (shared: other load "
-        "shows in the spread)",
+        f"rounds: in this process (serial), on local dask clusters of 1 and of 2 worker processes; "
+        f"{os.cpu_count()} CPUs (shared: other load shows in the spreads)",
     }

@@ -58,6 +58,13 @@ def add_model_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _file_for_workers(args: argparse.Namespace, path: str | None) -> str | None:
+    """A file option as the workers see it (absolute for a scheduler at an address; see many.for_scheduler)."""
+    if path is None or getattr(args, "sequence", None) is not None:  # one sequence: as given
+        return path
+    return many.for_scheduler(args.scheduler or "local", [path])[0]
+
+
 def _estimate_settings(args: argparse.Namespace) -> one_sequence.EstimateSettings:
     return one_sequence.EstimateSettings(
         solver=args.solver,
@@ -66,28 +73,34 @@ def _estimate_settings(args: argparse.Namespace) -> one_sequence.EstimateSetting
         method=args.method,
         tiles=args.tiles,
         model=getattr(args, "model", DEFAULT_AMBIENT_MODEL),
-        calibration=args.calibration,
+        calibration=_file_for_workers(args, args.calibration),
     )
 
 
 def _flash_settings(args: argparse.Namespace, out: str | None) -> one_sequence.FlashSettings:
-    return one_sequence.FlashSettings(_estimate_settings(args), args.mode, args.target, args.bounds, out)
+    target = args.target
+    if Path(target).is_file():  # a CSV file rather than an illuminant's name
+        target = _file_for_workers(args, target) or target
+    return one_sequence.FlashSettings(_estimate_settings(args), args.mode, target, args.bounds, out)
 
 
 def _many(args: argparse.Namespace) -> list[str] | None:
-    """The sequences when the command runs over many (several, a folder of them, or ``--scheduler``), else None."""
+    """The sequences when the command runs over many (several, a folder of them, or ``--scheduler``), else None
+    (``args.sequence`` then names the one)."""
+    args.sequence = None
     sequences, expanded = many.sequence_inputs(args.sequences)
     if len(sequences) == 1 and not expanded and args.scheduler is None and args.workers is None:
         args.sequence = sequences[0]
         return None
-    return sequences
+    return many.for_scheduler(args.scheduler or "local", sequences)
 
 
 def _run_many(args: argparse.Namespace, record, jobs: list) -> int:
     """Print each sequence's JSON line in input order, its notes and error on stderr; the worst status at the end."""
     done = []
-    scheduler = args.scheduler or "local"
-    for result in many.run_many(record, jobs, scheduler, args.workers, verbose=getattr(args, "verbose", 0) > 0):
+    for result in many.run_many(
+        record, jobs, args.scheduler or "local", args.workers, verbose=getattr(args, "verbose", 0) > 0
+    ):
         for note in result.notes:
             progress(f"{result.sequence}: {note}")
         if result.error is not None:
@@ -140,7 +153,7 @@ def _flash(args: argparse.Namespace) -> int:
     if sequences is not None:
         if args.out is not None:
             one_sequence.check_output_type(Path(args.out))
-        outputs = many.output_paths(args.out, sequences)
+        outputs = many.output_paths(_file_for_workers(args, args.out), sequences)
         jobs = [(sequence, _flash_settings(args, out)) for sequence, out in zip(sequences, outputs, strict=True)]
         return _run_many(args, many.flash_record, jobs)
     result = one_sequence.flash_one(args.sequence, _flash_settings(args, args.out), progress)

@@ -21,13 +21,26 @@ import logging
 import os
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, Protocol
 
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.progress import progress
 
-Mapper = Callable[[Callable[[Any], Any], Sequence[Any]], Iterator[Any]]
-"""``mapper(function, items)``: ``function(item)`` for each item, yielded in the items' order."""
+OnError = Callable[[Any, Exception], Any]
+"""``on_error(item, error)``: what to yield for an item whose job raised (or whose worker died)."""
+
+
+class Mapper(Protocol):
+    """``mapper(function, items)``: ``function(item)`` for each item, yielded in the items' order.
+
+    With ``on_error``, an item whose job raised, or whose worker process died, yields
+    ``on_error(item, error)`` and the others go on; without, the error is raised.
+    """
+
+    def __call__(
+        self, function: Callable[[Any], Any], items: Sequence[Any], on_error: OnError | None = None
+    ) -> Iterator[Any]: ...
+
 
 LOCAL = "local"
 SERIAL = "none"
@@ -35,9 +48,16 @@ CONNECT_TIMEOUT_S = 10
 """How long connecting to a scheduler address may take before the command gives up (exit 2)."""
 
 
-def serial_map(function: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[Any]:
-    """The serial mapper: ``function`` over ``items`` in this process, in order."""
-    return (function(item) for item in items)
+def serial_map(function: Callable[[Any], Any], items: Sequence[Any], on_error: OnError | None = None) -> Iterator[Any]:
+    """The serial :class:`Mapper`: ``function`` over ``items`` in this process, in order."""
+    for item in items:
+        try:
+            result = function(item)
+        except Exception as err:
+            if on_error is None:
+                raise
+            result = on_error(item, err)
+        yield result
 
 
 @contextmanager
@@ -120,10 +140,19 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
                 ) from None
             progress(f"dask: scheduler {scheduler}")
 
-        def mapper(function: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[Any]:
-            futures = client.map(function, list(items), pure=False)
-            for future in futures:  # in order, so results stay aligned with the items
-                yield future.result()
+        def mapper(
+            function: Callable[[Any], Any], items: Sequence[Any], on_error: OnError | None = None
+        ) -> Iterator[Any]:
+            items = list(items)
+            futures = client.map(function, items, pure=False)
+            for item, future in zip(items, futures, strict=True):  # in order, aligned with the items
+                try:
+                    result = future.result()
+                except Exception as err:  # the job's own error, or KilledWorker when its process died
+                    if on_error is None:
+                        raise
+                    result = on_error(item, err)
+                yield result
 
         try:
             yield mapper

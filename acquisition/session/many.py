@@ -18,7 +18,7 @@ from typing import Any
 
 from msflash.acquisition.errors import CameraError, CameraSettingError, CaptureError, RecordingError, UsageError
 from msflash.acquisition.session import one_sequence
-from msflash.acquisition.session.dask_map import dask_mapper
+from msflash.acquisition.session.dask_map import LOCAL, SERIAL, dask_mapper
 from msflash.led_controller.errors import BoothError
 from msflash.processing.errors import SolverError, SpectralDataError
 
@@ -77,6 +77,20 @@ def sequence_inputs(arguments: Sequence[str]) -> tuple[list[str], bool]:
         else:
             sequences.append(argument)
     return sequences, expanded
+
+
+def for_scheduler(scheduler: str, paths: Sequence[str]) -> list[str]:
+    """``paths`` as the scheduler's workers must see them: absolute for a scheduler at an address (its
+    workers run elsewhere, in other folders, and must share the files), as given on this machine.
+
+    >>> for_scheduler("local", ["day/0800"])
+    ['day/0800']
+    >>> for_scheduler("tcp://10.0.0.2:8786", ["/data/day/0800"])
+    ['/data/day/0800']
+    """
+    if scheduler in (LOCAL, SERIAL):
+        return list(paths)
+    return [os.path.abspath(path) for path in paths]
 
 
 def output_paths(template: str | None, sequences: Sequence[str]) -> list[str | None]:
@@ -171,10 +185,22 @@ def run_many(
 ) -> Iterator[SequenceRecord]:
     """``record`` over ``jobs`` on ``scheduler`` (:func:`~acquisition.session.dask_map.dask_mapper`), in order.
 
-    Each record is yielded as soon as it and those before it are done.
+    Each record is yielded as soon as it and those before it are done. ``record`` keeps a sequence's
+    own errors in its record; a job that does not come back at all (its worker process died, dask
+    gave up on it) is reported the same way, as that sequence's failure, and the others go on.
     """
     with dask_mapper(scheduler, workers, verbose=verbose) as mapper:
-        yield from mapper(record, jobs)
+        yield from mapper(record, jobs, on_error=_lost)
+
+
+def _lost(job: tuple[str, Any], err: Exception) -> SequenceRecord:
+    """The record of a sequence whose job did not come back (its worker process died, say): status 1."""
+    if type(err).__name__ != "KilledWorker":
+        return _failure(job[0], err, [])
+    text = " ".join(str(err).split())
+    return SequenceRecord(
+        job[0], None, (), f"{job[0]}: its worker process died, here and on dask's retries ({text})", 1
+    )
 
 
 def exit_status(records: Sequence[SequenceRecord]) -> int:

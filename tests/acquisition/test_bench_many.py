@@ -46,5 +46,6 @@ def test_the_part_reports_the_speedup_of_two_workers_with_identical_records() ->
     assert report["identical"] is True
     low, high = report["spread"]
     assert 0 < low <= report["speedup_1_to_2_workers"] <= high and math.isfinite(high)
-    assert report["seconds_1_worker"] > 0 and report["seconds_2_workers"] > 0
+    assert min(report["seconds_serial"], report["seconds_1_worker"], report["seconds_2_workers"]) > 0
+    assert report["two_workers_over_serial"] > 0
     assert "3 sequences of 48x64" in report["what"] and "2 interleaved rounds" in report["what"]

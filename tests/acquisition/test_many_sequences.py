@@ -158,6 +158,35 @@ def test_two_workers_give_the_one_by_one_results_bit_for_bit(
         np.testing.assert_array_equal(mine, theirs)
 
 
+_LOOPBACK_SCHEDULER = """
+import sys
+import distributed
+from msflash.acquisition.app.cli import main
+with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", host="127.0.0.1",
+                              dashboard_address=":0") as cluster:
+    status = main(["estimate", *sys.argv[1:], "--scheduler", cluster.scheduler_address])
+sys.exit(status)
+"""
+
+
+def test_a_scheduler_at_an_address_gets_absolute_paths_and_gives_the_same_lines(
+    day: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Its workers run in folders of their own: relative arguments are sent as absolute paths."""
+    good = sorted(day.iterdir())[:2]
+    expected = one_by_one(capsys, good, "estimate")
+    done = subprocess.run(
+        [sys.executable, "-c", _LOOPBACK_SCHEDULER, *(f"{day.name}/{sequence.name}" for sequence in good)],
+        capture_output=True,
+        text=True,
+        timeout=240,
+        cwd=day.parent,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.splitlines() == expected
+    assert "msflash: dask: scheduler tcp://127.0.0.1:" in done.stderr
+
+
 def test_a_scheduler_that_does_not_answer_is_refused_in_one_line(day: Path) -> None:
     with socket.socket() as probe:  # a loopback port nobody listens on
         probe.bind(("127.0.0.1", 0))
