@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 
 import numpy as np
@@ -98,15 +99,17 @@ def _many(args: argparse.Namespace) -> list[str] | None:
 def _run_many(args: argparse.Namespace, record, jobs: list) -> int:
     """Print each sequence's JSON line in input order, its notes and error on stderr; the worst status at the end."""
     done = []
-    for result in many.run_many(
+    records = many.run_many(
         record, jobs, args.scheduler or "local", args.workers, verbose=getattr(args, "verbose", 0) > 0
-    ):
-        for note in result.notes:
-            progress(f"{result.sequence}: {note}")
-        if result.error is not None:
-            progress(f"error: {result.error}")
-        print_json(result.json_object())
-        done.append(result)
+    )
+    with contextlib.closing(records):  # the cluster is closed even when printing fails (a closed pipe)
+        for result in records:
+            for note in result.notes:
+                progress(f"{result.sequence}: {note}")
+            if result.error is not None:
+                progress(f"error: {result.error}")
+            print_json(result.json_object())
+            done.append(result)
     failed = [result for result in done if result.status]
     if failed:
         progress(f"{len(failed)} of {len(done)} sequences failed")

@@ -11,7 +11,7 @@ refused it, with the notes a single run prints on stderr. A failed sequence does
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -182,7 +182,7 @@ def run_many(
     workers: int | None = None,
     *,
     verbose: bool = False,
-) -> Iterator[SequenceRecord]:
+) -> Generator[SequenceRecord, None, None]:
     """``record`` over ``jobs`` on ``scheduler`` (:func:`~acquisition.session.dask_map.dask_mapper`), in order.
 
     Each record is yielded as soon as it and those before it are done. ``record`` keeps a sequence's
