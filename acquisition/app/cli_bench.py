@@ -14,6 +14,7 @@ _OPTIONAL_PARTS = {
     "capture": ("msflash.acquisition.app.bench_capture", "capture_bench"),
     "decode": ("msflash.acquisition.app.bench_decode", "decode_bench"),
     "live": ("msflash.acquisition.app.live.bench", "live_bench"),
+    "many": ("msflash.acquisition.app.bench_many", "many_bench"),
 }
 """Bench parts contributed by other modules: part name → (module, function returning a dict)."""
 

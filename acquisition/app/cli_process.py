@@ -3,22 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import json
-import warnings
+import contextlib
 from pathlib import Path
 
 import numpy as np
 
 from msflash.acquisition.app.cli_common import UsageError, positive_int, print_json, progress
-from msflash.acquisition.app.options import add_estimation_options
-from msflash.acquisition.export.exr_metadata import exr_metadata
-from msflash.acquisition.sequence.format import Sequence, read_sequence
-from msflash.acquisition.sequence.image_files import read_image_header, write_image
-from msflash.acquisition.session import analysis
-from msflash.processing.ambient import LED_SIGNAL_Z
-from msflash.processing.errors import TargetUnreachableWarning
+from msflash.acquisition.app.options import add_estimation_options, add_scheduler_options
+from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session import analysis, many, one_sequence
 from msflash.processing.local import DEFAULT_TILES, LOCAL_METHODS
-from msflash.processing.synthesis import to_raw_values
 
 DEFAULT_LOCAL_METHOD = "auto"
 """Default of ``--method``: ``auto`` keeps the global estimate unless a local model predicts held-out tiles
@@ -46,36 +40,6 @@ def _add_calibration_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _read_calibrated(args: argparse.Namespace):
-    """The sequence, with a calibration applied (``--calibration`` or the sequence's reference); notes on stderr."""
-    sequence, notes = analysis.apply_calibration(read_sequence(args.sequence), getattr(args, "calibration", None))
-    for note in notes:
-        progress(note)
-    return sequence
-
-
-_FLASH_GOAL = {"matching": "match", "complementary": "complement"}
-"""What each flash mode does to the ambient (for the dark-ambient refusal)."""
-
-
-def _refuse_dark_ambient(sequence, estimate, what: str) -> None:
-    """A UsageError naming the ambient frame when it holds no light: there is no ambient to ``what``.
-
-    The estimate is then noise (or zero): estimate would plot it normalised to full height, matching
-    would rescale it to a full-drive mix, and complementary (scale-free, least power) returns a
-    flash of ~1e-6 drive that "reaches" the target on the noise.
-    """
-    if not estimate.ambient_is_dark:
-        return
-    index = sequence.indices("ambient")[0]
-    raise UsageError(
-        f"{sequence.path}: frames[{index}].file '{sequence.frames[index].file}': the ambient image holds no light "
-        f"(z-score {estimate.ambient_z:.2g} < {LED_SIGNAL_Z:g}: no signal above the black level "
-        f"{sequence.camera.black_level:g}); expected an ambient illuminant to {what} — was the light off, the lens "
-        "capped or the exposure far too short?"
-    )
-
-
 AMBIENT_MODELS = ("led", "prior", "auto")
 DEFAULT_AMBIENT_MODEL = "led"
 """Default of ``--model``: the LED-span estimate (eq. 4–6), the one ``run`` and ``flash`` solve their flash from.
@@ -95,22 +59,81 @@ def add_model_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _file_for_workers(args: argparse.Namespace, path: str | None) -> str | None:
+    """A file option as the workers see it (absolute for a scheduler at an address; see many.for_scheduler)."""
+    if path is None or getattr(args, "sequence", None) is not None:  # one sequence: as given
+        return path
+    return many.for_scheduler(args.scheduler or "local", [path])[0]
+
+
+def _estimate_settings(args: argparse.Namespace) -> one_sequence.EstimateSettings:
+    return one_sequence.EstimateSettings(
+        solver=args.solver,
+        alpha=args.alpha,
+        bin_factor=args.bin,
+        method=args.method,
+        tiles=args.tiles,
+        model=getattr(args, "model", DEFAULT_AMBIENT_MODEL),
+        calibration=_file_for_workers(args, args.calibration),
+    )
+
+
+def _flash_settings(args: argparse.Namespace, out: str | None) -> one_sequence.FlashSettings:
+    target = args.target
+    if Path(target).is_file():  # a CSV file rather than an illuminant's name
+        target = _file_for_workers(args, target) or target
+    return one_sequence.FlashSettings(_estimate_settings(args), args.mode, target, args.bounds, out)
+
+
+def _many(args: argparse.Namespace) -> list[str] | None:
+    """The sequences when the command runs over many (several, a folder of them, or ``--scheduler``), else None
+    (``args.sequence`` then names the one)."""
+    args.sequence = None
+    sequences, expanded = many.sequence_inputs(args.sequences)
+    if len(sequences) == 1 and not expanded and args.scheduler is None and args.workers is None:
+        args.sequence = sequences[0]
+        return None
+    return many.for_scheduler(args.scheduler or "local", sequences)
+
+
+def _run_many(args: argparse.Namespace, record, jobs: list) -> int:
+    """Print each sequence's JSON line in input order, its notes and error on stderr; the worst status at the end."""
+    done = []
+    records = many.run_many(
+        record, jobs, args.scheduler or "local", args.workers, verbose=getattr(args, "verbose", 0) > 0
+    )
+    with contextlib.closing(records):  # the cluster is closed even when printing fails (a closed pipe)
+        for result in records:
+            for note in result.notes:
+                progress(f"{result.sequence}: {note}")
+            if result.error is not None:
+                progress(f"error: {result.error}")
+            print_json(result.json_object())
+            done.append(result)
+    failed = [result for result in done if result.status]
+    if failed:
+        progress(f"{len(failed)} of {len(done)} sequences failed")
+    return many.exit_status(done)
+
+
 def _estimate(args: argparse.Namespace) -> int:
-    sequence = _read_calibrated(args)
-    if sequence.partial:
-        progress(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
-    if args.model != "led":
-        return _estimate_with_prior(args, sequence)
-    if args.method != "global":
-        return _estimate_local(args, sequence)
-    estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
-    _refuse_dark_ambient(sequence, estimate, "estimate")
-    payload = analysis.estimate_payload(sequence, estimate)
-    for warning in estimate.warnings:
-        progress(f"warning: {warning}")
+    sequences = _many(args)
+    settings = _estimate_settings(args)
+    if sequences is not None:
+        return _run_many(args, many.estimate_record, [(sequence, settings) for sequence in sequences])
+    result = one_sequence.estimate_one(args.sequence, settings, progress)
+    sequence, payload = result.sequence, result.payload
     if args.json:
         print_json(payload)
+    elif result.choice is not None:
+        chosen, reason = result.choice
+        print(f"ambient estimate of {sequence.directory} ({chosen} model; asked {args.model}): {reason}")
+        _print_spectrum(payload["spectrum"], sequence.wavelengths_nm)
+    elif result.local is not None:
+        _print_local(payload, result.local)
     else:
+        estimate = result.estimate
+        assert estimate is not None  # the global route
         names = payload["led_names"]
         print(f"ambient estimate of {sequence.directory} ({estimate.method}, alpha {estimate.alpha:.3g})")
         print("ambient weights: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, estimate.ambient_weights)))
@@ -118,59 +141,38 @@ def _estimate(args: argparse.Namespace) -> int:
             f"relative residual {estimate.relative_residual:.4f}, condition {estimate.condition_number:.3g}, "
             f"{estimate.n_samples} samples, {estimate.saturated_fraction:.1%} saturated"
         )
-        peak = float(np.max(payload["spectrum"])) or 1.0
-        for wavelength, value in zip(sequence.wavelengths_nm, payload["spectrum"]):
-            print(f"  {wavelength:6.1f} nm  {value / peak:7.4f}  {'#' * int(round(max(value, 0) / peak * 40))}")
+        _print_spectrum(payload["spectrum"], sequence.wavelengths_nm)
     return 0
 
 
-def _estimate_with_prior(args: argparse.Namespace, sequence: Sequence) -> int:
-    """``estimate --model prior|auto``: the light-prior estimate, or ``auto``'s choice between it and eq. 4–6.
-
-    The LED side is what ``--model led`` gives (global, or local when ``--method`` finds the illuminant
-    varying across the scene: the light prior is one global spectrum, so a local estimate stays).
-    """
-    from msflash.acquisition.session.prior_route import led_side, with_model_choice
-
-    stack = analysis.load_frame_stack(sequence)
-    led, payload, varies = led_side(sequence, stack, args.method, args.solver, args.alpha, args.tiles, args.bin)
-    _refuse_dark_ambient(sequence, led, "estimate")
-    payload, chosen, reason = with_model_choice(sequence, stack, payload, args.model, varies)
-    for warning in payload["warnings"]:
-        progress(f"warning: {warning}")
-    if args.json:
-        print_json(payload)
-    else:
-        print(f"ambient estimate of {sequence.directory} ({chosen} model; asked {args.model}): {reason}")
-        peak = float(np.max(payload["spectrum"])) or 1.0
-        for wavelength, value in zip(sequence.wavelengths_nm, payload["spectrum"]):
-            print(f"  {wavelength:6.1f} nm  {value / peak:7.4f}  {'#' * int(round(max(value, 0) / peak * 40))}")
-    return 0
+def _print_spectrum(spectrum, wavelengths_nm) -> None:
+    peak = float(np.max(spectrum)) or 1.0
+    for wavelength, value in zip(wavelengths_nm, spectrum):
+        print(f"  {wavelength:6.1f} nm  {value / peak:7.4f}  {'#' * int(round(max(value, 0) / peak * 40))}")
 
 
 def _flash(args: argparse.Namespace) -> int:
-    kind = None if args.out is None else _check_output_type(Path(args.out))
-    sequence = _read_calibrated(args)
-    if args.out is not None:
-        _check_raw_output(kind, Path(args.out), sequence)
-    if args.method != "global" or args.out is not None:
-        return _flash_local(args, sequence)
-    estimate = analysis.estimate_sequence(sequence, args.solver, args.alpha, bin_factor=args.bin)
-    _refuse_dark_ambient(sequence, estimate, _FLASH_GOAL[args.mode])
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", TargetUnreachableWarning)
-        solution = analysis.solve_sequence_flash(
-            sequence, args.mode, estimate.ambient_weights, args.target, args.bounds
-        )
-    for warning in caught:
-        progress(f"warning: {warning.message}")
-    payload = analysis.flash_payload(sequence, solution, args.target)
-    payload["estimate_warnings"] = list(estimate.warnings)
+    sequences = _many(args)
+    if sequences is not None:
+        if args.out is not None:
+            one_sequence.check_output_type(Path(args.out))
+        outputs = many.output_paths(_file_for_workers(args, args.out), sequences)
+        jobs = [(sequence, _flash_settings(args, out)) for sequence, out in zip(sequences, outputs, strict=True)]
+        return _run_many(args, many.flash_record, jobs)
+    result = one_sequence.flash_one(args.sequence, _flash_settings(args, args.out), progress)
+    solution, payload = result.solution, result.payload
     if args.json:
         print_json(payload)
+    elif result.local is not None:
+        names = payload["led_names"]
+        print(f"{solution.mode} flash for {payload['sequence']} ({solution.bounds} bounds, {result.local.model} model)")
+        label = "area-weighted mean flash weights" if result.local.model == "local" else "flash weights"
+        print(f"{label}: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, solution.flash_weights)))
+        if args.out is not None:
+            print(f"wrote {args.out}")
     else:
         names = payload["led_names"]
-        print(f"{solution.mode} flash for {sequence.directory} ({solution.bounds} bounds)")
+        print(f"{solution.mode} flash for {result.sequence.directory} ({solution.bounds} bounds)")
         print("flash weights: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, solution.flash_weights)))
         if solution.scale is not None:
             print(f"scale s = {solution.scale:.4g} (target {args.target})")
@@ -185,9 +187,11 @@ def _synthesize(args: argparse.Namespace) -> int:
     sequence = read_sequence(args.sequence)
     weights = _weights(args.weights, len(sequence.leds))
     output = Path(args.out)
-    _check_raw_output(_check_output_type(output), output, sequence)
+    one_sequence.check_raw_output(one_sequence.check_output_type(output), output, sequence)
     image, saturated, stack = analysis.synthesize_sequence(sequence, weights)
-    _write_flash_image(output, image, stack, sequence, {"msflash:flash_weights": weights.tolist()})
+    one_sequence.write_flash_image(
+        output, image, stack, sequence, {"msflash:flash_weights": weights.tolist()}, progress
+    )
     clipped = float(saturated.mean())
     if clipped > 0:
         progress(f"warning: {clipped:.1%} of the pixels were saturated in some input frame")
@@ -217,17 +221,7 @@ def add_local_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _estimate_local(args: argparse.Namespace, sequence: Sequence) -> int:
-    local = analysis.estimate_sequence_local(
-        sequence, args.method, args.solver, args.alpha, args.tiles, bin_factor=args.bin
-    )
-    _refuse_dark_ambient(sequence, local.global_estimate, "estimate")
-    payload = analysis.local_estimate_payload(sequence, local)
-    for warning in payload["warnings"]:
-        progress(f"warning: {warning}")
-    if args.json:
-        print_json(payload)
-        return 0
+def _print_local(payload: dict, local) -> None:
     names = payload["led_names"]
     chosen = f"{local.model} model" + (
         f", {local.tiles.shape[0]}x{local.tiles.shape[1]} tiles, smoothing {local.smoothing:g} tiles"
@@ -247,124 +241,32 @@ def _estimate_local(args: argparse.Namespace, sequence: Sequence) -> int:
         print(
             f"tile relative residuals: median {np.median(local.tile_residuals):.4f}, max {local.tile_residuals.max():.4f}"
         )
-    peak = float(np.max(payload["spectrum"])) or 1.0
-    for wavelength, value in zip(payload["wavelengths_nm"], payload["spectrum"]):
-        print(f"  {wavelength:6.1f} nm  {value / peak:7.4f}  {'#' * int(round(max(value, 0) / peak * 40))}")
-    return 0
+    _print_spectrum(payload["spectrum"], payload["wavelengths_nm"])
 
 
-def _flash_local(args: argparse.Namespace, sequence: Sequence) -> int:
-    stack = analysis.load_frame_stack(sequence)
-    local = analysis.estimate_sequence_local(
-        sequence, args.method, args.solver, args.alpha, args.tiles, stack=stack, bin_factor=args.bin
-    )
-    _refuse_dark_ambient(sequence, local.global_estimate, _FLASH_GOAL[args.mode])
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", TargetUnreachableWarning)
-        solution, tile_weights, _ = analysis.solve_sequence_flash_local(
-            sequence, args.mode, local, args.target, args.bounds
-        )
-    for message in dict.fromkeys(str(warning.message) for warning in caught):
-        progress(f"warning: {message}")
-    payload = analysis.local_flash_payload(sequence, solution, local, tile_weights, args.target)
-    if args.out is not None:
-        output = Path(args.out)
-        if local.model == "local":
-            image, saturated, _ = analysis.synthesize_sequence_local(sequence, tile_weights, local, stack)
-        else:
-            image, saturated, _ = analysis.synthesize_sequence(sequence, solution.flash_weights, stack)
-        metadata = {
-            "msflash:flash_weights": solution.flash_weights.tolist(),
-            "msflash:method": local.model,
-            "msflash:mode": solution.mode,
-        }
-        if local.model == "local":
-            metadata["msflash:tile_flash_weights"] = json.dumps(np.round(tile_weights, 6).tolist())
-        _write_flash_image(output, image, stack, sequence, metadata)
-        payload["out"] = str(output)
-        payload["saturated_fraction"] = float(saturated.mean())
-    if args.json:
-        print_json(payload)
-    else:
-        names = payload["led_names"]
-        print(f"{solution.mode} flash for {payload['sequence']} ({solution.bounds} bounds, {local.model} model)")
-        label = "area-weighted mean flash weights" if local.model == "local" else "flash weights"
-        print(f"{label}: " + ", ".join(f"{n}={w:.4g}" for n, w in zip(names, solution.flash_weights)))
-        if args.out is not None:
-            print(f"wrote {args.out}")
-    return 0
-
-
-_OUTPUT_TYPES = {".exr": "exr", ".tif": "tiff", ".tiff": "tiff"}
-"""``--out`` suffixes: linear float EXR, or 16-bit raw TIFF at the ambient frame's exposure and gain."""
-
-
-def _check_output_type(output: Path) -> str:
-    """``exr`` or ``tiff`` for ``--out``; refused before any work is done."""
-    kind = _OUTPUT_TYPES.get(output.suffix.lower())
-    if kind is None:
-        raise UsageError(f"--out {output}: unsupported image type; expected .exr (linear float) or .tiff (16-bit raw)")
-    return kind
-
-
-def _check_raw_output(kind: str | None, output: Path, sequence: Sequence) -> None:
-    """Refuse a raw ``.tiff`` (``kind`` from :func:`_check_output_type`) for a sequence whose frames are float (EXR): raw TIFF values are whole counts
-    in the frames' own encoding, and float frames have none (normalised ones, white level 1, would
-    all round to 0 or 1)."""
-    ambient = sequence.indices("ambient")
-    if kind != "tiff" or not ambient:
-        return
-    header = read_image_header(sequence.frame_path(ambient[0]))
-    if np.issubdtype(header.dtype, np.floating):
-        raise UsageError(
-            f"--out {output}: the frames of {sequence.path} are float ({sequence.frames[ambient[0]].file}, white level "
-            f"{sequence.camera.white_level:g}), so a 16-bit raw TIFF cannot hold them in their encoding; expected .exr "
-            "(linear float)"
-        )
-
-
-def _write_flash_image(
-    output: Path, image: np.ndarray, stack: analysis.FrameStack, sequence: Sequence, metadata: dict
-) -> None:
-    kind = _check_output_type(output)
-    try:
-        if kind == "exr":
-            exr = exr_metadata(sequence, 1 if image.ndim == 2 else image.shape[2])
-            write_image(output, image, {**metadata, **exr.attributes}, exr.chromaticities)
-            return
-        ambient = sequence.frames[stack.ambient_index]
-        white = sequence.camera.white_level
-        raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level, white)
-        write_image(output, raw, {**metadata, "msflash:exposure_us": ambient.exposure_us, "msflash:gain": ambient.gain})
-    except OSError as err:
-        blocking = next((parent for parent in output.parents if parent.exists()), None)
-        reason = (
-            f"{blocking} is not a directory"
-            if blocking is not None and not blocking.is_dir()
-            else err.strerror or str(err)
-        )
-        raise UsageError(f"--out {output}: cannot be written ({reason}); expected a writable file path") from None
-    clipped = int(np.count_nonzero((raw >= white) | (raw <= 0)))
-    if clipped:
-        progress(
-            f"warning: {clipped} of the {raw.size} samples of {output} ({clipped / raw.size:.2%}) are clipped to the "
-            f"raw range 0…{white:g} at the ambient frame's exposure; .exr keeps the linear values"
-        )
+_SEQUENCES_HELP = (
+    "sequence directory (format v1), or a folder of them (its sub-folders holding a sequence.json, in name "
+    "order); several are run on dask (--scheduler) and give one JSON line each, in input order, a failed "
+    "sequence its own error line while the others go on"
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``estimate``, ``flash`` and ``synthesize``."""
     estimate = subparsers.add_parser("estimate", help="estimate the ambient illuminant spectrum of a sequence")
-    estimate.add_argument("sequence", help="sequence directory (format v1)")
+    estimate.add_argument("sequences", nargs="+", metavar="SEQUENCE", help=_SEQUENCES_HELP)
     add_estimation_options(estimate)
     _add_calibration_option(estimate)
     add_local_options(estimate)
     add_model_option(estimate)
-    estimate.add_argument("--json", action="store_true", help="print one JSON object")
+    estimate.add_argument(
+        "--json", action="store_true", help="print one JSON object (several sequences: one JSON line each, always)"
+    )
+    add_scheduler_options(estimate, None, "sequences (with several)")
     estimate.set_defaults(handler=_estimate)
 
     flash = subparsers.add_parser("flash", help="solve the matching or complementary flash for a sequence")
-    flash.add_argument("sequence", help="sequence directory (format v1)")
+    flash.add_argument("sequences", nargs="+", metavar="SEQUENCE", help=_SEQUENCES_HELP)
     flash.add_argument("--mode", required=True, choices=("complementary", "matching"))
     flash.add_argument(
         "--target", default="D65", help="complementary target: an illuminant name (D65, A, FL2…) or a CSV file"
@@ -382,9 +284,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--out",
         default=None,
         help="also write the computational flash image (.exr linear float, .tiff 16-bit raw); "
-        "with a local estimate the flash weights vary across the frame",
+        "with a local estimate the flash weights vary across the frame; with several sequences a path "
+        "holding {name}, each sequence folder's name (out/{name}.exr)",
     )
-    flash.add_argument("--json", action="store_true", help="print one JSON object")
+    flash.add_argument(
+        "--json", action="store_true", help="print one JSON object (several sequences: one JSON line each, always)"
+    )
+    add_scheduler_options(flash, None, "sequences (with several)")
     flash.set_defaults(handler=_flash)
 
     synth = subparsers.add_parser("synthesize", help="synthesise the computational flash image from a sequence")

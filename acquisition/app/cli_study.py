@@ -15,9 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +26,9 @@ from msflash.acquisition.app.cli_common import (
     print_json,
     progress,
 )
+from msflash.acquisition.app.options import add_scheduler_options
 from msflash.acquisition.app.plot_style import PALETTE, pyplot, relative_power, save_figure
+from msflash.acquisition.session.dask_map import dask_mapper
 from msflash.processing.ambient import AMBIENT_METHODS
 
 STUDIES = ("table1", "surfaces", "cameras", "xy", "failure", "pareto")
@@ -69,54 +68,6 @@ def _names(text: str) -> list[str]:
     return values
 
 
-@contextmanager
-def _mapper(scheduler: str, workers: int | None) -> Iterator[Callable[[Callable[..., Any], Sequence[Any]], Any] | None]:
-    """A map function running jobs serially (``none``), on a local dask cluster (``local``) or at an address."""
-    if scheduler == "none":
-        yield None
-        return
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        if scheduler == "local":
-            progress("dask.distributed is not installed; running serially")
-            yield None
-            return
-        raise UsageError(
-            f"--scheduler {scheduler}: dask.distributed is not installed (pip install msflash[study])"
-        ) from None
-    cluster = None
-    if scheduler == "local":
-        n = workers or os.cpu_count() or 1
-        # Loopback only: the scheduler, workers and dashboard never listen on other interfaces.
-        cluster = LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address="127.0.0.1:0"
-        )
-        client = Client(cluster)
-        progress(f"dask: local cluster with {n} workers")
-    else:
-        try:
-            client = Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError, ValueError) as err:  # ValueError: not an address at all
-            raise UsageError(
-                f"--scheduler {scheduler}: cannot connect ({err}); expected 'local', 'none' or a dask "
-                "scheduler address (tcp://HOST:PORT)"
-            ) from None
-        progress(f"dask: scheduler {scheduler}")
-
-    def mapper(function: Callable[..., Any], items: Sequence[Any]) -> Iterator[Any]:
-        futures = client.map(function, list(items), pure=False)
-        for future in futures:  # in order, so results stay aligned with the cameras
-            yield future.result()
-
-    try:
-        yield mapper
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-
 def _run(args: argparse.Namespace) -> int:
     if args.name not in STUDIES:
         raise UsageError(f"study '{args.name}': unknown; expected one of {', '.join(STUDIES)}")
@@ -136,7 +87,7 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError("--alpha-units paper is the authors' eq. 6; expected --solver roughness")
     out = output_directory(args.out)
 
-    with _mapper(args.scheduler, args.workers) as mapper:
+    with dask_mapper(args.scheduler, args.workers, verbose=getattr(args, "verbose", 0) > 0) as mapper:
         if args.name == "table1":
             from msflash.processing.study.table1 import run_table1
 
@@ -399,14 +350,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     study.add_argument("--draws", type=positive_int, default=10, help="surfaces: draws per count (default 10)")
     study.add_argument("--seed", type=int, default=0, help="surfaces: random seed of the draws")
-    study.add_argument(
-        "--scheduler",
-        default="local",
-        help="'local' (a local dask cluster, default), 'none' (serial, in this process) or a dask scheduler ADDRESS",
-    )
-    study.add_argument(
-        "--workers", type=positive_int, default=None, help="workers of --scheduler local (default: CPUs)"
-    )
+    add_scheduler_options(study, what="study's cameras and illuminants")
     study.set_defaults(handler=_run)
 
 

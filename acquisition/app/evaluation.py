@@ -41,7 +41,7 @@ from msflash.acquisition.app.cli_common import dumps_json, progress
 from msflash.acquisition.app.html_report import HtmlReport
 from msflash.acquisition.app.plot_style import PALETTE, figure_png, in_plot_unit, pyplot, spectral_axis
 from msflash.acquisition.app.srgb_png import enlarged, srgb_png_bytes
-from msflash.acquisition.export.exr_metadata import LINEAR_UNITS
+from msflash.acquisition.sequence.exr_metadata import LINEAR_UNITS
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import write_image
 from msflash.acquisition.session import analysis

@@ -64,3 +64,18 @@ def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], 
         help="gap between patches in pixels (sim rig 2; default 2 with --patch-px)",
     )
     parser.add_argument("--margin-px", type=int, default=1, help="pixels ignored inside each patch edge")
+
+
+def add_scheduler_options(parser: argparse.ArgumentParser, default: str | None = "local", what: str = "jobs") -> None:
+    """``--scheduler local|none|ADDRESS`` and ``--workers N``: where ``what`` run (acquisition/session/dask_map.py)."""
+    parser.add_argument(
+        "--scheduler",
+        default=default,
+        metavar="local|none|ADDRESS",
+        help=f"where the {what} run: 'local' (a dask cluster on this machine, 127.0.0.1 only; default), 'none' "
+        "(one after another in this process) or the ADDRESS of a running dask scheduler (tcp://HOST:PORT, whose "
+        "workers have msflash installed; refused after 10 s without an answer)",
+    )
+    parser.add_argument(
+        "--workers", type=positive_int, default=None, help="worker processes of --scheduler local (default: CPUs)"
+    )

@@ -19,7 +19,7 @@ from msflash.acquisition.app.cli_common import dumps_json
 from msflash.acquisition.app.plot_style import PALETTE, in_plot_unit, pyplot, save_figure, spectral_axis
 from msflash.acquisition.app.srgb_png import enlarged, write_srgb_png
 from msflash.acquisition.errors import OutputWriteError
-from msflash.acquisition.export.exr_metadata import exr_metadata
+from msflash.acquisition.sequence.exr_metadata import exr_metadata
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import write_image
 from msflash.acquisition.session import analysis

@@ -45,11 +45,11 @@ import numpy as np
 
 from msflash.acquisition.errors import OutputWriteError, UsageError
 from msflash.acquisition.export.dng import write_dng
-from msflash.acquisition.export.exr_metadata import exr_metadata, led_peaks_nm
 from msflash.acquisition.export.formats import EXPORT_FORMATS
 from msflash.acquisition.export.ome_tiff import OmeLight, OmePlane, write_ome_tiff
 from msflash.acquisition.export.spectra_csv import SpectrumColumn, write_spectra_csv
 from msflash.acquisition.progress import progress
+from msflash.acquisition.sequence.exr_metadata import exr_metadata, led_peaks_nm
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
 from msflash.acquisition.session import analysis

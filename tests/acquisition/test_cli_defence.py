@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.app import cli_process
 from msflash.acquisition.app.cli import CRASH_LOG_ENV, main
+from msflash.acquisition.session import one_sequence
 from tests.helpers import write_test_sequence
 
 
@@ -114,7 +114,7 @@ def test_unexpected_exception_exits_1_with_one_line_and_a_crash_log(
     def broken(directory: object) -> None:
         raise ZeroDivisionError("a bug deep inside")
 
-    monkeypatch.setattr(cli_process, "read_sequence", broken)
+    monkeypatch.setattr(one_sequence, "read_sequence", broken)
     monkeypatch.setenv(CRASH_LOG_ENV, str(tmp_path / "crashes"))
     assert main(["estimate", str(sequence)]) == 1
     err = capsys.readouterr().err
@@ -132,7 +132,7 @@ def test_crash_log_falls_back_when_its_directory_cannot_be_made(
 ) -> None:
     blocker = tmp_path / "a-file"
     blocker.write_text("")
-    monkeypatch.setattr(cli_process, "read_sequence", lambda directory: {}[directory])
+    monkeypatch.setattr(one_sequence, "read_sequence", lambda directory: {}[directory])
     monkeypatch.setenv(CRASH_LOG_ENV, str(blocker / "crashes"))
     monkeypatch.setenv("TMPDIR", str(tmp_path))
     assert main(["estimate", str(sequence)]) == 1
@@ -145,13 +145,13 @@ def test_crash_log_falls_back_when_its_directory_cannot_be_made(
 def test_numpy_warnings_are_explained_in_one_line(
     sequence: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    real = cli_process.read_sequence
+    real = one_sequence.read_sequence
 
     def warns(directory: object) -> object:
         np.log(np.zeros(1))  # RuntimeWarning: divide by zero encountered in log
         return real(directory)
 
-    monkeypatch.setattr(cli_process, "read_sequence", warns)
+    monkeypatch.setattr(one_sequence, "read_sequence", warns)
     with warnings.catch_warnings():
         warnings.simplefilter("always")
         assert main(["estimate", str(sequence), "--json"]) == 0

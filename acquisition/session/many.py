@@ -1,0 +1,213 @@
+"""``msflash estimate`` and ``flash`` over many sequences: a day's time-lapse, a recorded study.
+
+The sequences are the command's arguments, each a sequence folder (holding ``sequence.json``) or a
+folder of sequence folders (its sub-folders holding one, in name order: :func:`sequence_inputs`).
+Each sequence goes through :mod:`acquisition.session.one_sequence`, the route of a single run, on a
+dask client (:mod:`acquisition.session.dask_map`), so its numbers are those of a one-by-one run.
+Each gives a :class:`SequenceRecord`, in input order: its JSON object, or the one-line error that
+refused it, with the notes a single run prints on stderr. A failed sequence does not stop the others.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Generator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from msflash.acquisition.errors import CameraError, CameraSettingError, CaptureError, RecordingError, UsageError
+from msflash.acquisition.session import one_sequence
+from msflash.acquisition.session.dask_map import LOCAL, SERIAL, dask_mapper
+from msflash.led_controller.errors import BoothError
+from msflash.processing.errors import SolverError, SpectralDataError
+
+SEQUENCE_FILE = "sequence.json"
+NAME_FIELD = "{name}"
+"""In ``flash --out`` over many sequences: replaced by each sequence folder's name."""
+
+
+@dataclass(frozen=True)
+class SequenceRecord:
+    """One sequence's outcome: its JSON object, or its error and exit status (2 refused input, 1 otherwise)."""
+
+    sequence: str
+    payload: dict[str, Any] | None
+    notes: tuple[str, ...] = ()
+    error: str | None = None
+    status: int = 0
+
+    def json_object(self) -> dict[str, Any]:
+        """What the command prints for this sequence: the single run's object, or the sequence, error and status."""
+        if self.payload is not None:
+            return self.payload
+        return {"sequence": self.sequence, "error": self.error, "status": self.status}
+
+
+def _is_sequence(path: Path) -> bool:
+    return (path / SEQUENCE_FILE).exists()
+
+
+def sequence_inputs(arguments: Sequence[str]) -> tuple[list[str], bool]:
+    """The sequences named by the arguments, and whether any argument was a folder of sequences.
+
+    An argument is kept as it is (the reader will name what is wrong with it) unless it is a folder
+    without ``sequence.json`` whose sub-folders hold one: then those sub-folders, in name order.
+
+    >>> sequence_inputs(["/nonexistent/a", "/nonexistent/b"])
+    (['/nonexistent/a', '/nonexistent/b'], False)
+    """
+    sequences: list[str] = []
+    expanded = False
+    for argument in arguments:
+        path = Path(argument)
+        inner: list[str] = []
+        try:
+            if path.is_dir() and not _is_sequence(path):
+                inner = sorted(
+                    os.path.join(argument, child.name)
+                    for child in path.iterdir()
+                    if child.is_dir() and _is_sequence(child)
+                )
+        except OSError:  # unreadable: the reader names it
+            inner = []
+        if inner:
+            sequences.extend(inner)
+            expanded = True
+        else:
+            sequences.append(argument)
+    return sequences, expanded
+
+
+def for_scheduler(scheduler: str, paths: Sequence[str]) -> list[str]:
+    """``paths`` as the scheduler's workers must see them: absolute for a scheduler at an address (its
+    workers run elsewhere, in other folders, and must share the files), as given on this machine.
+
+    >>> for_scheduler("local", ["day/0800"])
+    ['day/0800']
+    >>> for_scheduler("tcp://10.0.0.2:8786", ["/data/day/0800"])
+    ['/data/day/0800']
+    """
+    if scheduler in (LOCAL, SERIAL):
+        return list(paths)
+    return [os.path.abspath(path) for path in paths]
+
+
+def output_paths(template: str | None, sequences: Sequence[str]) -> list[str | None]:
+    """``flash --out`` for each sequence: ``{name}`` replaced by the sequence folder's name.
+
+    Raises
+    ------
+    UsageError
+        Several sequences and no ``{name}``, or two sequences whose outputs would be the same file.
+
+    >>> output_paths("out/{name}.exr", ["day/0800", "day/0900"])
+    ['out/0800.exr', 'out/0900.exr']
+    """
+    if template is None:
+        return [None] * len(sequences)
+    if NAME_FIELD not in template:
+        raise UsageError(
+            f"--out {template}: {len(sequences)} sequences would write the same file; expected a path holding "
+            f"{NAME_FIELD} (each sequence folder's name), e.g. out/{NAME_FIELD}.exr"
+        )
+    outputs = [template.replace(NAME_FIELD, Path(sequence).resolve().name) for sequence in sequences]
+    seen: dict[str, str] = {}
+    for sequence, output in zip(sequences, outputs, strict=True):
+        if output in seen:
+            raise UsageError(
+                f"--out {template}: {seen[output]} and {sequence} would both write {output}; expected sequence "
+                "folders with different names"
+            )
+        seen[output] = sequence
+    return list(outputs)
+
+
+_BAD_INPUT = (UsageError, RecordingError, CameraSettingError, SpectralDataError, FileNotFoundError)
+"""Refused input (exit 2), as the command line classes it (acquisition/app/cli.py)."""
+_RUNTIME = (CameraError, CaptureError, SolverError, BoothError)
+
+
+def _bad_input() -> tuple[type[BaseException], ...]:
+    try:
+        from msflash.calibration.errors import CalibrationError
+    except ImportError:
+        return _BAD_INPUT
+    return (*_BAD_INPUT, CalibrationError)
+
+
+def _failure(sequence: str, err: Exception, notes: list[str]) -> SequenceRecord:
+    """The record of a sequence that failed: one line naming it, status 2 for refused input, else 1."""
+    text = str(err) or type(err).__name__
+    if isinstance(err, FileNotFoundError) and err.filename:
+        text = f"{err.filename}: not found"
+    if isinstance(err, _bad_input()):
+        status = 2
+    elif isinstance(err, _RUNTIME):
+        status = 1
+    else:
+        status, text = 1, f"unexpected {type(err).__name__}: {text} — a bug"
+    text = " ".join(text.split())
+    if sequence not in text:
+        text = f"{sequence}: {text}"
+    return SequenceRecord(sequence, None, tuple(notes), text, status)
+
+
+def estimate_record(job: tuple[str, one_sequence.EstimateSettings]) -> SequenceRecord:
+    """``msflash estimate`` of one sequence as a record (what a dask worker runs)."""
+    sequence, settings = job
+    notes: list[str] = []
+    try:
+        result = one_sequence.estimate_one(sequence, settings, notes.append)
+    except Exception as err:  # every failure is this sequence's, reported for it; the others go on
+        return _failure(sequence, err, notes)
+    return SequenceRecord(sequence, result.payload, tuple(notes))
+
+
+def flash_record(job: tuple[str, one_sequence.FlashSettings]) -> SequenceRecord:
+    """``msflash flash`` of one sequence as a record (what a dask worker runs)."""
+    sequence, settings = job
+    notes: list[str] = []
+    try:
+        result = one_sequence.flash_one(sequence, settings, notes.append)
+    except Exception as err:  # every failure is this sequence's, reported for it; the others go on
+        return _failure(sequence, err, notes)
+    return SequenceRecord(sequence, result.payload, tuple(notes))
+
+
+def run_many(
+    record: Callable[[Any], SequenceRecord],
+    jobs: Sequence[Any],
+    scheduler: str = "local",
+    workers: int | None = None,
+    *,
+    verbose: bool = False,
+) -> Generator[SequenceRecord, None, None]:
+    """``record`` over ``jobs`` on ``scheduler`` (:func:`~acquisition.session.dask_map.dask_mapper`), in order.
+
+    Each record is yielded as soon as it and those before it are done. ``record`` keeps a sequence's
+    own errors in its record; a job that does not come back at all (its worker process died, dask
+    gave up on it) is reported the same way, as that sequence's failure, and the others go on.
+    """
+    with dask_mapper(scheduler, workers, verbose=verbose) as mapper:
+        yield from mapper(record, jobs, on_error=_lost)
+
+
+def _lost(job: tuple[str, Any], err: Exception) -> SequenceRecord:
+    """The record of a sequence whose job did not come back (its worker process died, say): status 1."""
+    if type(err).__name__ != "KilledWorker":
+        return _failure(job[0], err, [])
+    text = " ".join(str(err).split())
+    return SequenceRecord(
+        job[0], None, (), f"{job[0]}: its worker process died, here and on dask's retries ({text})", 1
+    )
+
+
+def exit_status(records: Sequence[SequenceRecord]) -> int:
+    """0 when every sequence succeeded, 2 when any was refused as bad input, else 1.
+
+    >>> exit_status([SequenceRecord("a", {}), SequenceRecord("b", None, error="b: x", status=1)])
+    1
+    """
+    statuses = {record.status for record in records}
+    return 2 if 2 in statuses else (1 if 1 in statuses else 0)

@@ -1,0 +1,293 @@
+"""What ``msflash estimate`` and ``msflash flash`` compute for one recorded sequence (docs/architecture.md §5.2).
+
+The one route from a sequence folder to the command's JSON object: read, calibrate, estimate (global,
+local or with the light prior, eq. 4–6), refuse a dark ambient, solve the flash (eq. 7–9) and write
+its computational image. The command line prints what these return, for one sequence
+(:mod:`acquisition.app.cli_process`) or for many (:mod:`acquisition.session.many`), so both give
+the same numbers. Notes meant for stderr go to a ``report`` callable as they arise.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from msflash.acquisition.errors import UsageError
+from msflash.acquisition.sequence.exr_metadata import exr_metadata
+from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.acquisition.sequence.image_files import read_image_header, write_image
+from msflash.acquisition.session import analysis
+from msflash.processing.ambient import LED_SIGNAL_Z, AmbientEstimate
+from msflash.processing.errors import TargetUnreachableWarning
+from msflash.processing.flash import FlashBounds, FlashSolution
+from msflash.processing.local import DEFAULT_TILES, LocalEstimate
+from msflash.processing.synthesis import to_raw_values
+
+Report = Callable[[str], None]
+"""Where a note for stderr goes (``progress`` for one sequence; a list's ``append`` on a dask worker)."""
+
+
+@dataclass(frozen=True)
+class EstimateSettings:
+    """The options of ``msflash estimate`` that shape the result (docs/architecture.md §7)."""
+
+    solver: str = "tikhonov"
+    alpha: float | str = "auto"
+    bin_factor: int = analysis.DEFAULT_BIN_FACTOR
+    method: str = "auto"
+    tiles: int = DEFAULT_TILES
+    model: str = "led"
+    calibration: str | None = None
+
+
+@dataclass(frozen=True)
+class FlashSettings:
+    """The options of ``msflash flash``: the estimate's, the flash's (eq. 7–9) and the image to write."""
+
+    estimate: EstimateSettings
+    mode: str
+    target: str = "D65"
+    bounds: FlashBounds = "physical"
+    out: str | None = None
+
+
+@dataclass(frozen=True)
+class EstimateResult:
+    """One sequence's estimate: the ``--json`` object and what the text output reads.
+
+    Exactly one of ``estimate`` (global LED model), ``local`` (``--method local|auto``) and
+    ``choice`` (``--model prior|auto``: the chosen model and why) is set.
+    """
+
+    sequence: Sequence
+    payload: dict[str, Any]
+    estimate: AmbientEstimate | None = None
+    local: LocalEstimate | None = None
+    choice: tuple[str, str] | None = None
+
+
+@dataclass(frozen=True)
+class FlashResult:
+    """One sequence's flash: the ``--json`` object, the solution and, on the local route, the local estimate."""
+
+    sequence: Sequence
+    payload: dict[str, Any]
+    solution: FlashSolution
+    local: LocalEstimate | None = None
+
+
+def read_calibrated(path: str, calibration: str | None, report: Report) -> Sequence:
+    """The sequence, with a calibration applied (``calibration`` or the sequence's reference); notes reported."""
+    sequence, notes = analysis.apply_calibration(read_sequence(path), calibration)
+    for note in notes:
+        report(note)
+    return sequence
+
+
+FLASH_GOAL = {"matching": "match", "complementary": "complement"}
+"""What each flash mode does to the ambient (for the dark-ambient refusal)."""
+
+
+def refuse_dark_ambient(sequence: Sequence, estimate: AmbientEstimate, what: str) -> None:
+    """A UsageError naming the ambient frame when it holds no light: there is no ambient to ``what``.
+
+    The estimate is then noise (or zero): estimate would plot it normalised to full height, matching
+    would rescale it to a full-drive mix, and complementary (scale-free, least power) returns a
+    flash of ~1e-6 drive that "reaches" the target on the noise.
+    """
+    if not estimate.ambient_is_dark:
+        return
+    index = sequence.indices("ambient")[0]
+    raise UsageError(
+        f"{sequence.path}: frames[{index}].file '{sequence.frames[index].file}': the ambient image holds no light "
+        f"(z-score {estimate.ambient_z:.2g} < {LED_SIGNAL_Z:g}: no signal above the black level "
+        f"{sequence.camera.black_level:g}); expected an ambient illuminant to {what} — was the light off, the lens "
+        "capped or the exposure far too short?"
+    )
+
+
+def estimate_one(path: str, settings: EstimateSettings, report: Report) -> EstimateResult:
+    """``msflash estimate`` of the sequence at ``path``: eq. 4–6 by the route ``settings`` choose.
+
+    Raises
+    ------
+    UsageError
+        The ambient frame holds no light; the reader's and calibration's own errors pass through.
+    """
+    sequence = read_calibrated(path, settings.calibration, report)
+    if sequence.partial:
+        report(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
+    if settings.model != "led":
+        from msflash.acquisition.session.prior_route import led_side, with_model_choice
+
+        stack = analysis.load_frame_stack(sequence)
+        led, payload, varies = led_side(
+            sequence, stack, settings.method, settings.solver, settings.alpha, settings.tiles, settings.bin_factor
+        )
+        refuse_dark_ambient(sequence, led, "estimate")
+        payload, chosen, reason = with_model_choice(sequence, stack, payload, settings.model, varies)
+        for warning in payload["warnings"]:
+            report(f"warning: {warning}")
+        return EstimateResult(sequence, payload, choice=(chosen, reason))
+    if settings.method != "global":
+        local = analysis.estimate_sequence_local(
+            sequence, settings.method, settings.solver, settings.alpha, settings.tiles, bin_factor=settings.bin_factor
+        )
+        refuse_dark_ambient(sequence, local.global_estimate, "estimate")
+        payload = analysis.local_estimate_payload(sequence, local)
+        for warning in payload["warnings"]:
+            report(f"warning: {warning}")
+        return EstimateResult(sequence, payload, local=local)
+    estimate = analysis.estimate_sequence(sequence, settings.solver, settings.alpha, bin_factor=settings.bin_factor)
+    refuse_dark_ambient(sequence, estimate, "estimate")
+    payload = analysis.estimate_payload(sequence, estimate)
+    for warning in estimate.warnings:
+        report(f"warning: {warning}")
+    return EstimateResult(sequence, payload, estimate=estimate)
+
+
+def flash_one(path: str, settings: FlashSettings, report: Report) -> FlashResult:
+    """``msflash flash`` of the sequence at ``path``: the estimate, the flash mix (eq. 7–9) and, with
+    ``settings.out``, its computational image written there.
+
+    Raises
+    ------
+    UsageError
+        An output type that cannot hold the frames, a dark ambient, an unwritable output.
+    """
+    kind = None if settings.out is None else check_output_type(Path(settings.out))
+    estimating = settings.estimate
+    sequence = read_calibrated(path, estimating.calibration, report)
+    if settings.out is not None:
+        check_raw_output(kind, Path(settings.out), sequence)
+    if estimating.method != "global" or settings.out is not None:
+        return _flash_local(sequence, settings, report)
+    estimate = analysis.estimate_sequence(
+        sequence, estimating.solver, estimating.alpha, bin_factor=estimating.bin_factor
+    )
+    refuse_dark_ambient(sequence, estimate, FLASH_GOAL[settings.mode])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", TargetUnreachableWarning)
+        solution = analysis.solve_sequence_flash(
+            sequence, settings.mode, estimate.ambient_weights, settings.target, settings.bounds
+        )
+    for warning in caught:
+        report(f"warning: {warning.message}")
+    payload = analysis.flash_payload(sequence, solution, settings.target)
+    payload["estimate_warnings"] = list(estimate.warnings)
+    return FlashResult(sequence, payload, solution)
+
+
+def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) -> FlashResult:
+    estimating = settings.estimate
+    stack = analysis.load_frame_stack(sequence)
+    local = analysis.estimate_sequence_local(
+        sequence,
+        estimating.method,
+        estimating.solver,
+        estimating.alpha,
+        estimating.tiles,
+        stack=stack,
+        bin_factor=estimating.bin_factor,
+    )
+    refuse_dark_ambient(sequence, local.global_estimate, FLASH_GOAL[settings.mode])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", TargetUnreachableWarning)
+        solution, tile_weights, _ = analysis.solve_sequence_flash_local(
+            sequence, settings.mode, local, settings.target, settings.bounds
+        )
+    for message in dict.fromkeys(str(warning.message) for warning in caught):
+        report(f"warning: {message}")
+    payload = analysis.local_flash_payload(sequence, solution, local, tile_weights, settings.target)
+    if settings.out is not None:
+        output = Path(settings.out)
+        if local.model == "local":
+            image, saturated, _ = analysis.synthesize_sequence_local(sequence, tile_weights, local, stack)
+        else:
+            image, saturated, _ = analysis.synthesize_sequence(sequence, solution.flash_weights, stack)
+        metadata = {
+            "msflash:flash_weights": solution.flash_weights.tolist(),
+            "msflash:method": local.model,
+            "msflash:mode": solution.mode,
+        }
+        if local.model == "local":
+            metadata["msflash:tile_flash_weights"] = json.dumps(np.round(tile_weights, 6).tolist())
+        write_flash_image(output, image, stack, sequence, metadata, report)
+        payload["out"] = str(output)
+        payload["saturated_fraction"] = float(saturated.mean())
+    return FlashResult(sequence, payload, solution, local)
+
+
+OUTPUT_TYPES = {".exr": "exr", ".tif": "tiff", ".tiff": "tiff"}
+"""``--out`` suffixes: linear float EXR, or 16-bit raw TIFF at the ambient frame's exposure and gain."""
+
+
+def check_output_type(output: Path) -> str:
+    """``exr`` or ``tiff`` for ``--out``; refused before any work is done."""
+    kind = OUTPUT_TYPES.get(output.suffix.lower())
+    if kind is None:
+        raise UsageError(f"--out {output}: unsupported image type; expected .exr (linear float) or .tiff (16-bit raw)")
+    return kind
+
+
+def check_raw_output(kind: str | None, output: Path, sequence: Sequence) -> None:
+    """Refuse a raw ``.tiff`` (``kind`` from :func:`check_output_type`) for a sequence whose frames are float (EXR):
+    raw TIFF values are whole counts in the frames' own encoding, and float frames have none (normalised ones,
+    white level 1, would all round to 0 or 1)."""
+    ambient = sequence.indices("ambient")
+    if kind != "tiff" or not ambient:
+        return
+    header = read_image_header(sequence.frame_path(ambient[0]))
+    if np.issubdtype(header.dtype, np.floating):
+        raise UsageError(
+            f"--out {output}: the frames of {sequence.path} are float ({sequence.frames[ambient[0]].file}, white level "
+            f"{sequence.camera.white_level:g}), so a 16-bit raw TIFF cannot hold them in their encoding; expected .exr "
+            "(linear float)"
+        )
+
+
+def write_flash_image(
+    output: Path,
+    image: np.ndarray,
+    stack: analysis.FrameStack,
+    sequence: Sequence,
+    metadata: dict[str, Any],
+    report: Report,
+) -> None:
+    """The computational image at ``output``: linear float EXR, or raw TIFF at the ambient frame's exposure.
+
+    Raises
+    ------
+    UsageError
+        ``output`` cannot be written (naming what is in the way).
+    """
+    kind = check_output_type(output)
+    try:
+        if kind == "exr":
+            exr = exr_metadata(sequence, 1 if image.ndim == 2 else image.shape[2])
+            write_image(output, image, {**metadata, **exr.attributes}, exr.chromaticities)
+            return
+        ambient = sequence.frames[stack.ambient_index]
+        white = sequence.camera.white_level
+        raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level, white)
+        write_image(output, raw, {**metadata, "msflash:exposure_us": ambient.exposure_us, "msflash:gain": ambient.gain})
+    except OSError as err:
+        blocking = next((parent for parent in output.parents if parent.exists()), None)
+        reason = (
+            f"{blocking} is not a directory"
+            if blocking is not None and not blocking.is_dir()
+            else err.strerror or str(err)
+        )
+        raise UsageError(f"--out {output}: cannot be written ({reason}); expected a writable file path") from None
+    clipped = int(np.count_nonzero((raw >= white) | (raw <= 0)))
+    if clipped:
+        report(
+            f"warning: {clipped} of the {raw.size} samples of {output} ({clipped / raw.size:.2%}) are clipped to the "
+            f"raw range 0…{white:g} at the ambient frame's exposure; .exr keeps the linear values"
+        )
