@@ -152,3 +152,36 @@ def gram(rows: np.ndarray, weights: np.ndarray | None, start: int, stop: int) ->
     lower = np.zeros((rows.shape[0], rows.shape[0]))
     kernels.gram(rows, np.empty(0) if weights is None else weights, start, stop, lower)
     return lower + np.tril(lower, -1).T
+
+
+MOMENT_TASK_PIXELS = 1 << 16
+"""Pixels per task of :func:`raw_moments` (several per worker, so both finish together)."""
+
+
+def raw_moments(frames: list[np.ndarray], white: float, workers: int, pool: Any = None) -> np.ndarray | None:
+    """The raw second moments of the rows ``[frames…, 1]`` over every sample of pixels no frame saturates,
+    (n+1, n+1) float64, in one compiled pass over integer frames; None when the kernels cannot take them.
+
+    ``pool`` (an executor) shares tasks of whole pixels among ``workers`` threads; the tasks' moments are
+    added in task order, so the result does not depend on the number of workers.
+    """
+    flat = synthesis_inputs(frames)
+    if flat is None:
+        return None
+    kernels = _compiled()
+    channels = frames[0].shape[2] if frames[0].ndim == 3 else 1
+    size = flat[0].size
+    step = MOMENT_TASK_PIXELS * channels
+    n = len(frames)
+
+    def task(start: int) -> np.ndarray:
+        lower = np.zeros((n + 1, n + 1))
+        kernels.moments(flat, channels, float(white), start, min(start + step, size), lower)
+        return lower
+
+    starts = range(0, size, step)
+    parts = pool.map(task, starts) if pool is not None and workers > 1 and len(starts) > 1 else map(task, starts)
+    lower = np.zeros((n + 1, n + 1))
+    for part in parts:
+        lower += part
+    return lower + np.tril(lower, -1).T

@@ -144,3 +144,56 @@ def gram(rows, weights, start, stop, out):
                 for t in range(width):
                     total += left[t] * right[t]
                 out[i, j] += total
+
+
+@njit(nogil=True, cache=True, fastmath=True)
+def moments(frames, channels, white, start, stop, out):
+    """Raw second moments of the rows ``[frames…, 1]`` over the flat samples ``start ≤ t < stop`` (whole
+    pixels), leaving out every sample of a pixel that some frame saturates (a sample at or above ``white``):
+    ``out[i, j] += Σ_t x_i x_j`` (``j ≤ i``), ``out[n, i] += Σ_t x_i`` and ``out[n, n] +=`` the count, with
+    ``n = len(frames)``; lower triangle only. Each tile of samples is converted to float64 once, in cache."""
+    n = len(frames)
+    tile = TILE - TILE % channels
+    values = np.empty((n, tile))
+    peak = np.empty(tile, frames[0].dtype)
+    for low in range(start, stop, tile):
+        high = min(low + tile, stop)
+        width = high - low
+        first = frames[0][low:high]
+        for t in range(width):
+            peak[t] = first[t]
+        for i in range(n):
+            source = frames[i][low:high]
+            target = values[i]
+            for t in range(width):
+                value = source[t]
+                target[t] = value
+                peak[t] = max(peak[t], value)
+        top = peak[0]
+        for t in range(width):
+            top = max(top, peak[t])
+        valid = width
+        if top >= white:
+            for pixel in range(width // channels):
+                hit = False
+                for c in range(channels):
+                    if peak[pixel * channels + c] >= white:
+                        hit = True
+                if hit:
+                    valid -= channels
+                    for i in range(n):
+                        for c in range(channels):
+                            values[i, pixel * channels + c] = 0.0
+        for i in range(n):
+            left = values[i]
+            for j in range(i + 1):
+                right = values[j]
+                total = 0.0
+                for t in range(width):
+                    total += left[t] * right[t]
+                out[i, j] += total
+            total = 0.0
+            for t in range(width):
+                total += left[t]
+            out[n, i] += total
+        out[n, n] += valid

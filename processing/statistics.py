@@ -408,8 +408,9 @@ def accumulate_statistics(
     cfa_period
         2 when the frames are Bayer mosaics (blocks then gather same-colour samples).
     workers
-        Threads sharing the frames of the binned pass (numpy releases the GIL while it sums); 1
-        runs on the calling thread. The statistics do not depend on it.
+        Threads sharing the frames of the binned pass, or the pixels of the compiled all-pixel pass
+        (numpy and the compiled kernels release the GIL while they sum); 1 runs on the calling
+        thread. The statistics do not depend on it (beyond rounding).
     weighting
         Inverse-variance sample weights (module notes); binned statistics with an even block size only
         (elsewhere there is no noise probe to fit them to, and the samples stay unweighted).
@@ -427,7 +428,9 @@ def accumulate_statistics(
     Notes
     -----
     A pixel is excluded when any channel of it, in any frame, is at or above the white level
-    (docs/architecture.md §6). Moments are accumulated in float64.
+    (docs/architecture.md §6). Moments are accumulated in float64. Integer frames are read once,
+    by the compiled kernels of :mod:`processing.frame_kernels` (binned: per frame; all pixels: every
+    frame's tile together), when numba is installed; numpy takes the same steps otherwise.
     """
     if bin_factor < 1 or cfa_period not in (1, 2):
         raise SpectralDataError(
@@ -457,6 +460,12 @@ def accumulate_statistics(
     n_led_frames = len(led_frames)
     n_rows = n_led_frames + 2
     white = spec.white_level
+    if mask_flat is None:
+        # Integer frames: one compiled pass, each sample converted once in a cache-sized tile.
+        pool = thread_pool(workers) if workers > 1 else None
+        compiled = frame_kernels.raw_moments([*led_frames, ambient], white, workers, pool)
+        if compiled is not None:
+            return _statistics_from_moments(compiled, spec, n_pixels * n_channels)
     # Raw second moments of the rows [F_1 … F_n, A, 1] over the valid samples. Every statistic of
     # the linearised differences is a linear transform of these (below), so the per-chunk work is
     # one conversion and one Gram product: no per-frame subtract, scale or difference passes.

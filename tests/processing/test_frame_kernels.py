@@ -185,10 +185,14 @@ def test_both_routes_weigh_samples_alike(dtype: type, monkeypatch: pytest.Monkey
         assert_same(result, reference, rtol=1e-10)
 
 
-@pytest.mark.parametrize(("shape", "period"), [((37, 53, 3), 1), ((45, 71), 2)])
-def test_all_pixel_statistics_match_the_reference(route: str, shape: tuple[int, ...], period: int) -> None:
+@pytest.mark.parametrize("shape", [(37, 53, 3), (45, 71), (97, 89, 3)])
+@pytest.mark.parametrize("workers", [1, 2])
+def test_all_pixel_statistics_match_the_reference(
+    route: str, shape: tuple[int, ...], workers: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(frame_kernels, "MOMENT_TASK_PIXELS", 500)  # several tasks, the last one short
     ambient, frames, spec = _frames(shape, 3, seed=3)
-    actual = accumulate_statistics(ambient, frames, spec, chunk_pixels=101)
+    actual = accumulate_statistics(ambient, frames, spec, chunk_pixels=101, workers=workers)
     # Every sample on its own (a mosaic's too): blocks of 1 of the frame as it is.
     expected = reference_statistics(ambient, frames, spec, 1, 1, 1)
     assert_same(actual, SequenceStatistics(**{**expected.__dict__, "noise": None}))
