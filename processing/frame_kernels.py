@@ -134,7 +134,11 @@ def weighted_sum_range(
     """``output[i] = offset + Σ_j factors[j] · frame_j[i]`` for flat samples ``start ≤ i < stop`` (whole
     pixels), and ``saturated[p]`` for their pixels: a sample of some frame at or above ``white``."""
     kernels = _compiled()
-    kernels.weighted_sum(flat_frames, factors, float(offset), float(white), channels, output, saturated, start, stop)
+    # Summed in float64 whatever the image's type: a float32 sum was measured no faster (the pass is
+    # bound by reading the frames), and it rounds.
+    kernels.weighted_sum(
+        flat_frames, factors.astype(np.float64), float(offset), float(white), channels, output, saturated, start, stop
+    )
 
 
 def gram(rows: np.ndarray, weights: np.ndarray | None, start: int, stop: int) -> np.ndarray | None:

@@ -79,10 +79,11 @@ TILE = 4096
 
 @njit(nogil=True, cache=True)
 def weighted_sum(frames, factors, offset, white, channels, output, saturated, start, stop):
-    """``output[i] = offset + Σ_j factors[j] · frames[j][i]`` for ``start ≤ i < stop`` (float64 sums, cast
-    to the output's type) and ``saturated[i // channels]`` where some frame reaches ``white``."""
+    """``output[i] = offset + Σ_j factors[j] · frames[j][i]`` for ``start ≤ i < stop``, summed in the type
+    of ``factors`` (float64) and cast to the output's, and ``saturated[i // channels]`` where some frame
+    reaches ``white``."""
     tile = TILE - TILE % channels
-    total = np.empty(tile, np.float64)
+    total = np.empty(tile, factors.dtype)
     peak = np.empty(tile, frames[0].dtype)
     for low in range(start, stop, tile):
         high = min(low + tile, stop)
