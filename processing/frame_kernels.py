@@ -11,7 +11,9 @@ blocks; for synthesis, the weighted sum of the frames (eq. 7–9's image) and it
 Integer frames only (≤ 16 bits: the block sums are exact in 32-bit integers for blocks up to
 181 × 181, the weighted sums are taken in float64); float frames keep the numpy route, as does
 everything when numba is missing (it is an optional dependency, ``pip install msflash[fast]``) or
-``MSFLASH_KERNELS=numpy`` is set. Both routes give the same numbers (tests/processing/test_frame_kernels.py).
+``MSFLASH_KERNELS=numpy`` is set, and small one-off work in a process that has not loaded the
+kernels (:func:`wanted`: numba's start-up would cost more than it saves). Both routes give the same
+numbers (tests/processing/test_frame_kernels.py).
 
 The block size, the CFA period and the channel count are passed as tuples of that length so that
 numba compiles (and caches on disk) one specialised kernel per combination: with them constant, its
@@ -21,19 +23,33 @@ inner loops unroll, about 5× faster than with them as run-time integers.
 from __future__ import annotations
 
 import os
+import sys
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
 KERNELS_VARIABLE = "MSFLASH_KERNELS"
-"""Environment variable: ``numpy`` turns the compiled kernels off (for comparisons)."""
+"""Environment variable: ``numpy`` turns the compiled kernels off, ``numba`` uses them on any work;
+unset (or ``auto``), :func:`wanted` decides."""
+
+COMPILE_BYTES = 256 << 20
+"""Frame bytes from which one call's work loads the kernels (:func:`wanted`): importing numba and
+loading the cached kernels costs a process about 0.5–1 s once, which the kernels win back only on
+stacks about this large (a 4096×3000 RGB16 stack of 8 frames is 590 MB; a 1280×1024 one, 63 MB,
+saves about 25 ms an estimate). A process that has loaded them (:func:`prepare`: a capture session,
+the bench) uses them on any work."""
+
+
+def _mode() -> str:
+    return os.environ.get(KERNELS_VARIABLE, "").strip().lower()
 
 
 @lru_cache(maxsize=1)
 def _compiled() -> Any:
-    """The compiled kernels (a namespace), or None without numba or with ``MSFLASH_KERNELS=numpy``."""
-    if os.environ.get(KERNELS_VARIABLE, "").strip().lower() == "numpy":
+    """The compiled kernels (a namespace), imported on first call, or None without numba or with
+    ``MSFLASH_KERNELS=numpy``."""
+    if _mode() == "numpy":
         return None
     try:
         from msflash.processing import frame_kernels_numba
@@ -42,9 +58,32 @@ def _compiled() -> Any:
     return frame_kernels_numba
 
 
-def enabled() -> bool:
-    """Whether the compiled kernels are used (numba installed and not turned off)."""
+def _loaded() -> Any:
+    """The kernels if they are in use in this process (loaded before, or forced), else None."""
+    if _mode() == "numpy":
+        return None
+    if _mode() == "numba" or "msflash.processing.frame_kernels_numba" in sys.modules:
+        return _compiled()
+    return None
+
+
+def prepare() -> bool:
+    """Load the kernels now (numba's import and the cached kernels), for a process that will run many
+    passes — a capture session, the bench; whether they are available."""
     return _compiled() is not None
+
+
+def wanted(frame_bytes: int) -> bool:
+    """Whether the passes over ``frame_bytes`` of frames use the kernels: loaded already, forced, or work
+    of at least :data:`COMPILE_BYTES` (which loads them)."""
+    if _loaded() is not None:
+        return True
+    return frame_bytes >= COMPILE_BYTES and _mode() != "numpy" and _compiled() is not None
+
+
+def enabled() -> bool:
+    """Whether the compiled kernels are in use in this process."""
+    return _loaded() is not None
 
 
 def _rows_view(frame: np.ndarray) -> np.ndarray | None:
@@ -85,7 +124,7 @@ def block_pass(
         numpy route); else the (H/f, W/f) mask of blocks with a sample at or above ``white``, or None
         when there is none.
     """
-    kernels = _compiled()
+    kernels = _loaded()
     rows = _rows_view(frame) if kernels is not None else None
     if rows is None:
         return False, None
@@ -109,7 +148,7 @@ def block_pass(
 def synthesis_inputs(frames: list[np.ndarray]) -> tuple[np.ndarray, ...] | None:
     """The frames as flat integer views of one type for :func:`weighted_sum_range`, or None when the
     kernels cannot take them (numba missing, float or mixed types, non-contiguous frames)."""
-    if _compiled() is None or len({frame.dtype for frame in frames}) != 1:
+    if _loaded() is None or len({frame.dtype for frame in frames}) != 1:
         return None
     flat = []
     for frame in frames:
@@ -133,7 +172,7 @@ def weighted_sum_range(
 ) -> None:
     """``output[i] = offset + Σ_j factors[j] · frame_j[i]`` for flat samples ``start ≤ i < stop`` (whole
     pixels), and ``saturated[p]`` for their pixels: a sample of some frame at or above ``white``."""
-    kernels = _compiled()
+    kernels = _loaded()
     # Summed in float64 whatever the image's type: a float32 sum was measured no faster (the pass is
     # bound by reading the frames), and it rounds.
     kernels.weighted_sum(
@@ -150,7 +189,7 @@ def gram(rows: np.ndarray, weights: np.ndarray | None, start: int, stop: int) ->
     ndarray or None
         The (n, n) symmetric product.
     """
-    kernels = _compiled()
+    kernels = _loaded()
     if kernels is None or rows.dtype != np.float64 or rows.ndim != 2 or not rows.flags.c_contiguous:
         return None
     lower = np.zeros((rows.shape[0], rows.shape[0]))
@@ -172,7 +211,7 @@ def raw_moments(frames: list[np.ndarray], white: float, workers: int, pool: Any 
     flat = synthesis_inputs(frames)
     if flat is None:
         return None
-    kernels = _compiled()
+    kernels = _loaded()
     channels = frames[0].shape[2] if frames[0].ndim == 3 else 1
     size = flat[0].size
     step = MOMENT_TASK_PIXELS * channels

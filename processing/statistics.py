@@ -436,6 +436,7 @@ def accumulate_statistics(
         raise SpectralDataError(
             f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2"
         )
+    frame_kernels.wanted(ambient.nbytes * (len(led_frames) + 1))  # loads the kernels for large stacks
     if bin_factor > 1:
         return _accumulate_binned(
             ambient, led_frames, spec, sample_mask, chunk_pixels, bin_factor, cfa_period, workers, weighting

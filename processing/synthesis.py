@@ -107,6 +107,7 @@ def synthesize(
     saturated = np.zeros(ambient.shape[:2], dtype=bool)
     white = spec.white_level
     channels = ambient.shape[2] if ambient.ndim == 3 else 1
+    frame_kernels.wanted(sum(frame.nbytes for frame in frames))  # loads the kernels for large stacks
     compiled = frame_kernels.synthesis_inputs(frames)
     if compiled is not None:
         _synthesize_compiled(compiled, factors64, spec.black_level, white, channels, output, saturated, workers)

@@ -230,6 +230,7 @@ def processing_bench(
     ``pairs`` interleaved pairs per ratio (targets are judged from 15); ``repeats`` for the solver timings.
     """
     sizes = sizes or ((height, width),)
+    frame_kernels.prepare()  # as a capture session does: the kernels at every size (their start-up is not timed)
     result: dict[str, Any] = {"kernels": "compiled (numba)" if frame_kernels.enabled() else "numpy", "targets": {}}
     world: dict[str, Any] | None = None
     for size in sizes:

@@ -32,6 +32,7 @@ from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
+from msflash.processing import frame_kernels
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.flash import FlashBounds, FlashModel, FlashSolution
 from msflash.processing.spectra import Spectra
@@ -124,7 +125,8 @@ class FlashSession:
 
     # -- per capture -------------------------------------------------------------------------
     def begin(self) -> None:
-        """Forget the frames of an earlier capture."""
+        """Forget the frames of an earlier capture (and load the compiled passes, once, before any frame)."""
+        frame_kernels.prepare()
         self._frames: list[RawFrame] = []
         self._roles: list[str] = []
         self._levels: list[tuple[float, ...]] = []

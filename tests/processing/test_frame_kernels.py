@@ -24,10 +24,7 @@ BLACK = 64.0
 @pytest.fixture(params=["compiled", "numpy"])
 def route(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
     """Run a test on the compiled kernels and on the numpy route."""
-    if request.param == "numpy":
-        monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numpy")
-    else:
-        monkeypatch.delenv(frame_kernels.KERNELS_VARIABLE, raising=False)
+    monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numpy" if request.param == "numpy" else "numba")
     frame_kernels._compiled.cache_clear()
     if request.param == "compiled" and not frame_kernels.enabled():
         pytest.skip("numba is not installed")
@@ -171,7 +168,7 @@ def test_both_routes_weigh_samples_alike(dtype: type, monkeypatch: pytest.Monkey
     """The inverse-variance weighted statistics (fitted to the probe) are the same on either route."""
     ambient, frames, spec = _frames((70, 98, 3), 4, seed=11, dtype=dtype)
     results = {}
-    for name in ("numpy", "compiled"):
+    for name in ("numpy", "numba"):
         monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, name)
         frame_kernels._compiled.cache_clear()
         results[name] = [
@@ -181,7 +178,7 @@ def test_both_routes_weigh_samples_alike(dtype: type, monkeypatch: pytest.Monkey
     frame_kernels._compiled.cache_clear()
     reference = results["numpy"][0]
     assert reference.weighted
-    for result in [*results["numpy"], *results["compiled"]]:
+    for result in [*results["numpy"], *results["numba"]]:
         assert_same(result, reference, rtol=1e-10)
 
 
@@ -246,3 +243,32 @@ def test_synthesis_refuses_an_image_type_it_cannot_write() -> None:
     ambient, frames, spec = _frames((8, 8, 3), 2, seed=1)
     with pytest.raises(statistics.SpectralDataError, match="image type int16; expected float32 or float64"):
         synthesize(ambient, frames, spec, np.ones(2), dtype=np.int16)
+
+
+POLICY = """
+import sys
+import numpy as np
+from msflash.processing import frame_kernels
+from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+frame_kernels.COMPILE_BYTES = int(sys.argv[1])
+frames = [np.full((32, 40, 3), 100 + k, np.uint16) for k in range(4)]
+accumulate_statistics(frames[0], frames[1:], FrameStackSpec(0, 4000, 1.0, (1.0,) * 3, np.eye(3)), bin_factor=4)
+print(frame_kernels.enabled(), "numba" in sys.modules)
+"""
+
+
+@pytest.mark.parametrize(("threshold", "expected"), [(1 << 40, "False False"), (0, "True True")])
+def test_small_one_off_work_does_not_pay_numbas_start_up(threshold: int, expected: str) -> None:
+    """A fresh process loads numba only for work of at least COMPILE_BYTES (unless told otherwise)."""
+    import os
+    import subprocess
+    import sys
+
+    if not frame_kernels.prepare():
+        pytest.skip("numba is not installed")
+    environment = {key: value for key, value in os.environ.items() if key != frame_kernels.KERNELS_VARIABLE}
+    result = subprocess.run(
+        [sys.executable, "-c", POLICY, str(threshold)], capture_output=True, text=True, env=environment, timeout=300
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split("\n")[-2] == expected
