@@ -37,8 +37,9 @@ COMPILE_BYTES = 256 << 20
 """Frame bytes from which one call's work loads the kernels (:func:`wanted`): importing numba and
 loading the cached kernels costs a process about 0.5–1 s once, which the kernels win back only on
 stacks about this large (a 4096×3000 RGB16 stack of 8 frames is 590 MB; a 1280×1024 one, 63 MB,
-saves about 25 ms an estimate). A process that has loaded them (:func:`prepare`: a capture session,
-the bench) uses them on any work."""
+saves about 25 ms an estimate). A process that has loaded them (:func:`prepare`: the bench) uses
+them on any work. A capture session does not load them itself: numba's import holds the
+interpreter for up to seconds on a busy machine, and a camera's stream lost frames to it."""
 
 
 def _mode() -> str:
@@ -69,7 +70,7 @@ def _loaded() -> Any:
 
 def prepare() -> bool:
     """Load the kernels now (numba's import and the cached kernels), for a process that will run many
-    passes — a capture session, the bench; whether they are available."""
+    passes (the bench); whether they are available. Not while a camera streams (:data:`COMPILE_BYTES`)."""
     return _compiled() is not None
 
 

@@ -32,7 +32,6 @@ from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
-from msflash.processing import frame_kernels
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.flash import FlashBounds, FlashModel, FlashSolution
 from msflash.processing.spectra import Spectra
@@ -125,8 +124,7 @@ class FlashSession:
 
     # -- per capture -------------------------------------------------------------------------
     def begin(self) -> None:
-        """Forget the frames of an earlier capture (and load the compiled passes, once, before any frame)."""
-        frame_kernels.prepare()
+        """Forget the frames of an earlier capture."""
         self._frames: list[RawFrame] = []
         self._roles: list[str] = []
         self._levels: list[tuple[float, ...]] = []
@@ -196,7 +194,9 @@ class FlashSession:
         if row > n_leds or (role == "led" and row == n_leds) or shape != self._rows.plane_shape:
             self._rows_complete = False
             return
-        self._rows.add_frame(row, pixels, period)  # one compiled pass over the raw frame where it can
+        # One compiled pass over the raw frame when the process has the kernels loaded (processing.frame_kernels):
+        # not loaded here, as numba's import would stall the camera's stream for up to seconds.
+        self._rows.add_frame(row, pixels, period)
 
     def stack(self) -> analysis.FrameStack:
         """The frame stack of the frames taken so far (first ``ambient`` and every ``led`` frame), in memory.
