@@ -35,7 +35,7 @@ stamp=.venv/.msflash-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     say "installing msflash (editable) and its dependencies into .venv"
     .venv/bin/python -m pip install -q --upgrade pip >/dev/null
-    .venv/bin/python -m pip install -q -e ".[test,study]"
+    .venv/bin/python -m pip install -q -e ".[test,study,fast]"
     touch "$stamp"
 else
     say "msflash already installed in .venv (pyproject.toml unchanged)"

@@ -50,6 +50,7 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 
+from msflash.processing import frame_kernels
 from msflash.processing.errors import SpectralDataError
 
 DEFAULT_CHUNK_PIXELS = 1 << 15
@@ -407,8 +408,9 @@ def accumulate_statistics(
     cfa_period
         2 when the frames are Bayer mosaics (blocks then gather same-colour samples).
     workers
-        Threads sharing the frames of the binned pass (numpy releases the GIL while it sums); 1
-        runs on the calling thread. The statistics do not depend on it.
+        Threads sharing the frames of the binned pass, or the pixels of the compiled all-pixel pass
+        (numpy and the compiled kernels release the GIL while they sum); 1 runs on the calling
+        thread. The statistics do not depend on it (beyond rounding).
     weighting
         Inverse-variance sample weights (module notes); binned statistics with an even block size only
         (elsewhere there is no noise probe to fit them to, and the samples stay unweighted).
@@ -426,12 +428,15 @@ def accumulate_statistics(
     Notes
     -----
     A pixel is excluded when any channel of it, in any frame, is at or above the white level
-    (docs/architecture.md §6). Moments are accumulated in float64.
+    (docs/architecture.md §6). Moments are accumulated in float64. Integer frames are read once,
+    by the compiled kernels of :mod:`processing.frame_kernels` (binned: per frame; all pixels: every
+    frame's tile together), when numba is installed; numpy takes the same steps otherwise.
     """
     if bin_factor < 1 or cfa_period not in (1, 2):
         raise SpectralDataError(
             f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2"
         )
+    frame_kernels.wanted(ambient.nbytes * (len(led_frames) + 1))  # loads the kernels for large stacks
     if bin_factor > 1:
         return _accumulate_binned(
             ambient, led_frames, spec, sample_mask, chunk_pixels, bin_factor, cfa_period, workers, weighting
@@ -456,6 +461,12 @@ def accumulate_statistics(
     n_led_frames = len(led_frames)
     n_rows = n_led_frames + 2
     white = spec.white_level
+    if mask_flat is None:
+        # Integer frames: one compiled pass, each sample converted once in a cache-sized tile.
+        pool = thread_pool(workers) if workers > 1 else None
+        compiled = frame_kernels.raw_moments([*led_frames, ambient], white, workers, pool)
+        if compiled is not None:
+            return _statistics_from_moments(compiled, spec, n_pixels * n_channels)
     # Raw second moments of the rows [F_1 … F_n, A, 1] over the valid samples. Every statistic of
     # the linearised differences is a linear transform of these (below), so the per-chunk work is
     # one conversion and one Gram product: no per-frame subtract, scale or difference passes.
@@ -509,20 +520,24 @@ def _accumulate_binned(
             )
     if sample_mask is not None and sample_mask.shape != ambient.shape[:2]:
         raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {ambient.shape[:2]}")
-    planes = [cfa_planes(frame, cfa_period) for frame in frames]
     n_led_frames = len(led_frames)
     rows = BlockRows(
-        n_led_frames, planes[0].shape, factor, spec.white_level, black_level=spec.black_level, weighting=weighting
+        n_led_frames,
+        plane_shape(ambient.shape, cfa_period),
+        factor,
+        spec.white_level,
+        black_level=spec.black_level,
+        weighting=weighting,
     )
     # Rows [F_1 … F_n, A, 1]: the ambient frame is row n. Each frame is one independent pass
-    # (block sums, saturation), so ``workers`` threads share the frames: numpy releases the GIL
-    # inside each pass.
-    jobs = list(zip([n_led_frames, *range(n_led_frames)], planes))
+    # (block sums, saturation), so ``workers`` threads share the frames: the compiled pass and
+    # numpy both release the GIL inside it.
+    jobs = list(zip([n_led_frames, *range(n_led_frames)], frames))
     if workers > 1 and len(jobs) > 1:
-        list(thread_pool(workers).map(lambda job: rows.add(*job), jobs))
+        list(thread_pool(workers).map(lambda job: rows.add_frame(job[0], job[1], cfa_period), jobs))
     else:
-        for row, plane in jobs:
-            rows.add(row, plane)
+        for row, frame in jobs:
+            rows.add_frame(row, frame, cfa_period)
     if sample_mask is not None:
         mask_sums, _ = bin_frame(sample_mask.astype(np.uint8), factor, cfa_period)
         full = mask_sums == factor * factor
@@ -615,10 +630,7 @@ class BlockRows:
         """Block-sum one (H, W, C) plane into ``row`` (LED frame j → j, ambient → n) and note its saturated blocks."""
         if plane.shape != self.plane_shape:
             raise SpectralDataError(f"frame stack: a frame has shape {plane.shape}; expected {self.plane_shape}")
-        if row in self._filled or not 0 <= row <= self.n_led_frames:
-            raise SpectralDataError(
-                f"frame stack: row {row} is taken or out of range; expected each of 0…{self.n_led_frames} once"
-            )
+        self._check_row(row)
         if np.issubdtype(plane.dtype, np.floating):
             # NaN/inf refused before the block sums, whose gather products would warn about them first.
             if not np.isfinite(plane.sum()):
@@ -636,7 +648,42 @@ class BlockRows:
             differences = _gathered(row_sums[:: self.probe_stride], self.factor, channels, _difference_gather)
             np.copyto(self.differences[row].reshape(self.difference_shape), differences)
         # One max per frame finds the frames that saturate at all; only those build masks.
-        saturated = saturated_blocks(plane, self.factor, self.white_level) if may_saturate else None
+        self._record(row, saturated_blocks(plane, self.factor, self.white_level) if may_saturate else None)
+
+    def add_frame(self, row: int, frame: np.ndarray, cfa_period: int = 1) -> None:
+        """:meth:`add` of the frame's CFA planes (:func:`cfa_planes`), in one compiled pass over the raw
+        frame where :mod:`processing.frame_kernels` can take it: each sample read once, no plane copy.
+
+        The block sums and half differences are the same integers either way (exact sums); the
+        saturated blocks the same mask.
+        """
+        if plane_shape(frame.shape, cfa_period) != self.plane_shape:
+            self.add(row, cfa_planes(frame, cfa_period))  # refuses the shape
+            return
+        self._check_row(row)
+        differences = None if self.differences is None else self.differences[row].reshape(self.difference_shape)
+        done, saturated = frame_kernels.block_pass(
+            frame,
+            self.factor,
+            cfa_period,
+            self.white_level,
+            self.probe_stride,
+            self.rows[row].reshape(self.block_shape),
+            differences,
+        )
+        if not done:
+            self.add(row, cfa_planes(frame, cfa_period))
+            return
+        self._record(row, saturated)
+
+    def _check_row(self, row: int) -> None:
+        if row in self._filled or not 0 <= row <= self.n_led_frames:
+            raise SpectralDataError(
+                f"frame stack: row {row} is taken or out of range; expected each of 0…{self.n_led_frames} once"
+            )
+
+    def _record(self, row: int, saturated: np.ndarray | None) -> None:
+        """After a row's block sums are in: its saturated blocks, the weights, the incremental moments."""
         if row == self.n_led_frames:
             self._ambient_saturated = saturated
             if self._moments is None and self.weighting:
@@ -1014,6 +1061,19 @@ def inverse_variance_weights(levels: np.ndarray, probed_levels: np.ndarray, prob
     return fit_noise_line(probed_levels, probe).weights(np.asarray(levels, dtype=float))
 
 
+def plane_shape(frame_shape: tuple[int, ...], cfa_period: int) -> tuple[int, int, int]:
+    """The shape of :func:`cfa_planes` of a frame of ``frame_shape`` (without building them).
+
+    Examples
+    --------
+    >>> plane_shape((5, 7), 2), plane_shape((5, 7, 3), 1), plane_shape((5, 7), 1)
+    ((2, 3, 4), (5, 7, 3), (5, 7, 1))
+    """
+    if cfa_period == 2:
+        return (frame_shape[0] // 2, frame_shape[1] // 2, 4)
+    return (frame_shape[0], frame_shape[1], frame_shape[2] if len(frame_shape) == 3 else 1)
+
+
 def cfa_planes(frame: np.ndarray, cfa_period: int) -> np.ndarray:
     """(H, W, C) view of a frame; a Bayer mosaic becomes its four CFA planes as channels."""
     if cfa_period == 2:
@@ -1221,15 +1281,21 @@ def _grams(parts: Sequence[tuple[np.ndarray, np.ndarray | None]], chunk: int, wo
     def product(task: tuple[int, int]) -> np.ndarray:
         rows, weights = parts[task[0]]
         start = task[1]
+        compiled = frame_kernels.gram(rows, weights, start, min(start + chunk, rows.shape[1]))
+        if compiled is not None:
+            return compiled
         block = rows[:, start : start + chunk]
         if weights is None:
             return block @ block.T
-        # Weighted in slices of PRODUCT_COLUMNS, so that each weighted copy is still in cache for its product.
+        # Weighted in slices of PRODUCT_COLUMNS, so that each weighted copy is still in cache for its
+        # product: ``(x·√w)(x·√w)ᵀ``, one symmetric product (BLAS syrk: half the multiplications).
         result = np.zeros((rows.shape[0], rows.shape[0]))
         column_weights = weights[start : start + chunk]
         for offset in range(0, block.shape[1], PRODUCT_COLUMNS):
-            part = block[:, offset : offset + PRODUCT_COLUMNS]
-            result += (part * column_weights[offset : offset + PRODUCT_COLUMNS]) @ part.T
+            part = block[:, offset : offset + PRODUCT_COLUMNS] * np.sqrt(
+                column_weights[offset : offset + PRODUCT_COLUMNS]
+            )
+            result += part @ part.T
         return result
 
     tasks = [(index, start) for index, (rows, _) in enumerate(parts) for start in range(0, rows.shape[1], chunk)]

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from msflash.processing import frame_kernels
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.statistics import (
     DEFAULT_CHUNK_PIXELS,
@@ -56,6 +57,7 @@ def synthesize(
     *,
     chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
     workers: int = DEFAULT_WORKERS,
+    dtype: type = np.float32,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Synthesise the computational flash image from raw frames.
 
@@ -70,14 +72,22 @@ def synthesize(
     chunk_pixels
         Pixels per chunk (each chunk is one cache-resident weighted sum).
     workers
-        Threads sharing the chunks (numpy releases the GIL inside each chunk's passes); the image
-        does not depend on it.
+        Threads sharing the chunks (numpy and the compiled pass release the GIL inside each chunk);
+        the image does not depend on it.
+    dtype
+        The image's type, float32 (default) or float64; written directly, in one pass.
 
     Returns
     -------
     image : ndarray
-        The linear image ``m_a + Σ w_k m_f,k`` in units of value per (µs · gain), float32, the
+        The linear image ``m_a + Σ w_k m_f,k`` in units of value per (µs · gain), of ``dtype``, the
         shape of the frames.
+
+    Notes
+    -----
+    Integer frames go through one compiled pass (:func:`processing.frame_kernels.weighted_sum_range`):
+    each sample is read once, scaled and summed in float64 in cache-sized tiles, and the image written
+    once in ``dtype``. Other frames, or without numba, take chunks through numpy (float32 sums).
     saturated : ndarray
         Boolean (H, W) mask of pixels saturated in some input frame (their values are unreliable).
     """
@@ -91,12 +101,20 @@ def synthesize(
     # Per-frame factors on raw values, and one constant absorbing every black-level offset.
     factors64 = np.concatenate([[ambient_coefficient * spec.ambient_scale], coefficients * np.asarray(spec.led_scales)])
     _check_range(factors64, frames, spec, flash_weights)
-    factors = factors64.astype(np.float32)
-    offset = np.float32(-spec.black_level * float(factors.astype(float).sum()))
-    output = np.empty(ambient.shape, dtype=np.float32)
+    if np.dtype(dtype) not in (np.float32, np.float64):
+        raise SpectralDataError(f"synthesis: image type {np.dtype(dtype).name}; expected float32 or float64")
+    output: np.ndarray = np.empty(ambient.shape, dtype=dtype)
     saturated = np.zeros(ambient.shape[:2], dtype=bool)
     white = spec.white_level
     channels = ambient.shape[2] if ambient.ndim == 3 else 1
+    frame_kernels.wanted(sum(frame.nbytes for frame in frames))  # loads the kernels for large stacks
+    compiled = frame_kernels.synthesis_inputs(frames)
+    if compiled is not None:
+        _synthesize_compiled(compiled, factors64, spec.black_level, white, channels, output, saturated, workers)
+        return output, saturated
+    # Summed in the image's type (float32 is exact for integer frames ≤ 24 bits, its products round).
+    factors: np.ndarray = factors64.astype(dtype)
+    offset = factors.dtype.type(-spec.black_level * float(factors.astype(float).sum()))
     # Flat sample views (a copy only for non-contiguous frames): chunks then need no row alignment.
     flat_frames = [np.ascontiguousarray(frame).reshape(-1) for frame in frames]
     flat_output = output.reshape(-1)
@@ -112,10 +130,10 @@ def synthesize(
 
     def synthesize_chunk(start: int) -> None:
         stop = min(start + chunk_samples, flat_output.size)
-        # One float32 row per frame (per thread): a chunk's output is then one weighted sum of rows.
+        # One row per frame (per thread): a chunk's output is then one weighted sum of rows.
         stack = getattr(buffers, "stack", None)
         if stack is None:
-            stack = buffers.stack = np.empty((len(frames), min(chunk_samples, flat_output.size)), dtype=np.float32)
+            stack = buffers.stack = np.empty((len(frames), min(chunk_samples, flat_output.size)), dtype=dtype)
         rows = stack[:, : stop - start]
         bright = None
         for index, frame in enumerate(flat_frames):
@@ -148,6 +166,46 @@ def synthesize(
     ):
         raise non_finite_frames_error([*frames[1:], frames[0]], "synthesis")  # its layout: LED frames, ambient
     return output, saturated
+
+
+COMPILED_TASK_PIXELS = 1 << 16
+"""Pixels per task of the compiled synthesis: enough tasks to keep both threads busy to the end."""
+
+
+def _synthesize_compiled(
+    flat_frames: tuple[np.ndarray, ...],
+    factors: np.ndarray,
+    black_level: float,
+    white: float,
+    channels: int,
+    output: np.ndarray,
+    saturated: np.ndarray,
+    workers: int,
+) -> None:
+    """The weighted sum of integer frames in one compiled pass, tasks of whole pixels shared by ``workers``."""
+    offset = -black_level * float(factors.sum())
+    flat_output, flat_saturated = output.reshape(-1), saturated.reshape(-1)
+    step = COMPILED_TASK_PIXELS * channels
+
+    def task(start: int) -> None:
+        frame_kernels.weighted_sum_range(
+            flat_frames,
+            factors,
+            offset,
+            white,
+            channels,
+            flat_output,
+            flat_saturated,
+            start,
+            min(start + step, flat_output.size),
+        )
+
+    starts = range(0, flat_output.size, step)
+    if workers > 1 and len(starts) > 1:
+        list(thread_pool(workers).map(task, starts))
+    else:
+        for start in starts:
+            task(start)
 
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)

@@ -1,23 +1,26 @@
 """``msflash bench``: speed figures as ratios measured in one run (these machines are noisy).
 
-Processing part (issue: foundation), on a 1280×1024 RGB sequence with 7 LEDs:
+Processing part. Issue 21's targets, at each size (1280×1024 and 4096×3000 by default), on 1 and 2
+threads, each the median of ≥ 15 interleaved pairs with a copy of the same frames into a pre-allocated
+buffer (:mod:`acquisition.app.bench_ratios`; quartiles and extremes beside it), with its target and
+whether it is met (``targets``; ``targets_met`` over all of them):
 
-- ``estimate_over_copy``: ambient estimation as ``msflash estimate`` does it (4×4 block sums, one-pass
-  statistics, the default solver, the image passes on ``DEFAULT_WORKERS`` threads) ÷ the time to
-  read those frames once (a numpy copy, one thread) — target ≤ 3: the best of ``repeats`` runs of
-  each; ``estimate_over_copy_interleaved`` the median of ``4·repeats + 1`` ratios of an estimate and a
-  copy run in turn (steadier when other load comes and goes); ``estimate_over_copy_by_threads``
-  the same on 1 and on 2 threads; ``estimate_unweighted_over_copy`` without the inverse-variance sample
-  weights (what they cost); ``estimate_all_pixels_over_copy`` without binning;
-- ``solver_speedup``: each estimation and flash solver ÷ cvxpy on exactly the same problems
+- ``estimate_over_copy``: ambient estimation as ``msflash estimate`` does it (the default block size
+  for the frame, the inverse-variance weighted one-pass statistics, the default solver) — ≤ 2;
+- ``estimate_all_pixels_over_copy``: the same without binning — ≤ 4;
+- ``synthesis_over_copy``: the computational flash image (float32) — ≤ 1.5;
+- ``peak_memory_over_frames``: the peak numpy memory of each of them over the frames' bytes — ≤ 0.5.
+
+On the first size alone (``height × width``):
+
+- ``solvers``: each estimation and flash solver ÷ cvxpy on exactly the same problems
   (recorded from our solver), with the objectives' relative difference — target ≥ 50×, ≤ 1e-6;
   the LED/camera part of each problem is prepared once per sequence (:class:`AmbientModel`,
-  :class:`FlashModel`), as cvxpy is handed the finished problem matrices;
-- ``synthesis_over_copy``: synthesis ÷ the same memory copy — target ≤ 2 (``DEFAULT_WORKERS``
-  threads; ``synthesis_over_copy_by_threads`` on 1 and 2);
+  :class:`FlashModel`), as cvxpy is handed the finished problem matrices (best of ``repeats``);
 - ``prior_estimate_over_copy``: the light prior's estimate (channel-resolved statistics and solve,
-  ``msflash estimate --model prior``) ÷ the same copy (``prior_estimate_over_copy_interleaved`` as above); ``auto_choice_s`` the held-out comparison
-  ``--model auto`` adds; ``model_reference_s``/``model_band_s`` the default estimate's model band.
+  ``msflash estimate --model prior``), interleaved with the copy as above; ``auto_choice_s`` the
+  held-out comparison ``--model auto`` adds; ``model_reference_s``/``model_band_s`` the default
+  estimate's model band.
 
 Camera and booth parts are added by their modules when present.
 """
@@ -31,15 +34,16 @@ from typing import Any
 
 import numpy as np
 
-from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, SAMPLE_WEIGHTING
-from msflash.processing import datasets, lights
+from msflash.acquisition.app.bench_ratios import against_target, interleaved_ratio, peak_bytes
+from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, SAMPLE_WEIGHTING, block_factor
+from msflash.processing import datasets, frame_kernels, lights
 from msflash.processing.ambient import AmbientModel, estimate_ambient
 from msflash.processing.flash import FlashModel
 from msflash.processing.image_formation import SensorModel, chart_scene, exposure_for_peak, render_frame
 from msflash.processing.least_squares import minimise_quadratic, recording_problems
 from msflash.processing.model_error import light_reference, reference_for, with_model_error
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
-from msflash.processing.statistics import DEFAULT_WORKERS, FrameStackSpec, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 from msflash.processing.synthesis import synthesize
 
 
@@ -53,24 +57,15 @@ def _best_time(function: Callable[[], Any], repeats: int) -> float:
     return float(best)
 
 
-def _interleaved_ratio(function: Callable[[], Any], reference: Callable[[], Any], rounds: int) -> float:
-    """Median over ``rounds`` of ``function``'s time ÷ ``reference``'s, the two run in turn in each round.
-
-    Each ratio pairs two runs a few milliseconds apart, so it holds when other load comes and goes; a
-    minimum of separate runs (:func:`_best_time`) pairs the luckiest copy with the luckiest estimate,
-    which on a busy machine need not be alike."""
-    ratios = []
-    for _ in range(rounds):
-        start = time.perf_counter()
-        reference()
-        middle = time.perf_counter()
-        function()
-        ratios.append((time.perf_counter() - middle) / (middle - start))
-    return float(np.median(ratios))
-
-
 def benchmark_world(height: int = 1024, width: int = 1280, seed: int = 0) -> dict[str, Any]:
-    """A rendered 7-LED RGB sequence (tungsten ambient, 110-patch chart) for the benchmarks."""
+    """A rendered 7-LED RGB sequence (tungsten ambient, 110-patch chart) for the benchmarks; beyond
+    :data:`RENDERED_PIXELS`, a 1280×1024 one tiled up to the size (rendering 4096×3000 takes far longer
+    than what is measured on it)."""
+    if height * width > RENDERED_PIXELS:
+        small = benchmark_world(1024, 1280, seed)
+        reps = (-(-height // 1024), -(-width // 1280), 1)
+        small["frames"] = [np.ascontiguousarray(np.tile(frame, reps)[:height, :width]) for frame in small["frames"]]
+        return small
     grid = DEFAULT_GRID
     leds = datasets.paper_leds().resample(grid, outside="zero").to_unit("photons")
     camera = datasets.isetcam_camera("NikonD100").resample(grid, outside="zero").to_unit("photons")
@@ -140,54 +135,121 @@ def _compare_with_cvxpy(name: str, run: Callable[[], Any], repeats: int) -> dict
     }
 
 
-def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) -> dict[str, Any]:
-    """The three processing figures (see the module notes)."""
-    world = benchmark_world(height, width)
-    frames, spec = world["frames"], world["spec"]
+TARGETS = {"estimate_over_copy": 2.0, "estimate_all_pixels_over_copy": 4.0, "synthesis_over_copy": 1.5}
+"""Issue 21's targets: each figure's median interleaved ratio to a copy of the frames, at most this."""
+MEMORY_TARGET = 0.5
+"""Issue 21: the peak memory of an estimate or a synthesis, over the frames' bytes, at most this."""
+DEFAULT_SIZES = ((1024, 1280), (3000, 4096))
+"""(height, width) of the frames the targets are measured on."""
+RENDERED_PIXELS = 1024 * 1280
+"""Frames larger than this are a rendered 1280×1024 sequence tiled up (the cost is in the pixels, not the scene)."""
 
-    def copy() -> list[np.ndarray]:
-        return [f.copy() for f in frames]
 
-    copy_time = _best_time(copy, repeats)
-    statistics = accumulate_statistics(frames[0], frames[1:], spec)
+def frame_copy(frames: list[np.ndarray]) -> Callable[[], None]:
+    """The reference of every ratio: a copy of the frames into buffers allocated once (one thread)."""
+    buffers = [np.empty_like(frame) for frame in frames]
 
-    def estimate(
-        bin_factor: int, workers: int = DEFAULT_WORKERS, weighting: bool = SAMPLE_WEIGHTING
-    ) -> Callable[[], object]:
+    def copy() -> None:
+        for buffer, frame in zip(buffers, frames):
+            np.copyto(buffer, frame)
+
+    return copy
+
+
+def target_figures(world: dict[str, Any], pairs: int, threads: tuple[int, ...] = (1, 2)) -> dict[str, Any]:
+    """Issue 21's figures for one sequence: each ratio on each thread count, against its target, and the peak
+    memory of each operation over the frames' bytes."""
+    frames, spec, leds = world["frames"], world["spec"], world["leds"]
+    copy = frame_copy(frames)
+    factor = block_factor(frames[0].shape, None)
+
+    def estimate(bin_factor: int, workers: int) -> Callable[[], object]:
         # As msflash estimate: the weighted statistics (acquisition.session.analysis.sequence_statistics) and the default solve.
         return lambda: estimate_ambient(
             accumulate_statistics(
-                frames[0], frames[1:], spec, bin_factor=bin_factor, workers=workers, weighting=weighting
+                frames[0], frames[1:], spec, bin_factor=bin_factor, workers=workers, weighting=SAMPLE_WEIGHTING
             ),
-            world["leds"],
+            leds,
         )
 
-    weights = estimate_ambient(statistics, world["leds"]).ambient_weights
-    flash_weights = np.clip(weights, 0, 1)
+    weights = np.clip(estimate(factor, 1)().ambient_weights, 0, 1)  # type: ignore[attr-defined]
 
-    def synthesis(workers: int = DEFAULT_WORKERS) -> Callable[[], object]:
-        return lambda: synthesize(frames[0], frames[1:], spec, flash_weights, workers=workers)
+    def synthesis(workers: int) -> Callable[[], object]:
+        return lambda: synthesize(frames[0], frames[1:], spec, weights, workers=workers)
 
-    estimate_time = _best_time(estimate(DEFAULT_BIN_FACTOR), repeats)
-    estimate_all_pixels_time = _best_time(estimate(1), repeats)
-    synthesis_time = _best_time(synthesis(), repeats)
-    result: dict[str, Any] = {
-        "frames": f"{len(frames)} × {height}×{width}×3 uint16",
-        "copy_s": copy_time,
-        "threads": DEFAULT_WORKERS,
-        "estimate_s": estimate_time,
-        "estimate_over_copy": estimate_time / copy_time,
-        "estimate_over_copy_interleaved": _interleaved_ratio(estimate(DEFAULT_BIN_FACTOR), copy, 4 * repeats + 1),
-        "estimate_over_copy_by_threads": {
-            str(n): _best_time(estimate(DEFAULT_BIN_FACTOR, n), repeats) / copy_time for n in (1, 2)
-        },
-        "estimate_unweighted_over_copy": _best_time(estimate(DEFAULT_BIN_FACTOR, weighting=False), repeats) / copy_time,
-        "estimate_bin": DEFAULT_BIN_FACTOR,
-        "estimate_all_pixels_over_copy": estimate_all_pixels_time / copy_time,
-        "synthesis_s": synthesis_time,
-        "synthesis_over_copy": synthesis_time / copy_time,
-        "synthesis_over_copy_by_threads": {str(n): _best_time(synthesis(n), repeats) / copy_time for n in (1, 2)},
+    runs = {
+        "estimate_over_copy": lambda workers: estimate(factor, workers),
+        "estimate_all_pixels_over_copy": lambda workers: estimate(1, workers),
+        "synthesis_over_copy": synthesis,
     }
+    figures: dict[str, Any] = {}
+    for name, run in runs.items():
+        figures[name] = {
+            f"{workers}_thread{'s' if workers > 1 else ''}": against_target(
+                interleaved_ratio(run(workers), copy, pairs), TARGETS[name]
+            )
+            for workers in threads
+        }
+    frame_bytes = sum(frame.nbytes for frame in frames)
+    memory = {
+        name.removesuffix("_over_copy"): peak_bytes(run(max(threads))) / frame_bytes for name, run in runs.items()
+    }
+    figures["peak_memory_over_frames"] = {
+        name: {"ratio": ratio, "target": f"≤ {MEMORY_TARGET:g}", "met": bool(ratio <= MEMORY_TARGET)}
+        for name, ratio in memory.items()
+    }
+    figures["estimate_bin"] = factor
+    return figures
+
+
+def all_met(figures: dict[str, Any]) -> bool | None:
+    """Whether every judged figure in a report meets its target (None when none was judged)."""
+    verdicts: list[bool] = []
+
+    def walk(value: Any) -> None:
+        if isinstance(value, dict):
+            if "met" in value and value["met"] is not None:
+                verdicts.append(bool(value["met"]))
+            for item in value.values():
+                walk(item)
+
+    walk(figures)
+    return all(verdicts) if verdicts else None
+
+
+def processing_bench(
+    height: int = 1024,
+    width: int = 1280,
+    repeats: int = 5,
+    pairs: int = 15,
+    sizes: tuple[tuple[int, int], ...] | None = None,
+) -> dict[str, Any]:
+    """The processing figures (see the module notes): issue 21's targets at each of ``sizes`` ((height, width);
+    default ``(height, width)`` alone), the solvers against cvxpy and the light prior on ``height × width``.
+
+    ``pairs`` interleaved pairs per ratio (targets are judged from 15); ``repeats`` for the solver timings.
+    """
+    sizes = sizes or ((height, width),)
+    frame_kernels.prepare()  # as a capture session does: the kernels at every size (their start-up is not timed)
+    result: dict[str, Any] = {"kernels": "compiled (numba)" if frame_kernels.enabled() else "numpy", "targets": {}}
+    world: dict[str, Any] | None = None
+    for size in sizes:
+        sized = benchmark_world(*size)
+        frames = sized["frames"]
+        label = f"{size[1]}×{size[0]}"
+        result["targets"][label] = {
+            "frames": f"{len(frames)} × {size[1]}×{size[0]}×3 {frames[0].dtype}",
+            **target_figures(sized, pairs),
+        }
+        if size == (height, width):
+            world = sized  # the other figures' sequence: kept rather than rendered again
+        del sized, frames
+    result["targets_met"] = all_met(result["targets"])
+    world = world or benchmark_world(height, width)
+    frames, spec = world["frames"], world["spec"]
+    copy = frame_copy(frames)
+    statistics = accumulate_statistics(frames[0], frames[1:], spec)
+    weights = estimate_ambient(statistics, world["leds"]).ambient_weights
     try:
         import cvxpy  # noqa: F401
     except ImportError:
@@ -216,7 +278,7 @@ def processing_bench(height: int = 1024, width: int = 1280, repeats: int = 5) ->
     result["model_reference_s"] = _best_time(lambda: light_reference(leds, camera), 3)
     reference, estimated = reference_for(leds, camera), estimate_ambient(statistics, leds)
     result["model_band_s"] = _best_time(lambda: with_model_error(estimated, reference), 20)
-    result.update(prior_bench(frames, spec, leds, camera, copy_time, repeats, copy))
+    result.update(prior_bench(frames, spec, leds, camera, pairs, repeats, copy))
     return result
 
 
@@ -225,13 +287,13 @@ def prior_bench(
     spec: FrameStackSpec,
     leds: Spectra,
     camera: Spectra,
-    copy_time: float,
+    pairs: int,
     repeats: int,
-    copy: Callable[[], Any] | None = None,
-) -> dict[str, float]:
+    copy: Callable[[], Any],
+) -> dict[str, Any]:
     """The light prior's figures (``msflash estimate --model prior|auto``): its channel-resolved statistics and
-    estimate ÷ the copy, as ``estimate_over_copy`` (and interleaved with ``copy``, when given);
-    ``auto``'s held-out comparison; the model's preparation."""
+    estimate interleaved with ``copy`` as the targets' ratios (no target of its own); ``auto``'s held-out
+    comparison; the model's preparation."""
     from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
     from msflash.processing.light_prior import choose_model, prior_model
 
@@ -244,16 +306,8 @@ def prior_bench(
     def estimate() -> object:
         return model.estimate(statistics())
 
-    prior_time = _best_time(estimate, repeats)
-    interleaved = (
-        {}
-        if copy is None
-        else {"prior_estimate_over_copy_interleaved": _interleaved_ratio(estimate, copy, 4 * repeats + 1)}
-    )
     return {
-        "prior_estimate_s": prior_time,
-        "prior_estimate_over_copy": prior_time / copy_time,
-        **interleaved,
+        "prior_estimate_over_copy": interleaved_ratio(estimate, copy, pairs),
         "prior_model_prepare_s": _best_time(lambda: prior_model(channels.channels, leds, camera), repeats),
         "auto_choice_s": _best_time(lambda: choose_model(channels, model), repeats),
     }

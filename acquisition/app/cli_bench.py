@@ -18,6 +18,9 @@ _OPTIONAL_PARTS = {
 }
 """Bench parts contributed by other modules: part name → (module, function returning a dict)."""
 
+LARGE_SIZE = (3000, 4096)
+"""(height, width) of the second size the processing targets are measured on (issue 21)."""
+
 
 def _bench(args: argparse.Namespace) -> int:
     from msflash.acquisition.app.bench import processing_bench
@@ -25,8 +28,12 @@ def _bench(args: argparse.Namespace) -> int:
     report: dict[str, Any] = {}
     parts = args.part or ["processing", "startup", *_OPTIONAL_PARTS]
     if "processing" in parts:
-        progress("bench: processing (1280×1024 RGB, 7 LEDs)…")
-        report["processing"] = processing_bench(args.height, args.width, repeats=args.repeats)
+        sizes = [(args.height, args.width)] + ([] if args.quick else [LARGE_SIZE])
+        shown = ", ".join(f"{width}×{height}" for height, width in sizes)
+        progress(f"bench: processing ({shown} RGB, 7 LEDs; {args.pairs} interleaved pairs a ratio)…")
+        report["processing"] = processing_bench(
+            args.height, args.width, repeats=args.repeats, pairs=args.pairs, sizes=tuple(sizes)
+        )
     if "startup" in parts:
         from msflash.acquisition.app.bench_startup import startup_bench
 
@@ -52,7 +59,9 @@ def _bench(args: argparse.Namespace) -> int:
 
 def _print_human(report: dict[str, Any], indent: str = "") -> None:
     for key, value in report.items():
-        if isinstance(value, dict):
+        if isinstance(value, dict) and "target" in value and "met" in value:
+            print(f"{indent}{key}: {_judged(value)}")
+        elif isinstance(value, dict):
             print(f"{indent}{key}:")
             _print_human(value, indent + "  ")
         elif isinstance(value, list):
@@ -64,6 +73,15 @@ def _print_human(report: dict[str, Any], indent: str = "") -> None:
                     print(f"{indent}  - {_fmt(item)}")
         else:
             print(f"{indent}{key}: {_fmt(value)}")
+
+
+def _judged(figure: dict[str, Any]) -> str:
+    """One line for a figure with a target: its value, spread, target and verdict."""
+    verdict = {True: "met", False: "NOT met", None: "not judged (too few pairs)"}[figure["met"]]
+    if "median" in figure:
+        spread = f"quartiles {figure['q1']:.3g}–{figure['q3']:.3g}, range {figure['min']:.3g}–{figure['max']:.3g}, {figure['pairs']} pairs"
+        return f"{figure['median']:.3g} (median; {spread}) target {figure['target']}: {verdict}"
+    return f"{figure['ratio']:.3g} target {figure['target']}: {verdict}"
 
 
 def _fmt(value: Any) -> str:
@@ -79,9 +97,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=("processing", "startup", *_OPTIONAL_PARTS),
         help="run only this part (repeatable); default all",
     )
-    bench.add_argument("--height", type=int, default=1024, help="frame height for the processing part")
-    bench.add_argument("--width", type=int, default=1280, help="frame width for the processing part")
-    bench.add_argument("--repeats", type=int, default=5, help="timing repeats (the best is kept)")
+    bench.add_argument("--height", type=int, default=1024, help="frame height for the processing part (its first size)")
+    bench.add_argument("--width", type=int, default=1280, help="frame width for the processing part (its first size)")
+    bench.add_argument(
+        "--repeats", type=int, default=5, help="processing part: repeats of the solver timings (the best is kept)"
+    )
+    bench.add_argument(
+        "--pairs",
+        type=positive_int,
+        default=15,
+        help="processing part: interleaved pairs per ratio (the targets are judged from 15)",
+    )
+    bench.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"processing part: the targets at --height × --width only, not also at {LARGE_SIZE[1]}×{LARGE_SIZE[0]}",
+    )
     bench.add_argument(
         "--rounds",
         type=positive_int,

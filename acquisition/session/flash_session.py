@@ -35,7 +35,7 @@ from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, 
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.flash import FlashBounds, FlashModel, FlashSolution
 from msflash.processing.spectra import Spectra
-from msflash.processing.statistics import BlockRows, SequenceStatistics, cfa_planes
+from msflash.processing.statistics import BlockRows, SequenceStatistics, plane_shape
 
 DEFAULT_EXPOSURE_POLICY = ExposurePolicy()
 """The policy a session predicts the flash exposure with unless given one (frozen: one instance serves all)."""
@@ -176,12 +176,12 @@ class FlashSession:
             self._factor = analysis.block_factor(pixels.shape, camera.cfa, self.bin_factor)
         if self._factor == 1 or not self._rows_complete:
             return
-        plane = cfa_planes(pixels, period)
+        shape = plane_shape(pixels.shape, period)
         n_leds = self.leds.count  # one row per LED frame of a plain plan; more frames use the general path
         if self._rows is None:
             self._rows = BlockRows(
                 n_leds,
-                plane.shape,
+                shape,
                 self._factor,
                 camera.white_level,
                 incremental=True,
@@ -191,10 +191,12 @@ class FlashSession:
         row = n_leds if role == "ambient" else self._n_led_rows
         if role == "led":
             self._n_led_rows += 1
-        if row > n_leds or (role == "led" and row == n_leds) or plane.shape != self._rows.plane_shape:
+        if row > n_leds or (role == "led" and row == n_leds) or shape != self._rows.plane_shape:
             self._rows_complete = False
             return
-        self._rows.add(row, plane)
+        # One compiled pass over the raw frame when the process has the kernels loaded (processing.frame_kernels):
+        # not loaded here, as numba's import would stall the camera's stream for up to seconds.
+        self._rows.add_frame(row, pixels, period)
 
     def stack(self) -> analysis.FrameStack:
         """The frame stack of the frames taken so far (first ``ambient`` and every ``led`` frame), in memory.

@@ -7,20 +7,24 @@ import math
 from msflash.acquisition.app.bench import processing_bench
 
 
-def test_processing_bench_reports_every_ratio_and_both_thread_counts() -> None:
-    report = processing_bench(height=48, width=64, repeats=1)
-    for key in (
-        "estimate_over_copy",
-        "estimate_over_copy_interleaved",
-        "estimate_all_pixels_over_copy",
-        "synthesis_over_copy",
-        "prior_estimate_over_copy",
-        "prior_estimate_over_copy_interleaved",
-    ):
-        assert math.isfinite(report[key]) and report[key] > 0, key
-    for key in ("estimate_over_copy_by_threads", "synthesis_over_copy_by_threads"):
-        assert set(report[key]) == {"1", "2"} and all(value > 0 for value in report[key].values()), key
-    assert report["threads"] in (1, 2)
+def test_processing_bench_reports_every_target_on_both_thread_counts_with_its_verdict() -> None:
+    report = processing_bench(height=48, width=64, repeats=1, pairs=3, sizes=((48, 64), (40, 72)))
+    assert set(report["targets"]) == {"64×48", "72×40"}
+    for figures in report["targets"].values():
+        for name, target in (
+            ("estimate_over_copy", "≤ 2"),
+            ("estimate_all_pixels_over_copy", "≤ 4"),
+            ("synthesis_over_copy", "≤ 1.5"),
+        ):
+            assert set(figures[name]) == {"1_thread", "2_threads"}, name
+            for figure in figures[name].values():
+                assert figure["target"] == target and figure["pairs"] == 3
+                assert 0 < figure["min"] <= figure["q1"] <= figure["median"] <= figure["q3"] <= figure["max"]
+                assert figure["met"] is None  # 3 pairs: too few to judge
+        for memory in figures["peak_memory_over_frames"].values():
+            assert memory["ratio"] > 0 and memory["target"] == "≤ 0.5" and memory["met"] == (memory["ratio"] <= 0.5)
+    assert report["targets_met"] is not None  # the memory figures are judged whatever the pairs
+    assert math.isfinite(report["prior_estimate_over_copy"]["median"])
     solvers = {entry["solver"]: entry for entry in report["solvers"]}
     assert set(solvers) == {
         "estimate nonneg",

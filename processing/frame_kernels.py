@@ -1,0 +1,231 @@
+"""Compiled one-pass kernels over raw integer frames: block sums with their noise probe, and weighted sums.
+
+The binned statistics (:class:`processing.statistics.BlockRows`) and synthesis
+(:func:`processing.synthesis.synthesize`) are passes over the raw frames. In numpy each step is a
+pass of its own (convert, sum rows, gather blocks, take differences, find the maxima), several
+times the cost of reading the frames once. These kernels read each raw sample once, in rows that
+stay in cache, and write only their results: per frame, its ``factor × factor`` block sums, its
+blocks' half differences (the noise probe of :mod:`processing.statistics`) and its saturated
+blocks; for synthesis, the weighted sum of the frames (eq. 7–9's image) and its saturated pixels.
+
+Integer frames only (≤ 16 bits: the block sums are exact in 32-bit integers for blocks up to
+181 × 181, the weighted sums are taken in float64); float frames keep the numpy route, as does
+everything when numba is missing (it is an optional dependency, ``pip install msflash[fast]``) or
+``MSFLASH_KERNELS=numpy`` is set, and small one-off work in a process that has not loaded the
+kernels (:func:`wanted`: numba's start-up would cost more than it saves). Both routes give the same
+numbers (tests/processing/test_frame_kernels.py).
+
+The block size, the CFA period and the channel count are passed as tuples of that length so that
+numba compiles (and caches on disk) one specialised kernel per combination: with them constant, its
+inner loops unroll, about 5× faster than with them as run-time integers.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+KERNELS_VARIABLE = "MSFLASH_KERNELS"
+"""Environment variable: ``numpy`` turns the compiled kernels off, ``numba`` uses them on any work;
+unset (or ``auto``), :func:`wanted` decides."""
+
+COMPILE_BYTES = 256 << 20
+"""Frame bytes from which one call's work loads the kernels (:func:`wanted`): importing numba and
+loading the cached kernels costs a process about 0.5–1 s once, which the kernels win back only on
+stacks about this large (a 4096×3000 RGB16 stack of 8 frames is 590 MB; a 1280×1024 one, 63 MB,
+saves about 25 ms an estimate). A process that has loaded them (:func:`prepare`: the bench) uses
+them on any work. A capture session does not load them itself: numba's import holds the
+interpreter for up to seconds on a busy machine, and a camera's stream lost frames to it."""
+
+
+def _mode() -> str:
+    return os.environ.get(KERNELS_VARIABLE, "").strip().lower()
+
+
+@lru_cache(maxsize=1)
+def _compiled() -> Any:
+    """The compiled kernels (a namespace), imported on first call, or None without numba or with
+    ``MSFLASH_KERNELS=numpy``."""
+    if _mode() == "numpy":
+        return None
+    try:
+        from msflash.processing import frame_kernels_numba
+    except ImportError:
+        return None
+    return frame_kernels_numba
+
+
+def _loaded() -> Any:
+    """The kernels if they are in use in this process (loaded before, or forced), else None."""
+    if _mode() == "numpy":
+        return None
+    if _mode() == "numba" or "msflash.processing.frame_kernels_numba" in sys.modules:
+        return _compiled()
+    return None
+
+
+def prepare() -> bool:
+    """Load the kernels now (numba's import and the cached kernels), for a process that will run many
+    passes (the bench); whether they are available. Not while a camera streams (:data:`COMPILE_BYTES`)."""
+    return _compiled() is not None
+
+
+def wanted(frame_bytes: int) -> bool:
+    """Whether the passes over ``frame_bytes`` of frames use the kernels: loaded already, forced, or work
+    of at least :data:`COMPILE_BYTES` (which loads them)."""
+    if _loaded() is not None:
+        return True
+    return frame_bytes >= COMPILE_BYTES and _mode() != "numpy" and _compiled() is not None
+
+
+def enabled() -> bool:
+    """Whether the compiled kernels are in use in this process."""
+    return _loaded() is not None
+
+
+def _rows_view(frame: np.ndarray) -> np.ndarray | None:
+    """The frame as (H, W·C) integer rows without a copy, or None when the kernels cannot take it."""
+    if frame.dtype not in (np.uint8, np.uint16) or frame.ndim not in (2, 3) or frame.size == 0:
+        return None
+    if frame.strides[-1] != frame.itemsize or (frame.ndim == 3 and frame.strides[1] != frame.itemsize * frame.shape[2]):
+        return None
+    return frame.reshape(frame.shape[0], -1)
+
+
+def block_pass(
+    frame: np.ndarray,
+    factor: int,
+    cfa_period: int,
+    white: float,
+    probe_stride: int,
+    sums: np.ndarray,
+    differences: np.ndarray | None,
+) -> tuple[bool, np.ndarray | None]:
+    """Block sums, half differences and saturated blocks of one raw frame, in one compiled pass.
+
+    Parameters
+    ----------
+    frame
+        (H, W) or (H, W, C) raw integer values; a Bayer mosaic with ``cfa_period`` 2 (then C = 1).
+    factor, cfa_period, white, probe_stride
+        Block side, CFA period, white level, and every how many block rows the probe is taken.
+    sums
+        Output, (H/f, C', W/f) float64 (C' = cfa_period² · C): block sums in moment-row order.
+    differences
+        Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64: each probed block's even-minus-odd columns; or None.
+
+    Returns
+    -------
+    tuple
+        ``(done, saturated)``: False when the kernels cannot take this frame (the caller takes the
+        numpy route); else the (H/f, W/f) mask of blocks with a sample at or above ``white``, or None
+        when there is none.
+    """
+    kernels = _loaded()
+    rows = _rows_view(frame) if kernels is not None else None
+    if rows is None:
+        return False, None
+    channels = frame.shape[2] if frame.ndim == 3 else 1
+    saturated = np.zeros((sums.shape[0], sums.shape[2]), dtype=bool)
+    probe = differences if differences is not None else np.empty((0, sums.shape[2], sums.shape[1]))
+    hit = kernels.block_pass(
+        rows,
+        (0,) * cfa_period,
+        (0,) * (cfa_period * channels),
+        (0,) * factor,
+        float(white),
+        int(probe_stride),
+        sums,
+        probe,
+        saturated,
+    )
+    return True, saturated if hit else None
+
+
+def synthesis_inputs(frames: list[np.ndarray]) -> tuple[np.ndarray, ...] | None:
+    """The frames as flat integer views of one type for :func:`weighted_sum_range`, or None when the
+    kernels cannot take them (numba missing, float or mixed types, non-contiguous frames)."""
+    if _loaded() is None or len({frame.dtype for frame in frames}) != 1:
+        return None
+    flat = []
+    for frame in frames:
+        rows = _rows_view(frame)
+        if rows is None or not frame.flags.c_contiguous:
+            return None
+        flat.append(frame.reshape(-1))
+    return tuple(flat)
+
+
+def weighted_sum_range(
+    flat_frames: tuple[np.ndarray, ...],
+    factors: np.ndarray,
+    offset: float,
+    white: float,
+    channels: int,
+    output: np.ndarray,
+    saturated: np.ndarray,
+    start: int,
+    stop: int,
+) -> None:
+    """``output[i] = offset + Σ_j factors[j] · frame_j[i]`` for flat samples ``start ≤ i < stop`` (whole
+    pixels), and ``saturated[p]`` for their pixels: a sample of some frame at or above ``white``."""
+    kernels = _loaded()
+    # Summed in float64 whatever the image's type: a float32 sum was measured no faster (the pass is
+    # bound by reading the frames), and it rounds.
+    kernels.weighted_sum(
+        flat_frames, factors.astype(np.float64), float(offset), float(white), channels, output, saturated, start, stop
+    )
+
+
+def gram(rows: np.ndarray, weights: np.ndarray | None, start: int, stop: int) -> np.ndarray | None:
+    """``rows[:, s] · diag(weights[s]) · rows[:, s]ᵀ`` over the columns ``s = start:stop`` of (n, N) float64
+    rows, in one compiled pass over them (no weighted copy), or None when the kernels are off.
+
+    Returns
+    -------
+    ndarray or None
+        The (n, n) symmetric product.
+    """
+    kernels = _loaded()
+    if kernels is None or rows.dtype != np.float64 or rows.ndim != 2 or not rows.flags.c_contiguous:
+        return None
+    lower = np.zeros((rows.shape[0], rows.shape[0]))
+    kernels.gram(rows, np.empty(0) if weights is None else weights, start, stop, lower)
+    return lower + np.tril(lower, -1).T
+
+
+MOMENT_TASK_PIXELS = 1 << 16
+"""Pixels per task of :func:`raw_moments` (several per worker, so both finish together)."""
+
+
+def raw_moments(frames: list[np.ndarray], white: float, workers: int, pool: Any = None) -> np.ndarray | None:
+    """The raw second moments of the rows ``[frames…, 1]`` over every sample of pixels no frame saturates,
+    (n+1, n+1) float64, in one compiled pass over integer frames; None when the kernels cannot take them.
+
+    ``pool`` (an executor) shares tasks of whole pixels among ``workers`` threads; the tasks' moments are
+    added in task order, so the result does not depend on the number of workers.
+    """
+    flat = synthesis_inputs(frames)
+    if flat is None:
+        return None
+    kernels = _loaded()
+    channels = frames[0].shape[2] if frames[0].ndim == 3 else 1
+    size = flat[0].size
+    step = MOMENT_TASK_PIXELS * channels
+    n = len(frames)
+
+    def task(start: int) -> np.ndarray:
+        lower = np.zeros((n + 1, n + 1))
+        kernels.moments(flat, channels, float(white), start, min(start + step, size), lower)
+        return lower
+
+    starts = range(0, size, step)
+    parts = pool.map(task, starts) if pool is not None and workers > 1 and len(starts) > 1 else map(task, starts)
+    lower = np.zeros((n + 1, n + 1))
+    for part in parts:
+        lower += part
+    return lower + np.tril(lower, -1).T

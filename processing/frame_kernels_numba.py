@@ -1,0 +1,204 @@
+"""The numba kernels behind :mod:`processing.frame_kernels` (imported only through it; needs numba).
+
+Compiled on first use and cached on disk (``cache=True``): about 1–2 s per kernel specialisation
+(frame type, CFA period, channels, block size) once per installation, then a load of a few ms.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(nogil=True, cache=True)
+def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, differences, saturated):
+    """Block sums (H/f, C', W/f), probed half differences (H'/f, W/f, C') and saturated (H/f, W/f) blocks
+    of raw rows (H, W·C); ``period_t``, ``plane_channels_t`` and ``factor_t`` carry the CFA period,
+    the channels per frame row group (period · C) and the block side as their lengths (compile-time
+    constants). Returns whether any block saturates."""
+    period = len(period_t)
+    group = len(plane_channels_t)  # values per pixel column group: period · C
+    factor = len(factor_t)
+    height, _, width = sums.shape
+    span = factor * group  # values of one block's row in a frame row
+    n_columns = width * span
+    row_sum = np.zeros(n_columns, np.int32)
+    row_peak = np.zeros(n_columns, raw.dtype)
+    any_saturated = False
+    probing = differences.shape[0] > 0
+    for block_row in range(height):
+        probed = probing and block_row % stride == 0
+        probe_row = block_row // stride
+        for p in range(period):
+            first = block_row * factor * period + p
+            line = raw[first]
+            for j in range(n_columns):
+                row_sum[j] = line[j]
+                row_peak[j] = line[j]
+            for member in range(1, factor):
+                line = raw[first + member * period]
+                for j in range(n_columns):
+                    value = line[j]
+                    row_sum[j] += value
+                    row_peak[j] = max(row_peak[j], value)
+            for block in range(width):
+                base = block * span
+                for k in range(group):
+                    total = np.int32(0)
+                    half = np.int32(0)
+                    for member in range(factor):
+                        value = row_sum[base + member * group + k]
+                        total += value
+                        if member % 2 == 0:
+                            half += value
+                        else:
+                            half -= value
+                    channel = p * group + k
+                    sums[block_row, channel, block] = total
+                    if probed:
+                        differences[probe_row, block, channel] = half
+            top = row_peak[0]
+            for j in range(n_columns):
+                top = max(top, row_peak[j])
+            if top < white:
+                continue
+            for block in range(width):
+                base = block * span
+                top = row_peak[base]
+                for j in range(base + 1, base + span):
+                    top = max(top, row_peak[j])
+                if top >= white:
+                    saturated[block_row, block] = True
+                    any_saturated = True
+    return any_saturated
+
+
+TILE = 4096
+"""Samples per tile of :func:`weighted_sum` (its float64 accumulator stays in L1)."""
+
+
+@njit(nogil=True, cache=True)
+def weighted_sum(frames, factors, offset, white, channels, output, saturated, start, stop):
+    """``output[i] = offset + Σ_j factors[j] · frames[j][i]`` for ``start ≤ i < stop``, summed in the type
+    of ``factors`` (float64) and cast to the output's, and ``saturated[i // channels]`` where some frame
+    reaches ``white``."""
+    tile = TILE - TILE % channels
+    total = np.empty(tile, factors.dtype)
+    peak = np.empty(tile, frames[0].dtype)
+    for low in range(start, stop, tile):
+        high = min(low + tile, stop)
+        n = high - low
+        first = frames[0][low:high]
+        weight = factors[0]
+        for t in range(n):
+            value = first[t]
+            total[t] = offset + weight * value
+            peak[t] = value
+        for j in range(1, len(frames)):
+            frame = frames[j][low:high]
+            weight = factors[j]
+            for t in range(n):
+                value = frame[t]
+                total[t] += weight * value
+                peak[t] = max(peak[t], value)
+        out = output[low:high]
+        for t in range(n):
+            out[t] = total[t]
+        top = peak[0]
+        for t in range(n):
+            top = max(top, peak[t])
+        if top >= white:
+            for t in range(n):
+                if peak[t] >= white:
+                    saturated[(low + t) // channels] = True
+
+
+GRAM_TILE = 256
+"""Columns per tile of :func:`gram`: the weighted tile of every row stays in L1 (10 × 256 × 8 B)."""
+
+
+@njit(nogil=True, cache=True, fastmath=True)
+def gram(rows, weights, start, stop, out):
+    """``out[i, j] += Σ_t w_t · rows[i, t] · rows[j, t]`` over ``start ≤ t < stop``, lower triangle
+    (``j ≤ i``) only; ``weights`` of size 0 weighs every column 1. Sums are reassociated
+    (vectorised), so they differ from a BLAS product's in the last bits only."""
+    n = rows.shape[0]
+    weighted = np.empty((n, GRAM_TILE))
+    for low in range(start, stop, GRAM_TILE):
+        high = min(low + GRAM_TILE, stop)
+        width = high - low
+        for i in range(n):
+            target = weighted[i]
+            source = rows[i, low:high]
+            if weights.size:
+                scale = weights[low:high]
+                for t in range(width):
+                    target[t] = source[t] * scale[t]
+            else:
+                for t in range(width):
+                    target[t] = source[t]
+        for i in range(n):
+            left = weighted[i]
+            for j in range(i + 1):
+                right = rows[j, low:high]
+                total = 0.0
+                for t in range(width):
+                    total += left[t] * right[t]
+                out[i, j] += total
+
+
+MOMENT_TILE = 384
+"""Samples per tile of :func:`moments`: every frame's float64 tile together stays in L1 (9 × 384 × 8 B)."""
+
+
+@njit(nogil=True, cache=True, fastmath=True)
+def moments(frames, channels, white, start, stop, out):
+    """Raw second moments of the rows ``[frames…, 1]`` over the flat samples ``start ≤ t < stop`` (whole
+    pixels), leaving out every sample of a pixel that some frame saturates (a sample at or above ``white``):
+    ``out[i, j] += Σ_t x_i x_j`` (``j ≤ i``), ``out[n, i] += Σ_t x_i`` and ``out[n, n] +=`` the count, with
+    ``n = len(frames)``; lower triangle only. Each tile of samples is converted to float64 once, in cache."""
+    n = len(frames)
+    tile = MOMENT_TILE - MOMENT_TILE % channels
+    values = np.empty((n, tile))
+    peak = np.empty(tile, frames[0].dtype)
+    for low in range(start, stop, tile):
+        high = min(low + tile, stop)
+        width = high - low
+        first = frames[0][low:high]
+        for t in range(width):
+            peak[t] = first[t]
+        for i in range(n):
+            source = frames[i][low:high]
+            target = values[i]
+            for t in range(width):
+                value = source[t]
+                target[t] = value
+                peak[t] = max(peak[t], value)
+        top = peak[0]
+        for t in range(width):
+            top = max(top, peak[t])
+        valid = width
+        if top >= white:
+            for pixel in range(width // channels):
+                hit = False
+                for c in range(channels):
+                    if peak[pixel * channels + c] >= white:
+                        hit = True
+                if hit:
+                    valid -= channels
+                    for i in range(n):
+                        for c in range(channels):
+                            values[i, pixel * channels + c] = 0.0
+        for i in range(n):
+            left = values[i]
+            for j in range(i + 1):
+                right = values[j]
+                total = 0.0
+                for t in range(width):
+                    total += left[t] * right[t]
+                out[i, j] += total
+            total = 0.0
+            for t in range(width):
+                total += left[t]
+            out[n, i] += total
+        out[n, n] += valid

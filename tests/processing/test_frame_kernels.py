@@ -1,0 +1,274 @@
+"""The one-pass statistics and synthesis against a straightforward reference written here.
+
+The reference takes the slow, obvious way: every frame linearised to float64, block sums by a
+reshape, half differences by a ± sign per member column, saturated blocks dropped, products by
+``@``. The fast routes — the compiled kernels (:mod:`processing.frame_kernels`) and the numpy route
+they replace — must give the same statistics to floating-point tolerance, on frames whose sizes
+are not multiples of the block, tile or task sizes, Bayer mosaics, saturated pixels, and 1 or 2
+workers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from msflash.processing import frame_kernels, statistics, synthesis
+from msflash.processing.statistics import BlockRows, FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing.synthesis import synthesize
+
+WHITE = 4000.0
+BLACK = 64.0
+
+
+@pytest.fixture(params=["compiled", "numpy"])
+def route(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Run a test on the compiled kernels and on the numpy route."""
+    monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numpy" if request.param == "numpy" else "numba")
+    frame_kernels._compiled.cache_clear()
+    if request.param == "compiled" and not frame_kernels.enabled():
+        pytest.skip("numba is not installed")
+    yield request.param
+    frame_kernels._compiled.cache_clear()
+
+
+def _frames(
+    shape: tuple[int, ...], n_leds: int, seed: int, dtype: type = np.uint16, saturate: bool = True
+) -> tuple[np.ndarray, list[np.ndarray], FrameStackSpec]:
+    rng = np.random.default_rng(seed)
+    top = min(int(WHITE) - 1, np.iinfo(dtype).max - 1)
+    scene = rng.uniform(BLACK, top / 3, shape)
+    ambient = rng.poisson(scene).astype(dtype)
+    frames = []
+    for _ in range(n_leds):
+        lit = np.clip(rng.poisson(scene * rng.uniform(1.1, 1.8)), 0, top)
+        frames.append(lit.astype(dtype))
+    if saturate:
+        frames[1][3:5, 7:9] = np.iinfo(dtype).max if WHITE > np.iinfo(dtype).max else int(WHITE)
+        ambient[-2, -3] = min(int(WHITE) + 5, np.iinfo(dtype).max)
+    white = min(WHITE, float(np.iinfo(dtype).max))
+    scales = tuple(float(s) for s in rng.uniform(0.5, 2.0, n_leds))
+    spec = FrameStackSpec(BLACK, white, 0.8, scales, np.diag(rng.uniform(0.5, 1.0, n_leds)))
+    return ambient, frames, spec
+
+
+def _planes(frame: np.ndarray, period: int) -> np.ndarray:
+    """(H, W, C) float64 planes, the obvious way."""
+    if period == 2:
+        rows, columns = frame.shape[0] // 2, frame.shape[1] // 2
+        return np.stack([frame[p : 2 * rows : 2, q : 2 * columns : 2] for p in (0, 1) for q in (0, 1)], axis=-1).astype(
+            float
+        )
+    return (frame if frame.ndim == 3 else frame[:, :, None]).astype(float)
+
+
+def _blocks(plane: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Block sums, half differences (even minus odd member columns) and block maxima, each (h, w, C)."""
+    h, w, c = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
+    members = plane[: h * factor, : w * factor].reshape(h, factor, w, factor, c)
+    sign = np.where(np.arange(factor) % 2 == 0, 1.0, -1.0)[None, None, None, :, None]
+    return members.sum(axis=(1, 3)), (members * sign).sum(axis=(1, 3)), members.max(axis=(1, 3))
+
+
+def reference_statistics(
+    ambient: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, factor: int, period: int, stride: int
+) -> SequenceStatistics:
+    """Eq. 4–6's statistics of the block sums, with the half differences' noise, written out directly."""
+    sums, halves, valid = [], [], None
+    for frame in [*led_frames, ambient]:
+        block_sums, half, peak = _blocks(_planes(frame, period), factor)
+        sums.append(block_sums)
+        halves.append(half)
+        ok = (peak < spec.white_level).all(axis=2)
+        valid = ok if valid is None else valid & ok
+    assert valid is not None
+    black = spec.black_level * factor * factor
+    scales = np.asarray(spec.led_scales)
+    a = spec.ambient_scale * (sums[-1] - black)
+    differences = np.stack([scales[j] * (sums[j] - black) - a for j in range(len(led_frames))])
+    f = np.einsum("kj,j...->k...", spec.unmixing, differences)
+    f_valid, a_valid = f[:, valid].reshape(f.shape[0], -1), a[valid].reshape(-1)
+    probed = np.zeros_like(valid)
+    probed[::stride] = True
+    probe_valid = valid & probed
+    noise_a = spec.ambient_scale * halves[-1]
+    noise_d = np.stack([scales[j] * halves[j] - noise_a for j in range(len(led_frames))])
+    noise_f = np.einsum("kj,j...->k...", spec.unmixing, noise_d)
+    nf, na = noise_f[:, probe_valid].reshape(f.shape[0], -1), noise_a[probe_valid].reshape(-1)
+    scale = valid.sum() / probe_valid.sum()
+    return SequenceStatistics(
+        gram=f_valid @ f_valid.T,
+        cross=f_valid @ a_valid,
+        ambient_energy=float(a_valid @ a_valid),
+        n_samples=int(valid.sum()) * a.shape[2],
+        n_total=a.size,
+        ambient_sum=float(a_valid.sum()),
+        led_sums=f_valid.sum(axis=1),
+        noise=statistics.NoiseMoments(scale * nf @ nf.T, scale * nf @ na, float(scale * na @ na)),
+    )
+
+
+def assert_same(actual: SequenceStatistics, expected: SequenceStatistics, rtol: float = 1e-9) -> None:
+    scale = float(np.abs(expected.gram).max())
+    np.testing.assert_allclose(actual.gram, expected.gram, rtol=rtol, atol=rtol * scale)
+    np.testing.assert_allclose(actual.cross, expected.cross, rtol=rtol, atol=rtol * scale)
+    np.testing.assert_allclose(actual.ambient_energy, expected.ambient_energy, rtol=rtol)
+    np.testing.assert_allclose(
+        actual.led_sums, expected.led_sums, rtol=rtol, atol=rtol * float(np.abs(expected.led_sums).max())
+    )
+    np.testing.assert_allclose(actual.ambient_sum, expected.ambient_sum, rtol=rtol)
+    assert (actual.n_samples, actual.n_total) == (expected.n_samples, expected.n_total)
+    assert (actual.noise is None) == (expected.noise is None)
+    if actual.noise is not None and expected.noise is not None:
+        noise_scale = float(np.abs(expected.noise.gram).max())
+        np.testing.assert_allclose(actual.noise.gram, expected.noise.gram, rtol=rtol, atol=rtol * noise_scale)
+        np.testing.assert_allclose(actual.noise.cross, expected.noise.cross, rtol=rtol, atol=rtol * noise_scale)
+        np.testing.assert_allclose(actual.noise.ambient_energy, expected.noise.ambient_energy, rtol=rtol)
+
+
+CASES = [
+    # shape, period, factor: sizes not multiples of the block; Bayer mosaics of odd size
+    ((37, 53, 3), 1, 4),
+    ((41, 67, 3), 1, 2),
+    ((43, 59, 3), 1, 3),
+    ((45, 71), 2, 4),
+    ((39, 61), 2, 2),
+    ((33, 47), 1, 4),
+]
+
+
+@pytest.mark.parametrize(("shape", "period", "factor"), CASES)
+@pytest.mark.parametrize("workers", [1, 2])
+def test_binned_statistics_match_the_reference(
+    route: str, shape: tuple[int, ...], period: int, factor: int, workers: int
+) -> None:
+    ambient, frames, spec = _frames(shape, 3, seed=sum(shape) + factor)
+    actual = accumulate_statistics(
+        ambient, frames, spec, bin_factor=factor, cfa_period=period, workers=workers, chunk_pixels=37
+    )
+    expected = reference_statistics(ambient, frames, spec, factor, period, 1)
+    if factor % 2:
+        expected = SequenceStatistics(**{**expected.__dict__, "noise": None})
+    assert actual.n_samples < actual.n_total  # the saturated blocks are out
+    assert_same(actual, expected)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_strided_noise_probe_matches_the_reference(route: str, workers: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(statistics, "PROBE_BLOCKS", 20)  # small frames probe every 2nd–4th block row
+    ambient, frames, spec = _frames((93, 85, 3), 4, seed=5)
+    stride = statistics.probe_stride(93 // 4, 85 // 4)
+    assert stride > 1
+    actual = accumulate_statistics(ambient, frames, spec, bin_factor=4, workers=workers)
+    assert_same(actual, reference_statistics(ambient, frames, spec, 4, 1, stride))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_both_routes_weigh_samples_alike(dtype: type, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The inverse-variance weighted statistics (fitted to the probe) are the same on either route."""
+    ambient, frames, spec = _frames((70, 98, 3), 4, seed=11, dtype=dtype)
+    results = {}
+    for name in ("numpy", "numba"):
+        monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, name)
+        frame_kernels._compiled.cache_clear()
+        results[name] = [
+            accumulate_statistics(ambient, frames, spec, bin_factor=4, workers=workers, weighting=True)
+            for workers in (1, 2)
+        ]
+    frame_kernels._compiled.cache_clear()
+    reference = results["numpy"][0]
+    assert reference.weighted
+    for result in [*results["numpy"], *results["numba"]]:
+        assert_same(result, reference, rtol=1e-10)
+
+
+@pytest.mark.parametrize("shape", [(37, 53, 3), (45, 71), (97, 89, 3)])
+@pytest.mark.parametrize("workers", [1, 2])
+def test_all_pixel_statistics_match_the_reference(
+    route: str, shape: tuple[int, ...], workers: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(frame_kernels, "MOMENT_TASK_PIXELS", 500)  # several tasks, the last one short
+    ambient, frames, spec = _frames(shape, 3, seed=3)
+    actual = accumulate_statistics(ambient, frames, spec, chunk_pixels=101, workers=workers)
+    # Every sample on its own (a mosaic's too): blocks of 1 of the frame as it is.
+    expected = reference_statistics(ambient, frames, spec, 1, 1, 1)
+    assert_same(actual, SequenceStatistics(**{**expected.__dict__, "noise": None}))
+
+
+@pytest.mark.parametrize("incremental", [False, True])
+def test_streamed_block_rows_match_the_reference(route: str, incremental: bool) -> None:
+    """A capture adds raw frames one by one (FlashSession): the same statistics."""
+    ambient, frames, spec = _frames((45, 71), 3, seed=8)
+    rows = BlockRows(
+        3, statistics.plane_shape(ambient.shape, 2), 2, spec.white_level, incremental, black_level=spec.black_level
+    )
+    for row, frame in [(0, frames[0]), (3, ambient), (1, frames[1]), (2, frames[2])]:
+        rows.add_frame(row, frame, 2)
+    assert_same(rows.statistics(spec), reference_statistics(ambient, frames, spec, 2, 2, 1))
+
+
+def reference_synthesis(
+    ambient: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, weights: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``m_a + Σ w_k m_f,k`` with ``m_f = pinv(L)(F − m_a)`` on linearised frames, and the saturated pixels."""
+    a = spec.ambient_scale * (ambient.astype(float) - spec.black_level)
+    linear = [s * (f.astype(float) - spec.black_level) for s, f in zip(spec.led_scales, led_frames)]
+    led_only = np.einsum("kj,j...->k...", spec.unmixing, np.stack([f - a for f in linear]))
+    image = a + np.einsum("k,k...->...", weights, led_only)
+    hit = np.zeros(ambient.shape, dtype=bool)
+    for frame in [ambient, *led_frames]:
+        hit |= frame >= spec.white_level
+    return image, hit.any(axis=2) if hit.ndim == 3 else hit
+
+
+@pytest.mark.parametrize("shape", [(131, 157, 3), (67, 45), (1, 1, 3)])
+@pytest.mark.parametrize("workers", [1, 2])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_synthesis_matches_the_reference(
+    route: str, shape: tuple[int, ...], workers: int, dtype: type, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(synthesis, "COMPILED_TASK_PIXELS", 1000)  # several tasks, the last one short
+    ambient, frames, spec = _frames(shape, 4, seed=shape[0], saturate=shape[0] > 10)
+    weights = np.array([0.3, 0.9, 0.0, 0.55])
+    image, saturated = synthesize(ambient, frames, spec, weights, workers=workers, chunk_pixels=777, dtype=dtype)
+    expected, expected_saturated = reference_synthesis(ambient, frames, spec, weights)
+    assert image.dtype == dtype and image.shape == shape
+    tolerance = 1e-6 if dtype == np.float32 else 1e-12
+    np.testing.assert_allclose(image, expected, rtol=tolerance, atol=tolerance * float(np.abs(expected).max()))
+    np.testing.assert_array_equal(saturated, expected_saturated)
+    assert saturated.any() == (shape[0] > 10)
+
+
+def test_synthesis_refuses_an_image_type_it_cannot_write() -> None:
+    ambient, frames, spec = _frames((8, 8, 3), 2, seed=1)
+    with pytest.raises(statistics.SpectralDataError, match="image type int16; expected float32 or float64"):
+        synthesize(ambient, frames, spec, np.ones(2), dtype=np.int16)
+
+
+POLICY = """
+import sys
+import numpy as np
+from msflash.processing import frame_kernels
+from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+frame_kernels.COMPILE_BYTES = int(sys.argv[1])
+frames = [np.full((32, 40, 3), 100 + k, np.uint16) for k in range(4)]
+accumulate_statistics(frames[0], frames[1:], FrameStackSpec(0, 4000, 1.0, (1.0,) * 3, np.eye(3)), bin_factor=4)
+print(frame_kernels.enabled(), "numba" in sys.modules)
+"""
+
+
+@pytest.mark.parametrize(("threshold", "expected"), [(1 << 40, "False False"), (0, "True True")])
+def test_small_one_off_work_does_not_pay_numbas_start_up(threshold: int, expected: str) -> None:
+    """A fresh process loads numba only for work of at least COMPILE_BYTES (unless told otherwise)."""
+    import os
+    import subprocess
+    import sys
+
+    if not frame_kernels.prepare():
+        pytest.skip("numba is not installed")
+    environment = {key: value for key, value in os.environ.items() if key != frame_kernels.KERNELS_VARIABLE}
+    result = subprocess.run(
+        [sys.executable, "-c", POLICY, str(threshold)], capture_output=True, text=True, env=environment, timeout=300
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split("\n")[-2] == expected
