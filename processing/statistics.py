@@ -466,7 +466,7 @@ def accumulate_statistics(
         pool = thread_pool(workers) if workers > 1 else None
         compiled = frame_kernels.raw_moments([*led_frames, ambient], white, workers, pool)
         if compiled is not None:
-            return _statistics_from_moments(compiled, spec, n_pixels * n_channels)
+            return statistics_from_moments(compiled, spec, n_pixels * n_channels)
     # Raw second moments of the rows [F_1 … F_n, A, 1] over the valid samples. Every statistic of
     # the linearised differences is a linear transform of these (below), so the per-chunk work is
     # one conversion and one Gram product: no per-frame subtract, scale or difference passes.
@@ -494,7 +494,7 @@ def accumulate_statistics(
         flat = view.reshape(n_rows, -1)
         moments += flat @ flat.T
 
-    return _statistics_from_moments(moments, spec, n_pixels * n_channels)
+    return statistics_from_moments(moments, spec, n_pixels * n_channels)
 
 
 def _accumulate_binned(
@@ -882,7 +882,7 @@ class BlockRows:
             noise = None if scale is None else noise * scale
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
         factor = self.factor
-        return _statistics_from_moments(
+        return statistics_from_moments(
             moments,
             spec,
             rows.shape[1],
@@ -893,7 +893,7 @@ class BlockRows:
         )
 
 
-def _statistics_from_moments(
+def statistics_from_moments(
     moments: np.ndarray,
     spec: FrameStackSpec,
     n_total: int,

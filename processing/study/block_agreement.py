@@ -20,7 +20,7 @@ frames, so it knows it: raw variance ``gain · (value − black) + read`` per fr
 (:class:`FrameNoise`). With the rows ``[F_1 … F_n, A, 1]`` and inverse-variance weights ``w`` (from the
 ambient frame), the noise's share of the weighted raw moments is diagonal (frames have independent
 noise): ``Σ w var_j = gain_j · Σ w (F_j − black) + read_j · Σ w``, taken from the moments' last column.
-Mapped like the moments (:func:`processing.statistics._statistics_from_moments`), it becomes the
+Mapped like the moments (:func:`processing.statistics.statistics_from_moments`), it becomes the
 statistics' :attr:`~processing.statistics.SequenceStatistics.noise`, and the solvers use it as they
 use the probe's. This is the best estimate the pixels allow; the block path is then judged by how far
 it lies from it in units of its pixel-noise band (:func:`agreement`).
@@ -39,7 +39,7 @@ from msflash.processing.statistics import (
     DEFAULT_CHUNK_PIXELS,
     FrameStackSpec,
     SequenceStatistics,
-    _statistics_from_moments,
+    statistics_from_moments,
 )
 
 
@@ -138,7 +138,7 @@ def all_pixel_statistics(
     noise_moments = np.zeros_like(moments)
     for row, line in enumerate(order):
         noise_moments[row, row] = line.gain * (moments[row, -1] - black * total_weight) + line.read * total_weight
-    return _statistics_from_moments(
+    return statistics_from_moments(
         moments,
         spec,
         n_pixels * channels,
