@@ -87,7 +87,8 @@ def synthesize(
     -----
     Integer frames go through one compiled pass (:func:`processing.frame_kernels.weighted_sum_range`):
     each sample is read once, scaled and summed in float64 in cache-sized tiles, and the image written
-    once in ``dtype``. Other frames, or without numba, take chunks through numpy (float32 sums).
+    once in ``dtype``. Other frames, or without numba, take chunks through numpy with the same
+    arithmetic (float64 sums in frame order, rounded once), so the two routes write the same image.
     saturated : ndarray
         Boolean (H, W) mask of pixels saturated in some input frame (their values are unreliable).
     """
@@ -112,15 +113,16 @@ def synthesize(
     if compiled is not None:
         _synthesize_compiled(compiled, factors64, spec.black_level, white, channels, output, saturated, workers)
         return output, saturated
-    # Summed in the image's type (float32 is exact for integer frames ≤ 24 bits, its products round).
-    factors: np.ndarray = factors64.astype(dtype)
-    offset = factors.dtype.type(-spec.black_level * float(factors.astype(float).sum()))
+    # Summed in float64 in frame order, then rounded once to the image's type: the compiled kernel's
+    # arithmetic step for step, so both routes give the same image bit for bit (a process that has
+    # the kernels loaded and one that has not write the same file).
+    offset = -spec.black_level * float(factors64.sum())
     # Flat sample views (a copy only for non-contiguous frames): chunks then need no row alignment.
     flat_frames = [np.ascontiguousarray(frame).reshape(-1) for frame in frames]
     flat_output = output.reshape(-1)
     flat_saturated = saturated.reshape(-1)
     # Frames whose type cannot reach the white level never saturate; the others are checked chunk
-    # by chunk right after the chunk is cast, while it is in cache (a whole-frame max first would be
+    # by chunk right after the chunk is read, while it is in cache (a whole-frame max first would be
     # one more pass over every frame in memory, on one thread).
     saturating = [
         not (np.issubdtype(frame.dtype, np.integer) and np.iinfo(frame.dtype).max < white) for frame in flat_frames
@@ -130,25 +132,27 @@ def synthesize(
 
     def synthesize_chunk(start: int) -> None:
         stop = min(start + chunk_samples, flat_output.size)
-        # One row per frame (per thread): a chunk's output is then one weighted sum of rows.
-        stack = getattr(buffers, "stack", None)
-        if stack is None:
-            stack = buffers.stack = np.empty((len(frames), min(chunk_samples, flat_output.size)), dtype=dtype)
-        rows = stack[:, : stop - start]
+        # Two float64 rows per thread, cache-sized: the running sum and one frame's scaled chunk.
+        sums = getattr(buffers, "sums", None)
+        if sums is None:
+            sums = buffers.sums = np.empty((2, min(chunk_samples, flat_output.size)), dtype=np.float64)
+        total, product = sums[0, : stop - start], sums[1, : stop - start]
         bright = None
         for index, frame in enumerate(flat_frames):
             chunk = frame[start:stop]
-            # Casting into a preallocated row is one streaming pass (exact for integers ≤ 24 bits).
-            np.copyto(rows[index], chunk, casting="unsafe")
+            # A float frame's inf or NaN stays quiet here: the whole image is checked below and refused.
+            with np.errstate(invalid="ignore", over="ignore"):
+                if index == 0:
+                    np.multiply(chunk, factors64[0], out=total, dtype=np.float64)
+                    total += offset
+                else:
+                    np.multiply(chunk, factors64[index], out=product, dtype=np.float64)
+                    total += product
             # A fast reduction on the cached chunk; the comparison mask only where it is needed.
             if saturating[index] and chunk.max() >= white:
                 hit = chunk >= white
                 bright = hit if bright is None else bright | hit
-        target = flat_output[start:stop]
-        # einsum's own single-threaded loop: as fast as BLAS gemv here, without OpenBLAS waking
-        # threads per call (which stalls badly when the other core is busy).
-        np.einsum("i,in->n", factors, rows, out=target)
-        target += offset
+        np.copyto(flat_output[start:stop], total, casting="same_kind")
         if bright is not None:
             flat_saturated[start // channels : stop // channels] = _any_channel(bright.reshape(-1, channels))
 

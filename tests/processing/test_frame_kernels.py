@@ -239,6 +239,28 @@ def test_synthesis_matches_the_reference(
     assert saturated.any() == (shape[0] > 10)
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_two_synthesis_routes_write_the_same_image_bit_for_bit(
+    dtype: type, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A process with the kernels loaded (live view, a study) and a fresh one (msflash flash) write the
+    # same file: the numpy route repeats the compiled kernel's float64 arithmetic, step for step.
+    monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numba")
+    frame_kernels._compiled.cache_clear()
+    if not frame_kernels.enabled():
+        frame_kernels._compiled.cache_clear()
+        pytest.skip("numba is not installed")
+    ambient, frames, spec = _frames((97, 203, 3), 7, seed=11)
+    weights = np.array([0.31, 0.97, 0.0, 0.55, 1.0, 0.123456789, 0.7])
+    compiled, compiled_saturated = synthesize(ambient, frames, spec, weights, dtype=dtype)
+    monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numpy")
+    frame_kernels._compiled.cache_clear()
+    plain, plain_saturated = synthesize(ambient, frames, spec, weights, dtype=dtype, chunk_pixels=501)
+    frame_kernels._compiled.cache_clear()
+    np.testing.assert_array_equal(plain, compiled)
+    np.testing.assert_array_equal(plain_saturated, compiled_saturated)
+
+
 def test_synthesis_refuses_an_image_type_it_cannot_write() -> None:
     ambient, frames, spec = _frames((8, 8, 3), 2, seed=1)
     with pytest.raises(statistics.SpectralDataError, match="image type int16; expected float32 or float64"):
