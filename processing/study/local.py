@@ -52,6 +52,7 @@ from msflash.processing.image_formation import (
 )
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, denoised_global, estimate_local, tile_statistics
 from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 
@@ -413,16 +414,22 @@ def run_study(
     seed0: int = 1000,
     timing: bool = True,
     sweep: bool = True,
+    progress: Progress | None = None,
 ) -> dict:
     """The acceptance study: auto → global rate on uniform scenes, RMSE cut on two-illuminant ones, cost.
 
     Seeds: uniform scenes ``seed0 + s``; boundary and gradient scenes ``seed0 + 10 000 + s`` (the same
     surfaces and ambient pair, mixed two ways); the tiles sweep ``seed0 + 20 000 + s``. The tests
     use seeds below 100. ``msflash local-study --out`` writes the summary and plots (:mod:`acquisition.app.cli_local`).
+    ``progress`` (:mod:`processing.progress`) hears of each scene done.
     """
-    results = [evaluate_scenario("uniform", seed0 + s, tiles) for s in range(n_uniform)]
-    for kind in ("boundary", "gradient"):
-        results += [evaluate_scenario(kind, seed0 + 10_000 + s, tiles) for s in range(n_mixed)]
+    scenes = [("uniform", seed0 + s) for s in range(n_uniform)]
+    scenes += [(kind, seed0 + 10_000 + s) for kind in ("boundary", "gradient") for s in range(n_mixed)]
+    started = time.perf_counter()
+    results = []
+    for done, (kind, seed) in enumerate(scenes, start=1):
+        results.append(evaluate_scenario(kind, seed, tiles))
+        report_count(progress, "local study", done, len(scenes), "scene", started)
     summary: dict = {"tiles": tiles, "n_uniform": n_uniform, "n_mixed_per_kind": n_mixed, "seed0": seed0}
     for kind in KINDS:
         rows = [r for r in results if r["kind"] == kind]
