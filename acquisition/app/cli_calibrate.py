@@ -18,6 +18,8 @@ from msflash.acquisition.app.cli_common import UsageError, claimed_output, posit
 from msflash.acquisition.app.evaluation import check_layout, sequence_layout  # the layouts of `msflash evaluate`
 from msflash.acquisition.app.options import layout_options
 from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
+from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.calibration.camera_response import (
     estimate_responsivities,
     learn_prior,
@@ -185,7 +187,7 @@ def _leds(args: argparse.Namespace) -> int:
     if not args.files and not args.white:
         raise UsageError("calibrate leds: expected spectrometer exports FILES…, --white SEQ, or both")
     calibration = _existing(args.out)
-    white = read_sequence(args.white) if args.white else None
+    white = read_sequence(locate_sequence(args.white, "--white ")) if args.white else None
     characterisations: list = []
     if args.files:
         spectra, characterisations, section = _measured_leds(args)
@@ -247,7 +249,7 @@ def _camera_from_sequences(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--chart {args.chart}: recorded sequences support the macbeth layout only; expected --chart macbeth"
         )
-    sequences = [read_sequence(directory) for directory in args.sequence]
+    sequences = [read_sequence(locate_sequence(directory, "--sequence ")) for directory in args.sequence]
     if args.light and len(args.light) != len(sequences):
         raise UsageError(
             f"--light given {len(args.light)} times for {len(sequences)} sequences; expected one per "
@@ -370,7 +372,7 @@ def _camera(args: argparse.Namespace) -> int:
 
 
 def _dark(args: argparse.Namespace) -> int:
-    sequence = read_sequence(args.sequence)
+    sequence = read_sequence(locate_sequence(args.sequence))
     indices = sequence.indices("dark")
     if not indices:
         raise UsageError(f"{sequence.path}: frames has no 'dark' frame; expected frames with role 'dark'")
@@ -390,7 +392,7 @@ def _dark(args: argparse.Namespace) -> int:
 
 
 def _linearity(args: argparse.Namespace) -> int:
-    sequence = read_sequence(args.sequence)
+    sequence = read_sequence(locate_sequence(args.sequence))
     indices = [i for i, f in enumerate(sequence.frames) if f.role != "dark"]
     lights = sorted({sequence.frames[i].led_levels for i in indices})
     if len(lights) > 1:  # e.g. a chart sequence: each frame under other LEDs, so no common response curve
@@ -502,7 +504,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ("linearity", _linearity, "linearity and saturation from frames at several exposures"),
     ):
         sub = commands.add_parser(name, help=text)
-        sub.add_argument("sequence", help="sequence directory (format v1)")
+        sub.add_argument("sequence", help=SEQUENCE_HELP)
         sub.add_argument("--out", required=True, help="calibration directory (created or updated)")
         sub.add_argument("--json", action="store_true")
         sub.set_defaults(handler=_bad_input(handler))

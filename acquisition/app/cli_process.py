@@ -13,6 +13,8 @@ from msflash.acquisition.app.cli_common import UsageError, positive_int, print_j
 from msflash.acquisition.app.options import add_estimation_options
 from msflash.acquisition.sequence.format import Sequence, read_sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
+from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
+from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.acquisition.session import analysis
 from msflash.processing.ambient import LED_SIGNAL_Z
 from msflash.processing.errors import TargetUnreachableWarning
@@ -47,7 +49,9 @@ def _add_calibration_option(parser: argparse.ArgumentParser) -> None:
 
 def _read_calibrated(args: argparse.Namespace):
     """The sequence, with a calibration applied (``--calibration`` or the sequence's reference); notes on stderr."""
-    sequence, notes = analysis.apply_calibration(read_sequence(args.sequence), getattr(args, "calibration", None))
+    sequence, notes = analysis.apply_calibration(
+        read_sequence(locate_sequence(args.sequence)), getattr(args, "calibration", None)
+    )
     for note in notes:
         progress(note)
     return sequence
@@ -181,7 +185,7 @@ def _flash(args: argparse.Namespace) -> int:
 
 
 def _synthesize(args: argparse.Namespace) -> int:
-    sequence = read_sequence(args.sequence)
+    sequence = read_sequence(locate_sequence(args.sequence))
     weights = _weights(args.weights, len(sequence.leds))
     output = Path(args.out)
     _check_raw_output(_check_output_type(output), output, sequence)
@@ -353,7 +357,7 @@ def _write_flash_image(
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``estimate``, ``flash`` and ``synthesize``."""
     estimate = subparsers.add_parser("estimate", help="estimate the ambient illuminant spectrum of a sequence")
-    estimate.add_argument("sequence", help="sequence directory (format v1)")
+    estimate.add_argument("sequence", help=SEQUENCE_HELP)
     add_estimation_options(estimate)
     _add_calibration_option(estimate)
     add_local_options(estimate)
@@ -362,7 +366,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     estimate.set_defaults(handler=_estimate)
 
     flash = subparsers.add_parser("flash", help="solve the matching or complementary flash for a sequence")
-    flash.add_argument("sequence", help="sequence directory (format v1)")
+    flash.add_argument("sequence", help=SEQUENCE_HELP)
     flash.add_argument("--mode", required=True, choices=("complementary", "matching"))
     flash.add_argument(
         "--target", default="D65", help="complementary target: an illuminant name (D65, A, FL2…) or a CSV file"
@@ -386,7 +390,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     flash.set_defaults(handler=_flash)
 
     synth = subparsers.add_parser("synthesize", help="synthesise the computational flash image from a sequence")
-    synth.add_argument("sequence", help="sequence directory (format v1)")
+    synth.add_argument("sequence", help=SEQUENCE_HELP)
     synth.add_argument(
         "--weights",
         required=True,
