@@ -69,16 +69,22 @@ def progress(message: str) -> None:
 def count(label: str, done: int, total: int, unit: str = "", note: str | None = None) -> None:
     """``done`` of ``total`` ``unit``\\ s of ``label`` finished: the bar moves, or ``note`` is printed.
 
-    The bar is opened at the first count of a label and closed when ``done`` reaches ``total`` (or
-    another label starts, or :func:`close_bar`).
+    The bar is opened at the first count of a label (``done`` may be 0: opened before the first
+    unit) and closed when ``done`` reaches ``total`` or by :func:`close_bar`. Counts of another
+    label while it is open are work inside one of its units (a run's frames inside its capture
+    step): they show beside the bar, ``frame 3/9``, instead of replacing it.
     """
     if not _state["bars"]:
         if note:
             progress(note)
         return
     bar = _state["bar"]
-    if bar is None or _state["label"] != label or bar.total != total:
+    if bar is not None and _state["label"] != label:
+        bar.set_postfix_str(f"{label}: {done}/{total}{' ' + unit if unit else ''}")
+        return
+    if bar is None or bar.total != total:
         bar = _open_bar(label, total, unit)
+    bar.set_postfix_str("", refresh=False)
     bar.update(max(0, done - bar.n))
     bar.refresh()  # units take longer than tqdm's display interval: show each one
     if done >= total:
@@ -127,7 +133,7 @@ def _open_bar(label: str, total: int, unit: str) -> Any:
         ncols=size.columns,
         nrows=size.lines,
         mininterval=0.2,
-        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt}{unit} [{elapsed}<{remaining}]",
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt}{unit} [{elapsed}<{remaining}]{postfix}",
     )
     _state["bar"], _state["label"] = bar, label
     return bar

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import os
 from collections.abc import Callable, Iterator, Sequence
@@ -70,8 +71,15 @@ def _names(text: str) -> list[str]:
 
 
 @contextmanager
-def _mapper(scheduler: str, workers: int | None) -> Iterator[Callable[[Callable[..., Any], Sequence[Any]], Any] | None]:
-    """A map function running jobs serially (``none``), on a local dask cluster (``local``) or at an address."""
+def _mapper(
+    scheduler: str, workers: int | None, verbose: int = 0
+) -> Iterator[Callable[[Callable[..., Any], Sequence[Any]], Any] | None]:
+    """A map function running jobs serially (``none``), on a local dask cluster (``local``) or at an address.
+
+    The local cluster's worker processes log on their own stderr: without ``-v`` only CRITICAL
+    records (a worker's heartbeat racing the scheduler's shutdown logged an ERROR and a 30-line
+    traceback after a finished study); a task's own failure reaches us as its exception.
+    """
     if scheduler == "none":
         yield None
         return
@@ -90,7 +98,12 @@ def _mapper(scheduler: str, workers: int | None) -> Iterator[Callable[[Callable[
         n = workers or os.cpu_count() or 1
         # Loopback only: the scheduler, workers and dashboard never listen on other interfaces.
         cluster = LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address="127.0.0.1:0"
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+            silence_logs=logging.CRITICAL if verbose == 0 else logging.INFO,
         )
         client = Client(cluster)
         progress(f"dask: local cluster with {n} workers")
@@ -135,7 +148,7 @@ def _run(args: argparse.Namespace) -> int:
     if alpha_units == "paper" and args.solver != "roughness":
         raise UsageError("--alpha-units paper is the authors' eq. 6; expected --solver roughness")
     with optional_claimed_output(args.out, "msflash study") as out:
-        with _mapper(args.scheduler, args.workers) as mapper:
+        with _mapper(args.scheduler, args.workers, args.verbose) as mapper:
             if args.name == "table1":
                 from msflash.processing.study.table1 import run_table1
 

@@ -64,6 +64,21 @@ def test_a_study_draws_a_bar_with_an_eta_on_a_terminal():
     assert "Table 1:" in shown  # the result itself
 
 
+def test_run_shows_its_steps_and_frames_as_one_bar_on_a_terminal(tmp_path):
+    shown = on_terminal(["run", "--out", str(tmp_path / "run")])
+    bars = [part for part in shown.split("\r") if part.startswith("msflash: run:") and "%|" in part]
+    assert any("4/4 step" in part for part in bars), bars
+    assert any("capture: 9/9 frame" in part for part in bars), bars  # the frames beside the run's bar
+    assert "captured step" not in shown  # no line per frame on a terminal
+    assert "msflash: opening rig 'sim'" in shown and "done in" in shown  # the lines stay, above the bar
+
+
+def test_capture_lines_on_a_pipe(tmp_path):
+    result = piped(["capture", "--out", str(tmp_path / "capture")])
+    assert "%|" not in result.stderr and "\r" not in result.stderr
+    assert sum("captured step" in line for line in result.stderr.splitlines()) == 8  # ambient + 7 LEDs
+
+
 def test_no_bar_on_a_terminal_with_json():
     shown = on_terminal([*QUICK_TABLE1, "--scheduler", "none", "--json"])
     assert "%|" not in shown and "\r msflash" not in shown
