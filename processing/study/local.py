@@ -337,8 +337,11 @@ def time_estimates(
     bin_factor: int = 4,
     repeats: int = 5,
     seed: int = 0,
+    progress: Progress | None = None,
 ) -> dict:
-    """Best-of-``repeats`` wall times of the global estimate and of ``auto`` / ``local`` on full-size frames (in memory)."""
+    """Best-of-``repeats`` wall times of the global estimate and of ``auto`` / ``local`` on full-size frames (in memory).
+
+    ``progress`` hears of each round of the interleaved repeats."""
     scenario = make_scenario("boundary", seed, shape)
     leds = scenario.led_spectra
 
@@ -355,11 +358,13 @@ def time_estimates(
         run()  # warm caches
     # Interleaved repeats, best of each: the least disturbed by other work on the machine.
     times: dict[str, list[float]] = {name: [] for name in runs}
-    for _ in range(repeats):
+    started = time.perf_counter()
+    for done in range(1, repeats + 1):
         for name, run in runs.items():
             start = time.perf_counter()
             run()
             times[name].append(time.perf_counter() - start)
+        report_count(progress, "local study timing", done, repeats, "round", started)
     timing: dict[str, Any] = {
         "shape": list(shape),
         "tiles": tiles,
@@ -373,14 +378,20 @@ def time_estimates(
 
 
 def tiles_sweep(
-    seeds: range, tile_counts: tuple[int, ...] = (4, 6, 8, 12, 16), shape: tuple[int, int] = (240, 320)
+    seeds: range,
+    tile_counts: tuple[int, ...] = (4, 6, 8, 12, 16),
+    shape: tuple[int, int] = (240, 320),
+    progress: Progress | None = None,
 ) -> list[dict]:
     """Per-pixel accuracy and time of forced-local estimates against the tile count on boundary scenes.
+
+    ``progress`` hears of each tile count done.
 
     ``rmse_local`` is the default local estimate (two regions where they fit), ``rmse_tiles`` the
     tile model alone; ``time_s`` the median time of tiled statistics + forced-local estimate.
     """
     rows = []
+    started = time.perf_counter()
     for tiles in tile_counts:
         errors_local, errors_tiles, errors_global, elapsed = [], [], [], []
         for seed in seeds:
@@ -404,6 +415,7 @@ def tiles_sweep(
                 "time_s": float(np.median(elapsed)),
             }
         )
+        report_count(progress, "local study tiles sweep", len(rows), len(tile_counts), "tile count", started)
     return rows
 
 
@@ -490,8 +502,9 @@ def run_study(
         both["locality_cut"] = 1.0 - both["rmse_auto"] / both["rmse_global_denoised"]
         both["excess_cut"] = 1.0 - (both["rmse_auto"] - both["rmse_bound"]) / (both["rmse_global"] - both["rmse_bound"])
     if timing:
-        summary["timing"] = time_estimates(tiles=tiles)
+        summary["timing"] = time_estimates(tiles=tiles, progress=progress)
     if sweep:
-        summary["tiles_sweep"] = tiles_sweep(range(seed0 + 20_000, seed0 + 20_000 + min(n_mixed, 10)))
+        seeds = range(seed0 + 20_000, seed0 + 20_000 + min(n_mixed, 10))
+        summary["tiles_sweep"] = tiles_sweep(seeds, progress=progress)
     summary["scenarios"] = results
     return summary
