@@ -62,14 +62,16 @@ def locate_sequence(path: str | os.PathLike, what: str = "") -> Path:
     """
     given = Path(path)
     shown = f"{what}{shown_path(given)}"
-    if given.name == SEQUENCE_FILE and given.is_file():
+    # Present is enough to decide: a sequence.json that is a FIFO, a device or a symlink loop is the
+    # reader's to refuse, naming what it is (processing/user_files.py).
+    if given.name == SEQUENCE_FILE and os.path.lexists(given) and not given.is_dir():
         return given.parent
-    if not given.exists():
+    if not os.path.lexists(given):
         raise RecordingError(f"{shown}: not found; {EXPECTED}")
     if not given.is_dir():
-        raise RecordingError(f"{shown}: is a file, not a folder; {EXPECTED}")
-    here = (given / SEQUENCE_FILE).is_file()
-    inside = (given / SEQUENCE_FOLDER / SEQUENCE_FILE).is_file()
+        raise RecordingError(f"{shown}: is not a folder; {EXPECTED}")
+    here = os.path.lexists(given / SEQUENCE_FILE)
+    inside = os.path.lexists(given / SEQUENCE_FOLDER / SEQUENCE_FILE)
     if here and inside:
         raise RecordingError(
             f"{shown}: holds both a sequence ({SEQUENCE_FILE}) and another in {SEQUENCE_FOLDER}/; "
@@ -93,7 +95,7 @@ def _sequences_below(folder: Path) -> list[str]:
     return [
         shown_path(child)
         for child in children
-        if (child / SEQUENCE_FILE).is_file() or (child / SEQUENCE_FOLDER / SEQUENCE_FILE).is_file()
+        if os.path.lexists(child / SEQUENCE_FILE) or os.path.lexists(child / SEQUENCE_FOLDER / SEQUENCE_FILE)
     ]
 
 

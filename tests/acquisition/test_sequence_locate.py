@@ -46,7 +46,7 @@ def test_a_run_folder_its_sequence_and_its_sequence_json_are_the_same_sequence(c
     ("make", "expected"),
     [
         (lambda root: root / "absent", "absent: not found; expected a sequence folder"),
-        (lambda root: (root / "file.txt", (root / "file.txt").write_text("x"))[0], "is a file, not a folder"),
+        (lambda root: (root / "file.txt", (root / "file.txt").write_text("x"))[0], "is not a folder"),
         (lambda root: (root / "empty", (root / "empty").mkdir())[0], "no sequence.json in it or in sequence/"),
     ],
 )
