@@ -148,7 +148,7 @@ def _run(args: argparse.Namespace) -> int:
     if alpha_units == "paper" and args.solver != "roughness":
         raise UsageError("--alpha-units paper is the authors' eq. 6; expected --solver roughness")
     with optional_claimed_output(args.out, "msflash study") as out:
-        with _mapper(args.scheduler, args.workers, args.verbose) as mapper:
+        with _mapper(args.scheduler, args.workers, getattr(args, "verbose", 0)) as mapper:
             if args.name == "table1":
                 from msflash.processing.study.table1 import run_table1
 
