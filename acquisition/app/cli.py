@@ -28,6 +28,8 @@ from typing import Any, NoReturn
 
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import CameraError, CameraSettingError, CaptureError, RecordingError
+from msflash.acquisition.progress import bars_wanted, close_bar
+from msflash.acquisition.progress import configure as configure_progress
 from msflash.processing.errors import SolverError, SpectralDataError
 
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -241,11 +243,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser(words)
         args = parser.parse_args(words)
-        logging.basicConfig(
-            level=logging.WARNING - 10 * min(args.verbose, 2),
-            format="msflash: %(name)s: %(message)s",
-            stream=sys.stderr,
-        )
+        _quiet_libraries(args.verbose)
+        configure_progress(bars=bars_wanted(bool(getattr(args, "json", False))))
         if not getattr(args, "handler", None):
             parser.print_help(sys.stderr)
             return 2
@@ -272,6 +271,31 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except Exception as err:  # the last line of defence: a bug, not bad input (KeyboardInterrupt/SystemExit pass)
         return _crashed(words, err)
+    finally:
+        close_bar()
+
+
+def _quiet_libraries(verbose: int) -> None:
+    """Log records on stderr from WARNING up, INFO with ``-v``, DEBUG with ``-vv``: ours and every library's.
+
+    The level is set on the handler as well as on the root logger: dask.distributed sets its own
+    loggers to INFO, so without ``-v`` ``study table1`` printed some 30 lines of its scheduler's and
+    nannies' start and stop.
+    """
+    level = logging.WARNING - 10 * min(verbose, 2)
+    root = logging.getLogger()
+    if not root.handlers:  # else someone else (a test's log capture, a notebook) owns logging: left alone
+        ours = logging.StreamHandler(sys.stderr)
+        ours.setFormatter(logging.Formatter("msflash: %(name)s: %(message)s"))
+        ours.set_name(_LOG_HANDLER)
+        root.addHandler(ours)
+    for handler in root.handlers:
+        if handler.get_name() == _LOG_HANDLER:
+            handler.setLevel(level)
+            root.setLevel(level)
+
+
+_LOG_HANDLER = "msflash-stderr"
 
 
 CRASH_LOG_ENV = "MSFLASH_CRASH_DIR"

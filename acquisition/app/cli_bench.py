@@ -7,6 +7,7 @@ import importlib
 from typing import Any
 
 from msflash.acquisition.app.cli_common import positive_int, print_json, progress
+from msflash.acquisition.progress import count
 
 _OPTIONAL_PARTS = {
     "camera": ("msflash.acquisition.app.bench_camera", "camera_bench"),
@@ -34,11 +35,13 @@ def _bench(args: argparse.Namespace) -> int:
         report["processing"] = processing_bench(
             args.height, args.width, repeats=args.repeats, pairs=args.pairs, sizes=tuple(sizes)
         )
+        _part_done(report, parts)
     if "startup" in parts:
         from msflash.acquisition.app.bench_startup import startup_bench
 
         progress(f"bench: start-up (msflash --help, msflash estimate, import numpy; {args.rounds} interleaved rounds)…")
         report["startup"] = startup_bench(args.rounds, args.sequence)
+        _part_done(report, parts)
     for part, (module_name, function_name) in _OPTIONAL_PARTS.items():
         if part not in parts:
             continue
@@ -50,11 +53,17 @@ def _bench(args: argparse.Namespace) -> int:
             continue
         progress(f"bench: {part}…")
         report[part] = function()
+        _part_done(report, parts)
     if args.json:
         print_json(report)
     else:
         _print_human(report)
     return 0
+
+
+def _part_done(report: dict[str, Any], parts: list[str]) -> None:
+    """The bench's bar (on a terminal): one step per part measured."""
+    count("bench", len(report), len(set(parts)), "part")
 
 
 def _print_human(report: dict[str, Any], indent: str = "") -> None:

@@ -15,6 +15,8 @@ from typing import Any
 from msflash.acquisition.app.cli_common import UsageError, claimed_output, positive_int, print_json, progress
 from msflash.acquisition.app.options import layout_options
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
+from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.acquisition.session.calibration_inputs import (
     camera_from_chart_sequences,
     dark_of_sequence,
@@ -75,7 +77,7 @@ def _leds(args: argparse.Namespace) -> int:
     if not args.files and not args.white:
         raise UsageError("calibrate leds: expected spectrometer exports FILES…, --white SEQ, or both")
     calibration = _existing(args.out)
-    white = read_sequence(args.white) if args.white else None
+    white = read_sequence(locate_sequence(args.white, "--white ")) if args.white else None
     characterisations: list = []
     if args.files:
         measured = measured_leds(args.files, args.unit, args.column, args.dark)
@@ -136,7 +138,7 @@ def _leds(args: argparse.Namespace) -> int:
 
 
 def _camera_from_sequences(args: argparse.Namespace) -> int:
-    sequences = [read_sequence(directory) for directory in args.sequence]
+    sequences = [read_sequence(locate_sequence(directory, "--sequence ")) for directory in args.sequence]
     result = camera_from_chart_sequences(
         sequences,
         args.light,
@@ -193,7 +195,7 @@ def _camera(args: argparse.Namespace) -> int:
 
 
 def _dark(args: argparse.Namespace) -> int:
-    sequence = read_sequence(args.sequence)
+    sequence = read_sequence(locate_sequence(args.sequence))
     result = dark_of_sequence(sequence)
     calibration = _existing(args.out).updated(
         dark={**result.as_dict(), "cfa": sequence.camera.cfa, "sequence": str(sequence.directory)}
@@ -209,7 +211,7 @@ def _dark(args: argparse.Namespace) -> int:
 
 
 def _linearity(args: argparse.Namespace) -> int:
-    sequence = read_sequence(args.sequence)
+    sequence = read_sequence(locate_sequence(args.sequence))
     calibration = _existing(args.out)
     black = calibration.dark["black_level"] if calibration.dark else sequence.camera.black_level
     result = linearity_of_sequence(sequence, black)
@@ -307,7 +309,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ("linearity", _linearity, "linearity and saturation from frames at several exposures"),
     ):
         sub = commands.add_parser(name, help=text)
-        sub.add_argument("sequence", help="sequence directory (format v1)")
+        sub.add_argument("sequence", help=SEQUENCE_HELP)
         sub.add_argument("--out", required=True, help="calibration directory (created or updated)")
         sub.add_argument("--json", action="store_true")
         sub.set_defaults(handler=_bad_input(handler))

@@ -7,6 +7,7 @@ import sys
 
 from msflash.acquisition.app.cli_common import dumps_json, print_json
 from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.processing.user_files import shown_path
 
 CHECK_HELP = "check every frame file of a sequence against the SHA-256 recorded when it was written"
@@ -14,8 +15,9 @@ CHECK_HELP = "check every frame file of a sequence against the SHA-256 recorded 
 
 def _check(args: argparse.Namespace) -> int:
     from msflash.acquisition.sequence.check import check_sequence
+    from msflash.acquisition.sequence.locate import locate_sequence
 
-    result = check_sequence(args.sequence)
+    result = check_sequence(locate_sequence(args.sequence))
     if args.json:
         print_json({**result.summary(), "files": [check.to_dict() for check in result.files]})
     else:
@@ -34,7 +36,7 @@ def _check(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``check``."""
     check = subparsers.add_parser("check", help=CHECK_HELP)
-    check.add_argument("sequence", help="sequence directory (format v1)")
+    check.add_argument("sequence", help=SEQUENCE_HELP)
     check.add_argument(
         "--json",
         action="store_true",

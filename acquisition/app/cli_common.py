@@ -102,7 +102,7 @@ def claimed_output(path: str | os.PathLike, what: str) -> Iterator[Path]:
     """
     from msflash.acquisition.sequence.folder_claim import claim_folder
 
-    created = not os.path.lexists(path)
+    created = [folder for folder in (Path(path), *Path(path).parents) if not os.path.lexists(folder)]  # deepest first
     out = output_directory(path)
     assert out is not None  # a path was given
     try:
@@ -115,10 +115,13 @@ def claimed_output(path: str | os.PathLike, what: str) -> Iterator[Path]:
         with claim:
             yield out
     except BaseException:
-        # A command refused before it wrote anything leaves no folder it created (the claim's lock is gone).
-        if created:
-            with contextlib.suppress(OSError):
-                out.rmdir()
+        # A command refused before it wrote anything leaves no folder it created, its parents included
+        # (the claim's lock is gone; a folder something was written to stays).
+        for folder in created:
+            try:
+                folder.rmdir()
+            except OSError:
+                break
         raise
 
 

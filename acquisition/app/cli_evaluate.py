@@ -16,6 +16,8 @@ from msflash.acquisition.app.cli_common import (
 from msflash.acquisition.app.evaluation import STUDY_AMBIENTS, colour_study, evaluate_sequence, public_result
 from msflash.acquisition.app.options import layout_options
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
+from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.acquisition.session.chart_layout import CHARTS
 from msflash.processing import lights, water
 
@@ -26,9 +28,7 @@ def _default_out(sequence_dir: Path) -> Path:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    directory = Path(args.sequence)
-    if not (directory / "sequence.json").exists() and (directory / "sequence" / "sequence.json").exists():
-        directory = directory / "sequence"  # a run directory
+    directory = locate_sequence(args.sequence)
     sequence = read_sequence(directory)
     with claimed_output(args.out if args.out else _default_out(directory), "msflash evaluate") as out:
         result = evaluate_sequence(
@@ -90,7 +90,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     evaluate = subparsers.add_parser(
         "evaluate", help="ΔE00 against the chart under D65 and noise, for a chart sequence"
     )
-    evaluate.add_argument("sequence", metavar="SEQ", help="sequence directory (or a run directory holding 'sequence')")
+    evaluate.add_argument("sequence", metavar="SEQ", help=SEQUENCE_HELP)
     evaluate.add_argument("--chart", required=True, choices=CHARTS, help="the chart in the scene")
     layout_options(evaluate)
     evaluate.add_argument("--target", default="D65", help="complementary target illuminant (name or CSV file)")

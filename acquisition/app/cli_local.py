@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.app.cli_common import output_directory, positive_int, print_json, progress
+from msflash.acquisition.app.cli_common import optional_claimed_output, positive_int, print_json, progress
+from msflash.acquisition.progress import REPORTER
 from msflash.processing.local import DEFAULT_TILES
 
 
@@ -19,17 +20,18 @@ def _local_study(args: argparse.Namespace) -> int:
         f"local study: {args.uniform} uniform scenes, {args.mixed} boundary + {args.mixed} gradient scenes, "
         f"{args.tiles}x{args.tiles} tiles, seeds from {args.seed0}"
     )
-    out = output_directory(args.out)
-    summary = run_study(
-        n_uniform=args.uniform,
-        n_mixed=args.mixed,
-        tiles=args.tiles,
-        seed0=args.seed0,
-        timing=not args.no_timing,
-        sweep=not args.no_timing,
-    )
-    if out is not None:
-        _write(summary, out)
+    with optional_claimed_output(args.out, "msflash local-study") as out:
+        summary = run_study(
+            n_uniform=args.uniform,
+            n_mixed=args.mixed,
+            tiles=args.tiles,
+            seed0=args.seed0,
+            timing=not args.no_timing,
+            sweep=not args.no_timing,
+            progress=REPORTER,
+        )
+        if out is not None:
+            _write(summary, out)
     scenarios = summary.pop("scenarios")
     if args.json:
         print_json(summary)

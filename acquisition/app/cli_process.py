@@ -11,6 +11,8 @@ import numpy as np
 from msflash.acquisition.app.cli_common import UsageError, positive_int, print_json, progress
 from msflash.acquisition.app.options import add_estimation_options, add_scheduler_options
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
+from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.acquisition.session import analysis, many, one_sequence
 from msflash.processing.local import DEFAULT_TILES, LOCAL_METHODS
 
@@ -184,7 +186,7 @@ def _flash(args: argparse.Namespace) -> int:
 
 
 def _synthesize(args: argparse.Namespace) -> int:
-    sequence = read_sequence(args.sequence)
+    sequence = read_sequence(locate_sequence(args.sequence))
     weights = _weights(args.weights, len(sequence.leds))
     output = Path(args.out)
     one_sequence.check_raw_output(one_sequence.check_output_type(output), output, sequence)
@@ -245,8 +247,7 @@ def _print_local(payload: dict, local) -> None:
 
 
 _SEQUENCES_HELP = (
-    "sequence directory (format v1), or a folder of them (its sub-folders holding a sequence.json, in name "
-    "order); several are run on dask (--scheduler) and give one JSON line each, in input order, a failed "
+    f"{SEQUENCE_HELP}; or a folder of those (its sub-folders, in name order); several are run on dask (--scheduler) and give one JSON line each, in input order, a failed "
     "sequence its own error line while the others go on"
 )
 
@@ -294,7 +295,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     flash.set_defaults(handler=_flash)
 
     synth = subparsers.add_parser("synthesize", help="synthesise the computational flash image from a sequence")
-    synth.add_argument("sequence", help="sequence directory (format v1)")
+    synth.add_argument("sequence", help=SEQUENCE_HELP)
     synth.add_argument(
         "--weights",
         required=True,

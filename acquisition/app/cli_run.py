@@ -35,6 +35,7 @@ from msflash.acquisition.app.cli_common import UsageError, claimed_output, progr
 from msflash.acquisition.app.options import add_estimation_options
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.errors import CaptureError
+from msflash.acquisition.progress import count
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import (
     read_sequence,
@@ -217,9 +218,14 @@ def _run(args: argparse.Namespace) -> int:
         return _run_claimed(args, out)
 
 
+RUN_STEPS = 4
+"""The steps of ``run`` its progress bar counts: open the rig, plan the exposures, capture, report."""
+
+
 def _run_claimed(args: argparse.Namespace, out: Path) -> int:
     started = time.perf_counter()
     spec = _rig_spec(args)
+    count("run", 0, RUN_STEPS, "step")
     # printable: a file name given to an option may hold any bytes, the line stays one line.
     progress(
         printable(
@@ -235,6 +241,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
     )
     # SIGTERM unwinds like Ctrl-C, so the LEDs go off and the partial sequence stays readable.
     with sigterm_as_exit(), _open(args) as rig:
+        count("run", 1, RUN_STEPS, "step")
         if rig.camera_responsivities is None:
             raise UsageError(
                 f"rig '{spec}': the flash solvers need the camera's responsivities; expected "
@@ -247,6 +254,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
             )
         exposure = plan_exposure(rig, args.exposure, _policy(args))
         report_exposure(exposure, list(rig.led_spectra.names))
+        count("run", 2, RUN_STEPS, "step")
         with sequence_writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
             if rig.name.startswith("replay:"):
                 estimate, solutions, caught, captured, flash_us, stack, decided = run_two_captures(
@@ -260,6 +268,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
             why_degenerate = degenerate(estimate)
             writer.finish()
             true_ambient = rig.true_ambient
+    count("run", 3, RUN_STEPS, "step")
     decision_ms = (decided - captured.last_frame_at) * 1e3
     progress(f"estimated the ambient and solved the flash in {decision_ms:.1f} ms after the last LED frame")
     for note in estimate.warnings:
@@ -312,6 +321,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
     summary["decision_ms"] = round(decision_ms, 3)
     summary["elapsed_s"] = round(time.perf_counter() - started, 3)
     run_html.write_run_summary(out, summary, sequence)
+    count("run", RUN_STEPS, RUN_STEPS, "step")
     progress(f"done in {summary['elapsed_s']:.1f} s: {out}")
     print(out)
     return 0
@@ -326,7 +336,9 @@ def _capture(args: argparse.Namespace) -> int:
 
 
 def _capture_claimed(args: argparse.Namespace, out: Path) -> int:
+    count("opening the rig", 0, 1, "step")  # seconds on the sim rig (its world is built): the bar shows them pass
     with sigterm_as_exit(), _open(args) as rig:
+        count("opening the rig", 1, 1, "step")
         path = capture_sequence(rig, out, args.exposure, _policy(args), args.sync)
     print(path)
     return 0

@@ -21,13 +21,14 @@ from typing import Any
 from msflash.acquisition.app.cli_common import (
     UsageError,
     dumps_json,
-    output_directory,
+    optional_claimed_output,
     positive_int,
     print_json,
     progress,
 )
 from msflash.acquisition.app.options import add_scheduler_options
 from msflash.acquisition.app.plot_style import PALETTE, pyplot, relative_power, save_figure
+from msflash.acquisition.progress import REPORTER
 from msflash.acquisition.session.dask_map import dask_mapper
 from msflash.processing.ambient import AMBIENT_METHODS
 
@@ -85,88 +86,87 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError("--alpha: a sweep is only for table1; expected one value")
     if alpha_units == "paper" and args.solver != "roughness":
         raise UsageError("--alpha-units paper is the authors' eq. 6; expected --solver roughness")
-    out = output_directory(args.out)
+    with optional_claimed_output(args.out, "msflash study") as out:
+        with dask_mapper(args.scheduler, args.workers, verbose=getattr(args, "verbose", 0) > 0) as mapper:
+            if args.name == "table1":
+                from msflash.processing.study.table1 import run_table1
 
-    with dask_mapper(args.scheduler, args.workers, verbose=getattr(args, "verbose", 0) > 0) as mapper:
-        if args.name == "table1":
-            from msflash.processing.study.table1 import run_table1
+                result = run_table1(
+                    n_leds_list=args.leds,
+                    method=args.solver,
+                    alpha=alpha,
+                    cameras=args.cameras,
+                    illuminants=args.illuminants,
+                    alpha_units=alpha_units,
+                    progress=REPORTER,
+                    map_function=mapper,
+                )
+            elif args.name == "surfaces":
+                from msflash.processing.study.surfaces import run_surfaces
 
-            result = run_table1(
-                n_leds_list=args.leds,
-                method=args.solver,
-                alpha=alpha,
-                cameras=args.cameras,
-                illuminants=args.illuminants,
-                alpha_units=alpha_units,
-                progress=progress,
-                map_function=mapper,
-            )
-        elif args.name == "surfaces":
-            from msflash.processing.study.surfaces import run_surfaces
+                result = run_surfaces(
+                    draws=args.draws,
+                    method=args.solver,
+                    alpha=alpha,
+                    cameras=args.cameras,
+                    illuminants=args.illuminants,
+                    alpha_units=alpha_units,
+                    seed=args.seed,
+                    progress=REPORTER,
+                    map_function=mapper,
+                )
+            elif args.name in ("cameras", "xy"):
+                if alpha_units == "paper":
+                    raise UsageError(f"--alpha-units paper: not for {args.name}; expected a dimensionless alpha")
+                from msflash.processing.study.cameras import run_cameras, run_xy
 
-            result = run_surfaces(
-                draws=args.draws,
-                method=args.solver,
-                alpha=alpha,
-                cameras=args.cameras,
-                illuminants=args.illuminants,
-                alpha_units=alpha_units,
-                seed=args.seed,
-                progress=progress,
-                map_function=mapper,
-            )
-        elif args.name in ("cameras", "xy"):
-            if alpha_units == "paper":
-                raise UsageError(f"--alpha-units paper: not for {args.name}; expected a dimensionless alpha")
-            from msflash.processing.study.cameras import run_cameras, run_xy
+                run = run_cameras if args.name == "cameras" else run_xy
+                result = run(
+                    n_leds_list=args.leds,
+                    method=args.solver,
+                    alpha=alpha,
+                    cameras=args.cameras,
+                    illuminants=args.illuminants,
+                    progress=REPORTER,
+                    map_function=mapper,
+                )
+            elif args.name == "failure":
+                from msflash.processing.study.failure import DEFAULT_CAMERAS, run_failure
 
-            run = run_cameras if args.name == "cameras" else run_xy
-            result = run(
-                n_leds_list=args.leds,
-                method=args.solver,
-                alpha=alpha,
-                cameras=args.cameras,
-                illuminants=args.illuminants,
-                progress=progress,
-                map_function=mapper,
-            )
-        elif args.name == "failure":
-            from msflash.processing.study.failure import DEFAULT_CAMERAS, run_failure
+                result = run_failure(
+                    factors=args.factors,
+                    cameras=args.cameras or DEFAULT_CAMERAS,
+                    seeds=args.seeds,
+                    method=args.solver,
+                    alpha=alpha,
+                    threshold=args.threshold,
+                    keep_records=args.records,
+                    progress=REPORTER,
+                    map_function=mapper,
+                    **({"ambients": args.ambients} if args.ambients else {}),
+                )
+            else:
+                from msflash.processing.study.pareto import DEFAULT_CAMERAS, run_pareto
 
-            result = run_failure(
-                factors=args.factors,
-                cameras=args.cameras or DEFAULT_CAMERAS,
-                seeds=args.seeds,
-                method=args.solver,
-                alpha=alpha,
-                threshold=args.threshold,
-                keep_records=args.records,
-                progress=progress,
-                map_function=mapper,
-                **({"ambients": args.ambients} if args.ambients else {}),
-            )
-        else:
-            from msflash.processing.study.pareto import DEFAULT_CAMERAS, run_pareto
-
-            result = run_pareto(
-                cameras=args.cameras or DEFAULT_CAMERAS,
-                seeds=args.seeds,
-                ambient_to_flash=args.ambient_to_flash,
-                patch_px=args.patch_px,
-                repeats=args.repeats,
-                progress=progress,
-                map_function=mapper,
-                **({"samplings": args.samplings} if args.samplings else {}),
-                **({"ambients": args.ambients} if args.ambients else {}),
-            )
-    result = json.loads(dumps_json(result))  # plain JSON types (numpy scalars, tuples) from here on
-    if out is not None:
-        json_path = out / f"{args.name}.json"
-        json_path.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
-        png_path = out / f"{args.name}.png"
-        PLOTS[args.name](result, png_path)
-        result["files"] = {"json": str(json_path), "png": str(png_path)}
-        progress(f"wrote {json_path} and {png_path}")
+                result = run_pareto(
+                    cameras=args.cameras or DEFAULT_CAMERAS,
+                    seeds=args.seeds,
+                    ambient_to_flash=args.ambient_to_flash,
+                    patch_px=args.patch_px,
+                    repeats=args.repeats,
+                    progress=REPORTER,
+                    map_function=mapper,
+                    **({"samplings": args.samplings} if args.samplings else {}),
+                    **({"ambients": args.ambients} if args.ambients else {}),
+                )
+        result = json.loads(dumps_json(result))  # plain JSON types (numpy scalars, tuples) from here on
+        if out is not None:
+            json_path = out / f"{args.name}.json"
+            json_path.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+            png_path = out / f"{args.name}.png"
+            PLOTS[args.name](result, png_path)
+            result["files"] = {"json": str(json_path), "png": str(png_path)}
+            progress(f"wrote {json_path} and {png_path}")
     if args.json:
         print_json(result)
     else:

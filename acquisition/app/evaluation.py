@@ -41,6 +41,7 @@ from msflash.acquisition.app.cli_common import dumps_json, progress
 from msflash.acquisition.app.html_report import HtmlReport
 from msflash.acquisition.app.plot_style import PALETTE, figure_png, in_plot_unit, pyplot, spectral_axis
 from msflash.acquisition.app.srgb_png import enlarged, srgb_png_bytes
+from msflash.acquisition.progress import counted
 from msflash.acquisition.sequence.exr_metadata import LINEAR_UNITS
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import write_image
@@ -647,11 +648,12 @@ def colour_study(
 ) -> dict[str, Any]:
     """Fig. 9 (ΔE per ambient: ambient / + matching / + complementary) and Fig. 3 (noise under water)."""
     results = {}
-    for name in ambients:
-        progress(f"colour study: {name}")
-        results[name] = study_ambient(
-            name, seed, patch_px, cfa, bounds, out / name if out is not None else None, **world_options
-        )
+    with counted("colour study", len(ambients), "ambient") as advance:
+        for name in ambients:
+            results[name] = study_ambient(
+                name, seed, patch_px, cfa, bounds, out / name if out is not None else None, **world_options
+            )
+            advance(f"colour study: {name} done")
     summary = delta_e_summary(results)
     noise = {
         name: {

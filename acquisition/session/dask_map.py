@@ -69,7 +69,7 @@ def _quiet_dask(verbose: bool) -> Iterator[None]:
     names = ("distributed", "dask")
     previous_levels = [logging.getLogger(name).level for name in names]
     previous_env = os.environ.get("DASK_LOGGING__DISTRIBUTED")
-    os.environ["DASK_LOGGING__DISTRIBUTED"] = "error"
+    os.environ["DASK_LOGGING__DISTRIBUTED"] = "critical"
     for name in names:
         logging.getLogger(name).setLevel(logging.ERROR)
     try:
@@ -126,7 +126,10 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
                 processes=True,
                 host="127.0.0.1",
                 dashboard_address="127.0.0.1:0",
-                silence_logs=logging.INFO if verbose else logging.ERROR,
+                # Worker processes log on their own stderr: without -v only CRITICAL records (a
+                # worker's heartbeat racing the scheduler's shutdown logged an ERROR and a 30-line
+                # traceback after a finished study); a task's own failure reaches us as its exception.
+                silence_logs=logging.INFO if verbose else logging.CRITICAL,
             )
             client = Client(cluster)
             progress(f"dask: local cluster with {n} workers")

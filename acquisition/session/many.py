@@ -1,7 +1,7 @@
 """``msflash estimate`` and ``flash`` over many sequences: a day's time-lapse, a recorded study.
 
-The sequences are the command's arguments, each a sequence folder (holding ``sequence.json``) or a
-folder of sequence folders (its sub-folders holding one, in name order: :func:`sequence_inputs`).
+The sequences are the command's arguments, each a sequence folder (holding ``sequence.json``), a run
+or capture folder (holding one in ``sequence/``) or a folder of those (its sub-folders holding one, in name order: :func:`sequence_inputs`).
 Each sequence goes through :mod:`acquisition.session.one_sequence`, the route of a single run, on a
 dask client (:mod:`acquisition.session.dask_map`), so its numbers are those of a one-by-one run.
 Each gives a :class:`SequenceRecord`, in input order: its JSON object, or the one-line error that
@@ -17,12 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.errors import CameraError, CameraSettingError, CaptureError, RecordingError, UsageError
+from msflash.acquisition.sequence.locate import SEQUENCE_FILE, SEQUENCE_FOLDER
 from msflash.acquisition.session import one_sequence
 from msflash.acquisition.session.dask_map import LOCAL, SERIAL, dask_mapper
 from msflash.led_controller.errors import BoothError
 from msflash.processing.errors import SolverError, SpectralDataError
 
-SEQUENCE_FILE = "sequence.json"
 NAME_FIELD = "{name}"
 """In ``flash --out`` over many sequences: replaced by each sequence folder's name."""
 
@@ -45,14 +45,17 @@ class SequenceRecord:
 
 
 def _is_sequence(path: Path) -> bool:
-    return (path / SEQUENCE_FILE).exists()
+    """Whether ``path`` names one sequence as :func:`~acquisition.sequence.locate.locate_sequence` reads it:
+    a sequence folder, or a run or capture folder holding one in ``sequence/``."""
+    return (path / SEQUENCE_FILE).exists() or (path / SEQUENCE_FOLDER / SEQUENCE_FILE).exists()
 
 
 def sequence_inputs(arguments: Sequence[str]) -> tuple[list[str], bool]:
     """The sequences named by the arguments, and whether any argument was a folder of sequences.
 
     An argument is kept as it is (the reader will name what is wrong with it) unless it is a folder
-    without ``sequence.json`` whose sub-folders hold one: then those sub-folders, in name order.
+    that is no sequence, run or capture folder and whose sub-folders are: then those sub-folders, in
+    name order (a day's sequences, or a folder of runs).
 
     >>> sequence_inputs(["/nonexistent/a", "/nonexistent/b"])
     (['/nonexistent/a', '/nonexistent/b'], False)

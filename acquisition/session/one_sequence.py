@@ -22,6 +22,7 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.exr_metadata import exr_metadata
 from msflash.acquisition.sequence.format import Sequence, read_sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
+from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.acquisition.session import analysis
 from msflash.processing.ambient import LED_SIGNAL_Z, AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
@@ -84,7 +85,7 @@ class FlashResult:
 
 def read_calibrated(path: str, calibration: str | None, report: Report) -> Sequence:
     """The sequence, with a calibration applied (``calibration`` or the sequence's reference); notes reported."""
-    sequence, notes = analysis.apply_calibration(read_sequence(path), calibration)
+    sequence, notes = analysis.apply_calibration(read_sequence(locate_sequence(path)), calibration)
     for note in notes:
         report(note)
     return sequence

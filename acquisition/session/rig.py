@@ -798,8 +798,9 @@ def open_aravis_fake_rig(
 def open_replay_rig(directory: str | Path, log_serial: str | Path | None = None, **_ignored: object) -> Rig:
     """The ``replay:DIR`` rig: ReplayCamera on a recorded sequence + emulator on a pty + LedBooth."""
     from msflash.acquisition.devices.replay_camera import ReplayCamera
+    from msflash.acquisition.sequence.locate import locate_sequence
 
-    camera = ReplayCamera.open(directory)  # RecordingError for a missing or malformed sequence
+    camera = ReplayCamera.open(locate_sequence(directory, "--rig replay:"))  # RecordingError: missing, malformed
     sequence = camera.sequence
     leds = sequence.led_spectra()
     responsivities = sequence.camera_responsivities()

@@ -21,7 +21,7 @@ from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.devices.replay_camera import format_levels, levels_match
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, StepRole, TriggerSource
-from msflash.acquisition.progress import progress
+from msflash.acquisition.progress import count, progress
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter, read_sequence
 from msflash.acquisition.session import analysis
@@ -84,8 +84,13 @@ def sequence_writer(rig: Rig, out: Path, exposure: ExposurePlan | None = None) -
     return rig.sequence_writer(out / "sequence", extra={"msflash": msflash})
 
 
-def report_frame(step, frame, entry) -> None:
-    progress(f"captured step {step.index} ({step.label}) → {entry.file}")
+def report_frame(step, frame, entry, total: int | None = None) -> None:
+    """One line per frame written; given the plan's ``total`` steps, a bar on a terminal instead."""
+    note = f"captured step {step.index} ({step.label}) → {entry.file}"
+    if total is None:
+        progress(note)
+    else:
+        count("capture", step.index + 1, total, "frame", note)
 
 
 @dataclass(frozen=True)
@@ -210,7 +215,7 @@ def capture_led_sequence(rig: Rig, writer: FrameWriter, plan: ExposurePlan, sync
     def keep(step, frame, entry) -> None:
         frames.append(frame)
         stamp["t"] = time.perf_counter()
-        report_frame(step, frame, entry)
+        report_frame(step, frame, entry, len(capture_plan.steps))
 
     capture_plan = CapturePlan.ambient_then_each_led(
         len(writer.sequence.leds),
@@ -302,7 +307,7 @@ def run_one_stream(
             session.add(frame, step.role, step.led_levels)
             frames.append(frame)
             stamp["t"] = time.perf_counter()
-        report_frame(step, frame, entry)
+        report_frame(step, frame, entry, n_leds + 2)  # ambient, the LEDs, the flash
         if on_frame is not None:
             on_frame(step, frame, entry)
 

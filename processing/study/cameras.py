@@ -24,11 +24,11 @@ from typing import Any
 import numpy as np
 
 from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.progress import Progress
 from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
 from msflash.processing.study.illuminants import SmoothIlluminant
 from msflash.processing.study.table1 import (
     MapFunction,
-    Progress,
     direct_fit,
     evaluate_all_cameras,
     evaluate_camera,

@@ -36,6 +36,7 @@ import numpy as np
 
 from msflash.processing import lights
 from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.statistics import accumulate_statistics
 from msflash.processing.study.noisy import (
@@ -48,7 +49,6 @@ from msflash.processing.study.noisy import (
 )
 from msflash.processing.study.table1 import (
     MapFunction,
-    Progress,
     direct_fit,
     flash_norm,
     led_subset_indices,
@@ -331,8 +331,7 @@ def run_failure(
     records: list[dict[str, Any]] = []
     for done, result in enumerate(mapper(_job, jobs), start=1):
         records.extend(result)
-        if progress:
-            progress(f"failure: world {done}/{len(jobs)} done ({time.perf_counter() - started:.1f} s)")
+        report_count(progress, "failure", done, len(jobs), "world", started)
     missed = [
         {
             k: r[k]

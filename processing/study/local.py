@@ -52,6 +52,7 @@ from msflash.processing.image_formation import (
 )
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, denoised_global, estimate_local, tile_statistics
 from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 
@@ -336,8 +337,11 @@ def time_estimates(
     bin_factor: int = 4,
     repeats: int = 5,
     seed: int = 0,
+    progress: Progress | None = None,
 ) -> dict:
-    """Best-of-``repeats`` wall times of the global estimate and of ``auto`` / ``local`` on full-size frames (in memory)."""
+    """Best-of-``repeats`` wall times of the global estimate and of ``auto`` / ``local`` on full-size frames (in memory).
+
+    ``progress`` hears of each round of the interleaved repeats."""
     scenario = make_scenario("boundary", seed, shape)
     leds = scenario.led_spectra
 
@@ -354,11 +358,13 @@ def time_estimates(
         run()  # warm caches
     # Interleaved repeats, best of each: the least disturbed by other work on the machine.
     times: dict[str, list[float]] = {name: [] for name in runs}
-    for _ in range(repeats):
+    started = time.perf_counter()
+    for done in range(1, repeats + 1):
         for name, run in runs.items():
             start = time.perf_counter()
             run()
             times[name].append(time.perf_counter() - start)
+        report_count(progress, "local study timing", done, repeats, "round", started)
     timing: dict[str, Any] = {
         "shape": list(shape),
         "tiles": tiles,
@@ -372,14 +378,20 @@ def time_estimates(
 
 
 def tiles_sweep(
-    seeds: range, tile_counts: tuple[int, ...] = (4, 6, 8, 12, 16), shape: tuple[int, int] = (240, 320)
+    seeds: range,
+    tile_counts: tuple[int, ...] = (4, 6, 8, 12, 16),
+    shape: tuple[int, int] = (240, 320),
+    progress: Progress | None = None,
 ) -> list[dict]:
     """Per-pixel accuracy and time of forced-local estimates against the tile count on boundary scenes.
+
+    ``progress`` hears of each tile count done.
 
     ``rmse_local`` is the default local estimate (two regions where they fit), ``rmse_tiles`` the
     tile model alone; ``time_s`` the median time of tiled statistics + forced-local estimate.
     """
     rows = []
+    started = time.perf_counter()
     for tiles in tile_counts:
         errors_local, errors_tiles, errors_global, elapsed = [], [], [], []
         for seed in seeds:
@@ -403,6 +415,7 @@ def tiles_sweep(
                 "time_s": float(np.median(elapsed)),
             }
         )
+        report_count(progress, "local study tiles sweep", len(rows), len(tile_counts), "tile count", started)
     return rows
 
 
@@ -413,16 +426,22 @@ def run_study(
     seed0: int = 1000,
     timing: bool = True,
     sweep: bool = True,
+    progress: Progress | None = None,
 ) -> dict:
     """The acceptance study: auto → global rate on uniform scenes, RMSE cut on two-illuminant ones, cost.
 
     Seeds: uniform scenes ``seed0 + s``; boundary and gradient scenes ``seed0 + 10 000 + s`` (the same
     surfaces and ambient pair, mixed two ways); the tiles sweep ``seed0 + 20 000 + s``. The tests
     use seeds below 100. ``msflash local-study --out`` writes the summary and plots (:mod:`acquisition.app.cli_local`).
+    ``progress`` (:mod:`processing.progress`) hears of each scene done.
     """
-    results = [evaluate_scenario("uniform", seed0 + s, tiles) for s in range(n_uniform)]
-    for kind in ("boundary", "gradient"):
-        results += [evaluate_scenario(kind, seed0 + 10_000 + s, tiles) for s in range(n_mixed)]
+    scenes = [("uniform", seed0 + s) for s in range(n_uniform)]
+    scenes += [(kind, seed0 + 10_000 + s) for kind in ("boundary", "gradient") for s in range(n_mixed)]
+    started = time.perf_counter()
+    results = []
+    for done, (kind, seed) in enumerate(scenes, start=1):
+        results.append(evaluate_scenario(kind, seed, tiles))
+        report_count(progress, "local study", done, len(scenes), "scene", started)
     summary: dict = {"tiles": tiles, "n_uniform": n_uniform, "n_mixed_per_kind": n_mixed, "seed0": seed0}
     for kind in KINDS:
         rows = [r for r in results if r["kind"] == kind]
@@ -483,8 +502,9 @@ def run_study(
         both["locality_cut"] = 1.0 - both["rmse_auto"] / both["rmse_global_denoised"]
         both["excess_cut"] = 1.0 - (both["rmse_auto"] - both["rmse_bound"]) / (both["rmse_global"] - both["rmse_bound"])
     if timing:
-        summary["timing"] = time_estimates(tiles=tiles)
+        summary["timing"] = time_estimates(tiles=tiles, progress=progress)
     if sweep:
-        summary["tiles_sweep"] = tiles_sweep(range(seed0 + 20_000, seed0 + 20_000 + min(n_mixed, 10)))
+        seeds = range(seed0 + 20_000, seed0 + 20_000 + min(n_mixed, 10))
+        summary["tiles_sweep"] = tiles_sweep(seeds, progress=progress)
     summary["scenarios"] = results
     return summary

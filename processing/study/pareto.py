@@ -36,10 +36,11 @@ from msflash.processing.ambient import estimate_ambient
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.image_formation import chart_scene
 from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.statistics import accumulate_statistics
 from msflash.processing.study.noisy import make_world, patch_mean_frames, render_stack
-from msflash.processing.study.table1 import MapFunction, Progress, select_cameras
+from msflash.processing.study.table1 import MapFunction, select_cameras
 
 SOLVERS: dict[str, tuple[str, float | str]] = {
     "lstsq": ("lstsq", 0.0),
@@ -214,8 +215,7 @@ def run_pareto(
     results = []
     for done, result in enumerate(mapper(_job, jobs), start=1):
         results.append(result)
-        if progress:
-            progress(f"pareto: world {done}/{len(jobs)} done ({time.perf_counter() - started:.1f} s)")
+        report_count(progress, "pareto", done, len(jobs), "world", started)
     errors = np.concatenate([r["errors"] for r in results])  # (worlds·seeds, n_samp, n_solv)
     solve_s = np.concatenate([r["solve_s"] for r in results])
     stats_s = np.concatenate([r["stats_s"] for r in results])

@@ -24,11 +24,11 @@ import numpy as np
 from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
 from msflash.processing.study.illuminants import SmoothIlluminant
 from msflash.processing.study.table1 import (
     MapFunction,
-    Progress,
     direct_fit,
     evaluate_camera,
     flash_norm,
@@ -111,8 +111,7 @@ def run_surfaces(
     results = []
     for done, result in enumerate(mapper(_evaluate_job, jobs), start=1):
         results.append(result)
-        if progress:
-            progress(f"surfaces: camera {done}/{len(names)} done ({time.perf_counter() - started:.1f} s)")
+        report_count(progress, "surfaces", done, len(names), "camera", started)
 
     # (n_cam, n_ill, 1, 1, n_counts·draws) → (n_counts, draws, n_cam·n_ill)
     def arrange(name: str) -> np.ndarray:

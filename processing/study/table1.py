@@ -63,6 +63,7 @@ from msflash.processing.ambient import AMBIENT_METHODS, estimate_ambient
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.least_squares import minimise_quadratic
 from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.statistics import SequenceStatistics
 from msflash.processing.study.illuminants import SmoothIlluminant, cmfs_photons, feasible_grid
@@ -85,7 +86,6 @@ PAPER_GRID_STEP_NM = 5.0
 METRICS = ("pixel_rmse", "pixel_rmse_ambient095", "xy_error", "xy_squared_distance", "spectrum_rmse")
 """Per-camera metrics, averaged over cameras and illuminants."""
 
-Progress = Callable[[str], None]
 MapFunction = Callable[[Callable[..., Any], Sequence[Any]], Iterable[Any]]
 
 
@@ -379,8 +379,7 @@ def evaluate_all_cameras(
     results = []
     for done, result in enumerate(mapper(_evaluate_job, jobs), start=1):
         results.append(result)
-        if progress:
-            progress(f"{label}: camera {done}/{len(names)} done ({time.perf_counter() - started:.1f} s)")
+        report_count(progress, label, done, len(names), "camera", started)
     return CameraRuns(counts, subsets, names, chosen_illuminants, truths, leds, results)
 
 
