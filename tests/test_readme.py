@@ -85,14 +85,15 @@ EXAMPLES = readme_examples(README.read_text(encoding="utf-8"))
 def test_the_readme_has_examples_and_marks_those_it_cannot_run_here():
     assert len(EXAMPLES) > 20
     skipped = {str(e): e.skip_reason for e in EXAMPLES if e.skip_reason}
-    # Hardware is named as such; the servers are the booth emulator; the only other need is its port.
+    # Hardware is named as such; the servers are the booth emulator and the live page; the only other need is
+    # the emulator's port.
     assert all(
         reason.startswith("needs hardware") or reason == "runs until stopped" or "booth-emulator" in reason
         for reason in skipped.values()
     ), skipped
     hardware = [e for e in EXAMPLES if "--camera" in e.words and "--simulate" not in e.words or "--port" in e.words]
     assert hardware and all(e.skip_reason for e in hardware), [str(e) for e in hardware]
-    assert all(e.words[1] == "booth-emulator" for e in EXAMPLES if e.skip_reason == "runs until stopped")
+    assert all(e.words[1] in ("booth-emulator", "live") for e in EXAMPLES if e.skip_reason == "runs until stopped")
 
 
 def run_examples(folder: Path, include_long: bool) -> list[str]:

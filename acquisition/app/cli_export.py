@@ -9,27 +9,10 @@ from pathlib import Path
 
 from msflash.acquisition.app.cli_common import print_json, progress
 from msflash.acquisition.app.options import add_estimation_options
-from msflash.acquisition.errors import UsageError
-from msflash.processing.user_files import shown_path
+from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 
 EXPORT_HELP = "write a sequence as DNG (raw frames), OME-TIFF (all frames), CSV (spectra) or EXR (linear images)"
 _FORMATS_HELP = "dng, ome-tiff, csv or exr; several comma-separated (dng,csv)"
-
-
-def _sequence_directory(text: str) -> Path:
-    """The sequence folder of ``text``: a sequence folder, or a run or capture folder holding ``sequence/``.
-
-    Private on purpose: the shared resolver of run, capture and sequence folders replaces it.
-    """
-    path = Path(text)
-    if (path / "sequence.json").is_file():
-        return path
-    if (path / "sequence" / "sequence.json").is_file():
-        return path / "sequence"
-    raise UsageError(
-        f"{shown_path(path)}: not a sequence; expected a sequence folder (with sequence.json) or a run or "
-        "capture folder holding sequence/"
-    )
 
 
 def _default_out(sequence: Path) -> Path:
@@ -40,17 +23,15 @@ def _default_out(sequence: Path) -> Path:
 def _export(args: argparse.Namespace) -> int:
     from msflash.acquisition.export.formats import parse_formats
     from msflash.acquisition.export.sequence_export import check_out, export_sequence
-    from msflash.acquisition.sequence.format import read_sequence
-    from msflash.acquisition.session.analysis import apply_calibration
+    from msflash.acquisition.sequence.locate import locate_sequence
+    from msflash.acquisition.session.one_sequence import read_calibrated
 
     formats = parse_formats(args.to, "--to")
-    directory = _sequence_directory(args.sequence)
+    directory = locate_sequence(args.sequence)
     out = Path(args.out) if args.out is not None else _default_out(directory)
     check_out(out, "--out")
     # As estimate and flash read it: the calibration given, or the one the sequence references.
-    sequence, notes = apply_calibration(read_sequence(directory), args.calibration)
-    for note in notes:
-        progress(note)
+    sequence = read_calibrated(str(directory), args.calibration, progress)
     result = export_sequence(
         sequence, formats, out, target=args.target, solver=args.solver, alpha=args.alpha, bin_factor=args.bin
     )
@@ -76,7 +57,7 @@ def _export(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``export``."""
     export = subparsers.add_parser("export", help=EXPORT_HELP)
-    export.add_argument("sequence", help="sequence folder (format v1), or a run or capture folder holding sequence/")
+    export.add_argument("sequence", help=SEQUENCE_HELP)
     export.add_argument("--to", required=True, help=_FORMATS_HELP)
     export.add_argument(
         "--out", default=None, help="new folder for the files (default ./NAME-export; never overwritten)"

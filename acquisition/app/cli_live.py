@@ -11,6 +11,7 @@ import argparse
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import UsageError, progress
+from msflash.acquisition.app.options import simulated_world
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.session.rig import Rig, open_rig
 from msflash.processing.datasets import PAPER_LED_SUBSETS
@@ -57,16 +58,7 @@ def _open(args: argparse.Namespace) -> Rig:
         raise UsageError(f"--cfa: describes the simulated rig's camera, but the rig is '{spec}'; expected --rig sim")
     if args.booth_port is not None and spec not in ("sim", "hw"):
         raise UsageError(f"--booth-port: the rig '{spec}' has its own emulated booth; expected --rig sim or hw")
-    world = {
-        "ambient": args.ambient,
-        "scene": args.scene,
-        "seed": args.seed,
-        "camera": args.sim_camera,
-        "n_leds": args.leds,
-        "led_spectra": args.led_spectra,
-        "flash_power": args.flash_power,
-        "log_serial": args.log_serial,
-    }
+    world = simulated_world(args)
     if spec == "sim":
         return open_rig("sim", cfa=args.cfa, booth_port=args.booth_port, **world)
     if spec == "aravis-fake":

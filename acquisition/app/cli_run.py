@@ -32,7 +32,7 @@ import numpy as np
 
 from msflash.acquisition.app.camera_options import add_camera_options, camera_options_from_args, given_camera_options
 from msflash.acquisition.app.cli_common import UsageError, claimed_output, progress
-from msflash.acquisition.app.options import add_estimation_options
+from msflash.acquisition.app.options import add_estimation_options, simulated_world
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.errors import CaptureError
 from msflash.acquisition.progress import count
@@ -164,16 +164,7 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
             booth_protocol=args.booth_protocol,
         )
     # The simulated world: the sim rig renders it with its own camera, aravis-fake through Aravis.
-    world = {
-        "ambient": args.ambient,
-        "scene": args.scene,
-        "seed": args.seed,
-        "camera": args.sim_camera,
-        "n_leds": args.leds,
-        "led_spectra": args.led_spectra,
-        "flash_power": args.flash_power,
-        "log_serial": args.log_serial,
-    }
+    world = simulated_world(args)
     if spec == "sim":
         return open_rig("sim", cfa=args.cfa, booth_port=args.booth_port, booth_protocol=args.booth_protocol, **world)
     if spec == "aravis-fake":

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Callable
+from typing import Any
 
 from msflash.acquisition.app.cli_common import positive_int
 from msflash.acquisition.session import analysis
@@ -79,3 +80,18 @@ def add_scheduler_options(parser: argparse.ArgumentParser, default: str | None =
     parser.add_argument(
         "--workers", type=positive_int, default=None, help="worker processes of --scheduler local (default: CPUs)"
     )
+
+
+def simulated_world(args: argparse.Namespace) -> dict[str, Any]:
+    """What the simulated world's options (``--ambient``, ``--scene``, ``--sim-camera``, ``--leds``, …) ask of
+    ``open_rig`` for the ``sim`` and ``aravis-fake`` rigs: one reading for ``run``, ``capture`` and ``live``."""
+    return {
+        "ambient": args.ambient,
+        "scene": args.scene,
+        "seed": args.seed,
+        "camera": args.sim_camera,
+        "n_leds": args.leds,
+        "led_spectra": args.led_spectra,
+        "flash_power": args.flash_power,
+        "log_serial": args.log_serial,
+    }

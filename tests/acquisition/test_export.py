@@ -312,7 +312,7 @@ def test_unknown_format_is_refused(capsys, tmp_path: Path, argv: list[str], name
 def test_not_a_sequence_is_refused(capsys, tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     status, stdout, err = run(capsys, "export", str(tmp_path / "empty"), "--to", "csv", "--out", str(tmp_path / "o"))
-    assert_bad_input(status, stdout, err, "empty", "not a sequence")
+    assert_bad_input(status, stdout, err, "empty", "no sequence.json in it")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty"]
 
 
