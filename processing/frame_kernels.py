@@ -24,6 +24,9 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import lru_cache
 from typing import Any
 
@@ -59,9 +62,33 @@ def _compiled() -> Any:
     return frame_kernels_numba
 
 
+_paused = 0
+_paused_lock = threading.Lock()
+
+
+@contextmanager
+def paused() -> Iterator[None]:
+    """No compiled kernel in this process while the block runs (every thread takes the numpy route).
+
+    For a capture that streams: a kernel specialisation not compiled yet in this process (a fresh
+    install has no on-disk cache) compiles on first use, holding the interpreter for a second or
+    more, and the booth's watchdog switched the LEDs off during the flash frame of a camera-synced
+    run while that happened. The numpy route gives the same block sums (exact integers) and the
+    same moments to rounding.
+    """
+    global _paused
+    with _paused_lock:
+        _paused += 1
+    try:
+        yield
+    finally:
+        with _paused_lock:
+            _paused -= 1
+
+
 def _loaded() -> Any:
     """The kernels if they are in use in this process (loaded before, or forced), else None."""
-    if _mode() == "numpy":
+    if _mode() == "numpy" or _paused:
         return None
     if _mode() == "numba" or "msflash.processing.frame_kernels_numba" in sys.modules:
         return _compiled()

@@ -32,6 +32,7 @@ from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
+from msflash.processing import frame_kernels
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.flash import FlashBounds, FlashModel, FlashSolution
 from msflash.processing.spectra import Spectra
@@ -194,9 +195,10 @@ class FlashSession:
         if row > n_leds or (role == "led" and row == n_leds) or shape != self._rows.plane_shape:
             self._rows_complete = False
             return
-        # One compiled pass over the raw frame when the process has the kernels loaded (processing.frame_kernels):
-        # not loaded here, as numba's import would stall the camera's stream for up to seconds.
-        self._rows.add_frame(row, pixels, period)
+        # Never a compiled kernel while the camera streams (processing.frame_kernels.paused): numba's import,
+        # or a first compile of a kernel, holds the interpreter for seconds and the booth's watchdog fires.
+        with frame_kernels.paused():
+            self._rows.add_frame(row, pixels, period)
 
     def stack(self) -> analysis.FrameStack:
         """The frame stack of the frames taken so far (first ``ambient`` and every ``led`` frame), in memory.
@@ -279,7 +281,8 @@ class FlashSession:
         the test patterns of the aravis fake).
         """
         stack = self.stack()
-        statistics = self.statistics(stack)
+        with frame_kernels.paused():  # between the LED frames and the flash frame: no compiling (see _add_rows)
+            statistics = self.statistics(stack)
         raw_weights, alpha_used = self.ambient_model.weights(statistics, self.method, self.alpha)
         weights = np.asarray(raw_weights, dtype=float)
         if sanitise:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -445,3 +446,25 @@ def test_collection_resumes_after_a_failed_flash_decision(sim_rig, tmp_path: Pat
         finally:
             gc.enable()
     assert sim_rig.emulator.levels == (0.0,) * 4
+
+
+def test_a_streaming_session_never_runs_a_compiled_kernel(sim_rig, tmp_path: Path, monkeypatch) -> None:
+    """Even in a process that has the kernels (forced here): adding frames and deciding take the numpy
+    route, as a first compile there stalls the stream and the booth's watchdog switches the LEDs off."""
+    from msflash.processing import frame_kernels
+    from msflash.processing.errors import TargetUnreachableWarning
+
+    monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numba")
+    frame_kernels._compiled.cache_clear()
+    used: list[str] = []
+    monkeypatch.setattr(frame_kernels, "_compiled", lambda: used.append("compiled"))  # any use is recorded
+    levels = [tuple(float(i == j) for i in range(4)) for j in range(4)]
+    session = _session_and_frames(sim_rig, tmp_path, levels)
+    statistics = session.statistics(session.stack())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", TargetUnreachableWarning)  # synthetic frames: any flash will do
+        decision = session.decide("complementary")
+    assert np.all(np.isfinite(decision.levels)) and statistics.n_samples > 0 and used == []
+    with frame_kernels.paused():
+        assert not frame_kernels.enabled()
+    assert used == []
