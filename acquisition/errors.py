@@ -7,6 +7,7 @@ Each class also inherits the matching built-in exception. Messages follow
 from __future__ import annotations
 
 from msflash.led_controller.errors import BoothError
+from msflash.processing.errors import SolverError, SpectralDataError
 
 
 class UsageError(ValueError):
@@ -86,3 +87,25 @@ class FolderInUseError(RecordingError):
 
     Bad input (exit 2): the user pointed two runs at one folder.
     """
+
+
+def bad_input_errors() -> tuple[type[BaseException], ...]:
+    """The errors that mean refused input (exit status 2): the command line's and the many-sequence path's one list.
+
+    The calibration package's error is among them when that package is installed (processing-only
+    use may leave it out).
+    """
+    errors: list[type[BaseException]] = [UsageError, RecordingError, CameraSettingError, SpectralDataError]
+    errors.append(FileNotFoundError)
+    try:
+        from msflash.calibration.errors import CalibrationError
+    except ImportError:
+        pass
+    else:
+        errors.append(CalibrationError)
+    return tuple(errors)
+
+
+def runtime_errors() -> tuple[type[BaseException], ...]:
+    """Device and runtime failures (exit status 1, one line): cameras, captures, solvers, the booth."""
+    return (CameraError, CaptureError, SolverError, BoothError)

@@ -27,10 +27,9 @@ from types import ModuleType
 from typing import Any, NoReturn
 
 from msflash.acquisition.app.cli_common import UsageError
-from msflash.acquisition.errors import CameraError, CameraSettingError, CaptureError, RecordingError
+from msflash.acquisition.errors import bad_input_errors, runtime_errors
 from msflash.acquisition.progress import bars_wanted, close_bar
 from msflash.acquisition.progress import configure as configure_progress
-from msflash.processing.errors import SolverError, SpectralDataError
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": ("msflash.acquisition.app.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
@@ -93,23 +92,6 @@ against the module's own registration."""
 
 COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in COMMANDS.values()))
 """Modules contributing subcommands, in help order."""
-
-_BAD_INPUT = (UsageError, RecordingError, CameraSettingError, SpectralDataError, FileNotFoundError)
-
-
-def _bad_input_errors() -> tuple[type[BaseException], ...]:
-    errors: list[type[BaseException]] = list(_BAD_INPUT)
-    try:
-        from msflash.calibration.errors import CalibrationError
-    except ImportError:  # the calibration package is optional for processing-only use
-        pass
-    else:
-        errors.append(CalibrationError)
-    return tuple(errors)
-
-
-def _runtime_errors() -> tuple[type[BaseException], ...]:
-    return (CameraError, CaptureError, SolverError, *_loaded("msflash.led_controller.errors", "BoothError"))
 
 
 def _terminated() -> tuple[type[BaseException], ...]:
@@ -263,10 +245,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Python from complaining again when it flushes stdout at exit.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
-    except _bad_input_errors() as err:
+    except bad_input_errors() as err:
         sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
         return 2
-    except _runtime_errors() as err:
+    except runtime_errors() as err:
         sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
         return 1
     except Exception as err:  # the last line of defence: a bug, not bad input (KeyboardInterrupt/SystemExit pass)

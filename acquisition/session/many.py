@@ -16,12 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.errors import CameraError, CameraSettingError, CaptureError, RecordingError, UsageError
+from msflash.acquisition.errors import UsageError, bad_input_errors, runtime_errors
 from msflash.acquisition.sequence.locate import SEQUENCE_FILE, SEQUENCE_FOLDER
 from msflash.acquisition.session import one_sequence
 from msflash.acquisition.session.dask_map import LOCAL, SERIAL, dask_mapper
-from msflash.led_controller.errors import BoothError
-from msflash.processing.errors import SolverError, SpectralDataError
 
 NAME_FIELD = "{name}"
 """In ``flash --out`` over many sequences: replaced by each sequence folder's name."""
@@ -126,27 +124,14 @@ def output_paths(template: str | None, sequences: Sequence[str]) -> list[str | N
     return list(outputs)
 
 
-_BAD_INPUT = (UsageError, RecordingError, CameraSettingError, SpectralDataError, FileNotFoundError)
-"""Refused input (exit 2), as the command line classes it (acquisition/app/cli.py)."""
-_RUNTIME = (CameraError, CaptureError, SolverError, BoothError)
-
-
-def _bad_input() -> tuple[type[BaseException], ...]:
-    try:
-        from msflash.calibration.errors import CalibrationError
-    except ImportError:
-        return _BAD_INPUT
-    return (*_BAD_INPUT, CalibrationError)
-
-
 def _failure(sequence: str, err: Exception, notes: list[str]) -> SequenceRecord:
     """The record of a sequence that failed: one line naming it, status 2 for refused input, else 1."""
     text = str(err) or type(err).__name__
     if isinstance(err, FileNotFoundError) and err.filename:
         text = f"{err.filename}: not found"
-    if isinstance(err, _bad_input()):
+    if isinstance(err, bad_input_errors()):
         status = 2
-    elif isinstance(err, _RUNTIME):
+    elif isinstance(err, runtime_errors()):
         status = 1
     else:
         status, text = 1, f"unexpected {type(err).__name__}: {text} — a bug"
