@@ -303,12 +303,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
             "files": [str(path) for path in exported.files],
             "notes": list(exported.notes),
         }
-    summary["exposure"] = {
-        **exposure.to_dict(),
-        "flash_exposure_us": flash_us,
-        "led_snr": captured.snr,
-        "led_snr_method": captured.snr_method,
-    }
+    summary["exposure"] = run_html.exposure_summary(exposure, flash_us, captured)
     summary["decision_ms"] = round(decision_ms, 3)
     summary["elapsed_s"] = round(time.perf_counter() - started, 3)
     run_html.write_run_summary(out, summary, sequence)

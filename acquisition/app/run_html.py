@@ -151,3 +151,14 @@ def write_run_summary(out: Path, summary: dict[str, Any], sequence: Sequence) ->
             f"for it. The sequence is complete in {out / 'sequence'} and the report beside it"
         ) from err
     write_run_html(Path(summary["report"]), summary, sequence)
+
+
+def exposure_summary(exposure: Any, flash_exposure_us: float, captured: Any) -> dict[str, Any]:
+    """``run.json``'s ``exposure``: the planned exposures (``ExposurePlan.to_dict``), the flash frame's, and the
+    LED frames' SNR as the capture measured it (``run`` and ``live`` alike)."""
+    return {
+        **exposure.to_dict(),
+        "flash_exposure_us": flash_exposure_us,
+        "led_snr": captured.snr,
+        "led_snr_method": captured.snr_method,
+    }

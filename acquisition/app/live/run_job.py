@@ -93,12 +93,7 @@ def run_sequence(
         summary = report.write_run_report(
             out, sequence, estimate, solutions, options.mode, rig.true_ambient, stack, options.target
         )
-        summary["exposure"] = {
-            **exposure.to_dict(),
-            "flash_exposure_us": flash_us,
-            "led_snr": captured.snr,
-            "led_snr_method": captured.snr_method,
-        }
+        summary["exposure"] = run_html.exposure_summary(exposure, flash_us, captured)
         summary["decision_ms"] = round((decided - captured.last_frame_at) * 1e3, 3)
         summary["elapsed_s"] = round(time.perf_counter() - started, 3)
         run_html.write_run_summary(out, summary, sequence)
