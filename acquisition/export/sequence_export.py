@@ -53,6 +53,7 @@ from msflash.acquisition.sequence.exr_metadata import exr_metadata, led_peaks_nm
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
 from msflash.acquisition.session import analysis
+from msflash.acquisition.session.one_sequence import refuse_dark_ambient
 from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
@@ -120,13 +121,9 @@ class _Work:
         if self.estimate_given is None:
             progress(f"estimating the ambient of {self.sequence.directory}")
             estimate = analysis.estimate_sequence(self.sequence, self.solver, self.alpha, bin_factor=self.bin_factor)
-            if estimate.ambient_is_dark:
-                index = self.sequence.indices("ambient")[0]
-                raise UsageError(
-                    f"{self.sequence.path}: frames[{index}].file '{self.sequence.frames[index].file}': the ambient "
-                    f"image holds no light (z-score {estimate.ambient_z:.2g}); expected an ambient to estimate for "
-                    "the neutral, the spectra and the flash images (--to ome-tiff needs none)"
-                )
+            refuse_dark_ambient(
+                self.sequence, estimate, "export a neutral, spectra and flash images for (--to ome-tiff needs none)"
+            )
             for warning in estimate.warnings:
                 self.note(f"estimate: {warning}")
             self.estimate_given = estimate
