@@ -92,11 +92,13 @@ def _sequences_below(folder: Path) -> list[str]:
         children = sorted(child for child in folder.iterdir() if child.is_dir())
     except OSError:
         return []
-    return [
-        shown_path(child)
-        for child in children
-        if os.path.lexists(child / SEQUENCE_FILE) or os.path.lexists(child / SEQUENCE_FOLDER / SEQUENCE_FILE)
-    ]
+    return [shown_path(child) for child in children if holds_sequence(child)]
+
+
+def holds_sequence(folder: Path) -> bool:
+    """Whether :func:`locate_sequence` finds a sequence in ``folder`` itself or in its ``sequence/``
+    (a sequence, run or capture folder), without reading it."""
+    return os.path.lexists(folder / SEQUENCE_FILE) or os.path.lexists(folder / SEQUENCE_FOLDER / SEQUENCE_FILE)
 
 
 ARGUMENT_HELP = "a sequence folder, or a run or capture folder holding one in sequence/"

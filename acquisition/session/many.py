@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.errors import UsageError, bad_input_errors, runtime_errors
-from msflash.acquisition.sequence.locate import SEQUENCE_FILE, SEQUENCE_FOLDER
+from msflash.acquisition.sequence.locate import holds_sequence
 from msflash.acquisition.session import one_sequence
 from msflash.acquisition.session.dask_map import LOCAL, SERIAL, dask_mapper
 
@@ -42,12 +42,6 @@ class SequenceRecord:
         return {"sequence": self.sequence, "error": self.error, "status": self.status}
 
 
-def _is_sequence(path: Path) -> bool:
-    """Whether ``path`` names one sequence as :func:`~acquisition.sequence.locate.locate_sequence` reads it:
-    a sequence folder, or a run or capture folder holding one in ``sequence/``."""
-    return (path / SEQUENCE_FILE).exists() or (path / SEQUENCE_FOLDER / SEQUENCE_FILE).exists()
-
-
 def sequence_inputs(arguments: Sequence[str]) -> tuple[list[str], bool]:
     """The sequences named by the arguments, and whether any argument was a folder of sequences.
 
@@ -64,11 +58,11 @@ def sequence_inputs(arguments: Sequence[str]) -> tuple[list[str], bool]:
         path = Path(argument)
         inner: list[str] = []
         try:
-            if path.is_dir() and not _is_sequence(path):
+            if path.is_dir() and not holds_sequence(path):
                 inner = sorted(
                     os.path.join(argument, child.name)
                     for child in path.iterdir()
-                    if child.is_dir() and _is_sequence(child)
+                    if child.is_dir() and holds_sequence(child)
                 )
         except OSError:  # unreadable: the reader names it
             inner = []
