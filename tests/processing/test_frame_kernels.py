@@ -44,7 +44,7 @@ def _frames(
         lit = np.clip(rng.poisson(scene * rng.uniform(1.1, 1.8)), 0, top)
         frames.append(lit.astype(dtype))
     if saturate:
-        frames[1][3:5, 7:9] = np.iinfo(dtype).max if WHITE > np.iinfo(dtype).max else int(WHITE)
+        frames[min(1, n_leds - 1)][3:5, 7:9] = np.iinfo(dtype).max if WHITE > np.iinfo(dtype).max else int(WHITE)
         ambient[-2, -3] = min(int(WHITE) + 5, np.iinfo(dtype).max)
     white = min(WHITE, float(np.iinfo(dtype).max))
     scales = tuple(float(s) for s in rng.uniform(0.5, 2.0, n_leds))
@@ -240,8 +240,9 @@ def test_synthesis_matches_the_reference(
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("n_leds", [1, 2, 6, 7, 10])  # the kernel adds four frames a sweep: every remainder
 def test_the_two_synthesis_routes_write_the_same_image_bit_for_bit(
-    dtype: type, monkeypatch: pytest.MonkeyPatch
+    dtype: type, n_leds: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # A process with the kernels loaded (live view, a study) and a fresh one (msflash flash) write the
     # same file: the numpy route repeats the compiled kernel's float64 arithmetic, step for step.
@@ -250,8 +251,8 @@ def test_the_two_synthesis_routes_write_the_same_image_bit_for_bit(
     if not frame_kernels.enabled():
         frame_kernels._compiled.cache_clear()
         pytest.skip("numba is not installed")
-    ambient, frames, spec = _frames((97, 203, 3), 7, seed=11)
-    weights = np.array([0.31, 0.97, 0.0, 0.55, 1.0, 0.123456789, 0.7])
+    ambient, frames, spec = _frames((97, 203, 3), n_leds, seed=11)
+    weights = np.resize([0.31, 0.97, 0.0, 0.55, 1.0, 0.123456789, 0.7], n_leds)
     compiled, compiled_saturated = synthesize(ambient, frames, spec, weights, dtype=dtype)
     monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numpy")
     frame_kernels._compiled.cache_clear()
