@@ -245,14 +245,17 @@ def raw_moments(frames: list[np.ndarray], white: float, workers: int, pool: Any 
     step = MOMENT_TASK_PIXELS * channels
     n = len(frames)
 
+    rows = -(-(n + 1) // kernels.MOMENT_BLOCK) * kernels.MOMENT_BLOCK
+
     def task(start: int) -> np.ndarray:
-        lower = np.zeros((n + 1, n + 1))
-        kernels.moments(flat, channels, float(white), start, min(start + step, size), lower)
-        return lower
+        block = np.zeros((rows, rows))
+        kernels.moments(flat, channels, float(white), start, min(start + step, size), block)
+        return block
 
     starts = range(0, size, step)
     parts = pool.map(task, starts) if pool is not None and workers > 1 and len(starts) > 1 else map(task, starts)
-    lower = np.zeros((n + 1, n + 1))
+    lower = np.zeros((rows, rows))
     for part in parts:
         lower += part
+    lower = np.tril(lower[: n + 1, : n + 1])
     return lower + np.tril(lower, -1).T

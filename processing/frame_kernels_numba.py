@@ -88,7 +88,7 @@ def weighted_sum(frames, factors, offset, white, channels, output, saturated, st
     and stored a quarter as often, which was the kernel's bound. The saturation test is a running
     maximum per tile; only a tile that reaches ``white`` is searched sample by sample.
     """
-    tile = TILE - TILE % channels
+    tile = max(TILE - TILE % channels, channels)
     total = np.empty(tile, factors.dtype)
     n_frames = len(frames)
     for low in range(start, stop, tile):
@@ -159,58 +159,79 @@ def gram(rows, weights, start, stop, out):
                 out[i, j] += total
 
 
-MOMENT_TILE = 384
-"""Samples per tile of :func:`moments`: every frame's float64 tile together stays in L1 (9 × 384 × 8 B)."""
+MOMENT_TILE = 192
+"""Samples per tile of :func:`moments`: every row's float64 tile together stays in L1 (9 × 192 × 8 B)."""
+MOMENT_BLOCK = 3
+"""Rows per side of the blocks of :func:`moments`' products: 3 × 3 running sums and 6 rows fit the registers."""
 
 
 @njit(nogil=True, cache=True, fastmath=True)
 def moments(frames, channels, white, start, stop, out):
     """Raw second moments of the rows ``[frames…, 1]`` over the flat samples ``start ≤ t < stop`` (whole
     pixels), leaving out every sample of a pixel that some frame saturates (a sample at or above ``white``):
-    ``out[i, j] += Σ_t x_i x_j`` (``j ≤ i``), ``out[n, i] += Σ_t x_i`` and ``out[n, n] +=`` the count, with
-    ``n = len(frames)``; lower triangle only. Each tile of samples is converted to float64 once, in cache."""
+    ``out[i, j] += Σ_t x_i x_j`` for ``i, j ≤ n`` with ``n = len(frames)`` and ``x_n = 1`` (so
+    ``out[n, i]`` is the sum of row i and ``out[n, n]`` the count). ``out`` is (r, r) with r the rows
+    rounded up to :data:`MOMENT_BLOCK`; only its lower triangle (``j ≤ i``) is meaningful.
+
+    Each tile of samples is converted to float64 once, in cache; the products are taken in 3 × 3 blocks
+    of rows, so each loaded value serves three products (one row pair at a time was bound by the loads
+    from cache). A saturated pixel's samples are zeroed in every row, the row of ones included.
+    """
     n = len(frames)
-    tile = MOMENT_TILE - MOMENT_TILE % channels
-    values = np.empty((n, tile))
-    peak = np.empty(tile, frames[0].dtype)
+    rows = out.shape[0]
+    tile = max(MOMENT_TILE - MOMENT_TILE % channels, channels)
+    values = np.zeros((rows, tile))
     for low in range(start, stop, tile):
         high = min(low + tile, stop)
         width = high - low
-        first = frames[0][low:high]
-        for t in range(width):
-            peak[t] = first[t]
+        top = frames[0][low]
         for i in range(n):
             source = frames[i][low:high]
             target = values[i]
             for t in range(width):
                 value = source[t]
                 target[t] = value
-                peak[t] = max(peak[t], value)
-        top = peak[0]
+                top = max(top, value)
+        ones = values[n]
         for t in range(width):
-            top = max(top, peak[t])
-        valid = width
+            ones[t] = 1.0
+        if width < tile:  # the last tile: its unused columns add nothing
+            for i in range(rows):
+                for t in range(width, tile):
+                    values[i, t] = 0.0
         if top >= white:
             for pixel in range(width // channels):
                 hit = False
-                for c in range(channels):
-                    if peak[pixel * channels + c] >= white:
-                        hit = True
+                for i in range(n):
+                    for c in range(channels):
+                        if frames[i][low + pixel * channels + c] >= white:
+                            hit = True
                 if hit:
-                    valid -= channels
-                    for i in range(n):
+                    for i in range(n + 1):
                         for c in range(channels):
                             values[i, pixel * channels + c] = 0.0
-        for i in range(n):
-            left = values[i]
-            for j in range(i + 1):
-                right = values[j]
-                total = 0.0
-                for t in range(width):
-                    total += left[t] * right[t]
-                out[i, j] += total
-            total = 0.0
-            for t in range(width):
-                total += left[t]
-            out[n, i] += total
-        out[n, n] += valid
+        for first in range(0, rows, 3):
+            a0, a1, a2 = values[first], values[first + 1], values[first + 2]
+            for second in range(0, first + 3, 3):
+                b0, b1, b2 = values[second], values[second + 1], values[second + 2]
+                s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
+                for t in range(tile):
+                    x0, x1, x2, y0, y1, y2 = a0[t], a1[t], a2[t], b0[t], b1[t], b2[t]
+                    s00 += x0 * y0
+                    s01 += x0 * y1
+                    s02 += x0 * y2
+                    s10 += x1 * y0
+                    s11 += x1 * y1
+                    s12 += x1 * y2
+                    s20 += x2 * y0
+                    s21 += x2 * y1
+                    s22 += x2 * y2
+                out[first, second] += s00
+                out[first, second + 1] += s01
+                out[first, second + 2] += s02
+                out[first + 1, second] += s10
+                out[first + 1, second + 1] += s11
+                out[first + 1, second + 2] += s12
+                out[first + 2, second] += s20
+                out[first + 2, second + 1] += s21
+                out[first + 2, second + 2] += s22

@@ -184,11 +184,12 @@ def test_both_routes_weigh_samples_alike(dtype: type, monkeypatch: pytest.Monkey
 
 @pytest.mark.parametrize("shape", [(37, 53, 3), (45, 71), (97, 89, 3)])
 @pytest.mark.parametrize("workers", [1, 2])
+@pytest.mark.parametrize("n_leds", [2, 3, 7])  # 4, 5 and 9 moment rows: the kernel's 3-row blocks padded or not
 def test_all_pixel_statistics_match_the_reference(
-    route: str, shape: tuple[int, ...], workers: int, monkeypatch: pytest.MonkeyPatch
+    route: str, shape: tuple[int, ...], workers: int, n_leds: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setattr(frame_kernels, "MOMENT_TASK_PIXELS", 500)  # several tasks, the last one short
-    ambient, frames, spec = _frames(shape, 3, seed=3)
+    ambient, frames, spec = _frames(shape, n_leds, seed=3)
     actual = accumulate_statistics(ambient, frames, spec, chunk_pixels=101, workers=workers)
     # Every sample on its own (a mosaic's too): blocks of 1 of the frame as it is.
     expected = reference_statistics(ambient, frames, spec, 1, 1, 1)
