@@ -587,8 +587,9 @@ def _constrained_band(
     draws = centre[:, None] + factor @ np.random.default_rng(0).standard_normal((len(centre), BAND_DRAWS))
     # A draw that already meets I w ≥ 0 is its own projection: only the others are solved.
     spectra = terms.values @ draws
-    for column in np.flatnonzero(np.any(terms.emitting @ draws < 0, axis=0)):
-        spectra[:, column] = terms.values @ problem.minimise(hessian @ draws[:, column] / scale).x
+    outside = np.flatnonzero(np.any(terms.emitting @ draws < 0, axis=0))
+    if outside.size:
+        spectra[:, outside] = terms.values @ problem.minimise_each(hessian @ draws[:, outside] / scale)
     return np.std(spectra, axis=1, ddof=1)
 
 

@@ -324,3 +324,49 @@ class FactoredQuadratic:
         if np.count_nonzero(slack < self.violation_limit):
             raise SolverError(f"{where}: constraint violated by {-slack.min():.3g} after solving; expected feasibility")
         return QuadraticSolution(x, slack, self, linear)
+
+    def minimise_each(self, linears: np.ndarray) -> np.ndarray:
+        """The minimisers for many linear terms, the columns of ``linears`` (n, N): (n, N).
+
+        Problems that differ only in f often share their active set (the band's draws scattered around
+        one estimate). Each full solve's active set A is tried on every column still open at once, on
+        its KKT system: with ``z``-rows ``B = G_A R⁻¹`` and ``s = R⁻ᵀ f``, ``(B Bᵀ) λ = h_A − B s`` and
+        ``x = R⁻¹ (s + Bᵀ λ)``. A column whose multipliers are non-negative and whose x meets every
+        constraint (to the tolerance of :meth:`minimise`'s polish) has its exact minimiser (the KKT
+        conditions are sufficient for a convex problem); the others go on to the next full solve. The
+        answers are those of :meth:`minimise` column by column, to rounding.
+
+        Raises
+        ------
+        SolverError
+            If the constraints are infeasible.
+        """
+        linears = np.asarray(linears, dtype=float)
+        solutions = np.empty_like(linears)
+        open_columns = np.arange(linears.shape[1])
+        scale = np.maximum(1.0, abs(self.bounds))
+        while open_columns.size:
+            column, open_columns = open_columns[0], open_columns[1:]
+            solution = self.minimise(linears[:, column])
+            solutions[:, column] = solution.x
+            active = solution.active
+            if not open_columns.size or not active.any():
+                continue
+            rows_z = self.constraints_z.compress(active, axis=0)
+            shifts = self.inverse_factor.T @ linears[:, open_columns]
+            *_, multipliers, info = lapack.dgesv(
+                rows_z @ rows_z.T, self.bounds.compress(active)[:, None] - rows_z @ shifts
+            )
+            if info != 0:
+                continue  # dependent active constraints: full solves for the rest
+            candidates = self.inverse_factor @ (shifts + rows_z.T @ multipliers)
+            slack = self.constraints @ candidates - self.bounds[:, None]
+            met = np.all(multipliers >= 0, axis=0) & np.all(slack >= -_FEASIBILITY_TOLERANCE * scale[:, None], axis=0)
+            for recorder in _recorders:
+                for accepted in open_columns[met]:
+                    recorder.append(
+                        (self.hessian.copy(), linears[:, accepted].copy(), self.constraints.copy(), self.bounds.copy())
+                    )
+            solutions[:, open_columns[met]] = candidates[:, met]
+            open_columns = open_columns[~met]
+        return solutions

@@ -192,3 +192,56 @@ def test_refactored_hessian_solves_as_the_one_shot_call_and_names_its_caller() -
     assert rows.with_hessian(np.eye(n)).where == "rows"
     with pytest.raises(SolverError, match="renamed: the normal matrix is not positive definite"):
         rows.with_hessian(-np.eye(n), "renamed")
+
+
+@PROPERTY
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n=st.integers(1, 8),
+    m=st.integers(0, 12),
+    kind=st.sampled_from(["random", "box", "duplicated"]),
+    spread=st.sampled_from([0.01, 1.0, 10.0]),
+)
+def test_many_linear_terms_solve_as_one_at_a_time(seed: int, n: int, m: int, kind: str, spread: float) -> None:
+    """minimise_each (active sets shared between columns) gives each column's minimise answer to rounding.
+
+    Columns scattered little (one active set for all), much (many active sets) and with degenerate
+    active sets (duplicated rows, whose KKT system is singular).
+    """
+    from msflash.processing.least_squares import FactoredQuadratic
+
+    hessian, linear, constraints, bounds, x0 = random_problem(seed, n, m)
+    if kind == "box":
+        constraints, bounds = np.vstack([np.eye(n), -np.eye(n)]), np.concatenate([np.zeros(n), -np.ones(n)])
+    elif kind == "duplicated" and m:
+        constraints = np.vstack([constraints, constraints])
+        bounds = np.concatenate([constraints[:m] @ x0, constraints[:m] @ x0])
+    problem = FactoredQuadratic.prepare(hessian, constraints, bounds)
+    rng = np.random.default_rng(seed)
+    linears = linear[:, None] + spread * rng.normal(size=(n, 40))
+    together = problem.minimise_each(linears)
+    for column in range(linears.shape[1]):
+        alone = problem.minimise(linears[:, column]).x
+        tolerance = 1e-7 * max(1.0, float(np.abs(alone).max()))
+        np.testing.assert_allclose(together[:, column], alone, rtol=0, atol=tolerance)
+
+
+def test_many_linear_terms_share_a_full_solve_per_active_set(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Columns with one active set cost one full solve; each is still its own exact minimiser."""
+    from msflash.processing.least_squares import FactoredQuadratic
+
+    full_solves = []
+    one_at_a_time = FactoredQuadratic.minimise
+
+    def counted(self: FactoredQuadratic, linear: np.ndarray):  # type: ignore[no-untyped-def]
+        full_solves.append(linear)
+        return one_at_a_time(self, linear)
+
+    monkeypatch.setattr(FactoredQuadratic, "minimise", counted)
+    problem = FactoredQuadratic.prepare(np.eye(3), np.eye(3), np.zeros(3))  # x ≥ 0: the minimiser is max(f, 0)
+    linears = np.array([[1.0, 2.0, 0.5, 3.0], [-1.0, -2.0, -0.1, -5.0], [0.3, 0.1, 0.2, 0.4]])
+    with recording_problems() as problems:
+        solved = problem.minimise_each(linears)
+    np.testing.assert_allclose(solved, np.maximum(linears, 0), atol=1e-15)
+    assert len(full_solves) == 1
+    assert len(problems) == 4  # every problem is recorded all the same (the bench re-solves them)
