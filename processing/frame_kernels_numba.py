@@ -15,7 +15,13 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
     """Block sums (H/f, C', W/f), probed half differences (H'/f, W/f, C') and saturated (H/f, W/f) blocks
     of raw rows (H, W·C); ``period_t``, ``plane_channels_t`` and ``factor_t`` carry the CFA period,
     the channels per frame row group (period · C) and the block side as their lengths (compile-time
-    constants). Returns whether any block saturates."""
+    constants). Returns whether any block saturates.
+
+    Each column of a block row's ``factor`` frame rows is summed in one sweep (the rows' values in
+    registers, one store per column), with a running maximum for the whole block row; only a block
+    row that reaches ``white`` is searched block by block. Summing row by row into the column sums,
+    with a per-column maximum, as first built, loaded and stored them ``factor`` times.
+    """
     period = len(period_t)
     group = len(plane_channels_t)  # values per pixel column group: period · C
     factor = len(factor_t)
@@ -23,7 +29,6 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
     span = factor * group  # values of one block's row in a frame row
     n_columns = width * span
     row_sum = np.zeros(n_columns, np.int32)
-    row_peak = np.zeros(n_columns, raw.dtype)
     any_saturated = False
     probing = differences.shape[0] > 0
     for block_row in range(height):
@@ -31,16 +36,14 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
         probe_row = block_row // stride
         for p in range(period):
             first = block_row * factor * period + p
-            line = raw[first]
+            top = raw[first, 0]
             for j in range(n_columns):
-                row_sum[j] = line[j]
-                row_peak[j] = line[j]
-            for member in range(1, factor):
-                line = raw[first + member * period]
-                for j in range(n_columns):
-                    value = line[j]
-                    row_sum[j] += value
-                    row_peak[j] = max(row_peak[j], value)
+                total = np.int32(0)
+                for member in range(factor):
+                    value = raw[first + member * period, j]
+                    total += value
+                    top = max(top, value)
+                row_sum[j] = total
             for block in range(width):
                 base = block * span
                 for k in range(group):
@@ -57,17 +60,17 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
                     sums[block_row, channel, block] = total
                     if probed:
                         differences[probe_row, block, channel] = half
-            top = row_peak[0]
-            for j in range(n_columns):
-                top = max(top, row_peak[j])
             if top < white:
                 continue
             for block in range(width):
                 base = block * span
-                top = row_peak[base]
-                for j in range(base + 1, base + span):
-                    top = max(top, row_peak[j])
-                if top >= white:
+                hit = False
+                for member in range(factor):
+                    line = raw[first + member * period]
+                    for j in range(base, base + span):
+                        if line[j] >= white:
+                            hit = True
+                if hit:
                     saturated[block_row, block] = True
                     any_saturated = True
     return any_saturated
