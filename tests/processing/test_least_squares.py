@@ -27,6 +27,19 @@ def random_problem(seed: int, n: int, m: int) -> tuple[np.ndarray, np.ndarray, n
     return hessian, linear, constraints, bounds, x0
 
 
+def kind_of_problem(seed: int, n: int, m: int, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`random_problem`'s H, f and G x ≥ h, or its H and f with box constraints 0 ≤ x ≤ 1 (``box``: the
+    flash problems, many bounds active), or with each row twice, active at the same point (``duplicated``:
+    degenerate active sets)."""
+    hessian, linear, constraints, bounds, x0 = random_problem(seed, n, m)
+    if kind == "box":
+        constraints, bounds = np.vstack([np.eye(n), -np.eye(n)]), np.concatenate([np.zeros(n), -np.ones(n)])
+    elif kind == "duplicated" and m:
+        constraints = np.vstack([constraints, constraints])
+        bounds = np.concatenate([constraints[:m] @ x0, constraints[:m] @ x0])
+    return hessian, linear, constraints, bounds
+
+
 def objective(hessian: np.ndarray, linear: np.ndarray, x: np.ndarray) -> float:
     return float(0.5 * x @ hessian @ x - linear @ x)
 
@@ -122,12 +135,7 @@ def test_factored_problem_solves_as_the_one_shot_call(seed: int, n: int, m: int,
     """
     from msflash.processing.least_squares import FactoredQuadratic
 
-    hessian, _, constraints, bounds, x0 = random_problem(seed, n, m)
-    if kind == "box":
-        constraints, bounds = np.vstack([np.eye(n), -np.eye(n)]), np.concatenate([np.zeros(n), -np.ones(n)])
-    elif kind == "duplicated" and m:
-        constraints = np.vstack([constraints, constraints])
-        bounds = np.concatenate([constraints[:m] @ x0, constraints[:m] @ x0])
+    hessian, _, constraints, bounds = kind_of_problem(seed, n, m, kind)
     problem = FactoredQuadratic.prepare(hessian, constraints, bounds)
     rng = np.random.default_rng(seed)
     for _ in range(3):
@@ -210,12 +218,7 @@ def test_many_linear_terms_solve_as_one_at_a_time(seed: int, n: int, m: int, kin
     """
     from msflash.processing.least_squares import FactoredQuadratic
 
-    hessian, linear, constraints, bounds, x0 = random_problem(seed, n, m)
-    if kind == "box":
-        constraints, bounds = np.vstack([np.eye(n), -np.eye(n)]), np.concatenate([np.zeros(n), -np.ones(n)])
-    elif kind == "duplicated" and m:
-        constraints = np.vstack([constraints, constraints])
-        bounds = np.concatenate([constraints[:m] @ x0, constraints[:m] @ x0])
+    hessian, linear, constraints, bounds = kind_of_problem(seed, n, m, kind)
     problem = FactoredQuadratic.prepare(hessian, constraints, bounds)
     rng = np.random.default_rng(seed)
     linears = linear[:, None] + spread * rng.normal(size=(n, 40))
