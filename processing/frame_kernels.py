@@ -13,7 +13,8 @@ Integer frames only (≤ 16 bits: the block sums are exact in 32-bit integers fo
 everything when numba is missing (it is an optional dependency, ``pip install msflash[fast]``) or
 ``MSFLASH_KERNELS=numpy`` is set, and small one-off work in a process that has not loaded the
 kernels (:func:`wanted`: numba's start-up would cost more than it saves). Both routes give the same
-numbers (tests/processing/test_frame_kernels.py).
+numbers to the bit (tests/processing/test_frame_kernels.py), so which one a process takes changes
+its speed only, never what it reports.
 
 The block size, the CFA period and the channel count are passed as tuples of that length so that
 numba compiles (and caches on disk) one specialised kernel per combination: with them constant, its
@@ -73,8 +74,8 @@ def paused() -> Iterator[None]:
     For a capture that streams: a kernel specialisation not compiled yet in this process (a fresh
     install has no on-disk cache) compiles on first use, holding the interpreter for a second or
     more, and the booth's watchdog switched the LEDs off during the flash frame of a camera-synced
-    run while that happened. The numpy route gives the same block sums (exact integers) and the
-    same moments to rounding.
+    run while that happened. The numpy route gives the same statistics to the bit (exact integer
+    block sums and all-pixel moments; numpy's weighted moments on both routes).
     """
     global _paused
     with _paused_lock:
@@ -208,33 +209,23 @@ def weighted_sum_range(
     )
 
 
-def gram(rows: np.ndarray, weights: np.ndarray | None, start: int, stop: int) -> np.ndarray | None:
-    """``rows[:, s] · diag(weights[s]) · rows[:, s]ᵀ`` over the columns ``s = start:stop`` of (n, N) float64
-    rows, in one compiled pass over them (no weighted copy), or None when the kernels are off.
-
-    Returns
-    -------
-    ndarray or None
-        The (n, n) symmetric product.
-    """
-    kernels = _loaded()
-    if kernels is None or rows.dtype != np.float64 or rows.ndim != 2 or not rows.flags.c_contiguous:
-        return None
-    lower = np.zeros((rows.shape[0], rows.shape[0]))
-    kernels.gram(rows, np.empty(0) if weights is None else weights, start, stop, lower)
-    return lower + np.tril(lower, -1).T
-
-
 MOMENT_TASK_PIXELS = 1 << 16
 """Pixels per task of :func:`raw_moments` (several per worker, so both finish together)."""
+EXACT_SAMPLES = 1 << 20
+"""Samples whose second moments sum exactly in float64, in any order: each product of two ≤ 16-bit values
+is below 2³², so 2²⁰ of them stay below 2⁵². A task or chunk of at most this many samples has exact
+integer moments, which are then added up in int64: the compiled and numpy routes give the same totals
+to the bit (an entry holds up to 2³¹ samples before int64 could overflow)."""
 
 
 def raw_moments(frames: list[np.ndarray], white: float, workers: int, pool: Any = None) -> np.ndarray | None:
     """The raw second moments of the rows ``[frames…, 1]`` over every sample of pixels no frame saturates,
     (n+1, n+1) float64, in one compiled pass over integer frames; None when the kernels cannot take them.
 
-    ``pool`` (an executor) shares tasks of whole pixels among ``workers`` threads; the tasks' moments are
-    added in task order, so the result does not depend on the number of workers.
+    ``pool`` (an executor) shares tasks of whole pixels among ``workers`` threads. Each task's moments are
+    exact integers (:data:`EXACT_SAMPLES`), added in int64: the result depends neither on the number of
+    workers nor on the route (the numpy route of :func:`processing.statistics.accumulate_statistics`
+    gives the same bits).
     """
     flat = synthesis_inputs(frames)
     if flat is None:
@@ -242,7 +233,7 @@ def raw_moments(frames: list[np.ndarray], white: float, workers: int, pool: Any 
     kernels = _loaded()
     channels = frames[0].shape[2] if frames[0].ndim == 3 else 1
     size = flat[0].size
-    step = MOMENT_TASK_PIXELS * channels
+    step = max(1, min(MOMENT_TASK_PIXELS, EXACT_SAMPLES // channels)) * channels
     n = len(frames)
 
     rows = -(-(n + 1) // kernels.MOMENT_BLOCK) * kernels.MOMENT_BLOCK
@@ -254,8 +245,8 @@ def raw_moments(frames: list[np.ndarray], white: float, workers: int, pool: Any 
 
     starts = range(0, size, step)
     parts = pool.map(task, starts) if pool is not None and workers > 1 and len(starts) > 1 else map(task, starts)
-    lower = np.zeros((rows, rows))
+    exact = np.zeros((rows, rows), dtype=np.int64)
     for part in parts:
-        lower += part
-    lower = np.tril(lower[: n + 1, : n + 1])
+        exact += part.astype(np.int64)  # each task's moments are exact integers (EXACT_SAMPLES)
+    lower = np.tril(exact[: n + 1, : n + 1].astype(np.float64))
     return lower + np.tril(lower, -1).T

@@ -128,40 +128,6 @@ def weighted_sum(frames, factors, offset, white, channels, output, saturated, st
                         saturated[(low + t) // channels] = True
 
 
-GRAM_TILE = 256
-"""Columns per tile of :func:`gram`: the weighted tile of every row stays in L1 (10 × 256 × 8 B)."""
-
-
-@njit(nogil=True, cache=True, fastmath=True)
-def gram(rows, weights, start, stop, out):
-    """``out[i, j] += Σ_t w_t · rows[i, t] · rows[j, t]`` over ``start ≤ t < stop``, lower triangle
-    (``j ≤ i``) only; ``weights`` of size 0 weighs every column 1. Sums are reassociated
-    (vectorised), so they differ from a BLAS product's in the last bits only."""
-    n = rows.shape[0]
-    weighted = np.empty((n, GRAM_TILE))
-    for low in range(start, stop, GRAM_TILE):
-        high = min(low + GRAM_TILE, stop)
-        width = high - low
-        for i in range(n):
-            target = weighted[i]
-            source = rows[i, low:high]
-            if weights.size:
-                scale = weights[low:high]
-                for t in range(width):
-                    target[t] = source[t] * scale[t]
-            else:
-                for t in range(width):
-                    target[t] = source[t]
-        for i in range(n):
-            left = weighted[i]
-            for j in range(i + 1):
-                right = rows[j, low:high]
-                total = 0.0
-                for t in range(width):
-                    total += left[t] * right[t]
-                out[i, j] += total
-
-
 MOMENT_TILE = 192
 """Samples per tile of :func:`moments`: every row's float64 tile together stays in L1 (9 × 192 × 8 B)."""
 MOMENT_BLOCK = 3

@@ -428,9 +428,12 @@ def accumulate_statistics(
     Notes
     -----
     A pixel is excluded when any channel of it, in any frame, is at or above the white level
-    (docs/architecture.md §6). Moments are accumulated in float64. Integer frames are read once,
-    by the compiled kernels of :mod:`processing.frame_kernels` (binned: per frame; all pixels: every
-    frame's tile together), when numba is installed; numpy takes the same steps otherwise.
+    (docs/architecture.md §6). Moments are accumulated in float64 (all pixels of ≤ 16-bit integer
+    frames: exactly, in integers). Integer frames are read once, by the compiled kernels of
+    :mod:`processing.frame_kernels` (binned: per frame; all pixels: every frame's tile together), when
+    numba is installed; numpy takes the same steps otherwise, and both routes give the same statistics
+    to the bit (the block sums and the all-pixel moments are exact integers; the weighted moments of
+    the block sums are taken by numpy on either route).
     """
     if bin_factor < 1 or cfa_period not in (1, 2):
         raise SpectralDataError(
@@ -471,6 +474,13 @@ def accumulate_statistics(
     # the linearised differences is a linear transform of these (below), so the per-chunk work is
     # one conversion and one Gram product: no per-frame subtract, scale or difference passes.
     # float64 keeps the cancellation in (s_j F_j − s_a A) harmless.
+    # Integer frames of ≤ 16 bits: each chunk's products are integers summing below 2⁵² (exact in
+    # float64 whatever the order of BLAS's sums), added up exactly in int64 — the compiled route's
+    # totals to the bit (frame_kernels.EXACT_SAMPLES).
+    exact = all(np.issubdtype(frame.dtype, np.integer) and frame.dtype.itemsize <= 2 for frame in frames)
+    if exact:
+        chunk_pixels = max(1, min(chunk_pixels, frame_kernels.EXACT_SAMPLES // n_channels))
+    exact_moments = np.zeros((n_rows, n_rows), dtype=np.int64)
     moments = np.zeros((n_rows, n_rows))
     block = np.empty((n_rows, min(chunk_pixels, n_pixels), n_channels))
     for start in range(0, n_pixels, chunk_pixels):
@@ -492,8 +502,12 @@ def accumulate_statistics(
         if saturated.any():
             view[:, saturated] = 0.0
         flat = view.reshape(n_rows, -1)
-        moments += flat @ flat.T
-
+        if exact:
+            exact_moments += (flat @ flat.T).astype(np.int64)
+        else:
+            moments += flat @ flat.T
+    if exact:
+        moments = exact_moments.astype(np.float64)
     return statistics_from_moments(moments, spec, n_pixels * n_channels)
 
 
@@ -1281,9 +1295,6 @@ def _grams(parts: Sequence[tuple[np.ndarray, np.ndarray | None]], chunk: int, wo
     def product(task: tuple[int, int]) -> np.ndarray:
         rows, weights = parts[task[0]]
         start = task[1]
-        compiled = frame_kernels.gram(rows, weights, start, min(start + chunk, rows.shape[1]))
-        if compiled is not None:
-            return compiled
         block = rows[:, start : start + chunk]
         if weights is None:
             return block @ block.T
