@@ -870,8 +870,8 @@ class LocalEstimate:
     smoothing: float | None
     """Gaussian width in tiles of the local fit (None for global)."""
     global_estimate: AmbientEstimate
-    """The single (global) estimate, eq. 4–6 on the whole frame's denoised statistics (always computed: it is the
-    sum of the tiles)."""
+    """The single (global) estimate, eq. 4–6 on the whole frame's denoised statistics (always computed: the one
+    the caller gave, else solved on the sum of the tiles)."""
     tile_weights: np.ndarray
     """Ambient weights of every tile, (ty, tx, k); all equal to the global weights for the global model."""
     tile_residuals: np.ndarray
@@ -928,6 +928,7 @@ def estimate_local(
     margin: float = SELECTION_MARGIN,
     regions_allowed: bool = True,
     noise_correction: bool = True,
+    global_estimate: AmbientEstimate | None = None,
 ) -> LocalEstimate:
     """Estimate the ambient globally or per tile, choosing the model from the data for ``auto``.
 
@@ -958,6 +959,14 @@ def estimate_local(
         :func:`processing.ambient.estimate_ambient` does on any statistics that carry their noise), so it is
         the whole-frame estimate of ``msflash estimate --method global``; model selection and region
         labels use the statistics as observed. False: everything on the statistics as observed.
+    global_estimate
+        The whole-frame estimate (eq. 4–6) when the caller has it: a sequence's, from the whole frame's
+        statistics (:func:`processing.statistics.accumulate_statistics`), so that the global numbers are
+        those of every other route from the frames to an estimate. It is then used as it is (its α scores
+        the selection), not solved again on the sum of the tiles — which is the same up to the summation
+        order, except on large frames (:data:`processing.statistics.PROBE_BLOCKS`), where the whole-frame
+        pass probes the noise on a stride of block rows and the tiles on every block (a different noise
+        correction, hence a different GCV α). None: solved on :meth:`TiledStatistics.total`.
     """
     if method not in LOCAL_METHODS:
         raise ValueError(f"local method '{method}' is unknown; expected one of {', '.join(LOCAL_METHODS)}")
@@ -969,7 +978,8 @@ def estimate_local(
     ambient_model = AmbientModel(led_spectra)
     # The global model is the one `msflash estimate --method global` and `msflash run` compute from the
     # whole frame: solved on the denoised statistics when the blocks carry the noise probe.
-    global_estimate = ambient_model.estimate(total, solver, alpha)
+    if global_estimate is None:
+        global_estimate = ambient_model.estimate(total, solver, alpha)
     led_values = led_spectra.values
     shape = tiles.shape
     selection = None

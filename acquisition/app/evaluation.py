@@ -39,7 +39,15 @@ import numpy as np
 
 from msflash.acquisition.app.cli_common import dumps_json, progress
 from msflash.acquisition.app.html_report import HtmlReport
-from msflash.acquisition.app.plot_style import PALETTE, figure_png, in_plot_unit, pyplot, spectral_axis
+from msflash.acquisition.app.plot_style import (
+    PALETTE,
+    draw_flash_mixes,
+    figure_png,
+    in_plot_unit,
+    peak_of,
+    pyplot,
+    spectral_axis,
+)
 from msflash.acquisition.app.srgb_png import enlarged, srgb_png_bytes
 from msflash.acquisition.progress import counted
 from msflash.acquisition.sequence.exr_metadata import LINEAR_UNITS
@@ -346,11 +354,9 @@ def spectra_figure(
     """The ambient estimate, the flash mixes and the target, in :data:`plot_style.PLOT_UNIT`."""
     plt = pyplot()
     wavelengths = grid.wavelengths_nm
-    led_values = in_plot_unit(leds)
     ambient = in_plot_unit(estimate)[:, 0]
-    peak = float(np.max(np.abs(ambient))) or 1.0
+    peak = peak_of(ambient)
     figure, axis = plt.subplots(figsize=(8, 4.2))
-    axis.plot(wavelengths, ambient / peak, color=PALETTE.ambient, lw=2, label="ambient (estimate)")
     if truth is not None:
         true_values = in_plot_unit(truth)[:, 0]
         axis.plot(
@@ -358,30 +364,10 @@ def spectra_figure(
             true_values * float(ambient @ true_values) / float(true_values @ true_values) / peak,
             color=PALETTE.truth,
             ls="--",
-            label="ambient (truth, scaled)",
+            lw=1.5,
+            label="true ambient (scaled)",
         )
-    for mode in ("matching", "complementary"):
-        flash = led_values @ solutions[mode].flash_weights
-        axis.plot(wavelengths, flash / peak, color=PALETTE.of(mode), lw=1.8, label=f"{mode} flash")
-    complementary = solutions["complementary"]
-    total = led_values @ (complementary.ambient_weights + complementary.flash_weights)
-    axis.plot(
-        wavelengths,
-        total / peak,
-        color=PALETTE.ambient_plus_complementary,
-        lw=2,
-        ls="-.",
-        label="ambient + complementary",
-    )
-    target_values = in_plot_unit(target)[:, 0]
-    axis.plot(
-        wavelengths,
-        target_values * float(total @ target_values) / float(target_values @ target_values) / peak,
-        color=PALETTE.target,
-        ls=":",
-        lw=1.8,
-        label="target (scaled)",
-    )
+    draw_flash_mixes(axis, wavelengths, in_plot_unit(leds), ambient, solutions, in_plot_unit(target)[:, 0], peak)
     spectral_axis(axis, "peak of the estimate")
     axis.legend(loc="upper left")
     figure.tight_layout()

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.app.srgb_png import srgb_png_bytes
+from msflash.processing.flash import FlashSolution
 from msflash.processing.spectra import Spectra, SpectralUnit, WavelengthGrid
 
 SERIES = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000")
@@ -131,6 +132,79 @@ def spectral_axis(axis: Any, scaled_to: str | None = None) -> None:
     """Label a spectrum plot's axes: wavelength in nm, relative power in :data:`PLOT_UNIT` (and what is 1)."""
     axis.set_xlabel(WAVELENGTH_AXIS_LABEL)
     axis.set_ylabel(SPECTRAL_AXIS_LABEL + (f"\n1 = {scaled_to}" if scaled_to else ""))
+
+
+def peak_of(values: np.ndarray) -> float:
+    """The largest magnitude of ``values``, the 1 of a plot scaled to it (1 for an all-zero curve)."""
+    return float(np.max(np.abs(values))) or 1.0
+
+
+FLASH_MODES = ("matching", "complementary")
+"""The flash mixes in the order every figure draws them (eq. 7, then eq. 8–9)."""
+
+
+def draw_flash_mixes(
+    axis: Any,
+    wavelengths_nm: np.ndarray,
+    led_values: np.ndarray,
+    ambient: np.ndarray,
+    solutions: dict[str, FlashSolution],
+    target: np.ndarray | None,
+    peak: float,
+) -> None:
+    """The flash-mix curves of every figure that shows them (the run's ``spectra.png``, ``evaluate``'s report).
+
+    The ambient estimate; each flash mix ``I w_f`` (eq. 7 and eq. 8–9: the LED spectra at the solved
+    weights, in :data:`FLASH_MODES` order, whatever the order of ``solutions``); the light the scene is
+    finally under, ambient + complementary flash ``I (w_a + w_f)``; and the target least-squares scaled
+    onto that sum (eq. 8 is scale-free), when given and not orthogonal to it. Every curve divided by
+    ``peak``.
+
+    Parameters
+    ----------
+    axis
+        The matplotlib axis to draw on.
+    wavelengths_nm
+        The grid, (n_wavelengths,).
+    led_values
+        The LED spectra at full drive in :data:`PLOT_UNIT`, (n_wavelengths, k).
+    ambient
+        The ambient estimate in :data:`PLOT_UNIT`, (n_wavelengths,).
+    solutions
+        Flash solutions by mode (``matching``, ``complementary``; either may be missing).
+    target
+        The complementary target in :data:`PLOT_UNIT`, (n_wavelengths,), or None.
+    peak
+        What 1 on the y axis is (:func:`peak_of` the estimate).
+    """
+    axis.plot(wavelengths_nm, ambient / peak, color=PALETTE.ambient, lw=2, label="ambient (estimate)")
+    for mode in FLASH_MODES:
+        if mode in solutions:
+            flash = led_values @ solutions[mode].flash_weights
+            axis.plot(wavelengths_nm, flash / peak, color=PALETTE.of(mode), lw=1.8, label=f"{mode} flash")
+    complementary = solutions.get("complementary")
+    if complementary is None:
+        return
+    total = led_values @ (complementary.ambient_weights + complementary.flash_weights)
+    axis.plot(
+        wavelengths_nm,
+        total / peak,
+        color=PALETTE.ambient_plus_complementary,
+        lw=2,
+        ls="-.",
+        label="ambient + complementary flash",
+    )
+    energy = float(target @ target) if target is not None else 0.0
+    if target is None or not energy > 0:
+        return
+    axis.plot(
+        wavelengths_nm,
+        target * (float(total @ target) / energy) / peak,
+        color=PALETTE.target,
+        ls=":",
+        lw=1.8,
+        label="target (scaled to ambient + complementary)",
+    )
 
 
 def figure_rgb8(figure: Any) -> np.ndarray:

@@ -16,7 +16,15 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.app.cli_common import dumps_json
-from msflash.acquisition.app.plot_style import PALETTE, in_plot_unit, pyplot, save_figure, spectral_axis
+from msflash.acquisition.app.plot_style import (
+    PALETTE,
+    draw_flash_mixes,
+    in_plot_unit,
+    peak_of,
+    pyplot,
+    save_figure,
+    spectral_axis,
+)
 from msflash.acquisition.app.srgb_png import enlarged, write_srgb_png
 from msflash.acquisition.errors import OutputWriteError
 from msflash.acquisition.sequence.exr_metadata import exr_metadata
@@ -95,7 +103,7 @@ def spectra_figure(
     leds = in_plot_unit(sequence.led_spectra())
     estimate_values = in_plot_unit(estimate.spectrum)[:, 0]
     std = in_plot_unit(estimate.spectrum.replace(values=estimate.spectrum_std[:, None]))[:, 0]
-    peak = float(np.max(estimate_values)) or 1.0
+    peak = peak_of(estimate_values)
     figure, axes = plt.subplots(1, 2, figsize=(12, 4.8))
     left, right = axes
     # The band is the estimate's own uncertainty (AmbientEstimate.spectrum_std), one standard deviation each side;
@@ -126,28 +134,8 @@ def spectra_figure(
     left.set_title("Ambient illuminant")
     spectral_axis(left, "peak of the estimate")
     left.legend()
-    right.plot(wavelengths, estimate_values / peak, color=PALETTE.ambient, lw=1.5, label="ambient (estimate)")
-    for mode, solution in solutions.items():
-        right.plot(
-            wavelengths, leds @ solution.flash_weights / peak, color=PALETTE.of(mode), lw=2, label=f"{mode} flash"
-        )
-    complementary = solutions.get("complementary")
-    if complementary is not None:
-        total = leds @ (complementary.ambient_weights + complementary.flash_weights)
-        right.plot(
-            wavelengths,
-            total / peak,
-            color=PALETTE.ambient_plus_complementary,
-            lw=2,
-            ls="-.",
-            label="ambient + complementary flash",
-        )
-        if target is not None and complementary.scale:
-            target_values = in_plot_unit(target)[:, 0]
-            target_scale = float(total @ target_values) / float(target_values @ target_values) / peak
-            right.plot(
-                wavelengths, target_values * target_scale, color=PALETTE.target, ls=":", lw=1.8, label="target (scaled)"
-            )
+    target_values = None if target is None else in_plot_unit(target)[:, 0]
+    draw_flash_mixes(right, wavelengths, leds, estimate_values, solutions, target_values, peak)
     right.set_title("Flash mixes")
     spectral_axis(right, "peak of the estimate")
     right.legend()

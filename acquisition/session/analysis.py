@@ -195,7 +195,6 @@ def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -
     RecordingError
         If the calibration cannot be read or lacks one of the sequence's LEDs.
     """
-    from dataclasses import replace
 
     from msflash.calibration.errors import CalibrationError
     from msflash.calibration.files import load_calibration
@@ -481,8 +480,15 @@ def estimate_sequence_local(
     stack: FrameStack | None = None,
     bin_factor: int = DEFAULT_BIN_FACTOR,
 ) -> LocalEstimate:
-    """Estimate the ambient of a sequence globally or per tile (``method`` auto|global|local, issue 9)."""
+    """Estimate the ambient of a sequence globally or per tile (``method`` auto|global|local, issue 9).
+
+    The global estimate is :func:`estimate_sequence`'s, from the whole frame's statistics, whatever
+    the model chosen: every command reporting a sequence's ambient (``estimate``, ``flash``, ``run``,
+    ``export``, ``evaluate``, the live view) gives the same global numbers, bit for bit. The tiles'
+    statistics serve the model selection and the local model only.
+    """
     stack = stack or load_frame_stack(sequence)
+    whole_frame = estimate_sequence(sequence, solver, alpha, stack=stack, bin_factor=bin_factor)
     factor, rows, columns = _local_grid(stack, sequence.camera.cfa, tiles, bin_factor)
     tiled = tile_statistics(
         stack.ambient,
@@ -493,8 +499,7 @@ def estimate_sequence_local(
         cfa_period=2 if sequence.camera.cfa is not None else 1,
         weighting=SAMPLE_WEIGHTING,
     )
-    local = estimate_local(tiled, led_spectra_photons(sequence), method, solver, alpha)
-    return replace(local, global_estimate=with_model_band(local.global_estimate, sequence))
+    return estimate_local(tiled, led_spectra_photons(sequence), method, solver, alpha, global_estimate=whole_frame)
 
 
 def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:

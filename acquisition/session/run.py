@@ -23,7 +23,7 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, StepRole, TriggerSource
 from msflash.acquisition.progress import count, progress
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter, read_sequence
+from msflash.acquisition.sequence.format import Sequence, SequenceFrame, SequenceWriter, read_sequence
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.capture import FrameWriter, preview_frames, run_capture, run_capture_with_flash
 from msflash.acquisition.session.exposure import (
@@ -38,6 +38,7 @@ from msflash.acquisition.session.exposure import (
 )
 from msflash.acquisition.session.flash_session import FlashSession
 from msflash.acquisition.session.rig import Rig
+from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
 
 SYNC_MODES: dict[str, TriggerSource] = {"host": "software", "booth": "booth", "camera": "camera"}
@@ -324,11 +325,11 @@ def run_one_stream(
                 )
                 chosen = session.solve(options.mode, estimate.ambient_weights)
                 levels = np.clip(chosen.flash_weights, 0.0, 1.0)
-                result.update(estimate=lambda: estimate, chosen=chosen, stack=stack)
+                result.update(chosen=chosen, stack=stack)
             else:
                 decision = session.decide(options.mode)
                 levels = decision.levels
-                result.update(estimate=lambda: decision.estimate, chosen=decision.solution)
+                result.update(chosen=decision.solution)
         flash_us = flash_exposure_for(rig, exposure, levels, session.flash_exposure)
         result.update(caught=list(caught), flash_us=flash_us)
         stamp["decided"] = time.perf_counter()
@@ -345,7 +346,7 @@ def run_one_stream(
         # The report's frames as the sequence records them (a mono camera's as three identical
         # channels), as for two captures; the session's own stack holds a mono frame's one plane.
         result["stack"] = analysis.load_frame_stack(writer.flush(), [frame.pixels for frame in frames])
-    estimate = result["estimate"]()
+    estimate = reported_estimate(writer.flush(), result["stack"], options)
     other = "matching" if options.mode == "complementary" else "complementary"
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
@@ -360,6 +361,19 @@ def run_one_stream(
         flash_entry.exposure_us,
         result["stack"],
         stamp["decided"],
+    )
+
+
+def reported_estimate(sequence: Sequence, stack: analysis.FrameStack, options: RunOptions) -> AmbientEstimate:
+    """The estimate a run reports: the sequence's, by :func:`analysis.estimate_sequence` on its frames.
+
+    The one route every command takes (``msflash estimate SEQ`` gives the same numbers, bit for bit).
+    The one-stream run decided its flash earlier, from the block sums :class:`FlashSession` took as the
+    frames arrived: the same statistics summed in another order, whose weights agree with these to
+    rounding (about 1e-11 relative); the flash it re-captured is that decision's.
+    """
+    return analysis.estimate_sequence(
+        sequence, options.solver, options.alpha, stack=stack, bin_factor=options.bin_factor
     )
 
 

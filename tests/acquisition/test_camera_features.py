@@ -232,6 +232,41 @@ def test_a_profile_with_a_bad_option_names_file_and_profile(tmp_path: Path, arav
         aravis.load_profiles(profiles)
 
 
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ('{"profiles": [\n  {"name": "a", "vendor": ".*",\n   "model": ".*",}\n]}', r"line 3 column 18"),
+        ('{"profiles": [{"name": "a", "vendor": ".*", "model": ".*", "read_noise_e": NaN}]}', "is NaN"),
+        ('{"profiles": [{"name": "a", "vendor": ".*", "model": ".*", "name": "b"}]}', "appears twice"),
+        ('{"profile": []}', "field 'profiles' is missing"),
+        (
+            '{"profiles": [{"name": "a", "vendor": ".*", "model": ".*", "gain_raw_per_db": "8"}]}',
+            r"profiles\[0\]\.gain_raw_per_db is '8'",
+        ),
+        (
+            '{"profiles": [{"name": "a", "vendor": ".*", "model": ".*", "exposure": 1}]}',
+            r"profiles\[0\]\.exposure is unknown",
+        ),
+        ('{"profiles": [{"name": "a", "model": ".*"}]}', r"profiles\[0\]\.vendor is missing"),
+        ('{"profiles": [{"name": "a", "vendor": ".*", "model": ".*", "gain_features": "Gain"}]}', "expected a list"),
+    ],
+)
+def test_a_broken_profiles_file_is_one_line_naming_file_and_field(
+    tmp_path: Path, aravis: ModuleType, text: str, expected: str
+) -> None:
+    profiles = tmp_path / "profiles.json"
+    profiles.write_text(text)
+    with pytest.raises(CameraSettingError, match=expected) as caught:
+        aravis.load_profiles(profiles)
+    message = str(caught.value)
+    assert message.startswith(f"{profiles}:") and "\n" not in message
+
+
+def test_the_shipped_profiles_read_as_data(aravis: ModuleType) -> None:
+    profiles = aravis.load_profiles()
+    assert profiles and all(isinstance(profile, aravis.CameraProfile) for _, _, profile in profiles)
+
+
 # -- the command line ------------------------------------------------------------------------------
 
 

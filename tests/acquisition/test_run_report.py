@@ -244,3 +244,40 @@ def test_a_report_that_cannot_be_written_is_one_line_and_run_json_stays(
     assert f"The sequence is complete in {out / 'sequence'} and run.json beside it" in last
     assert json.loads((out / "run.json").read_text())["report"] == str(out / "report.html")
     assert read_sequence(out / "sequence").complete
+
+
+def test_the_run_and_evaluate_draw_the_same_flash_mix_curves(run_folder: Path) -> None:
+    """Both figures draw the flash mixes through plot_style.draw_flash_mixes: the same labels in the same order
+    and the same curves (the run's right panel; evaluate's one axis, beside its truth)."""
+    sequence = read_sequence(run_folder / "sequence")
+    estimate = analysis.estimate_sequence(sequence)
+    solutions = {
+        mode: analysis.solve_sequence_flash(sequence, mode, estimate.ambient_weights)
+        for mode in ("complementary", "matching")
+    }
+    target = analysis.target_illuminant("D65", sequence)
+    truth = analysis.target_illuminant("A", sequence)
+    run = report.spectra_figure(sequence, estimate, solutions, truth, target)
+    evaluated = evaluation.spectra_figure(
+        sequence.grid, analysis.led_spectra_photons(sequence), estimate.spectrum, solutions, target, truth
+    )
+    plt = pyplot()
+    try:
+        drawn = [
+            {line.get_label(): line.get_ydata() for line in axis.get_lines()}
+            for axis in (run.axes[1], evaluated.axes[0])
+        ]
+    finally:
+        plt.close(run)
+        plt.close(evaluated)
+    assert list(drawn[1]) == ["true ambient (scaled)", *drawn[0]]
+    assert list(drawn[0]) == [
+        "ambient (estimate)",
+        "matching flash",
+        "complementary flash",
+        "ambient + complementary flash",
+        "target (scaled to ambient + complementary)",
+    ]
+    for label, values in drawn[0].items():
+        # evaluate is given the LED spectra in photons, the run its sequence's energy: a round trip's rounding
+        np.testing.assert_allclose(drawn[1][label], values, rtol=1e-12, err_msg=label)

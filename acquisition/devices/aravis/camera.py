@@ -29,7 +29,6 @@ from __future__ import annotations
 import collections
 import fcntl
 import ipaddress
-import json
 import logging
 import math
 import os
@@ -59,6 +58,8 @@ from msflash.acquisition.errors import (
     FrameTimeoutError,
 )
 from msflash.acquisition.plan import CapturePlan
+from msflash.processing.json_input import parse_json_document
+from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 try:
     import gi
@@ -457,16 +458,60 @@ class CameraProfile:
     ROI, binning, features); command-line options override them (:mod:`acquisition.devices.aravis.camera_features`)."""
 
 
+PROFILE_LISTS = ("exposure_features", "gain_features", "user_outputs")
+"""A profile's fields holding lists of names (tuples in :class:`CameraProfile`)."""
+
+PROFILE_NUMBERS = ("gain_raw_per_db", "electrons_per_dn", "read_noise_e")
+"""A profile's fields holding a positive number, or null when unknown."""
+
+
 def load_profiles(path: Path = PROFILES_JSON) -> tuple[tuple[str, str, CameraProfile], ...]:
-    """The profiles as ``(vendor_regex, model_regex, profile)``, in matching order."""
-    data = json.loads(path.read_text(encoding="utf-8"))
+    """The profiles as ``(vendor_regex, model_regex, profile)``, in matching order.
+
+    Read as every user-editable JSON file is (:func:`processing.json_input.parse_json_document`: line and
+    column of a syntax error, duplicate keys, non-finite numbers refused); a wrong field is named.
+
+    Raises
+    ------
+    CameraSettingError
+        One line naming ``path``, the profile and the field, and what was expected.
+    """
+    shown = shown_path(path)
+    text = read_user_text(path, "camera profiles JSON", JSON_MAX_BYTES, CameraSettingError)
+    data = parse_json_document(text, shown, CameraSettingError)
+    items = data.get("profiles") if isinstance(data, dict) else None
+    if not isinstance(items, list):
+        raise CameraSettingError(f"{shown}: field 'profiles' is missing or not a list; expected a list of profiles")
+    known = {name for name in CameraProfile.__dataclass_fields__} | {"vendor", "model"}
     profiles = []
-    for item in data["profiles"]:
-        item = dict(item)
+    for index, raw in enumerate(items):
+        where = f"{shown}: profiles[{index}]"
+        if not isinstance(raw, dict):
+            raise CameraSettingError(f"{where} is {type(raw).__name__}; expected an object")
+        item = dict(raw)
+        unknown = sorted(set(item) - known)
+        missing = [key for key in ("name", "vendor", "model") if not isinstance(item.get(key), str)]
+        if unknown or missing:
+            field_name = (unknown or missing)[0]
+            raise CameraSettingError(
+                f"{where}.{field_name} is {'unknown' if unknown else 'missing or not a string'}; expected the fields "
+                f"of a profile ({', '.join(sorted(known))}), with name, vendor and model strings"
+            )
         vendor, model = item.pop("vendor"), item.pop("model")
-        for key in ("exposure_features", "gain_features", "user_outputs"):
+        for key in PROFILE_LISTS:
             if key in item:
+                if not isinstance(item[key], list) or not all(isinstance(name, str) for name in item[key]):
+                    raise CameraSettingError(f"{where}.{key} is {item[key]!r}; expected a list of feature names")
                 item[key] = tuple(item[key])
+        for key in PROFILE_NUMBERS:
+            value = item.get(key)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int | float) or value <= 0):
+                raise CameraSettingError(f"{where}.{key} is {value!r}; expected a positive number or null")
+        if not isinstance(item.get("integer_exposure", False), bool) or not isinstance(item.get("notes", ""), str):
+            key = "notes" if isinstance(item.get("integer_exposure", False), bool) else "integer_exposure"
+            raise CameraSettingError(
+                f"{where}.{key} is {item[key]!r}; expected {'text' if key == 'notes' else 'true or false'}"
+            )
         if "options" in item:
             item["options"] = options_from_json(item["options"], f"{path} profile {item.get('name', '?')!r}")
         profiles.append((vendor, model, CameraProfile(**item)))
