@@ -21,7 +21,6 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.image_files import read_image
 from msflash.acquisition.session.many import SequenceRecord, exit_status, output_paths, sequence_inputs
-from msflash.processing.frame_kernels import KERNELS_VARIABLE
 from tests.helpers import led_mix, write_test_sequence
 
 REPOSITORY = Path(__file__).resolve().parents[2]
@@ -31,18 +30,6 @@ MIXES = (
     [0.1, 0.3, 0.2, 0.6, 0.1, 0.2, 0.3],
 )
 """Ambient weights of the day's sequences (three different in-span ambients)."""
-
-
-@pytest.fixture(autouse=True)
-def one_arithmetic_route(monkeypatch: pytest.MonkeyPatch) -> None:
-    """This process, the commands it starts and their dask workers all take the numpy route of the passes.
-
-    The compiled kernels give the same statistics as numpy to rounding only (processing/frame_kernels.py),
-    and a process uses them once it has loaded them (``frame_kernels.wanted``): a pytest worker that ran a
-    kernel test earlier would take them here while a fresh ``msflash`` process, on frames this small, does
-    not. The comparisons below are bit for bit, so every side takes one route (the one a fresh process takes).
-    """
-    monkeypatch.setenv(KERNELS_VARIABLE, "numpy")
 
 
 @pytest.fixture(scope="module")
