@@ -493,6 +493,15 @@ def _parse_camera(file: Path, value: Any, wavelengths_nm: np.ndarray) -> Sequenc
             camera.fail("camera.responsivity", f"lacks {', '.join(missing)}", "R, G and B spectra")
         # Channels beyond R, G, B are kept (and validated) rather than refused: unknown keys survive.
         responsivity = {str(c): _spectrum(file, f"camera.responsivity.{c}", v, wavelengths_nm) for c, v in raw.items()}
+        # A channel blind on the whole grid is no camera's: the estimate read it as LEDs that gave
+        # no light (exit 1, blaming the booth), and the flash solvers as a camera that sees nothing.
+        blind = [c for c in RESPONSIVITY_CHANNELS if not np.any(responsivity[c] > 0)]
+        if blind:
+            camera.fail(
+                f"camera.responsivity.{blind[0]}",
+                f"has no positive value on {wavelengths_nm[0]:g}–{wavelengths_nm[-1]:g} nm",
+                "each of R, G and B sensitive somewhere on the sequence's grid (or responsivity null)",
+            )
     return SequenceCamera(model, serial, pixel_format, cfa, black, white, responsivity, camera.extra)
 
 
