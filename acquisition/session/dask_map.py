@@ -45,6 +45,9 @@ class Mapper(Protocol):
 LOCAL = "local"
 SERIAL = "none"
 CONNECT_TIMEOUT_S = 10
+MAX_WORKERS_PER_CPU = 4
+"""``--workers`` of a local cluster beyond this many per CPU are refused: each is a process, and a
+slip of the keyboard (``--workers 100000``) would otherwise start that many."""
 """How long connecting to a scheduler address may take before the command gives up (exit 2)."""
 
 
@@ -100,7 +103,8 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
     ------
     UsageError
         An address that is not one, or whose scheduler does not answer within :data:`CONNECT_TIMEOUT_S`;
-        an address when dask.distributed is not installed.
+        an address when dask.distributed is not installed; more local workers than
+        :data:`MAX_WORKERS_PER_CPU` per CPU.
     """
     if scheduler == SERIAL:
         yield serial_map
@@ -118,7 +122,13 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
     with _quiet_dask(verbose):
         cluster = None
         if scheduler == LOCAL:
-            n = workers or os.cpu_count() or 1
+            cpus = os.cpu_count() or 1
+            n = workers or cpus
+            if n > MAX_WORKERS_PER_CPU * cpus:
+                raise UsageError(
+                    f"--workers {n}: more worker processes than this machine's {cpus} CPUs can serve; expected at "
+                    f"most {MAX_WORKERS_PER_CPU * cpus} ({MAX_WORKERS_PER_CPU} per CPU)"
+                )
             # Loopback only: the scheduler, workers and dashboard never listen on other interfaces.
             cluster = LocalCluster(
                 n_workers=n,
