@@ -88,3 +88,37 @@ def test_a_blank_scheduler_is_refused_not_taken_for_local(tmp_path: Path, capsys
         line
         == f"msflash: error: argument --scheduler: {blank!r}: expected 'local', 'none' or a dask scheduler address (tcp://HOST:PORT)"
     )
+
+
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_closed(stop: str) -> None:
+    # Was: the signal unwound out of LocalCluster(...) half-started; nothing could close it, and
+    # dask's exit hook failed to ("AssertionError: Status.init", a traceback under msflash's line).
+    import os
+    import signal
+    import threading
+    import time
+
+    pytest.importorskip("distributed")
+    from distributed.deploy.spec import SpecCluster
+
+    from msflash.led_controller.booth import Terminated, sigterm_as_exit
+
+    number = getattr(signal, stop)
+    known = set(SpecCluster._instances)
+
+    def signal_once_it_starts() -> None:
+        deadline = time.monotonic() + 120  # a hang guard, not a timing
+        while not set(SpecCluster._instances) - known and time.monotonic() < deadline:
+            time.sleep(0.001)
+        os.kill(os.getpid(), number)  # inside LocalCluster(...): its workers take far longer to start
+
+    sender = threading.Thread(target=signal_once_it_starts)
+    raised = KeyboardInterrupt if stop == "SIGINT" else Terminated
+    with sigterm_as_exit(), pytest.raises(raised):
+        sender.start()
+        with dask_mapper("local", 1) as mapper:
+            list(mapper(_tenfold, [0]))
+    sender.join()
+    started = set(SpecCluster._instances) - known
+    assert started and all(cluster.status.name == "closed" for cluster in started)
