@@ -1,6 +1,6 @@
 """Sequences written by other tools, edited by hand: refused in one line naming the field, on every command.
 
-Found by a hostile pass over the shared samples (docs/reliability.md §5); each case was a wrong exit
+Found by a hostile pass over the shared samples (docs/reliability.md §4); each case was a wrong exit
 (1, blaming something else) or a wrong field before its fix.
 """
 
