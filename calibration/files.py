@@ -43,7 +43,7 @@ from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.datasets import load_spectra_csv
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import parse_json_document
-from msflash.processing.negative_values import clip_negative_noise
+from msflash.processing.negative_values import blind_columns, clip_negative_noise
 from msflash.processing.spectra import Spectra, SpectralKind
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
@@ -143,6 +143,9 @@ def _without_negative_noise(spectra: Spectra, what: str, section: dict) -> tuple
         values, report = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, what)
     except SpectralDataError as err:
         raise CalibrationError(f"{err} (not written)") from None
+    blind = blind_columns(values, spectra.names)
+    if blind:  # the reader refuses it: never written
+        raise CalibrationError(f"{what}: column '{blind[0]}' has no positive value on {spectra.grid} (not written)")
     if not report:
         return spectra, section
     clipped = [*(section.get("clipped_negatives") or []), *(item.as_dict() for item in report)]
@@ -232,7 +235,7 @@ def _spectra(
     unit = section.get("unit")
     if unit not in ("energy", "photons"):
         raise CalibrationError(f"{path}: field '{key}.unit' is {unit!r}; expected 'energy' or 'photons'")
-    if not table.is_file():
+    if not os.path.lexists(table):  # anything else there (a directory, a FIFO) the table reader names
         raise CalibrationError(f"{path}: field '{key}.file': {table} is missing; expected the CSV table beside it")
     try:
         spectra = load_spectra_csv(table, kind=kind, unit=unit)
@@ -248,6 +251,12 @@ def _spectra(
         values, report = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, shown_path(table))
     except SpectralDataError as err:
         raise CalibrationError(str(err)) from None
+    blind = blind_columns(values, spectra.names)
+    if blind:
+        raise CalibrationError(
+            f"{shown_path(table)}: column '{blind[0]}' has no positive value on {spectra.grid}; expected "
+            f"{'a sensitivity' if kind == 'responsivity' else 'an emission'} somewhere on the grid ({path.name} field '{key}')"
+        )
     return spectra.replace(values=values), tuple(item.note(shown_path(table)) for item in report)
 
 

@@ -6,6 +6,7 @@ Public objects
 - :func:`noise_sigma`: a spectrum's noise, estimated from its sample-to-sample differences.
 - :class:`ClippedNegatives`: what was clipped in one spectrum (for the JSON and the notes).
 - :func:`clip_negative_noise`: the rule, applied to every column of a table.
+- :func:`blind_columns`: the columns left with no positive value (refused by the same readers).
 
 Measured spectra carry small negative values: a spectrometer export with the dark subtracted
 (by the instrument software or by ``--dark``) is noise about zero in the LED's tails, and half
@@ -194,3 +195,18 @@ def clip_negative_noise(
         )
         clipped[:, column] = np.maximum(column_values, 0.0)
     return clipped.reshape(array.shape), tuple(report)
+
+
+def blind_columns(values: np.ndarray, names: Sequence[str]) -> list[str]:
+    """The columns of ``values`` (wavelength × column) with no positive value: an LED that emits
+    nothing, a camera channel that sees nothing on the grid.
+
+    Every reader that applies :func:`clip_negative_noise` refuses them, naming the column: left in,
+    an all-zero responsivity made the ambient estimate fail later blaming the LEDs ("the LED-only
+    image … is empty; is it connected?").
+
+    >>> blind_columns(np.array([[0.0, 1.0], [0.0, 2.0]]), ["R", "G"])
+    ['R']
+    """
+    values = np.asarray(values, dtype=float).reshape(len(values), -1)
+    return [name for name, column in zip(names, values.T, strict=True) if not np.any(column > 0)]

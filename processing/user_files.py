@@ -8,6 +8,8 @@ Every path option and every file a sequence or a calibration names is read throu
 - :func:`read_user_bytes` and :func:`read_user_text` then read at most ``cap + 1`` bytes from a
   descriptor opened non-blocking and checked again with ``fstat``, so a file swapped after the
   check, or one whose size ``stat`` under-reports, still cannot block or grow memory past the cap;
+- :func:`check_output_name` refuses an output path the filesystem cannot hold (a name longer
+  than it allows), which ``Path.exists`` raises on rather than answers;
 - :func:`shown_path` prints any file name on one line, whatever bytes it holds (undecodable
   bytes as ``\\xNN``, control characters escaped).
 
@@ -182,3 +184,53 @@ __all__ = [
     "read_user_text",
     "shown_path",
 ]
+
+
+def check_output_name(path: str | os.PathLike, option: str, error: type[Exception] = SpectralDataError) -> None:
+    """Refuse an output ``path`` the filesystem cannot hold, before anything is created.
+
+    ``Path.exists`` and ``mkdir`` raise ``OSError`` (``ENAMETOOLONG``) for a name longer than the
+    filesystem allows instead of answering; a command's own checks then crashed.
+
+    Raises
+    ------
+    Exception
+        ``error``: one line naming ``option`` and the path.
+
+    Examples
+    --------
+    >>> check_output_name("/tmp/" + "x" * 300, "--out", ValueError)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: --out /tmp/xxx…x (300 characters): a name in it is longer than the filesystem allows; expected ...
+    >>> check_output_name("/tmp/new-folder", "--out", ValueError)
+    """
+    text = os.fsdecode(path)
+    limit = _name_max(path)
+    longest = max(text.split(os.sep), key=lambda part: len(os.fsencode(part)))
+    if len(os.fsencode(longest)) > limit:
+        shown = text.replace(longest, f"{longest[:3]}…{longest[-1:]} ({len(longest)} characters)")
+        raise error(
+            f"{option} {shown_path(shown)}: a name in it is longer than the filesystem allows; expected names of at "
+            f"most {limit} bytes"
+        )
+    try:
+        os.lstat(path)
+    except OSError as err:  # absent is the usual case; a whole path past PATH_MAX is refused here
+        if err.errno == errno.ENAMETOOLONG:
+            raise error(
+                f"{option} {shown_path(text[:60])}… ({len(text)} characters): longer than the filesystem allows; "
+                "expected a shorter path"
+            ) from None
+
+
+def _name_max(path: str | os.PathLike) -> int:
+    """The longest file name the filesystem holding ``path`` (or its nearest existing folder) accepts."""
+    folder = os.path.abspath(os.fsdecode(path))
+    while folder != os.path.dirname(folder):
+        folder = os.path.dirname(folder)
+        try:
+            return int(os.pathconf(folder, "PC_NAME_MAX"))
+        except OSError:
+            continue
+    return 255

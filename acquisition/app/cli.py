@@ -30,6 +30,7 @@ from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import bad_input_errors, runtime_errors
 from msflash.acquisition.progress import bars_wanted, close_bar
 from msflash.acquisition.progress import configure as configure_progress
+from msflash.led_controller.booth import sigterm_as_exit
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": ("msflash.acquisition.app.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
@@ -202,6 +203,24 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+READ_ONLY_COMMANDS = frozenset(
+    {"estimate", "flash", "synthesize", "check", "export", "evaluate", "study", "colour-study", "local-study"}
+)
+"""Commands that drive no camera and no booth: a stop line says nothing of LEDs or captured frames."""
+
+
+def _stop_line(words: Sequence[str], how: str) -> str:
+    """The one line a stopped command ends with: how it stopped and, for a capture, what it kept.
+
+    >>> _stop_line(["export", "SEQ", "--to", "dng"], "interrupted")
+    'msflash: interrupted\n'
+    """
+    command = next((word for word in words if not word.startswith("-")), None)
+    if command in READ_ONLY_COMMANDS:
+        return f"msflash: {how}\n"
+    return f"msflash: {how}; LEDs off{_what_was_kept()}\n"
+
+
 def _what_was_kept() -> str:
     """What a stopped command leaves, truthfully: the sequence it wrote, complete or cut short (marked so)."""
     written = sys.modules.get("msflash.acquisition.sequence.format")  # loaded only if a sequence was touched
@@ -230,14 +249,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not getattr(args, "handler", None):
             parser.print_help(sys.stderr)
             return 2
-        with warnings.catch_warnings():
+        # Every command unwinds on SIGTERM as on Ctrl-C: an export's staging folder, a synthesised
+        # image half-written, a local dask cluster are cleaned up by the blocks they unwind (the
+        # default action killed the process where it stood and left them behind).
+        with warnings.catch_warnings(), sigterm_as_exit():
             warnings.showwarning = _show_warning
             return int(args.handler(args))
     except KeyboardInterrupt:
-        sys.stderr.write(f"msflash: interrupted; LEDs off{_what_was_kept()}\n")
+        sys.stderr.write(_stop_line(words, "interrupted"))
         return 130
     except _terminated() as stop:
-        sys.stderr.write(f"msflash: terminated (SIGTERM); LEDs off{_what_was_kept()}\n")
+        sys.stderr.write(_stop_line(words, "terminated (SIGTERM)"))
         code = getattr(stop, "code", None)  # Terminated is a SystemExit
         return int(code) if isinstance(code, int) else 143
     except BrokenPipeError:

@@ -20,6 +20,7 @@ from typing import Any
 
 from msflash.acquisition.errors import UsageError as UsageError  # re-exported: every command raises it
 from msflash.acquisition.progress import progress as progress  # re-exported: every command reports with it
+from msflash.processing.user_files import check_output_name
 
 
 def positive_int(text: str) -> int:
@@ -78,6 +79,7 @@ def output_directory(path: str | os.PathLike | None) -> Path | None:
     if path is None or path == "":
         return None
     out = Path(path)
+    check_output_name(out, "--out", UsageError)
     blocking = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), None)
     if blocking is not None:
         raise UsageError(f"--out {out}: {blocking} is a file; expected a folder (or a path where one can be made)")

@@ -67,10 +67,24 @@ def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], 
     parser.add_argument("--margin-px", type=int, default=1, help="pixels ignored inside each patch edge")
 
 
+def _scheduler(text: str) -> str:
+    """argparse type of ``--scheduler``: a blank value was taken for the default, ``local``.
+
+    >>> _scheduler("none")
+    'none'
+    """
+    if not text.strip():
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected 'local', 'none' or a dask scheduler address (tcp://HOST:PORT)"
+        )
+    return text
+
+
 def add_scheduler_options(parser: argparse.ArgumentParser, default: str | None = "local", what: str = "jobs") -> None:
     """``--scheduler local|none|ADDRESS`` and ``--workers N``: where ``what`` run (acquisition/session/dask_map.py)."""
     parser.add_argument(
         "--scheduler",
+        type=_scheduler,
         default=default,
         metavar="local|none|ADDRESS",
         help=f"where the {what} run: 'local' (a dask cluster on this machine, 127.0.0.1 only; default), 'none' "

@@ -60,6 +60,7 @@ from msflash.processing.errors import TargetUnreachableWarning
 from msflash.processing.flash import FlashSolution
 from msflash.processing.raw_colour import camera_matrix, camera_neutral
 from msflash.processing.render import demosaic_bilinear
+from msflash.processing.user_files import check_output_name
 
 FLASH_MODES = ("matching", "complementary")
 
@@ -327,6 +328,7 @@ def check_out(out: Path, option: str = "--out") -> None:
     UsageError
         Naming the option and the folder.
     """
+    check_output_name(out, option, UsageError)
     if out.exists() or out.is_symlink():
         raise UsageError(f"{option} {out}: already exists; expected a new folder (nothing is overwritten)")
     if not out.parent.is_dir():

@@ -49,7 +49,7 @@ from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import MAX_NESTING as MAX_NESTING  # the deepest a sequence.json may nest
 from msflash.processing.json_input import parse_json_document
-from msflash.processing.negative_values import clip_negative_noise
+from msflash.processing.negative_values import blind_columns, clip_negative_noise
 from msflash.processing.spectra import Spectra, WavelengthGrid
 from msflash.processing.synthesis import linearise
 from msflash.processing.user_files import IMAGE_MAX_BYTES, JSON_MAX_BYTES, check_user_file, read_user_text, shown_path
@@ -493,6 +493,15 @@ def _parse_camera(file: Path, value: Any, wavelengths_nm: np.ndarray) -> Sequenc
             camera.fail("camera.responsivity", f"lacks {', '.join(missing)}", "R, G and B spectra")
         # Channels beyond R, G, B are kept (and validated) rather than refused: unknown keys survive.
         responsivity = {str(c): _spectrum(file, f"camera.responsivity.{c}", v, wavelengths_nm) for c, v in raw.items()}
+        # A channel blind on the whole grid is no camera's: the estimate read it as LEDs that gave
+        # no light (exit 1, blaming the booth), and the flash solvers as a camera that sees nothing.
+        blind = blind_columns(np.column_stack([responsivity[c] for c in RESPONSIVITY_CHANNELS]), RESPONSIVITY_CHANNELS)
+        if blind:
+            camera.fail(
+                f"camera.responsivity.{blind[0]}",
+                f"has no positive value on {wavelengths_nm[0]:g}–{wavelengths_nm[-1]:g} nm",
+                "each of R, G and B sensitive somewhere on the sequence's grid (or responsivity null)",
+            )
     return SequenceCamera(model, serial, pixel_format, cfa, black, white, responsivity, camera.extra)
 
 

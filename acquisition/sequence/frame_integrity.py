@@ -14,6 +14,8 @@ The rule
 - **Above white**: any value above ``white_level`` is refused; values *at* white are saturated
   pixels, which is normal. Float frames (EXR, often normalised to white 1.0) get a relative
   tolerance of :data:`FLOAT_WHITE_RTOL` for rounding; NaN and ±inf are refused as well.
+- **White beyond the bit depth**: an integer frame whose ``white_level`` is above the largest
+  value its type holds (1e30 on 16-bit data) is refused: it could never saturate.
 - **Below black**: read noise puts dark pixels a little below black, so values down to
   ``black − margin`` are accepted, with ``margin = BLACK_MARGIN_FRACTION × (white − black) ×
   max(gain, 1)``: a stated bound, since a frame alone cannot tell its read noise from an offset.
@@ -76,15 +78,29 @@ def check_frame_levels(
     Examples
     --------
     >>> check_frame_levels(np.array([250, 4095], dtype=np.uint16), 256, 4095)
+    >>> check_frame_levels(np.array([300, 4000], dtype=np.uint16), 256, 1e30, where="f.tiff")
+    Traceback (most recent call last):
+    ...
+    msflash.acquisition.errors.RecordingError: f.tiff: camera.white_level 1e+30 is above the largest value of this 16-bit \
+frame (65535); expected the white level of the frames' bit depth (at most 65535)
     >>> check_frame_levels(np.array([300, 65535], dtype=np.uint16), 256, 4095, where="f.tiff")
     Traceback (most recent call last):
     ...
-    acquisition.errors.RecordingError: f.tiff: 1 of 2 pixels above camera.white_level 4095 (values 300…65535); \
+    msflash.acquisition.errors.RecordingError: f.tiff: 1 of 2 pixels above camera.white_level 4095 (values 300…65535); \
 expected values in 179.2…4095 (black_level 256 minus a read-noise margin of 76.78, up to white_level 4095): \
 a white level declared for another bit depth (12-bit data in a 16-bit file?) or a corrupt file
     """
     if pixels.size == 0:
         return
+    if np.issubdtype(pixels.dtype, np.integer) and white_level > np.iinfo(pixels.dtype).max:
+        # No value of the frame can reach it: saturation would never be seen, and the DNG and EXR
+        # exports would carry a level their fields cannot hold.
+        largest = np.iinfo(pixels.dtype).max
+        raise RecordingError(
+            f"{where}: camera.white_level {white_level:g} is above the largest value of this "
+            f"{pixels.dtype.itemsize * 8}-bit frame ({largest}); expected the white level of the frames' bit depth "
+            f"(at most {largest})"
+        )
     low_bound = black_level - black_margin(black_level, white_level, gain)
     floating = np.issubdtype(pixels.dtype, np.floating)
     high_bound = white_level + (FLOAT_WHITE_RTOL * abs(white_level) if floating else 0.0)

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, Protocol
@@ -45,6 +47,9 @@ class Mapper(Protocol):
 LOCAL = "local"
 SERIAL = "none"
 CONNECT_TIMEOUT_S = 10
+MAX_WORKERS_PER_CPU = 4
+"""``--workers`` of a local cluster beyond this many per CPU are refused: each is a process, and a
+slip of the keyboard (``--workers 100000``) would otherwise start that many."""
 """How long connecting to a scheduler address may take before the command gives up (exit 2)."""
 
 
@@ -84,6 +89,33 @@ def _quiet_dask(verbose: bool) -> Iterator[None]:
 
 
 @contextmanager
+def _signals_held(held: list[int]) -> Iterator[None]:
+    """Ctrl-C and SIGTERM held while the block runs (main thread only): each is appended to ``held``.
+
+    A local cluster stopped half-way through starting or closing cannot be closed: its workers are
+    still starting, and dask's exit hook then printed a 30-line ``AssertionError: Status.init``
+    traceback under msflash's own line. The caller delivers a held signal once it is safe
+    (:func:`_deliver`).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    signals = (signal.SIGINT, signal.SIGTERM)
+    previous = [signal.signal(number, lambda number, _frame: held.append(number)) for number in signals]
+    try:
+        yield
+    finally:
+        for number, handler in zip(signals, previous, strict=True):
+            signal.signal(number, handler)
+
+
+def _deliver(held: list[int]) -> None:
+    """Raise a signal :func:`_signals_held` held, as its own handler would have (KeyboardInterrupt…)."""
+    if held:
+        signal.raise_signal(held.pop(0))
+
+
+@contextmanager
 def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = False) -> Iterator[Mapper]:
     """A :data:`Mapper` running on ``scheduler`` (``local``, ``none`` or an address; module docstring).
 
@@ -100,7 +132,8 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
     ------
     UsageError
         An address that is not one, or whose scheduler does not answer within :data:`CONNECT_TIMEOUT_S`;
-        an address when dask.distributed is not installed.
+        an address when dask.distributed is not installed; more local workers than
+        :data:`MAX_WORKERS_PER_CPU` per CPU.
     """
     if scheduler == SERIAL:
         yield serial_map
@@ -117,21 +150,29 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
         ) from None
     with _quiet_dask(verbose):
         cluster = None
+        held: list[int] = []
         if scheduler == LOCAL:
-            n = workers or os.cpu_count() or 1
+            cpus = os.cpu_count() or 1
+            n = workers or cpus
+            if n > MAX_WORKERS_PER_CPU * cpus:
+                raise UsageError(
+                    f"--workers {n}: more worker processes than this machine's {cpus} CPUs can serve; expected at "
+                    f"most {MAX_WORKERS_PER_CPU * cpus} ({MAX_WORKERS_PER_CPU} per CPU)"
+                )
             # Loopback only: the scheduler, workers and dashboard never listen on other interfaces.
-            cluster = LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                host="127.0.0.1",
-                dashboard_address="127.0.0.1:0",
-                # Worker processes log on their own stderr: without -v only CRITICAL records (a
-                # worker's heartbeat racing the scheduler's shutdown logged an ERROR and a 30-line
-                # traceback after a finished study); a task's own failure reaches us as its exception.
-                silence_logs=logging.INFO if verbose else logging.CRITICAL,
-            )
-            client = Client(cluster)
+            with _signals_held(held):
+                cluster = LocalCluster(
+                    n_workers=n,
+                    threads_per_worker=1,
+                    processes=True,
+                    host="127.0.0.1",
+                    dashboard_address="127.0.0.1:0",
+                    # Worker processes log on their own stderr: without -v only CRITICAL records (a
+                    # worker's heartbeat racing the scheduler's shutdown logged an ERROR and a 30-line
+                    # traceback after a finished study); a task's own failure reaches us as its exception.
+                    silence_logs=logging.INFO if verbose else logging.CRITICAL,
+                )
+                client = Client(cluster)
             progress(f"dask: local cluster with {n} workers")
         else:
             try:
@@ -158,8 +199,11 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
                 yield result
 
         try:
+            _deliver(held)  # a Ctrl-C while the cluster started: now that it can be closed
             yield mapper
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            with _signals_held(held):
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+            _deliver(held)

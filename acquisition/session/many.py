@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.errors import UsageError, bad_input_errors, runtime_errors
-from msflash.acquisition.sequence.locate import holds_sequence
+from msflash.acquisition.sequence.locate import SEQUENCE_FILE, SEQUENCE_FOLDER, holds_sequence
 from msflash.acquisition.session import one_sequence
 from msflash.acquisition.session.dask_map import LOCAL, SERIAL, dask_mapper
 
@@ -106,7 +106,7 @@ def output_paths(template: str | None, sequences: Sequence[str]) -> list[str | N
             f"--out {template}: {len(sequences)} sequences would write the same file; expected a path holding "
             f"{NAME_FIELD} (each sequence folder's name), e.g. out/{NAME_FIELD}.exr"
         )
-    outputs = [template.replace(NAME_FIELD, Path(sequence).resolve().name) for sequence in sequences]
+    outputs = [template.replace(NAME_FIELD, sequence_name(sequence)) for sequence in sequences]
     seen: dict[str, str] = {}
     for sequence, output in zip(sequences, outputs, strict=True):
         if output in seen:
@@ -116,6 +116,24 @@ def output_paths(template: str | None, sequences: Sequence[str]) -> list[str | N
             )
         seen[output] = sequence
     return list(outputs)
+
+
+def sequence_name(sequence: str) -> str:
+    """What ``{name}`` stands for: the run, capture or sequence folder the user named, however named.
+
+    ``runs/0800``, ``runs/0800/sequence`` and ``runs/0800/sequence/sequence.json`` are all ``0800``
+    (the inner names are the same in every run: taken as they are, ``runs/*/sequence`` gave every
+    sequence the name ``sequence`` and was refused as one file written twice).
+
+    >>> sequence_name("/data/runs/0800/sequence/sequence.json"), sequence_name("/data/day/0900")
+    ('0800', '0900')
+    """
+    path = Path(sequence).resolve()
+    if path.name == SEQUENCE_FILE:
+        path = path.parent
+    if path.name == SEQUENCE_FOLDER and not (path.parent / SEQUENCE_FILE).exists():
+        path = path.parent
+    return path.name
 
 
 def _failure(sequence: str, err: Exception, notes: list[str]) -> SequenceRecord:

@@ -63,3 +63,62 @@ def test_a_job_whose_worker_dies_is_given_to_on_error_and_the_rest_go_on() -> No
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert json.loads(done.stdout) == [0, [1, "KilledWorker"], 20]
+
+
+def test_more_local_workers_than_the_cpus_can_serve_are_refused_before_any_starts() -> None:
+    # Was: LocalCluster(n_workers=100000) started, one process each, on a 2-CPU machine.
+    import os
+
+    from msflash.acquisition.session.dask_map import MAX_WORKERS_PER_CPU
+
+    pytest.importorskip("distributed")
+    limit = MAX_WORKERS_PER_CPU * (os.cpu_count() or 1)
+    with pytest.raises(UsageError, match=rf"--workers {limit + 1}: .* expected at most {limit}"):
+        with dask_mapper("local", limit + 1):
+            pass
+
+
+@pytest.mark.parametrize("blank", ["", " "])
+def test_a_blank_scheduler_is_refused_not_taken_for_local(tmp_path: Path, capsys, blank: str) -> None:
+    from msflash.acquisition.app.cli import main
+
+    assert main(["estimate", str(tmp_path / "a"), str(tmp_path / "b"), "--scheduler", blank]) == 2
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert (
+        line
+        == f"msflash: error: argument --scheduler: {blank!r}: expected 'local', 'none' or a dask scheduler address (tcp://HOST:PORT)"
+    )
+
+
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_closed(stop: str) -> None:
+    # Was: the signal unwound out of LocalCluster(...) half-started; nothing could close it, and
+    # dask's exit hook failed to ("AssertionError: Status.init", a traceback under msflash's line).
+    import os
+    import signal
+    import threading
+    import time
+
+    pytest.importorskip("distributed")
+    from distributed.deploy.spec import SpecCluster
+
+    from msflash.led_controller.booth import Terminated, sigterm_as_exit
+
+    number = getattr(signal, stop)
+    known = set(SpecCluster._instances)
+
+    def signal_once_it_starts() -> None:
+        deadline = time.monotonic() + 120  # a hang guard, not a timing
+        while not set(SpecCluster._instances) - known and time.monotonic() < deadline:
+            time.sleep(0.001)
+        os.kill(os.getpid(), number)  # inside LocalCluster(...): its workers take far longer to start
+
+    sender = threading.Thread(target=signal_once_it_starts)
+    raised = KeyboardInterrupt if stop == "SIGINT" else Terminated
+    with sigterm_as_exit(), pytest.raises(raised):
+        sender.start()
+        with dask_mapper("local", 1) as mapper:
+            list(mapper(_tenfold, [0]))
+    sender.join()
+    started = set(SpecCluster._instances) - known
+    assert started and all(cluster.status.name == "closed" for cluster in started)

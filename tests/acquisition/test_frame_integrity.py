@@ -101,6 +101,28 @@ def test_the_count_and_range_are_exact(tmp_path: Path, capsys: pytest.CaptureFix
     assert "…5000)" in line
 
 
+@pytest.mark.parametrize(
+    "route",
+    [
+        ("estimate",),
+        ("synthesize", "--weights", "1,0,0,0,0,0,0", "--out", "{tmp}/s.exr"),
+        ("export", "--to", "dng", "--out", "{tmp}/export"),
+        ("export", "--to", "exr", "--out", "{tmp}/export"),
+    ],
+)
+def test_a_white_level_no_frame_value_can_reach_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture, route: tuple[str, ...]
+) -> None:
+    # white_level 1e30 on 16-bit frames: saturation could never be seen, and the DNG export failed
+    # with "unexpected error: argument out of range" (exit 1) writing it into its 32-bit WhiteLevel.
+    sequence = _rewritten(tmp_path, BAYER_12BIT, lambda i, p: p, {"white_level": 1e30})
+    argv = [route[0], str(sequence), *(a.format(tmp=tmp_path) for a in route[1:])]
+    line = _error(capsys, *argv)
+    assert "frames[0].file 'frames/000-ambient.tiff': camera.white_level 1e+30 is above the largest value" in line
+    assert "16-bit frame (65535)" in line
+    assert not (tmp_path / "export").exists() and not (tmp_path / "s.exr").exists()
+
+
 def test_a_black_level_declared_for_other_data_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     # The 12-bit sample's data have black 256; declaring 1024 puts most dark pixels ~768 DN below it.
     sequence = _rewritten(tmp_path, BAYER_12BIT, lambda i, p: p, {"black_level": 1024})

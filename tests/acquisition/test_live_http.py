@@ -247,3 +247,35 @@ def test_a_sequence_at_the_live_exposure_and_a_second_fire_while_it_runs(tmp_pat
 def test_a_wildcard_address_is_refused() -> None:
     with pytest.raises(UsageError, match="wildcard"):
         bind("0.0.0.0", 0)
+
+
+def test_hostile_request_bodies_are_400_naming_the_field_and_leave_the_leds_on(tmp_path: Path) -> None:
+    # Each of these was a 500 ("… (LEDs switched off)") or a JSON value taken silently: a huge
+    # integer (OverflowError), an unknown charset (LookupError; JSON is read as UTF-8 whatever it
+    # claims), a gzip body that does not inflate,
+    # nesting deeper than the recursion limit, a key twice (the last one won).
+    with live_server(tmp_path / "runs") as server:
+        base = f"http://127.0.0.1:{server.port}"
+        token = {TOKEN_HEADER: server.token}
+        status, _ = request("POST", base + "/api/levels", token, {"channel": 2, "level": 0.25})
+        assert status == 200
+        assert emulator_levels(server)[2] == pytest.approx(0.25, abs=1e-4)
+        json_type = {**token, "Content-Type": "application/json"}
+        for path, headers, body, field in (
+            ("/api/settings", json_type, '{"exposure_us": 1' + "0" * 400 + "}", "exposure_us"),
+            ("/api/settings", json_type, '{"gain": NaN}', "gain"),
+            ("/api/levels", json_type, '{"levels": [Infinity, 0, 0, 0, 0, 0, 0]}', "levels[0]"),
+            ("/api/settings", {**token, "Content-Type": "application/json; charset=bogus"}, '{"gain": "x"}', "gain"),
+            ("/api/settings", {**json_type, "Content-Encoding": "gzip"}, "not gzip", "request body"),
+            ("/api/settings", json_type, "[" * 60_000, "request body"),
+            ("/api/settings", json_type, '{"a":' * 10_000 + "1" + "}" * 10_000, "request body"),
+            ("/api/settings", json_type, '{"overlay": true, "overlay": false}', "overlay"),
+            ("/api/settings", json_type, b'{"mode": "\xff"}', "request body"),
+        ):
+            status, text = request("POST", base + path, headers, body)
+            assert status == 400, (body[:40], text)
+            message = json.loads(text)["error"]
+            assert field in message and "\n" not in message and len(message) < 300, message
+        # No request failed as a server error, so the live level is still lit.
+        assert emulator_levels(server)[2] == pytest.approx(0.25, abs=1e-4)
+        assert server.state.error is None

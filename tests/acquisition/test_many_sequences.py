@@ -214,3 +214,26 @@ def test_flash_over_a_copy_keeps_its_images_apart(
     ]
     assert captured.out == ""
     assert not list(tmp_path.glob("*.exr"))
+
+
+def test_name_in_out_is_the_run_folder_however_its_sequence_is_named(
+    day: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``runs/*/sequence`` and ``runs/*/sequence/sequence.json`` name each run: was every one ``sequence``
+    (``sequence.json``), refused as two sequences writing one file."""
+    runs = tmp_path / "runs"
+    for hour in ("0800", "0900"):
+        shutil.copytree(day / hour, runs / hour / "sequence")
+    for inner in ("sequence", "sequence/sequence.json"):
+        out = tmp_path / inner.replace("/", "-")
+        out.mkdir()
+        status = main(
+            ["flash", *(str(runs / hour / inner) for hour in ("0800", "0900")), "--mode", "matching"]
+            + ["--scheduler", "none", "--json", "--out", str(out / "{name}.exr")]
+        )
+        captured = capsys.readouterr()
+        assert status == 0, captured.err
+        assert sorted(path.name for path in out.iterdir()) == ["0800.exr", "0900.exr"]
+        assert [json.loads(line)["sequence"] for line in captured.out.splitlines()] == [
+            str(runs / hour / "sequence") for hour in ("0800", "0900")
+        ]

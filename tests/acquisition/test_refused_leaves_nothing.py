@@ -43,3 +43,30 @@ def test_synthesize_refused_writes_no_image_and_no_folder(tmp_path: Path, capsys
     assert main(["synthesize", RECORDED, "--weights", "1,2", "--out", str(out)]) == 2
     assert "--weights has 2 values; expected 7" in capsys.readouterr().err
     assert not (tmp_path / "images").exists()
+
+
+LONG_NAME = "y" * 300
+"""Longer than any Linux filesystem's file name (255 bytes): ``Path.exists`` raises ENAMETOOLONG on it."""
+
+TOO_LONG = {
+    "run": ["run"],
+    "capture": ["capture"],
+    "evaluate": ["evaluate", RECORDED, "--chart", "macbeth"],
+    "export": ["export", RECORDED, "--to", "csv"],
+}
+
+
+@pytest.mark.parametrize("where", ["{long}", "a/{long}/b"])
+@pytest.mark.parametrize("argv", TOO_LONG.values(), ids=TOO_LONG.keys())
+def test_an_out_name_longer_than_the_filesystem_allows_is_refused_in_one_line(
+    argv: list[str], where: str, tmp_path: Path, capsys
+) -> None:
+    # Was: "msflash: run: unexpected OSError: [Errno 36] File name too long" (exit 1, a crash log), and
+    # with a/LONG/b the parent "a" made before the refusal stayed behind.
+    out = tmp_path / where.format(long=LONG_NAME)
+    status = main([*argv, "--out", str(out)])
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert status == 2, lines
+    assert lines[-1].startswith(f"msflash: error: --out {tmp_path}/")
+    assert "yyy…y (300 characters)" in lines[-1] and "longer than the filesystem allows" in lines[-1]
+    assert list(tmp_path.iterdir()) == []

@@ -12,6 +12,7 @@ import io
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from msflash.acquisition.app import cli
@@ -137,3 +138,64 @@ def test_a_hostile_table_exits_2_naming_table_line_and_column(tmp_path: Path, ce
     status, out, err = run(["flash", str(SEQUENCE), "--mode", "matching", "--calibration", str(cal)])
     assert (status, out) == (2, "") and err.count("\n") == 1
     assert "leds.csv" in err and needle in err
+
+
+CAMERA = "wavelength_nm,R,G,B\n" + "".join(
+    f"{w},{0.2 + w / 1000},{0.5},{0.9 - w / 1000}\n" for w in range(400, 701, 10)
+)
+
+
+@pytest.mark.parametrize("command", ["estimate", "flash", "export"])
+def test_a_camera_channel_with_no_positive_value_exits_2_naming_table_and_column(tmp_path: Path, command: str) -> None:
+    # Was: estimate, flash and export exit 1 "ambient estimate: the LED-only image of led0, …, led6 is
+    # empty; expected every LED to add light (is it connected…?)" for a hand-zeroed camera.csv column.
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    (cal / "calibration.json").write_text(
+        json.dumps(
+            {
+                "format": "msflash-calibration",
+                "version": 1,
+                "id": "c",
+                "camera": {"file": "camera.csv", "unit": "energy"},
+            }
+        )
+    )
+    (cal / "camera.csv").write_text(CAMERA.replace(",0.5,", ",0,"))
+    extra = {"estimate": [], "flash": ["--mode", "matching"], "export": ["--to", "csv", "--out", str(tmp_path / "x")]}
+    status, out, err = run([command, str(SEQUENCE), "--calibration", str(cal), *extra[command]])
+    assert (status, out) == (2, "") and err.count("\n") == 1, err
+    assert err.startswith(f"msflash: error: {cal / 'camera.csv'}: column 'G' has no positive value on 400–700 nm")
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_table_that_is_a_directory_is_named_as_one(tmp_path: Path) -> None:
+    # Was: "…/camera.csv is missing; expected the CSV table beside it" for a directory of that name.
+    cal = tmp_path / "cal"
+    (cal / "camera.csv").mkdir(parents=True)
+    (cal / "calibration.json").write_text(
+        json.dumps(
+            {
+                "format": "msflash-calibration",
+                "version": 1,
+                "id": "c",
+                "camera": {"file": "camera.csv", "unit": "energy"},
+            }
+        )
+    )
+    status, out, err = run(["estimate", str(SEQUENCE), "--calibration", str(cal)])
+    assert (status, out) == (2, "") and err.count("\n") == 1, err
+    assert f"{cal / 'camera.csv'}: is a directory; expected a spectral table" in err
+
+
+def test_a_blind_column_is_never_written(tmp_path: Path) -> None:
+    from msflash.calibration.errors import CalibrationError
+    from msflash.calibration.files import CalibrationSet, save_calibration
+    from msflash.processing.spectra import Spectra
+
+    grid = np.arange(400.0, 701.0, 10.0)
+    values = np.column_stack([np.ones_like(grid), np.zeros_like(grid), np.ones_like(grid)])
+    camera = Spectra.from_samples(grid, values, ("R", "G", "B"), kind="responsivity", unit="energy")
+    with pytest.raises(CalibrationError, match="column 'G' has no positive value on 400–700 nm .*\\(not written\\)"):
+        save_calibration(CalibrationSet(camera_responsivities=camera), tmp_path / "cal")
+    assert not (tmp_path / "cal" / "calibration.json").exists()

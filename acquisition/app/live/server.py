@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 from aiohttp import WSMsgType, web
+from aiohttp.web_protocol import RequestPayloadError
 
 from msflash.acquisition.app.live.charts import run_charts
 from msflash.acquisition.app.live.preview import Preview, PreviewRenderer
@@ -49,6 +50,7 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.live import LiveStream
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run import RunOptions
+from msflash.processing.json_input import parse_json_document
 
 log = logging.getLogger(__name__)
 
@@ -580,10 +582,26 @@ def _finite(value: Any) -> Any:
 
 
 async def _json_object(request: web.Request) -> dict[str, Any]:
+    """The request's body as a JSON object, read as every user's JSON is (``processing/json_input.py``).
+
+    The bytes are read whatever the headers claim (an unknown ``charset``, a ``Content-Encoding`` that
+    does not decode) and taken as UTF-8, as JSON is; a NaN, an infinite or huge number, a key twice
+    or nesting past :data:`~msflash.processing.json_input.MAX_NESTING` levels is refused naming its
+    field (400), never a 500 that switches the LEDs off.
+    """
     try:
-        body = await request.json()
-    except (ValueError, UnicodeDecodeError) as err:
-        raise UsageError(f"request body: not JSON ({err}); expected a JSON object") from err
+        raw = await request.read()
+    except web.HTTPException:
+        raise  # the body is over client_max_size: 413
+    except (RequestPayloadError, ValueError) as err:  # a body that does not decode (e.g. bad gzip)
+        raise UsageError(f"request body: unreadable ({' '.join(str(err).split())}); expected a JSON object") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise UsageError(
+            f"request body: not UTF-8 ({err.reason} at byte {err.start}); expected a JSON object"
+        ) from None
+    body = parse_json_document(text, "request body", UsageError)
     if not isinstance(body, dict):
         raise UsageError("request body: expected a JSON object")
     return body
@@ -591,8 +609,8 @@ async def _json_object(request: web.Request) -> dict[str, Any]:
 
 def _number(body: dict[str, Any], key: str, default: float) -> float:
     value = body.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise UsageError(f"{key} {value!r}: expected a finite number")
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(float(value)):
+        raise UsageError(f"{key} {str(value)[:40]}: expected a finite number")
     return float(value)
 
 
