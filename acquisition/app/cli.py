@@ -210,7 +210,7 @@ READ_ONLY_COMMANDS = frozenset(
 
 
 def _stop_line(words: Sequence[str], how: str) -> str:
-    """The one line a stopped command ends with: how it stopped and, for a capture, what it kept.
+    r"""The one line a stopped command ends with: how it stopped and, for a capture, what it kept.
 
     >>> _stop_line(["export", "SEQ", "--to", "dng"], "interrupted")
     'msflash: interrupted\n'
