@@ -271,6 +271,7 @@ def test_hostile_request_bodies_are_400_naming_the_field_and_leave_the_leds_on(t
             ("/api/settings", json_type, '{"a":' * 10_000 + "1" + "}" * 10_000, "request body"),
             ("/api/settings", json_type, '{"overlay": true, "overlay": false}', "overlay"),
             ("/api/settings", json_type, b'{"mode": "\xff"}', "request body"),
+            ("/api/levels", json_type, '{"channel": 2}', "level"),  # the value missing: not taken as 0
         ):
             status, text = request("POST", base + path, headers, body)
             assert status == 400, (body[:40], text)

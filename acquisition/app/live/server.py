@@ -395,6 +395,8 @@ class LiveServer:
             channel = body.get("channel")
             if not isinstance(channel, int) or isinstance(channel, bool) or not 0 <= channel < len(levels):
                 raise UsageError(f"channel {channel!r}: expected an LED index 0–{len(levels) - 1}")
+            if "level" not in body:  # a slider message without its value must not switch the LED off
+                raise UsageError(f"level for channel {channel}: missing; expected a number in [0, 1]")
             levels[channel] = _number(body, "level", 0.0)
         await self._on_rig(self.stream.set_levels, levels)
         self.state.error = None
