@@ -783,16 +783,23 @@ def port_open_error(url: str, err: serial.SerialException) -> BoothError:
 
 
 class Terminated(SystemExit):
-    """SIGTERM, raised by :func:`sigterm_as_exit` (exit status 128 + 15): the CLI says so in one line."""
+    """SIGTERM or SIGHUP, raised by :func:`sigterm_as_exit` (exit status 128 + the signal's number): the CLI
+    says so in one line."""
+
+
+STOPPING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+"""Signals that stop a command as Ctrl-C does: SIGTERM (a service manager, ``kill``) and SIGHUP (the
+terminal or the SSH session closed under a running capture)."""
 
 
 @contextlib.contextmanager
 def sigterm_as_exit() -> Iterator[None]:
-    """Turn SIGTERM into ``SystemExit`` (:class:`Terminated`) while active, so ``with LedBooth…`` blocks clean up.
+    """Turn SIGTERM and SIGHUP (:data:`STOPPING_SIGNALS`) into ``SystemExit`` (:class:`Terminated`) while
+    active, so ``with LedBooth…`` blocks clean up.
 
-    Only effective in the main thread (elsewhere it does nothing): Python's default SIGTERM
-    action kills the process without running ``__exit__``, which would leave LEDs on until
-    the booth's watchdog fires.
+    Only effective in the main thread (elsewhere it does nothing): Python's default action for
+    either kills the process without running ``__exit__``, which would leave LEDs on until the
+    booth's watchdog fires and a half-written output behind.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -801,11 +808,12 @@ def sigterm_as_exit() -> Iterator[None]:
     def _raise(signum: int, _frame: object) -> None:
         raise Terminated(128 + signum)
 
-    previous = signal.signal(signal.SIGTERM, _raise)
+    previous = {number: signal.signal(number, _raise) for number in STOPPING_SIGNALS}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 def levels_close(a: Sequence[float], b: Sequence[float]) -> bool:

@@ -15,10 +15,12 @@ numerical and hardware libraries); the others are listed by name and one-line he
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import importlib.util
 import logging
 import os
+import signal
 import sys
 import warnings
 from collections.abc import Sequence
@@ -93,6 +95,18 @@ against the module's own registration."""
 
 COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in COMMANDS.values()))
 """Modules contributing subcommands, in help order."""
+
+
+def _signal_name(number: int) -> str:
+    """``SIGTERM`` for 15, ``SIGHUP`` for 1; ``signal N`` for a number without a name.
+
+    >>> _signal_name(1), _signal_name(15), _signal_name(99)
+    ('SIGHUP', 'SIGTERM', 'signal 99')
+    """
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return f"signal {number}"
 
 
 def _terminated() -> tuple[type[BaseException], ...]:
@@ -259,9 +273,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write(_stop_line(words, "interrupted"))
         return 130
     except _terminated() as stop:
-        sys.stderr.write(_stop_line(words, "terminated (SIGTERM)"))
-        code = getattr(stop, "code", None)  # Terminated is a SystemExit
-        return int(code) if isinstance(code, int) else 143
+        code = getattr(stop, "code", None)  # Terminated is a SystemExit: 128 + the signal's number
+        code = int(code) if isinstance(code, int) else 128 + signal.SIGTERM
+        with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
+            sys.stderr.write(_stop_line(words, f"terminated ({_signal_name(code - 128)})"))
+        return code
     except BrokenPipeError:
         # The reader of stdout went away (``msflash estimate SEQ | head``): stop quietly, and keep
         # Python from complaining again when it flushes stdout at exit.

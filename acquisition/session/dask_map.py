@@ -90,7 +90,7 @@ def _quiet_dask(verbose: bool) -> Iterator[None]:
 
 @contextmanager
 def _signals_held(held: list[int]) -> Iterator[None]:
-    """Ctrl-C and SIGTERM held while the block runs (main thread only): each is appended to ``held``.
+    """Ctrl-C, SIGTERM and SIGHUP held while the block runs (main thread only): each is appended to ``held``.
 
     A local cluster stopped half-way through starting or closing cannot be closed: its workers are
     still starting, and dask's exit hook then printed a 30-line ``AssertionError: Status.init``
@@ -100,7 +100,7 @@ def _signals_held(held: list[int]) -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    signals = (signal.SIGINT, signal.SIGTERM)
+    signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
     previous = [signal.signal(number, lambda number, _frame: held.append(number)) for number in signals]
     try:
         yield
