@@ -105,7 +105,7 @@ def _live(args: argparse.Namespace) -> int:
                         )
                     stop.set()
 
-                for sig in (signal.SIGINT, signal.SIGTERM):
+                for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # SIGHUP: the terminal closed
                     loop.add_signal_handler(sig, stopping)
                 await server.serve(stop)
 

@@ -188,7 +188,10 @@ def test_live_refuses_a_busy_port_and_a_mosaic_on_the_fake_in_one_line(tmp_path:
     assert not os.path.exists(tmp_path / "runs")
 
 
-def test_msflash_live_serves_the_page_and_ctrl_c_stops_it_with_the_leds_off(tmp_path: Path) -> None:
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGHUP], ids=["ctrl-c", "terminal-closed"])
+def test_msflash_live_serves_the_page_and_ctrl_c_stops_it_with_the_leds_off(
+    tmp_path: Path, stop: signal.Signals
+) -> None:
     transcript = tmp_path / "serial.log"
     command = [sys.executable, "-m", "msflash.acquisition.app.cli", "live", "--port", "0"]
     command += ["--runs", str(tmp_path / "runs"), "--log-serial", str(transcript)]
@@ -201,7 +204,7 @@ def test_msflash_live_serves_the_page_and_ctrl_c_stops_it_with_the_leds_off(tmp_
         token = page.split('name="msflash-token" content="')[1].split('"')[0]
         assert status == 200 and len(token) >= 24
         assert request("POST", url + "api/levels", {TOKEN_HEADER: token}, {"channel": 1, "level": 0.5})[0] == 200
-        process.send_signal(signal.SIGINT)
+        process.send_signal(stop)
         _, err = process.communicate(timeout=120)
     finally:
         if process.poll() is None:

@@ -13,7 +13,7 @@ is refused. Every state-changing request (each POST) and the WebSocket need the 
 another address (``--host``) is served only to ``?token=`` (then a ``SameSite=Strict`` cookie lets its images
 load). Files are served from the package's own page assets by name and from a run folder by
 :func:`acquisition.app.live.runs.run_file` (no path out of the folder). The LEDs go off when the last page
-has been gone :data:`LAST_CLIENT_GRACE_S` (a reload keeps them), when the server stops (Ctrl-C, SIGTERM),
+has been gone :data:`LAST_CLIENT_GRACE_S` (a reload keeps them), when the server stops (Ctrl-C, SIGTERM, SIGHUP),
 and on any error of a request or of the stream.
 """
 
