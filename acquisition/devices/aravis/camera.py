@@ -48,6 +48,7 @@ from typing import Any, Literal
 import numpy as np
 
 from msflash.acquisition.devices.aravis.camera_features import CameraOptions, FeatureInfo, options_from_json
+from msflash.acquisition.devices.aravis.gv_stream import create_gv_stream
 from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
 from msflash.acquisition.errors import (
@@ -550,6 +551,8 @@ class AcquisitionStats:
     """Count of each non-success buffer status (``missing-packets``, ``timeout``, …)."""
     n_buffers: int = 0
     """Size of the buffer pool."""
+    buffers_unfilled: int = 0
+    """Buffers Aravis returned never filled (status ``cleared``): no frame, pushed back unseen."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -1509,7 +1512,10 @@ class AravisCamera:
             self._stale_before_ns = 1  # start() sets the acquisition's start time
             return
         try:
-            stream = self._camera.create_stream(None, None)
+            if self._protocol == "gige":
+                stream = create_gv_stream(self._camera, payload)  # the UDP socket, sized for frames
+            else:
+                stream = self._camera.create_stream(None, None)
         except GLib.Error as err:
             raise self._fail("creating the stream for", "PayloadSize", err) from err
         if stream is None:
@@ -1590,6 +1596,12 @@ class AravisCamera:
             try:
                 if 0 < int(buffer.get_system_timestamp()) < stale_before_ns:
                     continue  # a frame of the previous acquisition still in flight when it stopped
+                if buffer.get_status() == Aravis.BufferStatus.CLEARED:
+                    # Never filled: Aravis hands a buffer back untouched when the packet that took
+                    # it could not start a frame (a stray datagram; gv_stream.py). Not a frame.
+                    with self._stats_lock:
+                        self._stats = replace(self._stats, buffers_unfilled=self._stats.buffers_unfilled + 1)
+                    continue
                 item, handed_out = self._take(buffer, pool, popped_ns)
             except Exception as exc:  # noqa: BLE001 - handed to the consumer, never lost
                 item = _Failure(exc)
@@ -2023,7 +2035,7 @@ def bare_aravis_run(
             device.set_string_feature_value("TriggerMode", "Off")
             if frame_rate_hz is not None:
                 camera.set_frame_rate(frame_rate_hz)
-        stream = camera.create_stream(None, None)
+        stream = create_gv_stream(camera, int(camera.get_payload()))  # as AravisCamera's
         pool = _BufferPool(stream, int(camera.get_payload()), zero_copy=True)  # buffers only pushed back
         pool.fill(n_buffers)
         camera.start_acquisition()
