@@ -48,6 +48,7 @@ from typing import Any, Literal
 import numpy as np
 
 from msflash.acquisition.devices.aravis.camera_features import CameraOptions, FeatureInfo, options_from_json
+from msflash.acquisition.devices.aravis.device_release import release_lost_device
 from msflash.acquisition.devices.aravis.gv_stream import create_gv_stream
 from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
@@ -86,6 +87,10 @@ INTERFACES: dict[str, str] = {"fake": "Fake", "gige": "GigEVision", "usb3": "USB
 
 _GV_FRAME_ID_WRAP = 1 << 16
 """GigE Vision 1.x block ids are 16 bits and skip 0 when they wrap (65535 is followed by 1)."""
+_GV_CCP_REGISTER = 0x0A00
+"""GigE Vision bootstrap register Control Channel Privilege."""
+_GV_CCP_CONTROL_BITS = 0b11
+"""Its exclusive (bit 0) and control (bit 1) access bits, either of which Aravis's heartbeat accepts."""
 _POP_POLL_US = 10_000
 """How long the pump thread waits in one ``timeout_pop_buffer`` call, so stop() is prompt (a frame
 ends the wait at once; only stop() waits for the timeout)."""
@@ -800,6 +805,8 @@ class AravisCamera:
         self._control_lost_handler: int | None = None
         self._control_lost = threading.Event()
         self._unreachable = False
+        self._release_thread: threading.Thread | None = None
+        """Releases a lost device after its control-lost emission (device_release.py)."""
         self._queue: queue.Queue[Any] = queue.Queue()
         self._pump: threading.Thread | None = None
         self._pump_stop = threading.Event()
@@ -910,9 +917,15 @@ class AravisCamera:
         try:
             self.stop()
         finally:
-            if self._device is not None and self._control_lost_handler is not None:
+            device, camera = self._device, self._camera
+            self._device = self._camera = None
+            if device is not None and self._protocol == "gige" and not self._still_in_control(device):
+                # Its control-lost emission may be under way: never drop the last reference here.
+                self._release_thread = release_lost_device(device, (camera,), self._control_lost, self._name)
+                device = camera = None
+            if device is not None and self._control_lost_handler is not None:
                 try:
-                    self._device.disconnect(self._control_lost_handler)
+                    device.disconnect(self._control_lost_handler)
                 except (TypeError, GLib.Error):  # pragma: no cover - already gone
                     pass
             self._control_lost_handler = None
@@ -922,8 +935,22 @@ class AravisCamera:
             spare, self._spare = self._spare, None
             if spare is not None:
                 spare.pool.release()
-            self._device = None
-            self._camera = None
+            device = camera = None  # a camera that answers: released here, no emission in flight
+
+    def _still_in_control(self, device: Any) -> bool:
+        """Whether this host still holds the GigE device's control channel (one read of CCP, 0x0A00).
+
+        Aravis's heartbeat thread emits ``control-lost`` when the same read shows no privilege or
+        fails; a device that answers with the privilege set cannot be in that emission now, so
+        :meth:`close` may finalise it on this thread (``device_release.py``).
+        """
+        if self._control_lost.is_set() or self._unreachable:
+            return False
+        try:
+            privilege = int(device.read_register(_GV_CCP_REGISTER))
+        except GLib.Error:
+            return False
+        return privilege & _GV_CCP_CONTROL_BITS != 0
 
     def __enter__(self) -> AravisCamera:
         return self
