@@ -91,9 +91,6 @@ _GV_CCP_REGISTER = 0x0A00
 """GigE Vision bootstrap register Control Channel Privilege."""
 _GV_CCP_CONTROL_BITS = 0b11
 """Its exclusive (bit 0) and control (bit 1) access bits, either of which Aravis's heartbeat accepts."""
-_FOREIGN_FRAME_GAP = 1024
-"""A broken buffer more frame ids than this past the last frame is another stream's (1.6 % of a
-random 16-bit id falls within it; this camera losing that many frames in a row is a failure anyway)."""
 _POP_POLL_US = 10_000
 """How long the pump thread waits in one ``timeout_pop_buffer`` call, so stop() is prompt (a frame
 ends the wait at once; only stop() waits for the timeout)."""
@@ -559,8 +556,6 @@ class AcquisitionStats:
     """Count of each non-success buffer status (``missing-packets``, ``timeout``, …)."""
     n_buffers: int = 0
     """Size of the buffer pool."""
-    buffers_foreign: int = 0
-    """Broken buffers whose frame id is far from this camera's last (a stray stream): skipped."""
     buffers_unfilled: int = 0
     """Buffers Aravis returned never filled (status ``cleared``): no frame, pushed back unseen."""
 
@@ -1721,11 +1716,8 @@ class AravisCamera:
                 f"{self._name}: control lost before {where}; expected a "
                 "connected camera — check power and cable, then reopen it"
             )
-        deadline = time.monotonic() + max(0.0, timeout_s)
         try:
             item = self._queue.get(timeout=max(0.0, timeout_s))
-            while isinstance(item, _Bad) and self._is_foreign(item.frame_id):
-                item = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
         except queue.Empty:
             stats = self.stats
             silent = self._silence()
@@ -1805,27 +1797,6 @@ class AravisCamera:
     def last_frame_timing(self) -> FrameTiming | None:
         """Stage times of the frame :meth:`next_frame` returned last (None before the first)."""
         return self._last_timing
-
-    def _is_foreign(self, frame_id: int) -> bool:
-        """Whether a broken buffer's frame id is too far from the last frame's to be this camera's.
-
-        A stray GVSP leader reaching the stream port (another camera's stream sent to a port this
-        one now has) opens a frame Aravis closes broken when this camera's next packet comes; its
-        id is unrelated to ours. Skipped and counted (``buffers_foreign``): never delivered, and the
-        next frame's continuity is still checked against the last one of ours.
-        """
-        previous = self._last_frame_id
-        if previous is None or self._protocol != "gige":
-            return False
-        gap = frame_id_gap(previous, frame_id, wrap=_GV_FRAME_ID_WRAP, skip_zero=True)
-        if 0 <= gap <= _FOREIGN_FRAME_GAP:
-            return False
-        with self._stats_lock:
-            self._stats = replace(self._stats, buffers_foreign=self._stats.buffers_foreign + 1)
-        log.warning(
-            "%s: skipped a broken buffer of frame %d, not this camera's (last %d)", self._name, frame_id, previous
-        )
-        return True
 
     def _check_continuity(self, frame_id: int) -> int:
         previous, self._last_frame_id = self._last_frame_id, frame_id
