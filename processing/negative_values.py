@@ -2,8 +2,8 @@
 
 Public objects
 --------------
-- :data:`PEAK_FRACTION`, :data:`NOISE_SIGMAS`: the two bounds of the rule.
-- :func:`noise_sigma`: a spectrum's noise, estimated from its sample-to-sample differences.
+- :data:`PEAK_FRACTION`, :data:`NOISE_SIGMAS`, :func:`noise_sigmas`: the two bounds of the rule.
+- :func:`noise_sigma`, :func:`noise_pairs`: a spectrum's noise, estimated from its sample-to-sample differences.
 - :class:`ClippedNegatives`: what was clipped in one spectrum (for the JSON and the notes).
 - :func:`clip_negative_noise`: the rule, applied to every column of a table.
 - :func:`blind_columns`: the columns left with no positive value (refused by the same readers).
@@ -14,9 +14,10 @@ of that noise is below zero. A spectral power (or responsivity) cannot be negati
 values are clipped to 0; but a value far below zero is no noise — a dark subtracted twice, a
 baseline offset, a wrong column — and is refused. A negative value is noise when it is at least
 
-    −max(PEAK_FRACTION × peak, NOISE_SIGMAS × σ)
+    −max(PEAK_FRACTION × peak, k × σ)
 
-with ``peak`` the column's largest value and ``σ`` its noise, measured in its tails from the
+with ``peak`` the column's largest value, ``σ`` its noise and ``k`` ≥ 5 from the noise model
+(:func:`noise_sigmas`: more for long columns and for σ measured on few pairs), measured in its tails from the
 differences of neighbouring samples (:func:`noise_sigma`; differences, so that an offset — a dark
 subtracted twice — is no noise). The fraction
 of the peak alone would refuse dim LEDs (an export with peak/noise 30, which
@@ -40,8 +41,17 @@ from msflash.processing.errors import SpectralDataError
 PEAK_FRACTION = 0.05
 """Negative values down to this fraction of the column's peak are noise."""
 NOISE_SIGMAS = 5.0
-"""Negative values down to this many noise σ (:func:`noise_sigma`) are noise: 5σ of Gaussian noise
-is exceeded by 1 sample in ~3.5 million."""
+"""Negative values down to at least this many noise σ (:func:`noise_sigma`) are noise: 5σ of
+Gaussian noise is exceeded by 1 sample in ~3.5 million; :func:`noise_sigmas` widens it for long
+columns and for σ measured on few pairs."""
+FALSE_REFUSAL = 1e-6
+"""The chance that a column of pure Gaussian noise (σ known) has a value beyond the noise bound."""
+SIGMA_SPREAD = 1.2
+"""Standard deviation of :func:`noise_sigma`'s σ / true σ, times √pairs (measured 1.17–1.19)."""
+SIGMA_SPREADS = 3.0
+"""How many of those spreads the noise bound allows for σ measured too low."""
+REGION_SIGMAS = 4.0
+"""The noise region reaches at least this many σ above zero (the noise's whole distribution)."""
 _MAD_TO_SIGMA = 1.4826
 """Median absolute deviation to the σ of a Gaussian."""
 
@@ -52,14 +62,42 @@ MIN_NOISE_PAIRS = 8
 """Fewer neighbouring pairs in the tails than this: no noise estimate (σ = 0, the peak bound alone)."""
 
 
+def _tail_pairs(values: np.ndarray, below: float) -> np.ndarray:
+    low = values < below
+    return low[:-1] & low[1:]
+
+
+def noise_pairs(values: np.ndarray) -> tuple[float, int]:
+    """The noise σ of a spectrum and how many neighbouring pairs it was measured on.
+
+    Pairs of samples both below :data:`NOISE_REGION` of the peak count: there the signal is
+    (nearly) zero, so the differences are noise, and a constant offset (a dark subtracted twice)
+    cancels instead of passing for noise. The median ignores the odd large difference; for
+    independent noise the difference of two samples has σ√2. When that region cuts into the noise
+    itself (its bound below :data:`REGION_SIGMAS` σ, a dim export), the pairs left are the
+    smaller differences and σ comes out low — at peak/σ = 7, the generator's dimmest export, by
+    about a third — so the region is widened to :data:`REGION_SIGMAS` σ and σ measured again.
+    With fewer than :data:`MIN_NOISE_PAIRS` pairs the answer is (0, pairs).
+    """
+    values = np.asarray(values, dtype=float)
+    peak = max(float(values.max()), 0.0) if values.size else 0.0
+    below = NOISE_REGION * peak
+    for _ in range(2):
+        pairs = _tail_pairs(values, below)
+        count = int(np.count_nonzero(pairs))
+        if count < MIN_NOISE_PAIRS:
+            return 0.0, count
+        sigma = float(_MAD_TO_SIGMA * np.median(np.abs(np.diff(values)[pairs])) / np.sqrt(2.0))
+        if below >= REGION_SIGMAS * sigma:
+            break
+        below = REGION_SIGMAS * sigma
+    return sigma, count
+
+
 def noise_sigma(values: np.ndarray) -> float:
     """The noise σ of a spectrum, from the differences of neighbouring samples in its tails.
 
-    Only pairs of samples both below :data:`NOISE_REGION` of the peak count: there the signal is
-    (nearly) zero, so the differences are noise, and a constant offset (a dark subtracted twice)
-    cancels instead of passing for noise. The median ignores the odd large difference; for
-    independent noise the difference of two samples has σ√2. With fewer than
-    :data:`MIN_NOISE_PAIRS` such pairs the answer is 0.
+    See :func:`noise_pairs`; with fewer than :data:`MIN_NOISE_PAIRS` pairs the answer is 0.
 
     Examples
     --------
@@ -68,13 +106,32 @@ def noise_sigma(values: np.ndarray) -> float:
     >>> round(noise_sigma(led), 2)
     0.01
     """
-    values = np.asarray(values, dtype=float)
-    peak = max(float(values.max()), 0.0) if values.size else 0.0
-    low = values < NOISE_REGION * peak
-    pairs = low[:-1] & low[1:]
-    if np.count_nonzero(pairs) < MIN_NOISE_PAIRS:
-        return 0.0
-    return float(_MAD_TO_SIGMA * np.median(np.abs(np.diff(values)[pairs])) / np.sqrt(2.0))
+    return noise_pairs(values)[0]
+
+
+def noise_sigmas(n_samples: int, n_pairs: int) -> float:
+    """How many σ below zero a column's noise may reach: :data:`NOISE_SIGMAS` or more.
+
+    Two allowances, both from the noise model (independent Gaussian noise, σ measured on
+    ``n_pairs`` neighbouring pairs):
+
+    - **many samples**: the bound one of ``n_samples`` pure-noise values crosses with probability
+      :data:`FALSE_REFUSAL` — ``Φ⁻¹(1 − FALSE_REFUSAL / n_samples)``, 5.8σ for 300 samples and
+      6.2σ for 3500 (a 0.2 nm export over 300–1000 nm), where a fixed 5σ refuses about one such
+      column in 900;
+    - **σ measured, not known**: the estimate's spread is :data:`SIGMA_SPREAD` / √pairs of σ
+      (measured: 1.17–1.19 for 100–2000 pairs of Gaussian noise); the bound is widened by
+      :data:`SIGMA_SPREADS` such spreads, as a σ measured that much too low would narrow it.
+
+    Examples
+    --------
+    >>> round(noise_sigmas(300, 300), 2), round(noise_sigmas(3500, 3400), 2)
+    (7.0, 6.58)
+    """
+    from scipy.special import ndtri
+
+    sigmas = max(NOISE_SIGMAS, float(-ndtri(FALSE_REFUSAL / max(int(n_samples), 1))))
+    return float(sigmas * (1.0 + SIGMA_SPREADS * SIGMA_SPREAD / np.sqrt(max(int(n_pairs), 1))))
 
 
 @dataclass(frozen=True)
@@ -114,7 +171,8 @@ def tolerance(values: np.ndarray) -> float:
     """How far below zero a column's values may go and still be noise (see the module notes)."""
     values = np.asarray(values, dtype=float)
     peak = max(float(values.max()), 0.0) if values.size else 0.0
-    return max(PEAK_FRACTION * peak, NOISE_SIGMAS * noise_sigma(values))
+    sigma, pairs = noise_pairs(values)
+    return max(PEAK_FRACTION * peak, noise_sigmas(values.size, pairs) * sigma)
 
 
 def clip_negative_noise(
@@ -178,10 +236,12 @@ def clip_negative_noise(
             where = f"{source}:{lines[row]}" if lines is not None else source
             peak = max(float(column_values.max()), 0.0)
             what = place(row, column) if place is not None else f"column '{name}' at {float(wavelengths_nm[row]):g} nm"
+            sigma, pairs = noise_pairs(column_values)
             raise SpectralDataError(
                 f"{where}: {what} is {column_values[row]:.6g}; expected a non-negative value, or measurement noise "
-                f"down to −{bound:.3g} (the larger of {PEAK_FRACTION:.0%} of the peak {peak:.3g} and {NOISE_SIGMAS:g} × "
-                f"the noise {noise_sigma(column_values):.3g}) — was the dark subtracted twice, or the baseline offset?"
+                f"down to −{bound:.3g} (the larger of {PEAK_FRACTION:.0%} of the peak {peak:.3g} and "
+                f"{noise_sigmas(column_values.size, pairs):.2f} × the noise {sigma:.3g}) — was the dark subtracted "
+                "twice, or the baseline offset?"
             )
         lowest = int(np.argmin(column_values))
         report.append(

@@ -4,9 +4,10 @@ Run as ``python camera_loss_child.py SCENARIO OUT_DIR``. It opens the GigE Visio
 (no discovery), takes two frames, prints ``READY`` and waits for the parent to kill the fake
 process and answer ``KILLED`` on stdin, then carries on and prints one JSON line with what it saw.
 
-Why a child: Aravis 0.8.26 has crashed (SIGSEGV) a few times while tearing down a device whose
-control was lost — inside Aravis, after msflash had already reported the error. In-process, that
-crash took the whole pytest worker down with it; here it is seen, and reported, as what it is.
+Why a child: Aravis 0.8.26 crashed (SIGTRAP, GLib's "Resource deadlock avoided") when the lost
+device was finalised on its own heartbeat thread; ``AravisCamera.close`` now prevents that
+(``devices/aravis/device_release.py``), and a child keeps any such crash from taking the pytest
+worker down with it, reported as what it is.
 
 Scenarios: ``camera`` (AravisCamera alone: the error names the step), ``silent`` (no frame after
 the kill: the error says the camera no longer answers (CameraDisconnectedError), not to check the trigger wiring) and ``capture`` (through

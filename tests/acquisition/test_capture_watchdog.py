@@ -20,6 +20,7 @@ from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.capture import host_silence_s, preview_frames, run_capture
 from msflash.acquisition.session.rig import Rig, open_sim_rig
+from msflash.led_controller import protocol
 from msflash.led_controller.booth import levels_close
 
 SHORT_WATCHDOG_S = 0.2
@@ -187,10 +188,12 @@ def test_a_watchdog_event_from_before_the_sequence_does_not_refuse_its_frames(si
     """LEDs left on and forgotten before the capture: the watchdog switched them off (its WDOG event is
     queued); the sequence that follows is not blamed for it."""
     sim_rig.booth.set_levels((0.5, 0.0, 0.0, 0.0))
-    deadline = time.monotonic() + 5.0
-    while sim_rig.emulator.levels != (0.0,) * 4 and time.monotonic() < deadline:
-        time.sleep(0.01)  # the 0.2 s watchdog fires
-    time.sleep(0.1)  # its event reaches the driver
+    booth = sim_rig.booth
+    with booth._events_cv:  # the 0.2 s watchdog fires and its event is queued in the driver, not yet taken
+        queued = booth._events_cv.wait_for(
+            lambda: any(getattr(e, "kind", None) == protocol.Event.WATCHDOG for e in booth._events), timeout=60.0
+        )
+    assert queued and sim_rig.emulator.levels == (0.0,) * 4
     plan = CapturePlan.ambient_then_each_led(4, 10_000.0)
     with sim_rig.sequence_writer(tmp_path / "sequence") as writer:
         assert len(run_capture(sim_rig.camera, sim_rig.booth, plan, writer)) == len(plan.steps)

@@ -36,6 +36,11 @@ def _write_all(fd: int, data: bytes) -> None:
         view = view[os.write(fd, view) :]
 
 
+EVENT_WAIT_S = 60.0
+"""Wait for an event the test already wrote: only a failure waits this long (the driver's 0.2 s
+command timeout is too short for its reader thread to get 20 KB through a pty on a loaded host)."""
+
+
 @pytest.fixture
 def booth_and_wire(tmp_path: Path) -> Iterator[tuple[LedBooth, int]]:
     """A driver on one end of a raw pty, its transcript in ``tmp_path``; the test writes the booth's side."""
@@ -58,8 +63,8 @@ def test_the_driver_reads_an_over_long_line_as_one_error_and_resynchronises(
     _write_all(wire, b"!" + b"A" * 20_000 + b"\n")  # several reads' worth (4096 bytes each) before its end
     _write_all(wire, encode_frame("!", 1, "TRIG 1 0"))
     with pytest.raises(BoothProtocolError, match=f"longer than {MAX_LINE}"):
-        booth.wait_event()
-    event = booth.wait_event()
+        booth.wait_event(timeout_s=EVENT_WAIT_S)
+    event = booth.wait_event(timeout_s=EVENT_WAIT_S)
     assert (event.kind, event.args) == ("TRIG", ("1", "0"))
     with pytest.raises(BoothTimeoutError):
         booth.wait_event(timeout_s=0.1)
@@ -73,7 +78,7 @@ def test_the_driver_refuses_an_event_whose_body_passes_the_limit(booth_and_wire:
     booth, wire = booth_and_wire
     os.write(wire, _frame_with_body(b"!", b"TRIG 1 0" + b" " * MAX_BODY) + b"\n")
     with pytest.raises(BoothProtocolError, match=f"body of {MAX_BODY + 8} bytes is longer than {MAX_BODY}"):
-        booth.wait_event()
+        booth.wait_event(timeout_s=EVENT_WAIT_S)
 
 
 def test_the_emulator_answers_an_over_long_line_once_and_reads_the_next_request() -> None:

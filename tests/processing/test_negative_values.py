@@ -7,10 +7,13 @@ import pytest
 
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.negative_values import (
+    FALSE_REFUSAL,
     NOISE_SIGMAS,
     PEAK_FRACTION,
     clip_negative_noise,
+    noise_pairs,
     noise_sigma,
+    noise_sigmas,
     tolerance,
 )
 
@@ -30,8 +33,24 @@ def test_dark_subtraction_noise_is_clipped_and_reported(noise: float) -> None:
     (item,) = report
     assert item.count == np.count_nonzero(values < 0) > 0.3 * W.size  # about half the tails
     assert item.most_negative == values.min() and item.at_nm == W[np.argmin(values)]
-    assert item.tolerance == max(PEAK_FRACTION * values.max(), NOISE_SIGMAS * noise_sigma(values))
+    sigma, pairs = noise_pairs(values)
+    assert item.tolerance == max(PEAK_FRACTION * values.max(), noise_sigmas(W.size, pairs) * sigma)
     assert noise_sigma(values) == pytest.approx(noise, rel=0.25)
+
+
+def test_the_noise_bound_follows_the_noise_model() -> None:
+    """At least 5σ; the Gaussian quantile one of n samples crosses with FALSE_REFUSAL; wider for few pairs."""
+    from scipy.stats import norm
+
+    assert noise_sigmas(1, 10**12) == pytest.approx(NOISE_SIGMAS, rel=1e-4)  # one sample: 4.75σ would do
+    assert noise_sigmas(3500, 10**12) == pytest.approx(norm.isf(FALSE_REFUSAL / 3500), rel=1e-4)
+    assert noise_sigmas(3500, 100) > noise_sigmas(3500, 3000) > noise_sigmas(300, 3000)
+
+
+def test_a_dim_exports_noise_is_not_measured_low() -> None:
+    """Peak/σ = 7: the 10 %-of-peak region alone keeps the pairs below 0.7σ and measures σ a third low."""
+    sigmas = [noise_sigma(0.07 * led(0.0, s) + np.random.default_rng(s).normal(0.0, 0.01, W.size)) for s in range(20)]
+    assert np.mean(sigmas) == pytest.approx(0.01, rel=0.1)
 
 
 def test_the_noise_bound_admits_a_dim_led_the_peak_bound_alone_would_refuse() -> None:

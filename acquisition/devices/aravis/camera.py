@@ -47,6 +47,8 @@ from typing import Any, Literal
 import numpy as np
 
 from msflash.acquisition.devices.aravis.camera_features import CameraOptions, FeatureInfo, options_from_json
+from msflash.acquisition.devices.aravis.device_release import release_lost_device
+from msflash.acquisition.devices.aravis.gv_stream import create_gv_stream
 from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
 from msflash.acquisition.errors import (
@@ -86,6 +88,10 @@ INTERFACES: dict[str, str] = {"fake": "Fake", "gige": "GigEVision", "usb3": "USB
 
 _GV_FRAME_ID_WRAP = 1 << 16
 """GigE Vision 1.x block ids are 16 bits and skip 0 when they wrap (65535 is followed by 1)."""
+_GV_CCP_REGISTER = 0x0A00
+"""GigE Vision bootstrap register Control Channel Privilege."""
+_GV_CCP_CONTROL_BITS = 0b11
+"""Its exclusive (bit 0) and control (bit 1) access bits, either of which Aravis's heartbeat accepts."""
 _POP_POLL_US = 10_000
 """How long the pump thread waits in one ``timeout_pop_buffer`` call, so stop() is prompt (a frame
 ends the wait at once; only stop() waits for the timeout)."""
@@ -595,6 +601,8 @@ class AcquisitionStats:
     """Count of each non-success buffer status (``missing-packets``, ``timeout``, …)."""
     n_buffers: int = 0
     """Size of the buffer pool."""
+    buffers_unfilled: int = 0
+    """Buffers Aravis returned never filled (status ``cleared``): no frame, pushed back unseen."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -842,6 +850,8 @@ class AravisCamera:
         self._control_lost_handler: int | None = None
         self._control_lost = threading.Event()
         self._unreachable = False
+        self._release_thread: threading.Thread | None = None
+        """Releases a lost device after its control-lost emission (device_release.py)."""
         self._queue: queue.Queue[Any] = queue.Queue()
         self._pump: threading.Thread | None = None
         self._pump_stop = threading.Event()
@@ -952,9 +962,15 @@ class AravisCamera:
         try:
             self.stop()
         finally:
-            if self._device is not None and self._control_lost_handler is not None:
+            device, camera = self._device, self._camera
+            self._device = self._camera = None
+            if device is not None and self._protocol == "gige" and not self._still_in_control(device):
+                # Its control-lost emission may be under way: never drop the last reference here.
+                self._release_thread = release_lost_device(device, (camera,), self._control_lost, self._name)
+                device = camera = None
+            if device is not None and self._control_lost_handler is not None:
                 try:
-                    self._device.disconnect(self._control_lost_handler)
+                    device.disconnect(self._control_lost_handler)
                 except (TypeError, GLib.Error):  # pragma: no cover - already gone
                     pass
             self._control_lost_handler = None
@@ -964,8 +980,22 @@ class AravisCamera:
             spare, self._spare = self._spare, None
             if spare is not None:
                 spare.pool.release()
-            self._device = None
-            self._camera = None
+            device = camera = None  # a camera that answers: released here, no emission in flight
+
+    def _still_in_control(self, device: Any) -> bool:
+        """Whether this host still holds the GigE device's control channel (one read of CCP, 0x0A00).
+
+        Aravis's heartbeat thread emits ``control-lost`` when the same read shows no privilege or
+        fails; a device that answers with the privilege set cannot be in that emission now, so
+        :meth:`close` may finalise it on this thread (``device_release.py``).
+        """
+        if self._control_lost.is_set() or self._unreachable:
+            return False
+        try:
+            privilege = int(device.read_register(_GV_CCP_REGISTER))
+        except GLib.Error:
+            return False
+        return privilege & _GV_CCP_CONTROL_BITS != 0
 
     def __enter__(self) -> AravisCamera:
         return self
@@ -1554,7 +1584,10 @@ class AravisCamera:
             self._stale_before_ns = 1  # start() sets the acquisition's start time
             return
         try:
-            stream = self._camera.create_stream(None, None)
+            if self._protocol == "gige":
+                stream = create_gv_stream(self._camera, payload)  # the UDP socket, sized for frames
+            else:
+                stream = self._camera.create_stream(None, None)
         except GLib.Error as err:
             raise self._fail("creating the stream for", "PayloadSize", err) from err
         if stream is None:
@@ -1635,6 +1668,12 @@ class AravisCamera:
             try:
                 if 0 < int(buffer.get_system_timestamp()) < stale_before_ns:
                     continue  # a frame of the previous acquisition still in flight when it stopped
+                if buffer.get_status() == Aravis.BufferStatus.CLEARED:
+                    # Never filled: Aravis hands a buffer back untouched when the packet that took
+                    # it could not start a frame (a stray datagram; gv_stream.py). Not a frame.
+                    with self._stats_lock:
+                        self._stats = replace(self._stats, buffers_unfilled=self._stats.buffers_unfilled + 1)
+                    continue
                 item, handed_out = self._take(buffer, pool, popped_ns)
             except Exception as exc:  # noqa: BLE001 - handed to the consumer, never lost
                 item = _Failure(exc)
@@ -2068,7 +2107,7 @@ def bare_aravis_run(
             device.set_string_feature_value("TriggerMode", "Off")
             if frame_rate_hz is not None:
                 camera.set_frame_rate(frame_rate_hz)
-        stream = camera.create_stream(None, None)
+        stream = create_gv_stream(camera, int(camera.get_payload()))  # as AravisCamera's
         pool = _BufferPool(stream, int(camera.get_payload()), zero_copy=True)  # buffers only pushed back
         pool.fill(n_buffers)
         camera.start_acquisition()
