@@ -46,6 +46,10 @@ TEXT_HELP = """commands of a plain-text booth (levels are 0..1, one per channel)
   help | quit"""
 
 
+TABLE_COMMANDS = frozenset({"table", "pset", "arm", "start", "next", "count", "ping", "wdog", "events"})
+"""Commands only our firmware's protocol has (pattern table, trigger count, watchdog, events)."""
+
+
 class ConsoleQuit(Exception):
     """The user asked to leave (``quit``, ``exit``)."""
 
@@ -126,6 +130,11 @@ class BoothConsole:
         if name == "help":
             return self._help.splitlines()
         command = self._commands.get(name)
+        if command is None and self._text is not None and name in TABLE_COMMANDS:
+            return [
+                f"error: {name} needs a booth that runs a pattern table (--booth-protocol msflash); "
+                f"this text booth takes {', '.join(self._commands)}, help, quit (nothing sent)"
+            ]
         if command is None:
             return [f"error: unknown command {name!r}; expected one of {', '.join(self._commands)}, help, quit"]
         try:

@@ -92,8 +92,10 @@ def test_console_help_and_commands_the_text_booth_lacks(server: TextBoothServer,
         try:
             assert "send LINE" in "\n".join(console.execute("help"))
             assert console.execute("table 1,0,0") == [
-                "error: unknown command 'table'; expected one of id, levels, off, status, send, help, quit"
+                "error: table needs a booth that runs a pattern table (--booth-protocol msflash); this text "
+                "booth takes id, levels, off, status, send, help, quit (nothing sent)"
             ]
+            assert console.execute("frobnicate")[0].startswith("error: unknown command 'frobnicate'")
             assert console.execute("send") == ["error: a line to send; expected send LINE (nothing sent)"]
             assert console.execute("levels 0 x 1") == [
                 "error: levels '0 x 1' are not numbers; expected levels L0 L1 … (one per channel) (nothing sent)"
