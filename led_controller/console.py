@@ -1,5 +1,10 @@
-"""The booth console: one typed command at a time, sent through :class:`LedBooth`, with the frames
+"""The booth console: one typed command at a time, sent through the booth's driver, with the frames
 on the wire and what they mean (``msflash booth console PORT``, for bringing up a booth).
+
+The driver is :class:`LedBooth` (our firmware) or :class:`TextBooth` (a plain-text booth,
+``--booth-protocol text``); ``id``, ``levels``, ``off`` and ``status`` go through either, the
+pattern-table commands only through :class:`LedBooth`, and ``send LINE`` (a raw text line) only
+through :class:`TextBooth`.
 
 :class:`BoothConsole` parses a line (``levels 0.5 0 1 …``, ``table …``, ``status`` …), checks it
 before anything is sent, runs it through the driver and returns the lines to show: the frames of
@@ -14,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
+from msflash.led_controller.adapters.text_booth import TextBooth, TextBoothInfo
 from msflash.led_controller.booth import LedBooth
 from msflash.led_controller.errors import BoothError
 from msflash.led_controller.protocol import BoothInfo, level_to_code
@@ -30,6 +36,18 @@ HELP = """commands (levels are 0..1, one per channel; times in µs):
   wdog SECONDS                    watchdog period (0 off, 0.05..600)
   events                          events received and not shown yet
   help | quit"""
+
+TEXT_HELP = """commands of a plain-text booth (levels are 0..1, one per channel):
+  id                              what the booth is (ID?)
+  levels L0 L1 …                  set every LED at once (L …)      e.g. levels 0.5 0 1
+  off                             all LEDs off (OFF)
+  status                          the levels the booth holds (L?)
+  send LINE                       send LINE as typed; show the reply e.g. send L?
+  help | quit"""
+
+
+TABLE_COMMANDS = frozenset({"table", "pset", "arm", "start", "next", "count", "ping", "wdog", "events"})
+"""Commands only our firmware's protocol has (pattern table, trigger count, watchdog, events)."""
 
 
 class ConsoleQuit(Exception):
@@ -51,18 +69,31 @@ class BoothConsole:
 
     Parameters
     ----------
-    booth : LedBooth
+    booth : LedBooth or TextBooth
         The booth, opened with ``log_serial=transcript``.
     transcript : Path
         The transcript the driver writes; the console shows the frames added by each command.
     """
 
-    def __init__(self, booth: LedBooth, transcript: Path) -> None:
-        self._booth = booth
+    def __init__(self, booth: LedBooth | TextBooth, transcript: Path) -> None:
         self._transcript: IO[str] = open(transcript, encoding="ascii")  # noqa: SIM115
         self._transcript.read()  # the header and the ID exchange of opening are shown by `id`
-        self._info: BoothInfo = booth.info
-        self._commands: dict[str, _Command] = {
+        self._info: BoothInfo | TextBoothInfo = booth.info
+        if isinstance(booth, TextBooth):
+            self._text: TextBooth | None = booth
+            self._help = TEXT_HELP
+            self._commands: dict[str, _Command] = {
+                "id": _Command(self._identify_text, "id"),
+                "levels": _Command(self._levels, "levels L0 L1 … (one per channel)"),
+                "off": _Command(self._off, "off"),
+                "status": _Command(self._status_text, "status"),
+                "send": _Command(self._send, "send LINE"),
+            }
+            return
+        self._text = None
+        self._help = HELP
+        self._booth = booth
+        self._commands = {
             "id": _Command(self._identify, "id"),
             "levels": _Command(self._levels, "levels L0 L1 … (one per channel)"),
             "off": _Command(self._off, "off"),
@@ -97,8 +128,13 @@ class BoothConsole:
         if name in ("quit", "exit"):
             raise ConsoleQuit
         if name == "help":
-            return HELP.splitlines()
+            return self._help.splitlines()
         command = self._commands.get(name)
+        if command is None and self._text is not None and name in TABLE_COMMANDS:
+            return [
+                f"error: {name} needs a booth that runs a pattern table (--booth-protocol msflash); "
+                f"this text booth takes {', '.join(self._commands)}, help, quit (nothing sent)"
+            ]
         if command is None:
             return [f"error: unknown command {name!r}; expected one of {', '.join(self._commands)}, help, quit"]
         try:
@@ -131,6 +167,8 @@ class BoothConsole:
         return levels
 
     def _describe(self, levels: list[float] | tuple[float, ...]) -> str:
+        if self._text is not None:  # no drive codes: the text protocol carries decimals
+            return ", ".join(f"{n} {x:.4f}" for n, x in zip(self._info.names, levels))
         return ", ".join(
             f"{n} {x:.4f} ({level_to_code(x, index=i):04X})" for i, (n, x) in enumerate(zip(self._info.names, levels))
         )
@@ -153,14 +191,40 @@ class BoothConsole:
 
     def _levels(self, args: list[str]) -> list[str]:
         levels = self._level_list(args)
-        self._booth.set_levels(levels)
+        (self._text or self._booth).set_levels(levels)
         return [f"LEDs now: {self._describe(levels)}"]
 
     def _off(self, args: list[str]) -> list[str]:
         if args:
             raise ConsoleInputError("off takes no arguments")
+        if self._text is not None:
+            self._text.all_off()
+            return ["all LEDs off"]
         self._booth.all_off()
         return ["all LEDs off; any armed or running sequence aborted (state IDLE)"]
+
+    # -- a plain-text booth ----------------------------------------------------------------------
+
+    def _identify_text(self, args: list[str]) -> list[str]:
+        if args:
+            raise ConsoleInputError("id takes no arguments")
+        assert self._text is not None
+        info = self._text.identify()
+        self._info = info
+        return [f"firmware {info.firmware!r}, plain-text protocol; {info.channels} channels: {' '.join(info.names)}"]
+
+    def _status_text(self, args: list[str]) -> list[str]:
+        if args:
+            raise ConsoleInputError("status takes no arguments")
+        assert self._text is not None
+        return [f"LEDs: {self._describe(self._text.reported_levels())}"]
+
+    def _send(self, args: list[str]) -> list[str]:
+        if not args:
+            raise ConsoleInputError("a line to send")
+        assert self._text is not None
+        reply = self._text.exchange(" ".join(args))
+        return [f"booth answered {reply!r}"]
 
     def _table(self, args: list[str]) -> list[str]:
         if not args:

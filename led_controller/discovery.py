@@ -81,6 +81,24 @@ def find_booths(ports: Iterable[SerialPortInfo] | None = None) -> list[SerialPor
     return found
 
 
+def other_serial_ports(ports: Iterable[SerialPortInfo]) -> list[SerialPortInfo]:
+    """The serial ports that do not look like our booths, in device order (a text booth may be among them).
+
+    Nothing is opened: which of them is a booth only asking can tell, and only a port the user names
+    is asked (:func:`text_booth_hint`).
+    """
+    return sorted((p for p in ports if not is_booth(p)), key=lambda p: p.device)
+
+
+def text_booth_hint(device: str) -> str:
+    """How to ask the port ``device`` whether it is a plain-text booth.
+
+    >>> text_booth_hint("/dev/ttyUSB0")
+    "'msflash doctor --port /dev/ttyUSB0 --booth-protocol text' to check a text booth"
+    """
+    return f"'msflash doctor --port {device} --booth-protocol text' to check a text booth"
+
+
 def find_booth(ports: Iterable[SerialPortInfo] | None = None) -> SerialPortInfo:
     """The one booth among the serial ports.
 

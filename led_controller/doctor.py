@@ -230,7 +230,8 @@ def check_serial_ports(ports: Sequence[SerialPortInfo], dev_root: Path, identity
                 "booth.ports",
                 "warn",
                 f"no booth among the serial ports (found: {listing})",
-                "plug the booth in; if it uses another USB id, pass --port",
+                "plug the booth in; if it uses another USB id, pass --port (a plain-text booth: "
+                "'msflash doctor --port P --booth-protocol text' asks port P who it is)",
             )
         ]
     findings = []

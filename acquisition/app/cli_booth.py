@@ -10,9 +10,11 @@ from pathlib import Path
 
 from msflash.acquisition.app.cli_common import UsageError, print_json, progress
 from msflash.led_controller.booth import sigterm_as_exit
+from msflash.led_controller.booth_probe import PROBE_PROTOCOLS, probe_booth
 from msflash.led_controller.doctor import run_doctor
 from msflash.led_controller.emulator import DEFAULT_NAMES, DEFAULT_PEAKS_NM, BoothEmulator, serve_on_pty
 from msflash.led_controller.emulator_faults import FaultInjector, emulator_state, parse_fault_spec, write_state_file
+from msflash.led_controller.errors import BoothError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -57,6 +59,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "doctor", help="check USB3 Vision, GigE and serial setup", description="Check the host for cameras and booths."
     )
     doc.add_argument("--json", action="store_true", help="print one JSON object")
+    doc.add_argument(
+        "--port",
+        default=None,
+        help="ask the booth on PORT who it is (only this port is opened; nothing is sent to other ports); "
+        "prints its firmware, channels and names, or what answered instead (exit 2)",
+    )
+    doc.add_argument(
+        "--booth-protocol",
+        choices=PROBE_PROTOCOLS,
+        default="msflash",
+        help="the protocol to ask --port in: msflash (our firmware) or text (plain-text booth); default %(default)s",
+    )
+    doc.add_argument("--timeout-s", type=float, default=1.0, help="--port: reply timeout in seconds (default 1)")
     doc.add_argument("--sysfs-root", type=Path, default=Path("/sys"), help=argparse.SUPPRESS)
     doc.add_argument("--dev-root", type=Path, default=Path("/dev"), help=argparse.SUPPRESS)
     doc.add_argument("--proc-root", type=Path, default=Path("/proc"), help=argparse.SUPPRESS)
@@ -143,7 +158,9 @@ def booth_emulator(args: argparse.Namespace, *, stop: threading.Event | None = N
 
 
 def doctor(args: argparse.Namespace) -> int:
-    """Run the host checks; exit 1 if any check failed."""
+    """Run the host checks; exit 1 if any check failed. With ``--port``: ask that one booth who it is."""
+    if getattr(args, "port", None) is not None:
+        return _doctor_port(args)
     findings = run_doctor(sysfs_root=args.sysfs_root, dev_root=args.dev_root, proc_root=args.proc_root)
     failed = any(f.status == "fail" for f in findings)
     if getattr(args, "json", False):
@@ -154,3 +171,21 @@ def doctor(args: argparse.Namespace) -> int:
             if f.remedy and f.status != "ok":
                 sys.stdout.write(f"      remedy: {f.remedy}\n")
     return 1 if failed else 0
+
+
+def _doctor_port(args: argparse.Namespace) -> int:
+    """``doctor --port P``: the booth's identity in ``--booth-protocol``, or one line and exit 2."""
+    if not args.timeout_s > 0:
+        raise UsageError(f"--timeout-s {args.timeout_s}: expected a positive number of seconds")
+    try:
+        found = probe_booth(args.port, args.booth_protocol, timeout_s=args.timeout_s)
+    except BoothError as err:
+        raise UsageError(f"{err} (--booth-protocol {args.booth_protocol})") from err
+    if getattr(args, "json", False):
+        print_json({"ok": True, "booth": {**found.__dict__, "names": list(found.names)}})
+        return 0
+    sys.stdout.write(
+        f"OK    booth.identity: booth {found.port} answers --booth-protocol {found.protocol}: "
+        f"firmware {found.firmware!r}; {found.channels} channels: {' '.join(found.names)}\n"
+    )
+    return 0

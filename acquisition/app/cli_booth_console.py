@@ -13,6 +13,8 @@ import tempfile
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import UsageError
+from msflash.led_controller.adapters import BOOTH_PROTOCOLS, open_booth
+from msflash.led_controller.adapters.text_booth import TextBooth
 from msflash.led_controller.booth import LedBooth, sigterm_as_exit
 from msflash.led_controller.console import BoothConsole, ConsoleQuit
 
@@ -32,6 +34,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "from stdin; each is checked, framed, sent, and its reply explained. LEDs off on exit.",
     )
     console.add_argument("port", help="serial port of the booth (e.g. /dev/ttyACM0)")
+    console.add_argument(
+        "--booth-protocol",
+        choices=BOOTH_PROTOCOLS,
+        default=BOOTH_PROTOCOLS[0],
+        help="the booth's protocol: msflash (our firmware) or text (plain-text booth); default %(default)s",
+    )
     console.add_argument("--timeout-s", type=float, default=2.0, help="reply timeout of each command in seconds")
     console.set_defaults(handler=booth_console)
     booth.set_defaults(handler=_booth_without_action)
@@ -45,31 +53,38 @@ def booth_console(args: argparse.Namespace) -> int:
     """Run the console until ``quit`` or the end of stdin."""
     if not args.timeout_s > 0:
         raise UsageError(f"--timeout-s {args.timeout_s}: expected a positive number of seconds")
-    interactive = sys.stdin.isatty()
     with tempfile.TemporaryDirectory(prefix="msflash-console-") as folder:
         transcript = Path(folder) / "transcript.txt"
-        with sigterm_as_exit(), LedBooth.open(args.port, timeout_s=args.timeout_s, log_serial=transcript) as booth:
-            console = BoothConsole(booth, transcript)
-            try:
-                _say(console.execute("id"))
-                _say(["type help for the commands; quit (or end of input) switches the LEDs off"])
-                while True:
-                    try:
-                        line = input("booth> ") if interactive else sys.stdin.readline()
-                    except EOFError:
-                        break
-                    if not interactive:
-                        if not line:
-                            break
-                        _say([f"booth> {line.rstrip()}"])
-                    try:
-                        _say(console.execute(line))
-                    except ConsoleQuit:
-                        break
-            finally:
-                console.close()
+        with sigterm_as_exit():
+            booth = open_booth(args.port, args.booth_protocol, log_serial=transcript, timeout_s=args.timeout_s)
+            assert isinstance(booth, LedBooth | TextBooth)  # what open_booth opens
+            with booth:  # LEDs off on every way out, as each driver's context manager does
+                _prompt(BoothConsole(booth, transcript))
         _say(["LEDs off"])
     return 0
+
+
+def _prompt(console: BoothConsole) -> None:
+    """Show the booth's identity, then run typed lines until ``quit`` or the end of stdin."""
+    interactive = sys.stdin.isatty()
+    try:
+        _say(console.execute("id"))
+        _say(["type help for the commands; quit (or end of input) switches the LEDs off"])
+        while True:
+            try:
+                line = input("booth> ") if interactive else sys.stdin.readline()
+            except EOFError:
+                break
+            if not interactive:
+                if not line:
+                    break
+                _say([f"booth> {line.rstrip()}"])
+            try:
+                _say(console.execute(line))
+            except ConsoleQuit:
+                break
+    finally:
+        console.close()
 
 
 def _say(lines: list[str]) -> None:

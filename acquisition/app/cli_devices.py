@@ -6,7 +6,10 @@ GigE Vision discovery broadcasts on every network interface, so it runs only whe
 entries; :meth:`AravisCamera.describe_feature`) — the names ``--feature NAME=VALUE`` takes.
 Booths are the serial ports that look like one (USB id or product string,
 :func:`led_controller.discovery.find_booths`; the system's port list, nothing is opened):
-``msflash run`` takes the single one found, and ``msflash doctor`` says why none is.
+``msflash run`` takes the single one found, and ``msflash doctor`` says why none is. The other
+serial ports are listed too (``serial`` lines, ``serial_ports`` in JSON), each with the
+``msflash doctor --port P --booth-protocol text`` that asks it whether it is a plain-text booth:
+no port is probed unless the user names it.
 """
 
 from __future__ import annotations
@@ -16,7 +19,8 @@ from typing import Any
 
 from msflash.acquisition.app.cli_common import UsageError, print_json, progress
 from msflash.acquisition.errors import CameraError
-from msflash.led_controller.discovery import SerialPortInfo, find_booths
+from msflash.led_controller import discovery
+from msflash.led_controller.discovery import SerialPortInfo, find_booths, other_serial_ports, text_booth_hint
 
 DEFAULT_INTERFACES = "usb3"
 """What ``devices`` searches without ``--interfaces``: never GigE Vision discovery by default."""
@@ -59,7 +63,9 @@ def _devices(args: argparse.Namespace) -> int:
         if not aravis_camera.is_ipv4_address(address):
             raise UsageError(f"--address {address!r}: not an IPv4 address; expected e.g. 192.168.1.20")
         cameras.append(_camera_at(address))
-    booths = [_booth_entry(port) for port in find_booths()]
+    ports = discovery.list_serial_ports()
+    booths = [_booth_entry(port) for port in find_booths(ports)]
+    serial_ports = [{**_booth_entry(port), "hint": text_booth_hint(port.device)} for port in other_serial_ports(ports)]
     if args.json:
         print_json(
             {
@@ -67,6 +73,7 @@ def _devices(args: argparse.Namespace) -> int:
                 "aravis": aravis_camera.Aravis._version,
                 "cameras": cameras,
                 "booths": booths,
+                "serial_ports": serial_ports,
             }
         )
         return 0
@@ -82,6 +89,11 @@ def _devices(args: argparse.Namespace) -> int:
         print(
             f"{camera['device_id']}\t{camera['interface']}\t{camera['vendor']} {camera['model']}\t"
             f"serial {camera['serial']}\t{where}"
+        )
+    for port in serial_ports:  # not our USB id: maybe another booth; never opened unless named
+        print(
+            f"serial\t{port['device']}\t{port['usb_id']}\t{port['product'] or port['description'] or '-'}\t"
+            f"{port['hint']}"
         )
     if not booths:
         print("no booth found among the serial ports")
@@ -126,8 +138,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     devices = subparsers.add_parser(
         "devices",
         help="list cameras (Aravis) on the given interfaces, and booths among the serial ports",
-        description="List cameras found by Aravis, and the serial ports that are msflash booths (by USB "
-        "id or product string). GigE Vision discovery broadcasts on every network "
+        description="List cameras found by Aravis, the serial ports that are msflash booths (by USB "
+        "id or product string), and the other serial ports (not opened; 'msflash doctor --port P "
+        "--booth-protocol text' asks one whether it is a text booth). GigE Vision discovery broadcasts on every network "
         "interface and runs only with --interfaces gige.",
     )
     devices.add_argument(

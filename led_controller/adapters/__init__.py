@@ -16,8 +16,12 @@ BOOTH_PROTOCOLS = ("msflash", "text")
 """``--booth-protocol`` names, the default first."""
 
 
-def open_booth(port: str, protocol: str = "msflash", *, log_serial: str | Path | None = None) -> Booth:
+def open_booth(
+    port: str, protocol: str = "msflash", *, log_serial: str | Path | None = None, timeout_s: float = 1.0
+) -> Booth:
     """The booth at ``port`` speaking ``protocol`` (a name of :data:`BOOTH_PROTOCOLS`), opened and identified.
+
+    ``timeout_s`` is the reply timeout of each command, in seconds.
 
     Raises
     ------
@@ -27,7 +31,7 @@ def open_booth(port: str, protocol: str = "msflash", *, log_serial: str | Path |
         The port did not open or answer in that protocol.
     """
     if protocol == "msflash":
-        return LedBooth.open(port, log_serial=log_serial)
+        return LedBooth.open(port, log_serial=log_serial, timeout_s=timeout_s)
     if protocol == "text":
-        return TextBooth.open(port, log_serial=log_serial)
+        return TextBooth.open(port, log_serial=log_serial, timeout_s=timeout_s)
     raise ValueError(f"--booth-protocol {protocol!r}: unknown; expected one of {', '.join(BOOTH_PROTOCOLS)}")

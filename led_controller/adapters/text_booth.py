@@ -253,6 +253,27 @@ class TextBooth:
         self.close()
         return False
 
+    # -- by hand (``msflash booth console PORT --booth-protocol text``) -------------------------
+
+    def identify(self) -> TextBoothInfo:
+        """Ask ``ID?`` again and return (and keep) what the booth says it is."""
+        self._info = parse_identity(self._ask("ID?"), f"booth {self._name}")
+        return self._info
+
+    def exchange(self, line: str) -> str:
+        """Send one typed command line as it is and return the reply line.
+
+        Raises
+        ------
+        BoothError
+            An ``ERR`` reply (its reason in the message), silence, or a lost link.
+        ValueError
+            ``line`` is empty or not printable ASCII (nothing sent).
+        """
+        if not line.strip() or not line.isascii() or not line.isprintable():
+            raise ValueError(f"booth {self._name}: line {line!r}; expected a printable ASCII command")
+        return self._ask(line.strip())
+
     # -- the wire -------------------------------------------------------------------------------
 
     def _expect_ok(self, line: str, *, off_on_error: bool = True) -> None:

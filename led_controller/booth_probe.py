@@ -1,0 +1,151 @@
+"""Asking one named serial port who it is, in one booth protocol (``msflash doctor --port P``).
+
+Only the port the user names is opened, and only the identity request of the protocol the user
+names is sent (``ID`` framed for ``msflash``, ``ID?`` for ``text``): bytes sent to an unknown
+serial device can upset it. The first reply line is read raw, so that what answered instead of
+a booth — nothing, binary noise, an ``ERR`` line, the other protocol — is said in one line.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import serial
+
+from msflash.led_controller.adapters.text_booth import parse_identity
+from msflash.led_controller.booth import port_open_error
+from msflash.led_controller.errors import BoothError, BoothTimeoutError
+from msflash.led_controller.protocol import encode_request, frame_problem, parse_frame, parse_identify, parse_reply
+
+PROBE_PROTOCOLS = ("msflash", "text")
+"""The protocols :func:`probe_booth` can ask in."""
+
+MAX_LINES = 8
+"""Reply lines read before giving up (an msflash booth may send events before the ID reply)."""
+
+
+@dataclass(frozen=True)
+class ProbedBooth:
+    """What a booth said it is when asked for its identity."""
+
+    port: str
+    """The port asked."""
+    protocol: str
+    """The protocol it answered in."""
+    firmware: str
+    """Its firmware string."""
+    channels: int
+    """Its number of LED channels."""
+    names: tuple[str, ...]
+    """One name per channel."""
+
+
+def describe_answer(raw: bytes) -> str:
+    """What a reply line ``raw`` looks like, for a message saying what answered instead of a booth.
+
+    >>> describe_answer(b"ERR unknown command")
+    "an ERR line 'ERR unknown command' (a text booth? try --booth-protocol text)"
+    >>> describe_answer(bytes([0xFF, 0x00, 0x13]))
+    'binary noise ff 00 13 (another device, or the wrong baud rate)'
+    >>> describe_answer(b"=00:01D:ERR - E_FRAME frame too short*234F")
+    "an msflash frame '=00:01D:ERR - E_FRAME frame too short*234F' (an msflash booth? try --booth-protocol msflash)"
+    """
+    line = raw.rstrip(b"\r\n")
+    if any(byte > 0x7E or (byte < 0x20 and byte != 0x09) for byte in line):
+        return f"binary noise {line[:16].hex(' ')} (another device, or the wrong baud rate)"
+    text = line.decode("ascii")
+    if text.startswith("ERR"):
+        return f"an ERR line {text[:80]!r} (a text booth? try --booth-protocol text)"
+    if frame_problem(line) is None:
+        return f"an msflash frame {text[:80]!r} (an msflash booth? try --booth-protocol msflash)"
+    return f"the line {text[:80]!r}"
+
+
+def probe_booth(port: str, protocol: str, *, timeout_s: float = 1.0, baudrate: int = 115200) -> ProbedBooth:
+    """Open ``port``, send ``protocol``'s identity request, and parse the answer.
+
+    Parameters
+    ----------
+    port : str
+        The device path or pyserial URL the user named.
+    protocol : str
+        ``msflash`` (``docs/booth-protocol.md``) or ``text`` (``docs/booth-adapters.md`` §2).
+    timeout_s : float
+        How long to wait for the reply line.
+
+    Raises
+    ------
+    BoothError
+        One line: the port did not open, or what answered instead and what was expected.
+    """
+    if protocol not in PROBE_PROTOCOLS:
+        raise ValueError(f"--booth-protocol {protocol!r}: unknown; expected one of {', '.join(PROBE_PROTOCOLS)}")
+    try:
+        link = serial.serial_for_url(
+            port, baudrate=baudrate, timeout=timeout_s, write_timeout=timeout_s, exclusive=True
+        )
+    except serial.SerialException as err:
+        raise port_open_error(port, err) from err
+    except ValueError as err:
+        raise BoothError(f"booth {port}: cannot open ({err}); expected a device path or pyserial URL") from err
+    where = f"booth {port}"
+    request = b"ID?\n" if protocol == "text" else encode_request(1, "ID")
+    expected = (
+        "'<firmware>,channels=<n>[,names=…]' (a text booth)"
+        if protocol == "text"
+        else "an msflash ID reply frame (our firmware)"
+    )
+    try:
+        link.reset_input_buffer()
+        link.write(request)
+        link.flush()
+        deadline = time.monotonic() + timeout_s
+        for _ in range(MAX_LINES):
+            raw = link.read_until(b"\n")
+            if not raw.endswith(b"\n"):
+                got = f"; got {describe_answer(raw)} without a line end" if raw else ""
+                raise BoothTimeoutError(
+                    f"{where}: nothing answered {request.strip().decode()} within {timeout_s:g} s{got}; "
+                    f"expected {expected}",
+                    command="ID",
+                    timeout_s=timeout_s,
+                )
+            line = raw.rstrip(b"\r\n")
+            if protocol == "msflash" and line.startswith(b"!") and frame_problem(line) is None:
+                if time.monotonic() > deadline:
+                    break
+                continue  # an event left over from a sequence: the ID reply follows
+            return _parse(port, protocol, line, expected)
+        raise BoothTimeoutError(
+            f"{where}: only events within {timeout_s:g} s, no ID reply; expected {expected}",
+            command="ID",
+            timeout_s=timeout_s,
+        )
+    except (OSError, serial.SerialException) as err:
+        if isinstance(err, BoothError):
+            raise
+        raise BoothError(
+            f"{where}: link lost while asking its identity ({err}); expected the device connected"
+        ) from err
+    finally:
+        link.close()
+
+
+def _parse(port: str, protocol: str, line: bytes, expected: str) -> ProbedBooth:
+    where = f"booth {port}"
+    instead = f"{where}: answered {describe_answer(line)}; expected {expected}"
+    try:
+        if protocol == "text":
+            if line.startswith(b"ERR") or frame_problem(line) is None:
+                raise BoothError(instead)
+            text_info = parse_identity(line.decode("ascii"), where)
+            return ProbedBooth(port, protocol, text_info.firmware, text_info.channels, text_info.names)
+        if frame_problem(line) is not None:
+            raise BoothError(instead)
+        info = parse_identify(
+            parse_reply(parse_frame(line, where=where, command="ID"), "ID", where=where), line, where=where
+        )
+    except UnicodeDecodeError:
+        raise BoothError(instead) from None
+    return ProbedBooth(port, protocol, info.firmware, info.channels, tuple(info.names))
