@@ -170,16 +170,7 @@ class LedBooth:
             If the port cannot be opened (permissions, busy — another program holds it: the port is
             opened exclusively) or does not answer as a booth.
         """
-        try:
-            # exclusive: a second host on the same booth (another msflash) would take replies meant
-            # for this one and drive the LEDs under its frames; it is refused as a busy port instead.
-            port = serial.serial_for_url(
-                url, baudrate=baudrate, timeout=_READ_POLL_S, write_timeout=timeout_s, exclusive=True
-            )
-        except serial.SerialException as err:
-            raise port_open_error(url, err) from err
-        except ValueError as err:
-            raise BoothError(f"booth {url}: cannot open ({err}); expected a device path or pyserial URL") from err
+        port = open_serial_port(url, baudrate, _READ_POLL_S, timeout_s)
         try:
             booth = cls(port, timeout_s=timeout_s, log_serial=log_serial, name=url)
         except BaseException:
@@ -760,6 +751,30 @@ class LedBooth:
         with self._events_cv:
             self._events.append(item)
             self._events_cv.notify_all()
+
+
+def open_serial_port(url: str, baudrate: int, read_timeout_s: float, write_timeout_s: float) -> serial.SerialBase:
+    """The serial port of a booth, opened exclusively, or one :class:`BoothError` line saying why not.
+
+    Exclusive: a second host on the same booth (another msflash) would take replies meant for this
+    one and drive the LEDs under its frames; it is refused as a busy port instead. Every booth driver
+    and the doctor's probe open their port here.
+
+    Raises
+    ------
+    BoothNotFoundError
+        If the port does not exist.
+    BoothError
+        If it cannot be opened (permissions, busy, a malformed pyserial URL).
+    """
+    try:
+        return serial.serial_for_url(
+            url, baudrate=baudrate, timeout=read_timeout_s, write_timeout=write_timeout_s, exclusive=True
+        )
+    except serial.SerialException as err:
+        raise port_open_error(url, err) from err
+    except ValueError as err:
+        raise BoothError(f"booth {url}: cannot open ({err}); expected a device path or pyserial URL") from err
 
 
 def port_open_error(url: str, err: serial.SerialException) -> BoothError:

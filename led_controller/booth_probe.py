@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import serial
 
 from msflash.led_controller.adapters.text_booth import parse_identity
-from msflash.led_controller.booth import port_open_error
+from msflash.led_controller.booth import open_serial_port
 from msflash.led_controller.errors import BoothError, BoothTimeoutError
 from msflash.led_controller.protocol import encode_request, frame_problem, parse_frame, parse_identify, parse_reply
 
@@ -81,14 +81,7 @@ def probe_booth(port: str, protocol: str, *, timeout_s: float = 1.0, baudrate: i
     """
     if protocol not in PROBE_PROTOCOLS:
         raise ValueError(f"--booth-protocol {protocol!r}: unknown; expected one of {', '.join(PROBE_PROTOCOLS)}")
-    try:
-        link = serial.serial_for_url(
-            port, baudrate=baudrate, timeout=timeout_s, write_timeout=timeout_s, exclusive=True
-        )
-    except serial.SerialException as err:
-        raise port_open_error(port, err) from err
-    except ValueError as err:
-        raise BoothError(f"booth {port}: cannot open ({err}); expected a device path or pyserial URL") from err
+    link = open_serial_port(port, baudrate, timeout_s, timeout_s)
     where = f"booth {port}"
     request = b"ID?\n" if protocol == "text" else encode_request(1, "ID")
     expected = (

@@ -276,3 +276,16 @@ def forget_digests(directory: Path) -> None:
         frame.pop("sha256", None)
         frame.pop("file_bytes", None)
     path.write_text(json.dumps(document, indent=1))
+
+
+class PipedLines:
+    """A non-interactive stdin holding ``text``: what a pipe gives an interactive command (the booth console)."""
+
+    def __init__(self, text: str) -> None:
+        self._lines = text.splitlines(keepends=True)
+
+    def isatty(self) -> bool:
+        return False
+
+    def readline(self) -> str:
+        return self._lines.pop(0) if self._lines else ""

@@ -29,7 +29,7 @@ from typing import IO, Any, Literal
 
 import serial
 
-from msflash.led_controller.booth import port_open_error
+from msflash.led_controller.booth import open_serial_port
 from msflash.led_controller.booth_interface import HOST_PACED_ONLY, BoothCapabilities
 from msflash.led_controller.errors import BoothError, BoothProtocolError, BoothTimeoutError
 
@@ -160,18 +160,11 @@ class TextBooth:
         Raises
         ------
         BoothNotFoundError
-            The port does not exist (:func:`led_controller.booth.port_open_error`).
+            The port does not exist (:func:`led_controller.booth.open_serial_port`).
         BoothError
             The port cannot be opened or does not answer as a text booth (its LEDs are sent ``OFF``).
         """
-        try:
-            port = serial.serial_for_url(
-                url, baudrate=baudrate, timeout=timeout_s, write_timeout=timeout_s, exclusive=True
-            )
-        except serial.SerialException as err:
-            raise port_open_error(url, err) from err  # missing, no permission, busy: as for LedBooth
-        except ValueError as err:
-            raise BoothError(f"booth {url}: cannot open ({err}); expected a device path or pyserial URL") from err
+        port = open_serial_port(url, baudrate, timeout_s, timeout_s)  # missing, no permission, busy: as for LedBooth
         try:
             booth = cls(port, name=url, log_serial=log_serial)
         except BaseException:

@@ -17,6 +17,7 @@ from msflash.acquisition.app.cli_booth import booth_emulator, register
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.led_controller import LedBooth
 from msflash.led_controller.bench import run_bench
+from tests.helpers import PipedLines
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -100,7 +101,7 @@ def test_booth_console_reads_commands_from_stdin_and_switches_off_at_the_end(
     at the end of input even though the last command switched them on."""
     from msflash.acquisition.app.cli import main
 
-    monkeypatch.setattr(sys, "stdin", _Lines("levels 1 0 0 0 0 0 0.5\nlevels 3\n"))
+    monkeypatch.setattr(sys, "stdin", PipedLines("levels 1 0 0 0 0 0 0.5\nlevels 3\n"))
     assert main(["booth", "console", booth_on_pty.port]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[2].startswith("firmware msflash-emulator-0.1, protocol 1; 7 channels")
@@ -120,16 +121,3 @@ def test_booth_without_an_action_is_a_usage_error(capsys: pytest.CaptureFixture[
         capsys.readouterr().err.strip()
         == "msflash: error: booth: no action given; expected 'msflash booth console PORT'"
     )
-
-
-class _Lines:
-    """A non-interactive stdin holding ``text``."""
-
-    def __init__(self, text: str) -> None:
-        self._lines = text.splitlines(keepends=True)
-
-    def isatty(self) -> bool:
-        return False
-
-    def readline(self) -> str:
-        return self._lines.pop(0) if self._lines else ""

@@ -22,6 +22,7 @@ from msflash.led_controller.console import BoothConsole
 from msflash.led_controller.discovery import SerialPortInfo
 from msflash.led_controller.emulator import BoothEmulator, serve_on_pty
 from msflash.led_controller.errors import BoothError
+from tests.helpers import PipedLines
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -30,19 +31,6 @@ ROOT = Path(__file__).resolve().parents[2]
 def server() -> Iterator[TextBoothServer]:
     with serve_text_booth(3, ["red", "green", "blue"]) as served:
         yield served
-
-
-class _Lines:
-    """A non-interactive stdin holding ``text`` (what a pipe gives the console)."""
-
-    def __init__(self, text: str) -> None:
-        self._lines = text.splitlines(keepends=True)
-
-    def isatty(self) -> bool:
-        return False
-
-    def readline(self) -> str:
-        return self._lines.pop(0) if self._lines else ""
 
 
 # -- the console --------------------------------------------------------------------------------
@@ -54,7 +42,7 @@ def test_console_session_levels_status_err_and_off_at_end_of_input(
     """Each line is checked against the booth's 3 channels, sent as a text line and explained; an ERR reply
     is one line; end of input switches the LEDs off although the last command switched them on."""
     typed = "levels 0.5 0 1\nstatus\nlevels 0.5\nsend L 2 0 0\nlevels 0.25 1 0\n"
-    monkeypatch.setattr(sys, "stdin", _Lines(typed))
+    monkeypatch.setattr(sys, "stdin", PipedLines(typed))
     assert main(["booth", "console", server.port, "--booth-protocol", "text"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[:3] == [
