@@ -259,13 +259,18 @@ class TextBooth:
         Raises
         ------
         BoothError
-            An ``ERR`` reply (its reason in the message), silence, or a lost link.
+            An ``ERR`` reply (its reason in the message), silence, or a lost link; the LEDs are sent
+            ``OFF`` first, as after every failed command.
         ValueError
             ``line`` is empty or not printable ASCII (nothing sent).
         """
         if not line.strip() or not line.isascii() or not line.isprintable():
             raise ValueError(f"booth {self._name}: line {line!r}; expected a printable ASCII command")
-        return self._ask(line.strip())
+        try:
+            return self._ask(line.strip())
+        except BoothError:
+            self._off_after_error()
+            raise
 
     # -- the wire -------------------------------------------------------------------------------
 

@@ -40,7 +40,8 @@ def test_console_session_levels_status_err_and_off_at_end_of_input(
     server: TextBoothServer, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """Each line is checked against the booth's 3 channels, sent as a text line and explained; an ERR reply
-    is one line; end of input switches the LEDs off although the last command switched them on."""
+    is one line and switches the LEDs off (a raw ``send`` too); end of input switches the LEDs off although
+    the last command switched them on."""
     typed = "levels 0.5 0 1\nstatus\nlevels 0.5\nsend L 2 0 0\nlevels 0.25 1 0\n"
     monkeypatch.setattr(sys, "stdin", PipedLines(typed))
     assert main(["booth", "console", server.port, "--booth-protocol", "text"]) == 0
@@ -65,6 +66,8 @@ def test_console_session_levels_status_err_and_off_at_end_of_input(
     assert refused == [
         "  > L 2 0 0",
         "  < ERR level 2 of channel 1 outside [0, 1]",
+        "  > OFF",  # a refused line switches the LEDs off, as every failed command does
+        "  < OK",
         f"booth: booth {server.port}: refused L: level 2 of channel 1 outside [0, 1]",
     ]
     assert out[-1] == "LEDs off"
