@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import json
 import shutil
+import signal
 import tempfile
 import warnings
 from collections.abc import Callable, Iterator
@@ -87,6 +88,10 @@ def check_export(sequence: Sequence, formats: tuple[str, ...]) -> None:
                 f"{sequence.path}: frames[0].file '{sequence.frames[0].file}' holds {header.dtype} values; expected "
                 "integer counts for --to dng (export float frames with --to ome-tiff or exr)"
             )
+
+
+STOPPING_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+"""Signals held pending while an export's staging folder is created (:func:`export_sequence`)."""
 
 
 @dataclass(frozen=True)
@@ -386,14 +391,19 @@ def export_sequence(
         raise UsageError(f"export format {unknown[0]!r} is unknown; expected some of {', '.join(EXPORT_FORMATS)}")
     check_out(out, option)
     check_export(sequence, formats)
+    # A stopping signal (Ctrl-C, SIGTERM, SIGHUP) between the staging folder's creation and the cleanup
+    # below taking charge of it would leave the folder behind: it is held pending until then.
+    signals_before = signal.pthread_sigmask(signal.SIG_BLOCK, STOPPING_SIGNALS)
     try:
         staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".export-tmp", dir=out.parent))
     except OSError as err:
+        signal.pthread_sigmask(signal.SIG_SETMASK, signals_before)
         raise UsageError(
             f"{option} {out}: cannot be created in {out.parent} ({err.strerror or err}); expected a writable folder"
         ) from None
-    work = _Work(sequence, target, estimate, solutions, solver, alpha, bin_factor)
     try:
+        signal.pthread_sigmask(signal.SIG_SETMASK, signals_before)  # a signal held meanwhile is raised here
+        work = _Work(sequence, target, estimate, solutions, solver, alpha, bin_factor)
         mode = default_file_mode()
         staging.chmod(mode | (mode & 0o444) >> 2)  # mkdtemp's 0700 would keep other lab users out: what mkdir gives
         for name in formats:
