@@ -344,7 +344,6 @@ class FactoredQuadratic:
         linears = np.asarray(linears, dtype=float)
         solutions = np.empty_like(linears)
         open_columns = np.arange(linears.shape[1])
-        scale = np.maximum(1.0, abs(self.bounds))
         while open_columns.size:
             column, open_columns = open_columns[0], open_columns[1:]
             solution = self.minimise(linears[:, column])
@@ -361,7 +360,7 @@ class FactoredQuadratic:
                 continue  # dependent active constraints: full solves for the rest
             candidates = self.inverse_factor @ (shifts + rows_z.T @ multipliers)
             slack = self.constraints @ candidates - self.bounds[:, None]
-            met = np.all(multipliers >= 0, axis=0) & np.all(slack >= -_FEASIBILITY_TOLERANCE * scale[:, None], axis=0)
+            met = np.all(multipliers >= 0, axis=0) & np.all(slack >= -self.active_limit[:, None], axis=0)
             for recorder in _recorders:
                 for accepted in open_columns[met]:
                     recorder.append(

@@ -480,8 +480,7 @@ def accumulate_statistics(
     exact = all(np.issubdtype(frame.dtype, np.integer) and frame.dtype.itemsize <= 2 for frame in frames)
     if exact:
         chunk_pixels = max(1, min(chunk_pixels, frame_kernels.EXACT_SAMPLES // n_channels))
-    exact_moments = np.zeros((n_rows, n_rows), dtype=np.int64)
-    moments = np.zeros((n_rows, n_rows))
+    moments = np.zeros((n_rows, n_rows), dtype=np.int64 if exact else np.float64)
     block = np.empty((n_rows, min(chunk_pixels, n_pixels), n_channels))
     for start in range(0, n_pixels, chunk_pixels):
         stop = min(start + chunk_pixels, n_pixels)
@@ -502,13 +501,8 @@ def accumulate_statistics(
         if saturated.any():
             view[:, saturated] = 0.0
         flat = view.reshape(n_rows, -1)
-        if exact:
-            exact_moments += (flat @ flat.T).astype(np.int64)
-        else:
-            moments += flat @ flat.T
-    if exact:
-        moments = exact_moments.astype(np.float64)
-    return statistics_from_moments(moments, spec, n_pixels * n_channels)
+        moments += (flat @ flat.T).astype(moments.dtype, copy=False)
+    return statistics_from_moments(moments.astype(np.float64, copy=False), spec, n_pixels * n_channels)
 
 
 def _accumulate_binned(
