@@ -27,6 +27,12 @@ count ahead of the frames received when a frame times out, or a ``TRIG`` whose s
 plan's raises :class:`DroppedFrameError` naming the missing step. Frames already written stay on
 disk (the writer keeps the sequence readable with ``complete: false``).
 
+Retakes (:func:`_with_retakes`): a frame lost at its own step — incomplete, or its frame id
+skipped (:class:`FrameLostError`) — is taken again, with the steps after it, up to
+:data:`RETAKES` times in the same sync mode; only when every retake is lost too does the capture
+fail. A lost frame costs a retake, not the sequence: a GigE Vision link under load drops packets
+and the camera does not resend them.
+
 The flash in the same run (:func:`run_capture_with_flash`): the plan gets one more step, a
 placeholder ``flash`` step, and the camera keeps streaming from the ambient frame to the flash
 frame. When the last LED frame arrives, ``decide(frames)`` computes the flash levels and
@@ -68,7 +74,14 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
 
 from msflash.acquisition.devices.camera import Camera, RawFrame
-from msflash.acquisition.errors import BoothStepError, CaptureError, DroppedFrameError, FrameTimeoutError, UsageError
+from msflash.acquisition.errors import (
+    BoothStepError,
+    CaptureError,
+    DroppedFrameError,
+    FrameLostError,
+    FrameTimeoutError,
+    UsageError,
+)
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter
@@ -94,6 +107,9 @@ WATCHDOG_SLACK_S = 0.5
 """Host pauses on top of a plan's scheduled silence towards the booth (writing a frame, the flash
 decision, the OS scheduler), in seconds: see :func:`host_silence_s`."""
 
+
+RETAKES = 2
+"""How many times a capture takes a lost frame again before it gives up (:func:`_with_retakes`)."""
 
 SYNC_OF_TRIGGER = {"software": "host", "booth": "booth", "camera": "camera"}
 """The ``--sync`` mode (:mod:`led_controller.booth_interface`) each plan trigger needs of the booth."""
@@ -186,13 +202,15 @@ def run_capture_with_flash(
     writer: FrameWriter,
     decide: FlashDecide,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
+    retakes: int = RETAKES,
 ) -> list[SequenceFrame]:
     """Capture ``plan`` and then a flash frame whose levels ``decide`` computes, in one stream.
 
     ``decide`` runs on the capturing thread right after the last frame of ``plan`` arrived; it
     returns the flash levels and exposure. Booth master: the step period is fixed when the table
     is armed, so the flash exposure is capped at the plan's longest exposure (logged). Returns the
-    entries of every frame, the flash last. Errors as :func:`run_capture`.
+    entries of every frame, the flash last. Errors and ``retakes`` as :func:`run_capture` (a retake
+    that reaches the flash step decides it again, from the same frames).
     """
     if not plan.steps:
         raise ValueError("run_capture_with_flash: the plan has no steps; expected ambient + LED steps")
@@ -217,10 +235,9 @@ def run_capture_with_flash(
     if plan.trigger not in ("software", "booth", "camera"):
         raise ValueError(f"run_capture_with_flash: plan trigger {plan.trigger!r}; expected software, booth or camera")
     check_booth_runs(booth, plan)
+    paced = _host_paced if plan.trigger == "software" else _table_paced
     with collector_paused():
-        if plan.trigger == "software":
-            return _host_paced(camera, booth, full, writer, on_frame, flash_step)
-        return _table_paced(camera, booth, full, writer, on_frame, flash_step)  # type: ignore[arg-type]
+        return _with_retakes(paced, camera, booth, full, writer, on_frame, flash_step, retakes)  # type: ignore[arg-type]
 
 
 @contextmanager
@@ -323,26 +340,133 @@ def run_capture(
     plan: CapturePlan,
     writer: FrameWriter,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
+    retakes: int = RETAKES,
 ) -> list[SequenceFrame]:
     """Capture every step of ``plan`` in its sync mode, writing each frame as it arrives.
+
+    A frame lost at its own step (:class:`FrameLostError`: incomplete, or its frame id skipped)
+    is taken again up to ``retakes`` times: the steps from the lost one on are captured anew in
+    the same sync mode (:func:`_with_retakes`); the frames already written stay.
 
     Raises
     ------
     FrameTimeoutError
         No frame within the frame timeout (and the booth counted no trigger for it); names the step.
+    FrameLostError
+        A frame was lost at its step and so was every retake of it; names the step.
     DroppedFrameError
-        A frame was lost (frame ids skipped, or the booth triggered a frame that never came);
-        names the step. Frames already written stay on disk.
+        The booth triggered a frame that never came, or exposed a step other than the plan's (not
+        retaken: the frames since may be paired with the wrong steps); names the step. Frames
+        already written stay on disk.
     UsageError
         The booth cannot run the plan's sync mode (:func:`check_booth_runs`); nothing was captured.
     """
     if plan.trigger in SYNC_OF_TRIGGER:
         check_booth_runs(booth, plan)
     if plan.trigger == "software":
-        return _host_paced(camera, booth, plan, writer, on_frame)
+        return _with_retakes(_host_paced, camera, booth, plan, writer, on_frame, None, retakes)
     if plan.trigger in ("booth", "camera"):
-        return _table_paced(camera, booth, plan, writer, on_frame)  # type: ignore[arg-type]
+        return _with_retakes(_table_paced, camera, booth, plan, writer, on_frame, None, retakes)  # type: ignore[arg-type]
     raise ValueError(f"run_capture: plan trigger {plan.trigger!r}; expected software, booth or camera")
+
+
+@dataclasses.dataclass
+class _Progress:
+    """What a capture has taken so far, across retakes (:func:`_with_retakes`)."""
+
+    written: list[SequenceFrame] = dataclasses.field(default_factory=list)
+    """The entries written, in step order."""
+    frames: list[RawFrame] = dataclasses.field(default_factory=list)
+    """The raw frames of those entries (the flash is decided from them)."""
+    retake: int = 0
+    """0 on the first attempt, then the number of the retake running."""
+
+
+PacedSteps = Callable[
+    [
+        Camera,
+        Booth,
+        CapturePlan,
+        FrameWriter,
+        Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
+        Callable[[list[RawFrame]], CaptureStep] | None,
+        _Progress,
+    ],
+    None,
+]
+"""A sync mode's capture loop (:func:`_host_paced`, :func:`_table_paced`): runs the plan's steps and
+adds each frame it writes to the progress."""
+
+
+def _vanished(plan: CapturePlan, progress: _Progress) -> bool:
+    """Whether a frame timeout is a frame lost on the link rather than a trigger never taken.
+
+    Host paced, one software trigger is out and its frame alone is awaited, so a timeout pairs
+    nothing wrongly; once this capture has had frames (whole or not) the trigger path works and
+    the frame vanished on its way (every packet of it, its leader among them, dropped). A timeout
+    before any frame is the trigger or the wiring: taken again it would time out again. Booth and
+    camera master time out only when the booth counted no trigger for the frame (a booth that
+    counted one raises :class:`DroppedFrameError`): that is never retaken.
+    """
+    return plan.trigger == "software" and bool(progress.written or progress.retake)
+
+
+def _with_retakes(
+    paced: PacedSteps,
+    camera: Camera,
+    booth: Booth,
+    plan: CapturePlan,
+    writer: FrameWriter,
+    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
+    flash: Callable[[list[RawFrame]], CaptureStep] | None,
+    retakes: int,
+) -> list[SequenceFrame]:
+    """Run ``paced`` over ``plan``; after a lost frame, run it again over the steps not yet written.
+
+    A frame lost on its way (:class:`FrameLostError`: incomplete — a GigE Vision link dropped
+    packets, which the camera never resends — or missing, its frame id skipped; host paced, a
+    frame that vanished after earlier ones came, :func:`_vanished`) is a transport failure found at
+    its own step, before any later frame was written: the scene and the LEDs are as they were, so
+    the same step taken again gives the frame the sequence needs.
+    The loop that lost it has already switched the LEDs off, aborted the booth's table and stopped
+    the camera (:func:`_leds_off_at_exit`); the retake prepares the camera and loads the booth
+    (its table, in booth and camera master) with the remaining steps, which keep their indices,
+    and pairs and checks their frames exactly as the first attempt did. The frames written before
+    the loss stay, in order, so the sequence on disk is the plan's whether or not a step was
+    retaken (the entry of each frame taken in a retake records ``retake``: 1, 2…). ``retakes`` 0
+    gives up at the first loss. Other failures are not retaken: no frame at all (a trigger the
+    camera never saw is found only once the booth has counted more triggers than frames arrived,
+    and the frames in between may already be paired with the wrong steps), a booth's table step
+    other than the plan's, the booth's link, the disk — taking them again would repeat them or
+    hide them.
+    """
+    if retakes < 0:
+        raise ValueError(f"retakes {retakes}; expected 0 or more")
+    progress = _Progress()
+    while True:
+        rest = dataclasses.replace(plan, steps=plan.steps[len(progress.written) :])
+        try:
+            paced(camera, booth, rest, writer, on_frame, flash, progress)
+            return progress.written
+        except (FrameLostError, FrameTimeoutError) as err:
+            del progress.frames[len(progress.written) :]  # a frame kept but not written goes with it
+            if isinstance(err, FrameTimeoutError) and not _vanished(plan, progress):
+                raise
+            if progress.retake >= retakes:
+                if progress.retake:
+                    raise type(err)(f"{err} (after {progress.retake} retake(s) of lost frames)") from err
+                raise
+            progress.retake += 1
+            lost = plan.steps[len(progress.written)]
+            log.warning(
+                "%s; taking step %d (%s) again, with the %d step(s) after it (retake %d of %d)",
+                err,
+                lost.index,
+                lost.label,
+                len(plan.steps) - len(progress.written) - 1,
+                progress.retake,
+                retakes,
+            )
 
 
 def _saved(writer: FrameWriter, written: list[SequenceFrame]) -> str:
@@ -353,15 +477,17 @@ def _write(
     writer: FrameWriter,
     step: CaptureStep,
     frame: RawFrame,
-    written: list[SequenceFrame],
+    progress: _Progress,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
     trigger: int | None = None,
 ) -> None:
     extra: dict = {"frame_id": frame.frame_id, "timestamp_ns": frame.timestamp_ns}
     if trigger is not None:
         extra["trigger"] = trigger
+    if progress.retake:
+        extra["retake"] = progress.retake
     entry = writer.add_frame(frame.pixels, step.role, step.led_levels, frame.exposure_us, frame.gain, extra=extra)
-    written.append(entry)
+    progress.written.append(entry)
     log.info("step %d (%s): frame %d saved as %s", step.index, step.label, frame.frame_id, entry.file)
     if on_frame is not None:
         on_frame(step, frame, entry)
@@ -373,20 +499,21 @@ def _host_paced(
     plan: CapturePlan,
     writer: FrameWriter,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
-    flash: Callable[[list[RawFrame]], CaptureStep] | None = None,
-) -> list[SequenceFrame]:
-    written: list[SequenceFrame] = []
-    frames: list[RawFrame] = []
+    flash: Callable[[list[RawFrame]], CaptureStep] | None,
+    progress: _Progress,
+) -> None:
+    written, frames = progress.written, progress.frames
     previous_id: int | None = None
+    last = len(plan.steps) - 1
     with _sequence_watchdog(booth, plan), _leds_off_at_exit(camera, booth):
         camera.prepare(plan)
         camera.start()
-        for step in plan.steps:
+        for position, step in enumerate(plan.steps):
             cover: AbstractContextManager[None] = nullcontext()
-            if flash is not None and step.index == len(plan.steps) - 1:
+            if flash is not None and position == last:
                 step = flash(frames)
                 plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
-                _replan(camera, plan, step.index)
+                _replan(camera, plan, position)
                 # The flash exposure is decided now and may be longer than any planned step.
                 cover = _watchdog_covering(booth, dataclasses.replace(plan, steps=(step,)))
             with cover, _booth_errors_at(f"step {step.index} ({step.label})", _saved(writer, written)):
@@ -399,15 +526,14 @@ def _host_paced(
                         f"step {step.index} ({step.label}): {err}; {_saved(writer, written)}"
                     ) from err
             if previous_id is not None and (frame.frame_id - previous_id) % FRAME_ID_MODULUS != 1:
-                raise DroppedFrameError(
+                raise FrameLostError(
                     f"step {step.index} ({step.label}): camera frame id {frame.frame_id} follows {previous_id}; "
                     f"a frame was lost. {_saved(writer, written)}"
                 )
             _check_watchdog(booth, f"step {step.index} ({step.label})", _saved(writer, written))
             previous_id = frame.frame_id
             frames.append(frame)
-            _write(writer, step, frame, written, on_frame)
-    return written
+            _write(writer, step, frame, progress, on_frame)
 
 
 def _table_paced(
@@ -416,10 +542,10 @@ def _table_paced(
     plan: CapturePlan,
     writer: FrameWriter,
     on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
-    flash: Callable[[list[RawFrame]], CaptureStep] | None = None,
-) -> list[SequenceFrame]:
-    written: list[SequenceFrame] = []
-    frames: list[RawFrame] = []
+    flash: Callable[[list[RawFrame]], CaptureStep] | None,
+    progress: _Progress,
+) -> None:
+    written, frames = progress.written, progress.frames
     last = len(plan.steps) - 1
     mode = plan.trigger
     settle_us = int(round(plan.settle_s * 1e6))
@@ -456,13 +582,14 @@ def _table_paced(
             camera.start()
             booth.start()
             for number, step in enumerate(plan.steps, start=1):
+                position = number - 1  # in this table (a retake's table starts at the lost step)
                 doing = f"step {step.index} ({step.label})"
-                if flash is not None and step.index == last - 1 and pause is not None:
+                if flash is not None and position == last - 1 and pause is not None:
                     pause()  # the writer thread waits from the last LED frame until the flash frame is in
-                if flash is not None and step.index == last:
+                if flash is not None and position == last:
                     step = flash(frames)
                     plan = dataclasses.replace(plan, steps=(*plan.steps[:-1], step))
-                    _replan(camera, plan, step.index)
+                    _replan(camera, plan, position)
                     if step.exposure_us > longest_us:  # camera master: the flash exposure is not capped
                         flash_plan = dataclasses.replace(plan, steps=(step,))
                         frame_timeout_s = max(frame_timeout_s, flash_plan.frame_timeout_s)
@@ -470,7 +597,7 @@ def _table_paced(
                     # The last LED frame is in, so its exposure is over: the flash step need not
                     # wait for its scheduled slot (booth master, PSET … NOW).
                     # (A booth firmware without NOW refuses it; LedBooth.set_step then falls back to plain PSET.)
-                    booth.set_step(step.index, step.led_levels, now=mode == "booth")
+                    booth.set_step(position, step.led_levels, now=mode == "booth")
                 if mode == "camera":
                     if number > 1:
                         time.sleep(plan.settle_s)  # the next step's LEDs settle between exposures
@@ -495,7 +622,7 @@ def _table_paced(
                 trigger = 1 + (frame.frame_id - first_id) % FRAME_ID_MODULUS
                 if trigger != number:
                     missing = plan.steps[number - 1]
-                    raise DroppedFrameError(
+                    raise FrameLostError(
                         f"step {missing.index} ({missing.label}): no frame for trigger {number}; the next frame "
                         f"(id {frame.frame_id}) is trigger {trigger}. {_saved(writer, written)}"
                     )
@@ -506,11 +633,11 @@ def _table_paced(
                         f"{trigger}; expected step {step.index} — a trigger was missed or doubled. {_saved(writer, written)}"
                     )
                 frames.append(frame)
-                if flash is not None and step.index == last and resume is not None:
+                if flash is not None and position == last and resume is not None:
                     # Only now: a writer resumed at the PSET took the GIL for its queued frames while
                     # the booth's thread was due to pulse the flash trigger (seen up to ~8 ms late).
                     resume()
-                _write(writer, paired, frame, written, on_frame, trigger=trigger)
+                _write(writer, paired, frame, progress, on_frame, trigger=trigger)
             doing = "after the last step (waiting for DONE)"
             done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
             log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))
@@ -521,7 +648,6 @@ def _table_paced(
         finally:
             if resume is not None:
                 resume()
-    return written
 
 
 def _booth_step_of(booth: SequencedBooth, trigger: int, timeout_s: float, step: CaptureStep) -> int:

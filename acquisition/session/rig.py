@@ -547,6 +547,7 @@ class WiredFakeCamera:
         self._exposing = False
         with self._pending_lock:
             self._pending.clear()
+        self._forget_latched_trigger()
         self.aravis.start()
         if self._mode == "booth":
             self._pulses = queue.Queue()
@@ -563,6 +564,17 @@ class WiredFakeCamera:
             except Exception as err:  # noqa: BLE001 - the capture sees the missing frame
                 log.error("aravis-fake trigger line: %s", err)
                 self._errors.append(err)
+
+    def _forget_latched_trigger(self) -> None:
+        """Clear a software trigger the fake latched but has not taken.
+
+        A real camera ignores triggers while it is not acquiring; the fake keeps the last one in
+        its register and takes it when the next acquisition starts, sending a frame nobody
+        triggered (seen after a capture stopped mid-table to take a lost frame again: the booth's
+        last pulses were still being issued).
+        """
+        if self._fake is not None:
+            self._fake.write_register(self.TRIGGER_REGISTER, 0)
 
     def _wait_trigger_taken(self, timeout_s: float = 1.0) -> None:
         if self._fake is None:
@@ -615,6 +627,11 @@ class WiredFakeCamera:
                 self._exposing = False
                 self._emulator.exposure_active(False)
         levels = self._take_levels()
+        if self.world is not None and levels is None:
+            raise CameraError(
+                f"aravis-fake: frame {frame.frame_id} arrived with no trigger issued for it; expected "
+                "one frame per trigger"
+            )
         if self.world is None or levels is None:
             return frame
         pixels = self.world.render(levels, frame.exposure_us, frame.gain)
@@ -632,12 +649,13 @@ class WiredFakeCamera:
             return self._pending.popleft() if self._pending else None
 
     def stop(self) -> None:
-        """Stop acquisition and the trigger-line thread."""
+        """Stop acquisition and the trigger-line thread; a trigger not yet taken is forgotten."""
         if self._pulse_thread is not None:
             self._pulses.put(None)
             self._pulse_thread.join(timeout=5.0)
             self._pulse_thread = None
         self.aravis.stop()
+        self._forget_latched_trigger()
 
     def close(self) -> None:
         """Release the fake camera."""
@@ -667,6 +685,7 @@ def open_aravis_fake_rig(
     led_spectra: str | Path | Spectra | None = None,
     flash_power: float | None = None,
     patch_px: int | None = None,
+    lost_packet_ratio: float = 0.0,
     **_ignored: object,
 ) -> Rig:
     """The ``aravis-fake`` rig: AravisCamera on the GigE fake at 127.0.0.1 + emulator on a pty + LedBooth.
@@ -681,6 +700,9 @@ def open_aravis_fake_rig(
     (RGGB) with the ROI the scene's size (``width``/``height`` None or equal to it; the default
     chart is 200 × 186). The rig records the world's LED spectra, responsivities and true
     ambient, as the ``sim`` rig does.
+
+    ``lost_packet_ratio``: the fraction of stream packets the fake drops, a lossy link (its frames
+    arrive incomplete now and then, as on a congested GigE Vision network).
 
     ``rendered`` False: the frames are the fake's test patterns (``pixel_format`` default Mono16,
     ``width`` × ``height`` default 64 × 48): the paper's seven LEDs, ISETCam's
@@ -733,7 +755,7 @@ def open_aravis_fake_rig(
             from msflash.acquisition.devices.aravis.fake_log import mute_unfilled_format_warning
 
             closers.append(mute_unfilled_format_warning())  # the pixels are rendered: its lines say nothing
-        fake = aravis_camera.AravisGvFake(serial=serial)
+        fake = aravis_camera.AravisGvFake(serial=serial, lost_packet_ratio=lost_packet_ratio)
         fake.start()
         closers.append(fake.close)
         aravis = aravis_camera.AravisCamera(

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app.cli import main
-from msflash.acquisition.errors import DroppedFrameError
+from msflash.acquisition.errors import DroppedFrameError, FrameLostError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
 from msflash.acquisition.session.capture import run_capture
@@ -101,13 +101,122 @@ def test_a_lost_frame_names_its_step_and_keeps_the_frames_written(sim_rig: Rig, 
         return real_next(timeout_s)
 
     camera.next_frame = losing_next
-    with pytest.raises(DroppedFrameError) as caught, _writer(sim_rig, tmp_path / "sequence") as writer:
-        run_capture(camera, sim_rig.booth, _plan(trigger), writer)
+    with pytest.raises(FrameLostError) as caught, _writer(sim_rig, tmp_path / "sequence") as writer:
+        run_capture(camera, sim_rig.booth, _plan(trigger), writer, retakes=0)
     assert str(caught.value).startswith("step 2 (led:2)")
     assert "2 frame(s) already saved" in str(caught.value)
     sequence = read_sequence(tmp_path / "sequence")
     assert not sequence.complete and len(sequence.frames) == 2
     assert sim_rig.emulator.levels == (0.0,) * 4
+
+
+def _losing_step(sim_rig: Rig, trigger: str, plan: CapturePlan, lost: int, times: int, how: str) -> dict[str, int]:
+    """Make the sim camera lose the frame of step ``lost`` the first ``times`` times that step is
+    exposed; returns the count of frames lost.
+
+    ``how``: ``incomplete`` — the camera reports it (:class:`FrameLostError`, as Aravis does for a
+    frame missing packets); ``skipped`` — it never arrives and the next one comes in its place,
+    its id skipped (found by the capture's own continuity check, from the second frame of a table
+    or of a host-paced run on)."""
+    camera = sim_rig.camera
+    real_next = camera.next_frame
+    count = {"lost": 0}
+
+    def losing_next(timeout_s: float):
+        frame = real_next(timeout_s)
+        if camera.rendered_levels[-1] == plan.steps[lost].led_levels and count["lost"] < times:
+            count["lost"] += 1
+            if how == "incomplete":
+                raise FrameLostError(f"camera: frame {frame.frame_id} arrived incomplete")
+            if how == "vanished":
+                raise FrameTimeoutError(f"camera: no frame within {timeout_s:.3g} s")
+            if trigger != "booth":
+                camera.trigger()  # host and camera master trigger the next step themselves
+            return real_next(timeout_s)
+        return frame
+
+    camera.next_frame = losing_next
+    return count
+
+
+def _nearest(frame: np.ndarray, references: list[np.ndarray]) -> int:
+    return int(np.argmin([np.abs(frame.astype(float) - r).mean() for r in references]))
+
+
+@pytest.mark.parametrize("how", ["incomplete", "skipped"])
+@pytest.mark.parametrize("trigger", MODES)
+def test_a_lost_frame_is_taken_again_with_the_steps_after_it(
+    sim_rig: Rig, tmp_path: Path, host_frames, trigger: str, how: str
+) -> None:
+    """The lost step and the ones after it are captured anew in the same sync mode: the sequence is
+    complete, each frame shows its own step's light, and the retaken frames say so."""
+    plan = _plan(trigger)
+    count = _losing_step(sim_rig, trigger, plan, lost=2, times=1, how=how)
+    with _writer(sim_rig, tmp_path / "sequence") as writer:
+        written = run_capture(sim_rig.camera, sim_rig.booth, plan, writer)
+        writer.finish()
+    assert count["lost"] == 1 and len(written) == len(plan.steps)
+    sequence = read_sequence(tmp_path / "sequence")
+    assert sequence.complete
+    assert [f.extra.get("retake", 0) for f in sequence.frames] == [0, 0, 1, 1, 1]
+    assert [tuple(f.led_levels) for f in sequence.frames] == [s.led_levels for s in plan.steps]
+    if trigger != "software":  # each table's triggers count from 1
+        assert [f.extra["trigger"] for f in sequence.frames] == [1, 2, 1, 2, 3]
+    # Each frame is its own step's (other noise draws than the host-paced reference, same light).
+    assert [_nearest(sequence.load_frame(i), host_frames) for i in range(5)] == [0, 1, 2, 3, 4]
+    assert sim_rig.emulator is not None and sim_rig.emulator.levels == (0.0,) * 4
+    assert not sim_rig.line_errors
+
+
+@pytest.mark.parametrize("trigger", MODES)
+def test_a_frame_lost_at_every_retake_fails_naming_its_step(sim_rig: Rig, tmp_path: Path, trigger: str) -> None:
+    plan = _plan(trigger)
+    count = _losing_step(sim_rig, trigger, plan, lost=3, times=100, how="incomplete")
+    with pytest.raises(FrameLostError) as caught, _writer(sim_rig, tmp_path / "sequence") as writer:
+        run_capture(sim_rig.camera, sim_rig.booth, plan, writer, retakes=2)
+    assert count["lost"] == 3  # the first attempt and two retakes
+    message = str(caught.value)
+    assert message.startswith("camera: frame") and message.endswith("(after 2 retake(s) of lost frames)")
+    sequence = read_sequence(tmp_path / "sequence")
+    assert not sequence.complete and len(sequence.frames) == 3
+    assert sim_rig.emulator.levels == (0.0,) * 4
+
+
+def test_a_host_paced_frame_that_vanishes_after_others_came_is_taken_again(
+    sim_rig: Rig, tmp_path: Path, host_frames
+) -> None:
+    plan = _plan("software")
+    count = _losing_step(sim_rig, "software", plan, lost=2, times=1, how="vanished")
+    with _writer(sim_rig, tmp_path / "sequence") as writer:
+        run_capture(sim_rig.camera, sim_rig.booth, plan, writer)
+        writer.finish()
+    sequence = read_sequence(tmp_path / "sequence")
+    assert count["lost"] == 1 and sequence.complete
+    assert [f.extra.get("retake", 0) for f in sequence.frames] == [0, 0, 1, 1, 1]
+    assert [_nearest(sequence.load_frame(i), host_frames) for i in range(5)] == [0, 1, 2, 3, 4]
+
+
+@pytest.mark.parametrize("trigger", MODES)
+def test_a_frame_that_never_comes_is_not_taken_again_where_it_may_be_the_trigger(
+    sim_rig: Rig, tmp_path: Path, trigger: str
+) -> None:
+    """Host paced, no frame yet: the trigger or the wiring, which a retake would only wait out
+    again. Booth and camera master, a frame the booth triggered but that never came: a missed
+    trigger is found only here, and the frames since may be paired with the wrong steps."""
+    plan = _plan(trigger)
+    lost = 0 if trigger == "software" else 2
+    count = _losing_step(sim_rig, trigger, plan, lost=lost, times=100, how="vanished")
+    expected = FrameTimeoutError if trigger == "software" else DroppedFrameError
+    with pytest.raises(expected) as caught, _writer(sim_rig, tmp_path / "sequence") as writer:
+        run_capture(sim_rig.camera, sim_rig.booth, plan, writer)
+    assert not isinstance(caught.value, FrameLostError)
+    assert count["lost"] == 1 and "retake" not in str(caught.value)
+    assert len(read_sequence(tmp_path / "sequence").frames) == lost
+
+
+def test_retakes_must_not_be_negative(sim_rig: Rig, tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="retakes -1; expected 0 or more"), _writer(sim_rig, tmp_path / "s") as writer:
+        run_capture(sim_rig.camera, sim_rig.booth, _plan("software"), writer, retakes=-1)
 
 
 def test_booth_master_trigger_without_a_frame_is_a_dropped_frame(sim_rig: Rig, tmp_path: Path) -> None:

@@ -54,10 +54,11 @@ def test_capture_writes_a_complete_sequence(aravis: ModuleType, tmp_path, sync: 
     assert [f.role for f in sequence.frames] == ["ambient"] + ["led"] * 7
     assert sequence.camera.pixel_format == "BayerRG16" and sequence.camera.cfa == "RGGB"
     assert "channels" not in sequence.camera.extra and "rendered" in sequence.camera.extra["pixels"]
-    ids = [f.extra["frame_id"] for f in sequence.frames]
-    assert all((b - a) % (1 << 16) == 1 for a, b in zip(ids, ids[1:]))
-    if sync != "host":
-        assert [f.extra["trigger"] for f in sequence.frames] == list(range(1, 9))
+    for attempt in _attempts(sequence.frames):  # a frame lost under load is taken again, in a new attempt
+        ids = [f.extra["frame_id"] for f in attempt]
+        assert all((b - a) % (1 << 16) == 1 for a, b in zip(ids, ids[1:]))
+        if sync != "host":
+            assert [f.extra["trigger"] for f in attempt] == list(range(1, len(attempt) + 1))
     for index, frame in enumerate(sequence.frames):
         assert frame.led_levels == pytest.approx([1.0 if i == index - 1 else 0.0 for i in range(7)])
     pixels = sequence.load_frame(0)
@@ -90,6 +91,51 @@ def test_each_frame_is_rendered_under_the_levels_of_its_trigger(aravis: ModuleTy
     _assert_released(aravis)
 
 
+def _attempts(frames) -> list[list]:
+    """The frames of a sequence grouped by capture attempt (``retake`` 0, 1, 2…, in order)."""
+    groups: dict[int, list] = {}
+    for frame in frames:
+        groups.setdefault(frame.extra.get("retake", 0), []).append(frame)
+    assert list(groups) == sorted(groups)
+    return list(groups.values())
+
+
+@pytest.mark.parametrize("sync", ["host", "booth", "camera"])
+def test_a_lossy_link_costs_retakes_not_the_sequence(aravis: ModuleType, tmp_path, sync: str) -> None:
+    """The fake drops 2 % of its stream packets, so about two frames in three arrive incomplete:
+    each lost frame is taken again, with the steps after it, until the sequence is complete, and
+    every frame written was rendered under its own step's levels (150 such sequences, 2,630
+    retakes, none failed or mispaired: docs/reliability.md)."""
+    trigger = {"host": "software", "booth": "booth", "camera": "camera"}[sync]
+    plan = CapturePlan.ambient_then_each_led(7, 8_000.0, trigger=trigger)  # type: ignore[arg-type]
+    paired = []
+    trace = []  # step, frame id, trigger, retake of each frame written: said when a pairing fails
+    with open_aravis_fake_rig(lost_packet_ratio=0.02) as rig:
+
+        def check(step, frame, entry) -> None:
+            paired.append((rig.camera.rendered_levels[-1], step.led_levels))
+            trace.append(f"{step.label}:{frame.frame_id}:{entry.extra.get('trigger')}:{entry.extra.get('retake', 0)}")
+
+        with rig.sequence_writer(tmp_path / "s") as writer:
+            run_capture(rig.camera, rig.booth, plan, writer, on_frame=check, retakes=100)
+            writer.finish()
+        assert not rig.line_errors
+    sequence = read_sequence(tmp_path / "s")
+    assert sequence.complete and len(sequence.frames) == 8
+    assert [tuple(f.led_levels) for f in sequence.frames] == [s.led_levels for s in plan.steps]
+    for used, wanted in paired:
+        assert used == pytest.approx(wanted, abs=1e-4), " ".join(trace)
+    attempts = _attempts(sequence.frames)
+    # P(eight frames in a row whole) = (0.98^~55 packets)^8 ≈ 1e-4: the link costs retakes.
+    assert len(attempts) > 1
+    for attempt in attempts:  # within an attempt, consecutive ids; a table's triggers count from 1
+        ids = [f.extra["frame_id"] for f in attempt]
+        assert all((b - a) % (1 << 16) == 1 for a, b in zip(ids, ids[1:]))
+        if sync == "booth":
+            assert [f.extra["trigger"] for f in attempt] == list(range(1, len(attempt) + 1))
+    _assert_released(aravis)
+
+
 def test_run_estimates_the_rendered_ambient(aravis: ModuleType, tmp_path, capfd) -> None:
     """Aravis streaming and software triggering end to end: a good estimate, flash re-captured, exit 0."""
     out = tmp_path / "r"
@@ -106,7 +152,8 @@ def test_run_estimates_the_rendered_ambient_in_each_sync_mode(aravis: ModuleType
     assert main(["run", "--rig", "aravis-fake", "--sync", sync, "--out", str(out)]) == 0
     _assert_good_run(out, capsys.readouterr().err)
     sequence = read_sequence(out / "sequence")
-    assert [f.extra["trigger"] for f in sequence.frames] == list(range(1, 10))
+    for attempt in _attempts(sequence.frames):
+        assert [f.extra["trigger"] for f in attempt] == list(range(1, len(attempt) + 1))
     _assert_released(aravis)
 
 

@@ -1714,7 +1714,8 @@ class AravisCamera:
 
     def _step_label(self, index: int) -> str:
         if self._plan is not None and index < len(self._plan.steps):
-            return f"step {index} '{self._plan.steps[index].label}'"
+            step = self._plan.steps[index]  # a capture's retake plans its remaining steps only
+            return f"step {step.index} '{step.label}'"
         return f"frame {index} (beyond the plan)"
 
     def trigger(self) -> None:
@@ -1894,6 +1895,11 @@ class AravisCamera:
                 "retries first (about 10 s)",
                 self._name,
             )
+            pool.release()
+        elif self._stats.frames_incomplete or self._stats.frames_missing:
+            # A stream that lost frames is not reused: Aravis may still hold a partial frame of
+            # it, which the next acquisition received in place of its first frame (seen on the
+            # lossy fake when a capture took a lost frame again: the new first frame never came).
             pool.release()
         else:
             self._spare = _SpareStream(pool, self._n_buffers, self._layout_key)
