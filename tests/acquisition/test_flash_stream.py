@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.errors import FrameLostError, RecordingError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
@@ -85,7 +85,7 @@ def test_async_writer_applies_back_pressure_instead_of_dropping(sim_rig, tmp_pat
 
 
 def test_async_writer_reports_a_write_error(sim_rig, tmp_path: Path) -> None:
-    from msflash.acquisition.errors import RecordingError
+    from msflash.acquisition.errors import FrameLostError, RecordingError
 
     with _writer(sim_rig, tmp_path / "s") as inner, pytest.raises(RecordingError, match="writing a frame failed"):
         writer = AsyncSequenceWriter(inner)
@@ -126,6 +126,48 @@ def test_flash_in_the_same_stream(sim_rig, tmp_path: Path, trigger: str) -> None
     # The camera exposed the flash under exactly the levels decided (within one 16-bit step).
     np.testing.assert_allclose(sim_rig.camera.rendered_levels[-1], flash, atol=1 / 65535)
     np.testing.assert_allclose(sequence.frames[-1].led_levels, flash)
+    assert not sim_rig.line_errors
+
+
+@pytest.mark.parametrize("lost", ["led", "flash"])
+@pytest.mark.parametrize("trigger", ["software", "booth", "camera"])
+def test_a_frame_lost_in_the_flash_stream_is_taken_again(sim_rig, tmp_path: Path, trigger: str, lost: str) -> None:
+    """The last LED frame or the flash frame arrives incomplete once: the retake captures it (and
+    the flash) anew; a lost flash is decided again from the same frames, a lost LED frame once."""
+    plan = CapturePlan.ambient_then_each_led(4, 10_000.0, trigger=trigger)
+    flash = (0.25, 0.5, 0.0, 1.0)
+    target = plan.steps[-1].led_levels if lost == "led" else flash
+    camera = sim_rig.camera
+    real_next = camera.next_frame
+    losses: list[int] = []
+
+    def losing_next(timeout_s: float):
+        frame = real_next(timeout_s)
+        if not losses and np.allclose(camera.rendered_levels[-1], target, atol=1 / 65535):
+            losses.append(frame.frame_id)
+            raise FrameLostError(f"camera: frame {frame.frame_id} arrived incomplete")
+        return frame
+
+    camera.next_frame = losing_next
+    seen: list[int] = []
+
+    def decide(frames):
+        seen.append(len(frames))
+        return flash, 8_000.0
+
+    with _writer(sim_rig, tmp_path / "s") as inner, AsyncSequenceWriter(inner) as writer:
+        entries = run_capture_with_flash(camera, sim_rig.booth, plan, writer, decide)
+        writer.finish()
+    assert len(losses) == 1
+    assert seen == ([5] if lost == "led" else [5, 5])
+    assert [e.role for e in entries] == ["ambient"] + ["led"] * 4 + ["flash"]
+    sequence = read_sequence(tmp_path / "s")
+    assert sequence.complete
+    retaken = [0] * 4 + [1, 1] if lost == "led" else [0] * 5 + [1]
+    assert [f.extra.get("retake", 0) for f in sequence.frames] == retaken
+    np.testing.assert_allclose(sequence.frames[-1].led_levels, flash)
+    np.testing.assert_allclose(camera.rendered_levels[-1], flash, atol=1 / 65535)
+    assert sim_rig.emulator.levels == (0.0,) * 4
     assert not sim_rig.line_errors
 
 
@@ -294,7 +336,7 @@ def test_flash_decision_reads_the_full_estimate_only_when_asked(sim_rig, tmp_pat
 def test_flash_session_predicts_the_flash_exposure_of_the_frames_taken(sim_rig, tmp_path: Path) -> None:
     """The rates taken frame by frame give flash_exposure's answer on the same frames (first ambient only)."""
     from msflash.acquisition.devices.camera import RawFrame
-    from msflash.acquisition.errors import RecordingError
+    from msflash.acquisition.errors import FrameLostError, RecordingError
     from msflash.acquisition.session.exposure import flash_exposure
 
     levels = [tuple(float(i == j) for i in range(4)) for j in range(4)]
