@@ -85,7 +85,7 @@ def test_async_writer_applies_back_pressure_instead_of_dropping(sim_rig, tmp_pat
 
 
 def test_async_writer_reports_a_write_error(sim_rig, tmp_path: Path) -> None:
-    from msflash.acquisition.errors import FrameLostError, RecordingError
+    from msflash.acquisition.errors import RecordingError
 
     with _writer(sim_rig, tmp_path / "s") as inner, pytest.raises(RecordingError, match="writing a frame failed"):
         writer = AsyncSequenceWriter(inner)
@@ -336,7 +336,7 @@ def test_flash_decision_reads_the_full_estimate_only_when_asked(sim_rig, tmp_pat
 def test_flash_session_predicts_the_flash_exposure_of_the_frames_taken(sim_rig, tmp_path: Path) -> None:
     """The rates taken frame by frame give flash_exposure's answer on the same frames (first ambient only)."""
     from msflash.acquisition.devices.camera import RawFrame
-    from msflash.acquisition.errors import FrameLostError, RecordingError
+    from msflash.acquisition.errors import RecordingError
     from msflash.acquisition.session.exposure import flash_exposure
 
     levels = [tuple(float(i == j) for i in range(4)) for j in range(4)]

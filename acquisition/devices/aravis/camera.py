@@ -1713,9 +1713,13 @@ class AravisCamera:
         return _Good(pixels, frame_id, timestamp, received, popped_ns), True
 
     def _step_label(self, index: int) -> str:
-        if self._plan is not None and index < len(self._plan.steps):
-            step = self._plan.steps[index]  # a capture's retake plans its remaining steps only
-            return f"step {step.index} '{step.label}'"
+        plan = self._plan
+        if plan is not None and index < len(plan.steps):
+            step = plan.steps[index]
+            # A sequence's steps are named by their index (a retake's plan holds the steps left,
+            # from the lost one); a plan repeating one step (the bench, live view) counts frames.
+            distinct = len({s.index for s in plan.steps}) == len(plan.steps)
+            return f"step {step.index if distinct else index} '{step.label}'"
         return f"frame {index} (beyond the plan)"
 
     def trigger(self) -> None:
@@ -1788,7 +1792,16 @@ class AravisCamera:
         self._n_consumed += 1
         if isinstance(item, _Failure):
             raise CameraError(f"{self._name}: {where}: {item.error}") from item.error
-        missing = self._check_continuity(item.frame_id)
+        if isinstance(item, _Bad) and item.frame_id == 0 and self._protocol == "gige":
+            # Aravis names no block id (0, never sent on GigE Vision) for a frame it could not
+            # identify: it is taken as the next frame, so neither it nor the frame after it counts
+            # the whole 16-bit range as missing.
+            missing = 0
+            previous = self._last_frame_id
+            if previous is not None:  # 65535 is followed by 1 (16-bit block ids), beyond by +1 (64-bit)
+                self._last_frame_id = 1 if previous == _GV_FRAME_ID_WRAP - 1 else previous + 1
+        else:
+            missing = self._check_continuity(item.frame_id)
         if isinstance(item, _Bad):
             with self._stats_lock:
                 statuses = dict(self._stats.statuses)
