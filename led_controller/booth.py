@@ -15,7 +15,6 @@ import itertools
 import logging
 import math
 import queue
-import signal
 import threading
 import time
 from collections.abc import Iterator, Sequence
@@ -795,40 +794,6 @@ def port_open_error(url: str, err: serial.SerialException) -> BoothError:
     if code == errno.EBUSY or "[Errno 16]" in text or "exclusively lock" in text:
         return BoothError(f"booth {url}: port busy; expected it free — close other programs using it")
     return BoothError(f"booth {url}: cannot open ({text}); expected a serial device or pyserial URL")
-
-
-class Terminated(SystemExit):
-    """SIGTERM or SIGHUP, raised by :func:`sigterm_as_exit` (exit status 128 + the signal's number): the CLI
-    says so in one line."""
-
-
-STOPPING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
-"""Signals that stop a command as Ctrl-C does: SIGTERM (a service manager, ``kill``) and SIGHUP (the
-terminal or the SSH session closed under a running capture)."""
-
-
-@contextlib.contextmanager
-def sigterm_as_exit() -> Iterator[None]:
-    """Turn SIGTERM and SIGHUP (:data:`STOPPING_SIGNALS`) into ``SystemExit`` (:class:`Terminated`) while
-    active, so ``with LedBooth…`` blocks clean up.
-
-    Only effective in the main thread (elsewhere it does nothing): Python's default action for
-    either kills the process without running ``__exit__``, which would leave LEDs on until the
-    booth's watchdog fires and a half-written output behind.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def _raise(signum: int, _frame: object) -> None:
-        raise Terminated(128 + signum)
-
-    previous = {number: signal.signal(number, _raise) for number in STOPPING_SIGNALS}
-    try:
-        yield
-    finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
 
 
 def levels_close(a: Sequence[float], b: Sequence[float]) -> bool:

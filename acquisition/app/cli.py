@@ -32,7 +32,7 @@ from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import bad_input_errors, runtime_errors
 from msflash.acquisition.progress import bars_wanted, close_bar
 from msflash.acquisition.progress import configure as configure_progress
-from msflash.led_controller.booth import sigterm_as_exit
+from msflash.acquisition.signals import Terminated, sigterm_as_exit
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": ("msflash.acquisition.app.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
@@ -107,19 +107,6 @@ def _signal_name(number: int) -> str:
         return signal.Signals(number).name
     except ValueError:
         return f"signal {number}"
-
-
-def _terminated() -> tuple[type[BaseException], ...]:
-    return _loaded("msflash.led_controller.booth", "Terminated")
-
-
-def _loaded(module_name: str, class_name: str) -> tuple[type[BaseException], ...]:
-    """``(class,)`` when its module is imported, else ``()``: an exception of a module never imported cannot be raised.
-
-    The booth package is not imported for this (the commands that talk to a booth import it).
-    """
-    module = sys.modules.get(module_name)
-    return (getattr(module, class_name),) if module is not None else ()
 
 
 def msflash_version() -> str:
@@ -272,7 +259,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         sys.stderr.write(_stop_line(words, "interrupted"))
         return 130
-    except _terminated() as stop:
+    except Terminated as stop:
         code = getattr(stop, "code", None)  # Terminated is a SystemExit: 128 + the signal's number
         code = int(code) if isinstance(code, int) else 128 + signal.SIGTERM
         with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone

@@ -9,7 +9,7 @@ import threading
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import UsageError, print_json, progress
-from msflash.led_controller.booth import sigterm_as_exit
+from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.booth_probe import PROBE_PROTOCOLS, probe_booth
 from msflash.led_controller.doctor import run_doctor
 from msflash.led_controller.emulator import DEFAULT_NAMES, DEFAULT_PEAKS_NM, BoothEmulator, serve_on_pty

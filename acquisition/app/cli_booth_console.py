@@ -13,9 +13,10 @@ import tempfile
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import UsageError
+from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.adapters import BOOTH_PROTOCOLS, open_booth
 from msflash.led_controller.adapters.text_booth import TextBooth
-from msflash.led_controller.booth import LedBooth, sigterm_as_exit
+from msflash.led_controller.booth import LedBooth
 from msflash.led_controller.console import BoothConsole, ConsoleQuit
 
 

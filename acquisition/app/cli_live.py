@@ -14,6 +14,7 @@ from msflash.acquisition.app.cli_common import UsageError, progress
 from msflash.acquisition.app.options import simulated_world
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.session.rig import Rig, open_rig
+from msflash.acquisition.signals import STOPPING_SIGNALS
 from msflash.processing.datasets import PAPER_LED_SUBSETS
 from msflash.processing.lights import AMBIENTS
 
@@ -79,7 +80,6 @@ def _open(args: argparse.Namespace) -> Rig:
 
 def _live(args: argparse.Namespace) -> int:
     import asyncio
-    import signal
 
     from msflash.acquisition.app.live.server import LiveServer, bind
 
@@ -105,7 +105,7 @@ def _live(args: argparse.Namespace) -> int:
                         )
                     stop.set()
 
-                for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # SIGHUP: the terminal closed
+                for sig in STOPPING_SIGNALS:  # SIGHUP: the terminal closed
                     loop.add_signal_handler(sig, stopping)
                 await server.serve(stop)
 

@@ -56,8 +56,8 @@ from msflash.acquisition.session.run import (
     run_two_captures,
     sequence_writer,
 )
+from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.adapters import BOOTH_PROTOCOLS
-from msflash.led_controller.booth import sigterm_as_exit
 from msflash.led_controller.booth_interface import unsupported_sync
 from msflash.processing.datasets import PAPER_LED_SUBSETS
 from msflash.processing.lights import AMBIENTS

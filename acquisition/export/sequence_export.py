@@ -35,7 +35,6 @@ from __future__ import annotations
 import contextlib
 import json
 import shutil
-import signal
 import tempfile
 import warnings
 from collections.abc import Callable, Iterator
@@ -55,6 +54,7 @@ from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.one_sequence import refuse_dark_ambient
+from msflash.acquisition.signals import hold_stopping_signals
 from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
@@ -88,10 +88,6 @@ def check_export(sequence: Sequence, formats: tuple[str, ...]) -> None:
                 f"{sequence.path}: frames[0].file '{sequence.frames[0].file}' holds {header.dtype} values; expected "
                 "integer counts for --to dng (export float frames with --to ome-tiff or exr)"
             )
-
-
-STOPPING_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
-"""Signals held pending while an export's staging folder is created (:func:`export_sequence`)."""
 
 
 @dataclass(frozen=True)
@@ -393,16 +389,16 @@ def export_sequence(
     check_export(sequence, formats)
     # A stopping signal (Ctrl-C, SIGTERM, SIGHUP) between the staging folder's creation and the cleanup
     # below taking charge of it would leave the folder behind: it is held pending until then.
-    signals_before = signal.pthread_sigmask(signal.SIG_BLOCK, STOPPING_SIGNALS)
+    release_signals = hold_stopping_signals()
     try:
         staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".export-tmp", dir=out.parent))
     except OSError as err:
-        signal.pthread_sigmask(signal.SIG_SETMASK, signals_before)
+        release_signals()
         raise UsageError(
             f"{option} {out}: cannot be created in {out.parent} ({err.strerror or err}); expected a writable folder"
         ) from None
     try:
-        signal.pthread_sigmask(signal.SIG_SETMASK, signals_before)  # a signal held meanwhile is raised here
+        release_signals()  # a signal held meanwhile is raised here
         work = _Work(sequence, target, estimate, solutions, solver, alpha, bin_factor)
         mode = default_file_mode()
         staging.chmod(mode | (mode & 0o444) >> 2)  # mkdtemp's 0700 would keep other lab users out: what mkdir gives

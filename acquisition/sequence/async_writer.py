@@ -13,7 +13,7 @@ Guarantees
   behind, ``add_frame`` blocks until there is room rather than dropping a frame.
 - **Drain on every exit a Python process survives**: leaving the ``with`` block — normally,
   through an exception, or through ``KeyboardInterrupt`` / ``SystemExit`` (Ctrl-C, SIGTERM via
-  :func:`led_controller.booth.sigterm_as_exit`) — first writes every queued frame, then re-raises
+  :func:`acquisition.signals.sigterm_as_exit`) — first writes every queued frame, then re-raises
   the original exception. So ``sequence.json`` lists every frame captured (``complete: false``
   after an error).
 - **SIGKILL / power loss**: what is on disk is still a readable sequence (the wrapped writer's

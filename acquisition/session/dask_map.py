@@ -19,14 +19,13 @@ from __future__ import annotations
 
 import logging
 import os
-import signal
-import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, Protocol
 
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.progress import progress
+from msflash.acquisition.signals import deliver_deferred, signals_deferred
 
 OnError = Callable[[Any, Exception], Any]
 """``on_error(item, error)``: what to yield for an item whose job raised (or whose worker died)."""
@@ -89,33 +88,6 @@ def _quiet_dask(verbose: bool) -> Iterator[None]:
 
 
 @contextmanager
-def _signals_held(held: list[int]) -> Iterator[None]:
-    """Ctrl-C, SIGTERM and SIGHUP held while the block runs (main thread only): each is appended to ``held``.
-
-    A local cluster stopped half-way through starting or closing cannot be closed: its workers are
-    still starting, and dask's exit hook then printed a 30-line ``AssertionError: Status.init``
-    traceback under msflash's own line. The caller delivers a held signal once it is safe
-    (:func:`_deliver`).
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-    previous = [signal.signal(number, lambda number, _frame: held.append(number)) for number in signals]
-    try:
-        yield
-    finally:
-        for number, handler in zip(signals, previous, strict=True):
-            signal.signal(number, handler)
-
-
-def _deliver(held: list[int]) -> None:
-    """Raise a signal :func:`_signals_held` held, as its own handler would have (KeyboardInterrupt…)."""
-    if held:
-        signal.raise_signal(held.pop(0))
-
-
-@contextmanager
 def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = False) -> Iterator[Mapper]:
     """A :data:`Mapper` running on ``scheduler`` (``local``, ``none`` or an address; module docstring).
 
@@ -160,7 +132,7 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
                     f"most {MAX_WORKERS_PER_CPU * cpus} ({MAX_WORKERS_PER_CPU} per CPU)"
                 )
             # Loopback only: the scheduler, workers and dashboard never listen on other interfaces.
-            with _signals_held(held):
+            with signals_deferred(held):
                 cluster = LocalCluster(
                     n_workers=n,
                     threads_per_worker=1,
@@ -199,11 +171,11 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
                 yield result
 
         try:
-            _deliver(held)  # a Ctrl-C while the cluster started: now that it can be closed
+            deliver_deferred(held)  # a Ctrl-C while the cluster started: now that it can be closed
             yield mapper
         finally:
-            with _signals_held(held):
+            with signals_deferred(held):
                 client.close()
                 if cluster is not None:
                     cluster.close()
-            _deliver(held)
+            deliver_deferred(held)

@@ -9,7 +9,7 @@ import signal
 import pytest
 
 from msflash.acquisition.app import cli
-from msflash.led_controller.booth import Terminated, sigterm_as_exit
+from msflash.acquisition.signals import Terminated, sigterm_as_exit
 
 
 def test_a_real_sigterm_inside_the_guard_unwinds_as_terminated() -> None:

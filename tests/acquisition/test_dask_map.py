@@ -102,7 +102,7 @@ def test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_clo
     pytest.importorskip("distributed")
     from distributed.deploy.spec import SpecCluster
 
-    from msflash.led_controller.booth import Terminated, sigterm_as_exit
+    from msflash.acquisition.signals import Terminated, sigterm_as_exit
 
     number = getattr(signal, stop)
     known = set(SpecCluster._instances)
