@@ -185,7 +185,12 @@ def check_layout(
         errors.append([c.std(ddof=1) / np.sqrt(c.size) if c.size > 1 else np.nan for c in channels])
     patch_means, standard_errors = np.array(means), np.array(errors)
     between = float(np.std(patch_means[:, green]))
-    spread = np.array(within) / between if between > 0 else np.full(len(within), np.inf)
+    if not between > 0:  # a blank frame: every ratio below would be inf and say nothing
+        raise UsageError(
+            f"chart layout: every patch reads the same value ({patch_means[0, green]:.6g}) in the ambient "
+            "image; expected the chart in view — the ambient frame is blank (black, saturated or uniform)"
+        )
+    spread = np.array(within) / between
     ratio = float(np.median(spread))
     if not ratio <= LAYOUT_UNIFORMITY_LIMIT:
         raise UsageError(

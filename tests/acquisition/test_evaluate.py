@@ -280,3 +280,13 @@ def test_out_under_a_file_is_refused_before_any_work(capsys, tmp_path: Path, arg
         == f"msflash: error: --out {out}: {blocker} is a file; expected a folder (or a path where one can be made)"
     )
     assert not any("Traceback" in line for line in err)
+
+
+def test_a_blank_ambient_frame_is_named_as_blank_not_as_an_infinite_spread() -> None:
+    """Every patch reads the same (an all-black frame): the layout check says the frame is blank."""
+    from msflash.acquisition.session.chart_layout import chart_layout, check_layout
+
+    image = np.zeros((120, 160, 3), dtype=np.uint16)
+    layout = chart_layout(image.shape[:2], "macbeth", 8, 2, 1)
+    with pytest.raises(UsageError, match=r"every patch reads the same value \(0\).*the ambient frame is blank"):
+        check_layout(image, layout, None)
