@@ -94,6 +94,12 @@ log = logging.getLogger(__name__)
 FrameWriter = SequenceWriter | AsyncSequenceWriter
 """Where captured frames go: written as they come, or handed to a writer thread."""
 
+OnFrame = Callable[[CaptureStep, RawFrame, SequenceFrame], None]
+"""Called with each frame written: its step, the raw frame and its entry in the sequence."""
+
+FlashStep = Callable[[list[RawFrame]], CaptureStep]
+"""The flash step, decided from the frames taken so far (:func:`run_capture_with_flash`)."""
+
 FRAME_ID_MODULUS = 1 << 16
 """GigE Vision block ids wrap at 16 bits; continuity is checked modulo this."""
 
@@ -201,7 +207,7 @@ def run_capture_with_flash(
     plan: CapturePlan,
     writer: FrameWriter,
     decide: FlashDecide,
-    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
+    on_frame: OnFrame | None = None,
     retakes: int = RETAKES,
 ) -> list[SequenceFrame]:
     """Capture ``plan`` and then a flash frame whose levels ``decide`` computes, in one stream.
@@ -339,7 +345,7 @@ def run_capture(
     booth: Booth,
     plan: CapturePlan,
     writer: FrameWriter,
-    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None = None,
+    on_frame: OnFrame | None = None,
     retakes: int = RETAKES,
 ) -> list[SequenceFrame]:
     """Capture every step of ``plan`` in its sync mode, writing each frame as it arrives.
@@ -388,8 +394,8 @@ PacedSteps = Callable[
         Booth,
         CapturePlan,
         FrameWriter,
-        Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
-        Callable[[list[RawFrame]], CaptureStep] | None,
+        OnFrame | None,
+        FlashStep | None,
         _Progress,
     ],
     None,
@@ -417,8 +423,8 @@ def _with_retakes(
     booth: Booth,
     plan: CapturePlan,
     writer: FrameWriter,
-    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
-    flash: Callable[[list[RawFrame]], CaptureStep] | None,
+    on_frame: OnFrame | None,
+    flash: FlashStep | None,
     retakes: int,
 ) -> list[SequenceFrame]:
     """Run ``paced`` over ``plan``; after a lost frame, run it again over the steps not yet written.
@@ -478,7 +484,7 @@ def _write(
     step: CaptureStep,
     frame: RawFrame,
     progress: _Progress,
-    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
+    on_frame: OnFrame | None,
     trigger: int | None = None,
 ) -> None:
     extra: dict = {"frame_id": frame.frame_id, "timestamp_ns": frame.timestamp_ns}
@@ -498,8 +504,8 @@ def _host_paced(
     booth: Booth,
     plan: CapturePlan,
     writer: FrameWriter,
-    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
-    flash: Callable[[list[RawFrame]], CaptureStep] | None,
+    on_frame: OnFrame | None,
+    flash: FlashStep | None,
     progress: _Progress,
 ) -> None:
     written, frames = progress.written, progress.frames
@@ -541,8 +547,8 @@ def _table_paced(
     booth: SequencedBooth,
     plan: CapturePlan,
     writer: FrameWriter,
-    on_frame: Callable[[CaptureStep, RawFrame, SequenceFrame], None] | None,
-    flash: Callable[[list[RawFrame]], CaptureStep] | None,
+    on_frame: OnFrame | None,
+    flash: FlashStep | None,
     progress: _Progress,
 ) -> None:
     written, frames = progress.written, progress.frames

@@ -124,7 +124,9 @@ def _losing_step(sim_rig: Rig, trigger: str, plan: CapturePlan, lost: int, times
 
     def losing_next(timeout_s: float):
         frame = real_next(timeout_s)
-        if camera.rendered_levels[-1] == plan.steps[lost].led_levels and count["lost"] < times:
+        # The sim camera numbers its renders from 1 (booth master renders on the booth's pulses,
+        # so the latest render may already be the next step's).
+        if camera.rendered_levels[frame.frame_id - 1] == plan.steps[lost].led_levels and count["lost"] < times:
             count["lost"] += 1
             if how == "incomplete":
                 raise FrameLostError(f"camera: frame {frame.frame_id} arrived incomplete")

@@ -143,7 +143,8 @@ def test_a_frame_lost_in_the_flash_stream_is_taken_again(sim_rig, tmp_path: Path
 
     def losing_next(timeout_s: float):
         frame = real_next(timeout_s)
-        if not losses and np.allclose(camera.rendered_levels[-1], target, atol=1 / 65535):
+        # The sim camera numbers its renders from 1 (booth master renders on the booth's pulses).
+        if not losses and np.allclose(camera.rendered_levels[frame.frame_id - 1], target, atol=1 / 65535):
             losses.append(frame.frame_id)
             raise FrameLostError(f"camera: frame {frame.frame_id} arrived incomplete")
         return frame
