@@ -88,6 +88,8 @@ def sequence_writer(rig: Rig, out: Path, exposure: ExposurePlan | None = None) -
 def report_frame(step, frame, entry, total: int | None = None) -> None:
     """One line per frame written; given the plan's ``total`` steps, a bar on a terminal instead."""
     note = f"captured step {step.index} ({step.label}) → {entry.file}"
+    if entry.extra.get("retake"):
+        note += f" (retake {entry.extra['retake']}, after a lost frame)"
     if total is None:
         progress(note)
     else:

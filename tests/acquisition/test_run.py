@@ -110,6 +110,38 @@ def test_leds_off_and_partial_sequence_kept_when_capture_fails(tmp_path, monkeyp
     assert all(level == 0 for level in booth_levels)
 
 
+def test_a_frame_lost_mid_sequence_is_taken_again_and_said(tmp_path, monkeypatch, capsys, caplog) -> None:
+    """The camera reports step 2's frame incomplete once: the capture warns, takes steps 2 on again,
+    says which frames are retakes, exits 0 with a complete sequence."""
+    from msflash.acquisition.errors import FrameLostError
+
+    original = rig_module.open_sim_rig
+
+    def open_and_lose(**options):
+        rig = original(**options)
+        real_next = rig.camera.next_frame
+        calls = {"n": 0}
+
+        def losing_next(timeout_s: float):
+            frame = real_next(timeout_s)
+            calls["n"] += 1
+            if calls["n"] == 3:
+                raise FrameLostError(f"simulated camera: frame {frame.frame_id} for step 2 arrived incomplete")
+            return frame
+
+        rig.camera.next_frame = losing_next  # fault injection on a real SimulatedCamera instance
+        return rig
+
+    monkeypatch.setattr(rig_module, "open_sim_rig", open_and_lose)
+    out = tmp_path / "lossy"
+    assert main(["capture", "--exposure", "10000", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "taking step 2 (led:2) again, with the 5 step(s) after it (retake 1 of 2)" in caplog.text
+    assert "captured step 2 (led:2) → frames/002-led.tiff (retake 1, after a lost frame)" in err
+    sequence = read_sequence(out / "sequence")
+    assert sequence.complete and [f.extra.get("retake", 0) for f in sequence.frames] == [0, 0] + [1] * 6
+
+
 def test_run_decides_the_flash_before_the_reliability_signals(tmp_path, monkeypatch) -> None:
     """`msflash run` drives the flash from FlashSession.decide (weights, flash, exposure predicted from the
     frames as they arrived); the estimate's reliability signals are computed only after the capture."""
