@@ -72,6 +72,7 @@ import math
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
+from typing import TypeVar
 
 from msflash.acquisition.devices.camera import Camera, RawFrame
 from msflash.acquisition.errors import (
@@ -243,7 +244,7 @@ def run_capture_with_flash(
     check_booth_runs(booth, plan)
     paced = _host_paced if plan.trigger == "software" else _table_paced
     with collector_paused():
-        return _with_retakes(paced, camera, booth, full, writer, on_frame, flash_step, retakes)  # type: ignore[arg-type]
+        return _with_retakes(paced, camera, booth, full, writer, on_frame, flash_step, retakes).written  # type: ignore[arg-type]
 
 
 @contextmanager
@@ -370,9 +371,9 @@ def run_capture(
     if plan.trigger in SYNC_OF_TRIGGER:
         check_booth_runs(booth, plan)
     if plan.trigger == "software":
-        return _with_retakes(_host_paced, camera, booth, plan, writer, on_frame, None, retakes)
+        return _with_retakes(_host_paced, camera, booth, plan, writer, on_frame, None, retakes).written
     if plan.trigger in ("booth", "camera"):
-        return _with_retakes(_table_paced, camera, booth, plan, writer, on_frame, None, retakes)  # type: ignore[arg-type]
+        return _with_retakes(_table_paced, camera, booth, plan, writer, on_frame, None, retakes).written  # type: ignore[arg-type]
     raise ValueError(f"run_capture: plan trigger {plan.trigger!r}; expected software, booth or camera")
 
 
@@ -381,27 +382,32 @@ class _Progress:
     """What a capture has taken so far, across retakes (:func:`_with_retakes`)."""
 
     written: list[SequenceFrame] = dataclasses.field(default_factory=list)
-    """The entries written, in step order."""
+    """The entries written, in step order (none for previews, which write nothing)."""
     frames: list[RawFrame] = dataclasses.field(default_factory=list)
-    """The raw frames of those entries (the flash is decided from them)."""
+    """The raw frames of the steps done (the flash is decided from them; previews return them)."""
+    steps_done: int = 0
+    """Steps finished: their frame written (a capture) or kept (previews). A retake starts after them."""
     retake: int = 0
     """0 on the first attempt, then the number of the retake running."""
 
+
+WriterOrNone = TypeVar("WriterOrNone", FrameWriter, None)
+"""A capture's writer, or None for previews (which write nothing)."""
 
 PacedSteps = Callable[
     [
         Camera,
         Booth,
         CapturePlan,
-        FrameWriter,
+        WriterOrNone,
         OnFrame | None,
         FlashStep | None,
         _Progress,
     ],
     None,
 ]
-"""A sync mode's capture loop (:func:`_host_paced`, :func:`_table_paced`): runs the plan's steps and
-adds each frame it writes to the progress."""
+"""A sync mode's capture loop (:func:`_host_paced`, :func:`_table_paced`, :func:`_preview_steps`): runs
+the plan's steps and adds each one it finishes to the progress."""
 
 
 def _vanished(plan: CapturePlan, progress: _Progress) -> bool:
@@ -414,20 +420,20 @@ def _vanished(plan: CapturePlan, progress: _Progress) -> bool:
     camera master time out only when the booth counted no trigger for the frame (a booth that
     counted one raises :class:`DroppedFrameError`): that is never retaken.
     """
-    return plan.trigger == "software" and bool(progress.written or progress.retake)
+    return plan.trigger == "software" and bool(progress.steps_done or progress.retake)
 
 
 def _with_retakes(
-    paced: PacedSteps,
+    paced: PacedSteps[WriterOrNone],
     camera: Camera,
     booth: Booth,
     plan: CapturePlan,
-    writer: FrameWriter,
+    writer: WriterOrNone,
     on_frame: OnFrame | None,
     flash: FlashStep | None,
     retakes: int,
-) -> list[SequenceFrame]:
-    """Run ``paced`` over ``plan``; after a lost frame, run it again over the steps not yet written.
+) -> _Progress:
+    """Run ``paced`` over ``plan``; after a lost frame, run it again over the steps not yet done.
 
     A frame lost on its way (:class:`FrameLostError`: incomplete — a GigE Vision link dropped
     packets, which the camera never resends — or missing, its frame id skipped; host paced, a
@@ -450,12 +456,12 @@ def _with_retakes(
         raise ValueError(f"retakes {retakes}; expected 0 or more")
     progress = _Progress()
     while True:
-        rest = dataclasses.replace(plan, steps=plan.steps[len(progress.written) :])
+        rest = dataclasses.replace(plan, steps=plan.steps[progress.steps_done :])
         try:
             paced(camera, booth, rest, writer, on_frame, flash, progress)
-            return progress.written
+            return progress
         except (FrameLostError, FrameTimeoutError) as err:
-            del progress.frames[len(progress.written) :]  # a frame kept but not written goes with it
+            del progress.frames[progress.steps_done :]  # a frame kept but not written goes with it
             if isinstance(err, FrameTimeoutError) and not _vanished(plan, progress):
                 raise
             if progress.retake >= retakes:
@@ -463,13 +469,13 @@ def _with_retakes(
                     raise type(err)(f"{err} (after {progress.retake} retake(s) of lost frames)") from err
                 raise
             progress.retake += 1
-            lost = plan.steps[len(progress.written)]
+            lost = plan.steps[progress.steps_done]
             log.warning(
                 "%s; taking step %d (%s) again, with the %d step(s) after it (retake %d of %d)",
                 err,
                 lost.index,
                 lost.label,
-                len(plan.steps) - len(progress.written) - 1,
+                len(plan.steps) - progress.steps_done - 1,
                 progress.retake,
                 retakes,
             )
@@ -494,6 +500,7 @@ def _write(
         extra["retake"] = progress.retake
     entry = writer.add_frame(frame.pixels, step.role, step.led_levels, frame.exposure_us, frame.gain, extra=extra)
     progress.written.append(entry)
+    progress.steps_done += 1
     log.info("step %d (%s): frame %d saved as %s", step.index, step.label, frame.frame_id, entry.file)
     if on_frame is not None:
         on_frame(step, frame, entry)
@@ -676,13 +683,27 @@ def _booth_step_of(booth: SequencedBooth, trigger: int, timeout_s: float, step: 
         # count < trigger: an event of an earlier trigger left over; skip it.
 
 
-def preview_frames(camera: Camera, booth: Booth, plan: CapturePlan) -> list[RawFrame]:
+def preview_frames(camera: Camera, booth: Booth, plan: CapturePlan, retakes: int = RETAKES) -> list[RawFrame]:
     """Capture ``plan`` host paced and return the frames in memory, writing nothing (exposure previews).
 
-    Frames pair with steps in order (host pacing); a skipped frame id raises
-    :class:`DroppedFrameError`. LEDs off and camera stopped at the end, as for :func:`run_capture`.
+    Frames pair with steps in order (host pacing). A frame lost at its step is taken again as in a
+    capture (:func:`_with_retakes`: a lossy link must not fail the metering); a skipped frame id
+    then raises :class:`FrameLostError`. LEDs off and camera stopped at the end, as for
+    :func:`run_capture`.
     """
-    frames: list[RawFrame] = []
+    return _with_retakes(_preview_steps, camera, booth, plan, None, None, None, retakes).frames
+
+
+def _preview_steps(
+    camera: Camera,
+    booth: Booth,
+    plan: CapturePlan,
+    _writer: None,
+    _on_frame: OnFrame | None,
+    _flash: FlashStep | None,
+    progress: _Progress,
+) -> None:
+    previous_id: int | None = None
     with _sequence_watchdog(booth, plan), _leds_off_at_exit(camera, booth):
         camera.prepare(plan)
         camera.start()
@@ -694,11 +715,12 @@ def preview_frames(camera: Camera, booth: Booth, plan: CapturePlan) -> list[RawF
                 frame = camera.next_frame(plan.frame_timeout_s)
             except FrameTimeoutError as err:
                 raise FrameTimeoutError(f"preview step {step.index} ({step.label}): {err}") from err
-            if frames and (frame.frame_id - frames[-1].frame_id) % FRAME_ID_MODULUS != 1:
-                raise DroppedFrameError(
+            if previous_id is not None and (frame.frame_id - previous_id) % FRAME_ID_MODULUS != 1:
+                raise FrameLostError(
                     f"preview step {step.index} ({step.label}): camera frame id "
-                    f"{frame.frame_id} follows {frames[-1].frame_id}; a frame was lost"
+                    f"{frame.frame_id} follows {previous_id}; a frame was lost"
                 )
             _check_watchdog(booth, f"preview step {step.index} ({step.label})")
-            frames.append(frame)
-    return frames
+            previous_id = frame.frame_id
+            progress.frames.append(frame)
+            progress.steps_done += 1

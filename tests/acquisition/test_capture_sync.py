@@ -18,7 +18,7 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import DroppedFrameError, FrameLostError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
-from msflash.acquisition.session.capture import run_capture
+from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import Rig, open_sim_rig
 
 MODES = ("software", "booth", "camera")
@@ -214,6 +214,25 @@ def test_a_frame_that_never_comes_is_not_taken_again_where_it_may_be_the_trigger
     assert not isinstance(caught.value, FrameLostError)
     assert count["lost"] == 1 and "retake" not in str(caught.value)
     assert len(read_sequence(tmp_path / "sequence").frames) == lost
+
+
+def test_a_lost_preview_frame_is_taken_again(sim_rig: Rig) -> None:
+    """Exposure previews are captured as a sequence is: a lost frame must not fail the metering."""
+    plan = _plan("software")
+    count = _losing_step(sim_rig, "software", plan, lost=1, times=1, how="incomplete")
+    frames = preview_frames(sim_rig.camera, sim_rig.booth, plan)
+    assert count["lost"] == 1 and len(frames) == len(plan.steps)
+    rendered = sim_rig.camera.rendered_levels
+    assert [rendered[frame.frame_id - 1] for frame in frames] == [step.led_levels for step in plan.steps]
+    assert sim_rig.emulator is not None and sim_rig.emulator.levels == (0.0,) * 4
+
+
+def test_a_preview_frame_lost_at_every_retake_fails(sim_rig: Rig) -> None:
+    plan = _plan("software")
+    count = _losing_step(sim_rig, "software", plan, lost=0, times=100, how="incomplete")
+    with pytest.raises(FrameLostError, match=r"\(after 2 retake\(s\) of lost frames\)$"):
+        preview_frames(sim_rig.camera, sim_rig.booth, plan)
+    assert count["lost"] == 3
 
 
 def test_retakes_must_not_be_negative(sim_rig: Rig, tmp_path: Path) -> None:

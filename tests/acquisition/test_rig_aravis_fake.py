@@ -19,7 +19,7 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session.capture import run_capture
+from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import ARAVIS_FAKE_PIXEL_FORMAT, open_aravis_fake_rig, open_rig
 from msflash.processing import datasets
 
@@ -133,6 +133,20 @@ def test_a_lossy_link_costs_retakes_not_the_sequence(aravis: ModuleType, tmp_pat
         assert all((b - a) % (1 << 16) == 1 for a, b in zip(ids, ids[1:]))
         if sync == "booth":
             assert [f.extra["trigger"] for f in attempt] == list(range(1, len(attempt) + 1))
+    _assert_released(aravis)
+
+
+def test_exposure_previews_on_a_lossy_link_are_taken_again(aravis: ModuleType) -> None:
+    """The metering previews (host paced, written nowhere) retake their lost frames too."""
+    plan = CapturePlan.ambient_then_each_led(7, 8_000.0)
+    with open_aravis_fake_rig(lost_packet_ratio=0.02) as rig:
+        frames = preview_frames(rig.camera, rig.booth, plan, retakes=100)
+        rendered = rig.camera.rendered_levels
+        assert not rig.line_errors
+    # The wired camera renders only the frames it delivers: one per preview step, in order.
+    assert len(frames) == len(rendered) == 8
+    for used, step in zip(rendered, plan.steps, strict=True):
+        assert used == pytest.approx(step.led_levels, abs=1e-4)
     _assert_released(aravis)
 
 
