@@ -178,6 +178,7 @@ __all__ = [
     "JSON_MAX_BYTES",
     "SPECTRAL_TABLE_MAX_BYTES",
     "TEXT_EXPORT_MAX_BYTES",
+    "check_output_name",
     "check_user_file",
     "printable",
     "read_user_bytes",

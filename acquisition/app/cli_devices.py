@@ -63,7 +63,7 @@ def _devices(args: argparse.Namespace) -> int:
         if not aravis_camera.is_ipv4_address(address):
             raise UsageError(f"--address {address!r}: not an IPv4 address; expected e.g. 192.168.1.20")
         cameras.append(_camera_at(address))
-    ports = discovery.list_serial_ports()
+    ports = discovery.list_serial_ports()  # looked up on the module: tests stand in their own port list
     booths = [_booth_entry(port) for port in find_booths(ports)]
     serial_ports = [{**_booth_entry(port), "hint": text_booth_hint(port.device)} for port in other_serial_ports(ports)]
     if args.json:

@@ -46,10 +46,10 @@ class Mapper(Protocol):
 LOCAL = "local"
 SERIAL = "none"
 CONNECT_TIMEOUT_S = 10
+"""How long connecting to a scheduler address may take before the command gives up (exit 2)."""
 MAX_WORKERS_PER_CPU = 4
 """``--workers`` of a local cluster beyond this many per CPU are refused: each is a process, and a
 slip of the keyboard (``--workers 100000``) would otherwise start that many."""
-"""How long connecting to a scheduler address may take before the command gives up (exit 2)."""
 
 
 def serial_map(function: Callable[[Any], Any], items: Sequence[Any], on_error: OnError | None = None) -> Iterator[Any]:

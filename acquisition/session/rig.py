@@ -566,7 +566,7 @@ class WiredFakeCamera:
                 self._errors.append(err)
 
     def _forget_latched_trigger(self) -> None:
-        """Clear a software trigger the fake latched but has not taken.
+        """Clear a software trigger the fake latched but has not taken (before each acquisition starts).
 
         A real camera ignores triggers while it is not acquiring; the fake keeps the last one in
         its register and takes it when the next acquisition starts, sending a frame nobody
@@ -627,13 +627,13 @@ class WiredFakeCamera:
                 self._exposing = False
                 self._emulator.exposure_active(False)
         levels = self._take_levels()
-        if self.world is not None and levels is None:
+        if self.world is None:
+            return frame
+        if levels is None:
             raise CameraError(
                 f"aravis-fake: frame {frame.frame_id} arrived with no trigger issued for it; expected "
                 "one frame per trigger"
             )
-        if self.world is None or levels is None:
-            return frame
         pixels = self.world.render(levels, frame.exposure_us, frame.gain)
         if pixels.shape != frame.pixels.shape:
             raise CameraError(
@@ -649,13 +649,12 @@ class WiredFakeCamera:
             return self._pending.popleft() if self._pending else None
 
     def stop(self) -> None:
-        """Stop acquisition and the trigger-line thread; a trigger not yet taken is forgotten."""
+        """Stop acquisition and the trigger-line thread (a trigger not yet taken is forgotten at the next start)."""
         if self._pulse_thread is not None:
             self._pulses.put(None)
             self._pulse_thread.join(timeout=5.0)
             self._pulse_thread = None
         self.aravis.stop()
-        self._forget_latched_trigger()
 
     def close(self) -> None:
         """Release the fake camera."""

@@ -2126,8 +2126,9 @@ def bare_aravis_run(
             device.set_string_feature_value("TriggerMode", "Off")
             if frame_rate_hz is not None:
                 camera.set_frame_rate(frame_rate_hz)
-        stream = create_gv_stream(camera, int(camera.get_payload()))  # as AravisCamera's
-        pool = _BufferPool(stream, int(camera.get_payload()), zero_copy=True)  # buffers only pushed back
+        payload = int(camera.get_payload())
+        stream = create_gv_stream(camera, payload)  # as AravisCamera's
+        pool = _BufferPool(stream, payload, zero_copy=True)  # buffers only pushed back
         pool.fill(n_buffers)
         camera.start_acquisition()
         frames = bad = missing = 0
