@@ -29,7 +29,6 @@ from __future__ import annotations
 import ctypes
 import shutil
 import signal
-import socket
 import subprocess
 import time
 from collections.abc import Callable, Iterator
@@ -38,6 +37,8 @@ from types import ModuleType
 from typing import Any
 
 import pytest
+
+from tests.acquisition.gvcp_port import gvcp_port_in_use
 
 FAKE_GV_TOOL = "arv-fake-gv-camera-0.8"
 
@@ -98,15 +99,6 @@ def _die_with_parent() -> None:
     ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
 
 
-def _port_in_use(address: str = "127.0.0.1", port: int = 3956) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        try:
-            probe.bind((address, port))
-        except OSError:
-            return True
-    return False
-
-
 @pytest.fixture
 def gv_fake_process(aravis: ModuleType) -> Iterator[Callable[..., subprocess.Popen[bytes]]]:
     """Factory: start ``arv-fake-gv-camera-0.8 -i 127.0.0.1`` (holding the port lock) and return the process."""
@@ -128,7 +120,7 @@ def gv_fake_process(aravis: ModuleType) -> Iterator[Callable[..., subprocess.Pop
         )
         processes.append(process)
         deadline = time.monotonic() + 10.0
-        while not _port_in_use():  # wait until the fake has bound its control port
+        while not gvcp_port_in_use():  # wait until the fake has bound its control port
             if process.poll() is not None or time.monotonic() > deadline:
                 pytest.fail(f"{FAKE_GV_TOOL} did not start listening on 127.0.0.1:3956 (exit status {process.poll()})")
             time.sleep(0.01)

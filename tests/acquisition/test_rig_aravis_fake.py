@@ -9,7 +9,6 @@ the booth's light: ``run`` estimates the ambient within 1.3× what the LEDs allo
 from __future__ import annotations
 
 import json
-import socket
 from types import ModuleType
 
 import numpy as np
@@ -22,17 +21,9 @@ from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import ARAVIS_FAKE_PIXEL_FORMAT, open_aravis_fake_rig, open_rig
 from msflash.processing import datasets
+from tests.acquisition.gvcp_port import gvcp_port_in_use
 
 pytestmark = pytest.mark.aravis
-
-
-def _gvcp_port_free() -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        try:
-            probe.bind(("127.0.0.1", 3956))
-        except OSError:
-            return False
-    return True
 
 
 def _assert_released(aravis: ModuleType) -> None:
@@ -42,7 +33,7 @@ def _assert_released(aravis: ModuleType) -> None:
     Another xdist worker may hold the lock for its own test meanwhile, hence the wait.
     """
     with aravis.gvcp_port_lock(timeout_s=120.0):
-        assert _gvcp_port_free()
+        assert not gvcp_port_in_use()
 
 
 @pytest.mark.parametrize("sync", ["booth", "camera"])  # host-paced: the run test below

@@ -145,12 +145,8 @@ CAMERA = "wavelength_nm,R,G,B\n" + "".join(
 )
 
 
-@pytest.mark.parametrize("command", ["estimate", "flash", "export"])
-def test_a_camera_channel_with_no_positive_value_exits_2_naming_table_and_column(tmp_path: Path, command: str) -> None:
-    # Was: estimate, flash and export exit 1 "ambient estimate: the LED-only image of led0, …, led6 is
-    # empty; expected every LED to add light (is it connected…?)" for a hand-zeroed camera.csv column.
-    cal = tmp_path / "cal"
-    cal.mkdir()
+def _camera_calibration(cal: Path) -> None:
+    """A calibration folder's ``calibration.json`` naming only a camera table, ``camera.csv``."""
     (cal / "calibration.json").write_text(
         json.dumps(
             {
@@ -161,6 +157,15 @@ def test_a_camera_channel_with_no_positive_value_exits_2_naming_table_and_column
             }
         )
     )
+
+
+@pytest.mark.parametrize("command", ["estimate", "flash", "export"])
+def test_a_camera_channel_with_no_positive_value_exits_2_naming_table_and_column(tmp_path: Path, command: str) -> None:
+    # Was: estimate, flash and export exit 1 "ambient estimate: the LED-only image of led0, …, led6 is
+    # empty; expected every LED to add light (is it connected…?)" for a hand-zeroed camera.csv column.
+    cal = tmp_path / "cal"
+    cal.mkdir()
+    _camera_calibration(cal)
     (cal / "camera.csv").write_text(CAMERA.replace(",0.5,", ",0,"))
     extra = {"estimate": [], "flash": ["--mode", "matching"], "export": ["--to", "csv", "--out", str(tmp_path / "x")]}
     status, out, err = run([command, str(SEQUENCE), "--calibration", str(cal), *extra[command]])
@@ -173,16 +178,7 @@ def test_a_table_that_is_a_directory_is_named_as_one(tmp_path: Path) -> None:
     # Was: "…/camera.csv is missing; expected the CSV table beside it" for a directory of that name.
     cal = tmp_path / "cal"
     (cal / "camera.csv").mkdir(parents=True)
-    (cal / "calibration.json").write_text(
-        json.dumps(
-            {
-                "format": "msflash-calibration",
-                "version": 1,
-                "id": "c",
-                "camera": {"file": "camera.csv", "unit": "energy"},
-            }
-        )
-    )
+    _camera_calibration(cal)
     status, out, err = run(["estimate", str(SEQUENCE), "--calibration", str(cal)])
     assert (status, out) == (2, "") and err.count("\n") == 1, err
     assert f"{cal / 'camera.csv'}: is a directory; expected a spectral table" in err

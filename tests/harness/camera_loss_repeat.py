@@ -11,24 +11,16 @@ temporary folder it names. ``docs/steady-tests.md`` §2 runs it under load.
 from __future__ import annotations
 
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from tests.acquisition.gvcp_port import gvcp_port_in_use
+
 REPO = Path(__file__).resolve().parents[2]
 CHILD = REPO / "tests" / "acquisition" / "camera_loss_child.py"
-
-
-def port_in_use() -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as p:
-        try:
-            p.bind(("127.0.0.1", 3956))
-        except OSError:
-            return True
-    return False
 
 
 def fake(serial: str, xml: str) -> subprocess.Popen:
@@ -37,7 +29,7 @@ def fake(serial: str, xml: str) -> subprocess.Popen:
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
-    while not port_in_use():
+    while not gvcp_port_in_use():
         time.sleep(0.01)
     return p
 
