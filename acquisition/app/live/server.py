@@ -42,6 +42,7 @@ from aiohttp import WSMsgType, web
 from aiohttp.web_protocol import RequestPayloadError
 
 from msflash.acquisition.app.live.charts import run_charts
+from msflash.acquisition.app.live.clients import Outbox, close_all
 from msflash.acquisition.app.live.preview import Preview, PreviewRenderer
 from msflash.acquisition.app.live.run_job import SequenceRequest, new_run_folder, run_sequence
 from msflash.acquisition.app.live.runs import list_runs, read_json, run_file, run_files, run_folder
@@ -60,6 +61,8 @@ LAST_CLIENT_GRACE_S = 2.0
 """How long the LEDs stay on after the last page went away (a reload reconnects within it)."""
 MAX_FPS = 25.0
 """The live stream's ceiling: frames are taken no faster (the machine is shared)."""
+SHUTDOWN_TIMEOUT_S = 1.0
+"""How long stopping waits for open connections' handlers before cancelling them."""
 ASSETS = {"live.js": "text/javascript", "live.css": "text/css"}
 """The page's assets, served by name from the package (``static/``)."""
 
@@ -153,7 +156,9 @@ class LiveServer:
         self.renderer = PreviewRenderer(info, rig.camera_responsivities)
         self.state = LiveState()
         self.rig_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="msflash-rig")
-        self.clients: set[web.WebSocketResponse] = set()
+        self.clients: set[Outbox] = set()
+        self.pages_dropped = 0
+        """Pages dropped because they stopped reading (:mod:`acquisition.app.live.clients`)."""
         self._watching = asyncio.Event()
         self._off_timer: asyncio.TimerHandle | None = None
         self._tasks: set[asyncio.Task] = set()
@@ -188,7 +193,8 @@ class LiveServer:
 
     async def serve(self, stop: asyncio.Event) -> None:
         """Serve until ``stop`` is set; then close the pages, switch the LEDs off and stop the rig thread."""
-        runner = web.AppRunner(self.app(), handle_signals=False, access_log=None)
+        # A connection that never finishes its request must not hold the shutdown (aiohttp waits 60 s).
+        runner = web.AppRunner(self.app(), handle_signals=False, access_log=None, shutdown_timeout=SHUTDOWN_TIMEOUT_S)
         await runner.setup()
         site = web.SockSite(runner, self.sock)
         await site.start()
@@ -202,8 +208,7 @@ class LiveServer:
         self._spawn(self._frame_loop())
 
     async def _on_shutdown(self, _app: web.Application) -> None:
-        for ws in list(self.clients):
-            await ws.close(code=1001, message=b"server stopping")
+        await close_all(self.clients)  # bounded: a page that does not read is aborted
 
     async def _on_cleanup(self, _app: web.Application) -> None:
         for task in list(self._tasks):
@@ -340,6 +345,7 @@ class LiveServer:
                 "frames": self.state.frames,
                 "lost_frames": self.stream.lost_frames,
                 "clients": len(self.clients),
+                "pages_dropped": self.pages_dropped,
                 "error": self.state.error,
                 "runs": list_runs(self.runs),
             }
@@ -352,9 +358,8 @@ class LiveServer:
         if not self.clients:
             return
         text = json.dumps({"type": "state", "state": self.state_json()})
-        for ws in list(self.clients):
-            with contextlib.suppress(ConnectionError, RuntimeError):
-                await ws.send_str(text)
+        for page in list(self.clients):
+            page.offer_state(text)  # never waits on a page (clients.py)
 
     def _busy(self) -> None:
         if self.state.job.status == "running":
@@ -489,23 +494,35 @@ class LiveServer:
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
         ws = web.WebSocketResponse(heartbeat=10.0)
         await ws.prepare(request)
-        self.clients.add(ws)
+        page = Outbox(ws, request.transport, self._page_gone)
+        self.clients.add(page)
         if self._off_timer is not None:
             self._off_timer.cancel()
             self._off_timer = None
         self._watching.set()
         try:
-            await ws.send_str(json.dumps({"type": "state", "state": self.state_json()}))
-            async for message in ws:  # the page sends nothing: commands are token-carrying POSTs
-                if message.type == WSMsgType.ERROR:
-                    break
+            await page.send_now(json.dumps({"type": "state", "state": self.state_json()}))
+            if not page.dropped:
+                async for message in ws:  # the page sends nothing: commands are token-carrying POSTs
+                    if message.type == WSMsgType.ERROR:
+                        break
         finally:
-            self.clients.discard(ws)
-            if not self.clients:
-                self._watching.clear()
-                loop = asyncio.get_running_loop()
-                self._off_timer = loop.call_later(LAST_CLIENT_GRACE_S, lambda: self._spawn(self._last_client_gone()))
+            page.stop_sending()
+            self._page_gone(page)
         return ws
+
+    def _page_gone(self, page: Outbox) -> None:
+        """A page closed, or was dropped for not reading: the last one gone starts the LEDs-off grace."""
+        if page not in self.clients:
+            return
+        self.clients.discard(page)
+        if page.dropped:
+            self.pages_dropped += 1
+        if not self.clients:
+            self._watching.clear()
+            loop = asyncio.get_running_loop()
+            if self._off_timer is None:
+                self._off_timer = loop.call_later(LAST_CLIENT_GRACE_S, lambda: self._spawn(self._last_client_gone()))
 
     async def _last_client_gone(self) -> None:
         self._off_timer = None
@@ -558,9 +575,8 @@ class LiveServer:
             }
         ).encode()
         message = struct.pack("<I", len(header)) + header + preview.jpeg
-        for ws in list(self.clients):
-            with contextlib.suppress(ConnectionError, RuntimeError):
-                await ws.send_bytes(message)
+        for page in list(self.clients):
+            page.offer_frame(message)  # the latest frame only; never waits on a page (clients.py)
 
 
 _NO_STORE = {"Cache-Control": "no-store"}
