@@ -10,7 +10,10 @@ Public objects
 A frame listed in ``sequence.json`` is
 
 - ``intact``: its recorded SHA-256 and length (``frames[].sha256``, ``frames[].file_bytes``,
-  docs/architecture.md §6) match the file, byte for byte;
+  docs/architecture.md §6) match the file, byte for byte, and the file was written for this entry;
+- ``mismatched``: the file is the one written, but for another entry: what it says of itself (index,
+  role, LED levels, exposure, gain; :mod:`acquisition.sequence.frame_binding`) differs from the entry
+  naming it — entries swapped, duplicated or re-ordered;
 - ``changed``: the file differs from the one written (other bytes, or longer);
 - ``truncated``: the file is shorter than the one written;
 - ``missing``: there is no such file;
@@ -34,13 +37,15 @@ from typing import Any, Literal
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.folder_claim import LOCK_FILE
 from msflash.acquisition.sequence.format import SEQUENCE_FILE, Sequence, read_sequence
+from msflash.acquisition.sequence.frame_binding import SelfDescription, binding_problem, describe_misbinding
 from msflash.acquisition.sequence.frame_digest import digest_problem, frame_state
-from msflash.acquisition.sequence.image_files import read_image
+from msflash.acquisition.sequence.image_files import read_image, read_image_header
 from msflash.processing.user_files import shown_path
 
-FileState = Literal["intact", "changed", "truncated", "missing", "unreadable", "unverified", "undeclared"]
+FileState = Literal["intact", "mismatched", "changed", "truncated", "missing", "unreadable", "unverified", "undeclared"]
 FILE_STATES: tuple[FileState, ...] = (
     "intact",
+    "mismatched",
     "changed",
     "truncated",
     "missing",
@@ -128,8 +133,38 @@ def check_sequence(directory: str | os.PathLike) -> SequenceCheck:
     """
     sequence = read_sequence(directory, require_files=False)
     files = [_check_frame(sequence, index) for index in range(len(sequence.frames))]
+    files = _check_bindings(sequence, files)
     files.extend(_undeclared(sequence))
     return SequenceCheck(sequence, tuple(files))
+
+
+def _said(sequence: Sequence, index: int) -> SelfDescription | None:
+    try:
+        return SelfDescription.from_attributes(read_image_header(sequence.frame_path(index)).attributes)
+    except RecordingError:
+        return None
+
+
+def _check_bindings(sequence: Sequence, files: list[FileCheck]) -> list[FileCheck]:
+    """Mark the intact and unverified frames whose files were written for another entry."""
+    readable = {"intact", "unverified"}
+    said = [_said(sequence, i) if check.state in readable else None for i, check in enumerate(files)]
+    said_indices = [description.index if description is not None else None for description in said]
+    checked = []
+    for index, (check, description) in enumerate(zip(files, said)):
+        frame = sequence.frames[index]
+        where = f"{sequence.path}: frames[{index}].file '{frame.file}'"
+        problem = None
+        if description is not None:
+            problem = binding_problem(
+                where, description, index, frame.role, frame.led_levels, frame.exposure_us, frame.gain
+            )
+        if problem is None:
+            checked.append(check)
+            continue
+        how = describe_misbinding(index, description.index if description else None, said_indices)
+        checked.append(FileCheck(frame.file, "mismatched", index, f"{how}: {problem}"))
+    return checked
 
 
 def _check_frame(sequence: Sequence, index: int) -> FileCheck:

@@ -42,9 +42,15 @@ import numpy as np
 
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.folder_claim import FolderClaim, claim_folder, stale_temporaries
+from msflash.acquisition.sequence.frame_binding import SelfDescription, binding_problem
 from msflash.acquisition.sequence.frame_digest import SHA256_PATTERN, FileDigest, check_frame_digest
 from msflash.acquisition.sequence.frame_integrity import check_frame_levels
-from msflash.acquisition.sequence.image_files import image_suffix, read_image, read_image_header, write_image_digest
+from msflash.acquisition.sequence.image_files import (
+    image_suffix,
+    read_image_and_header,
+    read_image_header,
+    write_image_digest,
+)
 from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import MAX_NESTING as MAX_NESTING  # the deepest a sequence.json may nest
@@ -285,16 +291,22 @@ class Sequence(_ArrayEquality):
         ------
         RecordingError
             If the file is not the one written (its recorded SHA-256 or length differ: changed,
-            truncated or missing), unreadable, its channel count does not match ``camera.cfa``, its
+            truncated or missing), was written for another entry (what the file says of its index,
+            role, levels, exposure and gain differs from the entry: :mod:`frame_binding`), unreadable, its channel count does not match ``camera.cfa``, its
             size differs from frame 0's (both files are named), or it holds values above white or
             below black by more than read noise allows (the count and range are named).
         """
         path = self.frame_path(index)
         where = f"{self.path}: frames[{index}].file '{self.frames[index].file}'"
-        recorded = self.frames[index].digest
+        entry = self.frames[index]
+        recorded = entry.digest
         if recorded is not None:
             check_frame_digest(path, recorded, where)
-        pixels = read_image(path)
+        header, pixels = read_image_and_header(path)
+        said = SelfDescription.from_attributes(header.attributes)
+        problem = binding_problem(where, said, index, entry.role, entry.led_levels, entry.exposure_us, entry.gain)
+        if problem is not None:
+            raise RecordingError(problem)
         channels = 1 if pixels.ndim == 2 else pixels.shape[2]
         if self.camera.cfa is not None and channels != 1:
             raise RecordingError(

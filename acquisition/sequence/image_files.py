@@ -187,6 +187,17 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
         signed integers), holds more than one image (a multi-page TIFF), or has a channel count
         other than 1 or 3. The encodings read and refused: docs/architecture.md §6.
     """
+    return read_image_and_header(path)[1]
+
+
+def read_image_and_header(path: str | os.PathLike) -> tuple[ImageHeader, np.ndarray]:
+    """The header (:func:`read_image_header`) and the pixels (:func:`read_image`) of an image file, opened once.
+
+    Raises
+    ------
+    RecordingError
+        As :func:`read_image`.
+    """
     path = Path(path)
     with _open_input(path) as image:
         header, request = _header(path, image)
@@ -194,7 +205,7 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
         if pixels is None:
             raise RecordingError(f"{path}: pixels cannot be decoded ({_oiio_error()}); expected a readable image")
     pixels = np.asarray(pixels, dtype=header.dtype).reshape(header.height, header.width, header.channels)
-    return pixels[:, :, 0] if header.channels == 1 else pixels
+    return header, (pixels[:, :, 0] if header.channels == 1 else pixels)
 
 
 def image_suffix(pixels: np.ndarray) -> str:

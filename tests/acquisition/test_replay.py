@@ -14,7 +14,7 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.devices.replay_camera import ReplayCamera
 from msflash.acquisition.errors import ReplayMismatchError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.format import read_sequence, write_sequence
 
 RECORDED = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
 
@@ -97,13 +97,18 @@ def test_replayed_run_reproduces_the_estimate(tmp_path: Path, capsys: pytest.Cap
 
 def test_a_recorded_flash_with_this_runs_levels_is_replayed(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     """A recording whose flash frame has the levels this run asks for: the flash frame is replayed as recorded."""
-    copy = tmp_path / "recording"
-    shutil.copytree(RECORDED, copy)
-    assert main(["flash", str(copy), "--mode", "complementary", "--json"]) == 0
+    assert main(["flash", str(RECORDED), "--mode", "complementary", "--json"]) == 0
     weights = np.clip(json.loads(capsys.readouterr().out)["flash_weights"], 0.0, 1.0)
-    document = json.loads((copy / "sequence.json").read_text())
-    document["frames"][8]["led_levels"] = [round(float(w), 6) for w in weights]
-    (copy / "sequence.json").write_text(json.dumps(document))
+    # The recording written again with its flash frame taken at those levels (a file says what it was
+    # taken under, so editing sequence.json alone would be refused as a frame bound to another entry).
+    recorded = read_sequence(RECORDED)
+    flash = dataclasses.replace(recorded.frames[8], led_levels=tuple(round(float(w), 6) for w in weights))
+    copy = tmp_path / "recording"
+    write_sequence(
+        copy,
+        dataclasses.replace(recorded, frames=(*recorded.frames[:8], flash)),
+        [recorded.load_frame(i) for i in range(len(recorded.frames))],
+    )
     out = tmp_path / "replayed"
     assert main(["run", "--rig", f"replay:{copy}", "--out", str(out)]) == 0
     sequence = read_sequence(out / "sequence")
@@ -200,7 +205,6 @@ def test_a_damaged_recorded_frame_is_the_error_in_every_sync_mode(
     master made the frame on the emulator's trigger-line thread, and the capture reported 'no frame for
     trigger 4' instead (the cause only in a log line). The replay camera now reads (and checks) every
     recorded frame when the rig opens, so the damaged file is refused before anything is captured."""
-    import shutil
 
     recording = tmp_path / "recording"
     shutil.copytree(RECORDED, recording)
@@ -219,7 +223,6 @@ def test_replaying_an_interrupted_recording_says_it_is_incomplete(
 ) -> None:
     """A capture interrupted after two frames (complete: false) cannot be replayed as a whole one; the
     mismatch says the recording is incomplete, the likely reason (it read as a role mismatch alone)."""
-    import shutil
 
     recording = tmp_path / "interrupted"
     shutil.copytree(RECORDED, recording)

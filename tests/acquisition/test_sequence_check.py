@@ -110,6 +110,7 @@ def test_an_intact_sequence_checks_with_exit_0(sequence: Path, capsys: pytest.Ca
         "complete": True,
         "frames": 8,
         "intact": 8,
+        "mismatched": 0,
         "changed": 0,
         "truncated": 0,
         "missing": 0,
@@ -176,6 +177,7 @@ def test_every_problem_is_counted_and_the_first_is_named(sequence: Path, capsys:
     ]
     assert {state: report[state] for state in FILE_STATES} == {
         "intact": 5,
+        "mismatched": 0,
         "changed": 1,
         "truncated": 1,
         "missing": 1,
@@ -337,3 +339,88 @@ def test_copying_a_sequence_records_the_new_files_digests(sequence: Path, tmp_pa
         assert frame.digest.sha256 == hashlib.sha256(copied.frame_path(index).read_bytes()).hexdigest()
     assert copied.frames == source.frames
     np.testing.assert_array_equal(copied.load_frame(3), source.load_frame(3))
+
+
+# -- a frame is bound to its entry ----------------------------------------------------------------------
+FILE_KEYS = ("file", "sha256", "file_bytes")
+
+
+def edit_entries(sequence: Path, change: Callable[[list[dict]], None]) -> None:
+    document = json.loads((sequence / "sequence.json").read_text())
+    change(document["frames"])
+    (sequence / "sequence.json").write_text(json.dumps(document))
+
+
+def swap_files(frames: list[dict], a: int, b: int) -> None:
+    """Swap what names a file (file, sha256, file_bytes) between two entries: each file stays intact."""
+    for key in FILE_KEYS:
+        frames[a][key], frames[b][key] = frames[b][key], frames[a][key]
+
+
+def test_swapped_entries_are_refused_by_every_reader_and_named_by_check(
+    sequence: Path, capsys: pytest.CaptureFixture
+) -> None:
+    edit_entries(sequence, lambda frames: swap_files(frames, 1, 2))
+    status, out, err = run(capsys, "estimate", str(sequence), "--json")
+    assert status == 2 and out == ""
+    line = one_error(err, "frames[1].file 'frames/002-led.tiff'", "written for frames[2]", "not for this entry")
+    assert "swapped" in line
+    status, out, err = run(capsys, "check", str(sequence), "--json")
+    assert status == 2
+    report = json.loads(out)
+    assert [(f["state"], f["index"]) for f in report["files"][:4]] == [
+        ("intact", 0),
+        ("mismatched", 1),
+        ("mismatched", 2),
+        ("intact", 3),
+    ]
+    assert report["files"][1]["problem"].startswith("swapped with frames[2]")
+    assert report["files"][2]["problem"].startswith("swapped with frames[1]")
+    assert report["mismatched"] == 2 and report["intact_sequence"] is False
+    one_error(err, "frames[1].file", "swapped with frames[2]")
+
+
+def test_duplicated_and_re_ordered_entries_are_named(sequence: Path, capsys: pytest.CaptureFixture) -> None:
+    # frames[5] names a copy of frames[4]'s file (its own digest, so the copy is intact), and frames 6, 7
+    # and 3 are rotated: 3 -> 6's file, 6 -> 7's, 7 -> 3's.
+    shutil.copy(sequence / "frames" / "004-led.tiff", sequence / "frames" / "004-copy.tiff")
+
+    def change(frames: list[dict]) -> None:
+        frames[5]["file"] = "frames/004-copy.tiff"
+        frames[5]["sha256"], frames[5]["file_bytes"] = frames[4]["sha256"], frames[4]["file_bytes"]
+        named = {i: {key: frames[i][key] for key in FILE_KEYS} for i in (3, 6, 7)}
+        for target, source in ((3, 6), (6, 7), (7, 3)):
+            frames[target].update(named[source])
+
+    edit_entries(sequence, change)
+    (sequence / "frames" / "005-led.tiff").unlink()  # the file frames[5] named: gone with its entry
+    status, out, err = run(capsys, "check", str(sequence), "--json")
+    assert status == 2
+    report = json.loads(out)
+    by_index = {f["index"]: f for f in report["files"] if f["index"] is not None}
+    assert [by_index[i]["state"] for i in range(8)] == ["intact"] * 3 + ["mismatched"] + ["intact"] + ["mismatched"] * 3
+    assert by_index[5]["problem"].startswith("duplicated: frames[4] names a file written for frames[4] too")
+    assert by_index[3]["problem"].startswith("re-ordered: its file was written for frames[6]")
+    assert by_index[7]["problem"].startswith("re-ordered: its file was written for frames[3]")
+
+
+def test_an_entry_edited_after_the_fact_is_refused(sequence: Path, capsys: pytest.CaptureFixture) -> None:
+    """Levels or exposure edited in sequence.json: the frame was not taken under them."""
+
+    def change(frames: list[dict]) -> None:
+        frames[3]["exposure_us"] = frames[3]["exposure_us"] * 2
+
+    edit_entries(sequence, change)
+    with pytest.raises(RecordingError, match=r"frames\[3\]\.file 'frames/003-led\.tiff' was written for frames\[3\]"):
+        read_sequence(sequence).load_frame(3)
+    status, out, err = run(capsys, "check", str(sequence))
+    assert status == 2
+    one_error(err, "frames[3].file", "role, LED levels, exposure or gain differ from the entry")
+
+
+def test_frames_of_another_tool_carry_no_binding_and_still_read() -> None:
+    """The independent writer's samples say nothing of their entries: nothing to compare, nothing refused."""
+    for sample in ("sample-rgb-tungsten", "sample-bayer-fluorescent-12bit"):
+        recorded = read_sequence(SAMPLES / sample)
+        for index in range(len(recorded.frames)):
+            recorded.load_frame(index)
