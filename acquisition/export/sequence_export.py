@@ -32,10 +32,7 @@ What each format holds:
 
 from __future__ import annotations
 
-import contextlib
 import json
-import shutil
-import tempfile
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -43,19 +40,18 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.errors import OutputWriteError, UsageError
+from msflash.acquisition.errors import UsageError
 from msflash.acquisition.export.dng import write_dng
 from msflash.acquisition.export.formats import EXPORT_FORMATS
 from msflash.acquisition.export.ome_tiff import OmeLight, OmePlane, write_ome_tiff
 from msflash.acquisition.export.spectra_csv import SpectrumColumn, write_spectra_csv
+from msflash.acquisition.export.staging import check_not_inside, staged_export
 from msflash.acquisition.progress import progress
 from msflash.acquisition.sequence.exr_metadata import exr_metadata, led_peaks_nm
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.one_sequence import refuse_dark_ambient
-from msflash.acquisition.signals import hold_stopping_signals
-from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
 from msflash.processing.flash import FlashSolution
@@ -352,7 +348,8 @@ def export_sequence(
     """Write ``formats`` of ``sequence`` into the new folder ``out``.
 
     The files are written into a hidden folder beside ``out``, renamed to ``out`` once all are
-    written: on any failure nothing is left (the hidden folder is removed).
+    written: on any failure nothing is left (the hidden folder is removed); one export at a time
+    per ``out``, and the hidden folders of killed exports are removed (:mod:`.staging`).
 
     Parameters
     ----------
@@ -375,7 +372,9 @@ def export_sequence(
     Raises
     ------
     UsageError
-        As :func:`check_out` and :func:`check_export`.
+        As :func:`check_out` and :func:`check_export`; ``out`` inside the sequence folder.
+    FolderInUseError
+        Another export is writing ``out`` (its PID named).
     RecordingError, SpectralDataError
         From reading the frames or estimating (nothing is left behind).
     OutputWriteError
@@ -386,36 +385,12 @@ def export_sequence(
     if unknown:
         raise UsageError(f"export format {unknown[0]!r} is unknown; expected some of {', '.join(EXPORT_FORMATS)}")
     check_out(out, option)
+    check_not_inside(out, sequence.directory, option, "the sequence folder")
     check_export(sequence, formats)
-    # A stopping signal (Ctrl-C, SIGTERM, SIGHUP) between the staging folder's creation and the cleanup
-    # below taking charge of it would leave the folder behind: it is held pending until then.
-    release_signals = hold_stopping_signals()
-    try:
-        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".export-tmp", dir=out.parent))
-    except OSError as err:
-        release_signals()
-        raise UsageError(
-            f"{option} {out}: cannot be created in {out.parent} ({err.strerror or err}); expected a writable folder"
-        ) from None
-    try:
-        release_signals()  # a signal held meanwhile is raised here
-        work = _Work(sequence, target, estimate, solutions, solver, alpha, bin_factor)
-        mode = default_file_mode()
-        staging.chmod(mode | (mode & 0o444) >> 2)  # mkdtemp's 0700 would keep other lab users out: what mkdir gives
+    work = _Work(sequence, target, estimate, solutions, solver, alpha, bin_factor)
+    with staged_export(out, option, check_out, work.notes) as staging:
         for name in formats:
             progress(f"exporting {name} of {sequence.directory}")
             _WRITERS[name](work, staging)
-        staging.rename(out)
-    except OSError as err:
-        with contextlib.suppress(OSError):
-            shutil.rmtree(staging)
-        raise OutputWriteError(
-            f"{option} {out}: could not be written ({err.strerror or err}); expected a writable disk with room "
-            "for it (nothing was left)"
-        ) from None
-    except BaseException:
-        with contextlib.suppress(OSError):
-            shutil.rmtree(staging)
-        raise
     files = tuple(out / path.relative_to(staging) for path in work.files)
     return ExportResult(out, files, tuple(work.notes), dict(work.details))

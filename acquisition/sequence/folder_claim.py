@@ -17,7 +17,7 @@ import fcntl
 import logging
 import os
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from msflash.acquisition.errors import FolderInUseError
@@ -56,12 +56,8 @@ class FolderClaim:
     def release(self) -> None:
         """Remove the lock file (still holding the lock, so no one can be relying on it) and unlock."""
         handle, self._handle = self._handle, None
-        if handle is None:
-            return
-        with contextlib.suppress(OSError):
-            if os.path.samestat(os.fstat(handle), os.stat(self.lock)):
-                os.unlink(self.lock)
-        os.close(handle)
+        if handle is not None:
+            release_lock(self.lock, handle)
 
     def __enter__(self) -> FolderClaim:
         return self
@@ -140,18 +136,42 @@ def claim_folder(folder: str | os.PathLike, what: str = "writing") -> FolderClai
         The folder or its lock file cannot be created (callers name it as a bad output path).
     """
     folder = Path(folder)
-    lock = folder / LOCK_FILE
     folder.mkdir(parents=True, exist_ok=True)
+    handle = lock_exclusively(
+        folder / LOCK_FILE,
+        what,
+        lambda holder: f"{folder}: in use by {holder}; expected a folder no other run is "
+        "writing (wait for it, or choose another --out)",
+        taken_over=f"{folder}",
+    )
+    return FolderClaim(folder, handle)
+
+
+def lock_exclusively(lock: Path, what: str, in_use: Callable[[str], str], *, taken_over: str) -> int:
+    """An exclusive ``flock`` on the file ``lock`` (created), holding this process's PID and ``what``.
+
+    The building block of :func:`claim_folder` and of claims on a name before its folder exists
+    (:func:`claim_name`). A lock file whose holder died is taken over with a note naming
+    ``taken_over``.
+
+    Parameters
+    ----------
+    in_use
+        Builds the message of the :class:`FolderInUseError` raised when a live process holds the
+        lock, from the holder's description (``msflash process PID (what, since …)``).
+
+    Returns
+    -------
+    int
+        The open handle holding the lock (release it with :func:`release_lock`).
+    """
     while True:
         handle = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(handle)
-            raise FolderInUseError(
-                f"{folder}: in use by {_holder(lock)}; expected a folder no other run is "
-                "writing (wait for it, or choose another --out)"
-            ) from None
+            raise FolderInUseError(in_use(_holder(lock))) from None
         # The holder before us may have removed the file between our open and our lock: then we
         # hold a lock on a file no one else can see, and must lock the one now at that path.
         try:
@@ -165,12 +185,34 @@ def claim_folder(folder: str | os.PathLike, what: str = "writing") -> FolderClai
     if previous.strip():
         pid = previous.partition("\n")[0]
         _log.warning(
-            "%s: taking over from msflash process %s, which stopped without releasing it (killed?)", folder, pid
+            "%s: taking over from msflash process %s, which stopped without releasing it (killed?)", taken_over, pid
         )
     os.ftruncate(handle, 0)
     started = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
     os.pwrite(handle, f"{os.getpid()}\n{what}, since {started}\n".encode("utf-8", errors="replace"), 0)
-    return FolderClaim(folder, handle)
+    return handle
+
+
+def release_lock(lock: Path, handle: int) -> None:
+    """Remove ``lock`` (still holding it, so no one can be relying on it) and unlock ``handle``."""
+    with contextlib.suppress(OSError):
+        if os.path.samestat(os.fstat(handle), os.stat(lock)):
+            os.unlink(lock)
+    os.close(handle)
+
+
+def try_lock(lock: Path) -> int | None:
+    """The lock on ``lock`` if no live process holds it (its holder died), else None; never waits."""
+    try:
+        handle = os.open(lock, os.O_RDWR | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(handle)
+        return None
+    return handle
 
 
 @contextlib.contextmanager
