@@ -140,8 +140,10 @@ def claim_folder(folder: str | os.PathLike, what: str = "writing") -> FolderClai
     handle = lock_exclusively(
         folder / LOCK_FILE,
         what,
-        lambda holder: f"{folder}: in use by {holder}; expected a folder no other run is "
-        "writing (wait for it, or choose another --out)",
+        lambda holder: (
+            f"{folder}: in use by {holder}; expected a folder no other run is "
+            "writing (wait for it, or choose another --out)"
+        ),
         taken_over=f"{folder}",
     )
     return FolderClaim(folder, handle)
