@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 from aiohttp import WSMsgType, web
+from aiohttp.http_exceptions import HttpProcessingError
 from aiohttp.web_protocol import RequestPayloadError
 
 from msflash.acquisition.app.live.charts import run_charts
@@ -65,6 +66,26 @@ SHUTDOWN_TIMEOUT_S = 1.0
 """How long stopping waits for open connections' handlers before cancelling them."""
 ASSETS = {"live.js": "text/javascript", "live.css": "text/css"}
 """The page's assets, served by name from the package (``static/``)."""
+
+
+class _MalformedRequestsInOneLine(logging.Filter):
+    """aiohttp logs a request that is not HTTP (a scanner, a TLS hello on the plain port) or whose body does not
+    decode with a traceback:
+    here it becomes one line at debug level (``-vv`` shows it); every other record passes unchanged."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        error = record.exc_info[1] if record.exc_info else None
+        if isinstance(error, HttpProcessingError | RequestPayloadError):
+            record.msg = "live: refused a request that is not HTTP (%s)"
+            record.args = (" ".join(str(error).split())[:200],)
+            record.exc_info, record.exc_text = None, None
+            record.levelno, record.levelname = logging.DEBUG, "DEBUG"
+        return True
+
+
+_AIOHTTP_SERVER_LOG = logging.getLogger("aiohttp.server")
+if not any(isinstance(f, _MalformedRequestsInOneLine) for f in _AIOHTTP_SERVER_LOG.filters):
+    _AIOHTTP_SERVER_LOG.addFilter(_MalformedRequestsInOneLine())
 
 
 def _asset(name: str) -> str:
