@@ -1,6 +1,7 @@
 /* Board layer for an ATmega2560 at 16 MHz (Arduino Mega 2560 class): UART0, the time base,
  * the LED PWM, the trigger pins and the hardware watchdog; everything else is the portable
  * core (core/booth_core.c). Pins: docs/booth-firmware.md. */
+#include <avr/eeprom.h>
 #include <avr/interrupt.h>
 #include <avr/io.h>
 #include <avr/sleep.h>
@@ -219,9 +220,35 @@ static void trigger_init(void)
     PORTA &= (uint8_t)~_BV(PA0);
     DDRA |= _BV(PA0);
     DDRD &= (uint8_t)~_BV(PD0);
+    PORTD |= _BV(PD0); /* internal pull-up: a loose wire reads high (no exposure edges), never floats */
     EICRA = (EICRA & (uint8_t)~(_BV(ISC01) | _BV(ISC00))) | _BV(ISC00); /* any edge */
     EIFR = _BV(INTF0);
     EIMSK |= _BV(INT0);
+}
+
+/* ---- the serial in EEPROM: 'M' 'S' <length> <text>, from address 0 ----------------------- */
+
+#define SERIAL_EEPROM ((uint8_t *)0)
+static const uint8_t serial_magic[2] = {'M', 'S'};
+
+void board_serial_load(char out[BOOTH_SERIAL_MAX + 1])
+{
+    uint8_t head[3];
+    eeprom_read_block(head, SERIAL_EEPROM, sizeof head);
+    out[0] = '\0';
+    if (head[0] != serial_magic[0] || head[1] != serial_magic[1] || head[2] == 0 || head[2] > BOOTH_SERIAL_MAX)
+        return; /* blank (0xFF) or foreign EEPROM: no serial */
+    eeprom_read_block(out, SERIAL_EEPROM + 3, head[2]);
+    out[head[2]] = '\0';
+}
+
+void board_serial_store(const char *serial, uint8_t len)
+{
+    /* eeprom_update_* writes only the bytes that change (3.4 ms each; SERIAL is refused while a
+     * sequence runs, and the hardware watchdog's 500 ms covers 35 bytes). */
+    uint8_t head[3] = {serial_magic[0], serial_magic[1], len};
+    eeprom_update_block(serial, SERIAL_EEPROM + 3, len);
+    eeprom_update_block(head, SERIAL_EEPROM, sizeof head);
 }
 
 /* ---- main ----------------------------------------------------------------------------- */
