@@ -194,10 +194,12 @@ def test_doctor_on_a_silent_port(capsys: pytest.CaptureFixture[str]) -> None:
 
         tty.setraw(slave)
         port = os.ttyname(slave)
-        assert main(["doctor", "--port", port, "--booth-protocol", "text", "--timeout-s", "0.2"]) == 2
+        command = ["doctor", "--port", port, "--booth-protocol", "text", "--timeout-s", "0.2", "--booth-boot-s", "0.3"]
+        assert main(command) == 2
         err = capsys.readouterr().err
         assert err == (
-            f"msflash: error: booth {port}: nothing answered ID? within 0.2 s; expected "
+            f"msflash: error: booth {port}: nothing answered ID? within 0.2 s (after 0.3 s waiting for it to "
+            "boot; a board that resets when its port opens may need a longer --booth-boot-s); expected "
             "'<firmware>,channels=<n>[,names=…]' (a text booth) (--booth-protocol text)\n"
         )
         assert os.read(master, 64) == b"ID?\n"  # the one request, and only to the named port

@@ -220,7 +220,9 @@ static void trigger_init(void)
     PORTA &= (uint8_t)~_BV(PA0);
     DDRA |= _BV(PA0);
     DDRD &= (uint8_t)~_BV(PD0);
+#if BOOTH_EXPOSURE_PULLUP
     PORTD |= _BV(PD0); /* internal pull-up: a loose wire reads high (no exposure edges), never floats */
+#endif
     EICRA = (EICRA & (uint8_t)~(_BV(ISC01) | _BV(ISC00))) | _BV(ISC00); /* any edge */
     EIFR = _BV(INTF0);
     EIMSK |= _BV(INT0);

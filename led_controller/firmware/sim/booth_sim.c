@@ -10,10 +10,11 @@
  * each rising edge of the trigger output (PA0), with the PWM duty of every channel at that
  * moment and the time since the duties last changed; "pulse_end <t_us>" on its falling edge;
  * "ok <command> ..." answering a command.
- * stdin commands: "exp 0|1" drive the ExposureActive input (PD0/INT0) and run 2 ms of
+ * stdin commands: "exp 0|1" drive the ExposureActive input (PD0/INT0) ("exp float": the wire
+ * loose, held by the pull-up or floating) and run 2 ms of
  * simulated time so the firmware has served the edge before "ok exp" (simavr compromise:
  * the emulator's exposure_active is synchronous); "levels" -> "ok levels <t_us> <top> <d0> ..";
- * "quit".
+ * "link" -> "ok link <t_us> opens <n> resets <n> bootloader <0|1>"; "quit".
  *
  * Time is simavr's simulated time; simavr sleeps in real time while the firmware sleeps, so
  * it runs close to real time (never faster while the CPU idles).
@@ -215,6 +216,39 @@ static void eeprom_file_io(int save)
         avr_ioctl(avr, AVR_IOCTL_EEPROM_SET, &desc);
 }
 
+/* ---- the ExposureActive wire (PD0): driven by the camera, or loose ---------------------- */
+
+static int exposure_level;   /* what the camera drives (idle low) */
+static int exposure_floating; /* "exp float": the wire is loose */
+#define PIND_ADDR 0x29
+#define PORTD_ADDR 0x2B
+#define DDRD_ADDR 0x2A
+
+/* Drive the pin, also when simavr's IRQ already holds that value (after a reset the pin register
+ * is cleared but the IRQ keeps its last value: raise the other value first; the firmware's INT0
+ * is off until it boots, so this makes no edge it sees). */
+static void exposure_drive(int level, int force)
+{
+    if (force)
+        avr_raise_irq(exposure_irq, !level);
+    avr_raise_irq(exposure_irq, level);
+}
+
+/* A loose wire: the internal pull-up (PORTD0 set, DDRD0 clear) holds it high; without it the
+ * input floats and picks up noise, each poll a random level (spurious edges, as on a real board). */
+static void exposure_float_step(void)
+{
+    if (!exposure_floating) {
+        /* simavr 1.6 drives an input high when the firmware writes its pull-up bit, whatever drives
+         * the pin from outside: the camera's output wins again (before the firmware can use it). */
+        if ((avr->data[PIND_ADDR] & 1) != exposure_level)
+            avr_raise_irq(exposure_irq, exposure_level);
+        return;
+    }
+    int pulled_up = (avr->data[PORTD_ADDR] & 1) && !(avr->data[DDRD_ADDR] & 1);
+    exposure_drive(pulled_up ? 1 : (rand() & 1), 0);
+}
+
 /* The host's open asserted DTR: the Mega resets and its bootloader takes the UART. */
 static void board_reset(void)
 {
@@ -224,6 +258,8 @@ static void board_reset(void)
         cycle_base = before - avr->cycle;
     uart_xon = 1;
     to_head = to_tail = 0;
+    if (!exposure_floating)
+        exposure_drive(exposure_level, 1); /* the camera still drives the wire */
     sample_levels(); /* pins are inputs now: every duty reads 0 */
     in_bootloader = 1;
     bootloader_end_us = wall_us() + (int64_t)bootloader_ms * 1000;
@@ -342,8 +378,16 @@ static int serve_stdin(void)
         cmd_len = 0;
         if (strcmp(cmd, "quit") == 0)
             return -1;
-        if (strcmp(cmd, "exp 0") == 0 || strcmp(cmd, "exp 1") == 0) {
-            avr_raise_irq(exposure_irq, cmd[4] == '1');
+        if (strcmp(cmd, "exp float") == 0) {
+            exposure_floating = 1;
+            exposure_float_step();
+            if (!in_bootloader)
+                run_for_us(2000);
+            printf("ok exp float %u\n", now_us());
+        } else if (strcmp(cmd, "exp 0") == 0 || strcmp(cmd, "exp 1") == 0) {
+            exposure_floating = 0;
+            exposure_level = cmd[4] == '1';
+            avr_raise_irq(exposure_irq, exposure_level);
             if (!in_bootloader) /* in the bootloader the firmware does not run */
                 run_for_us(2000);
             printf("ok exp %c %u\n", cmd[4], now_us());
@@ -434,6 +478,7 @@ int main(int argc, char **argv)
     clock_gettime(CLOCK_MONOTONIC, &wall_start);
     avr->sleep = pace_sleep;
     eeprom_file_io(0); /* the board's EEPROM as the last run left it */
+    exposure_drive(0, 1); /* the camera's ExposureActive output, idle low */
 
     /* Boot before announcing the port: simavr's UART drops bytes that arrive before the
      * firmware enables its receiver (a real board, too, is deaf while it boots). */
@@ -470,6 +515,7 @@ int main(int argc, char **argv)
         sample_levels();
         if (avr->cycle >= next_poll) { /* pty and stdin every 100 us of simulated time */
             next_poll = avr->cycle + avr_usec_to_cycles(avr, 100);
+            exposure_float_step();
             pty_service();
             if (poll(&in, 1, 0) > 0 && serve_stdin() < 0)
                 break;
