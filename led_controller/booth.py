@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import dataclasses
 import errno
 import itertools
 import logging
@@ -404,6 +405,24 @@ class LedBooth:
     def ping(self) -> None:
         """Check the link (and feed the booth's watchdog)."""
         self._command(Command.PING)
+
+    def set_serial(self, serial: str) -> None:
+        """Give the booth a serial (``SERIAL <text>``), which it keeps in its EEPROM and reports as ``SERIAL=``.
+
+        Raises
+        ------
+        ValueError
+            If ``serial`` is not 1..32 of ``A-Z a-z 0-9 . _ -`` (or is ``-``).
+        BoothError
+            ``E_STATE`` while a sequence is armed or running; ``E_CMD`` from firmware without ``SERIAL``.
+        """
+        if not protocol.serial_allowed(serial):
+            raise ValueError(
+                f"serial {serial!r}: expected 1..{protocol.SERIAL_MAX} of A-Z a-z 0-9 . _ - (and not '-' alone)"
+            )
+        self._command(Command.SERIAL, serial)
+        if self._info is not None:
+            self._info = dataclasses.replace(self._info, serial=serial)
 
     def set_watchdog(self, timeout_s: float) -> None:
         """Set the booth's watchdog: LEDs go off after ``timeout_s`` of host silence (0 disables)."""

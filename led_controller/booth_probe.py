@@ -39,6 +39,8 @@ class ProbedBooth:
     """Its number of LED channels."""
     names: tuple[str, ...]
     """One name per channel."""
+    serial: str | None = None
+    """The booth's own serial (``SERIAL=`` of an msflash booth; None: not set, or a text booth)."""
 
 
 def describe_answer(raw: bytes) -> str:
@@ -193,4 +195,4 @@ def _parse(port: str, protocol: str, line: bytes, expected: str) -> ProbedBooth:
         )
     except UnicodeDecodeError:
         raise BoothError(instead) from None
-    return ProbedBooth(port, protocol, info.firmware, info.channels, tuple(info.names))
+    return ProbedBooth(port, protocol, info.firmware, info.channels, tuple(info.names), info.serial)

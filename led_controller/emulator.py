@@ -42,7 +42,9 @@ from msflash.led_controller.protocol import (
     serial_allowed,
     watchdog_ms_allowed,
 )
+from msflash.led_controller.stk500v2 import Stk500v2Bootloader
 from msflash.led_controller.usb_link import (
+    BOOTLOADER_BYTE_HOLD_S,
     FTDI_LATENCY_S,
     MEGA_BOOTLOADER_S,
     Bootloader,
@@ -866,6 +868,8 @@ class PtyBoothServer:
         self.resets = 0
         """Times a host's open reset the board."""
         self._bootloader = Bootloader(window_s=float(bootloader_s))
+        self.programmer = Stk500v2Bootloader()
+        """The bootloader's STK500v2 side: what avrdude flashed while the board was in its bootloader."""
         self._held = HeldReplies(latency_s, time.monotonic())
         self._host_opens = 0
         self._opens_lock = threading.Lock()
@@ -904,6 +908,7 @@ class PtyBoothServer:
                 if self.auto_reset:
                     self.resets += 1
                     self.emulator.hold_in_reset()
+                    self.programmer.reset()
                     self._bootloader.reset(time.monotonic())
                     log.debug("booth emulator %s: reset by the port's open", self.port)
             elif change < 0 and was == 1:
@@ -937,6 +942,7 @@ class PtyBoothServer:
                     now = time.monotonic()
                     if data and self._bootloader.running(now):
                         self._bootloader.swallow(data, now)
+                        self._answer_programmer(data, now)
                     elif data:
                         self.emulator.receive(data)
                 if self._bootloader.finished(time.monotonic()):
@@ -951,6 +957,16 @@ class PtyBoothServer:
             if self.emulator.hangup_requested.is_set():
                 self._shutdown(from_thread=True)
                 return
+
+    def _answer_programmer(self, data: bytes, now: float) -> None:
+        """Bytes in the bootloader's window: STK500v2 messages (avrdude) are answered; the rest is lost."""
+        answer = self.programmer.feed(data)
+        if answer:
+            self._write(answer)
+        if self.programmer.left:
+            self._bootloader.ends_at = now  # CMD_LEAVE_PROGMODE_ISP: the bootloader starts the firmware
+        elif self.programmer.active:
+            self._bootloader.ends_at = max(self._bootloader.ends_at or now, now + BOOTLOADER_BYTE_HOLD_S)
 
     def _write(self, data: bytes) -> None:
         if self._watch is not None and not self.host_open:

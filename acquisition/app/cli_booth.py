@@ -6,12 +6,14 @@ import argparse
 import math
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, boot_seconds, print_json, progress
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.booth_probe import PROBE_PROTOCOLS, probe_booth
-from msflash.led_controller.doctor import run_doctor
+from msflash.led_controller.doctor import Finding, run_doctor
 from msflash.led_controller.emulator import DEFAULT_NAMES, DEFAULT_PEAKS_NM, BoothEmulator, serve_on_pty
 from msflash.led_controller.emulator_faults import FaultInjector, emulator_state, parse_fault_spec, write_state_file
 from msflash.led_controller.errors import BoothError
@@ -201,12 +203,41 @@ def booth_emulator(args: argparse.Namespace, *, stop: threading.Event | None = N
     return 0
 
 
+def aravis_finding(import_camera: Callable[[], Any] | None = None) -> Finding:
+    """Whether the Aravis 0.8 typelib imports (``gi.require_version('Aravis', '0.8')``): no camera without it.
+
+    ``import_camera`` imports msflash's Aravis camera module (the one place that imports ``gi``); tests
+    pass their own to stand for a machine without the typelib, which cannot be uninstalled here.
+    """
+
+    def default_import() -> Any:
+        from msflash.acquisition.devices.aravis import camera
+
+        return camera
+
+    try:
+        camera = (import_camera or default_import)()
+    except ImportError as err:
+        return Finding(
+            "aravis.typelib",
+            "fail",
+            f"Aravis cannot be used: {err}",
+            "sudo apt install gir1.2-aravis-0.8 python3-gi (setup.sh installs them); without it only the sim "
+            "and replay rigs work",
+        )
+    version = getattr(getattr(camera, "Aravis", None), "_version", "0.8")
+    return Finding("aravis.typelib", "ok", f"the Aravis {version} typelib imports (GObject introspection)")
+
+
 def doctor(args: argparse.Namespace) -> int:
-    """Run the host checks; exit 1 if any check failed. With ``--port``: ask that one booth who it is."""
+    """Run the host checks; exit 1 if any check warned or failed. With ``--port``: ask that one booth who it is."""
     if getattr(args, "port", None) is not None:
         return _doctor_port(args)
-    findings = run_doctor(sysfs_root=args.sysfs_root, dev_root=args.dev_root, proc_root=args.proc_root)
-    failed = any(f.status == "fail" for f in findings)
+    findings = [
+        aravis_finding(),
+        *run_doctor(sysfs_root=args.sysfs_root, dev_root=args.dev_root, proc_root=args.proc_root),
+    ]
+    failed = any(f.status in ("fail", "warn") for f in findings)
     if getattr(args, "json", False):
         print_json({"ok": not failed, "findings": [f.as_dict() for f in findings]})
     else:
@@ -230,6 +261,14 @@ def _doctor_port(args: argparse.Namespace) -> int:
         return 0
     sys.stdout.write(
         f"OK    booth.identity: booth {found.port} answers --booth-protocol {found.protocol}: "
-        f"firmware {found.firmware!r}; {found.channels} channels: {' '.join(found.names)}\n"
+        f"firmware {found.firmware!r}; {found.channels} channels: {' '.join(found.names)}"
+        + (
+            f"; serial {found.serial}"
+            if found.serial
+            else "; serial not set (booth console: serial TEXT)"
+            if found.protocol == "msflash"
+            else ""
+        )
+        + "\n"
     )
     return 0
