@@ -73,6 +73,10 @@ class _LinkLost:
         self.error = error
 
 
+class _BootedMeanwhile(Exception):
+    """The booth sent its boot banner while a request waited for its reply (the request went to its bootloader)."""
+
+
 class _Garbled:
     """Queue item: a line that is not a valid frame (carries the protocol error)."""
 
@@ -262,7 +266,7 @@ class LedBooth:
         """Get the sync modes an msflash booth runs: host pacing, booth master and camera master (protocol v1)."""
         return BoothCapabilities(booth_master=True, camera_master=True)
 
-    def identify(self, *, timeout_s: float | None = None) -> BoothInfo:
+    def identify(self, *, timeout_s: float | None = None, _until_boot: bool = False) -> BoothInfo:
         """Ask the booth for its firmware, channels, channel names, peak wavelengths and serial.
 
         Raises
@@ -271,7 +275,7 @@ class LedBooth:
             If the booth speaks another protocol version than this driver (``PROTO=``; a version
             is raised by any change that is not additive, ``docs/booth-protocol.md`` §9).
         """
-        reply, raw = self._command(Command.IDENTIFY, timeout_s=timeout_s)
+        reply, raw = self._command(Command.IDENTIFY, timeout_s=timeout_s, until_boot=_until_boot)
         info = protocol.parse_identify(reply, raw, where=self._name)
         if info.protocol != protocol.PROTOCOL_VERSION:
             newer = info.protocol > protocol.PROTOCOL_VERSION
@@ -315,14 +319,15 @@ class LedBooth:
         deadline = max(time.monotonic(), start + boot_s) + self.timeout_s
         while True:
             self._drop_boot_noise()
-            boots = self._boots
             remaining = deadline - time.monotonic()
             try:
-                return self.identify(timeout_s=max(min(self.timeout_s, remaining), 0.05))
+                return self.identify(timeout_s=max(remaining, 0.05), _until_boot=True)
+            except _BootedMeanwhile:
+                # The firmware booted while ID was on its way to a slow bootloader: ask it now.
+                banner = banner if banner is not None else time.monotonic() - start
+                deadline = max(deadline, time.monotonic() + self.timeout_s)
+                continue
             except BoothTimeoutError as err:
-                if self._boots != boots and deadline - time.monotonic() > 0:
-                    banner = banner if banner is not None else time.monotonic() - start
-                    continue  # the firmware booted while ID was on its way (a slow bootloader): ask again
                 raise self._no_answer(start, boot_s, banner_after_s=banner) from err
             except BoothProtocolError as err:
                 # A request cut by the boot (E_FRAME) or a reply with bootloader noise in it.
@@ -682,9 +687,14 @@ class LedBooth:
 
     # -- the exchange ---------------------------------------------------------------------
 
-    def _command(self, command: str, *args: object, timeout_s: float | None = None) -> tuple[protocol.Reply, bytes]:
+    def _command(
+        self, command: str, *args: object, timeout_s: float | None = None, until_boot: bool = False
+    ) -> tuple[protocol.Reply, bytes]:
+        """One request and its reply. ``until_boot``: give up (:class:`_BootedMeanwhile`) as soon as a
+        ``BOOT`` banner arrives, the request having gone to a bootloader that is now gone."""
         timeout = self.timeout_s if timeout_s is None else timeout_s
         name = str(command)
+        boots = self._boots
         with self._command_lock:
             if self._closed:
                 raise BoothError(f"{self._name}: {name} on a closed booth; expected an open LedBooth")
@@ -699,8 +709,12 @@ class LedBooth:
                 try:
                     if remaining <= 0:
                         raise queue.Empty
-                    item = self._replies.get(timeout=remaining)
+                    item = self._replies.get(timeout=min(remaining, 0.05) if until_boot else remaining)
                 except queue.Empty:
+                    if until_boot and self._boots != boots:
+                        raise _BootedMeanwhile from None
+                    if remaining > 0.05 and until_boot:
+                        continue
                     raise BoothTimeoutError(
                         f"{self._name}: no reply to {name} within {timeout:g} s; expected "
                         f"'={seq:02X}:…'; check that the booth is powered and the port is right",

@@ -37,6 +37,13 @@ def _script() -> list[bytes]:
     requests: list[tuple[str, list[object]]] = [
         ("WDOG", ["600000"]),
         ("ID", []),
+        ("SERIAL", []),  # never set: '-'
+        ("SERIAL", ["bench-A_1.2"]),
+        ("ID", []),  # SERIAL= last
+        ("SERIAL", ["a", "b"]),
+        ("SERIAL", ["-"]),
+        ("SERIAL", ["x" * 33]),
+        ("SERIAL", ["caf\u00e9".encode("ascii", "replace").decode()]),  # '?' is not allowed
         ("STAT", []),
         ("ID", ["x"]),
         ("SET", L7),
@@ -61,6 +68,7 @@ def _script() -> list[bytes]:
         ("ARM", ["CAMERA", "123456789", "0", "0"]),
         ("ARM", ["HOST", "0", "0"]),
         ("ARM", ["HOST", "0", "0", "0"]),
+        ("SERIAL", ["while-armed"]),  # E_STATE: an EEPROM write stalls the MCU for ms
         ("PCLR", []),
         ("SET", L7),
         ("START", []),
