@@ -123,7 +123,7 @@ def list_serial_ports(dev_root: Path = Path("/dev")) -> list[SerialPortInfo]:
     """All serial ports pyserial can see, with their ``/dev/serial/by-id`` links (nothing is opened)."""
     from serial.tools import list_ports
 
-    return with_by_id_links([_from_pyserial(p) for p in list_ports.comports()], dev_root)
+    return with_by_id_links([from_pyserial(p) for p in list_ports.comports()], dev_root)
 
 
 def by_id_links(dev_root: Path = Path("/dev")) -> dict[str, str]:
@@ -156,7 +156,8 @@ def with_by_id_links(ports: Iterable[SerialPortInfo], dev_root: Path = Path("/de
     return [replace(p, by_id=links.get(p.device, p.by_id)) for p in ports]
 
 
-def _from_pyserial(port: Any) -> SerialPortInfo:
+def from_pyserial(port: Any) -> SerialPortInfo:
+    """A pyserial ``ListPortInfo`` as a :class:`SerialPortInfo` (by-id link not filled in)."""
     return SerialPortInfo(
         device=port.device,
         vid=port.vid,
