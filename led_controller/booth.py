@@ -365,9 +365,9 @@ class LedBooth:
                 self._replies.put(item)
                 break
         with self._events_cv:
-            for item in list(self._events):
-                if isinstance(item, _Garbled) or (isinstance(item, BoothEvent) and item.kind == protocol.Event.BOOT):
-                    self._events.remove(item)
+            for event in list(self._events):
+                if isinstance(event, _Garbled) or (isinstance(event, BoothEvent) and event.kind == protocol.Event.BOOT):
+                    self._events.remove(event)
 
     def _no_answer(self, start: float, boot_s: float, *, banner_after_s: float | None) -> BoothTimeoutError:
         waited = time.monotonic() - start

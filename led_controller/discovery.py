@@ -110,7 +110,7 @@ class SerialPortInfo:
         key = (self.vid, self.pid)
         for table in (ARDUINO_MEGA_USB_IDS, OTHER_ARDUINO_USB_IDS, USB_SERIAL_CHIPS):
             if key in table:
-                return table[key]  # type: ignore[index]
+                return table[key]
         return self.product or self.description or "-"
 
     @property

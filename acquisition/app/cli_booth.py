@@ -153,12 +153,14 @@ def booth_emulator(args: argparse.Namespace, *, stop: threading.Event | None = N
     injector = _faults_from_args(args, emulator)
     state_file: Path | None = getattr(args, "state_file", None)
     stop = stop or threading.Event()
-    link = {
-        "auto_reset": not getattr(args, "no_auto_reset", False),
-        "bootloader_s": getattr(args, "bootloader_s", MEGA_BOOTLOADER_S),
-        "latency_s": getattr(args, "latency_ms", FTDI_LATENCY_S * 1000) / 1000,
-    }
-    with sigterm_as_exit(), serve_on_pty(emulator, **link) as server:
+    auto_reset = not getattr(args, "no_auto_reset", False)
+    bootloader_s = float(getattr(args, "bootloader_s", MEGA_BOOTLOADER_S))
+    latency_s = float(getattr(args, "latency_ms", FTDI_LATENCY_S * 1000)) / 1000
+    link = {"auto_reset": auto_reset, "bootloader_s": bootloader_s, "latency_s": latency_s}
+    with (
+        sigterm_as_exit(),
+        serve_on_pty(emulator, auto_reset=auto_reset, bootloader_s=bootloader_s, latency_s=latency_s) as server,
+    ):
         last: dict | None = None
 
         def record() -> None:
