@@ -256,7 +256,7 @@ def test_devices_lists_other_serial_ports_with_the_text_booth_hint(
     assert main(["devices", "--interfaces", "fake"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[-2:] == [
-        "serial\t/dev/ttyUSB0\t0403:6001\tFT232R USB UART\t"
+        "serial\t/dev/ttyUSB0\t0403:6001\tFTDI FT232R USB-serial\t-\t"
         "'msflash doctor --port /dev/ttyUSB0 --booth-protocol text' to check a text booth",
         "booth\t/dev/ttyACM0\t1209:4d53\tmsflash booth\tserial B0042",
     ]
@@ -270,6 +270,9 @@ def test_devices_lists_other_serial_ports_with_the_text_booth_hint(
             "product": "FT232R USB UART",
             "serial_number": "A10K",
             "description": "FT232R USB UART",
+            "kind": "usb-serial",
+            "board": "FTDI FT232R USB-serial",
+            "by_id": None,
             "hint": "'msflash doctor --port /dev/ttyUSB0 --booth-protocol text' to check a text booth",
         }
     ]
