@@ -145,7 +145,7 @@ def _frame(seq: int, body: bytes) -> bytes:
 def read_intel_hex(text: str) -> dict[int, int]:
     """The bytes an Intel HEX file puts where (address → byte), for comparing a flashed image.
 
-    >>> read_intel_hex(":0300000001020306\\n:00000001FF\\n")
+    >>> read_intel_hex(":03000000010203F7\\n:00000001FF\\n")
     {0: 1, 1: 2, 2: 3}
     """
     memory: dict[int, int] = {}

@@ -154,6 +154,7 @@ def test_doctor_on_a_text_booth(server: TextBoothServer, capsys: pytest.CaptureF
         "firmware": server.emulator.firmware,
         "channels": 3,
         "names": ["red", "green", "blue"],
+        "serial": None,
     }
 
 
