@@ -45,13 +45,13 @@ def test_each_open_resets_the_emulator_and_its_bootloader_swallows_what_is_sent(
         request = encode_request(1, "ID")
         with serial.Serial(server.port, 115200, timeout=0.05, exclusive=True) as link:
             link.write(request)  # at once: into the bootloader
-            banner = await_boot_banner(link, 5.0)
+            banner = await_boot_banner(link, 30.0)
             assert banner.startswith(b"\n!01:") and b"BOOT FW=msflash-emulator-0.1 PROTO=1" in banner
             assert server._bootloader.swallowed == len(request)
             link.timeout = 0.3
             assert link.read(200) == b""  # the ID sent into the bootloader is never answered
         with serial.Serial(server.port, 115200, timeout=0.05, exclusive=True) as link:
-            await_boot_banner(link, 5.0)
+            await_boot_banner(link, 30.0)
         assert server.resets == 2 and server.emulator.boots == 3  # power-up, then one per open
 
 

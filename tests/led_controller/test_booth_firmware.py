@@ -121,7 +121,7 @@ def _exchange(port: str, lines: list[bytes]) -> list[bytes]:
     received: list[bytes] = []
     pending = b""
     with serial.Serial(port, 115200, timeout=0.05, exclusive=True) as link:
-        received.append(await_boot_banner(link))
+        received.append(await_boot_banner(link, 30.0))  # a generous bound: it ends at the banner
         for line in lines:
             link.write(line)
             deadline = time.monotonic() + 10.0
@@ -183,7 +183,7 @@ def test_the_pattern_table_holds_its_capacity_and_refuses_one_more(small_image: 
 def firmware_link(firmware_image: Path) -> Iterator[tuple[SimulatedBooth, serial.Serial]]:
     """One simulated booth for many examples, its watchdog off and its LEDs at 0.25."""
     with SimulatedBooth(firmware_image) as sim, serial.Serial(sim.port, 115200, timeout=10.0, exclusive=True) as link:
-        await_boot_banner(link)
+        assert await_boot_banner(link, 30.0), "no boot banner within 30 s"
         for frame in (encode_request(1, "WDOG", 0), encode_request(2, "SET", *["4000"] * 7)):
             link.write(frame)
             assert link.readline().startswith(b"=0")
