@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import dataclasses
 import errno
 import itertools
 import logging
@@ -54,6 +55,13 @@ _READ_POLL_S = 0.02
 ARM_TIME_MAX_US = 10_000_000
 """Longest settle, pulse or step period :meth:`LedBooth.arm` sends, in µs (10 s)."""
 
+DEFAULT_BOOT_S = 2.5
+"""How long :meth:`LedBooth.open` waits, silent, for the firmware's boot banner after opening the port, in
+seconds (``--booth-boot-s``). A stock Arduino Mega resets when its port is opened and its bootloader
+swallows what the host sends for 1.5–2 s; the host must not send meanwhile (every byte keeps the
+stk500v2 bootloader longer, ``led_controller/usb_link.py``). 0: ask at once (a board with auto-reset
+disabled, or one that is not an Arduino)."""
+
 WATCHDOG_MAX_S = protocol.WATCHDOG_MAX_MS / 1000.0
 """Longest watchdog period the protocol allows, in seconds (:data:`led_controller.protocol.WATCHDOG_MAX_MS`)."""
 
@@ -63,6 +71,10 @@ class _LinkLost:
 
     def __init__(self, error: BaseException) -> None:
         self.error = error
+
+
+class _BootedMeanwhile(Exception):
+    """The booth sent its boot banner while a request waited for its reply (the request went to its bootloader)."""
 
 
 class _Garbled:
@@ -117,6 +129,7 @@ class LedBooth:
         self._info: BoothInfo | None = None
         self._pset_now = True
         self._watchdog_s: float | None = None  # the booth's watchdog period once known (STAT, WDOG)
+        self._boots = 0  # BOOT banners seen (the firmware started: a reset)
         try:
             self._transcript: IO[str] | None = (
                 open(log_serial, "w", encoding="ascii", newline="\n") if log_serial else None  # noqa: SIM115
@@ -141,8 +154,15 @@ class LedBooth:
         timeout_s: float = 1.0,
         log_serial: str | Path | None = None,
         baudrate: int = 115200,
+        boot_s: float = DEFAULT_BOOT_S,
     ) -> LedBooth:
-        """Open the booth at a pyserial URL and identify it.
+        """Open the booth at a pyserial URL, wait for it to boot, and identify it.
+
+        Opening the port resets a stock Arduino Mega (docs/booth-firmware.md §4): the driver then
+        sends nothing until the firmware's boot banner (``BOOT``, docs/booth-protocol.md §6) or
+        ``boot_s`` has passed, drops what came before it (bootloader noise), and asks ``ID``; a reply
+        damaged by the boot, or a banner that comes late, gets ``ID`` again until ``boot_s`` plus
+        ``timeout_s`` have passed.
 
         Parameters
         ----------
@@ -155,6 +175,9 @@ class LedBooth:
             Transcript file to record the exchange in.
         baudrate : int
             Baud rate (ignored by USB CDC devices and ptys).
+        boot_s : float
+            How long to wait for the boot banner, in seconds (:data:`DEFAULT_BOOT_S`; 0: send ``ID``
+            at once, for a board that does not reset when its port opens).
 
         Returns
         -------
@@ -168,7 +191,11 @@ class LedBooth:
         BoothError
             If the port cannot be opened (permissions, busy — another program holds it: the port is
             opened exclusively) or does not answer as a booth.
+        ValueError
+            If ``boot_s`` is negative or not finite.
         """
+        if not (0 <= boot_s < math.inf):
+            raise ValueError(f"boot wait {boot_s!r} s; expected a finite number of seconds ≥ 0 (0: no wait)")
         port = open_serial_port(url, baudrate, _READ_POLL_S, timeout_s)
         try:
             booth = cls(port, timeout_s=timeout_s, log_serial=log_serial, name=url)
@@ -176,7 +203,7 @@ class LedBooth:
             port.close()  # the driver never took the port: release it here
             raise
         try:
-            booth.identify()
+            booth.identify_after_boot(boot_s)
         except BaseException:
             booth.close()
             raise
@@ -239,8 +266,8 @@ class LedBooth:
         """Get the sync modes an msflash booth runs: host pacing, booth master and camera master (protocol v1)."""
         return BoothCapabilities(booth_master=True, camera_master=True)
 
-    def identify(self) -> BoothInfo:
-        """Ask the booth for its firmware, channels, channel names and peak wavelengths.
+    def identify(self, *, timeout_s: float | None = None, _until_boot: bool = False) -> BoothInfo:
+        """Ask the booth for its firmware, channels, channel names, peak wavelengths and serial.
 
         Raises
         ------
@@ -248,7 +275,7 @@ class LedBooth:
             If the booth speaks another protocol version than this driver (``PROTO=``; a version
             is raised by any change that is not additive, ``docs/booth-protocol.md`` §9).
         """
-        reply, raw = self._command(Command.IDENTIFY)
+        reply, raw = self._command(Command.IDENTIFY, timeout_s=timeout_s, until_boot=_until_boot)
         info = protocol.parse_identify(reply, raw, where=self._name)
         if info.protocol != protocol.PROTOCOL_VERSION:
             newer = info.protocol > protocol.PROTOCOL_VERSION
@@ -266,6 +293,104 @@ class LedBooth:
             ",".join(self._info.names),
         )
         return self._info
+
+    # -- the boot after opening (a board that resets when its port opens) --------------------
+
+    @property
+    def boots_seen(self) -> int:
+        """Get how many ``BOOT`` banners the booth sent since the port was opened."""
+        return self._boots
+
+    def identify_after_boot(self, boot_s: float) -> BoothInfo:
+        """Wait, silent, up to ``boot_s`` for the firmware's ``BOOT`` banner, then identify (see :meth:`open`).
+
+        Raises
+        ------
+        BoothTimeoutError
+            Nothing answered: one line naming the port, how long it waited and auto-reset as a cause.
+        """
+        start = time.monotonic()
+        if boot_s == 0:
+            try:
+                return self.identify()
+            except BoothTimeoutError as err:
+                raise self._no_answer(start, boot_s, banner_after_s=None) from err
+        banner = self._wait_boot_banner(start + boot_s)
+        deadline = max(time.monotonic(), start + boot_s) + self.timeout_s
+        while True:
+            self._drop_boot_noise()
+            remaining = deadline - time.monotonic()
+            try:
+                return self.identify(timeout_s=max(remaining, 0.05), _until_boot=True)
+            except _BootedMeanwhile:
+                # The firmware booted while ID was on its way to a slow bootloader: ask it now.
+                banner = banner if banner is not None else time.monotonic() - start
+                deadline = max(deadline, time.monotonic() + self.timeout_s)
+                continue
+            except BoothTimeoutError as err:
+                raise self._no_answer(start, boot_s, banner_after_s=banner) from err
+            except BoothProtocolError as err:
+                # A request cut by the boot (E_FRAME) or a reply with bootloader noise in it.
+                if deadline - time.monotonic() <= 0:
+                    raise
+                log.debug("%s: %s while booting; asking again", self._name, err)
+                time.sleep(0.05)
+
+    def _wait_boot_banner(self, until: float) -> float | None:
+        """Seconds from now to the ``BOOT`` banner, waiting up to ``until``; None if none came."""
+        start = time.monotonic()
+        with self._events_cv:
+            while True:
+                for item in list(self._events):
+                    if isinstance(item, BoothEvent) and item.kind == protocol.Event.BOOT:
+                        self._events.remove(item)
+                        return time.monotonic() - start
+                remaining = until - time.monotonic()
+                if remaining <= 0:
+                    return None
+                self._events_cv.wait(remaining)
+
+    def _drop_boot_noise(self) -> None:
+        """Forget what arrived before the firmware ran: bootloader noise, damaged lines, banners.
+
+        The reader thread has already taken every byte off the port into its queues, so emptying them is
+        the flush (a ``reset_input_buffer`` here would race with it and could cut a reply in two).
+        """
+        while True:
+            try:
+                item = self._replies.get_nowait()
+            except queue.Empty:
+                break
+            if isinstance(item, _LinkLost):
+                self._replies.put(item)
+                break
+        with self._events_cv:
+            for event in list(self._events):
+                if isinstance(event, _Garbled) or (isinstance(event, BoothEvent) and event.kind == protocol.Event.BOOT):
+                    self._events.remove(event)
+
+    def _no_answer(self, start: float, boot_s: float, *, banner_after_s: float | None) -> BoothTimeoutError:
+        waited = time.monotonic() - start
+        if banner_after_s is not None:
+            what = (
+                f"booted (its BOOT banner came {banner_after_s:.2g} s after the port opened) but did not answer "
+                f"ID within {waited:.3g} s of opening the port; expected an ID reply (is another program "
+                "sending to it, or is the baud rate wrong?)"
+            )
+        elif boot_s > 0:
+            what = (
+                f"no answer within {waited:.3g} s of opening the port (no boot banner in {boot_s:g} s, then "
+                f"no reply to ID); expected an msflash booth — check that it is powered and the port is right; "
+                f"a board that resets when its port opens (Arduino auto-reset) needs --booth-boot-s longer "
+                f"than its bootloader (now {boot_s:g} s), or auto-reset disabled (10 µF RESET–GND)"
+            )
+        else:
+            what = (
+                f"no reply to ID within {waited:.3g} s of opening the port (--booth-boot-s 0: no wait for a "
+                "boot); expected an msflash booth — check that it is powered and the port is right; if it "
+                f"resets when its port opens (Arduino auto-reset), let it boot: --booth-boot-s {DEFAULT_BOOT_S:g}"
+            )
+        return BoothTimeoutError(f"{self._name}: {what}", command=str(Command.IDENTIFY), timeout_s=waited)
 
     def set_levels(self, levels: Sequence[float]) -> None:
         """Set every LED level (one value per channel, each in [0, 1], 16-bit on the wire).
@@ -285,6 +410,24 @@ class LedBooth:
     def ping(self) -> None:
         """Check the link (and feed the booth's watchdog)."""
         self._command(Command.PING)
+
+    def set_serial(self, serial: str) -> None:
+        """Give the booth a serial (``SERIAL <text>``), which it keeps in its EEPROM and reports as ``SERIAL=``.
+
+        Raises
+        ------
+        ValueError
+            If ``serial`` is not 1..32 of ``A-Z a-z 0-9 . _ -`` (or is ``-``).
+        BoothError
+            ``E_STATE`` while a sequence is armed or running; ``E_CMD`` from firmware without ``SERIAL``.
+        """
+        if not protocol.serial_allowed(serial):
+            raise ValueError(
+                f"serial {serial!r}: expected 1..{protocol.SERIAL_MAX} of A-Z a-z 0-9 . _ - (and not '-' alone)"
+            )
+        self._command(Command.SERIAL, serial)
+        if self._info is not None:
+            self._info = dataclasses.replace(self._info, serial=serial)
 
     def set_watchdog(self, timeout_s: float) -> None:
         """Set the booth's watchdog: LEDs go off after ``timeout_s`` of host silence (0 disables)."""
@@ -505,6 +648,13 @@ class LedBooth:
                             f"{self._name}: the booth's watchdog switched the LEDs off while waiting "
                             f"for {kind}; expected the host to send a command at least every watchdog period"
                         )
+                    if item.kind == protocol.Event.BOOT:
+                        self._events.remove(item)
+                        raise BoothError(
+                            f"{self._name}: the booth restarted (its firmware sent BOOT) while waiting for "
+                            f"{kind}; its table and levels are lost; expected it to stay powered — check its "
+                            "supply (LED current), the USB cable, and that no other program opened its port"
+                        )
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
                     raise BoothTimeoutError(
@@ -537,9 +687,14 @@ class LedBooth:
 
     # -- the exchange ---------------------------------------------------------------------
 
-    def _command(self, command: str, *args: object, timeout_s: float | None = None) -> tuple[protocol.Reply, bytes]:
+    def _command(
+        self, command: str, *args: object, timeout_s: float | None = None, until_boot: bool = False
+    ) -> tuple[protocol.Reply, bytes]:
+        """One request and its reply. ``until_boot``: give up (:class:`_BootedMeanwhile`) as soon as a
+        ``BOOT`` banner arrives, the request having gone to a bootloader that is now gone."""
         timeout = self.timeout_s if timeout_s is None else timeout_s
         name = str(command)
+        boots = self._boots
         with self._command_lock:
             if self._closed:
                 raise BoothError(f"{self._name}: {name} on a closed booth; expected an open LedBooth")
@@ -554,8 +709,12 @@ class LedBooth:
                 try:
                     if remaining <= 0:
                         raise queue.Empty
-                    item = self._replies.get(timeout=remaining)
+                    item = self._replies.get(timeout=min(remaining, 0.05) if until_boot else remaining)
                 except queue.Empty:
+                    if until_boot and self._boots != boots:
+                        raise _BootedMeanwhile from None
+                    if remaining > 0.05 and until_boot:
+                        continue
                     raise BoothTimeoutError(
                         f"{self._name}: no reply to {name} within {timeout:g} s; expected "
                         f"'={seq:02X}:…'; check that the booth is powered and the port is right",
@@ -684,6 +843,8 @@ class LedBooth:
                     break
                 line = bytes(buffer[:end])
                 del buffer[: end + 1]
+                if not line:
+                    continue  # an empty line: the line end a booth sends before its boot banner
                 self._wire("<", line + protocol.TERMINATOR)
                 self._dispatch(line)
             if len(buffer) > protocol.MAX_LINE:
@@ -730,6 +891,9 @@ class LedBooth:
     def _check_event_seq(self, event: BoothEvent) -> None:
         last = self._last_event_seq
         self._last_event_seq = event.seq
+        if event.kind == protocol.Event.BOOT:
+            self._boots += 1  # the firmware started: its event counter starts again
+            return
         if last is None:
             return
         expected = last % 255 + 1

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import serial
 
 from msflash.led_controller.adapters.text_booth import parse_identity
-from msflash.led_controller.booth import open_serial_port
+from msflash.led_controller.booth import DEFAULT_BOOT_S, open_serial_port
 from msflash.led_controller.errors import BoothError, BoothTimeoutError
 from msflash.led_controller.protocol import encode_request, frame_problem, parse_frame, parse_identify, parse_reply
 
@@ -39,6 +39,8 @@ class ProbedBooth:
     """Its number of LED channels."""
     names: tuple[str, ...]
     """One name per channel."""
+    serial: str | None = None
+    """The booth's own serial (``SERIAL=`` of an msflash booth; None: not set, or a text booth)."""
 
 
 def describe_answer(raw: bytes) -> str:
@@ -62,7 +64,31 @@ def describe_answer(raw: bytes) -> str:
     return f"the line {text[:80]!r}"
 
 
-def probe_booth(port: str, protocol: str, *, timeout_s: float = 1.0, baudrate: int = 115200) -> ProbedBooth:
+def await_boot_banner(link: serial.SerialBase, boot_s: float = DEFAULT_BOOT_S) -> bytes:
+    """Read, sending nothing, until an msflash booth's ``BOOT`` banner or ``boot_s`` have passed.
+
+    A stock Arduino Mega resets when its port is opened (``docs/booth-firmware.md`` §4); its
+    bootloader must not be sent anything meanwhile. Returns every byte read up to and including the
+    banner's line end (``b""`` when none came: a booth that does not reset, or old firmware).
+    """
+    deadline = time.monotonic() + boot_s
+    seen = bytearray()
+    while True:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            return b""
+        link.timeout = min(remaining, 0.1)
+        seen += link.read_until(b"\n")
+        if not seen.endswith(b"\n"):
+            continue
+        line = bytes(seen[seen.rstrip(b"\n").rfind(b"\n") + 1 :]).rstrip(b"\n")
+        if line.startswith(b"!") and frame_problem(line) is None and line.split(b":", 2)[2].startswith(b"BOOT"):
+            return bytes(seen)
+
+
+def probe_booth(
+    port: str, protocol: str, *, timeout_s: float = 1.0, baudrate: int = 115200, boot_s: float = DEFAULT_BOOT_S
+) -> ProbedBooth:
     """Open ``port``, send ``protocol``'s identity request, and parse the answer.
 
     Parameters
@@ -73,6 +99,9 @@ def probe_booth(port: str, protocol: str, *, timeout_s: float = 1.0, baudrate: i
         ``msflash`` (``docs/booth-protocol.md``) or ``text`` (``docs/booth-adapters.md`` §2).
     timeout_s : float
         How long to wait for the reply line.
+    boot_s : float
+        How long to wait, silent, for the booth to boot after the open reset it (``--booth-boot-s``): an
+        msflash booth's ``BOOT`` banner ends the wait, a text booth's first line of its own too.
 
     Raises
     ------
@@ -90,7 +119,11 @@ def probe_booth(port: str, protocol: str, *, timeout_s: float = 1.0, baudrate: i
         else "an msflash ID reply frame (our firmware)"
     )
     try:
-        link.reset_input_buffer()
+        start = time.monotonic()
+        _await_boot(link, protocol, boot_s)
+        waited = time.monotonic() - start
+        link.timeout = timeout_s
+        link.reset_input_buffer()  # bootloader noise, a text booth's greeting
         link.write(request)
         link.flush()
         deadline = time.monotonic() + timeout_s
@@ -98,8 +131,15 @@ def probe_booth(port: str, protocol: str, *, timeout_s: float = 1.0, baudrate: i
             raw = link.read_until(b"\n")
             if not raw.endswith(b"\n"):
                 got = f"; got {describe_answer(raw)} without a line end" if raw else ""
+                booted = (
+                    f" (after {waited:.3g} s waiting for it to boot; a board that resets when its port opens "
+                    "may need a longer --booth-boot-s)"
+                    if boot_s > 0
+                    else " (--booth-boot-s 0: if it resets when its port opens, an Arduino's auto-reset, "
+                    f"let it boot: --booth-boot-s {DEFAULT_BOOT_S:g})"
+                )
                 raise BoothTimeoutError(
-                    f"{where}: nothing answered {request.strip().decode()} within {timeout_s:g} s{got}; "
+                    f"{where}: nothing answered {request.strip().decode()} within {timeout_s:g} s{got}{booted}; "
                     f"expected {expected}",
                     command="ID",
                     timeout_s=timeout_s,
@@ -125,6 +165,20 @@ def probe_booth(port: str, protocol: str, *, timeout_s: float = 1.0, baudrate: i
         link.close()
 
 
+def _await_boot(link: serial.SerialBase, protocol: str, boot_s: float) -> None:
+    """The silent wait after the open: until the msflash banner, a text booth's first line, or ``boot_s``."""
+    if boot_s <= 0:
+        return
+    if protocol == "msflash":
+        await_boot_banner(link, boot_s)
+        return
+    deadline = time.monotonic() + boot_s
+    while (remaining := deadline - time.monotonic()) > 0:
+        link.timeout = min(remaining, 0.1)
+        if link.read_until(b"\n").endswith(b"\n"):
+            return  # the firmware runs: it said something of its own
+
+
 def _parse(port: str, protocol: str, line: bytes, expected: str) -> ProbedBooth:
     where = f"booth {port}"
     instead = f"{where}: answered {describe_answer(line)}; expected {expected}"
@@ -141,4 +195,4 @@ def _parse(port: str, protocol: str, line: bytes, expected: str) -> ProbedBooth:
         )
     except UnicodeDecodeError:
         raise BoothError(instead) from None
-    return ProbedBooth(port, protocol, info.firmware, info.channels, tuple(info.names))
+    return ProbedBooth(port, protocol, info.firmware, info.channels, tuple(info.names), info.serial)

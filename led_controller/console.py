@@ -34,6 +34,8 @@ HELP = """commands (levels are 0..1, one per channel; times in µs):
   arm host|booth|camera [SETTLE [PULSE [PERIOD]]]   arm the table   e.g. arm booth 1000 100 100000
   start | next | count | status | ping
   wdog SECONDS                    watchdog period (0 off, 0.05..600)
+  serial [TEXT]                   the booth's serial, kept in its EEPROM; TEXT sets it
+                                  (1..32 of A-Z a-z 0-9 . _ -)   e.g. serial bench-A
   events                          events received and not shown yet
   help | quit"""
 
@@ -46,7 +48,7 @@ TEXT_HELP = """commands of a plain-text booth (levels are 0..1, one per channel)
   help | quit"""
 
 
-TABLE_COMMANDS = frozenset({"table", "pset", "arm", "start", "next", "count", "ping", "wdog", "events"})
+TABLE_COMMANDS = frozenset({"table", "pset", "arm", "start", "next", "count", "ping", "wdog", "events", "serial"})
 """Commands only our firmware's protocol has (pattern table, trigger count, watchdog, events)."""
 
 
@@ -107,6 +109,7 @@ class BoothConsole:
             "ping": _Command(self._ping, "ping"),
             "wdog": _Command(self._watchdog, "wdog SECONDS"),
             "events": _Command(self._events, "events"),
+            "serial": _Command(self._serial, "serial [TEXT]"),
         }
 
     def close(self) -> None:
@@ -187,6 +190,7 @@ class BoothConsole:
                 f"drive {info.level_bits} bits (the wire carries 16; the booth keeps the top {info.level_bits}); "
                 f"pattern table of {info.max_steps} steps"
             ),
+            f"serial {info.serial}" if info.serial else "serial not set (serial TEXT sets one, kept in its EEPROM)",
         ]
 
     def _levels(self, args: list[str]) -> list[str]:
@@ -298,6 +302,18 @@ class BoothConsole:
             ),
             f"LEDs: {self._describe(s.levels)}",
         ]
+
+    def _serial(self, args: list[str]) -> list[str]:
+        if len(args) > 1:
+            raise ConsoleInputError("serial takes one word: 1..32 of A-Z a-z 0-9 . _ -")
+        if args:
+            try:
+                self._booth.set_serial(args[0])
+            except ValueError as err:
+                raise ConsoleInputError(str(err)) from err
+            return [f"serial now {args[0]}, kept in the booth's EEPROM (ID says SERIAL={args[0]})"]
+        serial = self._booth.identify().serial
+        return [f"serial {serial}" if serial else "serial not set (serial TEXT sets one)"]
 
     def _ping(self, args: list[str]) -> list[str]:
         if args:

@@ -14,7 +14,15 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from msflash.led_controller.discovery import SerialPortInfo, find_booths, list_serial_ports
+from msflash.led_controller.discovery import (
+    FTDI_VENDOR,
+    SerialPortInfo,
+    describe_port,
+    find_booths,
+    find_megas,
+    list_serial_ports,
+    with_by_id_links,
+)
 
 log = logging.getLogger(__name__)
 
@@ -221,35 +229,86 @@ def _dev_path(device: str, dev_root: Path) -> Path:
 
 
 def check_serial_ports(ports: Sequence[SerialPortInfo], dev_root: Path, identity: Identity) -> list[Finding]:
-    """Booth ports found and accessible."""
+    """Booth ports found (by the booth's USB id, else the one Arduino Mega) and accessible; other boards named.
+
+    Nothing is opened: ``msflash doctor --port P`` asks one port who it is (its firmware and ``SERIAL=``).
+    """
+    ports = with_by_id_links(ports, dev_root)
     booths = find_booths(ports)
-    if not booths:
-        listing = ", ".join(f"{p.device} ({p.usb_id})" for p in ports) or "none"
-        return [
+    megas = find_megas(ports)
+    findings: list[Finding] = []
+    if not booths and len(megas) == 1:
+        mega = megas[0]
+        findings.append(
+            Finding(
+                "booth.ports",
+                "info",
+                f"no port with the booth's USB id; the Arduino Mega {describe_port(mega)} is taken as the booth "
+                f"('msflash doctor --port {mega.path}' asks it whether it runs the booth firmware)",
+            )
+        )
+        booths = megas
+    elif not booths:
+        listing = "; ".join(describe_port(p) for p in ports) or "none"
+        several = f"{len(megas)} Arduino Megas, " if megas else ""
+        findings.append(
             Finding(
                 "booth.ports",
                 "warn",
-                f"no booth among the serial ports (found: {listing})",
-                "plug the booth in; if it uses another USB id, pass --port (a plain-text booth: "
-                "'msflash doctor --port P --booth-protocol text' asks port P who it is)",
+                f"no booth among the serial ports ({several}found: {listing})",
+                "plug the booth in; a Mega clone (CH340, FTDI) or another USB id: pass --port (a /dev/serial/by-id "
+                "path stays the same across re-plugging); 'msflash doctor --port P' asks port P who it is "
+                "(--booth-protocol text for a plain-text booth)",
             )
-        ]
-    findings = []
+        )
     for port in booths:
         path = _dev_path(port.device, dev_root)
+        where = describe_port(port)
         if not path.exists():
-            findings.append(Finding("booth.access", "fail", f"booth {port.device}: {path} missing"))
+            findings.append(Finding("booth.access", "fail", f"booth {where}: {path} missing"))
         elif not can_read_write(path, identity):
             findings.append(
                 Finding(
                     "booth.access",
                     "fail",
-                    f"booth {port.device}: no read/write access",
+                    f"booth {where}: no read/write access",
                     "sudo usermod -aG dialout $USER, then log out and in again",
                 )
             )
         else:
-            findings.append(Finding("booth.access", "ok", f"booth {port.device} ({port.usb_id}) is accessible"))
+            findings.append(Finding("booth.access", "ok", f"booth {where} is accessible"))
+    for port in ports:
+        if port not in booths and port.kind != "serial":
+            findings.append(
+                Finding(
+                    "serial.boards",
+                    "info",
+                    f"{port.kind} {describe_port(port)}: not taken as the booth; pass --port {port.path} to use it",
+                )
+            )
+    return findings
+
+
+def check_ftdi_latency(ports: Sequence[SerialPortInfo], sysfs_root: Path) -> list[Finding]:
+    """The latency timer of FTDI ports: a reply shorter than a USB packet waits for it (16 ms by default)."""
+    findings = []
+    for port in ports:
+        if port.vid != FTDI_VENDOR:
+            continue
+        name = port.device.rsplit("/", 1)[-1]
+        path = sysfs_root / "bus" / "usb-serial" / "devices" / name / "latency_timer"
+        text = _read(path)
+        if text is None or not text.isdigit():
+            continue
+        findings.append(
+            Finding(
+                "serial.latency",
+                "info",
+                f"{port.device}: FTDI latency timer {int(text)} ms (each short reply waits up to that long; "
+                "msflash's timing allows it)",
+                f"echo 1 | sudo tee {path} for 1 ms (persist with a udev rule)" if int(text) > 1 else None,
+            )
+        )
     return findings
 
 
@@ -337,11 +396,12 @@ def run_doctor(
     """
     who = identity or Identity.current()
     usb_lister = list_usb or (lambda: list_usb_devices(sysfs_root=sysfs_root))
-    ports = list_serial_ports() if serial_ports is None else serial_ports
+    ports = list_serial_ports(dev_root) if serial_ports is None else serial_ports
     return [
         *check_usb3vision(usb_lister, dev_root, who),
         *check_usbfs_memory(sysfs_root),
         *check_serial_ports(ports, dev_root, who),
+        *check_ftdi_latency(ports, sysfs_root),
         *check_modemmanager(proc_root),
         *check_rmem_max(proc_root),
         *check_mtu(sysfs_root),

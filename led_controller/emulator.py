@@ -9,9 +9,12 @@ offers fault injection for tests. :func:`serve_on_pty` serves it on a real pseud
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import math
 import os
 import select
+import termios
 import threading
 import time
 import tty
@@ -28,13 +31,25 @@ from msflash.led_controller.protocol import (
     MAX_BODY,
     MAX_LINE,
     PROTOCOL_VERSION,
+    SERIAL_MAX,
+    SERIAL_UNSET,
     WATCHDOG_MAX_MS,
     WATCHDOG_MIN_MS,
     Command,
     ErrorCode,
     Event,
     Mode,
+    serial_allowed,
     watchdog_ms_allowed,
+)
+from msflash.led_controller.stk500v2 import Stk500v2Bootloader
+from msflash.led_controller.usb_link import (
+    BOOTLOADER_BYTE_HOLD_S,
+    FTDI_LATENCY_S,
+    MEGA_BOOTLOADER_S,
+    Bootloader,
+    HeldReplies,
+    PortOpenWatch,
 )
 
 log = logging.getLogger(__name__)
@@ -128,6 +143,9 @@ class BoothEmulator:
     protocol : int
         Protocol version reported by ``ID`` (``PROTO=``); another than this emulator's own
         (:data:`~led_controller.protocol.PROTOCOL_VERSION`) plays a firmware the host must refuse.
+    serial : str or None
+        The serial in the board's EEPROM (``SERIAL=`` in ``ID``; None: never set, ``SERIAL=-``).
+        ``SERIAL <text>`` changes it; resets keep it.
 
     Attributes
     ----------
@@ -148,6 +166,7 @@ class BoothEmulator:
         max_steps: int = 256,
         level_bits: int = 16,
         protocol: int = PROTOCOL_VERSION,
+        serial: str | None = None,
     ) -> None:
         if len(names) != len(peaks_nm) or not 1 <= len(names) <= 64:
             raise ValueError(
@@ -172,6 +191,30 @@ class BoothEmulator:
         self._lock = threading.RLock()
         self._out_lock = threading.Lock()
         self._output: Callable[[bytes], None] | None = None
+        self._power_up_watchdog_ms = watchdog_ms
+        if serial is not None and not serial_allowed(serial):
+            raise ValueError(f"BoothEmulator: serial {serial!r}; expected 1..{SERIAL_MAX} of A-Z a-z 0-9 . _ -")
+        self._serial = serial  # the board's EEPROM: kept across resets
+        self.boots = 0
+        """Times the firmware started since the emulator was made (:meth:`boot`)."""
+        self._power_up_state()
+        self._faults: list[EmulatorFault] = []
+        self._stalled = False
+        self._watchdog_fires = 0
+        self.hangup_requested = threading.Event()
+        self.fault_hook: Callable[[str], None] | None = None
+        """Called with ``"request"`` for each line from the host (before it is read) and ``"send"``
+        before each outgoing frame, on the emulator's thread with its lock held; it may call
+        :meth:`inject_fault` (``led_controller.emulator_faults`` draws random faults this way)."""
+        identify = self._cmd_identify([])
+        if len(f"OK {Command.IDENTIFY} {identify}") + SERIAL_MAX - len(self._serial or SERIAL_UNSET) > MAX_BODY:
+            raise ValueError(
+                f"BoothEmulator: its ID reply would be {len(identify) + 6} bytes, over the protocol's "
+                f"{MAX_BODY}; expected shorter or fewer names"
+            )
+
+    def _power_up_state(self) -> None:
+        """Everything the firmware holds in RAM, as at power-up (LEDs off, no table, power-up watchdog)."""
         self._inbuf = bytearray()
         self._codes = [0] * self.channels
         self._pattern: list[list[int]] = []
@@ -183,29 +226,41 @@ class BoothEmulator:
         self._step = -1
         self._triggers = 0
         self._event_seq = 0
-        self._watchdog_ms = watchdog_ms
-        self._last_host = clock()
+        self._watchdog_ms = self._power_up_watchdog_ms
+        self._last_host = self._clock()
         self._watchdog_tripped = False
         self._last_error: str | None = None
         self._bad_frames = 0
         self._t0 = 0.0
         self._next_action: tuple[float, str] | None = None
         self._deferred: list[tuple[float, int, str]] = []
-        self._faults: list[EmulatorFault] = []
-        self._stalled = False
         self._discarding = False
-        self._watchdog_fires = 0
-        self.hangup_requested = threading.Event()
-        self.fault_hook: Callable[[str], None] | None = None
-        """Called with ``"request"`` for each line from the host (before it is read) and ``"send"``
-        before each outgoing frame, on the emulator's thread with its lock held; it may call
-        :meth:`inject_fault` (``led_controller.emulator_faults`` draws random faults this way)."""
-        identify = self._cmd_identify([])
-        if len(f"OK {Command.IDENTIFY} {identify}") > MAX_BODY:
-            raise ValueError(
-                f"BoothEmulator: its ID reply would be {len(identify) + 6} bytes, over the protocol's "
-                f"{MAX_BODY}; expected shorter or fewer names"
-            )
+
+    # -- reset and boot (the board around the firmware: led_controller/usb_link.py) ------------
+
+    def hold_in_reset(self) -> None:
+        """The board is reset (its port was opened): pins are inputs, so the LEDs are off at once,
+        and everything in RAM is lost. Nothing runs until :meth:`boot`."""
+        with self._lock:
+            self._power_up_state()
+
+    def boot(self) -> None:
+        """The firmware starts: power-up state (the serial, in EEPROM, is kept) and the boot banner,
+        a line end then the ``BOOT`` event (``docs/booth-protocol.md`` §6)."""
+        with self._lock:
+            self._power_up_state()
+            self.boots += 1
+            self._event_seq = self._event_seq % 255 + 1
+            self._send(b"\n" + _frame(MARK_EVENT, self._event_seq, self._boot_banner()))
+
+    def _boot_banner(self) -> str:
+        return f"{Event.BOOT} FW={self.firmware} PROTO={self.protocol}"
+
+    @property
+    def serial(self) -> str | None:
+        """Get the serial set with ``SERIAL`` (None: never set)."""
+        with self._lock:
+            return self._serial
 
     # -- the camera side and observers ------------------------------------------------------
 
@@ -480,6 +535,7 @@ class BoothEmulator:
             Command.STATUS: self._cmd_status,
             Command.WATCHDOG: self._cmd_watchdog,
             Command.PING: self._cmd_ping,
+            Command.SERIAL: self._cmd_serial,
         }
 
     # -- commands ----------------------------------------------------------------------
@@ -503,7 +559,7 @@ class BoothEmulator:
         return (
             f"FW={self.firmware} PROTO={self.protocol} CH={self.channels} "
             f"NAMES={','.join(self.names)} PEAKS={peaks} BITS={self.level_bits} STEPS={self.max_steps}"
-        )
+        ) + self._identify_serial()
 
     def _cmd_set(self, args: list[str]) -> str:
         codes = self._levels_arg(args)
@@ -637,6 +693,21 @@ class BoothEmulator:
         self._no_args(args)
         return ""
 
+    # -- the serial in EEPROM (SERIAL, SERIAL= in ID) ------------------------------------------
+
+    def _identify_serial(self) -> str:
+        return f" SERIAL={self._serial or SERIAL_UNSET}"
+
+    def _cmd_serial(self, args: list[str]) -> str:
+        if not args:
+            return self._serial or SERIAL_UNSET
+        if len(args) != 1 or not serial_allowed(args[0]):
+            raise _Refused(ErrorCode.ARGUMENT, f"SERIAL [1..{SERIAL_MAX} of A-Z a-z 0-9 . _ -]")
+        if self._state in ("ARMED", "RUNNING"):
+            raise _Refused(ErrorCode.STATE, "sequence armed or running")
+        self._serial = args[0]
+        return args[0]
+
     # -- sequencing -------------------------------------------------------------------
 
     def _apply_step(self, index: int) -> bool:
@@ -759,45 +830,161 @@ class PtyBoothServer:
     ``close`` fault): an in-process emulator that woke every 2 ms took the GIL ~500 times a second
     from the capture loop it serves. A test's manual clock moves on its own, so it is polled every
     ``poll_s``.
+
+    The link is as unkind as a stock Arduino Mega's (``led_controller/usb_link.py``):
+
+    - ``auto_reset`` (default on): a host opening the port (the first open while none holds it:
+      inotify ``IN_OPEN`` on the slave node) resets the board. The LEDs go off at once, the bytes the
+      host sends for ``bootloader_s`` of wall-clock time (and :data:`BOOTLOADER_BYTE_HOLD_S` after
+      each of them) are swallowed by the bootloader, then the firmware boots: power-up state (the
+      serial kept, as in EEPROM) and the boot banner, a line end and the ``BOOT`` event. Every re-open
+      resets again. ``auto_reset=False`` is a board with auto-reset disabled (10 µF RESET–GND or the
+      ``RESET-EN`` jumper cut): it boots once, when the server starts.
+    - ``latency_s`` (default 16 ms, an FTDI chip's latency timer): what the booth sends reaches the
+      host in full packets at once and otherwise on the next tick of that timer (0: at once).
+    - What the booth sends while no host holds the port open is lost, as a real USB-serial chip's
+      (the power-up banner of a board nobody listens to), and a host's close drops what it did not read.
     """
 
-    def __init__(self, emulator: BoothEmulator, *, poll_s: float = 0.002, idle_poll_s: float = 0.05) -> None:
+    def __init__(
+        self,
+        emulator: BoothEmulator,
+        *,
+        poll_s: float = 0.002,
+        idle_poll_s: float = 0.05,
+        auto_reset: bool = True,
+        bootloader_s: float = MEGA_BOOTLOADER_S,
+        latency_s: float = FTDI_LATENCY_S,
+    ) -> None:
+        if not (0 <= bootloader_s < math.inf):
+            raise ValueError(f"PtyBoothServer: bootloader_s {bootloader_s!r}; expected a finite number of seconds ≥ 0")
         self.emulator = emulator
         self._poll_s = idle_poll_s if emulator.real_time else poll_s
         self._master, self._slave = os.openpty()
         # Raw mode before anyone opens the slave: no echo, no line editing, no CR/LF mapping.
         tty.setraw(self._slave)
         self.port = os.ttyname(self._slave)
+        self.auto_reset = bool(auto_reset)
+        self.resets = 0
+        """Times a host's open reset the board."""
+        self._bootloader = Bootloader(window_s=float(bootloader_s))
+        self.programmer = Stk500v2Bootloader()
+        """The bootloader's STK500v2 side: what avrdude flashed while the board was in its bootloader."""
+        self._held = HeldReplies(latency_s, time.monotonic())
+        self._host_opens = 0
+        self._opens_lock = threading.Lock()
+        # Watch the slave node before its path is handed out: every host open is seen (Linux only).
+        self._watch: PortOpenWatch | None = PortOpenWatch(self.port)
         self._wake_r, self._wake_w = os.pipe()
         self._stop = threading.Event()
         self._closed = False
         self._close_lock = threading.Lock()
         emulator.connect_output(self._write)
+        emulator.boot()  # powered up: the banner goes nowhere, no host has the port open yet
         self._thread = threading.Thread(target=self._run, name=f"booth-emulator {self.port}", daemon=True)
         self._thread.start()
         log.info("booth emulator serving on %s", self.port)
 
+    @property
+    def in_bootloader(self) -> bool:
+        """Get whether the board is in its bootloader now (reset by an open, firmware not yet running)."""
+        return self._bootloader.running(time.monotonic())
+
+    @property
+    def host_open(self) -> bool:
+        """Get whether a host holds the port open."""
+        with self._opens_lock:
+            return self._host_opens > 0
+
+    def _port_events(self) -> None:
+        assert self._watch is not None
+        for change in self._watch.changes():
+            with self._opens_lock:
+                was = self._host_opens
+                self._host_opens = max(0, was + change)
+            if change > 0 and was == 0:
+                # DTR asserted by the open: the Mega's reset (a second open finds DTR already up).
+                self._held.clear()
+                if self.auto_reset:
+                    self.resets += 1
+                    self.emulator.hold_in_reset()
+                    self.programmer.reset()
+                    self._bootloader.reset(time.monotonic())
+                    log.debug("booth emulator %s: reset by the port's open", self.port)
+            elif change < 0 and was == 1:
+                # The host's last close: what it did not read is gone, as the kernel frees a closed tty's buffers.
+                self._held.clear()
+                with contextlib.suppress(termios.error, OSError):
+                    termios.tcflush(self._slave, termios.TCIFLUSH)
+
     def _run(self) -> None:
+        watch_fd = self._watch.fileno() if self._watch is not None else -1
         while not self._stop.is_set():
             try:
-                # Wake for the emulator's next timed action (booth-master pulse), not only every poll.
-                due = self.emulator.next_due_s()
-                wait = self._poll_s if due is None else min(self._poll_s, due)
-                ready, _, _ = select.select([self._master, self._wake_r], [], [], wait)
+                now = time.monotonic()
+                waits = [self._poll_s]
+                if self._bootloader.ends_at is not None:
+                    waits.append(self._bootloader.ends_at - now)
+                else:
+                    due = self.emulator.next_due_s()
+                    if due is not None:
+                        waits.append(due)
+                flush = self._held.next_due()
+                if flush is not None:
+                    waits.append(flush - now)
+                ready, _, _ = select.select([self._master, self._wake_r, watch_fd], [], [], max(0.0, min(waits)))
+                if self._wake_r in ready:
+                    os.read(self._wake_r, 4096)
+                if watch_fd in ready:
+                    self._port_events()
                 if self._master in ready:
                     data = os.read(self._master, 4096)
-                    if data:
+                    now = time.monotonic()
+                    if data and self._bootloader.running(now):
+                        self._bootloader.swallow(data, now)
+                        self._answer_programmer(data, now)
+                    elif data:
                         self.emulator.receive(data)
+                if self._bootloader.finished(time.monotonic()):
+                    self.emulator.boot()
+                self._flush_held()
             except OSError as err:
                 if not self._stop.is_set():
                     log.error("booth emulator %s: pty failed: %s", self.port, err)
                 break
-            self.emulator.tick()
+            if self._bootloader.ends_at is None:
+                self.emulator.tick()
             if self.emulator.hangup_requested.is_set():
                 self._shutdown(from_thread=True)
                 return
 
+    def _answer_programmer(self, data: bytes, now: float) -> None:
+        """Bytes in the bootloader's window: STK500v2 messages (avrdude) are answered; the rest is lost."""
+        answer = self.programmer.feed(data)
+        if answer:
+            self._write(answer)
+        if self.programmer.left:
+            self._bootloader.ends_at = now  # CMD_LEAVE_PROGMODE_ISP: the bootloader starts the firmware
+        elif self.programmer.active:
+            self._bootloader.ends_at = max(self._bootloader.ends_at or now, now + BOOTLOADER_BYTE_HOLD_S)
+
     def _write(self, data: bytes) -> None:
+        if self._watch is not None and not self.host_open:
+            return  # nobody has the port open: a USB-serial chip drops what the board sends
+        if self._held.latency_s > 0:
+            self._held.hold(data, time.monotonic())
+            if threading.current_thread() is not self._thread:
+                with contextlib.suppress(OSError):
+                    os.write(self._wake_w, b"w")  # the serving thread sends it on the timer's tick
+            return
+        self._write_now(data)
+
+    def _flush_held(self) -> None:
+        data = self._held.take(time.monotonic())
+        if data:
+            self._write_now(data)
+
+    def _write_now(self, data: bytes) -> None:
         view = memoryview(data)
         while view:
             try:
@@ -825,6 +1012,8 @@ class PtyBoothServer:
             self._thread.join(timeout=2.0)
         self.emulator.connect_output(None)
         self.emulator.host_lost()
+        if self._watch is not None:
+            self._watch.close()
         for fd in (self._master, self._slave, self._wake_r, self._wake_w):
             try:
                 os.close(fd)
@@ -845,13 +1034,22 @@ class PtyBoothServer:
         self.close()
 
 
-def serve_on_pty(emulator: BoothEmulator | None = None, **kwargs: Any) -> PtyBoothServer:
-    """Serve a booth emulator on a new pseudo-terminal.
+def serve_on_pty(
+    emulator: BoothEmulator | None = None,
+    *,
+    auto_reset: bool = True,
+    bootloader_s: float = MEGA_BOOTLOADER_S,
+    latency_s: float = FTDI_LATENCY_S,
+    **kwargs: Any,
+) -> PtyBoothServer:
+    """Serve a booth emulator on a new pseudo-terminal, behind a Mega's unkind link (:class:`PtyBoothServer`).
 
     Parameters
     ----------
     emulator : BoothEmulator or None
         The emulator to serve; a new one is built from ``kwargs`` if None.
+    auto_reset, bootloader_s, latency_s
+        The link: reset on every open and its bootloader window, the USB latency timer.
     **kwargs
         Arguments of :class:`BoothEmulator` (only when ``emulator`` is None).
 
@@ -864,4 +1062,4 @@ def serve_on_pty(emulator: BoothEmulator | None = None, **kwargs: Any) -> PtyBoo
         emulator = BoothEmulator(**kwargs)
     elif kwargs:
         raise ValueError("serve_on_pty: got an emulator and emulator arguments; expected one or the other")
-    return PtyBoothServer(emulator)
+    return PtyBoothServer(emulator, auto_reset=auto_reset, bootloader_s=bootloader_s, latency_s=latency_s)

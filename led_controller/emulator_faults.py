@@ -152,12 +152,14 @@ class FaultInjector:
 
 
 def emulator_state(emulator: BoothEmulator, injector: FaultInjector | None, *, port: str, link: str) -> dict:
-    """What ``--state-file`` records: the booth's state, LEDs, watchdog and the faults injected so far."""
+    """What ``--state-file`` records: the booth's state, LEDs, watchdog, the faults injected so far and
+    ``boots``, how often its firmware started (power-up, then once per reset by a host's open)."""
     snapshot = emulator.snapshot()
     return {
         "port": port,
         "link": link,
         **snapshot,
+        "boots": emulator.boots,
         "requests": injector.requests if injector is not None else None,
         "faults": dict(injector.injected) if injector is not None else {},
     }

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 
+from msflash.led_controller.usb_link import FTDI_LATENCY_S, MEGA_BOOTLOADER_S
+
 FIRMWARE_DIR = Path(__file__).resolve().parent / "firmware"
 """The firmware's sources and Makefile (package data: an installed msflash carries them too)."""
 
@@ -106,13 +108,37 @@ class SimulatedBooth:
         The image's channel count (``CH=``).
     top : int
         PWM TOP of the image's drive resolution (``(1 << BITS) - 1``).
+    auto_reset : bool
+        Whether a host's open of :attr:`port` resets the MCU, as a stock Mega's does (default on):
+        the bootloader then swallows the host's bytes for ``bootloader_s`` of wall-clock time before
+        the firmware boots (``led_controller/usb_link.py``; the simavr bridge models it in C).
+    bootloader_s : float
+        The bootloader's window after a reset, wall-clock seconds.
+    latency_s : float
+        The USB-serial chip's latency timer holding short replies (0: none).
+    eeprom : Path or None
+        A file keeping the MCU's EEPROM (the booth's serial) across runs of the simulator.
     """
 
-    def __init__(self, elf: Path = ELF, *, channels: int = 7, top: int = 0xFFFF) -> None:
+    def __init__(
+        self,
+        elf: Path = ELF,
+        *,
+        channels: int = 7,
+        top: int = 0xFFFF,
+        auto_reset: bool = True,
+        bootloader_s: float = MEGA_BOOTLOADER_S,
+        latency_s: float = FTDI_LATENCY_S,
+        eeprom: Path | None = None,
+    ) -> None:
         self._top = top
         self._channels = channels
+        link = [] if auto_reset else ["--no-auto-reset"]
+        link += ["--bootloader-ms", str(round(bootloader_s * 1000)), "--latency-us", str(round(latency_s * 1e6))]
+        if eeprom is not None:
+            link += ["--eeprom", str(eeprom)]
         self._process = subprocess.Popen(
-            [str(HARNESS), str(elf)],
+            [str(HARNESS), *link, str(elf)],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL,
@@ -184,10 +210,21 @@ class SimulatedBooth:
         """Drive the camera's ExposureActive input; returns once 2 ms of simulated time served it."""
         self._ask(f"exp {int(edge)}")
 
+    def exposure_wire_loose(self) -> None:
+        """Disconnect the ExposureActive wire: the input is then held by the firmware's pull-up, or floats
+        (a random level every 100 µs of simulated time, as a real floating input picks up noise)."""
+        self._ask("exp float")
+
     def camera_strobe(self) -> None:
         """One whole exposure: a rising then a falling edge."""
         self.exposure_active(True)
         self.exposure_active(False)
+
+    def link(self) -> dict[str, int]:
+        """The board's link now: ``opens`` (hosts holding the port), ``resets`` (opens that reset the MCU),
+        ``bootloader`` (1 while the bootloader owns the UART)."""
+        words = self._ask("link")
+        return {"opens": int(words[2]), "resets": int(words[4]), "bootloader": int(words[6])}
 
     def advance(self, seconds: float) -> None:
         """Wait until ``seconds`` of simulated time have passed (paced to the wall clock)."""

@@ -64,6 +64,23 @@ def watchdog_ms_allowed(ms: int) -> bool:
 
 TERMINATOR = b"\n"
 
+SERIAL_MAX = 32
+"""Longest booth serial (``SERIAL <text>``), in characters."""
+
+SERIAL_UNSET = "-"
+"""What ``SERIAL=`` says of a booth whose serial was never set."""
+
+_SERIAL_RE = re.compile(r"[A-Za-z0-9._-]{1,32}")  # {1,32}: SERIAL_MAX
+
+
+def serial_allowed(text: str) -> bool:
+    """Whether ``text`` can be a booth serial: 1..32 of ``A-Z a-z 0-9 . _ -``, and not ``-`` alone.
+
+    >>> [serial_allowed(t) for t in ("booth-A1", "", "-", "a b", "x" * 33)]
+    [True, False, False, False, False]
+    """
+    return text != SERIAL_UNSET and _SERIAL_RE.fullmatch(text) is not None
+
 
 class Command(StrEnum):
     """Request names (first word of a request body)."""
@@ -81,6 +98,7 @@ class Command(StrEnum):
     STATUS = "STAT"
     WATCHDOG = "WDOG"
     PING = "PING"
+    SERIAL = "SERIAL"
 
 
 HOLD_FLAG = "HOLD"
@@ -94,6 +112,7 @@ class Event(StrEnum):
     TRIGGER = "TRIG"
     DONE = "DONE"
     WATCHDOG = "WDOG"
+    BOOT = "BOOT"
 
 
 class Mode(StrEnum):
@@ -173,6 +192,9 @@ class BoothInfo:
     """Resolution of the firmware's LED drive in bits (the wire always carries 16)."""
     max_steps: int
     """Capacity of the pattern table in steps."""
+    serial: str | None = None
+    """The booth's own serial (``SERIAL=``, set with the ``SERIAL`` command and kept in its EEPROM);
+    None when the booth does not report one or it was never set (``SERIAL=-``)."""
 
 
 @dataclass(frozen=True)
@@ -424,6 +446,7 @@ def parse_identify(reply: Reply, raw: bytes, *, where: str = "booth") -> BoothIn
             peaks_nm=peaks,
             level_bits=int(f["BITS"]),
             max_steps=int(f["STEPS"]),
+            serial=None if f.get("SERIAL", "-") == "-" else f["SERIAL"],
         )
     except ValueError as err:
         raise _bad_reply(where, cmd, "integer CH/PROTO/BITS/STEPS and numeric PEAKS", raw, "has a bad number") from err

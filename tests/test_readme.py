@@ -24,6 +24,8 @@ README = ROOT / "README.md"
 CLI = [sys.executable, "-m", "msflash.acquisition.app.cli"]
 SKIP = re.compile(r"\((needs [^)]*|runs until stopped)\)")
 LONG = re.compile(r"\(about \d+ min\)")
+HOST_VERDICT = re.compile(r"\bexit 1 on any WARN")
+"""A comment saying the command's status is the host's verdict (``doctor``): 0 or 1 are both as written."""
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,11 @@ class Example:
     def skip_reason(self) -> str | None:
         match = SKIP.search(self.comment)
         return match.group(1) if match else None
+
+    @property
+    def allowed_exits(self) -> tuple[int, ...]:
+        """Get the exit statuses that mean the example ran as written."""
+        return (0, 1) if HOST_VERDICT.search(self.comment) else (0,)
 
     @property
     def long(self) -> bool:
@@ -115,7 +122,11 @@ def run_examples(folder: Path, include_long: bool) -> list[str]:
             timeout=900,
             stdin=subprocess.DEVNULL,
         )
-        assert result.returncode == 0, f"{example} exited {result.returncode}:\n{result.stderr[-3000:]}"
+        assert result.returncode in example.allowed_exits, (
+            f"{example} exited {result.returncode}:\n{result.stderr[-3000:]}"
+        )
+        if result.returncode == 1:  # doctor's verdict on this host: a WARN or FAIL line, no crash
+            assert ("WARN" in result.stdout or "FAIL" in result.stdout) and "unexpected" not in result.stderr
     return skipped
 
 

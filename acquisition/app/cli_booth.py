@@ -6,15 +6,18 @@ import argparse
 import math
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-from msflash.acquisition.app.cli_common import UsageError, print_json, progress
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, boot_seconds, print_json, progress
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.booth_probe import PROBE_PROTOCOLS, probe_booth
-from msflash.led_controller.doctor import run_doctor
+from msflash.led_controller.doctor import Finding, run_doctor
 from msflash.led_controller.emulator import DEFAULT_NAMES, DEFAULT_PEAKS_NM, BoothEmulator, serve_on_pty
 from msflash.led_controller.emulator_faults import FaultInjector, emulator_state, parse_fault_spec, write_state_file
 from msflash.led_controller.errors import BoothError
+from msflash.led_controller.usb_link import FTDI_LATENCY_S, MEGA_BOOTLOADER_S
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -32,6 +35,35 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="comma-separated peak wavelengths in nm, one per name",
     )
     emu.add_argument("--watchdog-s", type=float, default=3.0, help="host-silence timeout (0 disables)")
+    link = emu.add_argument_group("the board's link (a stock Arduino Mega's by default)")
+    link.add_argument(
+        "--no-auto-reset",
+        action="store_true",
+        help="a board with auto-reset disabled (10 µF RESET–GND, or RESET-EN cut): opening the port does not "
+        "reset it; by default every open resets it as a stock Mega's does (LEDs off, the bootloader "
+        "swallowing what is sent for --bootloader-s, then the firmware's BOOT banner)",
+    )
+    link.add_argument(
+        "--bootloader-s",
+        type=boot_seconds,
+        default=MEGA_BOOTLOADER_S,
+        metavar="S",
+        help="how long the bootloader owns the port after a reset, in wall-clock seconds (default %(default)g)",
+    )
+    link.add_argument(
+        "--latency-ms",
+        type=boot_seconds,
+        default=FTDI_LATENCY_S * 1000,
+        metavar="MS",
+        help="the USB-serial chip's latency timer: replies shorter than a USB packet wait for its next tick "
+        "(default %(default)g, an FTDI chip's; 0: none)",
+    )
+    link.add_argument(
+        "--serial",
+        default=None,
+        metavar="TEXT",
+        help="the serial in the board's EEPROM (ID's SERIAL=; default: never set); SERIAL <text> changes it",
+    )
     emu.add_argument(
         "--fault",
         default=None,
@@ -72,6 +104,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="the protocol to ask --port in: msflash (our firmware) or text (plain-text booth); default %(default)s",
     )
     doc.add_argument("--timeout-s", type=float, default=1.0, help="--port: reply timeout in seconds (default 1)")
+    add_booth_boot_option(doc)
     doc.add_argument("--sysfs-root", type=Path, default=Path("/sys"), help=argparse.SUPPRESS)
     doc.add_argument("--dev-root", type=Path, default=Path("/dev"), help=argparse.SUPPRESS)
     doc.add_argument("--proc-root", type=Path, default=Path("/proc"), help=argparse.SUPPRESS)
@@ -91,7 +124,9 @@ def _emulator_from_args(args: argparse.Namespace) -> BoothEmulator:
             f"--watchdog-s {args.watchdog_s}: not a finite time ≥ 0; expected 0 (off) or a positive number of seconds"
         )
     try:
-        return BoothEmulator(names=names, peaks_nm=peaks, watchdog_s=args.watchdog_s)
+        return BoothEmulator(
+            names=names, peaks_nm=peaks, watchdog_s=args.watchdog_s, serial=getattr(args, "serial", None)
+        )
     except ValueError as err:
         raise UsageError(f"booth-emulator: {err}") from err
 
@@ -118,7 +153,14 @@ def booth_emulator(args: argparse.Namespace, *, stop: threading.Event | None = N
     injector = _faults_from_args(args, emulator)
     state_file: Path | None = getattr(args, "state_file", None)
     stop = stop or threading.Event()
-    with sigterm_as_exit(), serve_on_pty(emulator) as server:
+    auto_reset = not getattr(args, "no_auto_reset", False)
+    bootloader_s = float(getattr(args, "bootloader_s", MEGA_BOOTLOADER_S))
+    latency_s = float(getattr(args, "latency_ms", FTDI_LATENCY_S * 1000)) / 1000
+    link = {"auto_reset": auto_reset, "bootloader_s": bootloader_s, "latency_s": latency_s}
+    with (
+        sigterm_as_exit(),
+        serve_on_pty(emulator, auto_reset=auto_reset, bootloader_s=bootloader_s, latency_s=latency_s) as server,
+    ):
         last: dict | None = None
 
         def record() -> None:
@@ -140,7 +182,13 @@ def booth_emulator(args: argparse.Namespace, *, stop: threading.Event | None = N
             sys.stdout.write(server.port + "\n")
             sys.stdout.flush()
             progress(
-                f"booth emulator on {server.port} ({len(emulator.names)} channels)"
+                f"booth emulator on {server.port} ({len(emulator.names)} channels; "
+                + (
+                    f"resets when its port opens, bootloader {link['bootloader_s']:g} s"
+                    if link["auto_reset"]
+                    else "auto-reset disabled"
+                )
+                + f", USB latency {link['latency_s'] * 1000:g} ms)"
                 + (f", faults {args.fault} (seed {args.seed})" if injector is not None else "")
                 + "; Ctrl-C to stop"
             )
@@ -157,12 +205,41 @@ def booth_emulator(args: argparse.Namespace, *, stop: threading.Event | None = N
     return 0
 
 
+def aravis_finding(import_camera: Callable[[], Any] | None = None) -> Finding:
+    """Whether the Aravis 0.8 typelib imports (``gi.require_version('Aravis', '0.8')``): no camera without it.
+
+    ``import_camera`` imports msflash's Aravis camera module (the one place that imports ``gi``); tests
+    pass their own to stand for a machine without the typelib, which cannot be uninstalled here.
+    """
+
+    def default_import() -> Any:
+        from msflash.acquisition.devices.aravis import camera
+
+        return camera
+
+    try:
+        camera = (import_camera or default_import)()
+    except ImportError as err:
+        return Finding(
+            "aravis.typelib",
+            "fail",
+            f"Aravis cannot be used: {err}",
+            "sudo apt install gir1.2-aravis-0.8 python3-gi (setup.sh installs them); without it only the sim "
+            "and replay rigs work",
+        )
+    version = getattr(getattr(camera, "Aravis", None), "_version", "0.8")
+    return Finding("aravis.typelib", "ok", f"the Aravis {version} typelib imports (GObject introspection)")
+
+
 def doctor(args: argparse.Namespace) -> int:
-    """Run the host checks; exit 1 if any check failed. With ``--port``: ask that one booth who it is."""
+    """Run the host checks; exit 1 if any check warned or failed. With ``--port``: ask that one booth who it is."""
     if getattr(args, "port", None) is not None:
         return _doctor_port(args)
-    findings = run_doctor(sysfs_root=args.sysfs_root, dev_root=args.dev_root, proc_root=args.proc_root)
-    failed = any(f.status == "fail" for f in findings)
+    findings = [
+        aravis_finding(),
+        *run_doctor(sysfs_root=args.sysfs_root, dev_root=args.dev_root, proc_root=args.proc_root),
+    ]
+    failed = any(f.status in ("fail", "warn") for f in findings)
     if getattr(args, "json", False):
         print_json({"ok": not failed, "findings": [f.as_dict() for f in findings]})
     else:
@@ -178,7 +255,7 @@ def _doctor_port(args: argparse.Namespace) -> int:
     if not args.timeout_s > 0:
         raise UsageError(f"--timeout-s {args.timeout_s}: expected a positive number of seconds")
     try:
-        found = probe_booth(args.port, args.booth_protocol, timeout_s=args.timeout_s)
+        found = probe_booth(args.port, args.booth_protocol, timeout_s=args.timeout_s, boot_s=args.booth_boot_s)
     except BoothError as err:
         raise UsageError(f"{err} (--booth-protocol {args.booth_protocol})") from err
     if getattr(args, "json", False):
@@ -186,6 +263,14 @@ def _doctor_port(args: argparse.Namespace) -> int:
         return 0
     sys.stdout.write(
         f"OK    booth.identity: booth {found.port} answers --booth-protocol {found.protocol}: "
-        f"firmware {found.firmware!r}; {found.channels} channels: {' '.join(found.names)}\n"
+        f"firmware {found.firmware!r}; {found.channels} channels: {' '.join(found.names)}"
+        + (
+            f"; serial {found.serial}"
+            if found.serial
+            else "; serial not set (booth console: serial TEXT)"
+            if found.protocol == "msflash"
+            else ""
+        )
+        + "\n"
     )
     return 0

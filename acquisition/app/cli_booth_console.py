@@ -12,7 +12,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.adapters import BOOTH_PROTOCOLS, open_booth
 from msflash.led_controller.adapters.text_booth import TextBooth
@@ -42,6 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="the booth's protocol: msflash (our firmware) or text (plain-text booth); default %(default)s",
     )
     console.add_argument("--timeout-s", type=float, default=2.0, help="reply timeout of each command in seconds")
+    add_booth_boot_option(console)
     console.set_defaults(handler=booth_console)
     booth.set_defaults(handler=_booth_without_action)
 
@@ -57,7 +58,13 @@ def booth_console(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="msflash-console-") as folder:
         transcript = Path(folder) / "transcript.txt"
         with sigterm_as_exit():
-            booth = open_booth(args.port, args.booth_protocol, log_serial=transcript, timeout_s=args.timeout_s)
+            booth = open_booth(
+                args.port,
+                args.booth_protocol,
+                log_serial=transcript,
+                timeout_s=args.timeout_s,
+                boot_s=args.booth_boot_s,
+            )
             assert isinstance(booth, LedBooth | TextBooth)  # what open_booth opens
             with booth:  # LEDs off on every way out, as each driver's context manager does
                 _prompt(BoothConsole(booth, transcript))

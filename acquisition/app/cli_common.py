@@ -38,6 +38,40 @@ def positive_int(text: str) -> int:
     return value
 
 
+def boot_seconds(text: str) -> float:
+    """argparse type of ``--booth-boot-s``: a finite number of seconds ≥ 0 (0: no wait).
+
+    >>> boot_seconds("2.5"), boot_seconds("0")
+    (2.5, 0.0)
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (0 <= value < math.inf):
+        raise argparse.ArgumentTypeError(
+            f"'{text}': expected a number of seconds ≥ 0 (how long a booth that resets when its port "
+            "opens takes to boot; 0 for a board with auto-reset disabled)"
+        )
+    return value
+
+
+def add_booth_boot_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--booth-boot-s S``: how long to let a booth that resets when its port opens boot (docs/booth-firmware.md §4)."""
+    from msflash.led_controller.booth import DEFAULT_BOOT_S
+
+    parser.add_argument(
+        "--booth-boot-s",
+        type=boot_seconds,
+        default=DEFAULT_BOOT_S,
+        metavar="S",
+        help="after opening the booth's port, wait up to S seconds, sending nothing, for the booth to boot: "
+        "a stock Arduino Mega resets when its port opens and its bootloader swallows what is sent for "
+        "1.5–2 s; the wait ends at the firmware's boot banner (default %(default)g; 0: ask at once, for a "
+        "board with auto-reset disabled)",
+    )
+
+
 def _strict(value: Any) -> Any:
     """``value`` with numpy arrays/scalars made plain and non-finite numbers made ``None``.
 

@@ -91,10 +91,7 @@ def _devices(args: argparse.Namespace) -> int:
             f"serial {camera['serial']}\t{where}"
         )
     for port in serial_ports:  # not our USB id: maybe another booth; never opened unless named
-        print(
-            f"serial\t{port['device']}\t{port['usb_id']}\t{port['product'] or port['description'] or '-'}\t"
-            f"{port['hint']}"
-        )
+        print(f"serial\t{port['device']}\t{port['usb_id']}\t{port['board']}\t{port['by_id'] or '-'}\t{port['hint']}")
     if not booths:
         print("no booth found among the serial ports")
         progress("devices: 'msflash doctor' says why a booth is not found (USB id, permissions, ModemManager)")
@@ -130,6 +127,9 @@ def _booth_entry(port: SerialPortInfo) -> dict[str, Any]:
         "product": port.product,
         "serial_number": port.serial_number,
         "description": port.description,
+        "kind": port.kind,  # booth, arduino-mega, arduino, usb-serial, serial
+        "board": port.board,
+        "by_id": port.by_id,  # /dev/serial/by-id/…: stable across re-plugging
     }
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, progress
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, progress
 from msflash.acquisition.app.options import simulated_world
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.session.rig import Rig, open_rig
@@ -61,7 +61,7 @@ def _open(args: argparse.Namespace) -> Rig:
         raise UsageError(f"--booth-port: the rig '{spec}' has its own emulated booth; expected --rig sim or hw")
     world = simulated_world(args)
     if spec == "sim":
-        return open_rig("sim", cfa=args.cfa, booth_port=args.booth_port, **world)
+        return open_rig("sim", cfa=args.cfa, booth_port=args.booth_port, booth_boot_s=args.booth_boot_s, **world)
     if spec == "aravis-fake":
         return open_rig("aravis-fake", **world)
     if spec == "hw":
@@ -74,6 +74,7 @@ def _open(args: argparse.Namespace) -> Rig:
             led_spectra=args.led_spectra,
             responsivity=args.responsivity,
             log_serial=args.log_serial,
+            booth_boot_s=args.booth_boot_s,
         )
     return open_rig(spec, log_serial=args.log_serial)
 
@@ -146,6 +147,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="PATH",
         help="the booth's serial port (hw; default: the single booth found) or, on sim, a booth in another process",
     )
+    add_booth_boot_option(hardware)
     hardware.add_argument("--interfaces", default="usb3", help="Aravis interfaces to search (default usb3)")
     hardware.add_argument("--calibration", default=None, metavar="DIR", help="calibration directory")
     hardware.add_argument("--responsivity", default=None, metavar="FILE.csv", help="camera responsivities")

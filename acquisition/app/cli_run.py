@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from msflash.acquisition.app.camera_options import add_camera_options, camera_options_from_args, given_camera_options
-from msflash.acquisition.app.cli_common import UsageError, claimed_output, progress
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, claimed_output, progress
 from msflash.acquisition.app.options import add_estimation_options, simulated_world
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.errors import CaptureError
@@ -162,11 +162,19 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
             pixel_format=args.pixel_format,
             camera_options=camera_options_from_args(args),
             booth_protocol=args.booth_protocol,
+            booth_boot_s=args.booth_boot_s,
         )
     # The simulated world: the sim rig renders it with its own camera, aravis-fake through Aravis.
     world = simulated_world(args)
     if spec == "sim":
-        return open_rig("sim", cfa=args.cfa, booth_port=args.booth_port, booth_protocol=args.booth_protocol, **world)
+        return open_rig(
+            "sim",
+            cfa=args.cfa,
+            booth_port=args.booth_port,
+            booth_protocol=args.booth_protocol,
+            booth_boot_s=args.booth_boot_s,
+            **world,
+        )
     if spec == "aravis-fake":
         return open_rig("aravis-fake", **world)
     return open_rig(spec, log_serial=args.log_serial)
@@ -406,6 +414,7 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
         "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "
         "exposure-active line advances the booth's pattern table)",
     )
+    add_booth_boot_option(parser)
     parser.add_argument(
         "--booth-protocol",
         default="msflash",

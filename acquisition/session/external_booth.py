@@ -15,6 +15,7 @@ from pathlib import Path
 from msflash.acquisition.errors import RigOpenError, UsageError
 from msflash.led_controller import LedBooth
 from msflash.led_controller.adapters import open_booth
+from msflash.led_controller.booth import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import Booth
 from msflash.led_controller.recovery import reset_leftovers
 from msflash.processing.spectra import Spectra
@@ -46,7 +47,13 @@ def check_booth_port(rig: str, sync: str) -> None:
 
 
 def open_external_booth(
-    port: str, leds: Spectra, log_serial: str | Path | None, closers: list, protocol: str = "msflash"
+    port: str,
+    leds: Spectra,
+    log_serial: str | Path | None,
+    closers: list,
+    protocol: str = "msflash",
+    *,
+    boot_s: float = DEFAULT_BOOT_S,
 ) -> Booth:
     """The booth at ``port``, identified, checked to have one channel per LED and cleared of leftovers.
 
@@ -61,7 +68,7 @@ def open_external_booth(
         ``booth PORT: …``: the port did not open or answer as a booth, or its channels differ.
     """
     try:
-        booth = open_booth(port, protocol, log_serial=log_serial)
+        booth = open_booth(port, protocol, log_serial=log_serial, boot_s=boot_s)
         closers.append(booth.close)
         closers.append(booth.all_off)
         if booth.info.channels != leds.count:

@@ -71,6 +71,7 @@ from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, Seq
 from msflash.acquisition.session.external_booth import levels_reported_by, open_external_booth
 from msflash.led_controller import BoothEmulator, LedBooth, serve_on_pty
 from msflash.led_controller.adapters import open_booth
+from msflash.led_controller.booth import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import Booth
 from msflash.led_controller.errors import BoothProtocolError
 from msflash.led_controller.protocol import Command, encode_request, parse_frame, parse_identify, parse_reply
@@ -238,6 +239,13 @@ def _emulator_for(leds: Spectra) -> BoothEmulator:
     return BoothEmulator(names=[n.replace(" ", "_") for n in leds.names], peaks_nm=peaks)
 
 
+SIM_BOOTLOADER_S = 0.2
+"""The bootloader window of the simulated rigs' own booth, in seconds: it resets when the driver opens its
+pty, as a stock Mega does, and swallows what is sent meanwhile, but boots faster than a Mega's 1.6 s
+(:data:`led_controller.usb_link.MEGA_BOOTLOADER_S`) so every simulated run does not wait for it. The
+full window is what ``--booth-port`` against ``msflash booth-emulator`` or the firmware in simavr sees."""
+
+
 def _open_emulated_booth(leds: Spectra, log_serial: str | Path | None, closers: list) -> tuple[BoothEmulator, LedBooth]:
     """The booth emulator for ``leds`` served on a new pty, and the ``LedBooth`` driver on that pty.
 
@@ -252,7 +260,7 @@ def _open_emulated_booth(leds: Spectra, log_serial: str | Path | None, closers: 
     port = "a new pty"
     try:
         emulator = _emulator_for(leds)
-        server = serve_on_pty(emulator)
+        server = serve_on_pty(emulator, bootloader_s=SIM_BOOTLOADER_S)
         closers.append(server.close)
         port = server.port
         booth = LedBooth.open(server.port, log_serial=log_serial)
@@ -365,6 +373,7 @@ def open_sim_rig(
     flash_power: float | None = None,
     booth_port: str | None = None,
     booth_protocol: str = "msflash",
+    booth_boot_s: float = DEFAULT_BOOT_S,
 ) -> Rig:
     """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver.
 
@@ -390,6 +399,9 @@ def open_sim_rig(
     booth_protocol
         ``--booth-protocol``: what the booth at ``booth_port`` speaks (``msflash`` or ``text``,
         :data:`led_controller.adapters.BOOTH_PROTOCOLS`).
+    booth_boot_s
+        ``--booth-boot-s``: how long the booth at ``booth_port`` may take to boot after its port's open
+        reset it (:data:`led_controller.booth.DEFAULT_BOOT_S`).
 
     Raises
     ------
@@ -404,7 +416,9 @@ def open_sim_rig(
     try:
         closers.append(world.close)
         if booth_port is not None:
-            booth = open_external_booth(booth_port, world.led_spectra, log_serial, closers, booth_protocol)
+            booth = open_external_booth(
+                booth_port, world.led_spectra, log_serial, closers, booth_protocol, boot_s=booth_boot_s
+            )
             world.led_levels_source = levels_reported_by(booth)
             return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers)
         emulator, booth = _open_emulated_booth(world.led_spectra, log_serial, closers)
@@ -1065,6 +1079,7 @@ def open_hw_rig(
     pixel_format: str | None = None,
     camera_options: Any = None,
     booth_protocol: str = "msflash",
+    booth_boot_s: float = DEFAULT_BOOT_S,
     **_ignored: object,
 ) -> Rig:
     """The hardware rig: a GenICam camera by id/serial/IP + a booth on ``port`` (or the one discovered).
@@ -1123,7 +1138,7 @@ def open_hw_rig(
         errors.append(err)
     try:
         booth_port = port if port is not None else find_booth().device
-        booth = open_booth(booth_port, booth_protocol, log_serial=log_serial)
+        booth = open_booth(booth_port, booth_protocol, log_serial=log_serial, boot_s=booth_boot_s)
         closers.append(booth.close)
         closers.append(booth.all_off)
         if booth.info.channels != leds.count:

@@ -29,7 +29,7 @@ from typing import IO, Any, Literal
 
 import serial
 
-from msflash.led_controller.booth import open_serial_port
+from msflash.led_controller.booth import DEFAULT_BOOT_S, open_serial_port
 from msflash.led_controller.booth_interface import HOST_PACED_ONLY, BoothCapabilities
 from msflash.led_controller.errors import BoothError, BoothProtocolError, BoothTimeoutError
 
@@ -153,9 +153,19 @@ class TextBooth:
 
     @classmethod
     def open(
-        cls, url: str, *, timeout_s: float = 1.0, log_serial: str | Path | None = None, baudrate: int = 115200
+        cls,
+        url: str,
+        *,
+        timeout_s: float = 1.0,
+        log_serial: str | Path | None = None,
+        baudrate: int = 115200,
+        boot_s: float = DEFAULT_BOOT_S,
     ) -> TextBooth:
         """Open the text booth at ``url`` (device path, pty, pyserial URL), identify it, switch its LEDs off.
+
+        A board that resets when its port opens (an Arduino's auto-reset) is given ``boot_s`` to boot,
+        sending nothing: the wait ends at the first line the booth sends of its own (a sketch's greeting),
+        what came before is flushed, then ``ID?`` is asked. 0: ask at once.
 
         Raises
         ------
@@ -171,7 +181,23 @@ class TextBooth:
             port.close()
             raise
         try:
-            booth._info = parse_identity(booth._ask("ID?"), f"booth {url}")
+            start = time.monotonic()
+            booth._await_boot(boot_s)
+            try:
+                reply = booth._ask("ID?")
+            except BoothTimeoutError as err:
+                hint = (
+                    f"a board that resets when its port opens (Arduino auto-reset) needs --booth-boot-s longer than "
+                    f"its bootloader (now {boot_s:g} s)"
+                    if boot_s > 0
+                    else f"if it resets when its port opens (Arduino auto-reset), let it boot: --booth-boot-s {DEFAULT_BOOT_S:g}"
+                )
+                raise BoothTimeoutError(
+                    f"{err} ({time.monotonic() - start:.3g} s after opening the port; {hint})",
+                    command="ID?",
+                    timeout_s=err.timeout_s,
+                ) from err
+            booth._info = parse_identity(reply, f"booth {url}")
             booth.all_off()  # leftovers of a run that did not finish
         except BaseException:
             booth.close()
@@ -184,6 +210,26 @@ class TextBooth:
             ",".join(booth.info.names),
         )
         return booth
+
+    def _await_boot(self, boot_s: float) -> None:
+        """Send nothing until the booth's first line of its own or ``boot_s``; the bytes so far are dropped."""
+        if boot_s <= 0:
+            return
+        timeout = self._port.timeout
+        deadline = time.monotonic() + boot_s
+        try:
+            while (remaining := deadline - time.monotonic()) > 0:
+                self._port.timeout = min(remaining, 0.1)
+                line = self._port.read_until(b"\n")
+                if line.endswith(b"\n"):
+                    self._wire("<", line.rstrip(b"\r\n").decode("ascii", errors="backslashreplace"))
+                    break
+        except (OSError, serial.SerialException) as err:
+            raise BoothError(
+                f"booth {self._name}: link lost while it booted ({err}); expected the booth connected"
+            ) from err
+        finally:
+            self._port.timeout = timeout
 
     # -- the Booth interface ------------------------------------------------------------------
 

@@ -16,8 +16,11 @@ import math
 import os
 import select
 import threading
+import time
 import tty
 from collections.abc import Sequence
+
+from msflash.led_controller.usb_link import MEGA_BOOTLOADER_S, Bootloader, PortOpenWatch
 
 log = logging.getLogger(__name__)
 
@@ -94,26 +97,57 @@ class TextBoothServer:
 
     Open :attr:`port` (the slave's path) with :meth:`TextBooth.open`; close with :meth:`close` or
     ``with``.
+
+    Like a text booth built on a stock Arduino (``led_controller/usb_link.py``), a host's open resets it
+    unless ``auto_reset`` is False: levels off, the host's bytes swallowed for ``bootloader_s`` of
+    wall-clock time, then the sketch starts and prints its greeting line, ``<firmware> ready``. What it
+    sends while no host holds the port is lost.
     """
 
-    def __init__(self, emulator: TextBoothEmulator) -> None:
+    def __init__(
+        self, emulator: TextBoothEmulator, *, auto_reset: bool = True, bootloader_s: float = MEGA_BOOTLOADER_S
+    ) -> None:
         self.emulator = emulator
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)  # before anyone opens it: no echo, no line editing, no CR/LF mapping
         self.port = os.ttyname(self._slave)
+        self.auto_reset = auto_reset
+        self.resets = 0
+        self._bootloader = Bootloader(window_s=bootloader_s)
+        self._host_opens = 0
+        self._watch = PortOpenWatch(self.port)
         self._wake_r, self._wake_w = os.pipe()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"text-booth-emulator {self.port}", daemon=True)
         self._thread.start()
 
+    def _port_events(self) -> None:
+        for change in self._watch.changes():
+            was, self._host_opens = self._host_opens, max(0, self._host_opens + change)
+            if change > 0 and was == 0 and self.auto_reset:
+                self.resets += 1
+                self.emulator.levels = (0.0,) * len(self.emulator.names)  # reset: pins are inputs
+                self._bootloader.reset(time.monotonic())
+
     def _run(self) -> None:
         pending = b""
         while not self._stop.is_set():
             try:
-                ready, _, _ = select.select([self._master, self._wake_r], [], [])
-                if self._master not in ready:
+                wait = (
+                    None if self._bootloader.ends_at is None else max(0.0, self._bootloader.ends_at - time.monotonic())
+                )
+                ready, _, _ = select.select([self._master, self._wake_r, self._watch.fileno()], [], [], wait)
+                if self._watch.fileno() in ready:
+                    self._port_events()
+                data = os.read(self._master, 4096) if self._master in ready else b""
+                now = time.monotonic()
+                if self._bootloader.running(now):
+                    self._bootloader.swallow(data, now)
+                    pending = b""
                     continue
-                pending += os.read(self._master, 4096)
+                if self._bootloader.finished(now):
+                    self._write(f"{self.emulator.firmware} ready\n".encode("ascii"))  # the sketch's setup()
+                pending += data
             except OSError as err:
                 if not self._stop.is_set():
                     log.error("text booth emulator %s: pty failed: %s", self.port, err)
@@ -124,6 +158,8 @@ class TextBoothServer:
                 self._write((self.emulator.reply(text) + "\n").encode("ascii"))
 
     def _write(self, data: bytes) -> None:
+        if self._host_opens == 0:
+            return  # nobody has the port open: the USB-serial chip drops it
         view = memoryview(data)
         while view:
             try:
@@ -138,6 +174,7 @@ class TextBoothServer:
         self._stop.set()
         os.write(self._wake_w, b"x")
         self._thread.join(timeout=2.0)
+        self._watch.close()
         for fd in (self._master, self._slave, self._wake_r, self._wake_w):
             os.close(fd)
 
@@ -148,9 +185,17 @@ class TextBoothServer:
         self.close()
 
 
-def serve_text_booth(channels: int = 7, names: Sequence[str] | None = None) -> TextBoothServer:
-    """A text booth emulator with ``channels`` channels (named ``names``, or ``ch1`` … ``chN``) on a new pty."""
-    return TextBoothServer(TextBoothEmulator(names or [f"ch{i + 1}" for i in range(channels)]))
+def serve_text_booth(
+    channels: int = 7,
+    names: Sequence[str] | None = None,
+    *,
+    auto_reset: bool = True,
+    bootloader_s: float = MEGA_BOOTLOADER_S,
+) -> TextBoothServer:
+    """A text booth emulator with ``channels`` channels (named ``names``, or ``ch1`` … ``chN``) on a new pty,
+    resetting when its port opens unless ``auto_reset`` is False (:class:`TextBoothServer`)."""
+    emulator = TextBoothEmulator(names or [f"ch{i + 1}" for i in range(channels)])
+    return TextBoothServer(emulator, auto_reset=auto_reset, bootloader_s=bootloader_s)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -160,10 +205,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         description="Serve the plain-text booth emulator on a new pty.",
     )
     parser.add_argument("--channels", type=int, default=7, help="number of LED channels (default 7)")
+    parser.add_argument(
+        "--no-auto-reset", action="store_true", help="a board with auto-reset disabled: opening the port resets nothing"
+    )
     args = parser.parse_args(argv)
     if not 1 <= args.channels <= 64:
         parser.error(f"--channels {args.channels}: expected 1–64")
-    with serve_text_booth(args.channels) as server:
+    with serve_text_booth(args.channels, auto_reset=not args.no_auto_reset) as server:
         print(server.port, flush=True)
         try:
             threading.Event().wait()

@@ -72,6 +72,9 @@ def test_devices_lists_the_booths_among_the_serial_ports(
             "product": "msflash booth",
             "serial_number": "B0042",
             "description": "msflash booth",
+            "kind": "booth",
+            "board": "msflash booth",
+            "by_id": None,
         }
     ]
     assert main(["devices", "--interfaces", "fake"]) == 0

@@ -162,20 +162,53 @@ def test_a_booth_that_stalls_for_good_is_switched_off_by_its_watchdog(tmp_path: 
 
 
 def test_the_next_run_resets_what_a_killed_run_left_on_the_booth(tmp_path: Path) -> None:
-    """A killed run leaves its LEDs on and the watchdog it raised for a long exposure; the next run says so
-    and sets both back."""
-    with booth_process(tmp_path) as booth:
-        killed = LedBooth.open(booth.port)
+    """A killed run leaves its LEDs on and the watchdog it raised for a long exposure; on a board with
+    auto-reset disabled (its open resets nothing) the next run says so and sets both back."""
+    with booth_process(tmp_path, "--no-auto-reset") as booth:
+        killed = LedBooth.open(booth.port, boot_s=0)
         killed.set_watchdog(120.0)
         killed.set_levels([1.0, 0.0, 0.5])
         killed.close()  # the port closed without OFF, as the kernel does for a killed process
-        done = _msflash("capture", *SIM, "--booth-port", booth.port, "--out", str(tmp_path / "out"))
+        done = _msflash(
+            "capture", *SIM, "--booth-port", booth.port, "--booth-boot-s", "0", "--out", str(tmp_path / "out")
+        )
         state = booth.stop()
     assert done.returncode == 0, done.stderr
     assert f"{booth.port}: found the LEDs on (sequence IDLE)" in done.stderr
     assert f"{booth.port}: found the watchdog at 120 s" in done.stderr and "set back to 3 s" in done.stderr
     assert _sequence(tmp_path / "out")["complete"] is True
+    assert state["watchdog_ms"] == 3000 and state["leds_on"] is False and state["boots"] == 1
+
+
+def test_a_capture_through_a_port_that_resets_and_swallows_the_first_seconds(tmp_path: Path) -> None:
+    """A stock Mega: each open resets it and its bootloader swallows what is sent for 1.6 s (the twin's
+    default). What a killed run left on is gone with the reset, and the capture waits for the boot banner."""
+    with booth_process(tmp_path, "--bootloader-s", "1.6") as booth:
+        killed = LedBooth.open(booth.port)
+        killed.set_watchdog(120.0)
+        killed.set_levels([1.0, 0.0, 0.5])
+        killed.close()
+        done = _msflash("capture", *SIM, "--booth-port", booth.port, "--out", str(tmp_path / "out"))
+        state = booth.stop()
+    assert done.returncode == 0, done.stderr
+    assert "found the LEDs on" not in done.stderr and "found the watchdog" not in done.stderr  # the reset did it
+    assert _sequence(tmp_path / "out")["complete"] is True
+    assert state["boots"] == 3  # power-up, then one reset per open
     assert state["watchdog_ms"] == 3000 and state["leds_on"] is False
+
+
+def test_a_capture_that_does_not_wait_for_the_boot_fails_in_one_line_naming_auto_reset(tmp_path: Path) -> None:
+    """--booth-boot-s 0 on a board that resets: ID goes to the bootloader; one line, the port, the wait, the cause."""
+    with booth_process(tmp_path) as booth:
+        done = _msflash(
+            "capture", *SIM, "--booth-port", booth.port, "--booth-boot-s", "0", "--out", str(tmp_path / "out")
+        )
+        booth.stop()
+    assert done.returncode == 1, done.stderr
+    errors = _error_lines(done.stderr)
+    assert len(errors) == 1 and "Traceback" not in done.stderr, done.stderr
+    assert booth.port in errors[0] and "of opening the port" in errors[0]
+    assert "auto-reset" in errors[0] and "--booth-boot-s 2.5" in errors[0]
 
 
 @pytest.mark.parametrize(

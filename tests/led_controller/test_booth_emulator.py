@@ -248,8 +248,9 @@ def test_transcript_is_recorded(booth_on_pty: PtyBoothServer, tmp_path) -> None:
         booth.set_levels([0.0] * 7)
     lines = path.read_text().splitlines()
     assert lines[0].startswith("# msflash booth transcript")
-    assert [line[:5] for line in lines[1:]] == ["> ?01", "< =01", "> ?02", "< =02", "> ?03", "< =03"]
-    assert "SET 0000" in lines[3] and "OFF" in lines[5]
+    # The port's open reset the booth: its boot banner comes first, then the exchange.
+    assert [line[:5] for line in lines[1:]] == ["! !01", "> ?01", "< =01", "> ?02", "< =02", "> ?03", "< =03"]
+    assert "BOOT FW=" in lines[1] and "SET 0000" in lines[4] and "OFF" in lines[6]
 
 
 def test_an_unwritable_transcript_is_a_booth_error_and_the_port_is_released(

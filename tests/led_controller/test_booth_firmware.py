@@ -16,10 +16,11 @@ import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from msflash.led_controller import LedBooth, ManualClock, serve_on_pty
+from msflash.led_controller import ManualClock, serve_on_pty
+from msflash.led_controller.booth_probe import await_boot_banner
 from msflash.led_controller.emulator import BoothEmulator, firmware_crc
 from msflash.led_controller.firmware_sim import SimulatedBooth
-from msflash.led_controller.protocol import MAX_LINE, encode_levels, encode_request
+from msflash.led_controller.protocol import MAX_LINE, encode_frame, encode_levels, encode_request
 
 from .conftest import SMALL_TOP
 
@@ -36,6 +37,13 @@ def _script() -> list[bytes]:
     requests: list[tuple[str, list[object]]] = [
         ("WDOG", ["600000"]),
         ("ID", []),
+        ("SERIAL", []),  # never set: '-'
+        ("SERIAL", ["bench-A_1.2"]),
+        ("ID", []),  # SERIAL= last
+        ("SERIAL", ["a", "b"]),
+        ("SERIAL", ["-"]),
+        ("SERIAL", ["x" * 33]),
+        ("SERIAL", ["caf\u00e9".encode("ascii", "replace").decode()]),  # '?' is not allowed
         ("STAT", []),
         ("ID", ["x"]),
         ("SET", L7),
@@ -60,6 +68,7 @@ def _script() -> list[bytes]:
         ("ARM", ["CAMERA", "123456789", "0", "0"]),
         ("ARM", ["HOST", "0", "0"]),
         ("ARM", ["HOST", "0", "0", "0"]),
+        ("SERIAL", ["while-armed"]),  # E_STATE: an EEPROM write stalls the MCU for ms
         ("PCLR", []),
         ("SET", L7),
         ("START", []),
@@ -107,10 +116,12 @@ def _script() -> list[bytes]:
 
 
 def _exchange(port: str, lines: list[bytes]) -> list[bytes]:
-    """Send each line and collect everything the booth sends up to its reply."""
+    """Open the port (which resets the booth), take its boot banner, then send each line and collect
+    everything the booth sends up to its reply. The banner is the first item."""
     received: list[bytes] = []
     pending = b""
     with serial.Serial(port, 115200, timeout=0.05, exclusive=True) as link:
+        received.append(await_boot_banner(link, 30.0))  # a generous bound: it ends at the banner
         for line in lines:
             link.write(line)
             deadline = time.monotonic() + 10.0
@@ -137,6 +148,8 @@ def test_firmware_answers_every_frame_as_the_emulator_does(simulated: SimulatedB
     with serve_on_pty(BoothEmulator(firmware=FIRMWARE, clock=ManualClock())) as server:
         expected = _exchange(server.port, script)
     got = _exchange(simulated.port, script)
+    banner = b"BOOT FW=" + FIRMWARE.encode() + b" PROTO=1"
+    assert expected[0] == got[0] == b"\n" + encode_frame("!", 1, banner.decode())  # the same boot banner
     assert len(expected) >= len(script)  # a reply to each line, and the DONE event
     for index, (want, have) in enumerate(zip(expected, got)):
         assert have == want, f"line {index}: firmware sent {have!r}, emulator {want!r}"
@@ -146,10 +159,9 @@ def test_firmware_answers_every_frame_as_the_emulator_does(simulated: SimulatedB
 def test_an_overlong_line_is_refused_once_and_the_next_frame_is_read(simulated: SimulatedBooth) -> None:
     """The firmware refuses at the 1041st byte and drops the rest of the line (the emulator refuses
     per received chunk, so the two differ in how many refusals a long line earns)."""
-    got = _exchange(simulated.port, [b"?" * (MAX_LINE + 200) + b"\n"])
-    assert len(got) == 1 and b"ERR - E_LEN line too long" in got[0]
-    with LedBooth.open(simulated.port) as booth:
-        assert booth.status().bad_frames == 1
+    got = _exchange(simulated.port, [b"?" * (MAX_LINE + 200) + b"\n", encode_request(1, "STAT")])[1:]
+    assert len(got) == 2 and b"ERR - E_LEN line too long" in got[0]
+    assert b" BAD=1 " in got[1]  # on the same link: a re-open would reset the board (BAD=0)
 
 
 def test_the_pattern_table_holds_its_capacity_and_refuses_one_more(small_image: Path) -> None:
@@ -157,7 +169,7 @@ def test_the_pattern_table_holds_its_capacity_and_refuses_one_more(small_image: 
     that they fit the board's RAM is the Makefile's size check)."""
     with SimulatedBooth(small_image, top=SMALL_TOP) as sim:
         requests = [encode_request(1 + i, "PADD", *[f"{i:04X}"] * 2) for i in range(5)]
-        replies = _exchange(sim.port, requests)
+        replies = _exchange(sim.port, requests)[1:]
     assert [r.split(b"*")[0][8:] for r in replies] == [
         b"OK PADD 0",
         b"OK PADD 1",
@@ -171,6 +183,7 @@ def test_the_pattern_table_holds_its_capacity_and_refuses_one_more(small_image: 
 def firmware_link(firmware_image: Path) -> Iterator[tuple[SimulatedBooth, serial.Serial]]:
     """One simulated booth for many examples, its watchdog off and its LEDs at 0.25."""
     with SimulatedBooth(firmware_image) as sim, serial.Serial(sim.port, 115200, timeout=10.0, exclusive=True) as link:
+        assert await_boot_banner(link, 30.0), "no boot banner within 30 s"
         for frame in (encode_request(1, "WDOG", 0), encode_request(2, "SET", *["4000"] * 7)):
             link.write(frame)
             assert link.readline().startswith(b"=0")

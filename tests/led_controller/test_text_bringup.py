@@ -154,6 +154,7 @@ def test_doctor_on_a_text_booth(server: TextBoothServer, capsys: pytest.CaptureF
         "firmware": server.emulator.firmware,
         "channels": 3,
         "names": ["red", "green", "blue"],
+        "serial": None,
     }
 
 
@@ -194,10 +195,12 @@ def test_doctor_on_a_silent_port(capsys: pytest.CaptureFixture[str]) -> None:
 
         tty.setraw(slave)
         port = os.ttyname(slave)
-        assert main(["doctor", "--port", port, "--booth-protocol", "text", "--timeout-s", "0.2"]) == 2
+        command = ["doctor", "--port", port, "--booth-protocol", "text", "--timeout-s", "0.2", "--booth-boot-s", "0.3"]
+        assert main(command) == 2
         err = capsys.readouterr().err
         assert err == (
-            f"msflash: error: booth {port}: nothing answered ID? within 0.2 s; expected "
+            f"msflash: error: booth {port}: nothing answered ID? within 0.2 s (after 0.3 s waiting for it to "
+            "boot; a board that resets when its port opens may need a longer --booth-boot-s); expected "
             "'<firmware>,channels=<n>[,names=…]' (a text booth) (--booth-protocol text)\n"
         )
         assert os.read(master, 64) == b"ID?\n"  # the one request, and only to the named port
@@ -254,7 +257,7 @@ def test_devices_lists_other_serial_ports_with_the_text_booth_hint(
     assert main(["devices", "--interfaces", "fake"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[-2:] == [
-        "serial\t/dev/ttyUSB0\t0403:6001\tFT232R USB UART\t"
+        "serial\t/dev/ttyUSB0\t0403:6001\tFTDI FT232R USB-serial\t-\t"
         "'msflash doctor --port /dev/ttyUSB0 --booth-protocol text' to check a text booth",
         "booth\t/dev/ttyACM0\t1209:4d53\tmsflash booth\tserial B0042",
     ]
@@ -268,6 +271,9 @@ def test_devices_lists_other_serial_ports_with_the_text_booth_hint(
             "product": "FT232R USB UART",
             "serial_number": "A10K",
             "description": "FT232R USB UART",
+            "kind": "usb-serial",
+            "board": "FTDI FT232R USB-serial",
+            "by_id": None,
             "hint": "'msflash doctor --port /dev/ttyUSB0 --booth-protocol text' to check a text booth",
         }
     ]

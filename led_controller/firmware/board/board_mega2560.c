@@ -1,6 +1,7 @@
 /* Board layer for an ATmega2560 at 16 MHz (Arduino Mega 2560 class): UART0, the time base,
  * the LED PWM, the trigger pins and the hardware watchdog; everything else is the portable
  * core (core/booth_core.c). Pins: docs/booth-firmware.md. */
+#include <avr/eeprom.h>
 #include <avr/interrupt.h>
 #include <avr/io.h>
 #include <avr/sleep.h>
@@ -8,6 +9,7 @@
 #include <util/atomic.h>
 
 #include "booth_core.h"
+#include "pins_mega2560.h"
 
 #if F_CPU != 16000000UL
 #error "board_mega2560.c: timer and baud settings assume F_CPU 16 MHz"
@@ -121,16 +123,11 @@ typedef struct {
     uint8_t bit;
 } pwm_channel_t;
 
-/* Channel order = NAMES= order. Arduino pins D5, D2, D3, D6, D7, D8, D46. */
-static const pwm_channel_t channels[] = {
-    {&TCCR3A, &OCR3A, COM3A1, &PORTE, PE3},
-    {&TCCR3A, &OCR3B, COM3B1, &PORTE, PE4},
-    {&TCCR3A, &OCR3C, COM3C1, &PORTE, PE5},
-    {&TCCR4A, &OCR4A, COM4A1, &PORTH, PH3},
-    {&TCCR4A, &OCR4B, COM4B1, &PORTH, PH4},
-    {&TCCR4A, &OCR4C, COM4C1, &PORTH, PH5},
-    {&TCCR5A, &OCR5A, COM5A1, &PORTL, PL3},
-};
+/* Channel order = NAMES= order; the pins are board/pins_mega2560.h's (Arduino D5, D2, D3, D6, D7, D8, D46). */
+#define PWM_CHANNEL(index, port, bit, arduino, timer, unit) \
+    {&TCCR##timer##A, &OCR##timer##unit, COM##timer##unit##1, &PORT##port, P##port##bit},
+static const pwm_channel_t channels[] = {BOOTH_LED_PINS(PWM_CHANNEL)};
+#undef PWM_CHANNEL
 _Static_assert(sizeof channels / sizeof channels[0] >= BOOTH_CHANNELS, "more channels than PWM outputs");
 
 void board_set_levels(const uint16_t duty[BOOTH_CHANNELS])
@@ -179,6 +176,22 @@ static void pwm_init(void)
 
 /* ---- trigger pins: ExposureActive in on INT0 (PD0, D21), trigger out on PA0 (D22) -------- */
 
+/* From board/pins_mega2560.h. The ExposureActive input must be INT0's pin (its vector is below). */
+#define TRIG_PORT_(port, bit, arduino) PORT##port
+#define TRIG_DDR_(port, bit, arduino) DDR##port
+#define TRIG_BIT_(port, bit, arduino) P##port##bit
+#define EXP_PIN_(port, bit, arduino, irq) PIN##port
+#define EXP_PORT_(port, bit, arduino, irq) PORT##port
+#define EXP_DDR_(port, bit, arduino, irq) DDR##port
+#define EXP_BIT_(port, bit, arduino, irq) P##port##bit
+#define TRIGGER_PORT BOOTH_TRIGGER_OUT(TRIG_PORT_)
+#define TRIGGER_DDR BOOTH_TRIGGER_OUT(TRIG_DDR_)
+#define TRIGGER_BIT BOOTH_TRIGGER_OUT(TRIG_BIT_)
+#define EXPOSURE_PIN BOOTH_EXPOSURE_IN(EXP_PIN_)
+#define EXPOSURE_PORT BOOTH_EXPOSURE_IN(EXP_PORT_)
+#define EXPOSURE_DDR BOOTH_EXPOSURE_IN(EXP_DDR_)
+#define EXPOSURE_BIT BOOTH_EXPOSURE_IN(EXP_BIT_)
+
 #define EDGE_SIZE 16u
 static volatile uint8_t edge_buf[EDGE_SIZE];
 static volatile uint8_t edge_head, edge_tail;
@@ -187,7 +200,7 @@ ISR(INT0_vect)
 {
     uint8_t next = (uint8_t)((edge_head + 1u) & (EDGE_SIZE - 1u));
     if (next != edge_tail) {
-        edge_buf[edge_head] = (uint8_t)(PIND & _BV(PD0));
+        edge_buf[edge_head] = (uint8_t)(EXPOSURE_PIN & _BV(EXPOSURE_BIT));
         edge_head = next;
     }
 }
@@ -209,19 +222,47 @@ static bool edge_pop(bool *high)
 void board_trigger_out(bool high)
 {
     if (high)
-        PORTA |= _BV(PA0);
+        TRIGGER_PORT |= _BV(TRIGGER_BIT);
     else
-        PORTA &= (uint8_t)~_BV(PA0);
+        TRIGGER_PORT &= (uint8_t)~_BV(TRIGGER_BIT);
 }
 
 static void trigger_init(void)
 {
-    PORTA &= (uint8_t)~_BV(PA0);
-    DDRA |= _BV(PA0);
-    DDRD &= (uint8_t)~_BV(PD0);
+    TRIGGER_PORT &= (uint8_t)~_BV(TRIGGER_BIT);
+    TRIGGER_DDR |= _BV(TRIGGER_BIT);
+    EXPOSURE_DDR &= (uint8_t)~_BV(EXPOSURE_BIT);
+#if BOOTH_EXPOSURE_PULLUP
+    EXPOSURE_PORT |= _BV(EXPOSURE_BIT); /* internal pull-up: a loose wire reads high (no exposure edges), never floats */
+#endif
     EICRA = (EICRA & (uint8_t)~(_BV(ISC01) | _BV(ISC00))) | _BV(ISC00); /* any edge */
     EIFR = _BV(INTF0);
     EIMSK |= _BV(INT0);
+}
+
+/* ---- the serial in EEPROM: 'M' 'S' <length> <text>, from address 0 ----------------------- */
+
+#define SERIAL_EEPROM ((uint8_t *)0)
+static const uint8_t serial_magic[2] = {'M', 'S'};
+
+void board_serial_load(char out[BOOTH_SERIAL_MAX + 1])
+{
+    uint8_t head[3];
+    eeprom_read_block(head, SERIAL_EEPROM, sizeof head);
+    out[0] = '\0';
+    if (head[0] != serial_magic[0] || head[1] != serial_magic[1] || head[2] == 0 || head[2] > BOOTH_SERIAL_MAX)
+        return; /* blank (0xFF) or foreign EEPROM: no serial */
+    eeprom_read_block(out, SERIAL_EEPROM + 3, head[2]);
+    out[head[2]] = '\0';
+}
+
+void board_serial_store(const char *serial, uint8_t len)
+{
+    /* eeprom_update_* writes only the bytes that change (3.4 ms each; SERIAL is refused while a
+     * sequence runs, and the hardware watchdog's 500 ms covers 35 bytes). */
+    uint8_t head[3] = {serial_magic[0], serial_magic[1], len};
+    eeprom_update_block(serial, SERIAL_EEPROM + 3, len);
+    eeprom_update_block(head, SERIAL_EEPROM, sizeof head);
 }
 
 /* ---- main ----------------------------------------------------------------------------- */

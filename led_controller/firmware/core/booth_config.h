@@ -32,6 +32,12 @@
 #define BOOTH_WATCHDOG_MS 3000u
 #endif
 
+/* The ExposureActive input's internal pull-up (1: on). Off only for the tests' image that shows
+ * what a floating input does. */
+#ifndef BOOTH_EXPOSURE_PULLUP
+#define BOOTH_EXPOSURE_PULLUP 1
+#endif
+
 #if BOOTH_LEVEL_BITS < 12 || BOOTH_LEVEL_BITS > 16
 #error "BOOTH_LEVEL_BITS must be 12..16"
 #endif

@@ -277,6 +277,18 @@ void booth_poll(booth_t *b, uint32_t now_us)
     }
 }
 
+/* ---- boot banner ----------------------------------------------------------------------- */
+
+/* A line end first: whatever the reset left on the line (a half frame, bootloader noise) is then
+ * a line of its own, and the banner a clean frame. */
+static void booth_banner(booth_t *b)
+{
+    out_t o = {.len = 0};
+    board_write("\n", 1);
+    put_str(&o, "BOOT FW=" BOOTH_FIRMWARE " PROTO=1");
+    send_event(b, &o);
+}
+
 void booth_init(booth_t *b, uint32_t now_us)
 {
     memset(b, 0, sizeof *b);
@@ -287,6 +299,9 @@ void booth_init(booth_t *b, uint32_t now_us)
     b->last_host_us = now_us;
     leds_off(b);
     board_trigger_out(false);
+    board_serial_load(b->serial);
+    b->serial[BOOTH_SERIAL_MAX] = '\0';
+    booth_banner(b);
 }
 
 /* ---- commands ------------------------------------------------------------------------ */
@@ -381,7 +396,6 @@ static const char *mode_name(booth_mode_t m)
 
 static bool cmd_id(booth_t *b, const words_t *a, out_t *o)
 {
-    (void)b;
     if (!no_args(a))
         return false;
     put_str(o, " FW=" BOOTH_FIRMWARE " PROTO=1 CH=" BOOTH_CHANNELS_TEXT " NAMES=" BOOTH_NAMES
@@ -389,6 +403,8 @@ static bool cmd_id(booth_t *b, const words_t *a, out_t *o)
     put_u32(o, BOOTH_LEVEL_BITS);
     put_str(o, " STEPS=");
     put_u32(o, BOOTH_MAX_STEPS);
+    put_str(o, " SERIAL=");
+    put_str(o, b->serial[0] ? b->serial : "-");
     return true;
 }
 
@@ -609,6 +625,47 @@ static bool cmd_ping(booth_t *b, const words_t *a, out_t *o)
     return no_args(a);
 }
 
+/* ---- the serial in EEPROM (SERIAL, SERIAL= in ID) -------------------------------------- */
+
+/* 1..BOOTH_SERIAL_MAX of A-Z a-z 0-9 . _ - and not "-" alone (the emulator's serial_allowed). */
+static bool serial_text_ok(const char *s)
+{
+    uint8_t n = 0;
+    for (; s[n]; n++) {
+        char c = s[n];
+        bool ok = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' ||
+                  c == '_' || c == '-';
+        if (!ok || n >= BOOTH_SERIAL_MAX)
+            return false;
+    }
+    return n > 0 && strcmp(s, "-") != 0;
+}
+
+static void put_serial(out_t *o, const booth_t *b)
+{
+    put_str(o, b->serial[0] ? b->serial : "-");
+}
+
+static bool cmd_serial(booth_t *b, const words_t *a, out_t *o)
+{
+    if (a->n == 0) {
+        put_str(o, " ");
+        put_serial(o, b);
+        return true;
+    }
+    if (a->n != 1 || !serial_text_ok(a->w[0]))
+        return refuse("E_ARG", "SERIAL [1..32 of A-Z a-z 0-9 . _ -]");
+    if (b->state == STATE_ARMED || b->state == STATE_RUNNING)
+        return refuse("E_STATE", "sequence armed or running");
+    uint8_t len = (uint8_t)strlen(a->w[0]);
+    memcpy(b->serial, a->w[0], len);
+    b->serial[len] = '\0';
+    board_serial_store(b->serial, len);
+    put_str(o, " ");
+    put_serial(o, b);
+    return true;
+}
+
 /* ---- frames in ------------------------------------------------------------------------ */
 
 static void reject(booth_t *b, const char *code, const char *text)
@@ -647,6 +704,7 @@ static void dispatch(booth_t *b, uint8_t seq, const char *name, const words_t *a
     else if (strcmp(name, "STAT") == 0) ok = cmd_stat(b, args, &o);
     else if (strcmp(name, "WDOG") == 0) ok = cmd_wdog(b, args, &o);
     else if (strcmp(name, "PING") == 0) ok = cmd_ping(b, args, &o);
+    else if (strcmp(name, "SERIAL") == 0) ok = cmd_serial(b, args, &o);
     else refuse("E_CMD", "unknown command");
 
     if (refused) {

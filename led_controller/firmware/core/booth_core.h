@@ -15,6 +15,7 @@
  * word only tells "too many" (the count is capped at BOOTH_MAX_WORDS + 1, never an expected count). */
 #define BOOTH_MAX_WORDS (BOOTH_CHANNELS + 3u)
 #define BOOTH_OUT_MAX 320u                    /* longest frame the booth sends */
+#define BOOTH_SERIAL_MAX 32u                  /* longest serial (SERIAL <text>) */
 
 /* ---- hooks the board layer implements ------------------------------------------------ */
 
@@ -27,6 +28,10 @@ void board_write(const char *data, uint16_t len);
 /* Microseconds now (wrapping). The core stamps LED changes with it: handling a frame takes
  * the AVR a few hundred us, so the time a frame arrived is too early to settle from. */
 uint32_t board_micros(void);
+/* The booth's serial, kept in non-volatile memory (EEPROM): load it into out (up to
+ * BOOTH_SERIAL_MAX characters and a '\0'; "" when never set), and store a new one. */
+void board_serial_load(char out[BOOTH_SERIAL_MAX + 1]);
+void board_serial_store(const char *serial, uint8_t len);
 
 /* ---- the core ---------------------------------------------------------------------- */
 
@@ -68,11 +73,15 @@ typedef struct {
     bool watchdog_tripped;
     const char *last_error;      /* NULL: none */
     uint16_t bad_frames;
+    /* the serial, as loaded from EEPROM at boot ("" when never set) */
+    char serial[BOOTH_SERIAL_MAX + 1];
 } booth_t;
 
 /* CRC-16/CCITT-FALSE over len bytes (poly 0x1021, init 0xFFFF). */
 uint16_t booth_crc16(const uint8_t *data, uint16_t len);
 
+/* Power-up state, the serial loaded (board_serial_load), and the boot banner: a line end and the
+ * BOOT event (docs/booth-protocol.md section 6). */
 void booth_init(booth_t *b, uint32_t now_us);
 /* One byte from the host; a complete line is answered at once (through board_write). */
 void booth_feed(booth_t *b, uint8_t byte, uint32_t now_us);

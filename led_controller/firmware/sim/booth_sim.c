@@ -10,13 +10,27 @@
  * each rising edge of the trigger output (PA0), with the PWM duty of every channel at that
  * moment and the time since the duties last changed; "pulse_end <t_us>" on its falling edge;
  * "ok <command> ..." answering a command.
- * stdin commands: "exp 0|1" drive the ExposureActive input (PD0/INT0) and run 2 ms of
+ * stdin commands: "exp 0|1" drive the ExposureActive input (PD0/INT0) ("exp float": the wire
+ * loose, held by the pull-up or floating) and run 2 ms of
  * simulated time so the firmware has served the edge before "ok exp" (simavr compromise:
  * the emulator's exposure_active is synchronous); "levels" -> "ok levels <t_us> <top> <d0> ..";
- * "quit".
+ * "link" -> "ok link <t_us> opens <n> resets <n> bootloader <0|1>"; "quit".
  *
  * Time is simavr's simulated time; simavr sleeps in real time while the firmware sleeps, so
- * it runs close to real time (never faster while the CPU idles). */
+ * it runs close to real time (never faster while the CPU idles).
+ *
+ * The board around the MCU is a stock Arduino Mega's (led_controller/usb_link.py has the same
+ * model for the Python emulator): a host opening the pty (inotify IN_OPEN on the slave node, the
+ * first open while no host holds it) resets the MCU (avr_reset: pins inputs, LEDs off) and the
+ * bootloader owns the UART for --bootloader-ms of wall-clock time, swallowing the host's bytes
+ * (each one keeps it 1 s longer); then the firmware runs from its reset vector and sends its boot
+ * banner. --no-auto-reset: a board with auto-reset disabled. What the firmware sends while no
+ * host has the port open is lost; a host's close drops what it did not read. --latency-us holds
+ * short replies until the next tick of a USB-serial chip's latency timer (full 62-byte packets
+ * go at once). --eeprom FILE keeps the MCU's EEPROM (the booth's serial) in FILE across runs;
+ * resets keep it in any case, as a real EEPROM does.
+ *
+ * usage: booth_sim [--no-auto-reset] [--bootloader-ms N] [--latency-us N] [--eeprom FILE] FIRMWARE.elf */
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
@@ -30,9 +44,11 @@
 #include "sim_avr.h"
 #include "sim_elf.h"
 #include "sim_time.h"
+#include "avr_eeprom.h"
 #include "avr_uart.h"
 #include <errno.h>
 #include <pty.h>
+#include <sys/inotify.h>
 #include <termios.h>
 
 #define CHANNELS 7
@@ -57,7 +73,10 @@ static avr_cycle_count_t changed_at;
 static avr_irq_t *exposure_irq;
 static int trace; /* BOOTH_SIM_TRACE=1: print every duty change */
 
-static uint32_t now_us(void) { return (uint32_t)avr_cycles_to_usec(avr, avr->cycle); }
+/* Simulated time keeps running across resets (avr_reset may restart the cycle counter). */
+static avr_cycle_count_t cycle_base;
+static avr_cycle_count_t sim_cycles(void) { return cycle_base + avr->cycle; }
+static uint32_t now_us(void) { return (uint32_t)avr_cycles_to_usec(avr, sim_cycles()); }
 
 static uint16_t read16(uint16_t addr) { return (uint16_t)(avr->data[addr] | (avr->data[addr + 1] << 8)); }
 
@@ -68,7 +87,7 @@ static void sample_levels(void)
         uint16_t d = (avr->data[tccra_addr[c]] & (1u << com1_bit[c])) ? read16(ocr_addr[c]) : 0;
         if (d != duty[c]) {
             duty[c] = d;
-            changed_at = avr->cycle;
+            changed_at = sim_cycles();
             if (trace)
                 fprintf(stderr, "trace %u duty %d = %u\n", now_us(), c, d);
         }
@@ -89,7 +108,7 @@ static void trigger_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
     (void)param;
     sample_levels();
     if (value) {
-        printf("pulse %u %u", now_us(), (uint32_t)avr_cycles_to_usec(avr, avr->cycle - changed_at));
+        printf("pulse %u %u", now_us(), (uint32_t)avr_cycles_to_usec(avr, sim_cycles() - changed_at));
         print_duties();
     } else {
         printf("pulse_end %u\n", now_us());
@@ -117,7 +136,7 @@ static void pace_sleep(avr_t *a, avr_cycle_count_t how_long)
     struct timespec now;
     clock_gettime(CLOCK_MONOTONIC, &now);
     int64_t wall_us = (int64_t)(now.tv_sec - wall_start.tv_sec) * 1000000 + (now.tv_nsec - wall_start.tv_nsec) / 1000;
-    int64_t sim_us = (int64_t)avr_cycles_to_usec(a, a->cycle);
+    int64_t sim_us = (int64_t)avr_cycles_to_usec(a, cycle_base + a->cycle);
     if (sim_us > wall_us + 500)
         usleep((useconds_t)(sim_us - wall_us));
 }
@@ -146,6 +165,131 @@ static void uart_xoff_hook(struct avr_irq_t *irq, uint32_t value, void *param)
     uart_xon = 0;
 }
 
+/* ---- the board's link: reset on open, bootloader, latency timer (usb_link.py's model) ---- */
+
+static int auto_reset = 1;
+static uint32_t bootloader_ms = 1600;  /* usb_link.MEGA_BOOTLOADER_S */
+static uint32_t byte_hold_ms = 1000;   /* usb_link.BOOTLOADER_BYTE_HOLD_S */
+static uint32_t latency_us;            /* 0: replies at once */
+static const char *eeprom_file;
+static int watch_fd = -1;
+static int host_opens;
+static int in_bootloader;
+static int64_t bootloader_end_us;      /* wall clock, monotonic */
+static int64_t latency_due_us;
+static uint32_t resets;
+#define USB_PACKET_PAYLOAD 62
+
+static int64_t wall_us(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (int64_t)t.tv_sec * 1000000 + t.tv_nsec / 1000;
+}
+
+static void pty_flush_out(void);
+
+static void eeprom_file_io(int save)
+{
+    avr_eeprom_desc_t desc = {.ee = NULL, .offset = 0, .size = 4096};
+    static uint8_t image[4096];
+    if (!eeprom_file)
+        return;
+    desc.ee = image;
+    /* simavr 1.6's EEPROM ioctls do their work but return -1: their result is not checked. */
+    if (save) {
+        avr_ioctl(avr, AVR_IOCTL_EEPROM_GET, &desc);
+        FILE *f = fopen(eeprom_file, "wb");
+        if (f) {
+            fwrite(image, 1, desc.size, f);
+            fclose(f);
+        }
+        return;
+    }
+    FILE *f = fopen(eeprom_file, "rb");
+    if (!f)
+        return; /* a new board: blank EEPROM */
+    size_t n = fread(image, 1, sizeof image, f);
+    fclose(f);
+    desc.size = (uint32_t)n;
+    if (n)
+        avr_ioctl(avr, AVR_IOCTL_EEPROM_SET, &desc);
+}
+
+/* ---- the ExposureActive wire (PD0): driven by the camera, or loose ---------------------- */
+
+static int exposure_level;   /* what the camera drives (idle low) */
+static int exposure_floating; /* "exp float": the wire is loose */
+#define PIND_ADDR 0x29
+#define PORTD_ADDR 0x2B
+#define DDRD_ADDR 0x2A
+
+/* Drive the pin, also when simavr's IRQ already holds that value (after a reset the pin register
+ * is cleared but the IRQ keeps its last value: raise the other value first; the firmware's INT0
+ * is off until it boots, so this makes no edge it sees). */
+static void exposure_drive(int level, int force)
+{
+    if (force)
+        avr_raise_irq(exposure_irq, !level);
+    avr_raise_irq(exposure_irq, level);
+}
+
+/* A loose wire: the internal pull-up (PORTD0 set, DDRD0 clear) holds it high; without it the
+ * input floats and picks up noise, each poll a random level (spurious edges, as on a real board). */
+static void exposure_float_step(void)
+{
+    if (!exposure_floating) {
+        /* simavr 1.6 drives an input high when the firmware writes its pull-up bit, whatever drives
+         * the pin from outside: the camera's output wins again (before the firmware can use it). */
+        if ((avr->data[PIND_ADDR] & 1) != exposure_level)
+            avr_raise_irq(exposure_irq, exposure_level);
+        return;
+    }
+    int pulled_up = (avr->data[PORTD_ADDR] & 1) && !(avr->data[DDRD_ADDR] & 1);
+    exposure_drive(pulled_up ? 1 : (rand() & 1), 0);
+}
+
+/* The host's open asserted DTR: the Mega resets and its bootloader takes the UART. */
+static void board_reset(void)
+{
+    avr_cycle_count_t before = sim_cycles();
+    avr_reset(avr);
+    if (avr->cycle < before - cycle_base) /* the counter restarted: keep simulated time monotonic */
+        cycle_base = before - avr->cycle;
+    uart_xon = 1;
+    to_head = to_tail = 0;
+    if (!exposure_floating)
+        exposure_drive(exposure_level, 1); /* the camera still drives the wire */
+    sample_levels(); /* pins are inputs now: every duty reads 0 */
+    in_bootloader = 1;
+    bootloader_end_us = wall_us() + (int64_t)bootloader_ms * 1000;
+    resets++;
+    eeprom_file_io(1);
+}
+
+static void port_events(void)
+{
+    char buf[4096] __attribute__((aligned(__alignof__(struct inotify_event))));
+    ssize_t n;
+    while ((n = read(watch_fd, buf, sizeof buf)) > 0) {
+        for (char *p = buf; p < buf + n;) {
+            struct inotify_event *ev = (struct inotify_event *)p;
+            p += sizeof *ev + ev->len;
+            if (ev->mask & IN_OPEN) {
+                if (host_opens++ == 0) {
+                    from_len = 0;
+                    if (auto_reset)
+                        board_reset();
+                }
+            }
+            if ((ev->mask & (IN_CLOSE_WRITE | IN_CLOSE_NOWRITE)) && host_opens > 0 && --host_opens == 0) {
+                from_len = 0; /* the kernel frees a closed tty's buffers: unread bytes are gone */
+                tcflush(pty_slave, TCIFLUSH);
+            }
+        }
+    }
+}
+
 static void pty_flush_out(void)
 {
     while (from_len) {
@@ -160,6 +304,12 @@ static void pty_flush_out(void)
 static void uart_output_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq, (void)param;
+    if (watch_fd >= 0 && host_opens == 0)
+        return; /* nobody has the port open: the USB-serial chip drops it */
+    if (from_len == 0 && latency_us) {
+        int64_t now = wall_us();
+        latency_due_us = now + (int64_t)latency_us - now % (int64_t)latency_us; /* the timer's next tick */
+    }
     if (from_len == sizeof from_avr)
         pty_flush_out();
     if (from_len < sizeof from_avr)
@@ -169,6 +319,18 @@ static void uart_output_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 static void pty_service(void)
 {
     size_t room = (to_tail + sizeof to_avr - to_head - 1) % sizeof to_avr;
+    if (watch_fd >= 0)
+        port_events();
+    if (in_bootloader) {
+        uint8_t chunk[512];
+        ssize_t n = read(pty_master, chunk, sizeof chunk);
+        int64_t now = wall_us();
+        if (n > 0 && bootloader_end_us < now + (int64_t)byte_hold_ms * 1000)
+            bootloader_end_us = now + (int64_t)byte_hold_ms * 1000; /* swallowed; the bootloader stays */
+        if (now >= bootloader_end_us)
+            in_bootloader = 0; /* the firmware runs from its reset vector */
+        return;
+    }
     if (room) {
         uint8_t chunk[512];
         ssize_t n = read(pty_master, chunk, room < sizeof chunk ? room : sizeof chunk);
@@ -177,7 +339,8 @@ static void pty_service(void)
             to_head = (to_head + 1) % sizeof to_avr;
         }
     }
-    pty_flush_out();
+    if (!latency_us || from_len >= USB_PACKET_PAYLOAD || wall_us() >= latency_due_us)
+        pty_flush_out();
     uart_feed();
 }
 
@@ -215,10 +378,21 @@ static int serve_stdin(void)
         cmd_len = 0;
         if (strcmp(cmd, "quit") == 0)
             return -1;
-        if (strcmp(cmd, "exp 0") == 0 || strcmp(cmd, "exp 1") == 0) {
-            avr_raise_irq(exposure_irq, cmd[4] == '1');
-            run_for_us(2000);
+        if (strcmp(cmd, "exp float") == 0) {
+            exposure_floating = 1;
+            exposure_float_step();
+            if (!in_bootloader)
+                run_for_us(2000);
+            printf("ok exp float %u\n", now_us());
+        } else if (strcmp(cmd, "exp 0") == 0 || strcmp(cmd, "exp 1") == 0) {
+            exposure_floating = 0;
+            exposure_level = cmd[4] == '1';
+            avr_raise_irq(exposure_irq, exposure_level);
+            if (!in_bootloader) /* in the bootloader the firmware does not run */
+                run_for_us(2000);
             printf("ok exp %c %u\n", cmd[4], now_us());
+        } else if (strcmp(cmd, "link") == 0) {
+            printf("ok link %u opens %d resets %u bootloader %d\n", now_us(), host_opens, resets, in_bootloader);
         } else if (strcmp(cmd, "levels") == 0) {
             sample_levels();
             printf("ok levels %u %u", now_us(), read16(ICR3_ADDR));
@@ -245,13 +419,29 @@ static int serve_stdin(void)
 int main(int argc, char **argv)
 {
     elf_firmware_t fw;
-    if (argc != 2) {
-        fprintf(stderr, "usage: booth_sim FIRMWARE.elf\n");
+    const char *elf = NULL;
+    for (int i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "--no-auto-reset") == 0)
+            auto_reset = 0;
+        else if (strcmp(argv[i], "--bootloader-ms") == 0 && i + 1 < argc)
+            bootloader_ms = (uint32_t)strtoul(argv[++i], NULL, 10);
+        else if (strcmp(argv[i], "--latency-us") == 0 && i + 1 < argc)
+            latency_us = (uint32_t)strtoul(argv[++i], NULL, 10);
+        else if (strcmp(argv[i], "--eeprom") == 0 && i + 1 < argc)
+            eeprom_file = argv[++i];
+        else if (argv[i][0] != '-' && !elf)
+            elf = argv[i];
+        else
+            elf = NULL, i = argc; /* unknown option: usage */
+    }
+    if (!elf) {
+        fprintf(stderr, "usage: booth_sim [--no-auto-reset] [--bootloader-ms N] [--latency-us N] "
+                        "[--eeprom FILE] FIRMWARE.elf\n");
         return 2;
     }
     memset(&fw, 0, sizeof fw);
-    if (elf_read_firmware(argv[1], &fw) != 0) {
-        fprintf(stderr, "booth_sim: cannot read %s; expected an AVR ELF file\n", argv[1]);
+    if (elf_read_firmware(elf, &fw) != 0) {
+        fprintf(stderr, "booth_sim: cannot read %s; expected an AVR ELF file\n", elf);
         return 2;
     }
     avr = avr_make_mcu_by_name("atmega2560");
@@ -287,17 +477,36 @@ int main(int argc, char **argv)
      * nearly cycle by cycle (docs/booth-firmware.md, section 5). */
     clock_gettime(CLOCK_MONOTONIC, &wall_start);
     avr->sleep = pace_sleep;
+    eeprom_file_io(0); /* the board's EEPROM as the last run left it */
+    exposure_drive(0, 1); /* the camera's ExposureActive output, idle low */
 
     /* Boot before announcing the port: simavr's UART drops bytes that arrive before the
      * firmware enables its receiver (a real board, too, is deaf while it boots). */
     run_for_us(20000);
 
+    /* Watch the slave node before its path is handed out: every host open is seen. */
+    watch_fd = inotify_init1(IN_NONBLOCK | IN_CLOEXEC);
+    if (watch_fd < 0 || inotify_add_watch(watch_fd, pty_name, IN_OPEN | IN_CLOSE_WRITE | IN_CLOSE_NOWRITE) < 0) {
+        fprintf(stderr, "booth_sim: cannot watch %s for opens (%s); expected Linux inotify\n", pty_name,
+                strerror(errno));
+        return 2;
+    }
     printf("pty %s\n", pty_name);
     fflush(stdout);
 
     struct pollfd in = {.fd = 0, .events = POLLIN};
     avr_cycle_count_t next_poll = 0;
     for (;;) {
+        if (in_bootloader) { /* the MCU runs the bootloader, not the firmware: wall-clock time */
+            struct pollfd fds[3] = {{.fd = pty_master, .events = POLLIN}, {.fd = watch_fd, .events = POLLIN},
+                                    {.fd = 0, .events = POLLIN}};
+            poll(fds, 3, 1);
+            pty_service();
+            if ((fds[2].revents & (POLLIN | POLLHUP)) && serve_stdin() < 0)
+                break;
+            next_poll = avr->cycle;
+            continue;
+        }
         int state = avr_run(avr);
         if (state == cpu_Done || state == cpu_Crashed) {
             fprintf(stderr, "booth_sim: firmware stopped (state %d) at %u us\n", state, now_us());
@@ -306,12 +515,14 @@ int main(int argc, char **argv)
         sample_levels();
         if (avr->cycle >= next_poll) { /* pty and stdin every 100 us of simulated time */
             next_poll = avr->cycle + avr_usec_to_cycles(avr, 100);
+            exposure_float_step();
             pty_service();
             if (poll(&in, 1, 0) > 0 && serve_stdin() < 0)
                 break;
         }
     }
     pty_flush_out();
+    eeprom_file_io(1);
     close(pty_master);
     close(pty_slave);
     return 0;
