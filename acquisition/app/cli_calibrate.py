@@ -8,6 +8,7 @@ dark frames) exits with status 2 and one ``msflash: error:`` line.
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,21 @@ from msflash.acquisition.session.calibration_inputs import (
 from msflash.calibration.errors import CalibrationError
 from msflash.calibration.files import CalibrationSet, load_or_new, save_calibration
 from msflash.processing.spectra import DEFAULT_GRID
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (argparse names the option and exits 2).
+
+    >>> positive_float("2.5")
+    2.5
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}': expected a number > 0") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"'{text}': expected a finite number > 0")
+    return value
 
 
 def _bad_input(handler: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -80,7 +96,15 @@ def _leds(args: argparse.Namespace) -> int:
     white = read_sequence(locate_sequence(args.white, "--white ")) if args.white else None
     characterisations: list = []
     if args.files:
-        measured = measured_leds(args.files, args.unit, args.column, args.dark)
+        measured = measured_leds(
+            args.files,
+            args.unit,
+            args.column,
+            args.dark,
+            no_dark=args.no_dark,
+            integration_time_ms=args.integration_time_ms,
+            spectrometer_response=args.spectrometer_response,
+        )
         spectra, characterisations, section = measured.spectra, list(measured.characterisations), measured.section
     elif calibration.led_spectra is not None:
         spectra, section = calibration.led_spectra, dict(calibration.leds)
@@ -244,9 +268,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "leds", help="LED spectra from spectrometer exports; their power ratios through the camera"
     )
     leds.add_argument("files", nargs="*", help="spectrometer exports (CSV or text: wavelength, value), one per LED")
-    leds.add_argument("--unit", default="energy", choices=("energy", "photons"), help="what the value column holds")
+    leds.add_argument(
+        "--unit",
+        default=None,
+        choices=("energy", "photons", "counts"),
+        help="what the value column holds (default: as the export's header says; raw counts for Ocean exports, "
+        "energy for a plain file)",
+    )
     leds.add_argument("--column", type=positive_int, default=None, help="value column when there are more than two")
-    leds.add_argument("--dark", help="a dark export (shutter closed) to subtract")
+    leds.add_argument(
+        "--dark",
+        help="a dark export (shutter closed) to subtract; one of another integration time is scaled to each export's",
+    )
+    leds.add_argument(
+        "--no-dark",
+        action="store_true",
+        help="the exports need no dark (dark-corrected or calibrated); without --dark or this, the baseline is "
+        "measured on each export's out-of-band tail and subtracted with a warning",
+    )
+    leds.add_argument(
+        "--integration-time-ms",
+        type=positive_float,
+        default=None,
+        metavar="MS",
+        help="integration time of exports whose header states none",
+    )
+    leds.add_argument(
+        "--spectrometer-response",
+        metavar="FILE",
+        help="the spectrometer's response (its irradiance calibration: counts per unit energy, or energy per count "
+        "when the column header says '/count'): raw counts become energy",
+    )
     leds.add_argument(
         "--white",
         metavar="SEQ",

@@ -40,7 +40,7 @@ from msflash.calibration.chart_sequence import (
 from msflash.calibration.dark import DarkResult, LinearityResult, measure_dark, measure_linearity
 from msflash.calibration.files import CalibrationSet
 from msflash.calibration.led_spectra import LedCharacterisation, characterise_led, relative_power_through_camera
-from msflash.calibration.spectrometer import measurement_to_spectra, read_spectrometer_file, subtract_dark
+from msflash.calibration.led_exports import ExportOptions, read_led_exports
 from msflash.calibration.validation import calibration_lights, simulate_chart_responses
 from msflash.calibration.white_reference import parse_roi, white_led_responses
 from msflash.processing import datasets
@@ -57,7 +57,8 @@ class MeasuredLeds:
     """LED spectra from spectrometer exports, with what the calibration's ``leds`` section records."""
 
     spectra: Spectra
-    """One emission spectrum per export, energy units, on :data:`DEFAULT_GRID`."""
+    """One emission spectrum per export on :data:`DEFAULT_GRID`: energy, or spectrometer counts (per second)
+    when ``section["unit"]`` is ``counts`` (the math then treats them as energy)."""
     characterisations: tuple[LedCharacterisation, ...]
     """Peak, FWHM, centroid and the asymmetric-Gaussian model of each LED."""
     section: dict[str, Any]
@@ -66,38 +67,57 @@ class MeasuredLeds:
 
 def measured_leds(
     files: SequenceOf[str | Path],
-    unit: Literal["energy", "photons"] = "energy",
+    unit: Literal["energy", "photons", "counts"] | None = None,
     column: int | None = None,
     dark: str | Path | None = None,
     report: Report = progress,
+    *,
+    no_dark: bool = False,
+    integration_time_ms: float | None = None,
+    spectrometer_response: str | Path | None = None,
 ) -> MeasuredLeds:
     """Read, dark-subtract and characterise one spectrometer export per LED.
+
+    The exports are read as their instruments write them (:mod:`msflash.calibration.led_exports`):
+    unit and integration time from the header, the baseline removed (a dark export, scaled to each
+    export's integration time; the dark stored in the file; or the out-of-band tail, with a
+    warning), counts per second, energy when the spectrometer's response is given.
 
     Parameters
     ----------
     files
         One export per LED (CSV or text: wavelength, value), in the booth's LED order.
     unit
-        What the value column holds (``energy`` or ``photons``).
+        What the value column holds (``energy``, ``photons`` or raw ``counts``); None: as the header says.
     column
         The value column when a file has more than two.
     dark
         An export with the shutter closed, subtracted from each.
     report
-        Receives warnings (saturation, a low SNR) and the notes of clipped negatives.
+        Receives warnings (saturation, a low SNR, the baseline) and the notes of clipped negatives.
+    no_dark
+        The exports need no dark (dark-corrected or calibrated): taken as they are.
+    integration_time_ms
+        For exports whose header states no integration time.
+    spectrometer_response
+        The spectrometer's response (irradiance calibration): counts become energy.
     """
-    dark_measurement = read_spectrometer_file(dark, unit, column) if dark else None
-    measurements, characterisations = [], []
-    for file in files:
-        measurement = read_spectrometer_file(file, unit, column)
-        if dark_measurement is not None:
-            measurement = subtract_dark(measurement, dark_measurement)
+    options = ExportOptions(
+        unit=unit,
+        column=column,
+        integration_time_s=None if integration_time_ms is None else integration_time_ms / 1e3,
+        dark=dark,
+        no_dark=no_dark,
+        response=spectrometer_response,
+    )
+    exports = read_led_exports(files, DEFAULT_GRID, options, report)
+    characterisations = []
+    for measurement in exports.measurements:
         item = characterise_led(measurement)
         for warning in item.warnings:
             report(f"warning: {warning}")
-        measurements.append(measurement)
         characterisations.append(item)
-    spectra = measurement_to_spectra(measurements, DEFAULT_GRID).to_unit("energy")
+    spectra = exports.spectra.to_unit("energy")
     section = {
         "peaks_nm": [c.peak_nm for c in characterisations],
         "fwhm_nm": [c.fwhm_nm for c in characterisations],
@@ -107,7 +127,7 @@ def measured_leds(
             for c in characterisations
         ],
         "sources": [str(f) for f in files],
-        "dark": str(dark) if dark else None,
+        **exports.section,
         "relative_power": None,
         "relative_power_note": "ratios as measured by the spectrometer; measure them through the camera on a white "
         "reference with --white SEQ when the probe moved between LEDs",
