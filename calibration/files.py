@@ -44,7 +44,7 @@ import uuid
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -54,7 +54,7 @@ from msflash.processing.datasets import load_spectra_csv
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.negative_values import blind_columns, clip_negative_noise
-from msflash.processing.spectra import Spectra, SpectralKind
+from msflash.processing.spectra import Spectra, SpectralKind, SpectralUnit
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 FORMAT = "msflash-calibration"
@@ -222,8 +222,14 @@ def save_calibration(calibration: CalibrationSet, directory: str | Path) -> Path
             "channels": list(calibration.camera_responsivities.names),
         }
     if calibration.chart_reflectances is not None:
-        _write_text(directory / CHART_FILE, _csv_text(calibration.chart_reflectances, calibration.id, "chart reflectances"))
-        document["chart"] = {**calibration.chart, "file": CHART_FILE, "names": list(calibration.chart_reflectances.names)}
+        _write_text(
+            directory / CHART_FILE, _csv_text(calibration.chart_reflectances, calibration.id, "chart reflectances")
+        )
+        document["chart"] = {
+            **calibration.chart,
+            "file": CHART_FILE,
+            "names": list(calibration.chart_reflectances.names),
+        }
     if calibration.dark is not None:
         document["dark"] = calibration.dark
     if calibration.linearity is not None:
@@ -265,7 +271,7 @@ def _spectra(
     if not os.path.lexists(table):  # anything else there (a directory, a FIFO) the table reader names
         raise CalibrationError(f"{path}: field '{key}.file': {table} is missing; expected the CSV table beside it")
     try:
-        spectra = load_spectra_csv(table, kind=kind, unit=unit)
+        spectra = load_spectra_csv(table, kind=kind, unit=cast(SpectralUnit, unit))
     except SpectralDataError as err:
         raise CalibrationError(f"{path}: field '{key}.file': {err}") from err
     names = section.get(names_key)

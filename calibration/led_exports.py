@@ -86,14 +86,8 @@ def _resolved(measurement: SpectrometerMeasurement, options: ExportOptions) -> S
         )
     unit = options.unit or stated or ("counts" if settings.instrument in _OCEAN else "energy")
     time = settings.integration_time_s
-    if time is None and options.integration_time_s is not None:
-        time = options.integration_time_s
-    elif time is not None and options.integration_time_s is not None and abs(time / options.integration_time_s - 1) > 0.01:
-        line = settings.lines.get("integration_time_s")
-        raise CalibrationError(
-            f"{measurement.source}:{line}: integration time {1e3 * time:g} ms but --integration-time-ms "
-            f"{1e3 * options.integration_time_s:g}; expected the file's own time, or no --integration-time-ms"
-        )
+    if time is None:
+        time = options.integration_time_s  # the option fills in what the header does not state
     return replace(
         measurement,
         unit="photons" if unit == "photons" else "energy",
@@ -163,7 +157,10 @@ def read_led_exports(
     if len(units) > 1:
         raise CalibrationError(
             "LED exports mix "
-            + " and ".join(f"{u} ({next(m.source for m in measurements if m.settings.value_unit == u)})" for u in sorted(units))  # type: ignore[type-var]
+            + " and ".join(
+                f"{u} ({next(m.source for m in measurements if m.settings.value_unit == u)})"
+                for u in sorted(str(u) for u in units)
+            )
             + "; expected one unit for all (--unit)"
         )
     unit: ExportUnit = measurements[0].settings.value_unit  # type: ignore[assignment]

@@ -33,6 +33,7 @@ import math
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -249,7 +250,7 @@ def parse_spectrometer_text(
     peak = float(np.max(readings))
     if peak <= 0:
         raise CalibrationError(f"{source}: no positive value in the value column; expected a measured emission")
-    column_name, column_units = "", ()
+    column_name, column_units = "", cast(tuple[str, ...], ())
     metadata: dict = {"lines": tuple(lines)}
     if avantes is not None:
         names, units = avantes
@@ -263,6 +264,8 @@ def parse_spectrometer_text(
         header_cells = _header_cells(header[-1])
         if width is not None and len(header_cells) >= width:
             column_name = header_cells[value_column]
+            if re.fullmatch(r"\W*(?:raw\s+)?counts?\W*|.*[\[(]counts?[\])].*", column_name, re.IGNORECASE):
+                column_units = ("[counts]",)  # a plain file naming its column "counts": raw counts
     settings = acquisition_settings(header_lines, source, column_units)
     metadata["column"] = column_name
     _check_negatives(wavelengths, readings, column_name or "value", source, lines)
@@ -355,7 +358,9 @@ def clip_measurement_negatives(measurement: SpectrometerMeasurement, what: str) 
     CalibrationError
         A value below the negative-noise bound (:mod:`processing.negative_values`).
     """
-    _check_negatives(measurement.wavelengths_nm, measurement.values, measurement.metadata.get("column") or "value", what)
+    _check_negatives(
+        measurement.wavelengths_nm, measurement.values, measurement.metadata.get("column") or "value", what
+    )
     return measurement
 
 

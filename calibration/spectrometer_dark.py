@@ -162,9 +162,7 @@ def out_of_band_baseline(wavelengths_nm: np.ndarray, values: np.ndarray) -> Base
     # The median of n Gaussian samples spreads √(π/2)·σ/√n; neighbouring samples of a smoothed
     # export are correlated, so count one sample per box-car width at most.
     standard_error = math.sqrt(math.pi / 2) * sigma / math.sqrt(max(count / smoothing, 1.0))
-    return Baseline(
-        baseline, float(np.mean(baseline[tail])), sigma, standard_error, tail, _span(wavelengths, tail)
-    )
+    return Baseline(baseline, float(np.mean(baseline[tail])), sigma, standard_error, tail, _span(wavelengths, tail))
 
 
 def _integration_times(measurement: SpectrometerMeasurement, dark: SpectrometerMeasurement) -> tuple[float, float]:
@@ -273,8 +271,10 @@ def remove_baseline(
             values, how = dark.values, {"method": "dark export (integration times not stated)", "dark": dark.source}
         result = _with_values(measurement, measurement.values - values, how, f"{where} minus the dark {dark.source}")
         after = out_of_band_baseline(result.wavelengths_nm, result.values)
-        if after is not None and after.significant and abs(after.level) > BASELINE_PEAK_SHARE * float(
-            np.max(result.values)
+        if (
+            after is not None
+            and after.significant
+            and abs(after.level) > BASELINE_PEAK_SHARE * float(np.max(result.values))
         ):
             report(
                 f"warning: {where}: after subtracting the dark {dark.source} the out-of-band tail ({after.span}) "
@@ -365,11 +365,11 @@ def counts_per_second(
         if m.settings.value_unit == "counts" and t is not None:
             m = replace(m, values=m.values / t, metadata={**m.metadata, "per_second": True})
         result.append(m)
-    times = sorted({m.settings.integration_time_s for m in stated})
+    times = sorted({float(m.settings.integration_time_s or 0.0) for m in stated})
     if len(times) > 1:
         report(
             "LED exports at integration times "
-            + ", ".join(f"{1e3 * t:g}" for t in times if t is not None)
+            + ", ".join(f"{1e3 * t:g}" for t in times)
             + " ms: counts divided by each time (counts per second)"
         )
     return result, True

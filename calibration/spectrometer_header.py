@@ -259,7 +259,8 @@ def acquisition_settings(
                 put("electric_dark", flag, number)
     seconds: float | None = None
     if "integration_time_s" in found:
-        text, unit, line = found["integration_time_s"]  # type: ignore[misc]
+        stated: tuple[str, str, str] = found["integration_time_s"]  # type: ignore[assignment]
+        text, unit, line = stated
         value = header_number(str(text))
         seconds = _seconds(value, str(unit)) if value is not None else None
         if seconds is None or not math.isfinite(seconds) or seconds <= 0:

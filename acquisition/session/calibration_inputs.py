@@ -39,8 +39,8 @@ from msflash.calibration.chart_sequence import (
 )
 from msflash.calibration.dark import DarkResult, LinearityResult, measure_dark, measure_linearity
 from msflash.calibration.files import CalibrationSet
-from msflash.calibration.led_spectra import LedCharacterisation, characterise_led, relative_power_through_camera
 from msflash.calibration.led_exports import ExportOptions, read_led_exports
+from msflash.calibration.led_spectra import LedCharacterisation, characterise_led, relative_power_through_camera
 from msflash.calibration.validation import calibration_lights, simulate_chart_responses
 from msflash.calibration.white_reference import parse_roi, white_led_responses
 from msflash.processing import datasets
