@@ -45,6 +45,7 @@ from msflash.calibration.camera_response import (
     measurement_matrix,
 )
 from msflash.calibration.errors import CalibrationError
+from msflash.calibration.light_field import FIELD_TERMS, field_basis, fit_frame_fields, frame_gains
 from msflash.processing import datasets, lights
 from msflash.processing.colour_metrics import patch_pixels
 from msflash.processing.errors import SpectralDataError
@@ -118,6 +119,14 @@ class ChartMeasurements:
     """Name of each unknown-power group (``sequence index: light`` or ``sequence index: LEDs``)."""
     frames: tuple[dict[str, Any], ...] = field(default=())
     """Per used frame: sequence, file, light, patches used."""
+    frame: np.ndarray | None = None
+    """(rows,) index into ``frames`` of each row."""
+    patch: np.ndarray | None = None
+    """(rows,) chart patch of each row."""
+    positions: np.ndarray | None = None
+    """(rows, 2) the row's patch in the chart (column, row), in patch pitches: where the light field is evaluated."""
+    sequence: np.ndarray | None = None
+    """(rows,) the sequence of each row."""
 
 
 def patch_statistics(
@@ -146,6 +155,7 @@ def sequence_measurements(
     lights: Sequence[Spectra | None],
     reflectances: Spectra,
     labels_for: LabelBuilder | Sequence[LabelBuilder],
+    positions_for: Sequence[np.ndarray] | None = None,
 ) -> ChartMeasurements:
     """Patch means of every LED frame (minus the ambient) and of each ambient with a known light.
 
@@ -181,7 +191,16 @@ def sequence_measurements(
             f"chart reflectances on {reflectances.grid} but the sequence on {grid}; expected one grid"
         )
     n_patches = reflectances.count
-    design_rows, data_rows, std_rows, groups, names, used = [], [], [], [], [], []
+    design_rows, data_rows, std_rows, groups, names = [], [], [], [], []
+    used: list[dict[str, Any]] = []
+    frame_rows: list[np.ndarray] = []
+    patch_rows: list[np.ndarray] = []
+    position_rows: list[np.ndarray] = []
+    sequence_rows: list[np.ndarray] = []
+    if positions_for is None:
+        k = np.arange(n_patches)
+        positions_for = [np.column_stack([k // 4, k % 4]).astype(float)] * len(sequences)
+    current = {"sequence": 0}
 
     def add(
         image: np.ndarray,
@@ -206,9 +225,14 @@ def sequence_measurements(
         data_rows.append(means[valid])
         std_rows.append(errors[valid])
         groups.append(np.full(int(valid.sum()), group))
+        frame_rows.append(np.full(int(valid.sum()), len(used)))
+        patch_rows.append(np.flatnonzero(valid))
+        position_rows.append(np.asarray(positions_for[current["sequence"]], dtype=float)[valid])
+        sequence_rows.append(np.full(int(valid.sum()), current["sequence"]))
         used.append({"frame": where, "light": light.names[0], "patches": int(valid.sum())})
 
     for s, (sequence, light) in enumerate(zip(sequences, lights, strict=True)):
+        current["sequence"] = s
         where = str(sequence.path)
         if not sequence.grid.same_as(grid):
             raise CalibrationError(
@@ -283,7 +307,19 @@ def sequence_measurements(
     std = np.vstack(std_rows)
     # A floor on the standard error: flat (noise-free or quantised) patches must not get infinite weight.
     std = np.maximum(std, 1e-4 * np.nanmax(np.abs(data), axis=0) + 1e-300)
-    return ChartMeasurements(grid, np.vstack(design_rows), data, std, group, tuple(names), tuple(used))
+    return ChartMeasurements(
+        grid,
+        np.vstack(design_rows),
+        data,
+        std,
+        group,
+        tuple(names),
+        tuple(used),
+        np.concatenate(frame_rows),
+        np.concatenate(patch_rows),
+        np.vstack(position_rows),
+        np.concatenate(sequence_rows),
+    )
 
 
 @dataclass(frozen=True)
@@ -295,34 +331,84 @@ class SequenceCalibration:
     """Estimated power of each unknown-power group relative to its given spectrum (units of the
     first sequence's LEDs)."""
     iterations: int
+    light_field: dict[str, Any] = field(default_factory=dict)
+    """The fitted light across the chart: ``model`` and, per frame, the gain's range (min, max)."""
+
+
+LIGHT_FIELDS = ("quadratic", "flat")
+"""``quadratic``: a smooth gain field per frame (:mod:`calibration.light_field`); ``flat``: every patch equally lit."""
+FIELD_TOLERANCE = 1e-4
+"""Largest change of any field coefficient (log gain) at convergence."""
+MISFIT_PATCHES = 3
+"""How many of the worst-fitting patches a refusal names."""
+
+
+def _worst_patches(
+    m: ChartMeasurements, model: np.ndarray, patch_names: Sequence[str] | None, count: int = MISFIT_PATCHES
+) -> str:
+    """The patches whose means the model misses most, relative to their signal: ``'Red' 14 %, …``."""
+    if m.patch is None:
+        return ""
+    misses = []
+    for patch in np.unique(m.patch):
+        rows = m.patch == patch
+        signal = float(np.linalg.norm(m.data[rows]))
+        if signal > 0:
+            misses.append((float(np.linalg.norm(m.data[rows] - model[rows])) / signal, int(patch)))
+    misses.sort(reverse=True)
+    return ", ".join(
+        f"{patch_names[p] if patch_names is not None else f'patch {p + 1}'} {100 * miss:.0f} %"
+        for miss, p in misses[:count]
+    )
 
 
 def estimate_from_measurements(
-    measurements: ChartMeasurements, method: str = "pca_prior", prior: ResponsivityPrior | None = None
+    measurements: ChartMeasurements,
+    method: str = "pca_prior",
+    prior: ResponsivityPrior | None = None,
+    light_field: str = "quadratic",
+    patch_names: Sequence[str] | None = None,
 ) -> SequenceCalibration:
-    """Responsivities from :class:`ChartMeasurements`, the broadband lights' powers estimated jointly.
+    """Responsivities from :class:`ChartMeasurements`, the lights' powers and the light across the chart fitted jointly.
 
     Starts from the LED rows alone, then alternates: each broadband power by weighted least
-    squares over all its patches and channels given the curves, the curves given the powers, until
-    the powers change by less than :data:`SCALE_TOLERANCE` (relative).
+    squares over all its patches and channels given the curves, each frame's light field
+    (:func:`calibration.light_field.fit_frame_fields`, when ``light_field`` is ``quadratic``), the
+    curves given both, until the powers change by less than :data:`SCALE_TOLERANCE` (relative)
+    and the fields by less than :data:`FIELD_TOLERANCE`.
+
+    Parameters
+    ----------
+    light_field
+        One of :data:`LIGHT_FIELDS`.
+    patch_names
+        How a refusal names the chart's patches (default ``patch N``).
 
     Raises
     ------
     CalibrationError
-        If the model does not fit (see :data:`MISFIT_NOISE`).
+        If the model does not fit (see :data:`MISFIT_NOISE`): the message names the channel and
+        the patches that disagree most, and suggests measuring the chart.
     """
+    if light_field not in LIGHT_FIELDS:
+        raise CalibrationError(f"light field '{light_field}' is unknown; expected one of {', '.join(LIGHT_FIELDS)}")
     m = measurements
     known = m.group < 0
+    fielded = light_field == "quadratic" and m.frame is not None and m.positions is not None
+    frame = m.frame if m.frame is not None else np.zeros(len(m.group), dtype=int)
+    basis = field_basis(m.positions, frame) if fielded and m.positions is not None else None
+    theta = np.zeros((len(m.frames) or 1, len(FIELD_TERMS)))
+    gains = np.ones(len(m.group))
     fit: ChannelFit = fit_channels(m.design[known], m.data[known], m.std[known], method, prior)
     scales = np.ones(len(m.group_names))
     iterations = 0
     for iterations in range(1, SCALE_ITERATIONS + 1):  # noqa: B007 - read after the loop (how many it took)
-        if not m.group_names:
+        if not m.group_names and basis is None:
             break
         new = scales.copy()
         for g in range(len(m.group_names)):
             rows = m.group == g
-            predicted = (m.design[rows] @ fit.curves) / m.std[rows]
+            predicted = (m.design[rows] @ fit.curves) * gains[rows, None] / m.std[rows]
             observed = m.data[rows] / m.std[rows]
             denominator = float(np.sum(predicted * predicted))
             if not denominator > 0:
@@ -331,27 +417,46 @@ def estimate_from_measurements(
                     "expected LEDs that cover the camera's channels"
                 )
             new[g] = max(float(np.sum(predicted * observed)) / denominator, 1e-12)
-        row_scale = np.where(known, 1.0, new[np.maximum(m.group, 0)])
-        fit = fit_channels(m.design * row_scale[:, None], m.data, m.std, method, prior)
-        change = float(np.max(np.abs(new - scales) / np.maximum(np.abs(new), 1e-300)))
+        row_scale = np.where(known, 1.0, new[np.maximum(m.group, 0)]) if m.group_names else np.ones(len(m.group))
+        field_change = 0.0
+        if basis is not None:
+            predicted = (m.design @ fit.curves) * row_scale[:, None]
+            updated = fit_frame_fields(predicted, m.data, m.std, basis, frame, theta)
+            field_change = float(np.max(np.abs(updated - theta)))
+            theta = updated
+            gains = frame_gains(basis, frame, theta)
+        fit = fit_channels(m.design * (row_scale * gains)[:, None], m.data, m.std, method, prior)
+        change = float(np.max(np.abs(new - scales) / np.maximum(np.abs(new), 1e-300))) if m.group_names else 0.0
         scales = new
-        if change < SCALE_TOLERANCE:
+        if change < SCALE_TOLERANCE and field_change < FIELD_TOLERANCE:
             break
+    row_scale = np.where(known, 1.0, scales[np.maximum(m.group, 0)]) if m.group_names else np.ones(len(m.group))
     for c, channel in enumerate(CHANNELS):
         if fit.noise_scale[c] > MISFIT_NOISE and fit.relative_residual[c] > MISFIT_RESIDUAL:
+            model = (m.design @ fit.curves) * (row_scale * gains)[:, None]
             raise CalibrationError(
                 f"chart frames: the model does not fit the patch means (channel {channel}: residual "
-                f"{100 * fit.relative_residual[c]:.0f} % of the signal, {fit.noise_scale[c]:.1f}× the measurement noise); "
-                "expected the right --light for each sequence's ambient and the chart layout of the frames "
-                "(--patch-px/--border-px)"
+                f"{100 * fit.relative_residual[c]:.0f} % of the signal, {fit.noise_scale[c]:.1f}× the measurement noise; "
+                f"patches that disagree most: {_worst_patches(m, model, patch_names)}); expected the right --light for "
+                "each sequence's ambient, the chart layout of the frames (--patch-px/--border-px) and the chart's own "
+                "reflectances — a chart differs from its published data: measure it (msflash calibrate chart) and give "
+                "--chart FILE.csv"
             )
+    report: dict[str, Any] = {"model": light_field if basis is not None else "flat"}
+    if basis is not None:
+        report["gain_range_per_frame"] = [
+            [float(gains[frame == f].min()), float(gains[frame == f].max())] if np.any(frame == f) else None
+            for f in range(len(m.frames))
+        ]
+        report["terms"] = list(FIELD_TERMS)
     source = f"estimated from {len(m.frames)} chart frames ({method})"
     estimate = fit.normalised(m.grid, source)
-    return SequenceCalibration(estimate, dict(zip(m.group_names, map(float, scales), strict=True)), iterations)
+    return SequenceCalibration(estimate, dict(zip(m.group_names, map(float, scales), strict=True)), iterations, report)
 
 
 __all__ = [
     "CHANNELS",
+    "LIGHT_FIELDS",
     "ChartMeasurements",
     "SequenceCalibration",
     "estimate_from_measurements",

@@ -124,9 +124,16 @@ def read_spectrometer_response(path: str | Path, grid: WavelengthGrid) -> Spectr
 
 
 def read_led_exports(
-    files: Sequence[str | Path], grid: WavelengthGrid, options: ExportOptions, report: Report = lambda line: None
+    files: Sequence[str | Path],
+    grid: WavelengthGrid,
+    options: ExportOptions,
+    report: Report = lambda line: None,
+    relative: bool = False,
 ) -> LedExports:
     """Read one export per LED; remove each baseline; counts per second; energy if a response is given.
+
+    ``relative``: the exports are only compared with each other on one instrument (a chart's
+    patches against its white), so counts need no response and no warning.
 
     Raises
     ------
@@ -176,7 +183,7 @@ def read_led_exports(
         response = read_spectrometer_response(options.response, grid)
         spectra = divide_by_response(spectra, response, str(options.response))
         unit, response_source = "energy", response.source
-    elif unit == "counts":
+    elif unit == "counts" and not relative:
         report(
             "warning: LED spectra stored as spectrometer counts"
             + (" per second" if per_second else "")
