@@ -69,7 +69,7 @@ class ChartReference:
         """``'3 (column 1, row 3)'`` or the file's column name with its place."""
         place = f"column {patch // self.rows + 1}, row {patch % self.rows + 1}"
         name = self.reflectances.names[patch]
-        return f"'{name}' ({place})" if not re.fullmatch(r"\d+|patch\s*\d+|\w+ \d+", name) else f"{patch + 1} ({place})"
+        return f"'{name}' ({place})" if not re.fullmatch(r"\D{0,12}\d+", name) else f"patch {patch + 1} ({place})"
 
 
 def chart_reference_grid(count: int, given: str | None = None) -> tuple[int, int]:
