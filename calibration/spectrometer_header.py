@@ -212,9 +212,10 @@ def acquisition_settings(
 
     Examples
     --------
-    >>> s = acquisition_settings([(1, "Integration Time (usec): 60000 (USB4F06998)"), (2, "Spectra Averaged: 5 (USB4F06998)")], "x.txt")
+    >>> lines = ["SpectraSuite Data File", "Integration Time (usec): 60000 (USB4F06998)", "Spectra Averaged: 5 (USB4F06998)"]
+    >>> s = acquisition_settings(list(enumerate(lines, start=1)), "x.txt")
     >>> s.instrument, s.integration_time_s, s.averages
-    ('OceanView', 0.06, 5)
+    ('SpectraSuite', 0.06, 5)
     >>> acquisition_settings([(1, '" SCOPE->  Wave:632.47nm  Pix:1050  Time:30ms  Avg:10  Sm:1')], "d.SSM").integration_time_s
     0.03
     """
