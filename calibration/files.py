@@ -1,16 +1,26 @@
 """Versioned calibration files: one directory with ``calibration.json`` and its CSV tables.
 
-Layout (format ``msflash-calibration``, version 1)::
+Layout (format ``msflash-calibration``, version 2; version 1 files are read as before)::
 
     calibration.json   id, created_utc, and one optional section per measurement:
                          "leds":   {"file": "leds.csv", "unit", "names", "peaks_nm", "fwhm_nm",
-                                    "models", "relative_power", "sources", "warnings"}
+                                    "models", "relative_power", "sources", "warnings",
+                                    "acquisition", "baselines", "counts_per_second",
+                                    "spectrometer_response"}
+                         "chart":  {"file": "chart.csv", "names", "rows", "columns", "sources"}
                          "camera": {"file": "camera.csv", "unit", "channels", "method", "validation"}
                          "dark":   {"black_level": [per channel], "read_noise_dn": [...], "cfa"}
                          "linearity": {"slope_dn_per_exposure": [...], "max_relative_deviation",
                                        "emva_nonlinearity", "saturation_level", "linear_limit_dn", …}
     leds.csv           wavelength_nm, one column per LED (full-drive spectra, true ratios)
     camera.csv         wavelength_nm, R, G, B (responsivities)
+    chart.csv          wavelength_nm, one reflectance per chart patch (``calibrate chart``)
+
+Version 2 adds the unit ``counts`` for ``leds`` — spectrometer counts (per second when
+``counts_per_second``) that still hold the spectrometer's own response, because no
+``--spectrometer-response`` was given; they are read as relative energy with a note saying so —
+the export settings (``acquisition``: instrument, integration time, averaging) and how each
+baseline was removed (``baselines``), and the ``chart`` section.
 
 Unknown keys are kept and written back; a newer ``version`` is refused. The CSV tables hold
 values ≥ 0: negative noise is clipped on writing and on reading by the one rule of
@@ -34,7 +44,7 @@ import uuid
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -44,15 +54,17 @@ from msflash.processing.datasets import load_spectra_csv
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.negative_values import blind_columns, clip_negative_noise
-from msflash.processing.spectra import Spectra, SpectralKind
+from msflash.processing.spectra import Spectra, SpectralKind, SpectralUnit
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 FORMAT = "msflash-calibration"
-VERSION = 1
+VERSION = 2
+"""Written; every version up to it is read (1: no ``counts`` unit, no chart section)."""
 CALIBRATION_FILE = "calibration.json"
 LED_FILE = "leds.csv"
 CAMERA_FILE = "camera.csv"
-_KNOWN = ("format", "version", "id", "created_utc", "leds", "camera", "dark", "linearity")
+CHART_FILE = "chart.csv"
+_KNOWN = ("format", "version", "id", "created_utc", "leds", "camera", "dark", "linearity", "chart")
 
 
 def new_calibration_id() -> str:
@@ -69,9 +81,11 @@ class CalibrationSet:
     created_utc: str = field(default_factory=lambda: datetime.now(UTC).isoformat(timespec="seconds"))
     """When it was written."""
     led_spectra: Spectra | None = None
-    """LED spectra at full drive, (n_wavelengths, k), true ratios between LEDs."""
+    """LED spectra at full drive, (n_wavelengths, k), true ratios between LEDs (energy; spectrometer
+    counts read as relative energy when ``leds["unit"]`` is ``counts``)."""
     leds: dict = field(default_factory=dict)
-    """The ``leds`` section without the spectra: peaks, FWHM, models, relative power, warnings."""
+    """The ``leds`` section without the spectra: peaks, FWHM, models, relative power, warnings;
+    ``unit`` only when it is ``counts``."""
     camera_responsivities: Spectra | None = None
     """Camera responsivities, (n_wavelengths, 3), channels R, G, B."""
     camera: dict = field(default_factory=dict)
@@ -80,6 +94,10 @@ class CalibrationSet:
     """Black level per channel and read noise."""
     linearity: dict | None = None
     """Linearity and saturation level."""
+    chart_reflectances: Spectra | None = None
+    """The chart's patches as measured (``calibrate chart``), (n_wavelengths, n_patches), in chart order."""
+    chart: dict = field(default_factory=dict)
+    """The ``chart`` section without the table: rows, columns, sources."""
     extra: dict = field(default_factory=dict)
     """Unknown top-level keys, kept."""
     notes: tuple[str, ...] = field(default=(), compare=False)
@@ -123,9 +141,9 @@ def _write_text(path: Path, text: str) -> None:
         raise
 
 
-def _csv_text(spectra: Spectra, calibration_id: str, what: str) -> str:
+def _csv_text(spectra: Spectra, calibration_id: str, what: str, unit: str | None = None) -> str:
     lines = [
-        f"# msflash calibration {calibration_id}: {what}, unit {spectra.unit}",
+        f"# msflash calibration {calibration_id}: {what}, unit {unit or spectra.unit}",
         "wavelength_nm," + ",".join(spectra.names),
     ]
     for wavelength, row in zip(spectra.wavelengths_nm, spectra.values):
@@ -184,11 +202,12 @@ def save_calibration(calibration: CalibrationSet, directory: str | Path) -> Path
         "created_utc": calibration.created_utc,
     }
     if calibration.led_spectra is not None:
-        _write_text(directory / LED_FILE, _csv_text(calibration.led_spectra, calibration.id, "LED spectra"))
+        led_unit = "counts" if calibration.leds.get("unit") == "counts" else calibration.led_spectra.unit
+        _write_text(directory / LED_FILE, _csv_text(calibration.led_spectra, calibration.id, "LED spectra", led_unit))
         document["leds"] = {
             **calibration.leds,
             "file": LED_FILE,
-            "unit": calibration.led_spectra.unit,
+            "unit": led_unit,
             "names": list(calibration.led_spectra.names),
         }
     if calibration.camera_responsivities is not None:
@@ -201,6 +220,15 @@ def save_calibration(calibration: CalibrationSet, directory: str | Path) -> Path
             "file": CAMERA_FILE,
             "unit": calibration.camera_responsivities.unit,
             "channels": list(calibration.camera_responsivities.names),
+        }
+    if calibration.chart_reflectances is not None:
+        _write_text(
+            directory / CHART_FILE, _csv_text(calibration.chart_reflectances, calibration.id, "chart reflectances")
+        )
+        document["chart"] = {
+            **calibration.chart,
+            "file": CHART_FILE,
+            "names": list(calibration.chart_reflectances.names),
         }
     if calibration.dark is not None:
         document["dark"] = calibration.dark
@@ -232,13 +260,18 @@ def _spectra(
         raise CalibrationError(
             f"{path}: field '{key}.file' '{file_name}' leaves the calibration directory; expected a file name inside it"
         )
-    unit = section.get("unit")
-    if unit not in ("energy", "photons"):
-        raise CalibrationError(f"{path}: field '{key}.unit' is {unit!r}; expected 'energy' or 'photons'")
+    unit = "none" if kind == "reflectance" else section.get("unit")
+    if unit == "counts" and key == "leds":
+        unit = "energy"  # spectrometer counts, read as relative energy (load_calibration notes it)
+    if unit not in ("energy", "photons", "none"):
+        raise CalibrationError(
+            f"{path}: field '{key}.unit' is {unit!r}; expected 'energy' or 'photons'"
+            + (" (or 'counts')" if key == "leds" else "")
+        )
     if not os.path.lexists(table):  # anything else there (a directory, a FIFO) the table reader names
         raise CalibrationError(f"{path}: field '{key}.file': {table} is missing; expected the CSV table beside it")
     try:
-        spectra = load_spectra_csv(table, kind=kind, unit=unit)
+        spectra = load_spectra_csv(table, kind=kind, unit=cast(SpectralUnit, unit))
     except SpectralDataError as err:
         raise CalibrationError(f"{path}: field '{key}.file': {err}") from err
     names = section.get(names_key)
@@ -340,6 +373,7 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
     if not isinstance(created, str):
         raise CalibrationError(f"{path}: field 'created_utc' is {_shown(created)}; expected an ISO 8601 time string")
     led_section = _section(path, document, "leds")
+    chart_section = _section(path, document, "chart")
     camera_section = _section(path, document, "camera")
     dark = _section(path, document, "dark")
     linearity = _section(path, document, "linearity")
@@ -351,6 +385,24 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
         for name in ("peaks_nm", "fwhm_nm", "centroids_nm"):
             _number_list(path, led_section, "leds", name)
         _number_list(path, led_section, "leds", "relative_power", minimum=0.0)
+        if led_section.get("unit") == "counts":
+            ratios = (
+                "ratios measured through the camera (--white), shapes"
+                if led_section.get("relative_power_source")
+                else "shapes and ratios"
+            )
+            notes += (
+                f"{shown_path(path)}: LED spectra are spectrometer counts: the spectrometer's response is still in "
+                f"their {ratios} (calibrate leds --spectrometer-response FILE makes them energy)",
+            )
+    chart = None
+    if chart_section is not None:
+        chart, clipped = _spectra(path, chart_section, "chart", "reflectance", "names")
+        notes += clipped
+        for name in ("rows", "columns"):
+            value = chart_section.get(name)
+            if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
+                raise CalibrationError(f"{path}: field 'chart.{name}' is {_shown(value)}; expected a whole number ≥ 1")
     if camera_section is not None:
         camera, clipped = _spectra(path, camera_section, "camera", "responsivity", "channels")
         notes += clipped
@@ -375,13 +427,15 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
         led_spectra=led_spectra.replace(source=f"calibration {calibration_id} ({led_spectra.source})")
         if led_spectra
         else None,
-        leds={k: v for k, v in (led_section or {}).items() if k not in strip},
+        leds={k: v for k, v in (led_section or {}).items() if k not in strip or (k, v) == ("unit", "counts")},
         camera_responsivities=camera.replace(source=f"calibration {calibration_id} ({camera.source})")
         if camera
         else None,
         camera={k: v for k, v in (camera_section or {}).items() if k not in strip},
         dark=dark,
         linearity=linearity,
+        chart_reflectances=chart.replace(source=f"calibration {calibration_id} ({chart.source})") if chart else None,
+        chart={k: v for k, v in (chart_section or {}).items() if k not in strip},
         extra={k: v for k, v in document.items() if k not in _KNOWN},
         notes=notes,
     )

@@ -31,12 +31,14 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
 from msflash.calibration.errors import CalibrationError
+from msflash.calibration.spectrometer_header import AcquisitionSettings, acquisition_settings
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.negative_values import ClippedNegatives, clip_negative_noise
 from msflash.processing.spectra import Spectra, SpectralUnit, WavelengthGrid
@@ -47,6 +49,8 @@ _END_MARKERS = ("end", ">>>>>end")
 _SEPARATORS = re.compile(r"[,\t; ]+")
 _DECIMAL_COMMA_SEPARATORS = re.compile(r"[\t;]+")
 _DECIMAL_COMMA_NUMBER = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$|^[+-]?\d+(?:[eE][+-]?\d+)?$")
+_AVANTES_COLUMNS = ("wave", "sample", "dark", "reference")
+"""The first columns of an AvaSoft text export: wavelength, raw counts, the stored dark, the reference."""
 
 
 @dataclass(frozen=True)
@@ -66,7 +70,11 @@ class SpectrometerMeasurement:
     header: tuple[str, ...] = ()
     """The header lines, as read."""
     metadata: dict = field(default_factory=dict, compare=False)
-    """Extras: the value column's header, the line of each sample (``lines``)."""
+    """Extras: the value column's header, the line of each sample (``lines``), an in-file dark
+    column (``dark_values``, AvaSoft's *Dark*), what was done to the baseline (``baseline``)."""
+    settings: AcquisitionSettings = field(default_factory=AcquisitionSettings, compare=False)
+    """Instrument, integration time, averaging and value unit as the header states them
+    (:mod:`calibration.spectrometer_header`)."""
 
     @property
     def uniform(self) -> bool:
@@ -80,16 +88,37 @@ def _is_comment(line: str) -> bool:
 
 
 def _cells(line: str) -> list[str]:
-    """The cells of a line; decimal commas become points where the separators make them unambiguous."""
-    if "," in line and _DECIMAL_COMMA_SEPARATORS.search(line):
-        cells = [cell.strip() for cell in _DECIMAL_COMMA_SEPARATORS.split(line.strip()) if cell.strip() != ""]
-        if (
-            len(cells) >= 2
-            and any("," in cell for cell in cells)
-            and all(_DECIMAL_COMMA_NUMBER.match(c) for c in cells)
-        ):
-            return [cell.replace(",", ".") for cell in cells]
+    """The cells of a line; decimal commas become points where the separators make them unambiguous
+    (cells split by semicolons, tabs or blanks, each a number once its one comma is a point)."""
+    if "," in line:
+        for separators in (_DECIMAL_COMMA_SEPARATORS, re.compile(r"\s+")):
+            if not separators.search(line.strip()):
+                continue
+            cells = [cell.strip() for cell in separators.split(line.strip()) if cell.strip() != ""]
+            if (
+                len(cells) >= 2
+                and any("," in cell for cell in cells)
+                and all(_DECIMAL_COMMA_NUMBER.match(c) for c in cells)
+            ):
+                return [cell.replace(",", ".") for cell in cells]
     return [cell for cell in _SEPARATORS.split(line.strip()) if cell != ""]
+
+
+def _header_cells(line: str) -> list[str]:
+    """Column names of a header line ("Wavelength (nm)\tIrradiance", "Wave   ;Sample   ;Dark")."""
+    if re.search(r"[,\t;]", line):
+        return [c.strip() for c in re.split(r"[,\t;]", line) if c.strip()]
+    return _cells(line)
+
+
+def _avantes_columns(header: list[str]) -> tuple[list[str], list[str]] | None:
+    """AvaSoft's column names and units (``Wave;Sample;Dark;Reference…`` then ``[nm];[counts]…``)."""
+    for index, line in enumerate(header):
+        names = _header_cells(line)
+        if [n.lower() for n in names[: len(_AVANTES_COLUMNS)]] == list(_AVANTES_COLUMNS):
+            units = _header_cells(header[index + 1]) if index + 1 < len(header) else []
+            return names, units if all(u.startswith("[") for u in units) else []
+    return None
 
 
 def _numbers(cells: list[str]) -> list[float] | None:
@@ -138,13 +167,19 @@ def parse_spectrometer_text(
     if unit not in ("energy", "photons"):
         raise CalibrationError(f"{source}: unit '{unit}'; expected energy or photons")
     header: list[str] = []
+    header_lines: list[tuple[int, str]] = []  # header and comment lines, for the acquisition settings
     rows: list[list[float]] = []
     lines: list[int] = []
     width: int | None = None
+    avantes: tuple[list[str], list[str]] | None = None
     ended = False
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip().lstrip("\ufeff")
-        if not line or _is_comment(line):
+        if not line:
+            continue
+        if _is_comment(line):
+            if not rows:
+                header_lines.append((number, line))
             continue
         if ended:
             continue
@@ -153,6 +188,7 @@ def parse_spectrometer_text(
         if values is None:
             if not rows:
                 header.append(line)
+                header_lines.append((number, line))
                 continue
             if line.lower().startswith(_END_MARKERS):
                 ended = True
@@ -162,8 +198,11 @@ def parse_spectrometer_text(
             )
         if width is None:
             width = len(values)
+            avantes = _avantes_columns(header)
             if width < 2:
                 raise CalibrationError(f"{source}:{number}: 1 column; expected at least 2 (wavelength_nm, value)")
+            if width > 2 and column is None and avantes is not None:
+                column = 1  # AvaSoft: the Sample column (raw counts); its Dark column is the stored dark
             if width > 2 and column is None:
                 # "380,5,0,25": decimal commas between comma separators cannot be told apart from cells.
                 hint = (
@@ -194,7 +233,8 @@ def parse_spectrometer_text(
         raise CalibrationError(f"{source}: {len(rows)} data lines; expected at least 3 lines of 'wavelength_nm, value'")
     table = np.asarray(rows, dtype=float)
     wavelengths = table[:, 0]
-    readings = table[:, column if column is not None else 1]
+    value_column = column if column is not None else 1
+    readings = table[:, value_column]
     steps = np.diff(wavelengths)
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0)) + 1
@@ -210,16 +250,24 @@ def parse_spectrometer_text(
     peak = float(np.max(readings))
     if peak <= 0:
         raise CalibrationError(f"{source}: no positive value in the value column; expected a measured emission")
-    column_name = ""
-    if header:
+    column_name, column_units = "", cast(tuple[str, ...], ())
+    metadata: dict = {"lines": tuple(lines)}
+    if avantes is not None:
+        names, units = avantes
+        column_name = names[value_column] if value_column < len(names) else ""
+        column_units = tuple(units[value_column : value_column + 1])
+        dark_column = 2
+        if value_column == 1 and width is not None and width > dark_column and np.any(table[:, dark_column] != 0):
+            metadata["dark_values"] = table[:, dark_column].copy()  # AvaSoft stored a dark with the sample
+    elif header:
         # "Wavelength (nm)\tIrradiance": names may hold spaces when another separator is used.
-        header_cells = (
-            [c.strip() for c in re.split(r"[,\t;]", header[-1]) if c.strip()]
-            if re.search(r"[,\t;]", header[-1])
-            else _cells(header[-1])
-        )
+        header_cells = _header_cells(header[-1])
         if width is not None and len(header_cells) >= width:
-            column_name = header_cells[column if column is not None else 1]
+            column_name = header_cells[value_column]
+            if re.fullmatch(r"\W*(?:raw\s+)?counts?\W*|.*[\[(]counts?[\])].*", column_name, re.IGNORECASE):
+                column_units = ("[counts]",)  # a plain file naming its column "counts": raw counts
+    settings = acquisition_settings(header_lines, source, column_units)
+    metadata["column"] = column_name
     _check_negatives(wavelengths, readings, column_name or "value", source, lines)
     return SpectrometerMeasurement(
         wavelengths,
@@ -228,7 +276,8 @@ def parse_spectrometer_text(
         source,
         name or Path(source).stem,
         tuple(header),
-        {"column": column_name, "lines": tuple(lines)},
+        metadata,
+        settings,
     )
 
 
@@ -298,15 +347,21 @@ def subtract_dark(measurement: SpectrometerMeasurement, dark: SpectrometerMeasur
         measurement.metadata.get("column") or "value",
         f"{measurement.source} minus the dark {dark.source}",
     )
-    return SpectrometerMeasurement(
-        measurement.wavelengths_nm,
-        values,
-        measurement.unit,
-        measurement.source,
-        measurement.name,
-        measurement.header,
-        metadata,
+    return replace(measurement, values=values, metadata=metadata)
+
+
+def clip_measurement_negatives(measurement: SpectrometerMeasurement, what: str) -> SpectrometerMeasurement:
+    """``measurement`` unchanged once its negative values are checked to be noise (``what`` names it).
+
+    Raises
+    ------
+    CalibrationError
+        A value below the negative-noise bound (:mod:`processing.negative_values`).
+    """
+    _check_negatives(
+        measurement.wavelengths_nm, measurement.values, measurement.metadata.get("column") or "value", what
     )
+    return measurement
 
 
 def measurement_to_spectra(

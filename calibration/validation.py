@@ -45,13 +45,21 @@ BROADBAND_LIGHTS = ("A", "D65")
 """The two broadband lights of the study (known spectra, measured like the LEDs)."""
 
 
-def calibration_lights(grid: WavelengthGrid = DEFAULT_GRID, broadband: Sequence[str] = BROADBAND_LIGHTS) -> Spectra:
-    """The paper's 7 LEDs (true ratios) plus broadband lights scaled to the strongest LED's peak, energy."""
-    leds = datasets.paper_leds().resample(grid, outside="zero")
+def calibration_lights(
+    grid: WavelengthGrid = DEFAULT_GRID, broadband: Sequence[str] = BROADBAND_LIGHTS, leds: Spectra | None = None
+) -> Spectra:
+    """The LEDs (true ratios) plus broadband lights scaled to the strongest LED's peak, energy.
+
+    ``leds`` are the booth's measured LEDs (a calibration's); by default the paper's 7.
+    """
+    leds = (datasets.paper_leds() if leds is None else leds.to_unit("energy")).resample(grid, outside="zero")
     peak = float(leds.values.max())
     columns = [leds.values] + [datasets.illuminant(name, grid).values * peak for name in broadband]
     return leds.replace(
-        values=np.hstack(columns), names=leds.names + tuple(broadband), source="paper LEDs + " + " + ".join(broadband)
+        values=np.hstack(columns),
+        names=leds.names + tuple(broadband),
+        source=f"{leds.source} + " + " + ".join(broadband),
+        unit="energy",
     )
 
 

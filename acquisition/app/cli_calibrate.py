@@ -8,6 +8,7 @@ dark frames) exits with status 2 and one ``msflash: error:`` line.
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -19,15 +20,33 @@ from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.acquisition.session.calibration_inputs import (
     camera_from_chart_sequences,
+    chart_from_exports,
     dark_of_sequence,
     led_power_through_camera,
     linearity_of_sequence,
     measured_leds,
     simulated_camera_calibration,
 )
+from msflash.acquisition.session.chart_layout import chart_reference
 from msflash.calibration.errors import CalibrationError
 from msflash.calibration.files import CalibrationSet, load_or_new, save_calibration
+from msflash.calibration.led_exports import ExportOptions
 from msflash.processing.spectra import DEFAULT_GRID
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (argparse names the option and exits 2).
+
+    >>> positive_float("2.5")
+    2.5
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}': expected a number > 0") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"'{text}': expected a finite number > 0")
+    return value
 
 
 def _bad_input(handler: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -42,6 +61,15 @@ def _bad_input(handler: Callable[[argparse.Namespace], int]) -> Callable[[argpar
             raise UsageError(str(err)) from err
 
     return run
+
+
+def _chart(spec: str | None, calibration: CalibrationSet, grid: str | None = None) -> Any:
+    """``--chart``: a built-in name, a CSV of the chart's reflectances, else the calibration's measured chart."""
+    if spec == "chart110":
+        return "chart110"
+    if spec is None and calibration.chart_reflectances is not None:
+        progress(f"chart reflectances from calibration {calibration.id} (calibrate chart)")
+    return chart_reference(spec, calibration.chart_reflectances, f"calibration {calibration.id}", grid)
 
 
 def _existing(directory: str) -> CalibrationSet:
@@ -80,7 +108,15 @@ def _leds(args: argparse.Namespace) -> int:
     white = read_sequence(locate_sequence(args.white, "--white ")) if args.white else None
     characterisations: list = []
     if args.files:
-        measured = measured_leds(args.files, args.unit, args.column, args.dark)
+        measured = measured_leds(
+            args.files,
+            args.unit,
+            args.column,
+            args.dark,
+            no_dark=args.no_dark,
+            integration_time_ms=args.integration_time_ms,
+            spectrometer_response=args.spectrometer_response,
+        )
         spectra, characterisations, section = measured.spectra, list(measured.characterisations), measured.section
     elif calibration.led_spectra is not None:
         spectra, section = calibration.led_spectra, dict(calibration.leds)
@@ -139,18 +175,22 @@ def _leds(args: argparse.Namespace) -> int:
 
 def _camera_from_sequences(args: argparse.Namespace) -> int:
     sequences = [read_sequence(locate_sequence(directory, "--sequence ")) for directory in args.sequence]
+    existing = _existing(args.out)
+    if args.chart == "chart110":
+        raise UsageError("--chart chart110: recorded sequences need a chart on a grid; expected macbeth or a CSV")
     result = camera_from_chart_sequences(
         sequences,
         args.light,
         args.method,
         args.prior_exclude,
-        args.chart,
+        _chart(args.chart, existing, args.chart_grid),
         args.patch_px,
         args.border_px,
         args.margin_px,
+        light_field="flat" if args.flat_light else "quadratic",
     )
     estimate, rmse = result.estimate, result.rmse_vs_recorded
-    calibration = _existing(args.out).updated(camera_responsivities=estimate.responsivities, camera=result.section())
+    calibration = existing.updated(camera_responsivities=estimate.responsivities, camera=result.section())
     path = save_calibration(calibration, args.out)
     payload = {
         "calibration": str(path),
@@ -162,6 +202,8 @@ def _camera_from_sequences(args: argparse.Namespace) -> int:
             {"sequence": str(s.directory), **layout.report} for s, layout in zip(sequences, result.layouts, strict=True)
         ],
         "rmse_vs_sequence_responsivity": rmse,
+        "chart": result.chart,
+        "light_field": result.light_field,
     }
     if args.json:
         print_json(payload)
@@ -181,15 +223,48 @@ def _camera(args: argparse.Namespace) -> int:
         return _camera_from_sequences(args)
     if not args.simulate:
         raise UsageError("calibrate camera: expected --sequence SEQ… (recorded chart sequences) or --simulate")
-    simulated = simulated_camera_calibration(args.camera, args.chart, args.method, args.seed)
+    existing = _existing(args.out)
+    # The booth's measured LEDs, when the calibration has them, are the lights the chart is rendered under.
+    simulated = simulated_camera_calibration(
+        args.camera, _chart(args.chart, existing, args.chart_grid), args.method, args.seed, leds=existing.led_spectra
+    )
     estimate, rmse = simulated.estimate, simulated.rmse_vs_truth
-    calibration = _existing(args.out).updated(camera_responsivities=estimate.responsivities, camera=simulated.section())
+    calibration = existing.updated(camera_responsivities=estimate.responsivities, camera=simulated.section())
     path = save_calibration(calibration, args.out)
     payload = {"calibration": str(path), "id": calibration.id, "method": estimate.method, "rmse_vs_truth": rmse}
     if args.json:
         print_json(payload)
     else:
         print(f"{args.camera}: responsivities recovered ({estimate.method}), RMSE vs truth {rmse:.4f}")
+        print(f"wrote {path} (id {calibration.id})")
+    return 0
+
+
+def _chart_command(args: argparse.Namespace) -> int:
+    options = ExportOptions(
+        unit=args.unit,
+        column=args.column,
+        integration_time_s=None if args.integration_time_ms is None else args.integration_time_ms / 1e3,
+        dark=args.dark,
+        no_dark=args.no_dark,
+    )
+    reflectances, section = chart_from_exports(args.files, args.white, args.white_reflectance, options, args.chart_grid)
+    calibration = _existing(args.out).updated(chart_reflectances=reflectances, chart=section)
+    path = save_calibration(calibration, args.out)
+    payload = {
+        "calibration": str(path),
+        "id": calibration.id,
+        "patches": list(reflectances.names),
+        "rows": section["rows"],
+        "columns": section["columns"],
+    }
+    if args.json:
+        print_json(payload)
+    else:
+        print(
+            f"{reflectances.count} patch reflectances ({section['rows']}×{section['columns']} chart) measured over "
+            f"the white {args.white}"
+        )
         print(f"wrote {path} (id {calibration.id})")
     return 0
 
@@ -236,7 +311,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     commands = calibrate.add_subparsers(dest="calibrate_command", metavar="WHAT", parser_class=type(calibrate))
     calibrate.set_defaults(
         handler=lambda args: (_ for _ in ()).throw(
-            UsageError("calibrate: expected one of leds, camera, dark, linearity")
+            UsageError("calibrate: expected one of leds, camera, chart, dark, linearity")
         )
     )
 
@@ -244,9 +319,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "leds", help="LED spectra from spectrometer exports; their power ratios through the camera"
     )
     leds.add_argument("files", nargs="*", help="spectrometer exports (CSV or text: wavelength, value), one per LED")
-    leds.add_argument("--unit", default="energy", choices=("energy", "photons"), help="what the value column holds")
+    leds.add_argument(
+        "--unit",
+        default=None,
+        choices=("energy", "photons", "counts"),
+        help="what the value column holds (default: as the export's header says; raw counts for Ocean exports, "
+        "energy for a plain file)",
+    )
     leds.add_argument("--column", type=positive_int, default=None, help="value column when there are more than two")
-    leds.add_argument("--dark", help="a dark export (shutter closed) to subtract")
+    leds.add_argument(
+        "--dark",
+        help="a dark export (shutter closed) to subtract; one of another integration time is scaled to each export's",
+    )
+    leds.add_argument(
+        "--no-dark",
+        action="store_true",
+        help="the exports need no dark (dark-corrected or calibrated); without --dark or this, the baseline is "
+        "measured on each export's out-of-band tail and subtracted with a warning",
+    )
+    leds.add_argument(
+        "--integration-time-ms",
+        type=positive_float,
+        default=None,
+        metavar="MS",
+        help="integration time of exports whose header states none",
+    )
+    leds.add_argument(
+        "--spectrometer-response",
+        metavar="FILE",
+        help="the spectrometer's response (its irradiance calibration: counts per unit energy, or energy per count "
+        "when the column header says '/count'): raw counts become energy",
+    )
     leds.add_argument(
         "--white",
         metavar="SEQ",
@@ -292,7 +395,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     camera.add_argument("--simulate", action="store_true", help="render the chart in the sim world instead")
     camera.add_argument("--camera", default="NikonD100", help="simulated camera (one of the 34 paper cameras)")
-    camera.add_argument("--chart", default="macbeth", choices=("macbeth", "chart110"))
+    camera.add_argument(
+        "--chart",
+        default=None,
+        metavar="NAME_OR_CSV",
+        help="the chart's reflectances: macbeth (ISETCam's measurement, shipped), chart110 (--simulate), or a CSV "
+        "'wavelength_nm, one reflectance per patch' (0–1, patches column by column) — the vendor's data or your "
+        "own measurement; default: the calibration's measured chart (calibrate chart), else macbeth",
+    )
+    camera.add_argument(
+        "--chart-grid",
+        metavar="ROWSxCOLUMNS",
+        help="the chart's grid (default 4x6 for 24 patches, else the grid nearest 2:3)",
+    )
+    camera.add_argument(
+        "--flat-light",
+        action="store_true",
+        help="assume every patch equally lit (default: the light across the chart — lens falloff, an LED's "
+        "spot — is fitted, a smooth gain per frame)",
+    )
     camera.add_argument(
         "--method",
         default="pca_prior",
@@ -303,6 +424,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     camera.add_argument("--out", required=True, help="calibration directory (created or updated)")
     camera.add_argument("--json", action="store_true")
     camera.set_defaults(handler=_bad_input(_camera))
+
+    chart = commands.add_parser(
+        "chart",
+        help="a chart's reflectances measured with the spectrometer (each patch over a white reference)",
+    )
+    chart.add_argument("files", nargs="+", help="one spectrometer export per patch, in chart order (column by column)")
+    chart.add_argument("--white", required=True, metavar="FILE", help="the export of the white reference, same light")
+    chart.add_argument(
+        "--white-reflectance",
+        metavar="CSV",
+        help="the white reference's reflectance, 'wavelength_nm, reflectance' (default: 1)",
+    )
+    chart.add_argument("--unit", default=None, choices=("energy", "photons", "counts"), help="as for calibrate leds")
+    chart.add_argument("--column", type=positive_int, default=None, help="value column when there are more than two")
+    chart.add_argument("--dark", help="a dark export (shutter closed); one of another integration time is scaled")
+    chart.add_argument("--no-dark", action="store_true", help="the exports need no dark (dark-corrected)")
+    chart.add_argument("--integration-time-ms", type=positive_float, default=None, metavar="MS")
+    chart.add_argument("--chart-grid", metavar="ROWSxCOLUMNS", help="the chart's grid (default 4x6 for 24 patches)")
+    chart.add_argument("--out", required=True, help="calibration directory (created or updated)")
+    chart.add_argument("--json", action="store_true")
+    chart.set_defaults(handler=_bad_input(_chart_command))
 
     for name, handler, text in (
         ("dark", _dark, "black level and read noise from a sequence's dark frames"),

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from collections.abc import Sequence as SequenceOf
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -24,7 +24,15 @@ import numpy as np
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.progress import progress
 from msflash.acquisition.sequence.format import Sequence
-from msflash.acquisition.session.chart_layout import ChartName, SequenceLayout, check_layout, sequence_layout
+from msflash.acquisition.session.chart_layout import (
+    ChartName,
+    ChartReference,
+    SequenceLayout,
+    chart_reference,
+    chart_reference_grid,
+    check_layout,
+    sequence_layout,
+)
 from msflash.calibration.camera_response import (
     ResponsivityEstimate,
     estimate_responsivities,
@@ -39,8 +47,8 @@ from msflash.calibration.chart_sequence import (
 )
 from msflash.calibration.dark import DarkResult, LinearityResult, measure_dark, measure_linearity
 from msflash.calibration.files import CalibrationSet
+from msflash.calibration.led_exports import ExportOptions, read_led_exports
 from msflash.calibration.led_spectra import LedCharacterisation, characterise_led, relative_power_through_camera
-from msflash.calibration.spectrometer import measurement_to_spectra, read_spectrometer_file, subtract_dark
 from msflash.calibration.validation import calibration_lights, simulate_chart_responses
 from msflash.calibration.white_reference import parse_roi, white_led_responses
 from msflash.processing import datasets
@@ -57,7 +65,8 @@ class MeasuredLeds:
     """LED spectra from spectrometer exports, with what the calibration's ``leds`` section records."""
 
     spectra: Spectra
-    """One emission spectrum per export, energy units, on :data:`DEFAULT_GRID`."""
+    """One emission spectrum per export on :data:`DEFAULT_GRID`: energy, or spectrometer counts (per second)
+    when ``section["unit"]`` is ``counts`` (the math then treats them as energy)."""
     characterisations: tuple[LedCharacterisation, ...]
     """Peak, FWHM, centroid and the asymmetric-Gaussian model of each LED."""
     section: dict[str, Any]
@@ -66,38 +75,57 @@ class MeasuredLeds:
 
 def measured_leds(
     files: SequenceOf[str | Path],
-    unit: Literal["energy", "photons"] = "energy",
+    unit: Literal["energy", "photons", "counts"] | None = None,
     column: int | None = None,
     dark: str | Path | None = None,
     report: Report = progress,
+    *,
+    no_dark: bool = False,
+    integration_time_ms: float | None = None,
+    spectrometer_response: str | Path | None = None,
 ) -> MeasuredLeds:
     """Read, dark-subtract and characterise one spectrometer export per LED.
+
+    The exports are read as their instruments write them (:mod:`msflash.calibration.led_exports`):
+    unit and integration time from the header, the baseline removed (a dark export, scaled to each
+    export's integration time; the dark stored in the file; or the out-of-band tail, with a
+    warning), counts per second, energy when the spectrometer's response is given.
 
     Parameters
     ----------
     files
         One export per LED (CSV or text: wavelength, value), in the booth's LED order.
     unit
-        What the value column holds (``energy`` or ``photons``).
+        What the value column holds (``energy``, ``photons`` or raw ``counts``); None: as the header says.
     column
         The value column when a file has more than two.
     dark
         An export with the shutter closed, subtracted from each.
     report
-        Receives warnings (saturation, a low SNR) and the notes of clipped negatives.
+        Receives warnings (saturation, a low SNR, the baseline) and the notes of clipped negatives.
+    no_dark
+        The exports need no dark (dark-corrected or calibrated): taken as they are.
+    integration_time_ms
+        For exports whose header states no integration time.
+    spectrometer_response
+        The spectrometer's response (irradiance calibration): counts become energy.
     """
-    dark_measurement = read_spectrometer_file(dark, unit, column) if dark else None
-    measurements, characterisations = [], []
-    for file in files:
-        measurement = read_spectrometer_file(file, unit, column)
-        if dark_measurement is not None:
-            measurement = subtract_dark(measurement, dark_measurement)
+    options = ExportOptions(
+        unit=unit,
+        column=column,
+        integration_time_s=None if integration_time_ms is None else integration_time_ms / 1e3,
+        dark=dark,
+        no_dark=no_dark,
+        response=spectrometer_response,
+    )
+    exports = read_led_exports(files, DEFAULT_GRID, options, report)
+    characterisations = []
+    for measurement in exports.measurements:
         item = characterise_led(measurement)
         for warning in item.warnings:
             report(f"warning: {warning}")
-        measurements.append(measurement)
         characterisations.append(item)
-    spectra = measurement_to_spectra(measurements, DEFAULT_GRID).to_unit("energy")
+    spectra = exports.spectra.to_unit("energy")
     section = {
         "peaks_nm": [c.peak_nm for c in characterisations],
         "fwhm_nm": [c.fwhm_nm for c in characterisations],
@@ -107,7 +135,7 @@ def measured_leds(
             for c in characterisations
         ],
         "sources": [str(f) for f in files],
-        "dark": str(dark) if dark else None,
+        **exports.section,
         "relative_power": None,
         "relative_power_note": "ratios as measured by the spectrometer; measure them through the camera on a white "
         "reference with --white SEQ when the probe moved between LEDs",
@@ -226,12 +254,17 @@ class ChartCameraCalibration:
     """The known lights as given."""
     prior_excluded: tuple[str, ...]
     """Paper cameras left out of the prior."""
+    chart: str = "macbeth"
+    """The chart's reference data: ``macbeth`` (shipped) or the file / calibration it came from."""
+    light_field: dict[str, Any] = field(default_factory=dict)
+    """The fitted light across the chart (:class:`msflash.calibration.chart_sequence.SequenceCalibration`)."""
 
     def section(self) -> dict[str, Any]:
         """The calibration file's ``camera`` section."""
         return {
             **_fit_report(self.estimate),
-            "chart": "macbeth",
+            "chart": self.chart,
+            "light_field": self.light_field,
             "sequences": list(self.sequences),
             "lights": list(self.light_specs),
             "light_scales": self.light_scales,
@@ -256,11 +289,12 @@ def camera_from_chart_sequences(
     light_specs: SequenceOf[str | None],
     method: str = "pca_prior",
     prior_exclude: SequenceOf[str] = (),
-    chart: ChartName = "macbeth",
+    chart: ChartName | ChartReference = "macbeth",
     patch_px: int | None = None,
     border_px: int | None = None,
     margin_px: int = 1,
     report: Report = progress,
+    light_field: str = "quadratic",
 ) -> ChartCameraCalibration:
     """Camera responsivities from Macbeth chart sequences under the LEDs and known broadband lights.
 
@@ -277,11 +311,19 @@ def camera_from_chart_sequences(
     light_specs
         The known broadband light of each sequence's ambient, in order: a name, a CSV in energy
         units, or ``None``/``"none"`` for an unknown ambient; empty for all unknown.
+    chart
+        The chart's reference data: the shipped Macbeth, or a :class:`ChartReference` (a user's
+        ``--chart FILE.csv``, a calibration's measured chart).
+    light_field
+        ``quadratic`` (default): the light across the chart is fitted, a smooth gain per frame
+        (lens falloff, an LED's spot); ``flat``: every patch equally lit.
     """
-    if chart != "macbeth":
-        raise UsageError(
-            f"--chart {chart}: recorded sequences support the macbeth layout only; expected --chart macbeth"
-        )
+    if not isinstance(chart, ChartReference):
+        if chart != "macbeth":
+            raise UsageError(
+                f"--chart {chart}: recorded sequences need the chart's reflectances; expected --chart macbeth or a CSV"
+            )
+        chart = chart_reference("macbeth")
     if not sequences:
         raise UsageError("calibrate camera: expected at least one chart sequence (--sequence SEQ…)")
     if light_specs and len(light_specs) != len(sequences):
@@ -294,7 +336,7 @@ def camera_from_chart_sequences(
         None if spec is None or spec.lower() == "none" else resolve_light(spec, grid)
         for spec in (light_specs or [None] * len(sequences))
     ]
-    reflectances = datasets.macbeth().resample(grid, outside="edge")
+    reflectances = chart.on(grid)
     cameras = {name: s.resample(grid, outside="zero") for name, s in datasets.paper_cameras().items()}
     unknown = [name for name in prior_exclude if name not in cameras]
     if unknown:
@@ -310,13 +352,21 @@ def camera_from_chart_sequences(
         if layout.report["detected"]:
             report(f"{sequence.directory}: {layout_map.description}")
     labels_for = [lambda shape, excluded, layout=layout: layout.build(shape, excluded).labels for layout in layouts]
-    measurements = sequence_measurements(list(sequences), lights, reflectances, labels_for)
+    positions = [layout.patch_positions(chart.reflectances.count, chart.rows) for layout in layouts]
+    measurements = sequence_measurements(list(sequences), lights, reflectances, labels_for, positions)
     prior = learn_prior(cameras, exclude=list(prior_exclude)) if method != "smoothness" else None
     report(
-        f"{len(measurements.frames)} chart frames, {measurements.data.shape[0]} patch means; "
-        f"prior from {len(prior.cameras) if prior else 0} cameras"
+        f"{len(measurements.frames)} chart frames, {measurements.data.shape[0]} patch means of the {chart.name} "
+        f"chart; prior from {len(prior.cameras) if prior else 0} cameras"
     )
-    result = estimate_from_measurements(measurements, method, prior)
+    names = [chart.patch_name(p) for p in range(chart.reflectances.count)]
+    result = estimate_from_measurements(measurements, method, prior, light_field, names)
+    if result.light_field.get("gain_range_per_frame"):
+        ranges = [r for r in result.light_field["gain_range_per_frame"] if r]
+        report(
+            f"light across the chart (fitted, {light_field}): {min(r[0] for r in ranges):.3f}–"
+            f"{max(r[1] for r in ranges):.3f} of each frame's mean"
+        )
     recorded = sequences[0].camera_responsivities()
     rmse = (
         responsivity_rmse(result.estimate.responsivities, recorded.to_unit("photons")) if recorded is not None else None
@@ -330,6 +380,8 @@ def camera_from_chart_sequences(
         tuple(str(s.directory) for s in sequences),
         tuple(light_specs),
         tuple(prior_exclude),
+        chart.name,
+        result.light_field,
     )
 
 
@@ -351,30 +403,128 @@ class SimulatedCameraCalibration:
             "chart": self.chart,
             "lights": list(self.lights.names),
             "simulated_camera": self.camera_name,
+            "lights_source": self.lights.source,
             "rmse_vs_truth": self.rmse_vs_truth,
         }
 
 
 def simulated_camera_calibration(
-    camera_name: str, chart: ChartName = "macbeth", method: str = "pca_prior", seed: int = 0, report: Report = progress
+    camera_name: str,
+    chart: ChartName | ChartReference = "macbeth",
+    method: str = "pca_prior",
+    seed: int = 0,
+    report: Report = progress,
+    leds: Spectra | None = None,
 ) -> SimulatedCameraCalibration:
     """Render a chart under the calibration lights with paper camera ``camera_name`` and recover its responsivities.
 
-    The prior is learned from the other 33 cameras (never the camera under test).
+    The lights are ``leds`` — the booth's measured LEDs, from the calibration being updated — or
+    the paper's 7, plus the broadband lights. ``chart`` is a built-in chart's name or its
+    reflectances (a user's ``--chart FILE.csv``). The prior is learned from the other 33 cameras
+    (never the camera under test).
     """
     cameras = {name: s.resample(DEFAULT_GRID, outside="zero") for name, s in datasets.paper_cameras().items()}
     if camera_name not in cameras:
         raise UsageError(f"--camera '{camera_name}': not one of the 34 paper cameras; expected e.g. NikonD100")
-    reflectances = datasets.macbeth().resample(DEFAULT_GRID) if chart == "macbeth" else datasets.chart110()
-    lights = calibration_lights(DEFAULT_GRID)
-    report(f"simulating {chart} under {lights.count} lights ({', '.join(lights.names)}) with {camera_name}")
+    if isinstance(chart, ChartReference):
+        reflectances, chart_name = chart.on(DEFAULT_GRID), chart.name
+    else:
+        reflectances = datasets.macbeth().resample(DEFAULT_GRID) if chart == "macbeth" else datasets.chart110()
+        chart_name = chart
+    lights = calibration_lights(DEFAULT_GRID, leds=leds)
+    report(
+        f"simulating {chart_name} under {lights.count} lights ({', '.join(lights.names)}"
+        + (f"; LEDs from {leds.source}" if leds is not None else "; the paper's LEDs")
+        + f") with {camera_name}"
+    )
     truth = cameras[camera_name]
     responses, std = simulate_chart_responses(truth, reflectances, lights, rng=np.random.default_rng(seed))
     prior = learn_prior(cameras, exclude=[camera_name]) if method != "smoothness" else None
     estimate = estimate_responsivities(responses, reflectances, lights, method, prior, std)
     return SimulatedCameraCalibration(
-        estimate, lights, responsivity_rmse(estimate.responsivities, truth), camera_name, chart
+        estimate, lights, responsivity_rmse(estimate.responsivities, truth), camera_name, chart_name
     )
+
+
+# -- chart reflectances ---------------------------------------------------------------------------
+MIN_WHITE_SHARE = 0.02
+"""A chart's reflectance is measured where the white reference reads at least this share of its peak."""
+
+
+def chart_from_exports(
+    files: SequenceOf[str | Path],
+    white: str | Path,
+    white_reflectance: str | None = None,
+    options: ExportOptions | None = None,
+    grid_spec: str | None = None,
+    report: Report = progress,
+) -> tuple[Spectra, dict[str, Any]]:
+    """A chart's reflectances from spectrometer exports: each patch over a white reference.
+
+    ``ρ_p(λ) = (s_p(λ) − dark) / (s_white(λ) − dark) · ρ_white(λ)``, each export's baseline removed
+    and its counts per second taken as for LEDs (:func:`msflash.calibration.led_exports.read_led_exports`:
+    a dark of another integration time is scaled, none without ``--no-dark`` refused), so the
+    spectrometer's response cancels. Exports in chart order (column by column, as the Macbeth file).
+
+    Returns
+    -------
+    The reflectances on :data:`DEFAULT_GRID` (one column per patch, named after the files) and the
+    calibration's ``chart`` section.
+
+    Raises
+    ------
+    UsageError, CalibrationError
+        One line naming the file: what the export reader refuses, a white that does not cover the
+        grid, reflectances far outside 0–1.5 (a patch brighter than the white: the wrong file?).
+    """
+    options = options or ExportOptions()
+    patches = read_led_exports(files, DEFAULT_GRID, options, report, relative=True)
+    reference = read_led_exports([white], DEFAULT_GRID, options, report, relative=True)
+    if patches.unit != reference.unit:
+        raise UsageError(
+            f"--white {white}: {reference.unit} but the patches are {patches.unit}; expected one instrument and unit"
+        )
+    white_values = reference.spectra.values[:, 0]
+    usable = white_values > MIN_WHITE_SHARE * float(white_values.max())
+    if not np.all(usable):
+        missing = DEFAULT_GRID.wavelengths_nm[~usable]
+        raise UsageError(
+            f"--white {white}: reads below {100 * MIN_WHITE_SHARE:g} % of its peak at {missing[0]:g}–{missing[-1]:g} nm; "
+            f"expected a white reference lit over {DEFAULT_GRID} (a broadband lamp)"
+        )
+    factor = (
+        _white_reflectance(white_reflectance, DEFAULT_GRID).values[:, 0]
+        if white_reflectance
+        else np.ones(DEFAULT_GRID.size)
+    )
+    reflectances = patches.spectra.values / white_values[:, None] * factor[:, None]
+    worst = float(reflectances.max())
+    if worst > 1.5:
+        p = int(np.argmax(reflectances.max(axis=0)))
+        raise UsageError(
+            f"{files[p]}: reflects {worst:.3g} × the white {white}; expected a chart patch darker than the white "
+            "reference (same light, same geometry)"
+        )
+    names = tuple(Path(f).stem for f in files)
+    spectra = Spectra(
+        DEFAULT_GRID,
+        np.clip(reflectances, 0.0, None),
+        names,
+        kind="reflectance",
+        unit="none",
+        source=f"measured: {len(files)} exports over the white {white}",
+    )
+    rows, columns = chart_reference_grid(len(files), grid_spec)
+    section = {
+        "sources": [str(f) for f in files],
+        "white": str(white),
+        "white_reflectance": white_reflectance,
+        "rows": rows,
+        "columns": columns,
+        "acquisition": patches.section["acquisition"],
+        "baselines": patches.section["baselines"],
+    }
+    return spectra, section
 
 
 # -- dark and linearity --------------------------------------------------------------------------

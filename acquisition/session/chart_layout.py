@@ -10,8 +10,10 @@ camera --sequence`` both find their patches here (one source of truth for the la
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -20,7 +22,9 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.calibration import chart_detection
 from msflash.processing import colour_metrics, datasets
+from msflash.processing.errors import SpectralDataError
 from msflash.processing.image_formation import chart_scene
+from msflash.processing.spectra import Spectra, WavelengthGrid
 
 CHARTS = ("macbeth",)
 """Charts ``evaluate`` knows the layout and reference of."""
@@ -30,6 +34,121 @@ MACBETH_NEUTRALS = (3, 7, 11, 15, 19, 23)
 """The gray series of the Macbeth chart in ISET order (white … black), 0-based."""
 LAYOUT_UNIFORMITY_LIMIT = 0.25
 """Largest accepted ratio of within-patch to between-patch spread of the ambient image."""
+NEUTRAL_SPREAD = 0.1
+"""A patch of a user's chart is neutral (grey) when its reflectance varies less than this share of its mean."""
+
+
+# -- the chart's reference data ----------------------------------------------------------------
+@dataclass(frozen=True)
+class ChartReference:
+    """A chart: the reflectance of each patch and how the patches are arranged.
+
+    Patches are in chart order, column by column (ISET's Macbeth order: patch ``k`` sits in column
+    ``k // rows``, row ``k % rows``); chart detection also tries the file read row by row.
+    """
+
+    name: str
+    """``macbeth`` (ISETCam's measurement, shipped) or the file or calibration it came from."""
+    reflectances: Spectra
+    """One column per patch, on the file's own grid (resample before use)."""
+    rows: int
+    columns: int
+    neutrals: tuple[int, ...]
+    """The grey patches (0-based), for noise measures and reports."""
+
+    @property
+    def builtin(self) -> bool:
+        """Whether this is the shipped Macbeth chart (the sim rig's layout can be rebuilt for it)."""
+        return self.name == "macbeth"
+
+    def on(self, grid: WavelengthGrid) -> Spectra:
+        """The reflectances on ``grid`` (constant beyond the measured range)."""
+        return self.reflectances.resample(grid, outside="edge")
+
+    def patch_name(self, patch: int) -> str:
+        """``'3 (column 1, row 3)'`` or the file's column name with its place."""
+        place = f"column {patch // self.rows + 1}, row {patch % self.rows + 1}"
+        name = self.reflectances.names[patch]
+        return f"'{name}' ({place})" if not re.fullmatch(r"\D{0,12}\d+", name) else f"patch {patch + 1} ({place})"
+
+
+def chart_reference_grid(count: int, given: str | None = None) -> tuple[int, int]:
+    """Rows and columns of a chart of ``count`` patches (``--chart-grid`` or the default; see :func:`chart_reference`)."""
+    return _grid_shape(count, given, f"a {count}-patch chart")
+
+
+def _grid_shape(count: int, given: str | None, where: str) -> tuple[int, int]:
+    if given is not None:
+        match = re.fullmatch(r"\s*(\d+)\s*[x×X]\s*(\d+)\s*", given)
+        if not match or int(match.group(1)) < 1 or int(match.group(2)) < 1:
+            raise UsageError(f"--chart-grid '{given}': expected ROWSxCOLUMNS, e.g. 4x6")
+        rows, columns = int(match.group(1)), int(match.group(2))
+        if rows * columns != count:
+            raise UsageError(
+                f"--chart-grid {rows}x{columns}: {rows * columns} patches but {where} has {count}; expected "
+                "rows × columns = the number of reflectance columns"
+            )
+        return rows, columns
+    if count == 24:
+        return 4, 6  # the ColorChecker
+    shapes = [(r, count // r) for r in range(2, count) if count % r == 0 and r <= count // r and count // r <= 4 * r]
+    if not shapes:
+        raise UsageError(f"{where}: {count} patches make no grid of at most 1:4; expected --chart-grid ROWSxCOLUMNS")
+    return min(shapes, key=lambda shape: abs(shape[1] / shape[0] - 1.5))
+
+
+def _neutrals(reflectances: Spectra) -> tuple[int, ...]:
+    values = reflectances.values
+    spread = values.std(axis=0) / np.maximum(values.mean(axis=0), 1e-12)
+    return tuple(int(i) for i in np.flatnonzero(spread < NEUTRAL_SPREAD))
+
+
+def chart_reference(
+    spec: str | None, measured: Spectra | None = None, measured_from: str = "", grid: str | None = None
+) -> ChartReference:
+    """The chart named by ``--chart`` (built-in name or CSV file), else a calibration's measured one, else Macbeth.
+
+    Parameters
+    ----------
+    spec
+        ``macbeth``, or a CSV file ``wavelength_nm, <one reflectance per patch>`` (0–1, uniform
+        grid, patches column by column) — the vendor's data or a lab's own measurement; None: the
+        ``measured`` chart if there is one, else Macbeth.
+    measured, measured_from
+        The chart a calibration holds (``calibrate chart``) and where it is.
+    grid
+        ``--chart-grid ROWSxCOLUMNS`` (default: 4×6 for 24 patches, else the grid nearest 2:3).
+
+    Raises
+    ------
+    UsageError
+        Naming ``--chart`` or the file: an unknown name, a file the table reader refuses,
+        reflectances outside 0–1.5 (percentages), a grid that does not hold the patches.
+    """
+    if spec is None and measured is not None:
+        rows, columns = _grid_shape(measured.count, grid, measured_from)
+        return ChartReference(measured_from, measured, rows, columns, _neutrals(measured))
+    if spec is None or spec == "macbeth":
+        reflectances = datasets.macbeth()
+        rows, columns = _grid_shape(reflectances.count, grid, "macbeth")
+        return ChartReference("macbeth", reflectances, rows, columns, MACBETH_NEUTRALS)
+    path = Path(spec)
+    if not (path.suffix.lower() in (".csv", ".txt") or path.exists()):
+        raise UsageError(f"--chart '{spec}': unknown; expected macbeth or a CSV file of the chart's reflectances")
+    try:
+        reflectances = datasets.load_spectra_csv(path, kind="reflectance", unit="none")
+    except SpectralDataError as err:
+        raise UsageError(f"--chart {err}; expected 'wavelength_nm, one reflectance per patch' (0–1)") from err
+    peak = float(np.max(reflectances.values))
+    if not np.all(np.isfinite(reflectances.values)) or np.min(reflectances.values) < -0.05 or peak > 1.5:
+        raise UsageError(
+            f"--chart {spec}: reflectances span {float(np.min(reflectances.values)):g}–{peak:g}; expected reflectance "
+            "factors 0–1 (divide percentages by 100)"
+        )
+    if reflectances.count < 4:
+        raise UsageError(f"--chart {spec}: {reflectances.count} patches; expected at least 4 reflectance columns")
+    rows, columns = _grid_shape(reflectances.count, grid, spec)
+    return ChartReference(str(spec), reflectances.replace(source=str(spec)), rows, columns, _neutrals(reflectances))
 
 
 # -- the chart layout -------------------------------------------------------------------------
@@ -100,11 +219,23 @@ class SequenceLayout:
     """``build(shape, excluded=None)``: the label map for an image shape, dropping excluded pixels."""
     report: dict[str, Any]
     """For JSON output: ``detected`` and the layout's parameters."""
+    grid: chart_detection.ChartGrid | None = None
+    """The detected chart (None for a given layout): where each patch lies, for the light-field fit."""
+
+    def patch_positions(self, n_patches: int, rows: int) -> np.ndarray:
+        """Each patch's place in the chart (column, row) in patch pitches, shape (n_patches, 2).
+
+        A detected chart's own lattice (its rows may be the file's columns); a given layout's
+        column-by-column order otherwise.
+        """
+        rows = self.grid.rows if self.grid is not None else rows
+        k = np.arange(n_patches)
+        return np.column_stack([k // rows, k % rows]).astype(float)
 
 
 def sequence_layout(
     sequence: Sequence,
-    chart: ChartName = "macbeth",
+    chart: ChartName | ChartReference = "macbeth",
     patch_px: int | None = None,
     border_px: int | None = None,
     margin_px: int = 1,
@@ -113,28 +244,43 @@ def sequence_layout(
 
     Detection (:func:`calibration.chart_detection.detect_in_sequence`) finds the chart anywhere in
     the frames, at any scale and a small rotation; given options rebuild the sim rig's chart at the
-    top left (:func:`chart_layout`, the other option at its sim-rig default).
+    top left (:func:`chart_layout`, the other option at its sim-rig default; a 4 × 6 chart only).
+    A user's chart (``ChartReference``) is looked for as its rows × columns and, failing that, as
+    columns × rows (a file listing the patches row by row).
 
     Raises
     ------
     UsageError
         An unknown chart, or no single chart found (naming the sequence and the layout options).
     """
-    if chart not in CHARTS:
+    reference = chart if isinstance(chart, ChartReference) else None
+    name = "macbeth" if reference is not None else chart
+    if reference is None and chart not in CHARTS:
         raise UsageError(f"--chart '{chart}': unknown; expected one of {', '.join(CHARTS)}")
     if patch_px is not None or border_px is not None:
+        if reference is not None and (reference.rows, reference.columns) != chart_detection.MACBETH_GRID:
+            raise UsageError(
+                f"--patch-px/--border-px rebuild the sim rig's 4×6 chart but --chart {reference.name} is "
+                f"{reference.rows}×{reference.columns}; expected no layout options (the chart is detected)"
+            )
         patch, border = (8 if patch_px is None else patch_px), (2 if border_px is None else border_px)
         return SequenceLayout(
-            lambda shape, excluded=None: chart_layout(shape, chart, patch, border, margin_px, excluded),
+            lambda shape, excluded=None: chart_layout(shape, name, patch, border, margin_px, excluded),  # type: ignore[arg-type]
             {"detected": False, "patch_px": patch, "border_px": border, "margin_px": margin_px},
         )
     if margin_px < 0:
         raise UsageError(f"--margin-px {margin_px}: expected ≥ 0")
-    reflectances = datasets.macbeth().resample(sequence.grid, outside="edge")
+    reference = reference or chart_reference("macbeth")
+    reflectances = reference.on(sequence.grid)
     try:
-        grid = chart_detection.detect_in_sequence(sequence, reflectances, *chart_detection.MACBETH_GRID)
+        grid = chart_detection.detect_in_sequence(sequence, reflectances, reference.rows, reference.columns)
     except chart_detection.ChartDetectionError as err:
-        raise UsageError(str(err)) from err
+        if reference.builtin or reference.rows == reference.columns:
+            raise UsageError(str(err)) from err
+        try:  # the file may list the patches row by row: the same chart, transposed
+            grid = chart_detection.detect_in_sequence(sequence, reflectances, reference.columns, reference.rows)
+        except chart_detection.ChartDetectionError:
+            raise UsageError(str(err)) from err
     patch = min(grid.as_dict()["patch_px"])
     if 2 * margin_px >= patch:
         raise UsageError(
@@ -142,11 +288,13 @@ def sequence_layout(
             f"detected in {sequence.path}; expected margin < patch/2"
         )
     description = f"{grid.describe()}, {margin_px}-pixel margin"
+    neutrals = reference.neutrals
     return SequenceLayout(
         lambda shape, excluded=None: ChartLayout(
-            grid.labels(shape, margin_px, excluded), grid.rows * grid.columns, MACBETH_NEUTRALS, description
+            grid.labels(shape, margin_px, excluded), grid.rows * grid.columns, neutrals, description
         ),
         {"detected": True, **grid.as_dict(), "margin_px": margin_px},
+        grid,
     )
 
 

@@ -76,7 +76,7 @@ def test_bad_spectrometer_file_exits_2_with_one_line(tmp_path, capsys):
         (["calibrate", "camera", "--out", "X"], "expected --sequence SEQ… (recorded chart sequences) or --simulate"),
         (["calibrate", "dark", str(SEQUENCE), "--out", "X"], "no 'dark' frame"),
         (["calibrate", "leds", "missing.csv", "--out", "X"], "missing.csv: cannot be read"),
-        (["calibrate"], "expected one of leds, camera, dark, linearity"),
+        (["calibrate"], "expected one of leds, camera, chart, dark, linearity"),
     ],
 )
 def test_usage_errors(argv, needle, capsys, tmp_path, monkeypatch):

@@ -61,8 +61,8 @@ def edit(tmp_path, change):
 
 
 def test_newer_version_refused(tmp_path):
-    edit(tmp_path, lambda d: d.update(version=2))
-    with pytest.raises(CalibrationError, match=r"calibration\.json: field 'version' is 2; .*upgrade msflash"):
+    edit(tmp_path, lambda d: d.update(version=3))
+    with pytest.raises(CalibrationError, match=r"calibration\.json: field 'version' is 3; .*upgrade msflash"):
         load_calibration(tmp_path)
 
 

@@ -1,0 +1,286 @@
+"""What a spectrometer export's header says about how it was taken: instrument, integration time,
+averaging, smoothing, the unit of its values.
+
+Public objects
+--------------
+- :class:`AcquisitionSettings`: the settings found, each with the line it came from.
+- :func:`acquisition_settings`: read them from an export's header lines.
+- :func:`header_number`: a number as instrument software writes it (decimal comma or point,
+  ``1.2E+002``).
+
+Formats (header spellings checked against public exports of each program)
+-------------------------------------------------------------------------
+- **OceanView** (Ocean Insight): ``Integration Time (sec): 1.000000E-1``, ``Scans to average: 3``,
+  ``Boxcar width: 2``, ``Electric dark correction enabled: true``, then
+  ``>>>>>Begin Spectral Data<<<<<``; in a decimal-comma locale ``1,000000E-1`` and tab-separated
+  ``339,38<TAB>1234,56`` data.
+- **SpectraSuite** and **OOIBase32** (Ocean Optics, older): ``SpectraSuite Data File``,
+  ``Integration Time (usec): 100000 (USB4F01234)``, ``Spectra Averaged: 5 (USB4F01234)``,
+  ``Boxcar Smoothing: 5 (…)``, ``Correct for Electrical Dark: Yes (…)``,
+  ``>>>>>Begin Processed Spectral Data<<<<<``; OOIBase32 ``Integration Time (msec): 100``.
+  Localised SpectraSuite writes its other keys translated; the integration time key stays English.
+- **AvaSoft** (Avantes, ``.TRM``/``.RAW8``/``.IRR8`` exported as text): ``Integration time [ms]: 10.000``
+  (``35,000`` in a decimal-comma locale), ``Averaging Nr. [scans]: 9``, ``Smoothing Nr. [pixels]: 0``,
+  ``Data measured with spectrometer [name]: 0911147U1``, then a column row
+  ``Wave ;Sample ;Dark ;Reference;…`` and a unit row ``[nm] ;[counts] ;…``. The *Sample* column
+  holds the raw counts and the *Dark* column the dark the program stored (zeros if none).
+- **SpectraWiz** (StellarNet ``.SSM``/``.TRM``/``.IRR``): two lines in double quotes, the second
+  ``" SCOPE->  Wave:632.47nm  Pix:1050  Val:121.580  Time:30ms  Avg:10  Sm:1 …``, then
+  space-separated ``269.00  1.2112E+002`` rows.
+- **Thorlabs** (ThorSpectra, CCS spectrometers, CSV): ``#[SpectrumHeader]`` then ``#Key;value``
+  lines — ``#Average;0``, ``#IntegrationTime;0.010000`` (seconds, the CCS driver's unit),
+  ``#YAxisUnit;intensity`` — ``#[Data]``, the rows, ``#[EndOfFile]``.
+- **Plain** CSV or text: a comment or header line ``# integration_time_ms: 10`` or
+  ``Integration time: 10 ms`` (the unit in the key or after the value: s, ms, µs/us) and
+  ``# averages: 4``; or ``msflash calibrate leds --integration-time-ms``.
+
+Numbers in headers are read with a decimal comma or point (instrument software writes no
+thousands separators). An integration time that is not a positive finite number is refused naming
+the file, line and key.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Literal
+
+from msflash.calibration.errors import CalibrationError
+
+ValueUnit = Literal["counts", "energy", "photons"]
+
+SECONDS_PER = {"s": 1.0, "sec": 1.0, "secs": 1.0, "ms": 1e-3, "msec": 1e-3, "us": 1e-6, "µs": 1e-6, "usec": 1e-6}
+"""Seconds per unit of time as spectrometer programs spell it (``µs`` also as the micro sign U+00B5)."""
+
+_NUMBER = r"[-+]?(?:\d+(?:[.,]\d*)?|[.,]\d+)(?:[eE][-+]?\d+)?"
+_UNIT = r"(?:secs?|s|msec|ms|usec|us|µs|μs)"
+
+
+@dataclass(frozen=True)
+class AcquisitionSettings:
+    """How an export was taken, as far as its header says (``None``: the header does not say)."""
+
+    instrument: str = "plain"
+    """``OceanView``, ``SpectraSuite``, ``OOIBase32``, ``AvaSoft``, ``SpectraWiz``, ``Thorlabs`` or ``plain``."""
+    integration_time_s: float | None = None
+    """Integration time of one scan, seconds."""
+    averages: int | None = None
+    """Scans averaged (the programs average, they do not sum: the level does not change, the noise does)."""
+    boxcar: int | None = None
+    """Smoothing width, pixels (neighbouring samples' noise is then correlated)."""
+    value_unit: ValueUnit | None = None
+    """What the values are, when the header says: raw ``counts`` or a calibrated ``energy``/``photons``."""
+    electric_dark: bool | None = None
+    """The program subtracted the electrical dark (optically masked pixels): the fixed offset is gone."""
+    lines: dict[str, int] = field(default_factory=dict, compare=False)
+    """Line of the header each setting came from, for messages."""
+
+    def as_dict(self) -> dict[str, object]:
+        """For the calibration file and JSON output."""
+        return {
+            "instrument": self.instrument,
+            "integration_time_s": self.integration_time_s,
+            "averages": self.averages,
+            "boxcar": self.boxcar,
+            "value_unit": self.value_unit,
+            "electric_dark": self.electric_dark,
+        }
+
+
+def header_number(text: str) -> float | None:
+    """A number as instrument software writes it, or None.
+
+    Examples
+    --------
+    >>> header_number("1.000000E-1"), header_number("35,000"), header_number(" 1,2112E+002 "), header_number("x")
+    (0.1, 35.0, 121.12, None)
+    """
+    text = text.strip()
+    if not re.fullmatch(_NUMBER, text):
+        return None
+    return float(text.replace(",", "."))
+
+
+def _seconds(value: float, unit: str) -> float:
+    return value * SECONDS_PER[unit.lower().replace("μ", "µ")]
+
+
+def _flag(text: str) -> bool | None:
+    word = text.strip().split()[0].lower() if text.strip() else ""
+    if word in ("true", "yes", "enabled", "on", "1", "はい"):
+        return True
+    if word in ("false", "no", "disabled", "off", "0", "いいえ"):
+        return False
+    return None
+
+
+# (regex, field, how the value is read). The regex is matched against the line with any leading
+# comment marks ('#', '"', '%', '//', ';') and blanks removed; group "v" is the value, "u" a unit.
+_OCEAN_TIME = re.compile(rf"^integration time \((?P<u>{_UNIT})\)\s*:\s*(?P<v>{_NUMBER})", re.IGNORECASE)
+_AVANTES_TIME = re.compile(rf"^integration time \[(?P<u>{_UNIT})\]\s*:\s*(?P<v>{_NUMBER})", re.IGNORECASE)
+_THORLABS_TIME = re.compile(rf"^integrationtime\s*[;,\t=:]\s*(?P<v>{_NUMBER})\s*$", re.IGNORECASE)
+_SPECTRAWIZ = re.compile(r"\bTime:\s*(?P<v>[0-9.,]+)\s*(?P<u>ms|us|µs|s)?\b", re.IGNORECASE)
+_PLAIN_TIME = re.compile(
+    rf"^(?:integration|exposure)[ _-]?time(?:[ _-]?\(?\[?(?P<ku>{_UNIT})\]?\)?)?\s*[:=;,\t]\s*"
+    rf"(?P<v>{_NUMBER})\s*(?P<u>{_UNIT})?\s*$",
+    re.IGNORECASE,
+)
+_AVERAGES = re.compile(
+    r"^(?:scans to average|spectra averaged|averaging nr\. \[scans\]|average|averages|averaging|scans)\s*[:;,\t=]\s*"
+    r"(?P<v>\d+)",
+    re.IGNORECASE,
+)
+_BOXCAR = re.compile(
+    r"^(?:boxcar width|boxcar smoothing|smoothing nr\. \[pixels\]|spectrumsmooth|smoothing)\s*[:;,\t=]\s*(?P<v>\d+)",
+    re.IGNORECASE,
+)
+_ELECTRIC_DARK = re.compile(
+    r"^(?:electric dark correction enabled|correct for electrical dark)\s*:\s*(?P<v>\S+)", re.IGNORECASE
+)
+_THORLABS_UNIT = re.compile(r"^yaxisunit\s*[;,\t=]\s*(?P<v>.+)$", re.IGNORECASE)
+
+
+def _instrument(lines: list[str]) -> str:
+    joined = "\n".join(lines).lower()
+    if "spectrasuite" in joined:
+        return "SpectraSuite"
+    if "ooibase32" in joined:
+        return "OOIBase32"
+    if "begin spectral data" in joined or "begin processed spectral data" in joined:
+        return "OceanView"
+    if "data measured with spectrometer" in joined or "averaging nr." in joined or "integration time [ms]" in joined:
+        return "AvaSoft"
+    if "[spectrumheader]" in joined or re.search(r"^#?\s*integrationtime\s*[;,]", joined, re.MULTILINE):
+        return "Thorlabs"
+    if any(line.startswith('"') for line in lines) and re.search(r"\btime:\s*[0-9]", joined):
+        return "SpectraWiz"
+    return "plain"
+
+
+def _stripped(line: str) -> str:
+    return re.sub(r'^(?:#|%|//|;|")+\s*', "", line.strip()).strip()
+
+
+def _unit_of_values(instrument: str, lines: list[str], column_units: tuple[str, ...]) -> ValueUnit | None:
+    """What the values are, where the export says so."""
+    if column_units:
+        unit = column_units[0].strip("[] ").lower()
+        if unit in ("counts", "count", "adc", "dn"):
+            return "counts"
+        if re.search(r"w/|w /|watt|µw|uw|mw|j/", unit):
+            return "energy"
+        if re.search(r"photon|µmol|umol|quanta", unit):
+            return "photons"
+    if instrument == "SpectraWiz":
+        first = next((line for line in lines if "->" in line), "")
+        if "SCOPE" in first.upper():
+            return "counts"
+    if instrument == "Thorlabs":
+        for line in lines:
+            match = _THORLABS_UNIT.match(_stripped(line))
+            if match:
+                unit = match.group("v").strip().lower()
+                if unit in ("intensity", "counts", "a.u.", "au", "arb"):
+                    return "counts"
+                if re.search(r"w|watt", unit):
+                    return "energy"
+    return None
+
+
+def acquisition_settings(
+    header_lines: tuple[tuple[int, str], ...] | list[tuple[int, str]],
+    source: str,
+    column_units: tuple[str, ...] = (),
+) -> AcquisitionSettings:
+    """The settings an export's header states (see the module notes for the formats).
+
+    Parameters
+    ----------
+    header_lines
+        ``(line number, text)`` of every header and comment line, in file order.
+    source
+        Names the file in messages.
+    column_units
+        The units of the value column(s), where the export has a unit row (AvaSoft ``[counts]``).
+
+    Raises
+    ------
+    CalibrationError
+        ``<file>:<line>: <key> is …; expected …``: an integration time that is not a positive
+        finite number, or a plain-file time without a unit.
+
+    Examples
+    --------
+    >>> lines = ["SpectraSuite Data File", "Integration Time (usec): 60000 (USB4F06998)", "Spectra Averaged: 5 (USB4F06998)"]
+    >>> s = acquisition_settings(list(enumerate(lines, start=1)), "x.txt")
+    >>> s.instrument, s.integration_time_s, s.averages
+    ('SpectraSuite', 0.06, 5)
+    >>> acquisition_settings([(1, '" SCOPE->  Wave:632.47nm  Pix:1050  Time:30ms  Avg:10  Sm:1')], "d.SSM").integration_time_s
+    0.03
+    """
+    texts = [text.strip().lstrip("\ufeff") for _, text in header_lines]
+    instrument = _instrument(texts)
+    found: dict[str, object] = {}
+    lines: dict[str, int] = {}
+
+    def put(key: str, value: object, number: int) -> None:
+        if key not in found:
+            found[key] = value
+            lines[key] = number
+
+    for (number, _), raw in zip(header_lines, texts, strict=True):
+        line = _stripped(raw)
+        time_match = _OCEAN_TIME.match(line) or _AVANTES_TIME.match(line)
+        if time_match:
+            put("integration_time_s", (time_match.group("v"), time_match.group("u"), line), number)
+        elif instrument == "Thorlabs" and (match := _THORLABS_TIME.match(line)):
+            put("integration_time_s", (match.group("v"), "s", line), number)  # ThorSpectra writes seconds
+        elif instrument == "SpectraWiz" and raw.startswith('"') and (match := _SPECTRAWIZ.search(line)):
+            put("integration_time_s", (match.group("v"), match.group("u") or "ms", line), number)
+            if avg := re.search(r"\bAvg:\s*(\d+)", line, re.IGNORECASE):
+                put("averages", int(avg.group(1)), number)
+            if smooth := re.search(r"\bSm:\s*(\d+)", line, re.IGNORECASE):
+                put("boxcar", int(smooth.group(1)), number)
+        elif match := _PLAIN_TIME.match(line):
+            unit = match.group("ku") or match.group("u")
+            if unit is None:
+                raise CalibrationError(
+                    f"{source}:{number}: '{line[:60]}' states an integration time without a unit; expected e.g. "
+                    "'integration_time_ms: 10' or 'integration time: 10 ms'"
+                )
+            put("integration_time_s", (match.group("v"), unit, line), number)
+        if match := _AVERAGES.match(line):
+            put("averages", int(match.group("v")), number)
+        if match := _BOXCAR.match(line):
+            put("boxcar", int(match.group("v")), number)
+        if match := _ELECTRIC_DARK.match(line):
+            flag = _flag(match.group("v"))
+            if flag is not None:
+                put("electric_dark", flag, number)
+    seconds: float | None = None
+    if "integration_time_s" in found:
+        stated: tuple[str, str, str] = found["integration_time_s"]  # type: ignore[assignment]
+        text, unit, line = stated
+        value = header_number(str(text))
+        seconds = _seconds(value, str(unit)) if value is not None else None
+        if seconds is None or not math.isfinite(seconds) or seconds <= 0:
+            raise CalibrationError(
+                f"{source}:{lines['integration_time_s']}: '{str(line)[:60]}': integration time '{text}'; expected a "
+                "positive number"
+            )
+    averages = found.get("averages")
+    if averages is not None and int(averages) == 0:  # type: ignore[call-overload]
+        averages = 1  # Thorlabs writes 0 for "no averaging"
+    return AcquisitionSettings(
+        instrument=instrument,
+        integration_time_s=seconds,
+        averages=averages,  # type: ignore[arg-type]
+        boxcar=found.get("boxcar"),  # type: ignore[arg-type]
+        value_unit=_unit_of_values(instrument, texts, column_units),
+        electric_dark=found.get("electric_dark"),  # type: ignore[arg-type]
+        lines=lines,
+    )
+
+
+__all__ = ["SECONDS_PER", "AcquisitionSettings", "ValueUnit", "acquisition_settings", "header_number"]
