@@ -789,9 +789,7 @@ def open_aravis_fake_rig(
         )
         fake.start()
         closers.append(fake.close)
-        aravis = aravis_camera.AravisCamera(
-            fake.address, interfaces="gige", pixel_format=pixel_format, roi=(0, 0, width, height)
-        )
+        aravis = aravis_camera.AravisCamera(fake.address, interfaces="gige")
         closers.append(aravis.close)
         opened = aravis.info
         if (opened.serial, opened.model) != (serial, model.model):
@@ -800,6 +798,9 @@ def open_aravis_fake_rig(
                 f"rig's fake ({model.model} serial {serial}): another program's GigE Vision camera answers there; "
                 "expected the rig's own — stop the other fake"
             )
+        aravis.set_pixel_format(pixel_format)  # once the camera is known to be the rig's own
+        aravis.set_roi(0, 0, width, height)
+        opened = aravis.info
         if world is not None and opened.cfa != world.sensor.cfa:
             raise RigOpenError(
                 f"pixel format {pixel_format} has CFA {opened.cfa}; expected {world.sensor.cfa}, the rendered mosaic's"

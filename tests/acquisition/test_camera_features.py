@@ -168,7 +168,8 @@ def test_lines_and_gain_are_checked_before_any_capture(sfnc_fake_camera: Any) ->
     ):
         apply_camera_options(sfnc_fake_camera, CameraOptions(strobe_line="Out3"))
     with pytest.raises(
-        CameraSettingError, match=r"--gain 30 dB: Gain \(GainSelector All\) cannot be 30 dB; expected a number in 0 … 24 dB"
+        CameraSettingError,
+        match=r"--gain 30 dB: Gain \(GainSelector All\) cannot be 30 dB; expected a number in 0 … 24 dB",
     ):
         apply_camera_options(sfnc_fake_camera, CameraOptions(gain_db=30.0))
 
@@ -309,7 +310,9 @@ def test_devices_features_lists_type_value_and_range(sfnc_fake_xml: None, capsys
     assert "BlackLevel\tinteger\tRW\t0\ta whole number in 0 … 4095\tmsflash writes" in lines
 
 
-def test_devices_features_lists_what_msflash_uses_outside_root(capsys: pytest.CaptureFixture, aravis: ModuleType) -> None:
+def test_devices_features_lists_what_msflash_uses_outside_root(
+    capsys: pytest.CaptureFixture, aravis: ModuleType
+) -> None:
     # Aravis's own fake keeps GainRaw and GainAuto in a category Root does not list: a walk of Root
     # alone hid the one gain feature the camera has (issue 29).
     aravis.use_fake_genicam(None)
@@ -329,7 +332,11 @@ def test_devices_features_lists_what_msflash_uses_outside_root(capsys: pytest.Ca
         "visibility": "Beginner",
         "msflash": "writes",
     }
-    assert features["GainAuto"]["under_root"] is False and features["GainAuto"]["entries"] == ["Off", "Once", "Continuous"]
+    assert features["GainAuto"]["under_root"] is False and features["GainAuto"]["entries"] == [
+        "Off",
+        "Once",
+        "Continuous",
+    ]
     assert listing["gain"]["feature"] == "GainRaw" and listing["gain"]["range"] == [0, 10]
     assert main(["devices", "--interfaces", "fake", "--features", "Fake_1"]) == 0
     lines = capsys.readouterr().out.splitlines()
@@ -367,7 +374,10 @@ def led_spectra_csv(tmp_path: Path) -> Path:
             "expected one of RisingEdge, FallingEdge, AnyEdge, LevelHigh, LevelLow",
         ),
         (["--gain", "40"], "--gain 40 dB: Gain (GainSelector All) cannot be 40 dB; expected a number in 0 … 24 dB"),
-        (["--gain-raw", "11"], "--gain-raw 11: GainRaw (GainSelector All) cannot be 11; expected a whole number in 0 … 10"),
+        (
+            ["--gain-raw", "11"],
+            "--gain-raw 11: GainRaw (GainSelector All) cannot be 11; expected a whole number in 0 … 10",
+        ),
         (["--trigger-line", "Line9"], "--trigger-line Line9: TriggerSource has no entry 'Line9'"),
         (
             ["--binning", "32"],

@@ -2124,39 +2124,62 @@ def gvcp_port_holder(address: str = "127.0.0.1", port: int = GVCP_PORT) -> str |
     return None
 
 
+_gvcp_hold: dict[str, Any] = {"count": 0, "fd": None}
+"""This process's hold of :func:`gvcp_port_lock`: how many holders, and the locked file's descriptor."""
+_gvcp_hold_lock = threading.Lock()
+
+
 @contextmanager
 def gvcp_port_lock(timeout_s: float = 120.0) -> Iterator[None]:
     """Hold the machine-wide lock on the GigE Vision control port 3956 of 127.0.0.1.
 
     The Aravis GigE Vision fake binds 127.0.0.1:3956 and only the loopback address exists, so
     fakes in parallel test workers, benches and rigs must take turns. An ``flock`` is released by
-    the kernel if the holder dies.
+    the kernel if the holder dies. A process that holds it already holds it again at once (it
+    never waits for itself): a second fake it starts then finds the port bound and is refused
+    (:meth:`AravisGvFake.start`), as one of another program is. The ``flock`` goes with the last
+    holder of the process.
 
     Raises
     ------
     CameraError
         The lock was not obtained within ``timeout_s``.
     """
-    fd = os.open(GVCP_LOCK_PATH, os.O_CREAT | os.O_RDWR, 0o666)
-    try:
-        deadline = time.monotonic() + timeout_s
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    raise CameraError(
-                        f"GigE Vision fake: port 127.0.0.1:3956 busy for {timeout_s:g} s "
-                        f"(lock {GVCP_LOCK_PATH}); expected it free — another fake is running"
-                    ) from None
-                time.sleep(0.02)
+    with _gvcp_hold_lock:
+        if _gvcp_hold["count"]:
+            _gvcp_hold["count"] += 1
+            fd = None
+        else:
+            fd = os.open(GVCP_LOCK_PATH, os.O_CREAT | os.O_RDWR, 0o666)
+    if fd is not None:
         try:
-            yield
-        finally:
-            fcntl.flock(fd, fcntl.LOCK_UN)
+            deadline = time.monotonic() + timeout_s
+            while True:
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    if time.monotonic() > deadline:
+                        raise CameraError(
+                            f"GigE Vision fake: port 127.0.0.1:3956 busy for {timeout_s:g} s "
+                            f"(lock {GVCP_LOCK_PATH}); expected it free — another fake is running"
+                        ) from None
+                    time.sleep(0.02)
+        except BaseException:
+            os.close(fd)
+            raise
+        with _gvcp_hold_lock:
+            _gvcp_hold["count"] += 1
+            _gvcp_hold["fd"] = fd
+    try:
+        yield
     finally:
-        os.close(fd)
+        with _gvcp_hold_lock:
+            _gvcp_hold["count"] -= 1
+            if not _gvcp_hold["count"]:
+                held, _gvcp_hold["fd"] = _gvcp_hold["fd"], None
+                fcntl.flock(held, fcntl.LOCK_UN)
+                os.close(held)
 
 
 class AravisGvFake:
