@@ -226,8 +226,8 @@ def test_gain_on_the_gainraw_gige_fake_is_checked_before_the_sequence_and_record
             )
             assert not (out / "sequence").exists()  # refused before the sequence began
             status, out = _capture_on_gige_fake(tmp_path, led_spectra_csv, server.port, "--gain", "6")
-            assert status == 0
             err = capsys.readouterr().err.strip().splitlines()
+            assert status == 0, err
     finally:
         server.close()
     sequence = read_sequence(out / "sequence")
@@ -323,7 +323,9 @@ def test_gain_selector_camera_runs_with_its_analogue_gain_and_auto_gain_off(
     assert summary["spectrum_rmse_vs_truth"] <= 1.3 * summary["spectrum_rmse_led_bound"]
 
 
-def test_gain_selector_camera_power_up_state_is_undone_before_any_frame(aravis: ModuleType) -> None:
+def test_gain_selector_camera_power_up_state_is_undone_before_any_frame(
+    aravis: ModuleType, caplog: pytest.LogCaptureFixture
+) -> None:
     model = FAKE_MODELS["gain-selector"]
     with open_aravis_fake_rig(fake_camera="gain-selector") as rig:
         camera = rig.camera.aravis
@@ -331,6 +333,13 @@ def test_gain_selector_camera_power_up_state_is_undone_before_any_frame(aravis: 
         assert rig.camera_extra["gain"]["selector"] == "AnalogAll"
         fake = rig.camera._fake
         assert model.true_gain(fake.read_register) == pytest.approx(10 ** (2 / 20))  # DigitalAll's 2 dB stays
+        # … and is said: recorded, and warned once.
+        assert rig.camera_extra["gain"]["other_selectors"] == {"DigitalAll": pytest.approx(2.0)}
+    warned = [r.getMessage() for r in caplog.records if "GainSelector DigitalAll" in r.getMessage()]
+    assert warned == [
+        "camera Fake-GainSelector (serial MSFRIG01): GainSelector DigitalAll: Gain is 2 dB, left as the camera "
+        "has it (msflash sets AnalogAll); frames record the AnalogAll gain only"
+    ]
 
 
 def test_live_gain_is_checked_against_the_camera(aravis: ModuleType) -> None:

@@ -889,6 +889,9 @@ class AravisCamera:
         self._base_gain_db = 0.0
         """The gain a plan step of gain 1 gets, in dB (``--gain``; 0 without)."""
         self._native_gain: NativeGain | None = None
+        self._other_gains: dict[str, float] = {}
+        self._warned_gains: set[tuple[str, float]] = set()
+        """The gain feature under the other ``GainSelector`` entries, as found (not set by msflash)."""
         self._last_timing: FrameTiming | None = None
         self._open()
         try:
@@ -1411,14 +1414,52 @@ class AravisCamera:
             if control.db_known:
                 base_db = control.db_of(value) or 0.0  # what is written: an integer feature rounds
             self._write_gain(control, value)
+        if request is not None and request.unit == "dB" and control.scale == "dB" and not control.camera_unit:
+            log.warning(
+                "%s: %s: %s states no unit; taken as dB (SFNC's unit)", self._name, request.option, control.feature
+            )
         if control.settable:
             self._native_gain = self._read_native_gain(control)
+            self._other_gains = self._other_selected_gains(control)
         else:
             if control.feature is not None:  # a gain it cannot set: a stuck GainAuto, no selector entry
                 log.warning("%s: the gain is left as the camera has it: %s", self._name, control.why)
             self._native_gain = None
         self._gain_control, self._gain_request, self._base_gain_db = control, request, base_db
         return control
+
+    def _other_selected_gains(self, control: GainControl) -> dict[str, float]:
+        """The gain feature's value under every other ``GainSelector`` entry (msflash leaves them as they
+        are; a digital gain there multiplies every frame), with a warning for each that is not zero."""
+        if control.selector is None or control.feature is None or not self._is_writable("GainSelector"):
+            return {}
+        others: dict[str, float] = {}
+        try:
+            for entry in self.enum_entries("GainSelector"):
+                if entry != control.selector:
+                    self._set_enum("GainSelector", entry)
+                    if self._has(control.feature):
+                        others[entry] = self._number(control.feature)
+        except CameraError as err:
+            log.info("%s: reading the gain under each GainSelector entry: %s", self._name, err)
+        finally:
+            self._set_enum("GainSelector", control.selector)
+        for entry, value in others.items():
+            gain_db = control.db_of(value)
+            if (gain_db is None or abs(gain_db) > 1e-6) and (entry, value) not in self._warned_gains:
+                self._warned_gains.add((entry, value))
+                shown = f"{gain_db:g} dB" if gain_db is not None else f"{value:g} ({control.unit})"
+                log.warning(
+                    "%s: GainSelector %s: %s is %s, left as the camera has it (msflash sets %s); frames record "
+                    "the %s gain only",
+                    self._name,
+                    entry,
+                    control.feature,
+                    shown,
+                    control.selector,
+                    control.selector,
+                )
+        return others
 
     def _write_gain(self, control: GainControl, value: float) -> None:
         if control.selector is not None and self._is_writable("GainSelector"):
@@ -1525,6 +1566,7 @@ class AravisCamera:
             "requested": self._gain_request.to_dict() if self._gain_request is not None else None,
             "value": native.to_dict()["value"] if native is not None else None,
             "linear": linear,
+            **({"other_selectors": dict(self._other_gains)} if self._other_gains else {}),
         }
 
     # -- triggers and lines -------------------------------------------------------------------
