@@ -2274,7 +2274,9 @@ class AravisGvFake:
         self.serial = serial
         self.model = model
         self._registers = dict(registers or {})
-        self._xml = str(genicam_xml) if genicam_xml is not None else None
+        # None: the fake's built-in description, named explicitly — given no file, Aravis's fake
+        # reads the process-wide one use_fake_genicam last set for the in-process fake.
+        self._xml = str(genicam_xml) if genicam_xml is not None else _builtin_fake_xml_path()
         self._frequency = trigger_frequency_hz
         self._lost = lost_packet_ratio
         self._lock_timeout_s = lock_timeout_s
