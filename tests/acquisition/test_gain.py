@@ -201,6 +201,8 @@ def _capture_on_gige_fake(tmp_path: Path, led_spectra_csv: Path, port: str, *opt
             str(led_spectra_csv),
             "--exposure",
             "10000",
+            "--roi",
+            "0,0,64,48",  # small frames: the fake's 512 × 512 ones time out on a loaded machine
             *options,
             "--out",
             str(out),
@@ -233,7 +235,8 @@ def test_gain_on_the_gainraw_gige_fake_is_checked_before_the_sequence_and_record
     sequence = read_sequence(out / "sequence")
     assert sequence.complete
     assert sequence.camera.extra["camera_options"]["read_back"] == {
-        "gain": {"feature": "GainRaw", "value": 6, "unit": "raw"}
+        "gain": {"feature": "GainRaw", "value": 6, "unit": "raw"},
+        "roi": [0, 0, 64, 48],
     }
     assert [frame.extra["camera_gain"] for frame in sequence.frames] == [
         {"feature": "GainRaw", "value": 6, "unit": "raw"}
