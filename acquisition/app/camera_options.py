@@ -1,8 +1,9 @@
-"""The hardware rig's camera options on the command line (``run``, ``capture``).
+"""The GenICam camera's options on the command line (``run``, ``capture``: ``hw`` and ``aravis-fake`` rigs).
 
-``--trigger-line``, ``--strobe-line``, ``--gain``, ``--roi``, ``--binning`` and repeatable
+``--trigger-line``, ``--strobe-line``, ``--gain``/``--gain-raw``, ``--roi``, ``--binning`` and repeatable
 ``--feature NAME=VALUE`` become one :class:`~acquisition.devices.aravis.camera_features.CameraOptions`; what they
-mean and how they are checked is :mod:`acquisition.devices.aravis.camera_features`.
+mean and how they are checked is :mod:`acquisition.devices.aravis.camera_features` (the gain:
+:mod:`acquisition.devices.aravis.gain`).
 """
 
 from __future__ import annotations
@@ -10,19 +11,13 @@ from __future__ import annotations
 import argparse
 
 from msflash.acquisition.devices.aravis.camera_features import CameraOptions, parse_binning, parse_feature, parse_roi
+from msflash.acquisition.devices.aravis.gain import parse_gain_db, parse_gain_raw
 
-OPTION_NAMES = ("--trigger-line", "--strobe-line", "--gain", "--roi", "--binning", "--feature")
-"""The options this module adds (all describe a hardware rig's camera)."""
+OPTION_NAMES = ("--trigger-line", "--strobe-line", "--gain", "--gain-raw", "--roi", "--binning", "--feature")
+"""The options this module adds (all describe a GenICam camera)."""
 
-
-def _gain_db(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if value != value or value in (float("inf"), float("-inf")):
-        raise argparse.ArgumentTypeError(f"'{text}': expected a gain in dB, e.g. 6")
-    return value
+FAKE_RIG_OPTIONS = ("--gain", "--gain-raw", "--feature")
+"""Those the ``aravis-fake`` rig takes too (its ROI is the scene's, its lines are emulated)."""
 
 
 def add_camera_options(group: argparse._ArgumentGroup) -> None:
@@ -41,12 +36,24 @@ def add_camera_options(group: argparse._ArgumentGroup) -> None:
         help="camera output line driven by ExposureActive, for --sync camera (default: the camera "
         "profile's, else Line1)",
     )
-    group.add_argument(
+    gain = group.add_mutually_exclusive_group()
+    gain.add_argument(
         "--gain",
-        type=_gain_db,
+        type=parse_gain_db,
         default=None,
         metavar="DB",
-        help="analogue gain in dB for every frame (SFNC Gain; checked against the camera's range)",
+        help="analogue gain in dB for every frame, e.g. 6 or 6dB: SFNC Gain, or GainRaw where the camera's "
+        "profile gives its dB scale; checked against the camera's range before any frame "
+        "(also on --rig aravis-fake)",
+    )
+    gain.add_argument(
+        "--gain-raw",
+        type=parse_gain_raw,
+        default=None,
+        metavar="N",
+        help="analogue gain in the camera's own units, written as given to GainRaw (else its gain feature): "
+        "for cameras whose GainRaw has no known dB scale; frames then record gain 1 "
+        "(`msflash devices --features ID` shows the range)",
     )
     group.add_argument(
         "--roi", type=parse_roi, default=None, metavar="X,Y,W,H", help="region of interest in pixels (after binning)"
@@ -74,7 +81,8 @@ def camera_options_from_args(args: argparse.Namespace) -> CameraOptions:
     return CameraOptions(
         trigger_line=args.trigger_line,
         strobe_line=args.strobe_line,
-        gain_db=args.gain,
+        gain_db=args.gain.value if args.gain is not None else None,
+        gain_raw=args.gain_raw.value if args.gain_raw is not None else None,
         roi=args.roi,
         binning=args.binning,
         features=tuple(args.feature or ()),

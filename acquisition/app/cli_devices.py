@@ -104,20 +104,51 @@ def _devices(args: argparse.Namespace) -> int:
 
 
 def _features(aravis_camera: Any, device: str, interfaces: tuple[str, ...], as_json: bool) -> int:
-    """``devices --features ID``: every feature the camera offers, with type, value and what it accepts."""
+    """``devices --features ID``: every feature the camera offers, with type, value and what it accepts.
+
+    The features under the camera's ``Root`` category first, then every one msflash reads, writes or
+    executes that no category under ``Root`` lists (Aravis's fake hides ``GainRaw`` so), and how
+    ``--gain``/``--gain-raw`` map on this camera (feature, selector, unit, range).
+    """
     if aravis_camera.is_ipv4_address(device) and "gige" not in interfaces:
         interfaces = (*interfaces, "gige")  # by address: that one camera, no discovery broadcast
     with aravis_camera.AravisCamera(device, interfaces=interfaces) as camera:
         features = [camera.describe_feature(name, category) for name, category in camera.feature_names()]
+        gain = camera.gain_record()
         if as_json:
-            print_json({"camera": camera.name, "features": [info.to_dict() for info in features]})
+            print_json({"camera": camera.name, "features": [info.to_dict() for info in features], "gain": gain})
             return 0
-        print(f"# {camera.name}: {len(features)} features (name, type, access, value, accepts)")
-        for info in features:
-            value = "-" if info.value is None else str(info.value)
-            accepts = info.allowed() if info.writable else ""
-            print(f"{info.name}\t{info.kind}\t{info.access}\t{value}\t{accepts}".rstrip("\t"))
+        listed = [info for info in features if info.category]
+        hidden = [info for info in features if not info.category]
+        print(f"# {camera.name}: {len(features)} features (name, type, access, value, accepts, msflash's use)")
+        for info in listed:
+            print(_feature_line(info))
+        if hidden:
+            print("# not under the camera's Root category, but read or written by msflash:")
+            for info in hidden:
+                print(_feature_line(info))
+        print(f"# --gain/--gain-raw: {_gain_line(gain)}")
     return 0
+
+
+def _feature_line(info: Any) -> str:
+    value = "-" if info.value is None else str(info.value)
+    accepts = info.allowed() if info.writable else ""
+    use = f"msflash {info.msflash}" if info.msflash else ""
+    if info.visibility and info.visibility != "Beginner":
+        use = f"{use} ({info.visibility})".strip()
+    return f"{info.name}\t{info.kind}\t{info.access}\t{value}\t{accepts}\t{use}".rstrip("\t")
+
+
+def _gain_line(gain: dict[str, Any]) -> str:
+    if gain["feature"] is None or gain.get("why_not"):
+        return f"the gain cannot be set: {gain.get('why_not', 'no gain feature')}"
+    where = gain["feature"] + (f" under GainSelector {gain['selector']}" if gain["selector"] else "")
+    low_high = gain["range"]
+    span = f" {low_high[0]:g} … {low_high[1]:g}" if low_high else ""
+    if gain["unit"] == "raw" and gain["db_per_unit"] is None:
+        return f"{where},{span} in camera units ({gain['scale']}): --gain-raw N only"
+    return f"{where},{span} {gain['unit']} ({gain['scale']}): --gain in dB or --gain-raw in these units"
 
 
 def _booth_entry(port: SerialPortInfo) -> dict[str, Any]:

@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, progress
-from msflash.acquisition.app.options import simulated_world
+from msflash.acquisition.app.options import add_fake_camera_option, simulated_world
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.session.rig import Rig, open_rig
 from msflash.acquisition.signals import STOPPING_SIGNALS
@@ -57,13 +57,15 @@ def _open(args: argparse.Namespace) -> Rig:
         raise UsageError(f"{hw_only[0]}: describes a hardware rig, but the rig is '{spec}'; expected --rig hw")
     if args.cfa is not None and spec != "sim":
         raise UsageError(f"--cfa: describes the simulated rig's camera, but the rig is '{spec}'; expected --rig sim")
+    if args.fake_camera is not None and spec != "aravis-fake":
+        raise UsageError(f"--fake-camera: picks the aravis-fake rig's camera model, but the rig is '{spec}'")
     if args.booth_port is not None and spec not in ("sim", "hw"):
         raise UsageError(f"--booth-port: the rig '{spec}' has its own emulated booth; expected --rig sim or hw")
     world = simulated_world(args)
     if spec == "sim":
         return open_rig("sim", cfa=args.cfa, booth_port=args.booth_port, booth_boot_s=args.booth_boot_s, **world)
     if spec == "aravis-fake":
-        return open_rig("aravis-fake", **world)
+        return open_rig("aravis-fake", fake_camera=args.fake_camera or "sfnc", **world)
     if spec == "hw":
         return open_rig(
             "hw",
@@ -139,6 +141,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     live.add_argument("--port", type=_port, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT}; 0: any)")
     live.add_argument("--runs", default="runs", metavar="DIR", help="folder of the run folders (default runs)")
     live.add_argument("--target", default="D65", help="complementary target illuminant (name or CSV file)")
+    add_fake_camera_option(live)
     hardware = live.add_argument_group("hardware rig (--rig hw)")
     hardware.add_argument("--camera", default=None, metavar="ID", help="camera device id, serial number or IP")
     hardware.add_argument(

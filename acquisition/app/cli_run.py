@@ -30,9 +30,15 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.app.camera_options import add_camera_options, camera_options_from_args, given_camera_options
+from msflash.acquisition.app.camera_options import (
+    FAKE_RIG_OPTIONS,
+    add_camera_options,
+    camera_options_from_args,
+    given_camera_options,
+)
 from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, claimed_output, progress
-from msflash.acquisition.app.options import add_estimation_options, simulated_world
+from msflash.acquisition.app.options import add_estimation_options, add_fake_camera_option, simulated_world
+from msflash.acquisition.devices.aravis.fake_models import DEFAULT_FAKE_MODEL
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.errors import CaptureError
 from msflash.acquisition.progress import count
@@ -124,7 +130,13 @@ def _open(args: argparse.Namespace) -> Rig:
         )
         if value is not None
     ]
-    hw_only += given_camera_options(args)
+    camera_options = given_camera_options(args)
+    hw_only += [name for name in camera_options if spec != "aravis-fake" or name not in FAKE_RIG_OPTIONS]
+    if args.fake_camera is not None and spec != "aravis-fake":
+        raise UsageError(
+            f"--fake-camera {args.fake_camera}: picks the aravis-fake rig's camera model, but the rig is '{spec}'; "
+            "expected --rig aravis-fake"
+        )
     if hw_only and spec != "hw":
         hint = " (the simulated camera is --sim-camera NAME|FILE.csv)" if spec == "sim" else ""
         raise UsageError(
@@ -176,7 +188,12 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
             **world,
         )
     if spec == "aravis-fake":
-        return open_rig("aravis-fake", **world)
+        return open_rig(
+            "aravis-fake",
+            camera_options=camera_options_from_args(args),
+            fake_camera=args.fake_camera or DEFAULT_FAKE_MODEL,
+            **world,
+        )
     return open_rig(spec, log_serial=args.log_serial)
 
 
@@ -406,6 +423,7 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
         "Bayer*10p/12p, Mono12Packed, Bayer*12Packed … are decoded",
     )
     add_camera_options(hardware)
+    add_fake_camera_option(parser)
     parser.add_argument(
         "--sync",
         default="host",

@@ -96,6 +96,19 @@ def add_scheduler_options(parser: argparse.ArgumentParser, default: str | None =
     )
 
 
+def add_fake_camera_option(parser: argparse.ArgumentParser) -> None:
+    """``--fake-camera MODEL``: the ``aravis-fake`` rig's camera model (how it names its gain)."""
+    from msflash.acquisition.devices.aravis.fake_models import DEFAULT_FAKE_MODEL, FAKE_MODELS
+
+    parser.add_argument(
+        "--fake-camera",
+        default=None,
+        choices=tuple(FAKE_MODELS),
+        help=f"--rig aravis-fake: the fake's camera model (default {DEFAULT_FAKE_MODEL}): "
+        + "; ".join(f"{name}: {model.summary}" for name, model in FAKE_MODELS.items()),
+    )
+
+
 def simulated_world(args: argparse.Namespace) -> dict[str, Any]:
     """What the simulated world's options (``--ambient``, ``--scene``, ``--sim-camera``, ``--leds``, …) ask of
     ``open_rig`` for the ``sim`` and ``aravis-fake`` rigs: one reading for ``run``, ``capture`` and ``live``."""

@@ -15,6 +15,7 @@ from msflash.acquisition.app.cli_common import dumps_json
 from msflash.acquisition.app.html_report import HtmlReport
 from msflash.acquisition.errors import OutputWriteError
 from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.session.exposure import snr_or_none
 
 PREVIEW_CAPTIONS = {
     "ambient": "ambient only",
@@ -27,6 +28,11 @@ PREVIEW_CAPTIONS = {
 
 def _number(value: Any, digits: int = 3) -> str:
     return "—" if value is None else f"{float(value):.{digits}g}"
+
+
+def _snr(value: Any) -> str:
+    """An LED's SNR in the report: its figure, or "no signal" where none was measured (JSON null)."""
+    return "no signal" if value is None else f"{float(value):.3g}"
 
 
 def write_run_html(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
@@ -110,11 +116,13 @@ def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
         report.add_table(
             ["LED", "exposure (µs)", "planned SNR", "SNR"],
             [
-                [name, _number(us, 5), _number(p), _number(s)]
+                [name, _number(us, 5), _snr(p), _snr(s)]
                 for name, us, p, s in zip(names, exposures, planned, snr, strict=True)
             ],
             table_id="exposure",
         )
+        for note in exposure.get("led_snr_warnings") or ():
+            report.add_paragraph(f"Warning: {note}.", warning=True)
         report.add_paragraph(
             f"Ambient {_number(exposure.get('ambient_exposure_us'), 5)} µs ({exposure.get('mode', '?')}); flash "
             f"{_number(exposure.get('flash_exposure_us'), 5)} µs. SNR: {exposure.get('led_snr_method', '')}, median pixel.",
@@ -159,6 +167,7 @@ def exposure_summary(exposure: Any, flash_exposure_us: float, captured: Any) -> 
     return {
         **exposure.to_dict(),
         "flash_exposure_us": flash_exposure_us,
-        "led_snr": captured.snr,
+        "led_snr": [snr_or_none(v) for v in captured.snr],
         "led_snr_method": captured.snr_method,
+        "led_snr_warnings": list(captured.snr_warnings),
     }

@@ -37,6 +37,28 @@ class CameraInfo:
 
 
 @dataclass(frozen=True)
+class NativeGain:
+    """A camera's gain feature as it read back, in the camera's own unit (recorded per frame)."""
+
+    feature: str
+    """The feature (``Gain``, ``GainRaw``…)."""
+    value: float
+    """Its value as read back."""
+    unit: str
+    """``dB``, ``x`` (a linear factor) or ``raw`` (the camera's own units)."""
+    selector: str | None = None
+    """The ``GainSelector`` entry it was read under, if any."""
+
+    def to_dict(self) -> dict:
+        """JSON form: the sequence's ``frames[].camera_gain`` (docs/architecture.md §6)."""
+        value: float | int = int(self.value) if float(self.value).is_integer() else float(self.value)
+        out: dict = {"feature": self.feature, "value": value, "unit": self.unit}
+        if self.selector is not None:
+            out["selector"] = self.selector
+        return out
+
+
+@dataclass(frozen=True)
 class RawFrame:
     """One frame as the camera delivered it, before it is paired with a plan step."""
 
@@ -50,6 +72,8 @@ class RawFrame:
     """Exposure actually used, as read back from the camera."""
     gain: float
     """Linear gain actually used, as read back from the camera."""
+    camera_gain: NativeGain | None = None
+    """The gain feature's value behind ``gain``, in the camera's unit (cameras that have one)."""
 
     def __post_init__(self) -> None:
         pixels = np.asarray(self.pixels)

@@ -498,6 +498,8 @@ def _write(
         extra["trigger"] = trigger
     if progress.retake:
         extra["retake"] = progress.retake
+    if frame.camera_gain is not None:  # the gain feature behind frame.gain, in the camera's unit
+        extra["camera_gain"] = frame.camera_gain.to_dict()
     entry = writer.add_frame(frame.pixels, step.role, step.led_levels, frame.exposure_us, frame.gain, extra=extra)
     progress.written.append(entry)
     progress.steps_done += 1

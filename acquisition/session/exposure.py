@@ -26,6 +26,12 @@ median over unsaturated pixels of signal ÷ noise:
 
 The planned SNR is a prediction from the previews; :func:`measure_led_snr` measures it on the
 frames actually captured.
+
+**No LED signal is a warning, not a number.** An SNR that is not a finite positive number of
+plausible size — NaN (no pixel to measure on), infinite or above :data:`MAX_PLAUSIBLE_SNR` (a
+difference image without noise: identical or synthetic frames), zero or negative (the LED frame is
+no brighter than the ambient) — is never printed or recorded as a figure: :func:`led_snr_problem`
+says which, :func:`led_snr_warnings` names the LED, and JSON holds ``null`` in its place.
 """
 
 from __future__ import annotations
@@ -41,6 +47,11 @@ from msflash.acquisition.session import exposure_information as info
 
 DEFAULT_EXPOSURE_RANGE_US = (1.0, 10_000_000.0)
 """Exposure limits assumed for a camera that does not report its own."""
+
+MAX_PLAUSIBLE_SNR = 1e6
+"""Above this a per-pixel LED SNR is no measurement: photon noise bounds a pixel's SNR by √(full well),
+about 10³ for any sensor below 10¹² electrons, so a larger figure means the noise was not seen
+(issue 29 saw 1.5e+15 on the GigE fake's test patterns)."""
 
 MAX_INFORMATION_BLOCKS = 4096
 """The information criterion looks at most at this many blocks (evenly spaced) of a large frame."""
@@ -152,7 +163,7 @@ class ExposurePlan:
             "mode": self.mode,
             "ambient_exposure_us": self.ambient_exposure_us,
             "led_exposures_us": list(self.led_exposures_us),
-            "predicted_led_snr": [v if math.isfinite(v) else None for v in self.predicted_snr],
+            "predicted_led_snr": [snr_or_none(v) for v in self.predicted_snr],
             "snr_method": self.snr_method,
             "exposure_range_us": list(self.exposure_range_us),
             "policy": asdict(self.policy),
@@ -160,6 +171,65 @@ class ExposurePlan:
             "warnings": list(self.warnings),
             "lost_block_fraction": self.lost_block_fraction,
         }
+
+
+# -- an LED's SNR: a figure, or a warning ---------------------------------------------------------
+
+
+def led_snr_problem(snr: float) -> str | None:
+    """Why an LED's SNR is no measurement (the LED shows no signal), or None when it is one.
+
+    Examples
+    --------
+    >>> led_snr_problem(12.5) is None
+    True
+    >>> led_snr_problem(float("inf"))
+    'no LED signal measurable: the LED-only image has no noise (identical or synthetic frames)'
+    >>> led_snr_problem(-0.4)
+    'no LED signal: its frame is no brighter than the ambient frame (SNR -0.4)'
+    """
+    if math.isnan(snr):
+        return "no LED signal measured: too few unsaturated pixels in its frame and the ambient frame"
+    if snr > MAX_PLAUSIBLE_SNR:
+        return "no LED signal measurable: the LED-only image has no noise (identical or synthetic frames)"
+    if snr <= 0:
+        shown = f" (SNR {snr:.3g})" if snr > -MAX_PLAUSIBLE_SNR else ""
+        return f"no LED signal: its frame is no brighter than the ambient frame{shown}"
+    return None
+
+
+def snr_or_none(snr: float) -> float | None:
+    """``snr`` when it is a measurement (:func:`led_snr_problem`), else None (``null`` in JSON)."""
+    return None if led_snr_problem(snr) is not None else float(snr)
+
+
+def led_snr_warnings(names: Sequence[str], snrs: Sequence[float], what: str = "SNR") -> list[str]:
+    """One warning per LED whose SNR is no measurement, naming the LED (``what``: planned or measured).
+
+    Examples
+    --------
+    >>> led_snr_warnings(["led440", "led480"], [8.0, float("nan")], "measured SNR")
+    ['LED led480: measured SNR: no LED signal measured: too few unsaturated pixels in its frame and the ambient frame']
+    """
+    return [
+        f"LED {name}: {what}: {problem}"
+        for name, snr in zip(names, snrs, strict=True)
+        if (problem := led_snr_problem(snr)) is not None
+    ]
+
+
+def format_led_snr(names: Sequence[str], snrs: Sequence[float]) -> str:
+    """The LEDs' SNR for a progress line: figures, and ``no signal`` where there is none.
+
+    Examples
+    --------
+    >>> format_led_snr(["a", "b"], [3.14159, -4e14])
+    'a 3.14, b no signal'
+    """
+    return ", ".join(
+        f"{name} {snr:.3g}" if led_snr_problem(snr) is None else f"{name} no signal"
+        for name, snr in zip(names, snrs, strict=True)
+    )
 
 
 # -- what a camera offers ----------------------------------------------------------------------
@@ -392,11 +462,14 @@ def plan_exposures(
     policy: ExposurePolicy = ExposurePolicy(),
     start_us: float = 10_000.0,
     cfa: bool = False,
+    led_names: Sequence[str] | None = None,
 ) -> ExposurePlan:
     """Auto-exposure for an ambient + each-LED sequence.
 
-    ``capture(levels, exposure_us)`` returns one preview frame with the LEDs at ``levels``.
+    ``capture(levels, exposure_us)`` returns one preview frame with the LEDs at ``levels``;
+    ``led_names`` name the LEDs in warnings (``1`` … ``n`` when None).
     """
+    names = list(led_names) if led_names is not None else [str(i + 1) for i in range(n_leds)]
     dark = (0.0,) * n_leds
     ambient_us, ambient_px, ambient_px_us, metered, notes = auto_ambient_exposure(
         lambda e: capture(dark, e), start_us, black, white, limits, policy
@@ -425,11 +498,11 @@ def plan_exposures(
             exposure = _clamp(policy.headroom_fraction * full / bright_rate, limits)
         else:
             exposure = limits[1]
-            notes.append(f"LED {led + 1}: no signal in its preview")
+            notes.append(f"LED {names[led]}: no signal in its preview")
         if metered_led.saturated_fraction > policy.max_saturated_fraction:
             exposure = limits[0]
             notes.append(
-                f"LED {led + 1}: saturates {metered_led.saturated_fraction:.2%} of pixels at the shortest "
+                f"LED {names[led]}: saturates {metered_led.saturated_fraction:.2%} of pixels at the shortest "
                 f"exposure {limits[0]:g} µs; dim the LED"
             )
         led_us.append(exposure)
@@ -450,9 +523,11 @@ def plan_exposures(
             measured = snr_from_difference(ambient_px, pixels, ambient_px_us, preview_us, black, white, cfa)
             snr = measured * math.sqrt(exposure / preview_us) if math.isfinite(measured) else measured
         snrs.append(snr)
-        if not snr >= policy.min_snr:
+        if led_snr_problem(snr) is not None:
+            notes.extend(led_snr_warnings([names[led]], [snr], "planned SNR"))
+        elif not snr >= policy.min_snr:
             notes.append(
-                f"LED {led + 1}: planned SNR {snr:.3g} below {policy.min_snr:g} — the LED is weak against "
+                f"LED {names[led]}: planned SNR {snr:.3g} below {policy.min_snr:g} — the LED is weak against "
                 "the ambient; dim the ambient or move the booth closer"
             )
     return ExposurePlan(

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from msflash.acquisition.devices.camera import RawFrame
-from msflash.acquisition.errors import FrameLostError, UsageError
+from msflash.acquisition.errors import CameraSettingError, FrameLostError, UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep, StepRole
 from msflash.acquisition.session.exposure import camera_exposure_range
 from msflash.acquisition.session.rig import Rig
@@ -74,6 +74,12 @@ class LiveStream:
         """Take the next frames at ``exposure_us`` and linear ``gain`` (> 0); the settings now in force."""
         if not gain > 0 or gain > 64:
             raise UsageError(f"gain {gain:g}: expected a linear gain in (0, 64]")
+        check = getattr(self.rig.camera, "check_step_gain", None)  # a GenICam camera's range, in its units
+        if check is not None:
+            try:
+                check(float(gain))
+            except CameraSettingError as err:
+                raise UsageError(f"gain {gain:g}: {err}") from err
         exposure = self._checked_exposure(exposure_us)
         if (exposure, gain) != (self.settings.exposure_us, self.settings.gain):
             self.settings = LiveSettings(exposure, float(gain), self.settings.levels)

@@ -500,10 +500,14 @@ class WiredFakeCamera:
         fake: Any = None,
         errors: list[BaseException] | None = None,
         world: SimulatedCamera | None = None,
+        true_gain: Callable[[], float] | None = None,
     ) -> None:
         self.aravis = camera
         self.world = world
         """The scene's renderer, or None to keep the fake's test patterns."""
+        self._true_gain = true_gain
+        """The linear gain the twin's sensor applies now (its camera model's truth, from the fake's
+        registers); None renders at the gain the camera read back for the frame."""
         self._emulator = emulator
         self._fake = fake
         self._errors = errors if errors is not None else []
@@ -550,6 +554,10 @@ class WiredFakeCamera:
     def exposure_range_us(self) -> tuple[float, float] | None:
         """The fake's exposure limits in microseconds (what ``--exposure`` is checked against)."""
         return self.aravis.exposure_range_us
+
+    def check_step_gain(self, gain: float) -> None:
+        """Refuse a plan step's linear ``gain`` the camera cannot take (``AravisCamera.check_step_gain``)."""
+        self.aravis.check_step_gain(gain)
 
     def prepare(self, plan: CapturePlan) -> None:
         """Prepare the fake for ``plan`` with software triggering whatever the sync mode."""
@@ -629,7 +637,8 @@ class WiredFakeCamera:
         """The next frame, (H, W); in camera master the exposure line falls when it arrives.
 
         With a scene, its pixels are the scene rendered under the levels of its trigger, at the
-        exposure and gain the camera reports for it.
+        exposure the camera reports for it and the gain the twin's sensor applies (its camera
+        model's truth, read from the fake's registers: what msflash believes it set is not asked).
         """
         try:
             frame = self.aravis.next_frame(timeout_s)
@@ -648,7 +657,8 @@ class WiredFakeCamera:
                 f"aravis-fake: frame {frame.frame_id} arrived with no trigger issued for it; expected "
                 "one frame per trigger"
             )
-        pixels = self.world.render(levels, frame.exposure_us, frame.gain)
+        gain = self._true_gain() if self._true_gain is not None else frame.gain
+        pixels = self.world.render(levels, frame.exposure_us, gain)
         if pixels.shape != frame.pixels.shape:
             raise CameraError(
                 f"aravis-fake: the scene renders {pixels.shape} but the fake delivers "
@@ -699,12 +709,21 @@ def open_aravis_fake_rig(
     flash_power: float | None = None,
     patch_px: int | None = None,
     lost_packet_ratio: float = 0.0,
+    camera_options: Any = None,
+    fake_camera: str = "sfnc",
     **_ignored: object,
 ) -> Rig:
     """The ``aravis-fake`` rig: AravisCamera on the GigE fake at 127.0.0.1 + emulator on a pty + LedBooth.
 
     Holds the machine-wide GVCP port lock (:func:`~acquisition.devices.aravis.camera.gvcp_port_lock`)
-    until closed.
+    until closed. The fake is this process's own: a port another program holds is refused
+    (``AravisGvFake.start``), and the camera opened at 127.0.0.1 must report the fake's serial and
+    model, or the rig does not open (a fake of another process answers there otherwise).
+
+    ``fake_camera``: the fake's camera model (:data:`~acquisition.devices.aravis.fake_models.FAKE_MODELS`:
+    how it names its gain; rendered frames get the gain its sensor truly applies).
+    ``camera_options``: :class:`~acquisition.devices.aravis.camera_features.CameraOptions` (``--gain``,
+    ``--gain-raw``, ``--feature``), applied and checked as on the hardware rig before any frame.
 
     ``rendered`` (the default): the frames are the ``sim`` rig's world (``ambient``,
     ``scene``, ``seed``, ``camera``, ``n_leds``, ``led_spectra``, ``flash_power`` as for
@@ -725,13 +744,20 @@ def open_aravis_fake_rig(
     ------
     UsageError
         A bad world option (named), or a ``width``/``height`` other than the scene's.
+    CameraSettingError
+        A camera option the fake's camera cannot take (bad input; the booth is not opened).
     RigOpenError
-        The fake, the emulated booth or the world failed to open.
+        The fake, the emulated booth or the world failed to open, or another camera answered.
     """
     try:
         from msflash.acquisition.devices.aravis import camera as aravis_camera
+        from msflash.acquisition.devices.aravis.camera_features import CameraOptions, configure_camera
+        from msflash.acquisition.devices.aravis.fake_models import FAKE_MODELS
     except ImportError as err:
         raise RigOpenError(f"rig 'aravis-fake': {err}") from err
+    model = FAKE_MODELS.get(fake_camera)
+    if model is None:
+        raise UsageError(f"--fake-camera {fake_camera!r}: unknown; expected one of {', '.join(FAKE_MODELS)}")
     world = None
     if rendered:
         world = _sim_world(
@@ -762,24 +788,41 @@ def open_aravis_fake_rig(
     closers: list = []
     line_errors: list[BaseException] = []
     failures: dict[str, BaseException] = {}
-    emulator = booth = None
+    emulator = booth = setup = None
     try:
         if world is not None:
             from msflash.acquisition.devices.aravis.fake_log import mute_unfilled_format_warning
 
             closers.append(mute_unfilled_format_warning())  # the pixels are rendered: its lines say nothing
-        fake = aravis_camera.AravisGvFake(serial=serial, lost_packet_ratio=lost_packet_ratio)
+        fake = aravis_camera.AravisGvFake(
+            serial=serial,
+            genicam_xml=model.xml_path(),
+            lost_packet_ratio=lost_packet_ratio,
+            model=model.model,
+            registers=model.registers,
+        )
         fake.start()
         closers.append(fake.close)
-        aravis = aravis_camera.AravisCamera(
-            fake.address, interfaces="gige", pixel_format=pixel_format, roi=(0, 0, width, height)
-        )
+        aravis = aravis_camera.AravisCamera(fake.address, interfaces="gige")
         closers.append(aravis.close)
-        if world is not None and aravis.info.cfa != world.sensor.cfa:
+        opened = aravis.info
+        if (opened.serial, opened.model) != (serial, model.model):
             raise RigOpenError(
-                f"pixel format {pixel_format} has CFA {aravis.info.cfa}; expected "
-                f"{world.sensor.cfa}, the rendered mosaic's"
+                f"the camera at {fake.address} is {opened.vendor} {opened.model} serial {opened.serial}, not this "
+                f"rig's fake ({model.model} serial {serial}): another program's GigE Vision camera answers there; "
+                "expected the rig's own — stop the other fake"
             )
+        aravis.set_pixel_format(pixel_format)  # once the camera is known to be the rig's own
+        aravis.set_roi(0, 0, width, height)
+        opened = aravis.info
+        if world is not None and opened.cfa != world.sensor.cfa:
+            raise RigOpenError(
+                f"pixel format {pixel_format} has CFA {opened.cfa}; expected {world.sensor.cfa}, the rendered mosaic's"
+            )
+        setup = configure_camera(aravis, camera_options or CameraOptions(), strobe=False)
+    except CameraSettingError:
+        _close_all(closers)
+        raise  # bad input, not a device failure: one line, exit 2
     except Exception as err:  # noqa: BLE001 - reported with the booth's failure, if any
         failures[f"camera GigE fake {serial} at 127.0.0.1"] = err
         aravis = None
@@ -791,13 +834,19 @@ def open_aravis_fake_rig(
         _close_all(closers)
         listing = "; ".join(f"{device}: {err}" for device, err in failures.items())
         raise RigOpenError(f"rig 'aravis-fake': {listing}") from next(iter(failures.values()))
-    assert aravis is not None and emulator is not None and booth is not None
-    wired = WiredFakeCamera(aravis, emulator, fake, line_errors, world=world)
+    assert aravis is not None and emulator is not None and booth is not None and setup is not None
+    wired = WiredFakeCamera(
+        aravis, emulator, fake, line_errors, world=world, true_gain=lambda: model.true_gain(fake.read_register)
+    )
     closers.insert(closers.index(aravis.close) + 1, wired.stop)  # before the AravisCamera and the fake are released
     emulator.on_trigger_out = _line(line_errors, "aravis-fake trigger line", wired.trigger_line)
+    camera_record: dict = {"fake_camera": model.name, "gain": aravis.gain_record()}
+    if not setup.options.empty:
+        camera_record["camera_options"] = setup.to_dict()
     if world is None:
         extra = {
-            "responsivity_note": f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning"
+            "responsivity_note": f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning",
+            **camera_record,
         }
         return Rig(
             "aravis-fake",
@@ -814,7 +863,8 @@ def open_aravis_fake_rig(
         )
     extra = {
         "pixels": f"the Aravis fake's frames, pixels rendered by {world.info.model} under the booth's LEDs "
-        "at each frame's trigger"
+        "at each frame's trigger",
+        **camera_record,
     }
     return Rig(
         "aravis-fake",
@@ -1011,12 +1061,12 @@ class HardwareCamera:
         """Conversion gain and read noise from the camera profile, or None."""
         return getattr(self.aravis, "noise_model", None)
 
-    def prepare(self, plan: CapturePlan) -> None:
-        """Prepare the camera for ``plan`` (each step's gain times ``--gain``'s factor, if given)."""
-        if self.setup is not None:
-            from msflash.acquisition.devices.aravis.camera_features import with_gain
+    def check_step_gain(self, gain: float) -> None:
+        """Refuse a plan step's linear ``gain`` the camera cannot take (``AravisCamera.check_step_gain``)."""
+        self.aravis.check_step_gain(gain)
 
-            plan = with_gain(plan, self.setup.gain_factor)
+    def prepare(self, plan: CapturePlan) -> None:
+        """Prepare the camera for ``plan`` (each step's gain multiplies ``--gain``'s, which the camera holds)."""
         self.aravis.prepare(plan)
 
     def start(self) -> None:
@@ -1159,7 +1209,7 @@ def open_hw_rig(
     assert aravis is not None and booth is not None
     hardware = HardwareCamera(aravis, setup)
     info = aravis.info
-    extra: dict = {}
+    extra: dict = {"gain": aravis.gain_record()}
     if setup is not None and not setup.options.empty:
         extra["camera_options"] = setup.to_dict()  # what was asked (profile + options) and read back
     mono = info.cfa is None and info.pixel_format.startswith("Mono")

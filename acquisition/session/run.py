@@ -32,6 +32,8 @@ from msflash.acquisition.session.exposure import (
     camera_exposure_range,
     camera_noise_model,
     flash_exposure,
+    format_led_snr,
+    led_snr_warnings,
     measure_led_snr,
     metering_view,
     plan_exposures,
@@ -180,6 +182,7 @@ def plan_exposure(rig: Rig, exposure_option: str | float, policy: ExposurePolicy
         policy,
         start_us=suggested,
         cfa=info.cfa is not None,
+        led_names=list(rig.led_spectra.names),
     )
 
 
@@ -190,10 +193,7 @@ def report_exposure(plan: ExposurePlan, names: list[str]) -> None:
         + " µs"
     )
     if plan.mode == "auto":
-        progress(
-            f"planned LED SNR ({plan.snr_method}, median pixel): "
-            + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, plan.predicted_snr))
-        )
+        progress(f"planned LED SNR ({plan.snr_method}, median pixel): " + format_led_snr(names, plan.predicted_snr))
     for note in plan.warnings:
         progress(f"warning: {note}")
 
@@ -209,6 +209,8 @@ class LedCapture:
     """``time.perf_counter()`` when the last LED frame was handed over (written)."""
     snr: list[float]
     snr_method: str
+    snr_warnings: tuple[str, ...] = ()
+    """One per LED whose measured SNR is no measurement (no LED signal; :func:`led_snr_warnings`)."""
 
 
 def capture_led_sequence(rig: Rig, writer: FrameWriter, plan: ExposurePlan, sync: str = "host") -> LedCapture:
@@ -250,8 +252,11 @@ def led_capture(
         gain=frames[0].gain,
     )
     names = [led.name for led in writer.sequence.leds]
-    progress(f"LED SNR ({method}, median pixel): " + ", ".join(f"{n} {v:.3g}" for n, v in zip(names, snr)))
-    return LedCapture(plan, frames, entries, last_frame_at, snr, method)
+    progress(f"LED SNR ({method}, median pixel): " + format_led_snr(names, snr))
+    warned = tuple(led_snr_warnings(names, snr, "measured SNR"))
+    for note in warned:
+        progress(f"warning: {note}")
+    return LedCapture(plan, frames, entries, last_frame_at, snr, method, warned)
 
 
 def degenerate(estimate) -> str | None:

@@ -15,7 +15,8 @@ Aravis fixtures
     opened on it by address (no discovery).
 ``gv_fake_process``
     A factory starting ``arv-fake-gv-camera-0.8 -i 127.0.0.1`` as a separate process (to kill it,
-    or to drop packets with ``-r``).
+    to drop packets with ``-r``, to serve Aravis's own XML, or to be another program's camera on
+    the port).
 
 Parallel workers: the GigE Vision fake binds 127.0.0.1:3956 and the machine has no other
 loopback address configured (the fake needs an interface that owns its address), so two fakes
@@ -107,10 +108,14 @@ def gv_fake_process(aravis: ModuleType) -> Iterator[Callable[..., subprocess.Pop
     stack = ExitStack()
     processes: list[subprocess.Popen[bytes]] = []
 
-    def start(serial: str = "MSFPROC1", lost_per_thousand: float | None = None) -> subprocess.Popen[bytes]:
-        if not processes:  # one lock for the whole test (flock would block a second time)
+    def start(
+        serial: str = "MSFPROC1", lost_per_thousand: float | None = None, builtin_xml: bool = False
+    ) -> subprocess.Popen[bytes]:
+        if not processes:  # one lock for the whole test (this process's later holds nest in it)
             stack.enter_context(aravis.gvcp_port_lock())
-        command = [FAKE_GV_TOOL, "-i", "127.0.0.1", "-s", serial, "-g", str(aravis.FAKE_SFNC_XML)]
+        command = [FAKE_GV_TOOL, "-i", "127.0.0.1", "-s", serial]
+        if not builtin_xml:  # builtin_xml: Aravis's own description (GainRaw 0-10, no Gain)
+            command += ["-g", str(aravis.FAKE_SFNC_XML)]
         if lost_per_thousand is not None:
             command += ["-r", str(lost_per_thousand)]
         # PR_SET_PDEATHSIG: the fake dies with this worker even if the worker crashes, so no

@@ -167,7 +167,10 @@ def test_lines_and_gain_are_checked_before_any_capture(sfnc_fake_camera: Any) ->
         r"expected one of Line0, Line1, Line2",
     ):
         apply_camera_options(sfnc_fake_camera, CameraOptions(strobe_line="Out3"))
-    with pytest.raises(CameraSettingError, match=r"--gain 30: Gain cannot be 30 dB; expected a number in 0 … 24 dB"):
+    with pytest.raises(
+        CameraSettingError,
+        match=r"--gain 30 dB: Gain \(GainSelector All\) cannot be 30 dB; expected a number in 0 … 24 dB",
+    ):
         apply_camera_options(sfnc_fake_camera, CameraOptions(gain_db=30.0))
 
 
@@ -293,14 +296,56 @@ def test_devices_features_lists_type_value_and_range(sfnc_fake_xml: None, capsys
         "increment": None,
         "unit": "dB",
         "category": "MsflashSfnc",
+        "under_root": True,
+        "visibility": "Beginner",
+        "msflash": "writes",
     }
     assert features["TriggerSource"]["entries"] == ["Line0", "Software", "Line1", "Line2"]
     assert "Mono12p" in features["PixelFormat"]["entries"]
     assert features["LineStatus"]["access"] == "RO" and features["LineStatus"]["type"] == "boolean"
+    assert "msflash" not in features["LineStatus"]  # msflash never reads it
     assert main(["devices", "--interfaces", "fake", "--features", "Fake_1"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("# camera Fake (serial 1): ")
-    assert "BlackLevel\tinteger\tRW\t0\ta whole number in 0 … 4095" in lines
+    assert "BlackLevel\tinteger\tRW\t0\ta whole number in 0 … 4095\tmsflash writes" in lines
+
+
+def test_devices_features_lists_what_msflash_uses_outside_root(
+    capsys: pytest.CaptureFixture, aravis: ModuleType
+) -> None:
+    # Aravis's own fake keeps GainRaw and GainAuto in a category Root does not list: a walk of Root
+    # alone hid the one gain feature the camera has (issue 29).
+    aravis.use_fake_genicam(None)
+    assert main(["devices", "--interfaces", "fake", "--features", "Fake_1", "--json"]) == 0
+    listing = json.loads(capsys.readouterr().out)
+    features = {f["name"]: f for f in listing["features"]}
+    assert features["GainRaw"] == {
+        "name": "GainRaw",
+        "type": "integer",
+        "access": "RW",
+        "value": 0,
+        "minimum": 0,
+        "maximum": 10,
+        "increment": 1,
+        "unit": "",
+        "under_root": False,
+        "visibility": "Beginner",
+        "msflash": "writes",
+    }
+    assert features["GainAuto"]["under_root"] is False and features["GainAuto"]["entries"] == [
+        "Off",
+        "Once",
+        "Continuous",
+    ]
+    assert listing["gain"]["feature"] == "GainRaw" and listing["gain"]["range"] == [0, 10]
+    assert main(["devices", "--interfaces", "fake", "--features", "Fake_1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    hidden = lines.index("# not under the camera's Root category, but read or written by msflash:")
+    assert "GainRaw\tinteger\tRW\t0\ta whole number in 0 … 10\tmsflash writes" in lines[hidden:]
+    assert lines[-1] == (
+        "# --gain/--gain-raw: GainRaw, 0 … 10 raw (profile 'aravis-fake': gain_raw_per_db 1): "
+        "--gain in dB or --gain-raw in these units"
+    )
 
 
 def test_devices_features_of_a_missing_camera_is_one_line(capsys: pytest.CaptureFixture, aravis: ModuleType) -> None:
@@ -328,7 +373,11 @@ def led_spectra_csv(tmp_path: Path) -> Path:
             "TriggerActivation cannot be 'Sideways' (now RisingEdge); "
             "expected one of RisingEdge, FallingEdge, AnyEdge, LevelHigh, LevelLow",
         ),
-        (["--gain", "40"], "--gain 40: Gain cannot be 40 dB; expected a number in 0 … 24 dB"),
+        (["--gain", "40"], "--gain 40 dB: Gain (GainSelector All) cannot be 40 dB; expected a number in 0 … 24 dB"),
+        (
+            ["--gain-raw", "11"],
+            "--gain-raw 11: GainRaw (GainSelector All) cannot be 11; expected a whole number in 0 … 10",
+        ),
         (["--trigger-line", "Line9"], "--trigger-line Line9: TriggerSource has no entry 'Line9'"),
         (
             ["--binning", "32"],
@@ -422,10 +471,20 @@ def test_cli_capture_applies_the_options_and_records_them(
         "features": {"BlackLevel": "16", "TriggerActivation": "FallingEdge"},
     }
     assert recorded["read_back"] == {
+        "gain": {"feature": "Gain", "selector": "All", "unit": "dB", "value": pytest.approx(6.0, abs=0.02)},
         "roi": [0, 0, 64, 48],
         "binning": [2, 2],
         "features": {"BlackLevel": 16, "TriggerActivation": "FallingEdge"},
     }
+    # With its units: the feature behind each frame's gain, and how --gain was mapped.
+    assert all(frame.extra["camera_gain"]["feature"] == "Gain" for frame in sequence.frames)
+    gain = sequence.camera.extra["gain"]
+    assert (gain["feature"], gain["unit"], gain["range"], gain["requested"]) == (
+        "Gain",
+        "dB",
+        [0.0, 24.0],
+        {"value": 6.0, "unit": "dB"},
+    )
 
 
 def test_a_pixel_format_the_camera_does_not_offer_is_bad_input(

@@ -27,8 +27,8 @@ pytestmark = pytest.mark.aravis
 
 
 def _assert_released(aravis: ModuleType) -> None:
-    """The rig let go of the fake: the port lock can be taken (a lock this process still held would
-    time out — flock conflicts across file descriptions) and, holding it, nobody listens on 3956.
+    """The rig let go of the fake: holding the port lock (this process's own hold would be taken
+    again at once), nobody listens on 3956.
 
     Another xdist worker may hold the lock for its own test meanwhile, hence the wait.
     """

@@ -35,6 +35,7 @@ import os
 import queue
 import random
 import re
+import socket
 import tempfile
 import threading
 import time
@@ -46,11 +47,24 @@ from typing import Any, Literal
 
 import numpy as np
 
-from msflash.acquisition.devices.aravis.camera_features import CameraOptions, FeatureInfo, options_from_json
+from msflash.acquisition.devices.aravis.camera_features import (
+    MSFLASH_FEATURES,
+    CameraOptions,
+    FeatureInfo,
+    options_from_json,
+)
 from msflash.acquisition.devices.aravis.device_release import release_lost_device
+from msflash.acquisition.devices.aravis.fake_models import FAKE_SFNC_XML as _FAKE_SFNC_XML
+from msflash.acquisition.devices.aravis.gain import (
+    GAIN_FEATURES,
+    GainControl,
+    GainRequest,
+    choose_gain_control,
+    choose_selector,
+)
 from msflash.acquisition.devices.aravis.gv_stream import create_gv_stream
 from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
-from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.devices.camera import CameraInfo, NativeGain, RawFrame
 from msflash.acquisition.errors import (
     CameraDisconnectedError,
     CameraError,
@@ -78,7 +92,7 @@ log = logging.getLogger(__name__)
 
 GENICAM_DIR = Path(__file__).resolve().parent / "genicam"
 """Shipped GenICam data: the fake camera's SFNC description and the per-model profiles."""
-FAKE_SFNC_XML = GENICAM_DIR / "fake_sfnc.xml"
+FAKE_SFNC_XML = _FAKE_SFNC_XML
 """GenICam XML for the Aravis fake cameras adding SFNC ExposureTime, Gain, Line*, UserOutput*,
 Counter* and Chunk* as registers (generated from the fake's own XML, Aravis 0.8.26)."""
 PROFILES_JSON = GENICAM_DIR / "profiles.json"
@@ -446,9 +460,10 @@ class CameraProfile:
     exposure_features: tuple[str, ...] = ("ExposureTime", "ExposureTimeAbs")
     """Exposure features to try, in order (microseconds)."""
     gain_features: tuple[str, ...] = ("Gain",)
-    """Gain features to try, in order: ``Gain`` is in dB (SFNC); ``GainRaw`` needs ``gain_raw_per_db``."""
+    """Gain features to try first, in order (then ``Gain``, ``GainAbs``, ``GainRaw``): ``Gain`` is in dB
+    (SFNC), ``GainRaw`` in camera units (:mod:`acquisition.devices.aravis.gain`)."""
     gain_raw_per_db: float | None = None
-    """GainRaw units per dB, when the model documents it."""
+    """GainRaw units per dB, when the model documents it (then ``--gain`` in dB may use GainRaw)."""
     integer_exposure: bool = False
     """The camera rounds exposure to whole microseconds (the read-back value is recorded anyway)."""
     user_outputs: tuple[str, ...] = ()
@@ -858,7 +873,7 @@ class AravisCamera:
         self._acquiring = False
         self._plan: CapturePlan | None = None
         self._n_buffers = 0
-        self._triggered_settings: collections.deque[tuple[float, float]] = collections.deque()
+        self._triggered_settings: collections.deque[tuple[float, float, NativeGain | None]] = collections.deque()
         self._n_triggered = 0
         self._n_consumed = 0
         self._last_frame_id: int | None = None
@@ -867,7 +882,16 @@ class AravisCamera:
         self._trigger = TriggerConfig(mode="free")
         self._strobe: StrobeConfig | None = None
         self._step_request: tuple[float, float] | None = None
-        self._current: tuple[float, float] = (float("nan"), float("nan"))
+        self._current: tuple[float, float, NativeGain | None] = (float("nan"), float("nan"), None)
+        self._gain_control = GainControl(None, why="not resolved yet")
+        """How the gain is set (:meth:`configure_gain`)."""
+        self._gain_request: GainRequest | None = None
+        self._base_gain_db = 0.0
+        """The gain a plan step of gain 1 gets, in dB (``--gain``; 0 without)."""
+        self._native_gain: NativeGain | None = None
+        self._other_gains: dict[str, float] = {}
+        self._warned_gains: set[tuple[str, float]] = set()
+        """The gain feature under the other ``GainSelector`` entries, as found (not set by msflash)."""
         self._last_timing: FrameTiming | None = None
         self._open()
         try:
@@ -925,6 +949,14 @@ class AravisCamera:
         self._vendor = self._read_string("DeviceVendorName", default=self._camera.get_vendor_name() or "")
         self._model = self._read_string("DeviceModelName", default=self._camera.get_model_name() or "")
         self._serial = self._camera.get_device_serial_number() or (entry.serial if entry else device)
+        if entry is not None and entry.serial and self._serial != entry.serial:
+            reached = self._serial
+            self._camera = self._device = None
+            raise CameraNotFoundError(
+                f"camera {device!r}: opening {entry.device_id} reached a camera with serial {reached!r}, not the "
+                f"{entry.serial!r} discovery listed; expected that camera — is another device answering at its "
+                "address?"
+            )
         self._device_id = entry.device_id if entry else (self._camera.get_device_id() or device)
         self._protocol = "gige" if self._camera.is_gv_device() else ("usb3" if self._camera.is_uv_device() else "fake")
         self._address = device if is_ipv4_address(device) else (entry.address if entry else "")
@@ -953,9 +985,7 @@ class AravisCamera:
         if roi is not None:
             self.set_roi(*roi)
         self._exposure_feature = self._first_feature(self._profile.exposure_features, "exposure")
-        self._gain_feature = next((f for f in self._profile.gain_features if self._has(f)), None)
-        if self._gain_feature == "GainRaw" and self._profile.gain_raw_per_db is None:
-            self._gain_feature = None
+        self.configure_gain(None)
 
     def close(self) -> None:
         """Stop, then release the stream and the device; idempotent."""
@@ -1128,7 +1158,9 @@ class AravisCamera:
     _ACCESS = {Aravis.GcAccessMode.RO: "RO", Aravis.GcAccessMode.RW: "RW", Aravis.GcAccessMode.WO: "WO"}
 
     def feature_names(self) -> tuple[tuple[str, str], ...]:
-        """Every implemented, available feature under the GenICam ``Root`` category, with its category."""
+        """Every implemented, available feature under the GenICam ``Root`` category, with its category,
+        then every one msflash uses (:meth:`used_features`) that no category under ``Root`` lists
+        (category "": Aravis's fake keeps ``GainRaw`` so)."""
         genicam = self._live().get_genicam()
         found: dict[str, str] = {}
 
@@ -1141,7 +1173,18 @@ class AravisCamera:
                 found[name] = category
 
         walk("Root", "Root")
+        for name in self.used_features():
+            if name not in found and self._has(name):
+                found[name] = ""
         return tuple(found.items())
+
+    def used_features(self) -> dict[str, str]:
+        """Every feature msflash reads, writes or executes on this camera, by name: :data:`MSFLASH_FEATURES`
+        and the profile's exposure and gain features."""
+        used = dict(MSFLASH_FEATURES)
+        for name in (*self._profile.exposure_features, *self._profile.gain_features):
+            used.setdefault(name, "writes")
+        return used
 
     def describe_feature(self, feature: str, category: str = "") -> FeatureInfo:
         """One feature as the camera describes it now: type, access, value, range or entries."""
@@ -1160,7 +1203,19 @@ class AravisCamera:
                 value = self.get_feature(feature)
             except CameraError:
                 value = None
-        info = FeatureInfo(feature, kind, access, value, category=category)  # type: ignore[arg-type]
+        try:
+            visibility = str(node.get_visibility().value_nick).capitalize()
+        except (AttributeError, GLib.Error):
+            visibility = ""
+        info = FeatureInfo(
+            feature,
+            kind,  # type: ignore[arg-type]
+            access,
+            value,
+            category=category,
+            visibility="" if visibility == "Undefined" else visibility,
+            msflash=self.used_features().get(feature, ""),
+        )
         if kind == "enumeration":
             return replace(info, entries=self.enum_entries(feature))
         if kind in ("integer", "float"):
@@ -1308,49 +1363,211 @@ class AravisCamera:
             return None
         return float(self._profile.electrons_per_dn), float(self._profile.read_noise_e)
 
-    def set_gain(self, gain: float) -> float:
-        """Set the analogue gain (linear, 1.0 = 0 dB); returns the linear gain read back."""
+    def _resolve_gain(self, request: GainRequest | None, selector: str | None) -> GainControl:
+        """The gain feature for ``request``: selector entry set, ``GainAuto`` checked, range read now."""
+        why = ""
+        chosen = None
+        if self._has("GainSelector"):
+            entries = self.enum_entries("GainSelector")
+            chosen, why = choose_selector(entries, selector)
+            if chosen is not None and str(self.get_feature("GainSelector")) != chosen:
+                if not self._is_writable("GainSelector"):
+                    why = f"GainSelector is {self.get_feature('GainSelector')} and read-only; expected {chosen}"
+                else:
+                    self._set_enum("GainSelector", chosen)
+        elif selector is not None:
+            why = f"has no feature GainSelector; expected it for --feature GainSelector={selector}"
+        if not why and self._has("GainAuto"):
+            auto = str(self.get_feature("GainAuto"))
+            if auto != "Off":
+                why = (
+                    f"GainAuto is {auto} and could not be switched Off (access "
+                    f"{self.describe_feature('GainAuto').access}); expected automatic gain off, so frames are linear"
+                )
+        order = self._profile.gain_features
+        features = {
+            name: self.describe_feature(name) for name in dict.fromkeys((*order, *GAIN_FEATURES)) if self._has(name)
+        }
+        return choose_gain_control(
+            features, order, request, self._profile.gain_raw_per_db, self._profile.name, chosen, why
+        )
+
+    def configure_gain(self, request: GainRequest | None, selector: str | None = None) -> GainControl:
+        """Choose the gain feature for ``request``, check it against the camera's range, and set it.
+
+        ``request`` None keeps plan steps' own gains in dB on the first dB-scaled gain feature (a
+        step of gain 1 is 0 dB), or, on a camera without one, leaves the gain as it is (frames then
+        record gain 1). A request in dB becomes the gain of a plan step of gain 1 (each step's own
+        gain multiplies it); a request in camera units (``--gain-raw``) is written as given — on a
+        feature of no known dB scale it stays fixed, and only steps of gain 1 can be taken.
+        ``selector`` is the ``GainSelector`` entry asked for (``--feature GainSelector=NAME``).
+
+        Raises
+        ------
+        CameraSettingError
+            The request cannot be set, or is outside the range (named with it, in the camera's units).
+        """
+        control = self._resolve_gain(request, selector)
+        base_db = 0.0
+        if request is not None:
+            value = control.value_for(request, self._name)  # CameraSettingError: one line, exit 2
+            if control.db_known:
+                base_db = control.db_of(value) or 0.0  # what is written: an integer feature rounds
+            self._write_gain(control, value)
+        if request is not None and request.unit == "dB" and control.scale == "dB" and not control.camera_unit:
+            log.warning(
+                "%s: %s: %s states no unit; taken as dB (SFNC's unit)", self._name, request.option, control.feature
+            )
+        if control.settable:
+            self._native_gain = self._read_native_gain(control)
+            self._other_gains = self._other_selected_gains(control)
+        else:
+            if control.feature is not None:  # a gain it cannot set: a stuck GainAuto, no selector entry
+                log.warning("%s: the gain is left as the camera has it: %s", self._name, control.why)
+            self._native_gain = None
+        self._gain_control, self._gain_request, self._base_gain_db = control, request, base_db
+        return control
+
+    def _other_selected_gains(self, control: GainControl) -> dict[str, float]:
+        """The gain feature's value under every other ``GainSelector`` entry (msflash leaves them as they
+        are; a digital gain there multiplies every frame), with a warning for each that is not zero."""
+        if control.selector is None or control.feature is None or not self._is_writable("GainSelector"):
+            return {}
+        others: dict[str, float] = {}
+        try:
+            for entry in self.enum_entries("GainSelector"):
+                if entry != control.selector:
+                    self._set_enum("GainSelector", entry)
+                    if self._has(control.feature):
+                        others[entry] = self._number(control.feature)
+        except CameraError as err:
+            log.info("%s: reading the gain under each GainSelector entry: %s", self._name, err)
+        finally:
+            self._set_enum("GainSelector", control.selector)
+        for entry, value in others.items():
+            gain_db = control.db_of(value)
+            if (gain_db is None or abs(gain_db) > 1e-6) and (entry, value) not in self._warned_gains:
+                self._warned_gains.add((entry, value))
+                shown = f"{gain_db:g} dB" if gain_db is not None else f"{value:g} ({control.unit})"
+                log.warning(
+                    "%s: GainSelector %s: %s is %s, left as the camera has it (msflash sets %s); frames record "
+                    "the %s gain only",
+                    self._name,
+                    entry,
+                    control.feature,
+                    shown,
+                    control.selector,
+                    control.selector,
+                )
+        return others
+
+    def _write_gain(self, control: GainControl, value: float) -> None:
+        if control.selector is not None and self._is_writable("GainSelector"):
+            self._set_enum("GainSelector", control.selector)
+        assert control.feature is not None
+        if control.kind == "integer":
+            self._set_int(control.feature, int(value))
+        else:
+            self._set_float(control.feature, float(value))
+
+    def _read_native_gain(self, control: GainControl) -> NativeGain:
+        assert control.feature is not None
+        return NativeGain(control.feature, self._number(control.feature), control.unit, control.selector)
+
+    def _step_gain_value(self, gain: float) -> float | None:
+        """The feature's value for a plan step of linear ``gain`` (None: nothing to write), checked."""
         if gain <= 0 or not math.isfinite(gain):
             raise CameraError(f"{self._name}: gain {gain!r} is invalid; expected a finite linear gain > 0")
-        gain_db = 20.0 * math.log10(gain)
-        if self._gain_feature is None:
-            if abs(gain_db) > 1e-6:
-                raise CameraError(
-                    f"{self._name}: has no feature Gain; expected it to set gain {gain:g} "
-                    "(GainRaw needs gain_raw_per_db in genicam/profiles.json)"
+        control = self._gain_control
+        step_db = 20.0 * math.log10(gain)
+        if not control.db_known:
+            if abs(step_db) > 1e-6:
+                how = control.why or f"{control.where()} is {control.range_text()} ({control.source})"
+                raise CameraSettingError(
+                    f"{self._name}: a gain of {gain:.4g}x ({step_db:+.3g} dB) cannot be set: {how}; expected "
+                    "gain 1 (on this camera the gain is the one --gain-raw set, or the camera's own)"
                 )
+            return None
+        total_db = self._base_gain_db + step_db
+        value = control.value_of_db(total_db)
+        if not control.allows(value):
+            asked = f" on --gain {self._base_gain_db:g} dB" if self._gain_request is not None else ""
+            raise CameraSettingError(
+                f"{self._name}: a gain of {gain:.4g}x{asked} is {total_db:.4g} dB, {control.where()} {value:g}; "
+                f"expected {control.range_text()}"
+            )
+        return value
+
+    def check_step_gain(self, gain: float) -> None:
+        """Raise what :meth:`set_gain` would for a plan step of linear ``gain``, writing nothing.
+
+        Raises
+        ------
+        CameraSettingError
+            Outside the camera's range (with ``--gain``'s), or not 1 on a gain of no known dB scale.
+        """
+        self._step_gain_value(gain)
+
+    def set_gain(self, gain: float) -> float:
+        """Set a plan step's analogue gain (linear, 1.0 = the ``--gain`` asked, else 0 dB); returns the
+        linear gain read back (1 when the camera's gain has no known dB scale)."""
+        value = self._step_gain_value(gain)
+        if value is None:
             return 1.0
-        if self._has("GainSelector") and "All" in self.enum_entries("GainSelector"):
-            self._set_enum("GainSelector", "All")
-        if self._gain_feature == "GainRaw":
-            assert self._profile.gain_raw_per_db is not None
-            self._set_int("GainRaw", int(round(gain_db * self._profile.gain_raw_per_db)))
-        elif self._is_integer(self._gain_feature):
-            self._set_int(self._gain_feature, int(round(gain_db)))
-        else:
-            self._set_float(self._gain_feature, gain_db)
+        self._write_gain(self._gain_control, value)
         return self.gain
 
     @property
+    def gain_control(self) -> GainControl:
+        """How the gain is set: feature, selector, unit, range, dB scale (:meth:`configure_gain`)."""
+        return self._gain_control
+
+    @property
     def gain_feature(self) -> str | None:
-        """The feature :meth:`set_gain` writes (``Gain`` in dB, or ``GainRaw``), None when there is none."""
-        return self._gain_feature
+        """The feature :meth:`set_gain` writes (``Gain``, ``GainRaw``…), None when there is none."""
+        return self._gain_control.feature if self._gain_control.settable else None
+
+    @property
+    def native_gain(self) -> NativeGain | None:
+        """The gain feature's value as last read back, in the camera's unit (None without one)."""
+        return self._native_gain
 
     @property
     def gain_db(self) -> float:
-        """Gain read back from the camera, dB."""
-        if self._gain_feature is None:
+        """Gain read back from the camera, dB (0 when its dB scale is unknown: frames record gain 1)."""
+        control = self._gain_control
+        if not control.db_known:
             return 0.0
-        value = self._number(self._gain_feature)
-        if self._gain_feature == "GainRaw":
-            assert self._profile.gain_raw_per_db is not None
-            return value / self._profile.gain_raw_per_db
-        return value
+        native = self._read_native_gain(control)
+        self._native_gain = native
+        return control.db_of(native.value) or 0.0
 
     @property
     def gain(self) -> float:
-        """Linear gain read back from the camera."""
+        """Linear gain read back from the camera (1 when its dB scale is unknown)."""
         return float(10.0 ** (self.gain_db / 20.0))
+
+    def gain_record(self) -> dict[str, Any]:
+        """What the sequence records of the gain (``camera.gain``): feature, selector, unit, range,
+        dB scale, what was asked and read back, and whether ``frames[].gain`` is the true linear gain."""
+        control = self._gain_control
+        native = self._native_gain
+        if control.db_known:
+            linear = "true: frames[].gain is the linear gain the camera read back"
+        elif native is not None:
+            linear = (
+                f"relative: frames[].gain is 1 at {control.where()} {native.value:g} ({control.source}); every "
+                "frame has that same gain"
+            )
+        else:
+            linear = f"relative: frames[].gain is 1 ({control.why or 'no gain feature'})"
+        return {
+            **control.to_dict(),
+            "requested": self._gain_request.to_dict() if self._gain_request is not None else None,
+            "value": native.to_dict()["value"] if native is not None else None,
+            "linear": linear,
+            **({"other_selectors": dict(self._other_gains)} if self._other_gains else {}),
+        }
 
     # -- triggers and lines -------------------------------------------------------------------
 
@@ -1478,7 +1695,7 @@ class AravisCamera:
             "address": self._address,
             "profile": self._profile.name,
             "exposure_feature": self._exposure_feature,
-            "gain_feature": self._gain_feature,
+            "gain_feature": self.gain_feature,
             "firmware": self._read_string("DeviceVersion"),
         }
         return CameraInfo(
@@ -1506,7 +1723,7 @@ class AravisCamera:
             trigger=self._trigger,
             strobe=self._strobe,
             exposure_feature=self._exposure_feature,
-            gain_feature=self._gain_feature,
+            gain_feature=self.gain_feature,
         )
 
     @property
@@ -1536,7 +1753,7 @@ class AravisCamera:
         if self._strobe_request is not None:
             self.configure_strobe(self._strobe_request)
         self._step_request = None
-        self._current = (self.exposure_us, self.gain)
+        self._current = (self.exposure_us, self.gain, self._native_gain)
         self._apply_step(0, plan)
         self._plan = plan
         self._build_stream(len(plan.steps) + self._extra_buffers)
@@ -1544,19 +1761,20 @@ class AravisCamera:
         assert self._pool is not None
         self._pool.reserve(min(len(plan.steps), _MAX_SPARE_BYTES // self._pool.payload))
 
-    def _apply_step(self, index: int, plan: CapturePlan) -> tuple[float, float]:
+    def _apply_step(self, index: int, plan: CapturePlan) -> tuple[float, float, NativeGain | None]:
         # Write only what changes: each write and read-back is a GVCP round trip on the trigger path.
         step = plan.steps[index]
         requested = self._step_request
-        exposure, gain = self._current
+        exposure, gain, native = self._current
         if requested is None or requested[0] != step.exposure_us:
             exposure = self.set_exposure_us(step.exposure_us)
         if requested is None or requested[1] != step.gain:
             gain = self.set_gain(step.gain)
+            native = self._native_gain
         self._step_request = (step.exposure_us, step.gain)
         log.debug("%s: step %d exposure %.1f us gain %.3f", self._name, index, exposure, gain)
-        self._current = (exposure, gain)
-        return exposure, gain
+        self._current = (exposure, gain, native)
+        return exposure, gain, native
 
     def _build_stream(self, n_buffers: int) -> None:
         # Creating (and destroying) a stream costs tens of ms on GigE Vision (socket, thread, stream
@@ -1826,8 +2044,8 @@ class AravisCamera:
             # Without software triggers the next exposure is set between frames: the plan's
             # deadtime must cover these writes.
             self._apply_step(self._n_consumed, self._plan)
-        exposure_us, gain = settings
-        frame = RawFrame(item.pixels, item.frame_id, item.timestamp_ns, exposure_us, gain)
+        exposure_us, gain, native = settings
+        frame = RawFrame(item.pixels, item.frame_id, item.timestamp_ns, exposure_us, gain, native)
         self._last_timing = FrameTiming(item.timestamp_ns, item.received_ns, item.popped_ns, time.time_ns())
         return frame
 
@@ -1924,6 +2142,33 @@ class AravisCamera:
 
 GVCP_LOCK_PATH = Path(tempfile.gettempdir()) / "msflash-gvcp-127.0.0.1-3956.lock"
 """One GigE Vision fake can listen on 127.0.0.1:3956 at a time on this machine."""
+GVCP_PORT = 3956
+"""The GigE Vision control port (UDP)."""
+_GV_MODEL_NAME_REGISTER = 0x68
+"""GigE Vision bootstrap register of the model name (32 bytes), which the fake fills with "Fake"."""
+
+
+def gvcp_port_holder(address: str = "127.0.0.1", port: int = GVCP_PORT) -> str | None:
+    """Why ``address:port`` cannot be bound by itself (another program holds it), or None when it is free.
+
+    The probe binds without ``SO_REUSEADDR``: the Aravis GigE Vision fake binds its control port
+    *with* address reuse, so a second fake on the same address starts without error and the
+    kernel then hands each control request to one of the two — a camera opened at the address may
+    be the other program's (seen: ``arv-fake-gv-camera-0.8 -i 127.0.0.1`` running, the
+    ``aravis-fake`` rig's own fake started, and the rig talked to the other one). Only an
+    exclusive bind tells.
+    """
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind((address, port))
+        except OSError as err:
+            return err.strerror or str(err)
+    return None
+
+
+_gvcp_hold: dict[str, Any] = {"count": 0, "fd": None}
+"""This process's hold of :func:`gvcp_port_lock`: how many holders, and the locked file's descriptor."""
+_gvcp_hold_lock = threading.Lock()
 
 
 @contextmanager
@@ -1932,33 +2177,51 @@ def gvcp_port_lock(timeout_s: float = 120.0) -> Iterator[None]:
 
     The Aravis GigE Vision fake binds 127.0.0.1:3956 and only the loopback address exists, so
     fakes in parallel test workers, benches and rigs must take turns. An ``flock`` is released by
-    the kernel if the holder dies.
+    the kernel if the holder dies. A process that holds it already holds it again at once (it
+    never waits for itself): a second fake it starts then finds the port bound and is refused
+    (:meth:`AravisGvFake.start`), as one of another program is. The ``flock`` goes with the last
+    holder of the process.
 
     Raises
     ------
     CameraError
         The lock was not obtained within ``timeout_s``.
     """
-    fd = os.open(GVCP_LOCK_PATH, os.O_CREAT | os.O_RDWR, 0o666)
-    try:
-        deadline = time.monotonic() + timeout_s
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    raise CameraError(
-                        f"GigE Vision fake: port 127.0.0.1:3956 busy for {timeout_s:g} s "
-                        f"(lock {GVCP_LOCK_PATH}); expected it free — another fake is running"
-                    ) from None
-                time.sleep(0.02)
+    with _gvcp_hold_lock:
+        if _gvcp_hold["count"]:
+            _gvcp_hold["count"] += 1
+            fd = None
+        else:
+            fd = os.open(GVCP_LOCK_PATH, os.O_CREAT | os.O_RDWR, 0o666)
+    if fd is not None:
         try:
-            yield
-        finally:
-            fcntl.flock(fd, fcntl.LOCK_UN)
+            deadline = time.monotonic() + timeout_s
+            while True:
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    if time.monotonic() > deadline:
+                        raise CameraError(
+                            f"GigE Vision fake: port 127.0.0.1:3956 busy for {timeout_s:g} s "
+                            f"(lock {GVCP_LOCK_PATH}); expected it free — another fake is running"
+                        ) from None
+                    time.sleep(0.02)
+        except BaseException:
+            os.close(fd)
+            raise
+        with _gvcp_hold_lock:
+            _gvcp_hold["count"] += 1
+            _gvcp_hold["fd"] = fd
+    try:
+        yield
     finally:
-        os.close(fd)
+        with _gvcp_hold_lock:
+            _gvcp_hold["count"] -= 1
+            if not _gvcp_hold["count"]:
+                held, _gvcp_hold["fd"] = _gvcp_hold["fd"], None
+                fcntl.flock(held, fcntl.LOCK_UN)
+                os.close(held)
 
 
 class AravisGvFake:
@@ -1978,6 +2241,12 @@ class AravisGvFake:
         How often the fake checks for a software trigger (its trigger-to-frame latency).
     lost_packet_ratio
         Fraction of GVSP packets the fake drops (a lossy link).
+    model
+        Model name the fake reports (its bootstrap register; the XML's ``DeviceModelName`` reads it),
+        None for Aravis's "Fake". Camera profiles are matched on it.
+    registers
+        Registers written when the fake starts (address → 32-bit value): a camera's power-on state
+        (``GainAuto`` on, a gain register's first value).
 
     Examples
     --------
@@ -1999,9 +2268,15 @@ class AravisGvFake:
         trigger_frequency_hz: float = 1000.0,
         lost_packet_ratio: float = 0.0,
         lock_timeout_s: float = 120.0,
+        model: str | None = None,
+        registers: dict[int, int] | None = None,
     ) -> None:
         self.serial = serial
-        self._xml = str(genicam_xml) if genicam_xml is not None else None
+        self.model = model
+        self._registers = dict(registers or {})
+        # None: the fake's built-in description, named explicitly — given no file, Aravis's fake
+        # reads the process-wide one use_fake_genicam last set for the in-process fake.
+        self._xml = str(genicam_xml) if genicam_xml is not None else _builtin_fake_xml_path()
         self._frequency = trigger_frequency_hz
         self._lost = lost_packet_ratio
         self._lock_timeout_s = lock_timeout_s
@@ -2016,10 +2291,25 @@ class AravisGvFake:
         self.close()
 
     def start(self) -> None:
-        """Take the port lock and start serving."""
+        """Take the port lock and start serving.
+
+        Raises
+        ------
+        CameraError
+            The port is held by another program (not an msflash fake: those take the lock), whose
+            camera would answer in place of this one (:func:`gvcp_port_holder`).
+        """
         self._lock = gvcp_port_lock(self._lock_timeout_s)
         self._lock.__enter__()
         try:
+            held = gvcp_port_holder(self.address)
+            if held is not None:
+                raise CameraError(
+                    f"GigE Vision fake {self.serial}: {self.address}:{GVCP_PORT} is already bound by another "
+                    f"program ({held}) — another GigE Vision fake such as arv-fake-gv-camera-0.8?; expected it "
+                    "free: both would share the port and msflash could open the other camera — stop it, or use "
+                    "it with --rig hw --camera 127.0.0.1 --interfaces gige"
+                )
             fake = Aravis.GvFakeCamera.new_full(self.address, self.serial, self._xml)
             if not fake.is_running():
                 raise CameraError(
@@ -2029,6 +2319,10 @@ class AravisGvFake:
             fake.set_property("gvsp-lost-ratio", float(self._lost))
             fake.get_fake_camera().set_trigger_frequency(self._frequency)
             self._fake = fake
+            if self.model is not None:
+                self._write_model_name(self.model)
+            for address, value in self._registers.items():
+                self.write_register(address, value)
         except BaseException:
             self._lock.__exit__(None, None, None)
             self._lock = None
@@ -2040,6 +2334,11 @@ class AravisGvFake:
         if self._lock is not None:
             self._lock.__exit__(None, None, None)
             self._lock = None
+
+    def _write_model_name(self, model: str) -> None:
+        data = model.encode("ascii")[:31].ljust(32, b"\0")
+        for offset in range(0, 32, 4):
+            self.write_register(_GV_MODEL_NAME_REGISTER + offset, int.from_bytes(data[offset : offset + 4], "big"))
 
     def read_register(self, address: int) -> int:
         """A 32-bit register of the fake, as the camera side sees it."""

@@ -21,7 +21,10 @@ Public objects
 - :func:`parse_feature`, :func:`parse_roi`, :func:`parse_binning`: argparse types of the options.
 - :class:`FeatureInfo`: one feature as the camera describes it (``msflash devices --features``).
 - :func:`apply_camera_options`, :func:`apply_feature`, :class:`AppliedOptions`: writing and reading back.
-- :func:`gain_factor`: the linear factor ``--gain`` puts on every step of a capture plan.
+- :data:`MSFLASH_FEATURES`: every feature msflash reads or writes (``devices --features`` lists them
+  all, also those the camera's ``Root`` category leaves out).
+
+``--gain``/``--gain-raw`` (which feature, selector, unit and range) is :mod:`acquisition.devices.aravis.gain`.
 """
 
 from __future__ import annotations
@@ -30,9 +33,10 @@ import argparse
 import logging
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
+from msflash.acquisition.devices.aravis.gain import GainRequest
 from msflash.acquisition.errors import CameraError, CameraSettingError
 
 log = logging.getLogger(__name__)
@@ -41,6 +45,55 @@ FeatureKind = Literal["enumeration", "boolean", "integer", "float", "string", "c
 FeatureValue = str | int | float | bool
 
 _BINNING_FEATURES = ("BinningHorizontal", "BinningVertical")
+
+MSFLASH_FEATURES: dict[str, str] = {
+    **dict.fromkeys(("DeviceVendorName", "DeviceModelName", "DeviceSerialNumber", "DeviceVersion"), "reads"),
+    **dict.fromkeys(("PayloadSize",), "reads"),
+    **dict.fromkeys(
+        (
+            "PixelFormat",
+            "Width",
+            "Height",
+            "OffsetX",
+            "OffsetY",
+            "BinningHorizontal",
+            "BinningVertical",
+            "AcquisitionMode",
+            "AcquisitionFrameRate",
+            "AcquisitionFrameRateAbs",
+            "AcquisitionFrameRateEnable",
+            "AcquisitionFrameRateEnabled",
+            "ExposureTime",
+            "ExposureTimeAbs",
+            "ExposureAuto",
+            "Gain",
+            "GainAbs",
+            "GainRaw",
+            "GainSelector",
+            "GainAuto",
+            "BlackLevel",
+            "BlackLevelAuto",
+            "GammaEnable",
+            "TriggerSelector",
+            "TriggerMode",
+            "TriggerSource",
+            "TriggerActivation",
+            "TriggerDelay",
+            "TriggerDelayAbs",
+            "LineSelector",
+            "LineMode",
+            "LineSource",
+            "LineInverter",
+            "UserOutputSelector",
+            "UserOutputValue",
+        ),
+        "writes",
+    ),
+    **dict.fromkeys(("AcquisitionStart", "AcquisitionStop", "TriggerSoftware"), "executes"),
+}
+"""Every GenICam feature msflash reads, writes or executes, by name (a camera profile's
+``exposure_features`` and ``gain_features`` add theirs). ``msflash devices --features`` lists each the
+camera has, even when its ``Root`` category does not (Aravis's fake hides ``GainRaw`` so)."""
 
 
 @dataclass(frozen=True)
@@ -66,7 +119,11 @@ class FeatureInfo:
     entries: tuple[str, ...] = ()
     """Available entries of an enumeration."""
     category: str = ""
-    """The GenICam category the feature was found under."""
+    """The GenICam category the feature was found under ("" when no category under ``Root`` lists it)."""
+    visibility: str = ""
+    """GenICam visibility (``Beginner``, ``Expert``, ``Guru``, ``Invisible``), when the camera says."""
+    msflash: str = ""
+    """What msflash does with it: ``reads``, ``writes``, ``executes`` (:data:`MSFLASH_FEATURES`), else ""."""
 
     @property
     def writable(self) -> bool:
@@ -109,6 +166,11 @@ class FeatureInfo:
             out["entries"] = list(self.entries)
         if self.category:
             out["category"] = self.category
+        out["under_root"] = bool(self.category)
+        if self.visibility:
+            out["visibility"] = self.visibility
+        if self.msflash:
+            out["msflash"] = self.msflash
         return out
 
 
@@ -126,6 +188,8 @@ class FeatureCamera(Protocol):
 
     def set_roi(self, offset_x: int, offset_y: int, width: int, height: int) -> tuple[int, int, int, int]: ...  # noqa: D102
 
+    def configure_gain(self, request: GainRequest | None, selector: str | None = None) -> Any: ...  # noqa: D102
+
 
 @dataclass(frozen=True)
 class CameraOptions:
@@ -136,7 +200,9 @@ class CameraOptions:
     strobe_line: str | None = None
     """LineSelector entry driven by ExposureActive (camera-paced plans); default Line1."""
     gain_db: float | None = None
-    """Analogue gain in dB applied to every frame (multiplies each plan step's own gain)."""
+    """Analogue gain in dB applied to every frame (multiplies each plan step's own gain); ``--gain``."""
+    gain_raw: float | None = None
+    """Analogue gain in the camera's own units (``GainRaw``'s); ``--gain-raw``. At most one of the two."""
     roi: tuple[int, int, int, int] | None = None
     """(offset_x, offset_y, width, height) in pixels, after binning."""
     binning: tuple[int, int] | None = None
@@ -153,14 +219,26 @@ class CameraOptions:
         >>> merged = profile.overridden_by(CameraOptions(gain_db=6.0, features=(("BlackLevel", "0"),)))
         >>> merged.trigger_line, merged.gain_db, merged.features
         ('Line2', 6.0, (('BlackLevel', '0'), ('Gamma', '1')))
+        >>> CameraOptions(gain_db=6.0).overridden_by(CameraOptions(gain_raw=136)).gain_request
+        GainRequest(value=136, unit='raw')
         """
         asked = dict(other.features)
         features = tuple((name, asked.pop(name, value)) for name, value in self.features) + tuple(asked.items())
         merged = {
             name: getattr(other, name) if getattr(other, name) is not None else getattr(self, name)
-            for name in ("trigger_line", "strobe_line", "gain_db", "roi", "binning")
+            for name in ("trigger_line", "strobe_line", "roi", "binning")
         }
-        return CameraOptions(**merged, features=features)
+        gain = other if other.gain_request is not None else self  # one gain, in the unit it was asked in
+        return CameraOptions(**merged, gain_db=gain.gain_db, gain_raw=gain.gain_raw, features=features)
+
+    @property
+    def gain_request(self) -> GainRequest | None:
+        """The gain asked for, in its unit (``--gain`` dB or ``--gain-raw``), None when none is."""
+        if self.gain_db is not None:
+            return GainRequest(self.gain_db, "dB")
+        if self.gain_raw is not None:
+            return GainRequest(self.gain_raw, "raw")
+        return None
 
     @property
     def empty(self) -> bool:
@@ -170,7 +248,7 @@ class CameraOptions:
     def to_dict(self) -> dict[str, Any]:
         """JSON form, as a profile's ``"options"`` holds it (only what is set)."""
         out: dict[str, Any] = {}
-        for name in ("trigger_line", "strobe_line", "gain_db"):
+        for name in ("trigger_line", "strobe_line", "gain_db", "gain_raw"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name)
         if self.roi is not None:
@@ -245,8 +323,9 @@ def parse_binning(text: str) -> tuple[int, int]:
 def options_from_json(data: Any, where: str) -> CameraOptions:
     """A profile's ``"options"`` object as :class:`CameraOptions`; ``where`` names it in errors.
 
-    Keys: ``trigger_line``, ``strobe_line`` (strings), ``gain_db`` (number), ``roi`` ([x, y, w, h]),
-    ``binning`` (n or [h, v]), ``features`` ({name: value}).
+    Keys: ``trigger_line``, ``strobe_line`` (strings), ``gain_db`` or ``gain_raw`` (a number of dB,
+    or of the camera's own gain units), ``roi`` ([x, y, w, h]), ``binning`` (n or [h, v]),
+    ``features`` ({name: value}).
 
     Raises
     ------
@@ -255,7 +334,7 @@ def options_from_json(data: Any, where: str) -> CameraOptions:
     """
     if not isinstance(data, Mapping):
         raise CameraSettingError(f"{where}: options is {type(data).__name__}; expected an object")
-    known = ("trigger_line", "strobe_line", "gain_db", "roi", "binning", "features")
+    known = ("trigger_line", "strobe_line", "gain_db", "gain_raw", "roi", "binning", "features")
     unknown = sorted(set(data) - set(known))
     if unknown:
         raise CameraSettingError(
@@ -274,11 +353,16 @@ def options_from_json(data: Any, where: str) -> CameraOptions:
             if not isinstance(data[key], str) or not data[key]:
                 raise CameraSettingError(f"{where}: options.{key} is {data[key]!r}; expected a line name such as Line0")
             values[key] = data[key]
-    if "gain_db" in data:
-        gain = data["gain_db"]
-        if isinstance(gain, bool) or not isinstance(gain, int | float) or not math.isfinite(gain):
-            raise CameraSettingError(f"{where}: options.gain_db is {gain!r}; expected a number of dB")
-        values["gain_db"] = float(gain)
+    if "gain_db" in data and "gain_raw" in data:
+        raise CameraSettingError(
+            f"{where}: options has both gain_db and gain_raw; expected one (dB, or the camera's own units)"
+        )
+    for key, unit in (("gain_db", "a number of dB"), ("gain_raw", "a number in the camera's gain units")):
+        if key in data:
+            gain = data[key]
+            if isinstance(gain, bool) or not isinstance(gain, int | float) or not math.isfinite(gain):
+                raise CameraSettingError(f"{where}: options.{key} is {gain!r}; expected {unit}")
+            values[key] = float(gain)
     if "roi" in data:
         roi = data["roi"]
         text = ",".join(str(v) for v in roi) if isinstance(roi, list) else str(roi)
@@ -320,10 +404,14 @@ class AppliedOptions:
     """Binning read back, when asked for."""
     features: dict[str, FeatureValue] = field(default_factory=dict)
     """Each ``--feature`` read back, by name."""
+    gain: dict[str, Any] | None = None
+    """The gain feature as read back after ``--gain``/``--gain-raw`` (``NativeGain.to_dict``), when asked."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (recorded in the sequence's ``camera.extra``)."""
         out: dict[str, Any] = {}
+        if self.gain is not None:
+            out["gain"] = dict(self.gain)
         if self.roi is not None:
             out["roi"] = list(self.roi)
         if self.binning is not None:
@@ -432,31 +520,14 @@ def check_lines(camera: FeatureCamera, options: CameraOptions) -> None:
         _check_entry(camera, "LineSelector", options.strobe_line, f"--strobe-line {options.strobe_line}")
 
 
-def check_gain(camera: FeatureCamera, gain_db: float, feature: str = "Gain") -> None:
-    """Refuse a ``--gain`` outside the camera's Gain range (dB), before any capture.
-
-    Raises
-    ------
-    CameraSettingError
-        Names the option, the feature and its range.
-    """
-    option = f"--gain {gain_db:g}"
-    info = _describe(camera, feature, option)
-    if (
-        info.kind not in ("float", "integer")
-        or _convert(info, repr(float(gain_db)) if info.kind == "float" else str(round(gain_db))) is None
-    ):
-        raise CameraSettingError(
-            f"{camera.name}: {option}: {feature} cannot be {gain_db:g} dB; expected {info.allowed()}"
-        )
-
-
 def apply_camera_options(camera: FeatureCamera, options: CameraOptions) -> AppliedOptions:
-    """Write binning, then the ROI, then each feature in order; check the lines and the gain.
+    """Write binning, then the ROI, then each feature in order, then the gain; check the lines.
 
-    Binning comes first because it changes the sensor size the ROI is checked against. Lines and
-    gain are only checked here: the camera sets them per plan (trigger source, strobe output,
-    each step's gain).
+    Binning comes first because it changes the sensor size the ROI is checked against; the gain
+    last, under the ``GainSelector`` a ``--feature`` may have named. Lines are only checked here:
+    the camera sets them per plan (trigger source, strobe output). The gain is resolved, checked
+    against its range in the camera's units and written (``camera.configure_gain``,
+    :mod:`acquisition.devices.aravis.gain`); each plan step's own gain multiplies it.
 
     Raises
     ------
@@ -464,9 +535,11 @@ def apply_camera_options(camera: FeatureCamera, options: CameraOptions) -> Appli
         The first option the camera cannot take, named with what it allows.
     """
     check_lines(camera, options)
-    gain_feature = getattr(camera, "gain_feature", "Gain")
-    if options.gain_db is not None and gain_feature == "Gain":  # GainRaw's units are per profile: set_gain checks
-        check_gain(camera, options.gain_db, gain_feature)
+    if options.gain_db is not None and options.gain_raw is not None:
+        raise CameraSettingError(
+            f"{camera.name}: --gain {options.gain_db:g} and --gain-raw {options.gain_raw:g}: expected one of them "
+            "(dB, or the camera's own units)"
+        )
     binning = None
     if options.binning is not None:
         text = "x".join(str(v) for v in options.binning)
@@ -479,7 +552,11 @@ def apply_camera_options(camera: FeatureCamera, options: CameraOptions) -> Appli
     if options.roi is not None:
         roi = _apply_roi(camera, options.roi)
     features = {name: apply_feature(camera, name, text) for name, text in options.features}
-    return AppliedOptions(roi=roi, binning=binning, features=features)
+    request = options.gain_request
+    camera.configure_gain(request, selector=dict(options.features).get("GainSelector"))
+    native = getattr(camera, "native_gain", None)
+    gain = native.to_dict() if request is not None and native is not None else None
+    return AppliedOptions(roi=roi, binning=binning, features=features, gain=gain)
 
 
 def _apply_roi(camera: FeatureCamera, roi: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
@@ -502,24 +579,6 @@ def _apply_roi(camera: FeatureCamera, roi: tuple[int, int, int, int]) -> tuple[i
     return read
 
 
-def gain_factor(options: CameraOptions) -> float:
-    """Linear factor ``options.gain_db`` puts on each plan step's gain (1 when none is asked).
-
-    Examples
-    --------
-    >>> round(gain_factor(CameraOptions(gain_db=6.0)), 4), gain_factor(CameraOptions())
-    (1.9953, 1.0)
-    """
-    return 1.0 if options.gain_db is None else float(10.0 ** (options.gain_db / 20.0))
-
-
-def with_gain(plan: Any, factor: float) -> Any:
-    """``plan`` with every step's gain multiplied by ``factor`` (the plan itself when it is 1)."""
-    if factor == 1.0:
-        return plan
-    return replace(plan, steps=tuple(replace(step, gain=step.gain * factor) for step in plan.steps))
-
-
 class ConfigurableCamera(FeatureCamera, Protocol):
     """A :class:`FeatureCamera` with a profile and sync lines (``AravisCamera``)."""
 
@@ -531,14 +590,12 @@ class ConfigurableCamera(FeatureCamera, Protocol):
 
 @dataclass(frozen=True)
 class CameraSetup:
-    """Options in effect on an opened camera: as merged, as read back, and the plan gain factor."""
+    """Options in effect on an opened camera: as merged, and as read back."""
 
     options: CameraOptions
     """The profile's options overridden by the command line's."""
     applied: AppliedOptions
     """What the camera read back."""
-    gain_factor: float
-    """Linear factor on each plan step's gain (:func:`gain_factor`)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form recorded in the sequence (``camera.extra.camera_options``)."""
@@ -573,4 +630,4 @@ def configure_camera(
     applied = apply_camera_options(camera, options)
     strobe_line = (options.strobe_line or "Line1") if strobe else None
     camera.set_sync_lines(trigger_line=options.trigger_line, strobe_line=strobe_line)
-    return CameraSetup(options, applied, gain_factor(options))
+    return CameraSetup(options, applied)
