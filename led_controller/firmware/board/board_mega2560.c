@@ -87,21 +87,125 @@ static void uart_init(void)
 
 static volatile uint32_t ticks;
 
-ISR(TIMER1_COMPA_vect) { ticks++; }
+/* Timed events on Timer1's compare B (docs/booth-firmware.md, "Timing"): the trigger pulse's
+ * edges, timed to the timer's count rather than to the main loop's next wake-up (which the 250 us
+ * tick made 250 us late at worst), and wake-ups of the main loop for due actions and replies. */
+#define EVENT_RISE 0
+#define EVENT_FALL 1
+#define EVENT_WAKE 2
+#define EVENTS 3
+static volatile uint8_t event_pending;      /* bit per event */
+static volatile uint32_t event_at[EVENTS];  /* board_micros() time of each */
+static void fire_on_trigger(void);
+
+static uint32_t micros_locked(void) /* with interrupts off */
+{
+    uint32_t t = ticks;
+    uint16_t count = TCNT1;
+    if ((TIFR1 & _BV(OCF1A)) && count < TICK_US) /* wrapped, interrupt not served yet */
+        t++;
+    return t * TICK_US + count / 2u;
+}
 
 uint32_t board_micros(void)
 {
     uint32_t t;
-    uint16_t count;
-    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
-    {
-        t = ticks;
-        count = TCNT1;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { t = micros_locked(); }
+    return t;
+}
+
+static void run_event(uint8_t e)
+{
+    if (e == EVENT_RISE) {
+        PORTA |= _BV(PA0);
+        fire_on_trigger(); /* the LED pulses start with the trigger edge, a few cycles later */
+    } else if (e == EVENT_FALL) {
+        PORTA &= (uint8_t)~_BV(PA0);
+    }
+    event_pending &= (uint8_t)~_BV(e);
+}
+
+static volatile int8_t armed_event = -1; /* the event compare B is set for */
+
+/* Run what is due and set compare B for the next event of the current tick (interrupts off).
+ * Compare B sets its flag as TCNT1 leaves OCR1B: OCR1B = count - 1 runs the event at `count`
+ * (0.5 us each) after the tick's start, plus the interrupt's fixed entry time (a few us, the
+ * same for every event, so a pulse's width is exact to the count). */
+static void arm_events(void)
+{
+    for (;;) {
+        uint32_t t = ticks;
+        uint16_t count = TCNT1;
         if ((TIFR1 & _BV(OCF1A)) && count < TICK_US) /* wrapped, interrupt not served yet */
             t++;
+        uint32_t start = t * TICK_US;
+        int8_t next = -1;
+        int32_t target = 0; /* counts from this tick's start */
+        for (uint8_t e = 0; e < EVENTS; e++) {
+            if (!(event_pending & _BV(e)))
+                continue;
+            int32_t at = 2 * (int32_t)(event_at[e] - start);
+            if (next < 0 || at < target) {
+                next = (int8_t)e;
+                target = at;
+            }
+        }
+        armed_event = -1;
+        if (next < 0) {
+            TIMSK1 &= (uint8_t)~_BV(OCIE1B);
+            return;
+        }
+        if (target <= (int32_t)count + 2) { /* due, or too close to set: now */
+            run_event((uint8_t)next);
+            continue;
+        }
+        if (target >= (int32_t)(2u * TICK_US)) { /* in a later tick: the tick interrupt arms it then */
+            TIMSK1 &= (uint8_t)~_BV(OCIE1B);
+            return;
+        }
+        OCR1B = (uint16_t)(target - 1);
+        TIFR1 = _BV(OCF1B);
+        TIMSK1 |= _BV(OCIE1B);
+        armed_event = next;
+        return;
     }
-    return t * TICK_US + count / 2u;
 }
+
+ISR(TIMER1_COMPA_vect)
+{
+    ticks++;
+    if (event_pending)
+        arm_events();
+}
+
+ISR(TIMER1_COMPB_vect)
+{
+    if (armed_event >= 0) /* its time, by the compare hardware */
+        run_event((uint8_t)armed_event);
+    arm_events();
+}
+
+static void schedule_event(uint8_t e, uint32_t at_us)
+{
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        event_at[e] = at_us;
+        event_pending |= _BV(e);
+        arm_events();
+    }
+}
+
+void board_trigger_pulse(uint32_t at_us, uint32_t width_us)
+{
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        event_at[EVENT_FALL] = at_us + width_us;
+        event_pending |= _BV(EVENT_FALL);
+        schedule_event(EVENT_RISE, at_us);
+    }
+}
+
+void board_wake_at(uint32_t at_us) { schedule_event(EVENT_WAKE, at_us); }
 
 static void timebase_init(void)
 {
@@ -111,50 +215,153 @@ static void timebase_init(void)
     TIMSK1 = _BV(OCIE1A);
 }
 
-/* ---- LED PWM: timers 3, 4, 5 in fast PWM mode 14 (TOP = ICRn), clk/1 --------------------- */
+/* ---- LED drive: timers 3, 4, 5 -------------------------------------------------------------
+ * PWM (board_set_levels): fast PWM mode 14, TOP = ICRn = 2^BITS - 1, clk/1, non-inverting: high
+ * OCR + 1 of TOP + 1 ticks (OCR = TOP: constantly high), OCR chosen by pwm_ocr.
+ * Pulses (board_set_pulses): mode 14 with TOP = ICRn = 0, so the counter rests at 0; inverting
+ * output (set on compare match, clear at BOTTOM). Writing TCNTn = 0x10000 - window runs the counter
+ * once up to 0xFFFF and back to 0: a channel with OCR = 0xFFFF - width is high for exactly `width`
+ * ticks, ending `window` ticks after the write, both edges on the timer's compare hardware
+ * (ATmega2560 datasheet, section 17.9.3 and the note on TOP below TCNT in 17.9.3). */
 
 typedef struct {
     volatile uint8_t *tccra;
     volatile uint16_t *ocr;
-    uint8_t com1;            /* COMnx1 bit: non-inverting PWM on the pin */
-    volatile uint8_t *port;
+    uint8_t com1, com0;      /* COMnx1, COMnx0 */
+    uint8_t foc;             /* FOCnx in TCCRnC */
+    volatile uint8_t *port, *ddr;
     uint8_t bit;
 } pwm_channel_t;
 
 /* Channel order = NAMES= order. Arduino pins D5, D2, D3, D6, D7, D8, D46. */
-static const pwm_channel_t channels[] = {
-    {&TCCR3A, &OCR3A, COM3A1, &PORTE, PE3},
-    {&TCCR3A, &OCR3B, COM3B1, &PORTE, PE4},
-    {&TCCR3A, &OCR3C, COM3C1, &PORTE, PE5},
-    {&TCCR4A, &OCR4A, COM4A1, &PORTH, PH3},
-    {&TCCR4A, &OCR4B, COM4B1, &PORTH, PH4},
-    {&TCCR4A, &OCR4C, COM4C1, &PORTH, PH5},
-    {&TCCR5A, &OCR5A, COM5A1, &PORTL, PL3},
+static const __flash pwm_channel_t channels[] = {
+    {&TCCR3A, &OCR3A, COM3A1, COM3A0, FOC3A, &PORTE, &DDRE, PE3},
+    {&TCCR3A, &OCR3B, COM3B1, COM3B0, FOC3B, &PORTE, &DDRE, PE4},
+    {&TCCR3A, &OCR3C, COM3C1, COM3C0, FOC3C, &PORTE, &DDRE, PE5},
+    {&TCCR4A, &OCR4A, COM4A1, COM4A0, FOC4A, &PORTH, &DDRH, PH3},
+    {&TCCR4A, &OCR4B, COM4B1, COM4B0, FOC4B, &PORTH, &DDRH, PH4},
+    {&TCCR4A, &OCR4C, COM4C1, COM4C0, FOC4C, &PORTH, &DDRH, PH5},
+    {&TCCR5A, &OCR5A, COM5A1, COM5A0, FOC5A, &PORTL, &DDRL, PL3},
 };
 _Static_assert(sizeof channels / sizeof channels[0] >= BOOTH_CHANNELS, "more channels than PWM outputs");
 
+typedef struct {
+    volatile uint8_t *tccra, *tccrb, *tccrc;
+    volatile uint16_t *icr, *tcnt;
+} led_timer_t;
+
+static const __flash led_timer_t led_timers[3] = {
+    {&TCCR3A, &TCCR3B, &TCCR3C, &ICR3, &TCNT3},
+    {&TCCR4A, &TCCR4B, &TCCR4C, &ICR4, &TCNT4},
+    {&TCCR5A, &TCCR5B, &TCCR5C, &ICR5, &TCNT5},
+};
+#define WGM_14_A _BV(WGM31)                 /* WGMn1 in TCCRnA (same bit for timers 3, 4, 5) */
+#define WGM_14_B (_BV(WGM33) | _BV(WGM32))  /* WGMn3:2 in TCCRnB */
+
+/* Armed pulses: the TCNT value that starts them, and what fires them. */
+static volatile uint16_t fire_start;
+static volatile uint8_t fire_with_trigger, fire_with_exposure;
+
+static inline void fire(void)
+{
+    uint16_t start = fire_start;
+    TCNT3 = start;
+    TCNT4 = start;
+    TCNT5 = start;
+}
+
+static void fire_on_trigger(void) /* interrupts off */
+{
+    if (fire_with_trigger) {
+        fire();
+        fire_with_trigger = 0;
+    }
+}
+
+static void disarm(void)
+{
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { fire_with_trigger = fire_with_exposure = 0; }
+}
+
+/* The compare value whose duty (OCR + 1) / (TOP + 1) is nearest the level duty / TOP. */
+static uint16_t pwm_ocr(uint16_t duty) { return (uint16_t)(duty - 1u + (duty > LEVEL_TOP / 2u)); }
+
 void board_set_levels(const uint16_t duty[BOOTH_CHANNELS])
 {
+    disarm();
+    for (uint8_t t = 0; t < 3; t++) { /* PWM at clk/1, TOP = 2^BITS - 1 (a no-op when already so) */
+        *led_timers[t].icr = LEVEL_TOP;
+        *led_timers[t].tccrb = WGM_14_B | _BV(CS30);
+        *led_timers[t].tccra = (uint8_t)((*led_timers[t].tccra & ~3u) | WGM_14_A);
+    }
     for (uint8_t c = 0; c < BOOTH_CHANNELS; c++) {
-        const pwm_channel_t *ch = &channels[c];
+        const __flash pwm_channel_t *ch = &channels[c];
         if (duty[c] == 0) {
             /* Off is off: disconnect the compare output (fast PWM at OCR 0 still spikes). */
-            *ch->tccra &= (uint8_t)~_BV(ch->com1);
+            *ch->tccra &= (uint8_t)~(_BV(ch->com1) | _BV(ch->com0));
             *ch->port &= (uint8_t)~_BV(ch->bit);
             *ch->ocr = 0;
         } else {
-            *ch->ocr = duty[c] > LEVEL_TOP ? LEVEL_TOP : duty[c];
-            *ch->tccra |= _BV(ch->com1);
+            *ch->ocr = duty[c] >= LEVEL_TOP ? LEVEL_TOP : pwm_ocr(duty[c]);
+            *ch->tccra = (uint8_t)((*ch->tccra & ~_BV(ch->com0)) | _BV(ch->com1));
         }
     }
     /* In fast PWM the OCR registers are double-buffered and load at BOTTOM: up to one PWM
      * period (4.1 ms at 16 bits) late, longer than a short settle. Setting the counters to
-     * TOP makes the next clock load the new duties at once (the running period is cut short). */
+     * TOP makes the next clock load the new duties at once (the running period is cut short):
+     * every period then starts a whole number of periods after this write. */
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
         TCNT3 = LEVEL_TOP;
         TCNT4 = LEVEL_TOP;
         TCNT5 = LEVEL_TOP;
+    }
+}
+
+void board_set_pulses(const booth_pulses_t *p)
+{
+    disarm();
+    /* Every pin on its port bit first: off, or on throughout the step. */
+    for (uint8_t c = 0; c < BOOTH_CHANNELS; c++) {
+        const __flash pwm_channel_t *ch = &channels[c];
+        *ch->tccra &= (uint8_t)~(_BV(ch->com1) | _BV(ch->com0));
+        if (p->width[c] == BOOTH_PULSE_FULL)
+            *ch->port |= _BV(ch->bit);
+        else
+            *ch->port &= (uint8_t)~_BV(ch->bit);
+    }
+    /* Timers stopped in normal mode: clear the compare latches the pulses will use (force output
+     * compare, 'clear' action; the pin an input meanwhile, so a latch left high by PWM never shows),
+     * set the OCRs (not buffered in normal mode), then mode 14 with TOP 0 and the clock. */
+    for (uint8_t t = 0; t < 3; t++) {
+        *led_timers[t].tccrb = 0;
+        *led_timers[t].tccra = 0;
+        *led_timers[t].icr = 0;
+        *led_timers[t].tcnt = 0;
+    }
+    for (uint8_t c = 0; c < BOOTH_CHANNELS; c++) {
+        const __flash pwm_channel_t *ch = &channels[c];
+        uint8_t t = c / 3u;
+        if (p->width[c] == 0 || p->width[c] == BOOTH_PULSE_FULL)
+            continue;
+        *ch->ddr &= (uint8_t)~_BV(ch->bit);
+        *ch->tccra |= _BV(ch->com1);                       /* 'clear on compare' */
+        *led_timers[t].tccrc = _BV(ch->foc);               /* forced: latch low */
+        *ch->tccra |= _BV(ch->com0);                       /* 'set on compare, clear at BOTTOM' */
+        *ch->ddr |= _BV(ch->bit);
+        *ch->ocr = (uint16_t)(0xFFFFu - p->width[c]);
+    }
+    for (uint8_t t = 0; t < 3; t++) {
+        *led_timers[t].tccra |= WGM_14_A;
+        *led_timers[t].tccrb = WGM_14_B | p->clock_select;
+    }
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        fire_start = (uint16_t)(0x10000ul - p->window);
+        if (p->on_exposure_input)
+            fire_with_exposure = 1;
+        else
+            fire_with_trigger = 1;
     }
 }
 
@@ -185,9 +392,14 @@ static volatile uint8_t edge_head, edge_tail;
 
 ISR(INT0_vect)
 {
+    uint8_t level = (uint8_t)(PIND & _BV(PD0));
+    if (level && fire_with_exposure) { /* camera master: the LED pulses start with the exposure */
+        fire();
+        fire_with_exposure = 0;
+    }
     uint8_t next = (uint8_t)((edge_head + 1u) & (EDGE_SIZE - 1u));
     if (next != edge_tail) {
-        edge_buf[edge_head] = (uint8_t)(PIND & _BV(PD0));
+        edge_buf[edge_head] = level;
         edge_head = next;
     }
 }
@@ -208,10 +420,14 @@ static bool edge_pop(bool *high)
 
 void board_trigger_out(bool high)
 {
-    if (high)
-        PORTA |= _BV(PA0);
-    else
-        PORTA &= (uint8_t)~_BV(PA0);
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        event_pending &= (uint8_t)~(_BV(EVENT_RISE) | _BV(EVENT_FALL)); /* a scheduled pulse too */
+        if (high)
+            PORTA |= _BV(PA0);
+        else
+            PORTA &= (uint8_t)~_BV(PA0);
+    }
 }
 
 static void trigger_init(void)
