@@ -35,6 +35,7 @@ from msflash.led_controller.drive_waveform import (
     pwm_hz_text,
 )
 from msflash.led_controller.protocol import (
+    EXPOSURE_FLAG,
     HOLD_FLAG,
     MARK_EVENT,
     MARK_REPLY,
@@ -58,9 +59,6 @@ DEFAULT_PEAKS_NM = (440.0, 480.0, 500.0, 520.0, 596.0, 636.0, 660.0)
 FULL_SCALE = 0xFFFF
 _NOW_FLAG = "NOW"
 """``PSET … NOW``: start the step at once once the previous one was triggered (booth-protocol.md §5)."""
-_EXPOSURE_PREFIX = "EXP="
-"""``PADD … EXP=<us>``, ``PSET … EXP=<us>``: the step's exposure, for pulse dimming (booth-protocol.md §4)."""
-_ROLL = "ROLL"
 FIRE_LATENCY_US = (2.0, 8.0)
 """Camera master: how late the firmware's pulses start after ExposureActive rises (its interrupt
 latency: 2.4 µs measured with the main loop asleep, more while it serves another interrupt;
@@ -303,6 +301,10 @@ class BoothEmulator:
                 times.append(self._last_host + self._watchdog_ms / 1000.0)
             return max(0.0, min(times) - self._clock()) if times else None
 
+    def clock_s(self) -> float:
+        """The emulator's clock now, seconds (its drive trace's time base)."""
+        return self._clock()
+
     @property
     def real_time(self) -> bool:
         """Whether the emulator runs on the real monotonic clock (not a test's manual clock)."""
@@ -541,7 +543,7 @@ class BoothEmulator:
             Command.STATUS: self._cmd_status,
             Command.WATCHDOG: self._cmd_watchdog,
             Command.PING: self._cmd_ping,
-            _ROLL: self._cmd_roll,
+            Command.ROLL: self._cmd_roll,
         }
 
     # -- commands ----------------------------------------------------------------------
@@ -595,7 +597,7 @@ class BoothEmulator:
 
     def _exposure_arg(self, word: str) -> int:
         """``EXP=<us>``: the exposure's code (as the firmware stores it)."""
-        text = word[len(_EXPOSURE_PREFIX) :]
+        text = word[len(EXPOSURE_FLAG) :]
         if not text.isdigit() or len(text) > 8:
             raise _Refused(ErrorCode.ARGUMENT, "EXP=<microseconds>")
         if int(text) == 0:
@@ -614,7 +616,7 @@ class BoothEmulator:
         held = self.channels < words <= self.channels + 4 and args[words - 1] == HOLD_FLAG
         if held:
             words -= 1
-        timed = self.channels < words <= self.channels + 4 and args[words - 1].startswith(_EXPOSURE_PREFIX)
+        timed = self.channels < words <= self.channels + 4 and args[words - 1].startswith(EXPOSURE_FLAG)
         if timed:
             words -= 1
         codes = self._levels_arg(args[:words])
@@ -632,7 +634,7 @@ class BoothEmulator:
         now = self.channels + 1 < len(args) <= limit and args[-1] == _NOW_FLAG
         if now:
             args = args[:-1]
-        timed = self.channels + 1 < len(args) <= limit and args[-1].startswith(_EXPOSURE_PREFIX)
+        timed = self.channels + 1 < len(args) <= limit and args[-1].startswith(EXPOSURE_FLAG)
         exposure_word = args[-1] if timed else ""
         if timed:
             args = args[:-1]

@@ -125,12 +125,24 @@ static void run_event(uint8_t e)
     event_pending &= (uint8_t)~_BV(e);
 }
 
-static volatile int8_t armed_event = -1; /* the event compare B is set for */
+#define LEAD 20 /* counts (10 us): compare B fires this early for a trigger edge, which then waits for its count */
+
+/* TCNT1 reaches `target` (or the tick wraps). */
+static void wait_count(uint16_t target)
+{
+    uint16_t count, last = TCNT1;
+    while ((count = TCNT1) < target && count >= last)
+        last = count;
+}
 
 /* Run what is due and set compare B for the next event of the current tick (interrupts off).
- * Compare B sets its flag as TCNT1 leaves OCR1B: OCR1B = count - 1 runs the event at `count`
- * (0.5 us each) after the tick's start, plus the interrupt's fixed entry time (a few us, the
- * same for every event, so a pulse's width is exact to the count). */
+ * Compare B sets its flag as TCNT1 leaves OCR1B; for the trigger's edges it is set LEAD counts
+ * early and the interrupt waits for the exact count (0.5 us), so an edge does not depend on how
+ * long the interrupt takes to get there: a pulse's width and its settle are exact to a count,
+ * whatever else is pending. Wake-ups run at their count plus the entry time. A stale compare flag (an
+ * earlier match) only brings the interrupt early, which finds nothing due and sets OCR1B again:
+ * the flag is never cleared by writing TIFR1 (simavr 1.6 clears every Timer1 flag on such a
+ * write, compare A's tick too). */
 static void arm_events(void)
 {
     for (;;) {
@@ -150,12 +162,14 @@ static void arm_events(void)
                 target = at;
             }
         }
-        armed_event = -1;
         if (next < 0) {
             TIMSK1 &= (uint8_t)~_BV(OCIE1B);
             return;
         }
-        if (target <= (int32_t)count + 2) { /* due, or too close to set: now */
+        int32_t lead = next == EVENT_WAKE ? 2 : LEAD;
+        if (target <= (int32_t)count + lead) { /* due, or too close to set: now (an edge at its count) */
+            if (next != EVENT_WAKE && target > (int32_t)count)
+                wait_count((uint16_t)target);
             run_event((uint8_t)next);
             continue;
         }
@@ -163,11 +177,11 @@ static void arm_events(void)
             TIMSK1 &= (uint8_t)~_BV(OCIE1B);
             return;
         }
-        OCR1B = (uint16_t)(target - 1);
-        TIFR1 = _BV(OCF1B);
+        uint16_t at = (uint16_t)(target - 1 - (lead - 2));
+        OCR1B = at;
         TIMSK1 |= _BV(OCIE1B);
-        armed_event = next;
-        return;
+        if (TCNT1 < at) /* else this loop took so long that the count passed: run it from here */
+            return;
     }
 }
 
@@ -178,12 +192,7 @@ ISR(TIMER1_COMPA_vect)
         arm_events();
 }
 
-ISR(TIMER1_COMPB_vect)
-{
-    if (armed_event >= 0) /* its time, by the compare hardware */
-        run_event((uint8_t)armed_event);
-    arm_events();
-}
+ISR(TIMER1_COMPB_vect) { arm_events(); }
 
 static void schedule_event(uint8_t e, uint32_t at_us)
 {
