@@ -324,7 +324,6 @@ def run_one_stream(
         # after the flash trigger (``decision.estimate`` is read once the capture is over).
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", TargetUnreachableWarning)
-            warnings.simplefilter("always", FlashEnergyWarning)
             if options.from_disk:
                 sequence = read_sequence(writer.flush().directory)
                 stack = analysis.load_frame_stack(sequence)
@@ -338,8 +337,10 @@ def run_one_stream(
                 decision = session.decide(options.mode)
                 levels = decision.levels
                 result.update(chosen=decision.solution)
-        flash_us = flash_exposure_for(rig, exposure, levels, session.flash_exposure, options.sync)
-        result.update(caught=list(caught), flash_us=flash_us)
+        with warnings.catch_warnings(record=True) as flash_caught:
+            warnings.simplefilter("always", FlashEnergyWarning)
+            flash_us = flash_exposure_for(rig, exposure, levels, session.flash_exposure, options.sync)
+        result.update(caught=[*caught, *flash_caught], flash_us=flash_us)
         stamp["decided"] = time.perf_counter()
         return levels, flash_us
 

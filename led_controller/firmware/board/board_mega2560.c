@@ -114,6 +114,8 @@ uint32_t board_micros(void)
     return t;
 }
 
+static volatile uint8_t woken; /* a wake-up ran: the main loop polls before it sleeps again */
+
 static void run_event(uint8_t e)
 {
     if (e == EVENT_RISE) {
@@ -121,6 +123,8 @@ static void run_event(uint8_t e)
         fire_on_trigger(); /* the LED pulses start with the trigger edge, a few cycles later */
     } else if (e == EVENT_FALL) {
         PORTA &= (uint8_t)~_BV(PA0);
+    } else {
+        woken = 1;
     }
     event_pending &= (uint8_t)~_BV(e);
 }
@@ -166,8 +170,10 @@ static void arm_events(void)
             TIMSK1 &= (uint8_t)~_BV(OCIE1B);
             return;
         }
-        int32_t lead = next == EVENT_WAKE ? 2 : LEAD;
-        if (target <= (int32_t)count + lead) { /* due, or too close to set: now (an edge at its count) */
+        /* A wake-up never runs early (the loop would find nothing due and sleep a tick); an edge
+         * due within LEAD waits here for its count. */
+        int32_t lead = next == EVENT_WAKE ? 0 : LEAD;
+        if (target <= (int32_t)count + lead) { /* due: now (an edge at its count) */
             if (next != EVENT_WAKE && target > (int32_t)count)
                 wait_count((uint16_t)target);
             run_event((uint8_t)next);
@@ -177,7 +183,7 @@ static void arm_events(void)
             TIMSK1 &= (uint8_t)~_BV(OCIE1B);
             return;
         }
-        uint16_t at = (uint16_t)(target - 1 - (lead - 2));
+        uint16_t at = (uint16_t)(target - 1 - (lead ? lead - 2 : 0));
         OCR1B = at;
         TIMSK1 |= _BV(OCIE1B);
         if (TCNT1 < at) /* else this loop took so long that the count passed: run it from here */
@@ -484,7 +490,10 @@ int main(void)
             booth_exposure(&booth, high, board_micros());
         booth_poll(&booth, board_micros());
         cli();
-        if (rx_tail == rx_head && edge_tail == edge_head) {
+        if (woken) { /* a wake-up ran while this loop was busy: poll again before sleeping */
+            woken = 0;
+            sei();
+        } else if (rx_tail == rx_head && edge_tail == edge_head) {
             sleep_enable();
             sei(); /* the instruction after sei runs before any interrupt: no lost wake-up */
             sleep_cpu();

@@ -80,6 +80,23 @@ static void hex_into(char *to, uint32_t v, uint8_t digits)
         *to++ = hex[(v >> (4 * digits)) & 0xF];
 }
 
+/* The whole frame into `to` (room for body->len + 14 bytes); returns its length. */
+static uint16_t frame_into(char *to, char mark, uint8_t seq, const out_t *body)
+{
+    to[0] = mark;
+    hex_into(to + 1, seq, 2);
+    to[3] = ':';
+    hex_into(to + 4, body->len, 3);
+    to[7] = ':';
+    memcpy(to + 8, body->buf, body->len);
+    uint16_t n = (uint16_t)(8 + body->len);
+    uint16_t crc = booth_crc16((const uint8_t *)to, n);
+    to[n] = '*';
+    hex_into(to + n + 1, crc, 4);
+    to[n + 5] = '\n';
+    return (uint16_t)(n + 6);
+}
+
 static void send_frame(char mark, uint8_t seq, const out_t *body)
 {
     char head[8];
@@ -393,10 +410,8 @@ static void wake_for(booth_t *b, uint32_t now_us)
 void booth_poll(booth_t *b, uint32_t now_us)
 {
     if (b->deferred && due(now_us, b->deferred_due_us)) {
-        out_t o = {.len = 0};
         b->deferred = false;
-        put_str(&o, b->deferred_body);
-        send_frame('=', b->deferred_seq, &o);
+        board_write(b->deferred_frame, b->deferred_len); /* framed at NEXT: out at once */
     }
     while (b->action != ACTION_NONE && due(now_us, b->action_due_us))
         run_action(b, now_us);
@@ -733,6 +748,7 @@ static uint8_t cmd_next(booth_t *b, const words_t *a, out_t *o)
         return 0;
     }
     apply_step(b, (uint16_t)(b->step + 1));
+    b->deferred_due_us = board_micros() + b->settle_us; /* from the LED change, not the reply's framing */
     b->triggers++;
     put_str(o, " ");
     put_i32(o, b->step);
@@ -863,11 +879,10 @@ static void dispatch(booth_t *b, uint8_t seq, const char *name, const words_t *a
         put_str(&o, refused->text);
         send_frame('=', seq, &o);
     } else if (ok == 2) { /* NEXT: reply once the LEDs have settled */
-        uint16_t n = o.len < sizeof b->deferred_body - 1 ? o.len : (uint16_t)(sizeof b->deferred_body - 1);
-        memcpy(b->deferred_body, o.buf, n);
-        b->deferred_body[n] = '\0';
+        if (o.len > sizeof b->deferred_frame - 14)
+            o.len = (uint16_t)(sizeof b->deferred_frame - 14);
+        b->deferred_len = (uint8_t)frame_into(b->deferred_frame, '=', seq, &o);
         b->deferred_seq = seq;
-        b->deferred_due_us = board_micros() + b->settle_us;
         b->deferred = true;
     } else {
         send_frame('=', seq, &o);

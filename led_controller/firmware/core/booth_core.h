@@ -83,7 +83,8 @@ typedef struct {
     bool deferred;
     uint8_t deferred_seq;
     uint32_t deferred_due_us;
-    char deferred_body[24];
+    char deferred_frame[40];     /* the whole reply, framed in advance: at due it only goes out */
+    uint8_t deferred_len;
     /* link bookkeeping */
     uint8_t event_seq;
     uint32_t watchdog_ms;
