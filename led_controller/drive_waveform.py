@@ -193,6 +193,8 @@ class DriveTrace:
         drives = self._drives[channel]
         starts = [d.start_s for d in drives]
         i = max(0, bisect.bisect_right(starts, a) - 1)
+        if drives[i].kind == "level" and (i + 1 == len(drives) or drives[i + 1].start_s >= b):
+            return drives[i].high * (b - a)  # one steady level: exact (mean_levels divides it back)
         total = 0.0
         while i < len(drives) and drives[i].start_s < b:
             end = drives[i + 1].start_s if i + 1 < len(drives) else math.inf
@@ -202,6 +204,11 @@ class DriveTrace:
 
     def mean_levels(self, starts_s: Sequence[float], duration_s: float) -> list[list[float]]:
         """``[row][channel]``: each channel's mean level over ``[start, start + duration_s]`` per row."""
-        return [
-            [self.high_time(c, s, s + duration_s) / duration_s for c in range(len(self._drives))] for s in starts_s
-        ]
+        return [[self._mean(c, s, duration_s) for c in range(len(self._drives))] for s in starts_s]
+
+    def _mean(self, channel: int, start: float, duration: float) -> float:
+        drives = self._drives[channel]
+        i = max(0, bisect.bisect_right([d.start_s for d in drives], start) - 1)
+        if drives[i].kind == "level" and (i + 1 == len(drives) or drives[i + 1].start_s >= start + duration):
+            return drives[i].high  # steady over the window: exactly its level, no rounding of (a + T) − a
+        return self.high_time(channel, start, start + duration) / duration
