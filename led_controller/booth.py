@@ -397,10 +397,12 @@ class LedBooth:
         if exposures_us is None:
             return [()] * count
         if not self.info.pulse_dimming:
-            raise ValueError(f"{where}: exposures given to booth {self._name}, which does not pulse (DIM={self.info.dimming})")
+            raise ValueError(
+                f"{where}: exposures given to booth {self._name}, which does not pulse (DIM={self.info.dimming})"
+            )
         if len(exposures_us) != count:
             raise ValueError(f"{where}: {len(exposures_us)} exposures for {count} steps; expected one per step")
-        words = []
+        words: list[tuple[str, ...]] = []
         for i, exposure in enumerate(exposures_us):
             us = round(float(exposure)) if math.isfinite(float(exposure)) else -1
             if not 1 <= us <= 99_999_999:

@@ -17,8 +17,8 @@ import shutil
 import subprocess
 import threading
 import time
-from dataclasses import dataclass
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 
@@ -202,7 +202,9 @@ class SimulatedBooth:
                 self._process.stdin.write(command + "\n")
                 self._process.stdin.flush()
             except (OSError, ValueError) as err:
-                raise FirmwareSimError(f"booth_sim: cannot send {command!r} ({err}); the simulator has stopped") from err
+                raise FirmwareSimError(
+                    f"booth_sim: cannot send {command!r} ({err}); the simulator has stopped"
+                ) from err
             try:
                 answer = self._answers.get(timeout=timeout_s)
             except queue.Empty:
@@ -226,7 +228,8 @@ class SimulatedBooth:
         """A camera exposure starting ``latency_us`` from now (simulated), its flash window driven on
         ExposureActive; returns once its last row is over, with each row's LED on-times."""
         words = self._ask(
-            f"expose {exposure_us:.4f} {rows} {line_us:.4f} {latency_us:.4f}", timeout_s=self._window_timeout(exposure_us, rows, line_us)
+            f"expose {exposure_us:.4f} {rows} {line_us:.4f} {latency_us:.4f}",
+            timeout_s=self._window_timeout(exposure_us, rows, line_us),
         )
         return self._exposure(words, exposure_us, rows, line_us)
 
@@ -256,8 +259,13 @@ class SimulatedBooth:
     def _exposure(self, words: list[str], exposure_us: float, rows: int, line_us: float) -> Exposure:
         cycles = [int(w) for w in words[1:]]
         if len(cycles) != rows * SIM_CHANNELS or any(c < 0 for c in cycles):
-            raise FirmwareSimError(f"booth_sim: exposure answer {words[:4]!r}…; expected {rows} rows of {SIM_CHANNELS} on-times")
-        on = tuple(tuple(c / CYCLES_PER_US for c in cycles[r * SIM_CHANNELS : r * SIM_CHANNELS + self._channels]) for r in range(rows))
+            raise FirmwareSimError(
+                f"booth_sim: exposure answer {words[:4]!r}…; expected {rows} rows of {SIM_CHANNELS} on-times"
+            )
+        on = tuple(
+            tuple(c / CYCLES_PER_US for c in cycles[r * SIM_CHANNELS : r * SIM_CHANNELS + self._channels])
+            for r in range(rows)
+        )
         return Exposure(float(words[0]), float(exposure_us), float(line_us), on)
 
     @property

@@ -491,7 +491,9 @@ EXPOSURE_FLAG = "EXP="
 ON_FIELD = "ON="
 
 
-def parse_on_times(args: Sequence[str], channels: int, raw: bytes, *, command: str, where: str = "booth") -> tuple[float, ...] | None:
+def parse_on_times(
+    args: Sequence[str], channels: int, raw: bytes, *, command: str, where: str = "booth"
+) -> tuple[float, ...] | None:
     """The ``ON=<us>,…`` word of a ``PADD``/``PSET`` reply: each LED's on-time per exposure, or None.
 
     Raises

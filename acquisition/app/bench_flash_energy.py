@@ -229,7 +229,11 @@ def _firmware_part(draws: int, rng: random.Random) -> dict[str, Any]:
                 done = sim.integrate(pulse.time_us + latency(), exposure_us)
                 got = fractions(done)
                 delivered = booth.delivered_levels(index, exposure_us)
-                table.add(exposure_us / 1000.0, _row(LEVELS, got), _row(LEVELS, got, delivered[: len(LEVELS)]) if delivered else None)
+                table.add(
+                    exposure_us / 1000.0,
+                    _row(LEVELS, got),
+                    _row(LEVELS, got, delivered[: len(LEVELS)]) if delivered else None,
+                )
             result.setdefault("booth", {})[scheme] = table.report()
 
         for scheme in ("pwm", "pulse"):
@@ -243,7 +247,11 @@ def _firmware_part(draws: int, rng: random.Random) -> dict[str, Any]:
                 done = sim.expose(exposure_us, 1, 0.0, host_delay_us() + latency())
                 got = fractions(done)
                 delivered = booth.delivered_levels(index, exposure_us)
-                table.add(exposure_us / 1000.0, _row(LEVELS, got), _row(LEVELS, got, delivered[: len(LEVELS)]) if delivered else None)
+                table.add(
+                    exposure_us / 1000.0,
+                    _row(LEVELS, got),
+                    _row(LEVELS, got, delivered[: len(LEVELS)]) if delivered else None,
+                )
             booth.wait_event("DONE", timeout_s=10.0)
             result.setdefault("camera", {})[scheme] = table.report()
         booth.all_off()
@@ -267,7 +275,9 @@ def _judge(parts: dict[str, Any]) -> tuple[bool, list[str]]:
     return not misses, misses
 
 
-def flash_energy_bench(quick: bool = False, seed: int = 0, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+def flash_energy_bench(
+    quick: bool = False, seed: int = 0, progress: Callable[[str], None] | None = None
+) -> dict[str, Any]:
     """The flash-energy figures (module docstring); ``quick``: 2 draws a case instead of 6."""
     draws = 2 if quick else 6
     rng = random.Random(seed)
@@ -290,4 +300,3 @@ def flash_energy_bench(quick: bool = False, seed: int = 0, progress: Callable[[s
         "misses": misses,
         "seconds": round(time.perf_counter() - started, 1),
     }
-

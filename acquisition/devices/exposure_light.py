@@ -108,7 +108,9 @@ class ExposureLight(Protocol):
         ...
 
 
-def ambient_over_rows(modulation: AmbientModulation | None, light: RowLight, request: ExposureRequest) -> np.ndarray | None:
+def ambient_over_rows(
+    modulation: AmbientModulation | None, light: RowLight, request: ExposureRequest
+) -> np.ndarray | None:
     """The ambient's mean relative intensity in each row's window, or None when steady."""
     if modulation is None:
         return None
@@ -189,9 +191,13 @@ class FirmwareLight:
         if request.hardware_trigger:
             with self._lock:
                 if not self._pulses:
-                    raise CameraError("simavr camera: a hardware-triggered frame but no trigger pulse seen; expected one")
+                    raise CameraError(
+                        "simavr camera: a hardware-triggered frame but no trigger pulse seen; expected one"
+                    )
                 pulse_us = self._pulses.popleft()
-            done = self.booth.integrate(pulse_us + request.latency_us, request.exposure_us, request.rows, request.line_time_us)
+            done = self.booth.integrate(
+                pulse_us + request.latency_us, request.exposure_us, request.rows, request.line_time_us
+            )
         else:
             if request.skew_us >= request.exposure_us:
                 raise CameraError(

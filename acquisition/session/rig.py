@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.devices.exposure_light import EmulatorLight, FirmwareLight, Shutter
 from msflash.acquisition.devices.sim_world import (
     read_responsivity_file,
     read_spectra_file,
@@ -63,7 +64,6 @@ from msflash.acquisition.devices.sim_world import (
     sim_leds,
     sim_scene,
 )
-from msflash.acquisition.devices.exposure_light import EmulatorLight, FirmwareLight, Shutter
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.errors import CameraError, CameraSettingError, FrameLostError, RigOpenError, UsageError
 from msflash.acquisition.plan import CapturePlan
@@ -415,7 +415,9 @@ def open_sim_rig(
     closers: list = []
     line_errors: list[BaseException] = []
     if booth_firmware and booth_port is not None:
-        raise UsageError("--booth-firmware: the booth is the firmware in simavr, so --booth-port has no use; expected one of them")
+        raise UsageError(
+            "--booth-firmware: the booth is the firmware in simavr, so --booth-port has no use; expected one of them"
+        )
     world = _sim_world("sim", ambient, scene, cfa, seed, camera, n_leds, led_spectra, flash_power)
     try:
         world.shutter = Shutter(line_time_us=float(line_time_us))
@@ -430,8 +432,15 @@ def open_sim_rig(
         if booth_firmware:
             booth = open_firmware_booth(world, log_serial, closers, line_errors)
             return Rig(
-                "sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers,
-                line_errors=line_errors, camera_extra={"booth": "firmware in simavr"},
+                "sim",
+                world,
+                booth,
+                world.led_spectra,
+                world.camera_responsivities,
+                world.true_ambient,
+                closers,
+                line_errors=line_errors,
+                camera_extra={"booth": "firmware in simavr"},
             )
         emulator, booth = _open_emulated_booth(world.led_spectra, log_serial, closers)
 
@@ -458,7 +467,9 @@ def open_sim_rig(
     )
 
 
-def open_firmware_booth(world: SimulatedCamera, log_serial: str | Path | None, closers: list, line_errors: list) -> LedBooth:
+def open_firmware_booth(
+    world: SimulatedCamera, log_serial: str | Path | None, closers: list, line_errors: list
+) -> LedBooth:
     """The reference firmware in simavr wired to ``world`` as on a real rig; ``LedBooth`` on its pty.
 
     The firmware is built (``make``) and run by :class:`led_controller.firmware_sim.SimulatedBooth`;

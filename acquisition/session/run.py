@@ -9,8 +9,8 @@ parses options into a :class:`RunOptions`, opens the rig and reports; everything
 
 from __future__ import annotations
 
-import time
 import logging
+import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -474,9 +474,13 @@ def flash_exposure_for(
     pwm_hz = getattr(info, "pwm_hz", None)
     if pwm_hz is None or (sync in ("booth", "camera") and getattr(info, "pulse_dimming", False)):
         return exposure_us
-    chosen, note = whole_pwm_periods(exposure_us, levels, pwm_hz, plan.exposure_range_us, plan.policy)
+    chosen, note = whole_pwm_periods(
+        exposure_us, [float(v) for v in levels], pwm_hz, plan.exposure_range_us, plan.policy
+    )
     if note is not None:
         warnings.warn(note, FlashEnergyWarning, stacklevel=2)
     elif chosen != exposure_us:
-        log.info("flash exposure %.0f µs → %.0f µs: whole periods of the booth's %g Hz PWM", exposure_us, chosen, pwm_hz)
+        log.info(
+            "flash exposure %.0f µs → %.0f µs: whole periods of the booth's %g Hz PWM", exposure_us, chosen, pwm_hz
+        )
     return chosen
