@@ -39,7 +39,7 @@ def exposure_code(exposure_us: int) -> int:
     """``booth_exposure_code``: an exposure as 16 bits, exact below 4096 µs, else ``m << e`` (12-bit ``m``).
 
     >>> exposure_code(4095), exposure_code(5000), exposure_us_of(exposure_code(5000))
-    (4095, 7346, 5000)
+    (4095, 6596, 5000)
     """
     if exposure_us < 4096:
         return exposure_us
