@@ -132,7 +132,7 @@ def probe_booth(
             if not raw.endswith(b"\n"):
                 got = f"; got {describe_answer(raw)} without a line end" if raw else ""
                 booted = (
-                    f" (after {waited:.3g} s waiting for it to boot; a board that resets when its port opens "
+                    f" (after {min(waited, boot_s):.2g} s waiting for it to boot; a board that resets when its port opens "
                     "may need a longer --booth-boot-s)"
                     if boot_s > 0
                     else " (--booth-boot-s 0: if it resets when its port opens, an Arduino's auto-reset, "

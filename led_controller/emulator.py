@@ -13,6 +13,7 @@ import contextlib
 import logging
 import math
 import os
+import random
 import select
 import termios
 import threading
@@ -23,7 +24,20 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
+from msflash.led_controller.drive_waveform import (
+    CLOCK_HZ,
+    EXPOSURE_MAX_US,
+    PULSE_FULL,
+    Drive,
+    DriveTrace,
+    PulsePlan,
+    exposure_code,
+    on_time_text,
+    pulse_plan,
+    pwm_hz_text,
+)
 from msflash.led_controller.protocol import (
+    EXPOSURE_FLAG,
     HOLD_FLAG,
     MARK_EVENT,
     MARK_REPLY,
@@ -59,6 +73,12 @@ DEFAULT_PEAKS_NM = (440.0, 480.0, 500.0, 520.0, 596.0, 636.0, 660.0)
 FULL_SCALE = 0xFFFF
 _NOW_FLAG = "NOW"
 """``PSET … NOW``: start the step at once once the previous one was triggered (booth-protocol.md §5)."""
+FIRE_LATENCY_US = (2.0, 8.0)
+"""Camera master: how late the firmware's pulses start after ExposureActive rises (its interrupt
+latency: 2.4 µs measured with the main loop asleep, more while it serves another interrupt;
+docs/flash-energy.md). The emulator draws each fire's delay from this range."""
+TRIGGER_FIRE_US = 0.25
+"""Booth master: the firmware starts the pulse timers this long after raising the trigger output."""
 
 Clock = Callable[[], float]
 
@@ -146,6 +166,9 @@ class BoothEmulator:
     serial : str or None
         The serial in the board's EEPROM (``SERIAL=`` in ``ID``; None: never set, ``SERIAL=-``).
         ``SERIAL <text>`` changes it; resets keep it.
+    seed : int
+        Seed of the unkind parts of the drive model (the interrupt latency of a camera-master
+        pulse, the timer prescaler's phase).
 
     Attributes
     ----------
@@ -167,6 +190,7 @@ class BoothEmulator:
         level_bits: int = 16,
         protocol: int = PROTOCOL_VERSION,
         serial: str | None = None,
+        seed: int = 0,
     ) -> None:
         if len(names) != len(peaks_nm) or not 1 <= len(names) <= 64:
             raise ValueError(
@@ -197,6 +221,10 @@ class BoothEmulator:
         self._serial = serial  # the board's EEPROM: kept across resets
         self.boots = 0
         """Times the firmware started since the emulator was made (:meth:`boot`)."""
+        self.drive_trace = DriveTrace(self.channels)
+        """What each LED pin does over time (PWM, pulses, on, off), on this emulator's clock; kept
+        across resets (a reset shows as every LED off)."""
+        self._rng = random.Random(seed)
         self._power_up_state()
         self._faults: list[EmulatorFault] = []
         self._stalled = False
@@ -218,6 +246,13 @@ class BoothEmulator:
         self._inbuf = bytearray()
         self._codes = [0] * self.channels
         self._pattern: list[list[int]] = []
+        self._exposures: list[int] = []
+        self._roll_us = 0
+        self._armed: tuple[PulsePlan, str] | None = None
+        self._stamp_at: float | None = None
+        self._horizon = -math.inf
+        self.last_trigger_s: float | None = None
+        """Clock time of the last booth-master trigger pulse (its scheduled time), for the camera wired to it."""
         self._held: list[bool] = []
         self._holding = False
         self._state = "IDLE"
@@ -235,6 +270,7 @@ class BoothEmulator:
         self._next_action: tuple[float, str] | None = None
         self._deferred: list[tuple[float, int, str]] = []
         self._discarding = False
+        self._record_drive(None)  # pins are inputs at reset: every LED off from now
 
     # -- reset and boot (the board around the firmware: led_controller/usb_link.py) ------------
 
@@ -321,6 +357,10 @@ class BoothEmulator:
                 times.append(self._last_host + self._watchdog_ms / 1000.0)
             return max(0.0, min(times) - self._clock()) if times else None
 
+    def clock_s(self) -> float:
+        """The emulator's clock now, seconds (its drive trace's time base)."""
+        return self._clock()
+
     @property
     def real_time(self) -> bool:
         """Whether the emulator runs on the real monotonic clock (not a test's manual clock)."""
@@ -332,24 +372,48 @@ class BoothEmulator:
         with self._lock:
             return tuple(tuple(c / FULL_SCALE for c in step) for step in self._pattern)
 
-    def exposure_active(self, edge: bool) -> None:
+    def mean_levels(self, starts_s: Sequence[float], duration_s: float) -> list[list[float]]:
+        """``[row][channel]``: each LED's mean level over ``[start, start + duration_s]`` (clock seconds).
+
+        What a camera row exposed then collects from each LED, as a fraction of the LED on
+        throughout: the PWM waveform with its phase, the pulses, the level changes in between
+        (:class:`~led_controller.drive_waveform.DriveTrace`). Windows in the future assume the
+        drive stays as it is now.
+        """
+        with self._lock:
+            return self.drive_trace.mean_levels(starts_s, duration_s)
+
+    def exposure_active(self, edge: bool, at_s: float | None = None) -> None:
         """Drive the camera's ExposureActive line (camera-master mode).
 
         A rising edge (``True``) counts a trigger and reports ``TRIG``; a falling edge
         (``False``, exposure ended) loads the next step, or switches off and reports ``DONE``
-        after the last. Edges outside a running camera-master sequence are ignored.
+        after the last. Edges outside a running camera-master sequence are ignored. ``at_s`` dates
+        the edge on the emulator's clock (a simulated camera's exposure starts and ends when it
+        says, not when it calls); the drive changes it causes are dated from it.
         """
         with self._lock:
             if self._state != "RUNNING" or self._mode != Mode.CAMERA:
                 return
+            when = self._clock() if at_s is None else float(at_s)
+            self._horizon = max(self._horizon, when)
+            if edge and self._armed is not None and self._armed[1] == "exposure":
+                self._fire(when + self._rng.uniform(*FIRE_LATENCY_US) * 1e-6)
             if edge:
                 self._triggers += 1
                 # An exposure during a held step (LEDs off, levels not given yet) is reported as
                 # such, never as that step: the host must not take it for the step's frame.
                 step = HOLD_FLAG if self._holding else str(self._step)
                 self._event(f"{Event.TRIGGER} {self._triggers} {step}")
+            elif self._roll_us:
+                # A rolling shutter's flash window ends with its first row: the last row still exposes.
+                self._next_action = (when + self._roll_us / 1e6, "advance")
             else:
-                self._advance()
+                self._stamp_at = when
+                try:
+                    self._advance()
+                finally:
+                    self._stamp_at = None
 
     def camera_strobe(self) -> None:
         """One whole exposure on the ExposureActive line: a rising then a falling edge."""
@@ -536,6 +600,7 @@ class BoothEmulator:
             Command.WATCHDOG: self._cmd_watchdog,
             Command.PING: self._cmd_ping,
             Command.SERIAL: self._cmd_serial,
+            Command.ROLL: self._cmd_roll,
         }
 
     # -- commands ----------------------------------------------------------------------
@@ -559,13 +624,19 @@ class BoothEmulator:
         return (
             f"FW={self.firmware} PROTO={self.protocol} CH={self.channels} "
             f"NAMES={','.join(self.names)} PEAKS={peaks} BITS={self.level_bits} STEPS={self.max_steps}"
+            f"{self._dimming_words()}"
         ) + self._identify_serial()
+
+    def _dimming_words(self) -> str:
+        """The ID reply's dimming: pulses where the booth sees the exposure, PWM at ``PWMHZ`` otherwise."""
+        return f" DIM=PULSE PWMHZ={pwm_hz_text(self.level_bits)}"
 
     def _cmd_set(self, args: list[str]) -> str:
         codes = self._levels_arg(args)
         if self._state == "RUNNING" and self._mode in (Mode.BOOTH, Mode.CAMERA):
             raise _Refused(ErrorCode.STATE, "sequence running")
         self._codes = codes
+        self._record_drive(None)
         return ""
 
     def _cmd_off(self, args: list[str]) -> str:
@@ -577,34 +648,67 @@ class BoothEmulator:
         self._no_args(args)
         self._editable()
         self._pattern = []
+        self._exposures = []
         self._held = []
         return ""
 
+    def _exposure_arg(self, word: str) -> int:
+        """``EXP=<us>``: the exposure's code (as the firmware stores it)."""
+        text = word[len(EXPOSURE_FLAG) :]
+        if not text.isdigit() or len(text) > 8:
+            raise _Refused(ErrorCode.ARGUMENT, "EXP=<microseconds>")
+        if int(text) == 0:
+            raise _Refused(ErrorCode.RANGE, f"exposure 1..{EXPOSURE_MAX_US} us")
+        return exposure_code(int(text))
+
+    def _on_words(self, codes: list[int], exposure: int) -> str:
+        """`` ON=…`` for a step the booth will pulse (booth and camera master), else empty."""
+        plan = pulse_plan(self._duties(codes), self._top, exposure, self._roll_us, camera=False)
+        if plan is None:
+            return ""
+        return " ON=" + ",".join(on_time_text(on) for on in plan.on_us(exposure))
+
     def _cmd_pattern_add(self, args: list[str]) -> str:
-        held = len(args) == self.channels + 1 and args[-1] == HOLD_FLAG
-        codes = self._levels_arg(args[:-1] if held else args)
+        words = len(args)
+        held = self.channels < words <= self.channels + 4 and args[words - 1] == HOLD_FLAG
+        if held:
+            words -= 1
+        timed = self.channels < words <= self.channels + 4 and args[words - 1].startswith(EXPOSURE_FLAG)
+        if timed:
+            words -= 1
+        codes = self._levels_arg(args[:words])
+        exposure = self._exposure_arg(args[words]) if timed else 0
         self._editable()
         if len(self._pattern) >= self.max_steps:
             raise _Refused(ErrorCode.FULL, "pattern table full")
         self._pattern.append(codes)
+        self._exposures.append(exposure)
         self._held.append(held)
-        return str(len(self._pattern) - 1)
+        return f"{len(self._pattern) - 1}{self._on_words(codes, exposure)}"
 
     def _cmd_pattern_set(self, args: list[str]) -> str:
-        now = len(args) == self.channels + 2 and args[-1] == _NOW_FLAG
+        limit = self.channels + 4
+        now = self.channels + 1 < len(args) <= limit and args[-1] == _NOW_FLAG
         if now:
             args = args[:-1]
+        timed = self.channels + 1 < len(args) <= limit and args[-1].startswith(EXPOSURE_FLAG)
+        exposure_word = args[-1] if timed else ""
+        if timed:
+            args = args[:-1]
         if len(args) != self.channels + 1 or not args[0].isdigit() or len(args[0]) > 5:
-            raise _Refused(ErrorCode.ARGUMENT, f"PSET <step> and {self.channels} levels [NOW]")
+            raise _Refused(ErrorCode.ARGUMENT, f"PSET <step> and {self.channels} levels [EXP=<us>] [NOW]")
         index = int(args[0])
         codes = self._levels_arg(args[1:])
+        exposure = self._exposure_arg(exposure_word) if timed else 0
         if index >= len(self._pattern):
             raise _Refused(ErrorCode.RANGE, "no such step")
         running = self._state == "RUNNING"
         if running and (index < self._step or (index == self._step and not self._holding)):
             raise _Refused(ErrorCode.STATE, "step already exposed")
         self._pattern[index] = codes
+        self._exposures[index] = exposure
         self._held[index] = False
+        on = self._on_words(codes, exposure)
         if running and self._holding and index == self._step:
             self._release_hold()
         elif (
@@ -619,7 +723,7 @@ class BoothEmulator:
             # is over): this step's slot starts at once rather than at its scheduled time.
             self._apply_step(index)
             self._release_hold()
-        return ""
+        return on.strip()
 
     def _editable(self) -> None:
         if self._state in ("ARMED", "RUNNING"):
@@ -689,6 +793,14 @@ class BoothEmulator:
         self._watchdog_ms = ms
         return str(ms)
 
+    def _cmd_roll(self, args: list[str]) -> str:
+        if len(args) != 1 or not args[0].isdigit() or len(args[0]) > 8:
+            raise _Refused(ErrorCode.ARGUMENT, "ROLL <microseconds>")
+        if self._state == "RUNNING":
+            raise _Refused(ErrorCode.STATE, "sequence running")
+        self._roll_us = int(args[0])
+        return args[0].lstrip("0") or "0"
+
     def _cmd_ping(self, args: list[str]) -> str:
         self._no_args(args)
         return ""
@@ -710,21 +822,77 @@ class BoothEmulator:
 
     # -- sequencing -------------------------------------------------------------------
 
+    # -- the drive model (what the pins do, for a camera integrating them) --------------------
+
+    @property
+    def _top(self) -> int:
+        return (1 << self.level_bits) - 1
+
+    def _duties(self, codes: Sequence[int]) -> list[int]:
+        """The drive values (``level_bits`` wide) of wire-scaled codes."""
+        return [round(c * self._top / FULL_SCALE) for c in codes]
+
+    def _stamp(self) -> float:
+        """When a drive change happens: the scheduled time of the action being run, else now (never
+        before a change already dated by a camera's exposure edge)."""
+        now = self._stamp_at if self._stamp_at is not None else self._clock()
+        return max(now, self._horizon)
+
+    def _record_drive(self, index: int | None) -> None:
+        """The LEDs now show ``self._codes``: pulses for table step ``index`` in booth and camera
+        master when it has an exposure, PWM otherwise (as the firmware's ``drive_step``)."""
+        t = self._stamp()
+        duties = self._duties(self._codes)
+        plan = None
+        if index is not None and self._mode in (Mode.BOOTH, Mode.CAMERA) and index < len(self._exposures):
+            plan = pulse_plan(duties, self._top, self._exposures[index], self._roll_us, self._mode == Mode.CAMERA)
+        if plan is not None:
+            for c, width in enumerate(plan.widths):
+                self.drive_trace.set(c, Drive(t, "level", high=1.0 if width == PULSE_FULL else 0.0))
+            self._armed = (plan, "exposure" if self._mode == Mode.CAMERA else "trigger")
+            return
+        self._armed = None
+        period = (self._top + 1) / CLOCK_HZ
+        for c, duty in enumerate(duties):
+            if duty == 0 or duty >= self._top:
+                self.drive_trace.set(c, Drive(t, "level", high=0.0 if duty == 0 else 1.0))
+            else:  # the counters restart one clock after the write (firmware: TCNT = TOP)
+                compare = duty - 1 + (duty > self._top // 2)  # the firmware's pwm_ocr
+                fraction = (compare + 1) / (self._top + 1)
+                self.drive_trace.set(c, Drive(t, "pwm", duty=fraction, period_s=period, origin_s=t + 1 / CLOCK_HZ))
+
+    def _fire(self, when: float) -> None:
+        """The armed pulses start at ``when``: each on for its width, ending ``window`` ticks on."""
+        assert self._armed is not None
+        plan = self._armed[0]
+        self._armed = None
+        tick = plan.tick_s
+        start = when + self._rng.uniform(0.0, tick)  # the first timer clock: the prescaler's phase
+        for c, width in enumerate(plan.widths):
+            if 0 < width < PULSE_FULL:
+                off = start + (plan.window - 1) * tick
+                self.drive_trace.set(c, Drive(when, "pulse", on_s=off - width * tick, off_s=off))
+
+    # -- sequencing -------------------------------------------------------------------
+
     def _apply_step(self, index: int) -> bool:
         """Apply step ``index``; a held step instead waits for its PSET with the LEDs off (False)."""
         self._step = index
         if self._held[index]:
             self._holding = True
             self._codes = [0] * self.channels
+            self._record_drive(None)
             return False
         self._holding = False
         self._codes = list(self._pattern[index])
+        self._record_drive(index)
         return True
 
     def _release_hold(self) -> None:
         """PSET reached the step being held: apply it now and carry on from here."""
         self._holding = False
         self._codes = list(self._pattern[self._step])
+        self._record_drive(self._step)
         if self._mode == Mode.BOOTH:
             now = self._clock()
             # The step's slot starts now: settle, pulse, and the later steps keep their period.
@@ -739,6 +907,7 @@ class BoothEmulator:
 
     def _finish(self) -> None:
         self._codes = [0] * self.channels
+        self._record_drive(None)
         self._state = "DONE"
         self._holding = False
         self._next_action = None
@@ -746,6 +915,7 @@ class BoothEmulator:
 
     def _all_off(self) -> None:
         self._codes = [0] * self.channels
+        self._record_drive(None)
         self._holding = False
         self._next_action = None
         if self._state in ("ARMED", "RUNNING"):
@@ -753,8 +923,20 @@ class BoothEmulator:
 
     def _run_action(self) -> None:
         assert self._next_action is not None
+        self._stamp_at = self._next_action[0]
+        try:
+            self._run_action_at()
+        finally:
+            self._stamp_at = None
+
+    def _run_action_at(self) -> None:
+        assert self._next_action is not None
         when, kind = self._next_action
         period = self._period_us / 1e6
+        if kind == "advance":  # camera master, a rolling shutter's last row over
+            self._next_action = None
+            self._advance()
+            return
         if kind == "apply":
             index = self._step + 1
             if index >= len(self._pattern):
@@ -766,6 +948,9 @@ class BoothEmulator:
             self._next_action = (self._t0 + index * period + self._settle_us / 1e6, "pulse")
         else:
             self._triggers += 1
+            self.last_trigger_s = when
+            if self._armed is not None and self._armed[1] == "trigger":
+                self._fire(when + TRIGGER_FIRE_US * 1e-6)
             # The pulse first, then its report, as the firmware does: the report's write to the
             # host may block or yield the GIL to another thread, which must not delay the pulse.
             callback = self.on_trigger_out

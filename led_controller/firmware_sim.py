@@ -17,6 +17,7 @@ import shutil
 import subprocess
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -44,6 +45,37 @@ _TOOLS = ("avr-gcc", "avr-size", "make", "gcc")
 _HEADERS = (Path("/usr/lib/avr/include/avr/io.h"), Path("/usr/include/simavr/parts/uart_pty.h"))
 
 
+CYCLES_PER_US = 16.0
+"""The simulated ATmega2560 runs at 16 MHz."""
+SIM_CHANNELS = 7
+"""LED channels the harness reports (OC3A … OC5A), whatever the image drives."""
+
+
+@dataclass(frozen=True)
+class Exposure:
+    """One camera exposure in simulated time and what each LED pin gave each row.
+
+    Attributes
+    ----------
+    start_us : float
+        Simulated time the first row started exposing.
+    exposure_us, line_us : float
+        Each row's exposure and the delay between rows (0: a global shutter).
+    on_us : tuple of tuple of float
+        ``on_us[row][channel]``: µs the LED pin was high within that row's window, exact to the
+        cycle (``sim/pin_model.c``).
+    """
+
+    start_us: float
+    exposure_us: float
+    line_us: float
+    on_us: tuple[tuple[float, ...], ...]
+
+    def fractions(self) -> tuple[tuple[float, ...], ...]:
+        """Each row's energy from each LED as a fraction of the LED on for the whole exposure."""
+        return tuple(tuple(on / self.exposure_us for on in row) for row in self.on_us)
+
+
 class FirmwareSimError(RuntimeError):
     """The firmware could not be built or the simulator failed."""
 
@@ -59,11 +91,13 @@ class TriggerPulse:
     settled_us : int
         Simulated time since the LED duties last changed (the settle the camera got).
     levels : tuple of float
-        LED levels (PWM duty / TOP) during the pulse, one per channel.
+        LED levels during the pulse, one per channel: the PWM duty of each pin (high ticks per
+        period / (TOP + 1)), or 0/1 for a pin the timer does not drive (pulse dimming between
+        its pulses).
     """
 
-    time_us: int
-    settled_us: int | None
+    time_us: float
+    settled_us: float | None
     levels: tuple[float, ...]
 
 
@@ -147,6 +181,10 @@ class SimulatedBooth:
         )
         self._answers: queue.Queue[str] = queue.Queue()
         self._pulses: list[TriggerPulse] = []
+        self._trace: list[tuple[str, ...]] = []
+        self.on_pulse: Callable[[TriggerPulse], None] | None = None
+        """Called on the reader thread with each trigger-output pulse as it is seen (keep it short:
+        answers to commands wait behind it)."""
         self._lock = threading.Lock()
         self._command_lock = threading.Lock()
         assert self._process.stdout is not None
@@ -170,35 +208,91 @@ class SimulatedBooth:
                 continue
             if words[0] == "pulse":
                 pulse = TriggerPulse(
-                    int(words[1]), int(words[2]), tuple(int(w) / self._top for w in words[3 : 3 + self._channels])
+                    float(words[1]), float(words[2]), tuple(float(w) for w in words[3 : 3 + self._channels])
                 )
                 with self._lock:
                     self._pulses.append(pulse)
+                callback = self.on_pulse
+                if callback is not None:
+                    callback(pulse)
+            elif words[0] in ("tx", "tcnt", "expin", "pulse_end"):
+                with self._lock:
+                    self._trace.append((words[0], *words[1:]))
             elif words[0] in ("ok", "error"):
                 self._answers.put(line.strip())
 
-    def _ask(self, command: str) -> list[str]:
+    def _ask(self, command: str, timeout_s: float = 10.0) -> list[str]:
         with self._command_lock:
             assert self._process.stdin is not None
-            self._process.stdin.write(command + "\n")
-            self._process.stdin.flush()
             try:
-                answer = self._answers.get(timeout=10.0)
+                self._process.stdin.write(command + "\n")
+                self._process.stdin.flush()
+            except (OSError, ValueError) as err:
+                raise FirmwareSimError(
+                    f"booth_sim: cannot send {command!r} ({err}); the simulator has stopped"
+                ) from err
+            try:
+                answer = self._answers.get(timeout=timeout_s)
             except queue.Empty:
-                raise FirmwareSimError(f"booth_sim: no answer to {command!r} within 10 s") from None
+                raise FirmwareSimError(f"booth_sim: no answer to {command!r} within {timeout_s:g} s") from None
         if not answer.startswith("ok "):
             raise FirmwareSimError(f"booth_sim: {command!r} answered {answer!r}")
         return answer.split()[2:]
 
     @property
     def levels(self) -> tuple[float, ...]:
-        """Get the LED levels now: each PWM channel's duty / TOP (0 when its pin is disconnected)."""
+        """Get the LED levels now: each pin's PWM duty (high ticks per period / (TOP + 1)), or 0/1
+        for a pin the timer does not drive (the pin model of ``sim/pin_model.c``)."""
         words = self._ask("levels")
-        return tuple(int(w) / self._top for w in words[2 : 2 + self._channels])
+        return tuple(float(w) for w in words[1 : 1 + self._channels])
 
-    def now_us(self) -> int:
+    def now_us(self) -> float:
         """Simulated time in µs."""
-        return int(self._ask("levels")[0])
+        return float(self._ask("levels")[0])
+
+    def expose(self, exposure_us: float, rows: int = 1, line_us: float = 0.0, latency_us: float = 0.0) -> Exposure:
+        """A camera exposure starting ``latency_us`` from now (simulated), its flash window driven on
+        ExposureActive; returns once its last row is over, with each row's LED on-times."""
+        words = self._ask(
+            f"expose {exposure_us:.4f} {rows} {line_us:.4f} {latency_us:.4f}",
+            timeout_s=self._window_timeout(exposure_us, rows, line_us),
+        )
+        return self._exposure(words, exposure_us, rows, line_us)
+
+    def integrate(self, start_us: float, exposure_us: float, rows: int = 1, line_us: float = 0.0) -> Exposure:
+        """Each row's LED on-times over windows from ``start_us`` (simulated, absolute), once they are over."""
+        words = self._ask(
+            f"integrate {start_us:.4f} {exposure_us:.4f} {rows} {line_us:.4f}",
+            timeout_s=self._window_timeout(exposure_us, rows, line_us),
+        )
+        return self._exposure(words, exposure_us, rows, line_us)
+
+    def trace(self, on: bool = True) -> None:
+        """Record (or stop recording) frame starts, TCNT writes and ExposureActive edges (:meth:`traced`)."""
+        self._ask(f"trace {int(on)}")
+
+    def traced(self) -> list[tuple[str, ...]]:
+        """The trace lines so far: ``("tx", t_us)``, ``("tcnt", timer, t_us)``, ``("expin", level, t_us)``,
+        ``("pulse_end", t_us)`` (a copy; words as text)."""
+        with self._lock:
+            return list(self._trace)
+
+    @staticmethod
+    def _window_timeout(exposure_us: float, rows: int, line_us: float) -> float:
+        # Simulated time runs at most as fast as the wall clock: the window plus a margin.
+        return 10.0 + 3.0 * (exposure_us + rows * line_us) * 1e-6
+
+    def _exposure(self, words: list[str], exposure_us: float, rows: int, line_us: float) -> Exposure:
+        cycles = [int(w) for w in words[1:]]
+        if len(cycles) != rows * SIM_CHANNELS or any(c < 0 for c in cycles):
+            raise FirmwareSimError(
+                f"booth_sim: exposure answer {words[:4]!r}…; expected {rows} rows of {SIM_CHANNELS} on-times"
+            )
+        on = tuple(
+            tuple(c / CYCLES_PER_US for c in cycles[r * SIM_CHANNELS : r * SIM_CHANNELS + self._channels])
+            for r in range(rows)
+        )
+        return Exposure(float(words[0]), float(exposure_us), float(line_us), on)
 
     @property
     def pulses(self) -> list[TriggerPulse]:

@@ -99,6 +99,7 @@ class Command(StrEnum):
     WATCHDOG = "WDOG"
     PING = "PING"
     SERIAL = "SERIAL"
+    ROLL = "ROLL"
 
 
 HOLD_FLAG = "HOLD"
@@ -195,6 +196,17 @@ class BoothInfo:
     serial: str | None = None
     """The booth's own serial (``SERIAL=``, set with the ``SERIAL`` command and kept in its EEPROM);
     None when the booth does not report one or it was never set (``SERIAL=-``)."""
+
+    dimming: str | None = None
+    """``DIM=``: ``PULSE`` (exposure-synchronous pulses in booth and camera master for steps given
+    their exposure, PWM otherwise) or ``PWM``; None for a booth that does not say (PWM)."""
+    pwm_hz: float | None = None
+    """``PWMHZ=``: the PWM frequency the LEDs are dimmed at where they are not pulsed, or None."""
+
+    @property
+    def pulse_dimming(self) -> bool:
+        """Whether the booth pulses steps given their exposure (``PADD``/``PSET … EXP=``)."""
+        return self.dimming == "PULSE"
 
 
 @dataclass(frozen=True)
@@ -447,9 +459,13 @@ def parse_identify(reply: Reply, raw: bytes, *, where: str = "booth") -> BoothIn
             level_bits=int(f["BITS"]),
             max_steps=int(f["STEPS"]),
             serial=None if f.get("SERIAL", "-") == "-" else f["SERIAL"],
+            dimming=f.get("DIM"),
+            pwm_hz=float(f["PWMHZ"]) if "PWMHZ" in f else None,
         )
     except ValueError as err:
         raise _bad_reply(where, cmd, "integer CH/PROTO/BITS/STEPS and numeric PEAKS", raw, "has a bad number") from err
+    if info.pwm_hz is not None and not (math.isfinite(info.pwm_hz) and info.pwm_hz > 0):
+        raise _bad_reply(where, cmd, "PWMHZ a positive frequency", raw, "has a bad PWMHZ")
     if not 1 <= channels <= 64 or len(names) != channels or len(peaks) != channels:
         raise _bad_reply(
             where,
@@ -494,6 +510,33 @@ def parse_status(reply: Reply, raw: bytes, *, where: str = "booth") -> BoothStat
     return status
 
 
+EXPOSURE_FLAG = "EXP="
+"""``PADD … EXP=<us>``, ``PSET … EXP=<us>``: the step's exposure, for pulse dimming (``docs/booth-protocol.md`` §4)."""
+ON_FIELD = "ON="
+
+
+def parse_on_times(
+    args: Sequence[str], channels: int, raw: bytes, *, command: str, where: str = "booth"
+) -> tuple[float, ...] | None:
+    """The ``ON=<us>,…`` word of a ``PADD``/``PSET`` reply: each LED's on-time per exposure, or None.
+
+    Raises
+    ------
+    BoothProtocolError
+        If the word is there but not one non-negative number per channel.
+    """
+    words = [w for w in args if w.startswith(ON_FIELD)]
+    if not words:
+        return None
+    try:
+        values = tuple(float(v) for v in words[0][len(ON_FIELD) :].split(","))
+    except ValueError:
+        values = ()
+    if len(values) != channels or not all(math.isfinite(v) and v >= 0 for v in values):
+        raise _bad_reply(where, command, f"ON= with {channels} on-times in µs", raw, "has a bad ON=")
+    return values
+
+
 def parse_count(reply: Reply, raw: bytes, *, command: str, where: str = "booth") -> int:
     """Parse the single non-negative integer of a reply such as ``OK CNT 12``.
 
@@ -502,6 +545,7 @@ def parse_count(reply: Reply, raw: bytes, *, command: str, where: str = "booth")
     BoothProtocolError
         If the reply does not carry exactly one non-negative integer.
     """
-    if len(reply.args) != 1 or not reply.args[0].isdigit():
+    args = [a for a in reply.args if not a.startswith(ON_FIELD)]
+    if len(args) != 1 or not args[0].isdigit():
         raise _bad_reply(where, command, f"'OK {command} <integer>'", raw, "lacks one integer")
-    return int(reply.args[0])
+    return int(args[0])

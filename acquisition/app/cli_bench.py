@@ -16,8 +16,12 @@ _OPTIONAL_PARTS = {
     "decode": ("msflash.acquisition.app.bench_decode", "decode_bench"),
     "live": ("msflash.acquisition.app.live.bench", "live_bench"),
     "many": ("msflash.acquisition.app.bench_many", "many_bench"),
+    "flash-energy": ("msflash.acquisition.app.bench_flash_energy", "flash_energy_bench"),
 }
 """Bench parts contributed by other modules: part name → (module, function returning a dict)."""
+
+_QUICK_PARTS = frozenset({"flash-energy"})
+"""Optional parts whose function takes ``quick`` (``--quick``: fewer draws)."""
 
 LARGE_SIZE = (3000, 4096)
 """(height, width) of the second size the processing targets are measured on (issue 21)."""
@@ -52,7 +56,7 @@ def _bench(args: argparse.Namespace) -> int:
             report[part] = {"skipped": f"{module_name}.{function_name} unavailable ({err})"}
             continue
         progress(f"bench: {part}…")
-        report[part] = function()
+        report[part] = function(quick=args.quick) if part in _QUICK_PARTS else function()
         _part_done(report, parts)
     if args.json:
         print_json(report)
@@ -120,7 +124,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     bench.add_argument(
         "--quick",
         action="store_true",
-        help=f"processing part: the targets at --height × --width only, not also at {LARGE_SIZE[1]}×{LARGE_SIZE[0]}",
+        help=f"processing part: the targets at --height × --width only, not also at {LARGE_SIZE[1]}×{LARGE_SIZE[0]}; "
+        "flash-energy part: 2 draws a case instead of 6",
     )
     bench.add_argument(
         "--rounds",

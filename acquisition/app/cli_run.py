@@ -24,6 +24,7 @@ report is written from it (its numbers are not finite); ``run`` then exits 1 wit
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from datetime import UTC, datetime
 from pathlib import Path
@@ -145,6 +146,9 @@ def _open(args: argparse.Namespace) -> Rig:
         )
     if args.booth_port is not None:
         check_booth_port(spec, args.sync)
+    for option, given in (("--booth-firmware", args.booth_firmware), ("--line-time-us", args.line_time_us != 0.0)):
+        if given and spec != "sim":
+            raise UsageError(f"{option}: configures the simulated rig, but the rig is '{spec}'; expected --rig sim")
     if args.booth_protocol != "msflash" and args.port is None and args.booth_port is None:
         raise UsageError(
             f"--booth-protocol {args.booth_protocol}: says what the booth at --port or --booth-port "
@@ -185,6 +189,8 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
             booth_port=args.booth_port,
             booth_protocol=args.booth_protocol,
             booth_boot_s=args.booth_boot_s,
+            booth_firmware=args.booth_firmware,
+            line_time_us=args.line_time_us,
             **world,
         )
     if spec == "aravis-fake":
@@ -195,6 +201,16 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
             **world,
         )
     return open_rig(spec, log_serial=args.log_serial)
+
+
+def _line_time(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and 0.0 <= value <= 1000.0):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a line time in µs, 0..1000")
+    return value
 
 
 def _run_options(args: argparse.Namespace) -> RunOptions:
@@ -494,6 +510,20 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
         metavar="PATH",
         help="drive the booth at this port (msflash booth-emulator's pty, or a real booth) instead of "
         "an emulator in this process; --sync host only",
+    )
+    sim.add_argument(
+        "--booth-firmware",
+        action="store_true",
+        help="the booth is the reference firmware running in simavr (its real LED pins, trigger output and "
+        "ExposureActive input wired to the simulated camera; every --sync mode); needs the AVR toolchain",
+    )
+    sim.add_argument(
+        "--line-time-us",
+        type=_line_time,
+        default=0.0,
+        metavar="US",
+        help="a rolling shutter: each row of the simulated camera starts US µs after the one above "
+        "(default 0: a global shutter); the booth is told the skew so its pulses fall where every row exposes",
     )
     sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")

@@ -32,6 +32,14 @@ from typing import Literal
 import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.devices.exposure_light import (
+    AmbientModulation,
+    ExposureLight,
+    ExposureRequest,
+    RowLight,
+    Shutter,
+    ambient_over_rows,
+)
 from msflash.acquisition.devices.frame_queue import TriggeredFrames
 from msflash.acquisition.errors import CameraError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
@@ -146,6 +154,14 @@ class SimulatedCamera(TriggeredFrames):
         self._frame_id = 0
         self._clock_ns = 0
         self._rendered_levels: list[tuple[float, ...]] = []
+        self.exposure_light: ExposureLight | None = None
+        """Light over time (the booth's drive, :mod:`acquisition.devices.exposure_light`): when set,
+        every row integrates it over its own exposure window instead of taking constant levels."""
+        self.shutter = Shutter()
+        """Trigger latency and rolling-shutter line time (used with :attr:`exposure_light`)."""
+        self.ambient_modulation: AmbientModulation | None = None
+        """The ambient's intensity over time, integrated per row (None: steady)."""
+        self._latency_rng = np.random.default_rng(seed + 7919)
 
     # -- ground truth and identity ------------------------------------------------------------
     @property
@@ -328,8 +344,11 @@ class SimulatedCamera(TriggeredFrames):
             self._begin_frame()
         with self._render_lock:  # one render at a time keeps the noise stream in trigger order
             try:
-                levels = self._levels_for(step)
-                pixels = self._render(levels, step.exposure_us, step.gain)
+                if self.exposure_light is not None:
+                    levels, pixels = self._render_exposed(step, hardware_trigger=plan.trigger == "booth")
+                else:
+                    levels = self._levels_for(step)
+                    pixels = self._render(levels, step.exposure_us, step.gain)
                 with self._condition:
                     self._frame_id += 1
                     self._clock_ns += int(step.exposure_us * 1000) + self._frame_interval_ns
@@ -342,6 +361,74 @@ class SimulatedCamera(TriggeredFrames):
                 raise
             # Delivered under the render lock, so frames queue in trigger order.
             self._end_frame(frame)
+
+    # -- light over time: each row integrates the booth's drive over its own window ------------
+    @property
+    def readout_skew_us(self) -> float:
+        """First row's start to the last row's (rolling shutter), µs; 0 for a global shutter."""
+        return self.shutter.skew_us(self.scene.shape[0])
+
+    def _render_exposed(self, step: CaptureStep, hardware_trigger: bool) -> tuple[tuple[float, ...], np.ndarray]:
+        """The frame of ``step`` under :attr:`exposure_light`; its mean levels (over rows) and pixels."""
+        assert self.exposure_light is not None
+        shutter = self.shutter
+        request = ExposureRequest(
+            exposure_us=float(step.exposure_us),
+            rows=self.scene.shape[0],
+            line_time_us=shutter.line_time_us,
+            latency_us=shutter.latency_us + float(self._latency_rng.uniform(0.0, shutter.latency_jitter_us)),
+            hardware_trigger=hardware_trigger,
+        )
+        light = self.exposure_light.expose(request)
+        rows = np.asarray(light.led_levels, dtype=float)
+        if rows.shape != (request.rows, self.led_spectra.count) or not np.all((rows >= 0) & (rows <= 1)):
+            raise CameraError(
+                f"simulated camera '{self._name}': exposure light gave levels of shape {rows.shape}; expected "
+                f"({request.rows}, {self.led_spectra.count}) values in [0, 1]"
+            )
+        ambient = ambient_over_rows(self.ambient_modulation, light, request)
+        mean = tuple(float(v) for v in rows.mean(axis=0))
+        return mean, self._render_rows(light, ambient, step.exposure_us, step.gain)
+
+    def _render_rows(self, light: RowLight, ambient: np.ndarray | None, exposure_us: float, gain: float) -> np.ndarray:
+        """A frame whose row ``r`` saw the LEDs at ``light.led_levels[r]`` and the ambient × ``ambient[r]``.
+
+        Rows that all saw the same light render as any frame does (:meth:`_render`); otherwise the
+        illumination is a per-pixel mix of the ambient and each LED (light is additive).
+        """
+        rows = light.led_levels
+        if ambient is None and bool(np.all(rows == rows[:1])):
+            return self._render(tuple(float(v) for v in rows[0]), exposure_us, gain)
+        height, width = self.scene.shape
+        leds = self.led_spectra.to_unit("photons")
+        if self.ambient_illumination is not None:
+            base = self.ambient_illumination
+            ambient_spectra, ambient_weights = base.spectra, base.weights
+        else:
+            ambient_spectra = self.ambient.to_unit("photons")
+            ambient_weights = np.ones((height, width, 1))
+        factor = np.ones(height) if ambient is None else ambient
+        spectra = Spectra(
+            ambient_spectra.grid,
+            np.hstack([ambient_spectra.values, leds.values]),
+            tuple(ambient_spectra.names) + tuple(leds.names),
+            kind="spd",
+            unit="photons",
+            source=self.ambient.source,
+        )
+        led_weights = np.broadcast_to(rows[:, None, :], (height, width, leds.count))
+        weights = np.concatenate([ambient_weights * factor[:, None, None], led_weights], axis=-1)
+        return render_frame(
+            self.scene,
+            MixedIllumination(spectra, weights),
+            self.camera_responsivities,
+            self.sensor,
+            exposure_us,
+            gain,
+            self.scale,
+            rng=self._rng,
+            noise=self.noise,
+        )
 
     # -- a ready-made world -------------------------------------------------------------------
     @classmethod

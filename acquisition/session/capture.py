@@ -485,6 +485,12 @@ def _saved(writer: FrameWriter, written: list[SequenceFrame]) -> str:
     return f"{len(written)} frame(s) already saved in {writer.path.parent}"
 
 
+def _pulses_steps(booth: Booth) -> bool:
+    """Whether the booth dims steps given their exposure by pulses inside it (``DIM=PULSE``, booth and camera master)."""
+    info = getattr(booth, "info", None)
+    return bool(getattr(info, "pulse_dimming", False)) and hasattr(booth, "delivered_levels")
+
+
 def _write(
     writer: FrameWriter,
     step: CaptureStep,
@@ -492,10 +498,15 @@ def _write(
     progress: _Progress,
     on_frame: OnFrame | None,
     trigger: int | None = None,
+    delivered: Sequence[float] | None = None,
 ) -> None:
     extra: dict = {"frame_id": frame.frame_id, "timestamp_ns": frame.timestamp_ns}
     if trigger is not None:
         extra["trigger"] = trigger
+    if delivered is not None:
+        # Pulse dimming: each LED's on-time ÷ this frame's exposure, as the booth quantised it
+        # (docs/flash-energy.md); ``leds`` stays the level asked for.
+        extra["delivered_levels"] = [round(float(v), 7) for v in delivered]
     if progress.retake:
         extra["retake"] = progress.retake
     if frame.camera_gain is not None:  # the gain feature behind frame.gain, in the camera's unit
@@ -588,10 +599,15 @@ def _table_paced(
             drain = getattr(booth, "pending_events", None)
             if drain is not None:
                 drain()  # events of an earlier, aborted table must not pair with this one's frames
+            pulsing = _pulses_steps(booth)
+            timed: dict = {}
+            if pulsing:  # each step's exposure: the booth pulses w·T inside it (docs/flash-energy.md)
+                booth.set_roll(float(getattr(camera, "readout_skew_us", 0.0) or 0.0))  # type: ignore[attr-defined]
+                timed["exposures_us"] = [step.exposure_us for step in plan.steps]
             if flash is not None:  # the flash step is held until its levels are known (PSET)
-                booth.load_pattern([step.led_levels for step in plan.steps], held=(last,))
+                booth.load_pattern([step.led_levels for step in plan.steps], held=(last,), **timed)
             else:
-                booth.load_pattern([step.led_levels for step in plan.steps])
+                booth.load_pattern([step.led_levels for step in plan.steps], **timed)
             booth.arm(mode, settle_us=settle_us, pulse_us=TRIGGER_PULSE_US, period_us=period_us)
             camera.prepare(plan)
             camera.start()
@@ -612,7 +628,10 @@ def _table_paced(
                     # The last LED frame is in, so its exposure is over: the flash step need not
                     # wait for its scheduled slot (booth master, PSET … NOW).
                     # (A booth firmware without NOW refuses it; LedBooth.set_step then falls back to plain PSET.)
-                    booth.set_step(position, step.led_levels, now=mode == "booth")
+                    if pulsing:
+                        booth.set_step(position, step.led_levels, now=mode == "booth", exposure_us=step.exposure_us)  # type: ignore[call-arg]
+                    else:
+                        booth.set_step(position, step.led_levels, now=mode == "booth")
                 if mode == "camera":
                     if number > 1:
                         time.sleep(plan.settle_s)  # the next step's LEDs settle between exposures
@@ -641,7 +660,8 @@ def _table_paced(
                         f"step {missing.index} ({missing.label}): no frame for trigger {number}; the next frame "
                         f"(id {frame.frame_id}) is trigger {trigger}. {_saved(writer, written)}"
                     )
-                paired = plan.steps[_booth_step_of(booth, trigger, frame_timeout_s, step)]
+                table_step = _booth_step_of(booth, trigger, frame_timeout_s, step)
+                paired = plan.steps[table_step]
                 if paired.index != step.index:
                     raise DroppedFrameError(
                         f"step {step.index} ({step.label}): the booth exposed table step {paired.index} on trigger "
@@ -652,7 +672,8 @@ def _table_paced(
                     # Only now: a writer resumed at the PSET took the GIL for its queued frames while
                     # the booth's thread was due to pulse the flash trigger (seen up to ~8 ms late).
                     resume()
-                _write(writer, paired, frame, progress, on_frame, trigger=trigger)
+                delivered = booth.delivered_levels(table_step, frame.exposure_us) if pulsing else None  # type: ignore[attr-defined]
+                _write(writer, paired, frame, progress, on_frame, trigger=trigger, delivered=delivered)
             doing = "after the last step (waiting for DONE)"
             done = booth.wait_event("DONE", timeout_s=frame_timeout_s)
             log.info("booth %s-master sequence done after %s trigger(s)", mode, " ".join(done.args))

@@ -713,3 +713,67 @@ def flash_exposure(
     for frame, exposure in zip(led_frames, led_us, strict=True):
         predictor.add_led(frame, exposure)
     return predictor.predict(weights)
+
+
+# -- flash energy under PWM dimming (host paced) ------------------------------------------------
+
+
+class FlashEnergyWarning(UserWarning):
+    """A frame's LED energy may differ from level × full: a PWM-dimmed booth and an exposure that is
+    not a whole number of PWM periods (docs/flash-energy.md)."""
+
+
+def pwm_energy_error(level: float, exposure_us: float, period_us: float) -> float:
+    """The worst relative energy error of an LED PWM-dimmed at ``level`` over an exposure, over all phases.
+
+    ``exposure = n·P + r``: the n whole periods give exactly ``level·n·P``; the remainder ``r``
+    collects between ``max(0, r − (1 − level)·P)`` and ``min(r, level·P)`` depending on where it
+    cuts the period. 0 for levels 0 and 1 and for whole periods.
+
+    >>> round(pwm_energy_error(0.5, 1000.0, 4096.0), 3), pwm_energy_error(0.5, 8192.0, 4096.0)
+    (1.0, 0.0)
+    """
+    if not 0.0 < level < 1.0 or not exposure_us > 0 or not period_us > 0:
+        return 0.0
+    remainder = math.fmod(exposure_us, period_us)
+    high = level * period_us
+    least, most = max(0.0, remainder - (period_us - high)), min(remainder, high)
+    wanted = level * remainder
+    return max(abs(least - wanted), abs(most - wanted)) / (level * exposure_us)
+
+
+def whole_pwm_periods(
+    exposure_us: float,
+    levels: Sequence[float],
+    pwm_hz: float,
+    limits: tuple[float, float],
+    policy: ExposurePolicy = ExposurePolicy(),
+) -> tuple[float, str | None]:
+    """A frame's exposure for a PWM-dimmed booth (host paced): whole PWM periods, or a warning.
+
+    With every level 0 or 1 nothing changes. Otherwise the exposure becomes the nearest whole
+    number of periods, never more than ``headroom_fraction / target_fraction`` of it (the flash
+    exposure aims its bright end at the target: longer would saturate) and within the camera's
+    ``limits``; when no whole number fits (an exposure shorter than a period), the exposure is kept
+    and the warning gives the worst energy error over the fractional levels (:func:`pwm_energy_error`).
+
+    Returns
+    -------
+    (exposure_us, warning or None)
+    """
+    fractional = [float(w) for w in levels if 0.0 < float(w) < 1.0]
+    if not fractional or not pwm_hz > 0:
+        return exposure_us, None
+    period = 1e6 / pwm_hz
+    longest = exposure_us * policy.headroom_fraction / policy.target_fraction
+    candidates = [n * period for n in (math.floor(exposure_us / period), math.ceil(exposure_us / period)) if n >= 1]
+    fitting = [c for c in candidates if c <= longest and limits[0] <= c <= limits[1]]
+    if fitting:
+        return min(fitting, key=lambda c: abs(c - exposure_us)), None
+    error = max(pwm_energy_error(w, exposure_us, period) for w in fractional)
+    return exposure_us, (
+        f"flash exposure {exposure_us:.0f} µs: the booth dims by PWM at {pwm_hz:g} Hz (a {period:.0f} µs period) "
+        f"when the host paces it, and no whole number of periods fits this exposure, so a frame's LED "
+        f"energy may be off by up to {error:.0%} of its level; expected --sync booth or camera (the booth "
+        "then pulses each LED for level × exposure) or a longer exposure"
+    )

@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.devices.exposure_light import EmulatorLight, FirmwareLight, Shutter
 from msflash.acquisition.devices.sim_world import (
     read_responsivity_file,
     read_spectra_file,
@@ -374,6 +375,8 @@ def open_sim_rig(
     booth_port: str | None = None,
     booth_protocol: str = "msflash",
     booth_boot_s: float = DEFAULT_BOOT_S,
+    booth_firmware: bool = False,
+    line_time_us: float = 0.0,
 ) -> Rig:
     """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver.
 
@@ -402,6 +405,17 @@ def open_sim_rig(
     booth_boot_s
         ``--booth-boot-s``: how long the booth at ``booth_port`` may take to boot after its port's open
         reset it (:data:`led_controller.booth.DEFAULT_BOOT_S`).
+    booth_firmware
+        ``--booth-firmware``: the booth is the reference firmware in simavr
+        (:func:`open_firmware_booth`), wired to the camera as a real rig is (trigger output,
+        ExposureActive), so all three sync modes run; the frames integrate its real LED pins.
+    line_time_us
+        ``--line-time-us``: the simulated camera's rolling shutter (row ``r`` starts ``r`` line
+        times after row 0); 0, the default, is a global shutter.
+
+    The camera renders each row under the booth's drive integrated over that row's exposure
+    window (:mod:`acquisition.devices.exposure_light`): PWM cut at its phase, pulses where the
+    booth placed them.
 
     Raises
     ------
@@ -412,7 +426,15 @@ def open_sim_rig(
     """
     closers: list = []
     line_errors: list[BaseException] = []
+    if booth_firmware and booth_port is not None:
+        raise UsageError(
+            "--booth-firmware: the booth is the firmware in simavr, so --booth-port has no use; expected one of them"
+        )
     world = _sim_world("sim", ambient, scene, cfa, seed, camera, n_leds, led_spectra, flash_power)
+    try:
+        world.shutter = Shutter(line_time_us=float(line_time_us))
+    except CameraError as err:
+        raise UsageError(f"--line-time-us {line_time_us}: expected a line time ≥ 0 µs") from err
     try:
         closers.append(world.close)
         if booth_port is not None:
@@ -421,18 +443,24 @@ def open_sim_rig(
             )
             world.led_levels_source = levels_reported_by(booth)
             return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers)
+        if booth_firmware:
+            booth = open_firmware_booth(world, log_serial, closers, line_errors)
+            return Rig(
+                "sim",
+                world,
+                booth,
+                world.led_spectra,
+                world.camera_responsivities,
+                world.true_ambient,
+                closers,
+                line_errors=line_errors,
+                camera_extra={"booth": "firmware in simavr"},
+            )
         emulator, booth = _open_emulated_booth(world.led_spectra, log_serial, closers)
 
-        # Exposure-time coupling: the camera renders with what the emulator's LEDs are doing. The
-        # ExposureActive line is high while the levels are read (the exposure) — camera master.
-        def levels_during_exposure() -> tuple[float, ...]:
-            emulator.exposure_active(True)
-            try:
-                return emulator.levels
-            finally:
-                emulator.exposure_active(False)
-
-        world.led_levels_source = levels_during_exposure
+        # Exposure-time coupling: each row of the camera integrates the emulator's drive (PWM at its
+        # phase, pulses) over its exposure window, raising ExposureActive over the flash window.
+        world.exposure_light = EmulatorLight(emulator)
         # Booth master: the booth's trigger output is the camera's trigger input.
         emulator.on_trigger_out = _line(line_errors, "sim camera trigger line", world.trigger_line)
     except Exception as err:
@@ -451,6 +479,69 @@ def open_sim_rig(
         emulator=emulator,
         line_errors=line_errors,
     )
+
+
+def open_firmware_booth(
+    world: SimulatedCamera, log_serial: str | Path | None, closers: list, line_errors: list
+) -> LedBooth:
+    """The reference firmware in simavr wired to ``world`` as on a real rig; ``LedBooth`` on its pty.
+
+    The firmware is built (``make``) and run by :class:`led_controller.firmware_sim.SimulatedBooth`;
+    its trigger output starts the camera's exposures (booth master: a thread takes each pulse
+    the harness reports, so the harness's reader is never blocked), its ExposureActive input is
+    driven over each exposure's flash window by the harness (camera master), and every frame
+    integrates its LED pins over the rows' windows (:class:`FirmwareLight`). Closers are appended
+    as parts open.
+
+    Raises
+    ------
+    UsageError
+        The LEDs are not the firmware's 7 channels, or the AVR toolchain is missing.
+    RigOpenError
+        The build or the simulator failed.
+    """
+    from msflash.led_controller import firmware_sim
+
+    reason = firmware_sim.toolchain_missing()
+    if reason:
+        raise UsageError(f"--booth-firmware: {reason}")
+    if world.led_spectra.count != firmware_sim.SIM_CHANNELS:
+        raise UsageError(
+            f"--booth-firmware: the firmware image drives {firmware_sim.SIM_CHANNELS} LEDs but the simulated booth has "
+            f"{world.led_spectra.count}; expected --leds {firmware_sim.SIM_CHANNELS} (or no --leds/--led-spectra)"
+        )
+    try:
+        firmware_sim.build()
+        sim = firmware_sim.SimulatedBooth()
+    except firmware_sim.FirmwareSimError as err:
+        raise RigOpenError(f"--booth-firmware: {err}") from err
+    closers.append(sim.close)
+    light = FirmwareLight(sim)
+    world.exposure_light = light
+    pulses: queue.Queue[float | None] = queue.Queue()
+
+    def take_pulses() -> None:
+        while (time_us := pulses.get()) is not None:
+            light.triggered(time_us)
+            _line(line_errors, "simavr camera trigger line", world.trigger_line)()
+
+    worker = threading.Thread(target=take_pulses, name="simavr trigger line", daemon=True)
+    worker.start()
+    sim.on_pulse = lambda pulse: pulses.put(pulse.time_us)
+
+    def stop_worker() -> None:
+        sim.on_pulse = None
+        pulses.put(None)
+        worker.join(timeout=10.0)
+
+    closers.append(stop_worker)
+    try:
+        booth = LedBooth.open(sim.port, timeout_s=5.0, log_serial=log_serial)
+    except Exception as err:
+        raise RigOpenError(f"booth firmware in simavr on {sim.port}: {err}") from err
+    closers.append(booth.close)
+    closers.append(booth.all_off)
+    return booth
 
 
 class WiredFakeCamera:

@@ -9,6 +9,7 @@ parses options into a :class:`RunOptions`, opens the rig and reports; everything
 
 from __future__ import annotations
 
+import logging
 import time
 import warnings
 from collections.abc import Callable
@@ -29,6 +30,7 @@ from msflash.acquisition.session.capture import FrameWriter, preview_frames, run
 from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,
+    FlashEnergyWarning,
     camera_exposure_range,
     camera_noise_model,
     flash_exposure,
@@ -37,11 +39,14 @@ from msflash.acquisition.session.exposure import (
     measure_led_snr,
     metering_view,
     plan_exposures,
+    whole_pwm_periods,
 )
 from msflash.acquisition.session.flash_session import FlashSession
 from msflash.acquisition.session.rig import Rig
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
+
+log = logging.getLogger(__name__)
 
 SYNC_MODES: dict[str, TriggerSource] = {"host": "software", "booth": "booth", "camera": "camera"}
 """``--sync`` names and the plan trigger each stands for."""
@@ -337,8 +342,10 @@ def run_one_stream(
                 decision = session.decide(options.mode)
                 levels = decision.levels
                 result.update(chosen=decision.solution)
-        flash_us = flash_exposure_for(rig, exposure, levels, session.flash_exposure)
-        result.update(caught=list(caught), flash_us=flash_us)
+        with warnings.catch_warnings(record=True) as flash_caught:
+            warnings.simplefilter("always", FlashEnergyWarning)
+            flash_us = flash_exposure_for(rig, exposure, levels, session.flash_exposure, options.sync)
+        result.update(caught=[*caught, *flash_caught], flash_us=flash_us)
         stamp["decided"] = time.perf_counter()
         return levels, flash_us
 
@@ -426,22 +433,26 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
     frames = captured.frames
     info = rig.camera.info  # read once: on a real camera each read is several feature round trips
     pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
-    flash_us = flash_exposure_for(
-        rig,
-        exposure,
-        levels,
-        lambda weights: flash_exposure(
-            pixels[0],
-            frames[0].exposure_us,
-            pixels[1:],
-            [f.exposure_us for f in frames[1:]],
-            weights,
-            info.black_level,
-            info.white_level,
-            exposure.exposure_range_us,
-            exposure.policy,
-        ),
-    )
+    with warnings.catch_warnings(record=True) as flash_caught:
+        warnings.simplefilter("always", FlashEnergyWarning)
+        flash_us = flash_exposure_for(
+            rig,
+            exposure,
+            levels,
+            lambda weights: flash_exposure(
+                pixels[0],
+                frames[0].exposure_us,
+                pixels[1:],
+                [f.exposure_us for f in frames[1:]],
+                weights,
+                info.black_level,
+                info.white_level,
+                exposure.exposure_range_us,
+                exposure.policy,
+            ),
+            options.sync,
+        )
+    caught = [*caught, *flash_caught]
     flash_gain = recorded.flash_gain if exposure.mode == "recorded" and recorded is not None else 1.0
     flash_plan = CapturePlan.single(levels, flash_us, gain=flash_gain, trigger=SYNC_MODES[options.sync])
     decided = time.perf_counter()
@@ -450,12 +461,31 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
 
 
 def flash_exposure_for(
-    rig: Rig, plan: ExposurePlan, levels: np.ndarray, predict: Callable[[np.ndarray], float]
+    rig: Rig, plan: ExposurePlan, levels: np.ndarray, predict: Callable[[np.ndarray], float], sync: str = "host"
 ) -> float:
-    """The flash frame's exposure: fixed, recorded (replay), or ``predict(levels)`` from the frames in memory."""
+    """The flash frame's exposure: fixed, recorded (replay), or ``predict(levels)`` from the frames in memory.
+
+    A predicted exposure for a booth that dims by PWM here (host paced, or a booth without pulse
+    dimming) is made whole PWM periods, or a :class:`FlashEnergyWarning` gives the energy error
+    (:func:`~acquisition.session.exposure.whole_pwm_periods`).
+    """
     if plan.mode != "auto":
         recorded = recording_of(rig)
         if plan.mode == "recorded" and recorded is not None and recorded.flash_us is not None:
             return recorded.flash_us
         return plan.ambient_exposure_us
-    return predict(levels)
+    exposure_us = predict(levels)
+    info = getattr(rig.booth, "info", None)
+    pwm_hz = getattr(info, "pwm_hz", None)
+    if pwm_hz is None or (sync in ("booth", "camera") and getattr(info, "pulse_dimming", False)):
+        return exposure_us
+    chosen, note = whole_pwm_periods(
+        exposure_us, [float(v) for v in levels], pwm_hz, plan.exposure_range_us, plan.policy
+    )
+    if note is not None:
+        warnings.warn(note, FlashEnergyWarning, stacklevel=2)
+    elif chosen != exposure_us:
+        log.info(
+            "flash exposure %.0f µs → %.0f µs: whole periods of the booth's %g Hz PWM", exposure_us, chosen, pwm_hz
+        )
+    return chosen

@@ -114,7 +114,7 @@ def test_flash_in_the_same_stream(sim_rig, tmp_path: Path, trigger: str) -> None
                 assert sim_rig.emulator.levels == (0.0,) * 4 or sim_rig.emulator.holding is None
             decision = session.decide("complementary")
             assert decision.levels.shape == (4,)
-            return flash, 8_000.0
+            return flash, 8_192.0
 
         entries = run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, decide, on_frame=keep)
         writer.finish()
@@ -122,7 +122,7 @@ def test_flash_in_the_same_stream(sim_rig, tmp_path: Path, trigger: str) -> None
     assert [e.role for e in entries] == ["ambient"] + ["led"] * 4 + ["flash"]
     sequence = read_sequence(tmp_path / "s")
     assert sequence.complete and sequence.frames[-1].role == "flash"
-    assert sequence.frames[-1].exposure_us == 8_000.0 or trigger == "booth"
+    assert sequence.frames[-1].exposure_us == 8_192.0 or trigger == "booth"
     # The camera exposed the flash under exactly the levels decided (within one 16-bit step).
     np.testing.assert_allclose(sim_rig.camera.rendered_levels[-1], flash, atol=1 / 65535)
     np.testing.assert_allclose(sequence.frames[-1].led_levels, flash)
@@ -154,7 +154,7 @@ def test_a_frame_lost_in_the_flash_stream_is_taken_again(sim_rig, tmp_path: Path
 
     def decide(frames):
         seen.append(len(frames))
-        return flash, 8_000.0
+        return flash, 8_192.0
 
     with _writer(sim_rig, tmp_path / "s") as inner, AsyncSequenceWriter(inner) as writer:
         entries = run_capture_with_flash(camera, sim_rig.booth, plan, writer, decide)
@@ -382,7 +382,8 @@ def test_flash_step_released_with_now_only_in_booth_master(sim_rig, tmp_path: Pa
     sim_rig.booth.set_step = timed
     with _writer(sim_rig, tmp_path / "s") as writer:
         run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, lambda frames: ((0.5,) * 4, 5_000.0))
-    assert calls == [((5, (0.5,) * 4), {"now": trigger == "booth"})]
+    # the sim booth pulses (DIM=PULSE): the flash step's exposure travels with its levels
+    assert calls == [((5, (0.5,) * 4), {"now": trigger == "booth", "exposure_us": 5_000.0})]
     assert not sim_rig.line_errors
 
 

@@ -106,8 +106,8 @@ def test_leds_off_and_partial_sequence_kept_when_capture_fails(tmp_path, monkeyp
     assert "step 3" in err and "3 frame(s) already saved" in err and "(after 2 retake(s) of lost frames)" in err
     sequence = read_sequence(out / "sequence")
     assert not sequence.complete and len(sequence.frames) == 3
-    booth_levels = opened["rig"].camera.led_levels_source()
-    assert all(level == 0 for level in booth_levels)
+    assert opened["rig"].emulator is not None
+    assert all(level == 0 for level in opened["rig"].emulator.levels)
 
 
 def test_a_frame_lost_mid_sequence_is_taken_again_and_said(tmp_path, monkeypatch, capsys, caplog) -> None:

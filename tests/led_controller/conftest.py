@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from msflash.led_controller import LedBooth, ManualClock, PtyBoothServer, serve_on_pty
+from msflash.led_controller import BoothEmulator, LedBooth, ManualClock, PtyBoothServer, serve_on_pty
 from msflash.led_controller.firmware_sim import (
     ELF,
     SMALL_ELF,
@@ -177,6 +177,10 @@ class FarEnd:
     exposure_active: Callable[[bool], None]
     advance: Callable[[float], None]
     pulses_now: Callable[[], list[TriggerPulse]]
+    emulator: BoothEmulator | None = None
+    """The emulator (``kind`` emulator), for its drive model."""
+    sim: SimulatedBooth | None = None
+    """The harness (``kind`` firmware), for exposure windows over the LED pins."""
 
     @property
     def levels(self) -> tuple[float, ...]:
@@ -227,13 +231,16 @@ def far_end(request: pytest.FixtureRequest, clock: ManualClock) -> Iterator[FarE
                 emulator.exposure_active,
                 clock.advance,
                 lambda: list(pulses),
+                emulator=emulator,
             )
         finally:
             server.close()
     else:
         request.getfixturevalue("firmware_image")
         with SimulatedBooth() as sim:
-            yield FarEnd("firmware", sim.port, lambda: sim.levels, sim.exposure_active, sim.advance, lambda: sim.pulses)
+            yield FarEnd(
+                "firmware", sim.port, lambda: sim.levels, sim.exposure_active, sim.advance, lambda: sim.pulses, sim=sim
+            )
 
 
 @pytest.fixture

@@ -11,6 +11,22 @@
 #include "booth_core.h"
 #include "pins_mega2560.h"
 
+/* The trigger and ExposureActive pins, from the pin table. */
+#define TRIG_PORT_(port, bit, arduino) PORT##port
+#define TRIG_DDR_(port, bit, arduino) DDR##port
+#define TRIG_BIT_(port, bit, arduino) P##port##bit
+#define EXP_PIN_(port, bit, arduino, irq) PIN##port
+#define EXP_PORT_(port, bit, arduino, irq) PORT##port
+#define EXP_DDR_(port, bit, arduino, irq) DDR##port
+#define EXP_BIT_(port, bit, arduino, irq) P##port##bit
+#define TRIGGER_PORT BOOTH_TRIGGER_OUT(TRIG_PORT_)
+#define TRIGGER_DDR BOOTH_TRIGGER_OUT(TRIG_DDR_)
+#define TRIGGER_BIT BOOTH_TRIGGER_OUT(TRIG_BIT_)
+#define EXPOSURE_PIN BOOTH_EXPOSURE_IN(EXP_PIN_)
+#define EXPOSURE_PORT BOOTH_EXPOSURE_IN(EXP_PORT_)
+#define EXPOSURE_DDR BOOTH_EXPOSURE_IN(EXP_DDR_)
+#define EXPOSURE_BIT BOOTH_EXPOSURE_IN(EXP_BIT_)
+
 #if F_CPU != 16000000UL
 #error "board_mega2560.c: timer and baud settings assume F_CPU 16 MHz"
 #endif
@@ -89,21 +105,140 @@ static void uart_init(void)
 
 static volatile uint32_t ticks;
 
-ISR(TIMER1_COMPA_vect) { ticks++; }
+/* Timed events on Timer1's compare B (docs/booth-firmware.md, "Timing"): the trigger pulse's
+ * edges, timed to the timer's count rather than to the main loop's next wake-up (which the 250 us
+ * tick made 250 us late at worst), and wake-ups of the main loop for due actions and replies. */
+#define EVENT_RISE 0
+#define EVENT_FALL 1
+#define EVENT_WAKE 2
+#define EVENTS 3
+static volatile uint8_t event_pending;      /* bit per event */
+static volatile uint32_t event_at[EVENTS];  /* board_micros() time of each */
+static void fire_on_trigger(void);
+
+static uint32_t micros_locked(void) /* with interrupts off */
+{
+    uint32_t t = ticks;
+    uint16_t count = TCNT1;
+    if ((TIFR1 & _BV(OCF1A)) && count < TICK_US) /* wrapped, interrupt not served yet */
+        t++;
+    return t * TICK_US + count / 2u;
+}
 
 uint32_t board_micros(void)
 {
     uint32_t t;
-    uint16_t count;
-    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
-    {
-        t = ticks;
-        count = TCNT1;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { t = micros_locked(); }
+    return t;
+}
+
+static volatile uint8_t woken; /* a wake-up ran: the main loop polls before it sleeps again */
+
+static void run_event(uint8_t e)
+{
+    if (e == EVENT_RISE) {
+        TRIGGER_PORT |= _BV(TRIGGER_BIT);
+        fire_on_trigger(); /* the LED pulses start with the trigger edge, a few cycles later */
+    } else if (e == EVENT_FALL) {
+        TRIGGER_PORT &= (uint8_t)~_BV(TRIGGER_BIT);
+    } else {
+        woken = 1;
+    }
+    event_pending &= (uint8_t)~_BV(e);
+}
+
+#define LEAD 20 /* counts (10 us): compare B fires this early for a trigger edge, which then waits for its count */
+
+/* TCNT1 reaches `target` (or the tick wraps). */
+static void wait_count(uint16_t target)
+{
+    uint16_t count, last = TCNT1;
+    while ((count = TCNT1) < target && count >= last)
+        last = count;
+}
+
+/* Run what is due and set compare B for the next event of the current tick (interrupts off).
+ * Compare B sets its flag as TCNT1 leaves OCR1B; for the trigger's edges it is set LEAD counts
+ * early and the interrupt waits for the exact count (0.5 us), so an edge does not depend on how
+ * long the interrupt takes to get there: a pulse's width and its settle are exact to a count,
+ * whatever else is pending. Wake-ups run at their count plus the entry time. A stale compare flag (an
+ * earlier match) only brings the interrupt early, which finds nothing due and sets OCR1B again:
+ * the flag is never cleared by writing TIFR1 (simavr 1.6 clears every Timer1 flag on such a
+ * write, compare A's tick too). */
+static void arm_events(void)
+{
+    for (;;) {
+        uint32_t t = ticks;
+        uint16_t count = TCNT1;
         if ((TIFR1 & _BV(OCF1A)) && count < TICK_US) /* wrapped, interrupt not served yet */
             t++;
+        uint32_t start = t * TICK_US;
+        int8_t next = -1;
+        int32_t target = 0; /* counts from this tick's start */
+        for (uint8_t e = 0; e < EVENTS; e++) {
+            if (!(event_pending & _BV(e)))
+                continue;
+            int32_t at = 2 * (int32_t)(event_at[e] - start);
+            if (next < 0 || at < target) {
+                next = (int8_t)e;
+                target = at;
+            }
+        }
+        if (next < 0) {
+            TIMSK1 &= (uint8_t)~_BV(OCIE1B);
+            return;
+        }
+        /* A wake-up never runs early (the loop would find nothing due and sleep a tick); an edge
+         * due within LEAD waits here for its count. */
+        int32_t lead = next == EVENT_WAKE ? 0 : LEAD;
+        if (target <= (int32_t)count + lead) { /* due: now (an edge at its count) */
+            if (next != EVENT_WAKE && target > (int32_t)count)
+                wait_count((uint16_t)target);
+            run_event((uint8_t)next);
+            continue;
+        }
+        if (target >= (int32_t)(2u * TICK_US)) { /* in a later tick: the tick interrupt arms it then */
+            TIMSK1 &= (uint8_t)~_BV(OCIE1B);
+            return;
+        }
+        uint16_t at = (uint16_t)(target - 1 - (lead ? lead - 2 : 0));
+        OCR1B = at;
+        TIMSK1 |= _BV(OCIE1B);
+        if (TCNT1 < at) /* else this loop took so long that the count passed: run it from here */
+            return;
     }
-    return t * TICK_US + count / 2u;
 }
+
+ISR(TIMER1_COMPA_vect)
+{
+    ticks++;
+    if (event_pending)
+        arm_events();
+}
+
+ISR(TIMER1_COMPB_vect) { arm_events(); }
+
+static void schedule_event(uint8_t e, uint32_t at_us)
+{
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        event_at[e] = at_us;
+        event_pending |= _BV(e);
+        arm_events();
+    }
+}
+
+void board_trigger_pulse(uint32_t at_us, uint32_t width_us)
+{
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        event_at[EVENT_FALL] = at_us + width_us;
+        event_pending |= _BV(EVENT_FALL);
+        schedule_event(EVENT_RISE, at_us);
+    }
+}
+
+void board_wake_at(uint32_t at_us) { schedule_event(EVENT_WAKE, at_us); }
 
 static void timebase_init(void)
 {
@@ -113,45 +248,149 @@ static void timebase_init(void)
     TIMSK1 = _BV(OCIE1A);
 }
 
-/* ---- LED PWM: timers 3, 4, 5 in fast PWM mode 14 (TOP = ICRn), clk/1 --------------------- */
+/* ---- LED drive: timers 3, 4, 5 -------------------------------------------------------------
+ * PWM (board_set_levels): fast PWM mode 14, TOP = ICRn = 2^BITS - 1, clk/1, non-inverting: high
+ * OCR + 1 of TOP + 1 ticks (OCR = TOP: constantly high), OCR chosen by pwm_ocr.
+ * Pulses (board_set_pulses): mode 14 with TOP = ICRn = 0, so the counter rests at 0; inverting
+ * output (set on compare match, clear at BOTTOM). Writing TCNTn = 0x10000 - window runs the counter
+ * once up to 0xFFFF and back to 0: a channel with OCR = 0xFFFF - width is high for exactly `width`
+ * ticks, ending `window` ticks after the write, both edges on the timer's compare hardware
+ * (ATmega2560 datasheet, section 17.9.3 and the note on TOP below TCNT in 17.9.3). */
 
 typedef struct {
     volatile uint8_t *tccra;
     volatile uint16_t *ocr;
-    uint8_t com1;            /* COMnx1 bit: non-inverting PWM on the pin */
-    volatile uint8_t *port;
+    uint8_t com1, com0;      /* COMnx1, COMnx0 */
+    uint8_t foc;             /* FOCnx in TCCRnC */
+    volatile uint8_t *port, *ddr;
     uint8_t bit;
 } pwm_channel_t;
 
 /* Channel order = NAMES= order; the pins are board/pins_mega2560.h's (Arduino D5, D2, D3, D6, D7, D8, D46). */
-#define PWM_CHANNEL(index, port, bit, arduino, timer, unit) \
-    {&TCCR##timer##A, &OCR##timer##unit, COM##timer##unit##1, &PORT##port, P##port##bit},
-static const pwm_channel_t channels[] = {BOOTH_LED_PINS(PWM_CHANNEL)};
+#define PWM_CHANNEL(index, port, bit, arduino, timer, unit)                                              \
+    {&TCCR##timer##A, &OCR##timer##unit, COM##timer##unit##1, COM##timer##unit##0, FOC##timer##unit, &PORT##port, \
+     &DDR##port, P##port##bit},
+static const __flash pwm_channel_t channels[] = {BOOTH_LED_PINS(PWM_CHANNEL)};
 #undef PWM_CHANNEL
 _Static_assert(sizeof channels / sizeof channels[0] >= BOOTH_CHANNELS, "more channels than PWM outputs");
 
+typedef struct {
+    volatile uint8_t *tccra, *tccrb, *tccrc;
+    volatile uint16_t *icr, *tcnt;
+} led_timer_t;
+
+static const __flash led_timer_t led_timers[3] = {
+    {&TCCR3A, &TCCR3B, &TCCR3C, &ICR3, &TCNT3},
+    {&TCCR4A, &TCCR4B, &TCCR4C, &ICR4, &TCNT4},
+    {&TCCR5A, &TCCR5B, &TCCR5C, &ICR5, &TCNT5},
+};
+#define WGM_14_A _BV(WGM31)                 /* WGMn1 in TCCRnA (same bit for timers 3, 4, 5) */
+#define WGM_14_B (_BV(WGM33) | _BV(WGM32))  /* WGMn3:2 in TCCRnB */
+
+/* Armed pulses: the TCNT value that starts them, and what fires them. */
+static volatile uint16_t fire_start;
+static volatile uint8_t fire_with_trigger, fire_with_exposure;
+
+static inline void fire(void)
+{
+    uint16_t start = fire_start;
+    TCNT3 = start;
+    TCNT4 = start;
+    TCNT5 = start;
+}
+
+static void fire_on_trigger(void) /* interrupts off */
+{
+    if (fire_with_trigger) {
+        fire();
+        fire_with_trigger = 0;
+    }
+}
+
+static void disarm(void)
+{
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { fire_with_trigger = fire_with_exposure = 0; }
+}
+
+/* The compare value whose duty (OCR + 1) / (TOP + 1) is nearest the level duty / TOP. */
+static uint16_t pwm_ocr(uint16_t duty) { return (uint16_t)(duty - 1u + (duty > LEVEL_TOP / 2u)); }
+
 void board_set_levels(const uint16_t duty[BOOTH_CHANNELS])
 {
+    disarm();
+    for (uint8_t t = 0; t < 3; t++) { /* PWM at clk/1, TOP = 2^BITS - 1 (a no-op when already so) */
+        *led_timers[t].icr = LEVEL_TOP;
+        *led_timers[t].tccrb = WGM_14_B | _BV(CS30);
+        *led_timers[t].tccra = (uint8_t)((*led_timers[t].tccra & ~3u) | WGM_14_A);
+    }
     for (uint8_t c = 0; c < BOOTH_CHANNELS; c++) {
-        const pwm_channel_t *ch = &channels[c];
+        const __flash pwm_channel_t *ch = &channels[c];
         if (duty[c] == 0) {
             /* Off is off: disconnect the compare output (fast PWM at OCR 0 still spikes). */
-            *ch->tccra &= (uint8_t)~_BV(ch->com1);
+            *ch->tccra &= (uint8_t)~(_BV(ch->com1) | _BV(ch->com0));
             *ch->port &= (uint8_t)~_BV(ch->bit);
             *ch->ocr = 0;
         } else {
-            *ch->ocr = duty[c] > LEVEL_TOP ? LEVEL_TOP : duty[c];
-            *ch->tccra |= _BV(ch->com1);
+            *ch->ocr = duty[c] >= LEVEL_TOP ? LEVEL_TOP : pwm_ocr(duty[c]);
+            *ch->tccra = (uint8_t)((*ch->tccra & ~_BV(ch->com0)) | _BV(ch->com1));
         }
     }
     /* In fast PWM the OCR registers are double-buffered and load at BOTTOM: up to one PWM
      * period (4.1 ms at 16 bits) late, longer than a short settle. Setting the counters to
-     * TOP makes the next clock load the new duties at once (the running period is cut short). */
+     * TOP makes the next clock load the new duties at once (the running period is cut short):
+     * every period then starts a whole number of periods after this write. */
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
     {
         TCNT3 = LEVEL_TOP;
         TCNT4 = LEVEL_TOP;
         TCNT5 = LEVEL_TOP;
+    }
+}
+
+void board_set_pulses(const booth_pulses_t *p)
+{
+    disarm();
+    /* Every pin on its port bit first: off, or on throughout the step. */
+    for (uint8_t c = 0; c < BOOTH_CHANNELS; c++) {
+        const __flash pwm_channel_t *ch = &channels[c];
+        *ch->tccra &= (uint8_t)~(_BV(ch->com1) | _BV(ch->com0));
+        if (p->width[c] == BOOTH_PULSE_FULL)
+            *ch->port |= _BV(ch->bit);
+        else
+            *ch->port &= (uint8_t)~_BV(ch->bit);
+    }
+    /* Timers stopped in normal mode: clear the compare latches the pulses will use (force output
+     * compare, 'clear' action; the pin an input meanwhile, so a latch left high by PWM never shows),
+     * set the OCRs (not buffered in normal mode), then mode 14 with TOP 0 and the clock. */
+    for (uint8_t t = 0; t < 3; t++) {
+        *led_timers[t].tccrb = 0;
+        *led_timers[t].tccra = 0;
+        *led_timers[t].icr = 0;
+        *led_timers[t].tcnt = 0;
+    }
+    for (uint8_t c = 0; c < BOOTH_CHANNELS; c++) {
+        const __flash pwm_channel_t *ch = &channels[c];
+        uint8_t t = c / 3u;
+        if (p->width[c] == 0 || p->width[c] == BOOTH_PULSE_FULL)
+            continue;
+        *ch->ddr &= (uint8_t)~_BV(ch->bit);
+        *ch->tccra |= _BV(ch->com1);                       /* 'clear on compare' */
+        *led_timers[t].tccrc = _BV(ch->foc);               /* forced: latch low */
+        *ch->tccra |= _BV(ch->com0);                       /* 'set on compare, clear at BOTTOM' */
+        *ch->ddr |= _BV(ch->bit);
+        *ch->ocr = (uint16_t)(0xFFFFu - p->width[c]);
+    }
+    for (uint8_t t = 0; t < 3; t++) {
+        *led_timers[t].tccra |= WGM_14_A;
+        *led_timers[t].tccrb = WGM_14_B | p->clock_select;
+    }
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        fire_start = (uint16_t)(0x10000ul - p->window);
+        if (p->on_exposure_input)
+            fire_with_exposure = 1;
+        else
+            fire_with_trigger = 1;
     }
 }
 
@@ -177,20 +416,6 @@ static void pwm_init(void)
 /* ---- trigger pins: ExposureActive in on INT0 (PD0, D21), trigger out on PA0 (D22) -------- */
 
 /* From board/pins_mega2560.h. The ExposureActive input must be INT0's pin (its vector is below). */
-#define TRIG_PORT_(port, bit, arduino) PORT##port
-#define TRIG_DDR_(port, bit, arduino) DDR##port
-#define TRIG_BIT_(port, bit, arduino) P##port##bit
-#define EXP_PIN_(port, bit, arduino, irq) PIN##port
-#define EXP_PORT_(port, bit, arduino, irq) PORT##port
-#define EXP_DDR_(port, bit, arduino, irq) DDR##port
-#define EXP_BIT_(port, bit, arduino, irq) P##port##bit
-#define TRIGGER_PORT BOOTH_TRIGGER_OUT(TRIG_PORT_)
-#define TRIGGER_DDR BOOTH_TRIGGER_OUT(TRIG_DDR_)
-#define TRIGGER_BIT BOOTH_TRIGGER_OUT(TRIG_BIT_)
-#define EXPOSURE_PIN BOOTH_EXPOSURE_IN(EXP_PIN_)
-#define EXPOSURE_PORT BOOTH_EXPOSURE_IN(EXP_PORT_)
-#define EXPOSURE_DDR BOOTH_EXPOSURE_IN(EXP_DDR_)
-#define EXPOSURE_BIT BOOTH_EXPOSURE_IN(EXP_BIT_)
 
 #define EDGE_SIZE 16u
 static volatile uint8_t edge_buf[EDGE_SIZE];
@@ -198,9 +423,14 @@ static volatile uint8_t edge_head, edge_tail;
 
 ISR(INT0_vect)
 {
+    uint8_t level = (uint8_t)(EXPOSURE_PIN & _BV(EXPOSURE_BIT));
+    if (level && fire_with_exposure) { /* camera master: the LED pulses start with the exposure */
+        fire();
+        fire_with_exposure = 0;
+    }
     uint8_t next = (uint8_t)((edge_head + 1u) & (EDGE_SIZE - 1u));
     if (next != edge_tail) {
-        edge_buf[edge_head] = (uint8_t)(EXPOSURE_PIN & _BV(EXPOSURE_BIT));
+        edge_buf[edge_head] = level;
         edge_head = next;
     }
 }
@@ -221,10 +451,14 @@ static bool edge_pop(bool *high)
 
 void board_trigger_out(bool high)
 {
-    if (high)
-        TRIGGER_PORT |= _BV(TRIGGER_BIT);
-    else
-        TRIGGER_PORT &= (uint8_t)~_BV(TRIGGER_BIT);
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        event_pending &= (uint8_t)~(_BV(EVENT_RISE) | _BV(EVENT_FALL)); /* a scheduled pulse too */
+        if (high)
+            TRIGGER_PORT |= _BV(TRIGGER_BIT);
+        else
+            TRIGGER_PORT &= (uint8_t)~_BV(TRIGGER_BIT);
+    }
 }
 
 static void trigger_init(void)
@@ -300,7 +534,10 @@ int main(void)
             booth_exposure(&booth, high, board_micros());
         booth_poll(&booth, board_micros());
         cli();
-        if (rx_tail == rx_head && edge_tail == edge_head) {
+        if (woken) { /* a wake-up ran while this loop was busy: poll again before sleeping */
+            woken = 0;
+            sei();
+        } else if (rx_tail == rx_head && edge_tail == edge_head) {
             sleep_enable();
             sei(); /* the instruction after sei runs before any interrupt: no lost wake-up */
             sleep_cpu();

@@ -37,6 +37,22 @@
 #ifndef BOOTH_EXPOSURE_PULLUP
 #define BOOTH_EXPOSURE_PULLUP 1
 #endif
+/* Constant tables kept in flash on an AVR (its RAM is 8 KiB), plain const elsewhere. */
+#ifdef __AVR__
+#define BOOTH_FLASH __flash
+#else
+#define BOOTH_FLASH
+#endif
+/* The board's CPU clock: the pulse-dimming arithmetic counts its timer ticks in these cycles. */
+#ifndef BOOTH_CLOCK_HZ
+#define BOOTH_CLOCK_HZ 16000000ul
+#endif
+/* Camera master: the most the booth's reaction to ExposureActive may lag the edge (interrupt
+ * latency, measured in simavr: docs/flash-energy.md); pulses end this long before the flash
+ * window does, so the booth master's pulses tolerate this much camera trigger latency too. */
+#ifndef BOOTH_PULSE_MARGIN_US
+#define BOOTH_PULSE_MARGIN_US 10u
+#endif
 
 #if BOOTH_LEVEL_BITS < 12 || BOOTH_LEVEL_BITS > 16
 #error "BOOTH_LEVEL_BITS must be 12..16"

@@ -11,9 +11,8 @@
 
 /* ---- CRC-16/CCITT-FALSE, bitwise (small; a 512-byte table buys nothing at 115200 baud) -- */
 
-uint16_t booth_crc16(const uint8_t *data, uint16_t len)
+static uint16_t crc_update(uint16_t crc, const uint8_t *data, uint16_t len)
 {
-    uint16_t crc = 0xFFFF;
     while (len--) {
         crc ^= (uint16_t)(*data++) << 8;
         for (uint8_t bit = 0; bit < 8; bit++)
@@ -21,6 +20,8 @@ uint16_t booth_crc16(const uint8_t *data, uint16_t len)
     }
     return crc;
 }
+
+uint16_t booth_crc16(const uint8_t *data, uint16_t len) { return crc_update(0xFFFF, data, len); }
 
 /* ---- output: frames built in one buffer ------------------------------------------------ */
 
@@ -70,23 +71,47 @@ static void put_i32(out_t *o, int32_t v)
     }
 }
 
-/* Frame `body` (already in body->buf) with mark and seq and send it. */
+/* Frame `body` (already in body->buf) with mark and seq and send it: header, body and checksum
+ * go out in turn (no frame-sized copy: that RAM holds the steps' exposures instead). */
+static void hex_into(char *to, uint32_t v, uint8_t digits)
+{
+    static const char hex[] = "0123456789ABCDEF";
+    while (digits--)
+        *to++ = hex[(v >> (4 * digits)) & 0xF];
+}
+
+/* The whole frame into `to` (room for body->len + 14 bytes); returns its length. */
+static uint16_t frame_into(char *to, char mark, uint8_t seq, const out_t *body)
+{
+    to[0] = mark;
+    hex_into(to + 1, seq, 2);
+    to[3] = ':';
+    hex_into(to + 4, body->len, 3);
+    to[7] = ':';
+    memcpy(to + 8, body->buf, body->len);
+    uint16_t n = (uint16_t)(8 + body->len);
+    uint16_t crc = booth_crc16((const uint8_t *)to, n);
+    to[n] = '*';
+    hex_into(to + n + 1, crc, 4);
+    to[n + 5] = '\n';
+    return (uint16_t)(n + 6);
+}
+
 static void send_frame(char mark, uint8_t seq, const out_t *body)
 {
-    static out_t frame;
-    frame.len = 0;
-    frame.buf[frame.len++] = mark;
-    put_hex(&frame, seq, 2);
-    frame.buf[frame.len++] = ':';
-    put_hex(&frame, body->len, 3);
-    frame.buf[frame.len++] = ':';
-    memcpy(frame.buf + frame.len, body->buf, body->len);
-    frame.len += body->len;
-    uint16_t crc = booth_crc16((const uint8_t *)frame.buf, frame.len);
-    frame.buf[frame.len++] = '*';
-    put_hex(&frame, crc, 4);
-    frame.buf[frame.len++] = '\n';
-    board_write(frame.buf, frame.len);
+    char head[8];
+    head[0] = mark;
+    hex_into(head + 1, seq, 2);
+    head[3] = ':';
+    hex_into(head + 4, body->len, 3);
+    head[7] = ':';
+    uint16_t crc = crc_update(crc_update(0xFFFF, (const uint8_t *)head, 8), (const uint8_t *)body->buf, body->len);
+    board_write(head, 8);
+    board_write(body->buf, body->len);
+    head[0] = '*';
+    hex_into(head + 1, crc, 4);
+    head[5] = '\n';
+    board_write(head, 6);
 }
 
 static void send_event(booth_t *b, const out_t *body)
@@ -128,14 +153,112 @@ static void set_held(booth_t *b, uint16_t i, bool held)
 
 static bool due(uint32_t now_us, uint32_t when_us) { return (int32_t)(now_us - when_us) >= 0; }
 
+/* ---- pulse dimming: a step's exposure and its pulses (docs/booth-firmware.md, section 2) ---- */
+
+#define CYCLES_PER_US ((uint32_t)(BOOTH_CLOCK_HZ / 1000000ul))
+#define PULSE_TICKS_MAX 65535ul /* one lap of a 16-bit timer */
+
+uint16_t booth_exposure_code(uint32_t exposure_us)
+{
+    if (exposure_us < 4096u)
+        return (uint16_t)exposure_us;
+    uint8_t e = 1;
+    while ((exposure_us >> e) >= 4096u)
+        e++;
+    uint32_t m = (exposure_us + (1ul << (e - 1))) >> e; /* rounded half up */
+    if (m >= 4096u) {
+        e++;
+        m = (exposure_us + (1ul << (e - 1))) >> e;
+    }
+    return (uint16_t)((uint16_t)e << 12 | m);
+}
+
+uint32_t booth_exposure_us(uint16_t code) { return (uint32_t)(code & 0x0FFFu) << (code >> 12); }
+
+static const BOOTH_FLASH uint16_t prescalers[5] = {1, 8, 64, 256, 1024};
+
+bool booth_pulse_plan(const booth_t *b, const uint16_t duty[BOOTH_CHANNELS], uint16_t code, bool camera,
+                      booth_pulses_t *plan)
+{
+    uint32_t exposure_us = booth_exposure_us(code);
+    uint8_t k = 0;
+    if (!code)
+        return false;
+    while (k < 5 && exposure_us * CYCLES_PER_US > PULSE_TICKS_MAX * prescalers[k])
+        k++;
+    if (k == 5)
+        return false; /* longer than one lap at clk/1024 (4.19 s): PWM (off by < 0.1 %) */
+    uint32_t p = prescalers[k];
+    uint32_t ticks = exposure_us * CYCLES_PER_US / p; /* exact: see booth_exposure_code */
+    uint32_t margin = (BOOTH_PULSE_MARGIN_US * CYCLES_PER_US + p - 1) / p + 1;
+    uint32_t roll = (b->roll_us * CYCLES_PER_US + p - 1) / p;
+    if (ticks < roll + margin + 3)
+        return false; /* no room for a pulse in the flash window: PWM */
+    uint32_t cap = ticks - roll - margin - 2;
+    plan->clock_select = (uint8_t)(k + 1);
+    plan->on_exposure_input = camera;
+    /* CAMERA: from the flash window's start, ending `margin` before its end; BOOTH: from the
+     * trigger, ending a microsecond and a tick before the exposure would (zero camera latency). */
+    plan->window = (uint16_t)(camera ? ticks - roll - margin : ticks - (CYCLES_PER_US + p - 1) / p - 1);
+    for (uint8_t c = 0; c < BOOTH_CHANNELS; c++) {
+        if (duty[c] == 0) {
+            plan->width[c] = 0;
+        } else if (duty[c] >= LEVEL_TOP) {
+            plan->width[c] = BOOTH_PULSE_FULL;
+        } else {
+            uint32_t w = ((uint32_t)duty[c] * ticks + LEVEL_TOP / 2u) / LEVEL_TOP;
+            plan->width[c] = (uint16_t)(w < cap ? w : cap);
+        }
+    }
+    return true;
+}
+
+/* " ON=<us>,<us>,…": each LED's on-time per exposure, exact (the exposure itself when on throughout). */
+static void put_on_times(out_t *o, const booth_pulses_t *plan, uint16_t code)
+{
+    put_str(o, " ON=");
+    for (uint8_t c = 0; c < BOOTH_CHANNELS; c++) {
+        uint32_t cycles = plan->width[c] == BOOTH_PULSE_FULL
+                              ? booth_exposure_us(code) * CYCLES_PER_US
+                              : (uint32_t)plan->width[c] * prescalers[plan->clock_select - 1];
+        if (c)
+            put_str(o, ",");
+        put_u32(o, cycles / CYCLES_PER_US);
+        uint32_t frac = (cycles % CYCLES_PER_US) * (10000ul / CYCLES_PER_US); /* 1/16 us = 0.0625 */
+        if (frac) {
+            char digits[5];
+            uint8_t n = 4;
+            digits[4] = '\0';
+            while (n--) {
+                digits[n] = (char)('0' + frac % 10);
+                frac /= 10;
+            }
+            for (n = 4; n > 0 && digits[n - 1] == '0'; n--)
+                digits[n - 1] = '\0';
+            put_str(o, ".");
+            put_str(o, digits);
+        }
+    }
+}
+
+/* The LEDs for table step `index` (b->duty holds its levels): pulses in BOOTH and CAMERA mode for
+ * a step with an exposure, PWM otherwise. */
+static void drive_step(booth_t *b, uint16_t index)
+{
+    booth_pulses_t plan;
+    if ((b->mode == MODE_BOOTH || b->mode == MODE_CAMERA) &&
+        booth_pulse_plan(b, b->duty, b->exposure[index], b->mode == MODE_CAMERA, &plan))
+        board_set_pulses(&plan);
+    else
+        drive(b);
+}
+
 /* ---- sequencing (as BoothEmulator._apply_step, _release_hold, _finish, _all_off) -------- */
 
 static void trigger_low(booth_t *b)
 {
-    if (b->pulse_high) {
-        b->pulse_high = false;
-        board_trigger_out(false);
-    }
+    b->pulse_high = false;
+    board_trigger_out(false); /* also cancels a pulse the board has scheduled */
 }
 
 void booth_all_off(booth_t *b)
@@ -158,7 +281,7 @@ static bool apply_step(booth_t *b, uint16_t index)
     }
     b->holding = false;
     memcpy(b->duty, b->table[index], sizeof b->duty);
-    drive(b);
+    drive_step(b, index);
     return true;
 }
 
@@ -176,13 +299,14 @@ static void release_hold(booth_t *b, uint32_t now_us)
     (void)now_us;
     b->holding = false;
     memcpy(b->duty, b->table[b->step], sizeof b->duty);
-    drive(b);
+    drive_step(b, (uint16_t)b->step);
     if (b->mode == MODE_BOOTH) {
         /* The step's slot starts now; later steps keep the period from here. */
         uint32_t applied = board_micros();
         b->t0_us = applied - (uint32_t)b->step * b->period_us;
         b->action = ACTION_PULSE;
         b->action_due_us = applied + b->settle_us;
+        board_trigger_pulse(b->action_due_us, b->pulse_us);
     }
 }
 
@@ -198,9 +322,21 @@ static void finish(booth_t *b)
     send_event(b, &o);
 }
 
+/* CAMERA: the exposure is over (and, with ROLL, its last row): the next step, or done. */
+static void advance_camera(booth_t *b)
+{
+    if ((uint16_t)(b->step + 1) >= b->steps)
+        finish(b);
+    else
+        apply_step(b, (uint16_t)(b->step + 1));
+}
+
 static void run_action(booth_t *b, uint32_t now_us)
 {
-    if (b->action == ACTION_APPLY) {
+    if (b->action == ACTION_ADVANCE) {
+        b->action = ACTION_NONE;
+        advance_camera(b);
+    } else if (b->action == ACTION_APPLY) {
         uint16_t index = (uint16_t)(b->step + 1);
         if (index >= b->steps) {
             finish(b);
@@ -213,13 +349,13 @@ static void run_action(booth_t *b, uint32_t now_us)
         b->action = ACTION_PULSE;
         b->action_due_us = b->t0_us + (uint32_t)index * b->period_us + b->settle_us;
         settle_from_now(b);
+        /* Both edges (and the LED pulses with the first) on the board's timer, not this loop. */
+        board_trigger_pulse(b->action_due_us, b->pulse_us);
     } else {
         out_t o = {.len = 0};
+        (void)now_us;
         b->triggers++;
-        /* The pulse first, then its report: the report must not delay the pulse. */
-        board_trigger_out(true);
-        b->pulse_high = true;
-        b->pulse_end_us = now_us + b->pulse_us;
+        /* The board pulsed the trigger at action_due_us; now its report. */
         put_str(&o, "TRIG ");
         put_u32(&o, b->triggers);
         put_str(&o, " ");
@@ -232,7 +368,6 @@ static void run_action(booth_t *b, uint32_t now_us)
 
 void booth_exposure(booth_t *b, bool active, uint32_t now_us)
 {
-    (void)now_us;
     if (b->state != STATE_RUNNING || b->mode != MODE_CAMERA)
         return;
     if (active) {
@@ -246,22 +381,37 @@ void booth_exposure(booth_t *b, bool active, uint32_t now_us)
         else
             put_i32(&o, b->step);
         send_event(b, &o);
-    } else if ((uint16_t)(b->step + 1) >= b->steps) {
-        finish(b);
+    } else if (b->roll_us) {
+        /* A rolling shutter's flash window ends as its first row does: the last row still exposes. */
+        b->action = ACTION_ADVANCE;
+        b->action_due_us = now_us + b->roll_us;
     } else {
-        apply_step(b, (uint16_t)(b->step + 1));
+        advance_camera(b);
     }
+}
+
+/* Wake the main loop when the next timed action or deferred reply is due. */
+static void wake_for(booth_t *b, uint32_t now_us)
+{
+    bool any = false;
+    uint32_t next = now_us;
+    if (b->deferred) {
+        next = b->deferred_due_us;
+        any = true;
+    }
+    if (b->action != ACTION_NONE && (!any || (int32_t)(b->action_due_us - next) < 0)) {
+        next = b->action_due_us;
+        any = true;
+    }
+    if (any)
+        board_wake_at(next);
 }
 
 void booth_poll(booth_t *b, uint32_t now_us)
 {
-    if (b->pulse_high && due(now_us, b->pulse_end_us))
-        trigger_low(b);
     if (b->deferred && due(now_us, b->deferred_due_us)) {
-        out_t o = {.len = 0};
         b->deferred = false;
-        put_str(&o, b->deferred_body);
-        send_frame('=', b->deferred_seq, &o);
+        board_write(b->deferred_frame, b->deferred_len); /* framed at NEXT: out at once */
     }
     while (b->action != ACTION_NONE && due(now_us, b->action_due_us))
         run_action(b, now_us);
@@ -275,6 +425,7 @@ void booth_poll(booth_t *b, uint32_t now_us)
             send_event(b, &o);
         }
     }
+    wake_for(b, now_us);
 }
 
 /* ---- boot banner ----------------------------------------------------------------------- */
@@ -394,6 +545,25 @@ static const char *mode_name(booth_mode_t m)
     return names[m];
 }
 
+/* The PWM frequency at clk/1 and TOP = 2^BITS - 1, exactly (F_CPU 16 MHz). */
+#if BOOTH_CLOCK_HZ != 16000000ul
+#error "PWMHZ text below assumes a 16 MHz clock"
+#endif
+#if BOOTH_LEVEL_BITS == 16
+#define PWM_HZ_TEXT "244.140625"
+#elif BOOTH_LEVEL_BITS == 15
+#define PWM_HZ_TEXT "488.28125"
+#elif BOOTH_LEVEL_BITS == 14
+#define PWM_HZ_TEXT "976.5625"
+#elif BOOTH_LEVEL_BITS == 13
+#define PWM_HZ_TEXT "1953.125"
+#else
+#define PWM_HZ_TEXT "3906.25"
+#endif
+
+/* The ID reply's dimming words: pulses where the booth sees the exposure, PWM otherwise. */
+static void put_dimming(out_t *o) { put_str(o, " DIM=PULSE PWMHZ=" PWM_HZ_TEXT); }
+
 static bool cmd_id(booth_t *b, const words_t *a, out_t *o)
 {
     if (!no_args(a))
@@ -403,6 +573,7 @@ static bool cmd_id(booth_t *b, const words_t *a, out_t *o)
     put_u32(o, BOOTH_LEVEL_BITS);
     put_str(o, " STEPS=");
     put_u32(o, BOOTH_MAX_STEPS);
+    put_dimming(o);
     put_str(o, " SERIAL=");
     put_str(o, b->serial[0] ? b->serial : "-");
     return true;
@@ -440,35 +611,66 @@ static bool cmd_pclr(booth_t *b, const words_t *a, out_t *o)
     return true;
 }
 
+/* An optional "EXP=<us>" word at w[at] (at < n): strips it (n - 1) and checks its value. */
+static bool is_exposure_word(const char *w) { return strncmp(w, "EXP=", 4) == 0; }
+
+static bool exposure_arg(const char *w, uint16_t *code)
+{
+    uint32_t us;
+    if (!decimal(w + 4, 8, &us))
+        return refuse("E_ARG", "EXP=<microseconds>");
+    if (us == 0)
+        return refuse("E_RANGE", "exposure 1..99999999 us");
+    *code = booth_exposure_code(us);
+    return true;
+}
+
+/* A step given an exposure: " ON=…" when BOOTH and CAMERA mode pulse it. */
+static void put_step_pulses(const booth_t *b, out_t *o, const uint16_t duty[BOOTH_CHANNELS], uint16_t code)
+{
+    booth_pulses_t plan;
+    if (booth_pulse_plan(b, duty, code, false, &plan))
+        put_on_times(o, &plan, code);
+}
+
 static bool cmd_padd(booth_t *b, const words_t *a, out_t *o)
 {
     uint16_t duty[BOOTH_CHANNELS];
-    bool held = a->n == BOOTH_CHANNELS + 1 && strcmp(a->w[a->n - 1], "HOLD") == 0;
-    uint16_t count = (uint16_t)(held ? a->n - 1 : a->n);
-    if (!levels_arg(a, 0, count, duty) || !editable(b))
+    uint16_t count = a->n, code = 0;
+    bool held = count > BOOTH_CHANNELS && count <= BOOTH_MAX_WORDS && strcmp(a->w[count - 1], "HOLD") == 0;
+    if (held)
+        count--;
+    bool timed = count > BOOTH_CHANNELS && count <= BOOTH_MAX_WORDS && is_exposure_word(a->w[count - 1]);
+    if (timed)
+        count--;
+    if (!levels_arg(a, 0, count, duty) || (timed && !exposure_arg(a->w[count], &code)) || !editable(b))
         return false;
     if (b->steps >= BOOTH_MAX_STEPS)
         return refuse("E_FULL", "pattern table full");
     memcpy(b->table[b->steps], duty, sizeof duty);
+    b->exposure[b->steps] = code;
     set_held(b, b->steps, held);
     b->steps++;
     put_str(o, " ");
     put_u32(o, (uint32_t)(b->steps - 1));
+    put_step_pulses(b, o, duty, code);
     return true;
 }
 
 static bool cmd_pset(booth_t *b, const words_t *a, out_t *o, uint32_t now_us)
 {
     uint16_t duty[BOOTH_CHANNELS];
-    uint16_t n = a->n;
+    uint16_t n = a->n, code = 0;
     uint32_t index;
-    bool now = n == BOOTH_CHANNELS + 2 && strcmp(a->w[n - 1], "NOW") == 0;
-    (void)o;
+    bool now = n > BOOTH_CHANNELS + 1 && n <= BOOTH_MAX_WORDS && strcmp(a->w[n - 1], "NOW") == 0;
     if (now)
         n--;
+    bool timed = n > BOOTH_CHANNELS + 1 && n <= BOOTH_MAX_WORDS && is_exposure_word(a->w[n - 1]);
+    if (timed)
+        n--;
     if (n != BOOTH_CHANNELS + 1 || !decimal(a->w[0], 5, &index))
-        return refuse("E_ARG", "PSET <step> and " BOOTH_CHANNELS_TEXT " levels [NOW]");
-    if (!levels_arg(a, 1, (uint16_t)(n - 1), duty))
+        return refuse("E_ARG", "PSET <step> and " BOOTH_CHANNELS_TEXT " levels [EXP=<us>] [NOW]");
+    if (!levels_arg(a, 1, (uint16_t)(n - 1), duty) || (timed && !exposure_arg(a->w[n], &code)))
         return false;
     if (index >= b->steps)
         return refuse("E_RANGE", "no such step");
@@ -476,7 +678,9 @@ static bool cmd_pset(booth_t *b, const words_t *a, out_t *o, uint32_t now_us)
     if (running && ((int32_t)index < b->step || ((int32_t)index == b->step && !b->holding)))
         return refuse("E_STATE", "step already exposed");
     memcpy(b->table[index], duty, sizeof duty);
+    b->exposure[index] = code;
     set_held(b, (uint16_t)index, false);
+    put_step_pulses(b, o, duty, code);
     if (running && b->holding && (int32_t)index == b->step) {
         release_hold(b, now_us);
     } else if (now && running && b->mode == MODE_BOOTH && (int32_t)index == b->step + 1 &&
@@ -560,6 +764,7 @@ static uint8_t cmd_next(booth_t *b, const words_t *a, out_t *o)
         return 0;
     }
     apply_step(b, (uint16_t)(b->step + 1));
+    b->deferred_due_us = board_micros() + b->settle_us; /* from the LED change, not the reply's framing */
     b->triggers++;
     put_str(o, " ");
     put_i32(o, b->step);
@@ -615,6 +820,19 @@ static bool cmd_wdog(booth_t *b, const words_t *a, out_t *o)
     b->watchdog_ms = ms;
     put_str(o, " ");
     put_u32(o, ms);
+    return true;
+}
+
+static bool cmd_roll(booth_t *b, const words_t *a, out_t *o)
+{
+    uint32_t us;
+    if (a->n != 1 || !decimal(a->w[0], 8, &us))
+        return refuse("E_ARG", "ROLL <microseconds>");
+    if (b->state == STATE_RUNNING)
+        return refuse("E_STATE", "sequence running");
+    b->roll_us = us;
+    put_str(o, " ");
+    put_u32(o, us);
     return true;
 }
 
@@ -705,6 +923,7 @@ static void dispatch(booth_t *b, uint8_t seq, const char *name, const words_t *a
     else if (strcmp(name, "WDOG") == 0) ok = cmd_wdog(b, args, &o);
     else if (strcmp(name, "PING") == 0) ok = cmd_ping(b, args, &o);
     else if (strcmp(name, "SERIAL") == 0) ok = cmd_serial(b, args, &o);
+    else if (strcmp(name, "ROLL") == 0) ok = cmd_roll(b, args, &o);
     else refuse("E_CMD", "unknown command");
 
     if (refused) {
@@ -718,11 +937,10 @@ static void dispatch(booth_t *b, uint8_t seq, const char *name, const words_t *a
         put_str(&o, refused->text);
         send_frame('=', seq, &o);
     } else if (ok == 2) { /* NEXT: reply once the LEDs have settled */
-        uint16_t n = o.len < sizeof b->deferred_body - 1 ? o.len : (uint16_t)(sizeof b->deferred_body - 1);
-        memcpy(b->deferred_body, o.buf, n);
-        b->deferred_body[n] = '\0';
+        if (o.len > sizeof b->deferred_frame - 14)
+            o.len = (uint16_t)(sizeof b->deferred_frame - 14);
+        b->deferred_len = (uint8_t)frame_into(b->deferred_frame, '=', seq, &o);
         b->deferred_seq = seq;
-        b->deferred_due_us = board_micros() + b->settle_us;
         b->deferred = true;
     } else {
         send_frame('=', seq, &o);

@@ -11,9 +11,9 @@
 
 #define BOOTH_MAX_BODY 1024u
 #define BOOTH_MAX_LINE (BOOTH_MAX_BODY + 16u) /* a frame with its terminator */
-/* Words after the command name kept for parsing: PSET <step> <levels> NOW is CH + 2; one more
+/* Words after the command name kept for parsing: PSET <step> <levels> EXP=<us> NOW is CH + 3; one more
  * word only tells "too many" (the count is capped at BOOTH_MAX_WORDS + 1, never an expected count). */
-#define BOOTH_MAX_WORDS (BOOTH_CHANNELS + 3u)
+#define BOOTH_MAX_WORDS (BOOTH_CHANNELS + 4u)
 #define BOOTH_OUT_MAX 320u                    /* longest frame the booth sends */
 #define BOOTH_SERIAL_MAX 32u                  /* longest serial (SERIAL <text>) */
 
@@ -25,6 +25,27 @@ void board_set_levels(const uint16_t duty[BOOTH_CHANNELS]);
 void board_trigger_out(bool high);
 /* Queue bytes for the host (may wait for room; never drops). */
 void board_write(const char *data, uint16_t len);
+/* ---- exposure-synchronous pulse dimming (docs/booth-firmware.md, section 2) ---------------
+ * A step given its exposure (EXP=) runs in BOOTH and CAMERA mode with each LED on for w*T inside
+ * the exposure instead of PWM: every pulse ends `window` timer ticks after the exposure is seen
+ * (the trigger output's rising edge, or ExposureActive's), both of its edges on the timer's own
+ * compare hardware. */
+#define BOOTH_PULSE_FULL 0xFFFFu /* width: on throughout the step */
+typedef struct {
+    uint8_t clock_select;              /* timer clock: 1..5 = clk/1, /8, /64, /256, /1024 */
+    bool on_exposure_input;            /* fire on ExposureActive rising (CAMERA), else with the trigger output */
+    uint16_t window;                   /* ticks from the fire to the pulses' common end */
+    uint16_t width[BOOTH_CHANNELS];    /* ticks on; 0 off; BOOTH_PULSE_FULL on throughout */
+} booth_pulses_t;
+
+/* Drive the LEDs by pulses (armed: they fire once, at the next exposure start), until the next
+ * board_set_levels. */
+void board_set_pulses(const booth_pulses_t *pulses);
+/* The trigger output: high at at_us for width_us, both edges timed by the board's timer (and the
+ * armed pulses fired with the rising edge). board_trigger_out(false) cancels it. */
+void board_trigger_pulse(uint32_t at_us, uint32_t width_us);
+/* Wake the main loop (booth_poll) at at_us. */
+void board_wake_at(uint32_t at_us);
 /* Microseconds now (wrapping). The core stamps LED changes with it: handling a frame takes
  * the AVR a few hundred us, so the time a frame arrived is too early to settle from. */
 uint32_t board_micros(void);
@@ -37,7 +58,7 @@ void board_serial_store(const char *serial, uint8_t len);
 
 typedef enum { STATE_IDLE, STATE_ARMED, STATE_RUNNING, STATE_DONE } booth_state_t;
 typedef enum { MODE_NONE, MODE_HOST, MODE_BOOTH, MODE_CAMERA } booth_mode_t;
-typedef enum { ACTION_NONE, ACTION_APPLY, ACTION_PULSE } booth_action_t;
+typedef enum { ACTION_NONE, ACTION_APPLY, ACTION_PULSE, ACTION_ADVANCE } booth_action_t;
 
 typedef struct {
     /* the line being received */
@@ -47,8 +68,10 @@ typedef struct {
     /* LEDs and table (duty values, BITS wide) */
     uint16_t duty[BOOTH_CHANNELS];
     uint16_t table[BOOTH_MAX_STEPS][BOOTH_CHANNELS];
+    uint16_t exposure[BOOTH_MAX_STEPS]; /* EXP= of each step, booth_exposure_code(); 0: none (PWM) */
     uint8_t held[(BOOTH_MAX_STEPS + 7) / 8];
     uint16_t steps;
+    uint32_t roll_us;            /* ROLL: rolling-shutter skew, first row's start to the last's */
     /* sequencer */
     booth_state_t state;
     booth_mode_t mode;
@@ -65,7 +88,8 @@ typedef struct {
     bool deferred;
     uint8_t deferred_seq;
     uint32_t deferred_due_us;
-    char deferred_body[24];
+    char deferred_frame[40];     /* the whole reply, framed in advance: at due it only goes out */
+    uint8_t deferred_len;
     /* link bookkeeping */
     uint8_t event_seq;
     uint32_t watchdog_ms;
@@ -76,6 +100,13 @@ typedef struct {
     /* the serial, as loaded from EEPROM at boot ("" when never set) */
     char serial[BOOTH_SERIAL_MAX + 1];
 } booth_t;
+
+/* An exposure in us as 16 bits: below 4096 exact, above m << e with a 12-bit m (0.025 %). */
+uint16_t booth_exposure_code(uint32_t exposure_us);
+uint32_t booth_exposure_us(uint16_t code);
+/* The pulses of a step of these levels and exposure code (false: PWM); camera: CAMERA mode. */
+bool booth_pulse_plan(const booth_t *b, const uint16_t duty[BOOTH_CHANNELS], uint16_t code, bool camera,
+                      booth_pulses_t *plan);
 
 /* CRC-16/CCITT-FALSE over len bytes (poly 0x1021, init 0xFFFF). */
 uint16_t booth_crc16(const uint8_t *data, uint16_t len);

@@ -6,15 +6,28 @@
  * (requests were lost now and then under load). Here one thread does everything: the pty is
  * polled every 100 us of simulated time and bytes are fed to the UART while it signals XON.
  *
- * stdout, one line each:  "pty <path>" once ready; "pulse <t_us> <since_us> <d0> .. <dN>" on
- * each rising edge of the trigger output (PA0), with the PWM duty of every channel at that
- * moment and the time since the duties last changed; "pulse_end <t_us>" on its falling edge;
- * "ok <command> ..." answering a command.
+ * The LED pins are not simavr's: sim/pin_model.c computes them from the firmware's writes to
+ * timers 3, 4, 5 per the ATmega2560 datasheet (simavr 1.6's output-compare pins are wrong for this
+ * firmware, and its 16-bit fast PWM runs the simulation at a tenth of real time).
+ *
+ * The board around the firmware resets when the host opens the pty (DTR, led_controller/usb_link.py):
+ * the bootloader holds the UART for a wall-clock window, then the firmware runs from its reset vector.
+ * Simulated time keeps running forward across resets (every time printed and read is on that clock).
+ *
+ * stdout, one line each:  "pty <path>" once ready; "pulse <t_us> <since_us> <l0> .. <l6>" on
+ * each rising edge of the trigger output (PA0), with the level of every LED channel at that
+ * moment (pin_model_level: PWM duty, 0 or 1) and the time since a level last changed, times in
+ * us with 3 decimals; "pulse_end <t_us>" on its falling edge; "ok <command> ..." answering a
+ * command; with "trace 1", "tx <t_us>" as the firmware starts sending a frame, "tcnt <timer>
+ * <t_us>" on each write of TCNT3..5 and "expin <0|1> <t_us>" on each change of ExposureActive.
  * stdin commands: "exp 0|1" drive the ExposureActive input (PD0/INT0) ("exp float": the wire
- * loose, held by the pull-up or floating) and run 2 ms of
- * simulated time so the firmware has served the edge before "ok exp" (simavr compromise:
- * the emulator's exposure_active is synchronous); "levels" -> "ok levels <t_us> <top> <d0> ..";
- * "link" -> "ok link <t_us> opens <n> resets <n> bootloader <0|1>"; "quit".
+ * loose, held by the pull-up or floating) and run 2 ms of simulated time so the firmware has
+ * served the edge before "ok exp" (simavr compromise: the emulator's exposure_active is
+ * synchronous); "levels" -> "ok levels <t_us> <top> <d0> .."; "link" -> "ok link <t_us> opens
+ * <n> resets <n> bootloader <0|1>"; "quit"; the camera side (section below): "expose <T_us> <rows>
+ * <line_us> <latency_us>" and "integrate <start_us> <T_us> <rows> <line_us>" answer "ok
+ * expose|integrate <start_us> <c0> .. <c6> (per row)": the cycles each LED pin was high in each
+ * row's exposure window.
  *
  * Time is simavr's simulated time; simavr sleeps in real time while the firmware sleeps, so
  * it runs close to real time (never faster while the CPU idles).
@@ -46,18 +59,13 @@
 #include "sim_time.h"
 #include "avr_eeprom.h"
 #include "avr_uart.h"
+#include "pin_model.h"
 #include <errno.h>
 #include <pty.h>
 #include <sys/inotify.h>
 #include <termios.h>
 
-#define CHANNELS 7
-/* Data-space addresses of the PWM registers (ATmega2560 datasheet, register summary),
- * in the firmware's channel order: OC3A OC3B OC3C OC4A OC4B OC4C OC5A. */
-static const uint16_t ocr_addr[CHANNELS] = {0x98, 0x9A, 0x9C, 0xA8, 0xAA, 0xAC, 0x128};
-static const uint16_t tccra_addr[CHANNELS] = {0x90, 0x90, 0x90, 0xA0, 0xA0, 0xA0, 0x120};
-static const uint8_t com1_bit[CHANNELS] = {7, 5, 3, 7, 5, 3, 7};
-#define ICR3_ADDR 0x96
+#define CHANNELS 7 /* reported channels: OC3A OC3B OC3C OC4A OC4B OC4C OC5A (the firmware's order) */
 
 static avr_t *avr;
 static int pty_master = -1, pty_slave = -1;
@@ -68,36 +76,24 @@ static uint8_t from_avr[8192]; /* firmware -> host, waiting for the pty */
 static size_t from_len;
 static int uart_xon = 1;
 static avr_irq_t *uart_input;
-static uint16_t duty[CHANNELS];
-static avr_cycle_count_t changed_at;
 static avr_irq_t *exposure_irq;
-static int trace; /* BOOTH_SIM_TRACE=1: print every duty change */
+static int trace; /* "trace 1" on stdin: tx, tcnt and expin lines on stdout */
 
 /* Simulated time keeps running across resets (avr_reset may restart the cycle counter). */
 static avr_cycle_count_t cycle_base;
 static avr_cycle_count_t sim_cycles(void) { return cycle_base + avr->cycle; }
 static uint32_t now_us(void) { return (uint32_t)avr_cycles_to_usec(avr, sim_cycles()); }
 
-static uint16_t read16(uint16_t addr) { return (uint16_t)(avr->data[addr] | (avr->data[addr + 1] << 8)); }
+/* Simulated time in us, to the cycle (16 MHz: 1/16 us). */
+static double cycle_us(avr_cycle_count_t cycle) { return (double)cycle / (avr->frequency / 1e6); }
+/* The host's clock: avr->cycle (the pin model's and the firmware's, restarted by a reset) made
+ * monotonic across resets. Every time printed is on it; times read (integrate) are converted back. */
+static double ext_us(avr_cycle_count_t cycle) { return cycle_us(cycle_base + cycle); }
 
-/* The duty each pin is driven with: 0 when its compare output is disconnected. */
-static void sample_levels(void)
-{
-    for (int c = 0; c < CHANNELS; c++) {
-        uint16_t d = (avr->data[tccra_addr[c]] & (1u << com1_bit[c])) ? read16(ocr_addr[c]) : 0;
-        if (d != duty[c]) {
-            duty[c] = d;
-            changed_at = sim_cycles();
-            if (trace)
-                fprintf(stderr, "trace %u duty %d = %u\n", now_us(), c, d);
-        }
-    }
-}
-
-static void print_duties(void)
+static void print_levels(void)
 {
     for (int c = 0; c < CHANNELS; c++)
-        printf(" %u", duty[c]);
+        printf(" %.9g", pin_model_level(c));
     printf("\n");
     fflush(stdout);
 }
@@ -106,12 +102,12 @@ static void trigger_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
     (void)param;
-    sample_levels();
+    pin_model_advance();
     if (value) {
-        printf("pulse %u %u", now_us(), (uint32_t)avr_cycles_to_usec(avr, sim_cycles() - changed_at));
-        print_duties();
+        printf("pulse %.3f %.3f", ext_us(avr->cycle), cycle_us(avr->cycle - pin_model_changed_at()));
+        print_levels();
     } else {
-        printf("pulse_end %u\n", now_us());
+        printf("pulse_end %.3f\n", ext_us(avr->cycle));
         fflush(stdout);
     }
 }
@@ -123,7 +119,7 @@ static int run_for_us(uint32_t us)
         int state = avr_run(avr);
         if (state == cpu_Done || state == cpu_Crashed)
             return state;
-        sample_levels();
+        pin_model_advance();
     }
     return cpu_Running;
 }
@@ -260,7 +256,6 @@ static void board_reset(void)
     to_head = to_tail = 0;
     if (!exposure_floating)
         exposure_drive(exposure_level, 1); /* the camera still drives the wire */
-    sample_levels(); /* pins are inputs now: every duty reads 0 */
     in_bootloader = 1;
     bootloader_end_us = wall_us() + (int64_t)bootloader_ms * 1000;
     resets++;
@@ -301,9 +296,14 @@ static void pty_flush_out(void)
     }
 }
 
+static int frame_start = 1; /* the next byte from the firmware starts a frame */
+
 static void uart_output_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq, (void)param;
+    if (trace && frame_start)
+        printf("tx %.3f\n", ext_us(avr->cycle));
+    frame_start = value == '\n';
     if (watch_fd >= 0 && host_opens == 0)
         return; /* nobody has the port open: the USB-serial chip drops it */
     if (from_len == 0 && latency_us) {
@@ -358,6 +358,123 @@ static int pty_open(void)
     return 0;
 }
 
+/* ---- the camera side: exposure windows over the LED pins ----
+ *
+ * The camera's exposure (and each row's, for a rolling shutter: row r starts r line times
+ * after row 0) is a window of simulated time; what a row collects from LED i is the time pin i
+ * was high in its window (pin_model_on_cycles), exact to the cycle. ExposureActive (PD0) is
+ * driven with the flash window, from the last row's start to the first row's end (the whole
+ * exposure for a global shutter): the signal a camera-master booth needs (docs/flash-energy.md).
+ *   expose <T_us> <rows> <line_us> <latency_us>: an exposure starting latency_us from now;
+ *   integrate <start_us> <T_us> <rows> <line_us>: windows from an absolute start (booth master:
+ *     the trigger pulse's time plus the camera's latency).
+ * One request at a time; the answer comes once the last row's window is over. */
+
+#define MAX_ROWS 8192
+
+static void (*core_reset)(struct avr_t *a);
+
+static void reset_all(struct avr_t *a)
+{
+    if (core_reset)
+        core_reset(a);
+    pin_model_reset();
+}
+
+static void set_exposure_input(int high)
+{
+    exposure_floating = 0; /* the camera drives the wire (kept across a reset: board_reset) */
+    exposure_level = high != 0;
+    avr_raise_irq(exposure_irq, high != 0);
+    if (trace)
+        printf("expin %d %.3f\n", high != 0, ext_us(avr->cycle));
+}
+
+static avr_cycle_count_t edge_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
+{
+    (void)a, (void)when;
+    set_exposure_input(param != NULL);
+    return 0;
+}
+
+static void tcnt_trace(int timer, avr_cycle_count_t cycle)
+{
+    if (trace)
+        printf("tcnt %d %.3f\n", timer, ext_us(cycle));
+}
+
+static struct {
+    int pending;
+    const char *kind;
+    avr_cycle_count_t start, length, line;
+    int rows;
+} window;
+
+static avr_cycle_count_t us_cycles(double us) { return (avr_cycle_count_t)(us * (avr->frequency / 1e6) + 0.5); }
+
+/* Returns 1 if `text` is a camera command (answered now if it is malformed, else once served). */
+static int camera_command(const char *text)
+{
+    double a, b, c, d;
+    int rows;
+    int expose = strncmp(text, "expose ", 7) == 0;
+    if (!expose && strncmp(text, "integrate ", 10) != 0)
+        return 0;
+    if (window.pending) {
+        printf("error %s: an exposure is already being served\n", expose ? "expose" : "integrate");
+        return 1;
+    }
+    int n = expose ? sscanf(text + 7, "%lf %d %lf %lf", &a, &rows, &b, &c)
+                   : sscanf(text + 10, "%lf %lf %d %lf", &d, &a, &rows, &b);
+    if (n != 4 || !(a > 0) || rows < 1 || rows > MAX_ROWS || b < 0 || (expose && c < 0) || (!expose && d < 0)) {
+        printf("error %s expects %s\n", expose ? "expose" : "integrate",
+               expose ? "<T_us > 0> <rows 1..8192> <line_us >= 0> <latency_us >= 0>"
+                      : "<start_us >= 0> <T_us > 0> <rows 1..8192> <line_us >= 0>");
+        return 1;
+    }
+    window.kind = expose ? "expose" : "integrate";
+    window.length = us_cycles(a);
+    window.rows = rows;
+    window.line = us_cycles(b);
+    if (!expose && us_cycles(d) < cycle_base) {
+        printf("error integrate: start %.3f us is before the board's last reset (%.3f us); expected a later window\n",
+               d, cycle_us(cycle_base));
+        return 1;
+    }
+    window.start = expose ? avr->cycle + us_cycles(c) : us_cycles(d) - cycle_base;
+    window.pending = 1;
+    if (expose) {
+        avr_cycle_count_t skew = (avr_cycle_count_t)(rows - 1) * window.line;
+        if (skew >= window.length) {
+            printf("error expose: rolling shutter skew %.3f us is not shorter than the exposure %.3f us; "
+                   "expected a flash window\n", cycle_us(skew), cycle_us(window.length));
+            window.pending = 0;
+            return 1;
+        }
+        avr_cycle_timer_register(avr, window.start + skew - avr->cycle, edge_timer, (void *)1);
+        avr_cycle_timer_register(avr, window.start + window.length - avr->cycle, edge_timer, NULL);
+    }
+    return 1;
+}
+
+static void camera_serve(void)
+{
+    if (!window.pending)
+        return;
+    avr_cycle_count_t end = window.start + (avr_cycle_count_t)(window.rows - 1) * window.line + window.length;
+    if (avr->cycle < end)
+        return;
+    window.pending = 0;
+    printf("ok %s %.4f", window.kind, ext_us(window.start));
+    for (int r = 0; r < window.rows; r++) {
+        avr_cycle_count_t from = window.start + (avr_cycle_count_t)r * window.line;
+        for (int c = 0; c < CHANNELS; c++)
+            printf(" %lld", (long long)pin_model_on_cycles(c, from, from + window.length));
+    }
+    printf("\n");
+    fflush(stdout);
+}
+
 static char cmd[256];
 static size_t cmd_len;
 
@@ -385,18 +502,21 @@ static int serve_stdin(void)
                 run_for_us(2000);
             printf("ok exp float %u\n", now_us());
         } else if (strcmp(cmd, "exp 0") == 0 || strcmp(cmd, "exp 1") == 0) {
-            exposure_floating = 0;
-            exposure_level = cmd[4] == '1';
-            avr_raise_irq(exposure_irq, exposure_level);
+            set_exposure_input(cmd[4] == '1');
             if (!in_bootloader) /* in the bootloader the firmware does not run */
                 run_for_us(2000);
             printf("ok exp %c %u\n", cmd[4], now_us());
         } else if (strcmp(cmd, "link") == 0) {
             printf("ok link %u opens %d resets %u bootloader %d\n", now_us(), host_opens, resets, in_bootloader);
         } else if (strcmp(cmd, "levels") == 0) {
-            sample_levels();
-            printf("ok levels %u %u", now_us(), read16(ICR3_ADDR));
-            print_duties();
+            pin_model_advance();
+            printf("ok levels %.3f", ext_us(avr->cycle));
+            print_levels();
+        } else if (strcmp(cmd, "trace 0") == 0 || strcmp(cmd, "trace 1") == 0) {
+            trace = cmd[6] == '1';
+            printf("ok trace %d\n", trace);
+        } else if (camera_command(cmd)) {
+            /* answered by the camera side, now or once its exposure is over */
         } else if (strncmp(cmd, "peek ", 5) == 0) {
             /* "peek <addr> <n>": n bytes of data space (SRAM, I/O) in hex, for debugging */
             unsigned addr = 0, count = 0;
@@ -454,7 +574,10 @@ int main(int argc, char **argv)
     avr_load_firmware(avr, &fw);
     avr->frequency = 16000000;
     avr->log = LOG_ERROR;
-    trace = getenv("BOOTH_SIM_TRACE") != NULL;
+    pin_model_install(avr);
+    pin_model_tcnt_hook = tcnt_trace;
+    core_reset = avr->reset; /* a reset (the watchdog's) puts the pins back to inputs */
+    avr->reset = reset_all;
 
     uint32_t flags = 0; /* no stdio dump of the UART: it carries frames */
     avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
@@ -512,7 +635,8 @@ int main(int argc, char **argv)
             fprintf(stderr, "booth_sim: firmware stopped (state %d) at %u us\n", state, now_us());
             break;
         }
-        sample_levels();
+        pin_model_advance();
+        camera_serve();
         if (avr->cycle >= next_poll) { /* pty and stdin every 100 us of simulated time */
             next_poll = avr->cycle + avr_usec_to_cycles(avr, 100);
             exposure_float_step();
