@@ -84,6 +84,34 @@ class _Garbled:
         self.error = error
 
 
+IDEMPOTENT_COMMANDS = frozenset(
+    {
+        Command.IDENTIFY,
+        Command.STATUS,
+        Command.COUNT,
+        Command.PING,
+        Command.SET,
+        Command.OFF,
+        Command.WATCHDOG,
+        Command.PATTERN_CLEAR,
+        Command.ROLL,
+    }
+)
+"""Commands that leave the booth as one would, sent twice: sent again once after a damaged reply or
+none. The others (NEXT, PADD, PSET, ARM, START, SERIAL …) are never resent: the booth may have acted on them,
+and a frame-error reply (sequence 00) does not say which request it was for."""
+
+
+class _Retryable(Exception):
+    """A failed exchange :meth:`LedBooth._command` may send again (an idempotent command): the error to
+    raise otherwise, and why."""
+
+    def __init__(self, error: BoothError, why: str) -> None:
+        super().__init__(why)
+        self.error = error
+        self.why = why
+
+
 class LedBooth:
     """Driver of an msflash LED booth (protocol v1, see ``docs/booth-protocol.md``).
 
@@ -768,8 +796,30 @@ class LedBooth:
     def _command(
         self, command: str, *args: object, timeout_s: float | None = None, until_boot: bool = False
     ) -> tuple[protocol.Reply, bytes]:
-        """One request and its reply. ``until_boot``: give up (:class:`_BootedMeanwhile`) as soon as a
-        ``BOOT`` banner arrives, the request having gone to a bootloader that is now gone."""
+        """One request and its reply, asked once more where asking again cannot change what happens.
+
+        An idempotent command (:data:`IDEMPOTENT_COMMANDS`: the queries, SET, OFF, WDOG, PCLR, ROLL) is sent once
+        more after a reply that arrived damaged (a flipped bit, a dropped byte), no reply at all, or a
+        framing error the booth reports (sequence 00): sending it twice leaves the booth as once would.
+        Other commands fail at once (the booth may have acted). Each retry is logged. ``until_boot``: give up (:class:`_BootedMeanwhile`) as soon as a ``BOOT``
+        banner arrives, the request having gone to a bootloader that is now gone (never retried).
+        """
+        name = str(command)
+        try:
+            return self._exchange(name, *args, timeout_s=timeout_s, until_boot=until_boot)
+        except _Retryable as first:
+            if until_boot or name not in IDEMPOTENT_COMMANDS:
+                raise first.error from first.error.__cause__
+            log.warning("%s: %s once more after %s", self._name, name, first.why)
+            try:
+                return self._exchange(name, *args, timeout_s=timeout_s, until_boot=until_boot)
+            except _Retryable as second:
+                raise second.error from second.error.__cause__
+
+    def _exchange(
+        self, command: str, *args: object, timeout_s: float | None = None, until_boot: bool = False
+    ) -> tuple[protocol.Reply, bytes]:
+        """One request and its reply; :class:`_Retryable` wraps what :meth:`_command` may ask again."""
         timeout = self.timeout_s if timeout_s is None else timeout_s
         name = str(command)
         boots = self._boots
@@ -793,31 +843,39 @@ class LedBooth:
                         raise _BootedMeanwhile from None
                     if remaining > 0.05 and until_boot:
                         continue
-                    raise BoothTimeoutError(
-                        f"{self._name}: no reply to {name} within {timeout:g} s; expected "
-                        f"'={seq:02X}:…'; check that the booth is powered and the port is right",
-                        command=name,
-                        timeout_s=timeout,
+                    raise _Retryable(
+                        BoothTimeoutError(
+                            f"{self._name}: no reply to {name} within {timeout:g} s; expected "
+                            f"'={seq:02X}:…'; check that the booth is powered and the port is right",
+                            command=name,
+                            timeout_s=timeout,
+                        ),
+                        f"no reply within {timeout:g} s",
                     ) from None
                 if isinstance(item, _LinkLost):
                     raise self._link_lost_error(name, item.error) from item.error
                 if isinstance(item, _Garbled):
                     err = item.error
-                    raise BoothProtocolError(
+                    garbled = BoothProtocolError(
                         f"{self._name}: bad reply to {name}: {err.raw[:80]!r}; expected "
                         f"{protocol.FRAME_FORM} (line noise? check the cable and baud rate)",
                         command=name,
                         expected=err.expected,
                         raw=err.raw,
-                    ) from err
+                    )
+                    garbled.__cause__ = err
+                    raise _Retryable(garbled, f"a damaged reply {err.raw[:40]!r}")
                 if item.seq == protocol.SEQ_FRAME_ERROR:
                     reply = protocol.parse_reply(item, name, where=self._name)
-                    raise BoothProtocolError(
-                        f"{self._name}: the booth could not read the {name} request "
-                        f"({reply.code} {reply.text}); expected a clean link (check the cable)",
-                        command=name,
-                        expected=f"'={seq:02X}:…'",
-                        raw=item.raw,
+                    raise _Retryable(
+                        BoothProtocolError(
+                            f"{self._name}: the booth could not read the {name} request "
+                            f"({reply.code} {reply.text}); expected a clean link (check the cable)",
+                            command=name,
+                            expected=f"'={seq:02X}:…'",
+                            raw=item.raw,
+                        ),
+                        f"the booth could not read it ({reply.code})",
                     )
                 if item.seq != seq:
                     # A late reply to an earlier command that timed out: not ours.
@@ -826,12 +884,15 @@ class LedBooth:
                 reply = protocol.parse_reply(item, name, where=self._name)
                 if not reply.ok:
                     if reply.code in protocol.FRAME_ERROR_CODES:
-                        raise BoothProtocolError(
-                            f"{self._name}: the booth could not read the {name} request "
-                            f"({reply.code} {reply.text}); expected a clean link (check the cable)",
-                            command=name,
-                            expected=f"'={seq:02X}:…'",
-                            raw=item.raw,
+                        raise _Retryable(
+                            BoothProtocolError(
+                                f"{self._name}: the booth could not read the {name} request "
+                                f"({reply.code} {reply.text}); expected a clean link (check the cable)",
+                                command=name,
+                                expected=f"'={seq:02X}:…'",
+                                raw=item.raw,
+                            ),
+                            f"the booth could not read it ({reply.code})",
                         )
                     raise BoothError(
                         f"{self._name}: booth refused {name} ({reply.code}: {reply.text}); expected 'OK {name}'"
@@ -938,6 +999,16 @@ class LedBooth:
         try:
             frame = protocol.parse_frame(line, where=self._name)
         except BoothProtocolError as err:
+            tail = _resynchronised(line, self._name)
+            if tail is not None:  # a frame that lost its line end, then a whole frame: keep the whole one
+                log.warning(
+                    "%s: dropped a damaged frame %r (its line end was lost) before %r",
+                    self._name,
+                    line[: len(line) - len(tail)][:80],
+                    tail[:40],
+                )
+                self._dispatch(tail)
+                return
             if line.startswith(protocol.MARK_EVENT.encode()):
                 self._push_event(_Garbled(err))
             else:
@@ -992,6 +1063,20 @@ class LedBooth:
         with self._events_cv:
             self._events.append(item)
             self._events_cv.notify_all()
+
+
+def _resynchronised(line: bytes, where: str) -> bytes | None:
+    """The whole frame at the end of a damaged ``line``, if one is there (a byte lost from a frame may be
+    its line end: the next frame then follows it on the same line), else None."""
+    marks = (protocol.MARK_REPLY.encode(), protocol.MARK_EVENT.encode())
+    for start in range(1, len(line)):
+        if line[start : start + 1] in marks:
+            try:
+                protocol.parse_frame(line[start:], where=where)
+            except BoothProtocolError:
+                continue
+            return line[start:]
+    return None
 
 
 def open_serial_port(url: str, baudrate: int, read_timeout_s: float, write_timeout_s: float) -> serial.SerialBase:

@@ -138,7 +138,7 @@ class EmulatorFault:
     count: int = 1
 
 
-FAULT_KINDS = ("drop", "flip", "garble_input", "stall", "close")
+FAULT_KINDS = ("drop", "drop_end", "flip", "garble_input", "stall", "close")
 
 
 class BoothEmulator:
@@ -425,7 +425,8 @@ class BoothEmulator:
     def inject_fault(self, kind: str, count: int = 1) -> None:
         """Arrange a fault on the link.
 
-        ``drop``: drop one byte from each of the next ``count`` outgoing frames; ``flip``:
+        ``drop``: drop one byte from each of the next ``count`` outgoing frames (``drop_end``: its
+        line end, so the frame runs into the next one); ``flip``:
         flip one bit in each; ``garble_input``: flip one bit in the next ``count`` incoming
         frames; ``stall``: neither read nor answer until :meth:`resume` (the firmware keeps
         running, so its watchdog fires); ``close``: ask the transport to hang up.
@@ -974,12 +975,14 @@ class BoothEmulator:
         if self._stalled:
             return
         for fault in self._faults:
-            if fault.kind in ("drop", "flip"):
+            if fault.kind in ("drop", "drop_end", "flip"):
                 self._faults.remove(fault)
                 data = bytearray(frame)
                 middle = len(data) // 2
                 if fault.kind == "drop":
                     del data[middle]
+                elif fault.kind == "drop_end":
+                    del data[-1]
                 else:
                     data[middle] ^= 0x10
                 frame = bytes(data)

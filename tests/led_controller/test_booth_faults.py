@@ -23,25 +23,61 @@ OFF = (0.0,) * 7
 
 
 @pytest.mark.parametrize("kind", ["drop", "flip"])
-def test_damaged_reply_is_a_protocol_error_and_exit_switches_off(booth_on_pty: PtyBoothServer, kind: str) -> None:
+def test_damaged_reply_to_a_command_that_acts_is_a_protocol_error_and_exit_switches_off(
+    booth_on_pty: PtyBoothServer, kind: str
+) -> None:
+    """START acts (a second START is refused: not armed): it is never sent again, the damaged reply is the error."""
     emulator = booth_on_pty.emulator
-    with pytest.raises(BoothProtocolError, match="bad reply to SET") as info, LedBooth.open(booth_on_pty.port) as booth:
+    with (
+        pytest.raises(BoothProtocolError, match="bad reply to START") as info,
+        LedBooth.open(booth_on_pty.port) as booth,
+    ):
+        booth.load_pattern([[0.5] * 7])
+        booth.arm("camera")
         emulator.inject_fault(kind)
-        booth.set_levels([0.7] * 7)
-    assert info.value.command == "SET"
+        booth.start()
+    assert info.value.command == "START"
     assert info.value.raw.startswith(b"=0")
     assert emulator.levels == OFF
 
 
-def test_damaged_request_never_sets_a_wrong_level(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+def test_damaged_request_that_acts_never_sets_a_wrong_step(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
     emulator = booth_on_pty.emulator
-    booth.set_levels([0.2] * 7)
+    booth.load_pattern([[0.2] * 7])
+    booth.arm("camera")
     emulator.inject_fault("garble_input")
-    with pytest.raises(BoothProtocolError, match=r"could not read the SET request \(E_CRC"):
-        booth.set_levels([0.9] * 7)
-    assert levels_close(emulator.levels, [0.2] * 7)
+    with pytest.raises(BoothProtocolError, match=r"could not read the START request \(E_CRC"):
+        booth.start()
+    assert emulator.state == "ARMED" and emulator.levels == OFF
     status = booth.status()
     assert status.bad_frames == 1 and status.last_error == "E_CRC"
+
+
+@pytest.mark.parametrize("kind", ["drop", "flip", "drop_end", "garble_input"])
+def test_an_idempotent_command_is_sent_once_more_after_one_damaged_exchange(
+    booth: LedBooth, booth_on_pty: PtyBoothServer, kind: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A flipped bit, a lost byte or line end in the reply, or a request the booth could not read:
+    STAT, CNT, ID, PING, SET, OFF and WDOG leave the booth as once would, so they are sent again once
+    (logged) before anything fails. A lost line end costs the reply's timeout first."""
+    emulator = booth_on_pty.emulator
+    booth.timeout_s = 0.5
+    booth.set_levels([0.2] * 7)
+    for call in (booth.status, booth.trigger_count, booth.identify, booth.ping, lambda: booth.set_levels([0.6] * 7)):
+        emulator.inject_fault(kind)
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="msflash.led_controller.booth"):
+            call()
+        assert any(" once more after " in record.getMessage() for record in caplog.records), caplog.text
+    assert levels_close(emulator.levels, [0.6] * 7)
+
+
+def test_two_damaged_exchanges_in_a_row_fail_in_one_line(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:
+    emulator = booth_on_pty.emulator
+    emulator.inject_fault("flip", count=2)
+    with pytest.raises(BoothProtocolError, match="bad reply to STAT"):
+        booth.status()
+    assert booth.status().state == "IDLE"  # the link itself is fine
 
 
 def test_damaged_event_is_reported(booth: LedBooth, booth_on_pty: PtyBoothServer) -> None:

@@ -40,13 +40,8 @@ def test_error_transcript(replay_port, transcripts_dir: Path) -> None:
         booth.identify()
         with pytest.raises(BoothError, match=r"refused START \(E_STATE"):
             booth.start()
-        with pytest.raises(BoothProtocolError, match="could not read the SET request") as bad_request:
-            booth.set_levels([0.5] * 7)
-        assert bad_request.value.command == "SET"
-        with pytest.raises(BoothProtocolError, match="bad reply to PING") as bad_reply:
-            booth.ping()
-        assert bad_reply.value.raw == b"=04:007:OK0PING*789C"
-        booth.ping()
+        booth.set_levels([0.5] * 7)  # the booth could not read the first SET (E_CRC): sent once more
+        booth.ping()  # the first reply arrived damaged: asked once more
     port.assert_done()
 
 
@@ -84,7 +79,15 @@ def test_replay_fails_on_left_over_lines(replay_port) -> None:
 
 def test_stale_reply_is_dropped_and_the_command_times_out(replay_port) -> None:
     # The booth answers with a reply for another sequence number: never taken for ours.
-    port = replay_port(_lines((">", encode_request(1, "CNT")), ("<", encode_frame("=", 9, "OK CNT 5"))))
+    # CNT is a query: asked once more (sequence 2), again answered for another sequence number.
+    port = replay_port(
+        _lines(
+            (">", encode_request(1, "CNT")),
+            ("<", encode_frame("=", 9, "OK CNT 5")),
+            (">", encode_request(2, "CNT")),
+            ("<", encode_frame("=", 9, "OK CNT 5")),
+        )
+    )
     booth = LedBooth(port, timeout_s=0.05)
     try:
         with pytest.raises(BoothTimeoutError, match="no reply to CNT within 0.05 s") as info:
