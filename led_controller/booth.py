@@ -866,17 +866,7 @@ class LedBooth:
                     garbled.__cause__ = err
                     raise _Retryable(garbled, f"a damaged reply {err.raw[:40]!r}")
                 if item.seq == protocol.SEQ_FRAME_ERROR:
-                    reply = protocol.parse_reply(item, name, where=self._name)
-                    raise _Retryable(
-                        BoothProtocolError(
-                            f"{self._name}: the booth could not read the {name} request "
-                            f"({reply.code} {reply.text}); expected a clean link (check the cable)",
-                            command=name,
-                            expected=f"'={seq:02X}:…'",
-                            raw=item.raw,
-                        ),
-                        f"the booth could not read it ({reply.code})",
-                    )
+                    raise self._unread(name, seq, protocol.parse_reply(item, name, where=self._name), item.raw)
                 if item.seq != seq:
                     # A late reply to an earlier command that timed out: not ours.
                     log.warning("%s: dropped stale reply %r while waiting for %s", self._name, item.raw, name)
@@ -884,20 +874,24 @@ class LedBooth:
                 reply = protocol.parse_reply(item, name, where=self._name)
                 if not reply.ok:
                     if reply.code in protocol.FRAME_ERROR_CODES:
-                        raise _Retryable(
-                            BoothProtocolError(
-                                f"{self._name}: the booth could not read the {name} request "
-                                f"({reply.code} {reply.text}); expected a clean link (check the cable)",
-                                command=name,
-                                expected=f"'={seq:02X}:…'",
-                                raw=item.raw,
-                            ),
-                            f"the booth could not read it ({reply.code})",
-                        )
+                        raise self._unread(name, seq, reply, item.raw)
                     raise BoothError(
                         f"{self._name}: booth refused {name} ({reply.code}: {reply.text}); expected 'OK {name}'"
                     )
                 return reply, item.raw
+
+    def _unread(self, name: str, seq: int, reply: protocol.Reply, raw: bytes) -> _Retryable:
+        """The booth says it could not read the request (a framing error): nothing was done."""
+        return _Retryable(
+            BoothProtocolError(
+                f"{self._name}: the booth could not read the {name} request "
+                f"({reply.code} {reply.text}); expected a clean link (check the cable)",
+                command=name,
+                expected=f"'={seq:02X}:…'",
+                raw=raw,
+            ),
+            f"the booth could not read it ({reply.code})",
+        )
 
     def _drop_stale_replies(self) -> None:
         while True:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -42,3 +44,26 @@ def emulator_levels(server: LiveServer) -> tuple[float, ...]:
     emulator = server.rig.emulator
     assert emulator is not None
     return tuple(emulator.levels)
+
+
+def start_live_process(tmp_path: Path) -> tuple[subprocess.Popen, str, Path]:
+    """``msflash live --port 0`` in a subprocess (sim rig, the booth transcript logged): the process,
+    the page's URL (printed once the rig is open and the socket listens) and the transcript's path."""
+    transcript = tmp_path / "serial.log"
+    command = [sys.executable, "-m", "msflash.acquisition.app.cli", "live", "--port", "0"]
+    command += ["--runs", str(tmp_path / "runs"), "--log-serial", str(transcript)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert process.stdout is not None
+    return process, process.stdout.readline().strip(), transcript
+
+
+def page_token(page: str) -> str:
+    """The session token the live page carries."""
+    return page.split('name="msflash-token" content="')[1].split('"')[0]
+
+
+def stopped_with_the_leds_off(transcript: Path) -> bool:
+    """Whether the booth transcript sends OFF after the last SET (what a stopping live view must do)."""
+    sent = [line for line in transcript.read_text().splitlines() if line.startswith(">")]
+    last_set = max(i for i, line in enumerate(sent) if ":SET " in line)
+    return any(":OFF*" in line for line in sent[last_set + 1 :])

@@ -6,29 +6,14 @@ requests, bytes that are not HTTP, WebSocket sessions the page never opens and c
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
+from tests.acquisition.fuzz_runner import run_fuzz_worker
 
 
 def _fuzz(examples: int, timeout_s: float) -> dict:
-    try:
-        done = subprocess.run(
-            [sys.executable, "-m", "tests.acquisition.live_fuzz_worker", "--examples", str(examples)],
-            cwd=REPO,
-            capture_output=True,
-            text=True,
-            timeout=timeout_s,
-            check=False,
-        )
-    except subprocess.TimeoutExpired:
-        pytest.fail(f"the live fuzzer did not finish {examples} examples within {timeout_s} s (a hang)")
-    assert done.returncode == 0, done.stdout[-6000:] + done.stderr[-3000:]
-    summary = json.loads(done.stdout.splitlines()[-1])
+    summary = run_fuzz_worker("tests.acquisition.live_fuzz_worker", examples, timeout_s)
     outcomes = summary["outcomes"]
     # The API was reached (valid calls answered 200) and refused (400, 403) and the WebSocket opened.
     assert outcomes.get("http 200", 0) > examples // 10

@@ -9,8 +9,6 @@ import asyncio
 import json
 import os
 import signal
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +20,14 @@ from msflash.acquisition.app import cli
 from msflash.acquisition.app.live.server import LAST_CLIENT_GRACE_S, TOKEN_HEADER, LiveServer, bind, serve_in_thread
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.rig import open_rig
-from tests.acquisition.live_support import emulator_levels, live_server, wait_until
+from tests.acquisition.live_support import (
+    emulator_levels,
+    live_server,
+    page_token,
+    start_live_process,
+    stopped_with_the_leds_off,
+    wait_until,
+)
 
 
 def request(method: str, url: str | URL, headers: dict[str, str] | None = None, body: Any = None) -> tuple[int, str]:
@@ -192,16 +197,11 @@ def test_live_refuses_a_busy_port_and_a_mosaic_on_the_fake_in_one_line(tmp_path:
 def test_msflash_live_serves_the_page_and_ctrl_c_stops_it_with_the_leds_off(
     tmp_path: Path, stop: signal.Signals
 ) -> None:
-    transcript = tmp_path / "serial.log"
-    command = [sys.executable, "-m", "msflash.acquisition.app.cli", "live", "--port", "0"]
-    command += ["--runs", str(tmp_path / "runs"), "--log-serial", str(transcript)]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process, url, transcript = start_live_process(tmp_path)
     try:
-        assert process.stdout is not None
-        url = process.stdout.readline().strip()  # the URL, once the rig is open and the socket listens
         assert url.startswith("http://127.0.0.1:") and url.endswith("/")
         status, page = request("GET", url)
-        token = page.split('name="msflash-token" content="')[1].split('"')[0]
+        token = page_token(page)
         assert status == 200 and len(token) >= 24
         assert request("POST", url + "api/levels", {TOKEN_HEADER: token}, {"channel": 1, "level": 0.5})[0] == 200
         process.send_signal(stop)
@@ -213,9 +213,8 @@ def test_msflash_live_serves_the_page_and_ctrl_c_stops_it_with_the_leds_off(
     assert process.returncode == 0, err
     assert err.strip().splitlines()[-1] == "msflash: live view stopped; LEDs off"
     sent = [line for line in transcript.read_text().splitlines() if line.startswith(">")]
-    last_set = max(i for i, line in enumerate(sent) if ":SET " in line)
-    assert ":SET 0000 8000 0000" in sent[last_set]
-    assert any(":OFF*" in line for line in sent[last_set + 1 :])
+    assert ":SET 0000 8000 0000" in [line for line in sent if ":SET " in line][-1]
+    assert stopped_with_the_leds_off(transcript)
 
 
 def test_a_sequence_at_the_live_exposure_and_a_second_fire_while_it_runs(tmp_path: Path) -> None:

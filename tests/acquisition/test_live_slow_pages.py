@@ -14,8 +14,6 @@ import json
 import os
 import signal
 import socket
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -25,7 +23,14 @@ from pathlib import Path
 import aiohttp
 
 from msflash.acquisition.app.live.server import TOKEN_HEADER, LiveServer
-from tests.acquisition.live_support import emulator_levels, live_server, wait_until
+from tests.acquisition.live_support import (
+    emulator_levels,
+    live_server,
+    page_token,
+    start_live_process,
+    stopped_with_the_leds_off,
+    wait_until,
+)
 
 HANG_GUARD_S = 60.0
 
@@ -193,25 +198,19 @@ def test_slow_pages_get_the_latest_frame_not_a_backlog(tmp_path: Path) -> None:
 
 
 def test_sigterm_stops_live_with_the_leds_off_whatever_the_pages_do(tmp_path: Path) -> None:
-    transcript = tmp_path / "serial.log"
-    command = [sys.executable, "-m", "msflash.acquisition.app.cli", "live", "--port", "0"]
-    command += ["--runs", str(tmp_path / "runs"), "--log-serial", str(transcript)]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process, url, transcript = start_live_process(tmp_path)
     try:
-        assert process.stdout is not None
-        url = process.stdout.readline().strip()
         port = int(url.rsplit(":", 1)[1].strip("/"))
 
-        async def page_token() -> str:
+        async def leds_on() -> str:
             async with aiohttp.ClientSession() as session:
                 async with session.get(url) as response:
-                    page = await response.text()
-                token = page.split('name="msflash-token" content="')[1].split('"')[0]
+                    token = page_token(await response.text())
                 async with session.post(url + "api/levels", headers={TOKEN_HEADER: token}, json={"levels": [0.5] * 7}):
                     pass
                 return token
 
-        token = asyncio.run(page_token())
+        token = asyncio.run(leds_on())
         pages = [stalled_page(port, token, receive_buffer=1024) for _ in range(3)]
         with open_sockets(*pages, unfinished_handshake(port)):
             for page in pages:  # each page's queue is full (its sends block) or the server dropped it
@@ -226,6 +225,4 @@ def test_sigterm_stops_live_with_the_leds_off_whatever_the_pages_do(tmp_path: Pa
             process.wait()
     assert process.returncode == 0, err
     assert err.strip().splitlines()[-1] == "msflash: live view stopped; LEDs off"
-    sent = [line for line in transcript.read_text().splitlines() if line.startswith(">")]
-    last_set = max(i for i, line in enumerate(sent) if ":SET " in line)
-    assert any(":OFF*" in line for line in sent[last_set + 1 :])
+    assert stopped_with_the_leds_off(transcript)

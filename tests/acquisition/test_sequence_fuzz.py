@@ -7,29 +7,14 @@ right: :mod:`tests.acquisition.sequence_mutations`). CI runs 200 derandomised ex
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
+from tests.acquisition.fuzz_runner import run_fuzz_worker
 
 
 def _fuzz(examples: int, timeout_s: float) -> dict:
-    try:
-        done = subprocess.run(
-            [sys.executable, "-m", "tests.acquisition.sequence_fuzz_worker", "--examples", str(examples)],
-            cwd=REPO,
-            capture_output=True,
-            text=True,
-            timeout=timeout_s,
-            check=False,
-        )
-    except subprocess.TimeoutExpired:
-        pytest.fail(f"the fuzz worker did not finish {examples} examples within {timeout_s} s (a hang)")
-    assert done.returncode == 0, done.stdout[-6000:] + done.stderr[-6000:]
-    summary = json.loads(done.stdout.splitlines()[-1])
+    summary = run_fuzz_worker("tests.acquisition.sequence_fuzz_worker", examples, timeout_s)
     outcomes = summary["outcomes"]
     # Every example (drawn, plus each kind of frame change) ran check and one other command; every
     # corrupt one was refused (else the worker failed).

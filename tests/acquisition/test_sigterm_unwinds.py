@@ -12,6 +12,9 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -24,50 +27,37 @@ def _staging(parent: Path) -> list[Path]:
     return sorted(parent.glob(".*.export-tmp"))
 
 
-@pytest.mark.parametrize("stop", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
-def test_a_stopping_signal_during_an_export_leaves_nothing_and_says_so_in_one_line(
-    tmp_path: Path, stop: signal.Signals
-) -> None:
-    """SIGHUP is the terminal or SSH session closing under the command (it killed it where it stood)."""
-    sequence = write_test_sequence(tmp_path / "seq", cfa="RGGB")
+@dataclass(frozen=True)
+class Export:
+    """A sequence to export and a new folder ``out`` in an empty ``parent``."""
+
+    sequence: Path
+    parent: Path
+    out: Path
+
+
+@pytest.fixture
+def export(tmp_path: Path) -> Export:
     parent = tmp_path / "exports"
     parent.mkdir()
-    out = parent / "out"
+    return Export(write_test_sequence(tmp_path / "seq", cfa="RGGB"), parent, parent / "out")
+
+
+@contextmanager
+def export_process(export: Export) -> Iterator[subprocess.Popen]:
+    """A real ``msflash export`` of every format into ``export.out``; killed if still running at the end."""
     process = subprocess.Popen(
-        [sys.executable, "-m", "msflash.acquisition.app.cli", "export", str(sequence), "--to", "dng,ome-tiff,csv,exr"]
-        + ["--out", str(out)],
+        [sys.executable, "-m", "msflash.acquisition.app.cli", "export", str(export.sequence)]
+        + ["--to", "dng,ome-tiff,csv,exr", "--out", str(export.out)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
     try:
-        deadline = time.monotonic() + 120  # a hang guard, not a timing
-        while not _staging(parent):
-            assert process.poll() is None, process.communicate()
-            assert time.monotonic() < deadline, "no staging folder appeared"
-            time.sleep(0.005)
-        # Held still while the signal is sent: it lands while the files are being written.
-        os.kill(process.pid, signal.SIGSTOP)
-        assert _staging(parent) and not out.exists()
-        os.kill(process.pid, stop)
-        os.kill(process.pid, signal.SIGCONT)
-        _, err = process.communicate(timeout=120)
+        yield process
     finally:
         if process.poll() is None:
             process.kill()
             process.communicate()
-    assert process.returncode == 128 + stop, err.decode()
-    assert err.decode().strip().splitlines()[-1] == f"msflash: terminated ({stop.name})"
-    assert "Traceback" not in err.decode()
-    assert list(parent.iterdir()) == []
-
-
-def _export_process(sequence: Path, out: Path) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "msflash.acquisition.app.cli", "export", str(sequence), "--to", "dng,ome-tiff,csv,exr"]
-        + ["--out", str(out)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
 
 
 def _stopped_while_staging(process: subprocess.Popen, parent: Path) -> None:
@@ -80,53 +70,54 @@ def _stopped_while_staging(process: subprocess.Popen, parent: Path) -> None:
     os.kill(process.pid, signal.SIGSTOP)
 
 
+@pytest.mark.parametrize("stop", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_a_stopping_signal_during_an_export_leaves_nothing_and_says_so_in_one_line(
+    export: Export, stop: signal.Signals
+) -> None:
+    """SIGHUP is the terminal or SSH session closing under the command (it killed it where it stood)."""
+    with export_process(export) as process:
+        # Held still while the signal is sent: it lands while the files are being written.
+        _stopped_while_staging(process, export.parent)
+        assert _staging(export.parent) and not export.out.exists()
+        os.kill(process.pid, stop)
+        os.kill(process.pid, signal.SIGCONT)
+        _, err = process.communicate(timeout=120)
+    assert process.returncode == 128 + stop, err.decode()
+    assert err.decode().strip().splitlines()[-1] == f"msflash: terminated ({stop.name})"
+    assert "Traceback" not in err.decode()
+    assert list(export.parent.iterdir()) == []
+
+
 def test_a_killed_exports_staging_folder_is_removed_by_the_next_export_with_a_note(
-    tmp_path: Path, capsys: pytest.CaptureFixture
+    export: Export, capsys: pytest.CaptureFixture
 ) -> None:
     """SIGKILL runs no handler: the staging folder and the name's lock file stay; the next export takes over."""
-    sequence = write_test_sequence(tmp_path / "seq", cfa="RGGB")
-    parent = tmp_path / "exports"
-    parent.mkdir()
-    out = parent / "out"
-    process = _export_process(sequence, out)
-    try:
-        _stopped_while_staging(process, parent)
+    with export_process(export) as process:
+        _stopped_while_staging(process, export.parent)
         os.kill(process.pid, signal.SIGKILL)
         process.communicate(timeout=120)
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
-    left = _staging(parent)
-    assert len(left) == 1 and (parent / ".out.export-lock").exists() and not out.exists()
-    assert main(["export", str(sequence), "--to", "csv", "--out", str(out)]) == 0
+    left = _staging(export.parent)
+    assert len(left) == 1 and (export.parent / ".out.export-lock").exists() and not export.out.exists()
+    assert main(["export", str(export.sequence), "--to", "csv", "--out", str(export.out)]) == 0
     err = capsys.readouterr().err
     assert f"msflash: note: removed {left[0]}, the unfinished folder of an export that was stopped (killed?)" in err
-    assert sorted(p.name for p in parent.iterdir()) == ["out"]
+    assert sorted(p.name for p in export.parent.iterdir()) == ["out"]
 
 
 def test_of_two_exports_into_one_folder_the_second_names_the_first(
-    tmp_path: Path, capsys: pytest.CaptureFixture
+    export: Export, capsys: pytest.CaptureFixture
 ) -> None:
-    sequence = write_test_sequence(tmp_path / "seq", cfa="RGGB")
-    parent = tmp_path / "exports"
-    parent.mkdir()
-    out = parent / "out"
-    first = _export_process(sequence, out)
-    try:
-        _stopped_while_staging(first, parent)
-        status = main(["export", str(sequence), "--to", "csv", "--out", str(out)])
+    with export_process(export) as first:
+        _stopped_while_staging(first, export.parent)
+        status = main(["export", str(export.sequence), "--to", "csv", "--out", str(export.out)])
         err = capsys.readouterr().err.strip().splitlines()
         os.kill(first.pid, signal.SIGCONT)
         _, first_err = first.communicate(timeout=120)
-    finally:
-        if first.poll() is None:
-            first.kill()
-            first.communicate()
     assert status == 2 and len(err) == 1
-    assert err[0].startswith(f"msflash: error: --out {out}: another export is writing it: msflash process {first.pid}")
+    expected = f"msflash: error: --out {export.out}: another export is writing it: msflash process {first.pid}"
+    assert err[0].startswith(expected)
     assert first.returncode == 0, first_err.decode()  # the first export was not disturbed
-    assert sorted(p.name for p in parent.iterdir()) == ["out"]
+    assert sorted(p.name for p in export.parent.iterdir()) == ["out"]
 
 
 def test_an_export_into_the_sequence_folder_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
