@@ -105,6 +105,14 @@ def grid_nm(grid: tuple[float, float, float]) -> np.ndarray:
 
 
 def _light_energy(case: HarnessCase, wavelengths: np.ndarray, led_energy: np.ndarray) -> np.ndarray:
+    if case.light.startswith("physics:"):
+        from tests.harness.physics_cases import light_of
+        from tests.harness.physics_lights import on_grid
+
+        fine = light_of(case).energy()
+        # The rendering grid gets the 1-nm spectrum itself; a sequence's grid what a spectroradiometer of that
+        # bandwidth reports (a narrow line between two samples is shared by both, not lost).
+        return fine if np.array_equal(wavelengths, tables.FINE_NM) else on_grid(fine, wavelengths)
     if case.light.startswith("leds:"):
         return led_energy @ np.array([float(v) for v in case.light[5:].split(",")])
     return tables.lights().column(case.light).on(wavelengths)[:, 0]
