@@ -42,7 +42,7 @@ def _add_calibration_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-AMBIENT_MODELS = ("led", "prior", "auto")
+AMBIENT_MODELS = ("led", "prior", "family", "auto")
 DEFAULT_AMBIENT_MODEL = "led"
 """Default of ``--model``: the LED-span estimate (eq. 4–6), the one ``run`` and ``flash`` solve their flash from.
 ``auto`` beats it on the harness's mean (docs/ambient-harness.md) but not yet on the worst scenes, and ``run``
@@ -50,14 +50,16 @@ and ``flash`` do not use it yet."""
 
 
 def add_model_option(parser: argparse.ArgumentParser) -> None:
-    """``--model led|prior|auto`` (docs/light-prior.md)."""
+    """``--model led|prior|family|auto`` (docs/light-prior.md, docs/light-families.md)."""
     parser.add_argument(
         "--model",
         default=DEFAULT_AMBIENT_MODEL,
         choices=AMBIENT_MODELS,
         help="ambient model: led (a mix of the LED spectra, eq. 4-6; default), prior (a basis learnt "
         "from measured lights, read through the surfaces' colours; needs the camera's "
-        "responsivities), auto (prior only where it predicts held-out pixels better)",
+        "responsivities), family (light from physics: thermal, discharge, solid-state, transmitted or a "
+        "mixture, the family and its complexity chosen by held-out prediction; needs the responsivities), "
+        "auto (the LEDs' span unless a family predicts held-out pixels clearly better)",
     )
 
 

@@ -1,9 +1,10 @@
-"""From a recorded sequence to the light-prior estimate and the ``auto`` model choice (issue 17, build 3).
+"""From a recorded sequence to the models beyond the LEDs' span: ``--model prior|family|auto`` (issues 17 and 30).
 
-The thin layer between a :class:`~acquisition.sequence.format.Sequence` and
-:mod:`processing.light_prior`, as :mod:`acquisition.session.analysis` is for eq. 4–6: frames are read with
+The thin layer between a :class:`~acquisition.sequence.format.Sequence` and :mod:`processing.light_prior` /
+:mod:`processing.light_families`, as :mod:`acquisition.session.analysis` is for eq. 4–6: frames are read with
 :func:`~acquisition.session.analysis.load_frame_stack`, binned like ``msflash estimate`` and reduced to
-channel-resolved statistics; the LED spectra and responsivities go to photons.
+channel-resolved statistics; the LED spectra and responsivities go to photons. :data:`MODEL_ROUTES` is the one
+table from a ``--model`` name to what it computes.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from msflash.acquisition.session.analysis import (
 )
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
+from msflash.processing.light_families import AUTO_MARGIN, FamilyEstimate, family_model
 from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
 
 
@@ -134,42 +136,141 @@ def led_side(
     return led, analysis.estimate_payload(sequence, led), False
 
 
+def estimate_sequence_family(
+    sequence: Sequence, stack: FrameStack | None = None
+) -> tuple[PriorEstimate, FamilyEstimate]:
+    """The light prior's and the family model's estimates of a sequence (the prior is one of the candidates).
+
+    Raises
+    ------
+    RecordingError
+        If the sequence has no camera responsivities or unusable frames.
+    """
+    statistics = sequence_channel_statistics(sequence, stack)
+    leds = led_spectra_photons(sequence)
+    camera = camera_responsivities_photons(sequence)
+    prior = prior_model(statistics.channels, leds, camera).estimate(statistics)
+    family = family_model(statistics.channels, leds, camera).estimate(statistics, prior.spectrum.values[:, 0])
+    return prior, family
+
+
+def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
+    """The JSON block ``family``: the chosen family and form, its parameters, the evidence and why."""
+    fit = family.chosen.fit
+
+    def evidence(candidate) -> dict:  # noqa: ANN001 — a light_families.Candidate
+        return {
+            "model": candidate.fit.name,
+            "family": candidate.fit.family,
+            "n_parameters": candidate.fit.n_parameters,
+            "held_out_relative_error": candidate.held_out_error,
+            "held_out_relative_error_noise_removed": candidate.held_out_error_noise_removed,
+        }
+
+    return {
+        "family": fit.family,
+        "form": fit.name,
+        "parameters": fit.parameters(),
+        "n_parameters": fit.n_parameters,
+        "reason": family.reason,
+        "spectrum": spectrum_in_sequence_unit(sequence, family.spectrum),
+        "spectrum_std": spectrum_in_sequence_unit(
+            sequence, family.spectrum.replace(values=family.spectrum_std[:, None])
+        ),
+        "relative_residual": family.relative_residual,
+        "evidence": {
+            "criterion": "held-out prediction of the ambient image (5 folds of block rows, noise removed); the "
+            "simplest candidate within 20 % of the best is preferred",
+            "led": evidence(family.led),
+            "candidates": [evidence(c) for c in family.candidates],
+        },
+        "warnings": list(family.warnings),
+    }
+
+
+def _prior_route(sequence: Sequence, stack: FrameStack, requested: str, varies: bool) -> tuple[dict, str, str, dict]:
+    """``--model prior`` and the prior's fields: (its payload, chosen, reason, the replacement fields)."""
+    result = estimate_sequence_prior(sequence, stack)
+    prior = prior_payload(sequence, result)
+    replacement = {
+        "spectrum": prior["prior"]["spectrum"],
+        "spectrum_std": prior["prior"]["spectrum_std"],
+        "band": "±1σ posterior of the light prior (pixel noise and the model's misfit)",
+        "warnings": list(result.prior.warnings),
+    }
+    extra = {"model_choice": prior["model_choice"], "prior": prior["prior"]}
+    return extra, "prior", "asked for the light prior (--model prior)", replacement
+
+
+def _family_route(sequence: Sequence, stack: FrameStack, requested: str, varies: bool) -> tuple[dict, str, str, dict]:
+    """``--model family`` and ``--model auto``: the family model's choice (auto: the LEDs' span unless the evidence
+    says otherwise; a scene whose illuminant varies keeps the local LED model)."""
+    prior, family = estimate_sequence_family(sequence, stack)
+    block = family_payload(sequence, family)
+    led_error = family.led.held_out_error_noise_removed
+    choice = {
+        "held_out_relative_error_noise_removed": {
+            "led": led_error,
+            family.chosen.fit.name: family.chosen.held_out_error_noise_removed,
+        },
+        "margin": AUTO_MARGIN,
+    }
+    if requested == "family":
+        chosen, reason = family.chosen.fit.name, family.reason
+    elif varies:
+        chosen, reason = (
+            "led",
+            "the illuminant varies across the scene (the local LED model was chosen); the families are one global "
+            "spectrum",
+        )
+    else:
+        chosen, reason = family.auto_model, family.auto_reason
+    replacement = {
+        "spectrum": block["spectrum"],
+        "spectrum_std": block["spectrum_std"],
+        "band": "±1σ of the fitted family (tempered posterior) and the spread of the candidates that predict "
+        "held-out pixels about as well",
+        "warnings": list(family.warnings),
+    }
+    prior_block = {
+        "spectrum": spectrum_in_sequence_unit(sequence, prior.spectrum),
+        "spectrum_std": spectrum_in_sequence_unit(sequence, prior.spectrum.replace(values=prior.spectrum_std[:, None])),
+        "warnings": list(prior.warnings),
+    }
+    return {"model_choice": choice, "family": block, "prior": prior_block}, chosen, reason, replacement
+
+
+MODEL_ROUTES = {"prior": _prior_route, "family": _family_route, "auto": _family_route}
+"""``--model`` name → its route: ``(sequence, stack, requested, varies) → (fields, chosen, reason, replacement)``.
+``replacement`` holds the spectrum, band, band meaning and warnings that replace the LED ones when ``chosen`` is
+not ``led`` (``led`` itself needs no route: it is :mod:`acquisition.session.analysis`'s estimate)."""
+
+
 def with_model_choice(
     sequence: Sequence, stack: FrameStack, payload: dict, requested: str, varies: bool
 ) -> tuple[dict, str, str]:
-    """The estimate payload of ``--model prior|auto``: the light prior estimated, the model chosen and why.
+    """The estimate payload of ``--model prior|family|auto``: the model estimated, the model chosen and why.
 
-    ``prior`` takes the light prior; ``auto`` keeps a local LED estimate (the prior is one global
-    spectrum), else takes :func:`~processing.light_prior.choose_model`'s choice. The chosen model's
-    spectrum, band and warnings replace the LED ones, which stay under ``led`` when the prior wins.
+    ``prior`` takes the light prior; ``family`` the family model's choice (:mod:`processing.light_families`);
+    ``auto`` keeps the LEDs' span unless a family predicts held-out pixels clearly better, and keeps a local LED
+    estimate (a family is one global spectrum). The chosen model's spectrum, band and warnings replace the LED
+    ones, which stay under ``led`` when another model wins.
 
     Returns
     -------
     dict, str, str
         The payload (docs/architecture.md §7), the chosen model and the reason.
     """
-    result = estimate_sequence_prior(sequence, stack)
-    prior = prior_payload(sequence, result)
-    choice = prior["model_choice"]
-    if requested == "prior":
-        chosen, reason = "prior", "asked for the light prior (--model prior)"
-    elif varies:
-        chosen, reason = (
-            "led",
-            "the illuminant varies across the scene (the local LED model was chosen); "
-            "the light prior is one global spectrum",
-        )
-    else:
-        chosen, reason = choice["model"], choice["reason"]
+    fields, chosen, reason, replacement = MODEL_ROUTES[requested](sequence, stack, requested, varies)
     payload = dict(payload)
+    payload.update({key: value for key, value in fields.items() if key != "model_choice"})
     payload["model"] = chosen
-    payload["model_choice"] = {**choice, "model": chosen, "reason": reason, "requested": requested}
-    payload["prior"] = prior["prior"]
-    if chosen == "prior":
+    payload["model_choice"] = {**fields["model_choice"], "model": chosen, "reason": reason, "requested": requested}
+    if chosen != "led":
         payload["led"] = {key: payload[key] for key in ("spectrum", "spectrum_std", "ambient_weights", "warnings")}
-        payload["spectrum"] = prior["prior"]["spectrum"]
-        payload["spectrum_std"] = payload["spectrum_std_noise"] = prior["prior"]["spectrum_std"]
-        payload["band"] = "±1σ posterior of the light prior (pixel noise and the model's misfit)"
+        payload["spectrum"] = replacement["spectrum"]
+        payload["spectrum_std"] = payload["spectrum_std_noise"] = replacement["spectrum_std"]
+        payload["band"] = replacement["band"]
         payload["miss_risk"] = payload["expected_ratio_to_led_bound"] = None
-        payload["warnings"] = list(result.prior.warnings)
+        payload["warnings"] = replacement["warnings"]
     return payload, chosen, reason

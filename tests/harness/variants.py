@@ -88,6 +88,7 @@ _REGISTRY: Mapping[str, Callable[[str], Variant]] = {
     "msflash-lstsq": msflash("--solver", "lstsq"),
     "prior": msflash("--model", "prior"),
     "auto": msflash("--model", "auto"),
+    "family": msflash("--model", "family"),
     "authors": python(baselines.authors_estimate),
     "authors-alpha-scaled": python(baselines.authors_estimate_scaled),
     "lstsq-pixels": python(baselines.lstsq_estimate),
