@@ -52,8 +52,9 @@ is added: where the pixels cannot tell two families apart, the band says so.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
@@ -81,10 +82,29 @@ AUTO_MARGIN = 0.1
 """``auto`` leaves the LEDs' span only when the chosen candidate predicts held-out pixels (noise removed) this much
 better. Chosen on the tuning rows of both suites (docs/light-families.md): 0.02 left it for ambients that *are*
 LED mixes, 0.2 cost 0.05 in the mean."""
-EVIDENCE_TEMPERATURE = 0.02
-"""τ of the evidence weights ``exp(−(err/err_best − 1)/τ)`` whose candidates' spread enters the band."""
-POSTERIOR_SCALE = 1.0
-"""Multiplies the chosen fit's tempered posterior ±1σ in the band."""
+EVIDENCE_TEMPERATURE = 0.2
+"""τ of the evidence weights ``exp(−(err/err_best − 1)/τ)`` whose candidates' spread enters the band. With
+:data:`POSTERIOR_SCALE` chosen on the tuning rows of both suites for the band's coverage (docs/light-families.md:
+τ 0.01 → 0.2 took ±2σ from 80 % to 92 %, ±1σ from 67 % to 74 %)."""
+POSTERIOR_SCALE = 2.0
+"""Multiplies the chosen fit's tempered posterior ±1σ in the band (little effect: the spread dominates)."""
+PATCH_WEIGHT = 1.0
+"""With a reference patch (:class:`ReferencePatch`), a candidate's evidence is ``√(held-out² + w · patch²)``: the
+patch's relative error counts like the held-out error of the whole image."""
+PATCH_FIT_WEIGHT = 10.0
+"""The calibrated estimate refits the chosen form's amplitudes with the patch's rows weighted to this multiple of
+the whole image's data term."""
+MISS_RATIO = 1.3
+"""An estimate whose RMSE exceeds this multiple of the LED bound is a miss (the harness's definition)."""
+LED_WARNING = 1.13
+"""The LEDs' estimate is flagged when its distance from the family's, over the family's LED bound, reaches this
+(:func:`predicted_ratio`). Chosen on the tuning rows of both suites: recall 11 of 13 misses, 14 % false alarms."""
+PRIOR_WARNING = 1.2
+"""The same for the light prior's estimate: recall 20 of 24, 13 % false alarms on the tuning rows."""
+FAMILY_WARNING = 0.96
+"""The family's estimate is flagged when its evidence spread (the RMS of the band's spread part, max-normalised)
+over its LED bound reaches this: recall 17 of 21 misses but 45 % false alarms on the tuning rows — the pixels
+barely tell a family's misses (docs/light-families.md, ROC)."""
 MAX_DISCHARGE_ATOMS = 6
 """Most atoms the greedy discharge fit keeps."""
 BAND_COUNTS = (2, 3, 4)
@@ -491,6 +511,60 @@ class Whitened:
         return design @ (solution / scale) - self.target
 
 
+@dataclass(frozen=True)
+class ReferencePatch:
+    """A region of the scene known to be spectrally flat (a grey or white card): a check free of the reflectance
+    estimate (issue 30, item 4).
+
+    Its mean LED-only responses ``f̄_(c,i) = s Σ_λ C_c(λ) I_i(λ)`` give its unknown gain × reflectance s; its mean
+    ambient response must then be ``ā_c = s Σ_λ C_c(λ) e(λ)``: C equations every candidate spectrum e is held to.
+    """
+
+    design: np.ndarray
+    """(C, n): ``s C_cᵀ`` — the patch's predicted ambient response is ``design @ e``."""
+    target: np.ndarray
+    """(C,): the patch's measured mean ambient response."""
+    led_misfit: float
+    """Relative misfit of ``f̄`` by ``s Σ C I`` (large: the patch is not flat, or not where it was said to be)."""
+
+    @classmethod
+    def of(cls, statistics: ChannelStatistics, led_spectra: Spectra, responsivities: Spectra) -> ReferencePatch:
+        """From the channel statistics of the patch's pixels alone (:func:`processing.channel_statistics`)."""
+        count = max(statistics.n_blocks, 1)
+        led_mean = statistics.led_sums.sum(0).reshape(statistics.n_channels, statistics.n_leds) / count
+        ambient_mean = statistics.ambient_sums.sum(0) / count
+        planes = plane_responsivities(require_unit(responsivities, "photons"), statistics.channels)  # (n, C)
+        expected = planes.T @ require_unit(led_spectra, "photons").values  # (C, k)
+        scale = float((led_mean * expected).sum() / max((expected * expected).sum(), 1e-300))
+        misfit = float(np.linalg.norm(led_mean - scale * expected)) / max(float(np.linalg.norm(led_mean)), 1e-300)
+        if not scale > 0:
+            raise SpectralDataError(
+                "reference patch: its LED images hold no light; expected a grey or white surface lit by the flash"
+            )
+        return cls(scale * planes.T, ambient_mean, misfit)
+
+    def relative_error(self, spectrum: np.ndarray) -> float:
+        """``‖ā − design e‖ / ‖ā‖`` for the best overall scale of e (spectra carry their own scales)."""
+        predicted = self.design @ spectrum
+        energy = float(predicted @ predicted)
+        if not energy > 0:
+            return 1.0
+        fitted = predicted * float(predicted @ self.target) / energy
+        return float(np.linalg.norm(self.target - fitted)) / max(float(np.linalg.norm(self.target)), 1e-300)
+
+    def calibrate(self, problem: Whitened, atoms: np.ndarray) -> np.ndarray:
+        """Non-negative amplitudes of ``atoms`` fitting the image's data term and, :data:`PATCH_FIT_WEIGHT` times as
+        strongly, the patch."""
+        norm = max(float(np.linalg.norm(self.target)), 1e-300)
+        weight = math.sqrt(PATCH_FIT_WEIGHT * max(problem.energy, 1e-300))
+        design = np.vstack([problem.root @ atoms, weight * (self.design @ atoms) / norm])
+        target = np.concatenate([problem.target, weight * self.target / norm])
+        scale = np.linalg.norm(design, axis=0)
+        scale = np.where(scale > 0, scale, 1.0)
+        solution, _ = nnls(design / scale, target)
+        return solution / scale
+
+
 # -- fits -----------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Fit:
@@ -506,6 +580,8 @@ class Fit:
     n_parameters: int
     form: Form | None = None
     atom_names: tuple[str, ...] = ()
+    seconds: float = 0.0
+    """Wall time spent fitting and judging this candidate (for the accuracy-against-compute chart)."""
 
     @property
     def spectrum(self) -> np.ndarray:
@@ -700,6 +776,16 @@ class Candidate:
     held_out_error_noise_removed: float
     """The same with each held-out fold's noise share removed: the evidence the choice uses (on the tuning rows it
     chose better spectra than the observed error, docs/light-families.md)."""
+    patch_error: float | None = None
+    """With a reference patch: the relative error of the candidate's prediction of the patch (no reflectance
+    estimate involved: the patch is known to be spectrally flat)."""
+
+    @property
+    def evidence(self) -> float:
+        """What the choice ranks by: the held-out error (noise removed), with the patch's error when there is one."""
+        if self.patch_error is None:
+            return self.held_out_error_noise_removed
+        return math.sqrt(self.held_out_error_noise_removed**2 + PATCH_WEIGHT * self.patch_error**2)
 
 
 @dataclass(frozen=True)
@@ -723,6 +809,8 @@ class FamilyEstimate:
     relative_residual: float
     """``√(J(e)/E)`` on all folds, as observed."""
     n_samples: int
+    spread_std: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """The evidence-weighted spread of the candidates about the chosen spectrum (:func:`evidence_spread`)."""
     warnings: tuple[str, ...] = ()
 
     @property
@@ -752,6 +840,12 @@ def training_terms(scene: SceneForm) -> dict[int, Whitened]:
     """Each non-empty fold's complement as a :class:`Whitened` data term (denoised)."""
     folds = list(range(scene.n_folds))
     return {fold: scene.whitened([f for f in folds if f != fold]) for fold in folds if scene.counts[fold] > 0}
+
+
+def _timed(function: Callable[..., Fit], *arguments: object) -> Fit:
+    start = time.perf_counter()
+    fit = function(*arguments)
+    return replace(fit, seconds=time.perf_counter() - start)
 
 
 def _fixed(spectrum: np.ndarray) -> Callable[[int, Whitened], np.ndarray]:
@@ -804,18 +898,16 @@ def choose(candidates: list[Candidate], led: Candidate) -> tuple[Candidate, str,
     """
     if not candidates:
         return led, "only the LEDs' span was fitted", "led", "only the LEDs' span was fitted"
-    best = min(candidates, key=lambda c: c.held_out_error_noise_removed)
-    limit = best.held_out_error_noise_removed * (1 + SIMPLER_WITHIN)
-    simpler = [
-        c for c in candidates if c.held_out_error_noise_removed <= limit and c.fit.n_parameters < best.fit.n_parameters
-    ]
-    chosen = min(simpler, key=lambda c: (c.fit.n_parameters, c.held_out_error_noise_removed)) if simpler else best
-    error, led_error = chosen.held_out_error_noise_removed, led.held_out_error_noise_removed
+    best = min(candidates, key=lambda c: c.evidence)
+    limit = best.evidence * (1 + SIMPLER_WITHIN)
+    simpler = [c for c in candidates if c.evidence <= limit and c.fit.n_parameters < best.fit.n_parameters]
+    chosen = min(simpler, key=lambda c: (c.fit.n_parameters, c.evidence)) if simpler else best
+    error, led_error = chosen.evidence, led.evidence
     reason = (
         f"{chosen.fit.name} ({chosen.fit.n_parameters} parameters) predicts held-out pixels "
         + (
             f"within {SIMPLER_WITHIN:.0%} of the best candidate ({best.fit.name}, {best.fit.n_parameters} parameters, "
-            f"{best.held_out_error_noise_removed:.4f}) with fewer parameters"
+            f"{best.evidence:.4f}) with fewer parameters"
             if chosen is not best
             else "best of all candidates"
         )
@@ -865,8 +957,11 @@ class FamilyModel:
         scene = scene_form(statistics, self.reduction)
         problem = scene.whitened(list(range(scene.n_folds)))
         grid = self.grid
-        fits = [fit_form(form, grid, problem) for form in FORMS]
-        fits += fit_discharge(grid, problem)
+        fits = [_timed(fit_form, form, grid, problem) for form in FORMS]
+        start = time.perf_counter()
+        greedy = fit_discharge(grid, problem)
+        each = (time.perf_counter() - start) / max(len(greedy), 1)
+        fits += [replace(fit, seconds=each * (i + 1)) for i, fit in enumerate(greedy)]  # size m needs steps 1…m
         best_of: dict[str, Fit] = {}
         for fit in fits:
             if fit.family not in best_of or fit.objective < best_of[fit.family].objective:
@@ -874,7 +969,7 @@ class FamilyModel:
         families = sorted(best_of)
         for i, a in enumerate(families):
             for b in families[i + 1 :]:
-                fits.append(fit_mixture(best_of[a], best_of[b], grid, problem))
+                fits.append(_timed(fit_mixture, best_of[a], best_of[b], grid, problem))
         # The LEDs' span judged as the families are: non-negative weights on the same (denoised) data term, no
         # roughness penalty (eq. 5's α would bias its held-out error against it).
         leds = self.led_spectra.values
@@ -894,23 +989,41 @@ class FamilyModel:
             )
         return scene, fits, led_fit
 
-    def estimate(self, statistics: ChannelStatistics, prior_spectrum: np.ndarray | None = None) -> FamilyEstimate:
-        """Fit every family, judge each on held-out folds, choose, and give the band and the evidence."""
+    def estimate(
+        self,
+        statistics: ChannelStatistics,
+        prior_spectrum: np.ndarray | None = None,
+        reference: ReferencePatch | None = None,
+    ) -> FamilyEstimate:
+        """Fit every family, judge each on held-out folds, choose, and give the band and the evidence.
+
+        With a ``reference`` patch its error joins the evidence (:attr:`Candidate.evidence`) and the chosen form's
+        amplitudes are refitted to honour it (:data:`PATCH_FIT_WEIGHT`): the estimate is calibrated on it.
+        """
         scene, fits, led_fit = self.candidates(statistics, prior_spectrum)
         folds = list(range(scene.n_folds))
         training = training_terms(scene)
         led = Candidate(led_fit, *_held_out(_refit_amplitudes(led_fit), scene, training))
         candidates = []
         for fit in fits:
-            if fit.family == "prior":  # learnt elsewhere: judged as it is, not refitted
-                candidates.append(Candidate(fit, *_held_out(_fixed(fit.spectrum), scene, training)))
-            else:
-                candidates.append(Candidate(fit, *_held_out(_refit_amplitudes(fit), scene, training)))
-        candidates.sort(key=lambda c: c.held_out_error_noise_removed)
+            start = time.perf_counter()
+            # The prior is learnt elsewhere: judged as it is, not refitted.
+            spectrum_for = _fixed(fit.spectrum) if fit.family == "prior" else _refit_amplitudes(fit)
+            errors = _held_out(spectrum_for, scene, training)
+            candidates.append(Candidate(replace(fit, seconds=fit.seconds + time.perf_counter() - start), *errors))
+        if reference is not None:
+            led = replace(led, patch_error=reference.relative_error(led.fit.spectrum))
+            candidates = [replace(c, patch_error=reference.relative_error(c.fit.spectrum)) for c in candidates]
+        candidates.sort(key=lambda c: c.evidence)
         chosen, reason, auto_model, auto_reason = choose(candidates, led)
         problem = scene.whitened(folds)
         n_samples = statistics.n_blocks * statistics.n_channels
+        if reference is not None and chosen.fit.family not in ("prior", "led"):
+            calibrated = reference.calibrate(problem, chosen.fit.atoms)
+            chosen = replace(chosen, fit=replace(chosen.fit, amplitudes=calibrated))
+            candidates = [chosen if c.fit.name == chosen.fit.name else c for c in candidates]
         std = self.band(chosen, candidates, problem, n_samples)
+        spread, _ = evidence_spread(chosen, candidates)
         observed = scene.whitened(folds, denoised=False)
         residual = math.sqrt(max(observed.error(chosen.fit.spectrum), 0.0))
         spectrum = chosen.fit.spectrum
@@ -931,6 +1044,7 @@ class FamilyModel:
             auto_reason=auto_reason,
             relative_residual=residual,
             n_samples=n_samples,
+            spread_std=spread,
             warnings=warnings,
         )
 
@@ -958,12 +1072,80 @@ def evidence_spread(
     spectrum = chosen.fit.spectrum
     if not candidates:
         return np.zeros_like(spectrum), spectrum
-    best = min(c.held_out_error_noise_removed for c in candidates)
-    excess = np.array([c.held_out_error_noise_removed / max(best, 1e-300) - 1 for c in candidates])
+    best = min(c.evidence for c in candidates)
+    excess = np.array([c.evidence / max(best, 1e-300) - 1 for c in candidates])
     weights = np.exp(-excess / temperature)
     spectra = np.column_stack([_scaled_onto(c.fit.spectrum, spectrum) for c in candidates])
     spread = np.sqrt((weights * (spectra - spectrum[:, None]) ** 2).sum(1) / weights.sum())
     return spread, (spectra * weights).sum(1) / weights.sum()
+
+
+# -- warnings ------------------------------------------------------------------------------------------
+def paper_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """The paper's spectrum RMSE: the estimate max-normalised, the truth least-squares scaled onto it."""
+    estimate, truth = np.asarray(estimate, float), np.asarray(truth, float)
+    peak = float(np.max(np.abs(estimate)))
+    energy = float(truth @ truth)
+    if not peak > 0 or not energy > 0:
+        return math.nan
+    normalised = estimate / peak
+    return float(np.sqrt(np.mean((normalised - truth * (truth @ normalised) / energy) ** 2)))
+
+
+def led_bound(led_values: np.ndarray, spectrum: np.ndarray) -> float:
+    """:func:`paper_rmse` of the best non-negative fit of ``spectrum`` by the LED spectra (n, k): what they allow."""
+    weights, _ = nnls(np.asarray(led_values, float), np.asarray(spectrum, float))
+    return paper_rmse(np.asarray(led_values, float) @ weights, spectrum)
+
+
+@dataclass(frozen=True)
+class MissCheck:
+    """How far an estimate is predicted to be from the truth, in multiples of the LED bound, and whether that warns."""
+
+    predicted_ratio: float
+    """The predicted RMSE over the predicted LED bound (the family's estimate stands in for the truth)."""
+    threshold: float
+    """The predicted ratio from which the estimate is flagged (chosen on tuning rows)."""
+    basis: str
+    """What the prediction rests on, in words."""
+
+    @property
+    def warned(self) -> bool:
+        """Whether the estimate is flagged."""
+        return bool(self.predicted_ratio >= self.threshold)
+
+    def message(self, model: str) -> str:
+        """The warning's text."""
+        return (
+            f"the {model} spectrum may be off by more than {MISS_RATIO:g}× what the LEDs allow: {self.basis} "
+            f"predicts {self.predicted_ratio:.2f}× the LED bound (flagged from {self.threshold:g}×) — see the band"
+        )
+
+
+def predicted_ratio(
+    estimate: np.ndarray, family_spectrum: np.ndarray, led_values: np.ndarray, threshold: float, model: str
+) -> MissCheck:
+    """The check of another model's estimate against the family's: ``RMSE(estimate, family) / bound(family)``.
+
+    All spectra in one unit on one grid (the sequence's, as the harness scores them).
+    """
+    bound = led_bound(led_values, family_spectrum)
+    distance = paper_rmse(estimate, family_spectrum)
+    ratio = distance / bound if bound > 0 else math.inf
+    return MissCheck(
+        float(ratio), threshold, f"its distance from the family estimate ({model} against the physics families)"
+    )
+
+
+def self_check(family_spectrum: np.ndarray, spread: np.ndarray, led_values: np.ndarray) -> MissCheck:
+    """The family estimate's own check: the spread of the candidates that predict about as well, over its LED bound."""
+    peak = float(np.max(np.abs(family_spectrum)))
+    bound = led_bound(led_values, family_spectrum)
+    width = float(np.sqrt(np.mean((np.asarray(spread) / peak) ** 2))) if peak > 0 else math.inf
+    ratio = width / bound if bound > 0 else math.inf
+    return MissCheck(
+        ratio, FAMILY_WARNING, "the spread of the families that predict held-out pixels about as well as the chosen one"
+    )
 
 
 def _scaled_onto(spectrum: np.ndarray, reference: np.ndarray) -> np.ndarray:

@@ -63,6 +63,17 @@ def add_model_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _rectangle(text: str) -> tuple[int, int, int, int]:
+    """``X,Y,W,H`` (pixels) for ``--reference-patch``."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}': expected X,Y,WIDTH,HEIGHT in whole pixels") from None
+    if len(values) != 4 or min(values) < 0:
+        raise argparse.ArgumentTypeError(f"'{text}': expected four whole numbers ≥ 0, X,Y,WIDTH,HEIGHT")
+    return values
+
+
 def _file_for_workers(args: argparse.Namespace, path: str | None) -> str | None:
     """A file option as the workers see it (absolute for a scheduler at an address; see many.for_scheduler)."""
     if path is None or getattr(args, "sequence", None) is not None:  # one sequence: as given
@@ -79,6 +90,7 @@ def _estimate_settings(args: argparse.Namespace) -> one_sequence.EstimateSetting
         tiles=args.tiles,
         model=getattr(args, "model", DEFAULT_AMBIENT_MODEL),
         calibration=_file_for_workers(args, args.calibration),
+        reference_patch=getattr(args, "reference_patch", None),
     )
 
 
@@ -262,6 +274,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _add_calibration_option(estimate)
     add_local_options(estimate)
     add_model_option(estimate)
+    estimate.add_argument(
+        "--reference-patch",
+        type=_rectangle,
+        default=None,
+        metavar="X,Y,W,H",
+        help="a grey or white card in the scene (pixels of the full frame): its colour, free of any reflectance "
+        "estimate, joins the evidence that chooses the family and calibrates the estimate (--model prior|family|auto)",
+    )
     estimate.add_argument(
         "--json", action="store_true", help="print one JSON object (several sequences: one JSON line each, always)"
     )

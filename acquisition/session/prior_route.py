@@ -11,6 +11,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
+from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.analysis import (
@@ -23,7 +26,18 @@ from msflash.acquisition.session.analysis import (
 )
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
-from msflash.processing.light_families import AUTO_MARGIN, FamilyEstimate, family_model
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.light_families import (
+    AUTO_MARGIN,
+    LED_WARNING,
+    PRIOR_WARNING,
+    FamilyEstimate,
+    MissCheck,
+    ReferencePatch,
+    family_model,
+    predicted_ratio,
+    self_check,
+)
 from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
 
 
@@ -136,8 +150,55 @@ def led_side(
     return led, analysis.estimate_payload(sequence, led), False
 
 
+ReferenceRect = tuple[int, int, int, int]
+"""``(x, y, width, height)`` in pixels of the full frame: ``--reference-patch``."""
+
+
+def reference_patch(sequence: Sequence, stack: FrameStack, rect: ReferenceRect) -> ReferencePatch:
+    """The reference patch (:class:`~processing.light_families.ReferencePatch`) of a spectrally flat region.
+
+    Raises
+    ------
+    UsageError
+        A rectangle outside the frame, smaller than 8 × 8 pixels, or whose pixels are saturated.
+    """
+    x, y, width, height = rect
+    frame_height, frame_width = stack.ambient.shape[:2]
+    if sequence.camera.cfa is not None:  # whole 2 × 2 cells of the mosaic
+        x, y, width, height = x + x % 2, y + y % 2, width - width % 2 - 2 * (x % 2), height - height % 2 - 2 * (y % 2)
+    if x < 0 or y < 0 or width < 8 or height < 8 or x + width > frame_width or y + height > frame_height:
+        raise UsageError(
+            f"--reference-patch {','.join(map(str, rect))}: expected x,y,width,height of at least 8 × 8 pixels inside "
+            f"the {frame_width} × {frame_height} frame"
+        )
+
+    def crop(frame: np.ndarray) -> np.ndarray:
+        return frame[y : y + height, x : x + width]
+
+    statistics = accumulate_channel_statistics(
+        crop(stack.ambient),
+        [crop(frame) for frame in stack.led_frames],
+        stack.spec,
+        cfa=sequence.camera.cfa,
+        bin_factor=2,
+        n_folds=2,
+    )
+    if statistics.n_blocks == 0:
+        raise UsageError(
+            f"--reference-patch {','.join(map(str, rect))}: every pixel of the patch is saturated in some frame; "
+            "expected a grey or white surface below the white level"
+        )
+    try:
+        return ReferencePatch.of(statistics, led_spectra_photons(sequence), camera_responsivities_photons(sequence))
+    except SpectralDataError as error:
+        raise UsageError(f"--reference-patch {','.join(map(str, rect))}: {error}") from None
+
+
 def estimate_sequence_family(
-    sequence: Sequence, stack: FrameStack | None = None
+    sequence: Sequence,
+    stack: FrameStack | None = None,
+    prior: PriorEstimate | None = None,
+    reference: ReferenceRect | None = None,
 ) -> tuple[PriorEstimate, FamilyEstimate]:
     """The light prior's and the family model's estimates of a sequence (the prior is one of the candidates).
 
@@ -149,8 +210,12 @@ def estimate_sequence_family(
     statistics = sequence_channel_statistics(sequence, stack)
     leds = led_spectra_photons(sequence)
     camera = camera_responsivities_photons(sequence)
-    prior = prior_model(statistics.channels, leds, camera).estimate(statistics)
-    family = family_model(statistics.channels, leds, camera).estimate(statistics, prior.spectrum.values[:, 0])
+    if prior is None:
+        prior = prior_model(statistics.channels, leds, camera).estimate(statistics)
+    patch = None
+    if reference is not None:
+        patch = reference_patch(sequence, stack or load_frame_stack(sequence), reference)
+    family = family_model(statistics.channels, leds, camera).estimate(statistics, prior.spectrum.values[:, 0], patch)
     return prior, family
 
 
@@ -165,6 +230,7 @@ def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
             "n_parameters": candidate.fit.n_parameters,
             "held_out_relative_error": candidate.held_out_error,
             "held_out_relative_error_noise_removed": candidate.held_out_error_noise_removed,
+            "reference_patch_relative_error": candidate.patch_error,
         }
 
     return {
@@ -188,25 +254,115 @@ def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
     }
 
 
-def _prior_route(sequence: Sequence, stack: FrameStack, requested: str, varies: bool) -> tuple[dict, str, str, dict]:
-    """``--model prior`` and the prior's fields: (its payload, chosen, reason, the replacement fields)."""
+LED_GAP_SHARE = 0.25
+"""Where the family evidence is computed, the LEDs' band adds this share of the squared gap between their estimate
+and the family's (scaled onto it): on the tuning rows of both suites the band then covered the truth at 71–74 % (±1σ)
+and 96–98 % (±2σ), against 64 % and 90–94 % without (docs/light-families.md)."""
+OLD_LED_MISS_WARNING = "the spectrum may be off by more than"
+"""The start of :mod:`processing.model_error`'s warning, which the families' check replaces where it is computed."""
+
+
+def _checks(
+    sequence: Sequence, led_payload: dict, prior: PriorEstimate, family: FamilyEstimate
+) -> dict[str, MissCheck]:
+    """Every model's miss check against the family evidence, in the sequence's unit (as estimates are scored)."""
+    leds = np.column_stack([np.asarray(led.spd, float) for led in sequence.leds])
+    family_spectrum = np.asarray(spectrum_in_sequence_unit(sequence, family.spectrum), float)
+    spread = np.asarray(
+        spectrum_in_sequence_unit(sequence, family.spectrum.replace(values=family.spread_std[:, None])), float
+    )
+    prior_spectrum = np.asarray(spectrum_in_sequence_unit(sequence, prior.spectrum), float)
+    return {
+        "led": predicted_ratio(np.asarray(led_payload["spectrum"], float), family_spectrum, leds, LED_WARNING, "LEDs'"),
+        "prior": predicted_ratio(prior_spectrum, family_spectrum, leds, PRIOR_WARNING, "light prior's"),
+        "family": self_check(family_spectrum, spread, leds),
+    }
+
+
+def _models_block(
+    sequence: Sequence, led_payload: dict, prior: PriorEstimate, family: FamilyEstimate
+) -> tuple[dict, dict[str, MissCheck]]:
+    """``models``: each model's spectrum, band, warnings and miss check, whichever is chosen."""
+    checks = _checks(sequence, led_payload, prior, family)
+    led_warnings = [w for w in led_payload.get("warnings", []) if not w.startswith(OLD_LED_MISS_WARNING)]
+    led_spectrum = np.asarray(led_payload["spectrum"], float)
+    family_spectrum = np.asarray(spectrum_in_sequence_unit(sequence, family.spectrum), float)
+    energy = float(family_spectrum @ family_spectrum)
+    gap = led_spectrum - family_spectrum * (float(family_spectrum @ led_spectrum) / energy if energy > 0 else 0.0)
+    given = led_payload.get("spectrum_std")
+    led_std = np.zeros_like(led_spectrum) if given is None else np.asarray(given, float)
+    blocks = {
+        "led": {
+            "spectrum": led_payload["spectrum"],
+            "spectrum_std": np.sqrt(led_std**2 + LED_GAP_SHARE * gap**2),
+            "band": f"{led_payload.get('band', '±1σ')}, with {LED_GAP_SHARE:g} of the squared gap to the family "
+            "estimate added",
+            "warnings": led_warnings,
+        },
+        "prior": {
+            "spectrum": spectrum_in_sequence_unit(sequence, prior.spectrum),
+            "spectrum_std": spectrum_in_sequence_unit(
+                sequence, prior.spectrum.replace(values=prior.spectrum_std[:, None])
+            ),
+            "warnings": list(prior.warnings),
+        },
+        "family": {
+            "spectrum": spectrum_in_sequence_unit(sequence, family.spectrum),
+            "spectrum_std": spectrum_in_sequence_unit(
+                sequence, family.spectrum.replace(values=family.spectrum_std[:, None])
+            ),
+            "warnings": list(family.warnings),
+        },
+    }
+    for name, check in checks.items():
+        label = {"led": "LEDs'", "prior": "light prior's", "family": f"family ({family.chosen.fit.name})"}[name]
+        blocks[name]["miss_check"] = {
+            "predicted_ratio_to_led_bound": check.predicted_ratio,
+            "threshold": check.threshold,
+            "warned": check.warned,
+            "basis": check.basis,
+        }
+        if check.warned:
+            blocks[name]["warnings"].append(check.message(label))
+    return blocks, checks
+
+
+def _prior_route(
+    sequence: Sequence,
+    stack: FrameStack,
+    requested: str,
+    varies: bool,
+    led_payload: dict,
+    reference: ReferenceRect | None = None,
+) -> tuple[dict, str, str, dict]:
+    """``--model prior``: the light prior, checked against the family evidence."""
     result = estimate_sequence_prior(sequence, stack)
     prior = prior_payload(sequence, result)
+    _, family = estimate_sequence_family(sequence, stack, result.prior, reference)
+    models, _ = _models_block(sequence, led_payload, result.prior, family)
     replacement = {
         "spectrum": prior["prior"]["spectrum"],
         "spectrum_std": prior["prior"]["spectrum_std"],
         "band": "±1σ posterior of the light prior (pixel noise and the model's misfit)",
-        "warnings": list(result.prior.warnings),
+        "warnings": models["prior"]["warnings"],
     }
-    extra = {"model_choice": prior["model_choice"], "prior": prior["prior"]}
+    extra = {"model_choice": prior["model_choice"], "prior": prior["prior"], "models": models}
     return extra, "prior", "asked for the light prior (--model prior)", replacement
 
 
-def _family_route(sequence: Sequence, stack: FrameStack, requested: str, varies: bool) -> tuple[dict, str, str, dict]:
+def _family_route(
+    sequence: Sequence,
+    stack: FrameStack,
+    requested: str,
+    varies: bool,
+    led_payload: dict,
+    reference: ReferenceRect | None = None,
+) -> tuple[dict, str, str, dict]:
     """``--model family`` and ``--model auto``: the family model's choice (auto: the LEDs' span unless the evidence
     says otherwise; a scene whose illuminant varies keeps the local LED model)."""
-    prior, family = estimate_sequence_family(sequence, stack)
+    prior, family = estimate_sequence_family(sequence, stack, None, reference)
     block = family_payload(sequence, family)
+    models, _ = _models_block(sequence, led_payload, prior, family)
     led_error = family.led.held_out_error_noise_removed
     choice = {
         "held_out_relative_error_noise_removed": {
@@ -230,42 +386,58 @@ def _family_route(sequence: Sequence, stack: FrameStack, requested: str, varies:
         "spectrum_std": block["spectrum_std"],
         "band": "±1σ of the fitted family (tempered posterior) and the spread of the candidates that predict "
         "held-out pixels about as well",
-        "warnings": list(family.warnings),
+        "warnings": models["family"]["warnings"],
+        "led_warnings": models["led"]["warnings"],
     }
-    prior_block = {
-        "spectrum": spectrum_in_sequence_unit(sequence, prior.spectrum),
-        "spectrum_std": spectrum_in_sequence_unit(sequence, prior.spectrum.replace(values=prior.spectrum_std[:, None])),
-        "warnings": list(prior.warnings),
-    }
-    return {"model_choice": choice, "family": block, "prior": prior_block}, chosen, reason, replacement
+    return (
+        {"model_choice": choice, "family": block, "prior": models["prior"], "models": models},
+        chosen,
+        reason,
+        replacement,
+    )
 
 
 MODEL_ROUTES = {"prior": _prior_route, "family": _family_route, "auto": _family_route}
-"""``--model`` name → its route: ``(sequence, stack, requested, varies) → (fields, chosen, reason, replacement)``.
-``replacement`` holds the spectrum, band, band meaning and warnings that replace the LED ones when ``chosen`` is
-not ``led`` (``led`` itself needs no route: it is :mod:`acquisition.session.analysis`'s estimate)."""
+"""``--model`` name → its route: ``(sequence, stack, requested, varies, led payload) → (fields, chosen, reason,
+replacement)``. ``replacement`` holds the spectrum, band, band meaning and warnings that replace the LED ones when
+``chosen`` is not ``led`` (``led`` itself needs no route: it is :mod:`acquisition.session.analysis`'s estimate), and
+``led_warnings``, the LED payload's warnings with the families' check in place of the reference lights' when it is."""
 
 
 def with_model_choice(
-    sequence: Sequence, stack: FrameStack, payload: dict, requested: str, varies: bool
+    sequence: Sequence,
+    stack: FrameStack,
+    payload: dict,
+    requested: str,
+    varies: bool,
+    reference: ReferenceRect | None = None,
 ) -> tuple[dict, str, str]:
     """The estimate payload of ``--model prior|family|auto``: the model estimated, the model chosen and why.
 
     ``prior`` takes the light prior; ``family`` the family model's choice (:mod:`processing.light_families`);
     ``auto`` keeps the LEDs' span unless a family predicts held-out pixels clearly better, and keeps a local LED
     estimate (a family is one global spectrum). The chosen model's spectrum, band and warnings replace the LED
-    ones, which stay under ``led`` when another model wins.
+    ones, which stay under ``led`` when another model wins. ``models`` holds every model's spectrum, band, warnings
+    and miss check (predicted ratio to the LED bound against the family evidence, docs/light-families.md).
+    ``reference``: a spectrally flat patch (``--reference-patch``) whose error joins the evidence and on which the
+    family estimate is calibrated.
 
     Returns
     -------
     dict, str, str
         The payload (docs/architecture.md §7), the chosen model and the reason.
     """
-    fields, chosen, reason, replacement = MODEL_ROUTES[requested](sequence, stack, requested, varies)
+    fields, chosen, reason, replacement = MODEL_ROUTES[requested](
+        sequence, stack, requested, varies, payload, reference
+    )
     payload = dict(payload)
     payload.update({key: value for key, value in fields.items() if key != "model_choice"})
     payload["model"] = chosen
     payload["model_choice"] = {**fields["model_choice"], "model": chosen, "reason": reason, "requested": requested}
+    if chosen == "led" and "led_warnings" in replacement:
+        payload["warnings"] = replacement["led_warnings"]
+        payload["spectrum_std"] = fields["models"]["led"]["spectrum_std"]
+        payload["band"] = fields["models"]["led"]["band"]
     if chosen != "led":
         payload["led"] = {key: payload[key] for key in ("spectrum", "spectrum_std", "ambient_weights", "warnings")}
         payload["spectrum"] = replacement["spectrum"]

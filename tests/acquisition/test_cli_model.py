@@ -100,3 +100,42 @@ def test_the_models_beyond_the_leds_need_the_cameras_responsivities(
     assert main(["estimate", str(rendered.directory), "--model", model]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "responsivit" in err[0] and "Traceback" not in err[0]
+
+
+def test_every_model_is_checked_against_the_family_evidence(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``models`` holds each model as its own ``--model`` prints it, with its miss check (predicted ratio to the LED
+    bound): what the harness's prior, family and led-checked rows read from one ``--model auto`` run."""
+    rendered = render_case(Case("d50", light="D50", seed=6), tmp_path / "d50")
+    auto = _estimate(capsys, str(rendered.directory), "--model", "auto")
+    family = _estimate(capsys, str(rendered.directory), "--model", "family")
+    prior = _estimate(capsys, str(rendered.directory), "--model", "prior")
+    models = auto["models"]
+    assert set(models) == {"led", "prior", "family"}
+    np.testing.assert_allclose(models["family"]["spectrum"], family["spectrum"])
+    np.testing.assert_allclose(models["family"]["spectrum_std"], family["spectrum_std"])
+    np.testing.assert_allclose(models["prior"]["spectrum"], prior["spectrum"])
+    assert models["prior"]["warnings"] == prior["warnings"]
+    for block in models.values():
+        check = block["miss_check"]
+        assert check["predicted_ratio_to_led_bound"] >= 0 and check["threshold"] > 0
+        assert check["warned"] == (check["predicted_ratio_to_led_bound"] >= check["threshold"])
+        assert check["warned"] == any("may be off by more than" in w for w in block["warnings"])
+        assert len(block["spectrum_std"]) == len(block["spectrum"])
+
+
+def test_a_reference_patch_joins_the_evidence(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.harness.physics_cases import physics_cases_of
+    from tests.harness.render import REFERENCE_PATCH_FILE, render
+
+    truth = render(physics_cases_of("tuning")[5], tmp_path / "scene")
+    rect = ",".join(str(v) for v in json.loads((truth.directory / REFERENCE_PATCH_FILE).read_text()))
+    auto = _estimate(capsys, str(truth.directory), "--model", "auto", "--reference-patch", rect)
+    evidence = auto["family"]["evidence"]
+    assert 0 <= evidence["led"]["reference_patch_relative_error"] < 0.1
+    assert all(c["reference_patch_relative_error"] is not None for c in evidence["candidates"])
+    for arguments in (["--reference-patch", "150,120,40,40"], ["--reference-patch", "1,2,3"]):
+        assert main(["estimate", str(truth.directory), "--model", "auto", *arguments]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--reference-patch" in err[0] and "Traceback" not in err[0]
+    assert main(["estimate", str(truth.directory), "--reference-patch", rect]) == 2
+    assert "--model prior, family or auto" in capsys.readouterr().err

@@ -21,7 +21,7 @@ from tests.harness.physics_cases import select_physics_cases
 from tests.harness.run import CACHE_ENV, run_cases
 from tests.harness.variants import VARIANTS, select
 
-PHYSICS_VARIANTS = ("default", "prior", "auto", "family")
+PHYSICS_VARIANTS = ("default", "led-checked", "prior", "family", "auto", "family-patch", "auto-patch")
 """The variants the physics suite runs unless ``--variant`` names others (the baselines are the library's)."""
 
 

@@ -13,6 +13,7 @@ import csv
 import json
 import os
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -36,23 +37,34 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
     from msflash.acquisition.sequence.format import read_sequence
     from msflash.acquisition.session.analysis import (
         camera_responsivities_photons,
+        estimate_sequence,
         led_spectra_photons,
+        load_frame_stack,
         spectrum_in_sequence_unit,
     )
     from msflash.acquisition.session.prior_route import sequence_channel_statistics
-    from msflash.processing.ambient import AmbientModel
     from msflash.processing.light_families import evidence_spread, family_model, scene_form
     from msflash.processing.light_prior import prior_model
 
     truth = cached_render(case, cache)
     bound = metrics.led_bound(truth.led_spd, truth.ambient)
     sequence = read_sequence(truth.directory)
-    statistics = sequence_channel_statistics(sequence)
     leds = led_spectra_photons(sequence)
     camera = camera_responsivities_photons(sequence)
+    stack = load_frame_stack(sequence)
+    clock = time.perf_counter()
+    statistics = sequence_channel_statistics(sequence, stack)
+    seconds = {"statistics": time.perf_counter() - clock}
+    clock = time.perf_counter()
+    led_estimate = estimate_sequence(sequence, "tikhonov", "auto", stack=stack)
+    seconds["led"] = time.perf_counter() - clock
+    clock = time.perf_counter()
     prior = prior_model(statistics.channels, leds, camera).estimate(statistics)
+    seconds["prior"] = time.perf_counter() - clock
+    clock = time.perf_counter()
     model = family_model(statistics.channels, leds, camera)
     estimate = model.estimate(statistics, prior.spectrum.values[:, 0])
+    seconds["family"] = time.perf_counter() - clock
     rows: list[dict] = []
 
     def in_unit(values: np.ndarray) -> np.ndarray:
@@ -67,8 +79,9 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
     problem = scene.whitened(list(range(scene.n_folds)))
     own = model.posterior_std(chosen, problem, statistics.n_blocks * statistics.n_channels)
     family_spectrum = in_unit(chosen.fit.spectrum)
-    led_weights, _ = AmbientModel(leds).weights(statistics.led_statistics(), "tikhonov")
-    led_spectrum = in_unit(leds.values @ led_weights)
+    led_spectrum = np.asarray(
+        spectrum_in_sequence_unit(sequence, led_estimate.spectrum), float
+    )  # what msflash estimate gives (weighted statistics)
     prior_spectrum = in_unit(prior.spectrum.values[:, 0])
     auto_spectrum = led_spectrum if estimate.auto_model == "led" else family_spectrum
     case_row: dict = {
@@ -79,6 +92,7 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
         "bound": bound,
         "chosen": chosen.fit.name,
         "auto": estimate.auto_model,
+        **{f"t:{key}": value for key, value in seconds.items()},
     }
     for name, spectrum in (
         ("led", led_spectrum),
@@ -109,6 +123,17 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
                 float(np.sqrt(np.mean((spread_unit / peak) ** 2))) / proxy_bound
             )
         case_row[f"own:{temperature}"] = float(np.sqrt(np.mean((in_unit(own) / peak) ** 2)))
+    led_std = np.asarray(
+        spectrum_in_sequence_unit(sequence, led_estimate.spectrum.replace(values=led_estimate.spectrum_std[:, None])),
+        float,
+    )
+    gap = led_spectrum - family_spectrum * float(family_spectrum @ led_spectrum) / float(
+        family_spectrum @ family_spectrum
+    )
+    for gamma in (0.0, 0.25, 0.5, 1.0):
+        case_row[f"led_cov:{gamma}"] = metrics.band_coverage(
+            led_spectrum, np.sqrt(led_std**2 + gamma * gap**2), truth_ambient
+        )
     case_row["prior_band"] = float(
         np.sqrt(np.mean((in_unit(prior.spectrum_std) / max(float(np.max(prior_spectrum)), 1e-300)) ** 2))
     )
@@ -134,6 +159,7 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
                 "held_out": f"{candidate.held_out_error:.6g}",
                 "held_out_clean": f"{candidate.held_out_error_noise_removed:.6g}",
                 "objective": f"{candidate.fit.objective:.6g}",
+                "seconds": f"{candidate.fit.seconds:.5f}",
                 "ratio": f"{ratio:.4g}",
                 "chosen": int(candidate is estimate.chosen),
                 "auto": int(

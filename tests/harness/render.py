@@ -33,6 +33,9 @@ SPECULAR_GAIN = 2.5
 TEXTURE = 0.05
 """Pixel-scale texture: each pixel's reflectance times 1 ± this (fixed pattern, every frame)."""
 BASE_EXPOSURE_US = 10000.0
+REFERENCE_PATCH_FILE = "reference_patch.json"
+"""Beside ``sequence.json``: the white card's rectangle (an unknown key would do, but a sidecar keeps the sequence
+exactly what a user's would be)."""
 
 
 @dataclass(frozen=True)
@@ -162,10 +165,13 @@ def render(case: HarnessCase, directory: Path) -> Truth:
 
     # The scene: patches of the drawn surfaces (repeated to fill), a fixed texture, a specular strip.
     labels = rng.integers(0, surfaces.shape[1], (PATCH_ROWS, PATCH_COLUMNS))
-    labels[rng.integers(PATCH_ROWS), rng.integers(PATCH_COLUMNS)] = white_row  # one white patch (a chart's)
+    white_at = (int(rng.integers(PATCH_ROWS)), int(rng.integers(PATCH_COLUMNS)))
+    labels[white_at] = white_row  # one white patch (a chart's)
     labels = np.repeat(np.repeat(labels, PATCH_PX, 0), PATCH_PX, 1)
+    white_x = white_at[1] * PATCH_PX
     if case.specular:
         middle = labels.shape[1] // 2
+        white_x += 6 if white_x >= middle else 0
         labels = np.concatenate([labels[:, :middle], np.full((labels.shape[0], 6), glossy_row), labels[:, middle:]], 1)
     height, width = labels.shape
     texture = 1.0 + TEXTURE * rng.uniform(-1.0, 1.0, (height, width))
@@ -240,4 +246,8 @@ def render(case: HarnessCase, directory: Path) -> Truth:
         "frames": entries,
     }
     (directory / "sequence.json").write_text(json.dumps(document))
+    # Where the white card is (x, y, width, height in pixels, 2 pixels in from its edges): what a user gives
+    # `--reference-patch` (a flat reflectance with the scene's ±5 % texture and vignetting).
+    patch = [white_x + 2, white_at[0] * PATCH_PX + 2, PATCH_PX - 4, PATCH_PX - 4]
+    (directory / REFERENCE_PATCH_FILE).write_text(json.dumps(patch))
     return Truth(directory, nm, truth, led_written)

@@ -163,9 +163,14 @@ def worst_cases(results: Sequence[CaseResult], variant: str, count: int = 5) -> 
         scored = [(m.ratio, r, m) for r in subset if (m := r.of(variant)) is not None and math.isfinite(m.ratio)]
         for ratio, result, measured in sorted(scored, key=lambda t: -t[0])[:count]:
             c = result.case
+            light = c.light
+            if light.startswith("physics:"):
+                from tests.harness.physics_cases import light_of
+
+                light = light_of(c).label
             conditions = (
                 f"{c.mosaic} {c.cfa or ''} {c.bits}-bit, {c.grid_label} {c.unit}, {c.leds}, "
-                f"{c.light_type} '{c.light}', {c.camera}, ratio {c.ratio:.2f}, {c.exposures} exposures"
+                f"{c.light_type} '{light}', {c.camera}, ratio {c.ratio:.2f}, {c.exposures} exposures"
                 + (f", vignetting {c.vignetting:.2f}" if c.vignetting < 1 else "")
                 + (", specular" if c.specular else "")
             )
@@ -173,6 +178,33 @@ def worst_cases(results: Sequence[CaseResult], variant: str, count: int = 5) -> 
                 f"| {split} | {c.name} | {ratio:.2f} | {measured.rmse:.3f} | {result.bound:.3f} "
                 f"| {'yes' if measured.warnings else 'no'} | {conditions} |"
             )
+    return lines
+
+
+def failure_map(results: Sequence[CaseResult], variants: Sequence[Variant], by: str = "light kind") -> list[str]:
+    """Where each model fails and whether it warned: per value of ``by`` and split, each variant's misses
+    (ratio > 1.3) as ``warned / misses`` of the cases (— when the variant cannot warn)."""
+    key = FAMILIES[by]
+    lines = [
+        f"| {by} | split | cases | " + " | ".join(f"{v.name} warned / misses" for v in variants) + " |",
+        "|---|---|---|" + "---|" * len(variants),
+    ]
+    for value in sorted({key(r) for r in results}, key=str):
+        for split, subset in _by_split(results):
+            group = [r for r in subset if key(r) == value]
+            if not group:
+                continue
+            cells = []
+            for variant in variants:
+                measured = [m for r in group if (m := r.of(variant.name)) is not None and math.isfinite(m.ratio)]
+                misses = [m for m in measured if m.ratio > metrics.MISS_FACTOR]
+                if not misses:
+                    cells.append("·")
+                elif any(m.warnings is None for m in misses):
+                    cells.append(f"— / {len(misses)}")
+                else:
+                    cells.append(f"{sum(bool(m.warnings) for m in misses)} / {len(misses)}")
+            lines.append(f"| {value} | {split} | {len(group)} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -302,8 +334,18 @@ def markdown(
     for family in LIBRARY_FAMILIES if suite == "library" else PHYSICS_FAMILIES:
         title = "light family" if suite == "physics" and family == "light type" else family
         parts += [f"## Per family: {title} (ratio mean / worst)", "", *family_table(results, variants, family), ""]
-    if any(v.name == "default" for v in variants):
-        parts += ["## Worst cases of `default`", "", *worst_cases(results, "default"), ""]
+    if suite == "physics":
+        parts += [
+            "## Failure map: where each model misses, and whether it warned",
+            "",
+            "Per light kind: `warned / misses` (· no miss). Every model's warnings: `docs/light-families.md`.",
+            "",
+            *failure_map(results, variants),
+            "",
+        ]
+    for name in ("default", "auto") if suite == "physics" else ("default",):
+        if any(v.name == name for v in variants):
+            parts += [f"## Worst cases of `{name}`", "", *worst_cases(results, name), ""]
     problems = failures(results)
     parts += ["## Failures and Python warnings", "", *(problems or ["none"]), ""]
     return "\n".join(parts)

@@ -92,3 +92,40 @@ def test_a_physics_case_renders_and_is_estimated_end_to_end(tmp_path) -> None:
     assert measured is not None and not measured.error and math.isfinite(measured.ratio)
     assert 0 < result.bound and measured.ratio < 3
     assert metrics.summarise([measured.ratio]).count == 1
+
+
+def test_the_failure_map_counts_warned_misses_per_light_kind() -> None:
+    from tests.harness.report import failure_map
+    from tests.harness.run import CaseResult, Measured
+
+    cases = physics_cases.physics_cases_of("tuning")[:3]
+    results = [
+        CaseResult(cases[0], 0.1, (Measured("a", ratio=1.5, warnings=("w",)), Measured("b", ratio=1.4))),
+        CaseResult(cases[1], 0.1, (Measured("a", ratio=1.6, warnings=()), Measured("b", ratio=0.9))),
+        CaseResult(cases[2], 0.1, (Measured("a", ratio=0.9, warnings=()), Measured("b", ratio=0.8))),
+    ]
+    variants = [VARIANTS["default"].__class__("a"), VARIANTS["default"].__class__("b")]
+    lines = failure_map(results, variants, by="light type")
+    cells = {line.split(" | ")[0].strip("| "): line for line in lines[2:]}
+    assert len(lines) == 2 + len({c.light_type for c in cases})
+    if cases[0].light_type != cases[1].light_type:
+        assert "1 / 1" in cells[cases[0].light_type] and "0 / 1" in cells[cases[1].light_type]
+        assert "— / 1" in cells[cases[0].light_type]  # b cannot warn
+
+
+def test_the_chart_applies_the_family_rule_and_the_shipped_thresholds() -> None:
+    from msflash.processing.light_families import LED_WARNING, SIMPLER_WITHIN
+    from tests.harness import families_chart
+
+    rows = [
+        {"held_out_clean": "0.010", "n_parameters": "12", "ratio": "0.5"},
+        {"held_out_clean": str(0.010 * (1 + SIMPLER_WITHIN / 2)), "n_parameters": "2", "ratio": "0.9"},
+    ]
+    assert families_chart._choose(rows)["ratio"] == "0.9"  # the simplest within the margin
+    record = {"auto": "led", "led:ratio": 1.5, "prior:ratio": 0.5, "family:ratio": 0.5, "auto:ratio": 1.5}
+    record.update({"d:led:chosen:0.2": LED_WARNING + 0.1, "d:prior:chosen:0.2": 0.1, "spread:chosen:0.2": 0.1})
+    scores = families_chart.warning_scores({"x": record})
+    score, miss, threshold = scores["led"]
+    assert miss[0] and score[0] >= threshold
+    auto_score, auto_miss, auto_threshold = scores["auto"]
+    assert auto_miss[0] and auto_score[0] >= auto_threshold  # auto kept the LEDs: their check applies
