@@ -137,6 +137,13 @@ BROAD_BANDS: dict[str, tuple[float, float]] = {
 
 
 # -- spectral shapes on a grid ------------------------------------------------------------------------
+@lru_cache(maxsize=16)
+def _nm(grid: WavelengthGrid) -> np.ndarray:
+    """The grid's wavelengths, computed once (the forms evaluate their shapes thousands of times a scene)."""
+    wavelengths = grid.wavelengths_nm
+    wavelengths.flags.writeable = False
+    return wavelengths
+
 def _photons(wavelengths: np.ndarray, energy: np.ndarray) -> np.ndarray:
     """Energy → photons (∝ λ; the scale is immaterial: amplitudes are free)."""
     return energy * (wavelengths / 555.0)[:, None] if energy.ndim == 2 else energy * wavelengths / 555.0
@@ -157,7 +164,7 @@ def _daylight_basis(grid: WavelengthGrid) -> np.ndarray:
     import colour
 
     basis = colour.colorimetry.SDS_BASIS_FUNCTIONS_CIE_ILLUMINANT_D_SERIES
-    nm = grid.wavelengths_nm
+    nm = _nm(grid)
     return np.column_stack([np.interp(nm, basis[n].wavelengths, basis[n].values) for n in ("S0", "S1", "S2")])
 
 
@@ -177,12 +184,12 @@ def daylight(grid: WavelengthGrid, cct: float) -> np.ndarray:
 def band(grid: WavelengthGrid, centre: float, fwhm: float) -> np.ndarray:
     """A Gaussian emission band seen through the grid's triangular slit (its variance adds step²/6), peak 1."""
     sigma2 = (max(fwhm, 1e-3) / 2.3548) ** 2 + grid.step_nm**2 / 6.0
-    return np.exp(-0.5 * (grid.wavelengths_nm - centre) ** 2 / sigma2)
+    return np.exp(-0.5 * (_nm(grid) - centre) ** 2 / sigma2)
 
 
 def line(grid: WavelengthGrid, centre: float) -> np.ndarray:
     """A line narrower than the grid step, as a spectroradiometer of that bandwidth reports it (unit area)."""
-    return np.clip(1.0 - np.abs(grid.wavelengths_nm - centre) / grid.step_nm, 0.0, None)
+    return np.clip(1.0 - np.abs(_nm(grid) - centre) / grid.step_nm, 0.0, None)
 
 
 @lru_cache(maxsize=8)
@@ -191,7 +198,7 @@ def _water_shapes(grid: WavelengthGrid) -> np.ndarray:
     band), CDOM ``e^{−0.014 (λ−440)}``, phytoplankton ``A_φ`` (Bricaud 1998, edge values outside 400–700 nm)."""
     from msflash.processing.water import bricaud_1998
 
-    nm = grid.wavelengths_nm
+    nm = _nm(grid)
     table = datasets.water_absorption()
     a_w = np.interp(nm, table.wavelengths_nm, table.values[:, 0])
     beyond = nm > table.wavelengths_nm[-1]
@@ -239,7 +246,7 @@ def _thermal_forms() -> list[Form]:
             ("log_kelvin",),
             ((math.log(800.0), math.log(30000.0)),),
             temperatures,
-            lambda grid, th: _photons(grid.wavelengths_nm, planck(grid.wavelengths_nm, math.exp(th[0])))[:, None],
+            lambda grid, th: _photons(_nm(grid), planck(_nm(grid), math.exp(th[0])))[:, None],
         ),
         Form(
             "daylight",
@@ -247,7 +254,7 @@ def _thermal_forms() -> list[Form]:
             ("log_cct",),
             ((math.log(4000.0), math.log(25000.0)),),
             daylights,
-            lambda grid, th: _photons(grid.wavelengths_nm, daylight(grid, math.exp(th[0])))[:, None],
+            lambda grid, th: _photons(_nm(grid), daylight(grid, math.exp(th[0])))[:, None],
         ),
     ]
 
@@ -256,7 +263,7 @@ def _thermal_forms() -> list[Form]:
 def discharge_atoms(grid: WavelengthGrid) -> tuple[np.ndarray, tuple[str, ...]]:
     """The discharge family's dictionary (photons, n × atoms) and the atoms' names: lines, phosphor and sodium
     bands, and a warm continuum (Planck at 3000 K: a lamp's hot electrodes and recombination)."""
-    nm = grid.wavelengths_nm
+    nm = _nm(grid)
     columns, names = [], []
     for name, group in LINES.items():
         columns.append(sum(height * line(grid, centre) for centre, height in group))
@@ -282,7 +289,7 @@ def _band_form(count: int) -> Form:
     bounds = tuple((380.0, 720.0) for _ in range(count)) + tuple((8.0, 180.0) for _ in range(count))
 
     def atoms(grid: WavelengthGrid, th: np.ndarray) -> np.ndarray:
-        return _photons(grid.wavelengths_nm, np.column_stack([band(grid, th[i], th[count + i]) for i in range(count)]))
+        return _photons(_nm(grid), np.column_stack([band(grid, th[i], th[count + i]) for i in range(count)]))
 
     return Form(
         f"{count} bands",
@@ -297,13 +304,13 @@ def _band_form(count: int) -> Form:
 def _water_atoms(grid: WavelengthGrid, th: np.ndarray) -> np.ndarray:
     shapes = _water_shapes(grid)
     depth = np.clip(th[:3], 0.0, None)
-    return _photons(grid.wavelengths_nm, daylight(grid, math.exp(th[3])) * np.exp(-(shapes @ depth)))[:, None]
+    return _photons(_nm(grid), daylight(grid, math.exp(th[3])) * np.exp(-(shapes @ depth)))[:, None]
 
 
 def _filter_atoms(grid: WavelengthGrid, th: np.ndarray) -> np.ndarray:
-    x = (grid.wavelengths_nm - 550.0) / 100.0
+    x = (_nm(grid) - 550.0) / 100.0
     density = np.clip(th[1] * x + th[2] * x * x, -30.0, 30.0)
-    return _photons(grid.wavelengths_nm, planck(grid.wavelengths_nm, math.exp(th[0])) * np.exp(-density))[:, None]
+    return _photons(_nm(grid), planck(_nm(grid), math.exp(th[0])) * np.exp(-density))[:, None]
 
 
 def _transmitted_forms() -> list[Form]:
