@@ -327,23 +327,6 @@ def _models_block(
     return blocks, checks
 
 
-def auto_choice(family: FamilyEstimate, check: MissCheck) -> tuple[str, str]:
-    """What ``--model auto`` takes: the family's candidate when it predicts held-out pixels clearly better than the
-    LEDs' span (:func:`processing.light_families.choose`) *and* its own check does not flag it; else the LEDs.
-
-    The second condition: on the tuning rows of the library suite, leaving the LEDs for a flagged family made the
-    worst case 4.5× the LED bound and 13 % of the scenes misses; keeping them, 1.75× and 5 % (the physics suite's
-    tuning rows: worst 1.33 either way, mean 0.54 → 0.66; docs/light-families.md).
-    """
-    if family.auto_model == "led" or not check.warned:
-        return family.auto_model, family.auto_reason
-    return "led", (
-        f"{family.auto_model} predicts held-out pixels better than the LEDs' span, but the families that predict "
-        f"about as well disagree ({check.predicted_ratio:.2f}× the LED bound, flagged from {check.threshold:g}×): "
-        "the LEDs' span is kept"
-    )
-
-
 def _prior_route(
     sequence: Sequence,
     stack: FrameStack,
@@ -379,7 +362,7 @@ def _family_route(
     says otherwise; a scene whose illuminant varies keeps the local LED model)."""
     prior, family = estimate_sequence_family(sequence, stack, None, reference)
     block = family_payload(sequence, family)
-    models, checks = _models_block(sequence, led_payload, prior, family)
+    models, _ = _models_block(sequence, led_payload, prior, family)
     led_error = family.led.held_out_error_noise_removed
     choice = {
         "held_out_relative_error_noise_removed": {
@@ -397,7 +380,7 @@ def _family_route(
             "spectrum",
         )
     else:
-        chosen, reason = auto_choice(family, checks["family"])
+        chosen, reason = family.auto_model, family.auto_reason
     replacement = {
         "spectrum": block["spectrum"],
         "spectrum_std": block["spectrum_std"],

@@ -43,7 +43,7 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
         spectrum_in_sequence_unit,
     )
     from msflash.acquisition.session.prior_route import sequence_channel_statistics
-    from msflash.processing.light_families import evidence_spread, family_model, scene_form, self_check
+    from msflash.processing.light_families import evidence_spread, family_model, scene_form
     from msflash.processing.light_prior import prior_model
 
     truth = cached_render(case, cache)
@@ -83,9 +83,7 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
         spectrum_in_sequence_unit(sequence, led_estimate.spectrum), float
     )  # what msflash estimate gives (weighted statistics)
     prior_spectrum = in_unit(prior.spectrum.values[:, 0])
-    spread_unit = in_unit(estimate.spread_std)
-    flagged = self_check(family_spectrum, spread_unit, truth.led_spd).warned
-    auto_model = "led" if estimate.auto_model == "led" or flagged else estimate.auto_model  # prior_route.auto_choice
+    auto_model = estimate.auto_model
     auto_spectrum = led_spectrum if auto_model == "led" else family_spectrum
     case_row: dict = {
         "case": case.name,
