@@ -91,6 +91,7 @@ def _estimate_settings(args: argparse.Namespace) -> one_sequence.EstimateSetting
         model=getattr(args, "model", DEFAULT_AMBIENT_MODEL),
         calibration=_file_for_workers(args, args.calibration),
         reference_patch=getattr(args, "reference_patch", None),
+        reference_chart=_file_for_workers(args, getattr(args, "reference_chart", None)),
     )
 
 
@@ -281,6 +282,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="X,Y,W,H",
         help="a grey or white card in the scene (pixels of the full frame): its colour, free of any reflectance "
         "estimate, joins the evidence that chooses the family and calibrates the estimate (--model prior|family|auto)",
+    )
+    estimate.add_argument(
+        "--reference-chart",
+        default=None,
+        metavar="FILE",
+        help="a colour chart in the scene: a JSON file of patches (rect in pixels, reflectance per wavelength); "
+        "their colours, free of any reflectance estimate, join the evidence and calibrate the estimate "
+        "(--model prior|family|auto; docs/light-families.md)",
     )
     estimate.add_argument(
         "--json", action="store_true", help="print one JSON object (several sequences: one JSON line each, always)"

@@ -9,7 +9,9 @@ table from a ``--model`` name to what it computes.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -152,24 +154,29 @@ def led_side(
 
 ReferenceRect = tuple[int, int, int, int]
 """``(x, y, width, height)`` in pixels of the full frame: ``--reference-patch``."""
+Reference = ReferenceRect | str
+"""A grey card's rectangle (``--reference-patch``) or a chart file's path (``--reference-chart``)."""
 
 
-def reference_patch(sequence: Sequence, stack: FrameStack, rect: ReferenceRect) -> ReferencePatch:
-    """The reference patch (:class:`~processing.light_families.ReferencePatch`) of a spectrally flat region.
+def reference_patch(
+    sequence: Sequence, stack: FrameStack, rect: ReferenceRect, reflectance: np.ndarray | None = None, what: str = ""
+) -> ReferencePatch:
+    """The reference (:class:`~processing.light_families.ReferencePatch`) of one region of known reflectance
+    (``reflectance`` on the sequence's grid; None: spectrally flat).
 
     Raises
     ------
     UsageError
         A rectangle outside the frame, smaller than 8 × 8 pixels, or whose pixels are saturated.
     """
+    what = what or f"--reference-patch {','.join(map(str, rect))}"
     x, y, width, height = rect
     frame_height, frame_width = stack.ambient.shape[:2]
     if sequence.camera.cfa is not None:  # whole 2 × 2 cells of the mosaic
         x, y, width, height = x + x % 2, y + y % 2, width - width % 2 - 2 * (x % 2), height - height % 2 - 2 * (y % 2)
     if x < 0 or y < 0 or width < 8 or height < 8 or x + width > frame_width or y + height > frame_height:
         raise UsageError(
-            f"--reference-patch {','.join(map(str, rect))}: expected x,y,width,height of at least 8 × 8 pixels inside "
-            f"the {frame_width} × {frame_height} frame"
+            f"{what}: expected x,y,width,height of at least 8 × 8 pixels inside the {frame_width} × {frame_height} frame"
         )
 
     def crop(frame: np.ndarray) -> np.ndarray:
@@ -185,20 +192,57 @@ def reference_patch(sequence: Sequence, stack: FrameStack, rect: ReferenceRect) 
     )
     if statistics.n_blocks == 0:
         raise UsageError(
-            f"--reference-patch {','.join(map(str, rect))}: every pixel of the patch is saturated in some frame; "
-            "expected a grey or white surface below the white level"
+            f"{what}: every pixel of the patch is saturated in some frame; expected a surface below the white level"
         )
     try:
-        return ReferencePatch.of(statistics, led_spectra_photons(sequence), camera_responsivities_photons(sequence))
+        return ReferencePatch.of(
+            statistics, led_spectra_photons(sequence), camera_responsivities_photons(sequence), reflectance
+        )
     except SpectralDataError as error:
-        raise UsageError(f"--reference-patch {','.join(map(str, rect))}: {error}") from None
+        raise UsageError(f"{what}: {error}") from None
+
+
+def reference_chart(sequence: Sequence, stack: FrameStack, path: str) -> ReferencePatch:
+    """``--reference-chart FILE``: patches of known reflectance (a colour chart in the scene), one reference.
+
+    The file is JSON: ``{"patches": [{"rect": [x, y, width, height], "wavelengths_nm": [...], "reflectance":
+    [...]}, ...]}`` (pixels of the full frame; reflectance factors 0–1, interpolated onto the sequence's grid,
+    the edge values held beyond the data).
+
+    Raises
+    ------
+    UsageError
+        An unreadable file, a missing or malformed field (named), a patch outside the frame.
+    """
+    try:
+        document = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise UsageError(f"--reference-chart {path}: cannot be read ({error}); expected a JSON file") from None
+    patches = document.get("patches") if isinstance(document, dict) else None
+    if not isinstance(patches, list) or not patches:
+        raise UsageError(f"--reference-chart {path}: 'patches' missing or empty; expected a list of patches")
+    grid = np.asarray(sequence.wavelengths_nm, float)
+    references = []
+    for index, patch in enumerate(patches):
+        where = f"--reference-chart {path}: patches[{index}]"
+        try:
+            rect = tuple(int(v) for v in patch["rect"])
+            nm = np.asarray(patch["wavelengths_nm"], float)
+            values = np.asarray(patch["reflectance"], float)
+        except (KeyError, TypeError, ValueError) as error:
+            raise UsageError(f"{where}: {error}; expected rect, wavelengths_nm and reflectance") from None
+        if len(rect) != 4 or nm.shape != values.shape or nm.size < 2 or not np.all(np.isfinite(values)):
+            raise UsageError(f"{where}: expected a rect of 4 numbers and one finite reflectance per wavelength")
+        reflectance = np.interp(grid, nm, values)
+        references.append(reference_patch(sequence, stack, rect, reflectance, where))
+    return ReferencePatch.combined(references)
 
 
 def estimate_sequence_family(
     sequence: Sequence,
     stack: FrameStack | None = None,
     prior: PriorEstimate | None = None,
-    reference: ReferenceRect | None = None,
+    reference: Reference | None = None,
 ) -> tuple[PriorEstimate, FamilyEstimate]:
     """The light prior's and the family model's estimates of a sequence (the prior is one of the candidates).
 
@@ -214,7 +258,12 @@ def estimate_sequence_family(
         prior = prior_model(statistics.channels, leds, camera).estimate(statistics)
     patch = None
     if reference is not None:
-        patch = reference_patch(sequence, stack or load_frame_stack(sequence), reference)
+        loaded = stack or load_frame_stack(sequence)
+        patch = (
+            reference_chart(sequence, loaded, reference)
+            if isinstance(reference, str)
+            else reference_patch(sequence, loaded, reference)
+        )
     family = family_model(statistics.channels, leds, camera).estimate(statistics, prior.spectrum.values[:, 0], patch)
     return prior, family
 
@@ -244,6 +293,13 @@ def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
             sequence, family.spectrum.replace(values=family.spectrum_std[:, None])
         ),
         "relative_residual": family.relative_residual,
+        "reference": None
+        if family.reference is None
+        else {
+            "equations": int(family.reference.target.size),
+            "led_misfit": family.reference.led_misfit,
+            "chosen_relative_error": family.reference.relative_error(family.spectrum.values[:, 0]),
+        },
         "evidence": {
             "criterion": "held-out prediction of the ambient image (5 folds of block rows, noise removed); the "
             "simplest candidate within 20 % of the best is preferred",
@@ -333,7 +389,7 @@ def _prior_route(
     requested: str,
     varies: bool,
     led_payload: dict,
-    reference: ReferenceRect | None = None,
+    reference: Reference | None = None,
 ) -> tuple[dict, str, str, dict]:
     """``--model prior``: the light prior, checked against the family evidence."""
     result = estimate_sequence_prior(sequence, stack)
@@ -356,7 +412,7 @@ def _family_route(
     requested: str,
     varies: bool,
     led_payload: dict,
-    reference: ReferenceRect | None = None,
+    reference: Reference | None = None,
 ) -> tuple[dict, str, str, dict]:
     """``--model family`` and ``--model auto``: the family model's choice (auto: the LEDs' span unless the evidence
     says otherwise; a scene whose illuminant varies keeps the local LED model)."""
@@ -410,7 +466,7 @@ def with_model_choice(
     payload: dict,
     requested: str,
     varies: bool,
-    reference: ReferenceRect | None = None,
+    reference: Reference | None = None,
 ) -> tuple[dict, str, str]:
     """The estimate payload of ``--model prior|family|auto``: the model estimated, the model chosen and why.
 

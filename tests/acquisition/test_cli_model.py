@@ -139,3 +139,34 @@ def test_a_reference_patch_joins_the_evidence(tmp_path: Path, capsys: pytest.Cap
         assert len(err) == 1 and "--reference-patch" in err[0] and "Traceback" not in err[0]
     assert main(["estimate", str(truth.directory), "--reference-patch", rect]) == 2
     assert "--model prior, family or auto" in capsys.readouterr().err
+
+
+def test_a_reference_chart_holds_the_estimate_to_known_reflectances(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The harness's scene with a chart of its own surfaces: every patch's LED images are explained by its given
+    reflectance (the rectangles land on the right surfaces), and the chart's equations join the evidence."""
+    from tests.harness.physics_cases import physics_cases_of
+    from tests.harness.render import REFERENCE_CHART_FILE, render
+
+    case = next(c for c in physics_cases_of("tuning") if c.specular and c.cfa is not None)
+    truth = render(case, tmp_path / "scene")
+    chart = truth.directory / REFERENCE_CHART_FILE
+    auto = _estimate(capsys, str(truth.directory), "--model", "family", "--reference-chart", str(chart))
+    reference = auto["family"]["reference"]
+    patches = len(json.loads(chart.read_text())["patches"])
+    assert reference["equations"] == 4 * patches and reference["led_misfit"] < 0.2
+    assert all(c["reference_patch_relative_error"] is not None for c in auto["family"]["evidence"]["candidates"])
+    document = json.loads(chart.read_text())  # the reflectances handed to the wrong patches
+    reflectances = [p["reflectance"] for p in document["patches"]]
+    for patch, reflectance in zip(document["patches"], reflectances[1:] + reflectances[:1]):
+        patch["reflectance"] = reflectance
+    wrong = tmp_path / "wrong.json"
+    wrong.write_text(json.dumps(document))
+    misplaced = _estimate(capsys, str(truth.directory), "--model", "family", "--reference-chart", str(wrong))
+    assert misplaced["family"]["reference"]["led_misfit"] > 2 * reference["led_misfit"]
+    broken = tmp_path / "broken.json"
+    broken.write_text(json.dumps({"patches": [{"rect": [0, 0, 16, 16], "wavelengths_nm": [400, 700]}]}))
+    assert main(["estimate", str(truth.directory), "--model", "auto", "--reference-chart", str(broken)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "patches[0]" in err[0] and "reflectance" in err[0]

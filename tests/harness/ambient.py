@@ -21,7 +21,17 @@ from tests.harness.physics_cases import select_physics_cases
 from tests.harness.run import CACHE_ENV, run_cases
 from tests.harness.variants import VARIANTS, select
 
-PHYSICS_VARIANTS = ("default", "led-checked", "prior", "family", "auto", "family-patch", "auto-patch")
+PHYSICS_VARIANTS = (
+    "default",
+    "led-checked",
+    "prior",
+    "family",
+    "auto",
+    "family-patch",
+    "auto-patch",
+    "family-chart",
+    "auto-chart",
+)
 """The variants the physics suite runs unless ``--variant`` names others (the baselines are the library's)."""
 
 

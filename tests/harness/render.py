@@ -34,6 +34,7 @@ TEXTURE = 0.05
 """Pixel-scale texture: each pixel's reflectance times 1 ± this (fixed pattern, every frame)."""
 BASE_EXPOSURE_US = 10000.0
 REFERENCE_PATCH_FILE = "reference_patch.json"
+REFERENCE_CHART_FILE = "reference_chart.json"
 """Beside ``sequence.json``: the white card's rectangle (an unknown key would do, but a sidecar keeps the sequence
 exactly what a user's would be)."""
 
@@ -167,6 +168,7 @@ def render(case: HarnessCase, directory: Path) -> Truth:
     labels = rng.integers(0, surfaces.shape[1], (PATCH_ROWS, PATCH_COLUMNS))
     white_at = (int(rng.integers(PATCH_ROWS)), int(rng.integers(PATCH_COLUMNS)))
     labels[white_at] = white_row  # one white patch (a chart's)
+    patch_labels = labels.copy()
     labels = np.repeat(np.repeat(labels, PATCH_PX, 0), PATCH_PX, 1)
     white_x = white_at[1] * PATCH_PX
     if case.specular:
@@ -250,4 +252,23 @@ def render(case: HarnessCase, directory: Path) -> Truth:
     # `--reference-patch` (a flat reflectance with the scene's ±5 % texture and vignetting).
     patch = [white_x + 2, white_at[0] * PATCH_PX + 2, PATCH_PX - 4, PATCH_PX - 4]
     (directory / REFERENCE_PATCH_FILE).write_text(json.dumps(patch))
+    # A colour chart's worth of the scene's surfaces (up to 24, each at its first patch) with their reflectances:
+    # what `--reference-chart` reads (as a user's chart with the maker's reflectances would be).
+    chart, seen = [], set()
+    for row, column in np.ndindex(*patch_labels.shape):
+        surface = int(patch_labels[row, column])
+        if surface >= surfaces.shape[1] or surface in seen or len(chart) >= 24:
+            continue
+        seen.add(surface)
+        x = column * PATCH_PX
+        if case.specular and x >= PATCH_COLUMNS * PATCH_PX // 2:
+            x += 6
+        chart.append(
+            {
+                "rect": [x + 2, row * PATCH_PX + 2, PATCH_PX - 4, PATCH_PX - 4],
+                "wavelengths_nm": fine[::5].tolist(),
+                "reflectance": np.round(surfaces[::5, surface], 5).tolist(),
+            }
+        )
+    (directory / REFERENCE_CHART_FILE).write_text(json.dumps({"patches": chart}))
     return Truth(directory, nm, truth, led_written)

@@ -26,7 +26,7 @@ from tests.harness.variants import Variant
 
 CACHE_ENV = "MSFLASH_HARNESS_CACHE"
 """Environment variable naming the rendered-case cache directory (set by ``--cache``; unset: no cache)."""
-RENDER_VERSION = 2
+RENDER_VERSION = 3
 """Bumped whenever the renderer's output changes, so a cache never serves an old rendering."""
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from tests.harness import baselines
-from tests.harness.render import REFERENCE_PATCH_FILE
+from tests.harness.render import REFERENCE_CHART_FILE, REFERENCE_PATCH_FILE
 from tests.processing.unseen_sequences import run_cli
 
 
@@ -50,6 +50,8 @@ class Variant:
     """Read ``models[block]`` of the JSON (one model's spectrum, band and warnings) instead of the chosen one."""
     reference_patch: bool = False
     """Pass ``--reference-patch`` with the white card the renderer wrote beside the sequence."""
+    reference_chart: bool = False
+    """Pass ``--reference-chart`` with the chart of the scene's surfaces the renderer wrote beside the sequence."""
 
     @property
     def command(self) -> str:
@@ -58,6 +60,7 @@ class Variant:
             return f"{self.function.__module__}.{self.function.__name__}"
         command = " ".join(["msflash estimate SEQ --json", *map(shlex.quote, self.arguments)])
         command += " --reference-patch X,Y,W,H (the white card)" if self.reference_patch else ""
+        command += " --reference-chart FILE (24 of the scene's surfaces)" if self.reference_chart else ""
         return command + (f" (its models.{self.block})" if self.block else "")
 
     def estimate(self, directory: Path) -> Estimate:
@@ -71,6 +74,8 @@ class Variant:
         if self.reference_patch:
             rect = json.loads((directory / REFERENCE_PATCH_FILE).read_text())
             arguments += ("--reference-patch", ",".join(str(int(v)) for v in rect))
+        if self.reference_chart:
+            arguments += ("--reference-chart", str(directory / REFERENCE_CHART_FILE))
         status, out, err, caught = _run_estimate(str(directory), arguments)
         if status != 0:
             return Estimate(error=f"status {status}: {err.strip().splitlines()[-1] if err.strip() else ''}")
@@ -120,6 +125,8 @@ _REGISTRY: Mapping[str, Callable[[str], Variant]] = {
     "led-checked": lambda name: Variant(name, ("--model", "auto"), block="led"),
     "auto-patch": lambda name: Variant(name, ("--model", "auto"), reference_patch=True),
     "family-patch": lambda name: Variant(name, ("--model", "auto"), block="family", reference_patch=True),
+    "auto-chart": lambda name: Variant(name, ("--model", "auto"), reference_chart=True),
+    "family-chart": lambda name: Variant(name, ("--model", "auto"), block="family", reference_chart=True),
     "authors": python(baselines.authors_estimate),
     "authors-alpha-scaled": python(baselines.authors_estimate_scaled),
     "lstsq-pixels": python(baselines.lstsq_estimate),
