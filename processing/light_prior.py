@@ -314,25 +314,9 @@ class PriorModel:
                 f"prior model: ridge {self.ridge}, kappa {self.kappa}; expected ridge ≥ 0, kappa > 0"
             )
         planes = plane_responsivities(camera, self.channels)  # (n, C)
-        leds = led.values  # (n, k)
-        n_wl, channels, k = leds.shape[0], planes.shape[1], leds.shape[1]
-        sensing = (planes[:, :, None] * leds[:, None, :]).reshape(n_wl, channels * k).T  # G: (Ck, n)
-        basis_r = self.reflectance.basis.values
-        second = (basis_r * self.reflectance.weights) @ basis_r.T  # R (n, n)
-        gram = sensing @ second @ sensing.T
-        ridge = self.ridge * np.trace(gram) / gram.shape[0]
-        wiener = np.linalg.solve(
-            gram + ridge * np.eye(gram.shape[0]) + 1e-12 * np.trace(gram) * np.eye(gram.shape[0]), sensing @ second
-        ).T  # W: (n, Ck)
-        lights = self.prior.basis.values  # (n, q)
-        if self.split:
-            in_span = np.linalg.lstsq(leds, lights, rcond=None)[0]  # u: (k, q)
-            remainder = lights - leds @ in_span
-        else:
-            in_span, remainder = np.zeros((k, lights.shape[1])), lights
-        through_surface = np.einsum("nc,nm,nl->mcl", planes, remainder, wiener)  # T(b⊥_m) W
-        direct = np.einsum("cd,im->mcdi", np.eye(channels), in_span).reshape(lights.shape[1], channels, channels * k)
-        predictors = direct + through_surface
+        predictors = light_predictors(
+            led.values, planes, self.prior.basis.values, self.reflectance, self.ridge, self.split
+        )
         predictors.flags.writeable = False
         object.__setattr__(self, "predictors", predictors)
         difference = np.hstack([-self.prior.mean[:, None], np.eye(self.prior.dims - 1)])  # D φ = φ_rest − φ_0 μ
@@ -414,6 +398,42 @@ class PriorModel:
             n_samples=n,
             warnings=tuple(warnings),
         )
+
+
+def wiener_matrix(sensing: np.ndarray, reflectance: ReflectanceBasis, ridge: float) -> np.ndarray:
+    """W = R Gᵀ (G R Gᵀ + ρ̄ Id)⁻¹ (n, Ck): the reflectance from a block's LED responses (module notes, step 1)."""
+    basis_r = reflectance.basis.values
+    second = (basis_r * reflectance.weights) @ basis_r.T  # R (n, n)
+    gram = sensing @ second @ sensing.T
+    scale = np.trace(gram) / gram.shape[0]
+    return np.linalg.solve(gram + (ridge * scale + 1e-12 * np.trace(gram)) * np.eye(gram.shape[0]), sensing @ second).T
+
+
+def light_predictors(
+    leds: np.ndarray,
+    planes: np.ndarray,
+    lights: np.ndarray,
+    reflectance: ReflectanceBasis,
+    ridge: float = RIDGE,
+    split: bool = True,
+) -> np.ndarray:
+    """K_m (q, C, C·k) for lights ``lights`` (n, q): how each light's ambient image follows from the LED images.
+
+    ``K_m = E(u_m) + T(b⊥_m) W`` with ``b_m = I u_m + b⊥_m`` (module notes, step 2; ``split=False``: ``T(b_m) W``).
+    ``leds`` (n, k) and ``planes`` (n, C, each plane's responsivity) in photons on one grid. Linear in the
+    lights: the predictors of the unit spectra δ_λ give any light's as ``Σ_λ e(λ) K_λ``.
+    """
+    n_wl, channels, k = leds.shape[0], planes.shape[1], leds.shape[1]
+    sensing = (planes[:, :, None] * leds[:, None, :]).reshape(n_wl, channels * k).T  # G: (Ck, n)
+    wiener = wiener_matrix(sensing, reflectance, ridge)
+    if split:
+        in_span = np.linalg.lstsq(leds, lights, rcond=None)[0]  # u: (k, q)
+        remainder = lights - leds @ in_span
+    else:
+        in_span, remainder = np.zeros((k, lights.shape[1])), lights
+    through_surface = np.einsum("nc,nm,nl->mcl", planes, remainder, wiener)  # T(b⊥_m) W
+    direct = np.einsum("cd,im->mcdi", np.eye(channels), in_span).reshape(lights.shape[1], channels, channels * k)
+    return direct + through_surface
 
 
 def normal_equations(predictors: np.ndarray, moments: Moments) -> tuple[np.ndarray, np.ndarray, float]:

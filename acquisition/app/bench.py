@@ -19,8 +19,9 @@ On the first size alone (``height × width``):
   :class:`FlashModel`), as cvxpy is handed the finished problem matrices (best of ``repeats``);
 - ``prior_estimate_over_copy``: the light prior's estimate (channel-resolved statistics and solve,
   ``msflash estimate --model prior``), interleaved with the copy as above; ``auto_choice_s`` the
-  held-out comparison ``--model auto`` adds; ``model_reference_s``/``model_band_s`` the default
-  estimate's model band.
+  held-out comparison the light prior's ``auto`` made; ``model_reference_s``/``model_band_s`` the default
+  estimate's model band; ``family_estimate_over_copy`` the family model's estimate (``--model family|auto``:
+  statistics, prior and every family fitted and judged), target ≤ 3 (issue 30), reported beside the default.
 
 Camera and booth parts are added by their modules when present.
 """
@@ -282,6 +283,10 @@ def processing_bench(
     return result
 
 
+FAMILY_PAIRS = 5
+"""Interleaved pairs of the family model's figure (each of its estimates takes far longer than a copy)."""
+
+
 def prior_bench(
     frames: list[np.ndarray],
     spec: FrameStackSpec,
@@ -306,8 +311,21 @@ def prior_bench(
     def estimate() -> object:
         return model.estimate(statistics())
 
+    from msflash.processing.light_families import family_model
+
+    families = family_model(channels.channels, leds, camera)
+
+    def family_estimate() -> object:
+        statistics_now = statistics()
+        return families.estimate(statistics_now, model.estimate(statistics_now).spectrum.values[:, 0])
+
     return {
         "prior_estimate_over_copy": interleaved_ratio(estimate, copy, pairs),
         "prior_model_prepare_s": _best_time(lambda: prior_model(channels.channels, leds, camera), repeats),
         "auto_choice_s": _best_time(lambda: choose_model(channels, model), repeats),
+        # ``msflash estimate --model family|auto``: statistics, the light prior, every family fitted and judged on
+        # held-out folds (a fixed cost of the grid, not of the pixels); issue 30's target ≤ 3. Fewer pairs: each
+        # estimate takes a large fraction of a second.
+        "family_estimate_over_copy": interleaved_ratio(family_estimate, copy, min(pairs, FAMILY_PAIRS)),
+        "family_model_prepare_s": _best_time(lambda: family_model(channels.channels, leds, camera), 1),
     }

@@ -42,7 +42,7 @@ def _add_calibration_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-AMBIENT_MODELS = ("led", "prior", "auto")
+AMBIENT_MODELS = ("led", "prior", "family", "auto")
 DEFAULT_AMBIENT_MODEL = "led"
 """Default of ``--model``: the LED-span estimate (eq. 4–6), the one ``run`` and ``flash`` solve their flash from.
 ``auto`` beats it on the harness's mean (docs/ambient-harness.md) but not yet on the worst scenes, and ``run``
@@ -50,15 +50,28 @@ and ``flash`` do not use it yet."""
 
 
 def add_model_option(parser: argparse.ArgumentParser) -> None:
-    """``--model led|prior|auto`` (docs/light-prior.md)."""
+    """``--model led|prior|family|auto`` (docs/light-prior.md, docs/light-families.md)."""
     parser.add_argument(
         "--model",
         default=DEFAULT_AMBIENT_MODEL,
         choices=AMBIENT_MODELS,
         help="ambient model: led (a mix of the LED spectra, eq. 4-6; default), prior (a basis learnt "
         "from measured lights, read through the surfaces' colours; needs the camera's "
-        "responsivities), auto (prior only where it predicts held-out pixels better)",
+        "responsivities), family (light from physics: thermal, discharge, solid-state, transmitted or a "
+        "mixture, the family and its complexity chosen by held-out prediction; needs the responsivities), "
+        "auto (the LEDs' span unless a family predicts held-out pixels clearly better)",
     )
+
+
+def _rectangle(text: str) -> tuple[int, int, int, int]:
+    """``X,Y,W,H`` (pixels) for ``--reference-patch``."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}': expected X,Y,WIDTH,HEIGHT in whole pixels") from None
+    if len(values) != 4 or min(values) < 0:
+        raise argparse.ArgumentTypeError(f"'{text}': expected four whole numbers ≥ 0, X,Y,WIDTH,HEIGHT")
+    return values
 
 
 def _file_for_workers(args: argparse.Namespace, path: str | None) -> str | None:
@@ -77,6 +90,8 @@ def _estimate_settings(args: argparse.Namespace) -> one_sequence.EstimateSetting
         tiles=args.tiles,
         model=getattr(args, "model", DEFAULT_AMBIENT_MODEL),
         calibration=_file_for_workers(args, args.calibration),
+        reference_patch=getattr(args, "reference_patch", None),
+        reference_chart=_file_for_workers(args, getattr(args, "reference_chart", None)),
     )
 
 
@@ -260,6 +275,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _add_calibration_option(estimate)
     add_local_options(estimate)
     add_model_option(estimate)
+    estimate.add_argument(
+        "--reference-patch",
+        type=_rectangle,
+        default=None,
+        metavar="X,Y,W,H",
+        help="a grey or white card in the scene (pixels of the full frame): its colour, free of any reflectance "
+        "estimate, joins the evidence that chooses the family and calibrates the estimate (--model prior|family|auto)",
+    )
+    estimate.add_argument(
+        "--reference-chart",
+        default=None,
+        metavar="FILE",
+        help="a colour chart in the scene: a JSON file of patches (rect in pixels, reflectance per wavelength); "
+        "their colours, free of any reflectance estimate, join the evidence and calibrate the estimate "
+        "(--model prior|family|auto; docs/light-families.md)",
+    )
     estimate.add_argument(
         "--json", action="store_true", help="print one JSON object (several sequences: one JSON line each, always)"
     )

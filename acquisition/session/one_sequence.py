@@ -45,6 +45,10 @@ class EstimateSettings:
     tiles: int = DEFAULT_TILES
     model: str = "led"
     calibration: str | None = None
+    reference_patch: tuple[int, int, int, int] | None = None
+    """``--reference-patch``: a spectrally flat region (x, y, width, height) for ``--model prior|family|auto``."""
+    reference_chart: str | None = None
+    """``--reference-chart``: a JSON file of patches of known reflectance, for ``--model prior|family|auto``."""
 
 
 @dataclass(frozen=True)
@@ -124,6 +128,14 @@ def estimate_one(path: str, settings: EstimateSettings, report: Report) -> Estim
     sequence = read_calibrated(path, settings.calibration, report)
     if sequence.partial:
         report(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
+    reference = settings.reference_chart if settings.reference_chart is not None else settings.reference_patch
+    if settings.reference_patch is not None and settings.reference_chart is not None:
+        raise UsageError(
+            "--reference-patch and --reference-chart: expected one of them (a chart may hold the grey card)"
+        )
+    if reference is not None and settings.model == "led":
+        option = "--reference-chart" if settings.reference_chart is not None else "--reference-patch"
+        raise UsageError(f"{option}: expected --model prior, family or auto (the LEDs' span needs no reference)")
     if settings.model != "led":
         from msflash.acquisition.session.prior_route import led_side, with_model_choice
 
@@ -132,7 +144,7 @@ def estimate_one(path: str, settings: EstimateSettings, report: Report) -> Estim
             sequence, stack, settings.method, settings.solver, settings.alpha, settings.tiles, settings.bin_factor
         )
         refuse_dark_ambient(sequence, led, "estimate")
-        payload, chosen, reason = with_model_choice(sequence, stack, payload, settings.model, varies)
+        payload, chosen, reason = with_model_choice(sequence, stack, payload, settings.model, varies, reference)
         for warning in payload["warnings"]:
             report(f"warning: {warning}")
         return EstimateResult(sequence, payload, choice=(chosen, reason))

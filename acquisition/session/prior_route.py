@@ -1,15 +1,21 @@
-"""From a recorded sequence to the light-prior estimate and the ``auto`` model choice (issue 17, build 3).
+"""From a recorded sequence to the models beyond the LEDs' span: ``--model prior|family|auto`` (issues 17 and 30).
 
-The thin layer between a :class:`~acquisition.sequence.format.Sequence` and
-:mod:`processing.light_prior`, as :mod:`acquisition.session.analysis` is for eq. 4–6: frames are read with
+The thin layer between a :class:`~acquisition.sequence.format.Sequence` and :mod:`processing.light_prior` /
+:mod:`processing.light_families`, as :mod:`acquisition.session.analysis` is for eq. 4–6: frames are read with
 :func:`~acquisition.session.analysis.load_frame_stack`, binned like ``msflash estimate`` and reduced to
-channel-resolved statistics; the LED spectra and responsivities go to photons.
+channel-resolved statistics; the LED spectra and responsivities go to photons. :data:`MODEL_ROUTES` is the one
+table from a ``--model`` name to what it computes.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
+import numpy as np
+
+from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.analysis import (
@@ -22,6 +28,18 @@ from msflash.acquisition.session.analysis import (
 )
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.light_families import (
+    AUTO_MARGIN,
+    LED_WARNING,
+    PRIOR_WARNING,
+    FamilyEstimate,
+    MissCheck,
+    ReferencePatch,
+    family_model,
+    predicted_ratio,
+    self_check,
+)
 from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
 
 
@@ -134,42 +152,353 @@ def led_side(
     return led, analysis.estimate_payload(sequence, led), False
 
 
-def with_model_choice(
-    sequence: Sequence, stack: FrameStack, payload: dict, requested: str, varies: bool
-) -> tuple[dict, str, str]:
-    """The estimate payload of ``--model prior|auto``: the light prior estimated, the model chosen and why.
+ReferenceRect = tuple[int, int, int, int]
+"""``(x, y, width, height)`` in pixels of the full frame: ``--reference-patch``."""
+Reference = ReferenceRect | str
+"""A grey card's rectangle (``--reference-patch``) or a chart file's path (``--reference-chart``)."""
 
-    ``prior`` takes the light prior; ``auto`` keeps a local LED estimate (the prior is one global
-    spectrum), else takes :func:`~processing.light_prior.choose_model`'s choice. The chosen model's
-    spectrum, band and warnings replace the LED ones, which stay under ``led`` when the prior wins.
+
+def reference_patch(
+    sequence: Sequence, stack: FrameStack, rect: ReferenceRect, reflectance: np.ndarray | None = None, what: str = ""
+) -> ReferencePatch:
+    """The reference (:class:`~processing.light_families.ReferencePatch`) of one region of known reflectance
+    (``reflectance`` on the sequence's grid; None: spectrally flat).
+
+    Raises
+    ------
+    UsageError
+        A rectangle outside the frame, smaller than 8 × 8 pixels, or whose pixels are saturated.
+    """
+    what = what or f"--reference-patch {','.join(map(str, rect))}"
+    x, y, width, height = rect
+    frame_height, frame_width = stack.ambient.shape[:2]
+    if sequence.camera.cfa is not None:  # whole 2 × 2 cells of the mosaic
+        x, y, width, height = x + x % 2, y + y % 2, width - width % 2 - 2 * (x % 2), height - height % 2 - 2 * (y % 2)
+    if x < 0 or y < 0 or width < 8 or height < 8 or x + width > frame_width or y + height > frame_height:
+        raise UsageError(
+            f"{what}: expected x,y,width,height of at least 8 × 8 pixels inside the {frame_width} × {frame_height} frame"
+        )
+
+    def crop(frame: np.ndarray) -> np.ndarray:
+        return frame[y : y + height, x : x + width]
+
+    statistics = accumulate_channel_statistics(
+        crop(stack.ambient),
+        [crop(frame) for frame in stack.led_frames],
+        stack.spec,
+        cfa=sequence.camera.cfa,
+        bin_factor=2,
+        n_folds=2,
+    )
+    if statistics.n_blocks == 0:
+        raise UsageError(
+            f"{what}: every pixel of the patch is saturated in some frame; expected a surface below the white level"
+        )
+    try:
+        return ReferencePatch.of(
+            statistics, led_spectra_photons(sequence), camera_responsivities_photons(sequence), reflectance
+        )
+    except SpectralDataError as error:
+        raise UsageError(f"{what}: {error}") from None
+
+
+def reference_chart(sequence: Sequence, stack: FrameStack, path: str) -> ReferencePatch:
+    """``--reference-chart FILE``: patches of known reflectance (a colour chart in the scene), one reference.
+
+    The file is JSON: ``{"patches": [{"rect": [x, y, width, height], "wavelengths_nm": [...], "reflectance":
+    [...]}, ...]}`` (pixels of the full frame; reflectance factors 0–1, interpolated onto the sequence's grid,
+    the edge values held beyond the data).
+
+    Raises
+    ------
+    UsageError
+        An unreadable file, a missing or malformed field (named), a patch outside the frame.
+    """
+    try:
+        document = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise UsageError(f"--reference-chart {path}: cannot be read ({error}); expected a JSON file") from None
+    patches = document.get("patches") if isinstance(document, dict) else None
+    if not isinstance(patches, list) or not patches:
+        raise UsageError(f"--reference-chart {path}: 'patches' missing or empty; expected a list of patches")
+    grid = np.asarray(sequence.wavelengths_nm, float)
+    references = []
+    for index, patch in enumerate(patches):
+        where = f"--reference-chart {path}: patches[{index}]"
+        try:
+            rect = tuple(int(v) for v in patch["rect"])
+            nm = np.asarray(patch["wavelengths_nm"], float)
+            values = np.asarray(patch["reflectance"], float)
+        except (KeyError, TypeError, ValueError) as error:
+            raise UsageError(f"{where}: {error}; expected rect, wavelengths_nm and reflectance") from None
+        if len(rect) != 4 or nm.shape != values.shape or nm.size < 2 or not np.all(np.isfinite(values)):
+            raise UsageError(f"{where}: expected a rect of 4 numbers and one finite reflectance per wavelength")
+        reflectance = np.interp(grid, nm, values)
+        references.append(reference_patch(sequence, stack, rect, reflectance, where))
+    return ReferencePatch.combined(references)
+
+
+def estimate_sequence_family(
+    sequence: Sequence,
+    stack: FrameStack | None = None,
+    prior: PriorEstimate | None = None,
+    reference: Reference | None = None,
+) -> tuple[PriorEstimate, FamilyEstimate]:
+    """The light prior's and the family model's estimates of a sequence (the prior is one of the candidates).
+
+    Raises
+    ------
+    RecordingError
+        If the sequence has no camera responsivities or unusable frames.
+    """
+    statistics = sequence_channel_statistics(sequence, stack)
+    leds = led_spectra_photons(sequence)
+    camera = camera_responsivities_photons(sequence)
+    if prior is None:
+        prior = prior_model(statistics.channels, leds, camera).estimate(statistics)
+    patch = None
+    if reference is not None:
+        loaded = stack or load_frame_stack(sequence)
+        patch = (
+            reference_chart(sequence, loaded, reference)
+            if isinstance(reference, str)
+            else reference_patch(sequence, loaded, reference)
+        )
+    family = family_model(statistics.channels, leds, camera).estimate(statistics, prior.spectrum.values[:, 0], patch)
+    return prior, family
+
+
+def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
+    """The JSON block ``family``: the chosen family and form, its parameters, the evidence and why."""
+    fit = family.chosen.fit
+
+    def evidence(candidate) -> dict:  # noqa: ANN001 — a light_families.Candidate
+        return {
+            "model": candidate.fit.name,
+            "family": candidate.fit.family,
+            "n_parameters": candidate.fit.n_parameters,
+            "held_out_relative_error": candidate.held_out_error,
+            "held_out_relative_error_noise_removed": candidate.held_out_error_noise_removed,
+            "reference_patch_relative_error": candidate.patch_error,
+        }
+
+    return {
+        "family": fit.family,
+        "form": fit.name,
+        "parameters": fit.parameters(),
+        "n_parameters": fit.n_parameters,
+        "reason": family.reason,
+        "spectrum": spectrum_in_sequence_unit(sequence, family.spectrum),
+        "spectrum_std": spectrum_in_sequence_unit(
+            sequence, family.spectrum.replace(values=family.spectrum_std[:, None])
+        ),
+        "relative_residual": family.relative_residual,
+        "reference": None
+        if family.reference is None
+        else {
+            "equations": int(family.reference.target.size),
+            "led_misfit": family.reference.led_misfit,
+            "chosen_relative_error": family.reference.relative_error(family.spectrum.values[:, 0]),
+        },
+        "evidence": {
+            "criterion": "held-out prediction of the ambient image (5 folds of block rows, noise removed); the "
+            "simplest candidate within 20 % of the best is preferred",
+            "led": evidence(family.led),
+            "candidates": [evidence(c) for c in family.candidates],
+        },
+        "warnings": list(family.warnings),
+    }
+
+
+LED_GAP_SHARE = 0.25
+"""Where the family evidence is computed, the LEDs' band adds this share of the squared gap between their estimate
+and the family's (scaled onto it): on the tuning rows of both suites the band then covered the truth at 71–74 % (±1σ)
+and 96–98 % (±2σ), against 64 % and 90–94 % without (docs/light-families.md)."""
+OLD_LED_MISS_WARNING = "the spectrum may be off by more than"
+"""The start of :mod:`processing.model_error`'s warning, which the families' check replaces where it is computed."""
+
+
+def _checks(
+    sequence: Sequence, led_payload: dict, prior: PriorEstimate, family: FamilyEstimate
+) -> dict[str, MissCheck]:
+    """Every model's miss check against the family evidence, in the sequence's unit (as estimates are scored)."""
+    leds = np.column_stack([np.asarray(led.spd, float) for led in sequence.leds])
+    family_spectrum = np.asarray(spectrum_in_sequence_unit(sequence, family.spectrum), float)
+    spread = np.asarray(
+        spectrum_in_sequence_unit(sequence, family.spectrum.replace(values=family.spread_std[:, None])), float
+    )
+    prior_spectrum = np.asarray(spectrum_in_sequence_unit(sequence, prior.spectrum), float)
+    return {
+        "led": predicted_ratio(np.asarray(led_payload["spectrum"], float), family_spectrum, leds, LED_WARNING, "LEDs'"),
+        "prior": predicted_ratio(prior_spectrum, family_spectrum, leds, PRIOR_WARNING, "light prior's"),
+        "family": self_check(family_spectrum, spread, leds),
+    }
+
+
+def _models_block(
+    sequence: Sequence, led_payload: dict, prior: PriorEstimate, family: FamilyEstimate
+) -> tuple[dict, dict[str, MissCheck]]:
+    """``models``: each model's spectrum, band, warnings and miss check, whichever is chosen."""
+    checks = _checks(sequence, led_payload, prior, family)
+    led_warnings = [w for w in led_payload.get("warnings", []) if not w.startswith(OLD_LED_MISS_WARNING)]
+    led_spectrum = np.asarray(led_payload["spectrum"], float)
+    family_spectrum = np.asarray(spectrum_in_sequence_unit(sequence, family.spectrum), float)
+    energy = float(family_spectrum @ family_spectrum)
+    gap = led_spectrum - family_spectrum * (float(family_spectrum @ led_spectrum) / energy if energy > 0 else 0.0)
+    given = led_payload.get("spectrum_std")
+    led_std = np.zeros_like(led_spectrum) if given is None else np.asarray(given, float)
+    blocks = {
+        "led": {
+            "spectrum": led_payload["spectrum"],
+            "spectrum_std": np.sqrt(led_std**2 + LED_GAP_SHARE * gap**2),
+            "band": f"{led_payload.get('band', '±1σ')}, with {LED_GAP_SHARE:g} of the squared gap to the family "
+            "estimate added",
+            "warnings": led_warnings,
+        },
+        "prior": {
+            "spectrum": spectrum_in_sequence_unit(sequence, prior.spectrum),
+            "spectrum_std": spectrum_in_sequence_unit(
+                sequence, prior.spectrum.replace(values=prior.spectrum_std[:, None])
+            ),
+            "warnings": list(prior.warnings),
+        },
+        "family": {
+            "spectrum": spectrum_in_sequence_unit(sequence, family.spectrum),
+            "spectrum_std": spectrum_in_sequence_unit(
+                sequence, family.spectrum.replace(values=family.spectrum_std[:, None])
+            ),
+            "warnings": list(family.warnings),
+        },
+    }
+    for name, check in checks.items():
+        label = {"led": "LEDs'", "prior": "light prior's", "family": f"family ({family.chosen.fit.name})"}[name]
+        blocks[name]["miss_check"] = {
+            "predicted_ratio_to_led_bound": check.predicted_ratio,
+            "threshold": check.threshold,
+            "warned": check.warned,
+            "basis": check.basis,
+        }
+        if check.warned:
+            blocks[name]["warnings"].append(check.message(label))
+    return blocks, checks
+
+
+def _prior_route(
+    sequence: Sequence,
+    stack: FrameStack,
+    requested: str,
+    varies: bool,
+    led_payload: dict,
+    reference: Reference | None = None,
+) -> tuple[dict, str, str, dict]:
+    """``--model prior``: the light prior, checked against the family evidence."""
+    result = estimate_sequence_prior(sequence, stack)
+    prior = prior_payload(sequence, result)
+    _, family = estimate_sequence_family(sequence, stack, result.prior, reference)
+    models, _ = _models_block(sequence, led_payload, result.prior, family)
+    replacement = {
+        "spectrum": prior["prior"]["spectrum"],
+        "spectrum_std": prior["prior"]["spectrum_std"],
+        "band": "±1σ posterior of the light prior (pixel noise and the model's misfit)",
+        "warnings": models["prior"]["warnings"],
+    }
+    extra = {"model_choice": prior["model_choice"], "prior": prior["prior"], "models": models}
+    return extra, "prior", "asked for the light prior (--model prior)", replacement
+
+
+def _family_route(
+    sequence: Sequence,
+    stack: FrameStack,
+    requested: str,
+    varies: bool,
+    led_payload: dict,
+    reference: Reference | None = None,
+) -> tuple[dict, str, str, dict]:
+    """``--model family`` and ``--model auto``: the family model's choice (auto: the LEDs' span unless the evidence
+    says otherwise; a scene whose illuminant varies keeps the local LED model)."""
+    prior, family = estimate_sequence_family(sequence, stack, None, reference)
+    block = family_payload(sequence, family)
+    models, _ = _models_block(sequence, led_payload, prior, family)
+    led_error = family.led.held_out_error_noise_removed
+    choice = {
+        "held_out_relative_error_noise_removed": {
+            "led": led_error,
+            family.chosen.fit.name: family.chosen.held_out_error_noise_removed,
+        },
+        "margin": AUTO_MARGIN,
+    }
+    if requested == "family":
+        chosen, reason = family.chosen.fit.name, family.reason
+    elif varies:
+        chosen, reason = (
+            "led",
+            "the illuminant varies across the scene (the local LED model was chosen); the families are one global "
+            "spectrum",
+        )
+    else:
+        chosen, reason = family.auto_model, family.auto_reason
+    replacement = {
+        "spectrum": block["spectrum"],
+        "spectrum_std": block["spectrum_std"],
+        "band": "±1σ of the fitted family (tempered posterior) and the spread of the candidates that predict "
+        "held-out pixels about as well",
+        "warnings": models["family"]["warnings"],
+        "led_warnings": models["led"]["warnings"],
+    }
+    return (
+        {"model_choice": choice, "family": block, "prior": models["prior"], "models": models},
+        chosen,
+        reason,
+        replacement,
+    )
+
+
+MODEL_ROUTES = {"prior": _prior_route, "family": _family_route, "auto": _family_route}
+"""``--model`` name → its route: ``(sequence, stack, requested, varies, led payload) → (fields, chosen, reason,
+replacement)``. ``replacement`` holds the spectrum, band, band meaning and warnings that replace the LED ones when
+``chosen`` is not ``led`` (``led`` itself needs no route: it is :mod:`acquisition.session.analysis`'s estimate), and
+``led_warnings``, the LED payload's warnings with the families' check in place of the reference lights' when it is."""
+
+
+def with_model_choice(
+    sequence: Sequence,
+    stack: FrameStack,
+    payload: dict,
+    requested: str,
+    varies: bool,
+    reference: Reference | None = None,
+) -> tuple[dict, str, str]:
+    """The estimate payload of ``--model prior|family|auto``: the model estimated, the model chosen and why.
+
+    ``prior`` takes the light prior; ``family`` the family model's choice (:mod:`processing.light_families`);
+    ``auto`` keeps the LEDs' span unless a family predicts held-out pixels clearly better, and keeps a local LED
+    estimate (a family is one global spectrum). The chosen model's spectrum, band and warnings replace the LED
+    ones, which stay under ``led`` when another model wins. ``models`` holds every model's spectrum, band, warnings
+    and miss check (predicted ratio to the LED bound against the family evidence, docs/light-families.md).
+    ``reference``: a spectrally flat patch (``--reference-patch``) whose error joins the evidence and on which the
+    family estimate is calibrated.
 
     Returns
     -------
     dict, str, str
         The payload (docs/architecture.md §7), the chosen model and the reason.
     """
-    result = estimate_sequence_prior(sequence, stack)
-    prior = prior_payload(sequence, result)
-    choice = prior["model_choice"]
-    if requested == "prior":
-        chosen, reason = "prior", "asked for the light prior (--model prior)"
-    elif varies:
-        chosen, reason = (
-            "led",
-            "the illuminant varies across the scene (the local LED model was chosen); "
-            "the light prior is one global spectrum",
-        )
-    else:
-        chosen, reason = choice["model"], choice["reason"]
+    fields, chosen, reason, replacement = MODEL_ROUTES[requested](
+        sequence, stack, requested, varies, payload, reference
+    )
     payload = dict(payload)
+    payload.update({key: value for key, value in fields.items() if key != "model_choice"})
     payload["model"] = chosen
-    payload["model_choice"] = {**choice, "model": chosen, "reason": reason, "requested": requested}
-    payload["prior"] = prior["prior"]
-    if chosen == "prior":
+    payload["model_choice"] = {**fields["model_choice"], "model": chosen, "reason": reason, "requested": requested}
+    if chosen == "led" and "led_warnings" in replacement:
+        payload["warnings"] = replacement["led_warnings"]
+        payload["spectrum_std"] = fields["models"]["led"]["spectrum_std"]
+        payload["band"] = fields["models"]["led"]["band"]
+    if chosen != "led":
         payload["led"] = {key: payload[key] for key in ("spectrum", "spectrum_std", "ambient_weights", "warnings")}
-        payload["spectrum"] = prior["prior"]["spectrum"]
-        payload["spectrum_std"] = payload["spectrum_std_noise"] = prior["prior"]["spectrum_std"]
-        payload["band"] = "±1σ posterior of the light prior (pixel noise and the model's misfit)"
+        payload["spectrum"] = replacement["spectrum"]
+        payload["spectrum_std"] = payload["spectrum_std_noise"] = replacement["spectrum_std"]
+        payload["band"] = replacement["band"]
         payload["miss_risk"] = payload["expected_ratio_to_led_bound"] = None
-        payload["warnings"] = list(result.prior.warnings)
+        payload["warnings"] = replacement["warnings"]
     return payload, chosen, reason

@@ -8,6 +8,7 @@ the per-case CSV beside it (same name, ``.csv``).
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import time
@@ -16,8 +17,22 @@ from pathlib import Path
 
 from tests.harness import report
 from tests.harness.cases import select_cases
-from tests.harness.run import run_cases
-from tests.harness.variants import select
+from tests.harness.physics_cases import select_physics_cases
+from tests.harness.run import CACHE_ENV, run_cases
+from tests.harness.variants import VARIANTS, select
+
+PHYSICS_VARIANTS = (
+    "default",
+    "led-checked",
+    "prior",
+    "family",
+    "auto",
+    "family-patch",
+    "auto-patch",
+    "family-chart",
+    "auto-chart",
+)
+"""The variants the physics suite runs unless ``--variant`` names others (the baselines are the library's)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -25,6 +40,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m tests.harness.ambient", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("docs/ambient-harness.md"), help="markdown report to write")
     parser.add_argument("--split", choices=("tuning", "held_out", "both"), default="both")
+    parser.add_argument(
+        "--suite",
+        choices=("library", "physics"),
+        default="library",
+        help="library: lights of the 401-light library; physics: lights generated from physics (issue 30)",
+    )
+    parser.add_argument(
+        "--cache", type=Path, default=None, help="keep rendered cases in this directory and reuse them (gitignored)"
+    )
     parser.add_argument(
         "--variant",
         action="append",
@@ -66,7 +90,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as error:
         print(f"harness: error: {error}", file=sys.stderr)
         return 2
-    cases = select_cases(args.split, args.quick)
+    if args.cache is not None:
+        os.environ[CACHE_ENV] = str(args.cache.resolve())
+    if args.suite == "physics":
+        if not any("=" not in text for text in args.variant or []):
+            variants = [v for v in variants if v.name in PHYSICS_VARIANTS] + [
+                v for v in variants if v.name not in VARIANTS
+            ]
+        cases = select_physics_cases(args.split, args.quick)
+    else:
+        cases = select_cases(args.split, args.quick)
     print(
         f"{len(cases)} cases × {len(variants)} variants ({', '.join(v.name for v in variants)}), {args.jobs} jobs",
         flush=True,
@@ -86,6 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             jobs=args.jobs,
             commit=_commit(),
             csv_name=csv_path.name,
+            suite=args.suite,
         ),
         encoding="utf-8",
     )

@@ -33,6 +33,10 @@ SPECULAR_GAIN = 2.5
 TEXTURE = 0.05
 """Pixel-scale texture: each pixel's reflectance times 1 ± this (fixed pattern, every frame)."""
 BASE_EXPOSURE_US = 10000.0
+REFERENCE_PATCH_FILE = "reference_patch.json"
+REFERENCE_CHART_FILE = "reference_chart.json"
+"""Beside ``sequence.json``: the white card's rectangle (an unknown key would do, but a sidecar keeps the sequence
+exactly what a user's would be)."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +109,14 @@ def grid_nm(grid: tuple[float, float, float]) -> np.ndarray:
 
 
 def _light_energy(case: HarnessCase, wavelengths: np.ndarray, led_energy: np.ndarray) -> np.ndarray:
+    if case.light.startswith("physics:"):
+        from tests.harness.physics_cases import light_of
+        from tests.harness.physics_lights import on_grid
+
+        fine = light_of(case).energy()
+        # The rendering grid gets the 1-nm spectrum itself; a sequence's grid what a spectroradiometer of that
+        # bandwidth reports (a narrow line between two samples is shared by both, not lost).
+        return fine if np.array_equal(wavelengths, tables.FINE_NM) else on_grid(fine, wavelengths)
     if case.light.startswith("leds:"):
         return led_energy @ np.array([float(v) for v in case.light[5:].split(",")])
     return tables.lights().column(case.light).on(wavelengths)[:, 0]
@@ -154,10 +166,14 @@ def render(case: HarnessCase, directory: Path) -> Truth:
 
     # The scene: patches of the drawn surfaces (repeated to fill), a fixed texture, a specular strip.
     labels = rng.integers(0, surfaces.shape[1], (PATCH_ROWS, PATCH_COLUMNS))
-    labels[rng.integers(PATCH_ROWS), rng.integers(PATCH_COLUMNS)] = white_row  # one white patch (a chart's)
+    white_at = (int(rng.integers(PATCH_ROWS)), int(rng.integers(PATCH_COLUMNS)))
+    labels[white_at] = white_row  # one white patch (a chart's)
+    patch_labels = labels.copy()
     labels = np.repeat(np.repeat(labels, PATCH_PX, 0), PATCH_PX, 1)
+    white_x = white_at[1] * PATCH_PX
     if case.specular:
         middle = labels.shape[1] // 2
+        white_x += 6 if white_x >= middle else 0
         labels = np.concatenate([labels[:, :middle], np.full((labels.shape[0], 6), glossy_row), labels[:, middle:]], 1)
     height, width = labels.shape
     texture = 1.0 + TEXTURE * rng.uniform(-1.0, 1.0, (height, width))
@@ -232,4 +248,27 @@ def render(case: HarnessCase, directory: Path) -> Truth:
         "frames": entries,
     }
     (directory / "sequence.json").write_text(json.dumps(document))
+    # Where the white card is (x, y, width, height in pixels, 2 pixels in from its edges): what a user gives
+    # `--reference-patch` (a flat reflectance with the scene's ±5 % texture and vignetting).
+    patch = [white_x + 2, white_at[0] * PATCH_PX + 2, PATCH_PX - 4, PATCH_PX - 4]
+    (directory / REFERENCE_PATCH_FILE).write_text(json.dumps(patch))
+    # A colour chart's worth of the scene's surfaces (up to 24, each at its first patch) with their reflectances:
+    # what `--reference-chart` reads (as a user's chart with the maker's reflectances would be).
+    chart, seen = [], set()
+    for row, column in np.ndindex(*patch_labels.shape):
+        surface = int(patch_labels[row, column])
+        if surface >= surfaces.shape[1] or surface in seen or len(chart) >= 24:
+            continue
+        seen.add(surface)
+        x = column * PATCH_PX
+        if case.specular and x >= PATCH_COLUMNS * PATCH_PX // 2:
+            x += 6
+        chart.append(
+            {
+                "rect": [x + 2, row * PATCH_PX + 2, PATCH_PX - 4, PATCH_PX - 4],
+                "wavelengths_nm": fine[::5].tolist(),
+                "reflectance": np.round(surfaces[::5, surface], 5).tolist(),
+            }
+        )
+    (directory / REFERENCE_CHART_FILE).write_text(json.dumps({"patches": chart}))
     return Truth(directory, nm, truth, led_written)

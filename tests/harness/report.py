@@ -16,18 +16,40 @@ import numpy as np
 
 from tests.harness import metrics, splits
 from tests.harness.cases import CASES_PER_SPLIT, GRIDS, QUICK_EVERY, RATIO_RANGE
+from tests.harness.physics_cases import CASES_PER_SPLIT as PHYSICS_CASES
+from tests.harness.physics_cases import QUICK_EVERY as PHYSICS_QUICK
 from tests.harness.run import CaseResult, case_record
 from tests.harness.variants import Variant
 
+
+def _light_kind(result: CaseResult) -> str:
+    from tests.harness.physics_cases import light_of
+
+    light = light_of(result.case)
+    return light.kind if not light.second_kind else "+".join(sorted((light.kind, light.second_kind)))
+
+
 FAMILIES: dict[str, Callable[[CaseResult], object]] = {
     "RGB / Bayer": lambda r: r.case.mosaic,
+    "CFA layout": lambda r: r.case.cfa or "RGB",
     "wavelength grid": lambda r: r.case.grid_label,
     "LED count": lambda r: r.case.led_count,
     "light type": lambda r: r.case.light_type,
     "bit depth": lambda r: r.case.bits,
     "spectral unit": lambda r: r.case.unit,
+    "light kind": _light_kind,
 }
 """Family dimensions the report breaks results down by."""
+LIBRARY_FAMILIES = (
+    "RGB / Bayer",
+    "CFA layout",
+    "wavelength grid",
+    "LED count",
+    "light type",
+    "bit depth",
+    "spectral unit",
+)
+PHYSICS_FAMILIES = ("light type", "CFA layout", "light kind", "LED count", "wavelength grid", "bit depth")
 
 
 def _number(value: float | None, digits: int = 2) -> str:
@@ -141,9 +163,14 @@ def worst_cases(results: Sequence[CaseResult], variant: str, count: int = 5) -> 
         scored = [(m.ratio, r, m) for r in subset if (m := r.of(variant)) is not None and math.isfinite(m.ratio)]
         for ratio, result, measured in sorted(scored, key=lambda t: -t[0])[:count]:
             c = result.case
+            light = c.light
+            if light.startswith("physics:"):
+                from tests.harness.physics_cases import light_of
+
+                light = light_of(c).label
             conditions = (
                 f"{c.mosaic} {c.cfa or ''} {c.bits}-bit, {c.grid_label} {c.unit}, {c.leds}, "
-                f"{c.light_type} '{c.light}', {c.camera}, ratio {c.ratio:.2f}, {c.exposures} exposures"
+                f"{c.light_type} '{light}', {c.camera}, ratio {c.ratio:.2f}, {c.exposures} exposures"
                 + (f", vignetting {c.vignetting:.2f}" if c.vignetting < 1 else "")
                 + (", specular" if c.specular else "")
             )
@@ -151,6 +178,33 @@ def worst_cases(results: Sequence[CaseResult], variant: str, count: int = 5) -> 
                 f"| {split} | {c.name} | {ratio:.2f} | {measured.rmse:.3f} | {result.bound:.3f} "
                 f"| {'yes' if measured.warnings else 'no'} | {conditions} |"
             )
+    return lines
+
+
+def failure_map(results: Sequence[CaseResult], variants: Sequence[Variant], by: str = "light kind") -> list[str]:
+    """Where each model fails and whether it warned: per value of ``by`` and split, each variant's misses
+    (ratio > 1.3) as ``warned / misses`` of the cases (— when the variant cannot warn)."""
+    key = FAMILIES[by]
+    lines = [
+        f"| {by} | split | cases | " + " | ".join(f"{v.name} warned / misses" for v in variants) + " |",
+        "|---|---|---|" + "---|" * len(variants),
+    ]
+    for value in sorted({key(r) for r in results}, key=str):
+        for split, subset in _by_split(results):
+            group = [r for r in subset if key(r) == value]
+            if not group:
+                continue
+            cells = []
+            for variant in variants:
+                measured = [m for r in group if (m := r.of(variant.name)) is not None and math.isfinite(m.ratio)]
+                misses = [m for m in measured if m.ratio > metrics.MISS_FACTOR]
+                if not misses:
+                    cells.append("·")
+                elif any(m.warnings is None for m in misses):
+                    cells.append(f"— / {len(misses)}")
+                else:
+                    cells.append(f"{sum(bool(m.warnings) for m in misses)} / {len(misses)}")
+            lines.append(f"| {value} | {split} | {len(group)} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -248,11 +302,13 @@ def markdown(
     jobs: int,
     commit: str,
     csv_name: str,
+    suite: str = "library",
 ) -> str:
-    """The whole report."""
+    """The whole report (``suite``: ``library`` lights or ``physics`` lights)."""
     variant_lines = "\n".join(f"- `{v.name}`: `{v.command}`" for v in variants)
+    intro = INTRO if suite == "library" else PHYSICS_INTRO
     parts = [
-        INTRO.format(
+        intro.format(
             command=command,
             elapsed=elapsed,
             jobs=jobs,
@@ -260,10 +316,10 @@ def markdown(
             grids=", ".join(f"{a:g}–{b:g}/{c:g}" for a, b, c in GRIDS),
             ratio_low=RATIO_RANGE[0],
             ratio_high=RATIO_RANGE[1],
-            per_split=CASES_PER_SPLIT,
+            per_split=CASES_PER_SPLIT if suite == "library" else PHYSICS_CASES,
             variants=variant_lines,
             miss=metrics.MISS_FACTOR,
-            quick=QUICK_EVERY,
+            quick=QUICK_EVERY if suite == "library" else PHYSICS_QUICK,
             csv_name=csv_name,
         ),
         "## Summary",
@@ -275,13 +331,70 @@ def markdown(
         *confusion_table(results, variants),
         "",
     ]
-    for family in FAMILIES:
-        parts += [f"## Per family: {family} (ratio mean / worst)", "", *family_table(results, variants, family), ""]
-    if any(v.name == "default" for v in variants):
-        parts += ["## Worst cases of `default`", "", *worst_cases(results, "default"), ""]
+    for family in LIBRARY_FAMILIES if suite == "library" else PHYSICS_FAMILIES:
+        title = "light family" if suite == "physics" and family == "light type" else family
+        parts += [f"## Per family: {title} (ratio mean / worst)", "", *family_table(results, variants, family), ""]
+    if suite == "physics":
+        parts += [
+            "## Failure map: where each model misses, and whether it warned",
+            "",
+            "Per light kind: `warned / misses` (· no miss). Every model's warnings: `docs/light-families.md`.",
+            "",
+            *failure_map(results, variants),
+            "",
+        ]
+    for name in ("default", "auto") if suite == "physics" else ("default",):
+        if any(v.name == name for v in variants):
+            parts += [f"## Worst cases of `{name}`", "", *worst_cases(results, name), ""]
     problems = failures(results)
     parts += ["## Failures and Python warnings", "", *(problems or ["none"]), ""]
     return "\n".join(parts)
+
+
+PHYSICS_INTRO = """# Ambient-estimation harness on lights from physics (issue 30)
+
+Measured results of every ambient estimator variant on sequences lit by lights **generated from physics**,
+in no library: thermal (Planck, tungsten's emissivity, CIE daylight), discharge (mercury, sodium, metal-halide
+and rare-earth phosphor lines at their known wavelengths over continua), solid-state (phosphor-converted
+whites with free pump and phosphor bands, violet-pumped whites, RGB/RGBA luminaires), transmitted (daylight at
+depth in water of a composition, thermal light through dyed gels) and mixtures of two
+(`tests/harness/physics_lights.py`). Generated by `{command}` ({elapsed:.0f} s, {jobs} jobs, commit
+`{commit}`); do not edit by hand.
+
+## What it renders
+The library harness's renderer (`tests/harness/render.py`, independent of msflash's image formation):
+reflectance × light × camera on a 1-nm grid (380–780 nm), the sequence carrying its LED spectra and
+responsivities sampled on the case's grid ({grids}); the truth is the light as a spectroradiometer with a
+triangular slit as wide as the grid step reports it. RGB or raw Bayer (RGGB, BGGR, GRBG, GBRG, a fifth each),
+10–16 bits, photon and read noise, vignetting, unequal exposures, specular strips, ambient / flash ratio
+{ratio_low:g}–{ratio_high:g}, as in the library harness.
+
+## Splits
+- Lights: every kind's parameters are drawn from **disjoint intervals** per split
+  (`physics_lights.RANGES`): other colour temperatures, pump and phosphor wavelengths, phosphor blends, line
+  widths, depths and water compositions, gels.
+- Cameras: tuning cases use the library harness's tuning cameras or ten cameras made from physics
+  (`physics:t00…t09`: silicon QE × dye filters × IR cut, `tests/harness/physics_cameras.py`); held-out cases
+  its held-out cameras or ten other physics cameras (`physics:h00…h09`).
+- Surfaces: tuning scenes Vrhel Munsell + Objects + Macbeth; held-out scenes the CIE 2017 colour-fidelity
+  set (TM-30's 99, used nowhere else), Gretag SG 140 and Esser — none is Natural-100.
+- {per_split} cases per split, balanced over family, CFA layout, LED set, grid and bit depth
+  (`tests/harness/physics_cases.py`). **Never tune on the held-out rows.**
+
+## Variants
+{variants}
+
+## Metrics
+As the library harness (`docs/ambient-harness.md`): ratio = spectrum RMSE ÷ LED bound; a *miss* is a ratio
+above {miss:g}; recall = warned misses ÷ misses, false alarms = warned non-misses ÷ non-misses; band
+coverage = share of wavelengths with the scaled truth within ±1σ / ±2σ (targets 55–80 % and ≥ 90 %).
+
+## Reproduce
+```
+python -m tests.harness.ambient --suite physics --out docs/physics-harness.md --jobs 2 --cache .harness-cache
+```
+`--quick` keeps every {quick}th case; the per-case results are in `{csv_name}` beside this file.
+"""
 
 
 def write_csv(results: Sequence[CaseResult], path: Path) -> None:

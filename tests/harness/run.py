@@ -1,14 +1,19 @@
 """Run variants on cases: render each case once, estimate with every variant, measure.
 
 Cases run in worker processes (``jobs``); each renders into its own temporary directory and
-deletes it afterwards, so a full run leaves nothing but the report.
+deletes it afterwards, so a full run leaves nothing but the report — unless a cache directory is given
+(``--cache``, :data:`CACHE_ENV`): rendered cases are then kept there, keyed by the case's fields and
+:data:`RENDER_VERSION`, and read back on the next run (rendering is deterministic).
 """
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import shutil
 import tempfile
+import zlib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -16,8 +21,13 @@ from pathlib import Path
 import numpy as np
 
 from tests.harness import metrics
-from tests.harness.render import HarnessCase, render
+from tests.harness.render import HarnessCase, Truth, render
 from tests.harness.variants import Variant
+
+CACHE_ENV = "MSFLASH_HARNESS_CACHE"
+"""Environment variable naming the rendered-case cache directory (set by ``--cache``; unset: no cache)."""
+RENDER_VERSION = 3
+"""Bumped whenever the renderer's output changes, so a cache never serves an old rendering."""
 
 
 @dataclass(frozen=True)
@@ -78,8 +88,42 @@ def measure(variant: Variant, directory: Path, truth: np.ndarray, bound: float) 
     )
 
 
+def cached_render(case: HarnessCase, cache: Path) -> Truth:
+    """``render(case)`` kept under ``cache`` (rendered once; the truth beside the sequence in ``truth.json``)."""
+    key = f"{case.name}-{zlib.crc32(repr((RENDER_VERSION, case)).encode()):08x}"
+    directory = cache / key
+    stored = directory / "truth.json"
+    if stored.is_file():
+        data = json.loads(stored.read_text())
+        return Truth(directory, np.array(data["wavelengths_nm"]), np.array(data["ambient"]), np.array(data["led_spd"]))
+    partial = cache / f".{key}.{os.getpid()}"
+    shutil.rmtree(partial, ignore_errors=True)
+    truth = render(case, partial)
+    (partial / "truth.json").write_text(
+        json.dumps(
+            {
+                "wavelengths_nm": truth.wavelengths_nm.tolist(),
+                "ambient": truth.ambient.tolist(),
+                "led_spd": truth.led_spd.tolist(),
+            }
+        )
+    )
+    try:
+        partial.rename(directory)
+    except OSError:  # another worker rendered it first: the same bytes
+        shutil.rmtree(partial, ignore_errors=True)
+    return Truth(directory, truth.wavelengths_nm, truth.ambient, truth.led_spd)
+
+
 def run_case(case: HarnessCase, variants: list[Variant], root: Path | None = None) -> CaseResult:
-    """Render ``case`` (under ``root``, or a temporary directory removed afterwards) and measure every variant."""
+    """Render ``case`` (under ``root``, from the cache named by :data:`CACHE_ENV`, or in a temporary directory
+    removed afterwards) and measure every variant."""
+    cache = os.environ.get(CACHE_ENV)
+    if root is None and cache:
+        Path(cache).mkdir(parents=True, exist_ok=True)
+        truth = cached_render(case, Path(cache))
+        bound = metrics.led_bound(truth.led_spd, truth.ambient)
+        return CaseResult(case, bound, tuple(measure(v, truth.directory, truth.ambient, bound) for v in variants))
     scratch = Path(tempfile.mkdtemp(prefix="harness-")) if root is None else root
     try:
         truth = render(case, scratch / case.name)

@@ -138,8 +138,13 @@ def camera_identity(name: str) -> str:
 
 @cache
 def camera(name: str) -> Table:
-    """A camera's R, G, B quantal responsivities on its own grid, peak 1 (NaN → 0)."""
-    if name.startswith("isetcam:"):
+    """A camera's R, G, B quantal responsivities on its own grid, peak 1 (NaN → 0); ``physics:…`` cameras are
+    generated (:mod:`tests.harness.physics_cameras`) on the 1-nm grid."""
+    if name.startswith("physics:"):
+        from tests.harness.physics_cameras import physics_camera
+
+        nm, values = FINE_NM, physics_camera(name, FINE_NM)
+    elif name.startswith("isetcam:"):
         nm, _, values = _csv(_data(f"cameras/isetcam/{name[8:]}.csv"))
     elif name.startswith("colour:"):
         import colour  # colour-science's own camera data (BSD-3), offline
@@ -160,6 +165,7 @@ REFLECTANCE_FILES = {
     "macbeth": "reflectances/charts_isetcam/macbethChart_24.csv",
     "gretag": "reflectances/charts_isetcam/gretagDigitalColorSG_140.csv",
     "esser": "reflectances/charts_isetcam/esserChart_113.csv",
+    "ces99": "colour-science: CIE 2017 colour-fidelity samples (TM-30's 99 CES)",
 }
 """Surface sets the harness draws from (Natural-100 itself is not one of them)."""
 NATURAL100_FILE = "reflectances/natural100/natural100_400_700_10nm.csv"
@@ -172,6 +178,16 @@ since a light prior's reflectance basis may come from Natural-100."""
 @cache
 def reflectance_set(name: str) -> Table:
     """A surface set (reflectance factors on the file's grid), clipped to [0, 1]."""
+    if name == "ces99":  # never used by the library harness; no file: colour-science ships them
+        import colour
+        from colour.quality.cfi2017 import load_TCS_CIE2017
+
+        samples = load_TCS_CIE2017(colour.SpectralShape(380, 780, 5))
+        return Table(
+            np.asarray(samples.wavelengths, float),
+            tuple(f"ces99:{n}" for n in samples.labels),
+            np.clip(np.asarray(samples.values, float), 0.0, 1.0),
+        )
     nm, names, values = _csv(
         DATA / REFLECTANCE_FILES[name] if (DATA / REFLECTANCE_FILES[name]).is_file() else _data(REFLECTANCE_FILES[name])
     )

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from tests.harness import baselines
+from tests.harness.render import REFERENCE_CHART_FILE, REFERENCE_PATCH_FILE
 from tests.processing.unseen_sequences import run_cli
 
 
@@ -45,13 +46,22 @@ class Variant:
     name: str
     arguments: tuple[str, ...] = ()
     function: Callable[[Path], np.ndarray] | None = field(default=None, compare=False)
+    block: str = ""
+    """Read ``models[block]`` of the JSON (one model's spectrum, band and warnings) instead of the chosen one."""
+    reference_patch: bool = False
+    """Pass ``--reference-patch`` with the white card the renderer wrote beside the sequence."""
+    reference_chart: bool = False
+    """Pass ``--reference-chart`` with the chart of the scene's surfaces the renderer wrote beside the sequence."""
 
     @property
     def command(self) -> str:
         """How it estimates, for the report."""
         if self.function is not None:
             return f"{self.function.__module__}.{self.function.__name__}"
-        return " ".join(["msflash estimate SEQ --json", *map(shlex.quote, self.arguments)])
+        command = " ".join(["msflash estimate SEQ --json", *map(shlex.quote, self.arguments)])
+        command += " --reference-patch X,Y,W,H (the white card)" if self.reference_patch else ""
+        command += " --reference-chart FILE (24 of the scene's surfaces)" if self.reference_chart else ""
+        return command + (f" (its models.{self.block})" if self.block else "")
 
     def estimate(self, directory: Path) -> Estimate:
         """Run this variant on the sequence in ``directory``."""
@@ -60,10 +70,18 @@ class Variant:
                 return Estimate(spectrum=np.asarray(self.function(directory), float))
             except Exception as error:  # noqa: BLE001 — a failing baseline is a result, not a crash
                 return Estimate(error=f"{type(error).__name__}: {error}")
-        status, out, err, caught = run_cli(["estimate", str(directory), "--json", *self.arguments])
+        arguments = self.arguments
+        if self.reference_patch:
+            rect = json.loads((directory / REFERENCE_PATCH_FILE).read_text())
+            arguments += ("--reference-patch", ",".join(str(int(v)) for v in rect))
+        if self.reference_chart:
+            arguments += ("--reference-chart", str(directory / REFERENCE_CHART_FILE))
+        status, out, err, caught = _run_estimate(str(directory), arguments)
         if status != 0:
             return Estimate(error=f"status {status}: {err.strip().splitlines()[-1] if err.strip() else ''}")
         payload = json.loads(out)
+        if self.block:
+            payload = payload["models"][self.block]
         std = payload.get("spectrum_std")
         return Estimate(
             np.asarray(payload["spectrum"], float),
@@ -71,6 +89,19 @@ class Variant:
             tuple(payload.get("warnings", ())),
             notes=tuple(caught),
         )
+
+
+_LAST_RUN: dict[tuple[str, tuple[str, ...]], tuple[int, str, str, list[str]]] = {}
+
+
+def _run_estimate(directory: str, arguments: tuple[str, ...]) -> tuple[int, str, str, list[str]]:
+    """``msflash estimate DIRECTORY --json ARGUMENTS``, run once per sequence and arguments in this process: the
+    variants that read one model's block of the same ``--model auto`` run share it."""
+    key = (directory, arguments)
+    if key not in _LAST_RUN:
+        _LAST_RUN.clear()  # one sequence at a time: a worker measures every variant of a case before the next
+        _LAST_RUN[key] = run_cli(["estimate", directory, "--json", *arguments])
+    return _LAST_RUN[key]
 
 
 def msflash(*arguments: str) -> Callable[[str], Variant]:
@@ -86,8 +117,16 @@ def python(function: Callable[[Path], np.ndarray]) -> Callable[[str], Variant]:
 _REGISTRY: Mapping[str, Callable[[str], Variant]] = {
     "default": msflash(),
     "msflash-lstsq": msflash("--solver", "lstsq"),
-    "prior": msflash("--model", "prior"),
+    # The models beyond the LEDs all read one `--model auto` run: its `models` block holds each model's spectrum,
+    # band and warnings exactly as `--model prior` and `--model family` print them (tests/acquisition/test_cli_model.py).
+    "prior": lambda name: Variant(name, ("--model", "auto"), block="prior"),
+    "family": lambda name: Variant(name, ("--model", "auto"), block="family"),
     "auto": msflash("--model", "auto"),
+    "led-checked": lambda name: Variant(name, ("--model", "auto"), block="led"),
+    "auto-patch": lambda name: Variant(name, ("--model", "auto"), reference_patch=True),
+    "family-patch": lambda name: Variant(name, ("--model", "auto"), block="family", reference_patch=True),
+    "auto-chart": lambda name: Variant(name, ("--model", "auto"), reference_chart=True),
+    "family-chart": lambda name: Variant(name, ("--model", "auto"), block="family", reference_chart=True),
     "authors": python(baselines.authors_estimate),
     "authors-alpha-scaled": python(baselines.authors_estimate_scaled),
     "lstsq-pixels": python(baselines.lstsq_estimate),

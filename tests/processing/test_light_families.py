@@ -1,0 +1,122 @@
+"""The family model (processing/light_families.py, issue 30 item 2): its data term, its forms and its choice."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from msflash.processing import datasets
+from msflash.processing.channel_statistics import ChannelStatistics, Moments
+from msflash.processing.light_families import (
+    SIMPLER_WITHIN,
+    Candidate,
+    Fit,
+    choose,
+    daylight,
+    discharge_atoms,
+    family_model,
+    light_predictors,
+    planck,
+    reduce_predictors,
+    scene_form,
+    unit_predictors,
+)
+from msflash.processing.light_prior import learn_reflectance_basis, normal_equations, plane_responsivities
+from msflash.processing.spectra import WavelengthGrid
+
+GRID = WavelengthGrid(400.0, 700.0, 10.0)
+
+
+def _leds_and_camera():
+    leds = datasets.paper_leds().resample(GRID).to_unit("photons")
+    camera = datasets.camera_responsivities("Canon5DMarkII").resample(GRID).to_unit("photons")
+    return leds, camera
+
+
+def _statistics(light_photons: np.ndarray, seed: int = 0, folds: int = 5, blocks: int = 40) -> ChannelStatistics:
+    """Noise-free channel statistics of Natural-100 surfaces (with random gains) under ``light_photons``."""
+    leds, camera = _leds_and_camera()
+    rng = np.random.default_rng(seed)
+    surfaces = datasets.natural100().resample(GRID).values
+    planes = plane_responsivities(camera, ("R", "G", "B"))
+    k = leds.count
+    ff, fa, aa, counts = [], [], [], []
+    for _ in range(folds):
+        chosen = surfaces[:, rng.integers(0, surfaces.shape[1], blocks)] * rng.uniform(0.3, 1.0, blocks)
+        f = np.einsum("nc,nb,ni->bci", planes, chosen, leds.values).reshape(blocks, 3 * k)
+        a = np.einsum("nc,nb,n->bc", planes, chosen, light_photons)
+        ff.append(f.T @ f), fa.append(f.T @ a), aa.append(a.T @ a), counts.append(blocks)
+    moments = Moments(np.array(ff), np.array(fa), np.array(aa))
+    return ChannelStatistics(
+        moments,
+        None,
+        np.array(counts),
+        np.zeros((folds, 3 * k)),
+        np.zeros((folds, 3)),
+        folds * blocks,
+        k,
+        ("R", "G", "B"),
+    )
+
+
+def test_the_reduction_is_exact_and_small() -> None:
+    leds, camera = _leds_and_camera()
+    predictors = unit_predictors(leds, camera, ("R", "G", "B"))
+    reduction = reduce_predictors(predictors)
+    rank = reduction.lift.shape[0]
+    assert rank <= leds.count + 3 * 8  # LED weights + the planes' reflectance-basis projections
+    rebuilt = np.einsum("qn,qcl->ncl", reduction.lift, reduction.shapes)
+    np.testing.assert_allclose(rebuilt, predictors, atol=1e-9 * np.abs(predictors).max())
+
+
+def test_the_scene_form_is_the_light_priors_data_term_for_any_spectrum() -> None:
+    """J(e) from the reduced form equals Σ_b ‖a_b − K(e) f_b‖² computed with the prior's own predictors."""
+    leds, camera = _leds_and_camera()
+    statistics = _statistics(planck(GRID.wavelengths_nm, 3000.0) * GRID.wavelengths_nm)
+    model = family_model(statistics.channels, leds, camera)
+    scene = scene_form(statistics, model.reduction)
+    trial = daylight(GRID, 6500.0) * GRID.wavelengths_nm
+    predictors = light_predictors(
+        leds.values, plane_responsivities(camera, statistics.channels), trial[:, None], learn_reflectance_basis(GRID)
+    )
+    hessian, linear, energy = normal_equations(predictors, statistics.moments.total())
+    expected = (energy - 2 * linear[0] + hessian[0, 0]) / energy
+    problem = scene.whitened(list(range(scene.n_folds)), denoised=False)
+    assert problem.error(trial) == pytest.approx(expected, rel=1e-6)
+
+
+@pytest.mark.parametrize("kelvin", [2200.0, 3400.0, 5600.0])
+def test_a_blackbody_scene_is_read_as_a_blackbody_of_its_temperature(kelvin: float) -> None:
+    leds, camera = _leds_and_camera()
+    light = planck(GRID.wavelengths_nm, kelvin) * GRID.wavelengths_nm
+    statistics = _statistics(light, seed=int(kelvin))
+    estimate = family_model(statistics.channels, leds, camera).estimate(statistics)
+    fit = next(c.fit for c in estimate.candidates if c.fit.name == "thermal/blackbody")
+    assert fit.parameters()["kelvin"] == pytest.approx(kelvin, rel=0.03)
+    shape = estimate.spectrum.values[:, 0] / estimate.spectrum.values[:, 0].max()
+    error = np.sqrt(np.mean((shape - light / light.max()) ** 2))
+    led = estimate.led.fit.spectrum / estimate.led.fit.spectrum.max()
+    assert error < 0.5 * np.sqrt(np.mean((led - light / light.max()) ** 2)), estimate.reason
+
+
+def test_the_discharge_dictionary_holds_the_known_lines() -> None:
+    atoms, names = discharge_atoms(GRID)
+    assert atoms.shape == (GRID.size, len(names)) and np.all(atoms >= 0)
+    mercury = atoms[:, names.index("Hg 546")]
+    assert set(GRID.wavelengths_nm[mercury > 0]) == {540.0, 550.0}  # 546.07 nm shared by its two samples
+
+
+def _candidate(name: str, parameters: int, error: float) -> Candidate:
+    fit = Fit(name, name.split("/")[0], np.zeros(0), np.ones((3, 1)), np.ones(1), 0.0, parameters)
+    return Candidate(fit, error, error)
+
+
+def test_the_choice_prefers_the_simplest_candidate_that_predicts_about_as_well() -> None:
+    led = _candidate("led", 7, 0.010)
+    flexible = _candidate("solid_state/4 bands", 12, 0.0050)
+    simple = _candidate("thermal/blackbody", 2, 0.0050 * (1 + SIMPLER_WITHIN * 0.9))
+    worse = _candidate("thermal/daylight", 2, 0.0050 * (1 + SIMPLER_WITHIN * 1.5))
+    chosen, reason, auto, auto_reason = choose([flexible, simple, worse], led)
+    assert chosen is simple and "fewer parameters" in reason and auto == "thermal/blackbody"
+    chosen, _, auto, auto_reason = choose([_candidate("discharge/3 atoms", 3, 0.0099)], led)
+    assert auto == "led" and "as well" in auto_reason  # not 2 % better than the LEDs' span: keep it
