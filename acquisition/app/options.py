@@ -39,13 +39,17 @@ def add_estimation_options(parser: argparse.ArgumentParser) -> None:
         "--alpha",
         default="auto",
         type=alpha_value,
-        help="dimensionless roughness weight, or 'auto' (generalised cross-validation)",
+        help="dimensionless roughness weight of tikhonov and roughness, or 'auto' (default): tikhonov takes "
+        "the largest whose fit stays within the noise of the least-penalised one (the discrepancy principle; "
+        "each tile of --method local its own), roughness 0.01; lstsq and nonneg have none",
     )
     parser.add_argument(
         "--bin",
         type=positive_int,
         default=analysis.DEFAULT_BIN_FACTOR,
-        help=f"sum BIN×BIN pixel blocks before estimating (default {analysis.DEFAULT_BIN_FACTOR}; 1 = every pixel)",
+        help=f"sum BIN×BIN blocks of each channel (of each CFA plane of a mosaic: 2·BIN × 2·BIN pixels) before "
+        f"estimating (default {analysis.DEFAULT_BIN_FACTOR}; an odd BIN is taken one smaller, and BIN is halved, "
+        f"not below 4, on frames too small for {analysis.BLOCKS_PER_SIDE} blocks a side; 1 = every pixel)",
     )
 
 
