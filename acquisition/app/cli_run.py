@@ -32,7 +32,13 @@ import numpy as np
 
 from msflash.acquisition.app.camera_options import add_camera_options, camera_options_from_args, given_camera_options
 from msflash.acquisition.app.cli_common import UsageError, claimed_output, progress
-from msflash.acquisition.app.options import add_estimation_options, simulated_world
+from msflash.acquisition.app.options import (
+    SIM_CFA_CHOICES,
+    SIM_CFA_HELP,
+    add_estimation_options,
+    sim_cfa,
+    simulated_world,
+)
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.errors import CaptureError
 from msflash.acquisition.progress import count
@@ -62,8 +68,6 @@ from msflash.led_controller.booth_interface import unsupported_sync
 from msflash.processing.datasets import PAPER_LED_SUBSETS
 from msflash.processing.lights import AMBIENTS
 from msflash.processing.user_files import printable
-
-CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG")
 
 
 def _exposure_value(text: str) -> str | float:
@@ -166,7 +170,9 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
     # The simulated world: the sim rig renders it with its own camera, aravis-fake through Aravis.
     world = simulated_world(args)
     if spec == "sim":
-        return open_rig("sim", cfa=args.cfa, booth_port=args.booth_port, booth_protocol=args.booth_protocol, **world)
+        return open_rig(
+            "sim", cfa=sim_cfa(args.cfa), booth_port=args.booth_port, booth_protocol=args.booth_protocol, **world
+        )
     if spec == "aravis-fake":
         return open_rig("aravis-fake", **world)
     return open_rig(spec, log_serial=args.log_serial)
@@ -241,7 +247,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
         if args.export and "dng" in args.export and rig.camera.info.cfa is None:
             raise UsageError(
                 f"--export {','.join(args.export)}: rig '{spec}' gives RGB (debayered) frames, and a DNG holds a raw "
-                "mosaic; expected a raw (CFA) camera for dng (--cfa on the sim rig), or ome-tiff/exr for RGB"
+                "mosaic; expected a raw (CFA) camera for dng (the sim rig's default: not --cfa none), or ome-tiff/exr for RGB"
             )
         exposure = plan_exposure(rig, args.exposure, _policy(args))
         report_exposure(exposure, list(rig.led_spectra.names))
@@ -468,7 +474,7 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
         help="drive the booth at this port (msflash booth-emulator's pty, or a real booth) instead of "
         "an emulator in this process; --sync host only",
     )
-    sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
+    sim.add_argument("--cfa", default=None, choices=SIM_CFA_CHOICES, help=SIM_CFA_HELP)
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
     parser.add_argument(
         "--exposure",

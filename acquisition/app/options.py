@@ -8,6 +8,7 @@ from collections.abc import Callable
 from typing import Any
 
 from msflash.acquisition.app.cli_common import positive_int
+from msflash.acquisition.devices.simulated_camera import SIM_DEFAULT_CFA
 from msflash.acquisition.session import analysis
 from msflash.processing.ambient import AMBIENT_METHODS
 
@@ -98,6 +99,25 @@ def add_scheduler_options(parser: argparse.ArgumentParser, default: str | None =
     parser.add_argument(
         "--workers", type=positive_int, default=None, help="worker processes of --scheduler local (default: CPUs)"
     )
+
+
+SIM_CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG", "none")
+"""``--cfa`` of the ``sim`` rig: a Bayer layout, or ``none`` for RGB frames."""
+SIM_CFA_HELP = (
+    f"the simulated camera's colour filter: a raw Bayer mosaic of this layout, 12-bit (default {SIM_DEFAULT_CFA}, "
+    "as colour machine-vision cameras send), or none for 12-bit RGB frames"
+)
+
+
+def sim_cfa(value: str | None) -> str | None:
+    """The ``sim`` rig's CFA for ``--cfa``: not given → :data:`SIM_DEFAULT_CFA`, ``none`` → None (RGB frames).
+
+    >>> sim_cfa(None), sim_cfa("none"), sim_cfa("BGGR")
+    ('RGGB', None, 'BGGR')
+    """
+    if value is None:
+        return SIM_DEFAULT_CFA
+    return None if value == "none" else value
 
 
 def simulated_world(args: argparse.Namespace) -> dict[str, Any]:
