@@ -116,8 +116,8 @@ def haar_details(
     details = (top_difference - bottom_difference, top_difference + bottom_difference, top_sum - bottom_sum)
     usable = np.maximum(np.maximum(x00, x01), np.maximum(x10, x11)) < white
     if usable.all():
-        return total.reshape(-1), *(detail.reshape(-1) for detail in details)  # type: ignore[return-value]
-    return total[usable], *(detail[usable] for detail in details)  # type: ignore[return-value]
+        return total.reshape(-1), *(detail.reshape(-1) for detail in details)
+    return total[usable], *(detail[usable] for detail in details)
 
 
 def _weighted_line(levels: np.ndarray, values: np.ndarray, weights: np.ndarray) -> tuple[float, float]:
