@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # pragma: no cover - names for the annotations only
     import numpy as np
 
     from msflash.acquisition.sequence.format import Sequence
-    from msflash.processing.ambient import AmbientEstimate
+    from msflash.acquisition.session.one_sequence import SequenceEstimate
     from msflash.processing.flash import FlashSolution
 
 __version__ = "0.1.0"
@@ -39,12 +39,16 @@ _log = logging.getLogger("msflash")
 
 
 def read_sequence(path: str | Path, calibration: str | Path | None = None) -> Sequence:
-    """Read a recorded sequence (a folder holding ``sequence.json``, or that file).
+    """Read a recorded sequence: a sequence folder, a run or capture folder holding one, or its ``sequence.json``.
+
+    Whatever ``msflash estimate`` accepts as its sequence, this accepts too (the same
+    :func:`~msflash.acquisition.sequence.locate.locate_sequence` decides).
 
     Parameters
     ----------
     path
-        The sequence folder or its ``sequence.json`` (docs/architecture.md §6).
+        The sequence folder, the ``--out`` folder of ``msflash run``/``capture`` (which holds it in
+        ``sequence/``), or its ``sequence.json`` (docs/architecture.md §6).
     calibration
         A calibration folder written by ``msflash calibrate``; its LED spectra and camera
         responsivities replace the sequence's. ``None`` uses the calibration the sequence names,
@@ -61,36 +65,53 @@ def read_sequence(path: str | Path, calibration: str | Path | None = None) -> Se
         The file is missing, malformed or names frames or calibrations that are not usable; the
         message names the file and the field.
     """
-    from msflash.acquisition.sequence.format import read_sequence as read
-    from msflash.acquisition.session.analysis import apply_calibration
+    from msflash.acquisition.session.one_sequence import read_calibrated
 
-    sequence, notes = apply_calibration(read(path), calibration)
-    for note in notes:
-        _log.info(note)
-    return sequence
+    return read_calibrated(str(path), None if calibration is None else str(calibration), _log.info)
 
 
-def estimate_ambient(sequence: Sequence, solver: str = "tikhonov", alpha: float | str = "auto") -> AmbientEstimate:
+def estimate_ambient(
+    sequence: Sequence,
+    solver: str = "tikhonov",
+    alpha: float | str = "auto",
+    *,
+    method: str = "auto",
+    model: str = "led",
+    tiles: int | None = None,
+    bin_factor: int | None = None,
+) -> SequenceEstimate:
     """The ambient illuminant's spectrum as a mix of the LED spectra, from the pixels (eq. 4–6).
 
-    Exactly what ``msflash estimate`` computes by default: inverse-variance weighted statistics
-    of the ambient and LED-only frames, a non-negative Tikhonov solve (α by the discrepancy
-    principle when ``alpha="auto"``), and a band holding pixel noise and the LED model's own error
-    (docs/ambient-estimate.md).
+    Exactly what ``msflash estimate SEQ --json`` prints, with the same options and defaults (``solver``
+    is its ``--solver``, ``alpha`` its ``--alpha``, ``method``, ``model``, ``tiles`` and ``bin_factor``
+    its ``--method``, ``--model``, ``--tiles`` and ``--bin``): inverse-variance weighted statistics of
+    the ambient and LED-only frames, a non-negative Tikhonov solve (α by the discrepancy principle when
+    ``alpha="auto"``), and a band holding pixel noise and the LED model's own error
+    (docs/ambient-estimate.md). The numbers are the command's to the last digit, in its unit.
 
     Returns
     -------
-    AmbientEstimate
-        ``.spectrum`` (photons, relative to the LEDs at full drive), ``.ambient_weights`` (w_a),
-        ``.spectrum_std`` (±1σ; ``.band_meaning`` says what it covers) and ``.warnings``.
+    SequenceEstimate
+        ``.spectrum`` (in the sequence's spectral unit, ``.spectrum.unit``: what the JSON's
+        ``spectrum`` holds), ``.ambient_weights`` (w_a), ``.spectrum_std`` (±1σ, same unit;
+        ``.band_meaning`` says what it covers), ``.warnings`` and ``.payload``, the whole JSON object.
     """
-    from msflash.acquisition.session.analysis import estimate_sequence
+    from msflash.acquisition.session.one_sequence import EstimateSettings, SequenceEstimate, estimate_read
 
-    return estimate_sequence(sequence, solver, alpha)
+    defaults = EstimateSettings()
+    settings = EstimateSettings(
+        solver=solver,
+        alpha=alpha,
+        method=method,
+        model=model,
+        tiles=defaults.tiles if tiles is None else tiles,
+        bin_factor=defaults.bin_factor if bin_factor is None else bin_factor,
+    )
+    return SequenceEstimate.of(estimate_read(sequence, settings, _log.warning))
 
 
 def solve_flash(
-    sequence: Sequence, estimate: AmbientEstimate, mode: str = "matching", target: str = "D65"
+    sequence: Sequence, estimate: SequenceEstimate, mode: str = "matching", target: str = "D65"
 ) -> FlashSolution:
     """The LED mix that matches the ambient (eq. 7) or complements it towards ``target`` (eq. 8–9).
 

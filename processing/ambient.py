@@ -260,9 +260,16 @@ def _gcv_alpha(statistics: SequenceStatistics, penalty_gram: np.ndarray, penalty
     return float(ALPHA_GRID[np.argmax(scores <= scores.min() * (1 + 1e-12))])
 
 
-DISCREPANCY_SIGMAS = 1.0
+DISCREPANCY_SIGMAS = 0.1
 """How far (× k σ², the expected increase of a fit's residual by k noise-level parameters) the roughness
-penalty chosen by :func:`discrepancy_alpha` may raise the residual above the least-penalised fit's."""
+penalty chosen by :func:`discrepancy_alpha` may raise the residual above the least-penalised fit's.
+
+Chosen on the ambient harness's tuning split once the rise was taken unclipped (issue 30): 1, 0.3 and
+0.1 gave a mean ratio to the LED bound of 0.986, 0.980 and 0.978, worst 2.08, 1.78 and 1.69, misses 11,
+9 and 8 of 150 (a fixed α of 1e-6: 0.976, 1.72, 9). The 1 of issue 17 was chosen while clipped residuals
+ran α up on a third of the scenes. With 1, the simulated demo's raw frames (whose weights, from a third of
+the samples RGB frames have, are the less certain) took 1.8e-5…5.6e-5 and landed at 0.98–1.02 × the bound,
+worst 1.22 (docs/raw-frames.md)."""
 
 
 def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, terms: LedTerms) -> float:
@@ -272,7 +279,9 @@ def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, 
     With ``r(α)`` the residual energy of the fit on the ``solved`` (denoised) statistics — what the
     solve minimises, so it grows with α — and ``σ² = r_obs(α₀) / (n − k)`` the noise per sample left
     by the least-penalised fit on the ``observed`` ones, α is the largest with
-    ``r(α) ≤ r(α₀) + DISCREPANCY_SIGMAS · k σ²``: a penalty the data cannot tell from noise. It
+    ``r(α) ≤ r(α₀) + DISCREPANCY_SIGMAS · k σ²``: a penalty the data cannot tell from noise. The rise
+    ``r(α) − r(α₀)`` is taken from :meth:`~processing.statistics.SequenceStatistics.fit_energy`, never
+    from residuals clipped at 0. It
     regularises as much as the pixels allow, where generalised cross-validation (which minimises the
     predicted pixel error, :func:`gcv_alpha`) often takes the smallest α of its grid and lets nearly
     collinear LEDs trade false lobes the camera cannot see. The grid is bisected (about 6 solves).
@@ -287,10 +296,15 @@ def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, 
     least = weights(0)
     dof = max(observed.n_samples - observed.n_leds, 1)
     noise_variance = observed.residual_energy(least) / dof
-    allowed = solved.residual_energy(least) + DISCREPANCY_SIGMAS * observed.n_leds * noise_variance
+    # The rise r(α) − r(α₀), from the weight-dependent part of the residual alone: the denoised ambient
+    # energy (less its noise, whose sampling error is of the order of √(2/n) of it) cancels. Compared as
+    # clipped residuals, a denoised residual that read 0 at α₀ stayed 0 while α grew, hiding every rise:
+    # on Bayer frames (fewer samples, so larger sampling error) α ran to 1e-4…1e-2 and the estimate to
+    # 1.3–1.5× the LED bound (docs/raw-frames.md).
+    allowed = solved.fit_energy(least) + DISCREPANCY_SIGMAS * observed.n_leds * noise_variance
 
     def residual(index: int) -> float:
-        return solved.residual_energy(weights(index))
+        return solved.fit_energy(weights(index))
 
     low, high = 0, ALPHA_GRID.size - 1
     if residual(high) <= allowed:
@@ -665,7 +679,8 @@ def estimate_ambient(
     method
         A key of :data:`AMBIENT_METHODS`.
     alpha
-        Dimensionless roughness weight, or ``"auto"`` (GCV for ``tikhonov``).
+        Dimensionless roughness weight, or ``"auto"`` (``tikhonov``: :func:`discrepancy_alpha`; ``roughness``:
+        0.01; the others have none).
 
     Returns
     -------

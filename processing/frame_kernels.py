@@ -144,7 +144,8 @@ def block_pass(
     sums
         Output, (H/f, C', W/f) float64 (C' = cfa_period² · C): block sums in moment-row order.
     differences
-        Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64: each probed block's even-minus-odd columns; or None.
+        Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64: each probed block's checkerboard half difference
+        (:func:`processing.statistics.block_sums_and_differences`); or None.
 
     Returns
     -------

@@ -12,7 +12,7 @@ from numba import njit
 
 @njit(nogil=True, cache=True)
 def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, differences, saturated):
-    """Block sums (H/f, C', W/f), probed half differences (H'/f, W/f, C') and saturated (H/f, W/f) blocks
+    """Block sums (H/f, C', W/f), probed checkerboard half differences (H'/f, W/f, C') and saturated (H/f, W/f) blocks
     of raw rows (H, W·C); ``period_t``, ``plane_channels_t`` and ``factor_t`` carry the CFA period,
     the channels per frame row group (period · C) and the block side as their lengths (compile-time
     constants). Returns whether any block saturates.
@@ -29,6 +29,7 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
     span = factor * group  # values of one block's row in a frame row
     n_columns = width * span
     row_sum = np.zeros(n_columns, np.int32)
+    row_alternation = np.zeros(n_columns, np.int32)
     any_saturated = False
     probing = differences.shape[0] > 0
     for block_row in range(height):
@@ -37,25 +38,41 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
         for p in range(period):
             first = block_row * factor * period + p
             top = raw[first, 0]
-            for j in range(n_columns):
-                total = np.int32(0)
-                for member in range(factor):
-                    value = raw[first + member * period, j]
-                    total += value
-                    top = max(top, value)
-                row_sum[j] = total
+            if probed:
+                for j in range(n_columns):
+                    total = np.int32(0)
+                    alternation = np.int32(0)
+                    for member in range(factor):
+                        value = raw[first + member * period, j]
+                        total += value
+                        if member % 2 == 0:
+                            alternation += value
+                        else:
+                            alternation -= value
+                        top = max(top, value)
+                    row_sum[j] = total
+                    row_alternation[j] = alternation
+            else:
+                for j in range(n_columns):
+                    total = np.int32(0)
+                    for member in range(factor):
+                        value = raw[first + member * period, j]
+                        total += value
+                        top = max(top, value)
+                    row_sum[j] = total
             for block in range(width):
                 base = block * span
                 for k in range(group):
                     total = np.int32(0)
                     half = np.int32(0)
                     for member in range(factor):
-                        value = row_sum[base + member * group + k]
-                        total += value
-                        if member % 2 == 0:
-                            half += value
-                        else:
-                            half -= value
+                        total += row_sum[base + member * group + k]
+                        if probed:
+                            # the checkerboard: even rows minus odd rows, then even columns minus odd columns
+                            if member % 2 == 0:
+                                half += row_alternation[base + member * group + k]
+                            else:
+                                half -= row_alternation[base + member * group + k]
                     channel = p * group + k
                     sums[block_row, channel, block] = total
                     if probed:

@@ -392,6 +392,31 @@ class SensorModel:
         return min(self.full_well_e, (self.white_level - self.black_level) * self.electrons_per_dn / gain)
 
 
+def machine_vision_sensor(cfa: str | None = "RGGB") -> SensorModel:
+    """A colour machine-vision camera's sensor: a 12-bit raw Bayer mosaic (``cfa``; None for RGB frames).
+
+    The figures of a large-pixel global-shutter CMOS sensor of the class industrial colour cameras carry
+    (Sony IMX174-class, EMVA 1288 data sheets: about 32 ke⁻ saturation, 7 e⁻ temporal dark noise):
+    30.8 ke⁻ at the white level (8 e⁻ a digital number over 3855 codes), 7 e⁻ read noise, 12 bits with the
+    black pedestal at 240 — what the ``sim`` rig's camera delivers by default
+    (:meth:`acquisition.devices.simulated_camera.SimulatedCamera.default`). Small-pixel sensors hold a
+    third of that (IMX264-class, 10.5 ke⁻): docs/raw-frames.md has the demo with one.
+
+    >>> sensor = machine_vision_sensor()
+    >>> sensor.cfa, sensor.bit_depth, sensor.dtype.name, round(sensor.saturation_electrons(1.0))
+    ('RGGB', 12, 'uint16', 30840)
+    """
+    return SensorModel(
+        black_level=240.0,
+        white_level=4095.0,
+        bit_depth=12,
+        electrons_per_dn=8.0,
+        read_noise_e=7.0,
+        full_well_e=32000.0,
+        cfa=cfa,
+    )
+
+
 # -- Bayer mosaics ----------------------------------------------------------------------------
 def cfa_channel_map(cfa: str, shape: tuple[int, int]) -> np.ndarray:
     """Channel index (0 R, 1 G, 2 B) of every pixel of a ``cfa`` mosaic, int array ``shape``.

@@ -58,18 +58,18 @@ import numpy as np
 
 from msflash.processing.ambient import AMBIENT_METHODS, AmbientEstimate, AmbientModel, gcv_alpha
 from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.noise_level import detail_noise_line
 from msflash.processing.spectra import Spectra, require_unit
 from msflash.processing.statistics import (
     DEFAULT_WORKERS,
     FrameStackSpec,
     NoiseMoments,
     SequenceStatistics,
-    ambient_noise_line,
+    ambient_block_noise,
     block_sums,
     block_sums_and_differences,
     cfa_planes,
     non_finite_frames_error,
-    probe_stride,
     saturated_blocks,
     thread_pool,
 )
@@ -498,11 +498,11 @@ def tile_statistics(
     data[-1] = 1.0
     if weighting and differences is not None:
         ambient_row = len(frames) - 1
-        stride = probe_stride(height, width)
         black = spec.black_level * bin_factor * bin_factor
-        root = ambient_noise_line(
-            data[ambient_row], differences[ambient_row][::stride], black, masks[ambient_row], stride
-        ).root_weights(data[ambient_row], black)
+        pixel_noise = detail_noise_line(planes[ambient_row], 1, spec.black_level, spec.white_level)
+        root = ambient_block_noise(pixel_noise, bin_factor, data[ambient_row], black, masks[ambient_row]).root_weights(
+            data[ambient_row], black
+        )
         data *= root
         differences *= root
     invalid = np.zeros((height, width), dtype=bool)
@@ -942,7 +942,8 @@ def estimate_local(
         ``auto`` (:func:`select_model`), ``global`` (the paper) or ``local``.
     solver, alpha
         The estimator of :func:`processing.ambient.estimate_ambient` and its roughness weight. For
-        ``alpha="auto"`` with ``tikhonov``, GCV chooses it per tile.
+        ``alpha="auto"`` with ``tikhonov``, the discrepancy principle chooses it per tile
+        (:func:`processing.ambient.discrepancy_alpha`; the model selection's scoring fits use GCV).
     smoothing
         Gaussian width in tiles of the local fit; None takes the best of the selection. Giving it
         forces the tile model.

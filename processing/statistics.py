@@ -17,11 +17,16 @@ The LED-only images are differences of noisy frames, so their Gram matrix carrie
 variance of every frame and their products with the ambient image lose the ambient frame's
 (eq. 5 regresses on noisy regressors: the weights shrink towards zero, most for the LEDs the
 camera sees least). Binned statistics with an even block size also measure that noise, from
-every block's *half difference* (its even pixel columns minus its odd ones, :func:`block_sums_and_differences`):
-the two halves see the same surfaces and have independent noise, so with ``x`` a block's row of
-sums and ``d`` its half difference, ``x xᵀ − d dᵀ = 2 (x₁ x₂ᵀ + x₂ x₁ᵀ)`` is a product of
-independent halves — moments without the noise bias, whatever the texture inside a block (an
-instrumental-variable estimate; no noise model needed). :attr:`SequenceStatistics.noise` holds
+every block's *half difference* (its samples at even ``row + column`` minus those at odd, a
+checkerboard, :func:`block_sums_and_differences`): the two halves see the same surfaces and have
+independent noise, so with ``x`` a block's row of sums and ``d`` its half difference,
+``x xᵀ − d dᵀ = 2 (x₁ x₂ᵀ + x₂ x₁ᵀ)`` is a product of independent halves — moments without the noise
+bias, whatever the texture inside a block (an instrumental-variable estimate; no noise model needed).
+Texture the halves do not share still enters ``d``: it leaves the moments unbiased where eq. 5 holds
+but makes them noisier, and it changes which fit is best where eq. 5 does not. The checkerboard cancels
+edges along the rows or the columns and ramps; the even and odd *columns* it replaced did not cancel
+edges along the columns, which on a mosaic (one CFA plane's samples 2 pixels apart) put scene texture
+in 85 % of the simulated chart's probes (docs/raw-frames.md). :attr:`SequenceStatistics.noise` holds
 ``d dᵀ`` mapped like the moments, :meth:`SequenceStatistics.denoised` the corrected statistics.
 
 Inverse-variance weights
@@ -30,8 +35,10 @@ Unweighted moments count every sample alike, so the brightest samples — a spec
 at ten times the white, say — dominate the Gram matrix though their photon noise is the largest.
 With ``weighting=True`` (:class:`BlockRows`, :func:`accumulate_statistics`) each sample (block ×
 channel) enters the moments with weight ``1 / var``, its noise variance predicted from the ambient
-frame: ``var = gain · level + read`` (a photon-transfer line fitted to the half differences' squares
-against the ambient block sums, :func:`inverse_variance_weights`). The weights depend on the
+frame: ``var = gain · level + read`` (a photon-transfer line fitted to the fine-scale detail of the
+ambient frame's 2 × 2 cells, :mod:`processing.noise_level`, then scaled to block sums,
+:func:`block_noise_line`). It used to be fitted to the half differences against the block sums: on a
+mosaic, texture filled them and the weights came out up to 20× off either way. The weights depend on the
 ambient frame alone, so a capture can apply them to every LED frame as it arrives; the half
 differences are weighted alike, so the noise correction still holds. Weighted least squares is the
 best linear unbiased estimate of eq. 5 when the residual's noise is that of the ambient frame; the
@@ -52,6 +59,7 @@ import numpy as np
 
 from msflash.processing import frame_kernels
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.noise_level import PixelNoise, detail_noise_line
 
 DEFAULT_CHUNK_PIXELS = 1 << 15
 """Pixels per chunk: small enough to stay in cache for k ≈ 8 frames, large enough to amortise numpy calls."""
@@ -220,9 +228,25 @@ class SequenceStatistics:
         )
 
     def residual_energy(self, weights: np.ndarray) -> float:
-        """``‖a − Σ wᵢ fᵢ‖²`` for ambient weights ``w``, from the statistics alone."""
+        """``‖a − Σ wᵢ fᵢ‖²`` for ambient weights ``w``, from the statistics alone (clipped at 0: denoised
+        statistics can put it below, by the noise's sampling error)."""
+        return float(max(self.ambient_energy + self.fit_energy(weights), 0.0))
+
+    def fit_energy(self, weights: np.ndarray) -> float:
+        """``wᵀ G w − 2 cᵀ w``: the part of :meth:`residual_energy` that depends on the weights, unclipped.
+
+        Differences of residuals between two weight vectors are differences of this: the ambient's own
+        energy (and the noise correction of it) cancels, so they hold even where the residual of
+        denoised statistics reads 0.
+
+        Examples
+        --------
+        >>> stats = SequenceStatistics(np.eye(2), np.array([1.0, 0.5]), 0.5, 10, 10, 5.0, np.ones(2))
+        >>> stats.fit_energy(np.array([1.0, 0.5])), stats.residual_energy(np.array([1.0, 0.5]))
+        (-1.25, 0.0)
+        """
         w = np.asarray(weights, dtype=float)
-        return float(max(self.ambient_energy - 2.0 * self.cross @ w + w @ self.gram @ w, 0.0))
+        return float(w @ self.gram @ w - 2.0 * self.cross @ w)
 
     def replicated(self, copies: int) -> SequenceStatistics:
         """The statistics of ``copies`` identical copies of these samples: every sum times ``copies``.
@@ -622,6 +646,9 @@ class BlockRows:
         # the blocks the ambient frame itself saturates (left out of the fit).
         self.black_level = black_level
         self.weighting = weighting and self.differences is not None
+        self.ambient_noise: PixelNoise | None = None
+        """The ambient frame's noise per sample (:func:`processing.noise_level.detail_noise_line`), once it is in
+        (weighted rows only)."""
         self.root_weights: np.ndarray | None = None
         self._ambient_saturated: np.ndarray | None = None
         self._moments: np.ndarray | None = None
@@ -648,13 +675,16 @@ class BlockRows:
             _block_sums_into(plane, self.factor, self.rows[row].reshape(self.block_shape))
             may_saturate = _may_saturate(plane, self.white_level)
         else:
-            # Both from one pass of row sums, each product into its own contiguous array (a fused
-            # product's strided half cost more to copy than the product itself).
+            # The sums from one pass of row sums, the probe from the probed block rows' alternating sums;
+            # each product into its own contiguous array.
             row_sums, may_saturate = _block_row_sums_and_peak(plane, self.factor, self.white_level)
             channels = self.plane_shape[2]
             _gathered_by_channel(row_sums, self.factor, channels, self.rows[row].reshape(self.block_shape))
-            differences = _gathered(row_sums[:: self.probe_stride], self.factor, channels, _difference_gather)
+            alternation = _block_row_alternation(plane, self.factor, self.probe_stride)
+            differences = _gathered(alternation, self.factor, channels, _difference_gather)
             np.copyto(self.differences[row].reshape(self.difference_shape), differences)
+        if row == self.n_led_frames and self.weighting:
+            self.ambient_noise = detail_noise_line(plane, 1, self.black_level, self.white_level)
         # One max per frame finds the frames that saturate at all; only those build masks.
         self._record(row, saturated_blocks(plane, self.factor, self.white_level) if may_saturate else None)
 
@@ -682,6 +712,9 @@ class BlockRows:
         if not done:
             self.add(row, cfa_planes(frame, cfa_period))
             return
+        if row == self.n_led_frames and self.weighting:
+            # The same cells in the same order as from the planes (add): both routes weigh alike, to the bit.
+            self.ambient_noise = detail_noise_line(frame, cfa_period, self.black_level, self.white_level)
         self._record(row, saturated)
 
     def _check_row(self, row: int) -> None:
@@ -724,17 +757,16 @@ class BlockRows:
         self._filled.append(row)
 
     def _sample_weights(self) -> np.ndarray:
-        """The inverse-variance weights of every row column, from the ambient row and its probe."""
+        """The inverse-variance weights of every row column, from the ambient row and the noise line of its frame."""
         ambient = self.n_led_frames
-        assert self.differences is not None
-        # rows layout (block row, channel, block column); the probe's (probed block row, block column, channel)
+        # rows layout (block row, channel, block column)
         black = self.black_level * self.factor * self.factor
-        line = ambient_noise_line(
+        line = ambient_block_noise(
+            self.ambient_noise,
+            self.factor,
             self.rows[ambient].reshape(self.block_shape).transpose(0, 2, 1),
-            self.differences[ambient].reshape(self.difference_shape),
             black,
             self._ambient_saturated,
-            self.probe_stride,
         )
         return line.weights(self.rows[ambient], black)
 
@@ -960,14 +992,10 @@ def probe_stride(height: int, width: int) -> int:
     return max(1, min(4, height * width // PROBE_BLOCKS))
 
 
-NOISE_FIT_SAMPLES = 32768
-"""Probed samples the noise line is fitted to at most (:func:`fit_noise_line`)."""
-
-
 @dataclass(frozen=True)
 class NoiseLine:
     """A photon-transfer line: the noise variance of a sample at raw level ``x`` (black removed) is
-    ``max(gain · x + read, floor)`` (:func:`fit_noise_line`)."""
+    ``max(gain · x + read, floor)`` (:func:`block_noise_line`)."""
 
     gain: float
     read: float
@@ -994,79 +1022,41 @@ class NoiseLine:
 UNIFORM_NOISE = NoiseLine(0.0, 1.0, 1.0)
 """Noise alike everywhere: uniform weights."""
 
+FLOOR_QUANTILE = 0.05
+"""The weights' variance floor is the line's variance at this quantile of the samples' levels: a read
+noise near zero would give black samples unbounded weight."""
 
-def fit_noise_line(probed_levels: np.ndarray, probe: np.ndarray) -> NoiseLine:
-    """The photon-transfer line of samples at raw ``probed_levels`` (black removed) whose half differences
-    are ``probe`` (a half difference has the variance of its block sum, module notes).
 
-    ``gain`` and ``read`` are fitted by least squares to the squared half differences; a negative read
-    term is refitted as zero (a line through the origin), a negative gain as noise alike everywhere.
-    The floor is the line's variance at the 5th percentile of the probed levels: a fitted read noise
-    near zero would give black samples unbounded weight. Too few samples, or no positive floor:
-    :data:`UNIFORM_NOISE`.
+def block_noise_line(pixel: PixelNoise | None, factor: int, levels: np.ndarray) -> NoiseLine:
+    """The noise line of ``factor × factor`` block sums whose samples have the noise ``pixel`` (per sample,
+    :func:`processing.noise_level.detail_noise_line`): ``gain · B + factor² · read`` at block sum ``B`` above
+    black, floored at its value at the :data:`FLOOR_QUANTILE` of ``levels`` (block sums above black).
+    :data:`UNIFORM_NOISE` without a line, levels or a positive floor.
 
     Examples
     --------
-    >>> rng = np.random.default_rng(0)
-    >>> levels = rng.uniform(100, 10000, 20000)
-    >>> line = fit_noise_line(levels, rng.normal(0, np.sqrt(2 * levels + 5000)))
-    >>> bool(1.9 < line.gain < 2.1), bool(4000 < line.read < 6000)
-    (True, True)
+    >>> line = block_noise_line(PixelNoise(gain=2.0, read=16.0), 4, np.arange(100.0, 2100.0))
+    >>> line.gain, line.read, line.floor
+    (2.0, 256.0, 656.0)
     """
-    levels, differences = np.asarray(probed_levels).reshape(-1), np.asarray(probe).reshape(-1)
-    # Two parameters need far fewer samples than a frame has: at most NOISE_FIT_SAMPLES, evenly strided.
-    step = max(1, levels.size // NOISE_FIT_SAMPLES)
-    x = np.maximum(levels[::step].astype(float), 0.0)
-    y = np.square(differences[::step].astype(float))
-    n = x.size
-    if n < 3 or not np.isfinite(y.sum()):
+    flat = np.asarray(levels, dtype=float).reshape(-1)
+    if pixel is None or not flat.size:
         return UNIFORM_NOISE
-    # The normal equations of y ≈ gain · x + read, from five sums.
-    # einsum's own loop, not OpenBLAS's dot: that one splits vectors this long across its threads, and
-    # on a busy 2-core machine the calling thread spins waiting for a helper (docs/architecture.md §10).
-    sx, sy = float(x.sum()), float(y.sum())
-    sxx, sxy = float(np.einsum("i,i->", x, x)), float(np.einsum("i,i->", x, y))
-    determinant = n * sxx - sx * sx
-    if not determinant > 0:
-        return UNIFORM_NOISE
-    gain, read = (n * sxy - sx * sy) / determinant, (sxx * sy - sx * sxy) / determinant
-    if read < 0:
-        gain, read = sxy / max(sxx, 1e-300), 0.0
-    if gain < 0:
-        gain, read = 0.0, sy / n
-    floor = gain * float(np.partition(x, n // 20)[n // 20]) + read
-    return NoiseLine(gain, read, floor) if floor > 0 else UNIFORM_NOISE
+    gain, read = pixel.gain, pixel.read * factor * factor
+    position = int(FLOOR_QUANTILE * flat.size)
+    floor = gain * max(float(np.partition(flat, position)[position]), 0.0) + read
+    return NoiseLine(gain, read, floor) if floor > 0 and math.isfinite(floor) else UNIFORM_NOISE
 
 
-def ambient_noise_line(
-    ambient: np.ndarray, probe: np.ndarray, black: float, saturated: np.ndarray | None, stride: int
+def ambient_block_noise(
+    pixel: PixelNoise | None, factor: int, ambient: np.ndarray, black: float, saturated: np.ndarray | None
 ) -> NoiseLine:
-    """:func:`fit_noise_line` of (h, w, C) ambient block sums, whose block rows ``0, stride, 2·stride…``
-    have the half differences ``probe`` (h', w, C); blocks the ambient frame saturates (``saturated``,
-    (h, w)) are left out. Used alike by :class:`BlockRows` and the tiled statistics of
-    :mod:`processing.local`, so that both weigh the samples alike.
+    """:func:`block_noise_line` for (h, w, C) ambient block sums (raw, black ``black`` per block), its floor
+    taken over the blocks the ambient frame does not saturate (``saturated``, (h, w)). Used alike by
+    :class:`BlockRows` and the tiled statistics of :mod:`processing.local`, so that both weigh the samples alike.
     """
-    probed = ambient[::stride]
-    if saturated is not None:
-        usable = ~saturated[::stride]
-        probed, probe = probed[usable], probe[usable]
-    return fit_noise_line(np.subtract(probed, black, dtype=float), probe)
-
-
-def inverse_variance_weights(levels: np.ndarray, probed_levels: np.ndarray, probe: np.ndarray) -> np.ndarray:
-    """Inverse-variance weights (mean 1) of samples at raw ``levels`` (black removed), by the noise line
-    fitted to the ``probe`` at ``probed_levels`` (:func:`fit_noise_line`).
-
-    Examples
-    --------
-    >>> rng = np.random.default_rng(0)
-    >>> levels = rng.uniform(100, 10000, 20000)
-    >>> probe = rng.normal(0, np.sqrt(2 * levels + 50))
-    >>> weights = inverse_variance_weights(levels, levels, probe)
-    >>> round(float(weights.mean()), 6), bool(weights[np.argmin(levels)] > 10 * weights[np.argmax(levels)])
-    (1.0, True)
-    """
-    return fit_noise_line(probed_levels, probe).weights(np.asarray(levels, dtype=float))
+    levels = ambient if saturated is None else ambient[~saturated]
+    return block_noise_line(pixel, factor, np.subtract(levels, black, dtype=float))
 
 
 def plane_shape(frame_shape: tuple[int, ...], cfa_period: int) -> tuple[int, int, int]:
@@ -1195,6 +1185,20 @@ def _gathered(row_sums: np.ndarray, factor: int, channels: int, matrix) -> np.nd
     return grouped.reshape(height, width, gather.shape[1])
 
 
+def _block_row_alternation(plane: np.ndarray, factor: int, stride: int = 1) -> np.ndarray:
+    """Each block's even rows minus its odd rows, per column, of an (H, W, C) plane: (⌈(H/f)/stride⌉, W/f·f·C).
+
+    Block rows ``0, stride, 2·stride…`` only; edges dropped; exact as :func:`_block_row_sums` (integers below
+    2²⁴ in float32). Gathered with :func:`_difference_gather`, the checkerboard probe of the module notes.
+    """
+    height, width, channels = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
+    sum_type = np.float64 if np.issubdtype(plane.dtype, np.floating) else np.float32
+    cropped = plane[: height * factor, : width * factor].reshape(height, factor, width * factor * channels)[::stride]
+    alternation = cropped[:, 0::2].sum(axis=1, dtype=sum_type)
+    alternation -= cropped[:, 1::2].sum(axis=1, dtype=sum_type)
+    return alternation
+
+
 @lru_cache(maxsize=16)
 def _difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
     """(factor·channels, channels) ±1 matrix: per channel, a row group's even pixels minus its odd ones."""
@@ -1206,33 +1210,28 @@ def _difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
     return gather
 
 
-@lru_cache(maxsize=16)
-def _sum_and_difference_gather(factor: int, channels: int, dtype: type) -> np.ndarray:
-    """(factor·channels, 2·channels): :func:`gather_matrix` and :func:`_difference_gather` side by side."""
-    gather = np.concatenate(
-        [gather_matrix(factor, channels, dtype), _difference_gather(factor, channels, dtype)], axis=1
-    )
-    gather.flags.writeable = False
-    return gather
-
-
 def block_sums_and_differences(plane: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
-    """Block sums of an (H, W, C) plane and their even-column minus odd-column parts, each (H/f, W/f, C).
+    """Block sums of an (H, W, C) plane and their checkerboard half differences, each (H/f, W/f, C).
 
-    The rows of each block are summed once; products with the 0/1 and ±1 gather matrices then give
-    both parts per channel (exact: integers below 2²⁴ in float32 for ≤ 16-bit data and blocks ≤ 16×16).
-    The difference is the noise probe of the module notes (even ``factor``).
+    A block's half difference is the sum of its samples at even ``row + column`` minus those at odd (both
+    counted within the block): the noise probe of the module notes (even ``factor``). Exact: integers below
+    2²⁴ in float32 for ≤ 16-bit data and blocks ≤ 16×16.
 
     Examples
     --------
-    >>> sums, differences = block_sums_and_differences(np.arange(16.0).reshape(4, 4, 1), 2)
+    A ramp, an edge along the rows or the columns: no half difference (the halves see the same light).
+
+    >>> ramp = np.arange(16.0).reshape(4, 4, 1)
+    >>> sums, differences = block_sums_and_differences(ramp, 2)
     >>> sums[:, :, 0].tolist(), differences[:, :, 0].tolist()
-    ([[10.0, 18.0], [42.0, 50.0]], [[-2.0, -2.0], [-2.0, -2.0]])
+    ([[10.0, 18.0], [42.0, 50.0]], [[0.0, 0.0], [0.0, 0.0]])
+    >>> edge = np.zeros((4, 4, 1)); edge[:, 1:] = 100.0
+    >>> block_sums_and_differences(edge, 4)[1].tolist(), block_sums_and_differences(edge.transpose(1, 0, 2), 4)[1].tolist()
+    ([[[0.0]]], [[[0.0]]])
     """
     channels = plane.shape[2]
-    # One product with both gather matrices side by side: the row sums are read once.
-    both = _gathered(_block_row_sums(plane, factor), factor, channels, _sum_and_difference_gather)
-    return both[:, :, :channels], both[:, :, channels:]
+    sums = _gathered(_block_row_sums(plane, factor), factor, channels, gather_matrix)
+    return sums, _gathered(_block_row_alternation(plane, factor), factor, channels, _difference_gather)
 
 
 def _row_products(rows: np.ndarray, row: int) -> np.ndarray:

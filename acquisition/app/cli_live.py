@@ -11,7 +11,13 @@ import argparse
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, progress
-from msflash.acquisition.app.options import add_fake_camera_option, simulated_world
+from msflash.acquisition.app.options import (
+    SIM_CFA_CHOICES,
+    SIM_CFA_HELP,
+    add_fake_camera_option,
+    sim_cfa,
+    simulated_world,
+)
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.session.rig import Rig, open_rig
 from msflash.acquisition.signals import STOPPING_SIGNALS
@@ -19,7 +25,6 @@ from msflash.processing.datasets import PAPER_LED_SUBSETS
 from msflash.processing.lights import AMBIENTS
 
 DEFAULT_PORT = 8470
-CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG")
 
 
 def _port(text: str) -> int:
@@ -63,7 +68,9 @@ def _open(args: argparse.Namespace) -> Rig:
         raise UsageError(f"--booth-port: the rig '{spec}' has its own emulated booth; expected --rig sim or hw")
     world = simulated_world(args)
     if spec == "sim":
-        return open_rig("sim", cfa=args.cfa, booth_port=args.booth_port, booth_boot_s=args.booth_boot_s, **world)
+        return open_rig(
+            "sim", cfa=sim_cfa(args.cfa), booth_port=args.booth_port, booth_boot_s=args.booth_boot_s, **world
+        )
     if spec == "aravis-fake":
         return open_rig("aravis-fake", fake_camera=args.fake_camera or "sfnc", **world)
     if spec == "hw":
@@ -164,6 +171,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.add_argument("--ambient", default="tungsten", metavar="NAME|FILE.csv", help=f"ambient: {', '.join(AMBIENTS)} …")
     sim.add_argument("--scene", default="chart110", metavar="NAME|FILE.csv", help=f"scene: {', '.join(SIM_SCENES)} …")
     sim.add_argument("--flash-power", type=_positive, default=None, metavar="P", help="booth brightness (default 1)")
-    sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
+    sim.add_argument("--cfa", default=None, choices=SIM_CFA_CHOICES, help=SIM_CFA_HELP)
     sim.add_argument("--seed", type=int, default=0, help="noise seed")
     live.set_defaults(handler=_live)

@@ -38,7 +38,14 @@ from msflash.acquisition.app.camera_options import (
     given_camera_options,
 )
 from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, claimed_output, progress
-from msflash.acquisition.app.options import add_estimation_options, add_fake_camera_option, simulated_world
+from msflash.acquisition.app.options import (
+    SIM_CFA_CHOICES,
+    SIM_CFA_HELP,
+    add_estimation_options,
+    add_fake_camera_option,
+    sim_cfa,
+    simulated_world,
+)
 from msflash.acquisition.devices.aravis.fake_models import DEFAULT_FAKE_MODEL
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.errors import CaptureError
@@ -69,8 +76,6 @@ from msflash.led_controller.booth_interface import unsupported_sync
 from msflash.processing.datasets import PAPER_LED_SUBSETS
 from msflash.processing.lights import AMBIENTS
 from msflash.processing.user_files import printable
-
-CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG")
 
 
 def _exposure_value(text: str) -> str | float:
@@ -185,7 +190,7 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
     if spec == "sim":
         return open_rig(
             "sim",
-            cfa=args.cfa,
+            cfa=sim_cfa(args.cfa),
             booth_port=args.booth_port,
             booth_protocol=args.booth_protocol,
             booth_boot_s=args.booth_boot_s,
@@ -282,7 +287,7 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
         if args.export and "dng" in args.export and rig.camera.info.cfa is None:
             raise UsageError(
                 f"--export {','.join(args.export)}: rig '{spec}' gives RGB (debayered) frames, and a DNG holds a raw "
-                "mosaic; expected a raw (CFA) camera for dng (--cfa on the sim rig), or ome-tiff/exr for RGB"
+                "mosaic; expected a raw (CFA) camera for dng (the sim rig's default: not --cfa none), or ome-tiff/exr for RGB"
             )
         exposure = plan_exposure(rig, args.exposure, _policy(args))
         report_exposure(exposure, list(rig.led_spectra.names))
@@ -525,7 +530,7 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
         help="a rolling shutter: each row of the simulated camera starts US µs after the one above "
         "(default 0: a global shutter); the booth is told the skew so its pulses fall where every row exposes",
     )
-    sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
+    sim.add_argument("--cfa", default=None, choices=SIM_CFA_CHOICES, help=SIM_CFA_HELP)
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
     parser.add_argument(
         "--exposure",

@@ -329,7 +329,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--ambient-to-flash",
         type=float,
         default=0.5,
-        help="pareto: ambient-to-flash signal ratio (default 0.5, the sim rig's)",
+        help="pareto: the ambient's camera signal over all LEDs' together at full drive (default 0.5: the sim "
+        "rig's before --flash-power; its default booth now gives 0.05)",
     )
     study.add_argument(
         "--patch-px", type=positive_int, default=40, help="pareto: chart patch size in pixels (default 40)"

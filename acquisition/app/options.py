@@ -8,6 +8,7 @@ from collections.abc import Callable
 from typing import Any
 
 from msflash.acquisition.app.cli_common import positive_int
+from msflash.acquisition.devices.simulated_camera import SIM_DEFAULT_CFA
 from msflash.acquisition.session import analysis
 from msflash.processing.ambient import AMBIENT_METHODS
 
@@ -39,13 +40,17 @@ def add_estimation_options(parser: argparse.ArgumentParser) -> None:
         "--alpha",
         default="auto",
         type=alpha_value,
-        help="dimensionless roughness weight, or 'auto' (generalised cross-validation)",
+        help="dimensionless roughness weight of tikhonov and roughness, or 'auto' (default): tikhonov takes "
+        "the largest whose fit stays within the noise of the least-penalised one (the discrepancy principle; "
+        "each tile of --method local its own), roughness 0.01; lstsq and nonneg have none",
     )
     parser.add_argument(
         "--bin",
         type=positive_int,
         default=analysis.DEFAULT_BIN_FACTOR,
-        help=f"sum BIN×BIN pixel blocks before estimating (default {analysis.DEFAULT_BIN_FACTOR}; 1 = every pixel)",
+        help=f"sum BIN×BIN blocks of each channel (of each CFA plane of a mosaic: 2·BIN × 2·BIN pixels) before "
+        f"estimating (default {analysis.DEFAULT_BIN_FACTOR}; an odd BIN is taken one smaller, and BIN is halved, "
+        f"not below 4, on frames too small for {analysis.BLOCKS_PER_SIDE} blocks a side; 1 = every pixel)",
     )
 
 
@@ -107,6 +112,25 @@ def add_fake_camera_option(parser: argparse.ArgumentParser) -> None:
         help=f"--rig aravis-fake: the fake's camera model (default {DEFAULT_FAKE_MODEL}): "
         + "; ".join(f"{name}: {model.summary}" for name, model in FAKE_MODELS.items()),
     )
+
+
+SIM_CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG", "none")
+"""``--cfa`` of the ``sim`` rig: a Bayer layout, or ``none`` for RGB frames."""
+SIM_CFA_HELP = (
+    f"the simulated camera's colour filter: a raw Bayer mosaic of this layout, 12-bit (default {SIM_DEFAULT_CFA}, "
+    "as colour machine-vision cameras send), or none for 12-bit RGB frames"
+)
+
+
+def sim_cfa(value: str | None) -> str | None:
+    """The ``sim`` rig's CFA for ``--cfa``: not given → :data:`SIM_DEFAULT_CFA`, ``none`` → None (RGB frames).
+
+    >>> sim_cfa(None), sim_cfa("none"), sim_cfa("BGGR")
+    ('RGGB', None, 'BGGR')
+    """
+    if value is None:
+        return SIM_DEFAULT_CFA
+    return None if value == "none" else value
 
 
 def simulated_world(args: argparse.Namespace) -> dict[str, Any]:

@@ -51,6 +51,7 @@ from msflash.processing.image_formation import (
     chart_scene,
     expected_response,
     exposure_for_peak,
+    machine_vision_sensor,
     mosaic_scene,
     render_frame,
     total_illumination,
@@ -62,6 +63,12 @@ LedLevelsSource = Callable[[], Sequence[float]]
 """Returns the drive level (0–1) of every LED channel at the moment it is called."""
 
 _GENICAM_BAYER = {"RGGB": "BayerRG", "BGGR": "BayerBG", "GRBG": "BayerGR", "GBRG": "BayerGB"}
+_GENICAM_BITS = (8, 10, 12, 14, 16)
+"""Bit depths GenICam names unpacked formats by (BayerRG12, RGB12 …); others take their container's."""
+
+SIM_DEFAULT_CFA = "RGGB"
+"""The ``sim`` rig's camera sends a raw RGGB mosaic, 12-bit (:func:`processing.image_formation.machine_vision_sensor`),
+as colour machine-vision cameras do; ``cfa=None`` asks for RGB frames."""
 
 
 class SimulatedCamera(TriggeredFrames):
@@ -178,7 +185,8 @@ class SimulatedCamera(TriggeredFrames):
     @property
     def info(self) -> CameraInfo:
         """Identity and pixel encoding; ``extra`` names the ground-truth spectra."""
-        bits = 8 if self.sensor.bit_depth <= 8 else 16
+        depth = self.sensor.bit_depth
+        bits = depth if depth in _GENICAM_BITS else 8 if depth <= 8 else 16
         pixel_format = f"RGB{bits}" if self.sensor.cfa is None else f"{_GENICAM_BAYER[self.sensor.cfa]}{bits}"
         height, width = self.scene.shape
         return CameraInfo(
@@ -436,7 +444,7 @@ class SimulatedCamera(TriggeredFrames):
         cls,
         scene: Literal["chart110", "macbeth", "white"] | Scene | Spectra = "chart110",
         ambient: str | Spectra = "tungsten",
-        cfa: str | None = None,
+        cfa: str | None = SIM_DEFAULT_CFA,
         seed: int = 0,
         camera: str | Spectra = "NikonD100",
         n_leds: int = 7,
@@ -454,7 +462,8 @@ class SimulatedCamera(TriggeredFrames):
         ambient_map: np.ndarray | None = None,
     ) -> SimulatedCamera:
         """The ``sim`` rig's world: a chart, an ambient, an LED set and a camera (by default the paper's
-        110-surface chart, tungsten, the paper's 7 LEDs and ISETCam's NikonD100).
+        110-surface chart, tungsten, the paper's 7 LEDs and ISETCam's NikonD100 behind a 12-bit raw RGGB
+        sensor, :func:`processing.image_formation.machine_vision_sensor`).
 
         Parameters
         ----------
@@ -467,7 +476,7 @@ class SimulatedCamera(TriggeredFrames):
             A name of :func:`processing.lights.light_spectrum` (the sim ambients, CIE
             illuminants) or a spectrum covering ``grid``.
         cfa
-            None for RGB frames, or a Bayer layout.
+            The Bayer layout of the raw mosaic (default :data:`SIM_DEFAULT_CFA`), or None for RGB frames.
         seed
             Noise seed (and the mosaic's layout).
         camera
@@ -493,7 +502,9 @@ class SimulatedCamera(TriggeredFrames):
             (room for the flash on top, for captures at one exposure).
             ``suggested_exposure_us`` is set to ``reference_exposure_us``.
         sensor
-            Default: 16-bit, black 256, 0.5 e⁻/DN, 2 e⁻ read noise, 40 000 e⁻ full well.
+            Default: :func:`processing.image_formation.machine_vision_sensor` with ``cfa`` (12-bit, black
+            240, 8 e⁻/DN, 7 e⁻ read noise, 30.8 ke⁻ at white). Before issue 30 the rig's camera was
+            16-bit RGB, black 256, 0.5 e⁻/DN, 2 e⁻ read noise, 40 000 e⁻ (:class:`SensorModel`'s defaults).
         led_levels_source, noise
             As for the constructor.
         patch_px, specular_strip_px
@@ -531,7 +542,7 @@ class SimulatedCamera(TriggeredFrames):
         )
         leds = (datasets.paper_led_subset(n_leds) if led_spectra is None else led_spectra).resample(grid)
         responsivities = (datasets.camera_responsivities(camera) if isinstance(camera, str) else camera).resample(grid)
-        sensor = sensor if sensor is not None else SensorModel(cfa=cfa)
+        sensor = sensor if sensor is not None else machine_vision_sensor(cfa)
         if cfa is not None and sensor.cfa != cfa:
             raise CameraError(f"simulated camera: cfa '{cfa}' but the sensor model has '{sensor.cfa}'; expected one")
 

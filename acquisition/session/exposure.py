@@ -20,9 +20,10 @@ median over unsaturated pixels of signal ÷ noise:
 - with a noise model (conversion gain ``electrons_per_dn`` and read noise, from the simulated
   sensor or the camera's profile): variance of a value ``S`` DN is ``S·g/e + (σ_r·g/e)²`` at gain
   ``g``, propagated through the difference (method ``"photon+read noise"``);
-- otherwise from the difference image itself: the noise is the robust spread (1.4826 × MAD / √2)
-  of differences between neighbouring same-colour pixels, which cancels the scene except at edges
-  (method ``"difference image"``); predictions then scale the preview's SNR by √(exposure ratio).
+- otherwise from the difference image itself: the noise is read from the median of the diagonal
+  Haar details of 2 × 2 cells of same-colour pixels, which cancel edges along the rows or columns
+  (method ``"difference image"``; :func:`snr_from_difference`); predictions then scale the preview's
+  SNR by √(exposure ratio).
 
 The planned SNR is a prediction from the previews; :func:`measure_led_snr` measures it on the
 frames actually captured.
@@ -44,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.session import exposure_information as info
+from msflash.processing.noise_level import CHI2_1_MEDIAN, haar_details
 
 DEFAULT_EXPOSURE_RANGE_US = (1.0, 10_000_000.0)
 """Exposure limits assumed for a camera that does not report its own."""
@@ -433,21 +435,23 @@ def snr_from_difference(
     white: float,
     cfa: bool = False,
 ) -> float:
-    """Median signal ÷ noise of the LED-only rate image, the noise from the image itself (no sensor model)."""
+    """Median signal ÷ noise of the LED-only rate image, the noise from the image itself (no sensor model).
+
+    The noise is read from the diagonal Haar detail of 2 × 2 cells of same-colour samples
+    (:func:`processing.noise_level.haar_details`): ``median(HH²) = 0.455 · 4σ²`` for noise alone, and an
+    edge along the rows or the columns cancels in it. Differences of neighbouring same-colour samples,
+    before, held the scene wherever an edge fell between them — on a mosaic, whose same-colour samples
+    are 2 pixels apart, a third of them on the sim chart, and the SNR came out half the sensor model's.
+    """
     diff = (led.astype(np.float64) - black) / led_us - (ambient.astype(np.float64) - black) / ambient_us
     valid = _brightest(led, 1) < white
     valid &= _brightest(ambient, 1) < white
-    step = 2 if cfa else 1
-    neighbours = diff[:, step:] - diff[:, :-step]
-    pair_valid = valid[:, step:] & valid[:, :-step]
-    if neighbours.ndim == 3:
-        pair_valid = np.broadcast_to(pair_valid[..., None], neighbours.shape)
-    deltas = neighbours[pair_valid]
-    if deltas.size < 16:
-        return math.nan
-    mad = float(np.median(np.abs(deltas - np.median(deltas))))
-    sigma = 1.4826 * mad / math.sqrt(2.0)
     mask = np.broadcast_to(valid[..., None], diff.shape) if diff.ndim == 3 else valid
+    # Invalid samples as NaN: haar_details leaves out every cell holding one.
+    _, diagonal, _, _ = haar_details(np.where(mask, diff, np.nan), 2 if cfa else 1, 0.0, math.inf)
+    if diagonal.size < 16:
+        return math.nan
+    sigma = math.sqrt(float(np.median(np.square(diagonal))) / CHI2_1_MEDIAN / 4.0)
     signal = float(np.median(diff[mask]))
     return signal / sigma if sigma > 0 else math.inf
 

@@ -28,6 +28,7 @@ from msflash.processing.ambient import LED_SIGNAL_Z, AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
 from msflash.processing.flash import FlashBounds, FlashSolution
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate
+from msflash.processing.spectra import Spectra
 from msflash.processing.synthesis import to_raw_values
 
 Report = Callable[[str], None]
@@ -78,6 +79,52 @@ class EstimateResult:
 
 
 @dataclass(frozen=True)
+class SequenceEstimate:
+    """``msflash estimate SEQ --json`` as an object: the Python API's estimate (:func:`msflash.estimate_ambient`).
+
+    Its fields are the JSON object's, in the same unit and to the last digit: the spectrum and band are in
+    the sequence's spectral unit (``spectral_unit``, usually energy) on its grid — not processing's photons.
+    """
+
+    spectrum: Spectra
+    """The estimated ambient spectrum (the JSON's ``spectrum``), one column, the sequence's unit and grid."""
+    spectrum_std: np.ndarray
+    """±1σ per wavelength, in the same unit (the JSON's ``spectrum_std``; :attr:`band_meaning` says what it covers)."""
+    ambient_weights: np.ndarray
+    """``w_a``, one weight per LED (the JSON's ``ambient_weights``)."""
+    warnings: tuple[str, ...]
+    """Reliability warnings, as the command prints them."""
+    band_meaning: str
+    """What the band covers, in words (the JSON's ``band``)."""
+    payload: dict[str, Any]
+    """The whole ``--json`` object (model choice, tiles, solver, α, residuals …)."""
+    result: EstimateResult
+    """The route's own objects (the processing estimate in photons, a local estimate, the model choice)."""
+
+    @classmethod
+    def of(cls, result: EstimateResult) -> SequenceEstimate:
+        """The estimate of ``result``'s payload."""
+        sequence, payload = result.sequence, result.payload
+        spectrum = Spectra(
+            sequence.grid,
+            np.asarray(payload["spectrum"], dtype=float)[:, None],
+            ("ambient",),
+            kind="spd",
+            unit=sequence.spectral_unit,
+            source=f"ambient estimate of {sequence.directory}",
+        )
+        return cls(
+            spectrum=spectrum,
+            spectrum_std=np.asarray(payload["spectrum_std"], dtype=float),
+            ambient_weights=np.asarray(payload["ambient_weights"], dtype=float),
+            warnings=tuple(payload.get("warnings", ())),
+            band_meaning=str(payload.get("band", "")),
+            payload=payload,
+            result=result,
+        )
+
+
+@dataclass(frozen=True)
 class FlashResult:
     """One sequence's flash: the ``--json`` object, the solution and, on the local route, the local estimate."""
 
@@ -125,7 +172,13 @@ def estimate_one(path: str, settings: EstimateSettings, report: Report) -> Estim
     UsageError
         The ambient frame holds no light; the reader's and calibration's own errors pass through.
     """
-    sequence = read_calibrated(path, settings.calibration, report)
+    return estimate_read(read_calibrated(path, settings.calibration, report), settings, report)
+
+
+def estimate_read(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
+    """:func:`estimate_one` of a sequence already read (and calibrated): what ``msflash estimate`` prints for it,
+    and what :func:`msflash.estimate_ambient` returns (:class:`SequenceEstimate`). ``settings.calibration`` is
+    not applied here."""
     if sequence.partial:
         report(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
     reference = settings.reference_chart if settings.reference_chart is not None else settings.reference_patch

@@ -64,7 +64,7 @@ from msflash.acquisition.devices.sim_world import (
     sim_leds,
     sim_scene,
 )
-from msflash.acquisition.devices.simulated_camera import SimulatedCamera
+from msflash.acquisition.devices.simulated_camera import SIM_DEFAULT_CFA, SimulatedCamera
 from msflash.acquisition.errors import CameraError, CameraSettingError, FrameLostError, RigOpenError, UsageError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.progress import progress
@@ -365,7 +365,7 @@ def _sim_world(
 def open_sim_rig(
     ambient: str | Spectra = "tungsten",
     scene: str | Scene | Spectra = "chart110",
-    cfa: str | None = None,
+    cfa: str | None = SIM_DEFAULT_CFA,
     seed: int = 0,
     camera: str | Spectra | None = None,
     n_leds: int | None = None,
@@ -391,7 +391,8 @@ def open_sim_rig(
         channel, or spectra); neither gives the paper's 7. The emulated booth gets one channel
         per LED, named and peaked as they are (:func:`check_emulated_booth`).
     cfa, seed, log_serial
-        Raw mosaic layout, noise (and mosaic) seed, serial transcript file.
+        Raw mosaic layout (default :data:`~acquisition.devices.simulated_camera.SIM_DEFAULT_CFA`; None for RGB
+        frames), noise (and mosaic) seed, serial transcript file.
     flash_power
         ``--flash-power``: every LED at full drive gives at least this many times the ambient's
         mean camera signal (:meth:`SimulatedCamera.default`); None is its default, 1.

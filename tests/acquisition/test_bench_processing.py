@@ -9,10 +9,12 @@ from msflash.acquisition.app.bench import processing_bench
 
 def test_processing_bench_reports_every_target_on_both_thread_counts_with_its_verdict() -> None:
     report = processing_bench(height=48, width=64, repeats=1, pairs=3, sizes=((48, 64), (40, 72)))
-    assert set(report["targets"]) == {"64×48", "72×40"}
-    for figures in report["targets"].values():
+    assert set(report["targets"]) == {"64×48", "72×40", "64×48 RGGB", "72×40 RGGB"}  # RGB and raw frames
+    for label, figures in report["targets"].items():
+        raw = label.endswith("RGGB")
+        assert ("raw RGGB, 12-bit" in figures["frames"]) == raw
         for name, target in (
-            ("estimate_over_copy", "≤ 2"),
+            ("estimate_over_copy", "≤ 1.5" if raw else "≤ 2"),
             ("estimate_all_pixels_over_copy", "≤ 4"),
             ("synthesis_over_copy", "≤ 1.5"),
         ):

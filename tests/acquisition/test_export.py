@@ -389,7 +389,7 @@ def test_run_export_writes_dngs_whose_neutrals_follow_each_frames_light(capsys, 
 
 def test_run_export_dng_of_an_rgb_rig_is_refused_before_capture(capsys, tmp_path: Path) -> None:
     out = tmp_path / "run"
-    status, stdout, err = run(capsys, "run", "--rig", "sim", "--out", str(out), "--export", "dng")
+    status, stdout, err = run(capsys, "run", "--rig", "sim", "--cfa", "none", "--out", str(out), "--export", "dng")
     assert status == 2
     assert err.strip().splitlines()[-1].startswith("msflash: error: --export dng")
     assert not (out / "sequence").exists()

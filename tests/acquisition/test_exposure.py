@@ -60,6 +60,7 @@ def _plan(
         ex.camera_noise_model(rig.camera) if noise else None,
         policy,
         start_us=10_000.0,
+        cfa=info.cfa is not None,  # the sim rig's raw mosaic, as run.plan_exposure passes it
     )
 
 
@@ -394,9 +395,10 @@ def test_information_plan_on_the_sim_rig_predicts_its_losses_and_gains_snr(rig: 
         capture(tuple(1.0 if i == k else 0.0 for i in range(N_LEDS)), t)
         for k, t in enumerate(informed.led_exposures_us)
     ]
-    lost = _lost_blocks(frames, info.white_level)
+    block = 8 if info.cfa is not None else 4  # the estimator's 4 × 4 blocks of a CFA plane: 8 × 8 pixels of a mosaic
+    lost = _lost_blocks(frames, info.white_level, block)
     past_headroom = _lost_blocks(
-        frames, info.black_level + INFORMATION.headroom_fraction * (info.white_level - info.black_level)
+        frames, info.black_level + INFORMATION.headroom_fraction * (info.white_level - info.black_level), block
     )
     assert 0 < lost <= past_headroom <= INFORMATION.max_lost_fraction
     assert past_headroom == pytest.approx(informed.lost_block_fraction, abs=0.02)

@@ -26,13 +26,32 @@ def _writer(rig, path: Path) -> SequenceWriter:
 
 @pytest.fixture
 def sim_rig():
+    """The sim rig as it comes: a 12-bit raw RGGB camera."""
     with open_sim_rig(n_leds=4, seed=3) as rig:
         yield rig
 
 
-def _pixels(rig, value: int) -> np.ndarray:
+@pytest.fixture
+def rgb_sim_rig():
+    """The sim rig with RGB frames (``--cfa none``): a mono camera's sequences are recorded as RGB."""
+    with open_sim_rig(n_leds=4, seed=3, cfa=None) as rig:
+        yield rig
+
+
+def _shape(rig) -> tuple[int, ...]:
+    """The frames of the rig's camera: (H, W) for its raw mosaic (the sim rig's default), (H, W, 3) for RGB."""
     info = rig.camera.info
-    return np.full((info.height, info.width, 3), value, dtype=np.uint16)
+    return (info.height, info.width) if info.cfa is not None else (info.height, info.width, 3)
+
+
+def _pixels(rig, value: int) -> np.ndarray:
+    """A frame of the rig's camera, every sample ``value`` above its black level."""
+    return np.full(_shape(rig), rig.camera.info.black_level + value, dtype=np.uint16)
+
+
+def _value(rig, frame: np.ndarray) -> int:
+    """The first sample of a frame of :func:`_pixels`, less the black level."""
+    return int(frame.flat[0] - rig.camera.info.black_level)
 
 
 def test_async_writer_keeps_order_and_drains_on_exception(sim_rig, tmp_path: Path) -> None:
@@ -49,7 +68,7 @@ def test_async_writer_keeps_order_and_drains_on_exception(sim_rig, tmp_path: Pat
     sequence = read_sequence(tmp_path / "s")
     assert not sequence.complete
     assert [f.exposure_us for f in sequence.frames] == [1000.0 + v for v in range(5)]
-    assert [int(sequence.load_frame(i)[0, 0, 0]) for i in range(5)] == [100 + v for v in range(5)]
+    assert [_value(sim_rig, sequence.load_frame(i)) for i in range(5)] == [100 + v for v in range(5)]
 
 
 def test_async_writer_applies_back_pressure_instead_of_dropping(sim_rig, tmp_path: Path) -> None:
@@ -89,8 +108,8 @@ def test_async_writer_reports_a_write_error(sim_rig, tmp_path: Path) -> None:
 
     with _writer(sim_rig, tmp_path / "s") as inner, pytest.raises(RecordingError, match="writing a frame failed"):
         writer = AsyncSequenceWriter(inner)
-        writer.add_frame(np.zeros((2, 2, 3), dtype=np.uint16), "ambient", (0.0,) * 4, 1000.0)
-        writer.add_frame(np.zeros((3, 3, 3), dtype=np.uint16), "ambient", (0.0,) * 4, 1000.0)  # size mismatch
+        writer.add_frame(np.zeros((2, 2), dtype=np.uint16), "ambient", (0.0,) * 4, 1000.0)
+        writer.add_frame(np.zeros((4, 4), dtype=np.uint16), "ambient", (0.0,) * 4, 1000.0)  # size mismatch
         writer.finish()
 
 
@@ -212,7 +231,7 @@ def test_async_writer_pause_holds_frames_then_writes_them_in_order(sim_rig, tmp_
     writer.resume()
     sequence = writer.finish()
     assert [f.exposure_us for f in sequence.frames] == [1000.0 + v for v in range(4)]
-    assert [int(read_sequence(tmp_path / "s").load_frame(i)[0, 0, 0]) for i in range(4)] == [100, 101, 102, 103]
+    assert [_value(sim_rig, read_sequence(tmp_path / "s").load_frame(i)) for i in range(4)] == [100, 101, 102, 103]
 
 
 def test_async_writer_paused_still_drains_on_exit(sim_rig, tmp_path: Path) -> None:
@@ -265,9 +284,10 @@ def _session_and_frames(
     info = sim_rig.camera.info
     rng = np.random.default_rng(len(levels))
     white = int(info.white_level)
-    ambient = rng.integers(200, 3000, size=(info.height, info.width, 3))
+    black = int(info.black_level)
+    ambient = rng.integers(black + 100, black + 1800, size=_shape(sim_rig))
     session = FlashSession.prepare(_writer(sim_rig, tmp_path / "s").sequence, exposure_limits_us=exposure_limits_us)
-    pixels = [ambient] + [ambient + rng.integers(100, 2000, size=ambient.shape) for _ in levels]
+    pixels = [ambient] + [ambient + rng.integers(100, 1800, size=ambient.shape) for _ in levels]
     for index, (values, level) in enumerate(zip(pixels, [(0.0,) * 4, *levels])):
         values = values.astype(np.uint16)
         values[rng.random(values.shape[:2]) < saturate] = white
@@ -395,23 +415,26 @@ def test_flash_step_released_with_now_only_in_booth_master(sim_rig, tmp_path: Pa
     ],
     ids=["one-led-per-frame", "multiplexed-more-frames"],
 )
-def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(sim_rig, tmp_path: Path, levels) -> None:
+def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(
+    rgb_sim_rig, tmp_path: Path, levels
+) -> None:
     """A mono camera's (H, W) frames: the writer records three identical channels; the session
     block-sums the one plane and gives the statistics (and estimate) of the recorded sequence."""
     from msflash.acquisition.devices.camera import RawFrame
     from msflash.acquisition.session import analysis
     from msflash.acquisition.session.exposure import flash_exposure
 
-    info = sim_rig.camera.info
+    info = rgb_sim_rig.camera.info
     rng = np.random.default_rng(7)
     white = int(info.white_level)
-    ambient = rng.integers(200, 3000, size=(info.height, info.width))
-    pixels = [ambient] + [ambient + rng.integers(100, 2000, size=ambient.shape) for _ in levels]
-    refused = sim_rig.sequence_writer(tmp_path / "s")  # not a mono rig: (H, W) without cfa is an error
+    black = int(info.black_level)
+    ambient = rng.integers(black + 100, black + 1800, size=(info.height, info.width))
+    pixels = [ambient] + [ambient + rng.integers(100, 1800, size=ambient.shape) for _ in levels]
+    refused = rgb_sim_rig.sequence_writer(tmp_path / "s")  # not a mono rig: (H, W) without cfa is an error
     with pytest.raises(RecordingError, match="mono=True"):
         refused.add_frame(pixels[0].astype(np.uint16), "ambient", (0.0,) * 4, 1000.0)
     written = []
-    wavelengths, camera, leds = sim_rig.sequence_header()
+    wavelengths, camera, leds = rgb_sim_rig.sequence_header()
     with SequenceWriter(
         tmp_path / "mono", wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera, leds=leds, mono=True
     ) as writer:

@@ -14,6 +14,7 @@ from msflash.acquisition.devices.camera import CameraInfo
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.live import LiveStream
 from msflash.acquisition.session.rig import open_rig
+from msflash.processing.image_formation import cfa_channel_map
 
 
 def info(cfa: str | None) -> CameraInfo:
@@ -53,7 +54,10 @@ def test_the_stream_follows_exposure_and_the_booths_levels() -> None:
             assert reported == pytest.approx((0, 0, 0, 1.0, 0, 0, 0), abs=1e-4)
             assert rig.emulator is not None and rig.emulator.levels[3] == pytest.approx(1.0, abs=1e-4)
             lit = stream.grab().pixels.astype(float)
-            assert lit[..., 1].mean() > brighter  # led520 lights the green channel
+            info = rig.camera.info
+            assert info.cfa == "RGGB" and lit.shape == (info.height, info.width)  # the sim camera's raw mosaic
+            green = cfa_channel_map(info.cfa, lit.shape) == 1
+            assert lit[green].mean() > brighter  # led520 lights the green samples
             assert renderer.render(lit.astype(np.uint16)).width == 640
             with pytest.raises(UsageError, match="levels"):
                 stream.set_levels([2.0] * 7)
@@ -72,7 +76,7 @@ def test_the_live_bench_reports_the_preview_paths_rates(capsys) -> None:
 
     assert cli.main(["bench", "--part", "live", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)["live"]
-    assert report["preview_size"] == [PREVIEW_WIDTH, 606] and report["frame_shape"] == [106, 112, 3]
+    assert report["preview_size"] == [PREVIEW_WIDTH, 606] and report["frame_shape"] == [106, 112]  # a raw mosaic
     assert report["preview_fps"] > 0 and report["grab_fps"] > 0 and report["target_fps"] == 10
     assert report["preview_fps_over_target"] == pytest.approx(report["preview_fps"] / 10, abs=0.01)
     assert 0 < report["preview_over_grab"]  # a figure, not a verdict: speed is read from the bench

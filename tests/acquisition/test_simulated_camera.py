@@ -12,7 +12,13 @@ from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.errors import CameraError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan
 from msflash.processing import datasets, lights
-from msflash.processing.image_formation import SensorModel, chart_scene, expected_response, total_illumination
+from msflash.processing.image_formation import (
+    SensorModel,
+    cfa_channel_map,
+    chart_scene,
+    expected_response,
+    total_illumination,
+)
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 
 N_LEDS = 7
@@ -185,18 +191,28 @@ class TestDefaultWorld:
         assert camera.led_spectra.names == datasets.paper_leds().names
         np.testing.assert_allclose(camera.true_ambient.values, lights.ambient_spectrum("tungsten").values)
         assert camera.suggested_exposure_us is not None
+        # A colour machine-vision camera: a 12-bit raw RGGB mosaic above a black pedestal.
+        assert camera.info.pixel_format == "BayerRG12" and camera.info.cfa == "RGGB"
+        assert (camera.sensor.bit_depth, camera.sensor.black_level, camera.sensor.white_level) == (12, 240.0, 4095.0)
         frames = capture(camera, CapturePlan.ambient_then_each_led(N_LEDS, camera.suggested_exposure_us))
+        assert frames[0].pixels.shape == camera.scene.shape and frames[0].pixels.dtype == np.uint16
         diffuse = ~camera.scene.specular
         white = camera.sensor.white_level
+        channels = cfa_channel_map("RGGB", camera.scene.shape)
+
+        def channel_mean(pixels: np.ndarray) -> float:
+            """The mean over the diffuse scene of each of R, G and B, averaged (what the LEDs' power is set on)."""
+            signal = pixels.astype(float) - camera.sensor.black_level
+            return float(np.mean([signal[diffuse & (channels == c)].mean() for c in range(3)]))
+
         ambient = frames[0].pixels.astype(float) - camera.sensor.black_level
         assert ambient[diffuse].max() < 0.5 * white  # room for the flash
-        assert np.all(frames[0].pixels[camera.scene.specular].max(axis=-1) == white)  # the highlight saturates
+        highlight = camera.scene.specular
+        assert np.all(frames[0].pixels[highlight & (channels == 1)] == white)  # the highlight saturates (green)
         ratios = []
         for frame in frames[1:]:
             assert not np.any(frame.pixels[diffuse] >= white)  # ambient + any one LED fits at this exposure
-            ratios.append(
-                (frame.pixels[diffuse].astype(float) - camera.sensor.black_level).mean() / ambient[diffuse].mean() - 1
-            )
+            ratios.append(channel_mean(frame.pixels) / channel_mean(frames[0].pixels) - 1)
         # As a flash: every LED-only image at least the ambient's (flash_power 1: the weakest LED
         # equal to it, the others in the paper's ratios, up to 3.7× with this camera).
         assert min(ratios) == pytest.approx(1.0, abs=0.05)
@@ -204,7 +220,7 @@ class TestDefaultWorld:
 
     def test_default_world_with_a_mosaic(self) -> None:
         camera = SimulatedCamera.default(scene="macbeth", ambient="daylight", cfa="BGGR", seed=1, patch_px=4)
-        assert camera.info.pixel_format == "BayerBG16" and camera.info.cfa == "BGGR"
+        assert camera.info.pixel_format == "BayerBG12" and camera.info.cfa == "BGGR"
         frames = capture(camera, CapturePlan.ambient_then_each_led(N_LEDS, 10_000.0))
         assert len(frames) == N_LEDS + 1 and frames[0].pixels.shape == camera.scene.shape
 

@@ -43,7 +43,8 @@ def _chart(patch_px: int = 8) -> Scene:
 def _record(
     out: Path, scene: Scene | None, ambient_name: str = "tungsten", seed: int = 1, cfa: str | None = None
 ) -> Path:
-    """A sim rig capture of ``scene`` (None: the rig's own chart at the top left)."""
+    """A sim rig capture of ``scene`` (None: the rig's own chart at the top left); ``cfa`` None is the rig's
+    default camera (a raw RGGB mosaic), ``"none"`` RGB frames."""
     default = SimulatedCamera.default.__func__
 
     class PlacedWorld(SimulatedCamera):
@@ -74,8 +75,8 @@ def _record(
 
 # Offsets (odd and fractional), scales, small rotations, upside down; RGB and RGGB.
 PLACEMENTS = {
-    "offset-rgb": (dict(shape=(90, 120), centre_yx=(50.3, 61.7)), None),
-    "rotated-scaled-rgb": (dict(shape=(110, 150), centre_yx=(60.0, 68.0), angle_deg=6.0, scale=1.5), None),
+    "offset-rgb": (dict(shape=(90, 120), centre_yx=(50.3, 61.7)), "none"),
+    "rotated-scaled-rgb": (dict(shape=(110, 150), centre_yx=(60.0, 68.0), angle_deg=6.0, scale=1.5), "none"),
     "rotated-rggb": (dict(shape=(100, 130), centre_yx=(47.0, 70.0), angle_deg=-5.0, scale=1.3), "RGGB"),
     "upside-down-rggb": (dict(shape=(90, 120), centre_yx=(44.5, 57.5), angle_deg=183.0), "RGGB"),
 }
@@ -274,7 +275,7 @@ def _two_charts() -> Scene:
     ],
 )
 def test_no_single_chart_is_refused_naming_the_sequence_and_the_options(tmp_path, capsys, scene, message):
-    path = _record(tmp_path / "scene", scene())
+    path = _record(tmp_path / "scene", scene(), cfa="none")  # RGB frames: 2-pixel patches, a 1-pixel margin
     capsys.readouterr()
     argv = [
         "calibrate",

@@ -108,8 +108,21 @@ def test_bayer_white_reference(tmp_path, capsys):
     assert np.max(np.abs(_peak_ratios(load_calibration(tmp_path / "cal").led_spectra.values) / truth - 1)) < 0.01
 
 
-def test_a_coloured_scene_is_refused_as_a_white_reference(tmp_path, capsys):
-    chart = _capture(tmp_path / "chart", "chart110")
+_RAW_CHART_PASSES_AS_WHITE = pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "finding (issue 30, raw frames; calibration/white_reference.py): on the sim rig's raw mosaic the chart's "
+        "LED shares vary 9–24 % over the sub-blocks, but the noise subtracted from that spread comes from the "
+        "standard errors of each region's samples — the chart's own patches, and on a mosaic a quarter or half "
+        "of the samples per channel — 17–26 %, so every spread reads 0 and the chart passes as a white reference "
+        "(RGB: 8–20 % against 10–13 %, refused)"
+    ),
+)
+
+
+@pytest.mark.parametrize("cfa", ["none", pytest.param("RGGB", marks=_RAW_CHART_PASSES_AS_WHITE)])
+def test_a_coloured_scene_is_refused_as_a_white_reference(tmp_path, capsys, cfa):
+    chart = _capture(tmp_path / "chart", "chart110", cfa)
     assert cli.main(["calibrate", "leds", "--white", str(chart), "--out", str(tmp_path / "cal")]) == 2
     error = capsys.readouterr().err
     assert "share of the light varies" in error and "--white-roi" in error and str(chart) in error
@@ -133,7 +146,8 @@ def test_uneven_led_is_warned_about(white, tmp_path):
     for index, frame in enumerate(sequence.frames):
         pixels = sequence.load_frame(index)
         if index == led:
-            ramp = np.linspace(0.8, 1.2, pixels.shape[1])[None, :, None]
+            # across the columns, of RGB frames or of the sim rig's raw mosaic alike
+            ramp = np.linspace(0.8, 1.2, pixels.shape[1]).reshape((1, -1) + (1,) * (pixels.ndim - 2))
             pixels = np.clip(np.rint(ambient + (pixels - ambient) * ramp), 0, sequence.camera.white_level).astype(
                 np.uint16
             )

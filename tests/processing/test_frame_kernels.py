@@ -1,7 +1,7 @@
 """The one-pass statistics and synthesis against a straightforward reference written here.
 
 The reference takes the slow, obvious way: every frame linearised to float64, block sums by a
-reshape, half differences by a ± sign per member column, saturated blocks dropped, products by
+reshape, half differences by a checkerboard of ± signs over each block's members, saturated blocks dropped, products by
 ``@``. The fast routes — the compiled kernels (:mod:`processing.frame_kernels`) and the numpy route
 they replace — must give the same statistics to floating-point tolerance, on frames whose sizes
 are not multiples of the block, tile or task sizes, Bayer mosaics, saturated pixels, and 1 or 2
@@ -63,10 +63,11 @@ def _planes(frame: np.ndarray, period: int) -> np.ndarray:
 
 
 def _blocks(plane: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Block sums, half differences (even minus odd member columns) and block maxima, each (h, w, C)."""
+    """Block sums, half differences (members at even row + column minus those at odd) and block maxima, each (h, w, C)."""
     h, w, c = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
     members = plane[: h * factor, : w * factor].reshape(h, factor, w, factor, c)
-    sign = np.where(np.arange(factor) % 2 == 0, 1.0, -1.0)[None, None, None, :, None]
+    parity = np.add.outer(np.arange(factor), np.arange(factor)) % 2
+    sign = np.where(parity == 0, 1.0, -1.0)[None, :, None, :, None]
     return members.sum(axis=(1, 3)), (members * sign).sum(axis=(1, 3)), members.max(axis=(1, 3))
 
 
