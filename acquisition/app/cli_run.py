@@ -288,24 +288,18 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
         report_exposure(exposure, list(rig.led_spectra.names))
         count("run", 2, RUN_STEPS, "step")
         with sequence_writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
-            if rig.name.startswith("replay:"):
-                estimate, solutions, caught, captured, flash_us, stack, decided = run_two_captures(
-                    rig, writer, exposure, _run_options(args)
-                )
-            else:
-                estimate, solutions, caught, captured, flash_us, stack, decided = run_one_stream(
-                    rig, writer, exposure, _run_options(args)
-                )
+            run = run_two_captures if rig.name.startswith("replay:") else run_one_stream
+            result = run(rig, writer, exposure, _run_options(args))
+            estimate, solutions, flash_us = result.estimate, result.solutions, result.flash_exposure_us
             chosen = solutions[args.mode]
             why_degenerate = degenerate(estimate)
             writer.finish()
             true_ambient = rig.true_ambient
     count("run", 3, RUN_STEPS, "step")
-    decision_ms = (decided - captured.last_frame_at) * 1e3
-    progress(f"estimated the ambient and solved the flash in {decision_ms:.1f} ms after the last LED frame")
+    progress(f"estimated the ambient and solved the flash in {result.decision_ms:.1f} ms after the last LED frame")
     for note in estimate.warnings:
         progress(f"warning: {note}")
-    for warning in caught:
+    for warning in result.warnings:
         progress(f"warning: {warning.message}")
     progress(
         (
@@ -325,7 +319,9 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
 
     sequence = read_sequence(out / "sequence")
     progress("synthesising the computational images, previews and report")
-    summary = report.write_run_report(out, sequence, estimate, solutions, args.mode, true_ambient, stack, args.target)
+    summary = report.write_run_report(
+        out, sequence, estimate, solutions, args.mode, true_ambient, result.stack, args.target
+    )
     if "spectrum_rmse_vs_truth" in summary:
         progress(
             f"spectrum RMSE against the true ambient {summary['spectrum_rmse_vs_truth']:.4f}; the best "
@@ -344,8 +340,8 @@ def _run_claimed(args: argparse.Namespace, out: Path) -> int:
             "files": [str(path) for path in exported.files],
             "notes": list(exported.notes),
         }
-    summary["exposure"] = run_html.exposure_summary(exposure, flash_us, captured)
-    summary["decision_ms"] = round(decision_ms, 3)
+    summary["exposure"] = run_html.exposure_summary(exposure, flash_us, result.captured)
+    summary["decision_ms"] = round(result.decision_ms, 3)
     summary["elapsed_s"] = round(time.perf_counter() - started, 3)
     run_html.write_run_summary(out, summary, sequence)
     count("run", RUN_STEPS, RUN_STEPS, "step")

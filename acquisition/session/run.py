@@ -15,6 +15,7 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from warnings import WarningMessage
 
 import numpy as np
 
@@ -26,6 +27,7 @@ from msflash.acquisition.progress import count, progress
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import Sequence, SequenceFrame, SequenceWriter, read_sequence
 from msflash.acquisition.session import analysis
+from msflash.acquisition.session.both_flashes import SequenceFlashes, solve_both
 from msflash.acquisition.session.capture import FrameWriter, preview_frames, run_capture, run_capture_with_flash
 from msflash.acquisition.session.exposure import (
     ExposurePlan,
@@ -45,6 +47,7 @@ from msflash.acquisition.session.flash_session import FlashSession
 from msflash.acquisition.session.rig import Rig
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
+from msflash.processing.flash import FlashSolution
 
 log = logging.getLogger(__name__)
 
@@ -278,14 +281,29 @@ def degenerate(estimate) -> str | None:
     return f"not finite: {', '.join(bad)}; condition number {float(estimate.condition_number):.3g}"
 
 
-def solve_both(solve, weights: np.ndarray, first: str) -> tuple[dict, list]:
-    """Both flashes (``first`` solved first), with the TargetUnreachable warnings recorded."""
-    solutions = {}
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", TargetUnreachableWarning)
-        for mode in (first, *(m for m in ("matching", "complementary") if m != first)):
-            solutions[mode] = solve(mode, weights)
-    return solutions, list(caught)
+@dataclass(frozen=True)
+class RunResult:
+    """What a run (:func:`run_one_stream`, :func:`run_two_captures`) leaves for its report."""
+
+    estimate: AmbientEstimate
+    """The reported estimate: the sequence's, on the recorded frames (:func:`reported_estimate`)."""
+    solutions: dict[str, FlashSolution]
+    """The matching and complementary flashes (:func:`~acquisition.session.both_flashes.solve_both`)."""
+    warnings: tuple[WarningMessage, ...]
+    """Warnings of the decision and the solves (target unreachable, flash energy), in order."""
+    captured: LedCapture
+    """The ambient + LED frames as captured, with their measured SNR."""
+    flash_exposure_us: float | None
+    """The flash frame's exposure as the camera read it back; None when the flash is synthesised only."""
+    stack: analysis.FrameStack
+    """The recorded frames the report synthesises from."""
+    decided_at: float
+    """``time.perf_counter()`` when the flash was decided."""
+
+    @property
+    def decision_ms(self) -> float:
+        """From the last LED frame to the flash decision, in milliseconds."""
+        return (self.decided_at - self.captured.last_frame_at) * 1e3
 
 
 def run_one_stream(
@@ -294,7 +312,7 @@ def run_one_stream(
     exposure: ExposurePlan,
     options: RunOptions,
     on_frame: Callable[..., None] | None = None,
-):
+) -> RunResult:
     """Ambient + LEDs + flash in one stream, the flash decided from the frames in memory.
 
     ``on_frame(step, frame, entry)`` is called as each frame lands (the flash frame too), after it is
@@ -361,18 +379,14 @@ def run_one_stream(
         # channels), as for two captures; the session's own stack holds a mono frame's one plane.
         result["stack"] = analysis.load_frame_stack(writer.flush(), [frame.pixels for frame in frames])
     estimate = reported_estimate(writer.flush(), result["stack"], options)
-    other = "matching" if options.mode == "complementary" else "complementary"
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", TargetUnreachableWarning)
-        solutions = {options.mode: result["chosen"], other: session.solve(other, estimate.ambient_weights)}
+    both = solve_both(session, estimate.ambient_weights, options.mode, solved={options.mode: result["chosen"]})
     captured = led_capture(rig, writer, exposure, frames, list(entries[:-1]), stamp["t"])
-    flash_entry = entries[-1]
-    return (
+    return RunResult(
         estimate,
-        solutions,
-        result["caught"] + list(caught),
+        both.solutions,
+        (*result["caught"], *both.warnings),
         captured,
-        flash_entry.exposure_us,
+        entries[-1].exposure_us,
         result["stack"],
         stamp["decided"],
     )
@@ -391,7 +405,7 @@ def reported_estimate(sequence: Sequence, stack: analysis.FrameStack, options: R
     )
 
 
-def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, options: RunOptions):
+def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, options: RunOptions) -> RunResult:
     """LED sequence, then the flash as a second capture (replay rigs: plans are checked up front)."""
     captured = capture_led_sequence(rig, writer, exposure, options.sync)
     sequence = writer.flush()
@@ -403,11 +417,8 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
     estimate = analysis.estimate_sequence(
         sequence, options.solver, options.alpha, stack=stack, bin_factor=options.bin_factor
     )
-    solutions, caught = solve_both(
-        lambda mode, weights: analysis.solve_sequence_flash(sequence, mode, weights, options.target),
-        estimate.ambient_weights,
-        options.mode,
-    )
+    both = solve_both(SequenceFlashes(sequence, options.target), estimate.ambient_weights, options.mode)
+    solutions, caught = both.solutions, both.warnings
     levels = np.clip(solutions[options.mode].flash_weights, 0.0, 1.0)
     recorded = recording_of(rig)
     if exposure.mode == "recorded" and recorded is not None and recorded.flash_us is None:
@@ -415,7 +426,7 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
             "the recording has no flash frame (a sequence from 'msflash capture'): the flash is synthesised "
             "from the frames, not re-captured"
         )
-        return estimate, solutions, caught, captured, None, stack, time.perf_counter()
+        return RunResult(estimate, solutions, caught, captured, None, stack, time.perf_counter())
     if (
         exposure.mode == "recorded"
         and recorded is not None
@@ -429,7 +440,7 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
             f"{options.mode} flash asks for {format_levels(levels)} (recorded with other options or another "
             "msflash version): the flash is synthesised from the frames, not replayed"
         )
-        return estimate, solutions, caught, captured, None, stack, time.perf_counter()
+        return RunResult(estimate, solutions, caught, captured, None, stack, time.perf_counter())
     frames = captured.frames
     info = rig.camera.info  # read once: on a real camera each read is several feature round trips
     pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
@@ -452,12 +463,12 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
             ),
             options.sync,
         )
-    caught = [*caught, *flash_caught]
+    caught = (*caught, *flash_caught)
     flash_gain = recorded.flash_gain if exposure.mode == "recorded" and recorded is not None else 1.0
     flash_plan = CapturePlan.single(levels, flash_us, gain=flash_gain, trigger=SYNC_MODES[options.sync])
     decided = time.perf_counter()
     run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=report_frame)
-    return estimate, solutions, caught, captured, flash_us, stack, decided
+    return RunResult(estimate, solutions, caught, captured, flash_us, stack, decided)
 
 
 def flash_exposure_for(

@@ -76,10 +76,8 @@ def run_sequence(
         exposure = plan_exposure(rig, request.exposure, ExposurePolicy())
         phase("capturing ambient, each LED and the flash")
         with sequence_writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
-            estimate, solutions, _caught, captured, flash_us, stack, decided = run_one_stream(
-                rig, writer, exposure, options, on_frame=on_frame
-            )
-            why_degenerate = degenerate(estimate)
+            result = run_one_stream(rig, writer, exposure, options, on_frame=on_frame)
+            why_degenerate = degenerate(result.estimate)
             writer.finish()
         if why_degenerate is not None:
             raise CaptureError(
@@ -91,10 +89,17 @@ def run_sequence(
         phase("writing the report")
         sequence = read_sequence(out / "sequence")
         summary = report.write_run_report(
-            out, sequence, estimate, solutions, options.mode, rig.true_ambient, stack, options.target
+            out,
+            sequence,
+            result.estimate,
+            result.solutions,
+            options.mode,
+            rig.true_ambient,
+            result.stack,
+            options.target,
         )
-        summary["exposure"] = run_html.exposure_summary(exposure, flash_us, captured)
-        summary["decision_ms"] = round((decided - captured.last_frame_at) * 1e3, 3)
+        summary["exposure"] = run_html.exposure_summary(exposure, result.flash_exposure_us, result.captured)
+        summary["decision_ms"] = round(result.decision_ms, 3)
         summary["elapsed_s"] = round(time.perf_counter() - started, 3)
         run_html.write_run_summary(out, summary, sequence)
     return summary
