@@ -102,9 +102,11 @@ def _live(args: argparse.Namespace) -> int:
                 loop = asyncio.get_running_loop()
 
                 def stopping() -> None:
-                    if server.state.job.status == "running" and not stop.is_set():
+                    # A fired sequence stops before its next frame: LEDs off, the frames written kept.
+                    if server.stop_sequence() and not stop.is_set():
                         progress(
-                            "stopping once the sequence in progress has its frames (its capture ends with the LEDs off)"
+                            "stopping the sequence in progress before its next frame (LEDs off; the frames "
+                            "written so far stay, the sequence marked incomplete)"
                         )
                     stop.set()
 

@@ -655,6 +655,15 @@ class WiredFakeCamera:
         self._mode = plan.trigger
         self.aravis.prepare(dataclasses.replace(plan, trigger="software"))
 
+    def update_plan(self, plan: CapturePlan, index: int) -> None:
+        """Take ``plan`` with step ``index`` changed (software triggered, as prepared)."""
+        self.aravis.update_plan(dataclasses.replace(plan, trigger="software"), index)
+
+    @property
+    def readout_skew_us(self) -> float:
+        """The fake's (0: a global shutter)."""
+        return float(self.aravis.readout_skew_us)
+
     def start(self) -> None:
         """Start acquisition (and, for booth-paced plans, the thread that turns pulses into triggers)."""
         self._exposing = False
@@ -1159,6 +1168,15 @@ class HardwareCamera:
     def prepare(self, plan: CapturePlan) -> None:
         """Prepare the camera for ``plan`` (each step's gain multiplies ``--gain``'s, which the camera holds)."""
         self.aravis.prepare(plan)
+
+    def update_plan(self, plan: CapturePlan, index: int) -> None:
+        """Take ``plan`` with step ``index`` changed, before its trigger."""
+        self.aravis.update_plan(plan, index)
+
+    @property
+    def readout_skew_us(self) -> float:
+        """The camera's rolling-shutter skew, µs (0: a global shutter)."""
+        return float(self.aravis.readout_skew_us)
 
     def start(self) -> None:
         """Start acquisition."""

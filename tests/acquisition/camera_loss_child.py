@@ -101,9 +101,15 @@ def capture_scenario(out_dir: Path) -> dict:
     )
     plan = CapturePlan.ambient_then_each_led(3, 1000.0, timeout_margin_s=3.0)  # the process fake polls slowly
 
-    def on_frame(step, frame, written) -> None:  # noqa: ANN001 - capture callback
-        if step.index == 1:
-            _wait_for_kill()
+    class WaitAtStep1:
+        """A frame handler: once step 1's frame is written, wait to be killed."""
+
+        def frame_ready(self, event) -> None:  # noqa: ANN001 - a FrameEvent
+            if event.step.index == 1:
+                _wait_for_kill()
+
+        def sequence_finished(self, result) -> None:  # noqa: ANN001 - a CaptureResult
+            pass
 
     result: dict = {}
     try:
@@ -116,7 +122,7 @@ def capture_scenario(out_dir: Path) -> dict:
             )
             try:
                 with writer:
-                    run_capture(camera, booth, plan, writer, on_frame=on_frame)
+                    run_capture(camera, booth, plan, writer, (WaitAtStep1(),))
             except CameraError as err:
                 result = {"error": type(err).__name__, "message": str(err)}
             result["led_levels_after"] = list(server.emulator.levels)

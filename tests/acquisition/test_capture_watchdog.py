@@ -136,9 +136,9 @@ def test_a_frame_the_watchdog_darkened_is_refused_not_kept(
     watchdog is not raised) lets the watchdog switch the LED off mid-exposure: host paced, the next
     SET would just work, so the dark LED frame must be refused by name, not written as good data."""
     from msflash.acquisition.errors import CaptureError
-    from msflash.acquisition.session import capture
+    from msflash.acquisition.session import booth_guard
 
-    monkeypatch.setattr(capture, "host_silence_s", lambda plan: 0.0)
+    monkeypatch.setattr(booth_guard, "host_silence_s", lambda plan: 0.0)
     plan = CapturePlan(CapturePlan.ambient_then_each_led(4, 300_000.0).steps[:3])
     with pytest.raises(CaptureError) as caught, sim_rig.sequence_writer(tmp_path / "sequence") as writer:
         run_capture(_ExposingCamera(sim_rig.camera), sim_rig.booth, plan, writer)

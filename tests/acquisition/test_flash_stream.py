@@ -17,6 +17,7 @@ from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
 from msflash.acquisition.session.capture import run_capture_with_flash
 from msflash.acquisition.session.flash_session import FlashSession
 from msflash.acquisition.session.rig import open_sim_rig
+from tests.acquisition.support.capture_doubles import FixedFlash
 
 
 def _writer(rig, path: Path) -> SequenceWriter:
@@ -98,26 +99,23 @@ def test_async_writer_reports_a_write_error(sim_rig, tmp_path: Path) -> None:
 def test_flash_in_the_same_stream(sim_rig, tmp_path: Path, trigger: str) -> None:
     plan = CapturePlan.ambient_then_each_led(4, 10_000.0, trigger=trigger)
     flash = (0.25, 0.5, 0.0, 1.0)
-    seen: list[int] = []
     with _writer(sim_rig, tmp_path / "s") as inner, AsyncSequenceWriter(inner) as writer:
         session = FlashSession.prepare(writer.sequence)
 
-        def keep(step, frame, _entry) -> None:
-            if step.role != "flash":
-                session.add(frame, step.role, step.led_levels)
-
-        def decide(frames):
-            seen.append(len(frames))
+        def check() -> None:
             assert not gc.isenabled()  # no collection pause between the last LED frame and the flash
             # The booth holds the flash step: nothing exposed with stale levels meanwhile.
             if trigger != "software":
                 assert sim_rig.emulator.levels == (0.0,) * 4 or sim_rig.emulator.holding is None
             decision = session.decide("complementary")
             assert decision.levels.shape == (4,)
-            return flash, 8_192.0
 
-        entries = run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, decide, on_frame=keep)
+        decider = FixedFlash(flash, 8_192.0, check)
+        entries = run_capture_with_flash(
+            sim_rig.camera, sim_rig.booth, plan, writer, decider, handlers=(session, decider)
+        )
         writer.finish()
+    seen = decider.seen
     assert seen == [5] and gc.isenabled()
     assert [e.role for e in entries] == ["ambient"] + ["led"] * 4 + ["flash"]
     sequence = read_sequence(tmp_path / "s")
@@ -150,15 +148,11 @@ def test_a_frame_lost_in_the_flash_stream_is_taken_again(sim_rig, tmp_path: Path
         return frame
 
     camera.next_frame = losing_next
-    seen: list[int] = []
-
-    def decide(frames):
-        seen.append(len(frames))
-        return flash, 8_192.0
-
+    decider = FixedFlash(flash, 8_192.0)
     with _writer(sim_rig, tmp_path / "s") as inner, AsyncSequenceWriter(inner) as writer:
-        entries = run_capture_with_flash(camera, sim_rig.booth, plan, writer, decide)
+        entries = run_capture_with_flash(camera, sim_rig.booth, plan, writer, decider, handlers=(decider,))
         writer.finish()
+    seen = decider.seen
     assert len(losses) == 1
     assert seen == ([5] if lost == "led" else [5, 5])
     assert [e.role for e in entries] == ["ambient"] + ["led"] * 4 + ["flash"]
@@ -184,7 +178,7 @@ def test_flash_session_matches_the_sequence_path(sim_rig, tmp_path: Path) -> Non
             sim_rig.booth,
             plan,
             writer,
-            on_frame=lambda step, frame, _e: session.add(frame, step.role, step.led_levels),
+            handlers=(session,),
         )
         writer.finish()
     sequence = read_sequence(tmp_path / "s")
@@ -236,12 +230,8 @@ def test_flash_stream_pauses_the_writer_only_around_the_decision(sim_rig, tmp_pa
 
     monkeypatch.setattr(sim_rig.camera, "next_frame", next_frame)
     with AsyncSequenceWriter(_writer(sim_rig, tmp_path / "s")) as writer:
-
-        def decide(frames):
-            states.append(writer._running.is_set())
-            return (0.5,) * 4, 2000.0
-
-        entries = run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, decide)
+        decider = FixedFlash((0.5,) * 4, 2000.0, lambda: states.append(writer._running.is_set()))
+        entries = run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, decider)
         assert writer._running.is_set()  # resumed once the flash frame is in
         writer.finish()
     assert states == [False]
@@ -381,7 +371,7 @@ def test_flash_step_released_with_now_only_in_booth_master(sim_rig, tmp_path: Pa
 
     sim_rig.booth.set_step = timed
     with _writer(sim_rig, tmp_path / "s") as writer:
-        run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, lambda frames: ((0.5,) * 4, 5_000.0))
+        run_capture_with_flash(sim_rig.camera, sim_rig.booth, plan, writer, FixedFlash((0.5,) * 4, 5_000.0))
     # the sim booth pulses (DIM=PULSE): the flash step's exposure travels with its levels
     assert calls == [((5, (0.5,) * 4), {"now": trigger == "booth", "exposure_us": 5_000.0})]
     assert not sim_rig.line_errors
@@ -475,8 +465,10 @@ def test_collection_resumes_after_a_failed_flash_decision(sim_rig, tmp_path: Pat
     (and a collector the caller had disabled stays disabled)."""
     plan = CapturePlan.ambient_then_each_led(4, 10_000.0, trigger="booth")
 
-    def decide(frames):
+    def refuse() -> None:
         raise RuntimeError("no decision")
+
+    decide = FixedFlash((0.0,) * 4, 1_000.0, refuse)
 
     for enabled in (True, False):
         (gc.enable if enabled else gc.disable)()

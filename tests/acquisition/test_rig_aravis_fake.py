@@ -22,6 +22,7 @@ from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import ARAVIS_FAKE_PIXEL_FORMAT, open_aravis_fake_rig, open_rig
 from msflash.processing import datasets
 from tests.acquisition.gvcp_port import gvcp_port_in_use
+from tests.acquisition.support.capture_doubles import Watch
 
 pytestmark = pytest.mark.aravis
 
@@ -108,7 +109,7 @@ def test_a_lossy_link_costs_retakes_not_the_sequence(aravis: ModuleType, tmp_pat
             trace.append(f"{step.label}:{frame.frame_id}:{entry.extra.get('trigger')}:{entry.extra.get('retake', 0)}")
 
         with rig.sequence_writer(tmp_path / "s") as writer:
-            run_capture(rig.camera, rig.booth, plan, writer, on_frame=check, retakes=100)
+            run_capture(rig.camera, rig.booth, plan, writer, (Watch(check),), retakes=100)
             writer.finish()
         assert not rig.line_errors
     sequence = read_sequence(tmp_path / "s")

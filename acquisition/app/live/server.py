@@ -48,7 +48,8 @@ from msflash.acquisition.app.live.preview import Preview, PreviewRenderer
 from msflash.acquisition.app.live.run_job import SequenceRequest, new_run_folder, run_sequence
 from msflash.acquisition.app.live.runs import list_runs, read_json, run_file, run_files, run_folder
 from msflash.acquisition.app.live.state import LiveState, SequenceJob
-from msflash.acquisition.errors import UsageError
+from msflash.acquisition.errors import CaptureCancelled, UsageError
+from msflash.acquisition.session.engine import Cancellation, CaptureResult, FrameEvent
 from msflash.acquisition.session.live import LiveStream
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run import RunOptions
@@ -184,6 +185,8 @@ class LiveServer:
         self._off_timer: asyncio.TimerHandle | None = None
         self._tasks: set[asyncio.Task] = set()
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._cancel: Cancellation | None = None
+        """The running sequence's cancellation (:meth:`stop_sequence`), None when none runs."""
 
     @property
     def url(self) -> str:
@@ -231,7 +234,19 @@ class LiveServer:
     async def _on_shutdown(self, _app: web.Application) -> None:
         await close_all(self.clients)  # bounded: a page that does not read is aborted
 
+    def stop_sequence(self, reason: str = "msflash live is stopping") -> bool:
+        """Ask a running sequence to stop between frames (its LEDs off, its frames kept); whether one runs.
+
+        Safe from any thread or a signal handler: the capture checks it before each step.
+        """
+        cancel = self._cancel
+        if cancel is None:
+            return False
+        cancel.cancel(reason)
+        return True
+
     async def _on_cleanup(self, _app: web.Application) -> None:
+        self.stop_sequence()  # a fired sequence stops between frames, not at its end
         for task in list(self._tasks):
             task.cancel()
         for task in list(self._tasks):
@@ -239,7 +254,8 @@ class LiveServer:
                 await task
         if self._off_timer is not None:
             self._off_timer.cancel()
-        # The rig thread finishes what it is doing (a sequence ends with its LEDs off), then LEDs off.
+        # The rig thread finishes what it is doing (a cancelled sequence ends at its next frame with its
+        # LEDs off), then LEDs off.
         await asyncio.get_running_loop().run_in_executor(self.rig_thread, self._stop_rig)
         self.rig_thread.shutdown(wait=True)
 
@@ -460,18 +476,15 @@ class LiveServer:
     async def _sequence(self, folder: Path, request: SequenceRequest) -> None:
         loop = asyncio.get_running_loop()
         job = self.state.job
+        cancel = self._cancel = Cancellation()
 
         def on_phase(text: str) -> None:
             loop.call_soon_threadsafe(self._phase, job, text)
 
-        def on_frame(step: Any, frame: Any, entry: Any) -> None:
-            preview = self.renderer.render(frame.pixels, self.state.overlay)
-            loop.call_soon_threadsafe(self._landed, job, step.index, entry.file, step.label, preview)
-
         def work() -> dict[str, Any]:
             self.stream.pause()
             try:
-                summary = run_sequence(self.rig, folder, request, on_frame, on_phase)
+                summary = run_sequence(self.rig, folder, request, (_PageView(self, job, loop),), on_phase, cancel)
             except BaseException:
                 self.stream.all_off()  # the capture switched them off; the live levels say so too
                 raise
@@ -480,6 +493,9 @@ class LiveServer:
 
         try:
             summary = await self._on_rig(work)
+        except CaptureCancelled as err:
+            log.info("live: the sequence into %s stopped: %s", folder, err)
+            job.status, job.message = "stopped", f"stopped: {err}; the frames taken are in {folder.name}"
         except Exception as err:  # noqa: BLE001 - shown on the page; the capture switched the LEDs off
             log.error("live: the sequence into %s failed: %s", folder, err)
             job.status, job.message = "failed", str(err)
@@ -490,6 +506,9 @@ class LiveServer:
             job.message = f"done in {summary['elapsed_s']:.1f} s" + (
                 f"; spectrum RMSE against the true ambient {rmse:.4f}" if rmse is not None else ""
             )
+        finally:
+            if self._cancel is cancel:
+                self._cancel = None
         job.phase = job.status
         await self._push_state()
 
@@ -601,6 +620,22 @@ class LiveServer:
 
 
 _NO_STORE = {"Cache-Control": "no-store"}
+
+
+class _PageView:
+    """A fired sequence as the pages see it (a frame handler of the capture engine): each frame's
+    preview and its file, handed to the event loop."""
+
+    def __init__(self, server: LiveServer, job: SequenceJob, loop: asyncio.AbstractEventLoop) -> None:
+        self.server, self.job, self.loop = server, job, loop
+
+    def frame_ready(self, event: FrameEvent) -> None:
+        preview = self.server.renderer.render(event.frame.pixels, self.server.state.overlay)
+        file = event.entry.file if event.entry is not None else ""
+        self.loop.call_soon_threadsafe(self.server._landed, self.job, event.step.index, file, event.step.label, preview)
+
+    def sequence_finished(self, result: CaptureResult) -> None:
+        """The job's state says so once the report is written."""
 
 
 def _refuse(status: int, message: str) -> web.Response:

@@ -1761,6 +1761,19 @@ class AravisCamera:
         assert self._pool is not None
         self._pool.reserve(min(len(plan.steps), _MAX_SPARE_BYTES // self._pool.payload))
 
+    def update_plan(self, plan: CapturePlan, index: int) -> None:
+        """Take ``plan``, whose step ``index`` changed (before its trigger): software triggered, the
+        step is applied when triggered; on a trigger line it was set up after the previous frame, so
+        it is applied again now."""
+        self._plan = plan
+        if self._trigger.mode != "software" and self._n_consumed == index:
+            self._apply_step(index, plan)
+
+    @property
+    def readout_skew_us(self) -> float:
+        """0: the camera's rolling-shutter skew is not read (taken as a global shutter)."""
+        return 0.0
+
     def _apply_step(self, index: int, plan: CapturePlan) -> tuple[float, float, NativeGain | None]:
         # Write only what changes: each write and read-back is a GVCP round trip on the trigger path.
         step = plan.steps[index]
