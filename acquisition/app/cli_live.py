@@ -13,7 +13,15 @@ from pathlib import Path
 from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, progress
 from msflash.acquisition.app.options import add_fake_camera_option, simulated_world
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
-from msflash.acquisition.session.rig import Rig, open_rig
+from msflash.acquisition.session.rig import (
+    AravisFakeRigOptions,
+    HwRigOptions,
+    ReplayRigOptions,
+    Rig,
+    SimRigOptions,
+    open_rig,
+    rig_kind,
+)
 from msflash.acquisition.signals import STOPPING_SIGNALS
 from msflash.processing.datasets import PAPER_LED_SUBSETS
 from msflash.processing.lights import AMBIENTS
@@ -63,22 +71,38 @@ def _open(args: argparse.Namespace) -> Rig:
         raise UsageError(f"--booth-port: the rig '{spec}' has its own emulated booth; expected --rig sim or hw")
     world = simulated_world(args)
     if spec == "sim":
-        return open_rig("sim", cfa=args.cfa, booth_port=args.booth_port, booth_boot_s=args.booth_boot_s, **world)
+        return open_rig(
+            "sim",
+            SimRigOptions(
+                world,
+                cfa=args.cfa,
+                log_serial=args.log_serial,
+                booth_port=args.booth_port,
+                booth_boot_s=args.booth_boot_s,
+            ),
+        )
     if spec == "aravis-fake":
-        return open_rig("aravis-fake", fake_camera=args.fake_camera or "sfnc", **world)
+        return open_rig(
+            "aravis-fake",
+            AravisFakeRigOptions(world, log_serial=args.log_serial, fake_camera=args.fake_camera or "sfnc"),
+        )
     if spec == "hw":
         return open_rig(
             "hw",
-            camera=args.camera,
-            port=args.booth_port,
-            interfaces=args.interfaces,
-            calibration=args.calibration,
-            led_spectra=args.led_spectra,
-            responsivity=args.responsivity,
-            log_serial=args.log_serial,
-            booth_boot_s=args.booth_boot_s,
+            HwRigOptions(
+                camera=args.camera,
+                port=args.booth_port,
+                interfaces=args.interfaces,
+                calibration=args.calibration,
+                led_spectra=args.led_spectra,
+                responsivity=args.responsivity,
+                log_serial=args.log_serial,
+                booth_boot_s=args.booth_boot_s,
+            ),
         )
-    return open_rig(spec, log_serial=args.log_serial)
+    if rig_kind(spec) == "replay":
+        return open_rig(spec, ReplayRigOptions(log_serial=args.log_serial))
+    return open_rig(spec)
 
 
 def _live(args: argparse.Namespace) -> int:

@@ -51,7 +51,15 @@ from msflash.acquisition.session.exposure import (
     ExposurePolicy,
 )
 from msflash.acquisition.session.external_booth import check_booth_port
-from msflash.acquisition.session.rig import Rig, open_rig
+from msflash.acquisition.session.rig import (
+    AravisFakeRigOptions,
+    HwRigOptions,
+    ReplayRigOptions,
+    Rig,
+    SimRigOptions,
+    open_rig,
+    rig_kind,
+)
 from msflash.acquisition.session.run import (
     SYNC_MODES,
     RunOptions,
@@ -167,40 +175,50 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
     if spec == "hw":
         return open_rig(
             "hw",
-            camera=args.camera,
-            port=args.port,
-            interfaces=args.interfaces,
-            calibration=args.calibration,
-            led_spectra=args.led_spectra,
-            responsivity=args.responsivity,
-            log_serial=args.log_serial,
-            sync=args.sync,
-            pixel_format=args.pixel_format,
-            camera_options=camera_options_from_args(args),
-            booth_protocol=args.booth_protocol,
-            booth_boot_s=args.booth_boot_s,
+            HwRigOptions(
+                camera=args.camera,
+                port=args.port,
+                interfaces=args.interfaces,
+                calibration=args.calibration,
+                led_spectra=args.led_spectra,
+                responsivity=args.responsivity,
+                log_serial=args.log_serial,
+                sync=args.sync,
+                pixel_format=args.pixel_format,
+                camera_options=camera_options_from_args(args),
+                booth_protocol=args.booth_protocol,
+                booth_boot_s=args.booth_boot_s,
+            ),
         )
     # The simulated world: the sim rig renders it with its own camera, aravis-fake through Aravis.
     world = simulated_world(args)
     if spec == "sim":
         return open_rig(
             "sim",
-            cfa=args.cfa,
-            booth_port=args.booth_port,
-            booth_protocol=args.booth_protocol,
-            booth_boot_s=args.booth_boot_s,
-            booth_firmware=args.booth_firmware,
-            line_time_us=args.line_time_us,
-            **world,
+            SimRigOptions(
+                world,
+                cfa=args.cfa,
+                log_serial=args.log_serial,
+                booth_port=args.booth_port,
+                booth_protocol=args.booth_protocol,
+                booth_boot_s=args.booth_boot_s,
+                booth_firmware=args.booth_firmware,
+                line_time_us=args.line_time_us,
+            ),
         )
     if spec == "aravis-fake":
         return open_rig(
             "aravis-fake",
-            camera_options=camera_options_from_args(args),
-            fake_camera=args.fake_camera or DEFAULT_FAKE_MODEL,
-            **world,
+            AravisFakeRigOptions(
+                world,
+                log_serial=args.log_serial,
+                camera_options=camera_options_from_args(args),
+                fake_camera=args.fake_camera or DEFAULT_FAKE_MODEL,
+            ),
         )
-    return open_rig(spec, log_serial=args.log_serial)
+    if rig_kind(spec) == "replay":
+        return open_rig(spec, ReplayRigOptions(log_serial=args.log_serial))
+    return open_rig(spec)
 
 
 def _line_time(text: str) -> float:

@@ -28,10 +28,11 @@ from msflash.acquisition.devices.aravis.camera_features import (
     parse_feature,
     parse_roi,
 )
+from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.errors import CameraSettingError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session.rig import HardwareCamera, _emulator_for
+from msflash.acquisition.session.rig import emulator_for
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID
@@ -424,7 +425,7 @@ def test_cli_capture_applies_the_options_and_records_them(
     sfnc_fake_xml: None, tmp_path: Path, led_spectra_csv: Path
 ) -> None:
     leds = datasets.load_spectra_csv(led_spectra_csv, kind="spd", unit="energy")
-    server = serve_on_pty(_emulator_for(leds))
+    server = serve_on_pty(emulator_for(leds))
     out = tmp_path / "c"
     try:
         status = main(

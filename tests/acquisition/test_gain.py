@@ -38,7 +38,7 @@ from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageEr
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.exposure import ExposurePlan, ExposurePolicy
 from msflash.acquisition.session.live import LiveStream
-from msflash.acquisition.session.rig import _emulator_for, open_aravis_fake_rig
+from msflash.acquisition.session.rig import emulator_for, open_aravis_fake_rig
 from msflash.acquisition.session.run import LedCapture
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
@@ -215,7 +215,7 @@ def test_gain_on_the_gainraw_gige_fake_is_checked_before_the_sequence_and_record
     aravis: ModuleType, tmp_path: Path, led_spectra_csv: Path, capsys: pytest.CaptureFixture
 ) -> None:
     leds = datasets.load_spectra_csv(led_spectra_csv, kind="spd", unit="energy")
-    server = serve_on_pty(_emulator_for(leds))
+    server = serve_on_pty(emulator_for(leds))
     try:
         with aravis.AravisGvFake(serial="ISSUE29", genicam_xml=None):  # Aravis's own XML: GainRaw 0-10
             capsys.readouterr()

@@ -139,11 +139,12 @@ def test_a_booth_that_fails_to_open_is_named_and_the_rig_is_closed(monkeypatch: 
 
     from msflash.acquisition.errors import RigOpenError
     from msflash.acquisition.session import rig
+    from msflash.led_controller import LedBooth
 
     def refuse(port, **_kwargs):
         raise OSError(f"cannot open {port}")
 
-    monkeypatch.setattr(rig.LedBooth, "open", staticmethod(refuse))
+    monkeypatch.setattr(LedBooth, "open", staticmethod(refuse))
     threads = threading.active_count()
     with pytest.raises(
         RigOpenError, match=r"rig 'replay:.*': booth emulator on /dev/pts/\d+: cannot open /dev/pts/\d+"

@@ -20,7 +20,7 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import RigOpenError
 from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session.rig import _emulator_for, load_hw_spectra, open_rig
+from msflash.acquisition.session.rig import HwRigOptions, emulator_for, load_hw_spectra, open_rig
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
@@ -51,7 +51,7 @@ def calibration(tmp_path: Path) -> Path:
 def booth_port(calibration: Path) -> Iterator[str]:
     """The booth emulator (7 channels) served on a pty: its path is what --port gets."""
     leds = datasets.load_spectra_csv(calibration / "led_spectra.csv", kind="spd", unit="energy")
-    server = serve_on_pty(_emulator_for(leds))
+    server = serve_on_pty(emulator_for(leds))
     try:
         yield server.port
     finally:
@@ -111,7 +111,8 @@ def test_capture_on_fake_camera_and_emulated_booth(
 def test_rig_hw_with_csv_files_and_led_off_at_close(aravis: ModuleType, calibration: Path, booth_port: str) -> None:
     aravis.use_fake_genicam(None)
     with open_rig(
-        "hw", camera="Fake_1", interfaces="fake", port=booth_port, led_spectra=calibration / "led_spectra.csv"
+        "hw",
+        HwRigOptions(camera="Fake_1", interfaces="fake", port=booth_port, led_spectra=calibration / "led_spectra.csv"),
     ) as rig:
         assert rig.name == "hw" and rig.booth.info.channels == 7
         assert rig.camera_responsivities is None and "flash solvers" in rig.camera_extra["responsivity_note"]
@@ -119,13 +120,15 @@ def test_rig_hw_with_csv_files_and_led_off_at_close(aravis: ModuleType, calibrat
         assert 0 <= low < high
         rig.booth.set_levels([1.0] + [0.0] * 6)
     # closed: a second open of the same devices works (the camera and the port were released)
-    with open_rig("hw", camera="Fake_1", interfaces="fake", port=booth_port, calibration=calibration) as rig:
+    with open_rig(
+        "hw", HwRigOptions(camera="Fake_1", interfaces="fake", port=booth_port, calibration=calibration)
+    ) as rig:
         assert rig.camera_responsivities is not None
 
 
 def test_every_device_failure_is_listed(aravis: ModuleType, calibration: Path, silent_pty: str) -> None:
     with pytest.raises(RigOpenError) as caught:
-        open_rig("hw", camera="SN123", interfaces="fake", port=silent_pty, calibration=calibration)
+        open_rig("hw", HwRigOptions(camera="SN123", interfaces="fake", port=silent_pty, calibration=calibration))
     message = str(caught.value)
     assert message.startswith("rig 'hw': camera 'SN123': not found on fake (found: Fake_1")
     assert f"booth: {silent_pty}: no answer within " in message and "of opening the port" in message
@@ -158,16 +161,16 @@ def test_cli_failure_exits_1_with_one_line(
 def test_no_camera_without_an_id_lists_what_was_found(aravis: ModuleType, calibration: Path, booth_port: str) -> None:
     """No --camera: the single camera on the interfaces is taken; on fake there is exactly one."""
     aravis.use_fake_genicam(None)
-    with open_rig("hw", interfaces="fake", port=booth_port, calibration=calibration) as rig:
+    with open_rig("hw", HwRigOptions(interfaces="fake", port=booth_port, calibration=calibration)) as rig:
         assert rig.camera.info.extra["device_id"] == "Fake_1"
 
 
 def test_booth_channel_count_must_match_the_spectra(aravis: ModuleType, calibration: Path, tmp_path: Path) -> None:
     leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero").select([0, 1, 2])
-    server = serve_on_pty(_emulator_for(leds))
+    server = serve_on_pty(emulator_for(leds))
     try:
         with pytest.raises(RigOpenError, match=r"3 channels .* but the LED spectra have 7"):
-            open_rig("hw", camera="Fake_1", interfaces="fake", port=server.port, calibration=calibration)
+            open_rig("hw", HwRigOptions(camera="Fake_1", interfaces="fake", port=server.port, calibration=calibration))
     finally:
         server.close()
 
@@ -178,7 +181,7 @@ def test_a_booth_of_another_protocol_version_is_one_error_line(
     from msflash.led_controller import BoothEmulator
 
     leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
-    default = _emulator_for(leds)
+    default = emulator_for(leds)
     newer = BoothEmulator(names=default.names, peaks_nm=default.peaks_nm, firmware="booth-2.0", protocol=2)
     with serve_on_pty(newer) as server:
         status = main(
