@@ -194,7 +194,7 @@ def test_a_frame_aravis_could_not_identify_is_taken_as_the_next_one(aravis: Modu
     gv_camera.trigger()
     arrived = gv_camera._queue.get(timeout=plan.frame_timeout_s)  # the fake's second frame ...
     assert arrived.frame_id != 0
-    gv_camera._queue.put(aravis._Bad(0, "timeout"))  # ... as Aravis delivers one it could not identify
+    gv_camera._queue.put(aravis.Bad(0, "timeout"))  # ... as Aravis delivers one it could not identify
     with pytest.raises(FrameLostError, match="frame 0 for step 1 'flash' arrived incomplete"):
         gv_camera.next_frame(plan.frame_timeout_s)
     gv_camera.trigger()

@@ -378,7 +378,9 @@ def test_the_rig_checks_the_serial_and_model_it_opened(
     # nothing), the rig's own fake starts beside the other program's, Aravis reaches the other one
     # (the kernel hands the port's datagrams to the first socket bound), and the identity check stops it.
     gv_fake_process(serial="OTHER02")
-    monkeypatch.setattr(aravis, "gvcp_port_holder", lambda *_args: None)
+    from msflash.acquisition.devices.aravis import gv_fake
+
+    monkeypatch.setattr(gv_fake, "gvcp_port_holder", lambda *_args: None)
     with pytest.raises(RigOpenError) as refused:
         open_aravis_fake_rig()
     assert "the camera at 127.0.0.1 is Aravis Fake serial OTHER02, not this rig's fake (Fake serial MSFRIG01)" in str(
