@@ -108,7 +108,8 @@ def _open(args: argparse.Namespace) -> Rig:
 def _live(args: argparse.Namespace) -> int:
     import asyncio
 
-    from msflash.acquisition.app.live.server import LiveServer, bind
+    from msflash.acquisition.app.live.requests import bind
+    from msflash.acquisition.app.live.server import LiveServer
 
     runs = Path(args.runs)
     if runs.exists() and not runs.is_dir():

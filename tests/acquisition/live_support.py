@@ -8,7 +8,9 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.app.live.server import LiveServer, bind, serve_in_thread
+from msflash.acquisition.app.live.in_thread import serve_in_thread
+from msflash.acquisition.app.live.requests import bind
+from msflash.acquisition.app.live.server import LiveServer
 from msflash.acquisition.session.rig import open_rig
 
 

@@ -153,14 +153,14 @@ def test_an_unplugged_booth_through_the_cli_says_it_once_plus_the_leds_warning(
     """msflash capture with the booth's pty closed after two frames: exit 1, the error line is the lost link
     during SET, and the only diagnostics shown by default are the driver noticing it and the warning that
     the LEDs could not be confirmed off — not a second failure about OFF from closing the rig."""
-    from msflash.acquisition.app import cli_run
+    from msflash.acquisition.app import rig_choice
     from msflash.acquisition.app.cli import main
     from msflash.led_controller import PtyBoothServer
 
-    real_open = cli_run.open_rig
+    real_open = rig_choice.open_rig
 
-    def open_then_unplug_at_frame_3(spec, **options):  # noqa: ANN001, ANN003 - open_rig's signature
-        rig = real_open(spec, **options)
+    def open_then_unplug_at_frame_3(spec, options=None):  # noqa: ANN001 - open_rig's signature
+        rig = real_open(spec, options)
         server = next(c.__self__ for c in rig._closers if isinstance(getattr(c, "__self__", None), PtyBoothServer))
         real_next, count = rig.camera.next_frame, [0]
 
@@ -173,7 +173,7 @@ def test_an_unplugged_booth_through_the_cli_says_it_once_plus_the_leds_warning(
         rig.camera.next_frame = next_frame
         return rig
 
-    monkeypatch.setattr(cli_run, "open_rig", open_then_unplug_at_frame_3)
+    monkeypatch.setattr(rig_choice, "open_rig", open_then_unplug_at_frame_3)
     status = main(["capture", "--exposure-us", "5000", "--out", str(tmp_path / "x")])
     errors = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
     assert status == 1

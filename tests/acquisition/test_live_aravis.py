@@ -11,7 +11,9 @@ from types import ModuleType
 import aiohttp
 import pytest
 
-from msflash.acquisition.app.live.server import TOKEN_HEADER, LiveServer, bind, serve_in_thread
+from msflash.acquisition.app.live.in_thread import serve_in_thread
+from msflash.acquisition.app.live.requests import bind
+from msflash.acquisition.app.live.server import TOKEN_HEADER, LiveServer
 from msflash.acquisition.session.rig import open_rig
 
 pytestmark = pytest.mark.aravis

@@ -19,7 +19,9 @@ import pytest
 from yarl import URL
 
 from msflash.acquisition.app import cli
-from msflash.acquisition.app.live.server import LAST_CLIENT_GRACE_S, TOKEN_HEADER, LiveServer, bind, serve_in_thread
+from msflash.acquisition.app.live.in_thread import serve_in_thread
+from msflash.acquisition.app.live.requests import bind
+from msflash.acquisition.app.live.server import LAST_CLIENT_GRACE_S, TOKEN_HEADER, LiveServer
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.rig import open_rig
 from tests.acquisition.live_support import emulator_levels, live_server, wait_until
