@@ -16,7 +16,7 @@ only sums them.
 
 The results are those of :func:`acquisition.session.analysis.estimate_sequence` and
 :func:`acquisition.session.analysis.solve_sequence_flash` on the same frames (same statistics code,
-same solvers; only the order of the moment sums differs); ``tests/acquisition/test_flash_stream.py``
+same solvers; only the order of the moment sums differs); ``tests/acquisition/session/test_flash_stream.py``
 checks it.
 """
 

@@ -24,7 +24,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 HANG_GUARD_S = 120.0
 MSFLASH = (sys.executable, "-m", "msflash.acquisition.app.cli")
 LINK_TICK_MS = 250

@@ -22,7 +22,7 @@ from msflash.acquisition.sequence.format import read_sequence
 pytestmark = pytest.mark.aravis
 
 CHILD = Path(__file__).with_name("camera_loss_child.py")
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def _run_scenario(

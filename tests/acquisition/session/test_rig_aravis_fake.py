@@ -21,8 +21,8 @@ from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import ARAVIS_FAKE_PIXEL_FORMAT, open_aravis_fake_rig, open_rig
 from msflash.processing import datasets
-from tests.acquisition.gvcp_port import gvcp_port_in_use
 from tests.acquisition.support.capture_doubles import Watch
+from tests.acquisition.support.gvcp_port import gvcp_port_in_use
 
 pytestmark = pytest.mark.aravis
 

@@ -24,7 +24,7 @@ from msflash.acquisition.app.live.requests import bind
 from msflash.acquisition.app.live.server import LAST_CLIENT_GRACE_S, TOKEN_HEADER, LiveServer
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.rig import open_rig
-from tests.acquisition.live_support import emulator_levels, live_server, wait_until
+from tests.acquisition.support.live import emulator_levels, live_server, wait_until
 
 
 def request(method: str, url: str | URL, headers: dict[str, str] | None = None, body: Any = None) -> tuple[int, str]:

@@ -1,6 +1,6 @@
 """Fuzzing the live server (issue 32 item 5): a real ``msflash live`` process, capped in memory, sent hostile HTTP
 requests, bytes that are not HTTP, WebSocket sessions the page never opens and calls out of order
-(:mod:`tests.acquisition.live_fuzz_worker`, which states the rule). CI runs 200 derandomised examples; the
+(:mod:`tests.acquisition.app.live_fuzz_worker`, which states the rule). CI runs 200 derandomised examples; the
 ``study`` marker runs 2000. Results: docs/reliability.md."""
 
 from __future__ import annotations
@@ -12,13 +12,13 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def _fuzz(examples: int, timeout_s: float) -> dict:
     try:
         done = subprocess.run(
-            [sys.executable, "-m", "tests.acquisition.live_fuzz_worker", "--examples", str(examples)],
+            [sys.executable, "-m", "tests.acquisition.app.live_fuzz_worker", "--examples", str(examples)],
             cwd=REPO,
             capture_output=True,
             text=True,

@@ -16,7 +16,7 @@ from msflash.acquisition.errors import ReplayMismatchError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.format import read_sequence, write_sequence
 
-RECORDED = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
+RECORDED = Path(__file__).resolve().parents[2] / "data" / "sequences" / "sim-macbeth-fluorescent"
 
 
 def _recorded_plan(**timing) -> CapturePlan:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.acquisition.live_support import emulator_levels, live_server, wait_until
+from tests.acquisition.support.live import emulator_levels, live_server, wait_until
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"

@@ -1,6 +1,6 @@
 """The live server's fuzzer: a real ``msflash live`` process, capped in memory, against hostile HTTP and WebSocket traffic.
 
-``python -m tests.acquisition.live_fuzz_worker --examples N [--memory-gib G]``
+``python -m tests.acquisition.app.live_fuzz_worker --examples N [--memory-gib G]``
 
 It starts ``msflash live --rig sim --port 0`` in a subprocess whose address space is capped
 (``RLIMIT_AS``, ``--memory-gib``), reads the page's token, then lets Hypothesis (derandomised, no

@@ -25,7 +25,7 @@ from pathlib import Path
 import aiohttp
 
 from msflash.acquisition.app.live.server import TOKEN_HEADER, LiveServer
-from tests.acquisition.live_support import emulator_levels, live_server, wait_until
+from tests.acquisition.support.live import emulator_levels, live_server, wait_until
 
 HANG_GUARD_S = 60.0
 
