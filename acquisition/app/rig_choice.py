@@ -210,6 +210,13 @@ def add_rig_options(parser: argparse.ArgumentParser) -> None:
         "GigE Vision fake on 127.0.0.1 streaming the simulated scene, + emulator), replay:DIR (a recorded sequence + emulator), "
         "hw (a real camera and booth; implied by --camera/--port)",
     )
+    _add_hardware_options(parser)
+    _add_booth_options(parser)
+    _add_world_and_pacing_options(parser)
+
+
+def _add_hardware_options(parser: argparse.ArgumentParser) -> None:
+    """``--camera``, ``--port``, … and the camera options: the hardware rig."""
     hardware = parser.add_argument_group("hardware rig (--rig hw)")
     hardware.add_argument(
         "--camera",
@@ -248,6 +255,10 @@ def add_rig_options(parser: argparse.ArgumentParser) -> None:
         "Bayer*10p/12p, Mono12Packed, Bayer*12Packed … are decoded",
     )
     add_camera_options(hardware)
+
+
+def _add_booth_options(parser: argparse.ArgumentParser) -> None:
+    """The fake camera model and the booth: its port outside this process, protocol, boot time, firmware."""
     add_fake_camera_option(parser)
     parser.add_argument(
         "--sync",
@@ -274,6 +285,10 @@ def add_rig_options(parser: argparse.ArgumentParser) -> None:
         "(energy); hw: the real booth's channels; sim: the emulated booth gets these channels "
         "(names and peaks from the columns; the file must cover 400-700 nm)",
     )
+
+
+def _add_world_and_pacing_options(parser: argparse.ArgumentParser) -> None:
+    """The simulated world, then the exposure, the transcript and the sync mode."""
     sim = parser.add_argument_group("simulated world (--rig sim; --rig aravis-fake renders it too, except --cfa)")
     sim.add_argument(
         "--sim-camera",
@@ -336,6 +351,11 @@ def add_rig_options(parser: argparse.ArgumentParser) -> None:
     )
     sim.add_argument("--cfa", default=None, choices=CFA_CHOICES, help="raw Bayer mosaic frames with this layout")
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
+    _add_pacing_options(parser)
+
+
+def _add_pacing_options(parser: argparse.ArgumentParser) -> None:
+    """``--exposure``, ``--log-serial``, ``--sync`` and what paces the frames."""
     parser.add_argument(
         "--exposure",
         "--exposure-us",

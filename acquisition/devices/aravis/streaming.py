@@ -312,6 +312,20 @@ class Streaming(SyncLines):
         self._n_consumed += 1
         if isinstance(item, Failure):
             raise CameraError(f"{self._name}: {where}: {item.error}") from item.error
+        self._refuse_lost(item, where)
+        with self._stats_lock:
+            self._stats = replace(self._stats, frames_good=self._stats.frames_good + 1)
+        if self._trigger.mode != "software" and self._plan is not None and self._n_consumed < len(self._plan.steps):
+            # Without software triggers the next exposure is set between frames: the plan's
+            # deadtime must cover these writes.
+            self._apply_step(self._n_consumed, self._plan)
+        exposure_us, gain, native = settings
+        frame = RawFrame(item.pixels, item.frame_id, item.timestamp_ns, exposure_us, gain, native)
+        self._last_timing = FrameTiming(item.timestamp_ns, item.received_ns, item.popped_ns, time.time_ns())
+        return frame
+
+    def _refuse_lost(self, item: Good | Bad, where: str) -> None:
+        """Raise :class:`FrameLostError` for an incomplete frame (counted) or a gap in the frame ids."""
         if isinstance(item, Bad) and item.frame_id == 0 and self._protocol == "gige":
             # Aravis names no block id (0, never sent on GigE Vision) for a frame it could not
             # identify: it is taken as the next frame, so neither it nor the frame after it counts
@@ -340,16 +354,6 @@ class Streaming(SyncLines):
                 f"({where}); expected consecutive frame ids — enlarge the buffer pool "
                 "or lower the frame rate"
             )
-        with self._stats_lock:
-            self._stats = replace(self._stats, frames_good=self._stats.frames_good + 1)
-        if self._trigger.mode != "software" and self._plan is not None and self._n_consumed < len(self._plan.steps):
-            # Without software triggers the next exposure is set between frames: the plan's
-            # deadtime must cover these writes.
-            self._apply_step(self._n_consumed, self._plan)
-        exposure_us, gain, native = settings
-        frame = RawFrame(item.pixels, item.frame_id, item.timestamp_ns, exposure_us, gain, native)
-        self._last_timing = FrameTiming(item.timestamp_ns, item.received_ns, item.popped_ns, time.time_ns())
-        return frame
 
     def _silence(self) -> str | None:
         """Why the camera no longer answers, or None when it does (asked after a frame timeout).

@@ -10,9 +10,11 @@ BayerRG16; :class:`~acquisition.devices.wired_fake.WiredFakeCamera` paints each 
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.devices.wired_fake import WiredFakeCamera
 from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
 from msflash.acquisition.session.rigs.emulated_booth import (
@@ -62,10 +64,8 @@ def open_aravis_fake_rig(
 ) -> Rig:
     """The ``aravis-fake`` rig: AravisCamera on the GigE fake at 127.0.0.1 + emulator on a pty + LedBooth.
 
-    Holds the machine-wide GVCP port lock (:func:`~acquisition.devices.aravis.camera.gvcp_port_lock`)
-    until closed. The fake is this process's own: a port another program holds is refused
-    (``AravisGvFake.start``), and the camera opened at 127.0.0.1 must report the fake's serial and
-    model, or the rig does not open (a fake of another process answers there otherwise).
+    The fake is this process's own (docs/architecture.md §4): a GVCP port another program holds is
+    refused, and the camera opened at 127.0.0.1 must report the fake's serial and model.
 
     ``fake_camera``: the fake's camera model (:data:`~acquisition.devices.aravis.fake_models.FAKE_MODELS`:
     how it names its gain; rendered frames get the gain its sensor truly applies).
@@ -80,12 +80,9 @@ def open_aravis_fake_rig(
     chart is 200 × 186). The rig records the world's LED spectra, responsivities and true
     ambient, as the ``sim`` rig does.
 
-    ``lost_packet_ratio``: the fraction of stream packets the fake drops, a lossy link (its frames
-    arrive incomplete now and then, as on a congested GigE Vision network).
-
-    ``rendered`` False: the frames are the fake's test patterns (``pixel_format`` default Mono16,
-    ``width`` × ``height`` default 64 × 48): the paper's seven LEDs, ISETCam's
-    :data:`AravisFakeNominalCamera` recorded as nominal — the capture bench's transport figures.
+    ``lost_packet_ratio``: the fraction of stream packets the fake drops (a congested link).
+    ``rendered`` False: the fake's Mono16 test patterns (64 × 48 by default), the paper's seven LEDs
+    and :data:`AravisFakeNominalCamera` recorded as nominal — the capture bench's transport figures.
 
     Raises
     ------
@@ -97,23 +94,66 @@ def open_aravis_fake_rig(
         The fake, the emulated booth or the world failed to open, or another camera answered.
     """
     try:
-        from msflash.acquisition.devices.aravis import camera as aravis_camera
-        from msflash.acquisition.devices.aravis.camera_features import CameraOptions, configure_camera
+        from msflash.acquisition.devices.aravis.camera_features import CameraOptions
         from msflash.acquisition.devices.aravis.fake_models import FAKE_MODELS
     except ImportError as err:
         raise RigOpenError(f"rig 'aravis-fake': {err}") from err
     model = FAKE_MODELS.get(fake_camera)
     if model is None:
         raise UsageError(f"--fake-camera {fake_camera!r}: unknown; expected one of {', '.join(FAKE_MODELS)}")
-    world = None
-    if rendered:
+    world_options = (ambient, scene, seed, camera, n_leds, led_spectra, flash_power, patch_px)
+    frames = _FakeFrames.of(rendered, world_options, width, height, pixel_format)
+    closers: list = []
+    failures: dict[str, BaseException] = {}
+    emulator = booth = opened = None
+    try:
+        opened = _open_fake_camera(model, serial, lost_packet_ratio, frames, camera_options or CameraOptions(), closers)
+    except CameraSettingError:
+        close_all(closers)
+        raise  # bad input, not a device failure: one line, exit 2
+    except Exception as err:  # noqa: BLE001 - reported with the booth's failure, if any
+        failures[f"camera GigE fake {serial} at 127.0.0.1"] = err
+    try:
+        emulator, booth = open_emulated_booth(frames.leds, log_serial, closers)
+    except RigOpenError as err:
+        failures["booth"] = err
+    if failures:
+        close_all(closers)
+        listing = "; ".join(f"{device}: {err}" for device, err in failures.items())
+        raise RigOpenError(f"rig 'aravis-fake': {listing}") from next(iter(failures.values()))
+    assert opened is not None and emulator is not None and booth is not None
+    return _wired_rig(model, frames, opened, emulator, booth, closers)
+
+
+@dataclass(frozen=True)
+class _FakeFrames:
+    """What the fake's frames are: the rendered world (or the fake's test patterns), their size and format,
+    and the LED spectra and responsivities the rig records."""
+
+    world: SimulatedCamera | None
+    width: int
+    height: int
+    pixel_format: str
+    leds: Spectra
+    responsivities: Spectra
+
+    @classmethod
+    def of(
+        cls, rendered: bool, world_options: tuple, width: int | None, height: int | None, pixel_format: str | None
+    ) -> _FakeFrames:
+        """The ``sim`` world rendered into an RGGB mosaic the scene's size, or the fake's test patterns."""
+        if not rendered:
+            leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
+            camera = datasets.isetcam_camera(AravisFakeNominalCamera).resample(DEFAULT_GRID, outside="zero")
+            return cls(None, width or 64, height or 48, pixel_format or "Mono16", leds, camera)
+        ambient, scene, seed, camera_name, n_leds, led_spectra, flash_power, patch_px = world_options
         world = sim_world(
             "aravis-fake",
             ambient,
             scene,
             "RGGB",
             seed,
-            camera,
+            camera_name,
             n_leds,
             led_spectra,
             flash_power,
@@ -125,103 +165,88 @@ def open_aravis_fake_rig(
                 f"rig 'aravis-fake': ROI {width}x{height} but the scene is {scene_width}x{scene_height}; "
                 "expected the scene's size (the rendered mosaic fills the ROI)"
             )
-        width, height = scene_width, scene_height
         pixel_format = pixel_format or ARAVIS_FAKE_PIXEL_FORMAT
-        leds, responsivities = world.led_spectra, world.camera_responsivities
-    else:
-        width, height, pixel_format = width or 64, height or 48, pixel_format or "Mono16"
-        leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
-        responsivities = datasets.isetcam_camera(AravisFakeNominalCamera).resample(DEFAULT_GRID, outside="zero")
-    closers: list = []
-    line_errors: list[BaseException] = []
-    failures: dict[str, BaseException] = {}
-    emulator = booth = setup = None
-    try:
-        if world is not None:
-            from msflash.acquisition.devices.aravis.fake_log import mute_unfilled_format_warning
+        return cls(world, scene_width, scene_height, pixel_format, world.led_spectra, world.camera_responsivities)
 
-            closers.append(mute_unfilled_format_warning())  # the pixels are rendered: its lines say nothing
-        fake = aravis_camera.AravisGvFake(
-            serial=serial,
-            genicam_xml=model.xml_path(),
-            lost_packet_ratio=lost_packet_ratio,
-            model=model.model,
-            registers=model.registers,
+
+@dataclass(frozen=True)
+class _OpenedFake:
+    fake: Any
+    aravis: Any
+    setup: Any
+
+
+def _open_fake_camera(
+    model: Any, serial: str, lost_packet_ratio: float, frames: _FakeFrames, options: Any, closers: list
+) -> _OpenedFake:
+    """The fake served on 127.0.0.1 and the camera opened on it, checked to be the rig's own, configured."""
+    from msflash.acquisition.devices.aravis import camera as aravis_camera
+    from msflash.acquisition.devices.aravis.camera_features import configure_camera
+
+    if frames.world is not None:
+        from msflash.acquisition.devices.aravis.fake_log import mute_unfilled_format_warning
+
+        closers.append(mute_unfilled_format_warning())  # the pixels are rendered: its lines say nothing
+    fake = aravis_camera.AravisGvFake(
+        serial=serial,
+        genicam_xml=model.xml_path(),
+        lost_packet_ratio=lost_packet_ratio,
+        model=model.model,
+        registers=model.registers,
+    )
+    fake.start()
+    closers.append(fake.close)
+    aravis = aravis_camera.AravisCamera(fake.address, interfaces="gige")
+    closers.append(aravis.close)
+    opened = aravis.info
+    if (opened.serial, opened.model) != (serial, model.model):
+        raise RigOpenError(
+            f"the camera at {fake.address} is {opened.vendor} {opened.model} serial {opened.serial}, not this "
+            f"rig's fake ({model.model} serial {serial}): another program's GigE Vision camera answers there; "
+            "expected the rig's own — stop the other fake"
         )
-        fake.start()
-        closers.append(fake.close)
-        aravis = aravis_camera.AravisCamera(fake.address, interfaces="gige")
-        closers.append(aravis.close)
-        opened = aravis.info
-        if (opened.serial, opened.model) != (serial, model.model):
-            raise RigOpenError(
-                f"the camera at {fake.address} is {opened.vendor} {opened.model} serial {opened.serial}, not this "
-                f"rig's fake ({model.model} serial {serial}): another program's GigE Vision camera answers there; "
-                "expected the rig's own — stop the other fake"
-            )
-        aravis.set_pixel_format(pixel_format)  # once the camera is known to be the rig's own
-        aravis.set_roi(0, 0, width, height)
-        opened = aravis.info
-        if world is not None and opened.cfa != world.sensor.cfa:
-            raise RigOpenError(
-                f"pixel format {pixel_format} has CFA {opened.cfa}; expected {world.sensor.cfa}, the rendered mosaic's"
-            )
-        setup = configure_camera(aravis, camera_options or CameraOptions(), strobe=False)
-    except CameraSettingError:
-        close_all(closers)
-        raise  # bad input, not a device failure: one line, exit 2
-    except Exception as err:  # noqa: BLE001 - reported with the booth's failure, if any
-        failures[f"camera GigE fake {serial} at 127.0.0.1"] = err
-        aravis = None
-    try:
-        emulator, booth = open_emulated_booth(leds, log_serial, closers)
-    except RigOpenError as err:
-        failures["booth"] = err
-    if failures:
-        close_all(closers)
-        listing = "; ".join(f"{device}: {err}" for device, err in failures.items())
-        raise RigOpenError(f"rig 'aravis-fake': {listing}") from next(iter(failures.values()))
-    assert aravis is not None and emulator is not None and booth is not None and setup is not None
+    aravis.set_pixel_format(frames.pixel_format)  # once the camera is known to be the rig's own
+    aravis.set_roi(0, 0, frames.width, frames.height)
+    opened = aravis.info
+    if frames.world is not None and opened.cfa != frames.world.sensor.cfa:
+        raise RigOpenError(
+            f"pixel format {frames.pixel_format} has CFA {opened.cfa}; expected {frames.world.sensor.cfa}, "
+            "the rendered mosaic's"
+        )
+    return _OpenedFake(fake, aravis, configure_camera(aravis, options, strobe=False))
+
+
+def _wired_rig(model: Any, frames: _FakeFrames, opened: _OpenedFake, emulator: Any, booth: Any, closers: list) -> Rig:
+    """The rig: the fake's camera wired to the emulator (trigger line, rendered levels), with what it records."""
+    fake, aravis, world = opened.fake, opened.aravis, frames.world
+    line_errors: list[BaseException] = []
     wired = WiredFakeCamera(
         aravis, emulator, fake, line_errors, world=world, true_gain=lambda: model.true_gain(fake.read_register)
     )
     closers.insert(closers.index(aravis.close) + 1, wired.stop)  # before the AravisCamera and the fake are released
     emulator.on_trigger_out = line_callback(line_errors, "aravis-fake trigger line", wired.trigger_line)
-    camera_record: dict = {"fake_camera": model.name, "gain": aravis.gain_record()}
-    if not setup.options.empty:
-        camera_record["camera_options"] = setup.to_dict()
+    extra: dict = {"fake_camera": model.name, "gain": aravis.gain_record()}
+    if not opened.setup.options.empty:
+        extra["camera_options"] = opened.setup.to_dict()
     if world is None:
-        extra = {
-            "responsivity_note": f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning",
-            **camera_record,
-        }
-        return Rig(
-            "aravis-fake",
-            wired,
-            booth,
-            leds,
-            responsivities,
-            None,
-            closers,
-            emulator=emulator,
-            line_errors=line_errors,
-            camera_extra=extra,
-            mono=pixel_format.startswith("Mono"),
+        nominal = f"nominal: ISETCam {AravisFakeNominalCamera}; the fake's test patterns have no spectral meaning"
+        extra = {"responsivity_note": nominal, **extra}
+    else:
+        pixels = (
+            f"the Aravis fake's frames, pixels rendered by {world.info.model} under the booth's LEDs "
+            "at each frame's trigger"
         )
-    extra = {
-        "pixels": f"the Aravis fake's frames, pixels rendered by {world.info.model} under the booth's LEDs "
-        "at each frame's trigger",
-        **camera_record,
-    }
+        extra = {"pixels": pixels, **extra}
     return Rig(
         "aravis-fake",
         wired,
         booth,
-        leds,
-        responsivities,
-        world.true_ambient,
+        frames.leds,
+        frames.responsivities,
+        world.true_ambient if world is not None else None,
         closers,
         emulator=emulator,
         line_errors=line_errors,
         camera_extra=extra,
+        mono=world is None and frames.pixel_format.startswith("Mono"),
     )

@@ -30,6 +30,7 @@ from msflash.acquisition.session.rigs.rig import Rig
 from msflash.led_controller import LedBooth
 from msflash.led_controller.adapters import open_booth
 from msflash.led_controller.booth import DEFAULT_BOOT_S
+from msflash.led_controller.booth_interface import Booth
 from msflash.led_controller.recovery import reset_leftovers
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 
@@ -213,8 +214,6 @@ def open_hw_rig(
     RigOpenError
         One or both devices failed to open; the message lists each device's failure.
     """
-    from msflash.led_controller.discovery import find_booth
-
     leds, responsivities, reference = hw_spectra(calibration, led_spectra, responsivity)
     closers: list = []
     failures: list[str] = []
@@ -233,18 +232,7 @@ def open_hw_rig(
         failures.append(message if message.startswith("camera") else f"camera {camera!r}: {message}")
         errors.append(err)
     try:
-        booth_port = port if port is not None else find_booth().device
-        booth = open_booth(booth_port, booth_protocol, log_serial=log_serial, boot_s=booth_boot_s)
-        closers.append(booth.close)
-        closers.append(booth.all_off)
-        if booth.info.channels != leds.count:
-            raise RigOpenError(
-                f"booth {booth_port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the LED "
-                f"spectra have {leds.count} ({', '.join(leds.names)}); expected one spectrum per channel"
-            )
-        if isinstance(booth, LedBooth):  # an adapter switches its LEDs off when it opens
-            for note in reset_leftovers(booth):  # a killed run's LEDs and raised watchdog
-                log.warning("%s", note)
+        booth = _open_hw_booth(port, booth_protocol, log_serial, booth_boot_s, leds, closers)
     except Exception as err:  # noqa: BLE001 - reported with the camera's failure, if any
         message = str(err)
         failures.append(message if message.startswith("booth") else f"booth: {message}")
@@ -253,6 +241,41 @@ def open_hw_rig(
         close_all(closers)
         raise RigOpenError(f"rig 'hw': {'; '.join(failures)}") from errors[0]
     assert aravis is not None and booth is not None
+    return _hw_rig(aravis, setup, booth, leds, responsivities, reference, closers)
+
+
+def _open_hw_booth(
+    port: str | None, protocol: str, log_serial: str | Path | None, boot_s: float, leds: Spectra, closers: list
+) -> Booth:
+    """The booth at ``port`` (or the one discovery finds), checked to have one channel per LED and cleared
+    of a killed run's leftovers; its closers appended as it opens."""
+    from msflash.led_controller.discovery import find_booth
+
+    booth_port = port if port is not None else find_booth().device
+    booth = open_booth(booth_port, protocol, log_serial=log_serial, boot_s=boot_s)
+    closers.append(booth.close)
+    closers.append(booth.all_off)
+    if booth.info.channels != leds.count:
+        raise RigOpenError(
+            f"booth {booth_port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the LED "
+            f"spectra have {leds.count} ({', '.join(leds.names)}); expected one spectrum per channel"
+        )
+    if isinstance(booth, LedBooth):  # an adapter switches its LEDs off when it opens
+        for note in reset_leftovers(booth):  # a killed run's LEDs and raised watchdog
+            log.warning("%s", note)
+    return booth
+
+
+def _hw_rig(
+    aravis: Any,
+    setup: Any,
+    booth: Booth,
+    leds: Spectra,
+    responsivities: Spectra | None,
+    reference: tuple[str, Path] | None,
+    closers: list,
+) -> Rig:
+    """The hardware rig, recording the camera's gain, its options as read back and a mono camera as such."""
     hardware = HardwareCamera(aravis, setup)
     info = aravis.info
     extra: dict = {"gain": aravis.gain_record()}

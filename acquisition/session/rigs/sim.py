@@ -36,6 +36,7 @@ from msflash.acquisition.session.rigs.emulated_booth import (
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.led_controller import LedBooth
 from msflash.led_controller.booth import DEFAULT_BOOT_S
+from msflash.led_controller.booth_interface import Booth
 from msflash.processing.image_formation import Scene
 from msflash.processing.spectra import Spectra
 
@@ -113,40 +114,20 @@ def open_sim_rig(
 
     Parameters
     ----------
-    ambient, scene, camera
-        As the CLI's ``--ambient``, ``--scene``, ``--sim-camera`` (a name or a CSV file, resolved
-        by :mod:`acquisition.devices.sim_world`), or spectra / a :class:`Scene` already on the sim grid.
-        ``camera`` None is :data:`acquisition.devices.sim_world.SIM_DEFAULT_CAMERA`.
-    n_leds, led_spectra
-        The paper's subset of ``n_leds`` LEDs or the booth's LEDs (a CSV file, one column per
-        channel, or spectra); neither gives the paper's 7. The emulated booth gets one channel
-        per LED, named and peaked as they are (:func:`check_emulated_booth`).
-    cfa, seed, log_serial
-        Raw mosaic layout, noise (and mosaic) seed, serial transcript file.
-    flash_power
-        ``--flash-power``: every LED at full drive gives at least this many times the ambient's
-        mean camera signal (:meth:`SimulatedCamera.default`); None is its default, 1.
-    booth_port
-        ``--booth-port``: drive the booth at this port (``msflash booth-emulator`` on a pty, or a
-        real booth) instead of an emulator in this process (:mod:`acquisition.external_booth`; host
-        pacing only, :attr:`Rig.emulator` None).
-    booth_protocol
-        ``--booth-protocol``: what the booth at ``booth_port`` speaks (``msflash`` or ``text``,
-        :data:`led_controller.adapters.BOOTH_PROTOCOLS`).
-    booth_boot_s
-        ``--booth-boot-s``: how long the booth at ``booth_port`` may take to boot after its port's open
-        reset it (:data:`led_controller.booth.DEFAULT_BOOT_S`).
+    ambient, scene, camera, n_leds, led_spectra, flash_power, seed
+        The world (:class:`acquisition.session.rig.SimWorldOptions` says each; names and CSV files
+        resolved by :mod:`acquisition.devices.sim_world`, or spectra / a :class:`Scene` on the sim
+        grid). The emulated booth gets one channel per LED, named and peaked as they are
+        (:func:`check_emulated_booth`).
+    cfa, log_serial, line_time_us
+        Raw mosaic layout, serial transcript file, rolling shutter (``--line-time-us``; 0: global).
+    booth_port, booth_protocol, booth_boot_s
+        ``--booth-port``: the booth at this port (``msflash booth-emulator`` on a pty, or a real
+        booth; host pacing only, :attr:`Rig.emulator` None), what it speaks and how long it may
+        take to boot after its port's open reset it (:mod:`acquisition.session.external_booth`).
     booth_firmware
-        ``--booth-firmware``: the booth is the reference firmware in simavr
-        (:func:`open_firmware_booth`), wired to the camera as a real rig is (trigger output,
-        ExposureActive), so all three sync modes run; the frames integrate its real LED pins.
-    line_time_us
-        ``--line-time-us``: the simulated camera's rolling shutter (row ``r`` starts ``r`` line
-        times after row 0); 0, the default, is a global shutter.
-
-    The camera renders each row under the booth's drive integrated over that row's exposure
-    window (:mod:`acquisition.devices.exposure_light`): PWM cut at its phase, pulses where the
-    booth placed them.
+        ``--booth-firmware``: the reference firmware in simavr (:func:`open_firmware_booth`),
+        wired as a real rig is, so all three sync modes run on its real LED pins.
 
     Raises
     ------
@@ -155,8 +136,6 @@ def open_sim_rig(
     RigOpenError
         The world or the emulated booth failed to open.
     """
-    closers: list = []
-    line_errors: list[BaseException] = []
     if booth_firmware and booth_port is not None:
         raise UsageError(
             "--booth-firmware: the booth is the firmware in simavr, so --booth-port has no use; expected one of them"
@@ -166,50 +145,42 @@ def open_sim_rig(
         world.shutter = Shutter(line_time_us=float(line_time_us))
     except CameraError as err:
         raise UsageError(f"--line-time-us {line_time_us}: expected a line time ≥ 0 µs") from err
+    closers: list = [world.close]
     try:
-        closers.append(world.close)
         if booth_port is not None:
             booth = open_external_booth(
                 booth_port, world.led_spectra, log_serial, closers, booth_protocol, boot_s=booth_boot_s
             )
             world.led_levels_source = levels_reported_by(booth)
-            return Rig("sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers)
+            return _rig(world, booth, closers)
         if booth_firmware:
+            line_errors: list[BaseException] = []
             booth = open_firmware_booth(world, log_serial, closers, line_errors)
-            return Rig(
-                "sim",
-                world,
-                booth,
-                world.led_spectra,
-                world.camera_responsivities,
-                world.true_ambient,
-                closers,
-                line_errors=line_errors,
-                camera_extra={"booth": "firmware in simavr"},
-            )
-        emulator, booth = open_emulated_booth(world.led_spectra, log_serial, closers)
-
-        # Exposure-time coupling: each row of the camera integrates the emulator's drive (PWM at its
-        # phase, pulses) over its exposure window, raising ExposureActive over the flash window.
-        world.exposure_light = EmulatorLight(emulator)
-        # Booth master: the booth's trigger output is the camera's trigger input.
-        emulator.on_trigger_out = line_callback(line_errors, "sim camera trigger line", world.trigger_line)
+            return _rig(world, booth, closers, line_errors=line_errors, camera_extra={"booth": "firmware in simavr"})
+        return _with_emulated_booth(world, log_serial, closers)
     except Exception as err:
         close_all(closers)
         if isinstance(err, UsageError):
             raise
         raise RigOpenError(f"rig 'sim': {err}") from err
+
+
+def _rig(world: SimulatedCamera, booth: Booth, closers: list, **extra: Any) -> Rig:
     return Rig(
-        "sim",
-        world,
-        booth,
-        world.led_spectra,
-        world.camera_responsivities,
-        world.true_ambient,
-        closers,
-        emulator=emulator,
-        line_errors=line_errors,
+        "sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers, **extra
     )
+
+
+def _with_emulated_booth(world: SimulatedCamera, log_serial: str | Path | None, closers: list) -> Rig:
+    """The sim rig's own booth: the emulator on a pty, its drive and trigger output wired to the camera."""
+    line_errors: list[BaseException] = []
+    emulator, booth = open_emulated_booth(world.led_spectra, log_serial, closers)
+    # Exposure-time coupling: each row of the camera integrates the emulator's drive (PWM at its
+    # phase, pulses) over its exposure window, raising ExposureActive over the flash window.
+    world.exposure_light = EmulatorLight(emulator)
+    # Booth master: the booth's trigger output is the camera's trigger input.
+    emulator.on_trigger_out = line_callback(line_errors, "sim camera trigger line", world.trigger_line)
+    return _rig(world, booth, closers, emulator=emulator, line_errors=line_errors)
 
 
 def open_firmware_booth(
