@@ -6,7 +6,7 @@ drives it, and the test fires a sequence through the page's API. Once the sequen
 has landed, SIGTERM: the capture must stop before its next step (the runner's cancellation), switch
 the LEDs off (what the booth holds, read from its ``--state-file`` when it stops), keep the frames
 written (the sequence on disk ``complete: false``, no report), and ``msflash live`` must exit 0.
-With a 250 ms tick every remaining step costs at least two ticks (``SET``, then ``STAT`` for the
+With a 200 ms tick every remaining step costs at least two ticks (``SET``, then ``STAT`` for the
 levels the simulated camera renders), so the seven steps left after the first frame take seconds:
 had the capture waited for its end, the sequence would be complete. The waits are hang guards,
 never timings.
@@ -27,7 +27,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[3]
 HANG_GUARD_S = 120.0
 MSFLASH = (sys.executable, "-m", "msflash.acquisition.app.cli")
-LINK_TICK_MS = 250
+LINK_TICK_MS = 200
 """The emulated USB-serial latency timer: below the driver's 1 s reply timeout, long enough to make a step slow."""
 
 
