@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.acquisition.devices.camera import RawFrame
+from msflash.acquisition.devices.replay_camera import ReplayCamera
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, StepRole, TriggerSource
 from msflash.acquisition.progress import progress
@@ -60,9 +61,9 @@ class Recorded:
 
 def recording_of(rig: Rig) -> Recorded | None:
     """What a replay rig's recording holds (None for other rigs)."""
-    sequence = getattr(rig.camera, "sequence", None)
-    if sequence is None or not rig.name.startswith("replay:"):
+    if not isinstance(rig.camera, ReplayCamera):
         return None
+    sequence = rig.camera.sequence
     ambient = sequence.indices("ambient")
     leds = sequence.indices("led")
     flash = sequence.indices("flash")
