@@ -188,10 +188,10 @@ class Cancellation:
         """Whether :meth:`cancel` was called."""
         return self._event.is_set()
 
-    def check(self, where: str) -> None:
-        """Raise :class:`CaptureCancelled` naming ``where`` if cancelled."""
+    def check(self, step: CaptureStep) -> None:
+        """Raise :class:`CaptureCancelled` naming ``step`` (the one not taken) if cancelled."""
         if self._event.is_set():
-            raise CaptureCancelled(f"{where}: {self.reason}")
+            raise CaptureCancelled(f"before step {step.index} ({step.label}): {self.reason}")
 
 
 @contextmanager
@@ -313,11 +313,11 @@ class CaptureRunner:
         last = len(plan.steps) - 1
         flash_held = self.flash is not None and plan.steps[last].role == "flash"
         error: BaseException | None = None
-        self.cancel.check(f"before step {plan.steps[0].index} ({plan.steps[0].label})")
+        self.cancel.check(plan.steps[0])
         try:
             self.engine.setup_sequence(plan, flash_held)
             for position, step in enumerate(plan.steps):
-                self.cancel.check(f"before step {step.index} ({step.label})")
+                self.cancel.check(step)
                 if flash_held and position == last - 1 and self.recorder is not None:
                     self.recorder.hold()  # from the wait for the last LED frame until the flash frame is in
                 if flash_held and position == last:

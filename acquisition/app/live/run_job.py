@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.app.cli_common import claimed_output
-from msflash.acquisition.errors import CaptureError
+from msflash.acquisition.errors import CaptureCancelled, CaptureError
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.engine import Cancellation, FrameHandler
@@ -89,8 +89,10 @@ def run_sequence(
                 f"rig '{rig.name}': the ambient estimate is degenerate ({why_degenerate}); no report written. "
                 f"The sequence is complete in {out / 'sequence'}"
             )
-        if cancel is not None:
-            cancel.check("before the report")
+        if cancel is not None and cancel.cancelled:
+            raise CaptureCancelled(
+                f"before the report: {cancel.reason}; the sequence is complete in {out / 'sequence'}"
+            )
         from msflash.acquisition.app import report, run_html  # matplotlib: imported when a report is drawn
 
         phase("writing the report")
