@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Callable
-from typing import Any
 
 from msflash.acquisition.app.cli_common import positive_int
 from msflash.acquisition.devices.simulated_camera import SIM_DEFAULT_CFA
 from msflash.acquisition.session import analysis
+from msflash.acquisition.session.rig import SimWorldOptions
 from msflash.processing.ambient import AMBIENT_METHODS
 
 
@@ -133,16 +133,15 @@ def sim_cfa(value: str | None) -> str | None:
     return None if value == "none" else value
 
 
-def simulated_world(args: argparse.Namespace) -> dict[str, Any]:
-    """What the simulated world's options (``--ambient``, ``--scene``, ``--sim-camera``, ``--leds``, …) ask of
-    ``open_rig`` for the ``sim`` and ``aravis-fake`` rigs: one reading for ``run``, ``capture`` and ``live``."""
-    return {
-        "ambient": args.ambient,
-        "scene": args.scene,
-        "seed": args.seed,
-        "camera": args.sim_camera,
-        "n_leds": args.leds,
-        "led_spectra": args.led_spectra,
-        "flash_power": args.flash_power,
-        "log_serial": args.log_serial,
-    }
+def simulated_world(args: argparse.Namespace) -> SimWorldOptions:
+    """The simulated world's options (``--ambient``, ``--scene``, ``--sim-camera``, ``--leds``, …) for the
+    ``sim`` and ``aravis-fake`` rigs: one reading for ``run``, ``capture`` and ``live``."""
+    return SimWorldOptions(
+        ambient=args.ambient,
+        scene=args.scene,
+        seed=args.seed,
+        camera=args.sim_camera,
+        n_leds=args.leds,
+        led_spectra=args.led_spectra,
+        flash_power=args.flash_power,
+    )

@@ -161,7 +161,7 @@ def write_run_summary(out: Path, summary: dict[str, Any], sequence: Sequence) ->
     write_run_html(Path(summary["report"]), summary, sequence)
 
 
-def exposure_summary(exposure: Any, flash_exposure_us: float, captured: Any) -> dict[str, Any]:
+def exposure_summary(exposure: Any, flash_exposure_us: float | None, captured: Any) -> dict[str, Any]:
     """``run.json``'s ``exposure``: the planned exposures (``ExposurePlan.to_dict``), the flash frame's, and the
     LED frames' SNR as the capture measured it (``run`` and ``live`` alike)."""
     return {
