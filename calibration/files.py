@@ -403,6 +403,12 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
             value = chart_section.get(name)
             if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
                 raise CalibrationError(f"{path}: field 'chart.{name}' is {_shown(value)}; expected a whole number ≥ 1")
+        rows, columns = chart_section.get("rows"), chart_section.get("columns")
+        if rows is not None and columns is not None and rows * columns != chart.count:
+            raise CalibrationError(
+                f"{path}: fields 'chart.rows' × 'chart.columns' are {rows} × {columns}; expected {chart.count}, the "
+                "number of patches in the chart's file"
+            )
     if camera_section is not None:
         camera, clipped = _spectra(path, camera_section, "camera", "responsivity", "channels")
         notes += clipped
