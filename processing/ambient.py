@@ -665,7 +665,8 @@ def estimate_ambient(
     method
         A key of :data:`AMBIENT_METHODS`.
     alpha
-        Dimensionless roughness weight, or ``"auto"`` (GCV for ``tikhonov``).
+        Dimensionless roughness weight, or ``"auto"`` (the discrepancy principle for ``tikhonov``, 0.01 for
+        ``roughness``).
 
     Returns
     -------

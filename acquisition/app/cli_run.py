@@ -38,7 +38,12 @@ from msflash.acquisition.app.camera_options import (
     given_camera_options,
 )
 from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, claimed_output, progress
-from msflash.acquisition.app.options import add_estimation_options, add_fake_camera_option, simulated_world
+from msflash.acquisition.app.options import (
+    add_estimation_options,
+    add_fake_camera_option,
+    simulated_world,
+    target_value,
+)
 from msflash.acquisition.devices.aravis.fake_models import DEFAULT_FAKE_MODEL
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.errors import CaptureError
@@ -574,7 +579,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=("complementary", "matching"),
         help="flash to re-capture with (both are synthesised)",
     )
-    run.add_argument("--target", default="D65", help="complementary target illuminant (name or CSV file)")
+    run.add_argument(
+        "--target", default="D65", type=target_value, help="complementary target illuminant (name or CSV file)"
+    )
     add_estimation_options(run)
     run.add_argument(
         "--export",

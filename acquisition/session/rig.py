@@ -79,6 +79,8 @@ from msflash.led_controller.protocol import Command, encode_request, parse_frame
 from msflash.led_controller.recovery import reset_leftovers
 from msflash.processing import datasets
 from msflash.processing.image_formation import Scene
+from msflash.processing.led_wavelength import led_peaks_nm
+from msflash.processing.names import unknown_name
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 
 log = logging.getLogger(__name__)
@@ -149,7 +151,8 @@ class Rig:
                 **self.camera_extra,
             },
         )
-        entries = tuple(SequenceLed(name, leds.values[:, i]) for i, name in enumerate(leds.names))
+        peaks = led_peaks_nm(self.led_spectra)  # recorded with the sequence: the one number (docs/architecture.md §6)
+        entries = tuple(SequenceLed(name, leds.values[:, i], peak_nm=peaks[i]) for i, name in enumerate(leds.names))
         return leds.wavelengths_nm, camera, entries
 
     def sequence_writer(self, directory: str | Path, extra: dict | None = None) -> SequenceWriter:
@@ -236,8 +239,7 @@ def _line(rig_errors: list[BaseException], what: str, action: Callable[[], None]
 
 
 def _emulator_for(leds: Spectra) -> BoothEmulator:
-    peaks = [float(leds.wavelengths_nm[np.argmax(leds.values[:, i])]) for i in range(leds.count)]
-    return BoothEmulator(names=[n.replace(" ", "_") for n in leds.names], peaks_nm=peaks)
+    return BoothEmulator(names=[n.replace(" ", "_") for n in leds.names], peaks_nm=led_peaks_nm(leds))
 
 
 SIM_BOOTLOADER_S = 0.2
@@ -848,7 +850,7 @@ def open_aravis_fake_rig(
         raise RigOpenError(f"rig 'aravis-fake': {err}") from err
     model = FAKE_MODELS.get(fake_camera)
     if model is None:
-        raise UsageError(f"--fake-camera {fake_camera!r}: unknown; expected one of {', '.join(FAKE_MODELS)}")
+        raise UsageError(unknown_name("--fake-camera", fake_camera, FAKE_MODELS))
     world = None
     if rendered:
         world = _sim_world(
@@ -1013,7 +1015,7 @@ def open_rig(spec: str, **options: Any) -> Rig:
         return open_aravis_fake_rig(**options)
     if spec.startswith("replay:") and len(spec) > len("replay:"):
         return open_replay_rig(spec[len("replay:") :], log_serial=options.get("log_serial"))
-    raise UsageError(f"--rig '{spec}': unknown; expected one of {', '.join(RIG_SPECS)}")
+    raise UsageError(unknown_name("--rig", spec, RIG_SPECS))
 
 
 # -- the hardware rig --------------------------------------------------------------------------

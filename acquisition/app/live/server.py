@@ -53,6 +53,7 @@ from msflash.acquisition.session.live import LiveStream
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run import RunOptions
 from msflash.processing.json_input import parse_json_document
+from msflash.processing.led_wavelength import led_peaks_nm
 
 log = logging.getLogger(__name__)
 
@@ -348,7 +349,7 @@ class LiveServer:
         """Everything the page draws."""
         settings = self.stream.settings
         leds = self.rig.led_spectra
-        peaks = [float(leds.wavelengths_nm[int(np.argmax(leds.values[:, i]))]) for i in range(leds.count)]
+        peaks = led_peaks_nm(leds)  # the one number (processing/led_wavelength.py), as the sequence records it
         return _finite(
             {
                 "rig": self.rig.name,
