@@ -183,7 +183,7 @@ class BoothConsole:
             raise ConsoleInputError("id takes no arguments")
         info = self._booth.identify()
         self._info = info
-        leds = ", ".join(f"{n} (peak {p:g} nm, as the booth states)" for n, p in zip(info.names, info.peaks_nm))
+        leds = ", ".join(f"{n} ({p:g} nm)" for n, p in zip(info.names, info.peaks_nm))
         return [
             f"firmware {info.firmware}, protocol {info.protocol}; {info.channels} channels: {leds}",
             (

@@ -19,7 +19,7 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable
 
-LIST_AT_MOST = 15
+LIST_AT_MOST = 40
 """With a suggestion, the accepted names are all listed only if there are at most this many (else the first 8)."""
 CUTOFF = 0.6
 """``difflib`` similarity (0…1) below which a name is not suggested."""

@@ -184,7 +184,7 @@ class TestIlluminants:
         )
 
     def test_unknown_illuminant(self) -> None:
-        with pytest.raises(SpectralDataError, match="illuminant 'D99'.*expected one of A, D50"):
+        with pytest.raises(SpectralDataError, match="illuminant 'D99': unknown; expected one of A, B, C, D50"):
             datasets.illuminant("D99")
         with pytest.raises(SpectralDataError, match="bad temperature"):
             datasets.illuminant("blackbody:hot")
