@@ -53,6 +53,7 @@ from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.datasets import load_spectra_csv
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import parse_json_document
+from msflash.processing.led_wavelength import PEAK_METADATA_KEY
 from msflash.processing.negative_values import blind_columns, clip_negative_noise
 from msflash.processing.spectra import Spectra, SpectralKind, SpectralUnit
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
@@ -384,6 +385,12 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
         notes += clipped
         for name in ("peaks_nm", "fwhm_nm", "centroids_nm"):
             _number_list(path, led_section, "leds", name)
+        peaks = led_section.get("peaks_nm")
+        if isinstance(peaks, list) and len(peaks) == led_spectra.count:
+            # Measured on the spectrometer's own sampling: the one number for each LED (processing/led_wavelength.py).
+            led_spectra = led_spectra.replace(
+                metadata={**led_spectra.metadata, PEAK_METADATA_KEY: dict(zip(led_spectra.names, peaks, strict=True))}
+            )
         _number_list(path, led_section, "leds", "relative_power", minimum=0.0)
         if led_section.get("unit") == "counts":
             ratios = (

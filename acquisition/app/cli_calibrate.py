@@ -97,7 +97,7 @@ def _plot_leds(path: Path, spectra, characterisations) -> None:
         axis.plot(
             spectra.wavelengths_nm,
             spectra.values[:, index],
-            label=f"{item.name} ({item.peak_nm:.0f} nm, FWHM {item.fwhm_nm:.0f})",
+            label=f"{item.name} (measured peak {item.peak_nm:.1f} nm, FWHM {item.fwhm_nm:.0f})",
         )
     axis.set_xlabel("wavelength (nm)")
     axis.set_ylabel(f"spectral power ({spectra.unit})")

@@ -17,6 +17,7 @@ from msflash.acquisition.app.options import (
     add_fake_camera_option,
     sim_cfa,
     simulated_world,
+    target_value,
 )
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
 from msflash.acquisition.session.rig import (
@@ -172,7 +173,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     live.add_argument("--port", type=_port, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT}; 0: any)")
     live.add_argument("--runs", default="runs", metavar="DIR", help="folder of the run folders (default runs)")
-    live.add_argument("--target", default="D65", help="complementary target illuminant (name or CSV file)")
+    live.add_argument(
+        "--target", default="D65", type=target_value, help="complementary target illuminant (name or CSV file)"
+    )
     add_fake_camera_option(live)
     hardware = live.add_argument_group("hardware rig (--rig hw)")
     hardware.add_argument("--camera", default=None, metavar="ID", help="camera device id, serial number or IP")

@@ -73,6 +73,7 @@ from msflash.acquisition.session.rigs.rig import Rig
 from msflash.acquisition.session.rigs.sim import open_firmware_booth, open_sim_rig
 from msflash.led_controller.booth import DEFAULT_BOOT_S
 from msflash.processing.image_formation import Scene
+from msflash.processing.names import unknown_name
 from msflash.processing.spectra import Spectra
 
 if TYPE_CHECKING:
@@ -227,7 +228,7 @@ def rig_kind(spec: str) -> str:
     """
     kind = "replay" if spec.startswith("replay:") and len(spec) > len("replay:") else spec
     if kind not in RIG_BUILDERS or kind == "replay" and not spec.startswith("replay:"):
-        raise UsageError(f"--rig '{spec}': unknown; expected one of {', '.join(RIG_SPECS)}")
+        raise UsageError(unknown_name("--rig", spec, RIG_SPECS))
     return kind
 
 

@@ -322,8 +322,9 @@ def _measured_leds(folder: Path) -> Path:
     rng = np.random.default_rng(2)
     leds = datasets.paper_leds()
     files = []
-    for name, scale in (("led440", 1.0), ("led520", 0.6), ("led660", 0.8)):
-        column = leds.values[:, leds.names.index(name)]
+    # The paper's 1st, 4th and 7th LEDs (440, 520, 660 nm), named by the user's export files.
+    for index, name, scale in ((0, "led440", 1.0), (3, "led520", 0.6), (6, "led660", 0.8)):
+        column = leds.values[:, index]
         irradiance = np.interp(instrument.wavelengths_nm, leds.wavelengths_nm, column / column.max(), left=0, right=0)
         counts = instrument.counts(irradiance * 1500.0 * scale, 0.01, 8, rng)
         files.append(folder / f"{name}.txt")

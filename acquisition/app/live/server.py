@@ -33,7 +33,6 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from aiohttp import WSMsgType, web
 
 from msflash.acquisition.app.live.charts import run_charts
@@ -48,6 +47,7 @@ from msflash.acquisition.session.engine import Cancellation, CaptureResult, Fram
 from msflash.acquisition.session.live import LiveStream
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run import RunOptions
+from msflash.processing.led_wavelength import led_peaks_nm
 
 log = logging.getLogger(__name__)
 
@@ -299,7 +299,7 @@ class LiveServer:
         """Everything the page draws."""
         settings = self.stream.settings
         leds = self.rig.led_spectra
-        peaks = [float(leds.wavelengths_nm[int(np.argmax(leds.values[:, i]))]) for i in range(leds.count)]
+        peaks = led_peaks_nm(leds)  # the one number (processing/led_wavelength.py), as the sequence records it
         return finite(
             {
                 "rig": self.rig.name,

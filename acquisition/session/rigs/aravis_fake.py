@@ -26,6 +26,7 @@ from msflash.acquisition.session.rigs.rig import Rig
 from msflash.acquisition.session.rigs.sim import sim_world
 from msflash.processing import datasets
 from msflash.processing.image_formation import Scene
+from msflash.processing.names import unknown_name
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 
 log = logging.getLogger(__name__)
@@ -100,7 +101,7 @@ def open_aravis_fake_rig(
         raise RigOpenError(f"rig 'aravis-fake': {err}") from err
     model = FAKE_MODELS.get(fake_camera)
     if model is None:
-        raise UsageError(f"--fake-camera {fake_camera!r}: unknown; expected one of {', '.join(FAKE_MODELS)}")
+        raise UsageError(unknown_name("--fake-camera", fake_camera, FAKE_MODELS))
     world_options = (ambient, scene, seed, camera, n_leds, led_spectra, flash_power, patch_px)
     frames = _FakeFrames.of(rendered, world_options, width, height, pixel_format)
     closers: list = []

@@ -13,12 +13,11 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
-
 from msflash.acquisition.errors import RigOpenError, UsageError
 from msflash.led_controller import BoothEmulator, LedBooth, serve_on_pty
 from msflash.led_controller.errors import BoothProtocolError
 from msflash.led_controller.protocol import Command, encode_request, parse_frame, parse_identify, parse_reply
+from msflash.processing.led_wavelength import led_peaks_nm
 from msflash.processing.spectra import Spectra
 
 log = logging.getLogger(__name__)
@@ -38,8 +37,7 @@ def line_callback(rig_errors: list[BaseException], what: str, action: Callable[[
 
 
 def emulator_for(leds: Spectra) -> BoothEmulator:
-    peaks = [float(leds.wavelengths_nm[np.argmax(leds.values[:, i])]) for i in range(leds.count)]
-    return BoothEmulator(names=[n.replace(" ", "_") for n in leds.names], peaks_nm=peaks)
+    return BoothEmulator(names=[n.replace(" ", "_") for n in leds.names], peaks_nm=led_peaks_nm(leds))
 
 
 SIM_BOOTLOADER_S = 0.2

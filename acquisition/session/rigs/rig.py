@@ -16,6 +16,7 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
 from msflash.led_controller import BoothEmulator
 from msflash.led_controller.booth_interface import Booth
+from msflash.processing.led_wavelength import led_peaks_nm
 from msflash.processing.spectra import Spectra
 
 log = logging.getLogger(__name__)
@@ -78,7 +79,8 @@ class Rig:
                 **self.camera_extra,
             },
         )
-        entries = tuple(SequenceLed(name, leds.values[:, i]) for i, name in enumerate(leds.names))
+        peaks = led_peaks_nm(self.led_spectra)  # recorded with the sequence: the one number (docs/architecture.md §6)
+        entries = tuple(SequenceLed(name, leds.values[:, i], peak_nm=peaks[i]) for i, name in enumerate(leds.names))
         return leds.wavelengths_nm, camera, entries
 
     def sequence_writer(self, directory: str | Path, extra: dict | None = None) -> SequenceWriter:

@@ -246,8 +246,8 @@ def test_gain_on_the_gainraw_gige_fake_is_checked_before_the_sequence_and_record
     # The fake's test patterns carry no LED signal: a warning naming each LED, never a figure (inf, nan).
     snr = next(line for line in err if line.startswith("msflash: LED SNR"))
     assert snr.endswith(
-        "led440 no signal, led480 no signal, led500 no signal, led520 no signal, "
-        "led596 no signal, led636 no signal, led660 no signal"
+        "led440 no signal, led478 no signal, led500 no signal, led522 no signal, "
+        "led597 no signal, led636 no signal, led661 no signal"
     )
     assert sum(line.startswith("msflash: warning: LED led") and "no LED signal" in line for line in err) == 7
 

@@ -126,7 +126,7 @@ def test_a_camera_file_is_read_as_the_hardware_rigs_responsivity(tmp_path: Path)
         == 0
     )
     sequence = read_sequence(tmp_path / "c" / "sequence")
-    assert [led.name for led in sequence.leds] == ["led440", "led500", "led520", "led660"]
+    assert [led.name for led in sequence.leds] == ["led440", "led500", "led522", "led661"]  # named from their peaks
     assert sequence.camera.model == "SimulatedCamera (canon)"
     np.testing.assert_allclose(
         sequence.camera_responsivities().to_unit("energy").values, camera.resample(DEFAULT_GRID).values, rtol=1e-6
@@ -200,7 +200,7 @@ def _bad_files(tmp_path: Path) -> dict[str, Path]:
         ),
         (["--led-spectra", "{star}"], "--led-spectra {star}: 1 LED channel(s) (a*b): the booth emulator cannot serve"),
         (["--leds", "3", "--led-spectra", "{dark}"], "--leds 3 and --led-spectra {dark}: two LED sets; expected one"),
-        (["--leds", "8"], "argument --leds: invalid choice: 8 (choose from 3, 4, 5, 6, 7)"),
+        (["--leds", "8"], "--leds '8': unknown; expected one of 3, 4, 5, 6, 7"),
         (
             ["--rig", "replay:{percent}", "--sim-camera", "NikonD70"],
             "--sim-camera: describes the simulated world, but the "
