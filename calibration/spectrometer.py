@@ -41,8 +41,8 @@ from msflash.calibration.errors import CalibrationError
 from msflash.calibration.spectrometer_header import AcquisitionSettings, acquisition_settings
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.negative_values import ClippedNegatives, clip_negative_noise
-from msflash.processing.spectra import Spectra, SpectralUnit, WavelengthGrid
-from msflash.processing.user_files import TEXT_EXPORT_MAX_BYTES, read_user_bytes, shown_path
+from msflash.processing.spectra import MAX_TABLE_MAGNITUDE, Spectra, SpectralUnit, WavelengthGrid
+from msflash.processing.user_files import TEXT_EXPORT_MAX_BYTES, printable, read_user_bytes, shown_path
 
 _COMMENT_PREFIXES = ("#", "%", "//", ";")
 _END_MARKERS = ("end", ">>>>>end")
@@ -223,10 +223,13 @@ def parse_spectrometer_text(
             raise CalibrationError(
                 f"{source}:{number}: {len(values)} columns; expected {width} as on the first data line"
             )
-        bad = [i for i, v in enumerate(values) if not math.isfinite(v)]
+        bad = [i for i, v in enumerate(values) if not math.isfinite(v) or abs(v) > MAX_TABLE_MAGNITUDE]
         if bad:
             field_name = "wavelength" if bad[0] == 0 else f"column {bad[0] + 1}"
-            raise CalibrationError(f"{source}:{number}: {field_name} is '{cells[bad[0]]}'; expected a finite number")
+            raise CalibrationError(
+                f"{source}:{number}: {field_name} is '{printable(cells[bad[0]][:40])}'; expected a finite number of "
+                f"magnitude at most {MAX_TABLE_MAGNITUDE:g}"
+            )
         rows.append(values)
         lines.append(number)
     if len(rows) < 3:

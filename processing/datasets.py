@@ -38,6 +38,7 @@ from msflash.processing.led_wavelength import PEAK_METADATA_KEY, led_name, led_p
 from msflash.processing.names import unknown_name
 from msflash.processing.spectra import (
     DEFAULT_GRID,
+    MAX_TABLE_MAGNITUDE,
     Spectra,
     SpectralKind,
     SpectralUnit,
@@ -195,9 +196,10 @@ def load_spectra_csv(
                 raise SpectralDataError(
                     f"{where}:{line_number}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a number"
                 ) from err
-            if not math.isfinite(value):
+            if not math.isfinite(value) or abs(value) > MAX_TABLE_MAGNITUDE:
                 raise SpectralDataError(
-                    f"{where}:{line_number}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a finite number"
+                    f"{where}:{line_number}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a finite "
+                    f"number of magnitude at most {MAX_TABLE_MAGNITUDE:g}"
                 )
             row.append(value)
         rows.append(row)

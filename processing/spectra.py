@@ -39,6 +39,14 @@ PHOTON_REFERENCE_NM = 555.0
 
 _GRID_TOLERANCE_NM = 1e-6
 
+MAX_TABLE_MAGNITUDE = 1e100
+"""The largest magnitude a value read from a user's spectral table or spectrometer export may have.
+
+No measured spectral quantity comes near it in any unit (photons per second per square metre are
+about 1e20); beyond it the sums of squares the fits take overflow to infinity, and a calibration
+was written with NaN (``null``) where a peak's centroid should be. The readers refuse such a
+value naming the file, line and column."""
+
 
 @dataclass(frozen=True)
 class WavelengthGrid:

@@ -9,9 +9,7 @@ table from a ``--model`` name to what it computes.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -29,6 +27,7 @@ from msflash.acquisition.session.analysis import (
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.json_input import parse_json_document
 from msflash.processing.light_families import (
     AUTO_MARGIN,
     LED_WARNING,
@@ -41,6 +40,7 @@ from msflash.processing.light_families import (
     self_check,
 )
 from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
+from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 
 @dataclass(frozen=True)
@@ -202,37 +202,62 @@ def reference_patch(
         raise UsageError(f"{what}: {error}") from None
 
 
+MAX_REFLECTANCE = 1.5
+"""The largest reflectance factor a reference chart may give (fluorescent whites exceed 1; percentages do not fit)."""
+
+
+def _reference_chart_patch(patch: object, where: str) -> tuple[ReferenceRect, np.ndarray, np.ndarray]:
+    """One patch of a reference chart: its rectangle, wavelengths (increasing) and reflectance factors."""
+    if not isinstance(patch, dict) or not {"rect", "wavelengths_nm", "reflectance"} <= set(patch):
+        raise UsageError(f"{where}: is {str(patch)[:60]}; expected an object with rect, wavelengths_nm and reflectance")
+    rect, nm, values = patch["rect"], patch["wavelengths_nm"], patch["reflectance"]
+
+    def numbers(value: object) -> bool:
+        return isinstance(value, list) and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+
+    if not numbers(rect) or len(rect) != 4 or not all(float(v).is_integer() and abs(v) < 2**31 for v in rect):
+        raise UsageError(f"{where}.rect: is {str(rect)[:60]}; expected 4 whole numbers x, y, width, height (pixels)")
+    if not numbers(nm) or not numbers(values) or len(nm) != len(values) or len(nm) < 2:
+        raise UsageError(
+            f"{where}: wavelengths_nm and reflectance are not two lists of numbers of one length (at least 2); "
+            "expected one reflectance per wavelength"
+        )
+    wavelengths, reflectance = np.asarray(nm, float), np.asarray(values, float)
+    if not np.all(np.diff(wavelengths) > 0):
+        raise UsageError(f"{where}.wavelengths_nm: not increasing; expected wavelengths in increasing order")
+    if reflectance.min() < 0 or reflectance.max() > MAX_REFLECTANCE:
+        raise UsageError(
+            f"{where}.reflectance: holds values from {reflectance.min():g} to {reflectance.max():g}; expected "
+            f"reflectance factors 0–{MAX_REFLECTANCE:g} (not percent)"
+        )
+    return (int(rect[0]), int(rect[1]), int(rect[2]), int(rect[3])), wavelengths, reflectance
+
+
 def reference_chart(sequence: Sequence, stack: FrameStack, path: str) -> ReferencePatch:
     """``--reference-chart FILE``: patches of known reflectance (a colour chart in the scene), one reference.
 
     The file is JSON: ``{"patches": [{"rect": [x, y, width, height], "wavelengths_nm": [...], "reflectance":
-    [...]}, ...]}`` (pixels of the full frame; reflectance factors 0–1, interpolated onto the sequence's grid,
-    the edge values held beyond the data).
+    [...]}, ...]}`` (pixels of the full frame, whole numbers; wavelengths increasing; reflectance factors
+    0–:data:`MAX_REFLECTANCE`, interpolated onto the sequence's grid, the edge values held beyond the data).
+    It is read as every user's file is (:mod:`processing.user_files`: regular files of at most 16 MiB;
+    :mod:`processing.json_input`: NaN, huge numbers, deep nesting and a key twice refused naming the field).
 
     Raises
     ------
     UsageError
         An unreadable file, a missing or malformed field (named), a patch outside the frame.
     """
-    try:
-        document = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError) as error:
-        raise UsageError(f"--reference-chart {path}: cannot be read ({error}); expected a JSON file") from None
+    shown = f"--reference-chart {shown_path(path)}"
+    text = read_user_text(path, "a reference chart (UTF-8 JSON)", JSON_MAX_BYTES, UsageError)
+    document = parse_json_document(text, shown, UsageError)
     patches = document.get("patches") if isinstance(document, dict) else None
     if not isinstance(patches, list) or not patches:
-        raise UsageError(f"--reference-chart {path}: 'patches' missing or empty; expected a list of patches")
+        raise UsageError(f"{shown}: 'patches' missing or empty; expected a list of patches")
     grid = np.asarray(sequence.wavelengths_nm, float)
     references = []
     for index, patch in enumerate(patches):
-        where = f"--reference-chart {path}: patches[{index}]"
-        try:
-            rect = tuple(int(v) for v in patch["rect"])
-            nm = np.asarray(patch["wavelengths_nm"], float)
-            values = np.asarray(patch["reflectance"], float)
-        except (KeyError, TypeError, ValueError) as error:
-            raise UsageError(f"{where}: {error}; expected rect, wavelengths_nm and reflectance") from None
-        if len(rect) != 4 or nm.shape != values.shape or nm.size < 2 or not np.all(np.isfinite(values)):
-            raise UsageError(f"{where}: expected a rect of 4 numbers and one finite reflectance per wavelength")
+        where = f"{shown}: patches[{index}]"
+        rect, nm, values = _reference_chart_patch(patch, where)
         reflectance = np.interp(grid, nm, values)
         references.append(reference_patch(sequence, stack, rect, reflectance, where))
     return ReferencePatch.combined(references)
