@@ -23,9 +23,11 @@ from msflash.processing.errors import SpectralDataError
 from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, estimate_local, synthesize_local, tile_statistics
 from msflash.processing.model_error import reference_for, with_model_error
+from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
 from msflash.processing.synthesis import synthesize
+from msflash.processing.user_files import printable, shown_path
 
 
 @dataclass(frozen=True)
@@ -377,8 +379,17 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
         if not os.path.lexists(path):
             raise RecordingError(f"{target}: target illuminant file not found; expected a CSV file or a name like D65")
         spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
-        if spectra.count != 1:
-            spectra = spectra.select([0])
+        shown = shown_path(path)
+        if spectra.count != 1:  # its first column was taken: another file's numbers, silently
+            raise RecordingError(
+                f"--target {shown}: {spectra.count} spectra ({printable(', '.join(spectra.names))[:120]}); expected one "
+                "target illuminant (wavelength_nm, value) — an exported spectra.csv holds several: keep the column meant"
+            )
+        # Negative noise clipped to 0 as every measured spectrum's is; beyond it, and no light at all, refused.
+        values, _ = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, f"--target {shown}")
+        if not values.max() > 0:
+            raise RecordingError(f"--target {shown}: no light; expected a spectrum with some positive values")
+        spectra = spectra.replace(values=values)
         try:
             resampled = spectra.resample(sequence.grid, outside="error")
         except SpectralDataError as err:
