@@ -85,7 +85,11 @@ def resolve_light(spec: str, grid: WavelengthGrid) -> Spectra:
             )
         try:
             spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
-            light = spectra.select([0]).resample(grid, outside="error")
+            if spectra.count != 1:  # its first column was taken, silently
+                raise CalibrationError(
+                    f"{spec}: {spectra.count} spectra; expected one light, a CSV file 'wavelength_nm, value'"
+                )
+            light = spectra.resample(grid, outside="error")
         except (SpectralDataError, ValueError) as err:
             # The table's errors start with its path already ("x.csv:3: …"); only others get it prefixed.
             text = str(err)

@@ -150,14 +150,28 @@ def measured_leds(
 
 
 def _white_reflectance(path: str, grid: Any) -> Spectra:
+    """``--white-reflectance``: one reflectance (factors 0–1.5, as ``--chart``'s), covering the grid.
+
+    A file of several columns is refused (its first was taken, silently), and so is a table in percent.
+    """
     try:
-        return (
-            datasets.load_spectra_csv(path, kind="reflectance", unit="none").select([0]).resample(grid, outside="error")
-        )
+        table = datasets.load_spectra_csv(path, kind="reflectance", unit="none")
+        reflectance = table.resample(grid, outside="error")
     except (SpectralDataError, ValueError, OSError) as err:
         raise UsageError(
             f"--white-reflectance {path}: {err}; expected a CSV 'wavelength_nm, reflectance' covering the LEDs"
         ) from err
+    if table.count != 1:
+        raise UsageError(
+            f"--white-reflectance {path}: {table.count} columns of values; expected one, 'wavelength_nm, reflectance'"
+        )
+    low, high = float(table.values.min()), float(table.values.max())
+    if low < 0 or high > 1.5 or not high > 0:
+        raise UsageError(
+            f"--white-reflectance {path}: reflectances span {low:g}–{high:g}; expected reflectance factors 0–1 "
+            "(divide percentages by 100)"
+        )
+    return reflectance
 
 
 def led_power_through_camera(

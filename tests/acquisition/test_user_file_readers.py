@@ -134,3 +134,29 @@ def test_a_target_of_several_spectra_is_refused_not_its_first_column_taken(seque
     negative = tmp_path / "negative.csv"
     negative.write_text("wavelength_nm,x\n" + "".join(f"{w},{-1 if w == 550 else 1}\n" for w in range(400, 701, 10)))
     refused(["flash", str(sequence), "--mode", "complementary", "--target", str(negative)], "negative.csv", "550")
+
+
+def test_a_light_or_white_reflectance_of_several_columns_is_refused(tmp_path: Path) -> None:
+    """The same class as ``--target``: ``calibrate camera --light FILE.csv`` and ``calibrate leds
+    --white-reflectance FILE.csv`` took the first column of a file of several; the white reference's table in
+    percent was taken as factors 0–100."""
+    from msflash.acquisition.errors import UsageError
+    from msflash.acquisition.session.calibration_inputs import _white_reflectance
+    from msflash.calibration.chart_sequence import resolve_light
+    from msflash.calibration.errors import CalibrationError
+    from msflash.processing.spectra import DEFAULT_GRID
+
+    two = tmp_path / "two.csv"
+    two.write_text("wavelength_nm,a,b\n" + "".join(f"{w},0.5,0.9\n" for w in range(380, 781, 10)))
+    with pytest.raises(CalibrationError, match="two.csv: 2 spectra; expected one light"):
+        resolve_light(str(two), DEFAULT_GRID)
+    with pytest.raises(UsageError, match="two.csv: 2 columns of values; expected one"):
+        _white_reflectance(str(two), DEFAULT_GRID)
+    percent = tmp_path / "percent.csv"
+    percent.write_text("wavelength_nm,white\n" + "".join(f"{w},98\n" for w in range(380, 781, 10)))
+    with pytest.raises(UsageError, match=r"percent.csv: reflectances span 98–98; expected reflectance factors 0–1"):
+        _white_reflectance(str(percent), DEFAULT_GRID)
+    one = tmp_path / "one.csv"
+    one.write_text("wavelength_nm,white\n" + "".join(f"{w},0.98\n" for w in range(380, 781, 10)))
+    assert np.allclose(_white_reflectance(str(one), DEFAULT_GRID).values, 0.98)
+    assert resolve_light(str(one), DEFAULT_GRID).count == 1

@@ -117,8 +117,9 @@ def _separator(line: bytes) -> bytes:
 
 
 def _cells(line: bytes) -> tuple[bytes, list[bytes]]:
+    """The separator and cells of a line (runs of spaces are one separator)."""
     sep = _separator(line)
-    return sep, line.split(sep)
+    return sep, (line.split() if sep == b" " else line.split(sep))
 
 
 @st.composite
@@ -243,7 +244,7 @@ def table_mutations(draw: st.DrawFn, text: bytes, single: bool) -> FileMutation:
         return FileMutation(f"every value × 1e{power}", Expect.EITHER, b"\n".join(lines))
     if op == "dense":
         count = draw(st.sampled_from([20_000, 200_000]), label="rows")
-        table = np.array([[float(c) for c in _cells(lines[i])[1]] for i in rows])
+        table = np.array([[float(c.strip() or 0) for c in _cells(lines[i])[1]] for i in rows])
         sep = _separator(lines[rows[0]])
         grid = np.linspace(table[0, 0], table[-1, 0], count)
         dense = np.column_stack([grid] + [np.interp(grid, table[:, 0], table[:, j]) for j in range(1, table.shape[1])])
