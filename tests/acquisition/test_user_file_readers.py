@@ -160,3 +160,21 @@ def test_a_light_or_white_reflectance_of_several_columns_is_refused(tmp_path: Pa
     one.write_text("wavelength_nm,white\n" + "".join(f"{w},0.98\n" for w in range(380, 781, 10)))
     assert np.allclose(_white_reflectance(str(one), DEFAULT_GRID).values, 0.98)
     assert resolve_light(str(one), DEFAULT_GRID).count == 1
+
+
+@pytest.mark.parametrize("pattern", ["\\C", "(", "a{2,1}", "[z-a]"])
+def test_a_camera_profile_whose_pattern_is_no_regular_expression_is_refused_on_reading(
+    tmp_path: Path, pattern: str
+) -> None:
+    """Before: ``load_profiles`` took any string, and ``match_profile`` raised ``re.error`` when a camera was
+    opened (exit 1, "a bug"); now the file is refused naming the profile and field."""
+    from msflash.acquisition.devices.aravis.discovery import PROFILES_JSON
+    from msflash.acquisition.devices.aravis.profiles import load_profiles
+    from msflash.acquisition.errors import CameraSettingError
+
+    document = json.loads(PROFILES_JSON.read_text())
+    document["profiles"][1]["model"] = pattern
+    edited = tmp_path / "profiles.json"
+    edited.write_text(json.dumps(document))
+    with pytest.raises(CameraSettingError, match=r"profiles.json: profiles\[1\]\.model is .*not a regular expression"):
+        load_profiles(edited)

@@ -191,7 +191,15 @@ def build_surfaces(work: Path, sequence: Path) -> list[Surface]:
         Surface(
             "target",
             (UserFile("target.csv", "csv", single=True),),
-            lambda f, o: ["flash", str(sequence), "--mode", "complementary", "--target", str(f / "target.csv"), "--json"],
+            lambda f, o: [
+                "flash",
+                str(sequence),
+                "--mode",
+                "complementary",
+                "--target",
+                str(f / "target.csv"),
+                "--json",
+            ],
             json_outcome,
         )
     )
@@ -265,7 +273,16 @@ def build_surfaces(work: Path, sequence: Path) -> list[Surface]:
         Surface(
             "chart",
             (UserFile("chart.csv", "csv"),),
-            lambda f, o: ["calibrate", "camera", "--simulate", "--chart", str(f / "chart.csv"), "--out", str(o), "--json"],
+            lambda f, o: [
+                "calibrate",
+                "camera",
+                "--simulate",
+                "--chart",
+                str(f / "chart.csv"),
+                "--out",
+                str(o),
+                "--json",
+            ],
             calibration_outcome,
         )
     )
@@ -347,6 +364,8 @@ def run_profiles(path: Path) -> tuple[int, str, str]:
             re.fullmatch(model, "DFK 33UX264", re.IGNORECASE)
     except CameraSettingError as err:
         return 2, "", f"msflash: error: {err}\n"
+    except Exception as err:  # what the CLI calls a bug
+        return 1, "", f"msflash: unexpected {type(err).__name__}: {err}\n"
     return 0, repr(profiles), ""
 
 
@@ -495,7 +514,9 @@ def main_worker(argv: list[str] | None = None) -> int:
         tally = fuzz(args.examples, args.example_s, work, collected)
         for line in collected or []:
             print(line)
-    print(json.dumps({"examples": args.examples, "address_space_cap_bytes": cap, "outcomes": dict(sorted(tally.items()))}))
+    print(
+        json.dumps({"examples": args.examples, "address_space_cap_bytes": cap, "outcomes": dict(sorted(tally.items()))})
+    )
     return 0
 
 

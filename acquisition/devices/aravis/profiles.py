@@ -18,7 +18,7 @@ from msflash.acquisition.errors import (
     CameraSettingError,
 )
 from msflash.processing.json_input import parse_json_document
-from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
+from msflash.processing.user_files import JSON_MAX_BYTES, printable, read_user_text, shown_path
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +91,14 @@ def load_profiles(path: Path = PROFILES_JSON) -> tuple[tuple[str, str, CameraPro
                 f"of a profile ({', '.join(sorted(known))}), with name, vendor and model strings"
             )
         vendor, model = item.pop("vendor"), item.pop("model")
+        for key, pattern in (("vendor", vendor), ("model", model)):
+            try:  # matched as a regular expression on every camera opened (match_profile)
+                re.compile(pattern)
+            except (re.error, RecursionError, OverflowError) as err:
+                raise CameraSettingError(
+                    f"{where}.{key} is {printable(pattern[:60])!r}, not a regular expression ({err}); expected a "
+                    "pattern such as 'Basler' or 'acA1920-.*'"
+                ) from None
         for key in PROFILE_LISTS:
             if key in item:
                 if not isinstance(item[key], list) or not all(isinstance(name, str) for name in item[key]):
