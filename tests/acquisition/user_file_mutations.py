@@ -252,7 +252,7 @@ def table_mutations(draw: st.DrawFn, text: bytes, single: bool) -> FileMutation:
         new = lines[: rows[0]] + body + lines[rows[-1] + 1 :]
         return FileMutation(f"{count} interpolated rows", Expect.EITHER, b"\n".join(new))
     how = draw(st.sampled_from(["first", "last", "drop", "rename"]), label="how")
-    header = rows[0] - 1 if rows[0] > 0 else None
+    header = next((i for i in range(rows[0] - 1, -1, -1) if lines[i].strip()), None)  # the line above the numbers
     for index in ([header] if header is not None else []) + rows:
         sep, cells = _cells(lines[index])
         extra = b"extra" if index == header else b"0.25"
@@ -262,7 +262,7 @@ def table_mutations(draw: st.DrawFn, text: bytes, single: bool) -> FileMutation:
             cells.append(extra)
         elif how == "drop" and len(cells) > 2:
             cells.pop()
-        elif how == "rename" and index == header:
+        elif how == "rename" and index == header and cells:
             cells[-1] = "\u00e9\U0001f4a9 \x1b[31mred".encode()
         lines[index] = sep.join(cells)
     expect = Expect.SAME_OR_REFUSE if single and how == "first" else Expect.EITHER
