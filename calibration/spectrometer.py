@@ -41,7 +41,14 @@ from msflash.calibration.errors import CalibrationError
 from msflash.calibration.spectrometer_header import AcquisitionSettings, acquisition_settings
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.negative_values import ClippedNegatives, clip_negative_noise
-from msflash.processing.spectra import MAX_TABLE_MAGNITUDE, Spectra, SpectralUnit, WavelengthGrid
+from msflash.processing.spectra import (
+    MAX_TABLE_MAGNITUDE,
+    MIN_TABLE_PEAK,
+    Spectra,
+    SpectralUnit,
+    WavelengthGrid,
+    tiny_columns,
+)
 from msflash.processing.user_files import TEXT_EXPORT_MAX_BYTES, printable, read_user_bytes, shown_path
 
 _COMMENT_PREFIXES = ("#", "%", "//", ";")
@@ -253,6 +260,11 @@ def parse_spectrometer_text(
     peak = float(np.max(readings))
     if peak <= 0:
         raise CalibrationError(f"{source}: no positive value in the value column; expected a measured emission")
+    if tiny_columns(readings[:, None]):
+        raise CalibrationError(
+            f"{source}: the value column peaks at {peak:.3g}; expected values of magnitude at least "
+            f"{MIN_TABLE_PEAK:g} (a file scaled by mistake?)"
+        )
     column_name, column_units = "", cast(tuple[str, ...], ())
     metadata: dict = {"lines": tuple(lines)}
     if avantes is not None:

@@ -39,11 +39,13 @@ from msflash.processing.names import unknown_name
 from msflash.processing.spectra import (
     DEFAULT_GRID,
     MAX_TABLE_MAGNITUDE,
+    MIN_TABLE_PEAK,
     Spectra,
     SpectralKind,
     SpectralUnit,
     WavelengthGrid,
     require_same_grid,
+    tiny_columns,
 )
 from msflash.processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_text, shown_path
 
@@ -207,6 +209,11 @@ def load_spectra_csv(
     if header is None or len(rows) < 2:
         raise SpectralDataError(f"{where}: no data rows; expected a header and at least two wavelengths")
     table = np.asarray(rows, dtype=float)
+    for column in tiny_columns(table[:, 1:]):
+        raise SpectralDataError(
+            f"{where}: column '{printable(_cut(header[column + 1]))}' peaks at {np.max(np.abs(table[:, column + 1])):.3g}; "
+            f"expected values of magnitude at least {MIN_TABLE_PEAK:g} where there are any (a table scaled by mistake?)"
+        )
     grid = WavelengthGrid.from_wavelengths(table[:, 0], where=f"{where}: column '{header[0]}'")
     spectrum_names = tuple(header[1:]) if names is None else tuple(names)
     if len(spectrum_names) != table.shape[1] - 1:

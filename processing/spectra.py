@@ -47,6 +47,25 @@ about 1e20); beyond it the sums of squares the fits take overflow to infinity, a
 was written with NaN (``null``) where a peak's centroid should be. The readers refuse such a
 value naming the file, line and column."""
 
+MIN_TABLE_PEAK = 1e-100
+"""The smallest largest-magnitude a value column of a user's table may have, unless it is all zero.
+
+With :data:`MAX_TABLE_MAGNITUDE`, it keeps the products of two tables (an LED's spectrum times a
+camera's responsivity, counts divided by a spectrometer's response) and their squares normal
+floats: a column ×1e-300 made every LED-only image "empty" (exit 1), and a response ×1e-300 wrote
+LED energies of 1e301 that the calibration's reader then refused."""
+
+
+def tiny_columns(values: np.ndarray) -> list[int]:
+    """Indices of the columns of ``values`` (n, k) whose largest magnitude is above 0 but below
+    :data:`MIN_TABLE_PEAK` (a table scaled by mistake, or in a unit far from any spectral one).
+
+    >>> tiny_columns(np.array([[0.0, 1e-300, 1.0], [0.0, 0.0, 2.0]]))
+    [1]
+    """
+    peaks = np.max(np.abs(np.asarray(values, dtype=float).reshape(len(values), -1)), axis=0)
+    return [int(i) for i in np.flatnonzero((peaks > 0) & (peaks < MIN_TABLE_PEAK))]
+
 
 @dataclass(frozen=True)
 class WavelengthGrid:

@@ -178,3 +178,34 @@ def test_a_camera_profile_whose_pattern_is_no_regular_expression_is_refused_on_r
     edited.write_text(json.dumps(document))
     with pytest.raises(CameraSettingError, match=r"profiles.json: profiles\[1\]\.model is .*not a regular expression"):
         load_profiles(edited)
+
+
+def test_a_table_scaled_by_1e_300_is_refused_naming_its_column(sequence: Path, tmp_path: Path) -> None:
+    """Before: a calibration's ``leds.csv`` ×1e-300 made every LED-only image "empty" (exit 1, a runtime error
+    blaming the booth), and a spectrometer response ×1e-300 made ``calibrate leds`` write LED energies of 1e301
+    (exit 0) that every later command refused."""
+    from msflash.processing.errors import SpectralDataError
+
+    table = tmp_path / "leds.csv"
+    table.write_text("wavelength_nm,led440,led520\n" + "".join(f"{w},{1e-300},0.5\n" for w in range(400, 701, 10)))
+    with pytest.raises(SpectralDataError, match=r"leds.csv: column 'led440' peaks at 1e-300; expected values of"):
+        datasets.load_spectra_csv(table, kind="spd", unit="energy")
+    instrument = Instrument.typical(3)
+    truth = datasets.paper_leds().select([0, 3, 6])
+    rng = np.random.default_rng(1)
+    files = []
+    for index in range(3):
+        column = truth.values[:, index] / truth.values[:, index].max()
+        irradiance = np.interp(instrument.wavelengths_nm, truth.wavelengths_nm, column, left=0, right=0) * 250
+        path = tmp_path / f"led{index}.txt"
+        path.write_text(
+            export_text("plain", instrument.wavelengths_nm, instrument.counts(irradiance, 0.01, 4, rng), 0.01)
+        )
+        files.append(str(path))
+    response = tmp_path / "response.csv"
+    response.write_text(
+        "wavelength_nm,counts_per_s_per_irradiance\n"
+        + "".join(f"{w:.4f},{r * 1e-300:.9g}\n" for w, r in zip(instrument.wavelengths_nm, instrument.response))
+    )
+    argv = ["calibrate", "leds", *files, "--no-dark", "--spectrometer-response", str(response)]
+    refused([*argv, "--out", str(tmp_path / "cal")], "response.csv", "peaks at")
