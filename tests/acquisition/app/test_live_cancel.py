@@ -166,12 +166,20 @@ def test_a_signal_mid_sequence_with_stalled_pages_open_stops_live_with_the_leds_
                 assert fired["status"] == "running"
                 signalled = time.monotonic()
                 live.send_signal(stop)
+                leds_off_s = None  # when the booth itself holds the LEDs off (its state file), for the report
+                while live.poll() is None and time.monotonic() < signalled + HANG_GUARD_S:
+                    if leds_off_s is None and json.loads(state_file.read_text())["leds_on"] is False:
+                        leds_off_s = time.monotonic() - signalled
+                    time.sleep(0.01)
                 status = live.wait(HANG_GUARD_S)  # the stalled pages stay open meanwhile
                 STOP_TIMES_S[stop.name] = time.monotonic() - signalled
                 said = live.stderr.read()
         booth.send_signal(signal.SIGINT)
         assert booth.wait(HANG_GUARD_S) == 0
-    print(f"live exited {STOP_TIMES_S[stop.name]:.2f} s after {stop.name} mid-sequence with 3 stalled pages open")
+    print(
+        f"live exited {STOP_TIMES_S[stop.name]:.2f} s after {stop.name} mid-sequence with 3 stalled pages open; "
+        f"the booth held the LEDs off after {leds_off_s if leds_off_s is None else round(leds_off_s, 2)} s"
+    )
     assert status == 0, said
     assert "stopping the sequence in progress before its next frame" in said, said
     assert said.strip().splitlines()[-1] == "msflash: live view stopped; LEDs off", said
