@@ -299,10 +299,16 @@ def json_mutations(draw: st.DrawFn, text: bytes) -> FileMutation:
     at = text.index(b"{") + 1
     if op == "deep":
         depth = draw(st.sampled_from([150, 10_000]), label="depth")
-        return FileMutation(f"nested {depth} deep", Expect.REFUSE, text[:at] + b'"x_deep": ' + b"[" * depth + b"]" * depth + b"," + text[at:])
+        return FileMutation(
+            f"nested {depth} deep",
+            Expect.REFUSE,
+            text[:at] + b'"x_deep": ' + b"[" * depth + b"]" * depth + b"," + text[at:],
+        )
     if op == "digits":
         digits = draw(st.sampled_from([400, 5000]), label="digits")
-        return FileMutation(f"an integer of {digits} digits", Expect.REFUSE, text[:at] + b'"x_n": ' + b"9" * digits + b"," + text[at:])
+        return FileMutation(
+            f"an integer of {digits} digits", Expect.REFUSE, text[:at] + b'"x_n": ' + b"9" * digits + b"," + text[at:]
+        )
     key = next(iter(document))
     return FileMutation(f"key {key!r} twice", Expect.REFUSE, text[:at] + json.dumps(key).encode() + b": 1," + text[at:])
 
