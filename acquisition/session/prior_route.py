@@ -31,6 +31,7 @@ from msflash.processing.channel_statistics import ChannelStatistics, accumulate_
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.light_families import (
     AUTO_MARGIN,
+    AUTO_NOISE,
     LED_WARNING,
     PRIOR_WARNING,
     FamilyEstimate,
@@ -426,6 +427,8 @@ def _family_route(
             family.chosen.fit.name: family.chosen.held_out_error_noise_removed,
         },
         "margin": AUTO_MARGIN,
+        "noise_margin": AUTO_NOISE,
+        "noise_share": family.led.noise_share,
     }
     if requested == "family":
         chosen, reason = family.chosen.fit.name, family.reason
