@@ -332,7 +332,7 @@ def _checks(
     return {
         "led": predicted_ratio(np.asarray(led_payload["spectrum"], float), family_spectrum, leds, LED_WARNING, "LEDs'"),
         "prior": predicted_ratio(prior_spectrum, family_spectrum, leds, PRIOR_WARNING, "light prior's"),
-        "family": self_check(family_spectrum, spread, leds),
+        "family": self_check(family_spectrum, spread, leds, family.relative_error),
     }
 
 
