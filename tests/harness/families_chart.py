@@ -25,7 +25,6 @@ from msflash.processing.light_families import (
     LED_WARNING,
     MISS_RATIO,
     PRIOR_WARNING,
-    SIMPLER_NOISE,
     SIMPLER_WITHIN,
 )
 
@@ -43,25 +42,16 @@ def load(csv_path: Path) -> tuple[dict[str, list[dict]], dict[str, dict]]:
     return {k: v for k, v in rows.items() if k in records}, records
 
 
-def _choose(candidates: list[dict], noise: float = 0.0) -> dict:
-    """The family model's rule on study rows (:func:`processing.light_families.choose`): least held-out error (noise
-    removed), the simplest within the margin; ``noise`` the LEDs' span's noise share (squared)."""
+def _choose(candidates: list[dict]) -> dict:
+    """The family model's rule on study rows: least held-out error (noise removed), the simplest within the margin."""
     best = min(candidates, key=lambda r: float(r["held_out_clean"]))
-    limit = float(best["held_out_clean"]) ** 2 * (1 + SIMPLER_WITHIN) ** 2 + SIMPLER_NOISE * noise
+    limit = float(best["held_out_clean"]) * (1 + SIMPLER_WITHIN)
     simpler = [
         r
         for r in candidates
-        if float(r["held_out_clean"]) ** 2 <= limit and int(r["n_parameters"]) < int(best["n_parameters"])
+        if float(r["held_out_clean"]) <= limit and int(r["n_parameters"]) < int(best["n_parameters"])
     ]
     return min(simpler, key=lambda r: (int(r["n_parameters"]), float(r["held_out_clean"]))) if simpler else best
-
-
-def _noise_share(rows: list[dict]) -> float:
-    """The LEDs' span's :attr:`~processing.light_families.Candidate.noise_share` from a case's study rows (0 without)."""
-    led = [r for r in rows if r["candidate"] == "led"]
-    if not led:
-        return 0.0
-    return max(float(led[0]["held_out"]) ** 2 - float(led[0]["held_out_clean"]) ** 2, 0.0)
 
 
 def points(rows: dict[str, list[dict]], records: dict[str, dict]) -> list[tuple[str, np.ndarray, np.ndarray]]:
@@ -78,7 +68,7 @@ def points(rows: dict[str, list[dict]], records: dict[str, dict]) -> list[tuple[
 
         def ratio(case: str, family: str = family) -> float:
             own = [r for r in rows[case] if r["candidate_family"] == family]
-            return float(_choose(own, _noise_share(rows[case]))["ratio"]) if own else math.nan
+            return float(_choose(own)["ratio"]) if own else math.nan
 
         def seconds(case: str, family: str = family) -> float:
             wanted = {family} if family != "mixture" else set(FAMILY_ORDER)
