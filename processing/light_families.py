@@ -93,8 +93,8 @@ AUTO_NOISE = 0.1
 """…and by more than this multiple of the noise's share, squared (:func:`choose`). On the physics suite's raw tuning
 rows four emission bands beat the LEDs' span on held-out pixels by 0.07 of it on a metal-halide scene and landed at
 1.8–2.6× the LED bound (the true spectrum predicted the pixels *worse* than they did). Tuning rows of both suites:
-0 → 0.1 took auto's worst from 1.83 to 1.41 (physics) and from 4.44 to 3.01 (library), its mean from 0.565 to
-0.645 and from 0.75 to 0.86."""
+0 → 0.1 took auto's worst from 1.83 to 1.41 (physics) and from 3.86 to 3.01 (library), its mean from 0.565 to
+0.645 and from 0.741 to 0.856 (the sweep: docs/decisions/2026-11-light-families.md)."""
 EVIDENCE_TEMPERATURE = 0.5
 """τ of the evidence weights ``exp(−(err/err_best − 1)/τ)`` whose candidates' spread enters the band. With
 :data:`POSTERIOR_SCALE` chosen on the tuning rows of both suites for the band's coverage (docs/light-families.md):
