@@ -38,10 +38,11 @@ refined.
 **Choice by held-out prediction** (:func:`fit_families`). Every candidate — each form at each complexity,
 the LEDs' span (eq. 5) and the light prior — predicts each fold of block rows' ambient pixels from its
 LED-only pixels with its amplitudes refitted on the other folds (its nonlinear parameters stay those of
-the fit on all folds). The family model takes the candidate of least held-out error, except that a candidate
-with fewer parameters within :data:`SIMPLER_WITHIN` of it is preferred (no more model than the scene needs). ``auto`` leaves the LEDs' span only when the chosen candidate's
-held-out error is below ``(1 − AUTO_MARGIN)`` × the LEDs' and the gain exceeds :data:`AUTO_NOISE` of the noise's
-share (:func:`choose`): the noise-removed errors are differences of large numbers on raw frames, and held-out
+the fit on all folds). The family model takes the candidate of least held-out error, except that a
+candidate with fewer parameters within :data:`SIMPLER_WITHIN` of it is preferred (no more model than the
+scene needs). ``auto`` leaves the LEDs' span only when the chosen candidate's held-out error is below
+``(1 − AUTO_MARGIN)`` × the LEDs' and the gain exceeds :data:`AUTO_NOISE` of the noise's share
+(:func:`choose`): the noise-removed errors are differences of large numbers on raw frames, and held-out
 folds share the pixel model's own misfit, which a flexible form can fit instead of the light.
 
 The fits refine θ by variable projection with Kaufman's Jacobian (:func:`refine`): the spectrum's derivative in
