@@ -333,7 +333,9 @@ def test_small_one_off_work_does_not_pay_numbas_start_up(threshold: int, expecte
     assert result.stdout.split("\n")[-2] == expected
 
 
-@pytest.mark.parametrize(("shape", "cfa", "factor"), [((70, 98, 3), None, 4), ((66, 90), "GRBG", 4), ((37, 53, 3), None, 3)])
+@pytest.mark.parametrize(
+    ("shape", "cfa", "factor"), [((70, 98, 3), None, 4), ((66, 90), "GRBG", 4), ((37, 53, 3), None, 3)]
+)
 def test_channel_statistics_are_the_same_on_both_routes_to_the_bit(
     shape: tuple[int, ...], cfa: str | None, factor: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
