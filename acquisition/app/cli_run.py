@@ -47,7 +47,9 @@ from msflash.acquisition.app.options import (
     simulated_world,
 )
 from msflash.acquisition.devices.aravis.fake_models import DEFAULT_FAKE_MODEL
+from msflash.acquisition.devices.mains_flicker import FLICKER_WAVEFORMS, drawn_flicker, parse_flicker
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.errors import CaptureError
 from msflash.acquisition.progress import count
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
@@ -154,6 +156,11 @@ def _open(args: argparse.Namespace) -> Rig:
     for option, given in (("--booth-firmware", args.booth_firmware), ("--line-time-us", args.line_time_us != 0.0)):
         if given and spec != "sim":
             raise UsageError(f"{option}: configures the simulated rig, but the rig is '{spec}'; expected --rig sim")
+    if args.ambient_flicker is not None and spec not in ("sim", "aravis-fake"):
+        raise UsageError(
+            f"--ambient-flicker: describes the simulated world's lamp, but the rig is '{spec}'; expected --rig sim or "
+            "aravis-fake"
+        )
     if args.booth_protocol != "msflash" and args.port is None and args.booth_port is None:
         raise UsageError(
             f"--booth-protocol {args.booth_protocol}: says what the booth at --port or --booth-port "
@@ -188,24 +195,48 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
     # The simulated world: the sim rig renders it with its own camera, aravis-fake through Aravis.
     world = simulated_world(args)
     if spec == "sim":
-        return open_rig(
-            "sim",
-            cfa=sim_cfa(args.cfa),
-            booth_port=args.booth_port,
-            booth_protocol=args.booth_protocol,
-            booth_boot_s=args.booth_boot_s,
-            booth_firmware=args.booth_firmware,
-            line_time_us=args.line_time_us,
-            **world,
+        return _with_flicker(
+            open_rig(
+                "sim",
+                cfa=sim_cfa(args.cfa),
+                booth_port=args.booth_port,
+                booth_protocol=args.booth_protocol,
+                booth_boot_s=args.booth_boot_s,
+                booth_firmware=args.booth_firmware,
+                line_time_us=args.line_time_us,
+                **world,
+            ),
+            args,
         )
     if spec == "aravis-fake":
-        return open_rig(
-            "aravis-fake",
-            camera_options=camera_options_from_args(args),
-            fake_camera=args.fake_camera or DEFAULT_FAKE_MODEL,
-            **world,
+        return _with_flicker(
+            open_rig(
+                "aravis-fake",
+                camera_options=camera_options_from_args(args),
+                fake_camera=args.fake_camera or DEFAULT_FAKE_MODEL,
+                **world,
+            ),
+            args,
         )
     return open_rig(spec, log_serial=args.log_serial)
+
+
+def _ambient_flicker(text: str) -> tuple[float, float, str]:
+    """``--ambient-flicker HZ:DEPTH[:WAVEFORM]`` (:func:`acquisition.devices.mains_flicker.parse_flicker`)."""
+    try:
+        return parse_flicker(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def _with_flicker(rig: Rig, args: argparse.Namespace) -> Rig:
+    """The simulated world's lamp flickering as ``--ambient-flicker`` asks (the sim and aravis-fake rigs)."""
+    if args.ambient_flicker is None:
+        return rig
+    world = rig.camera if isinstance(rig.camera, SimulatedCamera) else getattr(rig.camera, "world", None)
+    if isinstance(world, SimulatedCamera):
+        world.ambient_modulation = drawn_flicker(*args.ambient_flicker, seed=args.seed)
+    return rig
 
 
 def _line_time(text: str) -> float:
@@ -529,6 +560,16 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
         metavar="US",
         help="a rolling shutter: each row of the simulated camera starts US µs after the one above "
         "(default 0: a global shutter); the booth is told the skew so its pulses fall where every row exposes",
+    )
+    sim.add_argument(
+        "--ambient-flicker",
+        type=_ambient_flicker,
+        default=None,
+        metavar="HZ:DEPTH[:WAVEFORM]",
+        help="the simulated lamp flickers on the mains: HZ the flicker frequency (100 on 50 Hz mains, 120 on 60 Hz; "
+        "the true one drawn within ±1 %% with --seed), DEPTH its percent flicker (0.3 = 30 %%), WAVEFORM "
+        f"{', '.join(FLICKER_WAVEFORMS)} (default sine: a filament; rectified: a fluorescent; clipped: an LED "
+        "driver); each frame sees the lamp's mean over its own exposure window (default: steady, docs/flicker.md)",
     )
     sim.add_argument("--cfa", default=None, choices=SIM_CFA_CHOICES, help=SIM_CFA_HELP)
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")

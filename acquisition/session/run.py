@@ -89,6 +89,9 @@ def sequence_writer(rig: Rig, out: Path, exposure: ExposurePlan | None = None) -
         # Ground truth of a simulated rig, on the sequence's grid and in its unit, for later scoring.
         truth = rig.true_ambient.resample(rig.led_spectra.grid).to_unit("energy")
         msflash["true_ambient"] = {"name": truth.names[0], "source": truth.source, "spd": truth.values[:, 0].tolist()}
+    flicker = getattr(getattr(rig.camera, "world", rig.camera), "ambient_modulation", None)
+    if hasattr(flicker, "to_dict"):  # a simulated lamp's mains flicker (docs/flicker.md)
+        msflash["true_flicker"] = flicker.to_dict()
     return rig.sequence_writer(out / "sequence", extra={"msflash": msflash})
 
 
