@@ -12,7 +12,8 @@ say() { printf 'setup: %s\n' "$*" >&2; }
 APT_PACKAGES=(gir1.2-aravis-0.8 aravis-tools aravis-tools-cli libgirepository1.0-dev libcairo2-dev pkg-config
               gcc-avr avr-libc binutils-avr simavr libsimavr-dev make gcc  # booth firmware + its simavr tests
               avrdude  # flashing the booth (make -C led_controller/firmware flash; tested against the bootloader twin)
-              chromium chromium-driver)  # browser tests: msflash live's page and the run report (headless, Selenium)
+              chromium chromium-driver  # browser tests: msflash live's page and the run report (headless, Selenium)
+              libimage-exiftool-perl)  # exiftool: the export tests validate every DNG with it
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

@@ -42,6 +42,11 @@ class DroppedFrameError(CaptureError):
     """A frame was lost or incomplete; frames already saved stay saved."""
 
 
+class CaptureCancelled(CaptureError):
+    """A capture stopped between frames because it was asked to (``msflash live`` stopping); the
+    frames already written stay, the sequence ``complete: false``, the LEDs off."""
+
+
 class ReplayMismatchError(CaptureError):
     """The plan differs from the recording being replayed; names the first differing step and field."""
 

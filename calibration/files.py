@@ -53,6 +53,7 @@ from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.datasets import load_spectra_csv
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import parse_json_document
+from msflash.processing.led_wavelength import PEAK_METADATA_KEY
 from msflash.processing.negative_values import blind_columns, clip_negative_noise
 from msflash.processing.spectra import Spectra, SpectralKind, SpectralUnit
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
@@ -384,6 +385,12 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
         notes += clipped
         for name in ("peaks_nm", "fwhm_nm", "centroids_nm"):
             _number_list(path, led_section, "leds", name)
+        peaks = led_section.get("peaks_nm")
+        if isinstance(peaks, list) and len(peaks) == led_spectra.count:
+            # Measured on the spectrometer's own sampling: the one number for each LED (processing/led_wavelength.py).
+            led_spectra = led_spectra.replace(
+                metadata={**led_spectra.metadata, PEAK_METADATA_KEY: dict(zip(led_spectra.names, peaks, strict=True))}
+            )
         _number_list(path, led_section, "leds", "relative_power", minimum=0.0)
         if led_section.get("unit") == "counts":
             ratios = (
@@ -403,6 +410,12 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
             value = chart_section.get(name)
             if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
                 raise CalibrationError(f"{path}: field 'chart.{name}' is {_shown(value)}; expected a whole number ≥ 1")
+        rows, columns = chart_section.get("rows"), chart_section.get("columns")
+        if rows is not None and columns is not None and rows * columns != chart.count:
+            raise CalibrationError(
+                f"{path}: fields 'chart.rows' × 'chart.columns' are {rows} × {columns}; expected {chart.count}, the "
+                "number of patches in the chart's file"
+            )
     if camera_section is not None:
         camera, clipped = _spectra(path, camera_section, "camera", "responsivity", "channels")
         notes += clipped

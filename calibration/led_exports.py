@@ -53,8 +53,9 @@ class ExportOptions:
     """The value column when a file has more than two (AvaSoft: Sample by default)."""
     integration_time_s: float | None = None
     """For exports (and the dark) whose header states none."""
-    dark: str | Path | None = None
-    """A dark export (shutter closed)."""
+    dark: str | Path | tuple[str | Path, ...] | None = None
+    """A dark export (shutter closed), or one per integration time (each export takes the dark of its
+    own time; with none of its time, the nearest, scaled as :func:`remove_baseline` allows)."""
     no_dark: bool = False
     """The exports need no dark: take them as they are."""
     response: str | Path | None = None
@@ -93,6 +94,50 @@ def _resolved(measurement: SpectrometerMeasurement, options: ExportOptions) -> S
         unit="photons" if unit == "photons" else "energy",
         settings=replace(settings, value_unit=unit, integration_time_s=time),
     )
+
+
+def dark_paths(options: ExportOptions) -> tuple[str | Path, ...]:
+    """The dark exports given (``--dark``, once or once per integration time)."""
+    if options.dark is None:
+        return ()
+    return tuple(options.dark) if isinstance(options.dark, tuple | list) else (options.dark,)
+
+
+def _dark_record(options: ExportOptions) -> str | list[str] | None:
+    paths = [str(p) for p in dark_paths(options)]
+    return None if not paths else paths[0] if len(paths) == 1 else paths
+
+
+def _check_darks(darks: list[SpectrometerMeasurement]) -> None:
+    """Several darks: each states its integration time, no two the same."""
+    if len(darks) < 2:
+        return
+    seen: dict[float, str] = {}
+    for dark in darks:
+        time = dark.settings.integration_time_s
+        if time is None:
+            raise CalibrationError(
+                f"--dark {dark.source}: states no integration time; expected each of several darks to state its "
+                "own (a header line), so that each export takes the dark of its time"
+            )
+        if time in seen:
+            raise CalibrationError(
+                f"--dark {dark.source} and {seen[time]} are both {1e3 * time:g} ms; expected one dark per "
+                "integration time"
+            )
+        seen[time] = dark.source
+
+
+def _dark_for(
+    measurement: SpectrometerMeasurement, darks: list[SpectrometerMeasurement]
+) -> SpectrometerMeasurement | None:
+    """The dark of the export's integration time; else the one nearest it (scaled, or refused, by remove_baseline)."""
+    if len(darks) < 2:
+        return darks[0] if darks else None
+    time = measurement.settings.integration_time_s
+    if time is None:
+        return darks[0]  # remove_baseline refuses an unstated time against a stated one, naming both
+    return min(darks, key=lambda dark: abs(np.log((dark.settings.integration_time_s or time) / time)))
 
 
 def read_spectrometer_response(path: str | Path, grid: WavelengthGrid) -> Spectra:
@@ -145,16 +190,17 @@ def read_led_exports(
     """
     if not files:
         raise CalibrationError("LED spectra: no export given; expected one spectrometer file per LED")
-    dark = _resolved(read_spectrometer_file(options.dark, "energy", options.column), options) if options.dark else None
-    if dark is not None and options.no_dark:
-        raise CalibrationError(f"--dark {dark.source} and --no-dark exclude each other; expected one")
+    darks = [_resolved(read_spectrometer_file(path, "energy", options.column), options) for path in dark_paths(options)]
+    if darks and options.no_dark:
+        raise CalibrationError(f"--dark {darks[0].source} and --no-dark exclude each other; expected one")
+    _check_darks(darks)
     measurements = []
     unstated = []
     for file in files:
         measurement = _resolved(read_spectrometer_file(file, "energy", options.column), options)
         if options.unit is None and measurement.settings.instrument == "plain":
             unstated.append(measurement.source)
-        measurements.append(remove_baseline(measurement, dark, options.no_dark, report))
+        measurements.append(remove_baseline(measurement, _dark_for(measurement, darks), options.no_dark, report))
     if unstated:
         report(
             f"{', '.join(unstated[:3])}{' …' if len(unstated) > 3 else ''}: the export does not say what its values "
@@ -197,7 +243,7 @@ def read_led_exports(
         "spectrometer_response": response_source,
         "acquisition": [m.settings.as_dict() for m in measurements],
         "baselines": [m.metadata.get("baseline") for m in measurements],
-        "dark": str(options.dark) if options.dark else None,
+        "dark": _dark_record(options),
         "no_dark": options.no_dark,
     }
     return LedExports(tuple(measurements), spectra, unit, section)

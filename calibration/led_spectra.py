@@ -26,6 +26,7 @@ from scipy.optimize import brentq, least_squares
 
 from msflash.calibration.errors import CalibrationError
 from msflash.calibration.spectrometer import SpectrometerMeasurement
+from msflash.processing.led_wavelength import peak_nm as measured_peak_nm
 from msflash.processing.spectra import Spectra, require_same_grid
 
 SATURATION_RUN = 3
@@ -139,15 +140,9 @@ def characterise_led(measurement: SpectrometerMeasurement) -> LedCharacterisatio
             f"{float(np.median(values)):g}); expected a narrowband LED measurement"
         )
     notes: list[str] = []
-    # Peak: parabola through the top sample and its neighbours.
-    peak_nm = float(wavelengths[top])
-    if 0 < top < values.size - 1:
-        y0, y1, y2 = values[top - 1], values[top], values[top + 1]
-        denominator = y0 - 2 * y1 + y2
-        if denominator < 0:
-            offset = 0.5 * (y0 - y2) / denominator
-            peak_nm = float(np.interp(top + offset, np.arange(values.size), wavelengths))
-    else:
+    # Peak: the one number msflash gives an LED's wavelength (parabola through the top sample and its neighbours).
+    peak_nm = measured_peak_nm(wavelengths, values)
+    if not 0 < top < values.size - 1:
         notes.append(
             f"{where}: the peak lies at the edge of the measured range ({peak_nm:g} nm); the LED may extend beyond it"
         )

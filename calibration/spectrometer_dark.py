@@ -368,7 +368,7 @@ def counts_per_second(
     times = sorted({float(m.settings.integration_time_s or 0.0) for m in stated})
     if len(times) > 1:
         report(
-            "LED exports at integration times "
+            "exports at integration times "
             + ", ".join(f"{1e3 * t:g}" for t in times)
             + " ms: counts divided by each time (counts per second)"
         )

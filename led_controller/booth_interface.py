@@ -24,6 +24,7 @@ it supports in :attr:`Booth.capabilities`, and capture refuses a plan the booth 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -82,12 +83,10 @@ class BoothIdentity(Protocol):
 
 
 class Booth(Protocol):
-    """What every capture needs of a booth: host-paced levels, identity, close.
+    """What every capture needs of a booth: host-paced levels, its watchdog, identity, close.
 
-    Optional extras found with ``getattr`` (``LedBooth`` offers them; an adapter may leave them
-    out): ``watchdog_covering(silence_s)``, a context manager keeping the booth's watchdog from
-    firing while the host is silent on purpose; ``watchdog_fired()``, whether it fired since last
-    asked; ``pending_events()``, the events left over from before a sequence.
+    A booth without a watchdog (the text adapter) covers nothing (:meth:`watchdog_covering` is a
+    null context) and never reports one fired.
     """
 
     @property
@@ -121,16 +120,59 @@ class Booth(Protocol):
         """Release the link (idempotent). Switching the LEDs off first is the caller's ``all_off``."""
         ...
 
+    def watchdog_covering(self, silence_s: float) -> AbstractContextManager[None]:
+        """A context keeping the booth's watchdog from firing while the host is silent on purpose for ``silence_s``."""
+        ...
+
+    def watchdog_fired(self) -> bool:
+        """Whether the booth's watchdog switched the LEDs off since last asked."""
+        ...
+
+
+class SequencedIdentity(BoothIdentity, Protocol):
+    """What a booth running a pattern table says of its dimming."""
+
+    @property
+    def pulse_dimming(self) -> bool:
+        """The booth dims a step given its exposure by pulses inside it (``DIM=PULSE``), else by PWM."""
+        ...
+
 
 class SequencedBooth(Booth, Protocol):
     """What booth- and camera-master capture need on top: the pattern table and its events."""
 
-    def load_pattern(self, steps: Sequence[Sequence[float]], *, held: Sequence[int] = ()) -> None:
-        """Replace the pattern table; ``held`` steps wait for :meth:`set_step` (never exposed before)."""
+    @property
+    def info(self) -> SequencedIdentity:
+        """What the booth said it is when it was opened, its dimming included."""
         ...
 
-    def set_step(self, index: int, levels: Sequence[float], *, now: bool = False) -> None:
+    def load_pattern(
+        self,
+        steps: Sequence[Sequence[float]],
+        *,
+        held: Sequence[int] = (),
+        exposures_us: Sequence[float] | None = None,
+    ) -> None:
+        """Replace the pattern table; ``held`` steps wait for :meth:`set_step` (never exposed before);
+        ``exposures_us``: each step's exposure, for a booth that pulses inside it."""
+        ...
+
+    def set_step(
+        self, index: int, levels: Sequence[float], *, now: bool = False, exposure_us: float | None = None
+    ) -> None:
         """Set one step's levels (also while running) and release it if held; ``now``: start it at once."""
+        ...
+
+    def set_roll(self, skew_us: float) -> None:
+        """The camera's rolling-shutter skew in µs (a pulsing booth fits its pulses to the flash window)."""
+        ...
+
+    def delivered_levels(self, index: int, exposure_us: float) -> tuple[float, ...] | None:
+        """What table step ``index`` gave each LED in ``exposure_us``, as a level; None when dimmed by PWM."""
+        ...
+
+    def pending_events(self) -> list[Any]:
+        """Remove and return the events received but not yet waited for (an earlier table's)."""
         ...
 
     def arm(self, mode: str, *, settle_us: int = ..., pulse_us: int = ..., period_us: int = ...) -> None:

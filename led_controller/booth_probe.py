@@ -70,20 +70,26 @@ def await_boot_banner(link: serial.SerialBase, boot_s: float = DEFAULT_BOOT_S) -
     A stock Arduino Mega resets when its port is opened (``docs/booth-firmware.md`` §4); its
     bootloader must not be sent anything meanwhile. Returns every byte read up to and including the
     banner's line end (``b""`` when none came: a booth that does not reset, or old firmware).
+    ``link.timeout`` is as it was on return (it polls with short reads meanwhile: a caller's reads
+    after it once got those 0.1 s instead of their own timeout, and a slow booth's reply was missed).
     """
     deadline = time.monotonic() + boot_s
     seen = bytearray()
-    while True:
-        remaining = deadline - time.monotonic()
-        if remaining <= 0:
-            return b""
-        link.timeout = min(remaining, 0.1)
-        seen += link.read_until(b"\n")
-        if not seen.endswith(b"\n"):
-            continue
-        line = bytes(seen[seen.rstrip(b"\n").rfind(b"\n") + 1 :]).rstrip(b"\n")
-        if line.startswith(b"!") and frame_problem(line) is None and line.split(b":", 2)[2].startswith(b"BOOT"):
-            return bytes(seen)
+    timeout = link.timeout
+    try:
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return b""
+            link.timeout = min(remaining, 0.1)
+            seen += link.read_until(b"\n")
+            if not seen.endswith(b"\n"):
+                continue
+            line = bytes(seen[seen.rstrip(b"\n").rfind(b"\n") + 1 :]).rstrip(b"\n")
+            if line.startswith(b"!") and frame_problem(line) is None and line.split(b":", 2)[2].startswith(b"BOOT"):
+                return bytes(seen)
+    finally:
+        link.timeout = timeout
 
 
 def probe_booth(

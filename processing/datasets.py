@@ -34,6 +34,8 @@ from typing import Any, Literal
 import numpy as np
 
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.led_wavelength import PEAK_METADATA_KEY, led_name, led_peaks_nm, with_peaks
+from msflash.processing.names import unknown_name
 from msflash.processing.spectra import (
     DEFAULT_GRID,
     Spectra,
@@ -48,7 +50,8 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 """Folder of the shipped data files (see ``SOURCES.md`` there)."""
 
 PAPER_LED_PEAKS_NM = (440, 480, 500, 520, 596, 636, 660)
-"""Nominal peaks of the paper's 7 Luxeon LEDs, in file order."""
+"""The paper's nominal peaks of its 7 Luxeon LEDs ("≈"), in file order. Not the LEDs' names: those are
+made from the measured peaks (:func:`paper_leds`)."""
 
 PAPER_LED_SUBSETS: dict[int, tuple[int, ...]] = {
     3: (1, 4, 7),
@@ -225,24 +228,35 @@ def _choose(what: str, name: str, valid: Sequence[str]) -> str:
     for candidate in valid:
         if candidate.lower() == name.lower():
             return candidate
-    raise SpectralDataError(f"{what}: unknown name '{name}'; expected one of {', '.join(valid)}")
+    raise SpectralDataError(unknown_name(what, name, valid))
 
 
 # -- the paper's data -------------------------------------------------------------------------
 def paper_leds() -> Spectra:
     """The paper's 7 Luxeon LEDs at full drive, energy units, true ratios between LEDs.
 
-    Names are ``led440, led480, led500, led520, led596, led636, led660`` (nominal peaks; 596 is a
-    broad phosphor-converted amber). Grid 380–1068 nm / 4 nm.
+    Names are made from the measured peaks (:func:`processing.led_wavelength.led_name` of
+    :func:`~processing.led_wavelength.peak_nm` on the shipped 4 nm samples, recorded in
+    ``metadata["peak_nm"]``): ``led440, led478, led500, led522, led597, led636, led661`` — the paper
+    calls them ≈ 440, 480, 500, 520, 596 (a broad phosphor-converted amber), 636 and 660 nm
+    (:data:`PAPER_LED_PEAKS_NM`, ``metadata["nominal_peak_nm"]``). Grid 380–1068 nm / 4 nm.
 
     Examples
     --------
-    >>> paper_leds().names[:3]
-    ('led440', 'led480', 'led500')
+    >>> paper_leds().names
+    ('led440', 'led478', 'led500', 'led522', 'led597', 'led636', 'led661')
     """
-    names = tuple(f"led{peak}" for peak in PAPER_LED_PEAKS_NM)
-    spectra = _shipped("paper/ximeaLights_energy_380_1068_4nm.csv", "spd", "energy", _PAPER_LICENCE, names=names)
-    return spectra.replace(metadata={**spectra.metadata, "peaks_nm": PAPER_LED_PEAKS_NM})
+    measured = with_peaks(_shipped("paper/ximeaLights_energy_380_1068_4nm.csv", "spd", "energy", _PAPER_LICENCE))
+    peaks = led_peaks_nm(measured)
+    names = tuple(led_name(peak) for peak in peaks)
+    return measured.replace(
+        names=names,
+        metadata={
+            **measured.metadata,
+            PEAK_METADATA_KEY: dict(zip(names, peaks, strict=True)),
+            "nominal_peak_nm": dict(zip(names, PAPER_LED_PEAKS_NM, strict=True)),
+        },
+    )
 
 
 def paper_led_subset(n_leds: int) -> Spectra:
@@ -256,7 +270,7 @@ def paper_led_subset(n_leds: int) -> Spectra:
     Examples
     --------
     >>> paper_led_subset(3).names
-    ('led440', 'led520', 'led660')
+    ('led440', 'led522', 'led661')
     """
     if n_leds not in PAPER_LED_SUBSETS:
         raise SpectralDataError(
@@ -384,7 +398,7 @@ def camera_responsivities(name: str, include_noncommercial: bool = True) -> Spec
     names = camera_names(include_noncommercial)
     found = next((n for n in names if _camera_key(n) == _camera_key(name)), None)
     if found is None:
-        raise SpectralDataError(f"camera '{name}': unknown; expected one of {', '.join(names)}")
+        raise SpectralDataError(unknown_name("camera", name, names))
     if found in ISETCAM_CAMERAS:
         return isetcam_camera(found)
     return paper_cameras(include_noncommercial)[found]
@@ -548,10 +562,7 @@ def illuminant(
     keys = list(colour.SDS_ILLUMINANTS.keys())
     key = next((k for k in keys if k.lower() == name.lower()), None)
     if key is None:
-        raise SpectralDataError(
-            f"illuminant '{name}': not a colour-science illuminant; expected one of A, D50, D65, FL2, FL11, "
-            f"blackbody:<kelvin> (all: {', '.join(keys[:30])}, …)"
-        )
+        raise SpectralDataError(unknown_name("illuminant", name, keys, "blackbody:<kelvin>"))
     sd = colour.SDS_ILLUMINANTS[key]
     wavelengths = grid.wavelengths_nm
     if wavelengths[0] < sd.wavelengths[0] or wavelengths[-1] > sd.wavelengths[-1]:

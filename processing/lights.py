@@ -17,6 +17,7 @@ import numpy as np
 
 from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.names import unknown_name
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.water import underwater_ambient, water_transmittance
 
@@ -29,7 +30,7 @@ def _ambient_key(name: str) -> str:
     for candidate in AMBIENTS:
         if candidate.lower() == name.lower():
             return candidate
-    raise SpectralDataError(f"ambient: unknown name '{name}'; expected one of {', '.join(AMBIENTS)}")
+    raise SpectralDataError(unknown_name("ambient", name, AMBIENTS))
 
 
 def _smooth_filter(wavelengths_nm: np.ndarray, kind: str) -> np.ndarray:
@@ -115,7 +116,5 @@ def light_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
         wanted = "fl" + wanted[1:]  # CIE's F2 is colour-science's FL2
     key = next((k for k in keys if k.lower() == wanted), None)
     if key is None:
-        raise SpectralDataError(
-            f"light '{name}': unknown; expected one of {', '.join(AMBIENTS + keys)}, blackbody:<kelvin>"
-        )
+        raise SpectralDataError(unknown_name("light", name, AMBIENTS + keys, "blackbody:<kelvin>"))
     return datasets.illuminant(key, grid)

@@ -40,7 +40,7 @@ def source_files() -> list[Path]:
 def test_scanner_sees_the_packages() -> None:
     files = source_files()
     assert any(p.relative_to(ROOT).as_posix() == "processing/ambient.py" for p in files)
-    assert "gi" in imported_top_level(ROOT / "acquisition" / "devices" / "aravis" / "camera.py")
+    assert "gi" in imported_top_level(ROOT / "acquisition" / "devices" / "aravis" / "gi_typelib.py")
 
 
 def test_gi_only_in_the_aravis_folder() -> None:

@@ -69,8 +69,6 @@ def capture_bench(
     width, height, pixel_format
         Frame format of the fake.
     """
-    import warnings
-
     from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
     from msflash.acquisition.session.capture import run_capture_with_flash
     from msflash.acquisition.session.exposure import ExposurePolicy
@@ -152,30 +150,12 @@ def capture_bench(
                 )
             session.begin()
             plan = CapturePlan.ambient_then_each_led(n_leds, exposure_us, **timing)
-            mark: dict[str, float] = {}
-
-            def decide(frames, session=session, mark=mark):
-                began = time.perf_counter()
-                mark["last_arrival"] = arrivals[-1]
-                mark["pulses"] = len(pulses)
-                mark["began"] = began
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    levels = session.decide("complementary", sanitise=True).levels
-                solved = time.perf_counter()
-                flash_us = session.flash_exposure(levels)
-                mark["compute"] = solved - began
-                mark["decided"] = time.perf_counter()
-                mark["exposure"] = mark["decided"] - solved
-                return levels, flash_us
-
-            def keep(step, frame, _entry, session=session) -> None:
-                if step.role != "flash":
-                    session.add(frame, step.role, step.led_levels)
+            decision = _TimedDecision(session, arrivals, pulses)
+            mark = decision.mark
 
             started = time.perf_counter()
             with AsyncSequenceWriter(writer) as background:
-                run_capture_with_flash(camera, rig.booth, plan, background, decide, on_frame=keep)
+                run_capture_with_flash(camera, rig.booth, plan, background, decision, handlers=(session,))
                 finished = arrivals[-1]
             if run == 0:
                 continue
@@ -224,3 +204,32 @@ def capture_bench(
 
 
 __all__ = ["capture_bench"]
+
+
+class _TimedDecision:
+    """The bench's flash decision (a :class:`~acquisition.session.engine.FlashDecider`): the flash session's,
+    with the hand-off, compute and exposure-prediction times marked."""
+
+    def __init__(self, session: Any, arrivals: list[float], pulses: list[float]) -> None:
+        self.session, self.arrivals, self.pulses = session, arrivals, pulses
+        self.mark: dict[str, float] = {}
+
+    def decide_flash(self) -> Any:
+        import warnings
+
+        from msflash.acquisition.session.engine import FlashChoice
+
+        mark = self.mark
+        began = time.perf_counter()
+        mark["last_arrival"] = self.arrivals[-1]
+        mark["pulses"] = len(self.pulses)
+        mark["began"] = began
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            levels = self.session.decide("complementary", sanitise=True).levels
+        solved = time.perf_counter()
+        flash_us = self.session.flash_exposure(levels)
+        mark["compute"] = solved - began
+        mark["decided"] = time.perf_counter()
+        mark["exposure"] = mark["decided"] - solved
+        return FlashChoice(tuple(float(v) for v in levels), float(flash_us))

@@ -134,10 +134,19 @@ class _VersionAction(argparse._VersionAction):
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse whose usage errors exit with status 2 and one ``msflash: error:`` line."""
+    """argparse whose usage errors exit with status 2 and one ``msflash: error:`` line, and whose
+    refusal of a choice (a command, ``--solver``, ``--model``…) says which one was meant
+    (:func:`processing.names.unknown_name`)."""
 
     def error(self, message: str) -> NoReturn:
         raise UsageError(message)
+
+    def _check_value(self, action: argparse.Action, value: Any) -> None:
+        if action.choices is not None and value not in action.choices:
+            from msflash.processing.names import unknown_name
+
+            where = "/".join(action.option_strings) or ("command" if action.dest == "command" else action.metavar)
+            raise argparse.ArgumentError(None, unknown_name(str(where or action.dest), value, list(action.choices)))
 
 
 def _command_module(argv: Sequence[str]) -> str | None:
@@ -204,30 +213,40 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-READ_ONLY_COMMANDS = frozenset(
-    {"estimate", "flash", "synthesize", "check", "export", "evaluate", "study", "colour-study", "local-study"}
-)
-"""Commands that drive no camera and no booth: a stop line says nothing of LEDs or captured frames."""
+CAPTURE_COMMANDS = frozenset({"run", "capture"})
+"""Commands that write a sequence: their stop line says what they kept (:func:`_what_was_kept`)."""
+BOOTH_COMMANDS = frozenset({"live", "booth", "booth-emulator", "bench"})
+"""Commands that drive a booth (or serve one) but write no sequence: their stop line says the LEDs are off."""
 
 
 def _stop_line(words: Sequence[str], how: str) -> str:
     r"""The one line a stopped command ends with: how it stopped and, for a capture, what it kept.
 
+    Only what is true of the command: a capture's LEDs and sequence, a booth's LEDs, nothing more for
+    the rest (``estimate``, ``export``, ``devices``, ``doctor``, ``calibrate`` … drive no LED and capture
+    no frame).
+
     >>> _stop_line(["export", "SEQ", "--to", "dng"], "interrupted")
     'msflash: interrupted\n'
+    >>> _stop_line(["booth", "console", "/dev/ttyACM0"], "interrupted")
+    'msflash: interrupted; LEDs off\n'
     """
     command = next((word for word in words if not word.startswith("-")), None)
-    if command in READ_ONLY_COMMANDS:
-        return f"msflash: {how}\n"
-    return f"msflash: {how}; LEDs off{_what_was_kept()}\n"
+    if command in CAPTURE_COMMANDS:
+        return f"msflash: {how}; LEDs off{_what_was_kept()}\n"
+    if command in BOOTH_COMMANDS:
+        return f"msflash: {how}; LEDs off\n"
+    return f"msflash: {how}\n"
 
 
 def _what_was_kept() -> str:
-    """What a stopped command leaves, truthfully: the sequence it wrote, complete or cut short (marked so)."""
+    """What a stopped command leaves, truthfully: the sequence it wrote, complete or cut short (marked so), or none."""
     written = sys.modules.get("msflash.acquisition.sequence.format")  # loaded only if a sequence was touched
     latest = written.latest_sequence_written() if written is not None else None
     if latest is None:
-        return "; frames captured so far are kept (marked incomplete)"
+        # Stopped before its sequence was begun (the rig still opening, the exposure being metered): no frame
+        # was kept, and the --out folder it made, still empty, is removed (cli_common.claimed_output).
+        return "; stopped before the sequence began: no frame was captured"
     from msflash.processing.user_files import printable
 
     directory, complete = printable(str(latest[0])), latest[1]

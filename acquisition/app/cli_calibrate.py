@@ -64,11 +64,17 @@ def _bad_input(handler: Callable[[argparse.Namespace], int]) -> Callable[[argpar
 
 
 def _chart(spec: str | None, calibration: CalibrationSet, grid: str | None = None) -> Any:
-    """``--chart``: a built-in name, a CSV of the chart's reflectances, else the calibration's measured chart."""
+    """``--chart``: a built-in name, a CSV of the chart's reflectances, else the calibration's measured chart.
+
+    The measured chart keeps the grid ``calibrate chart --chart-grid`` gave it unless ``--chart-grid`` says otherwise.
+    """
     if spec == "chart110":
         return "chart110"
     if spec is None and calibration.chart_reflectances is not None:
-        progress(f"chart reflectances from calibration {calibration.id} (calibrate chart)")
+        rows, columns = calibration.chart.get("rows"), calibration.chart.get("columns")
+        if grid is None and isinstance(rows, int) and isinstance(columns, int):
+            grid = f"{rows}x{columns}"
+        progress(f"chart reflectances from calibration {calibration.id} (calibrate chart), {grid or 'default'} grid")
     return chart_reference(spec, calibration.chart_reflectances, f"calibration {calibration.id}", grid)
 
 
@@ -91,7 +97,7 @@ def _plot_leds(path: Path, spectra, characterisations) -> None:
         axis.plot(
             spectra.wavelengths_nm,
             spectra.values[:, index],
-            label=f"{item.name} ({item.peak_nm:.0f} nm, FWHM {item.fwhm_nm:.0f})",
+            label=f"{item.name} (measured peak {item.peak_nm:.1f} nm, FWHM {item.fwhm_nm:.0f})",
         )
     axis.set_xlabel("wavelength (nm)")
     axis.set_ylabel(f"spectral power ({spectra.unit})")
@@ -245,7 +251,7 @@ def _chart_command(args: argparse.Namespace) -> int:
         unit=args.unit,
         column=args.column,
         integration_time_s=None if args.integration_time_ms is None else args.integration_time_ms / 1e3,
-        dark=args.dark,
+        dark=None if args.dark is None else tuple(args.dark),
         no_dark=args.no_dark,
     )
     reflectances, section = chart_from_exports(args.files, args.white, args.white_reflectance, options, args.chart_grid)
@@ -329,7 +335,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     leds.add_argument("--column", type=positive_int, default=None, help="value column when there are more than two")
     leds.add_argument(
         "--dark",
-        help="a dark export (shutter closed) to subtract; one of another integration time is scaled to each export's",
+        action="append",
+        help="a dark export (shutter closed) to subtract; one of another integration time is scaled to each export's; "
+        "once per integration time for darks of several (each export takes the dark of its own time)",
     )
     leds.add_argument(
         "--no-dark",
@@ -438,7 +446,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     chart.add_argument("--unit", default=None, choices=("energy", "photons", "counts"), help="as for calibrate leds")
     chart.add_argument("--column", type=positive_int, default=None, help="value column when there are more than two")
-    chart.add_argument("--dark", help="a dark export (shutter closed); one of another integration time is scaled")
+    chart.add_argument(
+        "--dark",
+        action="append",
+        help="a dark export (shutter closed), once per integration time used (the white is usually measured shorter "
+        "than the dark patches: a lamp's export has no out-of-band tail to scale a dark of another time on)",
+    )
     chart.add_argument("--no-dark", action="store_true", help="the exports need no dark (dark-corrected)")
     chart.add_argument("--integration-time-ms", type=positive_float, default=None, metavar="MS")
     chart.add_argument("--chart-grid", metavar="ROWSxCOLUMNS", help="the chart's grid (default 4x6 for 24 patches)")

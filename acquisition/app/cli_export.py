@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import print_json, progress
-from msflash.acquisition.app.options import add_estimation_options
+from msflash.acquisition.app.options import add_estimation_options, target_value
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 
 EXPORT_HELP = "write a sequence as DNG (raw frames), OME-TIFF (all frames), CSV (spectra) or EXR (linear images)"
@@ -35,6 +36,17 @@ def _export(args: argparse.Namespace) -> int:
     result = export_sequence(
         sequence, formats, out, target=args.target, solver=args.solver, alpha=args.alpha, bin_factor=args.bin
     )
+    if (
+        directory.name == "sequence"
+        and (directory.parent / "run.json").is_file()
+        and out.resolve().is_relative_to(directory.parent.resolve())
+    ):
+        # An export into the run folder, made after the run: its report links it too.
+        from msflash.acquisition.app.run_html import link_later_export
+
+        why_not = link_later_export(directory.parent, sequence, formats, result.files, result.notes)
+        if why_not is not None:
+            result = replace(result, notes=(*result.notes, why_not))
     if args.json:
         print_json(
             {
@@ -63,7 +75,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--out", default=None, help="new folder for the files (default ./NAME-export; never overwritten)"
     )
     export.add_argument(
-        "--target", default="D65", help="complementary flash target (name or CSV file), for csv and exr"
+        "--target",
+        default="D65",
+        type=target_value,
+        help="complementary flash target (name or CSV file), for csv and exr",
     )
     add_estimation_options(export)
     export.add_argument(

@@ -17,9 +17,18 @@ from msflash.acquisition.app.options import (
     add_fake_camera_option,
     sim_cfa,
     simulated_world,
+    target_value,
 )
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
-from msflash.acquisition.session.rig import Rig, open_rig
+from msflash.acquisition.session.rig import (
+    AravisFakeRigOptions,
+    HwRigOptions,
+    ReplayRigOptions,
+    Rig,
+    SimRigOptions,
+    open_rig,
+    rig_kind,
+)
 from msflash.acquisition.signals import STOPPING_SIGNALS
 from msflash.processing.datasets import PAPER_LED_SUBSETS
 from msflash.processing.lights import AMBIENTS
@@ -69,29 +78,44 @@ def _open(args: argparse.Namespace) -> Rig:
     world = simulated_world(args)
     if spec == "sim":
         return open_rig(
-            "sim", cfa=sim_cfa(args.cfa), booth_port=args.booth_port, booth_boot_s=args.booth_boot_s, **world
+            "sim",
+            SimRigOptions(
+                world,
+                cfa=sim_cfa(args.cfa),
+                log_serial=args.log_serial,
+                booth_port=args.booth_port,
+                booth_boot_s=args.booth_boot_s,
+            ),
         )
     if spec == "aravis-fake":
-        return open_rig("aravis-fake", fake_camera=args.fake_camera or "sfnc", **world)
+        return open_rig(
+            "aravis-fake",
+            AravisFakeRigOptions(world, log_serial=args.log_serial, fake_camera=args.fake_camera or "sfnc"),
+        )
     if spec == "hw":
         return open_rig(
             "hw",
-            camera=args.camera,
-            port=args.booth_port,
-            interfaces=args.interfaces,
-            calibration=args.calibration,
-            led_spectra=args.led_spectra,
-            responsivity=args.responsivity,
-            log_serial=args.log_serial,
-            booth_boot_s=args.booth_boot_s,
+            HwRigOptions(
+                camera=args.camera,
+                port=args.booth_port,
+                interfaces=args.interfaces,
+                calibration=args.calibration,
+                led_spectra=args.led_spectra,
+                responsivity=args.responsivity,
+                log_serial=args.log_serial,
+                booth_boot_s=args.booth_boot_s,
+            ),
         )
-    return open_rig(spec, log_serial=args.log_serial)
+    if rig_kind(spec) == "replay":
+        return open_rig(spec, ReplayRigOptions(log_serial=args.log_serial))
+    return open_rig(spec)
 
 
 def _live(args: argparse.Namespace) -> int:
     import asyncio
 
-    from msflash.acquisition.app.live.server import LiveServer, bind
+    from msflash.acquisition.app.live.requests import bind
+    from msflash.acquisition.app.live.server import LiveServer
 
     runs = Path(args.runs)
     if runs.exists() and not runs.is_dir():
@@ -109,9 +133,11 @@ def _live(args: argparse.Namespace) -> int:
                 loop = asyncio.get_running_loop()
 
                 def stopping() -> None:
-                    if server.state.job.status == "running" and not stop.is_set():
+                    # A fired sequence stops before its next frame: LEDs off, the frames written kept.
+                    if server.stop_sequence() and not stop.is_set():
                         progress(
-                            "stopping once the sequence in progress has its frames (its capture ends with the LEDs off)"
+                            "stopping the sequence in progress before its next frame (LEDs off; the frames "
+                            "written so far stay, the sequence marked incomplete)"
                         )
                     stop.set()
 
@@ -147,7 +173,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     live.add_argument("--port", type=_port, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT}; 0: any)")
     live.add_argument("--runs", default="runs", metavar="DIR", help="folder of the run folders (default runs)")
-    live.add_argument("--target", default="D65", help="complementary target illuminant (name or CSV file)")
+    live.add_argument(
+        "--target", default="D65", type=target_value, help="complementary target illuminant (name or CSV file)"
+    )
     add_fake_camera_option(live)
     hardware = live.add_argument_group("hardware rig (--rig hw)")
     hardware.add_argument("--camera", default=None, metavar="ID", help="camera device id, serial number or IP")

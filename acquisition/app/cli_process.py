@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from msflash.acquisition.app.cli_common import UsageError, positive_int, print_json, progress
-from msflash.acquisition.app.options import add_estimation_options, add_scheduler_options
+from msflash.acquisition.app.options import add_estimation_options, add_scheduler_options, target_value
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
@@ -301,7 +301,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     flash.add_argument("sequences", nargs="+", metavar="SEQUENCE", help=_SEQUENCES_HELP)
     flash.add_argument("--mode", required=True, choices=("complementary", "matching"))
     flash.add_argument(
-        "--target", default="D65", help="complementary target: an illuminant name (D65, A, FL2…) or a CSV file"
+        "--target",
+        default="D65",
+        type=target_value,
+        help="complementary target: an illuminant name (D65, A, FL2…) or a CSV file",
     )
     flash.add_argument(
         "--bounds",

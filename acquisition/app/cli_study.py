@@ -31,6 +31,7 @@ from msflash.acquisition.app.plot_style import PALETTE, pyplot, relative_power, 
 from msflash.acquisition.progress import REPORTER
 from msflash.acquisition.session.dask_map import dask_mapper
 from msflash.processing.ambient import AMBIENT_METHODS
+from msflash.processing.names import unknown_name
 
 STUDIES = ("table1", "surfaces", "cameras", "xy", "failure", "pareto")
 """Study names accepted by ``msflash study``."""
@@ -71,7 +72,7 @@ def _names(text: str) -> list[str]:
 
 def _run(args: argparse.Namespace) -> int:
     if args.name not in STUDIES:
-        raise UsageError(f"study '{args.name}': unknown; expected one of {', '.join(STUDIES)}")
+        raise UsageError(unknown_name("study", args.name, STUDIES))
     alpha = args.alpha
     alpha_units = args.alpha_units
     if alpha == "paper":

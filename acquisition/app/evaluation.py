@@ -30,7 +30,6 @@ calibrated in situ; an in-air calibration would give the solvers the wrong red).
 from __future__ import annotations
 
 import json
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,6 +53,7 @@ from msflash.acquisition.sequence.exr_metadata import LINEAR_UNITS
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import write_image
 from msflash.acquisition.session import analysis
+from msflash.acquisition.session.both_flashes import solve_both
 from msflash.acquisition.session.chart_layout import (
     ChartLayout,
     ChartName,
@@ -63,7 +63,7 @@ from msflash.acquisition.session.chart_layout import (
 )
 from msflash.processing import colour_metrics, datasets, lights, water
 from msflash.processing.ambient import estimate_ambient
-from msflash.processing.errors import SpectralDataError, TargetUnreachableWarning
+from msflash.processing.errors import SpectralDataError
 from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
 from msflash.processing.image_formation import chart_scene
 from msflash.processing.raw_colour import rgb_chromaticities
@@ -201,16 +201,26 @@ def write_outputs(
 
 
 # -- evaluate a sequence ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class _SpectraFlashes:
+    """The flash solvers on LED spectra and camera responsivities in photons (a :class:`FlashSolver`)."""
+
+    leds: Spectra
+    camera: Spectra
+    target: Spectra
+    bounds: FlashBounds
+
+    def solve(self, mode: str, ambient_weights: np.ndarray) -> FlashSolution:
+        if mode == "matching":
+            return solve_matching(ambient_weights, self.leds, self.camera, bounds=self.bounds)
+        return solve_complementary(ambient_weights, self.leds, self.camera, self.target, bounds=self.bounds)
+
+
 def _solve_both(
     ambient_weights: np.ndarray, leds: Spectra, camera: Spectra, target: Spectra, bounds: FlashBounds
 ) -> tuple[dict[str, FlashSolution], list[str]]:
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", TargetUnreachableWarning)
-        solutions = {
-            "matching": solve_matching(ambient_weights, leds, camera, bounds=bounds),
-            "complementary": solve_complementary(ambient_weights, leds, camera, target, bounds=bounds),
-        }
-    return solutions, [str(w.message) for w in caught]
+    both = solve_both(_SpectraFlashes(leds, camera, target, bounds), ambient_weights, first="matching")
+    return both.solutions, both.notes
 
 
 def evaluate_sequence(

@@ -4,13 +4,34 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from collections.abc import Callable
-from typing import Any
+from pathlib import Path
 
 from msflash.acquisition.app.cli_common import positive_int
 from msflash.acquisition.devices.simulated_camera import SIM_DEFAULT_CFA
 from msflash.acquisition.session import analysis
+from msflash.acquisition.session.rig import SimWorldOptions
 from msflash.processing.ambient import AMBIENT_METHODS
+
+
+def target_value(text: str) -> str:
+    """argparse type of ``--target``: a CSV file (read when used), or an illuminant name checked now.
+
+    A mistyped name is refused before a rig opens or a frame is captured (it was found only after the
+    capture, and the message did not name ``--target``), with the names it was probably meant to be.
+    """
+    if Path(text).suffix.lower() in (".csv", ".txt") or os.path.lexists(text):
+        return text
+    from msflash.processing import datasets
+    from msflash.processing.errors import SpectralDataError
+    from msflash.processing.spectra import DEFAULT_GRID
+
+    try:
+        datasets.illuminant(text, DEFAULT_GRID, outside="zero")
+    except SpectralDataError as err:
+        raise argparse.ArgumentTypeError(f"{err}; or a CSV file (wavelength_nm, value)") from None
+    return text
 
 
 def alpha_value(text: str) -> float | str:
@@ -28,13 +49,26 @@ def alpha_value(text: str) -> float | str:
     return value
 
 
+SOLVER_CONSTRAINTS = {
+    "tikhonov": "least squares with a squared roughness penalty; the spectrum I·w kept ≥ 0, each weight free",
+    "roughness": "least squares with the paper's (unsquared) roughness penalty; the spectrum I·w kept ≥ 0, each "
+    "weight free",
+    "nonneg": "least squares; the spectrum I·w kept ≥ 0, each weight free",
+    "lstsq": "plain least squares; nothing constrained",
+}
+"""What each ``--solver`` constrains, as the help and the run report say it (processing/ambient.py; the paper's
+eq. 6 asks only I·w ≥ 0, so a single LED's weight may be negative where its neighbours overlap it)."""
+
+
 def add_estimation_options(parser: argparse.ArgumentParser) -> None:
     """The options every command that estimates the ambient shares."""
     parser.add_argument(
         "--solver",
         default="tikhonov",
         choices=sorted(AMBIENT_METHODS),
-        help="ambient estimator (default: tikhonov, non-negative with roughness penalty)",
+        help="ambient estimator; "
+        + "; ".join(f"{name}: {words}" for name, words in SOLVER_CONSTRAINTS.items())
+        + " (default tikhonov; a single LED's weight may be negative, as the paper's eq. 6 allows)",
     )
     parser.add_argument(
         "--alpha",
@@ -133,16 +167,15 @@ def sim_cfa(value: str | None) -> str | None:
     return None if value == "none" else value
 
 
-def simulated_world(args: argparse.Namespace) -> dict[str, Any]:
-    """What the simulated world's options (``--ambient``, ``--scene``, ``--sim-camera``, ``--leds``, …) ask of
-    ``open_rig`` for the ``sim`` and ``aravis-fake`` rigs: one reading for ``run``, ``capture`` and ``live``."""
-    return {
-        "ambient": args.ambient,
-        "scene": args.scene,
-        "seed": args.seed,
-        "camera": args.sim_camera,
-        "n_leds": args.leds,
-        "led_spectra": args.led_spectra,
-        "flash_power": args.flash_power,
-        "log_serial": args.log_serial,
-    }
+def simulated_world(args: argparse.Namespace) -> SimWorldOptions:
+    """The simulated world's options (``--ambient``, ``--scene``, ``--sim-camera``, ``--leds``, …) for the
+    ``sim`` and ``aravis-fake`` rigs: one reading for ``run``, ``capture`` and ``live``."""
+    return SimWorldOptions(
+        ambient=args.ambient,
+        scene=args.scene,
+        seed=args.seed,
+        camera=args.sim_camera,
+        n_leds=args.leds,
+        led_spectra=args.led_spectra,
+        flash_power=args.flash_power,
+    )

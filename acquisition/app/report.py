@@ -27,7 +27,7 @@ from msflash.acquisition.app.plot_style import (
 )
 from msflash.acquisition.app.srgb_png import enlarged, write_srgb_png
 from msflash.acquisition.errors import OutputWriteError
-from msflash.acquisition.sequence.exr_metadata import exr_metadata
+from msflash.acquisition.sequence.exr_metadata import exr_image
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import write_image
 from msflash.acquisition.session import analysis
@@ -196,11 +196,15 @@ def _write_run_report(
     }
     for name, solution in solutions.items():
         image, _ = synthesize(stack.ambient, stack.led_frames, stack.spec, solution.flash_weights)
-        exr = exr_metadata(sequence, 1 if image.ndim == 2 else image.shape[2])
+        rgb, exr = exr_image(sequence, image)
         write_image(
             out / f"{name}.exr",
-            image,
-            {**exr.attributes, "msflash:flash_weights": solution.flash_weights.tolist()},
+            rgb,
+            {
+                **exr.attributes,
+                "msflash:content": f"the {name} computational flash image",
+                "msflash:flash_weights": solution.flash_weights.tolist(),
+            },
             exr.chromaticities,
         )
         previews[name] = write_preview(out / f"{name}.png", srgb_preview(linear_rgb(sequence, image), matrix))
@@ -219,6 +223,8 @@ def _write_run_report(
         "sequence": str(out / "sequence"),
         "frames": len(sequence.frames),
         "ambient_weights": estimate.ambient_weights,
+        "solver": estimate.method,
+        "led_peak_nm": list(sequence.led_peaks_nm()),
         "relative_residual": estimate.relative_residual,
         "estimate_warnings": list(estimate.warnings),
         "flash": {

@@ -4,18 +4,30 @@ Written with :class:`acquisition.app.html_report.HtmlReport` (the writer ``evalu
 the summary is complete, into the run folder beside the files it shows: the previews and the
 spectra plot are linked by relative path, not copied, and every link is checked to point at a
 file of the run (:meth:`HtmlReport.add_linked_images`). ``run.json`` names it (``report``).
+
+Its "Files" list links every export of the run: ``run --export``'s (``export`` in ``run.json``) and
+those ``msflash export RUN --out RUN/NAME`` makes later, inside the run folder, which
+:func:`link_later_export` adds to ``run.json`` (``exports``) before it writes the report again.
 """
 
 from __future__ import annotations
 
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Sequence as SequenceOf
 from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.app.cli_common import dumps_json
 from msflash.acquisition.app.html_report import HtmlReport
-from msflash.acquisition.errors import OutputWriteError
+from msflash.acquisition.app.options import SOLVER_CONSTRAINTS
+from msflash.acquisition.errors import FolderInUseError, OutputWriteError
+from msflash.acquisition.sequence.folder_claim import claim_folder
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session.exposure import snr_or_none
+from msflash.calibration.file_modes import default_file_mode
 
 PREVIEW_CAPTIONS = {
     "ambient": "ambient only",
@@ -81,17 +93,30 @@ def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
     order = {name: index for index, name in enumerate(PREVIEW_CAPTIONS)}
     shown = sorted(summary["previews"].items(), key=lambda item: order.get(item[0], len(order)))
     captions = dict(PREVIEW_CAPTIONS, **{"flash-capture": f"{summary['recaptured_mode']} flash re-captured"})
-    previews = [(captions.get(name, name), Path(file)) for name, file in shown]
+    previews = [(captions.get(name, name), _rebased(summary, file, base)) for name, file in shown]
     report.add_linked_images(previews, base, columns=2)
 
     report.add_heading("Spectra")
-    report.add_linked_images([("ambient estimate and flash mixes", Path(summary["plot"]))], base, plot=True)
+    report.add_linked_images(
+        [("ambient estimate and flash mixes", _rebased(summary, summary["plot"], base))], base, plot=True
+    )
 
     report.add_heading("LED weights")
-    rows: list[list[object]] = [["ambient (estimate)", *[_number(w) for w in summary["ambient_weights"]]]]
+    peaks = summary.get("led_peak_nm") or list(sequence.led_peaks_nm())
+    rows: list[list[object]] = [["measured peak (nm)", *[f"{float(p):.1f}" for p in peaks]]]
+    rows.append(["ambient (estimate)", *[_number(w) for w in summary["ambient_weights"]]])
     for mode, flash in summary["flash"].items():
         rows.append([f"{mode} flash", *[_number(w) for w in flash["flash_weights"]]])
     report.add_table(["", *names], rows, table_id="weights")
+    solver = summary.get("solver")
+    report.add_paragraph(
+        "The ambient weights are the LED mix whose images explain the ambient image (eq. 4–5)"
+        + (f", solved by {solver}: {SOLVER_CONSTRAINTS[solver]}" if solver in SOLVER_CONSTRAINTS else "")
+        + ". A weight may be negative where neighbouring LEDs overlap (the paper's eq. 6 keeps only the spectrum "
+        "non-negative). The flash weights are drive levels, 0 to 1. LED names are the booth's or made from the "
+        "measured peak; the peak is that of each LED's measured spectral power.",
+        note=True,
+    )
 
     report.add_heading("Fit and accuracy")
     accuracy: list[list[object]] = [["relative residual of the ambient fit", _number(summary["relative_residual"], 4)]]
@@ -139,7 +164,99 @@ def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
     files += [f"{mode}.exr" for mode in summary["flash"]] + ["sequence/sequence.json"]
     report.add_heading("Files")
     report.add_file_links(files, base)
-    return report.write(path)
+    for export in _exports(summary):
+        report.add_heading(f"Exported ({', '.join(export.get('formats', []))})", level=3)
+        report.add_file_links(_inside([str(_rebased(summary, f, base)) for f in export.get("files", [])], base), base)
+        for note in export.get("notes", []):
+            report.add_paragraph(f"note: {note}", note=True)
+    return _write_atomically(report, path)
+
+
+def _rebased(summary: dict[str, Any], file: str, base: Path) -> Path:
+    """A path ``run.json`` recorded, in the run folder ``base`` now holding the report: the same file of a run
+    folder that was moved or copied since (``run.json`` names the report where the run wrote it)."""
+    written = Path(str(summary.get("report", base / "report.html"))).parent
+    path = Path(file)
+    with contextlib.suppress(ValueError):
+        return base / path.relative_to(written)
+    return path
+
+
+def _exports(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """``run --export``'s export and the later ones (``exports``), oldest first."""
+    found = [summary["export"]] if isinstance(summary.get("export"), dict) else []
+    found += [item for item in summary.get("exports", []) if isinstance(item, dict)]
+    return found
+
+
+def _inside(files: SequenceOf[str], base: Path) -> list[str]:
+    """The files under ``base`` (the run folder), as paths relative to it; others are not linked (a report travels
+    with its folder)."""
+    inside = []
+    root = base.resolve()
+    for file in files:
+        with contextlib.suppress(ValueError, OSError):
+            inside.append(Path(file).resolve().relative_to(root).as_posix())
+    return inside
+
+
+def _write_atomically(report: HtmlReport, path: Path) -> Path:
+    """The report written to a temporary file beside ``path``, then renamed over it (a reader never sees half)."""
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(handle)
+    try:
+        report.write(temporary)
+        os.chmod(temporary, default_file_mode())
+        os.replace(temporary, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temporary)
+        raise
+    return path
+
+
+def link_later_export(
+    run_folder: Path, sequence: Sequence, formats: SequenceOf[str], files: SequenceOf[Path], notes: SequenceOf[str]
+) -> str | None:
+    """Add an export made after the run to ``run.json`` (``exports``) and write ``report.html`` again to link it.
+
+    For ``msflash export RUN --out RUN/NAME``: only a folder holding ``run.json`` and ``report.html``, and only
+    files inside it (a report links by relative path). Returns why nothing was changed, or None when the report
+    now links the files.
+    """
+    run_folder = Path(run_folder)
+    summary_path = run_folder / "run.json"
+    if not (summary_path.is_file() and (run_folder / "report.html").is_file()):
+        return f"{run_folder} holds no run.json and report.html: no run report to link the export from"
+    if not _inside([str(f) for f in files], run_folder):
+        return f"the export is outside {run_folder}: its report.html links only files inside the run folder"
+    try:
+        claim = claim_folder(run_folder, "msflash export (linking the export from the run report)")
+    except (FolderInUseError, OSError) as err:
+        return f"{run_folder}: report.html not updated ({err})"
+    with claim:
+        try:
+            summary = json.loads(summary_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as err:
+            return f"{summary_path}: unreadable ({err}); report.html not updated"
+        if not isinstance(summary, dict) or "report" not in summary:
+            return f"{summary_path}: not a run summary; report.html not updated"
+        summary["exports"] = [
+            *summary.get("exports", []),
+            {"formats": list(formats), "files": [str(f) for f in files], "notes": list(notes)},
+        ]
+        handle, temporary = tempfile.mkstemp(prefix=".run.json.", suffix=".tmp", dir=run_folder)
+        os.close(handle)
+        try:
+            Path(temporary).write_text(dumps_json(summary) + "\n", encoding="utf-8")
+            os.chmod(temporary, default_file_mode())
+            os.replace(temporary, summary_path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(temporary)
+            raise
+        write_run_html(run_folder / "report.html", summary, sequence)
+    return None
 
 
 def write_run_summary(out: Path, summary: dict[str, Any], sequence: Sequence) -> None:
@@ -156,12 +273,13 @@ def write_run_summary(out: Path, summary: dict[str, Any], sequence: Sequence) ->
     except OSError as err:
         raise OutputWriteError(
             f"{out / 'run.json'}: could not be written ({err}); expected a writable disk with room "
-            f"for it. The sequence is complete in {out / 'sequence'} and the report beside it"
+            f"for it. The sequence is complete in {out / 'sequence'}, the report's images and EXRs beside it "
+            "(report.html was not written)"
         ) from err
     write_run_html(Path(summary["report"]), summary, sequence)
 
 
-def exposure_summary(exposure: Any, flash_exposure_us: float, captured: Any) -> dict[str, Any]:
+def exposure_summary(exposure: Any, flash_exposure_us: float | None, captured: Any) -> dict[str, Any]:
     """``run.json``'s ``exposure``: the planned exposures (``ExposurePlan.to_dict``), the flash frame's, and the
     LED frames' SNR as the capture measured it (``run`` and ``live`` alike)."""
     return {

@@ -112,6 +112,15 @@ class Camera(Protocol):
         """The next frame; raises ``FrameTimeoutError`` after ``timeout_s``."""
         ...
 
+    def update_plan(self, plan: CapturePlan, index: int) -> None:
+        """Take ``plan``, whose step ``index`` (not yet triggered) changed, while streaming (the flash step)."""
+        ...
+
+    @property
+    def readout_skew_us(self) -> float:
+        """First row's exposure start to the last row's (a rolling shutter), µs; 0 for a global shutter."""
+        ...
+
     def stop(self) -> None:
         """Stop acquisition; idempotent."""
         ...

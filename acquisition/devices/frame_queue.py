@@ -64,6 +64,16 @@ class TriggeredFrames:
             raise item.error
         return item
 
+    def update_plan(self, plan: CapturePlan, index: int) -> None:
+        """Take ``plan``, whose step ``index`` changed: its frame is made from it when triggered."""
+        with self._condition:
+            self._plan = plan
+
+    @property
+    def readout_skew_us(self) -> float:
+        """0: every row exposed at once (a global shutter) unless a subclass says otherwise."""
+        return 0.0
+
     def stop(self) -> None:
         """Stop acquisition; idempotent. Queued frames stay readable until the next start."""
         with self._condition:

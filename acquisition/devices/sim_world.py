@@ -32,6 +32,7 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.progress import progress
 from msflash.processing import datasets, lights
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.names import unknown_name
 from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, SpectralKind, WavelengthGrid
 from msflash.processing.user_files import shown_path
@@ -207,8 +208,7 @@ def sim_scene(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> SimSceneName | 
         name = next((n for n in SIM_SCENES if n == spec), None)
         if name is None:
             raise UsageError(
-                f"--scene '{spec}': unknown; expected one of {', '.join(SIM_SCENES)} or a reflectance "
-                "CSV (wavelength_nm, one column per surface)"
+                unknown_name("--scene", spec, SIM_SCENES, "a reflectance CSV (wavelength_nm, one column per surface)")
             )
         return name
     where = f"--scene {spec}"

@@ -1,42 +1,66 @@
-"""A raw mosaic as a DNG file, written with tifffile (DNG is TIFF with its own tags).
+"""A raw mosaic as a DNG file (DNG 1.4: TIFF with its own tags, and EXIF in its own IFD).
 
 Public objects
 --------------
-- :func:`write_dng`: one CFA frame, its black and white levels, ``AsShotNeutral`` and ``ColorMatrix1``.
+- :func:`write_dng`: one CFA frame, its black and white levels, ``AsShotNeutral``, ``ColorMatrix1``
+  and the EXIF of its capture.
 - :data:`CFA_COLOURS`: DNG's ``CFAPattern`` codes of msflash's CFA names.
 
 What a raw developer needs (Adobe DNG Specification 1.4): ``DNGVersion``, ``UniqueCameraModel``,
 the CFA (``CFARepeatPatternDim``, ``CFAPattern``, ``CFAPlaneColor``, ``CFALayout``), ``BlackLevel``
 and ``WhiteLevel``, ``ColorMatrix1`` (XYZ → camera under ``CalibrationIlluminant1``) and
 ``AsShotNeutral`` (the camera RGB of white under the scene's light, which it white-balances to),
-and EXIF ``ExposureTime``.
+and ``Orientation``. The capture goes in the EXIF IFD that IFD0's ``ExifIFD`` points to, where
+EXIF 2.32 and ``exiftool -validate`` want it: ``ExposureTime``, ``DateTimeOriginal`` with
+``SubSecTimeOriginal`` and ``OffsetTimeOriginal`` (the frame's wall-clock time, UTC), and
+``ISOSpeedRatings`` only when the camera's ISO equivalence is known — a machine-vision camera's gain
+has none, and a made-up ISO would mislead a developer's noise reduction more than none
+(docs/decisions/dng-exif.md). The file is written byte by byte (:mod:`.tiff_ifd`).
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence as SequenceOf
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 import numpy as np
-import tifffile
+
+from msflash.acquisition.export.tiff_ifd import (
+    ascii_tag,
+    byte_tag,
+    long_tag,
+    rational_tag,
+    short_tag,
+    srational_tag,
+    undefined_tag,
+    write_tiff,
+)
 
 CFA_COLOURS = {"RGGB": (0, 1, 1, 2), "BGGR": (2, 1, 1, 0), "GRBG": (1, 0, 2, 1), "GBRG": (1, 2, 0, 1)}
 """DNG ``CFAPattern`` of each CFA name, row by row over the 2×2 tile (0 red, 1 green, 2 blue)."""
 
+ORIENTATION_TOP_LEFT = 1
+"""EXIF/TIFF ``Orientation`` 1: row 0 at the top, column 0 at the left — the sensor's readout, as recorded."""
+EXIF_VERSION = b"0232"
+"""EXIF 2.32: the version that defines ``OffsetTimeOriginal``."""
+
 _PHOTOMETRIC_CFA = 32803
 _D65 = 21  # EXIF LightSource code of D65, DNG CalibrationIlluminant1
-_RATIONAL, _SRATIONAL = 5, 10
-_DENOMINATOR = 1_000_000
+_SENSITIVITY_ISO_SPEED = 3  # EXIF SensitivityType: ISOSpeedRatings holds the ISO speed
 
 
-def _rationals(values: SequenceOf[float] | np.ndarray) -> tuple[int, ...]:
-    """Flat (numerator, denominator) pairs, as tifffile takes RATIONAL and SRATIONAL tags."""
-    pairs: list[int] = []
-    for value in values:
-        pairs += [round(float(value) * _DENOMINATOR), _DENOMINATOR]
-    return tuple(pairs)
+def exif_time(moment: datetime) -> tuple[str, str, str]:
+    """``DateTimeOriginal``, ``SubSecTimeOriginal`` and ``OffsetTimeOriginal`` of an aware time, in UTC.
+
+    >>> exif_time(datetime(2026, 3, 1, 12, 30, 5, 250000, tzinfo=UTC))
+    ('2026:03:01 12:30:05', '250000', '+00:00')
+    """
+    if moment.tzinfo is None:
+        raise ValueError(f"capture time {moment.isoformat()}: no time zone; expected an aware time (UTC)")
+    utc = moment.astimezone(UTC)
+    return utc.strftime("%Y:%m:%d %H:%M:%S"), f"{utc.microsecond:06d}", "+00:00"
 
 
 def write_dng(
@@ -50,6 +74,8 @@ def write_dng(
     camera_model: str,
     description: str = "",
     exposure_us: float | None = None,
+    captured_at: datetime | None = None,
+    iso_speed: float | None = None,
 ) -> Path:
     """Write one raw mosaic as a DNG (Bayer CFA, uncompressed 16-bit).
 
@@ -70,14 +96,21 @@ def write_dng(
     camera_model
         ``UniqueCameraModel`` and ``Model``.
     description
-        ``ImageDescription`` (what the frame is).
+        ``ImageDescription`` (what the frame is; 7-bit ASCII, anything else written as ``?``).
     exposure_us
         The frame's exposure, written as EXIF ``ExposureTime`` (seconds), or None.
+    captured_at
+        When the frame was captured (an aware time): EXIF ``DateTimeOriginal``, ``SubSecTimeOriginal``,
+        ``OffsetTimeOriginal`` (UTC) and IFD0's ``DateTime``; None writes no date.
+    iso_speed
+        The frame's ISO speed (``ISOSpeedRatings``, ``SensitivityType`` ISO speed), or None when the
+        camera's ISO equivalence is unknown (then no ISO tag at all).
 
     Raises
     ------
     ValueError
-        If the mosaic is not 2-D integer counts, the CFA unknown or the neutral not three values > 0.
+        If the mosaic is not 2-D integer counts, the CFA unknown, the neutral not three values > 0,
+        the matrix not a finite 3×3, the time naive or the ISO outside 1…65535.
     """
     pixels = np.asarray(mosaic)
     if pixels.ndim != 2 or not np.issubdtype(pixels.dtype, np.integer) or pixels.size == 0:
@@ -92,35 +125,48 @@ def write_dng(
     matrix = np.asarray(xyz_to_camera, dtype=float)
     if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)):
         raise ValueError(f"{path}: colour matrix of shape {matrix.shape}; expected a finite 3×3")
+    if iso_speed is not None and not 1 <= round(iso_speed) <= 65535:
+        raise ValueError(f"{path}: ISO speed {iso_speed}; expected 1…65535 or None (unknown)")
     model = camera_model or "unknown camera"
-    tags: list[tuple[int | str, int | str, int | None, Any, bool]] = [
-        (271, "s", 0, "msflash", True),  # Make
-        (272, "s", 0, model, True),  # Model
-        (50706, "B", 4, (1, 4, 0, 0), True),  # DNGVersion
-        (50707, "B", 4, (1, 1, 0, 0), True),  # DNGBackwardVersion
-        (50708, "s", 0, model, True),  # UniqueCameraModel
-        (33421, "H", 2, (2, 2), True),  # CFARepeatPatternDim
-        (33422, "B", 4, CFA_COLOURS[cfa], True),  # CFAPattern
-        (50710, "B", 3, (0, 1, 2), True),  # CFAPlaneColor
-        (50711, "H", 1, 1, True),  # CFALayout: rectangular
-        (50713, "H", 2, (1, 1), True),  # BlackLevelRepeatDim
-        (50714, _RATIONAL, 1, _rationals([black_level]), True),  # BlackLevel
-        (50717, "I", 1, round(white_level), True),  # WhiteLevel
-        (50721, _SRATIONAL, 9, _rationals(matrix.ravel()), True),  # ColorMatrix1
-        (50778, "H", 1, _D65, True),  # CalibrationIlluminant1
-        (50728, _RATIONAL, 3, _rationals(neutral_values), True),  # AsShotNeutral
+    ifd0 = [
+        long_tag(254, 0),  # NewSubfileType: the main (raw) image
+        short_tag(262, _PHOTOMETRIC_CFA),
+        ascii_tag(271, "msflash"),  # Make
+        ascii_tag(272, model),  # Model
+        short_tag(274, ORIENTATION_TOP_LEFT),
+        rational_tag(282, (1, 1)),  # XResolution
+        rational_tag(283, (1, 1)),  # YResolution
+        short_tag(296, 1),  # ResolutionUnit: none (a sensor's pixels have no print size)
+        ascii_tag(305, "msflash"),  # Software
+        short_tag(33421, 2, 2),  # CFARepeatPatternDim
+        byte_tag(33422, *CFA_COLOURS[cfa]),  # CFAPattern
+        byte_tag(50706, 1, 4, 0, 0),  # DNGVersion
+        byte_tag(50707, 1, 1, 0, 0),  # DNGBackwardVersion
+        ascii_tag(50708, model),  # UniqueCameraModel
+        byte_tag(50710, 0, 1, 2),  # CFAPlaneColor
+        short_tag(50711, 1),  # CFALayout: rectangular
+        short_tag(50713, 1, 1),  # BlackLevelRepeatDim
+        rational_tag(50714, float(black_level)),  # BlackLevel
+        long_tag(50717, round(white_level)),  # WhiteLevel
+        srational_tag(50721, *matrix.ravel()),  # ColorMatrix1
+        rational_tag(50728, *neutral_values),  # AsShotNeutral
+        short_tag(50778, _D65),  # CalibrationIlluminant1
     ]
+    if description:
+        ifd0.append(ascii_tag(270, description))  # ImageDescription
+    exif = [undefined_tag(36864, EXIF_VERSION)]
     if exposure_us is not None:
-        tags.append((33434, _RATIONAL, 1, (round(exposure_us), 1_000_000), True))  # ExposureTime, s
-    path = Path(path)
-    with tifffile.TiffWriter(path) as writer:
-        writer.write(
-            np.ascontiguousarray(pixels, dtype=np.uint16),
-            photometric=_PHOTOMETRIC_CFA,
-            subfiletype=0,
-            description=description or None,
-            software="msflash",
-            metadata=None,
-            extratags=tags,
-        )
-    return path
+        exif.append(rational_tag(33434, float(exposure_us) / 1e6))  # ExposureTime, s
+    if captured_at is not None:
+        stamp, subseconds, offset = exif_time(captured_at)
+        ifd0.append(ascii_tag(306, stamp))  # DateTime
+        exif += [
+            ascii_tag(36867, stamp),  # DateTimeOriginal
+            ascii_tag(36880, offset),  # OffsetTime (of DateTime)
+            ascii_tag(36881, offset),  # OffsetTimeOriginal
+            ascii_tag(37520, subseconds),  # SubSecTime
+            ascii_tag(37521, subseconds),  # SubSecTimeOriginal
+        ]
+    if iso_speed is not None:
+        exif += [short_tag(34855, round(iso_speed)), short_tag(34864, _SENSITIVITY_ISO_SPEED)]
+    return write_tiff(path, np.asarray(pixels, dtype=np.uint16), ifd0, exif)

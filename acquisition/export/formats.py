@@ -9,6 +9,7 @@ Public objects
 from __future__ import annotations
 
 from msflash.acquisition.errors import UsageError
+from msflash.processing.names import unknown_name
 
 EXPORT_FORMATS = ("dng", "ome-tiff", "csv", "exr")
 """DNG of raw frames, OME-TIFF of every frame, CSV of spectra, EXR of linear images."""
@@ -31,7 +32,8 @@ def parse_formats(text: str, option: str = "--to") -> tuple[str, ...]:
     unknown = [name for name in names if name not in EXPORT_FORMATS]
     if unknown:
         raise UsageError(
-            f"{option} {text}: unknown format {unknown[0]!r}; expected one or more of {', '.join(EXPORT_FORMATS)}, "
-            "comma-separated"
+            f"{option} {text}: "
+            + unknown_name("format", unknown[0], EXPORT_FORMATS)
+            + " (one or more, comma-separated)"
         )
     return tuple(dict.fromkeys(names))

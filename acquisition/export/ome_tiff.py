@@ -11,8 +11,9 @@ frame, ``TiffData`` naming it): an RGB frame is a channel of ``SamplesPerPixel``
 of 1. The instrument lists the LEDs as ``LightEmittingDiode`` light sources and the camera as the
 ``Detector``; a frame lit by one LED names it in ``LightSourceSettings`` with its peak wavelength,
 which is also the channel's ``ExcitationWavelength`` (nm); ``DetectorSettings.Gain`` is the frame's
-gain and ``Plane.ExposureTime`` its exposure (µs). Everything else (role, LED levels, black and white
-levels) is in a ``MapAnnotation`` per channel and one for the image.
+gain and ``Plane.ExposureTime`` its exposure (µs). ``Image.AcquisitionDate`` is the first frame's time
+and each ``Plane.DeltaT`` the frame's time after it (s), when known. Everything else (role, LED levels,
+black and white levels) is in a ``MapAnnotation`` per channel and one for the image.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import os
 from collections.abc import Iterable, Mapping
 from collections.abc import Sequence as SequenceOf
 from dataclasses import dataclass, field
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +45,7 @@ class OmeLight:
     name: str
     """The LED's name in the sequence."""
     peak_nm: float
-    """Wavelength of its spectrum's peak, nm."""
+    """Its measured peak wavelength, nm (:func:`processing.led_wavelength.led_peaks_nm`)."""
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,8 @@ class OmePlane:
     """Index in the lights of the one LED lighting the frame (besides the ambient), or None."""
     notes: Mapping[str, str] = field(default_factory=dict)
     """Key–value notes (role, LED levels…), written as the channel's ``MapAnnotation``."""
+    delta_t_s: float | None = None
+    """Seconds after the image's acquisition date (the first frame) the frame was taken, or None if unknown."""
 
 
 def _map_annotation(identifier: str, notes: Mapping[str, str]) -> ome.MapAnnotation:
@@ -75,6 +79,7 @@ def ome_document(
     camera_model: str,
     image_name: str,
     notes: Mapping[str, str],
+    acquired: datetime | None = None,
 ) -> ome.OME:
     """The OME model of :func:`write_ome_tiff`'s file (frames of ``shape`` and ``dtype``)."""
     samples = 3 if len(shape) == 3 else 1
@@ -106,6 +111,8 @@ def ome_document(
                 the_t=0,
                 exposure_time=plane.exposure_us,
                 exposure_time_unit=ome.UnitsTime.MICROSECOND,
+                delta_t=plane.delta_t_s,
+                delta_t_unit=ome.UnitsTime.SECOND,
             )
         )
         blocks.append(ome.TiffData(ifd=index, first_c=index, first_z=0, first_t=0, plane_count=1))
@@ -134,6 +141,7 @@ def ome_document(
     image = ome.Image(
         id="Image:0",
         name=image_name,
+        acquisition_date=acquired,
         pixels=pixels,
         instrument_ref=ome.InstrumentRef(id="Instrument:0"),
         annotation_refs=[ome.AnnotationRef(id="Annotation:image")],
@@ -154,6 +162,7 @@ def write_ome_tiff(
     camera_model: str,
     image_name: str,
     notes: Mapping[str, str] | None = None,
+    acquired: datetime | None = None,
 ) -> Path:
     """Write frames as one OME-TIFF, a page per frame, the OME-XML in the first page's description.
 
@@ -174,6 +183,8 @@ def write_ome_tiff(
         The OME image's name.
     notes
         Key–value notes for the image (``MapAnnotation``).
+    acquired
+        When the first frame was taken (an aware time): ``Image.AcquisitionDate``; None writes none.
 
     Raises
     ------
@@ -194,7 +205,7 @@ def write_ome_tiff(
                     )
                 first = pixels
                 document = ome_document(
-                    planes, lights, pixels.shape, pixels.dtype, camera_model, image_name, notes or {}
+                    planes, lights, pixels.shape, pixels.dtype, camera_model, image_name, notes or {}, acquired
                 )
                 # TIFF strings are 7-bit ASCII: anything else (µs, a name) as an XML character reference.
                 description: str | None = document.to_xml().encode("ascii", "xmlcharrefreplace").decode("ascii")

@@ -16,18 +16,25 @@ What each format holds:
   developer white-balances the ambient frame to the estimated ambient. A sequence without
   camera responsivities gets the sRGB assumption of msflash's previews (camera RGB taken as
   linear sRGB: the neutral is the sRGB of the estimate, the matrix XYZ → sRGB), said in the notes.
-  Dark frames get the ambient's neutral. RGB (debayered) frames are refused: a DNG's reason to
+  Dark frames get the ambient's neutral. EXIF (in its own IFD): ``ExposureTime``, ``DateTimeOriginal``
+  from the frame's ``time_utc`` (none for frames recorded without it, with a note) and ``ISOSpeedRatings``
+  only from ``camera.iso_speed_at_unit_gain`` × the frame's gain (none otherwise, with a note:
+  docs/decisions/dng-exif.md). The ``ImageDescription`` JSON holds the frame's role, levels, exposure,
+  gain and the LEDs with their peaks. RGB (debayered) frames are refused: a DNG's reason to
   exist is the raw mosaic a developer demosaics; an RGB sequence exports as OME-TIFF or EXR.
   Float frames are refused too (DNG readers expect integer counts).
-- ``ome-tiff``: ``sequence.ome.tif``, every frame as recorded (:mod:`.ome_tiff`).
+- ``ome-tiff``: ``sequence.ome.tif``, every frame as recorded (:mod:`.ome_tiff`), its
+  ``AcquisitionDate`` the first frame's ``time_utc`` and each plane's ``DeltaT`` from the camera's
+  ``timestamp_ns`` (else from ``time_utc``); the sequence named by its folder's name, no path.
 - ``csv``: ``spectra.csv`` (:mod:`.spectra_csv`) and ``spectra.json`` (the band's meaning, the weights,
   the estimate's warnings): the ambient estimate and its band (± 1σ), each
   LED at full drive, and with camera responsivities the matching and complementary flash mixes
   (LEDs at the solved physical weights) and ambient + complementary flash; in the sequence's
   spectral unit, relative (the LEDs' full-drive scale).
 - ``exr``: ``ambient.exr`` and, with camera responsivities, ``matching.exr`` and
-  ``complementary.exr`` (the computational flash images, eq. 7–9), linear, demosaicked
-  bilinearly, carrying :func:`.exr_metadata.exr_metadata`'s chromaticities, units and LED names.
+  ``complementary.exr`` (the computational flash images, eq. 7–9), linear RGB, a mosaic demosaicked
+  bilinearly (:func:`acquisition.sequence.exr_metadata.exr_image`, as every EXR of a sequence),
+  carrying chromaticities, units and the LEDs' names and peaks.
 """
 
 from __future__ import annotations
@@ -47,7 +54,7 @@ from msflash.acquisition.export.ome_tiff import OmeLight, OmePlane, write_ome_ti
 from msflash.acquisition.export.spectra_csv import SpectrumColumn, write_spectra_csv
 from msflash.acquisition.export.staging import check_not_inside, staged_export
 from msflash.acquisition.progress import progress
-from msflash.acquisition.sequence.exr_metadata import exr_metadata, led_peaks_nm
+from msflash.acquisition.sequence.exr_metadata import exr_image
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
 from msflash.acquisition.session import analysis
@@ -56,7 +63,6 @@ from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
 from msflash.processing.flash import FlashSolution
 from msflash.processing.raw_colour import camera_matrix, camera_neutral
-from msflash.processing.render import demosaic_bilinear
 from msflash.processing.user_files import check_output_name
 
 FLASH_MODES = ("matching", "complementary")
@@ -160,6 +166,57 @@ def _frame_notes(sequence: Sequence, index: int) -> dict[str, str]:
     }
 
 
+def _led_notes(sequence: Sequence) -> dict[str, object]:
+    """The LEDs' names and measured peaks (nm), the one number for each (:meth:`Sequence.led_peaks_nm`)."""
+    return {"led_names": [led.name for led in sequence.leds], "led_peak_nm": list(sequence.led_peaks_nm())}
+
+
+def _iso_speed(work: _Work, gain: float) -> float | None:
+    """A frame's ISO speed: ``camera.iso_speed_at_unit_gain`` × its linear gain, or None (with a note) when unknown."""
+    camera = work.sequence.camera
+    iso = camera.iso_speed_at_unit_gain
+    if iso is None:
+        work.note(
+            "DNG: no ISOSpeedRatings: the camera's ISO equivalence is unknown (no camera.iso_speed_at_unit_gain "
+            "in the sequence; machine-vision cameras state none)"
+        )
+        return None
+    if camera.gain_is_relative:
+        work.note("DNG: no ISOSpeedRatings: the frames' linear gain is unknown (camera.gain.linear is relative)")
+        return None
+    return iso * gain
+
+
+def _delta_t(sequence: Sequence) -> tuple[list[float | None], str]:
+    """Each frame's time after frame 0, s, and where it comes from.
+
+    The camera's clock (``timestamp_ns``) where frame 0 and the frame both have one and it did not run
+    back (a camera reopened or a replay without timestamps); else the wall clock (``time_utc``); else None.
+    """
+    frames = sequence.frames
+    first_tick = frames[0].extra.get("timestamp_ns") if frames else None
+    first_time = frames[0].captured_utc if frames else None
+    times: list[float | None] = []
+    sources: set[str] = set()
+    for index, frame in enumerate(frames):
+        tick = frame.extra.get("timestamp_ns")
+        moment = frame.captured_utc
+        if (
+            isinstance(tick, int)
+            and isinstance(first_tick, int)
+            and not isinstance(tick, bool)
+            and (tick > first_tick or (index == 0 and tick >= 0))
+        ):
+            times.append((tick - first_tick) / 1e9)
+            sources.add("the camera's clock (frames[].timestamp_ns)")
+        elif moment is not None and first_time is not None:
+            times.append((moment - first_time).total_seconds())
+            sources.add("the wall clock when each frame reached the writer (frames[].time_utc)")
+        else:
+            times.append(None)
+    return times, "; ".join(sorted(sources)) or "unknown (no timestamp_ns or time_utc recorded)"
+
+
 def _lone_led(levels: tuple[float, ...]) -> int | None:
     lit = [k for k, level in enumerate(levels) if level > 0]
     return lit[0] if len(lit) == 1 else None
@@ -180,6 +237,10 @@ def _write_dng(work: _Work, out: Path) -> None:
     leds = analysis.led_spectra_photons(sequence)
     ambient = estimate.spectrum.values[:, 0]
     work.details["color_matrix_source"] = matrix.source
+    if any(frame.captured_utc is None for frame in sequence.frames):
+        work.note(
+            "DNG: frames recorded without time_utc (by an older msflash or another tool) have no DateTimeOriginal"
+        )
     for index, frame in enumerate(sequence.frames):
         light = ambient + leds.values @ np.asarray(frame.led_levels)
         illuminant = estimate.spectrum.replace(values=light[:, None], source=f"{sequence.path}: frames[{index}] light")
@@ -196,8 +257,15 @@ def _write_dng(work: _Work, out: Path) -> None:
             neutral,
             matrix.xyz_to_camera,
             sequence.camera.model,
-            json.dumps({"msflash:" + key: value for key, value in _frame_notes(sequence, index).items()}),
+            json.dumps(
+                {
+                    "msflash:" + key: value
+                    for key, value in {**_frame_notes(sequence, index), **_led_notes(sequence)}.items()
+                }
+            ),
             frame.exposure_us,
+            frame.captured_utc,
+            _iso_speed(work, frame.gain),
         )
         work.files.append(path)
 
@@ -205,6 +273,7 @@ def _write_dng(work: _Work, out: Path) -> None:
 def _write_ome(work: _Work, out: Path) -> None:
     sequence = work.sequence
     names = [led.name for led in sequence.leds]
+    delta_t, delta_t_source = _delta_t(sequence)
     planes = []
     for index, frame in enumerate(sequence.frames):
         lone = _lone_led(frame.led_levels)
@@ -216,12 +285,20 @@ def _write_ome(work: _Work, out: Path) -> None:
                 frame.gain,
                 lone if frame.role == "led" else None,
                 _frame_notes(sequence, index),
+                delta_t[index],
             )
         )
-    lights = [OmeLight(name, peak) for name, peak in zip(names, led_peaks_nm(sequence), strict=True)]
+    lights = [OmeLight(name, peak) for name, peak in zip(names, sequence.led_peaks_nm(), strict=True)]
     camera = sequence.camera
+    acquired = sequence.frames[0].captured_utc
+    if acquired is None:
+        work.note(
+            "OME-TIFF: no AcquisitionDate: frame 0 was recorded without time_utc (an older msflash or another tool)"
+        )
     notes = {
-        "sequence": str(sequence.directory),
+        # The folder's name, not its path: a file that travels should not carry the user's directories.
+        "sequence": sequence.directory.name,
+        "delta_t_source": delta_t_source,
         "spectral_unit": sequence.spectral_unit,
         "cfa": camera.cfa or "none (RGB)",
         "black_level": repr(camera.black_level),
@@ -235,7 +312,7 @@ def _write_ome(work: _Work, out: Path) -> None:
             yield sequence.load_frame(index)
 
     path = out / "sequence.ome.tif"
-    write_ome_tiff(path, frames(), planes, lights, camera.model, sequence.directory.name, notes)
+    write_ome_tiff(path, frames(), planes, lights, camera.model, sequence.directory.name, notes, acquired)
     work.files.append(path)
 
 
@@ -267,10 +344,10 @@ def _write_csv(work: _Work, out: Path) -> None:
     # What a CSV header cannot say (a comment line would trip CSV readers): the band's meaning, the weights.
     about = {
         "spectra": path.name,
-        "sequence": str(sequence.directory),
+        "sequence": sequence.directory.name,
         "unit": f"{unit}: the sequence's spectral_unit, on the scale of the LED spectra at full drive",
         "band": estimate.band_meaning,
-        "led_names": list(leds.names),
+        **_led_notes(sequence),
         "ambient_weights": [float(w) for w in payload["ambient_weights"]],
         "flash_weights": {mode: solution.flash_weights.tolist() for mode, solution in work.solutions().items()},
         "complementary_target": work.target,
@@ -281,15 +358,8 @@ def _write_csv(work: _Work, out: Path) -> None:
     work.files.append(about_path)
 
 
-def _rgb(sequence: Sequence, image: np.ndarray) -> np.ndarray:
-    if image.ndim == 2 and sequence.camera.cfa is not None:
-        return demosaic_bilinear(image, sequence.camera.cfa)
-    return image
-
-
 def _write_exr(work: _Work, out: Path) -> None:
     sequence = work.sequence
-    metadata = exr_metadata(sequence, 3)
     if sequence.camera_responsivities() is None:
         work.note("no camera responsivities in the sequence: EXR chromaticities are sRGB's (assumed)")
     stack = analysis.load_frame_stack(sequence)
@@ -304,7 +374,7 @@ def _write_exr(work: _Work, out: Path) -> None:
         images[mode] = (image, content)
     for name, (image, content) in images.items():
         path = out / f"{name}.exr"
-        rgb = _rgb(sequence, image).astype(np.float32)
+        rgb, metadata = exr_image(sequence, image)
         write_image(path, rgb, {**metadata.attributes, **content}, metadata.chromaticities)
         work.files.append(path)
 

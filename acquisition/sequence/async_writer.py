@@ -48,6 +48,7 @@ from msflash.acquisition.sequence.format import (
     Sequence,
     SequenceFrame,
     SequenceWriter,
+    utc_now_text,
 )
 from msflash.acquisition.sequence.image_files import image_suffix
 
@@ -120,6 +121,8 @@ class AsyncSequenceWriter:
     ) -> SequenceFrame:
         """Queue one frame for :meth:`SequenceWriter.add_frame`; returns the entry it will be written as.
 
+        The frame's ``time_utc`` is stamped here, when it is handed over.
+
         Blocks only while the queue is full (back-pressure). Raises the writer thread's error, if any.
         The entry returned has no ``digest`` yet: the file's SHA-256 is taken when the thread writes
         it (:attr:`sequence`, after :meth:`flush`, has it).
@@ -128,6 +131,8 @@ class AsyncSequenceWriter:
         if self._closed:
             raise RecordingError(f"{self.path}: the asynchronous writer is closed; expected add_frame before close()")
         pixels = np.asarray(pixels)
+        extra = dict(extra or {})
+        handed_at = utc_now_text()  # the frame's time_utc: when it was handed over, not when the disk caught up
         name_role = role if role in FRAME_ROLES else "frame"
         entry = SequenceFrame(
             f"{FRAMES_DIR}/{self._added:03d}-{name_role}{image_suffix(pixels)}",
@@ -135,10 +140,11 @@ class AsyncSequenceWriter:
             tuple(led_levels),
             exposure_us,
             gain,
-            dict(extra or {}),
+            extra,
+            time_utc=handed_at,
         )
         self._added += 1
-        item = (pixels, role, entry.led_levels, exposure_us, gain, dict(extra or {}), entry.file)
+        item = (pixels, role, entry.led_levels, exposure_us, gain, extra, entry.file, handed_at)
         with self._held_lock:
             # Paused: keep the frame here rather than wake the writer thread only for it to wait
             # (each wake-up takes the GIL from the latency-critical capture thread).
@@ -238,9 +244,9 @@ class AsyncSequenceWriter:
                 if item is _STOP:
                     return
                 if self._error is None:  # after an error nothing more is written: the sequence stays consistent
-                    pixels, role, levels, exposure_us, gain, extra, file = item
+                    pixels, role, levels, exposure_us, gain, extra, file, handed_at = item
                     self._failed_file = file
-                    self._writer.add_frame(pixels, role, levels, exposure_us, gain, extra=extra)
+                    self._writer.add_frame(pixels, role, levels, exposure_us, gain, extra=extra, time_utc=handed_at)
             except BaseException as err:  # noqa: BLE001 - handed to the capture thread, which reports it
                 self._error = err
                 log.debug("%s: writing a frame failed: %s", self.path, err)

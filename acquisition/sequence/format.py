@@ -34,6 +34,7 @@ import sys
 import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
+from datetime import UTC, datetime
 from pathlib import Path, PurePosixPath
 from types import TracebackType
 from typing import Any, ClassVar, Literal, NoReturn, TypeVar, overload
@@ -55,6 +56,7 @@ from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import MAX_NESTING as MAX_NESTING  # the deepest a sequence.json may nest
 from msflash.processing.json_input import parse_json_document
+from msflash.processing.led_wavelength import PEAK_METADATA_KEY, led_peaks_nm
 from msflash.processing.negative_values import blind_columns, clip_negative_noise
 from msflash.processing.spectra import Spectra, WavelengthGrid
 from msflash.processing.synthesis import linearise
@@ -83,8 +85,41 @@ FrameRole = Literal["ambient", "led", "flash", "dark"]
 
 _TOP_KEYS = ("format", "version", "complete", "wavelengths_nm", "spectral_unit", "camera", "leds", "frames")
 _CAMERA_KEYS = ("model", "serial", "pixel_format", "cfa", "black_level", "white_level", "responsivity")
-_LED_KEYS = ("name", "spd")
-_FRAME_KEYS = ("file", "role", "led_levels", "exposure_us", "gain", "sha256", "file_bytes")
+_LED_KEYS = ("name", "spd", "peak_nm")
+_FRAME_KEYS = ("file", "role", "led_levels", "exposure_us", "gain", "sha256", "file_bytes", "time_utc")
+
+TIME_UTC_KEY = "time_utc"
+"""Optional ``frames[]`` key (docs/architecture.md §6): the wall-clock time the frame was handed to the writer."""
+ISO_SPEED_KEY = "iso_speed_at_unit_gain"
+"""Optional ``camera`` key (docs/architecture.md §6): the ISO speed the camera's maker states at linear gain 1."""
+PEAK_NM_KEY = "peak_nm"
+"""Optional ``leds[]`` key (docs/architecture.md §6): the LED's measured peak wavelength, nm."""
+
+
+def utc_now_text() -> str:
+    """Now, in UTC, as ``frames[].time_utc`` holds it: ISO 8601 with microseconds and ``Z``.
+
+    >>> len(utc_now_text()), utc_now_text()[-1]
+    (27, 'Z')
+    """
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def parse_time_utc(text: object) -> datetime | None:
+    """The aware time of a ``frames[].time_utc`` value (ISO 8601 with a zone), or None if it is not one.
+
+    >>> parse_time_utc("2026-03-01T12:30:05.250000Z").isoformat()
+    '2026-03-01T12:30:05.250000+00:00'
+    >>> parse_time_utc("2026-03-01 12:30"), parse_time_utc(5)
+    (None, None)
+    """
+    if not isinstance(text, str):
+        return None
+    try:
+        moment = datetime.fromisoformat(text)
+    except ValueError:
+        return None
+    return moment if moment.tzinfo is not None else None
 
 
 # -- data model ----------------------------------------------------------------------------------
@@ -146,6 +181,20 @@ class SequenceCamera(_ArrayEquality):
     extra: dict = field(default_factory=dict)
     """Keys of the ``camera`` object this version does not know, kept and written back."""
 
+    @property
+    def iso_speed_at_unit_gain(self) -> float | None:
+        """The ISO speed the camera's maker states at linear gain 1 (``camera.iso_speed_at_unit_gain``, optional,
+        docs/architecture.md §6), or None: unknown, as for most machine-vision cameras."""
+        value = self.extra.get(ISO_SPEED_KEY)
+        return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
+
+    @property
+    def gain_is_relative(self) -> bool:
+        """True when ``camera.gain.linear`` says every frame records gain 1 for an unknown true gain (issue 29)."""
+        gain = self.extra.get("gain")
+        linear = gain.get("linear") if isinstance(gain, dict) else None
+        return isinstance(linear, str) and linear.startswith("relative")
+
     def __post_init__(self) -> None:
         if self.responsivity is not None:
             object.__setattr__(self, "responsivity", {str(k): _frozen_array(v) for k, v in self.responsivity.items()})
@@ -164,9 +213,14 @@ class SequenceLed(_ArrayEquality):
     """Spectral power at full drive, shape (n_wavelengths,), read-only; relative, true ratios between LEDs."""
     extra: dict = field(default_factory=dict)
     """Unknown keys of this LED entry, kept and written back."""
+    peak_nm: float | None = field(default=None, compare=False)
+    """The LED's peak wavelength as measured where its spectrum was (``peak_nm``; optional,
+    docs/architecture.md §6), or None: then :meth:`Sequence.led_peaks_nm` computes it from ``spd``."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "spd", _frozen_array(self.spd))
+        if self.peak_nm is not None:
+            object.__setattr__(self, "peak_nm", float(self.peak_nm))
         object.__setattr__(self, "extra", _check_extra(f"led '{self.name}'", self.extra, _LED_KEYS))
 
 
@@ -191,6 +245,16 @@ class SequenceFrame(_ArrayEquality):
     or None for a frame recorded without them: then the file is read unchecked. Not compared: it
     describes the file's bytes, not the frame (the same frame written a second later has other bytes:
     the TIFF's time stamp)."""
+
+    time_utc: str | None = field(default=None, compare=False)
+    """When the frame was handed to the writer, ISO 8601 in UTC with microseconds (``time_utc``; optional,
+    docs/architecture.md §6), or None for a frame recorded without it. Not compared: the same frame
+    written again is written at another time."""
+
+    @property
+    def captured_utc(self) -> datetime | None:
+        """:attr:`time_utc` as an aware time, or None if not recorded."""
+        return parse_time_utc(self.time_utc)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "led_levels", tuple(float(v) for v in self.led_levels))
@@ -253,6 +317,15 @@ class Sequence(_ArrayEquality):
             unit=self.spectral_unit,
             source=str(self.path),
         )
+
+    def led_peaks_nm(self) -> tuple[float, ...]:
+        """Each LED's peak wavelength, nm: its recorded ``peak_nm``, else computed from its spectrum in energy.
+
+        The one number every export, report and page gives for an LED
+        (:func:`processing.led_wavelength.led_peaks_nm`).
+        """
+        recorded = {led.name: led.peak_nm for led in self.leds if led.peak_nm is not None}
+        return led_peaks_nm(self.led_spectra().replace(metadata={PEAK_METADATA_KEY: recorded}))
 
     def camera_responsivities(self) -> Spectra | None:
         """The camera's R, G, B responsivities, shape (n_wavelengths, 3), or None if not recorded."""
@@ -514,6 +587,10 @@ def _parse_camera(file: Path, value: Any, wavelengths_nm: np.ndarray) -> Sequenc
                 f"has no positive value on {wavelengths_nm[0]:g}–{wavelengths_nm[-1]:g} nm",
                 "each of R, G and B sensitive somewhere on the sequence's grid (or responsivity null)",
             )
+    if ISO_SPEED_KEY in camera.extra:
+        iso = _number(file, f"camera.{ISO_SPEED_KEY}", camera.extra[ISO_SPEED_KEY], "an ISO speed > 0")
+        if iso <= 0:
+            camera.fail(f"camera.{ISO_SPEED_KEY}", f"is {iso:g}", "an ISO speed > 0 (or no such key: unknown)")
     return SequenceCamera(model, serial, pixel_format, cfa, black, white, responsivity, camera.extra)
 
 
@@ -529,7 +606,12 @@ def _parse_leds(file: Path, value: Any, wavelengths_nm: np.ndarray) -> tuple[Seq
             led.fail(f"leds[{i}].name", f"{name!r} repeats leds[{seen[name]}].name", "unique LED names")
         seen[name] = i
         spd = _spectrum(file, f"leds[{i}].spd", led.get("spd", "a list of numbers"), wavelengths_nm)
-        leds.append(SequenceLed(name, spd, led.extra))
+        peak = led.get(PEAK_NM_KEY, "", optional=True)
+        if peak is not None:
+            peak = _number(file, f"leds[{i}].{PEAK_NM_KEY}", peak, "a wavelength in nm > 0")
+            if peak <= 0:
+                led.fail(f"leds[{i}].{PEAK_NM_KEY}", f"is {peak:g}", "a wavelength in nm > 0")
+        leds.append(SequenceLed(name, spd, led.extra, peak))
     return tuple(leds)
 
 
@@ -601,7 +683,14 @@ def _parse_frame(
             f"exposure_us × gain of at least {1 / sys.float_info.max:.3g}",
         )
     digest = _parse_digest(frame)
-    return SequenceFrame(path, role, tuple(levels.tolist()), exposure, gain, frame.extra, digest)
+    moment = frame.get(TIME_UTC_KEY, "", optional=True)
+    if moment is not None and parse_time_utc(moment) is None:
+        frame.fail(
+            name(TIME_UTC_KEY),
+            f"is {_describe(moment)}",
+            "an ISO 8601 time with its zone, e.g. 2026-03-01T12:30:05.250000Z",
+        )
+    return SequenceFrame(path, role, tuple(levels.tolist()), exposure, gain, frame.extra, digest, moment)
 
 
 def _parse_digest(frame: _Fields) -> FileDigest | None:
@@ -750,8 +839,17 @@ def _frame_json(frame: SequenceFrame) -> dict:
     }
     if frame.digest is not None:
         document.update(sha256=frame.digest.sha256, file_bytes=frame.digest.file_bytes)
+    if frame.time_utc is not None:
+        document[TIME_UTC_KEY] = frame.time_utc
     document.update(frame.extra)
     return document
+
+
+def _led_json(led: SequenceLed) -> dict:
+    document: dict = {"name": led.name, "spd": led.spd.tolist()}
+    if led.peak_nm is not None:
+        document[PEAK_NM_KEY] = led.peak_nm
+    return {**document, **led.extra}
 
 
 def _document(sequence: Sequence) -> dict:
@@ -762,7 +860,7 @@ def _document(sequence: Sequence) -> dict:
         "wavelengths_nm": [_plain(float(w)) for w in sequence.wavelengths_nm],
         "spectral_unit": sequence.spectral_unit,
         "camera": _camera_json(sequence.camera),
-        "leds": [{"name": led.name, "spd": led.spd.tolist(), **led.extra} for led in sequence.leds],
+        "leds": [_led_json(led) for led in sequence.leds],
         "frames": [_frame_json(frame) for frame in sequence.frames],
         **sequence.extra,
     }
@@ -969,6 +1067,9 @@ class SequenceWriter:
         exposure_us: float,
         gain: float = 1.0,
         extra: Mapping | None = None,
+        *,
+        time_utc: str | None = None,
+        stamp_time: bool = True,
     ) -> SequenceFrame:
         """Write one frame file, then list it in ``sequence.json``.
 
@@ -982,7 +1083,12 @@ class SequenceWriter:
         role, led_levels, exposure_us, gain
             As in :class:`SequenceFrame`; validated as :func:`read_sequence` does.
         extra
-            Extra keys for this frame's entry (``frame_id``, ``timestamp_ns``…).
+            Extra keys for this frame's entry (``frame_id``, ``timestamp_ns``, ``time_utc``…).
+        time_utc, stamp_time
+            The frame's ``time_utc`` (:func:`utc_now_text`'s form); None records now, the time the frame
+            reached the writer (:class:`~acquisition.sequence.async_writer.AsyncSequenceWriter` passes the
+            time the frame was handed to it) — or no time with ``stamp_time=False`` (a copy of a frame
+            recorded without one, :func:`write_sequence`).
 
         Returns
         -------
@@ -1016,6 +1122,7 @@ class SequenceWriter:
             "led_levels": [_as_float(v) for v in led_levels],
             "exposure_us": _as_float(exposure_us),
             "gain": _as_float(gain),
+            **({TIME_UTC_KEY: time_utc or utc_now_text()} if time_utc is not None or stamp_time else {}),
             **dict(extra or {}),
         }
         frame = _parse_frame(self._path, self._directory, index, entry, len(self._sequence.leds), must_exist=False)
@@ -1154,5 +1261,14 @@ def write_sequence(directory: str | os.PathLike, sequence: Sequence, frames: Ite
             f"{writer.path}: {len(pixels_list)} pixel arrays for {len(sequence.frames)} frames; expected one per frame"
         )
     for frame, pixels in zip(sequence.frames, pixels_list, strict=True):
-        writer.add_frame(pixels, frame.role, frame.led_levels, frame.exposure_us, frame.gain, frame.extra)
+        writer.add_frame(
+            pixels,
+            frame.role,
+            frame.led_levels,
+            frame.exposure_us,
+            frame.gain,
+            frame.extra,
+            time_utc=frame.time_utc,
+            stamp_time=False,
+        )
     return writer.finish() if sequence.complete else read_sequence(directory)

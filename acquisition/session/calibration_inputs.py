@@ -39,6 +39,7 @@ from msflash.calibration.camera_response import (
     learn_prior,
     responsivity_rmse,
 )
+from msflash.calibration.chart_noise import NOISE_WARNING, chart_noise, noise_summary
 from msflash.calibration.chart_sequence import (
     ChartMeasurements,
     estimate_from_measurements,
@@ -77,7 +78,7 @@ def measured_leds(
     files: SequenceOf[str | Path],
     unit: Literal["energy", "photons", "counts"] | None = None,
     column: int | None = None,
-    dark: str | Path | None = None,
+    dark: str | Path | SequenceOf[str | Path] | None = None,
     report: Report = progress,
     *,
     no_dark: bool = False,
@@ -100,7 +101,8 @@ def measured_leds(
     column
         The value column when a file has more than two.
     dark
-        An export with the shutter closed, subtracted from each.
+        An export with the shutter closed, subtracted from each; or one per integration time (each
+        export takes the dark of its own time).
     report
         Receives warnings (saturation, a low SNR, the baseline) and the notes of clipped negatives.
     no_dark
@@ -114,7 +116,7 @@ def measured_leds(
         unit=unit,
         column=column,
         integration_time_s=None if integration_time_ms is None else integration_time_ms / 1e3,
-        dark=dark,
+        dark=dark if dark is None or isinstance(dark, str | Path) else tuple(dark),
         no_dark=no_dark,
         response=spectrometer_response,
     )
@@ -463,8 +465,13 @@ def chart_from_exports(
 
     ``ρ_p(λ) = (s_p(λ) − dark) / (s_white(λ) − dark) · ρ_white(λ)``, each export's baseline removed
     and its counts per second taken as for LEDs (:func:`msflash.calibration.led_exports.read_led_exports`:
-    a dark of another integration time is scaled, none without ``--no-dark`` refused), so the
-    spectrometer's response cancels. Exports in chart order (column by column, as the Macbeth file).
+    each export takes the dark of its integration time, a dark of another time is scaled where an
+    out-of-band tail allows, none without ``--no-dark`` refused), so the spectrometer's response
+    cancels. Exports in chart order (column by column, as the Macbeth file).
+
+    The camera fit takes the chart as exact: the reflectances' noise is estimated
+    (:mod:`msflash.calibration.chart_noise`), recorded as ``noise`` and warned about above
+    ``NOISE_WARNING``.
 
     Returns
     -------
@@ -483,6 +490,12 @@ def chart_from_exports(
     if patches.unit != reference.unit:
         raise UsageError(
             f"--white {white}: {reference.unit} but the patches are {patches.unit}; expected one instrument and unit"
+        )
+    if patches.section["counts_per_second"] != reference.section["counts_per_second"]:
+        stated, unstated = (files[0], white) if patches.section["counts_per_second"] else (white, files[0])
+        raise UsageError(
+            f"{unstated}: states no integration time but {stated} does; expected both (a header line or "
+            "--integration-time-ms), so that the patches and the white are compared per second"
         )
     white_values = reference.spectra.values[:, 0]
     usable = white_values > MIN_WHITE_SHARE * float(white_values.max())
@@ -515,6 +528,16 @@ def chart_from_exports(
         source=f"measured: {len(files)} exports over the white {white}",
     )
     rows, columns = chart_reference_grid(len(files), grid_spec)
+    noise = noise_summary(
+        chart_noise(patches.measurements, reference.measurements[0], DEFAULT_GRID), names, DEFAULT_GRID
+    )
+    if noise is not None and noise["relative_rms"] > NOISE_WARNING:
+        report(
+            f"warning: the measured reflectances carry {100 * noise['relative_rms']:.2g} % noise (RMS; worst "
+            f"{noise['worst_patch']}, {100 * noise['worst_value']:.2g} % at {noise['worst_nm']:g} nm); the camera fit "
+            f"takes them as exact (above {100 * NOISE_WARNING:g} % it cost accuracy in tests): average more scans, or "
+            "lengthen the integration time of the dark patches (a dark export per time, --dark)"
+        )
     section = {
         "sources": [str(f) for f in files],
         "white": str(white),
@@ -523,6 +546,7 @@ def chart_from_exports(
         "columns": columns,
         "acquisition": patches.section["acquisition"],
         "baselines": patches.section["baselines"],
+        "noise": noise,
     }
     return spectra, section
 

@@ -24,6 +24,7 @@ from msflash.calibration import chart_detection
 from msflash.processing import colour_metrics, datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.image_formation import chart_scene
+from msflash.processing.names import unknown_name
 from msflash.processing.spectra import Spectra, WavelengthGrid
 
 CHARTS = ("macbeth",)
@@ -176,7 +177,7 @@ def chart_layout(
 ) -> ChartLayout:
     """The label map of a simulated chart of ``chart_scene(chart, patch_px, border_px)`` at the top left."""
     if chart not in CHARTS:
-        raise UsageError(f"--chart '{chart}': unknown; expected one of {', '.join(CHARTS)}")
+        raise UsageError(unknown_name("--chart", chart, CHARTS))
     if patch_px < 1 or border_px < 0 or margin_px < 0:
         raise UsageError(
             f"--patch-px {patch_px}, --border-px {border_px}, --margin-px {margin_px}: expected "
@@ -256,7 +257,7 @@ def sequence_layout(
     reference = chart if isinstance(chart, ChartReference) else None
     name = "macbeth" if reference is not None else chart
     if reference is None and chart not in CHARTS:
-        raise UsageError(f"--chart '{chart}': unknown; expected one of {', '.join(CHARTS)}")
+        raise UsageError(unknown_name("--chart", chart, CHARTS))
     if patch_px is not None or border_px is not None:
         if reference is not None and (reference.rows, reference.columns) != chart_detection.MACBETH_GRID:
             raise UsageError(

@@ -16,7 +16,7 @@ only sums them.
 
 The results are those of :func:`acquisition.session.analysis.estimate_sequence` and
 :func:`acquisition.session.analysis.solve_sequence_flash` on the same frames (same statistics code,
-same solvers; only the order of the moment sums differs); ``tests/acquisition/test_flash_stream.py``
+same solvers; only the order of the moment sums differs); ``tests/acquisition/session/test_flash_stream.py``
 checks it.
 """
 
@@ -31,6 +31,7 @@ from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session import analysis
+from msflash.acquisition.session.engine import CaptureResult, FrameEvent
 from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
 from msflash.processing import frame_kernels
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
@@ -169,6 +170,15 @@ class FlashSession:
                 self._exposure.add_ambient(metered, frame.exposure_us)
             else:
                 self._exposure.add_led(metered, frame.exposure_us)
+
+    # -- as a frame handler of the capture engine ---------------------------------------------
+    def frame_ready(self, event: FrameEvent) -> None:
+        """Take an ambient or LED frame of a run as it lands (:meth:`add`); the flash frame is not the estimate's."""
+        if event.step.role != "flash":
+            self.add(event.frame, event.step.role, event.step.led_levels)
+
+    def sequence_finished(self, result: CaptureResult) -> None:
+        """Nothing to do: the statistics were taken frame by frame."""
 
     def _add_rows(self, pixels: np.ndarray, role: str) -> None:
         camera = self.header.camera

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.errors import UsageError
-from msflash.acquisition.sequence.exr_metadata import exr_metadata
+from msflash.acquisition.sequence.exr_metadata import exr_image
 from msflash.acquisition.sequence.format import Sequence, read_sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
 from msflash.acquisition.sequence.locate import locate_sequence
@@ -326,7 +326,8 @@ def write_flash_image(
     metadata: dict[str, Any],
     report: Report,
 ) -> None:
-    """The computational image at ``output``: linear float EXR, or raw TIFF at the ambient frame's exposure.
+    """The computational image at ``output``: linear float EXR (RGB; a mosaic demosaicked,
+    :func:`acquisition.sequence.exr_metadata.exr_image`), or raw TIFF at the ambient frame's exposure.
 
     Raises
     ------
@@ -336,8 +337,8 @@ def write_flash_image(
     kind = check_output_type(output)
     try:
         if kind == "exr":
-            exr = exr_metadata(sequence, 1 if image.ndim == 2 else image.shape[2])
-            write_image(output, image, {**metadata, **exr.attributes}, exr.chromaticities)
+            rgb, exr = exr_image(sequence, image)  # a mosaic demosaicked: an EXR holds R, G, B
+            write_image(output, rgb, {**metadata, **exr.attributes}, exr.chromaticities)
             return
         ambient = sequence.frames[stack.ambient_index]
         white = sequence.camera.white_level

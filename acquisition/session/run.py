@@ -1,55 +1,59 @@
 """The capture and run sessions behind ``msflash capture`` and ``msflash run`` (docs/architecture.md §5.1).
 
-``capture``: exposures planned for the rig, then ambient + each LED in one plan. ``run``: the same,
-with the flash decided from the frames in memory and re-captured in the same stream
-(:func:`run_one_stream`), or — on a replay rig, which checks every plan against its recording up
-front — as a second capture (:func:`run_two_captures`). The command line (``app/cli_run.py``)
-parses options into a :class:`RunOptions`, opens the rig and reports; everything between is here.
+``capture``: exposures planned for the rig (:mod:`~acquisition.session.run_exposure`), then
+ambient + each LED in one plan. ``run``: the same, with the flash decided from the frames in memory
+and re-captured in the same stream (:func:`run_one_stream`), or — on a replay rig, which checks
+every plan against its recording up front — as a second capture (:func:`run_two_captures`). Both
+run the capture engine (:mod:`~acquisition.session.capture`) with frame handlers: the flash session
+(:class:`~acquisition.session.flash_session.FlashSession`, statistics as frames arrive), the run's
+flash decision (:class:`StreamFlash`), :class:`ProgressLines` and whatever the caller adds (the
+live page). The command line (``app/cli_run.py``) parses options into a :class:`RunOptions`, opens
+the rig and reports; everything between is here.
 """
 
 from __future__ import annotations
 
-import logging
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Sequence as Seq
 from dataclasses import dataclass
 from pathlib import Path
+from warnings import WarningMessage
 
 import numpy as np
 
 from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.devices.replay_camera import format_levels, levels_match
-from msflash.acquisition.errors import UsageError
-from msflash.acquisition.plan import CapturePlan, StepRole, TriggerSource
+from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.progress import count, progress
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import Sequence, SequenceFrame, SequenceWriter, read_sequence
 from msflash.acquisition.session import analysis
-from msflash.acquisition.session.capture import FrameWriter, preview_frames, run_capture, run_capture_with_flash
+from msflash.acquisition.session.both_flashes import SequenceFlashes, solve_both
+from msflash.acquisition.session.capture import FrameWriter, run_capture, run_capture_with_flash
+from msflash.acquisition.session.engine import Cancellation, CaptureResult, FlashChoice, FrameEvent, FrameHandler
 from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,
     FlashEnergyWarning,
-    camera_exposure_range,
-    camera_noise_model,
     flash_exposure,
-    format_led_snr,
-    led_snr_warnings,
-    measure_led_snr,
     metering_view,
-    plan_exposures,
-    whole_pwm_periods,
 )
 from msflash.acquisition.session.flash_session import FlashSession
 from msflash.acquisition.session.rig import Rig
+from msflash.acquisition.session.run_exposure import (
+    SYNC_MODES,
+    LedCapture,
+    Recorded,
+    flash_exposure_for,
+    led_capture,
+    plan_exposure,
+    recording_of,
+    report_exposure,
+)
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
-
-log = logging.getLogger(__name__)
-
-SYNC_MODES: dict[str, TriggerSource] = {"host": "software", "booth": "booth", "camera": "camera"}
-"""``--sync`` names and the plan trigger each stands for."""
+from msflash.processing.flash import FlashSolution
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,31 @@ class RunOptions:
     """``host``, ``booth`` or ``camera`` (docs/architecture.md §4)."""
     from_disk: bool = False
     """Re-read the frames from disk before deciding the flash (a check of the in-memory route)."""
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What a run (:func:`run_one_stream`, :func:`run_two_captures`) leaves for its report."""
+
+    estimate: AmbientEstimate
+    """The reported estimate: the sequence's, on the recorded frames (:func:`reported_estimate`)."""
+    solutions: dict[str, FlashSolution]
+    """The matching and complementary flashes (:func:`~acquisition.session.both_flashes.solve_both`)."""
+    warnings: tuple[WarningMessage, ...]
+    """Warnings of the decision and the solves (target unreachable, flash energy), in order."""
+    captured: LedCapture
+    """The ambient + LED frames as captured, with their measured SNR."""
+    flash_exposure_us: float | None
+    """The flash frame's exposure as the camera read it back; None when the flash is synthesised only."""
+    stack: analysis.FrameStack
+    """The recorded frames the report synthesises from."""
+    decided_at: float
+    """``time.perf_counter()`` when the flash was decided."""
+
+    @property
+    def decision_ms(self) -> float:
+        """From the last LED frame to the flash decision, in milliseconds."""
+        return (self.decided_at - self.captured.last_frame_at) * 1e3
 
 
 def capture_sequence(
@@ -95,7 +124,7 @@ def sequence_writer(rig: Rig, out: Path, exposure: ExposurePlan | None = None) -
     return rig.sequence_writer(out / "sequence", extra={"msflash": msflash})
 
 
-def report_frame(step, frame, entry, total: int | None = None) -> None:
+def report_frame(step: CaptureStep, entry: SequenceFrame, total: int | None = None) -> None:
     """One line per frame written; given the plan's ``total`` steps, a bar on a terminal instead."""
     note = f"captured step {step.index} ({step.label}) → {entry.file}"
     if entry.extra.get("retake"):
@@ -106,130 +135,46 @@ def report_frame(step, frame, entry, total: int | None = None) -> None:
         count("capture", step.index + 1, total, "frame", note)
 
 
-@dataclass(frozen=True)
-class Recorded:
-    """A replay rig's recorded exposures and gains: replay must ask for exactly those."""
+class ProgressLines:
+    """A frame handler reporting each frame written (:func:`report_frame`), as a bar of ``total`` steps on a terminal."""
 
-    ambient_us: float
-    led_us: tuple[float, ...]
-    flash_us: float | None
-    """None when the recording has no flash frame (a sequence from ``msflash capture``)."""
-    ambient_gain: float
-    led_gains: tuple[float, ...]
-    flash_gain: float
-    flash_levels: tuple[float, ...] | None = None
-    """The recorded flash frame's LED levels (None without one)."""
+    def __init__(self, total: int | None = None) -> None:
+        self.total = total
 
+    def frame_ready(self, event: FrameEvent) -> None:
+        if event.entry is not None:
+            report_frame(event.step, event.entry, self.total)
 
-def recording_of(rig: Rig) -> Recorded | None:
-    """What a replay rig's recording holds (None for other rigs)."""
-    sequence = getattr(rig.camera, "sequence", None)
-    if sequence is None or not rig.name.startswith("replay:"):
-        return None
-    ambient = sequence.indices("ambient")
-    leds = sequence.indices("led")
-    flash = sequence.indices("flash")
-    if not ambient:
-        return None
-    frames = sequence.frames
-    return Recorded(
-        frames[ambient[0]].exposure_us,
-        tuple(frames[i].exposure_us for i in leds),
-        frames[flash[0]].exposure_us if flash else None,
-        frames[ambient[0]].gain,
-        tuple(frames[i].gain for i in leds),
-        frames[flash[0]].gain if flash else 1.0,
-        tuple(frames[flash[0]].led_levels) if flash else None,
-    )
+    def sequence_finished(self, result: CaptureResult) -> None:
+        """Nothing more to say: the last frame's line was the last."""
 
 
-def plan_exposure(rig: Rig, exposure_option: str | float, policy: ExposurePolicy) -> ExposurePlan:
-    """``--exposure``: fixed, the replay's recording, the fake's suggestion, or metered previews (auto)."""
-    n_leds = rig.led_spectra.count
-    limits = camera_exposure_range(rig.camera)
-    noise = camera_noise_model(rig.camera)
-    method = "photon+read noise" if noise is not None else "difference image"
-    nan = (float("nan"),) * n_leds
-    if exposure_option != "auto":
-        exposure = float(exposure_option)
-        if not limits[0] <= exposure <= limits[1]:
-            raise UsageError(f"--exposure {exposure:g}: outside the camera's range {limits[0]:g}–{limits[1]:g} µs")
-        return ExposurePlan(exposure, (exposure,) * n_leds, nan, method, limits, policy, mode="fixed")
-    recorded = recording_of(rig)
-    if recorded is not None and len(recorded.led_us) == n_leds:
-        return ExposurePlan(
-            recorded.ambient_us,
-            recorded.led_us,
-            nan,
-            method,
-            limits,
-            policy,
-            mode="recorded",
-            ambient_gain=recorded.ambient_gain,
-            led_gains=recorded.led_gains,
-        )
-    suggested = float(getattr(rig.camera, "suggested_exposure_us", None) or 10_000.0)
-    progress(
-        f"auto exposure: metering ambient previews (≤ {policy.max_saturated_fraction:.2%} saturated, "
-        f"bright end at {policy.target_fraction:.0%} of full scale)"
-    )
-    info = rig.camera.info
+class LedFrames:
+    """A frame handler keeping the ambient + LED frames in memory and when the last one was handed over."""
 
-    def capture(levels, exposure_us: float):
-        role: StepRole = "led" if any(level > 0 for level in levels) else "ambient"
-        preview = CapturePlan.single(levels, exposure_us, role=role)
-        return metering_view(preview_frames(rig.camera, rig.booth, preview)[0].pixels, mosaic=info.cfa is not None)
+    def __init__(self) -> None:
+        self.frames: list[RawFrame] = []
+        self.last_frame_at = 0.0
+        """``time.perf_counter()`` when the last ambient or LED frame was handed over (written)."""
 
-    return plan_exposures(
-        capture,
-        n_leds,
-        info.black_level,
-        info.white_level,
-        limits,
-        noise,
-        policy,
-        start_us=suggested,
-        cfa=info.cfa is not None,
-        led_names=list(rig.led_spectra.names),
-    )
+    def frame_ready(self, event: FrameEvent) -> None:
+        if event.step.role != "flash":
+            self.frames.append(event.frame)
+            self.last_frame_at = time.perf_counter()
+
+    def sequence_finished(self, result: CaptureResult) -> None:
+        """The frames are kept as they came."""
 
 
-def report_exposure(plan: ExposurePlan, names: list[str]) -> None:
-    progress(
-        f"exposure ({plan.mode}): ambient {plan.ambient_exposure_us:.0f} µs; LEDs "
-        + ", ".join(f"{n} {e:.0f}" for n, e in zip(names, plan.led_exposures_us))
-        + " µs"
-    )
-    if plan.mode == "auto":
-        progress(f"planned LED SNR ({plan.snr_method}, median pixel): " + format_led_snr(names, plan.predicted_snr))
-    for note in plan.warnings:
-        progress(f"warning: {note}")
-
-
-@dataclass
-class LedCapture:
-    """The ambient + LED frames as captured, kept in memory for estimation (no re-read from disk)."""
-
-    plan: ExposurePlan
-    frames: list[RawFrame]
-    entries: list[SequenceFrame]
-    last_frame_at: float
-    """``time.perf_counter()`` when the last LED frame was handed over (written)."""
-    snr: list[float]
-    snr_method: str
-    snr_warnings: tuple[str, ...] = ()
-    """One per LED whose measured SNR is no measurement (no LED signal; :func:`led_snr_warnings`)."""
-
-
-def capture_led_sequence(rig: Rig, writer: FrameWriter, plan: ExposurePlan, sync: str = "host") -> LedCapture:
-    frames: list[RawFrame] = []
-    stamp = {"t": 0.0}
-
-    def keep(step, frame, entry) -> None:
-        frames.append(frame)
-        stamp["t"] = time.perf_counter()
-        report_frame(step, frame, entry, len(capture_plan.steps))
-
+def capture_led_sequence(
+    rig: Rig,
+    writer: FrameWriter,
+    plan: ExposurePlan,
+    sync: str = "host",
+    handlers: Seq[FrameHandler] = (),
+    cancel: Cancellation | None = None,
+) -> LedCapture:
+    """Ambient + each LED at the planned exposures and gains, written by ``writer``; the frames with their SNR."""
     capture_plan = CapturePlan.ambient_then_each_led(
         len(writer.sequence.leds),
         plan.ambient_exposure_us,
@@ -238,33 +183,17 @@ def capture_led_sequence(rig: Rig, writer: FrameWriter, plan: ExposurePlan, sync
         led_gains=plan.led_gains,
         trigger=SYNC_MODES[sync],
     )
-    entries = run_capture(rig.camera, rig.booth, capture_plan, writer, on_frame=keep)
-    return led_capture(rig, writer, plan, frames, entries, stamp["t"])
-
-
-def led_capture(
-    rig: Rig, writer, plan: ExposurePlan, frames: list[RawFrame], entries: list[SequenceFrame], last_frame_at: float
-) -> LedCapture:
-    """The LED frames with their measured SNR (reported)."""
-    info = rig.camera.info
-    pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
-    snr, method = measure_led_snr(
-        pixels[0],
-        frames[0].exposure_us,
-        pixels[1:],
-        [f.exposure_us for f in frames[1:]],
-        info.black_level,
-        info.white_level,
-        camera_noise_model(rig.camera),
-        cfa=info.cfa is not None,
-        gain=frames[0].gain,
+    kept = LedFrames()
+    entries = run_capture(
+        rig.camera,
+        rig.booth,
+        capture_plan,
+        writer,
+        (kept, ProgressLines(len(capture_plan.steps)), *handlers),
+        cancel=cancel,
     )
     names = [led.name for led in writer.sequence.leds]
-    progress(f"LED SNR ({method}, median pixel): " + format_led_snr(names, snr))
-    warned = tuple(led_snr_warnings(names, snr, "measured SNR"))
-    for note in warned:
-        progress(f"warning: {note}")
-    return LedCapture(plan, frames, entries, last_frame_at, snr, method, warned)
+    return led_capture(rig, names, plan, kept.frames, entries, kept.last_frame_at)
 
 
 def degenerate(estimate) -> str | None:
@@ -281,14 +210,58 @@ def degenerate(estimate) -> str | None:
     return f"not finite: {', '.join(bad)}; condition number {float(estimate.condition_number):.3g}"
 
 
-def solve_both(solve, weights: np.ndarray, first: str) -> tuple[dict, list]:
-    """Both flashes (``first`` solved first), with the TargetUnreachable warnings recorded."""
-    solutions = {}
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", TargetUnreachableWarning)
-        for mode in (first, *(m for m in ("matching", "complementary") if m != first)):
-            solutions[mode] = solve(mode, weights)
-    return solutions, list(caught)
+class StreamFlash(LedFrames):
+    """The one-stream run's flash decision (a :class:`~acquisition.session.engine.FlashDecider`).
+
+    A frame handler too: it keeps the ambient + LED frames (:class:`LedFrames`) while the
+    :class:`FlashSession`, another handler, takes their statistics. :meth:`decide_flash` solves the
+    ``options.mode`` flash from those statistics (or, with ``options.from_disk``, from the frames
+    re-read from disk), predicts its exposure, and keeps what the run reports: the solution, the
+    warnings raised (the estimate's reliability signals are left until read), the time decided.
+    """
+
+    def __init__(self, rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, options: RunOptions) -> None:
+        super().__init__()
+        self.rig, self.writer, self.exposure, self.options = rig, writer, exposure, options
+        auto = exposure.mode == "auto"  # then the session predicts the flash exposure from the frames as they arrive
+        self.session = FlashSession.prepare(
+            writer.sequence,
+            options.target,
+            options.solver,
+            options.alpha,
+            options.bin_factor,
+            exposure_limits_us=exposure.exposure_range_us if auto else None,
+            exposure_policy=exposure.policy,
+        )
+        self.chosen: FlashSolution | None = None
+        self.stack: analysis.FrameStack | None = None
+        """The frames re-read from disk (``from_disk``), else None until the run builds it."""
+        self.warnings: tuple[WarningMessage, ...] = ()
+        self.decided_at = 0.0
+
+    def decide_flash(self) -> FlashChoice:
+        """The flash levels and exposure from the frames taken (between the last LED frame and the flash)."""
+        options = self.options
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", TargetUnreachableWarning)
+            if options.from_disk:
+                sequence = read_sequence(self.writer.flush().directory)
+                self.stack = analysis.load_frame_stack(sequence)
+                estimate = analysis.estimate_sequence(
+                    sequence, options.solver, options.alpha, stack=self.stack, bin_factor=options.bin_factor
+                )
+                self.chosen = self.session.solve(options.mode, estimate.ambient_weights)
+                levels = np.clip(self.chosen.flash_weights, 0.0, 1.0)
+            else:
+                # As the capture bench: the estimate's reliability signals are left for after the trigger.
+                decision = self.session.decide(options.mode)
+                levels, self.chosen = decision.levels, decision.solution
+        with warnings.catch_warnings(record=True) as flash_caught:
+            warnings.simplefilter("always", FlashEnergyWarning)
+            flash_us = flash_exposure_for(self.rig, self.exposure, levels, self.session.flash_exposure, options.sync)
+        self.warnings = (*caught, *flash_caught)
+        self.decided_at = time.perf_counter()
+        return FlashChoice(tuple(float(v) for v in levels), float(flash_us))
 
 
 def run_one_stream(
@@ -296,88 +269,46 @@ def run_one_stream(
     writer: AsyncSequenceWriter,
     exposure: ExposurePlan,
     options: RunOptions,
-    on_frame: Callable[..., None] | None = None,
-):
+    handlers: Seq[FrameHandler] = (),
+    cancel: Cancellation | None = None,
+) -> RunResult:
     """Ambient + LEDs + flash in one stream, the flash decided from the frames in memory.
 
-    ``on_frame(step, frame, entry)`` is called as each frame lands (the flash frame too), after it is
-    queued for writing: ``msflash live`` shows the sequence's progress with it.
+    Each frame goes to the flash session, the decision, the progress line and then ``handlers`` as it
+    lands (the flash frame too), after it is queued for writing: ``msflash live`` shows the
+    sequence's progress with one. ``cancel`` stops the capture between frames.
     """
-    auto = exposure.mode == "auto"  # then the session predicts the flash exposure from the frames as they arrive
-    session = FlashSession.prepare(
-        writer.sequence,
-        options.target,
-        options.solver,
-        options.alpha,
-        options.bin_factor,
-        exposure_limits_us=exposure.exposure_range_us if auto else None,
-        exposure_policy=exposure.policy,
-    )
     n_leds = len(writer.sequence.leds)
-    frames: list[RawFrame] = []
-    stamp = {"t": 0.0, "decided": 0.0}
-    result: dict = {}
-
-    def keep(step, frame, entry) -> None:
-        if step.role != "flash":
-            session.add(frame, step.role, step.led_levels)
-            frames.append(frame)
-            stamp["t"] = time.perf_counter()
-        report_frame(step, frame, entry, n_leds + 2)  # ambient, the LEDs, the flash
-        if on_frame is not None:
-            on_frame(step, frame, entry)
-
-    def decide(_frames):
-        # As the capture bench: FlashSession.decide, the estimate's reliability signals left for
-        # after the flash trigger (``decision.estimate`` is read once the capture is over).
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", TargetUnreachableWarning)
-            if options.from_disk:
-                sequence = read_sequence(writer.flush().directory)
-                stack = analysis.load_frame_stack(sequence)
-                estimate = analysis.estimate_sequence(
-                    sequence, options.solver, options.alpha, stack=stack, bin_factor=options.bin_factor
-                )
-                chosen = session.solve(options.mode, estimate.ambient_weights)
-                levels = np.clip(chosen.flash_weights, 0.0, 1.0)
-                result.update(chosen=chosen, stack=stack)
-            else:
-                decision = session.decide(options.mode)
-                levels = decision.levels
-                result.update(chosen=decision.solution)
-        with warnings.catch_warnings(record=True) as flash_caught:
-            warnings.simplefilter("always", FlashEnergyWarning)
-            flash_us = flash_exposure_for(rig, exposure, levels, session.flash_exposure, options.sync)
-        result.update(caught=[*caught, *flash_caught], flash_us=flash_us)
-        stamp["decided"] = time.perf_counter()
-        return levels, flash_us
-
+    flash = StreamFlash(rig, writer, exposure, options)
     plan = CapturePlan.ambient_then_each_led(
         n_leds,
         exposure.ambient_exposure_us,
         led_exposures_us=exposure.led_exposures_us,
         trigger=SYNC_MODES[options.sync],
     )
-    entries = run_capture_with_flash(rig.camera, rig.booth, plan, writer, decide, on_frame=keep)
-    if "stack" not in result:
-        # The report's frames as the sequence records them (a mono camera's as three identical
-        # channels), as for two captures; the session's own stack holds a mono frame's one plane.
-        result["stack"] = analysis.load_frame_stack(writer.flush(), [frame.pixels for frame in frames])
-    estimate = reported_estimate(writer.flush(), result["stack"], options)
-    other = "matching" if options.mode == "complementary" else "complementary"
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", TargetUnreachableWarning)
-        solutions = {options.mode: result["chosen"], other: session.solve(other, estimate.ambient_weights)}
-    captured = led_capture(rig, writer, exposure, frames, list(entries[:-1]), stamp["t"])
-    flash_entry = entries[-1]
-    return (
+    handled: tuple[FrameHandler, ...] = (
+        flash.session,
+        flash,
+        ProgressLines(n_leds + 2),
+        *handlers,
+    )  # ambient, the LEDs, the flash
+    entries = run_capture_with_flash(rig.camera, rig.booth, plan, writer, flash, handled, cancel=cancel)
+    assert flash.chosen is not None
+    # The report's frames as the sequence records them (a mono camera's as three identical
+    # channels), as for two captures; the session's own stack holds a mono frame's one plane.
+    stack = flash.stack or analysis.load_frame_stack(writer.flush(), [frame.pixels for frame in flash.frames])
+    estimate = reported_estimate(writer.flush(), stack, options)
+    both = solve_both(flash.session, estimate.ambient_weights, options.mode, solved={options.mode: flash.chosen})
+    names = [led.name for led in writer.sequence.leds]
+    captured = led_capture(rig, names, exposure, flash.frames, list(entries[:-1]), flash.last_frame_at)
+    return RunResult(
         estimate,
-        solutions,
-        result["caught"] + list(caught),
+        both.solutions,
+        (*flash.warnings, *both.warnings),
         captured,
-        flash_entry.exposure_us,
-        result["stack"],
-        stamp["decided"],
+        entries[-1].exposure_us,
+        stack,
+        flash.decided_at,
     )
 
 
@@ -394,9 +325,19 @@ def reported_estimate(sequence: Sequence, stack: analysis.FrameStack, options: R
     )
 
 
-def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePlan, options: RunOptions):
-    """LED sequence, then the flash as a second capture (replay rigs: plans are checked up front)."""
-    captured = capture_led_sequence(rig, writer, exposure, options.sync)
+def run_two_captures(
+    rig: Rig,
+    writer: AsyncSequenceWriter,
+    exposure: ExposurePlan,
+    options: RunOptions,
+    handlers: Seq[FrameHandler] = (),
+    cancel: Cancellation | None = None,
+) -> RunResult:
+    """LED sequence, then the flash as a second capture (replay rigs: plans are checked up front).
+
+    Both captures go through the capture engine's runner (:func:`run_capture`), each frame to
+    ``handlers`` after the progress line."""
+    captured = capture_led_sequence(rig, writer, exposure, options.sync, handlers, cancel)
     sequence = writer.flush()
     if options.from_disk:
         sequence = read_sequence(writer.path.parent)
@@ -406,11 +347,8 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
     estimate = analysis.estimate_sequence(
         sequence, options.solver, options.alpha, stack=stack, bin_factor=options.bin_factor
     )
-    solutions, caught = solve_both(
-        lambda mode, weights: analysis.solve_sequence_flash(sequence, mode, weights, options.target),
-        estimate.ambient_weights,
-        options.mode,
-    )
+    both = solve_both(SequenceFlashes(sequence, options.target), estimate.ambient_weights, options.mode)
+    solutions, caught = both.solutions, both.warnings
     levels = np.clip(solutions[options.mode].flash_weights, 0.0, 1.0)
     recorded = recording_of(rig)
     if exposure.mode == "recorded" and recorded is not None and recorded.flash_us is None:
@@ -418,7 +356,7 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
             "the recording has no flash frame (a sequence from 'msflash capture'): the flash is synthesised "
             "from the frames, not re-captured"
         )
-        return estimate, solutions, caught, captured, None, stack, time.perf_counter()
+        return RunResult(estimate, solutions, caught, captured, None, stack, time.perf_counter())
     if (
         exposure.mode == "recorded"
         and recorded is not None
@@ -432,7 +370,7 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
             f"{options.mode} flash asks for {format_levels(levels)} (recorded with other options or another "
             "msflash version): the flash is synthesised from the frames, not replayed"
         )
-        return estimate, solutions, caught, captured, None, stack, time.perf_counter()
+        return RunResult(estimate, solutions, caught, captured, None, stack, time.perf_counter())
     frames = captured.frames
     info = rig.camera.info  # read once: on a real camera each read is several feature round trips
     pixels = [metering_view(f.pixels, mosaic=info.cfa is not None) for f in frames]
@@ -455,40 +393,32 @@ def run_two_captures(rig: Rig, writer: AsyncSequenceWriter, exposure: ExposurePl
             ),
             options.sync,
         )
-    caught = [*caught, *flash_caught]
+    caught = (*caught, *flash_caught)
     flash_gain = recorded.flash_gain if exposure.mode == "recorded" and recorded is not None else 1.0
     flash_plan = CapturePlan.single(levels, flash_us, gain=flash_gain, trigger=SYNC_MODES[options.sync])
     decided = time.perf_counter()
-    run_capture(rig.camera, rig.booth, flash_plan, writer, on_frame=report_frame)
-    return estimate, solutions, caught, captured, flash_us, stack, decided
+    run_capture(rig.camera, rig.booth, flash_plan, writer, (ProgressLines(), *handlers), cancel=cancel)
+    return RunResult(estimate, solutions, caught, captured, flash_us, stack, decided)
 
 
-def flash_exposure_for(
-    rig: Rig, plan: ExposurePlan, levels: np.ndarray, predict: Callable[[np.ndarray], float], sync: str = "host"
-) -> float:
-    """The flash frame's exposure: fixed, recorded (replay), or ``predict(levels)`` from the frames in memory.
-
-    A predicted exposure for a booth that dims by PWM here (host paced, or a booth without pulse
-    dimming) is made whole PWM periods, or a :class:`FlashEnergyWarning` gives the energy error
-    (:func:`~acquisition.session.exposure.whole_pwm_periods`).
-    """
-    if plan.mode != "auto":
-        recorded = recording_of(rig)
-        if plan.mode == "recorded" and recorded is not None and recorded.flash_us is not None:
-            return recorded.flash_us
-        return plan.ambient_exposure_us
-    exposure_us = predict(levels)
-    info = getattr(rig.booth, "info", None)
-    pwm_hz = getattr(info, "pwm_hz", None)
-    if pwm_hz is None or (sync in ("booth", "camera") and getattr(info, "pulse_dimming", False)):
-        return exposure_us
-    chosen, note = whole_pwm_periods(
-        exposure_us, [float(v) for v in levels], pwm_hz, plan.exposure_range_us, plan.policy
-    )
-    if note is not None:
-        warnings.warn(note, FlashEnergyWarning, stacklevel=2)
-    elif chosen != exposure_us:
-        log.info(
-            "flash exposure %.0f µs → %.0f µs: whole periods of the booth's %g Hz PWM", exposure_us, chosen, pwm_hz
-        )
-    return chosen
+__all__ = [
+    "SYNC_MODES",
+    "LedCapture",
+    "LedFrames",
+    "ProgressLines",
+    "Recorded",
+    "RunOptions",
+    "RunResult",
+    "StreamFlash",
+    "capture_led_sequence",
+    "capture_sequence",
+    "degenerate",
+    "flash_exposure_for",
+    "plan_exposure",
+    "recording_of",
+    "report_exposure",
+    "reported_estimate",
+    "run_one_stream",
+    "run_two_captures",
+    "sequence_writer",
+]

@@ -271,6 +271,14 @@ class TextBooth:
             self._off_after_error()
             raise
 
+    def watchdog_covering(self, silence_s: float) -> contextlib.AbstractContextManager[None]:
+        """Nothing to cover: the text protocol has no watchdog."""
+        return contextlib.nullcontext()
+
+    def watchdog_fired(self) -> bool:
+        """Never: the text protocol has no watchdog."""
+        return False
+
     def close(self) -> None:
         """Switch the LEDs off (best effort) and close the port (idempotent)."""
         if self._closed:

@@ -39,7 +39,7 @@ from typing import Any
 
 import pytest
 
-from tests.acquisition.gvcp_port import gvcp_port_in_use
+from tests.acquisition.support.gvcp_port import gvcp_port_in_use
 
 FAKE_GV_TOOL = "arv-fake-gv-camera-0.8"
 

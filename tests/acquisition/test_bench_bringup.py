@@ -24,7 +24,7 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session.rig import _emulator_for
+from msflash.acquisition.session.rig import emulator_for
 from msflash.led_controller import LedBooth, discovery, firmware_sim, serve_on_pty
 from msflash.led_controller.stk500v2 import read_intel_hex
 from msflash.led_controller.wiring import read_pins, wiring_svg
@@ -121,7 +121,7 @@ def test_run_on_the_hardware_rig_finds_the_mega_without_port(
         + "\n".join(f"{w:g}," + ",".join(f"{v:.6g}" for v in row) for w, row in zip(leds.wavelengths_nm, leds.values))
         + "\n"
     )
-    with serve_on_pty(_emulator_for(leds)) as server:
+    with serve_on_pty(emulator_for(leds)) as server:
         ports = [_serial_port("/dev/ttyS0"), _mega_port(server.port)]
         monkeypatch.setattr(discovery, "list_serial_ports", lambda dev_root=Path("/dev"): ports)
         assert discovery.find_booth().device == server.port

@@ -21,7 +21,7 @@ from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.capture import SYNC_OF_TRIGGER, check_booth_runs
 from msflash.led_controller.adapters.text_booth import TextBooth
 from msflash.led_controller.adapters.text_booth_emulator import TextBoothServer, serve_text_booth
-from tests.acquisition.test_rig_hw import calibration  # noqa: F401 - the fixture
+from tests.acquisition.session.test_rig_hw import calibration  # noqa: F401 - the fixture
 
 ROOT = Path(__file__).resolve().parents[2]
 SIM = ("--rig", "sim", "--leds", "3", "--exposure", "10000")

@@ -17,7 +17,7 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session import analysis
-from msflash.acquisition.session.rig import _emulator_for, hw_spectra
+from msflash.acquisition.session.rig import emulator_for, hw_spectra
 from msflash.calibration.files import CalibrationSet, load_calibration, save_calibration
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
@@ -35,7 +35,7 @@ def calibration(tmp_path: Path) -> Path:
 
 @pytest.fixture
 def booth_port(calibration: Path) -> Iterator[str]:
-    server = serve_on_pty(_emulator_for(load_calibration(calibration).led_spectra))
+    server = serve_on_pty(emulator_for(load_calibration(calibration).led_spectra))
     try:
         yield server.port
     finally:

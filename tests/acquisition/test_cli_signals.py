@@ -25,12 +25,12 @@ def test_a_real_sigterm_inside_the_guard_unwinds_as_terminated() -> None:
         (
             Terminated(143),
             143,
-            "msflash: terminated (SIGTERM); LEDs off; frames captured so far are kept (marked incomplete)",
+            "msflash: terminated (SIGTERM); LEDs off; stopped before the sequence began: no frame was captured",
         ),
         (
             KeyboardInterrupt(),
             130,
-            "msflash: interrupted; LEDs off; frames captured so far are kept (marked incomplete)",
+            "msflash: interrupted; LEDs off; stopped before the sequence began: no frame was captured",
         ),
     ],
 )

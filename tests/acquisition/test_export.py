@@ -131,7 +131,9 @@ def test_dng_colour_matrix_is_the_camera_fit_and_libraw_reads_it(capsys, grbg_se
         assert tuple(tags["DNGVersion"].value) == (1, 4, 0, 0)
         assert tags["UniqueCameraModel"].value == "test-render"
         assert tags["CalibrationIlluminant1"].value == 21  # D65
-        assert tags["ExposureTime"].value == (round(sequence.frames[0].exposure_us), 1_000_000)  # seconds
+        exif = tags["ExifTag"].value  # the EXIF sub-IFD, where ExposureTime belongs
+        numerator, denominator = exif["ExposureTime"]
+        assert numerator / denominator == pytest.approx(sequence.frames[0].exposure_us / 1e6, rel=1e-9)  # seconds
         pairs = np.asarray(tags["ColorMatrix1"].value, dtype=float).reshape(9, 2)
         np.testing.assert_allclose(pairs[:, 0] / pairs[:, 1], matrix.xyz_to_camera.ravel(), atol=1e-6)
     with rawpy.imread(str(out / "000-ambient.dng")) as raw:
@@ -171,7 +173,7 @@ def test_ome_tiff_holds_every_frame_with_led_wavelengths_exposures_and_gains(
     path = Path(result["files"][0])
     assert path.name == "sequence.ome.tif"
     sequence = read_sequence(sample)
-    peaks = [float(sequence.wavelengths_nm[np.argmax(led.spd)]) for led in sequence.leds]
+    peaks = list(sequence.led_peaks_nm())  # the one number (processing/led_wavelength.py)
     document = ome_types.from_tiff(path, validate=True)  # against the OME 2016-06 XSD (lxml)
     with tifffile.TiffFile(path) as tiff:
         assert ome_types.from_xml(tiff.ome_metadata) == document
@@ -382,8 +384,8 @@ def test_run_export_writes_dngs_whose_neutrals_follow_each_frames_light(capsys, 
         multipliers = np.asarray(raw.camera_whitebalance[:3])
     light = spectrum + leds @ np.asarray(sequence.frames[flash].led_levels)
     np.testing.assert_allclose(multipliers[1] / multipliers, independent_neutral(sequence_dir, light), rtol=1e-5)
-    spec, _ = exr_header(out / "complementary.exr")  # run's own EXR: a mosaic, so no chromaticities
-    assert spec.getattribute("msflash:cfa") == "RGGB"
+    spec, _ = exr_header(out / "complementary.exr")  # run's own EXR: the mosaic demosaicked, and said so
+    assert spec.nchannels == 3 and spec.getattribute("msflash:cfa") == "RGGB"
     assert spec.getattribute("msflash:led_names") == ", ".join(led.name for led in sequence.leds)
 
 

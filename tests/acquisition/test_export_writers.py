@@ -87,5 +87,5 @@ def test_spectra_csv_refuses_a_short_column_and_repeated_headers(tmp_path: Path)
 
 def test_format_names() -> None:
     assert parse_formats("DNG,ome-tiff, csv") == ("dng", "ome-tiff", "csv")
-    with pytest.raises(UsageError, match="--export dng,,csv: unknown format ''"):
+    with pytest.raises(UsageError, match="--export dng,,csv: format '': unknown"):
         parse_formats("dng,,csv", "--export")

@@ -123,8 +123,8 @@ def test_the_live_views_fire_reports_the_estimate_of_the_sequence_it_recorded(
 ) -> None:
     """Fire in the live view (sim rig): the run folder's estimate.json (what the page plots) is what
     ``msflash estimate`` and ``export`` give for the sequence it recorded."""
-    from tests.acquisition.live_support import live_server, wait_until
-    from tests.acquisition.test_live_http import TOKEN_HEADER, request
+    from tests.acquisition.app.test_live_http import TOKEN_HEADER, request
+    from tests.acquisition.support.live import live_server, wait_until
 
     runs = tmp_path / "runs"
     with live_server(runs) as server:

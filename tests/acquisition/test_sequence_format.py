@@ -118,7 +118,7 @@ def _edit(directory: Path, change: Callable[[dict], object]) -> Path:
 def test_round_trip_keeps_every_field_and_pixel(tmp_path: Path, cfa: str | None) -> None:
     directory = tmp_path / "seq"
     camera = _camera(cfa, lens="f/2.8", temperature_c=41.5)
-    leds = _leds(peak_nm=450, driver={"channel": 0})
+    leds = _leds(maker="Luxeon", driver={"channel": 0})
     pixels = [_pixels(cfa) for _ in range(4)]
     with _writer(directory, camera=camera, leds=leds, extra={"operator": "ab", "scene": {"id": 7}}) as writer:
         writer.add_frame(pixels[0], "ambient", (0, 0, 0), 10000, 1.0, extra={"frame_id": 17})
@@ -136,7 +136,7 @@ def test_round_trip_keeps_every_field_and_pixel(tmp_path: Path, cfa: str | None)
     assert sequence.camera == camera
     assert sequence.camera.extra == {"lens": "f/2.8", "temperature_c": 41.5}
     assert sequence.leds == tuple(leds)
-    assert sequence.leds[0].extra == {"peak_nm": 450, "driver": {"channel": 0}}
+    assert sequence.leds[0].extra == {"maker": "Luxeon", "driver": {"channel": 0}}
     assert sequence.extra == {"operator": "ab", "scene": {"id": 7}}
     assert [f.file for f in sequence.frames] == [
         "frames/000-ambient.tiff",

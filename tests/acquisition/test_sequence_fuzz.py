@@ -10,7 +10,7 @@ import json
 
 import pytest
 
-from tests.acquisition.fuzz_runner import run_fuzz_worker
+from tests.acquisition.support.fuzz_runner import run_fuzz_worker
 
 
 def _fuzz(examples: int, timeout_s: float) -> dict:

@@ -164,7 +164,10 @@ def test_what_calibrate_writes_every_calibration_reader_accepts(booth: dict, tmp
 def test_a_leds_csv_with_negative_noise_from_an_older_msflash_is_read_clipped(tmp_path: Path) -> None:
     """What booths already have on disk: ``leds.csv`` holding the negatives; read with a note, not refused."""
     cal = tmp_path / "cal"
-    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
+    # The paper's LEDs under the names the recorded sequence gives them (recorded before they were named
+    # after their measured peaks).
+    names = tuple(json.loads((SEQUENCE / "sequence.json").read_text())["leds"][k]["name"] for k in range(7))
+    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero").replace(names=names)
     rows = ["wavelength_nm," + ",".join(leds.names)]
     noisy = leds.values.copy()
     noisy[0, 2] = -0.02 * noisy[:, 2].max()  # noise below zero in led500's tail, within the rule

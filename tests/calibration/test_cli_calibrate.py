@@ -23,10 +23,14 @@ def with_calibrate(monkeypatch):
         monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
 
 
+SEQUENCE_LEDS = tuple(led["name"] for led in json.loads((SEQUENCE / "sequence.json").read_text())["leds"])
+"""The recorded sequence's names of the paper's LEDs (recorded before they were named after their measured peaks)."""
+
+
 def write_leds(directory: Path) -> list[str]:
     leds = datasets.paper_leds()
     files = []
-    for index, name in enumerate(leds.names):
+    for index, name in enumerate(SEQUENCE_LEDS):  # the exports named as the booth names its channels
         path = directory / f"{name}.txt"
         rows = "\n".join(f"{w:g}\t{v:.8g}" for w, v in zip(leds.wavelengths_nm, leds.values[:, index]))
         path.write_text(f"# PR-715 export\nWavelength (nm)\tRadiance\n{rows}\n")
@@ -40,7 +44,7 @@ def test_leds_then_estimate_with_calibration(tmp_path, capsys):
     payload = json.loads(capsys.readouterr().out)
     assert [round(item["peak_nm"] / 10) * 10 for item in payload["leds"]][:2] == [440, 480]
     calibration = load_calibration(out)
-    assert calibration.led_spectra.names == datasets.paper_leds().names
+    assert calibration.led_spectra.names == SEQUENCE_LEDS
     assert (out / "leds.png").exists()
     sequence = tmp_path / "seq"
     shutil.copytree(SEQUENCE, sequence)

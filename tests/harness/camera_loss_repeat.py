@@ -1,4 +1,4 @@
-"""Run the camera-loss child (``tests/acquisition/camera_loss_child.py``) as its test does, many times.
+"""Run the camera-loss child (``tests/acquisition/devices/camera_loss_child.py``) as its test does, many times.
 
 Run as ``python -m tests.harness.camera_loss_repeat N SCENARIO...`` from the repository root with
 it on ``PYTHONPATH``: per repetition and scenario (``camera``, ``capture``, ``silent``), the
@@ -17,10 +17,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from tests.acquisition.gvcp_port import gvcp_port_in_use
+from tests.acquisition.support.gvcp_port import gvcp_port_in_use
 
 REPO = Path(__file__).resolve().parents[2]
-CHILD = REPO / "tests" / "acquisition" / "camera_loss_child.py"
+CHILD = REPO / "tests" / "acquisition" / "devices" / "camera_loss_child.py"
 
 
 def fake(serial: str, xml: str) -> subprocess.Popen:

@@ -105,15 +105,25 @@ class Scene:
     origin_yx: tuple[int, int] = (33, 29)
     falloff: float = 0.0
     """Relative illumination lost at the frame's corners (0.12: an ordinary lens)."""
+    rows: int = 4
+    columns: int = 6
+    """The chart's grid (the Macbeth chart's 4 × 6 unless a test prints its patches otherwise)."""
 
     def labels(self) -> np.ndarray:
-        """Patch of each pixel (column by column, 4 rows), −1 on the border and background."""
+        """Patch of each pixel (column by column), −1 on the border and background."""
         h, w = self.shape
         y, x = np.mgrid[0:h, 0:w]
         row, dy = np.divmod(y - self.origin_yx[0], self.pitch_px)
         column, dx = np.divmod(x - self.origin_yx[1], self.pitch_px)
-        inside = (row >= 0) & (row < 4) & (column >= 0) & (column < 6) & (dy < self.patch_px) & (dx < self.patch_px)
-        return np.where(inside, column * 4 + row, -1)
+        inside = (
+            (row >= 0)
+            & (row < self.rows)
+            & (column >= 0)
+            & (column < self.columns)
+            & (dy < self.patch_px)
+            & (dx < self.patch_px)
+        )
+        return np.where(inside, column * self.rows + row, -1)
 
     def gain(self) -> np.ndarray:
         """Relative illumination: a cos⁴-like falloff, ``1 − falloff · (r / r_corner)²``."""

@@ -33,9 +33,10 @@ def repeat(n: int, sync: str, loss: float = 0.02) -> str:
     from msflash.acquisition.plan import CapturePlan
     from msflash.acquisition.session.capture import run_capture
     from msflash.acquisition.session.rig import open_aravis_fake_rig
+    from tests.acquisition.support.capture_doubles import Watch
 
     counter = _CountRetakes()
-    capture_log = logging.getLogger("msflash.acquisition.session.capture")
+    capture_log = logging.getLogger("msflash.acquisition.session.engine")
     capture_log.addHandler(counter)
     capture_log.propagate = False  # the count, not a page of warnings
     complete = mispaired = 0
@@ -52,7 +53,7 @@ def repeat(n: int, sync: str, loss: float = 0.02) -> str:
 
                 try:
                     with rig.sequence_writer(Path(folder) / "s") as writer:
-                        run_capture(rig.camera, rig.booth, plan, writer, on_frame=check, retakes=100)
+                        run_capture(rig.camera, rig.booth, plan, writer, (Watch(check),), retakes=100)
                         writer.finish()
                     complete += 1
                 except Exception as err:  # noqa: BLE001 - counted and named in the summary

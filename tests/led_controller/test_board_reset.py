@@ -55,6 +55,18 @@ def test_each_open_resets_the_emulator_and_its_bootloader_swallows_what_is_sent(
         assert server.resets == 2 and server.emulator.boots == 3  # power-up, then one per open
 
 
+def test_waiting_for_the_banner_leaves_the_links_timeout_as_it_was() -> None:
+    """It polls with short reads; a caller's next read keeps its own timeout (the firmware fuzz test's
+    10 s readline once got 0.1 s, and under load missed a reply the simulator gave a little later)."""
+    with serve_on_pty(bootloader_s=0.2) as server:
+        with serial.Serial(server.port, 115200, timeout=7.5, exclusive=True) as link:
+            assert await_boot_banner(link, 30.0)
+            assert link.timeout == 7.5
+        with serial.Serial(server.port, 115200, timeout=None, exclusive=True) as link:
+            assert await_boot_banner(link, 0.05) == b""  # ended by its deadline, within the bootloader
+            assert link.timeout is None
+
+
 def test_a_second_open_while_the_port_is_held_does_not_reset() -> None:
     """DTR is already up: a second open (another program, refused as busy by msflash) makes no edge."""
     with serve_on_pty(bootloader_s=0.2) as server, LedBooth.open(server.port) as booth:

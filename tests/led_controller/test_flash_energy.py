@@ -73,43 +73,50 @@ def test_pwm_cuts_a_short_exposure_and_whole_periods_are_exact(far_end: FarEnd, 
     assert whole[0] == pytest.approx(0.5, abs=1e-4)
 
 
-def test_booth_master_pulses_and_timing_from_the_pin_trace(firmware_image: Path) -> None:
-    """The firmware's trigger pulse and settle within 10 % of what is asked, and every pulse
-    inside an exposure that starts a few µs after the trigger (measured in simavr)."""
+@pytest.mark.parametrize("dimming", ["pulse", "pwm"])
+def test_booth_master_pulses_and_timing_from_the_pin_trace(firmware_image: Path, dimming: str) -> None:
+    """The firmware's trigger pulse and settle within 10 % of what is asked (never a settle short of
+    it), and every LED pulse inside an exposure that starts a few µs after the trigger (measured in
+    simavr). PWM steps (no EXP=) are timed the same way: a late wait once made their settle 1.27 ms."""
+    exposures = EXPOSURES_US * 2
     with SimulatedBooth() as sim, LedBooth.open(sim.port, timeout_s=3.0) as booth:
         sim.trace(True)
-        booth.load_pattern([LEVELS] * len(EXPOSURES_US), exposures_us=EXPOSURES_US)
+        booth.load_pattern([LEVELS] * len(exposures), exposures_us=exposures if dimming == "pulse" else None)
         booth.arm("booth", settle_us=1000, pulse_us=100, period_us=25_000)
         booth.start()
         booth.wait_event("DONE", timeout_s=10.0)
         pulses = sim.pulses
         ends = [float(w[1]) for w in sim.traced() if w[0] == "pulse_end"]
-        assert len(pulses) == len(EXPOSURES_US) and len(ends) == len(pulses)
-        for index, (pulse, end, exposure) in enumerate(zip(pulses, ends, EXPOSURES_US, strict=True)):
+        assert len(pulses) == len(exposures) and len(ends) == len(pulses)
+        for index, (pulse, end, exposure) in enumerate(zip(pulses, ends, exposures, strict=True)):
             assert 90 <= end - pulse.time_us <= 110, f"trigger pulse {end - pulse.time_us:.1f} µs"
-            assert pulse.settled_us is not None and 1000 <= pulse.settled_us <= 1100
-            collected = list(sim.integrate(pulse.time_us + 3.0, exposure).fractions()[0])
-            _delivered_close(collected, LEVELS, booth.delivered_levels(index, exposure))
+            assert pulse.settled_us is not None and 1000 <= pulse.settled_us <= 1100, pulse
+            if dimming == "pulse":
+                collected = list(sim.integrate(pulse.time_us + 3.0, exposure).fractions()[0])
+                _delivered_close(collected, LEVELS, booth.delivered_levels(index, exposure))
 
 
 def test_host_paced_settle_from_the_pin_trace(firmware_image: Path) -> None:
-    """NEXT replies once settle_us have passed since the LEDs changed (the reply's first byte)."""
+    """NEXT replies once settle_us have passed since the LEDs changed: the reply's first byte goes into
+    the UART (the harness's ``tx``) within 10 % after it, never before, for every settle ≥ 0.5 ms."""
     with SimulatedBooth() as sim, LedBooth.open(sim.port, timeout_s=3.0) as booth:
-        booth.load_pattern([[0.5] * 7, [0.25] * 7, [1.0] * 7])
-        booth.arm("host", settle_us=500, pulse_us=0, period_us=0)
-        booth.start()
+        booth.load_pattern([[0.5] * 7, [0.25] * 7, [1.0] * 7, [0.0] * 7])
         sim.trace(True)
-        settles = []
-        for _ in range(3):
-            before = len(sim.traced())
-            booth.next_step()
-            sim.now_us()  # the harness's trace lines up to now are in
-            traced = sim.traced()[before:]
-            changed = max(float(w[2]) for w in traced if w[0] == "tcnt")  # the PWM restarted: new levels
-            settles.append(min(float(w[1]) for w in traced if w[0] == "tx" and float(w[1]) > changed) - changed)
-        # Never early; within 10 % plus the first byte's time on the wire (85 µs at 117 647 baud: the
-        # harness sees a byte once the UART has it; docs/flash-energy.md has the figures)
-        assert min(settles) >= 500 and max(settles) <= 550 + 85, settles
+        settles: dict[int, list[float]] = {}
+        for settle_us in (500, 750, 1000, 2000, 5000):
+            booth.arm("host", settle_us=settle_us, pulse_us=0, period_us=0)
+            booth.start()
+            for _ in range(4):
+                before = len(sim.traced())
+                booth.next_step()
+                sim.now_us()  # the harness's trace lines up to now are in
+                traced = sim.traced()[before:]
+                changed = max(float(w[2]) for w in traced if w[0] == "tcnt")  # the PWM restarted: new levels
+                first = min(float(w[1]) for w in traced if w[0] == "tx" and float(w[1]) > changed)
+                settles.setdefault(settle_us, []).append(first - changed)
+            assert booth.next_step() is None
+        for settle_us, got in settles.items():
+            assert settle_us <= min(got) and max(got) <= 1.1 * settle_us, (settle_us, got)
 
 
 def test_camera_master_reacts_within_the_pulse_margin(firmware_image: Path) -> None:
@@ -128,8 +135,26 @@ def test_camera_master_reacts_within_the_pulse_margin(firmware_image: Path) -> N
         unanswered = [rise for rise in rises if not any(f >= rise for f in fires)]
         assert not unanswered, "a rise with no pulse after it; the trace:\n" + "\n".join(" ".join(w) for w in traced)
         delays = [min(f for f in fires if f >= rise) - rise for rise in rises]
-        # the median within the margin (a late one under load: docs/flash-energy.md, "Open")
-        assert len(delays) == 3 and all(d > 0 for d in delays) and sorted(delays)[1] < 10, delays
+        # every one within the margin (simulated time: the host's load does not enter; the late ones
+        # seen before were the harness's lost falling edge, test_an_exposure_is_answered_once_…)
+        assert len(delays) == 3 and all(0 < d < 10 for d in delays), delays
+
+
+def test_an_exposure_is_answered_once_its_falling_edge_is_on_the_wire(firmware_image: Path) -> None:
+    """The harness answers ``expose`` only after ExposureActive fell (its trace line comes first). It once
+    answered at the window's end with the falling edge still queued in simavr; a next ``expose`` read
+    in between cancelled that edge, the line stayed high, and the next exposure got no pulses."""
+    with SimulatedBooth() as sim, LedBooth.open(sim.port, timeout_s=3.0) as booth:
+        booth.load_pattern([LEVELS] * 3, exposures_us=[5000] * 3)
+        booth.arm("camera", settle_us=1000, pulse_us=100, period_us=0)
+        booth.start()
+        sim.trace(True)
+        for index in range(3):
+            exposure = sim.expose(5000.0, 1, 0.0, 1500.0)
+            edges = [(w[1], float(w[2])) for w in sim.traced() if w[0] == "expin"]
+            start, end = pytest.approx(exposure.start_us, abs=0.1), pytest.approx(exposure.start_us + 5000, abs=0.1)
+            assert edges[-2:] == [("1", start), ("0", end)]
+            _delivered_close(list(exposure.fractions()[0]), LEVELS, booth.delivered_levels(index, 5000))
 
 
 def test_rolling_shutter_pulses_fall_in_the_flash_window() -> None:

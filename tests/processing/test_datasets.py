@@ -33,19 +33,22 @@ class TestShippedFiles:
 class TestPaperData:
     def test_leds(self) -> None:
         leds = datasets.paper_leds()
-        assert leds.names == ("led440", "led480", "led500", "led520", "led596", "led636", "led660")
+        # Named after their measured peaks (processing/led_wavelength.py), the paper's nominal ones beside them.
+        assert leds.names == ("led440", "led478", "led500", "led522", "led597", "led636", "led661")
         assert (leds.kind, leds.unit, leds.count) == ("spd", "energy", 7)
         assert leds.grid == WavelengthGrid(380, 1068, 4)
         peaks = leds.wavelengths_nm[np.argmax(leds.values, axis=0)]
         np.testing.assert_allclose(peaks, datasets.PAPER_LED_PEAKS_NM, atol=8)
+        assert [round(p) for p in leds.metadata["peak_nm"].values()] == [int(n[3:]) for n in leds.names]
+        assert list(leds.metadata["nominal_peak_nm"].values()) == list(datasets.PAPER_LED_PEAKS_NM)
 
     @pytest.mark.parametrize(
         ("count", "expected"),
         [
-            (3, ("led440", "led520", "led660")),
-            (4, ("led440", "led500", "led520", "led660")),
-            (5, ("led440", "led500", "led520", "led596", "led660")),
-            (6, ("led440", "led480", "led500", "led520", "led596", "led660")),
+            (3, ("led440", "led522", "led661")),
+            (4, ("led440", "led500", "led522", "led661")),
+            (5, ("led440", "led500", "led522", "led597", "led661")),
+            (6, ("led440", "led478", "led500", "led522", "led597", "led661")),
             (7, None),
         ],
     )
@@ -181,7 +184,7 @@ class TestIlluminants:
         )
 
     def test_unknown_illuminant(self) -> None:
-        with pytest.raises(SpectralDataError, match="illuminant 'D99'.*expected one of A, D50"):
+        with pytest.raises(SpectralDataError, match="illuminant 'D99': unknown; expected one of A, B, C, D50"):
             datasets.illuminant("D99")
         with pytest.raises(SpectralDataError, match="bad temperature"):
             datasets.illuminant("blackbody:hot")

@@ -10,22 +10,20 @@ memory and re-captured in one stream (:func:`~acquisition.session.run.run_one_st
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.app.cli_common import claimed_output
-from msflash.acquisition.errors import CaptureError
+from msflash.acquisition.errors import CaptureCancelled, CaptureError
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.session.engine import Cancellation, FrameHandler
 from msflash.acquisition.session.exposure import ExposurePolicy
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run import RunOptions, degenerate, plan_exposure, run_one_stream, sequence_writer
-
-FrameHook = Callable[[Any, Any, Any], None]
-"""``on_frame(step, frame, entry)``: a step of the plan, its :class:`RawFrame` and its sequence entry."""
 
 
 @dataclass(frozen=True)
@@ -51,10 +49,15 @@ def run_sequence(
     rig: Rig,
     out: Path,
     request: SequenceRequest,
-    on_frame: FrameHook | None = None,
+    handlers: Sequence[FrameHandler] = (),
     on_phase: Callable[[str], None] | None = None,
+    cancel: Cancellation | None = None,
 ) -> dict[str, Any]:
     """Capture, estimate, flash, re-capture and report into ``out``, as ``msflash run --out out`` does.
+
+    Each frame goes to ``handlers`` as it lands (the page's view of the sequence). ``cancel`` stops
+    the metering or the capture between frames (:class:`CaptureCancelled`: the frames written stay,
+    the sequence ``complete: false``, the LEDs off) and skips the report.
 
     Returns
     -------
@@ -65,6 +68,8 @@ def run_sequence(
     ------
     CaptureError
         A degenerate estimate (the sequence is kept, no report), or any capture failure.
+    CaptureCancelled
+        ``cancel`` was cancelled before the report.
     OutputWriteError
         The report or ``run.json`` could not be written.
     """
@@ -73,28 +78,37 @@ def run_sequence(
     options = request.options
     with claimed_output(out, "msflash live"):
         phase("metering the exposure" if request.exposure == "auto" else "exposure fixed")
-        exposure = plan_exposure(rig, request.exposure, ExposurePolicy())
+        exposure = plan_exposure(rig, request.exposure, ExposurePolicy(), cancel=cancel)
         phase("capturing ambient, each LED and the flash")
         with sequence_writer(rig, out, exposure) as sync_writer, AsyncSequenceWriter(sync_writer) as writer:
-            estimate, solutions, _caught, captured, flash_us, stack, decided = run_one_stream(
-                rig, writer, exposure, options, on_frame=on_frame
-            )
-            why_degenerate = degenerate(estimate)
+            result = run_one_stream(rig, writer, exposure, options, handlers, cancel)
+            why_degenerate = degenerate(result.estimate)
             writer.finish()
         if why_degenerate is not None:
             raise CaptureError(
                 f"rig '{rig.name}': the ambient estimate is degenerate ({why_degenerate}); no report written. "
                 f"The sequence is complete in {out / 'sequence'}"
             )
+        if cancel is not None and cancel.cancelled:
+            raise CaptureCancelled(
+                f"before the report: {cancel.reason}; the sequence is complete in {out / 'sequence'}"
+            )
         from msflash.acquisition.app import report, run_html  # matplotlib: imported when a report is drawn
 
         phase("writing the report")
         sequence = read_sequence(out / "sequence")
         summary = report.write_run_report(
-            out, sequence, estimate, solutions, options.mode, rig.true_ambient, stack, options.target
+            out,
+            sequence,
+            result.estimate,
+            result.solutions,
+            options.mode,
+            rig.true_ambient,
+            result.stack,
+            options.target,
         )
-        summary["exposure"] = run_html.exposure_summary(exposure, flash_us, captured)
-        summary["decision_ms"] = round((decided - captured.last_frame_at) * 1e3, 3)
+        summary["exposure"] = run_html.exposure_summary(exposure, result.flash_exposure_us, result.captured)
+        summary["decision_ms"] = round(result.decision_ms, 3)
         summary["elapsed_s"] = round(time.perf_counter() - started, 3)
         run_html.write_run_summary(out, summary, sequence)
     return summary

@@ -7,6 +7,7 @@ hidden part: ``..``, absolute paths, symbolic links leading out and dot-files ar
 
 from __future__ import annotations
 
+import html
 import json
 import re
 from pathlib import Path, PurePosixPath
@@ -82,3 +83,45 @@ def run_files(folder: Path) -> list[str]:
         for path in folder.rglob("*")
         if path.is_file() and not any(part.startswith(".") for part in path.relative_to(folder).parts)
     )
+
+
+def run_page(info: dict[str, Any]) -> str:
+    """A page for a run without ``report.html`` (it stopped early): its numbers, spectra, previews and files."""
+    name = html.escape(info["name"])
+    summary = info.get("summary") or {}
+    files = info["files"]
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'>",
+        f"<title>msflash run {name}</title><link rel='stylesheet' href='/static/live.css'></head>",
+        f"<body class='report'><h1>Run {name}</h1><p><a href='/'>← live view</a></p>",
+    ]
+    if summary:
+        rows = [("frames", summary.get("frames")), ("relative residual", summary.get("relative_residual"))]
+        if "spectrum_rmse_vs_truth" in summary:
+            rows += [
+                ("spectrum RMSE vs the true ambient", summary["spectrum_rmse_vs_truth"]),
+                ("best LED fit of the truth (RMSE)", summary.get("spectrum_rmse_led_bound")),
+            ]
+        rows.append(("re-captured flash", summary.get("recaptured_mode")))
+        parts.append("<table class='summary'>")
+        for label, value in rows:
+            shown = f"{value:.4g}" if isinstance(value, float) else html.escape(str(value))
+            parts.append(f"<tr><th>{html.escape(label)}</th><td>{shown}</td></tr>")
+        parts.append("</table>")
+    else:
+        parts.append("<p>No report: the run did not finish (its sequence is listed below).</p>")
+    charts = info.get("charts")
+    if charts:
+        parts.append(f"<div class='charts'>{charts['ambient']}{charts['mixes']}</div>")
+    previews = [p for p in ("ambient.png", "matching.png", "complementary.png", "flash-capture.png") if p in files]
+    if previews:
+        parts.append("<div class='previews'>")
+        for preview in previews:
+            src = f"/runs/{name}/files/{html.escape(preview)}"
+            parts.append(f"<figure><img src='{src}' alt='{preview}'><figcaption>{preview}</figcaption></figure>")
+        parts.append("</div>")
+    parts.append("<h2>Files</h2><ul class='files'>")
+    for file in files:
+        parts.append(f"<li><a href='/runs/{name}/files/{html.escape(file)}'>{html.escape(file)}</a></li>")
+    parts.append("</ul></body></html>")
+    return "\n".join(parts)

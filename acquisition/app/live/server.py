@@ -23,36 +23,31 @@ import asyncio
 import contextlib
 import hmac
 import html
-import ipaddress
 import json
 import logging
-import math
 import secrets
 import socket
 import struct
-import threading
-from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from aiohttp import WSMsgType, web
-from aiohttp.http_exceptions import HttpProcessingError
-from aiohttp.web_protocol import RequestPayloadError
 
 from msflash.acquisition.app.live.charts import run_charts
 from msflash.acquisition.app.live.clients import Outbox, close_all
 from msflash.acquisition.app.live.preview import Preview, PreviewRenderer
+from msflash.acquisition.app.live.requests import boolean, finite, json_object, loopback, number, refuse
 from msflash.acquisition.app.live.run_job import SequenceRequest, new_run_folder, run_sequence
-from msflash.acquisition.app.live.runs import list_runs, read_json, run_file, run_files, run_folder
+from msflash.acquisition.app.live.runs import list_runs, read_json, run_file, run_files, run_folder, run_page
 from msflash.acquisition.app.live.state import LiveState, SequenceJob
-from msflash.acquisition.errors import UsageError
+from msflash.acquisition.errors import CaptureCancelled, UsageError
+from msflash.acquisition.session.engine import Cancellation, CaptureResult, FrameEvent
 from msflash.acquisition.session.live import LiveStream
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run import RunOptions
-from msflash.processing.json_input import parse_json_document
+from msflash.processing.led_wavelength import led_peaks_nm
 
 log = logging.getLogger(__name__)
 
@@ -68,67 +63,8 @@ ASSETS = {"live.js": "text/javascript", "live.css": "text/css"}
 """The page's assets, served by name from the package (``static/``)."""
 
 
-class _MalformedRequestsInOneLine(logging.Filter):
-    """aiohttp logs a request that is not HTTP (a scanner, a TLS hello on the plain port) or whose body does not
-    decode with a traceback:
-    here it becomes one line at debug level (``-vv`` shows it); every other record passes unchanged."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        error = record.exc_info[1] if record.exc_info else None
-        if isinstance(error, HttpProcessingError | RequestPayloadError):
-            record.msg = "live: refused a request that is not HTTP (%s)"
-            record.args = (" ".join(str(error).split())[:200],)
-            record.exc_info, record.exc_text = None, None
-            record.levelno, record.levelname = logging.DEBUG, "DEBUG"
-        return True
-
-
-_AIOHTTP_SERVER_LOG = logging.getLogger("aiohttp.server")
-if not any(isinstance(f, _MalformedRequestsInOneLine) for f in _AIOHTTP_SERVER_LOG.filters):
-    _AIOHTTP_SERVER_LOG.addFilter(_MalformedRequestsInOneLine())
-
-
 def _asset(name: str) -> str:
     return resources.files("msflash.acquisition.app.live").joinpath("static", name).read_text(encoding="utf-8")
-
-
-def _loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-def bind(host: str, port: int) -> socket.socket:
-    """A listening TCP socket on ``host``:``port`` (0: any free port); a one-line error when it cannot be bound.
-
-    A wildcard address (``0.0.0.0``, ``::``) is refused: the ``Host`` check needs the one address the page
-    is reached by.
-    """
-    wildcard = False
-    with contextlib.suppress(ValueError):
-        wildcard = ipaddress.ip_address(host).is_unspecified
-    if wildcard:
-        raise UsageError(
-            f"--host {host}: a wildcard address; expected the one address of this machine the page is "
-            "opened by (the Host header is checked against it)"
-        )
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    sock = socket.socket(family, socket.SOCK_STREAM)
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        sock.bind((host, port))
-        sock.listen(64)
-    except OSError as err:
-        sock.close()
-        raise UsageError(
-            f"--host {host} --port {port}: cannot listen there ({err.strerror or err}); expected a free port "
-            "on an address of this machine"
-        ) from err
-    sock.setblocking(False)
-    return sock
 
 
 class LiveServer:
@@ -166,7 +102,7 @@ class LiveServer:
         self.target = target
         address = sock.getsockname()
         self.host, self.port = str(address[0]), int(address[1])
-        self.remote = not _loopback(self.host) if token_for_pages is None else token_for_pages
+        self.remote = not loopback(self.host) if token_for_pages is None else token_for_pages
         names = {"127.0.0.1", "localhost", "[::1]"} if not self.remote else set()
         names.add(f"[{self.host}]" if ":" in self.host else self.host)
         self.allowed_hosts = {f"{name}:{self.port}" for name in names}
@@ -184,6 +120,8 @@ class LiveServer:
         self._off_timer: asyncio.TimerHandle | None = None
         self._tasks: set[asyncio.Task] = set()
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._cancel: Cancellation | None = None
+        """The running sequence's cancellation (:meth:`stop_sequence`), None when none runs."""
 
     @property
     def url(self) -> str:
@@ -231,7 +169,19 @@ class LiveServer:
     async def _on_shutdown(self, _app: web.Application) -> None:
         await close_all(self.clients)  # bounded: a page that does not read is aborted
 
+    def stop_sequence(self, reason: str = "msflash live is stopping") -> bool:
+        """Ask a running sequence to stop between frames (its LEDs off, its frames kept); whether one runs.
+
+        Safe from any thread or a signal handler: the capture checks it before each step.
+        """
+        cancel = self._cancel
+        if cancel is None:
+            return False
+        cancel.cancel(reason)
+        return True
+
     async def _on_cleanup(self, _app: web.Application) -> None:
+        self.stop_sequence()  # a fired sequence stops between frames, not at its end
         for task in list(self._tasks):
             task.cancel()
         for task in list(self._tasks):
@@ -239,7 +189,8 @@ class LiveServer:
                 await task
         if self._off_timer is not None:
             self._off_timer.cancel()
-        # The rig thread finishes what it is doing (a sequence ends with its LEDs off), then LEDs off.
+        # The rig thread finishes what it is doing (a cancelled sequence ends at its next frame with its
+        # LEDs off), then LEDs off.
         await asyncio.get_running_loop().run_in_executor(self.rig_thread, self._stop_rig)
         self.rig_thread.shutdown(wait=True)
 
@@ -266,28 +217,28 @@ class LiveServer:
     async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:
         host = request.headers.get("Host", "").lower()
         if host not in self.allowed_hosts:
-            return _refuse(403, f"Host '{host}': expected {' or '.join(sorted(self.allowed_hosts))}")
+            return refuse(403, f"Host '{host}': expected {' or '.join(sorted(self.allowed_hosts))}")
         origin = request.headers.get("Origin")
         if origin is not None and origin.lower() not in self.allowed_origins:
-            return _refuse(403, f"Origin '{origin}': cross-site requests are refused; expected this page's own")
+            return refuse(403, f"Origin '{origin}': cross-site requests are refused; expected this page's own")
         if request.headers.get("Sec-Fetch-Site", "same-origin") == "cross-site":
-            return _refuse(403, "Sec-Fetch-Site cross-site: refused; expected a request from this page")
+            return refuse(403, "Sec-Fetch-Site cross-site: refused; expected a request from this page")
         changes_state = request.method not in ("GET", "HEAD") or request.path == "/ws"
         given = request.headers.get(TOKEN_HEADER) or request.query.get("token")
         if (changes_state or self.remote) and not self._token_ok(given):
             cookie_ok = self.remote and not changes_state and self._token_ok(request.cookies.get(TOKEN_COOKIE))
             if not cookie_ok:
-                return _refuse(403, f"the session token is missing or wrong; expected it in {TOKEN_HEADER}")
+                return refuse(403, f"the session token is missing or wrong; expected it in {TOKEN_HEADER}")
         try:
             return await handler(request)
         except web.HTTPException:
             raise
         except UsageError as err:
-            return _refuse(400, str(err))
+            return refuse(400, str(err))
         except Exception as err:  # noqa: BLE001 - any failure: LEDs off, one line to the page
             log.error("live: %s %s failed: %s", request.method, request.path, err)
             await self._fail(err)
-            return _refuse(500, f"{type(err).__name__}: {err} (LEDs switched off)")
+            return refuse(500, f"{type(err).__name__}: {err} (LEDs switched off)")
 
     async def _fail(self, err: BaseException) -> None:
         """After an error: LEDs off (if the booth still answers), the error kept for the page."""
@@ -334,7 +285,7 @@ class LiveServer:
         }
 
     async def _get_run(self, request: web.Request) -> web.Response:
-        return web.json_response(_finite(self._run_info(request.match_info["name"])))
+        return web.json_response(finite(self._run_info(request.match_info["name"])))
 
     async def _run_page(self, request: web.Request) -> web.StreamResponse:
         """The run's own ``report.html`` (what ``msflash run`` writes); the page's summary for a run without one."""
@@ -348,8 +299,8 @@ class LiveServer:
         """Everything the page draws."""
         settings = self.stream.settings
         leds = self.rig.led_spectra
-        peaks = [float(leds.wavelengths_nm[int(np.argmax(leds.values[:, i]))]) for i in range(leds.count)]
-        return _finite(
+        peaks = led_peaks_nm(leds)  # the one number (processing/led_wavelength.py), as the sequence records it
+        return finite(
             {
                 "rig": self.rig.name,
                 "camera": self.camera_model,
@@ -387,9 +338,9 @@ class LiveServer:
             raise web.HTTPConflict(text="a sequence is running; expected its end first")
 
     async def _post_settings(self, request: web.Request) -> web.Response:
-        body = await _json_object(request)
+        body = await json_object(request)
         if "overlay" in body:
-            self.state.overlay = _boolean(body, "overlay")
+            self.state.overlay = boolean(body, "overlay")
         if "sequence_exposure" in body:
             if body["sequence_exposure"] not in ("auto", "live"):
                 raise UsageError(f"sequence_exposure {body['sequence_exposure']!r}: expected 'auto' or 'live'")
@@ -401,29 +352,29 @@ class LiveServer:
         if "exposure_us" in body or "gain" in body:
             self._busy()
             settings = self.stream.settings
-            exposure = _number(body, "exposure_us", settings.exposure_us)
-            gain = _number(body, "gain", settings.gain)
+            exposure = number(body, "exposure_us", settings.exposure_us)
+            gain = number(body, "gain", settings.gain)
             await self._on_rig(self.stream.set_exposure, exposure, gain)
         self.state.error = None
         await self._push_state()
         return web.json_response(self.state_json())
 
     async def _post_levels(self, request: web.Request) -> web.Response:
-        body = await _json_object(request)
+        body = await json_object(request)
         self._busy()
         levels = list(self.stream.settings.levels)
         if "levels" in body:
             given = body["levels"]
             if not isinstance(given, list):
                 raise UsageError("levels: expected a list of numbers in [0, 1], one per LED")
-            levels = [_number({"levels": v}, "levels", 0.0) for v in given]
+            levels = [number({"levels": v}, "levels", 0.0) for v in given]
         else:
             channel = body.get("channel")
             if not isinstance(channel, int) or isinstance(channel, bool) or not 0 <= channel < len(levels):
                 raise UsageError(f"channel {channel!r}: expected an LED index 0–{len(levels) - 1}")
             if "level" not in body:  # a slider message without its value must not switch the LED off
                 raise UsageError(f"level for channel {channel}: missing; expected a number in [0, 1]")
-            levels[channel] = _number(body, "level", 0.0)
+            levels[channel] = number(body, "level", 0.0)
         await self._on_rig(self.stream.set_levels, levels)
         self.state.error = None
         await self._push_state()
@@ -437,7 +388,7 @@ class LiveServer:
 
     # -- the sequence ---------------------------------------------------------------------------
     async def _post_sequence(self, request: web.Request) -> web.Response:
-        body = await _json_object(request)
+        body = await json_object(request)
         self._busy()
         if self.rig.camera_responsivities is None:
             raise UsageError(
@@ -460,18 +411,15 @@ class LiveServer:
     async def _sequence(self, folder: Path, request: SequenceRequest) -> None:
         loop = asyncio.get_running_loop()
         job = self.state.job
+        cancel = self._cancel = Cancellation()
 
         def on_phase(text: str) -> None:
             loop.call_soon_threadsafe(self._phase, job, text)
 
-        def on_frame(step: Any, frame: Any, entry: Any) -> None:
-            preview = self.renderer.render(frame.pixels, self.state.overlay)
-            loop.call_soon_threadsafe(self._landed, job, step.index, entry.file, step.label, preview)
-
         def work() -> dict[str, Any]:
             self.stream.pause()
             try:
-                summary = run_sequence(self.rig, folder, request, on_frame, on_phase)
+                summary = run_sequence(self.rig, folder, request, (_PageView(self, job, loop),), on_phase, cancel)
             except BaseException:
                 self.stream.all_off()  # the capture switched them off; the live levels say so too
                 raise
@@ -480,6 +428,9 @@ class LiveServer:
 
         try:
             summary = await self._on_rig(work)
+        except CaptureCancelled as err:
+            log.info("live: the sequence into %s stopped: %s", folder, err)
+            job.status, job.message = "stopped", f"stopped: {err}; the frames taken are in {folder.name}"
         except Exception as err:  # noqa: BLE001 - shown on the page; the capture switched the LEDs off
             log.error("live: the sequence into %s failed: %s", folder, err)
             job.status, job.message = "failed", str(err)
@@ -490,6 +441,9 @@ class LiveServer:
             job.message = f"done in {summary['elapsed_s']:.1f} s" + (
                 f"; spectrum RMSE against the true ambient {rmse:.4f}" if rmse is not None else ""
             )
+        finally:
+            if self._cancel is cancel:
+                self._cancel = None
         job.phase = job.status
         await self._push_state()
 
@@ -603,136 +557,17 @@ class LiveServer:
 _NO_STORE = {"Cache-Control": "no-store"}
 
 
-def _refuse(status: int, message: str) -> web.Response:
-    return web.json_response({"error": message}, status=status)
+class _PageView:
+    """A fired sequence as the pages see it (a frame handler of the capture engine): each frame's
+    preview and its file, handed to the event loop."""
 
+    def __init__(self, server: LiveServer, job: SequenceJob, loop: asyncio.AbstractEventLoop) -> None:
+        self.server, self.job, self.loop = server, job, loop
 
-def _finite(value: Any) -> Any:
-    """``value`` with NaN and infinities as None (JSON has neither) and numpy values as Python's."""
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
+    def frame_ready(self, event: FrameEvent) -> None:
+        preview = self.server.renderer.render(event.frame.pixels, self.server.state.overlay)
+        file = event.entry.file if event.entry is not None else ""
+        self.loop.call_soon_threadsafe(self.server._landed, self.job, event.step.index, file, event.step.label, preview)
 
-
-async def _json_object(request: web.Request) -> dict[str, Any]:
-    """The request's body as a JSON object, read as every user's JSON is (``processing/json_input.py``).
-
-    The bytes are read whatever the headers claim (an unknown ``charset``, a ``Content-Encoding`` that
-    does not decode) and taken as UTF-8, as JSON is; a NaN, an infinite or huge number, a key twice
-    or nesting past :data:`~msflash.processing.json_input.MAX_NESTING` levels is refused naming its
-    field (400), never a 500 that switches the LEDs off.
-    """
-    try:
-        raw = await request.read()
-    except web.HTTPException:
-        raise  # the body is over client_max_size: 413
-    except (RequestPayloadError, ValueError) as err:  # a body that does not decode (e.g. bad gzip)
-        raise UsageError(f"request body: unreadable ({' '.join(str(err).split())}); expected a JSON object") from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as err:
-        raise UsageError(
-            f"request body: not UTF-8 ({err.reason} at byte {err.start}); expected a JSON object"
-        ) from None
-    body = parse_json_document(text, "request body", UsageError)
-    if not isinstance(body, dict):
-        raise UsageError("request body: expected a JSON object")
-    return body
-
-
-def _number(body: dict[str, Any], key: str, default: float) -> float:
-    value = body.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(float(value)):
-        raise UsageError(f"{key} {str(value)[:40]}: expected a finite number")
-    return float(value)
-
-
-def _boolean(body: dict[str, Any], key: str) -> bool:
-    value = body[key]
-    if not isinstance(value, bool):
-        raise UsageError(f"{key} {value!r}: expected true or false")
-    return value
-
-
-def run_page(info: dict[str, Any]) -> str:
-    """A page for a run without ``report.html`` (it stopped early): its numbers, spectra, previews and files."""
-    name = html.escape(info["name"])
-    summary = info.get("summary") or {}
-    files = info["files"]
-    parts = [
-        "<!doctype html><html><head><meta charset='utf-8'>",
-        f"<title>msflash run {name}</title><link rel='stylesheet' href='/static/live.css'></head>",
-        f"<body class='report'><h1>Run {name}</h1><p><a href='/'>← live view</a></p>",
-    ]
-    if summary:
-        rows = [("frames", summary.get("frames")), ("relative residual", summary.get("relative_residual"))]
-        if "spectrum_rmse_vs_truth" in summary:
-            rows += [
-                ("spectrum RMSE vs the true ambient", summary["spectrum_rmse_vs_truth"]),
-                ("best LED fit of the truth (RMSE)", summary.get("spectrum_rmse_led_bound")),
-            ]
-        rows.append(("re-captured flash", summary.get("recaptured_mode")))
-        parts.append("<table class='summary'>")
-        for label, value in rows:
-            shown = f"{value:.4g}" if isinstance(value, float) else html.escape(str(value))
-            parts.append(f"<tr><th>{html.escape(label)}</th><td>{shown}</td></tr>")
-        parts.append("</table>")
-    else:
-        parts.append("<p>No report: the run did not finish (its sequence is listed below).</p>")
-    charts = info.get("charts")
-    if charts:
-        parts.append(f"<div class='charts'>{charts['ambient']}{charts['mixes']}</div>")
-    previews = [p for p in ("ambient.png", "matching.png", "complementary.png", "flash-capture.png") if p in files]
-    if previews:
-        parts.append("<div class='previews'>")
-        for preview in previews:
-            src = f"/runs/{name}/files/{html.escape(preview)}"
-            parts.append(f"<figure><img src='{src}' alt='{preview}'><figcaption>{preview}</figcaption></figure>")
-        parts.append("</div>")
-    parts.append("<h2>Files</h2><ul class='files'>")
-    for file in files:
-        parts.append(f"<li><a href='/runs/{name}/files/{html.escape(file)}'>{html.escape(file)}</a></li>")
-    parts.append("</ul></body></html>")
-    return "\n".join(parts)
-
-
-@contextlib.contextmanager
-def serve_in_thread(server: LiveServer) -> Iterator[LiveServer]:
-    """Serve ``server`` on its own event loop in a background thread while the block runs (tests, bench)."""
-    loop = asyncio.new_event_loop()
-    stop = asyncio.Event()
-    started = threading.Event()
-    failure: list[BaseException] = []
-
-    def main() -> None:
-        asyncio.set_event_loop(loop)
-
-        async def run() -> None:
-            started.set()
-            await server.serve(stop)
-
-        try:
-            loop.run_until_complete(run())
-        except BaseException as err:  # noqa: BLE001 - raised again in the caller's thread
-            failure.append(err)
-            started.set()
-        finally:
-            loop.close()
-
-    thread = threading.Thread(target=main, name="msflash-live", daemon=True)
-    thread.start()
-    started.wait()
-    try:
-        yield server
-    finally:
-        if not loop.is_closed():
-            loop.call_soon_threadsafe(stop.set)
-        thread.join(timeout=60)
-        if failure:
-            raise failure[0]
+    def sequence_finished(self, result: CaptureResult) -> None:
+        """The job's state says so once the report is written."""

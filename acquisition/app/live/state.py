@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-JobStatus = Literal["idle", "running", "done", "failed"]
+JobStatus = Literal["idle", "running", "done", "failed", "stopped"]
 
 
 @dataclass

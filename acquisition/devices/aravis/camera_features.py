@@ -38,6 +38,7 @@ from typing import Any, Literal, Protocol
 
 from msflash.acquisition.devices.aravis.gain import GainRequest
 from msflash.acquisition.errors import CameraError, CameraSettingError
+from msflash.processing.names import close_names
 
 log = logging.getLogger(__name__)
 
@@ -423,9 +424,12 @@ class AppliedOptions:
 
 def _describe(camera: FeatureCamera, feature: str, option: str) -> FeatureInfo:
     if not camera.has_feature(feature):
+        listing = getattr(camera, "feature_names", None)  # AravisCamera's; a twin without it gets no suggestion
+        near = close_names(feature, [name for name, _ in listing()] if callable(listing) else [])
         raise CameraSettingError(
-            f"{camera.name}: {option}: no feature {feature}; expected one the camera offers — "
-            "`msflash devices --features ID` lists them"
+            f"{camera.name}: {option}: no feature {feature}"
+            + (f"; did you mean {' or '.join(map(repr, near))}?" if near else "")
+            + "; expected one the camera offers — `msflash devices --features ID` lists them"
         )
     return camera.describe_feature(feature)
 

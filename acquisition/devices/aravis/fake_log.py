@@ -4,7 +4,7 @@ The fake streams frames of any ``PixelFormat`` its GenICam XML lists, but its pa
 (``arv_fake_camera_diagonal_ramp`` in Aravis 0.8.26) fills only Mono8/16, Bayer8 and RGB8 and logs
 ``g_critical("Unsupported pixel format")`` (no log domain) for every other frame. The
 ``aravis-fake`` rig replaces every frame's pixels with a rendered scene
-(:class:`acquisition.session.rig.WiredFakeCamera`), so that line — one per frame on stderr —
+(:class:`acquisition.devices.wired_fake.WiredFakeCamera`), so that line — one per frame on stderr —
 says nothing; :func:`mute_unfilled_format_warning` drops exactly it while the rig is open and
 passes every other critical message on to GLib's default handler.
 """

@@ -103,26 +103,36 @@ static void uart_init(void)
 
 /* ---- time base: Timer1 CTC every 250 us, 0.5 us resolution ------------------------------ */
 
-static volatile uint32_t ticks;
+#define TICK_COUNTS (2u * TICK_US) /* TCNT1 counts per tick (2 MHz) */
+static volatile uint32_t tick_us; /* board_micros() at the start of the current tick */
 
 /* Timed events on Timer1's compare B (docs/booth-firmware.md, "Timing"): the trigger pulse's
- * edges, timed to the timer's count rather than to the main loop's next wake-up (which the 250 us
- * tick made 250 us late at worst), and wake-ups of the main loop for due actions and replies. */
+ * edges and a timed frame's first byte, timed to the timer's count rather than to the main loop's
+ * next wake-up (which the 250 us tick made 250 us late at worst), and wake-ups of the main loop for
+ * due actions. */
 #define EVENT_RISE 0
 #define EVENT_FALL 1
 #define EVENT_WAKE 2
-#define EVENTS 3
+#define EVENT_SEND 3 /* a timed frame's first byte into the UART (board_write_at) */
+#define EVENTS 4
 static volatile uint8_t event_pending;      /* bit per event */
 static volatile uint32_t event_at[EVENTS];  /* board_micros() time of each */
 static void fire_on_trigger(void);
 
+/* The start of the tick TCNT1 read `count` in (interrupts off): a wrap whose interrupt has not run
+ * yet shows as compare A's flag with a small count. */
+static uint32_t tick_start_locked(uint16_t count)
+{
+    uint32_t start = tick_us;
+    if ((TIFR1 & _BV(OCF1A)) && count < TICK_COUNTS / 2u)
+        start += TICK_US;
+    return start;
+}
+
 static uint32_t micros_locked(void) /* with interrupts off */
 {
-    uint32_t t = ticks;
     uint16_t count = TCNT1;
-    if ((TIFR1 & _BV(OCF1A)) && count < TICK_US) /* wrapped, interrupt not served yet */
-        t++;
-    return t * TICK_US + count / 2u;
+    return tick_start_locked(count) + count / 2u;
 }
 
 uint32_t board_micros(void)
@@ -134,6 +144,33 @@ uint32_t board_micros(void)
 
 static volatile uint8_t woken; /* a wake-up ran: the main loop polls before it sleeps again */
 
+/* The frame of board_write_at, waiting for its time. */
+static char timed_frame[BOOTH_TIMED_MAX];
+static volatile uint8_t timed_len;   /* 0: none */
+static volatile uint8_t timed_late;  /* due, but the ring had no room: the main loop queues it */
+
+/* Queue the timed frame now (interrupts off): its first byte straight into the UART when nothing is
+ * ahead of it, the rest into the ring for the UDRE interrupt. */
+static void send_timed(void)
+{
+    uint8_t len = timed_len, i = 0;
+    uint16_t head = tx_head;
+    if (len > ((tx_tail - head - 1u) & (TX_SIZE - 1u))) {
+        timed_late = 1; /* no room: behind the bytes queued ahead, from the main loop */
+        woken = 1;
+        return;
+    }
+    if (tx_tail == head && (UCSR0A & _BV(UDRE0)))
+        UDR0 = (uint8_t)timed_frame[i++];
+    for (; i < len; i++) {
+        tx_buf[head] = (uint8_t)timed_frame[i];
+        head = (head + 1u) & (TX_SIZE - 1u);
+    }
+    tx_head = head;
+    timed_len = 0;
+    UCSR0B |= _BV(UDRIE0);
+}
+
 static void run_event(uint8_t e)
 {
     if (e == EVENT_RISE) {
@@ -141,47 +178,69 @@ static void run_event(uint8_t e)
         fire_on_trigger(); /* the LED pulses start with the trigger edge, a few cycles later */
     } else if (e == EVENT_FALL) {
         TRIGGER_PORT &= (uint8_t)~_BV(TRIGGER_BIT);
+    } else if (e == EVENT_SEND) {
+        send_timed();
     } else {
         woken = 1;
     }
     event_pending &= (uint8_t)~_BV(e);
 }
 
-#define LEAD 20 /* counts (10 us): compare B fires this early for a trigger edge, which then waits for its count */
+/* Counts (24 us) compare B fires ahead of a timed event (a trigger edge, a timed frame), which then
+ * waits for its exact count: more than the interrupt's entry and arm_events' look through the
+ * pending events take (measured in simavr: ~21 us before that look was made cheaper, when events
+ * ran up to 20 us late with a 10 us lead). */
+#define LEAD 48
 
-/* TCNT1 reaches `target` (or the tick wraps). */
-static void wait_count(uint16_t target)
+/* TCNT1 now, counted from the start of the tick in which TCNT1 read `since` (one wrap at most). */
+static uint16_t count_since(uint16_t since)
 {
-    uint16_t count, last = TCNT1;
-    while ((count = TCNT1) < target && count >= last)
-        last = count;
+    uint16_t count = TCNT1;
+    return count < since ? (uint16_t)(count + TICK_COUNTS) : count;
 }
 
-/* Run what is due and set compare B for the next event of the current tick (interrupts off).
- * Compare B sets its flag as TCNT1 leaves OCR1B; for the trigger's edges it is set LEAD counts
- * early and the interrupt waits for the exact count (0.5 us), so an edge does not depend on how
- * long the interrupt takes to get there: a pulse's width and its settle are exact to a count,
- * whatever else is pending. Wake-ups run at their count plus the entry time. A stale compare flag (an
- * earlier match) only brings the interrupt early, which finds nothing due and sets OCR1B again:
- * the flag is never cleared by writing TIFR1 (simavr 1.6 clears every Timer1 flag on such a
+/* Wait until TCNT1 reaches `target`, counted from the start of the tick in which TCNT1 read `since`
+ * (target may lie up to LEAD counts into the next tick). A wrap since then is seen whenever it
+ * happened: a wait whose first reading came after the wrap waited a whole tick (250 us late), and
+ * one whose target lay in the next tick ended at the wrap (early). */
+static void wait_count(uint16_t target, uint16_t since)
+{
+    uint16_t last = since;
+    for (;;) {
+        uint16_t count = TCNT1;
+        if (count < last && target >= TICK_COUNTS)
+            target = (uint16_t)(target - TICK_COUNTS); /* the tick wrapped: the target is in this one */
+        else if (count < last)
+            return; /* wrapped past a target of the earlier tick */
+        if (count >= target)
+            return;
+        last = count;
+    }
+}
+
+/* Run what is due and set compare B for the next event (interrupts off). Compare B sets its flag
+ * as TCNT1 leaves OCR1B; for the trigger's edges and a timed frame it is set LEAD counts early and
+ * the interrupt waits for the exact count (0.5 us), so an edge does not depend on how long the
+ * interrupt takes to get there: a pulse's width and its settle are exact to a count, whatever else
+ * is pending. The decision uses TCNT1 read after the look through the events (a count read before
+ * it was up to 15 us stale). Wake-ups run at their count plus the entry time. A stale compare flag
+ * (an earlier match) only brings the interrupt early, which finds nothing due and sets OCR1B
+ * again: the flag is never cleared by writing TIFR1 (simavr 1.6 clears every Timer1 flag on such a
  * write, compare A's tick too). */
 static void arm_events(void)
 {
     for (;;) {
-        uint32_t t = ticks;
-        uint16_t count = TCNT1;
-        if ((TIFR1 & _BV(OCF1A)) && count < TICK_US) /* wrapped, interrupt not served yet */
-            t++;
-        uint32_t start = t * TICK_US;
+        uint16_t since = TCNT1;
+        uint32_t start = tick_start_locked(since);
         int8_t next = -1;
-        int32_t target = 0; /* counts from this tick's start */
+        int32_t ahead_us = 0; /* from this tick's start */
         for (uint8_t e = 0; e < EVENTS; e++) {
             if (!(event_pending & _BV(e)))
                 continue;
-            int32_t at = 2 * (int32_t)(event_at[e] - start);
-            if (next < 0 || at < target) {
+            int32_t at = (int32_t)(event_at[e] - start);
+            if (next < 0 || at < ahead_us) {
                 next = (int8_t)e;
-                target = at;
+                ahead_us = at;
             }
         }
         if (next < 0) {
@@ -189,29 +248,31 @@ static void arm_events(void)
             return;
         }
         /* A wake-up never runs early (the loop would find nothing due and sleep a tick); an edge
-         * due within LEAD waits here for its count. */
-        int32_t lead = next == EVENT_WAKE ? 0 : LEAD;
-        if (target <= (int32_t)count + lead) { /* due: now (an edge at its count) */
-            if (next != EVENT_WAKE && target > (int32_t)count)
-                wait_count((uint16_t)target);
+         * or a frame due within LEAD waits here for its count. */
+        uint16_t lead = next == EVENT_WAKE ? 0 : LEAD;
+        uint16_t now = count_since(since);
+        if (ahead_us <= (int32_t)(now + lead) / 2) { /* due: now (an edge at its count) */
+            if (lead && ahead_us > 0)
+                wait_count((uint16_t)(2 * ahead_us), since);
             run_event((uint8_t)next);
             continue;
         }
-        if (target >= (int32_t)(2u * TICK_US)) { /* in a later tick: the tick interrupt arms it then */
+        uint16_t target = (uint16_t)(ahead_us > (int32_t)TICK_US * 3 ? 3 * TICK_COUNTS : 2 * ahead_us);
+        uint16_t at = (uint16_t)(target - 1u - (lead ? lead - 2u : 0u));
+        if (at >= TICK_COUNTS) { /* in a later tick: the tick interrupt arms it then */
             TIMSK1 &= (uint8_t)~_BV(OCIE1B);
             return;
         }
-        uint16_t at = (uint16_t)(target - 1 - (lead ? lead - 2 : 0));
         OCR1B = at;
         TIMSK1 |= _BV(OCIE1B);
-        if (TCNT1 < at) /* else this loop took so long that the count passed: run it from here */
+        if (count_since(since) < at) /* else this loop took so long that the count passed: run it from here */
             return;
     }
 }
 
 ISR(TIMER1_COMPA_vect)
 {
-    ticks++;
+    tick_us += TICK_US;
     if (event_pending)
         arm_events();
 }
@@ -239,6 +300,29 @@ void board_trigger_pulse(uint32_t at_us, uint32_t width_us)
 }
 
 void board_wake_at(uint32_t at_us) { schedule_event(EVENT_WAKE, at_us); }
+
+void board_write_at(const char *data, uint8_t len, uint32_t at_us)
+{
+    uint8_t waiting;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        waiting = timed_len;
+        event_pending &= (uint8_t)~_BV(EVENT_SEND);
+        timed_len = 0;
+        timed_late = 0;
+    }
+    if (waiting) /* an earlier frame not yet sent: at once, before this one */
+        board_write(timed_frame, waiting);
+    if (len > BOOTH_TIMED_MAX)
+        len = BOOTH_TIMED_MAX;
+    for (uint8_t i = 0; i < len; i++)
+        timed_frame[i] = data[i];
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        timed_len = len;
+        schedule_event(EVENT_SEND, at_us);
+    }
+}
 
 static void timebase_init(void)
 {
@@ -477,7 +561,7 @@ static void trigger_init(void)
 /* ---- the serial in EEPROM: 'M' 'S' <length> <text>, from address 0 ----------------------- */
 
 #define SERIAL_EEPROM ((uint8_t *)0)
-static const uint8_t serial_magic[2] = {'M', 'S'};
+static const __flash uint8_t serial_magic[2] = {'M', 'S'};
 
 void board_serial_load(char out[BOOTH_SERIAL_MAX + 1])
 {
@@ -532,6 +616,15 @@ int main(void)
             booth_feed(&booth, byte, board_micros());
         while (edge_pop(&high))
             booth_exposure(&booth, high, board_micros());
+        if (timed_late) { /* a timed frame found the ring full: behind what is queued */
+            uint8_t len;
+            ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+            {
+                len = timed_len;
+                timed_len = timed_late = 0;
+            }
+            board_write(timed_frame, len);
+        }
         booth_poll(&booth, board_micros());
         cli();
         if (woken) { /* a wake-up ran while this loop was busy: poll again before sleeping */

@@ -37,12 +37,18 @@
 #ifndef BOOTH_EXPOSURE_PULLUP
 #define BOOTH_EXPOSURE_PULLUP 1
 #endif
-/* Constant tables kept in flash on an AVR (its RAM is 8 KiB), plain const elsewhere. */
+/* Constant tables and texts kept in flash on an AVR (its RAM is 8 KiB), plain const elsewhere.
+ * BOOTH_TEXT("...") is a string literal placed in flash (a static array in the __flash address
+ * space, read with LPM through a booth_text_t): on an AVR a plain literal is copied to RAM at
+ * start-up, and the replies' texts took 1.2 KiB of it. */
 #ifdef __AVR__
 #define BOOTH_FLASH __flash
+#define BOOTH_TEXT(literal) (__extension__({ static const __flash char booth_text_[] = literal; &booth_text_[0]; }))
 #else
 #define BOOTH_FLASH
+#define BOOTH_TEXT(literal) (literal)
 #endif
+typedef const BOOTH_FLASH char *booth_text_t;
 /* The board's CPU clock: the pulse-dimming arithmetic counts its timer ticks in these cycles. */
 #ifndef BOOTH_CLOCK_HZ
 #define BOOTH_CLOCK_HZ 16000000ul

@@ -30,7 +30,34 @@ typedef struct {
     uint16_t len;
 } out_t;
 
-static void put_str(out_t *o, const char *s)
+/* Constant text (in flash: BOOTH_TEXT). */
+static void put_text(out_t *o, booth_text_t s)
+{
+    while (*s && o->len < BOOTH_OUT_MAX - 8)
+        o->buf[o->len++] = *s++;
+}
+#define PUT(o, literal) put_text((o), BOOTH_TEXT(literal))
+
+/* A received word (RAM) against a constant text (flash): starting with it, or equal to it. */
+static bool starts_with(const char *word, booth_text_t text)
+{
+    while (*text)
+        if (*word++ != *text++)
+            return false;
+    return true;
+}
+
+static bool text_is(const char *word, booth_text_t text)
+{
+    while (*text)
+        if (*word++ != *text++)
+            return false;
+    return *word == '\0';
+}
+#define IS(word, literal) text_is((word), BOOTH_TEXT(literal))
+
+/* Text in RAM (the serial, a command's name, digits). */
+static void put_ram(out_t *o, const char *s)
 {
     while (*s && o->len < BOOTH_OUT_MAX - 8)
         o->buf[o->len++] = *s++;
@@ -42,11 +69,18 @@ static void put_n(out_t *o, const char *s, uint16_t n)
         o->buf[o->len++] = *s++;
 }
 
+static void hex_into(char *to, uint32_t v, uint8_t digits)
+{
+    while (digits--) {
+        uint8_t d = (uint8_t)((v >> (4 * digits)) & 0xF);
+        *to++ = (char)(d < 10 ? '0' + d : 'A' - 10 + d);
+    }
+}
+
 static void put_hex(out_t *o, uint32_t v, uint8_t digits)
 {
-    static const char hex[] = "0123456789ABCDEF";
-    while (digits--)
-        o->buf[o->len++] = hex[(v >> (4 * digits)) & 0xF];
+    hex_into(o->buf + o->len, v, digits);
+    o->len = (uint16_t)(o->len + digits);
 }
 
 static void put_u32(out_t *o, uint32_t v)
@@ -71,15 +105,6 @@ static void put_i32(out_t *o, int32_t v)
     }
 }
 
-/* Frame `body` (already in body->buf) with mark and seq and send it: header, body and checksum
- * go out in turn (no frame-sized copy: that RAM holds the steps' exposures instead). */
-static void hex_into(char *to, uint32_t v, uint8_t digits)
-{
-    static const char hex[] = "0123456789ABCDEF";
-    while (digits--)
-        *to++ = hex[(v >> (4 * digits)) & 0xF];
-}
-
 /* The whole frame into `to` (room for body->len + 14 bytes); returns its length. */
 static uint16_t frame_into(char *to, char mark, uint8_t seq, const out_t *body)
 {
@@ -97,6 +122,8 @@ static uint16_t frame_into(char *to, char mark, uint8_t seq, const out_t *body)
     return (uint16_t)(n + 6);
 }
 
+/* Frame `body` (already in body->buf) with mark and seq and send it: header, body and checksum
+ * go out in turn (no frame-sized copy: that RAM holds the steps' exposures instead). */
 static void send_frame(char mark, uint8_t seq, const out_t *body)
 {
     char head[8];
@@ -112,6 +139,15 @@ static void send_frame(char mark, uint8_t seq, const out_t *body)
     hex_into(head + 1, crc, 4);
     head[5] = '\n';
     board_write(head, 6);
+}
+
+/* The booth's serial, or '-' when never set. */
+static void put_serial(out_t *o, const booth_t *b)
+{
+    if (b->serial[0])
+        put_ram(o, b->serial);
+    else
+        PUT(o, "-");
 }
 
 static void send_event(booth_t *b, const out_t *body)
@@ -216,13 +252,13 @@ bool booth_pulse_plan(const booth_t *b, const uint16_t duty[BOOTH_CHANNELS], uin
 /* " ON=<us>,<us>,…": each LED's on-time per exposure, exact (the exposure itself when on throughout). */
 static void put_on_times(out_t *o, const booth_pulses_t *plan, uint16_t code)
 {
-    put_str(o, " ON=");
+    PUT(o, " ON=");
     for (uint8_t c = 0; c < BOOTH_CHANNELS; c++) {
         uint32_t cycles = plan->width[c] == BOOTH_PULSE_FULL
                               ? booth_exposure_us(code) * CYCLES_PER_US
                               : (uint32_t)plan->width[c] * prescalers[plan->clock_select - 1];
         if (c)
-            put_str(o, ",");
+            PUT(o, ",");
         put_u32(o, cycles / CYCLES_PER_US);
         uint32_t frac = (cycles % CYCLES_PER_US) * (10000ul / CYCLES_PER_US); /* 1/16 us = 0.0625 */
         if (frac) {
@@ -235,8 +271,8 @@ static void put_on_times(out_t *o, const booth_pulses_t *plan, uint16_t code)
             }
             for (n = 4; n > 0 && digits[n - 1] == '0'; n--)
                 digits[n - 1] = '\0';
-            put_str(o, ".");
-            put_str(o, digits);
+            PUT(o, ".");
+            put_ram(o, digits);
         }
     }
 }
@@ -317,7 +353,7 @@ static void finish(booth_t *b)
     b->state = STATE_DONE;
     b->holding = false;
     b->action = ACTION_NONE;
-    put_str(&o, "DONE ");
+    PUT(&o, "DONE ");
     put_u32(&o, b->triggers);
     send_event(b, &o);
 }
@@ -356,9 +392,9 @@ static void run_action(booth_t *b, uint32_t now_us)
         (void)now_us;
         b->triggers++;
         /* The board pulsed the trigger at action_due_us; now its report. */
-        put_str(&o, "TRIG ");
+        PUT(&o, "TRIG ");
         put_u32(&o, b->triggers);
-        put_str(&o, " ");
+        PUT(&o, " ");
         put_i32(&o, b->step);
         send_event(b, &o);
         b->action = ACTION_APPLY;
@@ -373,11 +409,11 @@ void booth_exposure(booth_t *b, bool active, uint32_t now_us)
     if (active) {
         out_t o = {.len = 0};
         b->triggers++;
-        put_str(&o, "TRIG ");
+        PUT(&o, "TRIG ");
         put_u32(&o, b->triggers);
-        put_str(&o, " ");
+        PUT(&o, " ");
         if (b->holding)
-            put_str(&o, "HOLD"); /* never the step's index: its levels were not shown */
+            PUT(&o, "HOLD"); /* never the step's index: its levels were not shown */
         else
             put_i32(&o, b->step);
         send_event(b, &o);
@@ -390,29 +426,15 @@ void booth_exposure(booth_t *b, bool active, uint32_t now_us)
     }
 }
 
-/* Wake the main loop when the next timed action or deferred reply is due. */
-static void wake_for(booth_t *b, uint32_t now_us)
+/* Wake the main loop when the next timed action is due. */
+static void wake_for(booth_t *b)
 {
-    bool any = false;
-    uint32_t next = now_us;
-    if (b->deferred) {
-        next = b->deferred_due_us;
-        any = true;
-    }
-    if (b->action != ACTION_NONE && (!any || (int32_t)(b->action_due_us - next) < 0)) {
-        next = b->action_due_us;
-        any = true;
-    }
-    if (any)
-        board_wake_at(next);
+    if (b->action != ACTION_NONE)
+        board_wake_at(b->action_due_us);
 }
 
 void booth_poll(booth_t *b, uint32_t now_us)
 {
-    if (b->deferred && due(now_us, b->deferred_due_us)) {
-        b->deferred = false;
-        board_write(b->deferred_frame, b->deferred_len); /* framed at NEXT: out at once */
-    }
     while (b->action != ACTION_NONE && due(now_us, b->action_due_us))
         run_action(b, now_us);
     if (b->watchdog_ms && !b->watchdog_tripped &&
@@ -421,11 +443,11 @@ void booth_poll(booth_t *b, uint32_t now_us)
         if (any_on(b) || b->state == STATE_ARMED || b->state == STATE_RUNNING) {
             out_t o = {.len = 0};
             booth_all_off(b);
-            put_str(&o, "WDOG");
+            PUT(&o, "WDOG");
             send_event(b, &o);
         }
     }
-    wake_for(b, now_us);
+    wake_for(b);
 }
 
 /* ---- boot banner ----------------------------------------------------------------------- */
@@ -435,8 +457,9 @@ void booth_poll(booth_t *b, uint32_t now_us)
 static void booth_banner(booth_t *b)
 {
     out_t o = {.len = 0};
-    board_write("\n", 1);
-    put_str(&o, "BOOT FW=" BOOTH_FIRMWARE " PROTO=1");
+    char line_end = '\n';
+    board_write(&line_end, 1);
+    PUT(&o, "BOOT FW=" BOOTH_FIRMWARE " PROTO=1");
     send_event(b, &o);
 }
 
@@ -457,15 +480,26 @@ void booth_init(booth_t *b, uint32_t now_us)
 
 /* ---- commands ------------------------------------------------------------------------ */
 
+/* The refusal codes (protocol section 4), in flash. */
+static const BOOTH_FLASH char E_ARG[] = "E_ARG";
+static const BOOTH_FLASH char E_STATE[] = "E_STATE";
+static const BOOTH_FLASH char E_RANGE[] = "E_RANGE";
+static const BOOTH_FLASH char E_FULL[] = "E_FULL";
+static const BOOTH_FLASH char E_CMD[] = "E_CMD";
+static const BOOTH_FLASH char E_FRAME[] = "E_FRAME";
+static const BOOTH_FLASH char E_CRC[] = "E_CRC";
+static const BOOTH_FLASH char E_LEN[] = "E_LEN";
+
 typedef struct {
-    const char *code;
-    const char *text;
+    booth_text_t code;
+    booth_text_t text;
 } refusal_t;
 
 static const refusal_t *refused; /* set by a command that refuses */
 static refusal_t refusal_buf;
 
-static bool refuse(const char *code, const char *text)
+#define REFUSE(code, literal) refuse((code), BOOTH_TEXT(literal))
+static bool refuse(booth_text_t code, booth_text_t text)
 {
     refusal_buf.code = code;
     refusal_buf.text = text;
@@ -512,17 +546,17 @@ typedef struct {
 
 static bool no_args(const words_t *a)
 {
-    return a->n == 0 ? true : refuse("E_ARG", "takes no arguments");
+    return a->n == 0 ? true : REFUSE(E_ARG, "takes no arguments");
 }
 
 /* Levels: exactly BOOTH_CHANNELS words of 4 upper-case hex digits, from a->w[first]. */
 static bool levels_arg(const words_t *a, uint16_t first, uint16_t count, uint16_t out[BOOTH_CHANNELS])
 {
     if (count != BOOTH_CHANNELS)
-        return refuse("E_ARG", "needs " BOOTH_CHANNELS_TEXT " levels");
+        return REFUSE(E_ARG, "needs " BOOTH_CHANNELS_TEXT " levels");
     for (uint16_t i = 0; i < count; i++)
         if (strlen(a->w[first + i]) != 4 || !is_hex_text(a->w[first + i], 4))
-            return refuse("E_ARG", "levels are 4 hex digits");
+            return REFUSE(E_ARG, "levels are 4 hex digits");
     for (uint16_t i = 0; i < count; i++) /* keep the top BITS bits, as the PWM does */
         out[i] = (uint16_t)(hex_value(a->w[first + i], 4) >> (16 - BOOTH_LEVEL_BITS));
     return true;
@@ -530,20 +564,11 @@ static bool levels_arg(const words_t *a, uint16_t first, uint16_t count, uint16_
 
 static bool editable(const booth_t *b)
 {
-    return (b->state == STATE_ARMED || b->state == STATE_RUNNING) ? refuse("E_STATE", "table in use") : true;
+    return (b->state == STATE_ARMED || b->state == STATE_RUNNING) ? REFUSE(E_STATE, "table in use") : true;
 }
 
-static const char *state_name(booth_state_t s)
-{
-    static const char *const names[] = {"IDLE", "ARMED", "RUNNING", "DONE"};
-    return names[s];
-}
-
-static const char *mode_name(booth_mode_t m)
-{
-    static const char *const names[] = {"-", "HOST", "BOOTH", "CAMERA"};
-    return names[m];
-}
+static const BOOTH_FLASH char state_names[][8] = {"IDLE", "ARMED", "RUNNING", "DONE"};
+static const BOOTH_FLASH char mode_names[][7] = {"-", "HOST", "BOOTH", "CAMERA"};
 
 /* The PWM frequency at clk/1 and TOP = 2^BITS - 1, exactly (F_CPU 16 MHz). */
 #if BOOTH_CLOCK_HZ != 16000000ul
@@ -562,20 +587,20 @@ static const char *mode_name(booth_mode_t m)
 #endif
 
 /* The ID reply's dimming words: pulses where the booth sees the exposure, PWM otherwise. */
-static void put_dimming(out_t *o) { put_str(o, " DIM=PULSE PWMHZ=" PWM_HZ_TEXT); }
+static void put_dimming(out_t *o) { PUT(o, " DIM=PULSE PWMHZ=" PWM_HZ_TEXT); }
 
 static bool cmd_id(booth_t *b, const words_t *a, out_t *o)
 {
     if (!no_args(a))
         return false;
-    put_str(o, " FW=" BOOTH_FIRMWARE " PROTO=1 CH=" BOOTH_CHANNELS_TEXT " NAMES=" BOOTH_NAMES
+    PUT(o, " FW=" BOOTH_FIRMWARE " PROTO=1 CH=" BOOTH_CHANNELS_TEXT " NAMES=" BOOTH_NAMES
                " PEAKS=" BOOTH_PEAKS " BITS=");
     put_u32(o, BOOTH_LEVEL_BITS);
-    put_str(o, " STEPS=");
+    PUT(o, " STEPS=");
     put_u32(o, BOOTH_MAX_STEPS);
     put_dimming(o);
-    put_str(o, " SERIAL=");
-    put_str(o, b->serial[0] ? b->serial : "-");
+    PUT(o, " SERIAL=");
+    put_serial(o, b);
     return true;
 }
 
@@ -586,7 +611,7 @@ static bool cmd_set(booth_t *b, const words_t *a, out_t *o)
     if (!levels_arg(a, 0, a->n, duty))
         return false;
     if (b->state == STATE_RUNNING && (b->mode == MODE_BOOTH || b->mode == MODE_CAMERA))
-        return refuse("E_STATE", "sequence running");
+        return REFUSE(E_STATE, "sequence running");
     memcpy(b->duty, duty, sizeof duty);
     drive(b);
     return true;
@@ -612,15 +637,15 @@ static bool cmd_pclr(booth_t *b, const words_t *a, out_t *o)
 }
 
 /* An optional "EXP=<us>" word at w[at] (at < n): strips it (n - 1) and checks its value. */
-static bool is_exposure_word(const char *w) { return strncmp(w, "EXP=", 4) == 0; }
+static bool is_exposure_word(const char *w) { return starts_with(w, BOOTH_TEXT("EXP=")); }
 
 static bool exposure_arg(const char *w, uint16_t *code)
 {
     uint32_t us;
     if (!decimal(w + 4, 8, &us))
-        return refuse("E_ARG", "EXP=<microseconds>");
+        return REFUSE(E_ARG, "EXP=<microseconds>");
     if (us == 0)
-        return refuse("E_RANGE", "exposure 1..99999999 us");
+        return REFUSE(E_RANGE, "exposure 1..99999999 us");
     *code = booth_exposure_code(us);
     return true;
 }
@@ -637,7 +662,7 @@ static bool cmd_padd(booth_t *b, const words_t *a, out_t *o)
 {
     uint16_t duty[BOOTH_CHANNELS];
     uint16_t count = a->n, code = 0;
-    bool held = count > BOOTH_CHANNELS && count <= BOOTH_MAX_WORDS && strcmp(a->w[count - 1], "HOLD") == 0;
+    bool held = count > BOOTH_CHANNELS && count <= BOOTH_MAX_WORDS && IS(a->w[count - 1], "HOLD");
     if (held)
         count--;
     bool timed = count > BOOTH_CHANNELS && count <= BOOTH_MAX_WORDS && is_exposure_word(a->w[count - 1]);
@@ -646,12 +671,12 @@ static bool cmd_padd(booth_t *b, const words_t *a, out_t *o)
     if (!levels_arg(a, 0, count, duty) || (timed && !exposure_arg(a->w[count], &code)) || !editable(b))
         return false;
     if (b->steps >= BOOTH_MAX_STEPS)
-        return refuse("E_FULL", "pattern table full");
+        return REFUSE(E_FULL, "pattern table full");
     memcpy(b->table[b->steps], duty, sizeof duty);
     b->exposure[b->steps] = code;
     set_held(b, b->steps, held);
     b->steps++;
-    put_str(o, " ");
+    PUT(o, " ");
     put_u32(o, (uint32_t)(b->steps - 1));
     put_step_pulses(b, o, duty, code);
     return true;
@@ -662,21 +687,21 @@ static bool cmd_pset(booth_t *b, const words_t *a, out_t *o, uint32_t now_us)
     uint16_t duty[BOOTH_CHANNELS];
     uint16_t n = a->n, code = 0;
     uint32_t index;
-    bool now = n > BOOTH_CHANNELS + 1 && n <= BOOTH_MAX_WORDS && strcmp(a->w[n - 1], "NOW") == 0;
+    bool now = n > BOOTH_CHANNELS + 1 && n <= BOOTH_MAX_WORDS && IS(a->w[n - 1], "NOW");
     if (now)
         n--;
     bool timed = n > BOOTH_CHANNELS + 1 && n <= BOOTH_MAX_WORDS && is_exposure_word(a->w[n - 1]);
     if (timed)
         n--;
     if (n != BOOTH_CHANNELS + 1 || !decimal(a->w[0], 5, &index))
-        return refuse("E_ARG", "PSET <step> and " BOOTH_CHANNELS_TEXT " levels [EXP=<us>] [NOW]");
+        return REFUSE(E_ARG, "PSET <step> and " BOOTH_CHANNELS_TEXT " levels [EXP=<us>] [NOW]");
     if (!levels_arg(a, 1, (uint16_t)(n - 1), duty) || (timed && !exposure_arg(a->w[n], &code)))
         return false;
     if (index >= b->steps)
-        return refuse("E_RANGE", "no such step");
+        return REFUSE(E_RANGE, "no such step");
     bool running = b->state == STATE_RUNNING;
     if (running && ((int32_t)index < b->step || ((int32_t)index == b->step && !b->holding)))
-        return refuse("E_STATE", "step already exposed");
+        return REFUSE(E_STATE, "step already exposed");
     memcpy(b->table[index], duty, sizeof duty);
     b->exposure[index] = code;
     set_held(b, (uint16_t)index, false);
@@ -698,24 +723,24 @@ static bool cmd_arm(booth_t *b, const words_t *a, out_t *o)
     uint32_t t[3];
     (void)o;
     if (a->n == 4) {
-        if (strcmp(a->w[0], "HOST") == 0)
+        if (IS(a->w[0], "HOST"))
             mode = MODE_HOST;
-        else if (strcmp(a->w[0], "BOOTH") == 0)
+        else if (IS(a->w[0], "BOOTH"))
             mode = MODE_BOOTH;
-        else if (strcmp(a->w[0], "CAMERA") == 0)
+        else if (IS(a->w[0], "CAMERA"))
             mode = MODE_CAMERA;
     }
     if (mode == MODE_NONE)
-        return refuse("E_ARG", "ARM HOST|BOOTH|CAMERA settle_us pulse_us period_us");
+        return REFUSE(E_ARG, "ARM HOST|BOOTH|CAMERA settle_us pulse_us period_us");
     for (uint8_t i = 0; i < 3; i++)
         if (!decimal(a->w[i + 1], 8, &t[i]))
-            return refuse("E_ARG", "times are decimal microseconds");
+            return REFUSE(E_ARG, "times are decimal microseconds");
     if (b->state == STATE_RUNNING)
-        return refuse("E_STATE", "sequence running");
+        return REFUSE(E_STATE, "sequence running");
     if (mode != MODE_HOST && b->steps == 0)
-        return refuse("E_STATE", "pattern table empty");
+        return REFUSE(E_STATE, "pattern table empty");
     if (mode == MODE_BOOTH && (t[2] == 0 || t[2] < t[0] + t[1]))
-        return refuse("E_RANGE", "period shorter than settle plus pulse");
+        return REFUSE(E_RANGE, "period shorter than settle plus pulse");
     b->mode = mode;
     b->settle_us = t[0];
     b->pulse_us = t[1];
@@ -733,7 +758,7 @@ static bool cmd_start(booth_t *b, const words_t *a, out_t *o, uint32_t now_us)
     if (!no_args(a))
         return false;
     if (b->state != STATE_ARMED)
-        return refuse("E_STATE", "not armed");
+        return REFUSE(E_STATE, "not armed");
     b->state = STATE_RUNNING;
     if (b->mode == MODE_CAMERA) {
         apply_step(b, 0);
@@ -751,22 +776,22 @@ static uint8_t cmd_next(booth_t *b, const words_t *a, out_t *o)
     if (!no_args(a))
         return 0;
     if (b->state != STATE_RUNNING || b->mode != MODE_HOST) {
-        refuse("E_STATE", "not running in HOST mode");
+        REFUSE(E_STATE, "not running in HOST mode");
         return 0;
     }
     if (b->steps == 0 || (uint16_t)(b->step + 1) >= b->steps) {
         finish(b);
-        put_str(o, " DONE");
+        PUT(o, " DONE");
         return 1;
     }
     if (is_held(b, (uint16_t)(b->step + 1))) {
-        refuse("E_STATE", "next step held; expected PSET first");
+        REFUSE(E_STATE, "next step held; expected PSET first");
         return 0;
     }
     apply_step(b, (uint16_t)(b->step + 1));
     b->deferred_due_us = board_micros() + b->settle_us; /* from the LED change, not the reply's framing */
     b->triggers++;
-    put_str(o, " ");
+    PUT(o, " ");
     put_i32(o, b->step);
     return 2;
 }
@@ -775,7 +800,7 @@ static bool cmd_cnt(booth_t *b, const words_t *a, out_t *o)
 {
     if (!no_args(a))
         return false;
-    put_str(o, " ");
+    PUT(o, " ");
     put_u32(o, b->triggers);
     return true;
 }
@@ -784,26 +809,26 @@ static bool cmd_stat(booth_t *b, const words_t *a, out_t *o)
 {
     if (!no_args(a))
         return false;
-    put_str(o, " STATE=");
-    put_str(o, state_name(b->state));
-    put_str(o, " MODE=");
-    put_str(o, mode_name(b->mode));
-    put_str(o, " STEP=");
+    PUT(o, " STATE=");
+    put_text(o, state_names[b->state]);
+    PUT(o, " MODE=");
+    put_text(o, mode_names[b->mode]);
+    PUT(o, " STEP=");
     put_i32(o, b->step);
-    put_str(o, " STEPS=");
+    PUT(o, " STEPS=");
     put_u32(o, b->steps);
-    put_str(o, " TRIG=");
+    PUT(o, " TRIG=");
     put_u32(o, b->triggers);
-    put_str(o, " WDOG=");
+    PUT(o, " WDOG=");
     put_u32(o, b->watchdog_ms);
-    put_str(o, " ERR=");
-    put_str(o, b->last_error ? b->last_error : "-");
-    put_str(o, " BAD=");
+    PUT(o, " ERR=");
+    put_text(o, b->last_error ? b->last_error : BOOTH_TEXT("-"));
+    PUT(o, " BAD=");
     put_u32(o, b->bad_frames);
-    put_str(o, " LEVELS=");
+    PUT(o, " LEVELS=");
     for (uint8_t c = 0; c < BOOTH_CHANNELS; c++) {
         if (c)
-            put_str(o, ",");
+            PUT(o, ",");
         /* the wire's 16 bits: duty scaled back from BITS, as the emulator reports it */
         put_hex(o, (uint32_t)b->duty[c] * 0xFFFFul / LEVEL_TOP, 4);
     }
@@ -814,11 +839,11 @@ static bool cmd_wdog(booth_t *b, const words_t *a, out_t *o)
 {
     uint32_t ms;
     if (a->n != 1 || !decimal(a->w[0], 7, &ms))
-        return refuse("E_ARG", "WDOG <milliseconds>");
+        return REFUSE(E_ARG, "WDOG <milliseconds>");
     if (!(ms == 0 || (ms >= WATCHDOG_MIN_MS && ms <= WATCHDOG_MAX_MS)))
-        return refuse("E_RANGE", "0 or 50..600000 ms");
+        return REFUSE(E_RANGE, "0 or 50..600000 ms");
     b->watchdog_ms = ms;
-    put_str(o, " ");
+    PUT(o, " ");
     put_u32(o, ms);
     return true;
 }
@@ -827,11 +852,11 @@ static bool cmd_roll(booth_t *b, const words_t *a, out_t *o)
 {
     uint32_t us;
     if (a->n != 1 || !decimal(a->w[0], 8, &us))
-        return refuse("E_ARG", "ROLL <microseconds>");
+        return REFUSE(E_ARG, "ROLL <microseconds>");
     if (b->state == STATE_RUNNING)
-        return refuse("E_STATE", "sequence running");
+        return REFUSE(E_STATE, "sequence running");
     b->roll_us = us;
-    put_str(o, " ");
+    PUT(o, " ");
     put_u32(o, us);
     return true;
 }
@@ -856,45 +881,41 @@ static bool serial_text_ok(const char *s)
         if (!ok || n >= BOOTH_SERIAL_MAX)
             return false;
     }
-    return n > 0 && strcmp(s, "-") != 0;
-}
-
-static void put_serial(out_t *o, const booth_t *b)
-{
-    put_str(o, b->serial[0] ? b->serial : "-");
+    return n > 0 && !(s[0] == '-' && s[1] == '\0');
 }
 
 static bool cmd_serial(booth_t *b, const words_t *a, out_t *o)
 {
     if (a->n == 0) {
-        put_str(o, " ");
+        PUT(o, " ");
         put_serial(o, b);
         return true;
     }
     if (a->n != 1 || !serial_text_ok(a->w[0]))
-        return refuse("E_ARG", "SERIAL [1..32 of A-Z a-z 0-9 . _ -]");
+        return REFUSE(E_ARG, "SERIAL [1..32 of A-Z a-z 0-9 . _ -]");
     if (b->state == STATE_ARMED || b->state == STATE_RUNNING)
-        return refuse("E_STATE", "sequence armed or running");
+        return REFUSE(E_STATE, "sequence armed or running");
     uint8_t len = (uint8_t)strlen(a->w[0]);
     memcpy(b->serial, a->w[0], len);
     b->serial[len] = '\0';
     board_serial_store(b->serial, len);
-    put_str(o, " ");
+    PUT(o, " ");
     put_serial(o, b);
     return true;
 }
 
 /* ---- frames in ------------------------------------------------------------------------ */
 
-static void reject(booth_t *b, const char *code, const char *text)
+#define REJECT(b, code, literal) reject((b), (code), BOOTH_TEXT(literal))
+static void reject(booth_t *b, booth_text_t code, booth_text_t text)
 {
     out_t o = {.len = 0};
     b->bad_frames++;
     b->last_error = code;
-    put_str(&o, "ERR - ");
-    put_str(&o, code);
-    put_str(&o, " ");
-    put_str(&o, text);
+    PUT(&o, "ERR - ");
+    put_text(&o, code);
+    PUT(&o, " ");
+    put_text(&o, text);
     send_frame('=', 0, &o);
 }
 
@@ -907,41 +928,40 @@ static void dispatch(booth_t *b, uint8_t seq, const char *name, const words_t *a
     out_t o = {.len = 0};
     uint8_t ok = 0;
     refused = NULL;
-    put_str(&o, "OK ");
+    PUT(&o, "OK ");
     put_n(&o, name, NAME_ECHO_MAX);
-    if (strcmp(name, "ID") == 0) ok = cmd_id(b, args, &o);
-    else if (strcmp(name, "SET") == 0) ok = cmd_set(b, args, &o);
-    else if (strcmp(name, "OFF") == 0) ok = cmd_off(b, args, &o);
-    else if (strcmp(name, "PCLR") == 0) ok = cmd_pclr(b, args, &o);
-    else if (strcmp(name, "PADD") == 0) ok = cmd_padd(b, args, &o);
-    else if (strcmp(name, "PSET") == 0) ok = cmd_pset(b, args, &o, now_us);
-    else if (strcmp(name, "ARM") == 0) ok = cmd_arm(b, args, &o);
-    else if (strcmp(name, "START") == 0) ok = cmd_start(b, args, &o, now_us);
-    else if (strcmp(name, "NEXT") == 0) ok = cmd_next(b, args, &o);
-    else if (strcmp(name, "CNT") == 0) ok = cmd_cnt(b, args, &o);
-    else if (strcmp(name, "STAT") == 0) ok = cmd_stat(b, args, &o);
-    else if (strcmp(name, "WDOG") == 0) ok = cmd_wdog(b, args, &o);
-    else if (strcmp(name, "PING") == 0) ok = cmd_ping(b, args, &o);
-    else if (strcmp(name, "SERIAL") == 0) ok = cmd_serial(b, args, &o);
-    else if (strcmp(name, "ROLL") == 0) ok = cmd_roll(b, args, &o);
-    else refuse("E_CMD", "unknown command");
+    if (IS(name, "ID")) ok = cmd_id(b, args, &o);
+    else if (IS(name, "SET")) ok = cmd_set(b, args, &o);
+    else if (IS(name, "OFF")) ok = cmd_off(b, args, &o);
+    else if (IS(name, "PCLR")) ok = cmd_pclr(b, args, &o);
+    else if (IS(name, "PADD")) ok = cmd_padd(b, args, &o);
+    else if (IS(name, "PSET")) ok = cmd_pset(b, args, &o, now_us);
+    else if (IS(name, "ARM")) ok = cmd_arm(b, args, &o);
+    else if (IS(name, "START")) ok = cmd_start(b, args, &o, now_us);
+    else if (IS(name, "NEXT")) ok = cmd_next(b, args, &o);
+    else if (IS(name, "CNT")) ok = cmd_cnt(b, args, &o);
+    else if (IS(name, "STAT")) ok = cmd_stat(b, args, &o);
+    else if (IS(name, "WDOG")) ok = cmd_wdog(b, args, &o);
+    else if (IS(name, "PING")) ok = cmd_ping(b, args, &o);
+    else if (IS(name, "SERIAL")) ok = cmd_serial(b, args, &o);
+    else if (IS(name, "ROLL")) ok = cmd_roll(b, args, &o);
+    else REFUSE(E_CMD, "unknown command");
 
     if (refused) {
         b->last_error = refused->code;
         o.len = 0;
-        put_str(&o, "ERR ");
+        PUT(&o, "ERR ");
         put_n(&o, name, NAME_ECHO_MAX);
-        put_str(&o, " ");
-        put_str(&o, refused->code);
-        put_str(&o, " ");
-        put_str(&o, refused->text);
+        PUT(&o, " ");
+        put_text(&o, refused->code);
+        PUT(&o, " ");
+        put_text(&o, refused->text);
         send_frame('=', seq, &o);
     } else if (ok == 2) { /* NEXT: reply once the LEDs have settled */
-        if (o.len > sizeof b->deferred_frame - 14)
-            o.len = (uint16_t)(sizeof b->deferred_frame - 14);
-        b->deferred_len = (uint8_t)frame_into(b->deferred_frame, '=', seq, &o);
-        b->deferred_seq = seq;
-        b->deferred = true;
+        char frame[BOOTH_TIMED_MAX];
+        if (o.len > sizeof frame - 14)
+            o.len = (uint16_t)(sizeof frame - 14);
+        board_write_at(frame, (uint8_t)frame_into(frame, '=', seq, &o), b->deferred_due_us);
     } else {
         send_frame('=', seq, &o);
     }
@@ -951,45 +971,45 @@ static void dispatch(booth_t *b, uint8_t seq, const char *name, const words_t *a
 static void handle_line(booth_t *b, char *line, uint16_t len, uint32_t now_us)
 {
     if (len < 13) {
-        reject(b, "E_FRAME", "frame too short");
+        REJECT(b, E_FRAME, "frame too short");
         return;
     }
     uint16_t star = (uint16_t)(len - 5);
     if (line[star] != '*') {
-        reject(b, "E_FRAME", "no checksum field");
+        REJECT(b, E_FRAME, "no checksum field");
         return;
     }
     if (!is_hex_text(line + star + 1, 4)) {
-        reject(b, "E_FRAME", "checksum not hex");
+        REJECT(b, E_FRAME, "checksum not hex");
         return;
     }
     if (booth_crc16((const uint8_t *)line, star) != (uint16_t)hex_value(line + star + 1, 4)) {
-        reject(b, "E_CRC", "checksum mismatch");
+        REJECT(b, E_CRC, "checksum mismatch");
         return;
     }
     if (line[0] != '?' || line[3] != ':' || line[7] != ':') {
-        reject(b, "E_FRAME", "bad header");
+        REJECT(b, E_FRAME, "bad header");
         return;
     }
     if (!is_hex_text(line + 1, 2) || !is_hex_text(line + 4, 3)) {
-        reject(b, "E_FRAME", "header not hex");
+        REJECT(b, E_FRAME, "header not hex");
         return;
     }
     char *body = line + 8;
     uint16_t body_len = (uint16_t)(star - 8);
     if (hex_value(line + 4, 3) != body_len || body_len > BOOTH_MAX_BODY) {
-        reject(b, "E_LEN", "length mismatch");
+        REJECT(b, E_LEN, "length mismatch");
         return;
     }
     for (uint16_t i = 0; i < body_len; i++) {
         if ((uint8_t)body[i] < 0x20 || (uint8_t)body[i] > 0x7E || body[i] == '*') {
-            reject(b, "E_FRAME", "body not printable");
+            REJECT(b, E_FRAME, "body not printable");
             return;
         }
     }
     uint8_t seq = (uint8_t)hex_value(line + 1, 2);
     if (seq == 0) {
-        reject(b, "E_FRAME", "sequence 00 is reserved");
+        REJECT(b, E_FRAME, "sequence 00 is reserved");
         return;
     }
     /* A readable request: feed the watchdog. */
@@ -1031,7 +1051,7 @@ void booth_feed(booth_t *b, uint8_t byte, uint32_t now_us)
         /* Too long to be a frame: throw it away up to its end and say so once. */
         b->line_len = 0;
         b->discarding = true;
-        reject(b, "E_LEN", "line too long");
+        REJECT(b, E_LEN, "line too long");
         return;
     }
     b->line[b->line_len++] = (char)byte;

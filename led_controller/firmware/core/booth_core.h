@@ -25,6 +25,13 @@ void board_set_levels(const uint16_t duty[BOOTH_CHANNELS]);
 void board_trigger_out(bool high);
 /* Queue bytes for the host (may wait for room; never drops). */
 void board_write(const char *data, uint16_t len);
+/* Send a frame (up to BOOTH_TIMED_MAX bytes, copied) to the host at at_us: its first byte goes into
+ * the UART then, timed by the board's timer (right behind any bytes still queued ahead of it). A
+ * frame still waiting from an earlier call goes out at once first (never dropped). A host-paced
+ * NEXT's reply, due settle_us after the LED change, goes out this way (from the main loop it was
+ * ~57 us late: docs/booth-firmware.md, "Timing"). */
+#define BOOTH_TIMED_MAX 40u
+void board_write_at(const char *data, uint8_t len, uint32_t at_us);
 /* ---- exposure-synchronous pulse dimming (docs/booth-firmware.md, section 2) ---------------
  * A step given its exposure (EXP=) runs in BOOTH and CAMERA mode with each LED on for w*T inside
  * the exposure instead of PWM: every pulse ends `window` timer ticks after the exposure is seen
@@ -84,18 +91,14 @@ typedef struct {
     uint32_t action_due_us;
     bool pulse_high;
     uint32_t pulse_end_us;
-    /* a reply sent once the LEDs have settled (NEXT) */
-    bool deferred;
-    uint8_t deferred_seq;
+    /* a reply sent once the LEDs have settled (NEXT): framed at once, the board sends it at due */
     uint32_t deferred_due_us;
-    char deferred_frame[40];     /* the whole reply, framed in advance: at due it only goes out */
-    uint8_t deferred_len;
     /* link bookkeeping */
     uint8_t event_seq;
     uint32_t watchdog_ms;
     uint32_t last_host_us;
     bool watchdog_tripped;
-    const char *last_error;      /* NULL: none */
+    booth_text_t last_error;     /* the code of the last refusal (in flash); NULL: none */
     uint16_t bad_frames;
     /* the serial, as loaded from EEPROM at boot ("" when never set) */
     char serial[BOOTH_SERIAL_MAX + 1];
@@ -118,7 +121,7 @@ void booth_init(booth_t *b, uint32_t now_us);
 void booth_feed(booth_t *b, uint8_t byte, uint32_t now_us);
 /* An edge of the camera's ExposureActive line (true: rising, exposure starts). */
 void booth_exposure(booth_t *b, bool active, uint32_t now_us);
-/* Run what is due: deferred replies, booth-master steps and pulses, the watchdog. */
+/* Run what is due: booth-master steps and pulses, the camera's rolling-shutter advance, the watchdog. */
 void booth_poll(booth_t *b, uint32_t now_us);
 /* All LEDs off and any sequence aborted (the host link is gone, a fault). */
 void booth_all_off(booth_t *b);

@@ -374,11 +374,15 @@ static int pty_open(void)
 
 static void (*core_reset)(struct avr_t *a);
 
+static int edges_pending;
+static void edges_register(void);
+
 static void reset_all(struct avr_t *a)
 {
     if (core_reset)
         core_reset(a);
     pin_model_reset();
+    edges_register(); /* avr_reset dropped every cycle timer: the camera's edges come all the same */
 }
 
 static void set_exposure_input(int high)
@@ -390,11 +394,23 @@ static void set_exposure_input(int high)
         printf("expin %d %.3f\n", high != 0, ext_us(avr->cycle));
 }
 
+/* The exposure's ExposureActive edges not yet driven: bit 1 the rise, bit 0 the fall; their cycles. */
+static avr_cycle_count_t edge_at[2];
+
 static avr_cycle_count_t edge_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
 {
     (void)a, (void)when;
     set_exposure_input(param != NULL);
+    edges_pending &= ~(1 << (param != NULL));
     return 0;
+}
+
+static void edges_register(void)
+{
+    for (int rise = 0; rise < 2; rise++)
+        if (edges_pending & (1 << rise))
+            avr_cycle_timer_register(avr, edge_at[rise] > avr->cycle ? edge_at[rise] - avr->cycle : 1, edge_timer,
+                                     rise ? (void *)1 : NULL);
 }
 
 static void tcnt_trace(int timer, avr_cycle_count_t cycle)
@@ -451,8 +467,10 @@ static int camera_command(const char *text)
             window.pending = 0;
             return 1;
         }
-        avr_cycle_timer_register(avr, window.start + skew - avr->cycle, edge_timer, (void *)1);
-        avr_cycle_timer_register(avr, window.start + window.length - avr->cycle, edge_timer, NULL);
+        edge_at[1] = window.start + skew;
+        edge_at[0] = window.start + window.length;
+        edges_pending = 3;
+        edges_register();
     }
     return 1;
 }
@@ -462,7 +480,12 @@ static void camera_serve(void)
     if (!window.pending)
         return;
     avr_cycle_count_t end = window.start + (avr_cycle_count_t)(window.rows - 1) * window.line + window.length;
-    if (avr->cycle < end)
+    /* Not before the exposure's falling edge is on the wire: simavr's sleep jump can take the cycle
+     * count past a cycle timer before it runs (it runs at the next avr_run), and a next request
+     * read in between would re-register the edge timers and cancel it: the next rise would then
+     * find the line still high (no edge, no pulses). Answering only once both edges ran closes
+     * that window; the firmware has then seen the edge too. */
+    if (avr->cycle < end || edges_pending > 0)
         return;
     window.pending = 0;
     printf("ok %s %.4f", window.kind, ext_us(window.start));

@@ -1,0 +1,274 @@
+"""The ``aravis-fake`` rig's camera: the GigE Vision fake with the trigger wires it lacks, and a scene."""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera
+from msflash.acquisition.errors import CameraError, FrameLostError
+from msflash.acquisition.plan import CapturePlan
+
+log = logging.getLogger(__name__)
+
+
+class TriggerLines(Protocol):
+    """The booth's side of the wires the fake lacks (the booth emulator is one): the levels it holds
+    now and its ExposureActive input."""
+
+    @property
+    def levels(self) -> tuple[float, ...]:
+        """The LED levels the booth holds now."""
+        ...
+
+    def exposure_active(self, active: bool) -> None:
+        """Drive the booth's ExposureActive input (camera master)."""
+        ...
+
+
+class WiredFakeCamera:
+    """An ``AravisCamera`` on the GigE fake with the trigger wires the fake lacks, emulated, and a scene.
+
+    The fake honours only software triggers and has no ExposureActive output, so:
+
+    - every plan is prepared on the fake with software triggering;
+    - booth master (``plan.trigger == "booth"``): :meth:`trigger` is a no-op and the emulator's
+      trigger output calls :meth:`trigger_line`, which issues the software trigger;
+    - camera master (``"camera"``): :meth:`trigger` raises the emulator's ExposureActive line and
+      issues the software trigger; the frame's arrival lowers it (exposure over).
+
+    The fake latches a software trigger in a register that its stream thread polls and clears
+    (``TriggerSoftware`` at 0x30c, about 1 kHz): two triggers between polls make one frame. A real
+    trigger input takes every edge, so booth pulses go through a queue and a thread that issues
+    each software trigger only once the fake has acknowledged the previous one.
+
+    **The scene** (``world`` given, the ``aravis-fake`` rig's default): Aravis does the streaming
+    (buffers, frame ids, timestamps), the exposure and gain features and the triggering; the
+    pixels of each frame it delivers are replaced by ``world``'s rendering
+    (:meth:`SimulatedCamera.render`) under the booth's LED levels *at the moment that frame was
+    triggered* — read from the emulator when the software trigger is issued (host-paced), when
+    the booth pulses the trigger line (booth master; the levels travel with the pulse through the
+    queue) or after ExposureActive is raised (camera master) — with the exposure and gain the
+    camera read back for that frame. Levels wait in a first-in first-out queue, one per issued
+    trigger, and are taken in frame order. The fake's own pixel generator cannot be given the
+    scene: ``arv_fake_camera_set_fill_pattern`` takes a C callback whose closure argument has
+    scope ``call`` and no destroy notify in Aravis 0.8's typelib
+    (``GIRepository``: ``fill_pattern_callback`` scope ``GI_SCOPE_TYPE_CALL``, closure 1, destroy
+    -1), so PyGObject frees the Python callback when ``set_fill_pattern`` returns, while the fake
+    calls it for every later frame from its stream thread.
+
+    Without ``world`` (the capture bench's transport figures) frames are the fake's test pattern,
+    blind to the LED levels (Mono16: ``256 (x + y + frame_id) mod 65535`` scaled by gain and exposure,
+    ``arv_fake_camera_diagonal_ramp`` in Aravis 0.8.26); mono frames come as (H, W) and the writer
+    records them as three identical channels (:attr:`Rig.mono`).
+    """
+
+    TRIGGER_REGISTER = 0x30C
+    """The fake's TriggerSoftware register (see ``genicam/fake_sfnc.xml``): 1 until the fake takes the trigger."""
+
+    def __init__(
+        self,
+        camera: Any,
+        emulator: TriggerLines,
+        fake: Any = None,
+        errors: list[BaseException] | None = None,
+        world: SimulatedCamera | None = None,
+        true_gain: Callable[[], float] | None = None,
+    ) -> None:
+        self.aravis = camera
+        self.world = world
+        """The scene's renderer, or None to keep the fake's test patterns."""
+        self._true_gain = true_gain
+        """The linear gain the twin's sensor applies now (its camera model's truth, from the fake's
+        registers); None renders at the gain the camera read back for the frame."""
+        self._emulator = emulator
+        self._fake = fake
+        self._errors = errors if errors is not None else []
+        self._mode = "software"
+        self._exposing = False
+        self._pulses: queue.Queue[tuple[float, ...] | None] = queue.Queue()
+        self._pulse_thread: threading.Thread | None = None
+        self._pending: collections.deque[tuple[float, ...]] = collections.deque()
+        self._pending_lock = threading.Lock()
+        self._rendered_levels: list[tuple[float, ...]] = []
+
+    @property
+    def suggested_exposure_us(self) -> float:
+        """An exposure that suits the scene (the world's reference exposure), 10 ms for test patterns."""
+        suggested = self.world.suggested_exposure_us if self.world is not None else None
+        return float(suggested or 10_000.0)
+
+    @property
+    def sensor(self) -> Any:
+        """The rendered sensor's model (noise, levels), or None for test patterns."""
+        return self.world.sensor if self.world is not None else None
+
+    @property
+    def rendered_levels(self) -> tuple[tuple[float, ...], ...]:
+        """The LED levels each frame delivered so far was rendered under, in order."""
+        with self._pending_lock:
+            return tuple(self._rendered_levels)
+
+    @property
+    def info(self) -> CameraInfo:
+        """The fake's identity and pixel format; with a scene, the rendered sensor's black and white levels,
+        else mono frames delivered as RGB."""
+        info = self.aravis.info
+        if self.world is None:
+            return dataclasses.replace(info, cfa=None)
+        return dataclasses.replace(
+            info,
+            black_level=self.world.sensor.black_level,
+            white_level=self.world.sensor.white_level,
+            extra={**info.extra, "pixels": f"rendered scene ({self.world.info.model})"},
+        )
+
+    @property
+    def exposure_range_us(self) -> tuple[float, float] | None:
+        """The fake's exposure limits in microseconds (what ``--exposure`` is checked against)."""
+        return self.aravis.exposure_range_us
+
+    def check_step_gain(self, gain: float) -> None:
+        """Refuse a plan step's linear ``gain`` the camera cannot take (``AravisCamera.check_step_gain``)."""
+        self.aravis.check_step_gain(gain)
+
+    def prepare(self, plan: CapturePlan) -> None:
+        """Prepare the fake for ``plan`` with software triggering whatever the sync mode."""
+        self._mode = plan.trigger
+        self.aravis.prepare(dataclasses.replace(plan, trigger="software"))
+
+    def update_plan(self, plan: CapturePlan, index: int) -> None:
+        """Take ``plan`` with step ``index`` changed (software triggered, as prepared)."""
+        self.aravis.update_plan(dataclasses.replace(plan, trigger="software"), index)
+
+    @property
+    def readout_skew_us(self) -> float:
+        """The fake's (0: a global shutter)."""
+        return float(self.aravis.readout_skew_us)
+
+    def start(self) -> None:
+        """Start acquisition (and, for booth-paced plans, the thread that turns pulses into triggers)."""
+        self._exposing = False
+        with self._pending_lock:
+            self._pending.clear()
+        self._forget_latched_trigger()
+        self.aravis.start()
+        if self._mode == "booth":
+            self._pulses = queue.Queue()
+            self._pulse_thread = threading.Thread(
+                target=self._issue_pulses, name="aravis-fake trigger line", daemon=True
+            )
+            self._pulse_thread.start()
+
+    def _issue_pulses(self) -> None:
+        while (levels := self._pulses.get()) is not None:
+            try:
+                self._wait_trigger_taken()
+                self._software_trigger(levels)
+            except Exception as err:  # noqa: BLE001 - the capture sees the missing frame
+                log.error("aravis-fake trigger line: %s", err)
+                self._errors.append(err)
+
+    def _forget_latched_trigger(self) -> None:
+        """Clear a software trigger the fake latched but has not taken (before each acquisition starts).
+
+        A real camera ignores triggers while it is not acquiring; the fake keeps the last one in
+        its register and takes it when the next acquisition starts, sending a frame nobody
+        triggered (seen after a capture stopped mid-table to take a lost frame again: the booth's
+        last pulses were still being issued).
+        """
+        if self._fake is not None:
+            self._fake.write_register(self.TRIGGER_REGISTER, 0)
+
+    def _wait_trigger_taken(self, timeout_s: float = 1.0) -> None:
+        if self._fake is None:
+            return
+        deadline = time.monotonic() + timeout_s
+        while self._fake.read_register(self.TRIGGER_REGISTER) != 0 and time.monotonic() < deadline:
+            time.sleep(0.0005)
+
+    def _software_trigger(self, levels: tuple[float, ...]) -> None:
+        """Issue the fake's software trigger for a frame to be rendered under ``levels``.
+
+        The levels are queued first: the frame may arrive (on another thread) before the trigger
+        call returns. A trigger that fails takes its levels back (only one thread triggers at a time).
+        """
+        with self._pending_lock:
+            self._pending.append(levels)
+        try:
+            self.aravis.trigger()
+        except BaseException:
+            with self._pending_lock:
+                self._pending.pop()
+            raise
+
+    def trigger(self) -> None:
+        """Host-paced: software trigger; camera master: ExposureActive high, then software trigger."""
+        if self._mode == "booth":
+            return
+        if self._mode == "camera":
+            self._emulator.exposure_active(True)
+            self._exposing = True
+        self._software_trigger(self._emulator.levels)
+
+    def trigger_line(self) -> None:
+        """The booth pulsed the trigger input: queue a software trigger with the levels it exposes."""
+        self._pulses.put(self._emulator.levels)
+
+    def next_frame(self, timeout_s: float) -> RawFrame:
+        """The next frame, (H, W); in camera master the exposure line falls when it arrives.
+
+        With a scene, its pixels are the scene rendered under the levels of its trigger, at the
+        exposure the camera reports for it and the gain the twin's sensor applies (its camera
+        model's truth, read from the fake's registers: what msflash believes it set is not asked).
+        """
+        try:
+            frame = self.aravis.next_frame(timeout_s)
+        except FrameLostError:
+            self._take_levels()  # that trigger's frame is gone
+            raise
+        finally:
+            if self._exposing:
+                self._exposing = False
+                self._emulator.exposure_active(False)
+        levels = self._take_levels()
+        if self.world is None:
+            return frame
+        if levels is None:
+            raise CameraError(
+                f"aravis-fake: frame {frame.frame_id} arrived with no trigger issued for it; expected "
+                "one frame per trigger"
+            )
+        gain = self._true_gain() if self._true_gain is not None else frame.gain
+        pixels = self.world.render(levels, frame.exposure_us, gain)
+        if pixels.shape != frame.pixels.shape:
+            raise CameraError(
+                f"aravis-fake: the scene renders {pixels.shape} but the fake delivers "
+                f"{frame.pixels.shape}; expected the ROI to be the scene's size"
+            )
+        with self._pending_lock:
+            self._rendered_levels.append(levels)
+        return dataclasses.replace(frame, pixels=pixels)
+
+    def _take_levels(self) -> tuple[float, ...] | None:
+        with self._pending_lock:
+            return self._pending.popleft() if self._pending else None
+
+    def stop(self) -> None:
+        """Stop acquisition and the trigger-line thread (a trigger not yet taken is forgotten at the next start)."""
+        if self._pulse_thread is not None:
+            self._pulses.put(None)
+            self._pulse_thread.join(timeout=5.0)
+            self._pulse_thread = None
+        self.aravis.stop()
+
+    def close(self) -> None:
+        """Release the fake camera."""
+        self.aravis.close()

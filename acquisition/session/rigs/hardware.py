@@ -1,0 +1,289 @@
+"""The ``hw`` rig: a GenICam camera through Aravis and a real booth (docs/architecture.md §4).
+
+:class:`~acquisition.devices.hardware_camera.HardwareCamera` around an
+:class:`~acquisition.devices.aravis.camera.AravisCamera` opened by device id, serial or IP on the
+given interfaces (default ``usb3``: GigE Vision discovery broadcasts, so ``gige`` only when named,
+and an IP address opens one GigE camera without discovery), and the booth on ``port`` or the
+single one :func:`led_controller.discovery.find_booth` finds. Every device is tried;
+:class:`RigOpenError` lists each one's failure. LED spectra (and optionally the camera's
+responsivities) come from a calibration directory or CSV files (:func:`hw_spectra`).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+from typing import Any
+
+from msflash.acquisition.devices.hardware_camera import HardwareCamera
+from msflash.acquisition.devices.sim_world import (
+    read_responsivity_file,
+    read_spectra_file,
+)
+from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
+from msflash.acquisition.progress import progress
+from msflash.acquisition.session.rigs.emulated_booth import (
+    close_all,
+)
+from msflash.acquisition.session.rigs.rig import Rig
+from msflash.led_controller import LedBooth
+from msflash.led_controller.adapters import open_booth
+from msflash.led_controller.booth import DEFAULT_BOOT_S
+from msflash.led_controller.booth_interface import Booth
+from msflash.led_controller.recovery import reset_leftovers
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
+
+log = logging.getLogger(__name__)
+
+CALIBRATION_LED_FILES = ("led_spectra.csv", "leds.csv")
+"""File names looked for in ``--calibration DIR`` for the LED spectra (first found wins)."""
+CALIBRATION_RESPONSIVITY_FILES = ("camera_responsivity.csv", "responsivity.csv", "camera.csv")
+"""File names looked for in ``--calibration DIR`` for the camera's responsivities."""
+
+
+def load_hw_spectra(
+    calibration: str | Path | None = None, led_spectra: str | Path | None = None, responsivity: str | Path | None = None
+) -> tuple[Spectra, Spectra | None]:
+    """LED spectra and camera responsivities for the hardware rig, on :data:`DEFAULT_GRID`
+    (:func:`hw_spectra` without the calibration reference)."""
+    leds, camera, _ = hw_spectra(calibration, led_spectra, responsivity)
+    return leds, camera
+
+
+def hw_spectra(
+    calibration: str | Path | None = None, led_spectra: str | Path | None = None, responsivity: str | Path | None = None
+) -> tuple[Spectra, Spectra | None, tuple[str, Path] | None]:
+    """LED spectra, camera responsivities (on :data:`DEFAULT_GRID`) and the calibration they came from.
+
+    ``calibration`` is a ``msflash calibrate`` directory (``calibration.json``, read by
+    :func:`calibration.files.load_calibration`), or a directory holding ``led_spectra.csv`` (or
+    ``leds.csv``) and optionally ``camera_responsivity.csv`` (or ``responsivity.csv``,
+    ``camera.csv``); ``led_spectra`` / ``responsivity`` name
+    the files directly and win over the directory. Files are CSV tables read by
+    :func:`processing.datasets.load_spectra_csv`: first column ``wavelength_nm``, one column per LED
+    (in booth channel order) or per camera channel (R, G, B), energy units, each LED at full drive
+    with the true ratios between LEDs. Values outside a file's range are taken as zero.
+
+    The third item is (id, directory) when ``calibration`` is a ``msflash calibrate`` output (every
+    sequence of the rig refers to it, :attr:`Rig.calibration`), else None.
+
+    Raises
+    ------
+    UsageError
+        Nothing gives the LED spectra, a named file or directory is missing, or a file is malformed.
+    """
+    led_path = Path(led_spectra) if led_spectra else None
+    resp_path = Path(responsivity) if responsivity else None
+    leds: Spectra | None = None
+    camera: Spectra | None = None
+    reference: tuple[str, Path] | None = None
+    if calibration is not None:
+        directory = Path(calibration)
+        if not directory.is_dir():
+            raise UsageError(
+                f"--calibration {directory}: not a directory; expected a calibration directory "
+                "(calibration.json from 'msflash calibrate', or led_spectra.csv)"
+            )
+        # lexists, not is_file: a calibration.json that is a FIFO or a device is refused by its reader.
+        if os.path.lexists(directory / "calibration.json"):
+            leds, camera, calibration_id = _load_calibration_set(directory)
+            reference = (calibration_id, directory)
+        else:
+            if led_path is None:
+                led_path = next((directory / n for n in CALIBRATION_LED_FILES if os.path.lexists(directory / n)), None)
+                if led_path is None:
+                    raise UsageError(
+                        f"--calibration {directory}: no calibration.json or "
+                        f"{' or '.join(CALIBRATION_LED_FILES)}; expected the LED spectra"
+                    )
+            if resp_path is None:
+                resp_path = next(
+                    (directory / n for n in CALIBRATION_RESPONSIVITY_FILES if os.path.lexists(directory / n)), None
+                )
+    if led_path is not None:
+        leds = read_spectra_file(led_path, "spd")
+    if resp_path is not None:
+        camera = read_responsivity_file(resp_path)
+    if leds is None:
+        raise UsageError(
+            "rig 'hw': the LED spectra are needed for the sequence header; expected --calibration DIR "
+            "or --led-spectra FILE.csv (first column wavelength_nm, one column per LED at full drive, "
+            "energy units), and --responsivity FILE.csv for the flash solvers"
+        )
+    leds = leds.resample(DEFAULT_GRID, outside="zero")
+    if camera is not None:
+        if camera.count != 3:
+            raise UsageError(f"{resp_path or calibration}: {camera.count} responsivity columns; expected 3 (R, G, B)")
+        camera = camera.resample(DEFAULT_GRID, outside="zero")
+    return leds, camera, reference
+
+
+def _load_calibration_set(directory: Path) -> tuple[Spectra | None, Spectra | None, str]:
+    """LED spectra, responsivities and id of a ``msflash calibrate`` directory (``calibration.json``)."""
+    try:
+        from msflash.calibration.files import load_calibration
+    except ImportError as err:
+        raise UsageError(f"--calibration {directory}: calibration files unreadable here ({err})") from err
+    try:
+        found = load_calibration(directory)
+    except (OSError, ValueError) as err:
+        raise UsageError(str(err)) from err
+    except Exception as err:  # CalibrationError's base is the calibration package's choice
+        raise UsageError(str(err)) from err
+    for note in found.notes:  # negative noise clipped on reading
+        progress(note)
+    leds = found.led_spectra.to_unit("energy") if found.led_spectra is not None else None
+    camera = found.camera_responsivities.to_unit("energy") if found.camera_responsivities is not None else None
+    return leds, camera, found.id
+
+
+def _open_hw_camera(
+    camera: str | None, interfaces: str, sync: str, pixel_format: str | None, options: Any = None
+) -> tuple[Any, Any]:
+    """The camera, opened and configured (profile options overridden by ``options``), and its setup."""
+    from msflash.acquisition.devices.aravis import camera as aravis_camera
+    from msflash.acquisition.devices.aravis.camera_features import CameraOptions, configure_camera
+
+    names = aravis_camera.parse_interfaces(interfaces)
+    if camera is None:
+        found = aravis_camera.list_devices(names)
+        if len(found) != 1:
+            listing = ", ".join(f"{e.device_id} (serial {e.serial})" for e in found) or "none"
+            raise aravis_camera.CameraNotFoundError(
+                f"camera: {'no camera' if not found else f'{len(found)} cameras'} on {','.join(names)} "
+                f"(found: {listing}); expected one — pass --camera ID (device id, serial or IP) "
+                "or --interfaces"
+            )
+        camera = found[0].device_id
+    opened = aravis_camera.AravisCamera(camera, interfaces=names, pixel_format=pixel_format)
+    try:
+        setup = configure_camera(opened, options or CameraOptions(), strobe=sync == "camera")
+    except BaseException:
+        opened.close()
+        raise
+    return opened, setup
+
+
+def open_hw_rig(
+    camera: str | None = None,
+    port: str | None = None,
+    interfaces: str = "usb3",
+    calibration: str | Path | None = None,
+    led_spectra: str | Path | None = None,
+    responsivity: str | Path | None = None,
+    log_serial: str | Path | None = None,
+    sync: str = "host",
+    pixel_format: str | None = None,
+    camera_options: Any = None,
+    booth_protocol: str = "msflash",
+    booth_boot_s: float = DEFAULT_BOOT_S,
+) -> Rig:
+    """The hardware rig: a GenICam camera by id/serial/IP + a booth on ``port`` (or the one discovered).
+
+    Parameters
+    ----------
+    camera
+        Aravis device id, serial number or IPv4 address; None takes the single camera found on
+        ``interfaces``.
+    port
+        The booth's serial port (``/dev/ttyACM0``, a pty path, a pyserial URL); None discovers it.
+    interfaces
+        Aravis interfaces to enable (``usb3`` by default; ``gige`` broadcasts discovery unless
+        ``camera`` is an IP address; ``fake`` is Aravis's in-process test camera).
+    calibration, led_spectra, responsivity
+        Where the LED spectra and camera responsivities come from (:func:`hw_spectra`).
+    sync
+        ``host``, ``booth`` or ``camera``: camera master configures a strobe output (Line1 unless
+        ``camera_options`` or the camera profile name another line).
+    pixel_format
+        PixelFormat to set, or None to keep the camera's.
+    camera_options
+        :class:`~acquisition.devices.aravis.camera_features.CameraOptions` (trigger/strobe lines, gain, ROI, binning,
+        features), overriding the camera profile's.
+    booth_protocol
+        ``--booth-protocol``: what the booth at ``port`` speaks (``msflash``, the default, or ``text``,
+        :data:`led_controller.adapters.BOOTH_PROTOCOLS`); discovery finds msflash booths only.
+
+    Raises
+    ------
+    UsageError
+        No LED spectra given (checked before any device is opened).
+    CameraSettingError
+        A camera option the camera cannot take (bad input; the booth is not opened).
+    RigOpenError
+        One or both devices failed to open; the message lists each device's failure.
+    """
+    leds, responsivities, reference = hw_spectra(calibration, led_spectra, responsivity)
+    closers: list = []
+    failures: list[str] = []
+    errors: list[BaseException] = []
+    aravis = booth = setup = None
+    try:
+        aravis, setup = _open_hw_camera(camera, interfaces, sync, pixel_format, camera_options)
+        closers.append(aravis.close)
+    except CameraSettingError:
+        raise  # bad input, not a device failure: one line, exit 2
+    except ImportError as err:
+        failures.append(f"camera{f' {camera!r}' if camera else ''}: Aravis unavailable ({err}); run setup.sh")
+        errors.append(err)
+    except (OSError, ValueError) as err:  # CameraError is an OSError; bad interface names ValueError
+        message = str(err)
+        failures.append(message if message.startswith("camera") else f"camera {camera!r}: {message}")
+        errors.append(err)
+    try:
+        booth = _open_hw_booth(port, booth_protocol, log_serial, booth_boot_s, leds, closers)
+    except Exception as err:  # noqa: BLE001 - reported with the camera's failure, if any
+        message = str(err)
+        failures.append(message if message.startswith("booth") else f"booth: {message}")
+        errors.append(err)
+    if failures:
+        close_all(closers)
+        raise RigOpenError(f"rig 'hw': {'; '.join(failures)}") from errors[0]
+    assert aravis is not None and booth is not None
+    return _hw_rig(aravis, setup, booth, leds, responsivities, reference, closers)
+
+
+def _open_hw_booth(
+    port: str | None, protocol: str, log_serial: str | Path | None, boot_s: float, leds: Spectra, closers: list
+) -> Booth:
+    """The booth at ``port`` (or the one discovery finds), checked to have one channel per LED and cleared
+    of a killed run's leftovers; its closers appended as it opens."""
+    from msflash.led_controller.discovery import find_booth
+
+    booth_port = port if port is not None else find_booth().device
+    booth = open_booth(booth_port, protocol, log_serial=log_serial, boot_s=boot_s)
+    closers.append(booth.close)
+    closers.append(booth.all_off)
+    if booth.info.channels != leds.count:
+        raise RigOpenError(
+            f"booth {booth_port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the LED "
+            f"spectra have {leds.count} ({', '.join(leds.names)}); expected one spectrum per channel"
+        )
+    if isinstance(booth, LedBooth):  # an adapter switches its LEDs off when it opens
+        for note in reset_leftovers(booth):  # a killed run's LEDs and raised watchdog
+            log.warning("%s", note)
+    return booth
+
+
+def _hw_rig(
+    aravis: Any,
+    setup: Any,
+    booth: Booth,
+    leds: Spectra,
+    responsivities: Spectra | None,
+    reference: tuple[str, Path] | None,
+    closers: list,
+) -> Rig:
+    """The hardware rig, recording the camera's gain, its options as read back and a mono camera as such."""
+    hardware = HardwareCamera(aravis, setup)
+    info = aravis.info
+    extra: dict = {"gain": aravis.gain_record()}
+    if setup is not None and not setup.options.empty:
+        extra["camera_options"] = setup.to_dict()  # what was asked (profile + options) and read back
+    mono = info.cfa is None and info.pixel_format.startswith("Mono")
+    if responsivities is None:
+        extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
+    return Rig(
+        "hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono, calibration=reference
+    )
