@@ -94,6 +94,20 @@ class FlickerCheck:
     """Why it was not checked, or what was decided and why."""
     warnings: tuple[str, ...] = field(default=())
 
+    def summary(self) -> str | None:
+        """One line for the run's output when flicker was detected (None otherwise: a steady light stays quiet)."""
+        if not self.detected or self.frame_gains is None:
+            return None
+        every = np.concatenate([[1.0], self.frame_gains])
+        line = (
+            f"flicker: the LED frames saw {every.min():.2f}–{every.max():.2f}× the ambient frame's light "
+            f"(spread {self.spread:.0%}); each frame's ambient gain {'applied' if self.corrected else 'not applied'}"
+        )
+        fit = self.fit
+        if fit is not None and fit.decisive:
+            line += f"; fitted {fit.frequency_hz:.1f} Hz, depth {fit.depth:.0%}"
+        return line
+
     def to_dict(self) -> dict:
         """The JSON object ``flicker`` (docs/architecture.md §7)."""
 

@@ -31,6 +31,7 @@ from msflash.acquisition.app.options import (
 from msflash.acquisition.devices.aravis.fake_models import DEFAULT_FAKE_MODEL
 from msflash.acquisition.devices.mains_flicker import FLICKER_WAVEFORMS, drawn_flicker, parse_flicker
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
+from msflash.acquisition.session.anti_flicker import ANTI_FLICKER_CHOICES
 from msflash.acquisition.session.external_booth import check_booth_port
 from msflash.acquisition.session.rig import (
     AravisFakeRigOptions,
@@ -395,6 +396,14 @@ def _add_pacing_options(parser: argparse.ArgumentParser) -> None:
         metavar="auto|MICROSECONDS",
         help="auto (default: meter an ambient preview, then choose each LED frame's exposure for "
         "SNR below saturation) or one exposure in microseconds for every frame",
+    )
+    parser.add_argument(
+        "--anti-flicker",
+        default="off",
+        choices=ANTI_FLICKER_CHOICES,
+        help="exposures of whole flicker periods of mains lamps where the exposure allows: 50 (10 ms periods) or 60 "
+        "(8.33 ms) the mains in Hz, auto (50 ms: whole periods of both), off (default); shorter exposures are kept "
+        "and named in a warning (the estimate reads each frame's ambient gain; docs/flicker.md)",
     )
     parser.add_argument("--log-serial", default=None, help="write the booth serial transcript to this file")
     parser.add_argument(

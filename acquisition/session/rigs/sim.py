@@ -17,8 +17,8 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.exposure_light import EmulatorLight, FirmwareLight, Shutter
+from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.sim_world import (
     sim_ambient,
     sim_camera,
