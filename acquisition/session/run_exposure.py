@@ -21,9 +21,9 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, StepRole, TriggerSource
 from msflash.acquisition.progress import progress
 from msflash.acquisition.sequence.format import SequenceFrame
+from msflash.acquisition.session.anti_flicker import with_anti_flicker
 from msflash.acquisition.session.capture import preview_frames
 from msflash.acquisition.session.engine import Cancellation
-from msflash.acquisition.session.anti_flicker import with_anti_flicker
 from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,
