@@ -180,8 +180,11 @@ def ambient_gain_offsets(moments: ChannelMoments, directions: np.ndarray) -> tup
         offset = float(np.trace(projector @ clean.fa[i])) / ambient
         residual = float(np.trace(projector @ clean.ff[i])) - 2 * offset * float(np.trace(projector @ clean.fa[i]))
         residual += offset * offset * ambient
+        # The scatter about the fit, the noise included (the raw moments: the denoised ones have had it taken out).
+        scatter = float(np.trace(projector @ moments.ff[i])) - 2 * offset * float(np.trace(projector @ moments.fa[i]))
+        scatter += offset * offset * float(np.trace(projector @ moments.aa))
         dof = max(clean.n_blocks * (channels - q.shape[1]) - 1, 1)
-        noise_var = max(residual, 0.0) / dof / ambient
+        noise_var = max(scatter, residual, 0.0) / dof / ambient
         offsets[i] = offset
         sigmas[i] = math.sqrt(noise_var + MODEL_ERROR**2)
         energy = float(np.trace(clean.ff[i])) - 2 * offset * float(np.trace(clean.fa[i]))
