@@ -38,8 +38,12 @@ from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import ChannelMoments, NoiseMoments, SequenceStatistics
 
 MODEL_ERROR = 0.03
-"""One sigma of the colour read's bias under steady light (``|ê_i|`` with no flicker): the 90th percentile over the
-LEDs of the harness's tuning rows was 0.028 (docs/flicker.md). Added in quadrature to the noise's sigma."""
+"""One sigma of the colour read's bias under steady light for an LED of little curvature (:func:`curvature_share`),
+added in quadrature to the noise's sigma (docs/flicker.md)."""
+
+CURVATURE_ERROR = 0.4
+"""The read's bias per unit :func:`curvature_share` (one sigma): set on the harness's tuning lamp kinds, steady
+(docs/flicker.md)."""
 
 DETECTION_Z = 3.0
 """Flicker is *detected* (and the gains applied) when some LED's ``|ê_i|`` exceeds this many sigmas."""
@@ -93,6 +97,8 @@ class FlickerCheck:
     reason: str = ""
     """Why it was not checked, or what was decided and why."""
     warnings: tuple[str, ...] = field(default=())
+    applied_offsets: np.ndarray | None = None
+    """The shares the LED images were corrected by (``ê`` shrunk by each LED's sigma), or None when not corrected."""
 
     def summary(self) -> str | None:
         """One line for the run's output when flicker was detected (None otherwise: a steady light stays quiet)."""
@@ -122,6 +128,7 @@ class FlickerCheck:
             "frame_gains": listed(self.frame_gains),
             "led_gain_offsets": listed(self.led_gain_offsets),
             "led_gain_offsets_std": listed(self.led_gain_offsets_std),
+            "applied_gain_offsets": listed(self.applied_offsets),
             "spread": self.spread,
             "frequency_hz": fit.frequency_hz if fit is not None and fit.decisive else None,
             "depth": fit.depth if fit is not None and fit.decisive else None,
@@ -133,15 +140,17 @@ class FlickerCheck:
 
 
 def led_directions(led_spectra: Spectra, responsivities: Spectra, channels: Sequence[str]) -> np.ndarray:
-    """Each LED's response direction and its tilt across its band, per channel: shape (k, 2, C).
+    """Each LED's response direction, its tilt across its band and its curvature, per channel: shape (k, 3, C).
 
     ``channels`` name each channel ``R``, ``G`` or ``B`` (a mosaic's planes in CFA order). Both spectra in one unit
-    on one grid (photons inside processing).
+    on one grid (photons inside processing). The gains are read off the first two (module notes); the third, a
+    surface's reflectance curving inside the band, is what the read cannot tell from the ambient
+    (:func:`curvature_share`).
     """
     columns = [_CHANNEL_INDEX[c] for c in channels]
     camera = responsivities.values[:, columns]
     nm = led_spectra.wavelengths_nm
-    out = np.zeros((led_spectra.count, 2, len(columns)))
+    out = np.zeros((led_spectra.count, 3, len(columns)))
     for i in range(led_spectra.count):
         spd = np.clip(led_spectra.values[:, i], 0.0, None)
         total = float(spd.sum())
@@ -149,8 +158,24 @@ def led_directions(led_spectra: Spectra, responsivities: Spectra, channels: Sequ
             continue
         centre = float((nm * spd).sum() / total)
         width = math.sqrt(float(((nm - centre) ** 2 * spd).sum() / total)) or 1.0
+        x = (nm - centre) / width
         out[i, 0] = camera.T @ spd
-        out[i, 1] = camera.T @ (spd * (nm - centre) / width)
+        out[i, 1] = camera.T @ (spd * x)
+        out[i, 2] = camera.T @ (spd * (x * x - 1.0))
+    return out
+
+
+def curvature_share(directions: np.ndarray) -> np.ndarray:
+    """``‖P_i d''_i‖ / ‖d_i‖`` per LED: how far the LED's colour moves off its two read directions when a surface's
+    reflectance curves across the band (0.05–0.25 for most LEDs; 0.35–0.56 for an amber LED where a camera's R and
+    G cross, whose read is biased by up to 0.2 under steady light: docs/flicker.md)."""
+    out = np.zeros(directions.shape[0])
+    for i, (d0, d1, d2) in enumerate(directions[:, :3]):
+        norm = float(np.linalg.norm(d0))
+        if norm <= 0:
+            continue
+        q, _ = np.linalg.qr(np.column_stack([d0, d1]))
+        out[i] = float(np.linalg.norm(d2 - q @ (q.T @ d2))) / norm
     return out
 
 
@@ -165,9 +190,10 @@ def ambient_gain_offsets(moments: ChannelMoments, directions: np.ndarray) -> tup
     """
     clean = moments.denoised()
     k, channels = clean.fa.shape[0], clean.n_channels
+    curvature = curvature_share(directions) if directions.shape[1] > 2 else np.zeros(k)
     offsets, sigmas, misfits = np.full(k, np.nan), np.full(k, np.nan), np.full(k, np.nan)
     for i in range(k):
-        basis = directions[i].T  # (C, 2)
+        basis = directions[i, :2].T  # (C, 2)
         if not np.any(basis):
             continue
         q, r = np.linalg.qr(basis)
@@ -186,7 +212,7 @@ def ambient_gain_offsets(moments: ChannelMoments, directions: np.ndarray) -> tup
         dof = max(clean.n_blocks * (channels - q.shape[1]) - 1, 1)
         noise_var = max(scatter, residual, 0.0) / dof / ambient
         offsets[i] = offset
-        sigmas[i] = math.sqrt(noise_var + MODEL_ERROR**2)
+        sigmas[i] = math.sqrt(noise_var + MODEL_ERROR**2 + (CURVATURE_ERROR * curvature[i]) ** 2)
         energy = float(np.trace(clean.ff[i])) - 2 * offset * float(np.trace(clean.fa[i]))
         energy += offset * offset * float(np.trace(clean.aa))
         misfits[i] = max(residual, 0.0) / energy if energy > 0 else math.inf
@@ -304,7 +330,20 @@ def check_flicker(
         if detected
         else f"no LED's ambient share is beyond {DETECTION_Z:g} σ (largest {float(np.max(z)):.1f} σ): steady"
     )
-    return FlickerCheck(True, detected, detected, offsets, sigmas, frame_gains, spread, reason=reason)
+    # Each LED's share shrunk by its own evidence (positive-part James–Stein): a read within its sigma of 0 is not
+    # applied, one many sigmas out nearly in full (an LED whose read the surfaces bias weighs little).
+    applied = offsets * np.clip(1.0 - (sigmas / np.maximum(np.abs(offsets), 1e-300)) ** 2, 0.0, 1.0)
+    return FlickerCheck(
+        True,
+        detected,
+        detected,
+        offsets,
+        sigmas,
+        frame_gains,
+        spread,
+        reason=reason,
+        applied_offsets=applied if detected else None,
+    )
 
 
 def with_fit(check: FlickerCheck, starts_s: np.ndarray | None, exposures_s: np.ndarray | None) -> FlickerCheck:

@@ -313,8 +313,8 @@ def estimate_from_statistics(
     every route (from disk, live, replay) estimates. ``model``: one prepared for the sequence's LEDs (a
     live session prepares it before the first frame), else made here."""
     check = flicker_check(sequence, statistics)
-    if check.corrected and check.led_gain_offsets is not None:
-        statistics = with_ambient_gains(statistics, check.led_gain_offsets)
+    if check.corrected and check.applied_offsets is not None:
+        statistics = with_ambient_gains(statistics, check.applied_offsets)
     if model is None:
         estimate = estimate_ambient(statistics, led_spectra_photons(sequence), method, alpha)
     else:
