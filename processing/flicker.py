@@ -19,11 +19,14 @@ extra frame, so it works in every sync mode and on sequences already recorded.
 **Correcting.** ``f = f̃ − e a`` is linear, so the statistics of eq. 4–6 are corrected exactly from what they hold
 (:func:`with_ambient_gains`): ``G' = G − e cᵀ − c eᵀ + E e eᵀ``, ``c' = c − E e`` (``E = ‖a‖²``), the noise moments alike.
 
-**Deciding.** The colour read is biased by the model error (measured on steady light, tuning rows of the harness:
-:data:`MODEL_ERROR`); the gains are applied when some LED's ``|ê_i|`` exceeds :data:`DETECTION_Z` times its
-uncertainty (noise and that bias), and reported in every case (:class:`FlickerCheck`). Frame timestamps and
-exposures, when the sequence has them, fit the mains frequency and phase to the gains (:func:`fit_mains`) for the
-report only.
+**Deciding.** The colour read is biased where a surface's reflectance curves inside an LED's band and the camera
+turns that into colour the two directions do not hold (an amber LED where R and G cross reads up to 0.2 under steady
+light): each LED's sigma adds :data:`MODEL_ERROR` and :data:`CURVATURE_ERROR` times its :func:`curvature_share` to
+the noise's, both set on the harness's tuning lamp kinds under steady light (docs/flicker.md). Flicker is detected
+when some LED's ``|ê_i|`` exceeds :data:`DETECTION_Z` sigmas; the statistics are then corrected by each ``ê_i``
+shrunk by its own sigma (a read within its sigma of zero is not applied). What was read is reported in every case
+(:class:`FlickerCheck`). Frame timestamps and exposures, when the sequence has them, fit the mains frequency and
+phase to the gains (:func:`fit_mains`) for the report only.
 """
 
 from __future__ import annotations

@@ -13,7 +13,8 @@ Depth is the *percent flicker* of IES RP-16 and IEEE 1789, ``(max − min) / (ma
 is scaled to mean 1, so the ambient's mean spectrum is the one the sim names. The supply is not the nominal
 frequency: grids hold ±1 % at most (:data:`MAINS_TOLERANCE`), so the true frequency is drawn within it, and the
 phase at the light clock's zero is drawn too; a frame then sees its waveform's mean over its own exposure window
-(each row its own, on a rolling shutter), wherever real frame timing puts it (:mod:`acquisition.devices.exposure_light`).
+(each row its own, on a rolling shutter), the frames spaced on the lamp's clock as host pacing spaces them, drawn
+from the seed (:meth:`acquisition.devices.simulated_camera.SimulatedCamera._mains_start`): a run is reproducible.
 
 This is the simulator's model of the lamp, not the estimator's: the estimate never reads it
 (:mod:`processing.flicker` measures each frame's ambient gain from the pixels).

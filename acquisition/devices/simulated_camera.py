@@ -25,9 +25,7 @@ the frame's place, whoever triggered (on the booth's trigger line nobody else se
 
 from __future__ import annotations
 
-import math
 import threading
-import time
 from collections.abc import Callable, Sequence
 from typing import Literal
 
@@ -71,6 +69,10 @@ _GENICAM_BITS = (8, 10, 12, 14, 16)
 SIM_DEFAULT_CFA = "RGGB"
 """The ``sim`` rig's camera sends a raw RGGB mosaic, 12-bit (:func:`processing.image_formation.machine_vision_sensor`),
 as colour machine-vision cameras do; ``cfa=None`` asks for RGB frames."""
+
+FREE_RUNNING_GAP_S = (0.015, 0.060)
+"""From one frame's readout to the next exposure under a modulated ambient without a light over time: host pacing
+(a serial command, a trigger) spaces frames by a few tens of ms, drawn from the seed (docs/flicker.md)."""
 
 
 class SimulatedCamera(TriggeredFrames):
@@ -174,7 +176,8 @@ class SimulatedCamera(TriggeredFrames):
         start on the light's clock."""
         self.true_ambient_gains: list[float] = []
         """The ambient's relative intensity in each frame rendered so far (its mean over rows; 1 when steady)."""
-        self._free_end_s = -math.inf
+        self._free_end_s = 0.0
+        self._pacing_rng = np.random.default_rng([seed, 0x0F11C7E5, 1])
         self._latency_rng = np.random.default_rng(seed + 7919)
 
     # -- ground truth and identity ------------------------------------------------------------
@@ -331,18 +334,28 @@ class SimulatedCamera(TriggeredFrames):
                 return self._render_free_running(checked, float(exposure_us), float(gain))[0]
             return self._render(checked, float(exposure_us), float(gain))
 
+    def _mains_start(self, exposure_us: float, skew_s: float) -> float:
+        """The next exposure's start on the modulated ambient's clock (s).
+
+        Frames follow one another as host pacing spaces them, :data:`FREE_RUNNING_GAP_S` apart after the last
+        one's readout, drawn from the seed: a run is reproducible, and a short exposure meets a mains flicker at
+        an unrelated phase each frame (the mains keeps no time with the booth or the camera). The LEDs keep
+        their own clock (:attr:`exposure_light`).
+        """
+        gap = float(self._pacing_rng.uniform(*FREE_RUNNING_GAP_S))
+        start = self._free_end_s + self.shutter.readout_us * 1e-6 + gap
+        self._free_end_s = start + skew_s + exposure_us * 1e-6
+        return start
+
     def _render_free_running(
         self, levels: tuple[float, ...], exposure_us: float, gain: float
     ) -> tuple[np.ndarray, float]:
-        """A frame under a modulated ambient without a light over time (:attr:`exposure_light` None): the
-        exposure starts now on this process's monotonic clock (never before the last one ended plus the
-        readout), every row sees the ambient's mean over the window; the pixels and that start (s)."""
-        start = max(
-            time.monotonic() + self.shutter.latency_us * 1e-6, self._free_end_s + self.shutter.readout_us * 1e-6
-        )
+        """A frame under a modulated ambient without a light over time (:attr:`exposure_light` None): the pixels
+        and the exposure's start (s) on the ambient's clock (:meth:`_mains_start`); every row sees the ambient's
+        mean over its own window."""
         request = ExposureRequest(exposure_us, self.scene.shape[0], self.shutter.line_time_us, 0.0, False)
+        start = self._mains_start(exposure_us, request.skew_us * 1e-6)
         light = RowLight(start, np.broadcast_to(np.asarray(levels, dtype=float), (request.rows, len(levels))))
-        self._free_end_s = start + request.skew_us * 1e-6 + exposure_us * 1e-6
         ambient = ambient_over_rows(self.ambient_modulation, light, request)
         return self._render_rows(light, ambient, exposure_us, gain), start
 
@@ -420,7 +433,7 @@ class SimulatedCamera(TriggeredFrames):
         self, step: CaptureStep, hardware_trigger: bool
     ) -> tuple[tuple[float, ...], np.ndarray, float | None]:
         """The frame of ``step`` under :attr:`exposure_light`; its mean levels (over rows), pixels, and the
-        exposure's start on the light's clock (s) when the ambient is modulated (else None)."""
+        exposure's start on the modulated ambient's clock (s, :meth:`_mains_start`), or None when it is steady."""
         assert self.exposure_light is not None
         shutter = self.shutter
         request = ExposureRequest(
@@ -437,9 +450,12 @@ class SimulatedCamera(TriggeredFrames):
                 f"simulated camera '{self._name}': exposure light gave levels of shape {rows.shape}; expected "
                 f"({request.rows}, {self.led_spectra.count}) values in [0, 1]"
             )
-        ambient = ambient_over_rows(self.ambient_modulation, light, request)
+        start = None
+        ambient = None
+        if self.ambient_modulation is not None:
+            start = self._mains_start(step.exposure_us, request.skew_us * 1e-6)
+            ambient = ambient_over_rows(self.ambient_modulation, RowLight(start, rows), request)
         mean = tuple(float(v) for v in rows.mean(axis=0))
-        start = None if ambient is None else float(light.start_s)
         return mean, self._render_rows(light, ambient, step.exposure_us, step.gain), start
 
     def _render_rows(self, light: RowLight, ambient: np.ndarray | None, exposure_us: float, gain: float) -> np.ndarray:
