@@ -162,7 +162,8 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
     # The simulated world: the sim rig renders it with its own camera, aravis-fake through Aravis.
     world = simulated_world(args)
     if args.flicker is not None:  # the lamp's true frequency (within the grid's ±1 %) and phase drawn from --seed
-        world = dataclasses.replace(world, flicker=drawn_flicker(*args.flicker, seed=args.seed))
+        hz, depth, waveform = args.flicker
+        world = dataclasses.replace(world, flicker=drawn_flicker(hz, depth, waveform, seed=args.seed))
     if spec == "sim":
         return open_rig(
             "sim",
