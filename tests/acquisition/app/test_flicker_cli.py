@@ -22,6 +22,9 @@ def test_a_flickering_lamp_is_found_reported_and_recorded(tmp_path: Path, capsys
     assert "msflash: flicker: the LED frames saw" in err
     if flicker["frequency_hz"] is not None:  # the fit is reported only where the frames decide it
         assert abs(flicker["frequency_hz"] - truth["frequency_hz"]) < 1.0
+    # The recorded sequence tells the same from disk.
+    assert main(["estimate", str(out / "sequence")]) == 0
+    assert "msflash: flicker: the LED frames saw" in capsys.readouterr().err
 
 
 def test_a_steady_lamp_raises_no_flicker(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
