@@ -1007,18 +1007,15 @@ class BlockRows:
                 1.0, self.root_weights, out=np.zeros_like(self.root_weights), where=self.root_weights > 0
             )
         values = self.rows if column_factor is None else self.rows * column_factor
-        by_channel = (
-            values.reshape(n_rows, height, channels, width).transpose(2, 0, 1, 3).reshape(channels * n_rows, -1)
-        )
-        transform = _channel_transform(spec, channels, spec.black_level * self.factor * self.factor)
+        by_channel = values.reshape(n_rows, height, channels, width).transpose(0, 2, 1, 3).reshape(n_rows, channels, -1)
+        transform = _channel_transform(spec, spec.black_level * self.factor * self.factor)
         k = spec.n_leds
-        blocks = int(np.count_nonzero(by_channel[n_rows - 1 :: n_rows].any(axis=0))) if n_rows else 0
+        blocks = int(np.count_nonzero(by_channel[n_rows - 1].any(axis=0))) if n_rows else 0
 
         def mapped(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            product = transform @ _gram(rows, DEFAULT_CHUNK_PIXELS) @ transform.T
-            led = product[: channels * k, : channels * k].reshape(channels, k, channels, k)
-            cross = product[: channels * k, channels * k :].reshape(channels, k, channels)
-            return np.einsum("cid->icd", cross), np.einsum("cidi->icd", led), product[channels * k :, channels * k :]
+            images = np.tensordot(transform, rows, axes=(1, 0))  # (k + 1, C, blocks): each LED's, then the ambient's
+            leds, ambient = images[:k], images[k]
+            return leds @ ambient.T, leds @ leds.transpose(0, 2, 1), ambient @ ambient.T
 
         fa, ff, aa = mapped(by_channel)
         noise: tuple[np.ndarray | None, ...] = (None, None, None)
@@ -1027,8 +1024,8 @@ class BlockRows:
             if column_factor is not None:
                 probe = probe * self._at_probe(column_factor)
             probed = self.difference_shape
-            probe_rows = probe.reshape(n_rows, probed[0], probed[1], channels).transpose(3, 0, 1, 2)
-            noise = tuple(part * probe_scale for part in mapped(probe_rows.reshape(channels * n_rows, -1)))
+            probe_rows = probe.reshape(n_rows, probed[0], probed[1], channels).transpose(0, 3, 1, 2)
+            noise = tuple(part * probe_scale for part in mapped(probe_rows.reshape(n_rows, channels, -1)))
         return ChannelMoments(fa, ff, aa, blocks, *noise)
 
 
@@ -1086,21 +1083,17 @@ def statistics_from_moments(
     )
 
 
-def _channel_transform(spec: FrameStackSpec, channels: int, black: float) -> np.ndarray:
-    """(C·k + C, C·(n + 2)) map from per-channel raw rows ``[F_1 … F_n, A, 1]`` (index ``c·(n + 2) + r``) to
-    ``[f (c·k + i), a (c)]``: ``f_i = Σ_j U_ij (s_j (F_j − b) − s_a (A − b))``, ``a = s_a (A − b)``."""
+def _channel_transform(spec: FrameStackSpec, black: float) -> np.ndarray:
+    """(k + 1, n + 2) map from one channel's raw rows ``[F_1 … F_n, A, 1]`` to ``[f_1 … f_k, a]``:
+    ``f_i = Σ_j U_ij (s_j (F_j − b) − s_a (A − b))``, ``a = s_a (A − b)`` (the same for every channel)."""
     unmixing, scales = spec.unmixing, np.asarray(spec.led_scales, dtype=float)
     k, n = unmixing.shape
-    width = n + 2
-    transform = np.zeros((channels * k + channels, channels * width))
-    for c in range(channels):
-        base = c * width
-        rows = slice(c * k, (c + 1) * k)
-        transform[rows, base : base + n] = unmixing * scales
-        transform[rows, base + n] = -spec.ambient_scale * unmixing.sum(axis=1)
-        transform[rows, base + n + 1] = unmixing @ ((spec.ambient_scale - scales) * black)
-        transform[channels * k + c, base + n] = spec.ambient_scale
-        transform[channels * k + c, base + n + 1] = -spec.ambient_scale * black
+    transform = np.zeros((k + 1, n + 2))
+    transform[:k, :n] = unmixing * scales
+    transform[:k, n] = -spec.ambient_scale * unmixing.sum(axis=1)
+    transform[:k, n + 1] = unmixing @ ((spec.ambient_scale - scales) * black)
+    transform[k, n] = spec.ambient_scale
+    transform[k, n + 1] = -spec.ambient_scale * black
     return transform
 
 
