@@ -106,6 +106,16 @@ def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], 
     parser.add_argument("--margin-px", type=int, default=1, help="pixels ignored inside each patch edge")
 
 
+def flash_bounds_option(parser: argparse.ArgumentParser) -> None:
+    """``--bounds physical|nonnegative``: the flash weights' bounds (``evaluate``, ``colour-study``)."""
+    parser.add_argument(
+        "--bounds",
+        default="physical",
+        choices=("physical", "nonnegative"),
+        help="flash weights in [0, 1] (physical, default: re-capturable) or ≥ 0 (computational)",
+    )
+
+
 def _scheduler(text: str) -> str:
     """argparse type of ``--scheduler``: a blank value was taken for the default, ``local``.
 

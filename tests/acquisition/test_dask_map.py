@@ -52,7 +52,7 @@ with dask_mapper("local", 1) as mapper:
 
 
 def test_a_job_whose_worker_dies_is_given_to_on_error_and_the_rest_go_on() -> None:
-    """In a process of its own (distributed's event loops are per process; tests/processing/test_study.py)."""
+    """In a process of its own (distributed's event loops are per process; tests/lab/study/test_study.py)."""
     pytest.importorskip("distributed")
     done = subprocess.run(
         [sys.executable, "-c", _DYING_WORKER],

@@ -2,7 +2,7 @@
 
 The runs on a local cluster are subprocesses: distributed keeps its event loops per process, and a
 cluster started inside a test worker that had run other tests sometimes failed to start
-(tests/processing/test_study.py).
+(tests/lab/study/test_study.py).
 """
 
 from __future__ import annotations

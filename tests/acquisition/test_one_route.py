@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app.cli import main as msflash_main
-from msflash.processing.study.local import make_scenario
-from tests.acquisition.test_cli_local import SHAPE, write_scenario
+from msflash.lab.study.local import make_scenario
+from tests.lab.test_cli_local import SHAPE, write_scenario
 
 SAMPLE = Path("/work/shared/samples/sample-rgb-tungsten")
 

@@ -7,9 +7,9 @@ import itertools
 import numpy as np
 import pytest
 
-from msflash.acquisition.app.cli_study import xy_figure
 from msflash.acquisition.app.plot_style import PALETTE, SERIES, figure_png, pyplot, relative_power
 from msflash.acquisition.app.srgb_png import png_chunks
+from msflash.lab.cli_study import xy_figure
 
 
 def test_the_palette_gives_each_role_its_own_colour() -> None:

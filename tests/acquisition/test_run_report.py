@@ -19,6 +19,7 @@ from msflash.acquisition.app.plot_style import PALETTE, SPECTRAL_AXIS_LABEL, WAV
 from msflash.acquisition.app.srgb_png import enlargement, png_chunks
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session import analysis
+from msflash.lab import colour_study
 
 
 class Links(HTMLParser):
@@ -166,7 +167,7 @@ def test_every_plot_gives_each_flash_and_the_ambient_its_palette_colour(run_fold
         "evaluate spectra": evaluation.spectra_figure(
             sequence.grid, analysis.led_spectra_photons(sequence), estimate.spectrum, solutions, target
         ),
-        "fig9": evaluation.fig9_figure({"tungsten": {"ambient": 18.0, "matching": 18.2, "complementary": 4.0}}),
+        "fig9": colour_study.fig9_figure({"tungsten": {"ambient": 18.0, "matching": 18.2, "complementary": 4.0}}),
     }
     plt = pyplot()
     try:

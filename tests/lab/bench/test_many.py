@@ -11,12 +11,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-from msflash.acquisition.app.cli_bench import _OPTIONAL_PARTS
 from msflash.acquisition.sequence.format import read_sequence
+from msflash.lab.cli_bench import _OPTIONAL_PARTS
 
 _SMALL_BENCH = """
 import json
-import msflash.acquisition.app.bench_many as module
+import msflash.lab.bench.many as module
 from msflash.acquisition.app.cli import main
 module.many_bench.__defaults__ = (3, 48, 64, 2)  # 3 small sequences, 2 rounds keep the test short
 raise SystemExit(main(["bench", "--part", "many", "--json"]))
@@ -24,7 +24,7 @@ raise SystemExit(main(["bench", "--part", "many", "--json"]))
 
 
 def test_the_bench_sequences_are_sequences(tmp_path: Path) -> None:
-    from msflash.acquisition.app.bench_many import write_bench_sequences
+    from msflash.lab.bench.many import write_bench_sequences
 
     folders = write_bench_sequences(tmp_path, 2, 24, 32)
     assert folders == [str(tmp_path / "000"), str(tmp_path / "001")]
@@ -33,7 +33,7 @@ def test_the_bench_sequences_are_sequences(tmp_path: Path) -> None:
 
 
 def test_the_part_reports_the_speedup_of_two_workers_with_identical_records() -> None:
-    assert _OPTIONAL_PARTS["many"] == ("msflash.acquisition.app.bench_many", "many_bench")
+    assert _OPTIONAL_PARTS["many"] == ("msflash.lab.bench.many", "many_bench")
     done = subprocess.run(
         [sys.executable, "-c", _SMALL_BENCH],
         capture_output=True,

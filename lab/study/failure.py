@@ -3,7 +3,7 @@
 Protocol
 --------
 Noisy raw frames of the 110-surface chart (8-px patches, no border: 80 × 88 px, RGB) are rendered
-(:mod:`processing.study.noisy`) and estimated as the app does (4 × 4 block sums, ``tikhonov`` with
+(:mod:`lab.study.noisy`) and estimated as the app does (4 × 4 block sums, ``tikhonov`` with
 GCV by default). From a baseline — 7 LEDs, all 110 surfaces, ambient-to-flash ratio 0.5 (the sim
 rig's ``flash_to_ambient = 2``), exposure metered at 80 % of full scale on the brightest frame,
 no saturation, all LEDs working, the ambient a named light, no motion — one factor at a time is
@@ -34,12 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from msflash.processing import lights
-from msflash.processing.errors import SolverError, SpectralDataError
-from msflash.processing.progress import Progress, report_count
-from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from msflash.processing.statistics import accumulate_statistics
-from msflash.processing.study.noisy import (
+from msflash.lab.study.noisy import (
     World,
     app_estimate,
     make_world,
@@ -47,13 +42,18 @@ from msflash.processing.study.noisy import (
     reliability,
     render_stack,
 )
-from msflash.processing.study.table1 import (
+from msflash.lab.study.table1 import (
     MapFunction,
     direct_fit,
     flash_norm,
     led_subset_indices,
     select_cameras,
 )
+from msflash.processing import lights
+from msflash.processing.errors import SolverError, SpectralDataError
+from msflash.processing.progress import Progress, report_count
+from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
+from msflash.processing.statistics import accumulate_statistics
 
 FACTORS: dict[str, dict[str, Any]] = {
     "n_leds": {"levels": [7, 6, 5, 4, 3], "label": "number of LEDs (paper subsets)"},

@@ -8,7 +8,7 @@ Protocol (paper Section 5 and the authors' ``s_simNatural100.m`` / ``s_evalNatur
 - LEDs: the 7 paper LEDs resampled to the 400–700/10 nm grid, converted to photons and divided
   by one global maximum (``flashNorm`` of the authors); subsets by :data:`PAPER_LED_SUBSETS`.
 - Illuminants: the smoothest non-negative spectra of the 23 feasible points of the
-  ``linspace(0,1,10)²`` xy grid (:func:`processing.study.illuminants.feasible_grid`), photons,
+  ``linspace(0,1,10)²`` xy grid (:func:`lab.study.illuminants.feasible_grid`), photons,
   peak 1.
 - Images: ambient image ``a`` and LED-only images ``f_k`` (all 7 LEDs), noise-free. The stack
   ``[a, f_1 … f_7]`` is divided by its largest value (the authors' ``rawLin / max(rawLin(:))``):
@@ -58,6 +58,7 @@ from typing import Any
 
 import numpy as np
 
+from msflash.lab.study.illuminants import SmoothIlluminant, cmfs_photons, feasible_grid
 from msflash.processing import datasets
 from msflash.processing.ambient import AMBIENT_METHODS, estimate_ambient
 from msflash.processing.errors import SolverError, SpectralDataError
@@ -66,7 +67,6 @@ from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.statistics import SequenceStatistics
-from msflash.processing.study.illuminants import SmoothIlluminant, cmfs_photons, feasible_grid
 
 PAPER_TABLE1: dict[str, list[float]] = {
     "n_leds": [3, 4, 5, 6, 7],

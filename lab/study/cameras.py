@@ -1,8 +1,8 @@
 """Figs. 6–7 of the paper: camera invariance of the estimates, and the error over the xy grid.
 
-Same noise-free protocol as Table 1 (:mod:`processing.study.table1`): the 110-surface chart, the
+Same noise-free protocol as Table 1 (:mod:`lab.study.table1`): the 110-surface chart, the
 34 cameras, the feasible illuminants of the xy grid, the paper's LED subsets; one
-:func:`processing.study.table1.evaluate_camera` job per camera.
+:func:`lab.study.table1.evaluate_camera` job per camera.
 
 ``run_cameras`` (Fig. 6: "estimates become camera-invariant with ≥ 5 LEDs")
     For each LED count and illuminant, the max-normalised estimates of all cameras; the spread
@@ -23,16 +23,16 @@ from typing import Any
 
 import numpy as np
 
-from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.progress import Progress
-from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
-from msflash.processing.study.illuminants import SmoothIlluminant
-from msflash.processing.study.table1 import (
+from msflash.lab.study.illuminants import SmoothIlluminant
+from msflash.lab.study.table1 import (
     MapFunction,
     direct_fit,
     evaluate_all_cameras,
     evaluate_camera,
 )
+from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.progress import Progress
+from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
 
 
 def _per_camera(

@@ -14,7 +14,7 @@ from msflash.processing.local import DEFAULT_TILES
 
 
 def _local_study(args: argparse.Namespace) -> int:
-    from msflash.processing.study.local import run_study  # matplotlib and scipy only when asked
+    from msflash.lab.study.local import run_study  # matplotlib and scipy only when asked
 
     progress(
         f"local study: {args.uniform} uniform scenes, {args.mixed} boundary + {args.mixed} gradient scenes, "
@@ -77,8 +77,8 @@ def _write(summary: dict, out: Path) -> None:
 def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
     """Per-scenario auto vs global RMSE, the selection scores, where the error stays, and accuracy vs tiles/time."""
     from msflash.acquisition.app.plot_style import PALETTE, SERIES, pyplot, save_figure
+    from msflash.lab.study.local import KINDS
     from msflash.processing.local import SELECTION_MARGIN
-    from msflash.processing.study.local import KINDS
 
     plt = pyplot()
     paths = []

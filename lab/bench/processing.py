@@ -2,7 +2,7 @@
 
 Processing part. Issue 21's targets, at each size (1280×1024 and 4096×3000 by default), on 1 and 2
 threads, each the median of ≥ 15 interleaved pairs with a copy of the same frames into a pre-allocated
-buffer (:mod:`acquisition.app.bench_ratios`; quartiles and extremes beside it), with its target and
+buffer (:mod:`lab.bench.ratios`; quartiles and extremes beside it), with its target and
 whether it is met (``targets``; ``targets_met`` over all of them):
 
 - ``estimate_over_copy``: ambient estimation as ``msflash estimate`` does it (the default block size
@@ -36,8 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from msflash.acquisition.app.bench_ratios import against_target, interleaved_ratio, peak_bytes
 from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, SAMPLE_WEIGHTING, block_factor
+from msflash.lab.bench.ratios import against_target, interleaved_ratio, peak_bytes
 from msflash.processing import datasets, frame_kernels, lights
 from msflash.processing.ambient import AmbientModel, estimate_ambient
 from msflash.processing.flash import FlashModel

@@ -1,4 +1,4 @@
-"""Tests of the paper's simulation studies (processing.study) and ``msflash study``.
+"""Tests of the paper's simulation studies (lab.study) and ``msflash study``.
 
 The full Table 1 runs behind ``-m study`` (about 25 s serially for tikhonov/auto on one core);
 everything else takes seconds.
@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.processing.study.illuminants import feasible_grid, smoothest_spectrum, xy_of
-from msflash.processing.study.surfaces import run_surfaces
-from msflash.processing.study.table1 import PAPER_TABLE1, direct_fit, flash_norm, led_subset_indices, run_table1
+from msflash.lab.study.illuminants import feasible_grid, smoothest_spectrum, xy_of
+from msflash.lab.study.surfaces import run_surfaces
+from msflash.lab.study.table1 import PAPER_TABLE1, direct_fit, flash_norm, led_subset_indices, run_table1
 
 
 @pytest.mark.parametrize("xy", [(1 / 3, 1 / 3), (0.2, 0.5), (0.5, 0.35), (0.15, 0.08)])
@@ -34,7 +34,7 @@ def test_smoothest_spectrum_is_smoother_than_another_with_the_same_xy():
     smooth = smoothest_spectrum(1 / 3, 1 / 3).spectrum.values[:, 0]
     # Any non-negative spectrum with the same xy is at least as rough (after the same scaling of XYZ).
     rng = np.random.default_rng(1)
-    from msflash.processing.study.illuminants import cmfs_photons
+    from msflash.lab.study.illuminants import cmfs_photons
 
     cmf = cmfs_photons()
     for _ in range(5):
@@ -97,8 +97,8 @@ def test_tiny_surfaces_study_runs():
 
 
 def _parser() -> argparse.ArgumentParser:
-    from msflash.acquisition.app import cli_study
     from msflash.acquisition.app.cli_common import UsageError
+    from msflash.lab import cli_study
 
     class Parser(argparse.ArgumentParser):
         def error(self, message):  # like acquisition.app.cli: usage errors raise

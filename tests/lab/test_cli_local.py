@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.app import cli_local
 from msflash.acquisition.app.cli import build_parser, main
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
 from msflash.acquisition.sequence.image_files import read_image
+from msflash.lab import cli_local
+from msflash.lab.study.local import Scenario, make_scenario
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID
-from msflash.processing.study.local import Scenario, make_scenario
 
 SHAPE = (96, 128)
 

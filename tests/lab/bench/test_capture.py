@@ -7,13 +7,13 @@ from types import ModuleType
 
 import pytest
 
-from msflash.acquisition.app.cli_bench import _OPTIONAL_PARTS
+from msflash.lab.cli_bench import _OPTIONAL_PARTS
 
 pytestmark = pytest.mark.aravis
 
 
 def test_capture_bench_returns_every_figure(aravis: ModuleType) -> None:
-    from msflash.acquisition.app.bench_capture import capture_bench
+    from msflash.lab.bench.capture import capture_bench
 
     report = capture_bench(runs=1, width=64, height=48)
     for key in (
@@ -42,4 +42,4 @@ def test_capture_bench_returns_every_figure(aravis: ModuleType) -> None:
         assert per_run["pset_to_release_ms"][run] < per_run["pset_to_trigger_ms"][run]
     assert report["host_latency_ms_median"] == pytest.approx(report["host_latencies_ms"][0])
     assert isinstance(report["wall_target_met"], bool) and isinstance(report["latency_target_met"], bool)
-    assert _OPTIONAL_PARTS["capture"] == ("msflash.acquisition.app.bench_capture", "capture_bench")
+    assert _OPTIONAL_PARTS["capture"] == ("msflash.lab.bench.capture", "capture_bench")

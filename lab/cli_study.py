@@ -5,7 +5,7 @@
 (camera invariance vs number of LEDs); ``xy`` Fig. 7 (error over the xy grid); ``failure`` maps
 where the estimate fails on noisy frames and whether its warnings fire; ``pareto`` charts accuracy
 against time per solver × pixel subsampling. The computation lives
-in :mod:`processing.study`; this module parses options, runs it (serially, on a local dask
+in :mod:`lab.study`; this module parses options, runs it (serially, on a local dask
 cluster, or on a dask scheduler at an address), prints the result and, with ``--out``, writes
 ``<name>.json`` and ``<name>.png`` there. Progress goes to stderr.
 """
@@ -78,7 +78,7 @@ def _run(args: argparse.Namespace) -> int:
     if alpha == "paper":
         if args.solver != "roughness":
             raise UsageError("--alpha paper is the authors' sweep of eq. 6; expected --solver roughness")
-        from msflash.processing.study.table1 import PAPER_ALPHAS
+        from msflash.lab.study.table1 import PAPER_ALPHAS
 
         alpha, alpha_units = (list(PAPER_ALPHAS) if args.name == "table1" else 0.06), "paper"
     if args.name in ("failure", "pareto") and (alpha_units == "paper" or isinstance(alpha, list)):
@@ -90,7 +90,7 @@ def _run(args: argparse.Namespace) -> int:
     with optional_claimed_output(args.out, "msflash study") as out:
         with dask_mapper(args.scheduler, args.workers, verbose=getattr(args, "verbose", 0) > 0) as mapper:
             if args.name == "table1":
-                from msflash.processing.study.table1 import run_table1
+                from msflash.lab.study.table1 import run_table1
 
                 result = run_table1(
                     n_leds_list=args.leds,
@@ -103,7 +103,7 @@ def _run(args: argparse.Namespace) -> int:
                     map_function=mapper,
                 )
             elif args.name == "surfaces":
-                from msflash.processing.study.surfaces import run_surfaces
+                from msflash.lab.study.surfaces import run_surfaces
 
                 result = run_surfaces(
                     draws=args.draws,
@@ -119,7 +119,7 @@ def _run(args: argparse.Namespace) -> int:
             elif args.name in ("cameras", "xy"):
                 if alpha_units == "paper":
                     raise UsageError(f"--alpha-units paper: not for {args.name}; expected a dimensionless alpha")
-                from msflash.processing.study.cameras import run_cameras, run_xy
+                from msflash.lab.study.cameras import run_cameras, run_xy
 
                 run = run_cameras if args.name == "cameras" else run_xy
                 result = run(
@@ -132,7 +132,7 @@ def _run(args: argparse.Namespace) -> int:
                     map_function=mapper,
                 )
             elif args.name == "failure":
-                from msflash.processing.study.failure import DEFAULT_CAMERAS, run_failure
+                from msflash.lab.study.failure import DEFAULT_CAMERAS, run_failure
 
                 result = run_failure(
                     factors=args.factors,
@@ -147,7 +147,7 @@ def _run(args: argparse.Namespace) -> int:
                     **({"ambients": args.ambients} if args.ambients else {}),
                 )
             else:
-                from msflash.processing.study.pareto import DEFAULT_CAMERAS, run_pareto
+                from msflash.lab.study.pareto import DEFAULT_CAMERAS, run_pareto
 
                 result = run_pareto(
                     cameras=args.cameras or DEFAULT_CAMERAS,
@@ -509,7 +509,7 @@ def xy_figure(result: dict[str, Any]) -> Any:
     plt = pyplot()
     import numpy as np
 
-    from msflash.processing.study.illuminants import cmfs_photons
+    from msflash.lab.study.illuminants import cmfs_photons
 
     counts = result["n_leds"]
     columns = min(len(counts), 3)

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from msflash.lab.study.table1 import flash_norm, led_subset_indices
 from msflash.processing.ambient import (
     CONDITION_WARNING,
     RESIDUAL_WARNING,
@@ -53,7 +54,6 @@ from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.model_error import EXPECTED_RATIO_WARNING, reference_for, with_model_error
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
-from msflash.processing.study.table1 import flash_norm, led_subset_indices
 
 PEAK_FRACTION = 0.8
 """Metered peak of the brightest frame, as a fraction of full scale."""

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from msflash.acquisition.app.bench_camera import _plan, excess_ci, stage_ms
+from msflash.lab.bench.camera import _plan, excess_ci, stage_ms
 
 
 def _timing(sent: int, triggered: int, device: int, popped: int, delivered: int) -> Any:
@@ -83,7 +83,7 @@ def test_frame_timing_stages_are_ordered_on_the_host_clock(aravis: ModuleType, g
 
 @pytest.mark.aravis
 def test_camera_bench_reports_every_figure(aravis: ModuleType) -> None:
-    from msflash.acquisition.app.bench_camera import camera_bench
+    from msflash.lab.bench.camera import camera_bench
 
     report = camera_bench(
         n_frames=6, n_triggers=8, repeats=1, width=64, height=48, frame_rate_hz=200.0, latency_blocks=2

@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from msflash.acquisition.app.bench_decode import FORMATS, decode_bench
 from msflash.acquisition.app.cli import main
+from msflash.lab.bench.decode import FORMATS, decode_bench
 
 
 def test_decode_bench_reports_each_format_against_the_mono16_copy() -> None:
@@ -19,7 +19,7 @@ def test_decode_bench_reports_each_format_against_the_mono16_copy() -> None:
 
 
 def test_the_part_is_offered_by_msflash_bench(capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
-    import msflash.acquisition.app.bench_decode as module
+    import msflash.lab.bench.decode as module
 
     monkeypatch.setattr(module.decode_bench, "__defaults__", (64, 8, 2, 0))  # a small frame keeps the test short
     assert main(["bench", "--part", "decode", "--json"]) == 0

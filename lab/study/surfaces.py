@@ -21,13 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from msflash.processing import datasets
-from msflash.processing.errors import SpectralDataError
-from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.progress import Progress, report_count
-from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
-from msflash.processing.study.illuminants import SmoothIlluminant
-from msflash.processing.study.table1 import (
+from msflash.lab.study.illuminants import SmoothIlluminant
+from msflash.lab.study.table1 import (
     MapFunction,
     direct_fit,
     evaluate_camera,
@@ -37,6 +32,11 @@ from msflash.processing.study.table1 import (
     select_illuminants,
     transfer_matrix,
 )
+from msflash.processing import datasets
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.progress import Progress, report_count
+from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
 
 PAPER_SURFACE_COUNTS = (1, 3, 5, 7, 9, 20, 30)
 """Numbers of distinct surfaces of the paper's Fig. 5 (``[1:2:10, 20, 30]``)."""
@@ -67,7 +67,7 @@ def run_surfaces(
 ) -> dict[str, Any]:
     """Spectrum RMSE (and pixel RMSE) vs number of distinct surfaces (paper Fig. 5).
 
-    Parameters are those of :func:`processing.study.table1.run_table1` plus ``counts``,
+    Parameters are those of :func:`lab.study.table1.run_table1` plus ``counts``,
     ``draws`` and ``seed`` (the draws are reproducible).
 
     Returns

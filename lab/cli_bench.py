@@ -10,13 +10,13 @@ from msflash.acquisition.app.cli_common import positive_int, print_json, progres
 from msflash.acquisition.progress import count
 
 _OPTIONAL_PARTS = {
-    "camera": ("msflash.acquisition.app.bench_camera", "camera_bench"),
-    "booth": ("msflash.led_controller.bench", "run_bench"),
-    "capture": ("msflash.acquisition.app.bench_capture", "capture_bench"),
-    "decode": ("msflash.acquisition.app.bench_decode", "decode_bench"),
-    "live": ("msflash.acquisition.app.live.bench", "live_bench"),
-    "many": ("msflash.acquisition.app.bench_many", "many_bench"),
-    "flash-energy": ("msflash.acquisition.app.bench_flash_energy", "flash_energy_bench"),
+    "camera": ("msflash.lab.bench.camera", "camera_bench"),
+    "booth": ("msflash.lab.bench.booth", "run_bench"),
+    "capture": ("msflash.lab.bench.capture", "capture_bench"),
+    "decode": ("msflash.lab.bench.decode", "decode_bench"),
+    "live": ("msflash.lab.bench.live", "live_bench"),
+    "many": ("msflash.lab.bench.many", "many_bench"),
+    "flash-energy": ("msflash.lab.bench.flash_energy", "flash_energy_bench"),
 }
 """Bench parts contributed by other modules: part name → (module, function returning a dict)."""
 
@@ -28,7 +28,7 @@ LARGE_SIZE = (3000, 4096)
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from msflash.acquisition.app.bench import processing_bench
+    from msflash.lab.bench.processing import processing_bench
 
     report: dict[str, Any] = {}
     parts = args.part or ["processing", "startup", *_OPTIONAL_PARTS]
@@ -41,7 +41,7 @@ def _bench(args: argparse.Namespace) -> int:
         )
         _part_done(report, parts)
     if "startup" in parts:
-        from msflash.acquisition.app.bench_startup import startup_bench
+        from msflash.lab.bench.startup import startup_bench
 
         progress(f"bench: start-up (msflash --help, msflash estimate, import numpy; {args.rounds} interleaved rounds)…")
         report["startup"] = startup_bench(args.rounds, args.sequence)

@@ -1,6 +1,6 @@
 """``msflash bench --part many``: ``msflash estimate`` over many sequences, 1 against 2 dask workers.
 
-Eight sequences of the benchmark world (:func:`acquisition.app.bench.benchmark_world`, 512 × 640 RGB,
+Eight sequences of the benchmark world (:func:`lab.bench.processing.benchmark_world`, 512 × 640 RGB,
 7 LEDs) are written to a temporary folder; two local dask clusters, of one and of two worker processes,
 are started side by side and warmed up; then, round after round, the sequences' estimates
 (:func:`acquisition.session.many.estimate_record`, what ``msflash estimate DIR`` runs) are mapped
@@ -32,7 +32,7 @@ from msflash.acquisition.session.one_sequence import EstimateSettings
 
 def write_bench_sequences(out: Path, count: int, height: int, width: int) -> list[str]:
     """``count`` copies of the benchmark world's sequence under ``out`` (photon units); their folders."""
-    from msflash.acquisition.app.bench import benchmark_world
+    from msflash.lab.bench.processing import benchmark_world
 
     world = benchmark_world(height, width)
     spec = world["spec"]

@@ -1,6 +1,6 @@
 """The fast path is the same answer (issue 21, item 4): the block-sum estimate against the all-pixel reference.
 
-The reference (:mod:`msflash.processing.study.block_agreement`) uses every pixel, inverse-variance
+The reference (:mod:`msflash.lab.study.block_agreement`) uses every pixel, inverse-variance
 weighted, with its noise's share of the moments removed by the renderer's known noise; the block path is
 ``msflash estimate``'s (:func:`msflash.acquisition.session.analysis.block_factor`, weighted block sums, the
 half-difference probe). Both are solved at the same α (the block path's discrepancy choice), so what is
@@ -14,19 +14,19 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from msflash.acquisition.app.bench import benchmark_world
 from msflash.acquisition.session.analysis import SAMPLE_WEIGHTING, block_factor
-from msflash.processing.ambient import AmbientEstimate, estimate_ambient
-from msflash.processing.image_formation import SensorModel
-from msflash.processing.model_error import reference_for, with_model_error
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
-from msflash.processing.study.block_agreement import (
+from msflash.lab.bench.processing import benchmark_world
+from msflash.lab.study.block_agreement import (
     Agreement,
     FrameNoise,
     agreement,
     all_pixel_statistics,
     sensor_noise,
 )
+from msflash.processing.ambient import AmbientEstimate, estimate_ambient
+from msflash.processing.image_formation import SensorModel
+from msflash.processing.model_error import reference_for, with_model_error
+from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 
 WORST_Z = 3.0
 """The block estimate lies within this many σ of the reference's pixel-noise band at every wavelength (bench

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from msflash.acquisition.app.bench import processing_bench
+from msflash.lab.bench.processing import processing_bench
 
 
 def test_processing_bench_reports_every_target_on_both_thread_counts_with_its_verdict() -> None:

@@ -432,7 +432,7 @@ def run_study(
 
     Seeds: uniform scenes ``seed0 + s``; boundary and gradient scenes ``seed0 + 10 000 + s`` (the same
     surfaces and ambient pair, mixed two ways); the tiles sweep ``seed0 + 20 000 + s``. The tests
-    use seeds below 100. ``msflash local-study --out`` writes the summary and plots (:mod:`acquisition.app.cli_local`).
+    use seeds below 100. ``msflash local-study --out`` writes the summary and plots (:mod:`lab.cli_local`).
     ``progress`` (:mod:`processing.progress`) hears of each scene done.
     """
     scenes = [("uniform", seed0 + s) for s in range(n_uniform)]

@@ -1,4 +1,4 @@
-"""Tests of the failure, Pareto and Figs. 6–7 studies (processing.study.failure/pareto/cameras).
+"""Tests of the failure, Pareto and Figs. 6–7 studies (lab.study.failure/pareto/cameras).
 
 Fast reduced versions (one camera, one ambient, one noise seed, a few levels) run in seconds and
 pin the trends and whether the estimator's specific warnings (saturation, misfit) fire in the clear
@@ -16,12 +16,12 @@ import json
 import numpy as np
 import pytest
 
+from msflash.lab.study.cameras import camera_spread, run_cameras, run_xy
+from msflash.lab.study.failure import FACTORS, led_fill, run_failure, with_line
+from msflash.lab.study.noisy import make_world, render_stack
+from msflash.lab.study.pareto import pareto_front, run_pareto
 from msflash.processing import datasets, lights
 from msflash.processing.statistics import accumulate_statistics
-from msflash.processing.study.cameras import camera_spread, run_cameras, run_xy
-from msflash.processing.study.failure import FACTORS, led_fill, run_failure, with_line
-from msflash.processing.study.noisy import make_world, render_stack
-from msflash.processing.study.pareto import pareto_front, run_pareto
 
 CAMERA = "Canon 50D"
 
@@ -170,7 +170,7 @@ def test_tiny_cameras_and_xy_studies_run():
 
 
 def _parser():
-    from tests.processing.test_study import _parser as parser
+    from tests.lab.study.test_study import _parser as parser
 
     return parser()
 

@@ -2,7 +2,7 @@
 
 Protocol
 --------
-Noisy raw frames (:mod:`processing.study.noisy`) of the 110-surface chart with 40-px patches and a
+Noisy raw frames (:mod:`lab.study.noisy`) of the 110-surface chart with 40-px patches and a
 4-px dark border (444 × 488 px ≈ 2.2·10⁵ pixels, RGB), 7 LEDs, the baseline of the failure study
 (ambient-to-flash 0.5, metered exposure) — or a noisier one with ``ambient_to_flash``. For each
 camera × ambient × seed the frames are rendered once; then every *sampling* level builds the
@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from msflash.lab.study.noisy import make_world, patch_mean_frames, render_stack
+from msflash.lab.study.table1 import MapFunction, select_cameras
 from msflash.processing import lights
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.errors import SolverError, SpectralDataError
@@ -39,8 +41,6 @@ from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.statistics import accumulate_statistics
-from msflash.processing.study.noisy import make_world, patch_mean_frames, render_stack
-from msflash.processing.study.table1 import MapFunction, select_cameras
 
 SOLVERS: dict[str, tuple[str, float | str]] = {
     "lstsq": ("lstsq", 0.0),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from msflash.acquisition.app.bench_startup import ESTIMATE_TARGET, HELP_TARGET, startup_bench
+from msflash.lab.bench.startup import ESTIMATE_TARGET, HELP_TARGET, startup_bench
 
 
 def test_startup_bench_reports_both_ratios_from_interleaved_runs() -> None:
