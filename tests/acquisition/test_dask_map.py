@@ -122,3 +122,36 @@ def test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_clo
     sender.join()
     started = set(SpecCluster._instances) - known
     assert started and all(cluster.status.name == "closed" for cluster in started)
+
+
+_WITHOUT_DASK = """
+import sys
+sys.modules["distributed"] = None  # as on an install without the study/batch extra: importing it fails
+sys.modules["dask"] = None
+from msflash.acquisition.app.cli import main
+raise SystemExit(main(sys.argv[1:]))
+"""
+
+
+def test_without_dask_a_batch_runs_serially_and_an_address_is_refused(tmp_path: Path) -> None:
+    """dask is the ``study``/``batch`` extra (pyproject): without it ``--scheduler local`` (the default) runs the
+    sequences one after another in this process, with one note, and a scheduler address is a one-line usage error."""
+    from tests.helpers import write_test_sequence
+
+    sequences = [str(write_test_sequence(tmp_path / name)) for name in ("a", "b")]
+    run = subprocess.run(
+        [sys.executable, "-c", _WITHOUT_DASK, "estimate", *sequences, "--json"], capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    lines = [json.loads(line) for line in run.stdout.splitlines()]
+    assert [Path(line["sequence"]).name for line in lines] == ["a", "b"] and all("spectrum" in line for line in lines)
+    assert "dask.distributed is not installed; running serially" in run.stderr
+    refused = subprocess.run(
+        [sys.executable, "-c", _WITHOUT_DASK, "estimate", *sequences, "--scheduler", "tcp://127.0.0.1:1"],
+        capture_output=True,
+        text=True,
+    )
+    assert refused.returncode == 2
+    assert refused.stderr.strip().splitlines()[-1].startswith(
+        "msflash: error: --scheduler tcp://127.0.0.1:1: dask.distributed is not installed"
+    )
