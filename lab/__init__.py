@@ -14,3 +14,7 @@ this package lists none of them.
 
 Their measurements live in ``docs/`` (``docs/study-*.md``, ``docs/speed.md``, …).
 """
+
+from msflash.one_copy import one_copy
+
+one_copy(__name__)  # "import lab" from the repository root: a one-line ImportError naming msflash.…
