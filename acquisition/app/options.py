@@ -18,8 +18,8 @@ from msflash.processing.ambient import AMBIENT_METHODS
 def target_value(text: str) -> str:
     """argparse type of ``--target``: a CSV file (read when used), or an illuminant name checked now.
 
-    A mistyped name is refused before a rig opens or a frame is captured (it was found only after the
-    capture, and the message did not name ``--target``), with the names it was probably meant to be.
+    A mistyped name is refused before a rig opens or a frame is captured, naming ``--target`` and the
+    names it was probably meant to be.
     """
     if Path(text).suffix.lower() in (".csv", ".txt") or os.path.lexists(text):
         return text

@@ -1,7 +1,6 @@
 """Camera options a user or a camera profile sets: lines, gain, ROI, binning, any GenICam feature.
 
-The hardware rig used to hard-code its trigger input (Line0) and strobe output (Line1) and could
-set no other feature. :class:`CameraOptions` carries what ``--trigger-line``, ``--strobe-line``,
+:class:`CameraOptions` carries what ``--trigger-line``, ``--strobe-line``,
 ``--gain``, ``--roi``, ``--binning`` and ``--feature NAME=VALUE`` ask for (or a profile's
 ``"options"`` in ``genicam/profiles.json``; the command line wins), and
 :func:`apply_camera_options` writes them to an opened camera and reads each one back.
