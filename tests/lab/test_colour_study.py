@@ -22,7 +22,7 @@ import pytest
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.app.srgb_png import png_chunks
 from msflash.lab import cli_colour_study, colour_study
-from tests.acquisition.test_evaluate import parse_report
+from tests.acquisition.app.test_evaluate import parse_report
 
 ACCEPTANCE_AMBIENTS = ("tungsten", "fluorescent", "underwater")
 

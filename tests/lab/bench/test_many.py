@@ -1,6 +1,6 @@
 """``msflash bench --part many``: its report's shape and sense (no timed assertions).
 
-In a process of its own, as the other local-cluster tests (tests/acquisition/test_many_sequences.py).
+In a process of its own, as the other local-cluster tests (tests/acquisition/session/test_many_sequences.py).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def test_the_part_reports_the_speedup_of_two_workers_with_identical_records() ->
         capture_output=True,
         text=True,
         timeout=240,
-        cwd=Path(__file__).resolve().parents[2],
+        cwd=Path(__file__).resolve().parents[3],
     )
     assert done.returncode == 0, done.stderr[-2000:]
     report = json.loads(done.stdout)["many"]

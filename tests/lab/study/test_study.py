@@ -225,7 +225,7 @@ def test_cli_runs_on_a_loopback_dask_scheduler():
         capture_output=True,
         text=True,
         timeout=240,
-        cwd=Path(__file__).resolve().parents[2],
+        cwd=Path(__file__).resolve().parents[3],
     )
     assert done.returncode == 0, done.stderr[-2000:]
     result = json.loads(done.stdout)

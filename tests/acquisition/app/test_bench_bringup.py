@@ -31,7 +31,7 @@ from msflash.led_controller.wiring import read_pins, wiring_svg
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 MSFLASH = [sys.executable, "-m", "msflash.acquisition.app.cli"]
 
 

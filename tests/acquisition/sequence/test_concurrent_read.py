@@ -18,7 +18,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from tests.helpers import wait_for_frames
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def _read(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:

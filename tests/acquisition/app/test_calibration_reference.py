@@ -107,7 +107,7 @@ def test_a_calibration_that_misses_the_leds_light_is_refused(
 ) -> None:
     """It used to be zero-filled outside its range: a 500–700 nm LED calibration gave led440 a
     spectrum of 0 below 490 nm, and estimate exited 0."""
-    sequence = read_sequence(Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent")
+    sequence = read_sequence(Path(__file__).resolve().parents[2] / "data" / "sequences" / "sim-macbeth-fluorescent")
     leds = sequence.led_spectra().to_unit("energy")
     camera = sequence.camera_responsivities().to_unit("energy")  # type: ignore[union-attr]
     spectra = {"led_spectra": leds, "camera_responsivities": camera}[section]

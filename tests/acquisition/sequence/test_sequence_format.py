@@ -30,7 +30,7 @@ from msflash.acquisition.sequence.format import (
 from msflash.acquisition.sequence.image_files import read_image, read_image_header, write_image
 from tests.helpers import forget_digests
 
-REPOSITORY = Path(__file__).resolve().parents[2]
+REPOSITORY = Path(__file__).resolve().parents[3]
 SAMPLES = REPOSITORY.parent / "shared" / "samples"
 WAVELENGTHS = np.arange(400.0, 701.0, 10.0)
 N_LEDS = 3

@@ -22,7 +22,7 @@ from msflash.acquisition.sequence.folder_claim import LOCK_FILE, claim_folder, c
 from msflash.acquisition.sequence.format import read_sequence
 from tests.helpers import wait_for_frames, write_test_sequence
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 SLOW_CAPTURE = ["capture", "--sync", "booth", "--exposure-us", "1500000", "--scene", "macbeth"]
 
 

@@ -24,7 +24,7 @@ from msflash.acquisition.app.cli import main
 from msflash.processing.user_files import shown_path
 from tests.helpers import write_test_sequence
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 KINDS = ("fifo", "device", "directory", "loop", "large", "odd-name")
 BIG = 20 * (1 << 20)
 
@@ -159,7 +159,7 @@ def test_each_path_option_refuses(kind: str, sequence: Path, tmp_path: Path) -> 
 _CHILD = """
 import json, sys
 from pathlib import Path
-from tests.acquisition.test_user_file_options import cases, run_case
+from tests.acquisition.app.test_user_file_options import cases, run_case
 for option, (argv, named) in cases("fifo", Path(sys.argv[1]), Path(sys.argv[2])).items():
     status, err = run_case(argv)
     print(json.dumps({"option": option, "status": status, "err": err, "named": named}), flush=True)

@@ -23,7 +23,7 @@ from msflash.acquisition.sequence.image_files import read_image
 from msflash.acquisition.session.many import SequenceRecord, exit_status, output_paths, sequence_inputs
 from tests.helpers import led_mix, write_test_sequence
 
-REPOSITORY = Path(__file__).resolve().parents[2]
+REPOSITORY = Path(__file__).resolve().parents[3]
 MIXES = (
     [0.2, 0.05, 0.4, 0.3, 0.6, 0.1, 0.25],
     [0.5, 0.1, 0.1, 0.3, 0.2, 0.4, 0.05],

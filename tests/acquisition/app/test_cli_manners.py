@@ -19,7 +19,7 @@ from msflash.processing.ambient import AMBIENT_METHODS
 from tests.helpers import SAMPLES_DIR
 
 SAMPLE = SAMPLES_DIR / "sample-rgb-tungsten"
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:

@@ -59,7 +59,7 @@ def test_a_job_whose_worker_dies_is_given_to_on_error_and_the_rest_go_on() -> No
         capture_output=True,
         text=True,
         timeout=240,
-        cwd=Path(__file__).resolve().parents[2],
+        cwd=Path(__file__).resolve().parents[3],
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert json.loads(done.stdout) == [0, [1, "KilledWorker"], 20]
@@ -152,6 +152,8 @@ def test_without_dask_a_batch_runs_serially_and_an_address_is_refused(tmp_path: 
         text=True,
     )
     assert refused.returncode == 2
-    assert refused.stderr.strip().splitlines()[-1].startswith(
-        "msflash: error: --scheduler tcp://127.0.0.1:1: dask.distributed is not installed"
+    assert (
+        refused.stderr.strip()
+        .splitlines()[-1]
+        .startswith("msflash: error: --scheduler tcp://127.0.0.1:1: dask.distributed is not installed")
     )

@@ -4,7 +4,7 @@ A real process: exit 130/143 with one line, no output, no traceback, no dask pro
 landing inside ``LocalCluster(...)`` used to leave a cluster nothing could close (dask's exit hook
 then printed ``AssertionError: Status.init`` under ``msflash: interrupted``); whether this process
 catches that window depends on scheduling, so the window itself is pinned in-process by
-``tests/acquisition/test_dask_map.py::test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_closed``.
+``tests/acquisition/session/test_dask_map.py::test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_closed``.
 """
 
 from __future__ import annotations

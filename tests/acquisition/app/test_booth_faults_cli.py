@@ -28,7 +28,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.led_controller import LedBooth
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 EMULATOR = ("booth-emulator", "--names", "led440,led520,led660", "--peaks-nm", "440,520,660")
 SIM = ("--rig", "sim", "--leds", "3", "--exposure", "10000")
 STEP_2 = "step 2 (led:2): "

@@ -21,7 +21,7 @@ from msflash.acquisition.sequence.check import FILE_STATES, check_sequence
 from msflash.acquisition.sequence.format import read_sequence
 from tests.helpers import forget_digests, write_test_sequence
 
-REPOSITORY = Path(__file__).resolve().parents[2]
+REPOSITORY = Path(__file__).resolve().parents[3]
 SAMPLES = REPOSITORY.parent / "shared" / "samples"
 FRAME = "frames/003-led.tiff"
 """The frame the tests damage (frames[3])."""

@@ -17,7 +17,7 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.locate import locate_sequence
 
-RECORDED = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
+RECORDED = Path(__file__).resolve().parents[2] / "data" / "sequences" / "sim-macbeth-fluorescent"
 """A recorded sequence (a chart scene under fluorescent light, from ``msflash capture``)."""
 
 

@@ -12,7 +12,7 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 
-RECORDED = str(Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent")
+RECORDED = str(Path(__file__).resolve().parents[2] / "data" / "sequences" / "sim-macbeth-fluorescent")
 
 REFUSED = {
     "run, unknown sim camera": ["run", "--sim-camera", "nope"],

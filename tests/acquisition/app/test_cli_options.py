@@ -8,7 +8,7 @@ import pytest
 
 from msflash.acquisition.app import cli
 
-SIM_SEQUENCE = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
+SIM_SEQUENCE = Path(__file__).resolve().parents[2] / "data" / "sequences" / "sim-macbeth-fluorescent"
 
 
 @pytest.fixture(autouse=True)

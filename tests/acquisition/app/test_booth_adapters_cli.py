@@ -23,7 +23,7 @@ from msflash.led_controller.adapters.text_booth import TextBooth
 from msflash.led_controller.adapters.text_booth_emulator import TextBoothServer, serve_text_booth
 from tests.acquisition.session.test_rig_hw import calibration  # noqa: F401 - the fixture
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SIM = ("--rig", "sim", "--leds", "3", "--exposure", "10000")
 
 

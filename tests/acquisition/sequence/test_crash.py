@@ -16,7 +16,7 @@ from pathlib import Path
 from msflash.acquisition.sequence.format import read_sequence
 from tests.helpers import wait_for_frames
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 SLOW_CAPTURE = ["capture", "--sync", "booth", "--exposure-us", "300000", "--scene", "macbeth"]
 
 
