@@ -83,7 +83,7 @@ def _plan(n: int, exposure_us: float, trigger: TriggerSource) -> CapturePlan:
 
 
 def stage_ms(timings: Sequence[Any]) -> dict[str, np.ndarray]:
-    """Per-trigger stage durations in milliseconds from :class:`~acquisition.devices.aravis.camera.TriggerTiming` rows.
+    """Per-trigger stage durations in milliseconds from :class:`~msflash.lab.bench.bare_run.TriggerTiming` rows.
 
     Returns
     -------
@@ -207,9 +207,8 @@ def camera_bench(
         AravisGvFake,
         StrobeConfig,
         TriggerConfig,
-        TriggerTiming,
-        bare_aravis_run,
     )
+    from msflash.lab.bench.bare_run import TriggerTiming, bare_aravis_run
 
     roi = (0, 0, width, height)
     free_run = TriggerConfig(mode="free", frame_rate_hz=frame_rate_hz)

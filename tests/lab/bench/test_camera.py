@@ -61,8 +61,10 @@ def test_frame_timing_stages_are_ordered_on_the_host_clock(aravis: ModuleType, g
             t = camera.last_frame_timing
             assert sent <= t.device_ns <= t.received_ns <= t.popped_ns <= t.delivered_ns <= time.time_ns()
         camera.stop()
+    from msflash.lab.bench.bare_run import bare_aravis_run  # after the aravis fixture: needs the typelib
+
     for _ in range(3):  # the bare loop takes no frame again: one lost on loopback under load is run again
-        run = aravis.bare_aravis_run(
+        run = bare_aravis_run(
             gv_fake.address,
             width=64,
             height=48,

@@ -1,4 +1,7 @@
-"""Reference loops for the bench: plain Aravis, no msflash layer (:func:`bare_aravis_run`)."""
+"""Reference loops for the camera bench: plain Aravis, no msflash layer (:func:`bare_aravis_run`).
+
+The lab's (it measures the camera path; nothing in the product runs it); it uses the Aravis typelib
+through :mod:`msflash.acquisition.devices.aravis.gi_typelib`, never ``gi`` itself."""
 
 from __future__ import annotations
 
