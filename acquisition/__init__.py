@@ -1,1 +1,5 @@
 """msflash: acquisition."""
+
+from msflash.one_copy import one_copy
+
+one_copy(__name__)  # "import acquisition" from the repository root: a one-line ImportError naming msflash.…

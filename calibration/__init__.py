@@ -7,5 +7,8 @@ use too). Imports only :mod:`processing`.
 """
 
 from msflash.calibration.errors import CalibrationError, CalibrationWarning
+from msflash.one_copy import one_copy
+
+one_copy(__name__)  # "import calibration" from the repository root: a one-line ImportError naming msflash.…
 
 __all__ = ["CalibrationError", "CalibrationWarning"]

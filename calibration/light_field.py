@@ -16,10 +16,8 @@ colour). ``log g`` is a polynomial of total degree :data:`FIELD_DEGREE` in the p
 places along it determine: v³ at most on 4 rows), each term less its mean over the chart's
 patches, so the field has no overall level: each frame's power stays what the LED spectra (or
 the light's unknown scale) say. One field per sequence: a lens's falloff and the booth's geometry
-light all its frames alike. A quadratic in ``log g`` was tried first and left 3× the noise in the
-patch means of a 12 % falloff (``log(1 − a r²)`` is not quadratic); a field per frame absorbed
-so much of the LED frames' information that the curves came out worse than with no field at all
-(``docs/calibration.md``).
+light all its frames alike (why this form: ``docs/decisions/docstring-history.md``,
+``docs/calibration.md``).
 """
 
 from __future__ import annotations

@@ -10,6 +10,10 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from msflash.one_copy import one_copy
+
+one_copy(__name__)  # "import led_controller" from the repository root: a one-line ImportError naming msflash.…
+
 if TYPE_CHECKING:
     from msflash.led_controller.booth import LedBooth
     from msflash.led_controller.emulator import BoothEmulator, ManualClock, PtyBoothServer, serve_on_pty

@@ -70,8 +70,7 @@ def await_boot_banner(link: serial.SerialBase, boot_s: float = DEFAULT_BOOT_S) -
     A stock Arduino Mega resets when its port is opened (``docs/booth-firmware.md`` §4); its
     bootloader must not be sent anything meanwhile. Returns every byte read up to and including the
     banner's line end (``b""`` when none came: a booth that does not reset, or old firmware).
-    ``link.timeout`` is as it was on return (it polls with short reads meanwhile: a caller's reads
-    after it once got those 0.1 s instead of their own timeout, and a slow booth's reply was missed).
+    ``link.timeout`` is as it was on return (it polls with short reads meanwhile).
     """
     deadline = time.monotonic() + boot_s
     seen = bytearray()

@@ -1015,8 +1015,8 @@ class PtyBoothServer:
     The thread wakes for input, for the emulator's next timed action (:meth:`BoothEmulator.next_due_s`:
     booth-master steps, delayed replies, the watchdog) and otherwise every ``poll_s``. On the real
     clock every timed action is known in advance, so it polls only every ``idle_poll_s`` (for a
-    ``close`` fault): an in-process emulator that woke every 2 ms took the GIL ~500 times a second
-    from the capture loop it serves. A test's manual clock moves on its own, so it is polled every
+    ``close`` fault), so that an in-process emulator does not take the GIL from the capture loop it
+    serves (docs/decisions/docstring-history.md). A test's manual clock moves on its own, so it is polled every
     ``poll_s``.
 
     The link is as unkind as a stock Arduino Mega's (``led_controller/usb_link.py``):

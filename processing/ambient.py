@@ -32,7 +32,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -41,6 +41,9 @@ from msflash.processing.least_squares import FactoredQuadratic
 from msflash.processing.scipy_cores import lapack
 from msflash.processing.spectra import Spectra, require_unit
 from msflash.processing.statistics import SequenceStatistics
+
+if TYPE_CHECKING:
+    from msflash.processing.flicker import FlickerCheck
 
 AmbientMethod = Literal["lstsq", "nonneg", "tikhonov", "roughness"]
 
@@ -109,6 +112,9 @@ class AmbientEstimate:
     """Share of reference lights like this one whose estimate misses (:mod:`processing.model_error`), or None."""
     expected_ratio: float | None = None
     """Their median RMSE ÷ LED bound, or None."""
+    flicker: FlickerCheck | None = None
+    """What was found about a flickering ambient and whether the LED images were corrected for it
+    (:mod:`processing.flicker`), or None when it was not looked for."""
 
     @property
     def ambient_is_dark(self) -> bool:

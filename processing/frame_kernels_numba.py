@@ -160,8 +160,7 @@ def moments(frames, channels, white, start, stop, out):
     rounded up to :data:`MOMENT_BLOCK`; only its lower triangle (``j ≤ i``) is meaningful.
 
     Each tile of samples is converted to float64 once, in cache; the products are taken in 3 × 3 blocks
-    of rows, so each loaded value serves three products (one row pair at a time was bound by the loads
-    from cache). A saturated pixel's samples are zeroed in every row, the row of ones included.
+    of rows, so each loaded value serves three products. A saturated pixel's samples are zeroed in every row, the row of ones included.
     """
     n = len(frames)
     rows = out.shape[0]

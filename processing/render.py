@@ -212,8 +212,8 @@ def display_white(srgb_linear: np.ndarray, percentile: float = 99.5, median_leve
     white balance, does not clip its dominant channel): the ``percentile`` of it, unless that
     leaves the scene's median darker than ``median_level`` of white; then ``median / median_level``,
     and the few pixels above white clip. A small bright area — a specular highlight, the sim rig's
-    highlight strip below the chart (3.8 % of its pixels, 12 × brighter than the chart's white
-    patch) — then no longer sets the exposure and darkens everything else.
+    highlight strip below the chart (its size: docs/measurements.md) — then does not set the exposure
+    and darken everything else.
 
     Examples
     --------

@@ -52,7 +52,7 @@ import math
 import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 
 import numpy as np
@@ -162,6 +162,57 @@ class NoiseMoments:
 
 
 @dataclass(frozen=True)
+class ChannelMoments:
+    """Per-channel second moments of each LED-only block image with the ambient's (what a per-frame ambient gain
+    is read from, :mod:`processing.flicker`), over the same blocks, weights and noise probe as the statistics.
+
+    With ``f_i,b ∈ R^C`` block b's LED-only response to LED i at full drive (channel by channel: RGB, or a
+    mosaic's CFA planes in CFA order) and ``a_b ∈ R^C`` its ambient response: ``fa[i] = Σ_b f_i,b a_bᵀ``,
+    ``ff[i] = Σ_b f_i,b f_i,bᵀ``, ``aa = Σ_b a_b a_bᵀ``. The ``noise_*`` are the half-difference probe's share
+    of each (None when it was not measured).
+    """
+
+    fa: np.ndarray
+    """(k, C, C)."""
+    ff: np.ndarray
+    """(k, C, C)."""
+    aa: np.ndarray
+    """(C, C)."""
+    n_blocks: int
+    """Valid blocks summed."""
+    noise_fa: np.ndarray | None = None
+    noise_ff: np.ndarray | None = None
+    noise_aa: np.ndarray | None = None
+
+    @property
+    def n_channels(self) -> int:
+        """C."""
+        return int(self.aa.shape[0])
+
+    def denoised(self) -> ChannelMoments:
+        """The moments less the noise's share (as they are when the noise was not measured)."""
+        if self.noise_fa is None or self.noise_ff is None or self.noise_aa is None:
+            return self
+        return ChannelMoments(self.fa - self.noise_fa, self.ff - self.noise_ff, self.aa - self.noise_aa, self.n_blocks)
+
+    def __add__(self, other: ChannelMoments) -> ChannelMoments:
+        """The moments of the union of two disjoint sets of blocks."""
+
+        def both(mine: np.ndarray | None, theirs: np.ndarray | None) -> np.ndarray | None:
+            return None if mine is None or theirs is None else mine + theirs
+
+        return ChannelMoments(
+            self.fa + other.fa,
+            self.ff + other.ff,
+            self.aa + other.aa,
+            self.n_blocks + other.n_blocks,
+            both(self.noise_fa, other.noise_fa),
+            both(self.noise_ff, other.noise_ff),
+            both(self.noise_aa, other.noise_aa),
+        )
+
+
+@dataclass(frozen=True)
 class SequenceStatistics:
     """Sufficient statistics for ambient estimation (eq. 4–6) over the unsaturated samples.
 
@@ -190,6 +241,9 @@ class SequenceStatistics:
     weighted: bool = False
     """Whether the samples carry inverse-variance weights (module notes): the moments and sums are then
     weighted ones, normalised to mean weight 1 over all samples."""
+    channels: ChannelMoments | None = None
+    """The same blocks' moments channel by channel (binned statistics: :class:`BlockRows`), or None; kept by
+    :meth:`denoised` and ``+``, dropped by the other derivations."""
 
     @property
     def n_leds(self) -> int:
@@ -225,6 +279,7 @@ class SequenceStatistics:
             ambient_sum=self.ambient_sum,
             led_sums=self.led_sums,
             weighted=self.weighted,
+            channels=self.channels,
         )
 
     def residual_energy(self, weights: np.ndarray) -> float:
@@ -311,6 +366,7 @@ class SequenceStatistics:
             led_sums=self.led_sums + other.led_sums,
             noise=None if self.noise is None or other.noise is None else self.noise + other.noise,
             weighted=self.weighted and other.weighted,
+            channels=None if self.channels is None or other.channels is None else self.channels + other.channels,
         )
 
 
@@ -873,6 +929,7 @@ class BlockRows:
             # Batch mode: the weights enter each chunk's product (incremental mode weighs rows as frames come).
             weights = self._sample_weights() if self._batch_weights is None else self._batch_weights
             probe_weights = self._at_probe(weights)
+        column_factor: np.ndarray | None = None  # batch mode: √weight per column, 0 where left out
         if self._moments is not None:
             moments = self._moments  # incremental: saturated blocks were left out as they came (_drop)
             noise = self._noise
@@ -910,6 +967,7 @@ class BlockRows:
                         probe_weights,
                     )
                 )
+            column_factor = np.ones(rows.shape[1]) if invalid is None else (~self._columns(invalid)).astype(float)
             # The rows' and the probe's moments in one map: the probe's single chunk shares the threads.
             moments, *probed = _grams(parts, chunk, workers)
             noise = probed[0] if probed else None
@@ -922,7 +980,7 @@ class BlockRows:
             noise = None if scale is None else noise * scale
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
         factor = self.factor
-        return statistics_from_moments(
+        statistics = statistics_from_moments(
             moments,
             spec,
             rows.shape[1],
@@ -931,6 +989,44 @@ class BlockRows:
             n_samples=rows.shape[1] - excluded_columns,
             weighted=self.root_weights is not None or weights is not None,
         )
+        channel_moments = self._channel_moments(spec, column_factor, scale if noise is not None else None)
+        return replace(statistics, channels=channel_moments)
+
+    def _channel_moments(
+        self, spec: FrameStackSpec, column_factor: np.ndarray | None, probe_scale: float | None
+    ) -> ChannelMoments:
+        """:class:`ChannelMoments` of the rows, masked as :meth:`statistics` takes them (batch mode: by ``column_factor``;
+        incremental rows already are), the probe's scaled by ``probe_scale`` (None: none).
+
+        Unweighted: a sample's inverse-variance weight differs from channel to channel, and weighing the channels of
+        one block unequally would turn its colour away from the LED's (what :mod:`processing.flicker` reads).
+        """
+        n_rows, (height, channels, width) = self.rows.shape[0], self.block_shape
+        if column_factor is None and self.root_weights is not None:  # incremental rows were weighed: undo it
+            column_factor = np.divide(
+                1.0, self.root_weights, out=np.zeros_like(self.root_weights), where=self.root_weights > 0
+            )
+        values = self.rows if column_factor is None else self.rows * column_factor
+        by_channel = values.reshape(n_rows, height, channels, width).transpose(0, 2, 1, 3).reshape(n_rows, channels, -1)
+        transform = _channel_transform(spec, spec.black_level * self.factor * self.factor)
+        k = spec.n_leds
+        blocks = int(np.count_nonzero(by_channel[n_rows - 1].any(axis=0))) if n_rows else 0
+
+        def mapped(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            images = np.tensordot(transform, rows, axes=(1, 0))  # (k + 1, C, blocks): each LED's, then the ambient's
+            leds, ambient = images[:k], images[k]
+            return leds @ ambient.T, leds @ leds.transpose(0, 2, 1), ambient @ ambient.T
+
+        fa, ff, aa = mapped(by_channel)
+        noise: tuple[np.ndarray | None, ...] = (None, None, None)
+        if self.differences is not None and probe_scale is not None:
+            probe = self.differences
+            if column_factor is not None:
+                probe = probe * self._at_probe(column_factor)
+            probed = self.difference_shape
+            probe_rows = probe.reshape(n_rows, probed[0], probed[1], channels).transpose(0, 3, 1, 2)
+            noise = tuple(part * probe_scale for part in mapped(probe_rows.reshape(n_rows, channels, -1)))
+        return ChannelMoments(fa, ff, aa, blocks, *noise)
 
 
 def statistics_from_moments(
@@ -985,6 +1081,20 @@ def statistics_from_moments(
         noise=noise,
         weighted=weighted,
     )
+
+
+def _channel_transform(spec: FrameStackSpec, black: float) -> np.ndarray:
+    """(k + 1, n + 2) map from one channel's raw rows ``[F_1 … F_n, A, 1]`` to ``[f_1 … f_k, a]``:
+    ``f_i = Σ_j U_ij (s_j (F_j − b) − s_a (A − b))``, ``a = s_a (A − b)`` (the same for every channel)."""
+    unmixing, scales = spec.unmixing, np.asarray(spec.led_scales, dtype=float)
+    k, n = unmixing.shape
+    transform = np.zeros((k + 1, n + 2))
+    transform[:k, :n] = unmixing * scales
+    transform[:k, n] = -spec.ambient_scale * unmixing.sum(axis=1)
+    transform[:k, n + 1] = unmixing @ ((spec.ambient_scale - scales) * black)
+    transform[k, n] = spec.ambient_scale
+    transform[k, n + 1] = -spec.ambient_scale * black
+    return transform
 
 
 def probe_stride(height: int, width: int) -> int:

@@ -191,7 +191,7 @@ def check_output_name(path: str | os.PathLike, option: str, error: type[Exceptio
     """Refuse an output ``path`` the filesystem cannot hold, before anything is created.
 
     ``Path.exists`` and ``mkdir`` raise ``OSError`` (``ENAMETOOLONG``) for a name longer than the
-    filesystem allows instead of answering; a command's own checks then crashed.
+    filesystem allows instead of answering, so this is asked first, with a one-line answer.
 
     Raises
     ------

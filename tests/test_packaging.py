@@ -9,7 +9,7 @@ import zipfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-FOLDERS = ("acquisition", "processing", "calibration", "led_controller")
+FOLDERS = ("acquisition", "processing", "calibration", "led_controller", "lab")
 
 
 def _tracked_files() -> list[str]:

@@ -55,7 +55,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "msflash.acquisition.app.cli_live",
         "serve a browser page on 127.0.0.1: live image, exposure, gain, LED levels, fire a sequence, its spectrum",
     ),
-    "bench": ("msflash.acquisition.app.cli_bench", "measure speed as ratios in one run (processing, camera, booth)"),
+    "bench": ("msflash.lab.cli_bench", "measure speed as ratios in one run (processing, camera, booth)"),
     "devices": (
         "msflash.acquisition.app.cli_devices",
         "list cameras (Aravis) on the given interfaces, and booths among the serial ports",
@@ -67,7 +67,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "booth bring-up: 'booth console PORT' is an interactive prompt",
     ),
     "study": (
-        "msflash.acquisition.app.cli_study",
+        "msflash.lab.cli_study",
         "simulation studies (table1: Table 1; surfaces: Fig. 5; cameras: Fig. 6; xy: Fig. 7; "
         "failure: where estimates fail and whether they warn; pareto: accuracy vs time)",
     ),
@@ -76,7 +76,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "ΔE00 against the chart under D65 and noise, for a chart sequence",
     ),
     "colour-study": (
-        "msflash.acquisition.app.cli_evaluate",
+        "msflash.lab.cli_colour_study",
         "simulated Fig. 9 (ΔE per ambient) and Fig. 3 (noise) study",
     ),
     "calibrate": (
@@ -84,11 +84,15 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "measure LED spectra, camera responsivities, dark and linearity",
     ),
     "local-study": (
-        "msflash.acquisition.app.cli_local",
+        "msflash.lab.cli_local",
         "study local vs global ambient estimation on simulated scenes",
     ),
 }
 """Subcommands in help order: name → (module whose ``register`` adds it, the help line it gives it).
+
+``bench``, ``study``, ``colour-study`` and ``local-study`` belong to the lab (``msflash.lab``, outside the
+product: an import contract forbids the product to import it): they are named here, imported only when
+run, and left out of the help when the lab is not installed.
 
 The help line is what ``msflash --help`` lists without importing the module; a test checks it
 against the module's own registration."""

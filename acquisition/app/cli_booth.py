@@ -22,6 +22,12 @@ from msflash.led_controller.usb_link import FTDI_LATENCY_S, MEGA_BOOTLOADER_S
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``booth-emulator`` and ``doctor`` subcommands."""
+    _register_emulator(subparsers)
+    _register_doctor(subparsers)
+
+
+def _register_emulator(subparsers: argparse._SubParsersAction) -> None:
+    """``booth-emulator``: the firmware emulator on a new pty, its board's link and random faults."""
     emu = subparsers.add_parser(
         "booth-emulator",
         help="serve the booth firmware emulator on a pseudo-terminal",
@@ -87,6 +93,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     emu.set_defaults(handler=booth_emulator)
 
+
+def _register_doctor(subparsers: argparse._SubParsersAction) -> None:
+    """``doctor``: the host's cameras and booths, or one named port asked who it is."""
     doc = subparsers.add_parser(
         "doctor", help="check USB3 Vision, GigE and serial setup", description="Check the host for cameras and booths."
     )

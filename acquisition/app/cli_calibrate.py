@@ -321,6 +321,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         )
     )
 
+    _register_leds(commands)
+    _register_camera(commands)
+    _register_chart(commands)
+    for name, handler, text in (
+        ("dark", _dark, "black level and read noise from a sequence's dark frames"),
+        ("linearity", _linearity, "linearity and saturation from frames at several exposures"),
+    ):
+        sub = commands.add_parser(name, help=text)
+        sub.add_argument("sequence", help=SEQUENCE_HELP)
+        sub.add_argument("--out", required=True, help="calibration directory (created or updated)")
+        sub.add_argument("--json", action="store_true")
+        sub.set_defaults(handler=_bad_input(handler))
+
+
+def _register_leds(commands: argparse._SubParsersAction) -> None:
+    """``calibrate leds``: LED spectra from spectrometer exports, their power ratios through the camera."""
     leds = commands.add_parser(
         "leds", help="LED spectra from spectrometer exports; their power ratios through the camera"
     )
@@ -374,6 +390,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     leds.add_argument("--json", action="store_true")
     leds.set_defaults(handler=_bad_input(_leds))
 
+
+def _register_camera(commands: argparse._SubParsersAction) -> None:
+    """``calibrate camera``: responsivities from a chart under the LEDs and broadband lights."""
     camera = commands.add_parser(
         "camera", help="camera responsivities from a chart under the LEDs and broadband lights"
     )
@@ -433,6 +452,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     camera.add_argument("--json", action="store_true")
     camera.set_defaults(handler=_bad_input(_camera))
 
+
+def _register_chart(commands: argparse._SubParsersAction) -> None:
+    """``calibrate chart``: a chart's reflectances measured with the spectrometer."""
     chart = commands.add_parser(
         "chart",
         help="a chart's reflectances measured with the spectrometer (each patch over a white reference)",
@@ -458,13 +480,3 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     chart.add_argument("--out", required=True, help="calibration directory (created or updated)")
     chart.add_argument("--json", action="store_true")
     chart.set_defaults(handler=_bad_input(_chart_command))
-
-    for name, handler, text in (
-        ("dark", _dark, "black level and read noise from a sequence's dark frames"),
-        ("linearity", _linearity, "linearity and saturation from frames at several exposures"),
-    ):
-        sub = commands.add_parser(name, help=text)
-        sub.add_argument("sequence", help=SEQUENCE_HELP)
-        sub.add_argument("--out", required=True, help="calibration directory (created or updated)")
-        sub.add_argument("--json", action="store_true")
-        sub.set_defaults(handler=_bad_input(handler))

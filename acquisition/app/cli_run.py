@@ -82,6 +82,7 @@ def _policy(args: argparse.Namespace) -> ExposurePolicy:
             max_saturated_fraction=args.max_saturated / 100.0,
             criterion=args.exposure_criterion,
             max_lost_fraction=args.max_lost / 100.0,
+            anti_flicker=args.anti_flicker,
         )
     except ValueError as err:
         raise UsageError(
@@ -164,6 +165,9 @@ def _check_rig_runs(args: argparse.Namespace, rig: Rig, spec: str) -> None:
 def _say_decision(args: argparse.Namespace, result: RunResult) -> None:
     """The decision's time, the warnings, and the flash re-captured (or synthesised only)."""
     progress(f"estimated the ambient and solved the flash in {result.decision_ms:.1f} ms after the last LED frame")
+    flicker = result.estimate.flicker.summary() if result.estimate.flicker is not None else None
+    if flicker is not None:
+        progress(flicker)
     for note in result.estimate.warnings:
         progress(f"warning: {note}")
     for warning in result.warnings:

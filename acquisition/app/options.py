@@ -18,8 +18,8 @@ from msflash.processing.ambient import AMBIENT_METHODS
 def target_value(text: str) -> str:
     """argparse type of ``--target``: a CSV file (read when used), or an illuminant name checked now.
 
-    A mistyped name is refused before a rig opens or a frame is captured (it was found only after the
-    capture, and the message did not name ``--target``), with the names it was probably meant to be.
+    A mistyped name is refused before a rig opens or a frame is captured, naming ``--target`` and the
+    names it was probably meant to be.
     """
     if Path(text).suffix.lower() in (".csv", ".txt") or os.path.lexists(text):
         return text
@@ -104,6 +104,16 @@ def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], 
         help="gap between patches in pixels (sim rig 2; default 2 with --patch-px)",
     )
     parser.add_argument("--margin-px", type=int, default=1, help="pixels ignored inside each patch edge")
+
+
+def flash_bounds_option(parser: argparse.ArgumentParser) -> None:
+    """``--bounds physical|nonnegative``: the flash weights' bounds (``evaluate``, ``colour-study``)."""
+    parser.add_argument(
+        "--bounds",
+        default="physical",
+        choices=("physical", "nonnegative"),
+        help="flash weights in [0, 1] (physical, default: re-capturable) or ≥ 0 (computational)",
+    )
 
 
 def _scheduler(text: str) -> str:

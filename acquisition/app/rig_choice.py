@@ -9,6 +9,7 @@ ignore (one line, exit 2) and opens the rig through :func:`~acquisition.session.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 
 import numpy as np
@@ -28,7 +29,9 @@ from msflash.acquisition.app.options import (
     simulated_world,
 )
 from msflash.acquisition.devices.aravis.fake_models import DEFAULT_FAKE_MODEL
+from msflash.acquisition.devices.mains_flicker import FLICKER_WAVEFORMS, drawn_flicker, parse_flicker
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, SIM_SCENES
+from msflash.acquisition.session.anti_flicker import ANTI_FLICKER_CHOICES
 from msflash.acquisition.session.external_booth import check_booth_port
 from msflash.acquisition.session.rig import (
     AravisFakeRigOptions,
@@ -119,6 +122,10 @@ def open_from_args(args: argparse.Namespace) -> Rig:
     for option, given in (("--booth-firmware", args.booth_firmware), ("--line-time-us", args.line_time_us != 0.0)):
         if given and spec != "sim":
             raise UsageError(f"{option}: configures the simulated rig, but the rig is '{spec}'; expected --rig sim")
+    if args.flicker is not None and spec not in ("sim", "aravis-fake"):
+        raise UsageError(
+            f"--flicker: describes the simulated world's lamp, but the rig is '{spec}'; expected --rig sim or aravis-fake"
+        )
     if args.booth_protocol != "msflash" and args.port is None and args.booth_port is None:
         raise UsageError(
             f"--booth-protocol {args.booth_protocol}: says what the booth at --port or --booth-port "
@@ -154,6 +161,9 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
         )
     # The simulated world: the sim rig renders it with its own camera, aravis-fake through Aravis.
     world = simulated_world(args)
+    if args.flicker is not None:  # the lamp's true frequency (within the grid's ±1 %) and phase drawn from --seed
+        hz, depth, waveform = args.flicker
+        world = dataclasses.replace(world, flicker=drawn_flicker(hz, depth, waveform, seed=args.seed))
     if spec == "sim":
         return open_rig(
             "sim",
@@ -191,6 +201,14 @@ def _line_time(text: str) -> float:
     if not (math.isfinite(value) and 0.0 <= value <= 1000.0):
         raise argparse.ArgumentTypeError(f"{text!r}: expected a line time in µs, 0..1000")
     return value
+
+
+def _flicker(text: str) -> tuple[float, float, str]:
+    """``--flicker HZ:DEPTH[:WAVEFORM]`` (:func:`acquisition.devices.mains_flicker.parse_flicker`)."""
+    try:
+        return parse_flicker(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def _flash_power(text: str) -> float:
@@ -353,6 +371,16 @@ def _add_world_and_pacing_options(parser: argparse.ArgumentParser) -> None:
         help="a rolling shutter: each row of the simulated camera starts US µs after the one above "
         "(default 0: a global shutter); the booth is told the skew so its pulses fall where every row exposes",
     )
+    sim.add_argument(
+        "--flicker",
+        type=_flicker,
+        default=None,
+        metavar="HZ:DEPTH[:WAVEFORM]",
+        help="the ambient lamp flickers on the mains: HZ its flicker frequency (100 on 50 Hz mains, 120 on 60 Hz; "
+        "the true one drawn within ±1 %% from --seed, as is its phase), DEPTH its percent flicker (0.3 = 30 %%), "
+        f"WAVEFORM {', '.join(FLICKER_WAVEFORMS)} (default sine: a filament; rectified: a fluorescent; clipped: an "
+        "LED driver); each frame sees the lamp's mean over its own exposure window (default: steady; docs/flicker.md)",
+    )
     sim.add_argument("--cfa", default=None, choices=SIM_CFA_CHOICES, help=SIM_CFA_HELP)
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
     _add_pacing_options(parser)
@@ -369,6 +397,14 @@ def _add_pacing_options(parser: argparse.ArgumentParser) -> None:
         metavar="auto|MICROSECONDS",
         help="auto (default: meter an ambient preview, then choose each LED frame's exposure for "
         "SNR below saturation) or one exposure in microseconds for every frame",
+    )
+    parser.add_argument(
+        "--anti-flicker",
+        default="off",
+        choices=ANTI_FLICKER_CHOICES,
+        help="exposures of whole flicker periods of mains lamps where the exposure allows: 50 (10 ms periods) or 60 "
+        "(8.33 ms) the mains in Hz, auto (50 ms: whole periods of both), off (default); shorter exposures are kept "
+        "and named in a warning (the estimate reads each frame's ambient gain; docs/flicker.md)",
     )
     parser.add_argument("--log-serial", default=None, help="write the booth serial transcript to this file")
     parser.add_argument(

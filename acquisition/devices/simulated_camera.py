@@ -70,6 +70,10 @@ SIM_DEFAULT_CFA = "RGGB"
 """The ``sim`` rig's camera sends a raw RGGB mosaic, 12-bit (:func:`processing.image_formation.machine_vision_sensor`),
 as colour machine-vision cameras do; ``cfa=None`` asks for RGB frames."""
 
+FREE_RUNNING_GAP_S = (0.015, 0.060)
+"""From one frame's readout to the next exposure under a modulated ambient without a light over time: host pacing
+(a serial command, a trigger) spaces frames by a few tens of ms, drawn from the seed (docs/flicker.md)."""
+
 
 class SimulatedCamera(TriggeredFrames):
     """Renders ``scene`` under ``ambient`` + LEDs at the levels of ``led_levels_source``.
@@ -167,7 +171,13 @@ class SimulatedCamera(TriggeredFrames):
         self.shutter = Shutter()
         """Trigger latency and rolling-shutter line time (used with :attr:`exposure_light`)."""
         self.ambient_modulation: AmbientModulation | None = None
-        """The ambient's intensity over time, integrated per row (None: steady)."""
+        """The ambient's intensity over time, integrated per row (None: steady); e.g. mains flicker
+        (:class:`acquisition.devices.mains_flicker.MainsFlicker`). Frames are then dated by their exposure's
+        start on the light's clock."""
+        self.true_ambient_gains: list[float] = []
+        """The ambient's relative intensity in each frame rendered so far (its mean over rows; 1 when steady)."""
+        self._free_end_s = 0.0
+        self._pacing_rng = np.random.default_rng([seed, 0x0F11C7E5, 1])
         self._latency_rng = np.random.default_rng(seed + 7919)
 
     # -- ground truth and identity ------------------------------------------------------------
@@ -320,11 +330,47 @@ class SimulatedCamera(TriggeredFrames):
                 "expected exposure ≥ 0 and gain > 0"
             )
         with self._render_lock:
+            if self.ambient_modulation is not None:
+                return self._render_free_running(checked, float(exposure_us), float(gain))[0]
             return self._render(checked, float(exposure_us), float(gain))
 
-    def _render(self, levels: tuple[float, ...], exposure_us: float, gain: float) -> np.ndarray:
-        """The frame under ``levels`` (checked); the caller holds the render lock."""
-        illumination = total_illumination(self.ambient, self.led_spectra, levels)
+    def _mains_start(self, exposure_us: float, skew_s: float) -> float:
+        """The next exposure's start on the modulated ambient's clock (s).
+
+        Frames follow one another as host pacing spaces them, :data:`FREE_RUNNING_GAP_S` apart after the last
+        one's readout, drawn from the seed: a run is reproducible, and a short exposure meets a mains flicker at
+        an unrelated phase each frame (the mains keeps no time with the booth or the camera). The LEDs keep
+        their own clock (:attr:`exposure_light`).
+        """
+        gap = float(self._pacing_rng.uniform(*FREE_RUNNING_GAP_S))
+        start = self._free_end_s + self.shutter.readout_us * 1e-6 + gap
+        self._free_end_s = start + skew_s + exposure_us * 1e-6
+        return start
+
+    def _render_free_running(
+        self, levels: tuple[float, ...], exposure_us: float, gain: float
+    ) -> tuple[np.ndarray, float]:
+        """A frame under a modulated ambient without a light over time (:attr:`exposure_light` None): the pixels
+        and the exposure's start (s) on the ambient's clock (:meth:`_mains_start`); every row sees the ambient's
+        mean over its own window."""
+        request = ExposureRequest(exposure_us, self.scene.shape[0], self.shutter.line_time_us, 0.0, False)
+        start = self._mains_start(exposure_us, request.skew_us * 1e-6)
+        light = RowLight(start, np.broadcast_to(np.asarray(levels, dtype=float), (request.rows, len(levels))))
+        ambient = ambient_over_rows(self.ambient_modulation, light, request)
+        return self._render_rows(light, ambient, exposure_us, gain), start
+
+    def _render(
+        self, levels: tuple[float, ...], exposure_us: float, gain: float, ambient_gain: float = 1.0
+    ) -> np.ndarray:
+        """The frame under ``levels`` (checked), the ambient × ``ambient_gain``; the caller holds the render lock."""
+        if self.ambient_illumination is not None and ambient_gain != 1.0:  # two ambients: scaled per pixel
+            light = RowLight(0.0, np.broadcast_to(np.asarray(levels, dtype=float), (self.scene.shape[0], len(levels))))
+            return self._render_rows(light, np.full(self.scene.shape[0], ambient_gain), exposure_us, gain)
+        self.true_ambient_gains.append(ambient_gain)
+        ambient = (
+            self.ambient if ambient_gain == 1.0 else self.ambient.replace(values=self.ambient.values * ambient_gain)
+        )
+        illumination = total_illumination(ambient, self.led_spectra, levels)
         if self.ambient_illumination is not None:
             dark = self.ambient.replace(values=np.zeros_like(self.ambient.values))
             illumination = self.ambient_illumination.plus(total_illumination(dark, self.led_spectra, levels))  # type: ignore[assignment]
@@ -352,15 +398,22 @@ class SimulatedCamera(TriggeredFrames):
             self._begin_frame()
         with self._render_lock:  # one render at a time keeps the noise stream in trigger order
             try:
+                start_s: float | None = None
                 if self.exposure_light is not None:
-                    levels, pixels = self._render_exposed(step, hardware_trigger=plan.trigger == "booth")
+                    levels, pixels, start_s = self._render_exposed(step, hardware_trigger=plan.trigger == "booth")
+                elif self.ambient_modulation is not None:
+                    levels = self._levels_for(step)
+                    pixels, start_s = self._render_free_running(levels, step.exposure_us, step.gain)
                 else:
                     levels = self._levels_for(step)
                     pixels = self._render(levels, step.exposure_us, step.gain)
                 with self._condition:
                     self._frame_id += 1
                     self._clock_ns += int(step.exposure_us * 1000) + self._frame_interval_ns
-                    frame = RawFrame(pixels, self._frame_id, self._clock_ns, step.exposure_us, step.gain)
+                    # Under a modulated ambient the timestamp is the exposure's start on the light's clock, as a
+                    # camera's own clock dates its exposures (what the flicker fit reads).
+                    stamp = self._clock_ns if start_s is None else int(round(start_s * 1e9))
+                    frame = RawFrame(pixels, self._frame_id, stamp, step.exposure_us, step.gain)
                     self._rendered_levels.append(levels)
             except BaseException as err:
                 # next_frame raises it in this frame's place: on the booth's trigger line nobody else
@@ -376,8 +429,11 @@ class SimulatedCamera(TriggeredFrames):
         """First row's start to the last row's (rolling shutter), µs; 0 for a global shutter."""
         return self.shutter.skew_us(self.scene.shape[0])
 
-    def _render_exposed(self, step: CaptureStep, hardware_trigger: bool) -> tuple[tuple[float, ...], np.ndarray]:
-        """The frame of ``step`` under :attr:`exposure_light`; its mean levels (over rows) and pixels."""
+    def _render_exposed(
+        self, step: CaptureStep, hardware_trigger: bool
+    ) -> tuple[tuple[float, ...], np.ndarray, float | None]:
+        """The frame of ``step`` under :attr:`exposure_light`; its mean levels (over rows), pixels, and the
+        exposure's start on the modulated ambient's clock (s, :meth:`_mains_start`), or None when it is steady."""
         assert self.exposure_light is not None
         shutter = self.shutter
         request = ExposureRequest(
@@ -394,9 +450,13 @@ class SimulatedCamera(TriggeredFrames):
                 f"simulated camera '{self._name}': exposure light gave levels of shape {rows.shape}; expected "
                 f"({request.rows}, {self.led_spectra.count}) values in [0, 1]"
             )
-        ambient = ambient_over_rows(self.ambient_modulation, light, request)
+        start = None
+        ambient = None
+        if self.ambient_modulation is not None:
+            start = self._mains_start(step.exposure_us, request.skew_us * 1e-6)
+            ambient = ambient_over_rows(self.ambient_modulation, RowLight(start, rows), request)
         mean = tuple(float(v) for v in rows.mean(axis=0))
-        return mean, self._render_rows(light, ambient, step.exposure_us, step.gain)
+        return mean, self._render_rows(light, ambient, step.exposure_us, step.gain), start
 
     def _render_rows(self, light: RowLight, ambient: np.ndarray | None, exposure_us: float, gain: float) -> np.ndarray:
         """A frame whose row ``r`` saw the LEDs at ``light.led_levels[r]`` and the ambient × ``ambient[r]``.
@@ -405,8 +465,15 @@ class SimulatedCamera(TriggeredFrames):
         illumination is a per-pixel mix of the ambient and each LED (light is additive).
         """
         rows = light.led_levels
-        if ambient is None and bool(np.all(rows == rows[:1])):
-            return self._render(tuple(float(v) for v in rows[0]), exposure_us, gain)
+        uniform_leds = bool(np.all(rows == rows[:1]))
+        if uniform_leds and (
+            ambient is None or (self.ambient_illumination is None and bool(np.all(ambient == ambient[0])))
+        ):
+            # One light for every row (a global shutter): the ambient scaled as a whole.
+            return self._render(
+                tuple(float(v) for v in rows[0]), exposure_us, gain, 1.0 if ambient is None else float(ambient[0])
+            )
+        self.true_ambient_gains.append(1.0 if ambient is None else float(np.mean(ambient)))
         height, width = self.scene.shape
         leds = self.led_spectra.to_unit("photons")
         if self.ambient_illumination is not None:

@@ -19,8 +19,10 @@ from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence, as_recorded
 from msflash.processing import datasets
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
+from msflash.processing.channel_statistics import plane_channels
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
+from msflash.processing.flicker import FlickerCheck, check_flicker, with_ambient_gains, with_fit
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, estimate_local, synthesize_local, tile_statistics
 from msflash.processing.model_error import reference_for, with_model_error
 from msflash.processing.negative_values import clip_negative_noise
@@ -312,9 +314,42 @@ def estimate_from_statistics(
     """The ambient estimate of a sequence's statistics (eq. 4–6) with the LED model's band: the one place
     every route (from disk, live, replay) estimates. ``model``: one prepared for the sequence's LEDs (a
     live session prepares it before the first frame), else made here."""
+    check = flicker_check(sequence, statistics)
+    if check.corrected and check.applied_offsets is not None:
+        statistics = with_ambient_gains(statistics, check.applied_offsets)
     if model is None:
-        return with_model_band(estimate_ambient(statistics, led_spectra_photons(sequence), method, alpha), sequence)
-    return with_model_band(model.estimate(statistics, method, alpha), sequence)
+        estimate = estimate_ambient(statistics, led_spectra_photons(sequence), method, alpha)
+    else:
+        estimate = model.estimate(statistics, method, alpha)
+    return replace(with_model_band(estimate, sequence), flicker=check)
+
+
+def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> FlickerCheck:
+    """Each LED frame's ambient gain read from the statistics' colours, and whether to correct for it
+    (:func:`processing.flicker.check_flicker`); the mains fitted to the gains where frames carry timestamps."""
+    responsivities = sequence.camera_responsivities()
+    channels_of = plane_channels(sequence.camera.cfa) if statistics.channels is not None else None
+    stack = [i for i, e in enumerate(sequence.frames) if e.role == "led"]
+    ambient = next((i for i, e in enumerate(sequence.frames) if e.role == "ambient"), None)
+    levels = np.array([sequence.frames[i].led_levels for i in stack], dtype=float)
+    if not stack or levels.shape[1] != statistics.n_leds:  # a header written so far (a live capture): one LED a frame
+        levels = np.eye(statistics.n_leds)
+    check = check_flicker(
+        statistics,
+        led_spectra_photons(sequence),
+        None if responsivities is None else responsivities.to_unit("photons"),
+        channels_of,
+        levels,
+    )
+    order = [] if ambient is None else [ambient, *stack]
+    stamps = [sequence.frames[i].extra.get("timestamp_ns") for i in order]
+    if order and all(isinstance(v, int | float) for v in stamps):
+        check = with_fit(
+            check,
+            np.array(stamps, dtype=float) * 1e-9,
+            np.array([sequence.frames[i].exposure_us for i in order]) * 1e-6,
+        )
+    return check
 
 
 def with_model_band(estimate: AmbientEstimate, sequence: Sequence) -> AmbientEstimate:
@@ -364,6 +399,7 @@ def estimate_payload(sequence: Sequence, estimate: AmbientEstimate) -> dict:
         "warnings": list(estimate.warnings),
         "noise_correction": estimate.noise_correction,
         "sample_weights": "inverse noise variance" if estimate.weighted else "uniform",
+        "flicker": None if estimate.flicker is None else estimate.flicker.to_dict(),
         "complete": sequence.complete,
     }
 

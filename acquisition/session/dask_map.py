@@ -124,58 +124,78 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
         cluster = None
         held: list[int] = []
         if scheduler == LOCAL:
-            cpus = os.cpu_count() or 1
-            n = workers or cpus
-            if n > MAX_WORKERS_PER_CPU * cpus:
-                raise UsageError(
-                    f"--workers {n}: more worker processes than this machine's {cpus} CPUs can serve; expected at "
-                    f"most {MAX_WORKERS_PER_CPU * cpus} ({MAX_WORKERS_PER_CPU} per CPU)"
-                )
-            # Loopback only: the scheduler, workers and dashboard never listen on other interfaces.
+            n = _local_workers(workers)
             with signals_deferred(held):
-                cluster = LocalCluster(
-                    n_workers=n,
-                    threads_per_worker=1,
-                    processes=True,
-                    host="127.0.0.1",
-                    dashboard_address="127.0.0.1:0",
-                    # Worker processes log on their own stderr: without -v only CRITICAL records (a
-                    # worker's heartbeat racing the scheduler's shutdown logged an ERROR and a 30-line
-                    # traceback after a finished study); a task's own failure reaches us as its exception.
-                    silence_logs=logging.INFO if verbose else logging.CRITICAL,
-                )
-                client = Client(cluster)
+                cluster, client = _local_cluster(LocalCluster, Client, n, verbose)
             progress(f"dask: local cluster with {n} workers")
         else:
-            try:
-                client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
-            except (OSError, TimeoutError, ValueError, TypeError) as err:  # ValueError: not an address at all
-                raise UsageError(
-                    f"--scheduler {scheduler}: cannot connect ({' '.join(str(err).split())}); expected 'local', "
-                    "'none' or a dask scheduler address (tcp://HOST:PORT) that answers"
-                ) from None
-            progress(f"dask: scheduler {scheduler}")
-
-        def mapper(
-            function: Callable[[Any], Any], items: Sequence[Any], on_error: OnError | None = None
-        ) -> Iterator[Any]:
-            items = list(items)
-            futures = client.map(function, items, pure=False)
-            for item, future in zip(items, futures, strict=True):  # in order, aligned with the items
-                try:
-                    result = future.result()
-                except Exception as err:  # the job's own error, or KilledWorker when its process died
-                    if on_error is None:
-                        raise
-                    result = on_error(item, err)
-                yield result
-
+            client = _connect(Client, scheduler)
         try:
             deliver_deferred(held)  # a Ctrl-C while the cluster started: now that it can be closed
-            yield mapper
+            yield _client_mapper(client)
         finally:
             with signals_deferred(held):
                 client.close()
                 if cluster is not None:
                     cluster.close()
             deliver_deferred(held)
+
+
+def _local_workers(workers: int | None) -> int:
+    """The local cluster's processes: ``workers``, default the CPUs, at most :data:`MAX_WORKERS_PER_CPU` per CPU."""
+    cpus = os.cpu_count() or 1
+    n = workers or cpus
+    if n > MAX_WORKERS_PER_CPU * cpus:
+        raise UsageError(
+            f"--workers {n}: more worker processes than this machine's {cpus} CPUs can serve; expected at "
+            f"most {MAX_WORKERS_PER_CPU * cpus} ({MAX_WORKERS_PER_CPU} per CPU)"
+        )
+    return n
+
+
+def _local_cluster(cluster_type: Any, client_type: Any, n: int, verbose: bool) -> tuple[Any, Any]:
+    """A local cluster of ``n`` single-threaded worker processes on 127.0.0.1, and its client."""
+    # Loopback only: the scheduler, workers and dashboard never listen on other interfaces.
+    cluster = cluster_type(
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+        # Worker processes log on their own stderr: without -v only CRITICAL records (a
+        # worker's heartbeat racing the scheduler's shutdown logged an ERROR and a 30-line
+        # traceback after a finished study); a task's own failure reaches us as its exception.
+        silence_logs=logging.INFO if verbose else logging.CRITICAL,
+    )
+    return cluster, client_type(cluster)
+
+
+def _connect(client_type: Any, scheduler: str) -> Any:
+    """A client of the running scheduler at ``scheduler``, or a :class:`UsageError` naming the address."""
+    try:
+        client = client_type(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+    except (OSError, TimeoutError, ValueError, TypeError) as err:  # ValueError: not an address at all
+        raise UsageError(
+            f"--scheduler {scheduler}: cannot connect ({' '.join(str(err).split())}); expected 'local', "
+            "'none' or a dask scheduler address (tcp://HOST:PORT) that answers"
+        ) from None
+    progress(f"dask: scheduler {scheduler}")
+    return client
+
+
+def _client_mapper(client: Any) -> Mapper:
+    """The :class:`Mapper` of a dask client: every item submitted at once, results yielded in the items' order."""
+
+    def mapper(function: Callable[[Any], Any], items: Sequence[Any], on_error: OnError | None = None) -> Iterator[Any]:
+        items = list(items)
+        futures = client.map(function, items, pure=False)
+        for item, future in zip(items, futures, strict=True):  # in order, aligned with the items
+            try:
+                result = future.result()
+            except Exception as err:  # the job's own error, or KilledWorker when its process died
+                if on_error is None:
+                    raise
+                result = on_error(item, err)
+            yield result
+
+    return mapper

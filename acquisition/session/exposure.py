@@ -97,8 +97,13 @@ class ExposurePolicy:
     block_size: int = 4
     """The estimator's block (pixels per side, per CFA plane for a mosaic): a block saturated in any frame
     is dropped from every frame (``processing/statistics.py``)."""
+    anti_flicker: str = "off"
+    """``--anti-flicker``: ``50`` or ``60`` (the mains in Hz), ``auto`` or ``off``: exposures rounded to whole
+    flicker periods where they allow (:mod:`acquisition.session.anti_flicker`)."""
 
     def __post_init__(self) -> None:
+        if self.anti_flicker not in ("off", "50", "60", "auto"):
+            raise ValueError(f"anti_flicker {self.anti_flicker!r}; expected off, 50, 60 or auto")
         if self.criterion not in CRITERIA:
             raise ValueError(f"criterion {self.criterion!r}; expected one of {', '.join(CRITERIA)}")
         if not 0 <= self.max_lost_fraction < 1:

@@ -122,8 +122,8 @@ def sequence_name(sequence: str) -> str:
     """What ``{name}`` stands for: the run, capture or sequence folder the user named, however named.
 
     ``runs/0800``, ``runs/0800/sequence`` and ``runs/0800/sequence/sequence.json`` are all ``0800``
-    (the inner names are the same in every run: taken as they are, ``runs/*/sequence`` gave every
-    sequence the name ``sequence`` and was refused as one file written twice).
+    (the inner names are the same in every run: taken as they are, every sequence of ``runs/*/sequence``
+    would be named ``sequence``).
 
     >>> sequence_name("/data/runs/0800/sequence/sequence.json"), sequence_name("/data/day/0900")
     ('0800', '0900')

@@ -207,12 +207,18 @@ def estimate_read(sequence: Sequence, settings: EstimateSettings, report: Report
         )
         refuse_dark_ambient(sequence, local.global_estimate, "estimate")
         payload = analysis.local_estimate_payload(sequence, local)
+        flicker = local.global_estimate.flicker.summary() if local.global_estimate.flicker is not None else None
+        if flicker is not None:  # docs/flicker.md
+            report(flicker)
         for warning in payload["warnings"]:
             report(f"warning: {warning}")
         return EstimateResult(sequence, payload, local=local)
     estimate = analysis.estimate_sequence(sequence, settings.solver, settings.alpha, bin_factor=settings.bin_factor)
     refuse_dark_ambient(sequence, estimate, "estimate")
     payload = analysis.estimate_payload(sequence, estimate)
+    flicker = estimate.flicker.summary() if estimate.flicker is not None else None
+    if flicker is not None:  # docs/flicker.md
+        report(flicker)
     for warning in estimate.warnings:
         report(f"warning: {warning}")
     return EstimateResult(sequence, payload, estimate=estimate)

@@ -51,6 +51,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from msflash.acquisition.devices.hardware_camera import HardwareCamera
+from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.simulated_camera import SIM_DEFAULT_CFA
 from msflash.acquisition.devices.wired_fake import WiredFakeCamera
 from msflash.acquisition.errors import UsageError
@@ -101,6 +102,8 @@ class SimWorldOptions:
     """``--led-spectra``: the booth's LEDs, one column per channel."""
     flash_power: float | None = None
     """``--flash-power``: every LED at full drive gives at least this many times the ambient's signal."""
+    flicker: MainsFlicker | None = None
+    """``--flicker``: the ambient lamp's mains flicker (None: steady; :mod:`acquisition.devices.mains_flicker`)."""
 
     def as_arguments(self) -> dict[str, Any]:
         """The world as keyword arguments of :func:`open_sim_rig` and :func:`open_aravis_fake_rig`."""

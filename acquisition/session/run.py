@@ -23,6 +23,7 @@ from warnings import WarningMessage
 import numpy as np
 
 from msflash.acquisition.devices.camera import RawFrame
+from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.replay_camera import format_levels, levels_match
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.progress import count, progress
@@ -118,6 +119,9 @@ def sequence_writer(rig: Rig, out: Path, exposure: ExposurePlan | None = None) -
         # Ground truth of a simulated rig, on the sequence's grid and in its unit, for later scoring.
         truth = rig.true_ambient.resample(rig.led_spectra.grid).to_unit("energy")
         msflash["true_ambient"] = {"name": truth.names[0], "source": truth.source, "spd": truth.values[:, 0].tolist()}
+    flicker = getattr(getattr(rig.camera, "world", rig.camera), "ambient_modulation", None)
+    if isinstance(flicker, MainsFlicker):  # a simulated lamp's mains flicker (docs/flicker.md)
+        msflash["true_flicker"] = flicker.to_dict()
     return rig.sequence_writer(out / "sequence", extra={"msflash": msflash})
 
 

@@ -21,6 +21,7 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, StepRole, TriggerSource
 from msflash.acquisition.progress import progress
 from msflash.acquisition.sequence.format import SequenceFrame
+from msflash.acquisition.session.anti_flicker import with_anti_flicker
 from msflash.acquisition.session.capture import preview_frames
 from msflash.acquisition.session.engine import Cancellation
 from msflash.acquisition.session.exposure import (
@@ -97,7 +98,9 @@ def plan_exposure(
         exposure = float(exposure_option)
         if not limits[0] <= exposure <= limits[1]:
             raise UsageError(f"--exposure {exposure:g}: outside the camera's range {limits[0]:g}–{limits[1]:g} µs")
-        return ExposurePlan(exposure, (exposure,) * n_leds, nan, method, limits, policy, mode="fixed")
+        return with_anti_flicker(
+            ExposurePlan(exposure, (exposure,) * n_leds, nan, method, limits, policy, mode="fixed"), policy.anti_flicker
+        )
     recorded = recording_of(rig)
     if recorded is not None and len(recorded.led_us) == n_leds:
         return ExposurePlan(
@@ -124,7 +127,7 @@ def plan_exposure(
         frames = preview_frames(rig.camera, rig.booth, preview, cancel=cancel)
         return metering_view(frames[0].pixels, mosaic=info.cfa is not None)
 
-    return plan_exposures(
+    planned = plan_exposures(
         capture,
         n_leds,
         info.black_level,
@@ -136,6 +139,7 @@ def plan_exposure(
         cfa=info.cfa is not None,
         led_names=list(rig.led_spectra.names),
     )
+    return with_anti_flicker(planned, policy.anti_flicker)
 
 
 def report_exposure(plan: ExposurePlan, names: list[str]) -> None:

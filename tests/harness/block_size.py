@@ -9,10 +9,10 @@ memory, as ``msflash estimate`` does but with the block size forced (no fallback
 - ``local``: the tiled estimate, ``--method auto`` (accuracy: the mean RMSE over its tiles).
 
 Accuracy is the harness's RMSE ÷ LED bound (:mod:`tests.harness.metrics`). For ``led``, the agreement
-with the all-pixel reference (:func:`msflash.processing.study.block_agreement.all_pixel_statistics`:
+with the all-pixel reference (:func:`msflash.lab.study.block_agreement.all_pixel_statistics`:
 every pixel, weighted, its noise's share removed with the renderer's known noise) in units of the
-reference's pixel-noise band (:func:`~msflash.processing.study.block_agreement.agreement`).
-Time is measured on the bench's scene (:func:`msflash.acquisition.app.bench.benchmark_world`,
+reference's pixel-noise band (:func:`~msflash.lab.study.block_agreement.agreement`).
+Time is measured on the bench's scene (:func:`msflash.lab.bench.processing.benchmark_world`,
 1280 × 1024 RGB, 7 LEDs): each estimate ÷ a copy of the frames into a pre-allocated buffer, run
 in turn (ABAB…), the median of the per-pair ratios.
 
@@ -42,6 +42,7 @@ from msflash.acquisition.session.analysis import (
     load_frame_stack,
     spectrum_in_sequence_unit,
 )
+from msflash.lab.study.block_agreement import FrameNoise, agreement, all_pixel_statistics, sensor_noise
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.channel_statistics import accumulate_channel_statistics
 from msflash.processing.light_prior import prior_model
@@ -49,7 +50,6 @@ from msflash.processing.local import estimate_local, tile_statistics
 from msflash.processing.model_error import LightReference, reference_for, with_model_error
 from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import SequenceStatistics, accumulate_statistics
-from msflash.processing.study.block_agreement import FrameNoise, agreement, all_pixel_statistics, sensor_noise
 from tests.harness import metrics
 from tests.harness.cases import select_cases
 from tests.harness.render import HarnessCase, render
@@ -227,7 +227,7 @@ def interleaved_ratio(function: Callable[[], object], reference: Callable[[], ob
 
 def timings(rounds: int = 15, height: int = 1024, width: int = 1280) -> dict[tuple[str, int], float]:
     """``(family, block) → estimate time ÷ copy time`` on the bench's scene (interleaved), plus ``("reference", 1)``."""
-    from msflash.acquisition.app.bench import benchmark_world
+    from msflash.lab.bench.processing import benchmark_world
     from msflash.processing.image_formation import SensorModel
 
     world = benchmark_world(height, width)
@@ -267,7 +267,7 @@ def timings(rounds: int = 15, height: int = 1024, width: int = 1280) -> dict[tup
 
 def bench_agreement(height: int = 1024, width: int = 1280, seeds: int = 1) -> list[dict[str, Any]]:
     """The ``led`` family's agreement with the all-pixel reference on the bench's scene, per block size and seed."""
-    from msflash.acquisition.app.bench import benchmark_world
+    from msflash.lab.bench.processing import benchmark_world
     from msflash.processing import lights
     from msflash.processing.image_formation import SensorModel
     from msflash.processing.metrics import spectrum_rmse

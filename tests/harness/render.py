@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -139,8 +140,23 @@ def _vignetting(height: int, width: int, corner: float) -> np.ndarray:
     return np.cos(np.arctan(radius / focal)) ** 4
 
 
-def render(case: HarnessCase, directory: Path) -> Truth:
-    """Write ``case`` as a format-v1 sequence in ``directory`` (TIFF frames); return its truth."""
+def render(
+    case: HarnessCase,
+    directory: Path,
+    *,
+    ambient_gains: Sequence[float] | None = None,
+    exposures_us: Sequence[float] | None = None,
+    frame_extra: Sequence[dict] | None = None,
+) -> Truth:
+    """Write ``case`` as a format-v1 sequence in ``directory`` (TIFF frames); return its truth.
+
+    The keywords serve the flicker harness (:mod:`tests.harness.flicker`), one value per frame (the
+    ambient frame first): ``ambient_gains`` multiply the ambient's light in each frame (a flickering lamp:
+    the mean of its waveform over that frame's exposure window, relative to its mean); ``exposures_us``
+    replace the exposure times the case draws (the random draws stay the same, so the scene and noise
+    stream are the same with and without them); ``frame_extra`` are added to each frame's entry
+    (``timestamp_ns``). The truth is the lamp's mean spectrum.
+    """
     rng = np.random.default_rng(case.seed)
     fine = tables.FINE_NM
     quanta = fine / 550.0  # photons per unit energy (any constant)
@@ -162,7 +178,10 @@ def render(case: HarnessCase, directory: Path) -> Truth:
     led_resp = np.stack([responses(led_fine[:, i]) for i in range(k)])
     ambient_unit = responses(light_fine)
     scale = case.ratio * led_resp[:, white_row].sum(axis=1).mean() / ambient_unit[white_row].sum()
-    frames = [ambient_unit * scale] + [ambient_unit * scale + led_resp[i] for i in range(k)]
+    gains = np.ones(k + 1) if ambient_gains is None else np.asarray(ambient_gains, dtype=float)
+    if gains.shape != (k + 1,):
+        raise ValueError(f"ambient_gains: {gains.shape}; expected one gain per frame ({k + 1})")
+    frames = [ambient_unit * scale * gains[0]] + [ambient_unit * scale * gains[i + 1] + led_resp[i] for i in range(k)]
 
     # The scene: patches of the drawn surfaces (repeated to fill), a fixed texture, a specular strip.
     labels = rng.integers(0, surfaces.shape[1], (PATCH_ROWS, PATCH_COLUMNS))
@@ -186,6 +205,8 @@ def render(case: HarnessCase, directory: Path) -> Truth:
         gain = rng.choice([1.0, 2.0, 4.0], k + 1)
     else:
         exposure, gain = np.full(k + 1, BASE_EXPOSURE_US), np.ones(k + 1)
+    if exposures_us is not None:
+        exposure = np.asarray(exposures_us, dtype=float)
     code_max = 2**case.bits - 1
     span = code_max - case.black
     brightest = max(float(f[: white_row + 1].max()) * e * g for f, e, g in zip(frames, exposure, gain))
@@ -220,6 +241,7 @@ def render(case: HarnessCase, directory: Path) -> Truth:
                 "led_levels": levels.tolist(),
                 "exposure_us": float(exposure[index]),
                 "gain": float(gain[index]),
+                **(frame_extra[index] if frame_extra is not None else {}),
             }
         )
 

@@ -118,7 +118,7 @@ _REGISTRY: Mapping[str, Callable[[str], Variant]] = {
     "default": msflash(),
     "msflash-lstsq": msflash("--solver", "lstsq"),
     # The models beyond the LEDs all read one `--model auto` run: its `models` block holds each model's spectrum,
-    # band and warnings exactly as `--model prior` and `--model family` print them (tests/acquisition/test_cli_model.py).
+    # band and warnings exactly as `--model prior` and `--model family` print them (tests/acquisition/app/test_cli_model.py).
     "prior": lambda name: Variant(name, ("--model", "auto"), block="prior"),
     "family": lambda name: Variant(name, ("--model", "auto"), block="family"),
     "auto": msflash("--model", "auto"),

@@ -15,8 +15,8 @@ import pytest
 
 from msflash.acquisition.app.cli_booth import booth_emulator, register
 from msflash.acquisition.app.cli_common import UsageError
+from msflash.lab.bench.booth import run_bench
 from msflash.led_controller import LedBooth
-from msflash.led_controller.bench import run_bench
 from tests.helpers import PipedLines
 
 ROOT = Path(__file__).resolve().parents[2]

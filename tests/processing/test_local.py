@@ -1,6 +1,6 @@
 """Local ambient estimation (issue 9): tiled statistics, smoothing, model selection, local synthesis.
 
-Scenes come from :func:`processing.study.local.make_scenario` (random surface mosaics, the sim rig's
+Scenes come from :func:`lab.study.local.make_scenario` (random surface mosaics, the sim rig's
 sensor with noise); the seeds here (< 100) are not the study's (≥ 1000), and the selection margin
 was calibrated on the study's scenes, not on these.
 """
@@ -13,6 +13,17 @@ from functools import cache
 import numpy as np
 import pytest
 
+from msflash.lab.study.local import (
+    Scenario,
+    alone_rmse,
+    led_bound,
+    make_scenario,
+    pixel_bound,
+    pixel_rmse,
+    pixel_truth,
+    run_study,
+    tiled_rmse,
+)
 from msflash.processing.image_formation import MixedIllumination, expected_response
 from msflash.processing.local import (
     SELECTION_MARGIN,
@@ -29,17 +40,6 @@ from msflash.processing.local import (
 )
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
-from msflash.processing.study.local import (
-    Scenario,
-    alone_rmse,
-    led_bound,
-    make_scenario,
-    pixel_bound,
-    pixel_rmse,
-    pixel_truth,
-    run_study,
-    tiled_rmse,
-)
 from msflash.processing.synthesis import synthesize
 from tests.helpers import EXACT, FLOAT32, ambient, camera, chart, leds_photons, linear_frames, rendered_frames, spec_for
 

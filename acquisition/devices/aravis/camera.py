@@ -22,9 +22,8 @@ Public objects (and where they live)
 - :func:`decode_pixels`, :data:`PIXEL_FORMATS`, :func:`frame_id_gap`: pure helpers (:mod:`.pixel_layouts`).
 - :class:`AravisGvFake`, :func:`gvcp_port_lock`, :data:`FAKE_SFNC_XML`: the Aravis GigE Vision
   fake camera served on 127.0.0.1 with msflash's SFNC GenICam description (:mod:`.gv_fake`).
-- :class:`FrameTiming` (:attr:`AravisCamera.last_frame_timing`), :func:`bare_aravis_run` with
-  :class:`BareRun` and :class:`TriggerTiming`: stage times of frames, and the plain Aravis loop
-  the camera bench compares against (:mod:`.bare_run`).
+- :class:`FrameTiming` (:attr:`AravisCamera.last_frame_timing`): stage times of frames (the plain
+  Aravis loop the camera bench compares them against is the lab's, ``msflash.lab.bench.bare_run``).
 
 Network safety: Aravis discovers GigE Vision cameras by broadcasting on every network interface,
 and opening a camera by a name that is not an IP address makes the GigE Vision interface resolve
@@ -41,7 +40,6 @@ import threading
 from collections.abc import Iterable
 from typing import Any
 
-from msflash.acquisition.devices.aravis.bare_run import BareRun, TriggerTiming, bare_aravis_run
 from msflash.acquisition.devices.aravis.buffers import (
     CONTROL_LOST,
     ZERO_COPY_PROTOCOLS,
@@ -466,7 +464,6 @@ __all__ = [
     "AravisCamera",
     "AravisGvFake",
     "Bad",
-    "BareRun",
     "BufferPool",
     "CameraNotFoundError",
     "CameraProfile",
@@ -479,9 +476,7 @@ __all__ = [
     "PixelLayout",
     "StrobeConfig",
     "TriggerConfig",
-    "TriggerTiming",
     "aravis_lock",
-    "bare_aravis_run",
     "decode_pixels",
     "frame_id_gap",
     "gvcp_port_holder",

@@ -1,7 +1,6 @@
 """Camera options a user or a camera profile sets: lines, gain, ROI, binning, any GenICam feature.
 
-The hardware rig used to hard-code its trigger input (Line0) and strobe output (Line1) and could
-set no other feature. :class:`CameraOptions` carries what ``--trigger-line``, ``--strobe-line``,
+:class:`CameraOptions` carries what ``--trigger-line``, ``--strobe-line``,
 ``--gain``, ``--roi``, ``--binning`` and ``--feature NAME=VALUE`` ask for (or a profile's
 ``"options"`` in ``genicam/profiles.json``; the command line wins), and
 :func:`apply_camera_options` writes them to an opened camera and reads each one back.
@@ -37,6 +36,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
 from msflash.acquisition.devices.aravis.gain import GainRequest
+from msflash.acquisition.devices.aravis.msflash_features import MSFLASH_FEATURES as MSFLASH_FEATURES
 from msflash.acquisition.errors import CameraError, CameraSettingError
 from msflash.processing.names import close_names
 
@@ -46,55 +46,6 @@ FeatureKind = Literal["enumeration", "boolean", "integer", "float", "string", "c
 FeatureValue = str | int | float | bool
 
 _BINNING_FEATURES = ("BinningHorizontal", "BinningVertical")
-
-MSFLASH_FEATURES: dict[str, str] = {
-    **dict.fromkeys(("DeviceVendorName", "DeviceModelName", "DeviceSerialNumber", "DeviceVersion"), "reads"),
-    **dict.fromkeys(("PayloadSize",), "reads"),
-    **dict.fromkeys(
-        (
-            "PixelFormat",
-            "Width",
-            "Height",
-            "OffsetX",
-            "OffsetY",
-            "BinningHorizontal",
-            "BinningVertical",
-            "AcquisitionMode",
-            "AcquisitionFrameRate",
-            "AcquisitionFrameRateAbs",
-            "AcquisitionFrameRateEnable",
-            "AcquisitionFrameRateEnabled",
-            "ExposureTime",
-            "ExposureTimeAbs",
-            "ExposureAuto",
-            "Gain",
-            "GainAbs",
-            "GainRaw",
-            "GainSelector",
-            "GainAuto",
-            "BlackLevel",
-            "BlackLevelAuto",
-            "GammaEnable",
-            "TriggerSelector",
-            "TriggerMode",
-            "TriggerSource",
-            "TriggerActivation",
-            "TriggerDelay",
-            "TriggerDelayAbs",
-            "LineSelector",
-            "LineMode",
-            "LineSource",
-            "LineInverter",
-            "UserOutputSelector",
-            "UserOutputValue",
-        ),
-        "writes",
-    ),
-    **dict.fromkeys(("AcquisitionStart", "AcquisitionStop", "TriggerSoftware"), "executes"),
-}
-"""Every GenICam feature msflash reads, writes or executes, by name (a camera profile's
-``exposure_features`` and ``gain_features`` add theirs). ``msflash devices --features`` lists each the
-camera has, even when its ``Root`` category does not (Aravis's fake hides ``GainRaw`` so)."""
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,6 @@ from msflash.acquisition.devices.aravis.buffers import (
     SpareStream,
 )
 from msflash.acquisition.devices.aravis.camera_features import (
-    MSFLASH_FEATURES,
     FeatureInfo,
 )
 from msflash.acquisition.devices.aravis.camera_records import (
@@ -29,6 +28,7 @@ from msflash.acquisition.devices.aravis.gain import (
     GainRequest,
 )
 from msflash.acquisition.devices.aravis.gi_typelib import Aravis, GLib
+from msflash.acquisition.devices.aravis.msflash_features import MSFLASH_FEATURES
 from msflash.acquisition.devices.aravis.profiles import (
     CameraProfile,
 )

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.devices.wired_fake import WiredFakeCamera
 from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
@@ -62,6 +63,7 @@ def open_aravis_fake_rig(
     lost_packet_ratio: float = 0.0,
     camera_options: Any = None,
     fake_camera: str = "sfnc",
+    flicker: MainsFlicker | None = None,
 ) -> Rig:
     """The ``aravis-fake`` rig: AravisCamera on the GigE fake at 127.0.0.1 + emulator on a pty + LedBooth.
 
@@ -102,7 +104,7 @@ def open_aravis_fake_rig(
     model = FAKE_MODELS.get(fake_camera)
     if model is None:
         raise UsageError(unknown_name("--fake-camera", fake_camera, FAKE_MODELS))
-    world_options = (ambient, scene, seed, camera, n_leds, led_spectra, flash_power, patch_px)
+    world_options = (ambient, scene, seed, camera, n_leds, led_spectra, flash_power, patch_px, flicker)
     frames = _FakeFrames.of(rendered, world_options, width, height, pixel_format)
     closers: list = []
     failures: dict[str, BaseException] = {}
@@ -147,7 +149,7 @@ class _FakeFrames:
             leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
             camera = datasets.isetcam_camera(AravisFakeNominalCamera).resample(DEFAULT_GRID, outside="zero")
             return cls(None, width or 64, height or 48, pixel_format or "Mono16", leds, camera)
-        ambient, scene, seed, camera_name, n_leds, led_spectra, flash_power, patch_px = world_options
+        ambient, scene, seed, camera_name, n_leds, led_spectra, flash_power, patch_px, flicker = world_options
         world = sim_world(
             "aravis-fake",
             ambient,
@@ -159,6 +161,7 @@ class _FakeFrames:
             led_spectra,
             flash_power,
             ARAVIS_FAKE_PATCH_PX if patch_px is None else patch_px,
+            flicker,
         )
         scene_height, scene_width = world.scene.shape
         if (width or scene_width, height or scene_height) != (scene_width, scene_height):

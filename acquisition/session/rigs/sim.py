@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.devices.exposure_light import EmulatorLight, FirmwareLight, Shutter
+from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.sim_world import (
     sim_ambient,
     sim_camera,
@@ -54,6 +55,7 @@ def sim_world(
     led_spectra: str | Path | Spectra | None,
     flash_power: float | None,
     patch_px: int | None = None,
+    flicker: MainsFlicker | None = None,
 ) -> SimulatedCamera:
     """The simulated world of :func:`open_sim_rig` (names and files resolved, the booth's LEDs checked).
 
@@ -79,7 +81,7 @@ def sim_world(
             optional["patch_px"] = patch_px
         if flash_power is not None:
             optional["flash_power"] = flash_power
-        return SimulatedCamera.default(
+        world = SimulatedCamera.default(
             scene=scene_spec,
             ambient=ambient_spd,
             cfa=cfa,
@@ -92,6 +94,8 @@ def sim_world(
         raise
     except Exception as err:
         raise RigOpenError(f"rig '{rig}': {err}") from err
+    world.ambient_modulation = flicker  # each frame sees the lamp's mean over its own exposure window
+    return world
 
 
 def open_sim_rig(
@@ -109,12 +113,13 @@ def open_sim_rig(
     booth_boot_s: float = DEFAULT_BOOT_S,
     booth_firmware: bool = False,
     line_time_us: float = 0.0,
+    flicker: MainsFlicker | None = None,
 ) -> Rig:
     """The simulated rig: SimulatedCamera + BoothEmulator on a pty + the LedBooth driver.
 
     Parameters
     ----------
-    ambient, scene, camera, n_leds, led_spectra, flash_power, seed
+    ambient, scene, camera, n_leds, led_spectra, flash_power, seed, flicker
         The world (:class:`acquisition.session.rig.SimWorldOptions` says each; names and CSV files
         resolved by :mod:`acquisition.devices.sim_world`, or spectra / a :class:`Scene` on the sim
         grid). The emulated booth gets one channel per LED, named and peaked as they are
@@ -140,7 +145,7 @@ def open_sim_rig(
         raise UsageError(
             "--booth-firmware: the booth is the firmware in simavr, so --booth-port has no use; expected one of them"
         )
-    world = sim_world("sim", ambient, scene, cfa, seed, camera, n_leds, led_spectra, flash_power)
+    world = sim_world("sim", ambient, scene, cfa, seed, camera, n_leds, led_spectra, flash_power, flicker=flicker)
     try:
         world.shutter = Shutter(line_time_us=float(line_time_us))
     except CameraError as err:

@@ -16,10 +16,10 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.devices import simulated_camera
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.rig import open_sim_rig
+from msflash.lab.study.local import led_bound
 from msflash.processing import datasets, lights
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.spectra import DEFAULT_GRID
-from msflash.processing.study.local import led_bound
 
 GAUSSIAN_PEAKS_NM = (410, 450, 490, 530, 570, 610, 650, 690)
 """An 8-channel booth of Gaussian LEDs (σ 18 nm) spanning the grid: its best non-negative fit of

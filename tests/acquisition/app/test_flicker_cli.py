@@ -1,0 +1,64 @@
+"""``--flicker`` and ``--anti-flicker`` on ``msflash run``: the sim lamp flickers, the estimate reports and corrects it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from msflash.acquisition.app.cli import main
+
+
+def test_a_flickering_lamp_is_found_reported_and_recorded(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "run"
+    assert main(["run", "--out", str(out), "--flicker", "100:0.3", "--exposure", "2000", "--seed", "2"]) == 0
+    err = capsys.readouterr().err
+    flicker = json.loads((out / "estimate.json").read_text())["flicker"]
+    truth = json.loads((out / "sequence" / "sequence.json").read_text())["msflash"]["true_flicker"]
+    assert truth["depth"] == 0.3 and abs(truth["frequency_hz"] - 100) <= 1
+    assert flicker["checked"] and flicker["detected"] and flicker["corrected"]
+    assert flicker["spread"] > 0.05 and len(flicker["frame_gains"]) == 7
+    assert "msflash: flicker: the LED frames saw" in err
+    if flicker["frequency_hz"] is not None:  # the fit is reported only where the frames decide it
+        assert abs(flicker["frequency_hz"] - truth["frequency_hz"]) < 1.0
+    # The recorded sequence tells the same from disk.
+    assert main(["estimate", str(out / "sequence")]) == 0
+    assert "msflash: flicker: the LED frames saw" in capsys.readouterr().err
+
+
+def test_a_steady_lamp_raises_no_flicker(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "run"
+    assert main(["run", "--out", str(out), "--exposure", "2000", "--seed", "2"]) == 0
+    flicker = json.loads((out / "estimate.json").read_text())["flicker"]
+    assert flicker["checked"] and not flicker["detected"] and not flicker["corrected"]
+    assert "flicker" not in capsys.readouterr().err
+
+
+def test_anti_flicker_exposures_are_whole_periods(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "run"
+    argv = ["capture", "--out", str(out), "--exposure", "23000", "--anti-flicker", "60", "--flicker", "120:0.3"]
+    assert main(argv) == 0
+    frames = json.loads((out / "sequence" / "sequence.json").read_text())["frames"]
+    assert {round(f["exposure_us"], 3) for f in frames} == {round(2e6 / 120, 3)}
+    assert main(["capture", "--out", str(tmp_path / "short"), "--exposure", "2000", "--anti-flicker", "50"]) == 0
+    assert "shorter than one flicker period (10.00 ms)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, named",
+    [
+        (["--flicker", "abc"], "--flicker: 'abc': expected HZ:DEPTH"),
+        (["--flicker", "100:2"], "expected a percent flicker in (0, 1]"),
+        (["--anti-flicker", "55"], "--anti-flicker '55': unknown"),
+        (["--rig", "replay:nowhere", "--flicker", "100:0.3"], "--flicker: describes the simulated world's lamp"),
+    ],
+)
+def test_bad_flicker_options_are_one_line_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture, argv: list[str], named: str
+) -> None:
+    assert main(["run", "--out", str(tmp_path / "r"), *argv]) == 2
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("msflash: error")]
+    assert len(lines) == 1 and named in lines[0]
+    assert "Traceback" not in err

@@ -1,0 +1,36 @@
+"""The per-frame ambient gain model on the independent harness (tests/harness/flicker.py, docs/flicker.md)."""
+
+from __future__ import annotations
+
+import pytest
+
+from msflash.processing.flicker import fit_mains
+from tests.harness.flicker import flicker_cases, measure, timing
+
+
+@pytest.fixture(scope="module")
+def filament() -> object:
+    """tuning-000: a filament lamp, 30 % flicker, 1–3 ms frames, a raw BGGR camera (1.64× the LED bound without
+    the gain model, 0.99× steady)."""
+    case = next(c for c in flicker_cases(1) if c.name == "tuning-000")
+    return measure(case)
+
+
+def test_the_gain_model_undoes_flicker(filament) -> None:
+    assert filament.detected_flicker and filament.gain_error < 0.02
+    assert filament.ratios["flicker model"] <= 1.05 * filament.ratios["steady model"]
+    assert filament.ratios["flicker plain"] > 1.2 * filament.ratios["flicker model"]
+
+
+def test_a_steady_lamp_is_left_alone(filament) -> None:
+    assert not filament.detected_steady
+    assert filament.ratios["steady model"] == filament.ratios["steady plain"]
+
+
+def test_the_mains_fit_finds_the_lamp_from_the_frame_gains() -> None:
+    case = next(c for c in flicker_cases(6) if c.light_type == "incandescent" and c.led_count >= 6)
+    lamp = timing(case)
+    fit = fit_mains(lamp.starts_s, lamp.exposures_us * 1e-6, lamp.gains / lamp.gains[0])
+    assert fit is not None and fit.decisive
+    assert fit.frequency_hz == pytest.approx(lamp.frequency_hz, abs=0.5)
+    assert fit.depth == pytest.approx(0.3, abs=0.03)  # a filament's near-sinusoid: its first harmonic is the flicker
