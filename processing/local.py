@@ -70,6 +70,7 @@ from msflash.processing.statistics import (
     block_sums_and_differences,
     cfa_planes,
     non_finite_frames_error,
+    plane_shape,
     saturated_blocks,
     thread_pool,
 )
@@ -411,6 +412,161 @@ def _block_sums_and_differences(plane: np.ndarray, factor: int, sums: np.ndarray
     np.copyto(differences, difference_part[: differences.shape[0], : differences.shape[1]])
 
 
+class TileBlocks:
+    """Block sums of an ambient + LED frame stack for :class:`TiledStatistics`, added one frame at a time.
+
+    Rows as :class:`processing.statistics.BlockRows`'s: LED frame j → row j, the ambient frame → row n, a
+    ones row last. Each frame's block sums (and half differences, even bin factors) and saturated blocks
+    are taken by :meth:`add_frame` and the frame may then be let go; :meth:`statistics` weighs, masks and
+    sums the tiles once every frame is in. :func:`tile_statistics` is this over frames in memory.
+    """
+
+    def __init__(
+        self,
+        n_led_frames: int,
+        frame_shape: tuple[int, ...],
+        black_level: float,
+        white_level: float,
+        *,
+        bin_factor: int = 1,
+        cfa_period: int = 1,
+        weighting: bool = False,
+    ) -> None:
+        if bin_factor < 1 or cfa_period not in (1, 2):
+            raise SpectralDataError(
+                f"tiled statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2"
+            )
+        plane = plane_shape(frame_shape, cfa_period)
+        height, width, channels = plane[0] // bin_factor, plane[1] // bin_factor, plane[2]
+        if height == 0 or width == 0:
+            side = bin_factor * cfa_period
+            quads = f" ({bin_factor}×{bin_factor} of the mosaic's 2×2 quads)" if cfa_period == 2 else ""
+            raise SpectralDataError(
+                f"frame of shape {tuple(frame_shape)} is smaller than one {side}×{side}-pixel block{quads}; "
+                "expected a larger frame"
+            )
+        self.frame_shape = tuple(frame_shape)
+        self.n_led_frames = n_led_frames
+        self.black_level, self.white_level = black_level, white_level
+        self.bin_factor, self.cfa_period, self.weighting = bin_factor, cfa_period, weighting
+        n_rows = n_led_frames + 2
+        self.data = np.empty((n_rows, height, width, channels))
+        # Even bin factors also give every block's half difference, the noise probe of ``denoised``.
+        self.differences = np.empty_like(self.data) if bin_factor % 2 == 0 else None
+        if self.differences is not None:
+            self.differences[-1] = 0.0  # the ones row has no noise
+        self.data[-1] = 1.0
+        self.masks: list[np.ndarray | None] = [None] * (n_rows - 1)
+        self.filled: set[int] = set()
+        self.pixel_noise = None
+
+    @property
+    def block_grid(self) -> tuple[int, int]:
+        """Blocks per column and per row of a frame."""
+        return self.data.shape[1], self.data.shape[2]
+
+    def add_frame(self, row: int, frame: np.ndarray) -> None:
+        """Frame ``row``'s block sums (and half differences) and its saturated blocks (distinct rows may come
+        from several threads)."""
+        if tuple(frame.shape) != self.frame_shape:
+            raise SpectralDataError(
+                f"frame stack: a frame has shape {frame.shape} but the first frame {self.frame_shape}; "
+                "expected frames of one size"
+            )
+        if row in self.filled or not 0 <= row <= self.n_led_frames:
+            raise SpectralDataError(
+                f"frame stack: row {row} is taken or out of range; expected each of 0…{self.n_led_frames} once"
+            )
+        self.filled.add(row)
+        plane = cfa_planes(frame, self.cfa_period)
+        # Float frames (EXR) may hold NaN/inf: refused before the block sums, whose gather products would
+        # warn about them first. One sum per float frame; integer frames are finite.
+        if np.issubdtype(plane.dtype, np.floating) and not np.isfinite(plane.sum()):
+            name = "the ambient frame" if row == self.n_led_frames else f"LED frame {row + 1}"
+            raise SpectralDataError(f"frame stack: {name} holds non-finite values (NaN or inf); expected finite pixels")
+        if self.differences is None:
+            _block_sums(plane, self.bin_factor, self.data[row])
+        else:
+            _block_sums_and_differences(plane, self.bin_factor, self.data[row], self.differences[row])
+        if plane.size and plane.max() >= self.white_level:
+            self.masks[row] = saturated_blocks(plane, self.bin_factor, self.white_level)
+        if row == self.n_led_frames and self.weighting and self.differences is not None:
+            self.pixel_noise = detail_noise_line(plane, 1, self.black_level, self.white_level)
+
+    def statistics(
+        self, spec: FrameStackSpec, tiles: int | tuple[int, int] = DEFAULT_TILES, workers: int = DEFAULT_WORKERS
+    ) -> TiledStatistics:
+        """The tiles' statistics of the frames added (every row must be in); ``spec`` as for the raw frames.
+
+        Uses the arrays in place (weighs and masks them): call it once.
+        """
+        if len(self.filled) != self.n_led_frames + 1:
+            raise SpectralDataError(
+                f"frame stack: {len(self.filled)} of {self.n_led_frames + 1} frames added; expected all of them"
+            )
+        rows_tiles, columns_tiles = (tiles, tiles) if isinstance(tiles, int) else tiles
+        data, differences, bin_factor = self.data, self.differences, self.bin_factor
+        n_rows, height, width = data.shape[0], data.shape[1], data.shape[2]
+        saturated = [mask for mask in self.masks if mask is not None]
+        if self.weighting and differences is not None:
+            ambient_row = self.n_led_frames
+            black = spec.black_level * bin_factor * bin_factor
+            root = ambient_block_noise(
+                self.pixel_noise, bin_factor, data[ambient_row], black, self.masks[ambient_row]
+            ).root_weights(data[ambient_row], black)
+            data *= root
+            differences *= root
+        invalid = np.zeros((height, width), dtype=bool)
+        for mask in saturated:
+            invalid |= mask
+        if invalid.any():
+            data[:, invalid] = 0.0
+            if differences is not None:
+                differences[:, invalid] = 0.0
+        row_blocks, column_blocks = tile_edges(height, rows_tiles), tile_edges(width, columns_tiles)
+        moments = np.empty((rows_tiles, columns_tiles, n_rows, n_rows))
+        noise = np.empty_like(moments) if differences is not None else None
+        totals = np.empty((rows_tiles, columns_tiles))
+
+        def add_tile_row(i: int) -> None:
+            rows = slice(row_blocks[i], row_blocks[i + 1])
+            for j in range(columns_tiles):
+                columns = slice(column_blocks[j], column_blocks[j + 1])
+                samples = data[:, rows, columns].reshape(n_rows, -1)
+                moments[i, j] = samples @ samples.T
+                totals[i, j] = samples.shape[1]
+                if noise is not None and differences is not None:
+                    probe = differences[:, rows, columns].reshape(n_rows, -1)
+                    noise[i, j] = probe @ probe.T
+
+        list(
+            thread_pool(workers).map(add_tile_row, range(rows_tiles))
+            if workers > 1
+            else map(add_tile_row, range(rows_tiles))
+        )
+        block_spec = FrameStackSpec(
+            black_level=spec.black_level * bin_factor * bin_factor,
+            white_level=np.inf,
+            ambient_scale=spec.ambient_scale,
+            led_scales=spec.led_scales,
+            led_levels=spec.led_levels,
+        )
+        pixel = bin_factor * self.cfa_period
+        row_edges = row_blocks * pixel
+        column_edges = column_blocks * pixel
+        row_edges[-1], column_edges[-1] = self.frame_shape[0], self.frame_shape[1]
+        tiled = _tiled_from_moments(moments, totals, block_spec, row_edges, column_edges)
+        blocks = BlockData(raw=data, differences=differences, valid=~invalid, spec=block_spec, pixel=pixel)
+        denoised = None
+        if noise is not None:
+            denoised = _tiled_from_moments(moments - noise, totals, block_spec, row_edges, column_edges)
+        return TiledStatistics(
+            **{name: getattr(tiled, name) for name in tiled.__dataclass_fields__ if name not in ("blocks", "denoised")},
+            blocks=blocks,
+            denoised=denoised,
+        )
+
+
 def tile_statistics(
     ambient: np.ndarray,
     led_frames: Sequence[np.ndarray],
@@ -422,7 +578,7 @@ def tile_statistics(
     workers: int = DEFAULT_WORKERS,
     weighting: bool = False,
 ) -> TiledStatistics:
-    """The statistics of eq. 4–6 of every tile of a ``tiles`` grid, in one pass over the frames.
+    """The statistics of eq. 4–6 of every tile of a ``tiles`` grid, in one pass over the frames (:class:`TileBlocks`).
 
     Blocks (``bin_factor``, see :func:`processing.statistics.bin_frame`) are assigned to tiles
     whole; a block is left out when any member saturates in any frame. The tiles' statistics sum
@@ -444,11 +600,6 @@ def tile_statistics(
         notes; even bin factors only): the tiles then sum to the weighted global statistics, and
         :attr:`TiledStatistics.blocks` holds the weighted samples.
     """
-    rows_tiles, columns_tiles = (tiles, tiles) if isinstance(tiles, int) else tiles
-    if bin_factor < 1 or cfa_period not in (1, 2):
-        raise SpectralDataError(
-            f"tiled statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2"
-        )
     if len(led_frames) != spec.led_levels.shape[0]:
         raise SpectralDataError(f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}")
     frames = [*led_frames, ambient]
@@ -458,102 +609,22 @@ def tile_statistics(
                 f"frame stack: frame {index} has shape {frame.shape} but the ambient frame "
                 f"{ambient.shape}; expected frames of one size"
             )
-    planes = [cfa_planes(frame, cfa_period) for frame in frames]
-    # Float frames (EXR) may hold NaN/inf: refused before the block sums, whose gather products would
-    # warn about them first. One sum per float frame; integer frames are finite.
-    if any(np.issubdtype(plane.dtype, np.floating) and not np.isfinite(plane.sum()) for plane in planes):
-        raise non_finite_frames_error(planes)
-    height, width, channels = planes[0].shape[0] // bin_factor, planes[0].shape[1] // bin_factor, planes[0].shape[2]
-    if height == 0 or width == 0:
-        side = bin_factor * cfa_period
-        quads = f" ({bin_factor}×{bin_factor} of the mosaic's 2×2 quads)" if cfa_period == 2 else ""
-        raise SpectralDataError(
-            f"frame of shape {ambient.shape} is smaller than one {side}×{side}-pixel block{quads}; "
-            "expected a larger frame"
-        )
-    n_rows = len(frames) + 1
-    data = np.empty((n_rows, height, width, channels))
-    # Even bin factors also give every block's half difference, the noise probe of ``denoised``.
-    differences = np.empty_like(data) if bin_factor % 2 == 0 else None
-    if differences is not None:
-        differences[-1] = 0.0  # the ones row has no noise
-
-    def add_frame(row: int) -> np.ndarray | None:
-        """Frame ``row``'s block sums (and half differences) into the arrays; its saturated blocks, if any."""
-        plane = planes[row]
-        if differences is None:
-            _block_sums(plane, bin_factor, data[row])
-        else:
-            _block_sums_and_differences(plane, bin_factor, data[row], differences[row])
-        if plane.size and plane.max() >= spec.white_level:
-            return saturated_blocks(plane, bin_factor, spec.white_level)
-        return None
-
+    if any(np.issubdtype(frame.dtype, np.floating) and not np.isfinite(frame.sum()) for frame in frames):
+        raise non_finite_frames_error([cfa_planes(frame, cfa_period) for frame in frames])
+    accumulator = TileBlocks(
+        len(led_frames),
+        ambient.shape,
+        spec.black_level,
+        spec.white_level,
+        bin_factor=bin_factor,
+        cfa_period=cfa_period,
+        weighting=weighting,
+    )
     # The frames are independent: numpy releases the GIL in the sums (as in the global statistics' pass).
-    rows_done = (
-        thread_pool(workers).map(add_frame, range(len(planes))) if workers > 1 else map(add_frame, range(len(planes)))
-    )
-    masks = list(rows_done)
-    saturated = [mask for mask in masks if mask is not None]
-    data[-1] = 1.0
-    if weighting and differences is not None:
-        ambient_row = len(frames) - 1
-        black = spec.black_level * bin_factor * bin_factor
-        pixel_noise = detail_noise_line(planes[ambient_row], 1, spec.black_level, spec.white_level)
-        root = ambient_block_noise(pixel_noise, bin_factor, data[ambient_row], black, masks[ambient_row]).root_weights(
-            data[ambient_row], black
-        )
-        data *= root
-        differences *= root
-    invalid = np.zeros((height, width), dtype=bool)
-    for mask in saturated:
-        invalid |= mask
-    if invalid.any():
-        data[:, invalid] = 0.0
-        if differences is not None:
-            differences[:, invalid] = 0.0
-    row_blocks, column_blocks = tile_edges(height, rows_tiles), tile_edges(width, columns_tiles)
-    moments = np.empty((rows_tiles, columns_tiles, n_rows, n_rows))
-    noise = np.empty_like(moments) if differences is not None else None
-    totals = np.empty((rows_tiles, columns_tiles))
-
-    def add_tile_row(i: int) -> None:
-        rows = slice(row_blocks[i], row_blocks[i + 1])
-        for j in range(columns_tiles):
-            columns = slice(column_blocks[j], column_blocks[j + 1])
-            samples = data[:, rows, columns].reshape(n_rows, -1)
-            moments[i, j] = samples @ samples.T
-            totals[i, j] = samples.shape[1]
-            if noise is not None and differences is not None:
-                probe = differences[:, rows, columns].reshape(n_rows, -1)
-                noise[i, j] = probe @ probe.T
-
-    list(
-        thread_pool(workers).map(add_tile_row, range(rows_tiles))
-        if workers > 1
-        else map(add_tile_row, range(rows_tiles))
-    )
-    block_spec = FrameStackSpec(
-        black_level=spec.black_level * bin_factor * bin_factor,
-        white_level=np.inf,
-        ambient_scale=spec.ambient_scale,
-        led_scales=spec.led_scales,
-        led_levels=spec.led_levels,
-    )
-    pixel = bin_factor * cfa_period
-    row_edges = row_blocks * pixel
-    column_edges = column_blocks * pixel
-    row_edges[-1], column_edges[-1] = ambient.shape[0], ambient.shape[1]
-    tiled = _tiled_from_moments(moments, totals, block_spec, row_edges, column_edges)
-    blocks = BlockData(raw=data, differences=differences, valid=~invalid, spec=block_spec, pixel=pixel)
-    denoised = None
-    if noise is not None:
-        denoised = _tiled_from_moments(moments - noise, totals, block_spec, row_edges, column_edges)
-    return TiledStatistics(
-        **{name: getattr(tiled, name) for name in tiled.__dataclass_fields__ if name not in ("blocks", "denoised")},
-        blocks=blocks,
-        denoised=denoised,
-    )
+    rows = range(len(frames))
+    add = lambda row: accumulator.add_frame(row, frames[row])  # noqa: E731
+    list(thread_pool(workers).map(add, rows) if workers > 1 else map(add, rows))
+    return accumulator.statistics(spec, tiles, workers)
 
 
 def _projection(spec: FrameStackSpec) -> np.ndarray:

@@ -194,7 +194,7 @@ def _report(
     progress("synthesising the computational images, previews and report")
     estimate, solutions = result.estimate, result.solutions
     summary = report.write_run_report(
-        out, sequence, estimate, solutions, args.mode, true_ambient, result.stack, args.target
+        out, sequence, estimate, solutions, args.mode, true_ambient, result.stack, args.target, result.flash_frame
     )
     if "spectrum_rmse_vs_truth" in summary:
         progress(

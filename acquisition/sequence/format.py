@@ -33,7 +33,7 @@ import os
 import sys
 import tempfile
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from datetime import UTC, datetime
 from pathlib import Path, PurePosixPath
 from types import TracebackType
@@ -1006,6 +1006,9 @@ class SequenceWriter:
     ) -> None:
         self._directory = Path(directory)
         self._mono = bool(mono)
+        if self._mono and camera.cfa is None and "channels" not in camera.extra:
+            # Say so in the file (format v1, §6): a reader takes the three identical channels as one plane.
+            camera = replace(camera, extra={**camera.extra, "channels": "mono replicated to R, G, B"})
         self._path = self._directory / SEQUENCE_FILE
         self._claim: FolderClaim | None = None
         self._sequence = Sequence(

@@ -252,15 +252,18 @@ def flash_one(path: str, settings: FlashSettings, report: Report) -> FlashResult
 
 def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) -> FlashResult:
     estimating = settings.estimate
-    stack = analysis.load_frame_stack(sequence)
+    # The estimate streams the frames from disk one at a time; an image to synthesise needs them all.
+    stack = None if settings.out is None else analysis.load_frame_stack(sequence)
     local = analysis.estimate_sequence_local(
         sequence,
         estimating.method,
         estimating.solver,
         estimating.alpha,
         estimating.tiles,
-        stack=stack,
         bin_factor=estimating.bin_factor,
+        stream=None
+        if stack is None
+        else analysis.stream_stack(sequence, stack, estimating.bin_factor, estimating.tiles),
     )
     refuse_dark_ambient(sequence, local.global_estimate, FLASH_GOAL[settings.mode])
     with warnings.catch_warnings(record=True) as caught:
@@ -271,7 +274,7 @@ def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) ->
     for message in dict.fromkeys(str(warning.message) for warning in caught):
         report(f"warning: {message}")
     payload = analysis.local_flash_payload(sequence, solution, local, tile_weights, settings.target)
-    if settings.out is not None:
+    if settings.out is not None and stack is not None:
         output = Path(settings.out)
         if local.model == "local":
             image, saturated, _ = analysis.synthesize_sequence_local(sequence, tile_weights, local, stack)
