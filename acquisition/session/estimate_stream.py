@@ -234,6 +234,16 @@ class EstimateStream:
     def sequence_finished(self, result: CaptureResult) -> None:
         """Nothing to do: the statistics were taken frame by frame."""
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes the statistics hold (the block rows and their probe; the tiles' block sums when asked for)."""
+        arrays = []
+        if self._rows is not None:
+            arrays += [self._rows.rows, self._rows.differences]
+        if self._tiles is not None:
+            arrays += [self._tiles.data, self._tiles.differences]
+        return sum(array.nbytes for array in arrays if array is not None)
+
     # -- results -----------------------------------------------------------------------------------
     def layout(self) -> StackLayout:
         """The frames used and their linearisation (:func:`stack_layout` of the frames taken)."""
