@@ -58,7 +58,7 @@ import numpy as np
 
 from msflash.processing.ambient import AMBIENT_METHODS, AmbientEstimate, AmbientModel, gcv_alpha
 from msflash.processing.errors import SolverError, SpectralDataError
-from msflash.processing.noise_level import detail_noise_line
+from msflash.processing.noise_level import PixelNoise, detail_noise_line
 from msflash.processing.spectra import Spectra, require_unit
 from msflash.processing.statistics import (
     DEFAULT_WORKERS,
@@ -458,7 +458,7 @@ class TileBlocks:
         self.data[-1] = 1.0
         self.masks: list[np.ndarray | None] = [None] * (n_rows - 1)
         self.filled: set[int] = set()
-        self.pixel_noise = None
+        self.pixel_noise: PixelNoise | None = None
 
     @property
     def block_grid(self) -> tuple[int, int]:

@@ -237,7 +237,7 @@ class EstimateStream:
     @property
     def nbytes(self) -> int:
         """Bytes the statistics hold (the block rows and their probe; the tiles' block sums when asked for)."""
-        arrays = []
+        arrays: list[np.ndarray | None] = []
         if self._rows is not None:
             arrays += [self._rows.rows, self._rows.differences]
         if self._tiles is not None:
@@ -296,7 +296,9 @@ class EstimateStream:
             tiled = self._tiles.statistics(self.layout().spec, grid)
         except SpectralDataError as err:
             raise RecordingError(f"{self.header.path}: {err}") from err
-        return estimate_local(tiled, led_spectra_photons(self.header), method, solver, alpha, global_estimate=whole_frame)
+        return estimate_local(
+            tiled, led_spectra_photons(self.header), method, solver, alpha, global_estimate=whole_frame
+        )
 
 
 SAMPLE_WEIGHTING = True

@@ -42,9 +42,7 @@ def write_sequence(path: Path, n_led_frames: int = N_LED_FRAMES, shape: tuple[in
     scene = rng.uniform(0.2, 1.0, size=shape)
     ambient = black + 900 * scene
     with SequenceWriter(path, wavelengths_nm=wavelengths, spectral_unit="energy", camera=camera, leds=leds) as writer:
-        writer.add_frame(
-            (ambient + rng.normal(0, 3, shape)).astype(np.uint16), "ambient", (0.0,) * 4, 2000.0
-        )
+        writer.add_frame((ambient + rng.normal(0, 3, shape)).astype(np.uint16), "ambient", (0.0,) * 4, 2000.0)
         for j in range(n_led_frames):
             levels = tuple(float(i == j % 4) for i in range(4))
             response = 400 * scene * (0.6 + 0.1 * (j % 4)) * np.array([1.0, 0.8, 0.5])[(j % 4) % 3]
@@ -152,5 +150,7 @@ def test_a_stack_in_memory_and_the_files_give_the_same_estimate(tmp_path: Path) 
     stack = analysis.load_frame_stack(sequence)
     from_memory = analysis.estimate_sequence_local(sequence, stream=analysis.stream_stack(sequence, stack, 8, 8))
     from_disk = analysis.estimate_sequence_local(sequence)
-    np.testing.assert_array_equal(from_memory.global_estimate.ambient_weights, from_disk.global_estimate.ambient_weights)
+    np.testing.assert_array_equal(
+        from_memory.global_estimate.ambient_weights, from_disk.global_estimate.ambient_weights
+    )
     np.testing.assert_array_equal(from_memory.mean_weights, from_disk.mean_weights)
