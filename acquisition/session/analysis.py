@@ -17,6 +17,8 @@ import numpy as np
 
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence, as_recorded
+from msflash.acquisition.sequence.image_files import read_image_header
+from msflash.acquisition.sequence.memory_budget import check_decode
 from msflash.acquisition.session.estimate_stream import SAMPLE_WEIGHTING, EstimateStream, stack_layout, stream_sequence
 from msflash.processing import datasets
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
@@ -70,6 +72,8 @@ def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None =
     """
     entries = sequence.frames
     cfa = sequence.camera.cfa
+    if frames is None:
+        _check_stack_budget(sequence)
 
     def pixels(index: int) -> np.ndarray:
         return sequence.load_frame(index) if frames is None else as_recorded(frames[index], cfa)
@@ -90,6 +94,19 @@ def stream_stack(
     index = {i: frame for i, frame in zip(stack.led_indices, stack.led_frames, strict=True)}
     index[stack.ambient_index] = stack.ambient
     return stream_sequence(sequence, bin_factor, tiles, index.__getitem__)
+
+
+def _check_stack_budget(sequence: Sequence) -> None:
+    """Refuse loading every used frame at once past the memory budget, from their headers (nothing decoded)."""
+    roles = [entry.role for entry in sequence.frames]
+    used = [i for i, role in enumerate(roles) if role == "led"]
+    if "ambient" in roles:
+        used.insert(0, roles.index("ambient"))
+    total = 0
+    for index in used:
+        header = read_image_header(sequence.frame_path(index))
+        total += header.width * header.height * header.channels * header.dtype.itemsize
+    check_decode(f"{sequence.path}", total, f"its {len(used)} ambient and LED frames at once")
 
 
 def frame_stack(
