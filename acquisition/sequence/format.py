@@ -376,6 +376,7 @@ class Sequence(_ArrayEquality):
         recorded = entry.digest
         if recorded is not None:
             check_frame_digest(path, recorded, where)
+
         def declared(header: ImageHeader) -> None:
             """What the file's header says, checked before its pixels are decoded."""
             said = SelfDescription.from_attributes(header.attributes)

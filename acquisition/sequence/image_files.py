@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import contextlib
 import json
-from collections.abc import Callable
 import os
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,8 +29,8 @@ import numpy as np
 import OpenImageIO as oiio
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.memory_budget import check_decode
 from msflash.acquisition.sequence.frame_digest import FileDigest, digest_open_file
+from msflash.acquisition.sequence.memory_budget import check_decode
 from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.user_files import IMAGE_MAX_BYTES, check_user_file, shown_path
