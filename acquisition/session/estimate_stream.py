@@ -11,7 +11,8 @@ the same numbers to the last digit (``tests/acquisition/session/test_estimate_st
 
 Peak memory is one frame plus the statistics (the block rows: ``(n + 2)`` rows of ``H·W·C / b²``
 float64 for ``b × b`` blocks, a sixteenth of a 16-bit RGB frame per frame at ``b = 8``), whatever
-the frame count. The local estimate's tiles (:class:`processing.local.TileBlocks`) are accumulated
+the frame count (but for ``bin_factor`` 1, the all-pixel reference, whose exact moments need every
+frame's pixels together: the frames are kept). The local estimate's tiles (:class:`processing.local.TileBlocks`) are accumulated
 beside them when asked for.
 
 A mono camera's frames are taken as their one plane (the sequence records them as three identical
@@ -22,6 +23,7 @@ alike.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from collections.abc import Sequence as Seq
 from dataclasses import dataclass
@@ -35,7 +37,13 @@ from msflash.processing import frame_kernels
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, TileBlocks, estimate_local
-from msflash.processing.statistics import BlockRows, FrameStackSpec, SequenceStatistics, plane_shape
+from msflash.processing.statistics import (
+    BlockRows,
+    FrameStackSpec,
+    SequenceStatistics,
+    accumulate_statistics,
+    plane_shape,
+)
 
 USED_ROLES = ("ambient", "led")
 """The roles the estimate reads: the first ``ambient`` frame and every ``led`` frame."""
@@ -139,6 +147,7 @@ class EstimateStream:
         """The shape of the frames as the sequence records them (a mono frame's three channels included)."""
         self.factor: int | None = None
         self._rows: BlockRows | None = None
+        self._planes: dict[int, np.ndarray] = {}  # bin factor 1 only: the frames, kept
         self._tiles: TileBlocks | None = None
         self._n_led_rows = 0
         self._have_ambient = False
@@ -196,7 +205,11 @@ class EstimateStream:
                     f"{where} is LED frame {row + 1} but {self.n_led_frames} were planned; expected one row per LED frame"
                 )
         try:
-            if self._rows is None:
+            if self.factor == 1:
+                # Every pixel, no blocks (``--bin-factor 1``, the all-pixel reference): the exact all-pixel
+                # moments need each pixel of every frame together, so the frames are kept until the end.
+                self._planes[row] = plane
+            elif self._rows is None:
                 self._rows = BlockRows(
                     self.n_led_frames,
                     plane_shape(plane.shape, period),
@@ -206,10 +219,10 @@ class EstimateStream:
                     black_level=camera.black_level,
                     weighting=SAMPLE_WEIGHTING,
                 )
-            if self.live:
+            if self._rows is not None and self.live:
                 with frame_kernels.paused():
                     self._rows.add_frame(row, plane, period)
-            else:
+            elif self._rows is not None:
                 self._rows.add_frame(row, plane, period)
             if self.tiles is not None:
                 if self._tiles is None:
@@ -240,6 +253,7 @@ class EstimateStream:
         arrays: list[np.ndarray | None] = []
         if self._rows is not None:
             arrays += [self._rows.rows, self._rows.differences]
+        arrays += list(self._planes.values())
         if self._tiles is not None:
             arrays += [self._tiles.data, self._tiles.differences]
         return sum(array.nbytes for array in arrays if array is not None)
@@ -249,9 +263,9 @@ class EstimateStream:
         """The frames used and their linearisation (:func:`stack_layout` of the frames taken)."""
         return stack_layout(self.header, self.roles, self.levels, self.exposure_gain)
 
-    def _complete_rows(self) -> BlockRows:
+    def _complete_rows(self) -> BlockRows | None:
         layout = self.layout()
-        if self._rows is None or self._n_led_rows != self.n_led_frames or len(layout.led_indices) != self.n_led_frames:
+        if (self._rows is None and self.factor != 1) or self._n_led_rows != self.n_led_frames or len(layout.led_indices) != self.n_led_frames:
             raise RecordingError(
                 f"{self.header.path}: {self._n_led_rows} of {self.n_led_frames} LED frames taken; "
                 "expected every LED frame before the estimate"
@@ -262,11 +276,15 @@ class EstimateStream:
         """The sufficient statistics of eq. 4–6 of the frames taken (every LED frame must be in)."""
         rows = self._complete_rows()
         spec = self.layout().spec
-        if self.live:
-            with frame_kernels.paused():
+        with frame_kernels.paused() if self.live else contextlib.nullcontext():
+            if rows is None:
+                planes, n = self._planes, self.n_led_frames
+                period = 2 if self.header.camera.cfa is not None else 1
+                statistics = accumulate_statistics(
+                    planes[n], [planes[j] for j in range(n)], spec, bin_factor=1, cfa_period=period
+                )
+            else:
                 statistics = rows.statistics(spec)
-        else:
-            statistics = rows.statistics(spec)
         return statistics.replicated(3) if self.mono else statistics
 
     def estimate(
