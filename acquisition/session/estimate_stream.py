@@ -265,7 +265,11 @@ class EstimateStream:
 
     def _complete_rows(self) -> BlockRows | None:
         layout = self.layout()
-        if (self._rows is None and self.factor != 1) or self._n_led_rows != self.n_led_frames or len(layout.led_indices) != self.n_led_frames:
+        if (
+            (self._rows is None and self.factor != 1)
+            or self._n_led_rows != self.n_led_frames
+            or len(layout.led_indices) != self.n_led_frames
+        ):
             raise RecordingError(
                 f"{self.header.path}: {self._n_led_rows} of {self.n_led_frames} LED frames taken; "
                 "expected every LED frame before the estimate"
