@@ -191,6 +191,7 @@ def _report(
     from msflash.acquisition.app import report, run_html  # colour and matplotlib: only a run that reports needs them
 
     sequence = read_sequence(out / "sequence")
+    sequence.check_digests()  # the files are what was written (a failing disk): bytes only, no frame decoded
     progress("synthesising the computational images, previews and report")
     estimate, solutions = result.estimate, result.solutions
     summary = report.write_run_report(

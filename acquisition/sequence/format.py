@@ -353,6 +353,21 @@ class Sequence(_ArrayEquality):
             raise RecordingError(f"{self.path}: role '{role}' is unknown; expected one of {', '.join(FRAME_ROLES)}")
         return tuple(i for i, frame in enumerate(self.frames) if frame.role == role)
 
+    def check_digests(self) -> None:
+        """Refuse any frame file that is no longer, byte for byte, the one written (recorded SHA-256 and length;
+        frames without them pass). Reads the files' bytes, decodes nothing: a run checks what it wrote this way
+        (its estimate and report come from the frames in memory).
+
+        Raises
+        ------
+        RecordingError
+            As :meth:`load_frame` for a changed, truncated or missing file.
+        """
+        for index, entry in enumerate(self.frames):
+            if entry.digest is not None:
+                where = f"{self.path}: frames[{index}].file '{entry.file}'"
+                check_frame_digest(self.frame_path(index), entry.digest, where)
+
     def load_frame(self, index: int, *, check_levels: bool = True) -> np.ndarray:
         """The pixels of frame ``index``: (H, W) for a raw mosaic (``cfa`` set), (H, W, 3) for RGB.
 

@@ -109,6 +109,9 @@ WORKER = textwrap.dedent(
     from msflash.acquisition.sequence.format import read_sequence
     from msflash.acquisition.session import analysis
 
+    from msflash.acquisition.sequence.memory_budget import set_memory_budget
+
+    set_memory_budget(1 << 40)  # no budget: this measures the streaming, not the refusal (test_memory_budget.py)
     sequence = read_sequence(sys.argv[1])
     headroom = int(sys.argv[2])
     first = analysis.estimate_sequence(sequence)  # warm: libraries, thread pools and arenas mapped
