@@ -165,7 +165,7 @@ def synthesize_flash(sequence: Sequence, flash: FlashSolution | np.ndarray) -> n
     from msflash.acquisition.session.analysis import synthesize_sequence
 
     weights = flash.flash_weights if hasattr(flash, "flash_weights") else np.asarray(flash, dtype=float)
-    image, _saturated, _stack = synthesize_sequence(sequence, weights)
+    image, _saturated, _frames = synthesize_sequence(sequence, weights)
     return image
 
 

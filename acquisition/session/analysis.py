@@ -19,7 +19,13 @@ from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence, as_recorded
 from msflash.acquisition.sequence.image_files import read_image_header
 from msflash.acquisition.sequence.memory_budget import check_decode
-from msflash.acquisition.session.estimate_stream import SAMPLE_WEIGHTING, EstimateStream, stack_layout, stream_sequence
+from msflash.acquisition.session.estimate_stream import (
+    SAMPLE_WEIGHTING,
+    EstimateStream,
+    StackLayout,
+    stack_layout,
+    stream_sequence,
+)
 from msflash.processing import datasets
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
 from msflash.processing.errors import SpectralDataError
@@ -28,7 +34,7 @@ from msflash.processing.local import DEFAULT_TILES, LocalEstimate, synthesize_lo
 from msflash.processing.model_error import reference_for, with_model_error
 from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
-from msflash.processing.synthesis import synthesize
+from msflash.processing.synthesis import SynthesisStream, synthesize
 
 
 @dataclass(frozen=True)
@@ -461,14 +467,37 @@ def flash_payload(sequence: Sequence, solution: FlashSolution, target: str | Non
 
 def synthesize_sequence(
     sequence: Sequence, flash_weights: np.ndarray, stack: FrameStack | None = None
-) -> tuple[np.ndarray, np.ndarray, FrameStack]:
-    """The computational flash image ``m_a + Σ w_k m_f,k`` of a sequence (linear, per µs·gain)."""
-    stack = stack or load_frame_stack(sequence)
-    image, saturated = synthesize(stack.ambient, stack.led_frames, stack.spec, flash_weights)
-    return image, saturated, stack
+) -> tuple[np.ndarray, np.ndarray, StackLayout]:
+    """The computational flash image ``m_a + Σ w_k m_f,k`` of a sequence (linear, per µs·gain), its saturated
+    pixels and the frames it used.
+
+    Without ``stack`` the frames are read from disk one at a time into a
+    :class:`~processing.synthesis.SynthesisStream` (the ambient frame first, then the LED frames in order):
+    peak memory the float64 sum and one frame, and the image of :func:`processing.synthesis.synthesize`
+    on the stack, bit for bit.
+    """
+    if stack is not None:
+        image, saturated = synthesize(stack.ambient, stack.led_frames, stack.spec, flash_weights)
+        return image, saturated, StackLayout(stack.spec, stack.ambient_index, stack.led_indices)
+    entries = sequence.frames
+    layout = stack_layout(
+        sequence, [e.role for e in entries], [e.led_levels for e in entries], [e.exposure_us * e.gain for e in entries]
+    )
+    summed: SynthesisStream | None = None
+    for index in (layout.ambient_index, *layout.led_indices):
+        frame = sequence.load_frame(index)
+        if summed is None:
+            summed = SynthesisStream(layout.spec, flash_weights, frame.shape)
+        try:
+            summed.add(frame)
+        except SpectralDataError as err:
+            raise RecordingError(f"{sequence.path}: frames[{index}]: {err}") from err
+        del frame
+    assert summed is not None
+    image, saturated = summed.result()
+    return image, saturated, layout
 
 
-# -- local estimation (issue 9) ---------------------------------------------------------------
 def estimate_sequence_local(
     sequence: Sequence,
     method: str = "auto",

@@ -313,8 +313,8 @@ def flash_one(path: str, settings: FlashSettings, report: Report) -> FlashResult
 
 def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) -> FlashResult:
     estimating = settings.estimate
-    # The estimate streams the frames from disk one at a time; an image to synthesise needs them all.
-    stack = None if settings.out is None else analysis.load_frame_stack(sequence)
+    # The estimate streams the frames from disk one at a time, and so does a global image's synthesis; a local
+    # image (per-tile weights blended) is synthesised from the frames together.
     local = analysis.estimate_sequence_local(
         sequence,
         estimating.method,
@@ -322,9 +322,6 @@ def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) ->
         estimating.alpha,
         estimating.tiles,
         bin_factor=estimating.bin_factor,
-        stream=None
-        if stack is None
-        else analysis.stream_stack(sequence, stack, estimating.bin_factor, estimating.tiles),
     )
     refuse_dark_ambient(sequence, local.global_estimate, FLASH_GOAL[settings.mode])
     with warnings.catch_warnings(record=True) as caught:
@@ -335,12 +332,14 @@ def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) ->
     for message in dict.fromkeys(str(warning.message) for warning in caught):
         report(f"warning: {message}")
     payload = analysis.local_flash_payload(sequence, solution, local, tile_weights, settings.target)
-    if settings.out is not None and stack is not None:
+    if settings.out is not None:
         output = Path(settings.out)
         if local.model == "local":
-            image, saturated, _ = analysis.synthesize_sequence_local(sequence, tile_weights, local, stack)
+            image, saturated, stack = analysis.synthesize_sequence_local(sequence, tile_weights, local)
+            ambient_index = stack.ambient_index
         else:
-            image, saturated, _ = analysis.synthesize_sequence(sequence, solution.flash_weights, stack)
+            image, saturated, layout = analysis.synthesize_sequence(sequence, solution.flash_weights)
+            ambient_index = layout.ambient_index
         metadata = {
             "msflash:flash_weights": solution.flash_weights.tolist(),
             "msflash:method": local.model,
@@ -348,7 +347,7 @@ def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) ->
         }
         if local.model == "local":
             metadata["msflash:tile_flash_weights"] = json.dumps(np.round(tile_weights, 6).tolist())
-        write_flash_image(output, image, stack, sequence, metadata, report)
+        write_flash_image(output, image, ambient_index, sequence, metadata, report)
         payload["out"] = str(output)
         payload["saturated_fraction"] = float(saturated.mean())
     return FlashResult(sequence, payload, solution, local)
@@ -385,7 +384,7 @@ def check_raw_output(kind: str | None, output: Path, sequence: Sequence) -> None
 def write_flash_image(
     output: Path,
     image: np.ndarray,
-    stack: analysis.FrameStack,
+    ambient_index: int,
     sequence: Sequence,
     metadata: dict[str, Any],
     report: Report,
@@ -404,7 +403,7 @@ def write_flash_image(
             rgb, exr = exr_image(sequence, image)  # a mosaic demosaicked: an EXR holds R, G, B
             write_image(output, rgb, {**metadata, **exr.attributes}, exr.chromaticities)
             return
-        ambient = sequence.frames[stack.ambient_index]
+        ambient = sequence.frames[ambient_index]
         white = sequence.camera.white_level
         raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level, white)
         write_image(output, raw, {**metadata, "msflash:exposure_us": ambient.exposure_us, "msflash:gain": ambient.gain})

@@ -157,3 +157,22 @@ def test_a_stack_in_memory_and_the_files_give_the_same_estimate(tmp_path: Path) 
         from_memory.global_estimate.ambient_weights, from_disk.global_estimate.ambient_weights
     )
     np.testing.assert_array_equal(from_memory.mean_weights, from_disk.mean_weights)
+
+
+def test_synthesis_from_disk_streams_the_frames_and_gives_the_stacks_image_bit_for_bit(tmp_path: Path) -> None:
+    """``synthesize``/``flash --out``: one frame decoded at a time into a float64 sum; the image is the stack's."""
+    sequence = read_sequence(write_sequence(tmp_path / "s"))
+    weights = np.array([0.3, 0.6, 0.2, 0.9])
+    frame_bytes = int(np.prod(SHAPE)) * 2
+    tracemalloc.start()
+    try:
+        streamed, saturated, layout = analysis.synthesize_sequence(sequence, weights)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    # The float64 sum (4 frames' worth), the float32 image (2) and one frame, against a 33-frame stack.
+    assert peak < 8 * frame_bytes, peak / frame_bytes
+    stacked, stacked_saturated, _ = analysis.synthesize_sequence(sequence, weights, analysis.load_frame_stack(sequence))
+    np.testing.assert_array_equal(streamed, stacked)
+    np.testing.assert_array_equal(saturated, stacked_saturated)
+    assert layout.ambient_index == 0 and len(layout.led_indices) == N_LED_FRAMES
