@@ -185,6 +185,7 @@ def target_figures(world: dict[str, Any], pairs: int, threads: tuple[int, ...] =
         # As msflash estimate (acquisition.session.estimate_stream.EstimateStream): the frames one at a time into
         # incremental block rows, the weighted statistics and the default solve. One thread: frames come in order.
         n = len(frames) - 1
+        frame_kernels.wanted(frames[0].nbytes * len(frames))  # as the stream does for a sequence from disk
         rows = BlockRows(
             n,
             plane_shape(frames[0].shape, period),
