@@ -189,9 +189,8 @@ class EstimateStream:
         if self.frame_shape is None:
             self.frame_shape = recorded_shape
             self.factor = _block_factor(recorded_shape, camera.cfa, self.bin_factor)
-            if (
-                not self.live
-            ):  # as the batch pass: a large sequence loads the compiled kernels (never while streaming live)
+            # As the batch pass did: a large sequence loads the compiled kernels (never while a camera streams).
+            if not self.live:
                 frame_kernels.wanted(plane.nbytes * (self.n_led_frames + 1))
         elif recorded_shape != self.frame_shape:
             raise RecordingError(
