@@ -133,9 +133,13 @@ def test_memory_budget_option_sets_the_budget_anywhere_on_the_line(
 def test_a_stack_past_the_budget_is_refused_from_the_headers(
     bombs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """``flash --out`` needs every frame at once: their sum is checked before any is decoded."""
+    """A local image (``flash --method local --out``) needs every frame at once: their sum is checked before any
+    is decoded. A global one streams the frames (one at a time within the same budget)."""
     clean = str(bombs["clean"])
-    argv = ["flash", "--mode", "matching", clean, "--out", str(tmp_path / "f.exr"), "--memory-budget", "200K"]
-    assert msflash_main(argv) == 2
+    out = ["--out", str(tmp_path / "f.exr"), "--memory-budget", "200K"]
+    assert msflash_main(["flash", "--mode", "matching", "--method", "local", clean, *out]) == 2
     error = capsys.readouterr().err
     assert "5 ambient and LED frames at once needs 360 KiB" in error, error
+    assert msflash_main(["flash", "--mode", "matching", "--method", "global", clean, *out]) == 0, (
+        capsys.readouterr().err
+    )
