@@ -849,11 +849,13 @@ class BlockRows:
         if self._excluded is not None:
             self.rows[ones, self._excluded] = 0.0
         every = self._filled  # the ambient row's own products are taken by add() right after
-        self._moments[np.ix_(every, every)] = _gram(self.rows[every], DEFAULT_CHUNK_PIXELS * self.block_shape[1])
+        chunk = DEFAULT_CHUNK_PIXELS * self.block_shape[1]
+        # The ambient first (the usual order) leaves the ones row alone: a (1, K) gram is BLAS's threaded
+        # dot, whose wake-ups on a busy machine cost 10-20 ms; its product in slices (_row_products) does not.
+        gram = (lambda rows: _row_products(rows, 0)[:, None]) if len(every) == 1 else (lambda rows: _gram(rows, chunk))
+        self._moments[np.ix_(every, every)] = gram(self.rows[every])
         if self._noise is not None and self.differences is not None:
-            self._noise[np.ix_(every, every)] = _gram(
-                self.differences[every], DEFAULT_CHUNK_PIXELS * self.block_shape[1]
-            )
+            self._noise[np.ix_(every, every)] = gram(self.differences[every])
 
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
