@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from msflash.processing import frame_kernels
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.statistics import (
     FrameStackSpec,
@@ -238,24 +239,43 @@ def accumulate_channel_statistics(
     probe = bin_factor % 2 == 0
     n_frames, n_channels = len(frames), planes[0].shape[2]
     n_blocks = height * width
-    # Raw block sums of every frame side by side, [F_1 … F_n, A] × channels, then a ones column: every
-    # moment of the linearised, differenced and unmixed responses is a linear map of these rows' moments
-    # (as in processing.statistics), so the pixels see no arithmetic beyond the block sums.
-    # Column-major: each frame's block sums are written into contiguous columns (row-major writes of
-    # C values per row cost 10× more).
-    raw = np.empty((n_blocks, n_frames * n_channels + 1), order="F")
-    raw[:, -1] = 1.0
-    probes = np.empty((n_blocks, n_frames * n_channels + 1), order="F") if probe else None
+    # Raw block sums of every frame stacked, [F_1 … F_n, A] × channels, then a row of ones: every moment of
+    # the linearised, differenced and unmixed responses is a linear map of these rows' moments (as in
+    # processing.statistics), so the pixels see no arithmetic beyond the block sums. Features × blocks,
+    # row-major: each frame's channels are written as whole rows and a fold is a band of columns.
+    raw = np.empty((n_frames * n_channels + 1, n_blocks))
+    raw[-1] = 1.0
+    probes = np.empty_like(raw) if probe else None
     if probes is not None:
-        probes[:, -1] = 0.0
+        probes[-1] = 0.0
     invalid = np.zeros((height, width), dtype=bool)
     order = [*range(1, n_frames), 0]  # LED frames first, the ambient frame last
+    # The compiled one-pass kernel where this process has it loaded (the same integers as the numpy route).
+    fast = frame_kernels.wanted(sum(frame.nbytes for frame in frames))
+    sums = np.empty((height, n_channels, width)) if fast else None
+    differences = np.empty((height, width, n_channels)) if fast and probe else None
     for column, index in enumerate(order):
+        rows = raw[column * n_channels : (column + 1) * n_channels].reshape(n_channels, height, width)
+        probe_rows = (
+            None
+            if probes is None
+            else probes[column * n_channels : (column + 1) * n_channels].reshape(n_channels, height, width)
+        )
+        if sums is not None:
+            done, saturated = frame_kernels.block_pass(
+                frames[index], bin_factor, period, spec.white_level, 1, sums, differences
+            )
+            if done:
+                rows[...] = sums.transpose(1, 0, 2)
+                if probe_rows is not None and differences is not None:
+                    probe_rows[...] = differences.transpose(2, 0, 1)
+                if saturated is not None:
+                    invalid |= saturated
+                continue
         plane = planes[index]
-        where = slice(column * n_channels, (column + 1) * n_channels)
-        if probes is not None:
+        if probe_rows is not None:
             block, half = block_sums_and_differences(plane, bin_factor)
-            probes[:, where] = half.reshape(n_blocks, n_channels)
+            probe_rows[...] = half.transpose(2, 0, 1)
         else:
             block = (
                 plane[: height * bin_factor, : width * bin_factor]
@@ -263,21 +283,21 @@ def accumulate_channel_statistics(
                 .reshape(height, bin_factor, width, bin_factor, n_channels)
                 .sum(axis=(1, 3))
             )
-        raw[:, where] = block.reshape(n_blocks, n_channels)
+        rows[...] = block.transpose(2, 0, 1)
         if np.issubdtype(plane.dtype, np.floating) or np.iinfo(plane.dtype).max >= spec.white_level:
             if plane.max() >= spec.white_level:
                 invalid |= saturated_blocks(plane, bin_factor, spec.white_level)
     if invalid.any():
-        raw[invalid.reshape(-1)] = 0.0  # out of every moment, the count included
+        raw[:, invalid.reshape(-1)] = 0.0  # out of every moment, the count included
         if probes is not None:
-            probes[invalid.reshape(-1)] = 0.0
+            probes[:, invalid.reshape(-1)] = 0.0
     transform = _response_transform(spec, n_channels, spec.black_level * bin_factor * bin_factor)
     width_f = spec.n_leds * n_channels
     # Folds are bands of block rows: contiguous slices of the row-major blocks.
     bounds = ((np.arange(n_folds + 1) * height + n_folds - 1) // n_folds) * width
 
     def moments_of(rows: np.ndarray) -> tuple[Moments, np.ndarray]:
-        products = np.stack([_gram(rows[bounds[j] : bounds[j + 1]]) for j in range(n_folds)])
+        products = np.stack([_gram(rows[:, bounds[j] : bounds[j + 1]]) for j in range(n_folds)])
         mapped = transform @ products @ transform.T
         return Moments(
             mapped[:, :width_f, :width_f], mapped[:, :width_f, width_f:], mapped[:, width_f:, width_f:]
@@ -315,15 +335,16 @@ def _response_transform(spec: FrameStackSpec, channels: int, black: float) -> np
     return transform
 
 
-GRAM_ROWS = 256
-"""Rows per product in :func:`_gram`: below OpenBLAS's threading threshold (its threads' wake-up on a busy
-2-core machine cost far more than these thin products; see :mod:`processing.statistics`)."""
+GRAM_COLUMNS = 4096
+"""Blocks per product in :func:`_gram`: small enough that OpenBLAS runs each on one thread (its threads' wake-up on a
+busy 2-core machine costs more than these thin products; see :mod:`processing.statistics`), large enough that the
+product runs near the core's peak."""
 
 
 def _gram(values: np.ndarray) -> np.ndarray:
-    """``valuesᵀ values`` summed over slices of :data:`GRAM_ROWS` rows."""
-    product = np.zeros((values.shape[1], values.shape[1]))
-    for start in range(0, values.shape[0], GRAM_ROWS):
-        part = values[start : start + GRAM_ROWS]
-        product += part.T @ part
+    """``values valuesᵀ`` of (features, blocks) values, summed over slices of :data:`GRAM_COLUMNS` blocks."""
+    product = np.zeros((values.shape[0], values.shape[0]))
+    for start in range(0, values.shape[1], GRAM_COLUMNS):
+        part = values[:, start : start + GRAM_COLUMNS]
+        product += part @ part.T
     return product

@@ -31,6 +31,7 @@ from msflash.processing.channel_statistics import ChannelStatistics, accumulate_
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.light_families import (
     AUTO_MARGIN,
+    AUTO_NOISE,
     LED_WARNING,
     PRIOR_WARNING,
     FamilyEstimate,
@@ -331,7 +332,7 @@ def _checks(
     return {
         "led": predicted_ratio(np.asarray(led_payload["spectrum"], float), family_spectrum, leds, LED_WARNING, "LEDs'"),
         "prior": predicted_ratio(prior_spectrum, family_spectrum, leds, PRIOR_WARNING, "light prior's"),
-        "family": self_check(family_spectrum, spread, leds),
+        "family": self_check(family_spectrum, spread, leds, family.relative_error),
     }
 
 
@@ -426,6 +427,8 @@ def _family_route(
             family.chosen.fit.name: family.chosen.held_out_error_noise_removed,
         },
         "margin": AUTO_MARGIN,
+        "noise_margin": AUTO_NOISE,
+        "noise_share": family.led.noise_share,
     }
     if requested == "family":
         chosen, reason = family.chosen.fit.name, family.reason

@@ -32,6 +32,11 @@ def test_auto_says_which_model_it_chose_and_why(tmp_path: Path, capsys: pytest.C
     assert auto["model"] == auto["family"]["form"] == family["model"]
     held_out = auto["model_choice"]["held_out_relative_error_noise_removed"]
     assert held_out[auto["model"]] < held_out["led"] * (1 - auto["model_choice"]["margin"])
+    choice = auto["model_choice"]  # and the gain is beyond the noise correction's share (light_families.choose)
+    assert (
+        held_out[auto["model"]] ** 2 + choice["noise_margin"] * choice["noise_share"]
+        < (held_out["led"] * (1 - choice["margin"])) ** 2
+    )
     assert "predicts held-out pixels better" in auto["model_choice"]["reason"]
     block = auto["family"]
     assert block["family"] in ("thermal", "discharge", "solid_state", "transmitted", "mixture", "prior")

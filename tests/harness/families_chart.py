@@ -20,6 +20,7 @@ import numpy as np
 
 from msflash.processing.light_families import (
     AUTO_MARGIN,
+    EVIDENCE_TEMPERATURE,
     FAMILY_WARNING,
     LED_WARNING,
     MISS_RATIO,
@@ -137,13 +138,16 @@ def _roc(score: np.ndarray, miss: np.ndarray) -> tuple[np.ndarray, np.ndarray, f
 def warning_scores(records: dict[str, dict]) -> dict[str, tuple[np.ndarray, np.ndarray, float]]:
     """Per model: (predicted ratio, truly a miss, threshold) — the shipped checks recomputed from the study."""
     cases = list(records.values())
-    tau = "0.2"
+    tau = f"{EVIDENCE_TEMPERATURE:g}"
 
-    def column(key: str) -> np.ndarray:
-        return np.nan_to_num(np.array([float(c[key]) for c in cases]), nan=0.0)
+    def column(key: str, default: float = 0.0) -> np.ndarray:
+        return np.nan_to_num(np.array([float(c.get(key, default)) for c in cases]), nan=0.0)
 
     led, prior = column(f"d:led:chosen:{tau}"), column(f"d:prior:chosen:{tau}")
-    spread = column(f"spread:chosen:{tau}")
+    # self_check's score: the spread over the bound, times the chosen candidate's held-out error over the LEDs'.
+    led_error = column("led_held_out_clean", 1.0)
+    relative = np.where(led_error > 0, column("chosen_held_out_clean", 1.0) / np.where(led_error > 0, led_error, 1), 1)
+    spread = column(f"spread:chosen:{tau}") * relative
     auto_led = np.array([c["auto"] == "led" for c in cases])
     return {
         "led": (led, column("led:ratio") > MISS_RATIO, LED_WARNING),

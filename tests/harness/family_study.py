@@ -25,7 +25,7 @@ from tests.harness.render import HarnessCase
 from tests.harness.run import CACHE_ENV, cached_render
 
 BAND_SCALES = (0.5, 1.0, 2.0, 4.0)
-TEMPERATURES = (0.01, 0.02, 0.05, 0.1, 0.2)
+TEMPERATURES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5)
 
 
 def _paper_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
@@ -135,6 +135,11 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
         case_row[f"led_cov:{gamma}"] = metrics.band_coverage(
             led_spectrum, np.sqrt(led_std**2 + gamma * gap**2), truth_ambient
         )
+    # Evidence features of the family model's own miss risk: its estimate's LED bound and the LEDs' span's noise share.
+    case_row["family_bound"] = float(metrics.led_bound(truth.led_spd, family_spectrum))
+    case_row["led_held_out"] = estimate.led.held_out_error
+    case_row["led_held_out_clean"] = estimate.led.held_out_error_noise_removed
+    case_row["chosen_held_out_clean"] = chosen.held_out_error_noise_removed
     case_row["prior_band"] = float(
         np.sqrt(np.mean((in_unit(prior.spectrum_std) / max(float(np.max(prior_spectrum)), 1e-300)) ** 2))
     )

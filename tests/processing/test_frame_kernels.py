@@ -331,3 +331,34 @@ def test_small_one_off_work_does_not_pay_numbas_start_up(threshold: int, expecte
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.split("\n")[-2] == expected
+
+
+@pytest.mark.parametrize(
+    ("shape", "cfa", "factor"), [((70, 98, 3), None, 4), ((66, 90), "GRBG", 4), ((37, 53, 3), None, 3)]
+)
+def test_channel_statistics_are_the_same_on_both_routes_to_the_bit(
+    shape: tuple[int, ...], cfa: str | None, factor: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The light prior's and the families' channel-resolved moments (:mod:`processing.channel_statistics`) take the
+    compiled block pass where it is loaded: the same block sums, half differences and saturated blocks as numpy's, so
+    the same moments per fold — odd sizes, a mosaic, saturated pixels, an odd block (no probe)."""
+    from msflash.processing.channel_statistics import accumulate_channel_statistics
+
+    ambient, frames, spec = _frames(shape, 3, seed=5)
+    results = {}
+    for name in ("numpy", "numba"):
+        monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, name)
+        frame_kernels._compiled.cache_clear()
+        if name == "numba" and not frame_kernels.enabled():
+            frame_kernels._compiled.cache_clear()
+            pytest.skip("numba is not installed")
+        results[name] = accumulate_channel_statistics(ambient, frames, spec, cfa=cfa, bin_factor=factor)
+    frame_kernels._compiled.cache_clear()
+    numpy_route, compiled = results["numpy"], results["numba"]
+    assert numpy_route.n_blocks < numpy_route.n_blocks_total  # saturated blocks are out on both routes
+    assert np.array_equal(numpy_route.counts, compiled.counts)
+    for name in ("ff", "fa", "aa"):
+        assert np.array_equal(getattr(numpy_route.moments, name), getattr(compiled.moments, name))
+        if factor % 2 == 0:
+            assert np.array_equal(getattr(numpy_route.noise, name), getattr(compiled.noise, name))
+    assert (numpy_route.noise is None) == (factor % 2 == 1) == (compiled.noise is None)
