@@ -107,17 +107,28 @@ class PreviewRenderer:
         """The preview of one raw frame; ``overlay`` paints the saturated pixels."""
         rgb = self.camera_rgb(pixels)
         saturated = np.any(rgb >= 1.0 - SATURATION_MARGIN, axis=2)
+        return self.render_rgb(rgb, saturated if overlay else None, float(np.mean(saturated)))
+
+    def render_rgb(self, rgb: np.ndarray, paint: np.ndarray | None = None, saturated: float | None = None) -> Preview:
+        """The preview of (H, W, 3) camera RGB in [0, 1] of display white; ``paint`` marks pixels in
+        :data:`OVERLAY_RGB`; ``saturated`` is the fraction reported (default: ``paint``'s)."""
         bins = np.clip(rgb * HISTOGRAM_BINS, 0, HISTOGRAM_BINS - 1).astype(np.intp)
         histogram = tuple(
             tuple(int(n) for n in np.bincount(bins[:, :, c].ravel(), minlength=HISTOGRAM_BINS)) for c in range(3)
         )
         steps = np.clip(rgb @ self._to_srgb.T, 0, ENCODE_STEPS).astype(np.intp)
         rgb8 = self._encode[steps]
-        if overlay:
-            rgb8[saturated] = OVERLAY_RGB
+        if paint is not None:
+            rgb8[paint] = OVERLAY_RGB
+        if saturated is None:
+            saturated = float(np.mean(paint)) if paint is not None else 0.0
         height = max(1, round(rgb8.shape[0] * self.width / rgb8.shape[1]))
         resample = Image.Resampling.NEAREST if self.width >= rgb8.shape[1] else Image.Resampling.BOX
         image = Image.fromarray(rgb8).resize((self.width, height), resample)
         buffer = io.BytesIO()
         image.save(buffer, "JPEG", quality=JPEG_QUALITY)
-        return Preview(buffer.getvalue(), self.width, height, histogram, float(np.mean(saturated)))
+        return Preview(buffer.getvalue(), self.width, height, histogram, saturated)
+
+    def srgb8(self, rgb: np.ndarray) -> np.ndarray:
+        """(H, W, 3) camera RGB in [0, 1] → 8-bit sRGB (the preview's colour step, no resize)."""
+        return self._encode[np.clip(rgb @ self._to_srgb.T, 0, ENCODE_STEPS).astype(np.intp)]
