@@ -25,6 +25,7 @@ from msflash.acquisition.app.live.runs import read_json
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.analysis import FrameStack, load_frame_stack
+from msflash.processing import frame_kernels
 from msflash.processing.render import demosaic_superpixel
 from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import synthesize
@@ -36,19 +37,20 @@ WHITE_PERCENTILE = 99.5
 def preview_samples(raw: np.ndarray, cfa: str | None, width: int) -> np.ndarray:
     """The samples of ``raw`` a ``width``-pixel preview needs, contiguous, of ``raw``'s type.
 
-    A mosaic keeps whole 2×2 CFA cells (every ``step``-th cell, ``step`` even), so its superpixel debayer is
-    at least ``width`` wide; other frames keep every ``step``-th pixel. The same cut of ``synthesize``'s full
-    image gives the preview's image sample for sample (synthesis is per sample).
+    A mosaic keeps whole 2×2 CFA cells (one cell in every ``step / 2`` of each row and column), so its superpixel
+    debayer is the whole number of cells nearest ``width``; other frames keep every ``step``-th pixel, nearest
+    ``width`` too. The same cut of ``synthesize``'s full image gives the preview's image sample for sample
+    (synthesis is per sample).
     """
     frame = np.asarray(raw)
     if frame.ndim == 2 and cfa is not None:
-        step = max(1, frame.shape[1] // (2 * width)) * 2
+        step = max(1, round(frame.shape[1] / 2 / width)) * 2
         if step > 2:
             rows, columns = frame.shape[0] // step * step, frame.shape[1] // step * step
             cells = frame[:rows, :columns].reshape(rows // step, step, columns // step, step)[:, :2, :, :2]
             return np.ascontiguousarray(cells.reshape(rows // step * 2, columns // step * 2))
         return np.ascontiguousarray(frame)
-    step = max(1, frame.shape[1] // width)
+    step = max(1, round(frame.shape[1] / width))
     return np.ascontiguousarray(frame[::step, ::step])
 
 
@@ -99,6 +101,8 @@ class MixPreview:
         self.led_names = led_names
         self.spec: FrameStackSpec = stack.spec
         self.renderer = renderer
+        # The preview sums these frames again for every mix: the compiled pass pays off whatever their size.
+        frame_kernels.wanted(frame_kernels.COMPILE_BYTES)
         self.ambient = preview_samples(stack.ambient, self.cfa, renderer.width)
         self.led_frames = tuple(preview_samples(frame, self.cfa, renderer.width) for frame in stack.led_frames)
         self.solved = dict(solved)

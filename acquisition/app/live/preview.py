@@ -112,12 +112,13 @@ class PreviewRenderer:
     def render_rgb(self, rgb: np.ndarray, paint: np.ndarray | None = None, saturated: float | None = None) -> Preview:
         """The preview of (H, W, 3) camera RGB in [0, 1] of display white; ``paint`` marks pixels in
         :data:`OVERLAY_RGB`; ``saturated`` is the fraction reported (default: ``paint``'s)."""
-        bins = np.clip(rgb * HISTOGRAM_BINS, 0, HISTOGRAM_BINS - 1).astype(np.intp)
+        # Small integer types and in-place clips: at video rate the passes over the pixels are the cost.
+        scaled = np.multiply(rgb, HISTOGRAM_BINS, dtype=np.float32)
+        bins = np.clip(scaled, 0, HISTOGRAM_BINS - 1, out=scaled).astype(np.uint8)
         histogram = tuple(
             tuple(int(n) for n in np.bincount(bins[:, :, c].ravel(), minlength=HISTOGRAM_BINS)) for c in range(3)
         )
-        steps = np.clip(rgb @ self._to_srgb.T, 0, ENCODE_STEPS).astype(np.intp)
-        rgb8 = self._encode[steps]
+        rgb8 = self.srgb8(rgb)
         if paint is not None:
             rgb8[paint] = OVERLAY_RGB
         if saturated is None:
@@ -131,4 +132,5 @@ class PreviewRenderer:
 
     def srgb8(self, rgb: np.ndarray) -> np.ndarray:
         """(H, W, 3) camera RGB in [0, 1] → 8-bit sRGB (the preview's colour step, no resize)."""
-        return self._encode[np.clip(rgb @ self._to_srgb.T, 0, ENCODE_STEPS).astype(np.intp)]
+        linear = np.asarray(rgb, dtype=np.float32) @ self._to_srgb.T
+        return self._encode[np.clip(linear, 0, ENCODE_STEPS, out=linear).astype(np.uint16)]
