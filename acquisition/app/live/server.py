@@ -116,6 +116,10 @@ class LiveServer:
         self.stream = LiveStream(rig)
         info = rig.camera.info  # read once: on a real camera each read is feature round trips
         self.camera_model = info.model
+        self.camera_format = (
+            f"{info.pixel_format} · {info.width} × {info.height} px · ROI, binning and pixel format are the "
+            "camera's own (msflash's camera layer does not set them yet)"
+        )
         self.renderer = PreviewRenderer(info, rig.camera_responsivities)
         self.state = LiveState()
         self.rig_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="msflash-rig")
@@ -137,6 +141,8 @@ class LiveServer:
         self._mix_wanted: tuple[float, ...] | None = None
         self._mix_rendering = False
         self._last_raw: RawFrame | None = None
+        self._view_frames: dict[str, bytes] = {}
+        """The last frame of each flash-preview view, for pages that connect later."""
         self._last_mix_linear: np.ndarray | None = None
         self.live_frames = 0
         """Live frames grabbed (the page counts gaps in their numbers as dropped frames)."""
@@ -345,6 +351,7 @@ class LiveServer:
                 "runs": list_runs(self.runs),
                 "mix": self._mix_json(),
                 "camera_gain": self._camera_gain(),
+                "camera_format": self.camera_format,
             }
         )
 
@@ -520,10 +527,12 @@ class LiveServer:
         renderer = self.renderer
         mix = await asyncio.get_running_loop().run_in_executor(None, MixPreview.from_run, folder, renderer)
         self.mix, self.mix_capture = mix, None
+        self._view_frames.pop("mix-capture", None)
         self.mix_levels = mix.solved.get(self.state.mode, (0.0,) * len(mix.led_names))
         ambient = await asyncio.get_running_loop().run_in_executor(None, mix.image, (0.0,) * len(mix.led_names))
         await self._send_frame(ambient.preview, source=f"ambient of {mix.run}", view="mix-ambient")
         self._want_mix(self.mix_levels)
+        await self._push_state()
 
     async def _load_newest_mix(self) -> None:
         """At start: the newest run with a readable sequence, so the preview works after a restart."""
@@ -645,7 +654,10 @@ class LiveServer:
         finally:
             self.stream.pause()
             self.stream.set_exposure(before.exposure_us, before.gain)
-            self._restore_levels()
+            if self.clients and any(before.levels):  # the live levels again, as after a sequence
+                self.stream.set_levels(before.levels)
+            else:
+                self.stream.all_off()
 
     async def _post_snapshot(self, request: web.Request) -> web.Response:
         """The last live frame as a raw TIFF and an sRGB PNG in the runs folder's ``snapshots/``."""
@@ -708,6 +720,8 @@ class LiveServer:
         self._watching.set()
         try:
             await page.send_now(json.dumps({"type": "state", "state": self.state_json()}))
+            for view, message in list(self._view_frames.items()):
+                page.offer_frame(message, view)
             if not page.dropped:
                 async for message in ws:  # the page sends nothing: commands are token-carrying POSTs
                     if message.type == WSMsgType.ERROR:
@@ -785,8 +799,10 @@ class LiveServer:
             }
         ).encode()
         message = struct.pack("<I", len(header)) + header + preview.jpeg
+        if view != "live":
+            self._view_frames[view] = message  # a page that connects later is shown the flash preview too
         for page in list(self.clients):
-            page.offer_frame(message)  # the latest frame only; never waits on a page (clients.py)
+            page.offer_frame(message, view)  # the view's latest frame only; never waits on a page (clients.py)
 
 
 _NO_STORE = {"Cache-Control": "no-store"}
