@@ -720,8 +720,8 @@ class LiveServer:
         self._watching.set()
         try:
             await page.send_now(json.dumps({"type": "state", "state": self.state_json()}))
-            for view, message in list(self._view_frames.items()):
-                page.offer_frame(message, view)
+            for view, frame in list(self._view_frames.items()):
+                page.offer_frame(frame, view)
             if not page.dropped:
                 async for message in ws:  # the page sends nothing: commands are token-carrying POSTs
                     if message.type == WSMsgType.ERROR:
