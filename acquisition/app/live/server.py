@@ -314,11 +314,12 @@ class LiveServer:
         }
 
     async def _get_run(self, request: web.Request) -> web.Response:
-        return web.json_response(finite(self._run_info(request.match_info["name"])))
+        loop = asyncio.get_running_loop()  # the charts are drawn by matplotlib: off the event loop
+        return web.json_response(finite(await loop.run_in_executor(None, self._run_info, request.match_info["name"])))
 
     async def _run_page(self, request: web.Request) -> web.StreamResponse:
         """The run's own ``report.html`` (what ``msflash run`` writes); the page's summary for a run without one."""
-        info = self._run_info(request.match_info["name"])
+        info = await asyncio.get_running_loop().run_in_executor(None, self._run_info, request.match_info["name"])
         if "report.html" in info["files"]:
             raise web.HTTPFound(f"/runs/{info['name']}/files/report.html")
         return web.Response(text=run_page(info), content_type="text/html")
