@@ -1,4 +1,4 @@
-"""The live page at 1024 px and 1920 px in headless Chromium (issue 33): zoom, the pixel readout, fps, a snapshot,
+"""The live page at 1024 px, 1920 px and 4K in headless Chromium (issue 33): zoom, the pixel readout, fps, a snapshot,
 the flash before it fires (presets, a slider, Fire the mix shown), the keyboard, and a large disconnected state.
 
 A real sim rig and its booth emulator on a pty; the LED levels are read at the emulator's end. Each test leaves
@@ -62,7 +62,7 @@ def chromium(width: int, height: int) -> object:
     return driver
 
 
-@pytest.fixture(params=[(1024, 900), (1920, 1200)], ids=["1024px", "1920px"])
+@pytest.fixture(params=[(1024, 900), (1920, 1200), (3840, 2160)], ids=["1024px", "1920px", "4K"])
 def browser(request: pytest.FixtureRequest) -> Iterator[object]:
     driver = chromium(*request.param)
     try:
@@ -165,6 +165,9 @@ def test_the_page_zooms_reads_pixels_snapshots_previews_the_flash_and_shows_a_lo
         assert server.stream.settings.levels == (0.0,) * 7  # the live levels as before the mix fired: all off
         assert emulator_levels(server) == (0.0,) * 7
         wait_until(lambda: js(driver, "return document.getElementById('mix-capture').naturalWidth") > 0, "its image")
+        # The run's charts beside it: matplotlib's SVG, the estimate's band clipped to the axes.
+        wait_until(lambda: driver.find_elements("css selector", "#charts svg g#band g[clip-path]"), "the charts")
+        assert js(driver, "return document.documentElement.scrollWidth") <= width
         js(driver, "window.scrollTo(0, 0)")
         shot(driver, tmp_path, f"live-{width}")
 
@@ -183,7 +186,7 @@ def test_the_page_zooms_reads_pixels_snapshots_previews_the_flash_and_shows_a_lo
     # The server is gone: the page greys the image and says so, large, with a reconnect button.
     wait_until(lambda: js(driver, "return document.body.dataset.connection") == "disconnected", "the lost server")
     box = driver.find_element("id", "disconnected")
-    assert box.is_displayed() and "Disconnected" in box.text and "server" in box.text
+    assert box.is_displayed() and "Disconnected" in box.text and "server stopping" in box.text  # the close reason
     assert js(driver, "return getComputedStyle(arguments[0]).filter", image).startswith("grayscale")
     assert driver.find_element("id", "reconnect").is_displayed()
     driver.find_element("id", "reconnect").click()  # nobody answers: still disconnected, still saying why

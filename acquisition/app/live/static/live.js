@@ -321,6 +321,7 @@ function renderMix(mix) {
   $("flash-preview").dataset.run = mix ? mix.run : "";
   if (!mix) return;
   $("mix-run").textContent = `from ${mix.run}`;
+  if (mix.run !== shownRun && (!state || state.job.status !== "running")) showRun(mix.run);
   const box = $("mix-leds");
   if (box.dataset.run !== mix.run) {
     box.dataset.run = mix.run;
@@ -366,6 +367,7 @@ $("mix-complementary").addEventListener("click", () => sendMix({ preset: "comple
 $("mix-ambient-only").addEventListener("click", () => sendMix({ preset: "ambient" }));
 $("mix-fire").addEventListener("click", async () => {
   $("mix-fire").disabled = true;
+  while (mixPosting || mixPending) await new Promise((resolve) => setTimeout(resolve, 20));  // the mix shown is sent
   const reply = await post("/api/mix-fire", { levels: mixLevels });
   $("mix-fire").disabled = false;
   if (reply && reply.mix) renderMix(reply.mix);
@@ -398,7 +400,13 @@ function connect() {
   };
   ws.onclose = (event) => {
     if (socket !== ws) return;
-    closedReason = event.reason ? `the server closed the connection: ${event.reason}` : "the server does not answer (stopped, or the network is down); retrying every 2 s";
+    const since = new Date().toLocaleTimeString();
+    if (event.reason) closedReason = `the server closed the connection: ${event.reason} (${since}); retrying every 2 s`;
+    else if (!closedReason) closedReason = `the server does not answer (stopped, or the network is down; ${since}); retrying every 2 s`;
+    else closedReason = closedReason.replace(/; no answer since .*$/, "") + `; no answer since ${since}`;
+    liveArrivals.length = 0;
+    $("fps").textContent = "–";
+    $("fps").dataset.fps = 0;
     $("connection").textContent = "disconnected";
     $("connection").className = "badge off";
     showDisconnected();
