@@ -107,11 +107,18 @@ class MixPreview:
         self.led_frames = tuple(preview_samples(frame, self.cfa, renderer.width) for frame in stack.led_frames)
         self.solved = dict(solved)
         brightest = 0.0
+        saturated: np.ndarray = np.zeros(self.ambient.shape[:2], dtype=bool)
         for levels in [(0.0,) * len(led_names), *self.solved.values()]:
-            linear, _ = self.synthesize(levels)
+            linear, saturated = self.synthesize(levels)
             brightest = max(brightest, float(np.percentile(self.rgb(linear), WHITE_PERCENTILE)))
         self.white = brightest if brightest > 0 else 1.0
         """The linear value shown as display white."""
+        # Saturated in some input frame: the same samples whatever the mix (synthesize's mask), drawn per pixel.
+        self.paint: np.ndarray = saturated
+        if self.cfa is not None:  # one flag per superpixel: any of its cell's samples
+            rows, columns = saturated.shape[0] // 2, saturated.shape[1] // 2
+            cells = saturated[: rows * 2, : columns * 2].reshape(rows, 2, columns, 2)
+            self.paint = np.asarray(cells.any(axis=(1, 3)))
 
     @classmethod
     def from_run(cls, run: Path, renderer: PreviewRenderer) -> MixPreview:
@@ -161,16 +168,14 @@ class MixPreview:
     def rgb(self, linear: np.ndarray) -> np.ndarray:
         """Camera RGB of a linear image of the preview's samples (a mosaic's superpixels)."""
         if linear.ndim == 2 and self.cfa is not None:
-            return demosaic_superpixel(linear, self.cfa)
+            return demosaic_superpixel(linear, self.cfa, np.float32)
         return linear if linear.ndim == 3 else np.repeat(linear[:, :, None], 3, axis=2)
 
     def image(self, levels: tuple[float, ...], overlay: bool = True) -> MixImage:
         """The image under ``levels`` (drive levels, one per LED), rendered for the page."""
         linear, saturated = self.synthesize(levels)
-        rgb = self.rgb(linear) / self.white
-        mask: np.ndarray = saturated
-        if linear.ndim == 2 and self.cfa is not None:
-            cells = saturated[: rgb.shape[0] * 2, : rgb.shape[1] * 2]
-            mask = np.asarray(cells.reshape(rgb.shape[0], 2, rgb.shape[1], 2).any(axis=(1, 3)))
-        preview = self.renderer.render_rgb(rgb.astype(np.float32), mask if overlay else None)
+        paint = self.paint if overlay else None
+        preview = self.renderer.render_rgb(
+            self.rgb(linear), paint, float(np.mean(self.paint)), scale=1.0 / self.white, histogram=False
+        )
         return MixImage(levels, linear, saturated, preview)

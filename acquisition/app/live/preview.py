@@ -109,16 +109,26 @@ class PreviewRenderer:
         saturated = np.any(rgb >= 1.0 - SATURATION_MARGIN, axis=2)
         return self.render_rgb(rgb, saturated if overlay else None, float(np.mean(saturated)))
 
-    def render_rgb(self, rgb: np.ndarray, paint: np.ndarray | None = None, saturated: float | None = None) -> Preview:
-        """The preview of (H, W, 3) camera RGB in [0, 1] of display white; ``paint`` marks pixels in
-        :data:`OVERLAY_RGB`; ``saturated`` is the fraction reported (default: ``paint``'s)."""
+    def render_rgb(
+        self,
+        rgb: np.ndarray,
+        paint: np.ndarray | None = None,
+        saturated: float | None = None,
+        scale: float = 1.0,
+        histogram: bool = True,
+    ) -> Preview:
+        """The preview of (H, W, 3) camera RGB, ``rgb · scale`` in [0, 1] of display white; ``paint`` marks
+        pixels in :data:`OVERLAY_RGB`; ``saturated`` is the fraction reported (default: ``paint``'s); without
+        ``histogram`` its counts are all zero (a view that shows none: the flash preview)."""
         # Small integer types and in-place clips: at video rate the passes over the pixels are the cost.
-        scaled = np.multiply(rgb, HISTOGRAM_BINS, dtype=np.float32)
-        bins = np.clip(scaled, 0, HISTOGRAM_BINS - 1, out=scaled).astype(np.uint8)
-        histogram = tuple(
-            tuple(int(n) for n in np.bincount(bins[:, :, c].ravel(), minlength=HISTOGRAM_BINS)) for c in range(3)
-        )
-        rgb8 = self.srgb8(rgb)
+        counts: tuple[tuple[int, ...], ...] = ((0,) * HISTOGRAM_BINS,) * 3
+        if histogram:
+            scaled = np.multiply(rgb, HISTOGRAM_BINS * scale, dtype=np.float32)
+            bins = np.clip(scaled, 0, HISTOGRAM_BINS - 1, out=scaled).astype(np.uint8)
+            counts = tuple(
+                tuple(int(n) for n in np.bincount(bins[:, :, c].ravel(), minlength=HISTOGRAM_BINS)) for c in range(3)
+            )
+        rgb8 = self.srgb8(rgb, scale)
         if paint is not None:
             rgb8[paint] = OVERLAY_RGB
         if saturated is None:
@@ -128,9 +138,10 @@ class PreviewRenderer:
         image = Image.fromarray(rgb8).resize((self.width, height), resample)
         buffer = io.BytesIO()
         image.save(buffer, "JPEG", quality=JPEG_QUALITY)
-        return Preview(buffer.getvalue(), self.width, height, histogram, saturated)
+        return Preview(buffer.getvalue(), self.width, height, counts, saturated)
 
-    def srgb8(self, rgb: np.ndarray) -> np.ndarray:
-        """(H, W, 3) camera RGB in [0, 1] → 8-bit sRGB (the preview's colour step, no resize)."""
-        linear = np.asarray(rgb, dtype=np.float32) @ self._to_srgb.T
+    def srgb8(self, rgb: np.ndarray, scale: float = 1.0) -> np.ndarray:
+        """(H, W, 3) camera RGB, ``rgb · scale`` in [0, 1] → 8-bit sRGB (the preview's colour step, no resize)."""
+        matrix = self._to_srgb.T if scale == 1.0 else (self._to_srgb.T * np.float32(scale)).astype(np.float32)
+        linear = np.asarray(rgb, dtype=np.float32) @ matrix
         return self._encode[np.clip(linear, 0, ENCODE_STEPS, out=linear).astype(np.uint16)]

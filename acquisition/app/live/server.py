@@ -636,7 +636,7 @@ class LiveServer:
             "gain": frame.gain,
             "warning": pwm_note,
         }
-        captured = self.renderer.render_rgb((mix.rgb(linear) / mix.white).astype(np.float32))  # the mix's scale
+        captured = self.renderer.render_rgb(mix.rgb(linear), scale=1.0 / mix.white, histogram=False)  # the mix's scale
         await self._send_frame(captured, source=f"captured with the mix ({mix.run})", view="mix-capture")
         await self._push_state()
         return web.json_response({"mix": finite(self._mix_json())})
