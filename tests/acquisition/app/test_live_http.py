@@ -256,6 +256,7 @@ def test_a_sequence_at_the_live_exposure_and_a_second_fire_while_it_runs(tmp_pat
         matching = mixes[mixes.index('<g id="mix-matching-flash">') :].split("</g>")[0]
         assert f"stroke: {PALETTE.matching.lower()}" in matching.lower()
         assert "wavelength (nm)" in ambient and SPECTRAL_AXIS_LABEL.split(" (")[0] in ambient
+        assert "<clipPath id=" in ambient  # what leaves the axes is clipped to them (the band did not)
 
 
 def test_a_wildcard_address_is_refused() -> None:

@@ -132,9 +132,16 @@ function renderJob(job) {
 
 async function showRun(name) {
   shownRun = name;
-  const response = await fetch(`/api/runs/${encodeURIComponent(name)}`, { headers: { "X-Msflash-Token": token } });
-  if (!response.ok) return;
-  const run = await response.json();
+  let run = null;
+  try {
+    const response = await fetch(`/api/runs/${encodeURIComponent(name)}`, { headers: { "X-Msflash-Token": token } });
+    if (response.ok) run = await response.json();
+  } catch (err) { run = null; }
+  if (!run) {  // the server did not answer (busy, or gone for a moment): ask again
+    if (shownRun === name) shownRun = null;
+    setTimeout(() => { if (shownRun === null) showRun(name); }, 2000);
+    return;
+  }
   const link = $("result-link");
   link.href = `/runs/${encodeURIComponent(name)}/`;
   link.textContent = `report of ${name}`;
