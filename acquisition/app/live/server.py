@@ -477,8 +477,8 @@ class LiveServer:
             job.status = "done"
             try:
                 await self._load_mix(folder.name)
-            except UsageError as err:
-                log.error("live: the preview of %s could not be loaded: %s", folder.name, err)
+            except Exception as err:  # noqa: BLE001 - the run stands; only its flash preview is missing
+                log.error("live: the flash preview of %s could not be loaded: %s", folder.name, err)
             rmse = summary.get("spectrum_rmse_vs_truth")
             job.message = f"done in {summary['elapsed_s']:.1f} s" + (
                 f"; spectrum RMSE against the true ambient {rmse:.4f}" if rmse is not None else ""
@@ -541,7 +541,8 @@ class LiveServer:
             try:
                 await self._load_mix(run["name"])
                 return
-            except UsageError:
+            except Exception as err:  # noqa: BLE001 - an unreadable run: try the one before
+                log.info("live: no flash preview from %s: %s", run["name"], err)
                 continue
 
     def _want_mix(self, levels: tuple[float, ...]) -> None:
@@ -559,6 +560,8 @@ class LiveServer:
                 image = await asyncio.get_running_loop().run_in_executor(None, mix.image, levels, self.state.overlay)
                 self._last_mix_linear = image.linear
                 await self._send_frame(image.preview, source=f"synthesised from {mix.run}", view="mix")
+        except Exception as err:  # noqa: BLE001 - logged; the devices are not involved, the next mix tries again
+            log.error("live: synthesising the mix failed: %s", err)
         finally:
             self._mix_rendering = False
 
