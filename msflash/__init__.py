@@ -89,6 +89,12 @@ def estimate_ambient(
     ``alpha="auto"``), and a band holding pixel noise and the LED model's own error
     (docs/ambient-estimate.md). The numbers are the command's to the last digit, in its unit.
 
+    ``method`` is a name of the one method table
+    (:data:`msflash.acquisition.session.one_sequence.ESTIMATE_METHODS`): ``global``, ``local``, ``auto`` (the
+    LED span, one ambient or tiles), ``prior``, ``family`` or ``models`` (the light models beyond the LEDs'
+    span; ``models`` is ``--model auto``). The frames are read one at a time (peak memory about one frame
+    plus the statistics).
+
     Returns
     -------
     SequenceEstimate
@@ -96,17 +102,30 @@ def estimate_ambient(
         ``spectrum`` holds), ``.ambient_weights`` (w_a), ``.spectrum_std`` (±1σ, same unit;
         ``.band_meaning`` says what it covers), ``.warnings`` and ``.payload``, the whole JSON object.
     """
-    from msflash.acquisition.session.one_sequence import EstimateSettings, SequenceEstimate, estimate_read
+    from msflash.acquisition.session.one_sequence import (
+        LIGHT_MODELS,
+        EstimateSettings,
+        SequenceEstimate,
+        estimate_read,
+        with_method,
+    )
 
     defaults = EstimateSettings()
     settings = EstimateSettings(
         solver=solver,
         alpha=alpha,
-        method=method,
         model=model,
         tiles=defaults.tiles if tiles is None else tiles,
         bin_factor=defaults.bin_factor if bin_factor is None else bin_factor,
     )
+    # One method table: a light model's name (prior, family, models) picks it; global|local|auto the LED span's
+    # (and, with model=prior|family|auto, how the LED side beside the light models is taken).
+    if method in LIGHT_MODELS or model == "led":
+        settings = with_method(settings, method)
+    else:
+        from dataclasses import replace
+
+        settings = replace(settings, method=method)
     return SequenceEstimate.of(estimate_read(sequence, settings, _log.warning))
 
 
@@ -146,7 +165,7 @@ def synthesize_flash(sequence: Sequence, flash: FlashSolution | np.ndarray) -> n
     from msflash.acquisition.session.analysis import synthesize_sequence
 
     weights = flash.flash_weights if hasattr(flash, "flash_weights") else np.asarray(flash, dtype=float)
-    image, _saturated, _stack = synthesize_sequence(sequence, weights)
+    image, _saturated, _frames = synthesize_sequence(sequence, weights)
     return image
 
 

@@ -30,8 +30,8 @@ from msflash.processing.spectra import Spectra, WavelengthGrid, require_same_gri
 CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 
 
-def demosaic_superpixel(mosaic: np.ndarray, cfa: str) -> np.ndarray:
-    """Half-resolution RGB from a raw mosaic: each 2×2 cell gives one pixel (greens averaged).
+def demosaic_superpixel(mosaic: np.ndarray, cfa: str, dtype: type = np.float64) -> np.ndarray:
+    """Half-resolution RGB from a raw mosaic: each 2×2 cell gives one pixel (greens averaged), of ``dtype``.
 
     Exact (no interpolation) and fast; meant for previews and for per-patch colour, not for
     full-resolution output.
@@ -58,6 +58,13 @@ def demosaic_superpixel(mosaic: np.ndarray, cfa: str) -> np.ndarray:
         "GRBG": ((0, 1), ((0, 0), (1, 1)), (1, 0)),
         "GBRG": ((1, 0), ((0, 0), (1, 1)), (0, 1)),
     }[cfa]
+    if dtype != np.float64:  # written in place, one pass a channel (the live flash preview, at video rate)
+        out = np.empty((height // 2, width // 2, 3), dtype=dtype)
+        out[..., 0] = cells[positions[0]]
+        np.add(cells[positions[1][0]], cells[positions[1][1]], out=out[..., 1], dtype=dtype)
+        out[..., 1] *= 0.5
+        out[..., 2] = cells[positions[2]]
+        return out
     red = cells[positions[0]].astype(np.float64)
     green = 0.5 * (cells[positions[1][0]].astype(np.float64) + cells[positions[1][1]])
     blue = cells[positions[2]].astype(np.float64)

@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
@@ -159,6 +159,10 @@ class NoiseMoments:
         return NoiseMoments(
             self.gram + other.gram, self.cross + other.cross, self.ambient_energy + other.ambient_energy
         )
+
+
+CHANNEL_BAND_VALUES = 1 << 17
+"""How many values (all rows together) :meth:`BlockRows._channel_moments` puts in channel order at a time."""
 
 
 @dataclass(frozen=True)
@@ -849,11 +853,13 @@ class BlockRows:
         if self._excluded is not None:
             self.rows[ones, self._excluded] = 0.0
         every = self._filled  # the ambient row's own products are taken by add() right after
-        self._moments[np.ix_(every, every)] = _gram(self.rows[every], DEFAULT_CHUNK_PIXELS * self.block_shape[1])
+        chunk = DEFAULT_CHUNK_PIXELS * self.block_shape[1]
+        # The ambient first (the usual order) leaves the ones row alone: a (1, K) gram is BLAS's threaded
+        # dot, whose wake-ups on a busy machine cost 10-20 ms; its product in slices (_row_products) does not.
+        gram = (lambda rows: _row_products(rows, 0)[:, None]) if len(every) == 1 else (lambda rows: _gram(rows, chunk))
+        self._moments[np.ix_(every, every)] = gram(self.rows[every])
         if self._noise is not None and self.differences is not None:
-            self._noise[np.ix_(every, every)] = _gram(
-                self.differences[every], DEFAULT_CHUNK_PIXELS * self.block_shape[1]
-            )
+            self._noise[np.ix_(every, every)] = gram(self.differences[every])
 
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
@@ -1006,26 +1012,58 @@ class BlockRows:
             column_factor = np.divide(
                 1.0, self.root_weights, out=np.zeros_like(self.root_weights), where=self.root_weights > 0
             )
-        values = self.rows if column_factor is None else self.rows * column_factor
-        by_channel = values.reshape(n_rows, height, channels, width).transpose(0, 2, 1, 3).reshape(n_rows, channels, -1)
         transform = _channel_transform(spec, spec.black_level * self.factor * self.factor)
         k = spec.n_leds
-        blocks = int(np.count_nonzero(by_channel[n_rows - 1].any(axis=0))) if n_rows else 0
 
         def mapped(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             images = np.tensordot(transform, rows, axes=(1, 0))  # (k + 1, C, blocks): each LED's, then the ambient's
             leds, ambient = images[:k], images[k]
             return leds @ ambient.T, leds @ leds.transpose(0, 2, 1), ambient @ ambient.T
 
-        fa, ff, aa = mapped(by_channel)
+        def summed(parts: Iterator[np.ndarray]) -> tuple[np.ndarray, ...]:
+            total: list[np.ndarray] | None = None
+            for part in parts:
+                moments = mapped(part)
+                total = list(moments) if total is None else [a + b for a, b in zip(total, moments, strict=True)]
+            assert total is not None
+            return tuple(total)
+
+        # A band of block rows at a time (the moments are sums over blocks): the rows' copy in channel order stays
+        # about a megabyte whatever the frame count, so an estimate's peak stays one frame plus the statistics.
+        band = max(1, CHANNEL_BAND_VALUES // max(1, n_rows * channels * width))
+        row_values = height * channels * width
+
+        def rows_by_channel() -> Iterator[np.ndarray]:
+            for top in range(0, height, band):
+                cut = slice(top * channels * width, min(top + band, height) * channels * width)
+                values = self.rows[:, cut] if column_factor is None else self.rows[:, cut] * column_factor[cut]
+                tall = values.shape[1] // (channels * width)
+                yield values.reshape(n_rows, tall, channels, width).transpose(0, 2, 1, 3).reshape(n_rows, channels, -1)
+
+        assert self.rows.shape[1] == row_values
+        last_row = self.rows[n_rows - 1] if column_factor is None else self.rows[n_rows - 1] * column_factor
+        last = last_row.reshape(height, channels, width)
+        blocks = int(np.count_nonzero(last.any(axis=1))) if n_rows else 0
+        fa, ff, aa = summed(rows_by_channel())
         noise: tuple[np.ndarray | None, ...] = (None, None, None)
         if self.differences is not None and probe_scale is not None:
-            probe = self.differences
-            if column_factor is not None:
-                probe = probe * self._at_probe(column_factor)
             probed = self.difference_shape
-            probe_rows = probe.reshape(n_rows, probed[0], probed[1], channels).transpose(0, 3, 1, 2)
-            noise = tuple(part * probe_scale for part in mapped(probe_rows.reshape(n_rows, channels, -1)))
+            at_probe = None if column_factor is None else self._at_probe(column_factor)
+            probe_band = max(1, CHANNEL_BAND_VALUES // max(1, n_rows * channels * probed[1]))
+
+            def probe_by_channel() -> Iterator[np.ndarray]:
+                assert self.differences is not None
+                for top in range(0, probed[0], probe_band):
+                    cut = slice(top * probed[1] * channels, min(top + probe_band, probed[0]) * probed[1] * channels)
+                    values = self.differences[:, cut] if at_probe is None else self.differences[:, cut] * at_probe[cut]
+                    tall = values.shape[1] // (probed[1] * channels)
+                    yield (
+                        values.reshape(n_rows, tall, probed[1], channels)
+                        .transpose(0, 3, 1, 2)
+                        .reshape(n_rows, channels, -1)
+                    )
+
+            noise = tuple(part * probe_scale for part in summed(probe_by_channel()))
         return ChannelMoments(fa, ff, aa, blocks, *noise)
 
 

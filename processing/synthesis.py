@@ -277,3 +277,74 @@ def to_raw_values(
     values = image.astype(np.float64) * (exposure_us * gain) + black_level
     values = np.clip(np.rint(values), 0, white_level)
     return values.astype(dtype)
+
+
+class SynthesisStream:
+    """The computational flash image of :func:`synthesize`, summed one frame at a time.
+
+    Add the ambient frame first, then the LED frames in order (:meth:`add`); each may be let go after.
+    The sum runs in float64 in that order and is rounded once to ``dtype`` (:meth:`result`): the
+    arithmetic of :func:`synthesize`, step for step, so both give the same image bit for bit. Peak
+    memory is the float64 sum (four 16-bit frames' worth) and one frame, whatever the frame count.
+    """
+
+    def __init__(
+        self,
+        spec: FrameStackSpec,
+        flash_weights: np.ndarray,
+        shape: tuple[int, ...],
+        *,
+        chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
+        dtype: type = np.float32,
+    ) -> None:
+        if np.dtype(dtype) not in (np.float32, np.float64):
+            raise SpectralDataError(f"synthesis: image type {np.dtype(dtype).name}; expected float32 or float64")
+        ambient_coefficient, coefficients = frame_coefficients(spec, flash_weights)
+        self.spec, self.flash_weights, self.shape, self.dtype = spec, flash_weights, tuple(shape), dtype
+        self.factors = np.concatenate(
+            [[ambient_coefficient * spec.ambient_scale], coefficients * np.asarray(spec.led_scales)]
+        )
+        self.offset = -spec.black_level * float(self.factors.sum())
+        self.total = np.empty(self.shape, dtype=np.float64)
+        self.saturated = np.zeros(self.shape[:2], dtype=bool)
+        self.chunk_samples = max(1, chunk_pixels) * (self.shape[2] if len(self.shape) == 3 else 1)
+        self.added = 0
+        self.floating = False
+
+    def add(self, frame: np.ndarray) -> None:
+        """Add the next frame (the ambient frame first, then each LED frame in the spec's order)."""
+        index = self.added
+        if index >= self.factors.size:
+            raise SpectralDataError(f"synthesis: frame {index} is one more than the {self.factors.size} expected")
+        if frame.shape != self.shape:
+            raise SpectralDataError(
+                f"synthesis: frame {index} has shape {frame.shape} but the ambient frame {self.shape}"
+            )
+        _check_range(self.factors, [frame], self.spec, self.flash_weights)
+        self.floating = self.floating or bool(np.issubdtype(frame.dtype, np.floating))
+        flat_total, flat_frame = self.total.reshape(-1), np.ascontiguousarray(frame).reshape(-1)
+        product = np.empty(min(self.chunk_samples, flat_total.size), dtype=np.float64)
+        factor = self.factors[index]
+        for start in range(0, flat_total.size, self.chunk_samples):
+            stop = min(start + self.chunk_samples, flat_total.size)
+            chunk, total = flat_frame[start:stop], flat_total[start:stop]
+            with np.errstate(invalid="ignore", over="ignore"):  # non-finite float frames are refused in result()
+                if index == 0:
+                    np.multiply(chunk, factor, out=total, dtype=np.float64)
+                    total += self.offset
+                else:
+                    part = product[: stop - start]
+                    np.multiply(chunk, factor, out=part, dtype=np.float64)
+                    total += part
+        if not (np.issubdtype(frame.dtype, np.integer) and np.iinfo(frame.dtype).max < self.spec.white_level):
+            bright = frame >= self.spec.white_level
+            self.saturated |= np.any(bright, axis=2) if bright.ndim == 3 else bright
+        self.added += 1
+
+    def result(self) -> tuple[np.ndarray, np.ndarray]:
+        """The image (``dtype``) and the saturated pixels, once every frame is in."""
+        if self.added != self.factors.size:
+            raise SpectralDataError(f"synthesis: {self.added} of {self.factors.size} frames added; expected all")
+        if self.floating and not np.isfinite(self.total.sum()):
+            raise SpectralDataError("synthesis: a frame holds non-finite values (NaN or inf); expected finite pixels")
+        return self.total.astype(self.dtype), self.saturated

@@ -201,6 +201,12 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     parser.add_argument(
         "-v", "--verbose", action="count", default=0, help="more diagnostics on stderr (-vv: serial byte trace)"
     )
+    parser.add_argument(
+        "--memory-budget",
+        metavar="SIZE",
+        help="most memory a read may decode (800M, 2G …; accepted anywhere on the line); default 25%% of the "
+        "memory available. A frame (or a stack of frames) past it is refused unread, exit 2",
+    )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     wanted = None if argv is None else _command_module(argv)
     registered: set[str] = set()
@@ -259,6 +265,32 @@ def _what_was_kept() -> str:
     return f"; frames captured so far are kept (marked incomplete) in {directory}"
 
 
+def _take_memory_budget(words: list[str]) -> list[str]:
+    """``words`` without ``--memory-budget SIZE`` (wherever it stands), the budget set from it (or reset).
+
+    >>> _take_memory_budget(["estimate", "SEQ", "--memory-budget", "2G"])
+    ['estimate', 'SEQ']
+    """
+    from msflash.acquisition.sequence.memory_budget import parse_size, set_memory_budget
+
+    budget = None
+    kept: list[str] = []
+    rest = iter(words)
+    for word in rest:
+        if word == "--":
+            kept += [word, *rest]
+            break
+        if word == "--memory-budget" or word.startswith("--memory-budget="):
+            value = word.partition("=")[2] if "=" in word else next(rest, None)
+            if value is None:
+                raise UsageError("--memory-budget: expected a size such as 800M or 2G")
+            budget = parse_size(value)
+            continue
+        kept.append(word)
+    set_memory_budget(budget)
+    return kept
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``msflash``; returns the exit status (tests call this directly)."""
     words = list(argv if argv is not None else sys.argv[1:])
@@ -266,6 +298,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if written is not None:  # an earlier command in this process (tests, a notebook) wrote one
         written.forget_latest_sequence()
     try:
+        words = _take_memory_budget(words)
         parser = build_parser(words)
         args = parser.parse_args(words)
         _quiet_libraries(args.verbose)

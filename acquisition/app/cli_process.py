@@ -205,9 +205,9 @@ def _synthesize(args: argparse.Namespace) -> int:
     weights = _weights(args.weights, len(sequence.leds))
     output = Path(args.out)
     one_sequence.check_raw_output(one_sequence.check_output_type(output), output, sequence)
-    image, saturated, stack = analysis.synthesize_sequence(sequence, weights)
+    image, saturated, layout = analysis.synthesize_sequence(sequence, weights)
     one_sequence.write_flash_image(
-        output, image, stack, sequence, {"msflash:flash_weights": weights.tolist()}, progress
+        output, image, layout.ambient_index, sequence, {"msflash:flash_weights": weights.tolist()}, progress
     )
     clipped = float(saturated.mean())
     if clipped > 0:

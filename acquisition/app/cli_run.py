@@ -195,10 +195,11 @@ def _report(
     from msflash.acquisition.app import report, run_html  # colour and matplotlib: only a run that reports needs them
 
     sequence = read_sequence(out / "sequence")
+    sequence.check_digests()  # the files are what was written (a failing disk): bytes only, no frame decoded
     progress("synthesising the computational images, previews and report")
     estimate, solutions = result.estimate, result.solutions
     summary = report.write_run_report(
-        out, sequence, estimate, solutions, args.mode, true_ambient, result.stack, args.target
+        out, sequence, estimate, solutions, args.mode, true_ambient, result.stack, args.target, result.flash_frame
     )
     if "spectrum_rmse_vs_truth" in summary:
         progress(

@@ -233,7 +233,7 @@ def evaluate_sequence(
     found = sequence_layout(sequence, chart, patch_px, border_px, margin_px)
     check_layout(ambient, found.build(ambient.shape[:2], saturated), cfa)
     progress("estimating the ambient and solving the flashes")
-    estimate = analysis.estimate_sequence(sequence, stack=stack)
+    estimate = analysis.estimate_sequence(sequence, stream=analysis.stream_stack(sequence, stack))
     target_spd = analysis.target_illuminant(target, sequence)
     solutions, notes = _solve_both(estimate.ambient_weights, leds, camera, target_spd, bounds)
 

@@ -37,7 +37,7 @@ from msflash.processing.flash import FlashSolution
 from msflash.processing.metrics import led_fit, led_fit_rmse, spectrum_rmse
 from msflash.processing.render import camera_to_xyz_matrix, demosaic_superpixel, srgb_preview
 from msflash.processing.spectra import Spectra
-from msflash.processing.synthesis import synthesize
+from msflash.processing.synthesis import linearise, synthesize
 
 REPORT_NAME = "report.html"
 """The run's HTML report, beside ``run.json`` (written by :func:`acquisition.app.run_html.write_run_html`)."""
@@ -152,8 +152,13 @@ def write_run_report(
     true_ambient: Spectra | None,
     stack: analysis.FrameStack,
     target_name: str,
+    flash_frame: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Write everything a run shows a person; return the summary (also written as run.json).
+
+    Every image comes from frames in memory: the ambient and LED frames of ``stack`` and the re-captured
+    ``flash_frame`` (as recorded; None when the flash was synthesised only). No frame is read back from
+    disk.
 
     Raises
     ------
@@ -163,7 +168,9 @@ def write_run_report(
     """
     out = Path(out)
     try:
-        return _write_run_report(out, sequence, estimate, solutions, mode, true_ambient, stack, target_name)
+        return _write_run_report(
+            out, sequence, estimate, solutions, mode, true_ambient, stack, target_name, flash_frame
+        )
     except OSError as err:
         raise OutputWriteError(
             f"{out}: the run report could not be written ({err}); expected a writable disk with room for it. "
@@ -181,6 +188,7 @@ def _write_run_report(
     true_ambient: Spectra | None,
     stack: analysis.FrameStack,
     target_name: str,
+    flash_frame: np.ndarray | None,
 ) -> dict[str, Any]:
     estimate_payload = analysis.estimate_payload(sequence, estimate)
     (out / "estimate.json").write_text(dumps_json(estimate_payload) + "\n")
@@ -190,7 +198,7 @@ def _write_run_report(
         )
 
     matrix = _camera_to_xyz(sequence)
-    ambient_linear, _ = sequence.load_linear_frame(stack.ambient_index)
+    ambient_linear, _ = _linear(sequence, stack.ambient_index, stack.ambient)
     previews = {
         "ambient": write_preview(out / "ambient.png", srgb_preview(linear_rgb(sequence, ambient_linear), matrix))
     }
@@ -209,8 +217,8 @@ def _write_run_report(
         )
         previews[name] = write_preview(out / f"{name}.png", srgb_preview(linear_rgb(sequence, image), matrix))
     flash_indices = sequence.indices("flash")
-    if flash_indices:
-        captured, _ = sequence.load_linear_frame(flash_indices[-1])
+    if flash_indices and flash_frame is not None:
+        captured, _ = _linear(sequence, flash_indices[-1], flash_frame)
         previews["flash-capture"] = write_preview(
             out / "flash-capture.png", srgb_preview(linear_rgb(sequence, captured), matrix)
         )
@@ -240,6 +248,12 @@ def _write_run_report(
     if true_ambient is not None:
         summary.update(score_against_truth(sequence, estimate, true_ambient))
     return summary
+
+
+def _linear(sequence: Sequence, index: int, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Frame ``index``'s pixels in memory, as :meth:`Sequence.load_linear_frame` gives them from the file."""
+    entry, camera = sequence.frames[index], sequence.camera
+    return linearise(pixels, camera.black_level, camera.white_level, entry.exposure_us, entry.gain)
 
 
 def score_against_truth(sequence: Sequence, estimate: AmbientEstimate, true_ambient: Spectra) -> dict[str, float]:

@@ -33,7 +33,7 @@ import os
 import sys
 import tempfile
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from datetime import UTC, datetime
 from pathlib import Path, PurePosixPath
 from types import TracebackType
@@ -47,6 +47,7 @@ from msflash.acquisition.sequence.frame_binding import SelfDescription, binding_
 from msflash.acquisition.sequence.frame_digest import SHA256_PATTERN, FileDigest, check_frame_digest
 from msflash.acquisition.sequence.frame_integrity import check_frame_levels
 from msflash.acquisition.sequence.image_files import (
+    ImageHeader,
     image_suffix,
     read_image_and_header,
     read_image_header,
@@ -352,6 +353,21 @@ class Sequence(_ArrayEquality):
             raise RecordingError(f"{self.path}: role '{role}' is unknown; expected one of {', '.join(FRAME_ROLES)}")
         return tuple(i for i, frame in enumerate(self.frames) if frame.role == role)
 
+    def check_digests(self) -> None:
+        """Refuse any frame file that is no longer, byte for byte, the one written (recorded SHA-256 and length;
+        frames without them pass). Reads the files' bytes, decodes nothing: a run checks what it wrote this way
+        (its estimate and report come from the frames in memory).
+
+        Raises
+        ------
+        RecordingError
+            As :meth:`load_frame` for a changed, truncated or missing file.
+        """
+        for index, entry in enumerate(self.frames):
+            if entry.digest is not None:
+                where = f"{self.path}: frames[{index}].file '{entry.file}'"
+                check_frame_digest(self.frame_path(index), entry.digest, where)
+
     def load_frame(self, index: int, *, check_levels: bool = True) -> np.ndarray:
         """The pixels of frame ``index``: (H, W) for a raw mosaic (``cfa`` set), (H, W, 3) for RGB.
 
@@ -375,30 +391,34 @@ class Sequence(_ArrayEquality):
         recorded = entry.digest
         if recorded is not None:
             check_frame_digest(path, recorded, where)
-        header, pixels = read_image_and_header(path)
-        said = SelfDescription.from_attributes(header.attributes)
-        problem = binding_problem(where, said, index, entry.role, entry.led_levels, entry.exposure_us, entry.gain)
-        if problem is not None:
-            raise RecordingError(problem)
-        channels = 1 if pixels.ndim == 2 else pixels.shape[2]
-        if self.camera.cfa is not None and channels != 1:
-            raise RecordingError(
-                f"{where} has {channels} channels but camera.cfa is '{self.camera.cfa}'; "
-                "expected one channel (a raw mosaic)"
-            )
-        if self.camera.cfa is None and channels != 3:
-            raise RecordingError(
-                f"{where} has {channels} channel but camera.cfa is null; expected three channels (RGB), "
-                "or set camera.cfa for a raw mosaic"
-            )
-        # Checked lazily against frame 0's header only, so loading one frame never decodes another.
-        if index != 0:
-            first = read_image_header(self.frame_path(0))
-            if first.shape[:2] != pixels.shape[:2]:
+
+        def declared(header: ImageHeader) -> None:
+            """What the file's header says, checked before its pixels are decoded."""
+            said = SelfDescription.from_attributes(header.attributes)
+            problem = binding_problem(where, said, index, entry.role, entry.led_levels, entry.exposure_us, entry.gain)
+            if problem is not None:
+                raise RecordingError(problem)
+            channels = header.channels
+            if self.camera.cfa is not None and channels != 1:
                 raise RecordingError(
-                    f"{where} is {pixels.shape[1]}×{pixels.shape[0]} pixels but frames[0].file "
-                    f"'{self.frames[0].file}' is {first.width}×{first.height}; expected one size for all frames"
+                    f"{where} has {channels} channels but camera.cfa is '{self.camera.cfa}'; "
+                    "expected one channel (a raw mosaic)"
                 )
+            if self.camera.cfa is None and channels != 3:
+                raise RecordingError(
+                    f"{where} has {channels} channel but camera.cfa is null; expected three channels (RGB), "
+                    "or set camera.cfa for a raw mosaic"
+                )
+            # Checked lazily against frame 0's header only, so loading one frame never decodes another.
+            if index != 0:
+                first = read_image_header(self.frame_path(0))
+                if (first.height, first.width) != (header.height, header.width):
+                    raise RecordingError(
+                        f"{where} is {header.width}×{header.height} pixels but frames[0].file "
+                        f"'{self.frames[0].file}' is {first.width}×{first.height}; expected one size for all frames"
+                    )
+
+        _, pixels = read_image_and_header(path, declared)
         if check_levels:
             check_frame_levels(pixels, self.camera.black_level, self.camera.white_level, self.frames[index].gain, where)
         return pixels
@@ -1006,6 +1026,9 @@ class SequenceWriter:
     ) -> None:
         self._directory = Path(directory)
         self._mono = bool(mono)
+        if self._mono and camera.cfa is None and "channels" not in camera.extra:
+            # Say so in the file (format v1, §6): a reader takes the three identical channels as one plane.
+            camera = replace(camera, extra={**camera.extra, "channels": "mono replicated to R, G, B"})
         self._path = self._directory / SEQUENCE_FILE
         self._claim: FolderClaim | None = None
         self._sequence = Sequence(

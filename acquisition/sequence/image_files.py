@@ -21,6 +21,7 @@ import contextlib
 import json
 import os
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +30,7 @@ import OpenImageIO as oiio
 
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.frame_digest import FileDigest, digest_open_file
+from msflash.acquisition.sequence.memory_budget import check_decode
 from msflash.calibration.file_modes import default_file_mode
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.user_files import IMAGE_MAX_BYTES, check_user_file, shown_path
@@ -190,17 +192,30 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     return read_image_and_header(path)[1]
 
 
-def read_image_and_header(path: str | os.PathLike) -> tuple[ImageHeader, np.ndarray]:
+def read_image_and_header(
+    path: str | os.PathLike, before_decoding: Callable[[ImageHeader], None] | None = None
+) -> tuple[ImageHeader, np.ndarray]:
     """The header (:func:`read_image_header`) and the pixels (:func:`read_image`) of an image file, opened once.
+
+    The pixels are decoded only if the size the header declares fits the memory budget
+    (:func:`~acquisition.sequence.memory_budget.check_decode`) and ``before_decoding(header)`` (a caller's
+    check of the declared header, e.g. against another frame's size) raises nothing.
 
     Raises
     ------
     RecordingError
-        As :func:`read_image`.
+        As :func:`read_image`; or the decoded pixels would exceed the memory budget.
     """
     path = Path(path)
     with _open_input(path) as image:
         header, request = _header(path, image)
+        if before_decoding is not None:
+            before_decoding(header)
+        check_decode(
+            shown_path(path),
+            header.width * header.height * header.channels * header.dtype.itemsize,
+            f"its {header.width}×{header.height}×{header.channels} {header.dtype} pixels",
+        )
         pixels = image.read_image(0, 0, 0, header.channels, request)
         if pixels is None:
             raise RecordingError(f"{path}: pixels cannot be decoded ({_oiio_error()}); expected a readable image")

@@ -17,18 +17,27 @@ import numpy as np
 
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence, as_recorded
+from msflash.acquisition.sequence.image_files import read_image_header
+from msflash.acquisition.sequence.memory_budget import check_decode
+from msflash.acquisition.session.estimate_stream import (
+    SAMPLE_WEIGHTING,
+    EstimateStream,
+    StackLayout,
+    stack_layout,
+    stream_sequence,
+)
 from msflash.processing import datasets
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
 from msflash.processing.channel_statistics import plane_channels
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
 from msflash.processing.flicker import FlickerCheck, check_flicker, with_ambient_gains, with_fit
-from msflash.processing.local import DEFAULT_TILES, LocalEstimate, estimate_local, synthesize_local, tile_statistics
+from msflash.processing.local import DEFAULT_TILES, LocalEstimate, synthesize_local
 from msflash.processing.model_error import reference_for, with_model_error
 from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
-from msflash.processing.synthesis import synthesize
+from msflash.processing.synthesis import SynthesisStream, synthesize
 from msflash.processing.user_files import printable, shown_path
 
 
@@ -73,6 +82,8 @@ def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None =
     """
     entries = sequence.frames
     cfa = sequence.camera.cfa
+    if frames is None:
+        _check_stack_budget(sequence)
 
     def pixels(index: int) -> np.ndarray:
         return sequence.load_frame(index) if frames is None else as_recorded(frames[index], cfa)
@@ -84,6 +95,28 @@ def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None =
         [e.exposure_us * e.gain for e in entries],
         pixels,
     )
+
+
+def stream_stack(
+    sequence: Sequence, stack: FrameStack, bin_factor: int = 8, tiles: int | None = None
+) -> EstimateStream:
+    """A stack already in memory fed to the one accumulator, as :func:`stream_sequence` feeds the files."""
+    index = {i: frame for i, frame in zip(stack.led_indices, stack.led_frames, strict=True)}
+    index[stack.ambient_index] = stack.ambient
+    return stream_sequence(sequence, bin_factor, tiles, index.__getitem__)
+
+
+def _check_stack_budget(sequence: Sequence) -> None:
+    """Refuse loading every used frame at once past the memory budget, from their headers (nothing decoded)."""
+    roles = [entry.role for entry in sequence.frames]
+    used = [i for i, role in enumerate(roles) if role == "led"]
+    if "ambient" in roles:
+        used.insert(0, roles.index("ambient"))
+    total = 0
+    for index in used:
+        header = read_image_header(sequence.frame_path(index))
+        total += header.width * header.height * header.channels * header.dtype.itemsize
+    check_decode(f"{sequence.path}", total, f"its {len(used)} ambient and LED frames at once")
 
 
 def frame_stack(
@@ -100,29 +133,14 @@ def frame_stack(
     first ambient frame, every LED frame) and the linearisation (black and white levels, 1 /
     (exposure · gain)).
     """
-    ambient_indices = [i for i, role in enumerate(roles) if role == "ambient"]
-    led_indices = tuple(i for i, role in enumerate(roles) if role == "led")
-    if not ambient_indices:
-        raise RecordingError(f"{sequence.path}: frames has no 'ambient' frame; expected one")
-    if not led_indices:
-        raise RecordingError(f"{sequence.path}: frames has no 'led' frame; expected one per LED")
-    ambient_index = ambient_indices[0]
-    if any(level > 0 for level in led_levels[ambient_index]):
-        raise RecordingError(
-            f"{sequence.path}: frames[{ambient_index}] has role 'ambient' but LED levels "
-            f"{list(led_levels[ambient_index])}; expected all zero"
-        )
-    try:
-        spec = FrameStackSpec(
-            black_level=sequence.camera.black_level,
-            white_level=sequence.camera.white_level,
-            ambient_scale=1.0 / exposure_gain[ambient_index],
-            led_scales=tuple(1.0 / exposure_gain[i] for i in led_indices),
-            led_levels=np.array([led_levels[i] for i in led_indices], dtype=float),
-        )
-    except SpectralDataError as err:
-        raise RecordingError(f"{sequence.path}: frames: {err}") from err
-    return FrameStack(pixels(ambient_index), tuple(pixels(i) for i in led_indices), spec, ambient_index, led_indices)
+    layout = stack_layout(sequence, roles, led_levels, exposure_gain)
+    return FrameStack(
+        pixels(layout.ambient_index),
+        tuple(pixels(i) for i in layout.led_indices),
+        layout.spec,
+        layout.ambient_index,
+        layout.led_indices,
+    )
 
 
 DEFAULT_BIN_FACTOR = 8
@@ -136,11 +154,6 @@ BLOCKS_PER_SIDE = 32
 """A frame's short side (of its CFA planes) keeps at least this many blocks, or the blocks are halved,
 down to 4 × 4: on the harness's 128 × 160 frames 8 × 8 blocks cost the light prior accuracy and 4 × 4
 ones agree with the all-pixel estimate as well (docs/block-size.md)."""
-
-
-SAMPLE_WEIGHTING = True
-"""The estimate's statistics weigh each sample by its inverse noise variance (processing.statistics, module
-notes): unweighted, a bright highlight's noisy samples dominate eq. 5."""
 
 
 def sequence_statistics(
@@ -294,14 +307,14 @@ def estimate_sequence(
     sequence: Sequence,
     method: str = "tikhonov",
     alpha: float | str = "auto",
-    stack: FrameStack | None = None,
     bin_factor: int = DEFAULT_BIN_FACTOR,
+    stream: EstimateStream | None = None,
 ) -> AmbientEstimate:
-    """Estimate the ambient illuminant of a sequence (eq. 4–6)."""
-    stack = stack or load_frame_stack(sequence)
-    return estimate_from_statistics(
-        sequence, sequence_statistics(stack, sequence.camera.cfa, bin_factor), method, alpha
-    )
+    """Estimate the ambient illuminant of a sequence (eq. 4–6): its frames fed from disk, one at a time, to
+    the one accumulator (:func:`~acquisition.session.estimate_stream.stream_sequence`), or ``stream`` when
+    the frames were already fed (a capture's)."""
+    stream = stream or stream_sequence(sequence, bin_factor)
+    return stream.estimate(method, alpha)
 
 
 def estimate_from_statistics(
@@ -501,21 +514,35 @@ def flash_payload(sequence: Sequence, solution: FlashSolution, target: str | Non
 
 def synthesize_sequence(
     sequence: Sequence, flash_weights: np.ndarray, stack: FrameStack | None = None
-) -> tuple[np.ndarray, np.ndarray, FrameStack]:
-    """The computational flash image ``m_a + Σ w_k m_f,k`` of a sequence (linear, per µs·gain)."""
-    stack = stack or load_frame_stack(sequence)
-    image, saturated = synthesize(stack.ambient, stack.led_frames, stack.spec, flash_weights)
-    return image, saturated, stack
+) -> tuple[np.ndarray, np.ndarray, StackLayout]:
+    """The computational flash image ``m_a + Σ w_k m_f,k`` of a sequence (linear, per µs·gain), its saturated
+    pixels and the frames it used.
 
-
-# -- local estimation (issue 9) ---------------------------------------------------------------
-def _local_grid(stack: FrameStack, cfa: str | None, tiles: int, bin_factor: int) -> tuple[int, int, int]:
-    """The bin factor and tiles (rows, columns) that fit a frame: at least 2 blocks per tile side."""
-    period = 2 if cfa is not None else 1
-    height, width = stack.ambient.shape[:2]
-    bin_factor = block_factor(stack.ambient.shape, cfa, bin_factor)
-    blocks = (height // (bin_factor * period), width // (bin_factor * period))
-    return bin_factor, max(1, min(tiles, blocks[0] // 2)), max(1, min(tiles, blocks[1] // 2))
+    Without ``stack`` the frames are read from disk one at a time into a
+    :class:`~processing.synthesis.SynthesisStream` (the ambient frame first, then the LED frames in order):
+    peak memory the float64 sum and one frame, and the image of :func:`processing.synthesis.synthesize`
+    on the stack, bit for bit.
+    """
+    if stack is not None:
+        image, saturated = synthesize(stack.ambient, stack.led_frames, stack.spec, flash_weights)
+        return image, saturated, StackLayout(stack.spec, stack.ambient_index, stack.led_indices)
+    entries = sequence.frames
+    layout = stack_layout(
+        sequence, [e.role for e in entries], [e.led_levels for e in entries], [e.exposure_us * e.gain for e in entries]
+    )
+    summed: SynthesisStream | None = None
+    for index in (layout.ambient_index, *layout.led_indices):
+        frame = sequence.load_frame(index)
+        if summed is None:
+            summed = SynthesisStream(layout.spec, flash_weights, frame.shape)
+        try:
+            summed.add(frame)
+        except SpectralDataError as err:
+            raise RecordingError(f"{sequence.path}: frames[{index}]: {err}") from err
+        del frame
+    assert summed is not None
+    image, saturated = summed.result()
+    return image, saturated, layout
 
 
 def estimate_sequence_local(
@@ -524,29 +551,19 @@ def estimate_sequence_local(
     solver: str = "tikhonov",
     alpha: float | str = "auto",
     tiles: int = DEFAULT_TILES,
-    stack: FrameStack | None = None,
     bin_factor: int = DEFAULT_BIN_FACTOR,
+    stream: EstimateStream | None = None,
 ) -> LocalEstimate:
     """Estimate the ambient of a sequence globally or per tile (``method`` auto|global|local, issue 9).
 
     The global estimate is :func:`estimate_sequence`'s, from the whole frame's statistics, whatever
     the model chosen: every command reporting a sequence's ambient (``estimate``, ``flash``, ``run``,
     ``export``, ``evaluate``, the live view) gives the same global numbers, bit for bit. The tiles'
-    statistics serve the model selection and the local model only.
+    statistics serve the model selection and the local model only. Both are accumulated in one pass
+    over the frames, read from disk one at a time (or ``stream``, made with ``tiles``, already fed).
     """
-    stack = stack or load_frame_stack(sequence)
-    whole_frame = estimate_sequence(sequence, solver, alpha, stack=stack, bin_factor=bin_factor)
-    factor, rows, columns = _local_grid(stack, sequence.camera.cfa, tiles, bin_factor)
-    tiled = tile_statistics(
-        stack.ambient,
-        stack.led_frames,
-        stack.spec,
-        (rows, columns),
-        bin_factor=factor,
-        cfa_period=2 if sequence.camera.cfa is not None else 1,
-        weighting=SAMPLE_WEIGHTING,
-    )
-    return estimate_local(tiled, led_spectra_photons(sequence), method, solver, alpha, global_estimate=whole_frame)
+    stream = stream or stream_sequence(sequence, bin_factor, tiles)
+    return stream.local(method, solver, alpha)
 
 
 def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:

@@ -51,7 +51,7 @@ def whole_periods(exposure_us: float, period_us: float) -> float | None:
     (20000.0, 10000.0, None)
     """
     periods = math.floor(exposure_us * (1.0 + ROUND_UP_TOLERANCE) / period_us + 1e-9)
-    return None if periods < 1 else periods * period_us
+    return None if periods < 1 else float(periods * period_us)
 
 
 def with_anti_flicker(plan: ExposurePlan, choice: str) -> ExposurePlan:

@@ -14,10 +14,11 @@ Prepared with exposure limits, the session also takes each frame's rates for the
 (:class:`~acquisition.session.exposure.FlashExposure`) as it arrives, and :meth:`FlashSession.flash_exposure`
 only sums them.
 
-The results are those of :func:`acquisition.session.analysis.estimate_sequence` and
-:func:`acquisition.session.analysis.solve_sequence_flash` on the same frames (same statistics code,
-same solvers; only the order of the moment sums differs); ``tests/acquisition/session/test_flash_stream.py``
-checks it.
+The statistics are those of the one accumulator every route feeds
+(:class:`~acquisition.session.estimate_stream.EstimateStream`): :meth:`FlashSession.estimate` is the
+estimate the run reports, and :func:`acquisition.session.analysis.estimate_sequence` on the sequence
+written gives it to the last digit (the same frames in the same order into the same rows);
+``tests/acquisition/session/test_estimate_stream.py`` checks it.
 """
 
 from __future__ import annotations
@@ -32,12 +33,12 @@ from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.engine import CaptureResult, FrameEvent
+from msflash.acquisition.session.estimate_stream import EstimateStream
 from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
-from msflash.processing import frame_kernels
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.flash import FlashBounds, FlashModel, FlashSolution
 from msflash.processing.spectra import Spectra
-from msflash.processing.statistics import BlockRows, SequenceStatistics, plane_shape
+from msflash.processing.statistics import SequenceStatistics
 
 DEFAULT_EXPOSURE_POLICY = ExposurePolicy()
 """The policy a session predicts the flash exposure with unless given one (frozen: one instance serves all)."""
@@ -125,46 +126,31 @@ class FlashSession:
         return cls(header, leds, model, response, method, alpha, bin_factor, exposure_limits_us, exposure_policy)
 
     # -- per capture -------------------------------------------------------------------------
-    def begin(self) -> None:
-        """Forget the frames of an earlier capture."""
-        self._frames: list[RawFrame] = []
-        self._roles: list[str] = []
-        self._levels: list[tuple[float, ...]] = []
-        self._factor: int | None = None
-        self._rows: BlockRows | None = None
-        self._n_led_rows = 0
-        self._rows_complete = True  # False when a frame did not fit the prepared rows
-        self._stack: analysis.FrameStack | None = None
-        self._copies = 1  # 3 for a mono camera's (H, W) frames, recorded as three identical channels
+    def begin(self, n_led_frames: int | None = None) -> None:
+        """Forget the frames of an earlier capture; ``n_led_frames`` LED frames will come (default one per LED)."""
+        self.stream = EstimateStream(
+            self.header, self.leds.count if n_led_frames is None else n_led_frames, self.bin_factor, live=True
+        )
         camera = self.header.camera
         self._exposure = (
             None
             if self.exposure_limits_us is None
             else FlashExposure(camera.black_level, camera.white_level, self.exposure_limits_us, self.exposure_policy)
         )
+        self._seen_ambient = False
 
     def add(self, frame: RawFrame, role: str, levels: Seq[float]) -> None:
         """Take one captured frame; ambient and LED frames are block-summed now (between frames).
 
         The block sums, the per-block saturation and the frame's products with the frames before
-        it are what the binned statistics of :func:`processing.statistics.accumulate_statistics`
-        compute (:class:`~processing.statistics.BlockRows`); doing it as each frame arrives leaves
+        it go into the session's :class:`~acquisition.session.estimate_stream.EstimateStream`, the
+        accumulator a sequence read from disk is fed to as well; doing it as each frame arrives leaves
         :meth:`decide` only the small solves.
         """
-        if not hasattr(self, "_frames"):
-            self.begin()
-        self._frames.append(frame)
-        self._roles.append(role)
-        self._levels.append(tuple(float(v) for v in levels))
-        self._stack = None
-        if frame.pixels.ndim == 2 and self.header.camera.cfa is None:
-            # A mono camera: the writer records (H, W) as three identical channels; one plane has
-            # their statistics divided by 3 (see :meth:`statistics`) at a third of the work.
-            self._copies = 3
-        if role not in ("ambient", "led") or (role == "ambient" and role in self._roles[:-1]):
-            return  # the estimate uses the first ambient frame only (and no flash or dark frame)
-        self._add_rows(_plane(frame.pixels), role)
-        if self._exposure is not None:
+        first_ambient = role == "ambient" and not self._seen_ambient
+        self._seen_ambient = self._seen_ambient or role == "ambient"
+        self.stream.add(frame.pixels, role, levels, frame.exposure_us * frame.gain)
+        if self._exposure is not None and (role == "led" or first_ambient):
             metered = metering_view(frame.pixels, mosaic=self.header.camera.cfa is not None)
             if role == "ambient":
                 self._exposure.add_ambient(metered, frame.exposure_us)
@@ -180,82 +166,13 @@ class FlashSession:
     def sequence_finished(self, result: CaptureResult) -> None:
         """Nothing to do: the statistics were taken frame by frame."""
 
-    def _add_rows(self, pixels: np.ndarray, role: str) -> None:
-        camera = self.header.camera
-        period = 2 if camera.cfa is not None else 1
-        if self._factor is None:
-            self._factor = analysis.block_factor(pixels.shape, camera.cfa, self.bin_factor)
-        if self._factor == 1 or not self._rows_complete:
-            return
-        shape = plane_shape(pixels.shape, period)
-        n_leds = self.leds.count  # one row per LED frame of a plain plan; more frames use the general path
-        if self._rows is None:
-            self._rows = BlockRows(
-                n_leds,
-                shape,
-                self._factor,
-                camera.white_level,
-                incremental=True,
-                black_level=camera.black_level,
-                weighting=analysis.SAMPLE_WEIGHTING,
-            )
-        row = n_leds if role == "ambient" else self._n_led_rows
-        if role == "led":
-            self._n_led_rows += 1
-        if row > n_leds or (role == "led" and row == n_leds) or shape != self._rows.plane_shape:
-            self._rows_complete = False
-            return
-        # Never a compiled kernel while the camera streams (processing.frame_kernels.paused): numba's import,
-        # or a first compile of a kernel, holds the interpreter for seconds and the booth's watchdog fires.
-        with frame_kernels.paused():
-            self._rows.add_frame(row, pixels, period)
+    def statistics(self) -> SequenceStatistics:
+        """The statistics of the frames taken so far, from the block sums taken in :meth:`add`."""
+        return self.stream.statistics()
 
-    def stack(self) -> analysis.FrameStack:
-        """The frame stack of the frames taken so far (first ``ambient`` and every ``led`` frame), in memory.
-
-        Built by :func:`analysis.frame_stack`, as a sequence's is, from what the session was given
-        (the sequence file is still being written); a mono camera's frames stay one plane here
-        (:meth:`statistics` replicates their statistics).
-        """
-        if self._stack is None:
-            frames = self._frames
-            self._stack = analysis.frame_stack(
-                self.header,
-                self._roles,
-                self._levels,
-                [f.exposure_us * f.gain for f in frames],
-                lambda index: _plane(frames[index].pixels),
-            )
-        return self._stack
-
-    def statistics(self, stack: analysis.FrameStack) -> SequenceStatistics:
-        """The statistics of :func:`analysis.sequence_statistics` from the block sums taken in :meth:`add`.
-
-        Block sums with the black level scaled by the block area, no white level and the
-        saturated blocks left out are exactly what the binned pass feeds its moments (only the
-        summation order differs). Frames that did not fit the rows prepared for one frame per LED
-        (a multiplexed plan with more LED frames) take the general path. A mono camera's frames
-        are taken as one plane, and the statistics of the three identical channels the sequence
-        records are those of that plane replicated.
-        """
-        rows = self._rows
-        if (
-            (self._factor or 1) == 1
-            or rows is None
-            or not self._rows_complete
-            or self._n_led_rows != len(stack.led_indices)
-            or self._n_led_rows != self.leds.count
-        ):
-            statistics = analysis.sequence_statistics(stack, self.header.camera.cfa, self.bin_factor)
-        else:
-            statistics = rows.statistics(stack.spec)
-        return statistics.replicated(self._copies) if self._copies > 1 else statistics
-
-    def estimate(self, stack: analysis.FrameStack) -> AmbientEstimate:
-        """The ambient estimate of :func:`analysis.estimate_sequence` for the frames taken."""
-        return analysis.estimate_from_statistics(
-            self.header, self.statistics(stack), self.method, self.alpha, self.ambient_model
-        )
+    def estimate(self) -> AmbientEstimate:
+        """The reported ambient estimate of the frames taken (what ``msflash estimate`` gives for them)."""
+        return self.stream.estimate(self.method, self.alpha, self.ambient_model)
 
     def solve(self, mode: str, ambient_weights: np.ndarray, bounds: FlashBounds = "physical") -> FlashSolution:
         """The matching or complementary flash (as :func:`analysis.solve_sequence_flash`)."""
@@ -290,9 +207,7 @@ class FlashSession:
         weights by 0 before solving (a degenerate estimate still yields a flash to capture, e.g. on
         the test patterns of the aravis fake).
         """
-        stack = self.stack()
-        with frame_kernels.paused():  # between the LED frames and the flash frame: no compiling (see _add_rows)
-            statistics = self.statistics(stack)
+        statistics = self.statistics()  # the stream is live: no compiling between the LED frames and the flash
         raw_weights, alpha_used = self.ambient_model.weights(statistics, self.method, self.alpha)
         weights = np.asarray(raw_weights, dtype=float)
         if sanitise:
@@ -307,10 +222,6 @@ class FlashSession:
             flash,
             lambda: analysis.with_model_band(model.reliability(statistics, raw_weights, method, alpha_used), header),
         )
-
-
-def _plane(pixels: np.ndarray) -> np.ndarray:
-    return pixels[:, :, 0] if pixels.ndim == 3 and pixels.shape[2] == 1 else pixels
 
 
 __all__ = ["FlashDecision", "FlashSession"]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +28,7 @@ from msflash.processing.ambient import LED_SIGNAL_Z, AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
 from msflash.processing.flash import FlashBounds, FlashSolution
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate
+from msflash.processing.names import unknown_name
 from msflash.processing.spectra import Spectra
 from msflash.processing.synthesis import to_raw_values
 
@@ -178,7 +179,7 @@ def estimate_one(path: str, settings: EstimateSettings, report: Report) -> Estim
 def estimate_read(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
     """:func:`estimate_one` of a sequence already read (and calibrated): what ``msflash estimate`` prints for it,
     and what :func:`msflash.estimate_ambient` returns (:class:`SequenceEstimate`). ``settings.calibration`` is
-    not applied here."""
+    not applied here. The route is :data:`ESTIMATE_METHODS`'s entry for :func:`method_of` the settings."""
     if sequence.partial:
         report(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
     reference = settings.reference_chart if settings.reference_chart is not None else settings.reference_patch
@@ -189,30 +190,42 @@ def estimate_read(sequence: Sequence, settings: EstimateSettings, report: Report
     if reference is not None and settings.model == "led":
         option = "--reference-chart" if settings.reference_chart is not None else "--reference-patch"
         raise UsageError(f"{option}: expected --model prior, family or auto (the LEDs' span needs no reference)")
-    if settings.model != "led":
-        from msflash.acquisition.session.prior_route import led_side, with_model_choice
+    return ESTIMATE_METHODS[validate_method(method_of(settings))](sequence, settings, report)
 
-        stack = analysis.load_frame_stack(sequence)
-        led, payload, varies = led_side(
-            sequence, stack, settings.method, settings.solver, settings.alpha, settings.tiles, settings.bin_factor
-        )
-        refuse_dark_ambient(sequence, led, "estimate")
-        payload, chosen, reason = with_model_choice(sequence, stack, payload, settings.model, varies, reference)
-        for warning in payload["warnings"]:
-            report(f"warning: {warning}")
-        return EstimateResult(sequence, payload, choice=(chosen, reason))
-    if settings.method != "global":
-        local = analysis.estimate_sequence_local(
-            sequence, settings.method, settings.solver, settings.alpha, settings.tiles, bin_factor=settings.bin_factor
-        )
-        refuse_dark_ambient(sequence, local.global_estimate, "estimate")
-        payload = analysis.local_estimate_payload(sequence, local)
-        flicker = local.global_estimate.flicker.summary() if local.global_estimate.flicker is not None else None
-        if flicker is not None:  # docs/flicker.md
-            report(flicker)
-        for warning in payload["warnings"]:
-            report(f"warning: {warning}")
-        return EstimateResult(sequence, payload, local=local)
+
+def _light_models(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
+    """``prior``, ``family``, ``models``: the LED span beside the light prior and the physics families (§5.3)."""
+    from msflash.acquisition.session.prior_route import led_side, with_model_choice
+
+    reference = settings.reference_chart if settings.reference_chart is not None else settings.reference_patch
+    stack = analysis.load_frame_stack(sequence)
+    led, payload, varies = led_side(
+        sequence, stack, settings.method, settings.solver, settings.alpha, settings.tiles, settings.bin_factor
+    )
+    refuse_dark_ambient(sequence, led, "estimate")
+    payload, chosen, reason = with_model_choice(sequence, stack, payload, settings.model, varies, reference)
+    for warning in payload["warnings"]:
+        report(f"warning: {warning}")
+    return EstimateResult(sequence, payload, choice=(chosen, reason))
+
+
+def _tiled(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
+    """``auto`` and ``local``: the whole frame's estimate and the tiles', in one stream of the frames (issue 9)."""
+    local = analysis.estimate_sequence_local(
+        sequence, settings.method, settings.solver, settings.alpha, settings.tiles, bin_factor=settings.bin_factor
+    )
+    refuse_dark_ambient(sequence, local.global_estimate, "estimate")
+    payload = analysis.local_estimate_payload(sequence, local)
+    flicker = local.global_estimate.flicker.summary() if local.global_estimate.flicker is not None else None
+    if flicker is not None:  # docs/flicker.md
+        report(flicker)
+    for warning in payload["warnings"]:
+        report(f"warning: {warning}")
+    return EstimateResult(sequence, payload, local=local)
+
+
+def _global(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
+    """``global``: the paper's one ambient for the whole frame (eq. 4–6)."""
     estimate = analysis.estimate_sequence(sequence, settings.solver, settings.alpha, bin_factor=settings.bin_factor)
     refuse_dark_ambient(sequence, estimate, "estimate")
     payload = analysis.estimate_payload(sequence, estimate)
@@ -222,6 +235,54 @@ def estimate_read(sequence: Sequence, settings: EstimateSettings, report: Report
     for warning in estimate.warnings:
         report(f"warning: {warning}")
     return EstimateResult(sequence, payload, estimate=estimate)
+
+
+ESTIMATE_METHODS: dict[str, Callable[[Sequence, EstimateSettings, Report], EstimateResult]] = {
+    "global": _global,
+    "local": _tiled,
+    "auto": _tiled,
+    "prior": _light_models,
+    "family": _light_models,
+    "models": _light_models,
+}
+"""The one method table of an estimate (colour-science's method table and dispatcher): ``global`` (one ambient,
+eq. 4–6), ``local`` (tiles), ``auto`` (global or local as the tiles' held-out error says; the default), the
+light models ``prior`` and ``family`` (beyond the LEDs' span, §5.3) and ``models`` (``--model auto``: the LED
+span unless a light model predicts held-out folds 10 % better). Every route streams the frames into the one
+accumulator (:mod:`acquisition.session.estimate_stream`) for the LED span's estimate."""
+
+LIGHT_MODELS = {"prior": "prior", "family": "family", "models": "auto"}
+"""Method table names of the light models → their ``--model`` name."""
+
+
+def method_of(settings: EstimateSettings) -> str:
+    """The :data:`ESTIMATE_METHODS` name of ``--method``/``--model`` settings.
+
+    >>> method_of(EstimateSettings()), method_of(EstimateSettings(method="global")), method_of(EstimateSettings(model="auto"))
+    ('auto', 'global', 'models')
+    """
+    if settings.model == "led":
+        return settings.method
+    return next((name for name, model in LIGHT_MODELS.items() if model == settings.model), settings.model)
+
+
+def with_method(settings: EstimateSettings, method: str) -> EstimateSettings:
+    """``settings`` set to estimate by ``method``, a :data:`ESTIMATE_METHODS` name (the inverse of :func:`method_of`).
+
+    >>> with_method(EstimateSettings(), "models").model, with_method(EstimateSettings(), "local").method
+    ('auto', 'local')
+    """
+    method = validate_method(method)
+    if method in LIGHT_MODELS:
+        return replace(settings, model=LIGHT_MODELS[method])
+    return replace(settings, method=method, model="led")
+
+
+def validate_method(method: str) -> str:
+    """``method`` if :data:`ESTIMATE_METHODS` has it, else a UsageError naming the methods (and the closest)."""
+    if method not in ESTIMATE_METHODS:
+        raise UsageError(unknown_name("estimate method", method, ESTIMATE_METHODS))
+    return method
 
 
 def flash_one(path: str, settings: FlashSettings, report: Report) -> FlashResult:
@@ -258,14 +319,14 @@ def flash_one(path: str, settings: FlashSettings, report: Report) -> FlashResult
 
 def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) -> FlashResult:
     estimating = settings.estimate
-    stack = analysis.load_frame_stack(sequence)
+    # The estimate streams the frames from disk one at a time, and so does a global image's synthesis; a local
+    # image (per-tile weights blended) is synthesised from the frames together.
     local = analysis.estimate_sequence_local(
         sequence,
         estimating.method,
         estimating.solver,
         estimating.alpha,
         estimating.tiles,
-        stack=stack,
         bin_factor=estimating.bin_factor,
     )
     refuse_dark_ambient(sequence, local.global_estimate, FLASH_GOAL[settings.mode])
@@ -280,9 +341,11 @@ def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) ->
     if settings.out is not None:
         output = Path(settings.out)
         if local.model == "local":
-            image, saturated, _ = analysis.synthesize_sequence_local(sequence, tile_weights, local, stack)
+            image, saturated, stack = analysis.synthesize_sequence_local(sequence, tile_weights, local)
+            ambient_index = stack.ambient_index
         else:
-            image, saturated, _ = analysis.synthesize_sequence(sequence, solution.flash_weights, stack)
+            image, saturated, layout = analysis.synthesize_sequence(sequence, solution.flash_weights)
+            ambient_index = layout.ambient_index
         metadata = {
             "msflash:flash_weights": solution.flash_weights.tolist(),
             "msflash:method": local.model,
@@ -290,7 +353,7 @@ def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) ->
         }
         if local.model == "local":
             metadata["msflash:tile_flash_weights"] = json.dumps(np.round(tile_weights, 6).tolist())
-        write_flash_image(output, image, stack, sequence, metadata, report)
+        write_flash_image(output, image, ambient_index, sequence, metadata, report)
         payload["out"] = str(output)
         payload["saturated_fraction"] = float(saturated.mean())
     return FlashResult(sequence, payload, solution, local)
@@ -327,7 +390,7 @@ def check_raw_output(kind: str | None, output: Path, sequence: Sequence) -> None
 def write_flash_image(
     output: Path,
     image: np.ndarray,
-    stack: analysis.FrameStack,
+    ambient_index: int,
     sequence: Sequence,
     metadata: dict[str, Any],
     report: Report,
@@ -346,7 +409,7 @@ def write_flash_image(
             rgb, exr = exr_image(sequence, image)  # a mosaic demosaicked: an EXR holds R, G, B
             write_image(output, rgb, {**metadata, **exr.attributes}, exr.chromaticities)
             return
-        ambient = sequence.frames[stack.ambient_index]
+        ambient = sequence.frames[ambient_index]
         white = sequence.camera.white_level
         raw = to_raw_values(image, ambient.exposure_us, ambient.gain, sequence.camera.black_level, white)
         write_image(output, raw, {**metadata, "msflash:exposure_us": ambient.exposure_us, "msflash:gain": ambient.gain})

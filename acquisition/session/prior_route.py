@@ -146,10 +146,10 @@ def led_side(
     ``method`` finds the illuminant varying across the scene), its payload, and whether it varies."""
     if method != "global":
         local = analysis.estimate_sequence_local(
-            sequence, method, solver, alpha, tiles, stack=stack, bin_factor=bin_factor
+            sequence, method, solver, alpha, stream=analysis.stream_stack(sequence, stack, bin_factor, tiles)
         )
         return local.global_estimate, analysis.local_estimate_payload(sequence, local), local.model == "local"
-    led = analysis.estimate_sequence(sequence, solver, alpha, stack=stack, bin_factor=bin_factor)
+    led = analysis.estimate_sequence(sequence, solver, alpha, stream=analysis.stream_stack(sequence, stack, bin_factor))
     return led, analysis.estimate_payload(sequence, led), False
 
 

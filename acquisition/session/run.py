@@ -28,11 +28,12 @@ from msflash.acquisition.devices.replay_camera import format_levels, levels_matc
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.progress import count, progress
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import Sequence, SequenceFrame, SequenceWriter, read_sequence
+from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter, as_recorded, read_sequence
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.both_flashes import SequenceFlashes, solve_both
 from msflash.acquisition.session.capture import FrameWriter, run_capture, run_capture_with_flash
 from msflash.acquisition.session.engine import Cancellation, CaptureResult, FlashChoice, FrameEvent, FrameHandler
+from msflash.acquisition.session.estimate_stream import EstimateStream, stream_sequence
 from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,
@@ -79,7 +80,9 @@ class RunResult:
     """What a run (:func:`run_one_stream`, :func:`run_two_captures`) leaves for its report."""
 
     estimate: AmbientEstimate
-    """The reported estimate: the sequence's, on the recorded frames (:func:`reported_estimate`)."""
+    """The reported estimate: the statistics accumulated as the frames arrived
+    (:class:`~acquisition.session.estimate_stream.EstimateStream`), what ``msflash estimate`` gives for
+    the sequence written, to the last digit."""
     solutions: dict[str, FlashSolution]
     """The matching and complementary flashes (:func:`~acquisition.session.both_flashes.solve_both`)."""
     warnings: tuple[WarningMessage, ...]
@@ -89,9 +92,11 @@ class RunResult:
     flash_exposure_us: float | None
     """The flash frame's exposure as the camera read it back; None when the flash is synthesised only."""
     stack: analysis.FrameStack
-    """The recorded frames the report synthesises from."""
+    """The recorded frames the report synthesises from (in memory, as the reader would return them)."""
     decided_at: float
     """``time.perf_counter()`` when the flash was decided."""
+    flash_frame: np.ndarray | None = None
+    """The re-captured flash frame as recorded (in memory), for the report; None when synthesised only."""
 
     @property
     def decision_ms(self) -> float:
@@ -155,11 +160,15 @@ class LedFrames:
 
     def __init__(self) -> None:
         self.frames: list[RawFrame] = []
+        self.flash: RawFrame | None = None
+        """The last flash frame handed over, if any."""
         self.last_frame_at = 0.0
         """``time.perf_counter()`` when the last ambient or LED frame was handed over (written)."""
 
     def frame_ready(self, event: FrameEvent) -> None:
-        if event.step.role != "flash":
+        if event.step.role == "flash":
+            self.flash = event.frame
+        else:
             self.frames.append(event.frame)
             self.last_frame_at = time.perf_counter()
 
@@ -235,8 +244,8 @@ class StreamFlash(LedFrames):
             exposure_policy=exposure.policy,
         )
         self.chosen: FlashSolution | None = None
-        self.stack: analysis.FrameStack | None = None
-        """The frames re-read from disk (``from_disk``), else None until the run builds it."""
+        self.reread: EstimateStream | None = None
+        """The frames re-read from disk and fed to a stream of their own (``from_disk``), else None."""
         self.warnings: tuple[WarningMessage, ...] = ()
         self.decided_at = 0.0
 
@@ -247,10 +256,8 @@ class StreamFlash(LedFrames):
             warnings.simplefilter("always", TargetUnreachableWarning)
             if options.from_disk:
                 sequence = read_sequence(self.writer.flush().directory)
-                self.stack = analysis.load_frame_stack(sequence)
-                estimate = analysis.estimate_sequence(
-                    sequence, options.solver, options.alpha, stack=self.stack, bin_factor=options.bin_factor
-                )
+                self.reread = stream_sequence(sequence, options.bin_factor)
+                estimate = self.reread.estimate(options.solver, options.alpha)
                 self.chosen = self.session.solve(options.mode, estimate.ambient_weights)
                 levels = np.clip(self.chosen.flash_weights, 0.0, 1.0)
             else:
@@ -295,10 +302,11 @@ def run_one_stream(
     )  # ambient, the LEDs, the flash
     entries = run_capture_with_flash(rig.camera, rig.booth, plan, writer, flash, handled, cancel=cancel)
     assert flash.chosen is not None
-    # The report's frames as the sequence records them (a mono camera's as three identical
-    # channels), as for two captures; the session's own stack holds a mono frame's one plane.
-    stack = flash.stack or analysis.load_frame_stack(writer.flush(), [frame.pixels for frame in flash.frames])
-    estimate = reported_estimate(writer.flush(), stack, options)
+    # The report's frames as the sequence records them (a mono camera's as three identical channels),
+    # from memory; the reported estimate is the statistics accumulated as they arrived (no second pass).
+    recorded = writer.flush()
+    stack = analysis.load_frame_stack(recorded, [frame.pixels for frame in flash.frames])
+    estimate = (flash.reread or flash.session.stream).estimate(options.solver, options.alpha)
     both = solve_both(flash.session, estimate.ambient_weights, options.mode, solved={options.mode: flash.chosen})
     names = [led.name for led in writer.sequence.leds]
     captured = led_capture(rig, names, exposure, flash.frames, list(entries[:-1]), flash.last_frame_at)
@@ -310,19 +318,7 @@ def run_one_stream(
         entries[-1].exposure_us,
         stack,
         flash.decided_at,
-    )
-
-
-def reported_estimate(sequence: Sequence, stack: analysis.FrameStack, options: RunOptions) -> AmbientEstimate:
-    """The estimate a run reports: the sequence's, by :func:`analysis.estimate_sequence` on its frames.
-
-    The one route every command takes (``msflash estimate SEQ`` gives the same numbers, bit for bit).
-    The one-stream run decided its flash earlier, from the block sums :class:`FlashSession` took as the
-    frames arrived: the same statistics summed in another order, whose weights agree with these to
-    rounding (about 1e-11 relative); the flash it re-captured is that decision's.
-    """
-    return analysis.estimate_sequence(
-        sequence, options.solver, options.alpha, stack=stack, bin_factor=options.bin_factor
+        None if flash.flash is None else as_recorded(flash.flash.pixels, recorded.camera.cfa),
     )
 
 
@@ -338,16 +334,14 @@ def run_two_captures(
 
     Both captures go through the capture engine's runner (:func:`run_capture`), each frame to
     ``handlers`` after the progress line."""
-    captured = capture_led_sequence(rig, writer, exposure, options.sync, handlers, cancel)
+    statistics = EstimateStream(writer.sequence, len(writer.sequence.leds), options.bin_factor, live=True)
+    captured = capture_led_sequence(rig, writer, exposure, options.sync, (statistics, *handlers), cancel)
     sequence = writer.flush()
     if options.from_disk:
         sequence = read_sequence(writer.path.parent)
-        stack = analysis.load_frame_stack(sequence)
-    else:
-        stack = analysis.load_frame_stack(sequence, [frame.pixels for frame in captured.frames])
-    estimate = analysis.estimate_sequence(
-        sequence, options.solver, options.alpha, stack=stack, bin_factor=options.bin_factor
-    )
+        statistics = stream_sequence(sequence, options.bin_factor)
+    stack = analysis.load_frame_stack(sequence, [frame.pixels for frame in captured.frames])
+    estimate = statistics.estimate(options.solver, options.alpha)
     both = solve_both(SequenceFlashes(sequence, options.target), estimate.ambient_weights, options.mode)
     solutions, caught = both.solutions, both.warnings
     levels = np.clip(solutions[options.mode].flash_weights, 0.0, 1.0)
@@ -398,8 +392,10 @@ def run_two_captures(
     flash_gain = recorded.flash_gain if exposure.mode == "recorded" and recorded is not None else 1.0
     flash_plan = CapturePlan.single(levels, flash_us, gain=flash_gain, trigger=SYNC_MODES[options.sync])
     decided = time.perf_counter()
-    run_capture(rig.camera, rig.booth, flash_plan, writer, (ProgressLines(), *handlers), cancel=cancel)
-    return RunResult(estimate, solutions, caught, captured, flash_us, stack, decided)
+    flash_kept = LedFrames()
+    run_capture(rig.camera, rig.booth, flash_plan, writer, (flash_kept, ProgressLines(), *handlers), cancel=cancel)
+    flash_frame = None if flash_kept.flash is None else as_recorded(flash_kept.flash.pixels, sequence.camera.cfa)
+    return RunResult(estimate, solutions, caught, captured, flash_us, stack, decided, flash_frame)
 
 
 __all__ = [
@@ -418,7 +414,6 @@ __all__ = [
     "plan_exposure",
     "recording_of",
     "report_exposure",
-    "reported_estimate",
     "run_one_stream",
     "run_two_captures",
     "sequence_writer",

@@ -51,7 +51,7 @@ from msflash.processing.image_formation import (
 from msflash.processing.least_squares import minimise_quadratic, recording_problems
 from msflash.processing.model_error import light_reference, reference_for, with_model_error
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, plane_shape
 from msflash.processing.synthesis import synthesize
 
 
@@ -179,15 +179,37 @@ def target_figures(world: dict[str, Any], pairs: int, threads: tuple[int, ...] =
     factor = block_factor(frames[0].shape, cfa)
     targets = TARGETS if cfa is None else RAW_TARGETS
 
+    period = 2 if cfa is not None else 1
+
+    def streamed(bin_factor: int) -> object:
+        # As msflash estimate (acquisition.session.estimate_stream.EstimateStream): the frames one at a time into
+        # incremental block rows, the weighted statistics and the default solve. One thread: frames come in order.
+        n = len(frames) - 1
+        frame_kernels.wanted(frames[0].nbytes * len(frames))  # as the stream does for a sequence from disk
+        rows = BlockRows(
+            n,
+            plane_shape(frames[0].shape, period),
+            bin_factor,
+            spec.white_level,
+            incremental=True,
+            black_level=spec.black_level,
+            weighting=SAMPLE_WEIGHTING,
+        )
+        for row, frame in zip([n, *range(n)], frames, strict=True):
+            rows.add_frame(row, frame, period)
+        return estimate_ambient(rows.statistics(spec), leds)
+
     def estimate(bin_factor: int, workers: int) -> Callable[[], object]:
-        # As msflash estimate: the weighted statistics (acquisition.session.analysis.sequence_statistics) and the default solve.
+        if bin_factor > 1:
+            return lambda: streamed(bin_factor)
+        # Every pixel (--bin-factor 1): the exact all-pixel moments of the frames together, as the stream keeps them.
         return lambda: estimate_ambient(
             accumulate_statistics(
                 frames[0],
                 frames[1:],
                 spec,
-                bin_factor=bin_factor,
-                cfa_period=2 if cfa is not None else 1,
+                bin_factor=1,
+                cfa_period=period,
                 workers=workers,
                 weighting=SAMPLE_WEIGHTING,
             ),

@@ -29,7 +29,6 @@ from msflash.processing.local import (
     SELECTION_MARGIN,
     Cells,
     TiledStatistics,
-    _block_sums_and_differences,
     denoised_global,
     estimate_local,
     segment_regions,
@@ -41,6 +40,7 @@ from msflash.processing.local import (
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 from msflash.processing.synthesis import synthesize
+from msflash.processing.tile_statistics import _block_sums_and_differences
 from tests.helpers import EXACT, FLOAT32, ambient, camera, chart, leds_photons, linear_frames, rendered_frames, spec_for
 
 SHAPE = (160, 192)

@@ -110,7 +110,7 @@ def test_a_dead_led_in_a_sample_is_flagged(dead: int) -> None:
     frames = list(stack.led_frames)
     frames[dead] = np.clip(np.rint(noisy), 0, 65535).astype(np.uint16)
     broken = analysis.FrameStack(stack.ambient, tuple(frames), stack.spec, stack.ambient_index, stack.led_indices)
-    estimate = analysis.estimate_sequence(sequence, stack=broken)
+    estimate = analysis.estimate_sequence(sequence, stream=analysis.stream_stack(sequence, broken))
     flagged = [w for w in estimate.warnings if "holds noise" in w]
     assert len(flagged) == 1
     assert sequence.leds[dead].name in flagged[0]

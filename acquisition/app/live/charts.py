@@ -1,76 +1,86 @@
-"""The spectra of a run as SVG drawn on the server: the estimate with its band, the flash mixes.
+"""The spectra of a run as SVG drawn by matplotlib on the server: the estimate with its band, the flash mixes.
 
-The page's plots are plain SVG written here from the run's own files (``estimate.json``,
-``flash-*.json``, ``sequence/sequence.json``), so a run of an earlier session draws the same way and the
-page needs no plotting script or network. Left: the estimated ambient ± 1σ (the band ``estimate.json``
-describes) and, on a simulated rig, the true ambient scaled onto it (least squares, the metric's scaling);
-right: the matching and complementary flashes and ambient + complementary, as ``spectra.png`` shows them.
+The page's charts are the report's (``spectra.png``, :func:`acquisition.app.report.spectra_figure`) drawn
+from the run's own files (``estimate.json``, ``flash-*.json``, ``sequence/sequence.json``), so a run of an
+earlier session draws the same way, and the page needs no plotting script or network: matplotlib's axes,
+ticks, units (:func:`~acquisition.app.plot_style.spectral_axis`), clipping to the axes and the one palette
+(:data:`~acquisition.app.plot_style.PALETTE`, the flash mixes by
+:func:`~acquisition.app.plot_style.draw_flash_mixes`, as the report draws them). Left: the estimated ambient
+± 1σ (the band ``estimate.json`` describes) and, on a simulated rig, the true ambient scaled onto it (least
+squares, the metric's scaling); right: the matching and complementary flashes, ambient + complementary and
+the target. Each drawn series carries an SVG id (``band``, ``estimate``, ``truth``, ``mixes``) for the page's tests.
 """
 
 from __future__ import annotations
 
-import html
-from collections.abc import Sequence
+import io
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from msflash.acquisition.app.live.runs import read_json
+from msflash.processing.flash import FlashSolution
+from msflash.processing.spectra import Spectra, WavelengthGrid
 
-WIDTH, HEIGHT = 520, 260
-LEFT, RIGHT, TOP, BOTTOM = 44, 12, 24, 34
-COLOURS = {
-    "estimate": "#1f77b4",
-    "truth": "#222222",
-    "matching": "#ff7f0e",
-    "complementary": "#2ca02c",
-    "total": "#9467bd",
-}
+FIGSIZE = (5.6, 3.3)
+"""Each chart's size in inches (matplotlib's SVG is scalable: the page sizes it)."""
 
 
-def _xy(wavelengths: np.ndarray, values: np.ndarray, peak: float) -> list[tuple[float, float]]:
-    span = float(wavelengths[-1] - wavelengths[0]) or 1.0
-    x = LEFT + (wavelengths - wavelengths[0]) / span * (WIDTH - LEFT - RIGHT)
-    y = TOP + (1.0 - np.clip(values / peak, -0.05, 1.1) / 1.1) * (HEIGHT - TOP - BOTTOM)
-    return list(zip(x.tolist(), y.tolist()))
+def _plot_unit(wavelengths: np.ndarray, values: np.ndarray, unit: str) -> np.ndarray:
+    """``values`` (n_wavelengths, k) given in ``unit``, in the plots' unit."""
+    from msflash.acquisition.app.plot_style import in_plot_unit
+
+    step = float(wavelengths[1] - wavelengths[0]) if wavelengths.size > 1 else 1.0
+    grid = WavelengthGrid(float(wavelengths[0]), float(wavelengths[-1]), step)
+    names = tuple(f"s{i}" for i in range(values.shape[1]))
+    return in_plot_unit(Spectra(grid, values, names, "spd", unit))  # type: ignore[arg-type]
 
 
-def _points(points: Sequence[tuple[float, float]]) -> str:
-    return " ".join(f"{x:.1f},{y:.1f}" for x, y in points)
+def _svg(figure: Any) -> str:
+    from msflash.acquisition.app.plot_style import pyplot
+
+    buffer = io.StringIO()
+    try:
+        figure.savefig(buffer, format="svg", bbox_inches="tight")
+    finally:
+        pyplot().close(figure)
+    text = buffer.getvalue()
+    return text[text.index("<svg") :]  # no XML prologue: the SVG goes inline into the page
 
 
-def _frame(title: str, wavelengths: np.ndarray, body: list[str], legend: list[tuple[str, str, str]]) -> str:
-    parts = [
-        f'<svg xmlns="http://www.w3.org/2000/svg" class="chart" viewBox="0 0 {WIDTH} {HEIGHT}" '
-        f'width="{WIDTH}" height="{HEIGHT}" role="img" aria-label="{html.escape(title)}">',
-        f'<text x="{LEFT}" y="15" class="title">{html.escape(title)}</text>',
-        f'<rect x="{LEFT}" y="{TOP}" width="{WIDTH - LEFT - RIGHT}" height="{HEIGHT - TOP - BOTTOM}" class="axes"/>',
-    ]
-    first, last = float(wavelengths[0]), float(wavelengths[-1])
-    for tick in range(int(np.ceil(first / 50) * 50), int(last) + 1, 50):
-        x = LEFT + (tick - first) / ((last - first) or 1.0) * (WIDTH - LEFT - RIGHT)
-        parts.append(f'<text x="{x:.1f}" y="{HEIGHT - BOTTOM + 14}" class="tick">{tick}</text>')
-    parts.append(f'<text x="{WIDTH - RIGHT}" y="{HEIGHT - 4}" class="label" text-anchor="end">wavelength (nm)</text>')
-    parts += body
-    for i, (css, colour, text) in enumerate(legend):
-        y = TOP + 14 + 14 * i
-        parts.append(
-            f'<line x1="{LEFT + 8}" x2="{LEFT + 26}" y1="{y - 4}" y2="{y - 4}" stroke="{colour}" class="{css}"/>'
-        )
-        parts.append(f'<text x="{LEFT + 30}" y="{y}" class="legend">{html.escape(text)}</text>')
-    parts.append("</svg>")
-    return "\n".join(parts)
+def _solution(flash: Any, mode: str, count: int) -> FlashSolution | None:
+    if not isinstance(flash, dict):
+        return None
+    try:
+        weights = np.asarray(flash.get("flash_weights", []), dtype=float)
+        ambient = np.asarray(flash.get("ambient_weights", []), dtype=float)
+    except (TypeError, ValueError):
+        return None
+    if weights.shape != (count,) or ambient.shape != (count,):
+        return None
+    return FlashSolution(mode, ambient, weights, None, 0.0, str(flash.get("bounds", "")), True)
 
 
-def _polyline(css: str, colour: str, points: list[tuple[float, float]], dash: str = "") -> str:
-    dashed = f' stroke-dasharray="{dash}"' if dash else ""
-    return (
-        f'<polyline class="{css}" fill="none" stroke="{colour}" stroke-width="2"{dashed} points="{_points(points)}"/>'
-    )
+_CACHE: dict[tuple[str, int], dict[str, str] | None] = {}
+"""Charts drawn, by run folder and ``estimate.json``'s modification time (a run's report is written once)."""
 
 
 def run_charts(folder: Path) -> dict[str, str] | None:
-    """``{"ambient": svg, "mixes": svg}`` for the run in ``folder``, or None before its report exists."""
+    """``{"ambient": svg, "mixes": svg}`` for the run in ``folder``, or None before its report exists
+    (drawn once per run: matplotlib takes a fraction of a second a chart)."""
+    try:
+        key = (str(folder), (folder / "estimate.json").stat().st_mtime_ns)
+    except OSError:
+        return None
+    if key not in _CACHE:
+        if len(_CACHE) > 64:
+            _CACHE.clear()
+        _CACHE[key] = _draw_charts(folder)
+    return _CACHE[key]
+
+
+def _draw_charts(folder: Path) -> dict[str, str] | None:
     estimate = read_json(folder / "estimate.json")
     sequence = read_json(folder / "sequence" / "sequence.json")
     if not isinstance(estimate, dict) or not isinstance(sequence, dict):
@@ -80,44 +90,70 @@ def run_charts(folder: Path) -> dict[str, str] | None:
         spectrum = np.asarray(estimate["spectrum"], dtype=float)
         std = np.asarray(estimate["spectrum_std"], dtype=float)
         leds = np.array([led["spd"] for led in sequence["leds"]], dtype=float).T
+        estimate_unit = str(estimate.get("spectral_unit", "energy"))
+        sequence_unit = str(sequence.get("spectral_unit", "energy"))
     except (KeyError, TypeError, ValueError):
         return None
     if leds.shape[0] != wavelengths.size or spectrum.shape != wavelengths.shape or std.shape != wavelengths.shape:
         return None
-    peak = float(np.max(spectrum)) or 1.0
-    band = _xy(wavelengths, spectrum + std, peak) + _xy(wavelengths, spectrum - std, peak)[::-1]
-    body = [
-        f'<polygon class="band" fill="{COLOURS["estimate"]}" fill-opacity="0.25" points="{_points(band)}"/>',
-        _polyline("estimate", COLOURS["estimate"], _xy(wavelengths, spectrum, peak)),
-    ]
-    legend = [("estimate", COLOURS["estimate"], "estimate ± 1σ")]
-    band_meaning = str(estimate.get("band") or "")
-    truth = (sequence.get("msflash") or {}).get("true_ambient") if isinstance(sequence.get("msflash"), dict) else None
-    if isinstance(truth, dict) and len(truth.get("spd", [])) == wavelengths.size:
-        curve = np.asarray(truth["spd"], dtype=float)
-        if float(curve @ curve) > 0:
-            scaled = curve * float(spectrum @ curve) / float(curve @ curve)
-            body.append(_polyline("truth", COLOURS["truth"], _xy(wavelengths, scaled, peak), "6 4"))
-            legend.append(("truth", COLOURS["truth"], "true ambient (scaled)"))
-    if band_meaning:
-        body[0] = body[0].replace("/>", f"><title>{html.escape(band_meaning)}</title></polygon>")
-    ambient_chart = _frame("Ambient illuminant (estimate)", wavelengths, body, legend)
+    from msflash.acquisition.app.plot_style import PALETTE, draw_flash_mixes, peak_of, pyplot, spectral_axis
 
-    curves: list[tuple[str, str, np.ndarray, str, str]] = []
+    plt = pyplot()
+    try:
+        curves = _plot_unit(wavelengths, np.stack([spectrum, std], axis=1), estimate_unit)
+        led_values = _plot_unit(wavelengths, leds, sequence_unit)
+    except Exception:  # noqa: BLE001 - a unit or grid the plots cannot take: no charts, the files stay listed
+        return None
+    values, sigma = curves[:, 0], np.abs(curves[:, 1])
+    peak = peak_of(values)
+
+    figure, axis = plt.subplots(figsize=FIGSIZE)
+    covers = "pixel noise + model error" if estimate.get("miss_risk") is not None else "pixel noise only"
+    axis.fill_between(
+        wavelengths, (values - sigma) / peak, (values + sigma) / peak, color=PALETTE.ambient, alpha=0.2, lw=0,
+        label=f"estimate ± 1σ ({covers})", gid="band",
+    )  # fmt: skip
+    axis.plot(wavelengths, values / peak, color=PALETTE.ambient, lw=2, label="estimate", gid="estimate")
+    msflash = sequence.get("msflash")
+    truth = msflash.get("true_ambient") if isinstance(msflash, dict) else None
+    if isinstance(truth, dict) and len(truth.get("spd", [])) == wavelengths.size:
+        curve = _plot_unit(wavelengths, np.asarray(truth["spd"], dtype=float)[:, None], sequence_unit)[:, 0]
+        if float(curve @ curve) > 0:
+            scaled = curve * float(values @ curve) / float(curve @ curve)
+            axis.plot(
+                wavelengths, scaled / peak, color=PALETTE.truth, ls="--", lw=1.5, label="true ambient (scaled)",
+                gid="truth",
+            )  # fmt: skip
+    axis.set_ylim(min(0.0, float(np.min(values / peak)) - 0.05), 1.3)  # the band beyond it is clipped
+    axis.set_xlim(float(wavelengths[0]), float(wavelengths[-1]))
+    axis.set_title("Ambient illuminant (estimate)")
+    spectral_axis(axis, "peak of the estimate")
+    axis.legend(loc="upper left", fontsize=7)
+    ambient_chart = _svg(figure)
+
+    solutions = {}
     for mode in ("matching", "complementary"):
-        flash = read_json(folder / f"flash-{mode}.json")
-        if not isinstance(flash, dict):
-            continue
-        weights = np.asarray(flash.get("flash_weights", []), dtype=float)
-        if weights.size != leds.shape[1]:
-            continue
-        curves.append((f"mix-{mode}", COLOURS[mode], leds @ weights, "", f"{mode} flash"))
-        ambient_weights = np.asarray(flash.get("ambient_weights", []), dtype=float)
-        if mode == "complementary" and ambient_weights.size == weights.size:
-            total = leds @ (ambient_weights + weights)
-            curves.append(("mix-total", COLOURS["total"], total, "", "ambient + complementary"))
-    curves.append(("ambient", COLOURS["estimate"], spectrum, "2 3", "ambient (estimate)"))
-    mix_peak = max(float(np.max(curve)) for _, _, curve, _, _ in curves) or 1.0
-    mixes = [_polyline(css, colour, _xy(wavelengths, curve, mix_peak), dash) for css, colour, curve, dash, _ in curves]
-    mix_legend = [(css, colour, text) for css, colour, _, _, text in curves]
-    return {"ambient": ambient_chart, "mixes": _frame("Flash mixes", wavelengths, mixes, mix_legend)}
+        solution = _solution(read_json(folder / f"flash-{mode}.json"), mode, leds.shape[1])
+        if solution is not None:
+            solutions[mode] = solution
+    target = None
+    flash = read_json(folder / "flash-complementary.json")
+    if isinstance(flash, dict) and isinstance(flash.get("target"), str):
+        try:
+            from msflash.processing import datasets
+
+            grid = WavelengthGrid(float(wavelengths[0]), float(wavelengths[-1]), float(wavelengths[1] - wavelengths[0]))
+            from msflash.acquisition.app.plot_style import in_plot_unit
+
+            target = in_plot_unit(datasets.illuminant(flash["target"], grid))[:, 0]
+        except Exception:  # noqa: BLE001 - an unknown target: drawn without it
+            target = None
+    figure, axis = plt.subplots(figsize=FIGSIZE)
+    draw_flash_mixes(axis, wavelengths, led_values, values, solutions, target, peak)
+    for line in axis.get_lines():
+        line.set_gid("mix-" + str(line.get_label()).split(" (")[0].replace(" ", "-"))
+    axis.set_xlim(float(wavelengths[0]), float(wavelengths[-1]))
+    axis.set_title("Flash mixes")
+    spectral_axis(axis, "peak of the estimate")
+    axis.legend(loc="upper right", fontsize=7)
+    return {"ambient": ambient_chart, "mixes": _svg(figure)}

@@ -3,7 +3,8 @@
 A page that stops reading (a stalled tab, a client with a tiny receive buffer, a half-dead network) must
 not stall the frame loop, the rig thread or the other pages, and must not count as watching for ever:
 
-- every page has an :class:`Outbox` holding only the **latest** state and the **latest** frame; the
+- every page has an :class:`Outbox` holding only the **latest** state and the **latest** frame of each view
+  (the live image, the synthesised flash, its ambient, its capture: one view's frames never hide another's); the
   frame loop and the state pushes *offer* messages to it and never wait on a socket; a frame is
   written only once the one before has left the process, into a small kernel buffer
   (:data:`SEND_BUFFER_BYTES`), so a slow page is shown the newest frame, not one seconds old;
@@ -61,7 +62,8 @@ class Outbox:
         self._transport = transport
         self._on_dropped = on_dropped
         self._state: str | None = None
-        self._frame: bytes | None = None
+        self._frames: dict[str, bytes] = {}
+        """The latest frame of each view not yet sent (insertion order: the oldest view first)."""
         self._ready = asyncio.Event()
         self.dropped = False
         """True once the page was dropped (a send took longer than :data:`SEND_TIMEOUT_S`)."""
@@ -78,11 +80,11 @@ class Outbox:
         self._state = text
         self._ready.set()
 
-    def offer_frame(self, message: bytes) -> None:
-        """Queue ``message`` (a frame), replacing a frame not yet sent; never waits."""
-        if self._frame is not None:
+    def offer_frame(self, message: bytes, view: str = "live") -> None:
+        """Queue ``message`` (a frame of ``view``), replacing that view's frame not yet sent; never waits."""
+        if view in self._frames:
             self.frames_skipped += 1
-        self._frame = message
+        self._frames[view] = message
         self._ready.set()
 
     async def send_now(self, text: str) -> None:
@@ -95,13 +97,15 @@ class Outbox:
                 await self._ready.wait()
                 self._ready.clear()
                 state, self._state = self._state, None
-                frame, self._frame = self._frame, None
                 if state is not None:
                     await self._bounded(self.ws.send_str(state))
-                if frame is not None and not self.dropped:
+                while self._frames and not self.dropped:
+                    view = next(iter(self._frames))
+                    frame = self._frames.pop(view)
                     await self._bounded(self._after_the_last_left())
-                    if self._frame is not None:  # a newer frame came while the last one was leaving
-                        frame, self._frame = self._frame, None
+                    newer = self._frames.pop(view, None)
+                    if newer is not None:  # a newer frame of the view came while the last one was leaving
+                        frame = newer
                         self.frames_skipped += 1
                     if not self.dropped:
                         await self._bounded(self.ws.send_bytes(frame))

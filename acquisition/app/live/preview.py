@@ -107,17 +107,41 @@ class PreviewRenderer:
         """The preview of one raw frame; ``overlay`` paints the saturated pixels."""
         rgb = self.camera_rgb(pixels)
         saturated = np.any(rgb >= 1.0 - SATURATION_MARGIN, axis=2)
-        bins = np.clip(rgb * HISTOGRAM_BINS, 0, HISTOGRAM_BINS - 1).astype(np.intp)
-        histogram = tuple(
-            tuple(int(n) for n in np.bincount(bins[:, :, c].ravel(), minlength=HISTOGRAM_BINS)) for c in range(3)
-        )
-        steps = np.clip(rgb @ self._to_srgb.T, 0, ENCODE_STEPS).astype(np.intp)
-        rgb8 = self._encode[steps]
-        if overlay:
-            rgb8[saturated] = OVERLAY_RGB
+        return self.render_rgb(rgb, saturated if overlay else None, float(np.mean(saturated)))
+
+    def render_rgb(
+        self,
+        rgb: np.ndarray,
+        paint: np.ndarray | None = None,
+        saturated: float | None = None,
+        scale: float = 1.0,
+        histogram: bool = True,
+    ) -> Preview:
+        """The preview of (H, W, 3) camera RGB, ``rgb · scale`` in [0, 1] of display white; ``paint`` marks
+        pixels in :data:`OVERLAY_RGB`; ``saturated`` is the fraction reported (default: ``paint``'s); without
+        ``histogram`` its counts are all zero (a view that shows none: the flash preview)."""
+        # Small integer types and in-place clips: at video rate the passes over the pixels are the cost.
+        counts: tuple[tuple[int, ...], ...] = ((0,) * HISTOGRAM_BINS,) * 3
+        if histogram:
+            scaled = np.multiply(rgb, HISTOGRAM_BINS * scale, dtype=np.float32)
+            bins = np.clip(scaled, 0, HISTOGRAM_BINS - 1, out=scaled).astype(np.uint8)
+            counts = tuple(
+                tuple(int(n) for n in np.bincount(bins[:, :, c].ravel(), minlength=HISTOGRAM_BINS)) for c in range(3)
+            )
+        rgb8 = self.srgb8(rgb, scale)
+        if paint is not None:
+            rgb8[paint] = OVERLAY_RGB
+        if saturated is None:
+            saturated = float(np.mean(paint)) if paint is not None else 0.0
         height = max(1, round(rgb8.shape[0] * self.width / rgb8.shape[1]))
         resample = Image.Resampling.NEAREST if self.width >= rgb8.shape[1] else Image.Resampling.BOX
         image = Image.fromarray(rgb8).resize((self.width, height), resample)
         buffer = io.BytesIO()
         image.save(buffer, "JPEG", quality=JPEG_QUALITY)
-        return Preview(buffer.getvalue(), self.width, height, histogram, float(np.mean(saturated)))
+        return Preview(buffer.getvalue(), self.width, height, counts, saturated)
+
+    def srgb8(self, rgb: np.ndarray, scale: float = 1.0) -> np.ndarray:
+        """(H, W, 3) camera RGB, ``rgb · scale`` in [0, 1] → 8-bit sRGB (the preview's colour step, no resize)."""
+        matrix = self._to_srgb.T if scale == 1.0 else (self._to_srgb.T * np.float32(scale)).astype(np.float32)
+        linear = np.asarray(rgb, dtype=np.float32) @ matrix
+        return self._encode[np.clip(linear, 0, ENCODE_STEPS, out=linear).astype(np.uint16)]

@@ -106,6 +106,7 @@ def run_sequence(
             rig.true_ambient,
             result.stack,
             options.target,
+            result.flash_frame,
         )
         summary["exposure"] = run_html.exposure_summary(exposure, result.flash_exposure_us, result.captured)
         summary["decision_ms"] = round(result.decision_ms, 3)

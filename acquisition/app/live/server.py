@@ -33,21 +33,27 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from aiohttp import WSMsgType, web
 
 from msflash.acquisition.app.live.charts import run_charts
 from msflash.acquisition.app.live.clients import Outbox, close_all
+from msflash.acquisition.app.live.mix_preview import MixPreview, preview_samples
 from msflash.acquisition.app.live.preview import Preview, PreviewRenderer
 from msflash.acquisition.app.live.requests import boolean, finite, json_object, loopback, number, refuse
 from msflash.acquisition.app.live.run_job import SequenceRequest, new_run_folder, run_sequence
 from msflash.acquisition.app.live.runs import list_runs, read_json, run_file, run_files, run_folder, run_page
+from msflash.acquisition.app.live.snapshots import write_snapshot
 from msflash.acquisition.app.live.state import LiveState, SequenceJob
+from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.errors import CaptureCancelled, UsageError
 from msflash.acquisition.session.engine import Cancellation, CaptureResult, FrameEvent
+from msflash.acquisition.session.exposure import whole_pwm_periods
 from msflash.acquisition.session.live import LiveStream
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run import RunOptions
 from msflash.processing.led_wavelength import led_peaks_nm
+from msflash.processing.synthesis import linearise
 
 log = logging.getLogger(__name__)
 
@@ -110,6 +116,10 @@ class LiveServer:
         self.stream = LiveStream(rig)
         info = rig.camera.info  # read once: on a real camera each read is feature round trips
         self.camera_model = info.model
+        self.camera_format = (
+            f"{info.pixel_format} · {info.width} × {info.height} px · ROI, binning and pixel format are the "
+            "camera's own (msflash's camera layer does not set them yet)"
+        )
         self.renderer = PreviewRenderer(info, rig.camera_responsivities)
         self.state = LiveState()
         self.rig_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="msflash-rig")
@@ -122,6 +132,20 @@ class LiveServer:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._cancel: Cancellation | None = None
         """The running sequence's cancellation (:meth:`stop_sequence`), None when none runs."""
+        self.mix: MixPreview | None = None
+        """The last sequence's frames, ready to be synthesised under the page's mix (issue 33 item 2)."""
+        self.mix_levels: tuple[float, ...] = ()
+        """The mix the page shows (drive levels, one per LED)."""
+        self.mix_capture: dict[str, Any] | None = None
+        """The last mix fired from the preview: its files and how far the capture is from the synthesis."""
+        self._mix_wanted: tuple[float, ...] | None = None
+        self._mix_rendering = False
+        self._last_raw: RawFrame | None = None
+        self._view_frames: dict[str, bytes] = {}
+        """The last frame of each flash-preview view, for pages that connect later."""
+        self._last_mix_linear: np.ndarray | None = None
+        self.live_frames = 0
+        """Live frames grabbed (the page counts gaps in their numbers as dropped frames)."""
 
     @property
     def url(self) -> str:
@@ -145,6 +169,10 @@ class LiveServer:
         app.router.add_post("/api/levels", self._post_levels)
         app.router.add_post("/api/leds-off", self._post_leds_off)
         app.router.add_post("/api/sequence", self._post_sequence)
+        app.router.add_post("/api/mix", self._post_mix)
+        app.router.add_post("/api/mix-fire", self._post_mix_fire)
+        app.router.add_post("/api/snapshot", self._post_snapshot)
+        app.router.add_get("/api/pixel", self._get_pixel)
         app.on_startup.append(self._on_startup)
         app.on_shutdown.append(self._on_shutdown)
         app.on_cleanup.append(self._on_cleanup)
@@ -165,6 +193,7 @@ class LiveServer:
     async def _on_startup(self, _app: web.Application) -> None:
         self._loop = asyncio.get_running_loop()
         self._spawn(self._frame_loop())
+        self._spawn(self._load_newest_mix())
 
     async def _on_shutdown(self, _app: web.Application) -> None:
         await close_all(self.clients)  # bounded: a page that does not read is aborted
@@ -285,11 +314,12 @@ class LiveServer:
         }
 
     async def _get_run(self, request: web.Request) -> web.Response:
-        return web.json_response(finite(self._run_info(request.match_info["name"])))
+        loop = asyncio.get_running_loop()  # the charts are drawn by matplotlib: off the event loop
+        return web.json_response(finite(await loop.run_in_executor(None, self._run_info, request.match_info["name"])))
 
     async def _run_page(self, request: web.Request) -> web.StreamResponse:
         """The run's own ``report.html`` (what ``msflash run`` writes); the page's summary for a run without one."""
-        info = self._run_info(request.match_info["name"])
+        info = await asyncio.get_running_loop().run_in_executor(None, self._run_info, request.match_info["name"])
         if "report.html" in info["files"]:
             raise web.HTTPFound(f"/runs/{info['name']}/files/report.html")
         return web.Response(text=run_page(info), content_type="text/html")
@@ -320,8 +350,16 @@ class LiveServer:
                 "pages_dropped": self.pages_dropped,
                 "error": self.state.error,
                 "runs": list_runs(self.runs),
+                "mix": self._mix_json(),
+                "camera_gain": self._camera_gain(),
+                "camera_format": self.camera_format,
             }
         )
+
+    def _camera_gain(self) -> dict[str, Any] | None:
+        frame = self._last_raw
+        native = frame.camera_gain if frame is not None else None
+        return None if native is None else {"feature": native.feature, "value": native.value, "unit": native.unit}
 
     async def _get_state(self, _request: web.Request) -> web.Response:
         return web.json_response(self.state_json())
@@ -401,7 +439,7 @@ class LiveServer:
         exposure: str | float = "auto" if self.state.sequence_exposure == "auto" else self.stream.settings.exposure_us
         folder = new_run_folder(self.runs)
         n_leds = self.rig.led_spectra.count
-        labels = ["ambient", *(f"led:{i + 1}" for i in range(n_leds)), "flash"]
+        labels = ["ambient", *self.rig.led_spectra.names[:n_leds], "flash"]
         self.state.job = SequenceJob("running", folder.name, "starting", [{"label": label} for label in labels])
         request_ = SequenceRequest(exposure, RunOptions(mode=mode, target=self.target))
         self._spawn(self._sequence(folder, request_))
@@ -437,6 +475,10 @@ class LiveServer:
             self.state.error = f"sequence: {err}"
         else:
             job.status = "done"
+            try:
+                await self._load_mix(folder.name)
+            except Exception as err:  # noqa: BLE001 - the run stands; only its flash preview is missing
+                log.error("live: the flash preview of %s could not be loaded: %s", folder.name, err)
             rmse = summary.get("spectrum_rmse_vs_truth")
             job.message = f"done in {summary['elapsed_s']:.1f} s" + (
                 f"; spectrum RMSE against the true ambient {rmse:.4f}" if rmse is not None else ""
@@ -461,9 +503,214 @@ class LiveServer:
 
     def _landed(self, job: SequenceJob, index: int, file: str, label: str, preview: Preview) -> None:
         if index < len(job.steps):
+            label = job.steps[index]["label"]  # the LED's name, not the plan's led:N
             job.steps[index] = {"label": label, "file": file}
         self._spawn(self._send_frame(preview, source=f"sequence {label}"))
         self._spawn(self._push_state())
+
+    # -- the flash before it fires (issue 33 item 2) ----------------------------------------------
+    def _mix_json(self) -> dict[str, Any] | None:
+        mix = self.mix
+        if mix is None:
+            return None
+        return {
+            "run": mix.run,
+            "led_names": list(mix.led_names),
+            "solved": {mode: list(levels) for mode, levels in mix.solved.items()},
+            "levels": list(self.mix_levels),
+            "capture": self.mix_capture,
+        }
+
+    async def _load_mix(self, run: str) -> None:
+        folder = run_folder(self.runs, run)
+        if folder is None:
+            raise UsageError(f"run {run[:80]!r}: no such run in {self.runs}")
+        renderer = self.renderer
+        mix = await asyncio.get_running_loop().run_in_executor(None, MixPreview.from_run, folder, renderer)
+        self.mix, self.mix_capture = mix, None
+        self._view_frames.pop("mix-capture", None)
+        self.mix_levels = mix.solved.get(self.state.mode, (0.0,) * len(mix.led_names))
+        ambient = await asyncio.get_running_loop().run_in_executor(None, mix.image, (0.0,) * len(mix.led_names))
+        await self._send_frame(ambient.preview, source=f"ambient of {mix.run}", view="mix-ambient")
+        self._want_mix(self.mix_levels)
+        await self._push_state()
+
+    async def _load_newest_mix(self) -> None:
+        """At start: the newest run with a readable sequence, so the preview works after a restart."""
+        for run in list_runs(self.runs)[:5]:
+            try:
+                await self._load_mix(run["name"])
+                return
+            except Exception as err:  # noqa: BLE001 - an unreadable run: try the one before
+                log.info("live: no flash preview from %s: %s", run["name"], err)
+                continue
+
+    def _want_mix(self, levels: tuple[float, ...]) -> None:
+        """Render the mix ``levels`` for the pages; a newer mix replaces one not yet rendered (never a queue)."""
+        self._mix_wanted = levels
+        if not self._mix_rendering:
+            self._mix_rendering = True
+            self._spawn(self._render_mixes())
+
+    async def _render_mixes(self) -> None:
+        try:
+            while self._mix_wanted is not None and self.mix is not None:
+                levels, self._mix_wanted = self._mix_wanted, None
+                mix = self.mix
+                image = await asyncio.get_running_loop().run_in_executor(None, mix.image, levels, self.state.overlay)
+                self._last_mix_linear = image.linear
+                await self._send_frame(image.preview, source=f"synthesised from {mix.run}", view="mix")
+        except Exception as err:  # noqa: BLE001 - logged; the devices are not involved, the next mix tries again
+            log.error("live: synthesising the mix failed: %s", err)
+        finally:
+            self._mix_rendering = False
+
+    async def _post_mix(self, request: web.Request) -> web.Response:
+        """``{"run": name}`` loads a run's frames; ``{"levels": [...]}`` or ``{"preset": mode}`` sets the mix."""
+        body = await json_object(request)
+        if "run" in body:
+            if not isinstance(body["run"], str):
+                raise UsageError("run: expected a run folder's name")
+            await self._load_mix(body["run"])
+        mix = self.mix
+        if mix is None:
+            raise UsageError("no sequence to synthesise from yet; expected a fired sequence first")
+        if "preset" in body:
+            preset = body["preset"]
+            if preset == "ambient":
+                self.mix_levels = (0.0,) * len(mix.led_names)
+            elif preset in mix.solved:
+                self.mix_levels = mix.solved[preset]
+            else:
+                choices = ", ".join(["ambient", *mix.solved])
+                raise UsageError(f"preset {str(preset)[:40]!r}: expected one of {choices}")
+        elif "levels" in body:
+            self.mix_levels = mix.levels(body["levels"])
+        self._want_mix(self.mix_levels)
+        return web.json_response({"mix": finite(self._mix_json())})
+
+    async def _post_mix_fire(self, request: web.Request) -> web.Response:
+        """Capture one frame with exactly the mix shown, at the run's ambient exposure and gain; its raw TIFF and
+        sRGB PNG go to the run's ``mix-captures/``, with how far it is from the synthesised image."""
+        body = await json_object(request)
+        self._busy()
+        mix = self.mix
+        if mix is None:
+            raise UsageError("no sequence to synthesise from yet; expected a fired sequence first")
+        levels = mix.levels(body["levels"]) if "levels" in body else self.mix_levels
+        if levels != self.mix_levels:
+            raise UsageError("levels: not the mix shown; expected the page's current mix (reload the page)")
+        folder = run_folder(self.runs, mix.run)
+        if folder is None:
+            raise UsageError(f"run '{mix.run}': its folder is gone")
+        exposure_us, gain = mix.ambient_exposure
+        # A booth that dims by PWM delivers a fractional level's energy only over whole periods (as the
+        # sequence's flash frame is timed): the ambient exposure rounded to them, or the error named.
+        pwm_hz = getattr(getattr(self.rig.booth, "info", None), "pwm_hz", None)
+        pwm_note = None
+        if pwm_hz:
+            exposure_us, pwm_note = whole_pwm_periods(exposure_us, levels, pwm_hz, self.stream.exposure_range_us)
+        frame = await self._on_rig(self._grab_with, levels, exposure_us, gain)
+        linear, saturated = linearise(
+            preview_samples(frame.pixels, mix.cfa, self.renderer.width),
+            mix.spec.black_level,
+            mix.spec.white_level,
+            frame.exposure_us,
+            frame.gain,
+        )
+        synthesised, synth_saturated = mix.synthesize(levels)
+        if linear.shape != synthesised.shape:
+            raise UsageError(f"camera frame {frame.pixels.shape}: not the run's frame size; expected the same camera")
+        keep = ~(saturated | synth_saturated)
+        difference = float(np.sqrt(np.mean((linear - synthesised)[keep] ** 2)))
+        scale = float(np.sqrt(np.mean(synthesised[keep] ** 2))) or 1.0
+        names = dict(zip(mix.led_names, levels))
+        metadata = {"run": mix.run, "levels": names, "exposure_us": frame.exposure_us, "gain": frame.gain}
+        rgb = self.renderer.camera_rgb(frame.pixels)
+        tiff, png = await asyncio.get_running_loop().run_in_executor(
+            None, write_snapshot, folder / "mix-captures", frame.pixels, self.renderer.srgb8(rgb), metadata
+        )
+        self.mix_capture = {
+            "levels": list(levels),
+            "tiff": str(tiff.relative_to(folder)),
+            "png": str(png.relative_to(folder)),
+            "relative_rms_difference": difference / scale,
+            "exposure_us": frame.exposure_us,
+            "gain": frame.gain,
+            "warning": pwm_note,
+        }
+        captured = self.renderer.render_rgb(mix.rgb(linear), scale=1.0 / mix.white, histogram=False)  # the mix's scale
+        await self._send_frame(captured, source=f"captured with the mix ({mix.run})", view="mix-capture")
+        await self._push_state()
+        return web.json_response({"mix": finite(self._mix_json())})
+
+    def _grab_with(self, levels: tuple[float, ...], exposure_us: float, gain: float) -> RawFrame:
+        """One frame at ``levels``, ``exposure_us`` and ``gain``; the live settings back after it (rig thread)."""
+        before = self.stream.settings
+        try:
+            self.stream.pause()
+            self.stream.set_exposure(exposure_us, gain)
+            self.stream.set_levels(levels)
+            return self.stream.grab()
+        except BaseException:
+            self.stream.all_off()
+            raise
+        finally:
+            self.stream.pause()
+            self.stream.set_exposure(before.exposure_us, before.gain)
+            if self.clients and any(before.levels):  # the live levels again, as after a sequence
+                self.stream.set_levels(before.levels)
+            else:
+                self.stream.all_off()
+
+    async def _post_snapshot(self, request: web.Request) -> web.Response:
+        """The last live frame as a raw TIFF and an sRGB PNG in the runs folder's ``snapshots/``."""
+        await json_object(request)
+        frame = self._last_raw
+        if frame is None:
+            raise UsageError("no live frame yet; expected a page watching the stream")
+        rgb = self.renderer.camera_rgb(frame.pixels)
+        settings = self.stream.settings
+        metadata = {
+            "camera": self.camera_model,
+            "exposure_us": frame.exposure_us,
+            "gain": frame.gain,
+            "levels": dict(zip(self.rig.led_spectra.names, settings.levels)),
+            "timestamp_ns": frame.timestamp_ns,
+        }
+        tiff, png = await asyncio.get_running_loop().run_in_executor(
+            None, write_snapshot, self.runs / "snapshots", frame.pixels, self.renderer.srgb8(rgb), metadata
+        )
+        return web.json_response({"tiff": str(tiff.relative_to(self.runs)), "png": str(png.relative_to(self.runs))})
+
+    async def _get_pixel(self, request: web.Request) -> web.Response:
+        """``?view=live|mix&x=&y=`` (fractions of the image, 0–1): the raw values per channel there."""
+        view = request.query.get("view", "live")
+        if view not in ("live", "mix"):
+            raise UsageError(f"view {view[:40]!r}: expected 'live' or 'mix'")
+        fractions = []
+        for key in ("x", "y"):
+            try:
+                value = float(request.query.get(key, ""))
+            except ValueError:
+                value = float("nan")
+            if not 0.0 <= value <= 1.0:
+                raise UsageError(
+                    f"{key} {request.query.get(key, '')[:40]!r}: expected a fraction of the image in [0, 1]"
+                )
+            fractions.append(value)
+        values: np.ndarray | None
+        if view == "live":
+            frame = self._last_raw
+            if frame is None:
+                raise UsageError("no live frame yet; expected a page watching the stream")
+            values, cfa, unit = frame.pixels, self.renderer.cfa, "DN"
+        else:
+            values = self._last_mix_linear
+            if values is None or self.mix is None:
+                raise UsageError("no synthesised image yet; expected a fired sequence first")
+            cfa, unit = self.mix.cfa, "DN per µs·gain"
+        return web.json_response(finite(pixel_readout(values, cfa, fractions[0], fractions[1], unit)))
 
     # -- the live stream ------------------------------------------------------------------------
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
@@ -477,6 +724,8 @@ class LiveServer:
         self._watching.set()
         try:
             await page.send_now(json.dumps({"type": "state", "state": self.state_json()}))
+            for view, frame in list(self._view_frames.items()):
+                page.offer_frame(frame, view)
             if not page.dropped:
                 async for message in ws:  # the page sends nothing: commands are token-carrying POSTs
                     if message.type == WSMsgType.ERROR:
@@ -531,14 +780,18 @@ class LiveServer:
 
     def _grab(self) -> Preview:
         frame = self.stream.grab()
+        self._last_raw = frame
+        self.live_frames += 1
         return self.renderer.render(frame.pixels, self.state.overlay)
 
-    async def _send_frame(self, preview: Preview, source: str) -> None:
+    async def _send_frame(self, preview: Preview, source: str, view: str = "live") -> None:
         self.state.frames += 1
         header = json.dumps(
             {
                 "type": "frame",
                 "n": self.state.frames,
+                "view": view,
+                "live_n": self.live_frames,
                 "source": source,
                 "width": preview.width,
                 "height": preview.height,
@@ -550,11 +803,32 @@ class LiveServer:
             }
         ).encode()
         message = struct.pack("<I", len(header)) + header + preview.jpeg
+        if view != "live":
+            self._view_frames[view] = message  # a page that connects later is shown the flash preview too
         for page in list(self.clients):
-            page.offer_frame(message)  # the latest frame only; never waits on a page (clients.py)
+            page.offer_frame(message, view)  # the view's latest frame only; never waits on a page (clients.py)
 
 
 _NO_STORE = {"Cache-Control": "no-store"}
+
+CFA_CHANNELS = {"R": 0, "G": 1, "B": 2}
+
+
+def pixel_readout(values: np.ndarray, cfa: str | None, x: float, y: float, unit: str) -> dict[str, Any]:
+    """The values per channel at fractions ``x``, ``y`` of an image: a mosaic's 2×2 cell (``R``, ``G``, ``G``, ``B``
+    as its CFA lays them), an RGB pixel's three channels or a mono pixel's one; with the sample's position."""
+    height, width = values.shape[:2]
+    if values.ndim == 2 and cfa is not None:
+        row = min(int(y * (height // 2)), height // 2 - 1) * 2
+        column = min(int(x * (width // 2)), width // 2 - 1) * 2
+        cell = values[row : row + 2, column : column + 2].reshape(-1)
+        channels = [{"channel": name, "value": float(value)} for name, value in zip(cfa, cell)]
+    else:
+        row, column = min(int(y * height), height - 1), min(int(x * width), width - 1)
+        pixel = np.atleast_1d(values[row, column])
+        names = "RGB" if pixel.size == 3 else ["mono"] if pixel.size == 1 else [str(i) for i in range(pixel.size)]
+        channels = [{"channel": name, "value": float(value)} for name, value in zip(names, pixel)]
+    return {"row": row, "column": column, "unit": unit, "channels": channels}
 
 
 class _PageView:

@@ -64,8 +64,12 @@ PATHS = (
     "/api/settings",
     "/api/levels",
     "/api/leds-off",
+    "/api/mix",
+    "/api/mix-fire",
+    "/api/snapshot",
+    "/api/pixel?view=live&x=0.5&y=0.5",
 )
-POSTS = ("/api/settings", "/api/levels", "/api/leds-off")
+POSTS = ("/api/settings", "/api/levels", "/api/leds-off", "/api/mix", "/api/mix-fire", "/api/snapshot")
 NASTY_STRINGS = (
     "",
     "\x00",

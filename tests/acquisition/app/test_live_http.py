@@ -245,7 +245,18 @@ def test_a_sequence_at_the_live_exposure_and_a_second_fire_while_it_runs(tmp_pat
         assert [frame["exposure_us"] for frame in sequence["frames"]] == [4000] * 9
         assert emulator_levels(server) == (0.0,) * 7  # no page watches: the sequence left the LEDs off
         info = json.loads(request("GET", f"{base}/api/runs/{run}")[1])
-        assert "report.html" in info["files"] and '<polygon class="band"' in info["charts"]["ambient"]
+        assert "report.html" in info["files"] and '<g id="band">' in info["charts"]["ambient"]
+        # One palette with the report's spectra.png (acquisition/app/plot_style.py), axes labelled with units.
+        from msflash.acquisition.app.plot_style import PALETTE, SPECTRAL_AXIS_LABEL
+
+        ambient = info["charts"]["ambient"]
+        estimate = ambient[ambient.index('<g id="estimate">') :].split("</g>")[0]
+        assert f"stroke: {PALETTE.ambient.lower()}" in estimate.lower()
+        mixes = info["charts"]["mixes"]
+        matching = mixes[mixes.index('<g id="mix-matching-flash">') :].split("</g>")[0]
+        assert f"stroke: {PALETTE.matching.lower()}" in matching.lower()
+        assert "wavelength (nm)" in ambient and SPECTRAL_AXIS_LABEL.split(" (")[0] in ambient
+        assert "<clipPath id=" in ambient  # what leaves the axes is clipped to them (the band did not)
 
 
 def test_a_wildcard_address_is_refused() -> None:

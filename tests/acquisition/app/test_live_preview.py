@@ -80,3 +80,7 @@ def test_the_live_bench_reports_the_preview_paths_rates(capsys) -> None:
     assert report["preview_fps"] > 0 and report["grab_fps"] > 0 and report["target_fps"] == 10
     assert report["preview_fps_over_target"] == pytest.approx(report["preview_fps"] / 10, abs=0.01)
     assert 0 < report["preview_over_grab"]  # a figure, not a verdict: speed is read from the bench
+    flash = report["flash_preview"]  # issue 33 item 2: mixes synthesised + rendered per second at 640 px
+    assert flash["preview_size"][0] == PREVIEW_WIDTH and flash["sensor"] == [2048, 2448]
+    assert flash["mix_preview_fps"] > 0 and flash["synthesis_fps"] > 0 and flash["target_fps"] == 15
+    assert flash["mix_preview_fps_over_target"] == pytest.approx(flash["mix_preview_fps"] / 15, abs=0.01)

@@ -277,7 +277,7 @@ def test_run_refuses_its_own_frame_changed_on_disk(
     tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A frame changed on disk after it was written (a failing disk, another program) is caught when
-    ``run`` reads its frames back for the report."""
+    ``run`` checks the digests of what it wrote (its report comes from the frames in memory)."""
     real_write = sequence_format.write_image_digest
 
     def write_then_damage(path, pixels, attributes):  # noqa: ANN001 - the image_io signature

@@ -5,7 +5,8 @@
 of a recorded sequence through ``acquisition/session/analysis.py`` (docs/architecture.md §5.2); their
 numbers are compared bit for bit, on a simulated run's sequence and on one of the shared samples
 (written by another tool). The live view's Fire and ``run`` on the sim rig report the estimate of the
-sequence they recorded by the same route (``session/run.reported_estimate``): checked on the sim run.
+sequence they recorded by the same route (the statistics accumulated as the frames arrived,
+``session/estimate_stream.EstimateStream``, to which a sequence on disk is fed too): checked on the sim run.
 """
 
 from __future__ import annotations
@@ -86,8 +87,8 @@ def test_a_simulated_run_and_every_command_on_its_sequence_report_one_estimate(
     run = tmp_path / "run"
     assert msflash_main(["run", "--rig", "sim", "--scene", "macbeth", "--out", str(run)]) == 0
     found = every_route(run / "sequence", tmp_path, capsys, chart=True)
-    # The run itself decided its flash from block sums taken as frames arrived; what it reports is
-    # the recorded sequence's estimate, by the same route.
+    # The run decided its flash from the statistics taken as frames arrived and reports them: the
+    # recorded sequence's estimate to the last digit (one accumulator, the same frames in the same order).
     found["run --rig sim"] = json.loads((run / "estimate.json").read_text())
     assert_one_estimate(found)
 

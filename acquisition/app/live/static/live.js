@@ -5,8 +5,17 @@ const token = document.querySelector('meta[name="msflash-token"]').content;
 const $ = (id) => document.getElementById(id);
 let state = null;
 let shownRun = null;
-let frameUrl = null;
+const frameUrls = {};
 const EXPOSURE_STEPS = 1000;
+let socket = null;
+let closedReason = "";
+const liveArrivals = [];
+let lastLiveN = null;
+let dropped = 0;
+let mixLevels = null;
+let mixPosting = false;
+let mixPending = null;
+let mixFrames = 0;
 
 function showError(text) {
   const el = $("error");
@@ -40,6 +49,13 @@ function sliderToExposure(position) {
   const [low, high] = exposureRange();
   return Math.round(low * Math.pow(high / low, position / EXPOSURE_STEPS));
 }
+function formatGain(linear, native) {
+  const db = 20 * Math.log10(linear);
+  const both = `${linear.toFixed(2)}× · ${db.toFixed(1)} dB`;
+  if (native && native.unit === "dB") return `${db.toFixed(1)} dB (${linear.toFixed(2)}×)`;
+  if (native && native.unit === "raw") return `${native.feature} ${native.value} (${both})`;
+  return `${linear.toFixed(2)}× (${db.toFixed(1)} dB)`;
+}
 function formatUs(us) { return us >= 1000 ? (us / 1000).toFixed(us >= 1e5 ? 0 : 1) + " ms" : us.toFixed(0) + " µs"; }
 
 function buildLeds() {
@@ -70,7 +86,8 @@ function render(next) {
   setIfIdle($("exposure"), exposureToSlider(state.exposure_us));
   $("exposure-value").textContent = formatUs(state.exposure_us);
   setIfIdle($("gain"), state.gain);
-  $("gain-value").textContent = state.gain.toFixed(1) + "×";
+  $("gain-value").textContent = formatGain(state.gain, state.camera_gain);
+  $("camera-format").textContent = state.camera_format || "";
   $("overlay").checked = state.overlay;
   setIfIdle($("sequence-exposure"), state.sequence_exposure);
   setIfIdle($("mode"), state.mode);
@@ -81,6 +98,8 @@ function render(next) {
   showBooth(state.booth_levels);
   renderJob(state.job);
   renderRuns(state.runs);
+  renderMix(state.mix);
+  showDisconnected();
 }
 
 function showBooth(levels) {
@@ -113,9 +132,16 @@ function renderJob(job) {
 
 async function showRun(name) {
   shownRun = name;
-  const response = await fetch(`/api/runs/${encodeURIComponent(name)}`, { headers: { "X-Msflash-Token": token } });
-  if (!response.ok) return;
-  const run = await response.json();
+  let run = null;
+  try {
+    const response = await fetch(`/api/runs/${encodeURIComponent(name)}`, { headers: { "X-Msflash-Token": token } });
+    if (response.ok) run = await response.json();
+  } catch (err) { run = null; }
+  if (!run) {  // the server did not answer (busy, or gone for a moment): ask again
+    if (shownRun === name) shownRun = null;
+    setTimeout(() => { if (shownRun === null) showRun(name); }, 2000);
+    return;
+  }
   const link = $("result-link");
   link.href = `/runs/${encodeURIComponent(name)}/`;
   link.textContent = `report of ${name}`;
@@ -164,15 +190,26 @@ function drawHistogram(histogram) {
   });
 }
 
+const VIEW_IMAGES = { live: "live", mix: "mix-image", "mix-ambient": "mix-ambient", "mix-capture": "mix-capture" };
+
+function showImage(id, blob) {
+  const url = URL.createObjectURL(blob);
+  const img = $(id);
+  img.onload = () => { if (frameUrls[id] && frameUrls[id] !== url) URL.revokeObjectURL(frameUrls[id]); frameUrls[id] = url; };
+  img.src = url;
+}
+
 function onFrame(buffer) {
   const view = new DataView(buffer);
   const length = view.getUint32(0, true);
   const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, length)));
   const blob = new Blob([new Uint8Array(buffer, 4 + length)], { type: "image/jpeg" });
-  const url = URL.createObjectURL(blob);
-  const img = $("live");
-  img.onload = () => { if (frameUrl && frameUrl !== url) URL.revokeObjectURL(frameUrl); frameUrl = url; };
-  img.src = url;
+  const target = header.view || "live";
+  showImage(VIEW_IMAGES[target] || "live", blob);
+  if (target === "mix") { mixFrames += 1; $("mix-frames").dataset.frames = mixFrames; $("mix-caption").textContent = header.source; }
+  if (target === "mix-capture") $("mix-capture-figure").hidden = false;
+  if (target !== "live" && !header.source.startsWith("sequence")) return;
+  if (header.source === "live") countLive(header.live_n);
   const count = $("frame-count");
   count.textContent = header.n;
   count.dataset.frames = header.n;
@@ -182,10 +219,184 @@ function onFrame(buffer) {
   showBooth(header.booth_levels);
 }
 
+// fps over the last two seconds of live frames; dropped: gaps in the server's live frame numbers.
+function countLive(n) {
+  const now = performance.now();
+  liveArrivals.push(now);
+  while (liveArrivals.length && now - liveArrivals[0] > 2000) liveArrivals.shift();
+  const span = (liveArrivals[liveArrivals.length - 1] - liveArrivals[0]) / 1000;
+  const fps = liveArrivals.length > 1 && span > 0 ? (liveArrivals.length - 1) / span : 0;
+  $("fps").textContent = fps.toFixed(1);
+  $("fps").dataset.fps = fps;
+  if (lastLiveN !== null && n > lastLiveN + 1) dropped += n - lastLiveN - 1;
+  lastLiveN = n;
+  $("dropped").textContent = dropped;
+  $("dropped").dataset.dropped = dropped;
+}
+
+// Zoom and pan on the live image: the wheel zooms about the cursor, a drag pans, z toggles 1× / 4×.
+const zoom = { k: 1, x: 0, y: 0, drag: null, cursor: null };
+function applyZoom() {
+  const vp = $("viewport");
+  const w = vp.clientWidth, h = vp.clientHeight;
+  zoom.x = Math.min(0, Math.max(w - w * zoom.k, zoom.x));
+  zoom.y = Math.min(0, Math.max(h - h * zoom.k, zoom.y));
+  $("live").style.transform = `translate(${zoom.x}px, ${zoom.y}px) scale(${zoom.k})`;
+  vp.dataset.zoom = zoom.k;
+  $("zoom-level").textContent = `${zoom.k.toFixed(zoom.k < 10 ? 1 : 0)}×`;
+}
+function zoomAbout(k, px, py) {
+  const next = Math.min(32, Math.max(1, k));
+  zoom.x = px - (px - zoom.x) * next / zoom.k;
+  zoom.y = py - (py - zoom.y) * next / zoom.k;
+  zoom.k = next;
+  applyZoom();
+}
+function toggleZoom() {
+  const vp = $("viewport");
+  const [px, py] = zoom.cursor || [vp.clientWidth / 2, vp.clientHeight / 2];
+  zoomAbout(zoom.k > 1 ? 1 : 4, px, py);
+}
+$("viewport").addEventListener("wheel", (event) => {
+  event.preventDefault();
+  const rect = $("viewport").getBoundingClientRect();
+  zoomAbout(zoom.k * (event.deltaY < 0 ? 1.25 : 0.8), event.clientX - rect.left, event.clientY - rect.top);
+}, { passive: false });
+$("viewport").addEventListener("mousedown", (event) => { zoom.drag = [event.clientX - zoom.x, event.clientY - zoom.y]; });
+window.addEventListener("mouseup", () => { zoom.drag = null; });
+$("viewport").addEventListener("mousemove", (event) => {
+  const rect = $("viewport").getBoundingClientRect();
+  zoom.cursor = [event.clientX - rect.left, event.clientY - rect.top];
+  if (zoom.drag) { zoom.x = event.clientX - zoom.drag[0]; zoom.y = event.clientY - zoom.drag[1]; applyZoom(); }
+  readoutAt("live", $("live"), event);
+});
+$("zoom").addEventListener("click", toggleZoom);
+$("mix-image").addEventListener("mousemove", (event) => readoutAt("mix", $("mix-image"), event));
+
+// The pixel readout: the raw values per channel under the cursor, asked of the server (one request at a time).
+let readoutBusy = false;
+let readoutNext = null;
+function readoutAt(view, img, event) {
+  const rect = img.getBoundingClientRect();
+  const x = (event.clientX - rect.left) / rect.width, y = (event.clientY - rect.top) / rect.height;
+  if (!(x >= 0 && x <= 1 && y >= 0 && y <= 1)) return;
+  readoutNext = { view, x, y };
+  if (!readoutBusy) askReadout();
+}
+async function askReadout() {
+  if (!readoutNext) return;
+  const { view, x, y } = readoutNext;
+  readoutNext = null;
+  readoutBusy = true;
+  try {
+    const response = await fetch(`/api/pixel?view=${view}&x=${x.toFixed(5)}&y=${y.toFixed(5)}`, { headers: { "X-Msflash-Token": token } });
+    const reply = await response.json();
+    const box = $("readout");
+    box.dataset.view = view;
+    if (!response.ok) { box.textContent = reply.error; return; }
+    const values = reply.channels.map((c) => `${c.channel} ${view === "live" ? c.value.toFixed(0) : c.value.toPrecision(4)}`).join("  ");
+    box.textContent = `${view === "live" ? "live" : "synthesised"} · row ${reply.row}, column ${reply.column}: ${values} ${reply.unit}`;
+    box.dataset.values = JSON.stringify(reply.channels.map((c) => c.value));
+  } catch (err) { /* the server went away: the disconnected state says so */ }
+  finally { readoutBusy = false; if (readoutNext) askReadout(); }
+}
+
+async function snapshot() {
+  const reply = await post("/api/snapshot", {});
+  if (reply) { $("snapshot-result").textContent = `saved ${reply.tiff} + ${reply.png}`; $("snapshot-result").dataset.tiff = reply.tiff; }
+}
+$("snapshot").addEventListener("click", snapshot);
+
+// The disconnected state: the image greyed, the reason large on it, a reconnect button.
+function showDisconnected() {
+  const down = !socket || socket.readyState !== WebSocket.OPEN;
+  const streamError = state && state.error ? state.error : "";
+  const reason = down ? (closedReason || "connecting to the server…") : streamError;
+  const box = $("disconnected");
+  box.hidden = !(down || streamError);
+  $("view").classList.toggle("down", !box.hidden);
+  document.body.dataset.connection = down ? "disconnected" : streamError ? "error" : "live";
+  box.querySelector(".disconnected-title").textContent = down ? "Disconnected" : "Camera or booth error";
+  $("disconnected-reason").textContent = reason;
+}
+$("reconnect").addEventListener("click", () => { if (socket) socket.onclose = null; if (socket) socket.close(); connect(); });
+
+// The flash before it fires: sliders for the mix, presets, Fire with exactly the mix shown.
+function renderMix(mix) {
+  $("mix-empty").hidden = !!mix;
+  $("mix-body").hidden = !mix;
+  $("flash-preview").dataset.run = mix ? mix.run : "";
+  if (!mix) return;
+  $("mix-run").textContent = `from ${mix.run}`;
+  if (mix.run !== shownRun && (!state || state.job.status !== "running")) showRun(mix.run);
+  const box = $("mix-leds");
+  if (box.dataset.run !== mix.run) {
+    box.dataset.run = mix.run;
+    box.textContent = "";
+    mix.led_names.forEach((name, i) => {
+      const row = document.createElement("div");
+      row.className = "led";
+      row.innerHTML = `<span>${name}</span><input type="range" min="0" max="1000" step="1" id="mix-${i}">
+        <output id="mix-${i}-value"></output><span></span>`;
+      box.appendChild(row);
+      row.querySelector("input").addEventListener("input", () => { mixLevels[i] = Number($(`mix-${i}`).value) / 1000; sendMix({ levels: mixLevels.slice() }); showMixLevels(); });
+    });
+    ["matching", "complementary"].forEach((mode) => { $(`mix-${mode}`).disabled = !(mode in mix.solved); });
+  }
+  if (!mixPosting && !mixPending) { mixLevels = mix.levels.slice(); showMixLevels(); }
+  const capture = mix.capture;
+  const caption = $("mix-capture-caption");
+  if (capture) {
+    caption.textContent = `captured: ${(100 * capture.relative_rms_difference).toFixed(1)} % RMS from the synthesis` + (capture.warning ? ` (${capture.warning})` : "");
+    caption.dataset.difference = capture.relative_rms_difference;
+  }
+}
+function showMixLevels() {
+  mixLevels.forEach((level, i) => {
+    setIfIdle($(`mix-${i}`), Math.round(level * 1000));
+    $(`mix-${i}-value`).textContent = (level * 100).toFixed(1) + "%";
+  });
+}
+async function sendMix(body) {
+  mixPending = body;
+  if (mixPosting) return;
+  while (mixPending) {
+    const next = mixPending;
+    mixPending = null;
+    mixPosting = true;
+    const reply = await post("/api/mix", next);
+    mixPosting = false;
+    if (reply && reply.mix && !mixPending) { mixLevels = reply.mix.levels.slice(); showMixLevels(); }
+  }
+}
+$("mix-matching").addEventListener("click", () => sendMix({ preset: "matching" }));
+$("mix-complementary").addEventListener("click", () => sendMix({ preset: "complementary" }));
+$("mix-ambient-only").addEventListener("click", () => sendMix({ preset: "ambient" }));
+$("mix-fire").addEventListener("click", async () => {
+  $("mix-fire").disabled = true;
+  while (mixPosting || mixPending) await new Promise((resolve) => setTimeout(resolve, 20));  // the mix shown is sent
+  const reply = await post("/api/mix-fire", { levels: mixLevels });
+  $("mix-fire").disabled = false;
+  if (reply && reply.mix) renderMix(reply.mix);
+});
+
+// Keyboard: space fires the sequence, z zooms, s takes a snapshot, o switches the LEDs off.
+document.addEventListener("keydown", (event) => {
+  const tag = event.target && event.target.tagName;
+  if (tag === "INPUT" && event.target.type !== "range" || tag === "SELECT" || tag === "TEXTAREA") return;
+  if (event.ctrlKey || event.metaKey || event.altKey) return;
+  const actions = { " ": () => { if (!$("fire").disabled) $("fire").click(); }, z: toggleZoom, s: snapshot, o: () => post("/api/leds-off") };
+  const action = actions[event.key];
+  if (!action) return;
+  event.preventDefault();
+  action();
+});
+
 function connect() {
   const ws = new WebSocket(`ws://${location.host}/ws?token=${encodeURIComponent(token)}`);
+  socket = ws;
   ws.binaryType = "arraybuffer";
-  ws.onopen = () => { $("connection").textContent = "live"; $("connection").className = "badge on"; };
+  ws.onopen = () => { closedReason = ""; $("connection").textContent = "live"; $("connection").className = "badge on"; showDisconnected(); };
   ws.onmessage = (event) => {
     if (typeof event.data === "string") {
       const message = JSON.parse(event.data);
@@ -194,10 +405,19 @@ function connect() {
       onFrame(event.data);
     }
   };
-  ws.onclose = () => {
-    $("connection").textContent = "reconnecting…";
-    $("connection").className = "badge";
-    setTimeout(connect, 1000);
+  ws.onclose = (event) => {
+    if (socket !== ws) return;
+    const since = new Date().toLocaleTimeString();
+    if (event.reason) closedReason = `the server closed the connection: ${event.reason} (${since}); retrying every 2 s`;
+    else if (!closedReason) closedReason = `the server does not answer (stopped, or the network is down; ${since}); retrying every 2 s`;
+    else closedReason = closedReason.replace(/; no answer since .*$/, "") + `; no answer since ${since}`;
+    liveArrivals.length = 0;
+    $("fps").textContent = "–";
+    $("fps").dataset.fps = 0;
+    $("connection").textContent = "disconnected";
+    $("connection").className = "badge off";
+    showDisconnected();
+    setTimeout(() => { if (socket === ws) connect(); }, 2000);
   };
 }
 
