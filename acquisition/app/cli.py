@@ -311,7 +311,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         # default action killed the process where it stood and left them behind).
         with warnings.catch_warnings(), sigterm_as_exit():
             warnings.showwarning = _show_warning
-            return int(args.handler(args))
+            code = int(args.handler(args))
+        if argv is None and getattr(args, "exit_at_once", False):
+            _exit_at_once(code)
+        return code
     except KeyboardInterrupt:
         sys.stderr.write(_stop_line(words, "interrupted"))
         return 130
@@ -336,6 +339,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _crashed(words, err)
     finally:
         close_bar()
+
+
+def _exit_at_once(code: int) -> None:
+    """End the process now, its work done (a command that set ``exit_at_once``, run as the program).
+
+    ``msflash live`` sets it once the LEDs are off and the rig is closed: what is left of a normal exit is
+    the interpreter's teardown, whose final collection walks every object the live view made — 1–2 s of
+    the exit after a signal (docs/reliability.md §7), when ``live`` promises to be gone within 2 s.
+    Output and log records are flushed first; nothing else is left to run (no atexit work of msflash's).
+    """
+    close_bar()
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):
+            stream.flush()
+    os._exit(code)
 
 
 def _quiet_libraries(verbose: int) -> None:

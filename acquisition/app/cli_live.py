@@ -149,6 +149,7 @@ def _live(args: argparse.Namespace) -> int:
     finally:
         sock.close()
     progress("live view stopped; LEDs off")
+    args.exit_at_once = True  # run as the program: leave without the interpreter's teardown (cli._exit_at_once)
     return 0
 
 
