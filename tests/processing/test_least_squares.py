@@ -12,7 +12,9 @@ from msflash.processing.errors import SolverError
 from msflash.processing.least_squares import minimise_quadratic, recording_problems
 from tests.helpers import SOLVER
 
-PROPERTY = settings(max_examples=25, deadline=None)
+PROPERTY = settings(max_examples=25, deadline=None, derandomize=True)
+"""Derandomised: the same examples every run, so CI cannot fail on a draw; cases found by chance are kept as
+explicit tests below (``test_a_feasible_set_of_one_point_is_solved``)."""
 
 
 def random_problem(seed: int, n: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -145,6 +147,24 @@ def test_factored_problem_solves_as_the_one_shot_call(seed: int, n: int, m: int,
         np.testing.assert_array_equal(fast.x, reference.x)
         np.testing.assert_array_equal(fast.active, reference.active)
         assert fast.objective == reference.objective
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=SolverError,
+    reason="finding (found by hypothesis in a random draw, 2026-11-28): with each of 11 random rows twice, all "
+    "active at one point x0 in 6 dimensions, the feasible set {G x ≥ G x0} is that point alone (11 generic "
+    "half-spaces through it leave no cone); the LDP's NNLS (Lawson & Hanson 23.4) then returns a z whose x "
+    "violates a constraint by 6.07 and the solver refuses it (both the one-shot call and the factored one). "
+    "The flash problems (box constraints 0 ≤ w ≤ 1, a cone of full dimension) never are such a point",
+)
+def test_a_feasible_set_of_one_point_is_solved() -> None:
+    hessian, _, constraints, bounds = kind_of_problem(2848, 6, 11, "duplicated")
+    rng = np.random.default_rng(2848)
+    rng.normal(size=6)  # the draw's first linear term solves
+    linear = rng.normal(size=6) * 3
+    solution = minimise_quadratic(hessian, linear, constraints, bounds)
+    assert np.all(constraints @ solution.x - bounds >= -1e-7)
 
 
 def test_factored_problem_refuses_what_the_one_shot_call_refuses() -> None:
