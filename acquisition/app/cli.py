@@ -311,10 +311,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         # default action killed the process where it stood and left them behind).
         with warnings.catch_warnings(), sigterm_as_exit():
             warnings.showwarning = _show_warning
-            code = int(args.handler(args))
+            status = int(args.handler(args))
         if argv is None and getattr(args, "exit_at_once", False):
-            _exit_at_once(code)
-        return code
+            _exit_at_once(status)
+        return status
     except KeyboardInterrupt:
         sys.stderr.write(_stop_line(words, "interrupted"))
         return 130
