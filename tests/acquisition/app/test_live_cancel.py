@@ -22,6 +22,7 @@ import time
 import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -64,7 +65,40 @@ def wait_for(condition, what: str):  # noqa: ANN001, ANN201 - a predicate and it
     return value
 
 
-def test_sigterm_stops_a_fired_sequence_between_frames(tmp_path: Path) -> None:
+@dataclass
+class LiveBeside:
+    """``msflash live --rig sim`` driving a ``msflash booth-emulator`` on a pty, both real processes."""
+
+    live: subprocess.Popen
+    booth: subprocess.Popen
+    url: str
+    token: str
+    state_file: Path
+    runs: Path
+
+    def post(self, path: str, body: dict) -> dict:
+        request = urllib.request.Request(
+            self.url.rstrip("/") + path,
+            data=json.dumps(body).encode(),
+            headers={"Content-Type": "application/json", "X-Msflash-Token": self.token},
+        )
+        with urllib.request.urlopen(request, timeout=HANG_GUARD_S) as answer:
+            return json.loads(answer.read())
+
+    def job(self) -> dict:
+        with urllib.request.urlopen(self.url.rstrip("/") + "/api/state", timeout=HANG_GUARD_S) as answer:
+            return json.loads(answer.read())["job"]
+
+    def fire(self) -> tuple[str, dict]:
+        """A sequence fired at the live exposure (no metering), once its first frame has landed: its run and job."""
+        self.post("/api/settings", {"sequence_exposure": "live"})
+        run = self.post("/api/sequence", {"mode": "complementary"})["run"]
+        return run, wait_for(lambda: (state := self.job())["landed"] >= 1 and state, "the sequence's first frame")
+
+
+@contextmanager
+def live_beside_a_booth(tmp_path: Path) -> Iterator[LiveBeside]:
+    """Both processes started, the page's URL and token read; the booth stopped (and must exit 0) at the end."""
     state_file = tmp_path / "booth-state.json"
     runs = tmp_path / "runs"
     with process("booth-emulator", "--state-file", str(state_file), "--latency-ms", str(LINK_TICK_MS)) as booth:
@@ -78,31 +112,22 @@ def test_sigterm_stops_a_fired_sequence_between_frames(tmp_path: Path) -> None:
             token = next(
                 line.rsplit(" ", 1)[1].strip() for line in iter(live.stderr.readline, "") if "session token" in line
             )
-
-            def post(path: str, body: dict) -> dict:
-                request = urllib.request.Request(
-                    url.rstrip("/") + path,
-                    data=json.dumps(body).encode(),
-                    headers={"Content-Type": "application/json", "X-Msflash-Token": token},
-                )
-                with urllib.request.urlopen(request, timeout=HANG_GUARD_S) as answer:
-                    return json.loads(answer.read())
-
-            def job() -> dict:
-                with urllib.request.urlopen(url.rstrip("/") + "/api/state", timeout=HANG_GUARD_S) as answer:
-                    return json.loads(answer.read())["job"]
-
-            post("/api/settings", {"sequence_exposure": "live"})  # no metering: straight to the sequence
-            run = post("/api/sequence", {"mode": "complementary"})["run"]
-            fired = wait_for(lambda: (state := job())["landed"] >= 1 and state, "the sequence's first frame")
-            assert fired["status"] == "running" and fired["total"] == 9  # ambient, 7 LEDs, the flash
-            signalled = time.monotonic()
-            live.send_signal(signal.SIGTERM)
-            assert live.wait(HANG_GUARD_S) == 0
-            print(f"live exited {time.monotonic() - signalled:.2f} s after SIGTERM mid-sequence, no page open")
-            said = live.stderr.read()
+            yield LiveBeside(live, booth, url, token, state_file, runs)
         booth.send_signal(signal.SIGINT)
         assert booth.wait(HANG_GUARD_S) == 0
+
+
+def test_sigterm_stops_a_fired_sequence_between_frames(tmp_path: Path) -> None:
+    with live_beside_a_booth(tmp_path) as rig:
+        run, fired = rig.fire()
+        assert fired["status"] == "running" and fired["total"] == 9  # ambient, 7 LEDs, the flash
+        signalled = time.monotonic()
+        rig.live.send_signal(signal.SIGTERM)
+        assert rig.live.wait(HANG_GUARD_S) == 0
+        print(f"live exited {time.monotonic() - signalled:.2f} s after SIGTERM mid-sequence, no page open")
+        assert rig.live.stderr is not None
+        said = rig.live.stderr.read()
+    runs, state_file = rig.runs, rig.state_file
     assert "stopping the sequence in progress before its next frame" in said, said
     assert "live view stopped; LEDs off" in said, said
     sequence = json.loads((runs / run / "sequence" / "sequence.json").read_text())
@@ -128,54 +153,26 @@ def test_a_signal_mid_sequence_with_stalled_pages_open_stops_live_with_the_leds_
     their sends blocked) and one that never finished its handshake stay open; the signal must still stop the
     capture before its next frame, switch the LEDs off and end ``live`` (exit 0), without waiting for them.
     The exit time is measured and printed (``-s``); only the hang guard bounds it (docs/reliability.md §6)."""
-    state_file = tmp_path / "booth-state.json"
-    runs = tmp_path / "runs"
-    with process("booth-emulator", "--state-file", str(state_file), "--latency-ms", str(LINK_TICK_MS)) as booth:
-        assert booth.stdout is not None
-        port = booth.stdout.readline().strip()
-        assert port.startswith("/dev/pts/"), port
-        with process("live", "--rig", "sim", "--booth-port", port, "--port", "0", "--runs", str(runs)) as live:
-            assert live.stdout is not None and live.stderr is not None
-            url = live.stdout.readline().strip()
-            assert url.startswith("http://127.0.0.1:"), live.stderr.read() if live.poll() is not None else url
-            server_port = int(url.rsplit(":", 1)[1].strip("/"))
-            token = next(
-                line.rsplit(" ", 1)[1].strip() for line in iter(live.stderr.readline, "") if "session token" in line
-            )
-
-            def post(path: str, body: dict) -> dict:
-                request = urllib.request.Request(
-                    url.rstrip("/") + path,
-                    data=json.dumps(body).encode(),
-                    headers={"Content-Type": "application/json", "X-Msflash-Token": token},
-                )
-                with urllib.request.urlopen(request, timeout=HANG_GUARD_S) as answer:
-                    return json.loads(answer.read())
-
-            def job() -> dict:
-                with urllib.request.urlopen(url.rstrip("/") + "/api/state", timeout=HANG_GUARD_S) as answer:
-                    return json.loads(answer.read())["job"]
-
-            pages = [stalled_page(server_port, token, receive_buffer=1024) for _ in range(3)]
-            with open_sockets(*pages, unfinished_handshake(server_port)):
-                for page in pages:  # each page's queue is full (its sends block) or the server dropped it
-                    wait_until_stalled(server_port, page)
-                post("/api/settings", {"sequence_exposure": "live"})
-                run = post("/api/sequence", {"mode": "complementary"})["run"]
-                fired = wait_for(lambda: (state := job())["landed"] >= 1 and state, "the sequence's first frame")
-                assert fired["status"] == "running"
-                signalled = time.monotonic()
-                live.send_signal(stop)
-                leds_off_s = None  # when the booth itself holds the LEDs off (its state file), for the report
-                while live.poll() is None and time.monotonic() < signalled + HANG_GUARD_S:
-                    if leds_off_s is None and json.loads(state_file.read_text())["leds_on"] is False:
-                        leds_off_s = time.monotonic() - signalled
-                    time.sleep(0.01)
-                status = live.wait(HANG_GUARD_S)  # the stalled pages stay open meanwhile
-                STOP_TIMES_S[stop.name] = time.monotonic() - signalled
-                said = live.stderr.read()
-        booth.send_signal(signal.SIGINT)
-        assert booth.wait(HANG_GUARD_S) == 0
+    with live_beside_a_booth(tmp_path) as rig:
+        server_port = int(rig.url.rsplit(":", 1)[1].strip("/"))
+        pages = [stalled_page(server_port, rig.token, receive_buffer=1024) for _ in range(3)]
+        with open_sockets(*pages, unfinished_handshake(server_port)):
+            for page in pages:  # each page's queue is full (its sends block) or the server dropped it
+                wait_until_stalled(server_port, page)
+            run, fired = rig.fire()
+            assert fired["status"] == "running"
+            signalled = time.monotonic()
+            rig.live.send_signal(stop)
+            leds_off_s = None  # when the booth itself holds the LEDs off (its state file), for the report
+            while rig.live.poll() is None and time.monotonic() < signalled + HANG_GUARD_S:
+                if leds_off_s is None and json.loads(rig.state_file.read_text())["leds_on"] is False:
+                    leds_off_s = time.monotonic() - signalled
+                time.sleep(0.01)
+            status = rig.live.wait(HANG_GUARD_S)  # the stalled pages stay open meanwhile
+            STOP_TIMES_S[stop.name] = time.monotonic() - signalled
+            assert rig.live.stderr is not None
+            said = rig.live.stderr.read()
+    runs, state_file = rig.runs, rig.state_file
     print(
         f"live exited {STOP_TIMES_S[stop.name]:.2f} s after {stop.name} mid-sequence with 3 stalled pages open; "
         f"the booth held the LEDs off after {leds_off_s if leds_off_s is None else round(leds_off_s, 2)} s"
