@@ -59,13 +59,13 @@ import numpy as np
 
 from msflash.calibration.errors import CalibrationError
 from msflash.processing.colour_metrics import usable_labels
-from msflash.processing.image_formation import CFA_PATTERNS
+from msflash.processing.sensor import CFA_PATTERNS
 from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import cfa_planes
 
 MACBETH_GRID = (4, 6)
 """Rows × columns of the Macbeth chart, patches numbered column by column (ISET order, as
-:func:`processing.image_formation.chart_scene` lays it out)."""
+:func:`processing.scenes.chart_scene` lays it out)."""
 DETECTION_MAX_SIDE = 512
 """Frames are binned until their longer side (after the Bayer quads) is at most this."""
 LINK_FALSE_CUT = 1e-3

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.calibration.errors import CalibrationError
-from msflash.processing.image_formation import CFA_PATTERNS, cfa_channel_map
+from msflash.processing.sensor import CFA_PATTERNS, cfa_channel_map
 
 LINEARITY_TOLERANCE = 0.01
 """Relative deviation from linear accepted for :attr:`LinearityResult.linear_limit_dn`."""

@@ -29,14 +29,10 @@ from msflash.processing import datasets, lights
 from msflash.processing.colour_metrics import chart_delta_e, delta_e_2000, patch_pixels, reference_chart, usable_labels
 from msflash.processing.errors import TargetUnreachableWarning
 from msflash.processing.flash import solve_complementary
-from msflash.processing.image_formation import (
-    SensorModel,
-    chart_scene,
-    exposure_for_peak,
-    render_frame,
-    surface_responses,
-)
+from msflash.processing.image_formation import exposure_for_peak, render_frame, surface_responses
 from msflash.processing.render import camera_to_xyz_matrix
+from msflash.processing.scenes import chart_scene
+from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 
 STUDY_SEEDS = (0, 1, 2, 3, 4)

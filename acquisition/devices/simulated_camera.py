@@ -46,17 +46,13 @@ from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.processing import datasets, lights
 from msflash.processing.image_formation import (
     MixedIllumination,
-    Scene,
-    SensorModel,
-    chart_scene,
     expected_response,
     exposure_for_peak,
-    machine_vision_sensor,
-    mosaic_scene,
     render_frame,
     total_illumination,
-    white_reference_scene,
 )
+from msflash.processing.scenes import Scene, chart_scene, mosaic_scene, white_reference_scene
+from msflash.processing.sensor import SensorModel, machine_vision_sensor
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid, require_same_grid
 
 LedLevelsSource = Callable[[], Sequence[float]]
@@ -67,7 +63,7 @@ _GENICAM_BITS = (8, 10, 12, 14, 16)
 """Bit depths GenICam names unpacked formats by (BayerRG12, RGB12 …); others take their container's."""
 
 SIM_DEFAULT_CFA = "RGGB"
-"""The ``sim`` rig's camera sends a raw RGGB mosaic, 12-bit (:func:`processing.image_formation.machine_vision_sensor`),
+"""The ``sim`` rig's camera sends a raw RGGB mosaic, 12-bit (:func:`processing.sensor.machine_vision_sensor`),
 as colour machine-vision cameras do; ``cfa=None`` asks for RGB frames."""
 
 FREE_RUNNING_GAP_S = (0.015, 0.060)
@@ -81,7 +77,7 @@ class SimulatedCamera(TriggeredFrames):
     Parameters
     ----------
     scene
-        Surfaces and layout (:class:`processing.image_formation.Scene`).
+        Surfaces and layout (:class:`processing.scenes.Scene`).
     ambient
         The true ambient spectrum ``i_a`` (one spectrum; its scale is the ambient's power).
     led_spectra
@@ -530,15 +526,15 @@ class SimulatedCamera(TriggeredFrames):
     ) -> SimulatedCamera:
         """The ``sim`` rig's world: a chart, an ambient, an LED set and a camera (by default the paper's
         110-surface chart, tungsten, the paper's 7 LEDs and ISETCam's NikonD100 behind a 12-bit raw RGGB
-        sensor, :func:`processing.image_formation.machine_vision_sensor`).
+        sensor, :func:`processing.sensor.machine_vision_sensor`).
 
         Parameters
         ----------
         scene
             ``"chart110"`` (the paper's 110 surfaces), ``"macbeth"``, ``"white"`` (a white reference
-            filling the frame, :func:`processing.image_formation.white_reference_scene`, for
+            filling the frame, :func:`processing.scenes.white_reference_scene`, for
             ``msflash calibrate leds --white``), a :class:`Scene`, or reflectances (a random mosaic
-            of those surfaces drawn with ``seed``, :func:`processing.image_formation.mosaic_scene`).
+            of those surfaces drawn with ``seed``, :func:`processing.scenes.mosaic_scene`).
         ambient
             A name of :func:`processing.lights.light_spectrum` (the sim ambients, CIE
             illuminants) or a spectrum covering ``grid``.
@@ -569,7 +565,7 @@ class SimulatedCamera(TriggeredFrames):
             (room for the flash on top, for captures at one exposure).
             ``suggested_exposure_us`` is set to ``reference_exposure_us``.
         sensor
-            Default: :func:`processing.image_formation.machine_vision_sensor` with ``cfa`` (12-bit, black
+            Default: :func:`processing.sensor.machine_vision_sensor` with ``cfa`` (12-bit, black
             240, 8 e⁻/DN, 7 e⁻ read noise, 30.8 ke⁻ at white). Before issue 30 the rig's camera was
             16-bit RGB, black 256, 0.5 e⁻/DN, 2 e⁻ read noise, 40 000 e⁻ (:class:`SensorModel`'s defaults).
         led_levels_source, noise

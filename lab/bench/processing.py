@@ -41,15 +41,11 @@ from msflash.lab.bench.ratios import against_target, interleaved_ratio, peak_byt
 from msflash.processing import datasets, frame_kernels, lights
 from msflash.processing.ambient import AmbientModel, estimate_ambient
 from msflash.processing.flash import FlashModel
-from msflash.processing.image_formation import (
-    SensorModel,
-    chart_scene,
-    exposure_for_peak,
-    machine_vision_sensor,
-    render_frame,
-)
+from msflash.processing.image_formation import exposure_for_peak, render_frame
 from msflash.processing.least_squares import minimise_quadratic, recording_problems
 from msflash.processing.model_error import light_reference, reference_for, with_model_error
+from msflash.processing.scenes import chart_scene
+from msflash.processing.sensor import SensorModel, machine_vision_sensor
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, plane_shape
 from msflash.processing.synthesis import synthesize
@@ -68,7 +64,7 @@ def _best_time(function: Callable[[], Any], repeats: int) -> float:
 def benchmark_world(height: int = 1024, width: int = 1280, seed: int = 0, cfa: str | None = None) -> dict[str, Any]:
     """A rendered 7-LED sequence (tungsten ambient, 110-patch chart) for the benchmarks: 16-bit RGB frames, or
     with ``cfa`` the raw 12-bit mosaics of a colour machine-vision camera
-    (:func:`processing.image_formation.machine_vision_sensor`, as the ``sim`` rig's); beyond
+    (:func:`processing.sensor.machine_vision_sensor`, as the ``sim`` rig's); beyond
     :data:`RENDERED_PIXELS`, a 1280×1024 one tiled up to the size (rendering 4096×3000 takes far longer
     than what is measured on it; the tiles keep the mosaic's phase)."""
     if height * width > RENDERED_PIXELS:

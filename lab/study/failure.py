@@ -104,7 +104,7 @@ def with_line(ambient: Spectra, centre_nm: float, fraction: float, grid: Wavelen
 
 def relabelled(world_scene, n_surfaces: int, rng: np.random.Generator):  # noqa: ANN001, ANN201
     """The chart with every patch showing one of ``n_surfaces`` surfaces drawn without repetition."""
-    from msflash.processing.image_formation import Scene
+    from msflash.processing.scenes import Scene
 
     n_patches = world_scene.reflectances.count - 1  # the last surface is the (unused) border
     chosen = rng.choice(n_patches, size=n_surfaces, replace=False)

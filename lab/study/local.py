@@ -43,8 +43,6 @@ from msflash.processing import datasets, lights
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.image_formation import (
     MixedIllumination,
-    Scene,
-    SensorModel,
     expected_response,
     exposure_for_peak,
     render_frame,
@@ -53,6 +51,8 @@ from msflash.processing.image_formation import (
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, denoised_global, estimate_local, tile_statistics
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.progress import Progress, report_count
+from msflash.processing.scenes import Scene
+from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 

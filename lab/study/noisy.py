@@ -8,14 +8,14 @@ quantisation, saturation — and run the app's estimation path on them:
 
 The world (:class:`World`)
 --------------------------
-- Scene: the 110-surface chart (:func:`processing.image_formation.chart_scene`), square patches.
+- Scene: the 110-surface chart (:func:`processing.scenes.chart_scene`), square patches.
 - Ambient: a spectrum in photons (any scale: only its shape matters, the exposure is metered).
 - LEDs: a paper subset, scaled so that all LEDs at full drive give ``1 / ambient_to_flash`` times
   the ambient's mean camera signal (the sim rig's ``flash_to_ambient``, default 2 ⇒ ratio 0.5).
 - Exposure: metered so the brightest expected pixel of the brightest frame (ambient + one LED)
   is at ``peak_fraction`` (0.8) of full scale, times ``exposure_factor`` (< 1 under-exposes,
   > 1 saturates). One exposure and gain 1 for every frame.
-- Sensor: :class:`processing.image_formation.SensorModel` defaults (16 bit, 0.5 e⁻/DN, 2 e⁻ read
+- Sensor: :class:`processing.sensor.SensorModel` defaults (16 bit, 0.5 e⁻/DN, 2 e⁻ read
   noise, full well 40 000 e⁻, RGB frames).
 
 Frames: the ambient frame ``m_a`` and one frame per LED ``m_a + m_f,k`` — each independently
@@ -41,17 +41,11 @@ from msflash.processing.ambient import (
     estimate_ambient,
 )
 from msflash.processing.errors import SolverError, SpectralDataError
-from msflash.processing.image_formation import (
-    Scene,
-    SensorModel,
-    chart_scene,
-    expected_response,
-    exposure_for_peak,
-    render_frame,
-    total_illumination,
-)
+from msflash.processing.image_formation import expected_response, exposure_for_peak, render_frame, total_illumination
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.model_error import EXPECTED_RATIO_WARNING, reference_for, with_model_error
+from msflash.processing.scenes import Scene, chart_scene
+from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
 

@@ -228,7 +228,7 @@ def interleaved_ratio(function: Callable[[], object], reference: Callable[[], ob
 def timings(rounds: int = 15, height: int = 1024, width: int = 1280) -> dict[tuple[str, int], float]:
     """``(family, block) → estimate time ÷ copy time`` on the bench's scene (interleaved), plus ``("reference", 1)``."""
     from msflash.lab.bench.processing import benchmark_world
-    from msflash.processing.image_formation import SensorModel
+    from msflash.processing.sensor import SensorModel
 
     world = benchmark_world(height, width)
     frames, spec, leds, camera = world["frames"], world["spec"], world["leds"], world["camera"]
@@ -269,8 +269,8 @@ def bench_agreement(height: int = 1024, width: int = 1280, seeds: int = 1) -> li
     """The ``led`` family's agreement with the all-pixel reference on the bench's scene, per block size and seed."""
     from msflash.lab.bench.processing import benchmark_world
     from msflash.processing import lights
-    from msflash.processing.image_formation import SensorModel
     from msflash.processing.metrics import spectrum_rmse
+    from msflash.processing.sensor import SensorModel
     from msflash.processing.spectra import DEFAULT_GRID
 
     sensor = SensorModel()

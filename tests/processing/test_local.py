@@ -63,7 +63,7 @@ def tiled(kind: str, seed: int) -> TiledStatistics:
     ("bin_factor", "cfa", "tiles"), [(1, None, 5), (2, None, (3, 4)), (4, None, 2), (2, "GRBG", 3)]
 )
 def test_tiles_sum_to_the_global_statistics(bin_factor: int, cfa: str | None, tiles: int | tuple[int, int]) -> None:
-    from msflash.processing.image_formation import SensorModel
+    from msflash.processing.sensor import SensorModel
 
     sensor = SensorModel(cfa=cfa)
     frames = rendered_frames(ambient("tungsten"), sensor=sensor, noise=True, scene=chart(specular_strip_px=5))

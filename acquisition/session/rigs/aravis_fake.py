@@ -26,8 +26,8 @@ from msflash.acquisition.session.rigs.emulated_booth import (
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.acquisition.session.rigs.sim import sim_world
 from msflash.processing import datasets
-from msflash.processing.image_formation import Scene
 from msflash.processing.names import unknown_name
+from msflash.processing.scenes import Scene
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 
 log = logging.getLogger(__name__)

@@ -17,8 +17,8 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera, led_signals
 from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.session.rig import open_sim_rig
-from msflash.processing.image_formation import Scene
 from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.scenes import Scene
 
 
 def _signals(camera: SimulatedCamera) -> np.ndarray:

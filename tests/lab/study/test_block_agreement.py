@@ -24,8 +24,8 @@ from msflash.lab.study.block_agreement import (
     sensor_noise,
 )
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
-from msflash.processing.image_formation import SensorModel
 from msflash.processing.model_error import reference_for, with_model_error
+from msflash.processing.sensor import SensorModel
 from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 
 WORST_Z = 3.0
