@@ -4,8 +4,8 @@ Public objects
 --------------
 - :class:`SpectrometerMeasurement`: the raw samples of one export, on the instrument's own grid.
 - :func:`parse_spectrometer_text`, :func:`read_spectrometer_file`: the parser and its file form.
-- :func:`subtract_dark`: a dark (shutter closed) export taken off a measurement.
 - :func:`measurement_to_spectra`: the samples as :class:`~processing.spectra.Spectra` on a grid.
+  A dark export is taken off by :func:`calibration.spectrometer_dark.remove_baseline`.
 
 Accepted layout
 ---------------
@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import cast
 
@@ -368,34 +368,6 @@ def read_spectrometer_file(
     except UnicodeDecodeError:
         text = data.decode("latin-1")  # instrument software often writes µ or ° in Latin-1
     return parse_spectrometer_text(text, shown, unit, column, name)
-
-
-def subtract_dark(measurement: SpectrometerMeasurement, dark: SpectrometerMeasurement) -> SpectrometerMeasurement:
-    """The measurement minus a dark export taken on the same wavelengths.
-
-    Raises
-    ------
-    CalibrationError
-        If the two exports do not sample the same wavelengths.
-    """
-    if dark.wavelengths_nm.shape != measurement.wavelengths_nm.shape or not np.allclose(
-        dark.wavelengths_nm, measurement.wavelengths_nm, atol=1e-6
-    ):
-        raise CalibrationError(
-            f"{dark.source}: dark export samples {dark.wavelengths_nm.size} wavelengths "
-            f"{dark.wavelengths_nm[0]:g}–{dark.wavelengths_nm[-1]:g} nm but {measurement.source} samples "
-            f"{measurement.wavelengths_nm.size} ({measurement.wavelengths_nm[0]:g}–{measurement.wavelengths_nm[-1]:g} nm); "
-            "expected the same instrument grid"
-        )
-    metadata = {**measurement.metadata, "dark": dark.source}
-    values = measurement.values - dark.values
-    _check_negatives(
-        measurement.wavelengths_nm,
-        values,
-        measurement.metadata.get("column") or "value",
-        f"{measurement.source} minus the dark {dark.source}",
-    )
-    return replace(measurement, values=values, metadata=metadata)
 
 
 def clip_measurement_negatives(measurement: SpectrometerMeasurement, what: str) -> SpectrometerMeasurement:
