@@ -248,14 +248,8 @@ class _Rows:
     def __init__(self, reflectances: Spectra) -> None:
         self.reflectances = reflectances
         self.n_patches = reflectances.count
-        self.design: list[np.ndarray] = []
-        self.data: list[np.ndarray] = []
-        self.std: list[np.ndarray] = []
-        self.groups: list[np.ndarray] = []
-        self.frames: list[np.ndarray] = []
-        self.patches: list[np.ndarray] = []
-        self.positions: list[np.ndarray] = []
-        self.sequences: list[np.ndarray] = []
+        # Per frame, the rows' design, data, std, group, frame, patch, position and sequence.
+        self.parts: list[tuple[np.ndarray, ...]] = []
         self.names: list[str] = []
         self.used: list[dict[str, Any]] = []
 
@@ -272,7 +266,7 @@ class _Rows:
             raise CalibrationError(f"{where}: frames are one-channel without a cfa; expected RGB or a Bayer mosaic")
         leds = sequence.led_spectra()
         led_group = -1
-        if led_indices and any(g < 0 for g in np.concatenate(self.groups or [np.zeros(0)])):
+        if led_indices and any(np.any(part[3] < 0) for part in self.parts):
             # LED spectra hold true ratios within a sequence; between sequences (another day, gain or
             # LED calibration) only the first sequence's LEDs fix the scale.
             self.names.append(f"{s}: LEDs")
@@ -312,38 +306,27 @@ class _Rows:
                 "unsaturated pixels; expected most of the chart usable (check exposure and "
                 "--patch-px/--border-px)"
             )
-        self.design.append(measurement_matrix(self.reflectances, light.to_unit("photons"))[valid])
-        self.data.append(means[valid])
-        self.std.append(errors[valid])
-        self.groups.append(np.full(used, group))
-        self.frames.append(np.full(used, len(self.used)))
-        self.patches.append(np.flatnonzero(valid))
-        self.positions.append(frame.positions[valid])
-        self.sequences.append(np.full(used, frame.sequence))
+        design = measurement_matrix(self.reflectances, light.to_unit("photons"))[valid]
+        index = (np.full(used, group), np.full(used, len(self.used)), np.flatnonzero(valid))
+        self.parts.append(
+            (design, means[valid], errors[valid], *index, frame.positions[valid], np.full(used, frame.sequence))
+        )
         self.used.append({"frame": where, "light": light.names[0], "patches": used})
 
     def measurements(self, grid: WavelengthGrid) -> ChartMeasurements:
         """The rows gathered; refused without an LED frame (they fix the broadband lights' scale)."""
-        group = np.concatenate(self.groups)
+        design, data, std, group, frame, patch, positions, sequence = (
+            np.concatenate(part) for part in zip(*self.parts)
+        )
         if not np.any(group < 0):
             raise CalibrationError(
                 "no LED frame in any sequence; expected LED frames (they fix the scale of the broadband lights)"
             )
-        data = np.vstack(self.data)
         # A floor on the standard error: flat (noise-free or quantised) patches must not get infinite weight.
-        std = np.maximum(np.vstack(self.std), 1e-4 * np.nanmax(np.abs(data), axis=0) + 1e-300)
+        std = np.maximum(std, 1e-4 * np.nanmax(np.abs(data), axis=0) + 1e-300)
+        used = tuple(self.used)
         return ChartMeasurements(
-            grid,
-            np.vstack(self.design),
-            data,
-            std,
-            group,
-            tuple(self.names),
-            tuple(self.used),
-            np.concatenate(self.frames),
-            np.concatenate(self.patches),
-            np.vstack(self.positions),
-            np.concatenate(self.sequences),
+            grid, design, data, std, group, tuple(self.names), used, frame, patch, positions, sequence
         )
 
 
