@@ -19,17 +19,10 @@ Candidates are the global model and local models with smoothing widths :data:`SM
 prediction**: tile ``t``'s ambient image is predicted from LED weights fitted *without* tile ``t``
 — on all other tiles for the global model, on the Gaussian-weighted neighbours for a local one —
 and the held-out squared errors are summed over the tiles (from the statistics alone:
-``‖a_t − F_t w‖² = E_t − 2 c_tᵀ w + wᵀ G_t w``). Holding out whole tiles, not pixels, matters:
-when the ambient is uniform but outside the LEDs' span, a local fit adapts to the local surfaces
-and would win a pixel-wise split (neighbouring pixels share surfaces), but it does not generalise
-to the next tile's surfaces, while a truly varying ambient is shared by neighbours. A local model
-is chosen only when it cuts the held-out error by more than :data:`SELECTION_MARGIN` — the
-safeguard that keeps uniform scenes global (calibrated on simulated uniform scenes:
-docs/local-estimation.md) — *and* the cut is more than :data:`MIN_EXPLAINED_GAIN` of the ambient
-image's energy. The ratio alone fails at high signal-to-noise ratios: when the global model's
-held-out error is nothing but a tiny misfit (an ambient slightly outside the LEDs' span, blocks
-dropped for saturation), a local fit can cut that tiny error by half on a uniform scene. Two
-ambients leave a misfit that is a sizeable part of the image.
+``‖a_t − F_t w‖² = E_t − 2 c_tᵀ w + wᵀ G_t w``). A local model is chosen only when it cuts the
+held-out error by more than :data:`SELECTION_MARGIN` (the safeguard that keeps uniform scenes
+global) *and* the cut is more than :data:`MIN_EXPLAINED_GAIN` of the ambient image's energy. Why
+whole tiles and not pixels, and why both conditions: docs/local-estimation.md, how it works.
 
 Noise correction
 ----------------
