@@ -1,10 +1,5 @@
-"""Chart detection, step 3: the affine lattice through the patch candidates' centres.
-
-The dominant nearest-neighbour displacement gives one lattice vector, the nearest neighbour off that
-direction the other (Lagrange-reduced); sites by rounding, then the lattice by least squares, keeping
-the largest connected block of sites and the coarsest well-filled sub-lattice (see
-:mod:`calibration.chart_detection`, step 3).
-"""
+"""Chart detection, step 3 (:mod:`calibration.chart_detection`): the affine lattice through the patch candidates'
+centres, its largest connected block of sites and its coarsest well-filled sub-lattice."""
 
 from __future__ import annotations
 
