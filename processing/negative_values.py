@@ -8,25 +8,15 @@ Public objects
 - :func:`clip_negative_noise`: the rule, applied to every column of a table.
 - :func:`blind_columns`: the columns left with no positive value (refused by the same readers).
 
-Measured spectra carry small negative values: a spectrometer export with the dark subtracted
-(by the instrument software or by ``--dark``) is noise about zero in the LED's tails, and half
-of that noise is below zero. A spectral power (or responsivity) cannot be negative, so those
-values are clipped to 0; but a value far below zero is no noise — a dark subtracted twice, a
-baseline offset, a wrong column — and is refused. A negative value is noise when it is at least
+A negative value in a measured spectrum is noise, clipped to 0, when it is at least
 
     −max(PEAK_FRACTION × peak, k × σ)
 
-with ``peak`` the column's largest value, ``σ`` its noise and ``k`` ≥ 5 from the noise model
-(:func:`noise_sigmas`: more for long columns and for σ measured on few pairs), measured in its tails from the
-differences of neighbouring samples (:func:`noise_sigma`; differences, so that an offset — a dark
-subtracted twice — is no noise). The fraction
-of the peak alone would refuse dim LEDs (an export with peak/noise 30, which
-``characterise_led`` warns about, has −4σ tails at −13 % of the peak); the noise bound alone
-would refuse a smooth, correlated tail (a resampled or smoothed export, whose differences
-understate its noise). Every reader of spectra the user measured applies this function — the
-spectrometer reader, the calibration reader (:func:`calibration.files.load_calibration`), the
-sequence reader and the rigs' spectral tables — and every writer of a calibration writes what it
-returns, so what one command writes the others read.
+with ``peak`` the column's largest value, ``σ`` its noise measured in its tails from the differences
+of neighbouring samples (:func:`noise_sigma`) and ``k`` ≥ :data:`NOISE_SIGMAS` from the noise model
+(:func:`noise_sigmas`); anything lower is refused. Every reader of spectra the user measured applies
+:func:`clip_negative_noise` and every writer of a calibration writes what it returns. Why both bounds
+and why differences: ``docs/calibration.md`` ("Negative values").
 """
 
 from __future__ import annotations
@@ -47,7 +37,7 @@ columns and for σ measured on few pairs."""
 FALSE_REFUSAL = 1e-6
 """The chance that a column of pure Gaussian noise (σ known) has a value beyond the noise bound."""
 SIGMA_SPREAD = 1.2
-"""Standard deviation of :func:`noise_sigma`'s σ / true σ, times √pairs (measured 1.17–1.19)."""
+"""Standard deviation of :func:`noise_sigma`'s σ / true σ, times √pairs (``docs/measurements.md``)."""
 SIGMA_SPREADS = 3.0
 """How many of those spreads the noise bound allows for σ measured too low."""
 REGION_SIGMAS = 4.0
@@ -74,9 +64,8 @@ def noise_pairs(values: np.ndarray) -> tuple[float, int]:
     (nearly) zero, so the differences are noise, and a constant offset (a dark subtracted twice)
     cancels instead of passing for noise. The median ignores the odd large difference; for
     independent noise the difference of two samples has σ√2. When that region cuts into the noise
-    itself (its bound below :data:`REGION_SIGMAS` σ, a dim export), the pairs left are the
-    smaller differences and σ comes out low — at peak/σ = 7, the generator's dimmest export, by
-    about a third — so the region is widened to :data:`REGION_SIGMAS` σ and σ measured again.
+    itself (its bound below :data:`REGION_SIGMAS` σ, a dim export), it is widened to
+    :data:`REGION_SIGMAS` σ and σ measured again.
     With fewer than :data:`MIN_NOISE_PAIRS` pairs the answer is (0, pairs).
     """
     values = np.asarray(values, dtype=float)
@@ -116,12 +105,10 @@ def noise_sigmas(n_samples: int, n_pairs: int) -> float:
     ``n_pairs`` neighbouring pairs):
 
     - **many samples**: the bound one of ``n_samples`` pure-noise values crosses with probability
-      :data:`FALSE_REFUSAL` — ``Φ⁻¹(1 − FALSE_REFUSAL / n_samples)``, 5.8σ for 300 samples and
-      6.2σ for 3500 (a 0.2 nm export over 300–1000 nm), where a fixed 5σ refuses about one such
-      column in 900;
-    - **σ measured, not known**: the estimate's spread is :data:`SIGMA_SPREAD` / √pairs of σ
-      (measured: 1.17–1.19 for 100–2000 pairs of Gaussian noise); the bound is widened by
-      :data:`SIGMA_SPREADS` such spreads, as a σ measured that much too low would narrow it.
+      :data:`FALSE_REFUSAL` — ``Φ⁻¹(1 − FALSE_REFUSAL / n_samples)``;
+    - **σ measured, not known**: the estimate's spread is :data:`SIGMA_SPREAD` / √pairs of σ; the
+      bound is widened by :data:`SIGMA_SPREADS` such spreads, as a σ measured that much too low
+      would narrow it.
 
     Examples
     --------
@@ -261,9 +248,7 @@ def blind_columns(values: np.ndarray, names: Sequence[str]) -> list[str]:
     """The columns of ``values`` (wavelength × column) with no positive value: an LED that emits
     nothing, a camera channel that sees nothing on the grid.
 
-    Every reader that applies :func:`clip_negative_noise` refuses them, naming the column: left in,
-    an all-zero responsivity made the ambient estimate fail later blaming the LEDs ("the LED-only
-    image … is empty; is it connected?").
+    Every reader that applies :func:`clip_negative_noise` refuses them, naming the column.
 
     >>> blind_columns(np.array([[0.0, 1.0], [0.0, 2.0]]), ["R", "G"])
     ['R']
