@@ -1,11 +1,8 @@
 """How noisy a chart measured with the spectrometer is (``msflash calibrate chart``).
 
 The camera fit takes the chart's reflectances as exact: noise in them is error in the
-responsivities, and a lot of it (measured on the independent render of
-``tests/harness/chart_render.py``, held-out Aptina MT9M031 with a 12 % falloff: reflectances with
-0.2 % relative noise gave an RMSE of 0.032, 0.4 % gave 0.036, 0.6–1.1 % gave 0.06–0.07, where the
-chart file itself gives 0.034). So ``calibrate chart`` measures the noise of what it stores and
-warns when it is large.
+responsivities (how much: ``docs/measurements.md``). So ``calibrate chart`` measures the noise of
+what it stores and warns when it is large.
 
 Estimate: per export, the noise of one instrument pixel from second differences of neighbouring
 pixels (``x[i-1] − 2x[i] + x[i+1]`` has variance 6σ² for white noise; a smooth spectrum's

@@ -40,8 +40,7 @@ SUB_BLOCKS = 8
 """The region is split into ``SUB_BLOCKS × SUB_BLOCKS`` sub-blocks for the uniformity checks."""
 MAX_SHARE_SPREAD = 0.08
 """Largest relative spread of an LED's share of the light over the sub-blocks: above it the region
-is not a uniform neutral reference (the sim rig's chart of muted natural surfaces gives 7–16 %, a
-flat white 0 %)."""
+is not a uniform neutral reference (``docs/measurements.md``)."""
 SHARE_WARNING = 0.02
 """Share spread above which the ratios are said to depend on the reference's position."""
 MIN_SIGNIFICANCE = 3.0

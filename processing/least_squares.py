@@ -76,9 +76,8 @@ def _inverse_factor(hessian: np.ndarray, where: str) -> np.ndarray:
     """R⁻¹ for the upper Cholesky factor R of H = Rᵀ R; raises SolverError naming ``where``.
 
     The problems have a handful of variables, so an explicit inverse is cheap and accurate. LAPACK
-    is called directly (``dpotrf``, ``dtrtri``): for 8×8 matrices numpy's wrappers cost ~20 µs
-    each in checks, the routines themselves ~1 µs. One sum tells finite matrices apart (the exact
-    check runs only when it is not finite, e.g. on overflow).
+    is called directly (``dpotrf``, ``dtrtri``; why: ``docs/measurements.md``). One sum tells
+    finite matrices apart (the exact check runs only when it is not finite, e.g. on overflow).
     """
     if not math.isfinite(np.add.reduce(hessian, axis=None)) and not np.isfinite(hessian).all():
         raise SolverError(f"{where}: the normal matrix has non-finite entries; expected finite data")

@@ -288,7 +288,7 @@ def _label_cells(
     for iteration in range(iterations):
         errors = cells.errors(weights)
         # Residual differences summed over a (2r + 1)² box of cells: a vote weighted by the cells'
-        # brightness (normalised votes were tried: noisy dark cells then flip labels, worse on the study).
+        # brightness (docs/decisions/docstring-history.md).
         difference[valid] = errors[1] - errors[0]
         previous, labels = labels, _box(difference, radius) < 0.0
         member = labels[valid]

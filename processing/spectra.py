@@ -52,8 +52,7 @@ MIN_TABLE_PEAK = 1e-100
 
 With :data:`MAX_TABLE_MAGNITUDE`, it keeps the products of two tables (an LED's spectrum times a
 camera's responsivity, counts divided by a spectrometer's response) and their squares normal
-floats: a column ×1e-300 made every LED-only image "empty" (exit 1), and a response ×1e-300 wrote
-LED energies of 1e301 that the calibration's reader then refused."""
+floats (``docs/decisions/docstring-history.md``)."""
 
 
 def tiny_columns(values: np.ndarray) -> list[int]:
