@@ -36,7 +36,6 @@ from msflash.processing.errors import SolverError, SpectralDataError, TargetUnre
 from msflash.processing.least_squares import FactoredQuadratic, minimise_quadratic
 from msflash.processing.spectra import Spectra, require_same_grid, require_unit
 
-FlashMode = Literal["matching", "complementary"]
 FlashBounds = Literal["physical", "nonnegative", "free"]
 
 TIE_BREAK = 1e-6

@@ -9,7 +9,7 @@ Works identically on RGB images and raw mosaics (each sample is just a number).
 from __future__ import annotations
 
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -174,13 +174,8 @@ def _synthesize_chunks(
         if bright is not None:
             flat_saturated[start // channels : stop // channels] = _any_channel(bright.reshape(-1, channels))
 
-    starts = range(0, flat_output.size, chunk_samples)
-    if workers > 1 and len(starts) > 1:
-        # Chunks write disjoint slices of the output; each is computed exactly as on one thread.
-        list(thread_pool(workers).map(synthesize_chunk, starts))
-    else:
-        for start in starts:
-            synthesize_chunk(start)
+    # Chunks write disjoint slices of the output; each is computed exactly as on one thread.
+    _run_tasks(synthesize_chunk, range(0, flat_output.size, chunk_samples), workers)
     # Integer frames are finite and _check_range bounds the sum; float frames (EXR) may hold NaN or
     # inf, which would reach the image: one sum flags them (the exact search runs only then).
     if any(np.issubdtype(frame.dtype, np.floating) for frame in frames) and not np.isfinite(
@@ -221,7 +216,11 @@ def _synthesize_compiled(
             min(start + step, flat_output.size),
         )
 
-    starts = range(0, flat_output.size, step)
+    _run_tasks(task, range(0, flat_output.size, step), workers)
+
+
+def _run_tasks(task: Callable[[int], None], starts: range, workers: int) -> None:
+    """``task(start)`` for every start, on ``workers`` threads when there are several tasks."""
     if workers > 1 and len(starts) > 1:
         list(thread_pool(workers).map(task, starts))
     else:
