@@ -17,38 +17,14 @@ and the placement (:mod:`calibration.chart_placement`).
 
 Method
 ------
-All frames see the same geometry, so they are stacked as channels: RGB frames as they are, a
-Bayer mosaic as its four per-site planes at half resolution (each 2 × 2 quad one pixel, no
-demosaicking), large frames binned so the longer side is ≤ :data:`DETECTION_MAX_SIDE`.
-
-1. *Uniform regions.* Two neighbouring pixels are linked when they read the same in every
-   channel: ``χ² = Σ_c (a_c − b_c)² / var_c`` below the ``1 −`` :data:`LINK_FALSE_CUT` quantile of
-   χ² with one degree of freedom per channel. ``var_c`` is the noise of a difference as a function
-   of the signal, measured on the frames themselves (per signal bin; iterated on the pairs that
-   test uniform), never below the raw quantisation. Regions are the
-   connected components of the links: no erosion, so an 8-pixel patch stays an 8-pixel region.
-2. *Patch candidates.* Regions that are filled rectangles (area = product of the sides implied
-   by their second moments, ±:data:`RECTANGLE_TOLERANCE`; aspect ≤ :data:`MAX_ASPECT`) and of a
-   common size (within a factor :data:`SIZE_TOLERANCE`: a chart's patches are all alike).
-3. *Lattice.* The dominant nearest-neighbour displacement gives one lattice vector, the nearest
-   neighbour off that direction the other (Lagrange-reduced); integer sites by rounding, then
-   ``centre = origin + i u + j v`` by least squares on the centres within
-   :data:`SITE_TOLERANCE` of a site (an affine lattice: scale, rotation, shear of a slightly
-   oblique view), keeping the largest connected block of sites and the coarsest well-filled
-   sub-lattice. At least :data:`MIN_OCCUPANCY` of the chart's patches must
-   be found; leftover regions are searched for more lattices.
-4. *Placement: which corner is patch 1.* Each placement of the chart over the found sites (4
-   rotations × mirror; any shift when edge patches are missing; any window of a larger grid)
-   predicts the patch means of every LED frame minus the ambient: under a narrowband LED ``k`` a
-   channel reads ``g_kc ∫ ρ_p E_k`` for some gain ``g_kc ≥ 0`` whatever the camera. The relative
-   misfit (:func:`placement_misfit`, corrected for the noise of the means) of the best placement
-   must be ≤ :data:`COLOUR_MISFIT` and :data:`AMBIGUITY_RATIO` times below the best overlapping
-   alternative; two fitting placements that do not overlap are two charts (refused).
-
-The caller still checks the label map like a given layout (``check_layout``: patches uniform,
-distinct). References: the lattice fit is the usual checkerboard/ColorChecker grid fit (e.g.
-OpenCV's ``mcc`` module finds patch quadrilaterals and fits the chart's grid to their centres);
-here the patches are found by a noise-normalised uniformity test instead of contours.
+All frames are stacked as channels (a Bayer mosaic as its four per-site planes at half resolution,
+large frames binned, :data:`calibration.chart_regions.DETECTION_MAX_SIDE`); then 1. uniform regions
+(neighbours linked by a noise-normalised χ² test, :data:`calibration.chart_regions.LINK_FALSE_CUT`),
+2. patch candidates (filled rectangles of a common size), 3. the lattice (an affine grid fitted to
+their centres, :data:`MIN_OCCUPANCY` of the patches found), 4. the placement (which corner is patch
+1, :func:`calibration.chart_placement.placement_misfit` against :data:`COLOUR_MISFIT` and
+:data:`AMBIGUITY_RATIO`). Each step, its thresholds and the references: ``docs/calibration.md``
+("Chart detection"). The caller still checks the label map like a given layout (``check_layout``).
 """
 
 from __future__ import annotations

@@ -16,22 +16,13 @@ Layout (format ``msflash-calibration``, version 2; version 1 files are read as b
     camera.csv         wavelength_nm, R, G, B (responsivities)
     chart.csv          wavelength_nm, one reflectance per chart patch (``calibrate chart``)
 
-Version 2 adds the unit ``counts`` for ``leds`` — spectrometer counts (per second when
-``counts_per_second``) that still hold the spectrometer's own response, because no
-``--spectrometer-response`` was given; they are read as relative energy with a note saying so —
-the export settings (``acquisition``: instrument, integration time, averaging) and how each
-baseline was removed (``baselines``), and the ``chart`` section.
-
-Unknown keys are kept and written back; a newer ``version`` is refused. The CSV tables hold
-values ≥ 0: negative noise is clipped on writing and on reading by the one rule of
-:mod:`processing.negative_values` (reported in the section's ``clipped_negatives`` when written,
-in :attr:`CalibrationSet.notes` when read), and a value beyond it is refused naming the file,
-column, wavelength and value. Hostile JSON (NaN, huge numbers, deep nesting, wrong types) is
-refused naming the file and field (:mod:`processing.json_input`). A sequence refers to a
-calibration with ``"calibration": {"id": …, "file": "<dir>"}`` (a path relative to the sequence
-directory or absolute). Each calibrate command updates the sections it measures and keeps the
-others, so ``leds``, ``camera`` and ``dark`` can be run one after another into one directory;
-every save gets a new ``id``.
+Unknown keys are kept and written back; a newer ``version`` is refused; what version 2 added:
+``docs/calibration.md`` ("Files"). The CSV tables hold values ≥ 0 (negative noise clipped on writing
+and reading by :mod:`processing.negative_values`, reported in the section's ``clipped_negatives`` or
+:attr:`CalibrationSet.notes`); hostile JSON is refused naming the file and field
+(:mod:`processing.json_input`). A sequence refers to a calibration with ``"calibration": {"id": …,
+"file": "<dir>"}`` (relative to the sequence directory, or absolute). Each calibrate command updates
+the sections it measures and keeps the others; every save gets a new ``id``.
 """
 
 from __future__ import annotations

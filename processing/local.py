@@ -12,26 +12,10 @@ Statistics of disjoint samples add, so
   proportion to ``exp(−d²/2σ²)`` with ``d`` the distance in tiles,
 - and every tile is then solved in microseconds (:func:`estimate_local`).
 
-Model selection (:func:`select_model`)
--------------------------------------
-Candidates are the global model and local models with smoothing widths :data:`SMOOTHING_GRID`
-(the smallest is "local", the larger ones "local-smoothed"). Each is scored by **leave-one-tile-out
-prediction**: tile ``t``'s ambient image is predicted from LED weights fitted *without* tile ``t``
-— on all other tiles for the global model, on the Gaussian-weighted neighbours for a local one —
-and the held-out squared errors are summed over the tiles (from the statistics alone:
-``‖a_t − F_t w‖² = E_t − 2 c_tᵀ w + wᵀ G_t w``). A local model is chosen only when it cuts the
-held-out error by more than :data:`SELECTION_MARGIN` (the safeguard that keeps uniform scenes
-global) *and* the cut is more than :data:`MIN_EXPLAINED_GAIN` of the ambient image's energy. Why
-whole tiles and not pixels, and why both conditions: docs/local-estimation.md, how it works.
-
-Noise correction
-----------------
-The LED-only images are differences of noisy frames, so the moments of eq. 5 carry the noise
-variance (errors in variables). :func:`tile_statistics` also measures it per block from the
-difference of two interleaved column halves (:attr:`TiledStatistics.denoised`), and the local model
-is solved on the corrected statistics, as the global estimate is (:mod:`processing.statistics` measures
-the same probe for the whole frame; docs/architecture.md §8: the noise is measured from the data,
-without a noise model).
+Model selection (:func:`select_model`, leave-one-tile-out prediction against the global model,
+:data:`SELECTION_MARGIN` and :data:`MIN_EXPLAINED_GAIN`) and the noise correction
+(:attr:`TiledStatistics.denoised`, errors in variables, the same probe :mod:`processing.statistics`
+measures for the whole frame) are described in ``docs/local-estimation.md`` ("How it works").
 
 Public objects
 --------------

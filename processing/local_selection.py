@@ -1,5 +1,5 @@
 """Which ambient model a scene needs: global or local by leave-one-tile-out prediction, and two illuminant
-regions (:func:`select_model`, :func:`segment_regions`; :mod:`processing.local`'s module notes say how).
+regions (:func:`select_model`, :func:`segment_regions`; how: ``docs/local-estimation.md``).
 """
 
 from __future__ import annotations
