@@ -80,12 +80,6 @@ class Scene:
         """Image size (H, W)."""
         return (int(self.labels.shape[0]), int(self.labels.shape[1]))
 
-    def surface_mask(self, surface: int | str) -> np.ndarray:
-        """Pixels showing one surface (by index or name) without a highlight, bool (H, W)."""
-        index = self.reflectances.names.index(surface) if isinstance(surface, str) else int(surface)
-        mask = self.labels == index
-        return mask & ~self.specular if self.specular is not None else mask
-
 
 def uniform_scene(reflectance: Spectra, height: int, width: int, shading: np.ndarray | None = None) -> Scene:
     """A scene showing the first surface of ``reflectance`` everywhere (for tests and noise studies),
