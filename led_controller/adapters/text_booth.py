@@ -29,9 +29,10 @@ from typing import IO, Any, Literal
 
 import serial
 
-from msflash.led_controller.booth import DEFAULT_BOOT_S, open_serial_port
+from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import HOST_PACED_ONLY, BoothCapabilities
 from msflash.led_controller.errors import BoothError, BoothProtocolError, BoothTimeoutError
+from msflash.led_controller.serial_port import open_serial_port
 
 log = logging.getLogger(__name__)
 
@@ -170,7 +171,7 @@ class TextBooth:
         Raises
         ------
         BoothNotFoundError
-            The port does not exist (:func:`led_controller.booth.open_serial_port`).
+            The port does not exist (:func:`led_controller.serial_port.open_serial_port`).
         BoothError
             The port cannot be opened or does not answer as a text booth (its LEDs are sent ``OFF``).
         """
