@@ -17,7 +17,7 @@ import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Literal
+from typing import Literal
 
 from msflash.led_controller import protocol
 from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
@@ -56,18 +56,8 @@ class LedBooth(TimedTable):
         Name used in messages and logs (defaults to the port name).
     """
 
-    def __init__(
-        self,
-        port: Any,
-        *,
-        timeout_s: float = 1.0,
-        log_serial: str | Path | None = None,
-        name: str | None = None,
-    ) -> None:
-        super().__init__(port, timeout_s=timeout_s, log_serial=log_serial, name=name)
-        self._pset_now = True
-        self._on_us: dict[int, tuple[float, ...]] = {}  # table step -> ON= on-times (pulse-dimmed steps)
-        self._watchdog_s: float | None = None  # the booth's watchdog period once known (STAT, WDOG)
+    _watchdog_s: float | None = None
+    """The booth's watchdog period once known (``STAT``, ``WDOG``)."""
 
     # -- opening and closing -------------------------------------------------------------
 

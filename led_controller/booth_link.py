@@ -17,13 +17,14 @@ import queue
 import threading
 import time
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import serial
 
 from msflash.led_controller import protocol
 from msflash.led_controller.errors import BoothError, BoothProtocolError, BoothTimeoutError
 from msflash.led_controller.protocol import BoothEvent, Command
+from msflash.led_controller.serial_port import open_transcript
 
 try:
     import termios
@@ -108,17 +109,7 @@ class BoothLink:
         self._stop = threading.Event()
         self._closed = False
         self._boots = 0  # BOOT banners seen (the firmware started: a reset)
-        try:
-            self._transcript: IO[str] | None = (
-                open(log_serial, "w", encoding="ascii", newline="\n") if log_serial else None  # noqa: SIM115
-            )
-        except OSError as err:
-            raise BoothError(
-                f"{self._name}: cannot record the serial transcript in {log_serial} "
-                f"({err.strerror or err}); expected a writable file path"
-            ) from err
-        if self._transcript is not None:
-            self._transcript.write(f"# msflash booth transcript, port {self._name}, {time.strftime('%Y-%m-%d')}\n")
+        self._transcript = open_transcript(log_serial, self._name, "booth")
         self._reader = threading.Thread(target=self._read_loop, name=f"booth-reader {self._name}", daemon=True)
         self._reader.start()
 

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from types import MappingProxyType
 from typing import Literal
 
 from msflash.led_controller import protocol
@@ -32,8 +33,10 @@ ARM_TIME_MAX_US = 10_000_000
 class TimedTable(Handshake):
     """The pattern table's commands, over the booth's identity and link."""
 
-    _pset_now: bool
-    _on_us: dict[int, tuple[float, ...]]
+    _pset_now = True
+    """Whether to send ``PSET … NOW`` (until the booth refuses it)."""
+    _on_us: Mapping[int, tuple[float, ...]] = MappingProxyType({})
+    """Table step -> its ``ON=`` on-times (pulse-dimmed steps); replaced, never changed in place."""
 
     def load_pattern(
         self,
@@ -74,7 +77,7 @@ class TimedTable(Handshake):
             except ValueError as err:
                 raise ValueError(f"load_pattern: step {i}: {err}") from err
         self._command(Command.PATTERN_CLEAR)
-        self._on_us.clear()
+        self._on_us = {}
         for i, words in enumerate(encoded):
             flag = (protocol.HOLD_FLAG,) if i in held else ()
             reply, raw = self._command(Command.PATTERN_ADD, *words, *exposure_words[i], *flag)
@@ -109,9 +112,9 @@ class TimedTable(Handshake):
     def _keep_on_times(self, index: int, reply: protocol.Reply, raw: bytes, command: str) -> None:
         on = protocol.parse_on_times(reply.args, self.info.channels, raw, command=command, where=self._name)
         if on is None:
-            self._on_us.pop(index, None)
+            self._on_us = {step: times for step, times in self._on_us.items() if step != index}
         else:
-            self._on_us[index] = on
+            self._on_us = {**self._on_us, index: on}
 
     def delivered_levels(self, index: int, exposure_us: float) -> tuple[float, ...] | None:
         """What table step ``index`` gives each LED in an exposure of ``exposure_us``, as a level (its

@@ -13,7 +13,6 @@ import logging
 import math
 import threading
 import time
-from types import TracebackType
 from typing import Any
 
 from msflash.led_controller.emulator import BoothEmulator
@@ -198,9 +197,7 @@ class PtyBoothServer:
     def __enter__(self) -> PtyBoothServer:
         return self
 
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
+    def __exit__(self, *_exc: object) -> None:
         self.close()
 
 

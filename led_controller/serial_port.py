@@ -1,11 +1,15 @@
 """Opening a booth's serial port: exclusively, with one line saying why it did not open.
 
-Every booth driver (``LedBooth``, ``TextBooth``) and the doctor's probe open their port here.
+Every booth driver (``LedBooth``, ``TextBooth``) and the doctor's probe open their port here, and
+the drivers their transcript of the exchange.
 """
 
 from __future__ import annotations
 
 import errno
+import time
+from pathlib import Path
+from typing import IO
 
 import serial
 
@@ -54,3 +58,17 @@ def port_open_error(url: str, err: serial.SerialException) -> BoothError:
     if code == errno.EBUSY or "[Errno 16]" in text or "exclusively lock" in text:
         return BoothError(f"booth {url}: port busy; expected it free — close other programs using it")
     return BoothError(f"booth {url}: cannot open ({text}); expected a serial device or pyserial URL")
+
+
+def open_transcript(path: str | Path | None, port: str, kind: str) -> IO[str] | None:
+    """The serial transcript of ``port`` (None without ``path``), its header line written; one BoothError line if not."""
+    if not path:
+        return None
+    try:
+        transcript = open(path, "w", encoding="ascii", newline="\n")  # noqa: SIM115
+    except OSError as err:
+        raise BoothError(
+            f"{port}: cannot record the serial transcript in {path} ({err.strerror or err}); expected a writable file path"
+        ) from err
+    transcript.write(f"# msflash {kind} transcript, port {port}, {time.strftime('%Y-%m-%d')}\n")
+    return transcript
