@@ -8,11 +8,10 @@ noise and asks ``ID`` (:meth:`Handshake.identify`, which refuses another protoco
 from __future__ import annotations
 
 import logging
-import queue
 import time
 
 from msflash.led_controller import protocol
-from msflash.led_controller.booth_link import BoothLink, _BootedMeanwhile, _Garbled, _LinkLost
+from msflash.led_controller.booth_link import BoothLink, _BootedMeanwhile, _Garbled
 from msflash.led_controller.errors import BoothError, BoothProtocolError, BoothTimeoutError
 from msflash.led_controller.protocol import BoothEvent, BoothInfo, Command
 
@@ -126,14 +125,7 @@ class Handshake(BoothLink):
         The reader thread has already taken every byte off the port into its queues, so emptying them is
         the flush (a ``reset_input_buffer`` here would race with it and could cut a reply in two).
         """
-        while True:
-            try:
-                item = self._replies.get_nowait()
-            except queue.Empty:
-                break
-            if isinstance(item, _LinkLost):
-                self._replies.put(item)
-                break
+        self._drop_stale_replies(quietly=True)
         with self._events_cv:
             for event in list(self._events):
                 if isinstance(event, _Garbled) or (isinstance(event, BoothEvent) and event.kind == protocol.Event.BOOT):

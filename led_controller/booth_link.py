@@ -229,7 +229,8 @@ class BoothLink:
             f"the booth could not read it ({reply.code})",
         )
 
-    def _drop_stale_replies(self) -> None:
+    def _drop_stale_replies(self, *, quietly: bool = False) -> None:
+        """Empty the reply queue, but for a lost link (kept for the next request to report); logged unless ``quietly``."""
         while True:
             try:
                 item = self._replies.get_nowait()
@@ -238,8 +239,9 @@ class BoothLink:
             if isinstance(item, _LinkLost):
                 self._replies.put(item)
                 return
-            raw = item.raw if isinstance(item, protocol.Frame) else item.error.raw
-            log.warning("%s: dropped unclaimed reply %r", self._name, raw)
+            if not quietly:
+                raw = item.raw if isinstance(item, protocol.Frame) else item.error.raw
+                log.warning("%s: dropped unclaimed reply %r", self._name, raw)
 
     def _send(self, frame: bytes, command: str, timeout: float) -> None:
         self._wire(">", frame)
