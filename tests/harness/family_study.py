@@ -43,8 +43,9 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
         spectrum_in_sequence_unit,
     )
     from msflash.acquisition.session.prior_route import sequence_channel_statistics
-    from msflash.processing.light_families import evidence_spread, family_model, scene_form
+    from msflash.processing.light_families import evidence_spread, family_model
     from msflash.processing.light_prior import prior_model
+    from msflash.processing.spectral_data_term import scene_form
 
     truth = cached_render(case, cache)
     bound = metrics.led_bound(truth.led_spd, truth.ambient)

@@ -114,7 +114,8 @@ def test_the_failure_map_counts_warned_misses_per_light_kind() -> None:
 
 
 def test_the_chart_applies_the_family_rule_and_the_shipped_thresholds() -> None:
-    from msflash.processing.light_families import EVIDENCE_TEMPERATURE, LED_WARNING, SIMPLER_WITHIN
+    from msflash.processing.family_checks import LED_WARNING
+    from msflash.processing.light_families import EVIDENCE_TEMPERATURE, SIMPLER_WITHIN
     from tests.harness import families_chart
 
     rows = [

@@ -7,23 +7,17 @@ import pytest
 
 from msflash.processing import datasets
 from msflash.processing.channel_statistics import ChannelStatistics, Moments
-from msflash.processing.light_families import (
-    FORMS,
-    SIMPLER_WITHIN,
-    Candidate,
-    Fit,
-    choose,
-    daylight,
-    discharge_atoms,
-    family_model,
+from msflash.processing.family_fit import Fit
+from msflash.processing.light_families import SIMPLER_WITHIN, Candidate, choose, family_model
+from msflash.processing.light_forms import FORMS, daylight, discharge_atoms, planck
+from msflash.processing.light_prior import (
+    learn_reflectance_basis,
     light_predictors,
-    planck,
-    reduce_predictors,
-    scene_form,
-    unit_predictors,
+    normal_equations,
+    plane_responsivities,
 )
-from msflash.processing.light_prior import learn_reflectance_basis, normal_equations, plane_responsivities
 from msflash.processing.spectra import WavelengthGrid
+from msflash.processing.spectral_data_term import reduce_predictors, scene_form, unit_predictors
 
 GRID = WavelengthGrid(400.0, 700.0, 10.0)
 
