@@ -33,8 +33,8 @@ import numpy as np
 
 from msflash.processing.channel_statistics import ChannelStatistics
 from msflash.processing.family_fit import Fit, fit_discharge, fit_form, fit_mixture
-from msflash.processing.light_forms import FORMS
-from msflash.processing.light_prior import KAPPA
+from msflash.processing.light_forms import FORMS, Form, seen_forms
+from msflash.processing.light_prior import KAPPA, plane_responsivities
 from msflash.processing.reference_patch import PATCH_WEIGHT, ReferencePatch
 from msflash.processing.spectra import Spectra, WavelengthGrid, require_unit
 from msflash.processing.spectral_data_term import (
@@ -52,11 +52,18 @@ is preferred (:func:`choose`)."""
 AUTO_MARGIN = 0.1
 """``auto`` leaves the LEDs' span only when the chosen candidate predicts held-out pixels (noise removed) this much
 better (:func:`choose`)."""
-AUTO_NOISE = 0.1
+AUTO_NOISE = 0.07
 """…and by more than this multiple of the noise's share, squared (:func:`choose`): flexible forms fit what the
 folds share (the pixel model's misfit), not the light."""
+AVERAGE_TEMPERATURE = 0.1
+"""τ of the evidence weights of the estimate itself: the candidates' evidence-weighted average (Bayesian model
+averaging), not the chosen one alone — where the pixels leave two forms equally likely, their mean is the safer
+spectrum (the forms that tie are metameric for the camera and differ where it barely sees)."""
 EVIDENCE_TEMPERATURE = 0.5
 """τ of the evidence weights ``exp(−(err/err_best − 1)/τ)`` whose candidates' spread enters the band."""
+SEEN_FRACTION = 0.1
+"""An emission band's centre must lie where the camera's most sensitive plane reaches this fraction of its peak
+(:func:`processing.light_forms.seen_forms`)."""
 POSTERIOR_SCALE = 4.0
 """Multiplies the chosen fit's tempered posterior ±1σ in the band.
 
@@ -255,11 +262,22 @@ class FamilyModel:
     channels: tuple[str, ...]
     kappa: float = KAPPA
     reduction: Reduction = field(init=False, repr=False)
+    forms: tuple[Form, ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         reduction = reduce_predictors(unit_predictors(self.led_spectra, self.responsivities, self.channels))
         reduction.lift.flags.writeable = False
         object.__setattr__(self, "reduction", reduction)
+        object.__setattr__(self, "forms", seen_forms(FORMS, self.seen_nm))
+
+    @property
+    def seen_nm(self) -> tuple[float, float]:
+        """The wavelengths the camera sees: where its most sensitive plane reaches :data:`SEEN_FRACTION` of the
+        camera's peak (photons)."""
+        planes = plane_responsivities(self.responsivities, self.channels).max(axis=1)
+        seen = np.flatnonzero(planes >= SEEN_FRACTION * max(float(planes.max()), 1e-300))
+        nm = self.grid.wavelengths_nm
+        return (float(nm[seen[0]]), float(nm[seen[-1]])) if seen.size else (float(nm[0]), float(nm[-1]))
 
     @property
     def grid(self) -> WavelengthGrid:
@@ -273,7 +291,7 @@ class FamilyModel:
         scene = scene_form(statistics, self.reduction)
         problem = scene.whitened(list(range(scene.n_folds)))
         grid = self.grid
-        fits = [_timed(fit_form, form, grid, problem) for form in FORMS]
+        fits = [_timed(fit_form, form, grid, problem) for form in self.forms]
         start = time.perf_counter()
         greedy = fit_discharge(grid, problem)
         each = (time.perf_counter() - start) / max(len(greedy), 1)
@@ -342,7 +360,7 @@ class FamilyModel:
         spread, _ = evidence_spread(chosen, candidates)
         observed = scene.whitened(folds, denoised=False)
         residual = math.sqrt(max(observed.error(chosen.fit.spectrum), 0.0))
-        spectrum = chosen.fit.spectrum
+        _, spectrum = evidence_spread(chosen, candidates, AVERAGE_TEMPERATURE)
         warnings = () if np.max(spectrum) > 0 else ("the estimated spectrum is zero: no ambient light was found",)
         return FamilyEstimate(
             spectrum=self.led_spectra.replace(

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
@@ -36,8 +36,6 @@ from msflash.processing.spectra import WavelengthGrid
 
 FAMILIES = ("thermal", "discharge", "solid_state", "transmitted", "mixture")
 """The generative families (module notes)."""
-BAND_COUNTS = (2, 3, 4)
-"""Complexities of the solid-state form (emission bands)."""
 C2_NM_K = 1.4388e7
 """Second radiation constant, nm·K."""
 
@@ -215,14 +213,43 @@ def discharge_atoms(grid: WavelengthGrid) -> tuple[np.ndarray, tuple[str, ...]]:
     return atoms[:, keep], tuple(n for n, k in zip(names, keep) if k)
 
 
-def _band_form(count: int) -> Form:
-    centres = {2: ((450, 560),), 3: ((450, 540, 620), (450, 560, 640)), 4: ((410, 460, 540, 630), (450, 530, 590, 630))}
-    widths = {2: ((25, 110), (20, 90)), 3: ((25, 60, 80), (20, 100, 90)), 4: ((20, 50, 60, 90), (22, 32, 18, 18))}
-    starts = []
-    for c in centres[count]:
-        for w in widths[count]:
-            starts.append(tuple(c) + tuple(w))
-    bounds = tuple((380.0, 720.0) for _ in range(count)) + tuple((8.0, 180.0) for _ in range(count))
+SOLID_STATE: dict[str, tuple[tuple[tuple[float, float], tuple[float, float]], ...]] = {
+    "phosphor white": (((400.0, 480.0), (12.0, 40.0)), ((500.0, 620.0), (50.0, 140.0))),
+    "phosphor white + red": (
+        ((400.0, 480.0), (12.0, 40.0)),
+        ((500.0, 600.0), (50.0, 140.0)),
+        ((590.0, 680.0), (40.0, 120.0)),
+    ),
+    "RGB": (((430.0, 490.0), (12.0, 45.0)), ((490.0, 565.0), (12.0, 45.0)), ((590.0, 680.0), (12.0, 45.0))),
+    "RGBA": (
+        ((430.0, 490.0), (12.0, 45.0)),
+        ((490.0, 565.0), (12.0, 45.0)),
+        ((565.0, 610.0), (12.0, 45.0)),
+        ((610.0, 680.0), (12.0, 45.0)),
+    ),
+    "violet-pumped": (
+        ((380.0, 430.0), (12.0, 40.0)),
+        ((430.0, 490.0), (30.0, 120.0)),
+        ((490.0, 590.0), (40.0, 140.0)),
+        ((590.0, 680.0), (40.0, 120.0)),
+    ),
+}
+"""The solid-state forms: each band's (centre, FWHM) bounds in nm, as LEDs are made. A phosphor-converted white
+is a narrow blue pump (InGaN, 12–40 nm) and broad phosphor bands (50–140 nm); an RGB(A) luminaire narrow direct
+emitters; a violet-pumped white a violet pump and three phosphors. Free-floating bands with free widths fitted
+what the folds share (reflectance misfit) with narrow spikes and bands at the grid's blind edges instead."""
+
+
+def _band_form(name: str, limits: tuple[tuple[tuple[float, float], tuple[float, float]], ...]) -> Form:
+    count = len(limits)
+    centre_bounds = tuple(c for c, _ in limits)
+    width_bounds = tuple(w for _, w in limits)
+    middle = tuple(0.5 * (c[0] + c[1]) for c in centre_bounds)
+    narrow = tuple(w[0] + 0.25 * (w[1] - w[0]) for w in width_bounds)
+    broad = tuple(w[0] + 0.75 * (w[1] - w[0]) for w in width_bounds)
+    low = tuple(c[0] + 0.25 * (c[1] - c[0]) for c in centre_bounds)
+    high = tuple(c[0] + 0.75 * (c[1] - c[0]) for c in centre_bounds)
+    starts = tuple(c + w for c in (middle, low, high) for w in (narrow, broad))
 
     def atoms(grid: WavelengthGrid, th: np.ndarray) -> np.ndarray:
         return _bands(grid, th[:count], th[count:])[0]
@@ -236,11 +263,11 @@ def _band_form(count: int) -> Form:
         return np.hstack([by_centre, by_width])
 
     return Form(
-        f"{count} bands",
+        name,
         "solid_state",
         tuple(f"centre_{i}_nm" for i in range(count)) + tuple(f"fwhm_{i}_nm" for i in range(count)),
-        bounds,
-        tuple(starts),
+        centre_bounds + width_bounds,
+        starts,
         atoms,
         tangent=tangent,
     )
@@ -330,5 +357,31 @@ def _transmitted_forms() -> list[Form]:
     ]
 
 
-FORMS: tuple[Form, ...] = (*_thermal_forms(), *(_band_form(m) for m in BAND_COUNTS), *_transmitted_forms())
+FORMS: tuple[Form, ...] = (
+    *_thermal_forms(),
+    *(_band_form(n, limits) for n, limits in SOLID_STATE.items()),
+    *_transmitted_forms(),
+)
 """The parametric forms (the discharge family is a dictionary: :func:`discharge_atoms`)."""
+
+
+def seen_forms(forms: tuple[Form, ...], seen_nm: tuple[float, float]) -> tuple[Form, ...]:
+    """``forms`` with every emission band's centre held inside ``seen_nm``, the range the camera sees.
+
+    Outside it the pixels do not say where a band is: a band centred where the camera is blind costs the data term
+    nothing and can hold any energy there (on the tuning rows, bands at 384, 408 and 720 nm carried the family
+    model's worst misses). Thermal and transmitted forms extrapolate by their physics and are left as they are.
+    """
+    low, high = seen_nm
+    out = []
+    for form in forms:
+        if form.family != "solid_state":
+            out.append(form)
+            continue
+        bounds = tuple(
+            (max(b[0], low), min(b[1], high)) if name.startswith("centre_") else b
+            for name, b in zip(form.parameters, form.bounds)
+        )
+        starts = tuple(tuple(min(max(v, b[0]), b[1]) for v, b in zip(start, bounds)) for start in form.starts)
+        out.append(replace(form, bounds=bounds, starts=starts))
+    return tuple(out)
