@@ -59,12 +59,14 @@ AVERAGE_TEMPERATURE = 0.1
 """τ of the evidence weights of the estimate itself: the candidates' evidence-weighted average (Bayesian model
 averaging), not the chosen one alone — where the pixels leave two forms equally likely, their mean is the safer
 spectrum (the forms that tie are metameric for the camera and differ where it barely sees)."""
-EVIDENCE_TEMPERATURE = 0.5
+EVIDENCE_TEMPERATURE = 0.2
 """τ of the evidence weights ``exp(−(err/err_best − 1)/τ)`` whose candidates' spread enters the band."""
+CHECK_TEMPERATURE = 0.5
+"""τ of the spread the family's miss check reads (:func:`processing.family_checks.self_check`)."""
 SEEN_FRACTION = 0.1
 """An emission band's centre must lie where the camera's most sensitive plane reaches this fraction of its peak
 (:func:`processing.light_forms.seen_forms`)."""
-POSTERIOR_SCALE = 4.0
+POSTERIOR_SCALE = 1.0
 """Multiplies the chosen fit's tempered posterior ±1σ in the band.
 
 Every constant above was chosen on the tuning rows of both harness suites; the sweeps behind each are in
@@ -357,7 +359,7 @@ class FamilyModel:
             chosen = replace(chosen, fit=replace(chosen.fit, amplitudes=calibrated))
             candidates = [chosen if c.fit.name == chosen.fit.name else c for c in candidates]
         std = self.band(chosen, candidates, problem, n_samples)
-        spread, _ = evidence_spread(chosen, candidates)
+        spread, _ = evidence_spread(chosen, candidates, CHECK_TEMPERATURE)
         observed = scene.whitened(folds, denoised=False)
         residual = math.sqrt(max(observed.error(chosen.fit.spectrum), 0.0))
         _, spectrum = evidence_spread(chosen, candidates, AVERAGE_TEMPERATURE)

@@ -29,7 +29,14 @@ from msflash.processing.channel_statistics import ChannelStatistics, accumulate_
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.family_checks import LED_WARNING, PRIOR_WARNING, MissCheck, predicted_ratio, self_check
 from msflash.processing.json_input import parse_json_document
-from msflash.processing.light_families import AUTO_MARGIN, AUTO_NOISE, FamilyEstimate, family_model
+from msflash.processing.light_families import (
+    AUTO_MARGIN,
+    AUTO_NOISE,
+    AVERAGE_TEMPERATURE,
+    SIMPLER_WITHIN,
+    FamilyEstimate,
+    family_model,
+)
 from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
 from msflash.processing.reference_patch import ReferencePatch
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
@@ -318,8 +325,9 @@ def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
             "chosen_relative_error": family.reference.relative_error(family.spectrum.values[:, 0]),
         },
         "evidence": {
-            "criterion": "held-out prediction of the ambient image (5 folds of block rows, noise removed); the "
-            "simplest candidate within 20 % of the best is preferred",
+            "criterion": "held-out prediction of the ambient image (folds of block rows, noise removed); the "
+            f"simplest candidate within {SIMPLER_WITHIN:.0%} of the best is preferred; the spectrum is the "
+            f"candidates' average weighted by exp(-(error/best - 1)/{AVERAGE_TEMPERATURE:g})",
             "led": evidence(family.led),
             "candidates": [evidence(c) for c in family.candidates],
         },
