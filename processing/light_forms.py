@@ -34,8 +34,6 @@ import numpy as np
 from msflash.processing import datasets
 from msflash.processing.spectra import WavelengthGrid
 
-FAMILIES = ("thermal", "discharge", "solid_state", "transmitted", "mixture")
-"""The generative families (module notes)."""
 C2_NM_K = 1.4388e7
 """Second radiation constant, nm·K."""
 

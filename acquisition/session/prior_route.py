@@ -37,7 +37,8 @@ from msflash.processing.light_families import (
     FamilyEstimate,
     family_model,
 )
-from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
+from msflash.processing.light_prior import PriorEstimate, prior_model
+from msflash.processing.prior_choice import ModelChoice, choose_model
 from msflash.processing.reference_patch import ReferencePatch
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
