@@ -269,13 +269,7 @@ def _gcv_alpha(statistics: SequenceStatistics, penalty_gram: np.ndarray, penalty
 DISCREPANCY_SIGMAS = 0.1
 """How far (× k σ², the expected increase of a fit's residual by k noise-level parameters) the roughness
 penalty chosen by :func:`discrepancy_alpha` may raise the residual above the least-penalised fit's.
-
-Chosen on the ambient harness's tuning split once the rise was taken unclipped (issue 30): 1, 0.3 and
-0.1 gave a mean ratio to the LED bound of 0.986, 0.980 and 0.978, worst 2.08, 1.78 and 1.69, misses 11,
-9 and 8 of 150 (a fixed α of 1e-6: 0.976, 1.72, 9). The 1 of issue 17 was chosen while clipped residuals
-ran α up on a third of the scenes. With 1, the simulated demo's raw frames (whose weights, from a third of
-the samples RGB frames have, are the less certain) took 1.8e-5…5.6e-5 and landed at 0.98–1.02 × the bound,
-worst 1.22 (docs/raw-frames.md)."""
+ Chosen on the ambient harness's tuning split (docs/measurements.md)."""
 
 
 def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, terms: LedTerms) -> float:
@@ -302,11 +296,8 @@ def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, 
     least = weights(0)
     dof = max(observed.n_samples - observed.n_leds, 1)
     noise_variance = observed.residual_energy(least) / dof
-    # The rise r(α) − r(α₀), from the weight-dependent part of the residual alone: the denoised ambient
-    # energy (less its noise, whose sampling error is of the order of √(2/n) of it) cancels. Compared as
-    # clipped residuals, a denoised residual that read 0 at α₀ stayed 0 while α grew, hiding every rise:
-    # on Bayer frames (fewer samples, so larger sampling error) α ran to 1e-4…1e-2 and the estimate to
-    # 1.3–1.5× the LED bound (docs/raw-frames.md).
+    # The rise r(α) − r(α₀), from the weight-dependent part of the residual alone (the denoised ambient energy
+    # cancels): residuals clipped at 0 hid every rise on Bayer frames (docs/raw-frames.md).
     allowed = solved.fit_energy(least) + DISCREPANCY_SIGMAS * observed.n_leds * noise_variance
 
     def residual(index: int) -> float:

@@ -29,7 +29,7 @@ class Fit:
     """A form fitted to a scene: ``e = atoms @ amplitudes``."""
 
     name: str
-    """``family/form``, e.g. ``solid_state/3 bands`` (``led``, ``prior`` for the two baselines)."""
+    """``family/form``, e.g. ``solid_state/phosphor white`` (``led``, ``prior`` for the two baselines)."""
     family: str
     theta: np.ndarray
     atoms: np.ndarray

@@ -1,22 +1,10 @@
 """The generative families' spectral forms (issue 30, item 2): how each kind of light is made.
 
-``thermal``
-    Planck's law at a temperature T (``blackbody``), or CIE daylight at a correlated colour temperature
-    (``daylight``, the S0 + M1 S1 + M2 S2 locus): one parameter and a scale.
-``discharge``
-    Emission lines of real gases and phosphors at their known wavelengths (mercury, sodium, thallium,
-    indium, lithium; the Tb³⁺ and Eu³⁺ groups of rare-earth phosphors), pressure-broadened sodium, and the
-    broad bands of lamp phosphors (BAM blue, halophosphate Sb³⁺ and Mn²⁺): a dictionary of non-negative
-    atoms (:func:`discharge_atoms`), of which a greedy search keeps the few the scene needs.
-``solid_state``
-    A sum of m emission bands (m = 2: a phosphor-converted white's pump and phosphor; 3: with a red phosphor,
-    or an RGB luminaire; 4: RGBA or violet-pumped), each with a free centre and width.
-``transmitted``
-    Daylight through water: ``D(CCT) exp(−τ_w a_w − τ_g e^{−0.014(λ−440)} − τ_p a_φ)`` (pure water, dissolved
-    organics and phytoplankton, optical depths τ ≥ 0; ``underwater``), or a thermal source through a
-    filter whose optical density is smooth, ``B(T) exp(−(b₁ x + b₂ x²))`` (``filter``).
-``mixture``
-    Two forms of two families (:func:`processing.family_fit.fit_mixture`).
+``thermal``: a blackbody or CIE daylight. ``discharge``: known lines and lamp-phosphor bands, a dictionary
+(:func:`discharge_atoms`). ``solid_state``: emission bands as LEDs are made (:data:`SOLID_STATE`).
+``transmitted``: daylight through water ``D(CCT) exp(−τ_w a_w − τ_g e^{−0.014(λ−440)} − τ_p a_φ)``, or a thermal
+source through a filter of smooth optical density ``B(T) exp(−(b₁ x + b₂ x²))``. ``mixture``: two of them
+(:func:`processing.family_fit.fit_mixture`). The table with every atom: docs/light-families.md.
 
 Every form gives the ambient as ``e = B(θ) a``: non-negative atoms B (photons, on the sequence's grid) with
 non-negative amplitudes a and few nonlinear parameters θ (:class:`Form`); :data:`FORMS` lists the parametric ones.
