@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from msflash.processing.family_checks import FAMILY_WARNING, LED_WARNING, MISS_RATIO, PRIOR_WARNING
-from msflash.processing.light_families import AUTO_MARGIN, EVIDENCE_TEMPERATURE, SIMPLER_WITHIN
+from msflash.processing.light_families import AUTO_MARGIN, CHECK_TEMPERATURE, SIMPLER_WITHIN
 
 FAMILY_ORDER = ("thermal", "discharge", "solid_state", "transmitted", "mixture")
 
@@ -131,7 +131,7 @@ def _roc(score: np.ndarray, miss: np.ndarray) -> tuple[np.ndarray, np.ndarray, f
 def warning_scores(records: dict[str, dict]) -> dict[str, tuple[np.ndarray, np.ndarray, float]]:
     """Per model: (predicted ratio, truly a miss, threshold) — the shipped checks recomputed from the study."""
     cases = list(records.values())
-    tau = f"{EVIDENCE_TEMPERATURE:g}"
+    tau = f"{CHECK_TEMPERATURE:g}"  # the τ of the spread self_check reads (the distances do not depend on τ)
 
     def column(key: str, default: float = 0.0) -> np.ndarray:
         return np.nan_to_num(np.array([float(c.get(key, default)) for c in cases]), nan=0.0)
