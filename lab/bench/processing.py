@@ -341,7 +341,8 @@ def prior_bench(
     estimate interleaved with ``copy`` as the targets' ratios (no target of its own); ``auto``'s held-out
     comparison; the model's preparation."""
     from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
-    from msflash.processing.light_prior import choose_model, prior_model
+    from msflash.processing.light_prior import prior_model
+    from msflash.processing.prior_choice import choose_model
 
     def statistics() -> ChannelStatistics:
         return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=DEFAULT_BIN_FACTOR)

@@ -41,10 +41,10 @@ from msflash.processing.light_library import library_lights, light_library  # no
 from msflash.processing.light_prior import (  # noqa: E402
     CHOICE_MARGIN,
     PriorModel,
-    choose_model,
     learn_light_prior,
     learn_reflectance_basis,
 )
+from msflash.processing.prior_choice import choose_model  # noqa: E402
 from msflash.processing.spectra import Spectra, WavelengthGrid  # noqa: E402
 from tests.processing import unseen_sequences as us  # noqa: E402
 

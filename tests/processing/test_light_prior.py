@@ -17,13 +17,13 @@ from msflash.processing.errors import SpectralDataError
 from msflash.processing.light_library import NEAR_COPY_COSINE, lights_of
 from msflash.processing.light_prior import (
     PriorModel,
-    choose_model,
     estimate_ambient_prior,
     learn_light_prior,
     learn_reflectance_basis,
     prior_candidate_lights,
     prior_model,
 )
+from msflash.processing.prior_choice import choose_model
 from msflash.processing.spectra import Spectra, WavelengthGrid
 from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
 from tests.processing import unseen_sequences as us
