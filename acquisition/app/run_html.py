@@ -26,7 +26,7 @@ from msflash.acquisition.app.options import SOLVER_CONSTRAINTS
 from msflash.acquisition.errors import FolderInUseError, OutputWriteError
 from msflash.acquisition.sequence.folder_claim import claim_folder
 from msflash.acquisition.sequence.format import Sequence
-from msflash.acquisition.session.exposure import snr_or_none
+from msflash.acquisition.session.led_snr import snr_or_none
 from msflash.calibration.file_modes import default_file_mode
 
 PREVIEW_CAPTIONS = {

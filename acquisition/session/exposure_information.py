@@ -10,7 +10,7 @@ exposure ``tₖ`` to maximise the Fisher information about the LED-only rates ``
     Var(d̂_p) = v(r_p·tₖ)/tₖ² + v(a_p·T)/T²,   v(S) = S·κ + (σ_r·κ)²   (κ = DN per electron),
 
 the photon + read noise of the difference of the two rate images (the noise model of
-:class:`~acquisition.session.exposure.NoiseModel`; without one, photon noise only, κ = 1: the argmax does not
+:class:`~acquisition.session.led_snr.NoiseModel`; without one, photon noise only, κ = 1: the argmax does not
 depend on κ then). A block is lost for a frame when its brightest pixel would pass
 ``headroom`` × full scale at that exposure: it crosses at ``s_b = headroom·full / max_{p∈b} rate_p``.
 

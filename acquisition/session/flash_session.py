@@ -11,7 +11,7 @@ frames before it are taken by :meth:`FlashSession.add` as the frame arrives (bet
 :meth:`FlashSession.decide` then costs the statistics from those moments, one ambient solve and
 one small quadratic programme; the estimate's reliability signals wait until they are read.
 Prepared with exposure limits, the session also takes each frame's rates for the flash exposure
-(:class:`~acquisition.session.exposure.FlashExposure`) as it arrives, and :meth:`FlashSession.flash_exposure`
+(:class:`~acquisition.session.metering.FlashExposure`) as it arrives, and :meth:`FlashSession.flash_exposure`
 only sums them.
 
 The statistics are those of the one accumulator every route feeds
@@ -34,7 +34,8 @@ from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.engine import CaptureResult, FrameEvent
 from msflash.acquisition.session.estimate_stream import EstimateStream
-from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
+from msflash.acquisition.session.exposure import ExposurePolicy
+from msflash.acquisition.session.metering import FlashExposure, metering_view
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.flash import FlashBounds, FlashModel, FlashSolution
 from msflash.processing.spectra import Spectra

@@ -38,10 +38,9 @@ from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,
     FlashEnergyWarning,
-    flash_exposure,
-    metering_view,
 )
 from msflash.acquisition.session.flash_session import FlashSession
+from msflash.acquisition.session.metering import flash_exposure, metering_view
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run_exposure import (
     SYNC_MODES,

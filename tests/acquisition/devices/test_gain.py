@@ -392,7 +392,7 @@ def test_the_rig_checks_the_serial_and_model_it_opened(
 
 
 def test_led_snr_without_signal_is_a_warning_and_null_in_json() -> None:
-    from msflash.acquisition.session.exposure import led_snr_warnings
+    from msflash.acquisition.session.led_snr import led_snr_warnings
 
     names = ["led440", "led480", "led500", "led520"]
     snr = [12.5, math.inf, -4e14, math.nan]

@@ -367,7 +367,7 @@ def test_flash_session_predicts_the_flash_exposure_of_the_frames_taken(sim_rig, 
     """The rates taken frame by frame give flash_exposure's answer on the same frames (first ambient only)."""
     from msflash.acquisition.devices.camera import RawFrame
     from msflash.acquisition.errors import RecordingError
-    from msflash.acquisition.session.exposure import flash_exposure
+    from msflash.acquisition.session.metering import flash_exposure
 
     levels = [tuple(float(i == j) for i in range(4)) for j in range(4)]
     limits = (10.0, 1e6)
@@ -386,6 +386,7 @@ def test_flash_session_predicts_the_flash_exposure_of_the_frames_taken(sim_rig, 
             camera.black_level,
             camera.white_level,
             limits,
+            session.exposure_policy,
         )
         assert session.flash_exposure(weights) == expected
     session.begin()
@@ -431,7 +432,7 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(
     block-sums the one plane and gives the statistics (and estimate) of the recorded sequence."""
     from msflash.acquisition.devices.camera import RawFrame
     from msflash.acquisition.session import analysis
-    from msflash.acquisition.session.exposure import flash_exposure
+    from msflash.acquisition.session.metering import flash_exposure
 
     info = rgb_sim_rig.camera.info
     rng = np.random.default_rng(7)
@@ -498,6 +499,7 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(
         info.black_level,
         info.white_level,
         (1.0, 1e6),
+        session.exposure_policy,
     )
 
 
