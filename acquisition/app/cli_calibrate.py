@@ -15,9 +15,9 @@ from typing import Any
 
 from msflash.acquisition.app.cli_common import UsageError, claimed_output, positive_int, print_json, progress
 from msflash.acquisition.app.options import layout_options
-from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.calibration_inputs import (
     camera_from_chart_sequences,
     chart_from_exports,

@@ -25,7 +25,8 @@ from msflash.acquisition.devices.camera import CameraInfo, RawFrame
 from msflash.acquisition.devices.frame_queue import TriggeredFrames
 from msflash.acquisition.errors import CameraError, ReplayMismatchError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
-from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.sequence.reader import read_sequence
 
 LEVEL_TOLERANCE = 2.0 / 0xFFFF
 """LED levels match when within two 16-bit wire steps."""

@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import Sequence, as_recorded
+from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import read_image_header
 from msflash.acquisition.sequence.memory_budget import check_decode
+from msflash.acquisition.sequence.writer import as_recorded
 from msflash.acquisition.session.estimate_stream import (
     SAMPLE_WEIGHTING,
     EstimateStream,
@@ -72,7 +73,7 @@ def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None =
         The sequence's frames already in memory, as the camera gave them, indexed like
         ``sequence.frames`` (frames after the last LED frame may be missing): a live run's or a
         replay's. They are taken as the reader would return them from the files
-        (:func:`~acquisition.sequence.format.as_recorded`). ``None`` reads the files.
+        (:func:`~acquisition.sequence.writer.as_recorded`). ``None`` reads the files.
 
     Raises
     ------

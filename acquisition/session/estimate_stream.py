@@ -31,7 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import Sequence, mono_as_rgb
+from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.sequence.writer import mono_as_rgb
 from msflash.acquisition.session.engine import CaptureResult, FrameEvent
 from msflash.processing import frame_kernels
 from msflash.processing.ambient import AmbientEstimate, AmbientModel

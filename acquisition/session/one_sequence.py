@@ -20,9 +20,10 @@ import numpy as np
 
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.exr_metadata import exr_image
-from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
 from msflash.acquisition.sequence.locate import locate_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis
 from msflash.processing.ambient import LED_SIGNAL_Z, AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning

@@ -56,7 +56,7 @@ from msflash.acquisition.app.cli import CRASH_LOG_ENV, main
 from msflash.acquisition.devices.aravis.discovery import PROFILES_JSON
 from msflash.acquisition.devices.aravis.profiles import load_profiles
 from msflash.acquisition.errors import CameraSettingError
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.calibration.files import load_calibration
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.analysis import (
     camera_responsivities_photons,
     led_spectra_photons,

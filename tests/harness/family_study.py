@@ -34,7 +34,7 @@ def _paper_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
 
 def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
     """One row per candidate of ``case``, and one row for the case (band coverages, warning features)."""
-    from msflash.acquisition.sequence.format import read_sequence
+    from msflash.acquisition.sequence.reader import read_sequence
     from msflash.acquisition.session.analysis import (
         camera_responsivities_photons,
         estimate_sequence,

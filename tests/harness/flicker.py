@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.flicker import with_ambient_gains

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app.cli import build_parser, main
-from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
 from msflash.acquisition.sequence.image_files import read_image
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.lab import cli_local
 from msflash.lab.study.local import Scenario, make_scenario
 from msflash.processing import datasets

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis
 from tests.helpers import SAMPLES_DIR, spectrum_rmse
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis
 from msflash.processing.local import tile_statistics
 from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, cfa_planes

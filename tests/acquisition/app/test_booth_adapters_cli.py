@@ -17,7 +17,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.capture import SYNC_OF_TRIGGER, check_booth_runs
 from msflash.led_controller.adapters.text_booth import TextBooth
 from msflash.led_controller.adapters.text_booth_emulator import TextBoothServer, serve_text_booth

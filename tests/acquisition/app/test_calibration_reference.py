@@ -15,7 +15,7 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.rig import emulator_for, hw_spectra
 from msflash.calibration.files import CalibrationSet, load_calibration, save_calibration

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from msflash.acquisition.app.cli import main
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 
 
 @pytest.mark.parametrize("command", ["run", "capture"])

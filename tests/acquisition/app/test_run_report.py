@@ -17,7 +17,7 @@ from msflash.acquisition.app import evaluation, report
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.plot_style import PALETTE, SPECTRAL_AXIS_LABEL, WAVELENGTH_AXIS_LABEL, pyplot
 from msflash.acquisition.app.srgb_png import enlargement, png_chunks
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis
 from msflash.lab import colour_study
 

@@ -31,7 +31,7 @@ from msflash.acquisition.devices.aravis.camera_features import (
 from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.errors import CameraSettingError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rig import emulator_for
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets

@@ -35,7 +35,7 @@ from msflash.acquisition.devices.aravis.gain import (
     parse_gain_raw,
 )
 from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.exposure import ExposurePlan, ExposurePolicy
 from msflash.acquisition.session.live import LiveStream
 from msflash.acquisition.session.rig import emulator_for, open_aravis_fake_rig

@@ -22,7 +22,8 @@ import pytest
 
 from msflash.acquisition.app.cli import main as msflash_main
 from msflash.acquisition.sequence import image_files
-from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.estimate_stream import stream_sequence
 from msflash.acquisition.session.rig import open_sim_rig
@@ -106,7 +107,7 @@ def test_the_estimate_decodes_one_frame_at_a_time(tmp_path: Path) -> None:
 WORKER = textwrap.dedent(
     """
     import json, resource, sys
-    from msflash.acquisition.sequence.format import read_sequence
+    from msflash.acquisition.sequence.reader import read_sequence
     from msflash.acquisition.session import analysis
 
     from msflash.acquisition.sequence.memory_budget import set_memory_budget

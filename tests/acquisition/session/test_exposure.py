@@ -16,7 +16,7 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import exposure as ex
 from msflash.acquisition.session import led_snr, metering
 from msflash.acquisition.session.capture import preview_frames

@@ -13,7 +13,8 @@ import pytest
 from msflash.acquisition.errors import FrameLostError, RecordingError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session.capture import run_capture_with_flash
 from msflash.acquisition.session.flash_session import FlashSession
 from msflash.acquisition.session.rig import open_sim_rig

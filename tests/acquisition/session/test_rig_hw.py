@@ -19,7 +19,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import RigOpenError
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rig import HwRigOptions, emulator_for, load_hw_spectra, open_rig
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
