@@ -31,7 +31,7 @@ import numpy as np
 from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.acquisition.session.engine import CaptureResult, FrameEvent
 from msflash.acquisition.session.estimate_stream import EstimateStream
 from msflash.acquisition.session.exposure import ExposurePolicy
@@ -120,10 +120,10 @@ class FlashSession:
         RecordingError
             If the header has no camera responsivities, or the target cannot be read.
         """
-        leds = analysis.led_spectra_photons(header)
-        camera = analysis.camera_responsivities_photons(header)
+        leds = sequence_spectra.led_spectra_photons(header)
+        camera = sequence_spectra.camera_responsivities_photons(header)
         model = FlashModel(leds, camera)
-        response = model.target_response(analysis.target_illuminant(target, header)) if target else None
+        response = model.target_response(sequence_spectra.target_illuminant(target, header)) if target else None
         return cls(header, leds, model, response, method, alpha, bin_factor, exposure_limits_us, exposure_policy)
 
     # -- per capture -------------------------------------------------------------------------

@@ -16,7 +16,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.reader import read_sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.session import sequence_spectra
 from msflash.acquisition.session.rig import emulator_for, hw_spectra
 from msflash.calibration.files import CalibrationSet, load_calibration, save_calibration
 from msflash.led_controller import serve_on_pty
@@ -76,13 +76,13 @@ def test_a_sequence_refers_to_the_calibration_it_was_captured_with(
     }
     assert (sequence.directory / sequence.extra["calibration"]["file"]).resolve() == calibration.resolve()
 
-    _, notes = analysis.apply_calibration(sequence)  # what estimate/flash do without --calibration
+    _, notes = sequence_spectra.apply_calibration(sequence)  # what estimate/flash do without --calibration
     assert any(captured_with in note and "LED spectra" in note for note in notes)
     assert not any("captured with" in note for note in notes)
 
     recalibrated = load_calibration(calibration).updated()  # re-calibrated since: a new id at the same place
     save_calibration(recalibrated, calibration)
-    _, notes = analysis.apply_calibration(read_sequence(out / "sequence"))
+    _, notes = sequence_spectra.apply_calibration(read_sequence(out / "sequence"))
     assert any(f"captured with calibration {captured_with}" in note and recalibrated.id in note for note in notes)
 
 
@@ -116,6 +116,6 @@ def test_a_calibration_that_misses_the_leds_light_is_refused(
     narrow = spectra.resample(WavelengthGrid(start_nm, 700, 10), outside="zero")
     save_calibration(CalibrationSet(**{section: narrow}), tmp_path / "cal")
     with pytest.raises(RecordingError, match=message):
-        analysis.apply_calibration(sequence, tmp_path / "cal")
+        sequence_spectra.apply_calibration(sequence, tmp_path / "cal")
     save_calibration(CalibrationSet(**{section: spectra}), tmp_path / "full")  # covering: accepted
-    assert analysis.apply_calibration(sequence, tmp_path / "full")[1]
+    assert sequence_spectra.apply_calibration(sequence, tmp_path / "full")[1]

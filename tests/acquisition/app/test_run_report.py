@@ -18,7 +18,7 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.plot_style import PALETTE, SPECTRAL_AXIS_LABEL, WAVELENGTH_AXIS_LABEL, pyplot
 from msflash.acquisition.app.srgb_png import enlargement, png_chunks
 from msflash.acquisition.sequence.reader import read_sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.lab import colour_study
 
 
@@ -161,11 +161,11 @@ def test_every_plot_gives_each_flash_and_the_ambient_its_palette_colour(run_fold
         mode: analysis.solve_sequence_flash(sequence, mode, estimate.ambient_weights)
         for mode in ("complementary", "matching")  # the run's order, opposite to evaluate's
     }
-    target = analysis.target_illuminant("D65", sequence)
+    target = sequence_spectra.target_illuminant("D65", sequence)
     figures = {
         "run spectra": report.spectra_figure(sequence, estimate, solutions, None, target),
         "evaluate spectra": evaluation.spectra_figure(
-            sequence.grid, analysis.led_spectra_photons(sequence), estimate.spectrum, solutions, target
+            sequence.grid, sequence_spectra.led_spectra_photons(sequence), estimate.spectrum, solutions, target
         ),
         "fig9": colour_study.fig9_figure({"tungsten": {"ambient": 18.0, "matching": 18.2, "complementary": 4.0}}),
     }
@@ -256,11 +256,11 @@ def test_the_run_and_evaluate_draw_the_same_flash_mix_curves(run_folder: Path) -
         mode: analysis.solve_sequence_flash(sequence, mode, estimate.ambient_weights)
         for mode in ("complementary", "matching")
     }
-    target = analysis.target_illuminant("D65", sequence)
-    truth = analysis.target_illuminant("A", sequence)
+    target = sequence_spectra.target_illuminant("D65", sequence)
+    truth = sequence_spectra.target_illuminant("A", sequence)
     run = report.spectra_figure(sequence, estimate, solutions, truth, target)
     evaluated = evaluation.spectra_figure(
-        sequence.grid, analysis.led_spectra_photons(sequence), estimate.spectrum, solutions, target, truth
+        sequence.grid, sequence_spectra.led_spectra_photons(sequence), estimate.spectrum, solutions, target, truth
     )
     plt = pyplot()
     try:
