@@ -50,11 +50,6 @@ from msflash.acquisition.session.metering import (
 DEFAULT_EXPOSURE_RANGE_US = (1.0, 10_000_000.0)
 """Exposure limits assumed for a camera that does not report its own."""
 
-MAX_PLAUSIBLE_SNR = 1e6
-"""Above this a per-pixel LED SNR is no measurement: photon noise bounds a pixel's SNR by √(full well),
-about 10³ for any sensor below 10¹² electrons, so a larger figure means the noise was not seen
-(issue 29 saw 1.5e+15 on the GigE fake's test patterns)."""
-
 MAX_INFORMATION_BLOCKS = 4096
 """The information criterion looks at most at this many blocks (evenly spaced) of a large frame."""
 
