@@ -48,7 +48,7 @@ from msflash.calibration.chart_sequence import (
 )
 from msflash.calibration.dark import DarkResult, LinearityResult, measure_dark, measure_linearity
 from msflash.calibration.files import CalibrationSet
-from msflash.calibration.led_exports import ExportOptions, read_led_exports
+from msflash.calibration.led_exports import ExportOptions, LedExports, read_led_exports
 from msflash.calibration.led_spectra import LedCharacterisation, characterise_led, relative_power_through_camera
 from msflash.calibration.validation import calibration_lights, simulate_chart_responses
 from msflash.calibration.white_reference import parse_roi, white_led_responses
@@ -334,39 +334,18 @@ def camera_from_chart_sequences(
         ``quadratic`` (default): the light across the chart is fitted, a smooth gain per frame
         (lens falloff, an LED's spot); ``flat``: every patch equally lit.
     """
-    if not isinstance(chart, ChartReference):
-        if chart != "macbeth":
-            raise UsageError(
-                f"--chart {chart}: recorded sequences need the chart's reflectances; expected --chart macbeth or a CSV"
-            )
-        chart = chart_reference("macbeth")
-    if not sequences:
-        raise UsageError("calibrate camera: expected at least one chart sequence (--sequence SEQ…)")
-    if light_specs and len(light_specs) != len(sequences):
-        raise UsageError(
-            f"--light given {len(light_specs)} times for {len(sequences)} sequences; expected one per "
-            "sequence, in order (NAME, CSV file, or 'none' for an unknown ambient)"
-        )
+    chart = _recorded_chart(chart)
+    lights = _chart_lights(sequences, light_specs)
     grid = sequences[0].grid
-    lights = [
-        None if spec is None or spec.lower() == "none" else resolve_light(spec, grid)
-        for spec in (light_specs or [None] * len(sequences))
-    ]
     reflectances = chart.on(grid)
     cameras = {name: s.resample(grid, outside="zero") for name, s in datasets.paper_cameras().items()}
     unknown = [name for name in prior_exclude if name not in cameras]
     if unknown:
         raise UsageError(f"--prior-exclude {unknown}: not among the 34 paper cameras; expected names like NikonD100")
-
     # Each sequence its own layout: the chart may move between them.
     layouts = [sequence_layout(s, chart, patch_px, border_px, margin_px) for s in sequences]
-    for sequence, layout in zip(sequences, layouts, strict=True):  # the layout must fit before anything is estimated
-        index = sequence.indices("ambient")[0] if sequence.indices("ambient") else 0
-        raw = sequence.load_frame(index).astype(np.float64)
-        layout_map = layout.build(raw.shape[:2])
-        check_layout(raw, layout_map, sequence.camera.cfa)
-        if layout.report["detected"]:
-            report(f"{sequence.directory}: {layout_map.description}")
+    for sequence, layout in zip(sequences, layouts, strict=True):
+        _check_layout_fits(sequence, layout, report)
     labels_for = [lambda shape, excluded, layout=layout: layout.build(shape, excluded).labels for layout in layouts]
     positions = [layout.patch_positions(chart.reflectances.count, chart.rows) for layout in layouts]
     measurements = sequence_measurements(list(sequences), lights, reflectances, labels_for, positions)
@@ -399,6 +378,43 @@ def camera_from_chart_sequences(
         chart.name,
         result.light_field,
     )
+
+
+def _recorded_chart(chart: ChartName | ChartReference) -> ChartReference:
+    """The chart's reference data for recorded sequences: a :class:`ChartReference`, or the shipped Macbeth."""
+    if isinstance(chart, ChartReference):
+        return chart
+    if chart != "macbeth":
+        raise UsageError(
+            f"--chart {chart}: recorded sequences need the chart's reflectances; expected --chart macbeth or a CSV"
+        )
+    return chart_reference("macbeth")
+
+
+def _chart_lights(sequences: SequenceOf[Sequence], light_specs: SequenceOf[str | None]) -> list[Spectra | None]:
+    """Each sequence's known broadband light on the first sequence's grid (None: unknown), checked one per sequence."""
+    if not sequences:
+        raise UsageError("calibrate camera: expected at least one chart sequence (--sequence SEQ…)")
+    if light_specs and len(light_specs) != len(sequences):
+        raise UsageError(
+            f"--light given {len(light_specs)} times for {len(sequences)} sequences; expected one per "
+            "sequence, in order (NAME, CSV file, or 'none' for an unknown ambient)"
+        )
+    grid = sequences[0].grid
+    return [
+        None if spec is None or spec.lower() == "none" else resolve_light(spec, grid)
+        for spec in (light_specs or [None] * len(sequences))
+    ]
+
+
+def _check_layout_fits(sequence: Sequence, layout: SequenceLayout, report: Report) -> None:
+    """Refuse a layout that does not fit the sequence's ambient frame, before anything is estimated."""
+    index = sequence.indices("ambient")[0] if sequence.indices("ambient") else 0
+    raw = sequence.load_frame(index).astype(np.float64)
+    layout_map = layout.build(raw.shape[:2])
+    check_layout(raw, layout_map, sequence.camera.cfa)
+    if layout.report["detected"]:
+        report(f"{sequence.directory}: {layout_map.description}")
 
 
 @dataclass(frozen=True)
@@ -501,24 +517,8 @@ def chart_from_exports(
     options = options or ExportOptions()
     patches = read_led_exports(files, DEFAULT_GRID, options, report, relative=True)
     reference = read_led_exports([white], DEFAULT_GRID, options, report, relative=True)
-    if patches.unit != reference.unit:
-        raise UsageError(
-            f"--white {white}: {reference.unit} but the patches are {patches.unit}; expected one instrument and unit"
-        )
-    if patches.section["counts_per_second"] != reference.section["counts_per_second"]:
-        stated, unstated = (files[0], white) if patches.section["counts_per_second"] else (white, files[0])
-        raise UsageError(
-            f"{unstated}: states no integration time but {stated} does; expected both (a header line or "
-            "--integration-time-ms), so that the patches and the white are compared per second"
-        )
-    white_values = reference.spectra.values[:, 0]
-    usable = white_values > MIN_WHITE_SHARE * float(white_values.max())
-    if not np.all(usable):
-        missing = DEFAULT_GRID.wavelengths_nm[~usable]
-        raise UsageError(
-            f"--white {white}: reads below {100 * MIN_WHITE_SHARE:g} % of its peak at {missing[0]:g}–{missing[-1]:g} nm; "
-            f"expected a white reference lit over {DEFAULT_GRID} (a broadband lamp)"
-        )
+    _check_same_instrument(patches, reference, files[0], white)
+    white_values = _lit_white(reference, white)
     factor = (
         _white_reflectance(white_reflectance, DEFAULT_GRID).values[:, 0]
         if white_reflectance
@@ -545,13 +545,7 @@ def chart_from_exports(
     noise = noise_summary(
         chart_noise(patches.measurements, reference.measurements[0], DEFAULT_GRID), names, DEFAULT_GRID
     )
-    if noise is not None and noise["relative_rms"] > NOISE_WARNING:
-        report(
-            f"warning: the measured reflectances carry {100 * noise['relative_rms']:.2g} % noise (RMS; worst "
-            f"{noise['worst_patch']}, {100 * noise['worst_value']:.2g} % at {noise['worst_nm']:g} nm); the camera fit "
-            f"takes them as exact (above {100 * NOISE_WARNING:g} % it cost accuracy in tests): average more scans, or "
-            "lengthen the integration time of the dark patches (a dark export per time, --dark)"
-        )
+    _warn_noise(noise, report)
     section = {
         "sources": [str(f) for f in files],
         "white": str(white),
@@ -563,6 +557,44 @@ def chart_from_exports(
         "noise": noise,
     }
     return spectra, section
+
+
+def _check_same_instrument(patches: LedExports, reference: LedExports, first: str | Path, white: str | Path) -> None:
+    """Refuse patches and a white in different units, or one with an integration time and one without."""
+    if patches.unit != reference.unit:
+        raise UsageError(
+            f"--white {white}: {reference.unit} but the patches are {patches.unit}; expected one instrument and unit"
+        )
+    if patches.section["counts_per_second"] != reference.section["counts_per_second"]:
+        stated, unstated = (first, white) if patches.section["counts_per_second"] else (white, first)
+        raise UsageError(
+            f"{unstated}: states no integration time but {stated} does; expected both (a header line or "
+            "--integration-time-ms), so that the patches and the white are compared per second"
+        )
+
+
+def _lit_white(reference: LedExports, white: str | Path) -> np.ndarray:
+    """The white reference's values, refused where it reads below ``MIN_WHITE_SHARE`` of its peak."""
+    white_values = reference.spectra.values[:, 0]
+    usable = white_values > MIN_WHITE_SHARE * float(white_values.max())
+    if not np.all(usable):
+        missing = DEFAULT_GRID.wavelengths_nm[~usable]
+        raise UsageError(
+            f"--white {white}: reads below {100 * MIN_WHITE_SHARE:g} % of its peak at {missing[0]:g}–{missing[-1]:g} nm; "
+            f"expected a white reference lit over {DEFAULT_GRID} (a broadband lamp)"
+        )
+    return white_values
+
+
+def _warn_noise(noise: dict | None, report: Report) -> None:
+    """A warning when the measured reflectances' noise is above ``NOISE_WARNING``."""
+    if noise is not None and noise["relative_rms"] > NOISE_WARNING:
+        report(
+            f"warning: the measured reflectances carry {100 * noise['relative_rms']:.2g} % noise (RMS; worst "
+            f"{noise['worst_patch']}, {100 * noise['worst_value']:.2g} % at {noise['worst_nm']:g} nm); the camera fit "
+            f"takes them as exact (above {100 * NOISE_WARNING:g} % it cost accuracy in tests): average more scans, or "
+            "lengthen the integration time of the dark patches (a dark export per time, --dark)"
+        )
 
 
 # -- dark and linearity --------------------------------------------------------------------------
