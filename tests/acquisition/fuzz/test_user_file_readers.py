@@ -1,4 +1,4 @@
-"""What the user-file fuzzer found (issue 32 item 5; tests/acquisition/user_file_fuzz_worker.py), one test per
+"""What the user-file fuzzer found (issue 32 item 5; tests/acquisition/fuzz/user_file_fuzz_worker.py), one test per
 class of bug, each failing before its fix: ``--reference-chart`` read outside the one reader of a user's
 file, values so large that the fits overflow, and ``--target`` silently taking the first of several spectra."""
 
