@@ -17,29 +17,23 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import sequence_spectra
-from msflash.acquisition.session.rig import emulator_for, hw_spectra
+from msflash.acquisition.session.rig import hw_spectra
 from msflash.calibration.files import CalibrationSet, load_calibration, save_calibration
-from msflash.led_controller import serve_on_pty
-from msflash.processing import datasets
-from msflash.processing.spectra import DEFAULT_GRID
+from tests.acquisition.support.hw_rig import booth_on_pty, fake_camera_capture, nikon_d100, paper_leds
 
 
 @pytest.fixture
 def calibration(tmp_path: Path) -> Path:
     """A calibration directory as ``msflash calibrate`` writes it: the paper's 7 LEDs, a NikonD100."""
-    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
-    camera = datasets.isetcam_camera("NikonD100").resample(DEFAULT_GRID, outside="zero").to_unit("energy")
-    save_calibration(CalibrationSet(led_spectra=leds, camera_responsivities=camera), tmp_path / "lab" / "cal")
-    return tmp_path / "lab" / "cal"
+    directory = tmp_path / "lab" / "cal"
+    save_calibration(CalibrationSet(led_spectra=paper_leds(), camera_responsivities=nikon_d100()), directory)
+    return directory
 
 
 @pytest.fixture
 def booth_port(calibration: Path) -> Iterator[str]:
-    server = serve_on_pty(emulator_for(load_calibration(calibration).led_spectra))
-    try:
-        yield server.port
-    finally:
-        server.close()
+    with booth_on_pty(load_calibration(calibration).led_spectra) as port:
+        yield port
 
 
 @pytest.mark.aravis
@@ -50,21 +44,7 @@ def test_a_sequence_refers_to_the_calibration_it_was_captured_with(
     out = tmp_path / "runs" / "c"
     assert (
         main(
-            [
-                "capture",
-                "--camera",
-                "Fake_1",
-                "--interfaces",
-                "fake",
-                "--port",
-                booth_port,
-                "--calibration",
-                str(calibration),
-                "--exposure",
-                "10000",
-                "--out",
-                str(out),
-            ]
+            fake_camera_capture(booth_port, "--calibration", str(calibration), "--exposure", "10000", "--out", str(out))
         )
         == 0
     )
