@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import shutil
 import struct
-from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -20,49 +19,7 @@ from msflash.acquisition.app.srgb_png import enlargement, png_chunks
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.lab import colour_study
-
-
-class Links(HTMLParser):
-    """Every ``<img src>`` and ``<a href>`` of a page, and its tables' cells by id."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.images: list[str] = []
-        self.links: list[str] = []
-        self.tables: dict[str, list[list[str]]] = {}
-        self._table: str | None = None
-        self._cell: list[str] | None = None
-
-    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
-        values = dict(attrs)
-        if tag == "img":
-            self.images.append(values["src"] or "")
-        elif tag == "a":
-            self.links.append(values["href"] or "")
-        elif tag == "table":
-            self._table = values.get("id") or f"table-{len(self.tables)}"
-            self.tables[self._table] = []
-        elif tag == "tr" and self._table:
-            self.tables[self._table].append([])
-        elif tag in ("td", "th"):
-            self._cell = []
-
-    def handle_data(self, data: str) -> None:
-        if self._cell is not None:
-            self._cell.append(data)
-
-    def handle_endtag(self, tag: str) -> None:
-        if tag in ("td", "th") and self._cell is not None and self._table:
-            self.tables[self._table][-1].append("".join(self._cell).strip())
-            self._cell = None
-        elif tag == "table":
-            self._table = None
-
-
-def parse(path: Path) -> Links:
-    page = Links()
-    page.feed(path.read_text(encoding="utf-8"))
-    return page
+from tests.acquisition.support.report_pages import disk_full_for, parse_report
 
 
 def png_size(path: Path) -> tuple[int, int]:
@@ -111,7 +68,7 @@ def test_one_html_report_linked_from_run_json_points_at_files_of_the_run(run_fol
     page_path = Path(summary["report"])
     assert page_path == run_folder / "report.html" and page_path.is_file()
     assert not (run_folder / "report.md").exists()  # one report, HTML
-    page = parse(page_path)
+    page = parse_report(page_path)
     shown = {(run_folder / src).resolve() for src in page.images}
     expected = {Path(p).resolve() for p in summary["previews"].values()} | {(run_folder / "spectra.png").resolve()}
     assert shown == expected
@@ -230,14 +187,8 @@ def test_a_report_that_cannot_be_written_is_one_line_and_run_json_stays(
     tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Disk full when the HTML is written (injected, as test_run_outputs does for run.json)."""
-    real = Path.write_text
-
-    def full_disk(self: Path, *args, **kwargs):  # noqa: ANN202
-        if self.name == "report.html" or self.name.startswith(".report.html."):  # written beside, then renamed
-            raise OSError(28, "No space left on device")
-        return real(self, *args, **kwargs)
-
-    monkeypatch.setattr(Path, "write_text", full_disk)
+    # written beside, then renamed
+    disk_full_for(monkeypatch, lambda path: path.name == "report.html" or path.name.startswith(".report.html."))
     out = tmp_path / "run"
     assert main(["run", "--rig", "sim", "--out", str(out)]) == 1
     last = capsys.readouterr().err.strip().splitlines()[-1]
