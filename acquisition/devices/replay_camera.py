@@ -88,11 +88,6 @@ class ReplayCamera(TriggeredFrames):
         """The exposure of the first recorded frame (what ``run`` must ask for to match)."""
         return float(self.sequence.frames[0].exposure_us)
 
-    @property
-    def frames_served(self) -> int:
-        """Recorded frames served so far."""
-        return self._cursor
-
     # -- the Camera protocol --------------------------------------------------------------
     def prepare(self, plan: CapturePlan) -> None:
         """Check ``plan`` against the next recorded frames.

@@ -86,11 +86,7 @@ def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:
         payload["spectrum_global"] = to_unit(local.global_estimate.spectrum.values[:, 0])
         payload["ambient_weights_global"] = local.global_estimate.ambient_weights
         payload["tiles"] = {
-            "grid": list(local.tiles.shape),
-            "row_edges": local.tiles.row_edges,
-            "column_edges": local.tiles.column_edges,
-            "smoothing_tiles": local.smoothing,
-            "ambient_weights": local.tile_weights,
+            **_tiles(local),
             "spectra": to_unit(local.tile_spectra),
             "relative_residual": local.tile_residuals,
             "n_samples": local.tile_samples,
@@ -145,14 +141,7 @@ def local_flash_payload(
     payload["method"] = local.model
     payload["method_requested"] = local.method
     if local.model == "local":
-        payload["tiles"] = {
-            "grid": list(local.tiles.shape),
-            "row_edges": local.tiles.row_edges,
-            "column_edges": local.tiles.column_edges,
-            "smoothing_tiles": local.smoothing,
-            "ambient_weights": local.tile_weights,
-            "flash_weights": tile_weights,
-        }
+        payload["tiles"] = {**_tiles(local), "flash_weights": tile_weights}
     return payload
 
 
@@ -163,3 +152,14 @@ def synthesize_sequence_local(
     stack = stack or load_frame_stack(sequence)
     image, saturated = synthesize_local(stack.ambient, stack.led_frames, stack.spec, tile_flash_weights, local.tiles)
     return image, saturated, stack
+
+
+def _tiles(local: LocalEstimate) -> dict:
+    """What every payload says of a local model's tiles: the grid, its edges, the smoothing, the ambient weights."""
+    return {
+        "grid": list(local.tiles.shape),
+        "row_edges": local.tiles.row_edges,
+        "column_edges": local.tiles.column_edges,
+        "smoothing_tiles": local.smoothing,
+        "ambient_weights": local.tile_weights,
+    }
