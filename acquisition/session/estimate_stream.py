@@ -31,7 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import Sequence, mono_as_rgb
+from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.sequence.writer import mono_as_rgb
 from msflash.acquisition.session.engine import CaptureResult, FrameEvent
 from msflash.processing import frame_kernels
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
@@ -311,7 +312,7 @@ class EstimateStream:
     ) -> LocalEstimate:
         """The global-or-local estimate (``method`` auto|global|local) of the frames taken; the stream must
         have been made with ``tiles``. The global estimate is :meth:`estimate`'s (or ``global_estimate``)."""
-        from msflash.acquisition.session.analysis import led_spectra_photons
+        from msflash.acquisition.session.sequence_spectra import led_spectra_photons
 
         if self._tiles is None or self.tiles is None:
             raise RecordingError(f"{self.header.path}: the estimate stream was made without tiles; expected tiles=…")

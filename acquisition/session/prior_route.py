@@ -15,13 +15,11 @@ import numpy as np
 
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import Sequence
-from msflash.acquisition.session import analysis
-from msflash.acquisition.session.analysis import (
-    DEFAULT_BIN_FACTOR,
-    FrameStack,
+from msflash.acquisition.session import analysis, local_route
+from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, FrameStack, load_frame_stack
+from msflash.acquisition.session.sequence_spectra import (
     camera_responsivities_photons,
     led_spectra_photons,
-    load_frame_stack,
     spectrum_in_sequence_unit,
 )
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
@@ -144,10 +142,10 @@ def led_side(
     """The LED-span side of ``estimate --model prior|auto``: what ``--model led`` gives (global, or local when
     ``method`` finds the illuminant varying across the scene), its payload, and whether it varies."""
     if method != "global":
-        local = analysis.estimate_sequence_local(
+        local = local_route.estimate_sequence_local(
             sequence, method, solver, alpha, stream=analysis.stream_stack(sequence, stack, bin_factor, tiles)
         )
-        return local.global_estimate, analysis.local_estimate_payload(sequence, local), local.model == "local"
+        return local.global_estimate, local_route.local_estimate_payload(sequence, local), local.model == "local"
     led = analysis.estimate_sequence(sequence, solver, alpha, stream=analysis.stream_stack(sequence, stack, bin_factor))
     return led, analysis.estimate_payload(sequence, led), False
 

@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session.dask_map import dask_mapper
 from msflash.acquisition.session.many import estimate_record
 from msflash.acquisition.session.one_sequence import EstimateSettings

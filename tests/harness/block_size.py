@@ -35,11 +35,11 @@ from typing import Any
 
 import numpy as np
 
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session.analysis import (
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session.analysis import load_frame_stack
+from msflash.acquisition.session.sequence_spectra import (
     camera_responsivities_photons,
     led_spectra_photons,
-    load_frame_stack,
     spectrum_in_sequence_unit,
 )
 from msflash.lab.study.block_agreement import FrameNoise, agreement, all_pixel_statistics, sensor_noise

@@ -34,16 +34,14 @@ def _paper_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
 
 def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
     """One row per candidate of ``case``, and one row for the case (band coverages, warning features)."""
-    from msflash.acquisition.sequence.format import read_sequence
-    from msflash.acquisition.session.analysis import (
-        camera_responsivities_photons,
-        estimate_sequence,
-        led_spectra_photons,
-        load_frame_stack,
-        spectrum_in_sequence_unit,
-        stream_stack,
-    )
+    from msflash.acquisition.sequence.reader import read_sequence
+    from msflash.acquisition.session.analysis import estimate_sequence, load_frame_stack, stream_stack
     from msflash.acquisition.session.prior_route import sequence_channel_statistics
+    from msflash.acquisition.session.sequence_spectra import (
+        camera_responsivities_photons,
+        led_spectra_photons,
+        spectrum_in_sequence_unit,
+    )
     from msflash.processing.light_families import evidence_spread, family_model
     from msflash.processing.light_prior import prior_model
     from msflash.processing.spectral_data_term import scene_form

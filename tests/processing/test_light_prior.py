@@ -7,9 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session.analysis import camera_responsivities_photons, estimate_sequence, led_spectra_photons
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session.analysis import estimate_sequence
 from msflash.acquisition.session.prior_route import estimate_sequence_prior, prior_payload, sequence_channel_statistics
+from msflash.acquisition.session.sequence_spectra import camera_responsivities_photons, led_spectra_photons
 from msflash.processing import datasets
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.channel_statistics import accumulate_channel_statistics, plane_channels

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session import analysis, estimate_stream
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session import analysis, estimate_stream, sequence_spectra
 from msflash.processing import statistics
 from msflash.processing.local import tile_statistics
 from msflash.processing.noise_level import PixelNoise, detail_noise_line
@@ -116,7 +116,7 @@ def test_a_specular_strip_no_longer_dominates_the_estimate(tmp_path: Path, monke
             monkeypatch.setattr(estimate_stream, "SAMPLE_WEIGHTING", weighting)  # what the one accumulator reads
             estimate = analysis.estimate_sequence(sequence)
             assert estimate.weighted == weighting
-            error = rmse(analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum), rendered.truth)
+            error = rmse(sequence_spectra.spectrum_in_sequence_unit(sequence, estimate.spectrum), rendered.truth)
             ratios[weighting].append(error / led_bound(rendered))
     assert np.mean(ratios[True]) < np.mean(ratios[False]), ratios
 
