@@ -58,10 +58,10 @@ from typing import Any
 import numpy as np
 
 from msflash.calibration.errors import CalibrationError
+from msflash.processing.block_sums import cfa_planes
 from msflash.processing.colour_metrics import usable_labels
 from msflash.processing.image_formation import CFA_PATTERNS
 from msflash.processing.spectra import Spectra
-from msflash.processing.statistics import cfa_planes
 
 MACBETH_GRID = (4, 6)
 """Rows × columns of the Macbeth chart, patches numbered column by column (ISET order, as

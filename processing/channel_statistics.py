@@ -31,15 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.processing import frame_kernels
+from msflash.processing.block_sums import block_sums_and_differences, cfa_planes, saturated_blocks
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.statistics import (
-    FrameStackSpec,
-    NoiseMoments,
-    SequenceStatistics,
-    block_sums_and_differences,
-    cfa_planes,
-    saturated_blocks,
-)
+from msflash.processing.statistics import FrameStackSpec, NoiseMoments, SequenceStatistics
 
 DEFAULT_FOLDS = 5
 """Bands of block rows kept apart for held-out prediction (:func:`processing.light_prior.choose_model`)."""

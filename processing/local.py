@@ -36,7 +36,7 @@ Noise correction
 The LED-only images are differences of noisy frames, so the moments of eq. 5 carry the noise
 variance (errors in variables). :func:`tile_statistics` also measures it per block from the
 difference of two interleaved column halves (:attr:`TiledStatistics.denoised`), and the local model
-is solved on the corrected statistics, as the global estimate is (:mod:`processing.statistics` measures
+is solved on the corrected statistics, as the global estimate is (:mod:`processing.block_rows` measures
 the same probe for the whole frame; docs/architecture.md §8: the noise is measured from the data,
 without a noise model).
 
@@ -194,10 +194,10 @@ def estimate_local(
         labels use the statistics as observed. False: everything on the statistics as observed.
     global_estimate
         The whole-frame estimate (eq. 4–6) when the caller has it: a sequence's, from the whole frame's
-        statistics (:func:`processing.statistics.accumulate_statistics`), so that the global numbers are
+        statistics (:func:`processing.accumulate.accumulate_statistics`), so that the global numbers are
         those of every other route from the frames to an estimate. It is then used as it is (its α scores
         the selection), not solved again on the sum of the tiles — which is the same up to the summation
-        order, except on large frames (:data:`processing.statistics.PROBE_BLOCKS`), where the whole-frame
+        order, except on large frames (:data:`processing.block_rows.PROBE_BLOCKS`), where the whole-frame
         pass probes the noise on a stride of block rows and the tiles on every block (a different noise
         correction, hence a different GCV α). None: solved on :meth:`TiledStatistics.total`.
     """

@@ -16,22 +16,17 @@ from functools import lru_cache
 
 import numpy as np
 
-from msflash.processing.errors import SpectralDataError
-from msflash.processing.noise_level import PixelNoise, detail_noise_line
-from msflash.processing.statistics import (
-    DEFAULT_WORKERS,
-    FrameStackSpec,
-    NoiseMoments,
-    SequenceStatistics,
-    ambient_block_noise,
+from msflash.processing.block_sums import (
     block_sums,
     block_sums_and_differences,
     cfa_planes,
-    non_finite_frames_error,
     plane_shape,
     saturated_blocks,
-    thread_pool,
 )
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.moment_products import DEFAULT_WORKERS, thread_pool
+from msflash.processing.noise_level import PixelNoise, ambient_block_noise, detail_noise_line
+from msflash.processing.statistics import FrameStackSpec, NoiseMoments, SequenceStatistics, non_finite_frames_error
 
 DEFAULT_TILES = 8
 """Tiles per side of the frame (8 × 8 = 64 tiles)."""
@@ -269,7 +264,7 @@ class TiledStatistics:
     def total(self) -> SequenceStatistics:
         """The statistics of the whole frame: the sum of the tiles', with the noise the probe measured
         (:attr:`denoised`) as their :attr:`~processing.statistics.SequenceStatistics.noise` — what
-        :func:`processing.statistics.accumulate_statistics` gives for the same blocks (exactly below
+        :func:`processing.accumulate.accumulate_statistics` gives for the same blocks (exactly below
         ``4 · PROBE_BLOCKS`` blocks; above, it probes a stride of block rows, the tiles every block)."""
         gram, cross, energy = self.gram.sum(axis=(0, 1)), self.cross.sum(axis=(0, 1)), float(self.ambient_energy.sum())
         clean = self.denoised
@@ -343,7 +338,7 @@ def _block_sums(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
 
 
 def _block_sums_and_differences(plane: np.ndarray, factor: int, sums: np.ndarray, differences: np.ndarray) -> None:
-    """:func:`processing.statistics.block_sums_and_differences` of an (H, W, C) plane into (H/f, W/f, C) arrays."""
+    """:func:`processing.block_sums.block_sums_and_differences` of an (H, W, C) plane into (H/f, W/f, C) arrays."""
     block_sums_part, difference_part = block_sums_and_differences(plane, factor)
     np.copyto(sums, block_sums_part[: sums.shape[0], : sums.shape[1]])
     np.copyto(differences, difference_part[: differences.shape[0], : differences.shape[1]])
@@ -352,7 +347,7 @@ def _block_sums_and_differences(plane: np.ndarray, factor: int, sums: np.ndarray
 class TileBlocks:
     """Block sums of an ambient + LED frame stack for :class:`TiledStatistics`, added one frame at a time.
 
-    Rows as :class:`processing.statistics.BlockRows`'s: LED frame j → row j, the ambient frame → row n, a
+    Rows as :class:`processing.block_rows.BlockRows`'s: LED frame j → row j, the ambient frame → row n, a
     ones row last. Each frame's block sums (and half differences, even bin factors) and saturated blocks
     are taken by :meth:`add_frame` and the frame may then be let go; :meth:`statistics` weighs, masks and
     sums the tiles once every frame is in. :func:`tile_statistics` is this over frames in memory.
@@ -517,14 +512,14 @@ def tile_statistics(
 ) -> TiledStatistics:
     """The statistics of eq. 4–6 of every tile of a ``tiles`` grid, in one pass over the frames (:class:`TileBlocks`).
 
-    Blocks (``bin_factor``, see :func:`processing.statistics.bin_frame`) are assigned to tiles
+    Blocks (``bin_factor``, see :func:`processing.block_sums.bin_frame`) are assigned to tiles
     whole; a block is left out when any member saturates in any frame. The tiles' statistics sum
-    to those of :func:`processing.statistics.accumulate_statistics` with the same binning.
+    to those of :func:`processing.accumulate.accumulate_statistics` with the same binning.
 
     Parameters
     ----------
     ambient, led_frames, spec
-        As for :func:`processing.statistics.accumulate_statistics`.
+        As for :func:`processing.accumulate.accumulate_statistics`.
     tiles
         Tiles per side, or (rows, columns).
     bin_factor, cfa_period

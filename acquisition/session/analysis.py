@@ -27,6 +27,7 @@ from msflash.acquisition.session.estimate_stream import (
     stream_sequence,
 )
 from msflash.processing import datasets
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
 from msflash.processing.channel_statistics import plane_channels
 from msflash.processing.errors import SpectralDataError
@@ -36,7 +37,7 @@ from msflash.processing.local import DEFAULT_TILES, LocalEstimate, synthesize_lo
 from msflash.processing.model_error import reference_for, with_model_error
 from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import Spectra
-from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import SynthesisStream, synthesize
 from msflash.processing.user_files import printable, shown_path
 

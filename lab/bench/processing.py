@@ -39,7 +39,10 @@ import numpy as np
 from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, SAMPLE_WEIGHTING, block_factor
 from msflash.lab.bench.ratios import against_target, interleaved_ratio, peak_bytes
 from msflash.processing import datasets, frame_kernels, lights
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientModel, estimate_ambient
+from msflash.processing.block_rows import BlockRows
+from msflash.processing.block_sums import plane_shape
 from msflash.processing.flash import FlashModel
 from msflash.processing.image_formation import (
     SensorModel,
@@ -51,7 +54,7 @@ from msflash.processing.image_formation import (
 from msflash.processing.least_squares import minimise_quadratic, recording_problems
 from msflash.processing.model_error import light_reference, reference_for, with_model_error
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
-from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, plane_shape
+from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import synthesize
 
 

@@ -13,8 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from msflash.processing import frame_kernels, statistics, synthesis
-from msflash.processing.statistics import BlockRows, FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing import block_rows, block_sums, frame_kernels, statistics, synthesis
+from msflash.processing.accumulate import accumulate_statistics
+from msflash.processing.block_rows import BlockRows
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import synthesize
 
 WHITE = 4000.0
@@ -156,9 +159,9 @@ def test_binned_statistics_match_the_reference(
 
 @pytest.mark.parametrize("workers", [1, 2])
 def test_a_strided_noise_probe_matches_the_reference(route: str, workers: int, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(statistics, "PROBE_BLOCKS", 20)  # small frames probe every 2nd–4th block row
+    monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 20)  # small frames probe every 2nd–4th block row
     ambient, frames, spec = _frames((93, 85, 3), 4, seed=5)
-    stride = statistics.probe_stride(93 // 4, 85 // 4)
+    stride = block_rows.probe_stride(93 // 4, 85 // 4)
     assert stride > 1
     actual = accumulate_statistics(ambient, frames, spec, bin_factor=4, workers=workers)
     assert_same(actual, reference_statistics(ambient, frames, spec, 4, 1, stride))
@@ -236,7 +239,7 @@ def test_streamed_block_rows_match_the_reference(route: str, incremental: bool) 
     """A capture adds raw frames one by one (FlashSession): the same statistics."""
     ambient, frames, spec = _frames((45, 71), 3, seed=8)
     rows = BlockRows(
-        3, statistics.plane_shape(ambient.shape, 2), 2, spec.white_level, incremental, black_level=spec.black_level
+        3, block_sums.plane_shape(ambient.shape, 2), 2, spec.white_level, incremental, black_level=spec.black_level
     )
     for row, frame in [(0, frames[0]), (3, ambient), (1, frames[1]), (2, frames[2])]:
         rows.add_frame(row, frame, 2)
@@ -300,7 +303,7 @@ def test_the_two_synthesis_routes_write_the_same_image_bit_for_bit(
 
 def test_synthesis_refuses_an_image_type_it_cannot_write() -> None:
     ambient, frames, spec = _frames((8, 8, 3), 2, seed=1)
-    with pytest.raises(statistics.SpectralDataError, match="image type int16; expected float32 or float64"):
+    with pytest.raises(SpectralDataError, match="image type int16; expected float32 or float64"):
         synthesize(ambient, frames, spec, np.ones(2), dtype=np.int16)
 
 
@@ -308,7 +311,8 @@ POLICY = """
 import sys
 import numpy as np
 from msflash.processing import frame_kernels
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.accumulate import accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec
 frame_kernels.COMPILE_BYTES = int(sys.argv[1])
 frames = [np.full((32, 40, 3), 100 + k, np.uint16) for k in range(4)]
 accumulate_statistics(frames[0], frames[1:], FrameStackSpec(0, 4000, 1.0, (1.0,) * 3, np.eye(3)), bin_factor=4)
