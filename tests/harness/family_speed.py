@@ -32,7 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=9)
     args = parser.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from msflash.acquisition.app.bench import DEFAULT_BIN_FACTOR, benchmark_world, frame_copy
+    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR
+    from msflash.lab.bench.processing import benchmark_world, frame_copy
     from msflash.processing import frame_kernels
     from msflash.processing.channel_statistics import accumulate_channel_statistics
     from msflash.processing.light_families import family_model
