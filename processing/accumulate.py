@@ -102,44 +102,63 @@ def accumulate_statistics(
         raise SpectralDataError(
             f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2"
         )
+    _check_stack(ambient, led_frames, spec, sample_mask)
     frame_kernels.wanted(ambient.nbytes * (len(led_frames) + 1))  # loads the kernels for large stacks
     if bin_factor > 1:
         return _accumulate_binned(
             ambient, led_frames, spec, sample_mask, chunk_pixels, bin_factor, cfa_period, workers, weighting
         )
-    frames = [ambient, *led_frames]
-    if len(led_frames) != spec.led_levels.shape[0]:
-        raise SpectralDataError(f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}")
-    shape = ambient.shape
-    for index, frame in enumerate(frames):
-        if frame.shape != shape:
-            raise SpectralDataError(
-                f"frame stack: frame {index} has shape {frame.shape} but the ambient frame {shape}; "
-                "expected frames of one size"
-            )
-    samples = [_as_samples(f, f"frame {i}") for i, f in enumerate(frames)]
-    n_pixels, n_channels = samples[0].shape
-    mask_flat = None
-    if sample_mask is not None:
-        if sample_mask.shape != shape[:2]:
-            raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {shape[:2]}")
-        mask_flat = sample_mask.reshape(-1)
-    n_led_frames = len(led_frames)
-    n_rows = n_led_frames + 2
-    white = spec.white_level
-    if mask_flat is None:
+    n_samples = ambient.size
+    if sample_mask is None:
         # Integer frames: one compiled pass, each sample converted once in a cache-sized tile.
         pool = thread_pool(workers) if workers > 1 else None
-        compiled = frame_kernels.raw_moments([*led_frames, ambient], white, workers, pool)
+        compiled = frame_kernels.raw_moments([*led_frames, ambient], spec.white_level, workers, pool)
         if compiled is not None:
-            return statistics_from_moments(compiled, spec, n_pixels * n_channels)
-    # Raw second moments of the rows [F_1 … F_n, A, 1] over the valid samples. Every statistic of
-    # the linearised differences is a linear transform of these (below), so the per-chunk work is
-    # one conversion and one Gram product: no per-frame subtract, scale or difference passes.
-    # float64 keeps the cancellation in (s_j F_j − s_a A) harmless.
-    # Integer frames of ≤ 16 bits: each chunk's products are integers summing below 2⁵² (exact in
-    # float64 whatever the order of BLAS's sums), added up exactly in int64 — the compiled route's
-    # totals to the bit (frame_kernels.EXACT_SAMPLES).
+            return statistics_from_moments(compiled, spec, n_samples)
+    moments = _pixel_moments(ambient, led_frames, spec.white_level, sample_mask, chunk_pixels)
+    return statistics_from_moments(moments, spec, n_samples)
+
+
+def _check_stack(
+    ambient: np.ndarray, led_frames: Sequence[np.ndarray], spec: FrameStackSpec, sample_mask: np.ndarray | None
+) -> None:
+    """Refuse LED frames without levels, frames of another shape than the ambient's or not (H, W[, C]), a mask of
+    another size."""
+    if len(led_frames) != spec.led_levels.shape[0]:
+        raise SpectralDataError(f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}")
+    for index, frame in enumerate([ambient, *led_frames]):
+        if frame.shape != ambient.shape:
+            raise SpectralDataError(
+                f"frame stack: frame {index} has shape {frame.shape} but the ambient frame {ambient.shape}; "
+                "expected frames of one size"
+            )
+    if sample_mask is not None and sample_mask.shape != ambient.shape[:2]:
+        raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {ambient.shape[:2]}")
+    _as_samples(ambient, "frame 0")
+
+
+def _pixel_moments(
+    ambient: np.ndarray,
+    led_frames: Sequence[np.ndarray],
+    white: float,
+    sample_mask: np.ndarray | None,
+    chunk_pixels: int,
+) -> np.ndarray:
+    """Raw second moments of the rows ``[F_1 … F_n, A, 1]`` over every valid sample, in numpy, chunk by chunk.
+
+    Every statistic of the linearised differences is a linear transform of these
+    (:func:`processing.statistics.statistics_from_moments`), so the per-chunk work is one conversion and one
+    Gram product: no per-frame subtract, scale or difference passes. float64 keeps the cancellation in
+    ``(s_j F_j − s_a A)`` harmless. Integer frames of ≤ 16 bits: each chunk's products are integers summing
+    below 2⁵² (exact in float64 whatever the order of BLAS's sums), added up exactly in int64 — the compiled
+    route's totals to the bit (:data:`processing.frame_kernels.EXACT_SAMPLES`).
+    """
+    frames = [ambient, *led_frames]
+    samples = [_as_samples(f, f"frame {i}") for i, f in enumerate(frames)]
+    n_pixels, n_channels = samples[0].shape
+    mask_flat = None if sample_mask is None else sample_mask.reshape(-1)
+    n_led_frames = len(led_frames)
+    n_rows = n_led_frames + 2
     exact = all(np.issubdtype(frame.dtype, np.integer) and frame.dtype.itemsize <= 2 for frame in frames)
     if exact:
         chunk_pixels = max(1, min(chunk_pixels, frame_kernels.EXACT_SAMPLES // n_channels))
@@ -147,8 +166,7 @@ def accumulate_statistics(
     block = np.empty((n_rows, min(chunk_pixels, n_pixels), n_channels))
     for start in range(0, n_pixels, chunk_pixels):
         stop = min(start + chunk_pixels, n_pixels)
-        rows = stop - start
-        view = block[:, :rows]
+        view = block[:, : stop - start]
         for j in range(n_led_frames):
             view[j] = samples[j + 1][start:stop]
         view[n_led_frames] = samples[0][start:stop]
@@ -165,7 +183,7 @@ def accumulate_statistics(
             view[:, saturated] = 0.0
         flat = view.reshape(n_rows, -1)
         moments += (flat @ flat.T).astype(moments.dtype, copy=False)
-    return statistics_from_moments(moments.astype(np.float64, copy=False), spec, n_pixels * n_channels)
+    return moments.astype(np.float64, copy=False)
 
 
 def _accumulate_binned(
@@ -181,16 +199,6 @@ def _accumulate_binned(
 ) -> SequenceStatistics:
     """Statistics of block sums: a block is valid when no member is saturated (or masked out)."""
     frames = [ambient, *led_frames]
-    if len(led_frames) != spec.led_levels.shape[0]:
-        raise SpectralDataError(f"frame stack: {len(led_frames)} LED frames but levels for {spec.led_levels.shape[0]}")
-    for index, frame in enumerate(frames):
-        if frame.shape != ambient.shape:
-            raise SpectralDataError(
-                f"frame stack: frame {index} has shape {frame.shape} but the ambient frame {ambient.shape}; "
-                "expected frames of one size"
-            )
-    if sample_mask is not None and sample_mask.shape != ambient.shape[:2]:
-        raise SpectralDataError(f"sample mask has shape {sample_mask.shape}; expected {ambient.shape[:2]}")
     n_led_frames = len(led_frames)
     rows = BlockRows(
         n_led_frames,
