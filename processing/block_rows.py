@@ -38,7 +38,6 @@ count of valid samples.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -455,61 +454,57 @@ class BlockRows:
         Unweighted: a sample's inverse-variance weight differs from channel to channel, and weighing the channels of
         one block unequally would turn its colour away from the LED's (what :mod:`processing.flicker` reads).
         """
-        n_rows, (height, channels, width) = self.rows.shape[0], self.block_shape
         if column_factor is None and self.root_weights is not None:  # incremental rows were weighed: undo it
             column_factor = np.divide(
                 1.0, self.root_weights, out=np.zeros_like(self.root_weights), where=self.root_weights > 0
             )
         transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
-        k = spec.n_leds
+        ones = self.rows[-1] if column_factor is None else self.rows[-1] * column_factor
+        blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
+        fa, ff, aa = _channel_products(transform, self.rows, self.block_shape, 1, column_factor)
+        if self.differences is None or probe_scale is None:
+            return ChannelMoments(fa, ff, aa, blocks)
+        at_probe = None if column_factor is None else self._at_probe(column_factor)
+        noise = _channel_products(transform, self.differences, self.difference_shape, 2, at_probe)
+        return ChannelMoments(fa, ff, aa, blocks, *(part * probe_scale for part in noise))
 
-        def mapped(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            images = np.tensordot(transform, rows, axes=(1, 0))  # (k + 1, C, blocks): each LED's, then the ambient's
-            leds, ambient = images[:k], images[k]
-            return leds @ ambient.T, leds @ leds.transpose(0, 2, 1), ambient @ ambient.T
 
-        def summed(parts: Iterator[np.ndarray]) -> tuple[np.ndarray, ...]:
-            total: list[np.ndarray] | None = None
-            for part in parts:
-                moments = mapped(part)
-                total = list(moments) if total is None else [a + b for a, b in zip(total, moments, strict=True)]
-            assert total is not None
-            return tuple(total)
+def _channel_products(
+    transform: np.ndarray,
+    values: np.ndarray,
+    layout: tuple[int, int, int],
+    channel_axis: int,
+    column_factor: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(fa, ff, aa)`` of :class:`ChannelMoments` from rows ``values`` whose columns are laid out ``layout`` (block
+    rows first, the channels on ``channel_axis``): the rows mapped by ``transform`` (k + 1, n + 2) to the LEDs' and
+    the ambient's images, each column scaled by ``column_factor`` (None: 1), summed band by band.
 
-        # A band of block rows at a time (the moments are sums over blocks): the rows' copy in channel order stays
-        # about a megabyte whatever the frame count, so an estimate's peak stays one frame plus the statistics.
-        band = max(1, CHANNEL_BAND_VALUES // max(1, n_rows * channels * width))
-        row_values = height * channels * width
-
-        def rows_by_channel() -> Iterator[np.ndarray]:
-            for top in range(0, height, band):
-                cut = slice(top * channels * width, min(top + band, height) * channels * width)
-                values = self.rows[:, cut] if column_factor is None else self.rows[:, cut] * column_factor[cut]
-                tall = values.shape[1] // (channels * width)
-                yield values.reshape(n_rows, tall, channels, width).transpose(0, 2, 1, 3).reshape(n_rows, channels, -1)
-
-        assert self.rows.shape[1] == row_values
-        last_row = self.rows[n_rows - 1] if column_factor is None else self.rows[n_rows - 1] * column_factor
-        last = last_row.reshape(height, channels, width)
-        blocks = int(np.count_nonzero(last.any(axis=1))) if n_rows else 0
-        fa, ff, aa = summed(rows_by_channel())
-        noise: tuple[np.ndarray | None, ...] = (None, None, None)
-        if self.differences is not None and probe_scale is not None:
-            probed = self.difference_shape
-            at_probe = None if column_factor is None else self._at_probe(column_factor)
-            probe_band = max(1, CHANNEL_BAND_VALUES // max(1, n_rows * channels * probed[1]))
-
-            def probe_by_channel() -> Iterator[np.ndarray]:
-                assert self.differences is not None
-                for top in range(0, probed[0], probe_band):
-                    cut = slice(top * probed[1] * channels, min(top + probe_band, probed[0]) * probed[1] * channels)
-                    values = self.differences[:, cut] if at_probe is None else self.differences[:, cut] * at_probe[cut]
-                    tall = values.shape[1] // (probed[1] * channels)
-                    yield (
-                        values.reshape(n_rows, tall, probed[1], channels)
-                        .transpose(0, 3, 1, 2)
-                        .reshape(n_rows, channels, -1)
-                    )
-
-            noise = tuple(part * probe_scale for part in summed(probe_by_channel()))
-        return ChannelMoments(fa, ff, aa, blocks, *noise)
+    A band of block rows at a time (the moments are sums over blocks): its images in channel order stay about a
+    megabyte (:data:`CHANNEL_BAND_VALUES`) whatever the frame count, so an estimate's peak stays one frame plus the
+    statistics. The map comes first, along the rows' own order (one product of the band's contiguous columns): the
+    channel-order copy is then of the k + 1 images, not of the n + 2 rows.
+    """
+    height, inner = layout[0], layout[1] * layout[2]
+    k, channels = transform.shape[0] - 1, layout[channel_axis]
+    band = max(1, CHANNEL_BAND_VALUES // max(1, (k + 1) * inner))
+    # Two buffers for every band (fresh pages for each band's arrays cost more than the products).
+    images_buffer = np.empty((k + 1, min(band, height) * inner))
+    ordered_buffer = np.empty((k + 1, channels, min(band, height) * inner // channels))
+    totals: list[np.ndarray] = []
+    for top in range(0, height, band):
+        tall = min(top + band, height) - top
+        images = np.matmul(
+            transform, values[:, top * inner : (top + tall) * inner], out=images_buffer[:, : tall * inner]
+        )
+        if column_factor is not None:
+            images *= column_factor[top * inner : (top + tall) * inner]
+        ordered = ordered_buffer[:, :, : tall * inner // channels]  # (k + 1, C, blocks): each LED's, the ambient's
+        np.copyto(
+            ordered.reshape(k + 1, channels, tall, inner // channels),
+            np.moveaxis(images.reshape(k + 1, tall, layout[1], layout[2]), channel_axis + 1, 1),
+        )
+        leds, ambient = ordered[:k], ordered[k]
+        moments = [leds @ ambient.T, leds @ leds.transpose(0, 2, 1), ambient @ ambient.T]
+        totals = moments if not totals else [total + part for total, part in zip(totals, moments, strict=True)]
+    return totals[0], totals[1], totals[2]
