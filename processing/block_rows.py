@@ -153,6 +153,7 @@ class BlockRows:
         """The ambient frame's noise per sample (:func:`processing.noise_level.detail_noise_line`), once it is in
         (weighted rows only)."""
         self.root_weights: np.ndarray | None = None
+        self._probe_root_weights: np.ndarray | None = None  # the root weights in the probe's layout
         self._ambient_saturated: np.ndarray | None = None
         self._moments: np.ndarray | None = None
         self._batch_weights: np.ndarray | None = None  # batch mode: the weights, taken once the ambient row is in
@@ -254,7 +255,7 @@ class BlockRows:
             filled = [*self._filled, row]
             for rows, moments in ((self.rows, self._moments), (self.differences, self._noise)):
                 if rows is not None and moments is not None:
-                    products = row_products(rows, row)
+                    products = row_products(rows, row, filled)
                     moments[row, filled] = products[filled]
                     moments[filled, row] = products[filled]
         self._filled.append(row)
@@ -277,8 +278,8 @@ class BlockRows:
         """Scale one row (and its probe) by the root weights (incremental mode, weights known)."""
         assert self.root_weights is not None
         self.rows[row] *= self.root_weights
-        if self.differences is not None:
-            self.differences[row] *= self._at_probe(self.root_weights)
+        if self.differences is not None and self._probe_root_weights is not None:
+            self.differences[row] *= self._probe_root_weights
 
     def _at_probe(self, values: np.ndarray) -> np.ndarray:
         """Per-column ``values`` of the rows at the probed blocks, in the probe's layout."""
@@ -288,6 +289,7 @@ class BlockRows:
         """Incremental mode, the ambient row just in: weigh every filled row and retake their moments."""
         assert self._moments is not None
         self.root_weights = np.sqrt(self._sample_weights())
+        self._probe_root_weights = self._at_probe(self.root_weights)
         filled = [row for row in self._filled if row != self.n_led_frames + 1]
         for row in [*filled, self.n_led_frames]:
             self._weigh_row(row)

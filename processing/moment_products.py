@@ -23,8 +23,11 @@ DEFAULT_WORKERS = 2 if (os.cpu_count() or 1) >= 2 else 1
 
 
 PRODUCT_COLUMNS = 4096
-"""Columns per slice of the incremental moments' matrix–vector products (:func:`row_products`):
-one thread each (OpenBLAS threads a product only above about 10⁵ elements)."""
+"""Columns per slice of the weighted moments' products (:func:`gram_matrices`), and at least per slice of the
+incremental moments' matrix–vector products (:func:`row_products`)."""
+PRODUCT_ELEMENTS = 1 << 16
+"""Matrix elements per slice of :func:`row_products`: one thread each (OpenBLAS threads a product only above
+about 10⁵ elements), and few slices for few rows (each call costs microseconds of its own)."""
 
 
 @lru_cache(maxsize=4)
@@ -33,18 +36,40 @@ def thread_pool(workers: int) -> ThreadPoolExecutor:
     return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="msflash-image")
 
 
-def row_products(rows: np.ndarray, row: int) -> np.ndarray:
-    """``rows @ rows[row]``, summed over slices of :data:`PRODUCT_COLUMNS` columns.
+def row_products(rows: np.ndarray, row: int, among: Sequence[int] | None = None) -> np.ndarray:
+    """``rows @ rows[row]`` (only the rows ``among``, the others' products 0), summed over slices of
+    :data:`PRODUCT_ELEMENTS` (at least :data:`PRODUCT_COLUMNS` columns).
 
     OpenBLAS splits one large matrix–vector product across its threads; on a busy 2-core machine
     (the capture's stream and writer threads) their wake-up costs many times the product itself
-    (docs/architecture.md §10). Slices stay below its threading threshold.
+    (docs/architecture.md §10). Slices stay below its threading threshold. ``among`` is read as runs of
+    consecutive rows, one product each: a capture's rows not yet filled are not read.
+
+    Examples
+    --------
+    >>> rows = np.arange(12.0).reshape(4, 3)
+    >>> row_products(rows, 1).tolist(), row_products(rows, 1, [0, 1, 3]).tolist()
+    ([14.0, 50.0, 86.0, 122.0], [14.0, 50.0, 0.0, 122.0])
     """
     products = np.zeros(rows.shape[0])
+    runs = _runs(range(rows.shape[0]) if among is None else sorted(set(among)))
     vector = rows[row]
-    for start in range(0, rows.shape[1], PRODUCT_COLUMNS):
-        products += rows[:, start : start + PRODUCT_COLUMNS] @ vector[start : start + PRODUCT_COLUMNS]
+    for first, stop in runs:
+        width = max(PRODUCT_COLUMNS, PRODUCT_ELEMENTS // (stop - first))
+        for start in range(0, rows.shape[1], width):
+            products[first:stop] += rows[first:stop, start : start + width] @ vector[start : start + width]
     return products
+
+
+def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
+    """Sorted ``indices`` as ``(first, stop)`` runs of consecutive integers."""
+    runs: list[tuple[int, int]] = []
+    for index in indices:
+        if runs and runs[-1][1] == index:
+            runs[-1] = (runs[-1][0], index + 1)
+        else:
+            runs.append((index, index + 1))
+    return runs
 
 
 def gram_matrix(rows: np.ndarray, chunk: int, workers: int = 1, weights: np.ndarray | None = None) -> np.ndarray:
