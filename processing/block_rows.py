@@ -378,74 +378,61 @@ class BlockRows:
         # Integer sums are always finite; for float frames one sum flags NaN/inf (exact check only then).
         if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
             raise non_finite_frames_error(rows[:-1])
-        channels = self.block_shape[1]
-        weights = probe_weights = None
-        if self.weighting and self._moments is None:
-            # Batch mode: the weights enter each chunk's product (incremental mode weighs rows as frames come).
-            weights = self._sample_weights() if self._batch_weights is None else self._batch_weights
-            probe_weights = self._at_probe(weights)
-        column_factor: np.ndarray | None = None  # batch mode: √weight per column, 0 where left out
-        if self._moments is not None:
-            moments = self._moments  # incremental: saturated blocks were left out as they came (_drop)
-            noise = self._noise
-            excluded_columns = 0 if self._excluded is None else int(np.count_nonzero(self._excluded))
-            scale = self._probe_scale(
-                0 if self._excluded is None else int(np.count_nonzero(self._excluded)) // channels,
-                0
-                if self._excluded_differences is None
-                else int(np.count_nonzero(self._excluded_differences)) // channels,
-            )
+        weights = None
+        if self._moments is not None:  # incremental: saturated blocks were left out as they came (_drop)
+            moments, noise, excluded_columns, scale = self._incremental_moments()
+            column_factor = None
         else:
-            invalid = None
-            for mask in self._invalid:
-                invalid = mask if invalid is None else invalid | mask
-            chunk = chunk_pixels * self.block_shape[1]
-            invalid = invalid if invalid is not None and invalid.any() else None
-
-            def masked_part(
-                values: np.ndarray, columns: np.ndarray | None, column_weights: np.ndarray | None
-            ) -> tuple[np.ndarray, np.ndarray | None]:
-                if columns is not None:
-                    if column_weights is not None:  # weighted: left-out columns weigh 0, no copy of the rows
-                        column_weights = np.where(columns, 0.0, column_weights)
-                    else:
-                        values = values.copy()
-                        values[:, columns] = 0.0
-                return values, column_weights
-
-            parts = [masked_part(rows, self._columns(invalid) if invalid is not None else None, weights)]
-            if self.differences is not None:
-                parts.append(
-                    masked_part(
-                        self.differences,
-                        self._difference_columns(invalid) if invalid is not None else None,
-                        probe_weights,
-                    )
-                )
-            column_factor = np.ones(rows.shape[1]) if invalid is None else (~self._columns(invalid)).astype(float)
-            # The rows' and the probe's moments in one map: the probe's single chunk shares the threads.
-            moments, *probed = gram_matrices(parts, chunk, workers)
-            noise = probed[0] if probed else None
-            excluded_columns = int(np.count_nonzero(invalid)) * channels if invalid is not None else 0
-            scale = self._probe_scale(
-                int(np.count_nonzero(invalid)) if invalid is not None else 0,
-                int(np.count_nonzero(invalid[:: self.probe_stride])) if invalid is not None else 0,
-            )
+            if self.weighting:  # batch mode: the weights enter each chunk's product
+                weights = self._sample_weights() if self._batch_weights is None else self._batch_weights
+            moments, noise, excluded_columns, scale, column_factor = self._batch_moments(weights, chunk_pixels, workers)
         if noise is not None:
             noise = None if scale is None else noise * scale
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
-        factor = self.factor
         statistics = statistics_from_moments(
             moments,
             spec,
             rows.shape[1],
-            black_level=spec.black_level * factor * factor,
+            black_level=spec.black_level * self.factor * self.factor,
             noise_moments=noise,
             n_samples=rows.shape[1] - excluded_columns,
             weighted=self.root_weights is not None or weights is not None,
         )
         channel_moments = self._channel_moments(spec, column_factor, scale if noise is not None else None)
         return replace(statistics, channels=channel_moments)
+
+    def _incremental_moments(self) -> tuple[np.ndarray, np.ndarray | None, int, float | None]:
+        """Incremental mode: the moments and the probe's as accumulated, the columns left out, the probe's scale."""
+        assert self._moments is not None
+        channels = self.block_shape[1]
+        excluded_columns = 0 if self._excluded is None else int(np.count_nonzero(self._excluded))
+        excluded_probed = 0 if self._excluded_differences is None else int(np.count_nonzero(self._excluded_differences))
+        scale = self._probe_scale(excluded_columns // channels, excluded_probed // channels)
+        return self._moments, self._noise, excluded_columns, scale
+
+    def _batch_moments(
+        self, weights: np.ndarray | None, chunk_pixels: int, workers: int
+    ) -> tuple[np.ndarray, np.ndarray | None, int, float | None, np.ndarray | None]:
+        """Batch mode: the rows' and the probe's moments over the valid blocks (weighted by ``weights``, None:
+        unweighted), the columns left out, the probe's scale, and each column's factor (0 where left out; None:
+        none is)."""
+        invalid = None
+        for mask in self._invalid:
+            invalid = mask if invalid is None else invalid | mask
+        invalid = invalid if invalid is not None and invalid.any() else None
+        parts = [_masked_part(self.rows, None if invalid is None else self._columns(invalid), weights)]
+        if self.differences is not None:
+            probe_weights = None if weights is None else self._at_probe(weights)
+            left_out = None if invalid is None else self._difference_columns(invalid)
+            parts.append(_masked_part(self.differences, left_out, probe_weights))
+        # The rows' and the probe's moments in one map: the probe's single chunk shares the threads.
+        moments, *probed = gram_matrices(parts, chunk_pixels * self.block_shape[1], workers)
+        if invalid is None:
+            return moments, probed[0] if probed else None, 0, self._probe_scale(0, 0), None
+        excluded_columns = int(np.count_nonzero(invalid)) * self.block_shape[1]
+        scale = self._probe_scale(int(np.count_nonzero(invalid)), int(np.count_nonzero(invalid[:: self.probe_stride])))
+        column_factor = (~self._columns(invalid)).astype(float)
+        return moments, probed[0] if probed else None, excluded_columns, scale, column_factor
 
     def _channel_moments(
         self, spec: FrameStackSpec, column_factor: np.ndarray | None, probe_scale: float | None
@@ -469,6 +456,20 @@ class BlockRows:
         at_probe = None if column_factor is None else self._at_probe(column_factor)
         noise = _channel_products(transform, self.differences, self.difference_shape, 2, at_probe)
         return ChannelMoments(fa, ff, aa, blocks, *(part * probe_scale for part in noise))
+
+
+def _masked_part(
+    values: np.ndarray, columns: np.ndarray | None, column_weights: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(rows, weights)`` for :func:`processing.moment_products.gram_matrices` with the ``columns`` left out: weighted,
+    they weigh 0 (no copy of the rows); unweighted, a copy of the rows with those columns zeroed."""
+    if columns is None:
+        return values, column_weights
+    if column_weights is not None:
+        return values, np.where(columns, 0.0, column_weights)
+    values = values.copy()
+    values[:, columns] = 0.0
+    return values, None
 
 
 def _channel_products(
