@@ -69,15 +69,13 @@ from msflash.processing.local_selection import (
     segment_regions,
     select_model,
 )
+from msflash.processing.region_cells import Cells
 from msflash.processing.spectra import Spectra, require_unit
-from msflash.processing.statistics import (
-    FrameStackSpec,
-)
+from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import frame_coefficients
 from msflash.processing.tile_statistics import (
     DEFAULT_TILES,
     BlockData,
-    Cells,
     TileBlocks,
     TiledStatistics,
     tile_edges,
