@@ -56,7 +56,13 @@ from msflash.processing.block_sums import (
     saturated_blocks,
 )
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.moment_products import DEFAULT_CHUNK_PIXELS, gram_matrices, gram_matrix, row_products
+from msflash.processing.moment_products import (
+    DEFAULT_CHUNK_PIXELS,
+    gram_matrices,
+    gram_matrix,
+    row_products,
+    serial_columns,
+)
 from msflash.processing.noise_level import PixelNoise, ambient_block_noise, detail_noise_line
 from msflash.processing.statistics import (
     ChannelMoments,
@@ -78,7 +84,8 @@ estimation time (docs/architecture.md §10)."""
 
 
 CHANNEL_BAND_VALUES = 1 << 17
-"""How many values (all rows together) :meth:`BlockRows._channel_moments` puts in channel order at a time."""
+"""How many values (all images together) :meth:`BlockRows._channel_moments` puts in channel order at a time, at
+most (bands are also kept within one BLAS thread's product: :func:`processing.moment_products.serial_columns`)."""
 
 
 def probe_stride(height: int, width: int) -> int:
@@ -490,7 +497,7 @@ def _channel_products(
     """
     height, inner = layout[0], layout[1] * layout[2]
     k, channels = transform.shape[0] - 1, layout[channel_axis]
-    band = max(1, CHANNEL_BAND_VALUES // max(1, (k + 1) * inner))
+    band = max(1, min(CHANNEL_BAND_VALUES // (k + 1), serial_columns(values.shape[0], k + 1)) // max(1, inner))
     # Two buffers for every band (fresh pages for each band's arrays cost more than the products).
     images_buffer = np.empty((k + 1, min(band, height) * inner))
     ordered_buffer = np.empty((k + 1, channels, min(band, height) * inner // channels))

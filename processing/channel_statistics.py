@@ -33,6 +33,7 @@ import numpy as np
 from msflash.processing import frame_kernels
 from msflash.processing.block_sums import block_sums_and_differences, cfa_planes, plane_shape, saturated_blocks
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.moment_products import serial_columns
 from msflash.processing.statistics import FrameStackSpec, NoiseMoments, SequenceStatistics
 
 DEFAULT_FOLDS = 5
@@ -384,16 +385,12 @@ def _response_transform(spec: FrameStackSpec, channels: int, black: float) -> np
     return transform
 
 
-GRAM_COLUMNS = 4096
-"""Blocks per product in :func:`_gram`: small enough that OpenBLAS runs each on one thread (its threads' wake-up on a
-busy 2-core machine costs more than these thin products; see :mod:`processing.statistics`), large enough that the
-product runs near the core's peak."""
-
-
 def _gram(values: np.ndarray) -> np.ndarray:
-    """``values valuesᵀ`` of (features, blocks) values, summed over slices of :data:`GRAM_COLUMNS` blocks."""
+    """``values valuesᵀ`` of (features, blocks) values, summed over slices of blocks small enough for one BLAS
+    thread (:func:`processing.moment_products.serial_columns`: 240 blocks for the 33 rows of 8 raw frames)."""
     product = np.zeros((values.shape[0], values.shape[0]))
-    for start in range(0, values.shape[1], GRAM_COLUMNS):
-        part = values[:, start : start + GRAM_COLUMNS]
+    columns = serial_columns(values.shape[0], values.shape[0])
+    for start in range(0, values.shape[1], columns):
+        part = values[:, start : start + columns]
         product += part @ part.T
     return product

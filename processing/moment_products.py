@@ -23,11 +23,28 @@ DEFAULT_WORKERS = 2 if (os.cpu_count() or 1) >= 2 else 1
 
 
 PRODUCT_COLUMNS = 4096
-"""Columns per slice of the weighted moments' products (:func:`gram_matrices`), and at least per slice of the
-incremental moments' matrix–vector products (:func:`row_products`)."""
-PRODUCT_ELEMENTS = 1 << 16
-"""Matrix elements per slice of :func:`row_products`: one thread each (OpenBLAS threads a product only above
-about 10⁵ elements), and few slices for few rows (each call costs microseconds of its own)."""
+"""Columns per slice of the moments' products (:func:`row_products`, :func:`gram_matrices`): one thread each
+(OpenBLAS threads a matrix–vector product of 9 × 7 000 already, and its threads' wake-ups on a busy machine
+cost many times the product: docs/measurements.md)."""
+
+
+SERIAL_PRODUCT = 1 << 18
+"""Multiply-adds (m · n · k) of a matrix product that OpenBLAS still runs on the calling thread. Above, it splits some
+products across its threads — a (33 × 1024) Gram matrix, an (8 × 9) map of 16 320 columns — and on a busy 2-core
+machine their wake-ups cost 0.1–20 ms for a product of 0.1 ms alone (measured with ``OPENBLAS_NUM_THREADS`` 1 and 2
+interleaved, docs/speed.md)."""
+
+
+def serial_columns(rows: int, outputs: int) -> int:
+    """Columns per slice of a product ``(outputs × rows) @ (rows × columns)`` (or a Gram matrix of ``rows`` rows,
+    ``outputs = rows``) that stays within :data:`SERIAL_PRODUCT`.
+
+    Examples
+    --------
+    >>> serial_columns(33, 33), serial_columns(9, 8)
+    (240, 3640)
+    """
+    return max(1, SERIAL_PRODUCT // max(1, rows * outputs))
 
 
 @lru_cache(maxsize=4)
@@ -38,7 +55,7 @@ def thread_pool(workers: int) -> ThreadPoolExecutor:
 
 def row_products(rows: np.ndarray, row: int, among: Sequence[int] | None = None) -> np.ndarray:
     """``rows @ rows[row]`` (only the rows ``among``, the others' products 0), summed over slices of
-    :data:`PRODUCT_ELEMENTS` (at least :data:`PRODUCT_COLUMNS` columns).
+    :data:`PRODUCT_COLUMNS` columns.
 
     OpenBLAS splits one large matrix–vector product across its threads; on a busy 2-core machine
     (the capture's stream and writer threads) their wake-up costs many times the product itself
@@ -54,10 +71,10 @@ def row_products(rows: np.ndarray, row: int, among: Sequence[int] | None = None)
     products = np.zeros(rows.shape[0])
     runs = _runs(range(rows.shape[0]) if among is None else sorted(set(among)))
     vector = rows[row]
-    for first, stop in runs:
-        width = max(PRODUCT_COLUMNS, PRODUCT_ELEMENTS // (stop - first))
-        for start in range(0, rows.shape[1], width):
-            products[first:stop] += rows[first:stop, start : start + width] @ vector[start : start + width]
+    for start in range(0, rows.shape[1], PRODUCT_COLUMNS):
+        columns = slice(start, start + PRODUCT_COLUMNS)
+        for first, stop in runs:
+            products[first:stop] += rows[first:stop, columns] @ vector[columns]
     return products
 
 
