@@ -7,7 +7,7 @@ variance of every frame and their products with the ambient image lose the ambie
 (eq. 5 regresses on noisy regressors: the weights shrink towards zero, most for the LEDs the
 camera sees least). Binned statistics with an even block size also measure that noise, from
 every block's *half difference* (its samples at even ``row + column`` minus those at odd, a
-checkerboard, :func:`block_sums_and_differences`): the two halves see the same surfaces and have
+checkerboard, :func:`processing.block_sums.block_sums_and_differences`): the two halves see the same surfaces and have
 independent noise, so with ``x`` a block's row of sums and ``d`` its half difference,
 ``x xᵀ − d dᵀ = 2 (x₁ x₂ᵀ + x₂ x₁ᵀ)`` is a product of independent halves — moments without the noise
 bias, whatever the texture inside a block (an instrumental-variable estimate; no noise model needed).
@@ -22,11 +22,11 @@ Inverse-variance weights
 ------------------------
 Unweighted moments count every sample alike, so the brightest samples — a specular highlight
 at ten times the white, say — dominate the Gram matrix though their photon noise is the largest.
-With ``weighting=True`` (:class:`BlockRows`, :func:`accumulate_statistics`) each sample (block ×
+With ``weighting=True`` (:class:`BlockRows`, :func:`processing.accumulate.accumulate_statistics`) each sample (block ×
 channel) enters the moments with weight ``1 / var``, its noise variance predicted from the ambient
 frame: ``var = gain · level + read`` (a photon-transfer line fitted to the fine-scale detail of the
 ambient frame's 2 × 2 cells, :mod:`processing.noise_level`, then scaled to block sums,
-:func:`block_noise_line`). It used to be fitted to the half differences against the block sums: on a
+:func:`processing.noise_level.block_noise_line`). It used to be fitted to the half differences against the block sums: on a
 mosaic, texture filled them and the weights came out up to 20× off either way. The weights depend on the
 ambient frame alone, so a capture can apply them to every LED frame as it arrives; the half
 differences are weighted alike, so the noise correction still holds. Weighted least squares is the
@@ -96,9 +96,9 @@ def probe_stride(height: int, width: int) -> int:
 class BlockRows:
     """Block sums of an ambient + LED frame stack as the rows ``[F_1 … F_n, A, 1]`` of the moments.
 
-    The binned statistics (eq. 4–6 on ``factor × factor`` block sums, see :func:`bin_frame`) need,
+    The binned statistics (eq. 4–6 on ``factor × factor`` block sums, see :func:`processing.block_sums.bin_frame`) need,
     per frame, its block sums and which blocks saturate; then the second moments of the rows. The
-    binned pass of :func:`accumulate_statistics` adds every frame and takes the moments in one
+    binned pass of :func:`processing.accumulate.accumulate_statistics` adds every frame and takes the moments in one
     product. A capture adds each frame as it arrives (``incremental=True``): the new row's
     products with the rows already in are taken then, so once the last frame is in only its own
     block sums and one matrix–vector product remain — no full moment product on the latency path.

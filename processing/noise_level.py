@@ -266,7 +266,7 @@ def ambient_block_noise(
 ) -> NoiseLine:
     """:func:`block_noise_line` for (h, w, C) ambient block sums (raw, black ``black`` per block), its floor
     taken over the blocks the ambient frame does not saturate (``saturated``, (h, w)). Used alike by
-    :class:`BlockRows` and the tiled statistics of :mod:`processing.local`, so that both weigh the samples alike.
+    :class:`processing.block_rows.BlockRows` and the tiled statistics of :mod:`processing.local`, so that both weigh the samples alike.
     """
     levels = ambient if saturated is None else ambient[~saturated]
     return block_noise_line(pixel, factor, np.subtract(levels, black, dtype=float))

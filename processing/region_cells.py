@@ -22,7 +22,7 @@ MAX_REGION_CELLS = 6000
 
 @dataclass(frozen=True)
 class Cells:
-    """The valid cells of ``g × g`` blocks, reduced once to their statistics for :func:`segment_regions`.
+    """The valid cells of ``g × g`` blocks, reduced once to their statistics for :func:`processing.local_selection.segment_regions`.
 
     Every cell's products of its ambient and LED images (eq. 4–5), so that any region's or tile's
     statistics, and any weights' residual per cell, are sums and products over the cells.
@@ -45,7 +45,7 @@ class Cells:
     spec: FrameStackSpec | None = field(default=None, repr=False)
     """The block-level spec that maps raw moments to statistics (for :meth:`denoised_statistics`)."""
     differences: np.ndarray | None = field(default=None, repr=False)
-    """(R, N, C) every cell's half difference (the noise probe of :attr:`TiledStatistics.denoised`) in
+    """(R, N, C) every cell's half difference (the noise probe of :attr:`processing.tile_statistics.TiledStatistics.denoised`) in
     the rows ``[F_1 … F_n, A, 1]``; None when the blocks carry none."""
 
     @classmethod
@@ -54,7 +54,7 @@ class Cells:
 
         Sums of blocks obey the same linear model, so grouping only coarsens the labels. A cell is
         kept when all its blocks are valid. Each cell's statistics come from the raw moments of its
-        samples by the map of :func:`tile_statistics`: a cell is a tiny tile.
+        samples by the map of :func:`processing.tile_statistics.tile_statistics`: a cell is a tiny tile.
         """
         if group is None:
             group = max(1, int(np.ceil(np.sqrt(blocks.valid.size / MAX_REGION_CELLS))))
@@ -111,7 +111,7 @@ class Cells:
         )
 
     def denoised_statistics(self, member: np.ndarray) -> SequenceStatistics | None:
-        """:meth:`statistics` with the noise's contribution removed (:attr:`TiledStatistics.denoised`), or None.
+        """:meth:`statistics` with the noise's contribution removed (:attr:`processing.tile_statistics.TiledStatistics.denoised`), or None.
 
         The member cells' raw noise moments ``Σ d dᵀ`` are summed first and mapped once (the map is linear).
         """

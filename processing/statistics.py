@@ -181,7 +181,7 @@ class SequenceStatistics:
     """Whether the samples carry inverse-variance weights (module notes): the moments and sums are then
     weighted ones, normalised to mean weight 1 over all samples."""
     channels: ChannelMoments | None = None
-    """The same blocks' moments channel by channel (binned statistics: :class:`BlockRows`), or None; kept by
+    """The same blocks' moments channel by channel (binned statistics: :class:`processing.block_rows.BlockRows`), or None; kept by
     :meth:`denoised` and ``+``, dropped by the other derivations."""
 
     @property
