@@ -1,15 +1,8 @@
 """Sufficient statistics of a flash sequence (:mod:`processing.statistics`), accumulated in one pass over the pixels.
 
-Ambient estimation (eq. 4–6) needs only the k×k Gram matrix of the LED-only images, their
-k products with the ambient image, the ambient image's squared norm and the sample count
-(docs/architecture.md §8). They are accumulated chunk by chunk straight from the raw frames: each chunk is
-linearised (``(value − black_level) / (exposure_us · gain)``), saturated pixels are masked, the
-LED frames are differenced against the ambient frame and the products are added up. No full-size
-float copy of the stack ever exists.
-
-Frames need not light one LED each: any LED frame may drive several LEDs at any levels (a
-multiplexed sequence). With ``L`` the (n_led_frames, k) matrix of levels, the per-LED images at
-full drive are ``pinv(L) · (frames − ambient)``, applied to the statistics after accumulation.
+They are accumulated straight from the raw frames (docs/architecture.md §8): the raw second moments of the rows
+``[F_1 … F_n, A, 1]`` over the valid samples (all pixels, or block sums: :mod:`processing.block_rows`), then mapped
+to the linearised, differenced and unmixed images. No full-size float copy of the stack ever exists.
 """
 
 from __future__ import annotations

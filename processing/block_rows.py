@@ -13,9 +13,7 @@ independent noise, so with ``x`` a block's row of sums and ``d`` its half differ
 bias, whatever the texture inside a block (an instrumental-variable estimate; no noise model needed).
 Texture the halves do not share still enters ``d``: it leaves the moments unbiased where eq. 5 holds
 but makes them noisier, and it changes which fit is best where eq. 5 does not. The checkerboard cancels
-edges along the rows or the columns and ramps; the even and odd *columns* it replaced did not cancel
-edges along the columns, which on a mosaic (one CFA plane's samples 2 pixels apart) put scene texture
-in 85 % of the simulated chart's probes (docs/raw-frames.md). :attr:`SequenceStatistics.noise` holds
+edges along the rows or the columns and ramps (docs/raw-frames.md: why not even and odd columns). :attr:`SequenceStatistics.noise` holds
 ``d dᵀ`` mapped like the moments, :meth:`SequenceStatistics.denoised` the corrected statistics.
 
 Inverse-variance weights
@@ -26,8 +24,8 @@ With ``weighting=True`` (:class:`BlockRows`, :func:`processing.accumulate.accumu
 channel) enters the moments with weight ``1 / var``, its noise variance predicted from the ambient
 frame: ``var = gain · level + read`` (a photon-transfer line fitted to the fine-scale detail of the
 ambient frame's 2 × 2 cells, :mod:`processing.noise_level`, then scaled to block sums,
-:func:`processing.noise_level.block_noise_line`). It used to be fitted to the half differences against the block sums: on a
-mosaic, texture filled them and the weights came out up to 20× off either way. The weights depend on the
+:func:`processing.noise_level.block_noise_line`; not the half differences, which texture fills on a mosaic,
+docs/raw-frames.md). The weights depend on the
 ambient frame alone, so a capture can apply them to every LED frame as it arrives; the half
 differences are weighted alike, so the noise correction still holds. Weighted least squares is the
 best linear unbiased estimate of eq. 5 when the residual's noise is that of the ambient frame; the
@@ -307,7 +305,7 @@ class BlockRows:
         every = self._filled  # the ambient row's own products are taken by add() right after
         chunk = DEFAULT_CHUNK_PIXELS * self.block_shape[1]
         # The ambient first (the usual order) leaves the ones row alone: a (1, K) gram is BLAS's threaded
-        # dot, whose wake-ups on a busy machine cost 10-20 ms; its product in slices (row_products) does not.
+        # dot (docs/measurements.md); its product in slices (row_products) is not.
         gram = (
             (lambda rows: row_products(rows, 0)[:, None])
             if len(every) == 1

@@ -112,9 +112,8 @@ def saturated_blocks(plane: np.ndarray, factor: int, white: float) -> np.ndarray
 
     Block maxima first, then one comparison: the maxima over a block's ``factor`` rows run along
     whole contiguous rows, and the maxima over its ``factor · C`` columns work on data already
-    ``factor`` times smaller — about 3× faster than comparing every sample and reducing the
-    boolean mask (this runs on the capture's latency path for the last frame). ``fmax`` ignores
-    NaN as the comparison does.
+    ``factor`` times smaller (this runs on the capture's latency path for the last frame). ``fmax``
+    ignores NaN as the comparison does.
     """
     height, width, channels = plane.shape[0] // factor, plane.shape[1] // factor, plane.shape[2]
     groups = plane[: height * factor, : width * factor].reshape(height, factor, width * factor * channels)

@@ -34,9 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 FIT_CELLS = 4096
-"""Cells a line is fitted to at most: whole rows of cells, evenly strided over the frame. The sim rig's
-106 × 112 mosaic has 2 912, all used (with half of them the chart's gain came out 10 % low); on a
-1280 × 1024 frame the fit costs about 1 ms (32 768 cells cost 30)."""
+"""Cells a line is fitted to at most: whole rows of cells, evenly strided over the frame (why this many:
+docs/speed.md, Raw frames)."""
 MIN_CELLS = 64
 """Fewer usable cells than this give no line (:func:`detail_noise_line` returns None)."""
 LEVEL_BANDS = 16
