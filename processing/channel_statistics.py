@@ -31,7 +31,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.processing import frame_kernels
-from msflash.processing.block_sums import block_sums_and_differences, cfa_planes, plane_shape, saturated_blocks
+from msflash.processing.block_sums import (
+    block_sums,
+    block_sums_and_differences,
+    cfa_planes,
+    plane_shape,
+    saturated_blocks,
+)
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.moment_products import serial_columns
 from msflash.processing.statistics import FrameStackSpec, NoiseMoments, SequenceStatistics
@@ -313,17 +319,11 @@ def _numpy_block_sums(
     plane: np.ndarray, factor: int, white: float, rows: np.ndarray, probe_rows: np.ndarray | None
 ) -> np.ndarray | None:
     """:func:`_compiled_block_sums` of an (H, W, C) plane in numpy (the same integers)."""
-    channels, height, width = rows.shape
     if probe_rows is not None:
         block, half = block_sums_and_differences(plane, factor)
         probe_rows[...] = half.transpose(2, 0, 1)
     else:
-        block = (
-            plane[: height * factor, : width * factor]
-            .astype(float)
-            .reshape(height, factor, width, factor, channels)
-            .sum(axis=(1, 3))
-        )
+        block = block_sums(plane, factor)
     rows[...] = block.transpose(2, 0, 1)
     if np.issubdtype(plane.dtype, np.floating) or np.iinfo(plane.dtype).max >= white:
         if plane.max() >= white:
