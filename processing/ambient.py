@@ -679,7 +679,7 @@ def estimate_ambient(
     Parameters
     ----------
     statistics
-        Sufficient statistics of the sequence (:func:`processing.statistics.accumulate_statistics`).
+        Sufficient statistics of the sequence (:func:`processing.accumulate.accumulate_statistics`).
     led_spectra
         The k LED spectra at full drive, in photons, in the order of the statistics.
     method

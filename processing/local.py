@@ -29,7 +29,7 @@ Noise correction
 The LED-only images are differences of noisy frames, so the moments of eq. 5 carry the noise
 variance (errors in variables). :func:`tile_statistics` also measures it per block from the
 difference of two interleaved column halves (:attr:`TiledStatistics.denoised`), and the local model
-is solved on the corrected statistics, as the global estimate is (:mod:`processing.statistics` measures
+is solved on the corrected statistics, as the global estimate is (:mod:`processing.block_rows` measures
 the same probe for the whole frame; docs/architecture.md §8: the noise is measured from the data,
 without a noise model).
 
@@ -62,16 +62,13 @@ from msflash.processing.local_selection import (
     segment_regions,
     select_model,
 )
+from msflash.processing.region_cells import Cells
 from msflash.processing.spectra import Spectra, require_unit
-from msflash.processing.statistics import (
-    FrameStackSpec,
-    SequenceStatistics,
-)
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import frame_coefficients
 from msflash.processing.tile_statistics import (
     DEFAULT_TILES,
     BlockData,
-    Cells,
     TileBlocks,
     TiledStatistics,
     tile_edges,
@@ -187,7 +184,7 @@ def estimate_local(
         region labels use the statistics as observed. False: everything on the statistics as observed.
     global_estimate
         The whole-frame estimate (eq. 4–6) when the caller has it (a sequence's, from the whole frame's
-        statistics, :func:`processing.statistics.accumulate_statistics`), used as it is: its α scores the
+        statistics, :func:`processing.accumulate.accumulate_statistics`), used as it is: its α scores the
         selection. None: solved on :meth:`TiledStatistics.total` (why the two can differ on large frames:
         docs/local-estimation.md).
     """

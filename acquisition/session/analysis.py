@@ -31,13 +31,14 @@ from msflash.acquisition.session.sequence_spectra import (
     spectrum_in_sequence_unit,
     target_illuminant,
 )
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
 from msflash.processing.channel_statistics import plane_channels
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
 from msflash.processing.flicker import FlickerCheck, check_flicker, with_ambient_gains, with_fit
 from msflash.processing.model_error import reference_for, with_model_error
-from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import SynthesisStream, synthesize
 
 

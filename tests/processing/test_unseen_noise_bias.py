@@ -18,8 +18,11 @@ import pytest
 
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis, sequence_spectra
+from msflash.processing.accumulate import accumulate_statistics
+from msflash.processing.block_rows import BlockRows
+from msflash.processing.block_sums import cfa_planes
 from msflash.processing.local import tile_statistics
-from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, cfa_planes
+from msflash.processing.statistics import FrameStackSpec
 from tests.processing.unseen_sequences import MARGIN, Case, led_bound, render_case, rmse
 
 
