@@ -36,6 +36,7 @@ from msflash.acquisition.session.engine import CaptureResult, FrameEvent
 from msflash.processing import frame_kernels
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.flicker import corrected_tiles
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, TileBlocks, estimate_local
 from msflash.processing.statistics import (
     BlockRows,
@@ -321,6 +322,8 @@ class EstimateStream:
             tiled = self._tiles.statistics(self.layout().spec, grid)
         except SpectralDataError as err:
             raise RecordingError(f"{self.header.path}: {err}") from err
+        # The whole frame's flicker read corrects the tiles too (processing.flicker: the same shares, exactly).
+        tiled = corrected_tiles(tiled, whole_frame.flicker)
         return estimate_local(
             tiled, led_spectra_photons(self.header), method, solver, alpha, global_estimate=whole_frame
         )
