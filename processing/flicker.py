@@ -31,8 +31,9 @@ frames from which the extra ambient had been subtracted pixel by pixel (tests/pr
 turns that into colour the two directions do not hold (an amber LED where R and G cross reads up to 0.2 under steady
 light): each LED's sigma adds :data:`MODEL_ERROR` and :data:`CURVATURE_ERROR` times its :func:`curvature_share` to
 the noise's, both set on the harness's tuning lamp kinds under steady light (docs/flicker.md). Flicker is detected
-when some LED's ``|ê_i|`` exceeds :data:`DETECTION_Z` sigmas; the statistics are then corrected by each ``ê_i``
-shrunk by its own sigma (a read within its sigma of zero is not applied). What was read is reported in every case
+when some LED's ``|ê_i|`` exceeds :data:`DETECTION_Z` sigmas; the statistics are then corrected by every ``ê_i`` as
+read (not shrunk towards 0: a share left in the LED images costs the light models far more than the LED model,
+docs/decisions/flicker-every-model.md). What was read is reported in every case
 (:class:`FlickerCheck`). Frame timestamps and exposures, when the sequence has them, fit the mains frequency and
 phase to the gains (:func:`fit_mains`) for the report only.
 """
@@ -127,7 +128,7 @@ class FlickerCheck:
     """Why it was not checked, or what was decided and why."""
     warnings: tuple[str, ...] = field(default=())
     applied_offsets: np.ndarray | None = None
-    """The shares the LED images were corrected by (``ê`` shrunk by each LED's sigma), or None when not corrected."""
+    """The shares the LED images were corrected by (``ê`` as read), or None when not corrected."""
 
     def summary(self) -> str | None:
         """One line for the run's output when flicker was detected (None otherwise: a steady light stays quiet)."""
@@ -359,9 +360,10 @@ def check_flicker(
         if detected
         else f"no LED's ambient share is beyond {DETECTION_Z:g} σ (largest {float(np.max(z)):.1f} σ): steady"
     )
-    # Each LED's share shrunk by its own evidence (positive-part James–Stein): a read within its sigma of 0 is not
-    # applied, one many sigmas out nearly in full (an LED whose read the surfaces bias weighs little).
-    applied = offsets * np.clip(1.0 - (sigmas / np.maximum(np.abs(offsets), 1e-300)) ** 2, 0.0, 1.0)
+    # Every LED's share as read, once some LED shows flicker: shrinking each towards 0 by its own sigma (positive-part
+    # James–Stein, issue 30's first version) left up to 0.07 of an LED's image as ambient, which the families and the
+    # light prior read as the scene's colour (docs/decisions/flicker-every-model.md).
+    applied = offsets
     corrected = detected and _APPLY_GAINS.get()
     if detected and not corrected:
         reason = reason.replace("applied to the LED images", "not applied (switched off)")
