@@ -46,6 +46,17 @@ def test_anti_flicker_exposures_are_whole_periods(tmp_path: Path, capsys: pytest
     assert "shorter than one flicker period (10.00 ms)" in capsys.readouterr().err
 
 
+def test_the_runs_flash_recapture_is_named_when_no_whole_period_fits(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """In a booth the flash outshines the room: the re-capture's predicted exposure (a few ms) is shorter than a
+    flicker period, so it is kept and named (the rounding itself: tests/acquisition/session/test_anti_flicker.py)."""
+    argv = ["run", "--out", str(tmp_path / "r"), "--flicker", "100:0.3", "--anti-flicker", "50", "--seed", "1"]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "warning: flash exposure" in err and "shorter than one flicker period (10.00 ms, --anti-flicker 50)" in err
+
+
 @pytest.mark.parametrize(
     "argv, named",
     [
