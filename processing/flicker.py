@@ -76,8 +76,9 @@ MAINS_TOLERANCE = 0.01
 
 _CHANNEL_INDEX = {"R": 0, "G": 1, "B": 2}
 
-_APPLY_GAINS: ContextVar[bool] = ContextVar("msflash_apply_ambient_gains", default=True)
-"""Whether a detected flicker's gains are applied (:func:`gains_not_applied` switches it off, for studies)."""
+_APPLY_GAINS: ContextVar[bool | np.ndarray] = ContextVar("msflash_apply_ambient_gains", default=True)
+"""True: a detected flicker's gains are applied as read; False: none are (:func:`gains_not_applied`); an array: these
+shares are applied whatever was read (:func:`gains_applied`). The last two serve studies."""
 
 
 @contextmanager
@@ -85,6 +86,17 @@ def gains_not_applied() -> Iterator[None]:
     """Within the block, flicker is still read and reported but no statistics are corrected: what the estimate
     would be without the gain model (the flicker study's *plain* columns, tests/harness/flicker.py)."""
     token = _APPLY_GAINS.set(False)
+    try:
+        yield
+    finally:
+        _APPLY_GAINS.reset(token)
+
+
+@contextmanager
+def gains_applied(offsets: np.ndarray) -> Iterator[None]:
+    """Within the block, every check corrects the LED images by ``offsets`` (one share per LED) whatever it read:
+    what the estimate would be with a perfect read (the flicker study's *oracle* columns, tests/harness/flicker.py)."""
+    token = _APPLY_GAINS.set(np.array(offsets, dtype=float))
     try:
         yield
     finally:
@@ -364,8 +376,12 @@ def check_flicker(
     # James–Stein, issue 30's first version) left up to 0.07 of an LED's image as ambient, which the families and the
     # light prior read as the scene's colour (docs/decisions/flicker-every-model.md).
     applied = offsets
-    corrected = detected and _APPLY_GAINS.get()
-    if detected and not corrected:
+    setting = _APPLY_GAINS.get()
+    corrected = detected and setting is True
+    if isinstance(setting, np.ndarray):
+        applied, corrected = setting, True
+        reason += "; the shares given applied instead (a study's oracle)"
+    elif detected and not corrected:
         reason = reason.replace("applied to the LED images", "not applied (switched off)")
     return FlickerCheck(
         True,
