@@ -334,7 +334,7 @@ def report(rows: list[Row], command: str) -> str:
         "| case | kind | split | camera | CFA | "
         + " | ".join(VARIANTS)
         + " | true spread | gain error | alarm | detected | "
-        + " | ".join(f"{m} steady / flicker / plain" for m in MODELS if m != "led")
+        + " | ".join(f"{m} steady / flicker / plain / true gains" for m in MODELS if m != "led")
         + " |",
         "|---|---|---|---|---|" + "---|" * (len(VARIANTS) + 4 + len(MODELS) - 1),
     ]
@@ -345,7 +345,9 @@ def report(rows: list[Row], command: str) -> str:
             + f" | {r.true_spread:.3f} | {r.gain_error:.3f} | {'yes' if r.detected_steady else ''} | "
             f"{'yes' if r.detected_flicker else ''} | "
             + " | ".join(
-                f"{r.ratios[f'{m} steady']:.3f} / {r.ratios[f'{m} flicker']:.3f} / {r.ratios[f'{m} flicker plain']:.3f}"
+                " / ".join(
+                    f"{r.ratios[f'{m} {v}']:.3f}" for v in ("steady", "flicker", "flicker plain", "flicker oracle")
+                )
                 for m in MODELS
                 if m != "led"
             )
@@ -366,7 +368,9 @@ def main(argv: list[str] | None = None) -> int:
             rows = list(pool.map(measure, cases, chunksize=1))
     else:
         rows = [measure(case) for case in cases]
-    command = "python -m tests.harness.flicker" + (f" --per-kind {args.per_kind}" if args.per_kind != PER_KIND else "")
+    command = "python -m tests.harness.flicker --jobs 2" + (
+        f" --per-kind {args.per_kind}" if args.per_kind != PER_KIND else ""
+    )
     text = report(rows, command + (f" --out {args.out}" if args.out else ""))
     if args.out:
         Path(args.out).write_text(text)
