@@ -327,14 +327,21 @@ def estimate_from_statistics(
     """The ambient estimate of a sequence's statistics (eq. 4–6) with the LED model's band: the one place
     every route (from disk, live, replay) estimates. ``model``: one prepared for the sequence's LEDs (a
     live session prepares it before the first frame), else made here."""
-    check = flicker_check(sequence, statistics)
-    if check.corrected and check.applied_offsets is not None:
-        statistics = with_ambient_gains(statistics, check.applied_offsets)
+    statistics, check = flicker_corrected(sequence, statistics)
     if model is None:
         estimate = estimate_ambient(statistics, led_spectra_photons(sequence), method, alpha)
     else:
         estimate = model.estimate(statistics, method, alpha)
     return replace(with_model_band(estimate, sequence), flicker=check)
+
+
+def flicker_corrected(sequence: Sequence, statistics: SequenceStatistics) -> tuple[SequenceStatistics, FlickerCheck]:
+    """The statistics with each LED frame's ambient gain taken out where flicker is detected, and the check
+    (:func:`flicker_check`): what every estimate of a sequence, and a live flash decision, is made from."""
+    check = flicker_check(sequence, statistics)
+    if check.corrected and check.applied_offsets is not None:
+        statistics = with_ambient_gains(statistics, check.applied_offsets)
+    return statistics, check
 
 
 def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> FlickerCheck:

@@ -26,6 +26,12 @@ def test_a_flickering_lamp_is_found_reported_and_recorded(tmp_path: Path, capsys
     # The recorded sequence tells the same from disk.
     assert main(["estimate", str(out / "sequence")]) == 0
     assert "msflash: flicker: the LED frames saw" in capsys.readouterr().err
+    # The flash re-captured live was decided from the corrected statistics: the mix the sequence gives from disk
+    # (before, the live decision took the LED images as they were: 0.050, 0.122 against 0.052, 0.128).
+    frames = json.loads((out / "sequence" / "sequence.json").read_text())["frames"]
+    (recaptured,) = [f["led_levels"] for f in frames if f["role"] == "flash"]
+    assert main(["flash", str(out / "sequence"), "--mode", "complementary", "--method", "global", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["flash_weights"] == pytest.approx(recaptured, abs=1e-9)
 
 
 def test_a_steady_lamp_raises_no_flicker(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
