@@ -293,7 +293,9 @@ class SimulatedCamera(TriggeredFrames):
             )
         return levels
 
-    def render(self, levels: Sequence[float], exposure_us: float, gain: float) -> np.ndarray:
+    def render(
+        self, levels: Sequence[float], exposure_us: float, gain: float, start_s: float | None = None
+    ) -> np.ndarray:
         """One frame of this world under the LEDs at ``levels``, exposed ``exposure_us`` at linear ``gain``.
 
         The one renderer of the simulated world: :meth:`trigger` renders each plan step with it,
@@ -307,6 +309,10 @@ class SimulatedCamera(TriggeredFrames):
             Drive level (0–1) of each LED channel during the exposure.
         exposure_us, gain
             The exposure and the linear gain of the frame.
+        start_s
+            Under a modulated ambient (mains flicker), the exposure's start on the light's clock: a camera's own
+            timestamp (the ``aravis-fake`` rig's), so the lamp keeps the time the frames are stamped with. None:
+            host pacing's simulated clock (:meth:`_mains_start`).
 
         Returns
         -------
@@ -327,7 +333,7 @@ class SimulatedCamera(TriggeredFrames):
             )
         with self._render_lock:
             if self.ambient_modulation is not None:
-                return self._render_free_running(checked, float(exposure_us), float(gain))[0]
+                return self._render_free_running(checked, float(exposure_us), float(gain), start_s)[0]
             return self._render(checked, float(exposure_us), float(gain))
 
     def _mains_start(self, exposure_us: float, skew_s: float) -> float:
@@ -344,13 +350,13 @@ class SimulatedCamera(TriggeredFrames):
         return start
 
     def _render_free_running(
-        self, levels: tuple[float, ...], exposure_us: float, gain: float
+        self, levels: tuple[float, ...], exposure_us: float, gain: float, start_s: float | None = None
     ) -> tuple[np.ndarray, float]:
         """A frame under a modulated ambient without a light over time (:attr:`exposure_light` None): the pixels
         and the exposure's start (s) on the ambient's clock (:meth:`_mains_start`); every row sees the ambient's
         mean over its own window."""
         request = ExposureRequest(exposure_us, self.scene.shape[0], self.shutter.line_time_us, 0.0, False)
-        start = self._mains_start(exposure_us, request.skew_us * 1e-6)
+        start = self._mains_start(exposure_us, request.skew_us * 1e-6) if start_s is None else start_s
         light = RowLight(start, np.broadcast_to(np.asarray(levels, dtype=float), (request.rows, len(levels))))
         ambient = ambient_over_rows(self.ambient_modulation, light, request)
         return self._render_rows(light, ambient, exposure_us, gain), start

@@ -98,6 +98,7 @@ class WiredFakeCamera:
         self._pending: collections.deque[tuple[float, ...]] = collections.deque()
         self._pending_lock = threading.Lock()
         self._rendered_levels: list[tuple[float, ...]] = []
+        self._first_timestamp_ns: int | None = None
 
     @property
     def suggested_exposure_us(self) -> float:
@@ -247,7 +248,7 @@ class WiredFakeCamera:
                 "one frame per trigger"
             )
         gain = self._true_gain() if self._true_gain is not None else frame.gain
-        pixels = self.world.render(levels, frame.exposure_us, gain)
+        pixels = self.world.render(levels, frame.exposure_us, gain, self._lamp_time_s(frame.timestamp_ns))
         if pixels.shape != frame.pixels.shape:
             raise CameraError(
                 f"aravis-fake: the scene renders {pixels.shape} but the fake delivers "
@@ -256,6 +257,16 @@ class WiredFakeCamera:
         with self._pending_lock:
             self._rendered_levels.append(levels)
         return dataclasses.replace(frame, pixels=pixels)
+
+    def _lamp_time_s(self, timestamp_ns: int) -> float | None:
+        """A frame's exposure start on a flickering lamp's clock: its timestamp on the camera's clock, from the
+        first frame's (the mains keeps real time, and so does the fake's clock: the lamp is where the recorded
+        timestamps say, as with a real camera). None under a steady ambient or without a timestamp."""
+        if getattr(self.world, "ambient_modulation", None) is None or timestamp_ns <= 0:
+            return None
+        if self._first_timestamp_ns is None:
+            self._first_timestamp_ns = timestamp_ns
+        return (timestamp_ns - self._first_timestamp_ns) * 1e-9
 
     def _take_levels(self) -> tuple[float, ...] | None:
         with self._pending_lock:

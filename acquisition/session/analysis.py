@@ -223,14 +223,21 @@ def estimate_from_statistics(
     """The ambient estimate of a sequence's statistics (eq. 4–6) with the LED model's band: the one place
     every route (from disk, live, replay) estimates. ``model``: one prepared for the sequence's LEDs (a
     live session prepares it before the first frame), else made here."""
-    check = flicker_check(sequence, statistics)
-    if check.corrected and check.applied_offsets is not None:
-        statistics = with_ambient_gains(statistics, check.applied_offsets)
+    statistics, check = flicker_corrected(sequence, statistics)
     if model is None:
         estimate = estimate_ambient(statistics, led_spectra_photons(sequence), method, alpha)
     else:
         estimate = model.estimate(statistics, method, alpha)
     return replace(with_model_band(estimate, sequence), flicker=check)
+
+
+def flicker_corrected(sequence: Sequence, statistics: SequenceStatistics) -> tuple[SequenceStatistics, FlickerCheck]:
+    """The statistics with each LED frame's ambient gain taken out where flicker is detected, and the check
+    (:func:`flicker_check`): what every estimate of a sequence, and a live flash decision, is made from."""
+    check = flicker_check(sequence, statistics)
+    if check.corrected and check.applied_offsets is not None:
+        statistics = with_ambient_gains(statistics, check.applied_offsets)
+    return statistics, check
 
 
 def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> FlickerCheck:
@@ -239,7 +246,6 @@ def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> Flicker
     responsivities = sequence.camera_responsivities()
     channels_of = plane_channels(sequence.camera.cfa) if statistics.channels is not None else None
     stack = [i for i, e in enumerate(sequence.frames) if e.role == "led"]
-    ambient = next((i for i, e in enumerate(sequence.frames) if e.role == "ambient"), None)
     levels = np.array([sequence.frames[i].led_levels for i in stack], dtype=float)
     if not stack or levels.shape[1] != statistics.n_leds:  # a header written so far (a live capture): one LED a frame
         levels = np.eye(statistics.n_leds)
@@ -250,9 +256,17 @@ def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> Flicker
         channels_of,
         levels,
     )
+    return with_mains_fit(check, sequence)
+
+
+def with_mains_fit(check: FlickerCheck, sequence: Sequence) -> FlickerCheck:
+    """``check`` with the mains fitted to its frame gains at the frames' timestamps, where ``sequence`` records them
+    (a capture's estimate is made from a header without frames: the run fits again on the sequence it wrote)."""
+    stack = [i for i, e in enumerate(sequence.frames) if e.role == "led"]
+    ambient = next((i for i, e in enumerate(sequence.frames) if e.role == "ambient"), None)
     order = [] if ambient is None else [ambient, *stack]
     stamps = [sequence.frames[i].extra.get("timestamp_ns") for i in order]
-    if order and all(isinstance(v, int | float) for v in stamps):
+    if order and all(isinstance(v, int | float) and not isinstance(v, bool) for v in stamps):
         check = with_fit(
             check,
             np.array(stamps, dtype=float) * 1e-9,

@@ -40,6 +40,7 @@ from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.block_rows import BlockRows
 from msflash.processing.block_sums import plane_shape
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.flicker import corrected_tiles
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, TileBlocks, estimate_local
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 
@@ -319,6 +320,8 @@ class EstimateStream:
             tiled = self._tiles.statistics(self.layout().spec, grid)
         except SpectralDataError as err:
             raise RecordingError(f"{self.header.path}: {err}") from err
+        # The whole frame's flicker read corrects the tiles too (processing.flicker: the same shares, exactly).
+        tiled = corrected_tiles(tiled, whole_frame.flicker)
         return estimate_local(
             tiled, led_spectra_photons(self.header), method, solver, alpha, global_estimate=whole_frame
         )

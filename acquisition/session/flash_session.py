@@ -209,6 +209,9 @@ class FlashSession:
         the test patterns of the aravis fake).
         """
         statistics = self.statistics()  # the stream is live: no compiling between the LED frames and the flash
+        # A flickering ambient's gains out, as the reported estimate takes them (docs/flicker.md): the flash mix is
+        # the estimate's.
+        statistics, _ = analysis.flicker_corrected(self.header, statistics)
         raw_weights, alpha_used = self.ambient_model.weights(statistics, self.method, self.alpha)
         weights = np.asarray(raw_weights, dtype=float)
         if sanitise:

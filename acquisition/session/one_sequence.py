@@ -204,7 +204,12 @@ def _light_models(sequence: Sequence, settings: EstimateSettings, report: Report
         sequence, stack, settings.method, settings.solver, settings.alpha, settings.tiles, settings.bin_factor
     )
     refuse_dark_ambient(sequence, led, "estimate")
-    payload, chosen, reason = with_model_choice(sequence, stack, payload, settings.model, varies, reference)
+    payload, chosen, reason = with_model_choice(
+        sequence, stack, payload, settings.model, varies, reference, led.flicker
+    )
+    flicker = led.flicker.summary() if led.flicker is not None else None
+    if flicker is not None:  # docs/flicker.md
+        report(flicker)
     for warning in payload["warnings"]:
         report(f"warning: {warning}")
     return EstimateResult(sequence, payload, choice=(chosen, reason))

@@ -16,7 +16,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Sequence as Seq
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from warnings import WarningMessage
 
@@ -28,7 +28,7 @@ from msflash.acquisition.devices.replay_camera import format_levels, levels_matc
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.progress import count, progress
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import SequenceFrame
+from msflash.acquisition.sequence.format import Sequence, SequenceFrame
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.sequence.writer import SequenceWriter, as_recorded
 from msflash.acquisition.session import analysis
@@ -273,6 +273,14 @@ class StreamFlash(LedFrames):
         return FlashChoice(tuple(float(v) for v in levels), float(flash_us))
 
 
+def _fitted(estimate: AmbientEstimate, reread: EstimateStream | None, recorded: Sequence) -> AmbientEstimate:
+    """The estimate with the mains fitted to its flicker gains at the frames' timestamps: the live stream's header
+    has no frames yet, the sequence written has (docs/flicker.md)."""
+    if estimate.flicker is None or reread is not None:
+        return estimate
+    return replace(estimate, flicker=analysis.with_mains_fit(estimate.flicker, recorded))
+
+
 def run_one_stream(
     rig: Rig,
     writer: AsyncSequenceWriter,
@@ -307,7 +315,9 @@ def run_one_stream(
     # from memory; the reported estimate is the statistics accumulated as they arrived (no second pass).
     recorded = writer.flush()
     stack = analysis.load_frame_stack(recorded, [frame.pixels for frame in flash.frames])
-    estimate = (flash.reread or flash.session.stream).estimate(options.solver, options.alpha)
+    estimate = _fitted(
+        (flash.reread or flash.session.stream).estimate(options.solver, options.alpha), flash.reread, recorded
+    )
     both = solve_both(flash.session, estimate.ambient_weights, options.mode, solved={options.mode: flash.chosen})
     names = [led.name for led in writer.sequence.leds]
     captured = led_capture(rig, names, exposure, flash.frames, list(entries[:-1]), flash.last_frame_at)
@@ -342,7 +352,7 @@ def run_two_captures(
         sequence = read_sequence(writer.path.parent)
         statistics = stream_sequence(sequence, options.bin_factor)
     stack = analysis.load_frame_stack(sequence, [frame.pixels for frame in captured.frames])
-    estimate = statistics.estimate(options.solver, options.alpha)
+    estimate = _fitted(statistics.estimate(options.solver, options.alpha), None, sequence)
     both = solve_both(SequenceFlashes(sequence, options.target), estimate.ambient_weights, options.mode)
     solutions, caught = both.solutions, both.warnings
     levels = np.clip(solutions[options.mode].flash_weights, 0.0, 1.0)
