@@ -41,6 +41,8 @@ from msflash.acquisition.devices.exposure_light import (
     ambient_over_rows,
 )
 from msflash.acquisition.devices.frame_queue import TriggeredFrames
+from msflash.acquisition.devices.image_format import ImageFormat, ImageFormatRequest, ImageLimits
+from msflash.acquisition.devices.sim_readout import SimReadout
 from msflash.acquisition.errors import CameraError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.processing import datasets, lights
@@ -61,10 +63,6 @@ from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid, re
 
 LedLevelsSource = Callable[[], Sequence[float]]
 """Returns the drive level (0–1) of every LED channel at the moment it is called."""
-
-_GENICAM_BAYER = {"RGGB": "BayerRG", "BGGR": "BayerBG", "GRBG": "BayerGR", "GBRG": "BayerGB"}
-_GENICAM_BITS = (8, 10, 12, 14, 16)
-"""Bit depths GenICam names unpacked formats by (BayerRG12, RGB12 …); others take their container's."""
 
 SIM_DEFAULT_CFA = "RGGB"
 """The ``sim`` rig's camera sends a raw RGGB mosaic, 12-bit (:func:`processing.image_formation.machine_vision_sensor`),
@@ -179,6 +177,8 @@ class SimulatedCamera(TriggeredFrames):
         self._free_end_s = 0.0
         self._pacing_rng = np.random.default_rng([seed, 0x0F11C7E5, 1])
         self._latency_rng = np.random.default_rng(seed + 7919)
+        self.readout = SimReadout(scene.shape, sensor.cfa, sensor.bit_depth)
+        """Binning, ROI and pixel format applied to each rendered frame (:mod:`acquisition.devices.sim_readout`)."""
 
     # -- ground truth and identity ------------------------------------------------------------
     @property
@@ -194,29 +194,51 @@ class SimulatedCamera(TriggeredFrames):
 
     @property
     def info(self) -> CameraInfo:
-        """Identity and pixel encoding; ``extra`` names the ground-truth spectra."""
-        depth = self.sensor.bit_depth
-        bits = depth if depth in _GENICAM_BITS else 8 if depth <= 8 else 16
-        pixel_format = f"RGB{bits}" if self.sensor.cfa is None else f"{_GENICAM_BAYER[self.sensor.cfa]}{bits}"
-        height, width = self.scene.shape
+        """Identity and pixel encoding as read out now; ``extra`` names the ground-truth spectra."""
+        image = self.readout.format
+        black, white = self.readout.levels(self.sensor.black_level, self.sensor.white_level)
         return CameraInfo(
             vendor="msflash",
             model=self._name,
             serial=f"SIM-{self.seed}",
-            pixel_format=pixel_format,
+            pixel_format=image.pixel_format,
             cfa=self.sensor.cfa,
-            black_level=self.sensor.black_level,
-            white_level=self.sensor.white_level,
-            width=width,
-            height=height,
+            black_level=black,
+            white_level=white,
+            width=image.roi[2],
+            height=image.roi[3],
             extra={
                 "simulated": True,
-                "bit_depth": self.sensor.bit_depth,
+                "bit_depth": self.readout.out_bits,
                 "ambient": self.ambient.source,
                 "leds": self.led_spectra.names,
                 "responsivity": self.camera_responsivities.source,
+                **({"binning": list(image.binning)} if image.binning != (1, 1) else {}),
             },
         )
+
+    # -- the image format, between acquisitions ------------------------------------------------
+    @property
+    def image_format(self) -> ImageFormat:
+        """ROI, binning and pixel format in force."""
+        return self.readout.format
+
+    def image_limits(self) -> ImageLimits:
+        """What this camera allows now (:class:`~acquisition.devices.sim_readout.SimReadout`'s rules)."""
+        return self.readout.limits(self._label)
+
+    def set_image_format(self, request: ImageFormatRequest) -> ImageFormat:
+        """Stop streaming and take ``request``; ``CameraSettingError`` (nothing changed) for what the twin refuses.
+
+        Frames queued before are dropped (their size is the old one); the next ``prepare`` starts afresh.
+        """
+        self._check_open()
+        readout = self.readout.applied(request, self._label)
+        with self._condition:
+            self._started = False
+            self._queue.clear()
+            self.readout = readout
+        return readout.format
 
     # -- the Camera protocol ------------------------------------------------------------------
     def prepare(self, plan: CapturePlan) -> None:
@@ -315,8 +337,8 @@ class SimulatedCamera(TriggeredFrames):
         Returns
         -------
         numpy.ndarray
-            Raw values (``sensor.dtype``) as the sensor model delivers them: (H, W) for a mosaic, else
-            (H, W, 3).
+            Raw values as :attr:`readout` delivers them (the sensor model's, binned, cut to the ROI, in the
+            pixel format): (H, W) for a mosaic, else (H, W, 3).
 
         Raises
         ------
@@ -331,8 +353,8 @@ class SimulatedCamera(TriggeredFrames):
             )
         with self._render_lock:
             if self.ambient_modulation is not None:
-                return self._render_free_running(checked, float(exposure_us), float(gain))[0]
-            return self._render(checked, float(exposure_us), float(gain))
+                return self.readout.read(self._render_free_running(checked, float(exposure_us), float(gain))[0])
+            return self.readout.read(self._render(checked, float(exposure_us), float(gain)))
 
     def _mains_start(self, exposure_us: float, skew_s: float) -> float:
         """The next exposure's start on the modulated ambient's clock (s).
@@ -413,7 +435,7 @@ class SimulatedCamera(TriggeredFrames):
                     # Under a modulated ambient the timestamp is the exposure's start on the light's clock, as a
                     # camera's own clock dates its exposures (what the flicker fit reads).
                     stamp = self._clock_ns if start_s is None else int(round(start_s * 1e9))
-                    frame = RawFrame(pixels, self._frame_id, stamp, step.exposure_us, step.gain)
+                    frame = RawFrame(self.readout.read(pixels), self._frame_id, stamp, step.exposure_us, step.gain)
                     self._rendered_levels.append(levels)
             except BaseException as err:
                 # next_frame raises it in this frame's place: on the booth's trigger line nobody else

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 from aiohttp import WSMsgType, web
 
+from msflash.acquisition.app.live.camera_format import camera_format_json, format_request
 from msflash.acquisition.app.live.charts import run_charts
 from msflash.acquisition.app.live.clients import Outbox, close_all
 from msflash.acquisition.app.live.mix_preview import MixPreview, preview_samples
@@ -116,11 +117,10 @@ class LiveServer:
         self.stream = LiveStream(rig)
         info = rig.camera.info  # read once: on a real camera each read is feature round trips
         self.camera_model = info.model
-        self.camera_format = (
-            f"{info.pixel_format} · {info.width} × {info.height} px · ROI, binning and pixel format are the "
-            "camera's own (msflash's camera layer does not set them yet)"
-        )
+        self.camera_format: dict[str, Any] = {}
+        """The frame's size and format, and what the camera allows (:func:`camera_format_json`)."""
         self.renderer = PreviewRenderer(info, rig.camera_responsivities)
+        self._camera_changed(info)
         self.state = LiveState()
         self.rig_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="msflash-rig")
         self.clients: set[Outbox] = set()
@@ -172,6 +172,7 @@ class LiveServer:
         app.router.add_post("/api/mix", self._post_mix)
         app.router.add_post("/api/mix-fire", self._post_mix_fire)
         app.router.add_post("/api/snapshot", self._post_snapshot)
+        app.router.add_post("/api/camera-format", self._post_camera_format)
         app.router.add_get("/api/pixel", self._get_pixel)
         app.on_startup.append(self._on_startup)
         app.on_shutdown.append(self._on_shutdown)
@@ -397,6 +398,31 @@ class LiveServer:
         await self._push_state()
         return web.json_response(self.state_json())
 
+    async def _post_camera_format(self, request: web.Request) -> web.Response:
+        """``{"roi": [x, y, w, h]}``, ``{"binning": [h, v]}``, ``{"pixel_format": name}``: set between frames (the
+        stream stops, the camera takes it, the next frame streams at the new size); refused: 400 with the camera's
+        one-line reason, nothing else changed."""
+        body = await json_object(request)
+        self._busy()
+        image_request = format_request(body)
+        await self._on_rig(self._set_camera_format, image_request)
+        self.state.error = None
+        await self._push_state()
+        return web.json_response(self.state_json())
+
+    def _set_camera_format(self, request: Any) -> None:
+        """Set the format on the rig thread; the preview, readout and page follow what the camera reads back."""
+        try:
+            self.stream.set_image_format(request)
+        finally:
+            self._camera_changed(self.rig.camera.info)
+
+    def _camera_changed(self, info: Any) -> None:
+        """The camera's format may have changed: the renderer (CFA, levels), the last frame and the page's figures."""
+        self.renderer = PreviewRenderer(info, self.rig.camera_responsivities)
+        self._last_raw = None
+        self.camera_format = camera_format_json(info, self.stream)
+
     async def _post_levels(self, request: web.Request) -> web.Response:
         body = await json_object(request)
         self._busy()
@@ -603,6 +629,12 @@ class LiveServer:
         folder = run_folder(self.runs, mix.run)
         if folder is None:
             raise UsageError(f"run '{mix.run}': its folder is gone")
+        renderer = self.renderer
+        if (renderer.cfa, renderer.black, renderer.white) != (mix.cfa, mix.spec.black_level, mix.spec.white_level):
+            raise UsageError(
+                f"run '{mix.run}': taken in another pixel format than the camera's now ({self.camera_format['summary']});"
+                " expected the run's — set it back, or fire a new sequence"
+            )
         exposure_us, gain = mix.ambient_exposure
         # A booth that dims by PWM delivers a fractional level's energy only over whole periods (as the
         # sequence's flash frame is timed): the ambient exposure rounded to them, or the error named.
@@ -620,7 +652,10 @@ class LiveServer:
         )
         synthesised, synth_saturated = mix.synthesize(levels)
         if linear.shape != synthesised.shape:
-            raise UsageError(f"camera frame {frame.pixels.shape}: not the run's frame size; expected the same camera")
+            raise UsageError(
+                f"camera frame {frame.pixels.shape}: not run '{mix.run}''s frame size; expected the run's ROI and "
+                "binning — set them back, or fire a new sequence"
+            )
         keep = ~(saturated | synth_saturated)
         difference = float(np.sqrt(np.mean((linear - synthesised)[keep] ** 2)))
         scale = float(np.sqrt(np.mean(synthesised[keep] ** 2))) or 1.0
@@ -775,7 +810,9 @@ class LiveServer:
             if failed:  # the stream works again: the error it showed is over
                 failed, self.state.error = "", None
                 await self._push_state()
-            await self._send_frame(preview, source="live")
+            frame = self._last_raw
+            raw_size = [int(frame.pixels.shape[1]), int(frame.pixels.shape[0])] if frame is not None else None
+            await self._send_frame(preview, source="live", raw_size=raw_size)
             await asyncio.sleep(max(0.0, 1.0 / MAX_FPS - (loop.time() - started)))
 
     def _grab(self) -> Preview:
@@ -784,7 +821,9 @@ class LiveServer:
         self.live_frames += 1
         return self.renderer.render(frame.pixels, self.state.overlay)
 
-    async def _send_frame(self, preview: Preview, source: str, view: str = "live") -> None:
+    async def _send_frame(
+        self, preview: Preview, source: str, view: str = "live", raw_size: list[int] | None = None
+    ) -> None:
         self.state.frames += 1
         header = json.dumps(
             {
@@ -795,6 +834,7 @@ class LiveServer:
                 "source": source,
                 "width": preview.width,
                 "height": preview.height,
+                "raw_size": raw_size,
                 "histogram": preview.histogram,
                 "saturated": preview.saturated_fraction,
                 "booth_levels": list(self.stream.last_booth_levels) if source == "live" else None,
