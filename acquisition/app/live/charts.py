@@ -25,6 +25,8 @@ from msflash.processing.spectra import Spectra, WavelengthGrid
 
 FIGSIZE = (5.6, 3.3)
 """Each chart's size in inches (matplotlib's SVG is scalable: the page sizes it)."""
+BAND_TOP = 2.5
+"""The ambient chart's range reaches at most this many times the estimate's peak (and as far below 0)."""
 
 
 def _plot_unit(wavelengths: np.ndarray, values: np.ndarray, unit: str) -> np.ndarray:
@@ -107,24 +109,33 @@ def _draw_charts(folder: Path) -> dict[str, str] | None:
     values, sigma = curves[:, 0], np.abs(curves[:, 1])
     peak = peak_of(values)
 
-    figure, axis = plt.subplots(figsize=FIGSIZE)
-    covers = "pixel noise + model error" if estimate.get("miss_risk") is not None else "pixel noise only"
-    axis.fill_between(
-        wavelengths, (values - sigma) / peak, (values + sigma) / peak, color=PALETTE.ambient, alpha=0.2, lw=0,
-        label=f"estimate ± 1σ ({covers})", gid="band",
-    )  # fmt: skip
-    axis.plot(wavelengths, values / peak, color=PALETTE.ambient, lw=2, label="estimate", gid="estimate")
     msflash = sequence.get("msflash")
     truth = msflash.get("true_ambient") if isinstance(msflash, dict) else None
+    scaled = None
     if isinstance(truth, dict) and len(truth.get("spd", [])) == wavelengths.size:
         curve = _plot_unit(wavelengths, np.asarray(truth["spd"], dtype=float)[:, None], sequence_unit)[:, 0]
         if float(curve @ curve) > 0:
-            scaled = curve * float(values @ curve) / float(curve @ curve)
-            axis.plot(
-                wavelengths, scaled / peak, color=PALETTE.truth, ls="--", lw=1.5, label="true ambient (scaled)",
-                gid="truth",
-            )  # fmt: skip
-    axis.set_ylim(min(0.0, float(np.min(values / peak)) - 0.05), 1.3)  # the band beyond it is clipped
+            scaled = curve * float(values @ curve) / float(curve @ curve) / peak
+    lower, upper = (values - sigma) / peak, (values + sigma) / peak
+    # The axes hold every series: the band and the truth set the range, up to BAND_TOP; a band wider than that is
+    # drawn to the axes' edge (its geometry stays inside the plot area, never over the tick labels).
+    drawn = [upper] if scaled is None else [upper, scaled]
+    top = min(max(1.3, *(float(np.max(series)) + 0.05 for series in drawn)), BAND_TOP)
+    bottom = max(min(0.0, float(np.min(lower)) - 0.05, float(np.min(values / peak)) - 0.05), -BAND_TOP)
+
+    figure, axis = plt.subplots(figsize=FIGSIZE)
+    covers = "pixel noise + model error" if estimate.get("miss_risk") is not None else "pixel noise only"
+    axis.fill_between(
+        wavelengths, np.clip(lower, bottom, top), np.clip(upper, bottom, top), color=PALETTE.ambient, alpha=0.2,
+        lw=0, label=f"estimate ± 1σ ({covers})", gid="band",
+    )  # fmt: skip
+    axis.plot(wavelengths, values / peak, color=PALETTE.ambient, lw=2, label="estimate", gid="estimate")
+    if scaled is not None:
+        axis.plot(
+            wavelengths, np.clip(scaled, bottom, top), color=PALETTE.truth, ls="--", lw=1.5,
+            label="true ambient (scaled)", gid="truth",
+        )  # fmt: skip
+    axis.set_ylim(bottom, top)
     axis.set_xlim(float(wavelengths[0]), float(wavelengths[-1]))
     axis.set_title("Ambient illuminant (estimate)")
     spectral_axis(axis, "peak of the estimate")

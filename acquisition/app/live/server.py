@@ -47,7 +47,7 @@ from msflash.acquisition.app.live.runs import list_runs, read_json, run_file, ru
 from msflash.acquisition.app.live.snapshots import write_snapshot
 from msflash.acquisition.app.live.state import LiveState, SequenceJob
 from msflash.acquisition.devices.camera import RawFrame
-from msflash.acquisition.errors import CaptureCancelled, UsageError
+from msflash.acquisition.errors import CameraError, CaptureCancelled, UsageError
 from msflash.acquisition.session.engine import Cancellation, CaptureResult, FrameEvent
 from msflash.acquisition.session.exposure import whole_pwm_periods
 from msflash.acquisition.session.live import LiveStream
@@ -173,6 +173,7 @@ class LiveServer:
         app.router.add_post("/api/mix-fire", self._post_mix_fire)
         app.router.add_post("/api/snapshot", self._post_snapshot)
         app.router.add_post("/api/camera-format", self._post_camera_format)
+        app.router.add_post("/api/reconnect", self._post_reconnect)
         app.router.add_get("/api/pixel", self._get_pixel)
         app.on_startup.append(self._on_startup)
         app.on_shutdown.append(self._on_shutdown)
@@ -271,8 +272,11 @@ class LiveServer:
             return refuse(500, f"{type(err).__name__}: {err} (LEDs switched off)")
 
     async def _fail(self, err: BaseException) -> None:
-        """After an error: LEDs off (if the booth still answers), the error kept for the page."""
+        """After an error: LEDs off (if the booth still answers), the error and what failed kept for the page."""
         self.state.error = f"{err} — LEDs switched off"
+        self.state.error_source = (
+            "camera" if isinstance(err, CameraError) else "booth" if _booth_error(err) else "other"
+        )
         try:
             await self._on_rig(self._stop_rig)
         except Exception as off_err:  # noqa: BLE001 - the booth may be what failed
@@ -350,6 +354,7 @@ class LiveServer:
                 "clients": len(self.clients),
                 "pages_dropped": self.pages_dropped,
                 "error": self.state.error,
+                "error_source": self.state.error_source if self.state.error else None,
                 "runs": list_runs(self.runs),
                 "mix": self._mix_json(),
                 "camera_gain": self._camera_gain(),
@@ -397,6 +402,25 @@ class LiveServer:
         self.state.error = None
         await self._push_state()
         return web.json_response(self.state_json())
+
+    async def _post_reconnect(self, request: web.Request) -> web.Response:
+        """After a camera or booth error: take one frame now (the stream prepared afresh); its failure is 503 with
+        the reason (the error state stays), its success clears the error and the live stream goes on."""
+        await json_object(request)
+        self._busy()
+        try:
+            preview = await self._on_rig(self._reconnect)
+        except Exception as err:  # noqa: BLE001 - still failing: LEDs off, the reason to the page
+            await self._fail(err)
+            return refuse(503, f"still failing: {err}")
+        self.state.error = self.state.error_source = None
+        await self._send_frame(preview, source="live")
+        await self._push_state()
+        return web.json_response(self.state_json())
+
+    def _reconnect(self) -> Preview:
+        self.stream.pause()
+        return self._grab()
 
     async def _post_camera_format(self, request: web.Request) -> web.Response:
         """``{"roi": [x, y, w, h]}``, ``{"binning": [h, v]}``, ``{"pixel_format": name}``: set between frames (the
@@ -850,6 +874,12 @@ class LiveServer:
 
 
 _NO_STORE = {"Cache-Control": "no-store"}
+
+
+def _booth_error(err: BaseException) -> bool:
+    """Whether ``err`` came from the booth's side (its link or its controller)."""
+    return any("booth" in kind.__name__.lower() or "serial" in kind.__module__ for kind in type(err).__mro__)
+
 
 CFA_CHANNELS = {"R": 0, "G": 1, "B": 2}
 

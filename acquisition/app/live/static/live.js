@@ -383,7 +383,10 @@ async function snapshot() {
 }
 $("snapshot").addEventListener("click", snapshot);
 
-// The disconnected state: the image greyed, the reason large on it, a reconnect button.
+// The disconnected state: the image greyed, the reason large on it, a reconnect button. A lost server
+// ("Disconnected": the page reconnects its WebSocket) is told apart from a camera or booth that failed while the
+// server stays ("Camera error": the server switched the LEDs off; reconnect asks it to take a frame again).
+const ERROR_TITLES = { camera: "Camera error", booth: "Booth error" };
 function showDisconnected() {
   const down = !socket || socket.readyState !== WebSocket.OPEN;
   const streamError = state && state.error ? state.error : "";
@@ -392,10 +395,22 @@ function showDisconnected() {
   box.hidden = !(down || streamError);
   $("view").classList.toggle("down", !box.hidden);
   document.body.dataset.connection = down ? "disconnected" : streamError ? "error" : "live";
-  box.querySelector(".disconnected-title").textContent = down ? "Disconnected" : "Camera or booth error";
+  document.body.dataset.errorSource = !down && streamError ? state.error_source || "other" : "";
+  box.querySelector(".disconnected-title").textContent = down ? "Disconnected" : ERROR_TITLES[state.error_source] || "Error";
   $("disconnected-reason").textContent = reason;
 }
-$("reconnect").addEventListener("click", () => { if (socket) socket.onclose = null; if (socket) socket.close(); connect(); });
+$("reconnect").addEventListener("click", async () => {
+  if (socket && socket.readyState === WebSocket.OPEN) {  // the server is there: the device failed, try it again
+    const response = await fetch("/api/reconnect", { method: "POST", headers: { "Content-Type": "application/json", "X-Msflash-Token": token }, body: "{}" }).catch(() => null);
+    const reply = response ? await response.json().catch(() => ({})) : {};
+    if (response && response.ok) render(reply);
+    else $("disconnected-reason").textContent = reply.error || "the server does not answer";
+    return;
+  }
+  if (socket) socket.onclose = null;
+  if (socket) socket.close();
+  connect();
+});
 
 // The flash before it fires: sliders for the mix, presets, Fire with exactly the mix shown.
 function renderMix(mix) {
