@@ -436,10 +436,13 @@ class LiveServer:
 
     def _set_camera_format(self, request: Any) -> None:
         """Set the format on the rig thread; the preview, readout and page follow what the camera reads back."""
+        before = self.rig.camera.info
         try:
             self.stream.set_image_format(request)
         finally:
-            self._camera_changed(self.rig.camera.info)
+            after = self.rig.camera.info
+            if after != before:  # a refusal changed nothing: the last frame still stands
+                self._camera_changed(after)
 
     def _camera_changed(self, info: Any) -> None:
         """The camera's format may have changed: the renderer (CFA, levels), the last frame and the page's figures."""
