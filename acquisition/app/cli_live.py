@@ -14,7 +14,8 @@ from pathlib import Path
 
 from msflash.acquisition.app.cli_common import UsageError, progress
 from msflash.acquisition.app.options import target_value
-from msflash.acquisition.app.rig_choice import add_rig_options, open_from_args
+from msflash.acquisition.app.rig_choice import add_rig_options, open_from_args, rig_spec
+from msflash.acquisition.session.rig import rig_kind
 from msflash.acquisition.signals import STOPPING_SIGNALS
 
 DEFAULT_PORT = 8470
@@ -39,6 +40,12 @@ def _live(args: argparse.Namespace) -> int:
     runs = Path(args.runs)
     if runs.exists() and not runs.is_dir():
         raise UsageError(f"--runs {runs}: not a directory; expected a folder for the run folders")
+    spec = rig_spec(args)
+    if rig_kind(spec) == "replay":
+        raise UsageError(
+            f"--rig {spec}: a replay serves a recorded sequence in its order, frame for frame; expected a camera "
+            "that streams for the live view (--rig sim, aravis-fake or hw)"
+        )
     sock = bind(args.host, args.tcp_port)  # a port in use: one line before any device is opened
     try:
         with open_from_args(args) as rig:
