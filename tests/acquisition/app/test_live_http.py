@@ -207,6 +207,7 @@ def test_live_refuses_a_busy_port_and_a_mosaic_on_the_fake_in_one_line(tmp_path:
             ["--rig", "hw", "--flicker", "100:0.3"],
             "--flicker: describes the simulated world's lamp, but the rig is 'hw'",
         ),
+        (["--rig", "replay:runs/x"], "--rig replay:runs/x: a replay serves a recorded sequence in its order"),
     ],
 )
 def test_live_opens_its_rig_as_run_does_refusing_what_the_rig_would_ignore(
