@@ -77,54 +77,41 @@ def default_world(
     Parameters
     ----------
     scene
-        ``"chart110"`` (the paper's 110 surfaces), ``"macbeth"``, ``"white"`` (a white reference
-        filling the frame, :func:`processing.image_formation.white_reference_scene`, for
-        ``msflash calibrate leds --white``), a :class:`Scene`, or reflectances (a random mosaic
-        of those surfaces drawn with ``seed``, :func:`processing.image_formation.mosaic_scene`).
-    ambient
-        A name of :func:`processing.lights.light_spectrum` (the sim ambients, CIE
-        illuminants) or a spectrum covering ``grid``.
+        ``"chart110"`` (the paper's 110 surfaces), ``"macbeth"``, ``"white"`` (a white reference filling the frame,
+        for ``msflash calibrate leds --white``), a :class:`Scene`, or reflectances (a random mosaic of those
+        surfaces drawn with ``seed``, :func:`processing.image_formation.mosaic_scene`).
+    ambient, camera
+        A name (:func:`processing.lights.light_spectrum`; :func:`processing.datasets.camera_responsivities`) or
+        a spectrum (R, G, B responsivities) covering ``grid``.
     cfa
-        The Bayer layout of the raw mosaic (default :data:`SIM_DEFAULT_CFA`), or None for RGB frames.
+        The raw mosaic's Bayer layout (default :data:`SIM_DEFAULT_CFA`), or None for RGB frames.
     seed
         The mosaic scene's layout.
-    camera
-        A shipped camera's name (:func:`processing.datasets.camera_responsivities`) or R, G, B
-        responsivities covering ``grid``.
-    n_leds
-        The paper's LED subset (3–7), unless ``led_spectra`` is given.
-    led_spectra
-        The booth's LEDs (one spectrum per channel, covering ``grid``) instead of the paper's:
-        their ratios are kept, their power is set by ``flash_power``.
+    n_leds, led_spectra
+        The paper's LED subset (3–7), or the booth's LEDs (one spectrum per channel covering ``grid``; their
+        ratios are kept, their power set by ``flash_power``).
     flash_power
-        How bright the booth is, as a flash is: the weakest LED the camera sees
-        (:data:`VISIBLE_LED_FRACTION`) gives exactly ``flash_power`` × the ambient's mean camera
-        signal over the diffuse scene (all channels), every other one at least that
-        (:func:`flash_power_scale`; the booth is scaled as a whole, so the LEDs keep their ratios).
+        The weakest LED the camera sees (:data:`VISIBLE_LED_FRACTION`) gives exactly ``flash_power`` × the
+        ambient's mean camera signal over the diffuse scene, every other one at least that
+        (:func:`flash_power_scale`; the booth is scaled as a whole).
     reference_exposure_us, ambient_peak_fraction
-        At ``reference_exposure_us`` and gain 1 the brightest diffuse pixel under the ambient
-        alone reads ``ambient_peak_fraction`` of full scale, or less if the ambient plus the
-        brightest LED at full drive would then read more than :data:`FLASH_PEAK_FRACTION`
-        (room for the flash on top, for captures at one exposure).
+        At ``reference_exposure_us`` and gain 1 the brightest diffuse pixel under the ambient alone reads
+        ``ambient_peak_fraction`` of full scale, or less if the ambient plus the brightest LED at full drive would
+        then read more than :data:`FLASH_PEAK_FRACTION` (room for the flash, for captures at one exposure).
     sensor
         Default: :func:`processing.image_formation.machine_vision_sensor` with ``cfa``.
-    patch_px, specular_strip_px
-        Chart patch size and the height of a saturating highlight strip under it (0: none).
-    grid
-        The wavelength grid of the world.
+    patch_px, specular_strip_px, grid
+        Chart patch size, the height of a saturating highlight strip under it (0: none), the wavelength grid.
     second_ambient, ambient_map
-        A second ambient (name or spectrum) and the (H, W) map in [0, 1] of its share at each
-        pixel of the scene (see :class:`SimulatedCamera`); LED power and exposure are then set on
-        the mixed ambient.
+        A second ambient (name or spectrum) and the (H, W) map in [0, 1] of its share at each pixel (see
+        :class:`SimulatedCamera`); LED power and exposure are then set on the mixed ambient.
     """
     scene = _scene_on_grid(scene, seed, patch_px, specular_strip_px, grid)
     ambient_spd = lights.light_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)
     second_spd = _second_ambient(second_ambient, ambient_spd, ambient_map, grid)
-    metered_ambient = (
-        ambient_spd
-        if second_spd is None or ambient_map is None
-        else MixedIllumination.two_ambients(ambient_spd, second_spd, ambient_map)
-    )
+    metered_ambient = ambient_spd if second_spd is None or ambient_map is None else (
+        MixedIllumination.two_ambients(ambient_spd, second_spd, ambient_map)
+    )  # fmt: skip
     leds = (datasets.paper_led_subset(n_leds) if led_spectra is None else led_spectra).resample(grid)
     responsivities = (datasets.camera_responsivities(camera) if isinstance(camera, str) else camera).resample(grid)
     sensor = sensor if sensor is not None else machine_vision_sensor(cfa)
@@ -139,18 +126,10 @@ def default_world(
     camera_name = responsivities.metadata.get("camera") or (
         camera if isinstance(camera, str) else responsivities.source
     )
-    exposure_at_unit_scale = _exposure_at_unit_scale(scene, ambient_spd, metered_ambient, booth, responsivities,
-                                                     sensor, ambient_peak_fraction)  # fmt: skip
-    return DefaultWorld(
-        scene,
-        ambient_spd,
-        booth,
-        responsivities,
-        sensor,
-        exposure_at_unit_scale / reference_exposure_us,
-        str(camera_name),
-        second_spd,
-    )
+    exposure = _exposure_at_unit_scale(scene, ambient_spd, metered_ambient, booth, responsivities, sensor,
+                                       ambient_peak_fraction)  # fmt: skip
+    scale = exposure / reference_exposure_us
+    return DefaultWorld(scene, ambient_spd, booth, responsivities, sensor, scale, str(camera_name), second_spd)
 
 
 def _scene_on_grid(

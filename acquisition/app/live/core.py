@@ -81,7 +81,6 @@ class LiveCore:
         self._watching = asyncio.Event()
         self._off_timer: asyncio.TimerHandle | None = None
         self._tasks: set[asyncio.Task] = set()
-        self._loop: asyncio.AbstractEventLoop | None = None
         self._cancel: Cancellation | None = None
         """The running sequence's cancellation (:meth:`stop_sequence`), None when none runs."""
         self.mix: MixPreview | None = None

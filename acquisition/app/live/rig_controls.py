@@ -10,7 +10,6 @@ preview, readout and page follow what it reads back.
 from __future__ import annotations
 
 import asyncio
-import logging
 from typing import Any
 
 import numpy as np
@@ -22,8 +21,6 @@ from msflash.acquisition.app.live.preview import Preview
 from msflash.acquisition.app.live.requests import boolean, finite, json_object, number, refuse
 from msflash.acquisition.app.live.snapshots import write_snapshot
 from msflash.acquisition.errors import UsageError
-
-log = logging.getLogger(__name__)
 
 
 class RigControls(LiveCore):
@@ -167,9 +164,6 @@ class RigControls(LiveCore):
                 raise UsageError("no synthesised image yet; expected a fired sequence first")
             cfa, unit = self.mix.cfa, "DN per µs·gain"
         return web.json_response(finite(pixel_readout(values, cfa, fractions[0], fractions[1], unit)))
-
-
-CFA_CHANNELS = {"R": 0, "G": 1, "B": 2}
 
 
 def pixel_readout(values: np.ndarray, cfa: str | None, x: float, y: float, unit: str) -> dict[str, Any]:

@@ -114,7 +114,6 @@ class LiveServer(RigControls, SequenceRoutes):
             await runner.cleanup()
 
     async def _on_startup(self, _app: web.Application) -> None:
-        self._loop = asyncio.get_running_loop()
         self._spawn(self._frame_loop())
         self._spawn(self._load_newest_mix())
 
