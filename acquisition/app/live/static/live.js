@@ -401,8 +401,11 @@ function showDisconnected() {
 }
 $("reconnect").addEventListener("click", async () => {
   if (socket && socket.readyState === WebSocket.OPEN) {  // the server is there: the device failed, try it again
+    const button = $("reconnect");
     const response = await fetch("/api/reconnect", { method: "POST", headers: { "Content-Type": "application/json", "X-Msflash-Token": token }, body: "{}" }).catch(() => null);
     const reply = response ? await response.json().catch(() => ({})) : {};
+    button.dataset.tries = Number(button.dataset.tries || 0) + 1;
+    button.dataset.result = response && response.ok ? "ok" : "failed";  // the reason stays the state's (pushed too)
     if (response && response.ok) render(reply);
     else $("disconnected-reason").textContent = reply.error || "the server does not answer";
     return;
