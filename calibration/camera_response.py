@@ -89,11 +89,6 @@ class ResponsivityPrior:
     cameras: tuple[str, ...]
     """The training cameras."""
 
-    def components(self, channel: str, energy: float = 0.99) -> int:
-        """Principal directions holding ``energy`` of the channel's second moment (for reports)."""
-        eigen = np.sort(np.linalg.eigvalsh(self.moments[channel]))[::-1]
-        return int(np.searchsorted(np.cumsum(eigen) / eigen.sum(), energy) + 1)
-
     def covariance(self, channel: str, shrinkage: float) -> np.ndarray:
         """Prior covariance: the learned moment plus ``shrinkage`` × a smooth covariance of equal trace.
 

@@ -59,13 +59,10 @@ SCALE_ITERATIONS = 60
 """Most alternations between curves and unknown powers."""
 MISFIT_NOISE, MISFIT_RESIDUAL = 4.0, 0.05
 """A fit whose residual is both > 4× the measured noise and > 5 % of the signal is refused: a wrong
-layout or a wrong --light (the sim sequences fit to 1.0× the noise and 2 %; a 5-px layout on 8-px
-patches gives 10–17× and 77–92 %, swapped lights 6–16× and 12–31 %)."""
+layout or a wrong --light (measured: docs/calibration.md)."""
 FIELD_EXPLAINS = 4.0
-"""A light field explains a flat fit's misfit only if it takes the residual down this many times: a
-12 % falloff leaves 1–3 % flat and 0.1 % with the field (20×); a wrong chart reference (ISETCam's
-Macbeth data for the authors' chart) 7–10 % flat and 3–5 % with the field (2×) — the field took up
-half of it and the fit passed the 5 % bound, at 0.08–0.24 RMSE."""
+"""A light field explains a flat fit's misfit only if it takes the residual down this many times (a wrong
+chart reference does not; docs/calibration.md)."""
 SCALE_TOLERANCE = 1e-3
 """Largest relative change of any unknown power at convergence."""
 
@@ -187,6 +184,23 @@ def sequence_measurements(
         Mismatched grids, a sequence without ambient frame or LED frames, colour-less frames, a
         frame where most patches are unusable, or no signal at all.
     """
+    builders = _check_sequences(sequences, lights, reflectances, labels_for)
+    if positions_for is None:
+        k = np.arange(reflectances.count)
+        positions_for = [np.column_stack([k // 4, k % 4]).astype(float)] * len(sequences)
+    rows = _Rows(reflectances)
+    for s, (sequence, light) in enumerate(zip(sequences, lights, strict=True)):
+        rows.add_sequence(s, sequence, light, builders[s], np.asarray(positions_for[s], dtype=float))
+    return rows.measurements(sequences[0].grid)
+
+
+def _check_sequences(
+    sequences: Sequence[Any],
+    lights: Sequence[Spectra | None],
+    reflectances: Spectra,
+    labels_for: LabelBuilder | Sequence[LabelBuilder],
+) -> list[LabelBuilder]:
+    """One light and one label builder per sequence, all on the chart's grid; the builders."""
     if len(lights) != len(sequences):
         raise CalibrationError(f"{len(lights)} lights for {len(sequences)} sequences; expected one per sequence")
     if not sequences:
@@ -199,82 +213,65 @@ def sequence_measurements(
         raise CalibrationError(
             f"chart reflectances on {reflectances.grid} but the sequence on {grid}; expected one grid"
         )
-    n_patches = reflectances.count
-    design_rows, data_rows, std_rows, groups, names = [], [], [], [], []
-    used: list[dict[str, Any]] = []
-    frame_rows: list[np.ndarray] = []
-    patch_rows: list[np.ndarray] = []
-    position_rows: list[np.ndarray] = []
-    sequence_rows: list[np.ndarray] = []
-    if positions_for is None:
-        k = np.arange(n_patches)
-        positions_for = [np.column_stack([k // 4, k % 4]).astype(float)] * len(sequences)
-    current = {"sequence": 0}
-
-    def add(
-        image: np.ndarray,
-        excluded: np.ndarray,
-        light: Spectra,
-        group: int,
-        where: str,
-        cfa: str | None,
-        labels_of: LabelBuilder,
-    ) -> None:
-        labels = labels_of(image.shape[:2], excluded)
-        means, errors, _ = patch_statistics(image, labels, n_patches, cfa)
-        valid = np.all(np.isfinite(means), axis=1)
-        if valid.sum() < max(3, n_patches // 2):
-            raise CalibrationError(
-                f"{where}: only {int(valid.sum())} of {n_patches} chart patches have {MIN_PIXELS} "
-                "unsaturated pixels; expected most of the chart usable (check exposure and "
-                "--patch-px/--border-px)"
-            )
-        rows = measurement_matrix(reflectances, light.to_unit("photons"))
-        design_rows.append(rows[valid])
-        data_rows.append(means[valid])
-        std_rows.append(errors[valid])
-        groups.append(np.full(int(valid.sum()), group))
-        frame_rows.append(np.full(int(valid.sum()), len(used)))
-        patch_rows.append(np.flatnonzero(valid))
-        position_rows.append(np.asarray(positions_for[current["sequence"]], dtype=float)[valid])
-        sequence_rows.append(np.full(int(valid.sum()), current["sequence"]))
-        used.append({"frame": where, "light": light.names[0], "patches": int(valid.sum())})
-
-    for s, (sequence, light) in enumerate(zip(sequences, lights, strict=True)):
-        current["sequence"] = s
-        where = str(sequence.path)
+    for sequence in sequences[1:]:
         if not sequence.grid.same_as(grid):
             raise CalibrationError(
-                f"{where}: wavelengths_nm {sequence.grid} differ from {grid} of the first sequence; expected one grid"
+                f"{sequence.path}: wavelengths_nm {sequence.grid} differ from {grid} of the first sequence; "
+                "expected one grid"
             )
+    return builders
+
+
+def _ambient_index(sequence: Any, where: str, light: Spectra | None) -> int:
+    """The sequence's first ambient frame (all LEDs off), refusing a sequence that gives nothing to measure."""
+    ambient_indices = sequence.indices("ambient")
+    if not ambient_indices:
+        raise CalibrationError(
+            f"{where}: frames has no 'ambient' frame; expected one (the LED frames are measured against it)"
+        )
+    if not sequence.indices("led") and light is None:
+        raise CalibrationError(
+            f"{where}: no 'led' frame and no --light for its ambient; expected LED frames or a known broadband light"
+        )
+    a = ambient_indices[0]
+    if any(level > 0 for level in sequence.frames[a].led_levels):
+        raise CalibrationError(
+            f"{where}: frames[{a}] has role 'ambient' but LED levels "
+            f"{list(sequence.frames[a].led_levels)}; expected all zero"
+        )
+    return int(a)
+
+
+class _Rows:
+    """The rows of :class:`ChartMeasurements` as frames are measured, one usable patch a row."""
+
+    def __init__(self, reflectances: Spectra) -> None:
+        self.reflectances = reflectances
+        self.n_patches = reflectances.count
+        # Per frame, the rows' design, data, std, group, frame, patch, position and sequence.
+        self.parts: list[tuple[np.ndarray, ...]] = []
+        self.names: list[str] = []
+        self.used: list[dict[str, Any]] = []
+
+    def add_sequence(
+        self, s: int, sequence: Any, light: Spectra | None, labels_of: LabelBuilder, positions: np.ndarray
+    ) -> None:
+        """Every LED frame minus the ambient (under its LEDs), then the ambient under a known ``light``."""
+        where = str(sequence.path)
         cfa = sequence.camera.cfa
-        ambient_indices = sequence.indices("ambient")
-        if not ambient_indices:
-            raise CalibrationError(
-                f"{where}: frames has no 'ambient' frame; expected one (the LED frames are measured against it)"
-            )
+        a = _ambient_index(sequence, where, light)
         led_indices = sequence.indices("led")
-        if not led_indices and light is None:
-            raise CalibrationError(
-                f"{where}: no 'led' frame and no --light for its ambient; expected LED frames "
-                "or a known broadband light"
-            )
-        a = ambient_indices[0]
-        if any(level > 0 for level in sequence.frames[a].led_levels):
-            raise CalibrationError(
-                f"{where}: frames[{a}] has role 'ambient' but LED levels "
-                f"{list(sequence.frames[a].led_levels)}; expected all zero"
-            )
         ambient, ambient_saturated = sequence.load_linear_frame(a)
         if ambient.ndim != 3 and cfa is None:
             raise CalibrationError(f"{where}: frames are one-channel without a cfa; expected RGB or a Bayer mosaic")
         leds = sequence.led_spectra()
         led_group = -1
-        if led_indices and any(g < 0 for g in np.concatenate(groups or [np.zeros(0)])):
+        if led_indices and any(np.any(part[3] < 0) for part in self.parts):
             # LED spectra hold true ratios within a sequence; between sequences (another day, gain or
             # LED calibration) only the first sequence's LEDs fix the scale.
-            names.append(f"{s}: LEDs")
-            led_group = len(names) - 1
+            self.names.append(f"{s}: LEDs")
+            led_group = len(self.names) - 1
+        frame_of = _Frame(s, cfa, labels_of, positions)
         for i in led_indices:
             frame = sequence.frames[i]
             levels = np.asarray(frame.led_levels, dtype=float)
@@ -287,48 +284,60 @@ def sequence_measurements(
             spectrum = leds.replace(
                 values=leds.values @ levels[:, None], names=("+".join(n for n, v in zip(leds.names, levels) if v > 0),)
             )
-            add(
-                image - ambient,
-                saturated | ambient_saturated,
-                spectrum,
-                led_group,
-                f"{where}: {frame.file}",
-                cfa,
-                builders[s],
+            self.add(
+                frame_of, image - ambient, saturated | ambient_saturated, spectrum, led_group, f"{where}: {frame.file}"
             )
         if light is not None:
-            names.append(f"{s}: {light.names[0]}")
-            add(
-                ambient,
-                ambient_saturated,
-                light,
-                len(names) - 1,
-                f"{where}: {sequence.frames[a].file}",
-                cfa,
-                builders[s],
+            self.names.append(f"{s}: {light.names[0]}")
+            where_ambient = f"{where}: {sequence.frames[a].file}"
+            self.add(frame_of, ambient, ambient_saturated, light, len(self.names) - 1, where_ambient)
+
+    def add(
+        self, frame: _Frame, image: np.ndarray, excluded: np.ndarray, light: Spectra, group: int, where: str
+    ) -> None:
+        """One frame's usable patch means as rows under ``light`` (``group`` −1: known power)."""
+        labels = frame.labels_of(image.shape[:2], excluded)
+        means, errors, _ = patch_statistics(image, labels, self.n_patches, frame.cfa)
+        valid = np.all(np.isfinite(means), axis=1)
+        used = int(valid.sum())
+        if used < max(3, self.n_patches // 2):
+            raise CalibrationError(
+                f"{where}: only {used} of {self.n_patches} chart patches have {MIN_PIXELS} "
+                "unsaturated pixels; expected most of the chart usable (check exposure and "
+                "--patch-px/--border-px)"
             )
-    group = np.concatenate(groups)
-    if not np.any(group < 0):
-        raise CalibrationError(
-            "no LED frame in any sequence; expected LED frames (they fix the scale of the broadband lights)"
+        design = measurement_matrix(self.reflectances, light.to_unit("photons"))[valid]
+        index = (np.full(used, group), np.full(used, len(self.used)), np.flatnonzero(valid))
+        self.parts.append(
+            (design, means[valid], errors[valid], *index, frame.positions[valid], np.full(used, frame.sequence))
         )
-    data = np.vstack(data_rows)
-    std = np.vstack(std_rows)
-    # A floor on the standard error: flat (noise-free or quantised) patches must not get infinite weight.
-    std = np.maximum(std, 1e-4 * np.nanmax(np.abs(data), axis=0) + 1e-300)
-    return ChartMeasurements(
-        grid,
-        np.vstack(design_rows),
-        data,
-        std,
-        group,
-        tuple(names),
-        tuple(used),
-        np.concatenate(frame_rows),
-        np.concatenate(patch_rows),
-        np.vstack(position_rows),
-        np.concatenate(sequence_rows),
-    )
+        self.used.append({"frame": where, "light": light.names[0], "patches": used})
+
+    def measurements(self, grid: WavelengthGrid) -> ChartMeasurements:
+        """The rows gathered; refused without an LED frame (they fix the broadband lights' scale)."""
+        design, data, std, group, frame, patch, positions, sequence = (
+            np.concatenate(part) for part in zip(*self.parts)
+        )
+        if not np.any(group < 0):
+            raise CalibrationError(
+                "no LED frame in any sequence; expected LED frames (they fix the scale of the broadband lights)"
+            )
+        # A floor on the standard error: flat (noise-free or quantised) patches must not get infinite weight.
+        std = np.maximum(std, 1e-4 * np.nanmax(np.abs(data), axis=0) + 1e-300)
+        used = tuple(self.used)
+        return ChartMeasurements(
+            grid, design, data, std, group, tuple(self.names), used, frame, patch, positions, sequence
+        )
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """What a measured frame shares with its sequence: the index, mosaic, label builder, patch positions."""
+
+    sequence: int
+    cfa: str | None
+    labels_of: LabelBuilder
+    positions: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -406,33 +415,77 @@ def estimate_from_measurements(
     flat_misfit: tuple[float, ...] | None = None
     if light_field != "flat":
         try:
-            flat_misfit = estimate_from_measurements(
-                measurements, method, prior, "flat", patch_names
-            ).estimate.relative_residual
+            flat = estimate_from_measurements(measurements, method, prior, "flat", patch_names)
+            flat_misfit = flat.estimate.relative_residual
         except CalibrationError as err:
             flat_misfit = tuple(float(v) for v in getattr(err, "residuals", ())) or None
     m = measurements
-    known = m.group < 0
-    fielded = light_field == "quadratic" and m.sequence is not None and m.positions is not None
-    # One field per sequence: a lens's falloff and the booth's geometry light every frame of it alike.
-    frame = m.frame if m.frame is not None else np.zeros(len(m.group), dtype=int)
-    field_of = m.sequence if m.sequence is not None else np.zeros(len(m.group), dtype=int)
-    basis = field_basis(m.positions, field_of) if fielded and m.positions is not None else None
-    theta = np.zeros((int(field_of.max()) + 1, basis.shape[1] if basis is not None else 0))
-    n_groups = len(m.group_names)
+    joint = _JointFit(
+        m, method, prior, light_field == "quadratic" and m.sequence is not None and m.positions is not None
+    )
+    fit, state, iterations = joint.solve()
+    scales, theta = joint.unpack(state)
+    gains = joint.gains_of(theta)
+    _check_fit(m, fit, joint.row_scales(scales) * gains, flat_misfit if joint.basis is not None else None, patch_names)
+    report: dict[str, Any] = {"model": light_field if joint.basis is not None else "flat"}
+    if joint.basis is not None:
+        report["gain_range_per_frame"] = [
+            [float(gains[joint.frame == f].min()), float(gains[joint.frame == f].max())]
+            if np.any(joint.frame == f)
+            else None
+            for f in range(len(m.frames))
+        ]
+        assert m.positions is not None
+        report["terms"] = [f"u^{i} v^{j}" for i, j in field_terms(m.positions)]
+    estimate = fit.normalised(m.grid, f"estimated from {len(m.frames)} chart frames ({method})")
+    return SequenceCalibration(estimate, dict(zip(m.group_names, map(float, scales), strict=True)), iterations, report)
 
-    def row_scales(scales: np.ndarray) -> np.ndarray:
-        return np.where(known, 1.0, scales[np.maximum(m.group, 0)]) if n_groups else np.ones(len(m.group))
 
-    def gains_of(theta: np.ndarray) -> np.ndarray:
-        return frame_gains(basis, field_of, theta) if basis is not None else np.ones(len(m.group))
+class _JointFit:
+    """The curves, the unknown powers (log) and the light fields (one per sequence), fitted by alternation.
 
-    def step(state: np.ndarray, fit: ChannelFit) -> np.ndarray:
+    The state is ``[log powers…, field coefficients…]``; one alternation (:meth:`step`) solves the powers
+    and the fields given the curves, then the curves are refitted given both.
+    """
+
+    def __init__(self, m: ChartMeasurements, method: str, prior: ResponsivityPrior | None, fielded: bool) -> None:
+        self.m, self.method, self.prior = m, method, prior
+        self.known = m.group < 0
+        self.n_groups = len(m.group_names)
+        # One field per sequence: a lens's falloff and the booth's geometry light every frame of it alike.
+        self.frame = m.frame if m.frame is not None else np.zeros(len(m.group), dtype=int)
+        self.field_of = m.sequence if m.sequence is not None else np.zeros(len(m.group), dtype=int)
+        self.basis = field_basis(m.positions, self.field_of) if fielded and m.positions is not None else None
+        self.theta_shape = (int(self.field_of.max()) + 1, self.basis.shape[1] if self.basis is not None else 0)
+
+    def unpack(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The powers and the field coefficients of a state."""
+        return np.exp(state[: self.n_groups]), state[self.n_groups :].reshape(self.theta_shape)
+
+    def row_scales(self, scales: np.ndarray) -> np.ndarray:
+        """Each row's light power: 1 for the known LEDs, its group's otherwise."""
+        if not self.n_groups:
+            return np.ones(len(self.m.group))
+        return np.where(self.known, 1.0, scales[np.maximum(self.m.group, 0)])
+
+    def gains_of(self, theta: np.ndarray) -> np.ndarray:
+        """Each row's light-field gain (1 without a field)."""
+        return frame_gains(self.basis, self.field_of, theta) if self.basis is not None else np.ones(len(self.m.group))
+
+    def refit(self, state: np.ndarray) -> ChannelFit:
+        """The curves given the powers and fields of ``state``."""
+        scales, theta = self.unpack(state)
+        m = self.m
+        scaled = m.design * (self.row_scales(scales) * self.gains_of(theta))[:, None]
+        return fit_channels(scaled, m.data, m.std, self.method, self.prior)
+
+    def step(self, state: np.ndarray, fit: ChannelFit) -> np.ndarray:
         """One alternation: each light's power and each field given the curves (then the caller refits the curves)."""
-        scales, theta = np.exp(state[:n_groups]), state[n_groups:].reshape(theta_shape)
-        gains = gains_of(theta)
+        m = self.m
+        scales, theta = self.unpack(state)
+        gains = self.gains_of(theta)
         new = scales.copy()
-        for g in range(n_groups):
+        for g in range(self.n_groups):
             rows = m.group == g
             predicted = (m.design[rows] @ fit.curves) * gains[rows, None] / m.std[rows]
             observed = m.data[rows] / m.std[rows]
@@ -443,54 +496,64 @@ def estimate_from_measurements(
                     "expected LEDs that cover the camera's channels"
                 )
             new[g] = max(float(np.sum(predicted * observed)) / denominator, 1e-12)
-        if basis is not None:
-            predicted = (m.design @ fit.curves) * row_scales(new)[:, None]
-            theta = fit_frame_fields(predicted, m.data, m.std, basis, field_of, theta)
+        if self.basis is not None:
+            predicted = (m.design @ fit.curves) * self.row_scales(new)[:, None]
+            theta = fit_frame_fields(predicted, m.data, m.std, self.basis, self.field_of, theta)
         return np.concatenate([np.log(new), theta.ravel()])
 
-    theta_shape = theta.shape
-    fit: ChannelFit = fit_channels(m.design[known], m.data[known], m.std[known], method, prior)
-    state = np.concatenate([np.zeros(n_groups), theta.ravel()])
-    # Anderson acceleration of the alternation (memory ANDERSON_MEMORY): plain alternation crawls
-    # along the valley where the light field and the curves trade off (400 alternations to converge
-    # on a 12 % falloff); the accelerated one takes some tens.
-    history_x: list[np.ndarray] = []
-    history_f: list[np.ndarray] = []
-    iterations = 0
-    for iterations in range(1, SCALE_ITERATIONS + 1):  # noqa: B007 - read after the loop (how many it took)
-        if not n_groups and basis is None:
-            break
-        mapped = step(state, fit)
-        residual = mapped - state
-        history_x.append(state)
-        history_f.append(residual)
-        del history_x[: -ANDERSON_MEMORY - 1], history_f[: -ANDERSON_MEMORY - 1]
-        proposal = mapped
-        if len(history_f) > 1:
-            d_f = np.column_stack([b - a for a, b in zip(history_f[:-1], history_f[1:], strict=True)])
-            d_x = np.column_stack([b - a for a, b in zip(history_x[:-1], history_x[1:], strict=True)])
-            gamma, *_ = np.linalg.lstsq(d_f, residual, rcond=None)
-            proposal = mapped - (d_x + d_f) @ gamma
-        change = float(np.max(np.abs(residual))) if residual.size else 0.0
-        state = proposal
-        scales_now, theta_now = np.exp(state[:n_groups]), state[n_groups:].reshape(theta_shape)
-        fit = fit_channels(
-            m.design * (row_scales(scales_now) * gains_of(theta_now))[:, None], m.data, m.std, method, prior
-        )
-        if change < min(SCALE_TOLERANCE, FIELD_TOLERANCE):
-            break
-    scales, theta = np.exp(state[:n_groups]), state[n_groups:].reshape(theta_shape)
-    gains = gains_of(theta)
-    row_scale = np.where(known, 1.0, scales[np.maximum(m.group, 0)]) if m.group_names else np.ones(len(m.group))
+    def solve(self) -> tuple[ChannelFit, np.ndarray, int]:
+        """The fit from the LED rows alone, then Anderson-accelerated alternations; the fit, state, iterations.
+
+        Anderson acceleration (memory :data:`ANDERSON_MEMORY`) mixes the past alternations: plain
+        alternation crawls along the valley where the light field and the curves trade off.
+        """
+        m, known = self.m, self.known
+        fit = fit_channels(m.design[known], m.data[known], m.std[known], self.method, self.prior)
+        state = np.zeros(self.n_groups + int(np.prod(self.theta_shape)))
+        history_x: list[np.ndarray] = []
+        history_f: list[np.ndarray] = []
+        iterations = 0
+        for iterations in range(1, SCALE_ITERATIONS + 1):  # noqa: B007 - read after the loop (how many it took)
+            if not self.n_groups and self.basis is None:
+                break
+            mapped = self.step(state, fit)
+            residual = mapped - state
+            history_x.append(state)
+            history_f.append(residual)
+            del history_x[: -ANDERSON_MEMORY - 1], history_f[: -ANDERSON_MEMORY - 1]
+            proposal = mapped
+            if len(history_f) > 1:
+                d_f = np.column_stack([b - a for a, b in zip(history_f[:-1], history_f[1:], strict=True)])
+                d_x = np.column_stack([b - a for a, b in zip(history_x[:-1], history_x[1:], strict=True)])
+                gamma, *_ = np.linalg.lstsq(d_f, residual, rcond=None)
+                proposal = mapped - (d_x + d_f) @ gamma
+            change = float(np.max(np.abs(residual))) if residual.size else 0.0
+            state = proposal
+            fit = self.refit(state)
+            if change < min(SCALE_TOLERANCE, FIELD_TOLERANCE):
+                break
+        return fit, state, iterations
+
+
+def _check_fit(
+    m: ChartMeasurements,
+    fit: ChannelFit,
+    row_gain: np.ndarray,
+    flat_misfit: tuple[float, ...] | None,
+    patch_names: Sequence[str] | None,
+) -> None:
+    """Refuse a fit that misses the patch means (:data:`MISFIT_NOISE`), or whose field hides a flat misfit.
+
+    ``flat_misfit``: the flat model's relative residual per channel when a light field was fitted.
+    """
     for c, channel in enumerate(CHANNELS):
         unexplained = (
-            basis is not None
-            and flat_misfit is not None
+            flat_misfit is not None
             and flat_misfit[c] > MISFIT_RESIDUAL
             and fit.relative_residual[c] * FIELD_EXPLAINS > flat_misfit[c]
         )
         if fit.noise_scale[c] > MISFIT_NOISE and (fit.relative_residual[c] > MISFIT_RESIDUAL or unexplained):
-            model = (m.design @ fit.curves) * (row_scale * gains)[:, None]
+            model = (m.design @ fit.curves) * row_gain[:, None]
             error = CalibrationError(
                 f"chart frames: the model does not fit the patch means (channel {channel}: residual "
                 f"{100 * fit.relative_residual[c]:.0f} % of the signal, {fit.noise_scale[c]:.1f}× the measurement noise; "
@@ -501,17 +564,6 @@ def estimate_from_measurements(
             )
             error.residuals = fit.relative_residual  # type: ignore[attr-defined]
             raise error
-    report: dict[str, Any] = {"model": light_field if basis is not None else "flat"}
-    if basis is not None:
-        report["gain_range_per_frame"] = [
-            [float(gains[frame == f].min()), float(gains[frame == f].max())] if np.any(frame == f) else None
-            for f in range(len(m.frames))
-        ]
-        assert m.positions is not None
-        report["terms"] = [f"u^{i} v^{j}" for i, j in field_terms(m.positions)]
-    source = f"estimated from {len(m.frames)} chart frames ({method})"
-    estimate = fit.normalised(m.grid, source)
-    return SequenceCalibration(estimate, dict(zip(m.group_names, map(float, scales), strict=True)), iterations, report)
 
 
 __all__ = [

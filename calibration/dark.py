@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.calibration.errors import CalibrationError
-from msflash.processing.image_formation import CFA_PATTERNS, cfa_channel_map
+from msflash.processing.sensor import CFA_PATTERNS, cfa_channel_map
 
 LINEARITY_TOLERANCE = 0.01
 """Relative deviation from linear accepted for :attr:`LinearityResult.linear_limit_dn`."""
@@ -199,18 +199,7 @@ def measure_linearity(
         For fewer than 3 frames, mismatched lengths, non-positive exposures, or fewer than 2
         unsaturated frames with signal.
     """
-    stack = _stack(frames, "linearity frames")
-    exposures_array = np.asarray(exposures, dtype=float)
-    if exposures_array.shape != (stack.shape[0],):
-        raise CalibrationError(
-            f"linearity: {exposures_array.size} exposures for {stack.shape[0]} frames; expected one exposure per frame"
-        )
-    if stack.shape[0] < 3:
-        raise CalibrationError(f"linearity: {stack.shape[0]} frames; expected at least 3 exposures")
-    if not np.all(np.isfinite(exposures_array)) or np.any(exposures_array <= 0):
-        raise CalibrationError("linearity: exposures must be finite and > 0")
-    order = np.argsort(exposures_array, kind="stable")
-    stack, exposures_array = stack[order], exposures_array[order]
+    stack, exposures_array = _exposure_series(frames, exposures)
     n_channels = len(channel_planes(stack[0], cfa))
     blacks = (
         np.broadcast_to(np.asarray(black_level, dtype=float), (n_channels,))
@@ -219,20 +208,11 @@ def measure_linearity(
     )
     if blacks.shape != (n_channels,):
         raise CalibrationError(f"linearity: {blacks.size} black levels for {n_channels} channels")
-
-    top = float(stack.max())
     clip = white_level
     if clip is None:
-        at_top = np.mean(stack[-1] >= top)
-        clip = top if at_top > SATURATED_FRACTION else None
-    signals = np.full((stack.shape[0], n_channels), np.nan)
-    saturated: list[int] = []
-    for i, frame in enumerate(stack):
-        planes = channel_planes(frame, cfa)
-        if clip is not None and np.mean(frame >= clip) > SATURATED_FRACTION:
-            saturated.append(i)
-            continue
-        signals[i] = [float(np.mean(p)) - b for p, b in zip(planes, blacks)]
+        top = float(stack.max())
+        clip = top if np.mean(stack[-1] >= top) > SATURATED_FRACTION else None
+    signals, saturated = _unsaturated_signals(stack, cfa, blacks, clip)
     usable = ~np.isnan(signals[:, 0])
     if np.count_nonzero(usable) < 2 or np.nanmax(signals) <= 0:
         raise CalibrationError(
@@ -250,27 +230,12 @@ def measure_linearity(
     limit = math.inf
     emva = 0.0
     for c in range(n_channels):
-        x, y = exposures_array[usable], signals[usable, c]
-        # Small-signal slope: the linear term of a polynomial through the origin (black level),
-        # so a smooth compression of the highlights does not bend the reference line.
-        degree = min(3, distinct.size - 1)
-        powers = np.column_stack([x ** (p + 1) for p in range(degree)]) / x.max() ** np.arange(1, degree + 1)
-        slope = float(np.linalg.lstsq(powers, y, rcond=None)[0][0] / x.max())
-        slopes.append(slope)
-        deviation = y / (slope * x) - 1
-        deviations[usable, c] = deviation
-        bad = np.abs(deviation) > LINEARITY_TOLERANCE
-        if bad.any():
-            below = y[y < y[bad].min()]
-            limit = min(limit, float(below.max()) if below.size else 0.0)
-        else:
-            limit = min(limit, float(y.max()))
-        span = (y >= 0.05 * y.max()) & (y <= 0.95 * y.max())
-        if np.count_nonzero(span) >= 2:
-            fitted = np.polyfit(x[span], y[span], 1)
-            residual = y[span] - np.polyval(fitted, x[span])
-            emva = max(emva, float((residual.max() - residual.min()) / 2 / np.polyval(fitted, x[span]).max()))
-        polys.append(tuple(float(v) for v in np.polyfit(y, slope * x, degree)))
+        channel = _ChannelLinearity.fit(exposures_array[usable], signals[usable, c], min(3, distinct.size - 1))
+        slopes.append(channel.slope)
+        deviations[usable, c] = channel.deviation
+        limit = min(limit, channel.linear_limit)
+        emva = max(emva, channel.emva_nonlinearity)
+        polys.append(channel.linearisation)
     finite = deviations[~np.isnan(deviations)]
     return LinearityResult(
         exposures=tuple(float(v) for v in exposures_array),
@@ -284,3 +249,67 @@ def measure_linearity(
         saturated_frames=tuple(saturated),
         linearisation=tuple(polys),
     )
+
+
+def _exposure_series(frames: Sequence[np.ndarray], exposures: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """The frames stacked and sorted by exposure, with their exposures: at least 3, finite and > 0."""
+    stack = _stack(frames, "linearity frames")
+    exposures_array = np.asarray(exposures, dtype=float)
+    if exposures_array.shape != (stack.shape[0],):
+        raise CalibrationError(
+            f"linearity: {exposures_array.size} exposures for {stack.shape[0]} frames; expected one exposure per frame"
+        )
+    if stack.shape[0] < 3:
+        raise CalibrationError(f"linearity: {stack.shape[0]} frames; expected at least 3 exposures")
+    if not np.all(np.isfinite(exposures_array)) or np.any(exposures_array <= 0):
+        raise CalibrationError("linearity: exposures must be finite and > 0")
+    order = np.argsort(exposures_array, kind="stable")
+    return stack[order], exposures_array[order]
+
+
+def _unsaturated_signals(
+    stack: np.ndarray, cfa: str | None, blacks: np.ndarray, clip: float | None
+) -> tuple[np.ndarray, list[int]]:
+    """Mean signal above black per frame and channel (NaN for saturated frames), and the saturated frames."""
+    signals = np.full((stack.shape[0], len(blacks)), np.nan)
+    saturated: list[int] = []
+    for i, frame in enumerate(stack):
+        planes = channel_planes(frame, cfa)
+        if clip is not None and np.mean(frame >= clip) > SATURATED_FRACTION:
+            saturated.append(i)
+            continue
+        signals[i] = [float(np.mean(p)) - b for p, b in zip(planes, blacks)]
+    return signals, saturated
+
+
+@dataclass(frozen=True)
+class _ChannelLinearity:
+    """One channel's small-signal slope, deviation from it, linear limit, EMVA non-linearity and linearisation."""
+
+    slope: float
+    deviation: np.ndarray
+    linear_limit: float
+    emva_nonlinearity: float
+    linearisation: tuple[float, ...]
+
+    @classmethod
+    def fit(cls, x: np.ndarray, y: np.ndarray, degree: int) -> _ChannelLinearity:
+        """Fit signals ``y`` at exposures ``x`` (unsaturated frames)."""
+        # Small-signal slope: the linear term of a polynomial through the origin (black level),
+        # so a smooth compression of the highlights does not bend the reference line.
+        powers = np.column_stack([x ** (p + 1) for p in range(degree)]) / x.max() ** np.arange(1, degree + 1)
+        slope = float(np.linalg.lstsq(powers, y, rcond=None)[0][0] / x.max())
+        deviation = y / (slope * x) - 1
+        bad = np.abs(deviation) > LINEARITY_TOLERANCE
+        if bad.any():
+            below = y[y < y[bad].min()]
+            limit = float(below.max()) if below.size else 0.0
+        else:
+            limit = float(y.max())
+        emva = 0.0
+        span = (y >= 0.05 * y.max()) & (y <= 0.95 * y.max())
+        if np.count_nonzero(span) >= 2:
+            fitted = np.polyfit(x[span], y[span], 1)
+            residual = y[span] - np.polyval(fitted, x[span])
+            emva = float((residual.max() - residual.min()) / 2 / np.polyval(fitted, x[span]).max())
+        return cls(slope, deviation, limit, emva, tuple(float(v) for v in np.polyfit(y, slope * x, degree)))

@@ -344,6 +344,55 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
     """
     directory = Path(directory)
     path = directory if directory.suffix == ".json" else directory / CALIBRATION_FILE
+    document = _read_document(path)
+    calibration_id, created = document["id"], document.get("created_utc", "")
+    led_section = _section(path, document, "leds")
+    chart_section = _section(path, document, "chart")
+    camera_section = _section(path, document, "camera")
+    dark = _section(path, document, "dark")
+    linearity = _section(path, document, "linearity")
+    led_spectra = camera = chart = None
+    notes: tuple[str, ...] = ()
+    if led_section is not None:
+        led_spectra, clipped = _led_spectra(path, led_section)
+        notes += clipped
+    if chart_section is not None:
+        chart, clipped = _chart(path, chart_section)
+        notes += clipped
+    if camera_section is not None:
+        camera, clipped = _spectra(path, camera_section, "camera", "responsivity", "channels")
+        notes += clipped
+        if camera.count != 3:
+            raise CalibrationError(f"{path}: field 'camera.file' holds {camera.count} channels; expected R, G, B")
+    if dark is not None:
+        _check_dark(path, dark)
+    if linearity is not None:
+        _number_list(path, linearity, "linearity", "slope_dn_per_exposure", sizes=(1, 4))
+        for name in ("max_relative_deviation", "emva_nonlinearity", "saturation_level", "linear_limit_dn"):
+            _optional_number(path, linearity, "linearity", name)
+    strip = ("file", "unit", "names", "channels")
+    return CalibrationSet(
+        id=calibration_id,
+        created_utc=str(created),
+        led_spectra=led_spectra.replace(source=f"calibration {calibration_id} ({led_spectra.source})")
+        if led_spectra
+        else None,
+        leds={k: v for k, v in (led_section or {}).items() if k not in strip or (k, v) == ("unit", "counts")},
+        camera_responsivities=camera.replace(source=f"calibration {calibration_id} ({camera.source})")
+        if camera
+        else None,
+        camera={k: v for k, v in (camera_section or {}).items() if k not in strip},
+        dark=dark,
+        linearity=linearity,
+        chart_reflectances=chart.replace(source=f"calibration {calibration_id} ({chart.source})") if chart else None,
+        chart={k: v for k, v in (chart_section or {}).items() if k not in strip},
+        extra={k: v for k, v in document.items() if k not in _KNOWN},
+        notes=notes,
+    )
+
+
+def _read_document(path: Path) -> dict:
+    """``calibration.json`` read safely and parsed: format, a version this msflash reads, an id, a time."""
     if not os.path.lexists(path):
         raise CalibrationError(
             f"{shown_path(path)}: cannot be read (No such file or directory); expected a "
@@ -373,85 +422,59 @@ def load_calibration(directory: str | Path) -> CalibrationSet:
     created = document.get("created_utc", "")
     if not isinstance(created, str):
         raise CalibrationError(f"{path}: field 'created_utc' is {_shown(created)}; expected an ISO 8601 time string")
-    led_section = _section(path, document, "leds")
-    chart_section = _section(path, document, "chart")
-    camera_section = _section(path, document, "camera")
-    dark = _section(path, document, "dark")
-    linearity = _section(path, document, "linearity")
-    led_spectra = camera = None
-    notes: tuple[str, ...] = ()
-    if led_section is not None:
-        led_spectra, clipped = _spectra(path, led_section, "leds", "spd", "names")
-        notes += clipped
-        for name in ("peaks_nm", "fwhm_nm", "centroids_nm"):
-            _number_list(path, led_section, "leds", name)
-        peaks = led_section.get("peaks_nm")
-        if isinstance(peaks, list) and len(peaks) == led_spectra.count:
-            # Measured on the spectrometer's own sampling: the one number for each LED (processing/led_wavelength.py).
-            led_spectra = led_spectra.replace(
-                metadata={**led_spectra.metadata, PEAK_METADATA_KEY: dict(zip(led_spectra.names, peaks, strict=True))}
-            )
-        _number_list(path, led_section, "leds", "relative_power", minimum=0.0)
-        if led_section.get("unit") == "counts":
-            ratios = (
-                "ratios measured through the camera (--white), shapes"
-                if led_section.get("relative_power_source")
-                else "shapes and ratios"
-            )
-            notes += (
-                f"{shown_path(path)}: LED spectra are spectrometer counts: the spectrometer's response is still in "
-                f"their {ratios} (calibrate leds --spectrometer-response FILE makes them energy)",
-            )
-    chart = None
-    if chart_section is not None:
-        chart, clipped = _spectra(path, chart_section, "chart", "reflectance", "names")
-        notes += clipped
-        for name in ("rows", "columns"):
-            value = chart_section.get(name)
-            if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
-                raise CalibrationError(f"{path}: field 'chart.{name}' is {_shown(value)}; expected a whole number ≥ 1")
-        rows, columns = chart_section.get("rows"), chart_section.get("columns")
-        if rows is not None and columns is not None and rows * columns != chart.count:
-            raise CalibrationError(
-                f"{path}: fields 'chart.rows' × 'chart.columns' are {rows} × {columns}; expected {chart.count}, the "
-                "number of patches in the chart's file"
-            )
-    if camera_section is not None:
-        camera, clipped = _spectra(path, camera_section, "camera", "responsivity", "channels")
-        notes += clipped
-        if camera.count != 3:
-            raise CalibrationError(f"{path}: field 'camera.file' holds {camera.count} channels; expected R, G, B")
-    if dark is not None:
-        if "black_level" not in dark:
-            raise CalibrationError(f"{path}: field 'dark.black_level' is missing; expected one number per channel")
-        _number_list(path, dark, "dark", "black_level", sizes=(1, 4))
-        _number_list(path, dark, "dark", "read_noise_dn", minimum=0.0, sizes=(1, 4))
-        cfa = dark.get("cfa")
-        if cfa is not None and not isinstance(cfa, str):
-            raise CalibrationError(f"{path}: field 'dark.cfa' is {_shown(cfa)}; expected null or a Bayer layout name")
-    if linearity is not None:
-        _number_list(path, linearity, "linearity", "slope_dn_per_exposure", sizes=(1, 4))
-        for name in ("max_relative_deviation", "emva_nonlinearity", "saturation_level", "linear_limit_dn"):
-            _optional_number(path, linearity, "linearity", name)
-    strip = ("file", "unit", "names", "channels")
-    return CalibrationSet(
-        id=calibration_id,
-        created_utc=str(created),
-        led_spectra=led_spectra.replace(source=f"calibration {calibration_id} ({led_spectra.source})")
-        if led_spectra
-        else None,
-        leds={k: v for k, v in (led_section or {}).items() if k not in strip or (k, v) == ("unit", "counts")},
-        camera_responsivities=camera.replace(source=f"calibration {calibration_id} ({camera.source})")
-        if camera
-        else None,
-        camera={k: v for k, v in (camera_section or {}).items() if k not in strip},
-        dark=dark,
-        linearity=linearity,
-        chart_reflectances=chart.replace(source=f"calibration {calibration_id} ({chart.source})") if chart else None,
-        chart={k: v for k, v in (chart_section or {}).items() if k not in strip},
-        extra={k: v for k, v in document.items() if k not in _KNOWN},
-        notes=notes,
-    )
+    return document
+
+
+def _led_spectra(path: Path, section: dict) -> tuple[Spectra, tuple[str, ...]]:
+    """The ``leds`` section's spectra (with their measured peaks) and notes (clipped noise, counts)."""
+    led_spectra, notes = _spectra(path, section, "leds", "spd", "names")
+    for name in ("peaks_nm", "fwhm_nm", "centroids_nm"):
+        _number_list(path, section, "leds", name)
+    peaks = section.get("peaks_nm")
+    if isinstance(peaks, list) and len(peaks) == led_spectra.count:
+        # Measured on the spectrometer's own sampling: the one number for each LED (processing/led_wavelength.py).
+        led_spectra = led_spectra.replace(
+            metadata={**led_spectra.metadata, PEAK_METADATA_KEY: dict(zip(led_spectra.names, peaks, strict=True))}
+        )
+    _number_list(path, section, "leds", "relative_power", minimum=0.0)
+    if section.get("unit") == "counts":
+        ratios = (
+            "ratios measured through the camera (--white), shapes"
+            if section.get("relative_power_source")
+            else "shapes and ratios"
+        )
+        notes += (
+            f"{shown_path(path)}: LED spectra are spectrometer counts: the spectrometer's response is still in "
+            f"their {ratios} (calibrate leds --spectrometer-response FILE makes them energy)",
+        )
+    return led_spectra, notes
+
+
+def _chart(path: Path, section: dict) -> tuple[Spectra, tuple[str, ...]]:
+    """The ``chart`` section's reflectances, its grid (rows × columns) matching the patch count."""
+    chart, notes = _spectra(path, section, "chart", "reflectance", "names")
+    for name in ("rows", "columns"):
+        value = section.get(name)
+        if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
+            raise CalibrationError(f"{path}: field 'chart.{name}' is {_shown(value)}; expected a whole number ≥ 1")
+    rows, columns = section.get("rows"), section.get("columns")
+    if rows is not None and columns is not None and rows * columns != chart.count:
+        raise CalibrationError(
+            f"{path}: fields 'chart.rows' × 'chart.columns' are {rows} × {columns}; expected {chart.count}, the "
+            "number of patches in the chart's file"
+        )
+    return chart, notes
+
+
+def _check_dark(path: Path, dark: dict) -> None:
+    """The ``dark`` section: a black level per channel, read noise, a Bayer layout name or null."""
+    if "black_level" not in dark:
+        raise CalibrationError(f"{path}: field 'dark.black_level' is missing; expected one number per channel")
+    _number_list(path, dark, "dark", "black_level", sizes=(1, 4))
+    _number_list(path, dark, "dark", "read_noise_dn", minimum=0.0, sizes=(1, 4))
+    cfa = dark.get("cfa")
+    if cfa is not None and not isinstance(cfa, str):
+        raise CalibrationError(f"{path}: field 'dark.cfa' is {_shown(cfa)}; expected null or a Bayer layout name")
 
 
 def load_or_new(directory: str | Path) -> CalibrationSet:

@@ -149,59 +149,24 @@ def characterise_led(measurement: SpectrometerMeasurement) -> LedCharacterisatio
     fwhm, low, high = _fwhm(wavelengths, values, top)
     positive = np.clip(values, 0, None)
     centroid = float(np.sum(wavelengths * positive) / np.sum(positive))
-
-    # Saturation: a run of samples at the maximum.
-    at_max = values >= peak_value * (1 - SATURATION_TOLERANCE)
-    run, longest = 0, 0
-    for flag in at_max:
-        run = run + 1 if flag else 0
-        longest = max(longest, run)
-    saturated = longest >= SATURATION_RUN
-    if saturated:
-        notes.append(
-            f"{where}: {longest} samples at the maximum {peak_value:g} (flat top): the spectrometer "
-            "saturated; re-measure with a shorter integration time"
-        )
-
-    # Noise: samples far from the emission band.
+    at_max = _flat_top(values, peak_value, where, notes)
     band = max(fwhm, 5.0)
-    out_of_band = np.abs(wavelengths - peak_nm) > 4 * band
-    snr = math.inf
-    if np.count_nonzero(out_of_band) >= 5:
-        noise = float(np.std(values[out_of_band]))
-        snr = peak_value / noise if noise > 0 else math.inf
-        if snr < MIN_SNR:
-            notes.append(
-                f"{where}: noisy measurement (peak/noise {snr:.0f} < {MIN_SNR:.0f}); average more "
-                "scans or lengthen the integration time"
-            )
-
+    snr = _peak_snr(wavelengths, values, peak_nm, peak_value, band, where, notes)
     # Ohno 2005 model, asymmetric, fitted on the samples above 2 % of the peak plus a margin.
-    half_left = max(peak_nm - low, 1.0)
-    half_right = max(high - peak_nm, 1.0)
-    start = np.array([peak_value, peak_nm, half_left / HALF_WIDTH_FACTOR, half_right / HALF_WIDTH_FACTOR])
     fit_mask = np.abs(wavelengths - peak_nm) <= 3 * band + 2 * (wavelengths[1] - wavelengths[0])
-    usable = fit_mask & ~(at_max if saturated else np.zeros_like(at_max))
+    usable = fit_mask & ~(at_max if at_max is not None else np.zeros(values.shape, dtype=bool))
     if np.count_nonzero(usable) < 5:
         usable = fit_mask
-
-    def residual(p: np.ndarray) -> np.ndarray:
-        return (emission_model_Ohno2005(wavelengths[usable], *p) - values[usable]) / peak_value
-
-    span = wavelengths[-1] - wavelengths[0]
-    fit = least_squares(
-        residual,
-        start,
-        bounds=([0, wavelengths[0] - 50, 0.1, 0.1], [10 * peak_value, wavelengths[-1] + 50, span, span]),
-    )
-    amplitude, fitted_peak, width_left, width_right = (float(v) for v in fit.x)
-    model_values = emission_model_Ohno2005(wavelengths, *fit.x)
+    widths = (max(peak_nm - low, 1.0), max(high - peak_nm, 1.0))
+    model = _fit_emission_model(wavelengths, values, usable, peak_nm, peak_value, widths)
+    model_values = emission_model_Ohno2005(wavelengths, *model)
     model_residual = float(np.sqrt(np.mean(((values - model_values) / peak_value)[fit_mask] ** 2)))
     if model_residual > MAX_MODEL_RESIDUAL:
         notes.append(
             f"{where}: the single-peak emission model fits poorly (RMS residual {model_residual:.3f} of "
             "the peak): a phosphor-converted or multi-die LED? The measured spectrum is used, not the model"
         )
+    amplitude, fitted_peak, width_left, width_right = (float(v) for v in model)
     return LedCharacterisation(
         name=measurement.name,
         source=where,
@@ -216,9 +181,71 @@ def characterise_led(measurement: SpectrometerMeasurement) -> LedCharacterisatio
         },
         model_residual=model_residual,
         snr=snr,
-        saturated=saturated,
+        saturated=at_max is not None,
         warnings=tuple(notes),
     )
+
+
+def _flat_top(values: np.ndarray, peak_value: float, where: str, notes: list[str]) -> np.ndarray | None:
+    """The samples at the maximum when a run of them shows a saturated spectrometer (noted), else None."""
+    at_max = values >= peak_value * (1 - SATURATION_TOLERANCE)
+    run, longest = 0, 0
+    for flag in at_max:
+        run = run + 1 if flag else 0
+        longest = max(longest, run)
+    if longest < SATURATION_RUN:
+        return None
+    notes.append(
+        f"{where}: {longest} samples at the maximum {peak_value:g} (flat top): the spectrometer "
+        "saturated; re-measure with a shorter integration time"
+    )
+    return at_max
+
+
+def _peak_snr(
+    wavelengths: np.ndarray,
+    values: np.ndarray,
+    peak_nm: float,
+    peak_value: float,
+    band: float,
+    where: str,
+    notes: list[str],
+) -> float:
+    """Peak over the noise of the samples far from the emission band (inf without them); low is noted."""
+    out_of_band = np.abs(wavelengths - peak_nm) > 4 * band
+    if np.count_nonzero(out_of_band) < 5:
+        return math.inf
+    noise = float(np.std(values[out_of_band]))
+    snr = peak_value / noise if noise > 0 else math.inf
+    if snr < MIN_SNR:
+        notes.append(
+            f"{where}: noisy measurement (peak/noise {snr:.0f} < {MIN_SNR:.0f}); average more "
+            "scans or lengthen the integration time"
+        )
+    return snr
+
+
+def _fit_emission_model(
+    wavelengths: np.ndarray,
+    values: np.ndarray,
+    usable: np.ndarray,
+    peak_nm: float,
+    peak_value: float,
+    half_widths: tuple[float, float],
+) -> np.ndarray:
+    """The Ohno 2005 model's amplitude, peak and two half widths, least squares on the ``usable`` samples."""
+    start = np.array([peak_value, peak_nm, half_widths[0] / HALF_WIDTH_FACTOR, half_widths[1] / HALF_WIDTH_FACTOR])
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        return (emission_model_Ohno2005(wavelengths[usable], *p) - values[usable]) / peak_value
+
+    span = wavelengths[-1] - wavelengths[0]
+    fit = least_squares(
+        residual,
+        start,
+        bounds=([0, wavelengths[0] - 50, 0.1, 0.1], [10 * peak_value, wavelengths[-1] + 50, span, span]),
+    )
+    return np.asarray(fit.x)
 
 
 def relative_power_through_camera(

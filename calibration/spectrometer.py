@@ -4,8 +4,8 @@ Public objects
 --------------
 - :class:`SpectrometerMeasurement`: the raw samples of one export, on the instrument's own grid.
 - :func:`parse_spectrometer_text`, :func:`read_spectrometer_file`: the parser and its file form.
-- :func:`subtract_dark`: a dark (shutter closed) export taken off a measurement.
 - :func:`measurement_to_spectra`: the samples as :class:`~processing.spectra.Spectra` on a grid.
+  A dark export is taken off by :func:`calibration.spectrometer_dark.remove_baseline`.
 
 Accepted layout
 ---------------
@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import cast
 
@@ -173,29 +173,61 @@ def parse_spectrometer_text(
     """
     if unit not in ("energy", "photons"):
         raise CalibrationError(f"{source}: unit '{unit}'; expected energy or photons")
-    header: list[str] = []
-    header_lines: list[tuple[int, str]] = []  # header and comment lines, for the acquisition settings
-    rows: list[list[float]] = []
-    lines: list[int] = []
+    data = _read_rows(text, source, column)
+    table = np.asarray(data.rows, dtype=float)
+    wavelengths = table[:, 0]
+    value_column = data.column if data.column is not None else 1
+    readings = table[:, value_column]
+    _check_readings(wavelengths, readings, source, data.lines)
+    column_name, column_units, metadata = _value_column(data, table, value_column)
+    settings = acquisition_settings(data.header_lines, source, column_units)
+    _check_negatives(wavelengths, readings, column_name or "value", source, data.lines)
+    return SpectrometerMeasurement(
+        wavelengths,
+        readings,
+        unit,
+        source,
+        name or Path(source).stem,
+        tuple(data.header),
+        metadata,
+        settings,
+    )
+
+
+@dataclass
+class _Rows:
+    """A spectrometer export's lines sorted: header and comments, numeric data rows and their line numbers."""
+
+    column: int | None
+    header: list[str] = field(default_factory=list)
+    header_lines: list[tuple[int, str]] = field(default_factory=list)
+    """Header and comment lines, for the acquisition settings."""
+    rows: list[list[float]] = field(default_factory=list)
+    lines: list[int] = field(default_factory=list)
     width: int | None = None
     avantes: tuple[list[str], list[str]] | None = None
+
+
+def _read_rows(text: str, source: str, column: int | None) -> _Rows:
+    """The header lines before the data, the data rows (same width, finite), up to an end marker."""
+    data = _Rows(column)
     ended = False
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip().lstrip("\ufeff")
         if not line:
             continue
         if _is_comment(line):
-            if not rows:
-                header_lines.append((number, line))
+            if not data.rows:
+                data.header_lines.append((number, line))
             continue
         if ended:
             continue
         cells = _cells(line)
         values = _numbers(cells)
         if values is None:
-            if not rows:
-                header.append(line)
-                header_lines.append((number, line))
+            if not data.rows:
+                data.header.append(line)
+                data.header_lines.append((number, line))
                 continue
             if line.lower().startswith(_END_MARKERS):
                 ended = True
@@ -203,32 +235,11 @@ def parse_spectrometer_text(
             raise CalibrationError(
                 f"{source}:{number}: '{line[:50]}' is not numeric; expected 'wavelength, value' numbers on every data line"
             )
-        if width is None:
-            width = len(values)
-            avantes = _avantes_columns(header)
-            if width < 2:
-                raise CalibrationError(f"{source}:{number}: 1 column; expected at least 2 (wavelength_nm, value)")
-            if width > 2 and column is None and avantes is not None:
-                column = 1  # AvaSoft: the Sample column (raw counts); its Dark column is the stored dark
-            if width > 2 and column is None:
-                # "380,5,0,25": decimal commas between comma separators cannot be told apart from cells.
-                hint = (
-                    "; if the numbers have decimal commas, export with ';' or tab separators"
-                    if not re.search(r"[\t; ]", line)
-                    else ""
-                )
-                raise CalibrationError(
-                    f"{source}:{number}: {width} columns; expected 2 (wavelength_nm, value), or choose the "
-                    f"value column (column=N / --column N){hint}"
-                )
-            if column is not None and not 1 <= column < width:
-                raise CalibrationError(
-                    f"{source}:{number}: value column {column} requested but the data have {width} columns; "
-                    f"expected 1…{width - 1}"
-                )
-        elif len(values) != width:
+        if data.width is None:
+            _first_data_line(data, len(values), line, f"{source}:{number}")
+        elif len(values) != data.width:
             raise CalibrationError(
-                f"{source}:{number}: {len(values)} columns; expected {width} as on the first data line"
+                f"{source}:{number}: {len(values)} columns; expected {data.width} as on the first data line"
             )
         bad = [i for i, v in enumerate(values) if not math.isfinite(v) or abs(v) > MAX_TABLE_MAGNITUDE]
         if bad:
@@ -237,14 +248,42 @@ def parse_spectrometer_text(
                 f"{source}:{number}: {field_name} is '{printable(cells[bad[0]][:40])}'; expected a finite number of "
                 f"magnitude at most {MAX_TABLE_MAGNITUDE:g}"
             )
-        rows.append(values)
-        lines.append(number)
-    if len(rows) < 3:
-        raise CalibrationError(f"{source}: {len(rows)} data lines; expected at least 3 lines of 'wavelength_nm, value'")
-    table = np.asarray(rows, dtype=float)
-    wavelengths = table[:, 0]
-    value_column = column if column is not None else 1
-    readings = table[:, value_column]
+        data.rows.append(values)
+        data.lines.append(number)
+    if len(data.rows) < 3:
+        raise CalibrationError(
+            f"{source}: {len(data.rows)} data lines; expected at least 3 lines of 'wavelength_nm, value'"
+        )
+    return data
+
+
+def _first_data_line(data: _Rows, width: int, line: str, where: str) -> None:
+    """Fix the data's width and value column from the first data line (AvaSoft: its Sample column)."""
+    data.width = width
+    data.avantes = _avantes_columns(data.header)
+    if width < 2:
+        raise CalibrationError(f"{where}: 1 column; expected at least 2 (wavelength_nm, value)")
+    if width > 2 and data.column is None and data.avantes is not None:
+        data.column = 1  # AvaSoft: the Sample column (raw counts); its Dark column is the stored dark
+    if width > 2 and data.column is None:
+        # "380,5,0,25": decimal commas between comma separators cannot be told apart from cells.
+        hint = (
+            "; if the numbers have decimal commas, export with ';' or tab separators"
+            if not re.search(r"[\t; ]", line)
+            else ""
+        )
+        raise CalibrationError(
+            f"{where}: {width} columns; expected 2 (wavelength_nm, value), or choose the "
+            f"value column (column=N / --column N){hint}"
+        )
+    if data.column is not None and not 1 <= data.column < width:
+        raise CalibrationError(
+            f"{where}: value column {data.column} requested but the data have {width} columns; expected 1…{width - 1}"
+        )
+
+
+def _check_readings(wavelengths: np.ndarray, readings: np.ndarray, source: str, lines: list[int]) -> None:
+    """Wavelengths strictly increasing, in nanometres; a positive reading of a sensible magnitude."""
     steps = np.diff(wavelengths)
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0)) + 1
@@ -265,35 +304,29 @@ def parse_spectrometer_text(
             f"{source}: the value column peaks at {peak:.3g}; expected values of magnitude at least "
             f"{MIN_TABLE_PEAK:g} (a file scaled by mistake?)"
         )
+
+
+def _value_column(data: _Rows, table: np.ndarray, value_column: int) -> tuple[str, tuple[str, ...], dict]:
+    """The value column's name and units from the header, and the measurement's metadata (AvaSoft's dark)."""
     column_name, column_units = "", cast(tuple[str, ...], ())
-    metadata: dict = {"lines": tuple(lines)}
-    if avantes is not None:
-        names, units = avantes
+    metadata: dict = {"lines": tuple(data.lines)}
+    if data.avantes is not None:
+        names, units = data.avantes
         column_name = names[value_column] if value_column < len(names) else ""
         column_units = tuple(units[value_column : value_column + 1])
         dark_column = 2
+        width = data.width
         if value_column == 1 and width is not None and width > dark_column and np.any(table[:, dark_column] != 0):
             metadata["dark_values"] = table[:, dark_column].copy()  # AvaSoft stored a dark with the sample
-    elif header:
+    elif data.header:
         # "Wavelength (nm)\tIrradiance": names may hold spaces when another separator is used.
-        header_cells = _header_cells(header[-1])
-        if width is not None and len(header_cells) >= width:
+        header_cells = _header_cells(data.header[-1])
+        if data.width is not None and len(header_cells) >= data.width:
             column_name = header_cells[value_column]
             if re.fullmatch(r"\W*(?:raw\s+)?counts?\W*|.*[\[(]counts?[\])].*", column_name, re.IGNORECASE):
                 column_units = ("[counts]",)  # a plain file naming its column "counts": raw counts
-    settings = acquisition_settings(header_lines, source, column_units)
     metadata["column"] = column_name
-    _check_negatives(wavelengths, readings, column_name or "value", source, lines)
-    return SpectrometerMeasurement(
-        wavelengths,
-        readings,
-        unit,
-        source,
-        name or Path(source).stem,
-        tuple(header),
-        metadata,
-        settings,
-    )
+    return column_name, column_units, metadata
 
 
 def _check_negatives(
@@ -335,34 +368,6 @@ def read_spectrometer_file(
     except UnicodeDecodeError:
         text = data.decode("latin-1")  # instrument software often writes µ or ° in Latin-1
     return parse_spectrometer_text(text, shown, unit, column, name)
-
-
-def subtract_dark(measurement: SpectrometerMeasurement, dark: SpectrometerMeasurement) -> SpectrometerMeasurement:
-    """The measurement minus a dark export taken on the same wavelengths.
-
-    Raises
-    ------
-    CalibrationError
-        If the two exports do not sample the same wavelengths.
-    """
-    if dark.wavelengths_nm.shape != measurement.wavelengths_nm.shape or not np.allclose(
-        dark.wavelengths_nm, measurement.wavelengths_nm, atol=1e-6
-    ):
-        raise CalibrationError(
-            f"{dark.source}: dark export samples {dark.wavelengths_nm.size} wavelengths "
-            f"{dark.wavelengths_nm[0]:g}–{dark.wavelengths_nm[-1]:g} nm but {measurement.source} samples "
-            f"{measurement.wavelengths_nm.size} ({measurement.wavelengths_nm[0]:g}–{measurement.wavelengths_nm[-1]:g} nm); "
-            "expected the same instrument grid"
-        )
-    metadata = {**measurement.metadata, "dark": dark.source}
-    values = measurement.values - dark.values
-    _check_negatives(
-        measurement.wavelengths_nm,
-        values,
-        measurement.metadata.get("column") or "value",
-        f"{measurement.source} minus the dark {dark.source}",
-    )
-    return replace(measurement, values=values, metadata=metadata)
 
 
 def clip_measurement_negatives(measurement: SpectrometerMeasurement, what: str) -> SpectrometerMeasurement:

@@ -247,47 +247,61 @@ def remove_baseline(
         with no tail to measure the fixed offset on; a raw-counts export without a dark or a tail;
         a dark and an export of which only one states its integration time.
     """
-    where = measurement.source
-    raw_counts = measurement.settings.value_unit == "counts"
     if dark is not None:
-        _same_grid(measurement, dark)
-        times = (measurement.settings.integration_time_s, dark.settings.integration_time_s)
-        if times[0] is not None and times[1] is not None:
-            values, how = _dark_at_time(measurement, dark)
-            if how["method"] != "dark export":
-                report(
-                    f"{where}: the dark {dark.source} was taken at {1e3 * times[1]:g} ms, the export at "
-                    f"{1e3 * times[0]:g} ms: scaled (dark current ∝ time, fixed offset {how['fixed_offset']:.4g} from "
-                    f"{how['fixed_offset_from']})"
-                )
-        elif (times[0] is None) != (times[1] is None):
-            stated, unstated = (measurement, dark) if times[0] is not None else (dark, measurement)
-            raise CalibrationError(
-                f"{unstated.source}: states no integration time but {stated.source} does "
-                f"({1e3 * (stated.settings.integration_time_s or 0):g} ms); expected both (a header line or "
-                "--integration-time-ms), so that a dark of another time is not subtracted as if it were the same"
-            )
-        else:
-            values, how = dark.values, {"method": "dark export (integration times not stated)", "dark": dark.source}
-        result = _with_values(measurement, measurement.values - values, how, f"{where} minus the dark {dark.source}")
-        after = out_of_band_baseline(result.wavelengths_nm, result.values)
-        if (
-            after is not None
-            and after.significant
-            and abs(after.level) > BASELINE_PEAK_SHARE * float(np.max(result.values))
-        ):
-            report(
-                f"warning: {where}: after subtracting the dark {dark.source} the out-of-band tail ({after.span}) "
-                f"still sits at {after.level:.4g} ({100 * after.level / float(np.max(result.values)):.2g} % of the "
-                "peak): a dark of another integration time or temperature?"
-            )
-        return result
+        return _minus_dark(measurement, dark, report)
+    where = measurement.source
     stored = measurement.metadata.get("dark_values")
     if stored is not None and not no_dark:
         report(f"{where}: the dark stored in the export (its Dark column) subtracted")
         return _with_values(
             measurement, measurement.values - stored, {"method": "dark column of the export"}, f"{where} minus its Dark"
         )
+    return _minus_tail(measurement, no_dark, report)
+
+
+def _minus_dark(
+    measurement: SpectrometerMeasurement, dark: SpectrometerMeasurement, report: Report
+) -> SpectrometerMeasurement:
+    """The export minus a dark export, scaled to the export's integration time when both state theirs."""
+    where = measurement.source
+    _same_grid(measurement, dark)
+    times = (measurement.settings.integration_time_s, dark.settings.integration_time_s)
+    if times[0] is not None and times[1] is not None:
+        values, how = _dark_at_time(measurement, dark)
+        if how["method"] != "dark export":
+            report(
+                f"{where}: the dark {dark.source} was taken at {1e3 * times[1]:g} ms, the export at "
+                f"{1e3 * times[0]:g} ms: scaled (dark current ∝ time, fixed offset {how['fixed_offset']:.4g} from "
+                f"{how['fixed_offset_from']})"
+            )
+    elif (times[0] is None) != (times[1] is None):
+        stated, unstated = (measurement, dark) if times[0] is not None else (dark, measurement)
+        raise CalibrationError(
+            f"{unstated.source}: states no integration time but {stated.source} does "
+            f"({1e3 * (stated.settings.integration_time_s or 0):g} ms); expected both (a header line or "
+            "--integration-time-ms), so that a dark of another time is not subtracted as if it were the same"
+        )
+    else:
+        values, how = dark.values, {"method": "dark export (integration times not stated)", "dark": dark.source}
+    result = _with_values(measurement, measurement.values - values, how, f"{where} minus the dark {dark.source}")
+    after = out_of_band_baseline(result.wavelengths_nm, result.values)
+    if (
+        after is not None
+        and after.significant
+        and abs(after.level) > BASELINE_PEAK_SHARE * float(np.max(result.values))
+    ):
+        report(
+            f"warning: {where}: after subtracting the dark {dark.source} the out-of-band tail ({after.span}) "
+            f"still sits at {after.level:.4g} ({100 * after.level / float(np.max(result.values)):.2g} % of the "
+            "peak): a dark of another integration time or temperature?"
+        )
+    return result
+
+
+def _minus_tail(measurement: SpectrometerMeasurement, no_dark: bool, report: Report) -> SpectrometerMeasurement:
+    """Without a dark: the out-of-band tail checked (``no_dark``) or subtracted when it holds a baseline."""
+    where = measurement.source
+    raw_counts = measurement.settings.value_unit == "counts"
     tail = out_of_band_baseline(measurement.wavelengths_nm, measurement.values)
     peak = float(np.max(measurement.values))
     if no_dark:

@@ -221,66 +221,83 @@ def acquisition_settings(
     """
     texts = [text.strip().lstrip("\ufeff") for _, text in header_lines]
     instrument = _instrument(texts)
-    found: dict[str, object] = {}
-    lines: dict[str, int] = {}
-
-    def put(key: str, value: object, number: int) -> None:
-        if key not in found:
-            found[key] = value
-            lines[key] = number
-
+    found = _Found()
     for (number, _), raw in zip(header_lines, texts, strict=True):
-        line = _stripped(raw)
-        time_match = _OCEAN_TIME.match(line) or _AVANTES_TIME.match(line)
-        if time_match:
-            put("integration_time_s", (time_match.group("v"), time_match.group("u"), line), number)
-        elif instrument == "Thorlabs" and (match := _THORLABS_TIME.match(line)):
-            put("integration_time_s", (match.group("v"), "s", line), number)  # ThorSpectra writes seconds
-        elif instrument == "SpectraWiz" and raw.startswith('"') and (match := _SPECTRAWIZ.search(line)):
-            put("integration_time_s", (match.group("v"), match.group("u") or "ms", line), number)
-            if avg := re.search(r"\bAvg:\s*(\d+)", line, re.IGNORECASE):
-                put("averages", int(avg.group(1)), number)
-            if smooth := re.search(r"\bSm:\s*(\d+)", line, re.IGNORECASE):
-                put("boxcar", int(smooth.group(1)), number)
-        elif match := _PLAIN_TIME.match(line):
-            unit = match.group("ku") or match.group("u")
-            if unit is None:
-                raise CalibrationError(
-                    f"{source}:{number}: '{line[:60]}' states an integration time without a unit; expected e.g. "
-                    "'integration_time_ms: 10' or 'integration time: 10 ms'"
-                )
-            put("integration_time_s", (match.group("v"), unit, line), number)
-        if match := _AVERAGES.match(line):
-            put("averages", int(match.group("v")), number)
-        if match := _BOXCAR.match(line):
-            put("boxcar", int(match.group("v")), number)
-        if match := _ELECTRIC_DARK.match(line):
-            flag = _flag(match.group("v"))
-            if flag is not None:
-                put("electric_dark", flag, number)
-    seconds: float | None = None
-    if "integration_time_s" in found:
-        stated: tuple[str, str, str] = found["integration_time_s"]  # type: ignore[assignment]
-        text, unit, line = stated
-        value = header_number(str(text))
-        seconds = _seconds(value, str(unit)) if value is not None else None
-        if seconds is None or not math.isfinite(seconds) or seconds <= 0:
-            raise CalibrationError(
-                f"{source}:{lines['integration_time_s']}: '{str(line)[:60]}': integration time '{text}'; expected a "
-                "positive number"
-            )
-    averages = found.get("averages")
+        _read_setting_line(found, instrument, raw, number, source)
+    seconds = _integration_seconds(found, source)
+    averages = found.values.get("averages")
     if averages is not None and int(averages) == 0:  # type: ignore[call-overload]
         averages = 1  # Thorlabs writes 0 for "no averaging"
     return AcquisitionSettings(
         instrument=instrument,
         integration_time_s=seconds,
         averages=averages,  # type: ignore[arg-type]
-        boxcar=found.get("boxcar"),  # type: ignore[arg-type]
+        boxcar=found.values.get("boxcar"),  # type: ignore[arg-type]
         value_unit=_unit_of_values(instrument, texts, column_units),
-        electric_dark=found.get("electric_dark"),  # type: ignore[arg-type]
-        lines=lines,
+        electric_dark=found.values.get("electric_dark"),  # type: ignore[arg-type]
+        lines=found.lines,
     )
+
+
+class _Found:
+    """The settings found so far and the line each came from; the first statement of a key wins."""
+
+    def __init__(self) -> None:
+        self.values: dict[str, object] = {}
+        self.lines: dict[str, int] = {}
+
+    def put(self, key: str, value: object, number: int) -> None:
+        if key not in self.values:
+            self.values[key] = value
+            self.lines[key] = number
+
+
+def _read_setting_line(found: _Found, instrument: str, raw: str, number: int, source: str) -> None:
+    """The settings one header line states: integration time (as text, unit, line), averages, boxcar, dark."""
+    line = _stripped(raw)
+    time_match = _OCEAN_TIME.match(line) or _AVANTES_TIME.match(line)
+    if time_match:
+        found.put("integration_time_s", (time_match.group("v"), time_match.group("u"), line), number)
+    elif instrument == "Thorlabs" and (match := _THORLABS_TIME.match(line)):
+        found.put("integration_time_s", (match.group("v"), "s", line), number)  # ThorSpectra writes seconds
+    elif instrument == "SpectraWiz" and raw.startswith('"') and (match := _SPECTRAWIZ.search(line)):
+        found.put("integration_time_s", (match.group("v"), match.group("u") or "ms", line), number)
+        if avg := re.search(r"\bAvg:\s*(\d+)", line, re.IGNORECASE):
+            found.put("averages", int(avg.group(1)), number)
+        if smooth := re.search(r"\bSm:\s*(\d+)", line, re.IGNORECASE):
+            found.put("boxcar", int(smooth.group(1)), number)
+    elif match := _PLAIN_TIME.match(line):
+        unit = match.group("ku") or match.group("u")
+        if unit is None:
+            raise CalibrationError(
+                f"{source}:{number}: '{line[:60]}' states an integration time without a unit; expected e.g. "
+                "'integration_time_ms: 10' or 'integration time: 10 ms'"
+            )
+        found.put("integration_time_s", (match.group("v"), unit, line), number)
+    if match := _AVERAGES.match(line):
+        found.put("averages", int(match.group("v")), number)
+    if match := _BOXCAR.match(line):
+        found.put("boxcar", int(match.group("v")), number)
+    if match := _ELECTRIC_DARK.match(line):
+        flag = _flag(match.group("v"))
+        if flag is not None:
+            found.put("electric_dark", flag, number)
+
+
+def _integration_seconds(found: _Found, source: str) -> float | None:
+    """The stated integration time in seconds (None if not stated); refused unless positive and finite."""
+    if "integration_time_s" not in found.values:
+        return None
+    stated: tuple[str, str, str] = found.values["integration_time_s"]  # type: ignore[assignment]
+    text, unit, line = stated
+    value = header_number(str(text))
+    seconds = _seconds(value, str(unit)) if value is not None else None
+    if seconds is None or not math.isfinite(seconds) or seconds <= 0:
+        raise CalibrationError(
+            f"{source}:{found.lines['integration_time_s']}: '{str(line)[:60]}': integration time '{text}'; expected a "
+            "positive number"
+        )
+    return seconds
 
 
 __all__ = ["SECONDS_PER", "AcquisitionSettings", "ValueUnit", "acquisition_settings", "header_number"]

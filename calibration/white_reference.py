@@ -125,6 +125,50 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
         See the module notes.
     """
     where = str(sequence.path)
+    led_indices, names, levels = _led_frames(sequence, where)
+    ambient, ambient_saturated = sequence.load_linear_frame(sequence.indices("ambient")[0])
+    height, width = ambient.shape[:2]
+    roi = roi if roi is not None else _default_roi(height, width)
+    x, y, w, h = roi
+    if x + w > width or y + h > height:
+        raise CalibrationError(
+            f"{where}: --white-roi {x},{y},{w},{h} reaches outside the {width}×{height} frame; "
+            "expected X+W ≤ width and Y+H ≤ height"
+        )
+    frame_means, frame_errors, block_means, smallest = _frame_means(
+        sequence, led_indices, ambient, ambient_saturated, roi
+    )
+    unmixing = np.linalg.pinv(levels)  # (k, frames)
+    responses = unmixing @ frame_means
+    std = np.sqrt((unmixing**2) @ frame_errors**2)
+    for k, name in enumerate(names):
+        total, total_std = responses[k].sum(), np.sqrt(np.sum(std[k] ** 2))
+        if not total > MIN_SIGNIFICANCE * total_std:
+            raise CalibrationError(
+                f"{where}: LED '{name}' adds {total:.3g} ± {total_std:.2g} on the white reference; "
+                f"expected a response above {MIN_SIGNIFICANCE:g} standard errors (is it on? "
+                "is the exposure long enough?)"
+            )
+    per_block = np.einsum("kf,fbc->kbc", unmixing, block_means)  # (k, blocks, channels)
+    spread = _share_spread(per_block, std, SUB_BLOCKS * SUB_BLOCKS)
+    worst = int(np.argmax(spread))
+    if spread[worst] > MAX_SHARE_SPREAD:
+        raise CalibrationError(
+            f"{where}: in the region {x},{y},{w},{h} LED '{names[worst]}''s share of the light "
+            f"varies {100 * spread[worst]:.0f} % (> {100 * MAX_SHARE_SPREAD:.0f} %); expected a "
+            "uniform, neutral white reference there (choose it with --white-roi X,Y,W,H)"
+        )
+    warnings = tuple(
+        f"{where}: LED '{name}' lights the reference unevenly relative to the others (its share varies "
+        f"{100 * value:.1f} % over the region): its ratio holds for this position only"
+        for name, value in zip(names, spread, strict=True)
+        if value > SHARE_WARNING
+    )
+    return WhiteResponses(responses, std, names, (x, y, w, h), int(smallest), spread, warnings)
+
+
+def _led_frames(sequence: Any, where: str) -> tuple[list[int], tuple[str, ...], np.ndarray]:
+    """The LED frames, the LEDs' names and the frames' levels (which must separate the LEDs); an ambient frame."""
     ambient_indices = sequence.indices("ambient")
     led_indices = sequence.indices("led")
     if not ambient_indices or not led_indices:
@@ -139,21 +183,25 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
             f"{where}: the 'led' frames' led_levels (rank {np.linalg.matrix_rank(levels)}) do "
             f"not separate the {len(names)} LEDs; expected a frame per LED"
         )
-    cfa = sequence.camera.cfa
-    ambient, ambient_saturated = sequence.load_linear_frame(ambient_indices[0])
+    return list(led_indices), names, levels
+
+
+def _frame_means(
+    sequence: Any,
+    led_indices: list[int],
+    ambient: np.ndarray,
+    ambient_saturated: np.ndarray,
+    roi: tuple[int, int, int, int],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Per LED frame minus the ambient over the region: the means and errors per channel, the sub-blocks'
+    means, and the fewest samples a channel had."""
+    where = str(sequence.path)
     height, width = ambient.shape[:2]
-    roi = roi if roi is not None else _default_roi(height, width)
     x, y, w, h = roi
-    if x + w > width or y + h > height:
-        raise CalibrationError(
-            f"{where}: --white-roi {x},{y},{w},{h} reaches outside the {width}×{height} frame; "
-            "expected X+W ≤ width and Y+H ≤ height"
-        )
     roi_mask = np.zeros((height, width), dtype=bool)
     roi_mask[y : y + h, x : x + w] = True
     block_labels = _sub_block_labels((height, width), roi)
-    n_blocks = SUB_BLOCKS * SUB_BLOCKS
-
+    cfa = sequence.camera.cfa
     frame_means, frame_errors, block_means, smallest = [], [], [], roi_mask.sum()
     for i in led_indices:
         image, saturated = sequence.load_linear_frame(i)
@@ -169,35 +217,9 @@ def white_led_responses(sequence: Any, roi: tuple[int, int, int, int] | None = N
         smallest = min(smallest, int(counts[0]))
         frame_means.append(means[0])
         frame_errors.append(errors[0])
+        n_blocks = SUB_BLOCKS * SUB_BLOCKS
         block_means.append(patch_statistics(difference, np.where(usable, block_labels, -1), n_blocks, cfa)[0])
-    frame_means_array, frame_errors_array = np.array(frame_means), np.array(frame_errors)
-    unmixing = np.linalg.pinv(levels)  # (k, frames)
-    responses = unmixing @ frame_means_array
-    std = np.sqrt((unmixing**2) @ frame_errors_array**2)
-    for k, name in enumerate(names):
-        total, total_std = responses[k].sum(), np.sqrt(np.sum(std[k] ** 2))
-        if not total > MIN_SIGNIFICANCE * total_std:
-            raise CalibrationError(
-                f"{where}: LED '{name}' adds {total:.3g} ± {total_std:.2g} on the white reference; "
-                f"expected a response above {MIN_SIGNIFICANCE:g} standard errors (is it on? "
-                "is the exposure long enough?)"
-            )
-    per_block = np.einsum("kf,fbc->kbc", unmixing, np.array(block_means))  # (k, blocks, channels)
-    spread = _share_spread(per_block, std, n_blocks)
-    worst = int(np.argmax(spread))
-    if spread[worst] > MAX_SHARE_SPREAD:
-        raise CalibrationError(
-            f"{where}: in the region {x},{y},{w},{h} LED '{names[worst]}''s share of the light "
-            f"varies {100 * spread[worst]:.0f} % (> {100 * MAX_SHARE_SPREAD:.0f} %); expected a "
-            "uniform, neutral white reference there (choose it with --white-roi X,Y,W,H)"
-        )
-    warnings = tuple(
-        f"{where}: LED '{name}' lights the reference unevenly relative to the others (its share varies "
-        f"{100 * value:.1f} % over the region): its ratio holds for this position only"
-        for name, value in zip(names, spread, strict=True)
-        if value > SHARE_WARNING
-    )
-    return WhiteResponses(responses, std, names, (x, y, w, h), int(smallest), spread, warnings)
+    return np.array(frame_means), np.array(frame_errors), np.array(block_means), int(smallest)
 
 
 def _share_spread(per_block: np.ndarray, std: np.ndarray, n_blocks: int) -> tuple[float, ...]:

@@ -43,8 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.image_formation import cfa_channel_map
 from msflash.processing.render import reflectances_to_xyz
+from msflash.processing.sensor import cfa_channel_map
 from msflash.processing.spectra import Spectra
 
 

@@ -158,6 +158,29 @@ def load_spectra_csv(
     # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is dropped instead of becoming part of the header.
     text = read_user_text(path, "a spectral table (UTF-8 CSV file)", SPECTRAL_TABLE_MAX_BYTES, encoding="utf-8-sig")
 
+    comments, header, rows, missing = _parse_table(text, where, nan)
+    table = np.asarray(rows, dtype=float)
+    for column in tiny_columns(table[:, 1:]):
+        raise SpectralDataError(
+            f"{where}: column '{printable(_cut(header[column + 1]))}' peaks at {np.max(np.abs(table[:, column + 1])):.3g}; "
+            f"expected values of magnitude at least {MIN_TABLE_PEAK:g} where there are any (a table scaled by mistake?)"
+        )
+    grid = WavelengthGrid.from_wavelengths(table[:, 0], where=f"{where}: column '{header[0]}'")
+    spectrum_names = tuple(header[1:]) if names is None else tuple(names)
+    if len(spectrum_names) != table.shape[1] - 1:
+        raise SpectralDataError(
+            f"{where}: {len(spectrum_names)} names given for {table.shape[1] - 1} spectra; expected one per column"
+        )
+    metadata: dict = {"path": where, "comments": comments, "header": tuple(header[1:])}
+    if missing:
+        metadata["nan_set_to_zero"] = missing
+    return Spectra(grid, table[:, 1:], spectrum_names, kind=kind, unit=unit, source=source or where, metadata=metadata)
+
+
+def _parse_table(
+    text: str, where: str, nan: Literal["error", "zero"]
+) -> tuple[list[str], list[str], list[list[float]], list[tuple[int, str]]]:
+    """A spectral table's comments, header, number rows and missing cells (line, column) set to 0."""
     comments: list[str] = []
     header: list[str] | None = None
     rows: list[list[float]] = []
@@ -181,49 +204,41 @@ def load_spectra_csv(
             raise SpectralDataError(
                 f"{where}:{line_number}: {len(cells)} cells; expected {len(header)} as in the header"
             )
-        row: list[float] = []
-        for column, cell in enumerate(cells):
-            if cell == "" or cell.lower() == "nan":
-                if column == 0 or nan == "error":
-                    raise SpectralDataError(
-                        f"{where}:{line_number}: column '{header[column]}' is missing (NaN); expected a number "
-                        "(load with nan='zero' if zero is the right value)"
-                    )
-                missing.append((line_number, header[column]))
-                row.append(0.0)
-                continue
-            try:
-                value = float(cell)
-            except ValueError as err:
-                raise SpectralDataError(
-                    f"{where}:{line_number}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a number"
-                ) from err
-            if not math.isfinite(value) or abs(value) > MAX_TABLE_MAGNITUDE:
-                raise SpectralDataError(
-                    f"{where}:{line_number}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a finite "
-                    f"number of magnitude at most {MAX_TABLE_MAGNITUDE:g}"
-                )
-            row.append(value)
+        row, blanks = _parse_row(cells, header, f"{where}:{line_number}", nan)
         rows.append(row)
-
+        missing += [(line_number, column) for column in blanks]
     if header is None or len(rows) < 2:
         raise SpectralDataError(f"{where}: no data rows; expected a header and at least two wavelengths")
-    table = np.asarray(rows, dtype=float)
-    for column in tiny_columns(table[:, 1:]):
-        raise SpectralDataError(
-            f"{where}: column '{printable(_cut(header[column + 1]))}' peaks at {np.max(np.abs(table[:, column + 1])):.3g}; "
-            f"expected values of magnitude at least {MIN_TABLE_PEAK:g} where there are any (a table scaled by mistake?)"
-        )
-    grid = WavelengthGrid.from_wavelengths(table[:, 0], where=f"{where}: column '{header[0]}'")
-    spectrum_names = tuple(header[1:]) if names is None else tuple(names)
-    if len(spectrum_names) != table.shape[1] - 1:
-        raise SpectralDataError(
-            f"{where}: {len(spectrum_names)} names given for {table.shape[1] - 1} spectra; expected one per column"
-        )
-    metadata: dict = {"path": where, "comments": comments, "header": tuple(header[1:])}
-    if missing:
-        metadata["nan_set_to_zero"] = missing
-    return Spectra(grid, table[:, 1:], spectrum_names, kind=kind, unit=unit, source=source or where, metadata=metadata)
+    return comments, header, rows, missing
+
+
+def _parse_row(cells: list[str], header: list[str], where: str, nan: str) -> tuple[list[float], list[str]]:
+    """One data row's numbers and the columns whose missing cell (``nan="zero"``) was set to 0."""
+    blanks: list[str] = []
+    row: list[float] = []
+    for column, cell in enumerate(cells):
+        if cell == "" or cell.lower() == "nan":
+            if column == 0 or nan == "error":
+                raise SpectralDataError(
+                    f"{where}: column '{header[column]}' is missing (NaN); expected a number "
+                    "(load with nan='zero' if zero is the right value)"
+                )
+            blanks.append(header[column])
+            row.append(0.0)
+            continue
+        try:
+            value = float(cell)
+        except ValueError as err:
+            raise SpectralDataError(
+                f"{where}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a number"
+            ) from err
+        if not math.isfinite(value) or abs(value) > MAX_TABLE_MAGNITUDE:
+            raise SpectralDataError(
+                f"{where}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a finite "
+                f"number of magnitude at most {MAX_TABLE_MAGNITUDE:g}"
+            )
+        row.append(value)
+    return row, blanks
 
 
 def _shipped(relative: str, kind: SpectralKind, unit: SpectralUnit, licence: str, **options: Any) -> Spectra:

@@ -19,24 +19,17 @@ Candidates are the global model and local models with smoothing widths :data:`SM
 prediction**: tile ``t``'s ambient image is predicted from LED weights fitted *without* tile ``t``
 — on all other tiles for the global model, on the Gaussian-weighted neighbours for a local one —
 and the held-out squared errors are summed over the tiles (from the statistics alone:
-``‖a_t − F_t w‖² = E_t − 2 c_tᵀ w + wᵀ G_t w``). Holding out whole tiles, not pixels, matters:
-when the ambient is uniform but outside the LEDs' span, a local fit adapts to the local surfaces
-and would win a pixel-wise split (neighbouring pixels share surfaces), but it does not generalise
-to the next tile's surfaces, while a truly varying ambient is shared by neighbours. A local model
-is chosen only when it cuts the held-out error by more than :data:`SELECTION_MARGIN` — the
-safeguard that keeps uniform scenes global (calibrated on simulated uniform scenes:
-docs/local-estimation.md) — *and* the cut is more than :data:`MIN_EXPLAINED_GAIN` of the ambient
-image's energy. The ratio alone fails at high signal-to-noise ratios: when the global model's
-held-out error is nothing but a tiny misfit (an ambient slightly outside the LEDs' span, blocks
-dropped for saturation), a local fit can cut that tiny error by half on a uniform scene. Two
-ambients leave a misfit that is a sizeable part of the image.
+``‖a_t − F_t w‖² = E_t − 2 c_tᵀ w + wᵀ G_t w``). A local model is chosen only when it cuts the
+held-out error by more than :data:`SELECTION_MARGIN` (the safeguard that keeps uniform scenes
+global) *and* the cut is more than :data:`MIN_EXPLAINED_GAIN` of the ambient image's energy. Why
+whole tiles and not pixels, and why both conditions: docs/local-estimation.md, how it works.
 
 Noise correction
 ----------------
 The LED-only images are differences of noisy frames, so the moments of eq. 5 carry the noise
 variance (errors in variables). :func:`tile_statistics` also measures it per block from the
 difference of two interleaved column halves (:attr:`TiledStatistics.denoised`), and the local model
-is solved on the corrected statistics, as the global estimate is (:mod:`processing.statistics` measures
+is solved on the corrected statistics, as the global estimate is (:mod:`processing.block_rows` measures
 the same probe for the whole frame; docs/architecture.md §8: the noise is measured from the data,
 without a noise model).
 
@@ -69,15 +62,13 @@ from msflash.processing.local_selection import (
     segment_regions,
     select_model,
 )
+from msflash.processing.region_cells import Cells
 from msflash.processing.spectra import Spectra, require_unit
-from msflash.processing.statistics import (
-    FrameStackSpec,
-)
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import frame_coefficients
 from msflash.processing.tile_statistics import (
     DEFAULT_TILES,
     BlockData,
-    Cells,
     TileBlocks,
     TiledStatistics,
     tile_edges,
@@ -186,92 +177,126 @@ def estimate_local(
         (:func:`segment_regions`) and keep it when two regions explain the ambient image better
         than a smooth affine field; otherwise (or when False) solve per tile.
     noise_correction
-        Solve the local model (tiles and regions) on the denoised statistics
-        (:attr:`TiledStatistics.denoised`: the noise bias of the LED-only images' moments removed)
-        when the tiles have them (even bin factors). The global estimate is solved on them too (as
-        :func:`processing.ambient.estimate_ambient` does on any statistics that carry their noise), so it is
-        the whole-frame estimate of ``msflash estimate --method global``; model selection and region
-        labels use the statistics as observed. False: everything on the statistics as observed.
+        Solve the local model (tiles and regions) and the global estimate on the denoised statistics
+        (:attr:`TiledStatistics.denoised`: the noise bias of the LED-only images' moments removed) when the
+        tiles have them (even bin factors), as :func:`processing.ambient.estimate_ambient` does, so the global
+        estimate is that of ``msflash estimate --method global`` and ``msflash run``; model selection and
+        region labels use the statistics as observed. False: everything on the statistics as observed.
     global_estimate
-        The whole-frame estimate (eq. 4–6) when the caller has it: a sequence's, from the whole frame's
-        statistics (:func:`processing.statistics.accumulate_statistics`), so that the global numbers are
-        those of every other route from the frames to an estimate. It is then used as it is (its α scores
-        the selection), not solved again on the sum of the tiles — which is the same up to the summation
-        order, except on large frames (:data:`processing.statistics.PROBE_BLOCKS`), where the whole-frame
-        pass probes the noise on a stride of block rows and the tiles on every block (a different noise
-        correction, hence a different GCV α). None: solved on :meth:`TiledStatistics.total`.
+        The whole-frame estimate (eq. 4–6) when the caller has it (a sequence's, from the whole frame's
+        statistics, :func:`processing.accumulate.accumulate_statistics`), used as it is: its α scores the
+        selection. None: solved on :meth:`TiledStatistics.total` (why the two can differ on large frames:
+        docs/local-estimation.md).
     """
-    if method not in LOCAL_METHODS:
-        raise ValueError(f"local method '{method}' is unknown; expected one of {', '.join(LOCAL_METHODS)}")
-    if solver not in AMBIENT_METHODS:
-        raise ValueError(f"ambient method '{solver}' is unknown; expected one of {', '.join(AMBIENT_METHODS)}")
+    _check_local_method(method, solver)
     require_unit(led_spectra, "photons")
     total = tiles.total() if noise_correction else replace(tiles.total(), noise=None)
-    clean = tiles.denoised if noise_correction else None
     ambient_model = AmbientModel(led_spectra)
-    # The global model is the one `msflash estimate --method global` and `msflash run` compute from the
-    # whole frame: solved on the denoised statistics when the blocks carry the noise probe.
     if global_estimate is None:
         global_estimate = ambient_model.estimate(total, solver, alpha)
-    led_values = led_spectra.values
-    shape = tiles.shape
+    scoring_alpha = _scoring_alpha(solver, global_estimate)
     selection = None
-    # The scoring fits' roughness weight: the global estimate's (GCV on the statistics as observed,
-    # or the given α) — already computed there.
-    scoring_alpha = None
-    if solver == "tikhonov":
-        scoring_alpha = global_estimate.alpha if global_estimate.alpha > 0 else None
     if method == "auto" or (method == "local" and smoothing is None):
         selection = select_model(tiles, led_spectra, scoring_alpha, margin=margin)
     model = selection.model if method == "auto" and selection is not None else method
-    weights = np.broadcast_to(global_estimate.ambient_weights, shape + (tiles.n_leds,)).copy()
-    used_sigma, structure, regions = None, None, None
-    warnings: list[str] = []
+    fit = _TileFit(weights=np.broadcast_to(global_estimate.ambient_weights, tiles.shape + (tiles.n_leds,)).copy())
     if model == "local":
-        if smoothing is not None:
-            used_sigma = float(smoothing)
-        else:
-            assert selection is not None  # chosen above whenever no smoothing is given
-            used_sigma = float(selection.best_local)
-        if smoothing is None and regions_allowed:
-            labelling_alpha = (
-                scoring_alpha if scoring_alpha is not None else gcv_alpha(total, ambient_model.terms.roughness)
-            )
-            regions = segment_regions(
-                tiles, led_spectra, labelling_alpha, solver, alpha, noise_correction=noise_correction
-            )
-            if regions is not None and not regions.chosen:
-                regions = None
-        if regions is not None:
-            structure = "regions"
-            weights = _region_tile_weights(regions, tiles)
-        else:
-            structure = "tiles"
-            weights, warnings = _solve_tiles(
-                tiles.smoothed(used_sigma),
-                None if clean is None else clean.smoothed(used_sigma),
-                tiles,
-                ambient_model,
-                solver,
-                alpha,
-                global_estimate,
-            )
-    residual = np.sqrt(_held_out_error(tiles, weights) / np.maximum(tiles.ambient_energy, 1e-300))
+        used_sigma = float(smoothing) if smoothing is not None else float(_selected(selection).best_local)
+        solve = _LocalSolve(tiles, led_spectra, ambient_model, solver, alpha, noise_correction, global_estimate)
+        regions = solve.regions(scoring_alpha, total) if smoothing is None and regions_allowed else None
+        fit = solve.fit(used_sigma, regions)
+    residual = np.sqrt(_held_out_error(tiles, fit.weights) / np.maximum(tiles.ambient_energy, 1e-300))
     return LocalEstimate(
         model=model,
         method=method,
-        smoothing=used_sigma,
+        smoothing=fit.smoothing,
         global_estimate=global_estimate,
-        tile_weights=weights,
+        tile_weights=fit.weights,
         tile_residuals=residual,
         tile_samples=tiles.n_samples.copy(),
         tiles=tiles,
         selection=selection,
-        led_values=led_values,
-        warnings=tuple(warnings),
-        structure=structure,
-        regions=regions,
+        led_values=led_spectra.values,
+        warnings=fit.warnings,
+        structure=fit.structure,
+        regions=fit.regions,
     )
+
+
+def _check_local_method(method: str, solver: str) -> None:
+    """Refuse an unknown local method or ambient solver, naming the choices."""
+    if method not in LOCAL_METHODS:
+        raise ValueError(f"local method '{method}' is unknown; expected one of {', '.join(LOCAL_METHODS)}")
+    if solver not in AMBIENT_METHODS:
+        raise ValueError(f"ambient method '{solver}' is unknown; expected one of {', '.join(AMBIENT_METHODS)}")
+
+
+def _scoring_alpha(solver: str, global_estimate: AmbientEstimate) -> float | None:
+    """The selection's scoring fits' roughness weight: the global estimate's (GCV or the given α), for Tikhonov."""
+    if solver == "tikhonov" and global_estimate.alpha > 0:
+        return global_estimate.alpha
+    return None
+
+
+def _selected(selection: ModelSelection | None) -> ModelSelection:
+    """The model selection, which :func:`estimate_local` runs whenever no smoothing is given."""
+    assert selection is not None
+    return selection
+
+
+@dataclass(frozen=True)
+class _TileFit:
+    """Every tile's ambient weights and how they were found (the global model: the global weights)."""
+
+    weights: np.ndarray
+    smoothing: float | None = None
+    structure: str | None = None
+    regions: RegionSegmentation | None = None
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class _LocalSolve:
+    """The local model's two structures: two regions, or every tile on its smoothed statistics."""
+
+    tiles: TiledStatistics
+    led_spectra: Spectra
+    ambient_model: AmbientModel
+    solver: str
+    alpha: float | str
+    noise_correction: bool
+    global_estimate: AmbientEstimate
+
+    def regions(self, scoring_alpha: float | None, total: SequenceStatistics) -> RegionSegmentation | None:
+        """The two-region model when :func:`segment_regions` chooses it, else None."""
+        labelling_alpha = (
+            scoring_alpha if scoring_alpha is not None else gcv_alpha(total, self.ambient_model.terms.roughness)
+        )
+        regions = segment_regions(
+            self.tiles,
+            self.led_spectra,
+            labelling_alpha,
+            self.solver,
+            self.alpha,
+            noise_correction=self.noise_correction,
+        )
+        return regions if regions is not None and regions.chosen else None
+
+    def fit(self, sigma: float, regions: RegionSegmentation | None) -> _TileFit:
+        """The regions' weights mixed per tile, or the solver on every tile smoothed by ``sigma`` tiles."""
+        if regions is not None:
+            return _TileFit(_region_tile_weights(regions, self.tiles), sigma, "regions", regions)
+        clean = self.tiles.denoised if self.noise_correction else None
+        weights, warnings = _solve_tiles(
+            self.tiles.smoothed(sigma),
+            None if clean is None else clean.smoothed(sigma),
+            self.tiles,
+            self.ambient_model,
+            self.solver,
+            self.alpha,
+            self.global_estimate,
+        )
+        return _TileFit(weights, sigma, "tiles", None, tuple(warnings))
 
 
 def _region_tile_weights(regions: RegionSegmentation, tiles: TiledStatistics) -> np.ndarray:

@@ -11,8 +11,9 @@ import numpy as np
 
 from msflash.processing.ambient import AmbientModel, gcv_alpha
 from msflash.processing.errors import SolverError
+from msflash.processing.region_cells import Cells
 from msflash.processing.spectra import Spectra
-from msflash.processing.tile_statistics import Cells, TiledStatistics
+from msflash.processing.tile_statistics import TiledStatistics
 
 SMOOTHING_GRID = (0.5, 1.0, 2.0)
 """Gaussian widths (in tiles) of the local candidates: 0.5 is "local" (a tile and a little of its
@@ -235,9 +236,29 @@ def segment_regions(
     cells = Cells.of(blocks) if cells is None else cells
     if not cells.valid.any():
         return None
-    led_values = led_spectra.values
-    roughness = np.diff(led_values, axis=0)
+    roughness = np.diff(led_spectra.values, axis=0)
     penalty = roughness.T @ roughness
+    seeds = _seed_regions(tiles, led_spectra.values, penalty, alpha)
+    labels, weights = _label_cells(cells, seeds, penalty, alpha, radius, iterations)
+    member = labels[cells.valid]
+    final = weights.copy()
+    if member.any() and not member.all():
+        final = _solve_regions(
+            cells, labels, weights, AmbientModel(led_spectra), solver, solver_alpha, noise_correction
+        )
+    errors = cells.errors(final)
+    residual = float(np.where(member, errors[1], errors[0]).sum())
+    return RegionSegmentation(
+        labels=labels,
+        weights=final,
+        residual=residual,
+        affine_residual=_affine_residual(tiles, penalty, alpha),
+        pixel=cells.size,
+    )
+
+
+def _seed_regions(tiles: TiledStatistics, led_values: np.ndarray, penalty: np.ndarray, alpha: float) -> np.ndarray:
+    """Two regions' first weights: the tiles split by the two most different normalised σ = 0.5 tile spectra."""
     smoothed = tiles.smoothed(0.5)
     tile_weights = _batched_ridge(smoothed.gram, smoothed.cross, penalty, alpha).reshape(-1, tiles.n_leds)
     spectra = tile_weights @ led_values.T
@@ -247,12 +268,21 @@ def segment_regions(
     in_second = distances[second] < distances[first]
     gram = tiles.gram.reshape(-1, tiles.n_leds, tiles.n_leds)
     cross = tiles.cross.reshape(-1, tiles.n_leds)
-    weights = np.stack(
+    return np.stack(
         [
             _batched_ridge(gram[~in_second].sum(axis=0), cross[~in_second].sum(axis=0), penalty, alpha),
             _batched_ridge(gram[in_second].sum(axis=0), cross[in_second].sum(axis=0), penalty, alpha),
         ]
     )
+
+
+def _label_cells(
+    cells: Cells, weights: np.ndarray, penalty: np.ndarray, alpha: float, radius: int, iterations: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Label every cell by the region predicting its ambient image better, re-pool, repeat until stable.
+
+    Returns the labels (True: the second region) and the regions' last ridge weights.
+    """
     valid = cells.valid
     difference = np.zeros(valid.shape)
     labels = np.zeros(valid.shape, dtype=bool)
@@ -267,31 +297,34 @@ def segment_regions(
             break
         pooled = [cells.statistics(mask) for mask in (~member, member)]
         weights = np.stack([_batched_ridge(p.gram, p.cross, penalty, alpha) for p in pooled])
-    member = labels[valid]
+    return labels, weights
+
+
+def _solve_regions(
+    cells: Cells,
+    labels: np.ndarray,
+    weights: np.ndarray,
+    model: AmbientModel,
+    solver: str,
+    solver_alpha: float | str,
+    noise_correction: bool,
+) -> np.ndarray:
+    """The chosen solver on each region's pooled interior cells; a region whose solve fails keeps ``weights``."""
+    valid = cells.valid
     final = weights.copy()
-    if member.any() and not member.all():
-        model = AmbientModel(led_spectra)
-        for index, region in enumerate((~labels, labels)):
-            # The cells next to the label edge may straddle the true boundary (light of both sides) or
-            # be mislabelled: each region is solved on its interior (cells whose 3 × 3 neighbourhood
-            # shares the label), or on all its cells when it has no interior.
-            interior = _interior(region)[valid]
-            mask = interior if interior.any() else region[valid]
-            try:
-                final[index] = model.weights(
-                    cells.statistics(mask),
-                    solver,
-                    solver_alpha,
-                    denoised=cells.denoised_statistics(mask) if noise_correction else None,
-                )[0]
-            except SolverError:
-                pass
-    errors = cells.errors(final)
-    residual = float(np.where(member, errors[1], errors[0]).sum())
-    return RegionSegmentation(
-        labels=labels,
-        weights=final,
-        residual=residual,
-        affine_residual=_affine_residual(tiles, penalty, alpha),
-        pixel=cells.size,
-    )
+    for index, region in enumerate((~labels, labels)):
+        # The cells next to the label edge may straddle the true boundary (light of both sides) or
+        # be mislabelled: each region is solved on its interior (cells whose 3 × 3 neighbourhood
+        # shares the label), or on all its cells when it has no interior.
+        interior = _interior(region)[valid]
+        mask = interior if interior.any() else region[valid]
+        try:
+            final[index] = model.weights(
+                cells.statistics(mask),
+                solver,
+                solver_alpha,
+                denoised=cells.denoised_statistics(mask) if noise_correction else None,
+            )[0]
+        except SolverError:
+            pass
+    return final

@@ -91,7 +91,7 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str) -> np.ndarray:
     """
     from scipy.ndimage import convolve
 
-    from msflash.processing.image_formation import cfa_channel_map
+    from msflash.processing.sensor import cfa_channel_map
 
     if cfa not in CFA_PATTERNS:
         raise SpectralDataError(f"demosaic: CFA '{cfa}'; expected one of {', '.join(CFA_PATTERNS)}")

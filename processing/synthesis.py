@@ -15,13 +15,8 @@ import numpy as np
 
 from msflash.processing import frame_kernels
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.statistics import (
-    DEFAULT_CHUNK_PIXELS,
-    DEFAULT_WORKERS,
-    FrameStackSpec,
-    non_finite_frames_error,
-    thread_pool,
-)
+from msflash.processing.moment_products import DEFAULT_CHUNK_PIXELS, DEFAULT_WORKERS, thread_pool
+from msflash.processing.statistics import FrameStackSpec, non_finite_frames_error
 
 
 def frame_coefficients(spec: FrameStackSpec, flash_weights: np.ndarray) -> tuple[float, np.ndarray]:
@@ -83,14 +78,15 @@ def synthesize(
         The linear image ``m_a + Σ w_k m_f,k`` in units of value per (µs · gain), of ``dtype``, the
         shape of the frames.
 
+    saturated : ndarray
+        Boolean (H, W) mask of pixels saturated in some input frame (their values are unreliable).
+
     Notes
     -----
     Integer frames go through one compiled pass (:func:`processing.frame_kernels.weighted_sum_range`):
     each sample is read once, scaled and summed in float64 in cache-sized tiles, and the image written
     once in ``dtype``. Other frames, or without numba, take chunks through numpy with the same
     arithmetic (float64 sums in frame order, rounded once), so the two routes write the same image.
-    saturated : ndarray
-        Boolean (H, W) mask of pixels saturated in some input frame (their values are unreliable).
     """
     ambient_coefficient, coefficients = frame_coefficients(spec, flash_weights)
     frames = [ambient, *led_frames]
@@ -106,13 +102,30 @@ def synthesize(
         raise SpectralDataError(f"synthesis: image type {np.dtype(dtype).name}; expected float32 or float64")
     output: np.ndarray = np.empty(ambient.shape, dtype=dtype)
     saturated = np.zeros(ambient.shape[:2], dtype=bool)
-    white = spec.white_level
     channels = ambient.shape[2] if ambient.ndim == 3 else 1
     frame_kernels.wanted(sum(frame.nbytes for frame in frames))  # loads the kernels for large stacks
     compiled = frame_kernels.synthesis_inputs(frames)
     if compiled is not None:
-        _synthesize_compiled(compiled, factors64, spec.black_level, white, channels, output, saturated, workers)
-        return output, saturated
+        _synthesize_compiled(
+            compiled, factors64, spec.black_level, spec.white_level, channels, output, saturated, workers
+        )
+    else:
+        _synthesize_chunks(frames, factors64, spec, channels, output, saturated, chunk_pixels, workers)
+    return output, saturated
+
+
+def _synthesize_chunks(
+    frames: list[np.ndarray],
+    factors64: np.ndarray,
+    spec: FrameStackSpec,
+    channels: int,
+    output: np.ndarray,
+    saturated: np.ndarray,
+    chunk_pixels: int,
+    workers: int,
+) -> None:
+    """The numpy route of :func:`synthesize`: chunks of flat samples, the compiled pass's arithmetic."""
+    white = spec.white_level
     # Summed in float64 in frame order, then rounded once to the image's type: the compiled kernel's
     # arithmetic step for step, so both routes give the same image bit for bit (a process that has
     # the kernels loaded and one that has not write the same file).
@@ -169,7 +182,6 @@ def synthesize(
         output.sum(dtype=np.float64)
     ):
         raise non_finite_frames_error([*frames[1:], frames[0]], "synthesis")  # its layout: LED frames, ambient
-    return output, saturated
 
 
 COMPILED_TASK_PIXELS = 1 << 16

@@ -26,7 +26,8 @@ from msflash.acquisition.devices.frame_queue import TriggeredFrames
 from msflash.acquisition.devices.image_format import IMAGE_FEATURES, ImageFormat, ImageFormatRequest, ImageLimits
 from msflash.acquisition.errors import CameraError, CameraSettingError, ReplayMismatchError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
-from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.sequence.reader import read_sequence
 
 LEVEL_TOLERANCE = 2.0 / 0xFFFF
 """LED levels match when within two 16-bit wire steps."""
@@ -107,11 +108,6 @@ class ReplayCamera(TriggeredFrames):
     def suggested_exposure_us(self) -> float:
         """The exposure of the first recorded frame (what ``run`` must ask for to match)."""
         return float(self.sequence.frames[0].exposure_us)
-
-    @property
-    def frames_served(self) -> int:
-        """Recorded frames served so far."""
-        return self._cursor
 
     # -- the Camera protocol --------------------------------------------------------------
     def prepare(self, plan: CapturePlan) -> None:

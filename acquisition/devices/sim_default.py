@@ -20,20 +20,16 @@ from msflash.acquisition.errors import CameraError
 from msflash.processing import datasets, lights
 from msflash.processing.image_formation import (
     MixedIllumination,
-    Scene,
-    SensorModel,
-    chart_scene,
     expected_response,
     exposure_for_peak,
-    machine_vision_sensor,
-    mosaic_scene,
     total_illumination,
-    white_reference_scene,
 )
+from msflash.processing.scenes import Scene, chart_scene, mosaic_scene, white_reference_scene
+from msflash.processing.sensor import SensorModel, machine_vision_sensor
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 
 SIM_DEFAULT_CFA = "RGGB"
-"""The ``sim`` rig's camera sends a raw RGGB mosaic, 12-bit (:func:`processing.image_formation.machine_vision_sensor`),
+"""The ``sim`` rig's camera sends a raw RGGB mosaic, 12-bit (:func:`processing.sensor.machine_vision_sensor`),
 as colour machine-vision cameras do; ``cfa=None`` asks for RGB frames."""
 
 
@@ -72,14 +68,14 @@ def default_world(
     ambient_map: np.ndarray | None = None,
 ) -> DefaultWorld:
     """The ``sim`` rig's world (by default the paper's 110-surface chart, tungsten, the paper's 7 LEDs and ISETCam's
-    NikonD100 behind a 12-bit raw RGGB sensor, :func:`processing.image_formation.machine_vision_sensor`).
+    NikonD100 behind a 12-bit raw RGGB sensor, :func:`processing.sensor.machine_vision_sensor`).
 
     Parameters
     ----------
     scene
         ``"chart110"`` (the paper's 110 surfaces), ``"macbeth"``, ``"white"`` (a white reference filling the frame,
         for ``msflash calibrate leds --white``), a :class:`Scene`, or reflectances (a random mosaic of those
-        surfaces drawn with ``seed``, :func:`processing.image_formation.mosaic_scene`).
+        surfaces drawn with ``seed``, :func:`processing.scenes.mosaic_scene`).
     ambient, camera
         A name (:func:`processing.lights.light_spectrum`; :func:`processing.datasets.camera_responsivities`) or
         a spectrum (R, G, B responsivities) covering ``grid``.
@@ -99,7 +95,7 @@ def default_world(
         ``ambient_peak_fraction`` of full scale, or less if the ambient plus the brightest LED at full drive would
         then read more than :data:`FLASH_PEAK_FRACTION` (room for the flash, for captures at one exposure).
     sensor
-        Default: :func:`processing.image_formation.machine_vision_sensor` with ``cfa``.
+        Default: :func:`processing.sensor.machine_vision_sensor` with ``cfa``.
     patch_px, specular_strip_px, grid
         Chart patch size, the height of a saturating highlight strip under it (0: none), the wavelength grid.
     second_ambient, ambient_map

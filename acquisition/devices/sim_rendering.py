@@ -21,7 +21,9 @@ from msflash.acquisition.devices.exposure_light import (
 )
 from msflash.acquisition.errors import CameraError
 from msflash.acquisition.plan import CaptureStep
-from msflash.processing.image_formation import MixedIllumination, Scene, SensorModel, render_frame, total_illumination
+from msflash.processing.image_formation import MixedIllumination, render_frame, total_illumination
+from msflash.processing.scenes import Scene
+from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import Spectra
 
 FREE_RUNNING_GAP_S = (0.015, 0.060)

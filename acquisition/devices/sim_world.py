@@ -12,7 +12,7 @@ grid (:data:`processing.spectra.DEFAULT_GRID`, 400–700 nm):
   (:func:`processing.lights.light_spectrum`), or ``wavelength_nm, value`` (energy);
 - ``--scene NAME|FILE.csv``: ``chart110``, ``macbeth``, ``white``, or reflectances
   (``wavelength_nm`` + one column per surface, 0–1) shown as a random mosaic of those surfaces
-  (:func:`processing.image_formation.mosaic_scene`).
+  (:func:`processing.scenes.mosaic_scene`).
 
 Files are read by the one spectral table reader (:func:`processing.datasets.load_spectra_csv`) and
 put on the grid only by :meth:`Spectra.resample`. A sim file must cover the whole grid: the error

@@ -44,11 +44,9 @@ from msflash.acquisition.devices.sim_readout import SimReadout
 from msflash.acquisition.devices.sim_rendering import SimRendering
 from msflash.acquisition.errors import CameraError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
-from msflash.processing.image_formation import (
-    MixedIllumination,
-    Scene,
-    SensorModel,
-)
+from msflash.processing.image_formation import MixedIllumination
+from msflash.processing.scenes import Scene
+from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid, require_same_grid
 
 LedLevelsSource = Callable[[], Sequence[float]]
@@ -61,7 +59,7 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
     Parameters
     ----------
     scene
-        Surfaces and layout (:class:`processing.image_formation.Scene`).
+        Surfaces and layout (:class:`processing.scenes.Scene`).
     ambient
         The true ambient spectrum ``i_a`` (one spectrum; its scale is the ambient's power).
     led_spectra

@@ -23,14 +23,14 @@ from msflash.acquisition.sequence.format import Sequence
 from msflash.calibration import chart_detection
 from msflash.processing import colour_metrics, datasets
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.image_formation import chart_scene
 from msflash.processing.names import unknown_name
+from msflash.processing.scenes import chart_scene
 from msflash.processing.spectra import Spectra, WavelengthGrid
 
 CHARTS = ("macbeth",)
 """Charts ``evaluate`` knows the layout and reference of."""
 ChartName = Literal["chart110", "macbeth"]
-"""The chart layouts of :func:`processing.image_formation.chart_scene`."""
+"""The chart layouts of :func:`processing.scenes.chart_scene`."""
 MACBETH_NEUTRALS = (3, 7, 11, 15, 19, 23)
 """The gray series of the Macbeth chart in ISET order (white … black), 0-based."""
 LAYOUT_UNIFORMITY_LIMIT = 0.25

@@ -15,32 +15,29 @@ import numpy as np
 
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import Sequence
-from msflash.acquisition.session import analysis
-from msflash.acquisition.session.analysis import (
-    DEFAULT_BIN_FACTOR,
-    FrameStack,
+from msflash.acquisition.session import analysis, local_route
+from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, FrameStack, load_frame_stack
+from msflash.acquisition.session.sequence_spectra import (
     camera_responsivities_photons,
     led_spectra_photons,
-    load_frame_stack,
     spectrum_in_sequence_unit,
 )
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.family_checks import LED_WARNING, PRIOR_WARNING, MissCheck, predicted_ratio, self_check
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.light_families import (
     AUTO_MARGIN,
     AUTO_NOISE,
-    LED_WARNING,
-    PRIOR_WARNING,
+    AVERAGE_TEMPERATURE,
+    SIMPLER_WITHIN,
     FamilyEstimate,
-    MissCheck,
-    ReferencePatch,
     family_model,
-    predicted_ratio,
-    self_check,
 )
-from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
+from msflash.processing.light_prior import PriorEstimate, prior_model
+from msflash.processing.prior_choice import ModelChoice, choose_model
+from msflash.processing.reference_patch import ReferencePatch
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 
@@ -145,10 +142,10 @@ def led_side(
     """The LED-span side of ``estimate --model prior|auto``: what ``--model led`` gives (global, or local when
     ``method`` finds the illuminant varying across the scene), its payload, and whether it varies."""
     if method != "global":
-        local = analysis.estimate_sequence_local(
+        local = local_route.estimate_sequence_local(
             sequence, method, solver, alpha, stream=analysis.stream_stack(sequence, stack, bin_factor, tiles)
         )
-        return local.global_estimate, analysis.local_estimate_payload(sequence, local), local.model == "local"
+        return local.global_estimate, local_route.local_estimate_payload(sequence, local), local.model == "local"
     led = analysis.estimate_sequence(sequence, solver, alpha, stream=analysis.stream_stack(sequence, stack, bin_factor))
     return led, analysis.estimate_payload(sequence, led), False
 
@@ -162,7 +159,7 @@ Reference = ReferenceRect | str
 def reference_patch(
     sequence: Sequence, stack: FrameStack, rect: ReferenceRect, reflectance: np.ndarray | None = None, what: str = ""
 ) -> ReferencePatch:
-    """The reference (:class:`~processing.light_families.ReferencePatch`) of one region of known reflectance
+    """The reference (:class:`~processing.reference_patch.ReferencePatch`) of one region of known reflectance
     (``reflectance`` on the sequence's grid; None: spectrally flat).
 
     Raises
@@ -327,8 +324,9 @@ def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
             "chosen_relative_error": family.reference.relative_error(family.spectrum.values[:, 0]),
         },
         "evidence": {
-            "criterion": "held-out prediction of the ambient image (5 folds of block rows, noise removed); the "
-            "simplest candidate within 20 % of the best is preferred",
+            "criterion": "held-out prediction of the ambient image (folds of block rows, noise removed); the "
+            f"simplest candidate within {SIMPLER_WITHIN:.0%} of the best is preferred; the spectrum is the "
+            f"candidates' average weighted by exp(-(error/best - 1)/{AVERAGE_TEMPERATURE:g})",
             "led": evidence(family.led),
             "candidates": [evidence(c) for c in family.candidates],
         },

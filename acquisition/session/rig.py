@@ -72,9 +72,9 @@ from msflash.acquisition.session.rigs.hardware import (
 from msflash.acquisition.session.rigs.replay import open_replay_rig
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.acquisition.session.rigs.sim import open_firmware_booth, open_sim_rig
-from msflash.led_controller.booth import DEFAULT_BOOT_S
-from msflash.processing.image_formation import Scene
+from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.processing.names import unknown_name
+from msflash.processing.scenes import Scene
 from msflash.processing.spectra import Spectra
 
 if TYPE_CHECKING:

@@ -28,7 +28,9 @@ from msflash.acquisition.devices.replay_camera import format_levels, levels_matc
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.progress import count, progress
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter, as_recorded, read_sequence
+from msflash.acquisition.sequence.format import SequenceFrame
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import SequenceWriter, as_recorded
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.both_flashes import SequenceFlashes, solve_both
 from msflash.acquisition.session.capture import FrameWriter, run_capture, run_capture_with_flash
@@ -38,10 +40,9 @@ from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,
     FlashEnergyWarning,
-    flash_exposure,
-    metering_view,
 )
 from msflash.acquisition.session.flash_session import FlashSession
+from msflash.acquisition.session.metering import flash_exposure, metering_view
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run_exposure import (
     SYNC_MODES,

@@ -30,13 +30,11 @@ from msflash.acquisition.session.exposure import (
     FlashEnergyWarning,
     camera_exposure_range,
     camera_noise_model,
-    format_led_snr,
-    led_snr_warnings,
-    measure_led_snr,
-    metering_view,
     plan_exposures,
     whole_pwm_periods,
 )
+from msflash.acquisition.session.led_snr import format_led_snr, led_snr_warnings, measure_led_snr
+from msflash.acquisition.session.metering import metering_view
 from msflash.acquisition.session.rig import Rig
 
 log = logging.getLogger(__name__)

@@ -50,10 +50,10 @@ from msflash.lab.study.table1 import (
     select_cameras,
 )
 from msflash.processing import lights
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from msflash.processing.statistics import accumulate_statistics
 
 FACTORS: dict[str, dict[str, Any]] = {
     "n_leds": {"levels": [7, 6, 5, 4, 3], "label": "number of LEDs (paper subsets)"},
@@ -104,7 +104,7 @@ def with_line(ambient: Spectra, centre_nm: float, fraction: float, grid: Wavelen
 
 def relabelled(world_scene, n_surfaces: int, rng: np.random.Generator):  # noqa: ANN001, ANN201
     """The chart with every patch showing one of ``n_surfaces`` surfaces drawn without repetition."""
-    from msflash.processing.image_formation import Scene
+    from msflash.processing.scenes import Scene
 
     n_patches = world_scene.reflectances.count - 1  # the last surface is the (unused) border
     chosen = rng.choice(n_patches, size=n_surfaces, replace=False)

@@ -3,19 +3,19 @@
 Unlike Table 1 (noise-free per-surface matrices), these studies render real raw frames with
 :func:`processing.image_formation.render_frame` — photon and read noise, black level,
 quantisation, saturation — and run the app's estimation path on them:
-:func:`processing.statistics.accumulate_statistics` then
+:func:`processing.accumulate.accumulate_statistics` then
 :func:`processing.ambient.estimate_ambient`.
 
 The world (:class:`World`)
 --------------------------
-- Scene: the 110-surface chart (:func:`processing.image_formation.chart_scene`), square patches.
+- Scene: the 110-surface chart (:func:`processing.scenes.chart_scene`), square patches.
 - Ambient: a spectrum in photons (any scale: only its shape matters, the exposure is metered).
 - LEDs: a paper subset, scaled so that all LEDs at full drive give ``1 / ambient_to_flash`` times
   the ambient's mean camera signal (the sim rig's ``flash_to_ambient``, default 2 ⇒ ratio 0.5).
 - Exposure: metered so the brightest expected pixel of the brightest frame (ambient + one LED)
   is at ``peak_fraction`` (0.8) of full scale, times ``exposure_factor`` (< 1 under-exposes,
   > 1 saturates). One exposure and gain 1 for every frame.
-- Sensor: :class:`processing.image_formation.SensorModel` defaults (16 bit, 0.5 e⁻/DN, 2 e⁻ read
+- Sensor: :class:`processing.sensor.SensorModel` defaults (16 bit, 0.5 e⁻/DN, 2 e⁻ read
   noise, full well 40 000 e⁻, RGB frames).
 
 Frames: the ambient frame ``m_a`` and one frame per LED ``m_a + m_f,k`` — each independently
@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from msflash.lab.study.table1 import flash_norm, led_subset_indices
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import (
     CONDITION_WARNING,
     RESIDUAL_WARNING,
@@ -41,19 +42,13 @@ from msflash.processing.ambient import (
     estimate_ambient,
 )
 from msflash.processing.errors import SolverError, SpectralDataError
-from msflash.processing.image_formation import (
-    Scene,
-    SensorModel,
-    chart_scene,
-    expected_response,
-    exposure_for_peak,
-    render_frame,
-    total_illumination,
-)
+from msflash.processing.image_formation import expected_response, exposure_for_peak, render_frame, total_illumination
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.model_error import EXPECTED_RATIO_WARNING, reference_for, with_model_error
+from msflash.processing.scenes import Scene, chart_scene
+from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 
 PEAK_FRACTION = 0.8
 """Metered peak of the brightest frame, as a fraction of full scale."""

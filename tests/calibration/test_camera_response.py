@@ -12,7 +12,8 @@ from msflash.calibration.camera_response import (
     responsivity_rmse,
 )
 from msflash.calibration.errors import CalibrationError
-from msflash.calibration.validation import calibration_lights, leave_one_camera_out, summarise
+from msflash.calibration.validation import calibration_lights
+from msflash.lab.study.camera_calibration import leave_one_camera_out, summarise
 from msflash.processing import datasets
 from msflash.processing.image_formation import surface_responses
 from msflash.processing.spectra import DEFAULT_GRID
@@ -46,7 +47,7 @@ def test_noise_free_recovery_is_exact():
 
 
 def test_reduced_leave_one_out_meets_bound():
-    """A few cameras of the acceptance study (the full run is tests/calibration/test_study.py)."""
+    """A few cameras of the acceptance study (the full run is tests/lab/study/test_camera_calibration.py)."""
     summary = summarise(leave_one_camera_out(FAST_CAMERAS))
     assert summary["mean_rmse_prior"] <= 0.05
     assert summary["mean_rmse_prior"] < summary["mean_rmse_smoothness"]

@@ -1,7 +1,7 @@
 """Chart detection (calibration/chart_detection.py): the sim rig's Macbeth chart anywhere in the frame.
 
 Sequences are recorded through the whole sim rig (``msflash capture``) with the chart placed by
-:func:`processing.image_formation.placed_scene`; the truth is the placed scene's own label image.
+:func:`processing.scenes.placed_scene`; the truth is the placed scene's own label image.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import pytest
 
 from msflash.acquisition.app import cli
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rigs import sim as rig_module
 from msflash.calibration.chart_detection import (
     MACBETH_GRID,
@@ -24,7 +24,7 @@ from msflash.calibration.chart_detection import (
     detect_in_sequence,
 )
 from msflash.processing import datasets
-from msflash.processing.image_formation import Scene, chart_scene, placed_scene, uniform_scene
+from msflash.processing.scenes import Scene, chart_scene, placed_scene, uniform_scene
 from tests.helpers import GRID, SAMPLES_DIR, ambient, leds_photons, linear_frames
 
 N_PATCHES = MACBETH_GRID[0] * MACBETH_GRID[1]

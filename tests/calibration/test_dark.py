@@ -7,7 +7,7 @@ import pytest
 
 from msflash.calibration.dark import channel_planes, measure_dark, measure_linearity
 from msflash.calibration.errors import CalibrationError
-from msflash.processing.image_formation import mosaic
+from msflash.processing.sensor import mosaic
 
 BLACK = np.array([64.0, 66.0, 61.0])
 READ_NOISE = 3.0

@@ -10,8 +10,8 @@ from msflash.calibration.spectrometer import (
     measurement_to_spectra,
     parse_spectrometer_text,
     read_spectrometer_file,
-    subtract_dark,
 )
+from msflash.calibration.spectrometer_dark import remove_baseline
 from msflash.processing.spectra import DEFAULT_GRID, PHOTON_REFERENCE_NM
 
 
@@ -106,10 +106,10 @@ class TestParse:
         w = np.arange(400.0, 701.0, 2.0)
         light = parse_spectrometer_text(export(w, gaussian(w) + 0.1), "l.csv")
         dark = parse_spectrometer_text(export(w, np.full_like(w, 0.1)), "d.csv")
-        np.testing.assert_allclose(subtract_dark(light, dark).values, gaussian(w), atol=1e-8)
+        np.testing.assert_allclose(remove_baseline(light, dark).values, gaussian(w), atol=1e-8)
         other = parse_spectrometer_text(export(w[:-1], np.full(w.size - 1, 0.1)), "d2.csv")
         with pytest.raises(CalibrationError, match=r"d2\.csv: dark export .*expected the same instrument grid"):
-            subtract_dark(light, other)
+            remove_baseline(light, other)
 
 
 class TestBadFiles:

@@ -34,8 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.flicker import with_ambient_gains
 from tests.harness import metrics
@@ -133,12 +133,12 @@ def _estimates(directory: Path, true_offsets: np.ndarray) -> tuple[np.ndarray, n
     stack = analysis.load_frame_stack(sequence)
     statistics = analysis.sequence_statistics(stack, sequence.camera.cfa, analysis.DEFAULT_BIN_FACTOR)
     with_model = analysis.estimate_from_statistics(sequence, statistics)
-    leds = analysis.led_spectra_photons(sequence)
+    leds = sequence_spectra.led_spectra_photons(sequence)
     plain = estimate_ambient(statistics, leds, "tikhonov", "auto")
     oracle = estimate_ambient(with_ambient_gains(statistics, true_offsets), leds, "tikhonov", "auto")
 
     def values(estimate) -> np.ndarray:
-        return np.asarray(analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum), float)
+        return np.asarray(sequence_spectra.spectrum_in_sequence_unit(sequence, estimate.spectrum), float)
 
     return values(with_model), values(plain), values(oracle), with_model.flicker
 

@@ -10,7 +10,7 @@ import pytest
 from msflash.processing import colour_metrics as cm
 from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.image_formation import chart_scene, expected_response, mosaic, surface_responses
+from msflash.processing.image_formation import expected_response, surface_responses
 from msflash.processing.render import (
     camera_to_xyz_matrix,
     demosaic,
@@ -19,6 +19,8 @@ from msflash.processing.render import (
     reflectances_to_xyz,
     srgb_preview,
 )
+from msflash.processing.scenes import chart_scene
+from msflash.processing.sensor import mosaic
 from msflash.processing.spectra import DEFAULT_GRID
 
 GRID = DEFAULT_GRID

@@ -8,19 +8,14 @@ import pytest
 from msflash.processing import datasets, lights
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.image_formation import (
-    CFA_PATTERNS,
-    Scene,
-    SensorModel,
-    cfa_channel_map,
-    chart_scene,
     expected_response,
     exposure_for_peak,
-    mosaic,
     render_frame,
     surface_responses,
     total_illumination,
-    uniform_scene,
 )
+from msflash.processing.scenes import Scene, chart_scene, uniform_scene
+from msflash.processing.sensor import CFA_PATTERNS, SensorModel, cfa_channel_map, mosaic
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 
 TOLERANCE = 1e-9

@@ -24,6 +24,7 @@ from msflash.lab.study.local import (
     run_study,
     tiled_rmse,
 )
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.image_formation import MixedIllumination, expected_response
 from msflash.processing.local import (
     SELECTION_MARGIN,
@@ -38,7 +39,7 @@ from msflash.processing.local import (
     upsample_tiles,
 )
 from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import synthesize
 from msflash.processing.tile_statistics import _block_sums_and_differences
 from tests.helpers import EXACT, FLOAT32, ambient, camera, chart, leds_photons, linear_frames, rendered_frames, spec_for
@@ -63,7 +64,7 @@ def tiled(kind: str, seed: int) -> TiledStatistics:
     ("bin_factor", "cfa", "tiles"), [(1, None, 5), (2, None, (3, 4)), (4, None, 2), (2, "GRBG", 3)]
 )
 def test_tiles_sum_to_the_global_statistics(bin_factor: int, cfa: str | None, tiles: int | tuple[int, int]) -> None:
-    from msflash.processing.image_formation import SensorModel
+    from msflash.processing.sensor import SensorModel
 
     sensor = SensorModel(cfa=cfa)
     frames = rendered_frames(ambient("tungsten"), sensor=sensor, noise=True, scene=chart(specular_strip_px=5))

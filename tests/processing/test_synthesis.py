@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.image_formation import SensorModel
+from msflash.processing.sensor import SensorModel
 from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import frame_coefficients, synthesize, to_raw_values
 from tests.helpers import EXACT, FLOAT32, ambient, chart, one_hot_levels, rendered_frames, spec_for

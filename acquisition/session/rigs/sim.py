@@ -37,9 +37,9 @@ from msflash.acquisition.session.rigs.emulated_booth import (
 )
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.led_controller import LedBooth
-from msflash.led_controller.booth import DEFAULT_BOOT_S
+from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import Booth
-from msflash.processing.image_formation import Scene
+from msflash.processing.scenes import Scene
 from msflash.processing.spectra import Spectra
 
 log = logging.getLogger(__name__)

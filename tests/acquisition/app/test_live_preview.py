@@ -14,7 +14,7 @@ from msflash.acquisition.devices.camera import CameraInfo
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.live import LiveStream
 from msflash.acquisition.session.rig import open_rig
-from msflash.processing.image_formation import cfa_channel_map
+from msflash.processing.sensor import cfa_channel_map
 
 
 def info(cfa: str | None) -> CameraInfo:

@@ -12,13 +12,9 @@ from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.errors import CameraError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan
 from msflash.processing import datasets, lights
-from msflash.processing.image_formation import (
-    SensorModel,
-    cfa_channel_map,
-    chart_scene,
-    expected_response,
-    total_illumination,
-)
+from msflash.processing.image_formation import expected_response, total_illumination
+from msflash.processing.scenes import chart_scene
+from msflash.processing.sensor import SensorModel, cfa_channel_map
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 
 N_LEDS = 7

@@ -17,7 +17,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import ARAVIS_FAKE_PIXEL_FORMAT, open_aravis_fake_rig, open_rig
 from msflash.processing import datasets

@@ -14,7 +14,8 @@ import pytest
 from msflash.acquisition.devices import sim_rendering
 from msflash.acquisition.errors import DroppedFrameError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session.capture import run_capture
 from msflash.acquisition.session.rig import open_sim_rig
 from msflash.processing.errors import SpectralDataError

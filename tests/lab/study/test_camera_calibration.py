@@ -6,7 +6,7 @@ from functools import cache
 
 import pytest
 
-from msflash.calibration.validation import STUDY_SEEDS, leave_one_camera_out_seeds, summarise
+from msflash.lab.study.camera_calibration import STUDY_SEEDS, leave_one_camera_out_seeds, summarise
 
 
 @cache

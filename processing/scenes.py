@@ -1,0 +1,308 @@
+"""Scenes for simulation: surfaces (reflectances) laid out by a label image (eq. 1's ``r``).
+
+Public objects
+--------------
+- :class:`Scene`: surfaces laid out by a label image, with optional shading and a specular area.
+- :func:`chart_scene`, :func:`mosaic_scene`, :func:`uniform_scene`, :func:`white_reference_scene`
+  build common ones; :func:`placed_scene` puts a scene anywhere in a larger frame (scaled, rotated).
+
+A scene is rendered by :mod:`processing.image_formation` (eq. 1–3) once per *surface*, then indexed
+by the label image.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
+
+
+# -- scenes -----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Scene:
+    """A flat scene: each pixel shows one surface, optionally shaded, optionally specular.
+
+    Arrays are copied and made read-only on construction.
+    """
+
+    reflectances: Spectra
+    """Surface reflectances, shape (n_wavelengths, n_surfaces)."""
+    labels: np.ndarray
+    """Surface index of every pixel, integer array (H, W), values in ``[0, n_surfaces)``."""
+    shading: np.ndarray | None = None
+    """Per-pixel factor on the diffuse reflection (geometry, vignetting), (H, W), ≥ 0; None = 1."""
+    specular: np.ndarray | None = None
+    """Pixels that also show a neutral highlight (dichromatic model), bool (H, W); None = none."""
+    specular_gain: float = 4.0
+    """Strength of the highlight relative to a perfect white diffuser; > 1 saturates at metered exposures."""
+
+    def __post_init__(self) -> None:
+        where = f"scene ({self.reflectances.source or 'reflectances'})"
+        if self.reflectances.kind != "reflectance":
+            raise SpectralDataError(f"{where}: reflectances have kind '{self.reflectances.kind}'; expected reflectance")
+        labels = np.array(self.labels, copy=True)
+        if labels.ndim != 2 or labels.size == 0 or not np.issubdtype(labels.dtype, np.integer):
+            raise SpectralDataError(
+                f"{where}: labels have shape {labels.shape} and type {labels.dtype}; "
+                "expected a non-empty integer array (H, W)"
+            )
+        if labels.min() < 0 or labels.max() >= self.reflectances.count:
+            raise SpectralDataError(
+                f"{where}: labels span {labels.min()}…{labels.max()}; expected "
+                f"0…{self.reflectances.count - 1} (one per surface)"
+            )
+        labels.flags.writeable = False
+        object.__setattr__(self, "labels", labels)
+        if self.shading is not None:
+            shading = np.array(self.shading, dtype=float, copy=True)
+            if shading.shape != labels.shape or not np.all(np.isfinite(shading)) or np.any(shading < 0):
+                raise SpectralDataError(
+                    f"{where}: shading has shape {shading.shape}; expected finite values ≥ 0 of shape {labels.shape}"
+                )
+            shading.flags.writeable = False
+            object.__setattr__(self, "shading", shading)
+        if self.specular is not None:
+            specular = np.array(self.specular, dtype=bool, copy=True)
+            if specular.shape != labels.shape:
+                raise SpectralDataError(f"{where}: specular mask has shape {specular.shape}; expected {labels.shape}")
+            specular.flags.writeable = False
+            object.__setattr__(self, "specular", specular)
+        if not (math.isfinite(self.specular_gain) and self.specular_gain >= 0):
+            raise SpectralDataError(f"{where}: specular_gain is {self.specular_gain}; expected a finite value ≥ 0")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Image size (H, W)."""
+        return (int(self.labels.shape[0]), int(self.labels.shape[1]))
+
+    def surface_mask(self, surface: int | str) -> np.ndarray:
+        """Pixels showing one surface (by index or name) without a highlight, bool (H, W)."""
+        index = self.reflectances.names.index(surface) if isinstance(surface, str) else int(surface)
+        mask = self.labels == index
+        return mask & ~self.specular if self.specular is not None else mask
+
+
+def uniform_scene(reflectance: Spectra, height: int, width: int, shading: np.ndarray | None = None) -> Scene:
+    """A scene showing the first surface of ``reflectance`` everywhere (for tests and noise studies),
+    optionally with a :attr:`Scene.shading` map."""
+    return Scene(reflectance.select([0]), np.zeros((height, width), dtype=np.int32), shading=shading)
+
+
+def chart_scene(
+    reflectances: Spectra | Literal["chart110", "macbeth"] = "chart110",
+    patch_px: int = 8,
+    columns: int | None = None,
+    border_px: int = 2,
+    border_reflectance: float = 0.03,
+    specular_strip_px: int = 0,
+    specular_gain: float = 10.0,
+) -> Scene:
+    """A reflectance chart: square patches on a dark border, filled column by column (ISET order).
+
+    Parameters
+    ----------
+    reflectances
+        The patches, or ``"chart110"`` (the paper's Natural-100 + gray strip, default: 10 rows ×
+        11 columns, the gray strip last) or ``"macbeth"`` (ISETCam's, 4 rows × 6 columns).
+    patch_px
+        Side of a patch in pixels.
+    columns
+        Patches per row; by default 6 for 24 patches, otherwise ``ceil(sqrt(n))``.
+    border_px
+        Gap between and around patches, filled with a flat dark surface.
+    border_reflectance
+        Reflectance of that surface (real charts are printed on near-black board).
+    specular_strip_px
+        If > 0, a strip of this height below the chart with a neutral highlight
+        (:attr:`Scene.specular`), which saturates at exposures metered on the chart.
+    specular_gain
+        Strength of that highlight relative to a white diffuser (glossy highlights mirror the
+        light source, so they are many times brighter than any diffuse patch).
+
+    Returns
+    -------
+    Scene
+        Surfaces are the patches followed by one named ``"border"``; patch ``k`` has label ``k``.
+    """
+    if isinstance(reflectances, str):
+        # Resolved here so callers can name a chart; the data loaders are the only file readers.
+        from msflash.processing import datasets
+
+        loaders = {"chart110": datasets.chart110, "macbeth": datasets.macbeth}
+        if reflectances not in loaders:
+            raise SpectralDataError(f"chart_scene: unknown chart '{reflectances}'; expected chart110 or macbeth")
+        reflectances = loaders[reflectances]()
+    n = reflectances.count
+    if patch_px < 1 or border_px < 0 or specular_strip_px < 0:
+        raise SpectralDataError(
+            f"chart_scene: patch_px {patch_px}, border_px {border_px}, specular_strip_px "
+            f"{specular_strip_px}; expected patch_px ≥ 1 and the others ≥ 0"
+        )
+    if columns is None:
+        columns = 6 if n == 24 else math.ceil(math.sqrt(n))
+    rows = math.ceil(n / columns)
+    border = n
+    height = rows * patch_px + (rows + 1) * border_px
+    width = columns * patch_px + (columns + 1) * border_px
+    labels = np.full((height + specular_strip_px, width), border, dtype=np.int32)
+    for k in range(n):
+        row, column = k % rows, k // rows  # column-major, as ISET lays out its charts
+        top = border_px + row * (patch_px + border_px)
+        left = border_px + column * (patch_px + border_px)
+        labels[top : top + patch_px, left : left + patch_px] = k
+    surfaces = reflectances.replace(
+        values=np.hstack([reflectances.values, np.full((reflectances.grid.size, 1), float(border_reflectance))]),
+        names=reflectances.names + ("border",),
+    )
+    specular = None
+    if specular_strip_px:
+        specular = np.zeros(labels.shape, dtype=bool)
+        specular[height:, :] = True
+    return Scene(surfaces, labels, specular=specular, specular_gain=specular_gain)
+
+
+def mosaic_scene(
+    reflectances: Spectra, seed: int = 0, min_patches: int = 24, patch_px: int = 8, specular_strip_px: int = 0
+) -> Scene:
+    """A chart of any surfaces in random order: every surface at least once, repeated to ``min_patches``.
+
+    The layout is :func:`chart_scene`'s (square patches on a dark border, a highlight strip if
+    asked); which surface each patch shows is drawn with ``seed``. Fewer surfaces than
+    ``min_patches`` are repeated (each as often as the others, ±1), so a scene of three surfaces
+    still has a chart's area. The estimator's accuracy depends on the number of *distinct* surfaces
+    (the paper's Fig. 5), not on the repeats.
+
+    Returns
+    -------
+    Scene
+        Surfaces are ``reflectances`` (once each, in their order) then ``"border"``.
+
+    Examples
+    --------
+    >>> from msflash.processing.spectra import Spectra, WavelengthGrid
+    >>> two = Spectra(WavelengthGrid(400, 700, 300), [[0.2, 0.8], [0.3, 0.7]], ("a", "b"), kind="reflectance", unit="none")
+    >>> scene = mosaic_scene(two, patch_px=2)
+    >>> sorted(np.unique(scene.labels).tolist()), scene.reflectances.names
+    ([0, 1, 2], ('a', 'b', 'border'))
+    """
+    n = reflectances.count
+    if min_patches < 1:
+        raise SpectralDataError(f"mosaic_scene: min_patches {min_patches}; expected ≥ 1")
+    patches = max(n, min_patches)
+    order = np.random.default_rng(seed).permutation(np.resize(np.arange(n), patches))
+    chart = chart_scene(reflectances.select(order.tolist()), patch_px=patch_px, specular_strip_px=specular_strip_px)
+    # chart_scene's patch k shows column k of the selection, i.e. surface order[k]; the border follows.
+    surface_of = np.append(order, n)
+    surfaces = reflectances.replace(
+        values=np.hstack([reflectances.values, chart.reflectances.values[:, -1:]]),
+        names=reflectances.names + ("border",),
+    )
+    return Scene(surfaces, surface_of[chart.labels], specular=chart.specular, specular_gain=chart.specular_gain)
+
+
+def white_reference_scene(
+    height: int = 96, width: int = 128, reflectance: float = 0.95, corner_shading: float = 0.8
+) -> Scene:
+    """A uniform, spectrally flat white reference filling the frame, with a smooth radial falloff.
+
+    What a lab puts in the booth to measure the LEDs' power ratios through the camera
+    (:mod:`calibration.white_reference`): one surface of constant ``reflectance`` (a pressed-PTFE
+    or matte white card), shaded from 1 at the centre to ``corner_shading`` in the corners.
+
+    >>> scene = white_reference_scene(4, 6)
+    >>> scene.labels.shape, scene.reflectances.names, round(float(scene.shading.min()), 2)
+    ((4, 6), ('white',), 0.8)
+    """
+    if height < 2 or width < 2 or not 0 < reflectance <= 1 or not 0 < corner_shading <= 1:
+        raise SpectralDataError(
+            f"white_reference_scene: {height}×{width}, reflectance {reflectance}, corner shading "
+            f"{corner_shading}; expected a frame of at least 2×2 and both in (0, 1]"
+        )
+    surface = Spectra(
+        DEFAULT_GRID,
+        np.full((DEFAULT_GRID.size, 1), float(reflectance)),
+        ("white",),
+        kind="reflectance",
+        unit="none",
+        source=f"flat white reference {reflectance:g}",
+    )
+    rows = (np.arange(height) - (height - 1) / 2) / ((height - 1) / 2)
+    columns = (np.arange(width) - (width - 1) / 2) / ((width - 1) / 2)
+    radius2 = (rows[:, None] ** 2 + columns[None, :] ** 2) / 2
+    return uniform_scene(surface, height, width, shading=1.0 - (1.0 - corner_shading) * radius2)
+
+
+def placed_scene(
+    scene: Scene,
+    shape: tuple[int, int],
+    centre_yx: tuple[float, float] | None = None,
+    angle_deg: float = 0.0,
+    scale: float = 1.0,
+    background_reflectance: float = 0.2,
+) -> Scene:
+    """``scene`` photographed on a flat background: scaled, rotated and placed anywhere in a frame.
+
+    Each pixel of the new frame shows the surface under its centre (nearest neighbour), so a rotated
+    chart has the jagged edges of a real sampled one; shading and the specular mask move with it.
+
+    Parameters
+    ----------
+    scene
+        The scene to place (typically :func:`chart_scene`).
+    shape
+        Size (H, W) of the new frame.
+    centre_yx
+        Where the scene's centre lands (row, column; pixel centres are integers); default the
+        frame's centre.
+    angle_deg
+        Rotation, counter-clockwise as displayed (rows grow downwards).
+    scale
+        Pixels of the new frame per pixel of ``scene``.
+    background_reflectance
+        The flat surface, appended last and named ``"background"``, shown outside the scene.
+
+    Returns
+    -------
+    Scene
+        Surfaces of ``scene`` then ``"background"``.
+
+    Examples
+    --------
+    >>> chart = chart_scene("macbeth", patch_px=8)  # 42 × 62 pixels, centre (20.5, 30.5)
+    >>> placed = placed_scene(chart, (60, 80), centre_yx=(29.5, 39.5))
+    >>> bool(np.array_equal(placed.labels[9:51, 9:71], chart.labels)), placed.reflectances.names[-1]
+    (True, 'background')
+    """
+    height, width = int(shape[0]), int(shape[1])
+    if height < 1 or width < 1 or not (math.isfinite(scale) and scale > 0) or not math.isfinite(angle_deg):
+        raise SpectralDataError(
+            f"placed_scene: shape {shape}, scale {scale}, angle {angle_deg}; expected a positive "
+            "shape and scale and a finite angle"
+        )
+    centre = ((height - 1) / 2, (width - 1) / 2) if centre_yx is None else centre_yx
+    source_centre = ((scene.shape[0] - 1) / 2, (scene.shape[1] - 1) / 2)
+    rows, columns = np.mgrid[0:height, 0:width].astype(float)
+    dy, dx = rows - centre[0], columns - centre[1]
+    angle = math.radians(angle_deg)
+    cos, sin = math.cos(angle), math.sin(angle)
+    # Inverse map: undo the rotation (counter-clockwise as displayed: y points down) and the scale.
+    source_x = (cos * dx - sin * dy) / scale + source_centre[1]
+    source_y = (sin * dx + cos * dy) / scale + source_centre[0]
+    row_index, column_index = np.rint(source_y).astype(np.int64), np.rint(source_x).astype(np.int64)
+    inside = (row_index >= 0) & (row_index < scene.shape[0]) & (column_index >= 0) & (column_index < scene.shape[1])
+    row_index, column_index = np.where(inside, row_index, 0), np.where(inside, column_index, 0)
+    background = scene.reflectances.count
+    labels = np.where(inside, scene.labels[row_index, column_index], background).astype(np.int32)
+    shading = None if scene.shading is None else np.where(inside, scene.shading[row_index, column_index], 1.0)
+    specular = None if scene.specular is None else inside & scene.specular[row_index, column_index]
+    grid_size = scene.reflectances.grid.size
+    surfaces = scene.reflectances.replace(
+        values=np.hstack([scene.reflectances.values, np.full((grid_size, 1), float(background_reflectance))]),
+        names=scene.reflectances.names + ("background",),
+    )
+    return Scene(surfaces, labels, shading=shading, specular=specular, specular_gain=scene.specular_gain)
