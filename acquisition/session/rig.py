@@ -52,7 +52,7 @@ from typing import TYPE_CHECKING, Any
 
 from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
-from msflash.acquisition.devices.simulated_camera import SIM_DEFAULT_CFA
+from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
 from msflash.acquisition.devices.wired_fake import WiredFakeCamera
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.rigs.aravis_fake import (
