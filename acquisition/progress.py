@@ -50,11 +50,6 @@ def configure(*, bars: bool) -> None:
     _state["bars"] = bars
 
 
-def bars_on() -> bool:
-    """Whether :func:`count` draws a bar (else it prints its note lines)."""
-    return bool(_state["bars"])
-
-
 def progress(message: str) -> None:
     """A progress or diagnostic line on stderr (stdout stays for data), written above the bar when one is drawn."""
     line = f"msflash: {message}"

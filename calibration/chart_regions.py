@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.calibration.chart_grid import ChartDetectionError
+from msflash.processing.block_sums import cfa_planes
 from msflash.processing.sensor import CFA_PATTERNS
-from msflash.processing.statistics import cfa_planes
 
 DETECTION_MAX_SIDE = 512
 """Frames are binned until their longer side (after the Bayer quads) is at most this."""

@@ -35,7 +35,7 @@ def _bench(args: argparse.Namespace) -> int:
     if "processing" in parts:
         sizes = [(args.height, args.width)] + ([] if args.quick else [LARGE_SIZE])
         shown = ", ".join(f"{width}×{height}" for height, width in sizes)
-        progress(f"bench: processing ({shown} RGB, 7 LEDs; {args.pairs} interleaved pairs a ratio)…")
+        progress(f"bench: processing ({shown}, RGB and raw RGGB, 7 LEDs; {args.pairs} interleaved pairs a ratio)…")
         report["processing"] = processing_bench(
             args.height, args.width, repeats=args.repeats, pairs=args.pairs, sizes=tuple(sizes)
         )

@@ -42,11 +42,12 @@ from msflash.acquisition.app.plot_style import PALETTE, figure_png, pyplot
 from msflash.acquisition.progress import counted
 from msflash.acquisition.session.chart_layout import chart_layout
 from msflash.processing import colour_metrics, datasets, lights, water
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.flash import FlashBounds
 from msflash.processing.scenes import chart_scene
 from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import synthesize
 
 STUDY_AMBIENTS = ("tungsten", "fluorescent", "green", "orange", "underwater")

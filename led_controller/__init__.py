@@ -16,7 +16,8 @@ one_copy(__name__)  # "import led_controller" from the repository root: a one-li
 
 if TYPE_CHECKING:
     from msflash.led_controller.booth import LedBooth
-    from msflash.led_controller.emulator import BoothEmulator, ManualClock, PtyBoothServer, serve_on_pty
+    from msflash.led_controller.emulator import BoothEmulator, ManualClock
+    from msflash.led_controller.emulator_pty import PtyBoothServer, serve_on_pty
     from msflash.led_controller.errors import BoothError, BoothNotFoundError, BoothProtocolError, BoothTimeoutError
     from msflash.led_controller.protocol import BoothEvent, BoothInfo, BoothStatus
 
@@ -31,8 +32,8 @@ _HOME = {
     "BoothTimeoutError": "errors",
     "LedBooth": "booth",
     "ManualClock": "emulator",
-    "PtyBoothServer": "emulator",
-    "serve_on_pty": "emulator",
+    "PtyBoothServer": "emulator_pty",
+    "serve_on_pty": "emulator_pty",
 }
 """Each public name and the module that defines it."""
 

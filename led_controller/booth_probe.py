@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import serial
 
 from msflash.led_controller.adapters.text_booth import parse_identity
-from msflash.led_controller.booth import DEFAULT_BOOT_S, open_serial_port
+from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.led_controller.errors import BoothError, BoothTimeoutError
 from msflash.led_controller.protocol import encode_request, frame_problem, parse_frame, parse_identify, parse_reply
+from msflash.led_controller.serial_port import open_serial_port
 
 PROBE_PROTOCOLS = ("msflash", "text")
 """The protocols :func:`probe_booth` can ask in."""

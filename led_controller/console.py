@@ -65,6 +65,17 @@ class _Command:
     run: Callable[[list[str]], list[str]]
     form: str
 
+    @classmethod
+    def plain(cls, run: Callable[[], list[str]], name: str) -> _Command:
+        """A command of one word: an argument is refused before anything is sent."""
+
+        def checked(args: list[str]) -> list[str]:
+            if args:
+                raise ConsoleInputError(f"{name} takes no arguments")
+            return run()
+
+        return cls(checked, name)
+
 
 class BoothConsole:
     """Runs typed commands on an open booth and explains them.
@@ -85,10 +96,10 @@ class BoothConsole:
             self._text: TextBooth | None = booth
             self._help = TEXT_HELP
             self._commands: dict[str, _Command] = {
-                "id": _Command(self._identify_text, "id"),
+                "id": _Command.plain(self._identify_text, "id"),
                 "levels": _Command(self._levels, "levels L0 L1 … (one per channel)"),
-                "off": _Command(self._off, "off"),
-                "status": _Command(self._status_text, "status"),
+                "off": _Command.plain(self._off, "off"),
+                "status": _Command.plain(self._status_text, "status"),
                 "send": _Command(self._send, "send LINE"),
             }
             return
@@ -96,19 +107,19 @@ class BoothConsole:
         self._help = HELP
         self._booth = booth
         self._commands = {
-            "id": _Command(self._identify, "id"),
+            "id": _Command.plain(self._identify, "id"),
             "levels": _Command(self._levels, "levels L0 L1 … (one per channel)"),
-            "off": _Command(self._off, "off"),
+            "off": _Command.plain(self._off, "off"),
             "table": _Command(self._table, "table S0 S1 … (steps of comma-separated levels)"),
             "pset": _Command(self._pset, "pset STEP L0 L1 … [now]"),
             "arm": _Command(self._arm, "arm host|booth|camera [SETTLE_US [PULSE_US [PERIOD_US]]]"),
-            "start": _Command(self._start, "start"),
-            "next": _Command(self._next, "next"),
-            "count": _Command(self._count, "count"),
-            "status": _Command(self._status, "status"),
-            "ping": _Command(self._ping, "ping"),
+            "start": _Command.plain(self._start, "start"),
+            "next": _Command.plain(self._next, "next"),
+            "count": _Command.plain(self._count, "count"),
+            "status": _Command.plain(self._status, "status"),
+            "ping": _Command.plain(self._ping, "ping"),
             "wdog": _Command(self._watchdog, "wdog SECONDS"),
-            "events": _Command(self._events, "events"),
+            "events": _Command.plain(self._events, "events"),
             "serial": _Command(self._serial, "serial [TEXT]"),
         }
 
@@ -178,9 +189,7 @@ class BoothConsole:
 
     # -- the commands ------------------------------------------------------------------------
 
-    def _identify(self, args: list[str]) -> list[str]:
-        if args:
-            raise ConsoleInputError("id takes no arguments")
+    def _identify(self) -> list[str]:
         info = self._booth.identify()
         self._info = info
         leds = ", ".join(f"{n} ({p:g} nm)" for n, p in zip(info.names, info.peaks_nm))
@@ -198,9 +207,7 @@ class BoothConsole:
         (self._text or self._booth).set_levels(levels)
         return [f"LEDs now: {self._describe(levels)}"]
 
-    def _off(self, args: list[str]) -> list[str]:
-        if args:
-            raise ConsoleInputError("off takes no arguments")
+    def _off(self) -> list[str]:
         if self._text is not None:
             self._text.all_off()
             return ["all LEDs off"]
@@ -209,17 +216,13 @@ class BoothConsole:
 
     # -- a plain-text booth ----------------------------------------------------------------------
 
-    def _identify_text(self, args: list[str]) -> list[str]:
-        if args:
-            raise ConsoleInputError("id takes no arguments")
+    def _identify_text(self) -> list[str]:
         assert self._text is not None
         info = self._text.identify()
         self._info = info
         return [f"firmware {info.firmware!r}, plain-text protocol; {info.channels} channels: {' '.join(info.names)}"]
 
-    def _status_text(self, args: list[str]) -> list[str]:
-        if args:
-            raise ConsoleInputError("status takes no arguments")
+    def _status_text(self) -> list[str]:
         assert self._text is not None
         return [f"LEDs: {self._describe(self._text.reported_levels())}"]
 
@@ -271,28 +274,20 @@ class BoothConsole:
             (f"armed {mode}: settle {settle} µs, pulse {pulse} µs, period {period} µs; trigger count reset; send start")
         ]
 
-    def _start(self, args: list[str]) -> list[str]:
-        if args:
-            raise ConsoleInputError("start takes no arguments")
+    def _start(self) -> list[str]:
         self._booth.start()
         return ["sequence running"]
 
-    def _next(self, args: list[str]) -> list[str]:
-        if args:
-            raise ConsoleInputError("next takes no arguments")
+    def _next(self) -> list[str]:
         step = self._booth.next_step()
         if step is None:
             return ["no more steps: LEDs off, sequence DONE"]
         return [f"step {step} applied and settled: trigger the camera now"]
 
-    def _count(self, args: list[str]) -> list[str]:
-        if args:
-            raise ConsoleInputError("count takes no arguments")
+    def _count(self) -> list[str]:
         return [f"{self._booth.trigger_count()} triggers since arm"]
 
-    def _status(self, args: list[str]) -> list[str]:
-        if args:
-            raise ConsoleInputError("status takes no arguments")
+    def _status(self) -> list[str]:
         s = self._booth.status()
         watchdog = "off" if s.watchdog_s == 0 else f"{s.watchdog_s:g} s"
         return [
@@ -315,9 +310,7 @@ class BoothConsole:
         serial = self._booth.identify().serial
         return [f"serial {serial}" if serial else "serial not set (serial TEXT sets one)"]
 
-    def _ping(self, args: list[str]) -> list[str]:
-        if args:
-            raise ConsoleInputError("ping takes no arguments")
+    def _ping(self) -> list[str]:
         self._booth.ping()
         return ["booth answered (watchdog fed)"]
 
@@ -335,8 +328,6 @@ class BoothConsole:
             else f"watchdog {seconds:g} s: LEDs go off if no command arrives for that long"
         ]
 
-    def _events(self, args: list[str]) -> list[str]:
-        if args:
-            raise ConsoleInputError("events takes no arguments")
+    def _events(self) -> list[str]:
         events = self._booth.pending_events()
         return [f"event {e.kind} {' '.join(e.args)}" for e in events] or ["no events waiting"]

@@ -20,7 +20,6 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 
 from msflash.led_controller.usb_link import FTDI_LATENCY_S, MEGA_BOOTLOADER_S
 
@@ -349,7 +348,5 @@ class SimulatedBooth:
     def __enter__(self) -> SimulatedBooth:
         return self
 
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
+    def __exit__(self, *_exc: object) -> None:
         self.close()

@@ -28,7 +28,6 @@ CMD_GET_PARAMETER = 0x03
 CMD_LOAD_ADDRESS = 0x06
 CMD_ENTER_PROGMODE_ISP = 0x10
 CMD_LEAVE_PROGMODE_ISP = 0x11
-CMD_CHIP_ERASE_ISP = 0x12
 CMD_PROGRAM_FLASH_ISP = 0x13
 CMD_READ_FLASH_ISP = 0x14
 CMD_READ_FUSE_ISP = 0x18
@@ -131,7 +130,7 @@ class Stk500v2Bootloader:
         if command == CMD_SPI_MULTI and len(body) >= 7:
             answer = ATMEGA2560_SIGNATURE[min(body[6], 2)] if body[4] == 0x30 else 0
             return bytes([command, STATUS_CMD_OK, 0, body[4], 0, answer, STATUS_CMD_OK])
-        return bytes([command, STATUS_CMD_FAILED])  # CMD_CHIP_ERASE_ISP too, as the Mega's bootloader
+        return bytes([command, STATUS_CMD_FAILED])  # chip erase (0x12) too, as the Mega's bootloader
 
 
 def _frame(seq: int, body: bytes) -> bytes:

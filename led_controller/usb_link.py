@@ -9,20 +9,25 @@ default), a 16U2 running Arduino's USB-serial firmware on its own, shorter, time
 
 :class:`PortOpenWatch` sees a host open the pty's slave (inotify ``IN_OPEN`` on the ``/dev/pts/N``
 node — pyserial's open is such an open); :class:`Bootloader` is the wall-clock window in which a
-reset board swallows what the host sends; :class:`HeldReplies` is the latency timer. The Python
-emulator's server (:class:`~led_controller.emulator.PtyBoothServer`) uses all three; the simavr
+reset board swallows what the host sends; :class:`HeldReplies` is the latency timer; :class:`TwinPort`
+is the board's end of the pty. The Python twins' servers (:class:`~led_controller.emulator_pty.PtyBoothServer`,
+``adapters/text_booth_emulator.py``) use them; the simavr
 bridge (``firmware/sim/booth_sim.c``) has the same model in C. What cannot be simulated here (the
 16U2 itself, DTR as a voltage, the capacitor) is listed in ``docs/booth-firmware.md`` §4.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import math
 import os
+import select
 import struct
+import termios
 import threading
+import tty
 from dataclasses import dataclass
 
 MEGA_BOOTLOADER_S = 1.6
@@ -40,10 +45,6 @@ board, so a host that sends too early is seen to fail without slowing the tests 
 
 FTDI_LATENCY_S = 0.016
 """An FTDI chip's default latency timer: a reply shorter than a USB packet waits up to this long."""
-
-CDC_16U2_LATENCY_S = 0.004
-"""A Mega's 16U2 (CDC-ACM) flushes its buffer to USB on a timer of a few ms (an assumed figure, not
-measured here: the twins take any value)."""
 
 USB_PACKET_PAYLOAD = 62
 """Bytes of serial data in one full-speed FTDI packet (64 minus 2 status bytes): a full packet is sent
@@ -203,3 +204,75 @@ class HeldReplies:
             out = bytes(self._buffer[:size])
             del self._buffer[:size]
             return out
+
+
+class TwinPort:
+    """The board's end of a pseudo-terminal, for a twin served by a Python thread.
+
+    :attr:`path` is the slave a host opens (raw: no echo, no line editing, no CR/LF mapping). The
+    slave node is watched (:class:`PortOpenWatch`) before its path is handed out, so every host's
+    open is seen; :meth:`wait` reports a host's first open (the DTR edge that resets a stock Mega)
+    and its last close (the kernel then frees what the host did not read). What the board writes
+    while no host holds the port is lost, as a USB-serial chip's. Linux only.
+    """
+
+    def __init__(self) -> None:
+        self.master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        self.path = os.ttyname(self._slave)
+        self._watch = PortOpenWatch(self.path)
+        self._wake_r, self._wake_w = os.pipe()
+        self._opens = 0
+        self._lock = threading.Lock()
+
+    @property
+    def host_open(self) -> bool:
+        """Get whether a host holds the port open."""
+        with self._lock:
+            return self._opens > 0
+
+    def wait(self, timeout_s: float | None) -> tuple[bytes, list[str]]:
+        """Wait up to ``timeout_s`` (None: for ever) for the host's bytes, an open or close, or :meth:`wake`.
+
+        Returns the bytes read (maybe none) and, in order, ``"reset"`` for each first open and
+        ``"closed"`` for each last close. Raises OSError when the pty is gone.
+        """
+        ready, _, _ = select.select([self.master, self._wake_r, self._watch.fileno()], [], [], timeout_s)
+        if self._wake_r in ready:
+            os.read(self._wake_r, 4096)
+        changes = []
+        if self._watch.fileno() in ready:
+            for change in self._watch.changes():
+                with self._lock:
+                    was, self._opens = self._opens, max(0, self._opens + change)
+                if change > 0 and was == 0:  # a second open finds DTR already up: no reset
+                    changes.append("reset")
+                elif change < 0 and was == 1:
+                    changes.append("closed")
+                    with contextlib.suppress(termios.error, OSError):
+                        termios.tcflush(self._slave, termios.TCIFLUSH)
+        data = os.read(self.master, 4096) if self.master in ready else b""
+        return data, changes
+
+    def wake(self) -> None:
+        """Make a :meth:`wait` on the serving thread return now."""
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"w")
+
+    def write(self, data: bytes) -> None:
+        """Send ``data`` to the host, all of it; lost if no host holds the port or the pty is gone."""
+        if not self.host_open:
+            return
+        view = memoryview(data)
+        while view:
+            try:
+                view = view[os.write(self.master, view) :]
+            except OSError:
+                return  # the pty is gone: the host sees a dead link, as with an unplugged board
+
+    def close(self) -> None:
+        """Close the pty, the watch and the wake-up pipe (the host's next read fails)."""
+        self._watch.close()
+        for fd in (self.master, self._slave, self._wake_r, self._wake_w):
+            with contextlib.suppress(OSError):
+                os.close(fd)

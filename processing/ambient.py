@@ -269,13 +269,7 @@ def _gcv_alpha(statistics: SequenceStatistics, penalty_gram: np.ndarray, penalty
 DISCREPANCY_SIGMAS = 0.1
 """How far (× k σ², the expected increase of a fit's residual by k noise-level parameters) the roughness
 penalty chosen by :func:`discrepancy_alpha` may raise the residual above the least-penalised fit's.
-
-Chosen on the ambient harness's tuning split once the rise was taken unclipped (issue 30): 1, 0.3 and
-0.1 gave a mean ratio to the LED bound of 0.986, 0.980 and 0.978, worst 2.08, 1.78 and 1.69, misses 11,
-9 and 8 of 150 (a fixed α of 1e-6: 0.976, 1.72, 9). The 1 of issue 17 was chosen while clipped residuals
-ran α up on a third of the scenes. With 1, the simulated demo's raw frames (whose weights, from a third of
-the samples RGB frames have, are the less certain) took 1.8e-5…5.6e-5 and landed at 0.98–1.02 × the bound,
-worst 1.22 (docs/raw-frames.md)."""
+ Chosen on the ambient harness's tuning split (docs/measurements.md)."""
 
 
 def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, terms: LedTerms) -> float:
@@ -302,11 +296,8 @@ def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, 
     least = weights(0)
     dof = max(observed.n_samples - observed.n_leds, 1)
     noise_variance = observed.residual_energy(least) / dof
-    # The rise r(α) − r(α₀), from the weight-dependent part of the residual alone: the denoised ambient
-    # energy (less its noise, whose sampling error is of the order of √(2/n) of it) cancels. Compared as
-    # clipped residuals, a denoised residual that read 0 at α₀ stayed 0 while α grew, hiding every rise:
-    # on Bayer frames (fewer samples, so larger sampling error) α ran to 1e-4…1e-2 and the estimate to
-    # 1.3–1.5× the LED bound (docs/raw-frames.md).
+    # The rise r(α) − r(α₀), from the weight-dependent part of the residual alone (the denoised ambient energy
+    # cancels): residuals clipped at 0 hid every rise on Bayer frames (docs/raw-frames.md).
     allowed = solved.fit_energy(least) + DISCREPANCY_SIGMAS * observed.n_leds * noise_variance
 
     def residual(index: int) -> float:
@@ -489,69 +480,28 @@ class AmbientModel:
         self, statistics: SequenceStatistics, weights: np.ndarray, method: str, alpha_used: float
     ) -> AmbientEstimate:
         """The :class:`AmbientEstimate` of weights found by :meth:`weights`: spectrum and reliability signals."""
-        led_spectra, terms = self.led_spectra, self.terms
-        led_values = terms.values
         rss = statistics.residual_energy(weights)
-        dof = max(statistics.n_samples - statistics.n_leds, 1)
-        noise_variance = rss / dof
-        # The band is the solved system's (the denoised one when it was used): w = (G_s + λP)⁻¹ c, with the
-        # observed G in the middle of the sandwich as the products' covariance.
         solution = solved_statistics(statistics)
-        solved = solution.statistics
-        penalty_weight = alpha_used * terms.penalty_scale(solved) if method == "tikhonov" else 0.0
-        try:
-            system_inverse = np.linalg.pinv(solved.gram + penalty_weight * terms.penalty_gram)
-            weights_cov = noise_variance * system_inverse @ statistics.gram @ system_inverse
-        except np.linalg.LinAlgError:
-            weights_cov = np.full((statistics.n_leds,) * 2, np.inf)
-        if method == "lstsq" or not np.all(np.isfinite(weights_cov)):
-            spectrum_std = _sandwich_band(led_values, weights_cov)
-        else:
-            spectrum_std = _constrained_band(solved, terms, penalty_weight, weights_cov)
-
+        spectrum_std = self.spectrum_band(statistics, solution.statistics, rss, method, alpha_used)
         condition = _scaled_condition(statistics.gram)
         relative_residual = float(np.sqrt(rss / statistics.ambient_energy)) if statistics.ambient_energy > 0 else 0.0
         ambient_z = (
             statistics.ambient_sum / math.sqrt(statistics.ambient_energy) if statistics.ambient_energy > 0 else 0.0
         )
-        warnings = []
-        if not ambient_z >= LED_SIGNAL_Z:
-            warnings.append(
-                f"the ambient image holds noise, not light (z-score {ambient_z:.2g} below {LED_SIGNAL_Z:g}): there is "
-                "no ambient light to estimate and the spectrum is noise — was the ambient light off or the lens capped?"
-            )
-        if condition > CONDITION_WARNING:
-            warnings.append(
-                f"the LED-only images are nearly dependent (condition number {condition:.3g}); "
-                "the weights are poorly determined — more surfaces or more distinct LEDs would help"
-            )
-        misfit = (
-            relative_residual
-            if solved is statistics
-            else (
+        solved = solution.statistics
+        if solved is statistics:
+            misfit = relative_residual
+        else:
+            misfit = (
                 float(np.sqrt(solved.residual_energy(weights) / solved.ambient_energy))
                 if solved.ambient_energy > 0
                 else 0.0
             )
-        )
-        if misfit > RESIDUAL_WARNING and ambient_z >= LED_SIGNAL_Z:
-            warnings.append(
-                f"the LEDs explain the ambient image poorly (misfit {misfit:.3f} beyond the noise); "
-                "the ambient may lie outside the LEDs' span, vary across the scene, or the scene moved"
-            )
-        if statistics.saturated_fraction > SATURATION_WARNING:
-            warnings.append(f"{statistics.saturated_fraction:.0%} of the samples are saturated; lower the exposure")
-        signal_z = statistics.led_sums / np.sqrt(np.maximum(np.diag(statistics.gram), 1e-300))
-        dark = [name for name, value in zip(led_spectra.names, signal_z) if value < LED_SIGNAL_Z]
-        if dark:
-            warnings.append(
-                f"the image of LED {', '.join(dark)} holds noise, not light (z-score below {LED_SIGNAL_Z:g}); "
-                "did it fire, and does it reach the scene?"
-            )
-        centre = led_values @ weights
-
-        spectrum = led_spectra.replace(
-            values=centre[:, None], names=("ambient",), source=f"ambient estimate ({method})", metadata={}
+        spectrum = self.led_spectra.replace(
+            values=(self.terms.values @ weights)[:, None],
+            names=("ambient",),
+            source=f"ambient estimate ({method})",
+            metadata={},
         )
         return AmbientEstimate(
             spectrum=spectrum,
@@ -564,13 +514,63 @@ class AmbientModel:
             spectrum_std=spectrum_std,
             n_samples=statistics.n_samples,
             saturated_fraction=statistics.saturated_fraction,
-            warnings=tuple(warnings),
+            warnings=_reliability_warnings(statistics, self.led_spectra.names, condition, float(ambient_z), misfit),
             ambient_z=float(ambient_z),
             noise_correction=solution.description,
             weighted=statistics.weighted,
             model_misfit=misfit,
             noise_std=spectrum_std,
         )
+
+    def spectrum_band(
+        self, statistics: SequenceStatistics, solved: SequenceStatistics, rss: float, method: str, alpha_used: float
+    ) -> np.ndarray:
+        """±1σ of the spectrum: the solved system's (the denoised one when it was used), ``w = (G_s + λP)⁻¹ c`` with
+        the observed G in the middle of the sandwich as the products' covariance."""
+        terms = self.terms
+        noise_variance = rss / max(statistics.n_samples - statistics.n_leds, 1)
+        penalty_weight = alpha_used * terms.penalty_scale(solved) if method == "tikhonov" else 0.0
+        try:
+            system_inverse = np.linalg.pinv(solved.gram + penalty_weight * terms.penalty_gram)
+            weights_cov = noise_variance * system_inverse @ statistics.gram @ system_inverse
+        except np.linalg.LinAlgError:
+            weights_cov = np.full((statistics.n_leds,) * 2, np.inf)
+        if method == "lstsq" or not np.all(np.isfinite(weights_cov)):
+            return _sandwich_band(terms.values, weights_cov)
+        return _constrained_band(solved, terms, penalty_weight, weights_cov)
+
+
+def _reliability_warnings(
+    statistics: SequenceStatistics, led_names: tuple[str, ...], condition: float, ambient_z: float, misfit: float
+) -> tuple[str, ...]:
+    """The estimate's warnings: no ambient light, nearly dependent LED images, a misfit beyond the noise,
+    saturation, an LED whose image holds no light."""
+    warnings = []
+    if not ambient_z >= LED_SIGNAL_Z:
+        warnings.append(
+            f"the ambient image holds noise, not light (z-score {ambient_z:.2g} below {LED_SIGNAL_Z:g}): there is "
+            "no ambient light to estimate and the spectrum is noise — was the ambient light off or the lens capped?"
+        )
+    if condition > CONDITION_WARNING:
+        warnings.append(
+            f"the LED-only images are nearly dependent (condition number {condition:.3g}); "
+            "the weights are poorly determined — more surfaces or more distinct LEDs would help"
+        )
+    if misfit > RESIDUAL_WARNING and ambient_z >= LED_SIGNAL_Z:
+        warnings.append(
+            f"the LEDs explain the ambient image poorly (misfit {misfit:.3f} beyond the noise); "
+            "the ambient may lie outside the LEDs' span, vary across the scene, or the scene moved"
+        )
+    if statistics.saturated_fraction > SATURATION_WARNING:
+        warnings.append(f"{statistics.saturated_fraction:.0%} of the samples are saturated; lower the exposure")
+    signal_z = statistics.led_sums / np.sqrt(np.maximum(np.diag(statistics.gram), 1e-300))
+    dark = [name for name, value in zip(led_names, signal_z) if value < LED_SIGNAL_Z]
+    if dark:
+        warnings.append(
+            f"the image of LED {', '.join(dark)} holds noise, not light (z-score below {LED_SIGNAL_Z:g}); "
+            "did it fire, and does it reach the scene?"
+        )
+    return tuple(warnings)
 
 
 def _sandwich_band(led_values: np.ndarray, weights_cov: np.ndarray) -> np.ndarray:
@@ -679,7 +679,7 @@ def estimate_ambient(
     Parameters
     ----------
     statistics
-        Sufficient statistics of the sequence (:func:`processing.statistics.accumulate_statistics`).
+        Sufficient statistics of the sequence (:func:`processing.accumulate.accumulate_statistics`).
     led_spectra
         The k LED spectra at full drive, in photons, in the order of the statistics.
     method

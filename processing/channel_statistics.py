@@ -12,7 +12,7 @@ their second moments
 
 over the unsaturated blocks. They are kept per *fold* — contiguous bands of block rows — so that
 a model can be trained on all folds but one and judged on the pixels of the one left out
-(:func:`processing.light_prior.choose_model`); the totals are the sums over folds.
+(:func:`processing.prior_choice.choose_model`); the totals are the sums over folds.
 
 Frames are linearised as :mod:`processing.statistics` does (``(value − black) / (exposure · gain)``,
 LED-only images unmixed by ``pinv(levels)``), binned in ``factor × factor`` blocks per CFA plane
@@ -31,18 +31,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.processing import frame_kernels
-from msflash.processing.errors import SpectralDataError
-from msflash.processing.statistics import (
-    FrameStackSpec,
-    NoiseMoments,
-    SequenceStatistics,
+from msflash.processing.block_sums import (
+    block_sums,
     block_sums_and_differences,
     cfa_planes,
+    plane_shape,
     saturated_blocks,
 )
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.moment_products import serial_columns
+from msflash.processing.statistics import FrameStackSpec, NoiseMoments, SequenceStatistics
 
 DEFAULT_FOLDS = 5
-"""Bands of block rows kept apart for held-out prediction (:func:`processing.light_prior.choose_model`)."""
+"""Bands of block rows kept apart for held-out prediction (:func:`processing.prior_choice.choose_model`)."""
 
 
 @dataclass(frozen=True)
@@ -205,6 +206,28 @@ def accumulate_channel_statistics(
     SpectralDataError
         Frames of different shapes, the wrong number of LED frames, non-finite values, too few blocks.
     """
+    frames, period = _checked_frames(ambient, led_frames, spec, cfa, bin_factor, n_folds)
+    shape = plane_shape(frames[0].shape, period)
+    channels = plane_channels(cfa, shape[2])
+    blocks = _BlockLayout(shape[0] // bin_factor, shape[1] // bin_factor, shape[2])
+    if blocks.height < n_folds or blocks.width < 1:
+        raise SpectralDataError(
+            f"channel statistics: {blocks.height}×{blocks.width} blocks of {bin_factor}×{bin_factor}; expected at "
+            f"least {n_folds} rows of blocks (a larger frame or smaller blocks)"
+        )
+    raw, probes = _stacked_block_rows(frames, period, bin_factor, spec.white_level, blocks)
+    return _statistics_of_rows(raw, probes, spec, bin_factor, n_folds, blocks, channels)
+
+
+def _checked_frames(
+    ambient: np.ndarray,
+    led_frames: Sequence[np.ndarray],
+    spec: FrameStackSpec,
+    cfa: str | None,
+    bin_factor: int,
+    n_folds: int,
+) -> tuple[list[np.ndarray], int]:
+    """The frames ``[A, F_1 … F_n]`` and the CFA period, or the error naming what does not fit."""
     frames = [np.asarray(ambient), *[np.asarray(f) for f in led_frames]]
     if len(led_frames) != spec.led_levels.shape[0]:
         raise SpectralDataError(
@@ -223,78 +246,105 @@ def accumulate_channel_statistics(
             raise SpectralDataError(
                 f"channel statistics: frame {index} holds non-finite values; expected finite pixels"
             )
-    period = 2 if cfa is not None else 1
     if cfa is not None and frames[0].ndim != 2:
         raise SpectralDataError(
             f"channel statistics: CFA '{cfa}' but frames of shape {frames[0].shape}; expected (H, W)"
         )
-    planes = [cfa_planes(frame, period) for frame in frames]
-    channels = plane_channels(cfa, planes[0].shape[2])
-    height, width = planes[0].shape[0] // bin_factor, planes[0].shape[1] // bin_factor
-    if height < n_folds or width < 1:
-        raise SpectralDataError(
-            f"channel statistics: {height}×{width} blocks of {bin_factor}×{bin_factor}; expected at "
-            f"least {n_folds} rows of blocks (a larger frame or smaller blocks)"
-        )
-    probe = bin_factor % 2 == 0
-    n_frames, n_channels = len(frames), planes[0].shape[2]
-    n_blocks = height * width
-    # Raw block sums of every frame stacked, [F_1 … F_n, A] × channels, then a row of ones: every moment of
-    # the linearised, differenced and unmixed responses is a linear map of these rows' moments (as in
-    # processing.statistics), so the pixels see no arithmetic beyond the block sums. Features × blocks,
-    # row-major: each frame's channels are written as whole rows and a fold is a band of columns.
-    raw = np.empty((n_frames * n_channels + 1, n_blocks))
+    return frames, 2 if cfa is not None else 1
+
+
+@dataclass(frozen=True)
+class _BlockLayout:
+    """Blocks per frame: ``height`` rows of ``width`` blocks, each ``channels`` values (the CFA planes)."""
+
+    height: int
+    width: int
+    channels: int
+
+
+def _stacked_block_rows(
+    frames: list[np.ndarray], period: int, factor: int, white: float, blocks: _BlockLayout
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Raw block sums of every frame stacked, ``[F_1 … F_n, A] × channels``, then a row of ones; the probe's
+    half differences alike (even ``factor``), or None. Blocks saturated in any frame are zeroed in every row.
+
+    Every moment of the linearised, differenced and unmixed responses is a linear map of these rows' moments
+    (as in :mod:`processing.statistics`), so the pixels see no arithmetic beyond the block sums. Features ×
+    blocks, row-major: each frame's channels are written as whole rows and a fold is a band of columns.
+    """
+    channels, n_blocks = blocks.channels, blocks.height * blocks.width
+    raw = np.empty((len(frames) * channels + 1, n_blocks))
     raw[-1] = 1.0
-    probes = np.empty_like(raw) if probe else None
+    probes = np.empty_like(raw) if factor % 2 == 0 else None
     if probes is not None:
         probes[-1] = 0.0
-    invalid = np.zeros((height, width), dtype=bool)
-    order = [*range(1, n_frames), 0]  # LED frames first, the ambient frame last
+    invalid = np.zeros((blocks.height, blocks.width), dtype=bool)
     # The compiled one-pass kernel where this process has it loaded (the same integers as the numpy route).
     fast = frame_kernels.wanted(sum(frame.nbytes for frame in frames))
-    sums = np.empty((height, n_channels, width)) if fast else None
-    differences = np.empty((height, width, n_channels)) if fast and probe else None
-    for column, index in enumerate(order):
-        rows = raw[column * n_channels : (column + 1) * n_channels].reshape(n_channels, height, width)
-        probe_rows = (
-            None
-            if probes is None
-            else probes[column * n_channels : (column + 1) * n_channels].reshape(n_channels, height, width)
+    for column, index in enumerate([*range(1, len(frames)), 0]):  # LED frames first, the ambient frame last
+        band = slice(column * channels, (column + 1) * channels)
+        rows = raw[band].reshape(channels, blocks.height, blocks.width)
+        probe_rows = None if probes is None else probes[band].reshape(channels, blocks.height, blocks.width)
+        done, saturated = (
+            _compiled_block_sums(frames[index], period, factor, white, rows, probe_rows) if fast else (False, None)
         )
-        if sums is not None:
-            done, saturated = frame_kernels.block_pass(
-                frames[index], bin_factor, period, spec.white_level, 1, sums, differences
-            )
-            if done:
-                rows[...] = sums.transpose(1, 0, 2)
-                if probe_rows is not None and differences is not None:
-                    probe_rows[...] = differences.transpose(2, 0, 1)
-                if saturated is not None:
-                    invalid |= saturated
-                continue
-        plane = planes[index]
-        if probe_rows is not None:
-            block, half = block_sums_and_differences(plane, bin_factor)
-            probe_rows[...] = half.transpose(2, 0, 1)
-        else:
-            block = (
-                plane[: height * bin_factor, : width * bin_factor]
-                .astype(float)
-                .reshape(height, bin_factor, width, bin_factor, n_channels)
-                .sum(axis=(1, 3))
-            )
-        rows[...] = block.transpose(2, 0, 1)
-        if np.issubdtype(plane.dtype, np.floating) or np.iinfo(plane.dtype).max >= spec.white_level:
-            if plane.max() >= spec.white_level:
-                invalid |= saturated_blocks(plane, bin_factor, spec.white_level)
+        if not done:
+            saturated = _numpy_block_sums(cfa_planes(frames[index], period), factor, white, rows, probe_rows)
+        if saturated is not None:
+            invalid |= saturated
     if invalid.any():
         raw[:, invalid.reshape(-1)] = 0.0  # out of every moment, the count included
         if probes is not None:
             probes[:, invalid.reshape(-1)] = 0.0
-    transform = _response_transform(spec, n_channels, spec.black_level * bin_factor * bin_factor)
-    width_f = spec.n_leds * n_channels
+    return raw, probes
+
+
+def _compiled_block_sums(
+    frame: np.ndarray, period: int, factor: int, white: float, rows: np.ndarray, probe_rows: np.ndarray | None
+) -> tuple[bool, np.ndarray | None]:
+    """One raw frame's block sums into ``rows`` (C, h, w) and half differences into ``probe_rows``, in one compiled
+    pass (:func:`processing.frame_kernels.block_pass`, no CFA-plane copy): ``(done, saturated)`` as that returns."""
+    channels, height, width = rows.shape
+    sums = np.empty((height, channels, width))
+    differences = None if probe_rows is None else np.empty((height, width, channels))
+    done, saturated = frame_kernels.block_pass(frame, factor, period, white, 1, sums, differences)
+    if done:
+        rows[...] = sums.transpose(1, 0, 2)
+        if probe_rows is not None and differences is not None:
+            probe_rows[...] = differences.transpose(2, 0, 1)
+    return done, saturated
+
+
+def _numpy_block_sums(
+    plane: np.ndarray, factor: int, white: float, rows: np.ndarray, probe_rows: np.ndarray | None
+) -> np.ndarray | None:
+    """:func:`_compiled_block_sums` of an (H, W, C) plane in numpy (the same integers)."""
+    if probe_rows is not None:
+        block, half = block_sums_and_differences(plane, factor)
+        probe_rows[...] = half.transpose(2, 0, 1)
+    else:
+        block = block_sums(plane, factor)
+    rows[...] = block.transpose(2, 0, 1)
+    if np.issubdtype(plane.dtype, np.floating) or np.iinfo(plane.dtype).max >= white:
+        if plane.max() >= white:
+            return saturated_blocks(plane, factor, white)
+    return None
+
+
+def _statistics_of_rows(
+    raw: np.ndarray,
+    probes: np.ndarray | None,
+    spec: FrameStackSpec,
+    factor: int,
+    n_folds: int,
+    blocks: _BlockLayout,
+    channels: tuple[str, ...],
+) -> ChannelStatistics:
+    """:class:`ChannelStatistics` of stacked block rows (:func:`_stacked_block_rows`), per fold."""
+    transform = _response_transform(spec, blocks.channels, spec.black_level * factor * factor)
+    width_f = spec.n_leds * blocks.channels
     # Folds are bands of block rows: contiguous slices of the row-major blocks.
-    bounds = ((np.arange(n_folds + 1) * height + n_folds - 1) // n_folds) * width
+    bounds = ((np.arange(n_folds + 1) * blocks.height + n_folds - 1) // n_folds) * blocks.width
 
     def moments_of(rows: np.ndarray) -> tuple[Moments, np.ndarray]:
         products = np.stack([_gram(rows[:, bounds[j] : bounds[j + 1]]) for j in range(n_folds)])
@@ -311,7 +361,7 @@ def accumulate_channel_statistics(
         counts=np.rint(products[:, -1, -1]).astype(int),
         led_sums=sums[:, :width_f],
         ambient_sums=sums[:, width_f:],
-        n_blocks_total=height * width,
+        n_blocks_total=blocks.height * blocks.width,
         n_leds=spec.n_leds,
         channels=channels,
     )
@@ -335,16 +385,12 @@ def _response_transform(spec: FrameStackSpec, channels: int, black: float) -> np
     return transform
 
 
-GRAM_COLUMNS = 4096
-"""Blocks per product in :func:`_gram`: small enough that OpenBLAS runs each on one thread (its threads' wake-up on a
-busy 2-core machine costs more than these thin products; see :mod:`processing.statistics`), large enough that the
-product runs near the core's peak."""
-
-
 def _gram(values: np.ndarray) -> np.ndarray:
-    """``values valuesᵀ`` of (features, blocks) values, summed over slices of :data:`GRAM_COLUMNS` blocks."""
+    """``values valuesᵀ`` of (features, blocks) values, summed over slices of blocks small enough for one BLAS
+    thread (:func:`processing.moment_products.serial_columns`: 240 blocks for the 33 rows of 8 raw frames)."""
     product = np.zeros((values.shape[0], values.shape[0]))
-    for start in range(0, values.shape[1], GRAM_COLUMNS):
-        part = values[:, start : start + GRAM_COLUMNS]
+    columns = serial_columns(values.shape[0], values.shape[0])
+    for start in range(0, values.shape[1], columns):
+        part = values[:, start : start + columns]
         product += part @ part.T
     return product

@@ -19,12 +19,21 @@ extra frame, so it works in every sync mode and on sequences already recorded.
 **Correcting.** ``f = f̃ − e a`` is linear, so the statistics of eq. 4–6 are corrected exactly from what they hold
 (:func:`with_ambient_gains`): ``G' = G − e cᵀ − c eᵀ + E e eᵀ``, ``c' = c − E e`` (``E = ‖a‖²``), the noise moments alike.
 
+**Every model, one correction.** Every statistic a model is fitted through is linear in the LED-only images, so the
+same ``e`` corrects them all exactly, computed once from the whole frame and applied upstream of every model
+(:func:`corrected_channel_statistics`: the light prior's and the families' per-channel, per-fold moments,
+``f_(c,i) = f̃_(c,i) − e_i a_c``; :func:`corrected_tiles`: the local model's tiles, their noise-free part and the
+block rows the regions are segmented from). Sample weights (from the ambient frame) and saturated blocks (from the
+raw frames) do not depend on the ambient's share of an LED frame, so the corrected statistics are those of LED
+frames from which the extra ambient had been subtracted pixel by pixel (tests/processing/test_flicker_models.py).
+
 **Deciding.** The colour read is biased where a surface's reflectance curves inside an LED's band and the camera
 turns that into colour the two directions do not hold (an amber LED where R and G cross reads up to 0.2 under steady
 light): each LED's sigma adds :data:`MODEL_ERROR` and :data:`CURVATURE_ERROR` times its :func:`curvature_share` to
 the noise's, both set on the harness's tuning lamp kinds under steady light (docs/flicker.md). Flicker is detected
-when some LED's ``|ê_i|`` exceeds :data:`DETECTION_Z` sigmas; the statistics are then corrected by each ``ê_i``
-shrunk by its own sigma (a read within its sigma of zero is not applied). What was read is reported in every case
+when some LED's ``|ê_i|`` exceeds :data:`DETECTION_Z` sigmas; the statistics are then corrected by every ``ê_i`` as
+read (not shrunk towards 0: a share left in the LED images costs the light models far more than the LED model,
+docs/decisions/flicker-every-model.md). What was read is reported in every case
 (:class:`FlickerCheck`). Frame timestamps and exposures, when the sequence has them, fit the mains frequency and
 phase to the gains (:func:`fit_mains`) for the report only.
 """
@@ -32,13 +41,17 @@ phase to the gains (:func:`fit_mains`) for the report only.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from msflash.processing.channel_statistics import ChannelStatistics, Moments
 from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import ChannelMoments, NoiseMoments, SequenceStatistics
+from msflash.processing.tile_statistics import BlockData, TiledStatistics
 
 MODEL_ERROR = 0.03
 """One sigma of the colour read's bias under steady light for an LED of little curvature (:func:`curvature_share`),
@@ -62,6 +75,32 @@ MAINS_TOLERANCE = 0.01
 """The supply's frequency is searched within ±1 % of nominal."""
 
 _CHANNEL_INDEX = {"R": 0, "G": 1, "B": 2}
+
+_APPLY_GAINS: ContextVar[bool | np.ndarray] = ContextVar("msflash_apply_ambient_gains", default=True)
+"""True: a detected flicker's gains are applied as read; False: none are (:func:`gains_not_applied`); an array: these
+shares are applied whatever was read (:func:`gains_applied`). The last two serve studies."""
+
+
+@contextmanager
+def gains_not_applied() -> Iterator[None]:
+    """Within the block, flicker is still read and reported but no statistics are corrected: what the estimate
+    would be without the gain model (the flicker study's *plain* columns, tests/harness/flicker.py)."""
+    token = _APPLY_GAINS.set(False)
+    try:
+        yield
+    finally:
+        _APPLY_GAINS.reset(token)
+
+
+@contextmanager
+def gains_applied(offsets: np.ndarray) -> Iterator[None]:
+    """Within the block, every check corrects the LED images by ``offsets`` (one share per LED) whatever it read:
+    what the estimate would be with a perfect read (the flicker study's *oracle* columns, tests/harness/flicker.py)."""
+    token = _APPLY_GAINS.set(np.array(offsets, dtype=float))
+    try:
+        yield
+    finally:
+        _APPLY_GAINS.reset(token)
 
 
 @dataclass(frozen=True)
@@ -101,7 +140,7 @@ class FlickerCheck:
     """Why it was not checked, or what was decided and why."""
     warnings: tuple[str, ...] = field(default=())
     applied_offsets: np.ndarray | None = None
-    """The shares the LED images were corrected by (``ê`` shrunk by each LED's sigma), or None when not corrected."""
+    """The shares the LED images were corrected by (``ê`` as read), or None when not corrected."""
 
     def summary(self) -> str | None:
         """One line for the run's output when flicker was detected (None otherwise: a steady light stays quiet)."""
@@ -333,19 +372,27 @@ def check_flicker(
         if detected
         else f"no LED's ambient share is beyond {DETECTION_Z:g} σ (largest {float(np.max(z)):.1f} σ): steady"
     )
-    # Each LED's share shrunk by its own evidence (positive-part James–Stein): a read within its sigma of 0 is not
-    # applied, one many sigmas out nearly in full (an LED whose read the surfaces bias weighs little).
-    applied = offsets * np.clip(1.0 - (sigmas / np.maximum(np.abs(offsets), 1e-300)) ** 2, 0.0, 1.0)
+    # Every LED's share as read, once some LED shows flicker: shrinking each towards 0 by its own sigma (positive-part
+    # James–Stein, issue 30's first version) left up to 0.07 of an LED's image as ambient, which the families and the
+    # light prior read as the scene's colour (docs/decisions/flicker-every-model.md).
+    applied = offsets
+    setting = _APPLY_GAINS.get()
+    corrected = detected and setting is True
+    if isinstance(setting, np.ndarray):
+        applied, corrected = setting, True
+        reason += "; the shares given applied instead (a study's oracle)"
+    elif detected and not corrected:
+        reason = reason.replace("applied to the LED images", "not applied (switched off)")
     return FlickerCheck(
         True,
         detected,
-        detected,
+        corrected,
         offsets,
         sigmas,
         frame_gains,
         spread,
         reason=reason,
-        applied_offsets=applied if detected else None,
+        applied_offsets=applied if corrected else None,
     )
 
 
@@ -357,3 +404,84 @@ def with_fit(check: FlickerCheck, starts_s: np.ndarray | None, exposures_s: np.n
     if len(starts_s) != gains.size:
         return check
     return replace(check, fit=fit_mains(np.asarray(starts_s), np.asarray(exposures_s), gains))
+
+
+def applied_offsets(check: FlickerCheck | None) -> np.ndarray | None:
+    """The shares ``e`` a check corrects the LED images by, or None when it corrects nothing."""
+    if check is None or not check.corrected or check.applied_offsets is None:
+        return None
+    return np.asarray(check.applied_offsets, dtype=float)
+
+
+def corrected_channel_statistics(statistics: ChannelStatistics, check: FlickerCheck | None) -> ChannelStatistics:
+    """The channel-resolved statistics (:mod:`processing.channel_statistics`: the light prior's and the families')
+    of the LED-only images ``f_(c,i) = f̃_(c,i) − e_i a_c`` (module notes); ``statistics`` itself when ``check``
+    corrects nothing.
+
+    With ``E = I_C ⊗ e`` (C·k × C), ``f = f̃ − E a`` block by block, so fold by fold ``S_ff' = S_ff − E S_afᵀ −
+    S_fa Eᵀ + E S_aa Eᵀ``, ``S_fa' = S_fa − E S_aa``, ``Σ f' = Σ f̃ − E Σ a``, and the noise probe's moments alike.
+    """
+    e = applied_offsets(check)
+    if e is None:
+        return statistics
+    if e.size != statistics.n_leds:
+        raise ValueError(f"flicker correction: {e.size} LED shares for {statistics.n_leds} LEDs")
+    mixing = np.kron(np.eye(statistics.n_channels), e[:, None])  # (C·k, C)
+
+    def moved(moments: Moments) -> Moments:
+        fa_e = moments.fa @ mixing.T  # (folds, C·k, C·k): S_fa Eᵀ
+        e_aa = mixing @ moments.aa  # (folds, C·k, C): E S_aa
+        ff = moments.ff - fa_e - fa_e.transpose(0, 2, 1) + e_aa @ mixing.T
+        return Moments(ff, moments.fa - e_aa, moments.aa)
+
+    return replace(
+        statistics,
+        moments=moved(statistics.moments),
+        noise=None if statistics.noise is None else moved(statistics.noise),
+        led_sums=statistics.led_sums - statistics.ambient_sums @ mixing.T,
+    )
+
+
+def _corrected_tile_moments(tiles: TiledStatistics, e: np.ndarray) -> TiledStatistics:
+    """Eq. 4–6's statistics of every tile with ``f = f̃ − e a``: ``G − e cᵀ − c eᵀ + E e eᵀ``, ``c − E e``."""
+    cross, energy = tiles.cross, tiles.ambient_energy[..., None]
+    outer = cross[..., :, None] * e[None, None, None, :]
+    return replace(
+        tiles,
+        gram=tiles.gram - outer - outer.swapaxes(-1, -2) + energy[..., None] * np.outer(e, e),
+        cross=cross - energy * e,
+        led_sums=tiles.led_sums - tiles.ambient_sum[..., None] * e,
+    )
+
+
+def _corrected_blocks(blocks: BlockData, e: np.ndarray) -> BlockData:
+    """The block rows ``[F_1 … F_n, A, 1]`` with each LED frame's extra ambient subtracted: ``F_j − δ_j (s_a / s_j)
+    (A − b)`` with ``δ = L e``, which maps to ``f̃ − e a`` (``pinv(L) L = I``)."""
+    spec = blocks.spec
+    n = len(spec.led_scales)
+    share = (np.asarray(spec.led_levels, dtype=float) @ e) * spec.ambient_scale / np.asarray(spec.led_scales)
+    raw = blocks.raw.copy()
+    raw[:n] -= share[:, None, None, None] * (raw[n] - spec.black_level * raw[n + 1])[None]
+    differences = blocks.differences
+    if differences is not None:  # the ones row has no noise: its half difference is 0
+        differences = differences.copy()
+        differences[:n] -= share[:, None, None, None] * differences[n][None]
+    return replace(blocks, raw=raw, differences=differences)
+
+
+def corrected_tiles(tiles: TiledStatistics, check: FlickerCheck | None) -> TiledStatistics:
+    """The local model's tiles (:mod:`processing.tile_statistics`) with each LED image's ambient share ``e`` taken
+    out (module notes): their moments, their noise-free part (:attr:`TiledStatistics.denoised`) and the block rows
+    the regions are segmented from; ``tiles`` itself when ``check`` corrects nothing. The same ``e`` for every tile:
+    a frame's ambient gain is the frame's (a global shutter; docs/flicker.md for a rolling one)."""
+    e = applied_offsets(check)
+    if e is None:
+        return tiles
+    if e.size != tiles.n_leds:
+        raise ValueError(f"flicker correction: {e.size} LED shares for {tiles.n_leds} LEDs")
+    out = _corrected_tile_moments(tiles, e)
+    return replace(
+        out,
+        denoised=None if tiles.denoised is None else _corrected_tile_moments(tiles.denoised, e),
+        blocks=None if tiles.blocks is None else _corrected_blocks(tiles.blocks, e),
+    )

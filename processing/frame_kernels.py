@@ -1,11 +1,11 @@
 """Compiled one-pass kernels over raw integer frames: block sums with their noise probe, and weighted sums.
 
-The binned statistics (:class:`processing.statistics.BlockRows`) and synthesis
+The binned statistics (:class:`processing.block_rows.BlockRows`) and synthesis
 (:func:`processing.synthesis.synthesize`) are passes over the raw frames. In numpy each step is a
 pass of its own (convert, sum rows, gather blocks, take differences, find the maxima), several
 times the cost of reading the frames once. These kernels read each raw sample once, in rows that
 stay in cache, and write only their results: per frame, its ``factor × factor`` block sums, its
-blocks' half differences (the noise probe of :mod:`processing.statistics`) and its saturated
+blocks' half differences (the noise probe of :mod:`processing.block_rows`) and its saturated
 blocks; for synthesis, the weighted sum of the frames (eq. 7–9's image) and its saturated pixels.
 
 Integer frames only (≤ 16 bits: the block sums are exact in 32-bit integers for blocks up to
@@ -145,7 +145,7 @@ def block_pass(
         Output, (H/f, C', W/f) float64 (C' = cfa_period² · C): block sums in moment-row order.
     differences
         Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64: each probed block's checkerboard half difference
-        (:func:`processing.statistics.block_sums_and_differences`); or None.
+        (:func:`processing.block_sums.block_sums_and_differences`); or None.
 
     Returns
     -------
@@ -225,7 +225,7 @@ def raw_moments(frames: list[np.ndarray], white: float, workers: int, pool: Any 
 
     ``pool`` (an executor) shares tasks of whole pixels among ``workers`` threads. Each task's moments are
     exact integers (:data:`EXACT_SAMPLES`), added in int64: the result depends neither on the number of
-    workers nor on the route (the numpy route of :func:`processing.statistics.accumulate_statistics`
+    workers nor on the route (the numpy route of :func:`processing.accumulate.accumulate_statistics`
     gives the same bits).
     """
     flat = synthesis_inputs(frames)

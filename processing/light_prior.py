@@ -10,43 +10,18 @@ Image formation per block b and channel c (eq. 1–3, gain g folded into the ref
     f_b,(c,i) = Σ_λ C_c(λ) r_b(λ) I_i(λ)          (LED-only responses, LEDs at full drive)
     a_b,c     = Σ_λ C_c(λ) r_b(λ) e(λ)            (ambient response)
 
-The model (:class:`PriorModel`)
--------------------------------
-1. *Reflectance from the LED responses.* ``f_b = G r_b`` with ``G[(c,i), λ] = C_c(λ) I_i(λ)``. With a
-   reflectance prior of second moment ``R = B_r diag(s²) B_rᵀ`` (the first ``p`` principal components
-   of Natural-100, :func:`learn_reflectance_basis`), the linear MMSE (Wiener) estimate is
+The model (:class:`PriorModel`; derivation and validation in docs/light-prior.md): the reflectance of each block
+is the Wiener estimate ``r̂_b = W f_b`` from its LED responses (Natural-100's first p components,
+:func:`learn_reflectance_basis`); the ambient is ``e = B_e φ`` in a basis learnt from measured lights
+(:class:`LightPrior`), whose in-span part lights every surface as the LEDs do and whose remainder goes through r̂:
+``â_b = Σ_m φ_m K_m f_b``, ``K_m = E(u_m) + T(b⊥_m) W``. φ is the posterior mode under a Gaussian prior
+``φ_rest ~ N(s μ, s² Σ)`` with ``λ = κ σ²/s²`` (empirical Bayes), solved from the channel moments
+(:mod:`processing.channel_statistics`, denoised like eq. 5) with ``B_e φ ≥ 0``; the band is the tempered
+posterior ``κσ² (H + λ DᵀΣ⁻¹D)⁻¹`` mapped to the spectrum.
 
-       r̂_b = W f_b,   W = R Gᵀ (G R Gᵀ + ρ · tr(G R Gᵀ)/(Ck) · Id)⁻¹.
-
-   It is linear in f and blind to the unknown gain (r̂ scales with f).
-2. *The ambient in the light basis.* ``e = B_e φ`` (:class:`LightPrior`, q dims). Light ``b_m`` (a basis
-   column) splits into its least-squares part in the LEDs' span and a remainder,
-   ``b_m = I u_m + b⊥_m``. The in-span part lights every surface exactly as the LEDs do, whatever its
-   reflectance (``Σ_i u_m,i f_b,(c,i)``); only the remainder needs the recovered reflectance:
-
-       â_b = Σ_m φ_m K_m f_b,   K_m = E(u_m) + T(b⊥_m) W,
-
-   with ``E(u)[c, (c',i)] = δ_cc' u_i`` and ``T(x)[c, λ] = C_c(λ) x(λ)``. When the ambient lies in the
-   LEDs' span the prediction is exact for any surface (the LED model's); when it does not, the
-   reflectance estimate carries the rest. (The plain two-step, ``K_m = T(b_m) W``, is ``split=False``.)
-3. *Solve from the statistics.* The data term ``Σ_b ‖a_b − Σ φ_m K_m f_b‖²`` needs only the channel
-   moments (:mod:`processing.channel_statistics`): ``H[m,n] = tr(K_mᵀ K_n S_ff)``, ``g[m] = tr(K_m S_fa)``,
-   denoised (errors in variables) like eq. 5. The Gaussian prior of :class:`LightPrior` — a light is
-   ``φ = s (μ + ε)``, ``ε ~ N(0, Σ)`` with ``φ_0 = s`` its unknown scale — penalises
-   ``λ ‖Σ^{-1/2} (φ_rest − φ_0 μ_rest)‖²`` with ``λ = κ σ² / s²`` (σ² the residual variance per sample,
-   s the scale, both re-estimated a few times: empirical Bayes; κ > 1 discounts the blocks'
-   correlated model error). The spectrum is constrained non-negative, ``B_e φ ≥ 0``.
-4. *Band.* The Gaussian posterior ``Cov φ = κσ² (H + λ DᵀΣ⁻¹D)⁻¹``, mapped to the spectrum. The
-   estimate is the posterior mode of a *tempered* likelihood — errors of variance κσ², one
-   effective sample per κ blocks, which is what λ = κσ²/s² says — and this is its covariance: pixel
-   noise and model error both enter through the residual σ², and directions the data leave open keep
-   the prior's spread (s²Σ). Without κ in the covariance the band is far too narrow; with it, it
-   covers the truth about as often as nominal on the tuning split (docs/light-prior.md, validation).
-
-Model choice (:func:`choose_model`): both models predict the ambient image from the LED-only
-images, linearly; each is trained on all folds of blocks but one and predicts the pixels of the fold
-left out. ``auto`` uses the prior model only when its held-out error (on the pixels as observed) is below the
-LED model's by more than :data:`CHOICE_MARGIN` — no more model than the scene needs.
+Model choice (:func:`choose_model`): both models predict each fold of blocks from the others; ``auto`` uses the
+prior model only when its held-out error is below the LED model's by more than :data:`CHOICE_MARGIN` — no more
+model than the scene needs.
 """
 
 from __future__ import annotations
@@ -54,12 +29,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Literal
 
 import numpy as np
 
 from msflash.processing import datasets
-from msflash.processing.ambient import AmbientModel
 from msflash.processing.channel_statistics import ChannelStatistics, Moments
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.least_squares import FactoredQuadratic
@@ -371,7 +344,7 @@ class PriorModel:
 
     def estimate(self, statistics: ChannelStatistics) -> PriorEstimate:
         """The ambient of a sequence's channel statistics (:func:`estimate_ambient_prior`)."""
-        _check_statistics(statistics, self)
+        check_statistics(statistics, self)
         clean = statistics.denoised(statistics.moments.total())
         n = statistics.n_blocks * statistics.n_channels
         phi, covariance, weight, _ = self.solve(clean, n)
@@ -461,7 +434,8 @@ def _nonnegative(hessian: np.ndarray, linear: np.ndarray, basis: np.ndarray) -> 
     return problem.minimise(linear / scale).x
 
 
-def _check_statistics(statistics: ChannelStatistics, model: PriorModel) -> None:
+def check_statistics(statistics: ChannelStatistics, model: PriorModel) -> None:
+    """A one-line error unless ``statistics`` fit ``model`` (LED count, channel layout, enough blocks)."""
     if statistics.n_leds != model.led_spectra.count:
         raise SpectralDataError(
             f"prior estimate: {model.led_spectra.count} LED spectra but the statistics have "
@@ -535,101 +509,3 @@ def prior_model(
         learn_reflectance_basis(grid) if reflectance is None else reflectance,
         **options,  # type: ignore[arg-type]
     )
-
-
-# -- model choice ------------------------------------------------------------------------------------
-ModelName = Literal["led", "prior"]
-
-
-@dataclass(frozen=True)
-class ModelChoice:
-    """Which model ``auto`` uses and why: both models' held-out prediction errors of the ambient image."""
-
-    model: ModelName
-    """``"led"`` (eq. 4–6, the LEDs' span) or ``"prior"`` (the light prior)."""
-    led_error: float
-    """Held-out RMS error of the LED model's prediction of the ambient image (pixels as observed), relative to
-    the image's RMS."""
-    prior_error: float
-    """The same for the prior model."""
-    margin: float
-    """The prior model had to beat the LED model by this fraction."""
-    reason: str
-    """One sentence with the numbers."""
-    errors: HeldOutErrors
-    """All held-out errors (noise removed, and as observed)."""
-
-
-@dataclass(frozen=True)
-class HeldOutErrors:
-    """Held-out prediction errors of the ambient image, relative to its RMS (:func:`held_out_errors`)."""
-
-    led: float
-    """LED model, noise share removed (model error alone)."""
-    prior: float
-    """Prior model, noise share removed."""
-    led_observed: float
-    """LED model, on the pixels as observed (noise included)."""
-    prior_observed: float
-    """Prior model, on the pixels as observed."""
-
-
-def held_out_errors(statistics: ChannelStatistics, model: PriorModel, led_method: str = "tikhonov") -> HeldOutErrors:
-    """Both models' relative held-out errors over the folds of ``statistics``.
-
-    Each fold's ambient pixels are predicted from its LED-only pixels by models trained (on denoised
-    moments) on the other folds. The squared errors are summed over folds, on the pixels as observed
-    and with the fold's noise share (half-difference probe) removed — the part a better model can
-    reduce — and divided by the ambient image's energy.
-    """
-    _check_statistics(statistics, model)
-    led_model = AmbientModel(model.led_spectra)
-    sums = np.zeros(4)
-    k, channels = statistics.n_leds, statistics.n_channels
-    for fold in range(statistics.n_folds):
-        if statistics.counts[fold] == 0:
-            continue
-        training = [j for j in range(statistics.n_folds) if j != fold]
-        n_train = int(statistics.counts[training].sum()) * channels
-        phi, *_ = model.solve(statistics.denoised(statistics.moments.without(fold)), n_train)
-        weights, _ = led_model.weights(statistics.led_statistics(training), led_method)
-        direct = np.einsum("cd,i->cdi", np.eye(channels), weights).reshape(1, channels, channels * k)
-        held = statistics.moments.fold(fold)
-        clean = held if statistics.noise is None else held - statistics.noise.fold(fold)
-        sums += [
-            prediction_error(direct, np.ones(1), clean),
-            prediction_error(model.predictors, phi, clean),
-            prediction_error(direct, np.ones(1), held),
-            prediction_error(model.predictors, phi, held),
-        ]
-    energy = float(np.trace(statistics.moments.total().aa[0]))
-    relative = np.sqrt(sums / energy) if energy > 0 else np.zeros(4)
-    return HeldOutErrors(*(float(v) for v in relative))
-
-
-def choose_model(statistics: ChannelStatistics, model: PriorModel, margin: float = CHOICE_MARGIN) -> ModelChoice:
-    """``auto``: the prior model only where it predicts held-out pixels better than the LED model by ``margin``.
-
-    Both models predict each fold of blocks' ambient pixels from its LED-only pixels, trained on the
-    other folds (:func:`held_out_errors`); the errors compared are those on the pixels as observed
-    (noise amplified by a model counts against it): on the tuning split they picked the better
-    spectrum more often than the noise-corrected ones (docs/light-prior.md, validation). The LED
-    model is the simpler (k weights, exact for any surface when the ambient is in the LEDs' span);
-    it is kept unless the prior model's relative held-out RMS error is below ``(1 − margin)`` times
-    its own.
-    """
-    errors = held_out_errors(statistics, model)
-    led_error, prior_error = errors.led_observed, errors.prior_observed
-    if prior_error < (1.0 - margin) * led_error:
-        model_name: ModelName = "prior"
-        reason = (
-            f"the light prior predicts held-out pixels better: relative error {prior_error:.4f} against "
-            f"{led_error:.4f} for the LEDs' span (more than {margin:.0%} lower)"
-        )
-    else:
-        model_name = "led"
-        reason = (
-            f"the LEDs' span predicts held-out pixels as well or better: relative error {led_error:.4f} against "
-            f"{prior_error:.4f} for the light prior (which must be more than {margin:.0%} lower)"
-        )
-    return ModelChoice(model_name, led_error, prior_error, margin, reason, errors)

@@ -14,7 +14,7 @@ Statistics of disjoint samples add, so
 
 Model selection (:func:`select_model`, leave-one-tile-out prediction against the global model,
 :data:`SELECTION_MARGIN` and :data:`MIN_EXPLAINED_GAIN`) and the noise correction
-(:attr:`TiledStatistics.denoised`, errors in variables, the same probe :mod:`processing.statistics`
+(:attr:`TiledStatistics.denoised`, errors in variables, the same probe :mod:`processing.block_rows`
 measures for the whole frame) are described in ``docs/local-estimation.md`` ("How it works").
 
 Public objects
@@ -46,16 +46,13 @@ from msflash.processing.local_selection import (
     segment_regions,
     select_model,
 )
+from msflash.processing.region_cells import Cells
 from msflash.processing.spectra import Spectra, require_unit
-from msflash.processing.statistics import (
-    FrameStackSpec,
-    SequenceStatistics,
-)
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import frame_coefficients
 from msflash.processing.tile_statistics import (
     DEFAULT_TILES,
     BlockData,
-    Cells,
     TileBlocks,
     TiledStatistics,
     tile_edges,
@@ -171,7 +168,7 @@ def estimate_local(
         region labels use the statistics as observed. False: everything on the statistics as observed.
     global_estimate
         The whole-frame estimate (eq. 4–6) when the caller has it (a sequence's, from the whole frame's
-        statistics, :func:`processing.statistics.accumulate_statistics`), used as it is: its α scores the
+        statistics, :func:`processing.accumulate.accumulate_statistics`), used as it is: its α scores the
         selection. None: solved on :meth:`TiledStatistics.total` (why the two can differ on large frames:
         docs/local-estimation.md).
     """

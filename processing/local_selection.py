@@ -11,8 +11,9 @@ import numpy as np
 
 from msflash.processing.ambient import AmbientModel, gcv_alpha
 from msflash.processing.errors import SolverError
+from msflash.processing.region_cells import Cells
 from msflash.processing.spectra import Spectra
-from msflash.processing.tile_statistics import Cells, TiledStatistics
+from msflash.processing.tile_statistics import TiledStatistics
 
 SMOOTHING_GRID = (0.5, 1.0, 2.0)
 """Gaussian widths (in tiles) of the local candidates: 0.5 is "local" (a tile and a little of its

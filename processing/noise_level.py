@@ -1,7 +1,7 @@
 """The sensor's noise level, read from one raw frame: a photon-transfer line fitted to fine-scale detail.
 
 A linear sensor's sample at level ``ℓ`` above black has the variance ``gain · ℓ + read`` (photon noise
-plus read and quantisation noise: the Poisson-Gaussian model). :mod:`processing.statistics` weighs each
+plus read and quantisation noise: the Poisson-Gaussian model). :mod:`processing.block_rows` weighs each
 sample by the inverse of that variance, so it needs the line's two parameters — measured from the
 pixels, as no sequence records them.
 
@@ -19,7 +19,7 @@ starting from the smallest of the three details' medians of squares in bands of 
 textured cells are a minority in every band, or raise only some of the details). The selection uses ``HL`` and ``LH`` only, so it leaves the noise of ``HH`` unbiased; a
 cut at the 99.9th percentile of ``HH²`` itself (corrected for) drops what texture remains.
 
-Why not the block sums' half differences (the moments' noise probe, :mod:`processing.statistics`):
+Why not the block sums' half differences (the moments' noise probe, :mod:`processing.block_rows`):
 on a mosaic the samples of one CFA plane lie 2 pixels apart, so texture a block's halves do not share
 filled the probe — 99 % of its energy on the simulated Bayer chart — and the line fitted to it put the
 weights up to 20× off either way across the levels (docs/raw-frames.md). Poisson-Gaussian fitting from one raw image: Foi et al.,
@@ -34,9 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 FIT_CELLS = 4096
-"""Cells a line is fitted to at most: whole rows of cells, evenly strided over the frame. The sim rig's
-106 × 112 mosaic has 2 912, all used (with half of them the chart's gain came out 10 % low); on a
-1280 × 1024 frame the fit costs about 1 ms (32 768 cells cost 30)."""
+"""Cells a line is fitted to at most: whole rows of cells, evenly strided over the frame (why this many:
+docs/speed.md, Raw frames)."""
 MIN_CELLS = 64
 """Fewer usable cells than this give no line (:func:`detail_noise_line` returns None)."""
 LEVEL_BANDS = 16
@@ -106,7 +105,7 @@ def haar_details(
     # row i·period + p, column j·period + q of the slab.
     cells = slabs.reshape(slabs.shape[0], 2, cfa_period, columns // rows_per_cell, 2, cfa_period, slabs.shape[-1])
     # (cell row, cell column, phase row, phase column, channel): the order the CFA planes' own cells take
-    # (:func:`processing.statistics.cfa_planes`), so a frame and its planes give the same arrays.
+    # (:func:`processing.block_sums.cfa_planes`), so a frame and its planes give the same arrays.
     cells = cells.transpose(0, 3, 1, 4, 2, 5, 6)
     x00, x01 = cells[:, :, 0, 0], cells[:, :, 0, 1]
     x10, x11 = cells[:, :, 1, 0], cells[:, :, 1, 1]
@@ -202,3 +201,71 @@ def fit_detail_line(
 def detail_noise_line(frame: np.ndarray, cfa_period: int, black: float, white: float) -> PixelNoise | None:
     """:func:`fit_detail_line` of :func:`haar_details` of one raw frame: its sensor's noise line, or None."""
     return fit_detail_line(*haar_details(frame, cfa_period, black, white))
+
+
+@dataclass(frozen=True)
+class NoiseLine:
+    """A photon-transfer line: the noise variance of a sample at raw level ``x`` (black removed) is
+    ``max(gain · x + read, floor)`` (:func:`block_noise_line`)."""
+
+    gain: float
+    read: float
+    floor: float
+
+    def weights(self, levels: np.ndarray, black: float = 0.0) -> np.ndarray:
+        """``1/var`` of samples at raw ``levels`` (less ``black``), normalised to average 1, in the layout of
+        ``levels``."""
+        variance = np.subtract(levels, black, dtype=float)
+        np.maximum(variance, 0.0, out=variance)
+        variance *= self.gain
+        variance += self.read
+        np.maximum(variance, self.floor, out=variance)
+        np.reciprocal(variance, out=variance)
+        variance *= 1.0 / float(variance.mean())
+        return variance
+
+    def root_weights(self, levels: np.ndarray, black: float = 0.0) -> np.ndarray:
+        """``√`` of :meth:`weights`: the factor each sample's row entry is scaled by."""
+        weights = self.weights(levels, black)
+        return np.sqrt(weights, out=weights)
+
+
+UNIFORM_NOISE = NoiseLine(0.0, 1.0, 1.0)
+"""Noise alike everywhere: uniform weights."""
+
+
+FLOOR_QUANTILE = 0.05
+"""The weights' variance floor is the line's variance at this quantile of the samples' levels: a read
+noise near zero would give black samples unbounded weight."""
+
+
+def block_noise_line(pixel: PixelNoise | None, factor: int, levels: np.ndarray) -> NoiseLine:
+    """The noise line of ``factor × factor`` block sums whose samples have the noise ``pixel`` (per sample,
+    :func:`processing.noise_level.detail_noise_line`): ``gain · B + factor² · read`` at block sum ``B`` above
+    black, floored at its value at the :data:`FLOOR_QUANTILE` of ``levels`` (block sums above black).
+    :data:`UNIFORM_NOISE` without a line, levels or a positive floor.
+
+    Examples
+    --------
+    >>> line = block_noise_line(PixelNoise(gain=2.0, read=16.0), 4, np.arange(100.0, 2100.0))
+    >>> line.gain, line.read, line.floor
+    (2.0, 256.0, 656.0)
+    """
+    flat = np.asarray(levels, dtype=float).reshape(-1)
+    if pixel is None or not flat.size:
+        return UNIFORM_NOISE
+    gain, read = pixel.gain, pixel.read * factor * factor
+    position = int(FLOOR_QUANTILE * flat.size)
+    floor = gain * max(float(np.partition(flat, position)[position]), 0.0) + read
+    return NoiseLine(gain, read, floor) if floor > 0 and math.isfinite(floor) else UNIFORM_NOISE
+
+
+def ambient_block_noise(
+    pixel: PixelNoise | None, factor: int, ambient: np.ndarray, black: float, saturated: np.ndarray | None
+) -> NoiseLine:
+    """:func:`block_noise_line` for (h, w, C) ambient block sums (raw, black ``black`` per block), its floor
+    taken over the blocks the ambient frame does not saturate (``saturated``, (h, w)). Used alike by
+    :class:`processing.block_rows.BlockRows` and the tiled statistics of :mod:`processing.local`, so that both weigh the samples alike.
+    """
+    levels = ambient if saturated is None else ambient[~saturated]
+    return block_noise_line(pixel, factor, np.subtract(levels, black, dtype=float))

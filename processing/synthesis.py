@@ -15,13 +15,8 @@ import numpy as np
 
 from msflash.processing import frame_kernels
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.statistics import (
-    DEFAULT_CHUNK_PIXELS,
-    DEFAULT_WORKERS,
-    FrameStackSpec,
-    non_finite_frames_error,
-    thread_pool,
-)
+from msflash.processing.moment_products import DEFAULT_CHUNK_PIXELS, DEFAULT_WORKERS, thread_pool
+from msflash.processing.statistics import FrameStackSpec, non_finite_frames_error
 
 
 def frame_coefficients(spec: FrameStackSpec, flash_weights: np.ndarray) -> tuple[float, np.ndarray]:

@@ -11,33 +11,25 @@ of :mod:`processing.local` say why and how.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
 
-from msflash.processing.errors import SpectralDataError
-from msflash.processing.noise_level import PixelNoise, detail_noise_line
-from msflash.processing.statistics import (
-    DEFAULT_WORKERS,
-    FrameStackSpec,
-    NoiseMoments,
-    SequenceStatistics,
-    ambient_block_noise,
+from msflash.processing.block_sums import (
     block_sums,
     block_sums_and_differences,
     cfa_planes,
-    non_finite_frames_error,
     plane_shape,
     saturated_blocks,
-    thread_pool,
 )
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.moment_products import DEFAULT_WORKERS, thread_pool
+from msflash.processing.noise_level import PixelNoise, ambient_block_noise, detail_noise_line
+from msflash.processing.statistics import FrameStackSpec, NoiseMoments, SequenceStatistics, non_finite_frames_error
 
 DEFAULT_TILES = 8
 """Tiles per side of the frame (8 × 8 = 64 tiles)."""
-MAX_REGION_CELLS = 6000
-"""Blocks are grouped into cells of g × g blocks so that the labels have at most about this many cells
-(cost: a 240 × 320 frame at 4× binning keeps its 4 800 blocks; a 1024 × 1280 frame gets 16-pixel cells)."""
 
 
 # -- tile geometry ----------------------------------------------------------------------------
@@ -78,115 +70,6 @@ class BlockData:
     def shape(self) -> tuple[int, int]:
         """Blocks (rows, columns)."""
         return (int(self.valid.shape[0]), int(self.valid.shape[1]))
-
-
-@dataclass(frozen=True)
-class Cells:
-    """The valid cells of ``g × g`` blocks, reduced once to their statistics for :func:`segment_regions`.
-
-    Every cell's products of its ambient and LED images (eq. 4–5), so that any region's or tile's
-    statistics, and any weights' residual per cell, are sums and products over the cells.
-    """
-
-    valid: np.ndarray = field(repr=False)
-    """(h, w) the cell grid's valid cells (the N rows are its True entries in row-major order)."""
-    size: int
-    """Cell side in pixels."""
-    channels: int
-    """Samples per cell (colour channels)."""
-    gram: np.ndarray = field(repr=False)
-    """(N, k·k) ``F_bᵀ F_b`` of every cell, flattened."""
-    cross: np.ndarray = field(repr=False)
-    """(N, k) ``F_bᵀ a_b``."""
-    energy: np.ndarray = field(repr=False)
-    """(N,) ``a_bᵀ a_b``."""
-    sums: np.ndarray = field(repr=False)
-    """(N, 1 + k) sums over the channels of ``a_b`` and of every LED image."""
-    spec: FrameStackSpec | None = field(default=None, repr=False)
-    """The block-level spec that maps raw moments to statistics (for :meth:`denoised_statistics`)."""
-    differences: np.ndarray | None = field(default=None, repr=False)
-    """(R, N, C) every cell's half difference (the noise probe of :attr:`TiledStatistics.denoised`) in
-    the rows ``[F_1 … F_n, A, 1]``; None when the blocks carry none."""
-
-    @classmethod
-    def of(cls, blocks: BlockData, group: int | None = None) -> Cells:
-        """The cells of ``group × group`` blocks (None: at most about :data:`MAX_REGION_CELLS` cells).
-
-        Sums of blocks obey the same linear model, so grouping only coarsens the labels. A cell is
-        kept when all its blocks are valid. Each cell's statistics come from the raw moments of its
-        samples by the map of :func:`tile_statistics`: a cell is a tiny tile.
-        """
-        if group is None:
-            group = max(1, int(np.ceil(np.sqrt(blocks.valid.size / MAX_REGION_CELLS))))
-        rows, columns = blocks.shape[0] // group, blocks.shape[1] // group
-        valid = blocks.valid[: rows * group, : columns * group]
-        if group > 1:
-            valid = np.all(valid.reshape(rows, group, columns, group), axis=(1, 3))
-
-        def cell_samples(values: np.ndarray) -> np.ndarray:
-            values = values[:, : rows * group, : columns * group]
-            if group > 1:  # the rows' sums on the image threads (numpy releases the GIL)
-                values = np.stack(list(thread_pool(DEFAULT_WORKERS).map(lambda row: block_sums(row, group), values)))
-            return values[:, valid]  # (R, N, C)
-
-        samples = cell_samples(blocks.raw)
-        # The raw rows of every sample mapped to [f_1 … f_k, a] first (one product), then each cell's
-        # products summed over its channels: the same statistics as the tiles' map of raw moments.
-        # Channels before cells, so that the sums over the channels add whole rows of cells.
-        linear = np.tensordot(_projection(blocks.spec), samples.transpose(0, 2, 1), axes=1)  # (k + 1, C, N)
-        leds, ambient = linear[:-1], linear[-1]
-        k = leds.shape[0]
-        gram = (leds[:, None] * leds[None]).sum(axis=2).reshape(k * k, -1).T
-        differences = None if blocks.differences is None else cell_samples(blocks.differences)
-        return cls(
-            valid=valid,
-            size=blocks.pixel * group,
-            channels=int(samples.shape[2]),
-            gram=np.ascontiguousarray(gram),
-            cross=np.ascontiguousarray((leds * ambient).sum(axis=1).T),
-            energy=(ambient * ambient).sum(axis=0),
-            sums=np.column_stack([ambient.sum(axis=0), leds.sum(axis=1).T]),
-            spec=blocks.spec,
-            differences=differences,
-        )
-
-    def errors(self, weights: np.ndarray) -> np.ndarray:
-        """``‖a_b − F_b w‖²`` of every cell for each row of ``weights`` (R, k): (R, N)."""
-        quadratic = np.einsum("ri,rj->rij", weights, weights).reshape(weights.shape[0], -1)
-        return np.clip(self.energy[None] - 2.0 * weights @ self.cross.T + quadratic @ self.gram.T, 0.0, None)
-
-    def statistics(self, member: np.ndarray) -> SequenceStatistics:
-        """Pooled statistics of the cells where ``member`` (N,) is set."""
-        k = self.cross.shape[1]
-        select = np.asarray(member, dtype=float)
-        n = int(select.sum()) * self.channels
-        return SequenceStatistics(
-            gram=(select @ self.gram).reshape(k, k),
-            cross=select @ self.cross,
-            ambient_energy=float(select @ self.energy),
-            n_samples=n,
-            n_total=n,
-            ambient_sum=float(select @ self.sums[:, 0]),
-            led_sums=select @ self.sums[:, 1:],
-        )
-
-    def denoised_statistics(self, member: np.ndarray) -> SequenceStatistics | None:
-        """:meth:`statistics` with the noise's contribution removed (:attr:`TiledStatistics.denoised`), or None.
-
-        The member cells' raw noise moments ``Σ d dᵀ`` are summed first and mapped once (the map is linear).
-        """
-        if self.differences is None or self.spec is None:
-            return None
-        observed = self.statistics(member)
-        probe = self.differences[:, np.asarray(member, dtype=bool)].reshape(self.differences.shape[0], -1)
-        pooled = (probe @ probe.T)[None, None]
-        noise = _tiled_from_moments(pooled, np.ones((1, 1)), self.spec, np.zeros(2, dtype=int), np.zeros(2, dtype=int))
-        return replace(
-            observed,
-            gram=observed.gram - noise.gram[0, 0],
-            cross=observed.cross - noise.cross[0, 0],
-            ambient_energy=observed.ambient_energy - float(noise.ambient_energy[0, 0]),
-        )
 
 
 @dataclass(frozen=True)
@@ -269,7 +152,7 @@ class TiledStatistics:
     def total(self) -> SequenceStatistics:
         """The statistics of the whole frame: the sum of the tiles', with the noise the probe measured
         (:attr:`denoised`) as their :attr:`~processing.statistics.SequenceStatistics.noise` — what
-        :func:`processing.statistics.accumulate_statistics` gives for the same blocks (exactly below
+        :func:`processing.accumulate.accumulate_statistics` gives for the same blocks (exactly below
         ``4 · PROBE_BLOCKS`` blocks; above, it probes a stride of block rows, the tiles every block)."""
         gram, cross, energy = self.gram.sum(axis=(0, 1)), self.cross.sum(axis=(0, 1)), float(self.ambient_energy.sum())
         clean = self.denoised
@@ -343,7 +226,7 @@ def _block_sums(plane: np.ndarray, factor: int, out: np.ndarray) -> None:
 
 
 def _block_sums_and_differences(plane: np.ndarray, factor: int, sums: np.ndarray, differences: np.ndarray) -> None:
-    """:func:`processing.statistics.block_sums_and_differences` of an (H, W, C) plane into (H/f, W/f, C) arrays."""
+    """:func:`processing.block_sums.block_sums_and_differences` of an (H, W, C) plane into (H/f, W/f, C) arrays."""
     block_sums_part, difference_part = block_sums_and_differences(plane, factor)
     np.copyto(sums, block_sums_part[: sums.shape[0], : sums.shape[1]])
     np.copyto(differences, difference_part[: differences.shape[0], : differences.shape[1]])
@@ -352,7 +235,7 @@ def _block_sums_and_differences(plane: np.ndarray, factor: int, sums: np.ndarray
 class TileBlocks:
     """Block sums of an ambient + LED frame stack for :class:`TiledStatistics`, added one frame at a time.
 
-    Rows as :class:`processing.statistics.BlockRows`'s: LED frame j → row j, the ambient frame → row n, a
+    Rows as :class:`processing.block_rows.BlockRows`'s: LED frame j → row j, the ambient frame → row n, a
     ones row last. Each frame's block sums (and half differences, even bin factors) and saturated blocks
     are taken by :meth:`add_frame` and the frame may then be let go; :meth:`statistics` weighs, masks and
     sums the tiles once every frame is in. :func:`tile_statistics` is this over frames in memory.
@@ -492,11 +375,11 @@ class TileBlocks:
         row_edges = row_blocks * pixel
         column_edges = column_blocks * pixel
         row_edges[-1], column_edges[-1] = self.frame_shape[0], self.frame_shape[1]
-        tiled = _tiled_from_moments(moments, totals, block_spec, row_edges, column_edges)
+        tiled = tiled_from_moments(moments, totals, block_spec, row_edges, column_edges)
         blocks = BlockData(raw=data, differences=differences, valid=~invalid, spec=block_spec, pixel=pixel)
         denoised = None
         if noise is not None:
-            denoised = _tiled_from_moments(moments - noise, totals, block_spec, row_edges, column_edges)
+            denoised = tiled_from_moments(moments - noise, totals, block_spec, row_edges, column_edges)
         return TiledStatistics(
             **{name: getattr(tiled, name) for name in tiled.__dataclass_fields__ if name not in ("blocks", "denoised")},
             blocks=blocks,
@@ -517,14 +400,14 @@ def tile_statistics(
 ) -> TiledStatistics:
     """The statistics of eq. 4–6 of every tile of a ``tiles`` grid, in one pass over the frames (:class:`TileBlocks`).
 
-    Blocks (``bin_factor``, see :func:`processing.statistics.bin_frame`) are assigned to tiles
+    Blocks (``bin_factor``, see :func:`processing.block_sums.bin_frame`) are assigned to tiles
     whole; a block is left out when any member saturates in any frame. The tiles' statistics sum
-    to those of :func:`processing.statistics.accumulate_statistics` with the same binning.
+    to those of :func:`processing.accumulate.accumulate_statistics` with the same binning.
 
     Parameters
     ----------
     ambient, led_frames, spec
-        As for :func:`processing.statistics.accumulate_statistics`.
+        As for :func:`processing.accumulate.accumulate_statistics`.
     tiles
         Tiles per side, or (rows, columns).
     bin_factor, cfa_period
@@ -564,7 +447,7 @@ def tile_statistics(
     return accumulator.statistics(spec, tiles, workers)
 
 
-def _projection(spec: FrameStackSpec) -> np.ndarray:
+def linear_projection(spec: FrameStackSpec) -> np.ndarray:
     """(k + 1, R) linear map of the raw rows [F_1 … F_n, A, 1] to [f_1 … f_k, a] (LED images at full drive, ambient)."""
     n_led_frames = len(spec.led_scales)
     scales = np.asarray(spec.led_scales, dtype=float)
@@ -580,11 +463,11 @@ def _projection(spec: FrameStackSpec) -> np.ndarray:
     return np.vstack([spec.unmixing @ transform[:n_led_frames], transform[n_led_frames:]])
 
 
-def _tiled_from_moments(
+def tiled_from_moments(
     moments: np.ndarray, totals: np.ndarray, spec: FrameStackSpec, row_edges: np.ndarray, column_edges: np.ndarray
 ) -> TiledStatistics:
     """Tiled statistics from raw moments of the rows [F_1 … F_n, A, 1] (one (R, R) matrix per tile)."""
-    projection = _projection(spec)
+    projection = linear_projection(spec)
     k = projection.shape[0] - 1
     linear = np.matmul(np.matmul(projection, moments), projection.T)  # (…, k + 1, k + 1)
     sums = moments[..., :, -1] @ projection.T

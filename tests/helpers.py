@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.processing import datasets, lights
 from msflash.processing.image_formation import expected_response, exposure_for_peak, render_frame
 from msflash.processing.scenes import Scene, chart_scene

@@ -251,7 +251,7 @@ def _stop_line(words: Sequence[str], how: str) -> str:
 
 def _what_was_kept() -> str:
     """What a stopped command leaves, truthfully: the sequence it wrote, complete or cut short (marked so), or none."""
-    written = sys.modules.get("msflash.acquisition.sequence.format")  # loaded only if a sequence was touched
+    written = sys.modules.get("msflash.acquisition.sequence.writer")  # loaded only if a sequence was touched
     latest = written.latest_sequence_written() if written is not None else None
     if latest is None:
         # Stopped before its sequence was begun (the rig still opening, the exposure being metered): no frame
@@ -294,7 +294,7 @@ def _take_memory_budget(words: list[str]) -> list[str]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``msflash``; returns the exit status (tests call this directly)."""
     words = list(argv if argv is not None else sys.argv[1:])
-    written = sys.modules.get("msflash.acquisition.sequence.format")
+    written = sys.modules.get("msflash.acquisition.sequence.writer")
     if written is not None:  # an earlier command in this process (tests, a notebook) wrote one
         written.forget_latest_sequence()
     try:

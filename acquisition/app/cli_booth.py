@@ -14,8 +14,9 @@ from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.booth_probe import PROBE_PROTOCOLS, probe_booth
 from msflash.led_controller.doctor import Finding, run_doctor
-from msflash.led_controller.emulator import DEFAULT_NAMES, DEFAULT_PEAKS_NM, BoothEmulator, serve_on_pty
+from msflash.led_controller.emulator import DEFAULT_NAMES, DEFAULT_PEAKS_NM, BoothEmulator
 from msflash.led_controller.emulator_faults import FaultInjector, emulator_state, parse_fault_spec, write_state_file
+from msflash.led_controller.emulator_pty import serve_on_pty
 from msflash.led_controller.errors import BoothError
 from msflash.led_controller.usb_link import FTDI_LATENCY_S, MEGA_BOOTLOADER_S
 

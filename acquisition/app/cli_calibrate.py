@@ -15,18 +15,18 @@ from typing import Any
 
 from msflash.acquisition.app.cli_common import UsageError, claimed_output, positive_int, print_json, progress
 from msflash.acquisition.app.options import layout_options
-from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.calibration_inputs import (
     camera_from_chart_sequences,
-    chart_from_exports,
     dark_of_sequence,
     led_power_through_camera,
     linearity_of_sequence,
     measured_leds,
     simulated_camera_calibration,
 )
+from msflash.acquisition.session.chart_exports import chart_from_exports
 from msflash.acquisition.session.chart_layout import chart_reference
 from msflash.calibration.errors import CalibrationError
 from msflash.calibration.files import CalibrationSet, load_or_new, save_calibration

@@ -58,7 +58,7 @@ def boot_seconds(text: str) -> float:
 
 def add_booth_boot_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     """``--booth-boot-s S``: how long to let a booth that resets when its port opens boot (docs/booth-firmware.md §4)."""
-    from msflash.led_controller.booth import DEFAULT_BOOT_S
+    from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 
     parser.add_argument(
         "--booth-boot-s",

@@ -13,9 +13,9 @@ from msflash.acquisition.app.cli_common import (
 )
 from msflash.acquisition.app.evaluation import evaluate_sequence, public_result
 from msflash.acquisition.app.options import flash_bounds_option, layout_options, target_value
-from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.chart_layout import CHARTS
 
 

@@ -10,9 +10,9 @@ import numpy as np
 
 from msflash.acquisition.app.cli_common import UsageError, positive_int, print_json, progress
 from msflash.acquisition.app.options import add_estimation_options, add_scheduler_options, target_value
-from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis, many, one_sequence
 from msflash.processing.local import DEFAULT_TILES, LOCAL_METHODS
 

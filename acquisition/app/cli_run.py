@@ -36,9 +36,7 @@ from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA
 from msflash.acquisition.errors import CaptureError
 from msflash.acquisition.progress import count
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import (
-    read_sequence,
-)
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,

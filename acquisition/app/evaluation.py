@@ -42,7 +42,7 @@ from msflash.acquisition.app.srgb_png import enlarged, srgb_png_bytes
 from msflash.acquisition.sequence.exr_metadata import LINEAR_UNITS
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import write_image
-from msflash.acquisition.session import analysis
+from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.acquisition.session.both_flashes import solve_both
 from msflash.acquisition.session.chart_layout import (
     ChartLayout,
@@ -224,8 +224,8 @@ def evaluate_sequence(
     Without ``patch_px`` and ``border_px`` the chart is detected (:func:`sequence_layout`).
     """
     out.mkdir(parents=True, exist_ok=True)
-    camera = analysis.camera_responsivities_photons(sequence)
-    leds = analysis.led_spectra_photons(sequence)
+    camera = sequence_spectra.camera_responsivities_photons(sequence)
+    leds = sequence_spectra.led_spectra_photons(sequence)
     stack = analysis.load_frame_stack(sequence)
     cfa = sequence.camera.cfa
     ambient, saturated = sequence.load_linear_frame(stack.ambient_index)
@@ -234,7 +234,7 @@ def evaluate_sequence(
     check_layout(ambient, found.build(ambient.shape[:2], saturated), cfa)
     progress("estimating the ambient and solving the flashes")
     estimate = analysis.estimate_sequence(sequence, stream=analysis.stream_stack(sequence, stack))
-    target_spd = analysis.target_illuminant(target, sequence)
+    target_spd = sequence_spectra.target_illuminant(target, sequence)
     solutions, notes = _solve_both(estimate.ambient_weights, leds, camera, target_spd, bounds)
 
     images: dict[str, np.ndarray] = {"ambient": ambient}

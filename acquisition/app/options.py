@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import positive_int
-from msflash.acquisition.devices.simulated_camera import SIM_DEFAULT_CFA
+from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.rig import SimWorldOptions
 from msflash.processing.ambient import AMBIENT_METHODS

@@ -30,7 +30,7 @@ from msflash.acquisition.errors import OutputWriteError
 from msflash.acquisition.sequence.exr_metadata import exr_image
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import write_image
-from msflash.acquisition.session import analysis
+from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.processing import datasets
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.flash import FlashSolution
@@ -225,7 +225,7 @@ def _write_run_report(
 
     target = None
     if "complementary" in solutions:
-        target = analysis.target_illuminant(target_name, sequence).to_unit(sequence.spectral_unit)
+        target = sequence_spectra.target_illuminant(target_name, sequence).to_unit(sequence.spectral_unit)
     plot = plot_spectra(out / "spectra.png", sequence, estimate, solutions, true_ambient, target)
     summary: dict[str, Any] = {
         "sequence": str(out / "sequence"),
@@ -268,6 +268,8 @@ def score_against_truth(sequence: Sequence, estimate: AmbientEstimate, true_ambi
     """
     truth = true_ambient.resample(sequence.grid).to_unit(sequence.spectral_unit).values[:, 0]
     return {
-        "spectrum_rmse_vs_truth": spectrum_rmse(analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum), truth),
+        "spectrum_rmse_vs_truth": spectrum_rmse(
+            sequence_spectra.spectrum_in_sequence_unit(sequence, estimate.spectrum), truth
+        ),
         "spectrum_rmse_led_bound": led_fit_rmse(sequence.led_spectra().values, truth),
     }

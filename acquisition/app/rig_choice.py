@@ -1,9 +1,11 @@
 """Which rig ``run`` and ``capture`` open: the options that describe it, each checked against the rig it
 fits, and the rig's typed options (:mod:`acquisition.session.rig`) built from them.
 
-:func:`add_rig_options` adds the parser group both commands share; :func:`rig_spec` reads ``--rig``
-(``hw`` implied by ``--camera``/``--port``); :func:`open_from_args` refuses an option the rig would
-ignore (one line, exit 2) and opens the rig through :func:`~acquisition.session.rig.open_rig`.
+:func:`add_rig_options` adds the parser groups ``run``, ``capture`` and ``live`` share (``live`` without the
+pacing options, its stream being host paced, and with ``--booth-port`` for the booth of any rig, its ``--port``
+being the page's TCP port); :func:`rig_spec` reads ``--rig`` (``hw`` implied by ``--camera``/``--port``);
+:func:`open_from_args` refuses an option the rig would ignore (one line, exit 2) and opens the rig through
+:func:`~acquisition.session.rig.open_rig`.
 """
 
 from __future__ import annotations
@@ -75,6 +77,8 @@ def rig_spec(args: argparse.Namespace) -> str:
 def open_from_args(args: argparse.Namespace) -> Rig:
     """The rig ``args`` name, opened with its options; an option it would ignore is refused first."""
     spec = rig_spec(args)
+    if getattr(args, "booth_port_for_any_rig", False) and spec == "hw" and args.booth_port is not None:
+        args.port, args.booth_port = args.booth_port, None  # live: --booth-port names the hw rig's booth too
     world_options = [
         option
         for option, value in (
@@ -224,21 +228,33 @@ def _flash_power(text: str) -> float:
     return value
 
 
-def add_rig_options(parser: argparse.ArgumentParser) -> None:
+def add_rig_options(parser: argparse.ArgumentParser, live: bool = False) -> None:
+    """The rig's options; ``live``: without ``--port`` (the page's TCP port there) and the pacing options."""
     parser.add_argument(
         "--rig",
         default=None,
         help="rig: sim (default; simulated camera + booth emulator on a pty), aravis-fake (Aravis "
         "GigE Vision fake on 127.0.0.1 streaming the simulated scene, + emulator), replay:DIR (a recorded sequence + emulator), "
-        "hw (a real camera and booth; implied by --camera/--port)",
+        "hw (a real camera and booth; implied by --camera" + ("" if live else "/--port") + ")",
     )
-    _add_hardware_options(parser)
-    _add_booth_options(parser)
-    _add_world_and_pacing_options(parser)
+    _add_hardware_options(parser, booth_port=not live)
+    _add_booth_options(parser, sync=not live)
+    _add_world_options(parser, booth_port_help=_LIVE_BOOTH_PORT_HELP if live else None)
+    if live:
+        parser.add_argument("--log-serial", default=None, help="write the booth serial transcript to this file")
+        parser.set_defaults(port=None, sync="host", booth_port_for_any_rig=True)
+    else:
+        _add_pacing_options(parser)
 
 
-def _add_hardware_options(parser: argparse.ArgumentParser) -> None:
-    """``--camera``, ``--port``, … and the camera options: the hardware rig."""
+_LIVE_BOOTH_PORT_HELP = (
+    "the booth's serial port: hw (default: the single booth found), or, on sim, a booth in another process "
+    "(msflash booth-emulator's pty) instead of an emulator in this process"
+)
+
+
+def _add_hardware_options(parser: argparse.ArgumentParser, booth_port: bool = True) -> None:
+    """``--camera``, ``--port`` (unless not ``booth_port``), … and the camera options: the hardware rig."""
     hardware = parser.add_argument_group("hardware rig (--rig hw)")
     hardware.add_argument(
         "--camera",
@@ -246,12 +262,13 @@ def _add_hardware_options(parser: argparse.ArgumentParser) -> None:
         metavar="ID",
         help="camera device id, serial number or IP address (default: the single camera found)",
     )
-    hardware.add_argument(
-        "--port",
-        default=None,
-        metavar="PATH",
-        help="booth serial port, e.g. /dev/ttyACM0 (default: the single booth found)",
-    )
+    if booth_port:
+        hardware.add_argument(
+            "--port",
+            default=None,
+            metavar="PATH",
+            help="booth serial port, e.g. /dev/ttyACM0 (default: the single booth found)",
+        )
     hardware.add_argument(
         "--interfaces",
         default="usb3",
@@ -279,17 +296,18 @@ def _add_hardware_options(parser: argparse.ArgumentParser) -> None:
     add_camera_options(hardware)
 
 
-def _add_booth_options(parser: argparse.ArgumentParser) -> None:
-    """The fake camera model and the booth: its port outside this process, protocol, boot time, firmware."""
+def _add_booth_options(parser: argparse.ArgumentParser, sync: bool = True) -> None:
+    """The fake camera model and the booth: who paces (unless not ``sync``), protocol, boot time, LED spectra."""
     add_fake_camera_option(parser)
-    parser.add_argument(
-        "--sync",
-        default="host",
-        choices=tuple(SYNC_MODES),
-        help="who paces the frames: host (serial command, then software trigger; default), "
-        "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "
-        "exposure-active line advances the booth's pattern table)",
-    )
+    if sync:
+        parser.add_argument(
+            "--sync",
+            default="host",
+            choices=tuple(SYNC_MODES),
+            help="who paces the frames: host (serial command, then software trigger; default), "
+            "booth (booth sets LEDs then pulses the camera trigger), camera (the camera's "
+            "exposure-active line advances the booth's pattern table)",
+        )
     add_booth_boot_option(parser)
     parser.add_argument(
         "--booth-protocol",
@@ -309,8 +327,8 @@ def _add_booth_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_world_and_pacing_options(parser: argparse.ArgumentParser) -> None:
-    """The simulated world, then the exposure, the transcript and the sync mode."""
+def _add_world_options(parser: argparse.ArgumentParser, booth_port_help: str | None = None) -> None:
+    """The simulated world, and a booth outside this process."""
     sim = parser.add_argument_group("simulated world (--rig sim; --rig aravis-fake renders it too, except --cfa)")
     sim.add_argument(
         "--sim-camera",
@@ -354,7 +372,8 @@ def _add_world_and_pacing_options(parser: argparse.ArgumentParser) -> None:
         "--booth-port",
         default=None,
         metavar="PATH",
-        help="drive the booth at this port (msflash booth-emulator's pty, or a real booth) instead of "
+        help=booth_port_help
+        or "drive the booth at this port (msflash booth-emulator's pty, or a real booth) instead of "
         "an emulator in this process; --sync host only",
     )
     sim.add_argument(
@@ -383,7 +402,6 @@ def _add_world_and_pacing_options(parser: argparse.ArgumentParser) -> None:
     )
     sim.add_argument("--cfa", default=None, choices=SIM_CFA_CHOICES, help=SIM_CFA_HELP)
     sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
-    _add_pacing_options(parser)
 
 
 def _add_pacing_options(parser: argparse.ArgumentParser) -> None:

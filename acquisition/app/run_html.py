@@ -26,7 +26,7 @@ from msflash.acquisition.app.options import SOLVER_CONSTRAINTS
 from msflash.acquisition.errors import FolderInUseError, OutputWriteError
 from msflash.acquisition.sequence.folder_claim import claim_folder
 from msflash.acquisition.sequence.format import Sequence
-from msflash.acquisition.session.exposure import snr_or_none
+from msflash.acquisition.session.led_snr import snr_or_none
 from msflash.calibration.file_modes import default_file_mode
 
 PREVIEW_CAPTIONS = {
@@ -67,6 +67,7 @@ def write_run_html(path: Path, summary: dict[str, Any], sequence: Sequence) -> P
 
 
 def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
+    """The page, section by section, written atomically to ``path``."""
     base = path.parent
     names = [led.name for led in sequence.leds]
     report = HtmlReport(f"msflash run — {base.name}")
@@ -82,7 +83,23 @@ def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
         report.add_heading("Warnings")
         for note in warnings:
             report.add_paragraph(f"warning: {note}", warning=True)
+    _add_images(report, summary, base)
+    _add_weights(report, summary, sequence, names)
+    _add_accuracy(report, summary)
+    if exposure:
+        _add_exposure(report, exposure, names)
+    if "decision_ms" in summary:
+        report.add_paragraph(
+            f"Flash decided {summary['decision_ms']:.1f} ms after the last LED frame; the run took "
+            f"{summary.get('elapsed_s', float('nan')):.1f} s.",
+            note=True,
+        )
+    _add_files(report, summary, base)
+    return _write_atomically(report, path)
 
+
+def _add_images(report: HtmlReport, summary: dict[str, Any], base: Path) -> None:
+    """The previews, each linked to its full-size file, and the spectra plot."""
     report.add_heading("Images")
     report.add_paragraph(
         "Camera → XYZ fitted on a Macbeth chart under D65, sRGB, no white balance (the ambient's cast stays "
@@ -101,6 +118,9 @@ def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
         [("ambient estimate and flash mixes", _rebased(summary, summary["plot"], base))], base, plot=True
     )
 
+
+def _add_weights(report: HtmlReport, summary: dict[str, Any], sequence: Sequence, names: list[str]) -> None:
+    """Each LED's measured peak, ambient weight and flash weights, and what they mean."""
     report.add_heading("LED weights")
     peaks = summary.get("led_peak_nm") or list(sequence.led_peaks_nm())
     rows: list[list[object]] = [["measured peak (nm)", *[f"{float(p):.1f}" for p in peaks]]]
@@ -118,6 +138,9 @@ def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
         note=True,
     )
 
+
+def _add_accuracy(report: HtmlReport, summary: dict[str, Any]) -> None:
+    """The ambient fit's residual, the RMSE against the truth where it is known, each flash's target reached."""
     report.add_heading("Fit and accuracy")
     accuracy: list[list[object]] = [["relative residual of the ambient fit", _number(summary["relative_residual"], 4)]]
     if "spectrum_rmse_vs_truth" in summary:
@@ -133,33 +156,32 @@ def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
         accuracy.append([f"{mode} flash reaches its target", reached])
     report.add_table(["measure", "value"], accuracy, table_id="accuracy")
 
-    if exposure:
-        report.add_heading("Exposure")
-        snr = exposure.get("led_snr") or [None] * len(names)
-        planned = exposure.get("predicted_led_snr") or [None] * len(names)
-        exposures = exposure.get("led_exposures_us") or [None] * len(names)
-        report.add_table(
-            ["LED", "exposure (µs)", "planned SNR", "SNR"],
-            [
-                [name, _number(us, 5), _snr(p), _snr(s)]
-                for name, us, p, s in zip(names, exposures, planned, snr, strict=True)
-            ],
-            table_id="exposure",
-        )
-        for note in exposure.get("led_snr_warnings") or ():
-            report.add_paragraph(f"Warning: {note}.", warning=True)
-        report.add_paragraph(
-            f"Ambient {_number(exposure.get('ambient_exposure_us'), 5)} µs ({exposure.get('mode', '?')}); flash "
-            f"{_number(exposure.get('flash_exposure_us'), 5)} µs. SNR: {exposure.get('led_snr_method', '')}, median pixel.",
-            note=True,
-        )
-    if "decision_ms" in summary:
-        report.add_paragraph(
-            f"Flash decided {summary['decision_ms']:.1f} ms after the last LED frame; the run took "
-            f"{summary.get('elapsed_s', float('nan')):.1f} s.",
-            note=True,
-        )
 
+def _add_exposure(report: HtmlReport, exposure: dict[str, Any], names: list[str]) -> None:
+    """Each LED frame's exposure with its planned and measured SNR, and the ambient and flash exposures."""
+    report.add_heading("Exposure")
+    snr = exposure.get("led_snr") or [None] * len(names)
+    planned = exposure.get("predicted_led_snr") or [None] * len(names)
+    exposures = exposure.get("led_exposures_us") or [None] * len(names)
+    report.add_table(
+        ["LED", "exposure (µs)", "planned SNR", "SNR"],
+        [
+            [name, _number(us, 5), _snr(p), _snr(s)]
+            for name, us, p, s in zip(names, exposures, planned, snr, strict=True)
+        ],
+        table_id="exposure",
+    )
+    for note in exposure.get("led_snr_warnings") or ():
+        report.add_paragraph(f"Warning: {note}.", warning=True)
+    report.add_paragraph(
+        f"Ambient {_number(exposure.get('ambient_exposure_us'), 5)} µs ({exposure.get('mode', '?')}); flash "
+        f"{_number(exposure.get('flash_exposure_us'), 5)} µs. SNR: {exposure.get('led_snr_method', '')}, median pixel.",
+        note=True,
+    )
+
+
+def _add_files(report: HtmlReport, summary: dict[str, Any], base: Path) -> None:
+    """Links to the run's files and to what was exported."""
     files = ["run.json", "estimate.json", *[f"flash-{mode}.json" for mode in summary["flash"]]]
     files += [f"{mode}.exr" for mode in summary["flash"]] + ["sequence/sequence.json"]
     report.add_heading("Files")
@@ -169,7 +191,6 @@ def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
         report.add_file_links(_inside([str(_rebased(summary, f, base)) for f in export.get("files", [])], base), base)
         for note in export.get("notes", []):
             report.add_paragraph(f"note: {note}", note=True)
-    return _write_atomically(report, path)
 
 
 def _rebased(summary: dict[str, Any], file: str, base: Path) -> Path:

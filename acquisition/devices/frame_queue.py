@@ -12,7 +12,7 @@ import threading
 from collections import deque
 
 from msflash.acquisition.devices.camera import RawFrame
-from msflash.acquisition.errors import CameraError, FrameTimeoutError
+from msflash.acquisition.errors import CameraDisconnectedError, CameraError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan
 
 
@@ -41,6 +41,21 @@ class TriggeredFrames:
         self._closed = False
         self._producing = 0
         """Frames being made right now (a trigger that has not delivered yet)."""
+        self._unplugged: str | None = None
+        """Why the device is gone (:meth:`unplug`), None while it is there."""
+
+    def unplug(self, reason: str = "the cable was pulled") -> None:
+        """The twin of a camera that goes away mid-stream: every later call raises
+        :class:`~acquisition.errors.CameraDisconnectedError` naming ``reason`` (frames already queued stay
+        readable, as frames a host has received do) until :meth:`replug`."""
+        with self._condition:
+            self._unplugged = reason
+            self._condition.notify_all()
+
+    def replug(self) -> None:
+        """The device is back: calls work again (the caller prepares and starts again, as after a real loss)."""
+        with self._condition:
+            self._unplugged = None
 
     def next_frame(self, timeout_s: float) -> RawFrame:
         """The oldest queued frame; ``FrameTimeoutError`` if none arrives within ``timeout_s``.
@@ -57,7 +72,9 @@ class TriggeredFrames:
                 external = plan is not None and plan.trigger == "booth"
                 if not external and self._producing == 0:
                     raise FrameTimeoutError(self._timeout_message(timeout_s, "no trigger was issued"))
-                if not self._condition.wait_for(lambda: bool(self._queue) or self._closed, timeout=timeout_s):
+                if not self._condition.wait_for(
+                    lambda: bool(self._queue) or self._closed or self._unplugged is not None, timeout=timeout_s
+                ):
                     raise FrameTimeoutError(self._timeout_message(timeout_s, "the trigger did not arrive"))
             item = self._queue.popleft()
         if isinstance(item, _Failed):
@@ -91,6 +108,11 @@ class TriggeredFrames:
     def _check_open(self) -> None:
         if self._closed:
             raise CameraError(f"{self._label}: used after close(); expected an open camera")
+        if self._unplugged is not None:
+            raise CameraDisconnectedError(
+                f"{self._label}: the device is gone ({self._unplugged}); expected it connected — check the cable "
+                "and power, then reconnect"
+            )
 
     def _require_started(self) -> CapturePlan:
         self._check_open()

@@ -6,6 +6,7 @@ import logging
 from typing import Any
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.devices.image_format import ImageFormat, ImageFormatRequest, ImageLimits
 from msflash.acquisition.plan import CapturePlan
 
 log = logging.getLogger(__name__)
@@ -42,6 +43,19 @@ class HardwareCamera:
     def noise_model(self) -> Any:
         """Conversion gain and read noise from the camera profile, or None."""
         return getattr(self.aravis, "noise_model", None)
+
+    @property
+    def image_format(self) -> ImageFormat:
+        """ROI, binning and pixel format in force (``AravisCamera.image_format``)."""
+        return self.aravis.image_format
+
+    def image_limits(self) -> ImageLimits:
+        """What the camera's image features allow now (``AravisCamera.image_limits``)."""
+        return self.aravis.image_limits()
+
+    def set_image_format(self, request: ImageFormatRequest) -> ImageFormat:
+        """Stop streaming and write ``request`` (``AravisCamera.set_image_format``; ``CameraSettingError`` if refused)."""
+        return self.aravis.set_image_format(request)
 
     def check_step_gain(self, gain: float) -> None:
         """Refuse a plan step's linear ``gain`` the camera cannot take (``AravisCamera.check_step_gain``)."""

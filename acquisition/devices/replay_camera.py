@@ -23,9 +23,11 @@ import numpy as np
 
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
 from msflash.acquisition.devices.frame_queue import TriggeredFrames
-from msflash.acquisition.errors import CameraError, ReplayMismatchError
+from msflash.acquisition.devices.image_format import IMAGE_FEATURES, ImageFormat, ImageFormatRequest, ImageLimits
+from msflash.acquisition.errors import CameraError, CameraSettingError, ReplayMismatchError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
-from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.sequence.reader import read_sequence
 
 LEVEL_TOLERANCE = 2.0 / 0xFFFF
 """LED levels match when within two 16-bit wire steps."""
@@ -82,15 +84,30 @@ class ReplayCamera(TriggeredFrames):
             extra={"replay": str(self.sequence.directory)},
         )
 
+    # -- the image format: the recording's, fixed ------------------------------------------
+    @property
+    def image_format(self) -> ImageFormat:
+        """The recorded frames' size and pixel format (binning as recorded is not known: 1×1)."""
+        return ImageFormat((0, 0, int(self._shape[1]), int(self._shape[0])), (1, 1), self.sequence.camera.pixel_format)
+
+    def image_limits(self) -> ImageLimits:
+        """Nothing can be set: every image feature is locked to the recording's."""
+        why = "a replay serves the recorded frames as they are"
+        return ImageLimits("replay camera", {}, self.image_format.roi[2:], {name: why for name in IMAGE_FEATURES})
+
+    def set_image_format(self, request: ImageFormatRequest) -> ImageFormat:
+        """Refused: a replay cannot change the recorded frames' ROI, binning or pixel format."""
+        image = self.image_format
+        raise CameraSettingError(
+            f"replay camera: {self.sequence.directory}: its frames are {image.roi[2]} × {image.roi[3]} "
+            f"{image.pixel_format} as recorded; a replay cannot change ROI, binning or pixel format — "
+            "expected a live camera (--rig sim, aravis-fake or hw)"
+        )
+
     @property
     def suggested_exposure_us(self) -> float:
         """The exposure of the first recorded frame (what ``run`` must ask for to match)."""
         return float(self.sequence.frames[0].exposure_us)
-
-    @property
-    def frames_served(self) -> int:
-        """Recorded frames served so far."""
-        return self._cursor
 
     # -- the Camera protocol --------------------------------------------------------------
     def prepare(self, plan: CapturePlan) -> None:

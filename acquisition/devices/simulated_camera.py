@@ -35,43 +35,25 @@ from msflash.acquisition.devices.camera import CameraInfo, RawFrame
 from msflash.acquisition.devices.exposure_light import (
     AmbientModulation,
     ExposureLight,
-    ExposureRequest,
-    RowLight,
     Shutter,
-    ambient_over_rows,
 )
 from msflash.acquisition.devices.frame_queue import TriggeredFrames
+from msflash.acquisition.devices.image_format import ImageFormat, ImageFormatRequest, ImageLimits
+from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA, default_world
+from msflash.acquisition.devices.sim_readout import SimReadout
+from msflash.acquisition.devices.sim_rendering import SimRendering
 from msflash.acquisition.errors import CameraError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
-from msflash.processing import datasets, lights
-from msflash.processing.image_formation import (
-    MixedIllumination,
-    expected_response,
-    exposure_for_peak,
-    render_frame,
-    total_illumination,
-)
-from msflash.processing.scenes import Scene, chart_scene, mosaic_scene, white_reference_scene
-from msflash.processing.sensor import SensorModel, machine_vision_sensor
+from msflash.processing.image_formation import MixedIllumination
+from msflash.processing.scenes import Scene
+from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid, require_same_grid
 
 LedLevelsSource = Callable[[], Sequence[float]]
 """Returns the drive level (0–1) of every LED channel at the moment it is called."""
 
-_GENICAM_BAYER = {"RGGB": "BayerRG", "BGGR": "BayerBG", "GRBG": "BayerGR", "GBRG": "BayerGB"}
-_GENICAM_BITS = (8, 10, 12, 14, 16)
-"""Bit depths GenICam names unpacked formats by (BayerRG12, RGB12 …); others take their container's."""
 
-SIM_DEFAULT_CFA = "RGGB"
-"""The ``sim`` rig's camera sends a raw RGGB mosaic, 12-bit (:func:`processing.sensor.machine_vision_sensor`),
-as colour machine-vision cameras do; ``cfa=None`` asks for RGB frames."""
-
-FREE_RUNNING_GAP_S = (0.015, 0.060)
-"""From one frame's readout to the next exposure under a modulated ambient without a light over time: host pacing
-(a serial command, a trigger) spaces frames by a few tens of ms, drawn from the seed (docs/flicker.md)."""
-
-
-class SimulatedCamera(TriggeredFrames):
+class SimulatedCamera(SimRendering, TriggeredFrames):
     """Renders ``scene`` under ``ambient`` + LEDs at the levels of ``led_levels_source``.
 
     Parameters
@@ -175,6 +157,8 @@ class SimulatedCamera(TriggeredFrames):
         self._free_end_s = 0.0
         self._pacing_rng = np.random.default_rng([seed, 0x0F11C7E5, 1])
         self._latency_rng = np.random.default_rng(seed + 7919)
+        self.readout = SimReadout(scene.shape, sensor.cfa, sensor.bit_depth)
+        """Binning, ROI and pixel format applied to each rendered frame (:mod:`acquisition.devices.sim_readout`)."""
 
     # -- ground truth and identity ------------------------------------------------------------
     @property
@@ -190,29 +174,51 @@ class SimulatedCamera(TriggeredFrames):
 
     @property
     def info(self) -> CameraInfo:
-        """Identity and pixel encoding; ``extra`` names the ground-truth spectra."""
-        depth = self.sensor.bit_depth
-        bits = depth if depth in _GENICAM_BITS else 8 if depth <= 8 else 16
-        pixel_format = f"RGB{bits}" if self.sensor.cfa is None else f"{_GENICAM_BAYER[self.sensor.cfa]}{bits}"
-        height, width = self.scene.shape
+        """Identity and pixel encoding as read out now; ``extra`` names the ground-truth spectra."""
+        image = self.readout.format
+        black, white = self.readout.levels(self.sensor.black_level, self.sensor.white_level)
         return CameraInfo(
             vendor="msflash",
             model=self._name,
             serial=f"SIM-{self.seed}",
-            pixel_format=pixel_format,
+            pixel_format=image.pixel_format,
             cfa=self.sensor.cfa,
-            black_level=self.sensor.black_level,
-            white_level=self.sensor.white_level,
-            width=width,
-            height=height,
+            black_level=black,
+            white_level=white,
+            width=image.roi[2],
+            height=image.roi[3],
             extra={
                 "simulated": True,
-                "bit_depth": self.sensor.bit_depth,
+                "bit_depth": self.readout.out_bits,
                 "ambient": self.ambient.source,
                 "leds": self.led_spectra.names,
                 "responsivity": self.camera_responsivities.source,
+                **({"binning": list(image.binning)} if image.binning != (1, 1) else {}),
             },
         )
+
+    # -- the image format, between acquisitions ------------------------------------------------
+    @property
+    def image_format(self) -> ImageFormat:
+        """ROI, binning and pixel format in force."""
+        return self.readout.format
+
+    def image_limits(self) -> ImageLimits:
+        """What this camera allows now (:class:`~acquisition.devices.sim_readout.SimReadout`'s rules)."""
+        return self.readout.limits(self._label)
+
+    def set_image_format(self, request: ImageFormatRequest) -> ImageFormat:
+        """Stop streaming and take ``request``; ``CameraSettingError`` (nothing changed) for what the twin refuses.
+
+        Frames queued before are dropped (their size is the old one); the next ``prepare`` starts afresh.
+        """
+        self._check_open()
+        readout = self.readout.applied(request, self._label)
+        with self._condition:
+            self._started = False
+            self._queue.clear()
+            self.readout = readout
+        return readout.format
 
     # -- the Camera protocol ------------------------------------------------------------------
     def prepare(self, plan: CapturePlan) -> None:
@@ -293,7 +299,9 @@ class SimulatedCamera(TriggeredFrames):
             )
         return levels
 
-    def render(self, levels: Sequence[float], exposure_us: float, gain: float) -> np.ndarray:
+    def render(
+        self, levels: Sequence[float], exposure_us: float, gain: float, start_s: float | None = None
+    ) -> np.ndarray:
         """One frame of this world under the LEDs at ``levels``, exposed ``exposure_us`` at linear ``gain``.
 
         The one renderer of the simulated world: :meth:`trigger` renders each plan step with it,
@@ -307,12 +315,16 @@ class SimulatedCamera(TriggeredFrames):
             Drive level (0–1) of each LED channel during the exposure.
         exposure_us, gain
             The exposure and the linear gain of the frame.
+        start_s
+            Under a modulated ambient (mains flicker), the exposure's start on the light's clock: a camera's own
+            timestamp (the ``aravis-fake`` rig's), so the lamp keeps the time the frames are stamped with. None:
+            host pacing's simulated clock (:meth:`_mains_start`).
 
         Returns
         -------
         numpy.ndarray
-            Raw values (``sensor.dtype``) as the sensor model delivers them: (H, W) for a mosaic, else
-            (H, W, 3).
+            Raw values as :attr:`readout` delivers them (the sensor model's, binned, cut to the ROI, in the
+            pixel format): (H, W) for a mosaic, else (H, W, 3).
 
         Raises
         ------
@@ -327,60 +339,10 @@ class SimulatedCamera(TriggeredFrames):
             )
         with self._render_lock:
             if self.ambient_modulation is not None:
-                return self._render_free_running(checked, float(exposure_us), float(gain))[0]
-            return self._render(checked, float(exposure_us), float(gain))
-
-    def _mains_start(self, exposure_us: float, skew_s: float) -> float:
-        """The next exposure's start on the modulated ambient's clock (s).
-
-        Frames follow one another as host pacing spaces them, :data:`FREE_RUNNING_GAP_S` apart after the last
-        one's readout, drawn from the seed: a run is reproducible, and a short exposure meets a mains flicker at
-        an unrelated phase each frame (the mains keeps no time with the booth or the camera). The LEDs keep
-        their own clock (:attr:`exposure_light`).
-        """
-        gap = float(self._pacing_rng.uniform(*FREE_RUNNING_GAP_S))
-        start = self._free_end_s + self.shutter.readout_us * 1e-6 + gap
-        self._free_end_s = start + skew_s + exposure_us * 1e-6
-        return start
-
-    def _render_free_running(
-        self, levels: tuple[float, ...], exposure_us: float, gain: float
-    ) -> tuple[np.ndarray, float]:
-        """A frame under a modulated ambient without a light over time (:attr:`exposure_light` None): the pixels
-        and the exposure's start (s) on the ambient's clock (:meth:`_mains_start`); every row sees the ambient's
-        mean over its own window."""
-        request = ExposureRequest(exposure_us, self.scene.shape[0], self.shutter.line_time_us, 0.0, False)
-        start = self._mains_start(exposure_us, request.skew_us * 1e-6)
-        light = RowLight(start, np.broadcast_to(np.asarray(levels, dtype=float), (request.rows, len(levels))))
-        ambient = ambient_over_rows(self.ambient_modulation, light, request)
-        return self._render_rows(light, ambient, exposure_us, gain), start
-
-    def _render(
-        self, levels: tuple[float, ...], exposure_us: float, gain: float, ambient_gain: float = 1.0
-    ) -> np.ndarray:
-        """The frame under ``levels`` (checked), the ambient × ``ambient_gain``; the caller holds the render lock."""
-        if self.ambient_illumination is not None and ambient_gain != 1.0:  # two ambients: scaled per pixel
-            light = RowLight(0.0, np.broadcast_to(np.asarray(levels, dtype=float), (self.scene.shape[0], len(levels))))
-            return self._render_rows(light, np.full(self.scene.shape[0], ambient_gain), exposure_us, gain)
-        self.true_ambient_gains.append(ambient_gain)
-        ambient = (
-            self.ambient if ambient_gain == 1.0 else self.ambient.replace(values=self.ambient.values * ambient_gain)
-        )
-        illumination = total_illumination(ambient, self.led_spectra, levels)
-        if self.ambient_illumination is not None:
-            dark = self.ambient.replace(values=np.zeros_like(self.ambient.values))
-            illumination = self.ambient_illumination.plus(total_illumination(dark, self.led_spectra, levels))  # type: ignore[assignment]
-        return render_frame(
-            self.scene,
-            illumination,
-            self.camera_responsivities,
-            self.sensor,
-            exposure_us,
-            gain,
-            self.scale,
-            rng=self._rng,
-            noise=self.noise,
-        )
+                return self.readout.read(
+                    self._render_free_running(checked, float(exposure_us), float(gain), start_s)[0]
+                )
+            return self.readout.read(self._render(checked, float(exposure_us), float(gain)))
 
     def _render_next(self, plan: CapturePlan) -> None:
         with self._condition:
@@ -409,7 +371,7 @@ class SimulatedCamera(TriggeredFrames):
                     # Under a modulated ambient the timestamp is the exposure's start on the light's clock, as a
                     # camera's own clock dates its exposures (what the flicker fit reads).
                     stamp = self._clock_ns if start_s is None else int(round(start_s * 1e9))
-                    frame = RawFrame(pixels, self._frame_id, stamp, step.exposure_us, step.gain)
+                    frame = RawFrame(self.readout.read(pixels), self._frame_id, stamp, step.exposure_us, step.gain)
                     self._rendered_levels.append(levels)
             except BaseException as err:
                 # next_frame raises it in this frame's place: on the booth's trigger line nobody else
@@ -418,88 +380,6 @@ class SimulatedCamera(TriggeredFrames):
                 raise
             # Delivered under the render lock, so frames queue in trigger order.
             self._end_frame(frame)
-
-    # -- light over time: each row integrates the booth's drive over its own window ------------
-    @property
-    def readout_skew_us(self) -> float:
-        """First row's start to the last row's (rolling shutter), µs; 0 for a global shutter."""
-        return self.shutter.skew_us(self.scene.shape[0])
-
-    def _render_exposed(
-        self, step: CaptureStep, hardware_trigger: bool
-    ) -> tuple[tuple[float, ...], np.ndarray, float | None]:
-        """The frame of ``step`` under :attr:`exposure_light`; its mean levels (over rows), pixels, and the
-        exposure's start on the modulated ambient's clock (s, :meth:`_mains_start`), or None when it is steady."""
-        assert self.exposure_light is not None
-        shutter = self.shutter
-        request = ExposureRequest(
-            exposure_us=float(step.exposure_us),
-            rows=self.scene.shape[0],
-            line_time_us=shutter.line_time_us,
-            latency_us=shutter.latency_us + float(self._latency_rng.uniform(0.0, shutter.latency_jitter_us)),
-            hardware_trigger=hardware_trigger,
-        )
-        light = self.exposure_light.expose(request)
-        rows = np.asarray(light.led_levels, dtype=float)
-        if rows.shape != (request.rows, self.led_spectra.count) or not np.all((rows >= 0) & (rows <= 1)):
-            raise CameraError(
-                f"simulated camera '{self._name}': exposure light gave levels of shape {rows.shape}; expected "
-                f"({request.rows}, {self.led_spectra.count}) values in [0, 1]"
-            )
-        start = None
-        ambient = None
-        if self.ambient_modulation is not None:
-            start = self._mains_start(step.exposure_us, request.skew_us * 1e-6)
-            ambient = ambient_over_rows(self.ambient_modulation, RowLight(start, rows), request)
-        mean = tuple(float(v) for v in rows.mean(axis=0))
-        return mean, self._render_rows(light, ambient, step.exposure_us, step.gain), start
-
-    def _render_rows(self, light: RowLight, ambient: np.ndarray | None, exposure_us: float, gain: float) -> np.ndarray:
-        """A frame whose row ``r`` saw the LEDs at ``light.led_levels[r]`` and the ambient × ``ambient[r]``.
-
-        Rows that all saw the same light render as any frame does (:meth:`_render`); otherwise the
-        illumination is a per-pixel mix of the ambient and each LED (light is additive).
-        """
-        rows = light.led_levels
-        uniform_leds = bool(np.all(rows == rows[:1]))
-        if uniform_leds and (
-            ambient is None or (self.ambient_illumination is None and bool(np.all(ambient == ambient[0])))
-        ):
-            # One light for every row (a global shutter): the ambient scaled as a whole.
-            return self._render(
-                tuple(float(v) for v in rows[0]), exposure_us, gain, 1.0 if ambient is None else float(ambient[0])
-            )
-        self.true_ambient_gains.append(1.0 if ambient is None else float(np.mean(ambient)))
-        height, width = self.scene.shape
-        leds = self.led_spectra.to_unit("photons")
-        if self.ambient_illumination is not None:
-            base = self.ambient_illumination
-            ambient_spectra, ambient_weights = base.spectra, base.weights
-        else:
-            ambient_spectra = self.ambient.to_unit("photons")
-            ambient_weights = np.ones((height, width, 1))
-        factor = np.ones(height) if ambient is None else ambient
-        spectra = Spectra(
-            ambient_spectra.grid,
-            np.hstack([ambient_spectra.values, leds.values]),
-            tuple(ambient_spectra.names) + tuple(leds.names),
-            kind="spd",
-            unit="photons",
-            source=self.ambient.source,
-        )
-        led_weights = np.broadcast_to(rows[:, None, :], (height, width, leds.count))
-        weights = np.concatenate([ambient_weights * factor[:, None, None], led_weights], axis=-1)
-        return render_frame(
-            self.scene,
-            MixedIllumination(spectra, weights),
-            self.camera_responsivities,
-            self.sensor,
-            exposure_us,
-            gain,
-            self.scale,
-            rng=self._rng,
-            noise=self.noise,
-        )
 
     # -- a ready-made world -------------------------------------------------------------------
     @classmethod
@@ -524,206 +404,26 @@ class SimulatedCamera(TriggeredFrames):
         second_ambient: str | Spectra | None = None,
         ambient_map: np.ndarray | None = None,
     ) -> SimulatedCamera:
-        """The ``sim`` rig's world: a chart, an ambient, an LED set and a camera (by default the paper's
-        110-surface chart, tungsten, the paper's 7 LEDs and ISETCam's NikonD100 behind a 12-bit raw RGGB
-        sensor, :func:`processing.sensor.machine_vision_sensor`).
-
-        Parameters
-        ----------
-        scene
-            ``"chart110"`` (the paper's 110 surfaces), ``"macbeth"``, ``"white"`` (a white reference
-            filling the frame, :func:`processing.scenes.white_reference_scene`, for
-            ``msflash calibrate leds --white``), a :class:`Scene`, or reflectances (a random mosaic
-            of those surfaces drawn with ``seed``, :func:`processing.scenes.mosaic_scene`).
-        ambient
-            A name of :func:`processing.lights.light_spectrum` (the sim ambients, CIE
-            illuminants) or a spectrum covering ``grid``.
-        cfa
-            The Bayer layout of the raw mosaic (default :data:`SIM_DEFAULT_CFA`), or None for RGB frames.
-        seed
-            Noise seed (and the mosaic's layout).
-        camera
-            A shipped camera's name (:func:`processing.datasets.camera_responsivities`) or R, G, B
-            responsivities covering ``grid``.
-        n_leds
-            The paper's LED subset (3–7), unless ``led_spectra`` is given.
-        led_spectra
-            The booth's LEDs (one spectrum per channel, covering ``grid``) instead of the paper's:
-            their ratios are kept, their power is set by ``flash_power``.
-        flash_power
-            How bright the booth is, as a flash is: every LED at full drive gives at least this
-            many times the ambient's mean camera signal over the diffuse scene (all channels). The
-            booth is scaled as a whole, so the LEDs keep their ratios, and the weakest LED the
-            camera sees (:data:`VISIBLE_LED_FRACTION`) gives exactly ``flash_power`` × the
-            ambient (:func:`flash_power_scale`). With the default 1, the paper's 7 LEDs and the
-            NikonD100 give 1.0–3.7× the ambient each, whatever the LED count; it used to be all
-            LEDs together 2× (each 0.1–0.4×, LED SNR 0.6–3 in ``msflash run``).
-        reference_exposure_us, ambient_peak_fraction
-            At ``reference_exposure_us`` and gain 1 the brightest diffuse pixel under the ambient
-            alone reads ``ambient_peak_fraction`` of full scale, or less if the ambient plus the
-            brightest LED at full drive would then read more than :data:`FLASH_PEAK_FRACTION`
-            (room for the flash on top, for captures at one exposure).
-            ``suggested_exposure_us`` is set to ``reference_exposure_us``.
-        sensor
-            Default: :func:`processing.sensor.machine_vision_sensor` with ``cfa`` (12-bit, black
-            240, 8 e⁻/DN, 7 e⁻ read noise, 30.8 ke⁻ at white). Before issue 30 the rig's camera was
-            16-bit RGB, black 256, 0.5 e⁻/DN, 2 e⁻ read noise, 40 000 e⁻ (:class:`SensorModel`'s defaults).
-        led_levels_source, noise
-            As for the constructor.
-        patch_px, specular_strip_px
-            Chart patch size and the height of a saturating highlight strip under it (0: none).
-        grid
-            The wavelength grid of the world.
-        second_ambient, ambient_map
-            A second ambient (name or spectrum) and the (H, W) map in [0, 1] of its share at each
-            pixel of the scene (see the constructor); LED power and exposure are then set on
-            the mixed ambient.
-        """
-        if scene == "white":
-            scene = white_reference_scene()
-        elif isinstance(scene, str):
-            scene = chart_scene(scene, patch_px=patch_px, specular_strip_px=specular_strip_px)
-        elif isinstance(scene, Spectra):
-            scene = mosaic_scene(scene, seed=seed, patch_px=patch_px, specular_strip_px=specular_strip_px)
-        scene = Scene(
-            scene.reflectances.resample(grid), scene.labels, scene.shading, scene.specular, scene.specular_gain
-        )
-        ambient_spd = lights.light_spectrum(ambient, grid) if isinstance(ambient, str) else ambient.resample(grid)
-        second_spd = None
-        if second_ambient is not None:
-            second_spd = (
-                lights.light_spectrum(second_ambient, grid)
-                if isinstance(second_ambient, str)
-                else second_ambient.resample(grid)
-            ).to_unit(ambient_spd.unit)
-        if (second_spd is None) != (ambient_map is None):
-            raise CameraError("simulated camera: second_ambient and ambient_map go together; expected both or neither")
-        metered_ambient = (
-            ambient_spd
-            if second_spd is None or ambient_map is None
-            else MixedIllumination.two_ambients(ambient_spd, second_spd, ambient_map)
-        )
-        leds = (datasets.paper_led_subset(n_leds) if led_spectra is None else led_spectra).resample(grid)
-        responsivities = (datasets.camera_responsivities(camera) if isinstance(camera, str) else camera).resample(grid)
-        sensor = sensor if sensor is not None else machine_vision_sensor(cfa)
-        if cfa is not None and sensor.cfa != cfa:
-            raise CameraError(f"simulated camera: cfa '{cfa}' but the sensor model has '{sensor.cfa}'; expected one")
-
-        # LED power relative to the ambient, measured the way the camera sees it (mean signal over
-        # the diffuse scene), so it holds whatever the ambient's spectrum.
-        diffuse = Scene(scene.reflectances, scene.labels, scene.shading)
-        led_spectra = leds.replace(
-            values=leds.values * flash_power_scale(diffuse, metered_ambient, leds, responsivities, flash_power)
-        )
-        camera_name = responsivities.metadata.get("camera") or (
-            camera if isinstance(camera, str) else responsivities.source
-        )
-        dark = ambient_spd.replace(values=np.zeros_like(ambient_spd.values))
-        exposure_at_unit_scale = min(
-            exposure_for_peak(scene, metered_ambient, responsivities, sensor, ambient_peak_fraction),
-            *(
-                exposure_for_peak(
-                    scene,
-                    _plus(metered_ambient, total_illumination(dark, led_spectra, on)),
-                    responsivities,
-                    sensor,
-                    FLASH_PEAK_FRACTION,
-                )
-                for on in np.eye(led_spectra.count)
-            ),
-        )
+        """The ``sim`` rig's world (:func:`~acquisition.devices.sim_default.default_world`, whose parameters these
+        are) rendered by this camera; ``seed`` also seeds the noise, ``led_levels_source`` and ``noise`` are the
+        constructor's, and ``suggested_exposure_us`` is set to ``reference_exposure_us``."""
+        world = default_world(
+            scene, ambient, cfa, seed, camera, n_leds, led_spectra, flash_power, reference_exposure_us,
+            ambient_peak_fraction, sensor, patch_px, specular_strip_px, grid, second_ambient, ambient_map,
+        )  # fmt: skip
         simulated = cls(
-            scene,
-            ambient_spd,
-            led_spectra,
-            responsivities,
-            sensor,
-            scale=exposure_at_unit_scale / reference_exposure_us,
+            world.scene,
+            world.ambient,
+            world.led_spectra,
+            world.responsivities,
+            world.sensor,
+            scale=world.scale,
             led_levels_source=led_levels_source,
             seed=seed,
             noise=noise,
-            name=f"SimulatedCamera ({camera_name})",
-            second_ambient=second_spd,
+            name=f"SimulatedCamera ({world.camera_name})",
+            second_ambient=world.second_ambient,
             ambient_map=ambient_map,
         )
         simulated.suggested_exposure_us = reference_exposure_us
         return simulated
-
-
-VISIBLE_LED_FRACTION = 0.01
-"""An LED giving less than this share of the strongest LED's camera signal is one the camera hardly
-sees: it does not set the booth's power (raising the booth until it matched the ambient would blind
-the camera in every other LED's frame)."""
-FLASH_PEAK_FRACTION = 0.9
-"""At the sim's reference exposure, the ambient plus any one LED at full drive reads at most this share of full scale."""
-
-
-def _plus(ambient: Spectra | MixedIllumination, light: Spectra) -> Spectra | MixedIllumination:
-    """An ambient (uniform or spatially varying) plus a uniform light."""
-    if isinstance(ambient, MixedIllumination):
-        return ambient.plus(light)
-    return ambient.replace(values=ambient.values + light.to_unit(ambient.unit).values)
-
-
-def led_signals(
-    scene: Scene, ambient: Spectra | MixedIllumination, led_spectra: Spectra, camera_responsivities: Spectra
-) -> np.ndarray:
-    """Each LED's mean camera signal at full drive over ``scene`` (all pixels and channels), in units of the ambient's.
-
-    Raises
-    ------
-    CameraError
-        If the ambient gives no signal in this camera.
-    """
-    ambient_signal = float(np.mean(expected_response(scene, ambient, camera_responsivities, 1.0)))
-    if ambient_signal <= 0:
-        raise CameraError(
-            "simulated camera: the ambient gives no signal in this camera; expected light within the "
-            "camera's sensitivity"
-        )
-    spd = led_spectra.to_unit("photons")
-    dark = spd.replace(values=np.zeros((spd.grid.size, 1)), names=("dark",))
-    return (
-        np.array(
-            [
-                float(np.mean(expected_response(scene, total_illumination(dark, spd, on), camera_responsivities, 1.0)))
-                for on in np.eye(spd.count)
-            ]
-        )
-        / ambient_signal
-    )
-
-
-def flash_power_scale(
-    scene: Scene,
-    ambient: Spectra | MixedIllumination,
-    led_spectra: Spectra,
-    camera_responsivities: Spectra,
-    flash_power: float = 1.0,
-) -> float:
-    """The factor on ``led_spectra`` making the weakest LED the camera sees give ``flash_power`` × the ambient.
-
-    Signals are :func:`led_signals` (mean over ``scene``, all channels); LEDs below
-    :data:`VISIBLE_LED_FRACTION` of the strongest do not count. One factor for the whole booth,
-    so the LEDs keep their ratios and every LED the camera sees gives at least ``flash_power`` ×
-    the ambient.
-
-    Raises
-    ------
-    CameraError
-        If ``flash_power`` is not a positive finite number, or the ambient or every LED gives no
-        signal in this camera.
-    """
-    if not (np.isfinite(flash_power) and flash_power > 0):
-        raise CameraError(
-            f"simulated camera: flash power {flash_power}; expected a positive number (each LED's "
-            "signal in units of the ambient's)"
-        )
-    signals = led_signals(scene, ambient, led_spectra, camera_responsivities)
-    strongest = float(np.max(signals)) if signals.size else 0.0
-    if strongest <= 0:
-        raise CameraError(
-            "simulated camera: the LEDs give no signal in this camera; expected light within the camera's sensitivity"
-        )
-    weakest = float(np.min(signals[signals >= VISIBLE_LED_FRACTION * strongest]))
-    return flash_power / weakest

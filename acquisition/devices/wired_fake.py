@@ -11,9 +11,11 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from msflash.acquisition.devices.aravis.pixel_layouts import PIXEL_FORMATS
 from msflash.acquisition.devices.camera import CameraInfo, RawFrame
+from msflash.acquisition.devices.image_format import BINNING_FEATURES, ImageFormat, ImageFormatRequest, ImageLimits
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera
-from msflash.acquisition.errors import CameraError, FrameLostError
+from msflash.acquisition.errors import CameraError, CameraSettingError, FrameLostError
 from msflash.acquisition.plan import CapturePlan
 
 log = logging.getLogger(__name__)
@@ -98,6 +100,7 @@ class WiredFakeCamera:
         self._pending: collections.deque[tuple[float, ...]] = collections.deque()
         self._pending_lock = threading.Lock()
         self._rendered_levels: list[tuple[float, ...]] = []
+        self._first_timestamp_ns: int | None = None
 
     @property
     def suggested_exposure_us(self) -> float:
@@ -123,12 +126,57 @@ class WiredFakeCamera:
         info = self.aravis.info
         if self.world is None:
             return dataclasses.replace(info, cfa=None)
+        black, white = self.world.readout.levels(self.world.sensor.black_level, self.world.sensor.white_level)
         return dataclasses.replace(
             info,
-            black_level=self.world.sensor.black_level,
-            white_level=self.world.sensor.white_level,
+            black_level=black,
+            white_level=white,
             extra={**info.extra, "pixels": f"rendered scene ({self.world.info.model})"},
         )
+
+    # -- the image format: the fake's own features and limits; the scene follows its ROI and depth --
+    @property
+    def image_format(self) -> ImageFormat:
+        """The fake's ROI, binning and pixel format, read back."""
+        return self.aravis.image_format
+
+    def image_limits(self) -> ImageLimits:
+        """The fake's limits; with a scene, its binning locked (the fake's frames keep their size when it bins)."""
+        limits = self.aravis.image_limits()
+        if self.world is None:
+            return limits
+        why = "the Aravis fake keeps its frame size when it bins, so the rendered scene cannot follow; expected 1×1"
+        locked = {name: why for name in BINNING_FEATURES if name in limits.features}
+        return dataclasses.replace(limits, locked={**limits.locked, **locked})
+
+    def set_image_format(self, request: ImageFormatRequest) -> ImageFormat:
+        """Write ``request`` to the fake (between acquisitions); with a scene, refuse what the scene cannot follow
+        (binning, a layout other than its mosaic's, an ROI outside it) and read the scene out at the new ROI
+        and depth."""
+        world = self.world
+        if world is not None:
+            limits = self.image_limits()
+            if request.binning is not None and tuple(request.binning) != self.image_format.binning:
+                limits.check_binning(request.binning)
+            layout = PIXEL_FORMATS.get(request.pixel_format or "")
+            if request.pixel_format is not None and (layout is None or layout.cfa != world.sensor.cfa):
+                same = [name for name, entry in PIXEL_FORMATS.items() if entry.cfa == world.sensor.cfa]
+                offered = [name for name in limits.features["PixelFormat"].entries if name in same]
+                raise CameraSettingError(
+                    f"aravis-fake: pixel format {request.pixel_format}: the rendered scene is a "
+                    f"{world.sensor.cfa} mosaic; expected one of {', '.join(offered)}"
+                )
+            height, width = world.readout.sensor_shape
+            x, y, w, h = request.roi or (0, 0, 1, 1)
+            if x + w > width or y + h > height:
+                raise CameraSettingError(
+                    f"aravis-fake: ROI {x},{y},{w},{h}: outside the rendered scene ({width} × {height}); "
+                    "expected offset + size within it"
+                )
+        image = self.aravis.set_image_format(request)
+        if world is not None:
+            world.readout = dataclasses.replace(world.readout, roi=image.roi, pixel_format=image.pixel_format)
+        return image
 
     @property
     def exposure_range_us(self) -> tuple[float, float] | None:
@@ -247,7 +295,7 @@ class WiredFakeCamera:
                 "one frame per trigger"
             )
         gain = self._true_gain() if self._true_gain is not None else frame.gain
-        pixels = self.world.render(levels, frame.exposure_us, gain)
+        pixels = self.world.render(levels, frame.exposure_us, gain, self._lamp_time_s(frame.timestamp_ns))
         if pixels.shape != frame.pixels.shape:
             raise CameraError(
                 f"aravis-fake: the scene renders {pixels.shape} but the fake delivers "
@@ -256,6 +304,16 @@ class WiredFakeCamera:
         with self._pending_lock:
             self._rendered_levels.append(levels)
         return dataclasses.replace(frame, pixels=pixels)
+
+    def _lamp_time_s(self, timestamp_ns: int) -> float | None:
+        """A frame's exposure start on a flickering lamp's clock: its timestamp on the camera's clock, from the
+        first frame's (the mains keeps real time, and so does the fake's clock: the lamp is where the recorded
+        timestamps say, as with a real camera). None under a steady ambient or without a timestamp."""
+        if getattr(self.world, "ambient_modulation", None) is None or timestamp_ns <= 0:
+            return None
+        if self._first_timestamp_ns is None:
+            self._first_timestamp_ns = timestamp_ns
+        return (timestamp_ns - self._first_timestamp_ns) * 1e-9
 
     def _take_levels(self) -> tuple[float, ...] | None:
         with self._pending_lock:

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from msflash.acquisition.export.tiff_ifd import (
+    Tag,
     ascii_tag,
     byte_tag,
     long_tag,
@@ -112,6 +113,38 @@ def write_dng(
         If the mosaic is not 2-D integer counts, the CFA unknown, the neutral not three values > 0,
         the matrix not a finite 3×3, the time naive or the ISO outside 1…65535.
     """
+    pixels, neutral_values, matrix = _checked(path, mosaic, cfa, neutral, xyz_to_camera, iso_speed)
+    model = camera_model or "unknown camera"
+    ifd0 = _raw_ifd(model, cfa, black_level, white_level, matrix, neutral_values)
+    if description:
+        ifd0.append(ascii_tag(270, description))  # ImageDescription
+    exif = [undefined_tag(36864, EXIF_VERSION)]
+    if exposure_us is not None:
+        exif.append(rational_tag(33434, float(exposure_us) / 1e6))  # ExposureTime, s
+    if captured_at is not None:
+        stamp, subseconds, offset = exif_time(captured_at)
+        ifd0.append(ascii_tag(306, stamp))  # DateTime
+        exif += [
+            ascii_tag(36867, stamp),  # DateTimeOriginal
+            ascii_tag(36880, offset),  # OffsetTime (of DateTime)
+            ascii_tag(36881, offset),  # OffsetTimeOriginal
+            ascii_tag(37520, subseconds),  # SubSecTime
+            ascii_tag(37521, subseconds),  # SubSecTimeOriginal
+        ]
+    if iso_speed is not None:
+        exif += [short_tag(34855, round(iso_speed)), short_tag(34864, _SENSITIVITY_ISO_SPEED)]
+    return write_tiff(path, np.asarray(pixels, dtype=np.uint16), ifd0, exif)
+
+
+def _checked(
+    path: str | os.PathLike,
+    mosaic: np.ndarray,
+    cfa: str,
+    neutral: SequenceOf[float] | np.ndarray,
+    xyz_to_camera: np.ndarray,
+    iso_speed: float | None,
+) -> tuple[np.ndarray, list[float], np.ndarray]:
+    """The mosaic, the neutral and the matrix as :func:`write_dng` writes them, or its ``ValueError``."""
     pixels = np.asarray(mosaic)
     if pixels.ndim != 2 or not np.issubdtype(pixels.dtype, np.integer) or pixels.size == 0:
         raise ValueError(f"{path}: mosaic of shape {pixels.shape} and type {pixels.dtype}; expected (H, W) counts")
@@ -127,8 +160,14 @@ def write_dng(
         raise ValueError(f"{path}: colour matrix of shape {matrix.shape}; expected a finite 3×3")
     if iso_speed is not None and not 1 <= round(iso_speed) <= 65535:
         raise ValueError(f"{path}: ISO speed {iso_speed}; expected 1…65535 or None (unknown)")
-    model = camera_model or "unknown camera"
-    ifd0 = [
+    return pixels, neutral_values, matrix
+
+
+def _raw_ifd(
+    model: str, cfa: str, black_level: float, white_level: float, matrix: np.ndarray, neutral: list[float]
+) -> list[Tag]:
+    """IFD0's tags of a raw CFA image: identity, the CFA, the levels and the colour (DNG 1.4)."""
+    return [
         long_tag(254, 0),  # NewSubfileType: the main (raw) image
         short_tag(262, _PHOTOMETRIC_CFA),
         ascii_tag(271, "msflash"),  # Make
@@ -149,24 +188,6 @@ def write_dng(
         rational_tag(50714, float(black_level)),  # BlackLevel
         long_tag(50717, round(white_level)),  # WhiteLevel
         srational_tag(50721, *matrix.ravel()),  # ColorMatrix1
-        rational_tag(50728, *neutral_values),  # AsShotNeutral
+        rational_tag(50728, *neutral),  # AsShotNeutral
         short_tag(50778, _D65),  # CalibrationIlluminant1
     ]
-    if description:
-        ifd0.append(ascii_tag(270, description))  # ImageDescription
-    exif = [undefined_tag(36864, EXIF_VERSION)]
-    if exposure_us is not None:
-        exif.append(rational_tag(33434, float(exposure_us) / 1e6))  # ExposureTime, s
-    if captured_at is not None:
-        stamp, subseconds, offset = exif_time(captured_at)
-        ifd0.append(ascii_tag(306, stamp))  # DateTime
-        exif += [
-            ascii_tag(36867, stamp),  # DateTimeOriginal
-            ascii_tag(36880, offset),  # OffsetTime (of DateTime)
-            ascii_tag(36881, offset),  # OffsetTimeOriginal
-            ascii_tag(37520, subseconds),  # SubSecTime
-            ascii_tag(37521, subseconds),  # SubSecTimeOriginal
-        ]
-    if iso_speed is not None:
-        exif += [short_tag(34855, round(iso_speed)), short_tag(34864, _SENSITIVITY_ISO_SPEED)]
-    return write_tiff(path, np.asarray(pixels, dtype=np.uint16), ifd0, exif)

@@ -84,38 +84,22 @@ def ome_document(
     """The OME model of :func:`write_ome_tiff`'s file (frames of ``shape`` and ``dtype``)."""
     samples = 3 if len(shape) == 3 else 1
     annotations = [_map_annotation("Annotation:image", notes)]
-    channels, ome_planes, blocks = [], [], []
     for index, plane in enumerate(planes):
-        light = lights[plane.light] if plane.light is not None else None
         annotations.append(_map_annotation(f"Annotation:{index}", plane.notes))
-        channels.append(
-            ome.Channel(
-                id=f"Channel:0:{index}",
-                name=plane.name,
-                samples_per_pixel=samples,
-                excitation_wavelength=light.peak_nm if light is not None else None,
-                excitation_wavelength_unit=ome.UnitsLength.NANOMETER,
-                light_source_settings=(
-                    ome.LightSourceSettings(id=f"LightSource:{plane.light}", wavelength=light.peak_nm)
-                    if light is not None
-                    else None
-                ),
-                detector_settings=ome.DetectorSettings(id=_DETECTOR, gain=plane.gain),
-                annotation_refs=[ome.AnnotationRef(id=f"Annotation:{index}")],
-            )
+    channels = [_channel(index, plane, lights, samples) for index, plane in enumerate(planes)]
+    ome_planes = [
+        ome.Plane(
+            the_c=index,
+            the_z=0,
+            the_t=0,
+            exposure_time=plane.exposure_us,
+            exposure_time_unit=ome.UnitsTime.MICROSECOND,
+            delta_t=plane.delta_t_s,
+            delta_t_unit=ome.UnitsTime.SECOND,
         )
-        ome_planes.append(
-            ome.Plane(
-                the_c=index,
-                the_z=0,
-                the_t=0,
-                exposure_time=plane.exposure_us,
-                exposure_time_unit=ome.UnitsTime.MICROSECOND,
-                delta_t=plane.delta_t_s,
-                delta_t_unit=ome.UnitsTime.SECOND,
-            )
-        )
-        blocks.append(ome.TiffData(ifd=index, first_c=index, first_z=0, first_t=0, plane_count=1))
+        for index, plane in enumerate(planes)
+    ]
+    blocks = [ome.TiffData(ifd=i, first_c=i, first_z=0, first_t=0, plane_count=1) for i in range(len(planes))]
     instrument = ome.Instrument(
         id="Instrument:0",
         detectors=[ome.Detector(id=_DETECTOR, model=camera_model)],
@@ -151,6 +135,25 @@ def ome_document(
         images=[image],
         instruments=[instrument],
         structured_annotations=ome.StructuredAnnotations(map_annotations=annotations),
+    )
+
+
+def _channel(index: int, plane: OmePlane, lights: SequenceOf[OmeLight], samples: int) -> ome.Channel:
+    """Plane ``index``'s channel: its name, the LED lighting it (wavelength, light source) and the detector's gain."""
+    light = lights[plane.light] if plane.light is not None else None
+    return ome.Channel(
+        id=f"Channel:0:{index}",
+        name=plane.name,
+        samples_per_pixel=samples,
+        excitation_wavelength=light.peak_nm if light is not None else None,
+        excitation_wavelength_unit=ome.UnitsLength.NANOMETER,
+        light_source_settings=(
+            ome.LightSourceSettings(id=f"LightSource:{plane.light}", wavelength=light.peak_nm)
+            if light is not None
+            else None
+        ),
+        detector_settings=ome.DetectorSettings(id=_DETECTOR, gain=plane.gain),
+        annotation_refs=[ome.AnnotationRef(id=f"Annotation:{index}")],
     )
 
 

@@ -57,7 +57,7 @@ from msflash.acquisition.progress import progress
 from msflash.acquisition.sequence.exr_metadata import exr_image
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
-from msflash.acquisition.session import analysis
+from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.acquisition.session.one_sequence import refuse_dark_ambient
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
@@ -234,7 +234,7 @@ def _write_dng(work: _Work, out: Path) -> None:
             "linear sRGB (as msflash's previews do)"
         )
     matrix = camera_matrix(responsivities)
-    leds = analysis.led_spectra_photons(sequence)
+    leds = sequence_spectra.led_spectra_photons(sequence)
     ambient = estimate.spectrum.values[:, 0]
     work.details["color_matrix_source"] = matrix.source
     if any(frame.captured_utc is None for frame in sequence.frames):

@@ -1,6 +1,6 @@
 """Write a sequence from a background thread so the capture loop never waits for the disk.
 
-:class:`AsyncSequenceWriter` wraps a :class:`~acquisition.sequence.format.SequenceWriter` (the
+:class:`AsyncSequenceWriter` wraps a :class:`~acquisition.sequence.writer.SequenceWriter` (the
 format and its crash-safety contract are unchanged: each frame file is written, then
 ``sequence.json`` replaced atomically, in capture order). :meth:`AsyncSequenceWriter.add_frame`
 only queues the frame and returns at once with the entry it *will* have; one writer thread
@@ -47,10 +47,10 @@ from msflash.acquisition.sequence.format import (
     FrameRole,
     Sequence,
     SequenceFrame,
-    SequenceWriter,
     utc_now_text,
 )
 from msflash.acquisition.sequence.image_files import image_suffix
+from msflash.acquisition.sequence.writer import SequenceWriter
 
 log = logging.getLogger(__name__)
 

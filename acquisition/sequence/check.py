@@ -36,10 +36,11 @@ from typing import Any, Literal
 
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.folder_claim import LOCK_FILE
-from msflash.acquisition.sequence.format import SEQUENCE_FILE, Sequence, read_sequence
+from msflash.acquisition.sequence.format import SEQUENCE_FILE, Sequence
 from msflash.acquisition.sequence.frame_binding import SelfDescription, binding_problem, describe_misbinding
 from msflash.acquisition.sequence.frame_digest import digest_problem, frame_state
 from msflash.acquisition.sequence.image_files import read_image, read_image_header
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.processing.user_files import shown_path
 
 FileState = Literal["intact", "mismatched", "changed", "truncated", "missing", "unreadable", "unverified", "undeclared"]

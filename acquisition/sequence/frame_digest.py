@@ -5,7 +5,6 @@ Public objects
 - :class:`FileDigest`: a file's SHA-256 (hex) and length in bytes, as ``frames[].sha256`` and
   ``frames[].file_bytes`` record them (docs/architecture.md §6).
 - :func:`digest_open_file`: the digest of a file already open (the writer's fsync pass).
-- :func:`file_digest`: the digest of a file by name.
 - :func:`frame_state`: ``intact``, ``changed``, ``truncated`` or ``missing`` for a file against its record.
 - :func:`digest_problem`: one line saying how a file differs from its record.
 - :func:`check_frame_digest`: refuse a frame whose file is no longer the one written.
@@ -70,18 +69,6 @@ def digest_open_file(stream: BinaryIO) -> FileDigest:
         digest.update(view[:size])
         total += size
     return FileDigest(digest.hexdigest(), total)
-
-
-def file_digest(path: str | os.PathLike) -> FileDigest:
-    """The digest of the file at ``path``.
-
-    Raises
-    ------
-    OSError
-        If the file cannot be opened or read.
-    """
-    with open(path, "rb") as stream:
-        return digest_open_file(stream)
 
 
 def frame_state(path: Path, recorded: FileDigest) -> tuple[FrameState, FileDigest | None]:

@@ -92,15 +92,7 @@ a white level declared for another bit depth (12-bit data in a 16-bit file?) or 
     """
     if pixels.size == 0:
         return
-    if np.issubdtype(pixels.dtype, np.integer) and white_level > np.iinfo(pixels.dtype).max:
-        # No value of the frame can reach it: saturation would never be seen, and the DNG and EXR
-        # exports would carry a level their fields cannot hold.
-        largest = np.iinfo(pixels.dtype).max
-        raise RecordingError(
-            f"{where}: camera.white_level {white_level:g} is above the largest value of this "
-            f"{pixels.dtype.itemsize * 8}-bit frame ({largest}); expected the white level of the frames' bit depth "
-            f"(at most {largest})"
-        )
+    _check_white_fits_dtype(pixels, white_level, where)
     low_bound = black_level - black_margin(black_level, white_level, gain)
     floating = np.issubdtype(pixels.dtype, np.floating)
     high_bound = white_level + (FLOAT_WHITE_RTOL * abs(white_level) if floating else 0.0)
@@ -124,17 +116,35 @@ a white level declared for another bit depth (12-bit data in a 16-bit file?) or 
         problems.append(
             f"{below} of {pixels.size} pixels below camera.black_level {black_level:g} by more than read noise allows"
         )
+    raise RecordingError(
+        f"{where}: {' and '.join(problems)} (values {_value(low)}…{_value(high)}); expected "
+        f"values in {low_bound:.4g}…{white_level:g} (black_level {black_level:g} minus a read-noise margin of "
+        f"{black_margin(black_level, white_level, gain):.4g}, up to white_level {white_level:g}): "
+        f"{_likely_causes(above > 0, below > 0)}"
+    )
+
+
+def _check_white_fits_dtype(pixels: np.ndarray, white_level: float, where: str) -> None:
+    """Refuse a white level no value of an integer frame can reach: saturation would never be seen, and the
+    DNG and EXR exports would carry a level their fields cannot hold."""
+    if np.issubdtype(pixels.dtype, np.integer) and white_level > np.iinfo(pixels.dtype).max:
+        largest = np.iinfo(pixels.dtype).max
+        raise RecordingError(
+            f"{where}: camera.white_level {white_level:g} is above the largest value of this "
+            f"{pixels.dtype.itemsize * 8}-bit frame ({largest}); expected the white level of the frames' bit depth "
+            f"(at most {largest})"
+        )
+
+
+def _likely_causes(above: bool, below: bool) -> str:
+    """What most likely made values above white or below black, the last a corrupt file."""
     causes = []
     if above:
         causes.append("a white level declared for another bit depth (12-bit data in a 16-bit file?)")
     if below:
         causes.append("a black level declared for another camera mode or bit depth")
     causes.append("a corrupt file")
-    raise RecordingError(
-        f"{where}: {' and '.join(problems)} (values {_value(low)}…{_value(high)}); expected "
-        f"values in {low_bound:.4g}…{white_level:g} (black_level {black_level:g} minus a read-noise margin of "
-        f"{black_margin(black_level, white_level, gain):.4g}, up to white_level {white_level:g}): {' or '.join(causes)}"
-    )
+    return " or ".join(causes)
 
 
 def _value(value: float) -> str:

@@ -346,29 +346,8 @@ def write_image_digest(
     """
     path = Path(path)
     data, type_name = _prepare_pixels(path, pixels)
-    attributes = dict(attributes or {})
-    description = _attribute_json(path, attributes)
     channels = 1 if data.ndim == 2 else 3
-    spec = oiio.ImageSpec(data.shape[1], data.shape[0], channels, type_name)
-    if attributes:
-        spec.attribute("ImageDescription", description)
-    if type_name == "uint16":
-        # Uncompressed: capture writes every frame as it arrives, and zip costs many times the write
-        # itself for a 2× size gain on real data (docs/architecture.md §10).
-        spec.attribute("compression", "none")
-        format_name = "tiff"
-    else:
-        spec.attribute("compression", "zip")  # EXR: derived float images, not on the capture path
-        format_name = "openexr"
-        for name, value in attributes.items():
-            _set_native_attribute(spec, name, value)
-        if chromaticities is not None:
-            if len(chromaticities) != 8:
-                raise RecordingError(
-                    f"{path}: {len(chromaticities)} chromaticities; expected 8 (x, y of R, G, B, white)"
-                )
-            spec.attribute("chromaticities", oiio.TypeDesc("float[8]"), tuple(float(v) for v in chromaticities))
-
+    spec, format_name = _image_spec(path, data, channels, type_name, dict(attributes or {}), chromaticities)
     path.parent.mkdir(parents=True, exist_ok=True)
     # The temporary name keeps the real suffix and starts with a dot, so a crash leaves an
     # obviously stray file that no sequence lists, never a truncated frame under the real name.
@@ -396,3 +375,30 @@ def write_image_digest(
             os.unlink(temporary)
         raise
     return digest
+
+
+def _image_spec(
+    path: Path,
+    data: np.ndarray,
+    channels: int,
+    type_name: str,
+    attributes: dict,
+    chromaticities: tuple[float, ...] | None,
+) -> tuple[oiio.ImageSpec, str]:
+    """The OpenImageIO spec of a frame file and its format: an uncompressed TIFF, or a zip EXR with its attributes."""
+    spec = oiio.ImageSpec(data.shape[1], data.shape[0], channels, type_name)
+    if attributes:
+        spec.attribute("ImageDescription", _attribute_json(path, attributes))
+    if type_name == "uint16":
+        # Uncompressed: capture writes every frame as it arrives, and zip costs many times the write
+        # itself for a 2× size gain on real data (docs/architecture.md §10).
+        spec.attribute("compression", "none")
+        return spec, "tiff"
+    spec.attribute("compression", "zip")  # EXR: derived float images, not on the capture path
+    for name, value in attributes.items():
+        _set_native_attribute(spec, name, value)
+    if chromaticities is not None:
+        if len(chromaticities) != 8:
+            raise RecordingError(f"{path}: {len(chromaticities)} chromaticities; expected 8 (x, y of R, G, B, white)")
+        spec.attribute("chromaticities", oiio.TypeDesc("float[8]"), tuple(float(v) for v in chromaticities))
+    return spec, "openexr"

@@ -7,18 +7,17 @@ spectra to the processing unit (photons) and converts results back to the sequen
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from collections.abc import Sequence as SequenceOf
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import Sequence, as_recorded
+from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import read_image_header
 from msflash.acquisition.sequence.memory_budget import check_decode
+from msflash.acquisition.sequence.writer import as_recorded
 from msflash.acquisition.session.estimate_stream import (
     SAMPLE_WEIGHTING,
     EstimateStream,
@@ -26,19 +25,21 @@ from msflash.acquisition.session.estimate_stream import (
     stack_layout,
     stream_sequence,
 )
-from msflash.processing import datasets
+from msflash.acquisition.session.sequence_spectra import (
+    camera_responsivities_photons,
+    led_spectra_photons,
+    spectrum_in_sequence_unit,
+    target_illuminant,
+)
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
 from msflash.processing.channel_statistics import plane_channels
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
 from msflash.processing.flicker import FlickerCheck, check_flicker, with_ambient_gains, with_fit
-from msflash.processing.local import DEFAULT_TILES, LocalEstimate, synthesize_local
 from msflash.processing.model_error import reference_for, with_model_error
-from msflash.processing.negative_values import clip_negative_noise
-from msflash.processing.spectra import Spectra
-from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import SynthesisStream, synthesize
-from msflash.processing.user_files import printable, shown_path
 
 
 @dataclass(frozen=True)
@@ -72,7 +73,7 @@ def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None =
         The sequence's frames already in memory, as the camera gave them, indexed like
         ``sequence.frames`` (frames after the last LED frame may be missing): a live run's or a
         replay's. They are taken as the reader would return them from the files
-        (:func:`~acquisition.sequence.format.as_recorded`). ``None`` reads the files.
+        (:func:`~acquisition.sequence.writer.as_recorded`). ``None`` reads the files.
 
     Raises
     ------
@@ -198,111 +199,6 @@ def block_factor(shape: tuple[int, ...], cfa: str | None, bin_factor: int = DEFA
     return max(bin_factor, 1)
 
 
-def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -> tuple[Sequence, list[str]]:
-    """The sequence with LED spectra and/or responsivities taken from a calibration, and what changed.
-
-    ``directory`` is a ``msflash calibrate`` output; without it, the sequence's own
-    ``"calibration": {"file": …}`` reference is used if present (relative to the sequence
-    directory). LEDs are matched by name; spectra are resampled onto the sequence's grid and
-    converted to its unit. Without either, the sequence is returned unchanged. A note says so
-    when the calibration's id is not the one the sequence recorded (re-calibrated since).
-
-    Raises
-    ------
-    RecordingError
-        If the calibration cannot be read or lacks one of the sequence's LEDs.
-    """
-
-    from msflash.calibration.errors import CalibrationError
-    from msflash.calibration.files import load_calibration
-
-    if directory is None:
-        reference = sequence.extra.get("calibration")
-        if not isinstance(reference, dict) or not reference.get("file"):
-            return sequence, []
-        directory = sequence.directory / str(reference["file"])
-    try:
-        calibration = load_calibration(directory)
-    except CalibrationError as err:
-        raise RecordingError(str(err)) from err
-    notes: list[str] = list(calibration.notes)  # negative noise clipped on reading
-    reference = sequence.extra.get("calibration")
-    recorded_id = reference.get("id") if isinstance(reference, dict) else None
-    if recorded_id and recorded_id != calibration.id:
-        notes.append(
-            f"the sequence was captured with calibration {recorded_id}; {directory} now holds "
-            f"{calibration.id}, which is used"
-        )
-    grid = sequence.grid
-    leds = sequence.leds
-    if calibration.led_spectra is not None:
-        _require_coverage(
-            directory, calibration.id, "LED spectra", calibration.led_spectra.wavelengths_nm, sequence.led_spectra()
-        )
-        spectra = calibration.led_spectra.resample(grid, outside="zero").to_unit(sequence.spectral_unit)
-        missing = [led.name for led in leds if led.name not in spectra.names]
-        if missing:
-            raise RecordingError(
-                f"{directory}: calibration {calibration.id} has no LED named {', '.join(missing)}; "
-                f"expected the sequence's LEDs ({', '.join(led.name for led in leds)})"
-            )
-        leds = tuple(replace(led, spd=spectra.column(led.name)) for led in leds)
-        notes.append(f"LED spectra from calibration {calibration.id} ({directory}) replace the sequence's")
-    camera = sequence.camera
-    if calibration.camera_responsivities is not None:
-        lights = replace(sequence, leds=leds).led_spectra()  # the LEDs the responsivities will meet
-        _require_coverage(
-            directory, calibration.id, "camera responsivities", calibration.camera_responsivities.wavelengths_nm, lights
-        )
-        curves = calibration.camera_responsivities.resample(grid, outside="zero").to_unit(sequence.spectral_unit)
-        camera = replace(camera, responsivity={name: curves.column(name) for name in curves.names})
-        notes.append(f"camera responsivities from calibration {calibration.id} ({directory}) replace the sequence's")
-    return replace(sequence, leds=leds, camera=camera), notes
-
-
-COVERAGE_TOLERANCE = 0.01
-"""Largest share of the LEDs' energy a calibration's wavelength range may leave out."""
-
-
-def _shares_outside(values: np.ndarray, covered: np.ndarray, empty: float = 0.0) -> np.ndarray:
-    """Each column's share of its absolute sum on the wavelengths outside ``covered`` (``empty`` for a zero column)."""
-    energy = np.abs(values)
-    totals = energy.sum(axis=0)
-    return np.divide(energy[~covered].sum(axis=0), totals, out=np.full_like(totals, empty), where=totals > 0)
-
-
-def _require_coverage(
-    directory: str | Path, calibration_id: str, what: str, calibrated_nm: np.ndarray, leds: Spectra
-) -> None:
-    """Refuse a calibration whose range misses more than 1 % of an LED's energy (it would be zero-filled there)."""
-    low, high = float(calibrated_nm[0]), float(calibrated_nm[-1])
-    wavelengths = leds.wavelengths_nm
-    shares = _shares_outside(leds.values, (wavelengths >= low - 1e-9) & (wavelengths <= high + 1e-9))
-    worst = int(np.argmax(shares)) if shares.size else 0
-    if shares.size and shares[worst] > COVERAGE_TOLERANCE:
-        raise RecordingError(
-            f"{directory}: calibration {calibration_id} has {what} from {low:g} to {high:g} nm, but LED "
-            f"'{leds.names[worst]}' puts {100 * shares[worst]:.0f} % of its light outside that range; expected a "
-            f"calibration covering the sequence's LEDs ({float(wavelengths[0]):g}–{float(wavelengths[-1]):g} nm)"
-        )
-
-
-def led_spectra_photons(sequence: Sequence) -> Spectra:
-    """The sequence's LED spectra in photons (the processing unit)."""
-    return sequence.led_spectra().to_unit("photons")
-
-
-def camera_responsivities_photons(sequence: Sequence) -> Spectra:
-    """The sequence's camera responsivities in photons; a clear error if the sequence has none."""
-    responsivities = sequence.camera_responsivities()
-    if responsivities is None:
-        raise RecordingError(
-            f"{sequence.path}: camera.responsivity is missing; the flash solvers need the camera's "
-            "spectral responsivities (add them, or calibrate the camera)"
-        )
-    return responsivities.to_unit("photons")
-
-
 def estimate_sequence(
     sequence: Sequence,
     method: str = "tikhonov",
@@ -327,14 +223,21 @@ def estimate_from_statistics(
     """The ambient estimate of a sequence's statistics (eq. 4–6) with the LED model's band: the one place
     every route (from disk, live, replay) estimates. ``model``: one prepared for the sequence's LEDs (a
     live session prepares it before the first frame), else made here."""
-    check = flicker_check(sequence, statistics)
-    if check.corrected and check.applied_offsets is not None:
-        statistics = with_ambient_gains(statistics, check.applied_offsets)
+    statistics, check = flicker_corrected(sequence, statistics)
     if model is None:
         estimate = estimate_ambient(statistics, led_spectra_photons(sequence), method, alpha)
     else:
         estimate = model.estimate(statistics, method, alpha)
     return replace(with_model_band(estimate, sequence), flicker=check)
+
+
+def flicker_corrected(sequence: Sequence, statistics: SequenceStatistics) -> tuple[SequenceStatistics, FlickerCheck]:
+    """The statistics with each LED frame's ambient gain taken out where flicker is detected, and the check
+    (:func:`flicker_check`): what every estimate of a sequence, and a live flash decision, is made from."""
+    check = flicker_check(sequence, statistics)
+    if check.corrected and check.applied_offsets is not None:
+        statistics = with_ambient_gains(statistics, check.applied_offsets)
+    return statistics, check
 
 
 def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> FlickerCheck:
@@ -343,7 +246,6 @@ def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> Flicker
     responsivities = sequence.camera_responsivities()
     channels_of = plane_channels(sequence.camera.cfa) if statistics.channels is not None else None
     stack = [i for i, e in enumerate(sequence.frames) if e.role == "led"]
-    ambient = next((i for i, e in enumerate(sequence.frames) if e.role == "ambient"), None)
     levels = np.array([sequence.frames[i].led_levels for i in stack], dtype=float)
     if not stack or levels.shape[1] != statistics.n_leds:  # a header written so far (a live capture): one LED a frame
         levels = np.eye(statistics.n_leds)
@@ -354,9 +256,17 @@ def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> Flicker
         channels_of,
         levels,
     )
+    return with_mains_fit(check, sequence)
+
+
+def with_mains_fit(check: FlickerCheck, sequence: Sequence) -> FlickerCheck:
+    """``check`` with the mains fitted to its frame gains at the frames' timestamps, where ``sequence`` records them
+    (a capture's estimate is made from a header without frames: the run fits again on the sequence it wrote)."""
+    stack = [i for i, e in enumerate(sequence.frames) if e.role == "led"]
+    ambient = next((i for i, e in enumerate(sequence.frames) if e.role == "ambient"), None)
     order = [] if ambient is None else [ambient, *stack]
     stamps = [sequence.frames[i].extra.get("timestamp_ns") for i in order]
-    if order and all(isinstance(v, int | float) for v in stamps):
+    if order and all(isinstance(v, int | float) and not isinstance(v, bool) for v in stamps):
         check = with_fit(
             check,
             np.array(stamps, dtype=float) * 1e-9,
@@ -373,11 +283,6 @@ def with_model_band(estimate: AmbientEstimate, sequence: Sequence) -> AmbientEst
     return with_model_error(
         estimate, reference_for(led_spectra_photons(sequence), camera_responsivities_photons(sequence))
     )
-
-
-def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarray:
-    """A processing spectrum (photons) in the sequence's spectral unit, shape (n_wavelengths,)."""
-    return spectrum.to_unit(sequence.spectral_unit).values[:, 0]
 
 
 def estimate_payload(sequence: Sequence, estimate: AmbientEstimate) -> dict:
@@ -415,69 +320,6 @@ def estimate_payload(sequence: Sequence, estimate: AmbientEstimate) -> dict:
         "flicker": None if estimate.flicker is None else estimate.flicker.to_dict(),
         "complete": sequence.complete,
     }
-
-
-def target_illuminant(target: str, sequence: Sequence) -> Spectra:
-    """The complementary target ``i_d`` in photons on the sequence's grid: a name or a CSV file.
-
-    Names are those of :func:`processing.datasets.illuminant` (D65, A, FL2, …); a file is a
-    two-column CSV ``wavelength_nm, value`` in energy units.
-    """
-    path = Path(target)
-    if path.suffix.lower() in (".csv", ".txt") or os.path.lexists(path):
-        if not os.path.lexists(path):
-            raise RecordingError(f"{target}: target illuminant file not found; expected a CSV file or a name like D65")
-        spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
-        shown = shown_path(path)
-        if spectra.count != 1:  # its first column was taken: another file's numbers, silently
-            raise RecordingError(
-                f"--target {shown}: {spectra.count} spectra ({printable(', '.join(spectra.names))[:120]}); expected one "
-                "target illuminant (wavelength_nm, value) — an exported spectra.csv holds several: keep the column meant"
-            )
-        # Negative noise clipped to 0 as every measured spectrum's is; beyond it, and no light at all, refused.
-        values, _ = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, f"--target {shown}")
-        if not values.max() > 0:
-            raise RecordingError(f"--target {shown}: no light; expected a spectrum with some positive values")
-        spectra = spectra.replace(values=values)
-        try:
-            resampled = spectra.resample(sequence.grid, outside="error")
-        except SpectralDataError as err:
-            resampled = spectra.resample(sequence.grid, outside="zero")
-            inside = (sequence.wavelengths_nm >= spectra.wavelengths_nm[0]) & (
-                sequence.wavelengths_nm <= spectra.wavelengths_nm[-1]
-            )
-            _require_camera_coverage(sequence, inside, f"target illuminant {target}", err)
-    else:
-        try:
-            resampled = datasets.illuminant(target, sequence.grid)
-        except SpectralDataError as err:
-            # A table narrower than the sequence's grid (e.g. FL2's 380–780 nm on 360–830 nm): zero beyond
-            # it is harmless only where the camera sees (almost) nothing.
-            resampled = datasets.illuminant(target, sequence.grid, outside="zero")
-            _require_camera_coverage(
-                sequence, resampled.values[:, 0] > 0, f"target illuminant '{target}'", err, " (give --target FILE.csv)"
-            )
-    return resampled.to_unit("photons")
-
-
-def _require_camera_coverage(
-    sequence: Sequence, covered: np.ndarray, what: str, cause: Exception, hint: str = ""
-) -> None:
-    """Refuse zero beyond ``covered`` if the camera puts more than COVERAGE_TOLERANCE of its response there."""
-    curves = sequence.camera.responsivity
-    if curves is None:
-        raise RecordingError(f"{what}: {cause}") from cause
-    response = np.abs(np.stack([np.asarray(curve, dtype=float) for curve in curves.values()], axis=1))
-    share = float(_shares_outside(response.sum(axis=1, keepdims=True), covered, empty=1.0)[0])
-    if share > COVERAGE_TOLERANCE:
-        grid = sequence.wavelengths_nm
-        known = grid[covered] if covered.any() else grid[:0]
-        span = f"{float(known[0]):g}–{float(known[-1]):g} nm" if known.size else "none"
-        raise RecordingError(
-            f"{what}: its data cover {span} of the sequence's {float(grid[0]):g}–{float(grid[-1]):g} nm, and the "
-            f"camera puts {100 * share:.1f} % of its response outside that; expected a target covering the camera's "
-            f"range{hint}"
-        ) from cause
 
 
 def solve_sequence_flash(
@@ -543,141 +385,3 @@ def synthesize_sequence(
     assert summed is not None
     image, saturated = summed.result()
     return image, saturated, layout
-
-
-def estimate_sequence_local(
-    sequence: Sequence,
-    method: str = "auto",
-    solver: str = "tikhonov",
-    alpha: float | str = "auto",
-    tiles: int = DEFAULT_TILES,
-    bin_factor: int = DEFAULT_BIN_FACTOR,
-    stream: EstimateStream | None = None,
-) -> LocalEstimate:
-    """Estimate the ambient of a sequence globally or per tile (``method`` auto|global|local, issue 9).
-
-    The global estimate is :func:`estimate_sequence`'s, from the whole frame's statistics, whatever
-    the model chosen: every command reporting a sequence's ambient (``estimate``, ``flash``, ``run``,
-    ``export``, ``evaluate``, the live view) gives the same global numbers, bit for bit. The tiles'
-    statistics serve the model selection and the local model only. Both are accumulated in one pass
-    over the frames, read from disk one at a time (or ``stream``, made with ``tiles``, already fed).
-    """
-    stream = stream or stream_sequence(sequence, bin_factor, tiles)
-    return stream.local(method, solver, alpha)
-
-
-def local_estimate_payload(sequence: Sequence, local: LocalEstimate) -> dict:
-    """The ``msflash estimate --method … --json`` object: docs/architecture.md §7 keys plus the model and the tiles.
-
-    ``spectrum`` and ``ambient_weights`` are the global estimate for the global model and the
-    area-weighted mean over the tiles for the local one; the tiles are under ``tiles``.
-    """
-    payload = estimate_payload(sequence, local.global_estimate)
-    unit = sequence.spectral_unit
-    grid_spectra = local.global_estimate.spectrum
-
-    def to_unit(values: np.ndarray) -> np.ndarray:
-        flat = values.reshape(-1, values.shape[-1]).T
-        converted = grid_spectra.replace(values=flat, names=tuple(f"t{i}" for i in range(flat.shape[1])))
-        return converted.to_unit(unit).values.T.reshape(values.shape)
-
-    payload["method"] = local.model
-    payload["method_requested"] = local.method
-    payload["model_selection"] = (
-        None
-        if local.selection is None
-        else {
-            "chosen": local.selection.model,
-            "scores": local.selection.scores,
-            "margin": local.selection.margin,
-            "best_local_smoothing_tiles": local.selection.best_local,
-            "explained_gain": local.selection.explained_gain,
-            "min_explained_gain": local.selection.min_explained_gain,
-            "criterion": "leave-one-tile-out prediction error relative to the global model's, and its cut relative "
-            "to the ambient image's energy",
-        }
-    )
-    payload["warnings"] = payload["warnings"] + list(local.warnings)
-    if local.model == "local":
-        payload["spectrum"] = to_unit(local.mean_spectrum)
-        payload["ambient_weights"] = local.mean_weights
-        payload["spectrum_global"] = to_unit(local.global_estimate.spectrum.values[:, 0])
-        payload["ambient_weights_global"] = local.global_estimate.ambient_weights
-        payload["tiles"] = {
-            "grid": list(local.tiles.shape),
-            "row_edges": local.tiles.row_edges,
-            "column_edges": local.tiles.column_edges,
-            "smoothing_tiles": local.smoothing,
-            "ambient_weights": local.tile_weights,
-            "spectra": to_unit(local.tile_spectra),
-            "relative_residual": local.tile_residuals,
-            "n_samples": local.tile_samples,
-        }
-    return payload
-
-
-def solve_sequence_flash_local(
-    sequence: Sequence, mode: str, local: LocalEstimate, target: str = "D65", bounds: FlashBounds = "physical"
-) -> tuple[FlashSolution, np.ndarray, list[FlashSolution]]:
-    """Per-tile flash solutions for a local estimate.
-
-    Returns
-    -------
-    tuple
-        ``(mean, tile_flash_weights, tile_solutions)``: the solution for the area-weighted mean
-        ambient weights with the area-weighted mean flash weights (within the bounds, as a mean of
-        weights that are), the (ty, tx, k) per-tile weights and the per-tile solutions.
-    """
-    if local.model == "global":
-        solution = solve_sequence_flash(sequence, mode, local.global_estimate.ambient_weights, target, bounds)
-        weights = np.broadcast_to(solution.flash_weights, local.tiles.shape + (solution.flash_weights.size,)).copy()
-        return solution, weights, [solution]
-    solutions = [
-        solve_sequence_flash(sequence, mode, local.tile_weights[index], target, bounds)
-        for index in np.ndindex(local.tiles.shape)
-    ]
-    weights = np.array([solution.flash_weights for solution in solutions]).reshape(local.tiles.shape + (-1,))
-    areas = local.tiles.areas
-    mean_weights = np.einsum("ts,tsk->k", areas, weights) / areas.sum()
-    mean_solution = solve_sequence_flash(sequence, mode, local.mean_weights, target, bounds)
-    mean = FlashSolution(
-        mode=mean_solution.mode,
-        ambient_weights=local.mean_weights,
-        flash_weights=mean_weights,
-        scale=mean_solution.scale,
-        relative_error=max(s.relative_error for s in solutions),
-        bounds=bounds,
-        target_reached=all(s.target_reached for s in solutions),
-        warnings=tuple(dict.fromkeys(w for s in solutions for w in s.warnings)),
-    )
-    return mean, weights, solutions
-
-
-def local_flash_payload(
-    sequence: Sequence, solution: FlashSolution, local: LocalEstimate, tile_weights: np.ndarray, target: str | None
-) -> dict:
-    """The ``msflash flash --method local|auto --json`` object: :func:`flash_payload` with the model used and,
-    for a local model, its tiles and their ambient and flash weights (docs/architecture.md §7)."""
-    payload = flash_payload(sequence, solution, target)
-    payload["estimate_warnings"] = list(local.global_estimate.warnings) + list(local.warnings)
-    payload["method"] = local.model
-    payload["method_requested"] = local.method
-    if local.model == "local":
-        payload["tiles"] = {
-            "grid": list(local.tiles.shape),
-            "row_edges": local.tiles.row_edges,
-            "column_edges": local.tiles.column_edges,
-            "smoothing_tiles": local.smoothing,
-            "ambient_weights": local.tile_weights,
-            "flash_weights": tile_weights,
-        }
-    return payload
-
-
-def synthesize_sequence_local(
-    sequence: Sequence, tile_flash_weights: np.ndarray, local: LocalEstimate, stack: FrameStack | None = None
-) -> tuple[np.ndarray, np.ndarray, FrameStack]:
-    """The spatially varying computational flash image (per-tile weights blended between tile centres)."""
-    stack = stack or load_frame_stack(sequence)
-    image, saturated = synthesize_local(stack.ambient, stack.led_frames, stack.spec, tile_flash_weights, local.tiles)
-    return image, saturated, stack

@@ -9,6 +9,10 @@ against saturation, so it is not lengthened beyond that), never shorter than one
 period stays as planned and is named in a warning (the estimate then reads each frame's ambient gain,
 :mod:`processing.flicker`).
 
+The flash re-capture's exposure, predicted from the frames once the LED frames are in, is rounded the same way
+(:func:`flash_whole_periods`, from :func:`acquisition.session.run_exposure.flash_exposure_for`), or named in a
+:class:`FlashFlickerWarning` where no whole number of periods fits.
+
 ``--anti-flicker auto`` does not know the supply: it takes whole periods of both (multiples of 50 ms, five 100 Hz
 periods and six 120 Hz ones), so it helps only exposures of 50 ms and more.
 """
@@ -18,7 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from msflash.acquisition.session.exposure import ExposurePlan
+from msflash.acquisition.session.exposure import ExposurePlan, FlashEnergyWarning
 
 ANTI_FLICKER_CHOICES = ("off", "50", "60", "auto")
 """``--anti-flicker``: the mains frequency in Hz, ``auto`` (whole periods of both), or ``off`` (the default)."""
@@ -80,3 +84,41 @@ def with_anti_flicker(plan: ExposurePlan, choice: str) -> ExposurePlan:
             "ambient gain; docs/flicker.md)"
         )
     return replace(plan, ambient_exposure_us=ambient, led_exposures_us=leds, warnings=warnings)
+
+
+class FlashFlickerWarning(FlashEnergyWarning):
+    """The flash frame's exposure is not a whole number of flicker periods (``--anti-flicker`` on): its ambient share
+    may differ from the frames' the flash was computed from."""
+
+
+def flash_whole_periods(exposure_us: float, plan: ExposurePlan) -> tuple[float, str | None]:
+    """The flash frame's predicted exposure as a whole number of flicker periods (:func:`whole_periods`, within the
+    camera's range), or as it is with a warning naming it when no whole number fits; as it is, silently, when
+    ``--anti-flicker`` is off.
+
+    >>> from msflash.acquisition.session.exposure import ExposurePolicy
+    >>> policy = ExposurePolicy(anti_flicker="50")
+    >>> plan = ExposurePlan(20_000.0, (20_000.0,), (float("nan"),), "fixed", (10.0, 1e6), policy)
+    >>> flash_whole_periods(31_000.0, plan)
+    (30000.0, None)
+    >>> flash_whole_periods(4_000.0, plan)[1][:56]
+    'flash exposure 4000 µs: shorter than one flicker period '
+    """
+    choice = plan.policy.anti_flicker
+    period = flicker_period_us(choice)
+    if period is None:
+        return exposure_us, None
+    whole = whole_periods(exposure_us, period)
+    low, high = plan.exposure_range_us
+    if whole is not None and low <= whole <= high:
+        return whole, None
+    why = (
+        "shorter than one flicker period"
+        if whole is None
+        else "no whole number of flicker periods in the camera's range"
+    )
+    return exposure_us, (
+        f"flash exposure {exposure_us:.0f} µs: {why} ({period / 1000:.2f} ms, --anti-flicker {choice}), so the flash "
+        "frame may see a flickering lamp at another strength than the frames its mix was computed from "
+        "(docs/flicker.md); a longer exposure (less flash power) would allow whole periods"
+    )

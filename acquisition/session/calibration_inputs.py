@@ -29,7 +29,6 @@ from msflash.acquisition.session.chart_layout import (
     ChartReference,
     SequenceLayout,
     chart_reference,
-    chart_reference_grid,
     check_layout,
     sequence_layout,
 )
@@ -39,7 +38,6 @@ from msflash.calibration.camera_response import (
     learn_prior,
     responsivity_rmse,
 )
-from msflash.calibration.chart_noise import NOISE_WARNING, chart_noise, noise_summary
 from msflash.calibration.chart_sequence import (
     ChartMeasurements,
     estimate_from_measurements,
@@ -149,7 +147,7 @@ def measured_leds(
     return MeasuredLeds(spectra, tuple(characterisations), section)
 
 
-def _white_reflectance(path: str, grid: Any) -> Spectra:
+def read_white_reflectance(path: str, grid: Any) -> Spectra:
     """``--white-reflectance``: one reflectance (factors 0–1.5, as ``--chart``'s), covering the grid.
 
     A file of several columns is refused (its first was taken, silently), and so is a table in percent.
@@ -224,7 +222,7 @@ def led_power_through_camera(
     responses = white_led_responses(white, roi)
     for warning in responses.warnings:
         report(f"warning: {warning}")
-    reflectance = _white_reflectance(white_reflectance, shapes.grid) if white_reflectance else None
+    reflectance = read_white_reflectance(white_reflectance, shapes.grid) if white_reflectance else None
     peaks = shapes.values.max(axis=0)
     if not np.all(peaks > 0):
         raise UsageError(
@@ -334,39 +332,18 @@ def camera_from_chart_sequences(
         ``quadratic`` (default): the light across the chart is fitted, a smooth gain per frame
         (lens falloff, an LED's spot); ``flat``: every patch equally lit.
     """
-    if not isinstance(chart, ChartReference):
-        if chart != "macbeth":
-            raise UsageError(
-                f"--chart {chart}: recorded sequences need the chart's reflectances; expected --chart macbeth or a CSV"
-            )
-        chart = chart_reference("macbeth")
-    if not sequences:
-        raise UsageError("calibrate camera: expected at least one chart sequence (--sequence SEQ…)")
-    if light_specs and len(light_specs) != len(sequences):
-        raise UsageError(
-            f"--light given {len(light_specs)} times for {len(sequences)} sequences; expected one per "
-            "sequence, in order (NAME, CSV file, or 'none' for an unknown ambient)"
-        )
+    chart = _recorded_chart(chart)
+    lights = _chart_lights(sequences, light_specs)
     grid = sequences[0].grid
-    lights = [
-        None if spec is None or spec.lower() == "none" else resolve_light(spec, grid)
-        for spec in (light_specs or [None] * len(sequences))
-    ]
     reflectances = chart.on(grid)
     cameras = {name: s.resample(grid, outside="zero") for name, s in datasets.paper_cameras().items()}
     unknown = [name for name in prior_exclude if name not in cameras]
     if unknown:
         raise UsageError(f"--prior-exclude {unknown}: not among the 34 paper cameras; expected names like NikonD100")
-
     # Each sequence its own layout: the chart may move between them.
     layouts = [sequence_layout(s, chart, patch_px, border_px, margin_px) for s in sequences]
-    for sequence, layout in zip(sequences, layouts, strict=True):  # the layout must fit before anything is estimated
-        index = sequence.indices("ambient")[0] if sequence.indices("ambient") else 0
-        raw = sequence.load_frame(index).astype(np.float64)
-        layout_map = layout.build(raw.shape[:2])
-        check_layout(raw, layout_map, sequence.camera.cfa)
-        if layout.report["detected"]:
-            report(f"{sequence.directory}: {layout_map.description}")
+    for sequence, layout in zip(sequences, layouts, strict=True):
+        _check_layout_fits(sequence, layout, report)
     labels_for = [lambda shape, excluded, layout=layout: layout.build(shape, excluded).labels for layout in layouts]
     positions = [layout.patch_positions(chart.reflectances.count, chart.rows) for layout in layouts]
     measurements = sequence_measurements(list(sequences), lights, reflectances, labels_for, positions)
@@ -399,6 +376,43 @@ def camera_from_chart_sequences(
         chart.name,
         result.light_field,
     )
+
+
+def _recorded_chart(chart: ChartName | ChartReference) -> ChartReference:
+    """The chart's reference data for recorded sequences: a :class:`ChartReference`, or the shipped Macbeth."""
+    if isinstance(chart, ChartReference):
+        return chart
+    if chart != "macbeth":
+        raise UsageError(
+            f"--chart {chart}: recorded sequences need the chart's reflectances; expected --chart macbeth or a CSV"
+        )
+    return chart_reference("macbeth")
+
+
+def _chart_lights(sequences: SequenceOf[Sequence], light_specs: SequenceOf[str | None]) -> list[Spectra | None]:
+    """Each sequence's known broadband light on the first sequence's grid (None: unknown), checked one per sequence."""
+    if not sequences:
+        raise UsageError("calibrate camera: expected at least one chart sequence (--sequence SEQ…)")
+    if light_specs and len(light_specs) != len(sequences):
+        raise UsageError(
+            f"--light given {len(light_specs)} times for {len(sequences)} sequences; expected one per "
+            "sequence, in order (NAME, CSV file, or 'none' for an unknown ambient)"
+        )
+    grid = sequences[0].grid
+    return [
+        None if spec is None or spec.lower() == "none" else resolve_light(spec, grid)
+        for spec in (light_specs or [None] * len(sequences))
+    ]
+
+
+def _check_layout_fits(sequence: Sequence, layout: SequenceLayout, report: Report) -> None:
+    """Refuse a layout that does not fit the sequence's ambient frame, before anything is estimated."""
+    index = sequence.indices("ambient")[0] if sequence.indices("ambient") else 0
+    raw = sequence.load_frame(index).astype(np.float64)
+    layout_map = layout.build(raw.shape[:2])
+    check_layout(raw, layout_map, sequence.camera.cfa)
+    if layout.report["detected"]:
+        report(f"{sequence.directory}: {layout_map.description}")
 
 
 @dataclass(frozen=True)
@@ -460,109 +474,6 @@ def simulated_camera_calibration(
     return SimulatedCameraCalibration(
         estimate, lights, responsivity_rmse(estimate.responsivities, truth), camera_name, chart_name
     )
-
-
-# -- chart reflectances ---------------------------------------------------------------------------
-MIN_WHITE_SHARE = 0.02
-"""A chart's reflectance is measured where the white reference reads at least this share of its peak."""
-
-
-def chart_from_exports(
-    files: SequenceOf[str | Path],
-    white: str | Path,
-    white_reflectance: str | None = None,
-    options: ExportOptions | None = None,
-    grid_spec: str | None = None,
-    report: Report = progress,
-) -> tuple[Spectra, dict[str, Any]]:
-    """A chart's reflectances from spectrometer exports: each patch over a white reference.
-
-    ``ρ_p(λ) = (s_p(λ) − dark) / (s_white(λ) − dark) · ρ_white(λ)``, each export's baseline removed
-    and its counts per second taken as for LEDs (:func:`msflash.calibration.led_exports.read_led_exports`:
-    each export takes the dark of its integration time, a dark of another time is scaled where an
-    out-of-band tail allows, none without ``--no-dark`` refused), so the spectrometer's response
-    cancels. Exports in chart order (column by column, as the Macbeth file).
-
-    The camera fit takes the chart as exact: the reflectances' noise is estimated
-    (:mod:`msflash.calibration.chart_noise`), recorded as ``noise`` and warned about above
-    ``NOISE_WARNING``.
-
-    Returns
-    -------
-    The reflectances on :data:`DEFAULT_GRID` (one column per patch, named after the files) and the
-    calibration's ``chart`` section.
-
-    Raises
-    ------
-    UsageError, CalibrationError
-        One line naming the file: what the export reader refuses, a white that does not cover the
-        grid, reflectances far outside 0–1.5 (a patch brighter than the white: the wrong file?).
-    """
-    options = options or ExportOptions()
-    patches = read_led_exports(files, DEFAULT_GRID, options, report, relative=True)
-    reference = read_led_exports([white], DEFAULT_GRID, options, report, relative=True)
-    if patches.unit != reference.unit:
-        raise UsageError(
-            f"--white {white}: {reference.unit} but the patches are {patches.unit}; expected one instrument and unit"
-        )
-    if patches.section["counts_per_second"] != reference.section["counts_per_second"]:
-        stated, unstated = (files[0], white) if patches.section["counts_per_second"] else (white, files[0])
-        raise UsageError(
-            f"{unstated}: states no integration time but {stated} does; expected both (a header line or "
-            "--integration-time-ms), so that the patches and the white are compared per second"
-        )
-    white_values = reference.spectra.values[:, 0]
-    usable = white_values > MIN_WHITE_SHARE * float(white_values.max())
-    if not np.all(usable):
-        missing = DEFAULT_GRID.wavelengths_nm[~usable]
-        raise UsageError(
-            f"--white {white}: reads below {100 * MIN_WHITE_SHARE:g} % of its peak at {missing[0]:g}–{missing[-1]:g} nm; "
-            f"expected a white reference lit over {DEFAULT_GRID} (a broadband lamp)"
-        )
-    factor = (
-        _white_reflectance(white_reflectance, DEFAULT_GRID).values[:, 0]
-        if white_reflectance
-        else np.ones(DEFAULT_GRID.size)
-    )
-    reflectances = patches.spectra.values / white_values[:, None] * factor[:, None]
-    worst = float(reflectances.max())
-    if worst > 1.5:
-        p = int(np.argmax(reflectances.max(axis=0)))
-        raise UsageError(
-            f"{files[p]}: reflects {worst:.3g} × the white {white}; expected a chart patch darker than the white "
-            "reference (same light, same geometry)"
-        )
-    names = tuple(Path(f).stem for f in files)
-    spectra = Spectra(
-        DEFAULT_GRID,
-        np.clip(reflectances, 0.0, None),
-        names,
-        kind="reflectance",
-        unit="none",
-        source=f"measured: {len(files)} exports over the white {white}",
-    )
-    rows, columns = chart_reference_grid(len(files), grid_spec)
-    noise = noise_summary(
-        chart_noise(patches.measurements, reference.measurements[0], DEFAULT_GRID), names, DEFAULT_GRID
-    )
-    if noise is not None and noise["relative_rms"] > NOISE_WARNING:
-        report(
-            f"warning: the measured reflectances carry {100 * noise['relative_rms']:.2g} % noise (RMS; worst "
-            f"{noise['worst_patch']}, {100 * noise['worst_value']:.2g} % at {noise['worst_nm']:g} nm); the camera fit "
-            f"takes them as exact (above {100 * NOISE_WARNING:g} % it cost accuracy in tests): average more scans, or "
-            "lengthen the integration time of the dark patches (a dark export per time, --dark)"
-        )
-    section = {
-        "sources": [str(f) for f in files],
-        "white": str(white),
-        "white_reflectance": white_reflectance,
-        "rows": rows,
-        "columns": columns,
-        "acquisition": patches.section["acquisition"],
-        "baselines": patches.section["baselines"],
-        "noise": noise,
-    }
-    return spectra, section
 
 
 # -- dark and linearity --------------------------------------------------------------------------

@@ -36,7 +36,8 @@ from msflash.acquisition.devices.camera import Camera, RawFrame
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter
+from msflash.acquisition.sequence.format import SequenceFrame
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session.booth_guard import (
     READOUT_US,
     TRIGGER_PULSE_US,

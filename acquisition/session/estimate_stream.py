@@ -3,7 +3,7 @@
 Whatever feeds the frames — a capture's runner (:meth:`EstimateStream.frame_ready`, a frame handler of
 :mod:`acquisition.session.engine`), a sequence read from disk (:func:`stream_sequence`, one frame decoded
 at a time), a replay — they reach the estimate the same way: each frame's block sums, saturated blocks
-and products with the frames before it go into :class:`processing.statistics.BlockRows` (incremental)
+and products with the frames before it go into :class:`processing.block_rows.BlockRows` (incremental)
 as it arrives, and the frame is then let go. The statistics those rows give *are* the reported
 estimate: a live run reports the statistics it decided its flash from, and ``msflash estimate SEQ``
 on the sequence it wrote feeds the same frames in the same order to the same accumulator, so both give
@@ -31,19 +31,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import Sequence, mono_as_rgb
+from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.sequence.writer import mono_as_rgb
 from msflash.acquisition.session.engine import CaptureResult, FrameEvent
 from msflash.processing import frame_kernels
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
+from msflash.processing.block_rows import BlockRows
+from msflash.processing.block_sums import plane_shape
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.flicker import corrected_tiles
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, TileBlocks, estimate_local
-from msflash.processing.statistics import (
-    BlockRows,
-    FrameStackSpec,
-    SequenceStatistics,
-    accumulate_statistics,
-    plane_shape,
-)
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 
 USED_ROLES = ("ambient", "led")
 """The roles the estimate reads: the first ``ambient`` frame and every ``led`` frame."""
@@ -311,7 +310,7 @@ class EstimateStream:
     ) -> LocalEstimate:
         """The global-or-local estimate (``method`` auto|global|local) of the frames taken; the stream must
         have been made with ``tiles``. The global estimate is :meth:`estimate`'s (or ``global_estimate``)."""
-        from msflash.acquisition.session.analysis import led_spectra_photons
+        from msflash.acquisition.session.sequence_spectra import led_spectra_photons
 
         if self._tiles is None or self.tiles is None:
             raise RecordingError(f"{self.header.path}: the estimate stream was made without tiles; expected tiles=…")
@@ -321,13 +320,15 @@ class EstimateStream:
             tiled = self._tiles.statistics(self.layout().spec, grid)
         except SpectralDataError as err:
             raise RecordingError(f"{self.header.path}: {err}") from err
+        # The whole frame's flicker read corrects the tiles too (processing.flicker: the same shares, exactly).
+        tiled = corrected_tiles(tiled, whole_frame.flicker)
         return estimate_local(
             tiled, led_spectra_photons(self.header), method, solver, alpha, global_estimate=whole_frame
         )
 
 
 SAMPLE_WEIGHTING = True
-"""The estimate's statistics weigh each sample by its inverse noise variance (processing.statistics, module
+"""The estimate's statistics weigh each sample by its inverse noise variance (processing.block_rows, module
 notes): unweighted, a bright highlight's noisy samples dominate eq. 5."""
 
 

@@ -14,25 +14,9 @@ Two steps, both on short host-paced previews that are never written to the seque
    the longest exposure whose bright end of ambient + LED stays at ``headroom_fraction`` of full
    scale — the LED-only difference's SNR only grows with exposure — clamped to the camera's range.
 
-**SNR** of an LED-only image (LED frame ÷ its exposure − ambient frame ÷ its exposure) is the
-median over unsaturated pixels of signal ÷ noise:
-
-- with a noise model (conversion gain ``electrons_per_dn`` and read noise, from the simulated
-  sensor or the camera's profile): variance of a value ``S`` DN is ``S·g/e + (σ_r·g/e)²`` at gain
-  ``g``, propagated through the difference (method ``"photon+read noise"``);
-- otherwise from the difference image itself: the noise is read from the median of the diagonal
-  Haar details of 2 × 2 cells of same-colour pixels, which cancel edges along the rows or columns
-  (method ``"difference image"``; :func:`snr_from_difference`); predictions then scale the preview's
-  SNR by √(exposure ratio).
-
-The planned SNR is a prediction from the previews; :func:`measure_led_snr` measures it on the
-frames actually captured.
-
-**No LED signal is a warning, not a number.** An SNR that is not a finite positive number of
-plausible size — NaN (no pixel to measure on), infinite or above :data:`MAX_PLAUSIBLE_SNR` (a
-difference image without noise: identical or synthetic frames), zero or negative (the LED frame is
-no brighter than the ambient) — is never printed or recorded as a figure: :func:`led_snr_problem`
-says which, :func:`led_snr_warnings` names the LED, and JSON holds ``null`` in its place.
+Each LED frame's SNR is predicted from the previews (:mod:`acquisition.session.led_snr`); frames
+are read through :mod:`acquisition.session.metering`; the flash frame's exposure is
+:mod:`acquisition.session.flash_exposure`'s, made whole PWM periods here (:func:`whole_pwm_periods`).
 """
 
 from __future__ import annotations
@@ -45,15 +29,26 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.session import exposure_information as info
-from msflash.processing.noise_level import CHI2_1_MEDIAN, haar_details
+from msflash.acquisition.session.led_snr import (
+    NoiseModel,
+    led_snr_problem,
+    led_snr_warnings,
+    snr_from_difference,
+    snr_or_none,
+    snr_with_model,
+)
+from msflash.acquisition.session.metering import (
+    Levels,
+    brightest_channel,
+    clamp,
+    linear_quantile,
+    meter,
+    rates,
+    unsaturated,
+)
 
 DEFAULT_EXPOSURE_RANGE_US = (1.0, 10_000_000.0)
 """Exposure limits assumed for a camera that does not report its own."""
-
-MAX_PLAUSIBLE_SNR = 1e6
-"""Above this a per-pixel LED SNR is no measurement: photon noise bounds a pixel's SNR by √(full well),
-about 10³ for any sensor below 10¹² electrons, so a larger figure means the noise was not seen
-(issue 29 saw 1.5e+15 on the GigE fake's test patterns)."""
 
 MAX_INFORMATION_BLOCKS = 4096
 """The information criterion looks at most at this many blocks (evenly spaced) of a large frame."""
@@ -88,9 +83,8 @@ class ExposurePolicy:
     LED frame's at ``headroom_fraction``; at most ``max_saturated_fraction`` saturated per frame) or
     ``"information"`` (starting from the bright-end plan, the ambient and LED exposures that maximise the
     information the unsaturated blocks carry about the LED-only signals; see
-    :mod:`acquisition.session.exposure_information`). Not the default: it lowers the sim's mean spectrum RMSE
-    by 12 % but raises it under the underwater ambient, and the blocks it gives up (up to
-    ``max_lost_fraction``: the chart's white patches) are missing from the synthesised images too."""
+    :mod:`acquisition.session.exposure_information`). Not the default: the blocks it gives up (up to
+    ``max_lost_fraction``) are missing from the synthesised images too (docs/measurements-acquisition.md)."""
     max_lost_fraction: float = 0.25
     """Information criterion: at most this fraction of the estimator's blocks may be lost to saturation
     in the union of the frames (a guard; the criterion itself weighs what a lost block costs)."""
@@ -116,32 +110,6 @@ class ExposurePolicy:
             raise ValueError(
                 f"target {self.target_fraction}, headroom {self.headroom_fraction}; expected 0 < target ≤ headroom ≤ 1"
             )
-
-
-@dataclass(frozen=True)
-class NoiseModel:
-    """Sensor noise in the units of the pixel values."""
-
-    electrons_per_dn: float
-    """Conversion gain at gain 1 (electrons per DN)."""
-    read_noise_e: float
-    """Read noise, electrons."""
-
-    def variance_dn(self, signal_dn: np.ndarray, gain: float = 1.0) -> np.ndarray:
-        """Variance (DN²) of a value ``signal_dn`` above black: photon + read noise."""
-        dn_per_e = gain / self.electrons_per_dn
-        return np.maximum(signal_dn, 0.0) * dn_per_e + (self.read_noise_e * dn_per_e) ** 2
-
-
-@dataclass(frozen=True)
-class Levels:
-    """One frame, metered."""
-
-    exposure_us: float
-    bright_end: float
-    """The value only ``max_saturated_fraction`` of pixels exceed, as a fraction of full scale."""
-    saturated_fraction: float
-    """Fraction of pixels with a channel at or above the white level."""
 
 
 @dataclass
@@ -180,68 +148,6 @@ class ExposurePlan:
         }
 
 
-# -- an LED's SNR: a figure, or a warning ---------------------------------------------------------
-
-
-def led_snr_problem(snr: float) -> str | None:
-    """Why an LED's SNR is no measurement (the LED shows no signal), or None when it is one.
-
-    Examples
-    --------
-    >>> led_snr_problem(12.5) is None
-    True
-    >>> led_snr_problem(float("inf"))
-    'no LED signal measurable: the LED-only image has no noise (identical or synthetic frames)'
-    >>> led_snr_problem(-0.4)
-    'no LED signal: its frame is no brighter than the ambient frame (SNR -0.4)'
-    """
-    if math.isnan(snr):
-        return "no LED signal measured: too few unsaturated pixels in its frame and the ambient frame"
-    if snr > MAX_PLAUSIBLE_SNR:
-        return "no LED signal measurable: the LED-only image has no noise (identical or synthetic frames)"
-    if snr <= 0:
-        shown = f" (SNR {snr:.3g})" if snr > -MAX_PLAUSIBLE_SNR else ""
-        return f"no LED signal: its frame is no brighter than the ambient frame{shown}"
-    return None
-
-
-def snr_or_none(snr: float) -> float | None:
-    """``snr`` when it is a measurement (:func:`led_snr_problem`), else None (``null`` in JSON)."""
-    return None if led_snr_problem(snr) is not None else float(snr)
-
-
-def led_snr_warnings(names: Sequence[str], snrs: Sequence[float], what: str = "SNR") -> list[str]:
-    """One warning per LED whose SNR is no measurement, naming the LED (``what``: planned or measured).
-
-    Examples
-    --------
-    >>> led_snr_warnings(["led440", "led480"], [8.0, float("nan")], "measured SNR")
-    ['LED led480: measured SNR: no LED signal measured: too few unsaturated pixels in its frame and the ambient frame']
-    """
-    return [
-        f"LED {name}: {what}: {problem}"
-        for name, snr in zip(names, snrs, strict=True)
-        if (problem := led_snr_problem(snr)) is not None
-    ]
-
-
-def format_led_snr(names: Sequence[str], snrs: Sequence[float]) -> str:
-    """The LEDs' SNR for a progress line: figures, and ``no signal`` where there is none.
-
-    Examples
-    --------
-    >>> format_led_snr(["a", "b"], [3.14159, -4e14])
-    'a 3.14, b no signal'
-    """
-    return ", ".join(
-        f"{name} {snr:.3g}" if led_snr_problem(snr) is None else f"{name} no signal"
-        for name, snr in zip(names, snrs, strict=True)
-    )
-
-
-# -- what a camera offers ----------------------------------------------------------------------
-
-
 def camera_exposure_range(camera: Any) -> tuple[float, float]:
     """The camera's exposure range (µs), or :data:`DEFAULT_EXPOSURE_RANGE_US`."""
     found = getattr(camera, "exposure_range_us", None)
@@ -265,84 +171,6 @@ def camera_noise_model(camera: Any) -> NoiseModel | None:
     return None
 
 
-# -- metering ----------------------------------------------------------------------------------
-
-
-def metering_view(pixels: np.ndarray, mosaic: bool) -> np.ndarray:
-    """A frame as the metering functions here should read it.
-
-    They take an (H, W) frame for a raw mosaic and read it in whole 2×2 quads (every colour of
-    the mosaic). A mono camera's (H, W) frame (``mosaic`` False) becomes an (H, W, 1) view, read
-    pixel by pixel like any channel image: its bright end is that of its pixels, not of the
-    brightest of four neighbours, and a quarter of the values are read. Other frames are returned
-    as they are.
-
-    Examples
-    --------
-    >>> frame = np.zeros((4, 6), dtype=np.uint16)
-    >>> metering_view(frame, mosaic=False).shape, metering_view(frame, mosaic=True).shape
-    ((4, 6, 1), (4, 6))
-    """
-    return pixels[:, :, None] if pixels.ndim == 2 and not mosaic else pixels
-
-
-def _sample(pixels: np.ndarray, stride: int) -> np.ndarray:
-    """Every ``stride``-th pixel of a frame, as (h, w[, channels]) — for a one-plane frame whole 2×2 quads.
-
-    Striding a raw mosaic by an even step would read a single CFA site (one colour: a blue LED
-    metered on red sites looks dark), so a 2-D frame is sampled as 2×2 quads, each a 4-channel
-    "pixel" (every colour of the mosaic; for a mono frame four neighbours), on every
-    ``stride / 2``-th quad — the same number of values as before. ``stride`` 1 keeps the frame.
-    """
-    if stride <= 1:
-        return pixels
-    if pixels.ndim == 3:
-        return pixels[::stride, ::stride]
-    height, width = (pixels.shape[0] // 2) * 2, (pixels.shape[1] // 2) * 2
-    if height == 0 or width == 0:
-        return pixels[::stride, ::stride]
-    step = 2 * max(1, stride // 2)
-    # Site (p, q) of every sampled quad is one strided slice: four slice copies, not a reshape of
-    # a transposed view (which numpy copies element by element, ~20× slower on the capture path).
-    first = pixels[0:height:step, 0:width:step]
-    quads = np.empty((*first.shape, 4), dtype=pixels.dtype)
-    for site, (p, q) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
-        quads[:, :, site] = pixels[p:height:step, q:width:step]
-    return quads
-
-
-def _brightest(pixels: np.ndarray, stride: int) -> np.ndarray:
-    return _brightest_channel(_sample(pixels, stride))
-
-
-def _brightest_channel(values: np.ndarray) -> np.ndarray:
-    """The per-pixel maximum over the channels of (h, w, c) values (a new array); (h, w) values as they are.
-
-    A running ``np.maximum`` over the channel planes: numpy's ``max`` over a short last axis is
-    several times slower, and this runs for the flash exposure on the capture's latency path.
-    """
-    if values.ndim != 3:
-        return values
-    brightest = values[:, :, 0].copy()
-    for channel in range(1, values.shape[2]):
-        np.maximum(brightest, values[:, :, channel], out=brightest)
-    return brightest
-
-
-def meter(pixels: np.ndarray, black: float, white: float, policy: ExposurePolicy, exposure_us: float = 0.0) -> Levels:
-    """Bright end and saturated fraction of one frame."""
-    brightest = _brightest(np.asarray(pixels), policy.stride)
-    flat = brightest.reshape(-1)
-    saturated = float(np.count_nonzero(flat >= white)) / flat.size
-    q = 1.0 - policy.max_saturated_fraction
-    value = linear_quantile(flat, q) if flat.size else 0.0
-    return Levels(float(exposure_us), (value - black) / (white - black), saturated)
-
-
-def _clamp(value: float, limits: tuple[float, float]) -> float:
-    return float(min(max(value, limits[0]), limits[1]))
-
-
 def auto_ambient_exposure(
     capture: Callable[[float], np.ndarray],
     start_us: float,
@@ -356,7 +184,7 @@ def auto_ambient_exposure(
     ``capture(exposure_us)`` returns an ambient frame. Returns the chosen exposure, the last
     unsaturated preview and its exposure (for the LED rates), every preview metered, and warnings.
     """
-    exposure = _clamp(start_us, limits)
+    exposure = clamp(start_us, limits)
     metered: list[Levels] = []
     notes: list[str] = []
     good: tuple[np.ndarray, float] | None = None
@@ -372,13 +200,13 @@ def auto_ambient_exposure(
                 )
                 good = (pixels, exposure)
                 break
-            exposure = _clamp(exposure / 4.0, limits)
+            exposure = clamp(exposure / 4.0, limits)
             continue
         good = (pixels, exposure)
         factor = policy.target_fraction / levels.bright_end if levels.bright_end > 0 else 16.0
         if abs(factor - 1.0) <= policy.tolerance:
             break
-        proposed = _clamp(exposure * min(max(factor, 1 / 16), 16.0), limits)
+        proposed = clamp(exposure * min(max(factor, 1 / 16), 16.0), limits)
         if proposed == exposure:
             if factor > 1:
                 notes.append(
@@ -395,70 +223,6 @@ def auto_ambient_exposure(
     if good is None:
         good = (pixels, metered[-1].exposure_us)
     return exposure, good[0], good[1], metered, notes
-
-
-def _rates(pixels: np.ndarray, exposure_us: float, black: float, stride: int) -> np.ndarray:
-    rates = _sample(pixels, stride).astype(np.float64)
-    rates -= (
-        black  # in place: (sub − black) / exposure without two temporaries (the last frame's is on the latency path)
-    )
-    rates /= exposure_us
-    return rates
-
-
-def _valid(pixels: np.ndarray, white: float, stride: int) -> np.ndarray:
-    return _brightest(pixels, stride) < white
-
-
-def snr_with_model(
-    ambient_rate: np.ndarray,
-    led_rate: np.ndarray,
-    ambient_us: float,
-    led_us: float,
-    noise: NoiseModel,
-    valid: np.ndarray,
-    gain: float = 1.0,
-) -> float:
-    """Median SNR of the LED-only rate image for frames at these exposures, from expected values."""
-    signal = led_rate - ambient_rate
-    variance = (
-        noise.variance_dn(led_rate * led_us, gain) / led_us**2
-        + noise.variance_dn(ambient_rate * ambient_us, gain) / ambient_us**2
-    )
-    snr = signal / np.sqrt(np.maximum(variance, 1e-30))
-    mask = np.broadcast_to(valid[..., None], snr.shape) if snr.ndim == valid.ndim + 1 else valid
-    values = snr[mask]
-    return float(np.median(values)) if values.size else math.nan
-
-
-def snr_from_difference(
-    ambient: np.ndarray,
-    led: np.ndarray,
-    ambient_us: float,
-    led_us: float,
-    black: float,
-    white: float,
-    cfa: bool = False,
-) -> float:
-    """Median signal ÷ noise of the LED-only rate image, the noise from the image itself (no sensor model).
-
-    The noise is read from the diagonal Haar detail of 2 × 2 cells of same-colour samples
-    (:func:`processing.noise_level.haar_details`): ``median(HH²) = 0.455 · 4σ²`` for noise alone, and an
-    edge along the rows or the columns cancels in it. Differences of neighbouring same-colour samples,
-    before, held the scene wherever an edge fell between them — on a mosaic, whose same-colour samples
-    are 2 pixels apart, a third of them on the sim chart, and the SNR came out half the sensor model's.
-    """
-    diff = (led.astype(np.float64) - black) / led_us - (ambient.astype(np.float64) - black) / ambient_us
-    valid = _brightest(led, 1) < white
-    valid &= _brightest(ambient, 1) < white
-    mask = np.broadcast_to(valid[..., None], diff.shape) if diff.ndim == 3 else valid
-    # Invalid samples as NaN: haar_details leaves out every cell holding one.
-    _, diagonal, _, _ = haar_details(np.where(mask, diff, np.nan), 2 if cfa else 1, 0.0, math.inf)
-    if diagonal.size < 16:
-        return math.nan
-    sigma = math.sqrt(float(np.median(np.square(diagonal))) / CHI2_1_MEDIAN / 4.0)
-    signal = float(np.median(diff[mask]))
-    return signal / sigma if sigma > 0 else math.inf
 
 
 def plan_exposures(
@@ -484,72 +248,114 @@ def plan_exposures(
         lambda e: capture(dark, e), start_us, black, white, limits, policy
     )
     previews = [{"leds": "off", **asdict(m)} for m in metered]
-    full = white - black
-    stride = policy.stride
-    ambient_rate = _rates(ambient_px, ambient_px_us, black, stride)
-    ambient_ok = _valid(ambient_px, white, stride)
     led_us: list[float] = []
     led_previews: list[tuple[np.ndarray, float]] = []
     for led in range(n_leds):
         levels = tuple(1.0 if i == led else 0.0 for i in range(n_leds))
-        preview_us = _clamp(ambient_us * policy.led_preview_fraction, limits)
-        for _ in range(4):
-            pixels = capture(levels, preview_us)
-            metered_led = meter(pixels, black, white, policy, preview_us)
-            previews.append({"leds": f"led {led + 1}", **asdict(metered_led)})
-            if metered_led.saturated_fraction <= policy.max_saturated_fraction or preview_us <= limits[0]:
-                break
-            preview_us = _clamp(preview_us / 4.0, limits)
-        led_rate = _rates(pixels, preview_us, black, stride)
-        combined = _brightest_channel(led_rate)
-        bright_rate = linear_quantile(combined, 1.0 - policy.max_saturated_fraction)
-        if bright_rate > 0:
-            exposure = _clamp(policy.headroom_fraction * full / bright_rate, limits)
-        else:
-            exposure = limits[1]
-            notes.append(f"LED {names[led]}: no signal in its preview")
-        if metered_led.saturated_fraction > policy.max_saturated_fraction:
-            exposure = limits[0]
-            notes.append(
-                f"LED {names[led]}: saturates {metered_led.saturated_fraction:.2%} of pixels at the shortest "
-                f"exposure {limits[0]:g} µs; dim the LED"
-            )
+        exposure, preview, metered_led = _led_exposure(
+            capture, levels, names[led], ambient_us, black, white, limits, policy, notes
+        )
+        previews.extend({"leds": f"led {led + 1}", **asdict(m)} for m in metered_led)
         led_us.append(exposure)
-        led_previews.append((pixels, preview_us))
+        led_previews.append(preview)
     lost: float | None = None
     if policy.criterion == "information" and n_leds:
         ambient_us, chosen, lost = _most_informative(
             ambient_px, ambient_px_us, led_previews, ambient_us, led_us, black, white, limits, noise, policy, cfa
         )
         led_us = list(chosen)
+    ambient = (ambient_px, ambient_px_us, ambient_us)
+    snrs = _predicted_snrs(ambient, led_previews, led_us, black, white, noise, policy.stride, cfa)
+    notes.extend(_snr_notes(names, snrs, policy))
+    method = "photon+read noise" if noise is not None else "difference image"
+    return ExposurePlan(
+        ambient_us, tuple(led_us), tuple(snrs), method, limits, policy, previews, notes, lost_block_fraction=lost
+    )
+
+
+def _led_exposure(
+    capture: Callable[[Sequence[float], float], np.ndarray],
+    levels: Sequence[float],
+    name: str,
+    ambient_us: float,
+    black: float,
+    white: float,
+    limits: tuple[float, float],
+    policy: ExposurePolicy,
+    notes: list[str],
+) -> tuple[float, tuple[np.ndarray, float], list[Levels]]:
+    """One LED frame's exposure from its previews, the last preview with its exposure, and each preview metered.
+
+    The preview is taken at ``led_preview_fraction`` of the ambient exposure, 4× shorter while it
+    saturates; the frame then gets the longest exposure whose bright end stays at ``headroom_fraction``.
+    A preview without signal, or saturated at the shortest exposure, adds a warning to ``notes``.
+    """
+    preview_us = clamp(ambient_us * policy.led_preview_fraction, limits)
+    metered: list[Levels] = []
+    for _ in range(4):
+        pixels = capture(levels, preview_us)
+        metered.append(meter(pixels, black, white, policy, preview_us))
+        if metered[-1].saturated_fraction <= policy.max_saturated_fraction or preview_us <= limits[0]:
+            break
+        preview_us = clamp(preview_us / 4.0, limits)
+    combined = brightest_channel(rates(pixels, preview_us, black, policy.stride))
+    bright_rate = linear_quantile(combined, 1.0 - policy.max_saturated_fraction)
+    if bright_rate > 0:
+        exposure = clamp(policy.headroom_fraction * (white - black) / bright_rate, limits)
+    else:
+        exposure = limits[1]
+        notes.append(f"LED {name}: no signal in its preview")
+    saturated = metered[-1].saturated_fraction
+    if saturated > policy.max_saturated_fraction:
+        exposure = limits[0]
+        notes.append(
+            f"LED {name}: saturates {saturated:.2%} of pixels at the shortest exposure {limits[0]:g} µs; dim the LED"
+        )
+    return exposure, (pixels, preview_us), metered
+
+
+def _predicted_snrs(
+    ambient: tuple[np.ndarray, float, float],
+    led_previews: Sequence[tuple[np.ndarray, float]],
+    led_us: Sequence[float],
+    black: float,
+    white: float,
+    noise: NoiseModel | None,
+    stride: int,
+    cfa: bool,
+) -> list[float]:
+    """Each LED frame's SNR at its planned exposure, predicted from the previews.
+
+    ``ambient`` is the ambient preview, its exposure and the planned ambient exposure. With a noise
+    model, from the expected values; otherwise the previews' difference-image SNR scaled by √(exposure ratio).
+    """
+    ambient_px, ambient_px_us, ambient_us = ambient
+    ambient_rate = rates(ambient_px, ambient_px_us, black, stride)
+    ambient_ok = unsaturated(ambient_px, white, stride)
     snrs: list[float] = []
-    for led, ((pixels, preview_us), exposure) in enumerate(zip(led_previews, led_us, strict=True)):
+    for (pixels, preview_us), exposure in zip(led_previews, led_us, strict=True):
         if noise is not None:
-            led_rate = _rates(pixels, preview_us, black, stride)
-            valid = ambient_ok & _valid(pixels, white, stride)
-            snr = snr_with_model(ambient_rate, led_rate, ambient_us, exposure, noise, valid)
-        else:
-            measured = snr_from_difference(ambient_px, pixels, ambient_px_us, preview_us, black, white, cfa)
-            snr = measured * math.sqrt(exposure / preview_us) if math.isfinite(measured) else measured
-        snrs.append(snr)
+            led_rate = rates(pixels, preview_us, black, stride)
+            valid = ambient_ok & unsaturated(pixels, white, stride)
+            snrs.append(snr_with_model(ambient_rate, led_rate, ambient_us, exposure, noise, valid))
+            continue
+        measured = snr_from_difference(ambient_px, pixels, ambient_px_us, preview_us, black, white, cfa)
+        snrs.append(measured * math.sqrt(exposure / preview_us) if math.isfinite(measured) else measured)
+    return snrs
+
+
+def _snr_notes(names: Sequence[str], snrs: Sequence[float], policy: ExposurePolicy) -> list[str]:
+    """A warning for each LED whose planned SNR is no measurement or below ``min_snr``."""
+    notes: list[str] = []
+    for name, snr in zip(names, snrs, strict=True):
         if led_snr_problem(snr) is not None:
-            notes.extend(led_snr_warnings([names[led]], [snr], "planned SNR"))
+            notes.extend(led_snr_warnings([name], [snr], "planned SNR"))
         elif not snr >= policy.min_snr:
             notes.append(
-                f"LED {names[led]}: planned SNR {snr:.3g} below {policy.min_snr:g} — the LED is weak against "
+                f"LED {name}: planned SNR {snr:.3g} below {policy.min_snr:g} — the LED is weak against "
                 "the ambient; dim the ambient or move the booth closer"
             )
-    return ExposurePlan(
-        ambient_us,
-        tuple(led_us),
-        tuple(snrs),
-        "photon+read noise" if noise is not None else "difference image",
-        limits,
-        policy,
-        previews,
-        notes,
-        lost_block_fraction=lost,
-    )
+    return notes
 
 
 def _most_informative(
@@ -574,7 +380,7 @@ def _most_informative(
     limit_dn = policy.headroom_fraction * (white - black)
 
     def grouped(pixels: np.ndarray, exposure_us: float) -> tuple[np.ndarray, np.ndarray]:
-        rate = info.group_blocks(_rates(pixels, exposure_us, black, 1), block)
+        rate = info.group_blocks(rates(pixels, exposure_us, black, 1), block)
         clipped = np.any(info.group_blocks(np.asarray(pixels) >= white, block), axis=1)
         if rate.shape[0] > MAX_INFORMATION_BLOCKS:  # an even sample of the blocks estimates the sums and fractions
             keep = np.linspace(0, rate.shape[0] - 1, MAX_INFORMATION_BLOCKS).astype(int)
@@ -588,140 +394,6 @@ def _most_informative(
     dn_per_e = 1.0 / noise.electrons_per_dn if noise is not None else 1.0
     read_dn = noise.read_noise_e * dn_per_e if noise is not None else 0.0
     return info.most_informative(blocks, ambient_us, led_us, limits, dn_per_e, read_dn, policy.max_lost_fraction)
-
-
-def measure_led_snr(
-    ambient: np.ndarray,
-    ambient_us: float,
-    led_frames: Sequence[np.ndarray],
-    led_us: Sequence[float],
-    black: float,
-    white: float,
-    noise: NoiseModel | None,
-    cfa: bool = False,
-    gain: float = 1.0,
-    stride: int = 2,
-) -> tuple[list[float], str]:
-    """Per-LED SNR of the LED-only images of captured frames, and the method used."""
-    values: list[float] = []
-    if noise is None:
-        for frame, exposure in zip(led_frames, led_us, strict=True):
-            values.append(snr_from_difference(ambient, frame, ambient_us, exposure, black, white, cfa))
-        return values, "difference image"
-    ambient_rate = _rates(ambient, ambient_us, black, stride)
-    ambient_ok = _valid(ambient, white, stride)
-    for frame, exposure in zip(led_frames, led_us, strict=True):
-        rate = _rates(frame, exposure, black, stride)
-        valid = ambient_ok & _valid(frame, white, stride)
-        values.append(snr_with_model(ambient_rate, rate, ambient_us, exposure, noise, valid, gain))
-    return values, "photon+read noise"
-
-
-def linear_quantile(values: np.ndarray, q: float, *, overwrite: bool = False) -> float:
-    """``np.quantile(values, q)`` (linear method), bit for bit, from the two order statistics around it.
-
-    The sample at position ``(n − 1)·q`` of the sorted values, interpolated between its two
-    neighbours as numpy does (from the upper neighbour when the fraction is ≥ ½); NaN if any value
-    is NaN. One ``np.partition`` instead of ``np.quantile``'s general machinery: half the time on
-    the few thousand metered pixels. ``overwrite`` partitions ``values`` in place (the caller's
-    scratch array) instead of a copy.
-
-    >>> linear_quantile(np.array([3.0, 1.0, 4.0, 1.0, 5.0]), 0.9)  # sorted 1 1 3 4 5: 0.6 of the way from 4 to 5
-    4.6
-    """
-    flat = values.reshape(-1)
-    n = flat.size
-    if n == 0:
-        raise ValueError("linear_quantile: no values; expected at least one")
-    if not 0.0 <= q <= 1.0:
-        raise ValueError(f"linear_quantile: q {q}; expected 0 ≤ q ≤ 1")
-    position = (n - 1) * q
-    below = min(int(math.floor(position)), n - 1)
-    above = min(below + 1, n - 1)
-    ordered = flat if overwrite else flat.copy()
-    ordered.partition(sorted({below, above, n - 1}))
-    if flat.dtype.kind == "f" and math.isnan(ordered[n - 1]):
-        return math.nan  # NaN sorts last, as in np.quantile
-    low, high = float(ordered[below]), float(ordered[above])
-    gamma = position - below
-    diff = high - low
-    return high - diff * (1.0 - gamma) if gamma >= 0.5 else low + diff * gamma
-
-
-class FlashExposure:
-    """The flash frame's exposure, predicted from the ambient and LED frames as they arrive.
-
-    The model is linear: the flash frame's rate (DN/µs) at a pixel is the ambient rate plus
-    Σₖ wₖ·(LEDₖ rate − ambient rate) for flash weights ``w``. :meth:`add_ambient` and
-    :meth:`add_led` take each frame's rates and LED-only rates (on every ``2·policy.stride``-th row
-    and column) when it arrives, between frames; :meth:`predict` then costs only the weighted sum,
-    the brightest channel and the bright end: the exposure that puts the bright end (only
-    ``max_saturated_fraction`` of pixels brighter) at ``target_fraction`` of full scale, clamped
-    to ``limits``.
-    """
-
-    def __init__(
-        self, black: float, white: float, limits: tuple[float, float], policy: ExposurePolicy = ExposurePolicy()
-    ) -> None:
-        self.black = float(black)
-        self.white = float(white)
-        self.limits = limits
-        self.policy = policy
-        self._stride = policy.stride * 2
-        self._ambient_us: float | None = None
-        self._ambient_rate: np.ndarray | None = None
-        self._led_only: list[np.ndarray] = []
-
-    def add_ambient(self, pixels: np.ndarray, exposure_us: float) -> None:
-        """Take the ambient frame (LEDs off); it must come before the LED frames."""
-        if self._ambient_rate is not None:
-            raise ValueError("flash exposure: a second ambient frame; expected one ambient frame per capture")
-        self._ambient_us = float(exposure_us)
-        self._ambient_rate = _rates(pixels, exposure_us, self.black, self._stride)
-
-    def add_led(self, pixels: np.ndarray, exposure_us: float) -> None:
-        """Take the next LED frame (its LED-only rate: frame rate − ambient rate)."""
-        if self._ambient_rate is None:
-            raise ValueError("flash exposure: an LED frame before the ambient frame; expected the ambient first")
-        led_only = _rates(pixels, exposure_us, self.black, self._stride)
-        led_only -= self._ambient_rate
-        self._led_only.append(led_only)
-
-    def predict(self, weights: Sequence[float] | np.ndarray) -> float:
-        """The flash exposure (µs) for LED weights ``weights`` (one per LED frame added)."""
-        if self._ambient_rate is None or self._ambient_us is None:
-            raise ValueError("flash exposure: no ambient frame; expected the ambient and LED frames first")
-        total = self._ambient_rate.copy()
-        for led_only, weight in zip(self._led_only, weights, strict=True):
-            if weight > 0:
-                total += weight * led_only
-        rate = linear_quantile(_brightest_channel(total), 1.0 - self.policy.max_saturated_fraction, overwrite=True)
-        if not rate > 0:
-            return _clamp(self._ambient_us, self.limits)
-        return _clamp(self.policy.target_fraction * (self.white - self.black) / rate, self.limits)
-
-
-def flash_exposure(
-    ambient: np.ndarray,
-    ambient_us: float,
-    led_frames: Sequence[np.ndarray],
-    led_us: Sequence[float],
-    weights: Sequence[float] | np.ndarray,
-    black: float,
-    white: float,
-    limits: tuple[float, float],
-    policy: ExposurePolicy = ExposurePolicy(),
-) -> float:
-    """Exposure for the flash frame: ambient + Σ wₖ·LEDₖ with its bright end at the target fraction.
-
-    Predicted from the captured frames (the model is linear), so no preview is needed. The
-    one-shot form of :class:`FlashExposure` (which takes the frames as they arrive).
-    """
-    predictor = FlashExposure(black, white, limits, policy)
-    predictor.add_ambient(ambient, ambient_us)
-    for frame, exposure in zip(led_frames, led_us, strict=True):
-        predictor.add_led(frame, exposure)
-    return predictor.predict(weights)
 
 
 # -- flash energy under PWM dimming (host paced) ------------------------------------------------

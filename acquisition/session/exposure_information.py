@@ -10,7 +10,7 @@ exposure ``tₖ`` to maximise the Fisher information about the LED-only rates ``
     Var(d̂_p) = v(r_p·tₖ)/tₖ² + v(a_p·T)/T²,   v(S) = S·κ + (σ_r·κ)²   (κ = DN per electron),
 
 the photon + read noise of the difference of the two rate images (the noise model of
-:class:`~acquisition.session.exposure.NoiseModel`; without one, photon noise only, κ = 1: the argmax does not
+:class:`~acquisition.session.led_snr.NoiseModel`; without one, photon noise only, κ = 1: the argmax does not
 depend on κ then). A block is lost for a frame when its brightest pixel would pass
 ``headroom`` × full scale at that exposure: it crosses at ``s_b = headroom·full / max_{p∈b} rate_p``.
 
@@ -155,74 +155,99 @@ def most_informative(
     max_lost = int(np.floor(max_lost_fraction * n_blocks))
     ambient_us = float(start_ambient_us)
     led_us = [float(t) for t in start_led_us]
-    leds = blocks.leds
-
-    def lost_by(skip: int) -> np.ndarray:  # lost to every frame but: -1 the ambient, k LED k, -2 none
-        lost = np.zeros(n_blocks, dtype=bool) if skip == -1 else blocks.ambient_crossing < ambient_us
-        for k, crossing in enumerate(blocks.led_crossings):
-            if k != skip:
-                lost |= crossing < led_us[k]
-        return lost
-
+    noise = (dn_per_e, read_dn)
     for _ in range(sweeps):
         before = (ambient_us, tuple(led_us))
-        if optimise_ambient:  # every exposure × λ: a bright patch given up by all frames at once
-            exposures = np.array([ambient_us, *led_us])
-            joint = np.min(np.stack((blocks.ambient_crossing, *blocks.led_crossings)) / exposures[:, None], axis=0)
-            scale_limits = (float(np.max(limits[0] / exposures)), float(np.min(limits[1] / exposures)))
-
-            def joint_score(
-                values: np.ndarray, led_us: list[float] = led_us, ambient_us: float = ambient_us
-            ) -> np.ndarray:
-                scale = values[:, None, None]
-                return sum(
-                    (
-                        information(r, blocks.ambient, scale * led_us[k], scale * ambient_us, dn_per_e, read_dn)
-                        for k, r in enumerate(leds)
-                    ),
-                    np.zeros(()),
-                )
-
-            if scale_limits[0] <= 1.0 <= scale_limits[1]:
-                factor = _optimise(joint, np.zeros(n_blocks, dtype=bool), 1.0, scale_limits, max_lost, joint_score)
-                ambient_us, led_us = ambient_us * factor, [t * factor for t in led_us]
-            elsewhere = lost_by(-1)
-
-            def ambient_score(values: np.ndarray, led_us: list[float] = led_us) -> np.ndarray:
-                shape = values[:, None, None]
-                return sum(
-                    (
-                        information(r, blocks.ambient, np.float64(led_us[k]), shape, dn_per_e, read_dn)
-                        for k, r in enumerate(leds)
-                    ),
-                    np.zeros(()),
-                )
-
-            ambient_us = _optimise(blocks.ambient_crossing, elsewhere, ambient_us, limits, max_lost, ambient_score)
-        for k, rate in enumerate(leds):
-            elsewhere = lost_by(k)
-            others = sum(
-                (
-                    information(r, blocks.ambient, np.float64(led_us[j]), np.float64(ambient_us), dn_per_e, read_dn)
-                    for j, r in enumerate(leds)
-                    if j != k
-                ),
-                np.zeros(n_blocks),
-            )
-
-            def led_score(
-                values: np.ndarray, rate: np.ndarray = rate, others: np.ndarray = others, ambient_us: float = ambient_us
-            ) -> np.ndarray:
-                own = information(
-                    rate, blocks.ambient, values[:, None, None], np.float64(ambient_us), dn_per_e, read_dn
-                )
-                return own + others[None, :]
-
-            led_us[k] = _optimise(blocks.led_crossings[k], elsewhere, led_us[k], limits, max_lost, led_score)
+        if optimise_ambient:
+            ambient_us, led_us = _ascend_ambient(blocks, ambient_us, led_us, limits, noise, max_lost)
+        for k in range(len(blocks.leds)):
+            led_us[k] = _ascend_led(blocks, k, ambient_us, led_us, limits, noise, max_lost)
         if (ambient_us, tuple(led_us)) == before:
             break
-    lost = lost_by(-2)
+    lost = _lost_to_all_but(blocks, ambient_us, led_us, -2)
     return ambient_us, tuple(led_us), float(np.count_nonzero(lost)) / n_blocks
+
+
+def _lost_to_all_but(blocks: Blocks, ambient_us: float, led_us: Sequence[float], skip: int) -> np.ndarray:
+    """The blocks saturated in some frame other than ``skip``: -1 the ambient, k LED k, -2 none."""
+    lost = np.zeros(blocks.ambient.shape[0], dtype=bool) if skip == -1 else blocks.ambient_crossing < ambient_us
+    for k, crossing in enumerate(blocks.led_crossings):
+        if k != skip:
+            lost |= crossing < led_us[k]
+    return lost
+
+
+def _ascend_ambient(
+    blocks: Blocks,
+    ambient_us: float,
+    led_us: list[float],
+    limits: tuple[float, float],
+    noise: tuple[float, float],
+    max_lost: int,
+) -> tuple[float, list[float]]:
+    """One ascent step on the ambient: every exposure scaled at once (a bright patch given up by all frames
+    together), then the ambient exposure alone."""
+    dn_per_e, read_dn = noise
+    n_blocks = blocks.ambient.shape[0]
+    exposures = np.array([ambient_us, *led_us])
+    joint = np.min(np.stack((blocks.ambient_crossing, *blocks.led_crossings)) / exposures[:, None], axis=0)
+    scale_limits = (float(np.max(limits[0] / exposures)), float(np.min(limits[1] / exposures)))
+
+    def joint_score(values: np.ndarray) -> np.ndarray:
+        scale = values[:, None, None]
+        return sum(
+            (
+                information(r, blocks.ambient, scale * led_us[k], scale * ambient_us, dn_per_e, read_dn)
+                for k, r in enumerate(blocks.leds)
+            ),
+            np.zeros(()),
+        )
+
+    if scale_limits[0] <= 1.0 <= scale_limits[1]:
+        factor = _optimise(joint, np.zeros(n_blocks, dtype=bool), 1.0, scale_limits, max_lost, joint_score)
+        ambient_us, led_us = ambient_us * factor, [t * factor for t in led_us]
+    elsewhere = _lost_to_all_but(blocks, ambient_us, led_us, -1)
+
+    def ambient_score(values: np.ndarray) -> np.ndarray:
+        shape = values[:, None, None]
+        return sum(
+            (
+                information(r, blocks.ambient, np.float64(led_us[k]), shape, dn_per_e, read_dn)
+                for k, r in enumerate(blocks.leds)
+            ),
+            np.zeros(()),
+        )
+
+    return _optimise(blocks.ambient_crossing, elsewhere, ambient_us, limits, max_lost, ambient_score), led_us
+
+
+def _ascend_led(
+    blocks: Blocks,
+    k: int,
+    ambient_us: float,
+    led_us: Sequence[float],
+    limits: tuple[float, float],
+    noise: tuple[float, float],
+    max_lost: int,
+) -> float:
+    """One ascent step on LED ``k``'s exposure, the other frames' information held."""
+    dn_per_e, read_dn = noise
+    leds = blocks.leds
+    others = sum(
+        (
+            information(r, blocks.ambient, np.float64(led_us[j]), np.float64(ambient_us), dn_per_e, read_dn)
+            for j, r in enumerate(leds)
+            if j != k
+        ),
+        np.zeros(blocks.ambient.shape[0]),
+    )
+
+    def led_score(values: np.ndarray) -> np.ndarray:
+        own = information(leds[k], blocks.ambient, values[:, None, None], np.float64(ambient_us), dn_per_e, read_dn)
+        return own + others[None, :]
+
+    elsewhere = _lost_to_all_but(blocks, ambient_us, led_us, k)
+    return _optimise(blocks.led_crossings[k], elsewhere, led_us[k], limits, max_lost, led_score)
 
 
 def _optimise(

@@ -15,7 +15,7 @@ from pathlib import Path
 from msflash.acquisition.errors import RigOpenError, UsageError
 from msflash.led_controller import LedBooth
 from msflash.led_controller.adapters import open_booth
-from msflash.led_controller.booth import DEFAULT_BOOT_S
+from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import Booth
 from msflash.led_controller.recovery import reset_leftovers
 from msflash.processing.spectra import Spectra

@@ -11,7 +11,7 @@ frames before it are taken by :meth:`FlashSession.add` as the frame arrives (bet
 :meth:`FlashSession.decide` then costs the statistics from those moments, one ambient solve and
 one small quadratic programme; the estimate's reliability signals wait until they are read.
 Prepared with exposure limits, the session also takes each frame's rates for the flash exposure
-(:class:`~acquisition.session.exposure.FlashExposure`) as it arrives, and :meth:`FlashSession.flash_exposure`
+(:class:`~acquisition.session.metering.FlashExposure`) as it arrives, and :meth:`FlashSession.flash_exposure`
 only sums them.
 
 The statistics are those of the one accumulator every route feeds
@@ -31,10 +31,11 @@ import numpy as np
 from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.acquisition.session.engine import CaptureResult, FrameEvent
 from msflash.acquisition.session.estimate_stream import EstimateStream
-from msflash.acquisition.session.exposure import ExposurePolicy, FlashExposure, metering_view
+from msflash.acquisition.session.exposure import ExposurePolicy
+from msflash.acquisition.session.metering import FlashExposure, metering_view
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.flash import FlashBounds, FlashModel, FlashSolution
 from msflash.processing.spectra import Spectra
@@ -119,10 +120,10 @@ class FlashSession:
         RecordingError
             If the header has no camera responsivities, or the target cannot be read.
         """
-        leds = analysis.led_spectra_photons(header)
-        camera = analysis.camera_responsivities_photons(header)
+        leds = sequence_spectra.led_spectra_photons(header)
+        camera = sequence_spectra.camera_responsivities_photons(header)
         model = FlashModel(leds, camera)
-        response = model.target_response(analysis.target_illuminant(target, header)) if target else None
+        response = model.target_response(sequence_spectra.target_illuminant(target, header)) if target else None
         return cls(header, leds, model, response, method, alpha, bin_factor, exposure_limits_us, exposure_policy)
 
     # -- per capture -------------------------------------------------------------------------
@@ -208,6 +209,9 @@ class FlashSession:
         the test patterns of the aravis fake).
         """
         statistics = self.statistics()  # the stream is live: no compiling between the LED frames and the flash
+        # A flickering ambient's gains out, as the reported estimate takes them (docs/flicker.md): the flash mix is
+        # the estimate's.
+        statistics, _ = analysis.flicker_corrected(self.header, statistics)
         raw_weights, alpha_used = self.ambient_model.weights(statistics, self.method, self.alpha)
         weights = np.asarray(raw_weights, dtype=float)
         if sanitise:

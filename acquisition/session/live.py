@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from msflash.acquisition.devices.camera import RawFrame
+from msflash.acquisition.devices.image_format import ImageFormat, ImageFormatControl, ImageFormatRequest, ImageLimits
 from msflash.acquisition.errors import CameraSettingError, FrameLostError, UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep, StepRole
 from msflash.acquisition.session.exposure import camera_exposure_range
@@ -114,6 +115,29 @@ class LiveStream:
     def last_booth_levels(self) -> tuple[float, ...]:
         """The levels the booth reported when last asked (no I/O: any thread may read it)."""
         return self._booth_levels
+
+    # -- the image format (ROI, binning, pixel format), between acquisitions ------------------
+    def image_limits(self) -> ImageLimits | None:
+        """What the camera allows now; None for a camera that cannot say."""
+        camera = self.rig.camera
+        return camera.image_limits() if isinstance(camera, ImageFormatControl) else None
+
+    def set_image_format(self, request: ImageFormatRequest) -> ImageFormat:
+        """Stop streaming and set ``request`` on the camera; the next frame prepares a plan (and buffers) for it.
+
+        Raises
+        ------
+        UsageError
+            The camera refused (its one-line reason) or cannot change its format at all.
+        """
+        camera = self.rig.camera
+        if not isinstance(camera, ImageFormatControl):
+            raise UsageError(f"camera {camera.info.model}: msflash cannot change its image format")
+        self.pause()
+        try:
+            return camera.set_image_format(request)
+        except CameraSettingError as err:
+            raise UsageError(str(err)) from err
 
     # -- frames -----------------------------------------------------------------------------
     def _prepare(self) -> CapturePlan:

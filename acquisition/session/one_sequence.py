@@ -20,10 +20,11 @@ import numpy as np
 
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.exr_metadata import exr_image
-from msflash.acquisition.sequence.format import Sequence, read_sequence
+from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.image_files import read_image_header, write_image
 from msflash.acquisition.sequence.locate import locate_sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session import analysis, local_route, sequence_spectra
 from msflash.processing.ambient import LED_SIGNAL_Z, AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
 from msflash.processing.flash import FlashBounds, FlashSolution
@@ -137,7 +138,7 @@ class FlashResult:
 
 def read_calibrated(path: str, calibration: str | None, report: Report) -> Sequence:
     """The sequence, with a calibration applied (``calibration`` or the sequence's reference); notes reported."""
-    sequence, notes = analysis.apply_calibration(read_sequence(locate_sequence(path)), calibration)
+    sequence, notes = sequence_spectra.apply_calibration(read_sequence(locate_sequence(path)), calibration)
     for note in notes:
         report(note)
     return sequence
@@ -203,7 +204,12 @@ def _light_models(sequence: Sequence, settings: EstimateSettings, report: Report
         sequence, stack, settings.method, settings.solver, settings.alpha, settings.tiles, settings.bin_factor
     )
     refuse_dark_ambient(sequence, led, "estimate")
-    payload, chosen, reason = with_model_choice(sequence, stack, payload, settings.model, varies, reference)
+    payload, chosen, reason = with_model_choice(
+        sequence, stack, payload, settings.model, varies, reference, led.flicker
+    )
+    flicker = led.flicker.summary() if led.flicker is not None else None
+    if flicker is not None:  # docs/flicker.md
+        report(flicker)
     for warning in payload["warnings"]:
         report(f"warning: {warning}")
     return EstimateResult(sequence, payload, choice=(chosen, reason))
@@ -211,11 +217,11 @@ def _light_models(sequence: Sequence, settings: EstimateSettings, report: Report
 
 def _tiled(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
     """``auto`` and ``local``: the whole frame's estimate and the tiles', in one stream of the frames (issue 9)."""
-    local = analysis.estimate_sequence_local(
+    local = local_route.estimate_sequence_local(
         sequence, settings.method, settings.solver, settings.alpha, settings.tiles, bin_factor=settings.bin_factor
     )
     refuse_dark_ambient(sequence, local.global_estimate, "estimate")
-    payload = analysis.local_estimate_payload(sequence, local)
+    payload = local_route.local_estimate_payload(sequence, local)
     flicker = local.global_estimate.flicker.summary() if local.global_estimate.flicker is not None else None
     if flicker is not None:  # docs/flicker.md
         report(flicker)
@@ -321,7 +327,7 @@ def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) ->
     estimating = settings.estimate
     # The estimate streams the frames from disk one at a time, and so does a global image's synthesis; a local
     # image (per-tile weights blended) is synthesised from the frames together.
-    local = analysis.estimate_sequence_local(
+    local = local_route.estimate_sequence_local(
         sequence,
         estimating.method,
         estimating.solver,
@@ -332,16 +338,16 @@ def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) ->
     refuse_dark_ambient(sequence, local.global_estimate, FLASH_GOAL[settings.mode])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", TargetUnreachableWarning)
-        solution, tile_weights, _ = analysis.solve_sequence_flash_local(
+        solution, tile_weights, _ = local_route.solve_sequence_flash_local(
             sequence, settings.mode, local, settings.target, settings.bounds
         )
     for message in dict.fromkeys(str(warning.message) for warning in caught):
         report(f"warning: {message}")
-    payload = analysis.local_flash_payload(sequence, solution, local, tile_weights, settings.target)
+    payload = local_route.local_flash_payload(sequence, solution, local, tile_weights, settings.target)
     if settings.out is not None:
         output = Path(settings.out)
         if local.model == "local":
-            image, saturated, stack = analysis.synthesize_sequence_local(sequence, tile_weights, local)
+            image, saturated, stack = local_route.synthesize_sequence_local(sequence, tile_weights, local)
             ambient_index = stack.ambient_index
         else:
             image, saturated, layout = analysis.synthesize_sequence(sequence, solution.flash_weights)

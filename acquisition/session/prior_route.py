@@ -4,7 +4,9 @@ The thin layer between a :class:`~acquisition.sequence.format.Sequence` and :mod
 :mod:`processing.light_families`, as :mod:`acquisition.session.analysis` is for eq. 4–6: frames are read with
 :func:`~acquisition.session.analysis.load_frame_stack`, binned like ``msflash estimate`` and reduced to
 channel-resolved statistics; the LED spectra and responsivities go to photons. :data:`MODEL_ROUTES` is the one
-table from a ``--model`` name to what it computes.
+table from a ``--model`` name to what it computes. A flickering ambient is read once, by the LED side's estimate
+(:func:`acquisition.session.analysis.flicker_check`), and its correction is applied to every statistic the light
+models are fitted through (:func:`processing.flicker.corrected_channel_statistics`; docs/flicker.md).
 """
 
 from __future__ import annotations
@@ -15,32 +17,30 @@ import numpy as np
 
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import Sequence
-from msflash.acquisition.session import analysis
-from msflash.acquisition.session.analysis import (
-    DEFAULT_BIN_FACTOR,
-    FrameStack,
+from msflash.acquisition.session import analysis, local_route
+from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, FrameStack, load_frame_stack
+from msflash.acquisition.session.sequence_spectra import (
     camera_responsivities_photons,
     led_spectra_photons,
-    load_frame_stack,
     spectrum_in_sequence_unit,
 )
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
 from msflash.processing.errors import SpectralDataError
+from msflash.processing.family_checks import LED_WARNING, PRIOR_WARNING, MissCheck, predicted_ratio, self_check
+from msflash.processing.flicker import FlickerCheck, corrected_channel_statistics
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.light_families import (
     AUTO_MARGIN,
     AUTO_NOISE,
-    LED_WARNING,
-    PRIOR_WARNING,
+    AVERAGE_TEMPERATURE,
+    SIMPLER_WITHIN,
     FamilyEstimate,
-    MissCheck,
-    ReferencePatch,
     family_model,
-    predicted_ratio,
-    self_check,
 )
-from msflash.processing.light_prior import ModelChoice, PriorEstimate, choose_model, prior_model
+from msflash.processing.light_prior import PriorEstimate, prior_model
+from msflash.processing.prior_choice import ModelChoice, choose_model
+from msflash.processing.reference_patch import ReferencePatch
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 
@@ -62,25 +62,33 @@ class SequencePriorResult:
 
 
 def sequence_channel_statistics(
-    sequence: Sequence, stack: FrameStack | None = None, bin_factor: int = DEFAULT_BIN_FACTOR
+    sequence: Sequence,
+    stack: FrameStack | None = None,
+    bin_factor: int = DEFAULT_BIN_FACTOR,
+    flicker: FlickerCheck | None = None,
 ) -> ChannelStatistics:
-    """The channel statistics of a sequence, binned like :func:`acquisition.session.analysis.sequence_statistics`."""
+    """The channel statistics of a sequence, binned like :func:`acquisition.session.analysis.sequence_statistics`,
+    corrected for the ambient gains ``flicker`` applies (the LED estimate's check; None: as the frames hold them)."""
     stack = stack or load_frame_stack(sequence)
     factor = analysis.block_factor(stack.ambient.shape, sequence.camera.cfa, bin_factor)
-    return accumulate_channel_statistics(
+    statistics = accumulate_channel_statistics(
         stack.ambient, stack.led_frames, stack.spec, cfa=sequence.camera.cfa, bin_factor=factor
     )
+    return corrected_channel_statistics(statistics, flicker)
 
 
-def estimate_sequence_prior(sequence: Sequence, stack: FrameStack | None = None) -> SequencePriorResult:
-    """The light-prior estimate of a sequence, the LED-span one and ``auto``'s choice between them.
+def estimate_sequence_prior(
+    sequence: Sequence, stack: FrameStack | None = None, flicker: FlickerCheck | None = None
+) -> SequencePriorResult:
+    """The light-prior estimate of a sequence, the LED-span one and ``auto``'s choice between them (``flicker``:
+    the LED estimate's check, whose gains correct the statistics).
 
     Raises
     ------
     RecordingError
         If the sequence has no camera responsivities or unusable frames.
     """
-    statistics = sequence_channel_statistics(sequence, stack)
+    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker)
     leds = led_spectra_photons(sequence)
     model = prior_model(statistics.channels, leds, camera_responsivities_photons(sequence))
     return SequencePriorResult(
@@ -145,10 +153,10 @@ def led_side(
     """The LED-span side of ``estimate --model prior|auto``: what ``--model led`` gives (global, or local when
     ``method`` finds the illuminant varying across the scene), its payload, and whether it varies."""
     if method != "global":
-        local = analysis.estimate_sequence_local(
+        local = local_route.estimate_sequence_local(
             sequence, method, solver, alpha, stream=analysis.stream_stack(sequence, stack, bin_factor, tiles)
         )
-        return local.global_estimate, analysis.local_estimate_payload(sequence, local), local.model == "local"
+        return local.global_estimate, local_route.local_estimate_payload(sequence, local), local.model == "local"
     led = analysis.estimate_sequence(sequence, solver, alpha, stream=analysis.stream_stack(sequence, stack, bin_factor))
     return led, analysis.estimate_payload(sequence, led), False
 
@@ -160,10 +168,15 @@ Reference = ReferenceRect | str
 
 
 def reference_patch(
-    sequence: Sequence, stack: FrameStack, rect: ReferenceRect, reflectance: np.ndarray | None = None, what: str = ""
+    sequence: Sequence,
+    stack: FrameStack,
+    rect: ReferenceRect,
+    reflectance: np.ndarray | None = None,
+    what: str = "",
+    flicker: FlickerCheck | None = None,
 ) -> ReferencePatch:
-    """The reference (:class:`~processing.light_families.ReferencePatch`) of one region of known reflectance
-    (``reflectance`` on the sequence's grid; None: spectrally flat).
+    """The reference (:class:`~processing.reference_patch.ReferencePatch`) of one region of known reflectance
+    (``reflectance`` on the sequence's grid; None: spectrally flat), its statistics corrected for ``flicker``'s gains.
 
     Raises
     ------
@@ -191,6 +204,7 @@ def reference_patch(
         bin_factor=2,
         n_folds=2,
     )
+    statistics = corrected_channel_statistics(statistics, flicker)
     if statistics.n_blocks == 0:
         raise UsageError(
             f"{what}: every pixel of the patch is saturated in some frame; expected a surface below the white level"
@@ -234,7 +248,9 @@ def _reference_chart_patch(patch: object, where: str) -> tuple[ReferenceRect, np
     return (int(rect[0]), int(rect[1]), int(rect[2]), int(rect[3])), wavelengths, reflectance
 
 
-def reference_chart(sequence: Sequence, stack: FrameStack, path: str) -> ReferencePatch:
+def reference_chart(
+    sequence: Sequence, stack: FrameStack, path: str, flicker: FlickerCheck | None = None
+) -> ReferencePatch:
     """``--reference-chart FILE``: patches of known reflectance (a colour chart in the scene), one reference.
 
     The file is JSON: ``{"patches": [{"rect": [x, y, width, height], "wavelengths_nm": [...], "reflectance":
@@ -260,7 +276,7 @@ def reference_chart(sequence: Sequence, stack: FrameStack, path: str) -> Referen
         where = f"{shown}: patches[{index}]"
         rect, nm, values = _reference_chart_patch(patch, where)
         reflectance = np.interp(grid, nm, values)
-        references.append(reference_patch(sequence, stack, rect, reflectance, where))
+        references.append(reference_patch(sequence, stack, rect, reflectance, where, flicker))
     return ReferencePatch.combined(references)
 
 
@@ -269,15 +285,17 @@ def estimate_sequence_family(
     stack: FrameStack | None = None,
     prior: PriorEstimate | None = None,
     reference: Reference | None = None,
+    flicker: FlickerCheck | None = None,
 ) -> tuple[PriorEstimate, FamilyEstimate]:
-    """The light prior's and the family model's estimates of a sequence (the prior is one of the candidates).
+    """The light prior's and the family model's estimates of a sequence (the prior is one of the candidates);
+    ``flicker``: the LED estimate's check, whose gains correct every statistic (the reference's too).
 
     Raises
     ------
     RecordingError
         If the sequence has no camera responsivities or unusable frames.
     """
-    statistics = sequence_channel_statistics(sequence, stack)
+    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker)
     leds = led_spectra_photons(sequence)
     camera = camera_responsivities_photons(sequence)
     if prior is None:
@@ -286,9 +304,9 @@ def estimate_sequence_family(
     if reference is not None:
         loaded = stack or load_frame_stack(sequence)
         patch = (
-            reference_chart(sequence, loaded, reference)
+            reference_chart(sequence, loaded, reference, flicker)
             if isinstance(reference, str)
-            else reference_patch(sequence, loaded, reference)
+            else reference_patch(sequence, loaded, reference, flicker=flicker)
         )
     family = family_model(statistics.channels, leds, camera).estimate(statistics, prior.spectrum.values[:, 0], patch)
     return prior, family
@@ -327,8 +345,9 @@ def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
             "chosen_relative_error": family.reference.relative_error(family.spectrum.values[:, 0]),
         },
         "evidence": {
-            "criterion": "held-out prediction of the ambient image (5 folds of block rows, noise removed); the "
-            "simplest candidate within 20 % of the best is preferred",
+            "criterion": "held-out prediction of the ambient image (folds of block rows, noise removed); the "
+            f"simplest candidate within {SIMPLER_WITHIN:.0%} of the best is preferred; the spectrum is the "
+            f"candidates' average weighted by exp(-(error/best - 1)/{AVERAGE_TEMPERATURE:g})",
             "led": evidence(family.led),
             "candidates": [evidence(c) for c in family.candidates],
         },
@@ -416,11 +435,12 @@ def _prior_route(
     varies: bool,
     led_payload: dict,
     reference: Reference | None = None,
+    flicker: FlickerCheck | None = None,
 ) -> tuple[dict, str, str, dict]:
     """``--model prior``: the light prior, checked against the family evidence."""
-    result = estimate_sequence_prior(sequence, stack)
+    result = estimate_sequence_prior(sequence, stack, flicker)
     prior = prior_payload(sequence, result)
-    _, family = estimate_sequence_family(sequence, stack, result.prior, reference)
+    _, family = estimate_sequence_family(sequence, stack, result.prior, reference, flicker)
     models, _ = _models_block(sequence, led_payload, result.prior, family)
     replacement = {
         "spectrum": prior["prior"]["spectrum"],
@@ -439,10 +459,11 @@ def _family_route(
     varies: bool,
     led_payload: dict,
     reference: Reference | None = None,
+    flicker: FlickerCheck | None = None,
 ) -> tuple[dict, str, str, dict]:
     """``--model family`` and ``--model auto``: the family model's choice (auto: the LEDs' span unless the evidence
     says otherwise; a scene whose illuminant varies keeps the local LED model)."""
-    prior, family = estimate_sequence_family(sequence, stack, None, reference)
+    prior, family = estimate_sequence_family(sequence, stack, None, reference, flicker)
     block = family_payload(sequence, family)
     models, _ = _models_block(sequence, led_payload, prior, family)
     led_error = family.led.held_out_error_noise_removed
@@ -482,8 +503,8 @@ def _family_route(
 
 
 MODEL_ROUTES = {"prior": _prior_route, "family": _family_route, "auto": _family_route}
-"""``--model`` name → its route: ``(sequence, stack, requested, varies, led payload) → (fields, chosen, reason,
-replacement)``. ``replacement`` holds the spectrum, band, band meaning and warnings that replace the LED ones when
+"""``--model`` name → its route: ``(sequence, stack, requested, varies, led payload, reference, flicker) → (fields,
+chosen, reason, replacement)``. ``replacement`` holds the spectrum, band, band meaning and warnings that replace the LED ones when
 ``chosen`` is not ``led`` (``led`` itself needs no route: it is :mod:`acquisition.session.analysis`'s estimate), and
 ``led_warnings``, the LED payload's warnings with the families' check in place of the reference lights' when it is."""
 
@@ -495,6 +516,7 @@ def with_model_choice(
     requested: str,
     varies: bool,
     reference: Reference | None = None,
+    flicker: FlickerCheck | None = None,
 ) -> tuple[dict, str, str]:
     """The estimate payload of ``--model prior|family|auto``: the model estimated, the model chosen and why.
 
@@ -504,7 +526,8 @@ def with_model_choice(
     ones, which stay under ``led`` when another model wins. ``models`` holds every model's spectrum, band, warnings
     and miss check (predicted ratio to the LED bound against the family evidence, docs/light-families.md).
     ``reference``: a spectrally flat patch (``--reference-patch``) whose error joins the evidence and on which the
-    family estimate is calibrated.
+    family estimate is calibrated. ``flicker``: the LED side's flicker check; its gains correct the light models'
+    statistics as they corrected the LED estimate's (docs/flicker.md).
 
     Returns
     -------
@@ -512,7 +535,7 @@ def with_model_choice(
         The payload (docs/architecture.md §7), the chosen model and the reason.
     """
     fields, chosen, reason, replacement = MODEL_ROUTES[requested](
-        sequence, stack, requested, varies, payload, reference
+        sequence, stack, requested, varies, payload, reference, flicker
     )
     payload = dict(payload)
     payload.update({key: value for key, value in fields.items() if key != "model_choice"})

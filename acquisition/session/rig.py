@@ -52,7 +52,7 @@ from typing import TYPE_CHECKING, Any
 
 from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
-from msflash.acquisition.devices.simulated_camera import SIM_DEFAULT_CFA
+from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
 from msflash.acquisition.devices.wired_fake import WiredFakeCamera
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.rigs.aravis_fake import (
@@ -72,7 +72,7 @@ from msflash.acquisition.session.rigs.hardware import (
 from msflash.acquisition.session.rigs.replay import open_replay_rig
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.acquisition.session.rigs.sim import open_firmware_booth, open_sim_rig
-from msflash.led_controller.booth import DEFAULT_BOOT_S
+from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.processing.names import unknown_name
 from msflash.processing.scenes import Scene
 from msflash.processing.spectra import Spectra

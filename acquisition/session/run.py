@@ -16,7 +16,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Sequence as Seq
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from warnings import WarningMessage
 
@@ -28,7 +28,9 @@ from msflash.acquisition.devices.replay_camera import format_levels, levels_matc
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.progress import count, progress
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import SequenceFrame, SequenceWriter, as_recorded, read_sequence
+from msflash.acquisition.sequence.format import Sequence, SequenceFrame
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import SequenceWriter, as_recorded
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.both_flashes import SequenceFlashes, solve_both
 from msflash.acquisition.session.capture import FrameWriter, run_capture, run_capture_with_flash
@@ -38,10 +40,9 @@ from msflash.acquisition.session.exposure import (
     ExposurePlan,
     ExposurePolicy,
     FlashEnergyWarning,
-    flash_exposure,
-    metering_view,
 )
 from msflash.acquisition.session.flash_session import FlashSession
+from msflash.acquisition.session.metering import flash_exposure, metering_view
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run_exposure import (
     SYNC_MODES,
@@ -272,6 +273,14 @@ class StreamFlash(LedFrames):
         return FlashChoice(tuple(float(v) for v in levels), float(flash_us))
 
 
+def _fitted(estimate: AmbientEstimate, reread: EstimateStream | None, recorded: Sequence) -> AmbientEstimate:
+    """The estimate with the mains fitted to its flicker gains at the frames' timestamps: the live stream's header
+    has no frames yet, the sequence written has (docs/flicker.md)."""
+    if estimate.flicker is None or reread is not None:
+        return estimate
+    return replace(estimate, flicker=analysis.with_mains_fit(estimate.flicker, recorded))
+
+
 def run_one_stream(
     rig: Rig,
     writer: AsyncSequenceWriter,
@@ -306,7 +315,9 @@ def run_one_stream(
     # from memory; the reported estimate is the statistics accumulated as they arrived (no second pass).
     recorded = writer.flush()
     stack = analysis.load_frame_stack(recorded, [frame.pixels for frame in flash.frames])
-    estimate = (flash.reread or flash.session.stream).estimate(options.solver, options.alpha)
+    estimate = _fitted(
+        (flash.reread or flash.session.stream).estimate(options.solver, options.alpha), flash.reread, recorded
+    )
     both = solve_both(flash.session, estimate.ambient_weights, options.mode, solved={options.mode: flash.chosen})
     names = [led.name for led in writer.sequence.leds]
     captured = led_capture(rig, names, exposure, flash.frames, list(entries[:-1]), flash.last_frame_at)
@@ -341,7 +352,7 @@ def run_two_captures(
         sequence = read_sequence(writer.path.parent)
         statistics = stream_sequence(sequence, options.bin_factor)
     stack = analysis.load_frame_stack(sequence, [frame.pixels for frame in captured.frames])
-    estimate = statistics.estimate(options.solver, options.alpha)
+    estimate = _fitted(statistics.estimate(options.solver, options.alpha), None, sequence)
     both = solve_both(SequenceFlashes(sequence, options.target), estimate.ambient_weights, options.mode)
     solutions, caught = both.solutions, both.warnings
     levels = np.clip(solutions[options.mode].flash_weights, 0.0, 1.0)

@@ -21,7 +21,7 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, StepRole, TriggerSource
 from msflash.acquisition.progress import progress
 from msflash.acquisition.sequence.format import SequenceFrame
-from msflash.acquisition.session.anti_flicker import with_anti_flicker
+from msflash.acquisition.session.anti_flicker import FlashFlickerWarning, flash_whole_periods, with_anti_flicker
 from msflash.acquisition.session.capture import preview_frames
 from msflash.acquisition.session.engine import Cancellation
 from msflash.acquisition.session.exposure import (
@@ -30,13 +30,11 @@ from msflash.acquisition.session.exposure import (
     FlashEnergyWarning,
     camera_exposure_range,
     camera_noise_model,
-    format_led_snr,
-    led_snr_warnings,
-    measure_led_snr,
-    metering_view,
     plan_exposures,
     whole_pwm_periods,
 )
+from msflash.acquisition.session.led_snr import format_led_snr, led_snr_warnings, measure_led_snr
+from msflash.acquisition.session.metering import metering_view
 from msflash.acquisition.session.rig import Rig
 
 log = logging.getLogger(__name__)
@@ -204,22 +202,35 @@ def flash_exposure_for(
 ) -> float:
     """The flash frame's exposure: fixed, recorded (replay), or ``predict(levels)`` from the frames in memory.
 
-    A predicted exposure for a booth that dims by PWM here (host paced, or a booth without pulse
-    dimming) is made whole PWM periods, or a :class:`FlashEnergyWarning` gives the energy error
-    (:func:`~acquisition.session.exposure.whole_pwm_periods`).
+    A predicted exposure is made whole flicker periods when ``--anti-flicker`` is on and the exposure allows, else a
+    :class:`~acquisition.session.anti_flicker.FlashFlickerWarning` names it
+    (:func:`~acquisition.session.anti_flicker.flash_whole_periods`). A predicted exposure for a booth that dims by
+    PWM here (host paced, or a booth without pulse dimming) is made whole PWM periods, or a
+    :class:`FlashEnergyWarning` gives the energy error (:func:`~acquisition.session.exposure.whole_pwm_periods`);
+    whole flicker periods, once reached, are kept (the PWM's energy error is then what is warned about).
     """
     if plan.mode != "auto":
         recorded = recording_of(rig)
         if plan.mode == "recorded" and recorded is not None and recorded.flash_us is not None:
             return recorded.flash_us
         return plan.ambient_exposure_us
-    exposure_us = predict(levels)
+    predicted = predict(levels)
+    exposure_us, flicker_note = flash_whole_periods(predicted, plan)
+    if flicker_note is not None:
+        warnings.warn(flicker_note, FlashFlickerWarning, stacklevel=2)
+    elif exposure_us != predicted:
+        log.info("flash exposure %.0f µs → %.0f µs: whole flicker periods (--anti-flicker)", predicted, exposure_us)
     info = getattr(rig.booth, "info", None)
     pwm_hz = getattr(info, "pwm_hz", None)
     if pwm_hz is None or (sync in ("booth", "camera") and getattr(info, "pulse_dimming", False)):
         return exposure_us
+    whole_flicker = plan.policy.anti_flicker != "off" and flicker_note is None
     chosen, note = whole_pwm_periods(
-        exposure_us, [float(v) for v in levels], pwm_hz, plan.exposure_range_us, plan.policy
+        exposure_us,
+        [float(v) for v in levels],
+        pwm_hz,
+        (exposure_us, exposure_us) if whole_flicker else plan.exposure_range_us,
+        plan.policy,
     )
     if note is not None:
         warnings.warn(note, FlashEnergyWarning, stacklevel=2)

@@ -53,8 +53,8 @@ from msflash.acquisition.session.booth_guard import (
     watchdog_covering,
 )
 from msflash.acquisition.session.engine import FRAME_ID_MODULUS, Recorder, StepFrame
-from msflash.led_controller.booth import ARM_TIME_MAX_US
 from msflash.led_controller.booth_interface import SequencedBooth
+from msflash.led_controller.booth_table import ARM_TIME_MAX_US
 
 log = logging.getLogger(__name__)
 

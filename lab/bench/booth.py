@@ -7,7 +7,8 @@ import time
 from typing import Any
 
 from msflash.led_controller.booth import LedBooth
-from msflash.led_controller.emulator import BoothEmulator, serve_on_pty
+from msflash.led_controller.emulator import BoothEmulator
+from msflash.led_controller.emulator_pty import serve_on_pty
 
 
 def run_bench(*, round_trips: int = 200, uploads: int = 10, steps: int = 16, channels: int = 8) -> dict[str, Any]:

@@ -9,7 +9,7 @@ serially in this process (``--scheduler none``), on the one-worker cluster and o
 (runs seconds apart, so the ratio holds while other load comes and goes), with its spread;
 ``two_workers_over_serial`` the two-worker time ÷ the serial time (above 1: dask did not pay). The
 cluster start (2–3 s, more under load) is left out: it is paid once per command. Each worker's image
-passes already use two threads (``processing.statistics.DEFAULT_WORKERS``), so on two cores the ideal
+passes already use two threads (``processing.moment_products.DEFAULT_WORKERS``), so on two cores the ideal
 is below 2. The records of the three are checked equal (``identical``).
 """
 
@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session.dask_map import dask_mapper
 from msflash.acquisition.session.many import estimate_record
 from msflash.acquisition.session.one_sequence import EstimateSettings

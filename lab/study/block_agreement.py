@@ -3,7 +3,7 @@
 Why the two paths differed (issue 21, item 4)
 ---------------------------------------------
 ``msflash estimate --bin 1`` and the default 4 × 4 blocks are not the same estimator with more or
-fewer samples. Even block sizes carry the half-difference noise probe (:mod:`processing.statistics`,
+fewer samples. Even block sizes carry the half-difference noise probe (:mod:`processing.block_rows`,
 module notes): their moments are *denoised* (no errors-in-variables bias) and their samples
 *inverse-variance weighted*. Block size 1 — and every odd size — has no probe, so its estimate is
 solved on the moments as observed: the LED-only images' noise inflates their Gram matrix and the
@@ -35,12 +35,8 @@ import numpy as np
 
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.statistics import (
-    DEFAULT_CHUNK_PIXELS,
-    FrameStackSpec,
-    SequenceStatistics,
-    statistics_from_moments,
-)
+from msflash.processing.moment_products import DEFAULT_CHUNK_PIXELS
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, statistics_from_moments
 
 
 @dataclass(frozen=True)
@@ -84,7 +80,7 @@ def all_pixel_statistics(
     Parameters
     ----------
     ambient, led_frames, spec
-        As :func:`processing.statistics.accumulate_statistics` (a mosaic as (H, W): every sample alike).
+        As :func:`processing.accumulate.accumulate_statistics` (a mosaic as (H, W): every sample alike).
     noise
         The line of the ambient frame, then of each LED frame.
     weighting

@@ -50,10 +50,10 @@ from msflash.lab.study.table1 import (
     select_cameras,
 )
 from msflash.processing import lights
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from msflash.processing.statistics import accumulate_statistics
 
 FACTORS: dict[str, dict[str, Any]] = {
     "n_leds": {"levels": [7, 6, 5, 4, 3], "label": "number of LEDs (paper subsets)"},

@@ -26,7 +26,7 @@ Protocol
   best LED fit of every pixel's truth) and the global estimator run on each ambient alone over
   the whole scene (:func:`alone_rmse`) — the error left when locality is solved perfectly.
 - Cost: wall time of statistics + estimate on a full-size frame (1024 × 1280, the Ximea's) for the
-  global estimate (:func:`processing.statistics.accumulate_statistics` + :func:`estimate_ambient`)
+  global estimate (:func:`processing.accumulate.accumulate_statistics` + :func:`estimate_ambient`)
   and for ``auto`` (:func:`processing.local.tile_statistics` + :func:`estimate_local`), medians of
   repeats (interleaved, best of each); frames in memory.
 """
@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from msflash.processing import datasets, lights
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.image_formation import (
     MixedIllumination,
@@ -54,7 +55,7 @@ from msflash.processing.progress import Progress, report_count
 from msflash.processing.scenes import Scene
 from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec
 
 AMBIENT_POOL = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange")
 """Ambients the scenarios draw from."""

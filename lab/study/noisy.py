@@ -3,7 +3,7 @@
 Unlike Table 1 (noise-free per-surface matrices), these studies render real raw frames with
 :func:`processing.image_formation.render_frame` — photon and read noise, black level,
 quantisation, saturation — and run the app's estimation path on them:
-:func:`processing.statistics.accumulate_statistics` then
+:func:`processing.accumulate.accumulate_statistics` then
 :func:`processing.ambient.estimate_ambient`.
 
 The world (:class:`World`)
@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from msflash.lab.study.table1 import flash_norm, led_subset_indices
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import (
     CONDITION_WARNING,
     RESIDUAL_WARNING,
@@ -47,7 +48,7 @@ from msflash.processing.model_error import EXPECTED_RATIO_WARNING, reference_for
 from msflash.processing.scenes import Scene, chart_scene
 from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
-from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 
 PEAK_FRACTION = 0.8
 """Metered peak of the brightest frame, as a fraction of full scale."""

@@ -9,7 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from msflash.led_controller.adapters.text_booth import TextBooth
-from msflash.led_controller.booth import DEFAULT_BOOT_S, LedBooth
+from msflash.led_controller.booth import LedBooth
+from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import Booth
 
 BOOTH_PROTOCOLS = ("msflash", "text")

@@ -24,14 +24,14 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
-from typing import IO, Any, Literal
+from typing import Any, Literal
 
 import serial
 
-from msflash.led_controller.booth import DEFAULT_BOOT_S, open_serial_port
+from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import HOST_PACED_ONLY, BoothCapabilities
 from msflash.led_controller.errors import BoothError, BoothProtocolError, BoothTimeoutError
+from msflash.led_controller.serial_port import open_serial_port, open_transcript
 
 log = logging.getLogger(__name__)
 
@@ -139,17 +139,7 @@ class TextBooth:
         self._name = name
         self._closed = False
         self._info: TextBoothInfo | None = None
-        try:
-            self._transcript: IO[str] | None = (
-                open(log_serial, "w", encoding="ascii", newline="\n") if log_serial else None  # noqa: SIM115
-            )
-        except OSError as err:
-            raise BoothError(
-                f"{name}: cannot record the serial transcript in {log_serial} "
-                f"({err.strerror or err}); expected a writable file path"
-            ) from err
-        if self._transcript is not None:
-            self._transcript.write(f"# msflash text booth transcript, port {name}, {time.strftime('%Y-%m-%d')}\n")
+        self._transcript = open_transcript(log_serial, name, "text booth")
 
     @classmethod
     def open(
@@ -170,7 +160,7 @@ class TextBooth:
         Raises
         ------
         BoothNotFoundError
-            The port does not exist (:func:`led_controller.booth.open_serial_port`).
+            The port does not exist (:func:`led_controller.serial_port.open_serial_port`).
         BoothError
             The port cannot be opened or does not answer as a text booth (its LEDs are sent ``OFF``).
         """
@@ -294,9 +284,7 @@ class TextBooth:
     def __enter__(self) -> TextBooth:
         return self
 
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> Literal[False]:
+    def __exit__(self, *_exc: object) -> Literal[False]:
         self.close()
         return False
 

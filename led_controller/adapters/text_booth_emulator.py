@@ -13,14 +13,11 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import os
-import select
 import threading
 import time
-import tty
 from collections.abc import Sequence
 
-from msflash.led_controller.usb_link import MEGA_BOOTLOADER_S, Bootloader, PortOpenWatch
+from msflash.led_controller.usb_link import MEGA_BOOTLOADER_S, Bootloader, TwinPort
 
 log = logging.getLogger(__name__)
 
@@ -108,26 +105,14 @@ class TextBoothServer:
         self, emulator: TextBoothEmulator, *, auto_reset: bool = True, bootloader_s: float = MEGA_BOOTLOADER_S
     ) -> None:
         self.emulator = emulator
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)  # before anyone opens it: no echo, no line editing, no CR/LF mapping
-        self.port = os.ttyname(self._slave)
+        self._pty = TwinPort()
+        self.port = self._pty.path
         self.auto_reset = auto_reset
         self.resets = 0
         self._bootloader = Bootloader(window_s=bootloader_s)
-        self._host_opens = 0
-        self._watch = PortOpenWatch(self.port)
-        self._wake_r, self._wake_w = os.pipe()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"text-booth-emulator {self.port}", daemon=True)
         self._thread.start()
-
-    def _port_events(self) -> None:
-        for change in self._watch.changes():
-            was, self._host_opens = self._host_opens, max(0, self._host_opens + change)
-            if change > 0 and was == 0 and self.auto_reset:
-                self.resets += 1
-                self.emulator.levels = (0.0,) * len(self.emulator.names)  # reset: pins are inputs
-                self._bootloader.reset(time.monotonic())
 
     def _run(self) -> None:
         pending = b""
@@ -136,17 +121,19 @@ class TextBoothServer:
                 wait = (
                     None if self._bootloader.ends_at is None else max(0.0, self._bootloader.ends_at - time.monotonic())
                 )
-                ready, _, _ = select.select([self._master, self._wake_r, self._watch.fileno()], [], [], wait)
-                if self._watch.fileno() in ready:
-                    self._port_events()
-                data = os.read(self._master, 4096) if self._master in ready else b""
+                data, changes = self._pty.wait(wait)
+                for change in changes:
+                    if change == "reset" and self.auto_reset:
+                        self.resets += 1
+                        self.emulator.levels = (0.0,) * len(self.emulator.names)  # reset: pins are inputs
+                        self._bootloader.reset(time.monotonic())
                 now = time.monotonic()
                 if self._bootloader.running(now):
                     self._bootloader.swallow(data, now)
                     pending = b""
                     continue
                 if self._bootloader.finished(now):
-                    self._write(f"{self.emulator.firmware} ready\n".encode("ascii"))  # the sketch's setup()
+                    self._pty.write(f"{self.emulator.firmware} ready\n".encode("ascii"))  # the sketch's setup()
                 pending += data
             except OSError as err:
                 if not self._stop.is_set():
@@ -155,28 +142,16 @@ class TextBoothServer:
             while b"\n" in pending:
                 line, pending = pending.split(b"\n", 1)
                 text = line.rstrip(b"\r").decode("ascii", errors="replace")
-                self._write((self.emulator.reply(text) + "\n").encode("ascii"))
-
-    def _write(self, data: bytes) -> None:
-        if self._host_opens == 0:
-            return  # nobody has the port open: the USB-serial chip drops it
-        view = memoryview(data)
-        while view:
-            try:
-                view = view[os.write(self._master, view) :]
-            except OSError:
-                return  # the pty is gone
+                self._pty.write((self.emulator.reply(text) + "\n").encode("ascii"))
 
     def close(self) -> None:
         """Stop the thread and close the pty (idempotent)."""
         if self._stop.is_set():
             return
         self._stop.set()
-        os.write(self._wake_w, b"x")
+        self._pty.wake()
         self._thread.join(timeout=2.0)
-        self._watch.close()
-        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
-            os.close(fd)
+        self._pty.close()
 
     def __enter__(self) -> TextBoothServer:
         return self

@@ -13,6 +13,8 @@ Aravis fixtures
 ``gv_fake`` / ``gv_camera``
     The GigE Vision fake served on 127.0.0.1 inside the test process, and an ``AravisCamera``
     opened on it by address (no discovery).
+``hw_calibration``, ``hw_booth_port``, ``led_spectra_csv``
+    The hardware rig's calibration, booth and LED spectra (:mod:`tests.acquisition.support.hw_rig`).
 ``gv_fake_process``
     A factory starting ``arv-fake-gv-camera-0.8 -i 127.0.0.1`` as a separate process (to kill it,
     to drop packets with ``-r``, to serve Aravis's own XML, or to be another program's camera on
@@ -40,6 +42,7 @@ from typing import Any
 import pytest
 
 from tests.acquisition.support.gvcp_port import gvcp_port_in_use
+from tests.acquisition.support.hw_rig import hw_booth_port, hw_calibration, led_spectra_csv  # noqa: F401 - fixtures
 
 FAKE_GV_TOOL = "arv-fake-gv-camera-0.8"
 

@@ -23,11 +23,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from msflash.acquisition.app import cli
-from msflash.acquisition.sequence.format import (
-    SequenceCamera,
-    SequenceLed,
-    SequenceWriter,
-)
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.calibration.files import load_calibration
 from msflash.processing import datasets
 from msflash.processing.negative_values import PEAK_FRACTION

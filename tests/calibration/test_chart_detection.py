@@ -14,7 +14,7 @@ import pytest
 
 from msflash.acquisition.app import cli
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rigs import sim as rig_module
 from msflash.calibration.chart_detection import (
     MACBETH_GRID,

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app import cli
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.calibration.camera_response import responsivity_rmse
 from msflash.calibration.chart_sequence import resolve_light, sequence_measurements
 from msflash.calibration.errors import CalibrationError

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app import cli
-from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.sequence.image_files import write_image
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.calibration.errors import CalibrationError
 from msflash.calibration.files import load_calibration
 from msflash.calibration.white_reference import parse_roi, white_led_responses

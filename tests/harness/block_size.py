@@ -35,21 +35,22 @@ from typing import Any
 
 import numpy as np
 
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session.analysis import (
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session.analysis import load_frame_stack
+from msflash.acquisition.session.sequence_spectra import (
     camera_responsivities_photons,
     led_spectra_photons,
-    load_frame_stack,
     spectrum_in_sequence_unit,
 )
 from msflash.lab.study.block_agreement import FrameNoise, agreement, all_pixel_statistics, sensor_noise
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.channel_statistics import accumulate_channel_statistics
 from msflash.processing.light_prior import prior_model
 from msflash.processing.local import estimate_local, tile_statistics
 from msflash.processing.model_error import LightReference, reference_for, with_model_error
 from msflash.processing.spectra import Spectra
-from msflash.processing.statistics import SequenceStatistics, accumulate_statistics
+from msflash.processing.statistics import SequenceStatistics
 from tests.harness import metrics
 from tests.harness.cases import select_cases
 from tests.harness.render import HarnessCase, render

@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+from msflash.acquisition.sequence.writer import SequenceWriter
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED = ROOT.parent / "shared" / "data" if (ROOT.parent / "shared" / "data").exists() else Path("/work/shared/data")

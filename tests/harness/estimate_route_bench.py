@@ -22,7 +22,7 @@ import time
 import tracemalloc
 from pathlib import Path
 
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis
 from tests.acquisition.session.test_estimate_stream import write_sequence
 

@@ -4,7 +4,7 @@ From :mod:`tests.harness.family_study`'s output (one row per case and candidate,
 ``led`` (``msflash estimate``), each family alone (the family model restricted to that family's candidates,
 chosen by the same rule), ``prior``, ``family`` and ``auto``, the mean and worst ratio to the LED bound against
 the median compute per estimate; and for every model the ROC of its miss check (the predicted ratio to the LED
-bound against the family evidence, :func:`processing.light_families.predicted_ratio` and ``self_check``), with
+bound against the family evidence, :func:`processing.family_checks.predicted_ratio` and ``self_check``), with
 the operating point the shipped thresholds give.
 """
 
@@ -18,15 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.processing.light_families import (
-    AUTO_MARGIN,
-    EVIDENCE_TEMPERATURE,
-    FAMILY_WARNING,
-    LED_WARNING,
-    MISS_RATIO,
-    PRIOR_WARNING,
-    SIMPLER_WITHIN,
-)
+from msflash.processing.family_checks import FAMILY_WARNING, LED_WARNING, MISS_RATIO, PRIOR_WARNING
+from msflash.processing.light_families import AUTO_MARGIN, CHECK_TEMPERATURE, SIMPLER_WITHIN
 
 FAMILY_ORDER = ("thermal", "discharge", "solid_state", "transmitted", "mixture")
 
@@ -138,7 +131,7 @@ def _roc(score: np.ndarray, miss: np.ndarray) -> tuple[np.ndarray, np.ndarray, f
 def warning_scores(records: dict[str, dict]) -> dict[str, tuple[np.ndarray, np.ndarray, float]]:
     """Per model: (predicted ratio, truly a miss, threshold) — the shipped checks recomputed from the study."""
     cases = list(records.values())
-    tau = f"{EVIDENCE_TEMPERATURE:g}"
+    tau = f"{CHECK_TEMPERATURE:g}"  # the τ of the spread self_check reads (the distances do not depend on τ)
 
     def column(key: str, default: float = 0.0) -> np.ndarray:
         return np.nan_to_num(np.array([float(c.get(key, default)) for c in cases]), nan=0.0)

@@ -1,7 +1,7 @@
 """``python -m tests.harness.family_speed``: where the family model's time goes, RGB and raw, in one process.
 
-``msflash bench --part processing`` reports ``family_estimate_over_copy`` on RGB frames (interleaved with the copy,
-the issue's figure). This prints, for the bench's 1280×1024 world as RGB and as a raw 12-bit RGGB mosaic, the best of
+``msflash bench --part processing`` reports ``family_estimate_over_copy`` on RGB and raw frames (interleaved with the
+copy, the issue's figure). This prints, for the bench's 1280×1024 world as RGB and as a raw 12-bit RGGB mosaic, the best of
 ``--repeats`` timings of each step the family estimate takes — a copy of the frames, the channel statistics, the
 light prior, the families (fits and held-out judgement) — and the estimate over the copy. One thread
 (``OPENBLAS_NUM_THREADS=1``); no targets asserted.
@@ -32,7 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=9)
     args = parser.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from msflash.acquisition.app.bench import DEFAULT_BIN_FACTOR, benchmark_world, frame_copy
+    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR
+    from msflash.lab.bench.processing import benchmark_world, frame_copy
     from msflash.processing import frame_kernels
     from msflash.processing.channel_statistics import accumulate_channel_statistics
     from msflash.processing.light_families import family_model

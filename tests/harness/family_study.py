@@ -34,17 +34,17 @@ def _paper_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
 
 def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
     """One row per candidate of ``case``, and one row for the case (band coverages, warning features)."""
-    from msflash.acquisition.sequence.format import read_sequence
-    from msflash.acquisition.session.analysis import (
+    from msflash.acquisition.sequence.reader import read_sequence
+    from msflash.acquisition.session.analysis import estimate_sequence, load_frame_stack, stream_stack
+    from msflash.acquisition.session.prior_route import sequence_channel_statistics
+    from msflash.acquisition.session.sequence_spectra import (
         camera_responsivities_photons,
-        estimate_sequence,
         led_spectra_photons,
-        load_frame_stack,
         spectrum_in_sequence_unit,
     )
-    from msflash.acquisition.session.prior_route import sequence_channel_statistics
-    from msflash.processing.light_families import evidence_spread, family_model, scene_form
+    from msflash.processing.light_families import evidence_spread, family_model
     from msflash.processing.light_prior import prior_model
+    from msflash.processing.spectral_data_term import scene_form
 
     truth = cached_render(case, cache)
     bound = metrics.led_bound(truth.led_spd, truth.ambient)
@@ -56,7 +56,7 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
     statistics = sequence_channel_statistics(sequence, stack)
     seconds = {"statistics": time.perf_counter() - clock}
     clock = time.perf_counter()
-    led_estimate = estimate_sequence(sequence, "tikhonov", "auto", stack=stack)
+    led_estimate = estimate_sequence(sequence, "tikhonov", "auto", stream=stream_stack(sequence, stack))
     seconds["led"] = time.perf_counter() - clock
     clock = time.perf_counter()
     prior = prior_model(statistics.channels, leds, camera).estimate(statistics)
@@ -78,7 +78,7 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
     scene = scene_form(statistics, model.reduction)
     problem = scene.whitened(list(range(scene.n_folds)))
     own = model.posterior_std(chosen, problem, statistics.n_blocks * statistics.n_channels)
-    family_spectrum = in_unit(chosen.fit.spectrum)
+    family_spectrum = in_unit(estimate.spectrum.values[:, 0])  # what msflash reports (the evidence average)
     led_spectrum = np.asarray(
         spectrum_in_sequence_unit(sequence, led_estimate.spectrum), float
     )  # what msflash estimate gives (weighted statistics)
@@ -105,6 +105,7 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
     for temperature in TEMPERATURES:
         spread, average = evidence_spread(chosen, list(estimate.candidates), temperature)
         spread_unit, average_unit = in_unit(spread), in_unit(average)
+        case_row[f"average:ratio:{temperature}"] = _paper_rmse(average_unit, truth_ambient) / bound
         for scale in BAND_SCALES:
             std = np.sqrt((scale * in_unit(own)) ** 2 + spread_unit**2)
             cover = metrics.band_coverage(family_spectrum, std, truth_ambient)

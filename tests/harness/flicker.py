@@ -15,6 +15,10 @@ Each rendering is estimated twice by msflash's LED model (eq. 4–6, the default
 (:func:`processing.ambient.estimate_ambient` on the same statistics). The ratio is RMSE ÷ the LED bound (the best
 non-negative fit of the truth by the LEDs, :func:`tests.harness.metrics.led_bound`); the truth is the lamp's mean.
 
+Every model is also run the way ``msflash estimate`` runs it (:data:`MODELS`: the LED model global and local, the light
+prior, the families and ``auto``; :func:`acquisition.session.one_sequence.estimate_read`), on both renderings, and on the
+flickering one again with the gains read but not applied (:func:`processing.flicker.gains_not_applied`).
+
 Tuning rows are the lamp kinds the rule's constants were set on (:data:`TUNING_KINDS`); held-out rows the others.
 
 Run: ``.venv/bin/python -m tests.harness.flicker --out docs/flicker-results.md`` (``--per-kind N`` cases per
@@ -34,10 +38,11 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session import analysis, sequence_spectra
+from msflash.acquisition.session.one_sequence import EstimateSettings, estimate_read
 from msflash.processing.ambient import estimate_ambient
-from msflash.processing.flicker import with_ambient_gains
+from msflash.processing.flicker import gains_applied, gains_not_applied, with_ambient_gains
 from tests.harness import metrics
 from tests.harness.cases import cases_of
 from tests.harness.render import HarnessCase, render
@@ -52,6 +57,14 @@ PER_KIND = 12
 """Cases per lamp kind (the first of each kind in the harness's two splits)."""
 TUNING_KINDS = ("incandescent", "fluorescent")
 """Lamp kinds the gain model's constants were set on; the rest are held out."""
+MODELS = {
+    "led": EstimateSettings(method="global"),
+    "local": EstimateSettings(method="local"),
+    "prior": EstimateSettings(model="prior"),
+    "family": EstimateSettings(model="family"),
+    "auto": EstimateSettings(model="auto"),
+}
+"""Each model as ``msflash estimate`` runs it: ``--method global``, ``--method local``, ``--model prior|family|auto``."""
 WAVEFORMS = {"incandescent": "sine", "fluorescent": "rectified", "discharge": "rectified", "led": "clipped"}
 """Each lamp kind's waveform (others: sine)."""
 
@@ -114,7 +127,8 @@ class Row:
     kind: str
     split: str
     ratios: dict[str, float]
-    """``steady``/``flicker`` × ``model``/``plain``: RMSE ÷ LED bound."""
+    """``steady``/``flicker`` × ``model``/``plain``/``oracle``: RMSE ÷ LED bound; and per :data:`MODELS` name ``m``,
+    ``m steady``, ``m flicker`` and ``m flicker plain`` (the gains read but not applied)."""
     detected_steady: bool
     detected_flicker: bool
     gain_error: float
@@ -133,14 +147,36 @@ def _estimates(directory: Path, true_offsets: np.ndarray) -> tuple[np.ndarray, n
     stack = analysis.load_frame_stack(sequence)
     statistics = analysis.sequence_statistics(stack, sequence.camera.cfa, analysis.DEFAULT_BIN_FACTOR)
     with_model = analysis.estimate_from_statistics(sequence, statistics)
-    leds = analysis.led_spectra_photons(sequence)
+    leds = sequence_spectra.led_spectra_photons(sequence)
     plain = estimate_ambient(statistics, leds, "tikhonov", "auto")
     oracle = estimate_ambient(with_ambient_gains(statistics, true_offsets), leds, "tikhonov", "auto")
 
     def values(estimate) -> np.ndarray:
-        return np.asarray(analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum), float)
+        return np.asarray(sequence_spectra.spectrum_in_sequence_unit(sequence, estimate.spectrum), float)
 
     return values(with_model), values(plain), values(oracle), with_model.flicker
+
+
+def _model_ratios(
+    directory: Path, truth: np.ndarray, bound: float, rendering: str, true_offsets: np.ndarray
+) -> dict[str, float]:
+    """Each of :data:`MODELS` as ``msflash estimate`` runs it, RMSE ÷ LED bound; on the flickering rendering also
+    with the gains not applied, and with the true ones (the oracle)."""
+    sequence = read_sequence(directory)
+    out: dict[str, float] = {}
+
+    def ratio(settings: EstimateSettings) -> float:
+        payload = estimate_read(sequence, settings, lambda note: None).payload
+        return metrics.rmse(np.asarray(payload["spectrum"], float), truth) / bound
+
+    for name, settings in MODELS.items():
+        out[f"{name} {rendering}"] = ratio(settings)
+        if rendering == "flicker":
+            with gains_not_applied():
+                out[f"{name} flicker plain"] = ratio(settings)
+            with gains_applied(true_offsets):
+                out[f"{name} flicker oracle"] = ratio(settings)
+    return out
 
 
 def measure(case: HarnessCase) -> Row:
@@ -153,10 +189,12 @@ def measure(case: HarnessCase) -> Row:
         for name, gains in (("steady", np.ones_like(lamp.gains)), ("flicker", lamp.gains)):
             truth = render(case, scratch / name, ambient_gains=gains, exposures_us=lamp.exposures_us)
             bound = metrics.led_bound(truth.led_spd, truth.ambient)
-            model, plain, oracle, check = _estimates(truth.directory, gains[1:] / gains[0] - 1.0)
+            true_offsets = gains[1:] / gains[0] - 1.0  # one LED a frame at full drive: e = g − 1
+            model, plain, oracle, check = _estimates(truth.directory, true_offsets)
             ratios[f"{name} model"] = metrics.rmse(model, truth.ambient) / bound
             ratios[f"{name} plain"] = metrics.rmse(plain, truth.ambient) / bound
             ratios[f"{name} oracle"] = metrics.rmse(oracle, truth.ambient) / bound
+            ratios.update(_model_ratios(truth.directory, truth.ambient, bound, name, true_offsets))
             checks[name] = check
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
@@ -227,6 +265,30 @@ def table(rows: list[Row], title: str) -> list[str]:
     return [*lines, ""]
 
 
+def model_table(rows: list[Row], title: str) -> list[str]:
+    """Every model (:data:`MODELS`): mean (worst) ratio steady, flickering with the gains applied and not, the cost."""
+    lines = [
+        f"### {title}",
+        "",
+        "| model | n | steady mean (worst) | flicker, gains applied | flicker, not applied | flicker, true gains |"
+        " cost with gains | cost without | cost with true gains | read's cost (applied ÷ true − 1) | target ≤ 5 % |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name in MODELS:
+        steady = np.array([r.ratios[f"{name} steady"] for r in rows])
+        model = np.array([r.ratios[f"{name} flicker"] for r in rows])
+        plain = np.array([r.ratios[f"{name} flicker plain"] for r in rows])
+        oracle = np.array([r.ratios[f"{name} flicker oracle"] for r in rows])
+        cost, cost_plain = model.mean() / steady.mean() - 1, plain.mean() / steady.mean() - 1
+        lines.append(
+            f"| {name} | {len(rows)} | {steady.mean():.3f} ({steady.max():.2f}) | {model.mean():.3f} ({model.max():.2f})"
+            f" | {plain.mean():.3f} ({plain.max():.2f}) | {oracle.mean():.3f} ({oracle.max():.2f}) | **{cost:+.1%}** |"
+            f" {cost_plain:+.1%} | {oracle.mean() / steady.mean() - 1:+.1%} | {model.mean() / oracle.mean() - 1:+.1%} |"
+            f" {'met' if cost <= 0.05 else 'missed'} |"
+        )
+    return [*lines, ""]
+
+
 def report(rows: list[Row], command: str) -> str:
     """docs/flicker-results.md."""
     tuning = [r for r in rows if r.split == "tuning"]
@@ -245,6 +307,16 @@ def report(rows: list[Row], command: str) -> str:
         "mean ratio steady − 1. *oracle*: the flickering rendering corrected by the true gains (what a perfect "
         "read would give; it differs from *steady* by the noise alone, the two renderings' photon draws differing).",
         "",
+        "## Every model, as `msflash estimate` runs it",
+        "",
+        "*led* `--method global`, *local* `--method local`, *prior*/*family*/*auto* `--model …` (default method). "
+        "*gains applied*: msflash's default; *not applied*: the same read, the statistics left as they are "
+        "(`processing.flicker.gains_not_applied`). Cost = mean flickering ÷ mean steady − 1.",
+        "",
+        *model_table(tuning, f"Tuning rows (lamp kinds {', '.join(TUNING_KINDS)})"),
+        *model_table(held, "Held-out rows (the other lamp kinds; nothing was set on them)"),
+        "## The LED model in detail",
+        "",
         *table(tuning, f"Tuning rows (lamp kinds {', '.join(TUNING_KINDS)})"),
         *table(held, "Held-out rows (the other lamp kinds)"),
         "### The colour read under steady light (tuning rows)",
@@ -261,15 +333,25 @@ def report(rows: list[Row], command: str) -> str:
         "",
         "| case | kind | split | camera | CFA | "
         + " | ".join(VARIANTS)
-        + " | true spread | gain error | alarm | detected |",
-        "|---|---|---|---|---|" + "---|" * (len(VARIANTS) + 4),
+        + " | true spread | gain error | alarm | detected | "
+        + " | ".join(f"{m} steady / flicker / plain / true gains" for m in MODELS if m != "led")
+        + " |",
+        "|---|---|---|---|---|" + "---|" * (len(VARIANTS) + 4 + len(MODELS) - 1),
     ]
     for r in rows:
         lines.append(
             f"| {r.case.name} | {r.kind} | {r.split} | {r.case.camera} | {r.case.cfa or 'RGB'} | "
             + " | ".join(f"{r.ratios[v]:.3f}" for v in VARIANTS)
             + f" | {r.true_spread:.3f} | {r.gain_error:.3f} | {'yes' if r.detected_steady else ''} | "
-            f"{'yes' if r.detected_flicker else ''} |"
+            f"{'yes' if r.detected_flicker else ''} | "
+            + " | ".join(
+                " / ".join(
+                    f"{r.ratios[f'{m} {v}']:.3f}" for v in ("steady", "flicker", "flicker plain", "flicker oracle")
+                )
+                for m in MODELS
+                if m != "led"
+            )
+            + " |"
         )
     return "\n".join(lines) + "\n"
 
@@ -286,7 +368,9 @@ def main(argv: list[str] | None = None) -> int:
             rows = list(pool.map(measure, cases, chunksize=1))
     else:
         rows = [measure(case) for case in cases]
-    command = "python -m tests.harness.flicker" + (f" --per-kind {args.per_kind}" if args.per_kind != PER_KIND else "")
+    command = "python -m tests.harness.flicker --jobs 2" + (
+        f" --per-kind {args.per_kind}" if args.per_kind != PER_KIND else ""
+    )
     text = report(rows, command + (f" --out {args.out}" if args.out else ""))
     if args.out:
         Path(args.out).write_text(text)

@@ -114,7 +114,8 @@ def test_the_failure_map_counts_warned_misses_per_light_kind() -> None:
 
 
 def test_the_chart_applies_the_family_rule_and_the_shipped_thresholds() -> None:
-    from msflash.processing.light_families import EVIDENCE_TEMPERATURE, LED_WARNING, SIMPLER_WITHIN
+    from msflash.processing.family_checks import LED_WARNING
+    from msflash.processing.light_families import CHECK_TEMPERATURE, SIMPLER_WITHIN
     from tests.harness import families_chart
 
     rows = [
@@ -123,7 +124,7 @@ def test_the_chart_applies_the_family_rule_and_the_shipped_thresholds() -> None:
     ]
     assert families_chart._choose(rows)["ratio"] == "0.9"  # the simplest within the margin
     record = {"auto": "led", "led:ratio": 1.5, "prior:ratio": 0.5, "family:ratio": 0.5, "auto:ratio": 1.5}
-    tau = f"{EVIDENCE_TEMPERATURE:g}"
+    tau = f"{CHECK_TEMPERATURE:g}"
     record.update({f"d:led:chosen:{tau}": LED_WARNING + 0.1, f"d:prior:chosen:{tau}": 0.1, f"spread:chosen:{tau}": 0.1})
     scores = families_chart.warning_scores({"x": record})
     score, miss, threshold = scores["led"]

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app.cli import build_parser, main
-from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
 from msflash.acquisition.sequence.image_files import read_image
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.lab import cli_local
 from msflash.lab.study.local import Scenario, make_scenario
 from msflash.processing import datasets
@@ -83,7 +84,7 @@ def test_estimate_auto_uniform_is_the_global_estimate(
     assert payload["method"] == "global" and payload["method_requested"] == "auto"
     assert payload["model_selection"]["chosen"] == "global"
     assert payload["model_selection"]["scores"]["global"] == 1.0
-    # The same estimate, bit for bit: the global model is the whole frame's (analysis.estimate_sequence_local).
+    # The same estimate, bit for bit: the global model is the whole frame's (local_route.estimate_sequence_local).
     np.testing.assert_array_equal(payload["spectrum"], global_payload["spectrum"])
     assert "tiles" not in payload
 

@@ -22,7 +22,7 @@ import pytest
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.app.srgb_png import png_chunks
 from msflash.lab import cli_colour_study, colour_study
-from tests.acquisition.app.test_evaluate import parse_report
+from tests.acquisition.support.report_pages import parse_report
 
 ACCEPTANCE_AMBIENTS = ("tungsten", "fluorescent", "underwater")
 
@@ -87,14 +87,14 @@ class TestColourStudyCommand:
             assert float(row[3]) == pytest.approx(payload["delta_e"][row[0]]["complementary"], abs=0.006)
         assert "noise-underwater" in report.tables
         # Fig. 9 chart + 4 previews and a spectra plot per ambient + the Fig. 3 panel (3 images).
-        assert len(report.images) == 1 + 2 * 5 + 3
+        assert len(report.embedded) == 1 + 2 * 5 + 3
         assert (out / "underwater" / "complementary-capture.exr").exists()
         # The figures also as PNG files beside the report, named in the JSON, the same bytes the report shows.
         assert set(payload["figures"]) == {"fig9.png", "fig3-snr.png", "underwater/spectra.png", "tungsten/spectra.png"}
         for relative, path in payload["figures"].items():
             data = Path(path).read_bytes()
             assert Path(path) == out / relative and png_chunks(data)["sRGB"] == b"\x00"
-            assert data in report.images
+            assert data in report.embedded
 
     def test_bad_ambient(self) -> None:
         with pytest.raises(UsageError, match="--ambients 'moon'"):

@@ -66,7 +66,7 @@ def test_an_idempotent_command_is_sent_once_more_after_one_damaged_exchange(
     for call in (booth.status, booth.trigger_count, booth.identify, booth.ping, lambda: booth.set_levels([0.6] * 7)):
         emulator.inject_fault(kind)
         caplog.clear()
-        with caplog.at_level("WARNING", logger="msflash.led_controller.booth"):
+        with caplog.at_level("WARNING", logger="msflash.led_controller.booth_link"):
             call()
         assert any(" once more after " in record.getMessage() for record in caplog.records), caplog.text
     assert levels_close(emulator.levels, [0.6] * 7)

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from msflash.led_controller import protocol
-from msflash.led_controller.emulator import firmware_crc
+from msflash.led_controller.emulator_wire import firmware_crc
 from msflash.led_controller.errors import BoothProtocolError
 from msflash.led_controller.protocol import Command
 

@@ -20,7 +20,8 @@ from msflash.led_controller.adapters.text_booth_emulator import TextBoothServer,
 from msflash.led_controller.booth_probe import probe_booth
 from msflash.led_controller.console import BoothConsole
 from msflash.led_controller.discovery import SerialPortInfo
-from msflash.led_controller.emulator import BoothEmulator, serve_on_pty
+from msflash.led_controller.emulator import BoothEmulator
+from msflash.led_controller.emulator_pty import serve_on_pty
 from msflash.led_controller.errors import BoothError
 from tests.helpers import PipedLines
 

@@ -32,19 +32,20 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from msflash.acquisition.sequence.format import read_sequence  # noqa: E402
-from msflash.acquisition.session.analysis import camera_responsivities_photons, estimate_sequence, led_spectra_photons  # noqa: E402
+from msflash.acquisition.sequence.reader import read_sequence  # noqa: E402
+from msflash.acquisition.session.analysis import estimate_sequence  # noqa: E402
 from msflash.acquisition.session.prior_route import sequence_channel_statistics  # noqa: E402
+from msflash.acquisition.session.sequence_spectra import camera_responsivities_photons, led_spectra_photons  # noqa: E402
 from msflash.processing import datasets  # noqa: E402
 from msflash.processing.channel_statistics import ChannelStatistics  # noqa: E402
 from msflash.processing.light_library import library_lights, light_library  # noqa: E402
 from msflash.processing.light_prior import (  # noqa: E402
     CHOICE_MARGIN,
     PriorModel,
-    choose_model,
     learn_light_prior,
     learn_reflectance_basis,
 )
+from msflash.processing.prior_choice import choose_model  # noqa: E402
 from msflash.processing.spectra import Spectra, WavelengthGrid  # noqa: E402
 from tests.processing import unseen_sequences as us  # noqa: E402
 

@@ -15,10 +15,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from msflash.processing import datasets  # noqa: E402
+from msflash.processing.accumulate import accumulate_statistics  # noqa: E402
 from msflash.processing.channel_statistics import accumulate_channel_statistics  # noqa: E402
-from msflash.processing.light_prior import choose_model, prior_model  # noqa: E402
+from msflash.processing.light_prior import prior_model  # noqa: E402
+from msflash.processing.prior_choice import choose_model  # noqa: E402
 from msflash.processing.spectra import WavelengthGrid  # noqa: E402
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics  # noqa: E402
+from msflash.processing.statistics import FrameStackSpec  # noqa: E402
 
 
 def best_of(repeats: int, call) -> tuple[float, object]:  # noqa: ANN001

@@ -7,11 +7,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AMBIENT_METHODS, CONDITION_WARNING, RESIDUAL_WARNING, estimate_ambient
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.scenes import Scene
 from msflash.processing.sensor import CFA_PATTERNS, SensorModel
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec
 from tests.helpers import (
     EXACT,
     WEIGHTS_EXACT,

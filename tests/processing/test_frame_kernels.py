@@ -13,8 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from msflash.processing import frame_kernels, statistics, synthesis
-from msflash.processing.statistics import BlockRows, FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing import block_rows, block_sums, frame_kernels, statistics, synthesis
+from msflash.processing.accumulate import accumulate_statistics
+from msflash.processing.block_rows import BlockRows
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.statistics import ChannelMoments, FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import synthesize
 
 WHITE = 4000.0
@@ -156,9 +159,9 @@ def test_binned_statistics_match_the_reference(
 
 @pytest.mark.parametrize("workers", [1, 2])
 def test_a_strided_noise_probe_matches_the_reference(route: str, workers: int, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(statistics, "PROBE_BLOCKS", 20)  # small frames probe every 2nd–4th block row
+    monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 20)  # small frames probe every 2nd–4th block row
     ambient, frames, spec = _frames((93, 85, 3), 4, seed=5)
-    stride = statistics.probe_stride(93 // 4, 85 // 4)
+    stride = block_rows.probe_stride(93 // 4, 85 // 4)
     assert stride > 1
     actual = accumulate_statistics(ambient, frames, spec, bin_factor=4, workers=workers)
     assert_same(actual, reference_statistics(ambient, frames, spec, 4, 1, stride))
@@ -236,11 +239,82 @@ def test_streamed_block_rows_match_the_reference(route: str, incremental: bool) 
     """A capture adds raw frames one by one (FlashSession): the same statistics."""
     ambient, frames, spec = _frames((45, 71), 3, seed=8)
     rows = BlockRows(
-        3, statistics.plane_shape(ambient.shape, 2), 2, spec.white_level, incremental, black_level=spec.black_level
+        3, block_sums.plane_shape(ambient.shape, 2), 2, spec.white_level, incremental, black_level=spec.black_level
     )
     for row, frame in [(0, frames[0]), (3, ambient), (1, frames[1]), (2, frames[2])]:
         rows.add_frame(row, frame, 2)
     assert_same(rows.statistics(spec), reference_statistics(ambient, frames, spec, 2, 2, 1))
+
+
+def reference_channel_moments(
+    ambient: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, factor: int, period: int, stride: int
+) -> ChannelMoments:
+    """:class:`ChannelMoments` written out: per valid block b, ``f_i,b`` and ``a_b`` in R^C and their outer products
+    summed, the probed blocks' half differences alike (scaled by valid ÷ probed valid blocks)."""
+    sums, halves, valid = [], [], None
+    for frame in [*led_frames, ambient]:
+        block_sums, half, peak = _blocks(_planes(frame, period), factor)
+        sums.append(block_sums)
+        halves.append(half)
+        ok = (peak < spec.white_level).all(axis=2)
+        valid = ok if valid is None else valid & ok
+    assert valid is not None
+    black, scales = spec.black_level * factor * factor, np.asarray(spec.led_scales)
+
+    def images(values: list[np.ndarray], offset: float) -> tuple[np.ndarray, np.ndarray]:
+        a = spec.ambient_scale * (values[-1] - offset)
+        d = np.stack([scales[j] * (values[j] - offset) - a for j in range(len(led_frames))])
+        return np.einsum("kj,j...->k...", spec.unmixing, d), a  # (k, h, w, C), (h, w, C)
+
+    def moments(f: np.ndarray, a: np.ndarray, where: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        fb, ab = f[:, where], a[where]  # (k, blocks, C), (blocks, C)
+        return np.einsum("kbc,bd->kcd", fb, ab), np.einsum("kbc,kbd->kcd", fb, fb), ab.T @ ab
+
+    probed = np.zeros_like(valid)
+    probed[::stride] = True
+    scale = valid.sum() / (valid & probed).sum()
+    noise = moments(*images(halves, 0.0), valid & probed)
+    return ChannelMoments(*moments(*images(sums, black), valid), int(valid.sum()), *(scale * part for part in noise))
+
+
+@pytest.mark.parametrize(("shape", "period", "factor"), [((70, 98, 3), 1, 4), ((66, 90), 2, 4), ((93, 85, 3), 1, 2)])
+@pytest.mark.parametrize("incremental", [False, True])
+@pytest.mark.parametrize("weighting", [False, True])
+def test_channel_moments_match_the_reference(
+    route: str,
+    shape: tuple[int, ...],
+    period: int,
+    factor: int,
+    incremental: bool,
+    weighting: bool,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The per-channel moments flicker reads (:class:`ChannelMoments`) are unweighted whatever the main moments'
+    weights, over the same valid blocks, in bands of block rows (several here), with a strided probe on the
+    largest frame."""
+    monkeypatch.setattr(block_rows, "CHANNEL_BAND_VALUES", 900)
+    monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 400)
+    ambient, frames, spec = _frames(shape, 4, seed=sum(shape))
+    n = len(frames)
+    rows = BlockRows(
+        n,
+        block_sums.plane_shape(ambient.shape, period),
+        factor,
+        spec.white_level,
+        incremental,
+        black_level=spec.black_level,
+        weighting=weighting,
+    )
+    for row, frame in [(n, ambient), *enumerate(frames)]:
+        rows.add_frame(row, frame, period)
+    actual = rows.statistics(spec).channels
+    expected = reference_channel_moments(ambient, frames, spec, factor, period, rows.probe_stride)
+    assert actual is not None and actual.n_blocks == expected.n_blocks
+    assert rows.probe_stride > 1 or shape != (93, 85, 3)
+    for name in ("fa", "ff", "aa", "noise_fa", "noise_ff", "noise_aa"):
+        value, reference = getattr(actual, name), getattr(expected, name)
+        scale = float(np.abs(reference).max())
+        np.testing.assert_allclose(value, reference, rtol=1e-9, atol=1e-9 * scale, err_msg=name)
 
 
 def reference_synthesis(
@@ -300,7 +374,7 @@ def test_the_two_synthesis_routes_write_the_same_image_bit_for_bit(
 
 def test_synthesis_refuses_an_image_type_it_cannot_write() -> None:
     ambient, frames, spec = _frames((8, 8, 3), 2, seed=1)
-    with pytest.raises(statistics.SpectralDataError, match="image type int16; expected float32 or float64"):
+    with pytest.raises(SpectralDataError, match="image type int16; expected float32 or float64"):
         synthesize(ambient, frames, spec, np.ones(2), dtype=np.int16)
 
 
@@ -308,7 +382,8 @@ POLICY = """
 import sys
 import numpy as np
 from msflash.processing import frame_kernels
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.accumulate import accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec
 frame_kernels.COMPILE_BYTES = int(sys.argv[1])
 frames = [np.full((32, 40, 3), 100 + k, np.uint16) for k in range(4)]
 accumulate_statistics(frames[0], frames[1:], FrameStackSpec(0, 4000, 1.0, (1.0,) * 3, np.eye(3)), bin_factor=4)

@@ -7,25 +7,27 @@ import json
 import numpy as np
 import pytest
 
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session.analysis import camera_responsivities_photons, estimate_sequence, led_spectra_photons
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session.analysis import estimate_sequence
 from msflash.acquisition.session.prior_route import estimate_sequence_prior, prior_payload, sequence_channel_statistics
+from msflash.acquisition.session.sequence_spectra import camera_responsivities_photons, led_spectra_photons
 from msflash.processing import datasets
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.channel_statistics import accumulate_channel_statistics, plane_channels
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.light_library import NEAR_COPY_COSINE, lights_of
 from msflash.processing.light_prior import (
     PriorModel,
-    choose_model,
     estimate_ambient_prior,
     learn_light_prior,
     learn_reflectance_basis,
     prior_candidate_lights,
     prior_model,
 )
+from msflash.processing.prior_choice import choose_model
 from msflash.processing.spectra import Spectra, WavelengthGrid
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec
 from tests.processing import unseen_sequences as us
 from tests.processing.light_prior_study import rendering_with, study_surfaces
 

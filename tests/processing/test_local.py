@@ -24,6 +24,7 @@ from msflash.lab.study.local import (
     run_study,
     tiled_rmse,
 )
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.image_formation import MixedIllumination, expected_response
 from msflash.processing.local import (
     SELECTION_MARGIN,
@@ -38,7 +39,7 @@ from msflash.processing.local import (
     upsample_tiles,
 )
 from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import synthesize
 from msflash.processing.tile_statistics import _block_sums_and_differences
 from tests.helpers import EXACT, FLOAT32, ambient, camera, chart, leds_photons, linear_frames, rendered_frames, spec_for

@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import (
     ALPHA_GRID,
     DISCREPANCY_SIGMAS,
@@ -23,7 +24,6 @@ from msflash.processing.model_error import (
     reference_for,
     with_model_error,
 )
-from msflash.processing.statistics import accumulate_statistics
 from tests.helpers import ambient, camera, leds_photons, linear_frames, spectrum_rmse
 
 

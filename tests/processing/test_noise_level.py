@@ -11,10 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from msflash.processing.block_rows import BlockRows
+from msflash.processing.block_sums import block_sums_and_differences, cfa_planes
 from msflash.processing.noise_level import FIT_CELLS, PixelNoise, detail_noise_line, fit_detail_line, haar_details
 from msflash.processing.scenes import chart_scene
 from msflash.processing.sensor import SensorModel
-from msflash.processing.statistics import BlockRows, block_sums_and_differences, cfa_planes
 from tests.helpers import ambient, rendered_frames
 
 SENSOR = SensorModel(cfa="RGGB")

@@ -1,4 +1,4 @@
-"""Inverse-variance sample weights (processing.statistics, module notes).
+"""Inverse-variance sample weights (processing.block_rows, module notes).
 
 Unweighted moments let a specular strip at ten times the white dominate the Gram matrix: on the
 default demo the estimate averaged 1.34× the LED bound (15 of 20 seeds above 1.3×); weighted, 0.99×
@@ -12,18 +12,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session import analysis, estimate_stream
-from msflash.processing import statistics
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session import analysis, estimate_stream, sequence_spectra
+from msflash.processing import block_rows
+from msflash.processing.accumulate import accumulate_statistics
+from msflash.processing.block_rows import BlockRows
+from msflash.processing.block_sums import cfa_planes
 from msflash.processing.local import tile_statistics
-from msflash.processing.noise_level import PixelNoise, detail_noise_line
-from msflash.processing.statistics import (
-    BlockRows,
-    FrameStackSpec,
-    accumulate_statistics,
-    block_noise_line,
-    cfa_planes,
-)
+from msflash.processing.noise_level import PixelNoise, block_noise_line, detail_noise_line
+from msflash.processing.statistics import FrameStackSpec
 from tests.processing.unseen_sequences import Case, led_bound, render_case, rmse
 
 
@@ -116,7 +113,7 @@ def test_a_specular_strip_no_longer_dominates_the_estimate(tmp_path: Path, monke
             monkeypatch.setattr(estimate_stream, "SAMPLE_WEIGHTING", weighting)  # what the one accumulator reads
             estimate = analysis.estimate_sequence(sequence)
             assert estimate.weighted == weighting
-            error = rmse(analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum), rendered.truth)
+            error = rmse(sequence_spectra.spectrum_in_sequence_unit(sequence, estimate.spectrum), rendered.truth)
             ratios[weighting].append(error / led_bound(rendered))
     assert np.mean(ratios[True]) < np.mean(ratios[False]), ratios
 
@@ -125,7 +122,7 @@ def _direct_weighted_statistics(
     ambient: np.ndarray, leds: list[np.ndarray], spec: FrameStackSpec, factor: int, stride: int
 ) -> dict[str, object]:
     """Eq. 4–6's weighted statistics computed plainly in float64, sample by sample (module notes of
-    processing.statistics): block sums by reshaping, the checkerboard half differences, the ambient frame's
+    processing.block_rows): block sums by reshaping, the checkerboard half differences, the ambient frame's
     photon-transfer line, then every sum written out."""
     frames = [ambient, *leds]
     height, width = ambient.shape[0] // factor, ambient.shape[1] // factor
@@ -181,9 +178,9 @@ def test_weighted_statistics_equal_a_direct_computation(
     """The batch pass (threads, chunked moment products, the ambient frame's weights taken while LED frames
     are added) and the frame-by-frame pass give the plainly written-out weighted statistics to rounding;
     with few PROBE_BLOCKS the probe takes every second block row."""
-    monkeypatch.setattr(statistics, "PROBE_BLOCKS", probe_blocks)
+    monkeypatch.setattr(block_rows, "PROBE_BLOCKS", probe_blocks)
     ambient, leds, spec = _photon_stack(seed=3)
-    stride = statistics.probe_stride(ambient.shape[0] // 4, ambient.shape[1] // 4)
+    stride = block_rows.probe_stride(ambient.shape[0] // 4, ambient.shape[1] // 4)
     assert stride == (1 if probe_blocks > 1000 else 3)
     expected = _direct_weighted_statistics(ambient, leds, spec, 4, stride)
     batch = accumulate_statistics(ambient, leds, spec, bin_factor=4, weighting=True, workers=workers, chunk_pixels=50)

@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session import analysis, sequence_spectra
 from tests.helpers import SAMPLES_DIR, spectrum_rmse
 
 MARGIN = 0.1
@@ -78,7 +78,7 @@ def test_estimate_tracks_truth_within_margin_of_best_led_fit(name: str, method: 
     fit, _ = nnls(leds, truth)
     best = spectrum_rmse(leds @ fit, truth)
     estimate = analysis.estimate_sequence(sequence, method)
-    rmse = spectrum_rmse(analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum), truth)
+    rmse = spectrum_rmse(sequence_spectra.spectrum_in_sequence_unit(sequence, estimate.spectrum), truth)
     assert rmse <= best + MARGIN, f"{name} {method}: RMSE {rmse:.3f} vs best LED fit {best:.3f}"
 
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from tests.helpers import EXACT
 
 
@@ -187,7 +188,7 @@ def test_large_frames_probe_a_stride_of_block_rows_and_scale_it(
     """Above 4 × PROBE_BLOCKS blocks the noise probe reads every 4th block row, scaled by the valid blocks:
     its noise moments stay within a few per cent of the full probe's (sampling error ~1 %), saturated
     blocks included, and so do the denoised weights."""
-    from msflash.processing import statistics as module
+    from msflash.processing import block_rows as module
 
     rng = np.random.default_rng(7)
     shape, k = (1024, 1024, 3), 3

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics, bin_frame, saturated_blocks
+from msflash.processing.accumulate import accumulate_statistics
+from msflash.processing.block_sums import bin_frame, saturated_blocks
+from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import synthesize
 from tests.processing.test_statistics import MULTIPLEXED, assert_matches, naive_statistics, random_stack
 
@@ -107,7 +109,8 @@ def test_block_rows_frame_by_frame_equals_the_binned_pass(saturate: float) -> No
     Saturated blocks leave the running moments as each frame brings them: a few are taken back
     out, once a quarter of the columns is out the moments are taken anew.
     """
-    from msflash.processing.statistics import BlockRows, cfa_planes
+    from msflash.processing.block_rows import BlockRows
+    from msflash.processing.block_sums import cfa_planes
 
     rng = np.random.default_rng(11)
     ambient, leds, spec = random_stack(rng, (41, 53, 3), np.eye(4), white=4095.0, saturate=saturate)
@@ -135,8 +138,9 @@ def test_block_rows_frame_by_frame_equals_the_binned_pass(saturate: float) -> No
 
 
 def test_block_rows_refuses_a_missing_frame() -> None:
+    from msflash.processing.block_rows import BlockRows
+    from msflash.processing.block_sums import cfa_planes
     from msflash.processing.errors import SpectralDataError
-    from msflash.processing.statistics import BlockRows, cfa_planes
 
     rng = np.random.default_rng(12)
     ambient, leds, spec = random_stack(rng, (16, 16, 3), np.eye(2), white=4095.0, saturate=0.0)
@@ -199,7 +203,8 @@ def test_saturated_blocks_equal_the_any_of_each_block(dtype: type) -> None:
 
 def test_block_rows_exclude_between_frames_equals_a_masked_pass() -> None:
     """Blocks excluded by the caller part-way through an incremental fill leave every product."""
-    from msflash.processing.statistics import BlockRows, cfa_planes
+    from msflash.processing.block_rows import BlockRows
+    from msflash.processing.block_sums import cfa_planes
 
     rng = np.random.default_rng(5)
     ambient, leds, spec = random_stack(rng, (40, 48, 3), np.eye(3), white=4095.0, saturate=0.0005)

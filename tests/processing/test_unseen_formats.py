@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import read_sequence
 from msflash.acquisition.sequence.image_files import read_image
+from msflash.acquisition.sequence.reader import read_sequence
 from tests.processing.unseen_sequences import Case, check_case, expected_synthesis, render_case, run_cli
 
 

@@ -16,10 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session import analysis, sequence_spectra
+from msflash.processing.accumulate import accumulate_statistics
+from msflash.processing.block_rows import BlockRows
+from msflash.processing.block_sums import cfa_planes
 from msflash.processing.local import tile_statistics
-from msflash.processing.statistics import BlockRows, FrameStackSpec, accumulate_statistics, cfa_planes
+from msflash.processing.statistics import FrameStackSpec
 from tests.processing.unseen_sequences import MARGIN, Case, led_bound, render_case, rmse
 
 
@@ -28,7 +31,7 @@ def test_weakly_seen_leds_are_not_shrunk_by_the_noise(light: str, tmp_path: Path
     rendered = render_case(Case(f"booth8-{light}", leds="booth8", light=light, seed=3), tmp_path / light)
     sequence = read_sequence(rendered.directory)
     estimate = analysis.estimate_sequence(sequence)
-    error = rmse(analysis.spectrum_in_sequence_unit(sequence, estimate.spectrum), rendered.truth)
+    error = rmse(sequence_spectra.spectrum_in_sequence_unit(sequence, estimate.spectrum), rendered.truth)
     assert error <= led_bound(rendered) + MARGIN, (error, led_bound(rendered))
 
 
@@ -130,7 +133,7 @@ def test_the_uncertainty_band_is_that_of_the_system_solved(tmp_path: Path) -> No
     rendered = render_case(Case("band", leds="booth8", light="F2", seed=1), tmp_path / "band")
     sequence = read_sequence(rendered.directory)
     statistics = analysis.sequence_statistics(analysis.load_frame_stack(sequence), sequence.camera.cfa)
-    model = AmbientModel(analysis.led_spectra_photons(sequence))
+    model = AmbientModel(sequence_spectra.led_spectra_photons(sequence))
     estimate = model.estimate(statistics, "lstsq")
     clean = statistics.denoised()
     assert clean is not None

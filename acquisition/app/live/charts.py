@@ -25,6 +25,8 @@ from msflash.processing.spectra import Spectra, WavelengthGrid
 
 FIGSIZE = (5.6, 3.3)
 """Each chart's size in inches (matplotlib's SVG is scalable: the page sizes it)."""
+BAND_TOP = 2.5
+"""The ambient chart's range reaches at most this many times the estimate's peak (and as far below 0)."""
 
 
 def _plot_unit(wavelengths: np.ndarray, values: np.ndarray, unit: str) -> np.ndarray:
@@ -96,7 +98,7 @@ def _draw_charts(folder: Path) -> dict[str, str] | None:
         return None
     if leds.shape[0] != wavelengths.size or spectrum.shape != wavelengths.shape or std.shape != wavelengths.shape:
         return None
-    from msflash.acquisition.app.plot_style import PALETTE, draw_flash_mixes, peak_of, pyplot, spectral_axis
+    from msflash.acquisition.app.plot_style import draw_flash_mixes, peak_of, pyplot, spectral_axis
 
     plt = pyplot()
     try:
@@ -107,29 +109,11 @@ def _draw_charts(folder: Path) -> dict[str, str] | None:
     values, sigma = curves[:, 0], np.abs(curves[:, 1])
     peak = peak_of(values)
 
-    figure, axis = plt.subplots(figsize=FIGSIZE)
     covers = "pixel noise + model error" if estimate.get("miss_risk") is not None else "pixel noise only"
-    axis.fill_between(
-        wavelengths, (values - sigma) / peak, (values + sigma) / peak, color=PALETTE.ambient, alpha=0.2, lw=0,
-        label=f"estimate ± 1σ ({covers})", gid="band",
-    )  # fmt: skip
-    axis.plot(wavelengths, values / peak, color=PALETTE.ambient, lw=2, label="estimate", gid="estimate")
-    msflash = sequence.get("msflash")
-    truth = msflash.get("true_ambient") if isinstance(msflash, dict) else None
-    if isinstance(truth, dict) and len(truth.get("spd", [])) == wavelengths.size:
-        curve = _plot_unit(wavelengths, np.asarray(truth["spd"], dtype=float)[:, None], sequence_unit)[:, 0]
-        if float(curve @ curve) > 0:
-            scaled = curve * float(values @ curve) / float(curve @ curve)
-            axis.plot(
-                wavelengths, scaled / peak, color=PALETTE.truth, ls="--", lw=1.5, label="true ambient (scaled)",
-                gid="truth",
-            )  # fmt: skip
-    axis.set_ylim(min(0.0, float(np.min(values / peak)) - 0.05), 1.3)  # the band beyond it is clipped
-    axis.set_xlim(float(wavelengths[0]), float(wavelengths[-1]))
-    axis.set_title("Ambient illuminant (estimate)")
-    spectral_axis(axis, "peak of the estimate")
-    axis.legend(loc="upper left", fontsize=7)
-    ambient_chart = _svg(figure)
+    truth = _scaled_truth(sequence, wavelengths, values, sequence_unit)
+    ambient_chart = _ambient_chart(
+        wavelengths, values / peak, sigma / peak, None if truth is None else truth / peak, covers
+    )
 
     solutions = {}
     for mode in ("matching", "complementary"):
@@ -157,3 +141,48 @@ def _draw_charts(folder: Path) -> dict[str, str] | None:
     spectral_axis(axis, "peak of the estimate")
     axis.legend(loc="upper right", fontsize=7)
     return {"ambient": ambient_chart, "mixes": _svg(figure)}
+
+
+def _scaled_truth(sequence: dict, wavelengths: np.ndarray, values: np.ndarray, unit: str) -> np.ndarray | None:
+    """A simulated rig's true ambient, scaled onto the estimate ``values`` (least squares, the metric's), or None."""
+    msflash = sequence.get("msflash")
+    truth = msflash.get("true_ambient") if isinstance(msflash, dict) else None
+    if not isinstance(truth, dict) or len(truth.get("spd", [])) != wavelengths.size:
+        return None
+    curve = _plot_unit(wavelengths, np.asarray(truth["spd"], dtype=float)[:, None], unit)[:, 0]
+    if float(curve @ curve) <= 0:
+        return None
+    return curve * float(values @ curve) / float(curve @ curve)
+
+
+def _ambient_chart(
+    wavelengths: np.ndarray, values: np.ndarray, sigma: np.ndarray, truth: np.ndarray | None, covers: str
+) -> str:
+    """The estimate (in units of its peak) ± 1σ and the scaled truth, as SVG.
+
+    The axes hold every series: the band and the truth set the range, up to :data:`BAND_TOP`; a band wider than
+    that is drawn to the axes' edge (its geometry stays inside the plot area, never over the tick labels).
+    """
+    from msflash.acquisition.app.plot_style import PALETTE, pyplot, spectral_axis
+
+    lower, upper = values - sigma, values + sigma
+    drawn = [upper] if truth is None else [upper, truth]
+    top = min(max(1.3, *(float(np.max(series)) + 0.05 for series in drawn)), BAND_TOP)
+    bottom = max(min(0.0, float(np.min(lower)) - 0.05, float(np.min(values)) - 0.05), -BAND_TOP)
+    figure, axis = pyplot().subplots(figsize=FIGSIZE)
+    axis.fill_between(
+        wavelengths, np.clip(lower, bottom, top), np.clip(upper, bottom, top), color=PALETTE.ambient, alpha=0.2,
+        lw=0, label=f"estimate ± 1σ ({covers})", gid="band",
+    )  # fmt: skip
+    axis.plot(wavelengths, values, color=PALETTE.ambient, lw=2, label="estimate", gid="estimate")
+    if truth is not None:
+        axis.plot(
+            wavelengths, np.clip(truth, bottom, top), color=PALETTE.truth, ls="--", lw=1.5,
+            label="true ambient (scaled)", gid="truth",
+        )  # fmt: skip
+    axis.set_ylim(bottom, top)
+    axis.set_xlim(float(wavelengths[0]), float(wavelengths[-1]))
+    axis.set_title("Ambient illuminant (estimate)")
+    spectral_axis(axis, "peak of the estimate")
+    axis.legend(loc="upper left", fontsize=7)
+    return _svg(figure)

@@ -11,6 +11,14 @@ from collections.abc import Iterator
 from msflash.acquisition.app.live.server import LiveServer
 
 
+async def _let_closed_connections_finish() -> None:
+    """A few turns of the loop: connections the runner closed at shutdown finish closing in callbacks it has queued
+    (a transport's ``connection_lost``); a loop closed before them leaves their sockets open, each a
+    ``ResourceWarning`` when collected (seen under load, with a page's keep-alive connections)."""
+    for _ in range(3):
+        await asyncio.sleep(0.01)
+
+
 @contextlib.contextmanager
 def serve_in_thread(server: LiveServer) -> Iterator[LiveServer]:
     """Serve ``server`` on its own event loop in a background thread while the block runs (tests, bench)."""
@@ -32,7 +40,10 @@ def serve_in_thread(server: LiveServer) -> Iterator[LiveServer]:
             failure.append(err)
             started.set()
         finally:
-            loop.close()
+            try:
+                loop.run_until_complete(_let_closed_connections_finish())
+            finally:
+                loop.close()
 
     thread = threading.Thread(target=main, name="msflash-live", daemon=True)
     thread.start()

@@ -23,7 +23,7 @@ import numpy as np
 from msflash.acquisition.app.live.preview import Preview, PreviewRenderer
 from msflash.acquisition.app.live.runs import read_json
 from msflash.acquisition.errors import UsageError
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.analysis import FrameStack, load_frame_stack
 from msflash.processing import frame_kernels
 from msflash.processing.render import demosaic_superpixel

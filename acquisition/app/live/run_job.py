@@ -19,7 +19,7 @@ from typing import Any
 from msflash.acquisition.app.cli_common import claimed_output
 from msflash.acquisition.errors import CaptureCancelled, CaptureError
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.engine import Cancellation, FrameHandler
 from msflash.acquisition.session.exposure import ExposurePolicy
 from msflash.acquisition.session.rig import Rig

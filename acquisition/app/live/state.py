@@ -55,3 +55,5 @@ class LiveState:
     """Live frames sent since the server started."""
     error: str | None = None
     """The last error that switched the LEDs off, until the next setting succeeds."""
+    error_source: str | None = None
+    """What failed: ``camera`` (the stream's device went or timed out), ``booth`` or ``other``."""

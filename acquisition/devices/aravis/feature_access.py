@@ -335,9 +335,3 @@ class FeatureAccess:
         if isinstance(value, (int, float)):
             return float(value)
         raise CameraError(f"{self._name}: {feature} is {value!r}; expected a number")
-
-    def _execute(self, feature: str) -> None:
-        try:
-            self._live().execute_command(feature)
-        except GLib.Error as err:
-            raise self._fail("executing", feature, err) from err

@@ -13,6 +13,14 @@ from msflash.acquisition.devices.aravis.pixel_layouts import (
 from msflash.acquisition.devices.aravis.profiles import (
     CameraProfile,
 )
+from msflash.acquisition.devices.image_format import (
+    BINNING_FEATURES,
+    IMAGE_FEATURES,
+    ImageFormat,
+    ImageFormatRequest,
+    ImageLimits,
+    checked_request,
+)
 from msflash.acquisition.errors import (
     CameraError,
     CameraSettingError,
@@ -56,6 +64,56 @@ class ImageSettings(FeatureAccess):
             self._set_int("OffsetX", int(offset_x))
             self._set_int("OffsetY", int(offset_y))
         return self.roi
+
+    # -- the image format from the live page, between acquisitions ---------------------------
+
+    def image_limits(self) -> ImageLimits:
+        """What the camera's image features allow now, as it describes them (``WidthMax``/``HeightMax``, else
+        ``SensorWidth``/``SensorHeight``, else ``Width``'s and ``Height``'s maxima, bound the ROI)."""
+        features = {name: self.describe_feature(name) for name in IMAGE_FEATURES if self._has(name)}
+        sensor = []
+        for axis, size in (("Width", "WidthMax"), ("Height", "HeightMax")):
+            bound = next((name for name in (size, f"Sensor{axis}") if self._has(name)), None)
+            high = features[axis].maximum if axis in features else None
+            sensor.append(int(self._number(bound)) if bound is not None else int(high or 0))
+        return ImageLimits(self._name, features, (sensor[0], sensor[1]))
+
+    @property
+    def image_format(self) -> ImageFormat:
+        """ROI, binning (1×1 for a camera without it) and pixel format, read back."""
+        binning = tuple(int(self._number(name)) if self._has(name) else 1 for name in BINNING_FEATURES)
+        return ImageFormat(self.roi, (binning[0], binning[1]), str(self.get_feature("PixelFormat")))
+
+    def set_image_format(self, request: ImageFormatRequest) -> ImageFormat:
+        """Stop streaming, then write binning, pixel format and ROI, each checked first against what the camera
+        reports it allows; the format as read back. The next ``prepare`` re-allocates the buffers for the new
+        payload (a kept stream whose payload or layout differs is released, ``Streaming._build_stream``).
+
+        Raises
+        ------
+        CameraSettingError
+            A value the camera lacks, has locked or refuses; the message names the feature and what it allows.
+        """
+        self.stop()  # type: ignore[attr-defined]  # Streaming's, below in the camera's stack
+        checked_request(self.image_limits(), request, tuple(PIXEL_FORMATS))
+        try:
+            if request.binning is not None:
+                for name, factor in zip(BINNING_FEATURES, request.binning):
+                    if self._has(name):
+                        self.set_feature(name, int(factor))
+            if request.pixel_format is not None:
+                self.set_pixel_format(request.pixel_format)
+            if request.roi is not None:
+                self.image_limits().check_roi(request.roi)
+                self.set_roi(*request.roi)
+        except CameraSettingError:
+            raise
+        except CameraError as err:
+            raise CameraSettingError(
+                f"{self._name}: the camera refused the image format ({str(err).removeprefix(self._name + ': ')}); "
+                "expected a setting it allows — `msflash devices --features` lists them"
+            ) from err
+        return self.image_format
 
     @property
     def roi(self) -> tuple[int, int, int, int]:

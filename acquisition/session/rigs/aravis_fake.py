@@ -25,6 +25,7 @@ from msflash.acquisition.session.rigs.emulated_booth import (
 )
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.acquisition.session.rigs.sim import sim_world
+from msflash.led_controller import BoothEmulator, LedBooth
 from msflash.processing import datasets
 from msflash.processing.names import unknown_name
 from msflash.processing.scenes import Scene
@@ -107,13 +108,32 @@ def open_aravis_fake_rig(
     world_options = (ambient, scene, seed, camera, n_leds, led_spectra, flash_power, patch_px, flicker)
     frames = _FakeFrames.of(rendered, world_options, width, height, pixel_format)
     closers: list = []
+    opened, emulator, booth = _open_devices(
+        model, serial, lost_packet_ratio, frames, camera_options or CameraOptions(), log_serial, closers
+    )
+    return _wired_rig(model, frames, opened, emulator, booth, closers)
+
+
+def _open_devices(
+    model: Any,
+    serial: str,
+    lost_packet_ratio: float,
+    frames: _FakeFrames,
+    camera_options: Any,
+    log_serial: str | Path | None,
+    closers: list,
+) -> tuple[_OpenedFake, BoothEmulator, LedBooth]:
+    """The fake's camera and the emulated booth, opened; both failures reported in one ``RigOpenError``.
+
+    A ``CameraSettingError`` is bad input, not a device failure: raised as it is (one line, exit 2).
+    """
     failures: dict[str, BaseException] = {}
     emulator = booth = opened = None
     try:
-        opened = _open_fake_camera(model, serial, lost_packet_ratio, frames, camera_options or CameraOptions(), closers)
+        opened = _open_fake_camera(model, serial, lost_packet_ratio, frames, camera_options, closers)
     except CameraSettingError:
         close_all(closers)
-        raise  # bad input, not a device failure: one line, exit 2
+        raise
     except Exception as err:  # noqa: BLE001 - reported with the booth's failure, if any
         failures[f"camera GigE fake {serial} at 127.0.0.1"] = err
     try:
@@ -125,7 +145,7 @@ def open_aravis_fake_rig(
         listing = "; ".join(f"{device}: {err}" for device, err in failures.items())
         raise RigOpenError(f"rig 'aravis-fake': {listing}") from next(iter(failures.values()))
     assert opened is not None and emulator is not None and booth is not None
-    return _wired_rig(model, frames, opened, emulator, booth, closers)
+    return opened, emulator, booth
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from msflash.acquisition.session.rigs.emulated_booth import (
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.led_controller import LedBooth
 from msflash.led_controller.adapters import open_booth
-from msflash.led_controller.booth import DEFAULT_BOOT_S
+from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import Booth
 from msflash.led_controller.recovery import reset_leftovers
 from msflash.processing.spectra import DEFAULT_GRID, Spectra

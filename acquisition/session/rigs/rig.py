@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 
 from msflash.acquisition.errors import UsageError
-from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.led_controller import BoothEmulator
 from msflash.led_controller.booth_interface import Booth
 from msflash.processing.led_wavelength import led_peaks_nm

@@ -19,13 +19,14 @@ from typing import Any
 
 from msflash.acquisition.devices.exposure_light import EmulatorLight, FirmwareLight, Shutter
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
+from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
 from msflash.acquisition.devices.sim_world import (
     sim_ambient,
     sim_camera,
     sim_leds,
     sim_scene,
 )
-from msflash.acquisition.devices.simulated_camera import SIM_DEFAULT_CFA, SimulatedCamera
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.errors import CameraError, RigOpenError, UsageError
 from msflash.acquisition.session.external_booth import levels_reported_by, open_external_booth
 from msflash.acquisition.session.rigs.emulated_booth import (
@@ -36,7 +37,7 @@ from msflash.acquisition.session.rigs.emulated_booth import (
 )
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.led_controller import LedBooth
-from msflash.led_controller.booth import DEFAULT_BOOT_S
+from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import Booth
 from msflash.processing.scenes import Scene
 from msflash.processing.spectra import Spectra

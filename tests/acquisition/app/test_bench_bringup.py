@@ -23,7 +23,7 @@ from types import ModuleType
 import pytest
 
 from msflash.acquisition.app.cli import main
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rig import emulator_for
 from msflash.led_controller import LedBooth, discovery, firmware_sim, serve_on_pty
 from msflash.led_controller.stk500v2 import read_intel_hex

@@ -17,11 +17,11 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.capture import SYNC_OF_TRIGGER, check_booth_runs
 from msflash.led_controller.adapters.text_booth import TextBooth
 from msflash.led_controller.adapters.text_booth_emulator import TextBoothServer, serve_text_booth
-from tests.acquisition.session.test_rig_hw import calibration  # noqa: F401 - the fixture
+from tests.acquisition.support.hw_rig import fake_camera_capture
 
 ROOT = Path(__file__).resolve().parents[3]
 SIM = ("--rig", "sim", "--leds", "3", "--exposure", "10000")
@@ -112,7 +112,7 @@ def test_booth_master_through_the_sim_booth_port_is_refused(
 @pytest.mark.aravis
 def test_booth_master_on_a_host_paced_adapter_is_refused_naming_booth_and_mode(
     aravis: ModuleType,
-    calibration: Path,  # noqa: F811 - the fixture imported above
+    hw_calibration: Path,
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
@@ -120,25 +120,19 @@ def test_booth_master_on_a_host_paced_adapter_is_refused_naming_booth_and_mode(
     with serve_text_booth(7) as server:
         assert (
             main(
-                [
-                    "capture",
-                    "--camera",
-                    "Fake_1",
-                    "--interfaces",
-                    "fake",
-                    "--port",
+                fake_camera_capture(
                     server.port,
                     "--booth-protocol",
                     "text",
                     "--calibration",
-                    str(calibration),
+                    str(hw_calibration),
                     "--sync",
                     "booth",
                     "--exposure",
                     "10000",
                     "--out",
                     str(tmp_path / "c"),
-                ]
+                )
             )
             == 2
         )

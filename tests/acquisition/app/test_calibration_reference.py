@@ -15,31 +15,25 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session import analysis
-from msflash.acquisition.session.rig import emulator_for, hw_spectra
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session import sequence_spectra
+from msflash.acquisition.session.rig import hw_spectra
 from msflash.calibration.files import CalibrationSet, load_calibration, save_calibration
-from msflash.led_controller import serve_on_pty
-from msflash.processing import datasets
-from msflash.processing.spectra import DEFAULT_GRID
+from tests.acquisition.support.hw_rig import booth_on_pty, fake_camera_capture, nikon_d100, paper_leds
 
 
 @pytest.fixture
 def calibration(tmp_path: Path) -> Path:
     """A calibration directory as ``msflash calibrate`` writes it: the paper's 7 LEDs, a NikonD100."""
-    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
-    camera = datasets.isetcam_camera("NikonD100").resample(DEFAULT_GRID, outside="zero").to_unit("energy")
-    save_calibration(CalibrationSet(led_spectra=leds, camera_responsivities=camera), tmp_path / "lab" / "cal")
-    return tmp_path / "lab" / "cal"
+    directory = tmp_path / "lab" / "cal"
+    save_calibration(CalibrationSet(led_spectra=paper_leds(), camera_responsivities=nikon_d100()), directory)
+    return directory
 
 
 @pytest.fixture
 def booth_port(calibration: Path) -> Iterator[str]:
-    server = serve_on_pty(emulator_for(load_calibration(calibration).led_spectra))
-    try:
-        yield server.port
-    finally:
-        server.close()
+    with booth_on_pty(load_calibration(calibration).led_spectra) as port:
+        yield port
 
 
 @pytest.mark.aravis
@@ -50,21 +44,7 @@ def test_a_sequence_refers_to_the_calibration_it_was_captured_with(
     out = tmp_path / "runs" / "c"
     assert (
         main(
-            [
-                "capture",
-                "--camera",
-                "Fake_1",
-                "--interfaces",
-                "fake",
-                "--port",
-                booth_port,
-                "--calibration",
-                str(calibration),
-                "--exposure",
-                "10000",
-                "--out",
-                str(out),
-            ]
+            fake_camera_capture(booth_port, "--calibration", str(calibration), "--exposure", "10000", "--out", str(out))
         )
         == 0
     )
@@ -76,13 +56,13 @@ def test_a_sequence_refers_to_the_calibration_it_was_captured_with(
     }
     assert (sequence.directory / sequence.extra["calibration"]["file"]).resolve() == calibration.resolve()
 
-    _, notes = analysis.apply_calibration(sequence)  # what estimate/flash do without --calibration
+    _, notes = sequence_spectra.apply_calibration(sequence)  # what estimate/flash do without --calibration
     assert any(captured_with in note and "LED spectra" in note for note in notes)
     assert not any("captured with" in note for note in notes)
 
     recalibrated = load_calibration(calibration).updated()  # re-calibrated since: a new id at the same place
     save_calibration(recalibrated, calibration)
-    _, notes = analysis.apply_calibration(read_sequence(out / "sequence"))
+    _, notes = sequence_spectra.apply_calibration(read_sequence(out / "sequence"))
     assert any(f"captured with calibration {captured_with}" in note and recalibrated.id in note for note in notes)
 
 
@@ -116,6 +96,6 @@ def test_a_calibration_that_misses_the_leds_light_is_refused(
     narrow = spectra.resample(WavelengthGrid(start_nm, 700, 10), outside="zero")
     save_calibration(CalibrationSet(**{section: narrow}), tmp_path / "cal")
     with pytest.raises(RecordingError, match=message):
-        analysis.apply_calibration(sequence, tmp_path / "cal")
+        sequence_spectra.apply_calibration(sequence, tmp_path / "cal")
     save_calibration(CalibrationSet(**{section: spectra}), tmp_path / "full")  # covering: accepted
-    assert analysis.apply_calibration(sequence, tmp_path / "full")[1]
+    assert sequence_spectra.apply_calibration(sequence, tmp_path / "full")[1]

@@ -55,7 +55,9 @@ def test_the_stop_line_says_whether_the_sequence_was_complete(
     incomplete: the line says what the file says, and names the folder."""
     import numpy as np
 
-    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter, read_sequence
+    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+    from msflash.acquisition.sequence.reader import read_sequence
+    from msflash.acquisition.sequence.writer import SequenceWriter
 
     def stopped(args) -> int:
         camera = SequenceCamera(

@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import base64
 import json
 import struct
-from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +17,7 @@ from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.app.html_report import PNG_SIGNATURE, HtmlReport
 from msflash.acquisition.app.srgb_png import png_chunks
 from msflash.acquisition.sequence.image_files import read_image, read_image_header
+from tests.acquisition.support.report_pages import parse_report
 
 
 def parser() -> argparse.ArgumentParser:
@@ -30,48 +29,6 @@ def parser() -> argparse.ArgumentParser:
 def run_cli(argv: list[str]) -> int:
     args = parser().parse_args(argv)
     return int(args.handler(args))
-
-
-class ReportParser(HTMLParser):
-    """Collects embedded images and table cells by table id."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.images: list[bytes] = []
-        self.tables: dict[str, list[list[str]]] = {}
-        self._table: str | None = None
-        self._cell: list[str] | None = None
-
-    def handle_starttag(self, tag: str, attrs: list) -> None:
-        attributes = dict(attrs)
-        if tag == "img":
-            prefix = "data:image/png;base64,"
-            assert attributes["src"].startswith(prefix)
-            self.images.append(base64.b64decode(attributes["src"][len(prefix) :]))
-        elif tag == "table":
-            self._table = attributes.get("id", f"table{len(self.tables)}")
-            self.tables[self._table] = []
-        elif tag == "tr" and self._table:
-            self.tables[self._table].append([])
-        elif tag in ("td", "th"):
-            self._cell = []
-
-    def handle_data(self, data: str) -> None:
-        if self._cell is not None:
-            self._cell.append(data)
-
-    def handle_endtag(self, tag: str) -> None:
-        if tag in ("td", "th") and self._cell is not None and self._table:
-            self.tables[self._table][-1].append("".join(self._cell))
-            self._cell = None
-        elif tag == "table":
-            self._table = None
-
-
-def parse_report(path: Path) -> ReportParser:
-    report = ReportParser()
-    report.feed(path.read_text(encoding="utf-8"))
-    return report
 
 
 @pytest.fixture(scope="module")
@@ -96,7 +53,7 @@ class TestEvaluateSequence:
         assert result["layout_uniformity"] < 0.1 and result["noise_flash_image"] == "complementary-capture"
 
         report = parse_report(out / "report.html")
-        assert len(report.images) >= 6 and all(image.startswith(PNG_SIGNATURE) for image in report.images)
+        assert len(report.embedded) >= 6 and all(image.startswith(PNG_SIGNATURE) for image in report.embedded)
         rows = report.tables["delta-e"]
         assert rows[0] == ["image", "mean ΔE00", "max ΔE00"]
         shown = {row[0]: float(row[1]) for row in rows[1:]}

@@ -14,8 +14,9 @@ import pytest
 from scipy.optimize import nnls
 
 from msflash.acquisition.app.cli import main
-from msflash.acquisition.devices.simulated_camera import SimulatedCamera, led_signals
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.devices.sim_default import led_signals
+from msflash.acquisition.devices.simulated_camera import SimulatedCamera
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rig import open_sim_rig
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.scenes import Scene

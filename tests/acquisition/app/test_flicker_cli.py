@@ -20,11 +20,18 @@ def test_a_flickering_lamp_is_found_reported_and_recorded(tmp_path: Path, capsys
     assert flicker["checked"] and flicker["detected"] and flicker["corrected"]
     assert flicker["spread"] > 0.05 and len(flicker["frame_gains"]) == 7
     assert "msflash: flicker: the LED frames saw" in err
-    if flicker["frequency_hz"] is not None:  # the fit is reported only where the frames decide it
-        assert abs(flicker["frequency_hz"] - truth["frequency_hz"]) < 1.0
+    # The run's own estimate fits the mains at the timestamps of the sequence it wrote (its live header has none).
+    assert flicker["frequency_hz"] is not None and abs(flicker["frequency_hz"] - truth["frequency_hz"]) < 1.0
+    assert "; fitted " in err
     # The recorded sequence tells the same from disk.
     assert main(["estimate", str(out / "sequence")]) == 0
     assert "msflash: flicker: the LED frames saw" in capsys.readouterr().err
+    # The flash re-captured live was decided from the corrected statistics: the mix the sequence gives from disk
+    # (before, the live decision took the LED images as they were: 0.050, 0.122 against 0.052, 0.128).
+    frames = json.loads((out / "sequence" / "sequence.json").read_text())["frames"]
+    (recaptured,) = [f["led_levels"] for f in frames if f["role"] == "flash"]
+    assert main(["flash", str(out / "sequence"), "--mode", "complementary", "--method", "global", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["flash_weights"] == pytest.approx(recaptured, abs=1e-9)
 
 
 def test_a_steady_lamp_raises_no_flicker(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -43,6 +50,17 @@ def test_anti_flicker_exposures_are_whole_periods(tmp_path: Path, capsys: pytest
     assert {round(f["exposure_us"], 3) for f in frames} == {round(2e6 / 120, 3)}
     assert main(["capture", "--out", str(tmp_path / "short"), "--exposure", "2000", "--anti-flicker", "50"]) == 0
     assert "shorter than one flicker period (10.00 ms)" in capsys.readouterr().err
+
+
+def test_the_runs_flash_recapture_is_named_when_no_whole_period_fits(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """In a booth the flash outshines the room: the re-capture's predicted exposure (a few ms) is shorter than a
+    flicker period, so it is kept and named (the rounding itself: tests/acquisition/session/test_anti_flicker.py)."""
+    argv = ["run", "--out", str(tmp_path / "r"), "--flicker", "100:0.3", "--anti-flicker", "50", "--seed", "1"]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "warning: flash exposure" in err and "shorter than one flicker period (10.00 ms, --anti-flicker 50)" in err
 
 
 @pytest.mark.parametrize(

@@ -195,6 +195,30 @@ def test_live_refuses_a_busy_port_and_a_mosaic_on_the_fake_in_one_line(tmp_path:
     assert not os.path.exists(tmp_path / "runs")
 
 
+@pytest.mark.parametrize(
+    ("arguments", "why"),
+    [
+        (
+            ["--rig", "sim", "--roi", "0,0,64,48"],
+            "--roi: describes a hardware rig's camera or booth, but the rig is 'sim'",
+        ),
+        (["--rig", "sim", "--camera", "Fake_1"], "--rig sim: --camera/--port name hardware devices; expected --rig hw"),
+        (
+            ["--rig", "hw", "--flicker", "100:0.3"],
+            "--flicker: describes the simulated world's lamp, but the rig is 'hw'",
+        ),
+        (["--rig", "replay:runs/x"], "--rig replay:runs/x: a replay serves a recorded sequence in its order"),
+    ],
+)
+def test_live_opens_its_rig_as_run_does_refusing_what_the_rig_would_ignore(
+    tmp_path: Path, capsys, arguments: list[str], why: str
+) -> None:
+    """``live`` takes rig_choice's option groups and its one opener: the same refusals as ``run``."""
+    assert cli.main(["live", *arguments, "--port", "0", "--runs", str(tmp_path / "runs")]) == 2
+    error = capsys.readouterr().err.strip()
+    assert why in error and "\n" not in error
+
+
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGHUP], ids=["ctrl-c", "terminal-closed"])
 def test_msflash_live_serves_the_page_and_ctrl_c_stops_it_with_the_leds_off(
     tmp_path: Path, stop: signal.Signals

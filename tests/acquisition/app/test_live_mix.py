@@ -13,10 +13,11 @@ import tifffile
 
 from msflash.acquisition.app.live.mix_preview import MixPreview, preview_samples
 from msflash.acquisition.app.live.preview import PreviewRenderer
+from msflash.acquisition.app.live.rig_controls import pixel_readout
 from msflash.acquisition.app.live.run_job import SequenceRequest, run_sequence
-from msflash.acquisition.app.live.server import TOKEN_HEADER, pixel_readout
+from msflash.acquisition.app.live.server import TOKEN_HEADER
 from msflash.acquisition.app.live.snapshots import write_snapshot
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.analysis import FrameStack, synthesize_sequence
 from msflash.acquisition.session.rig import open_rig
 from msflash.processing.statistics import FrameStackSpec

@@ -3,7 +3,8 @@ the flash before it fires (presets, a slider, Fire the mix shown), the keyboard,
 
 A real sim rig and its booth emulator on a pty; the LED levels are read at the emulator's end. Each test leaves
 screenshots in its tmp dir; with ``MSFLASH_DOCS_SCREENSHOTS=DIR`` set, also ``DIR/live-<width>.png`` (how
-``docs/live-1024.png`` and ``docs/live-1920.png`` were made).
+``docs/live-1024.png``, ``docs/live-1920.png`` and ``docs/live-1024-disconnected.png`` were made; the camera panel's
+and a camera error's, ``docs/live-1024-camera*.png``, by ``test_live_page_camera.py``).
 """
 
 from __future__ import annotations

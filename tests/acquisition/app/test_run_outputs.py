@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from msflash.acquisition.app.cli import main
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
+from tests.acquisition.support.report_pages import disk_full_for
 
 
 @pytest.mark.parametrize("command", ["run", "capture"])
@@ -31,14 +32,7 @@ def test_run_json_that_cannot_be_written_is_one_line_and_the_sequence_stays(
 ) -> None:
     """Disk full when the summary is written (injected: no small file system can be mounted in CI;
     the same line was seen by hand on a full tmpfs for the report's images)."""
-    real = Path.write_text
-
-    def full_disk(self: Path, *args, **kwargs):
-        if self.name == "run.json":
-            raise OSError(28, "No space left on device")
-        return real(self, *args, **kwargs)
-
-    monkeypatch.setattr(Path, "write_text", full_disk)
+    disk_full_for(monkeypatch, lambda path: path.name == "run.json")
     out = tmp_path / "run"
     assert main(["run", "--rig", "sim", "--out", str(out)]) == 1
     last = capsys.readouterr().err.strip().splitlines()[-1]
@@ -46,5 +40,5 @@ def test_run_json_that_cannot_be_written_is_one_line_and_the_sequence_stays(
     assert f"The sequence is complete in {out / 'sequence'}" in last
     assert read_sequence(out / "sequence").complete
     assert not (out / "run.json").exists()
-    monkeypatch.setattr(Path, "write_text", real)
+    monkeypatch.undo()
     assert json.loads((out / "sequence" / "sequence.json").read_text())["complete"] is True

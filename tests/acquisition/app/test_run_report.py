@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import shutil
 import struct
-from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -17,52 +16,10 @@ from msflash.acquisition.app import evaluation, report
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.plot_style import PALETTE, SPECTRAL_AXIS_LABEL, WAVELENGTH_AXIS_LABEL, pyplot
 from msflash.acquisition.app.srgb_png import enlargement, png_chunks
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.lab import colour_study
-
-
-class Links(HTMLParser):
-    """Every ``<img src>`` and ``<a href>`` of a page, and its tables' cells by id."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.images: list[str] = []
-        self.links: list[str] = []
-        self.tables: dict[str, list[list[str]]] = {}
-        self._table: str | None = None
-        self._cell: list[str] | None = None
-
-    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
-        values = dict(attrs)
-        if tag == "img":
-            self.images.append(values["src"] or "")
-        elif tag == "a":
-            self.links.append(values["href"] or "")
-        elif tag == "table":
-            self._table = values.get("id") or f"table-{len(self.tables)}"
-            self.tables[self._table] = []
-        elif tag == "tr" and self._table:
-            self.tables[self._table].append([])
-        elif tag in ("td", "th"):
-            self._cell = []
-
-    def handle_data(self, data: str) -> None:
-        if self._cell is not None:
-            self._cell.append(data)
-
-    def handle_endtag(self, tag: str) -> None:
-        if tag in ("td", "th") and self._cell is not None and self._table:
-            self.tables[self._table][-1].append("".join(self._cell).strip())
-            self._cell = None
-        elif tag == "table":
-            self._table = None
-
-
-def parse(path: Path) -> Links:
-    page = Links()
-    page.feed(path.read_text(encoding="utf-8"))
-    return page
+from tests.acquisition.support.report_pages import disk_full_for, parse_report
 
 
 def png_size(path: Path) -> tuple[int, int]:
@@ -111,7 +68,7 @@ def test_one_html_report_linked_from_run_json_points_at_files_of_the_run(run_fol
     page_path = Path(summary["report"])
     assert page_path == run_folder / "report.html" and page_path.is_file()
     assert not (run_folder / "report.md").exists()  # one report, HTML
-    page = parse(page_path)
+    page = parse_report(page_path)
     shown = {(run_folder / src).resolve() for src in page.images}
     expected = {Path(p).resolve() for p in summary["previews"].values()} | {(run_folder / "spectra.png").resolve()}
     assert shown == expected
@@ -161,11 +118,11 @@ def test_every_plot_gives_each_flash_and_the_ambient_its_palette_colour(run_fold
         mode: analysis.solve_sequence_flash(sequence, mode, estimate.ambient_weights)
         for mode in ("complementary", "matching")  # the run's order, opposite to evaluate's
     }
-    target = analysis.target_illuminant("D65", sequence)
+    target = sequence_spectra.target_illuminant("D65", sequence)
     figures = {
         "run spectra": report.spectra_figure(sequence, estimate, solutions, None, target),
         "evaluate spectra": evaluation.spectra_figure(
-            sequence.grid, analysis.led_spectra_photons(sequence), estimate.spectrum, solutions, target
+            sequence.grid, sequence_spectra.led_spectra_photons(sequence), estimate.spectrum, solutions, target
         ),
         "fig9": colour_study.fig9_figure({"tungsten": {"ambient": 18.0, "matching": 18.2, "complementary": 4.0}}),
     }
@@ -230,14 +187,8 @@ def test_a_report_that_cannot_be_written_is_one_line_and_run_json_stays(
     tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Disk full when the HTML is written (injected, as test_run_outputs does for run.json)."""
-    real = Path.write_text
-
-    def full_disk(self: Path, *args, **kwargs):  # noqa: ANN202
-        if self.name == "report.html" or self.name.startswith(".report.html."):  # written beside, then renamed
-            raise OSError(28, "No space left on device")
-        return real(self, *args, **kwargs)
-
-    monkeypatch.setattr(Path, "write_text", full_disk)
+    # written beside, then renamed
+    disk_full_for(monkeypatch, lambda path: path.name == "report.html" or path.name.startswith(".report.html."))
     out = tmp_path / "run"
     assert main(["run", "--rig", "sim", "--out", str(out)]) == 1
     last = capsys.readouterr().err.strip().splitlines()[-1]
@@ -256,11 +207,11 @@ def test_the_run_and_evaluate_draw_the_same_flash_mix_curves(run_folder: Path) -
         mode: analysis.solve_sequence_flash(sequence, mode, estimate.ambient_weights)
         for mode in ("complementary", "matching")
     }
-    target = analysis.target_illuminant("D65", sequence)
-    truth = analysis.target_illuminant("A", sequence)
+    target = sequence_spectra.target_illuminant("D65", sequence)
+    truth = sequence_spectra.target_illuminant("A", sequence)
     run = report.spectra_figure(sequence, estimate, solutions, truth, target)
     evaluated = evaluation.spectra_figure(
-        sequence.grid, analysis.led_spectra_photons(sequence), estimate.spectrum, solutions, target, truth
+        sequence.grid, sequence_spectra.led_spectra_photons(sequence), estimate.spectrum, solutions, target, truth
     )
     plt = pyplot()
     try:

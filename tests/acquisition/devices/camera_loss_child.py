@@ -87,7 +87,8 @@ def capture_scenario(out_dir: Path) -> dict:
     from msflash.acquisition.devices.aravis import camera as aravis_camera
     from msflash.acquisition.errors import CameraError
     from msflash.acquisition.plan import CapturePlan
-    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+    from msflash.acquisition.sequence.writer import SequenceWriter
     from msflash.acquisition.session.capture import run_capture
     from msflash.led_controller import LedBooth, serve_on_pty
 

@@ -31,11 +31,9 @@ from msflash.acquisition.devices.aravis.camera_features import (
 from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.errors import CameraSettingError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import read_sequence
-from msflash.acquisition.session.rig import emulator_for
-from msflash.led_controller import serve_on_pty
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.processing import datasets
-from msflash.processing.spectra import DEFAULT_GRID
+from tests.acquisition.support.hw_rig import booth_on_pty, fake_camera_capture
 
 pytestmark = pytest.mark.aravis
 
@@ -355,17 +353,6 @@ def test_devices_features_of_a_missing_camera_is_one_line(capsys: pytest.Capture
     assert len(err) == 1 and err[0].startswith("msflash: error: camera 'SN404': not found on fake (found: Fake_1")
 
 
-@pytest.fixture
-def led_spectra_csv(tmp_path: Path) -> Path:
-    """The paper's 7 LED spectra as a CSV (the hardware rig needs them before it opens a device)."""
-    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
-    rows = ["wavelength_nm," + ",".join(leds.names)]
-    rows += [f"{w:g}," + ",".join(f"{v:.6g}" for v in row) for w, row in zip(leds.wavelengths_nm, leds.values)]
-    path = tmp_path / "led_spectra.csv"
-    path.write_text("\n".join(rows) + "\n")
-    return path
-
-
 @pytest.mark.parametrize(
     ("option", "message"),
     [
@@ -396,20 +383,9 @@ def test_cli_camera_option_errors_exit_2_with_one_line(
 ) -> None:
     # No booth is needed: the camera's options are refused before the booth is opened.
     status = main(
-        [
-            "capture",
-            "--camera",
-            "Fake_1",
-            "--interfaces",
-            "fake",
-            "--port",
-            str(tmp_path / "no-booth"),
-            "--led-spectra",
-            str(led_spectra_csv),
-            *option,
-            "--out",
-            str(tmp_path / "x"),
-        ]
+        fake_camera_capture(
+            str(tmp_path / "no-booth"), "--led-spectra", str(led_spectra_csv), *option, "--out", str(tmp_path / "x")
+        )
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2, err
@@ -425,18 +401,11 @@ def test_cli_capture_applies_the_options_and_records_them(
     sfnc_fake_xml: None, tmp_path: Path, led_spectra_csv: Path
 ) -> None:
     leds = datasets.load_spectra_csv(led_spectra_csv, kind="spd", unit="energy")
-    server = serve_on_pty(emulator_for(leds))
     out = tmp_path / "c"
-    try:
+    with booth_on_pty(leds) as port:
         status = main(
-            [
-                "capture",
-                "--camera",
-                "Fake_1",
-                "--interfaces",
-                "fake",
-                "--port",
-                server.port,
+            fake_camera_capture(
+                port,
                 "--led-spectra",
                 str(led_spectra_csv),
                 "--exposure",
@@ -453,10 +422,8 @@ def test_cli_capture_applies_the_options_and_records_them(
                 "TriggerActivation=FallingEdge",
                 "--out",
                 str(out),
-            ]
+            )
         )
-    finally:
-        server.close()
     assert status == 0
     sequence = read_sequence(out / "sequence")
     assert sequence.complete and sequence.load_frame(0).shape[:2] == (48, 64)
@@ -492,13 +459,7 @@ def test_a_pixel_format_the_camera_does_not_offer_is_bad_input(
     sfnc_fake_xml: None, tmp_path: Path, led_spectra_csv: Path, capsys: pytest.CaptureFixture
 ) -> None:
     status = main(
-        [
-            "capture",
-            "--camera",
-            "Fake_1",
-            "--interfaces",
-            "fake",
-            "--port",
+        fake_camera_capture(
             str(tmp_path / "no-booth"),
             "--led-spectra",
             str(led_spectra_csv),
@@ -506,7 +467,7 @@ def test_a_pixel_format_the_camera_does_not_offer_is_bad_input(
             "BayerGR12Packed",
             "--out",
             str(tmp_path / "x"),
-        ]
+        )
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(err) == 1

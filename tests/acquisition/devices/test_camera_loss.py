@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 
 pytestmark = pytest.mark.aravis
 

@@ -35,14 +35,13 @@ from msflash.acquisition.devices.aravis.gain import (
     parse_gain_raw,
 )
 from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.exposure import ExposurePlan, ExposurePolicy
 from msflash.acquisition.session.live import LiveStream
-from msflash.acquisition.session.rig import emulator_for, open_aravis_fake_rig
+from msflash.acquisition.session.rig import open_aravis_fake_rig
 from msflash.acquisition.session.run import LedCapture
-from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
-from msflash.processing.spectra import DEFAULT_GRID
+from tests.acquisition.support.hw_rig import booth_on_pty
 
 CAMERA = "camera X (serial 1)"
 
@@ -176,16 +175,6 @@ def test_the_range_is_the_selected_gains(aravis: ModuleType) -> None:
 # -- the issue's camera: Aravis's own GigE fake on 127.0.0.1, through `msflash capture` -----------
 
 
-@pytest.fixture
-def led_spectra_csv(tmp_path: Path) -> Path:
-    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
-    rows = ["wavelength_nm," + ",".join(leds.names)]
-    rows += [f"{w:g}," + ",".join(f"{v:.6g}" for v in row) for w, row in zip(leds.wavelengths_nm, leds.values)]
-    path = tmp_path / "led_spectra.csv"
-    path.write_text("\n".join(rows) + "\n")
-    return path
-
-
 def _capture_on_gige_fake(tmp_path: Path, led_spectra_csv: Path, port: str, *options: str) -> tuple[int, Path]:
     out = tmp_path / f"c{len(list(tmp_path.iterdir()))}"
     status = main(
@@ -215,23 +204,22 @@ def test_gain_on_the_gainraw_gige_fake_is_checked_before_the_sequence_and_record
     aravis: ModuleType, tmp_path: Path, led_spectra_csv: Path, capsys: pytest.CaptureFixture
 ) -> None:
     leds = datasets.load_spectra_csv(led_spectra_csv, kind="spd", unit="energy")
-    server = serve_on_pty(emulator_for(leds))
-    try:
-        with aravis.AravisGvFake(serial="ISSUE29", genicam_xml=None):  # Aravis's own XML: GainRaw 0-10
-            capsys.readouterr()
-            status, out = _capture_on_gige_fake(tmp_path, led_spectra_csv, server.port, "--gain", "20")
-            err = capsys.readouterr().err.strip().splitlines()
-            assert status == 2 and len(err) == 1, err
-            assert err[0] == (
-                "msflash: error: camera Fake (serial ISSUE29): --gain 20 dB: GainRaw cannot be 20 (20 dB at 1 per dB, "
-                "profile 'aravis-fake': gain_raw_per_db 1); expected a whole number in 0 … 10 (camera units; 0 … 10 dB)"
-            )
-            assert not (out / "sequence").exists()  # refused before the sequence began
-            status, out = _capture_on_gige_fake(tmp_path, led_spectra_csv, server.port, "--gain", "6")
-            err = capsys.readouterr().err.strip().splitlines()
-            assert status == 0, err
-    finally:
-        server.close()
+    with (
+        booth_on_pty(leds) as port,
+        aravis.AravisGvFake(serial="ISSUE29", genicam_xml=None),
+    ):  # Aravis's own XML: GainRaw 0-10
+        capsys.readouterr()
+        status, out = _capture_on_gige_fake(tmp_path, led_spectra_csv, port, "--gain", "20")
+        err = capsys.readouterr().err.strip().splitlines()
+        assert status == 2 and len(err) == 1, err
+        assert err[0] == (
+            "msflash: error: camera Fake (serial ISSUE29): --gain 20 dB: GainRaw cannot be 20 (20 dB at 1 per dB, "
+            "profile 'aravis-fake': gain_raw_per_db 1); expected a whole number in 0 … 10 (camera units; 0 … 10 dB)"
+        )
+        assert not (out / "sequence").exists()  # refused before the sequence began
+        status, out = _capture_on_gige_fake(tmp_path, led_spectra_csv, port, "--gain", "6")
+        err = capsys.readouterr().err.strip().splitlines()
+        assert status == 0, err
     sequence = read_sequence(out / "sequence")
     assert sequence.complete
     assert sequence.camera.extra["camera_options"]["read_back"] == {
@@ -392,7 +380,7 @@ def test_the_rig_checks_the_serial_and_model_it_opened(
 
 
 def test_led_snr_without_signal_is_a_warning_and_null_in_json() -> None:
-    from msflash.acquisition.session.exposure import led_snr_warnings
+    from msflash.acquisition.session.led_snr import led_snr_warnings
 
     names = ["led440", "led480", "led500", "led520"]
     snr = [12.5, math.inf, -4e14, math.nan]

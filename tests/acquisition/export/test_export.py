@@ -16,7 +16,7 @@ import rawpy
 import tifffile
 
 from msflash.acquisition.app.cli import main
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.processing.raw_colour import XYZ_TO_LINEAR_SRGB, camera_matrix
 from tests.helpers import SAMPLES_DIR, write_test_sequence
 
@@ -398,7 +398,8 @@ def test_run_export_dng_of_an_rgb_rig_is_refused_before_capture(capsys, tmp_path
 
 
 def test_dng_of_float_frames_is_refused(capsys, tmp_path: Path) -> None:
-    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+    from msflash.acquisition.sequence.writer import SequenceWriter
     from tests.helpers import GRID
 
     directory = tmp_path / "float"

@@ -24,7 +24,8 @@ import tifffile
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.export.dng import write_dng
-from msflash.acquisition.sequence.format import read_sequence, utc_now_text
+from msflash.acquisition.sequence.format import utc_now_text
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.processing.led_wavelength import led_name
 from msflash.processing.sensor import cfa_channel_map
 from tests.helpers import SAMPLES_DIR, forget_digests, write_test_sequence

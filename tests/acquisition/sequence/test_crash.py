@@ -13,7 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from tests.helpers import wait_for_frames
 
 REPO = Path(__file__).resolve().parents[3]

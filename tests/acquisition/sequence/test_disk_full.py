@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from msflash.acquisition.app.cli import main
-from msflash.acquisition.sequence import format as sequence_format
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence import writer as sequence_writer
+from msflash.acquisition.sequence.reader import read_sequence
 
 FULL_AT = 3
 """The frame whose file finds the disk full (0-based)."""
@@ -24,7 +24,7 @@ FULL_AT = 3
 
 @pytest.fixture
 def disk_full_at_frame(monkeypatch: pytest.MonkeyPatch) -> None:
-    real_write = sequence_format.write_image_digest
+    real_write = sequence_writer.write_image_digest
     calls = {"n": 0}
 
     def write_image(path, pixels, metadata):  # noqa: ANN001 - the image_io signature
@@ -33,7 +33,7 @@ def disk_full_at_frame(monkeypatch: pytest.MonkeyPatch) -> None:
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
         return real_write(path, pixels, metadata)
 
-    monkeypatch.setattr(sequence_format, "write_image_digest", write_image)
+    monkeypatch.setattr(sequence_writer, "write_image_digest", write_image)
 
 
 def test_a_full_disk_mid_capture_is_one_runtime_error_and_keeps_the_frames(

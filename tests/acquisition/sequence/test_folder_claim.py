@@ -19,7 +19,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import FolderInUseError
 from msflash.acquisition.sequence.folder_claim import LOCK_FILE, claim_folder, claimed
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from tests.helpers import wait_for_frames, write_test_sequence
 
 REPO = Path(__file__).resolve().parents[3]

@@ -1,7 +1,7 @@
 """Frame values the declared black and white levels cannot produce are refused, on every route.
 
 Real files throughout: sequences written to a temporary directory as 16-bit TIFF (OpenImageIO,
-through :func:`acquisition.sequence.format.write_sequence`) or float EXR, read back by the CLI.
+through :func:`acquisition.sequence.writer.write_sequence`) or float EXR, read back by the CLI.
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import read_sequence, write_sequence
 from msflash.acquisition.sequence.frame_integrity import black_margin, check_frame_levels
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import write_sequence
 from tests.helpers import SAMPLES_DIR
 
 BAYER_12BIT = SAMPLES_DIR / "sample-bayer-fluorescent-12bit"

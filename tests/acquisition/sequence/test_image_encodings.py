@@ -2,7 +2,7 @@
 
 The list is docs/architecture.md §6 ("Frame file encodings"); every row there is a case here. Files
 are written by OpenImageIO where its writer produces the encoding, and byte by byte
-(:mod:`tests.acquisition.tiff_files`) where it does not (big-endian, float16, uint32).
+(:mod:`tests.acquisition.support.tiff_files`) where it does not (big-endian, float16, uint32).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.image_files import read_image, read_image_header
-from tests.acquisition.tiff_files import write_baseline_tiff
+from tests.acquisition.support.tiff_files import write_baseline_tiff
 from tests.helpers import forget_digests, write_test_sequence
 
 COUNTS = (np.arange(5 * 7 * 3).reshape(5, 7, 3) * 611 % 65536).astype(np.uint16)

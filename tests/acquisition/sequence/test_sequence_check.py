@@ -16,9 +16,9 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence import format as sequence_format
+from msflash.acquisition.sequence import writer as sequence_writer
 from msflash.acquisition.sequence.check import FILE_STATES, check_sequence
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from tests.helpers import forget_digests, write_test_sequence
 
 REPOSITORY = Path(__file__).resolve().parents[3]
@@ -278,7 +278,7 @@ def test_run_refuses_its_own_frame_changed_on_disk(
 ) -> None:
     """A frame changed on disk after it was written (a failing disk, another program) is caught when
     ``run`` checks the digests of what it wrote (its report comes from the frames in memory)."""
-    real_write = sequence_format.write_image_digest
+    real_write = sequence_writer.write_image_digest
 
     def write_then_damage(path, pixels, attributes):  # noqa: ANN001 - the image_io signature
         digest = real_write(path, pixels, attributes)
@@ -286,7 +286,7 @@ def test_run_refuses_its_own_frame_changed_on_disk(
             change_one_byte(path)
         return digest
 
-    monkeypatch.setattr(sequence_format, "write_image_digest", write_then_damage)
+    monkeypatch.setattr(sequence_writer, "write_image_digest", write_then_damage)
     status, _, err = run(capsys, "run", "--out", str(tmp_path / "run"))
     assert status == 2
     one_error(err, "frames[0].file", "000-ambient.tiff", "has changed since it was written", after_progress=True)
@@ -328,7 +328,7 @@ def test_load_frame_refuses_a_changed_frame_and_reads_it_once_digests_are_droppe
 
 def test_copying_a_sequence_records_the_new_files_digests(sequence: Path, tmp_path: Path) -> None:
     source = read_sequence(sequence)
-    copied = sequence_format.write_sequence(
+    copied = sequence_writer.write_sequence(
         tmp_path / "copied", source, [source.load_frame(i) for i in range(len(source.frames))]
     )
     assert check_sequence(copied.directory).intact

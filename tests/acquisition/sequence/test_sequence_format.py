@@ -19,15 +19,10 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.errors import RecordingError
-from msflash.acquisition.sequence.format import (
-    SequenceCamera,
-    SequenceFrame,
-    SequenceLed,
-    SequenceWriter,
-    read_sequence,
-    write_sequence,
-)
+from msflash.acquisition.sequence.format import SequenceCamera, SequenceFrame, SequenceLed
 from msflash.acquisition.sequence.image_files import read_image, read_image_header, write_image
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import SequenceWriter, write_sequence
 from tests.helpers import forget_digests
 
 REPOSITORY = Path(__file__).resolve().parents[3]
@@ -546,7 +541,8 @@ _CHILD = textwrap.dedent(
     """
     import sys
     import numpy as np
-    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed, SequenceWriter
+    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+    from msflash.acquisition.sequence.writer import SequenceWriter
 
     wavelengths = np.arange(400.0, 701.0, 10.0)
     camera = SequenceCamera("Kill", "0", "RGB16", None, 0, 65535)

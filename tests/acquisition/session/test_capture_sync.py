@@ -17,7 +17,8 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import DroppedFrameError, FrameLostError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import Rig, open_sim_rig
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.capture import host_silence_s, preview_frames, run_capture
 from msflash.acquisition.session.rig import Rig, open_sim_rig
 from msflash.led_controller import protocol

@@ -12,7 +12,7 @@ import pytest
 from msflash.acquisition.errors import CaptureCancelled, UsageError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.both_flashes import solve_both
 from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.engine import Cancellation, CaptureResult, FrameEvent

@@ -22,8 +22,9 @@ import pytest
 
 from msflash.acquisition.app.cli import main as msflash_main
 from msflash.acquisition.sequence import image_files
-from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
-from msflash.acquisition.session import analysis
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import SequenceWriter
+from msflash.acquisition.session import analysis, local_route
 from msflash.acquisition.session.estimate_stream import stream_sequence
 from msflash.acquisition.session.rig import open_sim_rig
 
@@ -91,8 +92,8 @@ def test_the_estimate_decodes_one_frame_at_a_time(tmp_path: Path) -> None:
     sequence = read_sequence(write_sequence(tmp_path / "s"))
     frame_bytes = int(np.prod(SHAPE)) * 2
     stack_bytes = (N_LED_FRAMES + 1) * frame_bytes
-    analysis.estimate_sequence_local(sequence)  # warm: lazy imports, caches
-    for tiles, estimate in ((None, analysis.estimate_sequence), (8, analysis.estimate_sequence_local)):
+    local_route.estimate_sequence_local(sequence)  # warm: lazy imports, caches
+    for tiles, estimate in ((None, analysis.estimate_sequence), (8, local_route.estimate_sequence_local)):
         statistics = stream_sequence(sequence, 8, tiles).nbytes
         tracemalloc.start()
         try:
@@ -106,8 +107,9 @@ def test_the_estimate_decodes_one_frame_at_a_time(tmp_path: Path) -> None:
 WORKER = textwrap.dedent(
     """
     import json, resource, sys
-    from msflash.acquisition.sequence.format import read_sequence
+    from msflash.acquisition.sequence.reader import read_sequence
     from msflash.acquisition.session import analysis
+    from msflash.acquisition.session import local_route
 
     from msflash.acquisition.sequence.memory_budget import set_memory_budget
 
@@ -151,8 +153,8 @@ def test_a_stack_in_memory_and_the_files_give_the_same_estimate(tmp_path: Path) 
     """The frames of a stack in memory fed to the accumulator (``stream_stack``) = the files streamed."""
     sequence = read_sequence(write_sequence(tmp_path / "s", n_led_frames=4))
     stack = analysis.load_frame_stack(sequence)
-    from_memory = analysis.estimate_sequence_local(sequence, stream=analysis.stream_stack(sequence, stack, 8, 8))
-    from_disk = analysis.estimate_sequence_local(sequence)
+    from_memory = local_route.estimate_sequence_local(sequence, stream=analysis.stream_stack(sequence, stack, 8, 8))
+    from_disk = local_route.estimate_sequence_local(sequence)
     np.testing.assert_array_equal(
         from_memory.global_estimate.ambient_weights, from_disk.global_estimate.ambient_weights
     )

@@ -16,8 +16,9 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import exposure as ex
+from msflash.acquisition.session import led_snr, metering
 from msflash.acquisition.session.capture import preview_frames
 from msflash.acquisition.session.rig import Rig, open_sim_rig
 
@@ -64,21 +65,21 @@ def _plan(
     )
 
 
-def _check_frames(rig: Rig, plan: ex.ExposurePlan) -> tuple[ex.Levels, list[float]]:
+def _check_frames(rig: Rig, plan: ex.ExposurePlan) -> tuple[metering.Levels, list[float]]:
     """Capture the planned frames; none saturates beyond the budget; return the ambient's levels and the SNR."""
     info = rig.camera.info
     capture = _capture(rig)
     ambient = capture((0.0,) * N_LEDS, plan.ambient_exposure_us)
-    levels = ex.meter(ambient, info.black_level, info.white_level, POLICY)
+    levels = metering.meter(ambient, info.black_level, info.white_level, POLICY)
     assert levels.saturated_fraction <= POLICY.max_saturated_fraction
     leds = []
     for led, exposure in enumerate(plan.led_exposures_us):
         frame = capture(tuple(1.0 if i == led else 0.0 for i in range(N_LEDS)), exposure)
-        metered = ex.meter(frame, info.black_level, info.white_level, POLICY)
+        metered = metering.meter(frame, info.black_level, info.white_level, POLICY)
         assert metered.saturated_fraction <= POLICY.max_saturated_fraction, (led, metered)
         assert metered.bright_end <= POLICY.headroom_fraction * 1.05
         leds.append(frame)
-    snr, method = ex.measure_led_snr(
+    snr, method = led_snr.measure_led_snr(
         ambient,
         plan.ambient_exposure_us,
         leds,
@@ -147,7 +148,7 @@ def test_flash_exposure_keeps_the_flash_frame_below_saturation(rig: Rig) -> None
         capture(tuple(1.0 if i == k else 0.0 for i in range(N_LEDS)), e) for k, e in enumerate(plan.led_exposures_us)
     ]
     weights = np.ones(N_LEDS)
-    exposure = ex.flash_exposure(
+    exposure = metering.flash_exposure(
         ambient,
         plan.ambient_exposure_us,
         leds,
@@ -156,9 +157,10 @@ def test_flash_exposure_keeps_the_flash_frame_below_saturation(rig: Rig) -> None
         info.black_level,
         info.white_level,
         plan.exposure_range_us,
+        POLICY,
     )
     flash = capture(tuple(weights), exposure)
-    levels = ex.meter(flash, info.black_level, info.white_level, POLICY)
+    levels = metering.meter(flash, info.black_level, info.white_level, POLICY)
     assert levels.saturated_fraction <= POLICY.max_saturated_fraction
     assert levels.bright_end == pytest.approx(POLICY.target_fraction, rel=0.15)
 
@@ -211,13 +213,13 @@ def test_linear_quantile_is_numpy_quantile_bit_for_bit(dtype) -> None:
         if dtype is np.float64 and rng.random() < 0.5:
             values = np.round(values / 1000.0)  # ties
         for q in (0.0, 0.5, 0.999, 1.0, float(rng.random())):
-            assert ex.linear_quantile(values, q) == float(np.quantile(values, q))
+            assert metering.linear_quantile(values, q) == float(np.quantile(values, q))
     kept = np.array([5.0, 1.0, 3.0])
-    ex.linear_quantile(kept, 0.5)
+    metering.linear_quantile(kept, 0.5)
     assert kept.tolist() == [5.0, 1.0, 3.0]  # partitions a copy unless told to overwrite
-    assert math.isnan(ex.linear_quantile(np.array([1.0, math.nan, 2.0]), 0.5))
+    assert math.isnan(metering.linear_quantile(np.array([1.0, math.nan, 2.0]), 0.5))
     with pytest.raises(ValueError, match="no values"):
-        ex.linear_quantile(np.array([]), 0.5)
+        metering.linear_quantile(np.array([]), 0.5)
 
 
 @pytest.mark.parametrize("channels", [0, 3])
@@ -229,7 +231,7 @@ def test_flash_exposure_from_frames_as_they_arrive(channels: int) -> None:
     ambient = rng.integers(64, 1500, size=shape).astype(np.uint16)
     leds = [(ambient + rng.integers(0, 800, size=shape)).astype(np.uint16) for _ in range(5)]
     ambient_us, led_us = 2000.0, [1000.0, 1500.0, 2000.0, 2500.0, 3000.0]
-    predictor = ex.FlashExposure(black, white, limits, POLICY)
+    predictor = metering.FlashExposure(black, white, limits, POLICY)
     predictor.add_ambient(ambient, ambient_us)
     for frame, exposure in zip(leds, led_us):
         predictor.add_led(frame, exposure)
@@ -243,7 +245,7 @@ def test_flash_exposure_from_frames_as_they_arrive(channels: int) -> None:
 
     rate = (sampled(ambient).astype(float) - black) / ambient_us
     for weights in ([0.3, 0.0, 1.0, 0.2, 0.7], [0.0] * 5, [1.0] * 5):
-        one_shot = ex.flash_exposure(ambient, ambient_us, leds, led_us, weights, black, white, limits, POLICY)
+        one_shot = metering.flash_exposure(ambient, ambient_us, leds, led_us, weights, black, white, limits, POLICY)
         assert predictor.predict(weights) == one_shot
         total = rate + sum(
             w * ((sampled(f).astype(float) - black) / e - rate) for f, e, w in zip(leds, led_us, weights)
@@ -257,7 +259,7 @@ def test_flash_exposure_from_frames_as_they_arrive(channels: int) -> None:
 
 
 def test_flash_exposure_refuses_frames_out_of_order() -> None:
-    predictor = ex.FlashExposure(0.0, 4095.0, (1.0, 1e5))
+    predictor = metering.FlashExposure(0.0, 4095.0, (1.0, 1e5), POLICY)
     frame = np.ones((8, 8), dtype=np.uint16)
     with pytest.raises(ValueError, match="before the ambient"):
         predictor.add_led(frame, 100.0)
@@ -271,7 +273,7 @@ def test_flash_exposure_refuses_frames_out_of_order() -> None:
 # -- the information criterion -----------------------------------------------------------------
 
 BLACK, WHITE = 0.0, 4095.0
-NOISE = ex.NoiseModel(electrons_per_dn=2.0, read_noise_e=3.0)
+NOISE = led_snr.NoiseModel(electrons_per_dn=2.0, read_noise_e=3.0)
 
 
 def _lost_blocks(frames, white: float, block: int = 4) -> float:
@@ -402,7 +404,7 @@ def test_information_plan_on_the_sim_rig_predicts_its_losses_and_gains_snr(rig: 
     )
     assert 0 < lost <= past_headroom <= INFORMATION.max_lost_fraction
     assert past_headroom == pytest.approx(informed.lost_block_fraction, abs=0.02)
-    snr, _ = ex.measure_led_snr(
+    snr, _ = led_snr.measure_led_snr(
         frames[0],
         informed.ambient_exposure_us,
         frames[1:],
@@ -460,7 +462,7 @@ def test_a_mosaic_is_metered_on_every_colour_site() -> None:
     must meter bright (and saturate) all the same."""
     frame = np.full((64, 64), 100, dtype=np.uint16)
     frame[1::2, 1::2] = 4095  # every blue site of an RGGB mosaic saturated, red sites dark
-    levels = ex.meter(frame, 64.0, 4095.0, POLICY)
+    levels = metering.meter(frame, 64.0, 4095.0, POLICY)
     assert levels.saturated_fraction == 1.0  # every 2×2 quad holds a saturated site
     assert levels.bright_end == pytest.approx(1.0)
 
@@ -478,7 +480,7 @@ def test_a_mono_camera_meters_as_its_frames_recorded_in_rgb(criterion: str) -> N
     chosen = ex.ExposurePolicy(criterion=criterion)
 
     def as_mono(levels, exposure_us):
-        return ex.metering_view(mono(levels, exposure_us), mosaic=False)
+        return metering.metering_view(mono(levels, exposure_us), mosaic=False)
 
     def as_rgb(levels, exposure_us):
         return np.repeat(rgb(levels, exposure_us), 3, axis=2)
@@ -491,13 +493,25 @@ def test_a_mono_camera_meters_as_its_frames_recorded_in_rgb(criterion: str) -> N
     frames = [as_mono((0.0,) * 3, 500.0)] + [as_mono(tuple(float(i == k) for i in range(3)), 400.0) for k in range(3)]
     coloured = [np.repeat(f, 3, axis=2) for f in frames]
     for noise in (NOISE, None):
-        ours = ex.measure_led_snr(frames[0], 500.0, frames[1:], [400.0] * 3, BLACK, WHITE, noise)
-        assert ours == ex.measure_led_snr(coloured[0], 500.0, coloured[1:], [400.0] * 3, BLACK, WHITE, noise)
+        ours = led_snr.measure_led_snr(frames[0], 500.0, frames[1:], [400.0] * 3, BLACK, WHITE, noise)
+        assert ours == led_snr.measure_led_snr(coloured[0], 500.0, coloured[1:], [400.0] * 3, BLACK, WHITE, noise)
     weights = [0.5, 0.0, 1.0]
-    assert ex.flash_exposure(
-        frames[0], 500.0, frames[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6)
-    ) == ex.flash_exposure(coloured[0], 500.0, coloured[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6))
-    quads = ex.flash_exposure(
-        frames[0][:, :, 0], 500.0, [f[:, :, 0] for f in frames[1:]], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6)
+    assert metering.flash_exposure(
+        frames[0], 500.0, frames[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6), POLICY
+    ) == metering.flash_exposure(
+        coloured[0], 500.0, coloured[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6), POLICY
     )
-    assert quads != ex.flash_exposure(frames[0], 500.0, frames[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6))
+    quads = metering.flash_exposure(
+        frames[0][:, :, 0],
+        500.0,
+        [f[:, :, 0] for f in frames[1:]],
+        [400.0] * 3,
+        weights,
+        BLACK,
+        WHITE,
+        (1.0, 1e6),
+        POLICY,
+    )
+    assert quads != metering.flash_exposure(
+        frames[0], 500.0, frames[1:], [400.0] * 3, weights, BLACK, WHITE, (1.0, 1e6), POLICY
+    )

@@ -13,7 +13,8 @@ import pytest
 from msflash.acquisition.errors import FrameLostError, RecordingError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
-from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session.capture import run_capture_with_flash
 from msflash.acquisition.session.flash_session import FlashSession
 from msflash.acquisition.session.rig import open_sim_rig
@@ -367,7 +368,7 @@ def test_flash_session_predicts_the_flash_exposure_of_the_frames_taken(sim_rig, 
     """The rates taken frame by frame give flash_exposure's answer on the same frames (first ambient only)."""
     from msflash.acquisition.devices.camera import RawFrame
     from msflash.acquisition.errors import RecordingError
-    from msflash.acquisition.session.exposure import flash_exposure
+    from msflash.acquisition.session.metering import flash_exposure
 
     levels = [tuple(float(i == j) for i in range(4)) for j in range(4)]
     limits = (10.0, 1e6)
@@ -386,6 +387,7 @@ def test_flash_session_predicts_the_flash_exposure_of_the_frames_taken(sim_rig, 
             camera.black_level,
             camera.white_level,
             limits,
+            session.exposure_policy,
         )
         assert session.flash_exposure(weights) == expected
     session.begin()
@@ -431,7 +433,7 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(
     block-sums the one plane and gives the statistics (and estimate) of the recorded sequence."""
     from msflash.acquisition.devices.camera import RawFrame
     from msflash.acquisition.session import analysis
-    from msflash.acquisition.session.exposure import flash_exposure
+    from msflash.acquisition.session.metering import flash_exposure
 
     info = rgb_sim_rig.camera.info
     rng = np.random.default_rng(7)
@@ -498,6 +500,7 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(
         info.black_level,
         info.white_level,
         (1.0, 1e6),
+        session.exposure_policy,
     )
 
 

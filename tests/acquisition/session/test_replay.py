@@ -14,7 +14,8 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.devices.replay_camera import ReplayCamera
 from msflash.acquisition.errors import ReplayMismatchError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import read_sequence, write_sequence
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import write_sequence
 
 RECORDED = Path(__file__).resolve().parents[2] / "data" / "sequences" / "sim-macbeth-fluorescent"
 

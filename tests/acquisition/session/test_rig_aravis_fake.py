@@ -17,7 +17,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import ARAVIS_FAKE_PIXEL_FORMAT, open_aravis_fake_rig, open_rig
 from msflash.processing import datasets
@@ -261,3 +261,19 @@ def test_an_exposure_below_the_fakes_range_is_bad_input(aravis: ModuleType, tmp_
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2
     assert err[-1].startswith("msflash: error: --exposure 2: outside the camera's range 10–")
+
+
+def test_the_mains_is_fitted_from_the_fakes_timestamps(aravis: ModuleType, tmp_path, capfd) -> None:
+    """A flickering lamp on the aravis-fake keeps the camera's clock (the GigE fake's timestamps, as a real camera's
+    stamp its exposures on a clock that keeps real time with the mains): the mains fitted from the recorded
+    timestamps is the lamp's. Before, the lamp ran on a simulated clock of its own and no fit was ever decisive."""
+    out = tmp_path / "flicker"
+    argv = ["run", "--rig", "aravis-fake", "--flicker", "100:0.6", "--exposure", "2000", "--seed", "4"]
+    assert main([*argv, "--out", str(out)]) == 0
+    assert "fitted 10" in capfd.readouterr().err  # the run's own line ("fitted 100.4 Hz, depth 60%")
+    flicker = json.loads((out / "estimate.json").read_text())["flicker"]
+    truth = json.loads((out / "sequence" / "sequence.json").read_text())["msflash"]["true_flicker"]
+    assert flicker["detected"] and flicker["frequency_hz"] is not None
+    assert flicker["frequency_hz"] == pytest.approx(truth["frequency_hz"], abs=1.5)  # 8 frames over ~0.25 s
+    assert flicker["depth"] == pytest.approx(truth["depth"], abs=0.08)
+    _assert_released(aravis)

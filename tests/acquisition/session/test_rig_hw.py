@@ -19,43 +19,14 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import RigOpenError
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rig import HwRigOptions, emulator_for, load_hw_spectra, open_rig
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
-from msflash.processing.spectra import DEFAULT_GRID, Spectra
+from msflash.processing.spectra import DEFAULT_GRID
+from tests.acquisition.support.hw_rig import fake_camera_capture, write_spectra_csv
 
 pytestmark = pytest.mark.aravis
-
-
-def _write_csv(path: Path, spectra: Spectra) -> Path:
-    lines = ["wavelength_nm," + ",".join(spectra.names)]
-    lines += [f"{w:g}," + ",".join(f"{v:.6g}" for v in row) for w, row in zip(spectra.wavelengths_nm, spectra.values)]
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-@pytest.fixture
-def calibration(tmp_path: Path) -> Path:
-    """A calibration directory: the paper's 7 LEDs and a NikonD100's responsivities (energy units)."""
-    directory = tmp_path / "calibration"
-    directory.mkdir()
-    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
-    _write_csv(directory / "led_spectra.csv", leds)
-    camera = datasets.isetcam_camera("NikonD100").resample(DEFAULT_GRID, outside="zero").to_unit("energy")
-    _write_csv(directory / "camera_responsivity.csv", camera)
-    return directory
-
-
-@pytest.fixture
-def booth_port(calibration: Path) -> Iterator[str]:
-    """The booth emulator (7 channels) served on a pty: its path is what --port gets."""
-    leds = datasets.load_spectra_csv(calibration / "led_spectra.csv", kind="spd", unit="energy")
-    server = serve_on_pty(emulator_for(leds))
-    try:
-        yield server.port
-    finally:
-        server.close()
 
 
 @pytest.fixture
@@ -70,27 +41,15 @@ def silent_pty() -> Iterator[str]:
 
 
 def test_capture_on_fake_camera_and_emulated_booth(
-    aravis: ModuleType, calibration: Path, booth_port: str, tmp_path: Path
+    aravis: ModuleType, hw_calibration: Path, hw_booth_port: str, tmp_path: Path
 ) -> None:
     aravis.use_fake_genicam(None)
     out = tmp_path / "c"
     assert (
         main(
-            [
-                "capture",
-                "--camera",
-                "Fake_1",
-                "--interfaces",
-                "fake",
-                "--port",
-                booth_port,
-                "--calibration",
-                str(calibration),
-                "--exposure",
-                "10000",
-                "--out",
-                str(out),
-            ]
+            fake_camera_capture(
+                hw_booth_port, "--calibration", str(hw_calibration), "--exposure", "10000", "--out", str(out)
+            )
         )
         == 0
     )
@@ -108,11 +67,15 @@ def test_capture_on_fake_camera_and_emulated_booth(
     assert sequence.frames[0].exposure_us == pytest.approx(10_000)
 
 
-def test_rig_hw_with_csv_files_and_led_off_at_close(aravis: ModuleType, calibration: Path, booth_port: str) -> None:
+def test_rig_hw_with_csv_files_and_led_off_at_close(
+    aravis: ModuleType, hw_calibration: Path, hw_booth_port: str
+) -> None:
     aravis.use_fake_genicam(None)
     with open_rig(
         "hw",
-        HwRigOptions(camera="Fake_1", interfaces="fake", port=booth_port, led_spectra=calibration / "led_spectra.csv"),
+        HwRigOptions(
+            camera="Fake_1", interfaces="fake", port=hw_booth_port, led_spectra=hw_calibration / "led_spectra.csv"
+        ),
     ) as rig:
         assert rig.name == "hw" and rig.booth.info.channels == 7
         assert rig.camera_responsivities is None and "flash solvers" in rig.camera_extra["responsivity_note"]
@@ -121,14 +84,14 @@ def test_rig_hw_with_csv_files_and_led_off_at_close(aravis: ModuleType, calibrat
         rig.booth.set_levels([1.0] + [0.0] * 6)
     # closed: a second open of the same devices works (the camera and the port were released)
     with open_rig(
-        "hw", HwRigOptions(camera="Fake_1", interfaces="fake", port=booth_port, calibration=calibration)
+        "hw", HwRigOptions(camera="Fake_1", interfaces="fake", port=hw_booth_port, calibration=hw_calibration)
     ) as rig:
         assert rig.camera_responsivities is not None
 
 
-def test_every_device_failure_is_listed(aravis: ModuleType, calibration: Path, silent_pty: str) -> None:
+def test_every_device_failure_is_listed(aravis: ModuleType, hw_calibration: Path, silent_pty: str) -> None:
     with pytest.raises(RigOpenError) as caught:
-        open_rig("hw", HwRigOptions(camera="SN123", interfaces="fake", port=silent_pty, calibration=calibration))
+        open_rig("hw", HwRigOptions(camera="SN123", interfaces="fake", port=silent_pty, calibration=hw_calibration))
     message = str(caught.value)
     assert message.startswith("rig 'hw': camera 'SN123': not found on fake (found: Fake_1")
     assert f"booth: {silent_pty}: no answer within " in message and "of opening the port" in message
@@ -136,7 +99,7 @@ def test_every_device_failure_is_listed(aravis: ModuleType, calibration: Path, s
 
 
 def test_cli_failure_exits_1_with_one_line(
-    aravis: ModuleType, calibration: Path, silent_pty: str, tmp_path: Path, capsys: pytest.CaptureFixture
+    aravis: ModuleType, hw_calibration: Path, silent_pty: str, tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
     status = main(
         [
@@ -148,7 +111,7 @@ def test_cli_failure_exits_1_with_one_line(
             "--port",
             silent_pty,
             "--calibration",
-            str(calibration),
+            str(hw_calibration),
             "--out",
             str(tmp_path / "x"),
         ]
@@ -158,25 +121,29 @@ def test_cli_failure_exits_1_with_one_line(
     assert err[-1].startswith("msflash: error: rig 'hw': camera 'SN123'") and "booth" in err[-1]
 
 
-def test_no_camera_without_an_id_lists_what_was_found(aravis: ModuleType, calibration: Path, booth_port: str) -> None:
+def test_no_camera_without_an_id_lists_what_was_found(
+    aravis: ModuleType, hw_calibration: Path, hw_booth_port: str
+) -> None:
     """No --camera: the single camera on the interfaces is taken; on fake there is exactly one."""
     aravis.use_fake_genicam(None)
-    with open_rig("hw", HwRigOptions(interfaces="fake", port=booth_port, calibration=calibration)) as rig:
+    with open_rig("hw", HwRigOptions(interfaces="fake", port=hw_booth_port, calibration=hw_calibration)) as rig:
         assert rig.camera.info.extra["device_id"] == "Fake_1"
 
 
-def test_booth_channel_count_must_match_the_spectra(aravis: ModuleType, calibration: Path, tmp_path: Path) -> None:
+def test_booth_channel_count_must_match_the_spectra(aravis: ModuleType, hw_calibration: Path, tmp_path: Path) -> None:
     leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero").select([0, 1, 2])
     server = serve_on_pty(emulator_for(leds))
     try:
         with pytest.raises(RigOpenError, match=r"3 channels .* but the LED spectra have 7"):
-            open_rig("hw", HwRigOptions(camera="Fake_1", interfaces="fake", port=server.port, calibration=calibration))
+            open_rig(
+                "hw", HwRigOptions(camera="Fake_1", interfaces="fake", port=server.port, calibration=hw_calibration)
+            )
     finally:
         server.close()
 
 
 def test_a_booth_of_another_protocol_version_is_one_error_line(
-    aravis: ModuleType, calibration: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+    aravis: ModuleType, hw_calibration: Path, tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
     from msflash.led_controller import BoothEmulator
 
@@ -185,19 +152,7 @@ def test_a_booth_of_another_protocol_version_is_one_error_line(
     newer = BoothEmulator(names=default.names, peaks_nm=default.peaks_nm, firmware="booth-2.0", protocol=2)
     with serve_on_pty(newer) as server:
         status = main(
-            [
-                "capture",
-                "--camera",
-                "Fake_1",
-                "--interfaces",
-                "fake",
-                "--port",
-                server.port,
-                "--calibration",
-                str(calibration),
-                "--out",
-                str(tmp_path / "x"),
-            ]
+            fake_camera_capture(server.port, "--calibration", str(hw_calibration), "--out", str(tmp_path / "x"))
         )
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 1 and len(err) == 1
@@ -231,5 +186,5 @@ def test_calibration_directory_from_msflash_calibrate(tmp_path: Path) -> None:
     assert found_leds.count == 7 and found_leds.unit == "energy"
     assert found_camera is not None and found_camera.count == 3 and found_camera.unit == "energy"
     # a file on the command line wins over the calibration's section
-    only = _write_csv(tmp_path / "three.csv", leds.select([0, 1, 2]))
+    only = write_spectra_csv(tmp_path / "three.csv", leds.select([0, 1, 2]))
     assert load_hw_spectra(tmp_path / "cal", led_spectra=only)[0].count == 3

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app.cli import main
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import rig as rig_module
 
 # The sim world's spectrum RMSE is ~0.15–0.26 (the best LED fit of its ambients is 0.16–0.21);

@@ -14,7 +14,7 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.devices import simulated_camera
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rig import open_sim_rig
 from msflash.lab.study.local import led_bound
 from msflash.processing import datasets, lights

@@ -11,10 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from msflash.acquisition.devices import simulated_camera
+from msflash.acquisition.devices import sim_rendering
 from msflash.acquisition.errors import DroppedFrameError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan
-from msflash.acquisition.sequence.format import SequenceWriter, read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session.capture import run_capture
 from msflash.acquisition.session.rig import open_sim_rig
 from msflash.processing.errors import SpectralDataError
@@ -31,7 +32,7 @@ class RenderBroke(SpectralDataError):
 def test_a_render_error_is_raised_in_its_frames_place(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, trigger: str
 ) -> None:
-    real_render = simulated_camera.render_frame
+    real_render = sim_rendering.render_frame
     calls = {"n": 0}
 
     def render(*args, **kwargs):
@@ -40,7 +41,7 @@ def test_a_render_error_is_raised_in_its_frames_place(
             raise RenderBroke("render frame: the world broke at this frame")
         return real_render(*args, **kwargs)
 
-    monkeypatch.setattr(simulated_camera, "render_frame", render)
+    monkeypatch.setattr(sim_rendering, "render_frame", render)
     path = tmp_path / "sequence"
     with open_sim_rig(n_leds=3, seed=2) as rig:
         wavelengths, camera, leds = rig.sequence_header()

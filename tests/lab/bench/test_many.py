@@ -11,7 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.lab.cli_bench import _OPTIONAL_PARTS
 
 _SMALL_BENCH = """

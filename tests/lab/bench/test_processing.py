@@ -27,10 +27,10 @@ def test_processing_bench_reports_every_target_on_both_thread_counts_with_its_ve
             assert memory["ratio"] > 0 and memory["target"] == "≤ 0.5" and memory["met"] == (memory["ratio"] <= 0.5)
     assert report["targets_met"] is not None  # the memory figures are judged whatever the pairs
     assert math.isfinite(report["prior_estimate_over_copy"]["median"])
-    assert (
-        math.isfinite(report["family_estimate_over_copy"]["median"])
-        and report["family_estimate_over_copy"]["pairs"] == 3
-    )
+    for label in ("64×48", "64×48 RGGB"):  # the family model beside the default, RGB and raw, at the first size
+        family = report["targets"][label]["family_estimate_over_copy"]["1_thread"]
+        assert math.isfinite(family["median"]) and family["pairs"] == 3 and family["target"] == "≤ 3"
+    assert "family_estimate_over_copy" not in report["targets"]["72×40 RGGB"]
     solvers = {entry["solver"]: entry for entry in report["solvers"]}
     assert set(solvers) == {
         "estimate nonneg",

@@ -23,10 +23,11 @@ from msflash.lab.study.block_agreement import (
     all_pixel_statistics,
     sensor_noise,
 )
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.model_error import reference_for, with_model_error
 from msflash.processing.sensor import SensorModel
-from msflash.processing.statistics import FrameStackSpec, accumulate_statistics
+from msflash.processing.statistics import FrameStackSpec
 
 WORST_Z = 3.0
 """The block estimate lies within this many σ of the reference's pixel-noise band at every wavelength (bench

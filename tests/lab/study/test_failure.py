@@ -21,7 +21,7 @@ from msflash.lab.study.failure import FACTORS, led_fill, run_failure, with_line
 from msflash.lab.study.noisy import make_world, render_stack
 from msflash.lab.study.pareto import pareto_front, run_pareto
 from msflash.processing import datasets, lights
-from msflash.processing.statistics import accumulate_statistics
+from msflash.processing.accumulate import accumulate_statistics
 
 CAMERA = "Canon 50D"
 

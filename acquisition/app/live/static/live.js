@@ -87,7 +87,7 @@ function render(next) {
   $("exposure-value").textContent = formatUs(state.exposure_us);
   setIfIdle($("gain"), state.gain);
   $("gain-value").textContent = formatGain(state.gain, state.camera_gain);
-  $("camera-format").textContent = state.camera_format || "";
+  renderFormat(state.camera_format);
   $("overlay").checked = state.overlay;
   setIfIdle($("sequence-exposure"), state.sequence_exposure);
   setIfIdle($("mode"), state.mode);
@@ -101,6 +101,81 @@ function render(next) {
   renderMix(state.mix);
   showDisconnected();
 }
+
+// ROI, binning and pixel format: what the camera allows (its features' limits), each change a POST; a refusal's
+// one-line reason is shown under the controls.
+function renderFormat(camera) {
+  const box = $("camera-format");
+  if (!camera) { box.textContent = ""; return; }
+  box.textContent = camera.summary;
+  box.dataset.pixelFormat = camera.pixel_format;
+  box.dataset.width = camera.width;
+  box.dataset.height = camera.height;
+  const limits = camera.limits || {};
+  const image = camera.format || { roi: [0, 0, camera.width, camera.height], binning: [1, 1], pixel_format: camera.pixel_format };
+  const lock = (element, feature) => {
+    const entry = limits[feature];
+    element.disabled = !entry || !entry.available;
+    element.title = !entry ? "the camera cannot say" : entry.available ? `${feature}: ${entry.allowed}` : entry.why;
+  };
+  const formats = $("pixel-format");
+  const entries = (limits.PixelFormat && limits.PixelFormat.entries) || [image.pixel_format];
+  if (formats.dataset.entries !== entries.join()) {
+    formats.dataset.entries = entries.join();
+    formats.textContent = "";
+    entries.forEach((name) => formats.add(new Option(name, name)));
+  }
+  setIfIdle(formats, image.pixel_format);
+  lock(formats, "PixelFormat");
+  const binning = $("binning");
+  const most = Math.max(1, ...["BinningHorizontal", "BinningVertical"].map((f) => (limits[f] && limits[f].maximum) || 1));
+  if (binning.dataset.most !== String(most)) {
+    binning.dataset.most = most;
+    binning.textContent = "";
+    for (let k = 1; k <= most; k++) binning.add(new Option(`${k} × ${k}`, `${k}x${k}`));
+    if (most > 1) binning.add(new Option(`${most} × 1`, `${most}x1`));
+  }
+  const current = `${image.binning[0]}x${image.binning[1]}`;
+  if (![...binning.options].some((o) => o.value === current)) binning.add(new Option(current.replace("x", " × "), current));
+  setIfIdle(binning, current);
+  lock(binning, "BinningHorizontal");
+  ["x", "y", "w", "h"].forEach((key, i) => {
+    const input = $(`roi-${key}`);
+    const feature = ["OffsetX", "OffsetY", "Width", "Height"][i];
+    const entry = limits[feature];
+    if (entry && entry.increment) input.step = entry.increment;
+    if (entry && entry.maximum != null) input.max = entry.maximum;
+    setIfIdle(input, image.roi[i]);
+    lock(input, feature);
+  });
+  $("roi-apply").disabled = $("roi-w").disabled && $("roi-h").disabled;
+  $("roi-full").disabled = $("roi-apply").disabled;
+}
+async function postFormat(body) {
+  const message = $("format-message");
+  message.textContent = "setting…";
+  message.className = "format-message";
+  const response = await fetch("/api/camera-format", {
+    method: "POST",
+    headers: { "Content-Type": "application/json", "X-Msflash-Token": token },
+    body: JSON.stringify(body),
+  }).catch(() => null);
+  const reply = response ? await response.json().catch(() => ({})) : { error: "the server does not answer" };
+  if (!response || !response.ok) { message.textContent = reply.error || response.statusText; message.dataset.refused = "1"; return; }
+  message.dataset.refused = "";
+  message.className = "format-message ok";
+  message.textContent = `set: ${reply.camera_format.summary}`;
+  render(reply);
+}
+$("pixel-format").addEventListener("change", () => postFormat({ pixel_format: $("pixel-format").value }));
+$("binning").addEventListener("change", () => postFormat({ binning: $("binning").value.split("x").map(Number) }));
+$("roi-apply").addEventListener("click", () => postFormat({ roi: ["x", "y", "w", "h"].map((k) => Math.round(Number($(`roi-${k}`).value))) }));
+$("roi-full").addEventListener("click", () => {
+  const sensor = (state.camera_format.limits || {}).sensor || [state.camera_format.width, state.camera_format.height];
+  const width = state.camera_format.limits && state.camera_format.limits.Width ? state.camera_format.limits.Width : null;
+  const step = width && width.increment ? width.increment : 1;
+  postFormat({ roi: [0, 0, Math.floor(sensor[0] / step) * step, sensor[1]] });
+});
 
 function showBooth(levels) {
   if (!levels) return;
@@ -210,6 +285,7 @@ function onFrame(buffer) {
   if (target === "mix-capture") $("mix-capture-figure").hidden = false;
   if (target !== "live" && !header.source.startsWith("sequence")) return;
   if (header.source === "live") countLive(header.live_n);
+  if (header.raw_size) { $("frame-size").textContent = `${header.raw_size[0]} × ${header.raw_size[1]} px`; $("frame-size").dataset.size = header.raw_size.join("x"); }
   const count = $("frame-count");
   count.textContent = header.n;
   count.dataset.frames = header.n;
@@ -307,7 +383,10 @@ async function snapshot() {
 }
 $("snapshot").addEventListener("click", snapshot);
 
-// The disconnected state: the image greyed, the reason large on it, a reconnect button.
+// The disconnected state: the image greyed, the reason large on it, a reconnect button. A lost server
+// ("Disconnected": the page reconnects its WebSocket) is told apart from a camera or booth that failed while the
+// server stays ("Camera error": the server switched the LEDs off; reconnect asks it to take a frame again).
+const ERROR_TITLES = { camera: "Camera error", booth: "Booth error" };
 function showDisconnected() {
   const down = !socket || socket.readyState !== WebSocket.OPEN;
   const streamError = state && state.error ? state.error : "";
@@ -316,10 +395,25 @@ function showDisconnected() {
   box.hidden = !(down || streamError);
   $("view").classList.toggle("down", !box.hidden);
   document.body.dataset.connection = down ? "disconnected" : streamError ? "error" : "live";
-  box.querySelector(".disconnected-title").textContent = down ? "Disconnected" : "Camera or booth error";
+  document.body.dataset.errorSource = !down && streamError ? state.error_source || "other" : "";
+  box.querySelector(".disconnected-title").textContent = down ? "Disconnected" : ERROR_TITLES[state.error_source] || "Error";
   $("disconnected-reason").textContent = reason;
 }
-$("reconnect").addEventListener("click", () => { if (socket) socket.onclose = null; if (socket) socket.close(); connect(); });
+$("reconnect").addEventListener("click", async () => {
+  if (socket && socket.readyState === WebSocket.OPEN) {  // the server is there: the device failed, try it again
+    const button = $("reconnect");
+    const response = await fetch("/api/reconnect", { method: "POST", headers: { "Content-Type": "application/json", "X-Msflash-Token": token }, body: "{}" }).catch(() => null);
+    const reply = response ? await response.json().catch(() => ({})) : {};
+    button.dataset.tries = Number(button.dataset.tries || 0) + 1;
+    button.dataset.result = response && response.ok ? "ok" : "failed";  // the reason stays the state's (pushed too)
+    if (response && response.ok) render(reply);
+    else $("disconnected-reason").textContent = reply.error || "the server does not answer";
+    return;
+  }
+  if (socket) socket.onclose = null;
+  if (socket) socket.close();
+  connect();
+});
 
 // The flash before it fires: sliders for the mix, presets, Fire with exactly the mix shown.
 function renderMix(mix) {

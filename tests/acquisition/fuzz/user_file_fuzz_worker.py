@@ -1,12 +1,12 @@
 """The user-file fuzzer's worker (issue 32 item 5): every file msflash reads besides a sequence folder.
 
-``python -m tests.acquisition.user_file_fuzz_worker --examples N [--memory-gib G] [--example-s S]``
+``python -m tests.acquisition.fuzz.user_file_fuzz_worker --examples N [--memory-gib G] [--example-s S]``
 
-One process, capped as :mod:`tests.acquisition.sequence_fuzz_worker` is (``RLIMIT_AS`` its size after
+One process, capped as :mod:`tests.acquisition.fuzz.sequence_fuzz_worker` is (``RLIMIT_AS`` its size after
 imports plus ``--memory-gib``; ``SIGALRM`` after ``--example-s`` seconds per example), builds one valid
 set of inputs per *surface* (a command and the files it reads), records the command's result on them,
 then lets Hypothesis mutate one file of one surface at a time
-(:mod:`tests.acquisition.user_file_mutations`, which also holds the rule) and runs the command through
+(:mod:`tests.acquisition.fuzz.user_file_mutations`, which also holds the rule) and runs the command through
 ``main([...])``. Surfaces:
 
 - ``target``: ``flash SEQ --mode complementary --target FILE.csv``;
@@ -33,15 +33,10 @@ import contextlib
 import hashlib
 import io
 import json
-import logging
 import math
-import os
 import re
-import resource
 import shutil
-import signal
 import sys
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,40 +44,30 @@ from typing import Any
 
 import hypothesis
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
-from msflash.acquisition.app.cli import CRASH_LOG_ENV, main
+from msflash.acquisition.app.cli import main
 from msflash.acquisition.devices.aravis.discovery import PROFILES_JSON
 from msflash.acquisition.devices.aravis.profiles import load_profiles
 from msflash.acquisition.errors import CameraSettingError
-from msflash.acquisition.sequence.format import read_sequence
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.calibration.files import load_calibration
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID
-from tests.acquisition.user_file_mutations import (
+from tests.acquisition.fuzz.user_file_mutations import (
     Expect,
     FileMutation,
     apply_file_mutation,
     every_special,
     file_mutations,
 )
+from tests.acquisition.support.fuzz_runner import ExampleTimeout, example_alarm, fuzz_settings, worker_main
 from tests.calibration.spectrometer_writers import FORMATS, Instrument, export_text
 from tests.helpers import write_test_sequence
 
 Result = tuple[int, str, str, Any, str | None]
 """Exit status, stdout, stderr, a fingerprint of the numbers (None: nothing to compare), a sanity problem."""
-
-
-class ExampleTimeout(BaseException):
-    """Raised by SIGALRM when one example runs too long (a BaseException: ``main`` cannot catch it)."""
-
-
-class _CurrentStderr(io.TextIOBase):
-    """A stream writing to whatever ``sys.stderr`` is now (logging's handler outlives each redirect)."""
-
-    def write(self, text: str) -> int:
-        return sys.stderr.write(text)
 
 
 @dataclass(frozen=True)
@@ -415,17 +400,6 @@ def judge(mutation: FileMutation, changed: UserFile, result: Result, baseline: R
     return None
 
 
-def _address_space_cap(extra_gib: float) -> int:
-    vm_kib = next(
-        int(line.split()[1])
-        for line in Path("/proc/self/status").read_text().splitlines()
-        if line.startswith("VmSize:")
-    )
-    cap = vm_kib * 1024 + int(extra_gib * 2**30)
-    resource.setrlimit(resource.RLIMIT_AS, (cap, resource.getrlimit(resource.RLIMIT_AS)[1]))
-    return cap
-
-
 def fuzz(examples: int, example_s: int, work: Path, collect: list[str] | None = None) -> collections.Counter:
     """Run ``examples`` derandomised examples (and each special file on each file of each surface).
 
@@ -443,11 +417,6 @@ def fuzz(examples: int, example_s: int, work: Path, collect: list[str] | None = 
     by_name = {s.name: s for s in surfaces}
     tally: collections.Counter = collections.Counter()
 
-    def on_alarm(signum: int, frame: object) -> None:
-        raise ExampleTimeout(f"an example ran past {example_s} s")
-
-    signal.signal(signal.SIGALRM, on_alarm)
-
     @st.composite
     def cases(draw: st.DrawFn) -> tuple[str, int, FileMutation]:
         surface = by_name[draw(st.sampled_from(sorted(by_name)), label="surface")]
@@ -456,14 +425,7 @@ def fuzz(examples: int, example_s: int, work: Path, collect: list[str] | None = 
         text = (base / surface.name / user_file.name).read_bytes()
         return surface.name, index, draw(file_mutations(text, user_file.kind, user_file.single))
 
-    @settings(
-        max_examples=examples,
-        derandomize=True,
-        database=None,
-        deadline=None,
-        print_blob=False,
-        suppress_health_check=list(HealthCheck),
-    )
+    @fuzz_settings(examples)
     @given(cases())
     def example(drawn: tuple[str, int, FileMutation]) -> None:
         name, index, mutation = drawn
@@ -473,15 +435,13 @@ def fuzz(examples: int, example_s: int, work: Path, collect: list[str] | None = 
             shutil.rmtree(path, ignore_errors=True)
         shutil.copytree(base / name, case)
         apply_file_mutation(case / changed.name, mutation, outside)
-        signal.alarm(example_s)
         try:
-            result = run_surface(surface, case, out)
+            with example_alarm(example_s):
+                result = run_surface(surface, case, out)
         except ExampleTimeout:
             if collect is None:
                 raise
             result = (-1, "", "a hang (ExampleTimeout)", None, None)
-        finally:
-            signal.alarm(0)
         tally[f"{name} {mutation.expect.value} exit {result[0]}"] += 1
         problem = judge(mutation, changed, result, baselines[name])
         report = f"{name} {changed.name}: {problem} [{mutation.describe}] stderr: {result[2].strip()[-500:]}"
@@ -499,25 +459,17 @@ def fuzz(examples: int, example_s: int, work: Path, collect: list[str] | None = 
 
 
 def main_worker(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--examples", type=int, default=200)
-    parser.add_argument("--memory-gib", type=float, default=2.0)
-    parser.add_argument("--example-s", type=int, default=60)
-    parser.add_argument("--collect", action="store_true", help="list every broken rule instead of stopping")
-    args = parser.parse_args(argv)
-    logging.basicConfig(stream=_CurrentStderr(), format="msflash: %(name)s: %(message)s")
-    with tempfile.TemporaryDirectory(prefix="msflash-user-fuzz-") as temporary:
-        work = Path(temporary)
-        os.environ[CRASH_LOG_ENV] = str(work / "crashes")
-        cap = _address_space_cap(args.memory_gib)
+    def run(args: argparse.Namespace, work: Path) -> dict:
         collected: list[str] | None = [] if args.collect else None
         tally = fuzz(args.examples, args.example_s, work, collected)
         for line in collected or []:
             print(line)
-    print(
-        json.dumps({"examples": args.examples, "address_space_cap_bytes": cap, "outcomes": dict(sorted(tally.items()))})
-    )
-    return 0
+        return {"outcomes": dict(sorted(tally.items()))}
+
+    def collect_option(parser: argparse.ArgumentParser) -> None:
+        parser.add_argument("--collect", action="store_true", help="list every broken rule instead of stopping")
+
+    return worker_main(argv, "msflash-user-fuzz-", run, collect_option)
 
 
 if __name__ == "__main__":

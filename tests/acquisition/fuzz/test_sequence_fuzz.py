@@ -1,7 +1,7 @@
 """Fuzzing at the boundary (issue 19 item 6): structured-but-wrong sequences through ``estimate``,
 ``flash``, ``synthesize`` and ``check``, run in one worker process capped in memory and time
-(:mod:`tests.acquisition.sequence_fuzz_worker`; the mutations and the rule deciding which exit is
-right: :mod:`tests.acquisition.sequence_mutations`). CI runs 200 derandomised examples; the
+(:mod:`tests.acquisition.fuzz.sequence_fuzz_worker`; the mutations and the rule deciding which exit is
+right: :mod:`tests.acquisition.fuzz.sequence_mutations`). CI runs 200 derandomised examples; the
 ``study`` marker runs 2000. Results: docs/reliability.md."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from tests.acquisition.support.fuzz_runner import run_fuzz_worker
 
 
 def _fuzz(examples: int, timeout_s: float) -> dict:
-    summary = run_fuzz_worker("tests.acquisition.sequence_fuzz_worker", examples, timeout_s)
+    summary = run_fuzz_worker("tests.acquisition.fuzz.sequence_fuzz_worker", examples, timeout_s)
     outcomes = summary["outcomes"]
     # Every example (drawn, plus each kind of frame change) ran check and one other command; every
     # corrupt one was refused (else the worker failed).

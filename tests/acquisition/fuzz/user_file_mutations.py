@@ -14,7 +14,7 @@ Each mutation starts from one valid file and breaks it at one level:
   cell; a row deleted, duplicated, two rows swapped, all rows reversed; every value scaled by 10^±300;
   the rows replaced by 20 000 or 200 000 interpolated rows; a column added first or last, one removed,
   a header renamed;
-- **a JSON document's values** (:mod:`tests.acquisition.sequence_mutations`' values: wrong types,
+- **a JSON document's values** (:mod:`tests.acquisition.fuzz.sequence_mutations`' values: wrong types,
   NaN, 10³⁰⁰, long and odd strings, nested lists), a key deleted, an unknown key added, nesting
   10 000 deep, an integer of 5 000 digits, a key given twice.
 
@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from hypothesis import strategies as st
 
-from tests.acquisition.sequence_mutations import _get, json_paths, values
+from tests.acquisition.fuzz.sequence_mutations import _get, json_paths, values
 
 
 class Expect(enum.Enum):

@@ -1,16 +1,16 @@
 """The sequence fuzzer's worker: one process, capped in memory, running every example in-process.
 
-``python -m tests.acquisition.sequence_fuzz_worker --examples N [--memory-gib G] [--example-s S]``
+``python -m tests.acquisition.fuzz.sequence_fuzz_worker --examples N [--memory-gib G] [--example-s S]``
 
 It writes a valid sequence (:func:`tests.helpers.write_test_sequence`), records what ``estimate``,
 ``flash``, ``synthesize`` and ``check`` make of it, then lets Hypothesis mutate copies of it
-(:mod:`tests.acquisition.sequence_mutations`) and runs ``check`` and one of the three others on
+(:mod:`tests.acquisition.fuzz.sequence_mutations`) and runs ``check`` and one of the three others on
 each through ``main([...])``. Caps: the address space (``RLIMIT_AS``, the process's size after
 its imports plus ``--memory-gib``; running out shows as an "unexpected MemoryError"), and each
 example's wall time (``SIGALRM`` after ``--example-s`` seconds raises an exception no ``except
 Exception`` can swallow; a hang inside C code that never returns to Python is left to the test's
 own timeout on this process). Exit 0 and a JSON summary on the last stdout line if no example
-broke a rule (:mod:`tests.acquisition.sequence_mutations`); 1 with Hypothesis' falsifying
+broke a rule (:mod:`tests.acquisition.fuzz.sequence_mutations`); 1 with Hypothesis' falsifying
 example(s) otherwise.
 """
 
@@ -22,25 +22,21 @@ import contextlib
 import hashlib
 import io
 import json
-import logging
 import math
-import os
-import resource
 import shutil
-import signal
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import hypothesis
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
-from msflash.acquisition.app.cli import CRASH_LOG_ENV, main
+from msflash.acquisition.app.cli import main
 from msflash.acquisition.sequence.image_files import read_image
-from tests.acquisition.sequence_mutations import Expect, Mutation, apply_mutation, every_frame_mutation, mutations
+from tests.acquisition.fuzz.sequence_mutations import Expect, Mutation, apply_mutation, every_frame_mutation, mutations
+from tests.acquisition.support.fuzz_runner import example_alarm, fuzz_settings, worker_main
 from tests.helpers import write_test_sequence
 
 WEIGHTS = ",".join(["0.2"] * 7)
@@ -53,17 +49,6 @@ COMMANDS = {
 Result = tuple[int, str, str, str | None, bool]
 """Exit status, stdout, stderr, the SHA-256 of the pixels written (or None), whether its pixels are finite."""
 FINITE_KEYS = {"estimate": ("spectrum", "ambient_weights"), "flash": ("ambient_weights", "flash_weights")}
-
-
-class ExampleTimeout(BaseException):
-    """Raised by SIGALRM when one example runs too long (a BaseException: ``main`` cannot catch it)."""
-
-
-class _CurrentStderr(io.TextIOBase):
-    """A stream writing to whatever ``sys.stderr`` is now (logging's handler outlives each redirect)."""
-
-    def write(self, text: str) -> int:
-        return sys.stderr.write(text)
 
 
 def run_command(command: str, sequence: Path, out: Path) -> Result:
@@ -113,17 +98,6 @@ def judge(command: str, mutation: Mutation, result: Result, baseline: Result) ->
     return None
 
 
-def _address_space_cap(extra_gib: float) -> int:
-    vm_kib = next(
-        int(line.split()[1])
-        for line in Path("/proc/self/status").read_text().splitlines()
-        if line.startswith("VmSize:")
-    )
-    cap = vm_kib * 1024 + int(extra_gib * 2**30)
-    resource.setrlimit(resource.RLIMIT_AS, (cap, resource.getrlimit(resource.RLIMIT_AS)[1]))
-    return cap
-
-
 def fuzz(examples: int, example_s: int, work: Path) -> tuple[collections.Counter, list[str]]:
     """Run ``examples`` derandomised examples; raises Hypothesis' failure if any breaks a rule."""
     base = write_test_sequence(work / "base")
@@ -136,19 +110,7 @@ def fuzz(examples: int, example_s: int, work: Path) -> tuple[collections.Counter
     tally: collections.Counter = collections.Counter()
     runtime_errors: set[str] = set()
 
-    def on_alarm(signum: int, frame: object) -> None:
-        raise ExampleTimeout(f"an example ran past {example_s} s")
-
-    signal.signal(signal.SIGALRM, on_alarm)
-
-    @settings(
-        max_examples=examples,
-        derandomize=True,
-        database=None,
-        deadline=None,
-        print_blob=False,
-        suppress_health_check=list(HealthCheck),
-    )
+    @fuzz_settings(examples)
     @given(mutations(document, text), st.sampled_from(["estimate", "flash", "synthesize"]))
     def example(mutation: Mutation, command: str) -> None:
         shutil.rmtree(case.parent)
@@ -156,8 +118,7 @@ def fuzz(examples: int, example_s: int, work: Path) -> tuple[collections.Counter
         shutil.copytree(base, case, symlinks=True)
         apply_mutation(case, mutation)
         problems = []
-        signal.alarm(example_s)
-        try:
+        with example_alarm(example_s):
             for name in ("check", command):
                 result = run_command(name, case, out)
                 tally[f"{mutation.expect.value} {name} exit {result[0]}"] += 1
@@ -166,8 +127,6 @@ def fuzz(examples: int, example_s: int, work: Path) -> tuple[collections.Counter
                 problem = judge(name, mutation, result, baselines[name])
                 if problem:
                     problems.append(f"{name}: {problem} [{mutation.describe}] stderr: {result[2].strip()[-400:]}")
-        finally:
-            signal.alarm(0)
         assert not problems, "\n".join(problems)
 
     explicit = every_frame_mutation(1)
@@ -179,28 +138,11 @@ def fuzz(examples: int, example_s: int, work: Path) -> tuple[collections.Counter
 
 
 def main_worker(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--examples", type=int, default=200)
-    parser.add_argument("--memory-gib", type=float, default=2.0)
-    parser.add_argument("--example-s", type=int, default=60)
-    args = parser.parse_args(argv)
-    logging.basicConfig(stream=_CurrentStderr(), format="msflash: %(name)s: %(message)s")
-    with tempfile.TemporaryDirectory(prefix="msflash-fuzz-") as temporary:
-        work = Path(temporary)
-        os.environ[CRASH_LOG_ENV] = str(work / "crashes")
-        cap = _address_space_cap(args.memory_gib)
+    def run(args: argparse.Namespace, work: Path) -> dict:
         tally, runtime_errors = fuzz(args.examples, args.example_s, work)
-    print(
-        json.dumps(
-            {
-                "examples": args.examples,
-                "address_space_cap_bytes": cap,
-                "outcomes": dict(sorted(tally.items())),
-                "runtime_errors": runtime_errors,
-            }
-        )
-    )
-    return 0
+        return {"outcomes": dict(sorted(tally.items())), "runtime_errors": runtime_errors}
+
+    return worker_main(argv, "msflash-fuzz-", run)
 
 
 if __name__ == "__main__":

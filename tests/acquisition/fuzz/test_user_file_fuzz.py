@@ -1,7 +1,7 @@
 """Fuzzing every file msflash reads besides a sequence folder (issue 32 item 5): spectral tables, spectrometer
 exports, calibration folders, a reference chart, camera profiles, each through its command in one worker
-process capped in memory and time (:mod:`tests.acquisition.user_file_fuzz_worker`; the mutations and the
-rule deciding which exit is right: :mod:`tests.acquisition.user_file_mutations`). CI runs a small
+process capped in memory and time (:mod:`tests.acquisition.fuzz.user_file_fuzz_worker`; the mutations and the
+rule deciding which exit is right: :mod:`tests.acquisition.fuzz.user_file_mutations`). CI runs a small
 derandomised count plus every kind of special file (FIFO, ``/dev/zero``, loop, …) on every file of every
 surface; the ``study`` marker runs 2000. Results: docs/reliability.md §6."""
 
@@ -11,12 +11,12 @@ import json
 
 import pytest
 
+from tests.acquisition.fuzz.user_file_mutations import SPECIALS
 from tests.acquisition.support.fuzz_runner import run_fuzz_worker
-from tests.acquisition.user_file_mutations import SPECIALS
 
 
 def _fuzz(examples: int, timeout_s: float) -> dict:
-    summary = run_fuzz_worker("tests.acquisition.user_file_fuzz_worker", examples, timeout_s)
+    summary = run_fuzz_worker("tests.acquisition.fuzz.user_file_fuzz_worker", examples, timeout_s)
     outcomes = summary["outcomes"]
     explicit = outcomes.pop("explicit examples")
     assert sum(outcomes.values()) == examples + explicit

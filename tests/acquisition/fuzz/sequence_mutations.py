@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from hypothesis import strategies as st
 
-from tests.acquisition.tiff_files import write_baseline_tiff
+from tests.acquisition.support.tiff_files import write_baseline_tiff
 
 JsonPath = tuple[str | int, ...]
 

@@ -1,4 +1,4 @@
-"""What the user-file fuzzer found (issue 32 item 5; tests/acquisition/user_file_fuzz_worker.py), one test per
+"""What the user-file fuzzer found (issue 32 item 5; tests/acquisition/fuzz/user_file_fuzz_worker.py), one test per
 class of bug, each failing before its fix: ``--reference-chart`` read outside the one reader of a user's
 file, values so large that the fits overflow, and ``--target`` silently taking the first of several spectra."""
 
@@ -141,7 +141,7 @@ def test_a_light_or_white_reflectance_of_several_columns_is_refused(tmp_path: Pa
     --white-reflectance FILE.csv`` took the first column of a file of several; the white reference's table in
     percent was taken as factors 0–100."""
     from msflash.acquisition.errors import UsageError
-    from msflash.acquisition.session.calibration_inputs import _white_reflectance
+    from msflash.acquisition.session.calibration_inputs import read_white_reflectance
     from msflash.calibration.chart_sequence import resolve_light
     from msflash.calibration.errors import CalibrationError
     from msflash.processing.spectra import DEFAULT_GRID
@@ -151,14 +151,14 @@ def test_a_light_or_white_reflectance_of_several_columns_is_refused(tmp_path: Pa
     with pytest.raises(CalibrationError, match="two.csv: 2 spectra; expected one light"):
         resolve_light(str(two), DEFAULT_GRID)
     with pytest.raises(UsageError, match="two.csv: 2 columns of values; expected one"):
-        _white_reflectance(str(two), DEFAULT_GRID)
+        read_white_reflectance(str(two), DEFAULT_GRID)
     percent = tmp_path / "percent.csv"
     percent.write_text("wavelength_nm,white\n" + "".join(f"{w},98\n" for w in range(380, 781, 10)))
     with pytest.raises(UsageError, match=r"percent.csv: reflectances span 98–98; expected reflectance factors 0–1"):
-        _white_reflectance(str(percent), DEFAULT_GRID)
+        read_white_reflectance(str(percent), DEFAULT_GRID)
     one = tmp_path / "one.csv"
     one.write_text("wavelength_nm,white\n" + "".join(f"{w},0.98\n" for w in range(380, 781, 10)))
-    assert np.allclose(_white_reflectance(str(one), DEFAULT_GRID).values, 0.98)
+    assert np.allclose(read_white_reflectance(str(one), DEFAULT_GRID).values, 0.98)
     assert resolve_light(str(one), DEFAULT_GRID).count == 1
 
 

@@ -1,0 +1,518 @@
+"""Block sums of an ambient + LED frame stack as the rows of the binned statistics' moments (:class:`BlockRows`).
+
+Noise (errors in variables)
+---------------------------
+The LED-only images are differences of noisy frames, so their Gram matrix carries the noise
+variance of every frame and their products with the ambient image lose the ambient frame's
+(eq. 5 regresses on noisy regressors: the weights shrink towards zero, most for the LEDs the
+camera sees least). Binned statistics with an even block size also measure that noise, from
+every block's *half difference* (its samples at even ``row + column`` minus those at odd, a
+checkerboard, :func:`processing.block_sums.block_sums_and_differences`): the two halves see the same surfaces and have
+independent noise, so with ``x`` a block's row of sums and ``d`` its half difference,
+``x xᵀ − d dᵀ = 2 (x₁ x₂ᵀ + x₂ x₁ᵀ)`` is a product of independent halves — moments without the noise
+bias, whatever the texture inside a block (an instrumental-variable estimate; no noise model needed).
+Texture the halves do not share still enters ``d``: it leaves the moments unbiased where eq. 5 holds
+but makes them noisier, and it changes which fit is best where eq. 5 does not. The checkerboard cancels
+edges along the rows or the columns and ramps (docs/raw-frames.md: why not even and odd columns). :attr:`SequenceStatistics.noise` holds
+``d dᵀ`` mapped like the moments, :meth:`SequenceStatistics.denoised` the corrected statistics.
+
+Inverse-variance weights
+------------------------
+Unweighted moments count every sample alike, so the brightest samples — a specular highlight
+at ten times the white, say — dominate the Gram matrix though their photon noise is the largest.
+With ``weighting=True`` (:class:`BlockRows`, :func:`processing.accumulate.accumulate_statistics`) each sample (block ×
+channel) enters the moments with weight ``1 / var``, its noise variance predicted from the ambient
+frame: ``var = gain · level + read`` (a photon-transfer line fitted to the fine-scale detail of the
+ambient frame's 2 × 2 cells, :mod:`processing.noise_level`, then scaled to block sums,
+:func:`processing.noise_level.block_noise_line`; not the half differences, which texture fills on a mosaic,
+docs/raw-frames.md). The weights depend on the
+ambient frame alone, so a capture can apply them to every LED frame as it arrives; the half
+differences are weighted alike, so the noise correction still holds. Weighted least squares is the
+best linear unbiased estimate of eq. 5 when the residual's noise is that of the ambient frame; the
+weights are normalised to mean 1 over all samples, and :attr:`SequenceStatistics.n_samples` stays the
+count of valid samples.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from msflash.processing import frame_kernels
+from msflash.processing.block_sums import (
+    block_row_alternation,
+    block_row_sums_and_peak,
+    block_sums_into,
+    cfa_planes,
+    difference_gather,
+    frame_may_saturate,
+    gathered,
+    gathered_by_channel,
+    plane_shape,
+    saturated_blocks,
+)
+from msflash.processing.errors import SpectralDataError
+from msflash.processing.moment_products import (
+    DEFAULT_CHUNK_PIXELS,
+    gram_matrices,
+    gram_matrix,
+    row_products,
+    serial_columns,
+)
+from msflash.processing.noise_level import PixelNoise, ambient_block_noise, detail_noise_line
+from msflash.processing.statistics import (
+    ChannelMoments,
+    FrameStackSpec,
+    SequenceStatistics,
+    channel_transform,
+    frame_name,
+    non_finite_error,
+    non_finite_frames_error,
+    statistics_from_moments,
+)
+
+PROBE_BLOCKS = 16384
+"""Blocks the noise probe needs at least (:class:`BlockRows`): frames with several times more use
+every ``stride``-th block row only, ``stride = min(4, blocks // PROBE_BLOCKS)``. Its moments are then
+scaled by valid blocks ÷ probed valid blocks; with ≥ 16 384 probed blocks their sampling error is
+below 1.1 % of the noise's share (√(2/n)), while a full probe of a large stack costs markedly more
+estimation time (docs/architecture.md §10)."""
+
+
+CHANNEL_BAND_VALUES = 1 << 17
+"""How many values (all images together) :meth:`BlockRows._channel_moments` puts in channel order at a time, at
+most (bands are also kept within one BLAS thread's product: :func:`processing.moment_products.serial_columns`)."""
+
+
+def probe_stride(height: int, width: int) -> int:
+    """Every how many block rows the noise probe of ``height × width`` blocks is taken (:data:`PROBE_BLOCKS`)."""
+    return max(1, min(4, height * width // PROBE_BLOCKS))
+
+
+class BlockRows:
+    """Block sums of an ambient + LED frame stack as the rows ``[F_1 … F_n, A, 1]`` of the moments.
+
+    The binned statistics (eq. 4–6 on ``factor × factor`` block sums, see :func:`processing.block_sums.bin_frame`) need,
+    per frame, its block sums and which blocks saturate; then the second moments of the rows. The
+    binned pass of :func:`processing.accumulate.accumulate_statistics` adds every frame and takes the moments in one
+    product. A capture adds each frame as it arrives (``incremental=True``): the new row's
+    products with the rows already in are taken then, so once the last frame is in only its own
+    block sums and one matrix–vector product remain — no full moment product on the latency path.
+    Blocks saturated in any frame (or :meth:`exclude`-d) are left out of the moments; in
+    incremental mode as soon as they are known (their columns zeroed in every row, their products
+    taken out of the moments), so :meth:`statistics` has no mask left to apply.
+
+    Frames may be added from several threads (distinct rows), but not in incremental mode.
+    """
+
+    def __init__(
+        self,
+        n_led_frames: int,
+        plane_shape: tuple[int, ...],
+        factor: int,
+        white_level: float,
+        incremental: bool = False,
+        black_level: float = 0.0,
+        weighting: bool = False,
+    ) -> None:
+        height, width = plane_shape[0] // factor, plane_shape[1] // factor
+        if height == 0 or width == 0:
+            raise SpectralDataError(
+                f"frame of shape {plane_shape} is smaller than one {factor}×{factor} block; expected a larger frame"
+            )
+        self.factor, self.white_level, self.n_led_frames = factor, white_level, n_led_frames
+        self.plane_shape = tuple(plane_shape)
+        self.block_shape = (height, plane_shape[2], width)
+        n_rows = n_led_frames + 2
+        # Laid out (block row, channel, block column) per frame: any sample order works for
+        # moments, and this one lets every copy run along long rows.
+        # Incremental moments take every row's product with the new one: rows not filled yet must
+        # be zeros then; otherwise each row is written whole before use (no zeroing pass).
+        shape = (n_rows, height * plane_shape[2] * width)
+        self.rows = np.zeros(shape) if incremental else np.empty(shape)
+        self.rows[n_led_frames + 1] = 1.0
+        # Even blocks also give every block's half difference: the noise probe (module notes). The
+        # ones row has no noise; rows not filled yet are zeros in incremental mode, as above. Laid
+        # out (block row, block column, channel): the block sums' own order, copied without a transpose.
+        # Large frames probe every ``probe_stride``-th block row only (PROBE_BLOCKS).
+        self.probe_stride = probe_stride(height, width)
+        self.difference_shape = (len(range(0, height, self.probe_stride)), width, plane_shape[2])
+        probe_shape = (n_rows, math.prod(self.difference_shape))
+        self.differences = (
+            (np.zeros(probe_shape) if incremental else np.empty(probe_shape)) if factor % 2 == 0 else None
+        )
+        if self.differences is not None:
+            self.differences[n_led_frames + 1] = 0.0
+        self._noise: np.ndarray | None = None  # incremental mode: the probe's moments so far
+        self._invalid: list[np.ndarray] = []
+        self._filled = [n_led_frames + 1]
+        self._floating = False
+        # Inverse-variance weights (module notes): their square roots per row column, once the ambient
+        # frame is in (and its probe: without one there is no noise to fit). ``_ambient_saturated`` are
+        # the blocks the ambient frame itself saturates (left out of the fit).
+        self.black_level = black_level
+        self.weighting = weighting and self.differences is not None
+        self.ambient_noise: PixelNoise | None = None
+        """The ambient frame's noise per sample (:func:`processing.noise_level.detail_noise_line`), once it is in
+        (weighted rows only)."""
+        self.root_weights: np.ndarray | None = None
+        self._probe_root_weights: np.ndarray | None = None  # the root weights in the probe's layout
+        self._ambient_saturated: np.ndarray | None = None
+        self._moments: np.ndarray | None = None
+        self._batch_weights: np.ndarray | None = None  # batch mode: the weights, taken once the ambient row is in
+        self._excluded: np.ndarray | None = None  # incremental mode: columns already left out
+        self._excluded_differences: np.ndarray | None = None  # the same blocks' columns of the differences
+        if incremental:
+            self._moments = np.zeros((n_rows, n_rows))
+            self._moments[-1, -1] = self.rows.shape[1]
+            if self.differences is not None:
+                self._noise = np.zeros((n_rows, n_rows))
+
+    def add(self, row: int, plane: np.ndarray) -> None:
+        """Block-sum one (H, W, C) plane into ``row`` (LED frame j → j, ambient → n) and note its saturated blocks."""
+        if plane.shape != self.plane_shape:
+            raise SpectralDataError(f"frame stack: a frame has shape {plane.shape}; expected {self.plane_shape}")
+        self._check_row(row)
+        if np.issubdtype(plane.dtype, np.floating):
+            # NaN/inf refused before the block sums, whose gather products would warn about them first.
+            if not np.isfinite(plane.sum()):
+                raise non_finite_error([frame_name(row, self.n_led_frames)])
+            self._floating = True  # only ever set: safe when worker threads add frames
+        if self.differences is None:
+            block_sums_into(plane, self.factor, self.rows[row].reshape(self.block_shape))
+            may_saturate = frame_may_saturate(plane, self.white_level)
+        else:
+            # The sums from one pass of row sums, the probe from the probed block rows' alternating sums;
+            # each product into its own contiguous array.
+            row_sums, may_saturate = block_row_sums_and_peak(plane, self.factor, self.white_level)
+            channels = self.plane_shape[2]
+            gathered_by_channel(row_sums, self.factor, channels, self.rows[row].reshape(self.block_shape))
+            alternation = block_row_alternation(plane, self.factor, self.probe_stride)
+            differences = gathered(alternation, self.factor, channels, difference_gather)
+            np.copyto(self.differences[row].reshape(self.difference_shape), differences)
+        if row == self.n_led_frames and self.weighting:
+            self.ambient_noise = detail_noise_line(plane, 1, self.black_level, self.white_level)
+        # One max per frame finds the frames that saturate at all; only those build masks.
+        self._record(row, saturated_blocks(plane, self.factor, self.white_level) if may_saturate else None)
+
+    def add_frame(self, row: int, frame: np.ndarray, cfa_period: int = 1) -> None:
+        """:meth:`add` of the frame's CFA planes (:func:`cfa_planes`), in one compiled pass over the raw
+        frame where :mod:`processing.frame_kernels` can take it: each sample read once, no plane copy.
+
+        The block sums and half differences are the same integers either way (exact sums); the
+        saturated blocks the same mask.
+        """
+        if plane_shape(frame.shape, cfa_period) != self.plane_shape:
+            self.add(row, cfa_planes(frame, cfa_period))  # refuses the shape
+            return
+        self._check_row(row)
+        differences = None if self.differences is None else self.differences[row].reshape(self.difference_shape)
+        done, saturated = frame_kernels.block_pass(
+            frame,
+            self.factor,
+            cfa_period,
+            self.white_level,
+            self.probe_stride,
+            self.rows[row].reshape(self.block_shape),
+            differences,
+        )
+        if not done:
+            self.add(row, cfa_planes(frame, cfa_period))
+            return
+        if row == self.n_led_frames and self.weighting:
+            # The same cells in the same order as from the planes (add): both routes weigh alike, to the bit.
+            self.ambient_noise = detail_noise_line(frame, cfa_period, self.black_level, self.white_level)
+        self._record(row, saturated)
+
+    def _check_row(self, row: int) -> None:
+        if row in self._filled or not 0 <= row <= self.n_led_frames:
+            raise SpectralDataError(
+                f"frame stack: row {row} is taken or out of range; expected each of 0…{self.n_led_frames} once"
+            )
+
+    def _record(self, row: int, saturated: np.ndarray | None) -> None:
+        """After a row's block sums are in: its saturated blocks, the weights, the incremental moments."""
+        if row == self.n_led_frames:
+            self._ambient_saturated = saturated
+            if self._moments is None and self.weighting:
+                # Batch mode: the weights depend on the ambient row alone, so the thread that added it
+                # takes them while others still add LED frames (off the serial path of statistics()).
+                self._batch_weights = self._sample_weights()
+        if self._moments is not None and self.weighting:
+            if row == self.n_led_frames:
+                self._weigh_filled()  # the ambient frame sets the weights: weigh it and any row in before it
+            elif self.root_weights is not None:
+                self._weigh_row(row)
+        if self._moments is None:
+            if saturated is not None:
+                self._invalid.append(saturated)
+        else:
+            if saturated is not None:
+                self._drop(saturated)  # the new row is not in the moments yet: its columns are only zeroed
+            if self._excluded is not None:
+                self.rows[row, self._excluded] = 0.0
+                if self.differences is not None:
+                    self.differences[row, self._excluded_differences] = 0.0
+            # One matrix–vector product with every row (rows not filled yet are zeros; their
+            # products are set when they arrive): cheaper than gathering the filled rows first.
+            filled = [*self._filled, row]
+            for rows, moments in ((self.rows, self._moments), (self.differences, self._noise)):
+                if rows is not None and moments is not None:
+                    products = row_products(rows, row, filled)
+                    moments[row, filled] = products[filled]
+                    moments[filled, row] = products[filled]
+        self._filled.append(row)
+
+    def _sample_weights(self) -> np.ndarray:
+        """The inverse-variance weights of every row column, from the ambient row and the noise line of its frame."""
+        ambient = self.n_led_frames
+        # rows layout (block row, channel, block column)
+        black = self.black_level * self.factor * self.factor
+        line = ambient_block_noise(
+            self.ambient_noise,
+            self.factor,
+            self.rows[ambient].reshape(self.block_shape).transpose(0, 2, 1),
+            black,
+            self._ambient_saturated,
+        )
+        return line.weights(self.rows[ambient], black)
+
+    def _weigh_row(self, row: int) -> None:
+        """Scale one row (and its probe) by the root weights (incremental mode, weights known)."""
+        assert self.root_weights is not None
+        self.rows[row] *= self.root_weights
+        if self.differences is not None and self._probe_root_weights is not None:
+            self.differences[row] *= self._probe_root_weights
+
+    def _at_probe(self, values: np.ndarray) -> np.ndarray:
+        """Per-column ``values`` of the rows at the probed blocks, in the probe's layout."""
+        return values.reshape(self.block_shape)[:: self.probe_stride].transpose(0, 2, 1).reshape(-1)
+
+    def _weigh_filled(self) -> None:
+        """Incremental mode, the ambient row just in: weigh every filled row and retake their moments."""
+        assert self._moments is not None
+        self.root_weights = np.sqrt(self._sample_weights())
+        self._probe_root_weights = self._at_probe(self.root_weights)
+        filled = [row for row in self._filled if row != self.n_led_frames + 1]
+        for row in [*filled, self.n_led_frames]:
+            self._weigh_row(row)
+        ones = self.n_led_frames + 1
+        self.rows[ones] = self.root_weights
+        if self._excluded is not None:
+            self.rows[ones, self._excluded] = 0.0
+        every = self._filled  # the ambient row's own products are taken by add() right after
+        chunk = DEFAULT_CHUNK_PIXELS * self.block_shape[1]
+        # The ambient first (the usual order) leaves the ones row alone: a (1, K) gram is BLAS's threaded
+        # dot (docs/measurements.md); its product in slices (row_products) is not.
+        gram = (
+            (lambda rows: row_products(rows, 0)[:, None])
+            if len(every) == 1
+            else (lambda rows: gram_matrix(rows, chunk))
+        )
+        self._moments[np.ix_(every, every)] = gram(self.rows[every])
+        if self._noise is not None and self.differences is not None:
+            self._noise[np.ix_(every, every)] = gram(self.differences[every])
+
+    def exclude(self, blocks: np.ndarray) -> None:
+        """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
+        if self._moments is None:
+            self._invalid.append(blocks)
+        else:
+            self._drop(blocks)
+
+    def _columns(self, blocks: np.ndarray) -> np.ndarray:
+        """The row columns of the (H/f, W/f) block mask ``blocks`` (every channel of each block)."""
+        return np.broadcast_to(blocks[:, None, :], self.block_shape).reshape(-1)
+
+    def _difference_columns(self, blocks: np.ndarray) -> np.ndarray:
+        """The columns of :attr:`differences` of the (H/f, W/f) block mask ``blocks``."""
+        return np.broadcast_to(blocks[:: self.probe_stride, :, None], self.difference_shape).reshape(-1)
+
+    def _probe_scale(self, excluded_blocks: int, excluded_probed: int) -> float | None:
+        """Valid blocks ÷ probed valid blocks (1 without a stride), or None when no probed block is valid."""
+        probed = self.difference_shape[0] * self.difference_shape[1] - excluded_probed
+        if probed <= 0:
+            return None
+        return (self.block_shape[0] * self.block_shape[2] - excluded_blocks) / probed
+
+    def _drop(self, blocks: np.ndarray) -> None:
+        """Incremental mode: zero the columns of the (H/f, W/f) mask ``blocks`` in every row and take
+        the products of the filled rows over the newly left-out columns back out of the moments.
+
+        Once a quarter of the columns or more is out, the moments of the filled rows are taken
+        anew instead (subtracting most of a sum loses precision), as :meth:`statistics` does.
+        """
+        assert self._moments is not None
+        columns = self._columns(blocks)
+        new = columns if self._excluded is None else columns & ~self._excluded
+        fresh = np.flatnonzero(new)
+        if not fresh.size:
+            return
+        self._excluded = new if self._excluded is None else self._excluded | new
+        filled = np.asarray(self._filled, dtype=np.intp)
+        few = np.count_nonzero(self._excluded) * 4 < columns.size
+        parts = [(self.rows, self._moments, fresh)]
+        if self.differences is not None and self._noise is not None:
+            columns = self._difference_columns(blocks)
+            new = columns if self._excluded_differences is None else columns & ~self._excluded_differences
+            self._excluded_differences = new if self._excluded_differences is None else self._excluded_differences | new
+            parts.append((self.differences, self._noise, np.flatnonzero(new)))
+        for rows, moments, fresh in parts:
+            if few:
+                dropped = rows[np.ix_(filled, fresh)]
+                rows[:, fresh] = 0.0
+                moments[np.ix_(filled, filled)] -= dropped @ dropped.T
+            else:
+                rows[:, fresh] = 0.0
+                moments[np.ix_(filled, filled)] = gram_matrix(rows[filled], DEFAULT_CHUNK_PIXELS * self.block_shape[1])
+
+    def statistics(
+        self, spec: FrameStackSpec, chunk_pixels: int = DEFAULT_CHUNK_PIXELS, workers: int = 1
+    ) -> SequenceStatistics:
+        """The statistics of the rows added so far (every row must be in); ``spec`` as for the raw frames.
+
+        ``workers`` threads share the moment product (when it is not already accumulated).
+        """
+        rows = self.rows
+        if len(self._filled) != rows.shape[0]:
+            raise SpectralDataError(
+                f"frame stack: {len(self._filled) - 1} of {rows.shape[0] - 1} frames added; expected all of them"
+            )
+        # Integer sums are always finite; for float frames one sum flags NaN/inf (exact check only then).
+        if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
+            raise non_finite_frames_error(rows[:-1])
+        weights = None
+        if self._moments is not None:  # incremental: saturated blocks were left out as they came (_drop)
+            moments, noise, excluded_columns, scale = self._incremental_moments()
+            column_factor = None
+        else:
+            if self.weighting:  # batch mode: the weights enter each chunk's product
+                weights = self._sample_weights() if self._batch_weights is None else self._batch_weights
+            moments, noise, excluded_columns, scale, column_factor = self._batch_moments(weights, chunk_pixels, workers)
+        if noise is not None:
+            noise = None if scale is None else noise * scale
+        # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
+        statistics = statistics_from_moments(
+            moments,
+            spec,
+            rows.shape[1],
+            black_level=spec.black_level * self.factor * self.factor,
+            noise_moments=noise,
+            n_samples=rows.shape[1] - excluded_columns,
+            weighted=self.root_weights is not None or weights is not None,
+        )
+        channel_moments = self._channel_moments(spec, column_factor, scale if noise is not None else None)
+        return replace(statistics, channels=channel_moments)
+
+    def _incremental_moments(self) -> tuple[np.ndarray, np.ndarray | None, int, float | None]:
+        """Incremental mode: the moments and the probe's as accumulated, the columns left out, the probe's scale."""
+        assert self._moments is not None
+        channels = self.block_shape[1]
+        excluded_columns = 0 if self._excluded is None else int(np.count_nonzero(self._excluded))
+        excluded_probed = 0 if self._excluded_differences is None else int(np.count_nonzero(self._excluded_differences))
+        scale = self._probe_scale(excluded_columns // channels, excluded_probed // channels)
+        return self._moments, self._noise, excluded_columns, scale
+
+    def _batch_moments(
+        self, weights: np.ndarray | None, chunk_pixels: int, workers: int
+    ) -> tuple[np.ndarray, np.ndarray | None, int, float | None, np.ndarray | None]:
+        """Batch mode: the rows' and the probe's moments over the valid blocks (weighted by ``weights``, None:
+        unweighted), the columns left out, the probe's scale, and each column's factor (0 where left out; None:
+        none is)."""
+        invalid = None
+        for mask in self._invalid:
+            invalid = mask if invalid is None else invalid | mask
+        invalid = invalid if invalid is not None and invalid.any() else None
+        parts = [_masked_part(self.rows, None if invalid is None else self._columns(invalid), weights)]
+        if self.differences is not None:
+            probe_weights = None if weights is None else self._at_probe(weights)
+            left_out = None if invalid is None else self._difference_columns(invalid)
+            parts.append(_masked_part(self.differences, left_out, probe_weights))
+        # The rows' and the probe's moments in one map: the probe's single chunk shares the threads.
+        moments, *probed = gram_matrices(parts, chunk_pixels * self.block_shape[1], workers)
+        if invalid is None:
+            return moments, probed[0] if probed else None, 0, self._probe_scale(0, 0), None
+        excluded_columns = int(np.count_nonzero(invalid)) * self.block_shape[1]
+        scale = self._probe_scale(int(np.count_nonzero(invalid)), int(np.count_nonzero(invalid[:: self.probe_stride])))
+        column_factor = (~self._columns(invalid)).astype(float)
+        return moments, probed[0] if probed else None, excluded_columns, scale, column_factor
+
+    def _channel_moments(
+        self, spec: FrameStackSpec, column_factor: np.ndarray | None, probe_scale: float | None
+    ) -> ChannelMoments:
+        """:class:`ChannelMoments` of the rows, masked as :meth:`statistics` takes them (batch mode: by ``column_factor``;
+        incremental rows already are), the probe's scaled by ``probe_scale`` (None: none).
+
+        Unweighted: a sample's inverse-variance weight differs from channel to channel, and weighing the channels of
+        one block unequally would turn its colour away from the LED's (what :mod:`processing.flicker` reads).
+        """
+        if column_factor is None and self.root_weights is not None:  # incremental rows were weighed: undo it
+            column_factor = np.divide(
+                1.0, self.root_weights, out=np.zeros_like(self.root_weights), where=self.root_weights > 0
+            )
+        transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
+        ones = self.rows[-1] if column_factor is None else self.rows[-1] * column_factor
+        blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
+        fa, ff, aa = _channel_products(transform, self.rows, self.block_shape, 1, column_factor)
+        if self.differences is None or probe_scale is None:
+            return ChannelMoments(fa, ff, aa, blocks)
+        at_probe = None if column_factor is None else self._at_probe(column_factor)
+        noise = _channel_products(transform, self.differences, self.difference_shape, 2, at_probe)
+        return ChannelMoments(fa, ff, aa, blocks, *(part * probe_scale for part in noise))
+
+
+def _masked_part(
+    values: np.ndarray, columns: np.ndarray | None, column_weights: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(rows, weights)`` for :func:`processing.moment_products.gram_matrices` with the ``columns`` left out: weighted,
+    they weigh 0 (no copy of the rows); unweighted, a copy of the rows with those columns zeroed."""
+    if columns is None:
+        return values, column_weights
+    if column_weights is not None:
+        return values, np.where(columns, 0.0, column_weights)
+    values = values.copy()
+    values[:, columns] = 0.0
+    return values, None
+
+
+def _channel_products(
+    transform: np.ndarray,
+    values: np.ndarray,
+    layout: tuple[int, int, int],
+    channel_axis: int,
+    column_factor: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(fa, ff, aa)`` of :class:`ChannelMoments` from rows ``values`` whose columns are laid out ``layout`` (block
+    rows first, the channels on ``channel_axis``): the rows mapped by ``transform`` (k + 1, n + 2) to the LEDs' and
+    the ambient's images, each column scaled by ``column_factor`` (None: 1), summed band by band.
+
+    A band of block rows at a time (the moments are sums over blocks): its images in channel order stay about a
+    megabyte (:data:`CHANNEL_BAND_VALUES`) whatever the frame count, so an estimate's peak stays one frame plus the
+    statistics. The map comes first, along the rows' own order (one product of the band's contiguous columns): the
+    channel-order copy is then of the k + 1 images, not of the n + 2 rows.
+    """
+    height, inner = layout[0], layout[1] * layout[2]
+    k, channels = transform.shape[0] - 1, layout[channel_axis]
+    band = max(1, min(CHANNEL_BAND_VALUES // (k + 1), serial_columns(values.shape[0], k + 1)) // max(1, inner))
+    # Two buffers for every band (fresh pages for each band's arrays cost more than the products).
+    images_buffer = np.empty((k + 1, min(band, height) * inner))
+    ordered_buffer = np.empty((k + 1, channels, min(band, height) * inner // channels))
+    totals: list[np.ndarray] = []
+    for top in range(0, height, band):
+        tall = min(top + band, height) - top
+        images = np.matmul(
+            transform, values[:, top * inner : (top + tall) * inner], out=images_buffer[:, : tall * inner]
+        )
+        if column_factor is not None:
+            images *= column_factor[top * inner : (top + tall) * inner]
+        ordered = ordered_buffer[:, :, : tall * inner // channels]  # (k + 1, C, blocks): each LED's, the ambient's
+        np.copyto(
+            ordered.reshape(k + 1, channels, tall, inner // channels),
+            np.moveaxis(images.reshape(k + 1, tall, layout[1], layout[2]), channel_axis + 1, 1),
+        )
+        leds, ambient = ordered[:k], ordered[k]
+        moments = [leds @ ambient.T, leds @ leds.transpose(0, 2, 1), ambient @ ambient.T]
+        totals = moments if not totals else [total + part for total, part in zip(totals, moments, strict=True)]
+    return totals[0], totals[1], totals[2]

@@ -1,0 +1,131 @@
+"""Second moments of rows of samples: Gram matrices over column chunks shared by a process-wide pool of threads.
+
+The chunks' products are added in chunk order whatever the number of threads, so a moment does not depend on it;
+products stay below OpenBLAS's threading threshold (its threads' wake-ups cost more than the product on a busy
+2-core machine, docs/architecture.md §10).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from functools import lru_cache
+
+import numpy as np
+
+DEFAULT_CHUNK_PIXELS = 1 << 15
+"""Pixels per chunk: small enough to stay in cache for k ≈ 8 frames, large enough to amortise numpy calls."""
+
+
+DEFAULT_WORKERS = 2 if (os.cpu_count() or 1) >= 2 else 1
+"""Threads for the image passes (block sums, moments, synthesis): the app runs on 2 cores."""
+
+
+PRODUCT_COLUMNS = 4096
+"""Columns per slice of the moments' products (:func:`row_products`, :func:`gram_matrices`): one thread each
+(OpenBLAS threads a matrix–vector product of 9 × 7 000 already, and its threads' wake-ups on a busy machine
+cost many times the product: docs/measurements.md)."""
+
+
+SERIAL_PRODUCT = 1 << 18
+"""Multiply-adds (m · n · k) of a matrix product that OpenBLAS still runs on the calling thread. Above, it splits some
+products across its threads — a (33 × 1024) Gram matrix, an (8 × 9) map of 16 320 columns — and on a busy 2-core
+machine their wake-ups cost 0.1–20 ms for a product of 0.1 ms alone (measured with ``OPENBLAS_NUM_THREADS`` 1 and 2
+interleaved, docs/speed.md)."""
+
+
+def serial_columns(rows: int, outputs: int) -> int:
+    """Columns per slice of a product ``(outputs × rows) @ (rows × columns)`` (or a Gram matrix of ``rows`` rows,
+    ``outputs = rows``) that stays within :data:`SERIAL_PRODUCT`.
+
+    Examples
+    --------
+    >>> serial_columns(33, 33), serial_columns(9, 8)
+    (240, 3640)
+    """
+    return max(1, SERIAL_PRODUCT // max(1, rows * outputs))
+
+
+@lru_cache(maxsize=4)
+def thread_pool(workers: int) -> ThreadPoolExecutor:
+    """A process-wide pool of ``workers`` threads for the image passes (created on first use, then reused)."""
+    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="msflash-image")
+
+
+def row_products(rows: np.ndarray, row: int, among: Sequence[int] | None = None) -> np.ndarray:
+    """``rows @ rows[row]`` (only the rows ``among``, the others' products 0), summed over slices of
+    :data:`PRODUCT_COLUMNS` columns.
+
+    OpenBLAS splits one large matrix–vector product across its threads; on a busy 2-core machine
+    (the capture's stream and writer threads) their wake-up costs many times the product itself
+    (docs/architecture.md §10). Slices stay below its threading threshold. ``among`` is read as runs of
+    consecutive rows, one product each: a capture's rows not yet filled are not read.
+
+    Examples
+    --------
+    >>> rows = np.arange(12.0).reshape(4, 3)
+    >>> row_products(rows, 1).tolist(), row_products(rows, 1, [0, 1, 3]).tolist()
+    ([14.0, 50.0, 86.0, 122.0], [14.0, 50.0, 0.0, 122.0])
+    """
+    products = np.zeros(rows.shape[0])
+    runs = _runs(range(rows.shape[0]) if among is None else sorted(set(among)))
+    vector = rows[row]
+    for start in range(0, rows.shape[1], PRODUCT_COLUMNS):
+        columns = slice(start, start + PRODUCT_COLUMNS)
+        for first, stop in runs:
+            products[first:stop] += rows[first:stop, columns] @ vector[columns]
+    return products
+
+
+def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
+    """Sorted ``indices`` as ``(first, stop)`` runs of consecutive integers."""
+    runs: list[tuple[int, int]] = []
+    for index in indices:
+        if runs and runs[-1][1] == index:
+            runs[-1] = (runs[-1][0], index + 1)
+        else:
+            runs.append((index, index + 1))
+    return runs
+
+
+def gram_matrix(rows: np.ndarray, chunk: int, workers: int = 1, weights: np.ndarray | None = None) -> np.ndarray:
+    """``rows @ rows.T`` (with ``weights``, ``rows @ diag(weights) @ rows.T``) in float64 (:func:`gram_matrices`)."""
+    return gram_matrices([(rows, weights)], chunk, workers)[0]
+
+
+def gram_matrices(
+    parts: Sequence[tuple[np.ndarray, np.ndarray | None]], chunk: int, workers: int = 1
+) -> list[np.ndarray]:
+    """:func:`gram_matrix` of several ``(rows, weights)`` at once, accumulated over column chunks; ``workers``
+    threads share the chunks of all of them (one map: a part with a single chunk does not run alone after
+    the others). Each chunk is weighted while it is in cache.
+
+    The chunks' products are added in chunk order whatever the number of workers, so the result
+    does not depend on it.
+    """
+    chunk = max(chunk, 1)
+
+    def product(task: tuple[int, int]) -> np.ndarray:
+        rows, weights = parts[task[0]]
+        start = task[1]
+        block = rows[:, start : start + chunk]
+        if weights is None:
+            return block @ block.T
+        # Weighted in slices of PRODUCT_COLUMNS, so that each weighted copy is still in cache for its
+        # product: ``(x·√w)(x·√w)ᵀ``, one symmetric product (BLAS syrk: half the multiplications).
+        result = np.zeros((rows.shape[0], rows.shape[0]))
+        column_weights = weights[start : start + chunk]
+        for offset in range(0, block.shape[1], PRODUCT_COLUMNS):
+            part = block[:, offset : offset + PRODUCT_COLUMNS] * np.sqrt(
+                column_weights[offset : offset + PRODUCT_COLUMNS]
+            )
+            result += part @ part.T
+        return result
+
+    tasks = [(index, start) for index, (rows, _) in enumerate(parts) for start in range(0, rows.shape[1], chunk)]
+    products = thread_pool(workers).map(product, tasks) if workers > 1 and len(tasks) > 1 else map(product, tasks)
+    moments = [np.zeros((rows.shape[0], rows.shape[0])) for rows, _ in parts]
+    for (index, _), part in zip(tasks, products):
+        moments[index] += part
+    return moments
