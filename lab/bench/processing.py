@@ -173,6 +173,28 @@ def frame_copy(frames: list[np.ndarray]) -> Callable[[], None]:
     return copy
 
 
+def streamed_estimate(world: dict[str, Any], bin_factor: int) -> object:
+    """The default estimate of ``world``'s frames as ``msflash estimate`` streams them
+    (:class:`acquisition.session.estimate_stream.EstimateStream`): the frames one at a time into incremental block
+    rows (the ambient frame last), the weighted statistics and the default solve. One thread: frames come in order."""
+    frames, spec, leds = world["frames"], world["spec"], world["leds"]
+    period = 2 if world.get("cfa") is not None else 1
+    n = len(frames) - 1
+    frame_kernels.wanted(frames[0].nbytes * len(frames))  # as the stream does for a sequence from disk
+    rows = BlockRows(
+        n,
+        plane_shape(frames[0].shape, period),
+        bin_factor,
+        spec.white_level,
+        incremental=True,
+        black_level=spec.black_level,
+        weighting=SAMPLE_WEIGHTING,
+    )
+    for row, frame in zip([n, *range(n)], frames, strict=True):
+        rows.add_frame(row, frame, period)
+    return estimate_ambient(rows.statistics(spec), leds)
+
+
 def target_figures(world: dict[str, Any], pairs: int, threads: tuple[int, ...] = (1, 2)) -> dict[str, Any]:
     """Issue 21's figures for one sequence: each ratio on each thread count, against its target, and the peak
     memory of each operation over the frames' bytes."""
@@ -183,27 +205,9 @@ def target_figures(world: dict[str, Any], pairs: int, threads: tuple[int, ...] =
 
     period = 2 if cfa is not None else 1
 
-    def streamed(bin_factor: int) -> object:
-        # As msflash estimate (acquisition.session.estimate_stream.EstimateStream): the frames one at a time into
-        # incremental block rows, the weighted statistics and the default solve. One thread: frames come in order.
-        n = len(frames) - 1
-        frame_kernels.wanted(frames[0].nbytes * len(frames))  # as the stream does for a sequence from disk
-        rows = BlockRows(
-            n,
-            plane_shape(frames[0].shape, period),
-            bin_factor,
-            spec.white_level,
-            incremental=True,
-            black_level=spec.black_level,
-            weighting=SAMPLE_WEIGHTING,
-        )
-        for row, frame in zip([n, *range(n)], frames, strict=True):
-            rows.add_frame(row, frame, period)
-        return estimate_ambient(rows.statistics(spec), leds)
-
     def estimate(bin_factor: int, workers: int) -> Callable[[], object]:
         if bin_factor > 1:
-            return lambda: streamed(bin_factor)
+            return lambda: streamed_estimate(world, bin_factor)
         # Every pixel (--bin-factor 1): the exact all-pixel moments of the frames together, as the stream keeps them.
         return lambda: estimate_ambient(
             accumulate_statistics(

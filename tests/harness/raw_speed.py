@@ -24,36 +24,21 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.one_thread:
         os.environ["OPENBLAS_NUM_THREADS"] = "1"
-    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, SAMPLE_WEIGHTING, block_factor
-    from msflash.lab.bench.processing import benchmark_world, family_ratio, frame_copy
+    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor
+    from msflash.lab.bench.processing import benchmark_world, family_ratio, frame_copy, streamed_estimate
     from msflash.lab.bench.ratios import interleaved_ratio
     from msflash.processing import frame_kernels
-    from msflash.processing.ambient import estimate_ambient
-    from msflash.processing.block_rows import BlockRows
-    from msflash.processing.block_sums import plane_shape
     from msflash.processing.channel_statistics import accumulate_channel_statistics
 
     frame_kernels.prepare()
     figures: dict[str, float] = {}
     for cfa in ("RGGB", None):
         world = benchmark_world(args.height, args.width, cfa=cfa)
-        frames, spec, leds = world["frames"], world["spec"], world["leds"]
-        period, n = (2 if cfa else 1), len(frames) - 1
+        frames, spec = world["frames"], world["spec"]
         factor = block_factor(frames[0].shape, cfa)
 
-        def streamed(frames=frames, spec=spec, leds=leds, period=period, n=n, factor=factor) -> object:  # noqa: ANN001
-            rows = BlockRows(
-                n,
-                plane_shape(frames[0].shape, period),
-                factor,
-                spec.white_level,
-                incremental=True,
-                black_level=spec.black_level,
-                weighting=SAMPLE_WEIGHTING,
-            )
-            for row, frame in zip([n, *range(n)], frames, strict=True):
-                rows.add_frame(row, frame, period)
-            return estimate_ambient(rows.statistics(spec), leds)
+        def streamed(world=world, factor=factor) -> object:  # noqa: ANN001
+            return streamed_estimate(world, factor)
 
         def channels(frames=frames, spec=spec, cfa=cfa) -> object:  # noqa: ANN001
             bin_factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)
