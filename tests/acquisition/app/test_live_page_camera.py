@@ -15,14 +15,12 @@ from pathlib import Path
 
 import pytest
 
-from tests.acquisition.app.test_live_page_views import CHROMEDRIVER, CHROMIUM, RUN, chromium, data, js, shot
+from tests.acquisition.app.test_live_page_views import RUN, shot
 from tests.acquisition.app.test_live_page_views import sim_run as sim_run  # the module's run, a fixture here too
+from tests.acquisition.support.browser import chromium, data, js, needs_chromium
 from tests.acquisition.support.live import emulator_levels, live_server, wait_until
 
-pytestmark = pytest.mark.skipif(
-    not (shutil.which(CHROMIUM) and shutil.which(CHROMEDRIVER)),
-    reason="Debian's chromium and chromium-driver are not installed (setup.sh installs them)",
-)
+pytestmark = needs_chromium
 
 
 @pytest.fixture(params=[(1024, 900), (1920, 1200)], ids=["1024px", "1920px"])

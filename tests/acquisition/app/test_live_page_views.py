@@ -21,16 +21,12 @@ import tifffile
 
 from msflash.acquisition.app.live.run_job import SequenceRequest, run_sequence
 from msflash.acquisition.session.rig import open_rig
+from tests.acquisition.support.browser import chromium, data, js, needs_chromium
 from tests.acquisition.support.live import emulator_levels, live_server, wait_until
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMEDRIVER = "/usr/bin/chromedriver"
 RUN = "20260101-000000"
 
-pytestmark = pytest.mark.skipif(
-    not (shutil.which(CHROMIUM) and shutil.which(CHROMEDRIVER)),
-    reason="Debian's chromium and chromium-driver are not installed (setup.sh installs them)",
-)
+pytestmark = needs_chromium
 
 
 @pytest.fixture(scope="module")
@@ -42,27 +38,6 @@ def sim_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return runs / RUN
 
 
-def chromium(width: int, height: int) -> object:
-    webdriver = pytest.importorskip("selenium.webdriver")
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    for argument in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-dev-shm-usage",
-        f"--window-size={width},{height}",
-        "--no-first-run",
-        "--disable-extensions",
-    ):
-        options.add_argument(argument)
-    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
-    driver.set_page_load_timeout(60)
-    return driver
-
-
 @pytest.fixture(params=[(1024, 900), (1920, 1200), (3840, 2160)], ids=["1024px", "1920px", "4K"])
 def browser(request: pytest.FixtureRequest) -> Iterator[object]:
     driver = chromium(*request.param)
@@ -70,14 +45,6 @@ def browser(request: pytest.FixtureRequest) -> Iterator[object]:
         yield driver
     finally:
         driver.quit()  # type: ignore[attr-defined]
-
-
-def js(driver, script: str, *args):
-    return driver.execute_script(script, *args)
-
-
-def data(driver, element_id: str, key: str) -> str:
-    return driver.find_element("id", element_id).get_attribute(f"data-{key}") or ""
 
 
 def shot(driver, tmp_path: Path, name: str) -> None:

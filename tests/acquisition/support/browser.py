@@ -1,0 +1,49 @@
+"""Debian's headless Chromium driven by Selenium, for the pages' browser tests (the live page, its views and
+camera panel): the binaries, the skip when they are missing, one way to start a driver, small page helpers."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMEDRIVER = "/usr/bin/chromedriver"
+
+needs_chromium = pytest.mark.skipif(
+    not (shutil.which(CHROMIUM) and shutil.which(CHROMEDRIVER)),
+    reason="Debian's chromium and chromium-driver are not installed (setup.sh installs them)",
+)
+"""The browser tests' module mark: skipped, saying why, where setup.sh has not installed Chromium."""
+
+
+def chromium(width: int, height: int) -> object:
+    """A headless Chromium driver with a ``width`` × ``height`` window (skips without selenium)."""
+    webdriver = pytest.importorskip("selenium.webdriver")
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for argument in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        f"--window-size={width},{height}",
+        "--no-first-run",
+        "--disable-extensions",
+    ):
+        options.add_argument(argument)
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+    driver.set_page_load_timeout(60)
+    return driver
+
+
+def js(driver, script: str, *args):  # noqa: ANN001, ANN201
+    """``script`` run in the page."""
+    return driver.execute_script(script, *args)
+
+
+def data(driver, element_id: str, key: str) -> str:  # noqa: ANN001
+    """The ``data-key`` attribute of the element ``element_id`` ('' when absent)."""
+    return driver.find_element("id", element_id).get_attribute(f"data-{key}") or ""
