@@ -15,9 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.acquisition.app.test_live_page_views import RUN, shot
-from tests.acquisition.app.test_live_page_views import sim_run as sim_run  # the module's run, a fixture here too
-from tests.acquisition.support.browser import chromium, data, js, needs_chromium
+from tests.acquisition.support.browser import RUN, chromium, data, js, needs_chromium, shot
 from tests.acquisition.support.live import emulator_levels, live_server, wait_until
 
 pytestmark = needs_chromium

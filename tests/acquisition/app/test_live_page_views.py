@@ -10,7 +10,6 @@ and a camera error's, ``docs/live-1024-camera*.png``, by ``test_live_page_camera
 from __future__ import annotations
 
 import json
-import os
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -19,23 +18,10 @@ import numpy as np
 import pytest
 import tifffile
 
-from msflash.acquisition.app.live.run_job import SequenceRequest, run_sequence
-from msflash.acquisition.session.rig import open_rig
-from tests.acquisition.support.browser import chromium, data, js, needs_chromium
+from tests.acquisition.support.browser import RUN, chromium, data, js, needs_chromium, shot
 from tests.acquisition.support.live import emulator_levels, live_server, wait_until
 
-RUN = "20260101-000000"
-
 pytestmark = needs_chromium
-
-
-@pytest.fixture(scope="module")
-def sim_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One run of the sim rig, as the page's Fire leaves it (copied into each test's runs folder)."""
-    runs = tmp_path_factory.mktemp("runs")
-    with open_rig("sim") as rig:
-        run_sequence(rig, runs / RUN, SequenceRequest())
-    return runs / RUN
 
 
 @pytest.fixture(params=[(1024, 900), (1920, 1200), (3840, 2160)], ids=["1024px", "1920px", "4K"])
@@ -45,18 +31,6 @@ def browser(request: pytest.FixtureRequest) -> Iterator[object]:
         yield driver
     finally:
         driver.quit()  # type: ignore[attr-defined]
-
-
-def shot(driver, tmp_path: Path, name: str) -> None:
-    """A screenshot of the whole page (the window made as tall as the page, then back)."""
-    size = driver.get_window_size()
-    height = js(driver, "return document.documentElement.scrollHeight")
-    driver.set_window_size(size["width"], max(size["height"], height + 140))
-    driver.save_screenshot(str(tmp_path / f"{name}.png"))
-    docs = os.environ.get("MSFLASH_DOCS_SCREENSHOTS")
-    if docs and name.startswith("live-"):
-        driver.save_screenshot(str(Path(docs) / f"{name}.png"))
-    driver.set_window_size(size["width"], size["height"])
 
 
 def test_the_page_zooms_reads_pixels_snapshots_previews_the_flash_and_shows_a_lost_server(

@@ -3,9 +3,14 @@ camera panel): the binaries, the skip when they are missing, one way to start a 
 
 from __future__ import annotations
 
+import os
 import shutil
+from pathlib import Path
 
 import pytest
+
+RUN = "20260101-000000"
+"""The run folder name the pages' tests give the sim rig's run (``sim_run``)."""
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
@@ -47,3 +52,15 @@ def js(driver, script: str, *args):  # noqa: ANN001, ANN201
 def data(driver, element_id: str, key: str) -> str:  # noqa: ANN001
     """The ``data-key`` attribute of the element ``element_id`` ('' when absent)."""
     return driver.find_element("id", element_id).get_attribute(f"data-{key}") or ""
+
+
+def shot(driver, tmp_path: Path, name: str) -> None:
+    """A screenshot of the whole page (the window made as tall as the page, then back)."""
+    size = driver.get_window_size()
+    height = js(driver, "return document.documentElement.scrollHeight")
+    driver.set_window_size(size["width"], max(size["height"], height + 140))
+    driver.save_screenshot(str(tmp_path / f"{name}.png"))
+    docs = os.environ.get("MSFLASH_DOCS_SCREENSHOTS")
+    if docs and name.startswith("live-"):
+        driver.save_screenshot(str(Path(docs) / f"{name}.png"))
+    driver.set_window_size(size["width"], size["height"])
