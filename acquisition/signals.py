@@ -63,23 +63,28 @@ def sigterm_as_exit() -> Iterator[None]:
 
 
 def hold_stopping_signals() -> Callable[[], None]:
-    """Hold the stopping signals pending from now; returns the call that releases them (once; idempotent).
+    """Hold the stopping signals from now; returns the call that releases them (once; idempotent).
 
-    For a few instructions that must not be cut: the kernel keeps a signal that comes meanwhile
-    (``pthread_sigmask``), no handler runs before the release, and the release raises it. A
-    plain function rather than a ``with`` block, because the release belongs inside the ``try``
-    whose cleanup takes charge of what the held instructions made (an export's staging folder).
+    For a few instructions that must not be cut: a signal that comes meanwhile is recorded instead of acted
+    on, and the release restores the handlers and raises it. Held by the handlers, not by the main thread's
+    signal mask: a process-directed signal lands on any thread that does not block it (OpenBLAS's,
+    OpenImageIO's), and Python runs its handler in the main thread at once. A plain function rather than a
+    ``with`` block, because the release belongs inside the ``try`` whose cleanup takes charge of what the held
+    instructions made (an export's staging folder).
     """
     if not _in_main_thread():
         return lambda: None
-    before = signal.pthread_sigmask(signal.SIG_BLOCK, STOPPING_SIGNALS)
+    held: list[int] = []
+    previous = [signal.signal(number, lambda number, _frame: held.append(number)) for number in STOPPING_SIGNALS]
     released = False
 
     def release() -> None:
         nonlocal released
         if not released:
             released = True
-            signal.pthread_sigmask(signal.SIG_SETMASK, before)
+            for number, handler in zip(STOPPING_SIGNALS, previous, strict=True):
+                signal.signal(number, handler)
+            deliver_deferred(held)
 
     return release
 

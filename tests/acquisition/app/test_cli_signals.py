@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import argparse
 import os
+import select
 import signal
+import socket
+import threading
 
 import pytest
 
 from msflash.acquisition.app import cli
-from msflash.acquisition.signals import Terminated, sigterm_as_exit
+from msflash.acquisition.signals import Terminated, hold_stopping_signals, sigterm_as_exit
 
 
 def test_a_real_sigterm_inside_the_guard_unwinds_as_terminated() -> None:
@@ -17,6 +20,39 @@ def test_a_real_sigterm_inside_the_guard_unwinds_as_terminated() -> None:
         os.kill(os.getpid(), signal.SIGTERM)
     assert raised.value.code == 128 + signal.SIGTERM
     assert signal.getsignal(signal.SIGTERM) is not None  # the previous handler is back
+
+
+def test_a_held_signal_waits_for_the_release_even_when_another_thread_receives_it() -> None:
+    """A process-directed SIGTERM may land on any thread that does not block it (OpenBLAS's, OpenImageIO's…);
+    Python then runs its handler in the main thread at once. Holding it by the main thread's signal mask alone let
+    it through, between an export's staging folder being made and its cleanup taking charge (a flake that left
+    ``.NAME.*.export-tmp`` behind)."""
+    go = threading.Event()
+    other = threading.Thread(target=go.wait)  # made before the hold, as libraries' threads are
+    other.start()
+    steps: list[str] = []
+    arrived, wakeup = socket.socketpair()  # Python's C handler writes each signal's number here as it lands
+    wakeup.setblocking(False)
+    previous_wakeup = signal.set_wakeup_fd(wakeup.fileno())
+    try:
+        with pytest.raises(Terminated), sigterm_as_exit():
+            release = hold_stopping_signals()
+            try:
+                assert other.ident is not None
+                signal.pthread_kill(other.ident, signal.SIGTERM)  # delivered to that thread, not to the main one
+                assert select.select([arrived], [], [], 120)[0], "the signal never arrived"  # a hang guard
+                for _ in range(10_000):  # bytecodes in the main thread: a handler due now runs here
+                    pass
+                steps.append("held until the release")
+            finally:
+                release()  # the held signal is raised here
+    finally:
+        signal.set_wakeup_fd(previous_wakeup)
+        arrived.close()
+        wakeup.close()
+        go.set()
+        other.join()
+    assert steps == ["held until the release"]
 
 
 @pytest.mark.parametrize(
