@@ -19,8 +19,14 @@ from msflash.processing.moment_products import DEFAULT_CHUNK_PIXELS, DEFAULT_WOR
 from msflash.processing.statistics import FrameStackSpec, non_finite_frames_error
 
 
-def frame_coefficients(spec: FrameStackSpec, flash_weights: np.ndarray) -> tuple[float, np.ndarray]:
+def frame_coefficients(
+    spec: FrameStackSpec, flash_weights: np.ndarray, ambient_offsets: np.ndarray | None = None
+) -> tuple[float, np.ndarray]:
     """Coefficients of the linearised ambient and LED frames in ``m_a + Σ w_k m_f,k``.
+
+    With ``ambient_offsets`` (``e``, the ambient's share in each LED-only image of a flickering sequence,
+    :func:`processing.flicker.applied_offsets`) the LED images are taken as ``m_f,k − e_k m_a``, so the
+    ambient's coefficient loses ``w · e`` and the image holds the ambient once, as in the ambient frame.
 
     Returns
     -------
@@ -39,9 +45,17 @@ def frame_coefficients(spec: FrameStackSpec, flash_weights: np.ndarray) -> tuple
         raise SpectralDataError(f"synthesis: {weights.size} flash weights; expected {spec.n_leds} (one per LED)")
     if not np.all(np.isfinite(weights)):
         raise SpectralDataError("synthesis: flash weights must be finite numbers")
+    share = 0.0
+    if ambient_offsets is not None:
+        offsets = np.asarray(ambient_offsets, dtype=float)
+        if offsets.shape != (spec.n_leds,) or not np.all(np.isfinite(offsets)):
+            raise SpectralDataError(
+                f"synthesis: ambient offsets of shape {offsets.shape}; expected {spec.n_leds} finite numbers"
+            )
+        share = float(weights @ offsets)
     with np.errstate(over="ignore", invalid="ignore"):  # huge weights: synthesize refuses what overflows
         coefficients = spec.unmixing.T @ weights
-        return float(1.0 - coefficients.sum()), coefficients
+        return float(1.0 - coefficients.sum() - share), coefficients
 
 
 def synthesize(
@@ -53,6 +67,7 @@ def synthesize(
     chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
     workers: int = DEFAULT_WORKERS,
     dtype: type = np.float32,
+    ambient_offsets: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Synthesise the computational flash image from raw frames.
 
@@ -71,6 +86,8 @@ def synthesize(
         the image does not depend on it.
     dtype
         The image's type, float32 (default) or float64; written directly, in one pass.
+    ambient_offsets
+        A flickering sequence's ambient share in each LED image (:func:`frame_coefficients`), or None.
 
     Returns
     -------
@@ -88,7 +105,7 @@ def synthesize(
     once in ``dtype``. Other frames, or without numba, take chunks through numpy with the same
     arithmetic (float64 sums in frame order, rounded once), so the two routes write the same image.
     """
-    ambient_coefficient, coefficients = frame_coefficients(spec, flash_weights)
+    ambient_coefficient, coefficients = frame_coefficients(spec, flash_weights, ambient_offsets)
     frames = [ambient, *led_frames]
     for index, frame in enumerate(frames):
         if frame.shape != ambient.shape:
@@ -307,10 +324,11 @@ class SynthesisStream:
         *,
         chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
         dtype: type = np.float32,
+        ambient_offsets: np.ndarray | None = None,
     ) -> None:
         if np.dtype(dtype) not in (np.float32, np.float64):
             raise SpectralDataError(f"synthesis: image type {np.dtype(dtype).name}; expected float32 or float64")
-        ambient_coefficient, coefficients = frame_coefficients(spec, flash_weights)
+        ambient_coefficient, coefficients = frame_coefficients(spec, flash_weights, ambient_offsets)
         self.spec, self.flash_weights, self.shape, self.dtype = spec, flash_weights, tuple(shape), dtype
         self.factors = np.concatenate(
             [[ambient_coefficient * spec.ambient_scale], coefficients * np.asarray(spec.led_scales)]

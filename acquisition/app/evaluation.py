@@ -53,6 +53,7 @@ from msflash.acquisition.session.chart_layout import (
 from msflash.processing import colour_metrics, datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
+from msflash.processing.flicker import applied_offsets
 from msflash.processing.raw_colour import rgb_chromaticities
 from msflash.processing.render import camera_to_srgb_linear, camera_to_xyz_matrix, demosaic_bilinear, encode_srgb
 from msflash.processing.spectra import Spectra, WavelengthGrid
@@ -240,7 +241,13 @@ def evaluate_sequence(
     images: dict[str, np.ndarray] = {"ambient": ambient}
     weights: dict[str, np.ndarray] = {}
     for mode, solution in solutions.items():
-        image, synth_saturated = synthesize(stack.ambient, stack.led_frames, stack.spec, solution.flash_weights)
+        image, synth_saturated = synthesize(
+            stack.ambient,
+            stack.led_frames,
+            stack.spec,
+            solution.flash_weights,
+            ambient_offsets=applied_offsets(estimate.flicker),
+        )
         images[mode], weights[mode] = image.astype(np.float64), solution.flash_weights
         saturated |= synth_saturated
     for index in sequence.indices("flash"):

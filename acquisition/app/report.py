@@ -34,6 +34,7 @@ from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.processing import datasets
 from msflash.processing.ambient import AmbientEstimate
 from msflash.processing.flash import FlashSolution
+from msflash.processing.flicker import applied_offsets
 from msflash.processing.metrics import led_fit, led_fit_rmse, spectrum_rmse
 from msflash.processing.render import camera_to_xyz_matrix, demosaic_superpixel, srgb_preview
 from msflash.processing.spectra import Spectra
@@ -203,7 +204,13 @@ def _write_run_report(
         "ambient": write_preview(out / "ambient.png", srgb_preview(linear_rgb(sequence, ambient_linear), matrix))
     }
     for name, solution in solutions.items():
-        image, _ = synthesize(stack.ambient, stack.led_frames, stack.spec, solution.flash_weights)
+        image, _ = synthesize(
+            stack.ambient,
+            stack.led_frames,
+            stack.spec,
+            solution.flash_weights,
+            ambient_offsets=applied_offsets(estimate.flicker),
+        )
         rgb, exr = exr_image(sequence, image)
         write_image(
             out / f"{name}.exr",

@@ -366,7 +366,7 @@ def _write_exr(work: _Work, out: Path) -> None:
     ambient, _ = sequence.load_linear_frame(stack.ambient_index)
     images = {"ambient": (ambient, {"msflash:content": "the ambient frame"})}
     for mode, solution in work.solutions().items():
-        image, _, _ = analysis.synthesize_sequence(sequence, solution.flash_weights, stack)
+        image, _, _ = analysis.synthesize_sequence(sequence, solution.flash_weights, stack, work.estimate().flicker)
         content = {
             "msflash:content": f"the {mode} computational flash image",
             "msflash:flash_weights": solution.flash_weights.tolist(),

@@ -36,7 +36,7 @@ from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_a
 from msflash.processing.channel_statistics import plane_channels
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flash import FlashBounds, FlashSolution, solve_complementary, solve_matching
-from msflash.processing.flicker import FlickerCheck, check_flicker, with_ambient_gains, with_fit
+from msflash.processing.flicker import FlickerCheck, applied_offsets, check_flicker, with_ambient_gains, with_fit
 from msflash.processing.model_error import reference_for, with_model_error
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import SynthesisStream, synthesize
@@ -259,6 +259,15 @@ def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> Flicker
     return with_mains_fit(check, sequence)
 
 
+def sequence_flicker(sequence: Sequence) -> FlickerCheck | None:
+    """The flicker check of a sequence's frames read from disk (one pass, as an estimate's), or None where the
+    sequence carries no camera responsivities to read the ambient gains with: what a synthesis from weights
+    given alone (``msflash synthesize``, :func:`msflash.synthesize_flash`) corrects by."""
+    if sequence.camera_responsivities() is None:
+        return None
+    return flicker_check(sequence, stream_sequence(sequence, DEFAULT_BIN_FACTOR).statistics())
+
+
 def with_mains_fit(check: FlickerCheck, sequence: Sequence) -> FlickerCheck:
     """``check`` with the mains fitted to its frame gains at the frames' timestamps, where ``sequence`` records them
     (a capture's estimate is made from a header without frames: the run fits again on the sequence it wrote)."""
@@ -355,7 +364,7 @@ def flash_payload(sequence: Sequence, solution: FlashSolution, target: str | Non
 
 
 def synthesize_sequence(
-    sequence: Sequence, flash_weights: np.ndarray, stack: FrameStack | None = None
+    sequence: Sequence, flash_weights: np.ndarray, stack: FrameStack | None = None, flicker: FlickerCheck | None = None
 ) -> tuple[np.ndarray, np.ndarray, StackLayout]:
     """The computational flash image ``m_a + Σ w_k m_f,k`` of a sequence (linear, per µs·gain), its saturated
     pixels and the frames it used.
@@ -363,10 +372,14 @@ def synthesize_sequence(
     Without ``stack`` the frames are read from disk one at a time into a
     :class:`~processing.synthesis.SynthesisStream` (the ambient frame first, then the LED frames in order):
     peak memory the float64 sum and one frame, and the image of :func:`processing.synthesis.synthesize`
-    on the stack, bit for bit.
+    on the stack, bit for bit. With an estimate's ``flicker`` check that corrected the LED images, the
+    ambient's extra share in them is taken out of the image too (:func:`processing.flicker.applied_offsets`).
     """
+    offsets = applied_offsets(flicker)
     if stack is not None:
-        image, saturated = synthesize(stack.ambient, stack.led_frames, stack.spec, flash_weights)
+        image, saturated = synthesize(
+            stack.ambient, stack.led_frames, stack.spec, flash_weights, ambient_offsets=offsets
+        )
         return image, saturated, StackLayout(stack.spec, stack.ambient_index, stack.led_indices)
     entries = sequence.frames
     layout = stack_layout(
@@ -376,7 +389,7 @@ def synthesize_sequence(
     for index in (layout.ambient_index, *layout.led_indices):
         frame = sequence.load_frame(index)
         if summed is None:
-            summed = SynthesisStream(layout.spec, flash_weights, frame.shape)
+            summed = SynthesisStream(layout.spec, flash_weights, frame.shape, ambient_offsets=offsets)
         try:
             summed.add(frame)
         except SpectralDataError as err:

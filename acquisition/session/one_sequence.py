@@ -350,7 +350,9 @@ def _flash_local(sequence: Sequence, settings: FlashSettings, report: Report) ->
             image, saturated, stack = local_route.synthesize_sequence_local(sequence, tile_weights, local)
             ambient_index = stack.ambient_index
         else:
-            image, saturated, layout = analysis.synthesize_sequence(sequence, solution.flash_weights)
+            image, saturated, layout = analysis.synthesize_sequence(
+                sequence, solution.flash_weights, flicker=local.global_estimate.flicker
+            )
             ambient_index = layout.ambient_index
         metadata = {
             "msflash:flash_weights": solution.flash_weights.tolist(),

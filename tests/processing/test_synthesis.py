@@ -8,7 +8,7 @@ import pytest
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.sensor import SensorModel
 from msflash.processing.statistics import FrameStackSpec
-from msflash.processing.synthesis import frame_coefficients, synthesize, to_raw_values
+from msflash.processing.synthesis import SynthesisStream, frame_coefficients, synthesize, to_raw_values
 from tests.helpers import EXACT, FLOAT32, ambient, chart, one_hot_levels, rendered_frames, spec_for
 
 WEIGHTS = np.array([0.5, 0.0, 1.0, 0.25, 2.0, -0.3, 0.8])
@@ -122,3 +122,29 @@ def test_non_finite_float_frames_are_refused_naming_the_frame(frame: int, name: 
     frames[frame][1, 2, 0] = bad
     with pytest.raises(SpectralDataError, match=f"synthesis: {name} holds non-finite values"):
         synthesize(frames[0], frames[1:], spec, np.array([0.5, 0.5]))
+
+
+def test_a_flickering_stack_holds_the_ambient_once_with_its_offsets() -> None:
+    """Frames ``m_j = g_j a + Σ L_ji f_i`` (the lamp at gain ``g_j`` in frame j): the LED images read ``f + e a``
+    with ``e = U (g − 1)`` (processing/flicker.py); given ``e``, the image is ``a + Σ w_i f_i`` again."""
+    rng = np.random.default_rng(3)
+    k, shape = 3, (6, 5, 3)
+    levels = np.array([[1.0, 0.0, 0.0], [0.5, 1.0, 0.0], [0.0, 0.5, 1.0], [1.0, 1.0, 1.0]])
+    spec = FrameStackSpec(0.0, 1e9, 1.0, (1.0,) * len(levels), levels)
+    a = rng.uniform(10, 20, shape)
+    f = rng.uniform(0, 30, (k, *shape))
+    gains = np.array([1.3, 0.7, 1.1, 0.8])  # each LED frame's ambient, relative to the ambient frame's
+    frames = [g * a + np.tensordot(row, f, axes=1) for g, row in zip(gains, levels, strict=True)]
+    weights = np.array([0.6, 1.5, 0.4])
+    truth = a + np.tensordot(weights, f, axes=1)
+    offsets = spec.unmixing @ (gains - 1.0)
+    steady, _ = synthesize(a, frames, spec, weights, dtype=np.float64)
+    image, _ = synthesize(a, frames, spec, weights, dtype=np.float64, ambient_offsets=offsets)
+    assert np.abs(steady - truth).max() > 1.0  # without the offsets the lamp's extra share stays in
+    np.testing.assert_allclose(image, truth, rtol=1e-12)
+    stream = SynthesisStream(spec, weights, shape, dtype=np.float64, ambient_offsets=offsets)
+    for frame in (a, *frames):
+        stream.add(frame)
+    np.testing.assert_array_equal(stream.result()[0], image)
+    with pytest.raises(SpectralDataError, match="ambient offsets of shape"):
+        frame_coefficients(spec, weights, np.ones(k + 1))

@@ -5,9 +5,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from msflash.acquisition.app.cli import main
+from msflash.acquisition.sequence.format import Sequence
+from msflash.acquisition.sequence.reader import read_sequence
+from msflash.acquisition.session.analysis import sequence_flicker, synthesize_sequence
+from msflash.processing.flicker import FlickerCheck
 
 
 def test_a_flickering_lamp_is_found_reported_and_recorded(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -80,3 +85,47 @@ def test_bad_flicker_options_are_one_line_and_exit_2(
     lines = [line for line in err.splitlines() if line.startswith("msflash: error")]
     assert len(lines) == 1 and named in lines[0]
     assert "Traceback" not in err
+
+
+def _mean_image(path: Path) -> float:
+    import OpenImageIO as oiio
+
+    pixels = oiio.ImageInput.open(str(path)).read_image("float")
+    return float(np.mean(pixels))
+
+
+def test_the_flash_image_of_a_flickering_lamp_holds_its_ambient_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """The synthesised flash image takes out the lamp's extra share in each LED frame, as the estimate does: its
+    flash part (the image less the ambient frame) is the steady lamp's scene's, where before it kept that share."""
+    images = {}
+    for name, flicker in (("steady", []), ("flickering", ["--flicker", "100:0.3"])):
+        out = tmp_path / name
+        assert main(["run", "--out", str(out), "--exposure", "2000", "--seed", "2", *flicker]) == 0
+        images[name] = out / "sequence"
+    capsys.readouterr()
+    flash = tmp_path / "flash.exr"
+    argv = ["flash", str(images["flickering"]), "--mode", "complementary", "--method", "global", "--json"]
+    assert main([*argv, "--out", str(flash)]) == 0
+    weights = np.array(json.loads(capsys.readouterr().out)["flash_weights"])
+    steady, flickering = read_sequence(images["steady"]), read_sequence(images["flickering"])
+    check = sequence_flicker(flickering)
+    assert check is not None and check.corrected
+
+    def flash_part(sequence: Sequence, flicker: FlickerCheck | None = None) -> float:
+        image, _, _ = synthesize_sequence(sequence, weights, flicker=flicker)
+        return float(np.mean(image) - np.mean(synthesize_sequence(sequence, 0 * weights)[0]))
+
+    truth = flash_part(steady)
+    before = abs(flash_part(flickering) / truth - 1)  # the LED frames' extra ambient kept
+    after = abs(flash_part(flickering, check) / truth - 1)
+    # `flash --out` and `synthesize` (weights given alone) write that image, and say the flicker they took out
+    again = tmp_path / "again.exr"
+    assert (
+        main(["synthesize", str(images["flickering"]), "--weights=" + ",".join(map(str, weights)), "--out", str(again)])
+        == 0
+    )
+    assert "msflash: flicker: the LED frames saw" in capsys.readouterr().err
+    assert _mean_image(again) == pytest.approx(_mean_image(flash), rel=1e-6)
+    assert before > 0.03 and after < before / 3, (before, after)
