@@ -378,7 +378,11 @@ def upsample_tiles(values: np.ndarray, tiles: TiledStatistics, shape: tuple[int,
 
 
 def coefficient_maps(
-    spec: FrameStackSpec, tile_flash_weights: np.ndarray, tiles: TiledStatistics, shape: tuple[int, int]
+    spec: FrameStackSpec,
+    tile_flash_weights: np.ndarray,
+    tiles: TiledStatistics,
+    shape: tuple[int, int],
+    ambient_offsets: np.ndarray | None = None,
 ) -> np.ndarray:
     """Per-pixel coefficients of the linearised frames [ambient, LED frames…], (H, W, 1 + n_frames).
 
@@ -388,7 +392,7 @@ def coefficient_maps(
     per_tile: np.ndarray = np.empty(tile_flash_weights.shape[:2] + (1 + len(spec.led_scales),))
     for i in range(per_tile.shape[0]):
         for j in range(per_tile.shape[1]):
-            ambient_coefficient, coefficients = frame_coefficients(spec, tile_flash_weights[i, j])
+            ambient_coefficient, coefficients = frame_coefficients(spec, tile_flash_weights[i, j], ambient_offsets)
             per_tile[i, j, 0], per_tile[i, j, 1:] = ambient_coefficient, coefficients
     return upsample_tiles(per_tile, tiles, shape)
 
@@ -399,13 +403,15 @@ def synthesize_local(
     spec: FrameStackSpec,
     tile_flash_weights: np.ndarray,
     tiles: TiledStatistics,
+    ambient_offsets: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The spatially varying computational flash image ``m_a + Σ_k w_k(x) m_f,k``.
 
     Per-tile flash weights (e.g. complementary to each tile's ambient) are blended bilinearly
     between tile centres into per-pixel coefficient maps, and the image is the per-pixel weighted
     sum of the raw frames (a Bayer mosaic stays a mosaic: every sample has its own coefficients).
-    With equal weights in every tile it equals :func:`processing.synthesis.synthesize`.
+    With equal weights in every tile it equals :func:`processing.synthesis.synthesize`, ``ambient_offsets``
+    (a flickering lamp's share in each LED image) included.
 
     Returns
     -------
@@ -425,7 +431,7 @@ def synthesize_local(
             f"{tiles.shape + (spec.n_leds,)}"
         )
     shape = ambient.shape[:2]
-    maps = coefficient_maps(spec, tile_flash_weights, tiles, shape)
+    maps = coefficient_maps(spec, tile_flash_weights, tiles, shape, ambient_offsets)
     scales = np.concatenate([[spec.ambient_scale], np.asarray(spec.led_scales, dtype=float)])
     factors = (maps * scales).astype(np.float32)
     offset = (-spec.black_level * factors.astype(float).sum(axis=-1)).astype(np.float32)

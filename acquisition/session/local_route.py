@@ -24,6 +24,7 @@ from msflash.acquisition.session.estimate_stream import (
     stream_sequence,
 )
 from msflash.processing.flash import FlashBounds, FlashSolution
+from msflash.processing.flicker import applied_offsets
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, synthesize_local
 
 
@@ -148,9 +149,13 @@ def local_flash_payload(
 def synthesize_sequence_local(
     sequence: Sequence, tile_flash_weights: np.ndarray, local: LocalEstimate, stack: FrameStack | None = None
 ) -> tuple[np.ndarray, np.ndarray, FrameStack]:
-    """The spatially varying computational flash image (per-tile weights blended between tile centres)."""
+    """The spatially varying computational flash image (per-tile weights blended between tile centres), the
+    global estimate's flicker shares taken out as :func:`~acquisition.session.analysis.synthesize_sequence` does."""
     stack = stack or load_frame_stack(sequence)
-    image, saturated = synthesize_local(stack.ambient, stack.led_frames, stack.spec, tile_flash_weights, local.tiles)
+    offsets = applied_offsets(local.global_estimate.flicker)
+    image, saturated = synthesize_local(
+        stack.ambient, stack.led_frames, stack.spec, tile_flash_weights, local.tiles, offsets
+    )
     return image, saturated, stack
 
 

@@ -411,6 +411,13 @@ def test_local_synthesis_equals_global_for_equal_weights_and_blends_between() ->
     reference, reference_saturated = synthesize(s.ambient, s.led_frames, s.spec, weights)
     np.testing.assert_allclose(image, reference, rtol=0, atol=FLOAT32 * float(np.abs(reference).max()))
     np.testing.assert_array_equal(saturated, reference_saturated)
+    offsets = np.array([0.2, -0.1, 0.0, 0.3, 0.1, -0.2, 0.05])  # a flickering lamp's shares: the same taken out
+    flickering, _ = synthesize_local(
+        s.ambient, s.led_frames, s.spec, np.broadcast_to(weights, (TILES, TILES, 7)), t, offsets
+    )
+    flickering_reference, _ = synthesize(s.ambient, s.led_frames, s.spec, weights, ambient_offsets=offsets)
+    assert np.abs(flickering_reference - reference).max() > 100 * FLOAT32 * float(np.abs(reference).max())
+    np.testing.assert_allclose(flickering, flickering_reference, rtol=0, atol=FLOAT32 * float(np.abs(reference).max()))
     # Two different mixes left and right: pixels at the tile centres get their own tile's image.
     varying = np.zeros((TILES, TILES, 7))
     varying[:, : TILES // 2] = weights
