@@ -54,6 +54,20 @@ def preview_samples(raw: np.ndarray, cfa: str | None, width: int) -> np.ndarray:
     return np.ascontiguousarray(frame[::step, ::step])
 
 
+def _flicker_offsets(run: Path, names: tuple[str, ...]) -> np.ndarray | None:
+    """The flicker shares the run's estimate corrected its LED images by (``estimate.json``), or None."""
+    estimate = read_json(run / "estimate.json")
+    flicker = estimate.get("flicker") if isinstance(estimate, dict) else None
+    offsets = flicker.get("applied_gain_offsets") if isinstance(flicker, dict) and flicker.get("corrected") else None
+    if not isinstance(offsets, list) or len(offsets) != len(names):
+        return None
+    try:
+        values = np.array([float(v) for v in offsets])
+    except (TypeError, ValueError):
+        return None
+    return values if np.all(np.isfinite(values)) else None
+
+
 @dataclass(frozen=True)
 class MixImage:
     """One synthesised preview: the linear samples, their saturation and the rendered JPEG."""
@@ -82,6 +96,8 @@ class MixPreview:
         The live view's renderer (the camera → sRGB matrix); its width is the preview's.
     run
         The run folder's name (what the page shows).
+    ambient_offsets
+        The run's estimate's flicker shares (``estimate.json``'s ``flicker.applied_gain_offsets``), or None.
     """
 
     def __init__(
@@ -93,8 +109,11 @@ class MixPreview:
         renderer: PreviewRenderer,
         run: str = "",
         ambient_exposure: tuple[float, float] = (0.0, 1.0),
+        ambient_offsets: np.ndarray | None = None,
     ) -> None:
         self.run = run
+        self.ambient_offsets = ambient_offsets
+        """A flickering lamp's share in each LED image, taken out as the run's own synthesis does, or None."""
         self.ambient_exposure = ambient_exposure
         """The ambient frame's exposure (µs) and gain: a mix is fired at them."""
         self.cfa = cfa if stack.ambient.ndim == 2 else None
@@ -147,7 +166,9 @@ class MixPreview:
                     continue
         ambient = sequence.frames[stack.ambient_index]
         exposure = (float(ambient.exposure_us), float(ambient.gain))
-        return cls(stack, sequence.camera.cfa, names, solved, renderer, run.name, exposure)
+        return cls(
+            stack, sequence.camera.cfa, names, solved, renderer, run.name, exposure, _flicker_offsets(run, names)
+        )
 
     def levels(self, given: object) -> tuple[float, ...]:
         """``given`` checked as one drive level in [0, 1] per LED (a one-line :class:`UsageError` otherwise)."""
@@ -163,7 +184,10 @@ class MixPreview:
 
     def synthesize(self, levels: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
         """``synthesize`` on the preview's samples: the linear image and its saturation mask."""
-        return synthesize(self.ambient, self.led_frames, self.spec, np.asarray(levels, dtype=float), workers=1)
+        weights = np.asarray(levels, dtype=float)
+        return synthesize(
+            self.ambient, self.led_frames, self.spec, weights, workers=1, ambient_offsets=self.ambient_offsets
+        )
 
     def rgb(self, linear: np.ndarray) -> np.ndarray:
         """Camera RGB of a linear image of the preview's samples (a mosaic's superpixels)."""

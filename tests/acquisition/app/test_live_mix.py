@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import tifffile
 
+from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.live.mix_preview import MixPreview, preview_samples
 from msflash.acquisition.app.live.preview import PreviewRenderer
 from msflash.acquisition.app.live.rig_controls import pixel_readout
@@ -18,7 +19,7 @@ from msflash.acquisition.app.live.run_job import SequenceRequest, run_sequence
 from msflash.acquisition.app.live.server import TOKEN_HEADER
 from msflash.acquisition.app.live.snapshots import write_snapshot
 from msflash.acquisition.sequence.reader import read_sequence
-from msflash.acquisition.session.analysis import FrameStack, synthesize_sequence
+from msflash.acquisition.session.analysis import FrameStack, load_frame_stack, synthesize_sequence
 from msflash.acquisition.session.rig import open_rig
 from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import synthesize
@@ -48,6 +49,24 @@ def test_the_preview_is_synthesize_sample_for_sample_on_a_sim_run(sim_run: Path)
         full, saturated, _ = synthesize_sequence(sequence, np.array(levels, dtype=float))
         assert np.array_equal(image.linear, preview_samples(full, mix.cfa, renderer.width))
         assert image.preview.jpeg[:2] == b"\xff\xd8" and image.preview.width == renderer.width
+
+
+def test_the_preview_of_a_flickering_run_takes_the_lamps_share_out_as_the_run_did(tmp_path: Path) -> None:
+    folder = tmp_path / "run"
+    assert main(["run", "--out", str(folder), "--flicker", "100:0.3", "--exposure", "2000", "--seed", "2"]) == 0
+    flicker = json.loads((folder / "estimate.json").read_text())["flicker"]
+    assert flicker["corrected"]
+    offsets = np.array(flicker["applied_gain_offsets"])
+    with open_rig("sim") as rig:
+        renderer = PreviewRenderer(rig.camera.info, rig.camera_responsivities)
+    mix = MixPreview.from_run(folder, renderer)
+    stack = load_frame_stack(read_sequence(folder / "sequence"))
+    levels = mix.solved["complementary"]
+    full, _ = synthesize(stack.ambient, stack.led_frames, stack.spec, np.array(levels), ambient_offsets=offsets)
+    kept, _ = synthesize(stack.ambient, stack.led_frames, stack.spec, np.array(levels))
+    linear = mix.image(levels).linear
+    assert np.array_equal(linear, preview_samples(full, mix.cfa, renderer.width))
+    assert not np.array_equal(linear, preview_samples(kept, mix.cfa, renderer.width))
 
 
 @pytest.mark.parametrize("layout", ["mosaic", "rgb"])
