@@ -31,7 +31,7 @@ from msflash.lab.study.table1 import (
     evaluate_camera,
 )
 from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.progress import Progress
+from msflash.lab.progress import Progress
 from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
 
 

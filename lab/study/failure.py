@@ -52,7 +52,7 @@ from msflash.lab.study.table1 import (
 from msflash.processing import lights
 from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.errors import SolverError, SpectralDataError
-from msflash.processing.progress import Progress, report_count
+from msflash.lab.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 
 FACTORS: dict[str, dict[str, Any]] = {

@@ -38,7 +38,7 @@ from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.progress import Progress, report_count
+from msflash.lab.progress import Progress, report_count
 from msflash.processing.scenes import chart_scene
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 

@@ -16,7 +16,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.led_controller import discovery
 from msflash.led_controller.adapters.text_booth import TextBooth
-from msflash.led_controller.adapters.text_booth_emulator import TextBoothServer, serve_text_booth
+from msflash.lab.text_booth_emulator import TextBoothServer, serve_text_booth
 from msflash.led_controller.booth_probe import probe_booth
 from msflash.led_controller.console import BoothConsole
 from msflash.led_controller.discovery import SerialPortInfo
