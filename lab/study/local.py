@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from msflash.lab.progress import Progress, report_count
 from msflash.processing import datasets, lights
 from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import estimate_ambient
@@ -51,7 +52,6 @@ from msflash.processing.image_formation import (
 )
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, denoised_global, estimate_local, tile_statistics
 from msflash.processing.metrics import spectrum_rmse
-from msflash.lab.progress import Progress, report_count
 from msflash.processing.scenes import Scene
 from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra

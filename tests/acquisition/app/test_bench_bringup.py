@@ -25,9 +25,9 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rig import emulator_for
+from msflash.lab.wiring import read_pins, wiring_svg
 from msflash.led_controller import LedBooth, discovery, firmware_sim, serve_on_pty
 from msflash.led_controller.stk500v2 import read_intel_hex
-from msflash.lab.wiring import read_pins, wiring_svg
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID
 
