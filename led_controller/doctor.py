@@ -383,16 +383,8 @@ def run_doctor(
 ) -> list[Finding]:
     """Run every check and return the findings in a stable order.
 
-    Parameters
-    ----------
-    sysfs_root, dev_root, proc_root : Path
-        Roots standing for ``/sys``, ``/dev`` and ``/proc``.
-    list_usb : callable or None
-        Returns the USB devices (default: through pyusb).
-    serial_ports : sequence of SerialPortInfo or None
-        The serial ports (default: through pyserial).
-    identity : Identity or None
-        Whose access to check (default: this process).
+    The roots stand for ``/sys``, ``/dev`` and ``/proc``; by default the USB devices come through
+    pyusb, the serial ports through pyserial, and the access checked is this process's.
     """
     who = identity or Identity.current()
     usb_lister = list_usb or (lambda: list_usb_devices(sysfs_root=sysfs_root))

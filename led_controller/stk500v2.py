@@ -42,22 +42,14 @@ _PARAMETERS = {0x90: 0x0F, 0x91: 0x02, 0x92: 0x0A}  # HW_VER, SW_MAJOR, SW_MINOR
 
 @dataclass
 class Stk500v2Bootloader:
-    """An STK500v2 bootloader's message parser and flash (see the module docstring).
-
-    Attributes
-    ----------
-    flash : bytearray
-        The MCU's flash, erased (0xFF) at first; pages written by ``CMD_PROGRAM_FLASH_ISP`` land here.
-    active : bool
-        A programmer spoke to it (a valid message arrived): the bootloader stays until
-        ``CMD_LEAVE_PROGMODE_ISP``.
-    left : bool
-        The programmer ended its session: the bootloader starts the firmware.
-    """
+    """An STK500v2 bootloader's message parser and flash (see the module docstring)."""
 
     flash: bytearray = field(default_factory=lambda: bytearray(b"\xff" * FLASH_BYTES))
+    """Erased (0xFF) at first; pages written by ``CMD_PROGRAM_FLASH_ISP`` land here."""
     active: bool = False
+    """A programmer spoke to it: the bootloader stays until ``CMD_LEAVE_PROGMODE_ISP``."""
     left: bool = False
+    """The programmer ended its session: the bootloader starts the firmware."""
     written: int = 0
     _buffer: bytearray = field(default_factory=bytearray)
     _address: int = 0

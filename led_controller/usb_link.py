@@ -64,11 +64,6 @@ class PortOpenWatch:
     The watch is set up before the path is handed to a host, so every open a host makes is seen,
     and only those: reading the node's attributes (``stat``, pyserial's port listing) is no open.
 
-    Parameters
-    ----------
-    path : str
-        The node to watch (a pty's ``/dev/pts/N``).
-
     Raises
     ------
     OSError
