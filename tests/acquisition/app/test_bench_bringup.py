@@ -27,9 +27,9 @@ from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rig import emulator_for
 from msflash.lab.wiring import read_pins, wiring_svg
 from msflash.led_controller import LedBooth, discovery, firmware_sim, serve_on_pty
-from msflash.led_controller.stk500v2 import read_intel_hex
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID
+from tests.acquisition.support.intel_hex import read_intel_hex
 
 REPO = Path(__file__).resolve().parents[3]
 MSFLASH = [sys.executable, "-m", "msflash.acquisition.app.cli"]
