@@ -146,10 +146,6 @@ def parse_spectrometer_text(
 
     Parameters
     ----------
-    text
-        The file's contents.
-    source
-        Names the file in messages.
     unit
         ``energy`` or ``photons``: what the value column holds.
     column
@@ -398,10 +394,6 @@ def measurement_to_spectra(
 
     Parameters
     ----------
-    measurements
-        One or more exports (possibly on different instrument grids).
-    grid
-        The target grid (the sequence's, usually 400–700/10).
     unit
         The unit of the result (default: the first measurement's).
     """

@@ -231,8 +231,6 @@ def remove_baseline(
 
     Parameters
     ----------
-    measurement
-        The export.
     dark
         A dark export (shutter closed) on the same instrument grid, or None.
     no_dark

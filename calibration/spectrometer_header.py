@@ -199,8 +199,6 @@ def acquisition_settings(
     ----------
     header_lines
         ``(line number, text)`` of every header and comment line, in file order.
-    source
-        Names the file in messages.
     column_units
         The units of the value column(s), where the export has a unit row (AvaSoft ``[counts]``).
 
