@@ -54,8 +54,6 @@ def total_illumination(ambient: Spectra, led_spectra: Spectra, led_levels: Seque
 
     Parameters
     ----------
-    led_spectra
-        ``I``, (n_wavelengths, k): each LED at full drive, true ratios between LEDs.
     led_levels
         ``w``, k drive levels (0 = off, 1 = full).
 

@@ -103,14 +103,10 @@ def chart_scene(
     reflectances
         The patches, or ``"chart110"`` (the paper's Natural-100 + gray strip, default: 10 rows ×
         11 columns, the gray strip last) or ``"macbeth"`` (ISETCam's, 4 rows × 6 columns).
-    patch_px
-        Side of a patch in pixels.
     columns
         Patches per row; by default 6 for 24 patches, otherwise ``ceil(sqrt(n))``.
     border_px
         Gap between and around patches, filled with a flat dark surface.
-    border_reflectance
-        Reflectance of that surface (real charts are printed on near-black board).
     specular_strip_px
         If > 0, a strip of this height below the chart with a neutral highlight
         (:attr:`Scene.specular`), which saturates at exposures metered on the chart.
