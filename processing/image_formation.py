@@ -171,8 +171,6 @@ def render_frame(
 
     Parameters
     ----------
-    scene, illuminant, camera_responsivities, exposure_us, scale
-        As for :func:`expected_response`.
     gain
         Linear analogue gain, applied after the photo-electrons are collected.
     rng
