@@ -273,6 +273,3 @@ def _integration_seconds(found: _Found, source: str) -> float | None:
             "positive number"
         )
     return seconds
-
-
-__all__ = ["SECONDS_PER", "AcquisitionSettings", "ValueUnit", "acquisition_settings", "header_number"]
