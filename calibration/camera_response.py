@@ -86,7 +86,6 @@ class ResponsivityPrior:
     training curves, each channel scaled to unit Euclidean norm ``u = c / ‖c‖`` (rank ≤ number of
     cameras)."""
     cameras: tuple[str, ...]
-    """The training cameras."""
 
     def covariance(self, channel: str, shrinkage: float) -> np.ndarray:
         """Prior covariance: the learned moment plus ``shrinkage`` × a smooth covariance of equal trace.

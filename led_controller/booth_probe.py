@@ -31,11 +31,9 @@ class ProbedBooth:
     """What a booth said it is when asked for its identity."""
 
     port: str
-    """The port asked."""
     protocol: str
     """The protocol it answered in."""
     firmware: str
-    """Its firmware string."""
     channels: int
     """Its number of LED channels."""
     names: tuple[str, ...]

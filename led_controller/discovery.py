@@ -81,7 +81,6 @@ class SerialPortInfo:
     serial_number: str | None
     """USB serial number, or None."""
     description: str
-    """Human-readable description."""
     by_id: str | None = None
     """Its ``/dev/serial/by-id/…`` link (stable across re-plugging), or None."""
 

@@ -62,13 +62,9 @@ class UsbDevice:
     """A USB device as far as the checks need it."""
 
     bus: int
-    """Bus number."""
     address: int
-    """Device address on the bus."""
     vid: int
-    """Vendor id."""
     pid: int
-    """Product id."""
     product: str | None
     """Product string, if readable."""
     speed_mbps: float | None

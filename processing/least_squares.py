@@ -56,7 +56,6 @@ class QuadraticSolution:
     slack: np.ndarray
     """``G x − h``, shape (m,)."""
     problem: FactoredQuadratic = field(repr=False)
-    """The problem solved."""
     linear: np.ndarray = field(repr=False)
     """Its linear term f."""
 

@@ -73,11 +73,9 @@ class WavelengthGrid:
     """
 
     start_nm: float
-    """First wavelength."""
     stop_nm: float
     """Last wavelength (inclusive)."""
     step_nm: float
-    """Spacing between samples."""
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.start_nm) and np.isfinite(self.stop_nm) and np.isfinite(self.step_nm)):
@@ -187,7 +185,6 @@ class Spectra:
     """
 
     grid: WavelengthGrid
-    """The wavelength grid of every spectrum."""
     values: np.ndarray
     """The spectra, shape (n_wavelengths, n), one column per spectrum."""
     names: tuple[str, ...]
