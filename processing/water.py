@@ -263,8 +263,6 @@ def underwater_ambient(
         Override the constituents of ``water`` (mg/m³, 1/m at 440 nm, 1/m at 440 nm).
     grid
         Within 400–700 nm, the Bricaud table's range.
-    water
-        A :class:`WaterBody` or the name of a preset (:data:`WATER_TYPES`).
     surface_illuminant
         The light just below the surface (a :func:`processing.datasets.illuminant` name).
 
