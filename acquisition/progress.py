@@ -11,7 +11,7 @@ Bars are on only when ``msflash`` turned them on (:func:`configure`, from ``cli.
 stderr is a terminal and ``--json`` was not given (:func:`bars_wanted`): a pipe, a file, a test's
 captured stream or a notebook get lines only, and nothing of tqdm is imported.
 
-``processing`` reports through :data:`REPORTER`, a :class:`processing.progress.CountedProgress`:
+``processing`` reports through :data:`REPORTER`, a :class:`msflash.lab.progress.CountedProgress`:
 the studies call it with counts without knowing whether a bar is drawn.
 """
 
@@ -145,4 +145,4 @@ class _Reporter:
 
 
 REPORTER = _Reporter()
-"""The reporter to pass as a study's ``progress`` (:mod:`processing.progress`)."""
+"""The reporter to pass as a study's ``progress`` (:mod:`msflash.lab.progress`)."""

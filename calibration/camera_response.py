@@ -81,13 +81,11 @@ class ResponsivityPrior:
     """Second moments of each channel over a set of cameras: a Gaussian prior on the curve shape."""
 
     grid: WavelengthGrid
-    """The wavelength grid."""
     moments: dict[str, np.ndarray]
     """Channel → (n_wavelengths, n_wavelengths) uncentred second moment ``E[u uᵀ]`` of the
     training curves, each channel scaled to unit Euclidean norm ``u = c / ‖c‖`` (rank ≤ number of
     cameras)."""
     cameras: tuple[str, ...]
-    """The training cameras."""
 
     def covariance(self, channel: str, shrinkage: float) -> np.ndarray:
         """Prior covariance: the learned moment plus ``shrinkage`` × a smooth covariance of equal trace.
@@ -113,15 +111,7 @@ def learn_prior(cameras: Mapping[str, Spectra], exclude: Sequence[str] = ()) -> 
     Each training channel is scaled to unit norm before the moment is taken: a channel's gain is
     a nuisance the fit estimates from the data anyway (α is chosen per channel), so every camera
     weighs the same in the shape prior instead of in proportion to its channel's share of the
-    peak. (Leave-one-camera-out it does better than max-normalised curves on every noise seed:
-    ``docs/calibration.md``, camera responsivities.)
-
-    Parameters
-    ----------
-    cameras
-        Name → responsivities (R, G, B), all on one grid.
-    exclude
-        Cameras left out (the one under test).
+    peak. ``cameras``: name → R, G, B on one grid; ``exclude``: the camera under test.
 
     Raises
     ------
@@ -164,7 +154,7 @@ class ResponsivityEstimate:
     responsivities: Spectra
     """R, G, B in photons, max-normalised over the three channels."""
     method: str
-    """``smoothness`` or ``pca_prior``."""
+    """One of :data:`RESPONSIVITY_METHODS`."""
     alphas: tuple[float, ...]
     """The chosen prior precision per channel (relative)."""
     shrinkages: tuple[float, ...]
@@ -207,17 +197,15 @@ def estimate_responsivities(
 ) -> ResponsivityEstimate:
     """Responsivities from linear camera responses of a chart under known lights.
 
+    The model and the choice of α are the module notes'.
+
     Parameters
     ----------
     responses
         Linear camera values (black-subtracted, per unit exposure and drive), shape
         (n_lights, n_patches, 3), in the order of ``illuminants`` and ``reflectances``.
-    reflectances
-        The chart's patches, (n_wavelengths, n_patches).
     illuminants
-        The lights, (n_wavelengths, n_lights), with their true relative powers.
-    method
-        One of :data:`RESPONSIVITY_METHODS`.
+        The lights with their true relative powers.
     prior
         Required for ``pca_prior`` (learned without the camera under test).
     response_std
@@ -228,15 +216,6 @@ def estimate_responsivities(
     ------
     CalibrationError
         On shape mismatches, non-finite responses, an unknown method or a missing prior.
-
-    Notes
-    -----
-    Each channel is a linear-Gaussian problem: whitened responses ``m = A c + e`` with a prior
-    ``c ~ N(0, P/α)``. ``smoothness`` takes ``P = (D₂ᵀD₂ + δI)⁻¹``; ``pca_prior`` takes the
-    training cameras' second moment plus a smooth share (:meth:`ResponsivityPrior.covariance`).
-    α (and the smooth share) maximise the evidence ``p(m | α)`` with the noise level profiled
-    out (MacKay 1992) — chosen from the camera's own data, never from the truth. The estimate
-    is the MAP with ``c ≥ 0``, solved exactly by :func:`processing.least_squares.minimise_quadratic`.
     """
     if method not in RESPONSIVITY_METHODS:
         raise CalibrationError(

@@ -72,16 +72,10 @@ def detect_chart(
         Linear frames (H, W, 3) or Bayer mosaics (H, W), all of the same scene.
     excluded
         Pixels to ignore (saturated in some frame), bool (H, W).
-    cfa
-        The mosaic's layout, or None for RGB.
     colour
         The frames and lights of the orientation test.
     reflectances
         The chart's patches in chart order (column by column), on the lights' grid.
-    rows, columns
-        The chart's grid.
-    where
-        Named in errors (the sequence).
     quanta
         Per image, the linear value of one raw step (``1 / (exposure · gain)``), or None for
         unquantised frames.

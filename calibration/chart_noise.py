@@ -93,6 +93,3 @@ def noise_summary(noise: np.ndarray, names: Sequence[str], grid: WavelengthGrid)
         "worst_nm": float(grid.wavelengths_nm[at]),
         "worst_value": float(column[at]),
     }
-
-
-__all__ = ["NOISE_WARNING", "chart_noise", "noise_summary", "relative_noise_on_grid"]

@@ -564,14 +564,3 @@ def _check_fit(
             )
             error.residuals = fit.relative_residual  # type: ignore[attr-defined]
             raise error
-
-
-__all__ = [
-    "CHANNELS",
-    "LIGHT_FIELDS",
-    "ChartMeasurements",
-    "SequenceCalibration",
-    "estimate_from_measurements",
-    "resolve_light",
-    "sequence_measurements",
-]

@@ -247,6 +247,3 @@ def read_led_exports(
         "no_dark": options.no_dark,
     }
     return LedExports(tuple(measurements), spectra, unit, section)
-
-
-__all__ = ["ExportOptions", "ExportUnit", "LedExports", "read_led_exports", "read_spectrometer_response"]

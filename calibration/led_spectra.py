@@ -270,13 +270,11 @@ def relative_power_through_camera(
         Linear camera responses of the white under each LED alone, (k, n_channels).
     camera_responsivities
         The camera's responsivities in the same unit and on the same grid.
-    white_reflectance
-        The reference's reflectance (default: a perfect white).
 
     Returns
     -------
     np.ndarray
-        (k,) power factors, the largest 1; multiply column ``k`` of ``led_spectra`` by it.
+        (k,) power factors, the largest 1, for the columns of ``led_spectra``.
 
     Raises
     ------

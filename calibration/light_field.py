@@ -159,6 +159,3 @@ def fit_fields_from_ratios(
 def frame_gains(basis: np.ndarray, frame: np.ndarray, theta: np.ndarray) -> np.ndarray:
     """The gain ``g`` of every row, (rows,)."""
     return np.exp(np.clip(np.sum(basis * theta[frame], axis=1), -MAX_LOG_GAIN, MAX_LOG_GAIN))
-
-
-__all__ = ["FIELD_DEGREE", "field_basis", "field_terms", "fit_fields_from_ratios", "fit_frame_fields", "frame_gains"]

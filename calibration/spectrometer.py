@@ -7,24 +7,15 @@ Public objects
 - :func:`measurement_to_spectra`: the samples as :class:`~processing.spectra.Spectra` on a grid.
   A dark export is taken off by :func:`calibration.spectrometer_dark.remove_baseline`.
 
-Accepted layout
----------------
-Comment lines start with ``#``, ``%``, ``//`` or ``;``. Any non-numeric lines *before* the data
-are a header (instrument exports carry a few: ``Wavelength (nm)\tIrradiance``, Ocean Optics'
-``>>>>>Begin Spectral Data<<<<<`` block); the last of them names the columns if it has as many
-cells as the data. After the data starts, every line must be numeric, except an end marker
-(``>>>>>End Spectral Data<<<<<``). Decimal commas are read where they are unambiguous: on a line
-whose cells are separated by semicolons or tabs and each read as a number once its one comma is a
-point (``380,5;0,25`` — the European CSV convention, what a spectrometer program writes in a
-locale with a decimal comma). Elsewhere ``1,5`` is two cells. UTF-8, UTF-16 (with its byte-order
-mark, as Windows programs write it) and Latin-1 files are read.
-
-Spectrometers sample on their own, often non-uniform, grids (a CCD's pixel-to-wavelength
-polynomial). :func:`measurement_to_spectra` integrates the piecewise-linear curve through the
-samples over 1-nm (or finer) bins — a box-car, what a coarser spectral sample means — to reach a
-uniform grid and then uses
-:meth:`Spectra.resample`, the project's resampler, for everything else. Uniform exports skip the
-binning.
+Accepted layout (``docs/calibration.md``, *Reading the numbers*)
+----------------------------------------------------------------
+Comment lines start with ``#``, ``%``, ``//`` or ``;``. Non-numeric lines *before* the data are a
+header; the last of them names the columns if it has as many cells as the data. After the data
+starts, every line must be numeric, except an end marker (``>>>>>End Spectral Data<<<<<``).
+Decimal commas are read where they are unambiguous: cells separated by semicolons or tabs, each a
+number once its one comma is a point (``380,5;0,25``); elsewhere ``1,5`` is two cells. UTF-8,
+UTF-16 (with its byte-order mark) and Latin-1 files are read. Non-uniform instrument grids go
+through :meth:`Spectra.from_samples` (box-car bins), then :meth:`Spectra.resample`.
 """
 
 from __future__ import annotations
@@ -146,10 +137,6 @@ def parse_spectrometer_text(
 
     Parameters
     ----------
-    text
-        The file's contents.
-    source
-        Names the file in messages.
     unit
         ``energy`` or ``photons``: what the value column holds.
     column
@@ -398,10 +385,6 @@ def measurement_to_spectra(
 
     Parameters
     ----------
-    measurements
-        One or more exports (possibly on different instrument grids).
-    grid
-        The target grid (the sequence's, usually 400–700/10).
     unit
         The unit of the result (default: the first measurement's).
     """

@@ -231,8 +231,6 @@ def remove_baseline(
 
     Parameters
     ----------
-    measurement
-        The export.
     dark
         A dark export (shutter closed) on the same instrument grid, or None.
     no_dark
@@ -414,12 +412,3 @@ def divide_by_response(spectra: Spectra, response: Spectra, where: str) -> Spect
     with np.errstate(divide="ignore", invalid="ignore"):
         values = np.where(factor[:, None] > 0, spectra.values / factor[:, None], 0.0)
     return spectra.replace(values=values, unit="energy", source=f"{spectra.source} ÷ response {where}")
-
-
-__all__ = [
-    "Baseline",
-    "counts_per_second",
-    "divide_by_response",
-    "out_of_band_baseline",
-    "remove_baseline",
-]

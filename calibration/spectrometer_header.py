@@ -8,31 +8,8 @@ Public objects
 - :func:`header_number`: a number as instrument software writes it (decimal comma or point,
   ``1.2E+002``).
 
-Formats (header spellings checked against public exports of each program)
--------------------------------------------------------------------------
-- **OceanView** (Ocean Insight): ``Integration Time (sec): 1.000000E-1``, ``Scans to average: 3``,
-  ``Boxcar width: 2``, ``Electric dark correction enabled: true``, then
-  ``>>>>>Begin Spectral Data<<<<<``; in a decimal-comma locale ``1,000000E-1`` and tab-separated
-  ``339,38<TAB>1234,56`` data.
-- **SpectraSuite** and **OOIBase32** (Ocean Optics, older): ``SpectraSuite Data File``,
-  ``Integration Time (usec): 100000 (USB4F01234)``, ``Spectra Averaged: 5 (USB4F01234)``,
-  ``Boxcar Smoothing: 5 (…)``, ``Correct for Electrical Dark: Yes (…)``,
-  ``>>>>>Begin Processed Spectral Data<<<<<``; OOIBase32 ``Integration Time (msec): 100``.
-  Localised SpectraSuite writes its other keys translated; the integration time key stays English.
-- **AvaSoft** (Avantes, ``.TRM``/``.RAW8``/``.IRR8`` exported as text): ``Integration time [ms]: 10.000``
-  (``35,000`` in a decimal-comma locale), ``Averaging Nr. [scans]: 9``, ``Smoothing Nr. [pixels]: 0``,
-  ``Data measured with spectrometer [name]: 0911147U1``, then a column row
-  ``Wave ;Sample ;Dark ;Reference;…`` and a unit row ``[nm] ;[counts] ;…``. The *Sample* column
-  holds the raw counts and the *Dark* column the dark the program stored (zeros if none).
-- **SpectraWiz** (StellarNet ``.SSM``/``.TRM``/``.IRR``): two lines in double quotes, the second
-  ``" SCOPE->  Wave:632.47nm  Pix:1050  Val:121.580  Time:30ms  Avg:10  Sm:1 …``, then
-  space-separated ``269.00  1.2112E+002`` rows.
-- **Thorlabs** (ThorSpectra, CCS spectrometers, CSV): ``#[SpectrumHeader]`` then ``#Key;value``
-  lines — ``#Average;0``, ``#IntegrationTime;0.010000`` (seconds, the CCS driver's unit),
-  ``#YAxisUnit;intensity`` — ``#[Data]``, the rows, ``#[EndOfFile]``.
-- **Plain** CSV or text: a comment or header line ``# integration_time_ms: 10`` or
-  ``Integration time: 10 ms`` (the unit in the key or after the value: s, ms, µs/us) and
-  ``# averages: 4``; or ``msflash calibrate leds --integration-time-ms``.
+The header spellings of each program (OceanView, SpectraSuite/OOIBase32, AvaSoft, SpectraWiz,
+Thorlabs, plain files) are listed in ``docs/calibration.md`` (*Header spellings*).
 
 Numbers in headers are read with a decimal comma or point (instrument software writes no
 thousands separators). An integration time that is not a positive finite number is refused naming
@@ -199,8 +176,6 @@ def acquisition_settings(
     ----------
     header_lines
         ``(line number, text)`` of every header and comment line, in file order.
-    source
-        Names the file in messages.
     column_units
         The units of the value column(s), where the export has a unit row (AvaSoft ``[counts]``).
 
@@ -298,6 +273,3 @@ def _integration_seconds(found: _Found, source: str) -> float | None:
             "positive number"
         )
     return seconds
-
-
-__all__ = ["SECONDS_PER", "AcquisitionSettings", "ValueUnit", "acquisition_settings", "header_number"]

@@ -11,6 +11,8 @@ this package lists none of them.
   local estimation, block agreement), run serially or on dask (the ``study`` extra);
 - ``cli_study``, ``cli_local``, ``cli_colour_study``: their commands;
 - ``bench/`` and ``cli_bench``: ``msflash bench``, speed as ratios measured interleaved in one run.
+- ``progress``: how a study reports how far it got; ``wiring``: draws ``docs/booth-wiring.svg``
+  from the firmware's pin table; ``text_booth_emulator``: the plain-text booth on a pty.
 
 Their measurements live in ``docs/`` (``docs/study-*.md``, ``docs/speed.md``, …).
 """

@@ -41,19 +41,9 @@ class LedBooth(TimedTable):
     """Driver of an msflash LED booth (protocol v1, see ``docs/booth-protocol.md``).
 
     Use :meth:`open` rather than the constructor; use the booth as a context manager so that
-    every exit path switches the LEDs off.
-
-    Parameters
-    ----------
-    port : serial.SerialBase
-        An already-open port (a device, a pty, ``loop://``, ``spy://`` or a test transport).
-        Its read timeout should be short (tens of ms): it bounds how fast ``close`` returns.
-    timeout_s : float
-        Reply timeout of every command, in seconds.
-    log_serial : str or Path or None
-        If given, a transcript file of ``> request`` / ``< reply`` / ``! event`` lines.
-    name : str or None
-        Name used in messages and logs (defaults to the port name).
+    every exit path switches the LEDs off. An already-open ``port``'s read timeout should be short
+    (tens of ms): it bounds how fast ``close`` returns. ``log_serial`` is a transcript file of
+    ``> request`` / ``< reply`` / ``! event`` lines.
     """
 
     _watchdog_s: float | None = None
@@ -79,25 +69,10 @@ class LedBooth(TimedTable):
         damaged by the boot, or a banner that comes late, gets ``ID`` again until ``boot_s`` plus
         ``timeout_s`` have passed.
 
-        Parameters
-        ----------
-        url : str
-            A device path (``/dev/ttyACM0``), a pty path, or a pyserial URL (``loop://``,
-            ``spy:///dev/ttyACM0?file=trace.txt``).
-        timeout_s : float
-            Reply timeout of every command, in seconds.
-        log_serial : str or Path or None
-            Transcript file to record the exchange in.
-        baudrate : int
-            Baud rate (ignored by USB CDC devices and ptys).
-        boot_s : float
-            How long to wait for the boot banner, in seconds (:data:`DEFAULT_BOOT_S`; 0: send ``ID``
-            at once, for a board that does not reset when its port opens).
-
-        Returns
-        -------
-        LedBooth
-            An identified booth (:attr:`info` is set).
+        ``url`` is a device path (``/dev/ttyACM0``), a pty path, or a pyserial URL (``loop://``,
+        ``spy:///dev/ttyACM0?file=trace.txt``); ``baudrate`` is ignored by USB CDC devices and ptys;
+        ``boot_s`` 0 sends ``ID`` at once, for a board that does not reset when its port opens.
+        The booth returned is identified (:attr:`info` is set).
 
         Raises
         ------

@@ -31,11 +31,9 @@ class ProbedBooth:
     """What a booth said it is when asked for its identity."""
 
     port: str
-    """The port asked."""
     protocol: str
     """The protocol it answered in."""
     firmware: str
-    """Its firmware string."""
     channels: int
     """Its number of LED channels."""
     names: tuple[str, ...]
@@ -99,13 +97,9 @@ def probe_booth(
 
     Parameters
     ----------
-    port : str
-        The device path or pyserial URL the user named.
-    protocol : str
+    protocol
         ``msflash`` (``docs/booth-protocol.md``) or ``text`` (``docs/booth-adapters.md`` §2).
-    timeout_s : float
-        How long to wait for the reply line.
-    boot_s : float
+    boot_s
         How long to wait, silent, for the booth to boot after the open reset it (``--booth-boot-s``): an
         msflash booth's ``BOOT`` banner ends the wait, a text booth's first line of its own too.
 

@@ -195,15 +195,10 @@ class TimedTable(Handshake):
     ) -> None:
         """Arm the loaded pattern table in a synchronisation mode (resets the trigger counter).
 
-        Parameters
-        ----------
-        mode : {"host", "booth", "camera"}
-            ``camera``: the camera's ExposureActive line advances the table; ``booth``: the
-            booth sets each step, waits ``settle_us``, pulses the camera trigger for
-            ``pulse_us`` and moves on every ``period_us``; ``host``: each :meth:`next_step`
-            applies a step and replies after ``settle_us``, then the host triggers the camera.
-        settle_us, pulse_us, period_us : int
-            LED settle time, trigger pulse width and (booth mode) step period, in µs.
+        ``camera``: the camera's ExposureActive line advances the table; ``booth``: the booth sets
+        each step, waits ``settle_us`` (the LEDs' settle), pulses the camera trigger for ``pulse_us``
+        and moves on every ``period_us``; ``host``: each :meth:`next_step` applies a step and replies
+        after ``settle_us``, then the host triggers the camera.
         """
         modes = {"host": Mode.HOST, "booth": Mode.BOOTH, "camera": Mode.CAMERA}
         if mode not in modes:

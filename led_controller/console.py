@@ -78,14 +78,9 @@ class _Command:
 
 
 class BoothConsole:
-    """Runs typed commands on an open booth and explains them.
+    """Runs typed commands on a booth opened with ``log_serial=transcript`` and explains them.
 
-    Parameters
-    ----------
-    booth : LedBooth or TextBooth
-        The booth, opened with ``log_serial=transcript``.
-    transcript : Path
-        The transcript the driver writes; the console shows the frames added by each command.
+    The console shows the frames each command adds to the transcript.
     """
 
     def __init__(self, booth: LedBooth | TextBooth, transcript: Path) -> None:

@@ -81,7 +81,6 @@ class SerialPortInfo:
     serial_number: str | None
     """USB serial number, or None."""
     description: str
-    """Human-readable description."""
     by_id: str | None = None
     """Its ``/dev/serial/by-id/…`` link (stable across re-plugging), or None."""
 
@@ -191,13 +190,7 @@ def is_booth(port: SerialPortInfo) -> bool:
 
 
 def find_booths(ports: Iterable[SerialPortInfo] | None = None) -> list[SerialPortInfo]:
-    """The serial ports that look like booths, in device order.
-
-    Parameters
-    ----------
-    ports : iterable of SerialPortInfo or None
-        Ports to look through (default: :func:`list_serial_ports`).
-    """
+    """The serial ports (default: :func:`list_serial_ports`) that look like booths, in device order."""
     candidates = list_serial_ports() if ports is None else list(ports)
     found = sorted((p for p in candidates if is_booth(p)), key=lambda p: p.device)
     log.debug("booth discovery: %d of %d serial ports match", len(found), len(candidates))

@@ -62,13 +62,9 @@ class UsbDevice:
     """A USB device as far as the checks need it."""
 
     bus: int
-    """Bus number."""
     address: int
-    """Device address on the bus."""
     vid: int
-    """Vendor id."""
     pid: int
-    """Product id."""
     product: str | None
     """Product string, if readable."""
     speed_mbps: float | None
@@ -383,16 +379,8 @@ def run_doctor(
 ) -> list[Finding]:
     """Run every check and return the findings in a stable order.
 
-    Parameters
-    ----------
-    sysfs_root, dev_root, proc_root : Path
-        Roots standing for ``/sys``, ``/dev`` and ``/proc``.
-    list_usb : callable or None
-        Returns the USB devices (default: through pyusb).
-    serial_ports : sequence of SerialPortInfo or None
-        The serial ports (default: through pyserial).
-    identity : Identity or None
-        Whose access to check (default: this process).
+    The roots stand for ``/sys``, ``/dev`` and ``/proc``; by default the USB devices come through
+    pyusb, the serial ports through pyserial, and the access checked is this process's.
     """
     who = identity or Identity.current()
     usb_lister = list_usb or (lambda: list_usb_devices(sysfs_root=sysfs_root))

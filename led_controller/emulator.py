@@ -65,36 +65,28 @@ class BoothEmulator(FirmwareCommands):
 
     Parameters
     ----------
-    names : sequence of str
-        Channel names (their number is the channel count).
-    peaks_nm : sequence of float
-        Peak wavelength of each channel in nm.
-    clock : callable returning float
+    clock
         Monotonic seconds; inject a :class:`ManualClock` in tests.
-    watchdog_s : float
+    watchdog_s
         Host-silence timeout after which LEDs go off (0 disables); the host can change it.
-    firmware : str
-        Firmware name reported by ``ID`` (no spaces).
-    max_steps : int
-        Pattern table capacity.
-    level_bits : int
+    level_bits
         Reported drive resolution (12..16); levels are quantised to it.
-    protocol : int
-        Protocol version reported by ``ID`` (``PROTO=``); another than this emulator's own
-        (:data:`~led_controller.protocol.PROTOCOL_VERSION`) plays a firmware the host must refuse.
-    serial : str or None
-        The serial in the board's EEPROM (``SERIAL=`` in ``ID``; None: never set, ``SERIAL=-``).
-        ``SERIAL <text>`` changes it; resets keep it.
-    seed : int
-        Seed of the unkind parts of the drive model (the interrupt latency of a camera-master
-        pulse, the timer prescaler's phase).
+    protocol
+        ``PROTO=`` in ``ID``; another than :data:`~led_controller.protocol.PROTOCOL_VERSION`
+        plays a firmware the host must refuse.
+    serial
+        ``SERIAL=`` in ``ID`` (None: never set, ``SERIAL=-``); ``SERIAL <text>`` changes it,
+        resets keep it.
+    seed
+        Seed of the unkind parts of the drive model (a camera-master pulse's interrupt latency,
+        the timer prescaler's phase).
 
     Attributes
     ----------
-    on_trigger_out : callable or None
+    on_trigger_out
         Called with the trigger count each time the booth pulses the camera's trigger line
-        (booth-master mode). Runs on the emulator's thread with the booth's state consistent,
-        so :attr:`levels` already holds the step being exposed; keep it short.
+        (booth master), on the emulator's thread once :attr:`levels` holds the step being
+        exposed; keep it short.
     """
 
     def __init__(

@@ -211,19 +211,9 @@ def serve_on_pty(
 ) -> PtyBoothServer:
     """Serve a booth emulator on a new pseudo-terminal, behind a Mega's unkind link (:class:`PtyBoothServer`).
 
-    Parameters
-    ----------
-    emulator : BoothEmulator or None
-        The emulator to serve; a new one is built from ``kwargs`` if None.
-    auto_reset, bootloader_s, latency_s
-        The link: reset on every open and its bootloader window, the USB latency timer.
-    **kwargs
-        Arguments of :class:`BoothEmulator` (only when ``emulator`` is None).
-
-    Returns
-    -------
-    PtyBoothServer
-        Has ``.port`` (the path to open), ``.emulator`` and ``.close()``.
+    ``emulator`` None: a new one is built from ``kwargs``. The link resets on every open
+    (``auto_reset``) with its bootloader window, and holds replies for the USB latency timer. The
+    server has ``.port`` (the path to open), ``.emulator`` and ``.close()``.
     """
     if emulator is None:
         emulator = BoothEmulator(**kwargs)

@@ -22,17 +22,7 @@ class BoothNotFoundError(BoothError, LookupError):
 
 
 class BoothTimeoutError(BoothError, TimeoutError):
-    """The booth did not answer in time.
-
-    Parameters
-    ----------
-    message : str
-        Full message (names the port, the command and the timeout).
-    command : str
-        Name of the command that got no reply.
-    timeout_s : float
-        How long the driver waited, in seconds.
-    """
+    """The booth did not answer ``command`` within ``timeout_s``; the message names the port too."""
 
     def __init__(self, message: str, *, command: str, timeout_s: float) -> None:
         super().__init__(message)
@@ -43,16 +33,8 @@ class BoothTimeoutError(BoothError, TimeoutError):
 class BoothProtocolError(BoothError):
     """A frame broke the booth protocol (bad checksum or length, unexpected form).
 
-    Parameters
-    ----------
-    message : str
-        Full message (names the port, the command, the expected form and the raw bytes).
-    command : str or None
-        Name of the command whose reply was bad, or None for an unsolicited line.
-    expected : str
-        The expected form of the frame, in words.
-    raw : bytes
-        The raw line as received (without its terminator).
+    ``command`` is the command whose reply was bad (None: an unsolicited line), ``expected`` the
+    frame's expected form in words, ``raw`` the line without its terminator.
     """
 
     def __init__(self, message: str, *, command: str | None, expected: str, raw: bytes) -> None:

@@ -52,23 +52,16 @@ SIM_CHANNELS = 7
 
 @dataclass(frozen=True)
 class Exposure:
-    """One camera exposure in simulated time and what each LED pin gave each row.
-
-    Attributes
-    ----------
-    start_us : float
-        Simulated time the first row started exposing.
-    exposure_us, line_us : float
-        Each row's exposure and the delay between rows (0: a global shutter).
-    on_us : tuple of tuple of float
-        ``on_us[row][channel]``: µs the LED pin was high within that row's window, exact to the
-        cycle (``sim/pin_model.c``).
-    """
+    """One camera exposure in simulated time and what each LED pin gave each row."""
 
     start_us: float
+    """Simulated time the first row started exposing."""
     exposure_us: float
     line_us: float
+    """The delay between rows (0: a global shutter)."""
     on_us: tuple[tuple[float, ...], ...]
+    """``on_us[row][channel]``: µs the LED pin was high within that row's window, exact to the cycle
+    (``sim/pin_model.c``)."""
 
     def fractions(self) -> tuple[tuple[float, ...], ...]:
         """Each row's energy from each LED as a fraction of the LED on for the whole exposure."""
@@ -81,23 +74,14 @@ class FirmwareSimError(RuntimeError):
 
 @dataclass(frozen=True)
 class TriggerPulse:
-    """A rising edge of the booth's trigger output, as simavr saw it.
-
-    Attributes
-    ----------
-    time_us : int
-        Simulated time of the edge.
-    settled_us : int
-        Simulated time since the LED duties last changed (the settle the camera got).
-    levels : tuple of float
-        LED levels during the pulse, one per channel: the PWM duty of each pin (high ticks per
-        period / (TOP + 1)), or 0/1 for a pin the timer does not drive (pulse dimming between
-        its pulses).
-    """
+    """A rising edge of the booth's trigger output, as simavr saw it."""
 
     time_us: float
     settled_us: float | None
+    """Simulated time since the LED duties last changed (the settle the camera got)."""
     levels: tuple[float, ...]
+    """Per channel the PWM duty of its pin (high ticks per period / (TOP + 1)), or 0/1 for a pin the
+    timer does not drive (pulse dimming between its pulses)."""
 
 
 def toolchain_missing() -> str | None:
@@ -135,21 +119,16 @@ class SimulatedBooth:
 
     Parameters
     ----------
-    elf : Path
-        The firmware image (built by :func:`build`).
-    channels : int
-        The image's channel count (``CH=``).
-    top : int
-        PWM TOP of the image's drive resolution (``(1 << BITS) - 1``).
-    auto_reset : bool
-        Whether a host's open of :attr:`port` resets the MCU, as a stock Mega's does (default on):
-        the bootloader then swallows the host's bytes for ``bootloader_s`` of wall-clock time before
+    elf
+        The firmware image (built by :func:`build`), with ``channels`` (``CH=``) and PWM ``top``
+        (``(1 << BITS) - 1``).
+    auto_reset
+        Whether a host's open of :attr:`port` resets the MCU, as a stock Mega's does: the
+        bootloader then swallows the host's bytes for ``bootloader_s`` of wall-clock time before
         the firmware boots (``led_controller/usb_link.py``; the simavr bridge models it in C).
-    bootloader_s : float
-        The bootloader's window after a reset, wall-clock seconds.
-    latency_s : float
+    latency_s
         The USB-serial chip's latency timer holding short replies (0: none).
-    eeprom : Path or None
+    eeprom
         A file keeping the MCU's EEPROM (the booth's serial) across runs of the simulator.
     """
 

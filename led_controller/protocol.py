@@ -180,11 +180,8 @@ class BoothInfo:
     """What a booth is: firmware, channels and their LEDs."""
 
     firmware: str
-    """Firmware name and version."""
     protocol: int
-    """Protocol version spoken by the firmware."""
     channels: int
-    """Number of LED channels."""
     names: tuple[str, ...]
     """Channel names, one per channel."""
     peaks_nm: tuple[float, ...]

@@ -42,22 +42,14 @@ _PARAMETERS = {0x90: 0x0F, 0x91: 0x02, 0x92: 0x0A}  # HW_VER, SW_MAJOR, SW_MINOR
 
 @dataclass
 class Stk500v2Bootloader:
-    """An STK500v2 bootloader's message parser and flash (see the module docstring).
-
-    Attributes
-    ----------
-    flash : bytearray
-        The MCU's flash, erased (0xFF) at first; pages written by ``CMD_PROGRAM_FLASH_ISP`` land here.
-    active : bool
-        A programmer spoke to it (a valid message arrived): the bootloader stays until
-        ``CMD_LEAVE_PROGMODE_ISP``.
-    left : bool
-        The programmer ended its session: the bootloader starts the firmware.
-    """
+    """An STK500v2 bootloader's message parser and flash (see the module docstring)."""
 
     flash: bytearray = field(default_factory=lambda: bytearray(b"\xff" * FLASH_BYTES))
+    """Erased (0xFF) at first; pages written by ``CMD_PROGRAM_FLASH_ISP`` land here."""
     active: bool = False
+    """A programmer spoke to it: the bootloader stays until ``CMD_LEAVE_PROGMODE_ISP``."""
     left: bool = False
+    """The programmer ended its session: the bootloader starts the firmware."""
     written: int = 0
     _buffer: bytearray = field(default_factory=bytearray)
     _address: int = 0
@@ -139,35 +131,3 @@ def _frame(seq: int, body: bytes) -> bytes:
     for byte in head:
         checksum ^= byte
     return head + bytes([checksum])
-
-
-def read_intel_hex(text: str) -> dict[int, int]:
-    """The bytes an Intel HEX file puts where (address → byte), for comparing a flashed image.
-
-    >>> read_intel_hex(":03000000010203F7\\n:00000001FF\\n")
-    {0: 1, 1: 2, 2: 3}
-    """
-    memory: dict[int, int] = {}
-    base = 0
-    for number, line in enumerate(text.splitlines(), 1):
-        line = line.strip()
-        if not line:
-            continue
-        if not line.startswith(":"):
-            raise ValueError(f"line {number}: {line[:20]!r}; expected an Intel HEX record ':…'")
-        record = bytes.fromhex(line[1:])
-        if sum(record) & 0xFF:
-            raise ValueError(f"line {number}: checksum does not add up")
-        count, address, kind, data = record[0], record[1] << 8 | record[2], record[3], record[4 : 4 + record[0]]
-        if len(data) != count:
-            raise ValueError(f"line {number}: {len(data)} data bytes; expected {count}")
-        if kind == 0:
-            for offset, byte in enumerate(data):
-                memory[base + address + offset] = byte
-        elif kind == 1:
-            break
-        elif kind == 2:
-            base = int.from_bytes(data, "big") << 4
-        elif kind == 4:
-            base = int.from_bytes(data, "big") << 16
-    return memory

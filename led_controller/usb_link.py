@@ -11,7 +11,7 @@ default), a 16U2 running Arduino's USB-serial firmware on its own, shorter, time
 node — pyserial's open is such an open); :class:`Bootloader` is the wall-clock window in which a
 reset board swallows what the host sends; :class:`HeldReplies` is the latency timer; :class:`TwinPort`
 is the board's end of the pty. The Python twins' servers (:class:`~led_controller.emulator_pty.PtyBoothServer`,
-``adapters/text_booth_emulator.py``) use them; the simavr
+``lab/text_booth_emulator.py``) use them; the simavr
 bridge (``firmware/sim/booth_sim.c``) has the same model in C. What cannot be simulated here (the
 16U2 itself, DTR as a voltage, the capacitor) is listed in ``docs/booth-firmware.md`` §4.
 """
@@ -63,11 +63,6 @@ class PortOpenWatch:
 
     The watch is set up before the path is handed to a host, so every open a host makes is seen,
     and only those: reading the node's attributes (``stat``, pyserial's port listing) is no open.
-
-    Parameters
-    ----------
-    path : str
-        The node to watch (a pty's ``/dev/pts/N``).
 
     Raises
     ------

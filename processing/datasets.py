@@ -128,10 +128,6 @@ def load_spectra_csv(
 
     Parameters
     ----------
-    path
-        The CSV file.
-    kind, unit
-        What the values are (see :class:`Spectra`).
     names
         Names for the spectra, replacing the header's (same count).
     source

@@ -54,10 +54,6 @@ def total_illumination(ambient: Spectra, led_spectra: Spectra, led_levels: Seque
 
     Parameters
     ----------
-    ambient
-        ``i_a``, one spectrum.
-    led_spectra
-        ``I``, (n_wavelengths, k): each LED at full drive, true ratios between LEDs.
     led_levels
         ``w``, k drive levels (0 = off, 1 = full).
 
@@ -119,8 +115,6 @@ def expected_response(
 
     Parameters
     ----------
-    scene
-        Surfaces and their layout.
     illuminant
         ``i`` (e.g. from :func:`total_illumination`), one spectrum; energy is converted to photons.
         A :class:`MixedIllumination` gives a spatially varying illuminant
@@ -177,10 +171,6 @@ def render_frame(
 
     Parameters
     ----------
-    scene, illuminant, camera_responsivities, exposure_us, scale
-        As for :func:`expected_response`.
-    sensor
-        The sensor model.
     gain
         Linear analogue gain, applied after the photo-electrons are collected.
     rng

@@ -61,10 +61,6 @@ def parse_json_document(
 
     Parameters
     ----------
-    text
-        The file's contents.
-    source
-        Names the file in messages.
     error
         The exception type (or factory) the caller raises for bad input.
     finite_numbers

@@ -56,7 +56,6 @@ class QuadraticSolution:
     slack: np.ndarray
     """``G x − h``, shape (m,)."""
     problem: FactoredQuadratic = field(repr=False)
-    """The problem solved."""
     linear: np.ndarray = field(repr=False)
     """Its linear term f."""
 
@@ -185,18 +184,8 @@ def minimise_quadratic(
 ) -> QuadraticSolution:
     """Minimise ``½ xᵀ H x − fᵀ x`` subject to ``G x ≥ h``.
 
-    Parameters
-    ----------
-    hessian
-        H, shape (n, n), symmetric positive definite.
-    linear
-        f, shape (n,).
-    constraints
-        G, shape (m, n), or None for an unconstrained problem.
-    bounds
-        h, shape (m,).
-    where
-        Names the caller in error messages.
+    ``hessian`` H (n, n) symmetric positive definite, ``linear`` f (n,), ``constraints`` G (m, n)
+    or None for an unconstrained problem, ``bounds`` h (m,); ``where`` names the caller in errors.
 
     Raises
     ------

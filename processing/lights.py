@@ -55,8 +55,6 @@ def ambient_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID, water_path_
         paper's booth and pool ambients (Section 6) — or ``underwater_ocean`` (daylight at 5 m
         depth in mesotrophic ocean water, seen over 1 m: :func:`processing.water.underwater_ambient`
         with chlorophyll, CDOM and particles).
-    grid
-        The wavelength grid.
     water_path_m
         Light path through water for ``underwater`` (the paper dived to 5 m).
 
@@ -91,8 +89,6 @@ def light_spectrum(name: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
         One of :data:`AMBIENTS` (:func:`ambient_spectrum`), a key of ``colour.SDS_ILLUMINANTS``
         (``A``, ``D50``, ``D65``, ``FL2``, ``LED-B1``…; ``F2`` is read as ``FL2``), or
         ``blackbody:<kelvin>`` (:func:`processing.datasets.illuminant`). Case is ignored.
-    grid
-        The wavelength grid.
 
     Raises
     ------

@@ -141,8 +141,6 @@ def estimate_local(
 
     Parameters
     ----------
-    tiles
-        Tiled statistics (:func:`tile_statistics`).
     led_spectra
         The k LED spectra at full drive, photons.
     method

@@ -83,15 +83,11 @@ def select_model(
 
     Parameters
     ----------
-    tiles
-        Tiled statistics.
     led_spectra
         The LED spectra (photons): the fits are Tikhonov-regularised with their roughness.
     alpha
         Dimensionless roughness weight of the scoring fits; None chooses it by GCV on the global
         statistics.
-    smoothing_grid
-        Widths (tiles) of the local candidates.
     margin
         Relative improvement over the global model a local one must exceed.
     min_explained_gain

@@ -38,12 +38,7 @@ def led_fit(led_spectra: np.ndarray, truth: np.ndarray) -> np.ndarray:
     The closest spectrum the LEDs can make: an estimate built from them cannot be expected to be
     closer to the truth.
 
-    Parameters
-    ----------
-    led_spectra
-        ``I``, (n_wavelengths, k), in the unit of ``truth``.
-    truth
-        The true spectrum, (n_wavelengths,).
+    ``led_spectra`` (n_wavelengths, k) is in the unit of ``truth`` (n_wavelengths,).
 
     Examples
     --------

@@ -56,8 +56,6 @@ def unknown_name(what: str, given: object, accepted: Iterable[object], also: str
     ----------
     what
         Where the name came from (``--ambient``, ``light``, ``study``).
-    given
-        What the user typed.
     accepted
         The names accepted (strings or numbers, as typed).
     also

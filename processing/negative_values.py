@@ -174,14 +174,8 @@ def clip_negative_noise(
 
     Parameters
     ----------
-    wavelengths_nm
-        Shape (n,).
     values
         Shape (n,) or (n, k): one column per spectrum.
-    names
-        The column names (k of them), for messages.
-    source
-        The file (or field) the values came from, for messages.
     lines
         The file line of each row, if known: the refusal then names ``source:line``.
     place

@@ -64,14 +64,8 @@ def camera_neutral(illuminant: Spectra, camera_responsivities: Spectra | None) -
 
     DNG's ``AsShotNeutral``: what a raw developer white-balances to.
 
-    Parameters
-    ----------
-    illuminant
-        One spectrum (kind ``spd``), energy or photons.
-    camera_responsivities
-        The camera's R, G, B responsivities on the illuminant's grid, or None: then camera RGB is
-        taken as linear sRGB (as msflash's previews take it) and the neutral is the sRGB of the
-        illuminant's XYZ.
+    Without ``camera_responsivities`` camera RGB is taken as linear sRGB (as msflash's previews take
+    it) and the neutral is the sRGB of the illuminant's XYZ.
 
     Raises
     ------

@@ -249,21 +249,10 @@ def srgb_preview(
     percentile: float = 99.5,
     white_balance: np.ndarray | None = None,
 ) -> np.ndarray:
-    """An 8-bit sRGB preview of a linear camera RGB image (no white balance).
+    """An 8-bit sRGB preview of a linear camera RGB image (H, W, 3), rendered by :func:`camera_to_srgb_linear`.
 
-    Parameters
-    ----------
-    linear_rgb
-        (H, W, 3) linear camera values.
-    camera_to_xyz
-        The 3×3 camera → XYZ matrix; None treats camera RGB as linear sRGB.
-    white_value
-        The linear value that maps to display white; default: :func:`display_white` of the image
-        (the ``percentile`` of each pixel's brightest channel, or its median at :data:`MEDIAN_LEVEL`
-        when that is brighter), so previews of images with different exposures are comparable only
-        when given one ``white_value``.
-    white_balance
-        Optional von Kries gains on camera RGB (see :func:`camera_to_srgb_linear`).
+    ``white_value``, the linear value shown as display white, is :func:`display_white` of the image by
+    default: previews of images with different exposures are comparable only when given one.
     """
     if linear_rgb.ndim != 3 or linear_rgb.shape[2] != 3:
         raise SpectralDataError(f"preview: image has shape {linear_rgb.shape}; expected (H, W, 3)")

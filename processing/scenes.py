@@ -4,7 +4,7 @@ Public objects
 --------------
 - :class:`Scene`: surfaces laid out by a label image, with optional shading and a specular area.
 - :func:`chart_scene`, :func:`mosaic_scene`, :func:`uniform_scene`, :func:`white_reference_scene`
-  build common ones; :func:`placed_scene` puts a scene anywhere in a larger frame (scaled, rotated).
+  build common ones (a chart placed anywhere in a frame is the tests': ``tests/calibration/placed_scenes.py``).
 
 A scene is rendered by :mod:`processing.image_formation` (eq. 1–3) once per *surface*, then indexed
 by the label image.
@@ -103,14 +103,10 @@ def chart_scene(
     reflectances
         The patches, or ``"chart110"`` (the paper's Natural-100 + gray strip, default: 10 rows ×
         11 columns, the gray strip last) or ``"macbeth"`` (ISETCam's, 4 rows × 6 columns).
-    patch_px
-        Side of a patch in pixels.
     columns
         Patches per row; by default 6 for 24 patches, otherwise ``ceil(sqrt(n))``.
     border_px
         Gap between and around patches, filled with a flat dark surface.
-    border_reflectance
-        Reflectance of that surface (real charts are printed on near-black board).
     specular_strip_px
         If > 0, a strip of this height below the chart with a neutral highlight
         (:attr:`Scene.specular`), which saturates at exposures metered on the chart.
@@ -229,74 +225,3 @@ def white_reference_scene(
     columns = (np.arange(width) - (width - 1) / 2) / ((width - 1) / 2)
     radius2 = (rows[:, None] ** 2 + columns[None, :] ** 2) / 2
     return uniform_scene(surface, height, width, shading=1.0 - (1.0 - corner_shading) * radius2)
-
-
-def placed_scene(
-    scene: Scene,
-    shape: tuple[int, int],
-    centre_yx: tuple[float, float] | None = None,
-    angle_deg: float = 0.0,
-    scale: float = 1.0,
-    background_reflectance: float = 0.2,
-) -> Scene:
-    """``scene`` photographed on a flat background: scaled, rotated and placed anywhere in a frame.
-
-    Each pixel of the new frame shows the surface under its centre (nearest neighbour), so a rotated
-    chart has the jagged edges of a real sampled one; shading and the specular mask move with it.
-
-    Parameters
-    ----------
-    scene
-        The scene to place (typically :func:`chart_scene`).
-    shape
-        Size (H, W) of the new frame.
-    centre_yx
-        Where the scene's centre lands (row, column; pixel centres are integers); default the
-        frame's centre.
-    angle_deg
-        Rotation, counter-clockwise as displayed (rows grow downwards).
-    scale
-        Pixels of the new frame per pixel of ``scene``.
-    background_reflectance
-        The flat surface, appended last and named ``"background"``, shown outside the scene.
-
-    Returns
-    -------
-    Scene
-        Surfaces of ``scene`` then ``"background"``.
-
-    Examples
-    --------
-    >>> chart = chart_scene("macbeth", patch_px=8)  # 42 × 62 pixels, centre (20.5, 30.5)
-    >>> placed = placed_scene(chart, (60, 80), centre_yx=(29.5, 39.5))
-    >>> bool(np.array_equal(placed.labels[9:51, 9:71], chart.labels)), placed.reflectances.names[-1]
-    (True, 'background')
-    """
-    height, width = int(shape[0]), int(shape[1])
-    if height < 1 or width < 1 or not (math.isfinite(scale) and scale > 0) or not math.isfinite(angle_deg):
-        raise SpectralDataError(
-            f"placed_scene: shape {shape}, scale {scale}, angle {angle_deg}; expected a positive "
-            "shape and scale and a finite angle"
-        )
-    centre = ((height - 1) / 2, (width - 1) / 2) if centre_yx is None else centre_yx
-    source_centre = ((scene.shape[0] - 1) / 2, (scene.shape[1] - 1) / 2)
-    rows, columns = np.mgrid[0:height, 0:width].astype(float)
-    dy, dx = rows - centre[0], columns - centre[1]
-    angle = math.radians(angle_deg)
-    cos, sin = math.cos(angle), math.sin(angle)
-    # Inverse map: undo the rotation (counter-clockwise as displayed: y points down) and the scale.
-    source_x = (cos * dx - sin * dy) / scale + source_centre[1]
-    source_y = (sin * dx + cos * dy) / scale + source_centre[0]
-    row_index, column_index = np.rint(source_y).astype(np.int64), np.rint(source_x).astype(np.int64)
-    inside = (row_index >= 0) & (row_index < scene.shape[0]) & (column_index >= 0) & (column_index < scene.shape[1])
-    row_index, column_index = np.where(inside, row_index, 0), np.where(inside, column_index, 0)
-    background = scene.reflectances.count
-    labels = np.where(inside, scene.labels[row_index, column_index], background).astype(np.int32)
-    shading = None if scene.shading is None else np.where(inside, scene.shading[row_index, column_index], 1.0)
-    specular = None if scene.specular is None else inside & scene.specular[row_index, column_index]
-    grid_size = scene.reflectances.grid.size
-    surfaces = scene.reflectances.replace(
-        values=np.hstack([scene.reflectances.values, np.full((grid_size, 1), float(background_reflectance))]),
-        names=scene.reflectances.names + ("background",),
-    )
-    return Scene(surfaces, labels, shading=shading, specular=specular, specular_gain=scene.specular_gain)

@@ -91,21 +91,9 @@ NNLS_CORE = _checked_nnls_core()
 
 
 def nnls(matrix: np.ndarray, target: np.ndarray, maxiter: int | None = None) -> tuple[np.ndarray, float]:
-    """``argmin ‖A x − b‖, x ≥ 0`` and the residual norm, as :func:`scipy.optimize.nnls` answers.
+    """``(x, ‖A x − b‖)`` with ``x = argmin ‖A x − b‖, x ≥ 0``, as :func:`scipy.optimize.nnls` answers.
 
-    Parameters
-    ----------
-    matrix
-        A, m × n.
-    target
-        b, m values (or an m × 1 column).
-    maxiter
-        Iteration limit (default 3 n).
-
-    Returns
-    -------
-    tuple
-        ``(x, ‖A x − b‖)``.
+    ``matrix`` A is m × n, ``target`` b m values (or an m × 1 column); ``maxiter`` defaults to 3 n.
 
     Raises
     ------

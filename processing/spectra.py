@@ -40,12 +40,8 @@ PHOTON_REFERENCE_NM = 555.0
 _GRID_TOLERANCE_NM = 1e-6
 
 MAX_TABLE_MAGNITUDE = 1e100
-"""The largest magnitude a value read from a user's spectral table or spectrometer export may have.
-
-No measured spectral quantity comes near it in any unit (photons per second per square metre are
-about 1e20); beyond it the sums of squares the fits take overflow to infinity, and a calibration
-was written with NaN (``null``) where a peak's centroid should be. The readers refuse such a
-value naming the file, line and column."""
+"""The largest magnitude a value read from a user's spectral table or spectrometer export may have:
+no spectral quantity comes near it in any unit, and beyond it the fits' sums of squares overflow."""
 
 MIN_TABLE_PEAK = 1e-100
 """The smallest largest-magnitude a value column of a user's table may have, unless it is all zero.
@@ -77,11 +73,9 @@ class WavelengthGrid:
     """
 
     start_nm: float
-    """First wavelength."""
     stop_nm: float
     """Last wavelength (inclusive)."""
     step_nm: float
-    """Spacing between samples."""
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.start_nm) and np.isfinite(self.stop_nm) and np.isfinite(self.step_nm)):
@@ -116,12 +110,7 @@ class WavelengthGrid:
     ) -> WavelengthGrid:
         """The grid of a list of wavelengths, which must be uniform and increasing.
 
-        Parameters
-        ----------
-        wavelengths_nm
-            The sampled wavelengths.
-        where
-            Names the source in error messages (a file and field).
+        ``where`` names the source in error messages (a file and field).
 
         Raises
         ------
@@ -166,17 +155,10 @@ DEFAULT_GRID = WavelengthGrid(400.0, 700.0, 10.0)
 
 
 def energy_to_photons(values: np.ndarray, wavelengths_nm: np.ndarray, kind: SpectralKind = "spd") -> np.ndarray:
-    """Convert spectral values from energy to (relative) photon units.
+    """Convert spectra (n_wavelengths,) or (n_wavelengths, n) from energy to (relative) photon units.
 
-    Parameters
-    ----------
-    values
-        Spectra, shape (n_wavelengths,) or (n_wavelengths, n).
-    wavelengths_nm
-        The wavelengths, shape (n_wavelengths,).
-    kind
-        ``"spd"`` multiplies by ``λ/λ_ref``; ``"responsivity"`` divides by it, so that a
-        camera response ``responsivityᵀ · spd`` is unchanged.
+    ``kind="spd"`` multiplies by ``λ/λ_ref``; ``"responsivity"`` divides by it, so that a camera
+    response ``responsivityᵀ · spd`` is unchanged.
 
     Examples
     --------
@@ -203,7 +185,6 @@ class Spectra:
     """
 
     grid: WavelengthGrid
-    """The wavelength grid of every spectrum."""
     values: np.ndarray
     """The spectra, shape (n_wavelengths, n), one column per spectrum."""
     names: tuple[str, ...]
@@ -305,16 +286,8 @@ class Spectra:
         become box-car means over 1-nm bins (finer if every sample step is much finer): the
         running integral of the piecewise-linear curve through the samples, differenced at the
         bin edges — what a coarser spectral sample means. This and :meth:`resample` are the only
-        places where msflash changes the sampling of a spectrum.
-
-        Parameters
-        ----------
-        wavelengths_nm
-            Increasing wavelengths, shape (n_samples,).
-        values
-            Shape (n_samples,) or (n_samples, n).
-        names, kind, unit, source
-            As for :class:`Spectra`.
+        places where msflash changes the sampling of a spectrum. ``values`` is (n_samples,) or
+        (n_samples, n).
 
         Examples
         --------
@@ -373,14 +346,9 @@ class Spectra:
     def resample(self, grid: WavelengthGrid, outside: Literal["error", "zero", "edge"] = "error") -> Spectra:
         """The spectra on another grid, by linear interpolation; the only resampler in msflash.
 
-        Parameters
-        ----------
-        grid
-            The target grid.
-        outside
-            What to do for target wavelengths outside the source range: ``"error"`` raises,
-            ``"zero"`` fills with zeros (right for emission spectra measured beyond their
-            support), ``"edge"`` repeats the end values.
+        Target wavelengths outside the source range: ``outside="error"`` raises, ``"zero"`` fills
+        with zeros (right for emission spectra measured beyond their support), ``"edge"`` repeats
+        the end values.
 
         Raises
         ------

@@ -173,20 +173,6 @@ def read_user_text(
         ) from err
 
 
-__all__ = [
-    "IMAGE_MAX_BYTES",
-    "JSON_MAX_BYTES",
-    "SPECTRAL_TABLE_MAX_BYTES",
-    "TEXT_EXPORT_MAX_BYTES",
-    "check_output_name",
-    "check_user_file",
-    "printable",
-    "read_user_bytes",
-    "read_user_text",
-    "shown_path",
-]
-
-
 def check_output_name(path: str | os.PathLike, option: str, error: type[Exception] = SpectralDataError) -> None:
     """Refuse an output ``path`` the filesystem cannot hold, before anything is created.
 

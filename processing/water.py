@@ -259,16 +259,10 @@ def underwater_ambient(
 
     Parameters
     ----------
-    depth_m
-        Depth of the subject below the surface.
-    distance_m
-        Camera–subject distance.
     chlorophyll, cdom_440, nap_440
         Override the constituents of ``water`` (mg/m³, 1/m at 440 nm, 1/m at 440 nm).
     grid
-        The wavelength grid (within 400–700 nm, the Bricaud table's range).
-    water
-        A :class:`WaterBody` or the name of a preset (:data:`WATER_TYPES`).
+        Within 400–700 nm, the Bricaud table's range.
     surface_illuminant
         The light just below the surface (a :func:`processing.datasets.illuminant` name).
 

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from msflash.lab.progress import Progress
 from msflash.lab.study.illuminants import SmoothIlluminant
 from msflash.lab.study.table1 import (
     MapFunction,
@@ -31,7 +32,6 @@ from msflash.lab.study.table1 import (
     evaluate_camera,
 )
 from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.progress import Progress
 from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
 
 

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from msflash.lab.progress import Progress, report_count
 from msflash.lab.study.noisy import (
     World,
     app_estimate,
@@ -52,7 +53,6 @@ from msflash.lab.study.table1 import (
 from msflash.processing import lights
 from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.errors import SolverError, SpectralDataError
-from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 
 FACTORS: dict[str, dict[str, Any]] = {

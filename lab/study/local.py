@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from msflash.lab.progress import Progress, report_count
 from msflash.processing import datasets, lights
 from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import estimate_ambient
@@ -51,7 +52,6 @@ from msflash.processing.image_formation import (
 )
 from msflash.processing.local import DEFAULT_TILES, LocalEstimate, denoised_global, estimate_local, tile_statistics
 from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.progress import Progress, report_count
 from msflash.processing.scenes import Scene
 from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
@@ -434,7 +434,7 @@ def run_study(
     Seeds: uniform scenes ``seed0 + s``; boundary and gradient scenes ``seed0 + 10 000 + s`` (the same
     surfaces and ambient pair, mixed two ways); the tiles sweep ``seed0 + 20 000 + s``. The tests
     use seeds below 100. ``msflash local-study --out`` writes the summary and plots (:mod:`lab.cli_local`).
-    ``progress`` (:mod:`processing.progress`) hears of each scene done.
+    ``progress`` (:mod:`msflash.lab.progress`) hears of each scene done.
     """
     scenes = [("uniform", seed0 + s) for s in range(n_uniform)]
     scenes += [(kind, seed0 + 10_000 + s) for kind in ("boundary", "gradient") for s in range(n_mixed)]

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from msflash.lab.progress import Progress, report_count
 from msflash.lab.study.noisy import make_world, patch_mean_frames, render_stack
 from msflash.lab.study.table1 import MapFunction, select_cameras
 from msflash.processing import lights
@@ -38,7 +39,6 @@ from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.progress import Progress, report_count
 from msflash.processing.scenes import chart_scene
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 

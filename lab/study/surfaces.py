@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from msflash.lab.progress import Progress, report_count
 from msflash.lab.study.illuminants import SmoothIlluminant
 from msflash.lab.study.table1 import (
     MapFunction,
@@ -35,7 +36,6 @@ from msflash.lab.study.table1 import (
 from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, WavelengthGrid
 
 PAPER_SURFACE_COUNTS = (1, 3, 5, 7, 9, 20, 30)

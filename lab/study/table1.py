@@ -58,13 +58,13 @@ from typing import Any
 
 import numpy as np
 
+from msflash.lab.progress import Progress, report_count
 from msflash.lab.study.illuminants import SmoothIlluminant, cmfs_photons, feasible_grid
 from msflash.processing import datasets
 from msflash.processing.ambient import AMBIENT_METHODS, estimate_ambient
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.least_squares import minimise_quadratic
 from msflash.processing.metrics import spectrum_rmse
-from msflash.processing.progress import Progress, report_count
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 from msflash.processing.statistics import SequenceStatistics
 

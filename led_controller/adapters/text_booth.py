@@ -122,16 +122,9 @@ def parse_levels(reply: str, channels: int, where: str) -> tuple[float, ...]:
 class TextBooth:
     """A host-paced booth speaking the plain-text line protocol (see the module docstring).
 
-    Use :meth:`open`; it implements :class:`led_controller.booth_interface.Booth`.
-
-    Parameters
-    ----------
-    port : serial.SerialBase
-        An open port whose read timeout is the reply timeout.
-    name : str
-        The port's name in messages.
-    log_serial : str or Path or None
-        A transcript file of ``> request`` / ``< reply`` lines.
+    Use :meth:`open`; it implements :class:`led_controller.booth_interface.Booth`. The open
+    ``port``'s read timeout is the reply timeout; ``log_serial`` is a transcript file of
+    ``> request`` / ``< reply`` lines.
     """
 
     def __init__(self, port: Any, *, name: str, log_serial: str | Path | None = None) -> None:

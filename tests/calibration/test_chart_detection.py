@@ -1,7 +1,7 @@
 """Chart detection (calibration/chart_detection.py): the sim rig's Macbeth chart anywhere in the frame.
 
 Sequences are recorded through the whole sim rig (``msflash capture``) with the chart placed by
-:func:`processing.scenes.placed_scene`; the truth is the placed scene's own label image.
+:func:`tests.calibration.placed_scenes.placed_scene`; the truth is the placed scene's own label image.
 """
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ from msflash.calibration.chart_detection import (
     detect_in_sequence,
 )
 from msflash.processing import datasets
-from msflash.processing.scenes import Scene, chart_scene, placed_scene, uniform_scene
+from msflash.processing.scenes import Scene, chart_scene, uniform_scene
+from tests.calibration.placed_scenes import placed_scene
 from tests.helpers import GRID, SAMPLES_DIR, ambient, leds_photons, linear_frames
 
 N_PATCHES = MACBETH_GRID[0] * MACBETH_GRID[1]

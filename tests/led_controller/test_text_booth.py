@@ -7,9 +7,9 @@ from collections.abc import Iterator
 
 import pytest
 
+from msflash.lab.text_booth_emulator import TextBoothServer, serve_text_booth
 from msflash.led_controller.adapters import open_booth
 from msflash.led_controller.adapters.text_booth import TextBooth
-from msflash.led_controller.adapters.text_booth_emulator import TextBoothServer, serve_text_booth
 from msflash.led_controller.booth_interface import unsupported_sync
 from msflash.led_controller.errors import BoothError, BoothNotFoundError, BoothTimeoutError
 

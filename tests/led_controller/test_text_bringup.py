@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 
 from msflash.acquisition.app.cli import main
+from msflash.lab.text_booth_emulator import TextBoothServer, serve_text_booth
 from msflash.led_controller import discovery
 from msflash.led_controller.adapters.text_booth import TextBooth
-from msflash.led_controller.adapters.text_booth_emulator import TextBoothServer, serve_text_booth
 from msflash.led_controller.booth_probe import probe_booth
 from msflash.led_controller.console import BoothConsole
 from msflash.led_controller.discovery import SerialPortInfo

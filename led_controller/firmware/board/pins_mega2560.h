@@ -1,5 +1,5 @@
 /* The Arduino Mega 2560's booth pins: the one table the board layer (board_mega2560.c) and the
- * wiring diagram (led_controller/wiring.py -> docs/booth-wiring.svg, regenerated and compared by the
+ * wiring diagram (lab/wiring.py -> docs/booth-wiring.svg, regenerated and compared by the
  * tests) are made from. Change a pin here and both follow.
  *
  * BOOTH_LED_PINS: X(channel, AVR port, bit, Arduino pin, timer, compare unit) -- the LED channels in

@@ -25,11 +25,11 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rig import emulator_for
+from msflash.lab.wiring import read_pins, wiring_svg
 from msflash.led_controller import LedBooth, discovery, firmware_sim, serve_on_pty
-from msflash.led_controller.stk500v2 import read_intel_hex
-from msflash.led_controller.wiring import read_pins, wiring_svg
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID
+from tests.acquisition.support.intel_hex import read_intel_hex
 
 REPO = Path(__file__).resolve().parents[3]
 MSFLASH = [sys.executable, "-m", "msflash.acquisition.app.cli"]
@@ -86,7 +86,7 @@ def test_the_wiring_diagram_is_the_firmwares_pin_table() -> None:
     assert pins.trigger_out == ("A", 0, 22) and pins.exposure_in == ("D", 0, 21, "INT0")
     shipped = (REPO / "docs" / "booth-wiring.svg").read_text(encoding="utf-8")
     assert shipped == wiring_svg(pins), (
-        "docs/booth-wiring.svg is stale: python -m msflash.led_controller.wiring --out docs/booth-wiring.svg"
+        "docs/booth-wiring.svg is stale: python -m msflash.lab.wiring --out docs/booth-wiring.svg"
     )
 
 

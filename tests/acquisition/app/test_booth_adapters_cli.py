@@ -19,8 +19,8 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.capture import SYNC_OF_TRIGGER, check_booth_runs
+from msflash.lab.text_booth_emulator import TextBoothServer, serve_text_booth
 from msflash.led_controller.adapters.text_booth import TextBooth
-from msflash.led_controller.adapters.text_booth_emulator import TextBoothServer, serve_text_booth
 from tests.acquisition.support.hw_rig import fake_camera_capture
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -18,7 +18,7 @@ import termios
 import pytest
 
 from msflash.acquisition import progress as app_progress
-from msflash.processing.progress import CountedProgress, report_count
+from msflash.lab.progress import CountedProgress, report_count
 
 CLI = [sys.executable, "-m", "msflash.acquisition.app.cli"]
 QUICK_TABLE1 = ["study", "table1", "--cameras", "3", "--illuminants", "2", "--leds", "3"]

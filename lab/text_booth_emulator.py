@@ -3,7 +3,7 @@
 Its parser is its own (it shares no code with the adapter, as a vendor's device would not).
 Run it for a terminal or a ``--booth-protocol text`` capture::
 
-    python -m msflash.led_controller.adapters.text_booth_emulator --channels 7
+    python -m msflash.lab.text_booth_emulator --channels 7
 
 prints the pty path to open and serves until interrupted.
 """
@@ -176,7 +176,7 @@ def serve_text_booth(
 def main(argv: Sequence[str] | None = None) -> int:
     """Serve a text booth emulator on a pty until interrupted; print its path."""
     parser = argparse.ArgumentParser(
-        prog="python -m msflash.led_controller.adapters.text_booth_emulator",
+        prog="python -m msflash.lab.text_booth_emulator",
         description="Serve the plain-text booth emulator on a new pty.",
     )
     parser.add_argument("--channels", type=int, default=7, help="number of LED channels (default 7)")

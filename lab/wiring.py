@@ -2,7 +2,7 @@
 
 ``firmware/board/pins_mega2560.h`` is the one list of the Mega's booth pins: the board layer builds its
 PWM table and trigger pins from it and this module draws it, so the diagram cannot drift from the
-firmware. ``python -m msflash.led_controller.wiring --out docs/booth-wiring.svg`` rewrites it; the
+firmware. ``python -m msflash.lab.wiring --out docs/booth-wiring.svg`` rewrites it; the
 tests regenerate it and compare. Every LED channel goes to a constant-current LED driver's PWM
 (dimming/enable) input, never to an LED: an ATmega2560 pin is specified for 20 mA (40 mA absolute
 maximum; 200 mA through all VCC/GND pins, 100 mA for the port E group), far from an LED's current.
@@ -17,7 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import escape
 
-FIRMWARE_DIR = Path(__file__).resolve().parent / "firmware"
+from msflash.led_controller.firmware_sim import FIRMWARE_DIR
+
 PIN_TABLE = FIRMWARE_DIR / "board" / "pins_mega2560.h"
 CONFIG = FIRMWARE_DIR / "core" / "booth_config.h"
 
@@ -125,7 +126,7 @@ def wiring_svg(pins: Pins) -> str:
         _text(
             20,
             52,
-            "generated from led_controller/firmware/board/pins_mega2560.h (python -m msflash.led_controller.wiring)",
+            "generated from led_controller/firmware/board/pins_mega2560.h (python -m msflash.lab.wiring)",
             size=11,
         ),
         f'<rect x="20" y="{top - 25}" width="230" height="{row * (len(pins.leds) + 2) + 20}" rx="8" fill="#1f6fa8" stroke="black"/>',
@@ -185,7 +186,7 @@ def wiring_svg(pins: Pins) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Write (or print) the wiring diagram."""
-    parser = argparse.ArgumentParser(prog="python -m msflash.led_controller.wiring", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m msflash.lab.wiring", description=__doc__)
     parser.add_argument("--out", type=Path, default=None, help="write the SVG here (default: stdout)")
     args = parser.parse_args(argv)
     svg = wiring_svg(read_pins())
