@@ -15,13 +15,21 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.processing.family_checks import MISS_RATIO, led_bound, paper_rmse
+from msflash.processing.family_checks import (
+    FAMILY_WARNING,
+    LED_HALF_WARNING,
+    LED_WARNING,
+    MISS_RATIO,
+    led_bound,
+    paper_rmse,
+)
 
 MODELS = ("led", "prior", "family", "auto")
 
 RULES: dict[str, dict[str, tuple[tuple[str, float], ...]]] = {
     "led": {
         "shipped (1.13)": (("shipped", 1.13),),
+        "checked (after)": (("checked", LED_WARNING),),
         "split half": (("half:full/own", 0.687),),
         "jackknife": (("jack:std/own", 0.168),),
         "shipped or split half": (("shipped", 1.168), ("half:full/own", 0.842)),
@@ -40,6 +48,7 @@ RULES: dict[str, dict[str, tuple[tuple[str, float], ...]]] = {
     },
     "auto": {
         "shipped": (("shipped", 1.0),),
+        "checked (after)": (("checked", 1.0),),
         "split half": (("half:full/own", 0.833),),
         "jackknife": (("jack:std/own", 0.914),),
         "shipped or split half": (("shipped", 1.06), ("half:full/own", 1.208)),
@@ -88,7 +97,7 @@ def features(record: dict) -> dict[str, dict[str, float]]:
         "prior": paper_rmse(prior, family) / bounds["family"],
         "family": spread_score,
     }
-    shipped["auto"] = shipped["led"] / 1.13 if auto_is_led else shipped["family"] / 1.05
+    shipped["auto"] = shipped["led"] / 1.13 if auto_is_led else shipped["family"] / FAMILY_WARNING
 
     # Split-half consistency: each model's estimate from two disjoint halves of the folds.
     halves = [h for h in record["halves"] if "error" not in h]
@@ -192,11 +201,19 @@ def features(record: dict) -> dict[str, dict[str, float]]:
         xs, ss = x / (float(np.max(x)) or 1.0), s / (float(np.max(s)) or 1.0)
         return float(np.sqrt(np.sum((xs - ss)[where] ** 2) / xs.size))
 
+    # The LEDs' check as shipped after this study: the distance or, rescaled, the split half (the LEDs' span's).
+    if "led" in half:
+        led_checked = max(shipped["led"], half["led"]["half:full/own"] * LED_WARNING / LED_HALF_WARNING)
+        checked = {"led": led_checked, "prior": shipped["prior"], "family": shipped["family"]}
+        checked["auto"] = led_checked / LED_WARNING if auto_is_led else shipped["family"] / FAMILY_WARNING
+    else:
+        checked = dict(shipped)
     out: dict[str, dict[str, float]] = {}
     for name in MODELS:
         own = bounds[name]
         row = {
             "shipped": shipped[name],
+            "checked": checked[name],
             "own_bound_inv": 1.0 / own,
             "blind": blind_share[name],
             "blind/own": blind_share[name] / own,
@@ -277,6 +294,104 @@ def rule_table(records: list[dict], label: str) -> list[str]:
     return lines
 
 
+SHOWN = {
+    "shipped": "the check before this study (the LEDs', the prior's: distance from the family estimate; the "
+    "family's: its candidates' spread)",
+    "checked": "the check after it (the LEDs' with their split half)",
+    "half:full/own": "split half: the farther half's reading from the estimate, over the LED bound",
+    "half:pair/own": "split half: the two halves' readings apart, over the LED bound",
+    "jack:std/own": "jackknife over the five folds (each left out), over the LED bound",
+    "tol0.2:max/own": "the farthest candidate within 20 % of the best evidence, over the LED bound",
+    "null0.5": "that spread in the null space of the lift (what camera and LEDs cannot see)",
+    "blind": "the estimate's energy share where the camera is below 10 % of its peak",
+    "band_f/band_l": "the family's band over the LEDs' band",
+    "pair_max/own": "the largest disagreement of LEDs, prior and family, over the LED bound",
+    "worst_plausible": "the farthest plausible spectrum over the least plausible LED bound",
+}
+"""The scores the generated page shows (every score in :func:`features` is printed by the command line)."""
+
+
+def _roc_curve(score: np.ndarray, miss: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    score = np.nan_to_num(score, nan=-np.inf)
+    order = np.argsort(-score)
+    hits = np.concatenate([[0], np.cumsum(miss[order])]) / max(miss.sum(), 1)
+    alarms = np.concatenate([[0], np.cumsum(~miss[order])]) / max((~miss).sum(), 1)
+    return alarms, hits
+
+
+def draw(records: list[dict], path: Path, title: str) -> None:
+    """One ROC panel per model: the check before and after this study, the split half and the jackknife."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    table = [features(r) for r in records]
+    figure, axes = plt.subplots(1, 4, figsize=(14, 3.8), sharey=True)
+    for axis, model in zip(axes, MODELS):
+        miss = np.array([truth_miss(r, model) for r in records])
+        for key in ("shipped", "checked", "half:full/own", "jack:std/own"):
+            score = np.array([t[model].get(key, math.nan) for t in table], float)
+            auc = roc(score, miss)[0]
+            axis.plot(*_roc_curve(score, miss), label=f"{key.split(':')[0]} ({auc:.2f})")
+        axis.plot([0, 1], [0, 1], color="grey", lw=0.8, ls=":")
+        axis.axvline(0.2, color="grey", lw=0.6, ls="--")
+        axis.axhline(0.8, color="grey", lw=0.6, ls="--")
+        axis.set_title(f"{model}: {miss.sum()} misses of {miss.size}", fontsize=9)
+        axis.set_xlabel("false alarms")
+        axis.legend(fontsize=7, loc="lower right")
+    axes[0].set_ylabel("recall")
+    figure.suptitle(title, fontsize=10)
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def document(paths: list[Path], out: Path) -> None:
+    """``out`` (markdown) and its ROC charts beside it, from record files named ``<suite>-<split>.json``."""
+    lines = [
+        "# Warning evidence on cached harness records (issue 30, item 4)",
+        "",
+        "Generated by `python -m tests.harness.warning_rules --doc "
+        + str(out.name)
+        + " RECORDS…` from `python -m tests.harness.warning_study --suite library|physics --split tuning|held_out`; "
+        "do not edit by hand. What was chosen and why: `docs/light-families.md` (Warnings) and "
+        "`docs/decisions/2026-11-warning-evidence.md`. A miss is a ratio above 1.3 to the truth's LED bound; rules "
+        "were frozen on the tuning records of both suites before any held-out record was computed.",
+        "",
+        "## ROC area of each score (larger = more likely a miss)",
+        "",
+        "| records | model | misses | " + " | ".join(SHOWN) + " |",
+        "|---|---|---|" + "---|" * len(SHOWN),
+    ]
+    for path in paths:
+        records = load([path])
+        table = [features(r) for r in records]
+        for model in MODELS:
+            miss = np.array([truth_miss(r, model) for r in records])
+            areas = [roc(np.array([t[model].get(k, math.nan) for t in table], float), miss)[0] for k in SHOWN]
+            lines.append(
+                f"| {path.stem} | {model} | {miss.sum()} of {miss.size} | "
+                + " | ".join("—" if math.isnan(a) else f"{a:.2f}" for a in areas)
+                + " |"
+            )
+    lines += ["", "Scores: " + "; ".join(f"`{k}` — {v}" for k, v in SHOWN.items()) + ".", ""]
+    lines += [
+        "## The frozen rules (recall and false alarms; per kind: warned misses / misses, warned / non-misses)",
+        "",
+        "| records | model | rule | recall | false alarms | per kind |",
+        "|---|---|---|---|---|---|",
+    ]
+    for path in paths:
+        lines += rule_table(load([path]), path.stem)
+    lines += ["", "## ROC charts (the check before and after, split half, jackknife; ROC area in brackets)", ""]
+    for path in paths:
+        chart = out.with_name(f"{out.stem}-{path.stem}.png")
+        draw(load([path]), chart, path.stem)
+        lines += [f"### {path.stem}", "", f"![{path.stem}]({chart.name})", ""]
+    out.write_text("\n".join(lines))
+
+
 def load(paths: list[Path]) -> list[dict]:
     """Records of every file, failed cases dropped."""
     records = []
@@ -291,7 +406,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("records", type=Path, nargs="+")
     parser.add_argument("--model", action="append", choices=MODELS)
     parser.add_argument("--rules", action="store_true", help="the frozen rules' recall and false alarms instead")
+    parser.add_argument("--doc", type=Path, help="write the markdown page (and its ROC charts) here instead")
     args = parser.parse_args(argv)
+    if args.doc:
+        document(args.records, args.doc)
+        return 0
     records = load(args.records)
     if args.rules:
         print(
