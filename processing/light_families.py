@@ -66,8 +66,6 @@ CHECK_TEMPERATURE = 0.5
 SEEN_FRACTION = 0.1
 """An emission band's centre must lie where the camera's most sensitive plane reaches this fraction of its peak
 (:func:`processing.light_forms.seen_forms`)."""
-SPLIT_HALVES = ((0, 2, 4), (1, 3))
-"""Two disjoint sets of the folds of block rows, for the split-half readings (:attr:`FamilyEstimate.led_halves`)."""
 POSTERIOR_SCALE = 1.0
 """Multiplies the chosen fit's tempered posterior ±1σ in the band.
 
@@ -129,10 +127,6 @@ class FamilyEstimate:
     reference: ReferencePatch | None = None
     """The reference patches that joined the evidence, if any."""
     warnings: tuple[str, ...] = ()
-    led_halves: tuple[np.ndarray, ...] = ()
-    """The LEDs' span fitted (non-negative weights, denoised data term) on each of :data:`SPLIT_HALVES`' disjoint
-    fold sets: a light the pixels pin reads the same from either half (the LEDs' miss check,
-    :func:`processing.family_checks.predicted_ratio`)."""
 
     @property
     def family(self) -> str:
@@ -369,9 +363,6 @@ class FamilyModel:
         observed = scene.whitened(folds, denoised=False)
         residual = math.sqrt(max(observed.error(chosen.fit.spectrum), 0.0))
         _, spectrum = evidence_spread(chosen, candidates, AVERAGE_TEMPERATURE)
-        halves = [[f for f in half if f < scene.n_folds and scene.counts[f] > 0] for half in SPLIT_HALVES]
-        leds = self.led_spectra.values
-        led_halves = tuple(leds @ scene.whitened(half).amplitudes(leds)[0] for half in halves if half)
         warnings = () if np.max(spectrum) > 0 else ("the estimated spectrum is zero: no ambient light was found",)
         return FamilyEstimate(
             spectrum=self.led_spectra.replace(
@@ -392,7 +383,6 @@ class FamilyModel:
             spread_std=spread,
             reference=reference,
             warnings=warnings,
-            led_halves=led_halves if len(led_halves) == len(SPLIT_HALVES) else (),
         )
 
     def band(self, chosen: Candidate, candidates: list[Candidate], problem: Whitened, n_samples: int) -> np.ndarray:

@@ -373,14 +373,8 @@ def _checks(
         spectrum_in_sequence_unit(sequence, family.spectrum.replace(values=family.spread_std[:, None])), float
     )
     prior_spectrum = np.asarray(spectrum_in_sequence_unit(sequence, prior.spectrum), float)
-    led_halves = tuple(
-        np.asarray(spectrum_in_sequence_unit(sequence, family.spectrum.replace(values=half[:, None])), float)
-        for half in family.led_halves
-    )
     return {
-        "led": predicted_ratio(
-            np.asarray(led_payload["spectrum"], float), family_spectrum, leds, LED_WARNING, "LEDs'", led_halves
-        ),
+        "led": predicted_ratio(np.asarray(led_payload["spectrum"], float), family_spectrum, leds, LED_WARNING, "LEDs'"),
         "prior": predicted_ratio(prior_spectrum, family_spectrum, leds, PRIOR_WARNING, "light prior's"),
         "family": self_check(family_spectrum, spread, leds, family.relative_error),
     }

@@ -18,13 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.processing.family_checks import (
-    FAMILY_WARNING,
-    LED_HALF_WARNING,
-    LED_WARNING,
-    MISS_RATIO,
-    PRIOR_WARNING,
-)
+from msflash.processing.family_checks import FAMILY_WARNING, LED_WARNING, MISS_RATIO, PRIOR_WARNING
 from msflash.processing.light_families import AUTO_MARGIN, CHECK_TEMPERATURE, SIMPLER_WITHIN
 
 FAMILY_ORDER = ("thermal", "discharge", "solid_state", "transmitted", "mixture")
@@ -143,7 +137,6 @@ def warning_scores(records: dict[str, dict]) -> dict[str, tuple[np.ndarray, np.n
         return np.nan_to_num(np.array([float(c.get(key, default)) for c in cases]), nan=0.0)
 
     led, prior = column(f"d:led:chosen:{tau}"), column(f"d:prior:chosen:{tau}")
-    led = np.maximum(led, column("led_half") * LED_WARNING / LED_HALF_WARNING)  # the LEDs' split-half reading
     # self_check's score: the spread over the bound, times the chosen candidate's held-out error over the LEDs'.
     led_error = column("led_held_out_clean", 1.0)
     relative = np.where(led_error > 0, column("chosen_held_out_clean", 1.0) / np.where(led_error > 0, led_error, 1), 1)

@@ -42,7 +42,6 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
         led_spectra_photons,
         spectrum_in_sequence_unit,
     )
-    from msflash.processing.family_checks import split_half_ratio
     from msflash.processing.light_families import evidence_spread, family_model
     from msflash.processing.light_prior import prior_model
     from msflash.processing.spectral_data_term import scene_form
@@ -139,9 +138,6 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
         )
     # Evidence features of the family model's own miss risk: its estimate's LED bound and the LEDs' span's noise share.
     case_row["family_bound"] = float(metrics.led_bound(truth.led_spd, family_spectrum))
-    case_row["led_half"] = split_half_ratio(
-        led_spectrum, tuple(in_unit(half) for half in estimate.led_halves), family_spectrum, truth.led_spd
-    )
     case_row["led_held_out"] = estimate.led.held_out_error
     case_row["led_held_out_clean"] = estimate.led.held_out_error_noise_removed
     case_row["chosen_held_out_clean"] = chosen.held_out_error_noise_removed
