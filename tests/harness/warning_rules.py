@@ -17,7 +17,6 @@ import numpy as np
 
 from msflash.processing.family_checks import (
     FAMILY_WARNING,
-    LED_HALF_WARNING,
     LED_WARNING,
     MISS_RATIO,
     led_bound,
@@ -25,11 +24,14 @@ from msflash.processing.family_checks import (
 )
 
 MODELS = ("led", "prior", "family", "auto")
+TRIED_LED, TRIED_LED_HALF = 1.168, 0.842
+"""The LEDs' check tried and withdrawn (docs/decisions/2026-11-warning-evidence.md): the distance from the family
+estimate from 1.168, or the LEDs' split half from 0.842 of the family's LED bound."""
 
 RULES: dict[str, dict[str, tuple[tuple[str, float], ...]]] = {
     "led": {
         "shipped (1.13)": (("shipped", 1.13),),
-        "checked (after)": (("checked", LED_WARNING),),
+        "tried: distance or split half": (("checked", TRIED_LED),),
         "split half": (("half:full/own", 0.687),),
         "jackknife": (("jack:std/own", 0.168),),
         "shipped or split half": (("shipped", 1.168), ("half:full/own", 0.842)),
@@ -48,7 +50,7 @@ RULES: dict[str, dict[str, tuple[tuple[str, float], ...]]] = {
     },
     "auto": {
         "shipped": (("shipped", 1.0),),
-        "checked (after)": (("checked", 1.0),),
+        "tried: with the LEDs' split half": (("checked", 1.0),),
         "split half": (("half:full/own", 0.833),),
         "jackknife": (("jack:std/own", 0.914),),
         "shipped or split half": (("shipped", 1.06), ("half:full/own", 1.208)),
@@ -97,7 +99,7 @@ def features(record: dict) -> dict[str, dict[str, float]]:
         "prior": paper_rmse(prior, family) / bounds["family"],
         "family": spread_score,
     }
-    shipped["auto"] = shipped["led"] / 1.13 if auto_is_led else shipped["family"] / FAMILY_WARNING
+    shipped["auto"] = shipped["led"] / LED_WARNING if auto_is_led else shipped["family"] / FAMILY_WARNING
 
     # Split-half consistency: each model's estimate from two disjoint halves of the folds.
     halves = [h for h in record["halves"] if "error" not in h]
@@ -201,11 +203,11 @@ def features(record: dict) -> dict[str, dict[str, float]]:
         xs, ss = x / (float(np.max(x)) or 1.0), s / (float(np.max(s)) or 1.0)
         return float(np.sqrt(np.sum((xs - ss)[where] ** 2) / xs.size))
 
-    # The LEDs' check as shipped after this study: the distance or, rescaled, the split half (the LEDs' span's).
+    # The LEDs' check tried and withdrawn: the distance or, rescaled, the split half (the LEDs' span's).
     if "led" in half:
-        led_checked = max(shipped["led"], half["led"]["half:full/own"] * LED_WARNING / LED_HALF_WARNING)
+        led_checked = max(shipped["led"], half["led"]["half:full/own"] * TRIED_LED / TRIED_LED_HALF)
         checked = {"led": led_checked, "prior": shipped["prior"], "family": shipped["family"]}
-        checked["auto"] = led_checked / LED_WARNING if auto_is_led else shipped["family"] / FAMILY_WARNING
+        checked["auto"] = led_checked / TRIED_LED if auto_is_led else shipped["family"] / FAMILY_WARNING
     else:
         checked = dict(shipped)
     out: dict[str, dict[str, float]] = {}
@@ -295,9 +297,9 @@ def rule_table(records: list[dict], label: str) -> list[str]:
 
 
 SHOWN = {
-    "shipped": "the check before this study (the LEDs', the prior's: distance from the family estimate; the "
-    "family's: its candidates' spread)",
-    "checked": "the check after it (the LEDs' with their split half)",
+    "shipped": "the shipped check (the LEDs', the prior's: distance from the family estimate; the family's: its "
+    "candidates' spread)",
+    "checked": "the LEDs' check with their split half (tried, withdrawn)",
     "half:full/own": "split half: the farther half's reading from the estimate, over the LED bound",
     "half:pair/own": "split half: the two halves' readings apart, over the LED bound",
     "jack:std/own": "jackknife over the five folds (each left out), over the LED bound",
@@ -320,7 +322,7 @@ def _roc_curve(score: np.ndarray, miss: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def draw(records: list[dict], path: Path, title: str) -> None:
-    """One ROC panel per model: the check before and after this study, the split half and the jackknife."""
+    """One ROC panel per model: the shipped check, the tried LED check, the split half and the jackknife."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -384,7 +386,7 @@ def document(paths: list[Path], out: Path) -> None:
     ]
     for path in paths:
         lines += rule_table(load([path]), path.stem)
-    lines += ["", "## ROC charts (the check before and after, split half, jackknife; ROC area in brackets)", ""]
+    lines += ["", "## ROC charts (shipped, the tried LED check, split half, jackknife; ROC area in brackets)", ""]
     for path in paths:
         chart = out.with_name(f"{out.stem}-{path.stem}.png")
         draw(load([path]), chart, path.stem)
