@@ -256,12 +256,12 @@ def roc(score: np.ndarray, miss: np.ndarray) -> tuple[float, float, float, float
     if not positives.size or not negatives.size:
         return math.nan, math.nan, math.nan, math.nan
     auc = float(np.mean([(p > negatives).mean() + 0.5 * (p == negatives).mean() for p in positives]))
-    best = (0.0, math.inf, 0.0)
+    best = (0.0, math.inf, 1.0)
     for threshold in np.unique(score):
         warned = score >= threshold
         alarms = (warned & ~miss).sum() / negatives.size
         recall = (warned & miss).sum() / positives.size
-        if alarms <= 0.2 and recall > best[0]:
+        if alarms <= 0.2 and (recall, -alarms) > (best[0], -best[2]):
             best = (recall, float(threshold), alarms)
     return auc, *best
 
