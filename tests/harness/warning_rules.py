@@ -151,6 +151,29 @@ def features(record: dict) -> dict[str, dict[str, float]]:
                 jack[name]["ajack:max/own"] = float(d.max()) / bounds["family"]
         jack["family"]["jack:choice_changes"] = float(np.mean([j["chosen"] != record["chosen"] for j in parts]))
         jack["auto"]["jack:auto_changes"] = float(np.mean([(j["auto_model"] == "led") != auto_is_led for j in parts]))
+    # Surface halves: every model read from reddish and bluish blocks, from dark and bright ones.
+    surface: dict[str, dict[str, float]] = {}
+    for split, readings in record.get("surface_halves", {}).items():
+        good = [h for h in readings if "error" not in h]
+        if len(good) != 2:
+            continue
+        a, b = good
+        pairs_of = {
+            "led": (np.asarray(a["led"]) * unit, np.asarray(b["led"]) * unit),
+            "prior": (np.asarray(a["prior"]) * unit, np.asarray(b["prior"]) * unit),
+            "family": (np.asarray(a["family"]) * unit, np.asarray(b["family"]) * unit),
+        }
+        pairs_of["auto"] = pairs_of["led"] if auto_is_led else pairs_of["family"]
+        for name, (x, y) in pairs_of.items():
+            row = surface.setdefault(name, {})
+            row[f"surf:{split}:pair/own"] = paper_rmse(x, y) / bounds[name]
+            row[f"surf:{split}:full/own"] = (
+                max(paper_rmse(x, estimates[name]), paper_rmse(y, estimates[name])) / (bounds[name])
+            )
+    for row in surface.values():
+        if row:
+            row["surf:max/own"] = max(v for k, v in row.items() if k.endswith("full/own"))
+            row["surf:pairmax/own"] = max(v for k, v in row.items() if k.endswith("pair/own"))
     # Spread over candidates within the evidence's tolerance, in the metric of the LED bound.
     tol = {}
     for tolerance in (0.05, 0.1, 0.2, 0.5):
@@ -238,6 +261,7 @@ def features(record: dict) -> dict[str, dict[str, float]]:
             **null_scores,
             **half.get(name, {}),
             **jack.get(name, {}),
+            **surface.get(name, {}),
             **tol.get(name, {}),
         }
         out[name] = row

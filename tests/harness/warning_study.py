@@ -46,6 +46,48 @@ def _fold_subset(statistics, folds: tuple[int, ...]):  # noqa: ANN001, ANN202 �
     )
 
 
+def _block_splits(stack, cfa: str | None) -> dict[str, tuple[np.ndarray, np.ndarray]]:  # noqa: ANN001
+    """Pixel masks of two disjoint halves of the statistics' blocks, split by what the surfaces are: by the ambient
+    block's colour (log R/B) and by its brightness, each at the median. A light the pixels pin reads the same from
+    reddish and bluish surfaces, from dark and bright ones; folds of block rows share one mix of surfaces."""
+    from msflash.acquisition.session import analysis
+    from msflash.processing.block_sums import cfa_planes
+    from msflash.processing.channel_statistics import plane_channels
+
+    period = 2 if cfa else 1
+    factor = analysis.block_factor(stack.ambient.shape, cfa)
+    planes = cfa_planes(np.asarray(stack.ambient, float), period) - stack.spec.black_level
+    names = plane_channels(cfa, planes.shape[2])
+    bh, bw = planes.shape[0] // factor, planes.shape[1] // factor
+    means = planes[: bh * factor, : bw * factor].reshape(bh, factor, bw, factor, -1).mean(axis=(1, 3))
+    by = {c: means[..., [i for i, n in enumerate(names) if n == c]].mean(-1) for c in ("R", "G", "B")}
+    floor = 1e-3 * max(float(means.max()), 1e-9)
+    scores = {
+        "colour": np.log(np.maximum(by["R"], floor) / np.maximum(by["B"], floor)),
+        "brightness": by["R"] + by["G"] + by["B"],
+    }
+    side = factor * period
+    out = {}
+    for name, score in scores.items():
+        upper = score >= np.median(score)
+        pixels = np.zeros(stack.ambient.shape[:2], bool)
+        pixels[: bh * side, : bw * side] = np.kron(upper, np.ones((side, side), bool))
+        covered = np.zeros_like(pixels)
+        covered[: bh * side, : bw * side] = True
+        out[name] = (pixels, covered & ~pixels)
+    return out
+
+
+def _masked(stack, keep: np.ndarray):  # noqa: ANN001, ANN202 — a FrameStack with the other blocks saturated
+    white = stack.spec.white_level
+
+    def cut(frame: np.ndarray) -> np.ndarray:
+        mask = keep if frame.ndim == 2 else keep[:, :, None]
+        return np.where(mask, frame, np.asarray(white, dtype=frame.dtype))
+
+    return replace(stack, ambient=cut(stack.ambient), led_frames=tuple(cut(f) for f in stack.led_frames))
+
+
 def _list(values: np.ndarray) -> list[float]:
     return [float(v) for v in np.asarray(values, float).ravel()]
 
@@ -178,6 +220,27 @@ def study_case(case: HarnessCase, cache: Path) -> dict:
                 "led": _list(part_estimate.led.fit.spectrum),
             }
         )
+    record["surface_halves"] = {}
+    for split, masks in _block_splits(stack, sequence.camera.cfa).items():
+        readings = []
+        for keep in masks:
+            try:
+                part = sequence_channel_statistics(sequence, _masked(stack, keep))
+                part_prior = priors.estimate(part)
+                part_estimate = model.estimate(part, part_prior.spectrum.values[:, 0])
+            except Exception as error:  # noqa: BLE001 — recorded, not a crash
+                readings.append({"error": str(error)})
+                continue
+            readings.append(
+                {
+                    "prior": _list(part_prior.spectrum.values[:, 0]),
+                    "family": _list(part_estimate.spectrum.values[:, 0]),
+                    "chosen": part_estimate.chosen.fit.name,
+                    "auto_model": part_estimate.auto_model,
+                    "led": _list(part_estimate.led.fit.spectrum),
+                }
+            )
+        record["surface_halves"][split] = readings
     for folds in HALVES:
         half = _fold_subset(statistics, folds)
         try:
