@@ -39,6 +39,7 @@ def test_a_real_case_gives_every_score_and_the_shipped_checks(tmp_path) -> None:
 
     record = study_case(select_cases("tuning", quick=True)[0], tmp_path)
     assert len(record["halves"]) == 2 and len(record["jackknife"]) == 5
+    assert {split: len(halves) for split, halves in record["surface_halves"].items()} == {"colour": 2, "brightness": 2}
     scores = warning_rules.features(record)
     for model in warning_rules.MODELS:
         assert {"shipped", "half:full/own", "jack:std/own", "null0.5", "blind"} <= set(scores[model])
