@@ -228,6 +228,12 @@ def estimate_from_statistics(
         estimate = estimate_ambient(statistics, led_spectra_photons(sequence), method, alpha)
     else:
         estimate = model.estimate(statistics, method, alpha)
+    return reported(estimate, sequence, check)
+
+
+def reported(estimate: AmbientEstimate, sequence: Sequence, check: FlickerCheck) -> AmbientEstimate:
+    """The estimate as reported: the LED model's band (:func:`with_model_band`) and the flicker ``check`` its
+    statistics were corrected by."""
     return replace(with_model_band(estimate, sequence), flicker=check)
 
 
