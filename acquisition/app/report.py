@@ -168,35 +168,53 @@ def write_run_report(
     """
     out = Path(out)
     try:
-        return _write_run_report(
-            out, sequence, estimate, solutions, mode, true_ambient, stack, target_name, flash_frame
-        )
+        (out / "estimate.json").write_text(dumps_json(analysis.estimate_payload(sequence, estimate)) + "\n")
+        for name, solution in solutions.items():
+            (out / f"flash-{name}.json").write_text(
+                dumps_json(analysis.flash_payload(sequence, solution, target_name)) + "\n"
+            )
+        previews = _write_previews(out, sequence, solutions, stack, flash_frame)
+        target = None
+        if "complementary" in solutions:
+            target = sequence_spectra.target_illuminant(target_name, sequence).to_unit(sequence.spectral_unit)
+        plot = plot_spectra(out / "spectra.png", sequence, estimate, solutions, true_ambient, target)
     except OSError as err:
         raise OutputWriteError(
             f"{out}: the run report could not be written ({err}); expected a writable disk with room for it. "
             f"The sequence is complete in {sequence.directory} ('msflash estimate', 'flash' and 'synthesize' "
             "read it)"
         ) from err
+    summary: dict[str, Any] = {
+        "sequence": str(out / "sequence"),
+        "frames": len(sequence.frames),
+        "ambient_weights": estimate.ambient_weights,
+        "solver": estimate.method,
+        "led_peak_nm": list(sequence.led_peaks_nm()),
+        "relative_residual": estimate.relative_residual,
+        "estimate_warnings": list(estimate.warnings),
+        "flash": {
+            name: {"flash_weights": s.flash_weights, "scale": s.scale, "target_reached": s.target_reached}
+            for name, s in solutions.items()
+        },
+        "recaptured_mode": mode,
+        "target": target_name,
+        "previews": {name: str(path) for name, path in previews.items()},
+        "plot": str(plot),
+        "report": str(out / REPORT_NAME),
+    }
+    if true_ambient is not None:
+        summary.update(score_against_truth(sequence, estimate, true_ambient))
+    return summary
 
 
-def _write_run_report(
+def _write_previews(
     out: Path,
     sequence: Sequence,
-    estimate: AmbientEstimate,
     solutions: dict[str, FlashSolution],
-    mode: str,
-    true_ambient: Spectra | None,
     stack: analysis.FrameStack,
-    target_name: str,
     flash_frame: np.ndarray | None,
-) -> dict[str, Any]:
-    estimate_payload = analysis.estimate_payload(sequence, estimate)
-    (out / "estimate.json").write_text(dumps_json(estimate_payload) + "\n")
-    for name, solution in solutions.items():
-        (out / f"flash-{name}.json").write_text(
-            dumps_json(analysis.flash_payload(sequence, solution, target_name)) + "\n"
-        )
-
+) -> dict[str, Path]:
+    """The ambient's, each flash's synthesised (with its EXR) and the captured flash's previews."""
     matrix = _camera_to_xyz(sequence)
     ambient_linear, _ = _linear(sequence, stack.ambient_index, stack.ambient)
     previews = {
@@ -222,32 +240,7 @@ def _write_run_report(
         previews["flash-capture"] = write_preview(
             out / "flash-capture.png", srgb_preview(linear_rgb(sequence, captured), matrix)
         )
-
-    target = None
-    if "complementary" in solutions:
-        target = sequence_spectra.target_illuminant(target_name, sequence).to_unit(sequence.spectral_unit)
-    plot = plot_spectra(out / "spectra.png", sequence, estimate, solutions, true_ambient, target)
-    summary: dict[str, Any] = {
-        "sequence": str(out / "sequence"),
-        "frames": len(sequence.frames),
-        "ambient_weights": estimate.ambient_weights,
-        "solver": estimate.method,
-        "led_peak_nm": list(sequence.led_peaks_nm()),
-        "relative_residual": estimate.relative_residual,
-        "estimate_warnings": list(estimate.warnings),
-        "flash": {
-            name: {"flash_weights": s.flash_weights, "scale": s.scale, "target_reached": s.target_reached}
-            for name, s in solutions.items()
-        },
-        "recaptured_mode": mode,
-        "target": target_name,
-        "previews": {name: str(path) for name, path in previews.items()},
-        "plot": str(plot),
-        "report": str(out / REPORT_NAME),
-    }
-    if true_ambient is not None:
-        summary.update(score_against_truth(sequence, estimate, true_ambient))
-    return summary
+    return previews
 
 
 def _linear(sequence: Sequence, index: int, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
