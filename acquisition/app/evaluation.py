@@ -58,8 +58,6 @@ from msflash.processing.render import camera_to_srgb_linear, camera_to_xyz_matri
 from msflash.processing.spectra import Spectra, WavelengthGrid
 from msflash.processing.synthesis import synthesize
 
-STUDY_AMBIENTS = ("tungsten", "fluorescent", "green", "orange", "underwater")
-"""The ambients of Fig. 9 (the paper's booth ambients and its pool dive)."""
 CHANNELS = ("R", "G", "B")
 
 
