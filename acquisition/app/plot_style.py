@@ -141,8 +141,6 @@ def draw_flash_mixes(
 
     Parameters
     ----------
-    axis
-        The matplotlib axis to draw on.
     wavelengths_nm
         The grid, (n_wavelengths,).
     led_values

@@ -123,8 +123,6 @@ def claim_folder(folder: str | os.PathLike, what: str = "writing") -> FolderClai
 
     Parameters
     ----------
-    folder
-        The output folder.
     what
         What this process does there, recorded for a second process's message (``"msflash run"``).
 

@@ -230,8 +230,6 @@ class CaptureRunner:
 
     Parameters
     ----------
-    engine
-        The sync mode's engine.
     recorder
         Where frames are written, or None (exposure previews keep them in memory only).
     handlers
