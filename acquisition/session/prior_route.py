@@ -360,8 +360,7 @@ def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
 
 LED_GAP_SHARE = 0.25
 """Where the family evidence is computed, the LEDs' band adds this share of the squared gap between their estimate
-and the family's (scaled onto it): on the tuning rows of both suites the band then covered the truth at 71–74 % (±1σ)
-and 96–98 % (±2σ), against 64 % and 90–94 % without (docs/light-families.md)."""
+and the family's (scaled onto it; its coverage: docs/light-families.md)."""
 OLD_LED_MISS_WARNING = "the spectrum may be off by more than"
 """The start of :mod:`processing.model_error`'s warning, which the families' check replaces where it is computed."""
 
