@@ -305,7 +305,7 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
         """One frame of this world under the LEDs at ``levels``, exposed ``exposure_us`` at linear ``gain``.
 
         The one renderer of the simulated world: :meth:`trigger` renders each plan step with it,
-        and the ``aravis-fake`` rig (:class:`acquisition.session.rig.WiredFakeCamera`) paints each
+        and the ``aravis-fake`` rig (:class:`acquisition.devices.wired_fake.WiredFakeCamera`) paints each
         frame the Aravis fake delivers with it. Noise is drawn from this camera's generator, one
         render at a time, so frames are reproducible for a given seed and render order.
 

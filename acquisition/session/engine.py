@@ -368,20 +368,3 @@ def _vanished(plan: CapturePlan, taken: _Taken) -> bool:
     counted one raises :class:`DroppedFrameError`): that is never retaken.
     """
     return plan.trigger == "software" and bool(taken.steps_done or taken.retake)
-
-
-__all__ = [
-    "FRAME_ID_MODULUS",
-    "RETAKES",
-    "Cancellation",
-    "CaptureEngine",
-    "CaptureResult",
-    "CaptureRunner",
-    "FlashChoice",
-    "FlashDecider",
-    "FrameEvent",
-    "FrameHandler",
-    "Recorder",
-    "StepFrame",
-    "collector_paused",
-]

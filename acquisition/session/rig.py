@@ -34,28 +34,18 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
-from msflash.acquisition.devices.wired_fake import WiredFakeCamera
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.rigs.aravis_fake import (
-    ARAVIS_FAKE_PATCH_PX,
-    ARAVIS_FAKE_PIXEL_FORMAT,
-    AravisFakeNominalCamera,
     open_aravis_fake_rig,
 )
-from msflash.acquisition.session.rigs.emulated_booth import SIM_BOOTLOADER_S, check_emulated_booth, emulator_for
 from msflash.acquisition.session.rigs.hardware import (
-    CALIBRATION_LED_FILES,
-    CALIBRATION_RESPONSIVITY_FILES,
-    hw_spectra,
-    load_hw_spectra,
     open_hw_rig,
 )
 from msflash.acquisition.session.rigs.replay import open_replay_rig
 from msflash.acquisition.session.rigs.rig import Rig
-from msflash.acquisition.session.rigs.sim import open_firmware_booth, open_sim_rig
+from msflash.acquisition.session.rigs.sim import open_sim_rig
 from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.processing.names import unknown_name
 from msflash.processing.scenes import Scene
@@ -236,36 +226,3 @@ def open_rig(spec: str, options: RigOptions | None = None) -> Rig:
     if not isinstance(chosen, builder.options):
         raise TypeError(f"open_rig({spec!r}): {type(chosen).__name__} given; expected {builder.options.__name__}")
     return builder.build(spec, chosen)
-
-
-__all__ = [
-    "ARAVIS_FAKE_PATCH_PX",
-    "ARAVIS_FAKE_PIXEL_FORMAT",
-    "CALIBRATION_LED_FILES",
-    "CALIBRATION_RESPONSIVITY_FILES",
-    "RIG_BUILDERS",
-    "RIG_SPECS",
-    "SIM_BOOTLOADER_S",
-    "AravisFakeNominalCamera",
-    "AravisFakeRigOptions",
-    "HardwareCamera",
-    "HwRigOptions",
-    "ReplayRigOptions",
-    "Rig",
-    "RigBuilder",
-    "RigOptions",
-    "SimRigOptions",
-    "SimWorldOptions",
-    "WiredFakeCamera",
-    "check_emulated_booth",
-    "emulator_for",
-    "hw_spectra",
-    "load_hw_spectra",
-    "open_aravis_fake_rig",
-    "open_firmware_booth",
-    "open_hw_rig",
-    "open_replay_rig",
-    "open_rig",
-    "open_sim_rig",
-    "rig_kind",
-]

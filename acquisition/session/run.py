@@ -47,7 +47,6 @@ from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run_exposure import (
     SYNC_MODES,
     LedCapture,
-    Recorded,
     flash_exposure_for,
     led_capture,
     plan_exposure,
@@ -412,25 +411,3 @@ def run_two_captures(
     run_capture(rig.camera, rig.booth, flash_plan, writer, (flash_kept, ProgressLines(), *handlers), cancel=cancel)
     flash_frame = None if flash_kept.flash is None else as_recorded(flash_kept.flash.pixels, sequence.camera.cfa)
     return RunResult(estimate, solutions, caught, captured, flash_us, stack, decided, flash_frame)
-
-
-__all__ = [
-    "SYNC_MODES",
-    "LedCapture",
-    "LedFrames",
-    "ProgressLines",
-    "Recorded",
-    "RunOptions",
-    "RunResult",
-    "StreamFlash",
-    "capture_led_sequence",
-    "capture_sequence",
-    "degenerate",
-    "flash_exposure_for",
-    "plan_exposure",
-    "recording_of",
-    "report_exposure",
-    "run_one_stream",
-    "run_two_captures",
-    "sequence_writer",
-]
