@@ -77,18 +77,6 @@ def _camera_to_xyz(sequence: Sequence) -> np.ndarray | None:
     )
 
 
-def plot_spectra(
-    path: Path,
-    sequence: Sequence,
-    estimate: AmbientEstimate,
-    solutions: dict[str, FlashSolution],
-    true_ambient: Spectra | None,
-    target: Spectra | None,
-) -> Path:
-    """Write :func:`spectra_figure` as a PNG to ``path``."""
-    return save_figure(spectra_figure(sequence, estimate, solutions, true_ambient, target), path)
-
-
 def spectra_figure(
     sequence: Sequence,
     estimate: AmbientEstimate,
@@ -177,7 +165,7 @@ def write_run_report(
         target = None
         if "complementary" in solutions:
             target = sequence_spectra.target_illuminant(target_name, sequence).to_unit(sequence.spectral_unit)
-        plot = plot_spectra(out / "spectra.png", sequence, estimate, solutions, true_ambient, target)
+        plot = save_figure(spectra_figure(sequence, estimate, solutions, true_ambient, target), out / "spectra.png")
     except OSError as err:
         raise OutputWriteError(
             f"{out}: the run report could not be written ({err}); expected a writable disk with room for it. "

@@ -227,6 +227,3 @@ class FlashSession:
             flash,
             lambda: analysis.reported(model.reliability(statistics, raw_weights, method, alpha_used), header, check),
         )
-
-
-__all__ = ["FlashDecision", "FlashSession"]
