@@ -10,9 +10,6 @@ stdout stays for data. Two kinds of report:
 Bars are on only when ``msflash`` turned them on (:func:`configure`, from ``cli.main``) because
 stderr is a terminal and ``--json`` was not given (:func:`bars_wanted`): a pipe, a file, a test's
 captured stream or a notebook get lines only, and nothing of tqdm is imported.
-
-``processing`` reports through :data:`REPORTER`, a :class:`msflash.lab.progress.CountedProgress`:
-the studies call it with counts without knowing whether a bar is drawn.
 """
 
 from __future__ import annotations
@@ -132,17 +129,3 @@ def _open_bar(label: str, total: int, unit: str) -> Any:
     )
     _state["bar"], _state["label"] = bar, label
     return bar
-
-
-class _Reporter:
-    """What the app hands to ``processing`` as ``progress``: lines and counts (a ``CountedProgress``)."""
-
-    def __call__(self, message: str, /) -> None:
-        progress(message)
-
-    def count(self, label: str, done: int, total: int, unit: str, note: str) -> None:
-        count(label, done, total, unit, note)
-
-
-REPORTER = _Reporter()
-"""The reporter to pass as a study's ``progress`` (:mod:`msflash.lab.progress`)."""

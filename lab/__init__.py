@@ -9,7 +9,7 @@ this package lists none of them.
 
 - ``study/``: the paper's simulation studies (Table 1, Figs. 5–7) and issue 9's (failure, Pareto,
   local estimation, block agreement), run serially or on dask (the ``study`` extra);
-- ``cli_study``, ``cli_local``, ``cli_colour_study``: their commands;
+- ``cli_study``, ``cli_local``, ``cli_colour_study``: their commands (``cli_support``: what they share);
 - ``bench/`` and ``cli_bench``: ``msflash bench``, speed as ratios measured interleaved in one run.
 - ``progress``: how a study reports how far it got; ``wiring``: draws ``docs/booth-wiring.svg``
   from the firmware's pin table; ``text_booth_emulator``: the plain-text booth on a pty.

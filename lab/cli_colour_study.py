@@ -6,8 +6,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, optional_claimed_output, print_json, progress
+from msflash.acquisition.app.cli_common import UsageError, print_json, progress
 from msflash.acquisition.app.options import flash_bounds_option
+from msflash.lab.cli_support import optional_claimed_output
 from msflash.lab.colour_study import STUDY_AMBIENTS, colour_study
 from msflash.processing import lights, water
 

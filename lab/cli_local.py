@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.app.cli_common import optional_claimed_output, positive_int, print_json, progress
-from msflash.acquisition.progress import REPORTER
+from msflash.acquisition.app.cli_common import positive_int, print_json, progress
+from msflash.lab.cli_support import REPORTER, optional_claimed_output
 from msflash.processing.local import DEFAULT_TILES
 
 

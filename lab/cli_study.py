@@ -21,15 +21,14 @@ from typing import Any
 from msflash.acquisition.app.cli_common import (
     UsageError,
     dumps_json,
-    optional_claimed_output,
     positive_int,
     print_json,
     progress,
 )
 from msflash.acquisition.app.options import add_scheduler_options
-from msflash.acquisition.app.plot_style import PALETTE, pyplot, relative_power, save_figure
-from msflash.acquisition.progress import REPORTER
+from msflash.acquisition.app.plot_style import PALETTE, pyplot, save_figure
 from msflash.acquisition.session.dask_map import dask_mapper
+from msflash.lab.cli_support import REPORTER, optional_claimed_output, relative_power
 from msflash.processing.ambient import AMBIENT_METHODS
 from msflash.processing.names import unknown_name
 

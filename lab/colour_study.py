@@ -31,11 +31,11 @@ from msflash.acquisition.app.evaluation import (
     _measure,
     _noise_rows,
     _solve_both,
-    _spectra_plot,
     colour_context,
     delta_e_of,
     noise_of,
     public_result,
+    spectra_figure,
 )
 from msflash.acquisition.app.html_report import HtmlReport
 from msflash.acquisition.app.plot_style import PALETTE, figure_png, pyplot
@@ -167,7 +167,7 @@ def study_ambient(
             "flash_weights": {mode: s.flash_weights for mode, s in solutions.items()},
             "complementary_target_reached": solutions["complementary"].target_reached,
             "warnings": notes,
-            "_spectra_png": _spectra_plot(grid, leds, estimate.spectrum, solutions, target, truth)
+            "_spectra_png": figure_png(spectra_figure(grid, leds, estimate.spectrum, solutions, target, truth))
             if out is not None
             else None,
         }

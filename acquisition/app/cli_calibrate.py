@@ -143,9 +143,10 @@ def _leds(args: argparse.Namespace) -> int:
     path = save_calibration(calibration, args.out)
     if characterisations:
         _plot_leds(Path(args.out) / "leds.png", spectra, characterisations)
+    relative_power = (
+        dict(zip(spectra.names, section["relative_power"], strict=True)) if section.get("relative_power") else None
+    )
     payload: dict[str, Any] = {
-        "calibration": str(path),
-        "id": calibration.id,
         "leds": [
             {
                 "name": c.name,
@@ -157,26 +158,20 @@ def _leds(args: argparse.Namespace) -> int:
             }
             for c in characterisations
         ],
-        "relative_power": dict(zip(spectra.names, section["relative_power"], strict=True))
-        if section.get("relative_power")
-        else None,
+        "relative_power": relative_power,
         "clipped_negatives": section.get("clipped_negatives", []),
     }
-    if args.json:
-        print_json(payload)
-    else:
-        for c in characterisations:
-            print(
-                f"{c.name}: peak {c.peak_nm:.1f} nm, FWHM {c.fwhm_nm:.1f} nm, model residual {c.model_residual:.3f}"
-                + (" SATURATED" if c.saturated else "")
-            )
-        if payload["relative_power"]:
-            print(
-                "relative power through the camera: "
-                + ", ".join(f"{name} {value:.3f}" for name, value in payload["relative_power"].items())
-            )
-        print(f"wrote {path} (id {calibration.id})")
-    return 0
+    lines = [
+        f"{c.name}: peak {c.peak_nm:.1f} nm, FWHM {c.fwhm_nm:.1f} nm, model residual {c.model_residual:.3f}"
+        + (" SATURATED" if c.saturated else "")
+        for c in characterisations
+    ]
+    if relative_power:
+        lines.append(
+            "relative power through the camera: "
+            + ", ".join(f"{name} {value:.3f}" for name, value in relative_power.items())
+        )
+    return _report_saved(args, calibration, path, payload, lines)
 
 
 def _camera_from_sequences(args: argparse.Namespace) -> int:
@@ -199,8 +194,6 @@ def _camera_from_sequences(args: argparse.Namespace) -> int:
     calibration = existing.updated(camera_responsivities=estimate.responsivities, camera=result.section())
     path = save_calibration(calibration, args.out)
     payload = {
-        "calibration": str(path),
-        "id": calibration.id,
         "method": estimate.method,
         "light_scales": result.light_scales,
         "relative_residual": list(estimate.relative_residual),
@@ -211,15 +204,10 @@ def _camera_from_sequences(args: argparse.Namespace) -> int:
         "chart": result.chart,
         "light_field": result.light_field,
     }
-    if args.json:
-        print_json(payload)
-    else:
-        print(
-            f"responsivities recovered ({estimate.method}) from {len(result.measurements.frames)} chart frames"
-            + (f", RMSE vs the sequence's recorded responsivities {rmse:.4f}" if rmse is not None else "")
-        )
-        print(f"wrote {path} (id {calibration.id})")
-    return 0
+    line = f"responsivities recovered ({estimate.method}) from {len(result.measurements.frames)} chart frames" + (
+        f", RMSE vs the sequence's recorded responsivities {rmse:.4f}" if rmse is not None else ""
+    )
+    return _report_saved(args, calibration, path, payload, [line])
 
 
 def _camera(args: argparse.Namespace) -> int:
@@ -237,13 +225,9 @@ def _camera(args: argparse.Namespace) -> int:
     estimate, rmse = simulated.estimate, simulated.rmse_vs_truth
     calibration = existing.updated(camera_responsivities=estimate.responsivities, camera=simulated.section())
     path = save_calibration(calibration, args.out)
-    payload = {"calibration": str(path), "id": calibration.id, "method": estimate.method, "rmse_vs_truth": rmse}
-    if args.json:
-        print_json(payload)
-    else:
-        print(f"{args.camera}: responsivities recovered ({estimate.method}), RMSE vs truth {rmse:.4f}")
-        print(f"wrote {path} (id {calibration.id})")
-    return 0
+    payload = {"method": estimate.method, "rmse_vs_truth": rmse}
+    line = f"{args.camera}: responsivities recovered ({estimate.method}), RMSE vs truth {rmse:.4f}"
+    return _report_saved(args, calibration, path, payload, [line])
 
 
 def _chart_command(args: argparse.Namespace) -> int:
@@ -257,22 +241,12 @@ def _chart_command(args: argparse.Namespace) -> int:
     reflectances, section = chart_from_exports(args.files, args.white, args.white_reflectance, options, args.chart_grid)
     calibration = _existing(args.out).updated(chart_reflectances=reflectances, chart=section)
     path = save_calibration(calibration, args.out)
-    payload = {
-        "calibration": str(path),
-        "id": calibration.id,
-        "patches": list(reflectances.names),
-        "rows": section["rows"],
-        "columns": section["columns"],
-    }
-    if args.json:
-        print_json(payload)
-    else:
-        print(
-            f"{reflectances.count} patch reflectances ({section['rows']}×{section['columns']} chart) measured over "
-            f"the white {args.white}"
-        )
-        print(f"wrote {path} (id {calibration.id})")
-    return 0
+    payload = {"patches": list(reflectances.names), "rows": section["rows"], "columns": section["columns"]}
+    line = (
+        f"{reflectances.count} patch reflectances ({section['rows']}×{section['columns']} chart) measured over "
+        f"the white {args.white}"
+    )
+    return _report_saved(args, calibration, path, payload, [line])
 
 
 def _dark(args: argparse.Namespace) -> int:
@@ -282,13 +256,11 @@ def _dark(args: argparse.Namespace) -> int:
         dark={**result.as_dict(), "cfa": sequence.camera.cfa, "sequence": str(sequence.directory)}
     )
     path = save_calibration(calibration, args.out)
-    if args.json:
-        print_json({"calibration": str(path), "id": calibration.id, **result.as_dict()})
-    else:
-        print("black level per channel: " + ", ".join(f"{v:.2f}" for v in result.black_level))
-        print("read noise (DN): " + ", ".join(f"{v:.2f}" for v in result.read_noise_dn))
-        print(f"wrote {path} (id {calibration.id})")
-    return 0
+    lines = [
+        "black level per channel: " + ", ".join(f"{v:.2f}" for v in result.black_level),
+        "read noise (DN): " + ", ".join(f"{v:.2f}" for v in result.read_noise_dn),
+    ]
+    return _report_saved(args, calibration, path, result.as_dict(), lines)
 
 
 def _linearity(args: argparse.Namespace) -> int:
@@ -298,13 +270,23 @@ def _linearity(args: argparse.Namespace) -> int:
     result = linearity_of_sequence(sequence, black)
     calibration = calibration.updated(linearity={**result.as_dict(), "sequence": str(sequence.directory)})
     path = save_calibration(calibration, args.out)
+    line = (
+        f"max deviation from linear {result.max_relative_deviation:.4f}, linear up to "
+        f"{result.linear_limit_dn} DN, saturation level {result.saturation_level}"
+    )
+    return _report_saved(args, calibration, path, result.as_dict(), [line])
+
+
+def _report_saved(
+    args: argparse.Namespace, calibration: CalibrationSet, path: Path, payload: dict, lines: list[str]
+) -> int:
+    """Say what was saved at ``path``: with ``--json`` the file, the calibration's id and ``payload``; else
+    ``lines`` and the file."""
     if args.json:
-        print_json({"calibration": str(path), "id": calibration.id, **result.as_dict()})
+        print_json({"calibration": str(path), "id": calibration.id, **payload})
     else:
-        print(
-            f"max deviation from linear {result.max_relative_deviation:.4f}, linear up to "
-            f"{result.linear_limit_dn} DN, saturation level {result.saturation_level}"
-        )
+        for line in lines:
+            print(line)
         print(f"wrote {path} (id {calibration.id})")
     return 0
 

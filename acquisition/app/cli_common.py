@@ -159,13 +159,3 @@ def claimed_output(path: str | os.PathLike, what: str) -> Iterator[Path]:
             except OSError:
                 break
         raise
-
-
-@contextlib.contextmanager
-def optional_claimed_output(path: str | os.PathLike | None, what: str) -> Iterator[Path | None]:
-    """:func:`claimed_output` for an ``--out`` that may be absent (a study printing JSON only): None stays None."""
-    if path is None:
-        yield None
-        return
-    with claimed_output(path, what) as out:
-        yield out

@@ -59,8 +59,6 @@ from msflash.processing.render import camera_to_srgb_linear, camera_to_xyz_matri
 from msflash.processing.spectra import Spectra, WavelengthGrid
 from msflash.processing.synthesis import synthesize
 
-STUDY_AMBIENTS = ("tungsten", "fluorescent", "green", "orange", "underwater")
-"""The ambients of Fig. 9 (the paper's booth ambients and its pool dive)."""
 CHANNELS = ("R", "G", "B")
 
 
@@ -283,7 +281,7 @@ def evaluate_sequence(
             "noise_flash_image": noise_image if noise_image.endswith("capture") else "complementary (synthesised)",
         }
     )
-    spectra_png = _spectra_plot(sequence.grid, leds, estimate.spectrum, solutions, target_spd)
+    spectra_png = figure_png(spectra_figure(sequence.grid, leds, estimate.spectrum, solutions, target_spd))
     (out / "spectra.png").write_bytes(spectra_png)
     result["report"] = str(out / "report.html")
     (out / "evaluation.json").write_text(dumps_json(public_result(result)) + "\n")
@@ -333,17 +331,6 @@ def _measure(
         "previews": {name: f"{name}.png" for name in previews},
         "_png": previews,
     }
-
-
-def _spectra_plot(
-    grid: WavelengthGrid,
-    leds: Spectra,
-    estimate: Spectra,
-    solutions: dict[str, FlashSolution],
-    target: Spectra,
-    truth: Spectra | None = None,
-) -> bytes:
-    return figure_png(spectra_figure(grid, leds, estimate, solutions, target, truth))
 
 
 def spectra_figure(

@@ -21,7 +21,7 @@ import numpy as np
 
 from msflash.acquisition.app.srgb_png import srgb_png_bytes
 from msflash.processing.flash import FlashSolution
-from msflash.processing.spectra import Spectra, SpectralUnit, WavelengthGrid
+from msflash.processing.spectra import Spectra, SpectralUnit
 
 SERIES = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000")
 """Okabe & Ito's colours (blue, orange, bluish green, reddish purple, sky blue, vermillion, yellow, black)."""
@@ -107,27 +107,6 @@ def in_plot_unit(spectra: Spectra) -> np.ndarray:
     return spectra.to_unit(PLOT_UNIT).values
 
 
-def relative_power(
-    wavelengths_nm: np.ndarray | list[float], values: np.ndarray | list[float], unit: SpectralUnit
-) -> np.ndarray:
-    """A spectrum given in ``unit`` on ``wavelengths_nm``, in :data:`PLOT_UNIT`, scaled to a peak of 1 (NaN kept).
-
-    Examples
-    --------
-    >>> relative_power([400.0, 800.0], [1.0, 1.0], "photons").round(3).tolist()  # energy ∝ photons / λ
-    [1.0, 0.5]
-    """
-    wavelengths = np.asarray(wavelengths_nm, dtype=float)
-    data = np.asarray(values, dtype=float)
-    step = float(wavelengths[1] - wavelengths[0]) if wavelengths.size > 1 else 1.0
-    grid = WavelengthGrid(float(wavelengths[0]), float(wavelengths[-1]), step)
-    clean = np.nan_to_num(data)
-    converted = Spectra(grid, clean.reshape(-1, 1), ("spectrum",), "spd", unit).to_unit(PLOT_UNIT).values[:, 0]
-    converted = np.where(np.isnan(data), np.nan, converted)
-    peak = float(np.nanmax(np.abs(converted))) if np.any(np.isfinite(converted)) else 0.0
-    return converted / peak if peak > 0 else converted
-
-
 def spectral_axis(axis: Any, scaled_to: str | None = None) -> None:
     """Label a spectrum plot's axes: wavelength in nm, relative power in :data:`PLOT_UNIT` (and what is 1)."""
     axis.set_xlabel(WAVELENGTH_AXIS_LABEL)
@@ -162,8 +141,6 @@ def draw_flash_mixes(
 
     Parameters
     ----------
-    axis
-        The matplotlib axis to draw on.
     wavelengths_nm
         The grid, (n_wavelengths,).
     led_values

@@ -78,18 +78,6 @@ def _camera_to_xyz(sequence: Sequence) -> np.ndarray | None:
     )
 
 
-def plot_spectra(
-    path: Path,
-    sequence: Sequence,
-    estimate: AmbientEstimate,
-    solutions: dict[str, FlashSolution],
-    true_ambient: Spectra | None,
-    target: Spectra | None,
-) -> Path:
-    """Write :func:`spectra_figure` as a PNG to ``path``."""
-    return save_figure(spectra_figure(sequence, estimate, solutions, true_ambient, target), path)
-
-
 def spectra_figure(
     sequence: Sequence,
     estimate: AmbientEstimate,
@@ -169,71 +157,22 @@ def write_run_report(
     """
     out = Path(out)
     try:
-        return _write_run_report(
-            out, sequence, estimate, solutions, mode, true_ambient, stack, target_name, flash_frame
-        )
+        (out / "estimate.json").write_text(dumps_json(analysis.estimate_payload(sequence, estimate)) + "\n")
+        for name, solution in solutions.items():
+            (out / f"flash-{name}.json").write_text(
+                dumps_json(analysis.flash_payload(sequence, solution, target_name)) + "\n"
+            )
+        previews = _write_previews(out, sequence, solutions, stack, flash_frame, applied_offsets(estimate.flicker))
+        target = None
+        if "complementary" in solutions:
+            target = sequence_spectra.target_illuminant(target_name, sequence).to_unit(sequence.spectral_unit)
+        plot = save_figure(spectra_figure(sequence, estimate, solutions, true_ambient, target), out / "spectra.png")
     except OSError as err:
         raise OutputWriteError(
             f"{out}: the run report could not be written ({err}); expected a writable disk with room for it. "
             f"The sequence is complete in {sequence.directory} ('msflash estimate', 'flash' and 'synthesize' "
             "read it)"
         ) from err
-
-
-def _write_run_report(
-    out: Path,
-    sequence: Sequence,
-    estimate: AmbientEstimate,
-    solutions: dict[str, FlashSolution],
-    mode: str,
-    true_ambient: Spectra | None,
-    stack: analysis.FrameStack,
-    target_name: str,
-    flash_frame: np.ndarray | None,
-) -> dict[str, Any]:
-    estimate_payload = analysis.estimate_payload(sequence, estimate)
-    (out / "estimate.json").write_text(dumps_json(estimate_payload) + "\n")
-    for name, solution in solutions.items():
-        (out / f"flash-{name}.json").write_text(
-            dumps_json(analysis.flash_payload(sequence, solution, target_name)) + "\n"
-        )
-
-    matrix = _camera_to_xyz(sequence)
-    ambient_linear, _ = _linear(sequence, stack.ambient_index, stack.ambient)
-    previews = {
-        "ambient": write_preview(out / "ambient.png", srgb_preview(linear_rgb(sequence, ambient_linear), matrix))
-    }
-    for name, solution in solutions.items():
-        image, _ = synthesize(
-            stack.ambient,
-            stack.led_frames,
-            stack.spec,
-            solution.flash_weights,
-            ambient_offsets=applied_offsets(estimate.flicker),
-        )
-        rgb, exr = exr_image(sequence, image)
-        write_image(
-            out / f"{name}.exr",
-            rgb,
-            {
-                **exr.attributes,
-                "msflash:content": f"the {name} computational flash image",
-                "msflash:flash_weights": solution.flash_weights.tolist(),
-            },
-            exr.chromaticities,
-        )
-        previews[name] = write_preview(out / f"{name}.png", srgb_preview(linear_rgb(sequence, image), matrix))
-    flash_indices = sequence.indices("flash")
-    if flash_indices and flash_frame is not None:
-        captured, _ = _linear(sequence, flash_indices[-1], flash_frame)
-        previews["flash-capture"] = write_preview(
-            out / "flash-capture.png", srgb_preview(linear_rgb(sequence, captured), matrix)
-        )
-
-    target = None
-    if "complementary" in solutions:
-        target = sequence_spectra.target_illuminant(target_name, sequence).to_unit(sequence.spectral_unit)
-    plot = plot_spectra(out / "spectra.png", sequence, estimate, solutions, true_ambient, target)
     summary: dict[str, Any] = {
         "sequence": str(out / "sequence"),
         "frames": len(sequence.frames),
@@ -255,6 +194,50 @@ def _write_run_report(
     if true_ambient is not None:
         summary.update(score_against_truth(sequence, estimate, true_ambient))
     return summary
+
+
+def _write_previews(
+    out: Path,
+    sequence: Sequence,
+    solutions: dict[str, FlashSolution],
+    stack: analysis.FrameStack,
+    flash_frame: np.ndarray | None,
+    flicker_offsets: np.ndarray | None,
+) -> dict[str, Path]:
+    """The ambient's, each flash's synthesised (with its EXR; a flickering lamp's shares taken out) and the
+    captured flash's previews."""
+    matrix = _camera_to_xyz(sequence)
+    ambient_linear, _ = _linear(sequence, stack.ambient_index, stack.ambient)
+    previews = {
+        "ambient": write_preview(out / "ambient.png", srgb_preview(linear_rgb(sequence, ambient_linear), matrix))
+    }
+    for name, solution in solutions.items():
+        image, _ = synthesize(
+            stack.ambient,
+            stack.led_frames,
+            stack.spec,
+            solution.flash_weights,
+            ambient_offsets=flicker_offsets,
+        )
+        rgb, exr = exr_image(sequence, image)
+        write_image(
+            out / f"{name}.exr",
+            rgb,
+            {
+                **exr.attributes,
+                "msflash:content": f"the {name} computational flash image",
+                "msflash:flash_weights": solution.flash_weights.tolist(),
+            },
+            exr.chromaticities,
+        )
+        previews[name] = write_preview(out / f"{name}.png", srgb_preview(linear_rgb(sequence, image), matrix))
+    flash_indices = sequence.indices("flash")
+    if flash_indices and flash_frame is not None:
+        captured, _ = _linear(sequence, flash_indices[-1], flash_frame)
+        previews["flash-capture"] = write_preview(
+            out / "flash-capture.png", srgb_preview(linear_rgb(sequence, captured), matrix)
+        )
+    return previews
 
 
 def _linear(sequence: Sequence, index: int, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

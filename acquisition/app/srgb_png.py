@@ -25,8 +25,8 @@ import numpy as np
 PREVIEW_LONG_SIDE_PX = 1024
 """Smallest long side of a written preview (pixels); smaller images are enlarged by an integer factor."""
 PNG_COMPRESS_LEVEL = 1
-"""zlib level of written PNGs: 1 encodes an enlarged 1120 × 1060 preview in about half the time of Pillow's
-default 6 for a file about 20 % larger (blocks of equal pixels compress well at any level)."""
+"""zlib level of written PNGs: the fastest (blocks of equal pixels compress well at any level;
+docs/measurements-acquisition.md)."""
 SRGB_RENDERING_INTENT = 0
 """The ``sRGB`` chunk's rendering intent: 0, perceptual."""
 SRGB_GAMMA = 45455

@@ -46,7 +46,12 @@ class DefaultWorld:
     scale: float
     """Electrons per unit ``Σ r c i Δλ`` per microsecond."""
     camera_name: str
+    seed: int
+    """The mosaic scene's layout (and a camera's noise)."""
+    reference_exposure_us: float
+    """The exposure ``scale`` is set for."""
     second_ambient: Spectra | None = None
+    ambient_map: np.ndarray | None = None
 
 
 def default_world(
@@ -125,7 +130,10 @@ def default_world(
     exposure = _exposure_at_unit_scale(scene, ambient_spd, metered_ambient, booth, responsivities, sensor,
                                        ambient_peak_fraction)  # fmt: skip
     scale = exposure / reference_exposure_us
-    return DefaultWorld(scene, ambient_spd, booth, responsivities, sensor, scale, str(camera_name), second_spd)
+    return DefaultWorld(
+        scene, ambient_spd, booth, responsivities, sensor, scale, str(camera_name), seed, reference_exposure_us,
+        second_spd, ambient_map,
+    )  # fmt: skip
 
 
 def _scene_on_grid(

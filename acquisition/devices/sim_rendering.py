@@ -67,6 +67,9 @@ class SimRendering:
         if self.ambient_illumination is not None:
             dark = self.ambient.replace(values=np.zeros_like(self.ambient.values))
             illumination = self.ambient_illumination.plus(total_illumination(dark, self.led_spectra, levels))  # type: ignore[assignment]
+        return self._render_light(illumination, exposure_us, gain)
+
+    def _render_light(self, illumination: Spectra | MixedIllumination, exposure_us: float, gain: float) -> np.ndarray:
         return render_frame(
             self.scene,
             illumination,
@@ -114,17 +117,7 @@ class SimRendering:
         )
         led_weights = np.broadcast_to(rows[:, None, :], (height, width, leds.count))
         weights = np.concatenate([ambient_weights * factor[:, None, None], led_weights], axis=-1)
-        return render_frame(
-            self.scene,
-            MixedIllumination(spectra, weights),
-            self.camera_responsivities,
-            self.sensor,
-            exposure_us,
-            gain,
-            self.scale,
-            rng=self._rng,
-            noise=self.noise,
-        )
+        return self._render_light(MixedIllumination(spectra, weights), exposure_us, gain)
 
     @property
     def readout_skew_us(self) -> float:

@@ -148,7 +148,7 @@ def sim_leds(led_spectra: str | Path | None, n_leds: int | None, grid: Wavelengt
     """The sim booth's LEDs: ``--led-spectra FILE.csv`` (one column per channel) or the paper's ``--leds N``.
 
     Neither: the paper's 7 LEDs. Channel names and count are checked against what the booth
-    emulator can serve by :func:`acquisition.session.rig.check_emulated_booth` when the rig opens.
+    emulator can serve by :func:`acquisition.session.rigs.emulated_booth.check_emulated_booth` when the rig opens.
 
     Raises
     ------

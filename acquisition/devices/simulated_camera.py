@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Sequence
-from typing import Literal
+from typing import Any
 
 import numpy as np
 
@@ -39,7 +39,7 @@ from msflash.acquisition.devices.exposure_light import (
 )
 from msflash.acquisition.devices.frame_queue import TriggeredFrames
 from msflash.acquisition.devices.image_format import ImageFormat, ImageFormatRequest, ImageLimits
-from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA, default_world
+from msflash.acquisition.devices.sim_default import default_world
 from msflash.acquisition.devices.sim_readout import SimReadout
 from msflash.acquisition.devices.sim_rendering import SimRendering
 from msflash.acquisition.errors import CameraError
@@ -47,7 +47,7 @@ from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.processing.image_formation import MixedIllumination
 from msflash.processing.scenes import Scene
 from msflash.processing.sensor import SensorModel
-from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid, require_same_grid
+from msflash.processing.spectra import Spectra, require_same_grid
 
 LedLevelsSource = Callable[[], Sequence[float]]
 """Returns the drive level (0–1) of every LED channel at the moment it is called."""
@@ -305,7 +305,7 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
         """One frame of this world under the LEDs at ``levels``, exposed ``exposure_us`` at linear ``gain``.
 
         The one renderer of the simulated world: :meth:`trigger` renders each plan step with it,
-        and the ``aravis-fake`` rig (:class:`acquisition.session.rig.WiredFakeCamera`) paints each
+        and the ``aravis-fake`` rig (:class:`acquisition.devices.wired_fake.WiredFakeCamera`) paints each
         frame the Aravis fake delivers with it. Noise is drawn from this camera's generator, one
         render at a time, so frames are reproducible for a given seed and render order.
 
@@ -384,46 +384,25 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
     # -- a ready-made world -------------------------------------------------------------------
     @classmethod
     def default(
-        cls,
-        scene: Literal["chart110", "macbeth", "white"] | Scene | Spectra = "chart110",
-        ambient: str | Spectra = "tungsten",
-        cfa: str | None = SIM_DEFAULT_CFA,
-        seed: int = 0,
-        camera: str | Spectra = "NikonD100",
-        n_leds: int = 7,
-        led_spectra: Spectra | None = None,
-        flash_power: float = 1.0,
-        reference_exposure_us: float = 10_000.0,
-        ambient_peak_fraction: float = 0.25,
-        sensor: SensorModel | None = None,
-        led_levels_source: LedLevelsSource | None = None,
-        patch_px: int = 8,
-        specular_strip_px: int = 4,
-        grid: WavelengthGrid = DEFAULT_GRID,
-        noise: bool = True,
-        second_ambient: str | Spectra | None = None,
-        ambient_map: np.ndarray | None = None,
+        cls, led_levels_source: LedLevelsSource | None = None, noise: bool = True, **world: Any
     ) -> SimulatedCamera:
-        """The ``sim`` rig's world (:func:`~acquisition.devices.sim_default.default_world`, whose parameters these
-        are) rendered by this camera; ``seed`` also seeds the noise, ``led_levels_source`` and ``noise`` are the
-        constructor's, and ``suggested_exposure_us`` is set to ``reference_exposure_us``."""
-        world = default_world(
-            scene, ambient, cfa, seed, camera, n_leds, led_spectra, flash_power, reference_exposure_us,
-            ambient_peak_fraction, sensor, patch_px, specular_strip_px, grid, second_ambient, ambient_map,
-        )  # fmt: skip
+        """The ``sim`` rig's world (:func:`~acquisition.devices.sim_default.default_world` of the keywords
+        ``world``) rendered by this camera; its ``seed`` also seeds the noise, ``led_levels_source`` and ``noise``
+        are the constructor's, and ``suggested_exposure_us`` is set to its ``reference_exposure_us``."""
+        made = default_world(**world)
         simulated = cls(
-            world.scene,
-            world.ambient,
-            world.led_spectra,
-            world.responsivities,
-            world.sensor,
-            scale=world.scale,
+            made.scene,
+            made.ambient,
+            made.led_spectra,
+            made.responsivities,
+            made.sensor,
+            scale=made.scale,
             led_levels_source=led_levels_source,
-            seed=seed,
+            seed=made.seed,
             noise=noise,
-            name=f"SimulatedCamera ({world.camera_name})",
-            second_ambient=world.second_ambient,
-            ambient_map=ambient_map,
+            name=f"SimulatedCamera ({made.camera_name})",
+            second_ambient=made.second_ambient,
+            ambient_map=made.ambient_map,
         )
-        simulated.suggested_exposure_us = reference_exposure_us
+        simulated.suggested_exposure_us = made.reference_exposure_us
         return simulated

@@ -180,10 +180,6 @@ def write_ome_tiff(
         What each frame is, in order.
     lights
         The LEDs, in the order :attr:`OmePlane.light` indexes.
-    camera_model
-        The detector's model.
-    image_name
-        The OME image's name.
     notes
         Key–value notes for the image (``MapAnnotation``).
     acquired

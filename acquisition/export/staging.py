@@ -99,8 +99,6 @@ def staged_export(out: Path, option: str, check_out: Callable[[Path, str], None]
 
     Parameters
     ----------
-    out
-        The new output folder.
     option
         The option it came from, for messages.
     check_out

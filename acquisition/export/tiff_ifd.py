@@ -149,8 +149,6 @@ def write_tiff(path: str | os.PathLike, pixels: np.ndarray, ifd0: SequenceOf[Tag
         IFD0's tags besides those of the layout, which are added here: ``ImageWidth``, ``ImageLength``,
         ``BitsPerSample``, ``Compression`` (none), ``SamplesPerPixel``, ``PlanarConfiguration``,
         ``StripOffsets``, ``RowsPerStrip``, ``StripByteCounts`` and ``ExifIFD``.
-    exif
-        The EXIF IFD's tags.
 
     Raises
     ------

@@ -263,6 +263,3 @@ def _caused_by(error: BaseException | None, cause: BaseException) -> bool:
             return True
         error = error.__cause__
     return False
-
-
-__all__ = ["DEFAULT_MAX_QUEUED", "AsyncSequenceWriter"]

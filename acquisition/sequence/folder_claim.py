@@ -17,7 +17,7 @@ import fcntl
 import logging
 import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 from msflash.acquisition.errors import FolderInUseError
@@ -123,8 +123,6 @@ def claim_folder(folder: str | os.PathLike, what: str = "writing") -> FolderClai
 
     Parameters
     ----------
-    folder
-        The output folder.
     what
         What this process does there, recorded for a second process's message (``"msflash run"``).
 
@@ -215,13 +213,3 @@ def try_lock(lock: Path) -> int | None:
         os.close(handle)
         return None
     return handle
-
-
-@contextlib.contextmanager
-def claimed(folder: str | os.PathLike, what: str = "writing") -> Iterator[FolderClaim]:
-    """:func:`claim_folder` as a ``with`` block."""
-    claim = claim_folder(folder, what)
-    try:
-        yield claim
-    finally:
-        claim.release()

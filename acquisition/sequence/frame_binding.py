@@ -116,8 +116,6 @@ def binding_problem(
         ``<sequence.json>: frames[i].file '<file>'``, the entry's name in messages.
     said
         What the file says about itself.
-    index, role, led_levels, exposure_us, gain
-        The entry.
     """
     fields = disagreements(said, index, role, led_levels, exposure_us, gain)
     if not fields:
@@ -136,8 +134,6 @@ def describe_misbinding(index: int, said_index: int | None, said_indices: Sequen
 
     Parameters
     ----------
-    index
-        The entry.
     said_index
         The index its file says (None: it does not say, or says its own but other fields differ).
     said_indices

@@ -137,8 +137,6 @@ def check_frame_digest(path: Path, recorded: FileDigest, where: str) -> None:
 
     Parameters
     ----------
-    path
-        The frame file.
     recorded
         Its digest as ``sequence.json`` records it.
     where

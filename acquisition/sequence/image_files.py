@@ -332,11 +332,6 @@ def write_image_digest(
         ``chromaticities`` attribute viewers use to interpret the RGB
         (:func:`processing.raw_colour.rgb_chromaticities`); ignored for TIFF.
 
-    Returns
-    -------
-    FileDigest
-        SHA-256 and length in bytes of the written file.
-
     Raises
     ------
     RecordingError

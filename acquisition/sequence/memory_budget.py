@@ -103,14 +103,3 @@ def check_decode(where: str, nbytes: int, what: str) -> None:
             f"({source}); expected frames that fit it (a small file that inflates this far is refused unread; "
             "give --memory-budget SIZE to allow more)"
         )
-
-
-__all__ = [
-    "DEFAULT_SHARE",
-    "available_memory",
-    "check_decode",
-    "memory_budget",
-    "parse_size",
-    "set_memory_budget",
-    "size_text",
-]

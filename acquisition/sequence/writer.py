@@ -207,10 +207,6 @@ class SequenceWriter:
         The uniform wavelength grid, shape (n_wavelengths,).
     spectral_unit
         ``"energy"`` or ``"photons"``.
-    camera
-        The camera description.
-    leds
-        The LED channels.
     extra
         Extra top-level keys to store.
     mono
@@ -332,11 +328,6 @@ class SequenceWriter:
             reached the writer (:class:`~acquisition.sequence.async_writer.AsyncSequenceWriter` passes the
             time the frame was handed to it) — or no time with ``stamp_time=False`` (a copy of a frame
             recorded without one, :func:`write_sequence`).
-
-        Returns
-        -------
-        SequenceFrame
-            The entry added.
 
         Raises
         ------
@@ -485,8 +476,6 @@ def write_sequence(directory: str | os.PathLike, sequence: Sequence, frames: Ite
 
     Parameters
     ----------
-    directory
-        The new sequence directory.
     sequence
         The header and frame entries to copy (for instance from :func:`read_sequence`).
     frames

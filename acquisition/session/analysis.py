@@ -153,8 +153,7 @@ Why 8, and what 4 × 4 blocks changed on large frames: docs/block-size.md."""
 
 BLOCKS_PER_SIDE = 32
 """A frame's short side (of its CFA planes) keeps at least this many blocks, or the blocks are halved,
-down to 4 × 4: on the harness's 128 × 160 frames 8 × 8 blocks cost the light prior accuracy and 4 × 4
-ones agree with the all-pixel estimate as well (docs/block-size.md)."""
+down to 4 × 4 (docs/block-size.md)."""
 
 
 def sequence_statistics(
@@ -228,6 +227,12 @@ def estimate_from_statistics(
         estimate = estimate_ambient(statistics, led_spectra_photons(sequence), method, alpha)
     else:
         estimate = model.estimate(statistics, method, alpha)
+    return reported(estimate, sequence, check)
+
+
+def reported(estimate: AmbientEstimate, sequence: Sequence, check: FlickerCheck) -> AmbientEstimate:
+    """The estimate as reported: the LED model's band (:func:`with_model_band`) and the flicker ``check`` its
+    statistics were corrected by."""
     return replace(with_model_band(estimate, sequence), flicker=check)
 
 

@@ -82,6 +82,3 @@ def solve_both(
             known = (solved or {}).get(mode)
             solutions[mode] = known if known is not None else solver.solve(mode, ambient_weights)
     return BothFlashes(solutions, tuple(caught))
-
-
-__all__ = ["FLASH_MODES", "BothFlashes", "FlashSolver", "SequenceFlashes", "solve_both"]

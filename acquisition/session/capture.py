@@ -38,13 +38,6 @@ from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
 from msflash.acquisition.sequence.format import SequenceFrame
 from msflash.acquisition.sequence.writer import SequenceWriter
-from msflash.acquisition.session.booth_guard import (
-    READOUT_US,
-    TRIGGER_PULSE_US,
-    WATCHDOG_SLACK_S,
-    booth_period_us,
-    host_silence_s,
-)
 from msflash.acquisition.session.engine import (
     RETAKES,
     Cancellation,
@@ -215,22 +208,3 @@ def preview_frames(
     """
     runner = CaptureRunner(HostPaced(camera, booth, preview=True), retakes=retakes, cancel=cancel)
     return list(runner.run(plan).frames)
-
-
-__all__ = [
-    "READOUT_US",
-    "RETAKES",
-    "SYNC_OF_TRIGGER",
-    "TRIGGER_PULSE_US",
-    "WATCHDOG_SLACK_S",
-    "FrameWriter",
-    "SequenceRecorder",
-    "booth_period_us",
-    "check_booth_runs",
-    "collector_paused",
-    "engine_for",
-    "host_silence_s",
-    "preview_frames",
-    "run_capture",
-    "run_capture_with_flash",
-]

@@ -230,8 +230,6 @@ class CaptureRunner:
 
     Parameters
     ----------
-    engine
-        The sync mode's engine.
     recorder
         Where frames are written, or None (exposure previews keep them in memory only).
     handlers
@@ -370,20 +368,3 @@ def _vanished(plan: CapturePlan, taken: _Taken) -> bool:
     counted one raises :class:`DroppedFrameError`): that is never retaken.
     """
     return plan.trigger == "software" and bool(taken.steps_done or taken.retake)
-
-
-__all__ = [
-    "FRAME_ID_MODULUS",
-    "RETAKES",
-    "Cancellation",
-    "CaptureEngine",
-    "CaptureResult",
-    "CaptureRunner",
-    "FlashChoice",
-    "FlashDecider",
-    "FrameEvent",
-    "FrameHandler",
-    "Recorder",
-    "StepFrame",
-    "collector_paused",
-]

@@ -41,7 +41,7 @@ from msflash.processing.block_rows import BlockRows
 from msflash.processing.block_sums import plane_shape
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flicker import corrected_tiles
-from msflash.processing.local import DEFAULT_TILES, LocalEstimate, TileBlocks, estimate_local
+from msflash.processing.local import LocalEstimate, TileBlocks, estimate_local
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 
 USED_ROLES = ("ambient", "led")
@@ -368,14 +368,3 @@ def stream_sequence(
 
 
 _NO_PIXELS = np.zeros((0, 0), dtype=np.uint16)
-
-
-__all__ = [
-    "DEFAULT_TILES",
-    "SAMPLE_WEIGHTING",
-    "EstimateStream",
-    "StackLayout",
-    "is_mono",
-    "stack_layout",
-    "stream_sequence",
-]

@@ -62,7 +62,8 @@ class FlashDecision:
 
     @property
     def estimate(self) -> AmbientEstimate:
-        """The full ambient estimate (as :meth:`FlashSession.estimate`), computed once on first access."""
+        """The reported ambient estimate (:meth:`FlashSession.estimate`'s, from the same flicker check and
+        weights), computed once on first access."""
         if self._estimated is None:
             self._estimated = self._estimate()
         return self._estimated
@@ -211,7 +212,7 @@ class FlashSession:
         statistics = self.statistics()  # the stream is live: no compiling between the LED frames and the flash
         # A flickering ambient's gains out, as the reported estimate takes them (docs/flicker.md): the flash mix is
         # the estimate's.
-        statistics, _ = analysis.flicker_corrected(self.header, statistics)
+        statistics, check = analysis.flicker_corrected(self.header, statistics)
         raw_weights, alpha_used = self.ambient_model.weights(statistics, self.method, self.alpha)
         weights = np.asarray(raw_weights, dtype=float)
         if sanitise:
@@ -224,8 +225,5 @@ class FlashSession:
         return FlashDecision(
             solution,
             flash,
-            lambda: analysis.with_model_band(model.reliability(statistics, raw_weights, method, alpha_used), header),
+            lambda: analysis.reported(model.reliability(statistics, raw_weights, method, alpha_used), header, check),
         )
-
-
-__all__ = ["FlashDecision", "FlashSession"]

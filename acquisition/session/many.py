@@ -155,21 +155,19 @@ def _failure(sequence: str, err: Exception, notes: list[str]) -> SequenceRecord:
 
 def estimate_record(job: tuple[str, one_sequence.EstimateSettings]) -> SequenceRecord:
     """``msflash estimate`` of one sequence as a record (what a dask worker runs)."""
-    sequence, settings = job
-    notes: list[str] = []
-    try:
-        result = one_sequence.estimate_one(sequence, settings, notes.append)
-    except Exception as err:  # every failure is this sequence's, reported for it; the others go on
-        return _failure(sequence, err, notes)
-    return SequenceRecord(sequence, result.payload, tuple(notes))
+    return _record(job, one_sequence.estimate_one)
 
 
 def flash_record(job: tuple[str, one_sequence.FlashSettings]) -> SequenceRecord:
     """``msflash flash`` of one sequence as a record (what a dask worker runs)."""
+    return _record(job, one_sequence.flash_one)
+
+
+def _record(job: tuple[str, Any], command: Callable[[str, Any, Callable[[str], None]], Any]) -> SequenceRecord:
     sequence, settings = job
     notes: list[str] = []
     try:
-        result = one_sequence.flash_one(sequence, settings, notes.append)
+        result = command(sequence, settings, notes.append)
     except Exception as err:  # every failure is this sequence's, reported for it; the others go on
         return _failure(sequence, err, notes)
     return SequenceRecord(sequence, result.payload, tuple(notes))

@@ -41,6 +41,7 @@ from msflash.processing.light_families import (
 from msflash.processing.light_prior import PriorEstimate, prior_model
 from msflash.processing.prior_choice import ModelChoice, choose_model
 from msflash.processing.reference_patch import ReferencePatch
+from msflash.processing.spectra import Spectra
 from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 
@@ -112,8 +113,7 @@ def prior_payload(sequence: Sequence, result: SequencePriorResult) -> dict:
         "wavelengths_nm": sequence.wavelengths_nm,
         "spectral_unit": sequence.spectral_unit,
         "model": chosen,
-        "spectrum": spectrum_in_sequence_unit(sequence, spectrum),
-        "spectrum_std": spectrum_in_sequence_unit(sequence, spectrum.replace(values=std[:, None])),
+        **spectrum_fields(sequence, spectrum, std),
         "model_choice": {
             "model": chosen,
             "reason": result.choice.reason,
@@ -122,10 +122,7 @@ def prior_payload(sequence: Sequence, result: SequencePriorResult) -> dict:
             "held_out_relative_error_noise_removed": {"led": errors.led, "prior": errors.prior},
         },
         "prior": {
-            "spectrum": spectrum_in_sequence_unit(sequence, prior.spectrum),
-            "spectrum_std": spectrum_in_sequence_unit(
-                sequence, prior.spectrum.replace(values=prior.spectrum_std[:, None])
-            ),
+            **spectrum_fields(sequence, prior.spectrum, prior.spectrum_std),
             "coefficients": prior.coefficients,
             "prior_weight": prior.prior_weight,
             "relative_residual": prior.relative_residual,
@@ -138,6 +135,15 @@ def prior_payload(sequence: Sequence, result: SequencePriorResult) -> dict:
             "warnings": list(result.led.warnings),
         },
         "n_samples": prior.n_samples,
+    }
+
+
+def spectrum_fields(sequence: Sequence, spectrum: Spectra, std: np.ndarray) -> dict:
+    """``spectrum`` and its ±1σ band ``std`` as the payload's ``spectrum`` and ``spectrum_std`` (the sequence's
+    unit)."""
+    return {
+        "spectrum": spectrum_in_sequence_unit(sequence, spectrum),
+        "spectrum_std": spectrum_in_sequence_unit(sequence, spectrum.replace(values=np.asarray(std)[:, None])),
     }
 
 
@@ -332,10 +338,7 @@ def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
         "parameters": fit.parameters(),
         "n_parameters": fit.n_parameters,
         "reason": family.reason,
-        "spectrum": spectrum_in_sequence_unit(sequence, family.spectrum),
-        "spectrum_std": spectrum_in_sequence_unit(
-            sequence, family.spectrum.replace(values=family.spectrum_std[:, None])
-        ),
+        **spectrum_fields(sequence, family.spectrum, family.spectrum_std),
         "relative_residual": family.relative_residual,
         "reference": None
         if family.reference is None
@@ -357,8 +360,7 @@ def family_payload(sequence: Sequence, family: FamilyEstimate) -> dict:
 
 LED_GAP_SHARE = 0.25
 """Where the family evidence is computed, the LEDs' band adds this share of the squared gap between their estimate
-and the family's (scaled onto it): on the tuning rows of both suites the band then covered the truth at 71–74 % (±1σ)
-and 96–98 % (±2σ), against 64 % and 90–94 % without (docs/light-families.md)."""
+and the family's (scaled onto it; its coverage: docs/light-families.md)."""
 OLD_LED_MISS_WARNING = "the spectrum may be off by more than"
 """The start of :mod:`processing.model_error`'s warning, which the families' check replaces where it is computed."""
 
@@ -401,17 +403,11 @@ def _models_block(
             "warnings": led_warnings,
         },
         "prior": {
-            "spectrum": spectrum_in_sequence_unit(sequence, prior.spectrum),
-            "spectrum_std": spectrum_in_sequence_unit(
-                sequence, prior.spectrum.replace(values=prior.spectrum_std[:, None])
-            ),
+            **spectrum_fields(sequence, prior.spectrum, prior.spectrum_std),
             "warnings": list(prior.warnings),
         },
         "family": {
-            "spectrum": spectrum_in_sequence_unit(sequence, family.spectrum),
-            "spectrum_std": spectrum_in_sequence_unit(
-                sequence, family.spectrum.replace(values=family.spectrum_std[:, None])
-            ),
+            **spectrum_fields(sequence, family.spectrum, family.spectrum_std),
             "warnings": list(family.warnings),
         },
     }

@@ -6,28 +6,12 @@ frozen dataclass of its options (:class:`SimRigOptions`, :class:`AravisFakeRigOp
 (:mod:`acquisition.session.rigs`). :func:`open_rig` looks the spec up, checks the options are that
 kind's and builds the rig; the command line fills the options from its arguments.
 
-``sim`` (the default): a :class:`SimulatedCamera` rendering a spectral scene with the LED levels
-the booth *emulator* holds at exposure time, and the real :class:`led_controller.LedBooth`
-driver talking to that emulator over a real pseudo-terminal. The whole pipeline runs, with a
-known ground-truth ambient, through the same driver code a real booth uses.
-
-``aravis-fake``: :class:`~acquisition.devices.aravis.camera.AravisCamera` on the Aravis GigE Vision fake
-served in this process on 127.0.0.1 (opened by address: no discovery broadcast), the emulator on a
-pty and ``LedBooth``. Aravis streams (buffers, frame ids, timestamps, exposure and gain features,
-software triggers) in BayerRG16; :class:`~acquisition.devices.wired_fake.WiredFakeCamera` paints each frame with the ``sim`` rig's
-world rendered under the LED levels of that frame's trigger, so the Aravis path runs inside the
-whole pipeline with a known ground truth.
-
-``replay:DIR``: :class:`~acquisition.devices.replay_camera.ReplayCamera` serving a recorded sequence, with
-the emulator on a pty; re-runs estimation, flash solving and synthesis on recorded frames.
-
-``hw`` (real use; also implied by ``--camera`` / ``--port``): :class:`~acquisition.devices.hardware_camera.HardwareCamera` around an
-:class:`~acquisition.devices.aravis.camera.AravisCamera` opened by device id, serial or IP on the given
-interfaces (default ``usb3``: GigE Vision discovery broadcasts, so ``gige`` only when named, and an
-IP address opens one GigE camera without discovery), and :class:`led_controller.LedBooth` on
-``port`` or on the single booth :func:`led_controller.discovery.find_booth` finds. Every device is
-tried; :class:`RigOpenError` lists each one's failure. LED spectra (and optionally the camera's
-responsivities) come from a calibration directory or CSV files (:func:`~acquisition.session.rigs.hardware.load_hw_spectra`).
+The kinds (each builder's docstring has the details): ``sim`` (the default; :class:`SimulatedCamera` and the
+real :class:`led_controller.LedBooth` driver on the booth emulator over a pty, with a known ground-truth
+ambient), ``aravis-fake`` (:class:`~acquisition.devices.aravis.camera.AravisCamera` on the Aravis GigE fake at
+127.0.0.1, painted with the ``sim`` world), ``replay:DIR`` (:class:`~acquisition.devices.replay_camera.ReplayCamera`
+serving a recorded sequence) and ``hw`` (real use, also implied by ``--camera`` / ``--port``; every device is
+tried and :class:`RigOpenError` lists each one's failure).
 
 The trigger wires (docs/architecture.md §4, three sync modes) are modelled in every rig:
 
@@ -50,28 +34,18 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
-from msflash.acquisition.devices.wired_fake import WiredFakeCamera
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.rigs.aravis_fake import (
-    ARAVIS_FAKE_PATCH_PX,
-    ARAVIS_FAKE_PIXEL_FORMAT,
-    AravisFakeNominalCamera,
     open_aravis_fake_rig,
 )
-from msflash.acquisition.session.rigs.emulated_booth import SIM_BOOTLOADER_S, check_emulated_booth, emulator_for
 from msflash.acquisition.session.rigs.hardware import (
-    CALIBRATION_LED_FILES,
-    CALIBRATION_RESPONSIVITY_FILES,
-    hw_spectra,
-    load_hw_spectra,
     open_hw_rig,
 )
 from msflash.acquisition.session.rigs.replay import open_replay_rig
 from msflash.acquisition.session.rigs.rig import Rig
-from msflash.acquisition.session.rigs.sim import open_firmware_booth, open_sim_rig
+from msflash.acquisition.session.rigs.sim import open_sim_rig
 from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.processing.names import unknown_name
 from msflash.processing.scenes import Scene
@@ -252,36 +226,3 @@ def open_rig(spec: str, options: RigOptions | None = None) -> Rig:
     if not isinstance(chosen, builder.options):
         raise TypeError(f"open_rig({spec!r}): {type(chosen).__name__} given; expected {builder.options.__name__}")
     return builder.build(spec, chosen)
-
-
-__all__ = [
-    "ARAVIS_FAKE_PATCH_PX",
-    "ARAVIS_FAKE_PIXEL_FORMAT",
-    "CALIBRATION_LED_FILES",
-    "CALIBRATION_RESPONSIVITY_FILES",
-    "RIG_BUILDERS",
-    "RIG_SPECS",
-    "SIM_BOOTLOADER_S",
-    "AravisFakeNominalCamera",
-    "AravisFakeRigOptions",
-    "HardwareCamera",
-    "HwRigOptions",
-    "ReplayRigOptions",
-    "Rig",
-    "RigBuilder",
-    "RigOptions",
-    "SimRigOptions",
-    "SimWorldOptions",
-    "WiredFakeCamera",
-    "check_emulated_booth",
-    "emulator_for",
-    "hw_spectra",
-    "load_hw_spectra",
-    "open_aravis_fake_rig",
-    "open_firmware_booth",
-    "open_hw_rig",
-    "open_replay_rig",
-    "open_rig",
-    "open_sim_rig",
-    "rig_kind",
-]

@@ -41,13 +41,12 @@ from msflash.acquisition.session.exposure import (
     ExposurePolicy,
     FlashEnergyWarning,
 )
-from msflash.acquisition.session.flash_session import FlashSession
+from msflash.acquisition.session.flash_session import FlashDecision, FlashSession
 from msflash.acquisition.session.metering import flash_exposure, metering_view
 from msflash.acquisition.session.rig import Rig
 from msflash.acquisition.session.run_exposure import (
     SYNC_MODES,
     LedCapture,
-    Recorded,
     flash_exposure_for,
     led_capture,
     plan_exposure,
@@ -245,6 +244,8 @@ class StreamFlash(LedFrames):
             exposure_policy=exposure.policy,
         )
         self.chosen: FlashSolution | None = None
+        self.decision: FlashDecision | None = None
+        """The in-memory decision (its estimate is the one reported), unless ``from_disk``."""
         self.reread: EstimateStream | None = None
         """The frames re-read from disk and fed to a stream of their own (``from_disk``), else None."""
         self.warnings: tuple[WarningMessage, ...] = ()
@@ -263,8 +264,8 @@ class StreamFlash(LedFrames):
                 levels = np.clip(self.chosen.flash_weights, 0.0, 1.0)
             else:
                 # As the capture bench: the estimate's reliability signals are left for after the trigger.
-                decision = self.session.decide(options.mode)
-                levels, self.chosen = decision.levels, decision.solution
+                self.decision = self.session.decide(options.mode)
+                levels, self.chosen = self.decision.levels, self.decision.solution
         with warnings.catch_warnings(record=True) as flash_caught:
             warnings.simplefilter("always", FlashEnergyWarning)
             flash_us = flash_exposure_for(self.rig, self.exposure, levels, self.session.flash_exposure, options.sync)
@@ -273,10 +274,10 @@ class StreamFlash(LedFrames):
         return FlashChoice(tuple(float(v) for v in levels), float(flash_us))
 
 
-def _fitted(estimate: AmbientEstimate, reread: EstimateStream | None, recorded: Sequence) -> AmbientEstimate:
+def _fitted(estimate: AmbientEstimate, recorded: Sequence) -> AmbientEstimate:
     """The estimate with the mains fitted to its flicker gains at the frames' timestamps: the live stream's header
     has no frames yet, the sequence written has (docs/flicker.md)."""
-    if estimate.flicker is None or reread is not None:
+    if estimate.flicker is None:
         return estimate
     return replace(estimate, flicker=analysis.with_mains_fit(estimate.flicker, recorded))
 
@@ -315,9 +316,12 @@ def run_one_stream(
     # from memory; the reported estimate is the statistics accumulated as they arrived (no second pass).
     recorded = writer.flush()
     stack = analysis.load_frame_stack(recorded, [frame.pixels for frame in flash.frames])
-    estimate = _fitted(
-        (flash.reread or flash.session.stream).estimate(options.solver, options.alpha), flash.reread, recorded
-    )
+    # The flicker check and the ambient weights are the decision's, not solved again.
+    if flash.reread is not None:
+        estimate = flash.reread.estimate(options.solver, options.alpha)
+    else:
+        assert flash.decision is not None
+        estimate = _fitted(flash.decision.estimate, recorded)
     both = solve_both(flash.session, estimate.ambient_weights, options.mode, solved={options.mode: flash.chosen})
     names = [led.name for led in writer.sequence.leds]
     captured = led_capture(rig, names, exposure, flash.frames, list(entries[:-1]), flash.last_frame_at)
@@ -352,7 +356,7 @@ def run_two_captures(
         sequence = read_sequence(writer.path.parent)
         statistics = stream_sequence(sequence, options.bin_factor)
     stack = analysis.load_frame_stack(sequence, [frame.pixels for frame in captured.frames])
-    estimate = _fitted(statistics.estimate(options.solver, options.alpha), None, sequence)
+    estimate = _fitted(statistics.estimate(options.solver, options.alpha), sequence)
     both = solve_both(SequenceFlashes(sequence, options.target), estimate.ambient_weights, options.mode)
     solutions, caught = both.solutions, both.warnings
     levels = np.clip(solutions[options.mode].flash_weights, 0.0, 1.0)
@@ -407,25 +411,3 @@ def run_two_captures(
     run_capture(rig.camera, rig.booth, flash_plan, writer, (flash_kept, ProgressLines(), *handlers), cancel=cancel)
     flash_frame = None if flash_kept.flash is None else as_recorded(flash_kept.flash.pixels, sequence.camera.cfa)
     return RunResult(estimate, solutions, caught, captured, flash_us, stack, decided, flash_frame)
-
-
-__all__ = [
-    "SYNC_MODES",
-    "LedCapture",
-    "LedFrames",
-    "ProgressLines",
-    "Recorded",
-    "RunOptions",
-    "RunResult",
-    "StreamFlash",
-    "capture_led_sequence",
-    "capture_sequence",
-    "degenerate",
-    "flash_exposure_for",
-    "plan_exposure",
-    "recording_of",
-    "report_exposure",
-    "run_one_stream",
-    "run_two_captures",
-    "sequence_writer",
-]

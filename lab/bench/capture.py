@@ -4,7 +4,7 @@ The ``aravis-fake`` rig (AravisCamera on the fake at 127.0.0.1, booth emulator o
 ``LedBooth`` driver; in its test-pattern form, ``rendered=False``, so the figures are the transport's
 without the scene renderer's cost) runs booth master: the booth pulses the trigger once per period, so the
 camera runs at a fixed frame rate (``frame_rate_hz``; the exposure is what fills the rest of the
-period, :func:`acquisition.session.capture.booth_period_us`). Each run is one stream of ambient + k LEDs
+period, :func:`acquisition.session.booth_guard.booth_period_us`). Each run is one stream of ambient + k LEDs
 + flash (:func:`acquisition.session.capture.run_capture_with_flash`): the table is armed with the flash
 step held; when the last LED frame arrives the ambient is estimated from the frames in memory
 (:class:`acquisition.session.flash_session.FlashSession`, prepared once per rig), the complementary flash
@@ -48,7 +48,7 @@ from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.plan import CapturePlan, PlanTiming
-from msflash.acquisition.session.capture import READOUT_US, TRIGGER_PULSE_US
+from msflash.acquisition.session.booth_guard import READOUT_US, TRIGGER_PULSE_US
 from msflash.led_controller.booth import LedBooth
 
 WALL_RATIO_TARGET = 1.15

@@ -44,8 +44,6 @@ class Outbox:
 
     Parameters
     ----------
-    ws
-        The page's prepared WebSocket.
     transport
         Its connection (``request.transport``): aborted when the page is dropped.
     on_dropped

@@ -566,8 +566,6 @@ def configure_camera(
     ----------
     camera
         An opened camera (``AravisCamera``).
-    asked
-        The command line's options.
     strobe
         Whether plans drive a strobe output (camera-paced sync): then the strobe line is set up,
         Line1 unless an option names another.

@@ -24,7 +24,7 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.sequence.reader import read_sequence
-from msflash.acquisition.session.rig import emulator_for
+from msflash.acquisition.session.rigs.emulated_booth import emulator_for
 from msflash.lab.wiring import read_pins, wiring_svg
 from msflash.led_controller import LedBooth, discovery, firmware_sim, serve_on_pty
 from msflash.processing import datasets

@@ -17,7 +17,7 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import sequence_spectra
-from msflash.acquisition.session.rig import hw_spectra
+from msflash.acquisition.session.rigs.hardware import hw_spectra
 from msflash.calibration.files import CalibrationSet, load_calibration, save_calibration
 from tests.acquisition.support.hw_rig import booth_on_pty, fake_camera_capture, nikon_d100, paper_leds
 

@@ -17,7 +17,6 @@ import pytest
 from yarl import URL
 
 from msflash.acquisition.app import cli
-from msflash.acquisition.app.live.in_thread import serve_in_thread
 from msflash.acquisition.app.live.requests import bind
 from msflash.acquisition.app.live.server import LAST_CLIENT_GRACE_S, TOKEN_HEADER, LiveServer
 from msflash.acquisition.errors import UsageError
@@ -26,6 +25,7 @@ from tests.acquisition.support.live import (
     emulator_levels,
     live_server,
     page_token,
+    serve_in_thread,
     start_live_process,
     stopped_with_the_leds_off,
     wait_until,

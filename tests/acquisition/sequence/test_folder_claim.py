@@ -6,24 +6,36 @@ timeouts that fail the test, never by sleeps that decide it)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.errors import FolderInUseError
-from msflash.acquisition.sequence.folder_claim import LOCK_FILE, claim_folder, claimed
+from msflash.acquisition.sequence.folder_claim import LOCK_FILE, FolderClaim, claim_folder
 from msflash.acquisition.sequence.reader import read_sequence
 from tests.helpers import wait_for_frames, write_test_sequence
 
 REPO = Path(__file__).resolve().parents[3]
 SLOW_CAPTURE = ["capture", "--sync", "booth", "--exposure-us", "1500000", "--scene", "macbeth"]
+
+
+@contextlib.contextmanager
+def claimed(folder: str | os.PathLike, what: str = "writing") -> Iterator[FolderClaim]:
+    """:func:`claim_folder` as a ``with`` block."""
+    claim = claim_folder(folder, what)
+    try:
+        yield claim
+    finally:
+        claim.release()
 
 
 def _msflash(*args: str) -> subprocess.Popen[bytes]:

@@ -18,7 +18,8 @@ import pytest
 
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.reader import read_sequence
-from msflash.acquisition.session.capture import host_silence_s, preview_frames, run_capture
+from msflash.acquisition.session.booth_guard import host_silence_s
+from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import Rig, open_sim_rig
 from msflash.led_controller import protocol
 from msflash.led_controller.booth import levels_close

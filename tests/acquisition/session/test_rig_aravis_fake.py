@@ -19,7 +19,8 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.capture import preview_frames, run_capture
-from msflash.acquisition.session.rig import ARAVIS_FAKE_PIXEL_FORMAT, open_aravis_fake_rig, open_rig
+from msflash.acquisition.session.rig import open_aravis_fake_rig, open_rig
+from msflash.acquisition.session.rigs.aravis_fake import ARAVIS_FAKE_PIXEL_FORMAT
 from msflash.processing import datasets
 from tests.acquisition.support.capture_doubles import Watch
 from tests.acquisition.support.gvcp_port import gvcp_port_in_use

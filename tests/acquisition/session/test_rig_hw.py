@@ -20,7 +20,9 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import RigOpenError
 from msflash.acquisition.sequence.reader import read_sequence
-from msflash.acquisition.session.rig import HwRigOptions, emulator_for, load_hw_spectra, open_rig
+from msflash.acquisition.session.rig import HwRigOptions, open_rig
+from msflash.acquisition.session.rigs.emulated_booth import emulator_for
+from msflash.acquisition.session.rigs.hardware import load_hw_spectra
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID

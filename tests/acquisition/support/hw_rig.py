@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from msflash.acquisition.session.rig import emulator_for
+from msflash.acquisition.session.rigs.emulated_booth import emulator_for
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID, Spectra

@@ -1,19 +1,68 @@
-"""What the live view's tests share: a sim rig served by a :class:`LiveServer` in a background thread."""
+"""What the live view's tests share: a sim rig served by a :class:`LiveServer` in a background thread
+(:func:`serve_in_thread`; ``msflash live`` serves on the main thread)."""
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.app.live.in_thread import serve_in_thread
 from msflash.acquisition.app.live.requests import bind
 from msflash.acquisition.app.live.server import LiveServer
 from msflash.acquisition.session.rig import open_rig
+
+
+async def _let_closed_connections_finish() -> None:
+    """A few turns of the loop: connections the runner closed at shutdown finish closing in callbacks it has queued
+    (a transport's ``connection_lost``); a loop closed before them leaves their sockets open, each a
+    ``ResourceWarning`` when collected (seen under load, with a page's keep-alive connections)."""
+    for _ in range(3):
+        await asyncio.sleep(0.01)
+
+
+@contextlib.contextmanager
+def serve_in_thread(server: LiveServer) -> Iterator[LiveServer]:
+    """Serve ``server`` on its own event loop in a background thread while the block runs ."""
+    loop = asyncio.new_event_loop()
+    stop = asyncio.Event()
+    started = threading.Event()
+    failure: list[BaseException] = []
+
+    def main() -> None:
+        asyncio.set_event_loop(loop)
+
+        async def run() -> None:
+            started.set()
+            await server.serve(stop)
+
+        try:
+            loop.run_until_complete(run())
+        except BaseException as err:  # noqa: BLE001 - raised again in the caller's thread
+            failure.append(err)
+            started.set()
+        finally:
+            try:
+                loop.run_until_complete(_let_closed_connections_finish())
+            finally:
+                loop.close()
+
+    thread = threading.Thread(target=main, name="msflash-live", daemon=True)
+    thread.start()
+    started.wait()
+    try:
+        yield server
+    finally:
+        if not loop.is_closed():
+            loop.call_soon_threadsafe(stop.set)
+        thread.join(timeout=60)
+        if failure:
+            raise failure[0]
 
 
 @contextlib.contextmanager
