@@ -44,3 +44,42 @@ def test_the_mains_fit_finds_the_lamp_from_the_frame_gains() -> None:
     assert fit is not None and fit.decisive
     assert fit.frequency_hz == pytest.approx(lamp.frequency_hz, abs=0.5)
     assert fit.depth == pytest.approx(0.3, abs=0.03)  # a filament's near-sinusoid: its first harmonic is the flicker
+
+
+def test_paired_renderings_differ_in_the_flicker_alone(tmp_path) -> None:
+    """The paired arms (tests/harness/render.CommonNoise): the steady arm is one Poisson draw and the flickering arm
+    the same draw with the ambient's extra photons added (or its missing ones thinned) — frames whose gain is 1 are
+    equal to the last count, the others move by the ambient's share, and two seeds give different noise."""
+    import numpy as np
+    import tifffile
+
+    from tests.harness.flicker import common_noise
+    from tests.harness.render import CommonNoise, render
+
+    case = next(c for c in flicker_cases(1) if c.cfa is not None)
+    lamp = timing(case)
+    gains = np.ones_like(lamp.gains)
+    gains[1], gains[2] = 1.3, 0.7
+    pairing = common_noise(case, 0, lamp)
+    frames = {}
+    for name, g, noise in (
+        ("steady", np.ones_like(gains), pairing),
+        ("flicker", gains, pairing),
+        ("other", np.ones_like(gains), CommonNoise(pairing.seed + 1, pairing.scale_gains)),
+    ):
+        render(case, tmp_path / name, ambient_gains=g, exposures_us=lamp.exposures_us, common_noise=noise)
+        frames[name] = [
+            tifffile.imread(p).astype(float) - case.black for p in sorted((tmp_path / name / "frames").glob("*.tif"))
+        ]
+    steady, flicker, other = frames["steady"], frames["flicker"], frames["other"]
+    for index in (0, *range(3, len(gains))):
+        assert np.array_equal(steady[index], flicker[index])
+    ambient = steady[0]
+    for index, g in ((1, 1.3), (2, 0.7)):
+        moved = flicker[index] - steady[index]
+        expected = (g - 1.0) * lamp.exposures_us[index] / lamp.exposures_us[0]  # of the ambient frame's image
+        share = float(np.sum(moved * ambient) / np.sum(ambient * ambient))
+        assert share == pytest.approx(expected, rel=0.05)
+        # Superposition and thinning add only the moved photons' noise: far less than two independent draws differ.
+        assert np.std(moved - expected * ambient) < 0.5 * np.std(other[index] - steady[index])
+    assert not np.array_equal(steady[0], other[0])
