@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import pickle
 import shutil
 import tempfile
 import zlib
@@ -42,6 +43,7 @@ from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.acquisition.session.one_sequence import EstimateSettings, estimate_read
 from msflash.processing.ambient import estimate_ambient
+from msflash.processing.errors import SpectralDataError
 from msflash.processing.flicker import gains_applied, gains_not_applied, with_ambient_gains
 from tests.harness import metrics
 from tests.harness.cases import cases_of
@@ -55,7 +57,7 @@ FRAME_GAP_MS = (15.0, 60.0)
 """From one frame's start to the next: drawn uniformly (host pacing: a serial command, a trigger, a readout)."""
 PER_KIND = 12
 """Cases per lamp kind (the first of each kind in the harness's two splits)."""
-DRAWS = 6
+DRAWS = 4
 """Paired noise draws per case (:func:`measure` with ``draw``)."""
 TUNING_KINDS = ("incandescent", "fluorescent")
 """Lamp kinds the gain model's constants were set on; the rest are held out."""
@@ -142,6 +144,8 @@ class Row:
     """The largest |ê_i| on the steady rendering."""
     draw: int | None = None
     """The noise draw of a paired measurement (:func:`measure` with ``draw``); ``None``: the unpaired one."""
+    failures: tuple[str, ...] = ()
+    """Models that refused a rendering (their ratio NaN): ``"<model> <rendering>: <message>"``."""
 
 
 def _estimates(directory: Path, true_offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, object]:
@@ -162,24 +166,37 @@ def _estimates(directory: Path, true_offsets: np.ndarray) -> tuple[np.ndarray, n
 
 
 def _model_ratios(
-    directory: Path, truth: np.ndarray, bound: float, rendering: str, true_offsets: np.ndarray
+    directory: Path,
+    truth: np.ndarray,
+    bound: float,
+    rendering: str,
+    true_offsets: np.ndarray,
+    failures: list[str],
+    plain: bool = True,
 ) -> dict[str, float]:
     """Each of :data:`MODELS` as ``msflash estimate`` runs it, RMSE ÷ LED bound; on the flickering rendering also
-    with the gains not applied, and with the true ones (the oracle)."""
+    with the gains not applied (``plain``; the paired draws leave it out), and with the true ones (the oracle). A model that refuses the sequence
+    (``SpectralDataError``, what ``msflash estimate`` turns into exit 2) gives NaN, its message appended to
+    ``failures``; the tables leave that case's draw out of both arms for that model and count it."""
     sequence = read_sequence(directory)
     out: dict[str, float] = {}
 
-    def ratio(settings: EstimateSettings) -> float:
-        payload = estimate_read(sequence, settings, lambda note: None).payload
+    def ratio(name: str, settings: EstimateSettings) -> float:
+        try:
+            payload = estimate_read(sequence, settings, lambda note: None).payload
+        except SpectralDataError as error:
+            failures.append(f"{name} {rendering}: {error}")
+            return math.nan
         return metrics.rmse(np.asarray(payload["spectrum"], float), truth) / bound
 
     for name, settings in MODELS.items():
-        out[f"{name} {rendering}"] = ratio(settings)
+        out[f"{name} {rendering}"] = ratio(name, settings)
         if rendering == "flicker":
-            with gains_not_applied():
-                out[f"{name} flicker plain"] = ratio(settings)
+            if plain:
+                with gains_not_applied():
+                    out[f"{name} flicker plain"] = ratio(name, settings)
             with gains_applied(true_offsets):
-                out[f"{name} flicker oracle"] = ratio(settings)
+                out[f"{name} flicker oracle"] = ratio(name, settings)
     return out
 
 
@@ -200,6 +217,7 @@ def measure(case: HarnessCase, draw: int | None = None) -> Row:
     lamp = timing(case)
     pairing = None if draw is None else common_noise(case, draw, lamp)
     ratios: dict[str, float] = {}
+    failures: list[str] = []
     scratch = Path(tempfile.mkdtemp(prefix="flicker-"))
     try:
         checks = {}
@@ -213,7 +231,9 @@ def measure(case: HarnessCase, draw: int | None = None) -> Row:
             ratios[f"{name} model"] = metrics.rmse(model, truth.ambient) / bound
             ratios[f"{name} plain"] = metrics.rmse(plain, truth.ambient) / bound
             ratios[f"{name} oracle"] = metrics.rmse(oracle, truth.ambient) / bound
-            ratios.update(_model_ratios(truth.directory, truth.ambient, bound, name, true_offsets))
+            ratios.update(
+                _model_ratios(truth.directory, truth.ambient, bound, name, true_offsets, failures, draw is None)
+            )
             checks[name] = check
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
@@ -238,6 +258,7 @@ def measure(case: HarnessCase, draw: int | None = None) -> Row:
         tuple(float(v) for v in np.abs(offsets) / sigmas),
         float(np.max(np.abs(offsets))),
         draw,
+        tuple(failures),
     )
 
 
@@ -321,6 +342,7 @@ def cost_interval(rows: list[Row], numerator: str, denominator: str) -> tuple[fl
     """``mean(numerator) ÷ mean(denominator) − 1`` over ``rows`` and its 95 % percentile interval, resampling whole
     cases (each with all its draws: the draws of one case are not independent of each other) :data:`BOOTSTRAP`
     times with a fixed seed."""
+    rows = [r for r in rows if math.isfinite(r.ratios[numerator]) and math.isfinite(r.ratios[denominator])]
     names = sorted({r.case.name for r in rows})
     top = np.array([sum(r.ratios[numerator] for r in rows if r.case.name == n) for n in names])
     bottom = np.array([sum(r.ratios[denominator] for r in rows if r.case.name == n) for n in names])
@@ -369,13 +391,14 @@ def paired_table(rows: list[Row], title: str) -> list[str]:
         return f"{min(costs):+.1%} to {max(costs):+.1%}"
 
     for name in MODELS:
-        steady = np.array([r.ratios[f"{name} steady"] for r in rows])
-        flicker = np.array([r.ratios[f"{name} flicker"] for r in rows])
-        oracle = np.array([r.ratios[f"{name} flicker oracle"] for r in rows])
+        columns = (f"{name} steady", f"{name} flicker", f"{name} flicker oracle")
+        valid = [r for r in rows if all(math.isfinite(r.ratios[c]) for c in columns)]
+        steady, flicker, oracle = (np.array([r.ratios[c] for r in valid]) for c in columns)
+        refused = f" ({len(rows) - len(valid)} refused)" if len(valid) < len(rows) else ""
         cost = cost_interval(rows, f"{name} flicker", f"{name} steady")
         verdict = "met" if cost[2] <= 0.05 else ("met (point)" if cost[0] <= 0.05 else "missed")
         lines.append(
-            f"| {name} | {len({r.case.name for r in rows})} × {len(draws)} | {steady.mean():.3f} ({steady.max():.2f})"
+            f"| {name} | {len({r.case.name for r in rows})} × {len(draws)}{refused} | {steady.mean():.3f} ({steady.max():.2f})"
             f" | {flicker.mean():.3f} ({flicker.max():.2f}) | {oracle.mean():.3f} | **{_with_interval(cost)}** |"
             f" {_with_interval(cost_interval(rows, f'{name} flicker oracle', f'{name} steady'))} |"
             f" {_with_interval(cost_interval(rows, f'{name} flicker', f'{name} flicker oracle'))} |"
@@ -404,6 +427,17 @@ def paired_section(rows: list[Row], command: str) -> list[str]:
         *paired_table([r for r in rows if r.split == "tuning"], f"Tuning rows (lamp kinds {', '.join(TUNING_KINDS)})"),
         *paired_table(
             [r for r in rows if r.split == "held_out"], "Held-out rows (the other lamp kinds; nothing was set on them)"
+        ),
+        *(
+            [
+                "Refused (a model's `SpectralDataError`, what `msflash estimate` exits 2 with; that case's draw is left "
+                "out of both arms for that model):",
+                "",
+                *(f"- {r.case.name} draw {r.draw}: {message}" for r in rows for message in r.failures),
+                "",
+            ]
+            if any(r.failures for r in rows)
+            else []
         ),
     ]
 
@@ -495,6 +529,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--draws", type=int, default=DRAWS, help="paired noise draws per case (0: only the unpaired measurement)"
     )
+    parser.add_argument("--rows", default=None, help="also pickle the measured rows here (for a closer look)")
     args = parser.parse_args(argv)
     cases = flicker_cases(args.per_kind)
     jobs: list[tuple[HarnessCase, int | None]] = [(c, d) for c in cases for d in (None, *range(args.draws))]
@@ -503,6 +538,8 @@ def main(argv: list[str] | None = None) -> int:
             measured = list(pool.map(_measured, jobs, chunksize=1))
     else:
         measured = [_measured(job) for job in jobs]
+    if args.rows:
+        Path(args.rows).write_bytes(pickle.dumps(measured))
     rows = [r for r in measured if r.draw is None]
     paired = [r for r in measured if r.draw is not None]
     command = (
