@@ -53,13 +53,22 @@ from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import ChannelMoments, NoiseMoments, SequenceStatistics
 from msflash.processing.tile_statistics import BlockData, TiledStatistics
 
-MODEL_ERROR = 0.03
-"""One sigma of the colour read's bias under steady light for an LED of little curvature (:func:`curvature_share`),
-added in quadrature to the noise's sigma (docs/flicker.md)."""
+MODEL_ERROR = 0.01
+"""One sigma of the colour read's bias under steady light that no measured term accounts for, added in quadrature to
+the noise's sigma (docs/flicker.md)."""
 
-CURVATURE_ERROR = 0.4
-"""The read's bias per unit :func:`curvature_share` (one sigma): set on the harness's tuning lamp kinds, steady
-(docs/flicker.md)."""
+CURVATURE_ERROR = 0.2
+"""The read's bias per unit :func:`curvature_share` (one sigma): what the LED's spectrum alone says of how far a
+surface curving inside its band can move its colour (docs/flicker.md)."""
+
+RESIDUAL_ERROR = 0.75
+"""The read's bias per unit of the LED image's colour off its two directions that the ambient does not explain,
+relative to the ambient's colour off them (``√(R_i / A_i)``, :func:`ambient_gain_offsets`; one sigma). What the
+scene itself says of the read: that colour is the surfaces' curvature inside the band, and where it correlates with
+the ambient's the read takes it for ambient (an amber LED where a camera's R and G cross read 0.39 under a steady
+sodium lamp, at 2.7 of the old sigmas, and 0.48 once the lamp flickered: docs/flicker.md). The three constants were
+set on the harness's tuning lamp kinds, steady: the smallest that keep every steady read within 2σ (two thirds of
+:data:`DETECTION_Z`)."""
 
 DETECTION_Z = 3.0
 """Flicker is *detected* (and the gains applied) when some LED's ``|ê_i|`` exceeds this many sigmas."""
@@ -253,8 +262,11 @@ def ambient_gain_offsets(moments: ChannelMoments, directions: np.ndarray) -> tup
         scatter += offset * offset * float(np.trace(projector @ moments.aa))
         dof = max(clean.n_blocks * (channels - q.shape[1]) - 1, 1)
         noise_var = max(scatter, residual, 0.0) / dof / ambient
+        unexplained = max(residual, 0.0) / ambient  # the LED's own off-direction colour, in the ambient's units
         offsets[i] = offset
-        sigmas[i] = math.sqrt(noise_var + MODEL_ERROR**2 + (CURVATURE_ERROR * curvature[i]) ** 2)
+        sigmas[i] = math.sqrt(
+            noise_var + MODEL_ERROR**2 + (CURVATURE_ERROR * curvature[i]) ** 2 + RESIDUAL_ERROR**2 * unexplained
+        )
         energy = float(np.trace(clean.ff[i])) - 2 * offset * float(np.trace(clean.fa[i]))
         energy += offset * offset * float(np.trace(clean.aa))
         misfits[i] = max(residual, 0.0) / energy if energy > 0 else math.inf
