@@ -28,9 +28,11 @@ raw frames) do not depend on the ambient's share of an LED frame, so the correct
 frames from which the extra ambient had been subtracted pixel by pixel (tests/processing/test_flicker_models.py).
 
 **Deciding.** The colour read is biased where a surface's reflectance curves inside an LED's band and the camera
-turns that into colour the two directions do not hold (an amber LED where R and G cross reads up to 0.2 under steady
-light): each LED's sigma adds :data:`MODEL_ERROR` and :data:`CURVATURE_ERROR` times its :func:`curvature_share` to
-the noise's, both set on the harness's tuning lamp kinds under steady light (docs/flicker.md). Flicker is detected
+turns that into colour the two directions do not hold, correlated with the ambient's (an amber LED where R and G
+cross reads up to 0.4 under steady light): each LED's sigma adds to the noise's :data:`MODEL_ERROR`,
+:data:`CURVATURE_ERROR` times its :func:`curvature_share`, and :data:`RESIDUAL_ERROR` times the colour the ambient
+leaves unexplained in its image (what the scene itself says of the read's bias), set on the harness's tuning lamp
+kinds under steady light (docs/flicker.md). Flicker is detected
 when some LED's ``|ê_i|`` exceeds :data:`DETECTION_Z` sigmas; the statistics are then corrected by every ``ê_i`` as
 read (not shrunk towards 0: a share left in the LED images costs the light models far more than the LED model,
 docs/decisions/flicker-every-model.md). What was read is reported in every case
@@ -231,8 +233,8 @@ def curvature_share(directions: np.ndarray) -> np.ndarray:
 
 
 def ambient_gain_offsets(moments: ChannelMoments, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``ê``, its sigma (noise and :data:`MODEL_ERROR`) and each LED image's colour misfit from channel moments and
-    :func:`led_directions`.
+    """``ê``, its sigma (noise, :data:`MODEL_ERROR`, :data:`CURVATURE_ERROR` and :data:`RESIDUAL_ERROR`) and each LED
+    image's colour misfit from channel moments and :func:`led_directions`.
 
     The misfit is the share of ``f̃ − ê a``'s energy off the LED's two directions: a few per cent where the LED
     colours are what the responsivities say; near 1 where they are not (a mono camera recorded as three equal

@@ -489,7 +489,8 @@ def report(rows: list[Row], command: str, paired: list[Row] | None = None) -> st
         f"Largest |ê_i| per case: median {np.median(steady_offsets):.3f}, 90th percentile "
         f"{np.percentile(steady_offsets, 90):.3f}, max {np.max(steady_offsets):.3f} "
         "",
-        "Each LED's steady read in its own sigma (noise, MODEL_ERROR, CURVATURE_ERROR × its curvature share): "
+        "Each LED's steady read in its own sigma (noise, MODEL_ERROR, CURVATURE_ERROR × its curvature share, "
+        "RESIDUAL_ERROR × the colour the ambient leaves unexplained): "
         f"within ±1σ {np.mean(tuning_z <= 1):.0%} of {tuning_z.size} reads, ±2σ {np.mean(tuning_z <= 2):.0%}, beyond "
         f"the detection threshold {np.mean(tuning_z > 3):.1%} (tuning rows); held-out rows {np.mean(held_z <= 1):.0%}, "
         f"{np.mean(held_z <= 2):.0%}, {np.mean(held_z > 3):.1%} of {held_z.size}.",
