@@ -130,3 +130,22 @@ def test_flicker_the_constant_sigma_missed_is_detected(tmp_path, case_name: str)
     0.72× to 1.04× and from 0.97× to 2.3× the LED bound (docs/flicker.md). The steady rendering stays undetected."""
     assert _read(case_name, tmp_path, flickering=True).detected
     assert not _read(case_name, tmp_path, flickering=False).detected
+
+
+def test_the_cost_interval_resamples_whole_cases() -> None:
+    """The paired cost is the ratio of the means over cases × draws; its interval resamples cases with all their
+    draws, so two cases that both cost 10 % give exactly 10 %, and a case's draws never count as separate cases."""
+    from dataclasses import replace
+
+    from tests.harness.flicker import Row, cost_interval
+
+    base = Row(flicker_cases(1)[0], "k", "tuning", {}, False, False, 0.0, 0.0, (), 0.0, 0)
+
+    def row(name: str, draw: int, steady: float, flicker: float) -> Row:
+        return replace(base, case=replace(base.case, name=name), draw=draw, ratios={"s": steady, "f": flicker})
+
+    same = [row(n, d, 1.0 + d, 1.1 * (1.0 + d)) for n in ("a", "b") for d in (0, 1)]
+    assert cost_interval(same, "f", "s") == pytest.approx((0.1, 0.1, 0.1))
+    mixed = [row("a", 0, 1.0, 1.0), row("a", 1, 1.0, 1.0), row("b", 0, 1.0, 1.2), row("c", 0, 1.0, float("nan"))]
+    cost, low, high = cost_interval(mixed, "f", "s")
+    assert cost == pytest.approx(0.2 / 3) and low == pytest.approx(0.0) and high == pytest.approx(0.2)
