@@ -19,10 +19,16 @@ Every model is also run the way ``msflash estimate`` runs it (:data:`MODELS`: th
 prior, the families and ``auto``; :func:`acquisition.session.one_sequence.estimate_read`), on both renderings, and on the
 flickering one again with the gains read but not applied (:func:`processing.flicker.gains_not_applied`).
 
+**Paired draws (the measurement).** Each case is also rendered on :data:`DRAWS` noise draws with both arms on one
+noise realisation (:class:`tests.harness.render.CommonNoise`: they differ in the ambient's gain per frame and in
+nothing else); the cost is the ratio of the means over cases × draws, with a 95 % interval from resampling whole
+cases (:func:`cost_interval`), beside the floor (the true gains applied). The unpaired measurement above (the two
+arms' photon draws differing) is kept beside it for comparison.
+
 Tuning rows are the lamp kinds the rule's constants were set on (:data:`TUNING_KINDS`); held-out rows the others.
 
-Run: ``.venv/bin/python -m tests.harness.flicker --out docs/flicker-results.md`` (``--per-kind N`` cases per
-lamp kind, default :data:`PER_KIND`; ``--jobs``).
+Run: ``.venv/bin/python -m tests.harness.flicker --jobs 2 --out docs/flicker-results.md`` (``--per-kind N`` cases per
+lamp kind, default :data:`PER_KIND`; ``--draws N``, default :data:`DRAWS`; ``--rows FILE`` pickles the rows).
 """
 
 from __future__ import annotations
