@@ -19,16 +19,23 @@ Every model is also run the way ``msflash estimate`` runs it (:data:`MODELS`: th
 prior, the families and ``auto``; :func:`acquisition.session.one_sequence.estimate_read`), on both renderings, and on the
 flickering one again with the gains read but not applied (:func:`processing.flicker.gains_not_applied`).
 
+**Paired draws (the measurement).** Each case is also rendered on :data:`DRAWS` noise draws with both arms on one
+noise realisation (:class:`tests.harness.render.CommonNoise`: they differ in the ambient's gain per frame and in
+nothing else); the cost is the ratio of the means over cases × draws, with a 95 % interval from resampling whole
+cases (:func:`cost_interval`), beside the floor (the true gains applied). The unpaired measurement above (the two
+arms' photon draws differing) is kept beside it for comparison.
+
 Tuning rows are the lamp kinds the rule's constants were set on (:data:`TUNING_KINDS`); held-out rows the others.
 
-Run: ``.venv/bin/python -m tests.harness.flicker --out docs/flicker-results.md`` (``--per-kind N`` cases per
-lamp kind, default :data:`PER_KIND`; ``--jobs``).
+Run: ``.venv/bin/python -m tests.harness.flicker --jobs 2 --out docs/flicker-results.md`` (``--per-kind N`` cases per
+lamp kind, default :data:`PER_KIND`; ``--draws N``, default :data:`DRAWS`; ``--rows FILE`` pickles the rows).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import pickle
 import shutil
 import tempfile
 import zlib
@@ -42,10 +49,11 @@ from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.acquisition.session.one_sequence import EstimateSettings, estimate_read
 from msflash.processing.ambient import estimate_ambient
+from msflash.processing.errors import SpectralDataError
 from msflash.processing.flicker import gains_applied, gains_not_applied, with_ambient_gains
 from tests.harness import metrics
 from tests.harness.cases import cases_of
-from tests.harness.render import HarnessCase, render
+from tests.harness.render import CommonNoise, HarnessCase, render
 
 DEPTH = 0.3
 """Percent flicker of every flickering lamp, ``(max − min) / (max + min)``."""
@@ -55,6 +63,8 @@ FRAME_GAP_MS = (15.0, 60.0)
 """From one frame's start to the next: drawn uniformly (host pacing: a serial command, a trigger, a readout)."""
 PER_KIND = 12
 """Cases per lamp kind (the first of each kind in the harness's two splits)."""
+DRAWS = 4
+"""Paired noise draws per case (:func:`measure` with ``draw``)."""
 TUNING_KINDS = ("incandescent", "fluorescent")
 """Lamp kinds the gain model's constants were set on; the rest are held out."""
 MODELS = {
@@ -138,6 +148,10 @@ class Row:
     """Each LED's |ê_i| ÷ its sigma on the steady rendering (the read's error in its own sigmas)."""
     steady_offset: float
     """The largest |ê_i| on the steady rendering."""
+    draw: int | None = None
+    """The noise draw of a paired measurement (:func:`measure` with ``draw``); ``None``: the unpaired one."""
+    failures: tuple[str, ...] = ()
+    """Models that refused a rendering (their ratio NaN): ``"<model> <rendering>: <message>"``."""
 
 
 def _estimates(directory: Path, true_offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, object]:
@@ -158,43 +172,74 @@ def _estimates(directory: Path, true_offsets: np.ndarray) -> tuple[np.ndarray, n
 
 
 def _model_ratios(
-    directory: Path, truth: np.ndarray, bound: float, rendering: str, true_offsets: np.ndarray
+    directory: Path,
+    truth: np.ndarray,
+    bound: float,
+    rendering: str,
+    true_offsets: np.ndarray,
+    failures: list[str],
+    plain: bool = True,
 ) -> dict[str, float]:
     """Each of :data:`MODELS` as ``msflash estimate`` runs it, RMSE ÷ LED bound; on the flickering rendering also
-    with the gains not applied, and with the true ones (the oracle)."""
+    with the gains not applied (``plain``; the paired draws leave it out), and with the true ones (the oracle). A model that refuses the sequence
+    (``SpectralDataError``, what ``msflash estimate`` turns into exit 2) gives NaN, its message appended to
+    ``failures``; the tables leave that case's draw out of both arms for that model and count it."""
     sequence = read_sequence(directory)
     out: dict[str, float] = {}
 
-    def ratio(settings: EstimateSettings) -> float:
-        payload = estimate_read(sequence, settings, lambda note: None).payload
+    def ratio(name: str, settings: EstimateSettings) -> float:
+        try:
+            payload = estimate_read(sequence, settings, lambda note: None).payload
+        except SpectralDataError as error:
+            failures.append(f"{name} {rendering}: {error}")
+            return math.nan
         return metrics.rmse(np.asarray(payload["spectrum"], float), truth) / bound
 
     for name, settings in MODELS.items():
-        out[f"{name} {rendering}"] = ratio(settings)
+        out[f"{name} {rendering}"] = ratio(name, settings)
         if rendering == "flicker":
-            with gains_not_applied():
-                out[f"{name} flicker plain"] = ratio(settings)
+            if plain:
+                with gains_not_applied():
+                    out[f"{name} flicker plain"] = ratio(name, settings)
             with gains_applied(true_offsets):
-                out[f"{name} flicker oracle"] = ratio(settings)
+                out[f"{name} flicker oracle"] = ratio(name, settings)
     return out
 
 
-def measure(case: HarnessCase) -> Row:
-    """Render ``case`` steady and flickering (same exposures and times), estimate each with and without gains."""
+def common_noise(case: HarnessCase, draw: int, lamp: Timing) -> CommonNoise:
+    """The paired arms' shared noise for ``draw`` of ``case``: one seed from the case's name and the draw, the DN scale
+    set by the flickering frames (so neither arm is rescaled to its own brightest frame)."""
+    return CommonNoise(zlib.crc32(f"flicker-noise-{case.name}-{draw}".encode()), tuple(lamp.gains))
+
+
+def measure(case: HarnessCase, draw: int | None = None) -> Row:
+    """Render ``case`` steady and flickering (same exposures and times), estimate each with and without gains.
+
+    ``draw=None`` is the first study's measurement: the two renderings' photon draws differ (the Poisson stream
+    diverges at the first frame whose mean differs), so their difference holds each model's draw-to-draw spread
+    besides the flicker. With a ``draw`` the two renderings are paired on one noise realisation (:func:`common_noise`,
+    :class:`tests.harness.render.CommonNoise`): they differ in the ambient's gain per frame and in nothing else.
+    """
     lamp = timing(case)
+    pairing = None if draw is None else common_noise(case, draw, lamp)
     ratios: dict[str, float] = {}
+    failures: list[str] = []
     scratch = Path(tempfile.mkdtemp(prefix="flicker-"))
     try:
         checks = {}
         for name, gains in (("steady", np.ones_like(lamp.gains)), ("flicker", lamp.gains)):
-            truth = render(case, scratch / name, ambient_gains=gains, exposures_us=lamp.exposures_us)
+            truth = render(
+                case, scratch / name, ambient_gains=gains, exposures_us=lamp.exposures_us, common_noise=pairing
+            )
             bound = metrics.led_bound(truth.led_spd, truth.ambient)
             true_offsets = gains[1:] / gains[0] - 1.0  # one LED a frame at full drive: e = g − 1
             model, plain, oracle, check = _estimates(truth.directory, true_offsets)
             ratios[f"{name} model"] = metrics.rmse(model, truth.ambient) / bound
             ratios[f"{name} plain"] = metrics.rmse(plain, truth.ambient) / bound
             ratios[f"{name} oracle"] = metrics.rmse(oracle, truth.ambient) / bound
-            ratios.update(_model_ratios(truth.directory, truth.ambient, bound, name, true_offsets))
+            ratios.update(
+                _model_ratios(truth.directory, truth.ambient, bound, name, true_offsets, failures, draw is None)
+            )
             checks[name] = check
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
@@ -218,7 +263,13 @@ def measure(case: HarnessCase) -> Row:
         float((lamp.gains.max() - lamp.gains.min()) / (lamp.gains.max() + lamp.gains.min())),
         tuple(float(v) for v in np.abs(offsets) / sigmas),
         float(np.max(np.abs(offsets))),
+        draw,
+        tuple(failures),
     )
+
+
+def _measured(job: tuple[HarnessCase, int | None]) -> Row:
+    return measure(*job)
 
 
 def flicker_cases(per_kind: int = PER_KIND) -> list[HarnessCase]:
@@ -289,7 +340,115 @@ def model_table(rows: list[Row], title: str) -> list[str]:
     return [*lines, ""]
 
 
-def report(rows: list[Row], command: str) -> str:
+BOOTSTRAP = 2000
+"""Resamples of the cases for a cost's 95 % interval (:func:`cost_interval`)."""
+
+
+def cost_interval(rows: list[Row], numerator: str, denominator: str) -> tuple[float, float, float]:
+    """``mean(numerator) ÷ mean(denominator) − 1`` over ``rows`` and its 95 % percentile interval, resampling whole
+    cases (each with all its draws: the draws of one case are not independent of each other) :data:`BOOTSTRAP`
+    times with a fixed seed."""
+    rows = [r for r in rows if math.isfinite(r.ratios[numerator]) and math.isfinite(r.ratios[denominator])]
+    names = sorted({r.case.name for r in rows})
+    top = np.array([sum(r.ratios[numerator] for r in rows if r.case.name == n) for n in names])
+    bottom = np.array([sum(r.ratios[denominator] for r in rows if r.case.name == n) for n in names])
+    picks = np.random.default_rng(0).integers(0, len(names), (BOOTSTRAP, len(names)))
+    resampled = top[picks].sum(axis=1) / bottom[picks].sum(axis=1) - 1
+    low, high = np.percentile(resampled, [2.5, 97.5])
+    return float(top.sum() / bottom.sum() - 1), float(low), float(high)
+
+
+def _with_interval(value: tuple[float, float, float]) -> str:
+    cost, low, high = value
+    return f"{cost:+.1%} [{low:+.1%}, {high:+.1%}]"
+
+
+def paired_table(rows: list[Row], title: str) -> list[str]:
+    """Every model on the paired renderings (one noise realisation per draw, both arms): the cost with its 95 %
+    interval; the floor (the cost with the true gains applied); the read's share (applied ÷ true − 1); and the
+    cost as the first study measured it, re-made from these draws by pairing each draw's flickering rendering with
+    the next draw's steady one (different photon draws: what the unpaired figure can swing by)."""
+    draws = sorted({r.draw for r in rows if r.draw is not None})
+    by_draw = {d: {r.case.name: r for r in rows if r.draw == d} for d in draws}
+    crossed = [
+        replace(
+            r,
+            ratios={
+                **r.ratios,
+                **{f"{m} steady": by_draw[draws[(i + 1) % len(draws)]][n].ratios[f"{m} steady"] for m in MODELS},
+            },
+        )
+        for i, d in enumerate(draws)
+        for n, r in by_draw[d].items()
+    ]
+    lines = [
+        f"### {title}",
+        "",
+        "| model | cases × draws | steady mean (worst) | flicker mean (worst) | true gains mean | **cost** [95 % CI] |"
+        " floor: cost with true gains [95 % CI] | read's cost (applied ÷ true − 1) [95 % CI] |"
+        " one draw's cost, paired: range over draws | one draw's cost, unpaired: range over draws | target ≤ 5 % |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def spread(source: list[Row], name: str) -> str:
+        costs = [
+            cost_interval([r for r in source if r.draw == d], f"{name} flicker", f"{name} steady")[0] for d in draws
+        ]
+        return f"{min(costs):+.1%} to {max(costs):+.1%}"
+
+    for name in MODELS:
+        columns = (f"{name} steady", f"{name} flicker", f"{name} flicker oracle")
+        valid = [r for r in rows if all(math.isfinite(r.ratios[c]) for c in columns)]
+        steady, flicker, oracle = (np.array([r.ratios[c] for r in valid]) for c in columns)
+        refused = f" ({len(rows) - len(valid)} refused)" if len(valid) < len(rows) else ""
+        cost = cost_interval(rows, f"{name} flicker", f"{name} steady")
+        verdict = "met" if cost[2] <= 0.05 else ("met (point)" if cost[0] <= 0.05 else "missed")
+        lines.append(
+            f"| {name} | {len({r.case.name for r in rows})} × {len(draws)}{refused} | {steady.mean():.3f} ({steady.max():.2f})"
+            f" | {flicker.mean():.3f} ({flicker.max():.2f}) | {oracle.mean():.3f} | **{_with_interval(cost)}** |"
+            f" {_with_interval(cost_interval(rows, f'{name} flicker oracle', f'{name} steady'))} |"
+            f" {_with_interval(cost_interval(rows, f'{name} flicker', f'{name} flicker oracle'))} |"
+            f" {spread(rows, name)} | {spread(crossed, name)} | {verdict} |"
+        )
+    return [*lines, ""]
+
+
+def paired_section(rows: list[Row], command: str) -> list[str]:
+    """The paired study's tables (tuning and held-out rows) with how they were made."""
+    draws = len({r.draw for r in rows})
+    return [
+        "## Paired: both arms on one noise realisation (the measurement)",
+        "",
+        f"Each case rendered {draws} times with different noise (`{command}`); in each draw the steady and the "
+        "flickering rendering share the photon and read noise (`tests.harness.render.CommonNoise`: the steady "
+        "photon count drawn once per pixel, the flickering frame's extra ambient photons added by superposition or "
+        "its missing ones removed by thinning; one DN scale for both), so the two arms differ in the ambient's gain "
+        "per frame and in nothing else. Cost = mean flickering ÷ mean steady − 1 over cases × draws; the 95 % "
+        f"interval resamples whole cases ({BOOTSTRAP} times). *floor*: the flickering rendering with the true gains "
+        "applied (a perfect read); *one draw's cost*: the cost from a single draw of every case (as the first study "
+        "measured it), the range over the draws, paired and unpaired (each draw's flickering renderings against the "
+        "next draw's steady ones). *met* when the interval's upper end is ≤ 5 %; "
+        "*met (point)* when only the point estimate is.",
+        "",
+        *paired_table([r for r in rows if r.split == "tuning"], f"Tuning rows (lamp kinds {', '.join(TUNING_KINDS)})"),
+        *paired_table(
+            [r for r in rows if r.split == "held_out"], "Held-out rows (the other lamp kinds; nothing was set on them)"
+        ),
+        *(
+            [
+                "Refused (a model's `SpectralDataError`, what `msflash estimate` exits 2 with; that case's draw is left "
+                "out of both arms for that model):",
+                "",
+                *(f"- {r.case.name} draw {r.draw}: {message}" for r in rows for message in r.failures),
+                "",
+            ]
+            if any(r.failures for r in rows)
+            else []
+        ),
+    ]
+
+
+def report(rows: list[Row], command: str, paired: list[Row] | None = None) -> str:
     """docs/flicker-results.md."""
     tuning = [r for r in rows if r.split == "tuning"]
     held = [r for r in rows if r.split == "held_out"]
@@ -307,8 +466,20 @@ def report(rows: list[Row], command: str) -> str:
         "mean ratio steady − 1. *oracle*: the flickering rendering corrected by the true gains (what a perfect "
         "read would give; it differs from *steady* by the noise alone, the two renderings' photon draws differing).",
         "",
-        "## Every model, as `msflash estimate` runs it",
+        *(paired_section(paired, command) if paired else []),
+        "## Every model, as `msflash estimate` runs it"
+        + (" (unpaired: the first study's measurement)" if paired else ""),
         "",
+        *(
+            [
+                "Kept beside the paired tables for comparison: here the two renderings' photon draws differ (each "
+                "rendered from the case's stream, which diverges at the first frame whose mean differs), so a "
+                "difference of means holds each model's draw-to-draw spread as well as the flicker.",
+                "",
+            ]
+            if paired
+            else []
+        ),
         "*led* `--method global`, *local* `--method local`, *prior*/*family*/*auto* `--model …` (default method). "
         "*gains applied*: msflash's default; *not applied*: the same read, the statistics left as they are "
         "(`processing.flicker.gains_not_applied`). Cost = mean flickering ÷ mean steady − 1.",
@@ -324,7 +495,8 @@ def report(rows: list[Row], command: str) -> str:
         f"Largest |ê_i| per case: median {np.median(steady_offsets):.3f}, 90th percentile "
         f"{np.percentile(steady_offsets, 90):.3f}, max {np.max(steady_offsets):.3f} "
         "",
-        "Each LED's steady read in its own sigma (noise, MODEL_ERROR, CURVATURE_ERROR × its curvature share): "
+        "Each LED's steady read in its own sigma (noise, MODEL_ERROR, CURVATURE_ERROR × its curvature share, "
+        "RESIDUAL_ERROR × the colour the ambient leaves unexplained): "
         f"within ±1σ {np.mean(tuning_z <= 1):.0%} of {tuning_z.size} reads, ±2σ {np.mean(tuning_z <= 2):.0%}, beyond "
         f"the detection threshold {np.mean(tuning_z > 3):.1%} (tuning rows); held-out rows {np.mean(held_z <= 1):.0%}, "
         f"{np.mean(held_z <= 2):.0%}, {np.mean(held_z > 3):.1%} of {held_z.size}.",
@@ -361,17 +533,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=None, help="write the markdown report here (default: print it)")
     parser.add_argument("--per-kind", type=int, default=PER_KIND)
     parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument(
+        "--draws", type=int, default=DRAWS, help="paired noise draws per case (0: only the unpaired measurement)"
+    )
+    parser.add_argument("--rows", default=None, help="also pickle the measured rows here (for a closer look)")
     args = parser.parse_args(argv)
     cases = flicker_cases(args.per_kind)
+    jobs: list[tuple[HarnessCase, int | None]] = [(c, d) for c in cases for d in (None, *range(args.draws))]
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:
-            rows = list(pool.map(measure, cases, chunksize=1))
+            measured = list(pool.map(_measured, jobs, chunksize=1))
     else:
-        rows = [measure(case) for case in cases]
-    command = "python -m tests.harness.flicker --jobs 2" + (
-        f" --per-kind {args.per_kind}" if args.per_kind != PER_KIND else ""
+        measured = [_measured(job) for job in jobs]
+    if args.rows:
+        Path(args.rows).write_bytes(pickle.dumps(measured))
+    rows = [r for r in measured if r.draw is None]
+    paired = [r for r in measured if r.draw is not None]
+    command = (
+        "python -m tests.harness.flicker --jobs 2"
+        + (f" --per-kind {args.per_kind}" if args.per_kind != PER_KIND else "")
+        + (f" --draws {args.draws}" if args.draws != DRAWS else "")
     )
-    text = report(rows, command + (f" --out {args.out}" if args.out else ""))
+    text = report(rows, command + (f" --out {args.out}" if args.out else ""), paired)
     if args.out:
         Path(args.out).write_text(text)
     else:

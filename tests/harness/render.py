@@ -140,6 +140,36 @@ def _vignetting(height: int, width: int, corner: float) -> np.ndarray:
     return np.cos(np.arctan(radius / focal)) ** 4
 
 
+@dataclass(frozen=True)
+class CommonNoise:
+    """Two renderings of one case that differ in the ambient's per-frame gain and in nothing else (common random
+    numbers, for the flicker study's paired arms).
+
+    Each frame's photon count is drawn once for the steady lamp (ambient gain 1), from a generator of its own
+    (``seed``, frame index); a rendering whose ambient gain is larger adds Poisson(λ − λ₀) more photons (superposition),
+    one whose gain is smaller keeps each photon with probability λ ÷ λ₀ (thinning), from a second generator. Both are
+    exact Poisson(λ) draws, and at gain 1 the count is λ₀'s draw itself. The read-noise field is the same in both.
+    DN per unit response is set from the frames at ``scale_gains`` (elementwise at least 1), so both arms share one
+    camera scale instead of each being rescaled to its own brightest frame.
+    """
+
+    seed: int
+    scale_gains: Sequence[float]
+
+
+def _photons(lam: np.ndarray, steady_lam: np.ndarray, seed: int, index: int) -> tuple[np.ndarray, np.ndarray]:
+    """Electrons at mean ``lam`` coupled to the draw at ``steady_lam`` (see :class:`CommonNoise`), and the frame's
+    standard-normal read-noise field."""
+    base = np.random.default_rng([seed, index])
+    steady = base.poisson(steady_lam)
+    read = base.standard_normal(lam.shape)
+    extra = np.random.default_rng([seed, index, 1])
+    added = steady + extra.poisson(np.maximum(lam - steady_lam, 0.0))
+    ratio = np.divide(lam, steady_lam, out=np.ones_like(lam), where=steady_lam > 0)
+    kept = extra.binomial(steady, np.clip(ratio, 0.0, 1.0))
+    return np.where(lam >= steady_lam, added, kept), read
+
+
 def render(
     case: HarnessCase,
     directory: Path,
@@ -147,6 +177,7 @@ def render(
     ambient_gains: Sequence[float] | None = None,
     exposures_us: Sequence[float] | None = None,
     frame_extra: Sequence[dict] | None = None,
+    common_noise: CommonNoise | None = None,
 ) -> Truth:
     """Write ``case`` as a format-v1 sequence in ``directory`` (TIFF frames); return its truth.
 
@@ -155,7 +186,9 @@ def render(
     the mean of its waveform over that frame's exposure window, relative to its mean); ``exposures_us``
     replace the exposure times the case draws (the random draws stay the same, so the scene and noise
     stream are the same with and without them); ``frame_extra`` are added to each frame's entry
-    (``timestamp_ns``). The truth is the lamp's mean spectrum.
+    (``timestamp_ns``); ``common_noise`` pairs renderings that differ only in ``ambient_gains`` (:class:`CommonNoise`;
+    without it the photon draws of two such renderings differ, the Poisson stream diverging at the first frame whose
+    mean differs). The truth is the lamp's mean spectrum.
     """
     rng = np.random.default_rng(case.seed)
     fine = tables.FINE_NM
@@ -181,7 +214,14 @@ def render(
     gains = np.ones(k + 1) if ambient_gains is None else np.asarray(ambient_gains, dtype=float)
     if gains.shape != (k + 1,):
         raise ValueError(f"ambient_gains: {gains.shape}; expected one gain per frame ({k + 1})")
-    frames = [ambient_unit * scale * gains[0]] + [ambient_unit * scale * gains[i + 1] + led_resp[i] for i in range(k)]
+
+    def lit(frame_gains: np.ndarray) -> list[np.ndarray]:
+        return [ambient_unit * scale * frame_gains[0]] + [
+            ambient_unit * scale * frame_gains[i + 1] + led_resp[i] for i in range(k)
+        ]
+
+    frames = lit(gains)
+    steady_frames = lit(np.ones(k + 1))
 
     # The scene: patches of the drawn surfaces (repeated to fill), a fixed texture, a specular strip.
     labels = rng.integers(0, surfaces.shape[1], (PATCH_ROWS, PATCH_COLUMNS))
@@ -209,7 +249,8 @@ def render(
         exposure = np.asarray(exposures_us, dtype=float)
     code_max = 2**case.bits - 1
     span = code_max - case.black
-    brightest = max(float(f[: white_row + 1].max()) * e * g for f, e, g in zip(frames, exposure, gain))
+    scaled = frames if common_noise is None else lit(np.maximum(np.asarray(common_noise.scale_gains, float), 1.0))
+    brightest = max(float(f[: white_row + 1].max()) * e * g for f, e, g in zip(scaled, exposure, gain))
     dn_per_response = case.peak * span / brightest
     electrons_per_dn = case.full_well_e / span
     read_dn = case.read_noise_e / electrons_per_dn if math.isfinite(case.full_well_e) else 0.0
@@ -220,10 +261,22 @@ def render(
     entries = []
     for index, response in enumerate(frames):
         role = "ambient" if index == 0 else "led"
-        mean_dn = response[labels] * (dn_per_response * exposure[index] * gain[index]) * shading[:, :, None]
-        if sites is not None:
-            mean_dn = np.take_along_axis(mean_dn, sites[:, :, None], axis=2)[:, :, 0]
-        if math.isfinite(case.full_well_e):
+
+        def dn(response: np.ndarray, index: int = index) -> np.ndarray:
+            mean = response[labels] * (dn_per_response * exposure[index] * gain[index]) * shading[:, :, None]
+            return mean if sites is None else np.take_along_axis(mean, sites[:, :, None], axis=2)[:, :, 0]
+
+        mean_dn = dn(response)
+        if common_noise is not None and math.isfinite(case.full_well_e):
+            to_electrons = electrons_per_dn / gain[index]
+            electrons, read = _photons(
+                np.maximum(mean_dn * to_electrons, 0.0),
+                np.maximum(dn(steady_frames[index]) * to_electrons, 0.0),
+                common_noise.seed,
+                index,
+            )
+            noisy = electrons / to_electrons + read * read_dn * gain[index]
+        elif math.isfinite(case.full_well_e):
             electrons = rng.poisson(np.maximum(mean_dn * electrons_per_dn / gain[index], 0.0))
             noisy = electrons * gain[index] / electrons_per_dn + rng.normal(0.0, read_dn * gain[index], mean_dn.shape)
         else:

@@ -44,3 +44,109 @@ def test_the_mains_fit_finds_the_lamp_from_the_frame_gains() -> None:
     assert fit is not None and fit.decisive
     assert fit.frequency_hz == pytest.approx(lamp.frequency_hz, abs=0.5)
     assert fit.depth == pytest.approx(0.3, abs=0.03)  # a filament's near-sinusoid: its first harmonic is the flicker
+
+
+def test_paired_renderings_differ_in_the_flicker_alone(tmp_path) -> None:
+    """The paired arms (tests/harness/render.CommonNoise): the steady arm is one Poisson draw and the flickering arm
+    the same draw with the ambient's extra photons added (or its missing ones thinned) — frames whose gain is 1 are
+    equal to the last count, the others move by the ambient's share, and two seeds give different noise."""
+    import numpy as np
+    import tifffile
+
+    from tests.harness.flicker import common_noise
+    from tests.harness.render import CommonNoise, render
+
+    case = next(c for c in flicker_cases(1) if c.cfa is not None)
+    lamp = timing(case)
+    gains = np.ones_like(lamp.gains)
+    gains[1], gains[2] = 1.3, 0.7
+    pairing = common_noise(case, 0, lamp)
+    frames = {}
+    for name, g, noise in (
+        ("steady", np.ones_like(gains), pairing),
+        ("flicker", gains, pairing),
+        ("other", np.ones_like(gains), CommonNoise(pairing.seed + 1, pairing.scale_gains)),
+    ):
+        render(case, tmp_path / name, ambient_gains=g, exposures_us=lamp.exposures_us, common_noise=noise)
+        frames[name] = [
+            tifffile.imread(p).astype(float) - case.black for p in sorted((tmp_path / name / "frames").glob("*.tif"))
+        ]
+    steady, flicker, other = frames["steady"], frames["flicker"], frames["other"]
+    for index in (0, *range(3, len(gains))):
+        assert np.array_equal(steady[index], flicker[index])
+    ambient = steady[0]
+    for index, g in ((1, 1.3), (2, 0.7)):
+        moved = flicker[index] - steady[index]
+        expected = (g - 1.0) * lamp.exposures_us[index] / lamp.exposures_us[0]  # of the ambient frame's image
+        share = float(np.sum(moved * ambient) / np.sum(ambient * ambient))
+        assert share == pytest.approx(expected, rel=0.05)
+        # Superposition and thinning add only the moved photons' noise: far less than two independent draws differ.
+        assert np.std(moved - expected * ambient) < 0.5 * np.std(other[index] - steady[index])
+    assert not np.array_equal(steady[0], other[0])
+
+
+def _read(case_name: str, tmp_path, flickering: bool) -> object:
+    """The LED estimate's flicker check of a harness case rendered on draw 0's noise, steady or flickering."""
+    import numpy as np
+
+    from msflash.acquisition.sequence.reader import read_sequence
+    from msflash.acquisition.session import analysis
+    from tests.harness.flicker import common_noise
+    from tests.harness.render import render
+
+    case = next(c for c in flicker_cases(12) if c.name == case_name)
+    lamp = timing(case)
+    gains = lamp.gains if flickering else np.ones_like(lamp.gains)
+    directory = tmp_path / ("flicker" if flickering else "steady")
+    render(
+        case, directory, ambient_gains=gains, exposures_us=lamp.exposures_us, common_noise=common_noise(case, 0, lamp)
+    )
+    sequence = read_sequence(directory)
+    statistics = analysis.sequence_statistics(
+        analysis.load_frame_stack(sequence), sequence.camera.cfa, analysis.DEFAULT_BIN_FACTOR
+    )
+    return analysis.estimate_from_statistics(sequence, statistics).flicker
+
+
+def test_a_read_biased_by_its_lamp_stays_within_its_sigma(tmp_path) -> None:
+    """tuning-018: a sodium lamp, a raw RGGB camera, an amber LED where the camera's R and G cross. Under the steady
+    lamp the LED's image holds colour off its two directions that correlates with the ambient's, and the read takes
+    0.39 of it for ambient: the sigma from constants alone put that at 2.7σ (a near false alarm, and once the lamp
+    flickers the same bias is applied as a gain); the sigma from the colour the ambient leaves unexplained
+    (:data:`processing.flicker.RESIDUAL_ERROR`) puts it within 2σ."""
+    import numpy as np
+
+    check = _read("tuning-018", tmp_path, flickering=False)
+    z = np.abs(check.led_gain_offsets) / check.led_gain_offsets_std
+    assert not check.detected and float(np.max(np.abs(check.led_gain_offsets))) > 0.3
+    assert float(np.max(z)) < 2.0
+
+
+@pytest.mark.parametrize("case_name", ["tuning-017", "tuning-054"])
+def test_flicker_the_constant_sigma_missed_is_detected(tmp_path, case_name: str) -> None:
+    """Held-out lamps (a mixed 'other' lamp on a raw RGGB camera; an LED lamp on RGB) flickering with a frame spread
+    of 16 % and 5 %: each LED's read is within 0.03 of its true share, but the sigma made of constants (0.03 and 0.4
+    × the curvature share) put the largest at 2.8σ and 2.1σ, so nothing was corrected and the family model paid for it
+    (tuning-017 0.72× → 0.85–1.04× the LED bound over four paired draws, tuning-054 0.91–0.97× → 1.5–2.3× on three of
+    them; corrected, 0.72× and 0.94–1.44×: docs/flicker.md). The steady rendering stays undetected."""
+    assert _read(case_name, tmp_path, flickering=True).detected
+    assert not _read(case_name, tmp_path, flickering=False).detected
+
+
+def test_the_cost_interval_resamples_whole_cases() -> None:
+    """The paired cost is the ratio of the means over cases × draws; its interval resamples cases with all their
+    draws, so two cases that both cost 10 % give exactly 10 %, and a case's draws never count as separate cases."""
+    from dataclasses import replace
+
+    from tests.harness.flicker import Row, cost_interval
+
+    base = Row(flicker_cases(1)[0], "k", "tuning", {}, False, False, 0.0, 0.0, (), 0.0, 0)
+
+    def row(name: str, draw: int, steady: float, flicker: float) -> Row:
+        return replace(base, case=replace(base.case, name=name), draw=draw, ratios={"s": steady, "f": flicker})
+
+    same = [row(n, d, 1.0 + d, 1.1 * (1.0 + d)) for n in ("a", "b") for d in (0, 1)]
+    assert cost_interval(same, "f", "s") == pytest.approx((0.1, 0.1, 0.1))
+    mixed = [row("a", 0, 1.0, 1.0), row("a", 1, 1.0, 1.0), row("b", 0, 1.0, 1.2), row("c", 0, 1.0, float("nan"))]
+    cost, low, high = cost_interval(mixed, "f", "s")
+    assert cost == pytest.approx(0.2 / 3) and low == pytest.approx(0.0) and high == pytest.approx(0.2)
