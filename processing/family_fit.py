@@ -15,7 +15,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from msflash.processing.light_forms import Form, discharge_atoms
+from msflash.processing import family_kernels
+from msflash.processing.light_forms import Form, discharge_atoms, kernel_grid
 from msflash.processing.scipy_cores import lapack
 from msflash.processing.spectra import WavelengthGrid
 from msflash.processing.spectral_data_term import Whitened, nonnegative_fit
@@ -192,7 +193,11 @@ def refine(
 def fit_form(form: Form, grid: WavelengthGrid, problem: Whitened, refined: bool = True) -> Fit:
     """The form's best θ over its coarse starts, then refined (:func:`refine`), and its amplitudes."""
     best = np.array(form.starts[int(np.argmin(_start_costs(form, grid, problem)))], float)
-    if refined:
+    compiled = family_kernels.kernels() if refined and form.kind != family_kernels.NONE else None
+    if compiled is not None:
+        parts = ((form.kind, None), (family_kernels.NONE, None))
+        best = _compiled_refine(compiled, parts, best.size, grid, problem, best, form.bounds)
+    elif refined:
         closed = form.tangent
         tangent = None if closed is None else (lambda t, a: closed(grid, t, a))
         best = refine(lambda t: form.atoms(grid, t), problem, best, form.bounds, tangent_of=tangent)
@@ -215,16 +220,15 @@ def fit_discharge(grid: WavelengthGrid, problem: Whitened, most: int = MAX_DISCH
     """Greedy fits of the discharge dictionary with 1…``most`` atoms (each the best atom added to the last)."""
     dictionary, names = discharge_atoms(grid)
     designs = problem.root @ dictionary
+    compiled = family_kernels.kernels()
+    order = (
+        [int(i) for i in compiled.greedy_discharge(np.ascontiguousarray(designs), problem.target, most)]
+        if compiled is not None
+        else _greedy(designs, problem.target, most)
+    )
     chosen: list[int] = []
     fits = []
-    for size in range(1, min(most, dictionary.shape[1]) + 1):
-        best_value, best_atom = math.inf, -1
-        for atom in range(dictionary.shape[1]):
-            if atom in chosen:
-                continue
-            _, value = nonnegative_fit(designs[:, [*chosen, atom]], problem.target)
-            if value < best_value:
-                best_value, best_atom = value, atom
+    for size, best_atom in enumerate(order, start=1):
         chosen.append(best_atom)
         atoms = dictionary[:, chosen]
         amplitudes, objective = problem.amplitudes(atoms)
@@ -243,6 +247,22 @@ def fit_discharge(grid: WavelengthGrid, problem: Whitened, most: int = MAX_DISCH
             )
         )
     return fits
+
+
+def _greedy(designs: np.ndarray, target: np.ndarray, most: int) -> list[int]:
+    """The discharge atoms in the order the greedy fit adds them (each the one whose non-negative fit with those
+    before leaves the least residual)."""
+    chosen: list[int] = []
+    for _ in range(min(most, designs.shape[1])):
+        best_value, best_atom = math.inf, -1
+        for atom in range(designs.shape[1]):
+            if atom in chosen:
+                continue
+            _, value = nonnegative_fit(designs[:, [*chosen, atom]], target)
+            if value < best_value:
+                best_value, best_atom = value, atom
+        chosen.append(best_atom)
+    return chosen
 
 
 def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened) -> Fit:
@@ -273,7 +293,11 @@ def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened
     theta = np.concatenate([first.theta, second.theta])
     bounds = (first.form.bounds if first.form else ()) + (second.form.bounds if second.form else ())
 
-    if theta.size:
+    compiled = family_kernels.kernels() if theta.size else None
+    parts = (_part(first), _part(second))
+    if compiled is not None and all(kind != family_kernels.NONE for kind, _ in parts):
+        theta = _compiled_refine(compiled, parts, split, grid, problem, theta, bounds, iterations=15)
+    elif theta.size:
         theta = refine(atoms_of, problem, theta, bounds, iterations=15, tangent_of=tangent_of)
     atoms = atoms_of(theta)
     amplitudes, objective = problem.amplitudes(atoms)
@@ -290,6 +314,39 @@ def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened
         _mixture_form(first, second, bounds, atoms_of),
         names,
     )
+
+
+def _part(fit: Fit) -> tuple[int, np.ndarray | None]:
+    """A fit as a part of the compiled refinement: its form's kind, or fixed atoms (no θ)."""
+    if fit.form is None:
+        return family_kernels.FIXED, fit.atoms
+    return fit.form.kind, None
+
+
+def _compiled_refine(
+    compiled: object,
+    parts: tuple[tuple[int, np.ndarray | None], tuple[int, np.ndarray | None]],
+    split: int,
+    grid: WavelengthGrid,
+    problem: Whitened,
+    theta: np.ndarray,
+    bounds: tuple[tuple[float, float], ...],
+    iterations: int = REFINE_ITERATIONS,
+) -> np.ndarray:
+    """:func:`refine` by the compiled kernel (:mod:`processing.family_kernels`) of one part or two side by side
+    (``θ[:split]`` the first's)."""
+    (kind_a, fixed_a), (kind_b, fixed_b) = parts
+    empty = np.zeros((grid.size, 0))
+    a = empty if fixed_a is None else np.ascontiguousarray(fixed_a, float)
+    b = empty if fixed_b is None else np.ascontiguousarray(fixed_b, float)
+    nm, slit, basis, water = kernel_grid(grid)
+    lower = np.array([b_[0] for b_ in bounds], float)
+    upper = np.array([b_[1] for b_ in bounds], float)
+    return compiled.refine(  # type: ignore[attr-defined]
+        kind_a, a, split, kind_b, b, nm, slit, basis, water,
+        np.ascontiguousarray(problem.root, float), np.ascontiguousarray(problem.target, float),
+        np.ascontiguousarray(theta, float), lower, upper, iterations, REFINE_TOLERANCE,
+    )  # fmt: skip
 
 
 def _mixture_form(first: Fit, second: Fit, bounds: tuple, atoms_of: Callable[[np.ndarray], np.ndarray]) -> Form:

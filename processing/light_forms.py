@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from msflash.processing import datasets
+from msflash.processing import datasets, family_kernels
 from msflash.processing.spectra import WavelengthGrid
 
 C2_NM_K = 1.4388e7
@@ -122,6 +122,18 @@ def _water_shapes(grid: WavelengthGrid) -> np.ndarray:
     return np.column_stack([a_w, np.exp(-0.014 * (nm - 440.0)), a_phi / a_phi.max()])
 
 
+@lru_cache(maxsize=8)
+def kernel_grid(grid: WavelengthGrid) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """What the compiled forms need of a grid (:mod:`processing.family_kernels`): the wavelengths, the slit's
+    variance (step²/6), the daylight basis and the water shapes (C-ordered float64)."""
+    return (
+        np.ascontiguousarray(_nm(grid), float),
+        grid.step_nm**2 / 6.0,
+        np.ascontiguousarray(_daylight_basis(grid), float),
+        np.ascontiguousarray(_water_shapes(grid), float),
+    )
+
+
 # -- forms ------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Form:
@@ -140,6 +152,8 @@ class Form:
     atom_names: tuple[str, ...] = ()
     tangent: Callable[[WavelengthGrid, np.ndarray, np.ndarray], np.ndarray] | None = field(default=None, compare=False)
     """``∂(B(θ) a)/∂θ`` (n × P) in closed form, or None: forward differences of the atoms (:func:`refine`)."""
+    kind: int = field(default=family_kernels.NONE, compare=False)
+    """The compiled refinement's kind of this form (:data:`processing.family_kernels.KINDS`), or ``NONE``."""
 
     def describe(self, theta: np.ndarray) -> dict[str, float]:
         """The nonlinear parameters in physical units (temperatures in K rather than their logarithm)."""
@@ -167,6 +181,7 @@ def _thermal_forms() -> list[Form]:
                 _photons(_nm(grid), planck(_nm(grid), math.exp(th[0])) * planck_log_slope(_nm(grid), math.exp(th[0])))
                 * a[0]
             )[:, None],
+            kind=family_kernels.BLACKBODY,
         ),
         Form(
             "daylight",
@@ -175,6 +190,7 @@ def _thermal_forms() -> list[Form]:
             ((math.log(4000.0), math.log(25000.0)),),
             daylights,
             lambda grid, th: _photons(_nm(grid), daylight(grid, math.exp(th[0])))[:, None],
+            kind=family_kernels.DAYLIGHT,
         ),
     ]
 
@@ -256,6 +272,7 @@ def _band_form(name: str, limits: tuple[tuple[tuple[float, float], tuple[float, 
         starts,
         atoms,
         tangent=tangent,
+        kind=family_kernels.BANDS,
     )
 
 
@@ -330,6 +347,7 @@ def _transmitted_forms() -> list[Form]:
             water_starts,
             _water_atoms,
             tangent=_water_tangent,
+            kind=family_kernels.UNDERWATER,
         ),
         Form(
             "filter",
@@ -339,6 +357,7 @@ def _transmitted_forms() -> list[Form]:
             filter_starts,
             _filter_atoms,
             tangent=_filter_tangent,
+            kind=family_kernels.FILTER,
         ),
     ]
 
