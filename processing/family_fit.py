@@ -16,7 +16,7 @@ from functools import lru_cache
 import numpy as np
 
 from msflash.processing import family_kernels
-from msflash.processing.light_forms import Form, discharge_atoms, kernel_grid
+from msflash.processing.light_forms import FIXED, NONE, Form, discharge_atoms, kernel_grid
 from msflash.processing.scipy_cores import lapack
 from msflash.processing.spectra import WavelengthGrid
 from msflash.processing.spectral_data_term import Whitened, nonnegative_fit
@@ -193,9 +193,9 @@ def refine(
 def fit_form(form: Form, grid: WavelengthGrid, problem: Whitened, refined: bool = True) -> Fit:
     """The form's best θ over its coarse starts, then refined (:func:`refine`), and its amplitudes."""
     best = np.array(form.starts[int(np.argmin(_start_costs(form, grid, problem)))], float)
-    compiled = family_kernels.kernels() if refined and form.kind != family_kernels.NONE else None
+    compiled = family_kernels.kernels() if refined and form.kind != NONE else None
     if compiled is not None:
-        parts = ((form.kind, None), (family_kernels.NONE, None))
+        parts = ((form.kind, None), (NONE, None))
         best = _compiled_refine(compiled, parts, best.size, grid, problem, best, form.bounds)
     elif refined:
         closed = form.tangent
@@ -295,7 +295,7 @@ def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened
 
     compiled = family_kernels.kernels() if theta.size else None
     parts = (_part(first), _part(second))
-    if compiled is not None and all(kind != family_kernels.NONE for kind, _ in parts):
+    if compiled is not None and all(kind != NONE for kind, _ in parts):
         theta = _compiled_refine(compiled, parts, split, grid, problem, theta, bounds, iterations=15)
     elif theta.size:
         theta = refine(atoms_of, problem, theta, bounds, iterations=15, tangent_of=tangent_of)
@@ -319,7 +319,7 @@ def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened
 def _part(fit: Fit) -> tuple[int, np.ndarray | None]:
     """A fit as a part of the compiled refinement: its form's kind, or fixed atoms (no θ)."""
     if fit.form is None:
-        return family_kernels.FIXED, fit.atoms
+        return FIXED, fit.atoms
     return fit.form.kind, None
 
 

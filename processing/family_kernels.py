@@ -2,7 +2,7 @@
 
 :func:`processing.family_fit.refine` spends its time in Python around numpy calls on problems of ~30 × ≤ 12 (a
 Levenberg–Marquardt step is a dozen calls of a microsecond's work each). With numba loaded in the process the same
-arithmetic runs compiled (:mod:`processing.family_kernels_numba`): a form is one of the :data:`KINDS` with its θ,
+arithmetic runs compiled (:mod:`processing.family_kernels_numba`): a form is one of the kinds of :attr:`processing.light_forms.Form.kind` with its θ,
 a mixture two of them side by side. The route follows :mod:`processing.frame_kernels`: compiled where that module's
 kernels are in use (:func:`processing.frame_kernels.enabled`: numba loaded — the bench, large stacks — and not
 paused or turned off by ``MSFLASH_KERNELS=numpy``), numpy otherwise; importing numba for one estimate costs more
@@ -15,13 +15,6 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Any
 
-FIXED, BLACKBODY, DAYLIGHT, BANDS, UNDERWATER, FILTER = 0, 1, 2, 3, 4, 5
-"""The kinds of part the compiled refinement knows (:attr:`processing.light_forms.Form.kind`): fixed atoms (the
-discharge dictionary's chosen atoms, no θ), a blackbody, CIE daylight, emission bands (centres then FWHMs), daylight
-under water, a filtered blackbody."""
-NONE = -1
-"""No second part (a form alone), or a form the compiled route does not know."""
-
 
 @lru_cache(maxsize=1)
 def _compiled() -> Any:
@@ -31,6 +24,8 @@ def _compiled() -> Any:
     except ImportError:
         return None
     import numpy as np
+
+    from msflash.processing.light_forms import BANDS, BLACKBODY, FIXED
 
     nm = np.linspace(400.0, 700.0, 4)
     flat = np.ones((4, 3))

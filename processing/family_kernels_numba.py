@@ -1,7 +1,7 @@
 """The numba kernels behind :mod:`processing.family_kernels` (imported only through it; needs numba).
 
 The same arithmetic as :func:`processing.family_fit.refine` and the forms of :mod:`processing.light_forms`, written
-out for numba: a form is a *kind* (:data:`processing.family_kernels.KINDS`) and its parameters; a fit refines one
+out for numba: a form is a *kind* (:data:`processing.light_forms.KINDS`) and its parameters; a fit refines one
 or two parts side by side (a form, or a mixture of two fits). Compiled on first use and cached on disk
 (``cache=True``).
 """
@@ -13,8 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
-from msflash.processing.family_kernels import BANDS, BLACKBODY, DAYLIGHT, FILTER, FIXED, UNDERWATER
-from msflash.processing.light_forms import C2_NM_K
+from msflash.processing.light_forms import BANDS, BLACKBODY, C2_NM_K, DAYLIGHT, FILTER, FIXED, UNDERWATER
 
 LOG_4000 = math.log(4000.0)
 LOG_25000 = math.log(25000.0)
