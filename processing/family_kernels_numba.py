@@ -260,12 +260,56 @@ def _least_squares(design, passive, target):
 
 
 @njit(cache=True)
+def _passive_solve(gram, right, passive, design, target):
+    """The least-squares solution on the passive columns from the Gram matrix (Cholesky of ``G[P, P]``), or by
+    Householder QR of the design when that factor is not safely positive (nearly dependent columns)."""
+    columns = np.flatnonzero(passive)
+    size = columns.size
+    solution = np.zeros(gram.shape[0])
+    if size == 0:
+        return solution
+    factor = np.zeros((size, size))
+    for j in range(size):
+        total = gram[columns[j], columns[j]]
+        for k in range(j):
+            total -= factor[j, k] * factor[j, k]
+        if not total > 1e-10 * gram[columns[j], columns[j]]:
+            return _least_squares(design, passive, target)
+        factor[j, j] = math.sqrt(total)
+        for i in range(j + 1, size):
+            total = gram[columns[i], columns[j]]
+            for k in range(j):
+                total -= factor[i, k] * factor[j, k]
+            factor[i, j] = total / factor[j, j]
+    forward = np.empty(size)
+    for i in range(size):
+        total = right[columns[i]]
+        for k in range(i):
+            total -= factor[i, k] * forward[k]
+        forward[i] = total / factor[i, i]
+    for i in range(size - 1, -1, -1):
+        total = forward[i]
+        for k in range(i + 1, size):
+            total -= factor[k, i] * forward[k]
+        forward[i] = total / factor[i, i]
+    for i in range(size):
+        solution[columns[i]] = forward[i]
+    return solution
+
+
+@njit(cache=True)
 def nnls(design, target, most):
-    """Lawson–Hanson ``argmin ‖D x − z‖, x ≥ 0``: ``(x, ‖D x − z‖², converged)``."""
+    """Lawson–Hanson ``argmin ‖D x − z‖, x ≥ 0``: ``(x, ‖D x − z‖², converged)``.
+
+    The passive sets' least squares through the Gram matrix ``DᵀD`` (computed once; the residual at the end from
+    D itself), by QR where its Cholesky factor is not safely positive.
+    """
     rows, columns = design.shape
+    gram = design.T @ design
+    right = design.T @ target
     x = np.zeros(columns)
     passive = np.zeros(columns, np.bool_)
-    gradient = design.T @ target
+    gradient = right.copy()
     tolerance = 10.0 * max(rows, columns) * 2.220446049250313e-16 * max(np.abs(design).sum(axis=0).max(), 1.0)
     iterations = 0
     converged = True
@@ -277,7 +321,7 @@ def nnls(design, target, most):
         if chosen < 0:
             break
         passive[chosen] = True
-        trial = _least_squares(design, passive, target)
+        trial = _passive_solve(gram, right, passive, design, target)
         while True:
             smallest = math.inf
             for j in range(columns):
@@ -295,15 +339,14 @@ def nnls(design, target, most):
                 if passive[j] and x[j] <= tolerance:
                     passive[j] = False
                     x[j] = 0.0
-            trial = _least_squares(design, passive, target)
+            trial = _passive_solve(gram, right, passive, design, target)
         x = trial
         for j in range(columns):
             if not passive[j]:
                 x[j] = 0.0
         if not converged:
             break
-        residual = target - design @ x
-        gradient = design.T @ residual
+        gradient = right - gram @ x
     residual = design @ x - target
     return x, float(residual @ residual), converged
 
