@@ -344,7 +344,11 @@ class FamilyModel:
     ) -> tuple[SceneForm, list[Fit], Fit]:
         """Every family fit on all folds (denoised) and the LEDs' span, with the scene's form."""
         scene = scene_form(statistics, self.reduction)
-        problem = scene.whitened(list(range(scene.n_folds)))
+        fits, led_fit = self._fits(scene.whitened(list(range(scene.n_folds))), prior_spectrum)
+        return scene, fits, led_fit
+
+    def _fits(self, problem: Whitened, prior_spectrum: np.ndarray | None) -> tuple[list[Fit], Fit]:
+        """:meth:`candidates` on the all-folds data term ``problem``."""
         grid = self.grid
         fits = [_timed(fit_form, form, grid, problem) for form in self.forms]
         start = time.perf_counter()
@@ -376,7 +380,7 @@ class FamilyModel:
                     16,
                 )
             )
-        return scene, fits, led_fit
+        return fits, led_fit
 
     def estimate(
         self,
@@ -389,15 +393,16 @@ class FamilyModel:
         With a ``reference`` patch its error joins the evidence (:attr:`Candidate.evidence`) and the chosen form's
         amplitudes are refitted to honour it (:data:`PATCH_FIT_WEIGHT`): the estimate is calibrated on it.
         """
-        scene, fits, led_fit = self.candidates(statistics, prior_spectrum)
+        scene = scene_form(statistics, self.reduction)
         folds = list(range(scene.n_folds))
+        problem = scene.whitened(folds)
+        fits, led_fit = self._fits(problem, prior_spectrum)
         led, candidates = _judged(fits, led_fit, scene, training_terms(scene))
         if reference is not None:
             led = replace(led, patch_error=reference.relative_error(led.fit.spectrum))
             candidates = [replace(c, patch_error=reference.relative_error(c.fit.spectrum)) for c in candidates]
         candidates.sort(key=lambda c: c.evidence)
         chosen, reason, auto_model, auto_reason = choose(candidates, led)
-        problem = scene.whitened(folds)
         n_samples = statistics.n_blocks * statistics.n_channels
         if reference is not None and chosen.fit.family not in ("prior", "led"):
             calibrated = reference.calibrate(problem, chosen.fit.atoms)
@@ -405,8 +410,7 @@ class FamilyModel:
             candidates = [chosen if c.fit.name == chosen.fit.name else c for c in candidates]
         std = self.band(chosen, candidates, problem, n_samples)
         spread, _ = evidence_spread(chosen, candidates, CHECK_TEMPERATURE)
-        observed = scene.whitened(folds, denoised=False)
-        residual = math.sqrt(max(observed.error(chosen.fit.spectrum), 0.0))
+        residual = math.sqrt(max(scene.error(folds, chosen.fit.spectrum, denoised=False), 0.0))
         _, spectrum = evidence_spread(chosen, candidates, AVERAGE_TEMPERATURE)
         warnings = () if np.max(spectrum) > 0 else ("the estimated spectrum is zero: no ambient light was found",)
         return FamilyEstimate(
