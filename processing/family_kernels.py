@@ -37,6 +37,7 @@ def _compiled() -> Any:
             2, 1e-6,
         )  # fmt: skip
     family_kernels_numba.greedy_discharge(np.eye(4), np.ones(4), 2)
+    family_kernels_numba.block_costs(np.eye(4), np.array([0, 2, 4], np.int64), np.ones(4))
     folds = np.zeros(1, np.int64)
     square, row = np.eye(4)[None], np.ones((1, 4))
     family_kernels_numba.held_out(

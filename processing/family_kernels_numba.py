@@ -400,13 +400,14 @@ def _all_atoms(kind_a, fixed_a, theta, n_a, kind_b, fixed_b, nm, slit, basis, wa
 @njit(cache=True)
 def refine(kind_a, fixed_a, n_a, kind_b, fixed_b, nm, slit, basis, water, root, target, theta, lower, upper,
            iterations, tolerance):  # fmt: skip
-    """:func:`processing.family_fit.refine` of one part (``kind_b`` < 0) or two side by side (θ = θ_a ‖ θ_b)."""
+    """:func:`processing.family_fit.refine` of one part (``kind_b`` < 0) or two side by side (θ = θ_a ‖ θ_b):
+    ``(θ, B(θ), a, ‖R B a − z‖²)`` at the refined θ."""
     theta = np.minimum(np.maximum(theta.astype(np.float64), lower), upper)
     atoms = _all_atoms(kind_a, fixed_a, theta, n_a, kind_b, fixed_b, nm, slit, basis, water)
     design = root @ atoms
     amplitudes, cost = nonnegative_fit(design, target)
     if not math.isfinite(cost):
-        return theta
+        return theta, atoms, amplitudes, cost
     width_a = _width(kind_a, n_a, fixed_a)
     p = theta.size
     damping, growth = 1e-3, 2.0
@@ -458,14 +459,15 @@ def refine(kind_a, fixed_a, n_a, kind_b, fixed_b, nm, slit, basis, water, root, 
             if math.isfinite(trial_cost) and trial_cost < cost:
                 gain = (cost - trial_cost) / predicted
                 improved = cost - trial_cost > tolerance * max(cost, 1e-300)
-                theta, design, amplitudes, cost = candidate, trial_design, trial_amplitudes, trial_cost
+                theta, atoms, design = candidate, trial_atoms, trial_design
+                amplitudes, cost = trial_amplitudes, trial_cost
                 damping = max(damping * max(1 / 3, 1 - (2 * gain - 1) ** 3), 1e-9)
                 growth = 2.0
                 break
             damping, growth = damping * growth, growth * 2
         if not improved:
             break
-    return theta
+    return theta, atoms, amplitudes, cost
 
 
 @njit(cache=True)
@@ -517,3 +519,14 @@ def greedy_discharge(designs, target, most):
                 best_value, best_atom = value, atom
         chosen[size] = best_atom
     return chosen
+
+
+@njit(cache=True)
+def block_costs(designs, offsets, target):
+    """The non-negative fit's ``‖D a − z‖²`` of each block of columns ``designs[:, offsets[c]:offsets[c + 1]]``
+    (a multi-atom form's coarse starts, :func:`processing.family_fit._start_costs`)."""
+    count = offsets.size - 1
+    out = np.empty(count)
+    for c in range(count):
+        _, out[c] = nonnegative_fit(np.ascontiguousarray(designs[:, offsets[c] : offsets[c + 1]]), target)
+    return out
