@@ -298,11 +298,13 @@ def _passive_solve(gram, right, passive, design, target):
 
 
 @njit(cache=True)
-def nnls(design, target, most):
+def nnls(design, target, most, start=None):
     """Lawson–Hanson ``argmin ‖D x − z‖, x ≥ 0``: ``(x, ‖D x − z‖², converged)``.
 
     The passive sets' least squares through the Gram matrix ``DᵀD`` (computed once; the residual at the end from
-    D itself), by QR where its Cholesky factor is not safely positive.
+    D itself), by QR where its Cholesky factor is not safely positive. ``start`` (optional, columns): a guess of
+    the positive set (the last solution's in a refinement): taken when its least squares are positive, and the
+    algorithm goes on from there as from any of its own iterates (the solution is the same: the problem is convex).
     """
     rows, columns = design.shape
     gram = design.T @ design
@@ -311,6 +313,17 @@ def nnls(design, target, most):
     passive = np.zeros(columns, np.bool_)
     gradient = right.copy()
     tolerance = 10.0 * max(rows, columns) * 2.220446049250313e-16 * max(np.abs(design).sum(axis=0).max(), 1.0)
+    if start is not None and start.any():
+        trial = _passive_solve(gram, right, start, design, target)
+        positive = True
+        for j in range(columns):
+            if start[j] and not trial[j] > tolerance:
+                positive = False
+        if positive:
+            for j in range(columns):
+                passive[j] = start[j]
+                x[j] = trial[j] if start[j] else 0.0
+            gradient = right - gram @ x
     iterations = 0
     converged = True
     while True:
@@ -352,7 +365,7 @@ def nnls(design, target, most):
 
 
 @njit(cache=True)
-def nonnegative_fit(design, target):
+def nonnegative_fit(design, target, start=None):
     """:func:`processing.spectral_data_term.nonnegative_fit`: columns scaled to unit norm, one in closed form."""
     columns = design.shape[1]
     if columns == 1:
@@ -378,7 +391,7 @@ def nonnegative_fit(design, target):
     if not math.isfinite(total):
         return np.zeros(columns), math.inf
     scaled = design / scale
-    solution, norm2, _ = nnls(scaled, target, 30 * columns)
+    solution, norm2, _ = nnls(scaled, target, 30 * columns, start)
     return solution / scale, norm2
 
 
@@ -455,7 +468,7 @@ def refine(kind_a, fixed_a, n_a, kind_b, fixed_b, nm, slit, basis, water, root, 
                 break
             trial_atoms = _all_atoms(kind_a, fixed_a, candidate, n_a, kind_b, fixed_b, nm, slit, basis, water)
             trial_design = root @ trial_atoms
-            trial_amplitudes, trial_cost = nonnegative_fit(trial_design, target)
+            trial_amplitudes, trial_cost = nonnegative_fit(trial_design, target, amplitudes > 0)
             if math.isfinite(trial_cost) and trial_cost < cost:
                 gain = (cost - trial_cost) / predicted
                 improved = cost - trial_cost > tolerance * max(cost, 1e-300)
@@ -484,9 +497,11 @@ def held_out(atoms, offsets, roots, targets, folds, hessian, linear, energy, noi
         start, stop = offsets[c], offsets[c + 1]
         block = np.ascontiguousarray(atoms[:, start:stop])
         coordinates = np.ascontiguousarray(reduced[:, start:stop])
+        previous = np.zeros(stop - start, np.bool_)
         for i in range(folds.size):
             fold = folds[i]
-            amplitudes, _ = nonnegative_fit(roots[i] @ block, targets[i])
+            amplitudes, _ = nonnegative_fit(roots[i] @ block, targets[i], previous)
+            previous = amplitudes > 0
             y = coordinates @ amplitudes
             observed = energy[fold] - 2.0 * float(linear[fold] @ y) + float(y @ (hessian[fold] @ y))
             noise = noise_energy[fold] - 2.0 * float(noise_linear[fold] @ y) + float(y @ (noise_hessian[fold] @ y))

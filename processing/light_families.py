@@ -408,10 +408,11 @@ class FamilyModel:
             calibrated = reference.calibrate(problem, chosen.fit.atoms)
             chosen = replace(chosen, fit=replace(chosen.fit, amplitudes=calibrated))
             candidates = [chosen if c.fit.name == chosen.fit.name else c for c in candidates]
-        std = self.band(chosen, candidates, problem, n_samples)
-        spread, _ = evidence_spread(chosen, candidates, CHECK_TEMPERATURE)
+        scaled = _scaled_spectra(chosen, candidates)
+        std = self.band(chosen, candidates, problem, n_samples, scaled)
+        spread, _ = _weighted_spread(chosen.fit.spectrum, candidates, scaled, CHECK_TEMPERATURE)
         residual = math.sqrt(max(scene.error(folds, chosen.fit.spectrum, denoised=False), 0.0))
-        _, spectrum = evidence_spread(chosen, candidates, AVERAGE_TEMPERATURE)
+        _, spectrum = _weighted_spread(chosen.fit.spectrum, candidates, scaled, AVERAGE_TEMPERATURE)
         warnings = () if np.max(spectrum) > 0 else ("the estimated spectrum is zero: no ambient light was found",)
         return FamilyEstimate(
             spectrum=self.led_spectra.replace(
@@ -434,11 +435,20 @@ class FamilyModel:
             warnings=warnings,
         )
 
-    def band(self, chosen: Candidate, candidates: list[Candidate], problem: Whitened, n_samples: int) -> np.ndarray:
+    def band(
+        self,
+        chosen: Candidate,
+        candidates: list[Candidate],
+        problem: Whitened,
+        n_samples: int,
+        scaled: np.ndarray | None = None,
+    ) -> np.ndarray:
         """±1σ: the chosen fit's tempered posterior (× :data:`POSTERIOR_SCALE`) and the evidence-weighted spread of
-        the candidates (:func:`evidence_spread`) added in quadrature."""
+        the candidates (:func:`evidence_spread`; ``scaled``: their spectra scaled onto the chosen one's, when
+        computed already) added in quadrature."""
         own = self.posterior_std(chosen, problem, n_samples)
-        spread, _ = evidence_spread(chosen, candidates)
+        scaled = _scaled_spectra(chosen, candidates) if scaled is None else scaled
+        spread, _ = _weighted_spread(chosen.fit.spectrum, candidates, scaled)
         return np.sqrt((POSTERIOR_SCALE * own) ** 2 + spread**2)
 
     def posterior_std(self, chosen: Candidate, problem: Whitened, n_samples: int) -> np.ndarray:
@@ -454,22 +464,34 @@ def evidence_spread(
     """``(spread, average)``: the candidates' RMS distance from the chosen spectrum and their mean, weighted by
     their evidence ``exp(−(err/err_best − 1)/τ)`` (τ = :data:`EVIDENCE_TEMPERATURE`), each scaled onto the chosen
     one. Where the pixels cannot tell two families apart, the spread is wide."""
+    return _weighted_spread(chosen.fit.spectrum, candidates, _scaled_spectra(chosen, candidates), temperature)
+
+
+def _scaled_spectra(chosen: Candidate, candidates: list[Candidate]) -> np.ndarray:
+    """(n, candidates): each candidate's spectrum least-squares scaled onto the chosen one's (the spectra's overall
+    scales differ by fit)."""
+    reference = chosen.fit.spectrum
+    if not candidates:
+        return np.zeros((reference.size, 0))
+    spectra = np.column_stack([c.fit.spectrum for c in candidates])
+    energies = np.einsum("ij,ij->j", spectra, spectra)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scales = np.where(energies > 0, (reference @ spectra) / energies, 1.0)
+    return spectra * scales
+
+
+def _weighted_spread(
+    spectrum: np.ndarray, candidates: list[Candidate], spectra: np.ndarray, temperature: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`evidence_spread` from the candidates' scaled spectra (:func:`_scaled_spectra`)."""
     temperature = EVIDENCE_TEMPERATURE if temperature is None else temperature
-    spectrum = chosen.fit.spectrum
     if not candidates:
         return np.zeros_like(spectrum), spectrum
     best = min(c.evidence for c in candidates)
     excess = np.array([c.evidence / max(best, 1e-300) - 1 for c in candidates])
     weights = np.exp(-excess / temperature)
-    spectra = np.column_stack([_scaled_onto(c.fit.spectrum, spectrum) for c in candidates])
     spread = np.sqrt((weights * (spectra - spectrum[:, None]) ** 2).sum(1) / weights.sum())
     return spread, (spectra * weights).sum(1) / weights.sum()
-
-
-def _scaled_onto(spectrum: np.ndarray, reference: np.ndarray) -> np.ndarray:
-    """``spectrum`` least-squares scaled onto ``reference`` (the spectra's overall scales differ by fit)."""
-    energy = float(spectrum @ spectrum)
-    return spectrum * (float(spectrum @ reference) / energy) if energy > 0 else spectrum
 
 
 def family_model(channels: tuple[str, ...], led_spectra: Spectra, responsivities: Spectra) -> FamilyModel:
