@@ -493,14 +493,16 @@ def held_out(atoms, offsets, roots, targets, folds, hessian, linear, energy, noi
     count = offsets.size - 1
     out = np.zeros((count, 2))
     reduced = lift @ atoms  # (r, total width): y = L B a
+    designs = np.empty((folds.size, roots.shape[1], atoms.shape[1]))
+    for i in range(folds.size):
+        designs[i] = roots[i] @ atoms  # every candidate's design on fold i's complement at once
     for c in range(count):
         start, stop = offsets[c], offsets[c + 1]
-        block = np.ascontiguousarray(atoms[:, start:stop])
         coordinates = np.ascontiguousarray(reduced[:, start:stop])
         previous = np.zeros(stop - start, np.bool_)
         for i in range(folds.size):
             fold = folds[i]
-            amplitudes, _ = nonnegative_fit(roots[i] @ block, targets[i], previous)
+            amplitudes, _ = nonnegative_fit(np.ascontiguousarray(designs[i, :, start:stop]), targets[i], previous)
             previous = amplitudes > 0
             y = coordinates @ amplitudes
             observed = energy[fold] - 2.0 * float(linear[fold] @ y) + float(y @ (hessian[fold] @ y))
@@ -521,6 +523,8 @@ def greedy_discharge(designs, target, most):
         trial = np.empty((designs.shape[0], size + 1))
         for k in range(size):
             trial[:, k] = designs[:, chosen[k]]
+        kept = np.ones(size + 1, np.bool_)  # warm start: the atoms chosen so far (the last one's trial decides)
+        kept[size] = False
         for atom in range(atoms):
             taken = False
             for k in range(size):
@@ -529,7 +533,7 @@ def greedy_discharge(designs, target, most):
             if taken:
                 continue
             trial[:, size] = designs[:, atom]
-            _, value = nonnegative_fit(trial, target)
+            _, value = nonnegative_fit(trial, target, kept)
             if value < best_value:
                 best_value, best_atom = value, atom
         chosen[size] = best_atom
