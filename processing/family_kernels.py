@@ -1,17 +1,23 @@
-"""Compiled refinements of the family model's forms (issue 30's speed of ``--model family|auto``).
+"""Compiled fits of the family model (issue 30's speed of ``--model family|auto``).
 
 :func:`processing.family_fit.refine` spends its time in Python around numpy calls on problems of ~30 × ≤ 12 (a
-Levenberg–Marquardt step is a dozen calls of a microsecond's work each). With numba loaded in the process the same
-arithmetic runs compiled (:mod:`processing.family_kernels_numba`): a form is one of the kinds of :attr:`processing.light_forms.Form.kind` with its θ,
-a mixture two of them side by side. The route follows :mod:`processing.frame_kernels`: compiled where that module's
-kernels are in use (:func:`processing.frame_kernels.enabled`: numba loaded — the bench, large stacks — and not
-paused or turned off by ``MSFLASH_KERNELS=numpy``), numpy otherwise; importing numba for one estimate costs more
-than it saves. The two routes agree to rounding (tests/processing/test_family_kernels.py): the non-negative fits are
-Lawson–Hanson on both, the steps the same formulas.
+Levenberg–Marquardt step is a dozen calls of a microsecond's work each). Compiled, the same arithmetic
+(:mod:`processing.family_kernels_numba`) refines a form — one of :data:`processing.light_forms.KINDS` with its θ —
+or a mixture of two side by side, judges every candidate on the held-out folds in one call and runs the greedy
+discharge fit and the coarse starts.
+
+**Opt-in** (:func:`prepare`): loading the compiled fits costs a process 1–2 s from numba's on-disk cache (and a
+first compile of ~30 s on a fresh install) against ~15 ms saved an estimate, so only a process that runs many
+estimates prepares them — the bench, a service, a batch through the Python API. A one-shot ``msflash estimate`` or
+a capture session takes the numpy route. ``MSFLASH_KERNELS=numba`` forces the compiled route, ``numpy`` or
+:func:`processing.frame_kernels.paused` turn it off. The two routes agree to rounding
+(tests/processing/test_family_kernels.py; the harness tables are the same to their last digit): the non-negative
+fits are Lawson–Hanson on both, the steps the same formulas.
 """
 
 from __future__ import annotations
 
+import os
 from functools import lru_cache
 from typing import Any
 
@@ -47,8 +53,26 @@ def _compiled() -> Any:
     return family_kernels_numba
 
 
-def kernels() -> Any:
-    """The compiled refinement if this process uses compiled kernels (module notes), else None."""
+_prepared = False
+
+
+def prepare() -> bool:
+    """Load (or compile) the compiled fits now, with :mod:`processing.frame_kernels`' kernels, for a process that
+    will run many family estimates (module notes); whether they are available. Not while a camera streams."""
+    global _prepared
     from msflash.processing import frame_kernels
 
-    return _compiled() if frame_kernels.enabled() else None
+    frame_kernels.prepare()
+    _prepared = _compiled() is not None
+    return _prepared
+
+
+def kernels() -> Any:
+    """The compiled fits if this process prepared them (or ``MSFLASH_KERNELS=numba``) and the compiled kernels
+    are in use (not ``numpy``, not paused: :func:`processing.frame_kernels.enabled`), else None."""
+    from msflash.processing import frame_kernels
+
+    forced = os.environ.get(frame_kernels.KERNELS_VARIABLE, "").strip().lower() == "numba"
+    if not (_prepared or forced) or not frame_kernels.enabled():
+        return None
+    return _compiled()

@@ -79,3 +79,19 @@ def test_both_routes_fit_and_judge_alike(light: str, monkeypatch: pytest.MonkeyP
         )
     spectrum = numpy_estimate.spectrum.values[:, 0]
     np.testing.assert_allclose(numba_estimate.spectrum.values[:, 0], spectrum, atol=1e-6 * np.abs(spectrum).max())
+
+
+def test_the_compiled_fits_are_opt_in(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Loading them costs a process seconds against milliseconds saved: only a prepared process (or one forced by
+    MSFLASH_KERNELS=numba) takes them, and never while a camera streams (frame_kernels.paused) or with numpy."""
+    from msflash.processing import frame_kernels
+
+    monkeypatch.delenv("MSFLASH_KERNELS", raising=False)
+    monkeypatch.setattr(family_kernels, "_prepared", False)
+    assert family_kernels.kernels() is None
+    assert family_kernels.prepare()
+    assert family_kernels.kernels() is not None
+    with frame_kernels.paused():
+        assert family_kernels.kernels() is None
+    monkeypatch.setenv("MSFLASH_KERNELS", "numpy")
+    assert family_kernels.kernels() is None
