@@ -15,7 +15,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from msflash.processing.light_forms import Form, discharge_atoms
+from msflash.processing import family_kernels
+from msflash.processing.light_forms import FIXED, NONE, Form, discharge_atoms, kernel_grid
 from msflash.processing.scipy_cores import lapack
 from msflash.processing.spectra import WavelengthGrid
 from msflash.processing.spectral_data_term import Whitened, nonnegative_fit
@@ -74,18 +75,32 @@ def start_atoms(form: Form, grid: WavelengthGrid) -> tuple[np.ndarray, ...]:
     return tuple(out)
 
 
-def _start_costs(form: Form, grid: WavelengthGrid, problem: Whitened) -> np.ndarray:
-    """J at each coarse start (single-atom forms in one product: the amplitude is in closed form)."""
+@lru_cache(maxsize=64)
+def _stacked_starts(form: Form, grid: WavelengthGrid) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`start_atoms` side by side, and where each start's columns begin (C-ordered, computed once)."""
     atoms = start_atoms(form, grid)
-    if atoms and all(a.shape[1] == 1 for a in atoms):
-        designs = problem.root @ np.hstack(atoms)
+    stacked = np.ascontiguousarray(np.hstack(atoms)) if atoms else np.zeros((grid.size, 0))
+    offsets = np.concatenate([[0], np.cumsum([a.shape[1] for a in atoms])]).astype(np.int64)
+    stacked.flags.writeable = False
+    return stacked, offsets
+
+
+def _start_costs(form: Form, grid: WavelengthGrid, problem: Whitened) -> np.ndarray:
+    """J at each coarse start (single-atom forms in one product: the amplitude is in closed form; the others by
+    the compiled fits where :mod:`processing.family_kernels` is in use)."""
+    stacked, offsets = _stacked_starts(form, grid)
+    designs = problem.root @ stacked
+    if offsets.size > 1 and offsets[-1] == offsets.size - 1:  # one atom a start
         energies = np.einsum("ij,ij->j", designs, designs)
         projections = np.clip(designs.T @ problem.target, 0.0, None)
         with np.errstate(divide="ignore", invalid="ignore"):
             gains = np.where(energies > 0, projections**2 / energies, 0.0)
         costs = float(problem.target @ problem.target) - gains + problem.constant
         return np.where(np.isfinite(costs), costs, math.inf)
-    return np.array([problem.amplitudes(a)[1] for a in atoms])
+    compiled = family_kernels.kernels()
+    if compiled is not None and offsets.size > 1:
+        return compiled.block_costs(designs, offsets, problem.target) + problem.constant
+    return np.array([problem.amplitudes(a)[1] for a in start_atoms(form, grid)])
 
 
 def _difference_tangent(
@@ -192,12 +207,19 @@ def refine(
 def fit_form(form: Form, grid: WavelengthGrid, problem: Whitened, refined: bool = True) -> Fit:
     """The form's best θ over its coarse starts, then refined (:func:`refine`), and its amplitudes."""
     best = np.array(form.starts[int(np.argmin(_start_costs(form, grid, problem)))], float)
-    if refined:
-        closed = form.tangent
-        tangent = None if closed is None else (lambda t, a: closed(grid, t, a))
-        best = refine(lambda t: form.atoms(grid, t), problem, best, form.bounds, tangent_of=tangent)
-    atoms = form.atoms(grid, best)
-    amplitudes, objective = problem.amplitudes(atoms)
+    compiled = family_kernels.kernels() if refined and form.kind != NONE else None
+    if compiled is not None:
+        parts = ((form.kind, None), (NONE, None))
+        best, atoms, amplitudes, objective = _compiled_refine(
+            compiled, parts, best.size, grid, problem, best, form.bounds
+        )
+    else:
+        if refined:
+            closed = form.tangent
+            tangent = None if closed is None else (lambda t, a: closed(grid, t, a))
+            best = refine(lambda t: form.atoms(grid, t), problem, best, form.bounds, tangent_of=tangent)
+        atoms = form.atoms(grid, best)
+        amplitudes, objective = problem.amplitudes(atoms)
     return Fit(
         f"{form.family}/{form.name}",
         form.family,
@@ -215,16 +237,15 @@ def fit_discharge(grid: WavelengthGrid, problem: Whitened, most: int = MAX_DISCH
     """Greedy fits of the discharge dictionary with 1…``most`` atoms (each the best atom added to the last)."""
     dictionary, names = discharge_atoms(grid)
     designs = problem.root @ dictionary
+    compiled = family_kernels.kernels()
+    order = (
+        [int(i) for i in compiled.greedy_discharge(np.ascontiguousarray(designs), problem.target, most)]
+        if compiled is not None
+        else _greedy(designs, problem.target, most)
+    )
     chosen: list[int] = []
     fits = []
-    for size in range(1, min(most, dictionary.shape[1]) + 1):
-        best_value, best_atom = math.inf, -1
-        for atom in range(dictionary.shape[1]):
-            if atom in chosen:
-                continue
-            _, value = nonnegative_fit(designs[:, [*chosen, atom]], problem.target)
-            if value < best_value:
-                best_value, best_atom = value, atom
+    for size, best_atom in enumerate(order, start=1):
         chosen.append(best_atom)
         atoms = dictionary[:, chosen]
         amplitudes, objective = problem.amplitudes(atoms)
@@ -243,6 +264,22 @@ def fit_discharge(grid: WavelengthGrid, problem: Whitened, most: int = MAX_DISCH
             )
         )
     return fits
+
+
+def _greedy(designs: np.ndarray, target: np.ndarray, most: int) -> list[int]:
+    """The discharge atoms in the order the greedy fit adds them (each the one whose non-negative fit with those
+    before leaves the least residual)."""
+    chosen: list[int] = []
+    for _ in range(min(most, designs.shape[1])):
+        best_value, best_atom = math.inf, -1
+        for atom in range(designs.shape[1]):
+            if atom in chosen:
+                continue
+            _, value = nonnegative_fit(designs[:, [*chosen, atom]], target)
+            if value < best_value:
+                best_value, best_atom = value, atom
+        chosen.append(best_atom)
+    return chosen
 
 
 def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened) -> Fit:
@@ -273,10 +310,17 @@ def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened
     theta = np.concatenate([first.theta, second.theta])
     bounds = (first.form.bounds if first.form else ()) + (second.form.bounds if second.form else ())
 
-    if theta.size:
-        theta = refine(atoms_of, problem, theta, bounds, iterations=15, tangent_of=tangent_of)
-    atoms = atoms_of(theta)
-    amplitudes, objective = problem.amplitudes(atoms)
+    compiled = family_kernels.kernels() if theta.size else None
+    parts = (_part(first), _part(second))
+    if compiled is not None and all(kind != NONE for kind, _ in parts):
+        theta, atoms, amplitudes, objective = _compiled_refine(
+            compiled, parts, split, grid, problem, theta, bounds, iterations=15
+        )
+    else:
+        if theta.size:
+            theta = refine(atoms_of, problem, theta, bounds, iterations=15, tangent_of=tangent_of)
+        atoms = atoms_of(theta)
+        amplitudes, objective = problem.amplitudes(atoms)
     names = tuple(f"{first.name}: {n}" for n in (first.atom_names or [f"{i}" for i in range(first.atoms.shape[1])]))
     names += tuple(f"{second.name}: {n}" for n in (second.atom_names or [f"{i}" for i in range(second.atoms.shape[1])]))
     return Fit(
@@ -290,6 +334,40 @@ def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened
         _mixture_form(first, second, bounds, atoms_of),
         names,
     )
+
+
+def _part(fit: Fit) -> tuple[int, np.ndarray | None]:
+    """A fit as a part of the compiled refinement: its form's kind, or fixed atoms (no θ)."""
+    if fit.form is None:
+        return FIXED, fit.atoms
+    return fit.form.kind, None
+
+
+def _compiled_refine(
+    compiled: object,
+    parts: tuple[tuple[int, np.ndarray | None], tuple[int, np.ndarray | None]],
+    split: int,
+    grid: WavelengthGrid,
+    problem: Whitened,
+    theta: np.ndarray,
+    bounds: tuple[tuple[float, float], ...],
+    iterations: int = REFINE_ITERATIONS,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """:func:`refine` by the compiled kernel (:mod:`processing.family_kernels`) of one part or two side by side
+    (``θ[:split]`` the first's): the refined θ, its atoms, their non-negative amplitudes and J."""
+    (kind_a, fixed_a), (kind_b, fixed_b) = parts
+    empty = np.zeros((grid.size, 0))
+    a = empty if fixed_a is None else np.ascontiguousarray(fixed_a, float)
+    b = empty if fixed_b is None else np.ascontiguousarray(fixed_b, float)
+    nm, slit, basis, water = kernel_grid(grid)
+    lower = np.array([b_[0] for b_ in bounds], float)
+    upper = np.array([b_[1] for b_ in bounds], float)
+    theta, atoms, amplitudes, norm2 = compiled.refine(  # type: ignore[attr-defined]
+        kind_a, a, split, kind_b, b, nm, slit, basis, water,
+        np.ascontiguousarray(problem.root, float), np.ascontiguousarray(problem.target, float),
+        np.ascontiguousarray(theta, float), lower, upper, iterations, REFINE_TOLERANCE,
+    )  # fmt: skip
+    return theta, atoms, amplitudes, float(norm2) + problem.constant
 
 
 def _mixture_form(first: Fit, second: Fit, bounds: tuple, atoms_of: Callable[[np.ndarray], np.ndarray]) -> Form:

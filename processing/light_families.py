@@ -28,9 +28,11 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
+from msflash.processing import family_kernels
 from msflash.processing.channel_statistics import ChannelStatistics
 from msflash.processing.family_fit import Fit, fit_discharge, fit_form, fit_mixture
 from msflash.processing.light_forms import FORMS, Form, seen_forms
@@ -155,6 +157,57 @@ def _held_out(
     total = float(scene.energy.sum())
     observed_error, clean_error = np.sqrt(sums / max(total, 1e-300))
     return float(observed_error), float(clean_error)
+
+
+def _held_out_compiled(
+    compiled: Any, fits: list[Fit], scene: SceneForm, training: dict[int, Whitened]
+) -> list[tuple[float, float]]:
+    """:func:`_held_out` of every fit (amplitudes refitted per fold) in one compiled call
+    (:mod:`processing.family_kernels`)."""
+    widths = [fit.atoms.shape[1] for fit in fits]
+    offsets = np.concatenate([[0], np.cumsum(widths)]).astype(np.int64)
+    atoms = np.ascontiguousarray(np.hstack([fit.atoms for fit in fits]), float)
+    folds = np.array(list(training), np.int64)
+    roots = np.ascontiguousarray(np.stack([training[f].root for f in training]), float)
+    targets = np.ascontiguousarray(np.stack([training[f].target for f in training]), float)
+    arrays = (scene.hessian, scene.linear, scene.energy, scene.noise_hessian, scene.noise_linear, scene.noise_energy)
+    sums = compiled.held_out(
+        atoms, offsets, roots, targets, folds, *(np.ascontiguousarray(a, float) for a in arrays),
+        np.ascontiguousarray(scene.lift, float),
+    )  # fmt: skip
+    total = float(scene.energy.sum())
+    errors = np.sqrt(sums / max(total, 1e-300))
+    return [(float(observed), float(clean)) for observed, clean in errors]
+
+
+def _judged(
+    fits: list[Fit], led_fit: Fit, scene: SceneForm, training: dict[int, Whitened]
+) -> tuple[Candidate, list[Candidate]]:
+    """The LEDs' span and every fit as candidates with their held-out errors (:func:`_held_out`; compiled in one
+    call where :mod:`processing.family_kernels` is in use). The prior is learnt elsewhere: judged as it is, not
+    refitted."""
+    compiled = family_kernels.kernels()
+    judged: dict[str, tuple[float, float]] = {}
+    each = 0.0
+    if compiled is not None:
+        start = time.perf_counter()
+        refitted = [fit for fit in fits if fit.family != "prior"]
+        errors = _held_out_compiled(compiled, [led_fit, *refitted], scene, training)
+        each = (time.perf_counter() - start) / (len(refitted) + 1)
+        led = Candidate(led_fit, *errors[0])
+        judged = dict(zip((fit.name for fit in refitted), errors[1:]))
+    else:
+        led = Candidate(led_fit, *_held_out(_refit_amplitudes(led_fit), scene, training))
+    candidates = []
+    for fit in fits:
+        if fit.name in judged:
+            candidates.append(Candidate(replace(fit, seconds=fit.seconds + each), *judged[fit.name]))
+            continue
+        start = time.perf_counter()
+        spectrum_for = _fixed(fit.spectrum) if fit.family == "prior" else _refit_amplitudes(fit)
+        held = _held_out(spectrum_for, scene, training)
+        candidates.append(Candidate(replace(fit, seconds=fit.seconds + time.perf_counter() - start), *held))
+    return led, candidates
 
 
 def training_terms(scene: SceneForm) -> dict[int, Whitened]:
@@ -291,7 +344,11 @@ class FamilyModel:
     ) -> tuple[SceneForm, list[Fit], Fit]:
         """Every family fit on all folds (denoised) and the LEDs' span, with the scene's form."""
         scene = scene_form(statistics, self.reduction)
-        problem = scene.whitened(list(range(scene.n_folds)))
+        fits, led_fit = self._fits(scene.whitened(list(range(scene.n_folds))), prior_spectrum)
+        return scene, fits, led_fit
+
+    def _fits(self, problem: Whitened, prior_spectrum: np.ndarray | None) -> tuple[list[Fit], Fit]:
+        """:meth:`candidates` on the all-folds data term ``problem``."""
         grid = self.grid
         fits = [_timed(fit_form, form, grid, problem) for form in self.forms]
         start = time.perf_counter()
@@ -323,7 +380,7 @@ class FamilyModel:
                     16,
                 )
             )
-        return scene, fits, led_fit
+        return fits, led_fit
 
     def estimate(
         self,
@@ -336,33 +393,26 @@ class FamilyModel:
         With a ``reference`` patch its error joins the evidence (:attr:`Candidate.evidence`) and the chosen form's
         amplitudes are refitted to honour it (:data:`PATCH_FIT_WEIGHT`): the estimate is calibrated on it.
         """
-        scene, fits, led_fit = self.candidates(statistics, prior_spectrum)
+        scene = scene_form(statistics, self.reduction)
         folds = list(range(scene.n_folds))
-        training = training_terms(scene)
-        led = Candidate(led_fit, *_held_out(_refit_amplitudes(led_fit), scene, training))
-        candidates = []
-        for fit in fits:
-            start = time.perf_counter()
-            # The prior is learnt elsewhere: judged as it is, not refitted.
-            spectrum_for = _fixed(fit.spectrum) if fit.family == "prior" else _refit_amplitudes(fit)
-            errors = _held_out(spectrum_for, scene, training)
-            candidates.append(Candidate(replace(fit, seconds=fit.seconds + time.perf_counter() - start), *errors))
+        problem = scene.whitened(folds)
+        fits, led_fit = self._fits(problem, prior_spectrum)
+        led, candidates = _judged(fits, led_fit, scene, training_terms(scene))
         if reference is not None:
             led = replace(led, patch_error=reference.relative_error(led.fit.spectrum))
             candidates = [replace(c, patch_error=reference.relative_error(c.fit.spectrum)) for c in candidates]
         candidates.sort(key=lambda c: c.evidence)
         chosen, reason, auto_model, auto_reason = choose(candidates, led)
-        problem = scene.whitened(folds)
         n_samples = statistics.n_blocks * statistics.n_channels
         if reference is not None and chosen.fit.family not in ("prior", "led"):
             calibrated = reference.calibrate(problem, chosen.fit.atoms)
             chosen = replace(chosen, fit=replace(chosen.fit, amplitudes=calibrated))
             candidates = [chosen if c.fit.name == chosen.fit.name else c for c in candidates]
-        std = self.band(chosen, candidates, problem, n_samples)
-        spread, _ = evidence_spread(chosen, candidates, CHECK_TEMPERATURE)
-        observed = scene.whitened(folds, denoised=False)
-        residual = math.sqrt(max(observed.error(chosen.fit.spectrum), 0.0))
-        _, spectrum = evidence_spread(chosen, candidates, AVERAGE_TEMPERATURE)
+        scaled = _scaled_spectra(chosen, candidates)
+        std = self.band(chosen, candidates, problem, n_samples, scaled)
+        spread, _ = _weighted_spread(chosen.fit.spectrum, candidates, scaled, CHECK_TEMPERATURE)
+        residual = math.sqrt(max(scene.error(folds, chosen.fit.spectrum, denoised=False), 0.0))
+        _, spectrum = _weighted_spread(chosen.fit.spectrum, candidates, scaled, AVERAGE_TEMPERATURE)
         warnings = () if np.max(spectrum) > 0 else ("the estimated spectrum is zero: no ambient light was found",)
         return FamilyEstimate(
             spectrum=self.led_spectra.replace(
@@ -385,11 +435,20 @@ class FamilyModel:
             warnings=warnings,
         )
 
-    def band(self, chosen: Candidate, candidates: list[Candidate], problem: Whitened, n_samples: int) -> np.ndarray:
+    def band(
+        self,
+        chosen: Candidate,
+        candidates: list[Candidate],
+        problem: Whitened,
+        n_samples: int,
+        scaled: np.ndarray | None = None,
+    ) -> np.ndarray:
         """±1σ: the chosen fit's tempered posterior (× :data:`POSTERIOR_SCALE`) and the evidence-weighted spread of
-        the candidates (:func:`evidence_spread`) added in quadrature."""
+        the candidates (:func:`evidence_spread`; ``scaled``: their spectra scaled onto the chosen one's, when
+        computed already) added in quadrature."""
         own = self.posterior_std(chosen, problem, n_samples)
-        spread, _ = evidence_spread(chosen, candidates)
+        scaled = _scaled_spectra(chosen, candidates) if scaled is None else scaled
+        spread, _ = _weighted_spread(chosen.fit.spectrum, candidates, scaled)
         return np.sqrt((POSTERIOR_SCALE * own) ** 2 + spread**2)
 
     def posterior_std(self, chosen: Candidate, problem: Whitened, n_samples: int) -> np.ndarray:
@@ -405,22 +464,34 @@ def evidence_spread(
     """``(spread, average)``: the candidates' RMS distance from the chosen spectrum and their mean, weighted by
     their evidence ``exp(−(err/err_best − 1)/τ)`` (τ = :data:`EVIDENCE_TEMPERATURE`), each scaled onto the chosen
     one. Where the pixels cannot tell two families apart, the spread is wide."""
+    return _weighted_spread(chosen.fit.spectrum, candidates, _scaled_spectra(chosen, candidates), temperature)
+
+
+def _scaled_spectra(chosen: Candidate, candidates: list[Candidate]) -> np.ndarray:
+    """(n, candidates): each candidate's spectrum least-squares scaled onto the chosen one's (the spectra's overall
+    scales differ by fit)."""
+    reference = chosen.fit.spectrum
+    if not candidates:
+        return np.zeros((reference.size, 0))
+    spectra = np.column_stack([c.fit.spectrum for c in candidates])
+    energies = np.einsum("ij,ij->j", spectra, spectra)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scales = np.where(energies > 0, (reference @ spectra) / energies, 1.0)
+    return spectra * scales
+
+
+def _weighted_spread(
+    spectrum: np.ndarray, candidates: list[Candidate], spectra: np.ndarray, temperature: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`evidence_spread` from the candidates' scaled spectra (:func:`_scaled_spectra`)."""
     temperature = EVIDENCE_TEMPERATURE if temperature is None else temperature
-    spectrum = chosen.fit.spectrum
     if not candidates:
         return np.zeros_like(spectrum), spectrum
     best = min(c.evidence for c in candidates)
     excess = np.array([c.evidence / max(best, 1e-300) - 1 for c in candidates])
     weights = np.exp(-excess / temperature)
-    spectra = np.column_stack([_scaled_onto(c.fit.spectrum, spectrum) for c in candidates])
     spread = np.sqrt((weights * (spectra - spectrum[:, None]) ** 2).sum(1) / weights.sum())
     return spread, (spectra * weights).sum(1) / weights.sum()
-
-
-def _scaled_onto(spectrum: np.ndarray, reference: np.ndarray) -> np.ndarray:
-    """``spectrum`` least-squares scaled onto ``reference`` (the spectra's overall scales differ by fit)."""
-    energy = float(spectrum @ spectrum)
-    return spectrum * (float(spectrum @ reference) / energy) if energy > 0 else spectrum
 
 
 def family_model(channels: tuple[str, ...], led_spectra: Spectra, responsivities: Spectra) -> FamilyModel:

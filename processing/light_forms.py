@@ -24,6 +24,12 @@ from msflash.processing.spectra import WavelengthGrid
 
 C2_NM_K = 1.4388e7
 """Second radiation constant, nm·K."""
+KINDS = FIXED, BLACKBODY, DAYLIGHT, BANDS, UNDERWATER, FILTER = 0, 1, 2, 3, 4, 5
+"""The kinds of form the compiled refinement knows (:mod:`processing.family_kernels`): fixed atoms (the discharge
+dictionary's chosen atoms, no θ), a blackbody, CIE daylight, emission bands (centres then FWHMs), daylight under
+water, a filtered blackbody."""
+NONE = -1
+"""No second part (a form alone), or a form the compiled refinement does not know."""
 
 # Known emission lines (nm, air; NIST Atomic Spectra Database) and phosphor line groups (relative heights).
 LINES: dict[str, tuple[tuple[float, float], ...]] = {
@@ -122,6 +128,18 @@ def _water_shapes(grid: WavelengthGrid) -> np.ndarray:
     return np.column_stack([a_w, np.exp(-0.014 * (nm - 440.0)), a_phi / a_phi.max()])
 
 
+@lru_cache(maxsize=8)
+def kernel_grid(grid: WavelengthGrid) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """What the compiled forms need of a grid (:mod:`processing.family_kernels`): the wavelengths, the slit's
+    variance (step²/6), the daylight basis and the water shapes (C-ordered float64)."""
+    return (
+        np.ascontiguousarray(_nm(grid), float),
+        grid.step_nm**2 / 6.0,
+        np.ascontiguousarray(_daylight_basis(grid), float),
+        np.ascontiguousarray(_water_shapes(grid), float),
+    )
+
+
 # -- forms ------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Form:
@@ -140,6 +158,8 @@ class Form:
     atom_names: tuple[str, ...] = ()
     tangent: Callable[[WavelengthGrid, np.ndarray, np.ndarray], np.ndarray] | None = field(default=None, compare=False)
     """``∂(B(θ) a)/∂θ`` (n × P) in closed form, or None: forward differences of the atoms (:func:`refine`)."""
+    kind: int = field(default=NONE, compare=False)
+    """The compiled refinement's kind of this form (:data:`KINDS`), or ``NONE``."""
 
     def describe(self, theta: np.ndarray) -> dict[str, float]:
         """The nonlinear parameters in physical units (temperatures in K rather than their logarithm)."""
@@ -167,6 +187,7 @@ def _thermal_forms() -> list[Form]:
                 _photons(_nm(grid), planck(_nm(grid), math.exp(th[0])) * planck_log_slope(_nm(grid), math.exp(th[0])))
                 * a[0]
             )[:, None],
+            kind=BLACKBODY,
         ),
         Form(
             "daylight",
@@ -175,6 +196,7 @@ def _thermal_forms() -> list[Form]:
             ((math.log(4000.0), math.log(25000.0)),),
             daylights,
             lambda grid, th: _photons(_nm(grid), daylight(grid, math.exp(th[0])))[:, None],
+            kind=DAYLIGHT,
         ),
     ]
 
@@ -256,6 +278,7 @@ def _band_form(name: str, limits: tuple[tuple[tuple[float, float], tuple[float, 
         starts,
         atoms,
         tangent=tangent,
+        kind=BANDS,
     )
 
 
@@ -330,6 +353,7 @@ def _transmitted_forms() -> list[Form]:
             water_starts,
             _water_atoms,
             tangent=_water_tangent,
+            kind=UNDERWATER,
         ),
         Form(
             "filter",
@@ -339,6 +363,7 @@ def _transmitted_forms() -> list[Form]:
             filter_starts,
             _filter_atoms,
             tangent=_filter_tangent,
+            kind=FILTER,
         ),
     ]
 
