@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.processing.ambient import AmbientModel, gcv_alpha
-from msflash.processing.errors import SolverError
+from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.region_cells import Cells
 from msflash.processing.spectra import Spectra
 from msflash.processing.tile_statistics import TiledStatistics
@@ -305,7 +305,8 @@ def _solve_regions(
     solver_alpha: float | str,
     noise_correction: bool,
 ) -> np.ndarray:
-    """The chosen solver on each region's pooled interior cells; a region whose solve fails keeps ``weights``."""
+    """The chosen solver on each region's pooled interior cells; a region whose solve fails, or that holds no more
+    samples than LEDs, keeps ``weights``."""
     valid = cells.valid
     final = weights.copy()
     for index, region in enumerate((~labels, labels)):
@@ -321,6 +322,6 @@ def _solve_regions(
                 solver_alpha,
                 denoised=cells.denoised_statistics(mask) if noise_correction else None,
             )[0]
-        except SolverError:
+        except (SolverError, SpectralDataError):  # a region too small to solve (no more samples than LEDs)
             pass
     return final

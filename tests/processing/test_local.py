@@ -25,6 +25,7 @@ from msflash.lab.study.local import (
     tiled_rmse,
 )
 from msflash.processing.accumulate import accumulate_statistics
+from msflash.processing.ambient import AmbientModel
 from msflash.processing.image_formation import MixedIllumination, expected_response
 from msflash.processing.local import (
     SELECTION_MARGIN,
@@ -38,6 +39,7 @@ from msflash.processing.local import (
     tile_statistics,
     upsample_tiles,
 )
+from msflash.processing.local_selection import _solve_regions
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import synthesize
@@ -467,3 +469,17 @@ def test_issue_target_thirty_percent_cut_on_boundary_scenes() -> None:
     assert boundary["auto_cut"] >= 0.30
     # Most of it is locality's: against the global model with the same (denoised) estimator.
     assert boundary["locality_cut"] >= 0.9 * boundary["auto_cut"]
+
+
+def test_a_region_of_fewer_samples_than_leds_keeps_its_first_weights() -> None:
+    """A region of a few blocks (a flickering rendering's second region held 4) cannot be solved by eq. 4–6: it
+    keeps the labelling's ridge weights instead of refusing the whole estimate (it raised SpectralDataError)."""
+    s = scenario("boundary", 2)
+    cells = Cells.of(tiled("boundary", 2).blocks)
+    labels = np.zeros(cells.valid.shape, dtype=bool)
+    labels[tuple(np.argwhere(cells.valid)[0])] = True  # one cell: fewer samples than the 7 LEDs
+    assert cells.statistics(labels[cells.valid]).n_samples <= 7
+    first = np.stack([np.full(7, 0.2), np.full(7, 0.4)])
+    final = _solve_regions(cells, labels, first, AmbientModel(s.led_spectra), "tikhonov", "auto", True)
+    np.testing.assert_array_equal(final[1], first[1])
+    assert not np.array_equal(final[0], first[0])  # the large region is solved
