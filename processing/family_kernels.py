@@ -18,6 +18,8 @@ fits are Lawson–Hanson on both, the steps the same formulas.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import lru_cache
 from typing import Any
 
@@ -65,6 +67,18 @@ def prepare() -> bool:
     frame_kernels.prepare()
     _prepared = _compiled() is not None
     return _prepared
+
+
+@contextmanager
+def as_one_shot() -> Iterator[None]:
+    """The numpy fits inside the block, as a process that did not :func:`prepare` takes them (a one-shot
+    ``msflash estimate``), even where this process prepared the compiled ones; the frame kernels unchanged."""
+    global _prepared
+    before, _prepared = _prepared, False
+    try:
+        yield
+    finally:
+        _prepared = before
 
 
 def kernels() -> Any:

@@ -93,5 +93,8 @@ def test_the_compiled_fits_are_opt_in(monkeypatch: pytest.MonkeyPatch) -> None:
     assert family_kernels.kernels() is not None
     with frame_kernels.paused():
         assert family_kernels.kernels() is None
+    with family_kernels.as_one_shot():  # the bench's one-shot figure: the numpy fits, the frame kernels kept
+        assert family_kernels.kernels() is None and frame_kernels.enabled()
+    assert family_kernels.kernels() is not None
     monkeypatch.setenv("MSFLASH_KERNELS", "numpy")
     assert family_kernels.kernels() is None

@@ -30,6 +30,8 @@ def test_processing_bench_reports_every_target_on_both_thread_counts_with_its_ve
     for label in ("64×48", "64×48 RGGB"):  # the family model beside the default, RGB and raw, at the first size
         family = report["targets"][label]["family_estimate_over_copy"]["1_thread"]
         assert math.isfinite(family["median"]) and family["pairs"] == 3 and family["target"] == "≤ 3"
+        one_shot = report["targets"][label]["family_estimate_one_shot_over_copy"]  # the numpy fits, reported only
+        assert math.isfinite(one_shot["median"]) and "target" not in one_shot
     assert "family_estimate_over_copy" not in report["targets"]["72×40 RGGB"]
     solvers = {entry["solver"]: entry for entry in report["solvers"]}
     assert set(solvers) == {
