@@ -104,7 +104,9 @@ class BlockRows:
     incremental mode as soon as they are known (their columns zeroed in every row, their products
     taken out of the moments), so :meth:`statistics` has no mask left to apply.
 
-    Frames may be added from several threads (distinct rows), but not in incremental mode.
+    Frames may be added from several threads (distinct rows), but not in incremental mode; or one at a time,
+    each shared by ``workers`` threads by block rows (the compiled pass, :func:`processing.frame_kernels.block_pass`:
+    the same sums whatever the count).
     """
 
     def __init__(
@@ -116,6 +118,7 @@ class BlockRows:
         incremental: bool = False,
         black_level: float = 0.0,
         weighting: bool = False,
+        workers: int = 1,
     ) -> None:
         height, width = plane_shape[0] // factor, plane_shape[1] // factor
         if height == 0 or width == 0:
@@ -123,6 +126,7 @@ class BlockRows:
                 f"frame of shape {plane_shape} is smaller than one {factor}×{factor} block; expected a larger frame"
             )
         self.factor, self.white_level, self.n_led_frames = factor, white_level, n_led_frames
+        self.workers = workers
         self.plane_shape = tuple(plane_shape)
         self.block_shape = (height, plane_shape[2], width)
         n_rows = n_led_frames + 2
@@ -217,6 +221,7 @@ class BlockRows:
             self.probe_stride,
             self.rows[row].reshape(self.block_shape),
             differences,
+            self.workers,
         )
         if not done:
             self.add(row, cfa_planes(frame, cfa_period))

@@ -173,10 +173,11 @@ def frame_copy(frames: list[np.ndarray]) -> Callable[[], None]:
     return copy
 
 
-def streamed_estimate(world: dict[str, Any], bin_factor: int) -> object:
+def streamed_estimate(world: dict[str, Any], bin_factor: int, workers: int = 1) -> object:
     """The default estimate of ``world``'s frames as ``msflash estimate`` streams them
     (:class:`acquisition.session.estimate_stream.EstimateStream`): the frames one at a time into incremental block
-    rows (the ambient frame last), the weighted statistics and the default solve. One thread: frames come in order."""
+    rows (the ambient frame first), the weighted statistics and the default solve. Frames come in order; ``workers``
+    threads share each frame's block pass by block rows."""
     frames, spec, leds = world["frames"], world["spec"], world["leds"]
     period = 2 if world.get("cfa") is not None else 1
     n = len(frames) - 1
@@ -189,6 +190,7 @@ def streamed_estimate(world: dict[str, Any], bin_factor: int) -> object:
         incremental=True,
         black_level=spec.black_level,
         weighting=SAMPLE_WEIGHTING,
+        workers=workers,
     )
     for row, frame in zip([n, *range(n)], frames, strict=True):
         rows.add_frame(row, frame, period)
@@ -207,7 +209,7 @@ def target_figures(world: dict[str, Any], pairs: int, threads: tuple[int, ...] =
 
     def estimate(bin_factor: int, workers: int) -> Callable[[], object]:
         if bin_factor > 1:
-            return lambda: streamed_estimate(world, bin_factor)
+            return lambda: streamed_estimate(world, bin_factor, workers)
         # Every pixel (--bin-factor 1): the exact all-pixel moments of the frames together, as the stream keeps them.
         return lambda: estimate_ambient(
             accumulate_statistics(

@@ -246,6 +246,43 @@ def test_streamed_block_rows_match_the_reference(route: str, incremental: bool) 
     assert_same(rows.statistics(spec), reference_statistics(ambient, frames, spec, 2, 2, 1))
 
 
+@pytest.mark.parametrize(("shape", "period", "factor", "workers"), [((45, 71), 2, 2, 2), ((70, 98, 3), 1, 4, 3)])
+def test_block_rows_shared_by_threads_are_the_same_to_the_bit(
+    route: str, shape: tuple[int, ...], period: int, factor: int, workers: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each frame's compiled pass shared by block rows among threads (``BlockRows(workers=…)``, a frame from disk on
+    both cores) gives the same rows, probe, saturated blocks and statistics as one thread — uneven shares, a strided
+    probe, a mosaic, saturated pixels in one share only; the numpy route ignores ``workers``."""
+    monkeypatch.setattr(frame_kernels, "SPLIT_FRAME_BYTES", 0)  # share even these small frames
+    monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 40)
+    ambient, frames, spec = _frames(shape, 3, seed=21)
+    results = []
+    for count in (1, workers):
+        rows = BlockRows(
+            3,
+            block_sums.plane_shape(ambient.shape, period),
+            factor,
+            spec.white_level,
+            True,
+            black_level=spec.black_level,
+            weighting=True,
+            workers=count,
+        )
+        for row, frame in [(3, ambient), *enumerate(frames)]:
+            rows.add_frame(row, frame, period)
+        assert rows.probe_stride > 1
+        results.append((rows.rows.copy(), rows.differences.copy(), rows._excluded, rows.statistics(spec)))
+    (rows_1, probe_1, excluded_1, one), (rows_n, probe_n, excluded_n, shared) = results
+    assert excluded_1 is not None and excluded_1.any()  # the saturated pixels dropped blocks
+    np.testing.assert_array_equal(excluded_n, excluded_1)
+    np.testing.assert_array_equal(rows_n, rows_1)
+    np.testing.assert_array_equal(probe_n, probe_1)
+    for field in ("gram", "cross", "ambient_energy", "n_samples"):
+        np.testing.assert_array_equal(getattr(shared, field), getattr(one, field))
+    for name, value in vars(one.channels).items():
+        np.testing.assert_array_equal(getattr(shared.channels, name), value, err_msg=name)
+
+
 def reference_channel_moments(
     ambient: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, factor: int, period: int, stride: int
 ) -> ChannelMoments:
