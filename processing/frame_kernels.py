@@ -188,8 +188,11 @@ def block_pass(
     else:
         bounds = [height * part // shares for part in range(shares + 1)]
         others = [thread_pool(workers).submit(share, bounds[part], bounds[part + 1]) for part in range(1, shares)]
-        hit = share(bounds[0], bounds[1])
-        hit = any([hit, *(other.result() for other in others)])
+        hits = [share(bounds[0], bounds[1])]
+        for part, other in enumerate(others, start=1):
+            # A share the pool has not started (a call from inside the pool, a busy pool) is taken here.
+            hits.append(share(bounds[part], bounds[part + 1]) if other.cancel() else other.result())
+        hit = any(hits)
     return True, saturated if hit else None
 
 
