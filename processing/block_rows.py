@@ -36,6 +36,7 @@ count of valid samples.
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future
 from dataclasses import replace
 
 import numpy as np
@@ -60,6 +61,7 @@ from msflash.processing.moment_products import (
     gram_matrix,
     row_products,
     serial_columns,
+    thread_pool,
 )
 from msflash.processing.noise_level import PixelNoise, ambient_block_noise, detail_noise_line
 from msflash.processing.statistics import (
@@ -106,7 +108,9 @@ class BlockRows:
 
     Frames may be added from several threads (distinct rows), but not in incremental mode; or one at a time,
     each shared by ``workers`` threads by block rows (the compiled pass, :func:`processing.frame_kernels.block_pass`:
-    the same sums whatever the count).
+    the same sums whatever the count). Incremental and weighted on several threads, the ambient frame's noise line is
+    fitted on a second core while the next frames' passes run, and the rows are recorded in the order they came
+    once it is in: the same numbers as one thread.
     """
 
     def __init__(
@@ -165,6 +169,8 @@ class BlockRows:
         self._probe_root_weights: np.ndarray | None = None  # the root weights in the probe's layout
         self._ambient_saturated: np.ndarray | None = None
         self._moments: np.ndarray | None = None
+        self._fit: Future[PixelNoise | None] | None = None  # the ambient's noise line being fitted (add_frame)
+        self._waiting: list[tuple[int, np.ndarray | None]] = []  # rows (and saturated blocks) to record after it
         self._batch_weights: np.ndarray | None = None  # batch mode: the weights, taken once the ambient row is in
         self._excluded: np.ndarray | None = None  # incremental mode: columns already left out
         self._excluded_differences: np.ndarray | None = None  # the same blocks' columns of the differences
@@ -179,6 +185,7 @@ class BlockRows:
         if plane.shape != self.plane_shape:
             raise SpectralDataError(f"frame stack: a frame has shape {plane.shape}; expected {self.plane_shape}")
         self._check_row(row)
+        self._settle()
         if np.issubdtype(plane.dtype, np.floating):
             # NaN/inf refused before the block sums, whose gather products would warn about them first.
             if not np.isfinite(plane.sum()):
@@ -228,11 +235,32 @@ class BlockRows:
             return
         if row == self.n_led_frames and self.weighting:
             # The same cells in the same order as from the planes (add): both routes weigh alike, to the bit.
-            self.ambient_noise = detail_noise_line(frame, cfa_period, self.black_level, self.white_level)
+            noise_line = (frame, cfa_period, self.black_level, self.white_level)
+            if self.workers > 1 and self._moments is not None:
+                # Incremental, on several threads: the noise line is fitted on a second core while the next
+                # frames' passes run; rows are recorded in the order they came once it is in (_settle).
+                self._fit = thread_pool(self.workers).submit(detail_noise_line, *noise_line)
+                self._waiting.append((row, saturated))
+                return
+            self.ambient_noise = detail_noise_line(*noise_line)
+        if self._fit is not None and not self._fit.done():
+            self._waiting.append((row, saturated))
+            return
+        self._settle()
         self._record(row, saturated)
 
+    def _settle(self) -> None:
+        """The ambient's noise line in, if it was being fitted (:meth:`add_frame`): record the rows that waited
+        for it, in the order they came — the same steps, so the same numbers, as recording each on arrival."""
+        if self._fit is None:
+            return
+        self.ambient_noise, self._fit = self._fit.result(), None
+        waiting, self._waiting = self._waiting, []
+        for row, saturated in waiting:
+            self._record(row, saturated)
+
     def _check_row(self, row: int) -> None:
-        if row in self._filled or not 0 <= row <= self.n_led_frames:
+        if row in self._filled or any(row == taken for taken, _ in self._waiting) or not 0 <= row <= self.n_led_frames:
             raise SpectralDataError(
                 f"frame stack: row {row} is taken or out of range; expected each of 0…{self.n_led_frames} once"
             )
@@ -322,6 +350,7 @@ class BlockRows:
 
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
+        self._settle()
         if self._moments is None:
             self._invalid.append(blocks)
         else:
@@ -380,6 +409,7 @@ class BlockRows:
 
         ``workers`` threads share the moment product (when it is not already accumulated).
         """
+        self._settle()
         rows = self.rows
         if len(self._filled) != rows.shape[0]:
             raise SpectralDataError(

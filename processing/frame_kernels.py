@@ -177,22 +177,45 @@ def block_pass(
     probe = differences if differences is not None else np.empty((0, sums.shape[2], sums.shape[1]))
     shape = ((0,) * cfa_period, (0,) * (cfa_period * channels), (0,) * factor)
 
-    def share(first: int, stop: int) -> bool:
-        return bool(
-            kernels.block_pass(rows, *shape, float(white), int(probe_stride), sums, probe, saturated, first, stop)
-        )
-
     shares = max(1, min(workers, height)) if frame.nbytes >= SPLIT_FRAME_BYTES else 1
     if shares == 1:
-        hit = share(0, height)
-    else:
-        bounds = [height * part // shares for part in range(shares + 1)]
-        others = [thread_pool(workers).submit(share, bounds[part], bounds[part + 1]) for part in range(1, shares)]
-        hits = [share(bounds[0], bounds[1])]
-        for part, other in enumerate(others, start=1):
-            # A share the pool has not started (a call from inside the pool, a busy pool) is taken here.
-            hits.append(share(bounds[part], bounds[part + 1]) if other.cancel() else other.result())
-        hit = any(hits)
+        hit = kernels.block_pass(rows, *shape, float(white), int(probe_stride), sums, probe, saturated, 0, height)
+        return True, saturated if hit else None
+    bounds = [height * part // shares for part in range(shares + 1)]
+    # Shares are claimed in turn by the calling thread and the pool's helpers; the frame is reached through
+    # ``shared_rows`` only while shares are left, so a helper the pool starts late (busy, or a call from inside the pool:
+    # then the caller takes every share) neither holds the frame nor is waited for.
+    next_share = [0]
+    shared_rows: list[np.ndarray | None] = [rows]
+    lock = threading.Lock()
+
+    def take_shares() -> bool:
+        hit = False
+        while True:
+            with lock:
+                part, frame_rows = next_share[0], shared_rows[0]
+                if part >= shares or frame_rows is None:
+                    return hit
+                next_share[0] = part + 1
+            hit |= bool(
+                kernels.block_pass(
+                    frame_rows,
+                    *shape,
+                    float(white),
+                    int(probe_stride),
+                    sums,
+                    probe,
+                    saturated,
+                    *bounds[part : part + 2],
+                )
+            )
+
+    helpers = [thread_pool(workers).submit(take_shares) for _ in range(shares - 1)]
+    hits = [take_shares()]
+    with lock:
+        shared_rows[0] = None  # every share is taken: what starts now finds none
+    hits += [helper.result() for helper in helpers if not helper.cancel()]
+    hit = any(hits)
     return True, saturated if hit else None
 
 

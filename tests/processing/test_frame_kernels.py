@@ -10,6 +10,8 @@ workers.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -247,17 +249,34 @@ def test_streamed_block_rows_match_the_reference(route: str, incremental: bool) 
 
 
 @pytest.mark.parametrize(("shape", "period", "factor", "workers"), [((45, 71), 2, 2, 2), ((70, 98, 3), 1, 4, 3)])
+@pytest.mark.parametrize("ambient_first", [True, False])
 def test_block_rows_shared_by_threads_are_the_same_to_the_bit(
-    route: str, shape: tuple[int, ...], period: int, factor: int, workers: int, monkeypatch: pytest.MonkeyPatch
+    route: str,
+    shape: tuple[int, ...],
+    period: int,
+    factor: int,
+    workers: int,
+    ambient_first: bool,
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """Each frame's compiled pass shared by block rows among threads (``BlockRows(workers=…)``, a frame from disk on
-    both cores) gives the same rows, probe, saturated blocks and statistics as one thread — uneven shares, a strided
-    probe, a mosaic, saturated pixels in one share only; the numpy route ignores ``workers``."""
+    both cores), with the ambient's noise line fitted beside the next frames' passes, gives the same rows, probe,
+    saturated blocks and statistics as one thread — uneven shares, a strided probe, a mosaic, saturated pixels, the
+    ambient first or after an LED frame; the numpy route ignores ``workers``."""
     monkeypatch.setattr(frame_kernels, "SPLIT_FRAME_BYTES", 0)  # share even these small frames
     monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 40)
     ambient, frames, spec = _frames(shape, 3, seed=21)
     results = []
+    fitted = threading.Event()
+    fit = block_rows.detail_noise_line
+
+    def fit_when_told(*arguments: object) -> object:
+        fitted.wait(timeout=60)  # the ambient's line comes in only after every other frame: each row waits for it
+        return fit(*arguments)
+
     for count in (1, workers):
+        if count > 1 and route == "compiled":
+            monkeypatch.setattr(block_rows, "detail_noise_line", fit_when_told)
         rows = BlockRows(
             3,
             block_sums.plane_shape(ambient.shape, period),
@@ -268,10 +287,19 @@ def test_block_rows_shared_by_threads_are_the_same_to_the_bit(
             weighting=True,
             workers=count,
         )
-        for row, frame in [(3, ambient), *enumerate(frames)]:
+        order = [(3, ambient), *enumerate(frames)] if ambient_first else [(0, frames[0]), (3, ambient), (1, frames[1])]
+        for row, frame in order[:3]:
             rows.add_frame(row, frame, period)
+        with pytest.raises(SpectralDataError, match="taken"):
+            rows.add_frame(order[2][0], order[2][1], period)  # a row recorded or waiting is taken either way
+        for row, frame in order[3:] if ambient_first else [(2, frames[2])]:
+            rows.add_frame(row, frame, period)
+        if count > 1 and route == "compiled":
+            assert len(rows._waiting) == (4 if ambient_first else 3)  # the ambient and each frame after it
+            fitted.set()
         assert rows.probe_stride > 1
-        results.append((rows.rows.copy(), rows.differences.copy(), rows._excluded, rows.statistics(spec)))
+        taken = rows.statistics(spec)  # the rows as they stand once every frame is recorded
+        results.append((rows.rows.copy(), rows.differences.copy(), rows._excluded, taken))
     (rows_1, probe_1, excluded_1, one), (rows_n, probe_n, excluded_n, shared) = results
     assert excluded_1 is not None and excluded_1.any()  # the saturated pixels dropped blocks
     np.testing.assert_array_equal(excluded_n, excluded_1)
