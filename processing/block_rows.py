@@ -490,11 +490,22 @@ class BlockRows:
         transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
         ones = self.rows[-1] if column_factor is None else self.rows[-1] * column_factor
         blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
+        differences = self.differences if probe_scale is not None else None
+        noise_products = None
+        # On several threads, the probe's products beside the rows' on a second core (each taken as on one thread).
+        if differences is not None and self.workers > 1:
+            at_probe = None if column_factor is None else self._at_probe(column_factor)
+            noise_products = thread_pool(self.workers).submit(
+                _channel_products, transform, differences, self.difference_shape, 2, at_probe
+            )
         fa, ff, aa = _channel_products(transform, self.rows, self.block_shape, 1, column_factor)
-        if self.differences is None or probe_scale is None:
+        if differences is None or probe_scale is None:
             return ChannelMoments(fa, ff, aa, blocks)
-        at_probe = None if column_factor is None else self._at_probe(column_factor)
-        noise = _channel_products(transform, self.differences, self.difference_shape, 2, at_probe)
+        if noise_products is None or noise_products.cancel():  # one thread, or the pool had not started it
+            at_probe = None if column_factor is None else self._at_probe(column_factor)
+            noise = _channel_products(transform, differences, self.difference_shape, 2, at_probe)
+        else:
+            noise = noise_products.result()
         return ChannelMoments(fa, ff, aa, blocks, *(part * probe_scale for part in noise))
 
 
