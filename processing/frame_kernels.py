@@ -126,10 +126,11 @@ def _rows_view(frame: np.ndarray) -> np.ndarray | None:
     return frame.reshape(frame.shape[0], -1)
 
 
-SPLIT_FRAME_BYTES = 1 << 20
-"""Frames of at least this many bytes are shared by block rows among :func:`block_pass`'s ``workers`` (a
-1280×1024 12-bit mosaic is 2.6 MB: 0.2–0.3 ms a pass on one thread; below about a megabyte the second thread's
-hand-over costs about what it saves)."""
+SPLIT_FRAME_BYTES = 1 << 22
+"""Frames of at least this many bytes are shared by block rows among :func:`block_pass`'s ``workers``. Measured
+interleaved in one process on the shared 2-core machine (docs/speed.md, issue 30's second session): a 1280×1024
+RGB16 frame (7.9 MB, about 1 ms a pass) gains, a 12-bit mosaic of that size (2.6 MB, 0.2–0.3 ms) lost about a
+tenth of its estimate to the second thread's hand-over."""
 
 
 def block_pass(
