@@ -10,7 +10,9 @@ whether it is met (``targets``; ``targets_met`` over all of them):
   raw 12-bit RGGB frames of a colour machine-vision camera (each size's ``… RGGB`` entry) ≤ 1.5 (issue 30);
 - ``estimate_all_pixels_over_copy``: the same without binning — ≤ 4;
 - ``synthesis_over_copy``: the computational flash image (float32) — ≤ 1.5;
-- ``peak_memory_over_frames``: the peak numpy memory of each of them over the frames' bytes — ≤ 0.5.
+- ``peak_memory_over_frames``: the peak numpy memory of each of them over the frames' bytes — ≤ 0.5;
+- ``threads_gain``: the estimate's and synthesis' time on 2 threads ÷ on 1, interleaved (no target; below 1 when the
+  second thread earns its hand-over).
 
 On the first size alone (``height × width``):
 
@@ -241,6 +243,15 @@ def target_figures(world: dict[str, Any], pairs: int, threads: tuple[int, ...] =
                 interleaved_ratio(run(workers), copy, pairs), targets[name]
             )
             for workers in threads
+        }
+    if 1 in threads and len(threads) > 1:
+        # What the second thread earns, measured directly: the many-thread run ÷ the one-thread run, in turn (the
+        # two ratios to the copy above are taken apart in time, and on a busy machine they drift apart).
+        most = max(threads)
+        figures["threads_gain"] = {
+            name.removesuffix("_over_copy"): interleaved_ratio(run(most), run(1), pairs)
+            for name, run in runs.items()
+            if name != "estimate_all_pixels_over_copy"
         }
     frame_bytes = sum(frame.nbytes for frame in frames)
     memory = {
