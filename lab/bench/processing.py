@@ -177,9 +177,9 @@ def frame_copy(frames: list[np.ndarray]) -> Callable[[], None]:
 
 def streamed_estimate(world: dict[str, Any], bin_factor: int, workers: int = 1) -> object:
     """The default estimate of ``world``'s frames as ``msflash estimate`` streams them
-    (:class:`acquisition.session.estimate_stream.EstimateStream`): the frames one at a time into incremental block
-    rows (the ambient frame first), the weighted statistics and the default solve. Frames come in order; ``workers``
-    threads share each frame's block pass by block rows."""
+    (:class:`acquisition.session.estimate_stream.EstimateStream`): the frames one at a time into block rows (the
+    ambient frame first), the weighted statistics (one moment product at the end) and the default solve. Frames
+    come in order; ``workers`` threads share each frame's block pass by block rows and the product."""
     frames, spec, leds = world["frames"], world["spec"], world["leds"]
     period = 2 if world.get("cfa") is not None else 1
     n = len(frames) - 1
@@ -189,7 +189,6 @@ def streamed_estimate(world: dict[str, Any], bin_factor: int, workers: int = 1) 
         plane_shape(frames[0].shape, period),
         bin_factor,
         spec.white_level,
-        incremental=True,
         black_level=spec.black_level,
         weighting=SAMPLE_WEIGHTING,
         workers=workers,

@@ -236,13 +236,10 @@ def test_all_pixel_statistics_match_the_reference(
     assert_same(actual, SequenceStatistics(**{**expected.__dict__, "noise": None}))
 
 
-@pytest.mark.parametrize("incremental", [False, True])
-def test_streamed_block_rows_match_the_reference(route: str, incremental: bool) -> None:
+def test_streamed_block_rows_match_the_reference(route: str) -> None:
     """A capture adds raw frames one by one (FlashSession): the same statistics."""
     ambient, frames, spec = _frames((45, 71), 3, seed=8)
-    rows = BlockRows(
-        3, block_sums.plane_shape(ambient.shape, 2), 2, spec.white_level, incremental, black_level=spec.black_level
-    )
+    rows = BlockRows(3, block_sums.plane_shape(ambient.shape, 2), 2, spec.white_level, black_level=spec.black_level)
     for row, frame in [(0, frames[0]), (3, ambient), (1, frames[1]), (2, frames[2])]:
         rows.add_frame(row, frame, 2)
     assert_same(rows.statistics(spec), reference_statistics(ambient, frames, spec, 2, 2, 1))
@@ -271,7 +268,7 @@ def test_block_rows_shared_by_threads_are_the_same_to_the_bit(
     fit = block_rows.detail_noise_line
 
     def fit_when_told(*arguments: object) -> object:
-        fitted.wait(timeout=60)  # the ambient's line comes in only after every other frame: each row waits for it
+        fitted.wait(timeout=60)  # the ambient's line comes in only after every other frame
         return fit(*arguments)
 
     for count in (1, workers):
@@ -282,7 +279,6 @@ def test_block_rows_shared_by_threads_are_the_same_to_the_bit(
             block_sums.plane_shape(ambient.shape, period),
             factor,
             spec.white_level,
-            True,
             black_level=spec.black_level,
             weighting=True,
             workers=count,
@@ -291,15 +287,16 @@ def test_block_rows_shared_by_threads_are_the_same_to_the_bit(
         for row, frame in order[:3]:
             rows.add_frame(row, frame, period)
         with pytest.raises(SpectralDataError, match="taken"):
-            rows.add_frame(order[2][0], order[2][1], period)  # a row recorded or waiting is taken either way
+            rows.add_frame(order[2][0], order[2][1], period)  # a row added is taken
         for row, frame in order[3:] if ambient_first else [(2, frames[2])]:
             rows.add_frame(row, frame, period)
         if count > 1 and route == "compiled":
-            assert len(rows._waiting) == (4 if ambient_first else 3)  # the ambient and each frame after it
+            assert rows._fit is not None and not rows._fit.done()  # every frame in, the fit still held back
             fitted.set()
         assert rows.probe_stride > 1
         taken = rows.statistics(spec)  # the rows as they stand once every frame is recorded
-        results.append((rows.rows.copy(), rows.differences.copy(), rows._excluded, taken))
+        excluded = np.logical_or.reduce(rows._invalid) if rows._invalid else None
+        results.append((rows.rows.copy(), rows.differences.copy(), excluded, taken))
     (rows_1, probe_1, excluded_1, one), (rows_n, probe_n, excluded_n, shared) = results
     assert excluded_1 is not None and excluded_1.any()  # the saturated pixels dropped blocks
     np.testing.assert_array_equal(excluded_n, excluded_1)
@@ -343,14 +340,12 @@ def reference_channel_moments(
 
 
 @pytest.mark.parametrize(("shape", "period", "factor"), [((70, 98, 3), 1, 4), ((66, 90), 2, 4), ((93, 85, 3), 1, 2)])
-@pytest.mark.parametrize("incremental", [False, True])
 @pytest.mark.parametrize("weighting", [False, True])
 def test_channel_moments_match_the_reference(
     route: str,
     shape: tuple[int, ...],
     period: int,
     factor: int,
-    incremental: bool,
     weighting: bool,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -366,7 +361,6 @@ def test_channel_moments_match_the_reference(
         block_sums.plane_shape(ambient.shape, period),
         factor,
         spec.white_level,
-        incremental,
         black_level=spec.black_level,
         weighting=weighting,
     )
