@@ -1,7 +1,7 @@
 """``python -m tests.harness.raw_speed``: the raw-frame figures of issue 30 in one process, as interleaved ratios.
 
 For the bench's 1280×1024 world as RGB and as a raw 12-bit RGGB mosaic: the default estimate as ``msflash estimate``
-streams it (incremental weighted block rows, the default solve), the light models' channel statistics, and the family
+streams it (weighted block rows, one moment product at the end, the default solve), the light models' channel statistics, and the family
 model's estimate (statistics, prior, families), each the median of ``--pairs`` pairs interleaved with a copy of the
 frames (:func:`msflash.lab.bench.ratios.interleaved_ratio`, as ``msflash bench`` measures). ``--one-thread`` sets
 ``OPENBLAS_NUM_THREADS=1`` first. One JSON line; no targets asserted (docs/speed.md, Raw frames).
