@@ -275,12 +275,13 @@ class BlockRows:
         return (self.block_shape[0] * self.block_shape[2] - excluded_blocks) / probed
 
     def statistics(
-        self, spec: FrameStackSpec, chunk_pixels: int = DEFAULT_CHUNK_PIXELS, workers: int | None = None
+        self, spec: FrameStackSpec, chunk_pixels: int = DEFAULT_CHUNK_PIXELS, workers: int = 1
     ) -> SequenceStatistics:
         """The statistics of the rows added so far (every row must be in); ``spec`` as for the raw frames.
 
-        ``workers`` threads (None: the rows' own count) share the moment product; the moments do not depend on it
-        (the chunks' products are added in chunk order, :func:`processing.moment_products.gram_matrices`).
+        ``workers`` threads share the moment product; the moments do not depend on it (the chunks' products are
+        added in chunk order, :func:`processing.moment_products.gram_matrices`). The stream leaves it at 1: at
+        1280×1024 two threads took 3–8 % longer than one (docs/speed.md, 2026-11-28 third session).
         """
         rows = self.rows
         if len(self._filled) != rows.shape[0]:
@@ -293,7 +294,6 @@ class BlockRows:
         if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
             raise non_finite_frames_error(rows[:-1])
         weights = self._weights if self.weighting else None  # they enter each chunk's product
-        workers = self.workers if workers is None else workers
         moments, noise, excluded_columns, scale, column_factor = self._moments(weights, chunk_pixels, workers)
         if noise is not None:
             noise = None if scale is None else noise * scale
