@@ -36,6 +36,7 @@ count of valid samples.
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future
 from dataclasses import replace
 
 import numpy as np
@@ -57,9 +58,8 @@ from msflash.processing.errors import SpectralDataError
 from msflash.processing.moment_products import (
     DEFAULT_CHUNK_PIXELS,
     gram_matrices,
-    gram_matrix,
-    row_products,
     serial_columns,
+    thread_pool,
 )
 from msflash.processing.noise_level import PixelNoise, ambient_block_noise, detail_noise_line
 from msflash.processing.statistics import (
@@ -95,16 +95,22 @@ class BlockRows:
     """Block sums of an ambient + LED frame stack as the rows ``[F_1 … F_n, A, 1]`` of the moments.
 
     The binned statistics (eq. 4–6 on ``factor × factor`` block sums, see :func:`processing.block_sums.bin_frame`) need,
-    per frame, its block sums and which blocks saturate; then the second moments of the rows. The
-    binned pass of :func:`processing.accumulate.accumulate_statistics` adds every frame and takes the moments in one
-    product. A capture adds each frame as it arrives (``incremental=True``): the new row's
-    products with the rows already in are taken then, so once the last frame is in only its own
-    block sums and one matrix–vector product remain — no full moment product on the latency path.
-    Blocks saturated in any frame (or :meth:`exclude`-d) are left out of the moments; in
-    incremental mode as soon as they are known (their columns zeroed in every row, their products
-    taken out of the moments), so :meth:`statistics` has no mask left to apply.
+    per frame, its block sums and which blocks saturate; then the second moments of the rows. Every route that
+    estimates — :func:`processing.accumulate.accumulate_statistics`, a capture's frames as they arrive, a sequence
+    streamed from disk (:mod:`acquisition.session.estimate_stream`), the bench — adds each frame's block sums as it
+    comes and takes the moments in one product at the end (:meth:`statistics`): one arithmetic, so one set of numbers
+    whatever the route and the thread count. Blocks saturated in any frame (or :meth:`exclude`-d) weigh 0 in that
+    product.
 
-    Frames may be added from several threads (distinct rows), but not in incremental mode.
+    One product at the end, rather than each new row's products with the rows already in as it arrives: the
+    per-frame products read every filled row again for each frame (their sum over a stack is about n / 2 full
+    products), so the whole estimate costs less, though the last frame's latency carries one full product
+    (≈ 1 ms for a 1280×1024 mosaic; docs/speed.md).
+
+    Frames may be added from several threads (distinct rows); or one at a time, each shared by ``workers`` threads by
+    block rows (the compiled pass, :func:`processing.frame_kernels.block_pass`: the same sums whatever the count).
+    Weighted on several threads, the ambient frame's noise line and weights are fitted on a second core while the
+    next frames' passes run (:meth:`statistics` waits for them): the same numbers as one thread.
     """
 
     def __init__(
@@ -113,9 +119,9 @@ class BlockRows:
         plane_shape: tuple[int, ...],
         factor: int,
         white_level: float,
-        incremental: bool = False,
         black_level: float = 0.0,
         weighting: bool = False,
+        workers: int = 1,
     ) -> None:
         height, width = plane_shape[0] // factor, plane_shape[1] // factor
         if height == 0 or width == 0:
@@ -123,52 +129,36 @@ class BlockRows:
                 f"frame of shape {plane_shape} is smaller than one {factor}×{factor} block; expected a larger frame"
             )
         self.factor, self.white_level, self.n_led_frames = factor, white_level, n_led_frames
+        self.workers = workers
         self.plane_shape = tuple(plane_shape)
         self.block_shape = (height, plane_shape[2], width)
         n_rows = n_led_frames + 2
         # Laid out (block row, channel, block column) per frame: any sample order works for
-        # moments, and this one lets every copy run along long rows.
-        # Incremental moments take every row's product with the new one: rows not filled yet must
-        # be zeros then; otherwise each row is written whole before use (no zeroing pass).
-        shape = (n_rows, height * plane_shape[2] * width)
-        self.rows = np.zeros(shape) if incremental else np.empty(shape)
+        # moments, and this one lets every copy run along long rows. Each row is written whole before use.
+        self.rows = np.empty((n_rows, height * plane_shape[2] * width))
         self.rows[n_led_frames + 1] = 1.0
         # Even blocks also give every block's half difference: the noise probe (module notes). The
-        # ones row has no noise; rows not filled yet are zeros in incremental mode, as above. Laid
-        # out (block row, block column, channel): the block sums' own order, copied without a transpose.
-        # Large frames probe every ``probe_stride``-th block row only (PROBE_BLOCKS).
+        # ones row has no noise. Laid out (block row, block column, channel): the block sums' own order,
+        # copied without a transpose. Large frames probe every ``probe_stride``-th block row only (PROBE_BLOCKS).
         self.probe_stride = probe_stride(height, width)
         self.difference_shape = (len(range(0, height, self.probe_stride)), width, plane_shape[2])
-        probe_shape = (n_rows, math.prod(self.difference_shape))
-        self.differences = (
-            (np.zeros(probe_shape) if incremental else np.empty(probe_shape)) if factor % 2 == 0 else None
-        )
+        self.differences = np.empty((n_rows, math.prod(self.difference_shape))) if factor % 2 == 0 else None
         if self.differences is not None:
             self.differences[n_led_frames + 1] = 0.0
-        self._noise: np.ndarray | None = None  # incremental mode: the probe's moments so far
         self._invalid: list[np.ndarray] = []
         self._filled = [n_led_frames + 1]
         self._floating = False
-        # Inverse-variance weights (module notes): their square roots per row column, once the ambient
-        # frame is in (and its probe: without one there is no noise to fit). ``_ambient_saturated`` are
-        # the blocks the ambient frame itself saturates (left out of the fit).
+        # Inverse-variance weights (module notes): per row column, once the ambient frame is in (and its probe:
+        # without one there is no noise to fit). ``_ambient_saturated`` are the blocks the ambient frame itself
+        # saturates (left out of the fit).
         self.black_level = black_level
         self.weighting = weighting and self.differences is not None
         self.ambient_noise: PixelNoise | None = None
         """The ambient frame's noise per sample (:func:`processing.noise_level.detail_noise_line`), once it is in
         (weighted rows only)."""
-        self.root_weights: np.ndarray | None = None
-        self._probe_root_weights: np.ndarray | None = None  # the root weights in the probe's layout
         self._ambient_saturated: np.ndarray | None = None
-        self._moments: np.ndarray | None = None
-        self._batch_weights: np.ndarray | None = None  # batch mode: the weights, taken once the ambient row is in
-        self._excluded: np.ndarray | None = None  # incremental mode: columns already left out
-        self._excluded_differences: np.ndarray | None = None  # the same blocks' columns of the differences
-        if incremental:
-            self._moments = np.zeros((n_rows, n_rows))
-            self._moments[-1, -1] = self.rows.shape[1]
-            if self.differences is not None:
-                self._noise = np.zeros((n_rows, n_rows))
+        self._weights: np.ndarray | None = None  # the weights, taken once the ambient row is in
+        self._fit: Future[np.ndarray] | None = None  # the same, being fitted on a second core (add_frame)
 
     def add(self, row: int, plane: np.ndarray) -> None:
         """Block-sum one (H, W, C) plane into ``row`` (LED frame j → j, ambient → n) and note its saturated blocks."""
@@ -192,10 +182,10 @@ class BlockRows:
             alternation = block_row_alternation(plane, self.factor, self.probe_stride)
             differences = gathered(alternation, self.factor, channels, difference_gather)
             np.copyto(self.differences[row].reshape(self.difference_shape), differences)
-        if row == self.n_led_frames and self.weighting:
-            self.ambient_noise = detail_noise_line(plane, 1, self.black_level, self.white_level)
         # One max per frame finds the frames that saturate at all; only those build masks.
         self._record(row, saturated_blocks(plane, self.factor, self.white_level) if may_saturate else None)
+        if row == self.n_led_frames and self.weighting:
+            self._weights = self._fitted_weights(plane, 1)
 
     def add_frame(self, row: int, frame: np.ndarray, cfa_period: int = 1) -> None:
         """:meth:`add` of the frame's CFA planes (:func:`cfa_planes`), in one compiled pass over the raw
@@ -217,14 +207,18 @@ class BlockRows:
             self.probe_stride,
             self.rows[row].reshape(self.block_shape),
             differences,
+            self.workers,
         )
         if not done:
             self.add(row, cfa_planes(frame, cfa_period))
             return
+        self._record(row, saturated)
         if row == self.n_led_frames and self.weighting:
             # The same cells in the same order as from the planes (add): both routes weigh alike, to the bit.
-            self.ambient_noise = detail_noise_line(frame, cfa_period, self.black_level, self.white_level)
-        self._record(row, saturated)
+            if self.workers > 1:  # fitted on a second core while the next frames' passes run
+                self._fit = thread_pool(self.workers).submit(self._fitted_weights, frame, cfa_period)
+            else:
+                self._weights = self._fitted_weights(frame, cfa_period)
 
     def _check_row(self, row: int) -> None:
         if row in self._filled or not 0 <= row <= self.n_led_frames:
@@ -233,40 +227,18 @@ class BlockRows:
             )
 
     def _record(self, row: int, saturated: np.ndarray | None) -> None:
-        """After a row's block sums are in: its saturated blocks, the weights, the incremental moments."""
+        """After a row's block sums are in: its saturated blocks (the ambient's also for the weights' fit)."""
         if row == self.n_led_frames:
             self._ambient_saturated = saturated
-            if self._moments is None and self.weighting:
-                # Batch mode: the weights depend on the ambient row alone, so the thread that added it
-                # takes them while others still add LED frames (off the serial path of statistics()).
-                self._batch_weights = self._sample_weights()
-        if self._moments is not None and self.weighting:
-            if row == self.n_led_frames:
-                self._weigh_filled()  # the ambient frame sets the weights: weigh it and any row in before it
-            elif self.root_weights is not None:
-                self._weigh_row(row)
-        if self._moments is None:
-            if saturated is not None:
-                self._invalid.append(saturated)
-        else:
-            if saturated is not None:
-                self._drop(saturated)  # the new row is not in the moments yet: its columns are only zeroed
-            if self._excluded is not None:
-                self.rows[row, self._excluded] = 0.0
-                if self.differences is not None:
-                    self.differences[row, self._excluded_differences] = 0.0
-            # One matrix–vector product with every row (rows not filled yet are zeros; their
-            # products are set when they arrive): cheaper than gathering the filled rows first.
-            filled = [*self._filled, row]
-            for rows, moments in ((self.rows, self._moments), (self.differences, self._noise)):
-                if rows is not None and moments is not None:
-                    products = row_products(rows, row, filled)
-                    moments[row, filled] = products[filled]
-                    moments[filled, row] = products[filled]
+        if saturated is not None:
+            self._invalid.append(saturated)
         self._filled.append(row)
 
-    def _sample_weights(self) -> np.ndarray:
-        """The inverse-variance weights of every row column, from the ambient row and the noise line of its frame."""
+    def _fitted_weights(self, frame: np.ndarray, cfa_period: int) -> np.ndarray:
+        """The ambient frame's noise line (:attr:`ambient_noise`) and the inverse-variance weights of every row column
+        it gives, from the ambient row (in) and its frame: they depend on these alone, so the thread that added the
+        ambient frame takes them while others still add LED frames (off the serial path of :meth:`statistics`)."""
+        self.ambient_noise = detail_noise_line(frame, cfa_period, self.black_level, self.white_level)
         ambient = self.n_led_frames
         # rows layout (block row, channel, block column)
         black = self.black_level * self.factor * self.factor
@@ -279,48 +251,13 @@ class BlockRows:
         )
         return line.weights(self.rows[ambient], black)
 
-    def _weigh_row(self, row: int) -> None:
-        """Scale one row (and its probe) by the root weights (incremental mode, weights known)."""
-        assert self.root_weights is not None
-        self.rows[row] *= self.root_weights
-        if self.differences is not None and self._probe_root_weights is not None:
-            self.differences[row] *= self._probe_root_weights
-
     def _at_probe(self, values: np.ndarray) -> np.ndarray:
         """Per-column ``values`` of the rows at the probed blocks, in the probe's layout."""
         return values.reshape(self.block_shape)[:: self.probe_stride].transpose(0, 2, 1).reshape(-1)
 
-    def _weigh_filled(self) -> None:
-        """Incremental mode, the ambient row just in: weigh every filled row and retake their moments."""
-        assert self._moments is not None
-        self.root_weights = np.sqrt(self._sample_weights())
-        self._probe_root_weights = self._at_probe(self.root_weights)
-        filled = [row for row in self._filled if row != self.n_led_frames + 1]
-        for row in [*filled, self.n_led_frames]:
-            self._weigh_row(row)
-        ones = self.n_led_frames + 1
-        self.rows[ones] = self.root_weights
-        if self._excluded is not None:
-            self.rows[ones, self._excluded] = 0.0
-        every = self._filled  # the ambient row's own products are taken by add() right after
-        chunk = DEFAULT_CHUNK_PIXELS * self.block_shape[1]
-        # The ambient first (the usual order) leaves the ones row alone: a (1, K) gram is BLAS's threaded
-        # dot (docs/measurements.md); its product in slices (row_products) is not.
-        gram = (
-            (lambda rows: row_products(rows, 0)[:, None])
-            if len(every) == 1
-            else (lambda rows: gram_matrix(rows, chunk))
-        )
-        self._moments[np.ix_(every, every)] = gram(self.rows[every])
-        if self._noise is not None and self.differences is not None:
-            self._noise[np.ix_(every, every)] = gram(self.differences[every])
-
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
-        if self._moments is None:
-            self._invalid.append(blocks)
-        else:
-            self._drop(blocks)
+        self._invalid.append(blocks)
 
     def _columns(self, blocks: np.ndarray) -> np.ndarray:
         """The row columns of the (H/f, W/f) block mask ``blocks`` (every channel of each block)."""
@@ -337,60 +274,27 @@ class BlockRows:
             return None
         return (self.block_shape[0] * self.block_shape[2] - excluded_blocks) / probed
 
-    def _drop(self, blocks: np.ndarray) -> None:
-        """Incremental mode: zero the columns of the (H/f, W/f) mask ``blocks`` in every row and take
-        the products of the filled rows over the newly left-out columns back out of the moments.
-
-        Once a quarter of the columns or more is out, the moments of the filled rows are taken
-        anew instead (subtracting most of a sum loses precision), as :meth:`statistics` does.
-        """
-        assert self._moments is not None
-        columns = self._columns(blocks)
-        new = columns if self._excluded is None else columns & ~self._excluded
-        fresh = np.flatnonzero(new)
-        if not fresh.size:
-            return
-        self._excluded = new if self._excluded is None else self._excluded | new
-        filled = np.asarray(self._filled, dtype=np.intp)
-        few = np.count_nonzero(self._excluded) * 4 < columns.size
-        parts = [(self.rows, self._moments, fresh)]
-        if self.differences is not None and self._noise is not None:
-            columns = self._difference_columns(blocks)
-            new = columns if self._excluded_differences is None else columns & ~self._excluded_differences
-            self._excluded_differences = new if self._excluded_differences is None else self._excluded_differences | new
-            parts.append((self.differences, self._noise, np.flatnonzero(new)))
-        for rows, moments, fresh in parts:
-            if few:
-                dropped = rows[np.ix_(filled, fresh)]
-                rows[:, fresh] = 0.0
-                moments[np.ix_(filled, filled)] -= dropped @ dropped.T
-            else:
-                rows[:, fresh] = 0.0
-                moments[np.ix_(filled, filled)] = gram_matrix(rows[filled], DEFAULT_CHUNK_PIXELS * self.block_shape[1])
-
     def statistics(
         self, spec: FrameStackSpec, chunk_pixels: int = DEFAULT_CHUNK_PIXELS, workers: int = 1
     ) -> SequenceStatistics:
         """The statistics of the rows added so far (every row must be in); ``spec`` as for the raw frames.
 
-        ``workers`` threads share the moment product (when it is not already accumulated).
+        ``workers`` threads share the moment product; the moments do not depend on it (the chunks' products are
+        added in chunk order, :func:`processing.moment_products.gram_matrices`). The stream leaves it at 1: at
+        1280×1024 two threads took 3–8 % longer than one (docs/speed.md, 2026-11-28 third session).
         """
         rows = self.rows
         if len(self._filled) != rows.shape[0]:
             raise SpectralDataError(
                 f"frame stack: {len(self._filled) - 1} of {rows.shape[0] - 1} frames added; expected all of them"
             )
+        if self._fit is not None:
+            self._weights, self._fit = self._fit.result(), None
         # Integer sums are always finite; for float frames one sum flags NaN/inf (exact check only then).
         if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
             raise non_finite_frames_error(rows[:-1])
-        weights = None
-        if self._moments is not None:  # incremental: saturated blocks were left out as they came (_drop)
-            moments, noise, excluded_columns, scale = self._incremental_moments()
-            column_factor = None
-        else:
-            if self.weighting:  # batch mode: the weights enter each chunk's product
-                weights = self._sample_weights() if self._batch_weights is None else self._batch_weights
-            moments, noise, excluded_columns, scale, column_factor = self._batch_moments(weights, chunk_pixels, workers)
+        weights = self._weights if self.weighting else None  # they enter each chunk's product
+        moments, noise, excluded_columns, scale, column_factor = self._moments(weights, chunk_pixels, workers)
         if noise is not None:
             noise = None if scale is None else noise * scale
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
@@ -401,26 +305,16 @@ class BlockRows:
             black_level=spec.black_level * self.factor * self.factor,
             noise_moments=noise,
             n_samples=rows.shape[1] - excluded_columns,
-            weighted=self.root_weights is not None or weights is not None,
+            weighted=weights is not None,
         )
         channel_moments = self._channel_moments(spec, column_factor, scale if noise is not None else None)
         return replace(statistics, channels=channel_moments)
 
-    def _incremental_moments(self) -> tuple[np.ndarray, np.ndarray | None, int, float | None]:
-        """Incremental mode: the moments and the probe's as accumulated, the columns left out, the probe's scale."""
-        assert self._moments is not None
-        channels = self.block_shape[1]
-        excluded_columns = 0 if self._excluded is None else int(np.count_nonzero(self._excluded))
-        excluded_probed = 0 if self._excluded_differences is None else int(np.count_nonzero(self._excluded_differences))
-        scale = self._probe_scale(excluded_columns // channels, excluded_probed // channels)
-        return self._moments, self._noise, excluded_columns, scale
-
-    def _batch_moments(
+    def _moments(
         self, weights: np.ndarray | None, chunk_pixels: int, workers: int
     ) -> tuple[np.ndarray, np.ndarray | None, int, float | None, np.ndarray | None]:
-        """Batch mode: the rows' and the probe's moments over the valid blocks (weighted by ``weights``, None:
-        unweighted), the columns left out, the probe's scale, and each column's factor (0 where left out; None:
-        none is)."""
+        """The rows' and the probe's moments over the valid blocks (weighted by ``weights``, None: unweighted), the
+        columns left out, the probe's scale, and each column's factor (0 where left out; None: none is)."""
         invalid = None
         for mask in self._invalid:
             invalid = mask if invalid is None else invalid | mask
@@ -442,24 +336,31 @@ class BlockRows:
     def _channel_moments(
         self, spec: FrameStackSpec, column_factor: np.ndarray | None, probe_scale: float | None
     ) -> ChannelMoments:
-        """:class:`ChannelMoments` of the rows, masked as :meth:`statistics` takes them (batch mode: by ``column_factor``;
-        incremental rows already are), the probe's scaled by ``probe_scale`` (None: none).
+        """:class:`ChannelMoments` of the rows, masked as :meth:`statistics` takes them (by ``column_factor``), the
+        probe's scaled by ``probe_scale`` (None: none).
 
         Unweighted: a sample's inverse-variance weight differs from channel to channel, and weighing the channels of
         one block unequally would turn its colour away from the LED's (what :mod:`processing.flicker` reads).
         """
-        if column_factor is None and self.root_weights is not None:  # incremental rows were weighed: undo it
-            column_factor = np.divide(
-                1.0, self.root_weights, out=np.zeros_like(self.root_weights), where=self.root_weights > 0
-            )
         transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
         ones = self.rows[-1] if column_factor is None else self.rows[-1] * column_factor
         blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
+        differences = self.differences if probe_scale is not None else None
+        noise_products = None
+        # On several threads, the probe's products beside the rows' on a second core (each taken as on one thread).
+        if differences is not None and self.workers > 1:
+            at_probe = None if column_factor is None else self._at_probe(column_factor)
+            noise_products = thread_pool(self.workers).submit(
+                _channel_products, transform, differences, self.difference_shape, 2, at_probe
+            )
         fa, ff, aa = _channel_products(transform, self.rows, self.block_shape, 1, column_factor)
-        if self.differences is None or probe_scale is None:
+        if differences is None or probe_scale is None:
             return ChannelMoments(fa, ff, aa, blocks)
-        at_probe = None if column_factor is None else self._at_probe(column_factor)
-        noise = _channel_products(transform, self.differences, self.difference_shape, 2, at_probe)
+        if noise_products is None or noise_products.cancel():  # one thread, or the pool had not started it
+            at_probe = None if column_factor is None else self._at_probe(column_factor)
+            noise = _channel_products(transform, differences, self.difference_shape, 2, at_probe)
+        else:
+            noise = noise_products.result()
         return ChannelMoments(fa, ff, aa, blocks, *(part * probe_scale for part in noise))
 
 

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from msflash.processing.moment_products import thread_pool
+
 KERNELS_VARIABLE = "MSFLASH_KERNELS"
 """Environment variable: ``numpy`` turns the compiled kernels off, ``numba`` uses them on any work;
 unset (or ``auto``), :func:`wanted` decides."""
@@ -124,6 +126,13 @@ def _rows_view(frame: np.ndarray) -> np.ndarray | None:
     return frame.reshape(frame.shape[0], -1)
 
 
+SPLIT_FRAME_BYTES = 1 << 22
+"""Frames of at least this many bytes are shared by block rows among :func:`block_pass`'s ``workers``. Measured
+interleaved in one process on the shared 2-core machine (docs/speed.md, issue 30's second session): a 1280×1024
+RGB16 frame (7.9 MB, about 1 ms a pass) gains, a 12-bit mosaic of that size (2.6 MB, 0.2–0.3 ms) lost about a
+tenth of its estimate to the second thread's hand-over."""
+
+
 def block_pass(
     frame: np.ndarray,
     factor: int,
@@ -132,6 +141,7 @@ def block_pass(
     probe_stride: int,
     sums: np.ndarray,
     differences: np.ndarray | None,
+    workers: int = 1,
 ) -> tuple[bool, np.ndarray | None]:
     """Block sums, half differences and saturated blocks of one raw frame, in one compiled pass.
 
@@ -146,6 +156,10 @@ def block_pass(
     differences
         Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64: each probed block's checkerboard half difference
         (:func:`processing.block_sums.block_sums_and_differences`); or None.
+    workers
+        Threads sharing the frame by block rows (:func:`processing.moment_products.thread_pool`; the calling
+        thread takes the first share) when it has at least :data:`SPLIT_FRAME_BYTES`. Each block is summed by
+        one thread alone, in the same order, so the outputs do not depend on it.
 
     Returns
     -------
@@ -159,19 +173,50 @@ def block_pass(
     if rows is None:
         return False, None
     channels = frame.shape[2] if frame.ndim == 3 else 1
-    saturated = np.zeros((sums.shape[0], sums.shape[2]), dtype=bool)
+    height = sums.shape[0]
+    saturated = np.zeros((height, sums.shape[2]), dtype=bool)
     probe = differences if differences is not None else np.empty((0, sums.shape[2], sums.shape[1]))
-    hit = kernels.block_pass(
-        rows,
-        (0,) * cfa_period,
-        (0,) * (cfa_period * channels),
-        (0,) * factor,
-        float(white),
-        int(probe_stride),
-        sums,
-        probe,
-        saturated,
-    )
+    shape = ((0,) * cfa_period, (0,) * (cfa_period * channels), (0,) * factor)
+
+    shares = max(1, min(workers, height)) if frame.nbytes >= SPLIT_FRAME_BYTES else 1
+    if shares == 1:
+        hit = kernels.block_pass(rows, *shape, float(white), int(probe_stride), sums, probe, saturated, 0, height)
+        return True, saturated if hit else None
+    bounds = [height * part // shares for part in range(shares + 1)]
+    # Shares are claimed in turn by the calling thread and the pool's helpers; the frame is reached through
+    # ``shared_rows`` only while shares are left, so a helper the pool starts late (busy, or a call from inside the pool:
+    # then the caller takes every share) neither holds the frame nor is waited for.
+    next_share = [0]
+    shared_rows: list[np.ndarray | None] = [rows]
+    lock = threading.Lock()
+
+    def take_shares() -> bool:
+        hit = False
+        while True:
+            with lock:
+                part, frame_rows = next_share[0], shared_rows[0]
+                if part >= shares or frame_rows is None:
+                    return hit
+                next_share[0] = part + 1
+            hit |= bool(
+                kernels.block_pass(
+                    frame_rows,
+                    *shape,
+                    float(white),
+                    int(probe_stride),
+                    sums,
+                    probe,
+                    saturated,
+                    *bounds[part : part + 2],
+                )
+            )
+
+    helpers = [thread_pool(workers).submit(take_shares) for _ in range(shares - 1)]
+    hits = [take_shares()]
+    with lock:
+        shared_rows[0] = None  # every share is taken: what starts now finds none
+    hits += [helper.result() for helper in helpers if not helper.cancel()]
+    hit = any(hits)
     return True, saturated if hit else None
 
 

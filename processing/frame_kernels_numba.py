@@ -11,11 +11,12 @@ from numba import njit
 
 
 @njit(nogil=True, cache=True)
-def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, differences, saturated):
+def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, differences, saturated, first, stop):
     """Block sums (H/f, C', W/f), probed checkerboard half differences (H'/f, W/f, C') and saturated (H/f, W/f) blocks
-    of raw rows (H, W·C); ``period_t``, ``plane_channels_t`` and ``factor_t`` carry the CFA period,
-    the channels per frame row group (period · C) and the block side as their lengths (compile-time
-    constants). Returns whether any block saturates.
+    of raw rows (H, W·C), for the block rows ``first ≤ r < stop`` (each block row is written by its own
+    call alone: threads may share a frame by block rows); ``period_t``, ``plane_channels_t`` and
+    ``factor_t`` carry the CFA period, the channels per frame row group (period · C) and the block side
+    as their lengths (compile-time constants). Returns whether any of those blocks saturates.
 
     Each column of a block row's ``factor`` frame rows is summed in one sweep (the rows' values in
     registers, one store per column), with a running maximum for the whole block row; only a block
@@ -25,14 +26,14 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
     period = len(period_t)
     group = len(plane_channels_t)  # values per pixel column group: period · C
     factor = len(factor_t)
-    height, _, width = sums.shape
+    width = sums.shape[2]
     span = factor * group  # values of one block's row in a frame row
     n_columns = width * span
     row_sum = np.zeros(n_columns, np.int32)
     row_alternation = np.zeros(n_columns, np.int32)
     any_saturated = False
     probing = differences.shape[0] > 0
-    for block_row in range(height):
+    for block_row in range(first, stop):
         probed = probing and block_row % stride == 0
         probe_row = block_row // stride
         for p in range(period):

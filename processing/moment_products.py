@@ -23,7 +23,7 @@ DEFAULT_WORKERS = 2 if (os.cpu_count() or 1) >= 2 else 1
 
 
 PRODUCT_COLUMNS = 4096
-"""Columns per slice of the moments' products (:func:`row_products`, :func:`gram_matrices`): one thread each
+"""Columns per slice of the weighted moments' products (:func:`gram_matrices`) at most: one thread each
 (OpenBLAS threads a matrix–vector product of 9 × 7 000 already, and its threads' wake-ups on a busy machine
 cost many times the product: docs/measurements.md)."""
 
@@ -53,53 +53,12 @@ def thread_pool(workers: int) -> ThreadPoolExecutor:
     return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="msflash-image")
 
 
-def row_products(rows: np.ndarray, row: int, among: Sequence[int] | None = None) -> np.ndarray:
-    """``rows @ rows[row]`` (only the rows ``among``, the others' products 0), summed over slices of
-    :data:`PRODUCT_COLUMNS` columns.
-
-    OpenBLAS splits one large matrix–vector product across its threads; on a busy 2-core machine
-    (the capture's stream and writer threads) their wake-up costs many times the product itself
-    (docs/architecture.md §10). Slices stay below its threading threshold. ``among`` is read as runs of
-    consecutive rows, one product each: a capture's rows not yet filled are not read.
-
-    Examples
-    --------
-    >>> rows = np.arange(12.0).reshape(4, 3)
-    >>> row_products(rows, 1).tolist(), row_products(rows, 1, [0, 1, 3]).tolist()
-    ([14.0, 50.0, 86.0, 122.0], [14.0, 50.0, 0.0, 122.0])
-    """
-    products = np.zeros(rows.shape[0])
-    runs = _runs(range(rows.shape[0]) if among is None else sorted(set(among)))
-    vector = rows[row]
-    for start in range(0, rows.shape[1], PRODUCT_COLUMNS):
-        columns = slice(start, start + PRODUCT_COLUMNS)
-        for first, stop in runs:
-            products[first:stop] += rows[first:stop, columns] @ vector[columns]
-    return products
-
-
-def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
-    """Sorted ``indices`` as ``(first, stop)`` runs of consecutive integers."""
-    runs: list[tuple[int, int]] = []
-    for index in indices:
-        if runs and runs[-1][1] == index:
-            runs[-1] = (runs[-1][0], index + 1)
-        else:
-            runs.append((index, index + 1))
-    return runs
-
-
-def gram_matrix(rows: np.ndarray, chunk: int, workers: int = 1, weights: np.ndarray | None = None) -> np.ndarray:
-    """``rows @ rows.T`` (with ``weights``, ``rows @ diag(weights) @ rows.T``) in float64 (:func:`gram_matrices`)."""
-    return gram_matrices([(rows, weights)], chunk, workers)[0]
-
-
 def gram_matrices(
     parts: Sequence[tuple[np.ndarray, np.ndarray | None]], chunk: int, workers: int = 1
 ) -> list[np.ndarray]:
-    """:func:`gram_matrix` of several ``(rows, weights)`` at once, accumulated over column chunks; ``workers``
-    threads share the chunks of all of them (one map: a part with a single chunk does not run alone after
-    the others). Each chunk is weighted while it is in cache.
+    """``rows @ rows.T`` (with ``weights``, ``rows @ diag(weights) @ rows.T``) in float64 of several ``(rows, weights)``
+    at once, accumulated over column chunks; ``workers`` threads share the chunks of all of them (one map: a part
+    with a single chunk does not run alone after the others). Each chunk is weighted while it is in cache.
 
     The chunks' products are added in chunk order whatever the number of workers, so the result
     does not depend on it.
@@ -112,14 +71,14 @@ def gram_matrices(
         block = rows[:, start : start + chunk]
         if weights is None:
             return block @ block.T
-        # Weighted in slices of PRODUCT_COLUMNS, so that each weighted copy is still in cache for its
-        # product: ``(x·√w)(x·√w)ᵀ``, one symmetric product (BLAS syrk: half the multiplications).
+        # Weighted in slices, so that each weighted copy is still in cache for its product and that product stays
+        # on this thread (SERIAL_PRODUCT; a slice of a 33-frame stack's rows is then 70 kB, not 1 MB):
+        # ``(x·√w)(x·√w)ᵀ``, one symmetric product (BLAS syrk: half the multiplications).
         result = np.zeros((rows.shape[0], rows.shape[0]))
         column_weights = weights[start : start + chunk]
-        for offset in range(0, block.shape[1], PRODUCT_COLUMNS):
-            part = block[:, offset : offset + PRODUCT_COLUMNS] * np.sqrt(
-                column_weights[offset : offset + PRODUCT_COLUMNS]
-            )
+        step = min(PRODUCT_COLUMNS, max(256, serial_columns(rows.shape[0], rows.shape[0])))
+        for offset in range(0, block.shape[1], step):
+            part = block[:, offset : offset + step] * np.sqrt(column_weights[offset : offset + step])
             result += part @ part.T
         return result
 

@@ -232,12 +232,30 @@ def _synthesize_compiled(
 
 
 def _run_tasks(task: Callable[[int], None], starts: range, workers: int) -> None:
-    """``task(start)`` for every start, on ``workers`` threads when there are several tasks."""
-    if workers > 1 and len(starts) > 1:
-        list(thread_pool(workers).map(task, starts))
-    else:
+    """``task(start)`` for every start, on ``workers`` threads when there are several tasks: the calling thread and
+    ``workers − 1`` of the pool take the next task in turn (the caller works rather than waits for the pool: one
+    runnable thread fewer on two cores; a helper the pool has not started by the end is cancelled, so a call from
+    inside the pool cannot wait on itself)."""
+    if workers <= 1 or len(starts) <= 1:
         for start in starts:
             task(start)
+        return
+    pending = iter(starts)
+    lock = threading.Lock()
+
+    def work() -> None:
+        while True:
+            with lock:
+                start = next(pending, None)
+            if start is None:
+                return
+            task(start)
+
+    helpers = [thread_pool(workers).submit(work) for _ in range(min(workers, len(starts)) - 1)]
+    work()
+    for helper in helpers:
+        if not helper.cancel():
+            helper.result()
 
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)

@@ -2,9 +2,9 @@
 
 Whatever feeds the frames — a capture's runner (:meth:`EstimateStream.frame_ready`, a frame handler of
 :mod:`acquisition.session.engine`), a sequence read from disk (:func:`stream_sequence`, one frame decoded
-at a time), a replay — they reach the estimate the same way: each frame's block sums, saturated blocks
-and products with the frames before it go into :class:`processing.block_rows.BlockRows` (incremental)
-as it arrives, and the frame is then let go. The statistics those rows give *are* the reported
+at a time), a replay — they reach the estimate the same way: each frame's block sums and saturated blocks
+go into :class:`processing.block_rows.BlockRows` as it arrives, and the frame is then let go; the
+moments are one product of those rows once every frame is in. The statistics they give *are* the reported
 estimate: a live run reports the statistics it decided its flash from, and ``msflash estimate SEQ``
 on the sequence it wrote feeds the same frames in the same order to the same accumulator, so both give
 the same numbers to the last digit (``tests/acquisition/session/test_estimate_stream.py``).
@@ -42,6 +42,7 @@ from msflash.processing.block_sums import plane_shape
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flicker import corrected_tiles
 from msflash.processing.local import LocalEstimate, TileBlocks, estimate_local
+from msflash.processing.moment_products import DEFAULT_WORKERS
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 
 USED_ROLES = ("ambient", "led")
@@ -217,9 +218,9 @@ class EstimateStream:
                     plane_shape(plane.shape, period),
                     self.factor,
                     camera.white_level,
-                    incremental=True,
                     black_level=camera.black_level,
                     weighting=SAMPLE_WEIGHTING,
+                    workers=1 if self.live else DEFAULT_WORKERS,  # from disk: each frame's compiled pass on both cores
                 )
             if self._rows is not None and self.live:
                 with frame_kernels.paused():

@@ -10,7 +10,9 @@ whether it is met (``targets``; ``targets_met`` over all of them):
   raw 12-bit RGGB frames of a colour machine-vision camera (each size's ``… RGGB`` entry) ≤ 1.5 (issue 30);
 - ``estimate_all_pixels_over_copy``: the same without binning — ≤ 4;
 - ``synthesis_over_copy``: the computational flash image (float32) — ≤ 1.5;
-- ``peak_memory_over_frames``: the peak numpy memory of each of them over the frames' bytes — ≤ 0.5.
+- ``peak_memory_over_frames``: the peak numpy memory of each of them over the frames' bytes — ≤ 0.5;
+- ``threads_gain``: the estimate's and synthesis' time on 2 threads ÷ on 1, interleaved (no target; below 1 when the
+  second thread earns its hand-over).
 
 On the first size alone (``height × width``):
 
@@ -175,10 +177,11 @@ def frame_copy(frames: list[np.ndarray]) -> Callable[[], None]:
     return copy
 
 
-def streamed_estimate(world: dict[str, Any], bin_factor: int) -> object:
+def streamed_estimate(world: dict[str, Any], bin_factor: int, workers: int = 1) -> object:
     """The default estimate of ``world``'s frames as ``msflash estimate`` streams them
-    (:class:`acquisition.session.estimate_stream.EstimateStream`): the frames one at a time into incremental block
-    rows (the ambient frame last), the weighted statistics and the default solve. One thread: frames come in order."""
+    (:class:`acquisition.session.estimate_stream.EstimateStream`): the frames one at a time into block rows (the
+    ambient frame first), the weighted statistics (one moment product at the end) and the default solve. Frames
+    come in order; ``workers`` threads share each frame's block pass by block rows and the product."""
     frames, spec, leds = world["frames"], world["spec"], world["leds"]
     period = 2 if world.get("cfa") is not None else 1
     n = len(frames) - 1
@@ -188,9 +191,9 @@ def streamed_estimate(world: dict[str, Any], bin_factor: int) -> object:
         plane_shape(frames[0].shape, period),
         bin_factor,
         spec.white_level,
-        incremental=True,
         black_level=spec.black_level,
         weighting=SAMPLE_WEIGHTING,
+        workers=workers,
     )
     for row, frame in zip([n, *range(n)], frames, strict=True):
         rows.add_frame(row, frame, period)
@@ -209,7 +212,7 @@ def target_figures(world: dict[str, Any], pairs: int, threads: tuple[int, ...] =
 
     def estimate(bin_factor: int, workers: int) -> Callable[[], object]:
         if bin_factor > 1:
-            return lambda: streamed_estimate(world, bin_factor)
+            return lambda: streamed_estimate(world, bin_factor, workers)
         # Every pixel (--bin-factor 1): the exact all-pixel moments of the frames together, as the stream keeps them.
         return lambda: estimate_ambient(
             accumulate_statistics(
@@ -241,6 +244,15 @@ def target_figures(world: dict[str, Any], pairs: int, threads: tuple[int, ...] =
                 interleaved_ratio(run(workers), copy, pairs), targets[name]
             )
             for workers in threads
+        }
+    if 1 in threads and len(threads) > 1:
+        # What the second thread earns, measured directly: the many-thread run ÷ the one-thread run, in turn (the
+        # two ratios to the copy above are taken apart in time, and on a busy machine they drift apart).
+        most = max(threads)
+        figures["threads_gain"] = {
+            name.removesuffix("_over_copy"): interleaved_ratio(run(most), run(1), pairs)
+            for name, run in runs.items()
+            if name != "estimate_all_pixels_over_copy"
         }
     frame_bytes = sum(frame.nbytes for frame in frames)
     memory = {

@@ -5,7 +5,7 @@ RGB sequence of one ambient and N LED frames to a temporary folder, then alterna
 
 - *stack*: the route before — every frame decoded into a stack (``analysis.load_frame_stack``), the batch
   statistics (``analysis.sequence_statistics``, two threads over the frames) and the estimate;
-- *stream*: the route now — ``analysis.estimate_sequence``: one frame decoded at a time into the incremental
+- *stream*: the route now — ``analysis.estimate_sequence``: one frame decoded at a time into the
   block rows (``EstimateStream``).
 
 It prints, as JSON, each route's best and median wall time, their ratio (stream ÷ stack) per round, and each

@@ -111,7 +111,8 @@ def test_the_weights_of_a_bayer_chart_follow_the_sensors_noise() -> None:
     )
     rows = BlockRows(len(leds), cfa_planes(frame, 2).shape, 4, SENSOR.white_level, black_level=256.0, weighting=True)
     rows.add_frame(len(leds), frame, 2)
-    weights = rows._sample_weights()
+    weights = rows._weights
+    assert weights is not None
     levels = rows.rows[len(leds)] - 16 * SENSOR.black_level
     true = _true_pixel_noise(SENSOR)
     expected = 1.0 / (true.gain * np.maximum(levels, 0.0) + 16 * true.read)

@@ -54,8 +54,8 @@ def test_weights_follow_the_photon_transfer_line_of_the_ambient_frame() -> None:
 
 
 @pytest.mark.parametrize("order", [[3, 0, 1, 2], [0, 1, 3, 2]])
-def test_weighted_statistics_agree_across_batch_incremental_and_tiled_passes(order: list[int]) -> None:
-    """``estimate`` (batch), ``run`` (incremental: the ambient frame first, or after some LED frames, with
+def test_weighted_statistics_agree_across_batch_streamed_and_tiled_passes(order: list[int]) -> None:
+    """The binned pass, frames streamed one by one (the ambient frame first, or after some LED frames, with
     blocks excluded part-way) and the local model's tiles weigh the samples alike."""
     ambient, leds, spec = _photon_stack()
     batch = accumulate_statistics(ambient, leds, spec, bin_factor=4, weighting=True)
@@ -66,21 +66,20 @@ def test_weighted_statistics_agree_across_batch_incremental_and_tiled_passes(ord
     blocks = np.zeros((18, 21), dtype=bool)
     blocks[2:4, 5:9] = True
 
-    def filled(incremental: bool) -> BlockRows:
+    def filled(part_way: bool) -> BlockRows:
         rows = BlockRows(
             len(leds),
             ambient.shape,
             4,
             spec.white_level,
-            incremental=incremental,
             black_level=spec.black_level,
             weighting=True,
         )
         for position, row in enumerate(order):
             rows.add(row, cfa_planes(ambient if row == 3 else leds[row], 1))
-            if position == 1 and incremental:
+            if position == 1 and part_way:
                 rows.exclude(blocks)
-        if not incremental:
+        if not part_way:
             rows.exclude(blocks)
         return rows
 
@@ -184,9 +183,7 @@ def test_weighted_statistics_equal_a_direct_computation(
     assert stride == (1 if probe_blocks > 1000 else 3)
     expected = _direct_weighted_statistics(ambient, leds, spec, 4, stride)
     batch = accumulate_statistics(ambient, leds, spec, bin_factor=4, weighting=True, workers=workers, chunk_pixels=50)
-    rows = BlockRows(
-        len(leds), ambient.shape, 4, spec.white_level, incremental=True, black_level=spec.black_level, weighting=True
-    )
+    rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level, black_level=spec.black_level, weighting=True)
     for row in (1, 3, 0, 2):
         rows.add(row, cfa_planes(ambient if row == 3 else leds[row], 1))
     for ours in (batch, rows.statistics(spec)):

@@ -181,9 +181,9 @@ def test_non_finite_frame_is_named(bin_factor: int, frame: int, name: str) -> No
         tile_statistics(frames[0], frames[1:], spec, 2, bin_factor=bin_factor)
 
 
-@pytest.mark.parametrize("incremental", [False, True])
+@pytest.mark.parametrize("frame_by_frame", [False, True])
 def test_large_frames_probe_a_stride_of_block_rows_and_scale_it(
-    monkeypatch: pytest.MonkeyPatch, incremental: bool
+    monkeypatch: pytest.MonkeyPatch, frame_by_frame: bool
 ) -> None:
     """Above 4 × PROBE_BLOCKS blocks the noise probe reads every 4th block row, scaled by the valid blocks:
     its noise moments stay within a few per cent of the full probe's (sampling error ~1 %), saturated
@@ -206,9 +206,9 @@ def test_large_frames_probe_a_stride_of_block_rows_and_scale_it(
     spec = FrameStackSpec(0.0, 65535.0, 1.0, (1.0,) * k, np.eye(k))
 
     def statistics() -> SequenceStatistics:
-        if not incremental:
+        if not frame_by_frame:
             return accumulate_statistics(ambient, frames, spec, bin_factor=4)
-        rows = module.BlockRows(k, shape, 4, 65535.0, incremental=True)
+        rows = module.BlockRows(k, shape, 4, 65535.0)
         for row, frame in [(k, ambient), *enumerate(frames)]:
             rows.add(row, frame)
         return rows.statistics(spec)

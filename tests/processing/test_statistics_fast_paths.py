@@ -104,25 +104,22 @@ def test_synthesis_saturation_in_one_chunk_and_float_frames(chunk: int) -> None:
     "saturate", [0.0, 0.0003, 0.002, 0.02], ids=["none", "few-blocks", "many-blocks", "most-blocks"]
 )
 def test_block_rows_frame_by_frame_equals_the_binned_pass(saturate: float) -> None:
-    """BlockRows filled one frame at a time (a capture) gives the binned pass's statistics.
-
-    Saturated blocks leave the running moments as each frame brings them: a few are taken back
-    out, once a quarter of the columns is out the moments are taken anew.
-    """
+    """BlockRows filled one frame at a time, in any order (a capture) gives the binned pass's statistics, few or
+    most blocks saturated."""
     from msflash.processing.block_rows import BlockRows
     from msflash.processing.block_sums import cfa_planes
 
     rng = np.random.default_rng(11)
     ambient, leds, spec = random_stack(rng, (41, 53, 3), np.eye(4), white=4095.0, saturate=saturate)
     reference = accumulate_statistics(ambient, leds, spec, bin_factor=4, workers=1)
-    rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level, incremental=True)
+    rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level)
     for row in [2, 0, 4, 1, 3]:  # any arrival order; row 4 is the ambient frame
         rows.add(row, cfa_planes(ambient if row == 4 else leds[row], 1))
     stats = rows.statistics(spec)
     assert 0 < stats.n_samples <= stats.n_total
     assert (stats.n_samples < stats.n_total) == (saturate > 0)
     if saturate == 0.02:
-        assert stats.n_samples < 0.75 * stats.n_total  # the recomputing branch ran
+        assert stats.n_samples < 0.75 * stats.n_total  # most blocks out
     assert_matches(
         stats,
         {
@@ -144,7 +141,7 @@ def test_block_rows_refuses_a_missing_frame() -> None:
 
     rng = np.random.default_rng(12)
     ambient, leds, spec = random_stack(rng, (16, 16, 3), np.eye(2), white=4095.0, saturate=0.0)
-    rows = BlockRows(2, ambient.shape, 4, spec.white_level, incremental=True)
+    rows = BlockRows(2, ambient.shape, 4, spec.white_level)
     rows.add(2, cfa_planes(ambient, 1))
     rows.add(0, cfa_planes(leds[0], 1))
     with pytest.raises(SpectralDataError, match="2 of 3 frames"):
@@ -202,14 +199,14 @@ def test_saturated_blocks_equal_the_any_of_each_block(dtype: type) -> None:
 
 
 def test_block_rows_exclude_between_frames_equals_a_masked_pass() -> None:
-    """Blocks excluded by the caller part-way through an incremental fill leave every product."""
+    """Blocks excluded by the caller part-way through a frame-by-frame fill leave every product."""
     from msflash.processing.block_rows import BlockRows
     from msflash.processing.block_sums import cfa_planes
 
     rng = np.random.default_rng(5)
     ambient, leds, spec = random_stack(rng, (40, 48, 3), np.eye(3), white=4095.0, saturate=0.0005)
     blocks = rng.random((10, 12)) < 0.1
-    rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level, incremental=True)
+    rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level)
     batch = BlockRows(len(leds), ambient.shape, 4, spec.white_level)
     for row in [3, 0, 1, 2]:
         frame = cfa_planes(ambient if row == 3 else leds[row], 1)

@@ -46,9 +46,9 @@ def _noisy_stack(seed: int = 0) -> tuple[np.ndarray, list[np.ndarray], FrameStac
     return frames[0], frames[1:], spec
 
 
-def test_noise_is_measured_alike_by_the_batch_incremental_and_tiled_passes() -> None:
-    """``msflash estimate`` (batch), ``msflash run`` (incremental, with blocks excluded part-way) and the
-    local model's tiles give the same noise moments, so their global estimates agree."""
+def test_noise_is_measured_alike_by_the_batch_streamed_and_tiled_passes() -> None:
+    """The binned pass, frames streamed one by one (with blocks excluded part-way) and the local model's tiles
+    give the same noise moments, so their global estimates agree."""
     ambient, leds, spec = _noisy_stack()
     batch = accumulate_statistics(ambient, leds, spec, bin_factor=4)
     assert batch.noise is not None
@@ -64,14 +64,14 @@ def test_noise_is_measured_alike_by_the_batch_incremental_and_tiled_passes() -> 
     blocks = np.zeros((10, 12), dtype=bool)
     blocks[2:4, 5:9] = True
 
-    def filled(incremental: bool) -> BlockRows:
-        """Frames in capture order; the incremental fill has blocks excluded part-way, the batch one at the end."""
-        rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level, incremental=incremental)
+    def filled(part_way: bool) -> BlockRows:
+        """Frames in capture order, blocks excluded part-way or at the end."""
+        rows = BlockRows(len(leds), ambient.shape, 4, spec.white_level)
         for row in [3, 0, 1, 2]:
             rows.add(row, cfa_planes(ambient if row == 3 else leds[row], 1))
-            if row == 0 and incremental:
+            if row == 0 and part_way:
                 rows.exclude(blocks)
-        if not incremental:
+        if not part_way:
             rows.exclude(blocks)
         return rows
 

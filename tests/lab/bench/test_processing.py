@@ -23,6 +23,9 @@ def test_processing_bench_reports_every_target_on_both_thread_counts_with_its_ve
                 assert figure["target"] == target and figure["pairs"] == 3
                 assert 0 < figure["min"] <= figure["q1"] <= figure["median"] <= figure["q3"] <= figure["max"]
                 assert figure["met"] is None  # 3 pairs: too few to judge
+        gains = figures["threads_gain"]  # 2 threads ÷ 1, interleaved: no target
+        assert set(gains) == {"estimate", "synthesis"}
+        assert all(gain["pairs"] == 3 and "met" not in gain and gain["median"] > 0 for gain in gains.values())
         for memory in figures["peak_memory_over_frames"].values():
             assert memory["ratio"] > 0 and memory["target"] == "≤ 0.5" and memory["met"] == (memory["ratio"] <= 0.5)
     assert report["targets_met"] is not None  # the memory figures are judged whatever the pairs
