@@ -14,7 +14,9 @@ import json
 import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -186,10 +188,13 @@ def _one(arguments: tuple[HarnessCase, Path]) -> tuple[list[dict], dict]:
         return [failed], {"case": arguments[0].name, "error": str(error)}
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the study; 0 on success."""
-    parser = argparse.ArgumentParser(prog="python -m tests.harness.family_study")
-    parser.add_argument("--suite", choices=("library", "physics"), default="physics")
+def study_work(
+    prog: str, suite: str, argv: list[str] | None
+) -> tuple[argparse.Namespace, list[tuple[HarnessCase, Path]]]:
+    """A study's command line (``--suite``, ``--split``, ``--quick``, ``--jobs``, ``--cache``, ``--out``) and its
+    cases, each with the cache folder (made, and named to the workers through the environment)."""
+    parser = argparse.ArgumentParser(prog=prog)
+    parser.add_argument("--suite", choices=("library", "physics"), default=suite)
     parser.add_argument("--split", choices=("tuning", "held_out", "both"), default="tuning")
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--jobs", type=int, default=1)
@@ -199,14 +204,23 @@ def main(argv: list[str] | None = None) -> int:
     cases = (select_physics_cases if args.suite == "physics" else select_cases)(args.split, args.quick)
     os.environ[CACHE_ENV] = str(args.cache.resolve())
     args.cache.mkdir(parents=True, exist_ok=True)
-    work = [(case, args.cache.resolve()) for case in cases]
-    if args.jobs > 1:
+    return args, [(case, args.cache.resolve()) for case in cases]
+
+
+def study_map(one: Callable[[Any], Any], work: list[Any], jobs: int) -> list[Any]:
+    """``one`` over the work, in ``jobs`` worker processes when more than one."""
+    if jobs > 1:
         from concurrent.futures import ProcessPoolExecutor
 
-        with ProcessPoolExecutor(args.jobs) as pool:
-            results = list(pool.map(_one, work, chunksize=1))
-    else:
-        results = [_one(w) for w in work]
+        with ProcessPoolExecutor(jobs) as pool:
+            return list(pool.map(one, work, chunksize=1))
+    return [one(w) for w in work]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the study; 0 on success."""
+    args, work = study_work("python -m tests.harness.family_study", "physics", argv)
+    results = study_map(_one, work, args.jobs)
     rows = [row for result in results for row in result[0]]
     fields = list(dict.fromkeys(key for row in rows for key in row))
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -217,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
     case_rows = [result[1] for result in results]
     with args.out.with_suffix(".cases.json").open("w") as handle:
         json.dump(case_rows, handle, default=float)
-    print(f"{len(cases)} cases, {len(rows)} rows → {args.out}", file=sys.stderr)
+    print(f"{len(work)} cases, {len(rows)} rows → {args.out}", file=sys.stderr)
     return 0
 
 

@@ -9,9 +9,7 @@ are then evaluated offline on the records (:mod:`tests.harness.warning_rules`): 
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -19,10 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from tests.harness import metrics
-from tests.harness.cases import select_cases
-from tests.harness.physics_cases import select_physics_cases
+from tests.harness.family_study import study_map, study_work
 from tests.harness.render import HarnessCase
-from tests.harness.run import CACHE_ENV, cached_render
+from tests.harness.run import cached_render
 
 HALVES = ((0, 2, 4), (1, 3))
 """Two disjoint sets of the five folds of block rows: a light the pixels pin reads the same from either."""
@@ -270,25 +267,8 @@ def _one(arguments: tuple[HarnessCase, Path]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the study; 0 on success."""
-    parser = argparse.ArgumentParser(prog="python -m tests.harness.warning_study")
-    parser.add_argument("--suite", choices=("library", "physics"), default="library")
-    parser.add_argument("--split", choices=("tuning", "held_out", "both"), default="tuning")
-    parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("--cache", type=Path, default=Path(".harness-cache"))
-    parser.add_argument("--out", type=Path, required=True)
-    args = parser.parse_args(argv)
-    cases = (select_physics_cases if args.suite == "physics" else select_cases)(args.split, args.quick)
-    os.environ[CACHE_ENV] = str(args.cache.resolve())
-    args.cache.mkdir(parents=True, exist_ok=True)
-    work = [(case, args.cache.resolve()) for case in cases]
-    if args.jobs > 1:
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(args.jobs) as pool:
-            records = list(pool.map(_one, work, chunksize=1))
-    else:
-        records = [_one(w) for w in work]
+    args, work = study_work("python -m tests.harness.warning_study", "library", argv)
+    records = study_map(_one, work, args.jobs)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(records))
     failed = [r for r in records if "error" in r]
