@@ -76,10 +76,11 @@ def _blocks(plane: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray, np.
     return members.sum(axis=(1, 3)), (members * sign).sum(axis=(1, 3)), members.max(axis=(1, 3))
 
 
-def reference_statistics(
-    ambient: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, factor: int, period: int, stride: int
-) -> SequenceStatistics:
-    """Eq. 4–6's statistics of the block sums, with the half differences' noise, written out directly."""
+def _reference_blocks(
+    ambient: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, factor: int, period: int
+) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """Each frame's block sums and half differences (LED frames first, the ambient last) and the blocks no frame
+    saturates."""
     sums, halves, valid = [], [], None
     for frame in [*led_frames, ambient]:
         block_sums, half, peak = _blocks(_planes(frame, period), factor)
@@ -88,6 +89,14 @@ def reference_statistics(
         ok = (peak < spec.white_level).all(axis=2)
         valid = ok if valid is None else valid & ok
     assert valid is not None
+    return sums, halves, valid
+
+
+def reference_statistics(
+    ambient: np.ndarray, led_frames: list[np.ndarray], spec: FrameStackSpec, factor: int, period: int, stride: int
+) -> SequenceStatistics:
+    """Eq. 4–6's statistics of the block sums, with the half differences' noise, written out directly."""
+    sums, halves, valid = _reference_blocks(ambient, led_frames, spec, factor, period)
     black = spec.black_level * factor * factor
     scales = np.asarray(spec.led_scales)
     a = spec.ambient_scale * (sums[-1] - black)
@@ -313,14 +322,7 @@ def reference_channel_moments(
 ) -> ChannelMoments:
     """:class:`ChannelMoments` written out: per valid block b, ``f_i,b`` and ``a_b`` in R^C and their outer products
     summed, the probed blocks' half differences alike (scaled by valid ÷ probed valid blocks)."""
-    sums, halves, valid = [], [], None
-    for frame in [*led_frames, ambient]:
-        block_sums, half, peak = _blocks(_planes(frame, period), factor)
-        sums.append(block_sums)
-        halves.append(half)
-        ok = (peak < spec.white_level).all(axis=2)
-        valid = ok if valid is None else valid & ok
-    assert valid is not None
+    sums, halves, valid = _reference_blocks(ambient, led_frames, spec, factor, period)
     black, scales = spec.black_level * factor * factor, np.asarray(spec.led_scales)
 
     def images(values: list[np.ndarray], offset: float) -> tuple[np.ndarray, np.ndarray]:
