@@ -34,26 +34,31 @@ def _paper_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
     return metrics.rmse(estimate, truth) if np.any(estimate) and np.any(truth) else float("nan")
 
 
+def case_inputs(case: HarnessCase, cache: Path) -> tuple[Any, float, Any, Any, Any, Any]:
+    """A case's rendering (cached), its truth's LED bound, its sequence, LED spectra and camera (photons) and frames."""
+    from msflash.acquisition.sequence.reader import read_sequence
+    from msflash.acquisition.session.analysis import load_frame_stack
+    from msflash.acquisition.session.sequence_spectra import camera_responsivities_photons, led_spectra_photons
+
+    truth = cached_render(case, cache)
+    sequence = read_sequence(truth.directory)
+    bound = metrics.led_bound(truth.led_spd, truth.ambient)
+    leds, camera = led_spectra_photons(sequence), camera_responsivities_photons(sequence)
+    return truth, bound, sequence, leds, camera, load_frame_stack(sequence)
+
+
 def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
     """One row per candidate of ``case``, and one row for the case (band coverages, warning features)."""
-    from msflash.acquisition.sequence.reader import read_sequence
-    from msflash.acquisition.session.analysis import estimate_sequence, load_frame_stack, stream_stack
+    from msflash.acquisition.session.analysis import estimate_sequence, stream_stack
     from msflash.acquisition.session.prior_route import sequence_channel_statistics
     from msflash.acquisition.session.sequence_spectra import (
-        camera_responsivities_photons,
-        led_spectra_photons,
         spectrum_in_sequence_unit,
     )
     from msflash.processing.light_families import evidence_spread, family_model
     from msflash.processing.light_prior import prior_model
     from msflash.processing.spectral_data_term import scene_form
 
-    truth = cached_render(case, cache)
-    bound = metrics.led_bound(truth.led_spd, truth.ambient)
-    sequence = read_sequence(truth.directory)
-    leds = led_spectra_photons(sequence)
-    camera = camera_responsivities_photons(sequence)
-    stack = load_frame_stack(sequence)
+    truth, bound, sequence, leds, camera, stack = case_inputs(case, cache)
     clock = time.perf_counter()
     statistics = sequence_channel_statistics(sequence, stack)
     seconds = {"statistics": time.perf_counter() - clock}

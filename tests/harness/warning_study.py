@@ -17,9 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from tests.harness import metrics
-from tests.harness.family_study import study_map, study_work
+from tests.harness.family_study import case_inputs, study_map, study_work
 from tests.harness.render import HarnessCase
-from tests.harness.run import cached_render
 
 HALVES = ((0, 2, 4), (1, 3))
 """Two disjoint sets of the five folds of block rows: a light the pixels pin reads the same from either."""
@@ -91,12 +90,9 @@ def _list(values: np.ndarray) -> list[float]:
 
 def study_case(case: HarnessCase, cache: Path) -> dict:
     """The case's record (module notes); photons for the model's own spectra, ``unit`` converts to the sequence's."""
-    from msflash.acquisition.sequence.reader import read_sequence
-    from msflash.acquisition.session.analysis import estimate_sequence, load_frame_stack, stream_stack
+    from msflash.acquisition.session.analysis import estimate_sequence, stream_stack
     from msflash.acquisition.session.prior_route import sequence_channel_statistics
     from msflash.acquisition.session.sequence_spectra import (
-        camera_responsivities_photons,
-        led_spectra_photons,
         spectrum_in_sequence_unit,
     )
     from msflash.processing.light_families import (
@@ -109,12 +105,7 @@ def study_case(case: HarnessCase, cache: Path) -> dict:
     from msflash.processing.light_prior import plane_responsivities, prior_model
     from msflash.processing.spectral_data_term import scene_form
 
-    truth = cached_render(case, cache)
-    bound = metrics.led_bound(truth.led_spd, truth.ambient)
-    sequence = read_sequence(truth.directory)
-    leds = led_spectra_photons(sequence)
-    camera = camera_responsivities_photons(sequence)
-    stack = load_frame_stack(sequence)
+    truth, bound, sequence, leds, camera, stack = case_inputs(case, cache)
     statistics = sequence_channel_statistics(sequence, stack)
     led_estimate = estimate_sequence(sequence, "tikhonov", "auto", stream=stream_stack(sequence, stack))
     priors = prior_model(statistics.channels, leds, camera)
