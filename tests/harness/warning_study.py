@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -190,62 +192,35 @@ def study_case(case: HarnessCase, cache: Path) -> dict:
         chosen_replica = next(r for r, c in zip(replicas, estimate.candidates) if c is estimate.chosen)
         _, average = evidence_spread(chosen_replica, replicas, AVERAGE_TEMPERATURE)
         record["amplitude_jackknife"].append(_list(average))
-    record["jackknife"] = []
-    for left_out in range(statistics.n_folds):
-        part = _fold_subset(statistics, tuple(f for f in range(statistics.n_folds) if f != left_out))
+
+    def reading(part: Callable[[], Any]) -> dict:
+        """The prior's, the family model's and the LEDs' estimates from part of the statistics (an error recorded)."""
         try:
-            part_prior = priors.estimate(part)
-            part_estimate = model.estimate(part, part_prior.spectrum.values[:, 0])
-        except Exception as error:  # noqa: BLE001 — recorded, not a crash
-            record["jackknife"].append({"error": str(error)})
-            continue
-        record["jackknife"].append(
-            {
-                "prior": _list(part_prior.spectrum.values[:, 0]),
-                "family": _list(part_estimate.spectrum.values[:, 0]),
-                "chosen": part_estimate.chosen.fit.name,
-                "auto_model": part_estimate.auto_model,
-                "led": _list(part_estimate.led.fit.spectrum),
-            }
-        )
-    record["surface_halves"] = {}
-    for split, masks in _block_splits(stack, sequence.camera.cfa).items():
-        readings = []
-        for keep in masks:
-            try:
-                part = sequence_channel_statistics(sequence, _masked(stack, keep))
-                part_prior = priors.estimate(part)
-                part_estimate = model.estimate(part, part_prior.spectrum.values[:, 0])
-            except Exception as error:  # noqa: BLE001 — recorded, not a crash
-                readings.append({"error": str(error)})
-                continue
-            readings.append(
-                {
-                    "prior": _list(part_prior.spectrum.values[:, 0]),
-                    "family": _list(part_estimate.spectrum.values[:, 0]),
-                    "chosen": part_estimate.chosen.fit.name,
-                    "auto_model": part_estimate.auto_model,
-                    "led": _list(part_estimate.led.fit.spectrum),
-                }
-            )
-        record["surface_halves"][split] = readings
-    for folds in HALVES:
-        half = _fold_subset(statistics, folds)
-        try:
-            half_prior = priors.estimate(half)
-            half_estimate = model.estimate(half, half_prior.spectrum.values[:, 0])
-        except Exception as error:  # noqa: BLE001 — a half that cannot be fitted is recorded, not a crash
-            record["halves"].append({"error": str(error)})
-            continue
-        record["halves"].append(
-            {
-                "prior": _list(half_prior.spectrum.values[:, 0]),
-                "family": _list(half_estimate.spectrum.values[:, 0]),
-                "chosen": half_estimate.chosen.fit.name,
-                "auto_model": half_estimate.auto_model,
-                "led": _list(half_estimate.led.fit.spectrum),
-            }
-        )
+            statistics_part = part()
+            part_prior = priors.estimate(statistics_part)
+            part_estimate = model.estimate(statistics_part, part_prior.spectrum.values[:, 0])
+        except Exception as error:  # noqa: BLE001 — a part that cannot be fitted is recorded, not a crash
+            return {"error": str(error)}
+        return {
+            "prior": _list(part_prior.spectrum.values[:, 0]),
+            "family": _list(part_estimate.spectrum.values[:, 0]),
+            "chosen": part_estimate.chosen.fit.name,
+            "auto_model": part_estimate.auto_model,
+            "led": _list(part_estimate.led.fit.spectrum),
+        }
+
+    folds = range(statistics.n_folds)
+    record["jackknife"] = [
+        reading(lambda left_out=left_out: _fold_subset(statistics, tuple(f for f in folds if f != left_out)))
+        for left_out in folds
+    ]
+    record["surface_halves"] = {
+        split: [
+            reading(lambda keep=keep: sequence_channel_statistics(sequence, _masked(stack, keep))) for keep in masks
+        ]
+        for split, masks in _block_splits(stack, sequence.camera.cfa).items()
+    }
+    record["halves"] = [reading(lambda half=half: _fold_subset(statistics, half)) for half in HALVES]
     return record
 
 
