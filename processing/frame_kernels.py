@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from msflash.processing.moment_products import thread_pool
+from msflash.processing.moment_products import shared_tasks
 
 KERNELS_VARIABLE = "MSFLASH_KERNELS"
 """Environment variable: ``numpy`` turns the compiled kernels off, ``numba`` uses them on any work;
@@ -157,7 +157,7 @@ def block_pass(
         Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64: each probed block's checkerboard half difference
         (:func:`processing.block_sums.block_sums_and_differences`); or None.
     workers
-        Threads sharing the frame by block rows (:func:`processing.moment_products.thread_pool`; the calling
+        Threads sharing the frame by block rows (:func:`processing.moment_products.shared_tasks`; the calling
         thread takes the first share) when it has at least :data:`SPLIT_FRAME_BYTES`. Each block is summed by
         one thread alone, in the same order, so the outputs do not depend on it.
 
@@ -179,45 +179,15 @@ def block_pass(
     shape = ((0,) * cfa_period, (0,) * (cfa_period * channels), (0,) * factor)
 
     shares = max(1, min(workers, height)) if frame.nbytes >= SPLIT_FRAME_BYTES else 1
-    if shares == 1:
-        hit = kernels.block_pass(rows, *shape, float(white), int(probe_stride), sums, probe, saturated, 0, height)
-        return True, saturated if hit else None
     bounds = [height * part // shares for part in range(shares + 1)]
-    # Shares are claimed in turn by the calling thread and the pool's helpers; the frame is reached through
-    # ``shared_rows`` only while shares are left, so a helper the pool starts late (busy, or a call from inside the pool:
-    # then the caller takes every share) neither holds the frame nor is waited for.
-    next_share = [0]
-    shared_rows: list[np.ndarray | None] = [rows]
-    lock = threading.Lock()
-
-    def take_shares() -> bool:
-        hit = False
-        while True:
-            with lock:
-                part, frame_rows = next_share[0], shared_rows[0]
-                if part >= shares or frame_rows is None:
-                    return hit
-                next_share[0] = part + 1
-            hit |= bool(
-                kernels.block_pass(
-                    frame_rows,
-                    *shape,
-                    float(white),
-                    int(probe_stride),
-                    sums,
-                    probe,
-                    saturated,
-                    *bounds[part : part + 2],
-                )
-            )
-
-    helpers = [thread_pool(workers).submit(take_shares) for _ in range(shares - 1)]
-    hits = [take_shares()]
-    with lock:
-        shared_rows[0] = None  # every share is taken: what starts now finds none
-    hits += [helper.result() for helper in helpers if not helper.cancel()]
-    hit = any(hits)
-    return True, saturated if hit else None
+    hits = shared_tasks(
+        lambda part: kernels.block_pass(
+            rows, *shape, float(white), int(probe_stride), sums, probe, saturated, *bounds[part : part + 2]
+        ),
+        shares,
+        workers,
+    )
+    return True, saturated if any(hits) else None
 
 
 def synthesis_inputs(frames: list[np.ndarray]) -> tuple[np.ndarray, ...] | None:

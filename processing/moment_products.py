@@ -8,9 +8,11 @@ products stay below OpenBLAS's threading threshold (its threads' wake-ups cost m
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+import threading
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from functools import lru_cache
+from typing import TypeVar
 
 import numpy as np
 
@@ -51,6 +53,36 @@ def serial_columns(rows: int, outputs: int) -> int:
 def thread_pool(workers: int) -> ThreadPoolExecutor:
     """A process-wide pool of ``workers`` threads for the image passes (created on first use, then reused)."""
     return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="msflash-image")
+
+
+Result = TypeVar("Result")
+
+
+def shared_tasks(task: Callable[[int], Result], count: int, workers: int) -> list[Result]:
+    """``task(i)`` for every ``i`` in ``range(count)``, the results in that order: the calling thread and up to
+    ``workers − 1`` of the pool take the next task in turn. The caller works rather than waits for the pool (one
+    runnable thread fewer on two cores), and a helper the pool has not started by the end is cancelled, so a call
+    from inside the pool cannot wait on itself."""
+    if workers <= 1 or count <= 1:
+        return [task(index) for index in range(count)]
+    results: dict[int, Result] = {}
+    following = iter(range(count))
+    lock = threading.Lock()
+
+    def take() -> None:
+        while True:
+            with lock:
+                index = next(following, None)
+            if index is None:
+                return
+            results[index] = task(index)
+
+    helpers = [thread_pool(workers).submit(take) for _ in range(min(workers, count) - 1)]
+    take()
+    for helper in helpers:
+        if not helper.cancel():
+            helper.result()
+    return [results[index] for index in range(count)]
 
 
 def gram_matrices(

@@ -15,7 +15,7 @@ import numpy as np
 
 from msflash.processing import frame_kernels
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.moment_products import DEFAULT_CHUNK_PIXELS, DEFAULT_WORKERS, thread_pool
+from msflash.processing.moment_products import DEFAULT_CHUNK_PIXELS, DEFAULT_WORKERS, shared_tasks
 from msflash.processing.statistics import FrameStackSpec, non_finite_frames_error
 
 
@@ -232,30 +232,8 @@ def _synthesize_compiled(
 
 
 def _run_tasks(task: Callable[[int], None], starts: range, workers: int) -> None:
-    """``task(start)`` for every start, on ``workers`` threads when there are several tasks: the calling thread and
-    ``workers − 1`` of the pool take the next task in turn (the caller works rather than waits for the pool: one
-    runnable thread fewer on two cores; a helper the pool has not started by the end is cancelled, so a call from
-    inside the pool cannot wait on itself)."""
-    if workers <= 1 or len(starts) <= 1:
-        for start in starts:
-            task(start)
-        return
-    pending = iter(starts)
-    lock = threading.Lock()
-
-    def work() -> None:
-        while True:
-            with lock:
-                start = next(pending, None)
-            if start is None:
-                return
-            task(start)
-
-    helpers = [thread_pool(workers).submit(work) for _ in range(min(workers, len(starts)) - 1)]
-    work()
-    for helper in helpers:
-        if not helper.cancel():
-            helper.result()
+    """``task(start)`` for every start, shared by the calling thread and the pool (:func:`shared_tasks`)."""
+    shared_tasks(lambda index: task(starts[index]), len(starts), workers)
 
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
