@@ -155,8 +155,9 @@ def solve_flash(
 def synthesize_flash(sequence: Sequence, flash: FlashSolution | np.ndarray) -> np.ndarray:
     """The image under ambient + flash, synthesised from the frames already taken: ``m_a + Σ w_k m_f,k``.
 
-    A flickering lamp's extra share in the LED frames is read from the frames (one pass, as an estimate's) and
-    taken out, so the image holds the ambient once, as the ambient frame does (docs/flicker.md).
+    A flickering lamp's extra share in the LED frames is read from the frames and taken out, so the image holds
+    the ambient once, as the ambient frame does (docs/flicker.md). Each frame is read from disk once, feeding
+    both the flicker check and the sum (:func:`msflash.acquisition.session.analysis.synthesize_checked`).
 
     Returns
     -------
@@ -165,10 +166,10 @@ def synthesize_flash(sequence: Sequence, flash: FlashSolution | np.ndarray) -> n
     """
     import numpy as np
 
-    from msflash.acquisition.session.analysis import sequence_flicker, synthesize_sequence
+    from msflash.acquisition.session.analysis import synthesize_checked
 
     weights = flash.flash_weights if hasattr(flash, "flash_weights") else np.asarray(flash, dtype=float)
-    image, _saturated, _frames = synthesize_sequence(sequence, weights, flicker=sequence_flicker(sequence))
+    image, _saturated, _frames, _flicker = synthesize_checked(sequence, weights)
     return image
 
 

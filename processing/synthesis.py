@@ -366,6 +366,36 @@ class SynthesisStream:
             self.saturated |= np.any(bright, axis=2) if bright.ndim == 3 else bright
         self.added += 1
 
+    def take_out_ambient_share(self, ambient: np.ndarray, ambient_offsets: np.ndarray) -> None:
+        """Take a flickering ambient's share out of the sum after the pass, where it was not known before it.
+
+        The LED images taken as ``m_f,k − e_k m_a`` (``ambient_offsets`` = ``e``, :func:`frame_coefficients`)
+        lower the ambient's coefficient by ``w · e``: the sum changes by that coefficient's step times the
+        linearised ``ambient`` (the frame added first, kept by the caller). Linear in the frames, so the image
+        is the one of a stream made with ``ambient_offsets`` to rounding (float64 sums in another order,
+        then one rounding to ``dtype``). The saturated pixels do not change.
+        """
+        if self.added != self.factors.size:
+            raise SpectralDataError(f"synthesis: {self.added} of {self.factors.size} frames added; expected all")
+        if ambient.shape != self.shape:
+            raise SpectralDataError(f"synthesis: ambient frame of shape {ambient.shape}; expected {self.shape}")
+        corrected, _ = frame_coefficients(self.spec, self.flash_weights, ambient_offsets)
+        factors = self.factors.copy()
+        factors[0] = corrected * self.spec.ambient_scale
+        _check_range(factors, [ambient], self.spec, self.flash_weights)
+        step = float(factors[0] - self.factors[0])
+        flat_total, flat_frame = self.total.reshape(-1), np.ascontiguousarray(ambient).reshape(-1)
+        product = np.empty(min(self.chunk_samples, flat_total.size), dtype=np.float64)
+        for start in range(0, flat_total.size, self.chunk_samples):
+            stop = min(start + self.chunk_samples, flat_total.size)
+            part = product[: stop - start]
+            with np.errstate(invalid="ignore", over="ignore"):  # non-finite float frames are refused in result()
+                np.multiply(flat_frame[start:stop], step, out=part, dtype=np.float64)
+                part -= step * self.spec.black_level
+                flat_total[start:stop] += part
+        self.factors = factors
+        self.offset = -self.spec.black_level * float(factors.sum())
+
     def result(self) -> tuple[np.ndarray, np.ndarray]:
         """The image (``dtype``) and the saturated pixels, once every frame is in."""
         if self.added != self.factors.size:

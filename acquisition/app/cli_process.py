@@ -205,10 +205,9 @@ def _synthesize(args: argparse.Namespace) -> int:
     weights = _weights(args.weights, len(sequence.leds))
     output = Path(args.out)
     one_sequence.check_raw_output(one_sequence.check_output_type(output), output, sequence)
-    flicker = analysis.sequence_flicker(sequence)
+    image, saturated, layout, flicker = analysis.synthesize_checked(sequence, weights)  # each frame read once
     if flicker is not None and flicker.summary() is not None:  # docs/flicker.md
         progress(str(flicker.summary()))
-    image, saturated, layout = analysis.synthesize_sequence(sequence, weights, flicker=flicker)
     one_sequence.write_flash_image(
         output, image, layout.ambient_index, sequence, {"msflash:flash_weights": weights.tolist()}, progress
     )

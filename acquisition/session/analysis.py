@@ -267,10 +267,80 @@ def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> Flicker
 def sequence_flicker(sequence: Sequence) -> FlickerCheck | None:
     """The flicker check of a sequence's frames read from disk (one pass, as an estimate's), or None where the
     sequence carries no camera responsivities to read the ambient gains with: what a synthesis from weights
-    given alone (``msflash synthesize``, :func:`msflash.synthesize_flash`) corrects by."""
+    given alone (``msflash synthesize``, :func:`msflash.synthesize_flash`) corrects by, made there in the
+    synthesis's own pass (:func:`synthesize_checked`)."""
     if sequence.camera_responsivities() is None:
         return None
     return flicker_check(sequence, stream_sequence(sequence, DEFAULT_BIN_FACTOR).statistics())
+
+
+def synthesize_checked(
+    sequence: Sequence, flash_weights: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, StackLayout, FlickerCheck | None]:
+    """The computational flash image of a sequence read from disk with the flicker check of its frames, each
+    frame read once: what a synthesis from weights given alone (``msflash synthesize``,
+    :func:`msflash.synthesize_flash`) writes, and the check it corrected by (:func:`sequence_flicker`'s).
+
+    Each ambient and LED frame, decoded once in sequence order, feeds both the estimate's statistics
+    (:func:`~acquisition.session.estimate_stream.stream_sequence`, for the check) and the synthesis sum
+    (:class:`~processing.synthesis.SynthesisStream`, ambient first, then the LED frames in order). The flicker
+    correction is linear in the frames (:func:`processing.flicker.applied_offsets`), so where the check
+    corrects, the ambient's extra share is taken out of the sum after the pass
+    (:meth:`~processing.synthesis.SynthesisStream.take_out_ambient_share`). The image is
+    :func:`synthesize_sequence`'s with the same check bit for bit where nothing is corrected, and equal to
+    rounding (one float32 step) where it is; the saturated pixels and the frames used are the same.
+
+    Peak memory: the float64 sum (four 16-bit frames' worth), the raw ambient frame kept until the check
+    is known (where the sequence carries responsivities to check with), one frame being read, the
+    statistics' block rows (about a sixteenth of a 16-bit RGB frame per frame at the default block size)
+    and, at the end, the float32 image; LED frames recorded before the ambient frame are also kept until it
+    comes. Without camera responsivities there is no check (None) and only the sum is made.
+    """
+    entries = sequence.frames
+    layout = stack_layout(
+        sequence, [e.role for e in entries], [e.led_levels for e in entries], [e.exposure_us * e.gain for e in entries]
+    )
+    checked = sequence.camera_responsivities() is not None
+    order = (layout.ambient_index, *layout.led_indices)
+    waiting: dict[int, np.ndarray] = {}  # frames read, not yet summed (LED frames before the ambient)
+    summed: SynthesisStream | None = None
+    ambient: np.ndarray | None = None
+
+    def read(index: int) -> np.ndarray:
+        nonlocal summed, ambient
+        frame = sequence.load_frame(index)
+        waiting[index] = frame
+        while summed is None or summed.added < len(order):
+            position = 0 if summed is None else summed.added
+            if order[position] not in waiting:
+                break
+            next_frame = waiting.pop(order[position])
+            if summed is None:
+                summed = SynthesisStream(layout.spec, flash_weights, next_frame.shape)
+                ambient = next_frame if checked else None
+            try:
+                summed.add(next_frame)
+            except SpectralDataError as err:
+                raise RecordingError(f"{sequence.path}: frames[{order[position]}]: {err}") from err
+        return frame
+
+    flicker = None
+    if checked:
+        flicker = flicker_check(sequence, stream_sequence(sequence, DEFAULT_BIN_FACTOR, pixels=read).statistics())
+    else:
+        for index in order:
+            read(index)
+    assert summed is not None
+    offsets = applied_offsets(flicker)
+    try:
+        if offsets is not None:
+            assert ambient is not None
+            summed.take_out_ambient_share(ambient, offsets)
+        ambient = None  # the raw ambient frame let go before the float32 image is made
+        image, saturated = summed.result()
+    except SpectralDataError as err:
+        raise RecordingError(f"{sequence.path}: {err}") from err
+    return image, saturated, layout, flicker
 
 
 def with_mains_fit(check: FlickerCheck, sequence: Sequence) -> FlickerCheck:

@@ -146,5 +146,13 @@ def test_a_flickering_stack_holds_the_ambient_once_with_its_offsets() -> None:
     for frame in (a, *frames):
         stream.add(frame)
     np.testing.assert_array_equal(stream.result()[0], image)
+    # The offsets known only after the pass (a check read from the same frames): taken out of the sum then.
+    later = SynthesisStream(spec, weights, shape, dtype=np.float64)
+    for frame in (a, *frames):
+        later.add(frame)
+    later.take_out_ambient_share(a, offsets)
+    np.testing.assert_allclose(later.result()[0], image, rtol=1e-13)
     with pytest.raises(SpectralDataError, match="ambient offsets of shape"):
         frame_coefficients(spec, weights, np.ones(k + 1))
+    with pytest.raises(SpectralDataError, match="ambient frame of shape"):
+        later.take_out_ambient_share(a[:, :2], offsets)
