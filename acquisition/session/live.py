@@ -123,7 +123,8 @@ class LiveStream:
         return camera.image_limits() if isinstance(camera, ImageFormatControl) else None
 
     def set_image_format(self, request: ImageFormatRequest) -> ImageFormat:
-        """Stop streaming and set ``request`` on the camera; the next frame prepares a plan (and buffers) for it.
+        """Stop streaming and set ``request`` on the camera; the next frame prepares a plan (and buffers) for it, and
+        what the rig records of the camera follows the change (:meth:`~acquisition.session.rigs.rig.Rig.image_format_changed`).
 
         Raises
         ------
@@ -134,10 +135,16 @@ class LiveStream:
         if not isinstance(camera, ImageFormatControl):
             raise UsageError(f"camera {camera.info.model}: msflash cannot change its image format")
         self.pause()
+        before = camera.image_format
         try:
             return camera.set_image_format(request)
         except CameraSettingError as err:
             raise UsageError(str(err)) from err
+        finally:
+            if (
+                camera.image_format != before
+            ):  # later sequences record the camera as it is now (a refusal changed nothing)
+                self.rig.image_format_changed()
 
     # -- frames -----------------------------------------------------------------------------
     def _prepare(self) -> CapturePlan:

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from msflash.acquisition.devices.image_format import IMAGE_FEATURES, ImageFormatControl
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
 from msflash.acquisition.sequence.writer import SequenceWriter
@@ -84,6 +85,32 @@ class Rig:
         entries = tuple(SequenceLed(name, leds.values[:, i], peak_nm=peaks[i]) for i, name in enumerate(leds.names))
         return leds.wavelengths_nm, camera, entries
 
+    def image_format_changed(self) -> None:
+        """Follow an image format changed after the rig opened (the live view's ``POST /api/camera-format``).
+
+        What every later sequence records is then true of the camera: ``camera_extra["image_format"]`` holds the
+        ROI, binning and pixel format in force as the camera reads them back; the open's ``camera_options`` keep
+        only what still holds (the ROI, binning and image features they asked for and read back are dropped:
+        the change superseded them); :attr:`mono` follows the pixel format (a camera without a CFA sending
+        ``Mono*``). Each sequence's :class:`~acquisition.devices.camera.CameraInfo` (pixel format, levels,
+        size) is read afresh by :meth:`sequence_header` anyway.
+        """
+        camera = self.camera
+        if not isinstance(camera, ImageFormatControl):
+            return
+        image_format = camera.image_format
+        extra = {key: value for key, value in self.camera_extra.items() if key != "image_format"}
+        options = extra.get("camera_options")
+        if isinstance(options, dict):
+            extra["camera_options"] = {
+                part: _without_image_format(entries) if isinstance(entries, dict) else entries
+                for part, entries in options.items()
+            }
+        extra["image_format"] = {**image_format.to_json(), "set": "after the rig opened (live view)"}
+        self.camera_extra = extra
+        info = self.camera.info
+        self.mono = info.cfa is None and info.pixel_format.startswith("Mono")
+
     def sequence_writer(self, directory: str | Path, extra: dict | None = None) -> SequenceWriter:
         """A :class:`SequenceWriter` for a sequence from this rig (header of :meth:`sequence_header`).
 
@@ -152,3 +179,14 @@ class Rig:
             self.close()
         except Exception as close_err:  # noqa: BLE001 - the error in flight is the one to report
             log.info("rig '%s': closing after the error failed too: %s", self.name, close_err)
+
+
+def _without_image_format(entries: dict) -> dict:
+    """Camera options (as asked, or as read back) less the ROI, binning and image features a later change set."""
+    kept = {key: value for key, value in entries.items() if key not in ("roi", "binning")}
+    features = entries.get("features")
+    if isinstance(features, dict):
+        kept["features"] = {name: value for name, value in features.items() if name not in IMAGE_FEATURES}
+        if not kept["features"]:
+            del kept["features"]
+    return kept
