@@ -147,11 +147,19 @@ def _opening(args: argparse.Namespace, spec: str) -> str:
 
 
 def _check_rig_runs(args: argparse.Namespace, rig: Rig, spec: str) -> None:
-    """Refuse a rig the run cannot use: no responsivities for the flash, or a DNG export of RGB frames."""
+    """Refuse a rig the run cannot use: no responsivities for the flash, a mono camera (a flash mix matches or
+    complements colours: one channel has none), or a DNG export of RGB frames."""
     if rig.camera_responsivities is None:
         raise UsageError(
             f"rig '{spec}': the flash solvers need the camera's responsivities; expected "
             "--responsivity FILE.csv (wavelength_nm, R, G, B) or a calibration with a camera section"
+        )
+    if rig.mono:
+        info = rig.camera.info
+        raise UsageError(
+            f"rig '{spec}': camera {info.model} sends {info.pixel_format}, one value a pixel: the flash matches or "
+            "complements the ambient's colour, which one channel does not see; expected a colour camera (a Bayer or "
+            "RGB pixel format); `msflash capture` and `msflash estimate` take a mono camera's sequence"
         )
     if args.export and "dng" in args.export and rig.camera.info.cfa is None:
         raise UsageError(

@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import positive_int
-from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
+from msflash.acquisition.devices.sim_default import MONO, SIM_DEFAULT_CFA
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.rig import SimWorldOptions
 from msflash.processing.ambient import AMBIENT_METHODS
@@ -158,19 +158,21 @@ def add_fake_camera_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-SIM_CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG", "none")
-"""``--cfa`` of the ``sim`` rig: a Bayer layout, or ``none`` for RGB frames."""
+SIM_CFA_CHOICES = ("RGGB", "BGGR", "GRBG", "GBRG", "none", MONO)
+"""``--cfa`` of the ``sim`` rig: a Bayer layout, ``none`` for RGB frames, or ``mono`` for a monochrome sensor."""
 SIM_CFA_HELP = (
     f"the simulated camera's colour filter: a raw Bayer mosaic of this layout, 12-bit (default {SIM_DEFAULT_CFA}, "
-    "as colour machine-vision cameras send), or none for 12-bit RGB frames"
+    "as colour machine-vision cameras send), none for 12-bit RGB frames, or mono for a monochrome sensor "
+    "(no filter: Mono12 frames, the camera's R+G+B as its one responsivity)"
 )
 
 
 def sim_cfa(value: str | None) -> str | None:
-    """The ``sim`` rig's CFA for ``--cfa``: not given → :data:`SIM_DEFAULT_CFA`, ``none`` → None (RGB frames).
+    """The ``sim`` rig's CFA for ``--cfa``: not given → :data:`SIM_DEFAULT_CFA`, ``none`` → None (RGB frames),
+    ``mono`` as it is (a monochrome sensor).
 
-    >>> sim_cfa(None), sim_cfa("none"), sim_cfa("BGGR")
-    ('RGGB', None, 'BGGR')
+    >>> sim_cfa(None), sim_cfa("none"), sim_cfa("BGGR"), sim_cfa("mono")
+    ('RGGB', None, 'BGGR', 'mono')
     """
     if value is None:
         return SIM_DEFAULT_CFA

@@ -30,7 +30,24 @@ from msflash.processing.spectra import DEFAULT_GRID, Spectra, WavelengthGrid
 
 SIM_DEFAULT_CFA = "RGGB"
 """The ``sim`` rig's camera sends a raw RGGB mosaic, 12-bit (:func:`processing.sensor.machine_vision_sensor`),
-as colour machine-vision cameras do; ``cfa=None`` asks for RGB frames."""
+as colour machine-vision cameras do; ``cfa=None`` asks for RGB frames, ``cfa=MONO`` a monochrome sensor."""
+MONO = "mono"
+"""``cfa`` of a monochrome sensor: no colour filter, ``Mono12`` frames of one value a pixel
+(:func:`mono_responsivities`), as monochrome machine-vision cameras send."""
+
+
+def mono_responsivities(responsivities: Spectra) -> Spectra:
+    """The bare sensor of a colour camera: the sum of its R, G and B responsivities in each of the three channels.
+
+    Without its colour filter array a pixel sees what its three filters passed between them (to the filters'
+    overlap and their losses: a model, not a measured mono curve). The three channels are that one curve, as a
+    sequence records a mono camera's responsivity (docs/architecture.md §6).
+    """
+    curve = responsivities.values.sum(axis=1, keepdims=True)
+    name = responsivities.metadata.get("camera") or responsivities.source or "camera"
+    mono = responsivities.replace(values=np.repeat(curve, 3, axis=1), source=f"{responsivities.source} (R+G+B, mono)")
+    mono.metadata["camera"] = f"{name} mono"
+    return mono
 
 
 @dataclass(frozen=True)
@@ -52,6 +69,8 @@ class DefaultWorld:
     """The exposure ``scale`` is set for."""
     second_ambient: Spectra | None = None
     ambient_map: np.ndarray | None = None
+    mono: bool = False
+    """A monochrome sensor (``cfa`` :data:`MONO`): ``responsivities`` one curve in R, G and B."""
 
 
 def default_world(
@@ -85,7 +104,8 @@ def default_world(
         A name (:func:`processing.lights.light_spectrum`; :func:`processing.datasets.camera_responsivities`) or
         a spectrum (R, G, B responsivities) covering ``grid``.
     cfa
-        The raw mosaic's Bayer layout (default :data:`SIM_DEFAULT_CFA`), or None for RGB frames.
+        The raw mosaic's Bayer layout (default :data:`SIM_DEFAULT_CFA`), None for RGB frames, or :data:`MONO` for
+        a monochrome sensor (``camera``'s bare sensor, :func:`mono_responsivities`).
     seed
         The mosaic scene's layout.
     n_leds, led_spectra
@@ -115,6 +135,9 @@ def default_world(
     )  # fmt: skip
     leds = (datasets.paper_led_subset(n_leds) if led_spectra is None else led_spectra).resample(grid)
     responsivities = (datasets.camera_responsivities(camera) if isinstance(camera, str) else camera).resample(grid)
+    mono = cfa == MONO
+    if mono:
+        responsivities, cfa = mono_responsivities(responsivities), None
     sensor = sensor if sensor is not None else machine_vision_sensor(cfa)
     if cfa is not None and sensor.cfa != cfa:
         raise CameraError(f"simulated camera: cfa '{cfa}' but the sensor model has '{sensor.cfa}'; expected one")
@@ -132,7 +155,7 @@ def default_world(
     scale = exposure / reference_exposure_us
     return DefaultWorld(
         scene, ambient_spd, booth, responsivities, sensor, scale, str(camera_name), seed, reference_exposure_us,
-        second_spd, ambient_map,
+        second_spd, ambient_map, mono,
     )  # fmt: skip
 
 

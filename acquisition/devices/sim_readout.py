@@ -11,9 +11,9 @@ camera (``ImageLimits`` of :mod:`acquisition.devices.image_format`):
   (the mean of like-coloured pixels, so the CFA and the white level stay), an RGB frame pixel by pixel; a
   binning change resets the ROI to the whole binned sensor, as cameras clamp ``Width``;
 - ``PixelFormat``: the sensor's layout at 8 bits (the top 8 of the ADC's) or at its own depth
-  (``BayerRG8``/``BayerRG12`` for the ``sim`` rig's 12-bit RGGB sensor, ``RGB8``/``RGB12`` for an RGB one);
-  no Mono, no other CFA. Formats wider than the sensor (the aravis-fake's ``BayerRG16``) carry its values
-  unscaled.
+  (``BayerRG8``/``BayerRG12`` for the ``sim`` rig's 12-bit RGGB sensor, ``RGB8``/``RGB12`` for an RGB one,
+  ``Mono8``/``Mono12`` for a monochrome one, whose (H, W) frames carry one value a pixel); no other CFA. Formats
+  wider than the sensor (the aravis-fake's ``BayerRG16``) carry its values unscaled.
 """
 
 from __future__ import annotations
@@ -62,6 +62,8 @@ class SimReadout:
     """None: the whole (binned) sensor."""
     pixel_format: str = ""
     """"" : the sensor's own format (:meth:`native_format`)."""
+    mono: bool = False
+    """A monochrome sensor (no CFA): the rendered frame's channels are alike and one is read out, (H, W)."""
 
     @property
     def native_format(self) -> str:
@@ -71,6 +73,8 @@ class SimReadout:
 
     @property
     def _layout(self) -> str:
+        if self.mono:
+            return "Mono"
         return "RGB" if self.cfa is None else GENICAM_BAYER[self.cfa]
 
     @property
@@ -138,8 +142,11 @@ class SimReadout:
         return readout
 
     def read(self, pixels: np.ndarray) -> np.ndarray:
-        """A rendered frame (``sensor_shape``) read out: binned, cut to the ROI, packed into the format."""
+        """A rendered frame (``sensor_shape``) read out: binned, cut to the ROI, packed into the format (a mono
+        sensor's one channel of it)."""
         frame = np.asarray(pixels)
+        if self.mono and frame.ndim == 3:
+            frame = frame[:, :, 0]
         if self.binning != (1, 1):
             frame = _binned(frame, self.binning, self.cfa is not None).astype(frame.dtype)
         x, y, w, h = self.format.roi

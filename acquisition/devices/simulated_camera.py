@@ -84,6 +84,10 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
         A spatially varying ambient (issue 9): pixel ``x`` sees ``(1 − m(x)) · ambient +
         m(x) · second_ambient`` with ``m = ambient_map`` (H, W) in [0, 1] (a boundary, a
         gradient). Both None (the default) keep the single uniform ambient.
+    mono
+        A monochrome sensor: no CFA (``sensor.cfa`` None), ``camera_responsivities`` its one curve in all three
+        channels; it sends ``Mono12`` (or ``Mono8``) frames of shape (H, W), as a monochrome machine-vision
+        camera does (each rendered with its own noise: one channel of an RGB render).
 
     All spectra must share one grid (resample first); mismatches raise ``SpectralDataError``.
     """
@@ -103,6 +107,7 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
         frame_interval_ns: int = 2_000_000,
         second_ambient: Spectra | None = None,
         ambient_map: np.ndarray | None = None,
+        mono: bool = False,
     ) -> None:
         require_same_grid(scene.reflectances, ambient, led_spectra, camera_responsivities)
         self.ambient_illumination: MixedIllumination | None = None
@@ -121,6 +126,12 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
             self.ambient_illumination = MixedIllumination.two_ambients(ambient, second_ambient, ambient_map)
         if camera_responsivities.count != 3:
             raise CameraError(f"simulated camera '{name}': {camera_responsivities.count} channels; expected R, G, B")
+        if mono and (sensor.cfa is not None or np.ptp(camera_responsivities.values, axis=1).any()):
+            raise CameraError(
+                f"simulated camera '{name}': a mono sensor with CFA {sensor.cfa} or unlike channels; expected no CFA "
+                "and one responsivity curve in R, G and B"
+            )
+        self.mono = mono
         self.scene = scene
         self.ambient = ambient
         self.led_spectra = led_spectra
@@ -157,7 +168,7 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
         self._free_end_s = 0.0
         self._pacing_rng = np.random.default_rng([seed, 0x0F11C7E5, 1])
         self._latency_rng = np.random.default_rng(seed + 7919)
-        self.readout = SimReadout(scene.shape, sensor.cfa, sensor.bit_depth)
+        self.readout = SimReadout(scene.shape, sensor.cfa, sensor.bit_depth, mono=mono)
         """Binning, ROI and pixel format applied to each rendered frame (:mod:`acquisition.devices.sim_readout`)."""
 
     # -- ground truth and identity ------------------------------------------------------------
@@ -403,6 +414,7 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
             name=f"SimulatedCamera ({made.camera_name})",
             second_ambient=made.second_ambient,
             ambient_map=made.ambient_map,
+            mono=made.mono,
         )
         simulated.suggested_exposure_us = made.reference_exposure_us
         return simulated

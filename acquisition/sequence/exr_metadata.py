@@ -63,7 +63,7 @@ def exr_metadata(sequence: Sequence, units: str = LINEAR_UNITS) -> ExrMetadata:
     ``msflash:led_names`` is the LED names joined by ", " (EXR viewers show strings; the JSON
     ``ImageDescription`` keeps them too) and ``msflash:led_peak_nm`` their measured peaks, nm. A camera
     → XYZ fit whose primaries leave the visible (X + Y + Z ≤ 0) gets no chromaticities, and
-    ``msflash:chromaticities_source`` says so.
+    ``msflash:chromaticities_source`` says so, as does a camera whose three responsivities are one curve (mono).
     """
     responsivities = sequence.camera_responsivities()
     attributes: dict = {
@@ -75,8 +75,8 @@ def exr_metadata(sequence: Sequence, units: str = LINEAR_UNITS) -> ExrMetadata:
     if sequence.camera.cfa is not None:
         attributes["msflash:cfa"] = sequence.camera.cfa
         attributes["msflash:demosaic"] = DEMOSAIC_NOTE
-    matrix = camera_matrix(responsivities)
     try:
+        matrix = camera_matrix(responsivities)
         chromaticities: tuple[float, ...] | None = rgb_chromaticities(matrix.camera_to_xyz)
         attributes["msflash:chromaticities_source"] = (
             "camera responsivities (camera to XYZ fitted on a Macbeth chart under D65)"
@@ -86,6 +86,11 @@ def exr_metadata(sequence: Sequence, units: str = LINEAR_UNITS) -> ExrMetadata:
     except SpectralDataError as err:
         chromaticities = None
         attributes["msflash:chromaticities_source"] = f"none ({err})"
+    except np.linalg.LinAlgError:  # a mono camera's one curve in R, G and B: no colour to place
+        chromaticities = None
+        attributes["msflash:chromaticities_source"] = (
+            "none (the camera's R, G and B responsivities are not independent, as a mono camera's one curve)"
+        )
     return ExrMetadata(attributes, chromaticities)
 
 

@@ -22,6 +22,7 @@ from msflash.acquisition.session.estimate_stream import (
     SAMPLE_WEIGHTING,
     EstimateStream,
     StackLayout,
+    is_mono,
     stack_layout,
     stream_sequence,
 )
@@ -409,7 +410,19 @@ def estimate_payload(sequence: Sequence, estimate: AmbientEstimate) -> dict:
 def solve_sequence_flash(
     sequence: Sequence, mode: str, ambient_weights: np.ndarray, target: str = "D65", bounds: FlashBounds = "physical"
 ) -> FlashSolution:
-    """The matching or complementary flash for a sequence's estimated ambient weights."""
+    """The matching or complementary flash for a sequence's estimated ambient weights.
+
+    Raises
+    ------
+    RecordingError
+        An unknown mode, or a mono camera's sequence (its three channels one: no colour to match or complement).
+    """
+    if is_mono(sequence):
+        raise RecordingError(
+            f"{sequence.path}: camera {sequence.camera.model} is mono ({sequence.camera.extra['channels']}): the flash "
+            "matches or complements the ambient's colour, which one channel does not see; expected a colour camera's "
+            "sequence (`msflash estimate` gives a mono sequence's ambient)"
+        )
     leds = led_spectra_photons(sequence)
     camera = camera_responsivities_photons(sequence)
     if mode == "matching":

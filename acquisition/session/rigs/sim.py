@@ -173,7 +173,15 @@ def open_sim_rig(
 
 def _rig(world: SimulatedCamera, booth: Booth, closers: list, **extra: Any) -> Rig:
     return Rig(
-        "sim", world, booth, world.led_spectra, world.camera_responsivities, world.true_ambient, closers, **extra
+        "sim",
+        world,
+        booth,
+        world.led_spectra,
+        world.camera_responsivities,
+        world.true_ambient,
+        closers,
+        mono=world.mono,
+        **extra,
     )
 
 
