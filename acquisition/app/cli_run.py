@@ -46,6 +46,7 @@ from msflash.acquisition.session.run import (
     RunOptions,
     RunResult,
     capture_sequence,
+    check_colour_camera,
     degenerate,
     plan_exposure,
     report_exposure,
@@ -154,13 +155,7 @@ def _check_rig_runs(args: argparse.Namespace, rig: Rig, spec: str) -> None:
             f"rig '{spec}': the flash solvers need the camera's responsivities; expected "
             "--responsivity FILE.csv (wavelength_nm, R, G, B) or a calibration with a camera section"
         )
-    if rig.mono:
-        info = rig.camera.info
-        raise UsageError(
-            f"rig '{spec}': camera {info.model} sends {info.pixel_format}, one value a pixel: the flash matches or "
-            "complements the ambient's colour, which one channel does not see; expected a colour camera (a Bayer or "
-            "RGB pixel format); `msflash capture` and `msflash estimate` take a mono camera's sequence"
-        )
+    check_colour_camera(rig, spec)
     if args.export and "dng" in args.export and rig.camera.info.cfa is None:
         raise UsageError(
             f"--export {','.join(args.export)}: rig '{spec}' gives RGB (debayered) frames, and a DNG holds a raw "

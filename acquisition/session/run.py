@@ -25,6 +25,7 @@ import numpy as np
 from msflash.acquisition.devices.camera import RawFrame
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.replay_camera import format_levels, levels_match
+from msflash.acquisition.errors import UsageError
 from msflash.acquisition.plan import CapturePlan, CaptureStep
 from msflash.acquisition.progress import count, progress
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
@@ -204,6 +205,24 @@ def capture_led_sequence(
     )
     names = [led.name for led in writer.sequence.leds]
     return led_capture(rig, names, plan, kept.frames, entries, kept.last_frame_at)
+
+
+def check_colour_camera(rig: Rig, spec: str) -> None:
+    """Refuse a run (``msflash run``, a sequence fired from the live view) on a mono camera: the flash matches or
+    complements the ambient's colour, which one channel does not see (docs/decisions/mono-camera.md).
+
+    Raises
+    ------
+    UsageError
+        The rig's camera sends one value a pixel (:attr:`Rig.mono`), named with its pixel format.
+    """
+    if rig.mono:
+        info = rig.camera.info
+        raise UsageError(
+            f"rig '{spec}': camera {info.model} sends {info.pixel_format}, one value a pixel: the flash matches or "
+            "complements the ambient's colour, which one channel does not see; expected a colour camera (a Bayer or "
+            "RGB pixel format); `msflash capture` and `msflash estimate` take a mono camera's sequence"
+        )
 
 
 def degenerate(estimate) -> str | None:

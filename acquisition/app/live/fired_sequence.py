@@ -21,7 +21,7 @@ from msflash.acquisition.app.live.run_job import SequenceRequest, new_run_folder
 from msflash.acquisition.app.live.state import SequenceJob
 from msflash.acquisition.errors import CaptureCancelled, UsageError
 from msflash.acquisition.session.engine import Cancellation, CaptureResult, FrameEvent
-from msflash.acquisition.session.run import RunOptions
+from msflash.acquisition.session.run import RunOptions, check_colour_camera
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +37,7 @@ class SequenceRoutes(FlashPreviewRoutes):
                 f"rig '{self.rig.name}': the flash solvers need the camera's responsivities; expected "
                 "--responsivity FILE.csv or --calibration DIR with a camera section"
             )
+        check_colour_camera(self.rig, self.rig.name)
         mode = body.get("mode", self.state.mode)
         if mode not in ("complementary", "matching"):
             raise UsageError(f"mode {mode!r}: expected 'complementary' or 'matching'")

@@ -102,3 +102,32 @@ def test_a_mono_sequence_is_captured_and_estimated_and_the_flash_refused(
     assert source.startswith("none (the camera's R, G and B responsivities are not independent")
     assert json.loads(spec.getattribute("ImageDescription"))["msflash:chromaticities_source"] == source
     assert spec.getattribute("chromaticities") is None
+
+
+def test_the_live_view_refuses_to_fire_a_sequence_on_a_mono_camera(tmp_path: Path) -> None:
+    """The page's ``POST /api/sequence`` on a mono camera: 400 with the run's one line, no run folder, nothing lit."""
+    import asyncio
+
+    import aiohttp
+
+    from msflash.acquisition.app.live.requests import bind
+    from msflash.acquisition.app.live.server import TOKEN_HEADER, LiveServer
+    from tests.acquisition.support.live import emulator_levels, serve_in_thread
+
+    async def fire(url: str, token: str) -> tuple[int, str]:
+        async with aiohttp.ClientSession() as session:
+            async with session.post(url, headers={TOKEN_HEADER: token}, json={"mode": "matching"}) as response:
+                return response.status, await response.text()
+
+    sock = bind("127.0.0.1", 0)
+    try:
+        with open_sim_rig(cfa="mono") as rig:
+            server = LiveServer(rig, tmp_path / "runs", sock)
+            with serve_in_thread(server):
+                status, text = asyncio.run(fire(f"http://127.0.0.1:{server.port}/api/sequence", server.token))
+                assert status == 400, text
+                assert "camera SimulatedCamera (NikonD100 mono) sends Mono12" in text and "\n" not in text.strip()
+                assert server.state.job.status == "idle" and emulator_levels(server) == (0.0,) * 7
+    finally:
+        sock.close()
+    assert not any((tmp_path / "runs").glob("*/sequence"))
