@@ -292,10 +292,13 @@ def synthesize_checked(
     rounding (one float32 step) where it is; the saturated pixels and the frames used are the same.
 
     Peak memory: the float64 sum (four 16-bit frames' worth), the raw ambient frame kept until the check
-    is known (where the sequence carries responsivities to check with), one frame being read, the
-    statistics' block rows (about a sixteenth of a 16-bit RGB frame per frame at the default block size)
-    and, at the end, the float32 image; LED frames recorded before the ambient frame are also kept until it
-    comes. Without camera responsivities there is no check (None) and only the sum is made.
+    is known (where the sequence carries responsivities to check with), one frame being read with the block
+    pass's work on it, and the statistics' block rows (about a sixteenth of a 16-bit RGB frame per frame at the
+    default block size), all during the pass; the float32 image (two frames' worth) once the ambient is let go.
+    LED frames recorded before the ambient frame are also kept until it comes. Measured: 9 16-bit RGB frames'
+    worth on 1280 × 1024 × 15 frames, against 6 for the check's pass and the sum's one after the other, and
+    1.1× faster from the page cache (more where reading the files costs more). Without camera responsivities
+    there is no check (None) and only the sum is made.
     """
     entries = sequence.frames
     layout = stack_layout(

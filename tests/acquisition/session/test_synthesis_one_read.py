@@ -136,3 +136,27 @@ def test_led_frames_recorded_before_the_ambient_are_summed_after_it(
     else:
         np.testing.assert_allclose(image, before, rtol=2.5e-7, atol=1e-12 * float(np.abs(before).max()))
     np.testing.assert_array_equal(saturated, saturated_before)
+
+
+def test_the_one_read_keeps_a_few_frames_whatever_the_frame_count(tmp_path: Path) -> None:
+    """tracemalloc on a 33-frame RGB sequence: the float64 sum (4 frames' worth), the ambient frame kept for the
+    check, one frame being read, the float32 image (2) and the statistics' block rows — not the stack."""
+    import tracemalloc
+
+    from tests.acquisition.session.test_estimate_stream import N_LED_FRAMES, SHAPE, write_sequence
+
+    sequence = read_sequence(write_sequence(tmp_path / "s"))
+    weights = np.array([0.3, 0.6, 0.2, 0.9])
+    frame_bytes = int(np.prod(SHAPE)) * 2
+    analysis.synthesize_checked(sequence, weights)  # warm: lazy imports, caches
+    statistics = analysis.stream_sequence(sequence, analysis.DEFAULT_BIN_FACTOR).nbytes
+    tracemalloc.start()
+    try:
+        image, _, _, check = analysis.synthesize_checked(sequence, weights)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert check is not None and image.shape == SHAPE
+    # Measured 9 frames' worth at 1280 × 1024 × 15 frames (the two passes 6): the sum, the kept ambient frame and the
+    # block rows live together during the pass.
+    assert peak < 10 * frame_bytes + statistics < (N_LED_FRAMES + 1) * frame_bytes / 2, peak / frame_bytes
