@@ -33,8 +33,6 @@ from typing import Any
 
 import numpy as np
 
-from msflash.processing.moment_products import shared_tasks
-
 KERNELS_VARIABLE = "MSFLASH_KERNELS"
 """Environment variable: ``numpy`` turns the compiled kernels off, ``numba`` uses them on any work;
 unset (or ``auto``), :func:`wanted` decides."""
@@ -126,13 +124,6 @@ def _rows_view(frame: np.ndarray) -> np.ndarray | None:
     return frame.reshape(frame.shape[0], -1)
 
 
-SPLIT_FRAME_BYTES = 1 << 22
-"""Frames of at least this many bytes are shared by block rows among :func:`block_pass`'s ``workers``. Measured
-interleaved in one process on the shared 2-core machine (docs/speed.md, issue 30's second session): a 1280×1024
-RGB16 frame (7.9 MB, about 1 ms a pass) gains, a 12-bit mosaic of that size (2.6 MB, 0.2–0.3 ms) lost about a
-tenth of its estimate to the second thread's hand-over."""
-
-
 def block_pass(
     frame: np.ndarray,
     factor: int,
@@ -141,7 +132,6 @@ def block_pass(
     probe_stride: int,
     sums: np.ndarray,
     differences: np.ndarray | None,
-    workers: int = 1,
 ) -> tuple[bool, np.ndarray | None]:
     """Block sums, half differences and saturated blocks of one raw frame, in one compiled pass.
 
@@ -156,10 +146,6 @@ def block_pass(
     differences
         Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64: each probed block's checkerboard half difference
         (:func:`processing.block_sums.block_sums_and_differences`); or None.
-    workers
-        Threads sharing the frame by block rows (:func:`processing.moment_products.shared_tasks`; the calling
-        thread takes the first share) when it has at least :data:`SPLIT_FRAME_BYTES`. Each block is summed by
-        one thread alone, in the same order, so the outputs do not depend on it.
 
     Returns
     -------
@@ -178,16 +164,8 @@ def block_pass(
     probe = differences if differences is not None else np.empty((0, sums.shape[2], sums.shape[1]))
     shape = ((0,) * cfa_period, (0,) * (cfa_period * channels), (0,) * factor)
 
-    shares = max(1, min(workers, height)) if frame.nbytes >= SPLIT_FRAME_BYTES else 1
-    bounds = [height * part // shares for part in range(shares + 1)]
-    hits = shared_tasks(
-        lambda part: kernels.block_pass(
-            rows, *shape, float(white), int(probe_stride), sums, probe, saturated, *bounds[part : part + 2]
-        ),
-        shares,
-        workers,
-    )
-    return True, saturated if any(hits) else None
+    hit = kernels.block_pass(rows, *shape, float(white), int(probe_stride), sums, probe, saturated, 0, height)
+    return True, saturated if hit else None
 
 
 def synthesis_inputs(frames: list[np.ndarray]) -> tuple[np.ndarray, ...] | None:

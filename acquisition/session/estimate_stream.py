@@ -42,7 +42,6 @@ from msflash.processing.block_sums import plane_shape
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flicker import corrected_tiles
 from msflash.processing.local import LocalEstimate, TileBlocks, estimate_local
-from msflash.processing.moment_products import DEFAULT_WORKERS
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 
 USED_ROLES = ("ambient", "led")
@@ -220,7 +219,6 @@ class EstimateStream:
                     camera.white_level,
                     black_level=camera.black_level,
                     weighting=SAMPLE_WEIGHTING,
-                    workers=1 if self.live else DEFAULT_WORKERS,  # from disk: each frame's compiled pass on both cores
                 )
             if self._rows is not None and self.live:
                 with frame_kernels.paused():

@@ -10,8 +10,6 @@ workers.
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 import pytest
 
@@ -254,35 +252,17 @@ def test_streamed_block_rows_match_the_reference(route: str) -> None:
     assert_same(rows.statistics(spec), reference_statistics(ambient, frames, spec, 2, 2, 1))
 
 
-@pytest.mark.parametrize(("shape", "period", "factor", "workers"), [((45, 71), 2, 2, 2), ((70, 98, 3), 1, 4, 3)])
-@pytest.mark.parametrize("ambient_first", [True, False])
-def test_block_rows_shared_by_threads_are_the_same_to_the_bit(
-    route: str,
-    shape: tuple[int, ...],
-    period: int,
-    factor: int,
-    workers: int,
-    ambient_first: bool,
-    monkeypatch: pytest.MonkeyPatch,
+@pytest.mark.parametrize(("shape", "period", "factor"), [((45, 71), 2, 2), ((70, 98, 3), 1, 4)])
+def test_block_rows_give_the_same_bits_whatever_the_frames_order(
+    route: str, shape: tuple[int, ...], period: int, factor: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Each frame's compiled pass shared by block rows among threads (``BlockRows(workers=…)``, a frame from disk on
-    both cores), with the ambient's noise line fitted beside the next frames' passes, gives the same rows, probe,
-    saturated blocks and statistics as one thread — uneven shares, a strided probe, a mosaic, saturated pixels, the
-    ambient first or after an LED frame; the numpy route ignores ``workers``."""
-    monkeypatch.setattr(frame_kernels, "SPLIT_FRAME_BYTES", 0)  # share even these small frames
+    """The ambient frame first or after an LED frame (its noise line then fitted between LED frames): the same rows,
+    probe, saturated blocks and statistics to the bit — a strided probe, a mosaic, saturated pixels; a row added
+    twice is refused."""
     monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 40)
     ambient, frames, spec = _frames(shape, 3, seed=21)
     results = []
-    fitted = threading.Event()
-    fit = block_rows.detail_noise_line
-
-    def fit_when_told(*arguments: object) -> object:
-        fitted.wait(timeout=60)  # the ambient's line comes in only after every other frame
-        return fit(*arguments)
-
-    for count in (1, workers):
-        if count > 1 and route == "compiled":
-            monkeypatch.setattr(block_rows, "detail_noise_line", fit_when_told)
+    for ambient_first in (True, False):
         rows = BlockRows(
             3,
             block_sums.plane_shape(ambient.shape, period),
@@ -290,7 +270,6 @@ def test_block_rows_shared_by_threads_are_the_same_to_the_bit(
             spec.white_level,
             black_level=spec.black_level,
             weighting=True,
-            workers=count,
         )
         order = [(3, ambient), *enumerate(frames)] if ambient_first else [(0, frames[0]), (3, ambient), (1, frames[1])]
         for row, frame in order[:3]:
@@ -299,22 +278,19 @@ def test_block_rows_shared_by_threads_are_the_same_to_the_bit(
             rows.add_frame(order[2][0], order[2][1], period)  # a row added is taken
         for row, frame in order[3:] if ambient_first else [(2, frames[2])]:
             rows.add_frame(row, frame, period)
-        if count > 1 and route == "compiled":
-            assert rows._fit is not None and not rows._fit.done()  # every frame in, the fit still held back
-            fitted.set()
         assert rows.probe_stride > 1
-        taken = rows.statistics(spec)  # the rows as they stand once every frame is recorded
+        taken = rows.statistics(spec)
         excluded = np.logical_or.reduce(rows._invalid) if rows._invalid else None
         results.append((rows.rows.copy(), rows.differences.copy(), excluded, taken))
-    (rows_1, probe_1, excluded_1, one), (rows_n, probe_n, excluded_n, shared) = results
+    (rows_1, probe_1, excluded_1, one), (rows_n, probe_n, excluded_n, other) = results
     assert excluded_1 is not None and excluded_1.any()  # the saturated pixels dropped blocks
     np.testing.assert_array_equal(excluded_n, excluded_1)
     np.testing.assert_array_equal(rows_n, rows_1)
     np.testing.assert_array_equal(probe_n, probe_1)
     for field in ("gram", "cross", "ambient_energy", "n_samples"):
-        np.testing.assert_array_equal(getattr(shared, field), getattr(one, field))
+        np.testing.assert_array_equal(getattr(other, field), getattr(one, field))
     for name, value in vars(one.channels).items():
-        np.testing.assert_array_equal(getattr(shared.channels, name), value, err_msg=name)
+        np.testing.assert_array_equal(getattr(other.channels, name), value, err_msg=name)
 
 
 def reference_channel_moments(
