@@ -118,6 +118,7 @@ class BlockRows:
         white_level: float,
         black_level: float = 0.0,
         weighting: bool = False,
+        compiled: bool | None = None,
     ) -> None:
         height, width = plane_shape[0] // factor, plane_shape[1] // factor
         if height == 0 or width == 0:
@@ -153,6 +154,9 @@ class BlockRows:
         (weighted rows only)."""
         self._ambient_saturated: np.ndarray | None = None
         self._weights: np.ndarray | None = None  # the weights, taken once the ambient row is in
+        self.compiled = frame_kernels.statistics_compiled() if compiled is None else compiled
+        """Whether :meth:`statistics` takes the moments by the compiled pass (agreeing with the numpy route to
+        rounding only): decided when the rows are laid out (:func:`processing.frame_kernels.statistics_compiled`)."""
 
     def add(self, row: int, plane: np.ndarray) -> None:
         """Block-sum one (H, W, C) plane into ``row`` (LED frame j → j, ambient → n) and note its saturated blocks."""
@@ -282,7 +286,10 @@ class BlockRows:
         if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
             raise non_finite_frames_error(rows[:-1])
         weights = self._weights if self.weighting else None  # they enter each chunk's product
-        moments, noise, excluded_columns, scale, column_factor = self._moments(weights, chunk_pixels, workers)
+        if self.compiled:
+            moments, noise, excluded_columns, scale, channel_moments = self._compiled_moments(weights, spec)
+        else:
+            moments, noise, excluded_columns, scale, column_factor = self._moments(weights, chunk_pixels, workers)
         if noise is not None:
             noise = None if scale is None else noise * scale
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
@@ -295,18 +302,56 @@ class BlockRows:
             n_samples=rows.shape[1] - excluded_columns,
             weighted=weights is not None,
         )
-        channel_moments = self._channel_moments(spec, column_factor, scale if noise is not None else None)
+        if not self.compiled:
+            channel_moments = self._channel_moments(spec, column_factor, scale if noise is not None else None)
         return replace(statistics, channels=channel_moments)
+
+    def _invalid_blocks(self) -> np.ndarray | None:
+        """The (H/f, W/f) blocks left out (saturated in some frame, or excluded), or None when none is."""
+        invalid = None
+        for mask in self._invalid:
+            invalid = mask if invalid is None else invalid | mask
+        return invalid if invalid is not None and invalid.any() else None
+
+    def _compiled_moments(
+        self, weights: np.ndarray | None, spec: FrameStackSpec
+    ) -> tuple[np.ndarray, np.ndarray | None, int, float | None, ChannelMoments]:
+        """:meth:`_moments` and :meth:`_channel_moments` in one compiled pass over the rows and one over the probe
+        (:func:`processing.frame_kernels.block_statistics`): the same quantities, to rounding."""
+        invalid = self._invalid_blocks()
+        factors = np.ones(self.rows.shape[1]) if invalid is None else (~self._columns(invalid)).astype(float)
+        column_weights = factors if weights is None else weights if invalid is None else weights * factors
+        transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
+        moments, fa, ff, aa = frame_kernels.block_statistics(
+            self.rows, column_weights, factors, transform, self.block_shape, 1
+        )
+        ones = self.rows[-1] * factors
+        blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
+        excluded = 0 if invalid is None else int(np.count_nonzero(invalid))
+        excluded_probed = 0 if invalid is None else int(np.count_nonzero(invalid[:: self.probe_stride]))
+        scale = self._probe_scale(excluded, excluded_probed)
+        if self.differences is None:
+            return moments, None, excluded * self.block_shape[1], scale, ChannelMoments(fa, ff, aa, blocks)
+        noise, *channel_noise = frame_kernels.block_statistics(
+            self.differences,
+            self._at_probe(column_weights),
+            self._at_probe(factors),
+            transform,
+            self.difference_shape,
+            2,
+        )
+        if scale is None:
+            channels = ChannelMoments(fa, ff, aa, blocks)
+        else:
+            channels = ChannelMoments(fa, ff, aa, blocks, *(part * scale for part in channel_noise))
+        return moments, noise, excluded * self.block_shape[1], scale, channels
 
     def _moments(
         self, weights: np.ndarray | None, chunk_pixels: int, workers: int
     ) -> tuple[np.ndarray, np.ndarray | None, int, float | None, np.ndarray | None]:
         """The rows' and the probe's moments over the valid blocks (weighted by ``weights``, None: unweighted), the
         columns left out, the probe's scale, and each column's factor (0 where left out; None: none is)."""
-        invalid = None
-        for mask in self._invalid:
-            invalid = mask if invalid is None else invalid | mask
-        invalid = invalid if invalid is not None and invalid.any() else None
+        invalid = self._invalid_blocks()
         parts = [_masked_part(self.rows, None if invalid is None else self._columns(invalid), weights)]
         if self.differences is not None:
             probe_weights = None if weights is None else self._at_probe(weights)

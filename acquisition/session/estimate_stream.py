@@ -121,8 +121,10 @@ class EstimateStream:
         Also accumulate the tiles of the local estimate (``tiles`` per side), or None.
     live
         Frames arrive while a camera streams: never a compiled kernel's first load or compile then
-        (:func:`processing.frame_kernels.paused`). The numbers do not depend on it (both routes give the
-        same block sums and noise line to the bit).
+        (:func:`processing.frame_kernels.paused`). The numbers do not depend on it: both routes give the
+        same block sums and noise line to the bit, and the moments' route (compiled or numpy, which agree to
+        rounding only) is decided when the stream is made, by whether this process has the kernels loaded
+        already (:func:`processing.frame_kernels.statistics_compiled`), live or not.
     """
 
     def __init__(
@@ -150,6 +152,9 @@ class EstimateStream:
         self._tiles: TileBlocks | None = None
         self._n_led_rows = 0
         self._have_ambient = False
+        # The moments' route, decided before this stream loads anything (a live one never does): a capture's stream and
+        # ``msflash estimate`` of its sequence in the same kind of process take the same (frame_kernels.statistics_compiled).
+        self._compiled_statistics = frame_kernels.statistics_compiled()
 
     @classmethod
     def for_sequence(
@@ -219,6 +224,7 @@ class EstimateStream:
                     camera.white_level,
                     black_level=camera.black_level,
                     weighting=SAMPLE_WEIGHTING,
+                    compiled=self._compiled_statistics,
                 )
             if self._rows is not None and self.live:
                 with frame_kernels.paused():
