@@ -97,11 +97,20 @@ def accumulate_statistics(
             f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2"
         )
     _check_stack(ambient, led_frames, spec, sample_mask)
-    compiled = frame_kernels.statistics_compiled()  # as a stream decides it: before this call loads the kernels
+    block_moments_compiled = frame_kernels.statistics_compiled()  # as a stream decides: before this call loads them
     frame_kernels.wanted(ambient.nbytes * (len(led_frames) + 1))  # loads the kernels for large stacks
     if bin_factor > 1:
         return _accumulate_binned(
-            ambient, led_frames, spec, sample_mask, chunk_pixels, bin_factor, cfa_period, workers, weighting, compiled
+            ambient,
+            led_frames,
+            spec,
+            sample_mask,
+            chunk_pixels,
+            bin_factor,
+            cfa_period,
+            workers,
+            weighting,
+            block_moments_compiled,
         )
     n_samples = ambient.size
     if sample_mask is None:
