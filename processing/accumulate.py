@@ -87,19 +87,30 @@ def accumulate_statistics(
     (docs/architecture.md §6). Moments are accumulated in float64 (all pixels of ≤ 16-bit integer
     frames: exactly, in integers). Integer frames are read once, by the compiled kernels of
     :mod:`processing.frame_kernels` (binned: per frame; all pixels: every frame's tile together), when
-    numba is installed; numpy takes the same steps otherwise, and both routes give the same statistics
-    to the bit (the block sums and the all-pixel moments are exact integers; the weighted moments of
-    the block sums are taken by numpy on either route).
+    numba is installed; numpy takes the same steps otherwise. The block sums and the all-pixel moments are
+    exact integers on both routes; the moments of the block sums are taken by the compiled
+    :func:`processing.frame_kernels.block_statistics` where the kernels were loaded before the call
+    (:func:`processing.frame_kernels.statistics_compiled`), by numpy otherwise: the two agree to rounding.
     """
     if bin_factor < 1 or cfa_period not in (1, 2):
         raise SpectralDataError(
             f"statistics: bin_factor {bin_factor}, cfa_period {cfa_period}; expected ≥ 1 and 1 or 2"
         )
     _check_stack(ambient, led_frames, spec, sample_mask)
+    block_moments_compiled = frame_kernels.statistics_compiled()  # as a stream decides: before this call loads them
     frame_kernels.wanted(ambient.nbytes * (len(led_frames) + 1))  # loads the kernels for large stacks
     if bin_factor > 1:
         return _accumulate_binned(
-            ambient, led_frames, spec, sample_mask, chunk_pixels, bin_factor, cfa_period, workers, weighting
+            ambient,
+            led_frames,
+            spec,
+            sample_mask,
+            chunk_pixels,
+            bin_factor,
+            cfa_period,
+            workers,
+            weighting,
+            block_moments_compiled,
         )
     n_samples = ambient.size
     if sample_mask is None:
@@ -189,8 +200,10 @@ def _accumulate_binned(
     cfa_period: int,
     workers: int,
     weighting: bool = False,
+    compiled: bool | None = None,
 ) -> SequenceStatistics:
-    """Statistics of block sums: a block is valid when no member is saturated (or masked out)."""
+    """Statistics of block sums: a block is valid when no member is saturated (or masked out); the moments by the
+    compiled pass or numpy as ``compiled`` says (:class:`processing.block_rows.BlockRows`)."""
     frames = [ambient, *led_frames]
     n_led_frames = len(led_frames)
     rows = BlockRows(
@@ -200,6 +213,7 @@ def _accumulate_binned(
         spec.white_level,
         black_level=spec.black_level,
         weighting=weighting,
+        compiled=compiled,
     )
     # Rows [F_1 … F_n, A, 1]: the ambient frame is row n. Each frame is one independent pass
     # (block sums, saturation), so ``workers`` threads share the frames: the compiled pass and

@@ -36,7 +36,6 @@ count of valid samples.
 from __future__ import annotations
 
 import math
-from concurrent.futures import Future
 from dataclasses import replace
 
 import numpy as np
@@ -59,7 +58,6 @@ from msflash.processing.moment_products import (
     DEFAULT_CHUNK_PIXELS,
     gram_matrices,
     serial_columns,
-    thread_pool,
 )
 from msflash.processing.noise_level import PixelNoise, ambient_block_noise, detail_noise_line
 from msflash.processing.statistics import (
@@ -107,10 +105,9 @@ class BlockRows:
     products), so the whole estimate costs less, though the last frame's latency carries one full product
     (≈ 1 ms for a 1280×1024 mosaic; docs/speed.md).
 
-    Frames may be added from several threads (distinct rows); or one at a time, each shared by ``workers`` threads by
-    block rows (the compiled pass, :func:`processing.frame_kernels.block_pass`: the same sums whatever the count).
-    Weighted on several threads, the ambient frame's noise line and weights are fitted on a second core while the
-    next frames' passes run (:meth:`statistics` waits for them): the same numbers as one thread.
+    Frames may be added from several threads (distinct rows); each frame's pass, the noise line and the moments run on
+    the thread that calls them (a second thread sharing a frame's pass, the fit or the probe's moments measured no
+    faster: docs/speed.md, 2026-11-28, third session).
     """
 
     def __init__(
@@ -121,7 +118,7 @@ class BlockRows:
         white_level: float,
         black_level: float = 0.0,
         weighting: bool = False,
-        workers: int = 1,
+        compiled: bool | None = None,
     ) -> None:
         height, width = plane_shape[0] // factor, plane_shape[1] // factor
         if height == 0 or width == 0:
@@ -129,7 +126,6 @@ class BlockRows:
                 f"frame of shape {plane_shape} is smaller than one {factor}×{factor} block; expected a larger frame"
             )
         self.factor, self.white_level, self.n_led_frames = factor, white_level, n_led_frames
-        self.workers = workers
         self.plane_shape = tuple(plane_shape)
         self.block_shape = (height, plane_shape[2], width)
         n_rows = n_led_frames + 2
@@ -158,7 +154,9 @@ class BlockRows:
         (weighted rows only)."""
         self._ambient_saturated: np.ndarray | None = None
         self._weights: np.ndarray | None = None  # the weights, taken once the ambient row is in
-        self._fit: Future[np.ndarray] | None = None  # the same, being fitted on a second core (add_frame)
+        self.compiled = frame_kernels.statistics_compiled() if compiled is None else compiled
+        """Whether :meth:`statistics` takes the moments by the compiled pass (agreeing with the numpy route to
+        rounding only): decided when the rows are laid out (:func:`processing.frame_kernels.statistics_compiled`)."""
 
     def add(self, row: int, plane: np.ndarray) -> None:
         """Block-sum one (H, W, C) plane into ``row`` (LED frame j → j, ambient → n) and note its saturated blocks."""
@@ -207,7 +205,6 @@ class BlockRows:
             self.probe_stride,
             self.rows[row].reshape(self.block_shape),
             differences,
-            self.workers,
         )
         if not done:
             self.add(row, cfa_planes(frame, cfa_period))
@@ -215,10 +212,7 @@ class BlockRows:
         self._record(row, saturated)
         if row == self.n_led_frames and self.weighting:
             # The same cells in the same order as from the planes (add): both routes weigh alike, to the bit.
-            if self.workers > 1:  # fitted on a second core while the next frames' passes run
-                self._fit = thread_pool(self.workers).submit(self._fitted_weights, frame, cfa_period)
-            else:
-                self._weights = self._fitted_weights(frame, cfa_period)
+            self._weights = self._fitted_weights(frame, cfa_period)
 
     def _check_row(self, row: int) -> None:
         if row in self._filled or not 0 <= row <= self.n_led_frames:
@@ -288,13 +282,14 @@ class BlockRows:
             raise SpectralDataError(
                 f"frame stack: {len(self._filled) - 1} of {rows.shape[0] - 1} frames added; expected all of them"
             )
-        if self._fit is not None:
-            self._weights, self._fit = self._fit.result(), None
         # Integer sums are always finite; for float frames one sum flags NaN/inf (exact check only then).
         if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
             raise non_finite_frames_error(rows[:-1])
         weights = self._weights if self.weighting else None  # they enter each chunk's product
-        moments, noise, excluded_columns, scale, column_factor = self._moments(weights, chunk_pixels, workers)
+        if self.compiled:
+            moments, noise, excluded_columns, scale, channel_moments = self._compiled_moments(weights, spec)
+        else:
+            moments, noise, excluded_columns, scale, column_factor = self._moments(weights, chunk_pixels, workers)
         if noise is not None:
             noise = None if scale is None else noise * scale
         # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
@@ -307,18 +302,56 @@ class BlockRows:
             n_samples=rows.shape[1] - excluded_columns,
             weighted=weights is not None,
         )
-        channel_moments = self._channel_moments(spec, column_factor, scale if noise is not None else None)
+        if not self.compiled:
+            channel_moments = self._channel_moments(spec, column_factor, scale if noise is not None else None)
         return replace(statistics, channels=channel_moments)
+
+    def _invalid_blocks(self) -> np.ndarray | None:
+        """The (H/f, W/f) blocks left out (saturated in some frame, or excluded), or None when none is."""
+        invalid = None
+        for mask in self._invalid:
+            invalid = mask if invalid is None else invalid | mask
+        return invalid if invalid is not None and invalid.any() else None
+
+    def _compiled_moments(
+        self, weights: np.ndarray | None, spec: FrameStackSpec
+    ) -> tuple[np.ndarray, np.ndarray | None, int, float | None, ChannelMoments]:
+        """:meth:`_moments` and :meth:`_channel_moments` in one compiled pass over the rows and one over the probe
+        (:func:`processing.frame_kernels.block_statistics`): the same quantities, to rounding."""
+        invalid = self._invalid_blocks()
+        factors = np.ones(self.rows.shape[1]) if invalid is None else (~self._columns(invalid)).astype(float)
+        column_weights = factors if weights is None else weights if invalid is None else weights * factors
+        transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
+        moments, fa, ff, aa = frame_kernels.block_statistics(
+            self.rows, column_weights, factors, transform, self.block_shape, 1
+        )
+        ones = self.rows[-1] * factors
+        blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
+        excluded = 0 if invalid is None else int(np.count_nonzero(invalid))
+        excluded_probed = 0 if invalid is None else int(np.count_nonzero(invalid[:: self.probe_stride]))
+        scale = self._probe_scale(excluded, excluded_probed)
+        if self.differences is None:
+            return moments, None, excluded * self.block_shape[1], scale, ChannelMoments(fa, ff, aa, blocks)
+        noise, *channel_noise = frame_kernels.block_statistics(
+            self.differences,
+            self._at_probe(column_weights),
+            self._at_probe(factors),
+            transform,
+            self.difference_shape,
+            2,
+        )
+        if scale is None:
+            channels = ChannelMoments(fa, ff, aa, blocks)
+        else:
+            channels = ChannelMoments(fa, ff, aa, blocks, *(part * scale for part in channel_noise))
+        return moments, noise, excluded * self.block_shape[1], scale, channels
 
     def _moments(
         self, weights: np.ndarray | None, chunk_pixels: int, workers: int
     ) -> tuple[np.ndarray, np.ndarray | None, int, float | None, np.ndarray | None]:
         """The rows' and the probe's moments over the valid blocks (weighted by ``weights``, None: unweighted), the
         columns left out, the probe's scale, and each column's factor (0 where left out; None: none is)."""
-        invalid = None
-        for mask in self._invalid:
-            invalid = mask if invalid is None else invalid | mask
-        invalid = invalid if invalid is not None and invalid.any() else None
+        invalid = self._invalid_blocks()
         parts = [_masked_part(self.rows, None if invalid is None else self._columns(invalid), weights)]
         if self.differences is not None:
             probe_weights = None if weights is None else self._at_probe(weights)
@@ -345,22 +378,11 @@ class BlockRows:
         transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
         ones = self.rows[-1] if column_factor is None else self.rows[-1] * column_factor
         blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
-        differences = self.differences if probe_scale is not None else None
-        noise_products = None
-        # On several threads, the probe's products beside the rows' on a second core (each taken as on one thread).
-        if differences is not None and self.workers > 1:
-            at_probe = None if column_factor is None else self._at_probe(column_factor)
-            noise_products = thread_pool(self.workers).submit(
-                _channel_products, transform, differences, self.difference_shape, 2, at_probe
-            )
         fa, ff, aa = _channel_products(transform, self.rows, self.block_shape, 1, column_factor)
-        if differences is None or probe_scale is None:
+        if self.differences is None or probe_scale is None:
             return ChannelMoments(fa, ff, aa, blocks)
-        if noise_products is None or noise_products.cancel():  # one thread, or the pool had not started it
-            at_probe = None if column_factor is None else self._at_probe(column_factor)
-            noise = _channel_products(transform, differences, self.difference_shape, 2, at_probe)
-        else:
-            noise = noise_products.result()
+        at_probe = None if column_factor is None else self._at_probe(column_factor)
+        noise = _channel_products(transform, self.differences, self.difference_shape, 2, at_probe)
         return ChannelMoments(fa, ff, aa, blocks, *(part * probe_scale for part in noise))
 
 

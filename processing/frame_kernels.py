@@ -12,9 +12,13 @@ Integer frames only (≤ 16 bits: the block sums are exact in 32-bit integers fo
 181 × 181, the weighted sums are taken in float64); float frames keep the numpy route, as does
 everything when numba is missing (it is an optional dependency, ``pip install msflash[fast]``) or
 ``MSFLASH_KERNELS=numpy`` is set, and small one-off work in a process that has not loaded the
-kernels (:func:`wanted`: numba's start-up would cost more than it saves). Both routes give the same
-numbers to the bit (tests/processing/test_frame_kernels.py), so which one a process takes changes
-its speed only, never what it reports.
+kernels (:func:`wanted`: numba's start-up would cost more than it saves). The passes over the frames
+give the same numbers to the bit on both routes (exact integer sums; tests/processing/test_frame_kernels.py),
+so which one a process takes changes its speed only. The moments of the block rows
+(:func:`block_statistics`) agree with numpy's to rounding only (about 1e-14 relative): their route is
+decided once per stack, by whether the process has the kernels loaded before the stack's rows are laid
+out (:func:`statistics_compiled`), so that the live and the disk stream of one sequence in the same kind
+of process report the same digits.
 
 The block size, the CFA period and the channel count are passed as tuples of that length so that
 numba compiles (and caches on disk) one specialised kernel per combination: with them constant, its
@@ -32,8 +36,6 @@ from functools import lru_cache
 from typing import Any
 
 import numpy as np
-
-from msflash.processing.moment_products import shared_tasks
 
 KERNELS_VARIABLE = "MSFLASH_KERNELS"
 """Environment variable: ``numpy`` turns the compiled kernels off, ``numba`` uses them on any work;
@@ -62,7 +64,28 @@ def _compiled() -> Any:
         from msflash.processing import frame_kernels_numba
     except ImportError:
         return None
+    _warm(frame_kernels_numba)
     return frame_kernels_numba
+
+
+def _warm(kernels: Any) -> None:
+    """Run :func:`block_statistics`' one specialisation once, as the kernels load: a stream that decided on it
+    (:func:`statistics_compiled`) then never compiles it while a camera streams (loaded from the disk cache, or
+    compiled now, once per installation)."""
+    one = np.ones(1)
+    kernels.block_statistics(
+        np.ones((1, 1)),
+        one,
+        one,
+        np.ones((1, 1)),
+        1,
+        1,
+        1,
+        False,
+        np.zeros((1, 1)),
+        *(np.zeros((0, 1, 1)),) * 2,
+        np.zeros((1, 1)),
+    )
 
 
 _paused = 0
@@ -76,8 +99,9 @@ def paused() -> Iterator[None]:
     For a capture that streams: a kernel specialisation not compiled yet in this process (a fresh
     install has no on-disk cache) compiles on first use, holding the interpreter for a second or
     more, and the booth's watchdog switched the LEDs off during the flash frame of a camera-synced
-    run while that happened. The numpy route gives the same statistics to the bit (exact integer
-    block sums and all-pixel moments; numpy's weighted moments on both routes).
+    run while that happened. The numpy route gives the same block sums and all-pixel moments to the bit
+    (exact integers). The block rows' moments keep the route :func:`statistics_compiled` chose for the stack
+    (its one kernel specialisation is compiled as the kernels load, :func:`_warm`, so it never compiles here).
     """
     global _paused
     with _paused_lock:
@@ -112,6 +136,19 @@ def wanted(frame_bytes: int) -> bool:
     return frame_bytes >= COMPILE_BYTES and _mode() != "numpy" and _compiled() is not None
 
 
+def statistics_compiled() -> bool:
+    """Whether block rows laid out now take their moments by the compiled :func:`block_statistics`: the kernels are
+    loaded in this process already, or forced (``MSFLASH_KERNELS=numba``) — whatever :func:`paused` says, and never
+    by loading them. Decided once per stack, when its rows are laid out and before anything loads the kernels for it,
+    so that a capture's live stream and ``msflash estimate`` of its sequence in the same kind of process take the
+    same route (the two routes agree to rounding only; :class:`processing.block_rows.BlockRows`)."""
+    if _mode() == "numpy":
+        return False
+    if _mode() == "numba" or "msflash.processing.frame_kernels_numba" in sys.modules:
+        return _compiled() is not None
+    return False
+
+
 def enabled() -> bool:
     """Whether the compiled kernels are in use in this process."""
     return _loaded() is not None
@@ -126,13 +163,6 @@ def _rows_view(frame: np.ndarray) -> np.ndarray | None:
     return frame.reshape(frame.shape[0], -1)
 
 
-SPLIT_FRAME_BYTES = 1 << 22
-"""Frames of at least this many bytes are shared by block rows among :func:`block_pass`'s ``workers``. Measured
-interleaved in one process on the shared 2-core machine (docs/speed.md, issue 30's second session): a 1280×1024
-RGB16 frame (7.9 MB, about 1 ms a pass) gains, a 12-bit mosaic of that size (2.6 MB, 0.2–0.3 ms) lost about a
-tenth of its estimate to the second thread's hand-over."""
-
-
 def block_pass(
     frame: np.ndarray,
     factor: int,
@@ -141,7 +171,6 @@ def block_pass(
     probe_stride: int,
     sums: np.ndarray,
     differences: np.ndarray | None,
-    workers: int = 1,
 ) -> tuple[bool, np.ndarray | None]:
     """Block sums, half differences and saturated blocks of one raw frame, in one compiled pass.
 
@@ -156,10 +185,6 @@ def block_pass(
     differences
         Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64: each probed block's checkerboard half difference
         (:func:`processing.block_sums.block_sums_and_differences`); or None.
-    workers
-        Threads sharing the frame by block rows (:func:`processing.moment_products.shared_tasks`; the calling
-        thread takes the first share) when it has at least :data:`SPLIT_FRAME_BYTES`. Each block is summed by
-        one thread alone, in the same order, so the outputs do not depend on it.
 
     Returns
     -------
@@ -178,16 +203,48 @@ def block_pass(
     probe = differences if differences is not None else np.empty((0, sums.shape[2], sums.shape[1]))
     shape = ((0,) * cfa_period, (0,) * (cfa_period * channels), (0,) * factor)
 
-    shares = max(1, min(workers, height)) if frame.nbytes >= SPLIT_FRAME_BYTES else 1
-    bounds = [height * part // shares for part in range(shares + 1)]
-    hits = shared_tasks(
-        lambda part: kernels.block_pass(
-            rows, *shape, float(white), int(probe_stride), sums, probe, saturated, *bounds[part : part + 2]
-        ),
-        shares,
-        workers,
+    hit = kernels.block_pass(rows, *shape, float(white), int(probe_stride), sums, probe, saturated, 0, height)
+    return True, saturated if hit else None
+
+
+def block_statistics(
+    values: np.ndarray,
+    weights: np.ndarray,
+    factors: np.ndarray,
+    transform: np.ndarray,
+    layout: tuple[int, int, int],
+    channel_axis: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The weighted second moments of the rows ``values`` (R, N) and their images' channel moments, in one compiled
+    pass over them (used where :func:`statistics_compiled` said so, :func:`paused` or not).
+
+    ``weights`` (N,) weigh each column in ``Σ w x xᵀ``; ``transform`` (K + 1, R) maps the rows to the K LED images and
+    the ambient's, each column scaled by ``factors`` (N,), whose products per channel give ``(gram, fa, ff, aa)``:
+    ``gram`` (R, R) symmetric, ``fa`` and ``ff`` (K, C, C), ``aa`` (C, C) as :class:`processing.statistics.ChannelMoments`
+    holds them. The columns are laid out ``layout`` (block rows first; the channels on ``channel_axis`` 1 or 2).
+    """
+    kernels = _compiled()
+    height = layout[0]
+    channels, width = (layout[1], layout[2]) if channel_axis == 1 else (layout[2], layout[1])
+    rows, images = values.shape[0], transform.shape[0]
+    gram = np.zeros((rows, rows))
+    fa, ff = np.zeros((images - 1, channels, channels)), np.zeros((images - 1, channels, channels))
+    aa = np.zeros((channels, channels))
+    kernels.block_statistics(
+        np.ascontiguousarray(values, dtype=np.float64),
+        np.ascontiguousarray(weights, dtype=np.float64),
+        np.ascontiguousarray(factors, dtype=np.float64),
+        np.ascontiguousarray(transform, dtype=np.float64),
+        height,
+        channels,
+        width,
+        channel_axis == 2,
+        gram,
+        fa,
+        ff,
+        aa,
     )
-    return True, saturated if any(hits) else None
+    return gram + np.tril(gram, -1).T, fa, ff, aa
 
 
 def synthesis_inputs(frames: list[np.ndarray]) -> tuple[np.ndarray, ...] | None:

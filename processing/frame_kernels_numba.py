@@ -221,3 +221,81 @@ def moments(frames, channels, white, start, stop, out):
                 out[first + 2, second] += s20
                 out[first + 2, second + 1] += s21
                 out[first + 2, second + 2] += s22
+
+
+@njit(nogil=True, cache=True, fastmath=True)
+def block_statistics(values, weights, factors, transform, height, channels, width, channels_inner, gram, fa, ff, aa):
+    """The moments of block rows in one pass over them, block row by block row (each block row's values in cache):
+    ``gram[i, j] += Σ_t w_t x_it x_jt`` (``j ≤ i``: the lower triangle) over the columns ``t`` of ``values`` (R, N),
+    weighted by ``weights`` (N,); and the channel moments of the images ``y = transform · x`` (K + 1, R) scaled by
+    ``factors`` (N,): per image ``i < K`` and channels ``c, d``, ``fa[i, c, d] += Σ y_ic y_Kd`` and
+    ``ff[i, c, d] += Σ y_ic y_id`` over the blocks, and ``aa[c, d] += Σ y_Kc y_Kd``.
+
+    The N columns are ``height`` block rows of ``channels × width`` values, laid out (channel, block column) or, with
+    ``channels_inner``, (block column, channel). Sums are reassociated (fastmath): the numpy route
+    (:class:`processing.block_rows.BlockRows`) agrees to rounding, not to the bit.
+    """
+    rows = values.shape[0]
+    images = transform.shape[0]
+    k = images - 1
+    inner = channels * width
+    weighted = np.empty((rows, inner))
+    mapped = np.empty((images, inner))
+    image = np.empty((images, channels, width))
+    for h in range(height):
+        base = h * inner
+        for i in range(rows):
+            source = values[i]
+            target = weighted[i]
+            for t in range(inner):
+                target[t] = weights[base + t] * source[base + t]
+        for i in range(rows):
+            left = weighted[i]
+            for j in range(i + 1):
+                right = values[j]
+                total = 0.0
+                for t in range(inner):
+                    total += left[t] * right[base + t]
+                gram[i, j] += total
+        for i in range(images):
+            target = mapped[i]
+            for t in range(inner):
+                target[t] = 0.0
+            for j in range(rows):
+                scale = transform[i, j]
+                source = values[j]
+                for t in range(inner):
+                    target[t] += scale * source[base + t]
+            for t in range(inner):
+                target[t] *= factors[base + t]
+            if channels_inner:
+                for b in range(width):
+                    for c in range(channels):
+                        image[i, c, b] = target[b * channels + c]
+            else:
+                for c in range(channels):
+                    for b in range(width):
+                        image[i, c, b] = target[c * width + b]
+        ambient = image[k]
+        for i in range(k):
+            led = image[i]
+            for c in range(channels):
+                first = led[c]
+                for d in range(channels):
+                    other = ambient[d]
+                    second = led[d]
+                    cross = 0.0
+                    own = 0.0
+                    for b in range(width):
+                        cross += first[b] * other[b]
+                        own += first[b] * second[b]
+                    fa[i, c, d] += cross
+                    ff[i, c, d] += own
+        for c in range(channels):
+            first = ambient[c]
+            for d in range(channels):
+                other = ambient[d]
+                total = 0.0
+                for b in range(width):
+                    total += first[b] * other[b]
+                aa[c, d] += total

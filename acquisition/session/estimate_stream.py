@@ -42,7 +42,6 @@ from msflash.processing.block_sums import plane_shape
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flicker import corrected_tiles
 from msflash.processing.local import LocalEstimate, TileBlocks, estimate_local
-from msflash.processing.moment_products import DEFAULT_WORKERS
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 
 USED_ROLES = ("ambient", "led")
@@ -122,8 +121,10 @@ class EstimateStream:
         Also accumulate the tiles of the local estimate (``tiles`` per side), or None.
     live
         Frames arrive while a camera streams: never a compiled kernel's first load or compile then
-        (:func:`processing.frame_kernels.paused`). The numbers do not depend on it (both routes give the
-        same block sums and noise line to the bit).
+        (:func:`processing.frame_kernels.paused`). The numbers do not depend on it: both routes give the
+        same block sums and noise line to the bit, and the moments' route (compiled or numpy, which agree to
+        rounding only) is decided when the stream is made, by whether this process has the kernels loaded
+        already (:func:`processing.frame_kernels.statistics_compiled`), live or not.
     """
 
     def __init__(
@@ -151,6 +152,9 @@ class EstimateStream:
         self._tiles: TileBlocks | None = None
         self._n_led_rows = 0
         self._have_ambient = False
+        # The moments' route, decided before this stream loads anything (a live one never does): a capture's stream and
+        # ``msflash estimate`` of its sequence in the same kind of process take the same (frame_kernels.statistics_compiled).
+        self._compiled_statistics = frame_kernels.statistics_compiled()
 
     @classmethod
     def for_sequence(
@@ -220,7 +224,7 @@ class EstimateStream:
                     camera.white_level,
                     black_level=camera.black_level,
                     weighting=SAMPLE_WEIGHTING,
-                    workers=1 if self.live else DEFAULT_WORKERS,  # from disk: each frame's compiled pass on both cores
+                    compiled=self._compiled_statistics,
                 )
             if self._rows is not None and self.live:
                 with frame_kernels.paused():

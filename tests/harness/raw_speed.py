@@ -3,7 +3,7 @@
 For the bench's 1280×1024 world as RGB and as a raw 12-bit RGGB mosaic: the default estimate as ``msflash estimate``
 streams it (weighted block rows, one moment product at the end, the default solve), the light models' channel statistics, and the family
 model's estimate (statistics, prior, families), each the median of ``--pairs`` pairs interleaved with a copy of the
-frames (and the streamed estimate on two threads with it on one) (:func:`msflash.lab.bench.ratios.interleaved_ratio`, as ``msflash bench`` measures). ``--one-thread`` sets
+frames (:func:`msflash.lab.bench.ratios.interleaved_ratio`, as ``msflash bench`` measures). ``--one-thread`` sets
 ``OPENBLAS_NUM_THREADS=1`` first. One JSON line; no targets asserted (docs/speed.md, Raw frames).
 """
 
@@ -37,8 +37,8 @@ def main(argv: list[str] | None = None) -> int:
         frames, spec = world["frames"], world["spec"]
         factor = block_factor(frames[0].shape, cfa)
 
-        def streamed(world=world, factor=factor, workers=1) -> object:  # noqa: ANN001
-            return streamed_estimate(world, factor, workers)
+        def streamed(world=world, factor=factor) -> object:  # noqa: ANN001
+            return streamed_estimate(world, factor)
 
         def channels(frames=frames, spec=spec, cfa=cfa) -> object:  # noqa: ANN001
             bin_factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)
@@ -46,8 +46,6 @@ def main(argv: list[str] | None = None) -> int:
 
         label, copy = cfa or "RGB", frame_copy(frames)
         figures[f"{label} estimate"] = interleaved_ratio(streamed, copy, args.pairs)["median"]
-        two = interleaved_ratio(lambda streamed=streamed: streamed(workers=2), streamed, args.pairs)
-        figures[f"{label} estimate 2 threads ÷ 1"] = two["median"]
         figures[f"{label} channel_statistics"] = interleaved_ratio(channels, copy, args.pairs)["median"]
         figures[f"{label} family"] = family_ratio(world, args.pairs)["median"]
     print(json.dumps({name: round(value, 2) for name, value in figures.items()}))

@@ -528,23 +528,38 @@ def test_collection_resumes_after_a_failed_flash_decision(sim_rig, tmp_path: Pat
     assert sim_rig.emulator.levels == (0.0,) * 4
 
 
-def test_a_streaming_session_never_runs_a_compiled_kernel(sim_rig, tmp_path: Path, monkeypatch) -> None:
-    """Even in a process that has the kernels (forced here): adding frames and deciding take the numpy
-    route, as a first compile there stalls the stream and the booth's watchdog switches the LEDs off."""
+def test_a_streaming_session_never_compiles_a_kernel(sim_rig, tmp_path: Path, monkeypatch) -> None:
+    """Even in a process that has the kernels (forced here): adding frames and deciding take the numpy route for the
+    frames' passes, and the moments' kernel the stream chose when it was made (frame_kernels.statistics_compiled) was
+    compiled as the kernels loaded — nothing compiles while frames arrive (a first compile there stalls the stream and
+    the booth's watchdog switches the LEDs off)."""
     from msflash.processing import frame_kernels
     from msflash.processing.errors import TargetUnreachableWarning
 
     monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numba")
     frame_kernels._compiled.cache_clear()
+    kernels = frame_kernels._compiled()  # a process that has them: loaded and warmed
+    if kernels is None:
+        pytest.skip("numba is not installed")
+    compiled_before = {name: list(getattr(kernels, name).signatures) for name in ("block_pass", "block_statistics")}
     used: list[str] = []
-    monkeypatch.setattr(frame_kernels, "_compiled", lambda: used.append("compiled"))  # any use is recorded
+
+    class Recorder:
+        def __getattr__(self, name: str) -> object:
+            used.append(name)
+            return getattr(kernels, name)
+
+    monkeypatch.setattr(frame_kernels, "_compiled", lambda: Recorder())  # every kernel taken is recorded
     levels = [tuple(float(i == j) for i in range(4)) for j in range(4)]
     session = _session_and_frames(sim_rig, tmp_path, levels)
     statistics = session.statistics()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", TargetUnreachableWarning)  # synthetic frames: any flash will do
         decision = session.decide("complementary")
-    assert np.all(np.isfinite(decision.levels)) and statistics.n_samples > 0 and used == []
+    assert np.all(np.isfinite(decision.levels)) and statistics.n_samples > 0
+    assert set(used) == {"block_statistics"}  # the moments only: the frames' passes were numpy's
+    assert {name: list(getattr(kernels, name).signatures) for name in compiled_before} == compiled_before
+    used.clear()
     with frame_kernels.paused():
         assert not frame_kernels.enabled()
     assert used == []

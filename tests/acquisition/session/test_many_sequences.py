@@ -32,6 +32,16 @@ MIXES = (
 """Ambient weights of the day's sequences (three different in-span ambients)."""
 
 
+@pytest.fixture(autouse=True)
+def same_kind_of_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    """This test process may have the compiled kernels loaded (other tests), a worker process has not, and the block
+    moments' two routes agree to rounding only (processing.frame_kernels.statistics_compiled): the one-by-one runs
+    here and the workers (by inheritance) both take the numpy route, as two fresh processes would."""
+    from msflash.processing import frame_kernels
+
+    monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numpy")
+
+
 @pytest.fixture(scope="module")
 def day(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A folder of three noisy sequences, 0800, 0900, 1000: a time-lapse of an ambient."""

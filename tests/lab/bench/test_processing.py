@@ -7,7 +7,7 @@ import math
 from msflash.lab.bench.processing import processing_bench
 
 
-def test_processing_bench_reports_every_target_on_both_thread_counts_with_its_verdict() -> None:
+def test_processing_bench_reports_every_target_with_its_verdict() -> None:
     report = processing_bench(height=48, width=64, repeats=1, pairs=3, sizes=((48, 64), (40, 72)))
     assert set(report["targets"]) == {"64×48", "72×40", "64×48 RGGB", "72×40 RGGB"}  # RGB and raw frames
     for label, figures in report["targets"].items():
@@ -18,13 +18,14 @@ def test_processing_bench_reports_every_target_on_both_thread_counts_with_its_ve
             ("estimate_all_pixels_over_copy", "≤ 4"),
             ("synthesis_over_copy", "≤ 1.5"),
         ):
-            assert set(figures[name]) == {"1_thread", "2_threads"}, name
+            threads = {"1_thread"} if name == "estimate_over_copy" else {"1_thread", "2_threads"}  # one-thread estimate
+            assert set(figures[name]) == threads, name
             for figure in figures[name].values():
                 assert figure["target"] == target and figure["pairs"] == 3
                 assert 0 < figure["min"] <= figure["q1"] <= figure["median"] <= figure["q3"] <= figure["max"]
                 assert figure["met"] is None  # 3 pairs: too few to judge
         gains = figures["threads_gain"]  # 2 threads ÷ 1, interleaved: no target
-        assert set(gains) == {"estimate", "synthesis"}
+        assert set(gains) == {"synthesis"}
         assert all(gain["pairs"] == 3 and "met" not in gain and gain["median"] > 0 for gain in gains.values())
         for memory in figures["peak_memory_over_frames"].values():
             assert memory["ratio"] > 0 and memory["target"] == "≤ 0.5" and memory["met"] == (memory["ratio"] <= 0.5)
