@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -98,25 +99,38 @@ def haar_details(
         return empty, empty, empty, empty
     per_row = (columns // rows_per_cell) * cfa_period * cfa_period * frame.shape[2]
     stride = max(1, math.ceil(n_cell_rows * per_row / max(max_cells, 1)))
-    # (cell rows, 2·period, W, C): the chosen rows of cells, converted once.
+    # (cell rows, 2·period, W, C): the chosen rows of cells.
     slabs = frame[: n_cell_rows * rows_per_cell, :columns].reshape(n_cell_rows, rows_per_cell, columns, -1)[::stride]
-    slabs = slabs.astype(np.float64)
+    channels, cell_columns = slabs.shape[-1], columns // rows_per_cell
     # Split rows and columns into (cell member, CFA phase): sample (p, q) of cell member (i, j) is at
     # row i·period + p, column j·period + q of the slab.
-    cells = slabs.reshape(slabs.shape[0], 2, cfa_period, columns // rows_per_cell, 2, cfa_period, slabs.shape[-1])
-    # (cell row, cell column, phase row, phase column, channel): the order the CFA planes' own cells take
-    # (:func:`processing.block_sums.cfa_planes`), so a frame and its planes give the same arrays.
-    cells = cells.transpose(0, 3, 1, 4, 2, 5, 6)
-    x00, x01 = cells[:, :, 0, 0], cells[:, :, 0, 1]
-    x10, x11 = cells[:, :, 1, 0], cells[:, :, 1, 1]
+    cells = slabs.reshape(slabs.shape[0], 2, cfa_period, cell_columns, 2, cfa_period, channels)
+    # Converted once into (member row, member column, cell row, phase row, phase column, channel, cell column):
+    # each member a contiguous array with the long axis last, so the details below are plain array passes.
+    members = np.empty((2, 2, slabs.shape[0], cfa_period, cfa_period, channels, cell_columns))
+    np.copyto(members, cells.transpose(1, 4, 0, 2, 5, 6, 3))
+    x00, x01, x10, x11 = members[0, 0], members[0, 1], members[1, 0], members[1, 1]
     top_sum, bottom_sum, top_difference, bottom_difference = x00 + x01, x10 + x11, x00 - x01, x10 - x11
     total = top_sum + bottom_sum
     total -= 4.0 * black
     details = (top_difference - bottom_difference, top_difference + bottom_difference, top_sum - bottom_sum)
     usable = np.maximum(np.maximum(x00, x01), np.maximum(x10, x11)) < white
-    if usable.all():
-        return total.reshape(-1), *(detail.reshape(-1) for detail in details)
-    return total[usable], *(detail[usable] for detail in details)
+    # Returned in (cell row, cell column, phase row, phase column, channel) order: the order the CFA planes' own
+    # cells take (:func:`processing.block_sums.cfa_planes`), so a frame and its planes give the same arrays.
+    order = _cell_order(x00.shape)
+    usable = usable.reshape(-1).take(order)
+    if not usable.all():
+        order = order.compress(usable)
+    return total.reshape(-1).take(order), *(detail.reshape(-1).take(order) for detail in details)
+
+
+@lru_cache(maxsize=16)
+def _cell_order(shape: tuple[int, ...]) -> np.ndarray:
+    """The flat indices that take (cell row, phase row, phase column, channel, cell column) arrays of ``shape`` to
+    (cell row, cell column, phase row, phase column, channel) order (cached, read-only)."""
+    order = np.arange(math.prod(shape)).reshape(shape).transpose(0, 4, 1, 2, 3).reshape(-1)
+    order.flags.writeable = False
+    return order
 
 
 def _weighted_line(levels: np.ndarray, values: np.ndarray, weights: np.ndarray) -> tuple[float, float]:
