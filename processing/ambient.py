@@ -284,14 +284,34 @@ def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, 
     from residuals clipped at 0. It
     regularises as much as the pixels allow, where generalised cross-validation (which minimises the
     predicted pixel error, :func:`gcv_alpha`) often takes the smallest α of its grid and lets nearly
-    collinear LEDs trade false lobes the camera cannot see. The grid is bisected (about 6 solves).
+    collinear LEDs trade false lobes the camera cannot see. The grid is bisected (about 6 probes); a probe
+    whose unconstrained fit already meets ``I w ≥ 0`` is read from one sweep of the grid, the others solved
+    (:func:`_discrepancy_search`).
 
     Measured against GCV on scenes of tuning lights in docs/ambient-harness.md.
     """
+    return _discrepancy_search(solved, observed, terms)[0]
+
+
+def _discrepancy_search(
+    solved: SequenceStatistics, observed: SequenceStatistics, terms: LedTerms
+) -> tuple[float, np.ndarray | None]:
+    """:func:`discrepancy_alpha`'s α and, when the search solved it on the way, its weights (those of
+    :func:`_solve_penalised` at that α, to the bit), else None.
+
+    The least-penalised fit (hence σ² and the bound) and every α whose fit meets ``I w ≥ 0`` only where the
+    constraint binds are solved as before. Every other α of the bisection is read from one pass over the grid
+    (:func:`_unconstrained_sweep`): where the unconstrained minimiser of ``‖a − F w‖² + λ ‖L w‖²`` already
+    meets the constraint it is the constrained one, and its residual rise differs from a solve's by rounding
+    only (the bisection's comparisons then agree unless a rise lies within rounding of the bound).
+    """
     scale = terms.penalty_scale(solved)
+    solves: dict[int, np.ndarray] = {}
 
     def weights(index: int) -> np.ndarray:
-        return _solve_penalised(solved, terms, float(ALPHA_GRID[index]) * scale, True, "tikhonov estimate")
+        if index not in solves:
+            solves[index] = _solve_penalised(solved, terms, float(ALPHA_GRID[index]) * scale, True, "tikhonov estimate")
+        return solves[index]
 
     least = weights(0)
     dof = max(observed.n_samples - observed.n_leds, 1)
@@ -299,20 +319,55 @@ def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, 
     # The rise r(α) − r(α₀), from the weight-dependent part of the residual alone (the denoised ambient energy
     # cancels): residuals clipped at 0 hid every rise on Bayer frames (docs/raw-frames.md).
     allowed = solved.fit_energy(least) + DISCREPANCY_SIGMAS * observed.n_leds * noise_variance
+    sweep = _unconstrained_sweep(solved, terms, scale)
 
     def residual(index: int) -> float:
+        if sweep is not None and sweep[1][index]:
+            return float(sweep[0][index])
         return solved.fit_energy(weights(index))
 
     low, high = 0, ALPHA_GRID.size - 1
     if residual(high) <= allowed:
-        return float(ALPHA_GRID[high])
+        low = high
     while high - low > 1:
         middle = (low + high) // 2
         if residual(middle) <= allowed:
             low = middle
         else:
             high = middle
-    return float(ALPHA_GRID[low])
+    return float(ALPHA_GRID[low]), solves.get(low)
+
+
+def _unconstrained_sweep(
+    solved: SequenceStatistics, terms: LedTerms, scale: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """For every α of :data:`ALPHA_GRID`: the fit energy ``wᵀ G w − 2 cᵀ w`` of the unconstrained minimiser
+    ``w(λ) = (G + λ P + ε(λ) Id)⁻¹ c`` (``λ = α · scale``, ``ε(λ) = 10⁻¹² tr(G + λP) / k``: the ridge of
+    :func:`_solve_penalised`), and whether it meets ``I w ≥ 0``; None when ``G + ε Id`` has no Cholesky factor.
+
+    ``G + λ P`` is diagonalised with ``G`` once (``G = Rᵀ R``, ``R⁻ᵀ P R⁻¹ = U Λ Uᵀ``; both with their share of
+    the ridge): ``w(λ) = R⁻¹ U (Id + λ Λ)⁻¹ Uᵀ R⁻ᵀ c``, every α in one product (as :func:`_gcv_alpha`).
+    """
+    gram = solved.gram
+    k = gram.shape[0]
+    identity = _identity(k)
+    factor, info = lapack.dpotrf(gram + (1e-12 * _trace(gram) / k) * identity, lower=0, clean=1)
+    if info != 0:
+        return None
+    inverse_factor, info = lapack.dtrtri(factor, lower=0)
+    if info != 0:
+        return None
+    penalty = terms.penalty_gram + (1e-12 * terms.penalty_trace / k) * identity
+    eigenvalues, vectors, info = lapack.dsyevd(inverse_factor.T.dot(penalty).dot(inverse_factor), compute_v=1, lower=1)
+    if info != 0:
+        return None
+    basis = inverse_factor.dot(vectors)
+    filters = 1.0 / (1.0 + np.maximum(eigenvalues, 0.0)[:, None] * (ALPHA_GRID * scale))  # (k, n_alpha)
+    candidates = basis.dot(basis.T.dot(solved.cross)[:, None] * filters)  # (k, n_alpha)
+    fits = np.einsum("ia,ia->a", candidates, gram.dot(candidates)) - 2.0 * solved.cross.dot(candidates)
+    if not np.isfinite(fits).all():
+        return None
+    return fits, np.all(terms.emitting.dot(candidates) >= 0.0, axis=0)
 
 
 @lru_cache(maxsize=16)
@@ -466,7 +521,9 @@ class AmbientModel:
             )
         solved = solved_statistics(statistics, denoised).statistics
         if method == "tikhonov" and alpha == "auto":
-            alpha = discrepancy_alpha(solved, statistics, self.terms)
+            alpha, found = _discrepancy_search(solved, statistics, self.terms)
+            if found is not None:
+                return found, alpha  # what _weights_tikhonov would solve again at this α, to the bit
         return _METHODS[method](solved, self.terms, alpha)
 
     def estimate(
