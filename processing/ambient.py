@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -156,8 +156,11 @@ class LedTerms:
     """``10⁻¹² · Id`` (k × k), added to the scaled normal matrix."""
     nonnegative: FactoredQuadratic
     """The constraint ``I w ≥ 0`` (emitting rows) prepared once; each solve adds only its H."""
-    unconstrained: FactoredQuadratic
-    """No constraint, prepared once likewise."""
+
+    @cached_property
+    def unconstrained(self) -> FactoredQuadratic:
+        """No constraint, prepared likewise when first used (``lstsq`` only)."""
+        return FactoredQuadratic.prepare(np.eye(self.values.shape[1]), where="ambient estimate")
 
     @classmethod
     def of(cls, led_values: np.ndarray) -> LedTerms:
@@ -175,7 +178,6 @@ class LedTerms:
             emitting,
             1e-12 * np.eye(k),
             FactoredQuadratic.prepare(np.eye(k), emitting, np.zeros(emitting.shape[0]), "ambient estimate"),
-            FactoredQuadratic.prepare(np.eye(k), where="ambient estimate"),
         )
         for array in (terms.roughness, terms.penalty_gram, terms.emitting, terms.ridge):
             array.flags.writeable = False
@@ -189,7 +191,10 @@ class LedTerms:
 def _scaled_condition(gram: np.ndarray) -> float:
     diagonal = np.sqrt(np.clip(np.diag(gram), 1e-300, None))
     scaled = gram / np.outer(diagonal, diagonal)
-    eigenvalues = np.linalg.eigvalsh(scaled)
+    # LAPACK's dsyevd as np.linalg.eigvalsh calls it (the same values), without its dispatch.
+    eigenvalues, _, info = lapack.dsyevd(scaled, compute_v=0, lower=1)
+    if info != 0:
+        eigenvalues = np.linalg.eigvalsh(scaled)
     return float(eigenvalues[-1] / eigenvalues[0]) if eigenvalues[0] > 0 else float("inf")
 
 
@@ -472,8 +477,9 @@ class AmbientModel:
         led_spectra = require_unit(self.led_spectra, "photons")
         # An LED with no emission on the grid contributes nothing to I w: its weight would be solved
         # for, then silently dropped from the spectrum (a calibration on a grid that misses it, say).
-        empty = [name for name, column in zip(led_spectra.names, led_spectra.values.T) if not np.any(column > 0)]
-        if empty:
+        emits = np.any(led_spectra.values > 0, axis=0)
+        if not emits.all():
+            empty = [name for name, emitting in zip(led_spectra.names, emits) if not emitting]
             raise SpectralDataError(
                 f"{led_spectra.source or 'LED spectra'}: the spectrum of LED {', '.join(empty)} has no positive "
                 f"value on {led_spectra.grid}; expected each LED's emission at full drive on the sequence's grid"
@@ -495,6 +501,13 @@ class AmbientModel:
         whose signal the noise probe exceeds clipped; the statistics as observed when no noise was
         measured.
         """
+        weights, alpha_used, _ = self._weights(statistics, method, alpha, denoised)
+        return weights, alpha_used
+
+    def _weights(
+        self, statistics: SequenceStatistics, method: str, alpha: float | str, denoised: SequenceStatistics | None
+    ) -> tuple[np.ndarray, float, SolvedStatistics]:
+        """:meth:`weights` and the :func:`solved_statistics` they were solved on."""
         if method not in _METHODS:
             raise ValueError(f"ambient method '{method}' is unknown; expected one of {', '.join(_METHODS)}")
         if alpha != "auto" and (isinstance(alpha, str) or not float(alpha) >= 0 or not math.isfinite(float(alpha))):
@@ -519,26 +532,34 @@ class AmbientModel:
                 f"ambient estimate: the LED-only image of {', '.join(dark)} is empty; expected every LED to add light "
                 "(is it connected, and its level above 0?)"
             )
-        solved = solved_statistics(statistics, denoised).statistics
+        solution = solved_statistics(statistics, denoised)
+        solved = solution.statistics
         if method == "tikhonov" and alpha == "auto":
             alpha, found = _discrepancy_search(solved, statistics, self.terms)
             if found is not None:
-                return found, alpha  # what _weights_tikhonov would solve again at this α, to the bit
-        return _METHODS[method](solved, self.terms, alpha)
+                return found, alpha, solution  # what _weights_tikhonov would solve again at this α, to the bit
+        return (*_METHODS[method](solved, self.terms, alpha), solution)
 
     def estimate(
         self, statistics: SequenceStatistics, method: str = "tikhonov", alpha: float | str = "auto"
     ) -> AmbientEstimate:
         """The full estimate of :func:`estimate_ambient`."""
-        weights, alpha_used = self.weights(statistics, method, alpha)
-        return self.reliability(statistics, weights, method, alpha_used)
+        weights, alpha_used, solution = self._weights(statistics, method, alpha, None)
+        return self.reliability(statistics, weights, method, alpha_used, solution)
 
     def reliability(
-        self, statistics: SequenceStatistics, weights: np.ndarray, method: str, alpha_used: float
+        self,
+        statistics: SequenceStatistics,
+        weights: np.ndarray,
+        method: str,
+        alpha_used: float,
+        solution: SolvedStatistics | None = None,
     ) -> AmbientEstimate:
-        """The :class:`AmbientEstimate` of weights found by :meth:`weights`: spectrum and reliability signals."""
+        """The :class:`AmbientEstimate` of weights found by :meth:`weights`: spectrum and reliability signals.
+
+        ``solution`` is ``solved_statistics(statistics)`` when the caller has it already (:meth:`estimate`)."""
         rss = statistics.residual_energy(weights)
-        solution = solved_statistics(statistics)
+        solution = solved_statistics(statistics) if solution is None else solution
         spectrum_std = self.spectrum_band(statistics, solution.statistics, rss, method, alpha_used)
         condition = _scaled_condition(statistics.gram)
         relative_residual = float(np.sqrt(rss / statistics.ambient_energy)) if statistics.ambient_energy > 0 else 0.0
@@ -661,13 +682,33 @@ def _constrained_band(
         )
     except (np.linalg.LinAlgError, SolverError):
         return _sandwich_band(terms.values, weights_cov)
-    draws = centre[:, None] + factor @ np.random.default_rng(0).standard_normal((len(centre), BAND_DRAWS))
+    draws = centre[:, None] + factor @ _band_normals(len(centre))
     # A draw that already meets I w ≥ 0 is its own projection: only the others are solved.
     spectra = terms.values @ draws
     outside = np.flatnonzero(np.any(terms.emitting @ draws < 0, axis=0))
     if outside.size:
         spectra[:, outside] = terms.values @ problem.minimise_each(hessian @ draws[:, outside] / scale)
-    return np.std(spectra, axis=1, ddof=1)
+    return _row_std(spectra)
+
+
+def _row_std(values: np.ndarray) -> np.ndarray:
+    """``np.std(values, axis=1, ddof=1)``, in its own steps (the same sums in the same order: the same bits)
+    without its dispatch."""
+    mean = np.add.reduce(values, axis=1, keepdims=True)
+    mean /= values.shape[1]
+    deviations = values - mean
+    np.multiply(deviations, deviations, out=deviations)
+    variance = np.add.reduce(deviations, axis=1)
+    variance /= max(values.shape[1] - 1, 0)
+    return np.sqrt(variance, out=variance)
+
+
+@lru_cache(maxsize=16)
+def _band_normals(k: int) -> np.ndarray:
+    """The band's standard normal draws for k weights, (k, :data:`BAND_DRAWS`), seeded (0): drawn once, read-only."""
+    normals = np.random.default_rng(0).standard_normal((k, BAND_DRAWS))
+    normals.flags.writeable = False
+    return normals
 
 
 NOISE_FLOOR_SHARE = 0.1

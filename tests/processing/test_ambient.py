@@ -471,3 +471,12 @@ def test_the_discrepancy_search_chooses_as_a_search_of_constrained_solves(
     weights, used = AmbientModel(leds_photons()).weights(statistics)
     assert used == alpha
     np.testing.assert_array_equal(weights, AMBIENT_METHODS["tikhonov"](statistics, leds, alpha)[0])
+
+
+@PROPERTY
+@given(seed=st.integers(0, 2**31 - 1), decades=st.floats(-6, 6))
+def test_the_bands_row_deviation_is_numpys_to_the_bit(seed: int, decades: float) -> None:
+    from msflash.processing.ambient import BAND_DRAWS, _row_std
+
+    values = np.random.default_rng(seed).normal(size=(31, BAND_DRAWS)) * 10.0**decades + 10.0**decades
+    np.testing.assert_array_equal(_row_std(values), np.std(values, axis=1, ddof=1))
