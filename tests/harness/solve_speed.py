@@ -4,8 +4,9 @@ the ambient's noise line and the solve — on the bench's 1280×1024 worlds (raw
 Each stage's CPU time (``time.thread_time``, one BLAS thread: ``OPENBLAS_NUM_THREADS=1`` is set first), the median of
 ``--runs`` runs, ÷ the median CPU time of a copy of the frames (:func:`msflash.lab.bench.processing.frame_copy`):
 ``noise line`` (:func:`processing.noise_level.detail_noise_line` of the ambient frame) with its ``haar details`` and
-``fit``, and ``solve`` (:func:`processing.ambient.estimate_ambient` on the streamed statistics: α, weights, band) with
-its ``weights`` and ``reliability``. One JSON line; nothing asserted (docs/speed.md).
+``fit``, ``solve`` (:func:`processing.ambient.estimate_ambient` on the streamed statistics: α, weights, band) with
+its ``weights`` and ``reliability``, and the whole ``estimate`` as the bench streams it on one thread
+(:func:`msflash.lab.bench.processing.streamed_estimate`). One JSON line; nothing asserted (docs/speed.md).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ def _median_time(function: Callable[[], object], runs: int) -> float:
 def _figures(cfa: str | None, runs: int) -> dict[str, float]:
     """The stages of one world, each ÷ the copy (and the copy in ms)."""
     from msflash.acquisition.session.analysis import SAMPLE_WEIGHTING, block_factor
-    from msflash.lab.bench.processing import benchmark_world, frame_copy
+    from msflash.lab.bench.processing import benchmark_world, frame_copy, streamed_estimate
     from msflash.processing import noise_level
     from msflash.processing.ambient import AmbientModel, estimate_ambient
     from msflash.processing.block_rows import BlockRows
@@ -54,7 +55,9 @@ def _figures(cfa: str | None, runs: int) -> dict[str, float]:
     weights, alpha = model.weights(statistics)
     ambient, black, white = frames[0], spec.black_level, spec.white_level
     details = noise_level.haar_details(ambient, period, black, white)
+    factor = block_factor(frames[0].shape, cfa)
     stages: dict[str, Callable[[], object]] = {
+        "estimate": lambda: streamed_estimate(world, factor, 1),
         "noise line": lambda: noise_level.detail_noise_line(ambient, period, black, white),
         "haar details": lambda: noise_level.haar_details(ambient, period, black, white),
         "fit": lambda: noise_level.fit_detail_line(*details),
