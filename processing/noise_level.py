@@ -152,12 +152,15 @@ def _weighted_line(levels: np.ndarray, values: np.ndarray, weights: np.ndarray) 
 def _level_order(levels: np.ndarray, top: float) -> np.ndarray:
     """The indices that sort ``levels`` (≥ 0, largest ``top``), equal levels in index order: a stable argsort.
 
-    Whole-number levels (the sums of integer samples less an integer black) are sorted as the distinct keys
-    ``level · n + index``, which a plain argsort puts in the same order about three times faster; the keys are
-    exact while ``top · n + n < 2⁵³``. Other levels take the stable sort itself.
+    Whole-number levels (the sums of integer samples less an integer black) up to 65535 (a 12-bit mosaic's
+    cells) are sorted as 16-bit integers, which numpy's stable sort takes by radix, 6× faster; larger whole
+    numbers as the distinct keys ``level · n + index``, which a plain argsort puts in the same order 3× faster
+    (the keys are exact while ``top · n + n < 2⁵³``). Other levels take the stable sort itself.
     """
     n = levels.size
     if top * n + n < 2.0**53 and np.array_equal(levels, np.trunc(levels)):
+        if top <= 65535:
+            return np.argsort(levels.astype(np.uint16), kind="stable")
         return np.argsort(levels * n + np.arange(n, dtype=np.float64))
     return np.argsort(levels, kind="stable")
 
