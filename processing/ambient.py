@@ -304,11 +304,11 @@ def _discrepancy_search(
     """:func:`discrepancy_alpha`'s α and, when the search solved it on the way, its weights (those of
     :func:`_solve_penalised` at that α, to the bit), else None.
 
-    The least-penalised fit (hence σ² and the bound) and every α whose fit meets ``I w ≥ 0`` only where the
-    constraint binds are solved as before. Every other α of the bisection is read from one pass over the grid
-    (:func:`_unconstrained_sweep`): where the unconstrained minimiser of ``‖a − F w‖² + λ ‖L w‖²`` already
-    meets the constraint it is the constrained one, and its residual rise differs from a solve's by rounding
-    only (the bisection's comparisons then agree unless a rise lies within rounding of the bound).
+    The least-penalised fit (hence σ² and the bound) and every probe of the bisection where the constraint binds
+    are solved as before. The other probes are read from one pass over the grid (:func:`_unconstrained_sweep`):
+    where the unconstrained minimiser of ``‖a − F w‖² + λ ‖L w‖²`` already meets ``I w ≥ 0`` it is the
+    constrained one, and its residual rise differs from a solve's by rounding only (the bisection's comparisons
+    then agree unless a rise lies within rounding of the bound).
     """
     scale = terms.penalty_scale(solved)
     solves: dict[int, np.ndarray] = {}
