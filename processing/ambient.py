@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -156,8 +156,11 @@ class LedTerms:
     """``10⁻¹² · Id`` (k × k), added to the scaled normal matrix."""
     nonnegative: FactoredQuadratic
     """The constraint ``I w ≥ 0`` (emitting rows) prepared once; each solve adds only its H."""
-    unconstrained: FactoredQuadratic
-    """No constraint, prepared once likewise."""
+
+    @cached_property
+    def unconstrained(self) -> FactoredQuadratic:
+        """No constraint, prepared likewise when first used (``lstsq`` only)."""
+        return FactoredQuadratic.prepare(np.eye(self.values.shape[1]), where="ambient estimate")
 
     @classmethod
     def of(cls, led_values: np.ndarray) -> LedTerms:
@@ -175,7 +178,6 @@ class LedTerms:
             emitting,
             1e-12 * np.eye(k),
             FactoredQuadratic.prepare(np.eye(k), emitting, np.zeros(emitting.shape[0]), "ambient estimate"),
-            FactoredQuadratic.prepare(np.eye(k), where="ambient estimate"),
         )
         for array in (terms.roughness, terms.penalty_gram, terms.emitting, terms.ridge):
             array.flags.writeable = False
@@ -189,7 +191,10 @@ class LedTerms:
 def _scaled_condition(gram: np.ndarray) -> float:
     diagonal = np.sqrt(np.clip(np.diag(gram), 1e-300, None))
     scaled = gram / np.outer(diagonal, diagonal)
-    eigenvalues = np.linalg.eigvalsh(scaled)
+    # LAPACK's dsyevd as np.linalg.eigvalsh calls it (the same values), without its dispatch.
+    eigenvalues, _, info = lapack.dsyevd(scaled, compute_v=0, lower=1)
+    if info != 0:
+        eigenvalues = np.linalg.eigvalsh(scaled)
     return float(eigenvalues[-1] / eigenvalues[0]) if eigenvalues[0] > 0 else float("inf")
 
 
@@ -284,14 +289,34 @@ def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, 
     from residuals clipped at 0. It
     regularises as much as the pixels allow, where generalised cross-validation (which minimises the
     predicted pixel error, :func:`gcv_alpha`) often takes the smallest α of its grid and lets nearly
-    collinear LEDs trade false lobes the camera cannot see. The grid is bisected (about 6 solves).
+    collinear LEDs trade false lobes the camera cannot see. The grid is bisected (about 6 probes); a probe
+    whose unconstrained fit already meets ``I w ≥ 0`` is read from one sweep of the grid, the others solved
+    (:func:`_discrepancy_search`).
 
     Measured against GCV on scenes of tuning lights in docs/ambient-harness.md.
     """
+    return _discrepancy_search(solved, observed, terms)[0]
+
+
+def _discrepancy_search(
+    solved: SequenceStatistics, observed: SequenceStatistics, terms: LedTerms
+) -> tuple[float, np.ndarray | None]:
+    """:func:`discrepancy_alpha`'s α and, when the search solved it on the way, its weights (those of
+    :func:`_solve_penalised` at that α, to the bit), else None.
+
+    The least-penalised fit (hence σ² and the bound) and every probe of the bisection where the constraint binds
+    are solved as before. The other probes are read from one pass over the grid (:func:`_unconstrained_sweep`):
+    where the unconstrained minimiser of ``‖a − F w‖² + λ ‖L w‖²`` already meets ``I w ≥ 0`` it is the
+    constrained one, and its residual rise differs from a solve's by rounding only (the bisection's comparisons
+    then agree unless a rise lies within rounding of the bound).
+    """
     scale = terms.penalty_scale(solved)
+    solves: dict[int, np.ndarray] = {}
 
     def weights(index: int) -> np.ndarray:
-        return _solve_penalised(solved, terms, float(ALPHA_GRID[index]) * scale, True, "tikhonov estimate")
+        if index not in solves:
+            solves[index] = _solve_penalised(solved, terms, float(ALPHA_GRID[index]) * scale, True, "tikhonov estimate")
+        return solves[index]
 
     least = weights(0)
     dof = max(observed.n_samples - observed.n_leds, 1)
@@ -299,20 +324,55 @@ def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, 
     # The rise r(α) − r(α₀), from the weight-dependent part of the residual alone (the denoised ambient energy
     # cancels): residuals clipped at 0 hid every rise on Bayer frames (docs/raw-frames.md).
     allowed = solved.fit_energy(least) + DISCREPANCY_SIGMAS * observed.n_leds * noise_variance
+    sweep = _unconstrained_sweep(solved, terms, scale)
 
     def residual(index: int) -> float:
+        if sweep is not None and sweep[1][index]:
+            return float(sweep[0][index])
         return solved.fit_energy(weights(index))
 
     low, high = 0, ALPHA_GRID.size - 1
     if residual(high) <= allowed:
-        return float(ALPHA_GRID[high])
+        low = high
     while high - low > 1:
         middle = (low + high) // 2
         if residual(middle) <= allowed:
             low = middle
         else:
             high = middle
-    return float(ALPHA_GRID[low])
+    return float(ALPHA_GRID[low]), solves.get(low)
+
+
+def _unconstrained_sweep(
+    solved: SequenceStatistics, terms: LedTerms, scale: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """For every α of :data:`ALPHA_GRID`: the fit energy ``wᵀ G w − 2 cᵀ w`` of the unconstrained minimiser
+    ``w(λ) = (G + λ P + ε(λ) Id)⁻¹ c`` (``λ = α · scale``, ``ε(λ) = 10⁻¹² tr(G + λP) / k``: the ridge of
+    :func:`_solve_penalised`), and whether it meets ``I w ≥ 0``; None when ``G + ε Id`` has no Cholesky factor.
+
+    ``G + λ P`` is diagonalised with ``G`` once (``G = Rᵀ R``, ``R⁻ᵀ P R⁻¹ = U Λ Uᵀ``; both with their share of
+    the ridge): ``w(λ) = R⁻¹ U (Id + λ Λ)⁻¹ Uᵀ R⁻ᵀ c``, every α in one product (as :func:`_gcv_alpha`).
+    """
+    gram = solved.gram
+    k = gram.shape[0]
+    identity = _identity(k)
+    factor, info = lapack.dpotrf(gram + (1e-12 * _trace(gram) / k) * identity, lower=0, clean=1)
+    if info != 0:
+        return None
+    inverse_factor, info = lapack.dtrtri(factor, lower=0)
+    if info != 0:
+        return None
+    penalty = terms.penalty_gram + (1e-12 * terms.penalty_trace / k) * identity
+    eigenvalues, vectors, info = lapack.dsyevd(inverse_factor.T.dot(penalty).dot(inverse_factor), compute_v=1, lower=1)
+    if info != 0:
+        return None
+    basis = inverse_factor.dot(vectors)
+    filters = 1.0 / (1.0 + np.maximum(eigenvalues, 0.0)[:, None] * (ALPHA_GRID * scale))  # (k, n_alpha)
+    candidates = basis.dot(basis.T.dot(solved.cross)[:, None] * filters)  # (k, n_alpha)
+    fits = np.einsum("ia,ia->a", candidates, gram.dot(candidates)) - 2.0 * solved.cross.dot(candidates)
+    if not np.isfinite(fits).all():
+        return None
+    return fits, np.all(terms.emitting.dot(candidates) >= 0.0, axis=0)
 
 
 @lru_cache(maxsize=16)
@@ -417,8 +477,9 @@ class AmbientModel:
         led_spectra = require_unit(self.led_spectra, "photons")
         # An LED with no emission on the grid contributes nothing to I w: its weight would be solved
         # for, then silently dropped from the spectrum (a calibration on a grid that misses it, say).
-        empty = [name for name, column in zip(led_spectra.names, led_spectra.values.T) if not np.any(column > 0)]
-        if empty:
+        emits = np.any(led_spectra.values > 0, axis=0)
+        if not emits.all():
+            empty = [name for name, emitting in zip(led_spectra.names, emits) if not emitting]
             raise SpectralDataError(
                 f"{led_spectra.source or 'LED spectra'}: the spectrum of LED {', '.join(empty)} has no positive "
                 f"value on {led_spectra.grid}; expected each LED's emission at full drive on the sequence's grid"
@@ -440,6 +501,13 @@ class AmbientModel:
         whose signal the noise probe exceeds clipped; the statistics as observed when no noise was
         measured.
         """
+        weights, alpha_used, _ = self._weights(statistics, method, alpha, denoised)
+        return weights, alpha_used
+
+    def _weights(
+        self, statistics: SequenceStatistics, method: str, alpha: float | str, denoised: SequenceStatistics | None
+    ) -> tuple[np.ndarray, float, SolvedStatistics]:
+        """:meth:`weights` and the :func:`solved_statistics` they were solved on."""
         if method not in _METHODS:
             raise ValueError(f"ambient method '{method}' is unknown; expected one of {', '.join(_METHODS)}")
         if alpha != "auto" and (isinstance(alpha, str) or not float(alpha) >= 0 or not math.isfinite(float(alpha))):
@@ -464,24 +532,34 @@ class AmbientModel:
                 f"ambient estimate: the LED-only image of {', '.join(dark)} is empty; expected every LED to add light "
                 "(is it connected, and its level above 0?)"
             )
-        solved = solved_statistics(statistics, denoised).statistics
+        solution = solved_statistics(statistics, denoised)
+        solved = solution.statistics
         if method == "tikhonov" and alpha == "auto":
-            alpha = discrepancy_alpha(solved, statistics, self.terms)
-        return _METHODS[method](solved, self.terms, alpha)
+            alpha, found = _discrepancy_search(solved, statistics, self.terms)
+            if found is not None:
+                return found, alpha, solution  # what _weights_tikhonov would solve again at this α, to the bit
+        return (*_METHODS[method](solved, self.terms, alpha), solution)
 
     def estimate(
         self, statistics: SequenceStatistics, method: str = "tikhonov", alpha: float | str = "auto"
     ) -> AmbientEstimate:
         """The full estimate of :func:`estimate_ambient`."""
-        weights, alpha_used = self.weights(statistics, method, alpha)
-        return self.reliability(statistics, weights, method, alpha_used)
+        weights, alpha_used, solution = self._weights(statistics, method, alpha, None)
+        return self.reliability(statistics, weights, method, alpha_used, solution)
 
     def reliability(
-        self, statistics: SequenceStatistics, weights: np.ndarray, method: str, alpha_used: float
+        self,
+        statistics: SequenceStatistics,
+        weights: np.ndarray,
+        method: str,
+        alpha_used: float,
+        solution: SolvedStatistics | None = None,
     ) -> AmbientEstimate:
-        """The :class:`AmbientEstimate` of weights found by :meth:`weights`: spectrum and reliability signals."""
+        """The :class:`AmbientEstimate` of weights found by :meth:`weights`: spectrum and reliability signals.
+
+        ``solution`` is ``solved_statistics(statistics)`` when the caller has it already (:meth:`estimate`)."""
         rss = statistics.residual_energy(weights)
-        solution = solved_statistics(statistics)
+        solution = solved_statistics(statistics) if solution is None else solution
         spectrum_std = self.spectrum_band(statistics, solution.statistics, rss, method, alpha_used)
         condition = _scaled_condition(statistics.gram)
         relative_residual = float(np.sqrt(rss / statistics.ambient_energy)) if statistics.ambient_energy > 0 else 0.0
@@ -604,13 +682,33 @@ def _constrained_band(
         )
     except (np.linalg.LinAlgError, SolverError):
         return _sandwich_band(terms.values, weights_cov)
-    draws = centre[:, None] + factor @ np.random.default_rng(0).standard_normal((len(centre), BAND_DRAWS))
+    draws = centre[:, None] + factor @ _band_normals(len(centre))
     # A draw that already meets I w ≥ 0 is its own projection: only the others are solved.
     spectra = terms.values @ draws
     outside = np.flatnonzero(np.any(terms.emitting @ draws < 0, axis=0))
     if outside.size:
         spectra[:, outside] = terms.values @ problem.minimise_each(hessian @ draws[:, outside] / scale)
-    return np.std(spectra, axis=1, ddof=1)
+    return _row_std(spectra)
+
+
+def _row_std(values: np.ndarray) -> np.ndarray:
+    """``np.std(values, axis=1, ddof=1)``, in its own steps (the same sums in the same order: the same bits)
+    without its dispatch."""
+    mean = np.add.reduce(values, axis=1, keepdims=True)
+    mean /= values.shape[1]
+    deviations = values - mean
+    np.multiply(deviations, deviations, out=deviations)
+    variance = np.add.reduce(deviations, axis=1)
+    variance /= max(values.shape[1] - 1, 0)
+    return np.sqrt(variance, out=variance)
+
+
+@lru_cache(maxsize=16)
+def _band_normals(k: int) -> np.ndarray:
+    """The band's standard normal draws for k weights, (k, :data:`BAND_DRAWS`), seeded (0): drawn once, read-only."""
+    normals = np.random.default_rng(0).standard_normal((k, BAND_DRAWS))
+    normals.flags.writeable = False
+    return normals
 
 
 NOISE_FLOOR_SHARE = 0.1

@@ -8,7 +8,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from msflash.processing.accumulate import accumulate_statistics
-from msflash.processing.ambient import AMBIENT_METHODS, CONDITION_WARNING, RESIDUAL_WARNING, estimate_ambient
+from msflash.processing.ambient import (
+    ALPHA_GRID,
+    AMBIENT_METHODS,
+    CONDITION_WARNING,
+    DISCREPANCY_SIGMAS,
+    RESIDUAL_WARNING,
+    estimate_ambient,
+)
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.scenes import Scene
 from msflash.processing.sensor import CFA_PATTERNS, SensorModel
@@ -411,3 +418,65 @@ def test_prepared_constraint_rows_solve_as_the_one_shot_quadratic(tungsten_frame
     np.testing.assert_array_equal(minimise_quadratic(*problems[-1]).x, weights)
     constrained = method != "lstsq"
     assert problems[-1][2].shape[0] == (model.terms.emitting.shape[0] if constrained else 0)
+
+
+def reference_discrepancy_alpha(solved, observed, terms) -> float:
+    """The discrepancy search as first written: every α of the bisection solved with ``I w ≥ 0``."""
+    from msflash.processing.ambient import _solve_penalised
+
+    scale = terms.penalty_scale(solved)
+
+    def weights(index: int) -> np.ndarray:
+        return _solve_penalised(solved, terms, float(ALPHA_GRID[index]) * scale, True, "reference")
+
+    least = weights(0)
+    noise_variance = observed.residual_energy(least) / max(observed.n_samples - observed.n_leds, 1)
+    allowed = solved.fit_energy(least) + DISCREPANCY_SIGMAS * observed.n_leds * noise_variance
+    low, high = 0, ALPHA_GRID.size - 1
+    if solved.fit_energy(weights(high)) <= allowed:
+        return float(ALPHA_GRID[high])
+    while high - low > 1:
+        middle = (low + high) // 2
+        low, high = (middle, high) if solved.fit_energy(weights(middle)) <= allowed else (low, middle)
+    return float(ALPHA_GRID[low])
+
+
+@PROPERTY
+@given(seed=st.integers(0, 2**31 - 1), in_span=st.booleans(), noise=st.floats(1e-4, 10.0))
+def test_the_discrepancy_search_chooses_as_a_search_of_constrained_solves(
+    seed: int, in_span: bool, noise: float
+) -> None:
+    """The α of the unconstrained sweep (solves only where ``I w ≥ 0`` binds) is the plain search's; in span the
+    constraint rarely binds, a random mix binds it often. The weights are then a solve's at that α, to the bit."""
+    from msflash.processing.ambient import AmbientModel, LedTerms, discrepancy_alpha
+    from msflash.processing.statistics import SequenceStatistics
+
+    rng = np.random.default_rng(seed)
+    leds = leds_photons().values
+    images = np.abs(rng.normal(size=(300, leds.shape[1]))) * rng.uniform(0.1, 10, leds.shape[1])
+    mix = rng.uniform(0, 1, leds.shape[1]) if in_span else rng.normal(size=leds.shape[1])
+    target = images @ mix + rng.normal(size=300) * noise
+    statistics = SequenceStatistics(
+        images.T @ images,
+        images.T @ target,
+        float(target @ target),
+        300,
+        300,
+        float(target.sum()),
+        images.sum(axis=0),
+    )
+    terms = LedTerms.of(leds)
+    alpha = discrepancy_alpha(statistics, statistics, terms)
+    assert alpha == reference_discrepancy_alpha(statistics, statistics, terms)
+    weights, used = AmbientModel(leds_photons()).weights(statistics)
+    assert used == alpha
+    np.testing.assert_array_equal(weights, AMBIENT_METHODS["tikhonov"](statistics, leds, alpha)[0])
+
+
+@PROPERTY
+@given(seed=st.integers(0, 2**31 - 1), decades=st.floats(-6, 6))
+def test_the_bands_row_deviation_is_numpys_to_the_bit(seed: int, decades: float) -> None:
+    from msflash.processing.ambient import BAND_DRAWS, _row_std
+
+    values = np.random.default_rng(seed).normal(size=(31, BAND_DRAWS)) * 10.0**decades + 10.0**decades
+    np.testing.assert_array_equal(_row_std(values), np.std(values, axis=1, ddof=1))

@@ -130,3 +130,48 @@ def test_the_checkerboard_probe_cancels_the_charts_edges() -> None:
     sums, differences = block_sums_and_differences(cfa_planes(frame, 2), 4)
     signal = sums - 16 * SENSOR.black_level
     assert np.sum(differences**2) < 0.02 * np.sum(signal**2)
+
+
+def _plain_fit(levels: np.ndarray, hh: np.ndarray, hl: np.ndarray, lh: np.ndarray) -> PixelNoise | None:
+    """The fit written the plain way (a stable argsort, ``np.median`` per detail, the maximum of every round's
+    variances, boolean masks): what :func:`fit_detail_line` computes with fewer passes."""
+    from msflash.processing import noise_level as nl
+
+    levels = np.maximum(levels, 0.0)
+    squares, texture = hh * hh, hl * hl + lh * lh
+    per_band = levels.size // nl.LEVEL_BANDS
+    order = np.argsort(levels, kind="stable")[: per_band * nl.LEVEL_BANDS]
+    centres = levels[order].reshape(nl.LEVEL_BANDS, per_band).mean(axis=1)
+    medians = [np.median(np.square(d[order]).reshape(nl.LEVEL_BANDS, per_band), axis=1) for d in (hh, hl, lh)]
+    variances = np.minimum.reduce(medians) / nl.CHI2_1_MEDIAN
+    variances = np.maximum(variances, float(np.max(variances)) * 1e-12)
+    gain, offset = nl._weighted_line(centres, variances, per_band / (variances * variances))
+    for _ in range(nl.ROUNDS):
+        variance = gain * levels + offset
+        variance = np.maximum(variance, float(np.max(variance)) * 1e-12)
+        keep = (texture <= nl.SMOOTH_QUANTILE * variance) & (squares <= nl.DETAIL_CUT * variance)
+        if np.count_nonzero(keep) < nl.MIN_CELLS:
+            break
+        previous = (gain, offset)
+        gain, offset = nl._weighted_line(levels[keep], squares[keep] / nl._CUT_MEAN, 1.0 / variance[keep] ** 2)
+        steady = abs(gain - previous[0]) <= nl.CONVERGED * abs(gain)
+        if steady and abs(offset - previous[1]) <= nl.CONVERGED * abs(offset):
+            break
+    if not gain * float(np.median(levels)) + offset > 0:
+        return None
+    return PixelNoise(gain=float(gain), read=float(offset) / 4.0)
+
+
+@pytest.mark.parametrize("cells", [5120, 4095, 1000, 300])
+@pytest.mark.parametrize(("whole", "top"), [(True, 400), (True, 40000), (False, 400)])
+def test_the_fit_is_the_plain_fit_to_the_bit(cells: int, whole: bool, top: int) -> None:
+    """Whole-number levels (integer samples) with many ties, below 65535 (sorted as 16-bit integers) and above
+    (sorted by the keys ``level · n + index``), and fractional ones (the stable sort); bands of even and odd
+    counts; a third of the cells textured."""
+    rng = np.random.default_rng(cells)
+    levels = np.repeat(rng.integers(top // 40, top, (cells, 1)), 4, axis=1).astype(float)
+    levels[::3, 0] *= 3.0
+    details = _cells(levels, rng)
+    if whole:
+        details = tuple(np.round(detail) for detail in details)
+    assert fit_detail_line(*details) == _plain_fit(*details)

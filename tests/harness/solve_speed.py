@@ -1,0 +1,91 @@
+"""``python -m tests.harness.solve_speed``: the fixed costs of issue 30's estimate that do not scale with the pixels —
+the ambient's noise line and the solve — on the bench's 1280×1024 worlds (raw 12-bit RGGB and RGB16).
+
+Each stage's CPU time (``time.thread_time``, one BLAS thread: ``OPENBLAS_NUM_THREADS=1`` is set first), the median of
+``--runs`` runs, ÷ the median CPU time of a copy of the frames (:func:`msflash.lab.bench.processing.frame_copy`):
+``noise line`` (:func:`processing.noise_level.detail_noise_line` of the ambient frame) with its ``haar details`` and
+``fit``, ``solve`` (:func:`processing.ambient.estimate_ambient` on the streamed statistics: α, weights, band) with
+its ``weights`` and ``reliability``, and the whole ``estimate`` as the bench streams it on one thread
+(:func:`msflash.lab.bench.processing.streamed_estimate`). One JSON line; nothing asserted (docs/speed.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from collections.abc import Callable
+
+
+def _median_time(function: Callable[[], object], runs: int) -> float:
+    times = []
+    for _ in range(runs):
+        start = time.thread_time()
+        function()
+        times.append(time.thread_time() - start)
+    times.sort()
+    return times[len(times) // 2]
+
+
+def _figures(cfa: str | None, runs: int) -> dict[str, float]:
+    """The stages of one world, each ÷ the copy (and the copy in ms)."""
+    from msflash.acquisition.session.analysis import SAMPLE_WEIGHTING, block_factor
+    from msflash.lab.bench.processing import benchmark_world, frame_copy, streamed_estimate
+    from msflash.processing import noise_level
+    from msflash.processing.ambient import AmbientModel, estimate_ambient
+    from msflash.processing.block_rows import BlockRows
+    from msflash.processing.block_sums import plane_shape
+
+    world = benchmark_world(1024, 1280, cfa=cfa)
+    frames, spec, leds = world["frames"], world["spec"], world["leds"]
+    period, n = (2 if cfa else 1), len(frames) - 1
+    rows = BlockRows(
+        n,
+        plane_shape(frames[0].shape, period),
+        block_factor(frames[0].shape, cfa),
+        spec.white_level,
+        black_level=spec.black_level,
+        weighting=SAMPLE_WEIGHTING,
+    )
+    for row, frame in zip([n, *range(n)], frames, strict=True):
+        rows.add_frame(row, frame, period)
+    statistics = rows.statistics(spec)
+    model = AmbientModel(leds)
+    weights, alpha = model.weights(statistics)
+    ambient, black, white = frames[0], spec.black_level, spec.white_level
+    details = noise_level.haar_details(ambient, period, black, white)
+    factor = block_factor(frames[0].shape, cfa)
+    stages: dict[str, Callable[[], object]] = {
+        "estimate": lambda: streamed_estimate(world, factor, 1),
+        "noise line": lambda: noise_level.detail_noise_line(ambient, period, black, white),
+        "haar details": lambda: noise_level.haar_details(ambient, period, black, white),
+        "fit": lambda: noise_level.fit_detail_line(*details),
+        "solve": lambda: estimate_ambient(statistics, leds),
+        "weights": lambda: model.weights(statistics),
+        "reliability": lambda: model.reliability(statistics, weights, "tikhonov", alpha),
+    }
+    copy = _median_time(frame_copy(frames), runs)
+    label = cfa or "RGB"
+    figures = {f"{label} copy ms": copy * 1e3}
+    for name, stage in stages.items():
+        figures[f"{label} {name}"] = _median_time(stage, runs) / copy
+    return figures
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the figures; 0."""
+    parser = argparse.ArgumentParser(prog="python -m tests.harness.solve_speed", description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=41)
+    args = parser.parse_args(argv)
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    from msflash.processing import frame_kernels
+
+    frame_kernels.prepare()
+    figures = {**_figures("RGGB", args.runs), **_figures(None, args.runs)}
+    print(json.dumps({name: round(value, 3) for name, value in figures.items()}, ensure_ascii=False))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
