@@ -116,14 +116,6 @@ class LocalEstimate:
         """``I`` times :attr:`mean_weights`, photons (n_wavelengths,)."""
         return self.led_values @ self.mean_weights
 
-    def weights_map(self, shape: tuple[int, int] | None = None) -> np.ndarray:
-        """Per-pixel ambient weights (H, W, k): each pixel's region's, or bilinear between tile centres."""
-        shape = shape if shape is not None else self.tiles.frame_shape
-        if self.regions is not None:
-            labels = self.regions.label_map(shape)
-            return np.where(labels[..., None], self.regions.weights[1], self.regions.weights[0])
-        return upsample_tiles(self.tile_weights, self.tiles, shape)
-
 
 def estimate_local(
     tiles: TiledStatistics,

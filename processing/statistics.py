@@ -289,10 +289,6 @@ class SequenceStatistics:
             weighted=self.weighted,
         )
 
-    def permuted(self, order: Sequence[int]) -> SequenceStatistics:
-        """The same statistics with the LEDs in another order."""
-        return self.select_leds(order)
-
     def __add__(self, other: SequenceStatistics) -> SequenceStatistics:
         """Statistics of the union of two disjoint sets of samples (for tiles, chunks, workers)."""
         return SequenceStatistics(

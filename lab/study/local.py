@@ -50,7 +50,14 @@ from msflash.processing.image_formation import (
     render_frame,
     total_illumination,
 )
-from msflash.processing.local import DEFAULT_TILES, LocalEstimate, denoised_global, estimate_local, tile_statistics
+from msflash.processing.local import (
+    DEFAULT_TILES,
+    LocalEstimate,
+    denoised_global,
+    estimate_local,
+    tile_statistics,
+    upsample_tiles,
+)
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.scenes import Scene
 from msflash.processing.sensor import SensorModel
@@ -207,16 +214,24 @@ def pixel_rmses(estimates: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean((normalised - scale[:, None] * truth) ** 2, axis=1))
 
 
+def weights_map(estimate: LocalEstimate, shape: tuple[int, int]) -> np.ndarray:
+    """Per-pixel ambient weights (H, W, k): each pixel's region's, or bilinear between tile centres."""
+    if estimate.regions is not None:
+        labels = estimate.regions.label_map(shape)
+        return np.where(labels[..., None], estimate.regions.weights[1], estimate.regions.weights[0])
+    return upsample_tiles(estimate.tile_weights, estimate.tiles, shape)
+
+
 def pixel_rmse(estimate: LocalEstimate | np.ndarray, scenario: Scenario, truth: np.ndarray | None = None) -> float:
     """The study's metric: every pixel's estimated spectrum against that pixel's true ambient, averaged over pixels.
 
-    ``estimate`` is a :class:`LocalEstimate` (its per-pixel weights, :meth:`LocalEstimate.weights_map`:
+    ``estimate`` is a :class:`LocalEstimate` (its per-pixel weights, :func:`weights_map`:
     the pixel's region, or bilinear between tile centres — what the local flash uses) or one
     spectrum (n,) for the whole frame (a global estimate).
     """
     truth = pixel_truth(scenario) if truth is None else truth
     if isinstance(estimate, LocalEstimate):
-        weights = estimate.weights_map(scenario.ambient.shape[:2])
+        weights = weights_map(estimate, scenario.ambient.shape[:2])
         spectra = weights.reshape(-1, weights.shape[-1]) @ estimate.led_values.T
     else:
         spectra = np.broadcast_to(np.asarray(estimate, dtype=float), truth.shape)

@@ -17,7 +17,7 @@ from msflash.led_controller import (
     ManualClock,
     PtyBoothServer,
 )
-from msflash.led_controller.booth import levels_close
+from tests.helpers import levels_close
 
 OFF = (0.0,) * 7
 

@@ -141,7 +141,7 @@ def test_select_and_permute() -> None:
     ambient, leds, spec = random_stack(rng, (6, 6, 3), np.eye(3), white=1e9)
     stats = accumulate_statistics(ambient, leds, spec)
     order = [2, 0, 1]
-    permuted = stats.permuted(order)
+    permuted = stats.select_leds(order)
     np.testing.assert_array_equal(permuted.gram, stats.gram[np.ix_(order, order)])
     np.testing.assert_array_equal(permuted.cross, stats.cross[order])
     assert stats.select_leds([1]).n_leds == 1

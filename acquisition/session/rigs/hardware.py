@@ -42,15 +42,6 @@ CALIBRATION_RESPONSIVITY_FILES = ("camera_responsivity.csv", "responsivity.csv",
 """File names looked for in ``--calibration DIR`` for the camera's responsivities."""
 
 
-def load_hw_spectra(
-    calibration: str | Path | None = None, led_spectra: str | Path | None = None, responsivity: str | Path | None = None
-) -> tuple[Spectra, Spectra | None]:
-    """LED spectra and camera responsivities for the hardware rig, on :data:`DEFAULT_GRID`
-    (:func:`hw_spectra` without the calibration reference)."""
-    leds, camera, _ = hw_spectra(calibration, led_spectra, responsivity)
-    return leds, camera
-
-
 def hw_spectra(
     calibration: str | Path | None = None, led_spectra: str | Path | None = None, responsivity: str | Path | None = None
 ) -> tuple[Spectra, Spectra | None, tuple[str, Path] | None]:

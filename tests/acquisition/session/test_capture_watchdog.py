@@ -22,7 +22,7 @@ from msflash.acquisition.session.booth_guard import host_silence_s
 from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import Rig, open_sim_rig
 from msflash.led_controller import protocol
-from msflash.led_controller.booth import levels_close
+from tests.helpers import levels_close
 
 SHORT_WATCHDOG_S = 0.2
 
