@@ -15,7 +15,7 @@ Protocol
   rig's conventions, :meth:`acquisition.devices.simulated_camera.SimulatedCamera.default`).
 - Estimation: blocks of ``bin_factor`` × ``bin_factor`` (the CLI's default 4), ``tiles`` × ``tiles``
   tiles, Tikhonov solver with GCV; the local model on the denoised statistics
-  (:attr:`processing.local.TiledStatistics.denoised`), the global model on the observed ones (the
+  (:attr:`processing.tile_statistics.TiledStatistics.denoised`), the global model on the observed ones (the
   paper's estimate). ``rmse_global_denoised`` is the global model on the denoised statistics
   (:func:`processing.local.denoised_global`: what locality adds is auto against it), and
   ``rmse_auto_observed`` auto without the correction.
@@ -27,7 +27,7 @@ Protocol
   the whole scene (:func:`alone_rmse`) — the error left when locality is solved perfectly.
 - Cost: wall time of statistics + estimate on a full-size frame (1024 × 1280, the Ximea's) for the
   global estimate (:func:`processing.accumulate.accumulate_statistics` + :func:`estimate_ambient`)
-  and for ``auto`` (:func:`processing.local.tile_statistics` + :func:`estimate_local`), medians of
+  and for ``auto`` (:func:`processing.tile_statistics.tile_statistics` + :func:`estimate_local`), medians of
   repeats (interleaved, best of each); frames in memory.
 """
 
@@ -50,19 +50,13 @@ from msflash.processing.image_formation import (
     render_frame,
     total_illumination,
 )
-from msflash.processing.local import (
-    DEFAULT_TILES,
-    LocalEstimate,
-    denoised_global,
-    estimate_local,
-    tile_statistics,
-    upsample_tiles,
-)
+from msflash.processing.local import LocalEstimate, denoised_global, estimate_local, upsample_tiles
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.scenes import Scene
 from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 from msflash.processing.statistics import FrameStackSpec
+from msflash.processing.tile_statistics import DEFAULT_TILES, tile_statistics
 
 AMBIENT_POOL = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange")
 """Ambients the scenarios draw from."""

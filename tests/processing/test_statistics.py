@@ -168,7 +168,7 @@ def test_rejects_bad_input() -> None:
 @pytest.mark.parametrize(("frame", "name"), [(0, "the ambient frame"), (2, "LED frame 2")])
 def test_non_finite_frame_is_named(bin_factor: int, frame: int, name: str) -> None:
     """'a frame holds non-finite values' did not say which: the ambient, or which LED frame."""
-    from msflash.processing.local import tile_statistics
+    from msflash.processing.tile_statistics import tile_statistics
 
     rng = np.random.default_rng(9)
     ambient, leds, spec = random_stack(rng, (8, 8, 3), np.eye(3), white=1e9)
