@@ -27,12 +27,6 @@ from tests.helpers import GRID, SAMPLES_DIR, ambient, leds_photons, linear_frame
 N_PATCHES = MACBETH_GRID[0] * MACBETH_GRID[1]
 
 
-@pytest.fixture(autouse=True)
-def with_calibrate(monkeypatch):
-    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
-
-
 def _chart(patch_px: int = 8) -> Scene:
     return chart_scene("macbeth", patch_px=patch_px, specular_strip_px=4)
 
