@@ -37,8 +37,6 @@ def _build_directory() -> Path:
 
 BUILD_DIR = _build_directory()
 ELF = BUILD_DIR / "booth.elf"
-SMALL_ELF = BUILD_DIR / "booth_small.elf"
-"""The test build: 2 channels (uv, ir), 12-bit drive, 4 steps (``make sim``)."""
 HARNESS = BUILD_DIR / "booth_sim"
 _TOOLS = ("avr-gcc", "avr-size", "make", "gcc")
 _HEADERS = (Path("/usr/lib/avr/include/avr/io.h"), Path("/usr/include/simavr/parts/uart_pty.h"))
