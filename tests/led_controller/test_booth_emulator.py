@@ -22,8 +22,8 @@ from msflash.led_controller import (
     PtyBoothServer,
     serve_on_pty,
 )
-from msflash.led_controller.booth import levels_close
 from msflash.led_controller.firmware_sim import SimulatedBooth
+from tests.helpers import levels_close
 
 from .conftest import SMALL_TOP, FarEnd
 
