@@ -13,7 +13,7 @@ Statistics of disjoint samples add, so
 - and every tile is then solved in microseconds (:func:`estimate_local`).
 
 Model selection (:func:`select_model`, leave-one-tile-out prediction against the global model,
-:data:`SELECTION_MARGIN` and :data:`MIN_EXPLAINED_GAIN`) and the noise correction
+:data:`SELECTION_MARGIN` and :data:`~processing.local_selection.MIN_EXPLAINED_GAIN`) and the noise correction
 (:attr:`TiledStatistics.denoised`, errors in variables, the same probe :mod:`processing.block_rows`
 measures for the whole frame) are described in ``docs/local-estimation.md`` ("How it works").
 

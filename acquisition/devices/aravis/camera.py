@@ -73,7 +73,7 @@ class AravisCamera(Streaming):
     device
         Aravis device id (``Fake_1``), serial number, or the camera's IPv4 address.
     interfaces
-        Transport layers to use, from :data:`INTERFACES` (``("fake",)``, ``"gige,usb3"``). Only
+        Transport layers to use, from :data:`~.discovery.INTERFACES` (``("fake",)``, ``"gige,usb3"``). Only
         these are enabled; ``gige`` with a name that is not an IP address broadcasts discovery.
     pixel_format
         PixelFormat to set; ``None`` keeps the camera's.
@@ -101,8 +101,8 @@ class AravisCamera(Streaming):
     Release the camera with :meth:`close` (or use it as a context manager): Aravis keeps control
     of a GigE Vision device as long as any reference to it lives.
 
-    Frames of formats stored as the frame itself (:func:`is_zero_copy_format`) on GigE Vision and
-    the fake (:data:`ZERO_COPY_PROTOCOLS`) are not copied: Aravis writes each frame into a numpy
+    Frames of formats stored as the frame itself (:func:`~.pixel_layouts.is_zero_copy_format`) on GigE Vision and
+    the fake (:data:`~.buffers.ZERO_COPY_PROTOCOLS`) are not copied: Aravis writes each frame into a numpy
     array msflash allocated, and that array, once the frame is complete, is the frame returned
     (read-only, owned by the caller from then on). A new buffer replaces it in the stream after
     the frame is queued; :meth:`prepare` readies one per plan step so that a sequence allocates
