@@ -285,11 +285,6 @@ class SimulatedBooth:
         (a random level every 100 µs of simulated time, as a real floating input picks up noise)."""
         self._ask("exp float")
 
-    def camera_strobe(self) -> None:
-        """One whole exposure: a rising then a falling edge."""
-        self.exposure_active(True)
-        self.exposure_active(False)
-
     def link(self) -> dict[str, int]:
         """The board's link now: ``opens`` (hosts holding the port), ``resets`` (opens that reset the MCU),
         ``bootloader`` (1 while the bootloader owns the UART)."""
