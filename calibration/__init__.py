@@ -2,8 +2,8 @@
 
 Pure (arrays and :class:`~processing.spectra.Spectra` in, results out) apart from
 :mod:`calibration.spectrometer` and :mod:`calibration.files`, which read and write the text files
-calibration owns (with the permissions of :mod:`calibration.file_modes`, which acquisition's writers
-use too). Imports only :mod:`processing`.
+calibration owns (written whole, with the umask's permissions, by :mod:`calibration.file_modes`, which
+acquisition's writers use too). Imports only :mod:`processing`.
 """
 
 from msflash.calibration.errors import CalibrationError, CalibrationWarning

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from msflash.calibration.chart_grid import MACBETH_GRID, ChartDetectionError, ChartGrid
+from msflash.calibration.chart_grid import ChartDetectionError, ChartGrid
 from msflash.calibration.chart_lattice import _lattices
 from msflash.calibration.chart_placement import (
     COLOUR_MISFIT,
@@ -184,13 +184,3 @@ def detect_in_sequence(sequence: Any, reflectances: Spectra, rows: int, columns:
     lights = leds.replace(values=leds.values @ levels.T, names=tuple(str(sequence.frames[i].file) for i in led_indices))
     colour = ColourFrames(0, tuple(range(1, len(indices))), lights)
     return detect_chart(images, excluded, sequence.camera.cfa, colour, reflectances, rows, columns, where, quanta)
-
-
-__all__ = [
-    "MACBETH_GRID",
-    "ChartDetectionError",
-    "ChartGrid",
-    "ColourFrames",
-    "detect_chart",
-    "detect_in_sequence",
-]

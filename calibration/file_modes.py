@@ -1,4 +1,4 @@
-"""The permissions msflash gives the files it writes: what the user's umask allows.
+"""How msflash writes a file: whole or not at all, with the permissions the user's umask allows.
 
 Every output is written to a temporary file (``tempfile.mkstemp``, created ``0600``) and renamed
 into place, so without a ``chmod`` captures, sequence files and calibrations would be readable by
@@ -7,7 +7,10 @@ their owner only — not by the other users of a lab machine, as any file they c
 
 from __future__ import annotations
 
+import contextlib
 import os
+import tempfile
+from collections.abc import Iterator
 from functools import cache
 from pathlib import Path
 
@@ -33,3 +36,31 @@ def default_file_mode() -> int:
     384
     """
     return 0o666 & ~_read_umask()
+
+
+@contextlib.contextmanager
+def replacing(path: Path, suffix: str = ".tmp") -> Iterator[str]:
+    """A temporary file beside ``path`` to write, renamed over ``path`` when the block ends without error.
+
+    The temporary is hidden (``.NAME.XXXXXXXX`` + ``suffix``) so a crash leaves an obviously stray file,
+    never a truncated one under the real name; it has :func:`default_file_mode`. When the block raises,
+    the temporary is removed and the error propagates; ``path`` is left as it was.
+    """
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    os.fchmod(handle, default_file_mode())  # mkstemp's 0600 would keep other lab users out
+    os.close(handle)
+    try:
+        yield temporary
+        os.replace(temporary, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temporary)
+        raise
+
+
+def write_whole(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` through :func:`replacing`, flushed to disk before the rename."""
+    with replacing(path) as temporary, open(temporary, "w", encoding="utf-8") as stream:
+        stream.write(text)
+        stream.flush()
+        os.fsync(stream.fileno())

@@ -30,7 +30,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 import uuid
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
@@ -40,7 +39,7 @@ from typing import Any, cast
 import numpy as np
 
 from msflash.calibration.errors import CalibrationError
-from msflash.calibration.file_modes import default_file_mode
+from msflash.calibration.file_modes import write_whole
 from msflash.processing.datasets import load_spectra_csv
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import parse_json_document
@@ -120,19 +119,6 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _write_text(path: Path, text: str) -> None:
-    """Write atomically (temporary file in the same directory, then rename)."""
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.fchmod(handle, default_file_mode())  # mkstemp's 0600 would keep other lab users out
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8") as stream:
-            stream.write(text)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-
-
 def _csv_text(spectra: Spectra, calibration_id: str, what: str, unit: str | None = None) -> str:
     lines = [
         f"# msflash calibration {calibration_id}: {what}, unit {unit or spectra.unit}",
@@ -195,7 +181,7 @@ def save_calibration(calibration: CalibrationSet, directory: str | Path) -> Path
     }
     if calibration.led_spectra is not None:
         led_unit = "counts" if calibration.leds.get("unit") == "counts" else calibration.led_spectra.unit
-        _write_text(directory / LED_FILE, _csv_text(calibration.led_spectra, calibration.id, "LED spectra", led_unit))
+        write_whole(directory / LED_FILE, _csv_text(calibration.led_spectra, calibration.id, "LED spectra", led_unit))
         document["leds"] = {
             **calibration.leds,
             "file": LED_FILE,
@@ -203,7 +189,7 @@ def save_calibration(calibration: CalibrationSet, directory: str | Path) -> Path
             "names": list(calibration.led_spectra.names),
         }
     if calibration.camera_responsivities is not None:
-        _write_text(
+        write_whole(
             directory / CAMERA_FILE,
             _csv_text(calibration.camera_responsivities, calibration.id, "camera responsivities"),
         )
@@ -214,7 +200,7 @@ def save_calibration(calibration: CalibrationSet, directory: str | Path) -> Path
             "channels": list(calibration.camera_responsivities.names),
         }
     if calibration.chart_reflectances is not None:
-        _write_text(
+        write_whole(
             directory / CHART_FILE, _csv_text(calibration.chart_reflectances, calibration.id, "chart reflectances")
         )
         document["chart"] = {
@@ -228,7 +214,7 @@ def save_calibration(calibration: CalibrationSet, directory: str | Path) -> Path
         document["linearity"] = calibration.linearity
     document.update(calibration.extra)
     path = directory / CALIBRATION_FILE
-    _write_text(path, json.dumps(_plain(document), indent=2, allow_nan=False) + "\n")
+    write_whole(path, json.dumps(_plain(document), indent=2, allow_nan=False) + "\n")
     return path
 
 

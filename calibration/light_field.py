@@ -112,50 +112,6 @@ def fit_frame_fields(
     return theta
 
 
-def fit_fields_from_ratios(
-    predicted: np.ndarray,
-    data: np.ndarray,
-    std: np.ndarray,
-    basis: np.ndarray,
-    field_of: np.ndarray,
-    frame: np.ndarray,
-) -> np.ndarray:
-    """Each field's coefficients from the patches' ratios within each frame and channel, (n_fields, terms).
-
-    ``log(m / p) = basis · θ + a_fc``: a free level ``a_fc`` per frame and channel absorbs any error
-    of the curves' amplitude under that frame's light, so the field is measured on how the patches
-    of one frame and channel differ from what the curves predict — where the light falls — and
-    not on what the curves get wrong overall. Weighted least squares (weights ``(m/σ)²``, the
-    inverse variance of ``log m``), the levels profiled out per frame and channel; patch means
-    below 5σ are left out.
-    """
-    n_fields = int(field_of.max()) + 1
-    theta = np.zeros((n_fields, basis.shape[1]))
-    usable = (data > 5 * std) & (predicted > 0)
-    for f in range(n_fields):
-        rows = field_of == f
-        xs, ys, ws = [], [], []
-        for g in np.unique(frame[rows]):
-            in_frame = rows & (frame == g)
-            for c in range(data.shape[1]):
-                keep = in_frame & usable[:, c]
-                if np.count_nonzero(keep) < 3:
-                    continue
-                y = np.log(data[keep, c] / predicted[keep, c])
-                w = (data[keep, c] / std[keep, c]) ** 2
-                b = basis[keep]
-                # profile out the level: weighted centring within this frame and channel
-                xs.append(b - np.average(b, axis=0, weights=w))
-                ys.append(y - np.average(y, weights=w))
-                ws.append(w)
-        if not xs:
-            continue
-        x, y, w = np.vstack(xs), np.concatenate(ys), np.concatenate(ws)
-        normal = (x * w[:, None]).T @ x + 1e-9 * np.eye(x.shape[1])
-        theta[f] = np.linalg.solve(normal, (x * w[:, None]).T @ y)
-    return theta
-
-
 def frame_gains(basis: np.ndarray, frame: np.ndarray, theta: np.ndarray) -> np.ndarray:
     """The gain ``g`` of every row, (rows,)."""
     return np.exp(np.clip(np.sum(basis * theta[frame], axis=1), -MAX_LOG_GAIN, MAX_LOG_GAIN))

@@ -10,7 +10,7 @@ import numpy as np
 
 from msflash.acquisition.app.cli_common import positive_int, print_json, progress
 from msflash.lab.cli_support import REPORTER, optional_claimed_output
-from msflash.processing.local import DEFAULT_TILES
+from msflash.processing.tile_statistics import DEFAULT_TILES
 
 
 def _local_study(args: argparse.Namespace) -> int:
@@ -78,7 +78,7 @@ def _plots(summary: dict, results: list[dict], out: Path) -> list[str]:
     """Per-scenario auto vs global RMSE, the selection scores, where the error stays, and accuracy vs tiles/time."""
     from msflash.acquisition.app.plot_style import PALETTE, SERIES, pyplot, save_figure
     from msflash.lab.study.local import KINDS
-    from msflash.processing.local import SELECTION_MARGIN
+    from msflash.processing.local_selection import SELECTION_MARGIN
 
     plt = pyplot()
     paths = []

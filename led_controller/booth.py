@@ -302,8 +302,3 @@ class LedBooth(TimedTable):
             out = [e for e in self._events if isinstance(e, BoothEvent)]
             self._events.clear()
             return out
-
-
-def levels_close(a: Sequence[float], b: Sequence[float]) -> bool:
-    """Whether two level vectors agree to within one 16-bit wire step."""
-    return len(a) == len(b) and all(math.isclose(x, y, abs_tol=1.0 / protocol.LEVEL_MAX) for x, y in zip(a, b))

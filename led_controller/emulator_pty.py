@@ -168,12 +168,9 @@ class PtyBoothServer:
         if data:
             self._pty.write(data)
 
-    def hangup(self) -> None:
-        """Close the pty as an unplugged booth would (the host's next read fails)."""
-        self._shutdown(from_thread=False)
-
     def close(self) -> None:
-        """Stop serving and close the pty; the emulator's LEDs go off."""
+        """Stop serving and close the pty, as an unplugged booth would (the host's next read fails); the
+        emulator's LEDs go off."""
         self._shutdown(from_thread=False)
 
     def _shutdown(self, *, from_thread: bool) -> None:

@@ -186,11 +186,6 @@ class Sequencer:
                 finally:
                     self._stamp_at = None
 
-    def camera_strobe(self) -> None:
-        """One whole exposure on the ExposureActive line: a rising then a falling edge."""
-        self.exposure_active(True)
-        self.exposure_active(False)
-
     # -- the clock ------------------------------------------------------------------------
 
     def tick(self) -> None:

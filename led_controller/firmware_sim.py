@@ -37,8 +37,6 @@ def _build_directory() -> Path:
 
 BUILD_DIR = _build_directory()
 ELF = BUILD_DIR / "booth.elf"
-SMALL_ELF = BUILD_DIR / "booth_small.elf"
-"""The test build: 2 channels (uv, ir), 12-bit drive, 4 steps (``make sim``)."""
 HARNESS = BUILD_DIR / "booth_sim"
 _TOOLS = ("avr-gcc", "avr-size", "make", "gcc")
 _HEADERS = (Path("/usr/lib/avr/include/avr/io.h"), Path("/usr/include/simavr/parts/uart_pty.h"))
@@ -286,11 +284,6 @@ class SimulatedBooth:
         """Disconnect the ExposureActive wire: the input is then held by the firmware's pull-up, or floats
         (a random level every 100 µs of simulated time, as a real floating input picks up noise)."""
         self._ask("exp float")
-
-    def camera_strobe(self) -> None:
-        """One whole exposure: a rising then a falling edge."""
-        self.exposure_active(True)
-        self.exposure_active(False)
 
     def link(self) -> dict[str, int]:
         """The board's link now: ``opens`` (hosts holding the port), ``resets`` (opens that reset the MCU),

@@ -21,7 +21,3 @@ class ProcessingWarning(UserWarning):
 
 class TargetUnreachableWarning(ProcessingWarning):
     """The flash cannot bring ambient + flash to the target illuminant within the LED bounds."""
-
-
-class UnreliableEstimateWarning(ProcessingWarning):
-    """The ambient estimate's own reliability signals (conditioning, residual, band) are poor."""

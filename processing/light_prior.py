@@ -343,7 +343,7 @@ class PriorModel:
         return prediction_error(self.predictors, phi, moments)
 
     def estimate(self, statistics: ChannelStatistics) -> PriorEstimate:
-        """The ambient of a sequence's channel statistics (:func:`estimate_ambient_prior`)."""
+        """The ambient of a sequence's channel statistics."""
         check_statistics(statistics, self)
         clean = statistics.denoised(statistics.moments.total())
         n = statistics.n_blocks * statistics.n_channels
@@ -454,44 +454,6 @@ def check_statistics(statistics: ChannelStatistics, model: PriorModel) -> None:
             f"prior estimate: {statistics.n_blocks} valid blocks; expected more than the "
             f"{model.prior.dims} light coefficients (lower the exposure, or larger frames)"
         )
-
-
-def estimate_ambient_prior(
-    statistics: ChannelStatistics,
-    led_spectra: Spectra,
-    responsivities: Spectra,
-    prior: LightPrior | None = None,
-    reflectance: ReflectanceBasis | None = None,
-    **options: float | bool,
-) -> PriorEstimate:
-    """Estimate the ambient in the light prior's basis from a sequence's channel statistics.
-
-    Parameters
-    ----------
-    statistics
-        :func:`processing.channel_statistics.accumulate_channel_statistics` of the sequence.
-    led_spectra
-        The k LED spectra at full drive, photons, in the statistics' LED order.
-    responsivities
-        The camera's R, G, B responsivities, photons, on the LEDs' grid.
-    prior, reflectance
-        Default: :func:`learn_light_prior` and :func:`learn_reflectance_basis` on the LEDs' grid.
-    options
-        ``ridge``, ``kappa``, ``split`` of :class:`PriorModel`.
-
-    Returns
-    -------
-    PriorEstimate
-        Spectrum in the LEDs' units (like ``I w``), its posterior band and signals.
-
-    Raises
-    ------
-    SpectralDataError
-        Grids, units, LED count or channel layout that do not match; too few valid blocks.
-    """
-    return prior_model(statistics.channels, led_spectra, responsivities, prior, reflectance, **options).estimate(
-        statistics
-    )
 
 
 def prior_model(

@@ -13,7 +13,7 @@ Statistics of disjoint samples add, so
 - and every tile is then solved in microseconds (:func:`estimate_local`).
 
 Model selection (:func:`select_model`, leave-one-tile-out prediction against the global model,
-:data:`SELECTION_MARGIN` and :data:`MIN_EXPLAINED_GAIN`) and the noise correction
+:data:`SELECTION_MARGIN` and :data:`~processing.local_selection.MIN_EXPLAINED_GAIN`) and the noise correction
 (:attr:`TiledStatistics.denoised`, errors in variables, the same probe :mod:`processing.block_rows`
 measures for the whole frame) are described in ``docs/local-estimation.md`` ("How it works").
 
@@ -22,9 +22,8 @@ Public objects
 - here: :class:`LocalEstimate`, :func:`estimate_local`, :data:`LOCAL_METHODS`, :func:`denoised_global`;
   :func:`coefficient_maps`, :func:`synthesize_local`: the spatially varying computational image;
 - :mod:`processing.tile_statistics`: :class:`TiledStatistics`, :class:`TileBlocks`, :func:`tile_statistics`,
-  :func:`tile_edges` (re-exported here);
-- :mod:`processing.local_selection`: :class:`ModelSelection`, :func:`select_model`, :func:`segment_regions`
-  (re-exported here).
+  :func:`tile_edges`;
+- :mod:`processing.local_selection`: :class:`ModelSelection`, :func:`select_model`, :func:`segment_regions`.
 """
 
 from __future__ import annotations
@@ -37,27 +36,19 @@ import numpy as np
 from msflash.processing.ambient import AMBIENT_METHODS, AmbientEstimate, AmbientModel, gcv_alpha
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.local_selection import (
-    MIN_EXPLAINED_GAIN,
     SELECTION_MARGIN,
-    SMOOTHING_GRID,
     ModelSelection,
     RegionSegmentation,
     _held_out_error,
     segment_regions,
     select_model,
 )
-from msflash.processing.region_cells import Cells
 from msflash.processing.spectra import Spectra, require_unit
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import frame_coefficients
-from msflash.processing.tile_statistics import (
-    DEFAULT_TILES,
-    BlockData,
-    TileBlocks,
-    TiledStatistics,
-    tile_edges,
-    tile_statistics,
-)
+
+# DEFAULT_TILES and TileBlocks: acquisition's cli_process and estimate_stream still import them from here.
+from msflash.processing.tile_statistics import DEFAULT_TILES, TileBlocks, TiledStatistics  # noqa: F401
 
 LOCAL_METHODS = ("auto", "global", "local")
 """``auto`` selects the model from the data; ``global`` is the paper's; ``local`` forces tiles."""
@@ -115,14 +106,6 @@ class LocalEstimate:
     def mean_spectrum(self) -> np.ndarray:
         """``I`` times :attr:`mean_weights`, photons (n_wavelengths,)."""
         return self.led_values @ self.mean_weights
-
-    def weights_map(self, shape: tuple[int, int] | None = None) -> np.ndarray:
-        """Per-pixel ambient weights (H, W, k): each pixel's region's, or bilinear between tile centres."""
-        shape = shape if shape is not None else self.tiles.frame_shape
-        if self.regions is not None:
-            labels = self.regions.label_map(shape)
-            return np.where(labels[..., None], self.regions.weights[1], self.regions.weights[0])
-        return upsample_tiles(self.tile_weights, self.tiles, shape)
 
 
 def estimate_local(
@@ -442,29 +425,3 @@ def synthesize_local(
         hit = frame >= spec.white_level
         saturated |= hit.any(axis=2) if hit.ndim == 3 else hit
     return output, saturated
-
-
-__all__ = [
-    "DEFAULT_TILES",
-    "LOCAL_METHODS",
-    "MIN_EXPLAINED_GAIN",
-    "MIN_TILE_SAMPLES_PER_LED",
-    "SELECTION_MARGIN",
-    "SMOOTHING_GRID",
-    "BlockData",
-    "Cells",
-    "LocalEstimate",
-    "ModelSelection",
-    "RegionSegmentation",
-    "TileBlocks",
-    "TiledStatistics",
-    "coefficient_maps",
-    "denoised_global",
-    "estimate_local",
-    "segment_regions",
-    "select_model",
-    "synthesize_local",
-    "tile_edges",
-    "tile_statistics",
-    "upsample_tiles",
-]

@@ -272,27 +272,6 @@ class SequenceStatistics:
             weighted=self.weighted,
         )
 
-    def select_leds(self, which: Sequence[int]) -> SequenceStatistics:
-        """Statistics restricted to a subset of the LEDs (for leave-one-out and LED-count studies)."""
-        idx = np.asarray(which, dtype=int)
-        return SequenceStatistics(
-            gram=self.gram[np.ix_(idx, idx)],
-            cross=self.cross[idx],
-            ambient_energy=self.ambient_energy,
-            n_samples=self.n_samples,
-            n_total=self.n_total,
-            ambient_sum=self.ambient_sum,
-            led_sums=self.led_sums[idx],
-            noise=None
-            if self.noise is None
-            else NoiseMoments(self.noise.gram[np.ix_(idx, idx)], self.noise.cross[idx], self.noise.ambient_energy),
-            weighted=self.weighted,
-        )
-
-    def permuted(self, order: Sequence[int]) -> SequenceStatistics:
-        """The same statistics with the LEDs in another order."""
-        return self.select_leds(order)
-
     def __add__(self, other: SequenceStatistics) -> SequenceStatistics:
         """Statistics of the union of two disjoint sets of samples (for tiles, chunks, workers)."""
         return SequenceStatistics(

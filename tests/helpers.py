@@ -7,6 +7,7 @@ runs in a fraction of a second.
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import time
 from collections.abc import Sequence
@@ -18,6 +19,7 @@ import pytest
 
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
 from msflash.acquisition.sequence.writer import SequenceWriter
+from msflash.led_controller import protocol
 from msflash.processing import datasets, lights
 from msflash.processing.image_formation import expected_response, exposure_for_peak, render_frame
 from msflash.processing.scenes import Scene, chart_scene
@@ -284,3 +286,8 @@ class PipedLines:
 
     def readline(self) -> str:
         return self._lines.pop(0) if self._lines else ""
+
+
+def levels_close(a: Sequence[float], b: Sequence[float]) -> bool:
+    """Whether two level vectors agree to within one 16-bit wire step."""
+    return len(a) == len(b) and all(math.isclose(x, y, abs_tol=1.0 / protocol.LEVEL_MAX) for x, y in zip(a, b))

@@ -97,9 +97,6 @@ run, and left out of the help when the lab is not installed.
 The help line is what ``msflash --help`` lists without importing the module; a test checks it
 against the module's own registration."""
 
-COMMAND_MODULES = tuple(dict.fromkeys(module for module, _ in COMMANDS.values()))
-"""Modules contributing subcommands, in help order."""
-
 
 def _signal_name(number: int) -> str:
     """``SIGTERM`` for 15, ``SIGHUP`` for 1; ``signal N`` for a number without a name.

@@ -47,20 +47,21 @@ def _camera_at(address: str) -> dict[str, Any]:
 
 def _devices(args: argparse.Namespace) -> int:
     try:
-        from msflash.acquisition.devices.aravis import camera as aravis_camera
+        from msflash.acquisition.devices.aravis.discovery import is_ipv4_address, list_devices, parse_interfaces
+        from msflash.acquisition.devices.aravis.gi_typelib import Aravis
     except ImportError as err:
         raise CameraError(f"devices: {err}") from err
     try:
-        interfaces = aravis_camera.parse_interfaces(args.interfaces)
+        interfaces = parse_interfaces(args.interfaces)
     except ValueError as err:
         raise UsageError(f"--interfaces: {err}") from err
     if args.features is not None:
-        return _features(aravis_camera, args.features, interfaces, args.json)
+        return _features(args.features, interfaces, args.json)
     if "gige" in interfaces:
         progress("devices: GigE Vision discovery broadcasts on every network interface")
-    cameras = [entry.to_dict() for entry in aravis_camera.list_devices(interfaces)]
+    cameras = [entry.to_dict() for entry in list_devices(interfaces)]
     for address in args.address or ():
-        if not aravis_camera.is_ipv4_address(address):
+        if not is_ipv4_address(address):
             raise UsageError(f"--address {address!r}: not an IPv4 address; expected e.g. 192.168.1.20")
         cameras.append(_camera_at(address))
     ports = discovery.list_serial_ports()  # looked up on the module: tests stand in their own port list
@@ -70,7 +71,7 @@ def _devices(args: argparse.Namespace) -> int:
         print_json(
             {
                 "interfaces": list(interfaces),
-                "aravis": aravis_camera.Aravis._version,
+                "aravis": Aravis._version,
                 "cameras": cameras,
                 "booths": booths,
                 "serial_ports": serial_ports,
@@ -103,16 +104,19 @@ def _devices(args: argparse.Namespace) -> int:
     return 0
 
 
-def _features(aravis_camera: Any, device: str, interfaces: tuple[str, ...], as_json: bool) -> int:
+def _features(device: str, interfaces: tuple[str, ...], as_json: bool) -> int:
     """``devices --features ID``: every feature the camera offers, with type, value and what it accepts.
 
     The features under the camera's ``Root`` category first, then every one msflash reads, writes or
     executes that no category under ``Root`` lists (Aravis's fake hides ``GainRaw`` so), and how
     ``--gain``/``--gain-raw`` map on this camera (feature, selector, unit, range).
     """
-    if aravis_camera.is_ipv4_address(device) and "gige" not in interfaces:
+    from msflash.acquisition.devices.aravis.camera import AravisCamera
+    from msflash.acquisition.devices.aravis.discovery import is_ipv4_address
+
+    if is_ipv4_address(device) and "gige" not in interfaces:
         interfaces = (*interfaces, "gige")  # by address: that one camera, no discovery broadcast
-    with aravis_camera.AravisCamera(device, interfaces=interfaces) as camera:
+    with AravisCamera(device, interfaces=interfaces) as camera:
         features = [camera.describe_feature(name, category) for name, category in camera.feature_names()]
         gain = camera.gain_record()
         if as_json:

@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
-import tempfile
 from collections.abc import Sequence as SequenceOf
 from pathlib import Path
 from typing import Any
@@ -27,7 +25,7 @@ from msflash.acquisition.errors import FolderInUseError, OutputWriteError
 from msflash.acquisition.sequence.folder_claim import claim_folder
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session.led_snr import snr_or_none
-from msflash.calibration.file_modes import default_file_mode
+from msflash.calibration.file_modes import replacing, write_whole
 
 PREVIEW_CAPTIONS = {
     "ambient": "ambient only",
@@ -95,7 +93,9 @@ def _write(path: Path, summary: dict[str, Any], sequence: Sequence) -> Path:
             note=True,
         )
     _add_files(report, summary, base)
-    return _write_atomically(report, path)
+    with replacing(path) as temporary:  # a reader never sees half a report
+        report.write(temporary)
+    return path
 
 
 def _add_images(report: HtmlReport, summary: dict[str, Any], base: Path) -> None:
@@ -221,21 +221,6 @@ def _inside(files: SequenceOf[str], base: Path) -> list[str]:
     return inside
 
 
-def _write_atomically(report: HtmlReport, path: Path) -> Path:
-    """The report written to a temporary file beside ``path``, then renamed over it (a reader never sees half)."""
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(handle)
-    try:
-        report.write(temporary)
-        os.chmod(temporary, default_file_mode())
-        os.replace(temporary, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temporary)
-        raise
-    return path
-
-
 def link_later_export(
     run_folder: Path, sequence: Sequence, formats: SequenceOf[str], files: SequenceOf[Path], notes: SequenceOf[str]
 ) -> str | None:
@@ -266,16 +251,7 @@ def link_later_export(
             *summary.get("exports", []),
             {"formats": list(formats), "files": [str(f) for f in files], "notes": list(notes)},
         ]
-        handle, temporary = tempfile.mkstemp(prefix=".run.json.", suffix=".tmp", dir=run_folder)
-        os.close(handle)
-        try:
-            Path(temporary).write_text(dumps_json(summary) + "\n", encoding="utf-8")
-            os.chmod(temporary, default_file_mode())
-            os.replace(temporary, summary_path)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(temporary)
-            raise
+        write_whole(summary_path, dumps_json(summary) + "\n")
         write_run_html(run_folder / "report.html", summary, sequence)
     return None
 

@@ -80,24 +80,3 @@ def write_srgb_png(path: Path, rgb8: np.ndarray, text: Mapping[str, str] | None 
     path = Path(path)
     path.write_bytes(srgb_png_bytes(rgb8, text))
     return path
-
-
-def png_chunks(data: bytes) -> dict[str, bytes]:
-    """The chunks of PNG bytes by type (the first of each type), for checking what a file declares.
-
-    Examples
-    --------
-    >>> chunks = png_chunks(srgb_png_bytes(np.zeros((2, 3, 3), dtype=np.uint8)))
-    >>> chunks["sRGB"], struct.unpack(">2I", chunks["IHDR"][:8])
-    (b'\\x00', (3, 2))
-    """
-    if not data.startswith(b"\x89PNG\r\n\x1a\n"):
-        raise ValueError("PNG: missing signature; expected PNG data")
-    chunks: dict[str, bytes] = {}
-    position = 8
-    while position + 8 <= len(data):
-        (length,) = struct.unpack(">I", data[position : position + 4])
-        kind = data[position + 4 : position + 8].decode("latin-1")
-        chunks.setdefault(kind, data[position + 8 : position + 8 + length])
-        position += 12 + length
-    return chunks

@@ -53,7 +53,6 @@ class ReplayCamera(TriggeredFrames):
         super().__init__()
         self._label = "replay camera"
         self._cursor = 0
-        self._plan_start = 0
         self._released = 0
         # Every frame is read (and its values checked against the recorded levels) before the
         # rig opens, so a corrupt recording is refused before anything is captured or written;
@@ -132,7 +131,6 @@ class ReplayCamera(TriggeredFrames):
                 raise ReplayMismatchError(f"{where}: step {step.index} ({step.label}): {mismatch}")
         with self._condition:
             self._plan = plan
-            self._plan_start = self._cursor
             self._released = 0
             self._queue.clear()
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,7 +30,7 @@ import OpenImageIO as oiio
 from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.frame_digest import FileDigest, digest_open_file
 from msflash.acquisition.sequence.memory_budget import check_decode
-from msflash.calibration.file_modes import default_file_mode
+from msflash.calibration.file_modes import replacing
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.user_files import IMAGE_MAX_BYTES, check_user_file, shown_path
 
@@ -344,12 +343,7 @@ def write_image_digest(
     channels = 1 if data.ndim == 2 else 3
     spec, format_name = _image_spec(path, data, channels, type_name, dict(attributes or {}), chromaticities)
     path.parent.mkdir(parents=True, exist_ok=True)
-    # The temporary name keeps the real suffix and starts with a dot, so a crash leaves an
-    # obviously stray file that no sequence lists, never a truncated frame under the real name.
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
-    os.fchmod(handle, default_file_mode())  # mkstemp's 0600 would keep other lab users out
-    os.close(handle)
-    try:
+    with replacing(path, suffix=f".tmp{path.suffix}") as temporary:
         output = oiio.ImageOutput.create(format_name)
         if output is None:
             raise OSError(f"{path}: no OpenImageIO writer for {format_name} ({_oiio_error()})")
@@ -364,11 +358,6 @@ def write_image_digest(
         with open(temporary, "rb+") as written:
             digest = digest_open_file(written)
             os.fsync(written.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temporary)
-        raise
     return digest
 
 

@@ -45,7 +45,6 @@ from msflash.acquisition.sequence.format import (
 )
 from msflash.acquisition.sequence.frame_digest import SHA256_PATTERN, FileDigest
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.json_input import MAX_NESTING as MAX_NESTING  # the deepest a sequence.json may nest
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.negative_values import blind_columns, clip_negative_noise
 from msflash.processing.spectra import WavelengthGrid
@@ -175,8 +174,8 @@ def _load_json(path: Path) -> Any:
     """The document in ``sequence.json``, refused naming the field for anything but plain finite JSON.
 
     One reader for every JSON file a user hands msflash (:func:`msflash.processing.json_input.parse_json_document`):
-    a key twice, an integer of thousands of digits, nesting deeper than :data:`MAX_NESTING`
-    (format v1 needs 4).
+    a key twice, an integer of thousands of digits, nesting deeper than
+    :data:`~msflash.processing.json_input.MAX_NESTING` (format v1 needs 4).
     """
     if not os.path.lexists(path):
         raise RecordingError(

@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import fields, replace
 from pathlib import Path
@@ -45,7 +44,7 @@ from msflash.acquisition.sequence.image_files import (
     write_image_digest,
 )
 from msflash.acquisition.sequence.reader import parse_document, parse_frame, read_sequence
-from msflash.calibration.file_modes import default_file_mode
+from msflash.calibration.file_modes import write_whole
 
 
 def _plain(value: Any) -> Any:
@@ -124,19 +123,7 @@ def _json_text(path: Path, document: dict) -> str:
 
 
 def _replace_json(path: Path, document: dict | str) -> None:
-    text = document if isinstance(document, str) else _json_text(path, document)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.fchmod(handle, default_file_mode())  # mkstemp's 0600 would keep other lab users out
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8") as stream:
-            stream.write(text)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temporary)
-        raise
+    write_whole(path, document if isinstance(document, str) else _json_text(path, document))
     _fsync_directory(path.parent)
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.calibration import chart_detection
+from msflash.calibration.chart_grid import MACBETH_GRID, ChartDetectionError, ChartGrid
 from msflash.processing import colour_metrics, datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.names import unknown_name
@@ -220,7 +221,7 @@ class SequenceLayout:
     """``build(shape, excluded=None)``: the label map for an image shape, dropping excluded pixels."""
     report: dict[str, Any]
     """For JSON output: ``detected`` and the layout's parameters."""
-    grid: chart_detection.ChartGrid | None = None
+    grid: ChartGrid | None = None
     """The detected chart (None for a given layout): where each patch lies, for the light-field fit."""
 
     def patch_positions(self, n_patches: int, rows: int) -> np.ndarray:
@@ -259,7 +260,7 @@ def sequence_layout(
     if reference is None and chart not in CHARTS:
         raise UsageError(unknown_name("--chart", chart, CHARTS))
     if patch_px is not None or border_px is not None:
-        if reference is not None and (reference.rows, reference.columns) != chart_detection.MACBETH_GRID:
+        if reference is not None and (reference.rows, reference.columns) != MACBETH_GRID:
             raise UsageError(
                 f"--patch-px/--border-px rebuild the sim rig's 4×6 chart but --chart {reference.name} is "
                 f"{reference.rows}×{reference.columns}; expected no layout options (the chart is detected)"
@@ -275,12 +276,12 @@ def sequence_layout(
     reflectances = reference.on(sequence.grid)
     try:
         grid = chart_detection.detect_in_sequence(sequence, reflectances, reference.rows, reference.columns)
-    except chart_detection.ChartDetectionError as err:
+    except ChartDetectionError as err:
         if reference.builtin or reference.rows == reference.columns:
             raise UsageError(str(err)) from err
         try:  # the file may list the patches row by row: the same chart, transposed
             grid = chart_detection.detect_in_sequence(sequence, reflectances, reference.columns, reference.rows)
-        except chart_detection.ChartDetectionError:
+        except ChartDetectionError:
             raise UsageError(str(err)) from err
     patch = min(grid.as_dict()["patch_px"])
     if 2 * margin_px >= patch:

@@ -25,7 +25,8 @@ from msflash.acquisition.session.estimate_stream import (
 )
 from msflash.processing.flash import FlashBounds, FlashSolution
 from msflash.processing.flicker import applied_offsets
-from msflash.processing.local import DEFAULT_TILES, LocalEstimate, synthesize_local
+from msflash.processing.local import LocalEstimate, synthesize_local
+from msflash.processing.tile_statistics import DEFAULT_TILES
 
 
 def estimate_sequence_local(

@@ -28,10 +28,11 @@ from msflash.acquisition.session import analysis, local_route, sequence_spectra
 from msflash.processing.ambient import LED_SIGNAL_Z, AmbientEstimate
 from msflash.processing.errors import TargetUnreachableWarning
 from msflash.processing.flash import FlashBounds, FlashSolution
-from msflash.processing.local import DEFAULT_TILES, LocalEstimate
+from msflash.processing.local import LocalEstimate
 from msflash.processing.names import unknown_name
 from msflash.processing.spectra import Spectra
 from msflash.processing.synthesis import to_raw_values
+from msflash.processing.tile_statistics import DEFAULT_TILES
 
 Report = Callable[[str], None]
 """Where a note for stderr goes (``progress`` for one sequence; a list's ``append`` on a dask worker)."""

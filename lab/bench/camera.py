@@ -202,12 +202,9 @@ def camera_bench(
         (``latency_stages_ms``), end-to-end medians ``latency_ms_msflash`` / ``latency_ms_bare``,
         the targets and whether they are met.
     """
-    from msflash.acquisition.devices.aravis.camera import (
-        AravisCamera,
-        AravisGvFake,
-        StrobeConfig,
-        TriggerConfig,
-    )
+    from msflash.acquisition.devices.aravis.camera import AravisCamera
+    from msflash.acquisition.devices.aravis.camera_records import StrobeConfig, TriggerConfig
+    from msflash.acquisition.devices.aravis.gv_fake import AravisGvFake
     from msflash.lab.bench.bare_run import TriggerTiming, bare_aravis_run
 
     roi = (0, 0, width, height)

@@ -2,7 +2,7 @@
 
 Each round decodes one random frame of every packed family (Mono12p, Mono10p, Mono12Packed,
 Mono10Packed; the Bayer variants share their code) and copies the same frame's Mono16 payload
-into an owned array (what :func:`acquisition.devices.aravis.camera.decode_pixels` does for a payload it
+into an owned array (what :func:`acquisition.devices.aravis.pixel_layouts.decode_pixels` does for a payload it
 cannot keep). Rounds interleave the formats, so a machine busy with other work slows all of
 them alike; the medians' ratios are the figures to compare, the milliseconds only this machine's.
 """

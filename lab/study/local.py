@@ -15,7 +15,7 @@ Protocol
   rig's conventions, :meth:`acquisition.devices.simulated_camera.SimulatedCamera.default`).
 - Estimation: blocks of ``bin_factor`` × ``bin_factor`` (the CLI's default 4), ``tiles`` × ``tiles``
   tiles, Tikhonov solver with GCV; the local model on the denoised statistics
-  (:attr:`processing.local.TiledStatistics.denoised`), the global model on the observed ones (the
+  (:attr:`processing.tile_statistics.TiledStatistics.denoised`), the global model on the observed ones (the
   paper's estimate). ``rmse_global_denoised`` is the global model on the denoised statistics
   (:func:`processing.local.denoised_global`: what locality adds is auto against it), and
   ``rmse_auto_observed`` auto without the correction.
@@ -27,7 +27,7 @@ Protocol
   the whole scene (:func:`alone_rmse`) — the error left when locality is solved perfectly.
 - Cost: wall time of statistics + estimate on a full-size frame (1024 × 1280, the Ximea's) for the
   global estimate (:func:`processing.accumulate.accumulate_statistics` + :func:`estimate_ambient`)
-  and for ``auto`` (:func:`processing.local.tile_statistics` + :func:`estimate_local`), medians of
+  and for ``auto`` (:func:`processing.tile_statistics.tile_statistics` + :func:`estimate_local`), medians of
   repeats (interleaved, best of each); frames in memory.
 """
 
@@ -50,12 +50,13 @@ from msflash.processing.image_formation import (
     render_frame,
     total_illumination,
 )
-from msflash.processing.local import DEFAULT_TILES, LocalEstimate, denoised_global, estimate_local, tile_statistics
+from msflash.processing.local import LocalEstimate, denoised_global, estimate_local, upsample_tiles
 from msflash.processing.metrics import spectrum_rmse
 from msflash.processing.scenes import Scene
 from msflash.processing.sensor import SensorModel
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
 from msflash.processing.statistics import FrameStackSpec
+from msflash.processing.tile_statistics import DEFAULT_TILES, tile_statistics
 
 AMBIENT_POOL = ("tungsten", "fluorescent", "daylight", "underwater", "green", "orange")
 """Ambients the scenarios draw from."""
@@ -207,16 +208,24 @@ def pixel_rmses(estimates: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean((normalised - scale[:, None] * truth) ** 2, axis=1))
 
 
+def weights_map(estimate: LocalEstimate, shape: tuple[int, int]) -> np.ndarray:
+    """Per-pixel ambient weights (H, W, k): each pixel's region's, or bilinear between tile centres."""
+    if estimate.regions is not None:
+        labels = estimate.regions.label_map(shape)
+        return np.where(labels[..., None], estimate.regions.weights[1], estimate.regions.weights[0])
+    return upsample_tiles(estimate.tile_weights, estimate.tiles, shape)
+
+
 def pixel_rmse(estimate: LocalEstimate | np.ndarray, scenario: Scenario, truth: np.ndarray | None = None) -> float:
     """The study's metric: every pixel's estimated spectrum against that pixel's true ambient, averaged over pixels.
 
-    ``estimate`` is a :class:`LocalEstimate` (its per-pixel weights, :meth:`LocalEstimate.weights_map`:
+    ``estimate`` is a :class:`LocalEstimate` (its per-pixel weights, :func:`weights_map`:
     the pixel's region, or bilinear between tile centres — what the local flash uses) or one
     spectrum (n,) for the whole frame (a global estimate).
     """
     truth = pixel_truth(scenario) if truth is None else truth
     if isinstance(estimate, LocalEstimate):
-        weights = estimate.weights_map(scenario.ambient.shape[:2])
+        weights = weights_map(estimate, scenario.ambient.shape[:2])
         spectra = weights.reshape(-1, weights.shape[-1]) @ estimate.led_values.T
     else:
         spectra = np.broadcast_to(np.asarray(estimate, dtype=float), truth.shape)

@@ -35,9 +35,6 @@ from msflash.led_controller.serial_port import open_serial_port, open_transcript
 
 log = logging.getLogger(__name__)
 
-PROTOCOL_NAME = "text"
-"""The ``--booth-protocol`` name of this adapter."""
-
 LEVEL_DIGITS = 5
 """Decimals of each level on the wire (1e-5, finer than a 16-bit drive)."""
 

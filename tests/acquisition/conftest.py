@@ -22,7 +22,7 @@ Aravis fixtures
 
 Parallel workers: the GigE Vision fake binds 127.0.0.1:3956 and the machine has no other
 loopback address configured (the fake needs an interface that owns its address), so two fakes
-cannot run at once. Every fixture starting one holds ``aravis_camera.gvcp_port_lock`` (an
+cannot run at once. Every fixture starting one holds ``gv_fake.gvcp_port_lock`` (an
 ``flock`` that the kernel releases if a worker dies) for the duration of one test only, so
 xdist workers, and other suites on the machine using the same lock, take turns test by test.
 """
@@ -60,7 +60,9 @@ def aravis() -> ModuleType:
 @pytest.fixture
 def fake_camera(aravis: ModuleType) -> Iterator[Any]:
     """AravisCamera on the in-process Fake_1, Mono16 320x240, built-in GenICam XML."""
-    aravis.use_fake_genicam(None)
+    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+
+    use_fake_genicam(None)
     camera = aravis.AravisCamera("Fake_1", interfaces="fake", pixel_format="Mono16", roi=(0, 0, 320, 240))
     try:
         yield camera
@@ -71,11 +73,13 @@ def fake_camera(aravis: ModuleType) -> Iterator[Any]:
 @pytest.fixture
 def sfnc_fake_camera(aravis: ModuleType) -> Iterator[Any]:
     """AravisCamera on the in-process Fake_1 loaded with msflash's SFNC XML."""
-    aravis.use_fake_genicam(aravis.FAKE_SFNC_XML)
+    from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML, use_fake_genicam
+
+    use_fake_genicam(FAKE_SFNC_XML)
     try:
         camera = aravis.AravisCamera("Fake_1", interfaces="fake", pixel_format="Mono8", roi=(0, 0, 128, 96))
     finally:
-        aravis.use_fake_genicam(None)  # the XML is read when the fake device is created
+        use_fake_genicam(None)  # the XML is read when the fake device is created
     try:
         yield camera
     finally:
@@ -85,7 +89,9 @@ def sfnc_fake_camera(aravis: ModuleType) -> Iterator[Any]:
 @pytest.fixture
 def gv_fake(aravis: ModuleType) -> Iterator[Any]:
     """The GigE Vision fake on 127.0.0.1 in this process, with the SFNC XML and 1 kHz trigger polling."""
-    with aravis.AravisGvFake(serial="MSFTEST1") as fake:
+    from msflash.acquisition.devices.aravis.gv_fake import AravisGvFake
+
+    with AravisGvFake(serial="MSFTEST1") as fake:
         yield fake
 
 
@@ -106,6 +112,9 @@ def _die_with_parent() -> None:
 @pytest.fixture
 def gv_fake_process(aravis: ModuleType) -> Iterator[Callable[..., subprocess.Popen[bytes]]]:
     """Factory: start ``arv-fake-gv-camera-0.8 -i 127.0.0.1`` (holding the port lock) and return the process."""
+    from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML
+    from msflash.acquisition.devices.aravis.gv_fake import gvcp_port_lock
+
     if shutil.which(FAKE_GV_TOOL) is None:
         pytest.skip(f"{FAKE_GV_TOOL} not installed (Debian package aravis-tools)")
     stack = ExitStack()
@@ -115,10 +124,10 @@ def gv_fake_process(aravis: ModuleType) -> Iterator[Callable[..., subprocess.Pop
         serial: str = "MSFPROC1", lost_per_thousand: float | None = None, builtin_xml: bool = False
     ) -> subprocess.Popen[bytes]:
         if not processes:  # one lock for the whole test (this process's later holds nest in it)
-            stack.enter_context(aravis.gvcp_port_lock())
+            stack.enter_context(gvcp_port_lock())
         command = [FAKE_GV_TOOL, "-i", "127.0.0.1", "-s", serial]
         if not builtin_xml:  # builtin_xml: Aravis's own description (GainRaw 0-10, no Gain)
-            command += ["-g", str(aravis.FAKE_SFNC_XML)]
+            command += ["-g", str(FAKE_SFNC_XML)]
         if lost_per_thousand is not None:
             command += ["-r", str(lost_per_thousand)]
         # PR_SET_PDEATHSIG: the fake dies with this worker even if the worker crashes, so no

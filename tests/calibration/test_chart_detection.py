@@ -16,25 +16,15 @@ from msflash.acquisition.app import cli
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rigs import sim as rig_module
-from msflash.calibration.chart_detection import (
-    MACBETH_GRID,
-    ChartDetectionError,
-    ColourFrames,
-    detect_chart,
-    detect_in_sequence,
-)
+from msflash.calibration.chart_detection import detect_chart, detect_in_sequence
+from msflash.calibration.chart_grid import MACBETH_GRID, ChartDetectionError
+from msflash.calibration.chart_placement import ColourFrames
 from msflash.processing import datasets
 from msflash.processing.scenes import Scene, chart_scene, uniform_scene
 from tests.calibration.placed_scenes import placed_scene
 from tests.helpers import GRID, SAMPLES_DIR, ambient, leds_photons, linear_frames
 
 N_PATCHES = MACBETH_GRID[0] * MACBETH_GRID[1]
-
-
-@pytest.fixture(autouse=True)
-def with_calibrate(monkeypatch):
-    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
 
 
 def _chart(patch_px: int = 8) -> Scene:

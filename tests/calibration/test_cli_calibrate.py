@@ -16,13 +16,6 @@ from msflash.processing import datasets
 SEQUENCE = Path(__file__).resolve().parents[1] / "data" / "sequences" / "sim-macbeth-fluorescent"
 
 
-@pytest.fixture(autouse=True)
-def with_calibrate(monkeypatch):
-    """The lead adds the module to COMMAND_MODULES; until then the tests add it."""
-    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
-
-
 SEQUENCE_LEDS = tuple(led["name"] for led in json.loads((SEQUENCE / "sequence.json").read_text())["leds"])
 """The recorded sequence's names of the paper's LEDs (recorded before they were named after their measured peaks)."""
 

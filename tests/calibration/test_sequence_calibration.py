@@ -22,12 +22,6 @@ from msflash.lab.study.camera_calibration import flash_delta_e
 from msflash.processing import datasets
 
 
-@pytest.fixture(autouse=True)
-def with_calibrate(monkeypatch):
-    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
-
-
 def _record(root: Path, ambient: str, seed: int, cfa: str | None = None) -> Path:
     out = root / f"{ambient}-{cfa or 'rgb'}"
     argv = [

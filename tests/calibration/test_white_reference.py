@@ -22,12 +22,6 @@ from msflash.calibration.white_reference import parse_roi, white_led_responses
 from tests.helpers import forget_digests
 
 
-@pytest.fixture(autouse=True)
-def with_calibrate(monkeypatch):
-    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
-
-
 def _capture(root: Path, scene: str, cfa: str | None = None) -> Path:
     argv = ["capture", "--rig", "sim", "--scene", scene, "--ambient", "tungsten", "--seed", "4", "--out", str(root)]
     assert cli.main(argv + (["--cfa", cfa] if cfa else [])) == 0

@@ -47,10 +47,11 @@ from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
 from msflash.processing.channel_statistics import accumulate_channel_statistics
 from msflash.processing.light_prior import prior_model
-from msflash.processing.local import estimate_local, tile_statistics
+from msflash.processing.local import estimate_local
 from msflash.processing.model_error import LightReference, reference_for, with_model_error
 from msflash.processing.spectra import Spectra
 from msflash.processing.statistics import SequenceStatistics
+from msflash.processing.tile_statistics import tile_statistics
 from tests.harness import metrics
 from tests.harness.cases import select_cases
 from tests.harness.render import HarnessCase, render

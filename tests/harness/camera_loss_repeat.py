@@ -40,9 +40,9 @@ BOOT = (
 )
 
 
-def once(scenario: str, work: Path, probe_dead: bool, xml: str, ac) -> tuple[str, str]:  # noqa: ANN001
+def once(scenario: str, work: Path, probe_dead: bool, xml: str, gv_fake) -> tuple[str, str]:  # noqa: ANN001
     work.mkdir(parents=True)
-    with ac.gvcp_port_lock():
+    with gv_fake.gvcp_port_lock():
         f = fake("S", xml)
         child = subprocess.Popen(
             [sys.executable, "-X", "faulthandler", "-c", BOOT, "40", str(CHILD), scenario, str(work)],
@@ -87,16 +87,17 @@ def once(scenario: str, work: Path, probe_dead: bool, xml: str, ac) -> tuple[str
 
 def main() -> None:
     """Repeat the scenarios named on the command line."""
-    from msflash.acquisition.devices.aravis import camera as ac
+    from msflash.acquisition.devices.aravis import gv_fake
+    from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML
 
-    xml = str(ac.FAKE_SFNC_XML)
+    xml = str(FAKE_SFNC_XML)
     n = int(sys.argv[1])
     scen = sys.argv[2:]
     tmp = Path(tempfile.mkdtemp(prefix="camera-loss-"))
     tally: dict = {}
     for i in range(n):
         for s in scen:
-            what, detail = once(s, tmp / f"{s}{i}", s == "silent", xml, ac)
+            what, detail = once(s, tmp / f"{s}{i}", s == "silent", xml, gv_fake)
             tally[(s, what)] = tally.get((s, what), 0) + 1
             if what != "ok":
                 (tmp / f"camera-loss-{s}-{i}.txt").write_text(detail)

@@ -15,8 +15,9 @@ import sys
 
 def repeat(n: int, pixel_format: str = "Mono16", small: bool = False) -> str:
     """The summary line for ``n`` repetitions."""
-    from msflash.acquisition.devices.aravis import camera as ac
+    from msflash.acquisition.devices.aravis.camera import AravisCamera
     from msflash.acquisition.devices.aravis.fake_log import mute_unfilled_format_warning
+    from msflash.acquisition.devices.aravis.gv_fake import AravisGvFake
     from msflash.acquisition.errors import CameraError
     from msflash.acquisition.plan import CapturePlan, CaptureStep
 
@@ -30,8 +31,8 @@ def repeat(n: int, pixel_format: str = "Mono16", small: bool = False) -> str:
             plan = CapturePlan(steps, trigger="software")
             lost = False
             with (
-                ac.AravisGvFake(serial="REPEAT") as fake,
-                ac.AravisCamera(fake.address, interfaces="gige", pixel_format=pixel_format, roi=roi) as camera,
+                AravisGvFake(serial="REPEAT") as fake,
+                AravisCamera(fake.address, interfaces="gige", pixel_format=pixel_format, roi=roi) as camera,
             ):
                 camera.prepare(plan)
                 camera.start()

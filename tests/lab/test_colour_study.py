@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app.cli_common import UsageError
-from msflash.acquisition.app.srgb_png import png_chunks
 from msflash.lab import cli_colour_study, colour_study
+from tests.acquisition.support.png_files import png_chunks
 from tests.acquisition.support.report_pages import parse_report
 
 ACCEPTANCE_AMBIENTS = ("tungsten", "fluorescent", "underwater")

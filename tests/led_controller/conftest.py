@@ -13,8 +13,8 @@ import pytest
 
 from msflash.led_controller import BoothEmulator, LedBooth, ManualClock, PtyBoothServer, serve_on_pty
 from msflash.led_controller.firmware_sim import (
+    BUILD_DIR,
     ELF,
-    SMALL_ELF,
     SimulatedBooth,
     TriggerPulse,
     build,
@@ -211,8 +211,8 @@ SMALL_TOP = (1 << 12) - 1
 
 @pytest.fixture(scope="session")
 def small_image(firmware_image: Path) -> Path:
-    """The 2-channel, 12-bit, 4-step test image (built with ``firmware_image``)."""
-    return SMALL_ELF
+    """The 2-channel, 12-bit, 4-step test image, channels uv and ir (``make sim`` builds it with ``firmware_image``)."""
+    return BUILD_DIR / "booth_small.elf"
 
 
 @pytest.fixture(params=["emulator", "firmware"])

@@ -15,11 +15,11 @@ import pytest
 import serial
 
 from msflash.led_controller import BoothError, BoothTimeoutError, LedBooth, serve_on_pty
-from msflash.led_controller.booth import levels_close
 from msflash.led_controller.booth_probe import await_boot_banner
 from msflash.led_controller.firmware_sim import SimulatedBooth
 from msflash.led_controller.protocol import encode_request
 from msflash.led_controller.usb_link import USB_PACKET_PAYLOAD, HeldReplies, PortOpenWatch
+from tests.helpers import levels_close
 
 from .conftest import SMALL_TOP, FarEnd
 

@@ -22,8 +22,8 @@ from msflash.led_controller import (
     PtyBoothServer,
     serve_on_pty,
 )
-from msflash.led_controller.booth import levels_close
 from msflash.led_controller.firmware_sim import SimulatedBooth
+from tests.helpers import levels_close
 
 from .conftest import SMALL_TOP, FarEnd
 
@@ -246,7 +246,8 @@ def test_missing_port_is_not_found(tmp_path) -> None:
 
 def test_transcript_is_recorded(booth_on_pty: PtyBoothServer, tmp_path) -> None:
     path = tmp_path / "t.txt"
-    booth_on_pty.emulator.camera_strobe()  # ignored: nothing armed
+    booth_on_pty.emulator.exposure_active(True)  # one exposure, ignored: nothing armed
+    booth_on_pty.emulator.exposure_active(False)
     with LedBooth.open(booth_on_pty.port, log_serial=path) as booth:
         booth.set_levels([0.0] * 7)
     lines = path.read_text().splitlines()

@@ -17,7 +17,7 @@ from msflash.led_controller import (
     ManualClock,
     PtyBoothServer,
 )
-from msflash.led_controller.booth import levels_close
+from tests.helpers import levels_close
 
 OFF = (0.0,) * 7
 
@@ -119,7 +119,7 @@ def test_unplug_is_a_clear_error_and_the_booth_is_off(booth_on_pty: PtyBoothServ
         LedBooth.open(booth_on_pty.port, timeout_s=30.0) as booth,  # only a failure waits
     ):
         booth.set_levels([1.0] * 7)
-        booth_on_pty.hangup()
+        booth_on_pty.close()  # the booth unplugged
         booth.ping()
     assert "check the USB cable" in str(info.value)
     assert any("all_off" in note for note in info.value.__notes__)

@@ -17,12 +17,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from msflash.led_controller import ManualClock, serve_on_pty
-from msflash.led_controller.booth import levels_close
 from msflash.led_controller.booth_probe import await_boot_banner
 from msflash.led_controller.emulator import BoothEmulator
 from msflash.led_controller.emulator_wire import firmware_crc
 from msflash.led_controller.firmware_sim import SimulatedBooth
 from msflash.led_controller.protocol import MAX_LINE, encode_frame, encode_levels, encode_request
+from tests.helpers import levels_close
 
 from .conftest import SMALL_TOP
 

@@ -11,11 +11,12 @@ from collections.abc import Callable
 
 import pytest
 
-from msflash.led_controller.booth import LedBooth, levels_close
+from msflash.led_controller.booth import LedBooth
 from msflash.led_controller.emulator import BoothEmulator, ManualClock
 from msflash.led_controller.emulator_pty import PtyBoothServer
 from msflash.led_controller.errors import BoothError
 from msflash.led_controller.protocol import Command, encode_request
+from tests.helpers import levels_close
 
 from .conftest import FarEnd
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from msflash.led_controller import BoothError, BoothProtocolError, BoothTimeoutError, LedBooth
-from msflash.led_controller.booth import levels_close
 from msflash.led_controller.protocol import encode_frame, encode_request
+from tests.helpers import levels_close
 
 
 @pytest.mark.parametrize("recording", ["emulator-camera-master.txt", "simavr-firmware-camera-master.txt"])

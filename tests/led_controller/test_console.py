@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from msflash.led_controller import LedBooth, serve_on_pty
-from msflash.led_controller.booth import levels_close
 from msflash.led_controller.console import BoothConsole, ConsoleQuit
 from msflash.led_controller.protocol import encode_request
+from tests.helpers import levels_close
 
 from .conftest import FarEnd
 

@@ -18,8 +18,8 @@ from msflash.led_controller import (
     protocol,
     serve_on_pty,
 )
-from msflash.led_controller.booth import levels_close
 from msflash.led_controller.emulator import BoothEmulator
+from tests.helpers import levels_close
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

@@ -14,12 +14,12 @@ from msflash.acquisition.session.sequence_spectra import camera_responsivities_p
 from msflash.processing import datasets
 from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import estimate_ambient
-from msflash.processing.channel_statistics import accumulate_channel_statistics, plane_channels
+from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics, plane_channels
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.light_library import NEAR_COPY_COSINE, lights_of
 from msflash.processing.light_prior import (
+    PriorEstimate,
     PriorModel,
-    estimate_ambient_prior,
     learn_light_prior,
     learn_reflectance_basis,
     prior_candidate_lights,
@@ -32,6 +32,13 @@ from tests.processing import unseen_sequences as us
 from tests.processing.light_prior_study import rendering_with, study_surfaces
 
 GRID = WavelengthGrid(400, 700, 10)
+
+
+def estimate_ambient_prior(
+    statistics: ChannelStatistics, led_spectra: Spectra, responsivities: Spectra, **options: float
+) -> PriorEstimate:
+    """The light prior's estimate of a sequence's channel statistics."""
+    return prior_model(statistics.channels, led_spectra, responsivities, **options).estimate(statistics)
 
 
 def _unit(values: np.ndarray) -> np.ndarray:

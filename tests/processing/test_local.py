@@ -27,23 +27,13 @@ from msflash.lab.study.local import (
 from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientModel
 from msflash.processing.image_formation import MixedIllumination, expected_response
-from msflash.processing.local import (
-    SELECTION_MARGIN,
-    Cells,
-    TiledStatistics,
-    denoised_global,
-    estimate_local,
-    segment_regions,
-    select_model,
-    synthesize_local,
-    tile_statistics,
-    upsample_tiles,
-)
-from msflash.processing.local_selection import _solve_regions
+from msflash.processing.local import denoised_global, estimate_local, synthesize_local, upsample_tiles
+from msflash.processing.local_selection import SELECTION_MARGIN, _solve_regions, segment_regions, select_model
 from msflash.processing.metrics import spectrum_rmse
+from msflash.processing.region_cells import Cells
 from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.synthesis import synthesize
-from msflash.processing.tile_statistics import _block_sums_and_differences
+from msflash.processing.tile_statistics import TiledStatistics, _block_sums_and_differences, tile_statistics
 from tests.helpers import EXACT, FLOAT32, ambient, camera, chart, leds_photons, linear_frames, rendered_frames, spec_for
 
 SHAPE = (160, 192)

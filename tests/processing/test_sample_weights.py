@@ -18,9 +18,9 @@ from msflash.processing import block_rows
 from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.block_rows import BlockRows
 from msflash.processing.block_sums import cfa_planes
-from msflash.processing.local import tile_statistics
 from msflash.processing.noise_level import PixelNoise, block_noise_line, detail_noise_line
 from msflash.processing.statistics import FrameStackSpec
+from msflash.processing.tile_statistics import tile_statistics
 from tests.processing.unseen_sequences import Case, led_bound, render_case, rmse
 
 

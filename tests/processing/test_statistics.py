@@ -136,17 +136,6 @@ def test_residual_energy_matches_pixels() -> None:
     assert stats.residual_energy(w) == pytest.approx(direct, rel=1e-8)
 
 
-def test_select_and_permute() -> None:
-    rng = np.random.default_rng(7)
-    ambient, leds, spec = random_stack(rng, (6, 6, 3), np.eye(3), white=1e9)
-    stats = accumulate_statistics(ambient, leds, spec)
-    order = [2, 0, 1]
-    permuted = stats.permuted(order)
-    np.testing.assert_array_equal(permuted.gram, stats.gram[np.ix_(order, order)])
-    np.testing.assert_array_equal(permuted.cross, stats.cross[order])
-    assert stats.select_leds([1]).n_leds == 1
-
-
 def test_rejects_bad_input() -> None:
     rng = np.random.default_rng(8)
     ambient, leds, spec = random_stack(rng, (4, 4, 3), np.eye(2), white=1e9)
@@ -168,7 +157,7 @@ def test_rejects_bad_input() -> None:
 @pytest.mark.parametrize(("frame", "name"), [(0, "the ambient frame"), (2, "LED frame 2")])
 def test_non_finite_frame_is_named(bin_factor: int, frame: int, name: str) -> None:
     """'a frame holds non-finite values' did not say which: the ambient, or which LED frame."""
-    from msflash.processing.local import tile_statistics
+    from msflash.processing.tile_statistics import tile_statistics
 
     rng = np.random.default_rng(9)
     ambient, leds, spec = random_stack(rng, (8, 8, 3), np.eye(3), white=1e9)

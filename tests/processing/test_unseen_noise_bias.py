@@ -21,8 +21,8 @@ from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.block_rows import BlockRows
 from msflash.processing.block_sums import cfa_planes
-from msflash.processing.local import tile_statistics
 from msflash.processing.statistics import FrameStackSpec
+from msflash.processing.tile_statistics import tile_statistics
 from tests.processing.unseen_sequences import MARGIN, Case, led_bound, render_case, rmse
 
 

@@ -65,8 +65,6 @@ class Outbox:
         self._ready = asyncio.Event()
         self.dropped = False
         """True once the page was dropped (a send took longer than :data:`SEND_TIMEOUT_S`)."""
-        self.frames_skipped = 0
-        """Frames replaced by a newer one before they could be sent (the page reads slower than the stream)."""
         sock = transport.get_extra_info("socket") if transport is not None else None
         if sock is not None:
             with contextlib.suppress(OSError):
@@ -80,8 +78,6 @@ class Outbox:
 
     def offer_frame(self, message: bytes, view: str = "live") -> None:
         """Queue ``message`` (a frame of ``view``), replacing that view's frame not yet sent; never waits."""
-        if view in self._frames:
-            self.frames_skipped += 1
         self._frames[view] = message
         self._ready.set()
 
@@ -104,7 +100,6 @@ class Outbox:
                     newer = self._frames.pop(view, None)
                     if newer is not None:  # a newer frame of the view came while the last one was leaving
                         frame = newer
-                        self.frames_skipped += 1
                     if not self.dropped:
                         await self._bounded(self.ws.send_bytes(frame))
         except (ConnectionError, RuntimeError):

@@ -9,21 +9,10 @@ The camera is made of parts, one module each, stacked as mixins over one shared 
 :class:`~.feature_access.FeatureAccess` (features by name) → :class:`~.image_settings.ImageSettings`
 (pixel format, ROI, exposure) → :class:`~.gain_features.GainFeatures` → :class:`~.sync_lines.SyncLines`
 (trigger and strobe lines) → :class:`~.streaming.Streaming` (the stream, its buffers in
-:mod:`.buffers`, triggers and frames) → :class:`AravisCamera` (opening, closing, ``prepare``). This
-module re-exports the folder's public objects, so ``aravis.camera`` stays the one name to import.
-
-Public objects (and where they live)
-------------------------------------
-- :data:`INTERFACES`, :func:`parse_interfaces`, :func:`use_interfaces`, :func:`list_devices`,
-  :class:`DeviceEntry`: which transport layers Aravis may use and what they find (:mod:`.discovery`).
-- :class:`AravisCamera` with :class:`TriggerConfig`, :class:`StrobeConfig`,
-  :class:`CameraSettings`, :class:`AcquisitionStats` (:mod:`.camera_records`): one opened camera;
-  :class:`CameraProfile`, :func:`load_profiles`, :func:`match_profile` (:mod:`.profiles`).
-- :func:`decode_pixels`, :data:`PIXEL_FORMATS`, :func:`frame_id_gap`: pure helpers (:mod:`.pixel_layouts`).
-- :class:`AravisGvFake`, :func:`gvcp_port_lock`, :data:`FAKE_SFNC_XML`: the Aravis GigE Vision
-  fake camera served on 127.0.0.1 with msflash's SFNC GenICam description (:mod:`.gv_fake`).
-- :class:`FrameTiming` (:attr:`AravisCamera.last_frame_timing`): stage times of frames (the plain
-  Aravis loop the camera bench compares them against is the lab's, ``msflash.lab.bench.bare_run``).
+:mod:`.buffers`, triggers and frames) → :class:`AravisCamera` (opening, closing, ``prepare``). The rest of
+the folder is imported from where it is defined: device listing and interfaces (:mod:`.discovery`), the
+records (:mod:`.camera_records`), profiles (:mod:`.profiles`), pixel decoding (:mod:`.pixel_layouts`) and
+the GigE Vision fake on 127.0.0.1 (:mod:`.gv_fake`).
 
 Network safety: Aravis discovers GigE Vision cameras by broadcasting on every network interface,
 and opening a camera by a name that is not an IP address makes the GigE Vision interface resolve
@@ -40,14 +29,7 @@ import threading
 from collections.abc import Iterable
 from typing import Any
 
-from msflash.acquisition.devices.aravis.buffers import (
-    CONTROL_LOST,
-    ZERO_COPY_PROTOCOLS,
-    Bad,
-    BufferPool,
-    Good,
-    SpareStream,
-)
+from msflash.acquisition.devices.aravis.buffers import CONTROL_LOST, BufferPool, SpareStream
 from msflash.acquisition.devices.aravis.camera_records import (
     AcquisitionStats,
     CameraSettings,
@@ -57,52 +39,19 @@ from msflash.acquisition.devices.aravis.camera_records import (
 )
 from msflash.acquisition.devices.aravis.device_release import release_lost_device
 from msflash.acquisition.devices.aravis.discovery import (
-    FAKE_SFNC_XML,
-    GENICAM_DIR,
-    INTERFACES,
-    PROFILES_JSON,
     DeviceEntry,
     is_ipv4_address,
     list_devices,
     parse_interfaces,
-    use_fake_genicam,
     use_interfaces,
 )
-from msflash.acquisition.devices.aravis.gain import (
-    GainControl,
-    GainRequest,
-)
+from msflash.acquisition.devices.aravis.gain import GainControl, GainRequest
 from msflash.acquisition.devices.aravis.gi_typelib import Aravis, GLib, aravis_lock
-from msflash.acquisition.devices.aravis.gv_fake import (
-    GVCP_LOCK_PATH,
-    GVCP_PORT,
-    AravisGvFake,
-    gvcp_port_holder,
-    gvcp_port_lock,
-)
-from msflash.acquisition.devices.aravis.pixel_layouts import (
-    GV_FRAME_ID_WRAP,
-    PIXEL_FORMATS,
-    PixelLayout,
-    decode_pixels,
-    frame_id_gap,
-    is_zero_copy_format,
-    view_pixels,
-)
-from msflash.acquisition.devices.aravis.profiles import (
-    PROFILE_LISTS,
-    PROFILE_NUMBERS,
-    CameraProfile,
-    load_profiles,
-    match_profile,
-)
+from msflash.acquisition.devices.aravis.pixel_layouts import PIXEL_FORMATS
+from msflash.acquisition.devices.aravis.profiles import match_profile
 from msflash.acquisition.devices.aravis.streaming import Streaming
 from msflash.acquisition.devices.camera import CameraInfo, NativeGain
-from msflash.acquisition.errors import (
-    CameraError,
-    CameraNotFoundError,
-    FrameLostError,
-)
+from msflash.acquisition.errors import CameraError, CameraNotFoundError
 from msflash.acquisition.plan import CapturePlan
 
 log = logging.getLogger(__name__)
@@ -124,7 +73,7 @@ class AravisCamera(Streaming):
     device
         Aravis device id (``Fake_1``), serial number, or the camera's IPv4 address.
     interfaces
-        Transport layers to use, from :data:`INTERFACES` (``("fake",)``, ``"gige,usb3"``). Only
+        Transport layers to use, from :data:`~.discovery.INTERFACES` (``("fake",)``, ``"gige,usb3"``). Only
         these are enabled; ``gige`` with a name that is not an IP address broadcasts discovery.
     pixel_format
         PixelFormat to set; ``None`` keeps the camera's.
@@ -152,8 +101,8 @@ class AravisCamera(Streaming):
     Release the camera with :meth:`close` (or use it as a context manager): Aravis keeps control
     of a GigE Vision device as long as any reference to it lives.
 
-    Frames of formats stored as the frame itself (:func:`is_zero_copy_format`) on GigE Vision and
-    the fake (:data:`ZERO_COPY_PROTOCOLS`) are not copied: Aravis writes each frame into a numpy
+    Frames of formats stored as the frame itself (:func:`~.pixel_layouts.is_zero_copy_format`) on GigE Vision and
+    the fake (:data:`~.buffers.ZERO_COPY_PROTOCOLS`) are not copied: Aravis writes each frame into a numpy
     array msflash allocated, and that array, once the frame is complete, is the frame returned
     (read-only, owned by the caller from then on). A new buffer replaces it in the stream after
     the frame is queued; :meth:`prepare` readies one per plan step so that a sequence allocates
@@ -445,49 +394,3 @@ class AravisCamera(Streaming):
     def readout_skew_us(self) -> float:
         """0: the camera's rolling-shutter skew is not read (taken as a global shutter)."""
         return 0.0
-
-
-__all__ = [
-    "FAKE_SFNC_XML",
-    "GENICAM_DIR",
-    "GVCP_LOCK_PATH",
-    "GVCP_PORT",
-    "GV_FRAME_ID_WRAP",
-    "INTERFACES",
-    "PIXEL_FORMATS",
-    "PROFILES_JSON",
-    "PROFILE_LISTS",
-    "PROFILE_NUMBERS",
-    "ZERO_COPY_PROTOCOLS",
-    "AcquisitionStats",
-    "Aravis",
-    "AravisCamera",
-    "AravisGvFake",
-    "Bad",
-    "BufferPool",
-    "CameraNotFoundError",
-    "CameraProfile",
-    "CameraSettings",
-    "DeviceEntry",
-    "FrameLostError",
-    "FrameTiming",
-    "GLib",
-    "Good",
-    "PixelLayout",
-    "StrobeConfig",
-    "TriggerConfig",
-    "aravis_lock",
-    "decode_pixels",
-    "frame_id_gap",
-    "gvcp_port_holder",
-    "gvcp_port_lock",
-    "is_ipv4_address",
-    "is_zero_copy_format",
-    "list_devices",
-    "load_profiles",
-    "match_profile",
-    "parse_interfaces",
-    "use_fake_genicam",
-    "use_interfaces",
-    "view_pixels",
-]

@@ -20,8 +20,8 @@ Public objects
 - :func:`parse_feature`, :func:`parse_roi`, :func:`parse_binning`: argparse types of the options.
 - :class:`FeatureInfo`: one feature as the camera describes it (``msflash devices --features``).
 - :func:`apply_camera_options`, :func:`apply_feature`, :class:`AppliedOptions`: writing and reading back.
-- :data:`MSFLASH_FEATURES`: every feature msflash reads or writes (``devices --features`` lists them
-  all, also those the camera's ``Root`` category leaves out).
+- :data:`~.msflash_features.MSFLASH_FEATURES`: every feature msflash reads or writes (``devices --features``
+  lists them all, also those the camera's ``Root`` category leaves out).
 
 ``--gain``/``--gain-raw`` (which feature, selector, unit and range) is :mod:`acquisition.devices.aravis.gain`.
 """
@@ -36,7 +36,6 @@ from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
 from msflash.acquisition.devices.aravis.gain import GainRequest
-from msflash.acquisition.devices.aravis.msflash_features import MSFLASH_FEATURES as MSFLASH_FEATURES
 from msflash.acquisition.errors import CameraError, CameraSettingError
 from msflash.processing.names import close_names
 
@@ -75,7 +74,7 @@ class FeatureInfo:
     visibility: str = ""
     """GenICam visibility (``Beginner``, ``Expert``, ``Guru``, ``Invisible``), when the camera says."""
     msflash: str = ""
-    """What msflash does with it: ``reads``, ``writes``, ``executes`` (:data:`MSFLASH_FEATURES`), else ""."""
+    """What msflash does with it: ``reads``, ``writes``, ``executes`` (:mod:`.msflash_features`), else ""."""
 
     @property
     def writable(self) -> bool:

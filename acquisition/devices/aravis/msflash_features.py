@@ -1,4 +1,4 @@
-"""The GenICam features msflash uses (``msflash devices --features``); re-exported by :mod:`.camera_features`."""
+"""The GenICam features msflash uses (``msflash devices --features``)."""
 
 from __future__ import annotations
 

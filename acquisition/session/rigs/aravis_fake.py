@@ -204,14 +204,15 @@ def _open_fake_camera(
     model: Any, serial: str, lost_packet_ratio: float, frames: _FakeFrames, options: Any, closers: list
 ) -> _OpenedFake:
     """The fake served on 127.0.0.1 and the camera opened on it, checked to be the rig's own, configured."""
-    from msflash.acquisition.devices.aravis import camera as aravis_camera
+    from msflash.acquisition.devices.aravis.camera import AravisCamera
     from msflash.acquisition.devices.aravis.camera_features import configure_camera
+    from msflash.acquisition.devices.aravis.gv_fake import AravisGvFake
 
     if frames.world is not None:
         from msflash.acquisition.devices.aravis.fake_log import mute_unfilled_format_warning
 
         closers.append(mute_unfilled_format_warning())  # the pixels are rendered: its lines say nothing
-    fake = aravis_camera.AravisGvFake(
+    fake = AravisGvFake(
         serial=serial,
         genicam_xml=model.xml_path(),
         lost_packet_ratio=lost_packet_ratio,
@@ -220,7 +221,7 @@ def _open_fake_camera(
     )
     fake.start()
     closers.append(fake.close)
-    aravis = aravis_camera.AravisCamera(fake.address, interfaces="gige")
+    aravis = AravisCamera(fake.address, interfaces="gige")
     closers.append(aravis.close)
     opened = aravis.info
     if (opened.serial, opened.model) != (serial, model.model):

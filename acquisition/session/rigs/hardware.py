@@ -21,7 +21,7 @@ from msflash.acquisition.devices.sim_world import (
     read_responsivity_file,
     read_spectra_file,
 )
-from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
+from msflash.acquisition.errors import CameraNotFoundError, CameraSettingError, RigOpenError, UsageError
 from msflash.acquisition.progress import progress
 from msflash.acquisition.session.rigs.emulated_booth import (
     close_all,
@@ -40,15 +40,6 @@ CALIBRATION_LED_FILES = ("led_spectra.csv", "leds.csv")
 """File names looked for in ``--calibration DIR`` for the LED spectra (first found wins)."""
 CALIBRATION_RESPONSIVITY_FILES = ("camera_responsivity.csv", "responsivity.csv", "camera.csv")
 """File names looked for in ``--calibration DIR`` for the camera's responsivities."""
-
-
-def load_hw_spectra(
-    calibration: str | Path | None = None, led_spectra: str | Path | None = None, responsivity: str | Path | None = None
-) -> tuple[Spectra, Spectra | None]:
-    """LED spectra and camera responsivities for the hardware rig, on :data:`DEFAULT_GRID`
-    (:func:`hw_spectra` without the calibration reference)."""
-    leds, camera, _ = hw_spectra(calibration, led_spectra, responsivity)
-    return leds, camera
 
 
 def hw_spectra(
@@ -142,21 +133,22 @@ def _open_hw_camera(
     camera: str | None, interfaces: str, sync: str, pixel_format: str | None, options: Any = None
 ) -> tuple[Any, Any]:
     """The camera, opened and configured (profile options overridden by ``options``), and its setup."""
-    from msflash.acquisition.devices.aravis import camera as aravis_camera
+    from msflash.acquisition.devices.aravis.camera import AravisCamera
     from msflash.acquisition.devices.aravis.camera_features import CameraOptions, configure_camera
+    from msflash.acquisition.devices.aravis.discovery import list_devices, parse_interfaces
 
-    names = aravis_camera.parse_interfaces(interfaces)
+    names = parse_interfaces(interfaces)
     if camera is None:
-        found = aravis_camera.list_devices(names)
+        found = list_devices(names)
         if len(found) != 1:
             listing = ", ".join(f"{e.device_id} (serial {e.serial})" for e in found) or "none"
-            raise aravis_camera.CameraNotFoundError(
+            raise CameraNotFoundError(
                 f"camera: {'no camera' if not found else f'{len(found)} cameras'} on {','.join(names)} "
                 f"(found: {listing}); expected one — pass --camera ID (device id, serial or IP) "
                 "or --interfaces"
             )
         camera = found[0].device_id
-    opened = aravis_camera.AravisCamera(camera, interfaces=names, pixel_format=pixel_format)
+    opened = AravisCamera(camera, interfaces=names, pixel_format=pixel_format)
     try:
         setup = configure_camera(opened, options or CameraOptions(), strobe=sync == "camera")
     except BaseException:

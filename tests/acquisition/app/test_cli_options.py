@@ -11,12 +11,6 @@ from msflash.acquisition.app import cli
 SIM_SEQUENCE = Path(__file__).resolve().parents[2] / "data" / "sequences" / "sim-macbeth-fluorescent"
 
 
-@pytest.fixture(autouse=True)
-def with_calibrate(monkeypatch):
-    if "msflash.acquisition.app.cli_calibrate" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("msflash.acquisition.app.cli_calibrate",))
-
-
 @pytest.mark.parametrize("value", ["0", "-3", "two"])
 def test_whole_number_options_name_themselves(capsys: pytest.CaptureFixture, value: str) -> None:
     assert cli.main(["local-study", "--tiles", value]) == 2

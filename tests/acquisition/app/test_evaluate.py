@@ -15,8 +15,8 @@ from msflash.acquisition.app import cli_evaluate
 from msflash.acquisition.app.cli import main as msflash_main
 from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.app.html_report import PNG_SIGNATURE, HtmlReport
-from msflash.acquisition.app.srgb_png import png_chunks
 from msflash.acquisition.sequence.image_files import read_image, read_image_header
+from tests.acquisition.support.png_files import png_chunks
 from tests.acquisition.support.report_pages import parse_report
 
 

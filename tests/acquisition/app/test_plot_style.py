@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.app.plot_style import PALETTE, SERIES, figure_png, pyplot
-from msflash.acquisition.app.srgb_png import png_chunks
 from msflash.lab.cli_study import xy_figure
 from msflash.lab.cli_support import relative_power
+from tests.acquisition.support.png_files import png_chunks
 
 
 def test_the_palette_gives_each_role_its_own_colour() -> None:

@@ -15,10 +15,11 @@ from matplotlib.colors import to_hex
 from msflash.acquisition.app import evaluation, report
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.plot_style import PALETTE, SPECTRAL_AXIS_LABEL, WAVELENGTH_AXIS_LABEL, pyplot
-from msflash.acquisition.app.srgb_png import enlargement, png_chunks
+from msflash.acquisition.app.srgb_png import enlargement
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.lab import colour_study
+from tests.acquisition.support.png_files import png_chunks
 from tests.acquisition.support.report_pages import disk_full_for, parse_report
 
 

@@ -9,13 +9,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from msflash.acquisition.app.srgb_png import (
-    PREVIEW_LONG_SIDE_PX,
-    enlarged,
-    enlargement,
-    png_chunks,
-    srgb_png_bytes,
-)
+from msflash.acquisition.app.srgb_png import PREVIEW_LONG_SIDE_PX, enlarged, enlargement, srgb_png_bytes
+from tests.acquisition.support.png_files import png_chunks
 
 
 def test_pillow_reads_the_srgb_chunks_and_the_pixels_back() -> None:

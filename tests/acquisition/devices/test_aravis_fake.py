@@ -11,8 +11,18 @@ from typing import Any
 import numpy as np
 import pytest
 
+from msflash.acquisition.devices.aravis.camera_records import StrobeConfig, TriggerConfig
+from msflash.acquisition.devices.aravis.discovery import list_devices, parse_interfaces, use_fake_genicam
+from msflash.acquisition.devices.aravis.pixel_layouts import (
+    PIXEL_FORMATS,
+    decode_pixels,
+    frame_id_gap,
+    is_zero_copy_format,
+    view_pixels,
+)
+from msflash.acquisition.devices.aravis.profiles import match_profile
 from msflash.acquisition.devices.camera import Camera
-from msflash.acquisition.errors import CameraError, CameraNotFoundError, DroppedFrameError
+from msflash.acquisition.errors import CameraError, CameraNotFoundError, DroppedFrameError, FrameLostError
 from msflash.acquisition.plan import CapturePlan
 
 pytestmark = pytest.mark.aravis
@@ -34,17 +44,17 @@ pytestmark = pytest.mark.aravis
     ],
 )
 def test_frame_id_gap_wraps_at_16_bits_skipping_zero(aravis: ModuleType, previous: int, current: int, gap: int) -> None:
-    assert aravis.frame_id_gap(previous, current) == gap
+    assert frame_id_gap(previous, current) == gap
 
 
 def test_frame_id_gap_without_wrap(aravis: ModuleType) -> None:
-    assert aravis.frame_id_gap(2**40, 2**40 + 1, wrap=None, skip_zero=False) == 0
-    assert aravis.frame_id_gap(5, 9, wrap=None, skip_zero=False) == 3
+    assert frame_id_gap(2**40, 2**40 + 1, wrap=None, skip_zero=False) == 0
+    assert frame_id_gap(5, 9, wrap=None, skip_zero=False) == 3
 
 
 def test_decode_mono16_is_little_endian_owned_and_read_only(aravis: ModuleType) -> None:
     data = bytearray(np.arange(6, dtype="<u2").tobytes())
-    pixels = aravis.decode_pixels(data, "Mono16", 3, 2)
+    pixels = decode_pixels(data, "Mono16", 3, 2)
     data[0] = 99  # the array must not alias the buffer it came from
     assert pixels.dtype == np.uint16 and pixels.shape == (2, 3)
     np.testing.assert_array_equal(pixels, np.arange(6).reshape(2, 3))
@@ -52,54 +62,54 @@ def test_decode_mono16_is_little_endian_owned_and_read_only(aravis: ModuleType) 
 
 
 def test_decode_bgr8_is_returned_as_rgb(aravis: ModuleType) -> None:
-    pixels = aravis.decode_pixels(bytes([1, 2, 3, 4, 5, 6]), "BGR8", 2, 1)
+    pixels = decode_pixels(bytes([1, 2, 3, 4, 5, 6]), "BGR8", 2, 1)
     np.testing.assert_array_equal(pixels, [[[3, 2, 1], [6, 5, 4]]])
 
 
 def test_decode_refuses_short_payload_and_unknown_format(aravis: ModuleType) -> None:
     with pytest.raises(CameraError, match="too short.*expected 8 bytes"):
-        aravis.decode_pixels(bytes(7), "Mono16", 2, 2, where="camera X")
+        decode_pixels(bytes(7), "Mono16", 2, 2, where="camera X")
     with pytest.raises(CameraError, match="YUV422_8.*not supported"):
-        aravis.decode_pixels(bytes(8), "YUV422_8", 2, 2)
+        decode_pixels(bytes(8), "YUV422_8", 2, 2)
 
 
 def test_decode_and_view_route_packed_formats(aravis: ModuleType) -> None:
     # Mono12p 0x321, 0x654 (the packing itself is tested in test_pixel_formats.py)
-    np.testing.assert_array_equal(aravis.decode_pixels(bytes([0x21, 0x43, 0x65]), "Mono12p", 2, 1), [[0x321, 0x654]])
-    assert aravis.PIXEL_FORMATS["BayerRG12p"].cfa == "RGGB" and aravis.PIXEL_FORMATS["Mono10p"].bits == 10
-    assert not aravis.is_zero_copy_format("Mono12Packed")
+    np.testing.assert_array_equal(decode_pixels(bytes([0x21, 0x43, 0x65]), "Mono12p", 2, 1), [[0x321, 0x654]])
+    assert PIXEL_FORMATS["BayerRG12p"].cfa == "RGGB" and PIXEL_FORMATS["Mono10p"].bits == 10
+    assert not is_zero_copy_format("Mono12Packed")
     with pytest.raises(CameraError, match="needs decoding"):
-        aravis.view_pixels(np.zeros(3, np.uint8), "Mono12p", 2, 1)
+        view_pixels(np.zeros(3, np.uint8), "Mono12p", 2, 1)
 
 
 def test_bayer_formats_carry_their_mosaic(aravis: ModuleType) -> None:
-    assert aravis.PIXEL_FORMATS["BayerRG16"].cfa == "RGGB"
-    assert aravis.PIXEL_FORMATS["BayerGB8"].cfa == "GBRG"
-    assert aravis.PIXEL_FORMATS["Mono12"].bits == 12
+    assert PIXEL_FORMATS["BayerRG16"].cfa == "RGGB"
+    assert PIXEL_FORMATS["BayerGB8"].cfa == "GBRG"
+    assert PIXEL_FORMATS["Mono12"].bits == 12
 
 
 def test_parse_interfaces_names_the_valid_ones(aravis: ModuleType) -> None:
-    assert aravis.parse_interfaces("fake, GigE,fake") == ("fake", "gige")
+    assert parse_interfaces("fake, GigE,fake") == ("fake", "gige")
     with pytest.raises(ValueError, match="unknown firewire; expected a subset of fake, gige, usb3"):
-        aravis.parse_interfaces("fake,firewire")
+        parse_interfaces("fake,firewire")
     with pytest.raises(ValueError, match="empty"):
-        aravis.parse_interfaces("")
+        parse_interfaces("")
 
 
 def test_profiles_are_data_and_the_last_is_the_default(aravis: ModuleType) -> None:
-    assert aravis.match_profile("FLIR", "Blackfly S BFS-U3-16S2M").user_outputs == (
+    assert match_profile("FLIR", "Blackfly S BFS-U3-16S2M").user_outputs == (
         "UserOutput1",
         "UserOutput2",
         "UserOutput3",
     )
-    assert aravis.match_profile("Acme", "X1").name == "generic"
+    assert match_profile("Acme", "X1").name == "generic"
 
 
 # -- listing and opening --------------------------------------------------------------------
 
 
 def test_list_devices_on_the_fake_interface_only(aravis: ModuleType) -> None:
-    entries = aravis.list_devices("fake")
+    entries = list_devices("fake")
     assert [e.device_id for e in entries] == ["Fake_1"]
     assert entries[0].interface == "fake" and entries[0].to_dict()["model"] == "Fake"
 
@@ -115,7 +125,7 @@ def test_ip_address_needs_the_gige_interface(aravis: ModuleType) -> None:
 
 
 def test_open_by_serial_and_release_allows_reopening(aravis: ModuleType) -> None:
-    aravis.use_fake_genicam(None)
+    use_fake_genicam(None)
     first = aravis.AravisCamera("1", interfaces="fake")  # Fake_1's serial number is "1"
     assert first.info.serial == "1"
     first.close()
@@ -163,11 +173,11 @@ def test_wrong_pixel_format_names_camera_and_feature(fake_camera: Any) -> None:
 
 def test_missing_line_features_name_camera_and_feature(aravis: ModuleType, fake_camera: Any) -> None:
     with pytest.raises(CameraError, match=r"camera Fake \(serial 1\): has no feature LineSelector"):
-        fake_camera.configure_strobe(aravis.StrobeConfig(line="Line1"))
+        fake_camera.configure_strobe(StrobeConfig(line="Line1"))
     with pytest.raises(CameraError, match="has no feature UserOutputSelector"):
         fake_camera.set_user_output(0, True)
     with pytest.raises(CameraError, match="has no feature TriggerDelay"):
-        fake_camera.configure_trigger(aravis.TriggerConfig(mode="line", line="Line0", delay_us=10.0))
+        fake_camera.configure_trigger(TriggerConfig(mode="line", line="Line0", delay_us=10.0))
 
 
 def test_camera_paced_plan_needs_a_strobe(fake_camera: Any) -> None:
@@ -205,7 +215,7 @@ def test_sfnc_xml_gives_sfnc_names_and_integer_exposure_is_recorded(sfnc_fake_ca
 def test_pixel_formats_arrive_as_arrays(
     aravis: ModuleType, pixel_format: str, shape: tuple[int, ...], dtype: type, cfa: str | None, white: float
 ) -> None:
-    aravis.use_fake_genicam(None)
+    use_fake_genicam(None)
     with aravis.AravisCamera("Fake_1", interfaces="fake", pixel_format=pixel_format, roi=(0, 0, 64, 48)) as cam:
         assert (cam.info.cfa, cam.info.white_level) == (cfa, white)
         cam.prepare(CapturePlan.single([0.0], 1000.0))
@@ -238,8 +248,8 @@ def test_sequence_records_each_steps_exposure_and_keeps_ids_consecutive(fake_cam
 
 
 def test_frame_lost_error_is_a_dropped_frame(aravis: ModuleType) -> None:
-    assert issubclass(aravis.FrameLostError, DroppedFrameError)
-    assert issubclass(aravis.FrameLostError, CameraError)
+    assert issubclass(FrameLostError, DroppedFrameError)
+    assert issubclass(FrameLostError, CameraError)
 
 
 def test_start_before_prepare_is_an_error(fake_camera: Any) -> None:

@@ -12,6 +12,9 @@ from typing import Any
 
 import pytest
 
+from msflash.acquisition.devices.aravis.buffers import Bad
+from msflash.acquisition.devices.aravis.camera_records import StrobeConfig, TriggerConfig
+from msflash.acquisition.devices.aravis.pixel_layouts import frame_id_gap
 from msflash.acquisition.errors import CameraError, FrameLostError, FrameTimeoutError
 from msflash.acquisition.plan import CapturePlan
 
@@ -49,7 +52,7 @@ def test_opens_by_address_and_identifies_the_fake(gv_camera: Any) -> None:
 
 
 def test_software_plan_writes_trigger_exposure_gain_and_strobe(aravis: ModuleType, gv_fake: Any) -> None:
-    strobe = aravis.StrobeConfig(line="Line1", source="ExposureActive")
+    strobe = StrobeConfig(line="Line1", source="ExposureActive")
     plan = CapturePlan.ambient_then_each_led(2, 2500.4, gain=2.0)
     with aravis.AravisCamera(
         gv_fake.address, interfaces="gige", pixel_format="Mono16", roi=(0, 0, 64, 48), strobe=strobe
@@ -79,7 +82,7 @@ def test_per_step_exposures_follow_the_plan(gv_camera: Any, gv_fake: Any) -> Non
 
 
 def test_line_trigger_with_activation_and_delay(aravis: ModuleType, gv_fake: Any) -> None:
-    line = aravis.TriggerConfig(mode="line", line="Line1", activation="FallingEdge", delay_us=150.0)
+    line = TriggerConfig(mode="line", line="Line1", activation="FallingEdge", delay_us=150.0)
     plan = CapturePlan.single([1.0, 0.0], 1000.0, trigger="booth")
     with aravis.AravisCamera(gv_fake.address, interfaces="gige", roi=(0, 0, 32, 32), line_trigger=line) as camera:
         camera.prepare(plan)
@@ -101,9 +104,9 @@ def test_line_trigger_with_activation_and_delay(aravis: ModuleType, gv_fake: Any
 
 def test_unknown_line_names_the_entries(aravis: ModuleType, gv_camera: Any) -> None:
     with pytest.raises(CameraError, match=r"TriggerSource has no entry 'Line7'; expected one of Line0, Software"):
-        gv_camera.configure_trigger(aravis.TriggerConfig(mode="line", line="Line7"))
+        gv_camera.configure_trigger(TriggerConfig(mode="line", line="Line7"))
     with pytest.raises(CameraError, match=r"LineSource has no entry 'Timer0Active'"):
-        gv_camera.configure_strobe(aravis.StrobeConfig(line="Line2", source="Timer0Active"))
+        gv_camera.configure_strobe(StrobeConfig(line="Line2", source="Timer0Active"))
 
 
 def test_user_outputs_by_position_and_name(gv_camera: Any, gv_fake: Any) -> None:
@@ -194,12 +197,12 @@ def test_a_frame_aravis_could_not_identify_is_taken_as_the_next_one(aravis: Modu
     gv_camera.trigger()
     arrived = gv_camera._queue.get(timeout=plan.frame_timeout_s)  # the fake's second frame ...
     assert arrived.frame_id != 0
-    gv_camera._queue.put(aravis.Bad(0, "timeout"))  # ... as Aravis delivers one it could not identify
+    gv_camera._queue.put(Bad(0, "timeout"))  # ... as Aravis delivers one it could not identify
     with pytest.raises(FrameLostError, match="frame 0 for step 1 'flash' arrived incomplete"):
         gv_camera.next_frame(plan.frame_timeout_s)
     gv_camera.trigger()
     third = gv_camera.next_frame(plan.frame_timeout_s)
-    assert aravis.frame_id_gap(first.frame_id, third.frame_id) == 1
+    assert frame_id_gap(first.frame_id, third.frame_id) == 1
     stats = gv_camera.stats
     assert (stats.frames_good, stats.frames_incomplete, stats.frames_missing) == (2, 1, 0)
     gv_camera.stop()

@@ -17,6 +17,8 @@ from types import ModuleType
 import numpy as np
 import pytest
 
+from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML, use_fake_genicam
+from msflash.acquisition.devices.aravis.gv_fake import AravisGvFake
 from msflash.acquisition.errors import CameraError
 from msflash.acquisition.plan import CapturePlan
 
@@ -41,7 +43,7 @@ def test_gige_fake_streams_packed_frames_of_the_right_size(
     aravis: ModuleType, pixel_format: str, bits: int, cfa: str | None
 ) -> None:
     with (
-        aravis.AravisGvFake(serial="MSFPACK1") as fake,
+        AravisGvFake(serial="MSFPACK1") as fake,
         aravis.AravisCamera(fake.address, interfaces="gige", pixel_format=pixel_format, roi=(0, 0, 128, 96)) as camera,
     ):
         assert camera.get_feature("PixelFormat") == pixel_format
@@ -56,11 +58,11 @@ def test_gige_fake_streams_packed_frames_of_the_right_size(
 
 def test_in_process_fake_sends_no_packed_pixels_and_the_frame_is_refused(aravis: ModuleType) -> None:
     """The in-process Fake leaves a packed frame empty (0 bytes received): a clear error, not garbage."""
-    aravis.use_fake_genicam(aravis.FAKE_SFNC_XML)
+    use_fake_genicam(FAKE_SFNC_XML)
     try:
         camera = aravis.AravisCamera("Fake_1", interfaces="fake", pixel_format="Mono12p", roi=(0, 0, 128, 96))
     finally:
-        aravis.use_fake_genicam(None)
+        use_fake_genicam(None)
     with (
         camera,
         pytest.raises(

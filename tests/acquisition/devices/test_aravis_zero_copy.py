@@ -16,6 +16,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from msflash.acquisition.devices.aravis.buffers import ZERO_COPY_PROTOCOLS
+from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+from msflash.acquisition.devices.aravis.pixel_layouts import decode_pixels, is_zero_copy_format, view_pixels
 from msflash.acquisition.errors import CameraDisconnectedError, CameraError
 from msflash.acquisition.plan import CapturePlan
 
@@ -67,20 +70,20 @@ def test_view_pixels_matches_decode_pixels_without_copying(aravis: ModuleType) -
     payload = np.arange(40, dtype=np.uint8)  # 36 bytes of image, 4 bytes of trailing chunk data
     for pixel_format, shape in (("Mono16", (3, 6)), ("RGB8", (3, 4, 3)), ("BayerGR8", (6, 6))):
         width, height = shape[1], shape[0]
-        view = aravis.view_pixels(payload, pixel_format, width, height)
-        decoded = aravis.decode_pixels(payload.tobytes(), pixel_format, width, height)
+        view = view_pixels(payload, pixel_format, width, height)
+        decoded = decode_pixels(payload.tobytes(), pixel_format, width, height)
         assert view.shape == decoded.shape == shape and view.dtype == decoded.dtype
         np.testing.assert_array_equal(view, decoded)
         assert np.shares_memory(view, payload) and not view.flags.writeable and view.flags.c_contiguous
 
 
 def test_view_pixels_refuses_reordered_formats_and_short_payloads(aravis: ModuleType) -> None:
-    assert not aravis.is_zero_copy_format("BGR8") and not aravis.is_zero_copy_format("Mono12Packed")
-    assert "usb3" not in aravis.ZERO_COPY_PROTOCOLS
+    assert not is_zero_copy_format("BGR8") and not is_zero_copy_format("Mono12Packed")
+    assert "usb3" not in ZERO_COPY_PROTOCOLS
     with pytest.raises(CameraError, match="camera X: pixel format 'BGR8' needs decoding"):
-        aravis.view_pixels(np.zeros(6, np.uint8), "BGR8", 2, 1, where="camera X")
+        view_pixels(np.zeros(6, np.uint8), "BGR8", 2, 1, where="camera X")
     with pytest.raises(CameraError, match="camera X: payload of 7 bytes is too short.*expected 8 bytes"):
-        aravis.view_pixels(np.zeros(7, np.uint8), "Mono16", 2, 2, where="camera X")
+        view_pixels(np.zeros(7, np.uint8), "Mono16", 2, 2, where="camera X")
 
 
 # -- the GigE Vision fake -------------------------------------------------------------------
@@ -193,7 +196,7 @@ def test_close_with_frames_in_flight_releases_everything(aravis: ModuleType, gv_
 
 
 def test_control_lost_releases_the_pool_and_keeps_delivered_frames(aravis: ModuleType) -> None:
-    aravis.use_fake_genicam(None)
+    use_fake_genicam(None)
     with aravis.AravisCamera("Fake_1", interfaces="fake", pixel_format="Mono8", roi=(0, 0, WIDTH, HEIGHT)) as camera:
         camera.prepare(_plan(3))
         camera.start()

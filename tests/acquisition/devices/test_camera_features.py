@@ -28,6 +28,8 @@ from msflash.acquisition.devices.aravis.camera_features import (
     parse_feature,
     parse_roi,
 )
+from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML, use_fake_genicam
+from msflash.acquisition.devices.aravis.profiles import CameraProfile, load_profiles
 from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.errors import CameraSettingError
 from msflash.acquisition.plan import CapturePlan
@@ -213,7 +215,7 @@ def test_command_line_options_override_the_profiles(tmp_path: Path, aravis: Modu
             }
         )
     )
-    ((_, _, profile),) = aravis.load_profiles(profiles)
+    ((_, _, profile),) = load_profiles(profiles)
     setup = configure_camera(
         sfnc_fake_camera, CameraOptions(features=(("BlackLevel", "8"),)), strobe=False, profile_options=profile.options
     )
@@ -231,7 +233,7 @@ def test_a_profile_with_a_bad_option_names_file_and_profile(tmp_path: Path, arav
         json.dumps({"profiles": [{"name": "bad", "vendor": ".*", "model": ".*", "options": {"binning": "0"}}]})
     )
     with pytest.raises(CameraSettingError, match=rf"{profiles} profile 'bad': options.binning '0': expected"):
-        aravis.load_profiles(profiles)
+        load_profiles(profiles)
 
 
 @pytest.mark.parametrize(
@@ -259,14 +261,14 @@ def test_a_broken_profiles_file_is_one_line_naming_file_and_field(
     profiles = tmp_path / "profiles.json"
     profiles.write_text(text)
     with pytest.raises(CameraSettingError, match=expected) as caught:
-        aravis.load_profiles(profiles)
+        load_profiles(profiles)
     message = str(caught.value)
     assert message.startswith(f"{profiles}:") and "\n" not in message
 
 
 def test_the_shipped_profiles_read_as_data(aravis: ModuleType) -> None:
-    profiles = aravis.load_profiles()
-    assert profiles and all(isinstance(profile, aravis.CameraProfile) for _, _, profile in profiles)
+    profiles = load_profiles()
+    assert profiles and all(isinstance(profile, CameraProfile) for _, _, profile in profiles)
 
 
 # -- the command line ------------------------------------------------------------------------------
@@ -275,11 +277,11 @@ def test_the_shipped_profiles_read_as_data(aravis: ModuleType) -> None:
 @pytest.fixture
 def sfnc_fake_xml(aravis: ModuleType) -> Iterator[None]:
     """The in-process fake built with msflash's SFNC XML while the test runs."""
-    aravis.use_fake_genicam(aravis.FAKE_SFNC_XML)
+    use_fake_genicam(FAKE_SFNC_XML)
     try:
         yield
     finally:
-        aravis.use_fake_genicam(None)
+        use_fake_genicam(None)
 
 
 def test_devices_features_lists_type_value_and_range(sfnc_fake_xml: None, capsys: pytest.CaptureFixture) -> None:
@@ -314,7 +316,7 @@ def test_devices_features_lists_what_msflash_uses_outside_root(
 ) -> None:
     # Aravis's own fake keeps GainRaw and GainAuto in a category Root does not list: a walk of Root
     # alone hid the one gain feature the camera has (issue 29).
-    aravis.use_fake_genicam(None)
+    use_fake_genicam(None)
     assert main(["devices", "--interfaces", "fake", "--features", "Fake_1", "--json"]) == 0
     listing = json.loads(capsys.readouterr().out)
     features = {f["name"]: f for f in listing["features"]}

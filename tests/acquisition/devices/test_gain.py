@@ -24,6 +24,7 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.cli_common import dumps_json
 from msflash.acquisition.app.run_html import exposure_summary
 from msflash.acquisition.devices.aravis.camera_features import FeatureInfo
+from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
 from msflash.acquisition.devices.aravis.fake_models import FAKE_MODELS
 from msflash.acquisition.devices.aravis.gain import (
     GAIN_FEATURES,
@@ -34,6 +35,7 @@ from msflash.acquisition.devices.aravis.gain import (
     parse_gain_db,
     parse_gain_raw,
 )
+from msflash.acquisition.devices.aravis.gv_fake import AravisGvFake
 from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.exposure import ExposurePlan, ExposurePolicy
@@ -131,7 +133,7 @@ def test_a_gain_that_cannot_be_set_says_why() -> None:
 
 
 def test_aravis_own_fake_has_gainraw_only_and_its_profile_maps_db(aravis: ModuleType) -> None:
-    aravis.use_fake_genicam(None)
+    use_fake_genicam(None)
     with aravis.AravisCamera("Fake_1", interfaces="fake", pixel_format="Mono8", roi=(0, 0, 64, 48)) as camera:
         assert not camera.has_feature("Gain") and camera.gain_feature == "GainRaw"
         with pytest.raises(CameraSettingError) as refused:
@@ -153,11 +155,11 @@ def test_aravis_own_fake_has_gainraw_only_and_its_profile_maps_db(aravis: Module
 
 
 def test_the_range_is_the_selected_gains(aravis: ModuleType) -> None:
-    aravis.use_fake_genicam(FAKE_MODELS["gain-selector"].xml_path())
+    use_fake_genicam(FAKE_MODELS["gain-selector"].xml_path())
     try:
         camera = aravis.AravisCamera("Fake_1", interfaces="fake", pixel_format="Mono8", roi=(0, 0, 64, 48))
     finally:
-        aravis.use_fake_genicam(None)
+        use_fake_genicam(None)
     with camera:
         assert camera.gain_control.selector == "AnalogAll"  # no All: the whole analogue gain
         camera.configure_gain(GainRequest(20, "dB"))
@@ -206,7 +208,7 @@ def test_gain_on_the_gainraw_gige_fake_is_checked_before_the_sequence_and_record
     leds = datasets.load_spectra_csv(led_spectra_csv, kind="spd", unit="energy")
     with (
         booth_on_pty(leds) as port,
-        aravis.AravisGvFake(serial="ISSUE29", genicam_xml=None),
+        AravisGvFake(serial="ISSUE29", genicam_xml=None),
     ):  # Aravis's own XML: GainRaw 0-10
         capsys.readouterr()
         status, out = _capture_on_gige_fake(tmp_path, led_spectra_csv, port, "--gain", "20")

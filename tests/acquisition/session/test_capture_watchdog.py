@@ -22,7 +22,7 @@ from msflash.acquisition.session.booth_guard import host_silence_s
 from msflash.acquisition.session.capture import preview_frames, run_capture
 from msflash.acquisition.session.rig import Rig, open_sim_rig
 from msflash.led_controller import protocol
-from msflash.led_controller.booth import levels_close
+from tests.helpers import levels_close
 
 SHORT_WATCHDOG_S = 0.2
 
@@ -121,7 +121,7 @@ def test_a_lost_link_mid_sequence_is_the_error_reported(tmp_path: Path) -> None:
         def trigger_then_unplug() -> None:
             original()
             if camera._next == 2:
-                server.hangup()
+                server.close()  # the booth unplugged
 
         camera.trigger = trigger_then_unplug  # type: ignore[method-assign]
         with rig.sequence_writer(tmp_path / "sequence") as writer:
@@ -168,7 +168,7 @@ def test_an_unplugged_booth_through_the_cli_says_it_once_plus_the_leds_warning(
         def next_frame(timeout_s: float):  # noqa: ANN202 - the camera's
             count[0] += 1
             if count[0] == 3:
-                server.hangup()
+                server.close()  # the booth unplugged
             return real_next(timeout_s)
 
         rig.camera.next_frame = next_frame

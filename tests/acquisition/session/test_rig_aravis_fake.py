@@ -34,7 +34,9 @@ def _assert_released(aravis: ModuleType) -> None:
 
     Another xdist worker may hold the lock for its own test meanwhile, hence the wait.
     """
-    with aravis.gvcp_port_lock(timeout_s=120.0):
+    from msflash.acquisition.devices.aravis.gv_fake import gvcp_port_lock
+
+    with gvcp_port_lock(timeout_s=120.0):
         assert not gvcp_port_in_use()
 
 

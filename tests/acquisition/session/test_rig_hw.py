@@ -22,7 +22,7 @@ from msflash.acquisition.errors import RigOpenError
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session.rig import HwRigOptions, open_rig
 from msflash.acquisition.session.rigs.emulated_booth import emulator_for
-from msflash.acquisition.session.rigs.hardware import load_hw_spectra
+from msflash.acquisition.session.rigs.hardware import hw_spectra
 from msflash.led_controller import serve_on_pty
 from msflash.processing import datasets
 from msflash.processing.spectra import DEFAULT_GRID
@@ -45,7 +45,9 @@ def silent_pty() -> Iterator[str]:
 def test_capture_on_fake_camera_and_emulated_booth(
     aravis: ModuleType, hw_calibration: Path, hw_booth_port: str, tmp_path: Path
 ) -> None:
-    aravis.use_fake_genicam(None)
+    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+
+    use_fake_genicam(None)
     out = tmp_path / "c"
     assert (
         main(
@@ -72,7 +74,9 @@ def test_capture_on_fake_camera_and_emulated_booth(
 def test_rig_hw_with_csv_files_and_led_off_at_close(
     aravis: ModuleType, hw_calibration: Path, hw_booth_port: str
 ) -> None:
-    aravis.use_fake_genicam(None)
+    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+
+    use_fake_genicam(None)
     with open_rig(
         "hw",
         HwRigOptions(
@@ -127,7 +131,9 @@ def test_no_camera_without_an_id_lists_what_was_found(
     aravis: ModuleType, hw_calibration: Path, hw_booth_port: str
 ) -> None:
     """No --camera: the single camera on the interfaces is taken; on fake there is exactly one."""
-    aravis.use_fake_genicam(None)
+    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+
+    use_fake_genicam(None)
     with open_rig("hw", HwRigOptions(interfaces="fake", port=hw_booth_port, calibration=hw_calibration)) as rig:
         assert rig.camera.info.extra["device_id"] == "Fake_1"
 
@@ -166,11 +172,11 @@ def test_a_booth_of_another_protocol_version_is_one_error_line(
 
 def test_spectra_are_required_before_any_device_opens(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     with pytest.raises(UsageError, match="--calibration DIR or --led-spectra"):
-        load_hw_spectra()
+        hw_spectra()
     assert main(["capture", "--port", "/dev/does-not-exist", "--out", str(tmp_path / "x")]) == 2
     assert "LED spectra are needed" in capsys.readouterr().err
     with pytest.raises(UsageError, match="no calibration.json or led_spectra.csv"):
-        load_hw_spectra(calibration=tmp_path)
+        hw_spectra(calibration=tmp_path)
 
 
 def test_rig_sim_with_a_camera_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -184,9 +190,9 @@ def test_calibration_directory_from_msflash_calibrate(tmp_path: Path) -> None:
     leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")
     camera = datasets.isetcam_camera("NikonD100").resample(DEFAULT_GRID, outside="zero")
     files.save_calibration(files.CalibrationSet(led_spectra=leds, camera_responsivities=camera), tmp_path / "cal")
-    found_leds, found_camera = load_hw_spectra(tmp_path / "cal")
+    found_leds, found_camera, _ = hw_spectra(tmp_path / "cal")
     assert found_leds.count == 7 and found_leds.unit == "energy"
     assert found_camera is not None and found_camera.count == 3 and found_camera.unit == "energy"
     # a file on the command line wins over the calibration's section
     only = write_spectra_csv(tmp_path / "three.csv", leds.select([0, 1, 2]))
-    assert load_hw_spectra(tmp_path / "cal", led_spectra=only)[0].count == 3
+    assert hw_spectra(tmp_path / "cal", led_spectra=only)[0].count == 3

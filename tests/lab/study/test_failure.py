@@ -202,7 +202,7 @@ def _parser():
     ],
 )
 def test_cli_new_studies_write_json_and_png(tmp_path, capsys, argv, key):
-    from msflash.acquisition.app.srgb_png import png_chunks
+    from tests.acquisition.support.png_files import png_chunks
 
     args = _parser().parse_args(["study", *argv, "--out", str(tmp_path), "--scheduler", "none"])
     assert args.handler(args) == 0

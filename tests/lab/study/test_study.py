@@ -110,7 +110,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def test_cli_writes_json_and_png(tmp_path, capsys):
-    from msflash.acquisition.app.srgb_png import png_chunks
+    from tests.acquisition.support.png_files import png_chunks
 
     args = _parser().parse_args(
         [
