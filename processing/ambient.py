@@ -45,8 +45,6 @@ from msflash.processing.statistics import SequenceStatistics
 if TYPE_CHECKING:
     from msflash.processing.flicker import FlickerCheck
 
-AmbientMethod = Literal["lstsq", "nonneg", "tikhonov", "roughness"]
-
 ALPHA_GRID = np.logspace(-9, 1, 41)
 """Dimensionless roughness weights searched by ``alpha="auto"``."""
 
@@ -126,11 +124,6 @@ class AmbientEstimate:
         """The one-sigma band (lower, upper) around the spectrum."""
         centre = self.spectrum.values[:, 0]
         return centre - self.spectrum_std, centre + self.spectrum_std
-
-
-def roughness_operator(led_spectra: Spectra) -> np.ndarray:
-    """``L = ∇ I``: first differences over wavelength of the LED spectra, shape (n_wl − 1, k)."""
-    return np.diff(led_spectra.values, axis=0)
 
 
 @dataclass(frozen=True)
