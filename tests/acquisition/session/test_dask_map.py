@@ -107,9 +107,15 @@ def test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_clo
     number = getattr(signal, stop)
     known = set(SpecCluster._instances)
 
+    def cluster_started() -> bool:
+        try:
+            return bool(set(SpecCluster._instances) - known)
+        except RuntimeError:  # the WeakSet changed size while read: the main thread is adding the cluster now
+            return False
+
     def signal_once_it_starts() -> None:
         deadline = time.monotonic() + 120  # a hang guard, not a timing
-        while not set(SpecCluster._instances) - known and time.monotonic() < deadline:
+        while not cluster_started() and time.monotonic() < deadline:
             time.sleep(0.001)
         os.kill(os.getpid(), number)  # inside LocalCluster(...): its workers take far longer to start
 
