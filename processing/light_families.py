@@ -201,12 +201,12 @@ def _judged(
     candidates = []
     for fit in fits:
         if fit.name in judged:
-            candidates.append(Candidate(replace(fit, seconds=fit.seconds + each), *judged[fit.name]))
+            candidates.append(Candidate(fit.with_seconds(fit.seconds + each), *judged[fit.name]))
             continue
         start = time.perf_counter()
         spectrum_for = _fixed(fit.spectrum) if fit.family == "prior" else _refit_amplitudes(fit)
         held = _held_out(spectrum_for, scene, training)
-        candidates.append(Candidate(replace(fit, seconds=fit.seconds + time.perf_counter() - start), *held))
+        candidates.append(Candidate(fit.with_seconds(fit.seconds + time.perf_counter() - start), *held))
     return led, candidates
 
 
@@ -220,7 +220,7 @@ def _timed(function: Callable[..., Fit], *arguments: object, before: float = 0.0
     """``function(*arguments)`` with its wall time (and ``before`` seconds spent for it already) as its seconds."""
     start = time.perf_counter()
     fit = function(*arguments)
-    return replace(fit, seconds=before + time.perf_counter() - start)
+    return fit.with_seconds(before + time.perf_counter() - start)
 
 
 def _fixed(spectrum: np.ndarray) -> Callable[[int, Whitened], np.ndarray]:
@@ -360,7 +360,7 @@ class FamilyModel:
         start = time.perf_counter()
         greedy = fit_discharge(grid, problem)
         each = (time.perf_counter() - start) / max(len(greedy), 1)
-        fits += [replace(fit, seconds=each * (i + 1)) for i, fit in enumerate(greedy)]  # size m needs steps 1…m
+        fits += [fit.with_seconds(each * (i + 1)) for i, fit in enumerate(greedy)]  # size m needs steps 1…m
         best_of: dict[str, Fit] = {}
         for fit in fits:
             if fit.family not in best_of or fit.objective < best_of[fit.family].objective:
