@@ -42,6 +42,13 @@ class Fit:
     seconds: float = 0.0
     """Wall time spent fitting and judging this candidate (for the accuracy-against-compute chart)."""
 
+    def with_seconds(self, seconds: float) -> Fit:
+        """This fit with :attr:`seconds` set (``dataclasses.replace``'s result, without its field-by-field rebuild:
+        a family estimate makes ~40 of these)."""
+        timed = object.__new__(Fit)
+        timed.__dict__.update(self.__dict__, seconds=seconds)
+        return timed
+
     @property
     def spectrum(self) -> np.ndarray:
         """e (photons, the LEDs' units)."""
@@ -101,6 +108,55 @@ def _start_costs(form: Form, grid: WavelengthGrid, problem: Whitened) -> np.ndar
     if compiled is not None and offsets.size > 1:
         return compiled.block_costs(designs, offsets, problem.target) + problem.constant
     return np.array([problem.amplitudes(a)[1] for a in start_atoms(form, grid)])
+
+
+@lru_cache(maxsize=16)
+def _all_starts(forms: tuple[Form, ...], grid: WavelengthGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
+    """Every form's coarse starts side by side, the single-atom forms' and the others' apart (C-ordered, computed
+    once): ``(single, multi, multi offsets, spans)``, ``spans[i]`` where form i's costs lie among the single-atom
+    starts' (``True, start, stop``) or the others' (``False, start, stop``, start indices of the offsets)."""
+    singles, multis, spans = [], [], []
+    single_count, multi_offsets = 0, [0]
+    for form in forms:
+        stacked, offsets = _stacked_starts(form, grid)
+        if offsets.size > 1 and offsets[-1] == offsets.size - 1:
+            singles.append(stacked)
+            spans.append((True, single_count, single_count + offsets.size - 1))
+            single_count += offsets.size - 1
+        else:
+            multis.append(stacked)
+            spans.append((False, len(multi_offsets) - 1, len(multi_offsets) - 1 + offsets.size - 1))
+            base = multi_offsets[-1]
+            multi_offsets.extend(base + int(o) for o in offsets[1:])
+    empty = np.zeros((grid.size, 0))
+    single = np.ascontiguousarray(np.hstack(singles)) if singles else empty
+    multi = np.ascontiguousarray(np.hstack(multis)) if multis else empty
+    for array in (single, multi):
+        array.flags.writeable = False
+    return single, multi, np.array(multi_offsets, np.int64), tuple(spans)
+
+
+def start_costs(forms: tuple[Form, ...], grid: WavelengthGrid, problem: Whitened) -> list[np.ndarray]:
+    """:func:`_start_costs` of every form; where :mod:`processing.family_kernels` is in use, in two products and one
+    compiled call for all of them (the same formulas: the closed form for single-atom starts, the non-negative fit
+    for the others)."""
+    compiled = family_kernels.kernels()
+    if compiled is None:
+        return [_start_costs(form, grid, problem) for form in forms]
+    single, multi, offsets, spans = _all_starts(forms, grid)
+    designs = problem.root @ single
+    energies = np.einsum("ij,ij->j", designs, designs)
+    projections = np.clip(designs.T @ problem.target, 0.0, None)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gains = np.where(energies > 0, projections**2 / energies, 0.0)
+    costs = float(problem.target @ problem.target) - gains + problem.constant
+    single_costs = np.where(np.isfinite(costs), costs, math.inf)
+    multi_costs = (
+        compiled.block_costs(problem.root @ multi, offsets, problem.target) + problem.constant
+        if offsets.size > 1
+        else np.zeros(0)
+    )
+    return [(single_costs if alone else multi_costs)[start:stop] for alone, start, stop in spans]
 
 
 def _difference_tangent(
@@ -204,9 +260,13 @@ def refine(
     return theta
 
 
-def fit_form(form: Form, grid: WavelengthGrid, problem: Whitened, refined: bool = True) -> Fit:
-    """The form's best θ over its coarse starts, then refined (:func:`refine`), and its amplitudes."""
-    best = np.array(form.starts[int(np.argmin(_start_costs(form, grid, problem)))], float)
+def fit_form(
+    form: Form, grid: WavelengthGrid, problem: Whitened, refined: bool = True, costs: np.ndarray | None = None
+) -> Fit:
+    """The form's best θ over its coarse starts (``costs``: their J, when computed already, :func:`start_costs`),
+    then refined (:func:`refine`), and its amplitudes."""
+    costs = _start_costs(form, grid, problem) if costs is None else costs
+    best = np.array(form.starts[int(np.argmin(costs))], float)
     compiled = family_kernels.kernels() if refined and form.kind != NONE else None
     if compiled is not None:
         parts = ((form.kind, None), (NONE, None))

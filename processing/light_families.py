@@ -34,7 +34,7 @@ import numpy as np
 
 from msflash.processing import family_kernels
 from msflash.processing.channel_statistics import ChannelStatistics
-from msflash.processing.family_fit import Fit, fit_discharge, fit_form, fit_mixture
+from msflash.processing.family_fit import Fit, fit_discharge, fit_form, fit_mixture, start_costs
 from msflash.processing.light_forms import FORMS, Form, seen_forms
 from msflash.processing.light_prior import KAPPA, plane_responsivities
 from msflash.processing.reference_patch import PATCH_WEIGHT, ReferencePatch
@@ -201,12 +201,12 @@ def _judged(
     candidates = []
     for fit in fits:
         if fit.name in judged:
-            candidates.append(Candidate(replace(fit, seconds=fit.seconds + each), *judged[fit.name]))
+            candidates.append(Candidate(fit.with_seconds(fit.seconds + each), *judged[fit.name]))
             continue
         start = time.perf_counter()
         spectrum_for = _fixed(fit.spectrum) if fit.family == "prior" else _refit_amplitudes(fit)
         held = _held_out(spectrum_for, scene, training)
-        candidates.append(Candidate(replace(fit, seconds=fit.seconds + time.perf_counter() - start), *held))
+        candidates.append(Candidate(fit.with_seconds(fit.seconds + time.perf_counter() - start), *held))
     return led, candidates
 
 
@@ -216,10 +216,11 @@ def training_terms(scene: SceneForm) -> dict[int, Whitened]:
     return {fold: scene.whitened([f for f in folds if f != fold]) for fold in folds if scene.counts[fold] > 0}
 
 
-def _timed(function: Callable[..., Fit], *arguments: object) -> Fit:
+def _timed(function: Callable[..., Fit], *arguments: object, before: float = 0.0) -> Fit:
+    """``function(*arguments)`` with its wall time (and ``before`` seconds spent for it already) as its seconds."""
     start = time.perf_counter()
     fit = function(*arguments)
-    return replace(fit, seconds=time.perf_counter() - start)
+    return fit.with_seconds(before + time.perf_counter() - start)
 
 
 def _fixed(spectrum: np.ndarray) -> Callable[[int, Whitened], np.ndarray]:
@@ -350,11 +351,16 @@ class FamilyModel:
     def _fits(self, problem: Whitened, prior_spectrum: np.ndarray | None) -> tuple[list[Fit], Fit]:
         """:meth:`candidates` on the all-folds data term ``problem``."""
         grid = self.grid
-        fits = [_timed(fit_form, form, grid, problem) for form in self.forms]
+        start = time.perf_counter()
+        costs = start_costs(self.forms, grid, problem)  # every form's coarse starts at once
+        share = (time.perf_counter() - start) / max(len(self.forms), 1)
+        fits = [
+            _timed(fit_form, form, grid, problem, True, cost, before=share) for form, cost in zip(self.forms, costs)
+        ]
         start = time.perf_counter()
         greedy = fit_discharge(grid, problem)
         each = (time.perf_counter() - start) / max(len(greedy), 1)
-        fits += [replace(fit, seconds=each * (i + 1)) for i, fit in enumerate(greedy)]  # size m needs steps 1…m
+        fits += [fit.with_seconds(each * (i + 1)) for i, fit in enumerate(greedy)]  # size m needs steps 1…m
         best_of: dict[str, Fit] = {}
         for fit in fits:
             if fit.family not in best_of or fit.objective < best_of[fit.family].objective:

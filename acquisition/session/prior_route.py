@@ -79,17 +79,22 @@ def sequence_channel_statistics(
 
 
 def estimate_sequence_prior(
-    sequence: Sequence, stack: FrameStack | None = None, flicker: FlickerCheck | None = None
+    sequence: Sequence,
+    stack: FrameStack | None = None,
+    flicker: FlickerCheck | None = None,
+    statistics: ChannelStatistics | None = None,
 ) -> SequencePriorResult:
     """The light-prior estimate of a sequence, the LED-span one and ``auto``'s choice between them (``flicker``:
-    the LED estimate's check, whose gains correct the statistics).
+    the LED estimate's check, whose gains correct the statistics; ``statistics``: the sequence's channel statistics
+    so corrected, when taken already).
 
     Raises
     ------
     RecordingError
         If the sequence has no camera responsivities or unusable frames.
     """
-    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker)
+    if statistics is None:
+        statistics = sequence_channel_statistics(sequence, stack, flicker=flicker)
     leds = led_spectra_photons(sequence)
     model = prior_model(statistics.channels, leds, camera_responsivities_photons(sequence))
     return SequencePriorResult(
@@ -292,16 +297,19 @@ def estimate_sequence_family(
     prior: PriorEstimate | None = None,
     reference: Reference | None = None,
     flicker: FlickerCheck | None = None,
+    statistics: ChannelStatistics | None = None,
 ) -> tuple[PriorEstimate, FamilyEstimate]:
     """The light prior's and the family model's estimates of a sequence (the prior is one of the candidates);
-    ``flicker``: the LED estimate's check, whose gains correct every statistic (the reference's too).
+    ``flicker``: the LED estimate's check, whose gains correct every statistic (the reference's too);
+    ``statistics``: the sequence's channel statistics so corrected, when taken already.
 
     Raises
     ------
     RecordingError
         If the sequence has no camera responsivities or unusable frames.
     """
-    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker)
+    if statistics is None:
+        statistics = sequence_channel_statistics(sequence, stack, flicker=flicker)
     leds = led_spectra_photons(sequence)
     camera = camera_responsivities_photons(sequence)
     if prior is None:
@@ -434,9 +442,11 @@ def _prior_route(
     flicker: FlickerCheck | None = None,
 ) -> tuple[dict, str, str, dict]:
     """``--model prior``: the light prior, checked against the family evidence."""
-    result = estimate_sequence_prior(sequence, stack, flicker)
+    # One pass over the frames for both models' channel statistics (the same, corrected alike).
+    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker)
+    result = estimate_sequence_prior(sequence, stack, flicker, statistics)
     prior = prior_payload(sequence, result)
-    _, family = estimate_sequence_family(sequence, stack, result.prior, reference, flicker)
+    _, family = estimate_sequence_family(sequence, stack, result.prior, reference, flicker, statistics)
     models, _ = _models_block(sequence, led_payload, result.prior, family)
     replacement = {
         "spectrum": prior["prior"]["spectrum"],

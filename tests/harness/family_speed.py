@@ -6,6 +6,10 @@ copy, the issue's figure). This prints, for the bench's 1280×1024 world as RGB 
 light prior, the families (fits and held-out judgement; on the numpy route, as a one-shot ``msflash estimate``
 takes it, and compiled, as a process that prepared :mod:`processing.family_kernels` does) — and the estimate over
 the copy. One thread (``OPENBLAS_NUM_THREADS=1``); no targets asserted.
+
+``--stages``: instead, the compiled family estimate as the bench runs it (statistics, prior, families, one after
+the other, so each stage starts with the caches the frames' pass left), each stage's CPU time
+(``time.thread_time``) the median of ``--repeats`` runs, in ms and ÷ the median CPU time of the copy.
 """
 
 from __future__ import annotations
@@ -31,8 +35,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--height", type=int, default=1024)
     parser.add_argument("--width", type=int, default=1280)
     parser.add_argument("--repeats", type=int, default=9)
+    parser.add_argument("--stages", action="store_true", help="CPU time of each stage of the compiled estimate")
     args = parser.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    if args.stages:
+        return _stages(args.height, args.width, max(args.repeats, 21))
     from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR
     from msflash.lab.bench.processing import benchmark_world, frame_copy
     from msflash.processing import family_kernels, frame_kernels
@@ -71,6 +78,66 @@ def main(argv: list[str] | None = None) -> int:
             f"| {1e3 * family_s:.1f}{'' if compiled else ' (numba absent: numpy)'} "
             f"| {(stats + prior_s + numpy_s) / copy:.1f} | {(stats + prior_s + family_s) / copy:.1f} |"
         )
+    return 0
+
+
+def _stages(height: int, width: int, runs: int) -> int:
+    """The ``--stages`` table (module notes); 0."""
+    import numpy as np
+
+    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor
+    from msflash.lab.bench.processing import benchmark_world, frame_copy
+    from msflash.processing import family_kernels
+    from msflash.processing import light_families as lf
+    from msflash.processing.channel_statistics import accumulate_channel_statistics
+    from msflash.processing.light_prior import prior_model
+
+    family_kernels.prepare()
+    names = ("channel statistics", "light prior", "scene form, all-folds term", "fits (forms, discharge, mixtures)",
+             "fold complements' terms", "held-out judgement", "choice, band, spread", "families (sum)", "whole")  # fmt: skip
+    print("| stage | " + " | ".join(f"{cfa} ms (÷ copy)" for cfa in ("RGB", "raw RGGB")) + " |")
+    print("|---|---|---|")
+    columns = []
+    for cfa in (None, "RGGB"):
+        world = benchmark_world(height, width, cfa=cfa)
+        frames, spec, leds, camera = world["frames"], world["spec"], world["leds"], world["camera"]
+        factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)
+        channels = accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
+        prior, model = prior_model(channels.channels, leds, camera), lf.family_model(channels.channels, leds, camera)
+        copy = frame_copy(frames)
+        copies, rows = [], []
+        for _ in range(runs):
+            start = time.thread_time()
+            copy()
+            copies.append(time.thread_time() - start)
+            marks = [time.thread_time()]
+            statistics = accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
+            marks.append(time.thread_time())
+            spectrum = prior.estimate(statistics).spectrum.values[:, 0]
+            marks.append(time.thread_time())
+            scene = lf.scene_form(statistics, model.reduction)
+            problem = scene.whitened(list(range(scene.n_folds)))
+            marks.append(time.thread_time())
+            fits, led_fit = model._fits(problem, spectrum)
+            marks.append(time.thread_time())
+            training = lf.training_terms(scene)
+            marks.append(time.thread_time())
+            led, candidates = lf._judged(fits, led_fit, scene, training)
+            marks.append(time.thread_time())
+            candidates.sort(key=lambda c: c.evidence)
+            chosen = lf.choose(candidates, led)[0]
+            scaled = lf._scaled_spectra(chosen, candidates)
+            model.band(chosen, candidates, problem, statistics.n_blocks * statistics.n_channels, scaled)
+            lf._weighted_spread(chosen.fit.spectrum, candidates, scaled, lf.CHECK_TEMPERATURE)
+            lf._weighted_spread(chosen.fit.spectrum, candidates, scaled, lf.AVERAGE_TEMPERATURE)
+            marks.append(time.thread_time())
+            steps = list(np.diff(marks))
+            rows.append([*steps, sum(steps[2:]), marks[-1] - marks[0]])
+        reference = float(np.median(copies))
+        columns.append([f"{1e3 * v:.2f} ({v / reference:.2f})" for v in np.median(np.array(rows), axis=0)])
+        columns[-1].insert(0, f"{1e3 * reference:.2f} (1)")
+    for i, name in enumerate(("copy of the stack", *names)):
+        print(f"| {name} | {columns[0][i]} | {columns[1][i]} |")
     return 0
 
 

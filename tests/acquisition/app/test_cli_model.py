@@ -175,3 +175,26 @@ def test_a_reference_chart_holds_the_estimate_to_known_reflectances(
     assert main(["estimate", str(truth.directory), "--model", "auto", "--reference-chart", str(broken)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "patches[0]" in err[0] and "reflectance" in err[0]
+
+
+@pytest.mark.parametrize("model", ["prior", "family", "auto"])
+def test_the_light_models_read_the_channel_statistics_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, model: str
+) -> None:
+    """``--model prior`` fits the light prior and checks it against the family evidence; both read one set of
+    channel statistics (one pass over the frames for the two, as ``family|auto`` do), and print what they did."""
+    from msflash.acquisition.session import prior_route
+
+    rendered = render_case(Case("a", light="A", seed=5), tmp_path / "a")
+    before = _estimate(capsys, str(rendered.directory), "--model", model)
+    taken = []
+    counted = prior_route.sequence_channel_statistics
+
+    def counting(*args: object, **kwargs: object) -> object:
+        taken.append(args)
+        return counted(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(prior_route, "sequence_channel_statistics", counting)
+    after = _estimate(capsys, str(rendered.directory), "--model", model)
+    assert len(taken) == 1
+    assert after == before
