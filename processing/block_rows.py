@@ -319,14 +319,20 @@ class BlockRows:
         """:meth:`_moments` and :meth:`_channel_moments` in one compiled pass over the rows and one over the probe
         (:func:`processing.frame_kernels.block_statistics`): the same quantities, to rounding."""
         invalid = self._invalid_blocks()
-        factors = np.ones(self.rows.shape[1]) if invalid is None else (~self._columns(invalid)).astype(float)
-        column_weights = factors if weights is None else weights if invalid is None else weights * factors
+        # The columns' factors: 1 where valid, 0 where left out (None: none is, and the kernel skips them).
+        factors = None if invalid is None else (~self._columns(invalid)).astype(float)
+        if weights is None:
+            column_weights = np.ones(self.rows.shape[1]) if factors is None else factors
+        else:
+            column_weights = weights if factors is None else weights * factors
         transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
         moments, fa, ff, aa = frame_kernels.block_statistics(
             self.rows, column_weights, factors, transform, self.block_shape, 1
         )
-        ones = self.rows[-1] * factors
-        blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
+        if factors is None:  # every block is in (the ones row is 1 everywhere)
+            blocks = self.block_shape[0] * self.block_shape[2]
+        else:
+            blocks = int(np.count_nonzero(factors.reshape(self.block_shape).any(axis=1)))
         excluded = 0 if invalid is None else int(np.count_nonzero(invalid))
         excluded_probed = 0 if invalid is None else int(np.count_nonzero(invalid[:: self.probe_stride]))
         scale = self._probe_scale(excluded, excluded_probed)
@@ -335,7 +341,7 @@ class BlockRows:
         noise, *channel_noise = frame_kernels.block_statistics(
             self.differences,
             self._at_probe(column_weights),
-            self._at_probe(factors),
+            None if factors is None else self._at_probe(factors),
             transform,
             self.difference_shape,
             2,

@@ -77,6 +77,7 @@ def _warm(kernels: Any) -> None:
         np.ones((1, 1)),
         one,
         one,
+        True,
         np.ones((1, 1)),
         1,
         1,
@@ -210,7 +211,7 @@ def block_pass(
 def block_statistics(
     values: np.ndarray,
     weights: np.ndarray,
-    factors: np.ndarray,
+    factors: np.ndarray | None,
     transform: np.ndarray,
     layout: tuple[int, int, int],
     channel_axis: int,
@@ -219,7 +220,7 @@ def block_statistics(
     pass over them (used where :func:`statistics_compiled` said so, :func:`paused` or not).
 
     ``weights`` (N,) weigh each column in ``Σ w x xᵀ``; ``transform`` (K + 1, R) maps the rows to the K LED images and
-    the ambient's, each column scaled by ``factors`` (N,), whose products per channel give ``(gram, fa, ff, aa)``:
+    the ambient's, each column scaled by ``factors`` (N,; None: all 1), whose products per channel give ``(gram, fa, ff, aa)``:
     ``gram`` (R, R) symmetric, ``fa`` and ``ff`` (K, C, C), ``aa`` (C, C) as :class:`processing.statistics.ChannelMoments`
     holds them. The columns are laid out ``layout`` (block rows first; the channels on ``channel_axis`` 1 or 2).
     """
@@ -233,7 +234,8 @@ def block_statistics(
     kernels.block_statistics(
         np.ascontiguousarray(values, dtype=np.float64),
         np.ascontiguousarray(weights, dtype=np.float64),
-        np.ascontiguousarray(factors, dtype=np.float64),
+        np.ascontiguousarray(weights if factors is None else factors, dtype=np.float64),  # unread when None
+        factors is not None,
         np.ascontiguousarray(transform, dtype=np.float64),
         height,
         channels,

@@ -224,38 +224,44 @@ def moments(frames, channels, white, start, stop, out):
 
 
 @njit(nogil=True, cache=True, fastmath=True)
-def block_statistics(values, weights, factors, transform, height, channels, width, channels_inner, gram, fa, ff, aa):
+def block_statistics(
+    values, weights, factors, masked, transform, height, channels, width, channels_inner, gram, fa, ff, aa
+):
     """The moments of block rows in one pass over them, block row by block row (each block row's values in cache):
     ``gram[i, j] += Σ_t w_t x_it x_jt`` (``j ≤ i``: the lower triangle) over the columns ``t`` of ``values`` (R, N),
     weighted by ``weights`` (N,); and the channel moments of the images ``y = transform · x`` (K + 1, R) scaled by
-    ``factors`` (N,): per image ``i < K`` and channels ``c, d``, ``fa[i, c, d] += Σ y_ic y_Kd`` and
-    ``ff[i, c, d] += Σ y_ic y_id`` over the blocks, and ``aa[c, d] += Σ y_Kc y_Kd``.
+    ``factors`` (N,; all ones unless ``masked``): per image ``i < K`` and channels ``c, d``, ``fa[i, c, d] += Σ y_ic
+    y_Kd`` and ``ff[i, c, d] += Σ y_ic y_id`` over the blocks, and ``aa[c, d] += Σ y_Kc y_Kd``.
 
     The N columns are ``height`` block rows of ``channels × width`` values, laid out (channel, block column) or, with
     ``channels_inner``, (block column, channel). Sums are reassociated (fastmath): the numpy route
-    (:class:`processing.block_rows.BlockRows`) agrees to rounding, not to the bit.
+    (:class:`processing.block_rows.BlockRows`) agrees to rounding, not to the bit. The map skips the transform's zeros
+    (an LED image is two rows' difference, the ambient's one row less its black: 2 of R rows each), and in the
+    (channel, block column) layout the images are mapped in place of their channel-order copy; both only leave out
+    additions of zero (the dense map's numbers to the bit on the bench's worlds; docs/speed.md, 2026-11-29, a fifth
+    session).
     """
     rows = values.shape[0]
     images = transform.shape[0]
     k = images - 1
     inner = channels * width
     weighted = np.empty((rows, inner))
-    mapped = np.empty((images, inner))
     image = np.empty((images, channels, width))
+    mapped = np.empty((images, inner)) if channels_inner else image.reshape((images, inner))
     for h in range(height):
         base = h * inner
         for i in range(rows):
-            source = values[i]
+            source = values[i, base : base + inner]
             target = weighted[i]
             for t in range(inner):
-                target[t] = weights[base + t] * source[base + t]
+                target[t] = weights[base + t] * source[t]
         for i in range(rows):
             left = weighted[i]
             for j in range(i + 1):
-                right = values[j]
+                right = values[j, base : base + inner]
                 total = 0.0
                 for t in range(inner):
-                    total += left[t] * right[base + t]
+                    total += left[t] * right[t]
                 gram[i, j] += total
         for i in range(images):
             target = mapped[i]
@@ -263,19 +269,18 @@ def block_statistics(values, weights, factors, transform, height, channels, widt
                 target[t] = 0.0
             for j in range(rows):
                 scale = transform[i, j]
-                source = values[j]
+                if scale == 0.0:
+                    continue
+                source = values[j, base : base + inner]
                 for t in range(inner):
-                    target[t] += scale * source[base + t]
-            for t in range(inner):
-                target[t] *= factors[base + t]
+                    target[t] += scale * source[t]
+            if masked:
+                for t in range(inner):
+                    target[t] *= factors[base + t]
             if channels_inner:
                 for b in range(width):
                     for c in range(channels):
                         image[i, c, b] = target[b * channels + c]
-            else:
-                for c in range(channels):
-                    for b in range(width):
-                        image[i, c, b] = target[c * width + b]
         ambient = image[k]
         for i in range(k):
             led = image[i]
