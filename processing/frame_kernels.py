@@ -184,7 +184,8 @@ def block_pass(
     sums
         Output, (H/f, C', W/f) float64 (C' = cfa_period² · C): block sums in moment-row order.
     differences
-        Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64: each probed block's checkerboard half difference
+        Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64, any strides (a transposed view of (…, C', W/f) storage
+        writes the sums' order): each probed block's checkerboard half difference
         (:func:`processing.block_sums.block_sums_and_differences`); or None.
 
     Returns
