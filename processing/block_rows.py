@@ -349,6 +349,7 @@ class BlockRows:
             transform,
             self.difference_shape,
             1,
+            zero_last=True,  # the ones row has no noise
         )
         if scale is None:
             channels = ChannelMoments(fa, ff, aa, blocks)

@@ -83,6 +83,7 @@ def _warm(kernels: Any) -> None:
         1,
         1,
         False,
+        1,
         np.zeros((1, 1)),
         *(np.zeros((0, 1, 1)),) * 2,
         np.zeros((1, 1)),
@@ -216,14 +217,16 @@ def block_statistics(
     transform: np.ndarray,
     layout: tuple[int, int, int],
     channel_axis: int,
+    zero_last: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The weighted second moments of the rows ``values`` (R, N) and their images' channel moments, in one compiled
     pass over them (used where :func:`statistics_compiled` said so, :func:`paused` or not).
 
     ``weights`` (N,) weigh each column in ``Σ w x xᵀ``; ``transform`` (K + 1, R) maps the rows to the K LED images and
-    the ambient's, each column scaled by ``factors`` (N,; None: all 1), whose products per channel give ``(gram, fa, ff, aa)``:
-    ``gram`` (R, R) symmetric, ``fa`` and ``ff`` (K, C, C), ``aa`` (C, C) as :class:`processing.statistics.ChannelMoments`
+    the ambient's, each column scaled by ``factors`` (N,; None: all 1), whose products per channel give
+    ``(gram, fa, ff, aa)``: ``gram`` (R, R) symmetric, ``fa`` and ``ff`` (K, C, C), ``aa`` (C, C) as :class:`processing.statistics.ChannelMoments`
     holds them. The columns are laid out ``layout`` (block rows first; the channels on ``channel_axis`` 1 or 2).
+    ``zero_last``: the last row is zero (a probe's ones row), its Gram entries 0 without products.
     """
     kernels = _compiled()
     height = layout[0]
@@ -242,11 +245,15 @@ def block_statistics(
         channels,
         width,
         channel_axis == 2,
+        rows - 1 if zero_last else rows,
         gram,
         fa,
         ff,
         aa,
     )
+    lower = np.tril(np.ones((channels, channels), dtype=bool), -1)
+    ff = np.where(lower, ff, ff.transpose(0, 2, 1))  # each (c, d) from the lower triangle, d ≤ c
+    aa = np.where(lower, aa, aa.T)
     return gram + np.tril(gram, -1).T, fa, ff, aa
 
 

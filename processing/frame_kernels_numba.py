@@ -225,13 +225,14 @@ def moments(frames, channels, white, start, stop, out):
 
 @njit(nogil=True, cache=True, fastmath=True)
 def block_statistics(
-    values, weights, factors, masked, transform, height, channels, width, channels_inner, gram, fa, ff, aa
+    values, weights, factors, masked, transform, height, channels, width, channels_inner, gram_rows, gram, fa, ff, aa
 ):
     """The moments of block rows in one pass over them, block row by block row (each block row's values in cache):
-    ``gram[i, j] += Σ_t w_t x_it x_jt`` (``j ≤ i``: the lower triangle) over the columns ``t`` of ``values`` (R, N),
-    weighted by ``weights`` (N,); and the channel moments of the images ``y = transform · x`` (K + 1, R) scaled by
-    ``factors`` (N,; all ones unless ``masked``): per image ``i < K`` and channels ``c, d``, ``fa[i, c, d] += Σ y_ic
-    y_Kd`` and ``ff[i, c, d] += Σ y_ic y_id`` over the blocks, and ``aa[c, d] += Σ y_Kc y_Kd``.
+    ``gram[i, j] += Σ_t w_t x_it x_jt`` (``j ≤ i < gram_rows``: the lower triangle; the rows from ``gram_rows`` on
+    are zero, as the probe's ones row) over the columns ``t`` of ``values`` (R, N), weighted by ``weights`` (N,); and
+    the channel moments of the images ``y = transform · x`` (K + 1, R) scaled by ``factors`` (N,; all ones unless
+    ``masked``): per image ``i < K`` and channels ``c, d``, ``fa[i, c, d] += Σ y_ic y_Kd`` and ``ff[i, c, d] += Σ y_ic
+    y_id`` over the blocks, and ``aa[c, d] += Σ y_Kc y_Kd`` (``ff`` and ``aa`` for ``d ≤ c`` only: symmetric).
 
     The N columns are ``height`` block rows of ``channels × width`` values, laid out (channel, block column) or, with
     ``channels_inner``, (block column, channel). Sums are reassociated (fastmath): the numpy route
@@ -250,12 +251,12 @@ def block_statistics(
     mapped = np.empty((images, inner)) if channels_inner else image.reshape((images, inner))
     for h in range(height):
         base = h * inner
-        for i in range(rows):
+        for i in range(gram_rows):
             source = values[i, base : base + inner]
             target = weighted[i]
             for t in range(inner):
                 target[t] = weights[base + t] * source[t]
-        for i in range(rows):
+        for i in range(gram_rows):
             left = weighted[i]
             for j in range(i + 1):
                 right = values[j, base : base + inner]
@@ -286,7 +287,7 @@ def block_statistics(
             led = image[i]
             for c in range(channels):
                 first = led[c]
-                for d in range(channels):
+                for d in range(c + 1):
                     other = ambient[d]
                     second = led[d]
                     cross = 0.0
@@ -296,9 +297,15 @@ def block_statistics(
                         own += first[b] * second[b]
                     fa[i, c, d] += cross
                     ff[i, c, d] += own
+                for d in range(c + 1, channels):
+                    other = ambient[d]
+                    cross = 0.0
+                    for b in range(width):
+                        cross += first[b] * other[b]
+                    fa[i, c, d] += cross
         for c in range(channels):
             first = ambient[c]
-            for d in range(channels):
+            for d in range(c + 1):
                 other = ambient[d]
                 total = 0.0
                 for b in range(width):
