@@ -251,10 +251,7 @@ def block_statistics(
         ff,
         aa,
     )
-    lower = np.tril(np.ones((channels, channels), dtype=bool), -1)
-    ff = np.where(lower, ff, ff.transpose(0, 2, 1))  # each (c, d) from the lower triangle, d ≤ c
-    aa = np.where(lower, aa, aa.T)
-    return gram + np.tril(gram, -1).T, fa, ff, aa
+    return gram, fa, ff, aa
 
 
 def synthesis_inputs(frames: list[np.ndarray]) -> tuple[np.ndarray, ...] | None:

@@ -264,11 +264,12 @@ def block_statistics(
     values, weights, factors, masked, transform, height, channels, width, channels_inner, gram_rows, gram, fa, ff, aa
 ):
     """The moments of block rows in one pass over them, block row by block row (each block row's values in cache):
-    ``gram[i, j] += Σ_t w_t x_it x_jt`` (``j ≤ i < gram_rows``: the lower triangle; the rows from ``gram_rows`` on
+    ``gram[i, j] += Σ_t w_t x_it x_jt`` (``j ≤ i < gram_rows``; the rows from ``gram_rows`` on
     are zero, as the probe's ones row) over the columns ``t`` of ``values`` (R, N), weighted by ``weights`` (N,); and
     the channel moments of the images ``y = transform · x`` (K + 1, R) scaled by ``factors`` (N,; all ones unless
     ``masked``): per image ``i < K`` and channels ``c, d``, ``fa[i, c, d] += Σ y_ic y_Kd`` and ``ff[i, c, d] += Σ y_ic
-    y_id`` over the blocks, and ``aa[c, d] += Σ y_Kc y_Kd`` (``ff`` and ``aa`` for ``d ≤ c`` only: symmetric).
+    y_id`` over the blocks, and ``aa[c, d] += Σ y_Kc y_Kd`` (``gram``, ``ff`` and ``aa`` summed for ``d ≤ c`` only, then
+    their upper triangles set from the lower: symmetric).
 
     The N columns are ``height`` block rows of ``channels × width`` values, laid out (channel, block column) or, with
     ``channels_inner``, (block column, channel). Sums are reassociated (fastmath): the numpy route
@@ -347,3 +348,11 @@ def block_statistics(
                 for b in range(width):
                     total += first[b] * other[b]
                 aa[c, d] += total
+    for i in range(rows):  # the upper triangles from the lower
+        for j in range(i):
+            gram[j, i] = gram[i, j]
+    for c in range(channels):
+        for d in range(c):
+            aa[d, c] = aa[c, d]
+            for i in range(k):
+                ff[i, d, c] = ff[i, c, d]
