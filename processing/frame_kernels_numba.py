@@ -79,19 +79,19 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
                 for block in range(width):
                     base = block * half_span
                     for q in range(half_group):
-                        total = np.uint64(0)
+                        packed = np.uint64(0)
                         even = np.uint64(0)
                         odd = np.uint64(0)
                         for member in range(factor):
-                            total += pair_sum[base + member * half_group + q]
+                            packed += pair_sum[base + member * half_group + q]
                             if probed:  # the checkerboard: even rows minus odd rows, then even columns minus odd
                                 if member % 2 == 0:
                                     even += pair_alternation[base + member * half_group + q]
                                 else:
                                     odd += pair_alternation[base + member * half_group + q]
                         channel = p * group + 2 * q
-                        sums[block_row, channel, block] = total & low
-                        sums[block_row, channel + 1, block] = total >> shift
+                        sums[block_row, channel, block] = packed & low
+                        sums[block_row, channel + 1, block] = packed >> shift
                         if probed:  # as many odd members as even: the biases cancel
                             differences[probe_row, block, channel] = np.int64(even & low) - np.int64(odd & low)
                             differences[probe_row, block, channel + 1] = np.int64(even >> shift) - np.int64(
@@ -101,17 +101,17 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
                 for block in range(width):
                     base = block * span
                     for k in range(group):
-                        total = np.int64(0)
+                        block_total = np.int64(0)
                         half = np.int64(0)
                         for member in range(factor):
-                            total += row_sum[base + member * group + k]
+                            block_total += row_sum[base + member * group + k]
                             if probed:  # the checkerboard, as above (the biases cancel)
                                 if member % 2 == 0:
                                     half += row_alternation[base + member * group + k]
                                 else:
                                     half -= row_alternation[base + member * group + k]
                         channel = p * group + k
-                        sums[block_row, channel, block] = total
+                        sums[block_row, channel, block] = block_total
                         if probed:
                             differences[probe_row, block, channel] = half
             if top < white:
