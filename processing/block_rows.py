@@ -135,7 +135,8 @@ class BlockRows:
         self.rows[n_led_frames + 1] = 1.0
         # Even blocks also give every block's half difference: the noise probe (module notes). The
         # ones row has no noise. Laid out as the rows, (block row, channel, block column): the compiled moments read
-        # both alike, and the probe's weights are the rows' probed block rows (no transpose). Large frames probe every ``probe_stride``-th block row only (PROBE_BLOCKS).
+        # both alike, and the probe's weights are the rows' probed block rows (no transpose). Large frames probe
+        # every ``probe_stride``-th block row only (PROBE_BLOCKS).
         self.probe_stride = probe_stride(height, width)
         self.difference_shape = (len(range(0, height, self.probe_stride)), plane_shape[2], width)
         self.differences = np.empty((n_rows, math.prod(self.difference_shape))) if factor % 2 == 0 else None
