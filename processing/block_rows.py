@@ -134,10 +134,11 @@ class BlockRows:
         self.rows = np.empty((n_rows, height * plane_shape[2] * width))
         self.rows[n_led_frames + 1] = 1.0
         # Even blocks also give every block's half difference: the noise probe (module notes). The
-        # ones row has no noise. Laid out (block row, block column, channel): the block sums' own order,
-        # copied without a transpose. Large frames probe every ``probe_stride``-th block row only (PROBE_BLOCKS).
+        # ones row has no noise. Laid out as the rows, (block row, channel, block column): the compiled moments read
+        # both alike, and the probe's weights are the rows' probed block rows (no transpose). Large frames probe
+        # every ``probe_stride``-th block row only (PROBE_BLOCKS).
         self.probe_stride = probe_stride(height, width)
-        self.difference_shape = (len(range(0, height, self.probe_stride)), width, plane_shape[2])
+        self.difference_shape = (len(range(0, height, self.probe_stride)), plane_shape[2], width)
         self.differences = np.empty((n_rows, math.prod(self.difference_shape))) if factor % 2 == 0 else None
         if self.differences is not None:
             self.differences[n_led_frames + 1] = 0.0
@@ -179,7 +180,7 @@ class BlockRows:
             gathered_by_channel(row_sums, self.factor, channels, self.rows[row].reshape(self.block_shape))
             alternation = block_row_alternation(plane, self.factor, self.probe_stride)
             differences = gathered(alternation, self.factor, channels, difference_gather)
-            np.copyto(self.differences[row].reshape(self.difference_shape), differences)
+            np.copyto(self.differences[row].reshape(self.difference_shape), differences.transpose(0, 2, 1))
         # One max per frame finds the frames that saturate at all; only those build masks.
         self._record(row, saturated_blocks(plane, self.factor, self.white_level) if may_saturate else None)
         if row == self.n_led_frames and self.weighting:
@@ -196,7 +197,9 @@ class BlockRows:
             self.add(row, cfa_planes(frame, cfa_period))  # refuses the shape
             return
         self._check_row(row)
-        differences = None if self.differences is None else self.differences[row].reshape(self.difference_shape)
+        differences = None
+        if self.differences is not None:  # the kernel writes (block row, block column, channel): a view of our layout
+            differences = self.differences[row].reshape(self.difference_shape).transpose(0, 2, 1)
         done, saturated = frame_kernels.block_pass(
             frame,
             self.factor,
@@ -247,7 +250,9 @@ class BlockRows:
 
     def _at_probe(self, values: np.ndarray) -> np.ndarray:
         """Per-column ``values`` of the rows at the probed blocks, in the probe's layout."""
-        return values.reshape(self.block_shape)[:: self.probe_stride].transpose(0, 2, 1).reshape(-1)
+        if self.probe_stride == 1:
+            return values
+        return values.reshape(self.block_shape)[:: self.probe_stride].reshape(-1)
 
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
@@ -259,11 +264,11 @@ class BlockRows:
 
     def _difference_columns(self, blocks: np.ndarray) -> np.ndarray:
         """The columns of :attr:`differences` of the (H/f, W/f) block mask ``blocks``."""
-        return np.broadcast_to(blocks[:: self.probe_stride, :, None], self.difference_shape).reshape(-1)
+        return np.broadcast_to(blocks[:: self.probe_stride, None, :], self.difference_shape).reshape(-1)
 
     def _probe_scale(self, excluded_blocks: int, excluded_probed: int) -> float | None:
         """Valid blocks ÷ probed valid blocks (1 without a stride), or None when no probed block is valid."""
-        probed = self.difference_shape[0] * self.difference_shape[1] - excluded_probed
+        probed = self.difference_shape[0] * self.difference_shape[2] - excluded_probed
         if probed <= 0:
             return None
         return (self.block_shape[0] * self.block_shape[2] - excluded_blocks) / probed
@@ -319,14 +324,20 @@ class BlockRows:
         """:meth:`_moments` and :meth:`_channel_moments` in one compiled pass over the rows and one over the probe
         (:func:`processing.frame_kernels.block_statistics`): the same quantities, to rounding."""
         invalid = self._invalid_blocks()
-        factors = np.ones(self.rows.shape[1]) if invalid is None else (~self._columns(invalid)).astype(float)
-        column_weights = factors if weights is None else weights if invalid is None else weights * factors
+        # The columns' factors: 1 where valid, 0 where left out (None: none is, and the kernel skips them).
+        factors = None if invalid is None else (~self._columns(invalid)).astype(float)
+        if weights is None:
+            column_weights = np.ones(self.rows.shape[1]) if factors is None else factors
+        else:
+            column_weights = weights if factors is None else weights * factors
         transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
         moments, fa, ff, aa = frame_kernels.block_statistics(
             self.rows, column_weights, factors, transform, self.block_shape, 1
         )
-        ones = self.rows[-1] * factors
-        blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
+        if factors is None:  # every block is in (the ones row is 1 everywhere)
+            blocks = self.block_shape[0] * self.block_shape[2]
+        else:
+            blocks = int(np.count_nonzero(factors.reshape(self.block_shape).any(axis=1)))
         excluded = 0 if invalid is None else int(np.count_nonzero(invalid))
         excluded_probed = 0 if invalid is None else int(np.count_nonzero(invalid[:: self.probe_stride]))
         scale = self._probe_scale(excluded, excluded_probed)
@@ -335,10 +346,11 @@ class BlockRows:
         noise, *channel_noise = frame_kernels.block_statistics(
             self.differences,
             self._at_probe(column_weights),
-            self._at_probe(factors),
+            None if factors is None else self._at_probe(factors),
             transform,
             self.difference_shape,
-            2,
+            1,
+            zero_last=True,  # the ones row has no noise
         )
         if scale is None:
             channels = ChannelMoments(fa, ff, aa, blocks)
@@ -382,7 +394,7 @@ class BlockRows:
         if self.differences is None or probe_scale is None:
             return ChannelMoments(fa, ff, aa, blocks)
         at_probe = None if column_factor is None else self._at_probe(column_factor)
-        noise = _channel_products(transform, self.differences, self.difference_shape, 2, at_probe)
+        noise = _channel_products(transform, self.differences, self.difference_shape, 1, at_probe)
         return ChannelMoments(fa, ff, aa, blocks, *(part * probe_scale for part in noise))
 
 

@@ -77,11 +77,13 @@ def _warm(kernels: Any) -> None:
         np.ones((1, 1)),
         one,
         one,
+        True,
         np.ones((1, 1)),
         1,
         1,
         1,
         False,
+        1,
         np.zeros((1, 1)),
         *(np.zeros((0, 1, 1)),) * 2,
         np.zeros((1, 1)),
@@ -183,7 +185,8 @@ def block_pass(
     sums
         Output, (H/f, C', W/f) float64 (C' = cfa_period² · C): block sums in moment-row order.
     differences
-        Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64: each probed block's checkerboard half difference
+        Output, (⌈(H/f)/probe_stride⌉, W/f, C') float64, any strides (a transposed view of (…, C', W/f) storage
+        writes the sums' order): each probed block's checkerboard half difference
         (:func:`processing.block_sums.block_sums_and_differences`); or None.
 
     Returns
@@ -210,18 +213,20 @@ def block_pass(
 def block_statistics(
     values: np.ndarray,
     weights: np.ndarray,
-    factors: np.ndarray,
+    factors: np.ndarray | None,
     transform: np.ndarray,
     layout: tuple[int, int, int],
     channel_axis: int,
+    zero_last: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The weighted second moments of the rows ``values`` (R, N) and their images' channel moments, in one compiled
     pass over them (used where :func:`statistics_compiled` said so, :func:`paused` or not).
 
     ``weights`` (N,) weigh each column in ``Σ w x xᵀ``; ``transform`` (K + 1, R) maps the rows to the K LED images and
-    the ambient's, each column scaled by ``factors`` (N,), whose products per channel give ``(gram, fa, ff, aa)``:
-    ``gram`` (R, R) symmetric, ``fa`` and ``ff`` (K, C, C), ``aa`` (C, C) as :class:`processing.statistics.ChannelMoments`
+    the ambient's, each column scaled by ``factors`` (N,; None: all 1), whose products per channel give
+    ``(gram, fa, ff, aa)``: ``gram`` (R, R) symmetric, ``fa`` and ``ff`` (K, C, C), ``aa`` (C, C) as :class:`processing.statistics.ChannelMoments`
     holds them. The columns are laid out ``layout`` (block rows first; the channels on ``channel_axis`` 1 or 2).
+    ``zero_last``: the last row is zero (a probe's ones row), its Gram entries 0 without products.
     """
     kernels = _compiled()
     height = layout[0]
@@ -233,18 +238,20 @@ def block_statistics(
     kernels.block_statistics(
         np.ascontiguousarray(values, dtype=np.float64),
         np.ascontiguousarray(weights, dtype=np.float64),
-        np.ascontiguousarray(factors, dtype=np.float64),
+        np.ascontiguousarray(weights if factors is None else factors, dtype=np.float64),  # unread when None
+        factors is not None,
         np.ascontiguousarray(transform, dtype=np.float64),
         height,
         channels,
         width,
         channel_axis == 2,
+        rows - 1 if zero_last else rows,
         gram,
         fa,
         ff,
         aa,
     )
-    return gram + np.tril(gram, -1).T, fa, ff, aa
+    return gram, fa, ff, aa
 
 
 def synthesis_inputs(frames: list[np.ndarray]) -> tuple[np.ndarray, ...] | None:

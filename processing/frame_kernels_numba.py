@@ -21,7 +21,10 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
     Each column of a block row's ``factor`` frame rows is summed in one sweep (the rows' values in
     registers, one store per column), with a running maximum for the whole block row; only a block
     row that reaches ``white`` is searched block by block. Summing row by row into the column sums,
-    with a per-column maximum, as first built, loaded and stored them ``factor`` times.
+    with a per-column maximum, as first built, loaded and stored them ``factor`` times. The column sums are
+    32-bit unsigned (numba widens signed 32-bit sums to 64-bit lanes); where a pixel column group holds an even
+    number of values (a mosaic's two CFA columns), each block adds two channels' column sums at once, packed in one
+    64-bit word (0.13 → 0.11 ms a 1280×1024 mosaic frame; the same integers).
     """
     period = len(period_t)
     group = len(plane_channels_t)  # values per pixel column group: period · C
@@ -29,8 +32,16 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
     width = sums.shape[2]
     span = factor * group  # values of one block's row in a frame row
     n_columns = width * span
-    row_sum = np.zeros(n_columns, np.int32)
-    row_alternation = np.zeros(n_columns, np.int32)
+    # The rows' sums and alternating sums as unsigned 32-bit (wrapping, so numba keeps 32-bit lanes); an alternating
+    # sum carries ``bias`` (> its largest magnitude, factor · 65536), so that every value is a non-negative integer.
+    row_sum = np.zeros(n_columns + n_columns % 2, np.uint32)  # an even length: viewed as 64-bit pairs
+    row_alternation = np.zeros(n_columns + n_columns % 2, np.uint32)
+    pair_sum = row_sum.view(np.uint64)
+    pair_alternation = row_alternation.view(np.uint64)
+    bias = np.uint32(factor * 65536)
+    low = np.uint64(0xFFFFFFFF)
+    shift = np.uint64(32)
+    paired = group % 2 == 0
     any_saturated = False
     probing = differences.shape[0] > 0
     for block_row in range(first, stop):
@@ -41,43 +52,68 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
             top = raw[first, 0]
             if probed:
                 for j in range(n_columns):
-                    total = np.int32(0)
-                    alternation = np.int32(0)
+                    total = np.uint32(0)
+                    alternation = bias
                     for member in range(factor):
                         value = raw[first + member * period, j]
-                        total += value
+                        total = np.uint32(total + value)
                         if member % 2 == 0:
-                            alternation += value
+                            alternation = np.uint32(alternation + value)
                         else:
-                            alternation -= value
+                            alternation = np.uint32(alternation - value)
                         top = max(top, value)
                     row_sum[j] = total
                     row_alternation[j] = alternation
             else:
                 for j in range(n_columns):
-                    total = np.int32(0)
+                    total = np.uint32(0)
                     for member in range(factor):
                         value = raw[first + member * period, j]
-                        total += value
+                        total = np.uint32(total + value)
                         top = max(top, value)
                     row_sum[j] = total
-            for block in range(width):
-                base = block * span
-                for k in range(group):
-                    total = np.int32(0)
-                    half = np.int32(0)
-                    for member in range(factor):
-                        total += row_sum[base + member * group + k]
+            if paired:
+                # Two channels' sums in one 64-bit word (little-endian: the even channel low): each half's sum stays
+                # below 2³² (factor² · 65536 for factor ≤ 181), so no carry crosses; half the loads and additions.
+                half_group, half_span = group // 2, span // 2
+                for block in range(width):
+                    base = block * half_span
+                    for q in range(half_group):
+                        packed = np.uint64(0)
+                        even = np.uint64(0)
+                        odd = np.uint64(0)
+                        for member in range(factor):
+                            packed += pair_sum[base + member * half_group + q]
+                            if probed:  # the checkerboard: even rows minus odd rows, then even columns minus odd
+                                if member % 2 == 0:
+                                    even += pair_alternation[base + member * half_group + q]
+                                else:
+                                    odd += pair_alternation[base + member * half_group + q]
+                        channel = p * group + 2 * q
+                        sums[block_row, channel, block] = packed & low
+                        sums[block_row, channel + 1, block] = packed >> shift
+                        if probed:  # as many odd members as even: the biases cancel
+                            differences[probe_row, block, channel] = np.int64(even & low) - np.int64(odd & low)
+                            differences[probe_row, block, channel + 1] = np.int64(even >> shift) - np.int64(
+                                odd >> shift
+                            )
+            else:
+                for block in range(width):
+                    base = block * span
+                    for k in range(group):
+                        block_total = np.int64(0)
+                        half = np.int64(0)
+                        for member in range(factor):
+                            block_total += row_sum[base + member * group + k]
+                            if probed:  # the checkerboard, as above (the biases cancel)
+                                if member % 2 == 0:
+                                    half += row_alternation[base + member * group + k]
+                                else:
+                                    half -= row_alternation[base + member * group + k]
+                        channel = p * group + k
+                        sums[block_row, channel, block] = block_total
                         if probed:
-                            # the checkerboard: even rows minus odd rows, then even columns minus odd columns
-                            if member % 2 == 0:
-                                half += row_alternation[base + member * group + k]
-                            else:
-                                half -= row_alternation[base + member * group + k]
-                    channel = p * group + k
-                    sums[block_row, channel, block] = total
-                    if probed:
-                        differences[probe_row, block, channel] = half
+                            differences[probe_row, block, channel] = half
             if top < white:
                 continue
             for block in range(width):
@@ -224,38 +260,46 @@ def moments(frames, channels, white, start, stop, out):
 
 
 @njit(nogil=True, cache=True, fastmath=True)
-def block_statistics(values, weights, factors, transform, height, channels, width, channels_inner, gram, fa, ff, aa):
+def block_statistics(
+    values, weights, factors, masked, transform, height, channels, width, channels_inner, gram_rows, gram, fa, ff, aa
+):
     """The moments of block rows in one pass over them, block row by block row (each block row's values in cache):
-    ``gram[i, j] += Σ_t w_t x_it x_jt`` (``j ≤ i``: the lower triangle) over the columns ``t`` of ``values`` (R, N),
-    weighted by ``weights`` (N,); and the channel moments of the images ``y = transform · x`` (K + 1, R) scaled by
-    ``factors`` (N,): per image ``i < K`` and channels ``c, d``, ``fa[i, c, d] += Σ y_ic y_Kd`` and
-    ``ff[i, c, d] += Σ y_ic y_id`` over the blocks, and ``aa[c, d] += Σ y_Kc y_Kd``.
+    ``gram[i, j] += Σ_t w_t x_it x_jt`` (``j ≤ i < gram_rows``; the rows from ``gram_rows`` on
+    are zero, as the probe's ones row) over the columns ``t`` of ``values`` (R, N), weighted by ``weights`` (N,); and
+    the channel moments of the images ``y = transform · x`` (K + 1, R) scaled by ``factors`` (N,; all ones unless
+    ``masked``): per image ``i < K`` and channels ``c, d``, ``fa[i, c, d] += Σ y_ic y_Kd`` and ``ff[i, c, d] += Σ y_ic
+    y_id`` over the blocks, and ``aa[c, d] += Σ y_Kc y_Kd`` (``gram``, ``ff`` and ``aa`` summed for ``d ≤ c`` only, then
+    their upper triangles set from the lower: symmetric).
 
     The N columns are ``height`` block rows of ``channels × width`` values, laid out (channel, block column) or, with
     ``channels_inner``, (block column, channel). Sums are reassociated (fastmath): the numpy route
-    (:class:`processing.block_rows.BlockRows`) agrees to rounding, not to the bit.
+    (:class:`processing.block_rows.BlockRows`) agrees to rounding, not to the bit. The map skips the transform's zeros
+    (an LED image is two rows' difference, the ambient's one row less its black: 2 of R rows each), and in the
+    (channel, block column) layout the images are mapped in place of their channel-order copy; both only leave out
+    additions of zero (the dense map's numbers to the bit on the bench's worlds; docs/speed.md, 2026-11-29, a fifth
+    session).
     """
     rows = values.shape[0]
     images = transform.shape[0]
     k = images - 1
     inner = channels * width
     weighted = np.empty((rows, inner))
-    mapped = np.empty((images, inner))
     image = np.empty((images, channels, width))
+    mapped = np.empty((images, inner)) if channels_inner else image.reshape((images, inner))
     for h in range(height):
         base = h * inner
-        for i in range(rows):
-            source = values[i]
+        for i in range(gram_rows):
+            source = values[i, base : base + inner]
             target = weighted[i]
             for t in range(inner):
-                target[t] = weights[base + t] * source[base + t]
-        for i in range(rows):
+                target[t] = weights[base + t] * source[t]
+        for i in range(gram_rows):
             left = weighted[i]
             for j in range(i + 1):
-                right = values[j]
+                right = values[j, base : base + inner]
                 total = 0.0
                 for t in range(inner):
-                    total += left[t] * right[base + t]
+                    total += left[t] * right[t]
                 gram[i, j] += total
         for i in range(images):
             target = mapped[i]
@@ -263,25 +307,24 @@ def block_statistics(values, weights, factors, transform, height, channels, widt
                 target[t] = 0.0
             for j in range(rows):
                 scale = transform[i, j]
-                source = values[j]
+                if scale == 0.0:
+                    continue
+                source = values[j, base : base + inner]
                 for t in range(inner):
-                    target[t] += scale * source[base + t]
-            for t in range(inner):
-                target[t] *= factors[base + t]
+                    target[t] += scale * source[t]
+            if masked:
+                for t in range(inner):
+                    target[t] *= factors[base + t]
             if channels_inner:
                 for b in range(width):
                     for c in range(channels):
                         image[i, c, b] = target[b * channels + c]
-            else:
-                for c in range(channels):
-                    for b in range(width):
-                        image[i, c, b] = target[c * width + b]
         ambient = image[k]
         for i in range(k):
             led = image[i]
             for c in range(channels):
                 first = led[c]
-                for d in range(channels):
+                for d in range(c + 1):
                     other = ambient[d]
                     second = led[d]
                     cross = 0.0
@@ -291,11 +334,25 @@ def block_statistics(values, weights, factors, transform, height, channels, widt
                         own += first[b] * second[b]
                     fa[i, c, d] += cross
                     ff[i, c, d] += own
+                for d in range(c + 1, channels):
+                    other = ambient[d]
+                    cross = 0.0
+                    for b in range(width):
+                        cross += first[b] * other[b]
+                    fa[i, c, d] += cross
         for c in range(channels):
             first = ambient[c]
-            for d in range(channels):
+            for d in range(c + 1):
                 other = ambient[d]
                 total = 0.0
                 for b in range(width):
                     total += first[b] * other[b]
                 aa[c, d] += total
+    for i in range(rows):  # the upper triangles from the lower
+        for j in range(i):
+            gram[j, i] = gram[i, j]
+    for c in range(channels):
+        for d in range(c):
+            aa[d, c] = aa[c, d]
+            for i in range(k):
+                ff[i, d, c] = ff[i, c, d]

@@ -3,7 +3,9 @@ the ambient's noise line and the solve — on the bench's 1280×1024 worlds (raw
 
 Each stage's CPU time (``time.thread_time``, one BLAS thread: ``OPENBLAS_NUM_THREADS=1`` is set first), the median of
 ``--runs`` runs, ÷ the median CPU time of a copy of the frames (:func:`msflash.lab.bench.processing.frame_copy`):
-``noise line`` (:func:`processing.noise_level.detail_noise_line` of the ambient frame) with its ``haar details`` and
+``block pass`` (every frame into fresh unweighted :class:`processing.block_rows.BlockRows`), ``moments``
+(:meth:`processing.block_rows.BlockRows.statistics` of the weighted rows, in cache), ``noise line``
+(:func:`processing.noise_level.detail_noise_line` of the ambient frame) with its ``haar details`` and
 ``fit``, ``solve`` (:func:`processing.ambient.estimate_ambient` on the streamed statistics: α, weights, band) with
 its ``weights`` and ``reliability``, and the whole ``estimate`` as the bench streams it on one thread
 (:func:`msflash.lab.bench.processing.streamed_estimate`). One JSON line; nothing asserted (docs/speed.md).
@@ -56,8 +58,17 @@ def _figures(cfa: str | None, runs: int) -> dict[str, float]:
     ambient, black, white = frames[0], spec.black_level, spec.white_level
     details = noise_level.haar_details(ambient, period, black, white)
     factor = block_factor(frames[0].shape, cfa)
+
+    def block_pass() -> object:  # every frame's block sums and probe, unweighted: no noise line
+        unweighted = BlockRows(n, plane_shape(frames[0].shape, period), factor, white, black_level=black)
+        for row, frame in zip([n, *range(n)], frames, strict=True):
+            unweighted.add_frame(row, frame, period)
+        return unweighted
+
     stages: dict[str, Callable[[], object]] = {
-        "estimate": lambda: streamed_estimate(world, factor, 1),
+        "estimate": lambda: streamed_estimate(world, factor),
+        "block pass": block_pass,
+        "moments": lambda: rows.statistics(spec),
         "noise line": lambda: noise_level.detail_noise_line(ambient, period, black, white),
         "haar details": lambda: noise_level.haar_details(ambient, period, black, white),
         "fit": lambda: noise_level.fit_detail_line(*details),

@@ -548,3 +548,31 @@ def test_the_compiled_moments_give_the_numpy_estimate_to_rounding(cfa: str | Non
         expected, actual = getattr(numpy_route, name), getattr(compiled_route, name)
         expected, actual = getattr(expected, "values", expected), getattr(actual, "values", actual)
         np.testing.assert_allclose(actual, expected, rtol=0, atol=1e-9 * float(np.max(np.abs(expected))), err_msg=name)
+
+
+@pytest.mark.parametrize(("shape", "period"), [((70, 98), 2), ((40, 36, 2), 1), ((36, 44, 4), 1), ((36, 40, 3), 1)])
+@pytest.mark.parametrize("factor", [2, 4, 18])
+def test_the_compiled_block_pass_is_exact_at_the_full_16_bit_range(
+    shape: tuple[int, ...], period: int, factor: int
+) -> None:
+    """The block pass's 32-bit column sums (two channels packed in one 64-bit word where a pixel group holds an even
+    number of values, the alternating sums biased to stay non-negative) against int64 sums written out, on samples
+    at 0 and 65 535 (the largest sums and the largest half differences of either sign) and in between."""
+    if not frame_kernels.prepare():
+        pytest.skip("numba is not installed")
+    rng = np.random.default_rng(factor)
+    frame = np.where(rng.random(shape) < 0.5, 0, 65535).astype(np.uint16)
+    frame[: shape[0] // 2] = rng.integers(0, 65536, (shape[0] // 2, *shape[1:]), dtype=np.uint16)
+    planes = block_sums.cfa_planes(frame, period).astype(np.int64)
+    height, width, channels = planes.shape[0] // factor, planes.shape[1] // factor, planes.shape[2]
+    blocks = planes[: height * factor, : width * factor].reshape(height, factor, width, factor, channels)
+    signs = np.where((np.arange(factor)[:, None] + np.arange(factor)[None, :]) % 2 == 0, 1, -1)
+    expected_sums = blocks.sum(axis=(1, 3)).transpose(0, 2, 1)  # (H/f, C, W/f)
+    expected_halves = np.einsum("hawbc,ab->hwc", blocks, signs)  # (H/f, W/f, C)
+    sums = np.empty((height, channels, width))
+    halves = np.empty((height, width, channels)) if factor % 2 == 0 else None
+    done, saturated = frame_kernels.block_pass(frame, factor, period, 70000.0, 1, sums, halves)
+    assert done and saturated is None
+    np.testing.assert_array_equal(sums, expected_sums)
+    if halves is not None:
+        np.testing.assert_array_equal(halves, expected_halves)
