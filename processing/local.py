@@ -46,9 +46,7 @@ from msflash.processing.local_selection import (
 from msflash.processing.spectra import Spectra, require_unit
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 from msflash.processing.synthesis import frame_coefficients
-
-# DEFAULT_TILES and TileBlocks: acquisition's cli_process and estimate_stream still import them from here.
-from msflash.processing.tile_statistics import DEFAULT_TILES, TileBlocks, TiledStatistics  # noqa: F401
+from msflash.processing.tile_statistics import TiledStatistics
 
 LOCAL_METHODS = ("auto", "global", "local")
 """``auto`` selects the model from the data; ``global`` is the paper's; ``local`` forces tiles."""

@@ -14,7 +14,8 @@ from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis, many, one_sequence
-from msflash.processing.local import DEFAULT_TILES, LOCAL_METHODS
+from msflash.processing.local import LOCAL_METHODS
+from msflash.processing.tile_statistics import DEFAULT_TILES
 
 DEFAULT_LOCAL_METHOD = "auto"
 """Default of ``--method``: ``auto`` keeps the global estimate unless a local model predicts held-out tiles

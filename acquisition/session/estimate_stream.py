@@ -12,7 +12,7 @@ the same numbers to the last digit (``tests/acquisition/session/test_estimate_st
 Peak memory is one frame plus the statistics (the block rows: ``(n + 2)`` rows of ``H·W·C / b²``
 float64 for ``b × b`` blocks, a sixteenth of a 16-bit RGB frame per frame at ``b = 8``), whatever
 the frame count (but for ``bin_factor`` 1, the all-pixel reference, whose exact moments need every
-frame's pixels together: the frames are kept). The local estimate's tiles (:class:`processing.local.TileBlocks`) are accumulated
+frame's pixels together: the frames are kept). The local estimate's tiles (:class:`processing.tile_statistics.TileBlocks`) are accumulated
 beside them when asked for.
 
 A mono camera's frames are taken as their one plane (the sequence records them as three identical
@@ -41,8 +41,9 @@ from msflash.processing.block_rows import BlockRows
 from msflash.processing.block_sums import plane_shape
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flicker import corrected_tiles
-from msflash.processing.local import LocalEstimate, TileBlocks, estimate_local
+from msflash.processing.local import LocalEstimate, estimate_local
 from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
+from msflash.processing.tile_statistics import TileBlocks
 
 USED_ROLES = ("ambient", "led")
 """The roles the estimate reads: the first ``ambient`` frame and every ``led`` frame."""
