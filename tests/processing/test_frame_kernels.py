@@ -55,6 +55,15 @@ def _frames(
     return ambient, frames, spec
 
 
+def _block_rows(
+    n_leds: int, shape: tuple[int, ...], period: int, factor: int, spec: FrameStackSpec, **options: bool
+) -> BlockRows:
+    """Block rows for frames of ``shape`` with ``spec``'s white and black levels."""
+    return BlockRows(
+        n_leds, block_sums.plane_shape(shape, period), factor, spec.white_level, black_level=spec.black_level, **options
+    )
+
+
 def _planes(frame: np.ndarray, period: int) -> np.ndarray:
     """(H, W, C) float64 planes, the obvious way."""
     if period == 2:
@@ -250,15 +259,7 @@ def test_the_compiled_moments_agree_with_numpy_to_rounding(
     ambient, frames, spec = _frames(shape, 3, seed=5)
     taken = {}
     for compiled in (False, True):
-        rows = BlockRows(
-            3,
-            block_sums.plane_shape(ambient.shape, period),
-            factor,
-            spec.white_level,
-            black_level=spec.black_level,
-            weighting=weighting,
-            compiled=compiled,
-        )
+        rows = _block_rows(3, ambient.shape, period, factor, spec, weighting=weighting, compiled=compiled)
         for row, frame in [(3, ambient), *enumerate(frames)]:
             rows.add_frame(row, frame, period)
         excluded = np.zeros(rows.block_shape[::2], dtype=bool)
@@ -287,7 +288,7 @@ def test_all_pixel_statistics_match_the_reference(
 def test_streamed_block_rows_match_the_reference(route: str) -> None:
     """A capture adds raw frames one by one (FlashSession): the same statistics."""
     ambient, frames, spec = _frames((45, 71), 3, seed=8)
-    rows = BlockRows(3, block_sums.plane_shape(ambient.shape, 2), 2, spec.white_level, black_level=spec.black_level)
+    rows = _block_rows(3, ambient.shape, 2, 2, spec)
     for row, frame in [(0, frames[0]), (3, ambient), (1, frames[1]), (2, frames[2])]:
         rows.add_frame(row, frame, 2)
     assert_same(rows.statistics(spec), reference_statistics(ambient, frames, spec, 2, 2, 1))
@@ -304,14 +305,7 @@ def test_block_rows_give_the_same_bits_whatever_the_frames_order(
     ambient, frames, spec = _frames(shape, 3, seed=21)
     results = []
     for ambient_first in (True, False):
-        rows = BlockRows(
-            3,
-            block_sums.plane_shape(ambient.shape, period),
-            factor,
-            spec.white_level,
-            black_level=spec.black_level,
-            weighting=True,
-        )
+        rows = _block_rows(3, ambient.shape, period, factor, spec, weighting=True)
         order = [(3, ambient), *enumerate(frames)] if ambient_first else [(0, frames[0]), (3, ambient), (1, frames[1])]
         for row, frame in order[:3]:
             rows.add_frame(row, frame, period)
@@ -375,14 +369,7 @@ def test_channel_moments_match_the_reference(
     monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 400)
     ambient, frames, spec = _frames(shape, 4, seed=sum(shape))
     n = len(frames)
-    rows = BlockRows(
-        n,
-        block_sums.plane_shape(ambient.shape, period),
-        factor,
-        spec.white_level,
-        black_level=spec.black_level,
-        weighting=weighting,
-    )
+    rows = _block_rows(n, ambient.shape, period, factor, spec, weighting=weighting)
     for row, frame in [(n, ambient), *enumerate(frames)]:
         rows.add_frame(row, frame, period)
     actual = rows.statistics(spec).channels
@@ -531,15 +518,7 @@ def test_the_compiled_moments_give_the_numpy_estimate_to_rounding(cfa: str | Non
     frames, spec, period = world["frames"], world["spec"], 2 if cfa else 1
     estimates = []
     for compiled in (False, True):
-        rows = BlockRows(
-            len(frames) - 1,
-            block_sums.plane_shape(frames[0].shape, period),
-            4,
-            spec.white_level,
-            black_level=spec.black_level,
-            weighting=True,
-            compiled=compiled,
-        )
+        rows = _block_rows(len(frames) - 1, frames[0].shape, period, 4, spec, weighting=True, compiled=compiled)
         for row, frame in zip([len(frames) - 1, *range(len(frames) - 1)], frames, strict=True):
             rows.add_frame(row, frame, period)
         estimates.append(estimate_ambient(rows.statistics(spec), world["leds"]))
