@@ -13,7 +13,16 @@ import math
 import numpy as np
 from numba import njit
 
-from msflash.processing.light_forms import BANDS, BLACKBODY, C2_NM_K, DAYLIGHT, FILTER, FIXED, UNDERWATER
+from msflash.processing.light_forms import (
+    BANDS,
+    BLACKBODY,
+    C2_NM_K,
+    DAYLIGHT,
+    FILTER,
+    FIXED,
+    UNDERWATER,
+    daylight_weights,
+)
 
 LOG_4000 = math.log(4000.0)
 LOG_25000 = math.log(25000.0)
@@ -41,17 +50,12 @@ def _planck_log_slope(nm, kelvin):
     return out
 
 
+_daylight_weights = njit(cache=True)(daylight_weights)
+
+
 @njit(cache=True)
 def _daylight(basis, cct):
-    t = min(max(cct, 4000.0), 25000.0) * 1.4388 / 1.4380
-    if t <= 7000:
-        x = -4.6070e9 / t**3 + 2.9678e6 / t**2 + 0.09911e3 / t + 0.244063
-    else:
-        x = -2.0064e9 / t**3 + 1.9018e6 / t**2 + 0.24748e3 / t + 0.237040
-    y = -3.0 * x * x + 2.87 * x - 0.275
-    m = 0.0241 + 0.2562 * x - 0.7341 * y
-    w1 = (-1.3515 - 1.7703 * x + 5.9114 * y) / m
-    w2 = (0.0300 - 31.4424 * x + 30.0717 * y) / m
+    w1, w2 = _daylight_weights(cct)
     out = np.empty(basis.shape[0])
     for i in range(out.size):
         out[i] = max(basis[i, 0] + basis[i, 1] * w1 + basis[i, 2] * w2, 0.0)

@@ -88,8 +88,9 @@ def _daylight_basis(grid: WavelengthGrid) -> np.ndarray:
     return np.column_stack([np.interp(nm, basis[n].wavelengths, basis[n].values) for n in ("S0", "S1", "S2")])
 
 
-def daylight(grid: WavelengthGrid, cct: float) -> np.ndarray:
-    """CIE daylight at ``cct`` (energy; CIE 15 chromaticity of the daylight locus → M1, M2), clipped at 0."""
+def daylight_weights(cct: float) -> tuple[float, float]:
+    """CIE 15's M1, M2 of daylight at ``cct`` (clamped to 4000–25000 K): the chromaticity of the daylight locus,
+    then the weights of the S1, S2 basis. Plain arithmetic, so the compiled fits compile this same function."""
     t = min(max(float(cct), 4000.0), 25000.0) * 1.4388 / 1.4380
     if t <= 7000:
         x = -4.6070e9 / t**3 + 2.9678e6 / t**2 + 0.09911e3 / t + 0.244063
@@ -97,8 +98,13 @@ def daylight(grid: WavelengthGrid, cct: float) -> np.ndarray:
         x = -2.0064e9 / t**3 + 1.9018e6 / t**2 + 0.24748e3 / t + 0.237040
     y = -3.0 * x * x + 2.87 * x - 0.275
     m = 0.0241 + 0.2562 * x - 0.7341 * y
-    weights = np.array([1.0, (-1.3515 - 1.7703 * x + 5.9114 * y) / m, (0.0300 - 31.4424 * x + 30.0717 * y) / m])
-    return np.clip(_daylight_basis(grid) @ weights, 0.0, None)
+    return (-1.3515 - 1.7703 * x + 5.9114 * y) / m, (0.0300 - 31.4424 * x + 30.0717 * y) / m
+
+
+def daylight(grid: WavelengthGrid, cct: float) -> np.ndarray:
+    """CIE daylight at ``cct`` (energy; :func:`daylight_weights`), clipped at 0."""
+    m1, m2 = daylight_weights(cct)
+    return np.clip(_daylight_basis(grid) @ np.array([1.0, m1, m2]), 0.0, None)
 
 
 def band(grid: WavelengthGrid, centre: float, fwhm: float) -> np.ndarray:
