@@ -265,22 +265,13 @@ def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> Flicker
     return with_mains_fit(check, sequence)
 
 
-def sequence_flicker(sequence: Sequence) -> FlickerCheck | None:
-    """The flicker check of a sequence's frames read from disk (one pass, as an estimate's), or None where the
-    sequence carries no camera responsivities to read the ambient gains with: what a synthesis from weights
-    given alone (``msflash synthesize``, :func:`msflash.synthesize_flash`) corrects by, made there in the
-    synthesis's own pass (:func:`synthesize_checked`)."""
-    if sequence.camera_responsivities() is None:
-        return None
-    return flicker_check(sequence, stream_sequence(sequence, DEFAULT_BIN_FACTOR).statistics())
-
-
 def synthesize_checked(
     sequence: Sequence, flash_weights: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, StackLayout, FlickerCheck | None]:
     """The computational flash image of a sequence read from disk with the flicker check of its frames, each
     frame read once: what a synthesis from weights given alone (``msflash synthesize``,
-    :func:`msflash.synthesize_flash`) writes, and the check it corrected by (:func:`sequence_flicker`'s).
+    :func:`msflash.synthesize_flash`) writes, and the flicker check it corrected by (:func:`flicker_check` of the frames' statistics, None where
+    the sequence carries no camera responsivities to read the ambient gains with).
 
     Each ambient and LED frame, decoded once in sequence order, feeds both the estimate's statistics
     (:func:`~acquisition.session.estimate_stream.stream_sequence`, for the check) and the synthesis sum

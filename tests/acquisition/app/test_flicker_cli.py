@@ -11,7 +11,7 @@ import pytest
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.reader import read_sequence
-from msflash.acquisition.session.analysis import sequence_flicker, synthesize_sequence
+from msflash.acquisition.session.analysis import synthesize_checked, synthesize_sequence
 from msflash.processing.flicker import FlickerCheck
 
 
@@ -110,7 +110,7 @@ def test_the_flash_image_of_a_flickering_lamp_holds_its_ambient_once(
     assert main([*argv, "--out", str(flash)]) == 0
     weights = np.array(json.loads(capsys.readouterr().out)["flash_weights"])
     steady, flickering = read_sequence(images["steady"]), read_sequence(images["flickering"])
-    check = sequence_flicker(flickering)
+    check = synthesize_checked(flickering, weights)[3]
     assert check is not None and check.corrected
 
     def flash_part(sequence: Sequence, flicker: FlickerCheck | None = None) -> float:

@@ -21,6 +21,7 @@ from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session import analysis
+from msflash.acquisition.session.estimate_stream import stream_sequence
 from msflash.acquisition.session.rig import open_sim_rig
 
 WEIGHTS = np.array([0.4, 0.7, 0.2, 0.5, 0.3, 0.6, 0.1])
@@ -48,7 +49,10 @@ def recorded_run(path: Path, *flicker: str) -> Path:
 
 def two_passes(sequence: Sequence, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, analysis.StackLayout, object]:
     """What ``synthesize`` did before: the flicker check's pass, then the sum's."""
-    check = analysis.sequence_flicker(sequence)
+    check = None
+    if sequence.camera_responsivities() is not None:
+        statistics = stream_sequence(sequence, analysis.DEFAULT_BIN_FACTOR).statistics()
+        check = analysis.flicker_check(sequence, statistics)
     image, saturated, layout = analysis.synthesize_sequence(sequence, weights, flicker=check)
     return image, saturated, layout, check
 
