@@ -115,9 +115,10 @@ def paused() -> Iterator[None]:
             _paused -= 1
 
 
-def _loaded() -> Any:
-    """The kernels if they are in use in this process (loaded before, or forced), else None."""
-    if _mode() == "numpy" or _paused:
+def _loaded(*, pausable: bool = True) -> Any:
+    """The kernels if they are in use in this process (loaded before, or forced), else None; also None inside
+    :func:`paused` unless ``pausable`` is False."""
+    if _mode() == "numpy" or (_paused and pausable):
         return None
     if _mode() == "numba" or "msflash.processing.frame_kernels_numba" in sys.modules:
         return _compiled()
@@ -144,11 +145,7 @@ def statistics_compiled() -> bool:
     by loading them. Decided once per stack, when its rows are laid out and before anything loads the kernels for it,
     so that a capture's live stream and ``msflash estimate`` of its sequence in the same kind of process take the
     same route (the two routes agree to rounding only; :class:`processing.block_rows.BlockRows`)."""
-    if _mode() == "numpy":
-        return False
-    if _mode() == "numba" or "msflash.processing.frame_kernels_numba" in sys.modules:
-        return _compiled() is not None
-    return False
+    return _loaded(pausable=False) is not None
 
 
 def enabled() -> bool:
