@@ -1,11 +1,5 @@
 """A raw mosaic as a DNG file (DNG 1.4: TIFF with its own tags, and EXIF in its own IFD).
 
-Public objects
---------------
-- :func:`write_dng`: one CFA frame, its black and white levels, ``AsShotNeutral``, ``ColorMatrix1``
-  and the EXIF of its capture.
-- :data:`CFA_COLOURS`: DNG's ``CFAPattern`` codes of msflash's CFA names.
-
 What a raw developer needs (Adobe DNG Specification 1.4): ``DNGVersion``, ``UniqueCameraModel``,
 the CFA (``CFARepeatPatternDim``, ``CFAPattern``, ``CFAPlaneColor``, ``CFALayout``), ``BlackLevel``
 and ``WhiteLevel``, ``ColorMatrix1`` (XYZ → camera under ``CalibrationIlluminant1``) and

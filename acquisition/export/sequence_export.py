@@ -1,11 +1,5 @@
 """Export a sequence and what msflash makes of it: DNG, OME-TIFF, CSV and EXR files in a new folder.
 
-Public objects
---------------
-- :func:`check_export`: the refusals made before anything is written.
-- :class:`ExportResult` and :func:`export_sequence`: the files written, into a folder that appears
-  complete or not at all.
-
 What each format holds:
 
 - ``dng``: one DNG per frame of a raw (CFA) sequence (``NNN-role.dng``), the counts as recorded,

@@ -1,12 +1,5 @@
 """A classic little-endian TIFF written byte by byte: one image IFD, its pixel strips and an EXIF sub-IFD.
 
-Public objects
---------------
-- :class:`Tag` and the constructors :func:`ascii_tag`, :func:`short_tag`, :func:`long_tag`,
-  :func:`byte_tag`, :func:`undefined_tag`, :func:`rational_tag`, :func:`srational_tag`.
-- :func:`write_tiff`: IFD0 (the caller's tags plus the strip layout) and an EXIF IFD that IFD0's
-  ``ExifIFD`` tag (34665) points to.
-
 Why not tifffile: its writer refuses the ``ExifIFD`` pointer tag ("not writing extratag 34665"), so
 EXIF tags could only go into IFD0, where they do not belong (TIFF/EP and DNG put ``ExposureTime``,
 ``DateTimeOriginal`` and ``ISOSpeedRatings`` in the EXIF IFD; ``exiftool -validate`` warns

@@ -1,12 +1,5 @@
 """Is every frame of a sequence the file that was written? What ``msflash check`` reports.
 
-Public objects
---------------
-- :data:`FILE_STATES`: the states a file can be in, in the order the summary counts them.
-- :class:`FileCheck`: one file's state and why.
-- :class:`SequenceCheck`: every listed frame's state and every file the sequence does not list.
-- :func:`check_sequence`: check a sequence directory.
-
 A frame listed in ``sequence.json`` is
 
 - ``intact``: its recorded SHA-256 and length (``frames[].sha256``, ``frames[].file_bytes``,

@@ -1,14 +1,5 @@
 """Frame image files: the only module of msflash that uses OpenImageIO.
 
-Public objects
---------------
-- :func:`read_image`: pixels of a frame file in their native type, (H, W) or (H, W, 3).
-- :func:`read_image_header`: size, channel count, type and msflash attributes, without the pixels.
-- :func:`write_image`: a 16-bit TIFF (integer data) or float EXR (float data), atomically.
-- :func:`write_image_digest`: the same, returning the written file's SHA-256 and length
-  (:class:`~acquisition.sequence.frame_digest.FileDigest`), taken from the file renamed into place.
-- :func:`image_suffix`: the file suffix :func:`write_image` needs for some pixels.
-
 Frames describe themselves: :func:`write_image` stores its ``attributes`` (``msflash:role``,
 ``msflash:exposure_us``, ``msflash:led_levels``…) as a JSON object in the standard
 ``ImageDescription`` tag, because OpenImageIO's TIFF writer drops arbitrary attributes; EXR files

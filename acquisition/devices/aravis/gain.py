@@ -25,13 +25,6 @@ feature and its range in the camera's units (exit 2).
 
 No ``gi`` here: :class:`~acquisition.devices.aravis.camera.AravisCamera` reads the features and
 calls :func:`choose_gain_control`; everything else is testable without Aravis.
-
-Public objects
---------------
-- :class:`GainRequest`, :func:`parse_gain_db`, :func:`parse_gain_raw`: what the user asks.
-- :class:`GainControl`, :func:`feature_scale`, :func:`choose_gain_control`, :func:`choose_selector`:
-  how a camera's gain is set, and the checks.
-- :data:`GAIN_FEATURES`, :data:`SELECTOR_PREFERENCE`: the names tried.
 """
 
 from __future__ import annotations

@@ -19,11 +19,6 @@ the same way (their ``Width`` increment); a width that is not is refused, not gu
 
 Pure numpy: no ``gi`` here; :mod:`acquisition.devices.aravis.camera` calls :func:`unpack_pixels` for the
 formats of :data:`PACKED_FORMATS`.
-
-Public objects
---------------
-- :class:`PackedLayout`, :data:`PACKED_FORMATS`: the packed formats decoded, with PFNC codes.
-- :func:`packed_size`, :func:`unpack_pixels`: bytes of one frame, and the frame as ``uint16``.
 """
 
 from __future__ import annotations
