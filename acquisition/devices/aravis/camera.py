@@ -75,17 +75,13 @@ class AravisCamera(Streaming):
     interfaces
         Transport layers to use, from :data:`~.discovery.INTERFACES` (``("fake",)``, ``"gige,usb3"``). Only
         these are enabled; ``gige`` with a name that is not an IP address broadcasts discovery.
-    pixel_format
-        PixelFormat to set; ``None`` keeps the camera's.
-    roi
-        (offset_x, offset_y, width, height) to set; ``None`` keeps the camera's.
+    pixel_format, roi
+        PixelFormat and (offset_x, offset_y, width, height) to set; ``None`` keeps the camera's.
     line_trigger
         Trigger used for plans paced by the booth (``plan.trigger == "booth"``).
     strobe
         Output line to drive from the exposure; set up by :meth:`prepare` for every plan when
         given, and required for camera-paced plans (``plan.trigger == "camera"``).
-    extra_buffers
-        Buffers in the pool beyond one per plan step.
     zero_copy
         Deliver frames without copying them where possible (see Notes); False always copies.
 

@@ -158,16 +158,8 @@ def unpack_pixels(
 ) -> np.ndarray:
     """Decode one frame of a packed format into an owned, read-only ``uint16`` array.
 
-    Parameters
-    ----------
-    data
-        The payload: at least :func:`packed_size` bytes (trailing bytes, e.g. chunk data, are ignored).
-    pixel_format
-        A key of :data:`PACKED_FORMATS`.
-    width, height
-        Frame size in pixels; ``width`` must be a multiple of the packing group (2 or 4 samples).
-    where
-        Prefix of error messages (the camera's name).
+    ``data`` holds at least :func:`packed_size` bytes (trailing chunk data is ignored); ``width`` must be a
+    multiple of the packing group (2 or 4 samples); ``where`` prefixes error messages.
 
     Returns
     -------
