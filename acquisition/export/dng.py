@@ -88,8 +88,6 @@ def write_dng(
         Camera R, G, B of white under the scene's light, largest 1 (``AsShotNeutral``).
     xyz_to_camera
         3×3 XYZ → camera under D65 (``ColorMatrix1``, ``CalibrationIlluminant1`` = D65).
-    camera_model
-        ``UniqueCameraModel`` and ``Model``.
     description
         ``ImageDescription`` (what the frame is; 7-bit ASCII, anything else written as ``?``).
     exposure_us

@@ -165,13 +165,9 @@ def write_ome_tiff(
 
     Parameters
     ----------
-    path
-        The file to write (``.ome.tif``).
     frames
         One (H, W) or (H, W, 3) array per plane, all of one shape and type (uint8, uint16 or
         float32); taken one at a time, so a long sequence is never all in memory.
-    planes
-        What each frame is, in order.
     lights
         The LEDs, in the order :attr:`OmePlane.light` indexes.
     notes

@@ -134,8 +134,6 @@ def write_tiff(path: str | os.PathLike, pixels: np.ndarray, ifd0: SequenceOf[Tag
 
     Parameters
     ----------
-    path
-        The file (replaced if it exists).
     pixels
         (H, W) uint16.
     ifd0

@@ -106,13 +106,8 @@ def check_sequence(directory: str | os.PathLike) -> SequenceCheck:
     """Check every frame file of a sequence against its record, and look for undeclared files.
 
     Frames with a recorded digest are hashed, not decoded (the digest proves the bytes are those
-    written); frames without one are decoded (:func:`acquisition.image_io.read_image`) to tell
+    written); frames without one are decoded (:func:`acquisition.sequence.image_files.read_image`) to tell
     ``unverified`` from ``unreadable``.
-
-    Parameters
-    ----------
-    directory
-        The sequence directory, or its ``sequence.json``.
 
     Returns
     -------

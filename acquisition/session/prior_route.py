@@ -84,9 +84,8 @@ def estimate_sequence_prior(
     flicker: FlickerCheck | None = None,
     statistics: ChannelStatistics | None = None,
 ) -> SequencePriorResult:
-    """The light-prior estimate of a sequence, the LED-span one and ``auto``'s choice between them (``flicker``:
-    the LED estimate's check, whose gains correct the statistics; ``statistics``: the sequence's channel statistics
-    so corrected, when taken already).
+    """The light-prior estimate of a sequence, the LED-span one and ``auto``'s choice between them; ``flicker``
+    and ``statistics`` as in :func:`estimate_sequence_family`.
 
     Raises
     ------

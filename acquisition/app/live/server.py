@@ -67,10 +67,6 @@ class LiveServer(RigControls, SequenceRoutes):
         The runs directory: fired sequences go to new folders in it, and its runs are listed.
     sock
         The listening socket (:func:`bind`); its address decides the allowed ``Host`` names.
-    token
-        The session token (default: a new random one).
-    target
-        The complementary flash's target illuminant.
     token_for_pages
         Ask the token for every request, pages and files too; None: when the address is not loopback.
     """

@@ -45,8 +45,6 @@ def release_lost_device(device: Any, owners: tuple[Any, ...], lost: threading.Ev
     lost
         Set by the caller's own ``control-lost`` handler, still connected when this is called:
         an emission before this function connects its handler has set it.
-    name
-        The camera's name, for the log.
 
     Returns
     -------

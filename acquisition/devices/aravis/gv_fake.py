@@ -118,14 +118,10 @@ class AravisGvFake:
 
     Parameters
     ----------
-    serial
-        Serial number the fake reports.
     genicam_xml
         GenICam description (defaults to msflash's SFNC XML); ``None`` for the fake's built-in one.
     trigger_frequency_hz
         How often the fake checks for a software trigger (its trigger-to-frame latency).
-    lost_packet_ratio
-        Fraction of GVSP packets the fake drops (a lossy link).
     model
         Model name the fake reports (its bootstrap register; the XML's ``DeviceModelName`` reads it),
         None for Aravis's "Fake". Camera profiles are matched on it.

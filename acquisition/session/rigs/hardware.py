@@ -188,8 +188,6 @@ def open_hw_rig(
     sync
         ``host``, ``booth`` or ``camera``: camera master configures a strobe output (Line1 unless
         ``camera_options`` or the camera profile name another line).
-    pixel_format
-        PixelFormat to set, or None to keep the camera's.
     camera_options
         :class:`~acquisition.devices.aravis.camera_features.CameraOptions` (trigger/strobe lines, gain, ROI, binning,
         features), overriding the camera profile's.
