@@ -119,12 +119,8 @@ def stale_temporaries(folder: str | os.PathLike, *subfolders: str) -> list[Path]
 
 
 def claim_folder(folder: str | os.PathLike, what: str = "writing") -> FolderClaim:
-    """Claim ``folder`` (created if needed) for this process.
-
-    Parameters
-    ----------
-    what
-        What this process does there, recorded for a second process's message (``"msflash run"``).
+    """Claim ``folder`` (created if needed) for this process; ``what`` it does there (``"msflash run"``) is
+    recorded for a second process's message.
 
     Raises
     ------

@@ -124,14 +124,7 @@ def digest_problem(where: str, state: FrameState, found: FileDigest | None, reco
 
 
 def check_frame_digest(path: Path, recorded: FileDigest, where: str) -> None:
-    """Refuse a frame file that is not, byte for byte, the one recorded.
-
-    Parameters
-    ----------
-    recorded
-        Its digest as ``sequence.json`` records it.
-    where
-        The frame named in the message (file and field).
+    """Refuse a frame file that is not, byte for byte, the one ``recorded`` (``where`` names it in the message).
 
     Raises
     ------

@@ -159,12 +159,7 @@ def read_image_header(path: str | os.PathLike) -> ImageHeader:
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:
-    """The pixels of an image file.
-
-    Parameters
-    ----------
-    path
-        Any image OpenImageIO reads (16-bit TIFF or PNG, float EXR…).
+    """The pixels of an image file OpenImageIO reads (16-bit TIFF or PNG, float EXR…).
 
     Returns
     -------
@@ -301,11 +296,8 @@ def write_image_digest(
     """Write a frame image atomically and return the SHA-256 and length of the bytes written.
 
     The file is written to a temporary file in the same directory, then moved into place with
-    ``os.replace``. The digest is taken in the pass that flushes the temporary file to disk
-    (``fsync``), from the bytes the kernel holds for it, before the rename: it is the digest of
-    exactly the file renamed into place. (OpenImageIO's Python binding cannot write to memory, and
-    libtiff seeks back to patch offsets, so the bytes cannot be hashed as they are produced; they
-    are read back once, from the page cache they were just written to.)
+    ``os.replace``; the digest is read back in the ``fsync`` pass before the rename (OpenImageIO cannot
+    write to memory and libtiff seeks back, so the bytes cannot be hashed as produced).
 
     Parameters
     ----------
