@@ -98,11 +98,8 @@ class AravisCamera(Streaming):
     of a GigE Vision device as long as any reference to it lives.
 
     Frames of formats stored as the frame itself (:func:`~.pixel_layouts.is_zero_copy_format`) on GigE Vision and
-    the fake (:data:`~.buffers.ZERO_COPY_PROTOCOLS`) are not copied: Aravis writes each frame into a numpy
-    array msflash allocated, and that array, once the frame is complete, is the frame returned
-    (read-only, owned by the caller from then on). A new buffer replaces it in the stream after
-    the frame is queued; :meth:`prepare` readies one per plan step so that a sequence allocates
-    nothing while it runs. :attr:`pool_arrays` counts the arrays the camera holds.
+    the fake are not copied (:class:`~.buffers.BufferPool`): the array Aravis wrote into is the frame returned,
+    read-only and the caller's; :meth:`prepare` readies one replacement per plan step.
     """
 
     def __init__(

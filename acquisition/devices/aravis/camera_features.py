@@ -555,8 +555,6 @@ def configure_camera(
 
     Parameters
     ----------
-    camera
-        An opened camera (``AravisCamera``).
     strobe
         Whether plans drive a strobe output (camera-paced sync): then the strobe line is set up,
         Line1 unless an option names another.

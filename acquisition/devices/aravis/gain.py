@@ -409,10 +409,8 @@ def choose_gain_control(
         Names to try, in order (the profile's ``gain_features``, then :data:`GAIN_FEATURES`).
     request
         What the user asked; None picks the feature for plan steps' own gains (dB-scaled first).
-    raw_per_db, profile
-        ``GainRaw`` units per dB from the model's profile, and the profile's name.
-    selector
-        The ``GainSelector`` entry in force (None without a selector).
+    raw_per_db
+        ``GainRaw`` units per dB from the model's profile.
     why
         Why the gain cannot be set whatever the feature (a ``GainAuto`` that stays on, a selector
         with no usable entry), or "".

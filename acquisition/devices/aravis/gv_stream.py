@@ -34,12 +34,8 @@ FRAMES_IN_SOCKET = 4
 
 
 def socket_buffer_bytes(payload: int) -> int:
-    """The receive buffer for a stream of ``payload``-byte frames.
-
-    Returns
-    -------
-    int
-        ``FRAMES_IN_SOCKET × payload`` clipped to [1 MiB, 64 MiB].
+    """The receive buffer for a stream of ``payload``-byte frames: ``FRAMES_IN_SOCKET × payload`` clipped to
+    [1 MiB, 64 MiB].
 
     Examples
     --------
@@ -52,12 +48,8 @@ def socket_buffer_bytes(payload: int) -> int:
 
 
 def create_gv_stream(camera: Any, payload: int) -> Any:
-    """Create the stream of the GigE Vision ``camera`` on a UDP socket sized for ``payload``.
-
-    Returns
-    -------
-    Aravis.GvStream or None
-        The stream, as ``Aravis.Camera.create_stream`` returns it.
+    """Create the stream of the GigE Vision ``camera`` on a UDP socket sized for ``payload`` (as
+    ``Aravis.Camera.create_stream`` returns it: None possible).
 
     Raises
     ------
