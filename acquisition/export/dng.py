@@ -76,8 +76,6 @@ def write_dng(
 
     Parameters
     ----------
-    path
-        The file to write (replaced if it exists; the caller decides whether it may).
     mosaic
         (H, W) integer counts in 0…65535, as the camera gave them (black level included).
     cfa

@@ -266,8 +266,7 @@ def reference_chart(
     The file is JSON: ``{"patches": [{"rect": [x, y, width, height], "wavelengths_nm": [...], "reflectance":
     [...]}, ...]}`` (pixels of the full frame, whole numbers; wavelengths increasing; reflectance factors
     0–:data:`MAX_REFLECTANCE`, interpolated onto the sequence's grid, the edge values held beyond the data).
-    It is read as every user's file is (:mod:`processing.user_files`: regular files of at most 16 MiB;
-    :mod:`processing.json_input`: NaN, huge numbers, deep nesting and a key twice refused naming the field).
+    It is read as every user's file is (:mod:`processing.user_files`, :mod:`processing.json_input`).
 
     Raises
     ------

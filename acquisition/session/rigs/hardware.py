@@ -177,12 +177,9 @@ def open_hw_rig(
     ----------
     camera
         Aravis device id, serial number or IPv4 address; None takes the single camera found on
-        ``interfaces``.
+        ``interfaces`` (``usb3`` by default; ``gige`` broadcasts discovery unless ``camera`` is an IP address).
     port
         The booth's serial port (``/dev/ttyACM0``, a pty path, a pyserial URL); None discovers it.
-    interfaces
-        Aravis interfaces to enable (``usb3`` by default; ``gige`` broadcasts discovery unless
-        ``camera`` is an IP address; ``fake`` is Aravis's in-process test camera).
     calibration, led_spectra, responsivity
         Where the LED spectra and camera responsivities come from (:func:`hw_spectra`).
     sync
