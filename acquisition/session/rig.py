@@ -29,12 +29,8 @@ from typing import TYPE_CHECKING, Any
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
 from msflash.acquisition.errors import UsageError
-from msflash.acquisition.session.rigs.aravis_fake import (
-    open_aravis_fake_rig,
-)
-from msflash.acquisition.session.rigs.hardware import (
-    open_hw_rig,
-)
+from msflash.acquisition.session.rigs.aravis_fake import open_aravis_fake_rig
+from msflash.acquisition.session.rigs.hardware import open_hw_rig
 from msflash.acquisition.session.rigs.replay import open_replay_rig
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.acquisition.session.rigs.sim import open_sim_rig

@@ -19,9 +19,7 @@ from msflash.acquisition.devices.aravis.discovery import (
     _builtin_fake_xml_path,
 )
 from msflash.acquisition.devices.aravis.gi_typelib import Aravis
-from msflash.acquisition.errors import (
-    CameraError,
-)
+from msflash.acquisition.errors import CameraError
 
 log = logging.getLogger(__name__)
 

@@ -8,9 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
-from msflash.acquisition.errors import (
-    CameraError,
-)
+from msflash.acquisition.errors import CameraError
 
 log = logging.getLogger(__name__)
 

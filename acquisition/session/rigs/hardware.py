@@ -1,7 +1,6 @@
 """The ``hw`` rig: a GenICam camera through Aravis and a real booth (docs/architecture.md §4).
 
-:class:`~acquisition.devices.hardware_camera.HardwareCamera` around an
-:class:`~acquisition.devices.aravis.camera.AravisCamera` opened by device id, serial or IP on the
+The rig's camera is an :class:`~acquisition.devices.aravis.camera.AravisCamera` opened by device id, serial or IP on the
 given interfaces (default ``usb3``: GigE Vision discovery broadcasts, so ``gige`` only when named,
 and an IP address opens one GigE camera without discovery), and the booth on ``port`` or the
 single one :func:`led_controller.discovery.find_booth` finds. Every device is tried;
@@ -16,16 +15,13 @@ import os
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.devices.sim_world import (
     read_responsivity_file,
     read_spectra_file,
 )
 from msflash.acquisition.errors import CameraNotFoundError, CameraSettingError, RigOpenError, UsageError
 from msflash.acquisition.progress import progress
-from msflash.acquisition.session.rigs.emulated_booth import (
-    close_all,
-)
+from msflash.acquisition.session.rigs.emulated_booth import close_all
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.led_controller import LedBooth
 from msflash.led_controller.adapters import open_booth
@@ -262,8 +258,8 @@ def _hw_rig(
     reference: tuple[str, Path] | None,
     closers: list,
 ) -> Rig:
-    """The hardware rig, recording the camera's gain, its options as read back and a mono camera as such."""
-    hardware = HardwareCamera(aravis, setup)
+    """The hardware rig, recording the camera's gain, its options as read back and a mono camera as such (its
+    (H, W) frames are written as three identical channels)."""
     info = aravis.info
     extra: dict = {"gain": aravis.gain_record()}
     if setup is not None and not setup.options.empty:
@@ -272,5 +268,5 @@ def _hw_rig(
     if responsivities is None:
         extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
     return Rig(
-        "hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono, calibration=reference
+        "hw", aravis, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono, calibration=reference
     )
