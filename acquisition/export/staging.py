@@ -96,12 +96,8 @@ def check_not_inside(out: Path, folder: Path, option: str, what: str) -> None:
 def staged_export(out: Path, option: str, check_out: Callable[[Path, str], None], notes: list[str]) -> Iterator[Path]:
     """Claim ``out``'s name, then yield a staging folder that becomes ``out`` when the block ends without error.
 
-    Parameters
-    ----------
-    check_out
-        Checks ``out`` is still free once the name is claimed (another export may have finished it).
-    notes
-        Notes for the user are appended here (stale staging folders removed).
+    ``check_out`` checks ``out`` is still free once the name is claimed (another export may have finished it);
+    notes for the user (stale staging folders removed) are appended to ``notes``.
 
     Raises
     ------

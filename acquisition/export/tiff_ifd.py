@@ -132,14 +132,8 @@ def _ifd_bytes(offset: int, tags: SequenceOf[Tag]) -> bytes:
 def write_tiff(path: str | os.PathLike, pixels: np.ndarray, ifd0: SequenceOf[Tag], exif: SequenceOf[Tag]) -> Path:
     """Write one uncompressed 16-bit single-sample image with ``ifd0``'s tags and an EXIF IFD of ``exif``'s.
 
-    Parameters
-    ----------
-    pixels
-        (H, W) uint16.
-    ifd0
-        IFD0's tags besides those of the layout, which are added here: ``ImageWidth``, ``ImageLength``,
-        ``BitsPerSample``, ``Compression`` (none), ``SamplesPerPixel``, ``PlanarConfiguration``,
-        ``StripOffsets``, ``RowsPerStrip``, ``StripByteCounts`` and ``ExifIFD``.
+    ``pixels`` are (H, W) uint16; the layout's tags (``ImageWidth`` … ``StripByteCounts``, ``ExifIFD``) are added
+    here, not given in ``ifd0``.
 
     Raises
     ------
