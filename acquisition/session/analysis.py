@@ -19,7 +19,6 @@ from msflash.acquisition.sequence.image_files import read_image_header
 from msflash.acquisition.sequence.memory_budget import check_decode
 from msflash.acquisition.sequence.writer import as_recorded
 from msflash.acquisition.session.estimate_stream import (
-    SAMPLE_WEIGHTING,
     EstimateStream,
     StackLayout,
     is_mono,
@@ -32,7 +31,6 @@ from msflash.acquisition.session.sequence_spectra import (
     spectrum_in_sequence_unit,
     target_illuminant,
 )
-from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
 from msflash.processing.channel_statistics import plane_channels
 from msflash.processing.errors import SpectralDataError
@@ -140,21 +138,6 @@ Why 8, and what 4 × 4 blocks changed on large frames: docs/block-size.md."""
 BLOCKS_PER_SIDE = 32
 """A frame's short side (of its CFA planes) keeps at least this many blocks, or the blocks are halved,
 down to 4 × 4 (docs/block-size.md)."""
-
-
-def sequence_statistics(
-    stack: FrameStack, cfa: str | None = None, bin_factor: int = DEFAULT_BIN_FACTOR
-) -> SequenceStatistics:
-    """The sufficient statistics of eq. 4–6 for a loaded frame stack (inverse-variance weighted, :data:`SAMPLE_WEIGHTING`)."""
-    period = 2 if cfa is not None else 1
-    return accumulate_statistics(
-        stack.ambient,
-        stack.led_frames,
-        stack.spec,
-        bin_factor=block_factor(stack.ambient.shape, cfa, bin_factor),
-        cfa_period=period,
-        weighting=SAMPLE_WEIGHTING,
-    )
 
 
 def block_factor(shape: tuple[int, ...], cfa: str | None, bin_factor: int = DEFAULT_BIN_FACTOR) -> int:
