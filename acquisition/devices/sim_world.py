@@ -69,13 +69,8 @@ def read_spectra_file(path: str | Path, kind: SpectralKind) -> Spectra:
 
 
 def read_responsivity_file(path: str | Path) -> Spectra:
-    """Camera responsivities from a CSV ``wavelength_nm, R, G, B`` (energy), on the file's grid.
-
-    Raises
-    ------
-    UsageError
-        As :func:`read_spectra_file`, or the table does not hold exactly three channels.
-    """
+    """Camera responsivities from a CSV ``wavelength_nm, R, G, B`` (energy), on the file's grid; a
+    ``UsageError`` as :func:`read_spectra_file`'s, or for a table of other than three channels."""
     camera = read_spectra_file(path, "responsivity")
     if camera.count != 3:
         raise UsageError(

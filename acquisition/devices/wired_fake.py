@@ -216,9 +216,7 @@ class WiredFakeCamera:
         """Clear a software trigger the fake latched but has not taken (before each acquisition starts).
 
         A real camera ignores triggers while it is not acquiring; the fake keeps the last one in
-        its register and takes it when the next acquisition starts, sending a frame nobody
-        triggered (seen after a capture stopped mid-table to take a lost frame again: the booth's
-        last pulses were still being issued).
+        its register and takes it when the next acquisition starts, sending a frame nobody triggered.
         """
         if self._fake is not None:
             self._fake.write_register(self.TRIGGER_REGISTER, 0)

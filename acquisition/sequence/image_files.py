@@ -146,13 +146,8 @@ def _attributes(spec: oiio.ImageSpec) -> dict:
 
 
 def read_image_header(path: str | os.PathLike) -> ImageHeader:
-    """Size, channel count, pixel type and msflash attributes of an image file, without its pixels.
-
-    Raises
-    ------
-    RecordingError
-        Naming the file, as :func:`read_image` does.
-    """
+    """Size, channel count, pixel type and msflash attributes of an image file, without its pixels; refused as
+    :func:`read_image` refuses."""
     path = Path(path)
     with _open_input(path) as image:
         return _header(path, image)[0]
