@@ -5,7 +5,7 @@ stdout stays for data. Two kinds of report:
 - :func:`progress`: a diagnostic line, always shown (above the bar when one is drawn);
 - :func:`count` (or :func:`counted` around a loop): one unit of long work done, ``done`` of
   ``total``. When bars are on it moves a bar with the elapsed time and an ETA (tqdm); when they are
-  off it prints the unit's ``note`` line, as before bars existed (a log keeps one line per unit).
+  off it prints the unit's ``note`` line (a log keeps one line per unit).
 
 Bars are on only when ``msflash`` turned them on (:func:`configure`, from ``cli.main``) because
 stderr is a terminal and ``--json`` was not given (:func:`bars_wanted`): a pipe, a file, a test's

@@ -4,17 +4,10 @@ A command stops on Ctrl-C (``SIGINT``), ``SIGTERM`` (a service manager, ``kill``
 (the terminal or the SSH session closed under a running capture): :data:`STOPPING_SIGNALS`, the
 one list every part of msflash uses. Python raises ``KeyboardInterrupt`` for the first and kills
 the process where it stands for the other two, which would leave the LEDs on until the booth's
-watchdog fires and half-written outputs behind. So:
-
-- :func:`sigterm_as_exit` turns the other two into :class:`Terminated` (a ``SystemExit``), so
-  every ``with`` block unwinds as on Ctrl-C (the command line wraps each command in it);
-- :func:`hold_stopping_signals` holds all three pending across a short gap that must not be cut
-  (an export's staging folder created but not yet in the charge of its cleanup);
-- :func:`signals_deferred` records all three while a block that cannot be interrupted runs (a
-  local dask cluster starting or closing), and :func:`deliver_deferred` raises the first one
-  afterwards, as its own handler would have.
-
-Each works in the main thread only (Python delivers signals there); elsewhere it does nothing.
+watchdog fires and half-written outputs behind. So :func:`sigterm_as_exit` turns the other two into
+:class:`Terminated` (a ``SystemExit``: every ``with`` block unwinds as on Ctrl-C), :func:`hold_stopping_signals`
+holds all three across a short gap that must not be cut, and :func:`signals_deferred` records them while a block
+that cannot be interrupted runs (:func:`deliver_deferred` raises the first afterwards). Each works in the main thread only (Python delivers signals there); elsewhere it does nothing.
 """
 
 from __future__ import annotations

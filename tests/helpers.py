@@ -19,13 +19,16 @@ import pytest
 
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
 from msflash.acquisition.sequence.writer import SequenceWriter
+from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, FrameStack, block_factor
+from msflash.acquisition.session.estimate_stream import SAMPLE_WEIGHTING
 from msflash.led_controller import protocol
 from msflash.processing import datasets, lights
+from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.image_formation import expected_response, exposure_for_peak, render_frame
 from msflash.processing.scenes import Scene, chart_scene
 from msflash.processing.sensor import SensorModel, mosaic
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
-from msflash.processing.statistics import FrameStackSpec
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
 
 GRID = DEFAULT_GRID
 CAMERA_NAME = "NikonD100"
@@ -291,3 +294,18 @@ class PipedLines:
 def levels_close(a: Sequence[float], b: Sequence[float]) -> bool:
     """Whether two level vectors agree to within one 16-bit wire step."""
     return len(a) == len(b) and all(math.isclose(x, y, abs_tol=1.0 / protocol.LEVEL_MAX) for x, y in zip(a, b))
+
+
+def sequence_statistics(
+    stack: FrameStack, cfa: str | None = None, bin_factor: int = DEFAULT_BIN_FACTOR
+) -> SequenceStatistics:
+    """The sufficient statistics of eq. 4–6 of a loaded frame stack in one call: the reference the streamed
+    statistics (``EstimateStream``, what the product computes) are checked against."""
+    return accumulate_statistics(
+        stack.ambient,
+        stack.led_frames,
+        stack.spec,
+        bin_factor=block_factor(stack.ambient.shape, cfa, bin_factor),
+        cfa_period=2 if cfa is not None else 1,
+        weighting=SAMPLE_WEIGHTING,
+    )

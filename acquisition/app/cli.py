@@ -177,20 +177,8 @@ def _command_module_or_none(name: str) -> ModuleType | None:
 
 
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
-    """The parser; with ``argv``, only the module of the command named there is imported.
-
-    Parameters
-    ----------
-    argv
-        The arguments to be parsed. The module owning their command registers its subcommands
-        (all their options); every other command is listed by name and help line only. None (or
-        no command in ``argv``): without it, every module registers its subcommands.
-
-    Returns
-    -------
-    argparse.ArgumentParser
-        A parser whose subcommands set ``handler``.
-    """
+    """The parser, whose subcommands set ``handler``; with ``argv`` naming a command, only that command's
+    module registers its options (the others are listed by name and help line); else every module does."""
     parser = _Parser(
         prog="msflash", description="Computational multispectral flash: capture, estimate, flash, synthesise."
     )
@@ -341,10 +329,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _exit_at_once(code: int) -> None:
     """End the process now, its work done (a command that set ``exit_at_once``, run as the program).
 
-    ``msflash live`` sets it once the LEDs are off and the rig is closed: what is left of a normal exit is
-    the interpreter's teardown, whose final collection walks every object the live view made — 1–2 s of
-    the exit after a signal (docs/reliability.md §7), when ``live`` promises to be gone within 2 s.
-    Output and log records are flushed first; nothing else is left to run (no atexit work of msflash's).
+    ``msflash live`` sets it once the LEDs are off and the rig is closed, to skip the interpreter's teardown
+    (its final collection took most of the 2 s ``live`` promises to be gone in: docs/reliability.md §7).
+    Output and log records are flushed first.
     """
     close_bar()
     logging.shutdown()
@@ -357,9 +344,7 @@ def _exit_at_once(code: int) -> None:
 def _quiet_libraries(verbose: int) -> None:
     """Log records on stderr from WARNING up, INFO with ``-v``, DEBUG with ``-vv``: ours and every library's.
 
-    The level is set on the handler as well as on the root logger: dask.distributed sets its own
-    loggers to INFO, so without ``-v`` ``study table1`` printed some 30 lines of its scheduler's and
-    nannies' start and stop.
+    The level is set on the handler as well as on the root logger: dask.distributed sets its own loggers to INFO.
     """
     level = logging.WARNING - 10 * min(verbose, 2)
     root = logging.getLogger()

@@ -4,12 +4,8 @@ GigE Vision discovery broadcasts on every network interface, so it runs only whe
 ``--interfaces``. ``--address IP`` queries one GigE Vision camera directly, without discovery.
 ``--features ID`` lists what one camera offers (each feature's type, access, value, range or
 entries; :meth:`AravisCamera.describe_feature`) — the names ``--feature NAME=VALUE`` takes.
-Booths are the serial ports that look like one (USB id or product string,
-:func:`led_controller.discovery.find_booths`; the system's port list, nothing is opened):
-``msflash run`` takes the single one found, and ``msflash doctor`` says why none is. The other
-serial ports are listed too (``serial`` lines, ``serial_ports`` in JSON), each with the
-``msflash doctor --port P --booth-protocol text`` that asks it whether it is a plain-text booth:
-no port is probed unless the user names it.
+Booths are the serial ports that look like one (:func:`led_controller.discovery.find_booths`), listed with
+every other serial port from the system's list: nothing is opened (docs/cli.md).
 """
 
 from __future__ import annotations

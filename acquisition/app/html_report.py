@@ -95,15 +95,12 @@ class HtmlReport:
         self,
         headers: Sequence[str],
         rows: Sequence[Sequence[object]],
-        caption: str | None = None,
         table_id: str | None = None,
         digits: int = 2,
     ) -> None:
         """A table; floats are printed with ``digits`` decimals, everything else as text."""
         attributes = f' id="{html.escape(table_id, quote=True)}"' if table_id else ""
         parts = [f"<table{attributes}>"]
-        if caption:
-            parts.append(f"<caption>{html.escape(caption)}</caption>")
         parts.append("<tr>" + "".join(f"<th>{html.escape(str(h))}</th>" for h in headers) + "</tr>")
         for row in rows:
             parts.append("<tr>" + "".join(f"<td>{_cell(value, digits)}</td>" for value in row) + "</tr>")

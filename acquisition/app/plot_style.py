@@ -139,20 +139,8 @@ def draw_flash_mixes(
     onto that sum (eq. 8 is scale-free), when given and not orthogonal to it. Every curve divided by
     ``peak``.
 
-    Parameters
-    ----------
-    wavelengths_nm
-        The grid, (n_wavelengths,).
-    led_values
-        The LED spectra at full drive in :data:`PLOT_UNIT`, (n_wavelengths, k).
-    ambient
-        The ambient estimate in :data:`PLOT_UNIT`, (n_wavelengths,).
-    solutions
-        Flash solutions by mode (``matching``, ``complementary``; either may be missing).
-    target
-        The complementary target in :data:`PLOT_UNIT`, (n_wavelengths,), or None.
-    peak
-        What 1 on the y axis is (:func:`peak_of` the estimate).
+    Spectra are in :data:`PLOT_UNIT`: ``led_values`` (n_wavelengths, k) at full drive, ``ambient`` and ``target``
+    (n_wavelengths,); ``solutions`` by mode (either may be missing); ``peak`` is 1 on the y axis.
     """
     axis.plot(wavelengths_nm, ambient / peak, color=PALETTE.ambient, lw=2, label="ambient (estimate)")
     for mode in FLASH_MODES:

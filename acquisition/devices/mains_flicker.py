@@ -64,8 +64,6 @@ class MainsFlicker:
         The true flicker frequency (twice the supply's).
     depth
         Percent flicker, ``(max − min) / (max + min)``, in (0, 1].
-    waveform
-        One of :data:`FLICKER_WAVEFORMS`.
     phase
         Where in its period the waveform is at the light clock's zero, in cycles [0, 1).
     nominal_hz

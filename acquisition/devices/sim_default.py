@@ -106,8 +106,6 @@ def default_world(
     cfa
         The raw mosaic's Bayer layout (default :data:`SIM_DEFAULT_CFA`), None for RGB frames, or :data:`MONO` for
         a monochrome sensor (``camera``'s bare sensor, :func:`mono_responsivities`).
-    seed
-        The mosaic scene's layout.
     n_leds, led_spectra
         The paper's LED subset (3–7), or the booth's LEDs (one spectrum per channel covering ``grid``; their
         ratios are kept, their power set by ``flash_power``).
@@ -119,10 +117,8 @@ def default_world(
         At ``reference_exposure_us`` and gain 1 the brightest diffuse pixel under the ambient alone reads
         ``ambient_peak_fraction`` of full scale, or less if the ambient plus the brightest LED at full drive would
         then read more than :data:`FLASH_PEAK_FRACTION` (room for the flash, for captures at one exposure).
-    sensor
-        Default: :func:`processing.sensor.machine_vision_sensor` with ``cfa``.
-    patch_px, specular_strip_px, grid
-        Chart patch size, the height of a saturating highlight strip under it (0: none), the wavelength grid.
+    specular_strip_px
+        The height of a saturating highlight strip under the chart (0: none).
     second_ambient, ambient_map
         A second ambient (name or spectrum) and the (H, W) map in [0, 1] of its share at each pixel (see
         :class:`SimulatedCamera`); LED power and exposure are then set on the mixed ambient.

@@ -1,20 +1,8 @@
 """What the ``sim`` rig simulates, as the command line names it: camera, LEDs, ambient and scene.
 
-Each option is a shipped name or a CSV file, resolved here into spectra on the sim's wavelength
-grid (:data:`processing.spectra.DEFAULT_GRID`, 400–700 nm):
-
-- ``--sim-camera NAME|FILE.csv``: any shipped camera (:func:`processing.datasets.camera_names`)
-  or ``wavelength_nm, R, G, B`` responsivities (energy) — read by :func:`read_responsivity_file`,
-  the reader of the hardware rig's ``--responsivity``;
-- ``--led-spectra FILE.csv`` (one column per booth channel, energy) or ``--leds N`` (the paper's
-  subset of N LEDs, 3–7);
-- ``--ambient NAME|FILE.csv``: a sim ambient or a CIE illuminant
-  (:func:`processing.lights.light_spectrum`), or ``wavelength_nm, value`` (energy);
-- ``--scene NAME|FILE.csv``: ``chart110``, ``macbeth``, ``white``, or reflectances
-  (``wavelength_nm`` + one column per surface, 0–1) shown as a random mosaic of those surfaces
-  (:func:`processing.scenes.mosaic_scene`).
-
-Files are read by the one spectral table reader (:func:`processing.datasets.load_spectra_csv`) and
+Each option (``--sim-camera``, ``--led-spectra``/``--leds``, ``--ambient``, ``--scene``) is a shipped name or a
+CSV file (energy units; reflectances 0–1), resolved here into spectra on the sim's wavelength grid
+(:data:`processing.spectra.DEFAULT_GRID`, 400–700 nm). Files are read by the one spectral table reader (:func:`processing.datasets.load_spectra_csv`) and
 put on the grid only by :meth:`Spectra.resample`. A sim file must cover the whole grid: the error
 says which range the file covers and which is needed. Every problem is a one-line
 :class:`~acquisition.errors.UsageError` naming the option or the file and what was expected.
@@ -81,13 +69,8 @@ def read_spectra_file(path: str | Path, kind: SpectralKind) -> Spectra:
 
 
 def read_responsivity_file(path: str | Path) -> Spectra:
-    """Camera responsivities from a CSV ``wavelength_nm, R, G, B`` (energy), on the file's grid.
-
-    Raises
-    ------
-    UsageError
-        As :func:`read_spectra_file`, or the table does not hold exactly three channels.
-    """
+    """Camera responsivities from a CSV ``wavelength_nm, R, G, B`` (energy), on the file's grid; a
+    ``UsageError`` as :func:`read_spectra_file`'s, or for a table of other than three channels."""
     camera = read_spectra_file(path, "responsivity")
     if camera.count != 3:
         raise UsageError(
@@ -145,10 +128,8 @@ def sim_camera(spec: str | None, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra
 
 
 def sim_leds(led_spectra: str | Path | None, n_leds: int | None, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
-    """The sim booth's LEDs: ``--led-spectra FILE.csv`` (one column per channel) or the paper's ``--leds N``.
-
-    Neither: the paper's 7 LEDs. Channel names and count are checked against what the booth
-    emulator can serve by :func:`acquisition.session.rigs.emulated_booth.check_emulated_booth` when the rig opens.
+    """The sim booth's LEDs: ``--led-spectra FILE.csv`` (one column per channel) or the paper's ``--leds N``
+    (3–7; neither: the paper's 7 LEDs). What the emulator can serve is checked when the rig opens.
 
     Raises
     ------

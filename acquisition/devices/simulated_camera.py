@@ -12,15 +12,9 @@ Triggering
 - ``plan.trigger == "booth"``: :meth:`trigger` is a no-op, as the protocol says for cameras paced
   by a hardware line; the booth (emulator) pulses :meth:`SimulatedCamera.trigger_line` instead.
 
-Frames are rendered synchronously and queued. :meth:`next_frame` pops the oldest; with nothing
-queued it raises :class:`~acquisition.errors.FrameTimeoutError` at once when no trigger can be
-on its way (software/camera triggering, nothing rendering), and waits at most ``timeout_s`` only
-when the trigger comes from another thread (booth triggering) or a render is in progress.
-A trigger that fails (bad LED levels, more triggers than steps) raises ``CameraError`` and, in
-the first case, still consumes its step: the capture is broken at that point anyway. A frame
-that cannot be made (bad LED levels, a render error) is also queued as its error
-(:meth:`~acquisition.devices.frame_queue.TriggeredFrames._fail_frame`): :meth:`next_frame` raises it in
-the frame's place, whoever triggered (on the booth's trigger line nobody else sees it).
+Frames are rendered synchronously and queued (:mod:`acquisition.devices.frame_queue`): :meth:`next_frame`
+raises :class:`~acquisition.errors.FrameTimeoutError` at once when no trigger can be on its way, and a frame
+that cannot be made (bad LED levels, a render error) is queued as its error, raised in the frame's place.
 """
 
 from __future__ import annotations
@@ -58,26 +52,16 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
 
     Parameters
     ----------
-    scene
-        Surfaces and layout (:class:`processing.scenes.Scene`).
     ambient
         The true ambient spectrum ``i_a`` (one spectrum; its scale is the ambient's power).
     led_spectra
         ``I``, (n_wavelengths, k): each LED at full drive, with the true ratios between LEDs.
-    camera_responsivities
-        ``C``, (n_wavelengths, 3).
-    sensor
-        The sensor model (bit depth, levels, noise, CFA).
     scale
         Electrons per unit ``Σ r c i Δλ`` per microsecond (see :mod:`processing.image_formation`).
     led_levels_source
         Called at each exposure for the LED levels; None uses each plan step's own levels.
     seed
-        Seed of the noise generator (frames are reproducible for a given seed and trigger order).
-    noise
-        False renders noise-free frames, as the paper's simulations.
-    name
-        Model name reported in :attr:`info`.
+        Frames are reproducible for a given seed and trigger order.
     frame_interval_ns
         Extra simulated time between frames, for timestamps (no real waiting happens).
     second_ambient, ambient_map
@@ -313,19 +297,12 @@ class SimulatedCamera(SimRendering, TriggeredFrames):
     def render(
         self, levels: Sequence[float], exposure_us: float, gain: float, start_s: float | None = None
     ) -> np.ndarray:
-        """One frame of this world under the LEDs at ``levels``, exposed ``exposure_us`` at linear ``gain``.
-
-        The one renderer of the simulated world: :meth:`trigger` renders each plan step with it,
-        and the ``aravis-fake`` rig (:class:`acquisition.devices.wired_fake.WiredFakeCamera`) paints each
-        frame the Aravis fake delivers with it. Noise is drawn from this camera's generator, one
-        render at a time, so frames are reproducible for a given seed and render order.
+        """One frame of this world under the LEDs at ``levels`` (0–1 each), exposed ``exposure_us`` at linear
+        ``gain``: the one renderer of the simulated world (:meth:`trigger` and the ``aravis-fake`` rig's
+        :class:`acquisition.devices.wired_fake.WiredFakeCamera` use it), reproducible for a seed and render order.
 
         Parameters
         ----------
-        levels
-            Drive level (0–1) of each LED channel during the exposure.
-        exposure_us, gain
-            The exposure and the linear gain of the frame.
         start_s
             Under a modulated ambient (mains flicker), the exposure's start on the light's clock: a camera's own
             timestamp (the ``aravis-fake`` rig's), so the lamp keeps the time the frames are stamped with. None:

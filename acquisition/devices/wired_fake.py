@@ -51,25 +51,13 @@ class WiredFakeCamera:
     trigger input takes every edge, so booth pulses go through a queue and a thread that issues
     each software trigger only once the fake has acknowledged the previous one.
 
-    **The scene** (``world`` given, the ``aravis-fake`` rig's default): Aravis does the streaming
-    (buffers, frame ids, timestamps), the exposure and gain features and the triggering; the
-    pixels of each frame it delivers are replaced by ``world``'s rendering
+    **The scene** (``world`` given, the ``aravis-fake`` rig's default): Aravis does the streaming,
+    features and triggering; the pixels of each frame it delivers are replaced by ``world``'s rendering
     (:meth:`SimulatedCamera.render`) under the booth's LED levels *at the moment that frame was
-    triggered* — read from the emulator when the software trigger is issued (host-paced), when
-    the booth pulses the trigger line (booth master; the levels travel with the pulse through the
-    queue) or after ExposureActive is raised (camera master) — with the exposure and gain the
-    camera read back for that frame. Levels wait in a first-in first-out queue, one per issued
-    trigger, and are taken in frame order. The fake's own pixel generator cannot be given the
-    scene: ``arv_fake_camera_set_fill_pattern`` takes a C callback whose closure argument has
-    scope ``call`` and no destroy notify in Aravis 0.8's typelib
-    (``GIRepository``: ``fill_pattern_callback`` scope ``GI_SCOPE_TYPE_CALL``, closure 1, destroy
-    -1), so PyGObject frees the Python callback when ``set_fill_pattern`` returns, while the fake
-    calls it for every later frame from its stream thread.
-
-    Without ``world`` (the capture bench's transport figures) frames are the fake's test pattern,
-    blind to the LED levels (Mono16: ``256 (x + y + frame_id) mod 65535`` scaled by gain and exposure,
-    ``arv_fake_camera_diagonal_ramp`` in Aravis 0.8.26); mono frames come as (H, W) and the writer
-    records them as three identical channels (:attr:`Rig.mono`).
+    triggered* (queued first-in first-out, one per issued trigger), with the exposure and gain the
+    camera read back for that frame. (The fake's own generator cannot be given the scene:
+    docs/aravis-facts.md.) Without ``world`` (the capture bench) frames are the fake's Mono16 test
+    pattern, blind to the LED levels.
     """
 
     TRIGGER_REGISTER = 0x30C
@@ -228,9 +216,7 @@ class WiredFakeCamera:
         """Clear a software trigger the fake latched but has not taken (before each acquisition starts).
 
         A real camera ignores triggers while it is not acquiring; the fake keeps the last one in
-        its register and takes it when the next acquisition starts, sending a frame nobody
-        triggered (seen after a capture stopped mid-table to take a lost frame again: the booth's
-        last pulses were still being issued).
+        its register and takes it when the next acquisition starts, sending a frame nobody triggered.
         """
         if self._fake is not None:
             self._fake.write_register(self.TRIGGER_REGISTER, 0)

@@ -1,11 +1,5 @@
 """A raw mosaic as a DNG file (DNG 1.4: TIFF with its own tags, and EXIF in its own IFD).
 
-Public objects
---------------
-- :func:`write_dng`: one CFA frame, its black and white levels, ``AsShotNeutral``, ``ColorMatrix1``
-  and the EXIF of its capture.
-- :data:`CFA_COLOURS`: DNG's ``CFAPattern`` codes of msflash's CFA names.
-
 What a raw developer needs (Adobe DNG Specification 1.4): ``DNGVersion``, ``UniqueCameraModel``,
 the CFA (``CFARepeatPatternDim``, ``CFAPattern``, ``CFAPlaneColor``, ``CFALayout``), ``BlackLevel``
 and ``WhiteLevel``, ``ColorMatrix1`` (XYZ → camera under ``CalibrationIlluminant1``) and
@@ -82,8 +76,6 @@ def write_dng(
 
     Parameters
     ----------
-    path
-        The file to write (replaced if it exists; the caller decides whether it may).
     mosaic
         (H, W) integer counts in 0…65535, as the camera gave them (black level included).
     cfa
@@ -94,8 +86,6 @@ def write_dng(
         Camera R, G, B of white under the scene's light, largest 1 (``AsShotNeutral``).
     xyz_to_camera
         3×3 XYZ → camera under D65 (``ColorMatrix1``, ``CalibrationIlluminant1`` = D65).
-    camera_model
-        ``UniqueCameraModel`` and ``Model``.
     description
         ``ImageDescription`` (what the frame is; 7-bit ASCII, anything else written as ``?``).
     exposure_us

@@ -1,10 +1,4 @@
-"""The export formats and the option naming them (no heavy import: ``run`` parses ``--export`` with it).
-
-Public objects
---------------
-- :data:`EXPORT_FORMATS`: what ``msflash export --to`` and ``run --export`` write.
-- :func:`parse_formats`: ``dng`` or ``dng,csv`` checked.
-"""
+"""The export formats and the option naming them (no heavy import: ``run`` parses ``--export`` with it)."""
 
 from __future__ import annotations
 

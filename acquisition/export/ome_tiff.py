@@ -1,11 +1,5 @@
 """A sequence's frames as one OME-TIFF: one plane per frame, what lit it and how it was exposed.
 
-Public objects
---------------
-- :class:`OmeLight`: one light source of the instrument (an LED: its name and peak wavelength).
-- :class:`OmePlane`: what one frame is (name, exposure, gain, the LED lit alone, key–value notes).
-- :func:`write_ome_tiff`: the frames and their OME-XML (built with ome-types, pages written with tifffile).
-
 Layout. One OME ``Image`` whose channels are the frames (``DimensionOrder`` XYCZT, one TIFF page per
 frame, ``TiffData`` naming it): an RGB frame is a channel of ``SamplesPerPixel`` 3, a raw mosaic one
 of 1. The instrument lists the LEDs as ``LightEmittingDiode`` light sources and the camera as the
@@ -171,13 +165,9 @@ def write_ome_tiff(
 
     Parameters
     ----------
-    path
-        The file to write (``.ome.tif``).
     frames
         One (H, W) or (H, W, 3) array per plane, all of one shape and type (uint8, uint16 or
         float32); taken one at a time, so a long sequence is never all in memory.
-    planes
-        What each frame is, in order.
     lights
         The LEDs, in the order :attr:`OmePlane.light` indexes.
     notes

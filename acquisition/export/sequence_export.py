@@ -1,40 +1,12 @@
 """Export a sequence and what msflash makes of it: DNG, OME-TIFF, CSV and EXR files in a new folder.
 
-Public objects
---------------
-- :func:`check_export`: the refusals made before anything is written.
-- :class:`ExportResult` and :func:`export_sequence`: the files written, into a folder that appears
-  complete or not at all.
-
-What each format holds:
-
-- ``dng``: one DNG per frame of a raw (CFA) sequence (``NNN-role.dng``), the counts as recorded,
-  the CFA, black and white levels, ``ColorMatrix1`` (XYZ → camera under D65,
-  :func:`processing.raw_colour.camera_matrix`) and ``AsShotNeutral``: the camera's response to
-  the light of that frame, the estimated ambient plus the LEDs at the frame's levels
-  (eq. 4–6: the ambient is ``Σ w_k`` LED ``k`` in the same units as the LEDs' drive), so a raw
-  developer white-balances the ambient frame to the estimated ambient. A sequence without
-  camera responsivities gets the sRGB assumption of msflash's previews (camera RGB taken as
-  linear sRGB: the neutral is the sRGB of the estimate, the matrix XYZ → sRGB), said in the notes.
-  Dark frames get the ambient's neutral. EXIF (in its own IFD): ``ExposureTime``, ``DateTimeOriginal``
-  from the frame's ``time_utc`` (none for frames recorded without it, with a note) and ``ISOSpeedRatings``
-  only from ``camera.iso_speed_at_unit_gain`` × the frame's gain (none otherwise, with a note:
-  docs/decisions/dng-exif.md). The ``ImageDescription`` JSON holds the frame's role, levels, exposure,
-  gain and the LEDs with their peaks. RGB (debayered) frames are refused: a DNG's reason to
-  exist is the raw mosaic a developer demosaics; an RGB sequence exports as OME-TIFF or EXR.
-  Float frames are refused too (DNG readers expect integer counts).
-- ``ome-tiff``: ``sequence.ome.tif``, every frame as recorded (:mod:`.ome_tiff`), its
-  ``AcquisitionDate`` the first frame's ``time_utc`` and each plane's ``DeltaT`` from the camera's
-  ``timestamp_ns`` (else from ``time_utc``); the sequence named by its folder's name, no path.
-- ``csv``: ``spectra.csv`` (:mod:`.spectra_csv`) and ``spectra.json`` (the band's meaning, the weights,
-  the estimate's warnings): the ambient estimate and its band (± 1σ), each
-  LED at full drive, and with camera responsivities the matching and complementary flash mixes
-  (LEDs at the solved physical weights) and ambient + complementary flash; in the sequence's
-  spectral unit, relative (the LEDs' full-drive scale).
-- ``exr``: ``ambient.exr`` and, with camera responsivities, ``matching.exr`` and
-  ``complementary.exr`` (the computational flash images, eq. 7–9), linear RGB, a mosaic demosaicked
-  bilinearly (:func:`acquisition.sequence.exr_metadata.exr_image`, as every EXR of a sequence),
-  carrying chromaticities, units and the LEDs' names and peaks.
+What each format holds is docs/cli.md (``msflash export``). In short: ``dng`` one DNG per frame of a raw
+(CFA) sequence, its ``AsShotNeutral`` the camera's response to that frame's light (the estimated ambient plus
+the LEDs at the frame's levels, eq. 4–6; without responsivities camera RGB is taken as linear sRGB, with a
+note), RGB or float frames refused; ``ome-tiff`` every frame as recorded (:mod:`.ome_tiff`); ``csv`` the
+estimate with its ± 1σ band, the LEDs and the flash mixes (:mod:`.spectra_csv`) plus ``spectra.json``;
+``exr`` the ambient and the two computational flash images (eq. 7–9), linear RGB
+(:func:`acquisition.sequence.exr_metadata.exr_image`).
 """
 
 from __future__ import annotations
@@ -423,21 +395,13 @@ def export_sequence(
 
     Parameters
     ----------
-    sequence
-        The sequence (its frames are read through :meth:`Sequence.load_frame`, checked).
-    formats
-        Some of :data:`EXPORT_FORMATS`.
     out
         A folder that does not exist yet, in one that does.
     estimate, solutions
         The ambient estimate (photons) and the matching/complementary flash already made (``run``), or
         None to make them here through :mod:`acquisition.session.analysis` (the one route).
-    target
-        The complementary flash's target illuminant.
     solver, alpha, bin_factor
         How the ambient is estimated when ``estimate`` is None (:func:`acquisition.session.analysis.estimate_sequence`).
-    option
-        The option ``out`` came from, for messages.
 
     Raises
     ------

@@ -1,10 +1,5 @@
 """Spectra as a CSV table: wavelength first, one column per spectrum, units in the header.
 
-Public objects
---------------
-- :class:`SpectrumColumn`: one column (its name, unit and values).
-- :func:`write_spectra_csv`: the table.
-
 The header row names every column as ``name [unit]`` (``wavelength [nm]`` first), so any CSV
 reader (the csv module, pandas, a spreadsheet) gets the units without a side file; values are
 written with ``repr`` precision.

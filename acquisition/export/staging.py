@@ -45,8 +45,7 @@ def remove_stale_staging(parent: Path, own_name: str) -> list[Path]:
 
     A staging folder is stale when no live process holds its output name's lock: for ``own_name``
     this process holds it; for another name the lock is tried without waiting (a live export keeps
-    its folder). A staging folder without a lock file at all comes from a process that was killed
-    between removing the two, or from an msflash before locks: stale.
+    its folder). A staging folder without a lock file at all is stale.
     """
     removed: list[Path] = []
     try:
@@ -97,14 +96,8 @@ def check_not_inside(out: Path, folder: Path, option: str, what: str) -> None:
 def staged_export(out: Path, option: str, check_out: Callable[[Path, str], None], notes: list[str]) -> Iterator[Path]:
     """Claim ``out``'s name, then yield a staging folder that becomes ``out`` when the block ends without error.
 
-    Parameters
-    ----------
-    option
-        The option it came from, for messages.
-    check_out
-        Checks ``out`` is still free once the name is claimed (another export may have finished it).
-    notes
-        Notes for the user are appended here (stale staging folders removed).
+    ``check_out`` checks ``out`` is still free once the name is claimed (another export may have finished it);
+    notes for the user (stale staging folders removed) are appended to ``notes``.
 
     Raises
     ------

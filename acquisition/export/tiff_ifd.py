@@ -1,12 +1,5 @@
 """A classic little-endian TIFF written byte by byte: one image IFD, its pixel strips and an EXIF sub-IFD.
 
-Public objects
---------------
-- :class:`Tag` and the constructors :func:`ascii_tag`, :func:`short_tag`, :func:`long_tag`,
-  :func:`byte_tag`, :func:`undefined_tag`, :func:`rational_tag`, :func:`srational_tag`.
-- :func:`write_tiff`: IFD0 (the caller's tags plus the strip layout) and an EXIF IFD that IFD0's
-  ``ExifIFD`` tag (34665) points to.
-
 Why not tifffile: its writer refuses the ``ExifIFD`` pointer tag ("not writing extratag 34665"), so
 EXIF tags could only go into IFD0, where they do not belong (TIFF/EP and DNG put ``ExposureTime``,
 ``DateTimeOriginal`` and ``ISOSpeedRatings`` in the EXIF IFD; ``exiftool -validate`` warns
@@ -139,16 +132,8 @@ def _ifd_bytes(offset: int, tags: SequenceOf[Tag]) -> bytes:
 def write_tiff(path: str | os.PathLike, pixels: np.ndarray, ifd0: SequenceOf[Tag], exif: SequenceOf[Tag]) -> Path:
     """Write one uncompressed 16-bit single-sample image with ``ifd0``'s tags and an EXIF IFD of ``exif``'s.
 
-    Parameters
-    ----------
-    path
-        The file (replaced if it exists).
-    pixels
-        (H, W) uint16.
-    ifd0
-        IFD0's tags besides those of the layout, which are added here: ``ImageWidth``, ``ImageLength``,
-        ``BitsPerSample``, ``Compression`` (none), ``SamplesPerPixel``, ``PlanarConfiguration``,
-        ``StripOffsets``, ``RowsPerStrip``, ``StripByteCounts`` and ``ExifIFD``.
+    ``pixels`` are (H, W) uint16; the layout's tags (``ImageWidth`` … ``StripByteCounts``, ``ExifIFD``) are added
+    here, not given in ``ifd0``.
 
     Raises
     ------

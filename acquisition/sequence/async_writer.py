@@ -61,15 +61,8 @@ _STOP = object()
 
 
 class AsyncSequenceWriter:
-    """A :class:`SequenceWriter` fed through a bounded queue and a writer thread.
-
-    Parameters
-    ----------
-    writer
-        The sequence writer to feed (already created: its ``sequence.json`` exists).
-    max_queued
-        Queue bound; ``add_frame`` blocks while this many frames wait for the disk.
-    """
+    """A :class:`SequenceWriter` (already created) fed through a queue of at most ``max_queued`` frames and a
+    writer thread."""
 
     def __init__(self, writer: SequenceWriter, max_queued: int = DEFAULT_MAX_QUEUED) -> None:
         if max_queued < 1:

@@ -1,12 +1,5 @@
 """Is every frame of a sequence the file that was written? What ``msflash check`` reports.
 
-Public objects
---------------
-- :data:`FILE_STATES`: the states a file can be in, in the order the summary counts them.
-- :class:`FileCheck`: one file's state and why.
-- :class:`SequenceCheck`: every listed frame's state and every file the sequence does not list.
-- :func:`check_sequence`: check a sequence directory.
-
 A frame listed in ``sequence.json`` is
 
 - ``intact``: its recorded SHA-256 and length (``frames[].sha256``, ``frames[].file_bytes``,
@@ -113,13 +106,8 @@ def check_sequence(directory: str | os.PathLike) -> SequenceCheck:
     """Check every frame file of a sequence against its record, and look for undeclared files.
 
     Frames with a recorded digest are hashed, not decoded (the digest proves the bytes are those
-    written); frames without one are decoded (:func:`acquisition.image_io.read_image`) to tell
+    written); frames without one are decoded (:func:`acquisition.sequence.image_files.read_image`) to tell
     ``unverified`` from ``unreadable``.
-
-    Parameters
-    ----------
-    directory
-        The sequence directory, or its ``sequence.json``.
 
     Returns
     -------

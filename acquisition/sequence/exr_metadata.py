@@ -1,13 +1,5 @@
 """What an EXR of a sequence's linear image holds: RGB, chromaticities, units and the LEDs.
 
-Public objects
---------------
-- :data:`LINEAR_UNITS`: the unit of msflash's linear images.
-- :class:`ExrMetadata` and :func:`exr_metadata`: the ``msflash:*`` attributes and the standard
-  ``chromaticities`` for :func:`acquisition.sequence.image_files.write_image`.
-- :func:`exr_image`: a linear image of a sequence as its EXR holds it (RGB; a raw mosaic demosaicked)
-  and those attributes.
-
 Every EXR msflash writes from a sequence (``run``'s computational images, ``flash``/``synthesize
 --out``, ``evaluate``'s images, ``export --to exr``) goes through :func:`exr_metadata`, so a viewer
 knows what the RGB means (the camera's primaries in xy: the camera → XYZ fit of

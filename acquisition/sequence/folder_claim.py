@@ -119,12 +119,8 @@ def stale_temporaries(folder: str | os.PathLike, *subfolders: str) -> list[Path]
 
 
 def claim_folder(folder: str | os.PathLike, what: str = "writing") -> FolderClaim:
-    """Claim ``folder`` (created if needed) for this process.
-
-    Parameters
-    ----------
-    what
-        What this process does there, recorded for a second process's message (``"msflash run"``).
+    """Claim ``folder`` (created if needed) for this process; ``what`` it does there (``"msflash run"``) is
+    recorded for a second process's message.
 
     Raises
     ------
@@ -152,18 +148,8 @@ def lock_exclusively(lock: Path, what: str, in_use: Callable[[str], str], *, tak
 
     The building block of :func:`claim_folder` and of claims on a name before its folder exists
     (:func:`claim_name`). A lock file whose holder died is taken over with a note naming
-    ``taken_over``.
-
-    Parameters
-    ----------
-    in_use
-        Builds the message of the :class:`FolderInUseError` raised when a live process holds the
-        lock, from the holder's description (``msflash process PID (what, since …)``).
-
-    Returns
-    -------
-    int
-        The open handle holding the lock (release it with :func:`release_lock`).
+    ``taken_over``; ``in_use`` builds the :class:`FolderInUseError`'s message from a live holder's description.
+    Returns the open handle holding the lock (release it with :func:`release_lock`).
     """
     while True:
         handle = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)

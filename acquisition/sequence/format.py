@@ -323,13 +323,8 @@ class Sequence(_ArrayEquality):
 
     def check_digests(self) -> None:
         """Refuse any frame file that is no longer, byte for byte, the one written (recorded SHA-256 and length;
-        frames without them pass). Reads the files' bytes, decodes nothing: a run checks what it wrote this way
-        (its estimate and report come from the frames in memory).
-
-        Raises
-        ------
-        RecordingError
-            As :meth:`load_frame` for a changed, truncated or missing file.
+        frames without them pass; a ``RecordingError`` as :meth:`load_frame`'s). Reads the files' bytes, decodes
+        nothing: a run checks what it wrote this way (its estimate and report come from the frames in memory).
         """
         for index, entry in enumerate(self.frames):
             if entry.digest is not None:
@@ -393,13 +388,7 @@ class Sequence(_ArrayEquality):
 
     def load_linear_frame(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Frame ``index`` in processing units, ``(raw − black) / (exposure_us · gain)``, and its
-        saturated pixels (:func:`processing.synthesis.linearise`).
-
-        Raises
-        ------
-        RecordingError
-            As :meth:`load_frame`.
-        """
+        saturated pixels (:func:`processing.synthesis.linearise`); refused as :meth:`load_frame` refuses."""
         frame = self.frames[index]
         return linearise(
             self.load_frame(index), self.camera.black_level, self.camera.white_level, frame.exposure_us, frame.gain

@@ -108,15 +108,8 @@ def binding_problem(
     exposure_us: float,
     gain: float,
 ) -> str | None:
-    """One line naming the entry and what its file says, when they disagree; None when they agree.
-
-    Parameters
-    ----------
-    where
-        ``<sequence.json>: frames[i].file '<file>'``, the entry's name in messages.
-    said
-        What the file says about itself.
-    """
+    """One line naming the entry (``where``) and what its file says of itself (``said``), when they disagree;
+    None when they agree."""
     fields = disagreements(said, index, role, led_levels, exposure_us, gain)
     if not fields:
         return None
@@ -132,12 +125,7 @@ def binding_problem(
 def describe_misbinding(index: int, said_index: int | None, said_indices: Sequence[int | None]) -> str:
     """How entry ``index`` is misbound, from the indices every entry's file says: swapped, duplicated or re-ordered.
 
-    Parameters
-    ----------
-    said_index
-        The index its file says (None: it does not say, or says its own but other fields differ).
-    said_indices
-        What every entry's file says, in ``frames`` order.
+    ``said_index``: the index its file says (None: it does not say, or says its own but other fields differ).
     """
     if said_index is None or said_index == index:
         return "its file's role, LED levels, exposure or gain differ from the entry (the entry was edited?)"

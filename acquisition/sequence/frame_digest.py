@@ -1,14 +1,5 @@
 """Frame files provably as written: their SHA-256 and length, taken when written, compared when read.
 
-Public objects
---------------
-- :class:`FileDigest`: a file's SHA-256 (hex) and length in bytes, as ``frames[].sha256`` and
-  ``frames[].file_bytes`` record them (docs/architecture.md §6).
-- :func:`digest_open_file`: the digest of a file already open (the writer's fsync pass).
-- :func:`frame_state`: ``intact``, ``changed``, ``truncated`` or ``missing`` for a file against its record.
-- :func:`digest_problem`: one line saying how a file differs from its record.
-- :func:`check_frame_digest`: refuse a frame whose file is no longer the one written.
-
 Both fields are optional in format v1 (older recordings and independent samples have neither), so
 a frame without them is read as before; a frame with them is refused with one line naming it when
 its file differs. ``file_bytes`` is what tells a truncated file (shorter than written) from a
@@ -133,14 +124,7 @@ def digest_problem(where: str, state: FrameState, found: FileDigest | None, reco
 
 
 def check_frame_digest(path: Path, recorded: FileDigest, where: str) -> None:
-    """Refuse a frame file that is not, byte for byte, the one recorded.
-
-    Parameters
-    ----------
-    recorded
-        Its digest as ``sequence.json`` records it.
-    where
-        The frame named in the message (file and field).
+    """Refuse a frame file that is not, byte for byte, the one ``recorded`` (``where`` names it in the message).
 
     Raises
     ------

@@ -26,8 +26,7 @@ The rule
   mode (black 256 declared for data whose black is 0, or 4096 for a 12-bit black of 256 in a
   16-bit container).
 
-Cost: one ``min`` and one ``max`` over the frame (vectorised reductions, a small fraction of the
-file's decoding); the pixels are counted only when a bound is crossed.
+The pixels are counted only when a bound is crossed (otherwise one ``min`` and one ``max``).
 """
 
 from __future__ import annotations
@@ -58,16 +57,8 @@ def check_frame_levels(
 ) -> None:
     """Refuse a frame whose values the declared levels cannot produce.
 
-    Parameters
-    ----------
-    pixels
-        The frame as read: integer counts or floats, any shape (RGB, mosaic, mono).
-    black_level, white_level
-        The sequence's ``camera.black_level`` and ``camera.white_level``.
-    gain
-        The frame's gain (the read-noise margin below black grows with it).
-    where
-        The frame named in the message (file and field).
+    ``pixels``: the frame as read, integer counts or floats of any shape; ``gain``: the frame's (the margin
+    below black grows with it); ``where`` names the frame in the message.
 
     Raises
     ------

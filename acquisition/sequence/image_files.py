@@ -1,14 +1,5 @@
 """Frame image files: the only module of msflash that uses OpenImageIO.
 
-Public objects
---------------
-- :func:`read_image`: pixels of a frame file in their native type, (H, W) or (H, W, 3).
-- :func:`read_image_header`: size, channel count, type and msflash attributes, without the pixels.
-- :func:`write_image`: a 16-bit TIFF (integer data) or float EXR (float data), atomically.
-- :func:`write_image_digest`: the same, returning the written file's SHA-256 and length
-  (:class:`~acquisition.sequence.frame_digest.FileDigest`), taken from the file renamed into place.
-- :func:`image_suffix`: the file suffix :func:`write_image` needs for some pixels.
-
 Frames describe themselves: :func:`write_image` stores its ``attributes`` (``msflash:role``,
 ``msflash:exposure_us``, ``msflash:led_levels``…) as a JSON object in the standard
 ``ImageDescription`` tag, because OpenImageIO's TIFF writer drops arbitrary attributes; EXR files
@@ -155,25 +146,15 @@ def _attributes(spec: oiio.ImageSpec) -> dict:
 
 
 def read_image_header(path: str | os.PathLike) -> ImageHeader:
-    """Size, channel count, pixel type and msflash attributes of an image file, without its pixels.
-
-    Raises
-    ------
-    RecordingError
-        Naming the file, as :func:`read_image` does.
-    """
+    """Size, channel count, pixel type and msflash attributes of an image file, without its pixels; refused as
+    :func:`read_image` refuses."""
     path = Path(path)
     with _open_input(path) as image:
         return _header(path, image)[0]
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:
-    """The pixels of an image file.
-
-    Parameters
-    ----------
-    path
-        Any image OpenImageIO reads (16-bit TIFF or PNG, float EXR…).
+    """The pixels of an image file OpenImageIO reads (16-bit TIFF or PNG, float EXR…).
 
     Returns
     -------
@@ -310,11 +291,8 @@ def write_image_digest(
     """Write a frame image atomically and return the SHA-256 and length of the bytes written.
 
     The file is written to a temporary file in the same directory, then moved into place with
-    ``os.replace``. The digest is taken in the pass that flushes the temporary file to disk
-    (``fsync``), from the bytes the kernel holds for it, before the rename: it is the digest of
-    exactly the file renamed into place. (OpenImageIO's Python binding cannot write to memory, and
-    libtiff seeks back to patch offsets, so the bytes cannot be hashed as they are produced; they
-    are read back once, from the page cache they were just written to.)
+    ``os.replace``; the digest is read back in the ``fsync`` pass before the rename (OpenImageIO cannot
+    write to memory and libtiff seeks back, so the bytes cannot be hashed as produced).
 
     Parameters
     ----------

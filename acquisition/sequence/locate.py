@@ -28,21 +28,8 @@ EXPECTED = (
 
 
 def locate_sequence(path: str | os.PathLike, what: str = "") -> Path:
-    """The sequence folder meant by ``path``.
-
-    Parameters
-    ----------
-    path
-        A sequence folder (it holds ``sequence.json``), a run or capture folder (it holds
-        ``sequence/sequence.json``), or a ``sequence.json`` file.
-    what
-        How the command names the argument in its error (``"--white "``, ``"--rig replay:"``);
-        nothing for a positional argument.
-
-    Returns
-    -------
-    Path
-        The folder holding ``sequence.json`` (``path`` itself, or its ``sequence`` subfolder).
+    """The folder holding ``sequence.json`` meant by ``path`` (a sequence folder, a run or capture folder, or a
+    ``sequence.json`` file); ``what`` is how the command names the argument in its error (``"--rig replay:"``).
 
     Raises
     ------

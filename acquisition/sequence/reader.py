@@ -392,21 +392,10 @@ def parse_document(file: Path, directory: Path, document: Any, *, check_files: b
 
 
 def read_sequence(directory: str | os.PathLike, *, require_files: bool = True) -> Sequence:
-    """Read and validate a sequence directory (format v1), complete or partial.
+    """Read and validate a sequence directory (or its ``sequence.json``, format v1), complete or partial: check
+    :attr:`Sequence.partial` before treating it as a finished capture; pixels are read with :meth:`Sequence.load_frame`.
 
-    Parameters
-    ----------
-    directory
-        The sequence directory, or its ``sequence.json``.
-    require_files
-        Refuse a sequence whose frame files are missing or not regular files (the default). False
-        for ``msflash check``, which reports each frame's file itself.
-
-    Returns
-    -------
-    Sequence
-        The description; pixels are read with :meth:`Sequence.load_frame`. Check
-        :attr:`Sequence.partial` before treating it as a finished capture.
+    ``require_files`` False accepts missing or irregular frame files (``msflash check`` reports each itself).
 
     Raises
     ------

@@ -190,12 +190,6 @@ class SequenceWriter:
     ----------
     directory
         The sequence directory; created if needed. It must not already hold a sequence.
-    wavelengths_nm
-        The uniform wavelength grid, shape (n_wavelengths,).
-    spectral_unit
-        ``"energy"`` or ``"photons"``.
-    extra
-        Extra top-level keys to store.
     mono
         The camera is monochrome: its (H, W) frames (``camera.cfa`` null) are recorded as three
         identical channels (:func:`mono_as_rgb`), since format v1 holds RGB or raw mosaics. The
@@ -308,8 +302,6 @@ class SequenceWriter:
             records them as three identical channels.
         role, led_levels, exposure_us, gain
             As in :class:`SequenceFrame`; validated as :func:`read_sequence` does.
-        extra
-            Extra keys for this frame's entry (``frame_id``, ``timestamp_ns``, ``time_utc``…).
         time_utc, stamp_time
             The frame's ``time_utc`` (:func:`utc_now_text`'s form); None records now, the time the frame
             reached the writer (:class:`~acquisition.sequence.async_writer.AsyncSequenceWriter` passes the
@@ -456,22 +448,11 @@ def _replace(sequence: Sequence, **changes: Any) -> Sequence:
 
 
 def write_sequence(directory: str | os.PathLike, sequence: Sequence, frames: Iterable[np.ndarray]) -> Sequence:
-    """Write ``sequence``'s header and frame entries with the given pixels into a new directory.
+    """Write ``sequence``'s header and frame entries with ``frames`` (one pixel array per entry, in order)
+    into a new directory; return it as :func:`read_sequence` reads it.
 
     Frame files are renamed to the writer's scheme (``frames/NNN-<role>.tiff|exr``); everything
     else, unknown keys included, is kept. The result is complete if ``sequence`` is.
-
-    Parameters
-    ----------
-    sequence
-        The header and frame entries to copy (for instance from :func:`read_sequence`).
-    frames
-        One pixel array per entry of ``sequence.frames``, in order.
-
-    Returns
-    -------
-    Sequence
-        The written sequence, as :func:`read_sequence` reads it.
     """
     writer = SequenceWriter(
         directory,

@@ -19,7 +19,6 @@ from msflash.acquisition.sequence.image_files import read_image_header
 from msflash.acquisition.sequence.memory_budget import check_decode
 from msflash.acquisition.sequence.writer import as_recorded
 from msflash.acquisition.session.estimate_stream import (
-    SAMPLE_WEIGHTING,
     EstimateStream,
     StackLayout,
     is_mono,
@@ -32,7 +31,6 @@ from msflash.acquisition.session.sequence_spectra import (
     spectrum_in_sequence_unit,
     target_illuminant,
 )
-from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, AmbientModel, estimate_ambient
 from msflash.processing.channel_statistics import plane_channels
 from msflash.processing.errors import SpectralDataError
@@ -60,21 +58,11 @@ class FrameStack:
 
 
 def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None = None) -> FrameStack:
-    """The first ambient frame and every ``led`` frame of a sequence, with how to linearise them.
+    """The first ambient frame and every ``led`` frame of a sequence, with how to linearise them: the one
+    way from frames to a :class:`FrameStack` for disk, live and replay alike (docs/architecture.md §5).
 
-    The one way from frames to a :class:`FrameStack` (docs/architecture.md §5): a sequence read
-    from disk, a live capture and a replay all come through here, and the statistics, the
-    estimate and the flash are computed from what it returns.
-
-    Parameters
-    ----------
-    sequence
-        The sequence (read from disk, or the header a writer holds while capturing).
-    frames
-        The sequence's frames already in memory, as the camera gave them, indexed like
-        ``sequence.frames`` (frames after the last LED frame may be missing): a live run's or a
-        replay's. They are taken as the reader would return them from the files
-        (:func:`~acquisition.sequence.writer.as_recorded`). ``None`` reads the files.
+    ``frames``: the frames already in memory as the camera gave them, indexed like ``sequence.frames``
+    (taken as :func:`~acquisition.sequence.writer.as_recorded` returns them); ``None`` reads the files.
 
     Raises
     ------
@@ -128,13 +116,8 @@ def frame_stack(
     exposure_gain: SequenceOf[float],
     pixels: Callable[[int], np.ndarray],
 ) -> FrameStack:
-    """A :class:`FrameStack` from the frames' roles, LED levels, exposure × gain and pixels.
-
-    What :func:`load_frame_stack` and a :class:`~acquisition.session.flash_session.FlashSession`
-    (which knows its frames before the sequence file does) share: which frames are used (the
-    first ambient frame, every LED frame) and the linearisation (black and white levels, 1 /
-    (exposure · gain)).
-    """
+    """A :class:`FrameStack` of the first ambient frame and every LED frame, linearised by black and white
+    levels and 1 / (exposure · gain); shared by :func:`load_frame_stack` and ``FlashSession``."""
     layout = stack_layout(sequence, roles, led_levels, exposure_gain)
     return FrameStack(
         pixels(layout.ambient_index),
@@ -155,21 +138,6 @@ Why 8, and what 4 × 4 blocks changed on large frames: docs/block-size.md."""
 BLOCKS_PER_SIDE = 32
 """A frame's short side (of its CFA planes) keeps at least this many blocks, or the blocks are halved,
 down to 4 × 4 (docs/block-size.md)."""
-
-
-def sequence_statistics(
-    stack: FrameStack, cfa: str | None = None, bin_factor: int = DEFAULT_BIN_FACTOR
-) -> SequenceStatistics:
-    """The sufficient statistics of eq. 4–6 for a loaded frame stack (inverse-variance weighted, :data:`SAMPLE_WEIGHTING`)."""
-    period = 2 if cfa is not None else 1
-    return accumulate_statistics(
-        stack.ambient,
-        stack.led_frames,
-        stack.spec,
-        bin_factor=block_factor(stack.ambient.shape, cfa, bin_factor),
-        cfa_period=period,
-        weighting=SAMPLE_WEIGHTING,
-    )
 
 
 def block_factor(shape: tuple[int, ...], cfa: str | None, bin_factor: int = DEFAULT_BIN_FACTOR) -> int:
@@ -268,28 +236,14 @@ def flicker_check(sequence: Sequence, statistics: SequenceStatistics) -> Flicker
 def synthesize_checked(
     sequence: Sequence, flash_weights: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, StackLayout, FlickerCheck | None]:
-    """The computational flash image of a sequence read from disk with the flicker check of its frames, each
-    frame read once: what a synthesis from weights given alone (``msflash synthesize``,
-    :func:`msflash.synthesize_flash`) writes, and the flicker check it corrected by (:func:`flicker_check` of the frames' statistics, None where
-    the sequence carries no camera responsivities to read the ambient gains with).
+    """The computational flash image of a sequence on disk and the flicker check it was corrected by (None
+    without camera responsivities), each frame read once (``msflash synthesize``, :func:`msflash.synthesize_flash`).
 
-    Each ambient and LED frame, decoded once in sequence order, feeds both the estimate's statistics
-    (:func:`~acquisition.session.estimate_stream.stream_sequence`, for the check) and the synthesis sum
-    (:class:`~processing.synthesis.SynthesisStream`, ambient first, then the LED frames in order). The flicker
-    correction is linear in the frames (:func:`processing.flicker.applied_offsets`), so where the check
-    corrects, the ambient's extra share is taken out of the sum after the pass
-    (:meth:`~processing.synthesis.SynthesisStream.take_out_ambient_share`). The image is
-    :func:`synthesize_sequence`'s with the same check bit for bit where nothing is corrected, and equal to
-    rounding (one float32 step) where it is; the saturated pixels and the frames used are the same.
-
-    Peak memory: the float64 sum (four 16-bit frames' worth), the raw ambient frame kept until the check
-    is known (where the sequence carries responsivities to check with), one frame being read with the block
-    pass's work on it, and the statistics' block rows (about a sixteenth of a 16-bit RGB frame per frame at the
-    default block size), all during the pass; the float32 image (two frames' worth) once the ambient is let go.
-    LED frames recorded before the ambient frame are also kept until it comes. Measured: 9 16-bit RGB frames'
-    worth on 1280 × 1024 × 15 frames, against 6 for the check's pass and the sum's one after the other, and
-    1.1× faster from the page cache (more where reading the files costs more). Without camera responsivities
-    there is no check (None) and only the sum is made.
+    Each frame feeds both the check's statistics and the synthesis sum; where the check corrects, the ambient's
+    extra share is taken out of the sum after the pass (the correction is linear,
+    :func:`processing.flicker.applied_offsets`). The image is :func:`synthesize_sequence`'s with the same check,
+    bit for bit where nothing is corrected, to one float32 step where it is. Peak memory and speed:
+    docs/measurements-acquisition.md.
     """
     entries = sequence.frames
     layout = stack_layout(

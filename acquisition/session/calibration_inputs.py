@@ -96,8 +96,6 @@ def measured_leds(
         One export per LED (CSV or text: wavelength, value), in the booth's LED order.
     unit
         What the value column holds (``energy``, ``photons`` or raw ``counts``); None: as the header says.
-    column
-        The value column when a file has more than two.
     dark
         An export with the shutter closed, subtracted from each; or one per integration time (each
         export takes the dark of its own time).
@@ -105,10 +103,6 @@ def measured_leds(
         Receives warnings (saturation, a low SNR, the baseline) and the notes of clipped negatives.
     no_dark
         The exports need no dark (dark-corrected or calibrated): taken as they are.
-    integration_time_ms
-        For exports whose header states no integration time.
-    spectrometer_response
-        The spectrometer's response (irradiance calibration): counts become energy.
     """
     options = ExportOptions(
         unit=unit,
@@ -187,22 +181,9 @@ def led_power_through_camera(
     the camera measures it on the white reference (:func:`msflash.calibration.led_spectra.relative_power_through_camera`),
     with the camera's responsivities from ``calibration`` or, failing that, those the sequence records.
 
-    Parameters
-    ----------
-    white
-        A sequence of the white reference: ambient + one frame per LED, in ``shapes``' order.
-    shapes
-        The LED spectra whose relative power is measured.
-    calibration, calibration_directory
-        The calibration being updated (its camera responsivities, if any) and where it lives.
-    white_roi
-        ``X,Y,W,H`` where the reference is (default: the central half).
-    white_reflectance
-        A CSV of the reference's reflectance (default: spectrally flat).
-
-    Returns
-    -------
-    The scaled spectra and the keys added to the ``leds`` section (``relative_power`` and its source).
+    ``white`` is a sequence of the white reference (ambient + one frame per LED, in ``shapes``' order),
+    ``white_roi`` where it is (default: the central half), ``white_reflectance`` its reflectance (default
+    flat). Returns the scaled spectra and the keys added to the ``leds`` section (``relative_power``, its source).
     """
     if white.leds and len(white.leds) != shapes.count:
         raise UsageError(
@@ -320,8 +301,6 @@ def camera_from_chart_sequences(
 
     Parameters
     ----------
-    sequences
-        Recorded chart sequences (LED frames and each ambient frame).
     light_specs
         The known broadband light of each sequence's ambient, in order: a name, a CSV in energy
         units, or ``None``/``"none"`` for an unknown ambient; empty for all unknown.

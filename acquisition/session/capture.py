@@ -1,28 +1,19 @@
 """Run a capture plan: pair every frame with its step and write it to disk at once.
 
-The entry points of the capture engine (:mod:`acquisition.session.engine`): :func:`run_capture`
-(a plan, written), :func:`run_capture_with_flash` (a plan and then a flash step decided from its
-frames, in one stream) and :func:`preview_frames` (host paced, kept in memory: exposure metering).
-Each builds the engine of the plan's sync mode (docs/architecture.md §4; :func:`engine_for`) —
-``"software"``, *host paced* (:mod:`~acquisition.session.host_paced`), or ``"booth"`` / ``"camera"``,
-*booth* or *camera master* (:mod:`~acquisition.session.table_paced`) — and runs it with one
-:class:`~acquisition.session.engine.CaptureRunner`, which hands each frame to the
-:class:`SequenceRecorder` (the writer) and then to the handlers, and takes lost frames again
-(:data:`~acquisition.session.engine.RETAKES`).
+The entry points of the capture engine (:mod:`acquisition.session.engine`): each builds the engine of
+the plan's sync mode (:func:`engine_for`; docs/architecture.md §4) and runs it with one
+:class:`~acquisition.session.engine.CaptureRunner`.
 
 Frames already written stay on disk whatever fails (the writer keeps the sequence readable with
 ``complete: false``); the LEDs go off and the camera stops on every exit path
 (:mod:`~acquisition.session.booth_guard`, which also keeps the booth's watchdog covered).
 
-The flash in the same run (:func:`run_capture_with_flash`): the plan gets one more step, a
-placeholder ``flash`` step, and the camera keeps streaming from the ambient frame to the flash
-frame. When the last LED frame has been handed to the handlers, the
-:class:`~acquisition.session.engine.FlashDecider` gives the flash levels and exposure; host paced,
-``SET`` then the software trigger as for any step; booth and camera master, one ``PSET`` releases
-the held step. An :class:`~acquisition.sequence.async_writer.AsyncSequenceWriter` is paused from
-the wait for the last LED frame until the flash frame is in (frames stay queued, in order; nothing
-is dropped), so the disk writes compete neither with the decision nor with the flash trigger for
-the CPU and the GIL; Python's cyclic collector waits until the sequence is over.
+The flash in the same run (:func:`run_capture_with_flash`): the plan gets a placeholder ``flash`` step and
+the camera streams on from the ambient frame to the flash frame; host paced the flash is ``SET`` then
+triggered, booth and camera master one ``PSET`` releases the held step. An
+:class:`~acquisition.sequence.async_writer.AsyncSequenceWriter` is paused from the last LED frame until the
+flash frame is in (frames stay queued, nothing is dropped), and Python's cyclic collector waits until the
+sequence is over, so neither competes with the decision or the flash trigger.
 """
 
 from __future__ import annotations
@@ -138,12 +129,9 @@ def run_capture(
     retakes: int = RETAKES,
     cancel: Cancellation | None = None,
 ) -> list[SequenceFrame]:
-    """Capture every step of ``plan`` in its sync mode, writing each frame as it arrives.
-
-    Each frame, once written, goes to ``handlers`` in order. A frame lost at its own step
-    (:class:`FrameLostError`: incomplete, or its frame id skipped) is taken again up to ``retakes``
-    times: the steps from the lost one on are captured anew in the same sync mode
-    (:meth:`CaptureRunner.run`); the frames already written stay. Returns the entries written.
+    """Capture every step of ``plan`` in its sync mode, writing each frame as it arrives, then handing it to
+    ``handlers``; a frame lost at its own step is taken again up to ``retakes`` times
+    (:meth:`CaptureRunner.run`). Returns the entries written.
 
     Raises
     ------

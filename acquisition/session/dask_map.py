@@ -91,14 +91,7 @@ def _quiet_dask(verbose: bool) -> Iterator[None]:
 def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = False) -> Iterator[Mapper]:
     """A :data:`Mapper` running on ``scheduler`` (``local``, ``none`` or an address; module docstring).
 
-    Parameters
-    ----------
-    scheduler
-        ``local``, ``none`` or a dask scheduler address.
-    workers
-        Processes of the local cluster (default: the CPUs); ignored otherwise.
-    verbose
-        Let dask log below errors (``msflash -v``).
+    ``workers``: processes of the local cluster (default: the CPUs); ``verbose`` lets dask log below errors.
 
     Raises
     ------

@@ -226,21 +226,9 @@ class _Taken:
 
 
 class CaptureRunner:
-    """Runs a plan on a :class:`CaptureEngine`, handing each frame to a recorder and the handlers.
-
-    Parameters
-    ----------
-    recorder
-        Where frames are written, or None (exposure previews keep them in memory only).
-    handlers
-        Called with every frame, in order, after the recorder (:class:`FrameHandler`).
-    flash
-        Decides the last step of the plan, a ``flash`` placeholder, once the frames before it are in.
-    retakes
-        Times a lost frame is taken again (:data:`RETAKES`).
-    cancel
-        Checked before every step (:class:`Cancellation`).
-    """
+    """Runs a plan on a :class:`CaptureEngine`, handing each frame to ``recorder`` (None: frames kept in memory
+    only) and then to ``handlers``; ``flash`` decides the plan's last step once the frames before it are in;
+    a lost frame is taken again up to ``retakes`` times; ``cancel`` is checked before every step."""
 
     def __init__(
         self,
@@ -263,19 +251,12 @@ class CaptureRunner:
     def run(self, plan: CapturePlan) -> CaptureResult:
         """Capture every step of ``plan``; after a lost frame, the steps not yet done again.
 
-        A frame lost on its way (:class:`FrameLostError`: incomplete — a GigE Vision link dropped
-        packets, which the camera never resends — or missing, its frame id skipped; host paced, a
-        frame that vanished after earlier ones came, :func:`_vanished`) is a transport failure found
-        at its own step, before any later frame was written: the scene and the LEDs are as they
-        were, so the same step taken again gives the frame the sequence needs. The engine has
-        already switched the LEDs off, aborted the booth's table and stopped the camera; the retake
-        sets the engine up with the remaining steps, which keep their indices, and pairs and checks
-        their frames exactly as the first attempt did. The frames written before the loss stay, in
-        order (each frame of a retake records ``retake``: 1, 2…). ``retakes`` 0 gives up at the
-        first loss. Other failures are not retaken: no frame at all (a trigger the camera never saw
-        is found only once the booth has counted more triggers than frames arrived, and the frames
-        in between may already be paired with the wrong steps), a booth's table step other than the
-        plan's, the booth's link, the disk, a cancellation.
+        A frame lost on its way (:class:`FrameLostError`: incomplete, its frame id skipped, or host paced
+        vanished after earlier ones came, :func:`_vanished`) is found at its own step before any later frame
+        was written, so the same step taken again gives the frame the sequence needs: the retake sets the engine
+        up with the remaining steps (same indices, same pairing and checks); frames written before stay, each
+        retaken one records ``retake``: 1, 2…. Other failures are not retaken (a trigger never seen, a booth
+        table step other than the plan's, the booth's link, the disk, a cancellation): docs/decisions/capture-engine.md.
         """
         taken = _Taken()
         while True:

@@ -122,10 +122,7 @@ class EstimateStream:
         Also accumulate the tiles of the local estimate (``tiles`` per side), or None.
     live
         Frames arrive while a camera streams: never a compiled kernel's first load or compile then
-        (:func:`processing.frame_kernels.paused`). The numbers do not depend on it: both routes give the
-        same block sums and noise line to the bit, and the moments' route (compiled or numpy, which agree to
-        rounding only) is decided when the stream is made, by whether this process has the kernels loaded
-        already (:func:`processing.frame_kernels.statistics_compiled`), live or not.
+        (:func:`processing.frame_kernels.paused`); the numbers do not depend on it (docs/architecture.md §5.2).
     """
 
     def __init__(

@@ -144,7 +144,6 @@ def most_informative(
     read_dn: float,
     max_lost_fraction: float,
     sweeps: int = 3,
-    optimise_ambient: bool = True,
 ) -> tuple[float, tuple[float, ...], float]:
     """Coordinate ascent on ``F``: the ambient exposure, each LED exposure, and the union's lost fraction.
 
@@ -158,8 +157,7 @@ def most_informative(
     noise = (dn_per_e, read_dn)
     for _ in range(sweeps):
         before = (ambient_us, tuple(led_us))
-        if optimise_ambient:
-            ambient_us, led_us = _ascend_ambient(blocks, ambient_us, led_us, limits, noise, max_lost)
+        ambient_us, led_us = _ascend_ambient(blocks, ambient_us, led_us, limits, noise, max_lost)
         for k in range(len(blocks.leds)):
             led_us[k] = _ascend_led(blocks, k, ambient_us, led_us, limits, noise, max_lost)
         if (ambient_us, tuple(led_us)) == before:

@@ -42,12 +42,8 @@ class LiveSettings:
 class LiveStream:
     """A rig's camera streaming host paced at the live settings, and the booth at the live LED levels.
 
-    Parameters
-    ----------
-    rig
-        The open rig; the stream never closes it (the caller's ``with rig`` does, LEDs off).
-    exposure_us
-        The first exposure; None takes the camera's suggestion (the simulated cameras') or 10 ms.
+    The stream never closes ``rig`` (the caller's ``with rig`` does, LEDs off). ``exposure_us`` None starts at
+    the camera's suggestion (the simulated cameras') or 10 ms.
     """
 
     def __init__(self, rig: Rig, exposure_us: float | None = None) -> None:

@@ -61,7 +61,7 @@ def sampled(pixels: np.ndarray, stride: int) -> np.ndarray:
     Striding a raw mosaic by an even step would read a single CFA site (one colour: a blue LED
     metered on red sites looks dark), so a 2-D frame is sampled as 2×2 quads, each a 4-channel
     "pixel" (every colour of the mosaic; for a mono frame four neighbours), on every
-    ``stride / 2``-th quad — the same number of values as before. ``stride`` 1 keeps the frame.
+    ``stride / 2``-th quad. ``stride`` 1 keeps the frame.
     """
     if stride <= 1:
         return pixels
@@ -129,9 +129,7 @@ def linear_quantile(values: np.ndarray, q: float, *, overwrite: bool = False) ->
 
     The sample at position ``(n − 1)·q`` of the sorted values, interpolated between its two
     neighbours as numpy does (from the upper neighbour when the fraction is ≥ ½); NaN if any value
-    is NaN. One ``np.partition`` instead of ``np.quantile``'s general machinery: half the time on
-    the few thousand metered pixels. ``overwrite`` partitions ``values`` in place (the caller's
-    scratch array) instead of a copy.
+    is NaN; one ``np.partition``. ``overwrite`` partitions ``values`` in place (the caller's scratch array).
 
     >>> linear_quantile(np.array([3.0, 1.0, 4.0, 1.0, 5.0]), 0.9)  # sorted 1 1 3 4 5: 0.6 of the way from 4 to 5
     4.6

@@ -84,9 +84,8 @@ def estimate_sequence_prior(
     flicker: FlickerCheck | None = None,
     statistics: ChannelStatistics | None = None,
 ) -> SequencePriorResult:
-    """The light-prior estimate of a sequence, the LED-span one and ``auto``'s choice between them (``flicker``:
-    the LED estimate's check, whose gains correct the statistics; ``statistics``: the sequence's channel statistics
-    so corrected, when taken already).
+    """The light-prior estimate of a sequence, the LED-span one and ``auto``'s choice between them; ``flicker``
+    and ``statistics`` as in :func:`estimate_sequence_family`.
 
     Raises
     ------
@@ -267,8 +266,7 @@ def reference_chart(
     The file is JSON: ``{"patches": [{"rect": [x, y, width, height], "wavelengths_nm": [...], "reflectance":
     [...]}, ...]}`` (pixels of the full frame, whole numbers; wavelengths increasing; reflectance factors
     0–:data:`MAX_REFLECTANCE`, interpolated onto the sequence's grid, the edge values held beyond the data).
-    It is read as every user's file is (:mod:`processing.user_files`: regular files of at most 16 MiB;
-    :mod:`processing.json_input`: NaN, huge numbers, deep nesting and a key twice refused naming the field).
+    It is read as every user's file is (:mod:`processing.user_files`, :mod:`processing.json_input`).
 
     Raises
     ------

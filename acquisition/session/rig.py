@@ -13,17 +13,9 @@ ambient), ``aravis-fake`` (:class:`~acquisition.devices.aravis.camera.AravisCame
 serving a recorded sequence) and ``hw`` (real use, also implied by ``--camera`` / ``--port``; every device is
 tried and :class:`RigOpenError` lists each one's failure).
 
-The trigger wires (docs/architecture.md §4, three sync modes) are modelled in every rig:
-
-- *booth master*: the emulator's trigger output (``on_trigger_out``) drives the camera's trigger
-  input — :meth:`SimulatedCamera.trigger_line` on ``sim``; on ``aravis-fake`` (the fake has no
-  input lines) the callback issues the camera's software trigger;
-- *camera master*: the camera's ExposureActive output drives the emulator's input — on ``sim``
-  a rising edge just before the frame reads the LED levels and a falling edge right after; on
-  ``aravis-fake`` a rising edge before ``TriggerSoftware`` and a falling edge when the frame
-  arrives. The booth ignores the line outside a running camera-master sequence, as firmware does.
-
-A callback that fails on the emulator's thread is logged and kept in :attr:`Rig.line_errors`
+The trigger wires of the three sync modes are modelled in every rig (docs/rigs.md): booth master, the
+emulator's trigger output drives the camera's trigger input; camera master, the camera's ExposureActive
+output drives the emulator's input. A callback that fails on the emulator's thread is logged and kept in :attr:`Rig.line_errors`
 (it must not kill the emulator); the capture then sees the missing frame.
 """
 
@@ -37,12 +29,8 @@ from typing import TYPE_CHECKING, Any
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
 from msflash.acquisition.errors import UsageError
-from msflash.acquisition.session.rigs.aravis_fake import (
-    open_aravis_fake_rig,
-)
-from msflash.acquisition.session.rigs.hardware import (
-    open_hw_rig,
-)
+from msflash.acquisition.session.rigs.aravis_fake import open_aravis_fake_rig
+from msflash.acquisition.session.rigs.hardware import open_hw_rig
 from msflash.acquisition.session.rigs.replay import open_replay_rig
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.acquisition.session.rigs.sim import open_sim_rig

@@ -19,14 +19,10 @@ event), never its position in the arrival order. A skipped frame id is a frame l
 times out, or a ``TRIG`` whose step is not the plan's, raises :class:`DroppedFrameError` naming the
 missing step (never retaken: later frames may be paired with the wrong steps).
 
-The flash in the same stream: the table is loaded with the flash step *held* (``PADD … HOLD``),
-and one ``PSET`` (one serial round trip) releases it with its levels once they are decided
-(:meth:`TablePaced.set_flash_step`). A held step is never exposed with stale levels: the booth
-waits at it with the LEDs off and no trigger (booth master) or reports an exposure during it as
-``TRIG <n> HOLD`` (camera master), which the pairing refuses (``docs/booth-protocol.md`` §5).
-Booth master sends ``PSET … NOW``: the last LED frame is in, so its exposure is over and the flash
-step starts at once instead of waiting for its scheduled slot; its exposure is capped at the
-longest planned one, since the booth's period was fixed when the table was armed.
+The flash in the same stream: the table is loaded with the flash step *held* (``PADD … HOLD``), and one
+``PSET`` releases it with its levels once they are decided (:meth:`TablePaced.set_flash_step`; a held step is
+never exposed with stale levels, docs/booth-protocol.md §5). Booth master sends ``PSET … NOW`` (the last LED
+frame is in) and caps the flash exposure at the longest planned one, the period fixed when the table was armed.
 
 A booth that pulses (``DIM=PULSE``) gets each step's exposure with its levels and the camera's
 rolling-shutter skew, and each frame records the levels it delivered (docs/flash-energy.md).

@@ -43,7 +43,8 @@ from typing import Any
 
 import numpy as np
 
-from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, SAMPLE_WEIGHTING, block_factor
+from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor
+from msflash.acquisition.session.estimate_stream import SAMPLE_WEIGHTING
 from msflash.lab.bench.ratios import against_target, interleaved_ratio, peak_bytes
 from msflash.processing import datasets, frame_kernels, lights
 from msflash.processing.accumulate import accumulate_statistics

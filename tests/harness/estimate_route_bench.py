@@ -4,7 +4,7 @@
 RGB sequence of one ambient and N LED frames to a temporary folder, then alternates, R rounds:
 
 - *stack*: the route before — every frame decoded into a stack (``analysis.load_frame_stack``), the batch
-  statistics (``analysis.sequence_statistics``, two threads over the frames) and the estimate;
+  statistics (``tests.helpers.sequence_statistics``, two threads over the frames) and the estimate;
 - *stream*: the route now — ``analysis.estimate_sequence``: one frame decoded at a time into the
   block rows (``EstimateStream``).
 
@@ -25,11 +25,12 @@ from pathlib import Path
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis
 from tests.acquisition.session.test_estimate_stream import write_sequence
+from tests.helpers import sequence_statistics
 
 
 def stack_route(sequence) -> object:  # noqa: ANN001
     stack = analysis.load_frame_stack(sequence)
-    statistics_ = analysis.sequence_statistics(stack, sequence.camera.cfa)
+    statistics_ = sequence_statistics(stack, sequence.camera.cfa)
     return analysis.estimate_from_statistics(sequence, statistics_)
 
 

@@ -54,6 +54,7 @@ from msflash.processing.flicker import gains_applied, gains_not_applied, with_am
 from tests.harness import metrics
 from tests.harness.cases import cases_of
 from tests.harness.render import CommonNoise, HarnessCase, render
+from tests.helpers import sequence_statistics
 
 DEPTH = 0.3
 """Percent flicker of every flickering lamp, ``(max − min) / (max + min)``."""
@@ -159,7 +160,7 @@ def _estimates(directory: Path, true_offsets: np.ndarray) -> tuple[np.ndarray, n
     sequence unit; and the flicker check."""
     sequence = read_sequence(directory)
     stack = analysis.load_frame_stack(sequence)
-    statistics = analysis.sequence_statistics(stack, sequence.camera.cfa, analysis.DEFAULT_BIN_FACTOR)
+    statistics = sequence_statistics(stack, sequence.camera.cfa, analysis.DEFAULT_BIN_FACTOR)
     with_model = analysis.estimate_from_statistics(sequence, statistics)
     leds = sequence_spectra.led_spectra_photons(sequence)
     plain = estimate_ambient(statistics, leds, "tikhonov", "auto")

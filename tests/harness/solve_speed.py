@@ -32,7 +32,8 @@ def _median_time(function: Callable[[], object], runs: int) -> float:
 
 def _figures(cfa: str | None, runs: int) -> dict[str, float]:
     """The stages of one world, each ÷ the copy (and the copy in ms)."""
-    from msflash.acquisition.session.analysis import SAMPLE_WEIGHTING, block_factor
+    from msflash.acquisition.session.analysis import block_factor
+    from msflash.acquisition.session.estimate_stream import SAMPLE_WEIGHTING
     from msflash.lab.bench.processing import benchmark_world, frame_copy, streamed_estimate
     from msflash.processing import noise_level
     from msflash.processing.ambient import AmbientModel, estimate_ambient

@@ -6,6 +6,7 @@ import pytest
 
 from msflash.processing.flicker import fit_mains
 from tests.harness.flicker import flicker_cases, measure, timing
+from tests.helpers import sequence_statistics
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +103,7 @@ def _read(case_name: str, tmp_path, flickering: bool) -> object:
         case, directory, ambient_gains=gains, exposures_us=lamp.exposures_us, common_noise=common_noise(case, 0, lamp)
     )
     sequence = read_sequence(directory)
-    statistics = analysis.sequence_statistics(
+    statistics = sequence_statistics(
         analysis.load_frame_stack(sequence), sequence.camera.cfa, analysis.DEFAULT_BIN_FACTOR
     )
     return analysis.estimate_from_statistics(sequence, statistics).flicker

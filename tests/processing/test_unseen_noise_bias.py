@@ -23,6 +23,7 @@ from msflash.processing.block_rows import BlockRows
 from msflash.processing.block_sums import cfa_planes
 from msflash.processing.statistics import FrameStackSpec
 from msflash.processing.tile_statistics import tile_statistics
+from tests.helpers import sequence_statistics
 from tests.processing.unseen_sequences import MARGIN, Case, led_bound, render_case, rmse
 
 
@@ -132,7 +133,7 @@ def test_the_uncertainty_band_is_that_of_the_system_solved(tmp_path: Path) -> No
 
     rendered = render_case(Case("band", leds="booth8", light="F2", seed=1), tmp_path / "band")
     sequence = read_sequence(rendered.directory)
-    statistics = analysis.sequence_statistics(analysis.load_frame_stack(sequence), sequence.camera.cfa)
+    statistics = sequence_statistics(analysis.load_frame_stack(sequence), sequence.camera.cfa)
     model = AmbientModel(sequence_spectra.led_spectra_photons(sequence))
     estimate = model.estimate(statistics, "lstsq")
     clean = statistics.denoised()

@@ -86,16 +86,10 @@ class MixPreview:
     ----------
     stack
         The sequence's frames (:func:`~acquisition.session.analysis.load_frame_stack`).
-    cfa
-        The mosaic's CFA, None for RGB or mono frames.
-    led_names
-        One name per LED, in the sequence's order.
     solved
         Solved mixes by name (``matching``, ``complementary``), drive levels in [0, 1].
     renderer
         The live view's renderer (the camera → sRGB matrix); its width is the preview's.
-    run
-        The run folder's name (what the page shows).
     ambient_offsets
         The run's estimate's flicker shares (``estimate.json``'s ``flicker.applied_gain_offsets``), or None.
     """

@@ -58,12 +58,8 @@ class PreviewRenderer:
 
     Parameters
     ----------
-    info
-        The camera's identity and encoding (CFA, black and white levels).
     responsivities
         The camera's spectral responsivities, for the colour matrix; None shows the camera's RGB as sRGB.
-    width
-        The preview's width in pixels.
     """
 
     def __init__(self, info: CameraInfo, responsivities: Spectra | None, width: int = PREVIEW_WIDTH) -> None:

@@ -57,12 +57,7 @@ def run_sequence(
 
     Each frame goes to ``handlers`` as it lands (the page's view of the sequence). ``cancel`` stops
     the metering or the capture between frames (:class:`CaptureCancelled`: the frames written stay,
-    the sequence ``complete: false``, the LEDs off) and skips the report.
-
-    Returns
-    -------
-    dict
-        The run's summary (what ``run.json`` holds).
+    the sequence ``complete: false``, the LEDs off) and skips the report. Returns the run's summary (``run.json``).
 
     Raises
     ------

@@ -5,16 +5,11 @@ rig thread (a single-worker executor), so the live stream, the sliders and a fir
 the devices at once. Frames go to the page over a WebSocket as binary messages: a little-endian ``uint32``
 length, a JSON header (frame number, histogram, saturated fraction, the booth's levels) and the JPEG.
 
-**Safe by default.** Every request must name this server in ``Host`` (``127.0.0.1``/``localhost``/
-``[::1]`` and the port, or the ``--host`` address): a page on another site that rebinds its DNS name to
-127.0.0.1 is refused. A request carrying an ``Origin`` or ``Sec-Fetch-Site: cross-site`` from anywhere else
-is refused. Every state-changing request (each POST) and the WebSocket need the session token, sent in the
-``X-Msflash-Token`` header (the WebSocket: ``?token=``); the page served on loopback carries it, a page on
-another address (``--host``) is served only to ``?token=`` (then a ``SameSite=Strict`` cookie lets its images
-load). Files are served from the package's own page assets by name and from a run folder by
-:func:`acquisition.app.live.runs.run_file` (no path out of the folder). The LEDs go off when the last page
-has been gone :data:`LAST_CLIENT_GRACE_S` (a reload keeps them), when the server stops (Ctrl-C, SIGTERM, SIGHUP),
-and on any error of a request or of the stream.
+**Safe by default** (the guard: docs/route-of-a-frame.md): ``Host`` must name this server (no DNS rebinding),
+cross-site requests are refused, every POST and the WebSocket need the session token, and files come only from
+the page's assets and from inside a run folder (:func:`acquisition.app.live.runs.run_file`). The LEDs go off
+when the last page has been gone :data:`LAST_CLIENT_GRACE_S`, when the server stops, and on any error of a
+request or of the stream.
 """
 
 from __future__ import annotations
@@ -67,10 +62,6 @@ class LiveServer(RigControls, SequenceRoutes):
         The runs directory: fired sequences go to new folders in it, and its runs are listed.
     sock
         The listening socket (:func:`bind`); its address decides the allowed ``Host`` names.
-    token
-        The session token (default: a new random one).
-    target
-        The complementary flash's target illuminant.
     token_for_pages
         Ask the token for every request, pages and files too; None: when the address is not loopback.
     """

@@ -75,17 +75,13 @@ class AravisCamera(Streaming):
     interfaces
         Transport layers to use, from :data:`~.discovery.INTERFACES` (``("fake",)``, ``"gige,usb3"``). Only
         these are enabled; ``gige`` with a name that is not an IP address broadcasts discovery.
-    pixel_format
-        PixelFormat to set; ``None`` keeps the camera's.
-    roi
-        (offset_x, offset_y, width, height) to set; ``None`` keeps the camera's.
+    pixel_format, roi
+        PixelFormat and (offset_x, offset_y, width, height) to set; ``None`` keeps the camera's.
     line_trigger
         Trigger used for plans paced by the booth (``plan.trigger == "booth"``).
     strobe
         Output line to drive from the exposure; set up by :meth:`prepare` for every plan when
         given, and required for camera-paced plans (``plan.trigger == "camera"``).
-    extra_buffers
-        Buffers in the pool beyond one per plan step.
     zero_copy
         Deliver frames without copying them where possible (see Notes); False always copies.
 
@@ -102,11 +98,8 @@ class AravisCamera(Streaming):
     of a GigE Vision device as long as any reference to it lives.
 
     Frames of formats stored as the frame itself (:func:`~.pixel_layouts.is_zero_copy_format`) on GigE Vision and
-    the fake (:data:`~.buffers.ZERO_COPY_PROTOCOLS`) are not copied: Aravis writes each frame into a numpy
-    array msflash allocated, and that array, once the frame is complete, is the frame returned
-    (read-only, owned by the caller from then on). A new buffer replaces it in the stream after
-    the frame is queued; :meth:`prepare` readies one per plan step so that a sequence allocates
-    nothing while it runs. :attr:`pool_arrays` counts the arrays the camera holds.
+    the fake are not copied (:class:`~.buffers.BufferPool`): the array Aravis wrote into is the frame returned,
+    read-only and the caller's; :meth:`prepare` readies one replacement per plan step.
     """
 
     def __init__(

@@ -14,16 +14,8 @@ table of models.
 No ``gi`` here: the camera object does the GenICam access (``describe_feature``, ``set_feature``,
 ``set_roi``), so everything but that access is testable without Aravis.
 
-Public objects
---------------
-- :class:`CameraOptions`, :func:`options_from_json`: what to set, from the CLI or a profile.
-- :func:`parse_feature`, :func:`parse_roi`, :func:`parse_binning`: argparse types of the options.
-- :class:`FeatureInfo`: one feature as the camera describes it (``msflash devices --features``).
-- :func:`apply_camera_options`, :func:`apply_feature`, :class:`AppliedOptions`: writing and reading back.
-- :data:`~.msflash_features.MSFLASH_FEATURES`: every feature msflash reads or writes (``devices --features``
-  lists them all, also those the camera's ``Root`` category leaves out).
-
-``--gain``/``--gain-raw`` (which feature, selector, unit and range) is :mod:`acquisition.devices.aravis.gain`.
+``--gain``/``--gain-raw`` is :mod:`acquisition.devices.aravis.gain`; every feature msflash touches,
+:data:`~.msflash_features.MSFLASH_FEATURES`.
 """
 
 from __future__ import annotations
@@ -563,8 +555,6 @@ def configure_camera(
 
     Parameters
     ----------
-    camera
-        An opened camera (``AravisCamera``).
     strobe
         Whether plans drive a strobe output (camera-paced sync): then the strobe line is set up,
         Line1 unless an option names another.

@@ -1,15 +1,9 @@
 """Letting go of a GigE Vision device whose control is lost, on a thread that may finalise it.
 
-Aravis 0.8's heartbeat thread (``arv_gv_device_heartbeat_thread``) emits ``control-lost`` with
-``g_signal_emit``, which holds a reference to the device for the length of the emission. If the
-application drops its own references meanwhile — :meth:`AravisCamera.close` right after a camera
-died, the case the camera-loss tests make — the emission's reference is the last one: the device
-is finalised *on the heartbeat thread*, and ``arv_gv_device_finalize`` joins that same thread.
-GLib aborts the process (``g_system_thread_wait``: "Resource deadlock avoided", SIGTRAP); with
-the GIL held by a finalising Python thread the join can instead wait forever on a handler that
-needs the GIL.
-
-So a device known to be lost or unreachable is handed to :func:`release_lost_device`: a thread
+Aravis 0.8's heartbeat thread emits ``control-lost`` holding a reference to the device; if the application
+drops its own meanwhile (:meth:`AravisCamera.close` right after a camera died), the device is finalised *on
+the heartbeat thread*, which then joins itself: GLib aborts the process, or the join waits forever on a
+handler that needs the GIL (docs/steady-tests.md). So a device known to be lost or unreachable is handed to :func:`release_lost_device`: a thread
 of its own keeps it until its ``control-lost`` emission is over, then drops the last references
 itself (finalising it there joins the heartbeat thread from another thread, as GLib requires). A
 device that still answers is released by the caller at once: no emission can be in flight.
@@ -45,8 +39,6 @@ def release_lost_device(device: Any, owners: tuple[Any, ...], lost: threading.Ev
     lost
         Set by the caller's own ``control-lost`` handler, still connected when this is called:
         an emission before this function connects its handler has set it.
-    name
-        The camera's name, for the log.
 
     Returns
     -------

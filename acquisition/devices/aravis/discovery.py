@@ -32,17 +32,8 @@ INTERFACES: dict[str, str] = {"fake": "Fake", "gige": "GigEVision", "usb3": "USB
 
 
 def parse_interfaces(spec: str | Iterable[str]) -> tuple[str, ...]:
-    """Validate an interface list such as ``"fake,gige"`` and return it as a tuple.
-
-    Parameters
-    ----------
-    spec
-        Comma-separated text or an iterable of names from :data:`INTERFACES`.
-
-    Returns
-    -------
-    tuple of str
-        The names, lower case, without duplicates, in the given order.
+    """An interface list (``"fake,gige"`` or an iterable of names from :data:`INTERFACES`) as a tuple of
+    names, lower case, without duplicates, in the given order.
 
     Raises
     ------

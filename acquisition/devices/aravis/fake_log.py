@@ -23,13 +23,8 @@ UNFILLED_FORMAT_MESSAGE = "Unsupported pixel format"
 
 
 def mute_unfilled_format_warning() -> Callable[[], None]:
-    """Drop the fake's :data:`UNFILLED_FORMAT_MESSAGE` lines until the returned function is called.
-
-    Returns
-    -------
-    callable
-        Removes the log handler (call it once, when the fake is released).
-    """
+    """Drop the fake's :data:`UNFILLED_FORMAT_MESSAGE` lines until the returned function is called (once, when
+    the fake is released)."""
 
     def handler(domain: str | None, level: GLib.LogLevelFlags, message: str, *_data: object) -> None:
         if message != UNFILLED_FORMAT_MESSAGE:

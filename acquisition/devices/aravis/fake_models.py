@@ -2,8 +2,7 @@
 
 Real cameras set their analogue gain as SFNC ``Gain`` in dB, as ``GainRaw`` in units only their
 maker documents, or behind a ``GainSelector`` without an ``All`` entry and with ``GainAuto`` on
-at power-up. A twin kinder than that hid the ``GainRaw`` failure of issue 29, so
-``--fake-camera MODEL`` (``run``, ``capture``, ``live`` with ``--rig aravis-fake``) picks one of:
+at power-up (docs/decisions/gain-units.md); ``--fake-camera MODEL`` (``--rig aravis-fake``) picks one of:
 
 =================  ==================================================================================
 ``sfnc``           msflash's SFNC XML as shipped (``genicam/fake_sfnc.xml``): ``Gain`` 0–24 dB

@@ -14,9 +14,7 @@ from msflash.acquisition.devices.aravis.buffers import (
     BufferPool,
     SpareStream,
 )
-from msflash.acquisition.devices.aravis.camera_features import (
-    FeatureInfo,
-)
+from msflash.acquisition.devices.aravis.camera_features import FeatureInfo
 from msflash.acquisition.devices.aravis.camera_records import (
     AcquisitionStats,
     FrameTiming,
@@ -29,9 +27,7 @@ from msflash.acquisition.devices.aravis.gain import (
 )
 from msflash.acquisition.devices.aravis.gi_typelib import Aravis, GLib
 from msflash.acquisition.devices.aravis.msflash_features import MSFLASH_FEATURES
-from msflash.acquisition.devices.aravis.profiles import (
-    CameraProfile,
-)
+from msflash.acquisition.devices.aravis.profiles import CameraProfile
 from msflash.acquisition.devices.camera import NativeGain
 from msflash.acquisition.errors import (
     CameraDisconnectedError,

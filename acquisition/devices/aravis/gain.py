@@ -25,13 +25,6 @@ feature and its range in the camera's units (exit 2).
 
 No ``gi`` here: :class:`~acquisition.devices.aravis.camera.AravisCamera` reads the features and
 calls :func:`choose_gain_control`; everything else is testable without Aravis.
-
-Public objects
---------------
-- :class:`GainRequest`, :func:`parse_gain_db`, :func:`parse_gain_raw`: what the user asks.
-- :class:`GainControl`, :func:`feature_scale`, :func:`choose_gain_control`, :func:`choose_selector`:
-  how a camera's gain is set, and the checks.
-- :data:`GAIN_FEATURES`, :data:`SELECTOR_PREFERENCE`: the names tried.
 """
 
 from __future__ import annotations
@@ -416,10 +409,8 @@ def choose_gain_control(
         Names to try, in order (the profile's ``gain_features``, then :data:`GAIN_FEATURES`).
     request
         What the user asked; None picks the feature for plan steps' own gains (dB-scaled first).
-    raw_per_db, profile
-        ``GainRaw`` units per dB from the model's profile, and the profile's name.
-    selector
-        The ``GainSelector`` entry in force (None without a selector).
+    raw_per_db
+        ``GainRaw`` units per dB from the model's profile.
     why
         Why the gain cannot be set whatever the feature (a ``GainAuto`` that stays on, a selector
         with no usable entry), or "".

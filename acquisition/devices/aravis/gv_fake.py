@@ -19,9 +19,7 @@ from msflash.acquisition.devices.aravis.discovery import (
     _builtin_fake_xml_path,
 )
 from msflash.acquisition.devices.aravis.gi_typelib import Aravis
-from msflash.acquisition.errors import (
-    CameraError,
-)
+from msflash.acquisition.errors import CameraError
 
 log = logging.getLogger(__name__)
 
@@ -36,12 +34,9 @@ _GV_MODEL_NAME_REGISTER = 0x68
 def gvcp_port_holder(address: str = "127.0.0.1", port: int = GVCP_PORT) -> str | None:
     """Why ``address:port`` cannot be bound by itself (another program holds it), or None when it is free.
 
-    The probe binds without ``SO_REUSEADDR``: the Aravis GigE Vision fake binds its control port
-    *with* address reuse, so a second fake on the same address starts without error and the
-    kernel then hands each control request to one of the two — a camera opened at the address may
-    be the other program's (seen: ``arv-fake-gv-camera-0.8 -i 127.0.0.1`` running, the
-    ``aravis-fake`` rig's own fake started, and the rig talked to the other one). Only an
-    exclusive bind tells.
+    The probe binds without ``SO_REUSEADDR``: the Aravis GigE Vision fake binds its control port *with* address
+    reuse, so a second fake on the same address starts without error and a camera opened there may be the other
+    program's (docs/aravis-facts.md). Only an exclusive bind tells.
     """
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         try:
@@ -60,12 +55,9 @@ _gvcp_hold_lock = threading.Lock()
 def gvcp_port_lock(timeout_s: float = 120.0) -> Iterator[None]:
     """Hold the machine-wide lock on the GigE Vision control port 3956 of 127.0.0.1.
 
-    The Aravis GigE Vision fake binds 127.0.0.1:3956 and only the loopback address exists, so
-    fakes in parallel test workers, benches and rigs must take turns. An ``flock`` is released by
-    the kernel if the holder dies. A process that holds it already holds it again at once (it
-    never waits for itself): a second fake it starts then finds the port bound and is refused
-    (:meth:`AravisGvFake.start`), as one of another program is. The ``flock`` goes with the last
-    holder of the process.
+    Fakes in parallel test workers, benches and rigs take turns; the kernel releases the ``flock`` if the holder
+    dies. A process that holds it already holds it again at once (a second fake it starts then finds the port
+    bound and is refused, :meth:`AravisGvFake.start`).
 
     Raises
     ------
@@ -118,14 +110,10 @@ class AravisGvFake:
 
     Parameters
     ----------
-    serial
-        Serial number the fake reports.
     genicam_xml
         GenICam description (defaults to msflash's SFNC XML); ``None`` for the fake's built-in one.
     trigger_frequency_hz
         How often the fake checks for a software trigger (its trigger-to-frame latency).
-    lost_packet_ratio
-        Fraction of GVSP packets the fake drops (a lossy link).
     model
         Model name the fake reports (its bootstrap register; the XML's ``DeviceModelName`` reads it),
         None for Aravis's "Fake". Camera profiles are matched on it.

@@ -3,26 +3,14 @@
 Two of Aravis 0.8's stream defaults lose frames on a loaded host, for the GigE Vision fake on
 127.0.0.1 and for a camera on a real network alike:
 
-**The packet socket.** A process allowed raw sockets (root, or ``CAP_NET_RAW``) gets Aravis's
-packet-socket receiver (``_ring_buffer_loop`` in ``arvgvstream.c``, 0.8.26 and still upstream):
-an ``AF_PACKET`` ring that is mapped and bound to the interface *before* its packet filter is
-attached. Every IP datagram crossing the interface in between — another program's, another
-test's, the camera's own control replies — lands in the ring and is parsed as a stream packet.
-One whose bytes name no content type Aravis can size makes ``_find_frame_data`` take a buffer
-from the pool and return it untouched, status ``cleared``: a "frame" that never was, delivered
-ahead of the real ones (on a loaded machine the window between bind and filter is wide: measured
-with loopback traffic and busy CPUs in ``docs/steady-tests.md``). The ordinary UDP socket bound to
-the stream port receives only datagrams sent to that port, so msflash always asks for it
-(``ARV_GV_STREAM_OPTION_PACKET_SOCKET_DISABLED``). The ring is Aravis's speed-up for cameras
-filling a 10 GbE link; msflash's frames are a few per second.
+**The packet socket.** A process allowed raw sockets gets Aravis's ``AF_PACKET`` ring, bound to the
+interface before its packet filter is attached: any datagram in that window can come out as a ``cleared``
+"frame" that never was (docs/steady-tests.md). The ordinary UDP socket bound to the stream port receives
+only datagrams sent to that port, so msflash always asks for it (``ARV_GV_STREAM_OPTION_PACKET_SOCKET_DISABLED``).
 
-**The socket buffer.** In its default ``auto`` mode Aravis sets the socket's receive buffer to
-one payload. The kernel charges each datagram its whole buffer (on loopback about twice a
-1400-byte packet), so a frame's packets do not fit in one payload's worth and, if the stream
-thread is descheduled for a moment, the excess is dropped — a small frame (the bench's 64x48)
-is hit hardest, since Aravis shrinks the buffer below the system default for it. msflash fixes
-the buffer at :func:`socket_buffer_bytes`: room for about two whole frames, never below 1 MiB
-(the kernel caps it at ``net.core.rmem_max``).
+**The socket buffer.** Aravis's ``auto`` mode sets the receive buffer to one payload, less than the kernel
+charges for a frame's datagrams, so a descheduled stream thread drops packets. msflash fixes it at
+:func:`socket_buffer_bytes`: room for about two whole frames, never below 1 MiB (capped at ``net.core.rmem_max``).
 
 An incomplete frame is still possible (a real link drops packets; the fake never resends): the
 camera reports it as such and never delivers it (:meth:`AravisCamera.next_frame`).
@@ -46,17 +34,8 @@ FRAMES_IN_SOCKET = 4
 
 
 def socket_buffer_bytes(payload: int) -> int:
-    """The receive buffer for a stream of ``payload``-byte frames.
-
-    Parameters
-    ----------
-    payload
-        Bytes in one frame (GenICam ``PayloadSize``).
-
-    Returns
-    -------
-    int
-        ``FRAMES_IN_SOCKET × payload`` clipped to [1 MiB, 64 MiB].
+    """The receive buffer for a stream of ``payload``-byte frames: ``FRAMES_IN_SOCKET × payload`` clipped to
+    [1 MiB, 64 MiB].
 
     Examples
     --------
@@ -69,19 +48,8 @@ def socket_buffer_bytes(payload: int) -> int:
 
 
 def create_gv_stream(camera: Any, payload: int) -> Any:
-    """Create the stream of the GigE Vision ``camera`` on a UDP socket sized for ``payload``.
-
-    Parameters
-    ----------
-    camera
-        An ``Aravis.Camera`` on a GigE Vision device.
-    payload
-        Bytes in one frame.
-
-    Returns
-    -------
-    Aravis.GvStream or None
-        The stream, as ``Aravis.Camera.create_stream`` returns it.
+    """Create the stream of the GigE Vision ``camera`` on a UDP socket sized for ``payload`` (as
+    ``Aravis.Camera.create_stream`` returns it: None possible).
 
     Raises
     ------

@@ -7,12 +7,8 @@ import math
 
 from msflash.acquisition.devices.aravis.feature_access import FeatureAccess
 from msflash.acquisition.devices.aravis.gi_typelib import Aravis, GLib
-from msflash.acquisition.devices.aravis.pixel_layouts import (
-    PIXEL_FORMATS,
-)
-from msflash.acquisition.devices.aravis.profiles import (
-    CameraProfile,
-)
+from msflash.acquisition.devices.aravis.pixel_layouts import PIXEL_FORMATS
+from msflash.acquisition.devices.aravis.profiles import CameraProfile
 from msflash.acquisition.devices.image_format import (
     BINNING_FEATURES,
     IMAGE_FEATURES,

@@ -19,11 +19,6 @@ the same way (their ``Width`` increment); a width that is not is refused, not gu
 
 Pure numpy: no ``gi`` here; :mod:`acquisition.devices.aravis.camera` calls :func:`unpack_pixels` for the
 formats of :data:`PACKED_FORMATS`.
-
-Public objects
---------------
-- :class:`PackedLayout`, :data:`PACKED_FORMATS`: the packed formats decoded, with PFNC codes.
-- :func:`packed_size`, :func:`unpack_pixels`: bytes of one frame, and the frame as ``uint16``.
 """
 
 from __future__ import annotations
@@ -163,16 +158,8 @@ def unpack_pixels(
 ) -> np.ndarray:
     """Decode one frame of a packed format into an owned, read-only ``uint16`` array.
 
-    Parameters
-    ----------
-    data
-        The payload: at least :func:`packed_size` bytes (trailing bytes, e.g. chunk data, are ignored).
-    pixel_format
-        A key of :data:`PACKED_FORMATS`.
-    width, height
-        Frame size in pixels; ``width`` must be a multiple of the packing group (2 or 4 samples).
-    where
-        Prefix of error messages (the camera's name).
+    ``data`` holds at least :func:`packed_size` bytes (trailing chunk data is ignored); ``width`` must be a
+    multiple of the packing group (2 or 4 samples); ``where`` prefixes error messages.
 
     Returns
     -------

@@ -8,9 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
-from msflash.acquisition.errors import (
-    CameraError,
-)
+from msflash.acquisition.errors import CameraError
 
 log = logging.getLogger(__name__)
 
@@ -88,18 +86,8 @@ def _frame_shape(
 def decode_pixels(
     data: bytes | memoryview, pixel_format: str, width: int, height: int, where: str = "decode_pixels"
 ) -> np.ndarray:
-    """Turn an image payload into an owned, read-only array of raw linear values.
-
-    Parameters
-    ----------
-    data
-        The image bytes, at least ``width * height * channels * itemsize`` long.
-    pixel_format
-        A key of :data:`PIXEL_FORMATS`.
-    width, height
-        Image size in pixels.
-    where
-        Prefix of error messages (the camera's name).
+    """Turn an image payload (at least ``width * height * channels * itemsize`` bytes) into an owned,
+    read-only array of raw linear values; ``where`` prefixes error messages.
 
     Returns
     -------
@@ -168,12 +156,10 @@ def view_pixels(
 
 
 def frame_id_gap(previous: int, current: int, wrap: int | None = GV_FRAME_ID_WRAP, skip_zero: bool = True) -> int:
-    """Number of frame ids missing between two consecutive frames.
+    """Number of frame ids missing between two consecutive frames ``previous`` and ``current``.
 
     Parameters
     ----------
-    previous, current
-        Frame ids of two frames delivered one after the other.
     wrap
         Modulus of the counter (``1 << 16`` for GigE Vision 1.x block ids), or ``None`` for a
         counter that does not wrap.

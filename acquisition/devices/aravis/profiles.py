@@ -11,12 +11,8 @@ from msflash.acquisition.devices.aravis.camera_features import (
     CameraOptions,
     options_from_json,
 )
-from msflash.acquisition.devices.aravis.discovery import (
-    PROFILES_JSON,
-)
-from msflash.acquisition.errors import (
-    CameraSettingError,
-)
+from msflash.acquisition.devices.aravis.discovery import PROFILES_JSON
+from msflash.acquisition.errors import CameraSettingError
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.user_files import JSON_MAX_BYTES, printable, read_user_text, shown_path
 

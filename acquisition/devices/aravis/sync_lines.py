@@ -10,9 +10,7 @@ from msflash.acquisition.devices.aravis.camera_records import (
     TriggerConfig,
 )
 from msflash.acquisition.devices.aravis.gain_features import GainFeatures
-from msflash.acquisition.errors import (
-    CameraError,
-)
+from msflash.acquisition.errors import CameraError
 
 log = logging.getLogger(__name__)
 

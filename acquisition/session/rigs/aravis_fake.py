@@ -76,17 +76,11 @@ def open_aravis_fake_rig(
     ``camera_options``: :class:`~acquisition.devices.aravis.camera_features.CameraOptions` (``--gain``,
     ``--gain-raw``, ``--feature``), applied and checked as on the hardware rig before any frame.
 
-    ``rendered`` (the default): the frames are the ``sim`` rig's world (``ambient``,
-    ``scene``, ``seed``, ``camera``, ``n_leds``, ``led_spectra``, ``flash_power`` as for
-    :func:`open_sim_rig`; a chart's patches ``patch_px`` wide, default :data:`ARAVIS_FAKE_PATCH_PX`)
-    rendered by :class:`WiredFakeCamera` into the fake's frames, in :data:`ARAVIS_FAKE_PIXEL_FORMAT`
-    (RGGB) with the ROI the scene's size (``width``/``height`` None or equal to it; the default
-    chart is 200 × 186). The rig records the world's LED spectra, responsivities and true
-    ambient, as the ``sim`` rig does.
-
-    ``lost_packet_ratio``: the fraction of stream packets the fake drops (a congested link).
-    ``rendered`` False: the fake's Mono16 test patterns (64 × 48 by default), the paper's seven LEDs
-    and :data:`AravisFakeNominalCamera` recorded as nominal — the capture bench's transport figures.
+    ``rendered`` (the default): the frames are the ``sim`` rig's world (options as for :func:`open_sim_rig`;
+    patches ``patch_px`` wide) rendered by :class:`WiredFakeCamera` into the fake's frames, in
+    :data:`ARAVIS_FAKE_PIXEL_FORMAT` with the ROI the scene's size (``width``/``height`` None or equal to it),
+    recorded as the ``sim`` rig records it (docs/rigs.md). ``rendered`` False: the fake's Mono16 test patterns,
+    the paper's seven LEDs and :data:`AravisFakeNominalCamera` recorded as nominal (the capture bench).
 
     Raises
     ------

@@ -1,7 +1,6 @@
 """The ``hw`` rig: a GenICam camera through Aravis and a real booth (docs/architecture.md §4).
 
-:class:`~acquisition.devices.hardware_camera.HardwareCamera` around an
-:class:`~acquisition.devices.aravis.camera.AravisCamera` opened by device id, serial or IP on the
+The rig's camera is an :class:`~acquisition.devices.aravis.camera.AravisCamera` opened by device id, serial or IP on the
 given interfaces (default ``usb3``: GigE Vision discovery broadcasts, so ``gige`` only when named,
 and an IP address opens one GigE camera without discovery), and the booth on ``port`` or the
 single one :func:`led_controller.discovery.find_booth` finds. Every device is tried;
@@ -16,16 +15,13 @@ import os
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.devices.sim_world import (
     read_responsivity_file,
     read_spectra_file,
 )
 from msflash.acquisition.errors import CameraNotFoundError, CameraSettingError, RigOpenError, UsageError
 from msflash.acquisition.progress import progress
-from msflash.acquisition.session.rigs.emulated_booth import (
-    close_all,
-)
+from msflash.acquisition.session.rigs.emulated_booth import close_all
 from msflash.acquisition.session.rigs.rig import Rig
 from msflash.led_controller import LedBooth
 from msflash.led_controller.adapters import open_booth
@@ -177,19 +173,14 @@ def open_hw_rig(
     ----------
     camera
         Aravis device id, serial number or IPv4 address; None takes the single camera found on
-        ``interfaces``.
+        ``interfaces`` (``usb3`` by default; ``gige`` broadcasts discovery unless ``camera`` is an IP address).
     port
         The booth's serial port (``/dev/ttyACM0``, a pty path, a pyserial URL); None discovers it.
-    interfaces
-        Aravis interfaces to enable (``usb3`` by default; ``gige`` broadcasts discovery unless
-        ``camera`` is an IP address; ``fake`` is Aravis's in-process test camera).
     calibration, led_spectra, responsivity
         Where the LED spectra and camera responsivities come from (:func:`hw_spectra`).
     sync
         ``host``, ``booth`` or ``camera``: camera master configures a strobe output (Line1 unless
         ``camera_options`` or the camera profile name another line).
-    pixel_format
-        PixelFormat to set, or None to keep the camera's.
     camera_options
         :class:`~acquisition.devices.aravis.camera_features.CameraOptions` (trigger/strobe lines, gain, ROI, binning,
         features), overriding the camera profile's.
@@ -267,8 +258,8 @@ def _hw_rig(
     reference: tuple[str, Path] | None,
     closers: list,
 ) -> Rig:
-    """The hardware rig, recording the camera's gain, its options as read back and a mono camera as such."""
-    hardware = HardwareCamera(aravis, setup)
+    """The hardware rig, recording the camera's gain, its options as read back and a mono camera as such (its
+    (H, W) frames are written as three identical channels)."""
     info = aravis.info
     extra: dict = {"gain": aravis.gain_record()}
     if setup is not None and not setup.options.empty:
@@ -277,5 +268,5 @@ def _hw_rig(
     if responsivities is None:
         extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
     return Rig(
-        "hw", hardware, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono, calibration=reference
+        "hw", aravis, booth, leds, responsivities, None, closers, camera_extra=extra, mono=mono, calibration=reference
     )

@@ -30,7 +30,6 @@ from msflash.acquisition.devices.aravis.camera_features import (
 )
 from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML, use_fake_genicam
 from msflash.acquisition.devices.aravis.profiles import CameraProfile, load_profiles
-from msflash.acquisition.devices.hardware_camera import HardwareCamera
 from msflash.acquisition.errors import CameraSettingError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.reader import read_sequence
@@ -186,13 +185,12 @@ def test_an_roi_outside_the_sensor_names_the_limits(sfnc_fake_camera: Any) -> No
 
 def test_trigger_and_strobe_lines_and_gain_reach_the_camera_when_a_plan_is_prepared(sfnc_fake_camera: Any) -> None:
     camera = sfnc_fake_camera
-    setup = configure_camera(camera, CameraOptions(trigger_line="Line2", strobe_line="Line2", gain_db=6.0), strobe=True)
-    hardware = HardwareCamera(camera, setup)
-    hardware.prepare(CapturePlan.ambient_then_each_led(2, 1000.0, gain=2.0, trigger="booth"))
+    configure_camera(camera, CameraOptions(trigger_line="Line2", strobe_line="Line2", gain_db=6.0), strobe=True)
+    camera.prepare(CapturePlan.ambient_then_each_led(2, 1000.0, gain=2.0, trigger="booth"))
     assert camera.get_feature("TriggerSource") == "Line2" and camera.get_feature("TriggerMode") == "On"
     assert camera.get_feature("LineSelector") == "Line2" and camera.get_feature("LineSource") == "ExposureActive"
     assert camera.gain_db == pytest.approx(6.0 + 20 * 0.30103, abs=1e-3)  # --gain times the step's own gain 2
-    hardware.stop()
+    camera.stop()
 
 
 def test_command_line_options_override_the_profiles(tmp_path: Path, aravis: ModuleType, sfnc_fake_camera: Any) -> None:

@@ -19,6 +19,7 @@ from msflash.acquisition.session.capture import run_capture_with_flash
 from msflash.acquisition.session.flash_session import FlashSession
 from msflash.acquisition.session.rig import open_sim_rig
 from tests.acquisition.support.capture_doubles import FixedFlash
+from tests.helpers import sequence_statistics
 
 
 def _writer(rig, path: Path) -> SequenceWriter:
@@ -326,12 +327,11 @@ def _fed_stack(session):
 )
 def test_flash_session_statistics_are_the_sequence_statistics(sim_rig, tmp_path: Path, levels, saturate) -> None:
     """Frame-by-frame moments (more LED frames than LEDs too) = the batch statistics of the same frames."""
-    from msflash.acquisition.session import analysis
 
     session = _session_and_frames(sim_rig, tmp_path, levels, saturate)
     stack = _fed_stack(session)
     ours = session.statistics()
-    reference = analysis.sequence_statistics(stack, session.header.camera.cfa, session.bin_factor)
+    reference = sequence_statistics(stack, session.header.camera.cfa, session.bin_factor)
     assert ours.n_samples == reference.n_samples and (ours.n_samples < ours.n_total) == (saturate > 0)
     np.testing.assert_allclose(ours.gram, reference.gram, rtol=1e-9, atol=1e-9 * abs(reference.gram).max())
     np.testing.assert_allclose(ours.cross, reference.cross, rtol=1e-9, atol=1e-9 * abs(reference.cross).max())
@@ -464,7 +464,7 @@ def test_mono_frames_are_one_plane_in_the_session_and_three_channels_on_disk(
         recorded = sequence.load_frame(index)
         assert recorded.shape == (info.height, info.width, 3)
         assert all(np.array_equal(recorded[:, :, channel], values) for channel in range(3))
-    reference = analysis.sequence_statistics(analysis.load_frame_stack(sequence), None, session.bin_factor)
+    reference = sequence_statistics(analysis.load_frame_stack(sequence), None, session.bin_factor)
     ours = session.statistics()
     assert ours.n_samples == reference.n_samples < ours.n_total == reference.n_total
     np.testing.assert_allclose(ours.gram, reference.gram, rtol=1e-9, atol=1e-9 * abs(reference.gram).max())

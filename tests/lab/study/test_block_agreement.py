@@ -14,7 +14,8 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from msflash.acquisition.session.analysis import SAMPLE_WEIGHTING, block_factor
+from msflash.acquisition.session.analysis import block_factor
+from msflash.acquisition.session.estimate_stream import SAMPLE_WEIGHTING
 from msflash.lab.bench.processing import benchmark_world
 from msflash.lab.study.block_agreement import (
     Agreement,
