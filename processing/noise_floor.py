@@ -6,8 +6,8 @@ signal is weaker than the noise in some direction (a dim LED, two nearly colline
 ``S − N`` can lose positive definiteness by the probe's own sampling error. :func:`noise_floored` raises each
 such direction's eigenvalue to :data:`NOISE_FLOOR_SHARE` of the noise's along it: the solve stays defined,
 the estimate is not thrown back to the biased observed moments, and a band that inverts the matrix widens
-there. The LEDs' span (:func:`processing.ambient.solved_statistics`) and the light prior
-(:func:`processing.light_prior.solved_moments`) both use it.
+there. The LEDs' span floors its Gram matrix (:func:`processing.ambient.solved_statistics`), the light prior its
+normal matrix (:func:`processing.light_prior.floored_normal_equations`).
 """
 
 from __future__ import annotations
