@@ -38,6 +38,7 @@ import numpy as np
 
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.least_squares import FactoredQuadratic
+from msflash.processing.noise_floor import NOISE_FLOOR_SHARE, noise_floored
 from msflash.processing.scipy_cores import lapack
 from msflash.processing.spectra import Spectra, require_unit
 from msflash.processing.statistics import SequenceStatistics
@@ -704,11 +705,6 @@ def _band_normals(k: int) -> np.ndarray:
     return normals
 
 
-NOISE_FLOOR_SHARE = 0.1
-"""A direction of the denoised Gram matrix whose eigenvalue falls below this share of the noise's along
-it (the LED images hold less signal than noise there) is clipped up to it (:func:`solved_statistics`)."""
-
-
 @dataclass(frozen=True)
 class SolvedStatistics:
     """The statistics eq. 5 is solved on, and what was done to get them."""
@@ -748,15 +744,11 @@ def solved_statistics(statistics: SequenceStatistics, denoised: SequenceStatisti
     clean = statistics.denoised() if denoised is None else denoised
     if clean is None:
         return SolvedStatistics(statistics, "observed")
-    eigenvalues, vectors = np.linalg.eigh(clean.gram)
-    if eigenvalues[0] > 0 and eigenvalues[0] > 1e-12 * eigenvalues[-1]:
+    floored = noise_floored(clean.gram, statistics.gram - clean.gram)
+    if floored is None:
         return SolvedStatistics(clean, "denoised")
-    noise_gram = statistics.gram - clean.gram
-    noise_along = np.einsum("ji,jk,ki->i", vectors, noise_gram, vectors)
-    floor = np.maximum(NOISE_FLOOR_SHARE * noise_along, 1e-12 * max(float(eigenvalues[-1]), 1e-300))
-    low = eigenvalues < floor
-    raised = (vectors * np.where(low, floor, eigenvalues)) @ vectors.T
-    return SolvedStatistics(replace(clean, gram=(raised + raised.T) / 2), "clipped", int(np.count_nonzero(low)))
+    gram, clipped = floored
+    return SolvedStatistics(replace(clean, gram=gram), "clipped", clipped)
 
 
 def estimate_ambient(

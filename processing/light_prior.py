@@ -37,6 +37,7 @@ from msflash.processing.channel_statistics import ChannelStatistics, Moments
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.least_squares import FactoredQuadratic
 from msflash.processing.light_library import light_library, prior_training_lights, without_near_copies
+from msflash.processing.noise_floor import noise_floored
 from msflash.processing.spectra import Spectra, WavelengthGrid, require_unit
 
 LIGHT_DIMS = 16
@@ -302,20 +303,37 @@ class PriorModel:
         return normal_equations(self.predictors, moments)
 
     def solve(
-        self, moments: Moments, n_samples: int, nonnegative: bool = True
+        self, moments: Moments, n_samples: int, nonnegative: bool = True, observed: Moments | None = None
     ) -> tuple[np.ndarray, np.ndarray, float, float]:
-        """``(φ, posterior covariance of φ, λ, σ²)`` from one fold's (denoised) moments."""
-        hessian, linear, energy = self.normal_equations(moments)
+        """``(φ, posterior covariance of φ, λ, σ²)`` from one fold's moments.
+
+        ``moments`` are those φ solves (:func:`solved_moments`: denoised); ``observed`` the same blocks' moments as
+        observed, when they differ. Then the normal matrix is floored where the removed noise exceeds the signal
+        (:func:`floored_normal_equations`), and σ², which sets λ and the band, is the residual per sample on the
+        observed moments: the errors the posterior weighs include the pixel noise the estimate carries, which the
+        denoised moments no longer hold (the LEDs' span takes its band's variance from the observed residual too,
+        :meth:`processing.ambient.AmbientModel.spectrum_band`).
+        """
+        if observed is None:
+            hessian, linear, energy = self.normal_equations(moments)
+            seen = (hessian, linear, energy)
+        else:
+            hessian, linear, energy, _ = floored_normal_equations(self.predictors, moments, observed)
+            seen = self.normal_equations(observed)
         q = hessian.shape[0]
         prior, penalty = self.prior, self.penalty
         n = max(n_samples, q + 1)
+
+        def residual(phi: np.ndarray) -> float:
+            return float(seen[2] - 2 * seen[1] @ phi + phi @ seen[0] @ phi)
+
         # Start: the mean light alone (φ = s (1, μ)), its scale fitted — well determined.
         shape = np.concatenate([[1.0], prior.mean])
         s = float(linear @ shape / max(shape @ hessian @ shape, 1e-300))
         phi = s * shape
         weight = previous = 0.0
         for _ in range(EB_ITERATIONS):
-            rss = max(energy - 2 * linear @ phi + phi @ hessian @ phi, 1e-300 * max(energy, 1e-300))
+            rss = max(residual(phi), 1e-300 * max(seen[2], 1e-300))
             sigma2 = rss / n
             scale2 = max(phi[0] ** 2, 1e-300)
             weight = self.kappa * sigma2 / scale2
@@ -332,8 +350,7 @@ class PriorModel:
         system = hessian + weight * penalty
         if nonnegative:
             phi = _nonnegative(system, linear, prior.basis.values)
-        rss = max(energy - 2 * linear @ phi + phi @ hessian @ phi, 0.0)
-        sigma2 = rss / n
+        sigma2 = max(residual(phi), 0.0) / n
         # The tempered likelihood whose posterior mode this is: errors of variance κσ² (module notes, step 4).
         covariance = self.kappa * sigma2 * np.linalg.pinv(system)
         return phi, covariance, weight, sigma2
@@ -345,13 +362,12 @@ class PriorModel:
     def estimate(self, statistics: ChannelStatistics) -> PriorEstimate:
         """The ambient of a sequence's channel statistics."""
         check_statistics(statistics, self)
-        clean = statistics.denoised(statistics.moments.total())
         n = statistics.n_blocks * statistics.n_channels
-        phi, covariance, weight, _ = self.solve(clean, n)
+        observed = statistics.moments.total()
+        phi, covariance, weight, _ = self.solve(solved_moments(statistics), n, observed=observed)
         basis = self.prior.basis.values
         spectrum = basis @ phi
         std = np.sqrt(np.clip(np.einsum("nm,mj,nj->n", basis, covariance, basis), 0.0, None))
-        observed = statistics.moments.total()
         energy = float(np.trace(observed.aa[0]))
         relative = math.sqrt(self.prediction_error(phi, observed) / energy) if energy > 0 else 0.0
         warnings = []
@@ -371,6 +387,20 @@ class PriorModel:
             n_samples=n,
             warnings=tuple(warnings),
         )
+
+
+def solved_moments(statistics: ChannelStatistics, left_out: int | None = None) -> Moments:
+    """The moments the prior is solved on: all folds' (all but ``left_out``) less *their whole* noise share.
+
+    ``S − N`` summed over the chosen folds (errors in variables, :mod:`processing.channel_statistics`): no noise bias
+    in the normal equations. The moments as observed when no noise was measured. :meth:`PriorModel.solve` floors the
+    normal matrix where the removed noise exceeds the signal (:func:`floored_normal_equations`).
+    """
+    moments = statistics.moments
+    observed = moments.total() if left_out is None else moments.without(left_out)
+    if statistics.noise is None:
+        return observed
+    return observed - (statistics.noise.total() if left_out is None else statistics.noise.without(left_out))
 
 
 def wiener_matrix(sensing: np.ndarray, reflectance: ReflectanceBasis, ridge: float) -> np.ndarray:
@@ -427,6 +457,24 @@ def prediction_error(predictors: np.ndarray, phi: np.ndarray, moments: Moments) 
     """``Σ_b ‖a_b − Σ_m φ_m K_m f_b‖²`` over one fold's moments."""
     hessian, linear, energy = normal_equations(predictors, moments)
     return float(max(energy - 2 * linear @ phi + phi @ hessian @ phi, 0.0))
+
+
+def floored_normal_equations(
+    predictors: np.ndarray, moments: Moments, observed: Moments
+) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """``(H, g, Σ‖a‖², floored)``: :func:`normal_equations` of the denoised ``moments``, H kept positive definite.
+
+    The normal matrix of denoised moments, ``H(S − N)``, loses positive definiteness where the noise probe exceeds
+    the signal along some combination of the light coefficients (a dim or noisy scene). Its noise share is
+    ``H(S) − H(S − N)`` (``observed`` are S); each such direction is raised to a share of the noise along it
+    (:func:`processing.noise_floor.noise_floored`, the rule the LEDs' span applies to its Gram matrix), ``floored``
+    of them. H as it is when it is positive definite (``floored`` 0).
+    """
+    hessian, linear, energy = normal_equations(predictors, moments)
+    floored = noise_floored(hessian, normal_equations(predictors, observed)[0] - hessian)
+    if floored is None:
+        return hessian, linear, energy, 0
+    return floored[0], linear, energy, floored[1]
 
 
 def _nonnegative(hessian: np.ndarray, linear: np.ndarray, basis: np.ndarray) -> np.ndarray:

@@ -14,7 +14,13 @@ import numpy as np
 
 from msflash.processing.ambient import AmbientModel
 from msflash.processing.channel_statistics import ChannelStatistics
-from msflash.processing.light_prior import CHOICE_MARGIN, PriorModel, check_statistics, prediction_error
+from msflash.processing.light_prior import (
+    CHOICE_MARGIN,
+    PriorModel,
+    check_statistics,
+    prediction_error,
+    solved_moments,
+)
 
 ModelName = Literal["led", "prior"]
 
@@ -69,7 +75,7 @@ def held_out_errors(statistics: ChannelStatistics, model: PriorModel, led_method
             continue
         training = [j for j in range(statistics.n_folds) if j != fold]
         n_train = int(statistics.counts[training].sum()) * channels
-        phi, *_ = model.solve(statistics.denoised(statistics.moments.without(fold)), n_train)
+        phi, *_ = model.solve(solved_moments(statistics, fold), n_train, observed=statistics.moments.without(fold))
         weights, _ = led_model.weights(statistics.led_statistics(training), led_method)
         direct = np.einsum("cd,i->cdi", np.eye(channels), weights).reshape(1, channels, channels * k)
         held = statistics.moments.fold(fold)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,18 +15,27 @@ from msflash.acquisition.session.sequence_spectra import camera_responsivities_p
 from msflash.processing import datasets
 from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import estimate_ambient
-from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics, plane_channels
+from msflash.processing.channel_statistics import (
+    ChannelStatistics,
+    Moments,
+    accumulate_channel_statistics,
+    plane_channels,
+)
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.light_library import NEAR_COPY_COSINE, lights_of
 from msflash.processing.light_prior import (
     PriorEstimate,
     PriorModel,
+    floored_normal_equations,
     learn_light_prior,
     learn_reflectance_basis,
+    normal_equations,
     prior_candidate_lights,
     prior_model,
+    solved_moments,
 )
-from msflash.processing.prior_choice import choose_model
+from msflash.processing.noise_floor import NOISE_FLOOR_SHARE
+from msflash.processing.prior_choice import choose_model, held_out_errors
 from msflash.processing.spectra import Spectra, WavelengthGrid
 from msflash.processing.statistics import FrameStackSpec
 from tests.processing import unseen_sequences as us
@@ -199,6 +209,98 @@ def test_light_outside_the_led_span_beats_the_led_bound_rgb_and_bayer(fluorescen
         spectra[cfa] = result.prior.spectrum.values[:, 0]
     # Bayer and RGB frames of one scene give nearly one estimate
     assert us.rmse(spectra["RGGB"], spectra[None]) < 0.05
+
+
+def _noisy_statistics(scale: float = 1.0, noise: float = 0.02, seed: int = 1) -> tuple[ChannelStatistics, PriorModel]:
+    """CIE D65 under three paper LEDs, strong pixel noise (each fold's noise share differs), and its prior model."""
+    leds, camera = _leds((0, 3, 6)), _camera("Nikon D40")
+    light = scale * datasets.illuminant("D65", GRID).to_unit("photons").values[:, 0]
+    surfaces = study_surfaces(GRID.wavelengths_nm)
+    ambient, frames, spec = _scene(light, leds, camera, surfaces, noise=noise, patch=12, seed=seed)
+    statistics = accumulate_channel_statistics(ambient, frames, spec)
+    return statistics, prior_model(statistics.channels, leds, camera)
+
+
+def _solved_on(model: PriorModel, monkeypatch: pytest.MonkeyPatch, run) -> list[tuple]:
+    """The (moments, observed) each call of ``model.solve`` was handed while ``run()`` ran."""
+    seen, solve = [], PriorModel.solve
+
+    def spying(self, moments, n_samples, nonnegative=True, observed=None):
+        seen.append((moments, observed))
+        return solve(self, moments, n_samples, nonnegative, observed)
+
+    monkeypatch.setattr(PriorModel, "solve", spying)
+    run()
+    return seen
+
+
+def _assert_moments_equal(found: Moments, expected: Moments) -> None:
+    for name in ("ff", "fa", "aa"):
+        np.testing.assert_allclose(getattr(found, name), getattr(expected, name), rtol=1e-12, atol=0, err_msg=name)
+
+
+def test_the_prior_is_solved_on_the_moments_less_all_their_noise(monkeypatch: pytest.MonkeyPatch):
+    """Errors in variables: the prior's normal equations are the observed moments less the *whole* noise probe of
+    the blocks they sum — all five folds' for the estimate, the four training folds' for each held-out prediction —
+    and its σ² (λ, the band) is read from the observed residual, which holds the noise the estimate still carries."""
+    statistics, model = _noisy_statistics()
+    moments, noise = statistics.moments, statistics.noise
+    assert noise is not None and not np.allclose(noise.fold(0).ff, noise.total().ff / statistics.n_folds, rtol=0.1)
+    (solved, observed), *_ = _solved_on(model, monkeypatch, lambda: model.estimate(statistics))
+    _assert_moments_equal(solved, moments.total() - noise.total())
+    _assert_moments_equal(observed, moments.total())
+    folds = _solved_on(model, monkeypatch, lambda: held_out_errors(statistics, model))
+    assert len(folds) == statistics.n_folds
+    for fold, (solved, observed) in enumerate(folds):
+        _assert_moments_equal(solved, moments.without(fold) - noise.without(fold))
+        _assert_moments_equal(observed, moments.without(fold))
+
+
+def test_the_prior_estimate_does_not_depend_on_which_band_of_rows_comes_first():
+    """The folds are bands of block rows; the estimate is of the blocks, so listing the bands in another order must
+    not move it. (Denoised by the first fold's noise alone, it moved with that fold's share of the noise.)"""
+    statistics, model = _noisy_statistics()
+    order = np.roll(np.arange(statistics.n_folds), 2)
+
+    def moments_in(moments: Moments) -> Moments:
+        return Moments(moments.ff[order], moments.fa[order], moments.aa[order])
+
+    assert statistics.noise is not None
+    reordered = replace(
+        statistics,
+        moments=moments_in(statistics.moments),
+        noise=moments_in(statistics.noise),
+        counts=statistics.counts[order],
+        led_sums=statistics.led_sums[order],
+        ambient_sums=statistics.ambient_sums[order],
+    )
+    first, second = model.estimate(statistics), model.estimate(reordered)
+    np.testing.assert_allclose(second.spectrum.values, first.spectrum.values, rtol=1e-7, atol=1e-9)
+
+
+def test_a_dim_scene_whose_denoised_normal_matrix_is_indefinite_is_solved_on_a_floored_one():
+    """Where the noise probe exceeds the signal along some combination of light coefficients (a dim, noisy scene)
+    the denoised normal matrix ``H(S − N)`` is indefinite; those directions are raised to a share of the noise along
+    them, as the LEDs' span raises its Gram matrix's (processing.noise_floor), so the prior still solves — and the
+    matrix is untouched wherever the signal dominates."""
+    statistics, model = _noisy_statistics(scale=0.01, noise=0.05, seed=2)
+    observed, solved = statistics.moments.total(), solved_moments(statistics)
+    clean = normal_equations(model.predictors, solved)[0]
+    noise = normal_equations(model.predictors, observed)[0] - clean
+    eigenvalues, vectors = np.linalg.eigh(clean)
+    assert eigenvalues[0] < 0  # the case this test is about
+    hessian, _, _, floored = floored_normal_equations(model.predictors, solved, observed)
+    assert floored > 0 and np.linalg.eigvalsh(hessian)[0] > 0
+    noise_along = np.einsum("ji,jk,ki->i", vectors, noise, vectors)
+    kept = eigenvalues >= NOISE_FLOOR_SHARE * noise_along
+    assert np.count_nonzero(~kept) == floored
+    np.testing.assert_allclose(
+        vectors[:, kept].T @ hessian @ vectors[:, kept], np.diag(eigenvalues[kept]), atol=1e-9 * eigenvalues[-1]
+    )
+    estimate = model.estimate(statistics)
+    assert np.all(np.isfinite(estimate.spectrum.values)) and np.all(np.isfinite(estimate.spectrum_std))
+    errors = held_out_errors(statistics, model)
+    assert np.all(np.isfinite([errors.led, errors.prior, errors.led_observed, errors.prior_observed]))
 
 
 def test_choice_keeps_the_leds_when_the_ambient_is_in_their_span():
