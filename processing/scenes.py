@@ -156,14 +156,12 @@ def chart_scene(
     return Scene(surfaces, labels, specular=specular, specular_gain=specular_gain)
 
 
-def mosaic_scene(
-    reflectances: Spectra, seed: int = 0, min_patches: int = 24, patch_px: int = 8, specular_strip_px: int = 0
-) -> Scene:
-    """A chart of any surfaces in random order: every surface at least once, repeated to ``min_patches``.
+def mosaic_scene(reflectances: Spectra, seed: int = 0, patch_px: int = 8, specular_strip_px: int = 0) -> Scene:
+    """A chart of any surfaces in random order: every surface at least once, repeated to 24 patches.
 
     The layout is :func:`chart_scene`'s (square patches on a dark border, a highlight strip if
     asked); which surface each patch shows is drawn with ``seed``. Fewer surfaces than
-    ``min_patches`` are repeated (each as often as the others, ±1), so a scene of three surfaces
+    24 are repeated (each as often as the others, ±1), so a scene of three surfaces
     still has a chart's area. The estimator's accuracy depends on the number of *distinct* surfaces
     (the paper's Fig. 5), not on the repeats.
 
@@ -181,9 +179,7 @@ def mosaic_scene(
     ([0, 1, 2], ('a', 'b', 'border'))
     """
     n = reflectances.count
-    if min_patches < 1:
-        raise SpectralDataError(f"mosaic_scene: min_patches {min_patches}; expected ≥ 1")
-    patches = max(n, min_patches)
+    patches = max(n, 24)
     order = np.random.default_rng(seed).permutation(np.resize(np.arange(n), patches))
     chart = chart_scene(reflectances.select(order.tolist()), patch_px=patch_px, specular_strip_px=specular_strip_px)
     # chart_scene's patch k shows column k of the selection, i.e. surface order[k]; the border follows.
