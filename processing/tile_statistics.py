@@ -57,8 +57,8 @@ class BlockData:
     raw: np.ndarray = field(repr=False)
     """(n_frames + 2, h, w, C) block sums of the rows [F_1 … F_n, A, 1] (invalid blocks zeroed)."""
     differences: np.ndarray | None = field(repr=False)
-    """(n_frames + 2, h, w, C) the blocks' even-column sums minus their odd-column sums (the ones row 0,
-    invalid blocks zeroed): the noise probe of :attr:`TiledStatistics.denoised`. None for odd bin factors."""
+    """(n_frames + 2, h, w, C) the blocks' checkerboard half differences (the ones row 0, invalid blocks zeroed):
+    the noise probe of :attr:`TiledStatistics.denoised`. None for odd bin factors."""
     valid: np.ndarray = field(repr=False)
     """(h, w) blocks without a saturated member."""
     spec: FrameStackSpec
@@ -97,17 +97,10 @@ class TiledStatistics:
     blocks: BlockData | None = field(default=None, repr=False, compare=False)
     """The binned samples themselves (for region segmentation); None when built from moments only."""
     denoised: TiledStatistics | None = field(default=None, repr=False, compare=False)
-    """The same tiles with the noise's contribution to their moments removed, or None (odd bin factors).
-
-    The LED-only images are differences of noisy frames, so ``GᵀG``-type moments are biased by the
-    noise variance (eq. 5 regresses on noisy regressors: errors in variables). Each block's columns
-    are split into two interleaved halves with independent noise; with ``x = x₁ + x₂`` the block's
-    row of sums and ``d = x₁ − x₂``, ``E[d dᵀ]`` holds the noise covariance of ``x`` (plus the
-    halves' texture difference), and ``Σ (x xᵀ − d dᵀ) = 2 Σ (x₁ x₂ᵀ + x₂ x₁ᵀ)`` is a cross-product
-    of independent halves: the estimating equations of eq. 5 on these moments have no noise bias (an
-    instrumental-variable estimate; no noise model needed). The valid-sample counts and sums are the
-    tiles' own. :func:`estimate_local` solves the local model on them; :func:`denoised_global`
-    gives the global model's estimate on them."""
+    """The same tiles with the noise's contribution to their moments removed (``Σ (x xᵀ − d dᵀ)``, the half-difference
+    probe of :mod:`processing.block_rows`' module notes), or None (odd bin factors). The valid-sample counts and sums
+    are the tiles' own. :func:`estimate_local` solves the local model on them; :func:`denoised_global` gives the
+    global model's estimate on them."""
 
     @property
     def shape(self) -> tuple[int, int]:
