@@ -3,7 +3,7 @@
 Public objects
 --------------
 - :func:`demosaic_superpixel` (half resolution, exact) and :func:`demosaic_bilinear` (full
-  resolution, the paper's figures), :data:`DEMOSAIC_METHODS` and :func:`demosaic`.
+  resolution, the paper's figures).
 - :func:`reflectances_to_xyz`: CIE 1931 XYZ of surfaces under an illuminant (white Y = 1).
 - :func:`camera_to_xyz_matrix`: the 3×3 camera → XYZ matrix fitted on a chart.
 - :func:`camera_to_srgb_linear`: camera RGB → linear sRGB, with optional von Kries white balance.
@@ -109,17 +109,6 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str) -> np.ndarray:
         weight = convolve(present, kernel, mode="mirror")
         planes.append(np.where(present > 0, values, total / np.maximum(weight, 1e-12)))
     return np.stack(planes, axis=-1)
-
-
-DEMOSAIC_METHODS = {"superpixel": demosaic_superpixel, "bilinear": demosaic_bilinear}
-"""Demosaicking methods by name: ``superpixel`` (half resolution) and ``bilinear`` (full)."""
-
-
-def demosaic(mosaic: np.ndarray, cfa: str, method: str = "bilinear") -> np.ndarray:
-    """Demosaic with a method of :data:`DEMOSAIC_METHODS`."""
-    if method not in DEMOSAIC_METHODS:
-        raise ValueError(f"demosaic method '{method}' is unknown; expected one of {', '.join(DEMOSAIC_METHODS)}")
-    return DEMOSAIC_METHODS[method](mosaic, cfa)
 
 
 def _observer(grid: WavelengthGrid) -> np.ndarray:
