@@ -198,7 +198,6 @@ def segment_regions(
     alpha: float,
     solver: str = "tikhonov",
     solver_alpha: float | str = "auto",
-    cells: Cells | None = None,
     noise_correction: bool = True,
 ) -> RegionSegmentation | None:
     """Split the frame into two ambient regions and estimate each from all of its blocks.
@@ -215,13 +214,12 @@ def segment_regions(
        probe) these are the denoised statistics (:attr:`TiledStatistics.denoised`); labelling uses
        the statistics as observed.
 
-    ``cells`` are the tiles' :class:`Cells` when already built. Returns None when the tiles hold no
-    block data (statistics built from moments only).
+    Returns None when the tiles hold no block data (statistics built from moments only).
     """
     blocks = tiles.blocks
     if blocks is None or not blocks.valid.any():
         return None
-    cells = Cells.of(blocks) if cells is None else cells
+    cells = Cells.of(blocks)
     if not cells.valid.any():
         return None
     roughness = np.diff(led_spectra.values, axis=0)

@@ -388,7 +388,6 @@ def tile_statistics(
     *,
     bin_factor: int = 1,
     cfa_period: int = 1,
-    workers: int = DEFAULT_WORKERS,
     weighting: bool = False,
 ) -> TiledStatistics:
     """The statistics of eq. 4–6 of every tile of a ``tiles`` grid, in one pass over the frames (:class:`TileBlocks`).
@@ -405,9 +404,6 @@ def tile_statistics(
         Tiles per side, or (rows, columns).
     bin_factor, cfa_period
         Block size, and 2 for Bayer mosaics.
-    workers
-        Threads sharing the frames' block sums and the tiles' moments (1: the calling thread). The
-        statistics do not depend on it.
     weighting
         Inverse-variance sample weights, the global statistics' (:mod:`processing.statistics`, module
         notes; even bin factors only): the tiles then sum to the weighted global statistics, and
@@ -436,8 +432,8 @@ def tile_statistics(
     # The frames are independent: numpy releases the GIL in the sums (as in the global statistics' pass).
     rows = range(len(frames))
     add = lambda row: accumulator.add_frame(row, frames[row])  # noqa: E731
-    list(thread_pool(workers).map(add, rows) if workers > 1 else map(add, rows))
-    return accumulator.statistics(spec, tiles, workers)
+    list(thread_pool(DEFAULT_WORKERS).map(add, rows) if DEFAULT_WORKERS > 1 else map(add, rows))
+    return accumulator.statistics(spec, tiles)
 
 
 def linear_projection(spec: FrameStackSpec) -> np.ndarray:
