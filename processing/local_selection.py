@@ -74,9 +74,9 @@ def select_model(
     tiles: TiledStatistics,
     led_spectra: Spectra,
     alpha: float | None = None,
-    margin: float = SELECTION_MARGIN,
 ) -> ModelSelection:
-    """Choose between the global and local models (:data:`SMOOTHING_GRID`) by leave-one-tile-out prediction error.
+    """Choose between the global and local models (:data:`SMOOTHING_GRID`) by leave-one-tile-out prediction error:
+    a local one must beat the global by :data:`SELECTION_MARGIN` and :data:`MIN_EXPLAINED_GAIN`.
 
     Parameters
     ----------
@@ -85,8 +85,6 @@ def select_model(
     alpha
         Dimensionless roughness weight of the scoring fits; None chooses it by GCV on the global
         statistics.
-    margin
-        Relative improvement over the global model a local one must exceed (and :data:`MIN_EXPLAINED_GAIN`).
     """
     roughness = np.diff(led_spectra.values, axis=0)
     penalty = roughness.T @ roughness
@@ -114,13 +112,13 @@ def select_model(
         if score < best_score:
             best_sigma, best_score = float(sigma), score
     explained_gain = (1.0 - best_score) * global_error / max(float(tiles.ambient_energy.sum()), 1e-300)
-    chosen = "local" if best_score < 1.0 - margin and explained_gain > MIN_EXPLAINED_GAIN else "global"
+    chosen = "local" if best_score < 1.0 - SELECTION_MARGIN and explained_gain > MIN_EXPLAINED_GAIN else "global"
     return ModelSelection(
         model=chosen,
         smoothing=best_sigma if chosen == "local" else None,
         scores=scores,
         best_local=best_sigma,
-        margin=margin,
+        margin=SELECTION_MARGIN,
         explained_gain=float(explained_gain),
     )
 
