@@ -26,7 +26,13 @@ from msflash.processing.block_sums import (
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.moment_products import DEFAULT_WORKERS, thread_pool
 from msflash.processing.noise_level import PixelNoise, ambient_block_noise, detail_noise_line
-from msflash.processing.statistics import FrameStackSpec, NoiseMoments, SequenceStatistics, non_finite_frames_error
+from msflash.processing.statistics import (
+    FrameStackSpec,
+    NoiseMoments,
+    SequenceStatistics,
+    channel_transform,
+    non_finite_frames_error,
+)
 
 DEFAULT_TILES = 8
 """Tiles per side of the frame (8 × 8 = 64 tiles)."""
@@ -436,27 +442,11 @@ def tile_statistics(
     return accumulator.statistics(spec, tiles)
 
 
-def linear_projection(spec: FrameStackSpec) -> np.ndarray:
-    """(k + 1, R) linear map of the raw rows [F_1 … F_n, A, 1] to [f_1 … f_k, a] (LED images at full drive, ambient)."""
-    n_led_frames = len(spec.led_scales)
-    scales = np.asarray(spec.led_scales, dtype=float)
-    black = float(spec.black_level)
-    # d_j = s_j (F_j − b) − s_a (A − b), a = s_a (A − b): a linear map of the raw rows.
-    transform = np.zeros((n_led_frames + 1, n_led_frames + 2))
-    transform[:n_led_frames, :n_led_frames] = np.diag(scales)
-    transform[:n_led_frames, n_led_frames] = -spec.ambient_scale
-    transform[:n_led_frames, n_led_frames + 1] = (spec.ambient_scale - scales) * black
-    transform[n_led_frames, n_led_frames] = spec.ambient_scale
-    transform[n_led_frames, n_led_frames + 1] = -spec.ambient_scale * black
-    # Unmixed LED images at full drive (pinv of the levels) and the ambient: one (k + 1, R) map.
-    return np.vstack([spec.unmixing @ transform[:n_led_frames], transform[n_led_frames:]])
-
-
 def tiled_from_moments(
     moments: np.ndarray, totals: np.ndarray, spec: FrameStackSpec, row_edges: np.ndarray, column_edges: np.ndarray
 ) -> TiledStatistics:
     """Tiled statistics from raw moments of the rows [F_1 … F_n, A, 1] (one (R, R) matrix per tile)."""
-    projection = linear_projection(spec)
+    projection = channel_transform(spec, float(spec.black_level))
     k = projection.shape[0] - 1
     linear = np.matmul(np.matmul(projection, moments), projection.T)  # (…, k + 1, k + 1)
     sums = moments[..., :, -1] @ projection.T
