@@ -211,7 +211,6 @@ def exposure_for_peak(
     sensor: SensorModel,
     fraction: float = 0.95,
     gain: float = 1.0,
-    scale: float = 1.0,
 ) -> float:
     """The exposure (µs) putting the brightest expected pixel value at ``fraction`` of full scale.
 
@@ -228,7 +227,7 @@ def exposure_for_peak(
     metered = scene
     if scene.specular is not None:
         metered = Scene(scene.reflectances, scene.labels, scene.shading, None)
-    response = expected_response(metered, illuminant, camera_responsivities, 1.0, 1.0, scale)
+    response = expected_response(metered, illuminant, camera_responsivities, 1.0)
     if scene.specular is not None:
         response = response[~scene.specular]
     peak = float(np.max(response)) if response.size else 0.0
