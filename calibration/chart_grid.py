@@ -91,6 +91,12 @@ class ChartGrid:
     def _basis(self) -> np.ndarray:
         return np.column_stack([self.column_step_xy, self.row_step_xy]).astype(float)
 
+    def patch_centres(self) -> np.ndarray:
+        """Centres (x, y) of the patches in chart order (column by column), shape (rows·columns, 2)."""
+        k = np.arange(self.rows * self.columns)
+        lattice = np.column_stack([k // self.rows, k % self.rows]).astype(float)
+        return lattice @ self._basis().T + np.asarray(self.origin_xy)
+
     def labels(self, shape: tuple[int, int], margin_px: int = 1, excluded: np.ndarray | None = None) -> np.ndarray:
         """Patch index of every usable pixel (−1 elsewhere), like a given layout's label map.
 
