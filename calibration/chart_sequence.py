@@ -123,15 +123,15 @@ class ChartMeasurements:
     rows of unknown power g (a broadband light, or the LEDs of a later sequence)."""
     group_names: tuple[str, ...]
     """Name of each unknown-power group (``sequence index: light`` or ``sequence index: LEDs``)."""
-    frames: tuple[dict[str, Any], ...] = field(default=())
+    frames: tuple[dict[str, Any], ...]
     """Per used frame: sequence, file, light, patches used."""
-    frame: np.ndarray | None = None
+    frame: np.ndarray
     """(rows,) index into ``frames`` of each row."""
-    patch: np.ndarray | None = None
+    patch: np.ndarray
     """(rows,) chart patch of each row."""
-    positions: np.ndarray | None = None
+    positions: np.ndarray
     """(rows, 2) the row's patch in the chart (column, row), in patch pitches: where the light field is evaluated."""
-    sequence: np.ndarray | None = None
+    sequence: np.ndarray
     """(rows,) the sequence of each row."""
 
 
@@ -367,8 +367,6 @@ def _worst_patches(
     m: ChartMeasurements, model: np.ndarray, patch_names: Sequence[str] | None, count: int = MISFIT_PATCHES
 ) -> str:
     """The patches whose means the model misses most, relative to their signal: ``'Red' 14 %, …``."""
-    if m.patch is None:
-        return ""
     misses = []
     for patch in np.unique(m.patch):
         rows = m.patch == patch
@@ -420,9 +418,7 @@ def estimate_from_measurements(
         except CalibrationError as err:
             flat_misfit = tuple(float(v) for v in getattr(err, "residuals", ())) or None
     m = measurements
-    joint = _JointFit(
-        m, method, prior, light_field == "quadratic" and m.sequence is not None and m.positions is not None
-    )
+    joint = _JointFit(m, method, prior, light_field == "quadratic")
     fit, state, iterations = joint.solve()
     scales, theta = joint.unpack(state)
     gains = joint.gains_of(theta)
@@ -435,7 +431,6 @@ def estimate_from_measurements(
             else None
             for f in range(len(m.frames))
         ]
-        assert m.positions is not None
         report["terms"] = [f"u^{i} v^{j}" for i, j in field_terms(m.positions)]
     estimate = fit.normalised(m.grid, f"estimated from {len(m.frames)} chart frames ({method})")
     return SequenceCalibration(estimate, dict(zip(m.group_names, map(float, scales), strict=True)), iterations, report)
@@ -453,9 +448,9 @@ class _JointFit:
         self.known = m.group < 0
         self.n_groups = len(m.group_names)
         # One field per sequence: a lens's falloff and the booth's geometry light every frame of it alike.
-        self.frame = m.frame if m.frame is not None else np.zeros(len(m.group), dtype=int)
-        self.field_of = m.sequence if m.sequence is not None else np.zeros(len(m.group), dtype=int)
-        self.basis = field_basis(m.positions, self.field_of) if fielded and m.positions is not None else None
+        self.frame = m.frame
+        self.field_of = m.sequence
+        self.basis = field_basis(m.positions, self.field_of) if fielded else None
         self.theta_shape = (int(self.field_of.max()) + 1, self.basis.shape[1] if self.basis is not None else 0)
 
     def unpack(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

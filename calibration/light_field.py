@@ -32,21 +32,21 @@ MAX_LOG_GAIN = 1.5
 """The field is clipped to ``exp(±1.5)``: a wilder fit is no light field but a misfit."""
 
 
-def field_terms(positions: np.ndarray, degree: int = FIELD_DEGREE) -> list[tuple[int, int]]:
-    """The powers ``(i, j)`` of ``u^i v^j`` in the field: ``0 < i + j ≤ degree``, and no power of an
+def field_terms(positions: np.ndarray) -> list[tuple[int, int]]:
+    """The powers ``(i, j)`` of ``u^i v^j`` in the field: ``0 < i + j ≤`` :data:`FIELD_DEGREE`, and no power of an
     axis beyond what the chart's distinct places along it determine (4 rows: v³ at most)."""
     positions = np.asarray(positions, dtype=float)
     distinct = [len(np.unique(np.round(positions[:, a], 6))) for a in (0, 1)]
     return [
         (i, j)
-        for total in range(1, degree + 1)
+        for total in range(1, FIELD_DEGREE + 1)
         for i in range(total, -1, -1)
         for j in (total - i,)
         if i < distinct[0] and j < distinct[1]
     ]
 
 
-def field_basis(positions: np.ndarray, frame: np.ndarray, degree: int = FIELD_DEGREE) -> np.ndarray:
+def field_basis(positions: np.ndarray, frame: np.ndarray) -> np.ndarray:
     """The field's terms at each row's patch, (rows, terms), zero mean over each field's patches.
 
     Parameters
@@ -55,14 +55,12 @@ def field_basis(positions: np.ndarray, frame: np.ndarray, degree: int = FIELD_DE
         (rows, 2) each row's patch place (column, row) in pitches.
     frame
         (rows,) the field each row belongs to: the mean is taken per field, over its rows.
-    degree
-        Highest total power of the polynomial in ``(u, v)``.
     """
     positions = np.asarray(positions, dtype=float)
     low, high = positions.min(axis=0), positions.max(axis=0)
     scaled = (2 * (positions - low) / np.where(high > low, high - low, 1.0)) - 1.0
     u, v = scaled[:, 0], scaled[:, 1]
-    basis = np.column_stack([u**i * v**j for i, j in field_terms(positions, degree)])
+    basis = np.column_stack([u**i * v**j for i, j in field_terms(positions)])
     for f in np.unique(frame):
         rows = frame == f
         basis[rows] -= basis[rows].mean(axis=0)

@@ -165,17 +165,12 @@ def out_of_band_baseline(wavelengths_nm: np.ndarray, values: np.ndarray) -> Base
     return Baseline(baseline, float(np.mean(baseline[tail])), sigma, standard_error, tail, _span(wavelengths, tail))
 
 
-def _integration_times(measurement: SpectrometerMeasurement, dark: SpectrometerMeasurement) -> tuple[float, float]:
-    t, t_dark = measurement.settings.integration_time_s, dark.settings.integration_time_s
-    assert t is not None and t_dark is not None
-    return t, t_dark
-
-
 def _dark_at_time(
     measurement: SpectrometerMeasurement, dark: SpectrometerMeasurement
 ) -> tuple[np.ndarray, dict[str, object]]:
     """The dark brought to the export's integration time (see the module notes), and how."""
-    t, t_dark = _integration_times(measurement, dark)
+    t, t_dark = measurement.settings.integration_time_s, dark.settings.integration_time_s
+    assert t is not None and t_dark is not None  # _minus_dark calls it only when both are stated
     ratio = t / t_dark
     if abs(ratio - 1) <= SAME_TIME:
         return dark.values, {"method": "dark export", "dark": dark.source, "dark_integration_time_s": t_dark}

@@ -44,11 +44,10 @@ def simulate_chart_responses(
     camera: Spectra,
     chart: Spectra,
     lights: Spectra,
-    sensor: SensorModel | None = None,
-    patch_px: int = 12,
     rng: np.random.Generator | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Render the chart under each light alone and return linear patch means and standard errors.
+    """Render the chart (12-pixel patches, the default :class:`SensorModel`) under each light alone and return
+    linear patch means and standard errors.
 
     Each light gets its own exposure (brightest patch at 90 % of full scale); values are
     ``(mean − black) / exposure`` so all lights share one scale.
@@ -58,9 +57,9 @@ def simulate_chart_responses(
     tuple
         ``(responses, std)``, each (n_lights, n_patches, 3).
     """
-    sensor = sensor or SensorModel()
+    sensor = SensorModel()
     rng = rng if rng is not None else np.random.default_rng(0)
-    scene = chart_scene(chart, patch_px=patch_px)
+    scene = chart_scene(chart, patch_px=12)
     labels = usable_labels(scene.labels, margin_px=1)
     responses = np.empty((lights.count, chart.count, 3))
     std = np.empty_like(responses)

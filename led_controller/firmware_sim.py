@@ -120,12 +120,11 @@ class SimulatedBooth:
     elf
         The firmware image (built by :func:`build`), with ``channels`` (``CH=``) and PWM ``top``
         (``(1 << BITS) - 1``).
-    auto_reset
-        Whether a host's open of :attr:`port` resets the MCU, as a stock Mega's does: the
-        bootloader then swallows the host's bytes for ``bootloader_s`` of wall-clock time before
-        the firmware boots (``led_controller/usb_link.py``; the simavr bridge models it in C).
-    latency_s
-        The USB-serial chip's latency timer holding short replies (0: none).
+    bootloader_s
+        A host's open of :attr:`port` resets the MCU, as a stock Mega's does: the bootloader then
+        swallows the host's bytes for this long (wall-clock) before the firmware boots
+        (``led_controller/usb_link.py``; the simavr bridge models it in C). Short replies wait for
+        the USB-serial chip's latency timer (:data:`FTDI_LATENCY_S`).
     eeprom
         A file keeping the MCU's EEPROM (the booth's serial) across runs of the simulator.
     """
@@ -136,15 +135,12 @@ class SimulatedBooth:
         *,
         channels: int = 7,
         top: int = 0xFFFF,
-        auto_reset: bool = True,
         bootloader_s: float = MEGA_BOOTLOADER_S,
-        latency_s: float = FTDI_LATENCY_S,
         eeprom: Path | None = None,
     ) -> None:
         self._top = top
         self._channels = channels
-        link = [] if auto_reset else ["--no-auto-reset"]
-        link += ["--bootloader-ms", str(round(bootloader_s * 1000)), "--latency-us", str(round(latency_s * 1e6))]
+        link = ["--bootloader-ms", str(round(bootloader_s * 1000)), "--latency-us", str(round(FTDI_LATENCY_S * 1e6))]
         if eeprom is not None:
             link += ["--eeprom", str(eeprom)]
         self._process = subprocess.Popen(

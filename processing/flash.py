@@ -9,8 +9,7 @@ objective small terms that only choose among (near-)optimal solutions:
   for every surface and observer, not only for the camera on white), then rescales to
   ``max(w_f) = 1`` (most light, same colour cast);
 - **complementary** prefers the least total LED power ``Σ w_f`` (less heat, less glare, least
-  noise added), then the smallest change from ``previous_weights`` (a stable mix from frame
-  to frame).
+  noise added).
 
 The tie-break weights are :data:`TIE_BREAK` and :data:`TIE_BREAK_CHANGE` relative to the problem's scale: far below any visible
 change in the objective, far above round-off.
@@ -41,8 +40,7 @@ FlashBounds = Literal["physical", "nonnegative", "free"]
 TIE_BREAK = 1e-6
 """Relative weight of the first tie-break (spectral closeness; least total power)."""
 TIE_BREAK_CHANGE = 1e-8
-"""Relative weight of the second tie-break (change from the previous mix) and of the ridge that
-keeps the rank-3 camera problems strictly convex."""
+"""Relative weight of the ridge that keeps the rank-3 camera problems strictly convex."""
 UNREACHABLE_RELATIVE_ERROR = 0.02
 """Relative camera-space error ``‖A(w_a + w_f) − s t‖ / ‖s t‖`` above which the target counts as not reached."""
 MATCHING_ROUND_OFF = 1e-7
@@ -217,7 +215,6 @@ class FlashModel:
         ambient_weights: np.ndarray,
         target: Spectra | np.ndarray,
         bounds: FlashBounds = "physical",
-        previous_weights: np.ndarray | None = None,
     ) -> FlashSolution:
         """Complementary flash, eq. 8–9 (see :func:`solve_complementary`); ``target`` may be ``Cᵀ i_d``."""
         ambient_weights = np.asarray(ambient_weights, dtype=float)
@@ -232,7 +229,6 @@ class FlashModel:
         # the target's response unit norm: the tie-break weights are then relative.
         unit = max(_norm(ambient_response), self._full_flash_norm * 1e-3, 1e-300)
         t_vector = target_response / target_norm
-        previous = None if previous_weights is None else np.asarray(previous_weights, dtype=float)
 
         def solve(weight_bounds: str, fixed_scale: float | None) -> tuple[np.ndarray, float]:
             if fixed_scale is None:
@@ -242,8 +238,6 @@ class FlashModel:
                 hessian = design.T.dot(design)
                 hessian += _ridge(k + 1)
                 linear = design.T.dot(ambient_response / -unit)  # −(a/u) and a/(−u): the same bits
-                if previous is not None:
-                    linear[:k] += TIE_BREAK_CHANGE * previous
                 if weight_bounds != "free":
                     linear -= self._power_tie_break  # least total power first
                 x = self._complementary_rows[weight_bounds].with_hessian(hessian).minimise(linear).x
@@ -253,8 +247,6 @@ class FlashModel:
             hessian = a_matrix.T @ a_matrix
             hessian += _ridge(k)
             linear = a_matrix.T @ (fixed_scale * t_vector - ambient_response / unit)
-            if previous is not None:
-                linear += TIE_BREAK_CHANGE * previous
             x = minimise_quadratic(hessian, linear, constraints, limits, where="complementary flash").x
             return x, fixed_scale
 
@@ -327,7 +319,6 @@ def solve_complementary(
     camera_responsivities: Spectra,
     target: Spectra,
     bounds: FlashBounds = "physical",
-    previous_weights: np.ndarray | None = None,
 ) -> FlashSolution:
     """Complementary flash, eq. 8–9: ``min ‖Cᵀ I (w_a + w_f) − s Cᵀ i_d‖`` over ``w_f`` and ``s ≥ 0``.
 
@@ -341,17 +332,13 @@ def solve_complementary(
         The desired illuminant ``i_d`` (one spectrum, photons, same grid); D65 in the paper.
     bounds
         ``physical`` (0 ≤ w_f ≤ 1), ``nonnegative`` or ``free`` (see the module notes).
-    previous_weights
-        The previous mix, for the second tie-break (default: no preference).
 
     Warns
     -----
     TargetUnreachableWarning
         When ambient + flash cannot be brought to the target's colour within the bounds.
     """
-    return FlashModel(led_spectra, camera_responsivities).complementary(
-        ambient_weights, target, bounds, previous_weights
-    )
+    return FlashModel(led_spectra, camera_responsivities).complementary(ambient_weights, target, bounds)
 
 
 def _chromatic_error(response: np.ndarray, wanted: np.ndarray) -> float:

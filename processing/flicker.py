@@ -20,24 +20,14 @@ extra frame, so it works in every sync mode and on sequences already recorded.
 (:func:`with_ambient_gains`): ``G' = G − e cᵀ − c eᵀ + E e eᵀ``, ``c' = c − E e`` (``E = ‖a‖²``), the noise moments alike.
 
 **Every model, one correction.** Every statistic a model is fitted through is linear in the LED-only images, so the
-same ``e`` corrects them all exactly, computed once from the whole frame and applied upstream of every model
-(:func:`corrected_channel_statistics`: the light prior's and the families' per-channel, per-fold moments,
-``f_(c,i) = f̃_(c,i) − e_i a_c``; :func:`corrected_tiles`: the local model's tiles, their noise-free part and the
-block rows the regions are segmented from). Sample weights (from the ambient frame) and saturated blocks (from the
-raw frames) do not depend on the ambient's share of an LED frame, so the corrected statistics are those of LED
-frames from which the extra ambient had been subtracted pixel by pixel (tests/processing/test_flicker_models.py).
+same ``e``, read once from the whole frame, corrects them all exactly upstream of every model
+(:func:`corrected_channel_statistics`, :func:`corrected_tiles`; why exact: docs/flicker.md).
 
-**Deciding.** The colour read is biased where a surface's reflectance curves inside an LED's band and the camera
-turns that into colour the two directions do not hold, correlated with the ambient's (an amber LED where R and G
-cross reads up to 0.4 under steady light): each LED's sigma adds to the noise's :data:`MODEL_ERROR`,
-:data:`CURVATURE_ERROR` times its :func:`curvature_share`, and :data:`RESIDUAL_ERROR` times the colour the ambient
-leaves unexplained in its image (what the scene itself says of the read's bias), set on the harness's tuning lamp
-kinds under steady light (docs/flicker.md). Flicker is detected
-when some LED's ``|ê_i|`` exceeds :data:`DETECTION_Z` sigmas; the statistics are then corrected by every ``ê_i`` as
-read (not shrunk towards 0: a share left in the LED images costs the light models far more than the LED model,
-docs/decisions/flicker-every-model.md). What was read is reported in every case
-(:class:`FlickerCheck`). Frame timestamps and exposures, when the sequence has them, fit the mains frequency and
-phase to the gains (:func:`fit_mains`) for the report only.
+**Deciding.** Each LED's sigma adds to the noise the read's bias (:data:`MODEL_ERROR`, :data:`CURVATURE_ERROR`,
+:data:`RESIDUAL_ERROR`). Flicker is detected when some LED's ``|ê_i|`` exceeds :data:`DETECTION_Z` sigmas; the
+statistics are then corrected by every ``ê_i`` as read (not shrunk towards 0: docs/decisions/flicker-every-model.md).
+What was read is reported in every case (:class:`FlickerCheck`); frame timestamps and exposures, when the sequence
+has them, fit the mains frequency and phase to the gains (:func:`fit_mains`) for the report only.
 """
 
 from __future__ import annotations
@@ -67,11 +57,8 @@ RESIDUAL_ERROR = 0.75
 """The read's bias per unit of the LED image's colour off its two directions that the ambient does not explain,
 relative to the ambient's colour off them (``√(R_i / A_i)``, :func:`ambient_gain_offsets`; one sigma). What the
 scene itself says of the read: that colour is the surfaces' curvature inside the band, and where it correlates with
-the ambient's the read takes it for ambient (an amber LED where a camera's R and G cross read 0.39 under a steady
-sodium lamp, at 2.7 of the old sigmas, and 0.48 once the lamp flickered: docs/flicker.md). The three constants were
-set on the harness's tuning lamp kinds, steady, to keep every read within 2σ (two thirds of :data:`DETECTION_Z`;
-1.4σ at most with these), the curvature's raised from 0.2 to 0.3 because 0.2 raised a false alarm on the ``sim``
-rig's steady run of seed 6 (an LED read 0.18 whose image's colour the ambient explained entirely; 2.8σ now)."""
+the ambient's the read takes it for ambient. The three constants keep every read of the harness's tuning lamp kinds,
+steady, within 2σ (how they were set: docs/flicker.md)."""
 
 DETECTION_Z = 3.0
 """Flicker is *detected* (and the gains applied) when some LED's ``|ê_i|`` exceeds this many sigmas."""
@@ -387,9 +374,7 @@ def check_flicker(
         if detected
         else f"no LED's ambient share is beyond {DETECTION_Z:g} σ (largest {float(np.max(z)):.1f} σ): steady"
     )
-    # Every LED's share as read, once some LED shows flicker: shrinking each towards 0 by its own sigma (positive-part
-    # James–Stein, issue 30's first version) left up to 0.07 of an LED's image as ambient, which the families and the
-    # light prior read as the scene's colour (docs/decisions/flicker-every-model.md).
+    # Every LED's share as read, once some LED shows flicker, not shrunk towards 0 (docs/decisions/flicker-every-model.md).
     applied = offsets
     setting = _APPLY_GAINS.get()
     corrected = detected and setting is True

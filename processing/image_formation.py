@@ -211,14 +211,11 @@ def exposure_for_peak(
     sensor: SensorModel,
     fraction: float = 0.95,
     gain: float = 1.0,
-    scale: float = 1.0,
-    include_specular: bool = False,
 ) -> float:
     """The exposure (µs) putting the brightest expected pixel value at ``fraction`` of full scale.
 
     Full scale is the saturation point (:meth:`SensorModel.saturation_electrons`); the paper's
-    simulations use 95%. Highlights are left out unless ``include_specular``, as a photographer
-    meters the subject.
+    simulations use 95%. Highlights are left out, as a photographer meters the subject.
 
     Raises
     ------
@@ -228,10 +225,10 @@ def exposure_for_peak(
     if not 0 < fraction <= 1:
         raise SpectralDataError(f"exposure for peak: fraction {fraction}; expected 0 < fraction ≤ 1")
     metered = scene
-    if scene.specular is not None and not include_specular:
+    if scene.specular is not None:
         metered = Scene(scene.reflectances, scene.labels, scene.shading, None)
-    response = expected_response(metered, illuminant, camera_responsivities, 1.0, 1.0, scale)
-    if scene.specular is not None and not include_specular:
+    response = expected_response(metered, illuminant, camera_responsivities, 1.0)
+    if scene.specular is not None:
         response = response[~scene.specular]
     peak = float(np.max(response)) if response.size else 0.0
     if peak <= 0:

@@ -13,14 +13,8 @@ Every wavelength msflash prints or writes for an LED — OME ``ExcitationWavelen
 the booth emulator's ``PEAKS``, the calibration's ``peaks_nm`` — is this number, and every LED
 name msflash makes from a wavelength is :func:`led_name` of it (docs/decisions/led-wavelength.md).
 
-Why the peak and not the centroid: the centroid of a measured spectrum depends on the window and
-the baseline it is taken over — the paper's own measurements (380–1068 nm) put the 440 nm LED's
-centroid at 479 nm, dragged by its near-infrared tail — while the peak is what LED makers,
-OME's ``ExcitationWavelength`` and the booth's ``PEAKS`` mean. Why not the largest sample: on a
-10 nm grid it moves in 10 nm steps (the 596 nm amber read 600 nm, the 636 nm red 640 nm); the vertex
-of the parabola through the largest sample and its neighbours moves by 0.3 nm at most between the
-paper's 4, 5 and 10 nm samplings (0.5 nm for a 25 nm wide Gaussian sampled every 10 nm). Why energy: a spectrum in photons peaks up to 1.5 nm redder
-(×λ), so the peak is always taken of the energy (power) spectrum.
+Why the peak of the energy spectrum (not its centroid, its largest sample or the photon spectrum's peak), with
+the measurements: docs/decisions/led-wavelength.md.
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ Statistics of disjoint samples add, so
 - and every tile is then solved in microseconds (:func:`estimate_local`).
 
 Model selection (:func:`select_model`, leave-one-tile-out prediction against the global model,
-:data:`SELECTION_MARGIN` and :data:`~processing.local_selection.MIN_EXPLAINED_GAIN`) and the noise correction
+:data:`~processing.local_selection.SELECTION_MARGIN` and :data:`~processing.local_selection.MIN_EXPLAINED_GAIN`) and the noise correction
 (:attr:`TiledStatistics.denoised`, errors in variables, the same probe :mod:`processing.block_rows`
 measures for the whole frame) are described in ``docs/local-estimation.md`` ("How it works").
 
@@ -36,7 +36,6 @@ import numpy as np
 from msflash.processing.ambient import AMBIENT_METHODS, AmbientEstimate, AmbientModel, gcv_alpha
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.local_selection import (
-    SELECTION_MARGIN,
     ModelSelection,
     RegionSegmentation,
     _held_out_error,
@@ -113,7 +112,6 @@ def estimate_local(
     solver: str = "tikhonov",
     alpha: float | str = "auto",
     smoothing: float | None = None,
-    margin: float = SELECTION_MARGIN,
     regions_allowed: bool = True,
     noise_correction: bool = True,
     global_estimate: AmbientEstimate | None = None,
@@ -133,8 +131,6 @@ def estimate_local(
     smoothing
         Gaussian width in tiles of the local fit; None takes the best of the selection. Giving it
         forces the tile model.
-    margin
-        See :func:`select_model`.
     regions_allowed
         When the local model is used (and ``smoothing`` is None), try the two-region model
         (:func:`segment_regions`) and keep it when two regions explain the ambient image better
@@ -160,7 +156,7 @@ def estimate_local(
     scoring_alpha = _scoring_alpha(solver, global_estimate)
     selection = None
     if method == "auto" or (method == "local" and smoothing is None):
-        selection = select_model(tiles, led_spectra, scoring_alpha, margin=margin)
+        selection = select_model(tiles, led_spectra, scoring_alpha)
     model = selection.model if method == "auto" and selection is not None else method
     fit = _TileFit(weights=np.broadcast_to(global_estimate.ambient_weights, tiles.shape + (tiles.n_leds,)).copy())
     if model == "local":

@@ -4,7 +4,6 @@ regions (:func:`select_model`, :func:`segment_regions`; how: ``docs/local-estima
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,11 +74,9 @@ def select_model(
     tiles: TiledStatistics,
     led_spectra: Spectra,
     alpha: float | None = None,
-    smoothing_grid: Sequence[float] = SMOOTHING_GRID,
-    margin: float = SELECTION_MARGIN,
-    min_explained_gain: float = MIN_EXPLAINED_GAIN,
 ) -> ModelSelection:
-    """Choose between the global and local models by leave-one-tile-out prediction error.
+    """Choose between the global and local models (:data:`SMOOTHING_GRID`) by leave-one-tile-out prediction error:
+    a local one must beat the global by :data:`SELECTION_MARGIN` and :data:`MIN_EXPLAINED_GAIN`.
 
     Parameters
     ----------
@@ -88,10 +85,6 @@ def select_model(
     alpha
         Dimensionless roughness weight of the scoring fits; None chooses it by GCV on the global
         statistics.
-    margin
-        Relative improvement over the global model a local one must exceed.
-    min_explained_gain
-        Improvement, as a fraction of the ambient image's energy, a local one must also exceed.
     """
     roughness = np.diff(led_spectra.values, axis=0)
     penalty = roughness.T @ roughness
@@ -104,8 +97,8 @@ def select_model(
     global_error = float(_held_out_error(tiles, _batched_ridge(global_gram, global_cross, penalty, alpha)).sum())
     scores = {"global": 1.0}
     reference = max(global_error, 1e-300)
-    best_sigma, best_score = float(smoothing_grid[0]), np.inf
-    for sigma in smoothing_grid:
+    best_sigma, best_score = float(SMOOTHING_GRID[0]), np.inf
+    for sigma in SMOOTHING_GRID:
         neighbours = tiles.smoothed(float(sigma), leave_out=True)
         usable = neighbours.n_samples > tiles.n_leds
         weights = _batched_ridge(neighbours.gram, neighbours.cross, penalty, alpha)
@@ -119,15 +112,14 @@ def select_model(
         if score < best_score:
             best_sigma, best_score = float(sigma), score
     explained_gain = (1.0 - best_score) * global_error / max(float(tiles.ambient_energy.sum()), 1e-300)
-    chosen = "local" if best_score < 1.0 - margin and explained_gain > min_explained_gain else "global"
+    chosen = "local" if best_score < 1.0 - SELECTION_MARGIN and explained_gain > MIN_EXPLAINED_GAIN else "global"
     return ModelSelection(
         model=chosen,
         smoothing=best_sigma if chosen == "local" else None,
         scores=scores,
         best_local=best_sigma,
-        margin=margin,
+        margin=SELECTION_MARGIN,
         explained_gain=float(explained_gain),
-        min_explained_gain=min_explained_gain,
     )
 
 
@@ -204,9 +196,6 @@ def segment_regions(
     alpha: float,
     solver: str = "tikhonov",
     solver_alpha: float | str = "auto",
-    radius: int = REGION_RADIUS,
-    iterations: int = REGION_ITERATIONS,
-    cells: Cells | None = None,
     noise_correction: bool = True,
 ) -> RegionSegmentation | None:
     """Split the frame into two ambient regions and estimate each from all of its blocks.
@@ -215,27 +204,26 @@ def segment_regions(
        whose normalised spectra differ most, every tile to the nearer; each cluster's tiles are
        pooled into a first estimate.
     2. Every block is labelled with the region whose weights predict its ambient image better,
-       the residual differences summed over a (2r + 1)² box of cells first (a vote: the label
+       the residual differences summed over a (2r + 1)² box of cells first (r = :data:`REGION_RADIUS`) (a vote: the label
        follows the data, not the tile grid; a bright neighbour can pull a boundary by ≤ r cells). Each region's statistics are then
-       pooled from its blocks and re-solved; repeated until no label changes (at most ``iterations`` times).
+       pooled from its blocks and re-solved; repeated until no label changes (at most :data:`REGION_ITERATIONS` times).
     3. The chosen solver runs on each region's pooled statistics: a region sees as many surfaces
        as it covers, not a tile's worth. With ``noise_correction`` (and cells that carry a noise
        probe) these are the denoised statistics (:attr:`TiledStatistics.denoised`); labelling uses
        the statistics as observed.
 
-    ``cells`` are the tiles' :class:`Cells` when already built. Returns None when the tiles hold no
-    block data (statistics built from moments only).
+    Returns None when the tiles hold no block data (statistics built from moments only).
     """
     blocks = tiles.blocks
     if blocks is None or not blocks.valid.any():
         return None
-    cells = Cells.of(blocks) if cells is None else cells
+    cells = Cells.of(blocks)
     if not cells.valid.any():
         return None
     roughness = np.diff(led_spectra.values, axis=0)
     penalty = roughness.T @ roughness
     seeds = _seed_regions(tiles, led_spectra.values, penalty, alpha)
-    labels, weights = _label_cells(cells, seeds, penalty, alpha, radius, iterations)
+    labels, weights = _label_cells(cells, seeds, penalty, alpha)
     member = labels[cells.valid]
     final = weights.copy()
     if member.any() and not member.all():
@@ -272,9 +260,7 @@ def _seed_regions(tiles: TiledStatistics, led_values: np.ndarray, penalty: np.nd
     )
 
 
-def _label_cells(
-    cells: Cells, weights: np.ndarray, penalty: np.ndarray, alpha: float, radius: int, iterations: int
-) -> tuple[np.ndarray, np.ndarray]:
+def _label_cells(cells: Cells, weights: np.ndarray, penalty: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
     """Label every cell by the region predicting its ambient image better, re-pool, repeat until stable.
 
     Returns the labels (True: the second region) and the regions' last ridge weights.
@@ -282,12 +268,12 @@ def _label_cells(
     valid = cells.valid
     difference = np.zeros(valid.shape)
     labels = np.zeros(valid.shape, dtype=bool)
-    for iteration in range(iterations):
+    for iteration in range(REGION_ITERATIONS):
         errors = cells.errors(weights)
         # Residual differences summed over a (2r + 1)² box of cells: a vote weighted by the cells'
         # brightness (docs/decisions/docstring-history.md).
         difference[valid] = errors[1] - errors[0]
-        previous, labels = labels, _box(difference, radius) < 0.0
+        previous, labels = labels, _box(difference, REGION_RADIUS) < 0.0
         member = labels[valid]
         if member.all() or not member.any() or (iteration > 0 and np.array_equal(labels, previous)):
             break

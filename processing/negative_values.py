@@ -3,7 +3,7 @@
 Public objects
 --------------
 - :data:`PEAK_FRACTION`, :data:`NOISE_SIGMAS`, :func:`noise_sigmas`: the two bounds of the rule.
-- :func:`noise_sigma`, :func:`noise_pairs`: a spectrum's noise, estimated from its sample-to-sample differences.
+- :func:`noise_pairs`: a spectrum's noise, estimated from its sample-to-sample differences.
 - :class:`ClippedNegatives`: what was clipped in one spectrum (for the JSON and the notes).
 - :func:`clip_negative_noise`: the rule, applied to every column of a table.
 - :func:`blind_columns`: the columns left with no positive value (refused by the same readers).
@@ -13,7 +13,7 @@ A negative value in a measured spectrum is noise, clipped to 0, when it is at le
     −max(PEAK_FRACTION × peak, k × σ)
 
 with ``peak`` the column's largest value, ``σ`` its noise measured in its tails from the differences
-of neighbouring samples (:func:`noise_sigma`) and ``k`` ≥ :data:`NOISE_SIGMAS` from the noise model
+of neighbouring samples (:func:`noise_pairs`) and ``k`` ≥ :data:`NOISE_SIGMAS` from the noise model
 (:func:`noise_sigmas`); anything lower is refused. Every reader of spectra the user measured applies
 :func:`clip_negative_noise` and every writer of a calibration writes what it returns. Why both bounds
 and why differences: ``docs/calibration.md`` ("Negative values").
@@ -31,13 +31,13 @@ from msflash.processing.errors import SpectralDataError
 PEAK_FRACTION = 0.05
 """Negative values down to this fraction of the column's peak are noise."""
 NOISE_SIGMAS = 5.0
-"""Negative values down to at least this many noise σ (:func:`noise_sigma`) are noise: 5σ of
+"""Negative values down to at least this many noise σ (:func:`noise_pairs`) are noise: 5σ of
 Gaussian noise is exceeded by 1 sample in ~3.5 million; :func:`noise_sigmas` widens it for long
 columns and for σ measured on few pairs."""
 FALSE_REFUSAL = 1e-6
 """The chance that a column of pure Gaussian noise (σ known) has a value beyond the noise bound."""
 SIGMA_SPREAD = 1.2
-"""Standard deviation of :func:`noise_sigma`'s σ / true σ, times √pairs (``docs/measurements.md``)."""
+"""Standard deviation of :func:`noise_pairs`' σ / true σ, times √pairs (``docs/measurements.md``)."""
 SIGMA_SPREADS = 3.0
 """How many of those spreads the noise bound allows for σ measured too low."""
 REGION_SIGMAS = 4.0
@@ -67,6 +67,13 @@ def noise_pairs(values: np.ndarray) -> tuple[float, int]:
     itself (its bound below :data:`REGION_SIGMAS` σ, a dim export), it is widened to
     :data:`REGION_SIGMAS` σ and σ measured again.
     With fewer than :data:`MIN_NOISE_PAIRS` pairs the answer is (0, pairs).
+
+    Examples
+    --------
+    >>> w = np.arange(400.0, 700.0, 0.5)
+    >>> led = np.exp(-0.5 * ((w - 520) / 10) ** 2) + np.random.default_rng(0).normal(0.0, 0.01, w.size)
+    >>> round(noise_pairs(led)[0], 2)
+    0.01
     """
     values = np.asarray(values, dtype=float)
     peak = max(float(values.max()), 0.0) if values.size else 0.0
@@ -81,21 +88,6 @@ def noise_pairs(values: np.ndarray) -> tuple[float, int]:
             break
         below = REGION_SIGMAS * sigma
     return sigma, count
-
-
-def noise_sigma(values: np.ndarray) -> float:
-    """The noise σ of a spectrum, from the differences of neighbouring samples in its tails.
-
-    See :func:`noise_pairs`; with fewer than :data:`MIN_NOISE_PAIRS` pairs the answer is 0.
-
-    Examples
-    --------
-    >>> w = np.arange(400.0, 700.0, 0.5)
-    >>> led = np.exp(-0.5 * ((w - 520) / 10) ** 2) + np.random.default_rng(0).normal(0.0, 0.01, w.size)
-    >>> round(noise_sigma(led), 2)
-    0.01
-    """
-    return noise_pairs(values)[0]
 
 
 def noise_sigmas(n_samples: int, n_pairs: int) -> float:

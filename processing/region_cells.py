@@ -12,8 +12,8 @@ import numpy as np
 
 from msflash.processing.block_sums import block_sums
 from msflash.processing.moment_products import DEFAULT_WORKERS, thread_pool
-from msflash.processing.statistics import FrameStackSpec, SequenceStatistics
-from msflash.processing.tile_statistics import BlockData, linear_projection, tiled_from_moments
+from msflash.processing.statistics import FrameStackSpec, SequenceStatistics, channel_transform
+from msflash.processing.tile_statistics import BlockData, tiled_from_moments
 
 MAX_REGION_CELLS = 6000
 """Blocks are grouped into cells of g × g blocks so that the labels have at most about this many cells
@@ -73,7 +73,9 @@ class Cells:
         # The raw rows of every sample mapped to [f_1 … f_k, a] first (one product), then each cell's
         # products summed over its channels: the same statistics as the tiles' map of raw moments.
         # Channels before cells, so that the sums over the channels add whole rows of cells.
-        linear = np.tensordot(linear_projection(blocks.spec), samples.transpose(0, 2, 1), axes=1)  # (k + 1, C, N)
+        linear = np.tensordot(
+            channel_transform(blocks.spec, float(blocks.spec.black_level)), samples.transpose(0, 2, 1), axes=1
+        )  # (k + 1, C, N)
         leds, ambient = linear[:-1], linear[-1]
         k = leds.shape[0]
         gram = (leds[:, None] * leds[None]).sum(axis=2).reshape(k * k, -1).T

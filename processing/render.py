@@ -3,7 +3,7 @@
 Public objects
 --------------
 - :func:`demosaic_superpixel` (half resolution, exact) and :func:`demosaic_bilinear` (full
-  resolution, the paper's figures), :data:`DEMOSAIC_METHODS` and :func:`demosaic`.
+  resolution, the paper's figures).
 - :func:`reflectances_to_xyz`: CIE 1931 XYZ of surfaces under an illuminant (white Y = 1).
 - :func:`camera_to_xyz_matrix`: the 3×3 camera → XYZ matrix fitted on a chart.
 - :func:`camera_to_srgb_linear`: camera RGB → linear sRGB, with optional von Kries white balance.
@@ -111,17 +111,6 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str) -> np.ndarray:
     return np.stack(planes, axis=-1)
 
 
-DEMOSAIC_METHODS = {"superpixel": demosaic_superpixel, "bilinear": demosaic_bilinear}
-"""Demosaicking methods by name: ``superpixel`` (half resolution) and ``bilinear`` (full)."""
-
-
-def demosaic(mosaic: np.ndarray, cfa: str, method: str = "bilinear") -> np.ndarray:
-    """Demosaic with a method of :data:`DEMOSAIC_METHODS`."""
-    if method not in DEMOSAIC_METHODS:
-        raise ValueError(f"demosaic method '{method}' is unknown; expected one of {', '.join(DEMOSAIC_METHODS)}")
-    return DEMOSAIC_METHODS[method](mosaic, cfa)
-
-
 def _observer(grid: WavelengthGrid) -> np.ndarray:
     """CIE 1931 CMFs on ``grid`` (energy weights), shape (n_wavelengths, 3)."""
     return datasets.cie1931_cmfs(grid).values
@@ -212,12 +201,12 @@ MEDIAN_LEVEL = 0.25
 """The display level (linear, white = 1) a preview gives the median of the pixels' brightest channel."""
 
 
-def display_white(srgb_linear: np.ndarray, percentile: float = 99.5, median_level: float = MEDIAN_LEVEL) -> float:
+def display_white(srgb_linear: np.ndarray) -> float:
     """The linear value a preview shows as display white: its exposure.
 
     Measured on each pixel's brightest linear sRGB channel (so a strong cast, rendered without
-    white balance, does not clip its dominant channel): the ``percentile`` of it, unless that
-    leaves the scene's median darker than ``median_level`` of white; then ``median / median_level``,
+    white balance, does not clip its dominant channel): the 99.5th percentile of it, unless that
+    leaves the scene's median darker than :data:`MEDIAN_LEVEL` of white; then ``median / MEDIAN_LEVEL``,
     and the few pixels above white clip. A small bright area — a specular highlight, the sim rig's
     highlight strip below the chart (its size: docs/measurements.md) — then does not set the exposure
     and darken everything else.
@@ -235,10 +224,10 @@ def display_white(srgb_linear: np.ndarray, percentile: float = 99.5, median_leve
     brightest = brightest[np.isfinite(brightest)]
     if brightest.size == 0:
         return 1.0
-    white = float(np.percentile(brightest, percentile))
+    white = float(np.percentile(brightest, 99.5))
     median = float(np.median(brightest))
-    if median > 0 and median / median_level < white:
-        white = median / median_level
+    if median > 0 and median / MEDIAN_LEVEL < white:
+        white = median / MEDIAN_LEVEL
     return white if white > 0 else 1.0
 
 
@@ -246,7 +235,6 @@ def srgb_preview(
     linear_rgb: np.ndarray,
     camera_to_xyz: np.ndarray | None = None,
     white_value: float | None = None,
-    percentile: float = 99.5,
     white_balance: np.ndarray | None = None,
 ) -> np.ndarray:
     """An 8-bit sRGB preview of a linear camera RGB image (H, W, 3), rendered by :func:`camera_to_srgb_linear`.
@@ -258,5 +246,5 @@ def srgb_preview(
         raise SpectralDataError(f"preview: image has shape {linear_rgb.shape}; expected (H, W, 3)")
     srgb_linear, _ = camera_to_srgb_linear(linear_rgb, camera_to_xyz, white_balance)
     if white_value is None:
-        white_value = display_white(srgb_linear, percentile)
+        white_value = display_white(srgb_linear)
     return np.round(encode_srgb(srgb_linear, white_value) * 255).astype(np.uint8)

@@ -90,29 +90,24 @@ def uniform_scene(reflectance: Spectra, height: int, width: int, shading: np.nda
 def chart_scene(
     reflectances: Spectra | Literal["chart110", "macbeth"] = "chart110",
     patch_px: int = 8,
-    columns: int | None = None,
     border_px: int = 2,
-    border_reflectance: float = 0.03,
     specular_strip_px: int = 0,
-    specular_gain: float = 10.0,
 ) -> Scene:
     """A reflectance chart: square patches on a dark border, filled column by column (ISET order).
+
+    Patches per row: 6 for 24 patches, otherwise ``ceil(sqrt(n))``.
 
     Parameters
     ----------
     reflectances
         The patches, or ``"chart110"`` (the paper's Natural-100 + gray strip, default: 10 rows ×
         11 columns, the gray strip last) or ``"macbeth"`` (ISETCam's, 4 rows × 6 columns).
-    columns
-        Patches per row; by default 6 for 24 patches, otherwise ``ceil(sqrt(n))``.
     border_px
-        Gap between and around patches, filled with a flat dark surface.
+        Gap between and around patches, filled with a flat dark surface (reflectance 0.03).
     specular_strip_px
-        If > 0, a strip of this height below the chart with a neutral highlight
-        (:attr:`Scene.specular`), which saturates at exposures metered on the chart.
-    specular_gain
-        Strength of that highlight relative to a white diffuser (glossy highlights mirror the
-        light source, so they are many times brighter than any diffuse patch).
+        If > 0, a strip of this height below the chart with a neutral highlight (:attr:`Scene.specular`)
+        10 times a white diffuser's (a glossy highlight mirrors the light source), which saturates at
+        exposures metered on the chart.
 
     Returns
     -------
@@ -133,8 +128,7 @@ def chart_scene(
             f"chart_scene: patch_px {patch_px}, border_px {border_px}, specular_strip_px "
             f"{specular_strip_px}; expected patch_px ≥ 1 and the others ≥ 0"
         )
-    if columns is None:
-        columns = 6 if n == 24 else math.ceil(math.sqrt(n))
+    columns = 6 if n == 24 else math.ceil(math.sqrt(n))
     rows = math.ceil(n / columns)
     border = n
     height = rows * patch_px + (rows + 1) * border_px
@@ -146,24 +140,22 @@ def chart_scene(
         left = border_px + column * (patch_px + border_px)
         labels[top : top + patch_px, left : left + patch_px] = k
     surfaces = reflectances.replace(
-        values=np.hstack([reflectances.values, np.full((reflectances.grid.size, 1), float(border_reflectance))]),
+        values=np.hstack([reflectances.values, np.full((reflectances.grid.size, 1), 0.03)]),
         names=reflectances.names + ("border",),
     )
     specular = None
     if specular_strip_px:
         specular = np.zeros(labels.shape, dtype=bool)
         specular[height:, :] = True
-    return Scene(surfaces, labels, specular=specular, specular_gain=specular_gain)
+    return Scene(surfaces, labels, specular=specular, specular_gain=10.0)
 
 
-def mosaic_scene(
-    reflectances: Spectra, seed: int = 0, min_patches: int = 24, patch_px: int = 8, specular_strip_px: int = 0
-) -> Scene:
-    """A chart of any surfaces in random order: every surface at least once, repeated to ``min_patches``.
+def mosaic_scene(reflectances: Spectra, seed: int = 0, patch_px: int = 8, specular_strip_px: int = 0) -> Scene:
+    """A chart of any surfaces in random order: every surface at least once, repeated to 24 patches.
 
     The layout is :func:`chart_scene`'s (square patches on a dark border, a highlight strip if
     asked); which surface each patch shows is drawn with ``seed``. Fewer surfaces than
-    ``min_patches`` are repeated (each as often as the others, ±1), so a scene of three surfaces
+    24 are repeated (each as often as the others, ±1), so a scene of three surfaces
     still has a chart's area. The estimator's accuracy depends on the number of *distinct* surfaces
     (the paper's Fig. 5), not on the repeats.
 
@@ -181,9 +173,7 @@ def mosaic_scene(
     ([0, 1, 2], ('a', 'b', 'border'))
     """
     n = reflectances.count
-    if min_patches < 1:
-        raise SpectralDataError(f"mosaic_scene: min_patches {min_patches}; expected ≥ 1")
-    patches = max(n, min_patches)
+    patches = max(n, 24)
     order = np.random.default_rng(seed).permutation(np.resize(np.arange(n), patches))
     chart = chart_scene(reflectances.select(order.tolist()), patch_px=patch_px, specular_strip_px=specular_strip_px)
     # chart_scene's patch k shows column k of the selection, i.e. surface order[k]; the border follows.
@@ -195,33 +185,28 @@ def mosaic_scene(
     return Scene(surfaces, surface_of[chart.labels], specular=chart.specular, specular_gain=chart.specular_gain)
 
 
-def white_reference_scene(
-    height: int = 96, width: int = 128, reflectance: float = 0.95, corner_shading: float = 0.8
-) -> Scene:
+def white_reference_scene(height: int = 96, width: int = 128) -> Scene:
     """A uniform, spectrally flat white reference filling the frame, with a smooth radial falloff.
 
     What a lab puts in the booth to measure the LEDs' power ratios through the camera
-    (:mod:`calibration.white_reference`): one surface of constant ``reflectance`` (a pressed-PTFE
-    or matte white card), shaded from 1 at the centre to ``corner_shading`` in the corners.
+    (:mod:`calibration.white_reference`): one surface of constant reflectance 0.95 (a pressed-PTFE
+    or matte white card), shaded from 1 at the centre to 0.8 in the corners.
 
     >>> scene = white_reference_scene(4, 6)
     >>> scene.labels.shape, scene.reflectances.names, round(float(scene.shading.min()), 2)
     ((4, 6), ('white',), 0.8)
     """
-    if height < 2 or width < 2 or not 0 < reflectance <= 1 or not 0 < corner_shading <= 1:
-        raise SpectralDataError(
-            f"white_reference_scene: {height}×{width}, reflectance {reflectance}, corner shading "
-            f"{corner_shading}; expected a frame of at least 2×2 and both in (0, 1]"
-        )
+    if height < 2 or width < 2:
+        raise SpectralDataError(f"white_reference_scene: {height}×{width}; expected a frame of at least 2×2")
     surface = Spectra(
         DEFAULT_GRID,
-        np.full((DEFAULT_GRID.size, 1), float(reflectance)),
+        np.full((DEFAULT_GRID.size, 1), 0.95),
         ("white",),
         kind="reflectance",
         unit="none",
-        source=f"flat white reference {reflectance:g}",
+        source="flat white reference 0.95",
     )
     rows = (np.arange(height) - (height - 1) / 2) / ((height - 1) / 2)
     columns = (np.arange(width) - (width - 1) / 2) / ((width - 1) / 2)
     radius2 = (rows[:, None] ** 2 + columns[None, :] ** 2) / 2
-    return uniform_scene(surface, height, width, shading=1.0 - (1.0 - corner_shading) * radius2)
+    return uniform_scene(surface, height, width, shading=1.0 - 0.2 * radius2)

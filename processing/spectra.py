@@ -24,8 +24,8 @@ only scale every spectrum by ~5e18). Reflectances (``kind="reflectance"``) have 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from typing import Literal
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
 
 import numpy as np
 
@@ -256,19 +256,9 @@ class Spectra:
         indices = [self.names.index(w) if isinstance(w, str) else int(w) for w in which]
         return self.replace(values=self.values[:, indices], names=tuple(self.names[i] for i in indices))
 
-    def replace(self, **changes: object) -> Spectra:
-        """A copy with some fields changed (``dataclasses.replace`` that re-validates)."""
-        fields = dict(
-            grid=self.grid,
-            values=self.values,
-            names=self.names,
-            kind=self.kind,
-            unit=self.unit,
-            source=self.source,
-            metadata=dict(self.metadata),
-        )
-        fields.update(changes)
-        return Spectra(**fields)  # type: ignore[arg-type]
+    def replace(self, **changes: Any) -> Spectra:
+        """A copy with some fields changed, re-validated; its ``metadata`` a copy unless given."""
+        return replace(self, **{"metadata": dict(self.metadata), **changes})
 
     @classmethod
     def from_samples(

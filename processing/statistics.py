@@ -328,44 +328,31 @@ def statistics_from_moments(
     ``noise_moments`` are the half differences' moments in the same row layout (the noise probe),
     mapped the same way into :attr:`SequenceStatistics.noise`.
     """
-    n_led_frames = moments.shape[0] - 2
-    n_rows = n_led_frames + 2
-    # Linear map from the raw rows to [d_1 … d_n, a]: d_j = s_j (F_j − b) − s_a (A − b), a = s_a (A − b).
-    transform = np.zeros((n_led_frames + 1, n_rows))
-    scales = np.asarray(spec.led_scales, dtype=float)
-    black = float(spec.black_level if black_level is None else black_level)
-    transform[:n_led_frames, :n_led_frames] = np.diag(scales)
-    transform[:n_led_frames, n_led_frames] = -spec.ambient_scale
-    transform[:n_led_frames, n_led_frames + 1] = (spec.ambient_scale - scales) * black
-    transform[n_led_frames, n_led_frames] = spec.ambient_scale
-    transform[n_led_frames, n_led_frames + 1] = -spec.ambient_scale * black
+    transform = channel_transform(spec, float(spec.black_level if black_level is None else black_level))
+    k = transform.shape[0] - 1
     linear_moments = transform @ moments @ transform.T
     linear_sums = transform @ moments[:, -1]
-    unmixing = spec.unmixing
     noise = None
     if noise_moments is not None:
         linear_noise = transform @ noise_moments @ transform.T
-        noise = NoiseMoments(
-            gram=unmixing @ linear_noise[:n_led_frames, :n_led_frames] @ unmixing.T,
-            cross=unmixing @ linear_noise[:n_led_frames, n_led_frames],
-            ambient_energy=float(linear_noise[n_led_frames, n_led_frames]),
-        )
+        noise = NoiseMoments(linear_noise[:k, :k], linear_noise[:k, k], float(linear_noise[k, k]))
     return SequenceStatistics(
-        gram=unmixing @ linear_moments[:n_led_frames, :n_led_frames] @ unmixing.T,
-        cross=unmixing @ linear_moments[:n_led_frames, n_led_frames],
-        ambient_energy=float(linear_moments[n_led_frames, n_led_frames]),
+        gram=linear_moments[:k, :k],
+        cross=linear_moments[:k, k],
+        ambient_energy=float(linear_moments[k, k]),
         n_samples=int(round(moments[-1, -1])) if n_samples is None else n_samples,
         n_total=n_total,
-        ambient_sum=float(linear_sums[n_led_frames]),
-        led_sums=unmixing @ linear_sums[:n_led_frames],
+        ambient_sum=float(linear_sums[k]),
+        led_sums=linear_sums[:k],
         noise=noise,
         weighted=weighted,
     )
 
 
 def channel_transform(spec: FrameStackSpec, black: float) -> np.ndarray:
-    """(k + 1, n + 2) map from one channel's raw rows ``[F_1 … F_n, A, 1]`` to ``[f_1 … f_k, a]``:
-    ``f_i = Σ_j U_ij (s_j (F_j − b) − s_a (A − b))``, ``a = s_a (A − b)`` (the same for every channel)."""
+    """(k + 1, n + 2) map from the raw rows ``[F_1 … F_n, A, 1]`` (of a frame, a block, a channel) to the LED images at
+    full drive and the ambient, ``[f_1 … f_k, a]``: ``f_i = Σ_j U_ij (s_j (F_j − b) − s_a (A − b))``, ``a = s_a (A − b)``
+    with ``U = pinv(L)`` (:attr:`FrameStackSpec.unmixing`)."""
     unmixing, scales = spec.unmixing, np.asarray(spec.led_scales, dtype=float)
     k, n = unmixing.shape
     transform = np.zeros((k + 1, n + 2))

@@ -318,7 +318,6 @@ class SynthesisStream:
         flash_weights: np.ndarray,
         shape: tuple[int, ...],
         *,
-        chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
         dtype: type = np.float32,
         ambient_offsets: np.ndarray | None = None,
     ) -> None:
@@ -332,7 +331,7 @@ class SynthesisStream:
         self.offset = -spec.black_level * float(self.factors.sum())
         self.total = np.empty(self.shape, dtype=np.float64)
         self.saturated = np.zeros(self.shape[:2], dtype=bool)
-        self.chunk_samples = max(1, chunk_pixels) * (self.shape[2] if len(self.shape) == 3 else 1)
+        self.chunk_samples = DEFAULT_CHUNK_PIXELS * (self.shape[2] if len(self.shape) == 3 else 1)
         self.added = 0
         self.floating = False
 
@@ -347,20 +346,7 @@ class SynthesisStream:
             )
         _check_range(self.factors, [frame], self.spec, self.flash_weights)
         self.floating = self.floating or bool(np.issubdtype(frame.dtype, np.floating))
-        flat_total, flat_frame = self.total.reshape(-1), np.ascontiguousarray(frame).reshape(-1)
-        product = np.empty(min(self.chunk_samples, flat_total.size), dtype=np.float64)
-        factor = self.factors[index]
-        for start in range(0, flat_total.size, self.chunk_samples):
-            stop = min(start + self.chunk_samples, flat_total.size)
-            chunk, total = flat_frame[start:stop], flat_total[start:stop]
-            with np.errstate(invalid="ignore", over="ignore"):  # non-finite float frames are refused in result()
-                if index == 0:
-                    np.multiply(chunk, factor, out=total, dtype=np.float64)
-                    total += self.offset
-                else:
-                    part = product[: stop - start]
-                    np.multiply(chunk, factor, out=part, dtype=np.float64)
-                    total += part
+        self._accumulate(frame, self.factors[index], self.offset if index == 0 else None, overwrite=index == 0)
         if not (np.issubdtype(frame.dtype, np.integer) and np.iinfo(frame.dtype).max < self.spec.white_level):
             bright = frame >= self.spec.white_level
             self.saturated |= np.any(bright, axis=2) if bright.ndim == 3 else bright
@@ -384,17 +370,24 @@ class SynthesisStream:
         factors[0] = corrected * self.spec.ambient_scale
         _check_range(factors, [ambient], self.spec, self.flash_weights)
         step = float(factors[0] - self.factors[0])
-        flat_total, flat_frame = self.total.reshape(-1), np.ascontiguousarray(ambient).reshape(-1)
+        self._accumulate(ambient, step, -(step * self.spec.black_level), overwrite=False)
+        self.factors = factors
+        self.offset = -self.spec.black_level * float(factors.sum())
+
+    def _accumulate(self, frame: np.ndarray, factor: float, constant: float | None, *, overwrite: bool) -> None:
+        """``total = factor · frame + constant`` (``overwrite``), else ``total += factor · frame + constant``, in
+        float64 chunks of :data:`DEFAULT_CHUNK_PIXELS` pixels."""
+        flat_total, flat_frame = self.total.reshape(-1), np.ascontiguousarray(frame).reshape(-1)
         product = np.empty(min(self.chunk_samples, flat_total.size), dtype=np.float64)
         for start in range(0, flat_total.size, self.chunk_samples):
             stop = min(start + self.chunk_samples, flat_total.size)
-            part = product[: stop - start]
+            part = flat_total[start:stop] if overwrite else product[: stop - start]
             with np.errstate(invalid="ignore", over="ignore"):  # non-finite float frames are refused in result()
-                np.multiply(flat_frame[start:stop], step, out=part, dtype=np.float64)
-                part -= step * self.spec.black_level
-                flat_total[start:stop] += part
-        self.factors = factors
-        self.offset = -self.spec.black_level * float(factors.sum())
+                np.multiply(flat_frame[start:stop], factor, out=part, dtype=np.float64)
+                if constant is not None:
+                    part += constant
+                if not overwrite:
+                    flat_total[start:stop] += part
 
     def result(self) -> tuple[np.ndarray, np.ndarray]:
         """The image (``dtype``) and the saturated pixels, once every frame is in."""

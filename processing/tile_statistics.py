@@ -26,7 +26,13 @@ from msflash.processing.block_sums import (
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.moment_products import DEFAULT_WORKERS, thread_pool
 from msflash.processing.noise_level import PixelNoise, ambient_block_noise, detail_noise_line
-from msflash.processing.statistics import FrameStackSpec, NoiseMoments, SequenceStatistics, non_finite_frames_error
+from msflash.processing.statistics import (
+    FrameStackSpec,
+    NoiseMoments,
+    SequenceStatistics,
+    channel_transform,
+    non_finite_frames_error,
+)
 
 DEFAULT_TILES = 8
 """Tiles per side of the frame (8 × 8 = 64 tiles)."""
@@ -57,8 +63,8 @@ class BlockData:
     raw: np.ndarray = field(repr=False)
     """(n_frames + 2, h, w, C) block sums of the rows [F_1 … F_n, A, 1] (invalid blocks zeroed)."""
     differences: np.ndarray | None = field(repr=False)
-    """(n_frames + 2, h, w, C) the blocks' even-column sums minus their odd-column sums (the ones row 0,
-    invalid blocks zeroed): the noise probe of :attr:`TiledStatistics.denoised`. None for odd bin factors."""
+    """(n_frames + 2, h, w, C) the blocks' checkerboard half differences (the ones row 0, invalid blocks zeroed):
+    the noise probe of :attr:`TiledStatistics.denoised`. None for odd bin factors."""
     valid: np.ndarray = field(repr=False)
     """(h, w) blocks without a saturated member."""
     spec: FrameStackSpec
@@ -97,17 +103,10 @@ class TiledStatistics:
     blocks: BlockData | None = field(default=None, repr=False, compare=False)
     """The binned samples themselves (for region segmentation); None when built from moments only."""
     denoised: TiledStatistics | None = field(default=None, repr=False, compare=False)
-    """The same tiles with the noise's contribution to their moments removed, or None (odd bin factors).
-
-    The LED-only images are differences of noisy frames, so ``GᵀG``-type moments are biased by the
-    noise variance (eq. 5 regresses on noisy regressors: errors in variables). Each block's columns
-    are split into two interleaved halves with independent noise; with ``x = x₁ + x₂`` the block's
-    row of sums and ``d = x₁ − x₂``, ``E[d dᵀ]`` holds the noise covariance of ``x`` (plus the
-    halves' texture difference), and ``Σ (x xᵀ − d dᵀ) = 2 Σ (x₁ x₂ᵀ + x₂ x₁ᵀ)`` is a cross-product
-    of independent halves: the estimating equations of eq. 5 on these moments have no noise bias (an
-    instrumental-variable estimate; no noise model needed). The valid-sample counts and sums are the
-    tiles' own. :func:`estimate_local` solves the local model on them; :func:`denoised_global`
-    gives the global model's estimate on them."""
+    """The same tiles with the noise's contribution to their moments removed (``Σ (x xᵀ − d dᵀ)``, the half-difference
+    probe of :mod:`processing.block_rows`' module notes), or None (odd bin factors). The valid-sample counts and sums
+    are the tiles' own. :func:`estimate_local` solves the local model on them; :func:`denoised_global` gives the
+    global model's estimate on them."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -395,7 +394,6 @@ def tile_statistics(
     *,
     bin_factor: int = 1,
     cfa_period: int = 1,
-    workers: int = DEFAULT_WORKERS,
     weighting: bool = False,
 ) -> TiledStatistics:
     """The statistics of eq. 4–6 of every tile of a ``tiles`` grid, in one pass over the frames (:class:`TileBlocks`).
@@ -412,9 +410,6 @@ def tile_statistics(
         Tiles per side, or (rows, columns).
     bin_factor, cfa_period
         Block size, and 2 for Bayer mosaics.
-    workers
-        Threads sharing the frames' block sums and the tiles' moments (1: the calling thread). The
-        statistics do not depend on it.
     weighting
         Inverse-variance sample weights, the global statistics' (:mod:`processing.statistics`, module
         notes; even bin factors only): the tiles then sum to the weighted global statistics, and
@@ -443,31 +438,15 @@ def tile_statistics(
     # The frames are independent: numpy releases the GIL in the sums (as in the global statistics' pass).
     rows = range(len(frames))
     add = lambda row: accumulator.add_frame(row, frames[row])  # noqa: E731
-    list(thread_pool(workers).map(add, rows) if workers > 1 else map(add, rows))
-    return accumulator.statistics(spec, tiles, workers)
-
-
-def linear_projection(spec: FrameStackSpec) -> np.ndarray:
-    """(k + 1, R) linear map of the raw rows [F_1 … F_n, A, 1] to [f_1 … f_k, a] (LED images at full drive, ambient)."""
-    n_led_frames = len(spec.led_scales)
-    scales = np.asarray(spec.led_scales, dtype=float)
-    black = float(spec.black_level)
-    # d_j = s_j (F_j − b) − s_a (A − b), a = s_a (A − b): a linear map of the raw rows.
-    transform = np.zeros((n_led_frames + 1, n_led_frames + 2))
-    transform[:n_led_frames, :n_led_frames] = np.diag(scales)
-    transform[:n_led_frames, n_led_frames] = -spec.ambient_scale
-    transform[:n_led_frames, n_led_frames + 1] = (spec.ambient_scale - scales) * black
-    transform[n_led_frames, n_led_frames] = spec.ambient_scale
-    transform[n_led_frames, n_led_frames + 1] = -spec.ambient_scale * black
-    # Unmixed LED images at full drive (pinv of the levels) and the ambient: one (k + 1, R) map.
-    return np.vstack([spec.unmixing @ transform[:n_led_frames], transform[n_led_frames:]])
+    list(thread_pool(DEFAULT_WORKERS).map(add, rows) if DEFAULT_WORKERS > 1 else map(add, rows))
+    return accumulator.statistics(spec, tiles)
 
 
 def tiled_from_moments(
     moments: np.ndarray, totals: np.ndarray, spec: FrameStackSpec, row_edges: np.ndarray, column_edges: np.ndarray
 ) -> TiledStatistics:
     """Tiled statistics from raw moments of the rows [F_1 … F_n, A, 1] (one (R, R) matrix per tile)."""
-    projection = linear_projection(spec)
+    projection = channel_transform(spec, float(spec.black_level))
     k = projection.shape[0] - 1
     linear = np.matmul(np.matmul(projection, moments), projection.T)  # (…, k + 1, k + 1)
     sums = moments[..., :, -1] @ projection.T

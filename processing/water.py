@@ -50,7 +50,7 @@ H., Morel A. (1998), Limnol. Oceanogr. 43, 847–858. Gordon H. R. (1989), Limno
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -243,14 +243,10 @@ def water_body(water: WaterBody | str) -> WaterBody:
 def underwater_ambient(
     depth_m: float = 5.0,
     distance_m: float = 1.0,
-    chlorophyll: float | None = None,
-    cdom_440: float | None = None,
-    nap_440: float | None = None,
     grid: WavelengthGrid = DEFAULT_GRID,
     water: WaterBody | str = "ocean",
-    surface_illuminant: str = "D65",
 ) -> Spectra:
-    """Daylight at ``depth_m`` as a camera ``distance_m`` from the subject sees it, energy, peak 1.
+    """D65 daylight at ``depth_m`` as a camera ``distance_m`` from the subject sees it, energy, peak 1.
 
     ``E(λ) = E_0(λ) · exp(−K_d(λ) · depth_m) · exp(−(a + b_b)(λ) · distance_m)``. The second
     factor is the subject → camera path: it applies to every light the subject reflects, so a
@@ -259,12 +255,10 @@ def underwater_ambient(
 
     Parameters
     ----------
-    chlorophyll, cdom_440, nap_440
-        Override the constituents of ``water`` (mg/m³, 1/m at 440 nm, 1/m at 440 nm).
     grid
         Within 400–700 nm, the Bricaud table's range.
-    surface_illuminant
-        The light just below the surface (a :func:`processing.datasets.illuminant` name).
+    water
+        A :data:`WATER_TYPES` name, or a :class:`WaterBody` of any constituents.
 
     Examples
     --------
@@ -274,20 +268,14 @@ def underwater_ambient(
     True
     """
     body = water_body(water)
-    changes = {
-        key: value
-        for key, value in (("chlorophyll_mg_m3", chlorophyll), ("cdom_440_per_m", cdom_440), ("nap_440_per_m", nap_440))
-        if value is not None
-    }
-    body = replace(body, **changes) if changes else body
     depth_m = _check("depth_m", depth_m)
     distance_m = _check("distance_m", distance_m)
-    surface = datasets.illuminant(surface_illuminant, grid)
+    surface = datasets.illuminant("D65", grid)
     factor = np.exp(-body.diffuse_attenuation(grid) * depth_m - body.path_attenuation(grid) * distance_m)
     return surface.replace(
         values=surface.values * factor[:, None],
         names=("underwater",),
-        source=f"{surface_illuminant} at {depth_m:g} m depth, seen over {distance_m:g} m, in {body.describe()}",
+        source=f"D65 at {depth_m:g} m depth, seen over {distance_m:g} m, in {body.describe()}",
         metadata={"depth_m": depth_m, "distance_m": distance_m, "water": body.describe()},
     ).normalised("max")
 

@@ -13,7 +13,6 @@ from msflash.processing.errors import SpectralDataError
 from msflash.processing.image_formation import expected_response, surface_responses
 from msflash.processing.render import (
     camera_to_xyz_matrix,
-    demosaic,
     demosaic_bilinear,
     demosaic_superpixel,
     reflectances_to_xyz,
@@ -199,11 +198,9 @@ class TestRendering:
     def test_bilinear_is_exact_on_linear_ramps_inside(self) -> None:
         rows, columns = np.mgrid[0:12, 0:12].astype(float)
         rgb = np.stack([rows + columns, 2 * rows - columns + 30, 0.5 * columns + 4], axis=-1)
-        full = demosaic(mosaic(rgb, "BGGR"), "BGGR")
+        full = demosaic_bilinear(mosaic(rgb, "BGGR"), "BGGR")
         assert full[1:-1, 1:-1] == pytest.approx(rgb[1:-1, 1:-1])
-        assert demosaic(mosaic(rgb, "BGGR"), "BGGR", "superpixel").shape == (6, 6, 3)
-        with pytest.raises(ValueError, match="expected one of superpixel, bilinear"):
-            demosaic(rgb[..., 0], "BGGR", "ahd")
+        assert demosaic_superpixel(mosaic(rgb, "BGGR"), "BGGR").shape == (6, 6, 3)
 
     def test_superpixel_matches_bilinear_on_smooth_images(self) -> None:
         rgb = np.ones((8, 8, 3)) * np.array([1.0, 2.0, 3.0])

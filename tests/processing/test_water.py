@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -87,7 +89,8 @@ class TestUnderwaterAmbient:
         assert WAVELENGTHS[np.argmax(ocean.values)] < 500 < WAVELENGTHS[np.argmax(coastal.values)]
 
     def test_overrides_and_presets(self) -> None:
-        explicit = water.underwater_ambient(5.0, 1.0, chlorophyll=3.0, cdom_440=0.2, water="ocean")
+        body = replace(water.WATER_TYPES["ocean"], chlorophyll_mg_m3=3.0, cdom_440_per_m=0.2)
+        explicit = water.underwater_ambient(5.0, 1.0, water=body)
         assert explicit.values == pytest.approx(water.underwater_ambient(5.0, 1.0, water="coastal").values)
         with pytest.raises(SpectralDataError, match="expected one of pure"):
             water.underwater_ambient(water="bathtub")
