@@ -420,14 +420,20 @@ def _compiled_refine(
     a = empty if fixed_a is None else np.ascontiguousarray(fixed_a, float)
     b = empty if fixed_b is None else np.ascontiguousarray(fixed_b, float)
     nm, slit, basis, water = kernel_grid(grid)
-    lower = np.array([b_[0] for b_ in bounds], float)
-    upper = np.array([b_[1] for b_ in bounds], float)
+    lower, upper = _bound_arrays(bounds)
     theta, atoms, amplitudes, norm2 = compiled.refine(  # type: ignore[attr-defined]
         kind_a, a, split, kind_b, b, nm, slit, basis, water,
         np.ascontiguousarray(problem.root, float), np.ascontiguousarray(problem.target, float),
         np.ascontiguousarray(theta, float), lower, upper, iterations, REFINE_TOLERANCE,
     )  # fmt: skip
     return theta, atoms, amplitudes, float(norm2) + problem.constant
+
+
+@lru_cache(maxsize=128)
+def _bound_arrays(bounds: tuple[tuple[float, float], ...]) -> tuple[np.ndarray, np.ndarray]:
+    """θ's lower and upper bounds as arrays, made once per form or mixture (the compiled refinement only reads them;
+    left writeable, as numba compiles read-only arrays as another type)."""
+    return np.array([b[0] for b in bounds], float), np.array([b[1] for b in bounds], float)
 
 
 def _mixture_form(first: Fit, second: Fit, bounds: tuple, atoms_of: Callable[[np.ndarray], np.ndarray]) -> Form:
