@@ -303,16 +303,10 @@ def _compiled_block_sums(
     frame: np.ndarray, period: int, factor: int, white: float, rows: np.ndarray, probe_rows: np.ndarray | None
 ) -> tuple[bool, np.ndarray | None]:
     """One raw frame's block sums into ``rows`` (C, h, w) and half differences into ``probe_rows``, in one compiled
-    pass (:func:`processing.frame_kernels.block_pass`, no CFA-plane copy): ``(done, saturated)`` as that returns."""
-    channels, height, width = rows.shape
-    sums = np.empty((height, channels, width))
-    differences = None if probe_rows is None else np.empty((height, width, channels))
-    done, saturated = frame_kernels.block_pass(frame, factor, period, white, 1, sums, differences)
-    if done:
-        rows[...] = sums.transpose(1, 0, 2)
-        if probe_rows is not None and differences is not None:
-            probe_rows[...] = differences.transpose(2, 0, 1)
-    return done, saturated
+    pass (:func:`processing.frame_kernels.block_pass`, no CFA-plane copy), written in place through transposed
+    views (no temporary, no transposing copy): ``(done, saturated)`` as that returns."""
+    differences = None if probe_rows is None else probe_rows.transpose(1, 2, 0)
+    return frame_kernels.block_pass(frame, factor, period, white, 1, rows.transpose(1, 0, 2), differences)
 
 
 def _numpy_block_sums(

@@ -12,6 +12,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +24,14 @@ from msflash.processing.spectral_data_term import Whitened, nonnegative_fit
 
 MAX_DISCHARGE_ATOMS = 6
 """Most atoms the greedy discharge fit keeps."""
+
+ASK: Any = object()
+"""The fits' ``compiled`` default: ask :func:`processing.family_kernels.kernels` (a caller fitting many forms asks
+once and passes its answer — the compiled fits, or None for the numpy ones)."""
+
+
+def _kernels(compiled: Any) -> Any:
+    return family_kernels.kernels() if compiled is ASK else compiled
 
 
 @dataclass(frozen=True)
@@ -92,7 +101,7 @@ def _stacked_starts(form: Form, grid: WavelengthGrid) -> tuple[np.ndarray, np.nd
     return stacked, offsets
 
 
-def _start_costs(form: Form, grid: WavelengthGrid, problem: Whitened) -> np.ndarray:
+def _start_costs(form: Form, grid: WavelengthGrid, problem: Whitened, compiled: Any = ASK) -> np.ndarray:
     """J at each coarse start (single-atom forms in one product: the amplitude is in closed form; the others by
     the compiled fits where :mod:`processing.family_kernels` is in use)."""
     stacked, offsets = _stacked_starts(form, grid)
@@ -104,7 +113,7 @@ def _start_costs(form: Form, grid: WavelengthGrid, problem: Whitened) -> np.ndar
             gains = np.where(energies > 0, projections**2 / energies, 0.0)
         costs = float(problem.target @ problem.target) - gains + problem.constant
         return np.where(np.isfinite(costs), costs, math.inf)
-    compiled = family_kernels.kernels()
+    compiled = _kernels(compiled)
     if compiled is not None and offsets.size > 1:
         return compiled.block_costs(designs, offsets, problem.target) + problem.constant
     return np.array([problem.amplitudes(a)[1] for a in start_atoms(form, grid)])
@@ -136,13 +145,15 @@ def _all_starts(forms: tuple[Form, ...], grid: WavelengthGrid) -> tuple[np.ndarr
     return single, multi, np.array(multi_offsets, np.int64), tuple(spans)
 
 
-def start_costs(forms: tuple[Form, ...], grid: WavelengthGrid, problem: Whitened) -> list[np.ndarray]:
+def start_costs(
+    forms: tuple[Form, ...], grid: WavelengthGrid, problem: Whitened, compiled: Any = ASK
+) -> list[np.ndarray]:
     """:func:`_start_costs` of every form; where :mod:`processing.family_kernels` is in use, in two products and one
     compiled call for all of them (the same formulas: the closed form for single-atom starts, the non-negative fit
     for the others)."""
-    compiled = family_kernels.kernels()
+    compiled = _kernels(compiled)
     if compiled is None:
-        return [_start_costs(form, grid, problem) for form in forms]
+        return [_start_costs(form, grid, problem, None) for form in forms]
     single, multi, offsets, spans = _all_starts(forms, grid)
     designs = problem.root @ single
     energies = np.einsum("ij,ij->j", designs, designs)
@@ -261,13 +272,19 @@ def refine(
 
 
 def fit_form(
-    form: Form, grid: WavelengthGrid, problem: Whitened, refined: bool = True, costs: np.ndarray | None = None
+    form: Form,
+    grid: WavelengthGrid,
+    problem: Whitened,
+    refined: bool = True,
+    costs: np.ndarray | None = None,
+    compiled: Any = ASK,
 ) -> Fit:
     """The form's best θ over its coarse starts (``costs``: their J, when computed already, :func:`start_costs`),
-    then refined (:func:`refine`), and its amplitudes."""
-    costs = _start_costs(form, grid, problem) if costs is None else costs
+    then refined (:func:`refine`), and its amplitudes (``compiled``: :data:`ASK`)."""
+    compiled = _kernels(compiled)
+    costs = _start_costs(form, grid, problem, compiled) if costs is None else costs
     best = np.array(form.starts[int(np.argmin(costs))], float)
-    compiled = family_kernels.kernels() if refined and form.kind != NONE else None
+    compiled = compiled if refined and form.kind != NONE else None
     if compiled is not None:
         parts = ((form.kind, None), (NONE, None))
         best, atoms, amplitudes, objective = _compiled_refine(
@@ -293,11 +310,14 @@ def fit_form(
     )
 
 
-def fit_discharge(grid: WavelengthGrid, problem: Whitened, most: int = MAX_DISCHARGE_ATOMS) -> list[Fit]:
-    """Greedy fits of the discharge dictionary with 1…``most`` atoms (each the best atom added to the last)."""
+def fit_discharge(
+    grid: WavelengthGrid, problem: Whitened, most: int = MAX_DISCHARGE_ATOMS, compiled: Any = ASK
+) -> list[Fit]:
+    """Greedy fits of the discharge dictionary with 1…``most`` atoms (each the best atom added to the last;
+    ``compiled``: :data:`ASK`)."""
     dictionary, names = discharge_atoms(grid)
     designs = problem.root @ dictionary
-    compiled = family_kernels.kernels()
+    compiled = _kernels(compiled)
     order = (
         [int(i) for i in compiled.greedy_discharge(np.ascontiguousarray(designs), problem.target, most)]
         if compiled is not None
@@ -342,8 +362,9 @@ def _greedy(designs: np.ndarray, target: np.ndarray, most: int) -> list[int]:
     return chosen
 
 
-def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened) -> Fit:
-    """Two fits of two families together: their atoms side by side, the nonlinear parameters refined jointly."""
+def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened, compiled: Any = ASK) -> Fit:
+    """Two fits of two families together: their atoms side by side, the nonlinear parameters refined jointly
+    (``compiled``: :data:`ASK`)."""
     split = first.theta.size
     width = first.atoms.shape[1]
 
@@ -370,7 +391,7 @@ def fit_mixture(first: Fit, second: Fit, grid: WavelengthGrid, problem: Whitened
     theta = np.concatenate([first.theta, second.theta])
     bounds = (first.form.bounds if first.form else ()) + (second.form.bounds if second.form else ())
 
-    compiled = family_kernels.kernels() if theta.size else None
+    compiled = _kernels(compiled) if theta.size else None
     parts = (_part(first), _part(second))
     if compiled is not None and all(kind != NONE for kind, _ in parts):
         theta, atoms, amplitudes, objective = _compiled_refine(
@@ -420,14 +441,20 @@ def _compiled_refine(
     a = empty if fixed_a is None else np.ascontiguousarray(fixed_a, float)
     b = empty if fixed_b is None else np.ascontiguousarray(fixed_b, float)
     nm, slit, basis, water = kernel_grid(grid)
-    lower = np.array([b_[0] for b_ in bounds], float)
-    upper = np.array([b_[1] for b_ in bounds], float)
+    lower, upper = _bound_arrays(bounds)
     theta, atoms, amplitudes, norm2 = compiled.refine(  # type: ignore[attr-defined]
         kind_a, a, split, kind_b, b, nm, slit, basis, water,
         np.ascontiguousarray(problem.root, float), np.ascontiguousarray(problem.target, float),
         np.ascontiguousarray(theta, float), lower, upper, iterations, REFINE_TOLERANCE,
     )  # fmt: skip
     return theta, atoms, amplitudes, float(norm2) + problem.constant
+
+
+@lru_cache(maxsize=128)
+def _bound_arrays(bounds: tuple[tuple[float, float], ...]) -> tuple[np.ndarray, np.ndarray]:
+    """θ's lower and upper bounds as arrays, made once per form or mixture (the compiled refinement only reads them;
+    left writeable, as numba compiles read-only arrays as another type)."""
+    return np.array([b[0] for b in bounds], float), np.array([b[1] for b in bounds], float)
 
 
 def _mixture_form(first: Fit, second: Fit, bounds: tuple, atoms_of: Callable[[np.ndarray], np.ndarray]) -> Form:

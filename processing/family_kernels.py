@@ -23,6 +23,8 @@ from contextlib import contextmanager
 from functools import lru_cache
 from typing import Any
 
+from msflash.processing import frame_kernels
+
 
 @lru_cache(maxsize=1)
 def _compiled() -> Any:
@@ -62,8 +64,6 @@ def prepare() -> bool:
     """Load (or compile) the compiled fits now, with :mod:`processing.frame_kernels`' kernels, for a process that
     will run many family estimates (module notes); whether they are available. Not while a camera streams."""
     global _prepared
-    from msflash.processing import frame_kernels
-
     frame_kernels.prepare()
     _prepared = _compiled() is not None
     return _prepared
@@ -83,10 +83,8 @@ def as_one_shot() -> Iterator[None]:
 
 def kernels() -> Any:
     """The compiled fits if this process prepared them (or ``MSFLASH_KERNELS=numba``) and the compiled kernels
-    are in use (not ``numpy``, not paused: :func:`processing.frame_kernels.enabled`), else None."""
-    from msflash.processing import frame_kernels
-
-    forced = os.environ.get(frame_kernels.KERNELS_VARIABLE, "").strip().lower() == "numba"
-    if not (_prepared or forced) or not frame_kernels.enabled():
+    are in use (not ``numpy``, not paused: :func:`processing.frame_kernels.enabled`), else None. Asked once per
+    form and candidate (~20 times an estimate): the environment is read only where the answer depends on it."""
+    if not _prepared and os.environ.get(frame_kernels.KERNELS_VARIABLE, "").strip().lower() != "numba":
         return None
-    return _compiled()
+    return _compiled() if frame_kernels.enabled() else None

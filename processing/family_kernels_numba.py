@@ -107,16 +107,15 @@ def _atoms(kind, theta, fixed, nm, slit, basis, water, out):
 
 
 @njit(cache=True)
-def _tangent(kind, theta, amplitudes, fixed, nm, slit, basis, water, lower, upper, out):
+def _tangent(kind, theta, amplitudes, atoms, fixed, nm, slit, basis, water, lower, upper, out):
     """Write ``∂(B(θ) a)/∂θ`` of one part into ``out`` (n × P): closed forms where the numpy forms have them, else
-    forward differences (:func:`processing.family_fit._difference_tangent`)."""
+    forward differences (:func:`processing.family_fit._difference_tangent`). ``atoms``: the part's B(θ) (C-ordered),
+    as :func:`_atoms` wrote it for this θ (the refinement has it already: not evaluated again)."""
     n = nm.size
     p = theta.size
     if p == 0:
         return
-    width = _width(kind, p, fixed)
-    atoms = np.empty((n, width))
-    _atoms(kind, theta, fixed, nm, slit, basis, water, atoms)
+    width = atoms.shape[1]
     spectrum = atoms @ amplitudes
     if kind == BLACKBODY:
         slope = _planck_log_slope(nm, math.exp(theta[0]))
@@ -432,13 +431,13 @@ def refine(kind_a, fixed_a, n_a, kind_b, fixed_b, nm, slit, basis, water, root, 
         tangent = np.zeros((nm.size, p))
         if n_a > 0:
             part = np.zeros((nm.size, n_a))
-            _tangent(kind_a, theta[:n_a], amplitudes[:width_a], fixed_a, nm, slit, basis, water, lower[:n_a],
-                     upper[:n_a], part)  # fmt: skip
+            _tangent(kind_a, theta[:n_a], amplitudes[:width_a], np.ascontiguousarray(atoms[:, :width_a]), fixed_a, nm,
+                     slit, basis, water, lower[:n_a], upper[:n_a], part)  # fmt: skip
             tangent[:, :n_a] = part
         if kind_b >= 0 and p > n_a:
             part = np.zeros((nm.size, p - n_a))
-            _tangent(kind_b, theta[n_a:], amplitudes[width_a:], fixed_b, nm, slit, basis, water, lower[n_a:],
-                     upper[n_a:], part)  # fmt: skip
+            _tangent(kind_b, theta[n_a:], amplitudes[width_a:], np.ascontiguousarray(atoms[:, width_a:]), fixed_b, nm,
+                     slit, basis, water, lower[n_a:], upper[n_a:], part)  # fmt: skip
             tangent[:, n_a:] = part
         jacobian = root @ tangent
         active = np.flatnonzero(amplitudes > 0)

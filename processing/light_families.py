@@ -34,7 +34,7 @@ import numpy as np
 
 from msflash.processing import family_kernels
 from msflash.processing.channel_statistics import ChannelStatistics
-from msflash.processing.family_fit import Fit, fit_discharge, fit_form, fit_mixture, start_costs
+from msflash.processing.family_fit import MAX_DISCHARGE_ATOMS, Fit, fit_discharge, fit_form, fit_mixture, start_costs
 from msflash.processing.light_forms import FORMS, Form, seen_forms
 from msflash.processing.light_prior import KAPPA, plane_responsivities
 from msflash.processing.reference_patch import PATCH_WEIGHT, ReferencePatch
@@ -352,13 +352,15 @@ class FamilyModel:
         """:meth:`candidates` on the all-folds data term ``problem``."""
         grid = self.grid
         start = time.perf_counter()
-        costs = start_costs(self.forms, grid, problem)  # every form's coarse starts at once
+        compiled = family_kernels.kernels()  # asked once for every fit below
+        costs = start_costs(self.forms, grid, problem, compiled)  # every form's coarse starts at once
         share = (time.perf_counter() - start) / max(len(self.forms), 1)
         fits = [
-            _timed(fit_form, form, grid, problem, True, cost, before=share) for form, cost in zip(self.forms, costs)
+            _timed(fit_form, form, grid, problem, True, cost, compiled, before=share)
+            for form, cost in zip(self.forms, costs)
         ]
         start = time.perf_counter()
-        greedy = fit_discharge(grid, problem)
+        greedy = fit_discharge(grid, problem, MAX_DISCHARGE_ATOMS, compiled)
         each = (time.perf_counter() - start) / max(len(greedy), 1)
         fits += [fit.with_seconds(each * (i + 1)) for i, fit in enumerate(greedy)]  # size m needs steps 1…m
         best_of: dict[str, Fit] = {}
@@ -368,7 +370,7 @@ class FamilyModel:
         families = sorted(best_of)
         for i, a in enumerate(families):
             for b in families[i + 1 :]:
-                fits.append(_timed(fit_mixture, best_of[a], best_of[b], grid, problem))
+                fits.append(_timed(fit_mixture, best_of[a], best_of[b], grid, problem, compiled))
         # The LEDs' span judged as the families are: non-negative weights on the same (denoised) data term, no
         # roughness penalty (eq. 5's α would bias its held-out error against it).
         leds = self.led_spectra.values

@@ -10,6 +10,10 @@ the copy. One thread (``OPENBLAS_NUM_THREADS=1``); no targets asserted.
 ``--stages``: instead, the compiled family estimate as the bench runs it (statistics, prior, families, one after
 the other, so each stage starts with the caches the frames' pass left), each stage's CPU time
 (``time.thread_time``) the median of ``--repeats`` runs, in ms and ÷ the median CPU time of the copy.
+
+``--decile``: the bench's family figure by CPU time, steadier than its medians on a loaded machine: a copy, then the
+compiled family estimate (statistics, prior, families), in turn ``--repeats`` times; the lower decile of each, and the
+estimate's over the copy's (to compare checkouts, alternate processes).
 """
 
 from __future__ import annotations
@@ -36,10 +40,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--width", type=int, default=1280)
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--stages", action="store_true", help="CPU time of each stage of the compiled estimate")
+    parser.add_argument("--decile", action="store_true", help="lower decile of the CPU time, estimate ÷ copy")
     args = parser.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     if args.stages:
         return _stages(args.height, args.width, max(args.repeats, 21))
+    if args.decile:
+        return _decile(args.height, args.width, max(args.repeats, 21))
     from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR
     from msflash.lab.bench.processing import benchmark_world, frame_copy
     from msflash.processing import family_kernels, frame_kernels
@@ -138,6 +145,51 @@ def _stages(height: int, width: int, runs: int) -> int:
         columns[-1].insert(0, f"{1e3 * reference:.2f} (1)")
     for i, name in enumerate(("copy of the stack", *names)):
         print(f"| {name} | {columns[0][i]} | {columns[1][i]} |")
+    return 0
+
+
+def _decile(height: int, width: int, runs: int) -> int:
+    """The ``--decile`` table (module notes); 0."""
+    import numpy as np
+
+    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor
+    from msflash.lab.bench.processing import benchmark_world, frame_copy
+    from msflash.processing import family_kernels
+    from msflash.processing.channel_statistics import accumulate_channel_statistics
+    from msflash.processing.light_families import family_model
+    from msflash.processing.light_prior import prior_model
+
+    family_kernels.prepare()
+    print("| frames | copy ms | family estimate ms | ÷ copy |")
+    print("|---|---|---|---|")
+    for cfa in (None, "RGGB"):
+        world = benchmark_world(height, width, cfa=cfa)
+        frames, spec, leds, camera = world["frames"], world["spec"], world["leds"], world["camera"]
+        factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)
+
+        def statistics(frames=frames, spec=spec, factor=factor, cfa=cfa):  # noqa: ANN001, ANN202 — bound per world
+            return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
+
+        channels = statistics()
+        prior, families = prior_model(channels.channels, leds, camera), family_model(channels.channels, leds, camera)
+
+        def estimate(statistics=statistics, prior=prior, families=families):  # noqa: ANN001, ANN202
+            now = statistics()
+            return families.estimate(now, prior.estimate(now).spectrum.values[:, 0])
+
+        copy = frame_copy(frames)
+        copy(), estimate()
+        copies, estimates = [], []
+        for _ in range(runs):
+            start = time.thread_time()
+            copy()
+            middle = time.thread_time()
+            estimate()
+            estimates.append(time.thread_time() - middle)
+            copies.append(middle - start)
+        low_copy, low_estimate = (float(np.percentile(v, 10)) for v in (copies, estimates))
+        label = f"{width}×{height} " + ("RGB" if cfa is None else f"raw {cfa} 12-bit")
+        print(f"| {label} | {1e3 * low_copy:.2f} | {1e3 * low_estimate:.2f} | {low_estimate / low_copy:.2f} |")
     return 0
 
 

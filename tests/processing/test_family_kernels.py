@@ -98,3 +98,41 @@ def test_the_compiled_fits_are_opt_in(monkeypatch: pytest.MonkeyPatch) -> None:
     assert family_kernels.kernels() is not None
     monkeypatch.setenv("MSFLASH_KERNELS", "numpy")
     assert family_kernels.kernels() is None
+
+
+def test_a_route_passed_to_the_fits_is_the_one_they_take(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The family estimate asks for the compiled fits once and passes the answer to every fit: ``compiled=None``
+    gives the numpy route's fits to the bit, the kernels passed in the compiled route's, whatever the process has
+    prepared — so one estimate never mixes the two routes."""
+    from msflash.processing.family_fit import ASK, start_costs
+
+    leds, camera = _leds_and_camera()
+    statistics = _statistics(_lights()["phosphor white + red"], seed=11)
+    model = family_model(statistics.channels, leds, camera)
+    scene = scene_form(statistics, model.reduction)
+    problem = scene.whitened(list(range(scene.n_folds)))
+
+    def fits(compiled: object = ASK) -> list:  # ASK: each fit asks family_kernels.kernels() itself
+        costs = start_costs(model.forms, GRID, problem, compiled)
+        forms = [fit_form(form, GRID, problem, True, cost, compiled) for form, cost in zip(model.forms, costs)]
+        greedy = fit_discharge(GRID, problem, 6, compiled)
+        return [*forms, *greedy, fit_mixture(greedy[-1], forms[0], GRID, problem, compiled)]
+
+    def same(one: list, other: list) -> bool:
+        return all(
+            a.name == b.name and np.array_equal(a.theta, b.theta) and np.array_equal(a.amplitudes, b.amplitudes)
+            and a.objective == b.objective
+            for a, b in zip(one, other, strict=True)
+        )  # fmt: skip
+
+    monkeypatch.setenv("MSFLASH_KERNELS", "numpy")
+    numpy_route = fits()
+    monkeypatch.setenv("MSFLASH_KERNELS", "numba")
+    compiled = family_kernels.kernels()
+    assert compiled is not None
+    compiled_route = fits()
+    assert not same(numpy_route, compiled_route)  # the routes agree to rounding only: the test can tell them apart
+    assert same(fits(None), numpy_route)  # asked once as "numpy", whatever the process could take
+    assert same(fits(compiled), compiled_route)
+    monkeypatch.setenv("MSFLASH_KERNELS", "numpy")
+    assert same(fits(compiled), compiled_route)  # the answer passed in, not the environment now
