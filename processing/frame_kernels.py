@@ -69,7 +69,8 @@ def _compiled() -> Any:
 
 
 def _warm(kernels: Any) -> None:
-    """Run :func:`block_statistics`' one specialisation once, as the kernels load: a stream that decided on it
+    """Run :func:`block_statistics`' and :func:`detail_line`'s one specialisation once, as the kernels load: a stream
+    that decided on them
     (:func:`statistics_compiled`) then never compiles it while a camera streams (loaded from the disk cache, or
     compiled now, once per installation)."""
     one = np.ones(1)
@@ -88,6 +89,8 @@ def _warm(kernels: Any) -> None:
         *(np.zeros((0, 1, 1)),) * 2,
         np.zeros((1, 1)),
     )
+    cells = np.arange(80.0)
+    kernels.detail_line(cells, cells, cells, cells, 16, 9.0, 10.0, 0.9, 1, 1e-3, 64, 0.45, 1e-100)
 
 
 _paused = 0
@@ -249,6 +252,30 @@ def block_statistics(
         aa,
     )
     return gram, fa, ff, aa
+
+
+def detail_line(
+    levels: np.ndarray, diagonal: np.ndarray, across: np.ndarray, down: np.ndarray, constants: tuple[float, ...]
+) -> tuple[bool, float, float]:
+    """:func:`processing.noise_level.fit_detail_line`'s ``(found, gain, offset)`` in one compiled call (used where
+    :func:`statistics_compiled` said so); ``constants`` are that module's ``(LEVEL_BANDS, SMOOTH_QUANTILE,
+    DETAIL_CUT, cut mean, ROUNDS, CONVERGED, MIN_CELLS, CHI2_1_MEDIAN, tiny)``. The same selections and thresholds
+    as numpy's fit, its sums in order: the line agrees with numpy's to rounding (tests/processing/test_noise_level.py).
+    """
+    bands, smooth, cut, cut_mean, rounds, converged, min_cells, median, tiny = constants
+    found, gain, offset = _compiled().detail_line(
+        *(np.ascontiguousarray(cells, dtype=np.float64).reshape(-1) for cells in (levels, diagonal, across, down)),
+        int(bands),
+        float(smooth),
+        float(cut),
+        float(cut_mean),
+        int(rounds),
+        float(converged),
+        int(min_cells),
+        float(median),
+        float(tiny),
+    )
+    return bool(found), float(gain), float(offset)
 
 
 def synthesis_inputs(frames: list[np.ndarray]) -> tuple[np.ndarray, ...] | None:

@@ -34,6 +34,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from msflash.processing import frame_kernels
+
 FIT_CELLS = 4096
 """Cells a line is fitted to at most: whole rows of cells, evenly strided over the frame (why this many:
 docs/speed.md, Raw frames)."""
@@ -204,10 +206,15 @@ def _banded_medians(levels: np.ndarray, order: np.ndarray, squares: np.ndarray) 
 
 
 def fit_detail_line(
-    levels: np.ndarray, diagonal: np.ndarray, across: np.ndarray, down: np.ndarray
+    levels: np.ndarray, diagonal: np.ndarray, across: np.ndarray, down: np.ndarray, compiled: bool = False
 ) -> PixelNoise | None:
     """The noise line of cells with sums ``levels`` (above black) and Haar details ``HH``, ``HL``, ``LH``
     (module notes); None with fewer than :data:`MIN_CELLS` cells or no positive variance.
+
+    ``compiled``: the same fit in one compiled call (:func:`processing.frame_kernels.detail_line`; the kernels must
+    be loaded), for block rows that take the compiled route (:func:`processing.frame_kernels.statistics_compiled`):
+    it agrees with this numpy fit to rounding (its sums are taken in another order), and costs about a tenth of it
+    (a few dozen numpy calls on ~5 000 cells; docs/speed.md).
 
     Examples
     --------
@@ -223,6 +230,12 @@ def fit_detail_line(
     >>> bool(1.9 < line.gain < 2.1)
     True
     """
+    if compiled:
+        constants = (LEVEL_BANDS, SMOOTH_QUANTILE, DETAIL_CUT, _CUT_MEAN, ROUNDS, CONVERGED, MIN_CELLS)
+        found, gain, offset = frame_kernels.detail_line(
+            levels, diagonal, across, down, (*constants, CHI2_1_MEDIAN, _TINY)
+        )
+        return PixelNoise(gain=gain, read=offset / 4.0) if found else None
     levels = np.maximum(np.asarray(levels, dtype=float), 0.0)
     squares = np.empty((3, levels.size))
     np.square(np.asarray(diagonal, dtype=float), out=squares[0])
@@ -262,9 +275,12 @@ def fit_detail_line(
     return PixelNoise(gain=float(gain), read=float(offset) / 4.0)
 
 
-def detail_noise_line(frame: np.ndarray, cfa_period: int, black: float, white: float) -> PixelNoise | None:
-    """:func:`fit_detail_line` of :func:`haar_details` of one raw frame: its sensor's noise line, or None."""
-    return fit_detail_line(*haar_details(frame, cfa_period, black, white))
+def detail_noise_line(
+    frame: np.ndarray, cfa_period: int, black: float, white: float, compiled: bool = False
+) -> PixelNoise | None:
+    """:func:`fit_detail_line` of :func:`haar_details` of one raw frame: its sensor's noise line, or None
+    (``compiled`` as there)."""
+    return fit_detail_line(*haar_details(frame, cfa_period, black, white), compiled=compiled)
 
 
 @dataclass(frozen=True)

@@ -175,3 +175,82 @@ def test_the_fit_is_the_plain_fit_to_the_bit(cells: int, whole: bool, top: int) 
     if whole:
         details = tuple(np.round(detail) for detail in details)
     assert fit_detail_line(*details) == _plain_fit(*details)
+
+
+def _compiled_kernels() -> object:
+    """The compiled kernels, loaded (or the test skipped without numba)."""
+    from msflash.processing import frame_kernels
+
+    pytest.importorskip("numba")
+    if not frame_kernels.prepare():
+        pytest.skip("the compiled kernels are off (MSFLASH_KERNELS=numpy)")
+    return frame_kernels._compiled()
+
+
+def _close(line: PixelNoise | None, reference: PixelNoise | None) -> bool:
+    if line is None or reference is None:
+        return line is reference
+    return bool(np.allclose([line.gain, line.read], [reference.gain, reference.read], rtol=1e-12, atol=0.0))
+
+
+@pytest.mark.parametrize("cells", [5120, 4095, 1000, 300, 130, 63])
+@pytest.mark.parametrize(("whole", "top"), [(True, 400), (True, 40000), (False, 400)])
+def test_the_compiled_fit_is_the_numpy_fit_to_rounding(cells: int, whole: bool, top: int) -> None:
+    """The fit of the compiled route (:func:`processing.frame_kernels.detail_line`: its own stable sort, band medians
+    by selection, sums in order) against numpy's, on the cases of the plain-fit test and too few cells (None on both):
+    the same line to 1e-12 relative."""
+    _compiled_kernels()
+    rng = np.random.default_rng(cells + top)
+    levels = np.repeat(rng.integers(top // 40, top, (cells, 1)), 4, axis=1).astype(float)
+    levels[::3, 0] *= 3.0
+    details = _cells(levels, rng)
+    if whole:
+        details = tuple(np.round(detail) for detail in details)
+    reference = fit_detail_line(*details)
+    assert (reference is None) == (cells < 64)
+    assert _close(fit_detail_line(*details, compiled=True), reference)
+
+
+def test_the_compiled_fit_finds_no_line_where_numpy_finds_none() -> None:
+    """Identical samples (no noise to see), negative levels (clipped to 0) with no detail, and non-finite details."""
+    _compiled_kernels()
+    flat = np.full(4000, 400.0), np.zeros(4000), np.zeros(4000), np.zeros(4000)
+    negative = -np.arange(4000.0), np.zeros(4000), np.ones(4000), np.zeros(4000)
+    broken = np.arange(4000.0), np.full(4000, np.inf), np.zeros(4000), np.zeros(4000)
+    for details in (flat, negative, broken):
+        assert fit_detail_line(*details) is None
+        assert fit_detail_line(*details, compiled=True) is None
+
+
+@pytest.mark.parametrize("kind", ["whole", "large whole", "fractional", "zeros and ties"])
+def test_the_compiled_stable_order_is_numpys_stable_argsort(kind: str) -> None:
+    """The radix sort behind the compiled fit gives the order of numpy's stable argsort, ties in index order."""
+    kernels = _compiled_kernels()
+    rng = np.random.default_rng(3)
+    levels = {
+        "whole": rng.integers(0, 400, 5000).astype(float),
+        "large whole": rng.integers(0, 1 << 40, 5000).astype(float),
+        "fractional": rng.uniform(0.0, 1e6, 5000),
+        "zeros and ties": np.repeat([0.0, 2.5, 1e-300, 7.0], 1000),
+    }[kind]
+    assert np.array_equal(kernels._stable_order(levels), np.argsort(levels, kind="stable"))  # type: ignore[attr-defined]
+
+
+def test_block_rows_of_the_compiled_route_fit_the_compiled_line() -> None:
+    """Block rows that take the compiled moments fit the ambient's line on that route too (decided once per stack):
+    to rounding the numpy route's."""
+    from msflash.processing.block_sums import plane_shape
+
+    _compiled_kernels()
+    frame, _, _, _ = rendered_frames(
+        ambient("tungsten"), scene=SIM_CHART, sensor=SENSOR, noise=True, seed=3, peak_fraction=0.5
+    )
+    lines = []
+    for compiled in (True, False):
+        rows = BlockRows(
+            1, plane_shape(frame.shape, 2), 4, SENSOR.white_level, SENSOR.black_level, weighting=True, compiled=compiled
+        )
+        rows.add_frame(1, frame, 2)
+        lines.append(rows.ambient_noise)
+    assert lines[0] is not None and _close(lines[0], lines[1])
+    assert lines[0] == detail_noise_line(frame, 2, SENSOR.black_level, SENSOR.white_level, compiled=True)
