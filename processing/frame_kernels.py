@@ -69,7 +69,7 @@ def _compiled() -> Any:
 
 
 def _warm(kernels: Any) -> None:
-    """Run :func:`block_statistics`' and :func:`detail_line`'s one specialisation once, as the kernels load: a stream
+    """Run :func:`block_statistics`', :func:`detail_line`'s and :func:`haar_cells`' specialisations once, as the kernels load: a stream
     that decided on them
     (:func:`statistics_compiled`) then never compiles it while a camera streams (loaded from the disk cache, or
     compiled now, once per installation)."""
@@ -91,6 +91,8 @@ def _warm(kernels: Any) -> None:
     )
     cells = np.arange(80.0)
     kernels.detail_line(cells, cells, cells, cells, 16, 9.0, 10.0, 0.9, 1, 1e-3, 64, 0.45, 1e-100)
+    for sample in (np.uint8, np.uint16):
+        kernels.haar_cells(np.zeros((4, 4), sample), 1, 2, 2, 1, 2, 0.0, 1.0)
 
 
 _paused = 0
@@ -276,6 +278,28 @@ def detail_line(
         float(tiny),
     )
     return bool(found), float(gain), float(offset)
+
+
+def haar_cells(
+    frame: np.ndarray, cfa_period: int, cell_rows: int, stride: int, cell_columns: int, black: float, white: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """:func:`processing.noise_level.haar_details` of an (H, W) or (H, W, C) integer frame's cells (every ``stride``-th of the
+    first ``cell_rows`` rows of cells, the first ``cell_columns`` columns) in one compiled pass (used where
+    :func:`statistics_compiled` said so): the same arrays to the bit; None where the kernel cannot take the frame."""
+    rows = _rows_view(frame)
+    if rows is None:
+        return None
+    levels, diagonal, across, down = _compiled().haar_cells(
+        rows,
+        frame.shape[2] if frame.ndim == 3 else 1,
+        cfa_period,
+        cell_rows,
+        stride,
+        cell_columns,
+        float(black),
+        float(white),
+    )
+    return levels, diagonal, across, down
 
 
 def synthesis_inputs(frames: list[np.ndarray]) -> tuple[np.ndarray, ...] | None:

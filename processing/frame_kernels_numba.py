@@ -550,3 +550,42 @@ def detail_line(
     if not gain * middle + offset > 0:
         return False, 0.0, 0.0
     return True, gain, offset
+
+
+@njit(nogil=True, cache=True)
+def haar_cells(rows, channels, period, cell_rows, stride, cell_columns, black, white):
+    """:func:`processing.noise_level.haar_details` of raw integer rows (H, W·C): ``(S, HH, HL, LH)`` of the 2 × 2 cells
+    of every ``stride``-th of the first ``cell_rows`` rows of cells and of the first ``cell_columns`` cell columns, in
+    (cell row, cell column, phase row, phase column, channel) order, cells with a sample at or above ``white`` left
+    out. The same float64 operations in the same order on exact integers: the same arrays to the bit."""
+    per_row = cell_columns * period * period * channels
+    slabs = len(range(0, cell_rows, stride))
+    levels = np.empty(slabs * per_row)
+    diagonal = np.empty(slabs * per_row)
+    across = np.empty(slabs * per_row)
+    down = np.empty(slabs * per_row)
+    black4 = 4.0 * black
+    count = 0
+    for cell_row in range(0, cell_rows, stride):
+        top = cell_row * 2 * period
+        for cell_column in range(cell_columns):
+            left = cell_column * 2 * period
+            for p in range(period):
+                upper, lower = rows[top + p], rows[top + period + p]
+                for q in range(period):
+                    first, second = (left + q) * channels, (left + period + q) * channels
+                    for c in range(channels):
+                        x00, x01 = float(upper[first + c]), float(upper[second + c])
+                        x10, x11 = float(lower[first + c]), float(lower[second + c])
+                        if max(max(x00, x01), max(x10, x11)) >= white:
+                            continue
+                        top_sum, bottom_sum = x00 + x01, x10 + x11
+                        top_difference, bottom_difference = x00 - x01, x10 - x11
+                        total = top_sum + bottom_sum
+                        total -= black4
+                        levels[count] = total
+                        diagonal[count] = top_difference - bottom_difference
+                        across[count] = top_difference + bottom_difference
+                        down[count] = top_sum - bottom_sum
+                        count += 1
+    return levels[:count], diagonal[:count], across[:count], down[:count]

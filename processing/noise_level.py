@@ -75,10 +75,18 @@ class PixelNoise:
 
 
 def haar_details(
-    frame: np.ndarray, cfa_period: int, black: float, white: float, max_cells: int = FIT_CELLS
+    frame: np.ndarray,
+    cfa_period: int,
+    black: float,
+    white: float,
+    max_cells: int = FIT_CELLS,
+    compiled: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(S, HH, HL, LH)`` of 2 × 2 cells of a raw frame's planes, flattened; cells with a sample at or
     above ``white`` are left out, ``S`` is the cell's sum less ``4 · black``.
+
+    ``compiled``: integer frames in one compiled pass over the chosen rows
+    (:func:`processing.frame_kernels.haar_cells`; the kernels must be loaded): the same arrays to the bit.
 
     ``frame`` is (H, W) (mono, or a Bayer mosaic with ``cfa_period`` 2) or (H, W, C). Whole rows of cells
     are taken, evenly strided so that at most about ``max_cells`` cells are read: a 1280 × 1024 frame
@@ -92,6 +100,7 @@ def haar_details(
     ([60.0, 63.0], [0.0, 3.0], [-20.0, -17.0], [0.0, 3.0])
     """
     rows_per_cell = 2 * cfa_period
+    raw = frame
     if frame.ndim == 2:
         frame = frame[:, :, None]
     n_cell_rows = frame.shape[0] // rows_per_cell
@@ -101,6 +110,10 @@ def haar_details(
         return empty, empty, empty, empty
     per_row = (columns // rows_per_cell) * cfa_period * cfa_period * frame.shape[2]
     stride = max(1, math.ceil(n_cell_rows * per_row / max(max_cells, 1)))
+    if compiled:
+        cells = frame_kernels.haar_cells(raw, cfa_period, n_cell_rows, stride, columns // rows_per_cell, black, white)
+        if cells is not None:
+            return cells
     # (cell rows, 2·period, W, C): the chosen rows of cells.
     slabs = frame[: n_cell_rows * rows_per_cell, :columns].reshape(n_cell_rows, rows_per_cell, columns, -1)[::stride]
     channels, cell_columns = slabs.shape[-1], columns // rows_per_cell
@@ -280,7 +293,7 @@ def detail_noise_line(
 ) -> PixelNoise | None:
     """:func:`fit_detail_line` of :func:`haar_details` of one raw frame: its sensor's noise line, or None
     (``compiled`` as there)."""
-    return fit_detail_line(*haar_details(frame, cfa_period, black, white), compiled=compiled)
+    return fit_detail_line(*haar_details(frame, cfa_period, black, white, compiled=compiled), compiled=compiled)
 
 
 @dataclass(frozen=True)

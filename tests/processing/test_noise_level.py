@@ -254,3 +254,28 @@ def test_block_rows_of_the_compiled_route_fit_the_compiled_line() -> None:
         lines.append(rows.ambient_noise)
     assert lines[0] is not None and _close(lines[0], lines[1])
     assert lines[0] == detail_noise_line(frame, 2, SENSOR.black_level, SENSOR.white_level, compiled=True)
+
+
+@pytest.mark.parametrize(
+    ("shape", "period", "dtype", "white"),
+    [
+        ((1027, 1283), 2, np.uint16, 65535.0),  # a mosaic at the full 16-bit range, sizes not multiples of a cell
+        ((1027, 1283), 2, np.uint16, 4095.0),  # 12-bit: cells with a saturated sample left out
+        ((301, 203, 3), 1, np.uint16, 60000.0),
+        ((64, 96, 3), 1, np.uint8, 250.0),
+        ((6, 5), 2, np.uint16, 65535.0),  # one row of cells
+    ],
+)
+def test_the_compiled_haar_details_are_numpys_to_the_bit(
+    shape: tuple[int, ...], period: int, dtype: type, white: float
+) -> None:
+    """The compiled cells (:func:`processing.frame_kernels.haar_cells`) against numpy's: the same arrays, value for
+    value (exact sums of integer samples), the same cells left out, at several strides."""
+    _compiled_kernels()
+    top = min(np.iinfo(dtype).max, int(white * 1.02))  # about 8 % of the cells reach white below the type's top
+    frame = np.random.default_rng(len(shape)).integers(0, top, shape, endpoint=True).astype(dtype)
+    for max_cells in (4096, 100, 10**9):
+        reference = haar_details(frame, period, 64.0, white, max_cells)
+        cells = haar_details(frame, period, 64.0, white, max_cells, compiled=True)
+        assert all(a.dtype == b.dtype and np.array_equal(a, b) for a, b in zip(cells, reference, strict=True))
+        assert reference[0].size > 0 and (white >= top or np.max(reference[0]) < 4 * white)
