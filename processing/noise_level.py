@@ -111,9 +111,11 @@ def haar_details(
     per_row = (columns // rows_per_cell) * cfa_period * cfa_period * frame.shape[2]
     stride = max(1, math.ceil(n_cell_rows * per_row / max(max_cells, 1)))
     if compiled:
-        cells = frame_kernels.haar_cells(raw, cfa_period, n_cell_rows, stride, columns // rows_per_cell, black, white)
-        if cells is not None:
-            return cells
+        compiled_cells = frame_kernels.haar_cells(
+            raw, cfa_period, n_cell_rows, stride, columns // rows_per_cell, black, white
+        )
+        if compiled_cells is not None:
+            return compiled_cells
     # (cell rows, 2·period, W, C): the chosen rows of cells.
     slabs = frame[: n_cell_rows * rows_per_cell, :columns].reshape(n_cell_rows, rows_per_cell, columns, -1)[::stride]
     channels, cell_columns = slabs.shape[-1], columns // rows_per_cell
