@@ -8,6 +8,8 @@ raw frames landed at 1.2× the LED bound where RGB ones landed at 0.92× (docs/r
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -225,7 +227,7 @@ def test_the_compiled_fit_finds_no_line_where_numpy_finds_none() -> None:
 @pytest.mark.parametrize("kind", ["whole", "large whole", "fractional", "zeros and ties"])
 def test_the_compiled_stable_order_is_numpys_stable_argsort(kind: str) -> None:
     """The radix sort behind the compiled fit gives the order of numpy's stable argsort, ties in index order."""
-    kernels = _compiled_kernels()
+    kernels: Any = _compiled_kernels()
     rng = np.random.default_rng(3)
     levels = {
         "whole": rng.integers(0, 400, 5000).astype(float),
@@ -233,7 +235,7 @@ def test_the_compiled_stable_order_is_numpys_stable_argsort(kind: str) -> None:
         "fractional": rng.uniform(0.0, 1e6, 5000),
         "zeros and ties": np.repeat([0.0, 2.5, 1e-300, 7.0], 1000),
     }[kind]
-    assert np.array_equal(kernels._stable_order(levels), np.argsort(levels, kind="stable"))  # type: ignore[attr-defined]
+    assert np.array_equal(kernels._stable_order(levels), np.argsort(levels, kind="stable"))
 
 
 def test_block_rows_of_the_compiled_route_fit_the_compiled_line() -> None:
@@ -279,3 +281,15 @@ def test_the_compiled_haar_details_are_numpys_to_the_bit(
         cells = haar_details(frame, period, 64.0, white, max_cells, compiled=True)
         assert all(a.dtype == b.dtype and np.array_equal(a, b) for a, b in zip(cells, reference, strict=True))
         assert reference[0].size > 0 and (white >= top or np.max(reference[0]) < 4 * white)
+
+
+@pytest.mark.parametrize("size", [1, 2, 3, 8, 255, 320])
+def test_the_compiled_band_median_is_numpys_median(size: int) -> None:
+    """The selection behind the compiled fit's band medians (many ties, as squares of integer details; distinct
+    values; one value repeated) gives ``np.median`` exactly and leaves the values as they were."""
+    kernels: Any = _compiled_kernels()
+    rng = np.random.default_rng(size)
+    for values in (rng.integers(0, 6, size) ** 2.0, rng.permutation(size) * 1.5, np.full(size, 4.0)):
+        kept = values.copy()
+        median = kernels._band_median(values, np.empty(size), np.empty(size))
+        assert median == np.median(values) and np.array_equal(values, kept)
