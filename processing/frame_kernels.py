@@ -285,9 +285,11 @@ def haar_cells(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """:func:`processing.noise_level.haar_details` of an (H, W) or (H, W, C) integer frame's cells (every ``stride``-th of the
     first ``cell_rows`` rows of cells, the first ``cell_columns`` columns) in one compiled pass (used where
-    :func:`statistics_compiled` said so): the same arrays to the bit; None where the kernel cannot take the frame."""
+    :func:`statistics_compiled` said so): the same arrays to the bit; None where the kernel cannot take the frame.
+    C-contiguous 8- or 16-bit rows only: the specialisations :func:`_warm` compiles as the kernels load (a frame of
+    padded rows would compile another while a camera streams, which :func:`paused` exists to prevent)."""
     rows = _rows_view(frame)
-    if rows is None:
+    if rows is None or not rows.flags.c_contiguous:
         return None
     levels, diagonal, across, down = _compiled().haar_cells(
         rows,

@@ -293,3 +293,18 @@ def test_the_compiled_band_median_is_numpys_median(size: int) -> None:
         kept = values.copy()
         median = kernels._band_median(values, np.empty(size), np.empty(size))
         assert median == np.median(values) and np.array_equal(values, kept)
+
+
+def test_a_frame_of_padded_rows_takes_numpys_cells() -> None:
+    """A frame whose rows are padded (a view into wider rows) is not one of the kernels' warmed specialisations: the
+    compiled route hands it to numpy's cells (the same arrays), and the fit on it is the contiguous frame's."""
+    _compiled_kernels()
+    wide = np.random.default_rng(5).integers(0, 4000, (260, 330)).astype(np.uint16)
+    padded = wide[:, :320]
+    assert not padded.flags.c_contiguous
+    cells = haar_details(padded, 2, 64.0, 4095.0, compiled=True)
+    reference = haar_details(np.ascontiguousarray(padded), 2, 64.0, 4095.0)
+    assert all(np.array_equal(a, b) for a, b in zip(cells, reference, strict=True))
+    assert detail_noise_line(padded, 2, 64.0, 4095.0, compiled=True) == detail_noise_line(
+        np.ascontiguousarray(padded), 2, 64.0, 4095.0, compiled=True
+    )
