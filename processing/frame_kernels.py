@@ -92,7 +92,7 @@ def _warm(kernels: Any) -> None:
     cells = np.arange(80.0)
     kernels.detail_line(cells, cells, cells, cells, 16, 9.0, 10.0, 0.9, 1, 1e-3, 64, 0.45, 1e-100)
     for sample in (np.uint8, np.uint16):
-        kernels.haar_cells(np.zeros((4, 4), sample), 1, 2, 2, 1, 2, 0.0, 1.0)
+        kernels.haar_cells(np.zeros((4, 4), sample), 1, 1, 2, 1, 2, 0.0, 1.0)  # 2 × 2 cells of one channel
 
 
 _paused = 0
