@@ -15,8 +15,9 @@ everything when numba is missing (it is an optional dependency, ``pip install ms
 kernels (:func:`wanted`: numba's start-up would cost more than it saves). The passes over the frames
 give the same numbers to the bit on both routes (exact integer sums; tests/processing/test_frame_kernels.py),
 so which one a process takes changes its speed only. The moments of the block rows
-(:func:`block_statistics`) agree with numpy's to rounding only (about 1e-14 relative): their route is
-decided once per stack, by whether the process has the kernels loaded before the stack's rows are laid
+(:func:`block_statistics`) and the fit of the ambient's noise line (:func:`detail_line`, on the Haar cells of
+:func:`haar_cells`, which are numpy's to the bit) agree with numpy's to rounding only (about 1e-14 relative): their
+route is decided once per stack, by whether the process has the kernels loaded before the stack's rows are laid
 out (:func:`statistics_compiled`), so that the live and the disk stream of one sequence in the same kind
 of process report the same digits.
 
