@@ -235,7 +235,9 @@ class BlockRows:
         """The ambient frame's noise line (:attr:`ambient_noise`) and the inverse-variance weights of every row column
         it gives, from the ambient row (in) and its frame: they depend on these alone, so the thread that added the
         ambient frame takes them while others still add LED frames (off the serial path of :meth:`statistics`)."""
-        self.ambient_noise = detail_noise_line(frame, cfa_period, self.black_level, self.white_level)
+        self.ambient_noise = detail_noise_line(
+            frame, cfa_period, self.black_level, self.white_level, compiled=self.compiled
+        )
         ambient = self.n_led_frames
         # rows layout (block row, channel, block column)
         black = self.black_level * self.factor * self.factor

@@ -15,8 +15,9 @@ everything when numba is missing (it is an optional dependency, ``pip install ms
 kernels (:func:`wanted`: numba's start-up would cost more than it saves). The passes over the frames
 give the same numbers to the bit on both routes (exact integer sums; tests/processing/test_frame_kernels.py),
 so which one a process takes changes its speed only. The moments of the block rows
-(:func:`block_statistics`) agree with numpy's to rounding only (about 1e-14 relative): their route is
-decided once per stack, by whether the process has the kernels loaded before the stack's rows are laid
+(:func:`block_statistics`) and the fit of the ambient's noise line (:func:`detail_line`, on the Haar cells of
+:func:`haar_cells`, which are numpy's to the bit) agree with numpy's to rounding only (about 1e-14 relative): their
+route is decided once per stack, by whether the process has the kernels loaded before the stack's rows are laid
 out (:func:`statistics_compiled`), so that the live and the disk stream of one sequence in the same kind
 of process report the same digits.
 
@@ -69,7 +70,8 @@ def _compiled() -> Any:
 
 
 def _warm(kernels: Any) -> None:
-    """Run :func:`block_statistics`' one specialisation once, as the kernels load: a stream that decided on it
+    """Run :func:`block_statistics`', :func:`detail_line`'s and :func:`haar_cells`' specialisations once, as the kernels load: a stream
+    that decided on them
     (:func:`statistics_compiled`) then never compiles it while a camera streams (loaded from the disk cache, or
     compiled now, once per installation)."""
     one = np.ones(1)
@@ -88,6 +90,10 @@ def _warm(kernels: Any) -> None:
         *(np.zeros((0, 1, 1)),) * 2,
         np.zeros((1, 1)),
     )
+    cells = np.arange(80.0)
+    kernels.detail_line(cells, cells, cells, cells, 16, 9.0, 10.0, 0.9, 1, 1e-3, 64, 0.45, 1e-100)
+    for sample in (np.uint8, np.uint16):
+        kernels.haar_cells(np.zeros((4, 4), sample), 1, 1, 2, 1, 2, 0.0, 1.0)  # 2 × 2 cells of one channel
 
 
 _paused = 0
@@ -249,6 +255,54 @@ def block_statistics(
         aa,
     )
     return gram, fa, ff, aa
+
+
+def detail_line(
+    levels: np.ndarray, diagonal: np.ndarray, across: np.ndarray, down: np.ndarray, constants: tuple[float, ...]
+) -> tuple[bool, float, float]:
+    """:func:`processing.noise_level.fit_detail_line`'s ``(found, gain, offset)`` in one compiled call (used where
+    :func:`statistics_compiled` said so); ``constants`` are that module's ``(LEVEL_BANDS, SMOOTH_QUANTILE,
+    DETAIL_CUT, cut mean, ROUNDS, CONVERGED, MIN_CELLS, CHI2_1_MEDIAN, tiny)``. The same selections and thresholds
+    as numpy's fit, its sums in order: the line agrees with numpy's to rounding (tests/processing/test_noise_level.py).
+    """
+    bands, smooth, cut, cut_mean, rounds, converged, min_cells, median, tiny = constants
+    found, gain, offset = _compiled().detail_line(
+        *(np.ascontiguousarray(cells, dtype=np.float64).reshape(-1) for cells in (levels, diagonal, across, down)),
+        int(bands),
+        float(smooth),
+        float(cut),
+        float(cut_mean),
+        int(rounds),
+        float(converged),
+        int(min_cells),
+        float(median),
+        float(tiny),
+    )
+    return bool(found), float(gain), float(offset)
+
+
+def haar_cells(
+    frame: np.ndarray, cfa_period: int, cell_rows: int, stride: int, cell_columns: int, black: float, white: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """:func:`processing.noise_level.haar_details` of an (H, W) or (H, W, C) integer frame's cells (every ``stride``-th of the
+    first ``cell_rows`` rows of cells, the first ``cell_columns`` columns) in one compiled pass (used where
+    :func:`statistics_compiled` said so): the same arrays to the bit; None where the kernel cannot take the frame.
+    C-contiguous 8- or 16-bit rows only: the specialisations :func:`_warm` compiles as the kernels load (a frame of
+    padded rows would compile another while a camera streams, which :func:`paused` exists to prevent)."""
+    rows = _rows_view(frame)
+    if rows is None or not rows.flags.c_contiguous:
+        return None
+    levels, diagonal, across, down = _compiled().haar_cells(
+        rows,
+        frame.shape[2] if frame.ndim == 3 else 1,
+        cfa_period,
+        cell_rows,
+        stride,
+        cell_columns,
+        float(black),
+        float(white),
+    )
+    return levels, diagonal, across, down
 
 
 def synthesis_inputs(frames: list[np.ndarray]) -> tuple[np.ndarray, ...] | None:

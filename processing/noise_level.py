@@ -34,6 +34,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from msflash.processing import frame_kernels
+
 FIT_CELLS = 4096
 """Cells a line is fitted to at most: whole rows of cells, evenly strided over the frame (why this many:
 docs/speed.md, Raw frames)."""
@@ -73,10 +75,18 @@ class PixelNoise:
 
 
 def haar_details(
-    frame: np.ndarray, cfa_period: int, black: float, white: float, max_cells: int = FIT_CELLS
+    frame: np.ndarray,
+    cfa_period: int,
+    black: float,
+    white: float,
+    max_cells: int = FIT_CELLS,
+    compiled: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(S, HH, HL, LH)`` of 2 × 2 cells of a raw frame's planes, flattened; cells with a sample at or
     above ``white`` are left out, ``S`` is the cell's sum less ``4 · black``.
+
+    ``compiled``: integer frames in one compiled pass over the chosen rows
+    (:func:`processing.frame_kernels.haar_cells`; the kernels must be loaded): the same arrays to the bit.
 
     ``frame`` is (H, W) (mono, or a Bayer mosaic with ``cfa_period`` 2) or (H, W, C). Whole rows of cells
     are taken, evenly strided so that at most about ``max_cells`` cells are read: a 1280 × 1024 frame
@@ -90,6 +100,7 @@ def haar_details(
     ([60.0, 63.0], [0.0, 3.0], [-20.0, -17.0], [0.0, 3.0])
     """
     rows_per_cell = 2 * cfa_period
+    raw = frame
     if frame.ndim == 2:
         frame = frame[:, :, None]
     n_cell_rows = frame.shape[0] // rows_per_cell
@@ -99,6 +110,12 @@ def haar_details(
         return empty, empty, empty, empty
     per_row = (columns // rows_per_cell) * cfa_period * cfa_period * frame.shape[2]
     stride = max(1, math.ceil(n_cell_rows * per_row / max(max_cells, 1)))
+    if compiled:
+        compiled_cells = frame_kernels.haar_cells(
+            raw, cfa_period, n_cell_rows, stride, columns // rows_per_cell, black, white
+        )
+        if compiled_cells is not None:
+            return compiled_cells
     # (cell rows, 2·period, W, C): the chosen rows of cells.
     slabs = frame[: n_cell_rows * rows_per_cell, :columns].reshape(n_cell_rows, rows_per_cell, columns, -1)[::stride]
     channels, cell_columns = slabs.shape[-1], columns // rows_per_cell
@@ -204,10 +221,15 @@ def _banded_medians(levels: np.ndarray, order: np.ndarray, squares: np.ndarray) 
 
 
 def fit_detail_line(
-    levels: np.ndarray, diagonal: np.ndarray, across: np.ndarray, down: np.ndarray
+    levels: np.ndarray, diagonal: np.ndarray, across: np.ndarray, down: np.ndarray, compiled: bool = False
 ) -> PixelNoise | None:
     """The noise line of cells with sums ``levels`` (above black) and Haar details ``HH``, ``HL``, ``LH``
     (module notes); None with fewer than :data:`MIN_CELLS` cells or no positive variance.
+
+    ``compiled``: the same fit in one compiled call (:func:`processing.frame_kernels.detail_line`; the kernels must
+    be loaded), for block rows that take the compiled route (:func:`processing.frame_kernels.statistics_compiled`):
+    it agrees with this numpy fit to rounding (its sums are taken in another order), and costs about a tenth of it
+    (a few dozen numpy calls on ~5 000 cells; docs/speed.md).
 
     Examples
     --------
@@ -223,6 +245,12 @@ def fit_detail_line(
     >>> bool(1.9 < line.gain < 2.1)
     True
     """
+    if compiled:
+        constants = (LEVEL_BANDS, SMOOTH_QUANTILE, DETAIL_CUT, _CUT_MEAN, ROUNDS, CONVERGED, MIN_CELLS)
+        found, gain, offset = frame_kernels.detail_line(
+            levels, diagonal, across, down, (*constants, CHI2_1_MEDIAN, _TINY)
+        )
+        return PixelNoise(gain=gain, read=offset / 4.0) if found else None
     levels = np.maximum(np.asarray(levels, dtype=float), 0.0)
     squares = np.empty((3, levels.size))
     np.square(np.asarray(diagonal, dtype=float), out=squares[0])
@@ -262,9 +290,12 @@ def fit_detail_line(
     return PixelNoise(gain=float(gain), read=float(offset) / 4.0)
 
 
-def detail_noise_line(frame: np.ndarray, cfa_period: int, black: float, white: float) -> PixelNoise | None:
-    """:func:`fit_detail_line` of :func:`haar_details` of one raw frame: its sensor's noise line, or None."""
-    return fit_detail_line(*haar_details(frame, cfa_period, black, white))
+def detail_noise_line(
+    frame: np.ndarray, cfa_period: int, black: float, white: float, compiled: bool = False
+) -> PixelNoise | None:
+    """:func:`fit_detail_line` of :func:`haar_details` of one raw frame: its sensor's noise line, or None
+    (``compiled`` as there)."""
+    return fit_detail_line(*haar_details(frame, cfa_period, black, white, compiled=compiled), compiled=compiled)
 
 
 @dataclass(frozen=True)

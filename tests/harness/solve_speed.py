@@ -5,9 +5,10 @@ Each stage's CPU time (``time.thread_time``, one BLAS thread: ``OPENBLAS_NUM_THR
 ``--runs`` runs, ÷ the median CPU time of a copy of the frames (:func:`msflash.lab.bench.processing.frame_copy`):
 ``block pass`` (every frame into fresh unweighted :class:`processing.block_rows.BlockRows`), ``moments``
 (:meth:`processing.block_rows.BlockRows.statistics` of the weighted rows, in cache), ``noise line``
-(:func:`processing.noise_level.detail_noise_line` of the ambient frame) with its ``haar details`` and
-``fit``, ``solve`` (:func:`processing.ambient.estimate_ambient` on the streamed statistics: α, weights, band) with
-its ``weights`` and ``reliability``, and the whole ``estimate`` as the bench streams it on one thread
+(:func:`processing.noise_level.detail_noise_line` of the ambient frame, on the route the block rows take) with its
+``haar details`` and ``fit``, the ``numpy noise line`` (the route of a process without the kernels), ``solve``
+(:func:`processing.ambient.estimate_ambient` on the streamed statistics: α, weights, band) with its ``weights`` and
+``reliability``, and the whole ``estimate`` as the bench streams it on one thread
 (:func:`msflash.lab.bench.processing.streamed_estimate`). One JSON line; nothing asserted (docs/speed.md).
 """
 
@@ -57,6 +58,7 @@ def _figures(cfa: str | None, runs: int) -> dict[str, float]:
     model = AmbientModel(leds)
     weights, alpha = model.weights(statistics)
     ambient, black, white = frames[0], spec.black_level, spec.white_level
+    compiled = rows.compiled  # the noise line's route is the moments' (decided once per stack)
     details = noise_level.haar_details(ambient, period, black, white)
     factor = block_factor(frames[0].shape, cfa)
 
@@ -70,9 +72,10 @@ def _figures(cfa: str | None, runs: int) -> dict[str, float]:
         "estimate": lambda: streamed_estimate(world, factor),
         "block pass": block_pass,
         "moments": lambda: rows.statistics(spec),
-        "noise line": lambda: noise_level.detail_noise_line(ambient, period, black, white),
-        "haar details": lambda: noise_level.haar_details(ambient, period, black, white),
-        "fit": lambda: noise_level.fit_detail_line(*details),
+        "noise line": lambda: noise_level.detail_noise_line(ambient, period, black, white, compiled=compiled),
+        "haar details": lambda: noise_level.haar_details(ambient, period, black, white, compiled=compiled),
+        "fit": lambda: noise_level.fit_detail_line(*details, compiled=compiled),
+        "numpy noise line": lambda: noise_level.detail_noise_line(ambient, period, black, white),
         "solve": lambda: estimate_ambient(statistics, leds),
         "weights": lambda: model.weights(statistics),
         "reliability": lambda: model.reliability(statistics, weights, "tikhonov", alpha),

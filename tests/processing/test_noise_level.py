@@ -8,6 +8,8 @@ raw frames landed at 1.2× the LED bound where RGB ones landed at 0.92× (docs/r
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -175,3 +177,134 @@ def test_the_fit_is_the_plain_fit_to_the_bit(cells: int, whole: bool, top: int) 
     if whole:
         details = tuple(np.round(detail) for detail in details)
     assert fit_detail_line(*details) == _plain_fit(*details)
+
+
+def _compiled_kernels() -> object:
+    """The compiled kernels, loaded (or the test skipped without numba)."""
+    from msflash.processing import frame_kernels
+
+    pytest.importorskip("numba")
+    if not frame_kernels.prepare():
+        pytest.skip("the compiled kernels are off (MSFLASH_KERNELS=numpy)")
+    return frame_kernels._compiled()
+
+
+def _close(line: PixelNoise | None, reference: PixelNoise | None) -> bool:
+    if line is None or reference is None:
+        return line is reference
+    return bool(np.allclose([line.gain, line.read], [reference.gain, reference.read], rtol=1e-12, atol=0.0))
+
+
+@pytest.mark.parametrize("cells", [5120, 4095, 1000, 300, 130, 63])
+@pytest.mark.parametrize(("whole", "top"), [(True, 400), (True, 40000), (False, 400)])
+def test_the_compiled_fit_is_the_numpy_fit_to_rounding(cells: int, whole: bool, top: int) -> None:
+    """The fit of the compiled route (:func:`processing.frame_kernels.detail_line`: its own stable sort, band medians
+    by selection, sums in order) against numpy's, on the cases of the plain-fit test and too few cells (None on both):
+    the same line to 1e-12 relative."""
+    _compiled_kernels()
+    rng = np.random.default_rng(cells + top)
+    levels = np.repeat(rng.integers(top // 40, top, (cells, 1)), 4, axis=1).astype(float)
+    levels[::3, 0] *= 3.0
+    details = _cells(levels, rng)
+    if whole:
+        details = tuple(np.round(detail) for detail in details)
+    reference = fit_detail_line(*details)
+    assert (reference is None) == (cells < 64)
+    assert _close(fit_detail_line(*details, compiled=True), reference)
+
+
+def test_the_compiled_fit_finds_no_line_where_numpy_finds_none() -> None:
+    """Identical samples (no noise to see), negative levels (clipped to 0) with no detail, and non-finite details."""
+    _compiled_kernels()
+    flat = np.full(4000, 400.0), np.zeros(4000), np.zeros(4000), np.zeros(4000)
+    negative = -np.arange(4000.0), np.zeros(4000), np.ones(4000), np.zeros(4000)
+    broken = np.arange(4000.0), np.full(4000, np.inf), np.zeros(4000), np.zeros(4000)
+    for details in (flat, negative, broken):
+        assert fit_detail_line(*details) is None
+        assert fit_detail_line(*details, compiled=True) is None
+
+
+@pytest.mark.parametrize("kind", ["whole", "large whole", "fractional", "zeros and ties"])
+def test_the_compiled_stable_order_is_numpys_stable_argsort(kind: str) -> None:
+    """The radix sort behind the compiled fit gives the order of numpy's stable argsort, ties in index order."""
+    kernels: Any = _compiled_kernels()
+    rng = np.random.default_rng(3)
+    levels = {
+        "whole": rng.integers(0, 400, 5000).astype(float),
+        "large whole": rng.integers(0, 1 << 40, 5000).astype(float),
+        "fractional": rng.uniform(0.0, 1e6, 5000),
+        "zeros and ties": np.repeat([0.0, 2.5, 1e-300, 7.0], 1000),
+    }[kind]
+    assert np.array_equal(kernels._stable_order(levels), np.argsort(levels, kind="stable"))
+
+
+def test_block_rows_of_the_compiled_route_fit_the_compiled_line() -> None:
+    """Block rows that take the compiled moments fit the ambient's line on that route too (decided once per stack):
+    to rounding the numpy route's."""
+    from msflash.processing.block_sums import plane_shape
+
+    _compiled_kernels()
+    frame, _, _, _ = rendered_frames(
+        ambient("tungsten"), scene=SIM_CHART, sensor=SENSOR, noise=True, seed=3, peak_fraction=0.5
+    )
+    lines = []
+    for compiled in (True, False):
+        rows = BlockRows(
+            1, plane_shape(frame.shape, 2), 4, SENSOR.white_level, SENSOR.black_level, weighting=True, compiled=compiled
+        )
+        rows.add_frame(1, frame, 2)
+        lines.append(rows.ambient_noise)
+    assert lines[0] is not None and _close(lines[0], lines[1])
+    assert lines[0] == detail_noise_line(frame, 2, SENSOR.black_level, SENSOR.white_level, compiled=True)
+
+
+@pytest.mark.parametrize(
+    ("shape", "period", "dtype", "white"),
+    [
+        ((1027, 1283), 2, np.uint16, 65535.0),  # a mosaic at the full 16-bit range, sizes not multiples of a cell
+        ((1027, 1283), 2, np.uint16, 4095.0),  # 12-bit: cells with a saturated sample left out
+        ((301, 203, 3), 1, np.uint16, 60000.0),
+        ((64, 96, 3), 1, np.uint8, 250.0),
+        ((6, 5), 2, np.uint16, 65535.0),  # one row of cells
+    ],
+)
+def test_the_compiled_haar_details_are_numpys_to_the_bit(
+    shape: tuple[int, ...], period: int, dtype: type, white: float
+) -> None:
+    """The compiled cells (:func:`processing.frame_kernels.haar_cells`) against numpy's: the same arrays, value for
+    value (exact sums of integer samples), the same cells left out, at several strides."""
+    _compiled_kernels()
+    top = min(np.iinfo(dtype).max, int(white * 1.02))  # about 8 % of the cells reach white below the type's top
+    frame = np.random.default_rng(len(shape)).integers(0, top, shape, endpoint=True).astype(dtype)
+    for max_cells in (4096, 100, 10**9):
+        reference = haar_details(frame, period, 64.0, white, max_cells)
+        cells = haar_details(frame, period, 64.0, white, max_cells, compiled=True)
+        assert all(a.dtype == b.dtype and np.array_equal(a, b) for a, b in zip(cells, reference, strict=True))
+        assert reference[0].size > 0 and (white >= top or np.max(reference[0]) < 4 * white)
+
+
+@pytest.mark.parametrize("size", [1, 2, 3, 8, 255, 320])
+def test_the_compiled_band_median_is_numpys_median(size: int) -> None:
+    """The selection behind the compiled fit's band medians (many ties, as squares of integer details; distinct
+    values; one value repeated) gives ``np.median`` exactly and leaves the values as they were."""
+    kernels: Any = _compiled_kernels()
+    rng = np.random.default_rng(size)
+    for values in (rng.integers(0, 6, size) ** 2.0, rng.permutation(size) * 1.5, np.full(size, 4.0)):
+        kept = values.copy()
+        median = kernels._band_median(values, np.empty(size), np.empty(size))
+        assert median == np.median(values) and np.array_equal(values, kept)
+
+
+def test_a_frame_of_padded_rows_takes_numpys_cells() -> None:
+    """A frame whose rows are padded (a view into wider rows) is not one of the kernels' warmed specialisations: the
+    compiled route hands it to numpy's cells (the same arrays), and the fit on it is the contiguous frame's."""
+    _compiled_kernels()
+    wide = np.random.default_rng(5).integers(0, 4000, (260, 330)).astype(np.uint16)
+    padded = wide[:, :320]
+    assert not padded.flags.c_contiguous
+    cells = haar_details(padded, 2, 64.0, 4095.0, compiled=True)
+    reference = haar_details(np.ascontiguousarray(padded), 2, 64.0, 4095.0)
+    assert all(np.array_equal(a, b) for a, b in zip(cells, reference, strict=True))
+    assert detail_noise_line(padded, 2, 64.0, 4095.0, compiled=True) == detail_noise_line(
+        np.ascontiguousarray(padded), 2, 64.0, 4095.0, compiled=True
+    )
