@@ -150,7 +150,9 @@ def statistics_compiled() -> bool:
     loaded in this process already, or forced (``MSFLASH_KERNELS=numba``) — whatever :func:`paused` says, and never
     by loading them. Decided once per stack, when its rows are laid out and before anything loads the kernels for it,
     so that a capture's live stream and ``msflash estimate`` of its sequence in the same kind of process take the
-    same route (the two routes agree to rounding only; :class:`processing.block_rows.BlockRows`)."""
+    same route (the two routes agree to rounding only; :class:`processing.block_rows.BlockRows`). A process that
+    loads the kernels partway — the live view does for its first mix preview — takes the compiled route for the
+    stacks laid out after: its later fires agree with a one-off ``msflash estimate`` to rounding, not to the digit."""
     return _loaded(pausable=False) is not None
 
 
