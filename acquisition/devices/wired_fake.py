@@ -109,11 +109,11 @@ class WiredFakeCamera:
 
     @property
     def info(self) -> CameraInfo:
-        """The fake's identity and pixel format; with a scene, the rendered sensor's black and white levels,
-        else mono frames delivered as RGB."""
+        """The fake's identity and pixel format (its mosaic layout and depth as the format means them); with a scene,
+        the rendered sensor's black and white levels."""
         info = self.aravis.info
-        if self.world is None:
-            return dataclasses.replace(info, cfa=None)
+        if self.world is None:  # the fake's own test pattern, in whatever format it is set to
+            return info
         black, white = self.world.readout.levels(self.world.sensor.black_level, self.world.sensor.white_level)
         return dataclasses.replace(
             info,

@@ -23,7 +23,7 @@ from msflash.acquisition.session.rigs.emulated_booth import (
     line_callback,
     open_emulated_booth,
 )
-from msflash.acquisition.session.rigs.rig import Rig
+from msflash.acquisition.session.rigs.rig import Rig, sends_mono
 from msflash.acquisition.session.rigs.sim import sim_world
 from msflash.led_controller import BoothEmulator, LedBooth
 from msflash.processing import datasets
@@ -232,7 +232,9 @@ def _open_fake_camera(
             f"pixel format {frames.pixel_format} has CFA {opened.cfa}; expected {frames.world.sensor.cfa}, "
             "the rendered mosaic's"
         )
-    return _OpenedFake(fake, aravis, configure_camera(aravis, options, strobe=False))
+    setup = configure_camera(aravis, options, strobe=False)
+    sends_mono(aravis.info)  # a format msflash does not decode (a --feature PixelFormat=…) is refused here
+    return _OpenedFake(fake, aravis, setup)
 
 
 def _wired_rig(model: Any, frames: _FakeFrames, opened: _OpenedFake, emulator: Any, booth: Any, closers: list) -> Rig:
@@ -267,5 +269,5 @@ def _wired_rig(model: Any, frames: _FakeFrames, opened: _OpenedFake, emulator: A
         emulator=emulator,
         line_errors=line_errors,
         camera_extra=extra,
-        mono=world is None and frames.pixel_format.startswith("Mono"),
+        mono=world is None and sends_mono(wired.info),
     )
