@@ -226,14 +226,15 @@ def _open_fake_camera(
         )
     aravis.set_pixel_format(frames.pixel_format)  # once the camera is known to be the rig's own
     aravis.set_roi(0, 0, frames.width, frames.height)
-    opened = aravis.info
-    if frames.world is not None and opened.cfa != frames.world.sensor.cfa:
-        raise RigOpenError(
-            f"pixel format {frames.pixel_format} has CFA {opened.cfa}; expected {frames.world.sensor.cfa}, "
-            "the rendered mosaic's"
-        )
     setup = configure_camera(aravis, options, strobe=False)
-    sends_mono(aravis.info)  # a format msflash does not decode (a --feature PixelFormat=…) is refused here
+    # What the format in force means (a --feature PixelFormat=… may have changed it): one the table lacks is
+    # refused, and a rendered scene takes only its own mosaic's layout.
+    sends_mono(opened := aravis.info)
+    if frames.world is not None and opened.cfa != frames.world.sensor.cfa:
+        raise CameraSettingError(
+            f"aravis-fake: pixel format {opened.pixel_format} has CFA {opened.cfa}; expected "
+            f"{frames.world.sensor.cfa}, the rendered mosaic's (e.g. {ARAVIS_FAKE_PIXEL_FORMAT})"
+        )
     return _OpenedFake(fake, aravis, setup)
 
 

@@ -11,6 +11,7 @@ in-process ``Fake_1`` on the Fake interface (nothing is broadcast).
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from types import ModuleType
 
@@ -99,3 +100,24 @@ def test_the_fake_interfaces_camera_in_bayer_from_the_command_line(
     assert main(["estimate", str(out / "sequence"), "--json"]) == 2
     error = capsys.readouterr().err.strip().splitlines()[-1]
     assert error.startswith("msflash: error: frame stack: only ") and "saturated" in error
+
+
+@pytest.mark.parametrize(
+    ("pixel_format", "expected"),
+    [
+        ("YUV422_8", r"camera Aravis Fake \(serial MSFRIG01\): pixel format 'YUV422_8' is not one msflash decodes"),
+        ("BayerGR8", r"aravis-fake: pixel format BayerGR8 has CFA GRBG; expected RGGB, the rendered mosaic's"),
+    ],
+)
+def test_a_format_set_by_feature_is_checked_at_open(
+    aravis: ModuleType, tmp_path: Path, capsys: pytest.CaptureFixture, pixel_format: str, expected: str
+) -> None:
+    """``--feature PixelFormat=…`` is applied after the rig's own format: a format msflash does not decode (the
+    GigE fake offers YUV422_8, as colour cameras do) and, on the rendered scene, another mosaic's layout are each
+    refused in one line naming the camera and the format (exit 2), before any frame — not recorded as what they
+    are not."""
+    out = tmp_path / "c"
+    status = main(["capture", "--rig", "aravis-fake", "--feature", f"PixelFormat={pixel_format}", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and re.match(f"msflash: error: {expected}", err[-1]), err[-3:]
+    assert not (out / "sequence" / "sequence.json").exists()
