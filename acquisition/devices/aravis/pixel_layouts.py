@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
+from msflash.acquisition.devices.aravis.pixel_formats import BAYER_CFA, PACKED_FORMATS, unpack_pixels
 from msflash.acquisition.errors import CameraError, CameraSettingError
 
 if TYPE_CHECKING:
@@ -69,10 +69,9 @@ def _pixel_formats() -> dict[str, PixelLayout]:
         "RGB12": PixelLayout("<u2", 3, 12),
         "RGB16": PixelLayout("<u2", 3, 16),
     }
-    for cfa in ("RG", "GR", "GB", "BG"):
-        pattern = {"RG": "RGGB", "GR": "GRBG", "GB": "GBRG", "BG": "BGGR"}[cfa]
+    for cfa, pattern in BAYER_CFA.items():
         table[f"Bayer{cfa}8"] = PixelLayout("u1", 1, 8, pattern)
-        for bits in (10, 12, 16):
+        for bits in (10, 12, 14, 16):
             table[f"Bayer{cfa}{bits}"] = PixelLayout("<u2", 1, bits, pattern)
     for name, packed in PACKED_FORMATS.items():
         table[name] = PixelLayout("<u2", 1, packed.bits, packed.cfa, packed=True)
