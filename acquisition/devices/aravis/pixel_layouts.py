@@ -83,8 +83,9 @@ PIXEL_FORMATS: dict[str, PixelLayout] = _pixel_formats()
 :data:`acquisition.devices.aravis.pixel_formats.PACKED_FORMATS` (decoded to ``uint16``)."""
 
 
-def pixel_layout(pixel_format: str, camera: str) -> PixelLayout:
-    """What ``pixel_format`` means (layout, bit depth, :attr:`PixelLayout.kind`), from :data:`PIXEL_FORMATS`.
+def pixel_layout(pixel_format: str, camera: str, hint: str = "") -> PixelLayout:
+    """What ``pixel_format`` means (layout, bit depth, :attr:`PixelLayout.kind`), from :data:`PIXEL_FORMATS`;
+    ``hint`` ends the refusal's message.
 
     Raises
     ------
@@ -103,7 +104,7 @@ def pixel_layout(pixel_format: str, camera: str) -> PixelLayout:
     if layout is None:
         raise CameraSettingError(
             f"{camera}: pixel format {pixel_format!r} is not one msflash decodes; expected one of "
-            f"{', '.join(PIXEL_FORMATS)} (set one with --pixel-format)"
+            f"{', '.join(PIXEL_FORMATS)}{hint}"
         )
     return layout
 
@@ -116,7 +117,8 @@ def camera_pixel_layout(info: CameraInfo) -> PixelLayout:
     CameraSettingError
         A format msflash does not decode, naming the camera (model and serial) and the format.
     """
-    return pixel_layout(info.pixel_format, f"camera {info.vendor} {info.model} (serial {info.serial})".strip())
+    camera = f"camera {info.vendor} {info.model} (serial {info.serial})"
+    return pixel_layout(info.pixel_format, camera, " (set one with --pixel-format or --feature PixelFormat=…)")
 
 
 def _frame_shape(

@@ -121,3 +121,33 @@ def test_a_format_set_by_feature_is_checked_at_open(
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and re.match(f"msflash: error: {expected}", err[-1]), err[-3:]
     assert not (out / "sequence" / "sequence.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("pixel_format", "expected"),
+    [
+        (
+            "YUV422_8",
+            r"camera Fake \(serial 1\): pixel format 'YUV422_8' is not one msflash decodes; expected one of Mono8, .*BayerBG12Packed$",
+        ),
+        ("BayerRG16", r"camera Fake \(serial 1\): PixelFormat 'BayerRG16' is not offered by this camera; expected "),
+    ],
+)
+def test_the_command_lines_pixel_format_is_checked_against_the_one_table(
+    aravis: ModuleType,
+    hw_calibration: Path,
+    hw_booth_port: str,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture,
+    pixel_format: str,
+    expected: str,
+) -> None:
+    """``--pixel-format`` on the hardware rig: a name msflash does not decode, or one the camera does not offer,
+    is one line naming the camera and the format (exit 2), before the booth is opened."""
+    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+
+    use_fake_genicam(None)
+    options = ("--calibration", str(hw_calibration), "--pixel-format", pixel_format, "--out", str(tmp_path / "c"))
+    status = main(fake_camera_capture(hw_booth_port, *options))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and re.match(f"msflash: error: {expected}", err[-1]), err[-3:]
