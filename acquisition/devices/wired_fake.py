@@ -56,8 +56,9 @@ class WiredFakeCamera:
     (:meth:`SimulatedCamera.render`) under the booth's LED levels *at the moment that frame was
     triggered* (queued first-in first-out, one per issued trigger), with the exposure and gain the
     camera read back for that frame. (The fake's own generator cannot be given the scene:
-    docs/aravis-facts.md.) Without ``world`` (the capture bench) frames are the fake's Mono16 test
-    pattern, blind to the LED levels.
+    docs/aravis-facts.md.) Without ``world`` (the capture bench) frames are the fake's test pattern in
+    the format it is set to (Mono16, or a Bayer, RGB … format: recorded as what that format means), blind to the
+    LED levels.
     """
 
     TRIGGER_REGISTER = 0x30C

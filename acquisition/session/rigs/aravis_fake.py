@@ -79,8 +79,8 @@ def open_aravis_fake_rig(
     ``rendered`` (the default): the frames are the ``sim`` rig's world (options as for :func:`open_sim_rig`;
     patches ``patch_px`` wide) rendered by :class:`WiredFakeCamera` into the fake's frames, in
     :data:`ARAVIS_FAKE_PIXEL_FORMAT` with the ROI the scene's size (``width``/``height`` None or equal to it),
-    recorded as the ``sim`` rig records it (docs/rigs.md). ``rendered`` False: the fake's Mono16 test patterns,
-    the paper's seven LEDs and :data:`AravisFakeNominalCamera` recorded as nominal (the capture bench).
+    recorded as the ``sim`` rig records it (docs/rigs.md). ``rendered`` False: the fake's test patterns (Mono16
+    unless ``pixel_format`` says otherwise; a Bayer format is recorded as its mosaic), the paper's seven LEDs and :data:`AravisFakeNominalCamera` recorded as nominal (the capture bench).
 
     Raises
     ------
