@@ -18,12 +18,13 @@ camera (``ImageLimits`` of :mod:`acquisition.devices.image_format`):
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from msflash.acquisition.devices.aravis.camera_features import FeatureInfo
+from msflash.acquisition.devices.aravis.pixel_formats import BAYER_CFA
+from msflash.acquisition.devices.aravis.pixel_layouts import PIXEL_FORMATS, pixel_layout
 from msflash.acquisition.devices.image_format import (
     ImageFormat,
     ImageFormatRequest,
@@ -31,21 +32,14 @@ from msflash.acquisition.devices.image_format import (
     checked_request,
 )
 
-GENICAM_BAYER = {"RGGB": "BayerRG", "BGGR": "BayerBG", "GRBG": "BayerGR", "GBRG": "BayerGB"}
-GENICAM_BITS = (8, 10, 12, 14, 16)
-"""Bit depths GenICam names unpacked formats by (BayerRG12, RGB12 …); others take their container's."""
+GENICAM_BAYER = {cfa: f"Bayer{code}" for code, cfa in BAYER_CFA.items()}
+"""The GenICam name's stem of each mosaic layout (``RGGB`` → ``BayerRG``)."""
 WIDTH_INCREMENT = 8
 """The twin's ``Width`` step (machine-vision sensors read out in blocks of 4–16 columns)."""
 ROW_INCREMENT = 2
 """The step of ``Height``, ``OffsetX`` and ``OffsetY`` (a 2×2 CFA cell)."""
 MAX_BINNING = 2
 """The largest binning factor the twin offers on each axis."""
-
-
-def format_bits(pixel_format: str) -> int:
-    """The bit depth a GenICam format name states (``BayerRG12p`` → 12, ``RGB8`` → 8)."""
-    match = re.search(r"(\d+)(p|Packed)?$", pixel_format)
-    return int(match.group(1)) if match else 8
 
 
 @dataclass(frozen=True)
@@ -67,9 +61,10 @@ class SimReadout:
 
     @property
     def native_format(self) -> str:
-        """The sensor's layout at its own depth (its container's when GenICam has no name for it)."""
-        bits = self.bits if self.bits in GENICAM_BITS else 8 if self.bits <= 8 else 16
-        return f"{self._layout}{bits}"
+        """The sensor's layout at its own depth (its container's when GenICam has no name for it: the formats
+        are :data:`~acquisition.devices.aravis.pixel_layouts.PIXEL_FORMATS`')."""
+        own = f"{self._layout}{self.bits}"
+        return own if own in PIXEL_FORMATS else f"{self._layout}{8 if self.bits <= 8 else 16}"
 
     @property
     def _layout(self) -> str:
@@ -100,7 +95,7 @@ class SimReadout:
     @property
     def out_bits(self) -> int:
         """The depth of the values delivered: 8 for an 8-bit format, else the sensor's own."""
-        return 8 if format_bits(self.format.pixel_format) == 8 else self.bits
+        return 8 if pixel_layout(self.format.pixel_format, "simulated camera").bits == 8 else self.bits
 
     def levels(self, black: float, white: float) -> tuple[float, float]:
         """The sensor's black and white levels in the delivered values."""

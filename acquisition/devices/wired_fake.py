@@ -56,8 +56,9 @@ class WiredFakeCamera:
     (:meth:`SimulatedCamera.render`) under the booth's LED levels *at the moment that frame was
     triggered* (queued first-in first-out, one per issued trigger), with the exposure and gain the
     camera read back for that frame. (The fake's own generator cannot be given the scene:
-    docs/aravis-facts.md.) Without ``world`` (the capture bench) frames are the fake's Mono16 test
-    pattern, blind to the LED levels.
+    docs/aravis-facts.md.) Without ``world`` (the capture bench) frames are the fake's test pattern in
+    the format it is set to (Mono16, or a Bayer, RGB … format: recorded as what that format means), blind to the
+    LED levels.
     """
 
     TRIGGER_REGISTER = 0x30C
@@ -109,11 +110,11 @@ class WiredFakeCamera:
 
     @property
     def info(self) -> CameraInfo:
-        """The fake's identity and pixel format; with a scene, the rendered sensor's black and white levels,
-        else mono frames delivered as RGB."""
+        """The fake's identity and pixel format (its mosaic layout and depth as the format means them); with a scene,
+        the rendered sensor's black and white levels."""
         info = self.aravis.info
-        if self.world is None:
-            return dataclasses.replace(info, cfa=None)
+        if self.world is None:  # the fake's own test pattern, in whatever format it is set to
+            return info
         black, white = self.world.readout.levels(self.world.sensor.black_level, self.world.sensor.white_level)
         return dataclasses.replace(
             info,

@@ -304,7 +304,10 @@ class AravisCamera(Streaming):
 
     @property
     def info(self) -> CameraInfo:
-        """Identity and pixel encoding, read from the camera now."""
+        """Identity and pixel encoding, read from the camera now: the mosaic layout and white level are what
+        :data:`~acquisition.devices.aravis.pixel_layouts.PIXEL_FORMATS` says the format means (a format it lacks
+        reads as ``cfa`` None and white level NaN, for listing; the rigs refuse it at open,
+        :func:`~acquisition.devices.aravis.pixel_layouts.camera_pixel_layout`)."""
         pixel_format = str(self.get_feature("PixelFormat"))
         layout = PIXEL_FORMATS.get(pixel_format)
         _, _, width, height = self.roi

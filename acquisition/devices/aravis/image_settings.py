@@ -7,7 +7,7 @@ import math
 
 from msflash.acquisition.devices.aravis.feature_access import FeatureAccess
 from msflash.acquisition.devices.aravis.gi_typelib import Aravis, GLib
-from msflash.acquisition.devices.aravis.pixel_layouts import PIXEL_FORMATS
+from msflash.acquisition.devices.aravis.pixel_layouts import PIXEL_FORMATS, pixel_layout
 from msflash.acquisition.devices.aravis.profiles import CameraProfile
 from msflash.acquisition.devices.image_format import (
     BINNING_FEATURES,
@@ -32,11 +32,7 @@ class ImageSettings(FeatureAccess):
 
     def set_pixel_format(self, pixel_format: str) -> str:
         """Set PixelFormat; refuses formats the camera lacks or msflash cannot decode (``CameraSettingError``)."""
-        if pixel_format not in PIXEL_FORMATS:
-            raise CameraSettingError(
-                f"{self._name}: pixel format {pixel_format!r} cannot be decoded by msflash; "
-                f"expected one of {', '.join(PIXEL_FORMATS)}"
-            )
+        pixel_layout(pixel_format, self._name)
         offered = self.enum_entries("PixelFormat")
         if pixel_format not in offered:
             raise CameraSettingError(

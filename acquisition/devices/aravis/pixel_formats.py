@@ -52,7 +52,8 @@ class PackedLayout:
     """Mosaic layout for Bayer formats (``RGGB``, ``GRBG``, ``GBRG``, ``BGGR``)."""
 
 
-_CFA = {"RG": "RGGB", "GR": "GRBG", "GB": "GBRG", "BG": "BGGR"}
+BAYER_CFA = {"RG": "RGGB", "GR": "GRBG", "GB": "GBRG", "BG": "BGGR"}
+"""The mosaic layout each GenICam ``Bayer<XY>…`` name stands for (its first row's first two colours)."""
 
 
 def _packed_formats() -> dict[str, PackedLayout]:
@@ -74,7 +75,7 @@ def _packed_formats() -> dict[str, PackedLayout]:
         packing: Packing = "pfnc" if suffix.endswith("p") else "gev"
         group = (4, 5) if (bits, packing) == (10, "pfnc") else (2, 3)
         for cfa, code in zip(("GR", "RG", "GB", "BG"), family):
-            table[f"Bayer{cfa}{suffix}"] = PackedLayout(code, bits, packing, *group, cfa=_CFA[cfa])
+            table[f"Bayer{cfa}{suffix}"] = PackedLayout(code, bits, packing, *group, cfa=BAYER_CFA[cfa])
     return table
 
 

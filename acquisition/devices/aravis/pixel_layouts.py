@@ -1,16 +1,31 @@
-"""What a buffer's bytes mean: pixel layouts, decoding (a copy) or a view (zero copy), frame-id gaps."""
+"""What a pixel format means and what a buffer's bytes hold: pixel layouts, decoding (a copy) or a view
+(zero copy), frame-id gaps.
+
+:data:`PIXEL_FORMATS` is the one table of what a GenICam pixel format means — its mosaic layout, bit depth and
+whether frames are mono, a raw mosaic or RGB (:attr:`PixelLayout.kind`). Every path that sets or reads a
+camera's format asks it (:func:`pixel_layout`, :func:`camera_pixel_layout`): the camera's
+``CameraInfo``, the rigs at open, a live format change; a format it lacks is refused in one line naming the
+camera and the format, never recorded as something it is not.
+"""
 
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from msflash.acquisition.devices.aravis.pixel_formats import PACKED_FORMATS, unpack_pixels
-from msflash.acquisition.errors import CameraError
+from msflash.acquisition.devices.aravis.pixel_formats import BAYER_CFA, PACKED_FORMATS, unpack_pixels
+from msflash.acquisition.errors import CameraError, CameraSettingError
+
+if TYPE_CHECKING:
+    from msflash.acquisition.devices.camera import CameraInfo
 
 log = logging.getLogger(__name__)
+
+FrameKind = Literal["mono", "mosaic", "rgb"]
+"""What a frame of a pixel format is: one value a pixel (``mono``), a raw CFA mosaic, or three channels."""
 
 GV_FRAME_ID_WRAP = 1 << 16
 """GigE Vision 1.x block ids are 16 bits and skip 0 when they wrap (65535 is followed by 1)."""
@@ -33,6 +48,13 @@ class PixelLayout:
     packed: bool = False
     """Samples are bit-packed (:mod:`acquisition.devices.aravis.pixel_formats` decodes them to ``uint16``)."""
 
+    @property
+    def kind(self) -> FrameKind:
+        """``mosaic`` for a Bayer format (:attr:`cfa` its layout), ``rgb`` for three channels, else ``mono``."""
+        if self.cfa is not None:
+            return "mosaic"
+        return "rgb" if self.channels == 3 else "mono"
+
 
 def _pixel_formats() -> dict[str, PixelLayout]:
     table = {
@@ -43,12 +65,13 @@ def _pixel_formats() -> dict[str, PixelLayout]:
         "Mono16": PixelLayout("<u2", 1, 16),
         "RGB8": PixelLayout("u1", 3, 8),
         "BGR8": PixelLayout("u1", 3, 8, bgr=True),
+        "RGB10": PixelLayout("<u2", 3, 10),
+        "RGB12": PixelLayout("<u2", 3, 12),
         "RGB16": PixelLayout("<u2", 3, 16),
     }
-    for cfa in ("RG", "GR", "GB", "BG"):
-        pattern = {"RG": "RGGB", "GR": "GRBG", "GB": "GBRG", "BG": "BGGR"}[cfa]
+    for cfa, pattern in BAYER_CFA.items():
         table[f"Bayer{cfa}8"] = PixelLayout("u1", 1, 8, pattern)
-        for bits in (10, 12, 16):
+        for bits in (10, 12, 14, 16):
             table[f"Bayer{cfa}{bits}"] = PixelLayout("<u2", 1, bits, pattern)
     for name, packed in PACKED_FORMATS.items():
         table[name] = PixelLayout("<u2", 1, packed.bits, packed.cfa, packed=True)
@@ -60,18 +83,52 @@ PIXEL_FORMATS: dict[str, PixelLayout] = _pixel_formats()
 :data:`acquisition.devices.aravis.pixel_formats.PACKED_FORMATS` (decoded to ``uint16``)."""
 
 
+def pixel_layout(pixel_format: str, camera: str, hint: str = "") -> PixelLayout:
+    """What ``pixel_format`` means (layout, bit depth, :attr:`PixelLayout.kind`), from :data:`PIXEL_FORMATS`;
+    ``hint`` ends the refusal's message.
+
+    Raises
+    ------
+    CameraSettingError
+        A format msflash does not decode: one line naming ``camera`` and the format.
+
+    Examples
+    --------
+    >>> layout = pixel_layout("BayerGR8", "camera X")
+    >>> layout.kind, layout.cfa, layout.bits
+    ('mosaic', 'GRBG', 8)
+    >>> pixel_layout("Mono12p", "camera X").kind, pixel_layout("RGB8", "camera X").kind
+    ('mono', 'rgb')
+    """
+    layout = PIXEL_FORMATS.get(pixel_format)
+    if layout is None:
+        raise CameraSettingError(
+            f"{camera}: pixel format {pixel_format!r} is not one msflash decodes; expected one of "
+            f"{', '.join(PIXEL_FORMATS)}{hint}"
+        )
+    return layout
+
+
+def camera_pixel_layout(info: CameraInfo) -> PixelLayout:
+    """What the pixel format a camera reports in ``info`` means; the rigs ask it at open and after a change.
+
+    Raises
+    ------
+    CameraSettingError
+        A format msflash does not decode, naming the camera (model and serial) and the format.
+    """
+    camera = f"camera {info.vendor} {info.model} (serial {info.serial})"
+    return pixel_layout(info.pixel_format, camera, " (set one with --pixel-format or --feature PixelFormat=…)")
+
+
 def _frame_shape(
     pixel_format: str, width: int, height: int, n_bytes: int, where: str
 ) -> tuple[PixelLayout, int, tuple[int, ...]]:
     """The layout of ``pixel_format``, the sample count of one image and the frame's shape.
 
-    Raises :class:`CameraError` for an unknown format or a payload of ``n_bytes`` too short.
+    Raises :class:`CameraError` for an unknown format (:func:`pixel_layout`) or a payload of ``n_bytes`` too short.
     """
-    layout = PIXEL_FORMATS.get(pixel_format)
-    if layout is None:
-        raise CameraError(
-            f"{where}: pixel format {pixel_format!r} is not supported; expected one of {', '.join(PIXEL_FORMATS)}"
-        )
+    layout = pixel_layout(pixel_format, where)
     n = width * height * layout.channels
     itemsize = np.dtype(layout.dtype).itemsize
     if n_bytes < n * itemsize:

@@ -23,7 +23,7 @@ from msflash.acquisition.session.rigs.emulated_booth import (
     line_callback,
     open_emulated_booth,
 )
-from msflash.acquisition.session.rigs.rig import Rig
+from msflash.acquisition.session.rigs.rig import Rig, sends_mono
 from msflash.acquisition.session.rigs.sim import sim_world
 from msflash.led_controller import BoothEmulator, LedBooth
 from msflash.processing import datasets
@@ -79,8 +79,8 @@ def open_aravis_fake_rig(
     ``rendered`` (the default): the frames are the ``sim`` rig's world (options as for :func:`open_sim_rig`;
     patches ``patch_px`` wide) rendered by :class:`WiredFakeCamera` into the fake's frames, in
     :data:`ARAVIS_FAKE_PIXEL_FORMAT` with the ROI the scene's size (``width``/``height`` None or equal to it),
-    recorded as the ``sim`` rig records it (docs/rigs.md). ``rendered`` False: the fake's Mono16 test patterns,
-    the paper's seven LEDs and :data:`AravisFakeNominalCamera` recorded as nominal (the capture bench).
+    recorded as the ``sim`` rig records it (docs/rigs.md). ``rendered`` False: the fake's test patterns (Mono16
+    unless ``pixel_format`` says otherwise; a Bayer format is recorded as its mosaic), the paper's seven LEDs and :data:`AravisFakeNominalCamera` recorded as nominal (the capture bench).
 
     Raises
     ------
@@ -226,13 +226,16 @@ def _open_fake_camera(
         )
     aravis.set_pixel_format(frames.pixel_format)  # once the camera is known to be the rig's own
     aravis.set_roi(0, 0, frames.width, frames.height)
-    opened = aravis.info
+    setup = configure_camera(aravis, options, strobe=False)
+    # What the format in force means (a --feature PixelFormat=… may have changed it): one the table lacks is
+    # refused, and a rendered scene takes only its own mosaic's layout.
+    sends_mono(opened := aravis.info)
     if frames.world is not None and opened.cfa != frames.world.sensor.cfa:
-        raise RigOpenError(
-            f"pixel format {frames.pixel_format} has CFA {opened.cfa}; expected {frames.world.sensor.cfa}, "
-            "the rendered mosaic's"
+        raise CameraSettingError(
+            f"aravis-fake: pixel format {opened.pixel_format} has CFA {opened.cfa}; expected "
+            f"{frames.world.sensor.cfa}, the rendered mosaic's (e.g. {ARAVIS_FAKE_PIXEL_FORMAT})"
         )
-    return _OpenedFake(fake, aravis, configure_camera(aravis, options, strobe=False))
+    return _OpenedFake(fake, aravis, setup)
 
 
 def _wired_rig(model: Any, frames: _FakeFrames, opened: _OpenedFake, emulator: Any, booth: Any, closers: list) -> Rig:
@@ -267,5 +270,5 @@ def _wired_rig(model: Any, frames: _FakeFrames, opened: _OpenedFake, emulator: A
         emulator=emulator,
         line_errors=line_errors,
         camera_extra=extra,
-        mono=world is None and frames.pixel_format.startswith("Mono"),
+        mono=world is None and sends_mono(wired.info),
     )

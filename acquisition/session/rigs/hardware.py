@@ -22,7 +22,7 @@ from msflash.acquisition.devices.sim_world import (
 from msflash.acquisition.errors import CameraNotFoundError, CameraSettingError, RigOpenError, UsageError
 from msflash.acquisition.progress import progress
 from msflash.acquisition.session.rigs.emulated_booth import close_all
-from msflash.acquisition.session.rigs.rig import Rig
+from msflash.acquisition.session.rigs.rig import Rig, sends_mono
 from msflash.led_controller import LedBooth
 from msflash.led_controller.adapters import open_booth
 from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
@@ -147,6 +147,7 @@ def _open_hw_camera(
     opened = AravisCamera(camera, interfaces=names, pixel_format=pixel_format)
     try:
         setup = configure_camera(opened, options or CameraOptions(), strobe=sync == "camera")
+        sends_mono(opened.info)  # a format msflash does not decode is refused here, before the booth opens
     except BaseException:
         opened.close()
         raise
@@ -264,7 +265,7 @@ def _hw_rig(
     extra: dict = {"gain": aravis.gain_record()}
     if setup is not None and not setup.options.empty:
         extra["camera_options"] = setup.to_dict()  # what was asked (profile + options) and read back
-    mono = info.cfa is None and info.pixel_format.startswith("Mono")
+    mono = sends_mono(info)
     if responsivities is None:
         extra["responsivity_note"] = "not given (--responsivity or a calibration directory): flash solvers unavailable"
     return Rig(

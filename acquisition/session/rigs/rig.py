@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from msflash.acquisition.devices.aravis.pixel_layouts import camera_pixel_layout
+from msflash.acquisition.devices.camera import CameraInfo
 from msflash.acquisition.devices.image_format import IMAGE_FEATURES, ImageFormatControl
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
@@ -22,6 +24,18 @@ from msflash.processing.led_wavelength import led_peaks_nm
 from msflash.processing.spectra import Spectra
 
 log = logging.getLogger(__name__)
+
+
+def sends_mono(info: CameraInfo) -> bool:
+    """Whether a camera reporting ``info`` sends mono frames (one value a pixel, no CFA), as its pixel format means
+    (:func:`~acquisition.devices.aravis.pixel_layouts.camera_pixel_layout`: the one table of formats).
+
+    Raises
+    ------
+    CameraSettingError
+        A pixel format msflash does not decode, naming the camera and the format.
+    """
+    return camera_pixel_layout(info).kind == "mono"
 
 
 @dataclass
@@ -91,8 +105,7 @@ class Rig:
         What every later sequence records is then true of the camera: ``camera_extra["image_format"]`` holds the
         ROI, binning and pixel format in force as the camera reads them back; the open's ``camera_options`` keep
         only what still holds (the ROI, binning and image features they asked for and read back are dropped:
-        the change superseded them); :attr:`mono` follows the pixel format (a camera without a CFA sending
-        ``Mono*``). Each sequence's :class:`~acquisition.devices.camera.CameraInfo` (pixel format, levels,
+        the change superseded them); :attr:`mono` follows the pixel format (:func:`sends_mono`). Each sequence's :class:`~acquisition.devices.camera.CameraInfo` (pixel format, levels,
         size) is read afresh by :meth:`sequence_header` anyway.
         """
         camera = self.camera
@@ -108,8 +121,7 @@ class Rig:
             }
         extra["image_format"] = {**image_format.to_json(), "set": "after the rig opened (live view)"}
         self.camera_extra = extra
-        info = self.camera.info
-        self.mono = info.cfa is None and info.pixel_format.startswith("Mono")
+        self.mono = sends_mono(self.camera.info)
 
     def sequence_writer(self, directory: str | Path, extra: dict | None = None) -> SequenceWriter:
         """A :class:`SequenceWriter` for a sequence from this rig (header of :meth:`sequence_header`).
