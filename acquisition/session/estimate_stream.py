@@ -315,6 +315,7 @@ class EstimateStream:
         have been made with ``tiles``. The global estimate is :meth:`estimate`'s (or ``global_estimate``)."""
         from msflash.acquisition.session.sequence_spectra import led_spectra_photons
 
+        self._complete_rows()  # frames missing (an interrupted capture): say so, not that tiles are
         if self._tiles is None or self.tiles is None:
             raise RecordingError(f"{self.header.path}: the estimate stream was made without tiles; expected tiles=…")
         whole_frame = global_estimate if global_estimate is not None else self.estimate(solver, alpha)

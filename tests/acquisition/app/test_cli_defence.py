@@ -159,3 +159,17 @@ def test_numpy_warnings_are_explained_in_one_line(
     lines = [line for line in err.splitlines() if "divide by zero" in line]
     assert len(lines) == 1 and lines[0].startswith("msflash: warning: ") and "NaN" in lines[0]
     assert "np.log" not in err  # no source line
+
+
+def test_a_capture_interrupted_before_its_first_frame_says_what_is_missing(
+    sequence: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``complete: false`` with no frame at all: the estimate's one error names the missing frame, not the
+    estimate's inner workings (it said the stream 'was made without tiles')."""
+    document = json.loads((sequence / "sequence.json").read_text())
+    document.update(complete=False, frames=[])
+    (sequence / "sequence.json").write_text(json.dumps(document))
+    assert main(["estimate", str(sequence)]) == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert last.startswith(f"msflash: error: {sequence / 'sequence.json'}: ") and "expected" in last, last
+    assert "ambient" in last and "tiles" not in last, last
