@@ -84,6 +84,9 @@ def test_a_second_capture_into_a_busy_folder_names_the_holder(tmp_path: Path) ->
     first = _msflash(*SLOW_CAPTURE, "--out", str(out))
     try:
         wait_for_frames(first, out / "sequence" / "sequence.json", 1)
+        # Held still while the second one tries: under load the second's start-up took longer than the first's
+        # remaining frames, the first finished and released the folder, and the refusal named no holder.
+        first.send_signal(signal.SIGSTOP)
         status, err = _finish(_msflash("capture", "--out", str(out)))
         assert status == 2, err
         assert err.count("\n") == 1
