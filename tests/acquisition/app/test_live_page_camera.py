@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.acquisition.support.browser import RUN, chromium, data, js, needs_chromium, shot
+from tests.acquisition.support.browser import RUN, chromium, click, data, js, needs_chromium, shot
 from tests.acquisition.support.live import emulator_levels, live_server, wait_until
 
 pytestmark = needs_chromium
@@ -39,7 +39,7 @@ def set_roi(driver, x: int, y: int, w: int, h: int) -> None:
         field = driver.find_element("id", f"roi-{key}")
         field.clear()
         field.send_keys(str(value))
-    driver.find_element("id", "roi-apply").click()
+    click(driver, driver.find_element("id", "roi-apply"))
 
 
 def test_roi_binning_and_pixel_format_from_the_page(tmp_path: Path, browser) -> None:
@@ -115,13 +115,13 @@ def test_a_camera_that_fails_mid_stream_shows_its_reason_switches_the_leds_off_a
         js(driver, "window.scrollTo(0, 0)")
         shot(driver, tmp_path, f"live-{width}-camera-error")
 
-        reconnect.click()  # still unplugged: the retry fails, the error stays, saying why
+        click(driver, reconnect)  # still unplugged: the retry fails, the error stays, saying why
         wait_until(lambda: reconnect.get_attribute("data-result") == "failed", "a failed retry")
         assert js(driver, "return document.body.dataset.connection") == "error"
         assert "USB cable pulled" in driver.find_element("id", "disconnected-reason").text
         server.rig.camera.replug()
         shown = int(data(driver, "frame-count", "frames"))
-        reconnect.click()
+        click(driver, reconnect)
         wait_until(lambda: js(driver, "return document.body.dataset.connection") == "live", "live again")
         wait_until(lambda: int(data(driver, "frame-count", "frames")) > shown + 2, "frames again")
         assert not driver.find_element("id", "disconnected").is_displayed()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import time
 from pathlib import Path
 
 import pytest
@@ -47,6 +48,23 @@ def chromium(width: int, height: int) -> object:
 def js(driver, script: str, *args):  # noqa: ANN001, ANN201
     """``script`` run in the page."""
     return driver.execute_script(script, *args)
+
+
+UNCOVERED = """const box = arguments[0].getBoundingClientRect();
+const top = document.elementFromPoint(box.left + box.width / 2, box.top + box.height / 2);
+return top !== null && (top === arguments[0] || arguments[0].contains(top));"""
+
+
+def click(driver, element, timeout_s: float = 30.0) -> None:  # noqa: ANN001
+    """Click ``element`` once the page has laid it out on top (a hang guard, not a timing): right after a window
+    resize (:func:`shot`) on a loaded machine, a click at the old layout's point landed on another element."""
+    js(driver, "arguments[0].scrollIntoView({block: 'center'})", element)
+    deadline = time.monotonic() + timeout_s
+    while not js(driver, UNCOVERED, element):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"#{element.get_attribute('id')} stayed covered for {timeout_s} s")
+        time.sleep(0.05)
+    element.click()
 
 
 def data(driver, element_id: str, key: str) -> str:  # noqa: ANN001
