@@ -143,6 +143,7 @@ class BlockRows:
         if self.differences is not None:
             self.differences[n_led_frames + 1] = 0.0
         self._invalid: list[np.ndarray] = []
+        self._saturated: list[np.ndarray] = []  # the frames' saturated blocks only (not those excluded)
         self._filled = [n_led_frames + 1]
         self._floating = False
         # Inverse-variance weights (module notes): per row column, once the ambient frame is in (and its probe:
@@ -229,6 +230,7 @@ class BlockRows:
             self._ambient_saturated = saturated
         if saturated is not None:
             self._invalid.append(saturated)
+            self._saturated.append(saturated)
         self._filled.append(row)
 
     def _fitted_weights(self, frame: np.ndarray, cfa_period: int) -> np.ndarray:
@@ -255,6 +257,42 @@ class BlockRows:
         if self.probe_stride == 1:
             return values
         return values.reshape(self.block_shape)[:: self.probe_stride].reshape(-1)
+
+    def channel_rows(self) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """The rows as :mod:`processing.channel_statistics` stacks them from the frames — features ``[F_1 … F_n, A] ×
+        channels, 1`` by blocks in row-major order, blocks saturated in any frame zeroed in every row — and the probe's
+        half differences alike (None without one): the same numbers, so the channel statistics need no second pass
+        over the frames. None when the probe is strided (:data:`PROBE_BLOCKS`: the channel statistics probe every
+        block) or a frame is missing. Excluded blocks (:meth:`exclude`) stay in: only saturation leaves a block out.
+
+        A copy in the channel statistics' layout (the size of the rows, and of the probe): the moments read it
+        column band by column band, and a fold is a band of its columns.
+        """
+        if len(self._filled) != self.rows.shape[0] or self.probe_stride != 1:
+            return None
+        height, channels, width = self.block_shape
+        features = self.rows.shape[0] - 1
+
+        def stacked(values: np.ndarray, last: float) -> np.ndarray:
+            out = np.empty((features * channels + 1, height * width))
+            np.copyto(
+                out[:-1].reshape(features, channels, height, width),
+                values[:features].reshape(features, height, channels, width).transpose(0, 2, 1, 3),
+            )
+            out[-1] = last
+            return out
+
+        raw = stacked(self.rows, 1.0)
+        probes = None if self.differences is None else stacked(self.differences, 0.0)
+        saturated = None
+        for mask in self._saturated:
+            saturated = mask if saturated is None else saturated | mask
+        if saturated is not None and saturated.any():
+            columns = saturated.reshape(-1)
+            raw[:, columns] = 0.0  # out of every moment, the count included
+            if probes is not None:
+                probes[:, columns] = 0.0
+        return raw, probes
 
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""

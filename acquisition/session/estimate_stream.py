@@ -281,6 +281,16 @@ class EstimateStream:
             )
         return self._rows
 
+    @property
+    def block_rows(self) -> BlockRows | None:
+        """The frames' block rows once every frame is in (None before, and for ``--bin-factor 1``): what the channel
+        statistics of ``--model prior|family|auto`` are taken from without a second pass over the frames
+        (:func:`processing.channel_statistics.channel_statistics_of_block_rows`)."""
+        rows = self._rows
+        if rows is None or self._n_led_rows != self.n_led_frames or not self._have_ambient:
+            return None
+        return rows
+
     def statistics(self) -> SequenceStatistics:
         """The sufficient statistics of eq. 4–6 of the frames taken (every LED frame must be in)."""
         rows = self._complete_rows()

@@ -26,7 +26,8 @@ On the first size alone (``height × width``):
   estimate's model band.
 
 Beside the default estimate of each sequence at the first size, RGB and raw (``targets``):
-``family_estimate_over_copy`` the family model's estimate (``--model family|auto``: channel-resolved statistics,
+``family_estimate_over_copy`` the family model's estimate (``--model family|auto``: channel-resolved statistics from the
+LED estimate's block rows,
 prior and every family fitted and judged) with the compiled fits prepared, target ≤ 3 (issue 30);
 ``family_estimate_one_shot_over_copy`` the same on the numpy fits, as a one-shot ``msflash estimate`` runs it.
 
@@ -359,12 +360,18 @@ FAMILY_TARGET = 3.0
 
 def family_ratio(world: dict[str, Any], pairs: int, prepared: bool = True) -> dict[str, Any]:
     """The family model's estimate as ``msflash estimate --model family|auto`` takes it (the channel-resolved
-    statistics, the light prior, every family fitted and judged on held-out folds), interleaved with a copy of the
-    frames; the models themselves prepared once per LED set and camera, and the compiled fits loaded
-    (:func:`processing.family_kernels.prepare`), as a process that runs many estimates does — or, without
-    ``prepared``, the numpy fits a one-shot ``msflash estimate`` takes."""
+    statistics from the LED estimate's block rows, the light prior, every family fitted and judged on held-out
+    folds), interleaved with a copy of the frames; the models themselves prepared once per LED set and camera, and
+    the compiled fits loaded (:func:`processing.family_kernels.prepare`), as a process that runs many estimates does
+    — or, without ``prepared``, the numpy fits a one-shot ``msflash estimate`` takes.
+
+    The frames' one pass is the LED estimate's (the default figure): the block rows are filled once, untimed, as its
+    stream fills them, and the family's cost starts from them (issue 31; where the rows cannot give the channel
+    statistics, the frames' own pass is timed instead, as the route then takes it)."""
     from msflash.processing import family_kernels
-    from msflash.processing.channel_statistics import accumulate_channel_statistics
+    from msflash.processing.block_rows import BlockRows
+    from msflash.processing.block_sums import plane_shape
+    from msflash.processing.channel_statistics import accumulate_channel_statistics, channel_statistics_of_block_rows
     from msflash.processing.light_families import family_model
     from msflash.processing.light_prior import prior_model
 
@@ -372,9 +379,18 @@ def family_ratio(world: dict[str, Any], pairs: int, prepared: bool = True) -> di
     route = contextlib.nullcontext if prepared else family_kernels.as_one_shot
 
     factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)  # as acquisition.session.prior_route picks it
+    period = 2 if cfa is not None else 1
+    rows = BlockRows(
+        len(frames) - 1, plane_shape(frames[0].shape, period), factor, spec.white_level, spec.black_level, True
+    )
+    for row, frame in enumerate([*frames[1:], frames[0]]):  # LED frames, then the ambient, as the stream adds them
+        rows.add_frame(row, frame, period)
 
     def statistics() -> Any:
-        return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
+        taken = channel_statistics_of_block_rows(rows, spec, cfa=cfa)
+        if taken is None:
+            return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
+        return taken
 
     channels = statistics()
     prior, families = prior_model(channels.channels, leds, camera), family_model(channels.channels, leds, camera)

@@ -71,7 +71,7 @@ def _both_routes(name: str, statistics_of: Callable[[], Any], leds: Any, camera:
 
 def collect(cache: Path) -> dict[str, Any]:
     """Every answer (module notes), keyed ``case|route``."""
-    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor
+    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor, stream_stack
     from msflash.acquisition.session.prior_route import sequence_channel_statistics
     from msflash.lab.bench.processing import benchmark_world
     from msflash.processing.channel_statistics import accumulate_channel_statistics
@@ -89,7 +89,10 @@ def collect(cache: Path) -> dict[str, Any]:
                 _, _, sequence, leds, camera, stack = case_inputs(case, cache.resolve())
                 _both_routes(
                     f"{suite}:{case.name}",
-                    lambda sequence=sequence, stack=stack: sequence_channel_statistics(sequence, stack),
+                    # As ``msflash estimate --model family`` takes them: from the LED estimate's block rows.
+                    lambda sequence=sequence, stack=stack: sequence_channel_statistics(
+                        sequence, stack, rows=stream_stack(sequence, stack, DEFAULT_BIN_FACTOR).block_rows
+                    ),
                     leds,
                     camera,
                     out,
