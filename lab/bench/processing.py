@@ -369,15 +369,34 @@ def family_ratio(world: dict[str, Any], pairs: int, prepared: bool = True) -> di
     stream fills them, and the family's cost starts from them (issue 31; where the rows cannot give the channel
     statistics, the frames' own pass is timed instead, as the route then takes it)."""
     from msflash.processing import family_kernels
-    from msflash.processing.block_rows import BlockRows
-    from msflash.processing.block_sums import plane_shape
-    from msflash.processing.channel_statistics import accumulate_channel_statistics, channel_statistics_of_block_rows
     from msflash.processing.light_families import family_model
     from msflash.processing.light_prior import prior_model
 
-    frames, spec, leds, camera, cfa = world["frames"], world["spec"], world["leds"], world["camera"], world.get("cfa")
+    frames, leds, camera = world["frames"], world["leds"], world["camera"]
     route = contextlib.nullcontext if prepared else family_kernels.as_one_shot
+    statistics = family_statistics(world)
+    channels = statistics()
+    prior, families = prior_model(channels.channels, leds, camera), family_model(channels.channels, leds, camera)
+    family_kernels.prepare()  # as a process that runs many estimates does (loading is not timed)
 
+    def family_estimate() -> object:
+        with route():  # without ``prepared``: the numpy fits, as a process that never prepared them
+            now = statistics()
+            return families.estimate(now, prior.estimate(now).spectrum.values[:, 0])
+
+    return interleaved_ratio(family_estimate, frame_copy(frames), pairs)
+
+
+def family_statistics(world: dict[str, Any]) -> Callable[[], Any]:
+    """How ``msflash estimate --model family|auto`` takes a world's channel statistics: the block rows filled once
+    (untimed: the LED estimate's one pass over the frames, as its stream adds them), then a call gives the
+    statistics from them (:func:`processing.channel_statistics.channel_statistics_of_block_rows`), or from the
+    frames' own pass where the rows cannot give them (as the route then does)."""
+    from msflash.processing.block_rows import BlockRows
+    from msflash.processing.block_sums import plane_shape
+    from msflash.processing.channel_statistics import accumulate_channel_statistics, channel_statistics_of_block_rows
+
+    frames, spec, cfa = world["frames"], world["spec"], world.get("cfa")
     factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)  # as acquisition.session.prior_route picks it
     period = 2 if cfa is not None else 1
     rows = BlockRows(
@@ -392,16 +411,7 @@ def family_ratio(world: dict[str, Any], pairs: int, prepared: bool = True) -> di
             return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
         return taken
 
-    channels = statistics()
-    prior, families = prior_model(channels.channels, leds, camera), family_model(channels.channels, leds, camera)
-    family_kernels.prepare()  # as a process that runs many estimates does (loading is not timed)
-
-    def family_estimate() -> object:
-        with route():  # without ``prepared``: the numpy fits, as a process that never prepared them
-            now = statistics()
-            return families.estimate(now, prior.estimate(now).spectrum.values[:, 0])
-
-    return interleaved_ratio(family_estimate, frame_copy(frames), pairs)
+    return statistics
 
 
 def prior_bench(
