@@ -183,11 +183,11 @@ def led_side(
     rows its stream took (:attr:`EstimateStream.block_rows`: the light models' channel statistics come from them,
     :func:`sequence_channel_statistics`)."""
     if method != "global":
-        stream = analysis.stream_stack(sequence, stack, bin_factor, tiles)
+        stream = analysis.stream_stack(sequence, stack, bin_factor, tiles, full_probe=True)
         local = local_route.estimate_sequence_local(sequence, method, solver, alpha, stream=stream)
         payload = local_route.local_estimate_payload(sequence, local)
         return local.global_estimate, payload, local.model == "local", stream.block_rows
-    stream = analysis.stream_stack(sequence, stack, bin_factor)
+    stream = analysis.stream_stack(sequence, stack, bin_factor, full_probe=True)
     led = analysis.estimate_sequence(sequence, solver, alpha, stream=stream)
     return led, analysis.estimate_payload(sequence, led), False, stream.block_rows
 

@@ -400,7 +400,13 @@ def family_statistics(world: dict[str, Any]) -> Callable[[], Any]:
     factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)  # as acquisition.session.prior_route picks it
     period = 2 if cfa is not None else 1
     rows = BlockRows(
-        len(frames) - 1, plane_shape(frames[0].shape, period), factor, spec.white_level, spec.black_level, True
+        len(frames) - 1,
+        plane_shape(frames[0].shape, period),
+        factor,
+        spec.white_level,
+        spec.black_level,
+        SAMPLE_WEIGHTING,
+        full_probe=True,  # as the light models' stream keeps it (acquisition.session.prior_route.led_side)
     )
     for row, frame in enumerate([*frames[1:], frames[0]]):  # LED frames, then the ambient, as the stream adds them
         rows.add_frame(row, frame, period)

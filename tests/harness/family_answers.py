@@ -6,7 +6,9 @@ tuning and held out: 40 cases) and the bench's RGB and raw 1280×1024 worlds, ea
 (``MSFLASH_KERNELS=numpy``) and the compiled one (the frame kernels and the compiled fits prepared) — 84 estimates —
 digests of the channel statistics, the prior's spectrum, the family spectrum, its band and spread, and every
 candidate's held-out errors (``repr``, all digits) and spectrum, with the chosen candidate, ``auto``'s choice and the
-reason. ``--compare A B`` says how many differ and where.
+reason. ``--compare A B`` says how many differ and where. The harness cases' channel statistics are taken as
+``msflash estimate --model family`` takes them (from the LED estimate's block rows, since issue 31), the bench
+worlds' by the frames' own pass.
 
 Run it with each checkout's code (``PYTHONPATH=<checkout>``, e.g. a ``git archive`` of the commit before, next to a
 ``shared`` link to the spectral data), then compare: docs/speed.md, the family model's sections.
@@ -91,7 +93,9 @@ def collect(cache: Path) -> dict[str, Any]:
                     f"{suite}:{case.name}",
                     # As ``msflash estimate --model family`` takes them: from the LED estimate's block rows.
                     lambda sequence=sequence, stack=stack: sequence_channel_statistics(
-                        sequence, stack, rows=stream_stack(sequence, stack, DEFAULT_BIN_FACTOR).block_rows
+                        sequence,
+                        stack,
+                        rows=stream_stack(sequence, stack, DEFAULT_BIN_FACTOR, full_probe=True).block_rows,
                     ),
                     leds,
                     camera,

@@ -18,7 +18,14 @@ from msflash.processing.channel_statistics import (
 )
 
 
-def _rows(frames: list[np.ndarray], spec, cfa: str | None, factor: int) -> BlockRows:  # noqa: ANN001 — a spec
+def _rows(
+    frames: list[np.ndarray],
+    spec,  # noqa: ANN001 — a FrameStackSpec
+    cfa: str | None,
+    factor: int,
+    full_probe: bool = False,
+    compiled: bool | None = None,
+) -> BlockRows:
     """Block rows of ``frames`` (ambient first) fed as the estimate stream feeds them: LED frames, then the ambient."""
     period = 2 if cfa is not None else 1
     rows = BlockRows(
@@ -28,6 +35,8 @@ def _rows(frames: list[np.ndarray], spec, cfa: str | None, factor: int) -> Block
         spec.white_level,
         black_level=spec.black_level,
         weighting=True,
+        full_probe=full_probe,
+        compiled=compiled,
     )
     for row, frame in enumerate(frames[1:]):
         rows.add_frame(row, frame, period)
@@ -87,3 +96,32 @@ def test_rows_that_cannot_give_them_say_so(monkeypatch: pytest.MonkeyPatch) -> N
     strided = _rows(frames, spec, "RGGB", 4)
     assert strided.probe_stride > 1
     assert channel_statistics_of_block_rows(strided, spec, cfa="RGGB") is None
+
+
+@pytest.mark.parametrize("route", ["numpy", "numba"])
+def test_a_kept_probe_gives_large_frames_channel_statistics_and_leaves_the_estimate_as_it_was(
+    monkeypatch: pytest.MonkeyPatch, route: str
+) -> None:
+    """Large frames probe every few block rows (here forced on a small one): with ``full_probe`` the rows keep every
+    block row's half difference, give the frames' channel statistics to the bit, and the LED estimate's own
+    statistics (moments, probe, channel moments) are the strided probe's, to the bit, on both moment routes."""
+    monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, route)
+    monkeypatch.setattr(block_rows_module, "PROBE_BLOCKS", 64)
+    world = benchmark_world(192, 256, cfa="RGGB")
+    frames, spec = [np.array(frame) for frame in world["frames"]], world["spec"]
+    frames[3][10:30, 200:230] = int(spec.white_level)
+    compiled = route == "numba"
+    strided = _rows(frames, spec, "RGGB", 4, compiled=compiled)
+    kept = _rows(frames, spec, "RGGB", 4, full_probe=True, compiled=compiled)
+    assert strided.probe_stride == kept.probe_stride > 1
+    got = channel_statistics_of_block_rows(kept, spec, cfa="RGGB")
+    assert got is not None
+    _assert_identical(accumulate_channel_statistics(frames[0], frames[1:], spec, cfa="RGGB", bin_factor=4), got)
+    one, other = strided.statistics(spec), kept.statistics(spec)
+    assert np.array_equal(one.gram, other.gram) and np.array_equal(one.cross, other.cross)
+    assert one.noise is not None and other.noise is not None
+    assert np.array_equal(one.noise.gram, other.noise.gram) and np.array_equal(one.noise.cross, other.noise.cross)
+    assert one.ambient_energy == other.ambient_energy and one.n_samples == other.n_samples
+    assert one.channels is not None and other.channels is not None
+    for name in ("fa", "ff", "aa", "noise_fa", "noise_ff", "noise_aa"):
+        assert np.array_equal(getattr(one.channels, name), getattr(other.channels, name)), name

@@ -177,15 +177,20 @@ def test_a_reference_chart_holds_the_estimate_to_known_reflectances(
     assert len(err) == 1 and "patches[0]" in err[0] and "reflectance" in err[0]
 
 
+@pytest.mark.parametrize("strided", [False, True])
 @pytest.mark.parametrize("model", ["prior", "family", "auto"])
 def test_the_light_models_pass_over_each_frame_once(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, model: str
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, model: str, strided: bool
 ) -> None:
     """Issue 31: ``--model prior|family|auto`` take the channel statistics from the LED estimate's block rows, so each
     frame is block-summed once (the channel statistics' own pass over the frames is not taken), and the answer is the
-    one the frames' own pass gives (the same numbers: tests/processing/test_channel_statistics_from_rows.py)."""
-    from msflash.processing import channel_statistics
+    one the frames' own pass gives (the same numbers: tests/processing/test_channel_statistics_from_rows.py); also
+    where the frames are large enough for the LED estimate to probe every few block rows (``strided``, forced)."""
+    from msflash.processing import block_rows, channel_statistics
     from msflash.processing.block_rows import BlockRows
+
+    if strided:
+        monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 64)
 
     rendered = render_case(Case("a", light="A", seed=5), tmp_path / "a")
     passes: list[str] = []
