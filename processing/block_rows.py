@@ -119,6 +119,7 @@ class BlockRows:
         black_level: float = 0.0,
         weighting: bool = False,
         compiled: bool | None = None,
+        full_probe: bool = False,
     ) -> None:
         height, width = plane_shape[0] // factor, plane_shape[1] // factor
         if height == 0 or width == 0:
@@ -139,10 +140,15 @@ class BlockRows:
         # every ``probe_stride``-th block row only (PROBE_BLOCKS).
         self.probe_stride = probe_stride(height, width)
         self.difference_shape = (len(range(0, height, self.probe_stride)), plane_shape[2], width)
-        self.differences = np.empty((n_rows, math.prod(self.difference_shape))) if factor % 2 == 0 else None
+        # ``full_probe``: every block row's half difference is kept (what the channel statistics need,
+        # :meth:`channel_rows`), and the moments here still take every ``probe_stride``-th (the same numbers).
+        self._pass_stride = 1 if full_probe else self.probe_stride
+        self._stored_shape = (len(range(0, height, self._pass_stride)), plane_shape[2], width)
+        self.differences = np.empty((n_rows, math.prod(self._stored_shape))) if factor % 2 == 0 else None
         if self.differences is not None:
             self.differences[n_led_frames + 1] = 0.0
         self._invalid: list[np.ndarray] = []
+        self._saturated: list[np.ndarray] = []  # the frames' saturated blocks only (not those excluded)
         self._filled = [n_led_frames + 1]
         self._floating = False
         # Inverse-variance weights (module notes): per row column, once the ambient frame is in (and its probe:
@@ -178,9 +184,9 @@ class BlockRows:
             row_sums, may_saturate = block_row_sums_and_peak(plane, self.factor, self.white_level)
             channels = self.plane_shape[2]
             gathered_by_channel(row_sums, self.factor, channels, self.rows[row].reshape(self.block_shape))
-            alternation = block_row_alternation(plane, self.factor, self.probe_stride)
+            alternation = block_row_alternation(plane, self.factor, self._pass_stride)
             differences = gathered(alternation, self.factor, channels, difference_gather)
-            np.copyto(self.differences[row].reshape(self.difference_shape), differences.transpose(0, 2, 1))
+            np.copyto(self.differences[row].reshape(self._stored_shape), differences.transpose(0, 2, 1))
         # One max per frame finds the frames that saturate at all; only those build masks.
         self._record(row, saturated_blocks(plane, self.factor, self.white_level) if may_saturate else None)
         if row == self.n_led_frames and self.weighting:
@@ -199,13 +205,13 @@ class BlockRows:
         self._check_row(row)
         differences = None
         if self.differences is not None:  # the kernel writes (block row, block column, channel): a view of our layout
-            differences = self.differences[row].reshape(self.difference_shape).transpose(0, 2, 1)
+            differences = self.differences[row].reshape(self._stored_shape).transpose(0, 2, 1)
         done, saturated = frame_kernels.block_pass(
             frame,
             self.factor,
             cfa_period,
             self.white_level,
-            self.probe_stride,
+            self._pass_stride,
             self.rows[row].reshape(self.block_shape),
             differences,
         )
@@ -229,6 +235,7 @@ class BlockRows:
             self._ambient_saturated = saturated
         if saturated is not None:
             self._invalid.append(saturated)
+            self._saturated.append(saturated)
         self._filled.append(row)
 
     def _fitted_weights(self, frame: np.ndarray, cfa_period: int) -> np.ndarray:
@@ -256,6 +263,42 @@ class BlockRows:
             return values
         return values.reshape(self.block_shape)[:: self.probe_stride].reshape(-1)
 
+    def channel_rows(self) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """The rows as :mod:`processing.channel_statistics` stacks them from the frames — features ``[F_1 … F_n, A] ×
+        channels, 1`` by blocks in row-major order, blocks saturated in any frame zeroed in every row — and the probe's
+        half differences alike (None without one): the same numbers, so the channel statistics need no second pass
+        over the frames. None when the probe is strided (:data:`PROBE_BLOCKS`: the channel statistics probe every
+        block) or a frame is missing. Excluded blocks (:meth:`exclude`) stay in: only saturation leaves a block out.
+
+        A copy in the channel statistics' layout (the size of the rows, and of the probe): the moments read it
+        column band by column band, and a fold is a band of its columns.
+        """
+        if len(self._filled) != self.rows.shape[0] or self._pass_stride != 1:
+            return None
+        height, channels, width = self.block_shape
+        features = self.rows.shape[0] - 1
+
+        def stacked(values: np.ndarray, last: float) -> np.ndarray:
+            out = np.empty((features * channels + 1, height * width))
+            np.copyto(
+                out[:-1].reshape(features, channels, height, width),
+                values[:features].reshape(features, height, channels, width).transpose(0, 2, 1, 3),
+            )
+            out[-1] = last
+            return out
+
+        raw = stacked(self.rows, 1.0)
+        probes = None if self.differences is None else stacked(self.differences, 0.0)
+        saturated = None
+        for mask in self._saturated:
+            saturated = mask if saturated is None else saturated | mask
+        if saturated is not None and saturated.any():
+            columns = saturated.reshape(-1)
+            raw[:, columns] = 0.0  # out of every moment, the count included
+            if probes is not None:
+                probes[:, columns] = 0.0
+        return raw, probes
+
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
         self._invalid.append(blocks)
@@ -265,8 +308,17 @@ class BlockRows:
         return np.broadcast_to(blocks[:, None, :], self.block_shape).reshape(-1)
 
     def _difference_columns(self, blocks: np.ndarray) -> np.ndarray:
-        """The columns of :attr:`differences` of the (H/f, W/f) block mask ``blocks``."""
+        """The columns of the probe's moments (:meth:`_probe`) of the (H/f, W/f) block mask ``blocks``."""
         return np.broadcast_to(blocks[:: self.probe_stride, None, :], self.difference_shape).reshape(-1)
+
+    def _probe(self) -> np.ndarray | None:
+        """The half differences the moments take: every ``probe_stride``-th block row's (a copy of those rows where
+        the probe was kept whole, ``full_probe``: the same values in the same layout, so the same moments)."""
+        if self.differences is None or self._pass_stride == self.probe_stride:
+            return self.differences
+        height, channels, width = self._stored_shape
+        whole = self.differences.reshape(self.differences.shape[0], height, channels, width)
+        return np.ascontiguousarray(whole[:, :: self.probe_stride]).reshape(self.differences.shape[0], -1)
 
     def _probe_scale(self, excluded_blocks: int, excluded_probed: int) -> float | None:
         """Valid blocks ÷ probed valid blocks (1 without a stride), or None when no probed block is valid."""
@@ -343,10 +395,11 @@ class BlockRows:
         excluded = 0 if invalid is None else int(np.count_nonzero(invalid))
         excluded_probed = 0 if invalid is None else int(np.count_nonzero(invalid[:: self.probe_stride]))
         scale = self._probe_scale(excluded, excluded_probed)
-        if self.differences is None:
+        probe = self._probe()
+        if probe is None:
             return moments, None, excluded * self.block_shape[1], scale, ChannelMoments(fa, ff, aa, blocks)
         noise, *channel_noise = frame_kernels.block_statistics(
-            self.differences,
+            probe,
             self._at_probe(column_weights),
             None if factors is None else self._at_probe(factors),
             transform,
@@ -367,10 +420,11 @@ class BlockRows:
         columns left out, the probe's scale, and each column's factor (0 where left out; None: none is)."""
         invalid = self._invalid_blocks()
         parts = [_masked_part(self.rows, None if invalid is None else self._columns(invalid), weights)]
-        if self.differences is not None:
+        probe = self._probe()
+        if probe is not None:
             probe_weights = None if weights is None else self._at_probe(weights)
             left_out = None if invalid is None else self._difference_columns(invalid)
-            parts.append(_masked_part(self.differences, left_out, probe_weights))
+            parts.append(_masked_part(probe, left_out, probe_weights))
         # The rows' and the probe's moments in one map: the probe's single chunk shares the threads.
         moments, *probed = gram_matrices(parts, chunk_pixels * self.block_shape[1], workers)
         if invalid is None:
@@ -393,10 +447,11 @@ class BlockRows:
         ones = self.rows[-1] if column_factor is None else self.rows[-1] * column_factor
         blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
         fa, ff, aa = _channel_products(transform, self.rows, self.block_shape, 1, column_factor)
-        if self.differences is None or probe_scale is None:
+        probe = self._probe()
+        if probe is None or probe_scale is None:
             return ChannelMoments(fa, ff, aa, blocks)
         at_probe = None if column_factor is None else self._at_probe(column_factor)
-        noise = _channel_products(transform, self.differences, self.difference_shape, 1, at_probe)
+        noise = _channel_products(transform, probe, self.difference_shape, 1, at_probe)
         return ChannelMoments(fa, ff, aa, blocks, *(part * probe_scale for part in noise))
 
 

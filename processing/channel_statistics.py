@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from msflash.processing import frame_kernels
+from msflash.processing.block_rows import BlockRows
 from msflash.processing.block_sums import (
     block_sums,
     block_sums_and_differences,
@@ -217,6 +218,34 @@ def accumulate_channel_statistics(
         )
     raw, probes = _stacked_block_rows(frames, period, bin_factor, spec.white_level, blocks)
     return _statistics_of_rows(raw, probes, spec, bin_factor, n_folds, blocks, channels)
+
+
+def channel_statistics_of_block_rows(
+    rows: BlockRows, spec: FrameStackSpec, *, cfa: str | None = None, n_folds: int = DEFAULT_FOLDS
+) -> ChannelStatistics | None:
+    """:func:`accumulate_channel_statistics` of the frames already block-summed into ``rows`` (every frame in), with
+    their block size: the same numbers to the bit for integer frames (the block sums are the same exact integers, in
+    the same order, :meth:`processing.block_rows.BlockRows.channel_rows`), without a second pass over the frames.
+
+    None where the rows cannot give them — a strided probe (large frames), a missing frame, fewer block rows than
+    folds, planes that are not ``cfa``'s (a mono camera's one plane): then take
+    :func:`accumulate_channel_statistics` of the frames.
+    """
+    height, n_planes, width = rows.block_shape
+    if n_folds < 2 or height < n_folds or len(spec.led_levels) != rows.n_led_frames:
+        return None
+    try:
+        channels = plane_channels(cfa, n_planes)
+    except SpectralDataError:
+        return None
+    if len(channels) != n_planes:
+        return None
+    stacked = rows.channel_rows()
+    if stacked is None:
+        return None
+    raw, probes = stacked
+    blocks = _BlockLayout(height, width, n_planes)
+    return _statistics_of_rows(raw, probes, spec, rows.factor, n_folds, blocks, channels)
 
 
 def _checked_frames(

@@ -88,12 +88,13 @@ def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None =
 
 
 def stream_stack(
-    sequence: Sequence, stack: FrameStack, bin_factor: int = 8, tiles: int | None = None
+    sequence: Sequence, stack: FrameStack, bin_factor: int = 8, tiles: int | None = None, full_probe: bool = False
 ) -> EstimateStream:
-    """A stack already in memory fed to the one accumulator, as :func:`stream_sequence` feeds the files."""
+    """A stack already in memory fed to the one accumulator, as :func:`stream_sequence` feeds the files
+    (``full_probe``: every block row's half difference kept, for the light models' channel statistics)."""
     index = {i: frame for i, frame in zip(stack.led_indices, stack.led_frames, strict=True)}
     index[stack.ambient_index] = stack.ambient
-    return stream_sequence(sequence, bin_factor, tiles, index.__getitem__)
+    return stream_sequence(sequence, bin_factor, tiles, index.__getitem__, full_probe)
 
 
 def _check_stack_budget(sequence: Sequence) -> None:

@@ -132,8 +132,12 @@ class EstimateStream:
         bin_factor: int = 8,
         tiles: int | None = None,
         live: bool = False,
+        full_probe: bool = False,
     ) -> None:
         self.header = header
+        self.full_probe = full_probe
+        """Keep every block row's half difference (:class:`BlockRows`, ``full_probe``): the light models take their
+        channel statistics from :attr:`block_rows` then, on frames of any size."""
         self.n_led_frames = n_led_frames
         self.bin_factor = bin_factor
         self.tiles = tiles
@@ -156,11 +160,16 @@ class EstimateStream:
 
     @classmethod
     def for_sequence(
-        cls, sequence: Sequence, bin_factor: int = 8, tiles: int | None = None, live: bool = False
+        cls,
+        sequence: Sequence,
+        bin_factor: int = 8,
+        tiles: int | None = None,
+        live: bool = False,
+        full_probe: bool = False,
     ) -> EstimateStream:
         """A stream laid out for a sequence's own frames (its ``led`` entries)."""
         n_led = sum(1 for entry in sequence.frames if entry.role == "led")
-        return cls(sequence, n_led, bin_factor, tiles, live)
+        return cls(sequence, n_led, bin_factor, tiles, live, full_probe)
 
     # -- feeding -----------------------------------------------------------------------------------
     def add(self, pixels: np.ndarray, role: str, levels: Seq[float], exposure_gain: float) -> None:
@@ -223,6 +232,7 @@ class EstimateStream:
                     black_level=camera.black_level,
                     weighting=SAMPLE_WEIGHTING,
                     compiled=self._compiled_statistics,
+                    full_probe=self.full_probe,
                 )
             if self._rows is not None and self.live:
                 with frame_kernels.paused():
@@ -280,6 +290,16 @@ class EstimateStream:
                 "expected every LED frame before the estimate"
             )
         return self._rows
+
+    @property
+    def block_rows(self) -> BlockRows | None:
+        """The frames' block rows once every frame is in (None before, and for ``--bin-factor 1``): what the channel
+        statistics of ``--model prior|family|auto`` are taken from without a second pass over the frames
+        (:func:`processing.channel_statistics.channel_statistics_of_block_rows`)."""
+        rows = self._rows
+        if rows is None or self._n_led_rows != self.n_led_frames or not self._have_ambient:
+            return None
+        return rows
 
     def statistics(self) -> SequenceStatistics:
         """The sufficient statistics of eq. 4–6 of the frames taken (every LED frame must be in)."""
@@ -352,6 +372,7 @@ def stream_sequence(
     bin_factor: int = 8,
     tiles: int | None = None,
     pixels: Callable[[int], np.ndarray] | None = None,
+    full_probe: bool = False,
 ) -> EstimateStream:
     """Feed a sequence's frames to a new :class:`EstimateStream`, one decoded frame at a time, in order.
 
@@ -359,7 +380,7 @@ def stream_sequence(
     :meth:`~acquisition.sequence.format.Sequence.load_frame`, which checks each); the others are counted
     from their entries.
     """
-    stream = EstimateStream.for_sequence(sequence, bin_factor, tiles)
+    stream = EstimateStream.for_sequence(sequence, bin_factor, tiles, full_probe=full_probe)
     load = pixels or sequence.load_frame
     seen_ambient = False
     for index, entry in enumerate(sequence.frames):

@@ -201,12 +201,12 @@ def _light_models(sequence: Sequence, settings: EstimateSettings, report: Report
 
     reference = settings.reference_chart if settings.reference_chart is not None else settings.reference_patch
     stack = analysis.load_frame_stack(sequence)
-    led, payload, varies = led_side(
+    led, payload, varies, rows = led_side(
         sequence, stack, settings.method, settings.solver, settings.alpha, settings.tiles, settings.bin_factor
     )
     refuse_dark_ambient(sequence, led, "estimate")
     payload, chosen, reason = with_model_choice(
-        sequence, stack, payload, settings.model, varies, reference, led.flicker
+        sequence, stack, payload, settings.model, varies, reference, led.flicker, rows
     )
     flicker = led.flicker.summary() if led.flicker is not None else None
     if flicker is not None:  # docs/flicker.md

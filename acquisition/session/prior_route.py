@@ -25,7 +25,13 @@ from msflash.acquisition.session.sequence_spectra import (
     spectrum_in_sequence_unit,
 )
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
-from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
+from msflash.processing.block_rows import BlockRows
+from msflash.processing.block_sums import plane_shape
+from msflash.processing.channel_statistics import (
+    ChannelStatistics,
+    accumulate_channel_statistics,
+    channel_statistics_of_block_rows,
+)
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.family_checks import LED_WARNING, PRIOR_WARNING, MissCheck, predicted_ratio, self_check
 from msflash.processing.flicker import FlickerCheck, corrected_channel_statistics
@@ -67,14 +73,26 @@ def sequence_channel_statistics(
     stack: FrameStack | None = None,
     bin_factor: int = DEFAULT_BIN_FACTOR,
     flicker: FlickerCheck | None = None,
+    rows: BlockRows | None = None,
 ) -> ChannelStatistics:
     """The channel statistics of a sequence, binned like :func:`acquisition.session.analysis.sequence_statistics`,
-    corrected for the ambient gains ``flicker`` applies (the LED estimate's check; None: as the frames hold them)."""
+    corrected for the ambient gains ``flicker`` applies (the LED estimate's check; None: as the frames hold them).
+
+    ``rows``: the LED estimate's block rows of the same frames (:attr:`EstimateStream.block_rows`); where they hold
+    this block size and every block's probe, the statistics come from them (the same numbers, no second pass over
+    the frames, issue 31); otherwise from the frames."""
     stack = stack or load_frame_stack(sequence)
-    factor = analysis.block_factor(stack.ambient.shape, sequence.camera.cfa, bin_factor)
-    statistics = accumulate_channel_statistics(
-        stack.ambient, stack.led_frames, stack.spec, cfa=sequence.camera.cfa, bin_factor=factor
-    )
+    cfa = sequence.camera.cfa
+    factor = analysis.block_factor(stack.ambient.shape, cfa, bin_factor)
+    statistics = None
+    if rows is not None and rows.factor == factor:
+        period = 2 if cfa is not None else 1
+        if rows.plane_shape == plane_shape(stack.ambient.shape, period):
+            statistics = channel_statistics_of_block_rows(rows, stack.spec, cfa=cfa)
+    if statistics is None:
+        statistics = accumulate_channel_statistics(
+            stack.ambient, stack.led_frames, stack.spec, cfa=cfa, bin_factor=factor
+        )
     return corrected_channel_statistics(statistics, flicker)
 
 
@@ -159,16 +177,19 @@ def led_side(
     alpha: float | str,
     tiles: int,
     bin_factor: int = DEFAULT_BIN_FACTOR,
-) -> tuple[AmbientEstimate, dict, bool]:
+) -> tuple[AmbientEstimate, dict, bool, BlockRows | None]:
     """The LED-span side of ``estimate --model prior|auto``: what ``--model led`` gives (global, or local when
-    ``method`` finds the illuminant varying across the scene), its payload, and whether it varies."""
+    ``method`` finds the illuminant varying across the scene), its payload, whether it varies, and the frames' block
+    rows its stream took (:attr:`EstimateStream.block_rows`: the light models' channel statistics come from them,
+    :func:`sequence_channel_statistics`)."""
     if method != "global":
-        local = local_route.estimate_sequence_local(
-            sequence, method, solver, alpha, stream=analysis.stream_stack(sequence, stack, bin_factor, tiles)
-        )
-        return local.global_estimate, local_route.local_estimate_payload(sequence, local), local.model == "local"
-    led = analysis.estimate_sequence(sequence, solver, alpha, stream=analysis.stream_stack(sequence, stack, bin_factor))
-    return led, analysis.estimate_payload(sequence, led), False
+        stream = analysis.stream_stack(sequence, stack, bin_factor, tiles, full_probe=True)
+        local = local_route.estimate_sequence_local(sequence, method, solver, alpha, stream=stream)
+        payload = local_route.local_estimate_payload(sequence, local)
+        return local.global_estimate, payload, local.model == "local", stream.block_rows
+    stream = analysis.stream_stack(sequence, stack, bin_factor, full_probe=True)
+    led = analysis.estimate_sequence(sequence, solver, alpha, stream=stream)
+    return led, analysis.estimate_payload(sequence, led), False, stream.block_rows
 
 
 ReferenceRect = tuple[int, int, int, int]
@@ -438,10 +459,11 @@ def _prior_route(
     led_payload: dict,
     reference: Reference | None = None,
     flicker: FlickerCheck | None = None,
+    rows: BlockRows | None = None,
 ) -> tuple[dict, str, str, dict]:
     """``--model prior``: the light prior, checked against the family evidence."""
-    # One pass over the frames for both models' channel statistics (the same, corrected alike).
-    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker)
+    # One set of channel statistics for both models (the same, corrected alike), from the LED side's block rows.
+    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker, rows=rows)
     result = estimate_sequence_prior(sequence, stack, flicker, statistics)
     prior = prior_payload(sequence, result)
     _, family = estimate_sequence_family(sequence, stack, result.prior, reference, flicker, statistics)
@@ -464,10 +486,12 @@ def _family_route(
     led_payload: dict,
     reference: Reference | None = None,
     flicker: FlickerCheck | None = None,
+    rows: BlockRows | None = None,
 ) -> tuple[dict, str, str, dict]:
     """``--model family`` and ``--model auto``: the family model's choice (auto: the LEDs' span unless the evidence
     says otherwise; a scene whose illuminant varies keeps the local LED model)."""
-    prior, family = estimate_sequence_family(sequence, stack, None, reference, flicker)
+    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker, rows=rows)
+    prior, family = estimate_sequence_family(sequence, stack, None, reference, flicker, statistics)
     block = family_payload(sequence, family)
     models, _ = _models_block(sequence, led_payload, prior, family)
     led_error = family.led.held_out_error_noise_removed
@@ -507,7 +531,7 @@ def _family_route(
 
 
 MODEL_ROUTES = {"prior": _prior_route, "family": _family_route, "auto": _family_route}
-"""``--model`` name → its route: ``(sequence, stack, requested, varies, led payload, reference, flicker) → (fields,
+"""``--model`` name → its route: ``(sequence, stack, requested, varies, led payload, reference, flicker, rows) → (fields,
 chosen, reason, replacement)``. ``replacement`` holds the spectrum, band, band meaning and warnings that replace the LED ones when
 ``chosen`` is not ``led`` (``led`` itself needs no route: it is :mod:`acquisition.session.analysis`'s estimate), and
 ``led_warnings``, the LED payload's warnings with the families' check in place of the reference lights' when it is."""
@@ -521,6 +545,7 @@ def with_model_choice(
     varies: bool,
     reference: Reference | None = None,
     flicker: FlickerCheck | None = None,
+    rows: BlockRows | None = None,
 ) -> tuple[dict, str, str]:
     """The estimate payload of ``--model prior|family|auto``: the model estimated, the model chosen and why.
 
@@ -531,7 +556,8 @@ def with_model_choice(
     and miss check (predicted ratio to the LED bound against the family evidence, docs/light-families.md).
     ``reference``: a spectrally flat patch (``--reference-patch``) whose error joins the evidence and on which the
     family estimate is calibrated. ``flicker``: the LED side's flicker check; its gains correct the light models'
-    statistics as they corrected the LED estimate's (docs/flicker.md).
+    statistics as they corrected the LED estimate's (docs/flicker.md). ``rows``: the LED side's block rows of the
+    frames (:func:`led_side`), from which the light models' statistics are taken without a second pass.
 
     Returns
     -------
@@ -539,7 +565,7 @@ def with_model_choice(
         The payload (docs/architecture.md §7), the chosen model and the reason.
     """
     fields, chosen, reason, replacement = MODEL_ROUTES[requested](
-        sequence, stack, requested, varies, payload, reference, flicker
+        sequence, stack, requested, varies, payload, reference, flicker, rows
     )
     payload = dict(payload)
     payload.update({key: value for key, value in fields.items() if key != "model_choice"})

@@ -26,7 +26,8 @@ On the first size alone (``height × width``):
   estimate's model band.
 
 Beside the default estimate of each sequence at the first size, RGB and raw (``targets``):
-``family_estimate_over_copy`` the family model's estimate (``--model family|auto``: channel-resolved statistics,
+``family_estimate_over_copy`` the family model's estimate (``--model family|auto``: channel-resolved statistics from the
+LED estimate's block rows,
 prior and every family fitted and judged) with the compiled fits prepared, target ≤ 3 (issue 30);
 ``family_estimate_one_shot_over_copy`` the same on the numpy fits, as a one-shot ``msflash estimate`` runs it.
 
@@ -359,23 +360,21 @@ FAMILY_TARGET = 3.0
 
 def family_ratio(world: dict[str, Any], pairs: int, prepared: bool = True) -> dict[str, Any]:
     """The family model's estimate as ``msflash estimate --model family|auto`` takes it (the channel-resolved
-    statistics, the light prior, every family fitted and judged on held-out folds), interleaved with a copy of the
-    frames; the models themselves prepared once per LED set and camera, and the compiled fits loaded
-    (:func:`processing.family_kernels.prepare`), as a process that runs many estimates does — or, without
-    ``prepared``, the numpy fits a one-shot ``msflash estimate`` takes."""
+    statistics from the LED estimate's block rows, the light prior, every family fitted and judged on held-out
+    folds), interleaved with a copy of the frames; the models themselves prepared once per LED set and camera, and
+    the compiled fits loaded (:func:`processing.family_kernels.prepare`), as a process that runs many estimates does
+    — or, without ``prepared``, the numpy fits a one-shot ``msflash estimate`` takes.
+
+    The frames' one pass is the LED estimate's (the default figure): the block rows are filled once, untimed, as its
+    stream fills them, and the family's cost starts from them (issue 31; where the rows cannot give the channel
+    statistics, the frames' own pass is timed instead, as the route then takes it)."""
     from msflash.processing import family_kernels
-    from msflash.processing.channel_statistics import accumulate_channel_statistics
     from msflash.processing.light_families import family_model
     from msflash.processing.light_prior import prior_model
 
-    frames, spec, leds, camera, cfa = world["frames"], world["spec"], world["leds"], world["camera"], world.get("cfa")
+    frames, leds, camera = world["frames"], world["leds"], world["camera"]
     route = contextlib.nullcontext if prepared else family_kernels.as_one_shot
-
-    factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)  # as acquisition.session.prior_route picks it
-
-    def statistics() -> Any:
-        return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
-
+    statistics = family_statistics(world)
     channels = statistics()
     prior, families = prior_model(channels.channels, leds, camera), family_model(channels.channels, leds, camera)
     family_kernels.prepare()  # as a process that runs many estimates does (loading is not timed)
@@ -386,6 +385,39 @@ def family_ratio(world: dict[str, Any], pairs: int, prepared: bool = True) -> di
             return families.estimate(now, prior.estimate(now).spectrum.values[:, 0])
 
     return interleaved_ratio(family_estimate, frame_copy(frames), pairs)
+
+
+def family_statistics(world: dict[str, Any]) -> Callable[[], Any]:
+    """How ``msflash estimate --model family|auto`` takes a world's channel statistics: the block rows filled once
+    (untimed: the LED estimate's one pass over the frames, as its stream adds them), then a call gives the
+    statistics from them (:func:`processing.channel_statistics.channel_statistics_of_block_rows`), or from the
+    frames' own pass where the rows cannot give them (as the route then does)."""
+    from msflash.processing.block_rows import BlockRows
+    from msflash.processing.block_sums import plane_shape
+    from msflash.processing.channel_statistics import accumulate_channel_statistics, channel_statistics_of_block_rows
+
+    frames, spec, cfa = world["frames"], world["spec"], world.get("cfa")
+    factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)  # as acquisition.session.prior_route picks it
+    period = 2 if cfa is not None else 1
+    rows = BlockRows(
+        len(frames) - 1,
+        plane_shape(frames[0].shape, period),
+        factor,
+        spec.white_level,
+        spec.black_level,
+        SAMPLE_WEIGHTING,
+        full_probe=True,  # as the light models' stream keeps it (acquisition.session.prior_route.led_side)
+    )
+    for row, frame in enumerate([*frames[1:], frames[0]]):  # LED frames, then the ambient, as the stream adds them
+        rows.add_frame(row, frame, period)
+
+    def statistics() -> Any:
+        taken = channel_statistics_of_block_rows(rows, spec, cfa=cfa)
+        if taken is None:
+            return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
+        return taken
+
+    return statistics
 
 
 def prior_bench(

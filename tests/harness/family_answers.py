@@ -6,7 +6,9 @@ tuning and held out: 40 cases) and the bench's RGB and raw 1280×1024 worlds, ea
 (``MSFLASH_KERNELS=numpy``) and the compiled one (the frame kernels and the compiled fits prepared) — 84 estimates —
 digests of the channel statistics, the prior's spectrum, the family spectrum, its band and spread, and every
 candidate's held-out errors (``repr``, all digits) and spectrum, with the chosen candidate, ``auto``'s choice and the
-reason. ``--compare A B`` says how many differ and where.
+reason. ``--compare A B`` says how many differ and where. The harness cases' channel statistics are taken as
+``msflash estimate --model family`` takes them (from the LED estimate's block rows, since issue 31), the bench
+worlds' by the frames' own pass.
 
 Run it with each checkout's code (``PYTHONPATH=<checkout>``, e.g. a ``git archive`` of the commit before, next to a
 ``shared`` link to the spectral data), then compare: docs/speed.md, the family model's sections.
@@ -71,7 +73,7 @@ def _both_routes(name: str, statistics_of: Callable[[], Any], leds: Any, camera:
 
 def collect(cache: Path) -> dict[str, Any]:
     """Every answer (module notes), keyed ``case|route``."""
-    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor
+    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor, stream_stack
     from msflash.acquisition.session.prior_route import sequence_channel_statistics
     from msflash.lab.bench.processing import benchmark_world
     from msflash.processing.channel_statistics import accumulate_channel_statistics
@@ -89,7 +91,12 @@ def collect(cache: Path) -> dict[str, Any]:
                 _, _, sequence, leds, camera, stack = case_inputs(case, cache.resolve())
                 _both_routes(
                     f"{suite}:{case.name}",
-                    lambda sequence=sequence, stack=stack: sequence_channel_statistics(sequence, stack),
+                    # As ``msflash estimate --model family`` takes them: from the LED estimate's block rows.
+                    lambda sequence=sequence, stack=stack: sequence_channel_statistics(
+                        sequence,
+                        stack,
+                        rows=stream_stack(sequence, stack, DEFAULT_BIN_FACTOR, full_probe=True).block_rows,
+                    ),
                     leds,
                     camera,
                     out,

@@ -152,10 +152,8 @@ def _decile(height: int, width: int, runs: int) -> int:
     """The ``--decile`` table (module notes); 0."""
     import numpy as np
 
-    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor
-    from msflash.lab.bench.processing import benchmark_world, frame_copy
+    from msflash.lab.bench.processing import benchmark_world, family_statistics, frame_copy
     from msflash.processing import family_kernels
-    from msflash.processing.channel_statistics import accumulate_channel_statistics
     from msflash.processing.light_families import family_model
     from msflash.processing.light_prior import prior_model
 
@@ -164,12 +162,8 @@ def _decile(height: int, width: int, runs: int) -> int:
     print("|---|---|---|---|")
     for cfa in (None, "RGGB"):
         world = benchmark_world(height, width, cfa=cfa)
-        frames, spec, leds, camera = world["frames"], world["spec"], world["leds"], world["camera"]
-        factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)
-
-        def statistics(frames=frames, spec=spec, factor=factor, cfa=cfa):  # noqa: ANN001, ANN202 — bound per world
-            return accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
-
+        frames, leds, camera = world["frames"], world["leds"], world["camera"]
+        statistics = family_statistics(world)  # from the block rows, as ``msflash estimate --model family`` takes them
         channels = statistics()
         prior, families = prior_model(channels.channels, leds, camera), family_model(channels.channels, leds, camera)
 

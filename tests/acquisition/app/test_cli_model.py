@@ -177,6 +177,51 @@ def test_a_reference_chart_holds_the_estimate_to_known_reflectances(
     assert len(err) == 1 and "patches[0]" in err[0] and "reflectance" in err[0]
 
 
+@pytest.mark.parametrize("strided", [False, True])
+@pytest.mark.parametrize("model", ["prior", "family", "auto"])
+def test_the_light_models_pass_over_each_frame_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, model: str, strided: bool
+) -> None:
+    """Issue 31: ``--model prior|family|auto`` take the channel statistics from the LED estimate's block rows, so each
+    frame is block-summed once (the channel statistics' own pass over the frames is not taken), and the answer is the
+    one the frames' own pass gives (the same numbers: tests/processing/test_channel_statistics_from_rows.py); also
+    where the frames are large enough for the LED estimate to probe every few block rows (``strided``, forced)."""
+    from msflash.processing import block_rows, channel_statistics
+    from msflash.processing.block_rows import BlockRows
+
+    if strided:
+        monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 64)
+
+    rendered = render_case(Case("a", light="A", seed=5), tmp_path / "a")
+    passes: list[str] = []
+    add_frame, stacked = BlockRows.add_frame, channel_statistics._stacked_block_rows
+
+    def counted_rows(self: BlockRows, row: int, frame: np.ndarray, cfa_period: int = 1) -> None:
+        passes.append(f"rows {row}")
+        add_frame(self, row, frame, cfa_period)
+
+    def counted_frames(frames: list[np.ndarray], *args: object) -> object:
+        passes.extend(f"channel statistics {index}" for index in range(len(frames)))
+        return stacked(frames, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(BlockRows, "add_frame", counted_rows)
+    monkeypatch.setattr(channel_statistics, "_stacked_block_rows", counted_frames)
+    once = _estimate(capsys, str(rendered.directory), "--model", model)
+    n_frames = (
+        sum(
+            1
+            for entry in json.loads((rendered.directory / "sequence.json").read_text())["frames"]
+            if entry["role"] == "led"
+        )
+        + 1
+    )
+    assert sorted(passes) == sorted(f"rows {row}" for row in range(n_frames))
+    from msflash.acquisition.session import prior_route
+
+    monkeypatch.setattr(prior_route, "channel_statistics_of_block_rows", lambda *args, **kwargs: None)
+    assert _estimate(capsys, str(rendered.directory), "--model", model) == once  # from the frames: the same answer
+
+
 @pytest.mark.parametrize("model", ["prior", "family", "auto"])
 def test_the_light_models_read_the_channel_statistics_once(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, model: str
