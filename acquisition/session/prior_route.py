@@ -75,7 +75,7 @@ def sequence_channel_statistics(
     flicker: FlickerCheck | None = None,
     rows: BlockRows | None = None,
 ) -> ChannelStatistics:
-    """The channel statistics of a sequence, binned like :func:`acquisition.session.analysis.sequence_statistics`,
+    """The channel statistics of a sequence, binned like the LED estimate (:func:`acquisition.session.analysis.block_factor`),
     corrected for the ambient gains ``flicker`` applies (the LED estimate's check; None: as the frames hold them).
 
     ``rows``: the LED estimate's block rows of the same frames (:attr:`EstimateStream.block_rows`); where they hold
