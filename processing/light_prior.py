@@ -318,8 +318,8 @@ class PriorModel:
             hessian, linear, energy = self.normal_equations(moments)
             seen = (hessian, linear, energy)
         else:
-            hessian, linear, energy, _ = floored_normal_equations(self.predictors, moments, observed)
             seen = self.normal_equations(observed)
+            hessian, linear, energy, _ = floored_normal_equations(self.predictors, moments, seen[0])
         q = hessian.shape[0]
         prior, penalty = self.prior, self.penalty
         n = max(n_samples, q + 1)
@@ -460,18 +460,18 @@ def prediction_error(predictors: np.ndarray, phi: np.ndarray, moments: Moments) 
 
 
 def floored_normal_equations(
-    predictors: np.ndarray, moments: Moments, observed: Moments
+    predictors: np.ndarray, moments: Moments, observed_hessian: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, float, int]:
     """``(H, g, Σ‖a‖², floored)``: :func:`normal_equations` of the denoised ``moments``, H kept positive definite.
 
     The normal matrix of denoised moments, ``H(S − N)``, loses positive definiteness where the noise probe exceeds
     the signal along some combination of the light coefficients (a dim or noisy scene). Its noise share is
-    ``H(S) − H(S − N)`` (``observed`` are S); each such direction is raised to a share of the noise along it
-    (:func:`processing.noise_floor.noise_floored`, the rule the LEDs' span applies to its Gram matrix), ``floored``
-    of them. H as it is when it is positive definite (``floored`` 0).
+    ``H(S) − H(S − N)`` (``observed_hessian`` is ``H(S)``, which the caller has for σ²); each such direction is
+    raised to a share of the noise along it (:func:`processing.noise_floor.noise_floored`, the rule the LEDs' span
+    applies to its Gram matrix), ``floored`` of them. H as it is when it is positive definite (``floored`` 0).
     """
     hessian, linear, energy = normal_equations(predictors, moments)
-    floored = noise_floored(hessian, normal_equations(predictors, observed)[0] - hessian)
+    floored = noise_floored(hessian, observed_hessian - hessian)
     if floored is None:
         return hessian, linear, energy, 0
     return floored[0], linear, energy, floored[1]

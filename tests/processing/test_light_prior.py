@@ -285,11 +285,14 @@ def test_a_dim_scene_whose_denoised_normal_matrix_is_indefinite_is_solved_on_a_f
     matrix is untouched wherever the signal dominates."""
     statistics, model = _noisy_statistics(scale=0.01, noise=0.05, seed=2)
     observed, solved = statistics.moments.total(), solved_moments(statistics)
-    clean = normal_equations(model.predictors, solved)[0]
-    noise = normal_equations(model.predictors, observed)[0] - clean
+    clean, observed_hessian = (
+        normal_equations(model.predictors, solved)[0],
+        normal_equations(model.predictors, observed)[0],
+    )
+    noise = observed_hessian - clean
     eigenvalues, vectors = np.linalg.eigh(clean)
     assert eigenvalues[0] < 0  # the case this test is about
-    hessian, _, _, floored = floored_normal_equations(model.predictors, solved, observed)
+    hessian, _, _, floored = floored_normal_equations(model.predictors, solved, observed_hessian)
     assert floored > 0 and np.linalg.eigvalsh(hessian)[0] > 0
     noise_along = np.einsum("ji,jk,ki->i", vectors, noise, vectors)
     kept = eigenvalues >= NOISE_FLOOR_SHARE * noise_along
