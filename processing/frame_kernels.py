@@ -70,10 +70,9 @@ def _compiled() -> Any:
 
 
 def _warm(kernels: Any) -> None:
-    """Run :func:`block_statistics`', :func:`detail_line`'s and :func:`haar_cells`' specialisations once, as the kernels load: a stream
-    that decided on them
-    (:func:`statistics_compiled`) then never compiles it while a camera streams (loaded from the disk cache, or
-    compiled now, once per installation)."""
+    """Run :func:`block_statistics`', :func:`detail_line`'s and :func:`haar_cells`' specialisations once, as the
+    kernels load: a stream that decided on them (:func:`statistics_compiled`) then never compiles one while a camera
+    streams (loaded from the disk cache, or compiled now, once per installation)."""
     one = np.ones(1)
     kernels.block_statistics(
         np.ones((1, 1)),

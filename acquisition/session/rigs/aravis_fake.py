@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from msflash.acquisition.devices.aravis.pixel_layouts import camera_pixel_layout
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.devices.wired_fake import WiredFakeCamera
@@ -229,7 +230,8 @@ def _open_fake_camera(
     setup = configure_camera(aravis, options, strobe=False)
     # What the format in force means (a --feature PixelFormat=… may have changed it): one the table lacks is
     # refused, and a rendered scene takes only its own mosaic's layout.
-    sends_mono(opened := aravis.info)
+    opened = aravis.info
+    camera_pixel_layout(opened)
     if frames.world is not None and opened.cfa != frames.world.sensor.cfa:
         raise CameraSettingError(
             f"aravis-fake: pixel format {opened.pixel_format} has CFA {opened.cfa}; expected "

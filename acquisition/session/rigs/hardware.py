@@ -15,6 +15,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from msflash.acquisition.devices.aravis.pixel_layouts import camera_pixel_layout
 from msflash.acquisition.devices.sim_world import (
     read_responsivity_file,
     read_spectra_file,
@@ -147,7 +148,7 @@ def _open_hw_camera(
     opened = AravisCamera(camera, interfaces=names, pixel_format=pixel_format)
     try:
         setup = configure_camera(opened, options or CameraOptions(), strobe=sync == "camera")
-        sends_mono(opened.info)  # a format msflash does not decode is refused here, before the booth opens
+        camera_pixel_layout(opened.info)  # a format msflash does not decode is refused here, before the booth opens
     except BaseException:
         opened.close()
         raise

@@ -105,8 +105,9 @@ class Rig:
         What every later sequence records is then true of the camera: ``camera_extra["image_format"]`` holds the
         ROI, binning and pixel format in force as the camera reads them back; the open's ``camera_options`` keep
         only what still holds (the ROI, binning and image features they asked for and read back are dropped:
-        the change superseded them); :attr:`mono` follows the pixel format (:func:`sends_mono`). Each sequence's :class:`~acquisition.devices.camera.CameraInfo` (pixel format, levels,
-        size) is read afresh by :meth:`sequence_header` anyway.
+        the change superseded them); :attr:`mono` follows the pixel format (:func:`sends_mono`). Each sequence's
+        :class:`~acquisition.devices.camera.CameraInfo` (pixel format, levels, size) is read afresh by
+        :meth:`sequence_header` anyway.
         """
         camera = self.camera
         if not isinstance(camera, ImageFormatControl):

@@ -125,8 +125,9 @@ def open_sim_rig(
         resolved by :mod:`acquisition.devices.sim_world`, or spectra / a :class:`Scene` on the sim
         grid). The emulated booth gets one channel per LED, named and peaked as they are
         (:func:`check_emulated_booth`).
-    cfa, line_time_us
-        Raw mosaic layout (default :data:`SIM_DEFAULT_CFA`; None for RGB frames), rolling shutter (0: global).
+    cfa, log_serial, line_time_us
+        Raw mosaic layout (default :data:`SIM_DEFAULT_CFA`; None for RGB frames), serial transcript file, rolling
+        shutter (0: global).
     booth_port, booth_protocol, booth_boot_s
         ``--booth-port``: the booth at this port (``msflash booth-emulator`` on a pty, or a real
         booth; host pacing only, :attr:`Rig.emulator` None), what it speaks and how long it may
