@@ -158,8 +158,15 @@ class LedTerms:
 
     @classmethod
     def of(cls, led_values: np.ndarray) -> LedTerms:
-        """The terms of the LED spectra ``I`` (n_wl × k)."""
+        """The terms of the LED spectra ``I`` (n_wl × k): prepared once per set of values (the last
+        :data:`PREPARED_LED_SETS`), since every estimate of one LED set needs the same ones (a stream's
+        :func:`estimate_ambient` made them anew for each sequence: 0.1 ms, docs/speed.md). ``values`` is a
+        read-only copy, so a caller's later change to ``led_values`` cannot reach them."""
         values = np.asarray(led_values, dtype=float)
+        return _prepared_terms(values.shape, values.tobytes())
+
+    @classmethod
+    def _prepare(cls, values: np.ndarray) -> LedTerms:
         roughness = np.diff(values, axis=0)
         penalty_gram = roughness.T @ roughness
         k = values.shape[1]
@@ -377,6 +384,15 @@ def _identity(k: int) -> np.ndarray:
 
 
 _ALPHA_COLUMN = ALPHA_GRID[:, None]
+
+PREPARED_LED_SETS = 8
+"""How many LED sets' :class:`LedTerms` are kept prepared (:meth:`LedTerms.of`)."""
+
+
+@lru_cache(maxsize=PREPARED_LED_SETS)
+def _prepared_terms(shape: tuple[int, ...], data: bytes) -> LedTerms:
+    """:meth:`LedTerms.of` of the float64 values ``data`` of ``shape`` (read-only, not the caller's array)."""
+    return LedTerms._prepare(np.frombuffer(data).reshape(shape))
 
 
 def _weights_lstsq(statistics: SequenceStatistics, terms: LedTerms, alpha: float | str) -> tuple[np.ndarray, float]:

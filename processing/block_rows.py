@@ -59,7 +59,7 @@ from msflash.processing.moment_products import (
     gram_matrices,
     serial_columns,
 )
-from msflash.processing.noise_level import PixelNoise, ambient_block_noise, detail_noise_line
+from msflash.processing.noise_level import PixelNoise, ambient_block_weights, detail_noise_line
 from msflash.processing.statistics import (
     ChannelMoments,
     FrameStackSpec,
@@ -245,17 +245,15 @@ class BlockRows:
         self.ambient_noise = detail_noise_line(
             frame, cfa_period, self.black_level, self.white_level, compiled=self.compiled
         )
-        ambient = self.n_led_frames
-        # rows layout (block row, channel, block column)
-        black = self.black_level * self.factor * self.factor
-        line = ambient_block_noise(
+        return ambient_block_weights(
             self.ambient_noise,
             self.factor,
-            self.rows[ambient].reshape(self.block_shape).transpose(0, 2, 1),
-            black,
+            self.rows[self.n_led_frames],
+            self.block_shape,  # the rows' layout: (block row, channel, block column)
+            self.black_level * self.factor * self.factor,
             self._ambient_saturated,
+            compiled=self.compiled,
         )
-        return line.weights(self.rows[ambient], black)
 
     def _at_probe(self, values: np.ndarray) -> np.ndarray:
         """Per-column ``values`` of the rows at the probed blocks, in the probe's layout."""

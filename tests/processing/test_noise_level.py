@@ -8,6 +8,7 @@ raw frames landed at 1.2× the LED bound where RGB ones landed at 0.92× (docs/r
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -308,3 +309,31 @@ def test_a_frame_of_padded_rows_takes_numpys_cells() -> None:
     assert detail_noise_line(padded, 2, 64.0, 4095.0, compiled=True) == detail_noise_line(
         np.ascontiguousarray(padded), 2, 64.0, 4095.0, compiled=True
     )
+
+
+@pytest.mark.parametrize("case", ["mosaic", "rgb", "saturated", "all saturated", "no line", "below black", "no floor"])
+def test_the_compiled_block_weights_are_numpys_to_the_bit(case: str) -> None:
+    """The ambient's inverse-variance weights on the compiled route (the floor's levels gathered by a kernel, the
+    weights' steps in one pass) are numpy's to the bit: a quantile is one value, and the steps are the same IEEE
+    operations in the same order; the fallbacks (no line, every block saturated, no positive floor) alike."""
+    from msflash.processing.noise_level import ambient_block_weights
+
+    _compiled_kernels()
+    rng = np.random.default_rng(5)
+    layout = (13, 3, 17) if case == "rgb" else (12, 4, 20)
+    black = 64.0 * 240.0
+    ambient = rng.integers(0, 64 * 4095, math.prod(layout)).astype(float)
+    if case == "below black":
+        ambient[::3] = rng.integers(0, int(black), ambient[::3].size)
+    saturated = None
+    if case in ("saturated", "all saturated"):
+        saturated = rng.random((layout[0], layout[2])) < 0.3
+        if case == "all saturated":
+            saturated[:] = True
+    pixel = None if case == "no line" else PixelNoise(gain=0.7, read=-5.0 if case == "no floor" else 1.3)
+    expected = ambient_block_weights(pixel, 8, ambient, layout, black, saturated)
+    found = ambient_block_weights(pixel, 8, ambient, layout, black, saturated, compiled=True)
+    assert found.dtype == expected.dtype and found.shape == expected.shape
+    np.testing.assert_array_equal(found, expected)
+    if case in ("no line", "all saturated", "no floor"):
+        np.testing.assert_array_equal(found, np.ones(ambient.size))  # uniform weights
