@@ -483,3 +483,23 @@ def test_the_bands_row_deviation_is_numpys_to_the_bit(seed: int, decades: float)
 
     values = np.random.default_rng(seed).normal(size=(31, BAND_DRAWS)) * 10.0**decades + 10.0**decades
     np.testing.assert_array_equal(_row_std(values), np.std(values, axis=1, ddof=1))
+
+
+def test_the_led_terms_are_prepared_once_per_set_of_values() -> None:
+    """LedTerms.of keeps the terms of recent LED sets (every estimate of one set needs the same ones): the same
+    object for equal values, its own read-only copy of them (a caller's later change cannot reach them), and the
+    terms of fresh preparation to the bit."""
+    from msflash.processing.ambient import LedTerms
+
+    values = leds_photons().values.copy()
+    terms = LedTerms.of(values)
+    assert LedTerms.of(values.copy()) is terms
+    assert not terms.values.flags.writeable
+    fresh = LedTerms._prepare(values.copy())
+    for name in ("values", "roughness", "penalty_gram", "emitting", "ridge"):
+        np.testing.assert_array_equal(getattr(terms, name), getattr(fresh, name))
+    assert terms.penalty_trace == fresh.penalty_trace
+    np.testing.assert_array_equal(terms.nonnegative.inverse_factor, fresh.nonnegative.inverse_factor)
+    values[3, 2] += 1.0  # the caller's array changes: the cached terms do not, and the new values get their own
+    assert terms.values[3, 2] == fresh.values[3, 2]
+    assert LedTerms.of(values) is not terms
