@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from msflash.processing.ambient_band import constrained_band, sandwich_band
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.least_squares import FactoredQuadratic
 from msflash.processing.noise_floor import NOISE_FLOOR_SHARE, noise_floored
@@ -624,8 +625,8 @@ class AmbientModel:
         except np.linalg.LinAlgError:
             weights_cov = np.full((statistics.n_leds,) * 2, np.inf)
         if method == "lstsq" or not np.all(np.isfinite(weights_cov)):
-            return _sandwich_band(terms.values, weights_cov)
-        return _constrained_band(solved, terms, penalty_weight, weights_cov)
+            return sandwich_band(terms.values, weights_cov)
+        return constrained_band(solved, terms, penalty_weight, weights_cov)
 
 
 def _reliability_warnings(
@@ -659,66 +660,6 @@ def _reliability_warnings(
             "did it fire, and does it reach the scene?"
         )
     return tuple(warnings)
-
-
-def _sandwich_band(led_values: np.ndarray, weights_cov: np.ndarray) -> np.ndarray:
-    """``√diag(I Cov(w) Iᵀ)``: the spectrum's standard deviation for weights of covariance ``weights_cov``."""
-    return np.sqrt(np.clip(np.einsum("ij,jk,ik->i", led_values, weights_cov, led_values), 0, None))
-
-
-BAND_DRAWS = 64
-"""Draws of the unconstrained weights behind the band of a constrained estimate (:func:`_constrained_band`)."""
-
-
-def _constrained_band(
-    solved: SequenceStatistics, terms: LedTerms, penalty_weight: float, weights_cov: np.ndarray
-) -> np.ndarray:
-    """The pixel-noise band of an estimate solved with ``I w ≥ 0``: the spectrum's standard deviation
-    over :data:`BAND_DRAWS` draws of the unconstrained estimate ``(G_s + λP)⁻¹ c`` from its sandwich
-    covariance, each projected onto the constraint in the problem's metric.
-
-    A constrained quadratic minimiser is the projection of the unconstrained one in that metric, so the
-    draws follow the constrained estimator's scatter; the linear sandwich alone ignores the constraint
-    and, where it binds (a dark or poorly conditioned scene), says the spectrum could swing several
-    times its peak. Draws are seeded: the band is reproducible.
-    """
-    hessian = solved.gram + penalty_weight * terms.penalty_gram
-    scale = max(_trace(hessian) / hessian.shape[0], 1e-300)
-    try:
-        problem = terms.nonnegative.with_hessian(hessian / scale + terms.ridge, "ambient band")
-        centre = np.linalg.solve(hessian, solved.cross)
-        factor = np.linalg.cholesky(
-            weights_cov + 1e-12 * max(float(np.trace(weights_cov)), 1e-300) * np.eye(len(centre))
-        )
-    except (np.linalg.LinAlgError, SolverError):
-        return _sandwich_band(terms.values, weights_cov)
-    draws = centre[:, None] + factor @ _band_normals(len(centre))
-    # A draw that already meets I w ≥ 0 is its own projection: only the others are solved.
-    spectra = terms.values @ draws
-    outside = np.flatnonzero(np.any(terms.emitting @ draws < 0, axis=0))
-    if outside.size:
-        spectra[:, outside] = terms.values @ problem.minimise_each(hessian @ draws[:, outside] / scale)
-    return _row_std(spectra)
-
-
-def _row_std(values: np.ndarray) -> np.ndarray:
-    """``np.std(values, axis=1, ddof=1)``, in its own steps (the same sums in the same order: the same bits)
-    without its dispatch."""
-    mean = np.add.reduce(values, axis=1, keepdims=True)
-    mean /= values.shape[1]
-    deviations = values - mean
-    np.multiply(deviations, deviations, out=deviations)
-    variance = np.add.reduce(deviations, axis=1)
-    variance /= max(values.shape[1] - 1, 0)
-    return np.sqrt(variance, out=variance)
-
-
-@lru_cache(maxsize=16)
-def _band_normals(k: int) -> np.ndarray:
-    """The band's standard normal draws for k weights, (k, :data:`BAND_DRAWS`), seeded (0): drawn once, read-only."""
-    normals = np.random.default_rng(0).standard_normal((k, BAND_DRAWS))
-    normals.flags.writeable = False
-    return normals
 
 
 @dataclass(frozen=True)

@@ -479,10 +479,10 @@ def test_the_discrepancy_search_chooses_as_a_search_of_constrained_solves(
 @PROPERTY
 @given(seed=st.integers(0, 2**31 - 1), decades=st.floats(-6, 6))
 def test_the_bands_row_deviation_is_numpys_to_the_bit(seed: int, decades: float) -> None:
-    from msflash.processing.ambient import BAND_DRAWS, _row_std
+    from msflash.processing.ambient_band import BAND_DRAWS, row_std
 
     values = np.random.default_rng(seed).normal(size=(31, BAND_DRAWS)) * 10.0**decades + 10.0**decades
-    np.testing.assert_array_equal(_row_std(values), np.std(values, axis=1, ddof=1))
+    np.testing.assert_array_equal(row_std(values), np.std(values, axis=1, ddof=1))
 
 
 def test_the_led_terms_are_prepared_once_per_set_of_values() -> None:

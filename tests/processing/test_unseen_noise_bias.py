@@ -128,7 +128,7 @@ def test_the_uncertainty_band_is_that_of_the_system_solved(tmp_path: Path) -> No
     """The band (spectrum_std) came from the observed Gram matrix while the weights came from the
     denoised one: on the 8 narrow LEDs under F2 it said ±5 % of the peak where the estimate scattered
     by ±25 % (RMSE 0.13–0.25 over noise draws). It is the solved system's sandwich now (for the
-    unconstrained solver; a constrained one projects draws from it, :func:`processing.ambient._constrained_band`)."""
+    unconstrained solver; a constrained one projects draws from it, :func:`processing.ambient_band.constrained_band`)."""
     from msflash.processing.ambient import AmbientModel
 
     rendered = render_case(Case("band", leds="booth8", light="F2", seed=1), tmp_path / "band")
