@@ -6,15 +6,37 @@ onto the constraint. Split from :mod:`processing.ambient` by job (issue 31: modu
 from __future__ import annotations
 
 from functools import lru_cache
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from msflash.processing.errors import SolverError
+from msflash.processing.least_squares import FactoredQuadratic
 from msflash.processing.statistics import SequenceStatistics
 
-if TYPE_CHECKING:
-    from msflash.processing.ambient import LedTerms
+
+class LedTerms(Protocol):
+    """What the band needs of the LED spectra's terms (:class:`processing.ambient.LedTerms` has them)."""
+
+    @property
+    def values(self) -> np.ndarray:
+        """``I``, (n_wl, k)."""
+
+    @property
+    def penalty_gram(self) -> np.ndarray:
+        """``LᵀL``, (k, k)."""
+
+    @property
+    def emitting(self) -> np.ndarray:
+        """The rows of ``I`` where some LED emits."""
+
+    @property
+    def ridge(self) -> np.ndarray:
+        """``10⁻¹² · Id``."""
+
+    @property
+    def nonnegative(self) -> FactoredQuadratic:
+        """The constraint ``I w ≥ 0`` prepared."""
 
 
 def sandwich_band(led_values: np.ndarray, weights_cov: np.ndarray) -> np.ndarray:
