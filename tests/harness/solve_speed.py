@@ -6,7 +6,10 @@ Each stage's CPU time (``time.thread_time``, one BLAS thread: ``OPENBLAS_NUM_THR
 ``block pass`` (every frame into fresh unweighted :class:`processing.block_rows.BlockRows`), ``moments``
 (:meth:`processing.block_rows.BlockRows.statistics` of the weighted rows, in cache), ``noise line``
 (:func:`processing.noise_level.detail_noise_line` of the ambient frame, on the route the block rows take) with its
-``haar details`` and ``fit``, the ``numpy noise line`` (the route of a process without the kernels), ``solve``
+``haar details`` and ``fit``, the ``numpy noise line`` (the route of a process without the kernels), ``block weights`` (the
+inverse-variance weights of every row column from that line, on the rows' route), ``LED terms`` (an
+:class:`processing.ambient.AmbientModel` of the world's LEDs, as :func:`processing.ambient.estimate_ambient` makes
+one per estimate), ``solve``
 (:func:`processing.ambient.estimate_ambient` on the streamed statistics: α, weights, band) with its ``weights`` and
 ``reliability``, and the whole ``estimate`` as the bench streams it on one thread
 (:func:`msflash.lab.bench.processing.streamed_estimate`). One JSON line; nothing asserted (docs/speed.md).
@@ -68,6 +71,19 @@ def _figures(cfa: str | None, runs: int) -> dict[str, float]:
             unweighted.add_frame(row, frame, period)
         return unweighted
 
+    layout, black_sums = rows.block_shape, black * factor * factor
+    ambient_row, ambient_noise = rows.rows[n], rows.ambient_noise
+
+    def block_weights() -> object:  # the weights of every row column from the noise line (main's code: numpy's steps)
+        if hasattr(noise_level, "ambient_block_weights"):
+            return noise_level.ambient_block_weights(
+                ambient_noise, factor, ambient_row, layout, black_sums, None, compiled=compiled
+            )
+        blocks = ambient_row.reshape(layout).transpose(0, 2, 1)
+        return noise_level.ambient_block_noise(ambient_noise, factor, blocks, black_sums, None).weights(
+            ambient_row, black_sums
+        )
+
     stages: dict[str, Callable[[], object]] = {
         "estimate": lambda: streamed_estimate(world, factor),
         "block pass": block_pass,
@@ -76,6 +92,8 @@ def _figures(cfa: str | None, runs: int) -> dict[str, float]:
         "haar details": lambda: noise_level.haar_details(ambient, period, black, white, compiled=compiled),
         "fit": lambda: noise_level.fit_detail_line(*details, compiled=compiled),
         "numpy noise line": lambda: noise_level.detail_noise_line(ambient, period, black, white),
+        "block weights": block_weights,
+        "LED terms": lambda: AmbientModel(leds),
         "solve": lambda: estimate_ambient(statistics, leds),
         "weights": lambda: model.weights(statistics),
         "reliability": lambda: model.reliability(statistics, weights, "tikhonov", alpha),
