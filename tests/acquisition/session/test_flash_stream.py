@@ -531,7 +531,7 @@ def test_collection_resumes_after_a_failed_flash_decision(sim_rig, tmp_path: Pat
 def test_a_streaming_session_never_compiles_a_kernel(sim_rig, tmp_path: Path, monkeypatch) -> None:
     """Even in a process that has the kernels (forced here): adding frames and deciding take the numpy route for the
     frames' passes, and the kernels of the statistics' route the stream chose when it was made
-    (frame_kernels.statistics_compiled: the moments and the ambient's noise line) were compiled as the kernels loaded —
+    (frame_kernels.statistics_compiled: the moments, the ambient's noise line and weights) were compiled as the kernels loaded —
     nothing compiles while frames arrive (a first compile there stalls the stream and the booth's watchdog switches the
     LEDs off)."""
     from msflash.processing import frame_kernels
@@ -542,7 +542,8 @@ def test_a_streaming_session_never_compiles_a_kernel(sim_rig, tmp_path: Path, mo
     kernels = frame_kernels._compiled()  # a process that has them: loaded and warmed
     if kernels is None:
         pytest.skip("numba is not installed")
-    route = {"block_statistics", "detail_line", "haar_cells"}  # the moments, the noise line's cells and fit
+    # the moments, the noise line's cells and fit, the weights' floor levels and inverse variances
+    route = {"block_statistics", "detail_line", "haar_cells", "floor_levels", "inverse_variances"}
     compiled_before = {name: list(getattr(kernels, name).signatures) for name in ("block_pass", *sorted(route))}
     used: list[str] = []
 
