@@ -297,6 +297,17 @@ class BlockRows:
                 probes[:, columns] = 0.0
         return raw, probes
 
+    def stored_rows(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | None:
+        """What :meth:`channel_rows` lays out, as stored and without its copy, for integer frames: the rows and the
+        whole probe, each (frames + 1, block row · channel · block column; integers), and the (H/f, W/f) mask of
+        blocks saturated in any frame. None where :meth:`channel_rows` is, or for float frames."""
+        if len(self._filled) != self.rows.shape[0] or self._pass_stride != 1 or self._floating:
+            return None
+        saturated = np.zeros((self.block_shape[0], self.block_shape[2]), dtype=bool)
+        for mask in self._saturated:
+            saturated |= mask
+        return self.rows, self.differences, saturated
+
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
         self._invalid.append(blocks)

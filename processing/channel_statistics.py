@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from msflash.processing import frame_kernels
+from msflash.processing import family_kernels, frame_kernels
 from msflash.processing.block_rows import BlockRows
 from msflash.processing.block_sums import (
     block_sums,
@@ -240,12 +240,48 @@ def channel_statistics_of_block_rows(
         return None
     if len(channels) != n_planes:
         return None
+    blocks = _BlockLayout(height, width, n_planes)
+    products = _compiled_fold_products(rows, n_folds, blocks)
+    if products is not None:
+        return _statistics_of_products(*products, spec, rows.factor, n_folds, blocks, channels)
     stacked = rows.channel_rows()
     if stacked is None:
         return None
     raw, probes = stacked
-    blocks = _BlockLayout(height, width, n_planes)
     return _statistics_of_rows(raw, probes, spec, rows.factor, n_folds, blocks, channels)
+
+
+def _compiled_fold_products(
+    rows: BlockRows, n_folds: int, blocks: _BlockLayout
+) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """Each fold's Gram matrix of the rows and of the probe, as :func:`_statistics_of_rows` takes them from
+    :meth:`~processing.block_rows.BlockRows.channel_rows`, by the compiled kernel from the rows as stored
+    (:func:`processing.family_kernels_numba.fold_grams`: no transposing copy, 4 × 4 tiles): the same numbers to the
+    bit, since it answers only where every sum is exact (block sums of integer frames). None where the compiled fits
+    are not in use (:func:`processing.family_kernels.kernels`), the rows cannot give them or a sum would not be
+    exact: then the copy and the BLAS products. Not tried where the white level allows block sums whose squares
+    over a fold could exceed the bound (16-bit frames at 1280×1024: the kernel would only find them inexact)."""
+    compiled = family_kernels.kernels()
+    largest = rows.factor * rows.factor * float(rows.white_level)
+    blocks_a_fold = -(-blocks.height // n_folds) * blocks.width
+    if compiled is None or blocks_a_fold * largest * largest > compiled.EXACT_SUMS:
+        return None
+    stored = rows.stored_rows()
+    if stored is None:
+        return None
+    values, differences, saturated = stored
+    features = rows.n_led_frames + 1
+    bounds = ((np.arange(n_folds + 1) * blocks.height + n_folds - 1) // n_folds).astype(np.int64)
+
+    def grams(array: np.ndarray, last: float) -> np.ndarray | None:
+        taken, exact = compiled.fold_grams(array, features, blocks.channels, blocks.width, last, saturated, bounds)
+        return taken if exact else None
+
+    products = grams(values, 1.0)
+    noise = None if differences is None else grams(differences, 0.0)
+    if products is None or (differences is not None and noise is None):
+        return None
+    return products, noise
 
 
 def _checked_frames(
@@ -364,23 +400,40 @@ def _statistics_of_rows(
     channels: tuple[str, ...],
 ) -> ChannelStatistics:
     """:class:`ChannelStatistics` of stacked block rows (:func:`_stacked_block_rows`), per fold."""
-    transform = _response_transform(spec, blocks.channels, spec.black_level * factor * factor)
-    width_f = spec.n_leds * blocks.channels
     # Folds are bands of block rows: contiguous slices of the row-major blocks.
     bounds = ((np.arange(n_folds + 1) * blocks.height + n_folds - 1) // n_folds) * blocks.width
 
-    def moments_of(rows: np.ndarray) -> tuple[Moments, np.ndarray]:
-        products = np.stack([_gram(rows[:, bounds[j] : bounds[j + 1]]) for j in range(n_folds)])
-        mapped = transform @ products @ transform.T
-        return Moments(
-            mapped[:, :width_f, :width_f], mapped[:, :width_f, width_f:], mapped[:, width_f:, width_f:]
-        ), products
+    def products_of(rows: np.ndarray) -> np.ndarray:
+        return np.stack([_gram(rows[:, bounds[j] : bounds[j + 1]]) for j in range(n_folds)])
 
-    moments, products = moments_of(raw)
+    return _statistics_of_products(
+        products_of(raw), None if probes is None else products_of(probes), spec, factor, n_folds, blocks, channels
+    )
+
+
+def _statistics_of_products(
+    products: np.ndarray,
+    noise_products: np.ndarray | None,
+    spec: FrameStackSpec,
+    factor: int,
+    n_folds: int,
+    blocks: _BlockLayout,
+    channels: tuple[str, ...],
+) -> ChannelStatistics:
+    """:class:`ChannelStatistics` of each fold's Gram matrix of the stacked block rows and of their probe
+    (:func:`_statistics_of_rows`)."""
+    transform = _response_transform(spec, blocks.channels, spec.black_level * factor * factor)
+    width_f = spec.n_leds * blocks.channels
+
+    def moments_of(products: np.ndarray) -> Moments:
+        mapped = transform @ products @ transform.T
+        return Moments(mapped[:, :width_f, :width_f], mapped[:, :width_f, width_f:], mapped[:, width_f:, width_f:])
+
+    moments = moments_of(products)
     sums = products[:, :, -1] @ transform.T  # (folds, Ck + C): Σ f, Σ a
     return ChannelStatistics(
         moments=moments,
-        noise=None if probes is None else moments_of(probes)[0],
+        noise=None if noise_products is None else moments_of(noise_products),
         counts=np.rint(products[:, -1, -1]).astype(int),
         led_sums=sums[:, :width_f],
         ambient_sums=sums[:, width_f:],

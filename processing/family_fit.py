@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
@@ -58,10 +58,13 @@ class Fit:
         timed.__dict__.update(self.__dict__, seconds=seconds)
         return timed
 
-    @property
+    @cached_property
     def spectrum(self) -> np.ndarray:
-        """e (photons, the LEDs' units)."""
-        return self.atoms @ self.amplitudes
+        """e (photons, the LEDs' units): computed once (a family estimate reads each candidate's several times), and
+        read-only."""
+        spectrum = self.atoms @ self.amplitudes
+        spectrum.flags.writeable = False
+        return spectrum
 
     def parameters(self) -> dict[str, float]:
         """The fitted parameters by name (nonlinear in physical units, then the amplitudes)."""

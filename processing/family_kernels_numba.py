@@ -552,3 +552,82 @@ def block_costs(designs, offsets, target):
     for c in range(count):
         _, out[c] = nonnegative_fit(np.ascontiguousarray(designs[:, offsets[c] : offsets[c + 1]]), target)
     return out
+
+
+EXACT_SUMS = 2.0**51
+"""Integers up to this magnitude are exact in float64, with room for the rounding of the bound's own check
+(:func:`fold_grams`)."""
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def fold_grams(values, features, channels, width, last, saturated, bounds):
+    """Each fold's Gram matrix of integer block rows as stored (:meth:`processing.block_rows.BlockRows.stored_rows`):
+    ``(grams, exact)``.
+
+    ``values`` (≥ features rows, block row · channel · block column each), its first ``features`` rows taken as the
+    channel statistics stack them — feature ``f · channels + c``, then a row of ``last`` — over the blocks of block
+    rows ``bounds[j] … bounds[j + 1]`` for fold j, blocks saturated (``saturated``, (block rows, block columns))
+    zeroed in every row: :func:`processing.channel_statistics._gram` of each fold's band of
+    :meth:`~processing.block_rows.BlockRows.channel_rows`, without that transposing copy.
+
+    The sums are reassociated (4 × 4 tiles of vector sums): the same numbers only where every partial sum is exact.
+    For integer values (the caller's part: block sums of integer frames and their half differences) every partial
+    sum of ``Σ x_i y_i`` is an integer of magnitude at most ``√(Σ x_i² Σ y_i²)`` (Cauchy–Schwarz), at most the
+    larger diagonal entry: ``exact`` is True when every diagonal entry is at most :data:`EXACT_SUMS` — then these
+    are the exact sums, which the BLAS route also gives. Else the caller takes that route.
+    """
+    size = features * channels + 1
+    padded = (size + 3) // 4 * 4  # zero rows up to whole tiles: exact zeros in the padding
+    folds = bounds.size - 1
+    grams = np.zeros((folds, size, size))
+    longest = 0
+    for j in range(folds):
+        longest = max(longest, (bounds[j + 1] - bounds[j]) * width)
+    band = np.zeros((padded, longest))
+    tile = np.zeros((padded, padded))
+    for j in range(folds):
+        first, stop = bounds[j], bounds[j + 1]
+        count = (stop - first) * width
+        for h in range(first, stop):
+            base = (h - first) * width
+            for f in range(features):
+                for c in range(channels):
+                    source = (h * channels + c) * width
+                    row = f * channels + c
+                    for w in range(width):
+                        band[row, base + w] = 0.0 if saturated[h, w] else values[f, source + w]
+            for w in range(width):
+                band[size - 1, base + w] = 0.0 if saturated[h, w] else last
+        for p in range(0, padded, 4):
+            for q in range(p, padded, 4):
+                s00 = s01 = s02 = s03 = s10 = s11 = s12 = s13 = 0.0
+                s20 = s21 = s22 = s23 = s30 = s31 = s32 = s33 = 0.0
+                for i in range(count):
+                    x0, x1, x2, x3 = band[p, i], band[p + 1, i], band[p + 2, i], band[p + 3, i]
+                    y0, y1, y2, y3 = band[q, i], band[q + 1, i], band[q + 2, i], band[q + 3, i]
+                    s00 += x0 * y0
+                    s01 += x0 * y1
+                    s02 += x0 * y2
+                    s03 += x0 * y3
+                    s10 += x1 * y0
+                    s11 += x1 * y1
+                    s12 += x1 * y2
+                    s13 += x1 * y3
+                    s20 += x2 * y0
+                    s21 += x2 * y1
+                    s22 += x2 * y2
+                    s23 += x2 * y3
+                    s30 += x3 * y0
+                    s31 += x3 * y1
+                    s32 += x3 * y2
+                    s33 += x3 * y3
+                sums = ((s00, s01, s02, s03), (s10, s11, s12, s13), (s20, s21, s22, s23), (s30, s31, s32, s33))
+                for u in range(4):
+                    for v in range(4):
+                        tile[p + u, q + v] = sums[u][v]
+                        tile[q + v, p + u] = sums[u][v]
+        for p in range(size):
+            if not tile[p, p] <= EXACT_SUMS:  # also NaN
+                return grams, False
+        grams[j] = tile[:size, :size]
+    return grams, True

@@ -211,9 +211,8 @@ def _judged(
 
 
 def training_terms(scene: SceneForm) -> dict[int, Whitened]:
-    """Each non-empty fold's complement as a :class:`Whitened` data term (denoised)."""
-    folds = list(range(scene.n_folds))
-    return {fold: scene.whitened([f for f in folds if f != fold]) for fold in folds if scene.counts[fold] > 0}
+    """Each non-empty fold's complement as a :class:`Whitened` data term (denoised, :meth:`SceneForm.complements`)."""
+    return scene.complements()
 
 
 def _timed(function: Callable[..., Fit], *arguments: object, before: float = 0.0) -> Fit:
@@ -495,8 +494,9 @@ def _weighted_spread(
     temperature = EVIDENCE_TEMPERATURE if temperature is None else temperature
     if not candidates:
         return np.zeros_like(spectrum), spectrum
-    best = min(c.evidence for c in candidates)
-    excess = np.array([c.evidence / max(best, 1e-300) - 1 for c in candidates])
+    evidence = [c.evidence for c in candidates]
+    best = max(min(evidence), 1e-300)
+    excess = np.array([e / best - 1 for e in evidence])
     weights = np.exp(-excess / temperature)
     spread = np.sqrt((weights * (spectra - spectrum[:, None]) ** 2).sum(1) / weights.sum())
     return spread, (spectra * weights).sum(1) / weights.sum()

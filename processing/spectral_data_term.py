@@ -89,6 +89,22 @@ class SceneForm:
         """The folds' data term as a :class:`Whitened` problem."""
         return Whitened.of(*self.part(folds, denoised), self.lift)
 
+    def complements(self) -> dict[int, Whitened]:
+        """Each non-empty fold's complement, denoised, as a :class:`Whitened` problem: ``whitened`` of every other
+        fold, to the bit (the same sums in the same order: a reduction over the kept folds' axis adds them in turn),
+        with the sums of all complements taken at once."""
+        count = self.n_folds
+        keep = np.array([[f for f in range(count) if f != fold] for fold in range(count)], dtype=np.intp)
+        hessians = self.hessian[keep].sum(1) - self.noise_hessian[keep].sum(1)
+        hessians = 0.5 * (hessians + hessians.transpose(0, 2, 1))
+        linears = self.linear[keep].sum(1) - self.noise_linear[keep].sum(1)
+        energies = self.energy[keep].sum(1) - self.noise_energy[keep].sum(1)
+        return {
+            fold: Whitened.of(hessians[fold], linears[fold], float(energies[fold]), self.lift)
+            for fold in range(count)
+            if self.counts[fold] > 0
+        }
+
     def error(self, folds: list[int], spectrum: np.ndarray, denoised: bool = True) -> float:
         """J(e) of ``folds`` (:meth:`whitened`'s ``error`` without its eigendecomposition)."""
         hessian, linear, energy = self.part(folds, denoised)
@@ -176,9 +192,9 @@ class Whitened:
         if info != 0:
             values, vectors = np.linalg.eigh(hessian)
         floor = max(float(values[-1]), 1e-300) * 1e-9
-        values = np.maximum(values, floor)
-        root = (np.sqrt(values)[:, None] * vectors.T) @ lift
-        target = (vectors.T @ linear) / np.sqrt(values)
+        roots = np.sqrt(np.maximum(values, floor))
+        root = (roots[:, None] * vectors.T) @ lift
+        target = (vectors.T @ linear) / roots
         return cls(root, target, float(energy - target @ target), hessian, linear, energy, lift)
 
     def error(self, spectrum: np.ndarray) -> float:

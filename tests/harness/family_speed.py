@@ -7,8 +7,8 @@ light prior, the families (fits and held-out judgement; on the numpy route, as a
 takes it, and compiled, as a process that prepared :mod:`processing.family_kernels` does) — and the estimate over
 the copy. One thread (``OPENBLAS_NUM_THREADS=1``); no targets asserted.
 
-``--stages``: instead, the compiled family estimate as the bench runs it (statistics, prior, families, one after
-the other, so each stage starts with the caches the frames' pass left), each stage's CPU time
+``--stages``: instead, the compiled family estimate as the bench runs it (statistics from the block rows the
+default estimate filled, prior, families, one after the other, so each stage starts with the caches the frames' pass left), each stage's CPU time
 (``time.thread_time``) the median of ``--repeats`` runs, in ms and ÷ the median CPU time of the copy.
 
 ``--decile``: the bench's family figure by CPU time, steadier than its medians on a loaded machine: a copy, then the
@@ -92,11 +92,9 @@ def _stages(height: int, width: int, runs: int) -> int:
     """The ``--stages`` table (module notes); 0."""
     import numpy as np
 
-    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor
-    from msflash.lab.bench.processing import benchmark_world, frame_copy
+    from msflash.lab.bench.processing import benchmark_world, family_statistics, frame_copy
     from msflash.processing import family_kernels
     from msflash.processing import light_families as lf
-    from msflash.processing.channel_statistics import accumulate_channel_statistics
     from msflash.processing.light_prior import prior_model
 
     family_kernels.prepare()
@@ -107,9 +105,9 @@ def _stages(height: int, width: int, runs: int) -> int:
     columns = []
     for cfa in (None, "RGGB"):
         world = benchmark_world(height, width, cfa=cfa)
-        frames, spec, leds, camera = world["frames"], world["spec"], world["leds"], world["camera"]
-        factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)
-        channels = accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
+        frames, leds, camera = world["frames"], world["leds"], world["camera"]
+        taken = family_statistics(world)  # from the block rows, as the bench's family figure takes them
+        channels = taken()
         prior, model = prior_model(channels.channels, leds, camera), lf.family_model(channels.channels, leds, camera)
         copy = frame_copy(frames)
         copies, rows = [], []
@@ -118,7 +116,7 @@ def _stages(height: int, width: int, runs: int) -> int:
             copy()
             copies.append(time.thread_time() - start)
             marks = [time.thread_time()]
-            statistics = accumulate_channel_statistics(frames[0], frames[1:], spec, bin_factor=factor, cfa=cfa)
+            statistics = taken()
             marks.append(time.thread_time())
             spectrum = prior.estimate(statistics).spectrum.values[:, 0]
             marks.append(time.thread_time())

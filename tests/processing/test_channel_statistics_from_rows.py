@@ -8,6 +8,7 @@ import pytest
 
 from msflash.lab.bench.processing import benchmark_world
 from msflash.processing import block_rows as block_rows_module
+from msflash.processing import channel_statistics as channel_statistics_module
 from msflash.processing import frame_kernels
 from msflash.processing.block_rows import BlockRows
 from msflash.processing.block_sums import plane_shape
@@ -125,3 +126,55 @@ def test_a_kept_probe_gives_large_frames_channel_statistics_and_leaves_the_estim
     assert one.channels is not None and other.channels is not None
     for name in ("fa", "ff", "aa", "noise_fa", "noise_ff", "noise_aa"):
         assert np.array_equal(getattr(one.channels, name), getattr(other.channels, name)), name
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_the_compiled_fold_products_are_the_blas_products_to_the_bit(
+    monkeypatch: pytest.MonkeyPatch, cfa: str | None
+) -> None:
+    """With the compiled fits in use, each fold's Gram matrix of the rows and of the probe comes from the rows as
+    stored (family_kernels_numba.fold_grams, no transposing copy): the same numbers as the BLAS products of
+    channel_rows — saturated blocks zeroed in every row, folds of unequal height — and the statistics the frames'."""
+    pytest.importorskip("msflash.processing.family_kernels_numba", reason="numba (the fast extra) absent")
+    monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numba")
+    world = benchmark_world(184, 256, cfa=cfa)  # 46 block rows: folds of 10 and 9
+    frames, spec = [np.array(frame) for frame in world["frames"]], world["spec"]
+    frames[4][60:75, 30:47] = int(spec.white_level)
+    frames[0][0:3, 250:256] = int(spec.white_level)
+    rows = _rows(frames, spec, cfa, 4)
+    height, channels, width = rows.block_shape
+    blocks = channel_statistics_module._BlockLayout(height, width, channels)
+    taken = channel_statistics_module._compiled_fold_products(rows, 5, blocks)
+    assert taken is not None  # the route under test is the one taken
+    stacked = rows.channel_rows()
+    assert stacked is not None
+    bounds = ((np.arange(6) * height + 4) // 5) * width
+    for got, rows_of in zip(taken, stacked):
+        assert rows_of is not None and got is not None
+        expected = np.stack([channel_statistics_module._gram(rows_of[:, bounds[j] : bounds[j + 1]]) for j in range(5)])
+        assert np.array_equal(expected, got)
+    statistics = channel_statistics_of_block_rows(rows, spec, cfa=cfa)
+    assert statistics is not None
+    assert statistics.counts.sum() < statistics.n_blocks_total  # the clipped blocks are out
+    _assert_identical(accumulate_channel_statistics(frames[0], frames[1:], spec, cfa=cfa, bin_factor=4), statistics)
+
+
+def test_the_compiled_fold_products_answer_only_where_every_sum_is_exact(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Integers whose sums of squares pass 2⁵¹ (reassociated, they could round otherwise): the kernel says so; float
+    frames' rows are not offered to it; both routes then take the copy and BLAS, and the statistics are the frames'."""
+    kernels = pytest.importorskip("msflash.processing.family_kernels_numba", reason="numba (the fast extra) absent")
+    monkeypatch.setenv(frame_kernels.KERNELS_VARIABLE, "numba")
+    values = np.full((3, 2 * 1 * 4), 2.0**25)
+    saturated = np.zeros((2, 4), dtype=bool)
+    bounds = np.array([0, 1, 2], np.int64)
+    _, exact = kernels.fold_grams(values, 2, 1, 4, 1.0, saturated, bounds)
+    assert not exact
+    grams, exact = kernels.fold_grams(values / 2.0**4, 2, 1, 4, 1.0, saturated, bounds)
+    assert exact and grams[0, 0, 0] == 4 * 2.0**42 and grams[1, 2, 2] == 4  # the ones row counts the blocks
+    world = benchmark_world(96, 128, cfa="RGGB")
+    frames, spec = [np.asarray(frame, float) for frame in world["frames"]], world["spec"]
+    rows = _rows(frames, spec, "RGGB", 4)
+    assert rows.stored_rows() is None
+    got = channel_statistics_of_block_rows(rows, spec, cfa="RGGB")
+    assert got is not None
+    _assert_identical(accumulate_channel_statistics(frames[0], frames[1:], spec, cfa="RGGB", bin_factor=4), got)

@@ -83,6 +83,35 @@ def test_the_scene_form_is_the_light_priors_data_term_for_any_spectrum() -> None
     assert problem.error(trial) == pytest.approx(expected, rel=1e-6)
 
 
+def test_the_fold_complements_are_each_folds_whitened_complement_to_the_bit() -> None:
+    """SceneForm.complements sums every complement at once (the family estimate's held-out terms): the same numbers
+    as whitening each complement alone, with a noise share and an empty fold (left out as a held-out fold, kept in
+    the others' complements)."""
+    leds, camera = _leds_and_camera()
+    statistics = _statistics(planck(GRID.wavelengths_nm, 4000.0) * GRID.wavelengths_nm, seed=3)
+    noise = Moments(*(0.01 * m for m in (statistics.moments.ff, statistics.moments.fa, statistics.moments.aa)))
+    counts = statistics.counts.copy()
+    counts[2] = 0
+    statistics = ChannelStatistics(
+        statistics.moments, noise, counts, statistics.led_sums, statistics.ambient_sums,
+        statistics.n_blocks_total, statistics.n_leds, statistics.channels,
+    )  # fmt: skip
+    scene = scene_form(statistics, family_model(statistics.channels, leds, camera).reduction)
+    complements = scene.complements()
+    assert sorted(complements) == [0, 1, 3, 4]
+    for fold, got in complements.items():
+        expected = scene.whitened([f for f in range(scene.n_folds) if f != fold])
+        for name in ("root", "target", "constant", "hessian", "linear", "energy", "lift"):
+            assert np.array_equal(getattr(expected, name), getattr(got, name)), (fold, name)
+
+
+def test_a_fits_spectrum_is_computed_once_and_read_only() -> None:
+    atoms, amplitudes = np.arange(12.0).reshape(4, 3), np.array([1.0, 0.5, 2.0])
+    fit = Fit("x", "x", np.zeros(0), atoms, amplitudes, 0.0, 3)
+    assert fit.spectrum is fit.spectrum and fit.with_seconds(1.0).spectrum is fit.spectrum
+    assert np.array_equal(fit.spectrum, atoms @ amplitudes) and not fit.spectrum.flags.writeable
+
+
 @pytest.mark.parametrize(
     "kelvin",
     [
