@@ -381,9 +381,18 @@ def check_output_type(output: Path) -> str:
 
 
 def check_raw_output(kind: str | None, output: Path, sequence: Sequence) -> None:
-    """Refuse a raw ``.tiff`` (``kind`` from :func:`check_output_type`) for a sequence whose frames are float (EXR):
-    raw TIFF values are whole counts in the frames' own encoding, and float frames have none (normalised ones,
-    white level 1, would all round to 0 or 1)."""
+    """Refuse an ``--out`` inside the sequence's own folder, and a raw ``.tiff`` (``kind`` from
+    :func:`check_output_type`) for a sequence whose frames are float (EXR).
+
+    Inside the sequence folder the image would replace a captured frame (``--out SEQ/frames/000-ambient.tiff``,
+    a capture lost) or be an undeclared file there. Raw TIFF values are whole counts in the frames' own
+    encoding, and float frames have none (normalised ones, white level 1, would all round to 0 or 1)."""
+    folder = sequence.directory.resolve()
+    if output.resolve().is_relative_to(folder):
+        raise UsageError(
+            f"--out {output}: inside the sequence folder {sequence.directory}, where it would replace or sit "
+            "among the captured frames; expected a path outside it (e.g. beside it, in the run folder)"
+        )
     ambient = sequence.indices("ambient")
     if kind != "tiff" or not ambient:
         return

@@ -1,0 +1,67 @@
+"""A hostile user's pass over the command line and the Python API (branch hostile30): what a user types by
+accident is refused with one line naming the option or file and what was expected (exit 2), never a
+crash, silently other numbers or a lost capture. Each test failed before its fix; real files, ``main()``
+in-process, no mocks."""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+from pathlib import Path
+
+import pytest
+
+from msflash.acquisition.app.cli import main
+from tests.helpers import write_test_sequence
+
+
+@pytest.fixture(scope="module")
+def base_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_test_sequence(tmp_path_factory.mktemp("hostile") / "seq")
+
+
+@pytest.fixture
+def sequence(base_sequence: Path, tmp_path: Path) -> Path:
+    copy = tmp_path / "seq"
+    shutil.copytree(base_sequence, copy)
+    return copy
+
+
+def _digests(folder: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() for p in folder.rglob("*") if p.is_file()
+    }
+
+
+def _one_error_line(err: str) -> str:
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("msflash: error: "), err
+    return lines[0]
+
+
+@pytest.mark.parametrize(
+    ("command", "target"),
+    [
+        (["synthesize", "{seq}", "--weights", "1,0,0,0,0,0,0"], "frames/000-ambient.tiff"),
+        (["flash", "{seq}", "--mode", "matching"], "frames/001-led.tiff"),
+        (["synthesize", "{seq}", "--weights", "1,0,0,0,0,0,0"], "mix.exr"),
+    ],
+)
+def test_an_image_written_into_the_sequence_folder_is_refused_and_no_frame_is_lost(
+    sequence: Path, command: list[str], target: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--out SEQ/frames/000-ambient.tiff`` replaced the captured ambient frame by the synthesised image: the
+    sequence's first frame was lost (``check`` then called it truncated). Refused before anything is written."""
+    before = _digests(sequence)
+    words = [word.replace("{seq}", str(sequence)) for word in command]
+    assert main([*words, "--out", str(sequence / target)]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert f"--out {sequence / target}" in line and "inside the sequence folder" in line
+    assert _digests(sequence) == before
+    assert main(["check", str(sequence)]) == 0
+
+
+def test_an_image_beside_the_sequence_is_still_written(sequence: Path, tmp_path: Path) -> None:
+    out = tmp_path / "beside.exr"
+    assert main(["synthesize", str(sequence), "--weights", "1,0,0,0,0,0,0", "--out", str(out)]) == 0
+    assert out.stat().st_size > 0
