@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, print_json, progress
+from msflash.acquisition.app.cli_common import UsageError, print_json, progress, seed_int
 from msflash.acquisition.app.options import flash_bounds_option
 from msflash.lab.cli_support import optional_claimed_output
 from msflash.lab.colour_study import STUDY_AMBIENTS, colour_study
@@ -49,7 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``colour-study``."""
     study = subparsers.add_parser("colour-study", help="simulated Fig. 9 (ΔE per ambient) and Fig. 3 (noise) study")
     study.add_argument("--ambients", default=",".join(STUDY_AMBIENTS), help="comma-separated ambients")
-    study.add_argument("--seed", type=int, default=0, help="noise seed")
+    study.add_argument("--seed", type=seed_int, default=0, help="noise seed")
     study.add_argument("--patch-px", type=int, default=12, help="patch side in pixels")
     study.add_argument("--cfa", default=None, choices=("RGGB", "BGGR", "GRBG", "GBRG"), help="raw Bayer frames")
     flash_bounds_option(study)

@@ -24,6 +24,7 @@ from msflash.acquisition.app.cli_common import (
     positive_int,
     print_json,
     progress,
+    seed_int,
 )
 from msflash.acquisition.app.options import add_scheduler_options
 from msflash.acquisition.app.plot_style import PALETTE, pyplot, save_figure
@@ -350,7 +351,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="use N of the 23 feasible illuminants, spread over the grid",
     )
     study.add_argument("--draws", type=positive_int, default=10, help="surfaces: draws per count (default 10)")
-    study.add_argument("--seed", type=int, default=0, help="surfaces: random seed of the draws")
+    study.add_argument("--seed", type=seed_int, default=0, help="surfaces: random seed of the draws")
     add_scheduler_options(study, what="study's cameras and illuminants")
     study.set_defaults(handler=_run)
 

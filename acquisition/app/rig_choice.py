@@ -22,7 +22,7 @@ from msflash.acquisition.app.camera_options import (
     camera_options_from_args,
     given_camera_options,
 )
-from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, seed_int
 from msflash.acquisition.app.options import (
     SIM_CFA_CHOICES,
     SIM_CFA_HELP,
@@ -401,7 +401,7 @@ def _add_world_options(parser: argparse.ArgumentParser, booth_port_help: str | N
         "LED driver); each frame sees the lamp's mean over its own exposure window (default: steady; docs/flicker.md)",
     )
     sim.add_argument("--cfa", default=None, choices=SIM_CFA_CHOICES, help=SIM_CFA_HELP)
-    sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
+    sim.add_argument("--seed", type=seed_int, default=0, help="noise seed (and the mosaic scene's layout)")
 
 
 def _add_pacing_options(parser: argparse.ArgumentParser) -> None:

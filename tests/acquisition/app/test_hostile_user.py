@@ -65,3 +65,20 @@ def test_an_image_beside_the_sequence_is_still_written(sequence: Path, tmp_path:
     out = tmp_path / "beside.exr"
     assert main(["synthesize", str(sequence), "--weights", "1,0,0,0,0,0,0", "--out", str(out)]) == 0
     assert out.stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    "command",
+    [["run"], ["capture"], ["calibrate", "camera", "--simulate"], ["study", "surfaces"], ["colour-study"]],
+    ids=lambda words: " ".join(words),
+)
+def test_a_negative_seed_is_refused_naming_the_option(
+    command: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--seed -1`` reached numpy's generator: ``run``/``capture`` exited 1 "rig 'sim': expected non-negative
+    integer" (a device failure, naming neither the option), ``calibrate camera`` and ``study`` crashed."""
+    out = tmp_path / "out"
+    assert main([*command, "--seed", "-1", "--out", str(out)]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert "--seed" in line and "expected a whole number ≥ 0" in line
+    assert not out.exists()
