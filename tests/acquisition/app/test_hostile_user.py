@@ -82,3 +82,15 @@ def test_a_negative_seed_is_refused_naming_the_option(
     line = _one_error_line(capsys.readouterr().err)
     assert "--seed" in line and "expected a whole number ≥ 0" in line
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("patch", "border"), [("100000", "2"), ("8", "99999999999")])
+def test_a_chart_layout_far_larger_than_the_image_is_refused_before_it_is_drawn(
+    sequence: Path, patch: str, border: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``evaluate --patch-px 100000`` drew the chart's label map (894 GiB) before checking that it fits the image:
+    "unexpected MemoryError — a bug"."""
+    words = ["evaluate", str(sequence), "--chart", "macbeth", "--patch-px", patch, "--border-px", border]
+    assert main([*words, "--out", str(tmp_path / "eval")]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert f"--patch-px {patch} --border-px {border}: the macbeth chart is" in line and "but the image is" in line
