@@ -94,3 +94,14 @@ def test_a_chart_layout_far_larger_than_the_image_is_refused_before_it_is_drawn(
     assert main([*words, "--out", str(tmp_path / "eval")]) == 2
     line = _one_error_line(capsys.readouterr().err)
     assert f"--patch-px {patch} --border-px {border}: the macbeth chart is" in line and "but the image is" in line
+
+
+@pytest.mark.parametrize("patch", ["100000", "7", "0"])
+def test_colour_study_refuses_a_patch_side_it_cannot_render_or_measure(
+    patch: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``colour-study --patch-px 100000`` crashed (MemoryError drawing the chart); 7 or less with ``--cfa`` was
+    refused late, naming a ``--margin-px`` the command does not have."""
+    assert main(["colour-study", "--patch-px", patch, "--ambients", "green", "--cfa", "RGGB", "--json"]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert f"argument --patch-px: '{patch}': expected a whole number of pixels, 8-256" in line
