@@ -105,3 +105,74 @@ def test_colour_study_refuses_a_patch_side_it_cannot_render_or_measure(
     assert main(["colour-study", "--patch-px", patch, "--ambients", "green", "--cfa", "RGGB", "--json"]) == 2
     line = _one_error_line(capsys.readouterr().err)
     assert f"argument --patch-px: '{patch}': expected a whole number of pixels, 8-256" in line
+
+
+@pytest.fixture(scope="module")
+def read_back(base_sequence: Path):  # type: ignore[no-untyped-def]
+    import msflash
+
+    return msflash.read_sequence(base_sequence)
+
+
+@pytest.mark.parametrize(
+    ("options", "named"),
+    [
+        ({"bin_factor": 0}, "bin_factor (--bin) 0: expected a whole number ≥ 1"),
+        ({"bin_factor": -1}, "bin_factor (--bin) -1"),
+        ({"bin_factor": 1.5}, "bin_factor (--bin) 1.5"),
+        ({"bin_factor": True}, "bin_factor (--bin) True"),
+        ({"bin_factor": "4"}, "bin_factor (--bin) '4'"),
+        ({"method": "local", "tiles": 0}, "tiles (--tiles) 0: expected a whole number ≥ 1"),
+        ({"method": "local", "tiles": (2, 3)}, "tiles (--tiles) (2, 3)"),
+        ({"solver": "tikonov"}, "solver (--solver) 'tikonov': unknown; did you mean 'tikhonov'?"),
+        ({"alpha": None}, "alpha (--alpha) None: expected a finite number ≥ 0 or 'auto'"),
+        ({"alpha": True}, "alpha (--alpha) True"),
+        ({"model": "LED"}, "model (--model) 'LED': unknown; did you mean 'led'?"),
+    ],
+)
+def test_estimate_ambient_refuses_what_the_command_line_refuses(read_back, options: dict, named: str) -> None:  # type: ignore[no-untyped-def]
+    """The API passed its arguments on unchecked: ``bin_factor=0``/``-1``/``1.5``/``True`` and ``tiles=0`` were
+    taken as other numbers silently, ``"4"``, ``(2, 3)`` and ``alpha=None`` failed with a TypeError, a solver's
+    name with a plain ValueError, and ``model="LED"`` was called an unknown *method*."""
+    import msflash
+    from msflash.acquisition.errors import UsageError
+
+    with pytest.raises(UsageError) as caught:
+        msflash.estimate_ambient(read_back, **options)
+    assert named in str(caught.value)
+
+
+@pytest.mark.parametrize(
+    ("call", "named"),
+    [
+        (lambda m, seq, est: m.estimate_ambient(str(seq.directory)), "msflash.estimate_ambient: sequence is str"),
+        (lambda m, seq, est: m.solve_flash(seq, None), "msflash.solve_flash: estimate is NoneType None"),
+        (lambda m, seq, est: m.solve_flash(seq, est, "complementary", None), "msflash.solve_flash: target is NoneType"),
+        (lambda m, seq, est: m.synthesize_flash(str(seq.directory), [0] * 7), "msflash.synthesize_flash: sequence"),
+        (lambda m, seq, est: m.render_preview(seq, None), "msflash.render_preview: image is NoneType None"),
+    ],
+    ids=["path-for-sequence", "no-estimate", "no-target", "path-to-synthesize", "no-image"],
+)
+def test_the_python_api_names_a_wrong_argument(read_back, call, named: str) -> None:  # type: ignore[no-untyped-def]
+    """A path where a sequence belongs, None for the estimate, target or image: AttributeError or TypeError from
+    deep inside, naming neither the function nor the parameter."""
+    import msflash
+    from msflash.acquisition.errors import UsageError
+
+    estimate = msflash.estimate_ambient(read_back)
+    with pytest.raises(UsageError) as caught:
+        call(msflash, read_back, estimate)
+    assert named in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_render_preview_refuses_non_finite_pixels(read_back) -> None:  # type: ignore[no-untyped-def]
+    """NaN pixels were cast to uint8 under a RuntimeWarning: a preview of arbitrary bytes."""
+    import numpy as np
+
+    import msflash
+    from msflash.acquisition.errors import UsageError
+
+    image = np.ones(read_back.load_frame(0).shape)
+    image.flat[0] = np.nan
+    with pytest.raises(UsageError, match=r"image holds 1 NaN or infinite values of \d+; expected finite"):
+        msflash.render_preview(read_back, image)
