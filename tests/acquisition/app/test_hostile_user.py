@@ -176,3 +176,21 @@ def test_render_preview_refuses_non_finite_pixels(read_back) -> None:  # type: i
     image.flat[0] = np.nan
     with pytest.raises(UsageError, match=r"image holds 1 NaN or infinite values of \d+; expected finite"):
         msflash.render_preview(read_back, image)
+
+
+def test_a_bin_halved_to_fit_a_small_frame_stays_even_and_not_below_four(
+    sequence: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--bin 6`` on a frame too small for 32 six-pixel blocks was halved to 3 — below the 4 ``--help`` promises,
+    and odd, so the estimate lost its noise probe (``noise_correction: none``) and moved: other numbers than the
+    4 it should have fallen back to. (``--bin 1000`` ended at 3 too.)"""
+    import json
+
+    outputs = {}
+    for factor in ("4", "6", "1000"):
+        assert main(["estimate", str(sequence), "--bin", factor, "--json"]) == 0
+        outputs[factor] = json.loads(capsys.readouterr().out)
+    assert outputs["6"]["noise_correction"] == outputs["4"]["noise_correction"]
+    assert not outputs["4"]["noise_correction"].startswith("none")
+    for factor in ("6", "1000"):
+        assert outputs[factor]["spectrum"] == outputs["4"]["spectrum"]
