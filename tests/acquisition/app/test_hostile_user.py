@@ -194,3 +194,19 @@ def test_a_bin_halved_to_fit_a_small_frame_stays_even_and_not_below_four(
     assert not outputs["4"]["noise_correction"].startswith("none")
     for factor in ("6", "1000"):
         assert outputs[factor]["spectrum"] == outputs["4"]["spectrum"]
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "expected"),
+    [("--max-saturated", "101", "0 ≤ PERCENT < 50"), ("--max-lost", "200", "0 ≤ PERCENT < 100")],
+)
+def test_a_percentage_out_of_range_is_refused_in_percent(
+    option: str, value: str, expected: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--max-saturated 101`` (a percentage) was refused as "max_saturated_fraction 1.01; expected 0 ≤ f < 0.5":
+    the range in a unit the user never typed. Now refused when parsed, nothing made."""
+    out = tmp_path / "run"
+    assert main(["run", option, value, "--out", str(out)]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert f"argument {option}: '{value}': expected a percentage, {expected}" in line
+    assert not out.exists()
