@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from msflash.acquisition.app.cli import main
-from tests.helpers import write_test_sequence
+from tests.helpers import SAMPLES_DIR, write_test_sequence
 
 
 @pytest.fixture(scope="module")
@@ -210,3 +210,29 @@ def test_a_percentage_out_of_range_is_refused_in_percent(
     line = _one_error_line(capsys.readouterr().err)
     assert f"argument {option}: '{value}': expected a percentage, {expected}" in line
     assert not out.exists()
+
+
+@pytest.fixture(params=["sample-rgb-tungsten", "sample-bayer-fluorescent-12bit"])
+def sample(request: pytest.FixtureRequest, tmp_path: Path) -> Path:
+    """A copy of one of the two sequences written by an independent tool (no digests: nothing guards the frames)."""
+    copy = tmp_path / request.param
+    shutil.copytree(SAMPLES_DIR / request.param, copy)
+    return copy
+
+
+def test_a_frame_re_encoded_as_normalised_float_is_refused(sample: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Frame 3 of a 16-bit sequence re-saved as float32 divided by 4095 (an image tool's "normalise"): on the RGB
+    sample, whose black level is 0, every value stayed in range and ``estimate`` exited 0 with that LED's frame
+    4095 times too dark — other numbers, no word. A sample type other than frame 0's is refused, naming both."""
+    import numpy as np
+    import tifffile
+
+    frame = sample / "frames" / "003-led.tiff"
+    pixels = tifffile.imread(frame)
+    photometric = "rgb" if pixels.ndim == 3 else "minisblack"
+    tifffile.imwrite(frame, pixels.astype(np.float32) / 4095, photometric=photometric)
+    assert main(["estimate", str(sample), "--json"]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert "frames[3].file 'frames/003-led.tiff' holds float32 samples but frames[0].file" in line
+    assert "holds uint16; expected one sample type for all frames" in line
+
