@@ -236,3 +236,15 @@ def test_a_frame_re_encoded_as_normalised_float_is_refused(sample: Path, capsys:
     assert "frames[3].file 'frames/003-led.tiff' holds float32 samples but frames[0].file" in line
     assert "holds uint16; expected one sample type for all frames" in line
 
+
+def test_wavelengths_in_micrometres_are_refused(sample: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``wavelengths_nm`` written in µm (0.4–0.7): read as nanometres, estimated, printed as "0.4 nm" lines with a
+    warning that the estimate came out 4.6e10 times its LED bound — exit 0."""
+    import json
+
+    document = json.loads((sample / "sequence.json").read_text())
+    document["wavelengths_nm"] = [w / 1000 for w in document["wavelengths_nm"]]
+    (sample / "sequence.json").write_text(json.dumps(document))
+    assert main(["estimate", str(sample), "--json"]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert "wavelengths_nm spans 0.4–0.7; expected nanometres within 150–3000" in line
