@@ -169,7 +169,17 @@ def latest_sequence_written() -> tuple[Path, bool] | None:
     if not _LATEST_WRITER:
         return None
     writer = _LATEST_WRITER[0]
-    return writer._directory, writer._finished
+    return writer._directory, writer._finished or _complete_on_disk(writer._path)
+
+
+def _complete_on_disk(path: Path) -> bool:
+    """Whether ``sequence.json`` at ``path`` says ``complete: true``. A signal arriving inside :meth:`SequenceWriter.finish`
+    after the file was replaced but before the writer noted it left the flag behind the disk: the stop line then
+    said "marked incomplete" of a complete sequence."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8")).get("complete") is True
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def forget_latest_sequence() -> None:

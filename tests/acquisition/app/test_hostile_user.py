@@ -248,3 +248,52 @@ def test_wavelengths_in_micrometres_are_refused(sample: Path, capsys: pytest.Cap
     assert main(["estimate", str(sample), "--json"]) == 2
     line = _one_error_line(capsys.readouterr().err)
     assert "wavelengths_nm spans 0.4–0.7; expected nanometres within 150–3000" in line
+
+
+def test_a_signal_inside_finish_after_the_file_says_complete_is_reported_as_complete(tmp_path: Path) -> None:
+    """SIGTERM 2.3 s into ``msflash run --sync booth`` printed "frames captured so far are kept (marked incomplete)"
+    while its ``sequence.json`` said ``complete: true`` with all 9 frames: the signal came inside
+    ``SequenceWriter.finish`` after the file was replaced and before the writer noted it. The signal is delivered
+    here at that very point (a trace function raising KeyboardInterrupt as ``_replace_json`` returns, as Python
+    raises it at the next bytecode); the stop line must say what the disk says."""
+    import json
+    import sys
+
+    import numpy as np
+
+    from msflash.acquisition.app.cli import _stop_line
+    from msflash.acquisition.sequence import writer as writer_module
+    from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+
+    camera = SequenceCamera(model="t", serial=None, pixel_format="RGB16", cfa=None, black_level=0, white_level=65535)
+    leds = [SequenceLed("led", np.ones(3))]
+    writer_module.forget_latest_sequence()
+    writer = writer_module.SequenceWriter(
+        tmp_path / "seq",
+        wavelengths_nm=np.array([400.0, 500.0, 600.0]),
+        spectral_unit="energy",
+        camera=camera,
+        leds=leds,
+    )
+    writer.add_frame(np.full((8, 8, 3), 100, np.uint16), "ambient", [0.0], exposure_us=1000.0, gain=1.0)
+
+    def tracer(frame, event, arg):  # type: ignore[no-untyped-def]
+        if event == "call" and frame.f_code is writer_module._replace_json.__code__:
+            return local
+        return None
+
+    def local(frame, event, arg):  # type: ignore[no-untyped-def]
+        if event == "return":
+            raise KeyboardInterrupt
+        return local
+
+    sys.settrace(tracer)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            writer.finish()
+    finally:
+        sys.settrace(None)
+    assert json.loads((tmp_path / "seq" / "sequence.json").read_text())["complete"] is True
+    assert writer_module.latest_sequence_written() == (tmp_path / "seq", True)
+    assert "was complete before the stop and stays so" in _stop_line(["run"], "terminated (SIGTERM)")
+    writer_module.forget_latest_sequence()
