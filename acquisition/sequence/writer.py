@@ -194,7 +194,8 @@ class SequenceWriter:
     ``sequence.json`` is written (``complete: false``) when the writer is created; each
     :meth:`add_frame` writes the frame file, then replaces ``sequence.json`` atomically;
     :meth:`finish` (or leaving the ``with`` block normally) sets ``complete: true``. Leaving the
-    ``with`` block through an exception keeps ``complete: false`` and every frame written so far.
+    ``with`` block through an exception keeps ``complete: false`` and every frame written so far; a
+    sequence left without any frame is removed (with the folders the writer made, when empty).
 
     Parameters
     ----------
@@ -237,6 +238,7 @@ class SequenceWriter:
             # Say so in the file (format v1, §6): a reader takes the three identical channels as one plane.
             camera = replace(camera, extra={**camera.extra, "channels": "mono replicated to R, G, B"})
         self._path = self._directory / SEQUENCE_FILE
+        self._made_directory = not os.path.lexists(self._directory)
         self._claim: FolderClaim | None = None
         self._sequence = Sequence(
             self._directory,
@@ -437,6 +439,20 @@ class SequenceWriter:
                 self.finish()
         finally:
             self._release()
+            if exc_type is not None and not self._sequence.frames:
+                self._discard_empty()
+
+    def _discard_empty(self) -> None:
+        """Remove a sequence that never got a frame (a replay refused at its plan, a camera failing at step 0, Ctrl-C
+        before the first frame): its ``complete: false`` file with no frame kept nothing, yet made the ``--out`` it
+        sat in "already hold a run" and said frames were kept. The folders it made go too, when empty."""
+        with contextlib.suppress(OSError):
+            self._path.unlink()
+        for folder in (self._directory / FRAMES_DIR, *((self._directory,) if self._made_directory else ())):
+            with contextlib.suppress(OSError):  # absent, or holding something that is not ours
+                folder.rmdir()
+        if _LATEST_WRITER and _LATEST_WRITER[0] is self:
+            _LATEST_WRITER.clear()
 
 
 def _as_float(value: Any) -> Any:

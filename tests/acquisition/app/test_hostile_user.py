@@ -297,3 +297,25 @@ def test_a_signal_inside_finish_after_the_file_says_complete_is_reported_as_comp
     assert writer_module.latest_sequence_written() == (tmp_path / "seq", True)
     assert "was complete before the stop and stays so" in _stop_line(["run"], "terminated (SIGTERM)")
     writer_module.forget_latest_sequence()
+
+
+def test_a_replay_refused_before_its_first_frame_leaves_no_empty_run_behind(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Replaying an interrupted recording (complete: false, 2 frames) exited 1 naming the step, as it should, but
+    left ``OUT/sequence/sequence.json`` with no frame: the next attempt into the same ``--out`` was refused as
+    "already holds a run", and nothing had been captured. A sequence that never got a frame is removed, and with
+    it the ``--out`` the command made."""
+    import json
+
+    recording = tmp_path / "interrupted"
+    shutil.copytree(Path(__file__).parents[2] / "data" / "sequences" / "sim-macbeth-fluorescent", recording)
+    document = json.loads((recording / "sequence.json").read_text())
+    document.update(complete=False, frames=document["frames"][:2])
+    (recording / "sequence.json").write_text(json.dumps(document))
+    out = tmp_path / "replayed"
+    exposure = str(document["frames"][0]["exposure_us"])  # fixed: the plan is checked once the sequence is begun
+    assert main(["capture", "--rig", f"replay:{recording}", "--exposure-us", exposure, "--out", str(out)]) == 1
+    errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("msflash: error: ")]
+    assert len(errors) == 1 and "the recording is incomplete" in errors[0]
+    assert not out.exists()
