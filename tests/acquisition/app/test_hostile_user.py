@@ -319,3 +319,16 @@ def test_a_replay_refused_before_its_first_frame_leaves_no_empty_run_behind(
     errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("msflash: error: ")]
     assert len(errors) == 1 and "the recording is incomplete" in errors[0]
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "value"), [("--height", "0"), ("--width", "-1"), ("--height", "32"), ("--repeats", "0")]
+)
+def test_bench_names_a_frame_size_or_repeat_count_it_cannot_measure(
+    option: str, value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``bench --height 0`` was refused naming the simulated scene's label array, ``--width -1`` as a width of 0,
+    ``--height 32`` as "channel statistics: 4×4 blocks of 8×8", after seconds of setup; none named the option."""
+    assert main(["bench", "--part", "processing", "--quick", option, value]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert line.startswith(f"msflash: error: argument {option}: '{value}': expected a whole number")
