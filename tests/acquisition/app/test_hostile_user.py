@@ -332,3 +332,21 @@ def test_bench_names_a_frame_size_or_repeat_count_it_cannot_measure(
     assert main(["bench", "--part", "processing", "--quick", option, value]) == 2
     line = _one_error_line(capsys.readouterr().err)
     assert line.startswith(f"msflash: error: argument {option}: '{value}': expected a whole number")
+
+
+@pytest.mark.parametrize(
+    ("words", "expected"),
+    [
+        (["pareto", "--patch-px", "100000"], "argument --patch-px: '100000': expected a whole number of pixels, 1-256"),
+        (["failure", "--threshold", "nan"], "argument --threshold: 'nan': expected a finite RMSE ≥ 0"),
+        (["failure", "--threshold", "-1"], "argument --threshold: '-1': expected a finite RMSE ≥ 0"),
+        (["pareto", "--ambient-to-flash", "-1"], "argument --ambient-to-flash: '-1': expected a finite ratio > 0"),
+    ],
+)
+def test_study_options_out_of_range_are_refused_when_parsed(
+    words: list[str], expected: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``study pareto --patch-px 100000`` crashed (MemoryError drawing a 4 TiB chart); ``study failure --threshold
+    nan`` (or -1) exited 0 with a confusion table that counted no estimate (or every one) as failed."""
+    assert main(["study", *words, "--json"]) == 2
+    assert expected in _one_error_line(capsys.readouterr().err)
