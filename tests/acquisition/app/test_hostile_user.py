@@ -350,3 +350,26 @@ def test_study_options_out_of_range_are_refused_when_parsed(
     nan`` (or -1) exited 0 with a confusion table that counted no estimate (or every one) as failed."""
     assert main(["study", *words, "--json"]) == 2
     assert expected in _one_error_line(capsys.readouterr().err)
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "said"),
+    [
+        ("missing.csv", None, "target illuminant file not found"),
+        ("dark.csv", "wavelength_nm,value\n400,0\n700,0\n", "no light"),
+    ],
+)
+def test_run_reads_a_target_file_before_the_rig_opens(
+    name: str, text: str | None, said: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``run --target missing.csv`` (or an all-zero file) opened the rig, metered the ambient with the LEDs firing
+    and only then refused the file. It is now read when the command line is parsed (its coverage of the camera's
+    range still when used); nothing opened, nothing made."""
+    target = tmp_path / name
+    if text is not None:
+        target.write_text(text)
+    out = tmp_path / "run"
+    assert main(["run", "--target", str(target), "--out", str(out), "--log-serial", str(tmp_path / "serial.log")]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert line.startswith("msflash: error: argument --target: ") and said in line
+    assert not out.exists() and not (tmp_path / "serial.log").exists()
