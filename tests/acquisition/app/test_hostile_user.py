@@ -373,3 +373,13 @@ def test_run_reads_a_target_file_before_the_rig_opens(
     line = _one_error_line(capsys.readouterr().err)
     assert line.startswith("msflash: error: argument --target: ") and said in line
     assert not out.exists() and not (tmp_path / "serial.log").exists()
+
+
+def test_the_measured_led_snr_takes_each_frames_gain(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Replaying the independent Bayer sample (ambient at gain 1.5, most LED frames at gain 1) warned "no LED signal:
+    its frame is no brighter than the ambient frame" for three of its seven LEDs: the measured SNR divided each
+    frame by its exposure but not its gain. Every LED of the sample is lit and its estimate tracks the truth."""
+    sample = SAMPLES_DIR / "sample-bayer-fluorescent-12bit"
+    assert main(["capture", "--rig", f"replay:{sample}", "--out", str(tmp_path / "replayed")]) == 0
+    err = capsys.readouterr().err
+    assert "no LED signal" not in err and "no signal" not in err, err
