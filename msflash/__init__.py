@@ -176,6 +176,8 @@ def synthesize_flash(sequence: Sequence, flash: FlashSolution | np.ndarray) -> n
     from msflash.acquisition.session.analysis import synthesize_checked
 
     _require_sequence(sequence, "synthesize_flash")
+    if flash is None or isinstance(flash, str | bytes):  # np.asarray(None) is one NaN weight: "1 flash weights"
+        _refuse("synthesize_flash", "flash", flash, "the result of msflash.solve_flash, or one weight per LED")
 
     weights = flash.flash_weights if hasattr(flash, "flash_weights") else np.asarray(flash, dtype=float)
     image, _saturated, _frames, _flicker = synthesize_checked(sequence, weights)

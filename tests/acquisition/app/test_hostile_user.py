@@ -150,8 +150,9 @@ def test_estimate_ambient_refuses_what_the_command_line_refuses(read_back, optio
         (lambda m, seq, est: m.solve_flash(seq, est, "complementary", None), "msflash.solve_flash: target is NoneType"),
         (lambda m, seq, est: m.synthesize_flash(str(seq.directory), [0] * 7), "msflash.synthesize_flash: sequence"),
         (lambda m, seq, est: m.render_preview(seq, None), "msflash.render_preview: image is NoneType None"),
+        (lambda m, seq, est: m.synthesize_flash(seq, None), "msflash.synthesize_flash: flash is NoneType None"),
     ],
-    ids=["path-for-sequence", "no-estimate", "no-target", "path-to-synthesize", "no-image"],
+    ids=["path-for-sequence", "no-estimate", "no-target", "path-to-synthesize", "no-image", "no-flash"],
 )
 def test_the_python_api_names_a_wrong_argument(read_back, call, named: str) -> None:  # type: ignore[no-untyped-def]
     """A path where a sequence belongs, None for the estimate, target or image: AttributeError or TypeError from
