@@ -384,3 +384,20 @@ def test_the_measured_led_snr_takes_each_frames_gain(tmp_path: Path, capsys: pyt
     assert main(["capture", "--rig", f"replay:{sample}", "--out", str(tmp_path / "replayed")]) == 0
     err = capsys.readouterr().err
     assert "no LED signal" not in err and "no signal" not in err, err
+
+
+@pytest.mark.parametrize("marker", ["run.json", "sequence.json"])
+def test_evaluate_refuses_to_write_over_a_run_or_a_sequence(
+    sequence: Path, marker: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``evaluate RUN --chart macbeth --out RUN`` wrote the evaluation's report.html, matching.exr, ambient.png …
+    over the run's own (exit 0): the run's report was gone."""
+    folder = tmp_path / "run"
+    folder.mkdir()
+    (folder / marker).write_text("{}")
+    (folder / "report.html").write_text("the run's report")
+    assert main(["evaluate", str(sequence), "--chart", "macbeth", "--out", str(folder)]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert f"--out {folder}: holds a" in line and f"({marker})" in line
+    assert (folder / "report.html").read_text() == "the run's report"
+    assert sorted(p.name for p in folder.iterdir()) == sorted([marker, "report.html"])
