@@ -101,6 +101,27 @@ def _fmt(value: Any) -> str:
     return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
+MIN_FRAME_SIDE = 64
+"""The smallest ``--height``/``--width``: the estimate's statistics need at least 5 rows of 8 × 8 blocks of each CFA
+plane (``--height 0`` was refused naming the scene's label array, ``--width -1`` as a width of 0, 16 or 32 as
+"channel statistics: 2×2 blocks of 8×8" — none naming the option)."""
+
+
+def _frame_side(text: str) -> int:
+    """argparse type of ``--height`` and ``--width``: a whole number of pixels ≥ :data:`MIN_FRAME_SIDE`.
+
+    >>> _frame_side("1024")
+    1024
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < MIN_FRAME_SIDE:
+        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number of pixels ≥ {MIN_FRAME_SIDE}")
+    return value
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``bench``."""
     bench = subparsers.add_parser("bench", help="measure speed as ratios in one run (processing, camera, booth)")
@@ -110,10 +131,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=("processing", "startup", *_OPTIONAL_PARTS),
         help="run only this part (repeatable); default all",
     )
-    bench.add_argument("--height", type=int, default=1024, help="frame height for the processing part (its first size)")
-    bench.add_argument("--width", type=int, default=1280, help="frame width for the processing part (its first size)")
     bench.add_argument(
-        "--repeats", type=int, default=5, help="processing part: repeats of the solver timings (the best is kept)"
+        "--height",
+        type=_frame_side,
+        default=1024,
+        help=f"frame height for the processing part (its first size; at least {MIN_FRAME_SIDE})",
+    )
+    bench.add_argument(
+        "--width",
+        type=_frame_side,
+        default=1280,
+        help=f"frame width for the processing part (its first size; at least {MIN_FRAME_SIDE})",
+    )
+    bench.add_argument(
+        "--repeats",
+        type=positive_int,
+        default=5,
+        help="processing part: repeats of the solver timings (the best is kept)",
     )
     bench.add_argument(
         "--pairs",

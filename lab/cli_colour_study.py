@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, print_json, progress
+from msflash.acquisition.app.cli_common import UsageError, print_json, progress, seed_int
 from msflash.acquisition.app.options import flash_bounds_option
 from msflash.lab.cli_support import optional_claimed_output
 from msflash.lab.colour_study import STUDY_AMBIENTS, colour_study
@@ -45,12 +45,39 @@ def _study(args: argparse.Namespace) -> int:
     return 0
 
 
+MIN_PATCH_PX, MAX_PATCH_PX = 8, 256
+"""``--patch-px``'s range: the smallest that keeps at least 2 usable pixels of each CFA plane inside the study's
+edge margin (7 left 1 and the refusal named a ``--margin-px`` the command does not have), the largest a
+1 k × 1.6 k-pixel chart rendered under every light of the study (``--patch-px 100000`` asked for a
+400 000 × 600 000 label map and crashed with a MemoryError)."""
+
+
+def _patch_side(text: str) -> int:
+    """argparse type of ``--patch-px``: a whole number in :data:`MIN_PATCH_PX` … :data:`MAX_PATCH_PX`.
+
+    >>> _patch_side("12")
+    12
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not MIN_PATCH_PX <= value <= MAX_PATCH_PX:
+        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number of pixels, {MIN_PATCH_PX}-{MAX_PATCH_PX}")
+    return value
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``colour-study``."""
     study = subparsers.add_parser("colour-study", help="simulated Fig. 9 (ΔE per ambient) and Fig. 3 (noise) study")
     study.add_argument("--ambients", default=",".join(STUDY_AMBIENTS), help="comma-separated ambients")
-    study.add_argument("--seed", type=int, default=0, help="noise seed")
-    study.add_argument("--patch-px", type=int, default=12, help="patch side in pixels")
+    study.add_argument("--seed", type=seed_int, default=0, help="noise seed")
+    study.add_argument(
+        "--patch-px",
+        type=_patch_side,
+        default=12,
+        help=f"patch side in pixels, {MIN_PATCH_PX}-{MAX_PATCH_PX} (default 12; the simulated chart is 4 × 6 patches)",
+    )
     study.add_argument("--cfa", default=None, choices=("RGGB", "BGGR", "GRBG", "GBRG"), help="raw Bayer frames")
     flash_bounds_option(study)
     study.add_argument("--depth-m", type=float, default=5.0, help="underwater: depth of the chart")

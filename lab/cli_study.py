@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +25,7 @@ from msflash.acquisition.app.cli_common import (
     positive_int,
     print_json,
     progress,
+    seed_int,
 )
 from msflash.acquisition.app.options import add_scheduler_options
 from msflash.acquisition.app.plot_style import PALETTE, pyplot, save_figure
@@ -263,6 +265,43 @@ def _plot_surfaces(result: dict[str, Any], path: Path) -> None:
     save_figure(figure, path)
 
 
+MAX_PARETO_PATCH_PX = 256
+"""The largest pareto ``--patch-px``: its chart110 of 10 × 11 patches is then 2.9 k × 3.2 k pixels a frame
+(``--patch-px 100000`` asked for a 4 TiB label map and crashed with a MemoryError)."""
+
+
+def _pareto_patch(text: str) -> int:
+    """argparse type of ``--patch-px``: a whole number of pixels, 1 … :data:`MAX_PARETO_PATCH_PX`.
+
+    >>> _pareto_patch("40")
+    40
+    """
+    value = positive_int(text)
+    if value > MAX_PARETO_PATCH_PX:
+        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number of pixels, 1-{MAX_PARETO_PATCH_PX}")
+    return value
+
+
+def _finite_at_least(lowest: float, expected: str) -> Callable[[str], float]:
+    """argparse type of a finite number ≥ ``lowest`` (``--threshold nan`` counted no estimate as failed, ``-1``
+    every one; ``--ambient-to-flash -1`` or ``nan`` reached the simulation).
+
+    >>> _finite_at_least(0.0, "a finite RMSE ≥ 0")("0.1")
+    0.1
+    """
+
+    def number(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value >= lowest):
+            raise argparse.ArgumentTypeError(f"'{text}': expected {expected}")
+        return value
+
+    return number
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``msflash study``."""
     study = subparsers.add_parser(
@@ -320,20 +359,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     study.add_argument(
         "--threshold",
-        type=float,
+        type=_finite_at_least(0.0, "a finite RMSE ≥ 0"),
         default=0.1,
         help="failure: excess spectrum RMSE over the baseline counted as a failure (default 0.1)",
     )
     study.add_argument("--records", action="store_true", help="failure: keep every estimate's record in the JSON")
     study.add_argument(
         "--ambient-to-flash",
-        type=float,
+        type=_finite_at_least(math.ulp(0.0), "a finite ratio > 0"),
         default=0.5,
         help="pareto: the ambient's camera signal over all LEDs' together at full drive (default 0.5: the sim "
         "rig's before --flash-power; its default booth now gives 0.05)",
     )
     study.add_argument(
-        "--patch-px", type=positive_int, default=40, help="pareto: chart patch size in pixels (default 40)"
+        "--patch-px",
+        type=_pareto_patch,
+        default=40,
+        help=f"pareto: chart patch size in pixels (default 40; at most {MAX_PARETO_PATCH_PX})",
     )
     study.add_argument(
         "--samplings",
@@ -350,7 +392,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="use N of the 23 feasible illuminants, spread over the grid",
     )
     study.add_argument("--draws", type=positive_int, default=10, help="surfaces: draws per count (default 10)")
-    study.add_argument("--seed", type=int, default=0, help="surfaces: random seed of the draws")
+    study.add_argument("--seed", type=seed_int, default=0, help="surfaces: random seed of the draws")
     add_scheduler_options(study, what="study's cameras and illuminants")
     study.set_defaults(handler=_run)
 

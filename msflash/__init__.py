@@ -22,8 +22,9 @@ command line (which starts under this package) pays nothing for the public face.
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 if TYPE_CHECKING:  # pragma: no cover - names for the annotations only
     import numpy as np
@@ -102,6 +103,7 @@ def estimate_ambient(
         ``spectrum`` holds), ``.ambient_weights`` (w_a), ``.spectrum_std`` (±1σ, same unit;
         ``.band_meaning`` says what it covers), ``.warnings`` and ``.payload``, the whole JSON object.
     """
+    _require_sequence(sequence, "estimate_ambient")
     from msflash.acquisition.session.one_sequence import (
         LIGHT_MODELS,
         EstimateSettings,
@@ -147,6 +149,11 @@ def solve_flash(
     FlashSolution
         ``.flash_weights`` (one drive level per LED, 0–1), ``.relative_error``, ``.warnings``.
     """
+    _require_sequence(sequence, "solve_flash")
+    if not hasattr(estimate, "ambient_weights"):
+        _refuse("solve_flash", "estimate", estimate, "the result of msflash.estimate_ambient(sequence)")
+    if not isinstance(target, str | os.PathLike):
+        _refuse("solve_flash", "target", target, "an illuminant name (D65, A, …) or the path of a CSV file")
     from msflash.acquisition.session.analysis import solve_sequence_flash
 
     return solve_sequence_flash(sequence, mode, estimate.ambient_weights, target)
@@ -168,6 +175,10 @@ def synthesize_flash(sequence: Sequence, flash: FlashSolution | np.ndarray) -> n
 
     from msflash.acquisition.session.analysis import synthesize_checked
 
+    _require_sequence(sequence, "synthesize_flash")
+    if flash is None or isinstance(flash, str | bytes):  # np.asarray(None) is one NaN weight: "1 flash weights"
+        _refuse("synthesize_flash", "flash", flash, "the result of msflash.solve_flash, or one weight per LED")
+
     weights = flash.flash_weights if hasattr(flash, "flash_weights") else np.asarray(flash, dtype=float)
     image, _saturated, _frames, _flicker = synthesize_checked(sequence, weights)
     return image
@@ -179,6 +190,36 @@ def render_preview(sequence: Sequence, image: np.ndarray) -> np.ndarray:
     The camera's colours go to sRGB through a matrix fitted on a chart when the sequence carries
     the camera's responsivities; otherwise the camera's channels are shown as they are.
     """
-    from msflash.acquisition.app.report import preview_image
+    import numpy as np
 
+    from msflash.acquisition.app.report import preview_image
+    from msflash.acquisition.errors import UsageError
+
+    _require_sequence(sequence, "render_preview")
+    if not isinstance(image, np.ndarray) or image.ndim not in (2, 3) or not np.issubdtype(image.dtype, np.number):
+        _refuse("render_preview", "image", image, "a numeric image, (H, W) or (H, W, 3), such as synthesize_flash's")
+    finite = np.isfinite(image)
+    if not finite.all():
+        raise UsageError(
+            f"msflash.render_preview: image holds {image.size - int(np.count_nonzero(finite))} NaN or infinite "
+            f"values of {image.size}; expected finite linear values"
+        )
     return preview_image(sequence, image)
+
+
+def _require_sequence(sequence: object, function: str) -> None:
+    """Refuse anything but a read sequence as ``sequence`` (a path passed in its place failed with an
+    AttributeError deep inside)."""
+    from msflash.acquisition.sequence.format import Sequence
+
+    if not isinstance(sequence, Sequence):
+        _refuse(function, "sequence", sequence, "a sequence read by msflash.read_sequence(path)")
+
+
+def _refuse(function: str, name: str, value: object, expected: str) -> NoReturn:
+    """Raise the UsageError of a wrong argument: the function, the parameter, what it was and what it expects."""
+    from msflash.acquisition.errors import UsageError
+
+    shown = " ".join(repr(value).split())  # one line (an array's repr spans several)
+    shown = shown if len(shown) <= 60 else shown[:57] + "..."
+    raise UsageError(f"msflash.{function}: {name} is {type(value).__name__} {shown}; expected {expected}")

@@ -87,6 +87,27 @@ def uniform_scene(reflectance: Spectra, height: int, width: int, shading: np.nda
     return Scene(reflectance.select([0]), np.zeros((height, width), dtype=np.int32), shading=shading)
 
 
+def chart_grid(n_patches: int) -> tuple[int, int]:
+    """Rows and columns of :func:`chart_scene`'s chart of ``n_patches``: 6 columns for 24, else ``ceil(sqrt(n))``.
+
+    >>> chart_grid(24), chart_grid(110)
+    ((4, 6), (10, 11))
+    """
+    columns = 6 if n_patches == 24 else math.ceil(math.sqrt(n_patches))
+    return math.ceil(n_patches / columns), columns
+
+
+def chart_shape(n_patches: int, patch_px: int, border_px: int) -> tuple[int, int]:
+    """Height and width in pixels of :func:`chart_scene`'s chart, without building it (a caller checks that a
+    layout fits an image before the label map is allocated).
+
+    >>> chart_shape(24, 8, 2)
+    (42, 62)
+    """
+    rows, columns = chart_grid(n_patches)
+    return rows * patch_px + (rows + 1) * border_px, columns * patch_px + (columns + 1) * border_px
+
+
 def chart_scene(
     reflectances: Spectra | Literal["chart110", "macbeth"] = "chart110",
     patch_px: int = 8,
@@ -128,11 +149,9 @@ def chart_scene(
             f"chart_scene: patch_px {patch_px}, border_px {border_px}, specular_strip_px "
             f"{specular_strip_px}; expected patch_px ≥ 1 and the others ≥ 0"
         )
-    columns = 6 if n == 24 else math.ceil(math.sqrt(n))
-    rows = math.ceil(n / columns)
+    rows, _ = chart_grid(n)
     border = n
-    height = rows * patch_px + (rows + 1) * border_px
-    width = columns * patch_px + (columns + 1) * border_px
+    height, width = chart_shape(n, patch_px, border_px)
     labels = np.full((height + specular_strip_px, width), border, dtype=np.int32)
     for k in range(n):
         row, column = k % rows, k // rows  # column-major, as ISET lays out its charts

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.app.cli_common import UsageError, claimed_output, positive_int, print_json, progress
+from msflash.acquisition.app.cli_common import UsageError, claimed_output, positive_int, print_json, progress, seed_int
 from msflash.acquisition.app.options import layout_options
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
@@ -429,7 +429,7 @@ def _register_camera(commands: argparse._SubParsersAction) -> None:
         choices=("pca_prior", "pca_subspace", "smoothness"),
         help="prior: the learned second moment (default), its best subspace by evidence, or smoothness",
     )
-    camera.add_argument("--seed", type=int, default=0)
+    camera.add_argument("--seed", type=seed_int, default=0)
     camera.add_argument("--out", required=True, help="calibration directory (created or updated)")
     camera.add_argument("--json", action="store_true")
     camera.set_defaults(handler=_bad_input(_camera))

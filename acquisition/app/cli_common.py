@@ -38,6 +38,22 @@ def positive_int(text: str) -> int:
     return value
 
 
+def seed_int(text: str) -> int:
+    """argparse type of ``--seed``: a whole number ≥ 0, what numpy's generators take (a negative seed reached
+    them as a ValueError: exit 1 or a crash, naming neither the option nor what it expects).
+
+    >>> seed_int("0"), seed_int("12")
+    (0, 12)
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ 0") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ 0")
+    return value
+
+
 def boot_seconds(text: str) -> float:
     """argparse type of ``--booth-boot-s``: a finite number of seconds ≥ 0 (0: no wait).
 

@@ -4,9 +4,11 @@ measures and how: its docstring)."""
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import (
+    UsageError,
     claimed_output,
     print_json,
     progress,
@@ -24,10 +26,24 @@ def _default_out(sequence_dir: Path) -> Path:
     return sequence_dir.resolve().parent / "evaluation"
 
 
+def _refuse_a_run_or_sequence(out: Path) -> None:
+    """``--out`` must not be a run's folder or a sequence's: the evaluation writes ``report.html``,
+    ``matching.exr``, ``ambient.png`` … and ``evaluate RUN --out RUN`` replaced the run's own report and images."""
+    for marker, what in (("run.json", "run"), ("sequence.json", "sequence")):
+        if os.path.isfile(out / marker):  # False on any OSError: a name too long is claimed_output's to refuse
+            raise UsageError(
+                f"--out {out}: holds a {what} ({marker}); the evaluation's report.html and images would replace or sit "
+                "among its own; "
+                "expected a new folder or an earlier evaluation's (the default is evaluation/ beside the sequence)"
+            )
+
+
 def _evaluate(args: argparse.Namespace) -> int:
     directory = locate_sequence(args.sequence)
     sequence = read_sequence(directory)
-    with claimed_output(args.out if args.out else _default_out(directory), "msflash evaluate") as out:
+    target = Path(args.out) if args.out else _default_out(directory)
+    _refuse_a_run_or_sequence(target)
+    with claimed_output(target, "msflash evaluate") as out:
         result = evaluate_sequence(
             sequence, out, args.chart, args.patch_px, args.border_px, args.margin_px, args.bounds, args.target
         )

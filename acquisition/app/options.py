@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 from collections.abc import Callable
-from pathlib import Path
 
 from msflash.acquisition.app.cli_common import positive_int
 from msflash.acquisition.devices.sim_default import MONO, SIM_DEFAULT_CFA
@@ -16,15 +14,22 @@ from msflash.processing.ambient import AMBIENT_METHODS
 
 
 def target_value(text: str) -> str:
-    """argparse type of ``--target``: a CSV file (read when used), or an illuminant name checked now.
+    """argparse type of ``--target``: a CSV file or an illuminant name, both checked now (a file's coverage of the
+    sequence's grid when it is used).
 
     A mistyped name is refused before a rig opens or a frame is captured, naming ``--target`` and the
     names it was probably meant to be.
     """
-    if Path(text).suffix.lower() in (".csv", ".txt") or os.path.lexists(text):
+    from msflash.acquisition.session.sequence_spectra import is_target_file, target_file_spectrum
+    from msflash.processing.errors import SpectralDataError
+
+    if is_target_file(text):
+        try:  # read now: a missing or dark file was refused only after the rig had metered and captured
+            target_file_spectrum(text)
+        except (ValueError, OSError) as err:  # every bad-input error of msflash is a ValueError
+            raise argparse.ArgumentTypeError(str(err)) from None
         return text
     from msflash.processing import datasets
-    from msflash.processing.errors import SpectralDataError
     from msflash.processing.spectra import DEFAULT_GRID
 
     try:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -22,7 +23,7 @@ from msflash.acquisition.app.camera_options import (
     camera_options_from_args,
     given_camera_options,
 )
-from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, seed_int
 from msflash.acquisition.app.options import (
     SIM_CFA_CHOICES,
     SIM_CFA_HELP,
@@ -401,7 +402,27 @@ def _add_world_options(parser: argparse.ArgumentParser, booth_port_help: str | N
         "LED driver); each frame sees the lamp's mean over its own exposure window (default: steady; docs/flicker.md)",
     )
     sim.add_argument("--cfa", default=None, choices=SIM_CFA_CHOICES, help=SIM_CFA_HELP)
-    sim.add_argument("--seed", type=int, default=0, help="noise seed (and the mosaic scene's layout)")
+    sim.add_argument("--seed", type=seed_int, default=0, help="noise seed (and the mosaic scene's layout)")
+
+
+def _percent_below(upper: float) -> Callable[[str], float]:
+    """argparse type of a percentage in [0, ``upper``): the range in the unit the user types (the policy's own
+    check named the fraction, ``--max-saturated 101`` as "max_saturated_fraction 1.01; expected 0 ≤ f < 0.5").
+
+    >>> _percent_below(50.0)("0.1")
+    0.1
+    """
+
+    def percent(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not 0 <= value < upper:
+            raise argparse.ArgumentTypeError(f"'{text}': expected a percentage, 0 ≤ PERCENT < {upper:g}")
+        return value
+
+    return percent
 
 
 def _add_pacing_options(parser: argparse.ArgumentParser) -> None:
@@ -427,7 +448,7 @@ def _add_pacing_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-serial", default=None, help="write the booth serial transcript to this file")
     parser.add_argument(
         "--max-saturated",
-        type=float,
+        type=_percent_below(50.0),
         default=0.1,
         metavar="PERCENT",
         help="auto exposure: at most this percentage of pixels may saturate in a frame (default 0.1)",
@@ -442,7 +463,7 @@ def _add_pacing_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--max-lost",
-        type=float,
+        type=_percent_below(100.0),
         default=25.0,
         metavar="PERCENT",
         help="information criterion: at most this percentage of the estimator's blocks may be lost "

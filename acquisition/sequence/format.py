@@ -345,7 +345,7 @@ class Sequence(_ArrayEquality):
             If the file is not the one written (its recorded SHA-256 or length differ: changed,
             truncated or missing), was written for another entry (what the file says of its index,
             role, levels, exposure and gain differs from the entry: :mod:`frame_binding`), unreadable, its channel count does not match ``camera.cfa``, its
-            size differs from frame 0's (both files are named), or it holds values above white or
+            size or sample type differs from frame 0's (both files are named), or it holds values above white or
             below black by more than read noise allows (the count and range are named).
         """
         path = self.frame_path(index)
@@ -379,6 +379,11 @@ class Sequence(_ArrayEquality):
                     raise RecordingError(
                         f"{where} is {header.width}×{header.height} pixels but frames[0].file "
                         f"'{self.frames[0].file}' is {first.width}×{first.height}; expected one size for all frames"
+                    )
+                if first.dtype != header.dtype:  # a frame re-encoded (as float, normalised to 1?) by another tool
+                    raise RecordingError(
+                        f"{where} holds {header.dtype} samples but frames[0].file '{self.frames[0].file}' holds "
+                        f"{first.dtype}; expected one sample type for all frames (one camera, one encoding)"
                     )
 
         _, pixels = read_image_and_header(path, declared)

@@ -152,6 +152,12 @@ def _number_list(file: Path, field_name: str, value: Any, length: int | None, wh
     return np.array(value, dtype=float)
 
 
+WAVELENGTH_RANGE_NM = (150.0, 3000.0)
+"""Where a sequence's ``wavelengths_nm`` may lie: ultraviolet to short-wave infrared. A grid in micrometres (0.4–0.7)
+or ångström (4000–7000) was read as nanometres, every spectrum and the estimate on it (the band's measured lights,
+the prior, the targets resampled to nothing) and printed as "0.4 nm"."""
+
+
 def _spectrum(file: Path, field_name: str, value: Any, wavelengths_nm: np.ndarray) -> np.ndarray:
     """A spectrum's values; negatives within measurement noise become 0, larger ones are refused.
 
@@ -366,6 +372,13 @@ def parse_document(file: Path, directory: Path, document: Any, *, check_files: b
         grid = WavelengthGrid.from_wavelengths(wavelengths, where="wavelengths_nm")
     except SpectralDataError as err:
         raise RecordingError(f"{file}: {err}") from err
+    low, high = WAVELENGTH_RANGE_NM
+    if grid.start_nm < low or grid.stop_nm > high:
+        top.fail(
+            "wavelengths_nm",
+            f"spans {grid.start_nm:g}–{grid.stop_nm:g}",
+            f"nanometres within {low:g}–{high:g} (a grid of 0.4–0.7 is in micrometres: times 1000)",
+        )
     unit = top.choice("spectral_unit", SPECTRAL_UNITS)
     camera = _parse_camera(file, top.get("camera", "an object"), grid.wavelengths_nm)
     leds = _parse_leds(file, top.get("leds", "a list of LED objects"), grid.wavelengths_nm)

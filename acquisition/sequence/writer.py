@@ -169,7 +169,17 @@ def latest_sequence_written() -> tuple[Path, bool] | None:
     if not _LATEST_WRITER:
         return None
     writer = _LATEST_WRITER[0]
-    return writer._directory, writer._finished
+    return writer._directory, writer._finished or _complete_on_disk(writer._path)
+
+
+def _complete_on_disk(path: Path) -> bool:
+    """Whether ``sequence.json`` at ``path`` says ``complete: true``. A signal arriving inside :meth:`SequenceWriter.finish`
+    after the file was replaced but before the writer noted it left the flag behind the disk: the stop line then
+    said "marked incomplete" of a complete sequence."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8")).get("complete") is True
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def forget_latest_sequence() -> None:
@@ -184,7 +194,8 @@ class SequenceWriter:
     ``sequence.json`` is written (``complete: false``) when the writer is created; each
     :meth:`add_frame` writes the frame file, then replaces ``sequence.json`` atomically;
     :meth:`finish` (or leaving the ``with`` block normally) sets ``complete: true``. Leaving the
-    ``with`` block through an exception keeps ``complete: false`` and every frame written so far.
+    ``with`` block through an exception keeps ``complete: false`` and every frame written so far; a
+    sequence left without any frame is removed (with the folders the writer made, when empty).
 
     Parameters
     ----------
@@ -227,6 +238,7 @@ class SequenceWriter:
             # Say so in the file (format v1, §6): a reader takes the three identical channels as one plane.
             camera = replace(camera, extra={**camera.extra, "channels": "mono replicated to R, G, B"})
         self._path = self._directory / SEQUENCE_FILE
+        self._made_directory = not os.path.lexists(self._directory)
         self._claim: FolderClaim | None = None
         self._sequence = Sequence(
             self._directory,
@@ -427,6 +439,20 @@ class SequenceWriter:
                 self.finish()
         finally:
             self._release()
+            if exc_type is not None and not self._sequence.frames:
+                self._discard_empty()
+
+    def _discard_empty(self) -> None:
+        """Remove a sequence that never got a frame (a replay refused at its plan, a camera failing at step 0, Ctrl-C
+        before the first frame): its ``complete: false`` file with no frame kept nothing, yet made the ``--out`` it
+        sat in "already hold a run" and said frames were kept. The folders it made go too, when empty."""
+        with contextlib.suppress(OSError):
+            self._path.unlink()
+        for folder in (self._directory / FRAMES_DIR, *((self._directory,) if self._made_directory else ())):
+            with contextlib.suppress(OSError):  # absent, or holding something that is not ours
+                folder.rmdir()
+        if _LATEST_WRITER and _LATEST_WRITER[0] is self:
+            _LATEST_WRITER.clear()
 
 
 def _as_float(value: Any) -> Any:

@@ -156,15 +156,20 @@ def block_factor(shape: tuple[int, ...], cfa: str | None, bin_factor: int = DEFA
     (8, 4, 4)
     >>> block_factor((1024, 1280, 3), None, 5), block_factor((1024, 1280, 3), None, 1)
     (4, 1)
+    >>> [block_factor((106, 112), "RGGB", factor) for factor in (6, 10, 12, 1000)]
+    [4, 4, 4, 4]
     """
     period = 2 if cfa is not None else 1
     side = min(shape[:2]) // period
-    if bin_factor > 1 and bin_factor % 2:
-        bin_factor -= 1
+
+    def even(factor: int) -> int:  # an odd block has no noise probe: 1000 halved to 125, or 6 to 3, lost it
+        return factor - 1 if factor > 1 and factor % 2 else factor
+
+    bin_factor = even(bin_factor)
     while bin_factor > 4 and side // bin_factor < BLOCKS_PER_SIDE:
-        bin_factor //= 2
+        bin_factor = max(4, even(bin_factor // 2))
     while bin_factor > 1 and side // bin_factor < 8:
-        bin_factor //= 2
+        bin_factor = even(bin_factor // 2)
     return max(bin_factor, 1)
 
 

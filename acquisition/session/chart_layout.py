@@ -25,7 +25,7 @@ from msflash.calibration.chart_grid import MACBETH_GRID, ChartDetectionError, Ch
 from msflash.processing import colour_metrics, datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.names import unknown_name
-from msflash.processing.scenes import chart_scene
+from msflash.processing.scenes import chart_scene, chart_shape
 from msflash.processing.spectra import Spectra, WavelengthGrid
 
 CHARTS = ("macbeth",)
@@ -188,14 +188,15 @@ def chart_layout(
         raise UsageError(
             f"--margin-px {margin_px} leaves nothing of {patch_px}-pixel patches; expected margin < patch/2"
         )
-    scene = chart_scene(chart, patch_px=patch_px, border_px=border_px)
-    n_patches = scene.reflectances.count - 1  # the last surface is the border
-    height, width = scene.shape
+    # Checked before the chart is drawn: --patch-px 100000 asked for a label map of hundreds of GiB.
+    height, width = chart_shape(MACBETH_GRID[0] * MACBETH_GRID[1], patch_px, border_px)
     if height > shape[0] or width > shape[1]:
         raise UsageError(
             f"--patch-px {patch_px} --border-px {border_px}: the {chart} chart is {height}×{width} pixels "
             f"but the image is {shape[0]}×{shape[1]}; expected the sim rig's layout"
         )
+    scene = chart_scene(chart, patch_px=patch_px, border_px=border_px)
+    n_patches = scene.reflectances.count - 1  # the last surface is the border
     labels = np.full(shape, -1, dtype=np.int64)
     chart_labels = np.asarray(scene.labels, dtype=np.int64)
     labels[:height, :width] = np.where(chart_labels == n_patches, -1, chart_labels)

@@ -116,11 +116,18 @@ def snr_with_model(
     noise: NoiseModel,
     valid: np.ndarray,
     gain: float = 1.0,
+    led_gain: float | None = None,
 ) -> float:
-    """Median SNR of the LED-only rate image for frames at these exposures, from expected values."""
-    signal = led_rate - ambient_rate
+    """Median SNR of the LED-only rate image for frames at these exposures, from expected values.
+
+    Rates are DN per µs at each frame's own gain: ``gain`` the ambient frame's, ``led_gain`` the LED frame's (default
+    the same); the LED frame's rate is compared at the ambient's gain.
+    """
+    scale = 1.0 if led_gain is None else gain / led_gain
+    led_gain = gain if led_gain is None else led_gain
+    signal = led_rate * scale - ambient_rate
     variance = (
-        noise.variance_dn(led_rate * led_us, gain) / led_us**2
+        noise.variance_dn(led_rate * led_us, led_gain) / led_us**2 * scale**2
         + noise.variance_dn(ambient_rate * ambient_us, gain) / ambient_us**2
     )
     snr = signal / np.sqrt(np.maximum(variance, 1e-30))
@@ -168,17 +175,31 @@ def measure_led_snr(
     cfa: bool = False,
     gain: float = 1.0,
     stride: int = 2,
+    led_gains: Sequence[float] | None = None,
 ) -> tuple[list[float], str]:
-    """Per-LED SNR of the LED-only images of captured frames, and the method used."""
+    """Per-LED SNR of the LED-only images of captured frames, and the method used.
+
+    ``gain`` is the ambient frame's gain, ``led_gains`` each LED frame's (default all ``gain``): a frame's values
+    are divided by its exposure × gain before the ambient's are taken from them. (Divided by the exposure alone,
+    an LED frame at gain 1 after an ambient at gain 1.5 — the independent Bayer sample's — read darker than the
+    ambient: "no LED signal" for three LEDs that had one.)
+    """
+    gains = [gain] * len(led_frames) if led_gains is None else list(led_gains)
     values: list[float] = []
     if noise is None:
-        for frame, exposure in zip(led_frames, led_us, strict=True):
-            values.append(snr_from_difference(ambient, frame, ambient_us, exposure, black, white, cfa))
+        for frame, exposure, led_gain in zip(led_frames, led_us, gains, strict=True):
+            # The LED frame's exposure in the ambient's gain units (itself when the gains agree, bit for bit).
+            equivalent_us = exposure if led_gain == gain else exposure * led_gain / gain
+            values.append(snr_from_difference(ambient, frame, ambient_us, equivalent_us, black, white, cfa))
         return values, "difference image"
     ambient_rate = rates(ambient, ambient_us, black, stride)
     ambient_ok = unsaturated(ambient, white, stride)
-    for frame, exposure in zip(led_frames, led_us, strict=True):
+    for frame, exposure, led_gain in zip(led_frames, led_us, gains, strict=True):
         rate = rates(frame, exposure, black, stride)
         valid = ambient_ok & unsaturated(frame, white, stride)
-        values.append(snr_with_model(ambient_rate, rate, ambient_us, exposure, noise, valid, gain))
+        values.append(
+            snr_with_model(
+                ambient_rate, rate, ambient_us, exposure, noise, valid, gain, None if led_gain == gain else led_gain
+            )
+        )
     return values, "photon+read noise"

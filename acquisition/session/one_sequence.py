@@ -182,6 +182,7 @@ def estimate_read(sequence: Sequence, settings: EstimateSettings, report: Report
     """:func:`estimate_one` of a sequence already read (and calibrated): what ``msflash estimate`` prints for it,
     and what :func:`msflash.estimate_ambient` returns (:class:`SequenceEstimate`). ``settings.calibration`` is
     not applied here. The route is :data:`ESTIMATE_METHODS`'s entry for :func:`method_of` the settings."""
+    check_settings(settings)
     if sequence.partial:
         report(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
     reference = settings.reference_chart if settings.reference_chart is not None else settings.reference_patch
@@ -193,6 +194,34 @@ def estimate_read(sequence: Sequence, settings: EstimateSettings, report: Report
         option = "--reference-chart" if settings.reference_chart is not None else "--reference-patch"
         raise UsageError(f"{option}: expected --model prior, family or auto (the LEDs' span needs no reference)")
     return ESTIMATE_METHODS[validate_method(method_of(settings))](sequence, settings, report)
+
+
+def check_settings(settings: EstimateSettings) -> None:
+    """Refuse settings the command line's own types would have refused (the Python API passes them as given).
+
+    ``bin_factor=0`` and ``tiles=-1`` were taken as 1 silently, ``1.5`` and ``True`` as numbers, ``"4"`` or
+    ``nan`` failed deep inside with a TypeError; a solver's name was a plain ValueError.
+
+    Raises
+    ------
+    UsageError
+        Naming the parameter, its option and what it expects.
+    """
+    from msflash.processing.ambient import AMBIENT_METHODS
+
+    models = ("led", *LIGHT_MODELS.values())
+    if settings.model not in models:  # named as itself, not as the method it would have been looked up as
+        raise UsageError(unknown_name("model (--model)", str(settings.model), models))
+    if settings.solver not in AMBIENT_METHODS:
+        raise UsageError(unknown_name("solver (--solver)", str(settings.solver), sorted(AMBIENT_METHODS)))
+    alpha = settings.alpha
+    if alpha != "auto" and not (
+        isinstance(alpha, int | float) and not isinstance(alpha, bool) and 0 <= alpha < float("inf")
+    ):
+        raise UsageError(f"alpha (--alpha) {alpha!r}: expected a finite number ≥ 0 or 'auto'")
+    for name, option, value in (("bin_factor", "--bin", settings.bin_factor), ("tiles", "--tiles", settings.tiles)):
+        if not (isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 1):
+            raise UsageError(f"{name} ({option}) {value!r}: expected a whole number ≥ 1")
 
 
 def _light_models(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
@@ -381,9 +410,18 @@ def check_output_type(output: Path) -> str:
 
 
 def check_raw_output(kind: str | None, output: Path, sequence: Sequence) -> None:
-    """Refuse a raw ``.tiff`` (``kind`` from :func:`check_output_type`) for a sequence whose frames are float (EXR):
-    raw TIFF values are whole counts in the frames' own encoding, and float frames have none (normalised ones,
-    white level 1, would all round to 0 or 1)."""
+    """Refuse an ``--out`` inside the sequence's own folder, and a raw ``.tiff`` (``kind`` from
+    :func:`check_output_type`) for a sequence whose frames are float (EXR).
+
+    Inside the sequence folder the image would replace a captured frame (``--out SEQ/frames/000-ambient.tiff``,
+    a capture lost) or be an undeclared file there. Raw TIFF values are whole counts in the frames' own
+    encoding, and float frames have none (normalised ones, white level 1, would all round to 0 or 1)."""
+    folder = sequence.directory.resolve()
+    if output.resolve().is_relative_to(folder):
+        raise UsageError(
+            f"--out {output}: inside the sequence folder {sequence.directory}, where it would replace or sit "
+            "among the captured frames; expected a path outside it (e.g. beside it, in the run folder)"
+        )
     ambient = sequence.indices("ambient")
     if kind != "tiff" or not ambient:
         return

@@ -188,6 +188,7 @@ def led_capture(
         camera_noise_model(rig.camera),
         cfa=info.cfa is not None,
         gain=frames[0].gain,
+        led_gains=[f.gain for f in frames[1:]],
     )
     names = led_names
     progress(f"LED SNR ({method}, median pixel): " + format_led_snr(names, snr))

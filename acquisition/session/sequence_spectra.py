@@ -133,28 +133,47 @@ def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarr
     return spectrum.to_unit(sequence.spectral_unit).values[:, 0]
 
 
+def is_target_file(target: str) -> bool:
+    """Whether ``--target`` names a file (a ``.csv``/``.txt`` name, or anything on disk) rather than an illuminant."""
+    return Path(target).suffix.lower() in (".csv", ".txt") or os.path.lexists(target)
+
+
+def target_file_spectrum(target: str) -> Spectra:
+    """The one spectrum of a ``--target`` file, its negative noise clipped, as read (energy, the file's grid).
+
+    Needs no sequence, so ``--target`` is read when the command line is parsed: a missing, empty or dark file (or
+    one of several spectra) is refused before a rig opens, not after the frames were metered and captured.
+
+    Raises
+    ------
+    RecordingError
+        Missing, more than one spectrum, negative beyond noise, or no light; the table reader's own errors.
+    """
+    path = Path(target)
+    if not os.path.lexists(path):
+        raise RecordingError(f"{target}: target illuminant file not found; expected a CSV file or a name like D65")
+    spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
+    shown = shown_path(path)
+    if spectra.count != 1:  # its first column was taken: another file's numbers, silently
+        raise RecordingError(
+            f"--target {shown}: {spectra.count} spectra ({printable(', '.join(spectra.names))[:120]}); expected one "
+            "target illuminant (wavelength_nm, value) — an exported spectra.csv holds several: keep the column meant"
+        )
+    # Negative noise clipped to 0 as every measured spectrum's is; beyond it, and no light at all, refused.
+    values, _ = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, f"--target {shown}")
+    if not values.max() > 0:
+        raise RecordingError(f"--target {shown}: no light; expected a spectrum with some positive values")
+    return spectra.replace(values=values)
+
+
 def target_illuminant(target: str, sequence: Sequence) -> Spectra:
     """The complementary target ``i_d`` in photons on the sequence's grid: a name or a CSV file.
 
     Names are those of :func:`processing.datasets.illuminant` (D65, A, FL2, …); a file is a
     two-column CSV ``wavelength_nm, value`` in energy units.
     """
-    path = Path(target)
-    if path.suffix.lower() in (".csv", ".txt") or os.path.lexists(path):
-        if not os.path.lexists(path):
-            raise RecordingError(f"{target}: target illuminant file not found; expected a CSV file or a name like D65")
-        spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
-        shown = shown_path(path)
-        if spectra.count != 1:  # its first column was taken: another file's numbers, silently
-            raise RecordingError(
-                f"--target {shown}: {spectra.count} spectra ({printable(', '.join(spectra.names))[:120]}); expected one "
-                "target illuminant (wavelength_nm, value) — an exported spectra.csv holds several: keep the column meant"
-            )
-        # Negative noise clipped to 0 as every measured spectrum's is; beyond it, and no light at all, refused.
-        values, _ = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, f"--target {shown}")
-        if not values.max() > 0:
-            raise RecordingError(f"--target {shown}: no light; expected a spectrum with some positive values")
-        spectra = spectra.replace(values=values)
+    if is_target_file(target):
+        spectra = target_file_spectrum(target)
         try:
             resampled = spectra.resample(sequence.grid, outside="error")
         except SpectralDataError as err:

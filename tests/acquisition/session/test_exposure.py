@@ -454,7 +454,7 @@ def test_capture_with_the_information_criterion_from_the_command_line(tmp_path, 
     assert (
         main(["capture", "--out", str(tmp_path / "x"), "--exposure-criterion", "information", "--max-lost", "150"]) == 2
     )
-    assert "--max-lost 150" in capsys.readouterr().err
+    assert "--max-lost: '150'" in capsys.readouterr().err
 
 
 def test_a_mosaic_is_metered_on_every_colour_site() -> None:
