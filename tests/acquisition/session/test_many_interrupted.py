@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.acquisition.support.held_dask_worker import held_workers, workers_held
+from tests.acquisition.support.held_dask_worker import signal_pending, workers_held
 from tests.helpers import write_test_sequence
 
 
@@ -53,23 +53,23 @@ def test_a_signal_while_the_cluster_starts_exits_in_one_line_and_leaves_no_proce
     gate = tmp_path / "gate" / "workers"
     gate.parent.mkdir()
     children: list[int] = []
-    with workers_held(gate) as held_environment:
+    with workers_held(gate) as held:
         process = subprocess.Popen(
             [sys.executable, "-m", "msflash.acquisition.app.cli", "estimate", str(day), "--workers", "2", "--json"],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             start_new_session=True,  # its own group: SIGINT is not ignored as in a background job
-            env={**os.environ, **held_environment},
+            env={**os.environ, **held.environment},
         )
         try:
             deadline = time.monotonic() + 120  # a hang guard, not a timing
-            while not held_workers(gate):  # a worker waits at the gate: LocalCluster(...) cannot return
+            while not held.waiting():  # a worker waits at the gate: LocalCluster(...) cannot return
                 assert process.poll() is None, process.communicate()
                 assert time.monotonic() < deadline, "no dask worker reached the gate"
                 time.sleep(0.01)
             children = _descendants(process.pid)
             os.kill(process.pid, stop)
-            while _pending(process.pid, stop):  # delivered, before the workers may go on
+            while signal_pending(process.pid, stop):  # delivered, before the workers may go on
                 assert time.monotonic() < deadline, "the signal was never delivered"
                 time.sleep(0.01)
         except BaseException:
@@ -93,14 +93,6 @@ def test_a_signal_while_the_cluster_starts_exits_in_one_line_and_leaves_no_proce
     while alive := [pid for pid in children if _running(pid)]:
         assert time.monotonic() < deadline, f"dask processes {alive} outlived msflash"
         time.sleep(0.1)
-
-
-def _pending(pid: int, number: int) -> bool:
-    """Whether signal ``number`` sent to process ``pid`` waits undelivered (its shared pending set, /proc status)."""
-    for line in (Path("/proc") / str(pid) / "status").read_text().splitlines():
-        if line.startswith("ShdPnd:"):
-            return bool(int(line.split()[1], 16) >> (number - 1) & 1)
-    return False
 
 
 def _running(pid: int) -> bool:
