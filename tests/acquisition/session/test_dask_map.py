@@ -146,6 +146,43 @@ def test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_clo
     assert started and all(cluster.status.name == "closed" for cluster in started)
 
 
+def test_a_signal_just_after_the_cluster_started_still_closes_it() -> None:
+    """Ctrl-C between the deferred start (the handlers back) and the cleanup taking charge: the cluster is closed.
+    It was left running, to dask's exit hook at best. The signal is raised on that line by a trace hook in the main
+    thread, not by a race."""
+    import inspect
+    import signal
+    import sys
+
+    pytest.importorskip("distributed")
+    from distributed.deploy.spec import SpecCluster
+
+    from msflash.acquisition.session import dask_map
+
+    code = dask_map.dask_mapper.__wrapped__.__code__  # type: ignore[attr-defined]
+    source, first = inspect.getsourcelines(code)
+    line = first + next(i for i, text in enumerate(source) if 'progress(f"dask: local cluster' in text)
+
+    def on_the_line(frame, event: str, _arg):
+        if event == "line" and frame.f_lineno == line:
+            signal.raise_signal(signal.SIGINT)  # the handler is Python's again: KeyboardInterrupt here
+        return on_the_line
+
+    known = set(SpecCluster._instances)
+    sys.settrace(lambda frame, _event, _arg: on_the_line if frame.f_code is code else None)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with dask_mapper("local", 1) as mapper:
+                list(mapper(_tenfold, [0]))
+    finally:
+        sys.settrace(None)
+    started = set(SpecCluster._instances) - known
+    statuses = [cluster.status.name for cluster in started]
+    for cluster in started:
+        cluster.close()  # a no-op when closed; after a failure here, not left to the next test
+    assert statuses == ["closed"]
+
+
 _WITHOUT_DASK = """
 import sys
 sys.modules["distributed"] = None  # as on an install without the study/batch extra: importing it fails
