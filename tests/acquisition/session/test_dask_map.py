@@ -135,7 +135,7 @@ def test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_clo
     with workers_held(gate) as held:
         monkeypatch.setenv(GATE_VARIABLE, str(gate))  # the worker process inherits it
         sender = threading.Thread(target=signal_once_the_worker_waits, args=(held,))
-        with dask.config.set({"distributed.worker.preload": [held.environment["DASK_DISTRIBUTED__WORKER__PRELOAD"]]}):
+        with dask.config.set({"distributed.worker.preload": [held.preload]}):
             with sigterm_as_exit(), pytest.raises(raised):
                 sender.start()
                 with dask_mapper("local", 1) as mapper:

@@ -29,12 +29,14 @@ class HeldWorkers:
 
     gate: Path
     handle: IO[str]
+    preload: str = __file__
+    """The ``distributed.worker.preload`` that makes a worker wait at the gate: this file."""
     _released: threading.Event = field(default_factory=threading.Event)
 
     @property
     def environment(self) -> dict[str, str]:
         """What a process starting a local cluster needs in its environment for its workers to wait here."""
-        return {"DASK_DISTRIBUTED__WORKER__PRELOAD": __file__, GATE_VARIABLE: str(self.gate)}
+        return {"DASK_DISTRIBUTED__WORKER__PRELOAD": self.preload, GATE_VARIABLE: str(self.gate)}
 
     def waiting(self) -> list[int]:
         """The workers that reached the gate so far (their process ids)."""
