@@ -114,21 +114,25 @@ def dask_mapper(scheduler: str, workers: int | None = None, *, verbose: bool = F
             f"--scheduler {scheduler}: dask.distributed is not installed (pip install 'dask[distributed]')"
         ) from None
     with _quiet_dask(verbose):
-        cluster = None
+        cluster = client = None
         held: list[int] = []
-        if scheduler == LOCAL:
-            n = _local_workers(workers)
-            with signals_deferred(held):
-                cluster, client = _local_cluster(LocalCluster, Client, n, verbose)
-            progress(f"dask: local cluster with {n} workers")
-        else:
-            client = _connect(Client, scheduler)
+        # The cleanup takes charge before the cluster exists: a signal just after the deferred start (the handlers
+        # back) must still close it.
         try:
+            if scheduler == LOCAL:
+                n = _local_workers(workers)
+                with signals_deferred(held):
+                    cluster = _local_cluster(LocalCluster, n, verbose)
+                    client = Client(cluster)
+                progress(f"dask: local cluster with {n} workers")
+            else:
+                client = _connect(Client, scheduler)
             deliver_deferred(held)  # a Ctrl-C while the cluster started: now that it can be closed
             yield _client_mapper(client)
         finally:
             with signals_deferred(held):
-                client.close()
+                if client is not None:
+                    client.close()
                 if cluster is not None:
                     cluster.close()
             deliver_deferred(held)
@@ -146,10 +150,10 @@ def _local_workers(workers: int | None) -> int:
     return n
 
 
-def _local_cluster(cluster_type: Any, client_type: Any, n: int, verbose: bool) -> tuple[Any, Any]:
-    """A local cluster of ``n`` single-threaded worker processes on 127.0.0.1, and its client."""
+def _local_cluster(cluster_type: Any, n: int, verbose: bool) -> Any:
+    """A local cluster of ``n`` single-threaded worker processes on 127.0.0.1."""
     # Loopback only: the scheduler, workers and dashboard never listen on other interfaces.
-    cluster = cluster_type(
+    return cluster_type(
         n_workers=n,
         threads_per_worker=1,
         processes=True,
@@ -160,7 +164,6 @@ def _local_cluster(cluster_type: Any, client_type: Any, n: int, verbose: bool) -
         # traceback after a finished study); a task's own failure reaches us as its exception.
         silence_logs=logging.INFO if verbose else logging.CRITICAL,
     )
-    return cluster, client_type(cluster)
 
 
 def _connect(client_type: Any, scheduler: str) -> Any:

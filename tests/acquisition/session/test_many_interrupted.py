@@ -2,8 +2,9 @@
 
 A real process: exit 130/143 with one line, no output, no traceback, no dask process left. A signal
 landing inside ``LocalCluster(...)`` used to leave a cluster nothing could close (dask's exit hook
-then printed ``AssertionError: Status.init`` under ``msflash: interrupted``); whether this process
-catches that window depends on scheduling, so the window itself is pinned in-process by
+then printed ``AssertionError: Status.init`` under ``msflash: interrupted``); the workers are held at
+their start so that the signal lands there (tests/acquisition/support/held_dask_worker.py). The same
+window in-process:
 ``tests/acquisition/session/test_dask_map.py::test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_closed``.
 """
 
@@ -19,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.acquisition.support.held_dask_worker import signal_pending, workers_held
 from tests.helpers import write_test_sequence
 
 
@@ -40,28 +42,41 @@ def _descendants(pid: int) -> list[int]:
 def test_a_signal_while_the_cluster_starts_exits_in_one_line_and_leaves_no_process(
     tmp_path: Path, stop: signal.Signals
 ) -> None:
+    """The workers are held at their start (tests/acquisition/support/held_dask_worker.py) until the signal has
+    landed: ``LocalCluster(...)`` cannot return before. It was a race: the test signalled once it saw three dask
+    processes, and a loaded machine let the cluster start and the sequences' results print before its poll ran
+    (stdout not empty)."""
     pytest.importorskip("distributed")
     day = tmp_path / "day"
     first = write_test_sequence(day / "0800")
     shutil.copytree(first, day / "0900")
-    process = subprocess.Popen(
-        [sys.executable, "-m", "msflash.acquisition.app.cli", "estimate", str(day), "--workers", "2", "--json"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        start_new_session=True,  # its own group: SIGINT is not ignored as in a background job
-    )
+    gate = tmp_path / "gate" / "workers"
+    gate.parent.mkdir()
     children: list[int] = []
+    with workers_held(gate) as held:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "msflash.acquisition.app.cli", "estimate", str(day), "--workers", "2", "--json"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            start_new_session=True,  # its own group: SIGINT is not ignored as in a background job
+            env={**os.environ, **held.environment},
+        )
+        try:
+            deadline = time.monotonic() + 120  # a hang guard, not a timing
+            while not held.waiting():  # a worker waits at the gate: LocalCluster(...) cannot return
+                assert process.poll() is None, process.communicate()
+                assert time.monotonic() < deadline, "no dask worker reached the gate"
+                time.sleep(0.01)
+            children = _descendants(process.pid)
+            os.kill(process.pid, stop)
+            while signal_pending(process.pid, stop):  # delivered, before the workers may go on
+                assert time.monotonic() < deadline, "the signal was never delivered"
+                time.sleep(0.01)
+        except BaseException:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.communicate()
+            raise
     try:
-        deadline = time.monotonic() + 120  # a hang guard, not a timing
-        # Its resource tracker and both nannies: the workers are starting, LocalCluster(...) has not returned.
-        while len(children := _descendants(process.pid)) < 3:
-            assert process.poll() is None, process.communicate()
-            assert time.monotonic() < deadline, "no dask worker process appeared"
-            time.sleep(0.01)
-        # Held still so the signal lands inside LocalCluster(...): it cannot finish starting while stopped.
-        os.kill(process.pid, signal.SIGSTOP)
-        os.kill(process.pid, stop)
-        os.kill(process.pid, signal.SIGCONT)
         out, err = process.communicate(timeout=120)
     finally:
         if process.poll() is None:
@@ -73,6 +88,7 @@ def test_a_signal_while_the_cluster_starts_exits_in_one_line_and_leaves_no_proce
     expected = "msflash: interrupted" if stop == signal.SIGINT else "msflash: terminated (SIGTERM)"
     assert text.strip().splitlines()[-1] == expected
     assert out == b""
+    assert children
     deadline = time.monotonic() + 60
     while alive := [pid for pid in children if _running(pid)]:
         assert time.monotonic() < deadline, f"dask processes {alive} outlived msflash"
