@@ -14,7 +14,7 @@ import json
 import math
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -23,35 +23,31 @@ from msflash.acquisition.progress import progress as progress  # re-exported: ev
 from msflash.processing.user_files import check_output_name
 
 
-def positive_int(text: str) -> int:
-    """argparse type: a whole number ≥ 1 (argparse names the option and exits 2).
+def whole_number_at_least(lowest: int) -> Callable[[str], int]:
+    """argparse type: a whole number ≥ ``lowest`` (argparse names the option and exits 2).
 
-    >>> positive_int("3")
-    3
+    >>> whole_number_at_least(1)("3"), whole_number_at_least(0)("0")
+    (3, 0)
     """
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ 1") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ 1")
-    return value
+
+    def whole_number(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = lowest - 1
+        if value < lowest:
+            raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ {lowest}")
+        return value
+
+    return whole_number
 
 
-def seed_int(text: str) -> int:
-    """argparse type of ``--seed``: a whole number ≥ 0, what numpy's generators take (a negative seed reached
-    them as a ValueError: exit 1 or a crash, naming neither the option nor what it expects).
+positive_int = whole_number_at_least(1)
+"""argparse type: a whole number ≥ 1."""
 
-    >>> seed_int("0"), seed_int("12")
-    (0, 12)
-    """
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ 0") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ 0")
-    return value
+seed_int = whole_number_at_least(0)
+"""argparse type of ``--seed``: a whole number ≥ 0, what numpy's generators take (a negative seed reached them as a
+ValueError: exit 1 or a crash, naming neither the option nor what it expects)."""
 
 
 def boot_seconds(text: str) -> float:
