@@ -184,6 +184,7 @@ def estimate_read(sequence: Sequence, settings: EstimateSettings, report: Report
     not applied here. The route is :data:`ESTIMATE_METHODS`'s entry for :func:`method_of` the settings."""
     check_settings(settings)
     if sequence.partial:
+        _check_every_led_captured(sequence)
         report(f"{sequence.path}: the sequence is incomplete (complete: false); estimating from the frames present")
     reference = settings.reference_chart if settings.reference_chart is not None else settings.reference_patch
     if settings.reference_patch is not None and settings.reference_chart is not None:
@@ -194,6 +195,31 @@ def estimate_read(sequence: Sequence, settings: EstimateSettings, report: Report
         option = "--reference-chart" if settings.reference_chart is not None else "--reference-patch"
         raise UsageError(f"{option}: expected --model prior, family or auto (the LEDs' span needs no reference)")
     return ESTIMATE_METHODS[validate_method(method_of(settings))](sequence, settings, report)
+
+
+def _check_every_led_captured(sequence: Sequence) -> None:
+    """Refuse an interrupted sequence that holds no ambient frame or no frame lighting some LED, naming what is
+    missing (the solve's own refusal spoke of the levels' rank, not of the frames the capture never took).
+
+    Raises
+    ------
+    UsageError
+        Naming the sequence and the frames it lacks.
+    """
+    lit = np.zeros(len(sequence.leds), dtype=bool)
+    for frame in sequence.frames:
+        if frame.role == "led":
+            lit |= np.asarray(frame.led_levels) > 0
+    names = [led.name for led, on in zip(sequence.leds, lit, strict=True) if not on]
+    missing = [] if any(frame.role == "ambient" for frame in sequence.frames) else ["the ambient (LEDs off)"]
+    if names:
+        missing.append(("LED " if len(names) == 1 else "LEDs ") + ", ".join(names))
+    if missing:
+        raise UsageError(
+            f"{sequence.path}: the sequence is incomplete (complete: false) and holds no frame of "
+            f"{' nor of '.join(missing)} (the capture stopped before them); expected an ambient frame and a frame "
+            "lighting each LED: capture the sequence again"
+        )
 
 
 def check_settings(settings: EstimateSettings) -> None:

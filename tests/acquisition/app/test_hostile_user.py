@@ -401,3 +401,25 @@ def test_evaluate_refuses_to_write_over_a_run_or_a_sequence(
     assert f"--out {folder}: holds a" in line and f"({marker})" in line
     assert (folder / "report.html").read_text() == "the run's report"
     assert sorted(p.name for p in folder.iterdir()) == sorted([marker, "report.html"])
+
+
+@pytest.mark.parametrize("kept", [5, 7])
+def test_an_interrupted_sequence_names_the_leds_it_never_captured(
+    tmp_path: Path, kept: int, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The independent RGB sample cut after ``kept`` frames and marked incomplete, as an interrupted capture leaves
+    it: ``estimate`` refused it with the solve's "rank 4 < 7 LEDs"; it now names the LEDs without a frame."""
+    import json
+
+    sequence = tmp_path / "cut"
+    shutil.copytree(SAMPLES_DIR / "sample-rgb-tungsten", sequence)
+    document = json.loads((sequence / "sequence.json").read_text())
+    names = [led["name"] for led in document["leds"]]
+    document["complete"] = False
+    document["frames"] = document["frames"][:kept]
+    (sequence / "sequence.json").write_text(json.dumps(document))
+    assert main(["estimate", str(sequence)]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    never = names[kept - 1 :]
+    assert ("LEDs " if len(never) > 1 else "LED ") + ", ".join(never) in line
+    assert "incomplete" in line and "rank" not in line
