@@ -27,7 +27,8 @@ def target_value(text: str) -> str:
         try:  # read now: a missing or dark file was refused only after the rig had metered and captured
             target_file_spectrum(text)
         except (ValueError, OSError) as err:  # every bad-input error of msflash is a ValueError
-            raise argparse.ArgumentTypeError(str(err)) from None
+            # argparse names the option itself: "argument --target: --target f.csv: …" said it twice
+            raise argparse.ArgumentTypeError(str(err).removeprefix("--target ")) from None
         return text
     from msflash.processing import datasets
     from msflash.processing.spectra import DEFAULT_GRID

@@ -373,6 +373,7 @@ def test_run_reads_a_target_file_before_the_rig_opens(
     assert main(["run", "--target", str(target), "--out", str(out), "--log-serial", str(tmp_path / "serial.log")]) == 2
     line = _one_error_line(capsys.readouterr().err)
     assert line.startswith("msflash: error: argument --target: ") and said in line
+    assert line.count("--target") == 1, line  # argparse names the option; the message did again
     assert not out.exists() and not (tmp_path / "serial.log").exists()
 
 
