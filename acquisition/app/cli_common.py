@@ -138,6 +138,29 @@ def output_directory(path: str | os.PathLike | None) -> Path | None:
     return out
 
 
+def check_folder_can_be_made(path: Path, option: str) -> None:
+    """Refuse ``option``'s folder ``path`` unless it is a folder or can be made as one; a folder made to find out
+    is removed again, with the parents made for it (``live --runs /proc/x`` served the page and failed only when
+    a sequence was fired).
+
+    Raises
+    ------
+    UsageError
+        Naming ``option``, the path and why it cannot be made.
+    """
+    created = [folder for folder in (path, *path.parents) if not os.path.lexists(folder)]  # deepest first
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise UsageError(
+            f"{option} {path}: cannot make the folder ({err.strerror or err}); expected a folder or a path where "
+            "one can be made"
+        ) from None
+    for folder in created:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+
+
 @contextlib.contextmanager
 def claimed_output(path: str | os.PathLike, what: str) -> Iterator[Path]:
     """``--out DIR`` created and claimed for this process while the block runs (one owner per folder,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, progress
+from msflash.acquisition.app.cli_common import UsageError, check_folder_can_be_made, progress
 from msflash.acquisition.app.options import target_value
 from msflash.acquisition.app.rig_choice import add_rig_options, open_from_args, rig_spec
 from msflash.acquisition.session.rig import rig_kind
@@ -38,8 +38,7 @@ def _live(args: argparse.Namespace) -> int:
     from msflash.acquisition.app.live.server import LiveServer
 
     runs = Path(args.runs)
-    if runs.exists() and not runs.is_dir():
-        raise UsageError(f"--runs {runs}: not a directory; expected a folder for the run folders")
+    check_folder_can_be_made(runs, "--runs")  # before the page is served: a run is fired long after
     spec = rig_spec(args)
     if rig_kind(spec) == "replay":
         raise UsageError(

@@ -424,3 +424,25 @@ def test_an_interrupted_sequence_names_the_leds_it_never_captured(
     never = names[kept - 1 :]
     assert ("LEDs " if len(never) > 1 else "LED ") + ", ".join(never) in line
     assert "incomplete" in line and "rank" not in line
+
+
+@pytest.mark.parametrize("where", ["file/runs", "proc"])
+def test_live_refuses_a_runs_folder_it_cannot_make_before_serving(
+    tmp_path: Path, where: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``live --runs /proc/x`` (or a path under a file) served the page and failed only when a sequence was fired.
+    Refused before any socket or device is opened; a folder the check makes to find out is removed again."""
+    (tmp_path / "file").write_text("not a folder")
+    runs = tmp_path / "file" / "runs" if where == "file/runs" else Path("/proc/msflash-runs")
+    assert main(["live", "--rig", "sim", "--port", "0", "--runs", str(runs)]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert f"--runs {runs}: cannot make the folder" in line
+
+
+def test_live_leaves_no_runs_folder_behind_when_it_only_checked(tmp_path: Path) -> None:
+    """The check makes the folder (and its parents) and removes what it made: nothing left until a run is fired."""
+    from msflash.acquisition.app.cli_common import check_folder_can_be_made
+
+    runs = tmp_path / "a" / "b" / "runs"
+    check_folder_can_be_made(runs, "--runs")
+    assert list(tmp_path.iterdir()) == []
