@@ -6,7 +6,7 @@ import argparse
 import importlib
 from typing import Any
 
-from msflash.acquisition.app.cli_common import positive_int, print_json, progress
+from msflash.acquisition.app.cli_common import positive_int, print_json, progress, whole_number
 from msflash.acquisition.progress import count
 
 _OPTIONAL_PARTS = {
@@ -107,19 +107,8 @@ plane (``--height 0`` was refused naming the scene's label array, ``--width -1``
 "channel statistics: 2×2 blocks of 8×8" — none naming the option)."""
 
 
-def _frame_side(text: str) -> int:
-    """argparse type of ``--height`` and ``--width``: a whole number of pixels ≥ :data:`MIN_FRAME_SIDE`.
-
-    >>> _frame_side("1024")
-    1024
-    """
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < MIN_FRAME_SIDE:
-        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number of pixels ≥ {MIN_FRAME_SIDE}")
-    return value
+_frame_side = whole_number(MIN_FRAME_SIDE, unit="pixels")
+"""argparse type of ``--height`` and ``--width``: a whole number of pixels ≥ :data:`MIN_FRAME_SIDE`."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

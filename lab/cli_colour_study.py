@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, print_json, progress, seed_int
+from msflash.acquisition.app.cli_common import UsageError, print_json, progress, seed_int, whole_number
 from msflash.acquisition.app.options import flash_bounds_option
 from msflash.lab.cli_support import optional_claimed_output
 from msflash.lab.colour_study import STUDY_AMBIENTS, colour_study
@@ -52,19 +52,8 @@ edge margin (7 left 1 and the refusal named a ``--margin-px`` the command does n
 400 000 × 600 000 label map and crashed with a MemoryError)."""
 
 
-def _patch_side(text: str) -> int:
-    """argparse type of ``--patch-px``: a whole number in :data:`MIN_PATCH_PX` … :data:`MAX_PATCH_PX`.
-
-    >>> _patch_side("12")
-    12
-    """
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if not MIN_PATCH_PX <= value <= MAX_PATCH_PX:
-        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number of pixels, {MIN_PATCH_PX}-{MAX_PATCH_PX}")
-    return value
+_patch_side = whole_number(MIN_PATCH_PX, MAX_PATCH_PX, "pixels")
+"""argparse type of ``--patch-px``: a whole number in :data:`MIN_PATCH_PX` … :data:`MAX_PATCH_PX`."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -22,10 +22,12 @@ from typing import Any
 from msflash.acquisition.app.cli_common import (
     UsageError,
     dumps_json,
+    number_where,
     positive_int,
     print_json,
     progress,
     seed_int,
+    whole_number,
 )
 from msflash.acquisition.app.options import add_scheduler_options
 from msflash.acquisition.app.plot_style import PALETTE, pyplot, save_figure
@@ -270,36 +272,14 @@ MAX_PARETO_PATCH_PX = 256
 (``--patch-px 100000`` asked for a 4 TiB label map and crashed with a MemoryError)."""
 
 
-def _pareto_patch(text: str) -> int:
-    """argparse type of ``--patch-px``: a whole number of pixels, 1 … :data:`MAX_PARETO_PATCH_PX`.
-
-    >>> _pareto_patch("40")
-    40
-    """
-    value = positive_int(text)
-    if value > MAX_PARETO_PATCH_PX:
-        raise argparse.ArgumentTypeError(f"'{text}': expected a whole number of pixels, 1-{MAX_PARETO_PATCH_PX}")
-    return value
+_pareto_patch = whole_number(1, MAX_PARETO_PATCH_PX, "pixels")
+"""argparse type of ``--patch-px``: a whole number of pixels, 1 … :data:`MAX_PARETO_PATCH_PX`."""
 
 
 def _finite_at_least(lowest: float, expected: str) -> Callable[[str], float]:
     """argparse type of a finite number ≥ ``lowest`` (``--threshold nan`` counted no estimate as failed, ``-1``
-    every one; ``--ambient-to-flash -1`` or ``nan`` reached the simulation).
-
-    >>> _finite_at_least(0.0, "a finite RMSE ≥ 0")("0.1")
-    0.1
-    """
-
-    def number(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        if not (math.isfinite(value) and value >= lowest):
-            raise argparse.ArgumentTypeError(f"'{text}': expected {expected}")
-        return value
-
-    return number
+    every one; ``--ambient-to-flash -1`` or ``nan`` reached the simulation)."""
+    return number_where(lambda value: math.isfinite(value) and value >= lowest, expected)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -23,29 +23,51 @@ from msflash.acquisition.progress import progress as progress  # re-exported: ev
 from msflash.processing.user_files import check_output_name
 
 
-def whole_number_at_least(lowest: int) -> Callable[[str], int]:
-    """argparse type: a whole number ≥ ``lowest`` (argparse names the option and exits 2).
+def whole_number(lowest: int, highest: int | None = None, unit: str = "") -> Callable[[str], int]:
+    """argparse type: a whole number in ``lowest`` … ``highest`` (no upper end when None), of ``unit`` when given
+    (argparse names the option and exits 2).
 
-    >>> whole_number_at_least(1)("3"), whole_number_at_least(0)("0")
-    (3, 0)
+    >>> whole_number(1)("3"), whole_number(8, 256, "pixels")("12")
+    (3, 12)
     """
+    what = f"a whole number of {unit}" if unit else "a whole number"
+    expected = f"{what} ≥ {lowest}" if highest is None else f"{what}, {lowest}-{highest}"
 
-    def whole_number(text: str) -> int:
+    def whole(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             value = lowest - 1
-        if value < lowest:
-            raise argparse.ArgumentTypeError(f"'{text}': expected a whole number ≥ {lowest}")
+        if value < lowest or (highest is not None and value > highest):
+            raise argparse.ArgumentTypeError(f"'{text}': expected {expected}")
         return value
 
-    return whole_number
+    return whole
 
 
-positive_int = whole_number_at_least(1)
+def number_where(accept: Callable[[float], bool], expected: str) -> Callable[[str], float]:
+    """argparse type: a number ``accept`` takes (a text that is no number is NaN to it), refused as ``expected``.
+
+    >>> number_where(lambda value: 0 <= value < 50, "a percentage, 0 ≤ PERCENT < 50")("0.1")
+    0.1
+    """
+
+    def number(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not accept(value):
+            raise argparse.ArgumentTypeError(f"'{text}': expected {expected}")
+        return value
+
+    return number
+
+
+positive_int = whole_number(1)
 """argparse type: a whole number ≥ 1."""
 
-seed_int = whole_number_at_least(0)
+seed_int = whole_number(0)
 """argparse type of ``--seed``: a whole number ≥ 0, what numpy's generators take (a negative seed reached them as a
 ValueError: exit 1 or a crash, naming neither the option nor what it expects)."""
 

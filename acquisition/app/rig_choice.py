@@ -23,7 +23,7 @@ from msflash.acquisition.app.camera_options import (
     camera_options_from_args,
     given_camera_options,
 )
-from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, seed_int
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, number_where, seed_int
 from msflash.acquisition.app.options import (
     SIM_CFA_CHOICES,
     SIM_CFA_HELP,
@@ -407,22 +407,8 @@ def _add_world_options(parser: argparse.ArgumentParser, booth_port_help: str | N
 
 def _percent_below(upper: float) -> Callable[[str], float]:
     """argparse type of a percentage in [0, ``upper``): the range in the unit the user types (the policy's own
-    check named the fraction, ``--max-saturated 101`` as "max_saturated_fraction 1.01; expected 0 ≤ f < 0.5").
-
-    >>> _percent_below(50.0)("0.1")
-    0.1
-    """
-
-    def percent(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        if not 0 <= value < upper:
-            raise argparse.ArgumentTypeError(f"'{text}': expected a percentage, 0 ≤ PERCENT < {upper:g}")
-        return value
-
-    return percent
+    check named the fraction, ``--max-saturated 101`` as "max_saturated_fraction 1.01; expected 0 ≤ f < 0.5")."""
+    return number_where(lambda value: 0 <= value < upper, f"a percentage, 0 ≤ PERCENT < {upper:g}")
 
 
 def _add_pacing_options(parser: argparse.ArgumentParser) -> None:
