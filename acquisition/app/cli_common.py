@@ -170,7 +170,7 @@ def check_folder_can_be_made(path: Path, option: str) -> None:
     UsageError
         Naming ``option``, the path and why it cannot be made.
     """
-    created = [folder for folder in (path, *path.parents) if not os.path.lexists(folder)]  # deepest first
+    created = _missing_folders(path)
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -178,9 +178,21 @@ def check_folder_can_be_made(path: Path, option: str) -> None:
             f"{option} {path}: cannot make the folder ({err.strerror or err}); expected a folder or a path where "
             "one can be made"
         ) from None
-    for folder in created:
-        with contextlib.suppress(OSError):
+    _remove_empty(created)
+
+
+def _missing_folders(path: str | os.PathLike) -> list[Path]:
+    """The folders of ``path`` and its parents that do not exist yet, deepest first: what making it makes."""
+    return [folder for folder in (Path(path), *Path(path).parents) if not os.path.lexists(folder)]
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove ``folders`` (deepest first, as :func:`_missing_folders` lists them) while each is empty."""
+    for folder in folders:
+        try:
             folder.rmdir()
+        except OSError:
+            break
 
 
 @contextlib.contextmanager
@@ -195,7 +207,7 @@ def claimed_output(path: str | os.PathLike, what: str) -> Iterator[Path]:
     """
     from msflash.acquisition.sequence.folder_claim import claim_folder
 
-    created = [folder for folder in (Path(path), *Path(path).parents) if not os.path.lexists(folder)]  # deepest first
+    created = _missing_folders(path)
     out = output_directory(path)
     assert out is not None  # a path was given
     try:
@@ -210,9 +222,5 @@ def claimed_output(path: str | os.PathLike, what: str) -> Iterator[Path]:
     except BaseException:
         # A command refused before it wrote anything leaves no folder it created, its parents included
         # (the claim's lock is gone; a folder something was written to stays).
-        for folder in created:
-            try:
-                folder.rmdir()
-            except OSError:
-                break
+        _remove_empty(created)
         raise
