@@ -387,17 +387,17 @@ def family_ratio(world: dict[str, Any], pairs: int, prepared: bool = True) -> di
     return interleaved_ratio(family_estimate, frame_copy(frames), pairs)
 
 
-def family_statistics(world: dict[str, Any]) -> Callable[[], Any]:
-    """How ``msflash estimate --model family|auto`` takes a world's channel statistics: the block rows filled once
-    (untimed: the LED estimate's one pass over the frames, as its stream adds them), then a call gives the
-    statistics from them (:func:`processing.channel_statistics.channel_statistics_of_block_rows`), or from the
-    frames' own pass where the rows cannot give them (as the route then does)."""
-    from msflash.processing.block_rows import BlockRows
-    from msflash.processing.block_sums import plane_shape
-    from msflash.processing.channel_statistics import accumulate_channel_statistics, channel_statistics_of_block_rows
-
-    frames, spec, cfa = world["frames"], world["spec"], world.get("cfa")
-    factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)  # as acquisition.session.prior_route picks it
+def led_stream_rows(
+    frames: list[np.ndarray],
+    spec: FrameStackSpec,
+    cfa: str | None,
+    factor: int,
+    *,
+    full_probe: bool = False,
+    compiled: bool | None = None,
+) -> BlockRows:
+    """Block rows of ``frames`` (ambient first) filled as the light models' stream fills them: the LED frames, then
+    the ambient, weighted as the estimate stream weights (``SAMPLE_WEIGHTING``)."""
     period = 2 if cfa is not None else 1
     rows = BlockRows(
         len(frames) - 1,
@@ -406,10 +406,25 @@ def family_statistics(world: dict[str, Any]) -> Callable[[], Any]:
         spec.white_level,
         spec.black_level,
         SAMPLE_WEIGHTING,
-        full_probe=True,  # as the light models' stream keeps it (acquisition.session.prior_route.led_side)
+        compiled=compiled,
+        full_probe=full_probe,
     )
-    for row, frame in enumerate([*frames[1:], frames[0]]):  # LED frames, then the ambient, as the stream adds them
+    for row, frame in enumerate([*frames[1:], frames[0]]):
         rows.add_frame(row, frame, period)
+    return rows
+
+
+def family_statistics(world: dict[str, Any]) -> Callable[[], Any]:
+    """How ``msflash estimate --model family|auto`` takes a world's channel statistics: the block rows filled once
+    (untimed: the LED estimate's one pass over the frames, as its stream adds them), then a call gives the
+    statistics from them (:func:`processing.channel_statistics.channel_statistics_of_block_rows`), or from the
+    frames' own pass where the rows cannot give them (as the route then does)."""
+    from msflash.processing.channel_statistics import accumulate_channel_statistics, channel_statistics_of_block_rows
+
+    frames, spec, cfa = world["frames"], world["spec"], world.get("cfa")
+    factor = block_factor(frames[0].shape, cfa, DEFAULT_BIN_FACTOR)  # as acquisition.session.prior_route picks it
+    # The full probe, as the light models' stream keeps it (acquisition.session.prior_route.led_side).
+    rows = led_stream_rows(frames, spec, cfa, factor, full_probe=True)
 
     def statistics() -> Any:
         taken = channel_statistics_of_block_rows(rows, spec, cfa=cfa)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from msflash.lab.bench.processing import benchmark_world
+from msflash.lab.bench.processing import benchmark_world, led_stream_rows
 from msflash.processing import block_rows as block_rows_module
 from msflash.processing import channel_statistics as channel_statistics_module
 from msflash.processing import frame_kernels
@@ -17,32 +17,6 @@ from msflash.processing.channel_statistics import (
     accumulate_channel_statistics,
     channel_statistics_of_block_rows,
 )
-
-
-def _rows(
-    frames: list[np.ndarray],
-    spec,  # noqa: ANN001 — a FrameStackSpec
-    cfa: str | None,
-    factor: int,
-    full_probe: bool = False,
-    compiled: bool | None = None,
-) -> BlockRows:
-    """Block rows of ``frames`` (ambient first) fed as the estimate stream feeds them: LED frames, then the ambient."""
-    period = 2 if cfa is not None else 1
-    rows = BlockRows(
-        len(frames) - 1,
-        plane_shape(frames[0].shape, period),
-        factor,
-        spec.white_level,
-        black_level=spec.black_level,
-        weighting=True,
-        full_probe=full_probe,
-        compiled=compiled,
-    )
-    for row, frame in enumerate(frames[1:]):
-        rows.add_frame(row, frame, period)
-    rows.add_frame(len(frames) - 1, frames[0], period)
-    return rows
 
 
 def _assert_identical(expected: ChannelStatistics, got: ChannelStatistics) -> None:
@@ -72,7 +46,7 @@ def test_the_rows_give_the_frames_channel_statistics_to_the_bit(
     frames, spec = [np.array(frame) for frame in world["frames"]], world["spec"]
     frames[2][40:52, 60:75] = int(spec.white_level)  # clipped in one LED frame only
     frames[0][100:103, 10:12] = int(spec.white_level)
-    rows = _rows(frames, spec, cfa, 4)
+    rows = led_stream_rows(frames, spec, cfa, 4)
     rows.exclude(np.eye(*rows.block_shape[::2], dtype=bool))  # the LED estimate's own choice, not the statistics'
     expected = accumulate_channel_statistics(frames[0], frames[1:], spec, cfa=cfa, bin_factor=4)
     got = channel_statistics_of_block_rows(rows, spec, cfa=cfa)
@@ -88,13 +62,13 @@ def test_rows_that_cannot_give_them_say_so(monkeypatch: pytest.MonkeyPatch) -> N
     """A strided probe (large frames probe every few block rows), a missing frame, too few block rows: None."""
     world = benchmark_world(96, 128, cfa="RGGB")
     frames, spec = world["frames"], world["spec"]
-    rows = _rows(frames, spec, "RGGB", 4)
+    rows = led_stream_rows(frames, spec, "RGGB", 4)
     assert channel_statistics_of_block_rows(rows, spec, cfa="RGGB", n_folds=rows.block_shape[0] + 1) is None
     partial = BlockRows(len(frames) - 1, plane_shape(frames[0].shape, 2), 4, spec.white_level)
     partial.add_frame(0, frames[1], 2)
     assert channel_statistics_of_block_rows(partial, spec, cfa="RGGB") is None
     monkeypatch.setattr(block_rows_module, "PROBE_BLOCKS", 1)
-    strided = _rows(frames, spec, "RGGB", 4)
+    strided = led_stream_rows(frames, spec, "RGGB", 4)
     assert strided.probe_stride > 1
     assert channel_statistics_of_block_rows(strided, spec, cfa="RGGB") is None
 
@@ -112,8 +86,8 @@ def test_a_kept_probe_gives_large_frames_channel_statistics_and_leaves_the_estim
     frames, spec = [np.array(frame) for frame in world["frames"]], world["spec"]
     frames[3][10:30, 200:230] = int(spec.white_level)
     compiled = route == "numba"
-    strided = _rows(frames, spec, "RGGB", 4, compiled=compiled)
-    kept = _rows(frames, spec, "RGGB", 4, full_probe=True, compiled=compiled)
+    strided = led_stream_rows(frames, spec, "RGGB", 4, compiled=compiled)
+    kept = led_stream_rows(frames, spec, "RGGB", 4, full_probe=True, compiled=compiled)
     assert strided.probe_stride == kept.probe_stride > 1
     got = channel_statistics_of_block_rows(kept, spec, cfa="RGGB")
     assert got is not None
@@ -141,7 +115,7 @@ def test_the_compiled_fold_products_are_the_blas_products_to_the_bit(
     frames, spec = [np.array(frame) for frame in world["frames"]], world["spec"]
     frames[4][60:75, 30:47] = int(spec.white_level)
     frames[0][0:3, 250:256] = int(spec.white_level)
-    rows = _rows(frames, spec, cfa, 4)
+    rows = led_stream_rows(frames, spec, cfa, 4)
     height, channels, width = rows.block_shape
     blocks = channel_statistics_module._BlockLayout(height, width, channels)
     taken = channel_statistics_module._compiled_fold_products(rows, 5, blocks)
@@ -173,7 +147,7 @@ def test_the_compiled_fold_products_answer_only_where_every_sum_is_exact(monkeyp
     assert exact and grams[0, 0, 0] == 4 * 2.0**42 and grams[1, 2, 2] == 4  # the ones row counts the blocks
     world = benchmark_world(96, 128, cfa="RGGB")
     frames, spec = [np.asarray(frame, float) for frame in world["frames"]], world["spec"]
-    rows = _rows(frames, spec, "RGGB", 4)
+    rows = led_stream_rows(frames, spec, "RGGB", 4)
     assert rows.stored_rows() is None
     got = channel_statistics_of_block_rows(rows, spec, cfa="RGGB")
     assert got is not None
