@@ -308,15 +308,19 @@ class NoiseLine:
     read: float
     floor: float
 
-    def weights(self, levels: np.ndarray, black: float = 0.0) -> np.ndarray:
+    def weights(self, levels: np.ndarray, black: float = 0.0, compiled: bool = False) -> np.ndarray:
         """``1/var`` of samples at raw ``levels`` (less ``black``), normalised to average 1, in the layout of
-        ``levels``."""
-        variance = np.subtract(levels, black, dtype=float)
-        np.maximum(variance, 0.0, out=variance)
-        variance *= self.gain
-        variance += self.read
-        np.maximum(variance, self.floor, out=variance)
-        np.reciprocal(variance, out=variance)
+        ``levels``. ``compiled`` (float64 levels, the kernels loaded): the steps before the normalisation in one
+        compiled pass (:func:`processing.frame_kernels.inverse_variances`), the same numbers to the bit."""
+        if compiled:
+            variance = frame_kernels.inverse_variances(levels, black, self.gain, self.read, self.floor)
+        else:
+            variance = np.subtract(levels, black, dtype=float)
+            np.maximum(variance, 0.0, out=variance)
+            variance *= self.gain
+            variance += self.read
+            np.maximum(variance, self.floor, out=variance)
+            np.reciprocal(variance, out=variance)
         variance *= 1.0 / float(variance.mean())
         return variance
 
@@ -401,6 +405,4 @@ def ambient_block_weights(
         count,
         lambda position: frame_kernels.floor_level(ambient, saturated, layout, black, position),
     )
-    weights = frame_kernels.inverse_variances(ambient, black, line.gain, line.read, line.floor)
-    weights *= 1.0 / float(weights.mean())
-    return weights
+    return line.weights(ambient, black, compiled=True)
