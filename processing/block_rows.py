@@ -287,10 +287,8 @@ class BlockRows:
 
         raw = stacked(self.rows, 1.0)
         probes = None if self.differences is None else stacked(self.differences, 0.0)
-        saturated = None
-        for mask in self._saturated:
-            saturated = mask if saturated is None else saturated | mask
-        if saturated is not None and saturated.any():
+        saturated = self._saturated_anywhere()
+        if saturated.any():
             columns = saturated.reshape(-1)
             raw[:, columns] = 0.0  # out of every moment, the count included
             if probes is not None:
@@ -303,10 +301,14 @@ class BlockRows:
         blocks saturated in any frame. None where :meth:`channel_rows` is, or for float frames."""
         if len(self._filled) != self.rows.shape[0] or self._pass_stride != 1 or self._floating:
             return None
+        return self.rows, self.differences, self._saturated_anywhere()
+
+    def _saturated_anywhere(self) -> np.ndarray:
+        """The (H/f, W/f) mask of blocks saturated in any frame (not those :meth:`exclude` left out)."""
         saturated = np.zeros((self.block_shape[0], self.block_shape[2]), dtype=bool)
         for mask in self._saturated:
             saturated |= mask
-        return self.rows, self.differences, saturated
+        return saturated
 
     def exclude(self, blocks: np.ndarray) -> None:
         """Leave the blocks where the (H/f, W/f) mask ``blocks`` is set out of the moments."""
