@@ -76,14 +76,21 @@ class SceneForm:
 
     def part(self, folds: list[int], denoised: bool = True) -> tuple[np.ndarray, np.ndarray, float]:
         """``(H, g, E)`` summed over ``folds`` (noise removed when ``denoised``)."""
-        h = self.hessian[folds].sum(0)
-        g = self.linear[folds].sum(0)
-        e = float(self.energy[folds].sum())
+        hessian, linear, energy = self._sums(np.asarray(folds, dtype=np.intp), denoised)
+        return hessian, linear, float(energy)
+
+    def _sums(self, folds: np.ndarray, denoised: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(H, g, E)`` summed over the last axis of the fold indices ``folds`` — one set (1-D) or one per row
+        (2-D) —, noise removed when ``denoised``, H symmetrised."""
+        axis = folds.ndim - 1
+        h = self.hessian[folds].sum(axis)
+        g = self.linear[folds].sum(axis)
+        e = self.energy[folds].sum(axis)
         if denoised:
-            h = h - self.noise_hessian[folds].sum(0)
-            g = g - self.noise_linear[folds].sum(0)
-            e -= float(self.noise_energy[folds].sum())
-        return 0.5 * (h + h.T), g, e
+            h = h - self.noise_hessian[folds].sum(axis)
+            g = g - self.noise_linear[folds].sum(axis)
+            e = e - self.noise_energy[folds].sum(axis)
+        return 0.5 * (h + np.swapaxes(h, -1, -2)), g, e
 
     def whitened(self, folds: list[int], denoised: bool = True) -> Whitened:
         """The folds' data term as a :class:`Whitened` problem."""
@@ -95,10 +102,7 @@ class SceneForm:
         with the sums of all complements taken at once."""
         count = self.n_folds
         keep = np.array([[f for f in range(count) if f != fold] for fold in range(count)], dtype=np.intp)
-        hessians = self.hessian[keep].sum(1) - self.noise_hessian[keep].sum(1)
-        hessians = 0.5 * (hessians + hessians.transpose(0, 2, 1))
-        linears = self.linear[keep].sum(1) - self.noise_linear[keep].sum(1)
-        energies = self.energy[keep].sum(1) - self.noise_energy[keep].sum(1)
+        hessians, linears, energies = self._sums(keep, denoised=True)
         return {
             fold: Whitened.of(hessians[fold], linears[fold], float(energies[fold]), self.lift)
             for fold in range(count)
