@@ -207,11 +207,10 @@ def _check_every_led_captured(sequence: Sequence) -> None:
         Naming the sequence and the frames it lacks.
     """
     lit = np.zeros(len(sequence.leds), dtype=bool)
-    for frame in sequence.frames:
-        if frame.role == "led":
-            lit |= np.asarray(frame.led_levels) > 0
+    for index in sequence.indices("led"):
+        lit |= np.asarray(sequence.frames[index].led_levels) > 0
     names = [led.name for led, on in zip(sequence.leds, lit, strict=True) if not on]
-    missing = [] if any(frame.role == "ambient" for frame in sequence.frames) else ["the ambient (LEDs off)"]
+    missing = [] if sequence.indices("ambient") else ["the ambient (LEDs off)"]
     if names:
         missing.append(("LED " if len(names) == 1 else "LEDs ") + ", ".join(names))
     if missing:
