@@ -183,6 +183,12 @@ class EstimateStream:
             or a frame holds non-finite values.
         """
         index = len(self.roles)
+        where = f"{self.header.path}: frames[{index}]"
+        if role == "led" and self._n_led_rows >= self.n_led_frames:  # refused before it counts as taken
+            raise RecordingError(
+                f"{where} is LED frame {self._n_led_rows + 1} but {self.n_led_frames} were planned; expected one row "
+                "per LED frame"
+            )
         self.roles.append(role)
         self.levels.append(tuple(float(v) for v in levels))
         self.exposure_gain.append(float(exposure_gain))
@@ -196,7 +202,6 @@ class EstimateStream:
         plane = pixels[:, :, 0] if self.mono and pixels.ndim == 3 else pixels
         camera = self.header.camera
         period = 2 if camera.cfa is not None else 1
-        where = f"{self.header.path}: frames[{index}]"
         if self.frame_shape is None:
             self.frame_shape = recorded_shape
             self.factor = _block_factor(recorded_shape, camera.cfa, self.bin_factor)
@@ -214,10 +219,6 @@ class EstimateStream:
         else:
             row = self._n_led_rows
             self._n_led_rows += 1
-            if row >= self.n_led_frames:
-                raise RecordingError(
-                    f"{where} is LED frame {row + 1} but {self.n_led_frames} were planned; expected one row per LED frame"
-                )
         try:
             if self.factor == 1:
                 # Every pixel, no blocks (``--bin-factor 1``, the all-pixel reference): the exact all-pixel
@@ -278,13 +279,16 @@ class EstimateStream:
         """The frames used and their linearisation (:func:`stack_layout` of the frames taken)."""
         return stack_layout(self.header, self.roles, self.levels, self.exposure_gain)
 
+    def _complete(self) -> bool:
+        """Every laid-out LED frame and the ambient frame taken, and their block rows made (bin factor 1 keeps the
+        frames instead): the one completeness rule of :attr:`block_rows` and every result."""
+        have_rows = self._rows is not None or self.factor == 1
+        return have_rows and self._have_ambient and self._n_led_rows == self.n_led_frames
+
     def _complete_rows(self) -> BlockRows | None:
-        layout = self.layout()
-        if (
-            (self._rows is None and self.factor != 1)
-            or self._n_led_rows != self.n_led_frames
-            or len(layout.led_indices) != self.n_led_frames
-        ):
+        """The block rows of the frames taken (None for bin factor 1), or a RecordingError naming what is missing."""
+        if not self._complete():
+            self.layout()  # no ambient frame: its own message
             raise RecordingError(
                 f"{self.header.path}: {self._n_led_rows} of {self.n_led_frames} LED frames taken; "
                 "expected every LED frame before the estimate"
@@ -296,10 +300,7 @@ class EstimateStream:
         """The frames' block rows once every frame is in (None before, and for ``--bin-factor 1``): what the channel
         statistics of ``--model prior|family|auto`` are taken from without a second pass over the frames
         (:func:`processing.channel_statistics.channel_statistics_of_block_rows`)."""
-        rows = self._rows
-        if rows is None or self._n_led_rows != self.n_led_frames or not self._have_ambient:
-            return None
-        return rows
+        return self._rows if self._complete() else None
 
     def statistics(self) -> SequenceStatistics:
         """The sufficient statistics of eq. 4–6 of the frames taken (every LED frame must be in)."""

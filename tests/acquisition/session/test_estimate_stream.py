@@ -178,3 +178,32 @@ def test_synthesis_from_disk_streams_the_frames_and_gives_the_stacks_image_bit_f
     np.testing.assert_array_equal(streamed, stacked)
     np.testing.assert_array_equal(saturated, stacked_saturated)
     assert layout.ambient_index == 0 and len(layout.led_indices) == N_LED_FRAMES
+
+
+@pytest.mark.parametrize("ambient_last", [False, True])
+def test_the_block_rows_and_the_estimate_share_one_completeness_rule(tmp_path: Path, ambient_last: bool) -> None:
+    """Issue 31: frame by frame, :attr:`EstimateStream.block_rows` is None exactly while the statistics refuse (a
+    missing LED frame, or every LED frame in but the ambient not yet), and both answer once every frame is in."""
+    from msflash.acquisition.errors import RecordingError
+    from msflash.acquisition.session.estimate_stream import EstimateStream
+
+    sequence = read_sequence(write_sequence(tmp_path / "s", n_led_frames=4, shape=(64, 80, 3)))
+    entries = list(enumerate(sequence.frames))
+    if ambient_last:
+        entries = entries[1:] + entries[:1]
+    stream = EstimateStream.for_sequence(sequence)
+    answers = []
+    for index, entry in entries:
+        stream.add(sequence.load_frame(index), entry.role, entry.led_levels, entry.exposure_us * entry.gain)
+        try:
+            stream.statistics()
+            refused = False
+        except RecordingError:
+            refused = True
+        answers.append((stream.block_rows is None, refused))
+    assert answers == [(True, True)] * (len(entries) - 1) + [(False, False)]
+    index, entry = next((i, e) for i, e in enumerate(sequence.frames) if e.role == "led")
+    with pytest.raises(RecordingError, match="LED frame 5 but 4 were planned"):
+        stream.add(sequence.load_frame(index), entry.role, entry.led_levels, entry.exposure_us * entry.gain)
+    # The refused frame is not taken: both still answer (they disagreed when only the estimate counted it).
+    assert stream.block_rows is not None and stream.statistics().n_leds == 4
