@@ -120,6 +120,37 @@ class ChannelStatistics:
         moments = self.moments if moments is None else moments
         return moments if self.noise is None else moments - self.noise
 
+    def replicated(self, channels: tuple[str, ...]) -> ChannelStatistics:
+        """One plane's statistics as ``len(channels)`` identical channels: a mono camera's frames, which format v1
+        records as three alike channels, read as their one plane (every moment repeated in each pair of channels, f
+        laid out ``c·k + i``; what the frames as recorded give, to rounding).
+
+        Examples
+        --------
+        >>> one = Moments(np.ones((1, 2, 2)), np.ones((1, 2, 1)), np.ones((1, 1, 1)))
+        >>> mono = ChannelStatistics(one, None, np.array([4]), np.ones((1, 2)), np.ones((1, 1)), 4, 2, ("Y",))
+        >>> three = mono.replicated(("R", "G", "B"))
+        >>> three.moments.ff.shape, three.moments.fa.shape, three.led_sums.shape, three.n_blocks
+        ((1, 6, 6), (1, 6, 3), (1, 6), 4)
+        """
+        if self.n_channels != 1:
+            raise SpectralDataError(f"replicated channel statistics: {self.n_channels} channels; expected one plane")
+        copies = np.ones((len(channels), len(channels)))
+
+        def spread(moments: Moments) -> Moments:
+            return Moments(np.kron(copies, moments.ff), np.kron(copies, moments.fa), np.kron(copies, moments.aa))
+
+        return ChannelStatistics(
+            moments=spread(self.moments),
+            noise=None if self.noise is None else spread(self.noise),
+            counts=self.counts,
+            led_sums=np.tile(self.led_sums, (1, len(channels))),
+            ambient_sums=np.tile(self.ambient_sums, (1, len(channels))),
+            n_blocks_total=self.n_blocks_total,
+            n_leds=self.n_leds,
+            channels=channels,
+        )
+
     def led_statistics(self, folds: Sequence[int] | None = None) -> SequenceStatistics:
         """The channel-summed statistics of eq. 4–6 (:class:`~processing.statistics.SequenceStatistics`) of some folds.
 
@@ -227,28 +258,32 @@ def channel_statistics_of_block_rows(
     their block size: the same numbers to the bit for integer frames (the block sums are the same exact integers, in
     the same order, :meth:`processing.block_rows.BlockRows.channel_rows`), without a second pass over the frames.
 
-    None where the rows cannot give them — a strided probe (large frames), a missing frame, fewer block rows than
-    folds, planes that are not ``cfa``'s (a mono camera's one plane): then take
-    :func:`accumulate_channel_statistics` of the frames.
+    One plane without a CFA is a mono camera's: its statistics are :meth:`ChannelStatistics.replicated` to the three
+    alike channels its sequence records (the frames' own pass on them gives the same, to rounding). None where the
+    rows cannot give them — a strided probe (large frames; ``BlockRows(full_probe=True)`` keeps it whole), a missing
+    frame, fewer block rows than folds, planes that are not ``cfa``'s.
     """
     height, n_planes, width = rows.block_shape
     if n_folds < 2 or height < n_folds or len(spec.led_levels) != rows.n_led_frames:
         return None
+    mono = cfa is None and n_planes == 1
     try:
-        channels = plane_channels(cfa, n_planes)
+        channels = ("Y",) if mono else plane_channels(cfa, n_planes)
     except SpectralDataError:
         return None
     if len(channels) != n_planes:
         return None
     blocks = _BlockLayout(height, width, n_planes)
     products = _compiled_fold_products(rows, n_folds, blocks)
-    if products is not None:
-        return _statistics_of_products(*products, spec, rows.factor, n_folds, blocks, channels)
-    stacked = rows.channel_rows()
-    if stacked is None:
-        return None
-    raw, probes = stacked
-    return _statistics_of_rows(raw, probes, spec, rows.factor, n_folds, blocks, channels)
+    if products is None:
+        stacked = rows.channel_rows()
+        if stacked is None:
+            return None
+        raw, probes = stacked
+        statistics = _statistics_of_rows(raw, probes, spec, rows.factor, n_folds, blocks, channels)
+    else:
+        statistics = _statistics_of_products(*products, spec, rows.factor, n_folds, blocks, channels)
+    return statistics.replicated(plane_channels(None)) if mono else statistics
 
 
 def _compiled_fold_products(

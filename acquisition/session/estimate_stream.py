@@ -39,6 +39,7 @@ from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
 from msflash.processing.block_rows import BlockRows
 from msflash.processing.block_sums import plane_shape
+from msflash.processing.channel_statistics import DEFAULT_FOLDS, ChannelStatistics, channel_statistics_of_block_rows
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.flicker import corrected_tiles
 from msflash.processing.local import LocalEstimate, estimate_local
@@ -150,6 +151,7 @@ class EstimateStream:
         """The shape of the frames as the sequence records them (a mono frame's three channels included)."""
         self.factor: int | None = None
         self._rows: BlockRows | None = None
+        self._model_rows: BlockRows | None = None  # full_probe only: the light models' (module notes)
         self._planes: dict[int, np.ndarray] = {}  # bin factor 1 only: the frames, kept
         self._tiles: TileBlocks | None = None
         self._n_led_rows = 0
@@ -224,22 +226,7 @@ class EstimateStream:
                 # Every pixel, no blocks (``--bin-factor 1``, the all-pixel reference): the exact all-pixel
                 # moments need each pixel of every frame together, so the frames are kept until the end.
                 self._planes[row] = plane
-            elif self._rows is None:
-                self._rows = BlockRows(
-                    self.n_led_frames,
-                    plane_shape(plane.shape, period),
-                    self.factor,
-                    camera.white_level,
-                    black_level=camera.black_level,
-                    weighting=SAMPLE_WEIGHTING,
-                    compiled=self._compiled_statistics,
-                    full_probe=self.full_probe,
-                )
-            if self._rows is not None and self.live:
-                with frame_kernels.paused():
-                    self._rows.add_frame(row, plane, period)
-            elif self._rows is not None:
-                self._rows.add_frame(row, plane, period)
+            self._add_to_rows(row, plane, period)
             if self.tiles is not None:
                 if self._tiles is None:
                     self._tiles = TileBlocks(
@@ -254,6 +241,37 @@ class EstimateStream:
                 self._tiles.add_frame(row, mono_as_rgb(plane) if self.mono else plane)
         except SpectralDataError as err:
             raise RecordingError(f"{where}: {err}") from err
+
+    def _add_to_rows(self, row: int, plane: np.ndarray, period: int) -> None:
+        """The frame's block sums into the block rows, laid out at the first frame: the estimate's (none for bin factor
+        1), and with ``full_probe`` the light models', at the default block size whatever the estimate's (the size
+        they are tuned at: docs/decisions/one-estimation-route.md), made once when the two coincide."""
+        if self._rows is None and self._model_rows is None and (self.factor != 1 or self.full_probe):
+            assert self.frame_shape is not None and self.factor is not None
+            default = _block_factor(self.frame_shape, self.header.camera.cfa)
+            if self.factor != 1:
+                self._rows = self._laid_out(plane, period, self.factor, self.full_probe and self.factor == default)
+            if self.full_probe:
+                same = self._rows is not None and self.factor == default
+                self._model_rows = self._rows if same else self._laid_out(plane, period, default, True)
+        with frame_kernels.paused() if self.live else contextlib.nullcontext():
+            for rows in dict.fromkeys(r for r in (self._rows, self._model_rows) if r is not None):
+                rows.add_frame(row, plane, period)
+
+    def _laid_out(self, plane: np.ndarray, period: int, factor: int, full_probe: bool) -> BlockRows:
+        """Empty block rows of ``factor`` for the frames of ``plane``'s size (``full_probe``: the light models' rows;
+        the estimate's own moments are the strided probe's either way)."""
+        camera = self.header.camera
+        return BlockRows(
+            self.n_led_frames,
+            plane_shape(plane.shape, period),
+            factor,
+            camera.white_level,
+            black_level=camera.black_level,
+            weighting=SAMPLE_WEIGHTING,
+            compiled=self._compiled_statistics,
+            full_probe=full_probe,
+        )
 
     def frame_ready(self, event: FrameEvent) -> None:
         """A capture's frame as it lands (a handler of :class:`~acquisition.session.engine.CaptureRunner`)."""
@@ -281,7 +299,7 @@ class EstimateStream:
 
     def _complete(self) -> bool:
         """Every laid-out LED frame and the ambient frame taken, and their block rows made (bin factor 1 keeps the
-        frames instead): the one completeness rule of :attr:`block_rows` and every result."""
+        frames instead): the one completeness rule of every result."""
         have_rows = self._rows is not None or self.factor == 1
         return have_rows and self._have_ambient and self._n_led_rows == self.n_led_frames
 
@@ -295,25 +313,47 @@ class EstimateStream:
             )
         return self._rows
 
-    @property
-    def block_rows(self) -> BlockRows | None:
-        """The frames' block rows once every frame is in (None before, and for ``--bin-factor 1``): what the channel
-        statistics of ``--model prior|family|auto`` are taken from without a second pass over the frames
-        (:func:`processing.channel_statistics.channel_statistics_of_block_rows`)."""
-        return self._rows if self._complete() else None
+    def channel_statistics(self) -> ChannelStatistics:
+        """The channel-resolved statistics of the frames taken (``--model prior|family|auto``, docs/architecture.md
+        §5.3), from the block rows made as the frames arrived: no second pass over the frames (issue 31; the frames'
+        own pass, :func:`processing.channel_statistics.accumulate_channel_statistics`, gives the same numbers). The
+        stream must keep every block row's probe (``full_probe``). Their block size is the default one whatever the
+        estimate's (:meth:`_add_to_rows`); a mono camera's one plane gives the three alike channels its sequence
+        records.
+
+        Raises
+        ------
+        RecordingError
+            A frame missing, a stream made without ``full_probe``, or fewer block rows than folds.
+        """
+        self._complete_rows()
+        rows = self._model_rows
+        if rows is None:
+            raise RecordingError(
+                f"{self.header.path}: the estimate stream kept no full probe; expected full_probe=True for the channel "
+                "statistics"
+            )
+        statistics = channel_statistics_of_block_rows(rows, self.layout().spec, cfa=self.header.camera.cfa)
+        if statistics is None:
+            raise RecordingError(
+                f"{self.header.path}: {rows.block_shape[0]} rows of {rows.factor}×{rows.factor} blocks; expected at "
+                f"least {DEFAULT_FOLDS} for the light models' held-out folds (larger frames)"
+            )
+        return statistics
 
     def statistics(self) -> SequenceStatistics:
         """The sufficient statistics of eq. 4–6 of the frames taken (every LED frame must be in)."""
         rows = self._complete_rows()
         spec = self.layout().spec
         with frame_kernels.paused() if self.live else contextlib.nullcontext():
-            if rows is None:
+            if self.factor == 1:
                 planes, n = self._planes, self.n_led_frames
                 period = 2 if self.header.camera.cfa is not None else 1
                 statistics = accumulate_statistics(
                     planes[n], [planes[j] for j in range(n)], spec, bin_factor=1, cfa_period=period
                 )
             else:
+                assert rows is not None
                 statistics = rows.statistics(spec)
         return statistics.replicated(3) if self.mono else statistics
 
@@ -357,10 +397,11 @@ SAMPLE_WEIGHTING = True
 notes): unweighted, a bright highlight's noisy samples dominate eq. 5."""
 
 
-def _block_factor(shape: tuple[int, ...], cfa: str | None, bin_factor: int) -> int:
-    from msflash.acquisition.session.analysis import block_factor
+def _block_factor(shape: tuple[int, ...], cfa: str | None, bin_factor: int | None = None) -> int:
+    """:func:`acquisition.session.analysis.block_factor` (``None``: of the default block size)."""
+    from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, block_factor
 
-    return block_factor(shape, cfa, bin_factor)
+    return block_factor(shape, cfa, DEFAULT_BIN_FACTOR if bin_factor is None else bin_factor)
 
 
 def _tile_grid(blocks: tuple[int, int], tiles: int) -> tuple[int, int]:

@@ -254,13 +254,14 @@ def _light_models(sequence: Sequence, settings: EstimateSettings, report: Report
     from msflash.acquisition.session.prior_route import led_side, with_model_choice
 
     reference = settings.reference_chart if settings.reference_chart is not None else settings.reference_patch
-    stack = analysis.load_frame_stack(sequence)
-    led, payload, varies, rows = led_side(
+    # The frames streamed from disk one at a time, held together only for a reference's crops.
+    stack = None if reference is None else analysis.load_frame_stack(sequence)
+    led, payload, varies, stream = led_side(
         sequence, stack, settings.method, settings.solver, settings.alpha, settings.tiles, settings.bin_factor
     )
     refuse_dark_ambient(sequence, led, "estimate")
     payload, chosen, reason = with_model_choice(
-        sequence, stack, payload, settings.model, varies, reference, led.flicker, rows
+        sequence, stack, payload, settings.model, varies, reference, led.flicker, stream
     )
     flicker = led.flicker.summary() if led.flicker is not None else None
     if flicker is not None:  # docs/flicker.md

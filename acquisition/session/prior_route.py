@@ -1,9 +1,10 @@
 """From a recorded sequence to the models beyond the LEDs' span: ``--model prior|family|auto`` (issues 17 and 30).
 
 The thin layer between a :class:`~acquisition.sequence.format.Sequence` and :mod:`processing.light_prior` /
-:mod:`processing.light_families`, as :mod:`acquisition.session.analysis` is for eq. 4–6: frames are read with
-:func:`~acquisition.session.analysis.load_frame_stack`, binned like ``msflash estimate`` and reduced to
-channel-resolved statistics; the LED spectra and responsivities go to photons. :data:`MODEL_ROUTES` is the one
+:mod:`processing.light_families`, as :mod:`acquisition.session.analysis` is for eq. 4–6: the channel-resolved
+statistics are the LED estimate's stream's (:meth:`EstimateStream.channel_statistics`: its block rows, each frame
+passed over once), the LED spectra and responsivities go to photons; only a reference patch or chart crops the
+frames themselves (:func:`~acquisition.session.analysis.load_frame_stack`). :data:`MODEL_ROUTES` is the one
 table from a ``--model`` name to what it computes. A flickering ambient is read once, by the LED side's estimate
 (:func:`acquisition.session.analysis.flicker_check`), and its correction is applied to every statistic the light
 models are fitted through (:func:`processing.flicker.corrected_channel_statistics`; docs/flicker.md).
@@ -19,19 +20,14 @@ from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session import analysis, local_route
 from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, FrameStack, load_frame_stack
+from msflash.acquisition.session.estimate_stream import EstimateStream, stream_sequence
 from msflash.acquisition.session.sequence_spectra import (
     camera_responsivities_photons,
     led_spectra_photons,
     spectrum_in_sequence_unit,
 )
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
-from msflash.processing.block_rows import BlockRows
-from msflash.processing.block_sums import plane_shape
-from msflash.processing.channel_statistics import (
-    ChannelStatistics,
-    accumulate_channel_statistics,
-    channel_statistics_of_block_rows,
-)
+from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.family_checks import LED_WARNING, PRIOR_WARNING, MissCheck, predicted_ratio, self_check
 from msflash.processing.flicker import FlickerCheck, corrected_channel_statistics
@@ -73,27 +69,24 @@ def sequence_channel_statistics(
     stack: FrameStack | None = None,
     bin_factor: int = DEFAULT_BIN_FACTOR,
     flicker: FlickerCheck | None = None,
-    rows: BlockRows | None = None,
+    stream: EstimateStream | None = None,
 ) -> ChannelStatistics:
-    """The channel statistics of a sequence, binned like the LED estimate (:func:`acquisition.session.analysis.block_factor`),
-    corrected for the ambient gains ``flicker`` applies (the LED estimate's check; None: as the frames hold them).
+    """The channel statistics of a sequence, corrected for the ambient gains ``flicker`` applies (the LED estimate's
+    check; None: as the frames hold them): :meth:`EstimateStream.channel_statistics` of ``stream``, the LED
+    estimate's own (made by :func:`light_model_stream`: the frames are passed over once, issue 31), or of one fed
+    ``stack`` (None: the files, one frame at a time) binned by ``bin_factor`` like the LED estimate."""
+    stream = stream or light_model_stream(sequence, stack, bin_factor)
+    return corrected_channel_statistics(stream.channel_statistics(), flicker)
 
-    ``rows``: the LED estimate's block rows of the same frames (:attr:`EstimateStream.block_rows`); where they hold
-    this block size and every block's probe, the statistics come from them (the same numbers, no second pass over
-    the frames, issue 31); otherwise from the frames."""
-    stack = stack or load_frame_stack(sequence)
-    cfa = sequence.camera.cfa
-    factor = analysis.block_factor(stack.ambient.shape, cfa, bin_factor)
-    statistics = None
-    if rows is not None and rows.factor == factor:
-        period = 2 if cfa is not None else 1
-        if rows.plane_shape == plane_shape(stack.ambient.shape, period):
-            statistics = channel_statistics_of_block_rows(rows, stack.spec, cfa=cfa)
-    if statistics is None:
-        statistics = accumulate_channel_statistics(
-            stack.ambient, stack.led_frames, stack.spec, cfa=cfa, bin_factor=factor
-        )
-    return corrected_channel_statistics(statistics, flicker)
+
+def light_model_stream(
+    sequence: Sequence, stack: FrameStack | None, bin_factor: int = DEFAULT_BIN_FACTOR, tiles: int | None = None
+) -> EstimateStream:
+    """The LED estimate's stream as the light models need it (every block row's probe kept, ``full_probe``), fed
+    ``stack`` or, without one, the files one frame at a time (:func:`~acquisition.session.estimate_stream.stream_sequence`)."""
+    if stack is None:
+        return stream_sequence(sequence, bin_factor, tiles, full_probe=True)
+    return analysis.stream_stack(sequence, stack, bin_factor, tiles, full_probe=True)
 
 
 def estimate_sequence_prior(
@@ -171,25 +164,24 @@ def spectrum_fields(sequence: Sequence, spectrum: Spectra, std: np.ndarray) -> d
 
 def led_side(
     sequence: Sequence,
-    stack: FrameStack,
+    stack: FrameStack | None,
     method: str,
     solver: str,
     alpha: float | str,
     tiles: int,
     bin_factor: int = DEFAULT_BIN_FACTOR,
-) -> tuple[AmbientEstimate, dict, bool, BlockRows | None]:
+) -> tuple[AmbientEstimate, dict, bool, EstimateStream]:
     """The LED-span side of ``estimate --model prior|auto``: what ``--model led`` gives (global, or local when
-    ``method`` finds the illuminant varying across the scene), its payload, whether it varies, and the frames' block
-    rows its stream took (:attr:`EstimateStream.block_rows`: the light models' channel statistics come from them,
-    :func:`sequence_channel_statistics`)."""
+    ``method`` finds the illuminant varying across the scene), its payload, whether it varies, and the stream of the
+    frames (``stack``, or the files one at a time) it was made from: the light models' channel statistics come from
+    it (:func:`sequence_channel_statistics`)."""
+    stream = light_model_stream(sequence, stack, bin_factor, None if method == "global" else tiles)
     if method != "global":
-        stream = analysis.stream_stack(sequence, stack, bin_factor, tiles, full_probe=True)
         local = local_route.estimate_sequence_local(sequence, method, solver, alpha, stream=stream)
         payload = local_route.local_estimate_payload(sequence, local)
-        return local.global_estimate, payload, local.model == "local", stream.block_rows
-    stream = analysis.stream_stack(sequence, stack, bin_factor, full_probe=True)
+        return local.global_estimate, payload, local.model == "local", stream
     led = analysis.estimate_sequence(sequence, solver, alpha, stream=stream)
-    return led, analysis.estimate_payload(sequence, led), False, stream.block_rows
+    return led, analysis.estimate_payload(sequence, led), False, stream
 
 
 ReferenceRect = tuple[int, int, int, int]
@@ -453,17 +445,17 @@ def _models_block(
 
 def _prior_route(
     sequence: Sequence,
-    stack: FrameStack,
+    stack: FrameStack | None,
     requested: str,
     varies: bool,
     led_payload: dict,
     reference: Reference | None = None,
     flicker: FlickerCheck | None = None,
-    rows: BlockRows | None = None,
+    stream: EstimateStream | None = None,
 ) -> tuple[dict, str, str, dict]:
     """``--model prior``: the light prior, checked against the family evidence."""
-    # One set of channel statistics for both models (the same, corrected alike), from the LED side's block rows.
-    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker, rows=rows)
+    # One set of channel statistics for both models (the same, corrected alike), from the LED side's stream.
+    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker, stream=stream)
     result = estimate_sequence_prior(sequence, stack, flicker, statistics)
     prior = prior_payload(sequence, result)
     _, family = estimate_sequence_family(sequence, stack, result.prior, reference, flicker, statistics)
@@ -480,17 +472,17 @@ def _prior_route(
 
 def _family_route(
     sequence: Sequence,
-    stack: FrameStack,
+    stack: FrameStack | None,
     requested: str,
     varies: bool,
     led_payload: dict,
     reference: Reference | None = None,
     flicker: FlickerCheck | None = None,
-    rows: BlockRows | None = None,
+    stream: EstimateStream | None = None,
 ) -> tuple[dict, str, str, dict]:
     """``--model family`` and ``--model auto``: the family model's choice (auto: the LEDs' span unless the evidence
     says otherwise; a scene whose illuminant varies keeps the local LED model)."""
-    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker, rows=rows)
+    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker, stream=stream)
     prior, family = estimate_sequence_family(sequence, stack, None, reference, flicker, statistics)
     block = family_payload(sequence, family)
     models, _ = _models_block(sequence, led_payload, prior, family)
@@ -531,7 +523,7 @@ def _family_route(
 
 
 MODEL_ROUTES = {"prior": _prior_route, "family": _family_route, "auto": _family_route}
-"""``--model`` name → its route: ``(sequence, stack, requested, varies, led payload, reference, flicker, rows) → (fields,
+"""``--model`` name → its route: ``(sequence, stack, requested, varies, led payload, reference, flicker, stream) → (fields,
 chosen, reason, replacement)``. ``replacement`` holds the spectrum, band, band meaning and warnings that replace the LED ones when
 ``chosen`` is not ``led`` (``led`` itself needs no route: it is :mod:`acquisition.session.analysis`'s estimate), and
 ``led_warnings``, the LED payload's warnings with the families' check in place of the reference lights' when it is."""
@@ -539,13 +531,13 @@ chosen, reason, replacement)``. ``replacement`` holds the spectrum, band, band m
 
 def with_model_choice(
     sequence: Sequence,
-    stack: FrameStack,
+    stack: FrameStack | None,
     payload: dict,
     requested: str,
     varies: bool,
     reference: Reference | None = None,
     flicker: FlickerCheck | None = None,
-    rows: BlockRows | None = None,
+    stream: EstimateStream | None = None,
 ) -> tuple[dict, str, str]:
     """The estimate payload of ``--model prior|family|auto``: the model estimated, the model chosen and why.
 
@@ -556,8 +548,8 @@ def with_model_choice(
     and miss check (predicted ratio to the LED bound against the family evidence, docs/light-families.md).
     ``reference``: a spectrally flat patch (``--reference-patch``) whose error joins the evidence and on which the
     family estimate is calibrated. ``flicker``: the LED side's flicker check; its gains correct the light models'
-    statistics as they corrected the LED estimate's (docs/flicker.md). ``rows``: the LED side's block rows of the
-    frames (:func:`led_side`), from which the light models' statistics are taken without a second pass.
+    statistics as they corrected the LED estimate's (docs/flicker.md). ``stream``: the LED side's stream of the
+    frames (:func:`led_side`), from whose block rows the light models' statistics are taken without a second pass.
 
     Returns
     -------
@@ -565,7 +557,7 @@ def with_model_choice(
         The payload (docs/architecture.md §7), the chosen model and the reason.
     """
     fields, chosen, reason, replacement = MODEL_ROUTES[requested](
-        sequence, stack, requested, varies, payload, reference, flicker, rows
+        sequence, stack, requested, varies, payload, reference, flicker, stream
     )
     payload = dict(payload)
     payload.update({key: value for key, value in fields.items() if key != "model_choice"})

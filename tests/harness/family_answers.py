@@ -95,7 +95,7 @@ def collect(cache: Path) -> dict[str, Any]:
                     lambda sequence=sequence, stack=stack: sequence_channel_statistics(
                         sequence,
                         stack,
-                        rows=stream_stack(sequence, stack, DEFAULT_BIN_FACTOR, full_probe=True).block_rows,
+                        stream=stream_stack(sequence, stack, DEFAULT_BIN_FACTOR, full_probe=True),
                     ),
                     leds,
                     camera,

@@ -177,49 +177,87 @@ def test_a_reference_chart_holds_the_estimate_to_known_reflectances(
     assert len(err) == 1 and "patches[0]" in err[0] and "reflectance" in err[0]
 
 
+def _light_model_case(name: str, directory: Path) -> tuple[Path, list[str]]:
+    """A sequence of the light models' cases and the ``estimate`` options it is read with."""
+    if name == "mono":  # the sim's Mono12 camera: one plane, recorded as three alike channels
+        assert main(["capture", "--rig", "sim", "--cfa", "mono", "--seed", "3", "--out", str(directory)]) == 0
+        return directory / "sequence", []
+    cases = {
+        "rgb": (Case("a", light="A", seed=5), []),
+        "raw": (Case("a", light="A", seed=5, cfa="GRBG"), []),
+        "bin 1": (Case("a", light="A", seed=5), ["--bin", "1"]),
+        # 400 × 440: --bin 4 gives the estimate 4 × 4 blocks, the light models keep the default 8 × 8
+        "bin 4": (Case("a", light="A", seed=5, patch_px=40), ["--bin", "4"]),
+        "local": (Case("a", light="A", seed=5, cfa="RGGB"), ["--method", "local", "--tiles", "2"]),
+    }
+    case, options = cases[name]
+    return render_case(case, directory).directory, options
+
+
 @pytest.mark.parametrize("strided", [False, True])
-@pytest.mark.parametrize("model", ["prior", "family", "auto"])
+@pytest.mark.parametrize(
+    ("case", "model"),
+    [("rgb", "prior"), ("rgb", "family"), ("rgb", "auto"), ("raw", "auto"), ("mono", "family"), ("bin 1", "prior")]
+    + [("bin 4", "family"), ("local", "auto")],
+)
 def test_the_light_models_pass_over_each_frame_once(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, model: str, strided: bool
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    case: str,
+    model: str,
+    strided: bool,
 ) -> None:
-    """Issue 31: ``--model prior|family|auto`` take the channel statistics from the LED estimate's block rows, so each
-    frame is block-summed once (the channel statistics' own pass over the frames is not taken), and the answer is the
-    one the frames' own pass gives (the same numbers: tests/processing/test_channel_statistics_from_rows.py); also
-    where the frames are large enough for the LED estimate to probe every few block rows (``strided``, forced)."""
+    """Issue 31: ``--model prior|family|auto`` take the channel statistics from the LED estimate's stream (its block
+    rows), so each frame is decoded once and never passed over by the channel statistics' own pass — for an RGB,
+    a raw and a mono camera, the all-pixel reference (``--bin 1``), another block size and the local method; also
+    where the frames are large enough for the LED estimate to probe every few block rows (``strided``, forced). The
+    statistics are the frames' own pass's (to the bit; a mono plane replicated, to rounding)."""
+    from msflash.acquisition.sequence.format import Sequence
+    from msflash.acquisition.sequence.reader import read_sequence
+    from msflash.acquisition.session.analysis import block_factor, load_frame_stack
+    from msflash.acquisition.session.prior_route import sequence_channel_statistics
     from msflash.processing import block_rows, channel_statistics
-    from msflash.processing.block_rows import BlockRows
 
     if strided:
         monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 64)
+    directory, options = _light_model_case(case, tmp_path / "case")
+    capsys.readouterr()
+    decoded: list[int] = []
+    frames_pass: list[int] = []
+    real_load, real_pass = Sequence.load_frame, channel_statistics._stacked_block_rows
 
-    rendered = render_case(Case("a", light="A", seed=5), tmp_path / "a")
-    passes: list[str] = []
-    add_frame, stacked = BlockRows.add_frame, channel_statistics._stacked_block_rows
+    def counted_load(self: Sequence, index: int) -> np.ndarray:  # the one reader of a sequence's frames
+        decoded.append(index)
+        return real_load(self, index)
 
-    def counted_rows(self: BlockRows, row: int, frame: np.ndarray, cfa_period: int = 1) -> None:
-        passes.append(f"rows {row}")
-        add_frame(self, row, frame, cfa_period)
+    def counted_pass(frames: list[np.ndarray], *args: object) -> object:
+        frames_pass.append(len(frames))
+        return real_pass(frames, *args)  # type: ignore[arg-type]
 
-    def counted_frames(frames: list[np.ndarray], *args: object) -> object:
-        passes.extend(f"channel statistics {index}" for index in range(len(frames)))
-        return stacked(frames, *args)  # type: ignore[arg-type]
-
-    monkeypatch.setattr(BlockRows, "add_frame", counted_rows)
-    monkeypatch.setattr(channel_statistics, "_stacked_block_rows", counted_frames)
-    once = _estimate(capsys, str(rendered.directory), "--model", model)
-    n_frames = (
-        sum(
-            1
-            for entry in json.loads((rendered.directory / "sequence.json").read_text())["frames"]
-            if entry["role"] == "led"
-        )
-        + 1
+    monkeypatch.setattr(Sequence, "load_frame", counted_load)
+    monkeypatch.setattr(channel_statistics, "_stacked_block_rows", counted_pass)
+    _estimate(capsys, str(directory), "--model", model, *options)
+    sequence = read_sequence(directory)
+    used = [index for index, entry in enumerate(sequence.frames) if entry.role in ("ambient", "led")]
+    assert frames_pass == [] and sorted(decoded) == used
+    monkeypatch.undo()
+    stack = load_frame_stack(sequence)
+    frames_own = channel_statistics.accumulate_channel_statistics(
+        stack.ambient,
+        stack.led_frames,
+        stack.spec,
+        cfa=sequence.camera.cfa,
+        bin_factor=block_factor(stack.ambient.shape, sequence.camera.cfa),
     )
-    assert sorted(passes) == sorted(f"rows {row}" for row in range(n_frames))
-    from msflash.acquisition.session import prior_route
-
-    monkeypatch.setattr(prior_route, "channel_statistics_of_block_rows", lambda *args, **kwargs: None)
-    assert _estimate(capsys, str(rendered.directory), "--model", model) == once  # from the frames: the same answer
+    taken = sequence_channel_statistics(sequence, stack)
+    assert taken.channels == frames_own.channels and np.array_equal(taken.counts, frames_own.counts)
+    for name in ("ff", "fa", "aa"):
+        ours, theirs = getattr(taken.moments, name), getattr(frames_own.moments, name)
+        if case == "mono":
+            np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-12 * np.abs(theirs).max())
+        else:
+            assert np.array_equal(ours, theirs), name
 
 
 @pytest.mark.parametrize("model", ["prior", "family", "auto"])

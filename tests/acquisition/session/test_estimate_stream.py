@@ -181,9 +181,12 @@ def test_synthesis_from_disk_streams_the_frames_and_gives_the_stacks_image_bit_f
 
 
 @pytest.mark.parametrize("ambient_last", [False, True])
-def test_the_block_rows_and_the_estimate_share_one_completeness_rule(tmp_path: Path, ambient_last: bool) -> None:
-    """Issue 31: frame by frame, :attr:`EstimateStream.block_rows` is None exactly while the statistics refuse (a
-    missing LED frame, or every LED frame in but the ambient not yet), and both answer once every frame is in."""
+def test_the_estimate_and_the_channel_statistics_share_one_completeness_rule(
+    tmp_path: Path, ambient_last: bool
+) -> None:
+    """Issue 31: frame by frame, the light models' channel statistics refuse exactly while the estimate's statistics do
+    (a missing LED frame, or every LED frame in but the ambient not yet), and both answer once every frame is in; an
+    LED frame beyond the planned ones is refused before it counts, so both still answer after it."""
     from msflash.acquisition.errors import RecordingError
     from msflash.acquisition.session.estimate_stream import EstimateStream
 
@@ -191,19 +194,21 @@ def test_the_block_rows_and_the_estimate_share_one_completeness_rule(tmp_path: P
     entries = list(enumerate(sequence.frames))
     if ambient_last:
         entries = entries[1:] + entries[:1]
-    stream = EstimateStream.for_sequence(sequence)
+    stream = EstimateStream.for_sequence(sequence, full_probe=True)
+
+    def refuses(result: object) -> bool:
+        try:
+            result()  # type: ignore[operator]
+        except RecordingError:
+            return True
+        return False
+
     answers = []
     for index, entry in entries:
         stream.add(sequence.load_frame(index), entry.role, entry.led_levels, entry.exposure_us * entry.gain)
-        try:
-            stream.statistics()
-            refused = False
-        except RecordingError:
-            refused = True
-        answers.append((stream.block_rows is None, refused))
+        answers.append((refuses(stream.statistics), refuses(stream.channel_statistics)))
     assert answers == [(True, True)] * (len(entries) - 1) + [(False, False)]
     index, entry = next((i, e) for i, e in enumerate(sequence.frames) if e.role == "led")
     with pytest.raises(RecordingError, match="LED frame 5 but 4 were planned"):
         stream.add(sequence.load_frame(index), entry.role, entry.led_levels, entry.exposure_us * entry.gain)
-    # The refused frame is not taken: both still answer (they disagreed when only the estimate counted it).
-    assert stream.block_rows is not None and stream.statistics().n_leds == 4
+    assert stream.statistics().n_leds == stream.channel_statistics().n_leds == 4
