@@ -305,7 +305,8 @@ class PriorModel:
     def solve(
         self, moments: Moments, n_samples: int, nonnegative: bool = True, observed: Moments | None = None
     ) -> tuple[np.ndarray, np.ndarray, float, float]:
-        """``(φ, posterior covariance of φ, λ, σ²)`` from one fold's moments.
+        """``(φ, posterior covariance of φ, λ, Σ‖a − Σ φ_m K_m f‖²)`` from one fold's moments: the last the residual on
+        the observed moments at φ (``n_samples`` σ², what the estimate's relative residual is read from).
 
         ``moments`` are those φ solves (:func:`solved_moments`: denoised); ``observed`` the same blocks' moments as
         observed, when they differ. Then the normal matrix is floored where the removed noise exceeds the signal
@@ -350,26 +351,22 @@ class PriorModel:
         system = hessian + weight * penalty
         if nonnegative:
             phi = _nonnegative(system, linear, prior.basis.values)
-        sigma2 = max(residual(phi), 0.0) / n
+        rss = max(residual(phi), 0.0)
         # The tempered likelihood whose posterior mode this is: errors of variance κσ² (module notes, step 4).
-        covariance = self.kappa * sigma2 * np.linalg.pinv(system)
-        return phi, covariance, weight, sigma2
-
-    def prediction_error(self, phi: np.ndarray, moments: Moments) -> float:
-        """``Σ‖a − Σ φ_m K_m f‖²`` over one fold's moments."""
-        return prediction_error(self.predictors, phi, moments)
+        covariance = self.kappa * (rss / n) * np.linalg.pinv(system)
+        return phi, covariance, weight, rss
 
     def estimate(self, statistics: ChannelStatistics) -> PriorEstimate:
         """The ambient of a sequence's channel statistics."""
         check_statistics(statistics, self)
         n = statistics.n_blocks * statistics.n_channels
         observed = statistics.moments.total()
-        phi, covariance, weight, _ = self.solve(solved_moments(statistics), n, observed=observed)
+        phi, covariance, weight, rss = self.solve(solved_moments(statistics), n, observed=observed)
         basis = self.prior.basis.values
         spectrum = basis @ phi
         std = np.sqrt(np.clip(np.einsum("nm,mj,nj->n", basis, covariance, basis), 0.0, None))
         energy = float(np.trace(observed.aa[0]))
-        relative = math.sqrt(self.prediction_error(phi, observed) / energy) if energy > 0 else 0.0
+        relative = math.sqrt(rss / energy) if energy > 0 else 0.0
         warnings = []
         # The posterior band says how far the spectrum may be off at each wavelength (docs/light-prior.md);
         # a warning on a wide band flagged mostly good estimates (docs/light-prior.md, validation), so the

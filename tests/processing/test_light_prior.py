@@ -256,6 +256,29 @@ def test_the_prior_is_solved_on_the_moments_less_all_their_noise(monkeypatch: py
         _assert_moments_equal(observed, moments.without(fold))
 
 
+def test_an_estimate_forms_each_set_of_normal_equations_once(monkeypatch: pytest.MonkeyPatch):
+    """The observed moments' normal equations set σ² (λ, the band) and the relative residual: formed once for both
+    (they were formed again for the residual), the denoised moments' once for φ; the answer as before."""
+    from msflash.processing import light_prior
+
+    statistics, model = _noisy_statistics()
+    expected = model.estimate(statistics)
+    formed: list[Moments] = []
+    real = light_prior.normal_equations
+
+    def counted(predictors: np.ndarray, moments: Moments) -> tuple[np.ndarray, np.ndarray, float]:
+        formed.append(moments)
+        return real(predictors, moments)
+
+    monkeypatch.setattr(light_prior, "normal_equations", counted)
+    found = model.estimate(statistics)
+    assert len(formed) == 2
+    _assert_moments_equal(formed[0], statistics.moments.total())
+    _assert_moments_equal(formed[1], solved_moments(statistics))
+    assert found.relative_residual == expected.relative_residual > 0
+    assert np.array_equal(found.spectrum_std, expected.spectrum_std)
+
+
 def test_the_prior_estimate_does_not_depend_on_which_band_of_rows_comes_first():
     """The folds are bands of block rows; the estimate is of the blocks, so listing the bands in another order must
     not move it. (Denoised by the first fold's noise alone, it moved with that fold's share of the noise.)"""
