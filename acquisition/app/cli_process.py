@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from msflash.acquisition.app.cli_common import UsageError, positive_int, print_json, progress
-from msflash.acquisition.app.options import add_estimation_options, add_scheduler_options, target_value
+from msflash.acquisition.app.cli_common import UsageError, print_json, progress
+from msflash.acquisition.app.options import add_estimation_options, add_scheduler_options, target_value, tiles_value
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.acquisition.sequence.reader import read_sequence
@@ -43,7 +43,6 @@ def _add_calibration_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-AMBIENT_MODELS = ("led", "prior", "family", "auto")
 DEFAULT_AMBIENT_MODEL = "led"
 """Default of ``--model``: the LED-span estimate (eq. 4–6), the one ``run`` and ``flash`` solve their flash from.
 ``auto`` beats it on the harness's mean (docs/ambient-harness.md) but not yet on the worst scenes, and ``run``
@@ -55,7 +54,7 @@ def add_model_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--model",
         default=DEFAULT_AMBIENT_MODEL,
-        choices=AMBIENT_MODELS,
+        choices=one_sequence.AMBIENT_MODELS,
         help="ambient model: led (a mix of the LED spectra, eq. 4-6; default), prior (a basis learnt "
         "from measured lights, read through the surfaces' colours; needs the camera's "
         "responsivities), family (light from physics: thermal, discharge, solid-state, transmitted or a "
@@ -235,7 +234,7 @@ def add_local_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--tiles",
-        type=positive_int,
+        type=tiles_value,
         default=DEFAULT_TILES,
         help=f"tiles per side for local estimation (default {DEFAULT_TILES})",
     )

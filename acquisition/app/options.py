@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import math
 from collections.abc import Callable
+from typing import Any
 
 from msflash.acquisition.app.cli_common import positive_int
 from msflash.acquisition.devices.sim_default import MONO, SIM_DEFAULT_CFA
@@ -40,19 +40,34 @@ def target_value(text: str) -> str:
     return text
 
 
-def alpha_value(text: str) -> float | str:
-    """argparse type of ``--alpha``: a finite number ≥ 0, or ``auto``."""
-    # argparse.ArgumentTypeError: argparse prints its message; for a ValueError (UsageError is one)
-    # it prints "invalid _alpha value: '-1'" instead, naming this function and not what is expected.
-    if text == "auto":
-        return text
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (value >= 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"'{text}': expected a finite number ≥ 0 or 'auto'")
-    return value
+def setting_type(name: str, parse: Callable[[str], Any]) -> Callable[[str], Any]:
+    """argparse type of the estimate setting ``name``: the text ``parse``-d, then the setting's one rule
+    (:data:`acquisition.session.one_sequence.SETTING_RULES`, which the Python API applies too), argparse naming
+    the option."""
+
+    def value_of(text: str) -> Any:
+        from msflash.acquisition.session.one_sequence import SETTING_RULES
+
+        # argparse.ArgumentTypeError: argparse prints its message; for a ValueError (UsageError is one)
+        # it prints "invalid value_of value: '-1'" instead, naming this function and not what is expected.
+        try:
+            value = parse(text)
+        except ValueError:
+            value = None
+        rule = SETTING_RULES[name]
+        if not rule.accepts(value):
+            raise argparse.ArgumentTypeError(rule.refusal(f"'{text}'"))
+        return value
+
+    return value_of
+
+
+alpha_value = setting_type("alpha", lambda text: text if text == "auto" else float(text))
+"""argparse type of ``--alpha``: a finite number ≥ 0, or ``auto``."""
+bin_value = setting_type("bin_factor", int)
+"""argparse type of ``--bin``: a whole number ≥ 1."""
+tiles_value = setting_type("tiles", int)
+"""argparse type of ``--tiles``: a whole number ≥ 1."""
 
 
 SOLVER_CONSTRAINTS = {
@@ -86,7 +101,7 @@ def add_estimation_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--bin",
-        type=positive_int,
+        type=bin_value,
         default=analysis.DEFAULT_BIN_FACTOR,
         help=f"sum BIN×BIN blocks of each channel (of each CFA plane of a mosaic: 2·BIN × 2·BIN pixels) before "
         f"estimating (default {analysis.DEFAULT_BIN_FACTOR}; an odd BIN is taken one smaller, and BIN is halved, "

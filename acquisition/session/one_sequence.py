@@ -221,11 +221,43 @@ def _check_every_led_captured(sequence: Sequence) -> None:
         )
 
 
-def check_settings(settings: EstimateSettings) -> None:
-    """Refuse settings the command line's own types would have refused (the Python API passes them as given).
+@dataclass(frozen=True)
+class SettingRule:
+    """One estimate setting's rule: the values it takes and, in words, what is expected. The command line's type
+    (:mod:`acquisition.app.options`, argparse naming the option) and the Python API's :func:`check_settings` (naming
+    the parameter and its option) both apply it, so they refuse alike and say so alike."""
 
-    ``bin_factor=0`` and ``tiles=-1`` were taken as 1 silently, ``1.5`` and ``True`` as numbers, ``"4"`` or
-    ``nan`` failed deep inside with a TypeError; a solver's name was a plain ValueError.
+    option: str
+    expected: str
+    accepts: Callable[[object], bool]
+
+    def refusal(self, shown: str) -> str:
+        """The message for a refused value, ``shown`` as the caller gave it (``'0'`` typed, ``0`` passed)."""
+        return f"{shown}: expected {self.expected}"
+
+
+def _whole_number(value: object) -> bool:
+    return isinstance(value, int | np.integer) and not isinstance(value, bool) and bool(value >= 1)
+
+
+def _alpha(value: object) -> bool:
+    if value == "auto":
+        return True
+    return isinstance(value, int | float) and not isinstance(value, bool) and 0 <= value < float("inf")
+
+
+SETTING_RULES = {
+    "alpha": SettingRule("--alpha", "a finite number ≥ 0 or 'auto'", _alpha),
+    "bin_factor": SettingRule("--bin", "a whole number ≥ 1", _whole_number),
+    "tiles": SettingRule("--tiles", "a whole number ≥ 1", _whole_number),
+}
+""":class:`EstimateSettings` field → its rule (the names among the settings are checked against their tables:
+``model`` :data:`AMBIENT_MODELS`, ``solver`` :data:`processing.ambient.AMBIENT_METHODS`)."""
+
+
+def check_settings(settings: EstimateSettings) -> None:
+    """Refuse settings the command line's own types would have refused (the Python API passes them as given): the
+    same rules (:data:`SETTING_RULES`, the tables of names).
 
     Raises
     ------
@@ -234,19 +266,14 @@ def check_settings(settings: EstimateSettings) -> None:
     """
     from msflash.processing.ambient import AMBIENT_METHODS
 
-    models = ("led", *LIGHT_MODELS.values())
-    if settings.model not in models:  # named as itself, not as the method it would have been looked up as
-        raise UsageError(unknown_name("model (--model)", str(settings.model), models))
+    if settings.model not in AMBIENT_MODELS:  # named as itself, not as the method it would have been looked up as
+        raise UsageError(unknown_name("model (--model)", str(settings.model), AMBIENT_MODELS))
     if settings.solver not in AMBIENT_METHODS:
         raise UsageError(unknown_name("solver (--solver)", str(settings.solver), sorted(AMBIENT_METHODS)))
-    alpha = settings.alpha
-    if alpha != "auto" and not (
-        isinstance(alpha, int | float) and not isinstance(alpha, bool) and 0 <= alpha < float("inf")
-    ):
-        raise UsageError(f"alpha (--alpha) {alpha!r}: expected a finite number ≥ 0 or 'auto'")
-    for name, option, value in (("bin_factor", "--bin", settings.bin_factor), ("tiles", "--tiles", settings.tiles)):
-        if not (isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 1):
-            raise UsageError(f"{name} ({option}) {value!r}: expected a whole number ≥ 1")
+    for name, rule in SETTING_RULES.items():
+        value = getattr(settings, name)
+        if not rule.accepts(value):
+            raise UsageError(f"{name} ({rule.option}) {rule.refusal(repr(value))}")
 
 
 def _light_models(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
@@ -315,6 +342,9 @@ accumulator (:mod:`acquisition.session.estimate_stream`) for the LED span's esti
 
 LIGHT_MODELS = {"prior": "prior", "family": "family", "models": "auto"}
 """Method table names of the light models → their ``--model`` name."""
+
+AMBIENT_MODELS = ("led", *LIGHT_MODELS.values())
+"""The ``--model`` names: the LEDs' span (eq. 4–6) and the light models."""
 
 
 def method_of(settings: EstimateSettings) -> str:

@@ -143,6 +143,32 @@ def test_estimate_ambient_refuses_what_the_command_line_refuses(read_back, optio
 
 
 @pytest.mark.parametrize(
+    ("name", "option", "typed", "passed"),
+    [("bin_factor", "--bin", "0", 0), ("tiles", "--tiles", "1.5", 1.5), ("alpha", "--alpha", "nan", float("nan"))],
+)
+def test_the_command_line_and_the_api_apply_one_rule_per_setting(  # type: ignore[no-untyped-def]
+    read_back, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, name, option, typed, passed
+) -> None:
+    """Issue 31: each setting's rule is stated once (``one_sequence.SETTING_RULES``): the command line's exit-2 line
+    names the option, the API's UsageError the parameter and its option, and both say what the one rule expects —
+    a rule changed in that one place changes both."""
+    from dataclasses import replace
+
+    import msflash
+    from msflash.acquisition.errors import UsageError
+    from msflash.acquisition.session import one_sequence
+
+    rule = one_sequence.SETTING_RULES[name]
+    monkeypatch.setitem(one_sequence.SETTING_RULES, name, replace(rule, expected=f"{rule.expected} (the one rule)"))
+    assert main(["estimate", str(read_back.directory), option, typed]) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert line.endswith(f"argument {option}: '{typed}': expected {rule.expected} (the one rule)"), line
+    with pytest.raises(UsageError) as caught:
+        msflash.estimate_ambient(read_back, **{name: passed})
+    assert str(caught.value) == f"{name} ({option}) {passed!r}: expected {rule.expected} (the one rule)"
+
+
+@pytest.mark.parametrize(
     ("call", "named"),
     [
         (lambda m, seq, est: m.estimate_ambient(str(seq.directory)), "msflash.estimate_ambient: sequence is str"),
