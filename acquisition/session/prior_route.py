@@ -443,23 +443,28 @@ def _models_block(
     return blocks, checks
 
 
-def _prior_route(
-    sequence: Sequence,
-    stack: FrameStack | None,
-    requested: str,
-    varies: bool,
-    led_payload: dict,
-    reference: Reference | None = None,
-    flicker: FlickerCheck | None = None,
-    stream: EstimateStream | None = None,
-) -> tuple[dict, str, str, dict]:
+@dataclass(frozen=True)
+class _RouteInputs:
+    """What a ``--model`` route reads (:data:`MODEL_ROUTES`; the fields as :func:`with_model_choice` takes them)."""
+
+    sequence: Sequence
+    stack: FrameStack | None
+    requested: str
+    varies: bool
+    led_payload: dict
+    reference: Reference | None
+    flicker: FlickerCheck | None
+    statistics: ChannelStatistics
+    """One set of channel statistics for both models (the same, corrected alike), from the LED side's stream."""
+
+
+def _prior_route(given: _RouteInputs) -> tuple[dict, str, str, dict]:
     """``--model prior``: the light prior, checked against the family evidence."""
-    # One set of channel statistics for both models (the same, corrected alike), from the LED side's stream.
-    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker, stream=stream)
+    sequence, stack, flicker, statistics = given.sequence, given.stack, given.flicker, given.statistics
     result = estimate_sequence_prior(sequence, stack, flicker, statistics)
     prior = prior_payload(sequence, result)
-    _, family = estimate_sequence_family(sequence, stack, result.prior, reference, flicker, statistics)
-    models, _ = _models_block(sequence, led_payload, result.prior, family)
+    _, family = estimate_sequence_family(sequence, stack, result.prior, given.reference, flicker, statistics)
+    models, _ = _models_block(sequence, given.led_payload, result.prior, family)
     replacement = {
         "spectrum": prior["prior"]["spectrum"],
         "spectrum_std": prior["prior"]["spectrum_std"],
@@ -470,22 +475,15 @@ def _prior_route(
     return extra, "prior", "asked for the light prior (--model prior)", replacement
 
 
-def _family_route(
-    sequence: Sequence,
-    stack: FrameStack | None,
-    requested: str,
-    varies: bool,
-    led_payload: dict,
-    reference: Reference | None = None,
-    flicker: FlickerCheck | None = None,
-    stream: EstimateStream | None = None,
-) -> tuple[dict, str, str, dict]:
+def _family_route(given: _RouteInputs) -> tuple[dict, str, str, dict]:
     """``--model family`` and ``--model auto``: the family model's choice (auto: the LEDs' span unless the evidence
     says otherwise; a scene whose illuminant varies keeps the local LED model)."""
-    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker, stream=stream)
-    prior, family = estimate_sequence_family(sequence, stack, None, reference, flicker, statistics)
+    sequence = given.sequence
+    prior, family = estimate_sequence_family(
+        sequence, given.stack, None, given.reference, given.flicker, given.statistics
+    )
     block = family_payload(sequence, family)
-    models, _ = _models_block(sequence, led_payload, prior, family)
+    models, _ = _models_block(sequence, given.led_payload, prior, family)
     led_error = family.led.held_out_error_noise_removed
     choice = {
         "held_out_relative_error_noise_removed": {
@@ -496,9 +494,9 @@ def _family_route(
         "noise_margin": AUTO_NOISE,
         "noise_share": family.led.noise_share,
     }
-    if requested == "family":
+    if given.requested == "family":
         chosen, reason = family.chosen.fit.name, family.reason
-    elif varies:
+    elif given.varies:
         chosen, reason = (
             "led",
             "the illuminant varies across the scene (the local LED model was chosen); the families are one global "
@@ -523,10 +521,10 @@ def _family_route(
 
 
 MODEL_ROUTES = {"prior": _prior_route, "family": _family_route, "auto": _family_route}
-"""``--model`` name → its route: ``(sequence, stack, requested, varies, led payload, reference, flicker, stream) → (fields,
-chosen, reason, replacement)``. ``replacement`` holds the spectrum, band, band meaning and warnings that replace the LED ones when
-``chosen`` is not ``led`` (``led`` itself needs no route: it is :mod:`acquisition.session.analysis`'s estimate), and
-``led_warnings``, the LED payload's warnings with the families' check in place of the reference lights' when it is."""
+"""``--model`` name → its route: ``_RouteInputs → (fields, chosen, reason, replacement)``. ``replacement`` holds the
+spectrum, band, band meaning and warnings that replace the LED ones when ``chosen`` is not ``led`` (``led`` itself
+needs no route: it is :mod:`acquisition.session.analysis`'s estimate), and ``led_warnings``, the LED payload's
+warnings with the families' check in place of the reference lights' when it is."""
 
 
 def with_model_choice(
@@ -556,9 +554,9 @@ def with_model_choice(
     dict, str, str
         The payload (docs/architecture.md §7), the chosen model and the reason.
     """
-    fields, chosen, reason, replacement = MODEL_ROUTES[requested](
-        sequence, stack, requested, varies, payload, reference, flicker, stream
-    )
+    statistics = sequence_channel_statistics(sequence, stack, flicker=flicker, stream=stream)
+    given = _RouteInputs(sequence, stack, requested, varies, payload, reference, flicker, statistics)
+    fields, chosen, reason, replacement = MODEL_ROUTES[requested](given)
     payload = dict(payload)
     payload.update({key: value for key, value in fields.items() if key != "model_choice"})
     payload["model"] = chosen
