@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -269,13 +270,33 @@ _SEQUENCES_HELP = (
 )
 
 
+def _sequences_command(subparsers: argparse._SubParsersAction, name: str, what: str) -> argparse.ArgumentParser:
+    """A command over one or more sequences (``estimate``, ``flash``)."""
+    parser = subparsers.add_parser(name, help=what)
+    parser.add_argument("sequences", nargs="+", metavar="SEQUENCE", help=_SEQUENCES_HELP)
+    return parser
+
+
+def _add_estimate_options(parser: argparse.ArgumentParser) -> None:
+    """The estimate's options of ``estimate`` and ``flash``: the solver, the calibration, the local model."""
+    add_estimation_options(parser)
+    _add_calibration_option(parser)
+    add_local_options(parser)
+
+
+def _json_and_scheduler(parser: argparse.ArgumentParser, handler: Callable[[argparse.Namespace], int]) -> None:
+    """``--json``, the scheduler of several sequences, and the command's handler."""
+    parser.add_argument(
+        "--json", action="store_true", help="print one JSON object (several sequences: one JSON line each, always)"
+    )
+    add_scheduler_options(parser, None, "sequences (with several)")
+    parser.set_defaults(handler=handler)
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``estimate``, ``flash`` and ``synthesize``."""
-    estimate = subparsers.add_parser("estimate", help="estimate the ambient illuminant spectrum of a sequence")
-    estimate.add_argument("sequences", nargs="+", metavar="SEQUENCE", help=_SEQUENCES_HELP)
-    add_estimation_options(estimate)
-    _add_calibration_option(estimate)
-    add_local_options(estimate)
+    estimate = _sequences_command(subparsers, "estimate", "estimate the ambient illuminant spectrum of a sequence")
+    _add_estimate_options(estimate)
     add_model_option(estimate)
     estimate.add_argument(
         "--reference-patch",
@@ -293,14 +314,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "their colours, free of any reflectance estimate, join the evidence and calibrate the estimate "
         "(--model prior|family|auto; docs/light-families.md)",
     )
-    estimate.add_argument(
-        "--json", action="store_true", help="print one JSON object (several sequences: one JSON line each, always)"
-    )
-    add_scheduler_options(estimate, None, "sequences (with several)")
-    estimate.set_defaults(handler=_estimate)
+    _json_and_scheduler(estimate, _estimate)
 
-    flash = subparsers.add_parser("flash", help="solve the matching or complementary flash for a sequence")
-    flash.add_argument("sequences", nargs="+", metavar="SEQUENCE", help=_SEQUENCES_HELP)
+    flash = _sequences_command(subparsers, "flash", "solve the matching or complementary flash for a sequence")
     flash.add_argument("--mode", required=True, choices=("complementary", "matching"))
     flash.add_argument(
         "--target",
@@ -314,9 +330,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=("physical", "nonnegative", "free"),
         help="physical: 0..1 (re-capture); nonnegative/free: computational synthesis",
     )
-    add_estimation_options(flash)
-    _add_calibration_option(flash)
-    add_local_options(flash)
+    _add_estimate_options(flash)
     flash.add_argument(
         "--out",
         default=None,
@@ -324,11 +338,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "with a local estimate the flash weights vary across the frame; with several sequences a path "
         "holding {name}, each sequence folder's name (out/{name}.exr)",
     )
-    flash.add_argument(
-        "--json", action="store_true", help="print one JSON object (several sequences: one JSON line each, always)"
-    )
-    add_scheduler_options(flash, None, "sequences (with several)")
-    flash.set_defaults(handler=_flash)
+    _json_and_scheduler(flash, _flash)
 
     synth = subparsers.add_parser("synthesize", help="synthesise the computational flash image from a sequence")
     synth.add_argument("sequence", help=SEQUENCE_HELP)
