@@ -26,7 +26,7 @@ from msflash.led_controller.booth_link import _Garbled, _LinkLost
 from msflash.led_controller.booth_table import TimedTable
 from msflash.led_controller.errors import BoothError, BoothTimeoutError
 from msflash.led_controller.protocol import BoothEvent, BoothStatus, Command
-from msflash.led_controller.serial_port import open_serial_port
+from msflash.led_controller.serial_port import open_driver
 
 log = logging.getLogger(__name__)
 
@@ -86,18 +86,13 @@ class LedBooth(TimedTable):
         """
         if not (0 <= boot_s < math.inf):
             raise ValueError(f"boot wait {boot_s!r} s; expected a finite number of seconds ≥ 0 (0: no wait)")
-        port = open_serial_port(url, baudrate, _READ_POLL_S, timeout_s)
-        try:
-            booth = cls(port, timeout_s=timeout_s, log_serial=log_serial, name=url)
-        except BaseException:
-            port.close()  # the driver never took the port: release it here
-            raise
-        try:
-            booth.identify_after_boot(boot_s)
-        except BaseException:
-            booth.close()
-            raise
-        return booth
+        return open_driver(
+            url,
+            baudrate,
+            (_READ_POLL_S, timeout_s),
+            lambda port: cls(port, timeout_s=timeout_s, log_serial=log_serial, name=url),
+            lambda booth: booth.identify_after_boot(boot_s),
+        )
 
     def __enter__(self) -> LedBooth:
         return self

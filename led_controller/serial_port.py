@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import errno
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import IO
+from typing import IO, Protocol, TypeVar
 
 import serial
 
@@ -38,6 +39,37 @@ def open_serial_port(url: str, baudrate: int, read_timeout_s: float, write_timeo
         raise port_open_error(url, err) from err
     except ValueError as err:
         raise BoothError(f"booth {url}: cannot open ({err}); expected a device path or pyserial URL") from err
+
+
+class _Closable(Protocol):
+    def close(self) -> None: ...
+
+
+Driver = TypeVar("Driver", bound=_Closable)
+
+
+def open_driver(
+    url: str,
+    baudrate: int,
+    timeouts_s: tuple[float, float],
+    driver: Callable[[serial.SerialBase], Driver],
+    start: Callable[[Driver], object],
+) -> Driver:
+    """A booth driver on the port at ``url`` (:func:`open_serial_port`, ``timeouts_s`` read and write): ``driver``
+    made on the port, then ``start``-ed (identified); the port closed if the driver cannot be made, the driver
+    (switching its LEDs off) if it cannot start. Every booth driver opens through here."""
+    port = open_serial_port(url, baudrate, *timeouts_s)
+    try:
+        made = driver(port)
+    except BaseException:
+        port.close()  # the driver never took the port: release it here
+        raise
+    try:
+        start(made)
+    except BaseException:
+        made.close()
+        raise
+    return made
 
 
 def port_open_error(url: str, err: serial.SerialException) -> BoothError:

@@ -31,7 +31,7 @@ import serial
 from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import HOST_PACED_ONLY, BoothCapabilities
 from msflash.led_controller.errors import BoothError, BoothProtocolError, BoothTimeoutError
-from msflash.led_controller.serial_port import open_serial_port, open_transcript
+from msflash.led_controller.serial_port import open_driver, open_transcript
 
 log = logging.getLogger(__name__)
 
@@ -154,42 +154,37 @@ class TextBooth:
         BoothError
             The port cannot be opened or does not answer as a text booth (its LEDs are sent ``OFF``).
         """
-        port = open_serial_port(url, baudrate, timeout_s, timeout_s)  # missing, no permission, busy: as for LedBooth
-        try:
-            booth = cls(port, name=url, log_serial=log_serial)
-        except BaseException:
-            port.close()
-            raise
-        try:
-            start = time.monotonic()
-            booth._await_boot(boot_s)
-            try:
-                reply = booth._ask("ID?")
-            except BoothTimeoutError as err:
-                hint = (
-                    f"a board that resets when its port opens (Arduino auto-reset) needs --booth-boot-s longer than "
-                    f"its bootloader (now {boot_s:g} s)"
-                    if boot_s > 0
-                    else f"if it resets when its port opens (Arduino auto-reset), let it boot: --booth-boot-s {DEFAULT_BOOT_S:g}"
-                )
-                raise BoothTimeoutError(
-                    f"{err} ({time.monotonic() - start:.3g} s after opening the port; {hint})",
-                    command="ID?",
-                    timeout_s=err.timeout_s,
-                ) from err
-            booth._info = parse_identity(reply, f"booth {url}")
-            booth.all_off()  # leftovers of a run that did not finish
-        except BaseException:
-            booth.close()
-            raise
-        log.info(
-            "%s: text booth %s, %d channels %s",
+        booth = open_driver(
             url,
-            booth.info.firmware,
-            booth.info.channels,
-            ",".join(booth.info.names),
+            baudrate,
+            (timeout_s, timeout_s),  # missing, no permission, busy: as for LedBooth
+            lambda port: cls(port, name=url, log_serial=log_serial),
+            lambda booth: booth._identify_after_boot(boot_s),
         )
+        info = booth.info
+        log.info("%s: text booth %s, %d channels %s", url, info.firmware, info.channels, ",".join(info.names))
         return booth
+
+    def _identify_after_boot(self, boot_s: float) -> None:
+        """Wait for the booth to boot (:meth:`_await_boot`), ask ``ID?``, switch the LEDs off."""
+        start = time.monotonic()
+        self._await_boot(boot_s)
+        try:
+            reply = self._ask("ID?")
+        except BoothTimeoutError as err:
+            hint = (
+                f"a board that resets when its port opens (Arduino auto-reset) needs --booth-boot-s longer than "
+                f"its bootloader (now {boot_s:g} s)"
+                if boot_s > 0
+                else f"if it resets when its port opens (Arduino auto-reset), let it boot: --booth-boot-s {DEFAULT_BOOT_S:g}"
+            )
+            raise BoothTimeoutError(
+                f"{err} ({time.monotonic() - start:.3g} s after opening the port; {hint})",
+                command="ID?",
+                timeout_s=err.timeout_s,
+            ) from err
+        self._info = parse_identity(reply, f"booth {self._name}")
+        self.all_off()  # leftovers of a run that did not finish
 
     def _await_boot(self, boot_s: float) -> None:
         """Send nothing until the booth's first line of its own or ``boot_s``; the bytes so far are dropped."""

@@ -91,3 +91,32 @@ def test_unknown_protocol_and_missing_port() -> None:
         open_booth("/dev/null", "acme")
     with pytest.raises(BoothNotFoundError, match="booth /nonexistent/tty: no such port"):
         TextBooth.open("/nonexistent/tty")
+
+
+@pytest.mark.parametrize("driver", ["text", "msflash"])
+def test_a_booth_that_does_not_identify_releases_its_port(monkeypatch: pytest.MonkeyPatch, driver: str) -> None:
+    """Both drivers open through the one opener (``serial_port.open_driver``): a silent port times out, and the port
+    it held exclusively is released, so the next open finds it free (not busy) and times out alike."""
+    from msflash.led_controller import serial_port
+    from msflash.led_controller.booth import LedBooth
+
+    opened: list[str] = []
+    real = serial_port.open_driver
+
+    def counted(url, *args):  # noqa: ANN001, ANN202 — the module's own opener, counted
+        opened.append(url)
+        return real(url, *args)
+
+    monkeypatch.setattr(
+        f"msflash.led_controller.{'adapters.text_booth' if driver == 'text' else 'booth'}.open_driver", counted
+    )
+    cls = TextBooth if driver == "text" else LedBooth
+    master, slave = os.openpty()
+    try:
+        for _ in range(2):
+            with pytest.raises(BoothTimeoutError):
+                cls.open(os.ttyname(slave), timeout_s=0.2, boot_s=0)
+        assert opened == [os.ttyname(slave)] * 2
+    finally:
+        os.close(master)
+        os.close(slave)
