@@ -248,7 +248,9 @@ def accumulate_channel_statistics(
             f"least {n_folds} rows of blocks (a larger frame or smaller blocks)"
         )
     raw, probes = _stacked_block_rows(frames, period, bin_factor, spec.white_level, blocks)
-    return _statistics_of_rows(raw, probes, spec, bin_factor, n_folds, blocks, channels)
+    return _statistics_of_products(
+        *_fold_products(raw, probes, n_folds, blocks), spec, bin_factor, n_folds, blocks, channels
+    )
 
 
 def channel_statistics_of_block_rows(
@@ -279,17 +281,15 @@ def channel_statistics_of_block_rows(
         stacked = rows.channel_rows()
         if stacked is None:
             return None
-        raw, probes = stacked
-        statistics = _statistics_of_rows(raw, probes, spec, rows.factor, n_folds, blocks, channels)
-    else:
-        statistics = _statistics_of_products(*products, spec, rows.factor, n_folds, blocks, channels)
+        products = _fold_products(*stacked, n_folds, blocks)
+    statistics = _statistics_of_products(*products, spec, rows.factor, n_folds, blocks, channels)
     return statistics.replicated(plane_channels(None)) if mono else statistics
 
 
 def _compiled_fold_products(
     rows: BlockRows, n_folds: int, blocks: _BlockLayout
 ) -> tuple[np.ndarray, np.ndarray | None] | None:
-    """Each fold's Gram matrix of the rows and of the probe, as :func:`_statistics_of_rows` takes them from
+    """Each fold's Gram matrix of the rows and of the probe, as :func:`_fold_products` takes them from
     :meth:`~processing.block_rows.BlockRows.channel_rows`, by the compiled kernel from the rows as stored
     (:func:`processing.family_kernels_numba.fold_grams`: no transposing copy, 4 × 4 tiles): the same numbers to the
     bit, since it answers only where every sum is exact (block sums of integer frames). None where the compiled fits
@@ -425,25 +425,17 @@ def _numpy_block_sums(
     return None
 
 
-def _statistics_of_rows(
-    raw: np.ndarray,
-    probes: np.ndarray | None,
-    spec: FrameStackSpec,
-    factor: int,
-    n_folds: int,
-    blocks: _BlockLayout,
-    channels: tuple[str, ...],
-) -> ChannelStatistics:
-    """:class:`ChannelStatistics` of stacked block rows (:func:`_stacked_block_rows`), per fold."""
+def _fold_products(
+    raw: np.ndarray, probes: np.ndarray | None, n_folds: int, blocks: _BlockLayout
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Each fold's Gram matrix of stacked block rows (:func:`_stacked_block_rows`) and of their probe."""
     # Folds are bands of block rows: contiguous slices of the row-major blocks.
     bounds = ((np.arange(n_folds + 1) * blocks.height + n_folds - 1) // n_folds) * blocks.width
 
     def products_of(rows: np.ndarray) -> np.ndarray:
         return np.stack([_gram(rows[:, bounds[j] : bounds[j + 1]]) for j in range(n_folds)])
 
-    return _statistics_of_products(
-        products_of(raw), None if probes is None else products_of(probes), spec, factor, n_folds, blocks, channels
-    )
+    return products_of(raw), None if probes is None else products_of(probes)
 
 
 def _statistics_of_products(
@@ -456,7 +448,7 @@ def _statistics_of_products(
     channels: tuple[str, ...],
 ) -> ChannelStatistics:
     """:class:`ChannelStatistics` of each fold's Gram matrix of the stacked block rows and of their probe
-    (:func:`_statistics_of_rows`)."""
+    (:func:`_fold_products`)."""
     transform = _response_transform(spec, blocks.channels, spec.black_level * factor * factor)
     width_f = spec.n_leds * blocks.channels
 
