@@ -194,13 +194,7 @@ class CameraOptions:
         for name in ("trigger_line", "strobe_line", "gain_db", "gain_raw"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name)
-        if self.roi is not None:
-            out["roi"] = list(self.roi)
-        if self.binning is not None:
-            out["binning"] = list(self.binning)
-        if self.features:
-            out["features"] = dict(self.features)
-        return out
+        return _with_image_fields(out, self.roi, self.binning, self.features)
 
 
 # -- parsing ----------------------------------------------------------------------------------
@@ -355,13 +349,23 @@ class AppliedOptions:
         out: dict[str, Any] = {}
         if self.gain is not None:
             out["gain"] = dict(self.gain)
-        if self.roi is not None:
-            out["roi"] = list(self.roi)
-        if self.binning is not None:
-            out["binning"] = list(self.binning)
-        if self.features:
-            out["features"] = dict(self.features)
-        return out
+        return _with_image_fields(out, self.roi, self.binning, self.features)
+
+
+def _with_image_fields(
+    out: dict[str, Any],
+    roi: tuple[int, int, int, int] | None,
+    binning: tuple[int, int] | None,
+    features: tuple[tuple[str, str], ...] | dict[str, FeatureValue],
+) -> dict[str, Any]:
+    """``out`` with the region, binning and raw features that are set, as JSON (the options' and the record's)."""
+    if roi is not None:
+        out["roi"] = list(roi)
+    if binning is not None:
+        out["binning"] = list(binning)
+    if features:
+        out["features"] = dict(features)
+    return out
 
 
 def _describe(camera: FeatureCamera, feature: str, option: str) -> FeatureInfo:
