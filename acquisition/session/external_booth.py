@@ -67,24 +67,42 @@ def open_external_booth(
     RigOpenError
         ``booth PORT: …``: the port did not open or answer as a booth, or its channels differ.
     """
+    mismatch = ("the simulated LEDs are", "one channel per LED (--leds N or --led-spectra FILE.csv)")
     try:
-        booth = open_booth(port, protocol, log_serial=log_serial, boot_s=boot_s)
-        closers.append(booth.close)
-        closers.append(booth.all_off)
-        if booth.info.channels != leds.count:
-            raise RigOpenError(
-                f"booth {port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the simulated "
-                f"LEDs are {leds.count} ({', '.join(leds.names)}); expected one channel per LED (--leds N or "
-                "--led-spectra FILE.csv)"
-            )
-        if isinstance(booth, LedBooth):
-            for note in reset_leftovers(booth):
-                log.warning("%s", note)
+        booth = open_checked_booth(port, protocol, log_serial, boot_s, leds, closers, mismatch)
     except RigOpenError:
         raise
     except Exception as err:  # noqa: BLE001 - every failure to open is the rig's, with the port named
         message = str(err)
         raise RigOpenError(message if message.startswith(("booth", port)) else f"booth {port}: {message}") from err
+    return booth
+
+
+def open_checked_booth(
+    port: str,
+    protocol: str,
+    log_serial: str | Path | None,
+    boot_s: float,
+    leds: Spectra,
+    closers: list,
+    mismatch: tuple[str, str],
+) -> Booth:
+    """The booth at ``port``, its closers appended to ``closers`` as soon as it is open (LEDs off, then the port),
+    checked to have one channel per LED (``mismatch``: what the LEDs are and what is expected, for the refusal) and
+    cleared of a killed run's leftovers and raised watchdog (:func:`reset_leftovers`; an adapter of another
+    ``protocol`` switches its LEDs off as it opens). The one opening of the sim rig's external booth and the
+    hardware rig's."""
+    booth = open_booth(port, protocol, log_serial=log_serial, boot_s=boot_s)
+    closers.append(booth.close)
+    closers.append(booth.all_off)
+    if booth.info.channels != leds.count:
+        raise RigOpenError(
+            f"booth {port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but {mismatch[0]} "
+            f"{leds.count} ({', '.join(leds.names)}); expected {mismatch[1]}"
+        )
+    if isinstance(booth, LedBooth):
+        for note in reset_leftovers(booth):
+            log.warning("%s", note)
     return booth
 
 

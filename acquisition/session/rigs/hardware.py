@@ -10,7 +10,6 @@ responsivities) come from a calibration directory or CSV files (:func:`hw_spectr
 
 from __future__ import annotations
 
-import logging
 import os
 from pathlib import Path
 from typing import Any
@@ -22,16 +21,12 @@ from msflash.acquisition.devices.sim_world import (
 )
 from msflash.acquisition.errors import CameraNotFoundError, CameraSettingError, RigOpenError, UsageError
 from msflash.acquisition.progress import progress
+from msflash.acquisition.session.external_booth import open_checked_booth
 from msflash.acquisition.session.rigs.emulated_booth import close_all
 from msflash.acquisition.session.rigs.rig import Rig, sends_mono
-from msflash.led_controller import LedBooth
-from msflash.led_controller.adapters import open_booth
 from msflash.led_controller.booth_handshake import DEFAULT_BOOT_S
 from msflash.led_controller.booth_interface import Booth
-from msflash.led_controller.recovery import reset_leftovers
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
-
-log = logging.getLogger(__name__)
 
 CALIBRATION_LED_FILES = ("led_spectra.csv", "leds.csv")
 """File names looked for in ``--calibration DIR`` for the LED spectra (first found wins)."""
@@ -237,18 +232,8 @@ def _open_hw_booth(
     from msflash.led_controller.discovery import find_booth
 
     booth_port = port if port is not None else find_booth().device
-    booth = open_booth(booth_port, protocol, log_serial=log_serial, boot_s=boot_s)
-    closers.append(booth.close)
-    closers.append(booth.all_off)
-    if booth.info.channels != leds.count:
-        raise RigOpenError(
-            f"booth {booth_port}: {booth.info.channels} channels ({', '.join(booth.info.names)}) but the LED "
-            f"spectra have {leds.count} ({', '.join(leds.names)}); expected one spectrum per channel"
-        )
-    if isinstance(booth, LedBooth):  # an adapter switches its LEDs off when it opens
-        for note in reset_leftovers(booth):  # a killed run's LEDs and raised watchdog
-            log.warning("%s", note)
-    return booth
+    mismatch = ("the LED spectra have", "one spectrum per channel")
+    return open_checked_booth(booth_port, protocol, log_serial, boot_s, leds, closers, mismatch)
 
 
 def _hw_rig(

@@ -150,6 +150,31 @@ def test_booth_channel_count_must_match_the_spectra(aravis: ModuleType, hw_calib
         server.close()
 
 
+def test_the_sim_rig_checks_its_external_booth_as_the_hw_rig_does(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Both rigs open a booth on a port through the one ``external_booth.open_checked_booth``: the sim rig's
+    ``--booth-port`` with a booth of 3 channels for its 7 LEDs is refused in its own words, the booth's LEDs off."""
+    from msflash.acquisition.session import external_booth
+    from msflash.acquisition.session.rigs.sim import open_sim_rig
+
+    opened: list[str] = []
+    real = external_booth.open_checked_booth
+
+    def counted(port, *args):  # noqa: ANN001, ANN202 — the module's own opener, counted
+        opened.append(port)
+        return real(port, *args)
+
+    monkeypatch.setattr(external_booth, "open_checked_booth", counted)
+    leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero").select([0, 1, 2])
+    emulator = emulator_for(leds)
+    server = serve_on_pty(emulator)
+    try:
+        with pytest.raises(RigOpenError, match=r"3 channels .* but the simulated LEDs are 7 .*expected one channel"):
+            open_sim_rig(booth_port=server.port)
+        assert opened == [server.port] and list(emulator.levels) == [0.0, 0.0, 0.0]
+    finally:
+        server.close()
+
+
 def test_a_booth_of_another_protocol_version_is_one_error_line(
     aravis: ModuleType, hw_calibration: Path, tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
