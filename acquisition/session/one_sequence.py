@@ -290,12 +290,7 @@ def _light_models(sequence: Sequence, settings: EstimateSettings, report: Report
     payload, chosen, reason = with_model_choice(
         sequence, stack, payload, settings.model, varies, reference, led.flicker, stream
     )
-    flicker = led.flicker.summary() if led.flicker is not None else None
-    if flicker is not None:  # docs/flicker.md
-        report(flicker)
-    for warning in payload["warnings"]:
-        report(f"warning: {warning}")
-    return EstimateResult(sequence, payload, choice=(chosen, reason))
+    return _reported(EstimateResult(sequence, payload, choice=(chosen, reason)), led, report)
 
 
 def _tiled(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
@@ -305,12 +300,7 @@ def _tiled(sequence: Sequence, settings: EstimateSettings, report: Report) -> Es
     )
     refuse_dark_ambient(sequence, local.global_estimate, "estimate")
     payload = local_route.local_estimate_payload(sequence, local)
-    flicker = local.global_estimate.flicker.summary() if local.global_estimate.flicker is not None else None
-    if flicker is not None:  # docs/flicker.md
-        report(flicker)
-    for warning in payload["warnings"]:
-        report(f"warning: {warning}")
-    return EstimateResult(sequence, payload, local=local)
+    return _reported(EstimateResult(sequence, payload, local=local), local.global_estimate, report)
 
 
 def _global(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
@@ -318,12 +308,17 @@ def _global(sequence: Sequence, settings: EstimateSettings, report: Report) -> E
     estimate = analysis.estimate_sequence(sequence, settings.solver, settings.alpha, bin_factor=settings.bin_factor)
     refuse_dark_ambient(sequence, estimate, "estimate")
     payload = analysis.estimate_payload(sequence, estimate)
-    flicker = estimate.flicker.summary() if estimate.flicker is not None else None
-    if flicker is not None:  # docs/flicker.md
+    return _reported(EstimateResult(sequence, payload, estimate=estimate), estimate, report)
+
+
+def _reported(result: EstimateResult, led: AmbientEstimate, report: Report) -> EstimateResult:
+    """``result``, once the LED estimate's flicker note (docs/flicker.md) and the payload's warnings are reported."""
+    flicker = led.flicker.summary() if led.flicker is not None else None
+    if flicker is not None:
         report(flicker)
-    for warning in estimate.warnings:
+    for warning in result.payload["warnings"]:
         report(f"warning: {warning}")
-    return EstimateResult(sequence, payload, estimate=estimate)
+    return result
 
 
 ESTIMATE_METHODS: dict[str, Callable[[Sequence, EstimateSettings, Report], EstimateResult]] = {

@@ -315,3 +315,28 @@ def test_a_closed_stdout_pipe_ends_quietly(tmp_path: Path) -> None:
     reader.wait(timeout=10)
     assert "Traceback" not in writer.stderr
     assert writer.returncode in (0, 141)
+
+
+@pytest.mark.parametrize("options", [["--method", "global"], ["--method", "local"], [], ["--model", "prior"]])
+def test_every_estimate_route_reports_its_notes_through_one_place(
+    capsys, base_sequence: Path, monkeypatch: pytest.MonkeyPatch, options: list[str]
+) -> None:
+    """The global, tiled and light-model routes report the flicker note and the payload's warnings through one
+    ``one_sequence._reported`` (each wrote the same five lines before): once per estimate, each warning on stderr."""
+    from msflash.acquisition.session import one_sequence
+
+    calls = []
+    real = one_sequence._reported
+
+    def counted(*args):  # noqa: ANN002, ANN202 — the module's own reporter, counted
+        calls.append(args)
+        return real(*args)
+
+    monkeypatch.setattr(one_sequence, "_reported", counted)
+    assert main(["estimate", str(base_sequence), *options, "--json"]) == 0
+    captured = capsys.readouterr()
+    warnings = json.loads(captured.out)["warnings"]
+    assert len(calls) == 1
+    assert [line for line in captured.err.splitlines() if line.startswith("msflash: warning:")] == [
+        f"msflash: warning: {warning}" for warning in warnings
+    ]
