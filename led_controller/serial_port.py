@@ -10,10 +10,11 @@ import errno
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import IO, Protocol, TypeVar
+from typing import IO, TypeVar
 
 import serial
 
+from msflash.led_controller.booth_interface import Booth
 from msflash.led_controller.errors import BoothError, BoothNotFoundError
 
 
@@ -41,11 +42,7 @@ def open_serial_port(url: str, baudrate: int, read_timeout_s: float, write_timeo
         raise BoothError(f"booth {url}: cannot open ({err}); expected a device path or pyserial URL") from err
 
 
-class _Closable(Protocol):
-    def close(self) -> None: ...
-
-
-Driver = TypeVar("Driver", bound=_Closable)
+Driver = TypeVar("Driver", bound=Booth)
 
 
 def open_driver(
