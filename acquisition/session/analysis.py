@@ -70,7 +70,6 @@ def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None =
         If there is no ambient frame, no LED frame, or the LED frames do not light every LED
         independently.
     """
-    entries = sequence.frames
     cfa = sequence.camera.cfa
     if frames is None:
         _check_stack_budget(sequence)
@@ -78,13 +77,7 @@ def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None =
     def pixels(index: int) -> np.ndarray:
         return sequence.load_frame(index) if frames is None else as_recorded(frames[index], cfa)
 
-    return frame_stack(
-        sequence,
-        [e.role for e in entries],
-        [e.led_levels for e in entries],
-        [e.exposure_us * e.gain for e in entries],
-        pixels,
-    )
+    return frame_stack(sequence_layout(sequence), pixels)
 
 
 def stream_stack(
@@ -110,16 +103,16 @@ def _check_stack_budget(sequence: Sequence) -> None:
     check_decode(f"{sequence.path}", total, f"its {len(used)} ambient and LED frames at once")
 
 
-def frame_stack(
-    sequence: Sequence,
-    roles: SequenceOf[str],
-    led_levels: SequenceOf[SequenceOf[float]],
-    exposure_gain: SequenceOf[float],
-    pixels: Callable[[int], np.ndarray],
-) -> FrameStack:
-    """A :class:`FrameStack` of the first ambient frame and every LED frame, linearised by black and white
-    levels and 1 / (exposure · gain); shared by :func:`load_frame_stack` and ``FlashSession``."""
-    layout = stack_layout(sequence, roles, led_levels, exposure_gain)
+def sequence_layout(sequence: Sequence) -> StackLayout:
+    """:func:`~acquisition.session.estimate_stream.stack_layout` of a sequence's own frame entries."""
+    entries = sequence.frames
+    roles, levels = [e.role for e in entries], [e.led_levels for e in entries]
+    return stack_layout(sequence, roles, levels, [e.exposure_us * e.gain for e in entries])
+
+
+def frame_stack(layout: StackLayout, pixels: Callable[[int], np.ndarray]) -> FrameStack:
+    """A :class:`FrameStack` of the first ambient frame and every LED frame of ``layout`` (``pixels(index)``),
+    linearised by black and white levels and 1 / (exposure · gain)."""
     return FrameStack(
         pixels(layout.ambient_index),
         tuple(pixels(i) for i in layout.led_indices),
@@ -251,10 +244,7 @@ def synthesize_checked(
     bit for bit where nothing is corrected, to one float32 step where it is. Peak memory and speed:
     docs/measurements-acquisition.md.
     """
-    entries = sequence.frames
-    layout = stack_layout(
-        sequence, [e.role for e in entries], [e.led_levels for e in entries], [e.exposure_us * e.gain for e in entries]
-    )
+    layout = sequence_layout(sequence)
     checked = sequence.camera_responsivities() is not None
     order = (layout.ambient_index, *layout.led_indices)
     waiting: dict[int, np.ndarray] = {}  # frames read, not yet summed (LED frames before the ambient)
@@ -423,10 +413,7 @@ def synthesize_sequence(
             stack.ambient, stack.led_frames, stack.spec, flash_weights, ambient_offsets=offsets
         )
         return image, saturated, StackLayout(stack.spec, stack.ambient_index, stack.led_indices)
-    entries = sequence.frames
-    layout = stack_layout(
-        sequence, [e.role for e in entries], [e.led_levels for e in entries], [e.exposure_us * e.gain for e in entries]
-    )
+    layout = sequence_layout(sequence)
     summed: SynthesisStream | None = None
     for index in (layout.ambient_index, *layout.led_indices):
         frame = sequence.load_frame(index)

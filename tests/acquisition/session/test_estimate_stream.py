@@ -212,3 +212,29 @@ def test_the_estimate_and_the_channel_statistics_share_one_completeness_rule(
     with pytest.raises(RecordingError, match="LED frame 5 but 4 were planned"):
         stream.add(sequence.load_frame(index), entry.role, entry.led_levels, entry.exposure_us * entry.gain)
     assert stream.statistics().n_leds == stream.channel_statistics().n_leds == 4
+
+
+@pytest.mark.parametrize("reader", ["load_frame_stack", "synthesize_sequence", "synthesize_checked"])
+def test_the_readers_of_a_sequences_frames_take_its_layout_from_one_place(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, reader: str
+) -> None:
+    """The frame stack and both syntheses take which frames to use and how to linearise them from one
+    ``analysis.sequence_layout`` (each built the roles, levels and exposure·gain lists itself before)."""
+    sequence = read_sequence(write_sequence(tmp_path / "s", n_led_frames=4, shape=(32, 40, 3)))
+    taken = []
+    real = analysis.sequence_layout
+
+    def counted(given):  # noqa: ANN001, ANN202 — the module's own layout, counted
+        taken.append(given)
+        return real(given)
+
+    monkeypatch.setattr(analysis, "sequence_layout", counted)
+    weights = np.full(4, 0.5)
+    result = (
+        analysis.load_frame_stack(sequence)
+        if reader == "load_frame_stack"
+        else getattr(analysis, reader)(sequence, weights)
+    )
+    assert taken == [sequence]
+    layout = result.spec if reader == "load_frame_stack" else result[2].spec
+    assert layout.led_levels.shape == (4, 4)

@@ -298,13 +298,10 @@ def _fed_stack(session):
     from msflash.acquisition.session import analysis
 
     frames = session.fed
-    return analysis.frame_stack(
-        session.header,
-        ["ambient" if i == 0 else "led" for i in range(len(frames))],
-        session.stream.levels,
-        [f.exposure_us * f.gain for f in frames],
-        lambda index: frames[index].pixels,
-    )
+    roles = ["ambient" if i == 0 else "led" for i in range(len(frames))]
+    gains = [f.exposure_us * f.gain for f in frames]
+    layout = analysis.stack_layout(session.header, roles, session.stream.levels, gains)
+    return analysis.frame_stack(layout, lambda index: frames[index].pixels)
 
 
 @pytest.mark.parametrize(
