@@ -270,20 +270,6 @@ _SEQUENCES_HELP = (
 )
 
 
-def _sequences_command(subparsers: argparse._SubParsersAction, name: str, what: str) -> argparse.ArgumentParser:
-    """A command over one or more sequences (``estimate``, ``flash``)."""
-    parser = subparsers.add_parser(name, help=what)
-    parser.add_argument("sequences", nargs="+", metavar="SEQUENCE", help=_SEQUENCES_HELP)
-    return parser
-
-
-def _add_estimate_options(parser: argparse.ArgumentParser) -> None:
-    """The estimate's options of ``estimate`` and ``flash``: the solver, the calibration, the local model."""
-    add_estimation_options(parser)
-    _add_calibration_option(parser)
-    add_local_options(parser)
-
-
 def _json_and_scheduler(parser: argparse.ArgumentParser, handler: Callable[[argparse.Namespace], int]) -> None:
     """``--json``, the scheduler of several sequences, and the command's handler."""
     parser.add_argument(
@@ -295,8 +281,11 @@ def _json_and_scheduler(parser: argparse.ArgumentParser, handler: Callable[[argp
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``estimate``, ``flash`` and ``synthesize``."""
-    estimate = _sequences_command(subparsers, "estimate", "estimate the ambient illuminant spectrum of a sequence")
-    _add_estimate_options(estimate)
+    estimate = subparsers.add_parser("estimate", help="estimate the ambient illuminant spectrum of a sequence")
+    estimate.add_argument("sequences", nargs="+", metavar="SEQUENCE", help=_SEQUENCES_HELP)
+    add_estimation_options(estimate)
+    _add_calibration_option(estimate)
+    add_local_options(estimate)
     add_model_option(estimate)
     estimate.add_argument(
         "--reference-patch",
@@ -316,7 +305,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     _json_and_scheduler(estimate, _estimate)
 
-    flash = _sequences_command(subparsers, "flash", "solve the matching or complementary flash for a sequence")
+    flash = subparsers.add_parser("flash", help="solve the matching or complementary flash for a sequence")
+    flash.add_argument("sequences", nargs="+", metavar="SEQUENCE", help=_SEQUENCES_HELP)
     flash.add_argument("--mode", required=True, choices=("complementary", "matching"))
     flash.add_argument(
         "--target",
@@ -330,7 +320,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=("physical", "nonnegative", "free"),
         help="physical: 0..1 (re-capture); nonnegative/free: computational synthesis",
     )
-    _add_estimate_options(flash)
+    add_estimation_options(flash)
+    _add_calibration_option(flash)
+    add_local_options(flash)
     flash.add_argument(
         "--out",
         default=None,
