@@ -36,11 +36,11 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from msflash.processing.ambient_alpha import (  # re-exported: the α search was split from here (issue 31)
-    ALPHA_GRID as ALPHA_GRID,
-)
+# ALPHA_GRID, DISCREPANCY_SIGMAS, discrepancy_alpha and gcv_alpha are re-exported: the α search was split from here.
+from msflash.processing.ambient_alpha import ALPHA_GRID as ALPHA_GRID
 from msflash.processing.ambient_alpha import DISCREPANCY_SIGMAS as DISCREPANCY_SIGMAS
-from msflash.processing.ambient_alpha import _discrepancy_search, _solve_penalised, _trace, discrepancy_alpha
+from msflash.processing.ambient_alpha import _discrepancy_search, _solve_penalised, _trace
+from msflash.processing.ambient_alpha import discrepancy_alpha as discrepancy_alpha
 from msflash.processing.ambient_alpha import gcv_alpha as gcv_alpha
 from msflash.processing.ambient_band import constrained_band, sandwich_band
 from msflash.processing.errors import SolverError, SpectralDataError
@@ -223,7 +223,10 @@ def _weights_nonneg(statistics: SequenceStatistics, terms: LedTerms, alpha: floa
 
 
 def _weights_tikhonov(statistics: SequenceStatistics, terms: LedTerms, alpha: float | str) -> tuple[np.ndarray, float]:
-    alpha_value = discrepancy_alpha(statistics, statistics, terms) if alpha == "auto" else float(alpha)
+    if alpha == "auto":
+        alpha_value, weights = _discrepancy_search(statistics, statistics, terms)
+        return weights, alpha_value
+    alpha_value = float(alpha)
     weight = alpha_value * terms.penalty_scale(statistics)
     return _solve_penalised(statistics, terms, weight, True, "tikhonov estimate"), alpha_value
 
@@ -365,8 +368,7 @@ class AmbientModel:
         solved = solution.statistics
         if method == "tikhonov" and alpha == "auto":
             alpha, found = _discrepancy_search(solved, statistics, self.terms)
-            if found is not None:
-                return found, alpha, solution  # what _weights_tikhonov would solve again at this α, to the bit
+            return found, alpha, solution
         return (*_METHODS[method](solved, self.terms, alpha), solution)
 
     def estimate(

@@ -139,22 +139,28 @@ def discrepancy_alpha(solved: SequenceStatistics, observed: SequenceStatistics, 
 
 def _discrepancy_search(
     solved: SequenceStatistics, observed: SequenceStatistics, terms: LedTerms
-) -> tuple[float, np.ndarray | None]:
-    """:func:`discrepancy_alpha`'s α and, when the search solved it on the way, its weights (those of
-    :func:`_solve_penalised` at that α, to the bit), else None.
+) -> tuple[float, np.ndarray]:
+    """:func:`discrepancy_alpha`'s α and its weights.
 
-    The least-penalised fit (hence σ² and the bound) and every probe of the bisection where the constraint binds
-    are solved as before. The other probes are read from one pass over the grid (:func:`_unconstrained_sweep`):
-    where the unconstrained minimiser of ``‖a − F w‖² + λ ‖L w‖²`` already meets ``I w ≥ 0`` it is the
-    constrained one, and its residual rise differs from a solve's by rounding only (the bisection's comparisons
-    then agree unless a rise lies within rounding of the bound).
+    One pass over the grid (:func:`_unconstrained_sweep`) gives every α's unconstrained minimiser of
+    ``‖a − F w‖² + λ ‖L w‖²``; where it meets ``I w ≥ 0`` it is the constrained one, so its residual rise and, for
+    the least-penalised fit (hence σ² and the bound) and the chosen α, its weights are read from the sweep: they
+    differ from a constrained solve's (:func:`_solve_penalised`) by rounding only (the bisection's comparisons agree
+    unless a rise lies within rounding of the bound). Only where the constraint binds is a probe solved.
     """
     scale = terms.penalty_scale(solved)
     solves: dict[int, np.ndarray] = {}
 
+    sweep = _unconstrained_sweep(solved, terms, scale)
+
     def weights(index: int) -> np.ndarray:
         if index not in solves:
-            solves[index] = _solve_penalised(solved, terms, float(ALPHA_GRID[index]) * scale, True, "tikhonov estimate")
+            if sweep is not None and sweep[1][index]:  # the constraint does not bind: the sweep's minimiser
+                solves[index] = np.ascontiguousarray(sweep[2][:, index])
+            else:
+                solves[index] = _solve_penalised(
+                    solved, terms, float(ALPHA_GRID[index]) * scale, True, "tikhonov estimate"
+                )
         return solves[index]
 
     least = weights(0)
@@ -163,7 +169,6 @@ def _discrepancy_search(
     # The rise r(α) − r(α₀), from the weight-dependent part of the residual alone (the denoised ambient energy
     # cancels): residuals clipped at 0 hid every rise on Bayer frames (docs/raw-frames.md).
     allowed = solved.fit_energy(least) + DISCREPANCY_SIGMAS * observed.n_leds * noise_variance
-    sweep = _unconstrained_sweep(solved, terms, scale)
 
     def residual(index: int) -> float:
         if sweep is not None and sweep[1][index]:
@@ -179,15 +184,15 @@ def _discrepancy_search(
             low = middle
         else:
             high = middle
-    return float(ALPHA_GRID[low]), solves.get(low)
+    return float(ALPHA_GRID[low]), weights(low)
 
 
 def _unconstrained_sweep(
     solved: SequenceStatistics, terms: LedTerms, scale: float
-) -> tuple[np.ndarray, np.ndarray] | None:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """For every α of :data:`ALPHA_GRID`: the fit energy ``wᵀ G w − 2 cᵀ w`` of the unconstrained minimiser
     ``w(λ) = (G + λ P + ε(λ) Id)⁻¹ c`` (``λ = α · scale``, ``ε(λ) = 10⁻¹² tr(G + λP) / k``: the ridge of
-    :func:`_solve_penalised`), and whether it meets ``I w ≥ 0``; None when ``G + ε Id`` has no Cholesky factor.
+    :func:`_solve_penalised`), whether it meets ``I w ≥ 0``, and the minimisers (the columns, (k, n_α)); None when ``G + ε Id`` has no Cholesky factor.
 
     ``G + λ P`` is diagonalised with ``G`` once (``G = Rᵀ R``, ``R⁻ᵀ P R⁻¹ = U Λ Uᵀ``; both with their share of
     the ridge): ``w(λ) = R⁻¹ U (Id + λ Λ)⁻¹ Uᵀ R⁻ᵀ c``, every α in one product (as :func:`_gcv_alpha`).
@@ -211,7 +216,7 @@ def _unconstrained_sweep(
     fits = np.einsum("ia,ia->a", candidates, gram.dot(candidates)) - 2.0 * solved.cross.dot(candidates)
     if not np.isfinite(fits).all():
         return None
-    return fits, np.all(terms.emitting.dot(candidates) >= 0.0, axis=0)
+    return fits, np.all(terms.emitting.dot(candidates) >= 0.0, axis=0), candidates
 
 
 @lru_cache(maxsize=16)
