@@ -42,7 +42,7 @@ from msflash.processing.ambient_alpha import DISCREPANCY_SIGMAS as DISCREPANCY_S
 from msflash.processing.ambient_alpha import _discrepancy_search, _solve_penalised, _trace
 from msflash.processing.ambient_alpha import discrepancy_alpha as discrepancy_alpha
 from msflash.processing.ambient_alpha import gcv_alpha as gcv_alpha
-from msflash.processing.ambient_band import constrained_band, sandwich_band
+from msflash.processing.ambient_band import constrained_band, sandwich_band, weights_covariance
 from msflash.processing.errors import SolverError, SpectralDataError
 from msflash.processing.least_squares import FactoredQuadratic
 from msflash.processing.noise_floor import NOISE_FLOOR_SHARE, noise_floored
@@ -391,7 +391,7 @@ class AmbientModel:
         ``solution`` is ``solved_statistics(statistics)`` when the caller has it already (:meth:`estimate`)."""
         rss = statistics.residual_energy(weights)
         solution = solved_statistics(statistics) if solution is None else solution
-        spectrum_std = self.spectrum_band(statistics, solution.statistics, rss, method, alpha_used)
+        spectrum_std = self.spectrum_band(statistics, solution.statistics, rss, method, alpha_used, weights)
         condition = _scaled_condition(statistics.gram)
         relative_residual = float(np.sqrt(rss / statistics.ambient_energy)) if statistics.ambient_energy > 0 else 0.0
         ambient_z = (
@@ -432,21 +432,30 @@ class AmbientModel:
         )
 
     def spectrum_band(
-        self, statistics: SequenceStatistics, solved: SequenceStatistics, rss: float, method: str, alpha_used: float
+        self,
+        statistics: SequenceStatistics,
+        solved: SequenceStatistics,
+        rss: float,
+        method: str,
+        alpha_used: float,
+        weights: np.ndarray | None = None,
     ) -> np.ndarray:
         """±1σ of the spectrum: the solved system's (the denoised one when it was used), ``w = (G_s + λP)⁻¹ c`` with
-        the observed G in the middle of the sandwich as the products' covariance."""
+        the observed G in the middle of the sandwich as the products' covariance; for a constrained method, where
+        ``I w ≥ 0`` may bind at the estimate ``weights`` (or they are not given), the scatter of the constrained
+        estimator (:func:`processing.ambient_band.constrained_band`)."""
         terms = self.terms
         noise_variance = rss / max(statistics.n_samples - statistics.n_leds, 1)
         penalty_weight = alpha_used * terms.penalty_scale(solved) if method == "tikhonov" else 0.0
         try:
-            system_inverse = np.linalg.pinv(solved.gram + penalty_weight * terms.penalty_gram)
-            weights_cov = noise_variance * system_inverse @ statistics.gram @ system_inverse
+            weights_cov = weights_covariance(
+                solved.gram + penalty_weight * terms.penalty_gram, statistics.gram, noise_variance
+            )
         except np.linalg.LinAlgError:
             weights_cov = np.full((statistics.n_leds,) * 2, np.inf)
         if method == "lstsq" or not np.all(np.isfinite(weights_cov)):
             return sandwich_band(terms.values, weights_cov)
-        return constrained_band(solved, terms, penalty_weight, weights_cov)
+        return constrained_band(solved, terms, penalty_weight, weights_cov, weights)
 
 
 def _reliability_warnings(
