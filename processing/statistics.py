@@ -317,6 +317,7 @@ def statistics_from_moments(
     noise_moments: np.ndarray | None = None,
     n_samples: int | None = None,
     weighted: bool = False,
+    transform: np.ndarray | None = None,
 ) -> SequenceStatistics:
     """Statistics from the raw second moments of the rows [F_1 … F_n, A, 1].
 
@@ -326,9 +327,11 @@ def statistics_from_moments(
 
     ``black_level`` replaces the spec's (block sums: the black level times the block area).
     ``noise_moments`` are the half differences' moments in the same row layout (the noise probe),
-    mapped the same way into :attr:`SequenceStatistics.noise`.
+    mapped the same way into :attr:`SequenceStatistics.noise`. ``transform``: :func:`channel_transform` of ``spec`` and
+    that black level when the caller has it already.
     """
-    transform = channel_transform(spec, float(spec.black_level if black_level is None else black_level))
+    if transform is None:
+        transform = channel_transform(spec, float(spec.black_level if black_level is None else black_level))
     k = transform.shape[0] - 1
     linear_moments = transform @ moments @ transform.T
     linear_sums = transform @ moments[:, -1]
