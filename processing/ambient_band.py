@@ -49,17 +49,16 @@ def sandwich_band(led_values: np.ndarray, weights_cov: np.ndarray) -> np.ndarray
 def weights_covariance(system: np.ndarray, gram: np.ndarray, noise_variance: float) -> np.ndarray:
     """``σ² S⁻¹ G S⁻¹``: the covariance of weights ``S⁻¹ c`` whose products ``c`` have the covariance ``σ² G``.
 
-    ``S⁻¹`` from its Cholesky factor (LAPACK's ``dpotrf`` and ``dpotri``: two calls, where the pseudo-inverse's SVD
-    and its checks cost four times as much at k ≈ 7); ``np.linalg.pinv`` where ``S`` has no factor (not positive
-    definite). The two agree to rounding where both apply. Raises ``np.linalg.LinAlgError`` as ``pinv`` does.
+    ``S⁻¹ = R⁻¹ R⁻ᵀ`` from the Cholesky factor ``S = Rᵀ R`` (LAPACK's ``dpotrf`` and ``dtrtri``, as
+    :mod:`processing.least_squares` takes them), where the pseudo-inverse's SVD and its checks cost several times as
+    much at k ≈ 7; ``np.linalg.pinv`` where ``S`` has no factor (not positive definite). The two agree to rounding
+    where both apply. (Not ``dpotri``: OpenBLAS runs its ``dlauum`` on its threads whatever the size, and on a busy
+    machine their wake-ups cost milliseconds.) Raises ``np.linalg.LinAlgError`` as ``pinv`` does.
     """
     factor, info = lapack.dpotrf(system, lower=0, clean=1)
     if info == 0:
-        inverse, info = lapack.dpotri(factor, lower=0)  # its upper triangle; the lower one stays the factor's zeros
-    if info == 0:
-        inverse += np.triu(inverse, 1).T
-    else:
-        inverse = np.linalg.pinv(system)
+        inverse_factor, info = lapack.dtrtri(factor, lower=0)
+    inverse = inverse_factor.dot(inverse_factor.T) if info == 0 else np.linalg.pinv(system)
     return noise_variance * inverse @ gram @ inverse
 
 
