@@ -155,6 +155,8 @@ class LedTerms:
     """``10⁻¹² · Id`` (k × k), added to the scaled normal matrix."""
     nonnegative: FactoredQuadratic
     """The constraint ``I w ≥ 0`` (emitting rows) prepared once; each solve adds only its H."""
+    silent: tuple[int, ...] = ()
+    """The LEDs (columns of ``I``) with no positive value: :class:`AmbientModel` refuses them."""
 
     @cached_property
     def unconstrained(self) -> FactoredQuadratic:
@@ -184,6 +186,7 @@ class LedTerms:
             emitting,
             1e-12 * np.eye(k),
             FactoredQuadratic.prepare(np.eye(k), emitting, np.zeros(emitting.shape[0]), "ambient estimate"),
+            tuple(np.flatnonzero(~np.any(values > 0, axis=0)).tolist()),
         )
         for array in (terms.roughness, terms.penalty_gram, terms.emitting, terms.ridge):
             array.flags.writeable = False
@@ -307,16 +310,16 @@ class AmbientModel:
 
     def __post_init__(self) -> None:
         led_spectra = require_unit(self.led_spectra, "photons")
+        terms = LedTerms.of(led_spectra.values)
         # An LED with no emission on the grid contributes nothing to I w: its weight would be solved
         # for, then silently dropped from the spectrum (a calibration on a grid that misses it, say).
-        emits = np.any(led_spectra.values > 0, axis=0)
-        if not emits.all():
-            empty = [name for name, emitting in zip(led_spectra.names, emits) if not emitting]
+        if terms.silent:
+            empty = [led_spectra.names[i] for i in terms.silent]
             raise SpectralDataError(
                 f"{led_spectra.source or 'LED spectra'}: the spectrum of LED {', '.join(empty)} has no positive "
                 f"value on {led_spectra.grid}; expected each LED's emission at full drive on the sequence's grid"
             )
-        object.__setattr__(self, "terms", LedTerms.of(led_spectra.values))
+        object.__setattr__(self, "terms", terms)
 
     def weights(
         self,
