@@ -1,6 +1,7 @@
 """The pixel-noise band of an ambient estimate (:meth:`processing.ambient.AmbientModel.spectrum_band`): the linear
-sandwich of the weights' covariance, and for an estimate solved with ``I w ≥ 0`` the scatter of seeded draws projected
-onto the constraint. Split from :mod:`processing.ambient` by job (issue 31: modules of one job, ≤ 600 lines).
+sandwich of the weights' covariance, and for an estimate solved with ``I w ≥ 0`` where the constraint may bind the
+scatter of seeded draws projected onto the constraint. Split from :mod:`processing.ambient` by job (issue 31: modules
+of one job, ≤ 600 lines).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import numpy as np
 
 from msflash.processing.errors import SolverError
 from msflash.processing.least_squares import FactoredQuadratic
+from msflash.processing.scipy_cores import lapack
 from msflash.processing.statistics import SequenceStatistics
 
 
@@ -44,12 +46,37 @@ def sandwich_band(led_values: np.ndarray, weights_cov: np.ndarray) -> np.ndarray
     return np.sqrt(np.clip(np.einsum("ij,jk,ik->i", led_values, weights_cov, led_values), 0, None))
 
 
+def weights_covariance(system: np.ndarray, gram: np.ndarray, noise_variance: float) -> np.ndarray:
+    """``σ² S⁻¹ G S⁻¹``: the covariance of weights ``S⁻¹ c`` whose products ``c`` have the covariance ``σ² G``.
+
+    ``S⁻¹ = R⁻¹ R⁻ᵀ`` from the Cholesky factor ``S = Rᵀ R`` (LAPACK's ``dpotrf`` and ``dtrtri``, as
+    :mod:`processing.least_squares` takes them), where the pseudo-inverse's SVD and its checks cost several times as
+    much at k ≈ 7; ``np.linalg.pinv`` where ``S`` has no factor (not positive definite). The two agree to rounding
+    where both apply. (Not ``dpotri``: OpenBLAS runs its ``dlauum`` on its threads whatever the size, and on a busy
+    machine their wake-ups cost milliseconds.) Raises ``np.linalg.LinAlgError`` as ``pinv`` does.
+    """
+    factor, info = lapack.dpotrf(system, lower=0, clean=1)
+    if info == 0:
+        inverse_factor, info = lapack.dtrtri(factor, lower=0)
+    inverse = inverse_factor.dot(inverse_factor.T) if info == 0 else np.linalg.pinv(system)
+    return noise_variance * inverse @ gram @ inverse
+
+
 BAND_DRAWS = 64
 """Draws of the unconstrained weights behind the band of a constrained estimate (:func:`constrained_band`)."""
 
+BAND_MARGIN_Z = 4.0
+"""Where the estimated spectrum lies at least this many of its sandwich standard deviations above 0 at every
+wavelength some LED emits, ``I w ≥ 0`` cannot bind within the band's draws (:func:`constrained_band`): the band is the
+sandwich itself."""
+
 
 def constrained_band(
-    solved: SequenceStatistics, terms: LedTerms, penalty_weight: float, weights_cov: np.ndarray
+    solved: SequenceStatistics,
+    terms: LedTerms,
+    penalty_weight: float,
+    weights_cov: np.ndarray,
+    weights: np.ndarray | None = None,
 ) -> np.ndarray:
     """The pixel-noise band of an estimate solved with ``I w ≥ 0``: the spectrum's standard deviation
     over :data:`BAND_DRAWS` draws of the unconstrained estimate ``(G_s + λP)⁻¹ c`` from its sandwich
@@ -59,7 +86,15 @@ def constrained_band(
     draws follow the constrained estimator's scatter; the linear sandwich alone ignores the constraint
     and, where it binds (a dark or poorly conditioned scene), says the spectrum could swing several
     times its peak. Draws are seeded: the band is reproducible.
+
+    Where the estimate's spectrum ``I w`` (``weights`` given) lies :data:`BAND_MARGIN_Z` sandwich deviations or more
+    above 0 wherever an LED emits, the constraint does not bind at ``w`` (so ``w`` is the unconstrained estimate) nor,
+    but for a draw beyond 4σ, at any draw: the draws' scatter would be the sandwich's up to their sampling error
+    (≈ 9 % at 64 draws), and the band is the sandwich, exactly (docs/speed.md, 2026-11-29, rawspeed30d).
     """
+    sandwich = sandwich_band(terms.values, weights_cov)
+    if weights is not None and np.all(terms.values.dot(weights) >= BAND_MARGIN_Z * sandwich):
+        return sandwich
     hessian = solved.gram + penalty_weight * terms.penalty_gram
     scale = max(float(np.add.reduce(hessian.diagonal())) / hessian.shape[0], 1e-300)  # tr H / k, as the solve's
     try:
@@ -69,7 +104,7 @@ def constrained_band(
             weights_cov + 1e-12 * max(float(np.trace(weights_cov)), 1e-300) * np.eye(len(centre))
         )
     except (np.linalg.LinAlgError, SolverError):
-        return sandwich_band(terms.values, weights_cov)
+        return sandwich
     draws = centre[:, None] + factor @ _band_normals(len(centre))
     # A draw that already meets I w ≥ 0 is its own projection: only the others are solved.
     spectra = terms.values @ draws

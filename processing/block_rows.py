@@ -356,24 +356,27 @@ class BlockRows:
         if self._floating and not np.isfinite(rows.sum()) and not np.isfinite(rows).all():
             raise non_finite_frames_error(rows[:-1])
         weights = self._weights if self.weighting else None  # they enter each chunk's product
+        black = spec.black_level * self.factor * self.factor  # block sums: the black level counts once per member
+        transform = channel_transform(spec, black)
         if self.compiled:
-            moments, noise, excluded_columns, scale, channel_moments = self._compiled_moments(weights, spec)
+            moments, noise, excluded_columns, scale, channel_moments = self._compiled_moments(weights, transform)
         else:
             moments, noise, excluded_columns, scale, column_factor = self._moments(weights, chunk_pixels, workers)
         if noise is not None:
             noise = None if scale is None else noise * scale
-        # Block sums: the black level counts once per member; the spec's unmixing is reused as is.
+        # The spec's unmixing is reused as is.
         statistics = statistics_from_moments(
             moments,
             spec,
             rows.shape[1],
-            black_level=spec.black_level * self.factor * self.factor,
+            black_level=black,
             noise_moments=noise,
             n_samples=rows.shape[1] - excluded_columns,
             weighted=weights is not None,
+            transform=transform,
         )
         if not self.compiled:
-            channel_moments = self._channel_moments(spec, column_factor, scale if noise is not None else None)
+            channel_moments = self._channel_moments(transform, column_factor, scale if noise is not None else None)
         return replace(statistics, channels=channel_moments)
 
     def _invalid_blocks(self) -> np.ndarray | None:
@@ -384,7 +387,7 @@ class BlockRows:
         return invalid if invalid is not None and invalid.any() else None
 
     def _compiled_moments(
-        self, weights: np.ndarray | None, spec: FrameStackSpec
+        self, weights: np.ndarray | None, transform: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray | None, int, float | None, ChannelMoments]:
         """:meth:`_moments` and :meth:`_channel_moments` in one compiled pass over the rows and one over the probe
         (:func:`processing.frame_kernels.block_statistics`): the same quantities, to rounding."""
@@ -395,7 +398,6 @@ class BlockRows:
             column_weights = np.ones(self.rows.shape[1]) if factors is None else factors
         else:
             column_weights = weights if factors is None else weights * factors
-        transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
         moments, fa, ff, aa = frame_kernels.block_statistics(
             self.rows, column_weights, factors, transform, self.block_shape, 1
         )
@@ -446,7 +448,7 @@ class BlockRows:
         return moments, probed[0] if probed else None, excluded_columns, scale, column_factor
 
     def _channel_moments(
-        self, spec: FrameStackSpec, column_factor: np.ndarray | None, probe_scale: float | None
+        self, transform: np.ndarray, column_factor: np.ndarray | None, probe_scale: float | None
     ) -> ChannelMoments:
         """:class:`ChannelMoments` of the rows, masked as :meth:`statistics` takes them (by ``column_factor``), the
         probe's scaled by ``probe_scale`` (None: none).
@@ -454,7 +456,6 @@ class BlockRows:
         Unweighted: a sample's inverse-variance weight differs from channel to channel, and weighing the channels of
         one block unequally would turn its colour away from the LED's (what :mod:`processing.flicker` reads).
         """
-        transform = channel_transform(spec, spec.black_level * self.factor * self.factor)
         ones = self.rows[-1] if column_factor is None else self.rows[-1] * column_factor
         blocks = int(np.count_nonzero(ones.reshape(self.block_shape).any(axis=1)))
         fa, ff, aa = _channel_products(transform, self.rows, self.block_shape, 1, column_factor)

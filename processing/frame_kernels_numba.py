@@ -364,35 +364,7 @@ def block_statistics(
                 for b in range(width):
                     for c in range(channels):
                         image[i, c, b] = target[b * channels + c]
-        ambient = image[k]
-        for i in range(k):
-            led = image[i]
-            for c in range(channels):
-                first = led[c]
-                for d in range(c + 1):
-                    other = ambient[d]
-                    second = led[d]
-                    cross = 0.0
-                    own = 0.0
-                    for b in range(width):
-                        cross += first[b] * other[b]
-                        own += first[b] * second[b]
-                    fa[i, c, d] += cross
-                    ff[i, c, d] += own
-                for d in range(c + 1, channels):
-                    other = ambient[d]
-                    cross = 0.0
-                    for b in range(width):
-                        cross += first[b] * other[b]
-                    fa[i, c, d] += cross
-        for c in range(channels):
-            first = ambient[c]
-            for d in range(c + 1):
-                other = ambient[d]
-                total = 0.0
-                for b in range(width):
-                    total += first[b] * other[b]
-                aa[c, d] += total
+        _image_moments(image, k, channels, width, fa, ff, aa)
     for i in range(rows):  # the upper triangles from the lower
         for j in range(i):
             gram[j, i] = gram[i, j]
@@ -401,3 +373,112 @@ def block_statistics(
             aa[d, c] = aa[c, d]
             for i in range(k):
                 ff[i, d, c] = ff[i, c, d]
+
+
+@njit(nogil=True, cache=True, fastmath=True)
+def _image_moments(image, k, channels, width, fa, ff, aa):
+    """One block row's channel moments of the mapped images ``image`` (K + 1, C, W), LEDs first: ``fa[i, c, d] += Σ_b
+    y_icb y_Kdb``, ``ff[i, c, d] += Σ_b y_icb y_idb`` and ``aa[c, d] += Σ_b y_Kcb y_Kdb`` (``ff`` and ``aa`` for
+    ``d ≤ c`` only). Four channels (a mosaic's CFA planes) take each LED's 16 + 10 sums in two sweeps over the block
+    columns (:func:`_led_sums4`); a sum a loop, as for other channel counts, spent more on each short loop's set-up and
+    final reduction than on its 80 products (docs/speed.md, 2026-11-29, rawspeed30d)."""
+    ambient = image[k]
+    for i in range(k):
+        led = image[i]
+        if channels == 4:
+            _led_sums4(led, ambient, width, fa[i], ff[i])
+            continue
+        for c in range(channels):
+            first = led[c]
+            for d in range(c + 1):
+                other = ambient[d]
+                second = led[d]
+                cross = 0.0
+                own = 0.0
+                for b in range(width):
+                    cross += first[b] * other[b]
+                    own += first[b] * second[b]
+                fa[i, c, d] += cross
+                ff[i, c, d] += own
+            for d in range(c + 1, channels):
+                other = ambient[d]
+                cross = 0.0
+                for b in range(width):
+                    cross += first[b] * other[b]
+                fa[i, c, d] += cross
+    for c in range(channels):
+        first = ambient[c]
+        for d in range(c + 1):
+            other = ambient[d]
+            total = 0.0
+            for b in range(width):
+                total += first[b] * other[b]
+            aa[c, d] += total
+
+
+@njit(nogil=True, cache=True, fastmath=True)
+def _led_sums4(led, ambient, width, fa, ff):
+    """:func:`_image_moments` of one LED image ``led`` (4, W) with the ambient's (4, W): ``fa`` (4, 4) in one sweep
+    (16 sums), the lower triangle of ``ff`` in another (10); each sum's products in block-column order, as before."""
+    l0, l1, l2, l3 = led[0], led[1], led[2], led[3]
+    a0, a1, a2, a3 = ambient[0], ambient[1], ambient[2], ambient[3]
+    x00 = x01 = x02 = x03 = x10 = x11 = x12 = x13 = 0.0
+    x20 = x21 = x22 = x23 = x30 = x31 = x32 = x33 = 0.0
+    for b in range(width):
+        p0, p1, p2, p3 = l0[b], l1[b], l2[b], l3[b]
+        q0, q1, q2, q3 = a0[b], a1[b], a2[b], a3[b]
+        x00 += p0 * q0
+        x01 += p0 * q1
+        x02 += p0 * q2
+        x03 += p0 * q3
+        x10 += p1 * q0
+        x11 += p1 * q1
+        x12 += p1 * q2
+        x13 += p1 * q3
+        x20 += p2 * q0
+        x21 += p2 * q1
+        x22 += p2 * q2
+        x23 += p2 * q3
+        x30 += p3 * q0
+        x31 += p3 * q1
+        x32 += p3 * q2
+        x33 += p3 * q3
+    fa[0, 0] += x00
+    fa[0, 1] += x01
+    fa[0, 2] += x02
+    fa[0, 3] += x03
+    fa[1, 0] += x10
+    fa[1, 1] += x11
+    fa[1, 2] += x12
+    fa[1, 3] += x13
+    fa[2, 0] += x20
+    fa[2, 1] += x21
+    fa[2, 2] += x22
+    fa[2, 3] += x23
+    fa[3, 0] += x30
+    fa[3, 1] += x31
+    fa[3, 2] += x32
+    fa[3, 3] += x33
+    y00 = y10 = y11 = y20 = y21 = y22 = y30 = y31 = y32 = y33 = 0.0
+    for b in range(width):
+        p0, p1, p2, p3 = l0[b], l1[b], l2[b], l3[b]
+        y00 += p0 * p0
+        y10 += p1 * p0
+        y11 += p1 * p1
+        y20 += p2 * p0
+        y21 += p2 * p1
+        y22 += p2 * p2
+        y30 += p3 * p0
+        y31 += p3 * p1
+        y32 += p3 * p2
+        y33 += p3 * p3
+    ff[0, 0] += y00
+    ff[1, 0] += y10
+    ff[1, 1] += y11
+    ff[2, 0] += y20
+    ff[2, 1] += y21
+    ff[2, 2] += y22
+    ff[3, 0] += y30
+    ff[3, 1] += y31
+    ff[3, 2] += y32
+    ff[3, 3] += y33

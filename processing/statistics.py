@@ -71,6 +71,13 @@ class FrameStackSpec:
         unmixing.flags.writeable = False
         return unmixing
 
+    @cached_property
+    def unmixing_diagonal(self) -> tuple[float, ...] | None:
+        """The diagonal of :attr:`unmixing` as floats where it is diagonal (one LED per frame), else None."""
+        unmixing = self.unmixing
+        diagonal = np.diag(unmixing)
+        return tuple(diagonal.tolist()) if np.count_nonzero(unmixing) == np.count_nonzero(diagonal) else None
+
 
 def _is_invertible_diagonal(levels: np.ndarray) -> bool:
     """Whether the levels are square, diagonal and without a zero on the diagonal."""
@@ -317,6 +324,7 @@ def statistics_from_moments(
     noise_moments: np.ndarray | None = None,
     n_samples: int | None = None,
     weighted: bool = False,
+    transform: np.ndarray | None = None,
 ) -> SequenceStatistics:
     """Statistics from the raw second moments of the rows [F_1 … F_n, A, 1].
 
@@ -326,9 +334,11 @@ def statistics_from_moments(
 
     ``black_level`` replaces the spec's (block sums: the black level times the block area).
     ``noise_moments`` are the half differences' moments in the same row layout (the noise probe),
-    mapped the same way into :attr:`SequenceStatistics.noise`.
+    mapped the same way into :attr:`SequenceStatistics.noise`. ``transform``: :func:`channel_transform` of ``spec`` and
+    that black level when the caller has it already.
     """
-    transform = channel_transform(spec, float(spec.black_level if black_level is None else black_level))
+    if transform is None:
+        transform = channel_transform(spec, float(spec.black_level if black_level is None else black_level))
     k = transform.shape[0] - 1
     linear_moments = transform @ moments @ transform.T
     linear_sums = transform @ moments[:, -1]
@@ -353,6 +363,9 @@ def channel_transform(spec: FrameStackSpec, black: float) -> np.ndarray:
     """(k + 1, n + 2) map from the raw rows ``[F_1 … F_n, A, 1]`` (of a frame, a block, a channel) to the LED images at
     full drive and the ambient, ``[f_1 … f_k, a]``: ``f_i = Σ_j U_ij (s_j (F_j − b) − s_a (A − b))``, ``a = s_a (A − b)``
     with ``U = pinv(L)`` (:attr:`FrameStackSpec.unmixing`)."""
+    diagonal = spec.unmixing_diagonal
+    if diagonal is not None and len(diagonal) == len(spec.led_scales):
+        return _diagonal_transform(diagonal, tuple(map(float, spec.led_scales)), float(spec.ambient_scale), black)
     unmixing, scales = spec.unmixing, np.asarray(spec.led_scales, dtype=float)
     k, n = unmixing.shape
     transform = np.zeros((k + 1, n + 2))
@@ -362,3 +375,25 @@ def channel_transform(spec: FrameStackSpec, black: float) -> np.ndarray:
     transform[k, n] = spec.ambient_scale
     transform[k, n + 1] = -spec.ambient_scale * black
     return transform
+
+
+def _diagonal_transform(
+    diagonal: tuple[float, ...], scales: tuple[float, ...], ambient: float, black: float
+) -> np.ndarray:
+    """:func:`channel_transform` where ``U`` is diagonal (one LED per frame, the usual plan), in Python floats: the
+    same products as the array route (a sum or product over a row of ``U`` is its one diagonal term), so the same
+    transform to the bit, from one array call instead of a dozen (each costs microseconds right after the frames'
+    pass has evicted numpy's code; docs/speed.md, 2026-11-29, rawspeed30d)."""
+    n = len(diagonal)
+    rows = []
+    for i, (unmix, scale) in enumerate(zip(diagonal, scales, strict=True)):
+        row = [0.0] * (n + 2)
+        row[i] = unmix * scale
+        row[n] = -ambient * unmix
+        row[n + 1] = unmix * ((ambient - scale) * black)
+        rows.append(row)
+    last = [0.0] * (n + 2)
+    last[n] = ambient
+    last[n + 1] = -ambient * black
+    rows.append(last)
+    return np.array(rows)

@@ -213,3 +213,28 @@ def test_large_frames_probe_a_stride_of_block_rows_and_scale_it(
     solve = lambda stats: np.linalg.solve(stats.denoised().gram, stats.denoised().cross)  # noqa: E731
     np.testing.assert_allclose(solve(strided), solve(full), atol=0.01)
     np.testing.assert_allclose(solve(full), truth, atol=0.02)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_one_led_per_frame_transform_is_the_array_routes_to_the_bit(seed: int) -> None:
+    """channel_transform's Python-float route for a diagonal unmixing (one LED per frame) gives the array route's
+    transform to the bit (signs of zeros included); a mixed plan takes the array route."""
+    from msflash.processing import statistics
+
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(1, 9))
+    levels = np.diag(rng.uniform(0.05, 1.0, k))
+    spec = FrameStackSpec(
+        float(rng.uniform(0, 300)), 4095.0, float(rng.uniform(1e-4, 1.0)), tuple(rng.uniform(1e-4, 1.0, k)), levels
+    )
+    black = float(rng.uniform(0, 2e4))
+    assert spec.unmixing_diagonal is not None
+    fast = statistics.channel_transform(spec, black)
+    reference = FrameStackSpec(spec.black_level, spec.white_level, spec.ambient_scale, spec.led_scales, levels)
+    object.__setattr__(reference, "unmixing_diagonal", None)  # the array route
+    slow = statistics.channel_transform(reference, black)
+    np.testing.assert_array_equal(fast, slow)
+    np.testing.assert_array_equal(np.signbit(fast), np.signbit(slow))
+    mixed = FrameStackSpec(0.0, 4095.0, 1.0, (1.0, 0.5), np.array([[1.0, 0.5], [0.0, 1.0]]))
+    assert mixed.unmixing_diagonal is None
+    assert statistics.channel_transform(mixed, 0.0).shape == (3, 4)
