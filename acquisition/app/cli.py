@@ -20,6 +20,7 @@ import importlib
 import importlib.util
 import logging
 import os
+import re
 import signal
 import sys
 import warnings
@@ -134,12 +135,28 @@ class _VersionAction(argparse._VersionAction):
         super().__call__(parser, namespace, values, option_string)
 
 
+NEGATIVE_VALUE = re.compile(r"^-(?:\.?\d|inf|nan)", re.IGNORECASE)
+"""A word that argparse takes as a value, not an option: a minus then a digit (``-5,0,0``, ``-1e3``, ``-.5``,
+``-10:20``) or ``-inf``/``-nan`` (then refused as what the option expects). argparse's own pattern takes only
+``-5`` and ``-0.5``: ``--weights -5,0,0`` was "expected one argument", naming nothing it expects. No msflash
+option looks like that (a test checks), so none is shadowed."""
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse whose usage errors exit with status 2 and one ``msflash: error:`` line, and whose
+    """argparse whose usage errors exit with status 2 and one ``msflash: error:`` line, whose
     refusal of a choice (a command, ``--solver``, ``--model``…) says which one was meant
-    (:func:`processing.names.unknown_name`)."""
+    (:func:`processing.names.unknown_name`), and which reads a value beginning with a minus and a digit
+    (:data:`NEGATIVE_VALUE`) as the value of the option before it."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_VALUE
 
     def error(self, message: str) -> NoReturn:
+        missing = re.match(r"argument (--[\w-]+)(?:/\S+)?: expected (?:one|at least one) argument$", message)
+        if missing is not None:  # the next word began with '-': an option to argparse
+            option = missing.group(1)
+            message += f"; a value that begins with '-' is written {option}=VALUE (a file: {option} ./-NAME)"
         raise UsageError(message)
 
     def _check_value(self, action: argparse.Action, value: Any) -> None:
