@@ -10,7 +10,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, boot_seconds, print_json, progress
+from msflash.acquisition.app.cli_common import (
+    UsageError,
+    add_booth_boot_option,
+    boot_seconds,
+    print_json,
+    progress,
+    serial_port,
+)
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.booth_probe import PROBE_PROTOCOLS, probe_booth
 from msflash.led_controller.doctor import Finding, run_doctor
@@ -103,9 +110,11 @@ def _register_doctor(subparsers: argparse._SubParsersAction) -> None:
     doc.add_argument("--json", action="store_true", help="print one JSON object")
     doc.add_argument(
         "--port",
+        type=serial_port,
         default=None,
         help="ask the booth on PORT who it is (only this port is opened; nothing is sent to other ports); "
-        "prints its firmware, channels and names, or what answered instead (exit 2)",
+        "prints its firmware, channels and names, or what answered instead (exit 1; a PORT that does not exist: "
+        "exit 2)",
     )
     doc.add_argument(
         "--booth-protocol",
@@ -261,13 +270,14 @@ def doctor(args: argparse.Namespace) -> int:
 
 
 def _doctor_port(args: argparse.Namespace) -> int:
-    """``doctor --port P``: the booth's identity in ``--booth-protocol``, or one line and exit 2."""
+    """``doctor --port P``: the booth's identity in ``--booth-protocol``, or one line and exit 1 (a port that does not
+    exist was refused when parsed, exit 2, as by every command that takes a port)."""
     if not args.timeout_s > 0:
         raise UsageError(f"--timeout-s {args.timeout_s}: expected a positive number of seconds")
     try:
         found = probe_booth(args.port, args.booth_protocol, timeout_s=args.timeout_s, boot_s=args.booth_boot_s)
-    except BoothError as err:
-        raise UsageError(f"{err} (--booth-protocol {args.booth_protocol})") from err
+    except BoothError as err:  # the device's answer (or silence): a device failure, exit 1, as every command's
+        raise BoothError(f"{err} (--booth-protocol {args.booth_protocol})") from err
     if getattr(args, "json", False):
         print_json({"ok": True, "booth": {**found.__dict__, "names": list(found.names)}})
         return 0

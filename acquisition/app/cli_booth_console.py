@@ -12,7 +12,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, serial_port
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.adapters import BOOTH_PROTOCOLS, open_booth
 from msflash.led_controller.adapters.text_booth import TextBooth
@@ -34,7 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Open the booth on PORT and read commands (levels 0.5 0 1 …, table …, status, help) "
         "from stdin; each is checked, framed, sent, and its reply explained. LEDs off on exit.",
     )
-    console.add_argument("port", help="serial port of the booth (e.g. /dev/ttyACM0)")
+    console.add_argument("port", type=serial_port, help="serial port of the booth (e.g. /dev/ttyACM0)")
     console.add_argument(
         "--booth-protocol",
         choices=BOOTH_PROTOCOLS,

@@ -13,6 +13,7 @@ import contextlib
 import json
 import math
 import os
+import stat
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -20,7 +21,7 @@ from typing import Any
 
 from msflash.acquisition.errors import UsageError as UsageError  # re-exported: every command raises it
 from msflash.acquisition.progress import progress as progress  # re-exported: every command reports with it
-from msflash.processing.user_files import check_output_name
+from msflash.processing.user_files import check_output_name, shown_path
 
 
 def whole_number(lowest: int, highest: int | None = None, unit: str = "") -> Callable[[str], int]:
@@ -88,6 +89,41 @@ def boot_seconds(text: str) -> float:
             "opens takes to boot; 0 for a board with auto-reset disabled)"
         )
     return value
+
+
+_PORT_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISREG, "a regular file"), (stat.S_ISFIFO, "a FIFO"))
+
+
+def serial_port(text: str) -> str:
+    """argparse type of every option naming a booth's serial port (``booth console PORT``, ``doctor --port``,
+    ``--port``, ``--booth-port``): a pyserial URL (``socket://…``, ``loop://``) as given, else a path to a character
+    device. A path that does not exist, or is a file or a folder, is bad input, refused when the line is parsed
+    (exit 2, naming the path) — before a rig opens or an LED fires; a device that is there but does not answer is
+    the device's failure (exit 1) when it is opened.
+
+    >>> serial_port("/dev/null"), serial_port("socket://127.0.0.1:7000")
+    ('/dev/null', 'socket://127.0.0.1:7000')
+    """
+    if "://" in text:
+        return text
+    shown = shown_path(text)
+    try:
+        mode = os.stat(text).st_mode
+    except (FileNotFoundError, NotADirectoryError, ValueError):
+        raise argparse.ArgumentTypeError(
+            f"'{shown}': no such port; expected an existing serial device such as /dev/ttyACM0 (run 'msflash doctor' "
+            "or 'msflash devices' to list booths)"
+        ) from None
+    except OSError as err:
+        raise argparse.ArgumentTypeError(
+            f"'{shown}': cannot look at it ({err.strerror or err}); expected a serial device such as /dev/ttyACM0"
+        ) from None
+    if not stat.S_ISCHR(mode):
+        kind = next((name for test, name in _PORT_KINDS if test(mode)), "not a device")
+        raise argparse.ArgumentTypeError(
+            f"'{shown}': {kind}; expected a serial device (a character device such as /dev/ttyACM0) or a pyserial URL"
+        )
+    return text
 
 
 def add_booth_boot_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:

@@ -23,7 +23,7 @@ from msflash.acquisition.app.camera_options import (
     camera_options_from_args,
     given_camera_options,
 )
-from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, number_where, seed_int
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, number_where, seed_int, serial_port
 from msflash.acquisition.app.options import (
     SIM_CFA_CHOICES,
     SIM_CFA_HELP,
@@ -266,6 +266,7 @@ def _add_hardware_options(parser: argparse.ArgumentParser, booth_port: bool = Tr
     if booth_port:
         hardware.add_argument(
             "--port",
+            type=serial_port,
             default=None,
             metavar="PATH",
             help="booth serial port, e.g. /dev/ttyACM0 (default: the single booth found)",
@@ -371,6 +372,7 @@ def _add_world_options(parser: argparse.ArgumentParser, booth_port_help: str | N
     )
     sim.add_argument(
         "--booth-port",
+        type=serial_port,
         default=None,
         metavar="PATH",
         help=booth_port_help

@@ -4,7 +4,11 @@ its fix; real files, ``main()`` in-process, no mocks."""
 
 from __future__ import annotations
 
+import io
+import os
 import shutil
+import tty
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -85,3 +89,69 @@ def test_no_option_looks_like_a_negative_value() -> None:
                 parsers.append(sub)
     assert len(names) > 100
     assert [name for name in names if NEGATIVE_VALUE.match(name)] == []
+
+
+PORT_COMMANDS = [
+    ["booth", "console", "{port}"],
+    ["doctor", "--port", "{port}"],
+    ["capture", "--rig", "sim", "--booth-port", "{port}", "--out", "{out}"],
+    ["run", "--rig", "sim", "--booth-port", "{port}", "--out", "{out}"],
+    ["run", "--rig", "hw", "--port", "{port}", "--out", "{out}"],
+    ["live", "--booth-port", "{port}", "--runs", "{out}"],
+]
+
+
+@pytest.mark.parametrize("command", PORT_COMMANDS, ids=lambda words: " ".join(words[:2]))
+@pytest.mark.parametrize(
+    ("port", "said"),
+    [
+        ("{tmp}/ttyNONE", "no such port; expected an existing serial device"),
+        ("{tmp}/file/ttyACM0", "no such port"),
+        ("{tmp}/file", "a regular file; expected a serial device"),
+        ("{tmp}", "a folder; expected a serial device"),
+    ],
+    ids=["missing", "under-a-file", "a-file", "a-folder"],
+)
+def test_every_command_refuses_a_port_that_is_no_device_as_bad_input(
+    command: list[str], port: str, said: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``booth console /dev/nonexistent`` and ``run --booth-port /dev/nonexistent`` exited 1 (a device failure, the
+    sim rig opened first) while ``doctor --port /dev/nonexistent`` exited 2."""
+    (tmp_path / "file").write_text("not a port\n")
+    port = port.replace("{tmp}", str(tmp_path))
+    out = tmp_path / "out"
+    words = [word.replace("{port}", port).replace("{out}", str(out)) for word in command]
+    assert main(words) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert f"'{port}': {said}" in line
+    assert not out.exists()
+
+
+@pytest.fixture
+def silent_port() -> Iterator[str]:
+    """A pseudo-terminal nobody answers on: a device that exists and stays silent."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        yield os.ttyname(slave)
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["booth", "console", "{port}", "--timeout-s", "0.2", "--booth-boot-s", "0"],
+        ["doctor", "--port", "{port}", "--timeout-s", "0.2", "--booth-boot-s", "0"],
+    ],
+    ids=["booth console", "doctor"],
+)
+def test_a_port_that_exists_but_does_not_answer_is_a_device_failure(
+    command: list[str], silent_port: str, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``doctor --port`` of a silent device exited 2 (bad input) where ``booth console`` exited 1."""
+    monkeypatch.setattr("sys.stdin", io.StringIO("quit\n"))
+    assert main([word.replace("{port}", silent_port) for word in command]) == 1
+    line = _one_error_line(capsys.readouterr().err)
+    assert silent_port in line and ("no reply" in line or "nothing answered" in line)
