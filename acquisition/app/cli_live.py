@@ -16,7 +16,7 @@ from msflash.acquisition.app.cli_common import UsageError, check_folder_can_be_m
 from msflash.acquisition.app.options import target_value
 from msflash.acquisition.app.rig_choice import add_rig_options, open_from_args, rig_spec
 from msflash.acquisition.session.rig import rig_kind
-from msflash.acquisition.signals import STOPPING_SIGNALS
+from msflash.acquisition.signals import STOPPING_SIGNALS, handlers_kept
 
 DEFAULT_PORT = 8470
 
@@ -70,7 +70,8 @@ def _live(args: argparse.Namespace) -> int:
                     loop.add_signal_handler(sig, stopping)
                 await server.serve(stop)
 
-            asyncio.run(serve())
+            with handlers_kept():  # asyncio sets the signals it took to their default action when it closes
+                asyncio.run(serve())
     finally:
         sock.close()
     progress("live view stopped; LEDs off")
