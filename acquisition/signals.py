@@ -16,10 +16,13 @@ thread only (Python delivers signals there); elsewhere it does nothing.
 
 from __future__ import annotations
 
+import _thread
 import contextlib
 import signal
+import sys
 import threading
 from collections.abc import Callable, Iterator
+from typing import Any, cast
 
 TERMINATING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 """The stopping signals whose default action kills the process: turned into :class:`Terminated`."""
@@ -52,6 +55,7 @@ class _Stop:
         """The signal raised, if one was."""
         self.late: list[int] = []
         """The signals recorded instead of raised."""
+        self.exception: BaseException | None = None
 
     def __call__(self, number: int, _frame: object) -> None:
         if not self.raising:
@@ -59,9 +63,33 @@ class _Stop:
             return
         self.raising = False  # before raising: a signal landing while this one unwinds is recorded
         self.raised = number
-        if number == signal.SIGINT:
-            raise KeyboardInterrupt
-        raise Terminated(128 + number)
+        self.exception = KeyboardInterrupt() if number == signal.SIGINT else Terminated(128 + number)
+        raise self.exception
+
+    def swallowed(self, unraisable: Any) -> bool:
+        """Whether the exception Python could not raise (``sys.unraisablehook``) is the one this handler raised: then
+        the signal is delivered again, from a thread of its own, to land once the finalizer it hit has returned.
+
+        A signal whose handler runs inside a ``__del__``, a weakref callback or a garbage collection raises there,
+        and Python prints "Exception ignored in …" with a traceback and goes on: the stop was lost (the traceback
+        seen once under load, with SIGTERM)."""
+        if self.exception is None or unraisable.exc_value is not self.exception:
+            return False
+        number, self.raising, self.raised, self.exception = cast(int, self.raised), True, None, None
+        main = threading.main_thread().ident
+        assert main is not None  # the main thread has started: this runs in it
+        # Not threading.Thread: its start() waits for the thread, and the signal would land in that wait, inside this
+        # hook (whose exceptions Python prints too). The thread sends it once this hook has let go of ``leaving``.
+        leaving = _thread.allocate_lock()
+        leaving.acquire()
+
+        def deliver() -> None:
+            with leaving:
+                signal.pthread_kill(main, number)
+
+        _thread.start_new_thread(deliver, ())
+        leaving.release()
+        return True
 
     def quiet(self) -> None:
         """From now on record every stopping signal rather than raise it."""
@@ -84,6 +112,23 @@ def _restore(previous: dict[int, object]) -> None:
 
 
 @contextlib.contextmanager
+def _redelivered_from_finalizers(stop: _Stop) -> Iterator[None]:
+    """While the block runs, a stop raised inside a finalizer is delivered again (:meth:`_Stop.swallowed`) instead
+    of printed as an ignored exception."""
+    previous = sys.unraisablehook
+
+    def hook(unraisable: Any) -> None:
+        if not stop.swallowed(unraisable):
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = previous
+
+
+@contextlib.contextmanager
 def sigterm_as_exit() -> Iterator[None]:
     """Turn SIGTERM and SIGHUP (:data:`TERMINATING_SIGNALS`) into :class:`Terminated` while active (once: a second
     signal is recorded, not raised, so it cannot cut the cleanup the first one unwinds).
@@ -99,7 +144,8 @@ def sigterm_as_exit() -> Iterator[None]:
     stop = _Stop()
     previous = _install(stop, TERMINATING_SIGNALS)
     try:
-        yield
+        with _redelivered_from_finalizers(stop):
+            yield
     finally:
         stop.quiet()  # a signal while the handlers are put back is recorded, not raised out of this block
         _restore(previous)
@@ -118,7 +164,8 @@ def command_signals() -> Iterator[_Stop]:
         return
     previous = _install(stop, STOPPING_SIGNALS)
     try:
-        yield stop
+        with _redelivered_from_finalizers(stop):
+            yield stop
     finally:
         stop.quiet()
         _restore(previous)

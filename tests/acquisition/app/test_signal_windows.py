@@ -218,3 +218,35 @@ def test_terminated_carries_the_signals_status() -> None:
         stack.enter_context(sigterm_as_exit())
         signal.raise_signal(signal.SIGHUP)
     assert raised.value.code == 128 + signal.SIGHUP
+
+
+def test_a_sigterm_landing_inside_a_finalizer_still_stops_the_command_in_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], let_through: list[int]
+) -> None:
+    """A handler that runs inside a ``__del__`` (or a weakref callback, a garbage collection) raises there; Python
+    printed "Exception ignored in …" with the Terminated traceback and went on: the stop was lost (the SIGTERM
+    traceback seen once under load). Now the signal is delivered again once the finalizer has returned."""
+    import threading
+    import time
+
+    class Frame:
+        def __del__(self) -> None:
+            signal.raise_signal(signal.SIGTERM)  # lands inside the finalizer
+
+    steps: list[str] = []
+
+    def capture(args: argparse.Namespace) -> int:
+        frame = Frame()
+        del frame
+        steps.append("after the finalizer")
+        deadline = time.monotonic() + 120  # a hang guard, not a timing: the signal comes back within milliseconds
+        while time.monotonic() < deadline:
+            threading.Event().wait(0.01)
+        steps.append("never stopped")
+        return 0
+
+    assert _run(monkeypatch, capture, ["capture"]) == 128 + signal.SIGTERM
+    assert steps == ["after the finalizer"]
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and lines[0].startswith("msflash: terminated (SIGTERM); LEDs off"), lines
+    assert let_through == []
