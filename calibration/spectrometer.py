@@ -43,12 +43,13 @@ from msflash.processing.spectra import (
     tiny_columns,
 )
 from msflash.processing.user_files import TEXT_EXPORT_MAX_BYTES, printable, read_user_bytes, shown_path
+from msflash.processing.user_numbers import plain_number
 
 _COMMENT_PREFIXES = ("#", "%", "//", ";")
 _END_MARKERS = ("end", ">>>>>end")
 _SEPARATORS = re.compile(r"[,\t; ]+")
 _DECIMAL_COMMA_SEPARATORS = re.compile(r"[\t;]+")
-_DECIMAL_COMMA_NUMBER = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$|^[+-]?\d+(?:[eE][+-]?\d+)?$")
+_DECIMAL_COMMA_NUMBER = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$|^[+-]?\d+(?:[eE][+-]?\d+)?$", re.ASCII)
 _AVANTES_COLUMNS = ("wave", "sample", "dark", "reference")
 """The first columns of an AvaSoft text export: wavelength, raw counts, the stored dark, the reference."""
 
@@ -122,8 +123,10 @@ def _avantes_columns(header: list[str]) -> tuple[list[str], list[str]] | None:
 
 
 def _numbers(cells: list[str]) -> list[float] | None:
+    """The cells as numbers (the one reading of a user's number, :func:`processing.user_numbers.plain_number`), or
+    None when one is no number: a header line before the data, an end marker, or a refused data line."""
     try:
-        return [float(cell) for cell in cells]
+        return [plain_number(cell) for cell in cells]
     except ValueError:
         return None
 

@@ -14,9 +14,12 @@ from msflash.acquisition.app.cli_common import (
     UsageError,
     add_booth_boot_option,
     boot_seconds,
+    number,
     print_json,
     progress,
+    seed_int,
     serial_port,
+    whole_number,
 )
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.booth_probe import PROBE_PROTOCOLS, probe_booth
@@ -48,7 +51,7 @@ def _register_emulator(subparsers: argparse._SubParsersAction) -> None:
         default=",".join(f"{p:g}" for p in DEFAULT_PEAKS_NM),
         help="comma-separated peak wavelengths in nm, one per name",
     )
-    emu.add_argument("--watchdog-s", type=float, default=3.0, help="host-silence timeout (0 disables)")
+    emu.add_argument("--watchdog-s", type=number, default=3.0, help="host-silence timeout (0 disables)")
     link = emu.add_argument_group("the board's link (a stock Arduino Mega's by default)")
     link.add_argument(
         "--no-auto-reset",
@@ -87,9 +90,13 @@ def _register_emulator(subparsers: argparse._SubParsersAction) -> None:
         "answering, for good without SECONDS), close:P (hang up); P per frame, e.g. "
         "drop:0.01,flip:0.001",
     )
-    emu.add_argument("--seed", type=int, default=0, help="seed of the fault draws (default 0)")
+    emu.add_argument("--seed", type=seed_int, default=0, help="seed of the fault draws (default 0)")
     emu.add_argument(
-        "--fault-after", type=int, default=0, metavar="N", help="let the first N requests through unfaulted (default 0)"
+        "--fault-after",
+        type=whole_number(0),
+        default=0,
+        metavar="N",
+        help="let the first N requests through unfaulted (default 0)",
     )
     emu.add_argument(
         "--state-file",
@@ -122,7 +129,7 @@ def _register_doctor(subparsers: argparse._SubParsersAction) -> None:
         default="msflash",
         help="the protocol to ask --port in: msflash (our firmware) or text (plain-text booth); default %(default)s",
     )
-    doc.add_argument("--timeout-s", type=float, default=1.0, help="--port: reply timeout in seconds (default 1)")
+    doc.add_argument("--timeout-s", type=number, default=1.0, help="--port: reply timeout in seconds (default 1)")
     add_booth_boot_option(doc)
     doc.add_argument("--sysfs-root", type=Path, default=Path("/sys"), help=argparse.SUPPRESS)
     doc.add_argument("--dev-root", type=Path, default=Path("/dev"), help=argparse.SUPPRESS)

@@ -12,7 +12,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, serial_port
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, number, serial_port
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.adapters import BOOTH_PROTOCOLS, open_booth
 from msflash.led_controller.adapters.text_booth import TextBooth
@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=BOOTH_PROTOCOLS[0],
         help="the booth's protocol: msflash (our firmware) or text (plain-text booth); default %(default)s",
     )
-    console.add_argument("--timeout-s", type=float, default=2.0, help="reply timeout of each command in seconds")
+    console.add_argument("--timeout-s", type=number, default=2.0, help="reply timeout of each command in seconds")
     add_booth_boot_option(console)
     console.set_defaults(handler=booth_console)
     booth.set_defaults(handler=_booth_without_action)

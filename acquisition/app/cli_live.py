@@ -17,13 +17,14 @@ from msflash.acquisition.app.options import target_value
 from msflash.acquisition.app.rig_choice import add_rig_options, open_from_args, rig_spec
 from msflash.acquisition.session.rig import rig_kind
 from msflash.acquisition.signals import STOPPING_SIGNALS, handlers_kept
+from msflash.processing.user_numbers import plain_whole_number
 
 DEFAULT_PORT = 8470
 
 
 def _port(text: str) -> int:
     try:
-        value = int(text)
+        value = plain_whole_number(text)
     except ValueError:
         value = -1
     if not 0 <= value <= 65535:

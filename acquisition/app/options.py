@@ -6,7 +6,7 @@ import argparse
 import math
 from collections.abc import Callable
 
-from msflash.acquisition.app.cli_common import positive_int
+from msflash.acquisition.app.cli_common import positive_int, user_number, whole
 from msflash.acquisition.devices.sim_default import MONO, SIM_DEFAULT_CFA
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.rig import SimWorldOptions
@@ -46,10 +46,7 @@ def alpha_value(text: str) -> float | str:
     # it prints "invalid _alpha value: '-1'" instead, naming this function and not what is expected.
     if text == "auto":
         return text
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
+    value = user_number(text)
     if not (value >= 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"'{text}': expected a finite number ≥ 0 or 'auto'")
     return value
@@ -94,7 +91,7 @@ def add_estimation_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], int] = int) -> None:
+def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], int] = whole) -> None:
     """``--patch-px``, ``--border-px``, ``--margin-px``: a given chart layout, or none (detect the chart)."""
     parser.add_argument(
         "--patch-px",
@@ -105,11 +102,11 @@ def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], 
     )
     parser.add_argument(
         "--border-px",
-        type=int,
+        type=whole,
         default=None,
         help="gap between patches in pixels (sim rig 2; default 2 with --patch-px)",
     )
-    parser.add_argument("--margin-px", type=int, default=1, help="pixels ignored inside each patch edge")
+    parser.add_argument("--margin-px", type=whole, default=1, help="pixels ignored inside each patch edge")
 
 
 def flash_bounds_option(parser: argparse.ArgumentParser) -> None:
