@@ -74,7 +74,9 @@ def test_a_number_option_refuses_what_float_reads_but_a_user_does_not_mean(
     words: list[str], option: str, value: str, sequence: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """Each option was read through ``float`` or ``int``: ``1_0`` as 10, ``١٢`` as 12 (``infinity`` reached some)."""
-    line = [w.replace("{seq}", str(sequence)).replace("{out}", str(tmp_path / "out")).replace("{v}", value) for w in words]
+    line = [
+        w.replace("{seq}", str(sequence)).replace("{out}", str(tmp_path / "out")).replace("{v}", value) for w in words
+    ]
     assert main(line) == 2
     lines = [text for text in capsys.readouterr().err.splitlines() if text.strip()]
     assert len(lines) == 1 and lines[0].startswith("msflash: error: ") and option in lines[0], lines

@@ -383,9 +383,7 @@ def test_cli_camera_option_errors_exit_2_with_one_line(
 ) -> None:
     # No booth is needed: the camera's options are refused before the booth is opened (/dev/null: a device, no booth).
     status = main(
-        fake_camera_capture(
-            "/dev/null", "--led-spectra", str(led_spectra_csv), *option, "--out", str(tmp_path / "x")
-        )
+        fake_camera_capture("/dev/null", "--led-spectra", str(led_spectra_csv), *option, "--out", str(tmp_path / "x"))
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2, err
