@@ -18,6 +18,7 @@ from msflash.led_controller.adapters import BOOTH_PROTOCOLS, open_booth
 from msflash.led_controller.adapters.text_booth import TextBooth
 from msflash.led_controller.booth import LedBooth
 from msflash.led_controller.console import BoothConsole, ConsoleQuit
+from msflash.processing.user_numbers import plain_number, plain_whole_number
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -67,7 +68,7 @@ def booth_console(args: argparse.Namespace) -> int:
             )
             assert isinstance(booth, LedBooth | TextBooth)  # what open_booth opens
             with booth:  # LEDs off on every way out, as each driver's context manager does
-                _prompt(BoothConsole(booth, transcript))
+                _prompt(BoothConsole(booth, transcript, plain_number, plain_whole_number))  # the one number parser
         _say(["LEDs off"])
     return 0
 

@@ -138,3 +138,21 @@ def test_a_header_number_with_unicode_digits_is_not_read() -> None:
     from msflash.calibration.spectrometer_header import header_number
 
     assert header_number("١٠") is None and header_number("1_0") is None and header_number("1,5") == 1.5
+
+
+def test_the_booth_console_reads_typed_levels_with_the_same_parser(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``levels ١ ١ ١ …`` (Arabic-Indic ones, from a keyboard layout) lit every LED at full: ``float`` reads them."""
+    import io
+
+    from msflash.led_controller import BoothEmulator, serve_on_pty
+
+    typed = "levels ١ ١ ١ ١ ١ ١ ١\npset ١ 0 0 0 0 0 0 0\nwdog 1_0\nquit\n"
+    monkeypatch.setattr("sys.stdin", io.StringIO(typed))
+    with serve_on_pty(BoothEmulator()) as served:
+        assert main(["booth", "console", served.port, "--booth-boot-s", "0"]) == 0
+        assert served.emulator.levels == (0.0,) * 7
+    out = capsys.readouterr().out
+    assert "levels '١ ١ ١ ١ ١ ١ ١' are not numbers" in out and "a step number first" in out
+    assert "'1_0' is not a number of seconds" in out
