@@ -43,7 +43,7 @@ from msflash.processing.spectra import (
     tiny_columns,
 )
 from msflash.processing.user_files import TEXT_EXPORT_MAX_BYTES, printable, read_user_bytes, shown_path
-from msflash.processing.user_numbers import plain_number
+from msflash.processing.user_numbers import number_or_non_finite
 
 _COMMENT_PREFIXES = ("#", "%", "//", ";")
 _END_MARKERS = ("end", ">>>>>end")
@@ -126,7 +126,7 @@ def _numbers(cells: list[str]) -> list[float] | None:
     """The cells as numbers (the one reading of a user's number, :func:`processing.user_numbers.plain_number`), or
     None when one is no number: a header line before the data, an end marker, or a refused data line."""
     try:
-        return [plain_number(cell) for cell in cells]
+        return [number_or_non_finite(cell) for cell in cells]  # inf, nan: refused below naming the column
     except ValueError:
         return None
 

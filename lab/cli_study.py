@@ -35,7 +35,7 @@ from msflash.acquisition.session.dask_map import dask_mapper
 from msflash.lab.cli_support import REPORTER, optional_claimed_output, relative_power
 from msflash.processing.ambient import AMBIENT_METHODS
 from msflash.processing.names import unknown_name
-from msflash.processing.user_numbers import plain_number, plain_whole_number
+from msflash.processing.user_numbers import number_or_non_finite, plain_whole_number
 
 STUDIES = ("table1", "surfaces", "cameras", "xy", "failure", "pareto")
 """Study names accepted by ``msflash study``."""
@@ -47,7 +47,7 @@ def _alpha(text: str) -> float | str | list[float]:
     if text in ("auto", "paper"):
         return text
     try:
-        values = [plain_number(part) for part in text.split(",")]
+        values = [number_or_non_finite(part) for part in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"'{text}': expected a number ≥ 0, a comma-separated list, 'auto' or 'paper'"

@@ -90,6 +90,31 @@ def plain_whole_number(text: str) -> int:
     return int(stripped)
 
 
+_NON_FINITE = {"inf": math.inf, "infinity": math.inf, "nan": math.nan}
+
+
+def number_or_non_finite(text: str) -> float:
+    """:func:`plain_number`, except that a text naming a non-finite value (``inf``, ``-Infinity``, ``NaN``) or
+    overflowing (``1e400``) is that value: for a caller whose refusal then says "expected a finite number", which
+    tells the user more than "expected a number" would.
+
+    >>> number_or_non_finite("2"), number_or_non_finite("-inf"), number_or_non_finite("1e400")
+    (2.0, -inf, inf)
+
+    Raises
+    ------
+    NotANumber
+        Anything else :func:`plain_number` refuses (``1_0``, ``١٢``, ``0x10``).
+    """
+    stripped = text.strip(_BLANKS)
+    named = _NON_FINITE.get(stripped.lstrip("+-").lower())
+    if named is not None:
+        return -named if stripped.startswith("-") else named
+    if _PLAIN.fullmatch(stripped):
+        return float(stripped)
+    raise NotANumber(f"{_shown(text)}: expected {EXPECTED_NUMBER}")
+
+
 def written_as_number(text: str) -> bool:
     """Whether ``text`` is written as a plain number, finite or not (``1e400`` is; ``inf``, ``1_0`` are not).
 

@@ -19,7 +19,7 @@ from msflash.acquisition.app.cli_common import (
     progress,
     seed_int,
     serial_port,
-    whole_number,
+    whole,
 )
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.booth_probe import PROBE_PROTOCOLS, probe_booth
@@ -93,7 +93,7 @@ def _register_emulator(subparsers: argparse._SubParsersAction) -> None:
     emu.add_argument("--seed", type=seed_int, default=0, help="seed of the fault draws (default 0)")
     emu.add_argument(
         "--fault-after",
-        type=whole_number(0),
+        type=whole,
         default=0,
         metavar="N",
         help="let the first N requests through unfaulted (default 0)",
