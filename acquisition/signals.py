@@ -1,21 +1,28 @@
-"""The signals that stop a command, and the three ways msflash lets them stop it cleanly.
+"""The signals that stop a command, and the ways msflash lets them stop it cleanly.
 
 A command stops on Ctrl-C (``SIGINT``), ``SIGTERM`` (a service manager, ``kill``) and ``SIGHUP``
 (the terminal or the SSH session closed under a running capture): :data:`STOPPING_SIGNALS`, the
 one list every part of msflash uses. Python raises ``KeyboardInterrupt`` for the first and kills
 the process where it stands for the other two, which would leave the LEDs on until the booth's
-watchdog fires and half-written outputs behind. So :func:`sigterm_as_exit` turns the other two into
-:class:`Terminated` (a ``SystemExit``: every ``with`` block unwinds as on Ctrl-C), :func:`hold_stopping_signals`
-holds all three across a short gap that must not be cut, and :func:`signals_deferred` records them while a block
-that cannot be interrupted runs (:func:`deliver_deferred` raises the first afterwards). Each works in the main thread only (Python delivers signals there); elsewhere it does nothing.
+watchdog fires and half-written outputs behind. So :func:`command_signals` (the CLI's ``main``, from its first
+instruction to its last) and :func:`sigterm_as_exit` (the Python API's capture blocks) turn them into exceptions —
+:class:`Terminated` is a ``SystemExit``: every ``with`` block unwinds as on Ctrl-C — *once*: a second signal is
+recorded, never raised inside the cleanup the first one unwinds; a signal the process ignores (``nohup``) stays
+ignored. :func:`hold_stopping_signals` holds all three across a short gap that must not be cut,
+:func:`signals_deferred` records them while a block that cannot be interrupted runs (:func:`deliver_deferred` raises
+the first afterwards), and :func:`handlers_kept` puts back what asyncio's loop replaced. Each works in the main
+thread only (Python delivers signals there); elsewhere it does nothing.
 """
 
 from __future__ import annotations
 
+import _thread
 import contextlib
 import signal
+import sys
 import threading
 from collections.abc import Callable, Iterator
+from typing import Any, cast
 
 TERMINATING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 """The stopping signals whose default action kills the process: turned into :class:`Terminated`."""
@@ -33,26 +40,153 @@ def _in_main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
+class _Stop:
+    """The handler of the stopping signals while a command runs: the first signal raises (``KeyboardInterrupt`` for
+    Ctrl-C, :class:`Terminated` for the others), every later one is recorded in :attr:`late` instead.
+
+    One raise per command: a second signal (the terminal closing after a ``kill``, a service manager's SIGTERM
+    repeated, Ctrl-C pressed again) would otherwise land inside the ``finally`` blocks the first one unwinds —
+    switching the LEDs off, finishing ``sequence.json`` — and cut them short. After :meth:`quiet` (the command
+    has finished) even the first is only recorded, for the CLI to report once its outcome is written."""
+
+    def __init__(self) -> None:
+        self.raising = True
+        self.raised: int | None = None
+        """The signal raised, if one was."""
+        self.late: list[int] = []
+        """The signals recorded instead of raised."""
+        self.exception: BaseException | None = None
+
+    def __call__(self, number: int, _frame: object) -> None:
+        if not self.raising:
+            self.late.append(number)
+            return
+        self.raising = False  # before raising: a signal landing while this one unwinds is recorded
+        self.raised = number
+        self.exception = KeyboardInterrupt() if number == signal.SIGINT else Terminated(128 + number)
+        raise self.exception
+
+    def swallowed(self, unraisable: Any) -> bool:
+        """Whether the exception Python could not raise (``sys.unraisablehook``) is the one this handler raised: then
+        the signal is delivered again, from a thread of its own, to land once the finalizer it hit has returned.
+
+        A signal whose handler runs inside a ``__del__``, a weakref callback or a garbage collection raises there,
+        and Python prints "Exception ignored in …" with a traceback and goes on: the stop was lost (the traceback
+        seen once under load, with SIGTERM)."""
+        if self.exception is None or unraisable.exc_value is not self.exception:
+            return False
+        number, self.raising, self.raised, self.exception = cast(int, self.raised), True, None, None
+        main = threading.main_thread().ident
+        assert main is not None  # the main thread has started: this runs in it
+        # Not threading.Thread: its start() waits for the thread, and the signal would land in that wait, inside this
+        # hook (whose exceptions Python prints too). The thread sends it once this hook has let go of ``leaving``.
+        leaving = _thread.allocate_lock()
+        leaving.acquire()
+
+        def deliver() -> None:
+            with leaving:
+                signal.pthread_kill(main, number)
+
+        _thread.start_new_thread(deliver, ())
+        leaving.release()
+        return True
+
+    def quiet(self) -> None:
+        """From now on record every stopping signal rather than raise it."""
+        self.raising = False
+
+
+def _install(stop: _Stop, numbers: tuple[int, ...]) -> dict[int, object]:
+    """``stop`` as the handler of ``numbers``, but for a signal the process was told to ignore (``nohup`` ignores
+    SIGHUP, a shell's background job SIGINT: the user asked to survive them); the previous handlers."""
+    previous: dict[int, object] = {}
+    for number in numbers:
+        if signal.getsignal(number) is not signal.SIG_IGN:
+            previous[number] = signal.signal(number, stop)
+    return previous
+
+
+def _restore(previous: dict[int, object]) -> None:
+    for number, handler in previous.items():
+        signal.signal(number, handler)  # type: ignore[arg-type]
+
+
+@contextlib.contextmanager
+def _redelivered_from_finalizers(stop: _Stop) -> Iterator[None]:
+    """While the block runs, a stop raised inside a finalizer is delivered again (:meth:`_Stop.swallowed`) instead
+    of printed as an ignored exception."""
+    previous = sys.unraisablehook
+
+    def hook(unraisable: Any) -> None:
+        if not stop.swallowed(unraisable):
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = previous
+
+
 @contextlib.contextmanager
 def sigterm_as_exit() -> Iterator[None]:
-    """Turn SIGTERM and SIGHUP (:data:`TERMINATING_SIGNALS`) into :class:`Terminated` while active.
+    """Turn SIGTERM and SIGHUP (:data:`TERMINATING_SIGNALS`) into :class:`Terminated` while active (once: a second
+    signal is recorded, not raised, so it cannot cut the cleanup the first one unwinds).
 
     Then ``with LedBooth…`` blocks switch the LEDs off and writers finish or remove what they
-    wrote, as on Ctrl-C. The previous handlers are restored on exit.
+    wrote, as on Ctrl-C. The previous handlers are restored on exit. Inside :func:`command_signals` (the CLI's
+    ``main``) it changes nothing: the command's handler already does this, for the whole command. A signal the
+    process ignores (``nohup``'s SIGHUP) stays ignored.
+    """
+    if not _in_main_thread() or isinstance(signal.getsignal(signal.SIGTERM), _Stop):
+        yield
+        return
+    stop = _Stop()
+    previous = _install(stop, TERMINATING_SIGNALS)
+    try:
+        with _redelivered_from_finalizers(stop):
+            yield
+    finally:
+        stop.quiet()  # a signal while the handlers are put back is recorded, not raised out of this block
+        _restore(previous)
+
+
+@contextlib.contextmanager
+def command_signals() -> Iterator[_Stop]:
+    """Every stopping signal (:data:`STOPPING_SIGNALS`) raised once, from the first instruction of a command to its
+    last: parsing and importing its modules included (before, SIGTERM there killed the process silently), and the
+    moments after it returned (a signal then was lost). The caller calls :meth:`_Stop.quiet` once the command has
+    returned and reports what :attr:`_Stop.late` recorded meanwhile. Outside the main thread it yields a handler
+    that is never installed."""
+    stop = _Stop()
+    if not _in_main_thread():
+        yield stop
+        return
+    previous = _install(stop, STOPPING_SIGNALS)
+    try:
+        with _redelivered_from_finalizers(stop):
+            yield stop
+    finally:
+        stop.quiet()
+        _restore(previous)
+
+
+@contextlib.contextmanager
+def handlers_kept() -> Iterator[None]:
+    """Put the stopping signals' handlers back as they were when the block began, whatever it did to them.
+
+    asyncio's event loop takes the signals it was given (``loop.add_signal_handler``) and, when it closes, sets them
+    to the *default* action, not to what was there before: ``live``'s rig, still open, could then be killed where it
+    stood by a SIGTERM, its LEDs left on.
     """
     if not _in_main_thread():
         yield
         return
-
-    def _raise(signum: int, _frame: object) -> None:
-        raise Terminated(128 + signum)
-
-    previous = {number: signal.signal(number, _raise) for number in TERMINATING_SIGNALS}
+    previous = {number: signal.getsignal(number) for number in STOPPING_SIGNALS}
     try:
         yield
     finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
+        _restore({number: handler for number, handler in previous.items() if handler is not None})
 
 
 def hold_stopping_signals() -> Callable[[], None]:

@@ -12,7 +12,8 @@ Accepted layout (``docs/calibration.md``, *Reading the numbers*)
 Comment lines start with ``#``, ``%``, ``//`` or ``;``. Non-numeric lines *before* the data are a
 header; the last of them names the columns if it has as many cells as the data. After the data
 starts, every line must be numeric, except an end marker (``>>>>>End Spectral Data<<<<<``).
-Decimal commas are read where they are unambiguous: cells separated by semicolons or tabs, each a
+Descending wavelengths, repeated rows and one-column exports with the grid in the header are read
+(:mod:`calibration.spectrometer_rows`). Decimal commas are read where they are unambiguous: cells separated by semicolons or tabs, each a
 number once its one comma is a point (``380,5;0,25``); elsewhere ``1,5`` is two cells. UTF-8,
 UTF-16 (with its byte-order mark) and Latin-1 files are read. Non-uniform instrument grids go
 through :meth:`Spectra.from_samples` (box-car bins), then :meth:`Spectra.resample`.
@@ -30,6 +31,7 @@ import numpy as np
 
 from msflash.calibration.errors import CalibrationError
 from msflash.calibration.spectrometer_header import AcquisitionSettings, acquisition_settings
+from msflash.calibration.spectrometer_rows import header_wavelengths, in_wavelength_order
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.negative_values import ClippedNegatives, clip_negative_noise
 from msflash.processing.spectra import (
@@ -41,12 +43,13 @@ from msflash.processing.spectra import (
     tiny_columns,
 )
 from msflash.processing.user_files import TEXT_EXPORT_MAX_BYTES, printable, read_user_bytes, shown_path
+from msflash.processing.user_numbers import number_or_non_finite
 
 _COMMENT_PREFIXES = ("#", "%", "//", ";")
 _END_MARKERS = ("end", ">>>>>end")
 _SEPARATORS = re.compile(r"[,\t; ]+")
 _DECIMAL_COMMA_SEPARATORS = re.compile(r"[\t;]+")
-_DECIMAL_COMMA_NUMBER = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$|^[+-]?\d+(?:[eE][+-]?\d+)?$")
+_DECIMAL_COMMA_NUMBER = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$|^[+-]?\d+(?:[eE][+-]?\d+)?$", re.ASCII)
 _AVANTES_COLUMNS = ("wave", "sample", "dark", "reference")
 """The first columns of an AvaSoft text export: wavelength, raw counts, the stored dark, the reference."""
 
@@ -120,8 +123,10 @@ def _avantes_columns(header: list[str]) -> tuple[list[str], list[str]] | None:
 
 
 def _numbers(cells: list[str]) -> list[float] | None:
+    """The cells as numbers (the one reading of a user's number, :func:`processing.user_numbers.plain_number`), or
+    None when one is no number: a header line before the data, an end marker, or a refused data line."""
     try:
-        return [float(cell) for cell in cells]
+        return [number_or_non_finite(cell) for cell in cells]  # inf, nan: refused below naming the column
     except ValueError:
         return None
 
@@ -149,7 +154,8 @@ def parse_spectrometer_text(
     ------
     CalibrationError
         Naming the file and line: no data, a non-numeric or ragged data line, wrong column
-        count, NaN/infinite values, non-increasing wavelengths, a value below the negative-noise
+        count, NaN/infinite values, wavelengths that rise and fall (descending ones are reversed, rows sharing a
+        wavelength collapsed or averaged: :mod:`calibration.spectrometer_rows`), a value below the negative-noise
         bound (:mod:`processing.negative_values`), no signal.
 
     Examples
@@ -161,12 +167,14 @@ def parse_spectrometer_text(
     if unit not in ("energy", "photons"):
         raise CalibrationError(f"{source}: unit '{unit}'; expected energy or photons")
     data = _read_rows(text, source, column)
-    table = np.asarray(data.rows, dtype=float)
+    table, data.lines, order_notes = in_wavelength_order(np.asarray(data.rows, dtype=float), data.lines, source)
     wavelengths = table[:, 0]
     value_column = data.column if data.column is not None else 1
     readings = table[:, value_column]
     _check_readings(wavelengths, readings, source, data.lines)
     column_name, column_units, metadata = _value_column(data, table, value_column)
+    if order_notes:
+        metadata["order"] = order_notes
     settings = acquisition_settings(data.header_lines, source, column_units)
     _check_negatives(wavelengths, readings, column_name or "value", source, data.lines)
     return SpectrometerMeasurement(
@@ -241,6 +249,10 @@ def _read_rows(text: str, source: str, column: int | None) -> _Rows:
         raise CalibrationError(
             f"{source}: {len(data.rows)} data lines; expected at least 3 lines of 'wavelength_nm, value'"
         )
+    if data.width == 1:  # one value a line: the grid from the header, or refused naming what is expected
+        wavelengths = header_wavelengths(data.header_lines, len(data.rows), source, data.lines[0])
+        data.rows = [[float(wavelength), *row] for wavelength, row in zip(wavelengths, data.rows, strict=True)]
+        data.width = 2
     return data
 
 
@@ -249,7 +261,7 @@ def _first_data_line(data: _Rows, width: int, line: str, where: str) -> None:
     data.width = width
     data.avantes = _avantes_columns(data.header)
     if width < 2:
-        raise CalibrationError(f"{where}: 1 column; expected at least 2 (wavelength_nm, value)")
+        return  # one value a line: read on the header's grid (spectrometer_rows.header_wavelengths), or refused
     if width > 2 and data.column is None and data.avantes is not None:
         data.column = 1  # AvaSoft: the Sample column (raw counts); its Dark column is the stored dark
     if width > 2 and data.column is None:
@@ -270,14 +282,8 @@ def _first_data_line(data: _Rows, width: int, line: str, where: str) -> None:
 
 
 def _check_readings(wavelengths: np.ndarray, readings: np.ndarray, source: str, lines: list[int]) -> None:
-    """Wavelengths strictly increasing, in nanometres; a positive reading of a sensible magnitude."""
-    steps = np.diff(wavelengths)
-    if np.any(steps <= 0):
-        k = int(np.argmax(steps <= 0)) + 1
-        raise CalibrationError(
-            f"{source}:{lines[k]}: wavelength {wavelengths[k]:g} nm after {wavelengths[k - 1]:g} nm; "
-            "expected strictly increasing wavelengths"
-        )
+    """Wavelengths (put in increasing order by :func:`in_wavelength_order`) in nanometres; a positive reading of a
+    sensible magnitude."""
     if wavelengths[0] < 100 or wavelengths[-1] > 3000:
         raise CalibrationError(
             f"{source}:{lines[0]}: wavelengths span {wavelengths[0]:g}–{wavelengths[-1]:g}; expected nanometres "

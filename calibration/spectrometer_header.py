@@ -24,13 +24,14 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from msflash.calibration.errors import CalibrationError
+from msflash.processing.user_numbers import plain_number
 
 ValueUnit = Literal["counts", "energy", "photons"]
 
 SECONDS_PER = {"s": 1.0, "sec": 1.0, "secs": 1.0, "ms": 1e-3, "msec": 1e-3, "us": 1e-6, "µs": 1e-6, "usec": 1e-6}
 """Seconds per unit of time as spectrometer programs spell it (``µs`` also as the micro sign U+00B5)."""
 
-_NUMBER = r"[-+]?(?:\d+(?:[.,]\d*)?|[.,]\d+)(?:[eE][-+]?\d+)?"
+_NUMBER = r"[-+]?(?:[0-9]+(?:[.,][0-9]*)?|[.,][0-9]+)(?:[eE][-+]?[0-9]+)?"
 _UNIT = r"(?:secs?|s|msec|ms|usec|us|µs|μs)"
 
 
@@ -73,10 +74,12 @@ def header_number(text: str) -> float | None:
     >>> header_number("1.000000E-1"), header_number("35,000"), header_number(" 1,2112E+002 "), header_number("x")
     (0.1, 35.0, 121.12, None)
     """
-    text = text.strip()
-    if not re.fullmatch(_NUMBER, text):
+    if not re.fullmatch(_NUMBER, text.strip()):
         return None
-    return float(text.replace(",", "."))
+    try:  # the one reading of a user's number, its decimal comma made a point
+        return plain_number(text.replace(",", "."))
+    except ValueError:
+        return None
 
 
 def _seconds(value: float, unit: str) -> float:
@@ -106,11 +109,11 @@ _PLAIN_TIME = re.compile(
 _AVERAGES = re.compile(
     r"^(?:scans to average|spectra averaged|averaging nr\. \[scans\]|average|averages|averaging|scans)\s*[:;,\t=]\s*"
     r"(?P<v>\d+)",
-    re.IGNORECASE,
+    re.IGNORECASE | re.ASCII,
 )
 _BOXCAR = re.compile(
     r"^(?:boxcar width|boxcar smoothing|smoothing nr\. \[pixels\]|spectrumsmooth|smoothing)\s*[:;,\t=]\s*(?P<v>\d+)",
-    re.IGNORECASE,
+    re.IGNORECASE | re.ASCII,
 )
 _ELECTRIC_DARK = re.compile(
     r"^(?:electric dark correction enabled|correct for electrical dark)\s*:\s*(?P<v>\S+)", re.IGNORECASE
@@ -237,9 +240,9 @@ def _read_setting_line(found: _Found, instrument: str, raw: str, number: int, so
         found.put("integration_time_s", (match.group("v"), "s", line), number)  # ThorSpectra writes seconds
     elif instrument == "SpectraWiz" and raw.startswith('"') and (match := _SPECTRAWIZ.search(line)):
         found.put("integration_time_s", (match.group("v"), match.group("u") or "ms", line), number)
-        if avg := re.search(r"\bAvg:\s*(\d+)", line, re.IGNORECASE):
+        if avg := re.search(r"\bAvg:\s*(\d+)", line, re.IGNORECASE | re.ASCII):
             found.put("averages", int(avg.group(1)), number)
-        if smooth := re.search(r"\bSm:\s*(\d+)", line, re.IGNORECASE):
+        if smooth := re.search(r"\bSm:\s*(\d+)", line, re.IGNORECASE | re.ASCII):
             found.put("boxcar", int(smooth.group(1)), number)
     elif match := _PLAIN_TIME.match(line):
         unit = match.group("ku") or match.group("u")

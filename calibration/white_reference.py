@@ -35,6 +35,7 @@ import numpy as np
 
 from msflash.calibration.chart_sequence import patch_statistics
 from msflash.calibration.errors import CalibrationError
+from msflash.processing.user_numbers import plain_whole_number
 
 SUB_BLOCKS = 8
 """The region is split into ``SUB_BLOCKS × SUB_BLOCKS`` sub-blocks for the uniformity checks."""
@@ -83,7 +84,7 @@ def parse_roi(text: str) -> tuple[int, int, int, int]:
     """
     parts = [p.strip() for p in text.split(",")]
     try:
-        values = tuple(int(p) for p in parts)
+        values = tuple(plain_whole_number(p) for p in parts)
     except ValueError:
         values = ()
     if len(values) != 4 or values[0] < 0 or values[1] < 0 or values[2] < 2 or values[3] < 2:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, print_json, progress, seed_int, whole_number
+from msflash.acquisition.app.cli_common import UsageError, number, print_json, progress, seed_int, whole_number
 from msflash.acquisition.app.options import flash_bounds_option
 from msflash.lab.cli_support import optional_claimed_output
 from msflash.lab.colour_study import STUDY_AMBIENTS, colour_study
@@ -69,8 +69,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     study.add_argument("--cfa", default=None, choices=("RGGB", "BGGR", "GRBG", "GBRG"), help="raw Bayer frames")
     flash_bounds_option(study)
-    study.add_argument("--depth-m", type=float, default=5.0, help="underwater: depth of the chart")
-    study.add_argument("--distance-m", type=float, default=1.0, help="underwater: camera–chart distance")
+    study.add_argument("--depth-m", type=number, default=5.0, help="underwater: depth of the chart")
+    study.add_argument("--distance-m", type=number, default=1.0, help="underwater: camera–chart distance")
     study.add_argument("--water", default="ocean", choices=tuple(water.WATER_TYPES), help="underwater: water type")
     study.add_argument("--out", default=None, help="output directory (default colour-study/; none with --json)")
     study.add_argument("--json", action="store_true", help="print the results as one JSON object")

@@ -35,6 +35,7 @@ from msflash.acquisition.session.dask_map import dask_mapper
 from msflash.lab.cli_support import REPORTER, optional_claimed_output, relative_power
 from msflash.processing.ambient import AMBIENT_METHODS
 from msflash.processing.names import unknown_name
+from msflash.processing.user_numbers import number_or_non_finite, plain_whole_number
 
 STUDIES = ("table1", "surfaces", "cameras", "xy", "failure", "pareto")
 """Study names accepted by ``msflash study``."""
@@ -46,7 +47,7 @@ def _alpha(text: str) -> float | str | list[float]:
     if text in ("auto", "paper"):
         return text
     try:
-        values = [float(part) for part in text.split(",")]
+        values = [number_or_non_finite(part) for part in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"'{text}': expected a number ≥ 0, a comma-separated list, 'auto' or 'paper'"
@@ -58,7 +59,7 @@ def _alpha(text: str) -> float | str | list[float]:
 
 def _counts(text: str) -> list[int]:
     try:
-        values = [int(part) for part in text.split(",")]
+        values = [plain_whole_number(part) for part in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(f"'{text}': expected comma-separated whole numbers") from None
     if not values or min(values) < 1:

@@ -83,7 +83,16 @@ class BoothConsole:
     The console shows the frames each command adds to the transcript.
     """
 
-    def __init__(self, booth: LedBooth | TextBooth, transcript: Path) -> None:
+    def __init__(
+        self,
+        booth: LedBooth | TextBooth,
+        transcript: Path,
+        number: Callable[[str], float] = float,
+        whole: Callable[[str], int] = int,
+    ) -> None:
+        """``number`` and ``whole`` read the typed numbers (the CLI passes msflash's one parser of a user's number,
+        :mod:`processing.user_numbers`, which this package may not import: ``float`` reads ``1_0`` and ``١``)."""
+        self._number, self._whole = number, whole
         self._transcript: IO[str] = open(transcript, encoding="ascii")  # noqa: SIM115
         self._transcript.read()  # the header and the ID exchange of opening are shown by `id`
         self._info: BoothInfo | TextBoothInfo = booth.info
@@ -167,7 +176,7 @@ class BoothConsole:
         if len(words) != self._info.channels:
             raise ConsoleInputError(f"{len(words)} levels for {self._info.channels} channels")
         try:
-            levels = [float(w) for w in words]
+            levels = [self._number(w) for w in words]
         except ValueError:
             raise ConsoleInputError(f"levels {' '.join(words)!r} are not numbers") from None
         for index, level in enumerate(levels):
@@ -249,9 +258,13 @@ class BoothConsole:
         now = bool(args) and args[-1].lower() == "now"
         if now:
             args = args[:-1]
-        if not args or not args[0].isdigit():
+        try:
+            step = self._whole(args[0]) if args else -1
+        except ValueError:
+            step = -1
+        if step < 0:
             raise ConsoleInputError("a step number first")
-        step, levels = int(args[0]), self._level_list(args[1:])
+        levels = self._level_list(args[1:])
         self._booth.set_step(step, levels, now=now)
         return [f"step {step} {'started at once' if now else 'filled in'}: {self._describe(levels)}"]
 
@@ -260,7 +273,7 @@ class BoothConsole:
             raise ConsoleInputError("a mode and up to three times")
         mode = args[0].lower()
         try:
-            times = [int(w) for w in args[1:]]
+            times = [self._whole(w) for w in args[1:]]
         except ValueError:
             raise ConsoleInputError(f"times {' '.join(args[1:])!r} are not whole microseconds") from None
         settle, pulse, period = (times + [1000, 100, 0][len(times) :])[:3]
@@ -313,7 +326,7 @@ class BoothConsole:
         if len(args) != 1:
             raise ConsoleInputError("one period in seconds")
         try:
-            seconds = float(args[0])
+            seconds = self._number(args[0])
         except ValueError:
             raise ConsoleInputError(f"{args[0]!r} is not a number of seconds") from None
         self._booth.set_watchdog(seconds)

@@ -48,6 +48,7 @@ from msflash.processing.spectra import (
     tiny_columns,
 )
 from msflash.processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_text, shown_path
+from msflash.processing.user_numbers import plain_number, written_as_number
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 """Folder of the shipped data files (see ``SOURCES.md`` there)."""
@@ -223,11 +224,14 @@ def _parse_row(cells: list[str], header: list[str], where: str, nan: str) -> tup
             row.append(0.0)
             continue
         try:
-            value = float(cell)
+            value = plain_number(cell)  # the one reading of a user's number: not 1_0, ١٢ or infinity
         except ValueError as err:
-            raise SpectralDataError(
-                f"{where}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a number"
-            ) from err
+            if not written_as_number(cell):
+                raise SpectralDataError(
+                    f"{where}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a number "
+                    "(ASCII digits, a point, an optional exponent: 1.5, -2, 3e-4)"
+                ) from err
+            value = math.inf  # 1e400: refused below as out of range
         if not math.isfinite(value) or abs(value) > MAX_TABLE_MAGNITUDE:
             raise SpectralDataError(
                 f"{where}: column '{header[column]}' holds '{printable(_cut(cell))}'; expected a finite "

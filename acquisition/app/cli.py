@@ -20,6 +20,7 @@ import importlib
 import importlib.util
 import logging
 import os
+import re
 import signal
 import sys
 import warnings
@@ -32,7 +33,7 @@ from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import bad_input_errors, runtime_errors
 from msflash.acquisition.progress import bars_wanted, close_bar
 from msflash.acquisition.progress import configure as configure_progress
-from msflash.acquisition.signals import Terminated, sigterm_as_exit
+from msflash.acquisition.signals import Terminated, command_signals
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": ("msflash.acquisition.app.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
@@ -134,12 +135,28 @@ class _VersionAction(argparse._VersionAction):
         super().__call__(parser, namespace, values, option_string)
 
 
+NEGATIVE_VALUE = re.compile(r"^-(?:\.?\d|inf|nan)", re.IGNORECASE)
+"""A word that argparse takes as a value, not an option: a minus then a digit (``-5,0,0``, ``-1e3``, ``-.5``,
+``-10:20``) or ``-inf``/``-nan`` (then refused as what the option expects). argparse's own pattern takes only
+``-5`` and ``-0.5``: ``--weights -5,0,0`` was "expected one argument", naming nothing it expects. No msflash
+option looks like that (a test checks), so none is shadowed."""
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse whose usage errors exit with status 2 and one ``msflash: error:`` line, and whose
+    """argparse whose usage errors exit with status 2 and one ``msflash: error:`` line, whose
     refusal of a choice (a command, ``--solver``, ``--model``…) says which one was meant
-    (:func:`processing.names.unknown_name`)."""
+    (:func:`processing.names.unknown_name`), and which reads a value beginning with a minus and a digit
+    (:data:`NEGATIVE_VALUE`) as the value of the option before it."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_VALUE
 
     def error(self, message: str) -> NoReturn:
+        missing = re.match(r"argument (--[\w-]+)(?:/\S+)?: expected (?:one|at least one) argument$", message)
+        if missing is not None:  # the next word began with '-': an option to argparse
+            option = missing.group(1)
+            message += f"; a value that begins with '-' is written {option}=VALUE (a file: {option} ./-NAME)"
         raise UsageError(message)
 
     def _check_value(self, action: argparse.Action, value: Any) -> None:
@@ -277,11 +294,35 @@ def _take_memory_budget(words: list[str]) -> list[str]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``msflash``; returns the exit status (tests call this directly)."""
+    """Run ``msflash``; returns the exit status (tests call this directly).
+
+    Every stopping signal unwinds the command as Ctrl-C does (an export's staging folder, a half-written image, a
+    local dask cluster are cleaned up by the blocks they unwind; LEDs go off), from the first instruction to the
+    last (:func:`~acquisition.signals.command_signals`): one landing while the line is parsed or the command's
+    module imported, or just as the command finished, is said in one line too; a second one cannot cut the
+    cleanup the first one unwinds.
+    """
     words = list(argv if argv is not None else sys.argv[1:])
     written = sys.modules.get("msflash.acquisition.sequence.writer")
     if written is not None:  # an earlier command in this process (tests, a notebook) wrote one
         written.forget_latest_sequence()
+    with command_signals() as signals:
+        try:
+            status, exit_at_once = _outcome(words)
+            signals.quiet()  # from here a signal is recorded, and said below
+        except (KeyboardInterrupt, Terminated) as stop:  # the first signal, landing while an outcome was written
+            status, exit_at_once = _stopped(words, stop), False
+        if signals.raised is None and signals.late:  # it landed as the command finished: said, not lost
+            number = signals.late[0]
+            status = _stopped(words, KeyboardInterrupt() if number == signal.SIGINT else Terminated(128 + number))
+        if argv is None and exit_at_once:
+            _exit_at_once(status)
+    return status
+
+
+def _outcome(words: list[str]) -> tuple[int, bool]:
+    """Parse ``words``, run the command; its exit status (errors turned into one line) and whether it asked to
+    leave at once (:func:`_exit_at_once`)."""
     try:
         words = _take_memory_budget(words)
         parser = build_parser(words)
@@ -290,40 +331,41 @@ def main(argv: Sequence[str] | None = None) -> int:
         configure_progress(bars=bars_wanted(bool(getattr(args, "json", False))))
         if not getattr(args, "handler", None):
             parser.print_help(sys.stderr)
-            return 2
-        # Every command unwinds on SIGTERM as on Ctrl-C: an export's staging folder, a synthesised
-        # image half-written, a local dask cluster are cleaned up by the blocks they unwind (the
-        # default action killed the process where it stood and left them behind).
-        with warnings.catch_warnings(), sigterm_as_exit():
+            return 2, False
+        with warnings.catch_warnings():
             warnings.showwarning = _show_warning
             status = int(args.handler(args))
-        if argv is None and getattr(args, "exit_at_once", False):
-            _exit_at_once(status)
-        return status
-    except KeyboardInterrupt:
-        sys.stderr.write(_stop_line(words, "interrupted"))
-        return 130
-    except Terminated as stop:
-        code = getattr(stop, "code", None)  # Terminated is a SystemExit: 128 + the signal's number
-        code = int(code) if isinstance(code, int) else 128 + signal.SIGTERM
-        with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
-            sys.stderr.write(_stop_line(words, f"terminated ({_signal_name(code - 128)})"))
-        return code
+        return status, bool(getattr(args, "exit_at_once", False))
+    except (KeyboardInterrupt, Terminated) as stop:
+        return _stopped(words, stop), False
     except BrokenPipeError:
         # The reader of stdout went away (``msflash estimate SEQ | head``): stop quietly, and keep
         # Python from complaining again when it flushes stdout at exit.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 141
+        return 141, False
     except bad_input_errors() as err:
         sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
-        return 2
+        return 2, False
     except runtime_errors() as err:
         sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
-        return 1
+        return 1, False
     except Exception as err:  # the last line of defence: a bug, not bad input (KeyboardInterrupt/SystemExit pass)
-        return _crashed(words, err)
+        return _crashed(words, err), False
     finally:
         close_bar()
+
+
+def _stopped(words: Sequence[str], stop: BaseException) -> int:
+    """The stop line of a command stopped by Ctrl-C (130) or SIGTERM/SIGHUP (128 + the signal's number), written."""
+    if isinstance(stop, KeyboardInterrupt):
+        line, code = _stop_line(words, "interrupted"), 130
+    else:
+        given = getattr(stop, "code", None)  # Terminated is a SystemExit: 128 + the signal's number
+        code = int(given) if isinstance(given, int) else 128 + signal.SIGTERM
+        line = _stop_line(words, f"terminated ({_signal_name(code - 128)})")
+    with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
+        sys.stderr.write(line)
+    return code
 
 
 def _exit_at_once(code: int) -> None:

@@ -10,7 +10,17 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, boot_seconds, print_json, progress
+from msflash.acquisition.app.cli_common import (
+    UsageError,
+    add_booth_boot_option,
+    boot_seconds,
+    number,
+    print_json,
+    progress,
+    seed_int,
+    serial_port,
+    whole,
+)
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.booth_probe import PROBE_PROTOCOLS, probe_booth
 from msflash.led_controller.doctor import Finding, run_doctor
@@ -41,7 +51,7 @@ def _register_emulator(subparsers: argparse._SubParsersAction) -> None:
         default=",".join(f"{p:g}" for p in DEFAULT_PEAKS_NM),
         help="comma-separated peak wavelengths in nm, one per name",
     )
-    emu.add_argument("--watchdog-s", type=float, default=3.0, help="host-silence timeout (0 disables)")
+    emu.add_argument("--watchdog-s", type=number, default=3.0, help="host-silence timeout (0 disables)")
     link = emu.add_argument_group("the board's link (a stock Arduino Mega's by default)")
     link.add_argument(
         "--no-auto-reset",
@@ -80,9 +90,13 @@ def _register_emulator(subparsers: argparse._SubParsersAction) -> None:
         "answering, for good without SECONDS), close:P (hang up); P per frame, e.g. "
         "drop:0.01,flip:0.001",
     )
-    emu.add_argument("--seed", type=int, default=0, help="seed of the fault draws (default 0)")
+    emu.add_argument("--seed", type=seed_int, default=0, help="seed of the fault draws (default 0)")
     emu.add_argument(
-        "--fault-after", type=int, default=0, metavar="N", help="let the first N requests through unfaulted (default 0)"
+        "--fault-after",
+        type=whole,
+        default=0,
+        metavar="N",
+        help="let the first N requests through unfaulted (default 0)",
     )
     emu.add_argument(
         "--state-file",
@@ -103,9 +117,11 @@ def _register_doctor(subparsers: argparse._SubParsersAction) -> None:
     doc.add_argument("--json", action="store_true", help="print one JSON object")
     doc.add_argument(
         "--port",
+        type=serial_port,
         default=None,
         help="ask the booth on PORT who it is (only this port is opened; nothing is sent to other ports); "
-        "prints its firmware, channels and names, or what answered instead (exit 2)",
+        "prints its firmware, channels and names, or what answered instead (exit 1; a PORT that does not exist: "
+        "exit 2)",
     )
     doc.add_argument(
         "--booth-protocol",
@@ -113,7 +129,7 @@ def _register_doctor(subparsers: argparse._SubParsersAction) -> None:
         default="msflash",
         help="the protocol to ask --port in: msflash (our firmware) or text (plain-text booth); default %(default)s",
     )
-    doc.add_argument("--timeout-s", type=float, default=1.0, help="--port: reply timeout in seconds (default 1)")
+    doc.add_argument("--timeout-s", type=number, default=1.0, help="--port: reply timeout in seconds (default 1)")
     add_booth_boot_option(doc)
     doc.add_argument("--sysfs-root", type=Path, default=Path("/sys"), help=argparse.SUPPRESS)
     doc.add_argument("--dev-root", type=Path, default=Path("/dev"), help=argparse.SUPPRESS)
@@ -261,13 +277,14 @@ def doctor(args: argparse.Namespace) -> int:
 
 
 def _doctor_port(args: argparse.Namespace) -> int:
-    """``doctor --port P``: the booth's identity in ``--booth-protocol``, or one line and exit 2."""
+    """``doctor --port P``: the booth's identity in ``--booth-protocol``, or one line and exit 1 (a port that does not
+    exist was refused when parsed, exit 2, as by every command that takes a port)."""
     if not args.timeout_s > 0:
         raise UsageError(f"--timeout-s {args.timeout_s}: expected a positive number of seconds")
     try:
         found = probe_booth(args.port, args.booth_protocol, timeout_s=args.timeout_s, boot_s=args.booth_boot_s)
-    except BoothError as err:
-        raise UsageError(f"{err} (--booth-protocol {args.booth_protocol})") from err
+    except BoothError as err:  # the device's answer (or silence): a device failure, exit 1, as every command's
+        raise BoothError(f"{err} (--booth-protocol {args.booth_protocol})") from err
     if getattr(args, "json", False):
         print_json({"ok": True, "booth": {**found.__dict__, "names": list(found.names)}})
         return 0

@@ -12,12 +12,13 @@ import sys
 import tempfile
 from pathlib import Path
 
-from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option
+from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, number, serial_port
 from msflash.acquisition.signals import sigterm_as_exit
 from msflash.led_controller.adapters import BOOTH_PROTOCOLS, open_booth
 from msflash.led_controller.adapters.text_booth import TextBooth
 from msflash.led_controller.booth import LedBooth
 from msflash.led_controller.console import BoothConsole, ConsoleQuit
+from msflash.processing.user_numbers import plain_number, plain_whole_number
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -34,14 +35,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Open the booth on PORT and read commands (levels 0.5 0 1 …, table …, status, help) "
         "from stdin; each is checked, framed, sent, and its reply explained. LEDs off on exit.",
     )
-    console.add_argument("port", help="serial port of the booth (e.g. /dev/ttyACM0)")
+    console.add_argument("port", type=serial_port, help="serial port of the booth (e.g. /dev/ttyACM0)")
     console.add_argument(
         "--booth-protocol",
         choices=BOOTH_PROTOCOLS,
         default=BOOTH_PROTOCOLS[0],
         help="the booth's protocol: msflash (our firmware) or text (plain-text booth); default %(default)s",
     )
-    console.add_argument("--timeout-s", type=float, default=2.0, help="reply timeout of each command in seconds")
+    console.add_argument("--timeout-s", type=number, default=2.0, help="reply timeout of each command in seconds")
     add_booth_boot_option(console)
     console.set_defaults(handler=booth_console)
     booth.set_defaults(handler=_booth_without_action)
@@ -67,7 +68,7 @@ def booth_console(args: argparse.Namespace) -> int:
             )
             assert isinstance(booth, LedBooth | TextBooth)  # what open_booth opens
             with booth:  # LEDs off on every way out, as each driver's context manager does
-                _prompt(BoothConsole(booth, transcript))
+                _prompt(BoothConsole(booth, transcript, plain_number, plain_whole_number))  # the one number parser
         _say(["LEDs off"])
     return 0
 

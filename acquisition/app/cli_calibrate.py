@@ -32,6 +32,7 @@ from msflash.calibration.errors import CalibrationError
 from msflash.calibration.files import CalibrationSet, load_or_new, save_calibration
 from msflash.calibration.led_exports import ExportOptions
 from msflash.processing.spectra import DEFAULT_GRID
+from msflash.processing.user_numbers import plain_number
 
 
 def positive_float(text: str) -> float:
@@ -41,7 +42,7 @@ def positive_float(text: str) -> float:
     2.5
     """
     try:
-        value = float(text)
+        value = plain_number(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"'{text}': expected a number > 0") from None
     if not (math.isfinite(value) and value > 0):

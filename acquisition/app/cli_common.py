@@ -13,6 +13,7 @@ import contextlib
 import json
 import math
 import os
+import stat
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -20,7 +21,8 @@ from typing import Any
 
 from msflash.acquisition.errors import UsageError as UsageError  # re-exported: every command raises it
 from msflash.acquisition.progress import progress as progress  # re-exported: every command reports with it
-from msflash.processing.user_files import check_output_name
+from msflash.processing.user_files import check_output_name, shown_path
+from msflash.processing.user_numbers import plain_number, plain_whole_number
 
 
 def whole_number(lowest: int, highest: int | None = None, unit: str = "") -> Callable[[str], int]:
@@ -35,7 +37,7 @@ def whole_number(lowest: int, highest: int | None = None, unit: str = "") -> Cal
 
     def whole(text: str) -> int:
         try:
-            value = int(text)
+            value = plain_whole_number(text)
         except ValueError:
             value = lowest - 1
         if value < lowest or (highest is not None and value > highest):
@@ -53,15 +55,50 @@ def number_where(accept: Callable[[float], bool], expected: str) -> Callable[[st
     """
 
     def number(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
+        value = user_number(text)
         if not accept(value):
             raise argparse.ArgumentTypeError(f"'{text}': expected {expected}")
         return value
 
     return number
+
+
+def user_number(text: str) -> float:
+    """The finite number a user wrote in ``text`` (:func:`processing.user_numbers.plain_number`), or NaN for anything
+    else (``1_0``, ``١٢``, ``inf``, ``nan``, ``0x10``), which every argparse type here then refuses as what it expects.
+
+    >>> user_number("2.5"), user_number("1_0")
+    (2.5, nan)
+    """
+    try:
+        return plain_number(text)
+    except ValueError:
+        return math.nan
+
+
+def number(text: str) -> float:
+    """argparse type of a plain finite number (the type every numeric option without a range of its own takes,
+    instead of ``float``, which reads ``1_0`` as 10, ``١٢`` as 12 and ``inf``/``nan`` as numbers).
+
+    >>> number("0.25")
+    0.25
+    """
+    try:
+        return plain_number(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def whole(text: str) -> int:
+    """argparse type of a plain whole number of any sign (instead of ``int``, which reads ``1_0`` and ``١٢``).
+
+    >>> whole("-3")
+    -3
+    """
+    try:
+        return plain_whole_number(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 positive_int = whole_number(1)
@@ -78,16 +115,48 @@ def boot_seconds(text: str) -> float:
     >>> boot_seconds("2.5"), boot_seconds("0")
     (2.5, 0.0)
     """
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
+    value = user_number(text)
     if not (0 <= value < math.inf):
         raise argparse.ArgumentTypeError(
             f"'{text}': expected a number of seconds ≥ 0 (how long a booth that resets when its port "
             "opens takes to boot; 0 for a board with auto-reset disabled)"
         )
     return value
+
+
+_PORT_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISREG, "a regular file"), (stat.S_ISFIFO, "a FIFO"))
+
+
+def serial_port(text: str) -> str:
+    """argparse type of every option naming a booth's serial port (``booth console PORT``, ``doctor --port``,
+    ``--port``, ``--booth-port``): a pyserial URL (``socket://…``, ``loop://``) as given, else a path to a character
+    device. A path that does not exist, or is a file or a folder, is bad input, refused when the line is parsed
+    (exit 2, naming the path) — before a rig opens or an LED fires; a device that is there but does not answer is
+    the device's failure (exit 1) when it is opened.
+
+    >>> serial_port("/dev/null"), serial_port("socket://127.0.0.1:7000")
+    ('/dev/null', 'socket://127.0.0.1:7000')
+    """
+    if "://" in text:
+        return text
+    shown = shown_path(text)
+    try:
+        mode = os.stat(text).st_mode
+    except (FileNotFoundError, NotADirectoryError, ValueError):
+        raise argparse.ArgumentTypeError(
+            f"'{shown}': no such port; expected an existing serial device such as /dev/ttyACM0 (run 'msflash doctor' "
+            "or 'msflash devices' to list booths)"
+        ) from None
+    except OSError as err:
+        raise argparse.ArgumentTypeError(
+            f"'{shown}': cannot look at it ({err.strerror or err}); expected a serial device such as /dev/ttyACM0"
+        ) from None
+    if not stat.S_ISCHR(mode):
+        kind = next((name for test, name in _PORT_KINDS if test(mode)), "not a device")
+        raise argparse.ArgumentTypeError(
+            f"'{shown}': {kind}; expected a serial device (a character device such as /dev/ttyACM0) or a pyserial URL"
+        )
+    return text
 
 
 def add_booth_boot_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:

@@ -16,14 +16,15 @@ from msflash.acquisition.app.cli_common import UsageError, check_folder_can_be_m
 from msflash.acquisition.app.options import target_value
 from msflash.acquisition.app.rig_choice import add_rig_options, open_from_args, rig_spec
 from msflash.acquisition.session.rig import rig_kind
-from msflash.acquisition.signals import STOPPING_SIGNALS
+from msflash.acquisition.signals import STOPPING_SIGNALS, handlers_kept
+from msflash.processing.user_numbers import plain_whole_number
 
 DEFAULT_PORT = 8470
 
 
 def _port(text: str) -> int:
     try:
-        value = int(text)
+        value = plain_whole_number(text)
     except ValueError:
         value = -1
     if not 0 <= value <= 65535:
@@ -70,7 +71,8 @@ def _live(args: argparse.Namespace) -> int:
                     loop.add_signal_handler(sig, stopping)
                 await server.serve(stop)
 
-            asyncio.run(serve())
+            with handlers_kept():  # asyncio sets the signals it took to their default action when it closes
+                asyncio.run(serve())
     finally:
         sock.close()
     progress("live view stopped; LEDs off")

@@ -17,6 +17,7 @@ from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.session import analysis, many, one_sequence
 from msflash.processing.local import LOCAL_METHODS
 from msflash.processing.tile_statistics import DEFAULT_TILES
+from msflash.processing.user_numbers import plain_number, plain_whole_number
 
 DEFAULT_LOCAL_METHOD = "auto"
 """Default of ``--method``: ``auto`` keeps the global estimate unless a local model predicts held-out tiles
@@ -25,7 +26,7 @@ clearly better, so a uniform scene costs nothing (its acceptance results: docs/l
 
 def _weights(text: str, n_leds: int) -> np.ndarray:
     try:
-        values = np.array([float(v) for v in text.split(",")], dtype=float)
+        values = np.array([plain_number(v) for v in text.split(",")], dtype=float)
     except ValueError:
         raise UsageError(f"--weights '{text}': expected comma-separated numbers, one per LED") from None
     if values.size != n_leds:
@@ -67,7 +68,7 @@ def add_model_option(parser: argparse.ArgumentParser) -> None:
 def _rectangle(text: str) -> tuple[int, int, int, int]:
     """``X,Y,W,H`` (pixels) for ``--reference-patch``."""
     try:
-        values = tuple(int(v) for v in text.split(","))
+        values = tuple(plain_whole_number(v) for v in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"'{text}': expected X,Y,WIDTH,HEIGHT in whole pixels") from None
     if len(values) != 4 or min(values) < 0:

@@ -6,11 +6,12 @@ import argparse
 from collections.abc import Callable
 from typing import Any
 
-from msflash.acquisition.app.cli_common import positive_int
+from msflash.acquisition.app.cli_common import positive_int, user_number, whole
 from msflash.acquisition.devices.sim_default import MONO, SIM_DEFAULT_CFA
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.rig import SimWorldOptions
 from msflash.processing.ambient import AMBIENT_METHODS
+from msflash.processing.user_numbers import plain_whole_number
 
 
 def target_value(text: str) -> str:
@@ -62,11 +63,11 @@ def setting_type(name: str, parse: Callable[[str], Any]) -> Callable[[str], Any]
     return value_of
 
 
-alpha_value = setting_type("alpha", lambda text: text if text == "auto" else float(text))
+alpha_value = setting_type("alpha", lambda text: text if text == "auto" else user_number(text))
 """argparse type of ``--alpha``: a finite number ≥ 0, or ``auto``."""
-bin_value = setting_type("bin_factor", int)
+bin_value = setting_type("bin_factor", plain_whole_number)
 """argparse type of ``--bin``: a whole number ≥ 1."""
-tiles_value = setting_type("tiles", int)
+tiles_value = setting_type("tiles", plain_whole_number)
 """argparse type of ``--tiles``: a whole number ≥ 1."""
 
 
@@ -109,7 +110,7 @@ def add_estimation_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], int] = int) -> None:
+def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], int] = whole) -> None:
     """``--patch-px``, ``--border-px``, ``--margin-px``: a given chart layout, or none (detect the chart)."""
     parser.add_argument(
         "--patch-px",
@@ -120,11 +121,11 @@ def layout_options(parser: argparse.ArgumentParser, patch_type: Callable[[str], 
     )
     parser.add_argument(
         "--border-px",
-        type=int,
+        type=whole,
         default=None,
         help="gap between patches in pixels (sim rig 2; default 2 with --patch-px)",
     )
-    parser.add_argument("--margin-px", type=int, default=1, help="pixels ignored inside each patch edge")
+    parser.add_argument("--margin-px", type=whole, default=1, help="pixels ignored inside each patch edge")
 
 
 def flash_bounds_option(parser: argparse.ArgumentParser) -> None:

@@ -23,7 +23,15 @@ from msflash.acquisition.app.camera_options import (
     camera_options_from_args,
     given_camera_options,
 )
-from msflash.acquisition.app.cli_common import UsageError, add_booth_boot_option, number_where, seed_int
+from msflash.acquisition.app.cli_common import (
+    UsageError,
+    add_booth_boot_option,
+    number_where,
+    seed_int,
+    serial_port,
+    user_number,
+    whole,
+)
 from msflash.acquisition.app.options import (
     SIM_CFA_CHOICES,
     SIM_CFA_HELP,
@@ -50,6 +58,7 @@ from msflash.led_controller.adapters import BOOTH_PROTOCOLS
 from msflash.led_controller.booth_interface import unsupported_sync
 from msflash.processing.datasets import PAPER_LED_SUBSETS
 from msflash.processing.lights import AMBIENTS
+from msflash.processing.user_numbers import plain_number
 
 
 def _exposure_value(text: str) -> str | float:
@@ -57,7 +66,7 @@ def _exposure_value(text: str) -> str | float:
     if text.strip().lower() == "auto":
         return "auto"
     try:
-        value = float(text)
+        value = plain_number(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"'{text}': expected auto or an exposure in microseconds") from None
     if not (value > 0 and np.isfinite(value)):
@@ -199,10 +208,7 @@ def _open_spec(args: argparse.Namespace, spec: str) -> Rig:
 
 
 def _line_time(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
+    value = user_number(text)
     if not (math.isfinite(value) and 0.0 <= value <= 1000.0):
         raise argparse.ArgumentTypeError(f"{text!r}: expected a line time in µs, 0..1000")
     return value
@@ -218,10 +224,7 @@ def _flicker(text: str) -> tuple[float, float, str]:
 
 def _flash_power(text: str) -> float:
     """``--flash-power``: a positive number (each LED's signal in units of the ambient's)."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
+    value = user_number(text)
     if not (np.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(
             f"'{text}': expected a positive number (each LED's signal in units of the ambient's, e.g. 1)"
@@ -266,6 +269,7 @@ def _add_hardware_options(parser: argparse.ArgumentParser, booth_port: bool = Tr
     if booth_port:
         hardware.add_argument(
             "--port",
+            type=serial_port,
             default=None,
             metavar="PATH",
             help="booth serial port, e.g. /dev/ttyACM0 (default: the single booth found)",
@@ -341,7 +345,7 @@ def _add_world_options(parser: argparse.ArgumentParser, booth_port_help: str | N
     )
     sim.add_argument(
         "--leds",
-        type=int,
+        type=whole,
         default=None,
         choices=tuple(PAPER_LED_SUBSETS),
         help="the paper's subset of N LEDs (3: 440, 520, 660 nm … 7: all; default 7); or --led-spectra",
@@ -371,6 +375,7 @@ def _add_world_options(parser: argparse.ArgumentParser, booth_port_help: str | N
     )
     sim.add_argument(
         "--booth-port",
+        type=serial_port,
         default=None,
         metavar="PATH",
         help=booth_port_help

@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from msflash.processing.user_numbers import plain_number
+
 FLICKER_WAVEFORMS = ("sine", "rectified", "clipped")
 """The waveforms the simulated lamp can have (module notes)."""
 
@@ -138,7 +140,7 @@ def parse_flicker(text: str) -> tuple[float, float, str]:
     if len(parts) not in (2, 3):
         raise ValueError(f"{text!r}: expected HZ:DEPTH[:WAVEFORM], e.g. 100:0.3 or 120:0.5:rectified")
     try:
-        hz, depth = float(parts[0]), float(parts[1])
+        hz, depth = plain_number(parts[0]), plain_number(parts[1])
     except ValueError:
         raise ValueError(f"{text!r}: expected numbers in HZ:DEPTH, e.g. 100:0.3") from None
     if not (math.isfinite(hz) and 1.0 <= hz <= 10_000.0):

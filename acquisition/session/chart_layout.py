@@ -81,7 +81,7 @@ def chart_reference_grid(count: int, given: str | None = None) -> tuple[int, int
 
 def _grid_shape(count: int, given: str | None, where: str) -> tuple[int, int]:
     if given is not None:
-        match = re.fullmatch(r"\s*(\d+)\s*[x×X]\s*(\d+)\s*", given)
+        match = re.fullmatch(r"\s*(\d+)\s*[x×X]\s*(\d+)\s*", given, re.ASCII)  # not ١٢: ASCII digits only
         if not match or int(match.group(1)) < 1 or int(match.group(2)) < 1:
             raise UsageError(f"--chart-grid '{given}': expected ROWSxCOLUMNS, e.g. 4x6")
         rows, columns = int(match.group(1)), int(match.group(2))

@@ -61,10 +61,9 @@ def _flicker_offsets(run: Path, names: tuple[str, ...]) -> np.ndarray | None:
     offsets = flicker.get("applied_gain_offsets") if isinstance(flicker, dict) and flicker.get("corrected") else None
     if not isinstance(offsets, list) or len(offsets) != len(names):
         return None
-    try:
-        values = np.array([float(v) for v in offsets])
-    except (TypeError, ValueError):
-        return None
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in offsets):
+        return None  # a text where a number belongs ("1_0" would read as 10): not the run's figures
+    values = np.array(offsets, dtype=float)
     return values if np.all(np.isfinite(values)) else None
 
 

@@ -30,6 +30,7 @@ from typing import Any, Literal, Protocol
 from msflash.acquisition.devices.aravis.gain import GainRequest
 from msflash.acquisition.errors import CameraError, CameraSettingError
 from msflash.processing.names import close_names
+from msflash.processing.user_numbers import plain_number, plain_whole_number
 
 log = logging.getLogger(__name__)
 
@@ -227,7 +228,7 @@ def parse_roi(text: str) -> tuple[int, int, int, int]:
     """
     parts = [p.strip() for p in text.split(",")]
     try:
-        x, y, w, h = (int(p) for p in parts)
+        x, y, w, h = (plain_whole_number(p) for p in parts)
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"'{text}': expected X,Y,W,H as four whole numbers, e.g. 0,0,640,480"
@@ -247,7 +248,7 @@ def parse_binning(text: str) -> tuple[int, int]:
     """
     parts = text.lower().split("x")
     try:
-        factors = tuple(int(p) for p in parts)
+        factors = tuple(plain_whole_number(p) for p in parts)
     except ValueError:
         factors = ()
     if len(factors) not in (1, 2) or min(factors) < 1:
@@ -389,6 +390,8 @@ def _convert(info: FeatureInfo, text: str) -> FeatureValue | None:
     if info.kind == "string":
         return text
     if info.kind == "integer":
+        if "_" in text or not text.isascii():  # int() reads 1_0 as 10 and ١٢ as 12: no register value a user means
+            return None
         try:
             value: float = int(text, 0)  # 64, 0x40, 0b1000000
         except ValueError:
@@ -398,10 +401,8 @@ def _convert(info: FeatureInfo, text: str) -> FeatureValue | None:
                 return None
     elif info.kind == "float":
         try:
-            value = float(text)
+            value = plain_number(text)
         except ValueError:
-            return None
-        if not math.isfinite(value):
             return None
     else:
         return None

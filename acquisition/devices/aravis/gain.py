@@ -37,6 +37,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
 from msflash.acquisition.errors import CameraSettingError
+from msflash.processing.user_numbers import plain_number
 
 if TYPE_CHECKING:  # camera_features imports this module
     from msflash.acquisition.devices.aravis.camera_features import FeatureInfo
@@ -97,7 +98,7 @@ def parse_gain_db(text: str) -> GainRequest:
     value = float("nan")
     if match is not None:
         try:
-            value = float(match.group(1))
+            value = plain_number(match.group(1))
         except ValueError:
             pass
     if not math.isfinite(value):
@@ -116,7 +117,7 @@ def parse_gain_raw(text: str) -> GainRequest:
     GainRequest(value=136.0, unit='raw')
     """
     try:
-        value = float(text)
+        value = plain_number(text)
     except ValueError:
         value = float("nan")
     if not math.isfinite(value):

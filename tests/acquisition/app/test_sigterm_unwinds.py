@@ -51,6 +51,8 @@ def export_process(export: Export) -> Iterator[subprocess.Popen]:
         + ["--to", "dng,ome-tiff,csv,exr", "--out", str(export.out)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
+        # Under nohup the test runner ignores SIGHUP and msflash keeps an ignored SIGHUP ignored, as nohup asks.
+        preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_DFL),
     )
     try:
         yield process

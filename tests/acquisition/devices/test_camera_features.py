@@ -381,11 +381,9 @@ def test_cli_camera_option_errors_exit_2_with_one_line(
     message: str,
     capsys: pytest.CaptureFixture,
 ) -> None:
-    # No booth is needed: the camera's options are refused before the booth is opened.
+    # No booth is needed: the camera's options are refused before the booth is opened (/dev/null: a device, no booth).
     status = main(
-        fake_camera_capture(
-            str(tmp_path / "no-booth"), "--led-spectra", str(led_spectra_csv), *option, "--out", str(tmp_path / "x")
-        )
+        fake_camera_capture("/dev/null", "--led-spectra", str(led_spectra_csv), *option, "--out", str(tmp_path / "x"))
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2, err
@@ -460,7 +458,7 @@ def test_a_pixel_format_the_camera_does_not_offer_is_bad_input(
 ) -> None:
     status = main(
         fake_camera_capture(
-            str(tmp_path / "no-booth"),
+            "/dev/null",
             "--led-spectra",
             str(led_spectra_csv),
             "--pixel-format",

@@ -198,7 +198,7 @@ def test_a_booth_of_another_protocol_version_is_one_error_line(
 def test_spectra_are_required_before_any_device_opens(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     with pytest.raises(UsageError, match="--calibration DIR or --led-spectra"):
         hw_spectra()
-    assert main(["capture", "--port", "/dev/does-not-exist", "--out", str(tmp_path / "x")]) == 2
+    assert main(["capture", "--port", "/dev/null", "--out", str(tmp_path / "x")]) == 2
     assert "LED spectra are needed" in capsys.readouterr().err
     with pytest.raises(UsageError, match="no calibration.json or led_spectra.csv"):
         hw_spectra(calibration=tmp_path)

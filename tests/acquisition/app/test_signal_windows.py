@@ -1,0 +1,252 @@
+"""The moments a stopping signal was not turned into one line (docs/reliability.md §8): while the command line was
+parsed and the command's module imported (the default action killed the process silently), just as the command
+finished (lost), a second signal inside the cleanup the first one unwinds (the cleanup cut short), ``nohup``'s
+ignored SIGHUP (overridden), and ``live`` after its event loop closed (asyncio set the default action back: its rig,
+still open, was killed where it stood).
+
+Each signal is delivered at a chosen point by ``signal.raise_signal`` from a hook in the command's path — no
+sleeps, no timing. In-process tests first install a recording handler of their own, so that before the fix a
+signal the command let through was recorded there instead of killing pytest."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import subprocess
+import sys
+import textwrap
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from msflash.acquisition.app import cli
+from msflash.acquisition.signals import Terminated, sigterm_as_exit
+
+
+@pytest.fixture
+def let_through() -> Iterator[list[int]]:
+    """The stopping signals that got past msflash to the handlers it found (the default action, before the fix)."""
+    seen: list[int] = []
+    previous = {
+        number: signal.signal(number, lambda n, _f: seen.append(n)) for number in (signal.SIGTERM, signal.SIGHUP)
+    }
+    try:
+        yield seen
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def _run(monkeypatch: pytest.MonkeyPatch, handler: Callable[[argparse.Namespace], int], words: list[str]) -> int:
+    """``cli.main(words)`` with ``handler`` as the command (the line parsed as usual, then the handler swapped in)."""
+    parser = cli.build_parser(words)
+    monkeypatch.setattr(parser, "parse_args", lambda argv: argparse.Namespace(verbose=0, handler=handler))
+    monkeypatch.setattr(cli, "build_parser", lambda argv=None: parser)
+    return cli.main(words)
+
+
+def _stderr_lines(capsys: pytest.CaptureFixture[str]) -> list[str]:
+    return [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+
+
+def test_a_sigterm_while_the_line_is_parsed_stops_the_command_in_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], let_through: list[int]
+) -> None:
+    """The handler was installed around the command's handler only: parsing and importing the command's module
+    (numpy, OpenImageIO… seconds under load) ran under the default action."""
+    ran: list[str] = []
+    real = cli.build_parser
+
+    def parsing(argv: list[str] | None = None) -> argparse.ArgumentParser:
+        parser = real(argv)
+        signal.raise_signal(signal.SIGTERM)  # lands while the line is being parsed
+        monkeypatch.setattr(parser, "parse_args", lambda argv: argparse.Namespace(verbose=0, handler=ran.append))
+        return parser
+
+    monkeypatch.setattr(cli, "build_parser", parsing)
+    assert cli.main(["estimate", "SEQ"]) == 128 + signal.SIGTERM
+    assert _stderr_lines(capsys) == ["msflash: terminated (SIGTERM)"]
+    assert ran == [] and let_through == []
+
+
+def test_a_sigterm_as_the_command_finishes_is_said_not_lost(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], let_through: list[int]
+) -> None:
+    """After the command's handler returned, the default action was back: the signal killed the process silently
+    (or, here, went to the handler msflash found). Now the command's outcome, then the stop line."""
+    calls = []
+
+    def closing_the_progress_bar() -> None:  # the last thing a command does
+        calls.append(1)
+        if len(calls) == 1:
+            signal.raise_signal(signal.SIGTERM)
+
+    monkeypatch.setattr(cli, "close_bar", closing_the_progress_bar)
+    assert _run(monkeypatch, lambda args: 0, ["capture"]) == 128 + signal.SIGTERM
+    lines = _stderr_lines(capsys)
+    assert lines == [
+        "msflash: terminated (SIGTERM); LEDs off; stopped before the sequence began: no frame was captured"
+    ]
+    assert let_through == []
+
+
+def test_a_signal_after_the_command_returned_is_recorded_and_said() -> None:
+    from msflash.acquisition.signals import command_signals
+
+    with command_signals() as signals:
+        signals.quiet()
+        signal.raise_signal(signal.SIGTERM)
+        signal.raise_signal(signal.SIGINT)
+        for _ in range(1000):  # bytecodes: a handler due now runs here
+            pass
+    assert signals.raised is None and signals.late == [signal.SIGTERM, signal.SIGINT]
+
+
+@pytest.mark.parametrize("second", [signal.SIGHUP, signal.SIGTERM, signal.SIGINT], ids=["SIGHUP", "SIGTERM", "SIGINT"])
+def test_a_second_signal_cannot_cut_the_cleanup_the_first_one_unwinds(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], let_through: list[int], second: int
+) -> None:
+    """SIGTERM then the terminal closing (SIGHUP), or a service manager repeating SIGTERM: the second landed inside
+    the ``finally`` switching the LEDs off and raised there, cutting it short."""
+    steps: list[str] = []
+
+    def capture(args: argparse.Namespace) -> int:
+        with sigterm_as_exit():  # as run and capture hold it around their rig
+            try:
+                signal.raise_signal(signal.SIGTERM)
+                steps.append("captured on")
+            finally:
+                signal.raise_signal(second)  # lands inside the cleanup
+                steps.append("LEDs off")
+        return 0
+
+    assert _run(monkeypatch, capture, ["capture"]) == 128 + signal.SIGTERM
+    assert steps == ["LEDs off"]
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and lines[0].startswith("msflash: terminated (SIGTERM); LEDs off")
+    assert let_through == []
+
+
+def test_a_sighup_nohup_ignores_stays_ignored(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``nohup msflash run …``, then the session closed: msflash replaced the ignored SIGHUP by its own handler and
+    stopped the capture — what nohup was run to prevent."""
+    previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+
+        def capture(args: argparse.Namespace) -> int:
+            with sigterm_as_exit():
+                signal.raise_signal(signal.SIGHUP)  # the terminal closes
+                for _ in range(1000):
+                    pass
+            return 0
+
+        assert _run(monkeypatch, capture, ["capture"]) == 0
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGHUP, previous)
+    assert _stderr_lines(capsys) == []
+
+
+def test_sigterm_after_lives_event_loop_closed_still_switches_the_leds_off(tmp_path: Path) -> None:
+    """asyncio's loop took SIGINT, SIGTERM and SIGHUP to stop the page, and set them to the *default* action when it
+    closed: a SIGTERM while ``live`` then closed its rig killed the process where it stood — LEDs on, no line.
+    The signal is raised by a hook around the rig, after the loop closed and before the rig closes (in a process of
+    its own: before the fix it killed that process). The page is not served: ``serve`` returns once the loop holds
+    the signals."""
+    script = textwrap.dedent(
+        """
+        import contextlib, signal, sys
+        from msflash.acquisition.app import cli, cli_live
+        from msflash.acquisition.app.live.server import LiveServer
+
+        async def serve_nothing(self, stop):
+            return None
+
+        LiveServer.serve = serve_nothing
+        real, closed = cli_live.open_from_args, []
+
+        @contextlib.contextmanager
+        def rig_then_sigterm(args):
+            try:
+                with real(args) as rig:
+                    try:
+                        yield rig
+                    finally:
+                        signal.raise_signal(signal.SIGTERM)  # the loop closed; the rig still open
+            finally:
+                closed.append("the rig's own exit ran")
+
+        cli_live.open_from_args = rig_then_sigterm
+        status = cli.main(["live", "--rig", "sim", "--port", "0", "--runs", sys.argv[1]])
+        print("rig closed:", closed, flush=True)
+        sys.exit(status)
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(tmp_path / "runs")], capture_output=True, text=True, timeout=600
+    )
+    assert done.returncode == 128 + signal.SIGTERM, done.stderr[-2000:]
+    assert 'rig closed: ["the rig\'s own exit ran"]' in done.stdout
+    assert "Traceback" not in done.stderr
+    assert done.stderr.strip().splitlines()[-1] == "msflash: terminated (SIGTERM); LEDs off"
+
+
+def test_outside_the_main_thread_nothing_is_installed() -> None:
+    import threading
+
+    from msflash.acquisition.signals import command_signals
+
+    before = signal.getsignal(signal.SIGTERM)
+    seen: list[object] = []
+
+    def other() -> None:
+        with command_signals() as signals, sigterm_as_exit():
+            seen.append(signals)
+
+    thread = threading.Thread(target=other)
+    thread.start()
+    thread.join()
+    assert len(seen) == 1 and signal.getsignal(signal.SIGTERM) is before
+
+
+def test_terminated_carries_the_signals_status() -> None:
+    with pytest.raises(Terminated) as raised, contextlib.ExitStack() as stack:
+        stack.enter_context(sigterm_as_exit())
+        signal.raise_signal(signal.SIGHUP)
+    assert raised.value.code == 128 + signal.SIGHUP
+
+
+def test_a_sigterm_landing_inside_a_finalizer_still_stops_the_command_in_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], let_through: list[int]
+) -> None:
+    """A handler that runs inside a ``__del__`` (or a weakref callback, a garbage collection) raises there; Python
+    printed "Exception ignored in …" with the Terminated traceback and went on: the stop was lost (the SIGTERM
+    traceback seen once under load). Now the signal is delivered again once the finalizer has returned."""
+    import threading
+    import time
+
+    class Frame:
+        def __del__(self) -> None:
+            signal.raise_signal(signal.SIGTERM)  # lands inside the finalizer
+
+    steps: list[str] = []
+
+    def capture(args: argparse.Namespace) -> int:
+        frame = Frame()
+        del frame
+        steps.append("after the finalizer")
+        deadline = time.monotonic() + 120  # a hang guard, not a timing: the signal comes back within milliseconds
+        while time.monotonic() < deadline:
+            threading.Event().wait(0.01)
+        steps.append("never stopped")
+        return 0
+
+    assert _run(monkeypatch, capture, ["capture"]) == 128 + signal.SIGTERM
+    assert steps == ["after the finalizer"]
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and lines[0].startswith("msflash: terminated (SIGTERM); LEDs off"), lines
+    assert let_through == []
