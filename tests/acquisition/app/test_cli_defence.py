@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -16,19 +15,6 @@ import pytest
 
 from msflash.acquisition.app.cli import CRASH_LOG_ENV, main
 from msflash.acquisition.session import one_sequence
-from tests.helpers import write_test_sequence
-
-
-@pytest.fixture(scope="module")
-def base_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_test_sequence(tmp_path_factory.mktemp("defence") / "seq")
-
-
-@pytest.fixture
-def sequence(base_sequence: Path, tmp_path: Path) -> Path:
-    copy = tmp_path / "seq"
-    shutil.copytree(base_sequence, copy)
-    return copy
 
 
 def _huge_integer(seq: Path) -> str:

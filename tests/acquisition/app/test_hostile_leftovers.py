@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import io
 import os
-import shutil
 import tty
 from collections.abc import Iterator
 from pathlib import Path
@@ -16,19 +15,6 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.sequence.image_files import read_image
-from tests.helpers import write_test_sequence
-
-
-@pytest.fixture(scope="module")
-def base_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_test_sequence(tmp_path_factory.mktemp("leftovers") / "seq")
-
-
-@pytest.fixture
-def sequence(base_sequence: Path, tmp_path: Path) -> Path:
-    copy = tmp_path / "seq"
-    shutil.copytree(base_sequence, copy)
-    return copy
 
 
 def _one_error_line(err: str) -> str:

@@ -12,19 +12,7 @@ from pathlib import Path
 import pytest
 
 from msflash.acquisition.app.cli import main
-from tests.helpers import SAMPLES_DIR, write_test_sequence
-
-
-@pytest.fixture(scope="module")
-def base_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_test_sequence(tmp_path_factory.mktemp("hostile") / "seq")
-
-
-@pytest.fixture
-def sequence(base_sequence: Path, tmp_path: Path) -> Path:
-    copy = tmp_path / "seq"
-    shutil.copytree(base_sequence, copy)
-    return copy
+from tests.helpers import SAMPLES_DIR
 
 
 def _digests(folder: Path) -> dict[str, str]:

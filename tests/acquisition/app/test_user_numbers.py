@@ -4,7 +4,6 @@ as numbers, so ``--weights=1_0,…`` weighted an LED ten times. Real files, ``ma
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +12,6 @@ import pytest
 from msflash.acquisition.app.cli import build_parser, main
 from msflash.acquisition.sequence.image_files import read_image
 from msflash.processing.user_numbers import NotANumber, plain_number, plain_whole_number
-from tests.helpers import write_test_sequence
 
 HOSTILE = ["1_0", "١٢", "１２", "infinity", "nan", "0x10", "1,5"]
 """What ``float`` or ``int`` read (or a user may type) that is no plain number: underscores, Arabic-Indic and
@@ -37,18 +35,6 @@ def test_plain_numbers_are_read_blanks_around_them_dropped(text: str, value: flo
 def test_a_whole_number_is_ascii_digits(text: str) -> None:
     with pytest.raises(NotANumber, match="expected a whole number such as 3"):
         plain_whole_number(text)
-
-
-@pytest.fixture(scope="module")
-def base_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_test_sequence(tmp_path_factory.mktemp("numbers") / "seq")
-
-
-@pytest.fixture
-def sequence(base_sequence: Path, tmp_path: Path) -> Path:
-    copy = tmp_path / "seq"
-    shutil.copytree(base_sequence, copy)
-    return copy
 
 
 OPTIONS = [
