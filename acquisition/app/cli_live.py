@@ -34,6 +34,7 @@ def _port(text: str) -> int:
 
 def _live(args: argparse.Namespace) -> int:
     import asyncio
+    import signal
 
     from msflash.acquisition.app.live.requests import bind
     from msflash.acquisition.app.live.server import LiveServer
@@ -68,7 +69,8 @@ def _live(args: argparse.Namespace) -> int:
                     stop.set()
 
                 for sig in STOPPING_SIGNALS:  # SIGHUP: the terminal closed
-                    loop.add_signal_handler(sig, stopping)
+                    if signal.getsignal(sig) is not signal.SIG_IGN:  # nohup's SIGHUP stays ignored, as asked
+                        loop.add_signal_handler(sig, stopping)
                 await server.serve(stop)
 
             with handlers_kept():  # asyncio sets the signals it took to their default action when it closes

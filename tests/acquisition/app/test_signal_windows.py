@@ -195,6 +195,34 @@ def test_sigterm_after_lives_event_loop_closed_still_switches_the_leds_off(tmp_p
     assert done.stderr.strip().splitlines()[-1] == "msflash: terminated (SIGTERM); LEDs off"
 
 
+def test_live_under_nohup_keeps_sighup_ignored(tmp_path: Path) -> None:
+    """``nohup msflash live …``, then the session closed: asyncio's loop took SIGHUP over nohup's ignore and stopped
+    the live view. The page's serve raises SIGHUP itself (the hook) and reports whether the view was told to stop;
+    it must not be, and ``live`` ends as the serve returns (exit 0)."""
+    script = textwrap.dedent(
+        """
+        import asyncio, signal, sys
+        from msflash.acquisition.app import cli
+        from msflash.acquisition.app.live.server import LiveServer
+
+        async def serve_through_a_sighup(self, stop):
+            signal.raise_signal(signal.SIGHUP)
+            for _ in range(20):  # the loop's turns: its self-pipe read, then the handler it schedules
+                await asyncio.sleep(0)
+            print("stopped by SIGHUP:", stop.is_set(), flush=True)
+
+        LiveServer.serve = serve_through_a_sighup
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)  # as nohup leaves it
+        sys.exit(cli.main(["live", "--rig", "sim", "--port", "0", "--runs", sys.argv[1]]))
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(tmp_path / "runs")], capture_output=True, text=True, timeout=600
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "stopped by SIGHUP: False" in done.stdout
+
+
 def test_outside_the_main_thread_nothing_is_installed() -> None:
     import threading
 
