@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import _thread
 import contextlib
+import os
 import signal
 import sys
 import threading
@@ -40,13 +41,30 @@ def _in_main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
+FORCING_CTRL_C = 3
+"""Ctrl-C pressed this many times in one command ends it at once, its cleanup cut short: a person insisting is never
+left with a process that will not stop (a cleanup waiting on a device that no longer answers)."""
+
+
+def _forced_exit() -> None:
+    """End the process now (exit 130), saying so in one line: the cleanup was cut short and the LEDs are left to the
+    booth's watchdog, which a capture arms (:mod:`acquisition.session.booth_guard`)."""
+    os.write(
+        2,
+        f"msflash: stopped at once (Ctrl-C {FORCING_CTRL_C} times): cleanup cut short; the booth's watchdog "
+        "switches its LEDs off\n".encode(),
+    )
+    os._exit(128 + signal.SIGINT)
+
+
 class _Stop:
     """The handler of the stopping signals while a command runs: the first signal raises (``KeyboardInterrupt`` for
     Ctrl-C, :class:`Terminated` for the others), every later one is recorded in :attr:`late` instead.
 
     One raise per command: a second signal (the terminal closing after a ``kill``, a service manager's SIGTERM
     repeated, Ctrl-C pressed again) would otherwise land inside the ``finally`` blocks the first one unwinds —
-    switching the LEDs off, finishing ``sequence.json`` — and cut them short. After :meth:`quiet` (the command
+    switching the LEDs off, finishing ``sequence.json`` — and cut them short. Ctrl-C pressed
+    :data:`FORCING_CTRL_C` times is the exception: the person insists, and the process ends at once. After :meth:`quiet` (the command
     has finished) even the first is only recorded, for the CLI to report once its outcome is written."""
 
     def __init__(self) -> None:
@@ -60,6 +78,8 @@ class _Stop:
     def __call__(self, number: int, _frame: object) -> None:
         if not self.raising:
             self.late.append(number)
+            if number == signal.SIGINT and self.late.count(signal.SIGINT) >= FORCING_CTRL_C - 1:
+                _forced_exit()
             return
         self.raising = False  # before raising: a signal landing while this one unwinds is recorded
         self.raised = number

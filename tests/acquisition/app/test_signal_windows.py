@@ -129,6 +129,43 @@ def test_a_second_signal_cannot_cut_the_cleanup_the_first_one_unwinds(
     assert let_through == []
 
 
+def test_ctrl_c_three_times_ends_a_cleanup_that_does_not_end() -> None:
+    """A second signal is recorded, not raised, so that it cannot cut the cleanup short; but a cleanup waiting on a
+    device that no longer answers would then never end, whatever the person pressed. Ctrl-C a third time ends the
+    process at once, in one line. The command's cleanup presses Ctrl-C twice itself and then waits for ever (in a
+    process of its own: the exit is immediate)."""
+    script = textwrap.dedent(
+        """
+        import argparse, signal, threading
+        from msflash.acquisition.app import cli
+
+        def hanging_cleanup(args):
+            try:
+                signal.raise_signal(signal.SIGINT)
+            finally:
+                print("cleanup began", flush=True)
+                signal.raise_signal(signal.SIGINT)
+                print("second Ctrl-C recorded", flush=True)
+                signal.raise_signal(signal.SIGINT)
+                print("third Ctrl-C recorded", flush=True)
+                threading.Event().wait()  # a device that no longer answers
+            return 0
+
+        parser = cli.build_parser(["capture"])
+        parser.parse_args = lambda argv: argparse.Namespace(verbose=0, handler=hanging_cleanup)
+        cli.build_parser = lambda argv=None: parser
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # as a terminal leaves it (a background job ignores it)
+        cli.main(["capture"])
+        """
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 128 + signal.SIGINT, done.stderr[-2000:]
+    assert done.stdout.splitlines() == ["cleanup began", "second Ctrl-C recorded"]
+    assert done.stderr.strip().splitlines() == [
+        "msflash: stopped at once (Ctrl-C 3 times): cleanup cut short; the booth's watchdog switches its LEDs off"
+    ]
+
+
 def test_a_sighup_nohup_ignores_stays_ignored(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
