@@ -47,12 +47,12 @@ left with a process that will not stop (a cleanup waiting on a device that no lo
 
 
 def _forced_exit() -> None:
-    """End the process now (exit 130), saying so in one line: the cleanup was cut short and the LEDs are left to the
-    booth's watchdog, which a capture arms (:mod:`acquisition.session.booth_guard`)."""
+    """End the process now (exit 130), saying so in one line: the cleanup was cut short, and an LED left on goes off
+    only when the booth's watchdog fires (docs/booth-protocol.md §7; :mod:`acquisition.session.booth_guard`)."""
     os.write(
         2,
-        f"msflash: stopped at once (Ctrl-C {FORCING_CTRL_C} times): cleanup cut short; the booth's watchdog "
-        "switches its LEDs off\n".encode(),
+        f"msflash: stopped at once (Ctrl-C {FORCING_CTRL_C} times): cleanup cut short; an LED left on goes off "
+        "only by the booth's watchdog\n".encode(),
     )
     os._exit(128 + signal.SIGINT)
 

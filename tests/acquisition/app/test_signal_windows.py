@@ -162,7 +162,7 @@ def test_ctrl_c_three_times_ends_a_cleanup_that_does_not_end() -> None:
     assert done.returncode == 128 + signal.SIGINT, done.stderr[-2000:]
     assert done.stdout.splitlines() == ["cleanup began", "second Ctrl-C recorded"]
     assert done.stderr.strip().splitlines() == [
-        "msflash: stopped at once (Ctrl-C 3 times): cleanup cut short; the booth's watchdog switches its LEDs off"
+        "msflash: stopped at once (Ctrl-C 3 times): cleanup cut short; an LED left on goes off only by the booth's watchdog"
     ]
 
 
