@@ -122,16 +122,3 @@ def written_as_number(text: str) -> bool:
     (True, False)
     """
     return _PLAIN.fullmatch(text.strip(_BLANKS)) is not None
-
-
-def is_plain_number(text: str) -> bool:
-    """Whether ``text`` is a number :func:`plain_number` reads.
-
-    >>> is_plain_number("380,5"), is_plain_number("380.5"), is_plain_number("NaN")
-    (False, True, False)
-    """
-    try:
-        plain_number(text)
-    except NotANumber:
-        return False
-    return True
