@@ -36,6 +36,7 @@ import subprocess
 import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
+from pathlib import Path
 from types import ModuleType
 from typing import Any
 
@@ -151,3 +152,19 @@ def gv_fake_process(aravis: ModuleType) -> Iterator[Callable[..., subprocess.Pop
                 process.send_signal(signal.SIGKILL)
             process.wait(timeout=10)
         stack.close()
+
+
+@pytest.fixture(scope="module")
+def base_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A test sequence (tests.helpers.write_test_sequence), written once a module."""
+    from tests.helpers import write_test_sequence
+
+    return write_test_sequence(tmp_path_factory.mktemp("sequence") / "seq")
+
+
+@pytest.fixture
+def sequence(base_sequence: Path, tmp_path: Path) -> Path:
+    """A fresh copy of :func:`base_sequence` for each test (which may damage it)."""
+    copy = tmp_path / "seq"
+    shutil.copytree(base_sequence, copy)
+    return copy

@@ -19,24 +19,12 @@ from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence import writer as sequence_writer
 from msflash.acquisition.sequence.check import FILE_STATES, check_sequence
 from msflash.acquisition.sequence.reader import read_sequence
-from tests.helpers import forget_digests, write_test_sequence
+from tests.helpers import forget_digests
 
 REPOSITORY = Path(__file__).resolve().parents[3]
 SAMPLES = REPOSITORY.parent / "shared" / "samples"
 FRAME = "frames/003-led.tiff"
 """The frame the tests damage (frames[3])."""
-
-
-@pytest.fixture(scope="module")
-def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_test_sequence(tmp_path_factory.mktemp("check") / "seq")
-
-
-@pytest.fixture
-def sequence(recorded: Path, tmp_path: Path) -> Path:
-    target = tmp_path / "copy"
-    shutil.copytree(recorded, target)
-    return target
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
@@ -71,11 +59,11 @@ def change_one_byte(path: Path) -> None:
 
 
 # -- what the writer records -------------------------------------------------------------------------
-def test_each_frame_records_the_sha256_and_length_of_its_file(recorded: Path) -> None:
-    document = json.loads((recorded / "sequence.json").read_text())
+def test_each_frame_records_the_sha256_and_length_of_its_file(base_sequence: Path) -> None:
+    document = json.loads((base_sequence / "sequence.json").read_text())
     assert len(document["frames"]) == 8
     for entry in document["frames"]:
-        data = (recorded / entry["file"]).read_bytes()
+        data = (base_sequence / entry["file"]).read_bytes()
         assert entry["sha256"] == hashlib.sha256(data).hexdigest()
         assert entry["file_bytes"] == len(data)
     assert document["version"] == 1  # an optional field: same version (docs/architecture.md §6)
