@@ -25,6 +25,7 @@ from msflash.acquisition.session.estimate_stream import (
     stack_layout,
     stream_sequence,
 )
+from msflash.acquisition.session.reference_crops import ReferenceCrops
 from msflash.acquisition.session.sequence_spectra import (
     camera_responsivities_photons,
     led_spectra_photons,
@@ -81,13 +82,19 @@ def load_frame_stack(sequence: Sequence, frames: SequenceOf[np.ndarray] | None =
 
 
 def stream_stack(
-    sequence: Sequence, stack: FrameStack, bin_factor: int = 8, tiles: int | None = None, full_probe: bool = False
+    sequence: Sequence,
+    stack: FrameStack,
+    bin_factor: int = 8,
+    tiles: int | None = None,
+    full_probe: bool = False,
+    references: ReferenceCrops | None = None,
 ) -> EstimateStream:
     """A stack already in memory fed to the one accumulator, as :func:`stream_sequence` feeds the files
-    (``full_probe``: every block row's half difference kept, for the light models' channel statistics)."""
+    (``full_probe``: every block row's half difference kept, for the light models' channel statistics;
+    ``references``: a reference's crops taken from the frames as they pass)."""
     index = {i: frame for i, frame in zip(stack.led_indices, stack.led_frames, strict=True)}
     index[stack.ambient_index] = stack.ambient
-    return stream_sequence(sequence, bin_factor, tiles, index.__getitem__, full_probe)
+    return stream_sequence(sequence, bin_factor, tiles, index.__getitem__, full_probe, references)
 
 
 def _check_stack_budget(sequence: Sequence) -> None:

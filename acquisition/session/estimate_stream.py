@@ -34,6 +34,7 @@ from msflash.acquisition.errors import RecordingError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.writer import mono_as_rgb
 from msflash.acquisition.session.engine import CaptureResult, FrameEvent
+from msflash.acquisition.session.reference_crops import ReferenceCrops
 from msflash.processing import frame_kernels
 from msflash.processing.accumulate import accumulate_statistics
 from msflash.processing.ambient import AmbientEstimate, AmbientModel
@@ -124,6 +125,11 @@ class EstimateStream:
     live
         Frames arrive while a camera streams: never a compiled kernel's first load or compile then
         (:func:`processing.frame_kernels.paused`); the numbers do not depend on it (docs/architecture.md §5.2).
+    full_probe
+        Keep every block row's half difference (the light models' channel statistics, :meth:`channel_statistics`).
+    references
+        A reference patch's or chart's crops (:class:`~acquisition.session.reference_crops.ReferenceCrops`), fed each
+        ambient and LED frame this stream uses, as it passes (``--reference-patch|--reference-chart``); or None.
     """
 
     def __init__(
@@ -134,8 +140,11 @@ class EstimateStream:
         tiles: int | None = None,
         live: bool = False,
         full_probe: bool = False,
+        references: ReferenceCrops | None = None,
     ) -> None:
         self.header = header
+        self.references = references
+        """The reference rectangles' crops, fed each frame used (None: no reference)."""
         self.full_probe = full_probe
         """Keep every block row's half difference (:class:`BlockRows`, ``full_probe``): the light models take their
         channel statistics from :attr:`block_rows` then, on frames of any size."""
@@ -168,10 +177,11 @@ class EstimateStream:
         tiles: int | None = None,
         live: bool = False,
         full_probe: bool = False,
+        references: ReferenceCrops | None = None,
     ) -> EstimateStream:
         """A stream laid out for a sequence's own frames (its ``led`` entries)."""
         n_led = sum(1 for entry in sequence.frames if entry.role == "led")
-        return cls(sequence, n_led, bin_factor, tiles, live, full_probe)
+        return cls(sequence, n_led, bin_factor, tiles, live, full_probe, references)
 
     # -- feeding -----------------------------------------------------------------------------------
     def add(self, pixels: np.ndarray, role: str, levels: Seq[float], exposure_gain: float) -> None:
@@ -221,6 +231,8 @@ class EstimateStream:
         else:
             row = self._n_led_rows
             self._n_led_rows += 1
+        if self.references is not None:  # the reference rectangles' pixels, copied: the frame is still let go
+            self.references.add(row, pixels)
         try:
             if self.factor == 1:
                 # Every pixel, no blocks (``--bin-factor 1``, the all-pixel reference): the exact all-pixel
@@ -415,14 +427,15 @@ def stream_sequence(
     tiles: int | None = None,
     pixels: Callable[[int], np.ndarray] | None = None,
     full_probe: bool = False,
+    references: ReferenceCrops | None = None,
 ) -> EstimateStream:
     """Feed a sequence's frames to a new :class:`EstimateStream`, one decoded frame at a time, in order.
 
     Only the ambient and LED frames are decoded (``pixels(index)``; by default read from disk by
     :meth:`~acquisition.sequence.format.Sequence.load_frame`, which checks each); the others are counted
-    from their entries.
+    from their entries. ``references``: crops of a reference patch or chart taken from the same frames as they pass.
     """
-    stream = EstimateStream.for_sequence(sequence, bin_factor, tiles, full_probe=full_probe)
+    stream = EstimateStream.for_sequence(sequence, bin_factor, tiles, full_probe=full_probe, references=references)
     load = pixels or sequence.load_frame
     seen_ambient = False
     for index, entry in enumerate(sequence.frames):

@@ -279,16 +279,18 @@ def check_settings(settings: EstimateSettings) -> None:
 def _light_models(sequence: Sequence, settings: EstimateSettings, report: Report) -> EstimateResult:
     """``prior``, ``family``, ``models``: the LED span beside the light prior and the physics families (§5.3)."""
     from msflash.acquisition.session.prior_route import led_side, with_model_choice
+    from msflash.acquisition.session.reference_crops import ReferenceCrops
 
     reference = settings.reference_chart if settings.reference_chart is not None else settings.reference_patch
-    # The frames streamed from disk one at a time, held together only for a reference's crops.
-    stack = None if reference is None else analysis.load_frame_stack(sequence)
+    # The frames streamed from disk one at a time; a reference keeps its rectangles' crops of each as it passes (a
+    # chart file read and a rectangle outside the frame refused first, before any frame is decoded).
+    crops = None if reference is None else ReferenceCrops.of(sequence, reference)
     led, payload, varies, stream = led_side(
-        sequence, stack, settings.method, settings.solver, settings.alpha, settings.tiles, settings.bin_factor
+        sequence, None, settings.method, settings.solver, settings.alpha, settings.tiles, settings.bin_factor, crops
     )
     refuse_dark_ambient(sequence, led, "estimate")
     payload, chosen, reason = with_model_choice(
-        sequence, stack, payload, settings.model, varies, reference, led.flicker, stream
+        sequence, None, payload, settings.model, varies, crops, led.flicker, stream
     )
     return _reported(EstimateResult(sequence, payload, choice=(chosen, reason)), led, report)
 

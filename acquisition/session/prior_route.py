@@ -3,8 +3,9 @@
 The thin layer between a :class:`~acquisition.sequence.format.Sequence` and :mod:`processing.light_prior` /
 :mod:`processing.light_families`, as :mod:`acquisition.session.analysis` is for eq. 4–6: the channel-resolved
 statistics are the LED estimate's stream's (:meth:`EstimateStream.channel_statistics`: its block rows, each frame
-passed over once), the LED spectra and responsivities go to photons; only a reference patch or chart crops the
-frames themselves (:func:`~acquisition.session.analysis.load_frame_stack`). :data:`MODEL_ROUTES` is the one
+passed over once), the LED spectra and responsivities go to photons; a reference patch or chart keeps only its
+rectangles' crops, taken as the frames pass through the same stream
+(:class:`~acquisition.session.reference_crops.ReferenceCrops`). :data:`MODEL_ROUTES` is the one
 table from a ``--model`` name to what it computes. A flickering ambient is read once, by the LED side's estimate
 (:func:`acquisition.session.analysis.flicker_check`), and its correction is applied to every statistic the light
 models are fitted through (:func:`processing.flicker.corrected_channel_statistics`; docs/flicker.md).
@@ -16,22 +17,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.session import analysis, local_route
-from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, FrameStack, load_frame_stack
+from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, FrameStack
 from msflash.acquisition.session.estimate_stream import EstimateStream, stream_sequence
+from msflash.acquisition.session.reference_crops import ReferenceCrops
 from msflash.acquisition.session.sequence_spectra import (
     camera_responsivities_photons,
     led_spectra_photons,
     spectrum_in_sequence_unit,
 )
 from msflash.processing.ambient import AmbientEstimate, estimate_ambient
-from msflash.processing.channel_statistics import ChannelStatistics, accumulate_channel_statistics
-from msflash.processing.errors import SpectralDataError
+from msflash.processing.channel_statistics import ChannelStatistics
 from msflash.processing.family_checks import LED_WARNING, PRIOR_WARNING, MissCheck, predicted_ratio, self_check
 from msflash.processing.flicker import FlickerCheck, corrected_channel_statistics
-from msflash.processing.json_input import parse_json_document
 from msflash.processing.light_families import (
     AUTO_MARGIN,
     AUTO_NOISE,
@@ -44,7 +43,6 @@ from msflash.processing.light_prior import PriorEstimate, prior_model
 from msflash.processing.prior_choice import ModelChoice, choose_model
 from msflash.processing.reference_patch import ReferencePatch
 from msflash.processing.spectra import Spectra
-from msflash.processing.user_files import JSON_MAX_BYTES, read_user_text, shown_path
 
 
 @dataclass(frozen=True)
@@ -80,13 +78,18 @@ def sequence_channel_statistics(
 
 
 def light_model_stream(
-    sequence: Sequence, stack: FrameStack | None, bin_factor: int = DEFAULT_BIN_FACTOR, tiles: int | None = None
+    sequence: Sequence,
+    stack: FrameStack | None,
+    bin_factor: int = DEFAULT_BIN_FACTOR,
+    tiles: int | None = None,
+    references: ReferenceCrops | None = None,
 ) -> EstimateStream:
     """The LED estimate's stream as the light models need it (every block row's probe kept, ``full_probe``), fed
-    ``stack`` or, without one, the files one frame at a time (:func:`~acquisition.session.estimate_stream.stream_sequence`)."""
+    ``stack`` or, without one, the files one frame at a time (:func:`~acquisition.session.estimate_stream.stream_sequence`);
+    ``references``: a reference patch's or chart's crops, taken from the same frames as they pass."""
     if stack is None:
-        return stream_sequence(sequence, bin_factor, tiles, full_probe=True)
-    return analysis.stream_stack(sequence, stack, bin_factor, tiles, full_probe=True)
+        return stream_sequence(sequence, bin_factor, tiles, full_probe=True, references=references)
+    return analysis.stream_stack(sequence, stack, bin_factor, tiles, full_probe=True, references=references)
 
 
 def estimate_sequence_prior(
@@ -170,12 +173,14 @@ def led_side(
     alpha: float | str,
     tiles: int,
     bin_factor: int = DEFAULT_BIN_FACTOR,
+    references: ReferenceCrops | None = None,
 ) -> tuple[AmbientEstimate, dict, bool, EstimateStream]:
     """The LED-span side of ``estimate --model prior|auto``: what ``--model led`` gives (global, or local when
     ``method`` finds the illuminant varying across the scene), its payload, whether it varies, and the stream of the
     frames (``stack``, or the files one at a time) it was made from: the light models' channel statistics come from
-    it (:func:`sequence_channel_statistics`)."""
-    stream = light_model_stream(sequence, stack, bin_factor, None if method == "global" else tiles)
+    it (:func:`sequence_channel_statistics`), and a reference's crops (``references``) are taken by it as the frames
+    pass."""
+    stream = light_model_stream(sequence, stack, bin_factor, None if method == "global" else tiles, references)
     if method != "global":
         local = local_route.estimate_sequence_local(sequence, method, solver, alpha, stream=stream)
         payload = local_route.local_estimate_payload(sequence, local)
@@ -184,134 +189,18 @@ def led_side(
     return led, analysis.estimate_payload(sequence, led), False, stream
 
 
-ReferenceRect = tuple[int, int, int, int]
-"""``(x, y, width, height)`` in pixels of the full frame: ``--reference-patch``."""
-Reference = ReferenceRect | str
-"""A grey card's rectangle (``--reference-patch``) or a chart file's path (``--reference-chart``)."""
-
-
-def reference_patch(
-    sequence: Sequence,
-    stack: FrameStack,
-    rect: ReferenceRect,
-    reflectance: np.ndarray | None = None,
-    what: str = "",
-    flicker: FlickerCheck | None = None,
-) -> ReferencePatch:
-    """The reference (:class:`~processing.reference_patch.ReferencePatch`) of one region of known reflectance
-    (``reflectance`` on the sequence's grid; None: spectrally flat), its statistics corrected for ``flicker``'s gains.
-
-    Raises
-    ------
-    UsageError
-        A rectangle outside the frame, smaller than 8 × 8 pixels, or whose pixels are saturated.
-    """
-    what = what or f"--reference-patch {','.join(map(str, rect))}"
-    x, y, width, height = rect
-    frame_height, frame_width = stack.ambient.shape[:2]
-    if sequence.camera.cfa is not None:  # whole 2 × 2 cells of the mosaic
-        x, y, width, height = x + x % 2, y + y % 2, width - width % 2 - 2 * (x % 2), height - height % 2 - 2 * (y % 2)
-    if x < 0 or y < 0 or width < 8 or height < 8 or x + width > frame_width or y + height > frame_height:
-        raise UsageError(
-            f"{what}: expected x,y,width,height of at least 8 × 8 pixels inside the {frame_width} × {frame_height} frame"
-        )
-
-    def crop(frame: np.ndarray) -> np.ndarray:
-        return frame[y : y + height, x : x + width]
-
-    statistics = accumulate_channel_statistics(
-        crop(stack.ambient),
-        [crop(frame) for frame in stack.led_frames],
-        stack.spec,
-        cfa=sequence.camera.cfa,
-        bin_factor=2,
-        n_folds=2,
-    )
-    statistics = corrected_channel_statistics(statistics, flicker)
-    if statistics.n_blocks == 0:
-        raise UsageError(
-            f"{what}: every pixel of the patch is saturated in some frame; expected a surface below the white level"
-        )
-    try:
-        return ReferencePatch.of(
-            statistics, led_spectra_photons(sequence), camera_responsivities_photons(sequence), reflectance
-        )
-    except SpectralDataError as error:
-        raise UsageError(f"{what}: {error}") from None
-
-
-MAX_REFLECTANCE = 1.5
-"""The largest reflectance factor a reference chart may give (fluorescent whites exceed 1; percentages do not fit)."""
-
-
-def _reference_chart_patch(patch: object, where: str) -> tuple[ReferenceRect, np.ndarray, np.ndarray]:
-    """One patch of a reference chart: its rectangle, wavelengths (increasing) and reflectance factors."""
-    if not isinstance(patch, dict) or not {"rect", "wavelengths_nm", "reflectance"} <= set(patch):
-        raise UsageError(f"{where}: is {str(patch)[:60]}; expected an object with rect, wavelengths_nm and reflectance")
-    rect, nm, values = patch["rect"], patch["wavelengths_nm"], patch["reflectance"]
-
-    def numbers(value: object) -> bool:
-        return isinstance(value, list) and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
-
-    if not numbers(rect) or len(rect) != 4 or not all(float(v).is_integer() and abs(v) < 2**31 for v in rect):
-        raise UsageError(f"{where}.rect: is {str(rect)[:60]}; expected 4 whole numbers x, y, width, height (pixels)")
-    if not numbers(nm) or not numbers(values) or len(nm) != len(values) or len(nm) < 2:
-        raise UsageError(
-            f"{where}: wavelengths_nm and reflectance are not two lists of numbers of one length (at least 2); "
-            "expected one reflectance per wavelength"
-        )
-    wavelengths, reflectance = np.asarray(nm, float), np.asarray(values, float)
-    if not np.all(np.diff(wavelengths) > 0):
-        raise UsageError(f"{where}.wavelengths_nm: not increasing; expected wavelengths in increasing order")
-    if reflectance.min() < 0 or reflectance.max() > MAX_REFLECTANCE:
-        raise UsageError(
-            f"{where}.reflectance: holds values from {reflectance.min():g} to {reflectance.max():g}; expected "
-            f"reflectance factors 0–{MAX_REFLECTANCE:g} (not percent)"
-        )
-    return (int(rect[0]), int(rect[1]), int(rect[2]), int(rect[3])), wavelengths, reflectance
-
-
-def reference_chart(
-    sequence: Sequence, stack: FrameStack, path: str, flicker: FlickerCheck | None = None
-) -> ReferencePatch:
-    """``--reference-chart FILE``: patches of known reflectance (a colour chart in the scene), one reference.
-
-    The file is JSON: ``{"patches": [{"rect": [x, y, width, height], "wavelengths_nm": [...], "reflectance":
-    [...]}, ...]}`` (pixels of the full frame, whole numbers; wavelengths increasing; reflectance factors
-    0–:data:`MAX_REFLECTANCE`, interpolated onto the sequence's grid, the edge values held beyond the data).
-    It is read as every user's file is (:mod:`processing.user_files`, :mod:`processing.json_input`).
-
-    Raises
-    ------
-    UsageError
-        An unreadable file, a missing or malformed field (named), a patch outside the frame.
-    """
-    shown = f"--reference-chart {shown_path(path)}"
-    text = read_user_text(path, "a reference chart (UTF-8 JSON)", JSON_MAX_BYTES, UsageError)
-    document = parse_json_document(text, shown, UsageError)
-    patches = document.get("patches") if isinstance(document, dict) else None
-    if not isinstance(patches, list) or not patches:
-        raise UsageError(f"{shown}: 'patches' missing or empty; expected a list of patches")
-    grid = np.asarray(sequence.wavelengths_nm, float)
-    references = []
-    for index, patch in enumerate(patches):
-        where = f"{shown}: patches[{index}]"
-        rect, nm, values = _reference_chart_patch(patch, where)
-        reflectance = np.interp(grid, nm, values)
-        references.append(reference_patch(sequence, stack, rect, reflectance, where, flicker))
-    return ReferencePatch.combined(references)
-
-
 def estimate_sequence_family(
     sequence: Sequence,
     stack: FrameStack | None = None,
     prior: PriorEstimate | None = None,
-    reference: Reference | None = None,
+    reference: ReferencePatch | None = None,
     flicker: FlickerCheck | None = None,
     statistics: ChannelStatistics | None = None,
 ) -> tuple[PriorEstimate, FamilyEstimate]:
     """The light prior's and the family model's estimates of a sequence (the prior is one of the candidates);
-    ``flicker``: the LED estimate's check, whose gains correct every statistic (the reference's too);
+    ``reference``: a reference patch or chart already measured (:meth:`ReferenceCrops.patch
+    <acquisition.session.reference_crops.ReferenceCrops.patch>`, its crops taken as the frames passed through the
+    stream: no frame is read here); ``flicker``: the LED estimate's check, whose gains correct every statistic;
     ``statistics``: the sequence's channel statistics so corrected, when taken already.
 
     Raises
@@ -325,15 +214,9 @@ def estimate_sequence_family(
     camera = camera_responsivities_photons(sequence)
     if prior is None:
         prior = prior_model(statistics.channels, leds, camera).estimate(statistics)
-    patch = None
-    if reference is not None:
-        loaded = stack or load_frame_stack(sequence)
-        patch = (
-            reference_chart(sequence, loaded, reference, flicker)
-            if isinstance(reference, str)
-            else reference_patch(sequence, loaded, reference, flicker=flicker)
-        )
-    family = family_model(statistics.channels, leds, camera).estimate(statistics, prior.spectrum.values[:, 0], patch)
+    family = family_model(statistics.channels, leds, camera).estimate(
+        statistics, prior.spectrum.values[:, 0], reference
+    )
     return prior, family
 
 
@@ -452,7 +335,8 @@ class _RouteInputs:
     requested: str
     varies: bool
     led_payload: dict
-    reference: Reference | None
+    reference: ReferencePatch | None
+    """The reference patch or chart, measured from its crops (None: none given)."""
     flicker: FlickerCheck | None
     statistics: ChannelStatistics
     """One set of channel statistics for both models (the same, corrected alike), from the LED side's stream."""
@@ -533,7 +417,7 @@ def with_model_choice(
     payload: dict,
     requested: str,
     varies: bool,
-    reference: Reference | None = None,
+    reference: ReferenceCrops | None = None,
     flicker: FlickerCheck | None = None,
     stream: EstimateStream | None = None,
 ) -> tuple[dict, str, str]:
@@ -544,18 +428,23 @@ def with_model_choice(
     estimate (a family is one global spectrum). The chosen model's spectrum, band and warnings replace the LED
     ones, which stay under ``led`` when another model wins. ``models`` holds every model's spectrum, band, warnings
     and miss check (predicted ratio to the LED bound against the family evidence, docs/light-families.md).
-    ``reference``: a spectrally flat patch (``--reference-patch``) whose error joins the evidence and on which the
-    family estimate is calibrated. ``flicker``: the LED side's flicker check; its gains correct the light models'
-    statistics as they corrected the LED estimate's (docs/flicker.md). ``stream``: the LED side's stream of the
-    frames (:func:`led_side`), from whose block rows the light models' statistics are taken without a second pass.
+    ``reference``: the crops of a spectrally flat patch (``--reference-patch``) or of a chart's patches
+    (``--reference-chart``), taken by ``stream`` as the frames passed (:class:`~acquisition.session.reference_crops.
+    ReferenceCrops`), whose error joins the evidence and on which the family estimate is calibrated. ``flicker``: the
+    LED side's flicker check; its gains correct the light models' statistics and the reference's as they corrected
+    the LED estimate's (docs/flicker.md). ``stream``: the LED side's stream of the frames (:func:`led_side`), from
+    whose block rows the light models' statistics are taken without a second pass (None: one is made here, fed
+    ``stack`` or the files, and ``reference``).
 
     Returns
     -------
     dict, str, str
         The payload (docs/architecture.md §7), the chosen model and the reason.
     """
+    stream = stream or light_model_stream(sequence, stack, references=reference)
     statistics = sequence_channel_statistics(sequence, stack, flicker=flicker, stream=stream)
-    given = _RouteInputs(sequence, stack, requested, varies, payload, reference, flicker, statistics)
+    patch = None if reference is None else reference.patch(stream.layout().spec, flicker)
+    given = _RouteInputs(sequence, stack, requested, varies, payload, patch, flicker, statistics)
     fields, chosen, reason, replacement = MODEL_ROUTES[requested](given)
     payload = dict(payload)
     payload.update({key: value for key, value in fields.items() if key != "model_choice"})

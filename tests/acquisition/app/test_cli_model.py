@@ -194,11 +194,33 @@ def _light_model_case(name: str, directory: Path) -> tuple[Path, list[str]]:
     return render_case(case, directory).directory, options
 
 
+REFERENCES = {
+    "patch": (["--reference-patch", "16,16,24,24"], 24),
+    "chart": (["--reference-chart", "CHART"], 20),
+}
+"""A reference of the light models' cases (inside their 80 × 88 and 106 × 112 frames) and its largest crop's side."""
+
+
+def _reference_options(reference: str | None, directory: Path) -> tuple[list[str], int]:
+    """The options of ``reference`` (a chart written beside the sequence) and its crops' largest side (0: none)."""
+    if reference is None:
+        return [], 0
+    options, side = REFERENCES[reference]
+    if reference == "chart":
+        chart = directory.parent / "chart.json"
+        patches = [[4, 4, 16, 16], [40, 30, 20, 18]]
+        document = {"patches": [{"rect": r, "wavelengths_nm": [400, 700], "reflectance": [0.6, 0.4]} for r in patches]}
+        chart.write_text(json.dumps(document))
+        options = [options[0], str(chart)]
+    return options, side
+
+
 @pytest.mark.parametrize("strided", [False, True])
 @pytest.mark.parametrize(
-    ("case", "model"),
-    [("rgb", "prior"), ("rgb", "family"), ("rgb", "auto"), ("raw", "auto"), ("mono", "family"), ("bin 1", "prior")]
-    + [("bin 4", "family"), ("local", "auto")],
+    ("case", "model", "reference"),
+    [("rgb", "prior", None), ("rgb", "family", None), ("rgb", "auto", None), ("raw", "auto", None)]
+    + [("mono", "family", None), ("bin 1", "prior", None), ("bin 4", "family", None), ("local", "auto", None)]
+    + [("rgb", "family", "patch"), ("raw", "auto", "chart"), ("mono", "prior", "patch"), ("local", "auto", "chart")],
 )
 def test_the_light_models_pass_over_each_frame_once(
     tmp_path: Path,
@@ -206,15 +228,19 @@ def test_the_light_models_pass_over_each_frame_once(
     monkeypatch: pytest.MonkeyPatch,
     case: str,
     model: str,
+    reference: str | None,
     strided: bool,
 ) -> None:
     """Issue 31: ``--model prior|family|auto`` take the channel statistics from the LED estimate's stream (its block
     rows), so each frame is decoded once and never passed over by the channel statistics' own pass — for an RGB,
     a raw and a mono camera, the all-pixel reference (``--bin 1``), another block size and the local method; also
     where the frames are large enough for the LED estimate to probe every few block rows (``strided``, forced). The
-    statistics are the frames' own pass's (to the bit; a mono plane replicated, to rounding)."""
+    statistics are the frames' own pass's (to the bit; a mono plane replicated, to rounding). With a reference patch
+    or chart, no frame stack is built either (main loaded one to crop it): the crops are taken as the frames pass,
+    and the channel statistics' own pass sees only them."""
     from msflash.acquisition.sequence.format import Sequence
     from msflash.acquisition.sequence.reader import read_sequence
+    from msflash.acquisition.session import analysis
     from msflash.acquisition.session.analysis import block_factor, load_frame_stack
     from msflash.acquisition.session.prior_route import sequence_channel_statistics
     from msflash.processing import block_rows, channel_statistics
@@ -222,25 +248,34 @@ def test_the_light_models_pass_over_each_frame_once(
     if strided:
         monkeypatch.setattr(block_rows, "PROBE_BLOCKS", 64)
     directory, options = _light_model_case(case, tmp_path / "case")
+    reference_options, crop_side = _reference_options(reference, directory)
     capsys.readouterr()
     decoded: list[int] = []
-    frames_pass: list[int] = []
-    real_load, real_pass = Sequence.load_frame, channel_statistics._stacked_block_rows
+    frames_pass: list[tuple[int, ...]] = []
+    stacks: list[int] = []
+    real_load, real_pass, real_stack = Sequence.load_frame, channel_statistics._stacked_block_rows, analysis.frame_stack
 
     def counted_load(self: Sequence, index: int) -> np.ndarray:  # the one reader of a sequence's frames
         decoded.append(index)
         return real_load(self, index)
 
     def counted_pass(frames: list[np.ndarray], *args: object) -> object:
-        frames_pass.append(len(frames))
+        frames_pass.extend(frame.shape for frame in frames)
         return real_pass(frames, *args)  # type: ignore[arg-type]
+
+    def counted_stack(layout, pixels):  # noqa: ANN001, ANN202 — every FrameStack is built here
+        stacks.append(len(layout.led_indices) + 1)
+        return real_stack(layout, pixels)
 
     monkeypatch.setattr(Sequence, "load_frame", counted_load)
     monkeypatch.setattr(channel_statistics, "_stacked_block_rows", counted_pass)
-    _estimate(capsys, str(directory), "--model", model, *options)
+    monkeypatch.setattr(analysis, "frame_stack", counted_stack)
+    _estimate(capsys, str(directory), "--model", model, *options, *reference_options)
     sequence = read_sequence(directory)
     used = [index for index, entry in enumerate(sequence.frames) if entry.role in ("ambient", "led")]
-    assert frames_pass == [] and sorted(decoded) == used
+    assert sorted(decoded) == used and stacks == []
+    assert all(max(shape[:2]) <= crop_side for shape in frames_pass), frames_pass  # crops only, if any
+    assert bool(frames_pass) == (reference is not None)
     monkeypatch.undo()
     stack = load_frame_stack(sequence)
     frames_own = channel_statistics.accumulate_channel_statistics(
