@@ -433,6 +433,67 @@ def _split_tables(rows: list[Row], label: str = "") -> list[str]:
     ]
 
 
+def sources_table(rows: list[Row], title: str) -> list[str]:
+    """Where each model's cost on ``rows`` (paired draws) comes from, in shares of the mean steady ratio: the floor
+    (flicker with the true gains, less steady) and the read's share (as read, less the true gains) split between the
+    sequences whose flicker went undetected (left as they are) and those corrected; false alarms (steady renderings
+    corrected); and how far the model moves from one noise draw to the next under steady light alone (each case's
+    four steady ratios' standard deviation over their mean: median and 90th percentile of the cases) beside how
+    far the true gains (and the read) move it from its steady ratio on the same draw (median, 90th percentile)."""
+    if not rows:
+        return []
+    undetected = [r for r in rows if not r.detected_flicker]
+    alarms = [r for r in rows if r.detected_steady]
+    alarmed = sorted({r.case.name for r in alarms})
+    named = "; ".join(
+        f"{n} draw{'s' if sum(r.case.name == n for r in alarms) > 1 else ''} "
+        + ", ".join(str(r.draw) for r in alarms if r.case.name == n)
+        for n in alarmed
+    )
+    names = sorted({r.case.name for r in rows})
+    lines = [
+        f"### {title}",
+        "",
+        f"{len(undetected)} of {len(rows)} flickering renderings undetected; {len(alarms)} of {len(rows)} steady ones "
+        "raised a false alarm (their steady arm corrected by the read)" + (f": {named}." if alarms else "."),
+        "",
+        "| model | floor (true gains − steady) | read's share (read − true gains) | of it: undetected | of it: corrected |"
+        " steady, noise alone: draw-to-draw spread (median / 90th pct of cases) | true gains − steady, absolute "
+        "(median / 90th pct) | read − true gains, absolute (median / 90th pct) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name in MODELS:
+        columns = (f"{name} steady", f"{name} flicker", f"{name} flicker oracle")
+        valid = [r for r in rows if all(math.isfinite(r.ratios[c]) for c in columns)]
+        steady_sum = sum(r.ratios[f"{name} steady"] for r in valid)
+
+        def share(members: list[Row], a: str, b: str, total: float = steady_sum) -> float:
+            return sum(r.ratios[a] - r.ratios[b] for r in members) / total
+
+        read = (f"{name} flicker", f"{name} flicker oracle")
+        spreads, moved, missed = [], [], []
+        for case in names:
+            own = [r for r in valid if r.case.name == case]
+            steady = np.array([r.ratios[f"{name} steady"] for r in own])
+            if steady.size > 1 and steady.mean() > 0:
+                spreads.append(float(np.std(steady, ddof=1) / steady.mean()))
+            for r in own:
+                level = float(steady.mean()) if steady.size else math.nan
+                moved.append(abs(r.ratios[f"{name} flicker oracle"] - r.ratios[f"{name} steady"]) / level)
+                missed.append(abs(r.ratios[read[0]] - r.ratios[read[1]]) / level)
+
+        def quantiles(values: list[float]) -> str:
+            return f"{np.median(values):.1%} / {np.percentile(values, 90):.1%}" if values else "–"
+
+        lines.append(
+            f"| {name} | {share(valid, f'{name} flicker oracle', f'{name} steady'):+.1%} | {share(valid, *read):+.1%} |"
+            f" {share([r for r in valid if not r.detected_flicker], *read):+.1%} |"
+            f" {share([r for r in valid if r.detected_flicker], *read):+.1%} | {quantiles(spreads)} |"
+            f" {quantiles(moved)} | {quantiles(missed)} |"
+        )
+    return [*lines, ""]
+
+
 def per_kind_index(cases: Sequence[HarnessCase]) -> dict[str, int]:
     """Each case's place among the cases of its lamp kind (0 for the first), as :func:`flicker_cases` lists them."""
     seen: dict[str, int] = {}
@@ -479,6 +540,11 @@ def paired_section(rows: list[Row], command: str, first_per_kind: int | None = N
         *([f"Every case: {len(place)} cases ({kinds} lamp kinds) × {draws} draws.", ""] if subsets else []),
         *_split_tables(rows),
         *subsets,
+        "**Where the cost comes from** (every case; shares of the mean steady ratio, so the floor and the read's "
+        "share add up to the cost):",
+        "",
+        *sources_table([r for r in rows if r.split == "tuning"], "Tuning rows: the cost's sources"),
+        *sources_table([r for r in rows if r.split == "held_out"], "Held-out rows: the cost's sources"),
         *(
             [
                 "Refused (a model's `SpectralDataError`, what `msflash estimate` exits 2 with; that case's draw is left "
@@ -606,6 +672,11 @@ def main(argv: list[str] | None = None) -> int:
         "--draws", type=int, default=DRAWS, help="paired noise draws per case (0: only the unpaired measurement)"
     )
     parser.add_argument("--rows", default=None, help="also pickle the measured rows here (for a closer look)")
+    parser.add_argument(
+        "--from-rows",
+        default=None,
+        help="write the report from rows pickled by --rows (measured with the same options) instead of measuring",
+    )
     args = parser.parse_args(argv)
     cases = flicker_cases(args.per_kind)
     if args.split != "both":
@@ -615,12 +686,14 @@ def main(argv: list[str] | None = None) -> int:
     jobs: list[tuple[HarnessCase, int | None]] = [
         (c, d) for c in cases for d in ((None,) if place[c.name] < unpaired else ()) + tuple(range(args.draws))
     ]
-    if args.jobs > 1:
+    if args.from_rows:
+        measured = pickle.loads(Path(args.from_rows).read_bytes())
+    elif args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:
             measured = list(pool.map(_measured, jobs, chunksize=1))
     else:
         measured = [_measured(job) for job in jobs]
-    if args.rows:
+    if args.rows and not args.from_rows:
         Path(args.rows).write_bytes(pickle.dumps(measured))
     rows = [r for r in measured if r.draw is None]
     paired = [r for r in measured if r.draw is not None]
