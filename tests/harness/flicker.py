@@ -28,7 +28,10 @@ arms' photon draws differing) is kept beside it for comparison.
 Tuning rows are the lamp kinds the rule's constants were set on (:data:`TUNING_KINDS`); held-out rows the others.
 
 Run: ``.venv/bin/python -m tests.harness.flicker --jobs 2 --out docs/flicker-results.md`` (``--per-kind N`` cases per
-lamp kind, default :data:`PER_KIND`; ``--draws N``, default :data:`DRAWS`; ``--rows FILE`` pickles the rows).
+lamp kind, default :data:`PER_KIND`; ``--unpaired-per-kind N``: only the first N of each kind measured unpaired, and
+with a larger ``--per-kind`` their paired tables shown apart beside the later cases' alone; ``--split tuning``: the
+tuning rows alone; ``--draws N``, default :data:`DRAWS`; ``--rows FILE`` pickles the rows). The larger sample of
+docs/decisions/flicker-larger-sample.md: ``--per-kind 36 --unpaired-per-kind 12``.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import pickle
 import shutil
 import tempfile
 import zlib
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -369,6 +373,8 @@ def paired_table(rows: list[Row], title: str) -> list[str]:
     interval; the floor (the cost with the true gains applied); the read's share (applied ÷ true − 1); and the
     cost as the first study measured it, re-made from these draws by pairing each draw's flickering rendering with
     the next draw's steady one (different photon draws: what the unpaired figure can swing by)."""
+    if not rows:
+        return []
     draws = sorted({r.draw for r in rows if r.draw is not None})
     by_draw = {d: {r.case.name: r for r in rows if r.draw == d} for d in draws}
     crossed = [
@@ -414,9 +420,109 @@ def paired_table(rows: list[Row], title: str) -> list[str]:
     return [*lines, ""]
 
 
-def paired_section(rows: list[Row], command: str) -> list[str]:
-    """The paired study's tables (tuning and held-out rows) with how they were made."""
+def _split_tables(rows: list[Row], label: str = "") -> list[str]:
+    """:func:`paired_table` of the tuning rows and of the held-out rows (``label`` after each title)."""
+    return [
+        *paired_table(
+            [r for r in rows if r.split == "tuning"], f"Tuning rows (lamp kinds {', '.join(TUNING_KINDS)}){label}"
+        ),
+        *paired_table(
+            [r for r in rows if r.split == "held_out"],
+            f"Held-out rows (the other lamp kinds; nothing was set on them){label}",
+        ),
+    ]
+
+
+def sources_table(rows: list[Row], title: str) -> list[str]:
+    """Where each model's cost on ``rows`` (paired draws) comes from, in shares of the mean steady ratio: the floor
+    (flicker with the true gains, less steady) and the read's share (as read, less the true gains) split between the
+    sequences whose flicker went undetected (left as they are) and those corrected; false alarms (steady renderings
+    corrected); and how far the model moves from one noise draw to the next under steady light alone (each case's
+    four steady ratios' standard deviation over their mean: median and 90th percentile of the cases) beside how
+    far the true gains (and the read) move it from its steady ratio on the same draw (median, 90th percentile)."""
+    if not rows:
+        return []
+    undetected = [r for r in rows if not r.detected_flicker]
+    alarms = [r for r in rows if r.detected_steady]
+    alarmed = sorted({r.case.name for r in alarms})
+    named = "; ".join(
+        f"{n} draw{'s' if sum(r.case.name == n for r in alarms) > 1 else ''} "
+        + ", ".join(str(r.draw) for r in alarms if r.case.name == n)
+        for n in alarmed
+    )
+    names = sorted({r.case.name for r in rows})
+    lines = [
+        f"### {title}",
+        "",
+        f"{len(undetected)} of {len(rows)} flickering renderings undetected; {len(alarms)} of {len(rows)} steady ones "
+        "raised a false alarm (their steady arm corrected by the read)" + (f": {named}." if alarms else "."),
+        "",
+        "| model | floor (true gains − steady) | read's share (read − true gains) | of it: undetected | of it: corrected |"
+        " steady, noise alone: draw-to-draw spread (median / 90th pct of cases) | true gains − steady, absolute "
+        "(median / 90th pct) | read − true gains, absolute (median / 90th pct) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name in MODELS:
+        columns = (f"{name} steady", f"{name} flicker", f"{name} flicker oracle")
+        valid = [r for r in rows if all(math.isfinite(r.ratios[c]) for c in columns)]
+        steady_sum = sum(r.ratios[f"{name} steady"] for r in valid)
+
+        def share(members: list[Row], a: str, b: str, total: float = steady_sum) -> float:
+            return sum(r.ratios[a] - r.ratios[b] for r in members) / total
+
+        read = (f"{name} flicker", f"{name} flicker oracle")
+        spreads, moved, missed = [], [], []
+        for case in names:
+            own = [r for r in valid if r.case.name == case]
+            steady = np.array([r.ratios[f"{name} steady"] for r in own])
+            if steady.size > 1 and steady.mean() > 0:
+                spreads.append(float(np.std(steady, ddof=1) / steady.mean()))
+            for r in own:
+                level = float(steady.mean()) if steady.size else math.nan
+                moved.append(abs(r.ratios[f"{name} flicker oracle"] - r.ratios[f"{name} steady"]) / level)
+                missed.append(abs(r.ratios[read[0]] - r.ratios[read[1]]) / level)
+
+        def quantiles(values: list[float]) -> str:
+            return f"{np.median(values):.1%} / {np.percentile(values, 90):.1%}" if values else "–"
+
+        lines.append(
+            f"| {name} | {share(valid, f'{name} flicker oracle', f'{name} steady'):+.1%} | {share(valid, *read):+.1%} |"
+            f" {share([r for r in valid if not r.detected_flicker], *read):+.1%} |"
+            f" {share([r for r in valid if r.detected_flicker], *read):+.1%} | {quantiles(spreads)} |"
+            f" {quantiles(moved)} | {quantiles(missed)} |"
+        )
+    return [*lines, ""]
+
+
+def per_kind_index(cases: Sequence[HarnessCase]) -> dict[str, int]:
+    """Each case's place among the cases of its lamp kind (0 for the first), as :func:`flicker_cases` lists them."""
+    seen: dict[str, int] = {}
+    out = {}
+    for case in cases:
+        out[case.name] = seen.get(case.light_type, 0)
+        seen[case.light_type] = out[case.name] + 1
+    return out
+
+
+def paired_section(rows: list[Row], command: str, first_per_kind: int | None = None) -> list[str]:
+    """The paired study's tables (tuning and held-out rows) with how they were made. With ``first_per_kind`` (a
+    sample larger than the first study's), the tables of every case come first, then those of the first
+    ``first_per_kind`` cases of each lamp kind (the first study's sample) and of the cases after them alone."""
     draws = len({r.draw for r in rows})
+    kinds = len({r.kind for r in rows})
+    place = per_kind_index(list({r.case.name: r.case for r in rows}.values()))
+    subsets: list[str] = []
+    if first_per_kind is not None and any(place[r.case.name] >= first_per_kind for r in rows):
+        earlier = [r for r in rows if place[r.case.name] < first_per_kind]
+        later = [r for r in rows if place[r.case.name] >= first_per_kind]
+        subsets = [
+            f"**The first {first_per_kind} cases of each lamp kind** (the earlier sample, reproduced by this run):",
+            "",
+            *_split_tables(earlier, f", first {first_per_kind} per kind"),
+            f"**The cases after the first {first_per_kind} of each lamp kind, alone** (a replication):",
+            "",
+            *_split_tables(later, f", cases after the first {first_per_kind} per kind"),
+        ]
     return [
         "## Paired: both arms on one noise realisation (the measurement)",
         "",
@@ -431,10 +537,14 @@ def paired_section(rows: list[Row], command: str) -> list[str]:
         "next draw's steady ones). *met* when the interval's upper end is ≤ 5 %; "
         "*met (point)* when only the point estimate is.",
         "",
-        *paired_table([r for r in rows if r.split == "tuning"], f"Tuning rows (lamp kinds {', '.join(TUNING_KINDS)})"),
-        *paired_table(
-            [r for r in rows if r.split == "held_out"], "Held-out rows (the other lamp kinds; nothing was set on them)"
-        ),
+        *([f"Every case: {len(place)} cases ({kinds} lamp kinds) × {draws} draws.", ""] if subsets else []),
+        *_split_tables(rows),
+        *subsets,
+        "**Where the cost comes from** (every case; shares of the mean steady ratio, so the floor and the read's "
+        "share add up to the cost):",
+        "",
+        *sources_table([r for r in rows if r.split == "tuning"], "Tuning rows: the cost's sources"),
+        *sources_table([r for r in rows if r.split == "held_out"], "Held-out rows: the cost's sources"),
         *(
             [
                 "Refused (a model's `SpectralDataError`, what `msflash estimate` exits 2 with; that case's draw is left "
@@ -449,10 +559,21 @@ def paired_section(rows: list[Row], command: str) -> list[str]:
     ]
 
 
-def report(rows: list[Row], command: str, paired: list[Row] | None = None) -> str:
-    """docs/flicker-results.md."""
+def report(rows: list[Row], command: str, paired: list[Row] | None = None, first_per_kind: int | None = None) -> str:
+    """docs/flicker-results.md (``first_per_kind``: :func:`paired_section`'s)."""
     tuning = [r for r in rows if r.split == "tuning"]
     held = [r for r in rows if r.split == "held_out"]
+    if not tuning or not held:  # one split measured (``--split``): its paired tables alone
+        return "\n".join(
+            [
+                "# Flicker study: results (one split)",
+                "",
+                f"Generated by `{command}` (tests/harness/flicker.py; the method and the reading are in "
+                "docs/flicker.md).",
+                "",
+                *(paired_section(paired, command, first_per_kind) if paired else []),
+            ]
+        )
     steady_offsets = [r.steady_offset for r in tuning]
     tuning_z = np.concatenate([r.steady_z for r in tuning])
     held_z = np.concatenate([r.steady_z for r in held])
@@ -467,7 +588,7 @@ def report(rows: list[Row], command: str, paired: list[Row] | None = None) -> st
         "mean ratio steady − 1. *oracle*: the flickering rendering corrected by the true gains (what a perfect "
         "read would give; it differs from *steady* by the noise alone, the two renderings' photon draws differing).",
         "",
-        *(paired_section(paired, command) if paired else []),
+        *(paired_section(paired, command, first_per_kind) if paired else []),
         "## Every model, as `msflash estimate` runs it"
         + (" (unpaired: the first study's measurement)" if paired else ""),
         "",
@@ -532,30 +653,63 @@ def report(rows: list[Row], command: str, paired: list[Row] | None = None) -> st
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m tests.harness.flicker", description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=None, help="write the markdown report here (default: print it)")
-    parser.add_argument("--per-kind", type=int, default=PER_KIND)
+    parser.add_argument("--per-kind", type=int, default=PER_KIND, help="cases per lamp kind of the paired measurement")
+    parser.add_argument(
+        "--unpaired-per-kind",
+        type=int,
+        default=None,
+        help="measure only the first N cases of each lamp kind unpaired (default: every case); with a larger "
+        "--per-kind their paired tables are shown apart too, beside the later cases' alone",
+    )
+    parser.add_argument(
+        "--split",
+        choices=("both", "tuning", "held_out"),
+        default="both",
+        help="measure only the tuning rows (lamp kinds the constants were set on) or only the held-out ones",
+    )
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument(
         "--draws", type=int, default=DRAWS, help="paired noise draws per case (0: only the unpaired measurement)"
     )
     parser.add_argument("--rows", default=None, help="also pickle the measured rows here (for a closer look)")
+    parser.add_argument(
+        "--from-rows",
+        default=None,
+        help="write the report from rows pickled by --rows (measured with the same options) instead of measuring",
+    )
     args = parser.parse_args(argv)
     cases = flicker_cases(args.per_kind)
-    jobs: list[tuple[HarnessCase, int | None]] = [(c, d) for c in cases for d in (None, *range(args.draws))]
-    if args.jobs > 1:
+    if args.split != "both":
+        cases = [c for c in cases if (c.light_type in TUNING_KINDS) == (args.split == "tuning")]
+    place = per_kind_index(cases)
+    unpaired = args.per_kind if args.unpaired_per_kind is None else args.unpaired_per_kind
+    jobs: list[tuple[HarnessCase, int | None]] = [
+        (c, d) for c in cases for d in ((None,) if place[c.name] < unpaired else ()) + tuple(range(args.draws))
+    ]
+    if args.from_rows:
+        measured = pickle.loads(Path(args.from_rows).read_bytes())
+    elif args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:
             measured = list(pool.map(_measured, jobs, chunksize=1))
     else:
         measured = [_measured(job) for job in jobs]
-    if args.rows:
+    if args.rows and not args.from_rows:
         Path(args.rows).write_bytes(pickle.dumps(measured))
     rows = [r for r in measured if r.draw is None]
     paired = [r for r in measured if r.draw is not None]
     command = (
         "python -m tests.harness.flicker --jobs 2"
         + (f" --per-kind {args.per_kind}" if args.per_kind != PER_KIND else "")
+        + (f" --unpaired-per-kind {args.unpaired_per_kind}" if args.unpaired_per_kind is not None else "")
+        + (f" --split {args.split}" if args.split != "both" else "")
         + (f" --draws {args.draws}" if args.draws != DRAWS else "")
     )
-    text = report(rows, command + (f" --out {args.out}" if args.out else ""), paired)
+    text = report(
+        rows,
+        command + (f" --out {args.out}" if args.out else ""),
+        paired,
+        unpaired if unpaired < args.per_kind else None,
+    )
     if args.out:
         Path(args.out).write_text(text)
     else:

@@ -151,3 +151,53 @@ def test_the_cost_interval_resamples_whole_cases() -> None:
     mixed = [row("a", 0, 1.0, 1.0), row("a", 1, 1.0, 1.0), row("b", 0, 1.0, 1.2), row("c", 0, 1.0, float("nan"))]
     cost, low, high = cost_interval(mixed, "f", "s")
     assert cost == pytest.approx(0.2 / 3) and low == pytest.approx(0.0) and high == pytest.approx(0.2)
+
+
+def _study_rows(per_kind: int, draws: int) -> list:
+    """Rows of a paired study of the first ``per_kind`` cases of each lamp kind, with made-up ratios (the report's
+    arithmetic alone: each case's flicker costs it 1 % per place among its kind, the true gains half of that)."""
+    from dataclasses import replace
+
+    from tests.harness.flicker import MODELS, TUNING_KINDS, Row, per_kind_index
+
+    cases = flicker_cases(per_kind)
+    place = per_kind_index(cases)
+    rows = []
+    for case in cases:
+        for draw in range(draws):
+            steady = 1.0 + 0.1 * draw
+            cost = 0.01 * place[case.name]
+            ratios = {}
+            for name in MODELS:
+                ratios |= {
+                    f"{name} steady": steady,
+                    f"{name} flicker": steady * (1 + cost),
+                    f"{name} flicker oracle": steady * (1 + cost / 2),
+                }
+            split = "tuning" if case.light_type in TUNING_KINDS else "held_out"
+            base = Row(case, case.light_type, split, ratios, False, place[case.name] > 0, 0.0, 0.0, (), 0.0)
+            rows.append(replace(base, draw=draw))
+    return rows
+
+
+def test_a_larger_sample_reports_the_earlier_one_beside_it() -> None:
+    """``--per-kind 3 --unpaired-per-kind 1`` (docs/decisions/flicker-larger-sample.md): the paired section gives the
+    tables of every case, then those of the first case of each kind — equal to what a study of that case alone gives
+    — and of the later cases alone; the sources table splits the read's share between undetected and corrected
+    renderings, and floor + read's share = the cost."""
+    from tests.harness.flicker import paired_section, paired_table, sources_table
+
+    rows = _study_rows(3, 2)
+    section = "\n".join(paired_section(rows, "cmd", first_per_kind=1))
+    earlier = [r for r in _study_rows(1, 2) if r.split == "tuning"]
+    alone = paired_table(earlier, "Tuning rows (lamp kinds incandescent, fluorescent), first 1 per kind")
+    assert "\n".join(alone) in section
+    assert "Every case: 15 cases (5 lamp kinds) × 2 draws." in section
+    assert "cases after the first 1 per kind" in section
+    # The first case of each kind costs nothing (and went undetected); the second 1 %, the third 2 %: 1 % in all.
+    assert "| family | 6 × 2 | " in section and "**+1.0% [" in section
+    sources = "\n".join(sources_table([r for r in rows if r.split == "tuning"], "t"))
+    assert "| family | +0.5% | +0.5% | +0.0% | +0.5% |" in sources
+    assert "4 of 12 flickering renderings undetected; 0 of 12 steady ones raised a false alarm" in sources
+    assert paired_section(rows, "cmd") == paired_section(rows, "cmd", first_per_kind=None)
+    assert "first 1 per kind" not in "\n".join(paired_section(_study_rows(1, 2), "cmd", first_per_kind=1))
