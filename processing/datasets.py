@@ -47,6 +47,7 @@ from msflash.processing.spectra import (
     require_same_grid,
     tiny_columns,
 )
+from msflash.processing.spectral_rows import in_wavelength_order
 from msflash.processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_text, shown_path
 from msflash.processing.user_numbers import plain_number, written_as_number
 
@@ -126,6 +127,12 @@ def load_spectra_csv(
 
     Lines starting with ``#`` are comments (kept in ``metadata["comments"]``), blank lines are
     skipped, the first other line is the header, and ``nan`` or an empty cell is a missing value.
+    The rows follow the one set of row rules of every user's spectral file
+    (:func:`processing.spectral_rows.in_wavelength_order`): descending wavelengths are read in
+    ascending order, a row written twice is read once, readings of one wavelength are averaged
+    with a :class:`~processing.errors.SpectralDataWarning` naming the file and lines, and
+    wavelengths that turn back are refused naming both lines; ``metadata["row_order"]`` says
+    what was done. An ascending table is read as written.
 
     Parameters
     ----------
@@ -146,7 +153,8 @@ def load_spectra_csv(
     ------
     SpectralDataError
         On a missing or unreadable file, one that is not a regular file (FIFO, device,
-        directory, symlink loop) or is above 16 MiB (checked before reading), a bad header, a ragged row, a non-number or (with
+        directory, symlink loop) or is above 16 MiB (checked before reading), a bad header, a ragged row, a non-number,
+        wavelengths that rise and fall, a non-uniform grid or (with
         ``nan="error"``) a missing value; the message names the file, line and column.
     """
     path = Path(path)
@@ -155,8 +163,10 @@ def load_spectra_csv(
     # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is dropped instead of becoming part of the header.
     text = read_user_text(path, "a spectral table (UTF-8 CSV file)", SPECTRAL_TABLE_MAX_BYTES, encoding="utf-8-sig")
 
-    comments, header, rows, missing = _parse_table(text, where, nan)
-    table = np.asarray(rows, dtype=float)
+    comments, header, rows, lines, missing = _parse_table(text, where, nan)
+    # The one set of row rules (descending reversed, repeats once, readings of one wavelength averaged with a
+    # warning, wavelengths that turn back refused): an ascending table comes back as it is.
+    table, _, row_notes = in_wavelength_order(np.asarray(rows, dtype=float), lines, where)
     for column in tiny_columns(table[:, 1:]):
         raise SpectralDataError(
             f"{where}: column '{printable(_cut(header[column + 1]))}' peaks at {np.max(np.abs(table[:, column + 1])):.3g}; "
@@ -171,16 +181,20 @@ def load_spectra_csv(
     metadata: dict = {"path": where, "comments": comments, "header": tuple(header[1:])}
     if missing:
         metadata["nan_set_to_zero"] = missing
+    if row_notes:
+        metadata["row_order"] = row_notes
     return Spectra(grid, table[:, 1:], spectrum_names, kind=kind, unit=unit, source=source or where, metadata=metadata)
 
 
 def _parse_table(
     text: str, where: str, nan: Literal["error", "zero"]
-) -> tuple[list[str], list[str], list[list[float]], list[tuple[int, str]]]:
-    """A spectral table's comments, header, number rows and missing cells (line, column) set to 0."""
+) -> tuple[list[str], list[str], list[list[float]], list[int], list[tuple[int, str]]]:
+    """A spectral table's comments, header, number rows, the line of each row and missing cells (line, column) set
+    to 0."""
     comments: list[str] = []
     header: list[str] | None = None
     rows: list[list[float]] = []
+    lines: list[int] = []
     missing: list[tuple[int, str]] = []
     for line_number, raw_line in enumerate(text.splitlines(), start=1):
         line = raw_line.strip()
@@ -203,10 +217,11 @@ def _parse_table(
             )
         row, blanks = _parse_row(cells, header, f"{where}:{line_number}", nan)
         rows.append(row)
+        lines.append(line_number)
         missing += [(line_number, column) for column in blanks]
     if header is None or len(rows) < 2:
         raise SpectralDataError(f"{where}: no data rows; expected a header and at least two wavelengths")
-    return comments, header, rows, missing
+    return comments, header, rows, lines, missing
 
 
 def _parse_row(cells: list[str], header: list[str], where: str, nan: str) -> tuple[list[float], list[str]]:
