@@ -171,7 +171,7 @@ def parse_spectrometer_text(
     wavelengths = table[:, 0]
     value_column = data.column if data.column is not None else 1
     readings = table[:, value_column]
-    _check_readings(wavelengths, readings, source, data.lines)
+    _check_readings(readings, source)
     column_name, column_units, metadata = _value_column(data, table, value_column)
     if order_notes:
         metadata["order"] = order_notes
@@ -281,14 +281,9 @@ def _first_data_line(data: _Rows, width: int, line: str, where: str) -> None:
         )
 
 
-def _check_readings(wavelengths: np.ndarray, readings: np.ndarray, source: str, lines: list[int]) -> None:
-    """Wavelengths (put in increasing order by :func:`in_wavelength_order`) in nanometres; a positive reading of a
-    sensible magnitude."""
-    if wavelengths[0] < 100 or wavelengths[-1] > 3000:
-        raise CalibrationError(
-            f"{source}:{lines[0]}: wavelengths span {wavelengths[0]:g}–{wavelengths[-1]:g}; expected nanometres "
-            "(100–3000)"
-        )
+def _check_readings(readings: np.ndarray, source: str) -> None:
+    """A positive reading of a sensible magnitude (the wavelengths were put in increasing order, in nanometres, by
+    :func:`in_wavelength_order`)."""
     peak = float(np.max(readings))
     if peak <= 0:
         raise CalibrationError(f"{source}: no positive value in the value column; expected a measured emission")

@@ -48,7 +48,7 @@ from msflash.processing.spectra import (
     tiny_columns,
 )
 from msflash.processing.spectral_rows import in_wavelength_order
-from msflash.processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_text, shown_path
+from msflash.processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_bytes, shown_path
 from msflash.processing.user_numbers import plain_number, written_as_number
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
@@ -110,6 +110,14 @@ _JIANG_LICENCE = (
 
 
 # -- the CSV reader ---------------------------------------------------------------------------
+_TABLE = "a spectral table (UTF-8 CSV file)"
+
+
+class NotATableError(SpectralDataError):
+    """A file that does not start as a spectral table: not UTF-8 text, or its first line (after comments) is no
+    ``wavelength_nm,<name>,…`` header. It may be a spectrometer export (:mod:`calibration.light_files` reads both)."""
+
+
 def _cut(cell: str) -> str:
     """A cell quoted in a message: at most 40 characters (a 5000-digit number stays readable)."""
     return cell if len(cell) <= 40 else f"{cell[:37]}... ({len(cell)} characters)"
@@ -132,7 +140,8 @@ def load_spectra_csv(
     ascending order, a row written twice is read once, readings of one wavelength are averaged
     with a :class:`~processing.errors.SpectralDataWarning` naming the file and lines, and
     wavelengths that turn back are refused naming both lines; ``metadata["row_order"]`` says
-    what was done. An ascending table is read as written.
+    what was done, ``metadata["lines"]`` the file line of each row read. An ascending table is
+    read as written.
 
     Parameters
     ----------
@@ -152,7 +161,8 @@ def load_spectra_csv(
     Raises
     ------
     SpectralDataError
-        On a missing or unreadable file, one that is not a regular file (FIFO, device,
+        On a missing or unreadable file (:class:`NotATableError` for text that is not UTF-8 or a first line
+        that is no table header: it may be another kind of file, such as a spectrometer export), one that is not a regular file (FIFO, device,
         directory, symlink loop) or is above 16 MiB (checked before reading), a bad header, a ragged row, a non-number,
         wavelengths that rise and fall, a non-uniform grid or (with
         ``nan="error"``) a missing value; the message names the file, line and column.
@@ -161,12 +171,18 @@ def load_spectra_csv(
     where = shown_path(path)
     # The one safe way to open a user's file: regular files only, at most 16 MiB, read with a cap.
     # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is dropped instead of becoming part of the header.
-    text = read_user_text(path, "a spectral table (UTF-8 CSV file)", SPECTRAL_TABLE_MAX_BYTES, encoding="utf-8-sig")
+    data = read_user_bytes(path, _TABLE, SPECTRAL_TABLE_MAX_BYTES)
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:  # UTF-16 or Latin-1: no table, perhaps a spectrometer export
+        raise NotATableError(
+            f"{where}: is not UTF-8 text ({err.reason} at byte {err.start}); expected {_TABLE}"
+        ) from err
 
     comments, header, rows, lines, missing = _parse_table(text, where, nan)
     # The one set of row rules (descending reversed, repeats once, readings of one wavelength averaged with a
     # warning, wavelengths that turn back refused): an ascending table comes back as it is.
-    table, _, row_notes = in_wavelength_order(np.asarray(rows, dtype=float), lines, where)
+    table, row_lines, row_notes = in_wavelength_order(np.asarray(rows, dtype=float), lines, where)
     for column in tiny_columns(table[:, 1:]):
         raise SpectralDataError(
             f"{where}: column '{printable(_cut(header[column + 1]))}' peaks at {np.max(np.abs(table[:, column + 1])):.3g}; "
@@ -178,7 +194,7 @@ def load_spectra_csv(
         raise SpectralDataError(
             f"{where}: {len(spectrum_names)} names given for {table.shape[1] - 1} spectra; expected one per column"
         )
-    metadata: dict = {"path": where, "comments": comments, "header": tuple(header[1:])}
+    metadata: dict = {"path": where, "comments": comments, "header": tuple(header[1:]), "lines": tuple(row_lines)}
     if missing:
         metadata["nan_set_to_zero"] = missing
     if row_notes:
@@ -206,7 +222,7 @@ def _parse_table(
         cells = [cell.strip() for cell in line.split(",")]
         if header is None:
             if not cells[0].lower().startswith("wavelength") or len(cells) < 2:
-                raise SpectralDataError(
+                raise NotATableError(
                     f"{where}:{line_number}: header is '{printable(line[:60])}'; expected 'wavelength_nm,<name>,…'"
                 )
             header = cells

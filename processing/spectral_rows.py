@@ -17,6 +17,9 @@ What writers do, and what is read (``docs/calibration.md``, *Row order, repeats 
   the file and lines (:class:`processing.errors.SpectralDataWarning`, or the reader's own category).
 - **Wavelengths that turn back** (rising, then falling, or a second scan appended) are refused, naming the file and
   both lines: no order of the rows is the writer's.
+- **Wavelengths that are not nanometres** (micrometres 0.38–0.78, ångström 3800–7800, wavenumbers) are refused,
+  naming the file and the line: the rows must lie within :data:`NANOMETRE_RANGE` (UV to short-wave infrared, what a
+  spectrometer or spectrophotometer measures).
 
 An ascending table with one row per wavelength is returned as it is (the same array): the shipped tables read to
 the same numbers, bit for bit.
@@ -30,6 +33,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from msflash.processing.errors import SpectralDataError, SpectralDataWarning
+
+NANOMETRE_RANGE = (100.0, 3000.0)
+"""Wavelengths of a user's spectral file, in nm: anything outside is another unit (µm, ångström), never a sample."""
 
 
 def in_wavelength_order(
@@ -62,8 +68,10 @@ def in_wavelength_order(
     Raises
     ------
     SpectralDataError
-        Wavelengths that rise and fall, naming the file and the two lines.
+        Wavelengths that rise and fall, naming the file and the two lines; wavelengths outside
+        :data:`NANOMETRE_RANGE`, naming the file and the line of the first one outside.
     """
+    _require_nanometres(table[:, 0], lines, source)
     notes: list[str] = []
     lines = list(lines)
     steps = np.diff(table[:, 0])
@@ -80,6 +88,18 @@ def in_wavelength_order(
     if not np.any(steps == 0):
         return table, lines, tuple(notes)
     return _one_row_per_wavelength(table, lines, source, notes, warning, stacklevel + 2)
+
+
+def _require_nanometres(wavelengths: np.ndarray, lines: Sequence[int], source: str) -> None:
+    """Refuse wavelengths outside :data:`NANOMETRE_RANGE`, naming the line of the first one outside."""
+    low, high = NANOMETRE_RANGE
+    outside = np.flatnonzero((wavelengths < low) | (wavelengths > high))
+    if outside.size:
+        first = int(outside[0])
+        raise SpectralDataError(
+            f"{source}:{lines[first]}: wavelength {wavelengths[first]:g}; the rows span {np.min(wavelengths):g}–"
+            f"{np.max(wavelengths):g}; expected nanometres ({low:g}–{high:g})"
+        )
 
 
 def _one_row_per_wavelength(
@@ -102,7 +122,8 @@ def _one_row_per_wavelength(
             averaged.append((start, end))
     if averaged:
         start, end = averaged[0]
-        readings = ", ".join(f"{value:g} (line {lines[i]})" for i, value in zip(range(start, end), table[start:end, 1]))
+        in_file_order = sorted(range(start, end), key=lambda i: lines[i])
+        readings = ", ".join(f"{table[i, 1]:g} (line {lines[i]})" for i in in_file_order)
         more = f"; {len(averaged) - 1} more wavelengths read more than once, averaged too" if len(averaged) > 1 else ""
         message = (
             f"{source}: {end - start} readings at {table[start, 0]:g} nm, {readings}: averaged{more} (wavelengths "

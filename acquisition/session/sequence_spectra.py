@@ -8,6 +8,7 @@ complementary flash's target illuminant on the sequence's grid (:func:`target_il
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.progress import progress
 from msflash.acquisition.sequence.format import Sequence
 from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
@@ -138,21 +140,43 @@ def is_target_file(target: str) -> bool:
     return Path(target).suffix.lower() in (".csv", ".txt") or os.path.lexists(target)
 
 
+VISIBLE_TO_CAMERAS_NM = (300.0, 1100.0)
+"""Where a silicon camera sees: a target light with no power in this range cannot be matched by any flash."""
+
+
 def target_file_spectrum(target: str) -> Spectra:
     """The one spectrum of a ``--target`` file, its negative noise clipped, as read (energy, the file's grid).
 
-    Needs no sequence, so ``--target`` is read when the command line is parsed: a missing, empty or dark file (or
-    one of several spectra) is refused before a rig opens, not after the frames were metered and captured.
+    The file is a spectral table ``wavelength_nm,value`` or a spectrometer export of the light
+    (:func:`calibration.light_files.read_measured_light`: one set of row rules for both). Needs no sequence, so
+    ``--target`` is read when the command line is parsed: a missing, empty or dark file (or one of several spectra)
+    is refused before a rig opens, not after the frames were metered and captured. A file is read once per version
+    (path, size, modification time): reading it again when the flash is solved gives the same spectrum without
+    saying its warnings (averaged rows, raw counts) a second time.
 
     Raises
     ------
     RecordingError
-        Missing, more than one spectrum, negative beyond noise, or no light; the table reader's own errors.
+        Missing, more than one spectrum, negative beyond noise, or no light between 300 and 1100 nm; the readers'
+        own errors (:class:`~processing.errors.SpectralDataError`), naming the file and line.
     """
     path = Path(target)
     if not os.path.lexists(path):
         raise RecordingError(f"{target}: target illuminant file not found; expected a CSV file or a name like D65")
-    spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
+    try:
+        found = os.stat(path)
+    except OSError:  # a symlink loop, a dangling link: the reader refuses it by what it is
+        return _read_target(target, None)
+    return _read_target(target, (found.st_dev, found.st_ino, found.st_size, found.st_mtime_ns))
+
+
+@functools.lru_cache(maxsize=16)
+def _read_target(target: str, version: tuple[int, ...] | None) -> Spectra:
+    """:func:`target_file_spectrum` of one version of the file (``version`` keys the cache only)."""
+    from msflash.calibration.light_files import read_measured_light
+
+    path = Path(target)
+    spectra = read_measured_light(path, report=progress)
     shown = shown_path(path)
     if spectra.count != 1:  # its first column was taken: another file's numbers, silently
         raise RecordingError(
@@ -160,10 +184,23 @@ def target_file_spectrum(target: str) -> Spectra:
             "target illuminant (wavelength_nm, value) — an exported spectra.csv holds several: keep the column meant"
         )
     # Negative noise clipped to 0 as every measured spectrum's is; beyond it, and no light at all, refused.
-    values, _ = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, f"--target {shown}")
+    lines = spectra.metadata.get("lines") or None
+    values, _ = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, f"--target {shown}", lines)
     if not values.max() > 0:
         raise RecordingError(f"--target {shown}: no light; expected a spectrum with some positive values")
-    return spectra.replace(values=values)
+    low, high = VISIBLE_TO_CAMERAS_NM
+    seen = (spectra.wavelengths_nm >= low) & (spectra.wavelengths_nm <= high)
+    if not np.any(values[seen] > 0):
+        lit = np.flatnonzero(values[:, 0] > 0)
+        first = f":{lines[lit[0]]}" if lines else ""
+        raise RecordingError(
+            f"--target {shown}{first}: light only at {spectra.wavelengths_nm[lit[0]]:g}–"
+            f"{spectra.wavelengths_nm[lit[-1]]:g} nm; expected some light between {low:g} and {high:g} nm, where a "
+            "camera sees (wavelengths in nanometres?)"
+        )
+    result = spectra.replace(values=values)
+    result.values.setflags(write=False)  # one array for every reading of this version of the file
+    return result
 
 
 def target_illuminant(target: str, sequence: Sequence) -> Spectra:
