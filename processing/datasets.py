@@ -235,8 +235,10 @@ def _parse_table(
         rows.append(row)
         lines.append(line_number)
         missing += [(line_number, column) for column in blanks]
-    if header is None or len(rows) < 2:
+    if header is None or not rows:
         raise SpectralDataError(f"{where}: no data rows; expected a header and at least two wavelengths")
+    if len(rows) < 2:
+        raise SpectralDataError(f"{where}:{lines[0]}: one data row; expected at least two wavelengths")
     return comments, header, rows, lines, missing
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import os
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -176,8 +177,17 @@ def _read_target(target: str, version: tuple[int, ...] | None) -> Spectra:
     from msflash.calibration.light_files import read_measured_light
 
     path = Path(target)
-    spectra = read_measured_light(path, report=progress)
-    shown = shown_path(path)
+    with warnings.catch_warnings(record=True) as said:  # said once the file is taken, not before a refusal
+        warnings.simplefilter("always")
+        spectra = _checked_target(read_measured_light(path, report=progress), shown_path(path))
+    for warning in said:
+        warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
+    spectra.values.setflags(write=False)  # one array for every reading of this version of the file
+    return spectra
+
+
+def _checked_target(spectra: Spectra, shown: str) -> Spectra:
+    """A target file's spectra with negative noise clipped, refused if not one light a camera sees."""
     if spectra.count != 1:  # its first column was taken: another file's numbers, silently
         raise RecordingError(
             f"--target {shown}: {spectra.count} spectra ({printable(', '.join(spectra.names))[:120]}); expected one "
@@ -198,9 +208,7 @@ def _read_target(target: str, version: tuple[int, ...] | None) -> Spectra:
             f"{spectra.wavelengths_nm[lit[-1]]:g} nm; expected some light between {low:g} and {high:g} nm, where a "
             "camera sees (wavelengths in nanometres?)"
         )
-    result = spectra.replace(values=values)
-    result.values.setflags(write=False)  # one array for every reading of this version of the file
-    return result
+    return spectra.replace(values=values)
 
 
 def target_illuminant(target: str, sequence: Sequence) -> Spectra:
