@@ -1,5 +1,11 @@
 """A light a user measured, from a spectral table or a spectrometer export (``--target FILE``, ``--led-spectra``).
 
+Public objects
+--------------
+- :func:`read_measured_light`: ``--target FILE``: a table, or an export of one light.
+- :func:`read_led_export_files`: ``--led-spectra``: exports of the booth's LEDs, one per channel, as
+  ``msflash calibrate leds`` reads them.
+
 A user who measured the light to match, or the booth's LEDs, with a spectrometer hands msflash what the instrument's
 program wrote — the same file ``msflash calibrate leds`` reads — or a table made from it. Both are read here, by the
 two readers of a user's spectral file, which follow one set of row rules (:mod:`processing.spectral_rows`:
@@ -23,22 +29,26 @@ from __future__ import annotations
 
 import re
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from msflash.calibration.errors import CalibrationError
-from msflash.calibration.led_exports import ExportOptions, resolved_export
+from msflash.calibration.led_exports import ExportOptions, read_led_exports, resolved_export
 from msflash.calibration.spectrometer import read_spectrometer_file
 from msflash.calibration.spectrometer_dark import remove_baseline
 from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError, SpectralDataWarning
-from msflash.processing.spectra import Spectra
+from msflash.processing.spectra import Spectra, WavelengthGrid
 from msflash.processing.user_files import shown_path
 
 Report = Callable[[str], None]
 
 
-def read_measured_light(path: str | Path, report: Report = lambda line: None) -> Spectra:
+def _quiet(line: str) -> None:
+    """A report that says nothing."""
+
+
+def read_measured_light(path: str | Path, report: Report = _quiet) -> Spectra:
     """The spectra of a light file: a table's columns, or an export's one spectrum (see the module notes).
 
     Parameters
@@ -111,4 +121,44 @@ def _neither(where: str, not_table: Exception, as_export: Exception) -> str:
     return (
         f"{where}: neither a spectral table nor a spectrometer export: as a table, {table_reason}; as an export, "
         f"{export_reason.removeprefix(f'{where}:').lstrip(' ')}"
+    )
+
+
+def read_led_export_files(paths: Sequence[str | Path], grid: WavelengthGrid, report: Report = _quiet) -> Spectra:
+    """LED spectra on ``grid`` from spectrometer exports, one per LED in channel order, read as
+    ``msflash calibrate leds`` reads them with no options (:func:`calibration.led_exports.read_led_exports`: the
+    baseline taken off — the dark an AvaSoft export stores, else the out-of-band tail, with a warning through
+    ``report`` —, counts per second when the integration times are stated). Exports of raw counts still hold the
+    spectrometer's own response: read, with a warning through ``report`` (``msflash calibrate leds
+    --spectrometer-response`` makes them energy).
+
+    Raises
+    ------
+    SpectralDataError
+        One line naming the file (and line): what ``calibrate leds`` refuses.
+    """
+
+    def said(line: str) -> None:  # the dark's options are calibrate's: say where they are
+        report(
+            line
+            + (
+                " (options of 'msflash calibrate leds', whose --out DIR --calibration takes)"
+                if "--dark" in line
+                else ""
+            )
+        )
+
+    try:
+        exports = read_led_exports(paths, grid, ExportOptions(), said, relative=True)
+    except CalibrationError as err:
+        raise SpectralDataError(str(err)) from None
+    if exports.unit == "counts":
+        shown = ", ".join(shown_path(p) for p in paths[:3]) + (" …" if len(paths) > 3 else "")
+        report(
+            f"warning: {shown}: raw spectrometer counts: the spectrometer's own response is still in the LED "
+            "spectra (their shapes and ratios); expected energy: 'msflash calibrate leds FILES --spectrometer-response "
+            "FILE --out DIR', then --calibration DIR"
+        )
+    return exports.spectra.replace(
+        metadata={**exports.spectra.metadata, "read_as": "spectrometer exports", "leds": exports.section}
     )
