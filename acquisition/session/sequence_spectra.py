@@ -145,7 +145,7 @@ VISIBLE_TO_CAMERAS_NM = (300.0, 1100.0)
 """Where a silicon camera sees: a target light with no power in this range cannot be matched by any flash."""
 
 
-def target_file_spectrum(target: str) -> Spectra:
+def target_file_spectrum(target: str, say_warnings: bool = True) -> Spectra:
     """The one spectrum of a ``--target`` file, its negative noise clipped, as read (energy, the file's grid).
 
     The file is a spectral table ``wavelength_nm,value`` or a spectrometer export of the light
@@ -153,7 +153,8 @@ def target_file_spectrum(target: str) -> Spectra:
     ``--target`` is read when the command line is parsed: a missing, empty or dark file (or one of several spectra)
     is refused before a rig opens, not after the frames were metered and captured. A file is read once per version
     (path, size, modification time): reading it again when the flash is solved gives the same spectrum without
-    saying its warnings (averaged rows, raw counts) a second time.
+    saying its warnings (averaged rows, raw counts) a second time. ``say_warnings=False`` never says them: a reading
+    after the one that did (:func:`target_illuminant`, once per sequence, perhaps in a worker process).
 
     Raises
     ------
@@ -167,23 +168,28 @@ def target_file_spectrum(target: str) -> Spectra:
     try:
         found = os.stat(path)
     except OSError:  # a symlink loop, a dangling link: the reader refuses it by what it is
-        return _read_target(target, None)
-    return _read_target(target, (found.st_dev, found.st_ino, found.st_size, found.st_mtime_ns))
+        return _read_target(target, None, say_warnings)
+    return _read_target(target, (found.st_dev, found.st_ino, found.st_size, found.st_mtime_ns), say_warnings)
 
 
 @functools.lru_cache(maxsize=16)
-def _read_target(target: str, version: tuple[int, ...] | None) -> Spectra:
+def _read_target(target: str, version: tuple[int, ...] | None, say_warnings: bool) -> Spectra:
     """:func:`target_file_spectrum` of one version of the file (``version`` keys the cache only)."""
     from msflash.calibration.light_files import read_measured_light
 
     path = Path(target)
     with warnings.catch_warnings(record=True) as said:  # said once the file is taken, not before a refusal
         warnings.simplefilter("always")
-        spectra = _checked_target(read_measured_light(path, report=progress), shown_path(path))
-    for warning in said:
+        light = read_measured_light(path, report=progress if say_warnings else _quiet)
+        spectra = _checked_target(light, shown_path(path))
+    for warning in said if say_warnings else ():
         warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
     spectra.values.setflags(write=False)  # one array for every reading of this version of the file
     return spectra
+
+
+def _quiet(line: str) -> None:
+    """A report that says nothing (a target file read again)."""
 
 
 def _checked_target(spectra: Spectra, shown: str) -> Spectra:
@@ -215,10 +221,11 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
     """The complementary target ``i_d`` in photons on the sequence's grid: a name or a CSV file.
 
     Names are those of :func:`processing.datasets.illuminant` (D65, A, FL2, …); a file is a
-    two-column CSV ``wavelength_nm, value`` in energy units.
+    two-column CSV ``wavelength_nm, value`` in energy units, or a spectrometer export of the light
+    (:func:`target_file_spectrum`, which says the file's warnings: this reading, once per sequence, does not).
     """
     if is_target_file(target):
-        spectra = target_file_spectrum(target)
+        spectra = target_file_spectrum(target, say_warnings=False)  # said when --target was read (target_value)
         try:
             resampled = spectra.resample(sequence.grid, outside="error")
         except SpectralDataError as err:
