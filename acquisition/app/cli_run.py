@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.app.cli_common import UsageError, claimed_output, progress
-from msflash.acquisition.app.options import add_estimation_options, target_value
+from msflash.acquisition.app.options import TARGET_HELP, add_estimation_options, target_value
 from msflash.acquisition.app.rig_choice import add_rig_options, open_from_args, rig_spec
 from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, led_files_shown
 from msflash.acquisition.errors import CaptureError
@@ -264,9 +264,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=("complementary", "matching"),
         help="flash to re-capture with (both are synthesised)",
     )
-    run.add_argument(
-        "--target", default="D65", type=target_value, help="complementary target illuminant (name or CSV file)"
-    )
+    run.add_argument("--target", default="D65", type=target_value, help=TARGET_HELP)
     add_estimation_options(run)
     run.add_argument(
         "--export",

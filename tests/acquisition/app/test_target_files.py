@@ -247,3 +247,28 @@ def test_a_file_neither_table_nor_export_is_refused_saying_what_was_expected(
         "line 1: header is 'measured the lamp on Tuesday'; expected 'wavelength_nm,<name>,…'; as an export, 0 data "
         "lines; expected at least 3 lines of 'wavelength_nm, value'"
     ]
+
+
+def test_run_on_the_sim_rig_solves_the_tables_flash_from_an_export_and_says_its_warning_once(
+    ascending: tuple[Path, dict], tmp_path: Path
+) -> None:
+    """``msflash run --target``: the target is read when the line is parsed, then solved with twice (the decision
+    before the flash frame, both flashes after it), quietly."""
+    table, _ = ascending
+    wavelengths, values = _light()
+    export = tmp_path / "lamp.txt"
+    export.write_bytes(encoded(export_text("avasoft", wavelengths[::-1], values[::-1], 0.01, 4, name="lamp")))
+    solved = []
+    for target, out in ((table, tmp_path / "table"), (export, tmp_path / "export")):
+        status, _, err = _run(
+            ["run", "--rig", "sim", "--seed", "0", "--mode", "complementary"]
+            + ["--target", str(target), "--out", str(out)]
+        )
+        assert status == 0, err
+        solved.append(json.loads((out / "flash-complementary.json").read_text()))
+        said = [line for line in err.splitlines() if "raw spectrometer counts" in line]
+        assert len(said) == (target == export), err
+    for payload in solved:
+        for key in ("target", "sequence"):
+            payload.pop(key)
+    assert solved[1] == solved[0]
