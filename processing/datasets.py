@@ -161,11 +161,12 @@ def load_spectra_csv(
     Raises
     ------
     SpectralDataError
-        On a missing or unreadable file (:class:`NotATableError` for text that is not UTF-8 or a first line
-        that is no table header: it may be another kind of file, such as a spectrometer export), one that is not a regular file (FIFO, device,
-        directory, symlink loop) or is above 16 MiB (checked before reading), a bad header, a ragged row, a non-number,
-        wavelengths that rise and fall, a non-uniform grid or (with
-        ``nan="error"``) a missing value; the message names the file, line and column.
+        On a missing or unreadable file, one that is not a regular file (FIFO, device, directory,
+        symlink loop) or is above 16 MiB (checked before reading), a bad header, a ragged row, a
+        non-number, wavelengths that rise and fall or are not nanometres, a non-uniform grid or
+        (with ``nan="error"``) a missing value; the message names the file, line and column.
+        :class:`NotATableError` (a ``SpectralDataError``) for text that is not UTF-8 or a first
+        line that is no table header: another kind of file, such as a spectrometer export.
     """
     path = Path(path)
     where = shown_path(path)

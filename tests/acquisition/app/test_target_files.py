@@ -272,3 +272,27 @@ def test_run_on_the_sim_rig_solves_the_tables_flash_from_an_export_and_says_its_
         for key in ("target", "sequence"):
             payload.pop(key)
     assert solved[1] == solved[0]
+
+
+def test_the_python_api_says_a_target_files_warning_once(base_sequence: Path, tmp_path: Path) -> None:
+    """``msflash.solve_flash(…, target=FILE)`` reads the file as ``--target`` does: its warning said, once per
+    version of the file (the solver's own reading is quiet)."""
+    import warnings
+
+    import msflash
+    from msflash.processing.errors import SpectralDataWarning
+
+    wavelengths, values = _light()
+    text = _table(wavelengths, values).splitlines()
+    text.insert(51, f"{wavelengths[49]:g},{values[49] + 40:g}")
+    path = tmp_path / "api-rounded.csv"
+    path.write_text("\n".join(text) + "\n")
+    sequence = msflash.read_sequence(base_sequence)
+    estimate = msflash.estimate_ambient(sequence)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        first = msflash.solve_flash(sequence, estimate, "complementary", str(path))
+        again = msflash.solve_flash(sequence, estimate, "complementary", path)
+    averaged = [w for w in said if issubclass(w.category, SpectralDataWarning)]
+    assert len(averaged) == 1 and f"{path}: 2 readings at {wavelengths[49]:g} nm" in str(averaged[0].message)
+    np.testing.assert_array_equal(first.flash_weights, again.flash_weights)
