@@ -307,7 +307,7 @@ def _value_column(data: _Rows, table: np.ndarray, value_column: int) -> tuple[st
         width = data.width
         if value_column == 1 and width is not None and width > dark_column and np.any(table[:, dark_column] != 0):
             metadata["dark_values"] = table[:, dark_column].copy()  # AvaSoft stored a dark with the sample
-    elif data.header:
+    elif data.header and not data.header[-1].startswith(">>>>>"):  # OceanView's begin marker names no column
         # "Wavelength (nm)\tIrradiance": names may hold spaces when another separator is used.
         header_cells = _header_cells(data.header[-1])
         if data.width is not None and len(header_cells) >= data.width:

@@ -233,6 +233,8 @@ def test_a_hostile_target_is_refused_in_one_line_naming_file_and_line(
     errors = err.splitlines()
     assert len(errors) == 1 and errors[0].startswith("msflash: error: argument --target: "), err
     assert f"{path}:{line}: " in errors[0] and "expected" in errors[0], errors[0]
+    if case == "negative":  # OceanView's ">>>>>Begin Spectral Data<<<<<" names no column (it read as 'Spectral')
+        assert f"column '{'lamp' if kind == 'table' else 'value'}' at 359.5 nm is -10060; " in errors[0], errors[0]
 
 
 def test_a_file_neither_table_nor_export_is_refused_saying_what_was_expected(
