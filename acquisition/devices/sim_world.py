@@ -11,6 +11,7 @@ says which range the file covers and which is needed. Every problem is a one-lin
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 from typing import Literal
 
@@ -101,12 +102,30 @@ def read_led_files(spec: LedFiles, grid: WavelengthGrid = DEFAULT_GRID) -> Spect
             return read_spectra_file(paths[0], "spd")
         except _NotATable:
             pass  # a spectrometer export of one LED
+    for path in paths if len(paths) > 1 else ():
+        columns = _table_columns(path)
+        if columns > 1:
+            raise UsageError(
+                f"--led-spectra {shown_path(path)}: a table of {columns} LEDs among {len(paths)} files; expected that "
+                "table alone, or one spectrometer export (or one-LED table) per channel"
+            )
     from msflash.calibration.light_files import read_led_export_files
 
     try:
         return read_led_export_files(paths, grid, progress)
     except (SpectralDataError, OSError) as err:
         raise UsageError(str(err)) from err
+
+
+def _table_columns(path: str | Path) -> int:
+    """How many spectra ``path`` holds if it is a spectral table (0 if it is not one, or a bad one: its reader says
+    why)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # read again, and said, by the export reader
+        try:
+            return datasets.load_spectra_csv(path, kind="spd", unit="energy").count
+        except (SpectralDataError, OSError):
+            return 0
 
 
 def read_responsivity_file(path: str | Path) -> Spectra:

@@ -81,3 +81,16 @@ def test_an_export_among_led_files_that_is_refused_names_its_file_and_line(tmp_p
     assert len(errors) == 1 and errors[0].startswith(
         f"msflash: error: {files[1]}:{first + 100}: column 2 is 'NaN'; expected a finite number"
     ), err
+
+
+def test_a_table_of_several_leds_among_led_files_is_refused_saying_what_is_expected(tmp_path: Path) -> None:
+    files, _, _ = _write_booth(tmp_path, "oceanview", dark=False, seed=14)
+    table = tmp_path / "leds.csv"
+    table.write_text("wavelength_nm,a,b\n400,1,0\n500,0,1\n600,0,0\n")
+    status, _, err = run(["capture", "--rig", "sim", *_options([*files[:2], str(table)]), "--out", str(tmp_path / "c")])
+    assert status == 2
+    assert err.splitlines() == [
+        f"msflash: error: --led-spectra {table}: a table of 2 LEDs among 3 files; expected that table alone, or one "
+        "spectrometer export (or one-LED table) per channel"
+    ]
+    assert not (tmp_path / "c").exists()
