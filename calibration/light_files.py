@@ -137,21 +137,12 @@ def read_led_export_files(paths: Sequence[str | Path], grid: WavelengthGrid, rep
     SpectralDataError
         One line naming the file (and line): what ``calibrate leds`` refuses.
     """
-
-    def said(line: str) -> None:  # the dark's options are calibrate's: say where they are
-        report(
-            line
-            + (
-                " (options of 'msflash calibrate leds', whose --out DIR --calibration takes)"
-                if "--dark" in line
-                else ""
-            )
-        )
-
     try:
-        exports = read_led_exports(paths, grid, ExportOptions(), said, relative=True)
+        exports = read_led_exports(
+            paths, grid, ExportOptions(), lambda line: report(_calibrate_hint(line)), relative=True
+        )
     except CalibrationError as err:
-        raise SpectralDataError(str(err)) from None
+        raise SpectralDataError(_calibrate_hint(str(err))) from None
     if exports.unit == "counts":
         shown = ", ".join(shown_path(p) for p in paths[:3]) + (" …" if len(paths) > 3 else "")
         report(
@@ -162,3 +153,10 @@ def read_led_export_files(paths: Sequence[str | Path], grid: WavelengthGrid, rep
     return exports.spectra.replace(
         metadata={**exports.spectra.metadata, "read_as": "spectrometer exports", "leds": exports.section}
     )
+
+
+def _calibrate_hint(line: str) -> str:
+    """``line`` with where its ``--dark``/``--no-dark`` are: options of ``calibrate leds``, not of the rig's commands."""
+    if "--dark" not in line:
+        return line
+    return f"{line} (options of 'msflash calibrate leds FILES --out DIR', whose DIR --calibration takes)"
