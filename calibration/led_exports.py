@@ -6,6 +6,7 @@ Public objects
 - :class:`LedExports`, :func:`read_led_exports`: the exports read, their baselines removed, made
   counts per second, and energy when a response is given; with what the calibration records.
 - :func:`read_spectrometer_response`: the spectrometer's response (irradiance calibration) on a grid.
+- :func:`resolved_export`: an export's unit and integration time, as its header states them or the options say.
 
 Units
 -----
@@ -76,8 +77,8 @@ class LedExports:
     """What the calibration's ``leds`` section records about the exports."""
 
 
-def _resolved(measurement: SpectrometerMeasurement, options: ExportOptions) -> SpectrometerMeasurement:
-    """The export with its unit and integration time settled (see the module notes)."""
+def resolved_export(measurement: SpectrometerMeasurement, options: ExportOptions) -> SpectrometerMeasurement:
+    """The export with its unit (``settings.value_unit``) and integration time settled (see the module notes)."""
     settings = measurement.settings
     stated = settings.value_unit
     if options.unit is not None and stated is not None and options.unit != stated:
@@ -184,20 +185,22 @@ def read_led_exports(
     ------
     CalibrationError
         One line naming the file (and line or field): what the reader, the unit and time checks
-        (:func:`_resolved`), the baseline (:func:`calibration.spectrometer_dark.remove_baseline`)
+        (:func:`resolved_export`), the baseline (:func:`calibration.spectrometer_dark.remove_baseline`)
         and the response refuse; exports mixing raw counts and calibrated units; a response given
         for calibrated exports.
     """
     if not files:
         raise CalibrationError("LED spectra: no export given; expected one spectrometer file per LED")
-    darks = [_resolved(read_spectrometer_file(path, "energy", options.column), options) for path in dark_paths(options)]
+    darks = [
+        resolved_export(read_spectrometer_file(path, "energy", options.column), options) for path in dark_paths(options)
+    ]
     if darks and options.no_dark:
         raise CalibrationError(f"--dark {darks[0].source} and --no-dark exclude each other; expected one")
     _check_darks(darks)
     measurements = []
     unstated = []
     for file in files:
-        measurement = _resolved(read_spectrometer_file(file, "energy", options.column), options)
+        measurement = resolved_export(read_spectrometer_file(file, "energy", options.column), options)
         if options.unit is None and measurement.settings.instrument == "plain":
             unstated.append(measurement.source)
         measurements.append(remove_baseline(measurement, _dark_for(measurement, darks), options.no_dark, report))

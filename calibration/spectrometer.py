@@ -171,7 +171,7 @@ def parse_spectrometer_text(
     wavelengths = table[:, 0]
     value_column = data.column if data.column is not None else 1
     readings = table[:, value_column]
-    _check_readings(wavelengths, readings, source, data.lines)
+    _check_readings(readings, source)
     column_name, column_units, metadata = _value_column(data, table, value_column)
     if order_notes:
         metadata["order"] = order_notes
@@ -246,8 +246,10 @@ def _read_rows(text: str, source: str, column: int | None) -> _Rows:
         data.rows.append(values)
         data.lines.append(number)
     if len(data.rows) < 3:
+        first = f":{data.lines[0]}" if data.lines else ""  # the line of a lone data row, for the user to look at
         raise CalibrationError(
-            f"{source}: {len(data.rows)} data lines; expected at least 3 lines of 'wavelength_nm, value'"
+            f"{source}{first}: {len(data.rows)} data line{'' if len(data.rows) == 1 else 's'}; expected at least 3 lines of "
+            "'wavelength_nm, value'"
         )
     if data.width == 1:  # one value a line: the grid from the header, or refused naming what is expected
         wavelengths = header_wavelengths(data.header_lines, len(data.rows), source, data.lines[0])
@@ -281,14 +283,9 @@ def _first_data_line(data: _Rows, width: int, line: str, where: str) -> None:
         )
 
 
-def _check_readings(wavelengths: np.ndarray, readings: np.ndarray, source: str, lines: list[int]) -> None:
-    """Wavelengths (put in increasing order by :func:`in_wavelength_order`) in nanometres; a positive reading of a
-    sensible magnitude."""
-    if wavelengths[0] < 100 or wavelengths[-1] > 3000:
-        raise CalibrationError(
-            f"{source}:{lines[0]}: wavelengths span {wavelengths[0]:g}–{wavelengths[-1]:g}; expected nanometres "
-            "(100–3000)"
-        )
+def _check_readings(readings: np.ndarray, source: str) -> None:
+    """A positive reading of a sensible magnitude (the wavelengths were put in increasing order, in nanometres, by
+    :func:`in_wavelength_order`)."""
     peak = float(np.max(readings))
     if peak <= 0:
         raise CalibrationError(f"{source}: no positive value in the value column; expected a measured emission")
@@ -311,7 +308,7 @@ def _value_column(data: _Rows, table: np.ndarray, value_column: int) -> tuple[st
         width = data.width
         if value_column == 1 and width is not None and width > dark_column and np.any(table[:, dark_column] != 0):
             metadata["dark_values"] = table[:, dark_column].copy()  # AvaSoft stored a dark with the sample
-    elif data.header:
+    elif data.header and not data.header[-1].startswith(">>>>>"):  # OceanView's begin marker names no column
         # "Wavelength (nm)\tIrradiance": names may hold spaces when another separator is used.
         header_cells = _header_cells(data.header[-1])
         if data.width is not None and len(header_cells) >= data.width:

@@ -1,19 +1,11 @@
 """A spectrometer export's rows put in wavelength order, and the wavelengths of a one-column export.
 
-What instruments write, and what is read (``docs/calibration.md``, *Row order, repeats and one column*):
+What instruments write, and what is read (``docs/calibration.md``, *Row order, repeats and one column*); the
+row rules are :mod:`processing.spectral_rows`, which every reader of a user's spectral file applies:
 
-- **Descending wavelengths.** Scanning instruments (UV-Vis spectrophotometers, monochromator scans) step from long
-  to short wavelengths by default, and their exports list the samples in that order. Read: the rows reversed, each
-  value kept with its wavelength (the line numbers too, for messages).
-- **A row written twice.** A writer repeating a line (at a segment or page boundary, a file appended by hand) gives
-  exact duplicate rows. Read: collapsed to one, silently — nothing is lost or changed.
-- **One wavelength, several readings.** A high-resolution CCD whose pixel wavelengths are exported rounded (one
-  decimal, or whole nanometres, by the program's or a spreadsheet's number format) gives adjacent rows with one
-  printed wavelength and different values; a scanning instrument's grating or detector change gives two readings at
-  the change-over wavelength. Both are readings of that wavelength: averaged (every column), with a warning naming
-  the lines (:class:`calibration.errors.CalibrationWarning`).
-- **Wavelengths that turn back** (rising, then falling, or a second scan appended) are refused, naming both lines:
-  no order of the rows is the instrument's.
+- **Descending wavelengths** reversed, **a row written twice** read once, **one wavelength with several readings**
+  averaged with a warning naming the lines (here :class:`calibration.errors.CalibrationWarning`), **wavelengths that
+  turn back** refused naming both lines: :mod:`processing.spectral_rows` says why each is what instruments write.
 - **One column.** A value per line with the grid in the header — ``Start wavelength: 380`` and ``Step: 1`` (or the
   last wavelength: ``End: 780``), as some instruments and the older plain formats write it — is read on that grid;
   one column without them is refused, naming the file and what is expected.
@@ -22,12 +14,13 @@ What instruments write, and what is read (``docs/calibration.md``, *Row order, r
 from __future__ import annotations
 
 import re
-import warnings
 
 import numpy as np
 
 from msflash.calibration.errors import CalibrationError, CalibrationWarning
 from msflash.calibration.spectrometer_header import header_number
+from msflash.processing import spectral_rows
+from msflash.processing.errors import SpectralDataError
 
 _KEY = re.compile(r"^\s*(?P<key>[A-Za-zλ][^:;=,\t]*?)\s*[:;=,\t]\s*(?P<value>[^:;=\t]*?)\s*(?:nm)?\s*$")
 _START = re.compile(r"^(?:start|starting|first|begin)(?:wavelength|wl|lambda|λ)?$")
@@ -39,7 +32,8 @@ def in_wavelength_order(
     table: np.ndarray, lines: list[int], source: str
 ) -> tuple[np.ndarray, list[int], tuple[str, ...]]:
     """``table``'s rows (wavelength first) in ascending wavelength order, one row per wavelength; the line of each
-    row, and what was done (see the module notes).
+    row, and what was done: the one set of row rules (:func:`processing.spectral_rows.in_wavelength_order`), which
+    the spectral table reader applies too, with the calibration package's error and warning.
 
     Examples
     --------
@@ -52,52 +46,10 @@ def in_wavelength_order(
     CalibrationError
         Wavelengths that rise and fall, naming the two lines.
     """
-    notes: list[str] = []
-    steps = np.diff(table[:, 0])
-    if steps.size and np.all(steps <= 0) and np.any(steps < 0):
-        table, lines = table[::-1], lines[::-1]
-        notes.append("descending wavelengths: read in ascending order")
-        steps = -steps[::-1]
-    if np.any(steps < 0):
-        k = int(np.argmax(steps < 0))
-        raise CalibrationError(
-            f"{source}:{lines[k + 1]}: wavelength {table[k + 1, 0]:g} nm after {table[k, 0]:g} nm (line {lines[k]}); "
-            "expected the wavelengths in one order, ascending or descending (two scans in one file?)"
-        )
-    if not np.any(steps == 0):
-        return table, list(lines), tuple(notes)
-    return _one_row_per_wavelength(table, list(lines), source, notes)
-
-
-def _one_row_per_wavelength(
-    table: np.ndarray, lines: list[int], source: str, notes: list[str]
-) -> tuple[np.ndarray, list[int], tuple[str, ...]]:
-    """Rows sharing a wavelength (adjacent, the table in order) as one: repeats collapsed, readings averaged."""
-    starts = np.flatnonzero(np.r_[True, np.diff(table[:, 0]) != 0])
-    ends = np.r_[starts[1:], len(table)]
-    rows, kept, averaged = [], [], []
-    for start, end in zip(starts, ends, strict=True):
-        group = table[start:end]
-        rows.append(group.mean(axis=0))
-        first, *again = sorted(lines[start:end])  # in the file's order, whichever way the rows were turned
-        kept.append(first)
-        if not again:
-            continue
-        if np.all(group == group[0]):
-            notes.append(f"line {', '.join(map(str, again))} repeats line {first}: read once")
-        else:
-            averaged.append((start, end))
-    if averaged:
-        start, end = averaged[0]
-        readings = ", ".join(f"{value:g} (line {lines[i]})" for i, value in zip(range(start, end), table[start:end, 1]))
-        more = f"; {len(averaged) - 1} more wavelengths read more than once, averaged too" if len(averaged) > 1 else ""
-        message = (
-            f"{source}: {end - start} readings at {table[start, 0]:g} nm, {readings}: averaged{more} (wavelengths "
-            "rounded in the export, or a scan's change-over point)"
-        )
-        notes.append(message)
-        warnings.warn(message, CalibrationWarning, stacklevel=4)
-    return np.array(rows), kept, tuple(notes)
+    try:  # the averaged-readings warning points at the export's reader (read_spectrometer_file)
+        return spectral_rows.in_wavelength_order(table, lines, source, CalibrationWarning, stacklevel=3)
+    except SpectralDataError as err:
+        raise CalibrationError(str(err)) from None
 
 
 def header_wavelengths(header_lines: list[tuple[int, str]], count: int, source: str, first_line: int) -> np.ndarray:

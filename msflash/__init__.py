@@ -141,8 +141,9 @@ def solve_flash(
     mode
         ``"matching"`` or ``"complementary"``.
     target
-        For ``complementary``: an illuminant name (D65, A, FL2, …) or a CSV file
-        ``wavelength_nm, value`` in energy units.
+        For ``complementary``: an illuminant name (D65, A, FL2, …), or a file: a table
+        ``wavelength_nm, value`` in energy units or a spectrometer export of the light (its warnings —
+        rows averaged, raw counts — said once per version of the file).
 
     Returns
     -------
@@ -155,7 +156,10 @@ def solve_flash(
     if not isinstance(target, str | os.PathLike):
         _refuse("solve_flash", "target", target, "an illuminant name (D65, A, …) or the path of a CSV file")
     from msflash.acquisition.session.analysis import solve_sequence_flash
+    from msflash.acquisition.session.sequence_spectra import is_target_file, target_file_spectrum
 
+    if mode == "complementary" and is_target_file(os.fspath(target)):
+        target_file_spectrum(os.fspath(target))  # read as the command line reads --target: its warnings said here
     return solve_sequence_flash(sequence, mode, estimate.ambient_weights, target)
 
 

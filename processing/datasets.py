@@ -47,7 +47,8 @@ from msflash.processing.spectra import (
     require_same_grid,
     tiny_columns,
 )
-from msflash.processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_text, shown_path
+from msflash.processing.spectral_rows import in_wavelength_order
+from msflash.processing.user_files import SPECTRAL_TABLE_MAX_BYTES, printable, read_user_bytes, shown_path
 from msflash.processing.user_numbers import plain_number, written_as_number
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
@@ -109,6 +110,14 @@ _JIANG_LICENCE = (
 
 
 # -- the CSV reader ---------------------------------------------------------------------------
+_TABLE = "a spectral table (UTF-8 CSV file)"
+
+
+class NotATableError(SpectralDataError):
+    """A file that does not start as a spectral table: not UTF-8 text, or its first line (after comments) is no
+    ``wavelength_nm,<name>,…`` header. It may be a spectrometer export (:mod:`calibration.light_files` reads both)."""
+
+
 def _cut(cell: str) -> str:
     """A cell quoted in a message: at most 40 characters (a 5000-digit number stays readable)."""
     return cell if len(cell) <= 40 else f"{cell[:37]}... ({len(cell)} characters)"
@@ -126,6 +135,13 @@ def load_spectra_csv(
 
     Lines starting with ``#`` are comments (kept in ``metadata["comments"]``), blank lines are
     skipped, the first other line is the header, and ``nan`` or an empty cell is a missing value.
+    The rows follow the one set of row rules of every user's spectral file
+    (:func:`processing.spectral_rows.in_wavelength_order`): descending wavelengths are read in
+    ascending order, a row written twice is read once, readings of one wavelength are averaged
+    with a :class:`~processing.errors.SpectralDataWarning` naming the file and lines, and
+    wavelengths that turn back are refused naming both lines; ``metadata["row_order"]`` says
+    what was done, ``metadata["lines"]`` the file line of each row read. An ascending table is
+    read as written.
 
     Parameters
     ----------
@@ -145,18 +161,29 @@ def load_spectra_csv(
     Raises
     ------
     SpectralDataError
-        On a missing or unreadable file, one that is not a regular file (FIFO, device,
-        directory, symlink loop) or is above 16 MiB (checked before reading), a bad header, a ragged row, a non-number or (with
-        ``nan="error"``) a missing value; the message names the file, line and column.
+        On a missing or unreadable file, one that is not a regular file (FIFO, device, directory,
+        symlink loop) or is above 16 MiB (checked before reading), a bad header, a ragged row, a
+        non-number, wavelengths that rise and fall or are not nanometres, a non-uniform grid or
+        (with ``nan="error"``) a missing value; the message names the file, line and column.
+        :class:`NotATableError` (a ``SpectralDataError``) for text that is not UTF-8 or a first
+        line that is no table header: another kind of file, such as a spectrometer export.
     """
     path = Path(path)
     where = shown_path(path)
     # The one safe way to open a user's file: regular files only, at most 16 MiB, read with a cap.
     # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is dropped instead of becoming part of the header.
-    text = read_user_text(path, "a spectral table (UTF-8 CSV file)", SPECTRAL_TABLE_MAX_BYTES, encoding="utf-8-sig")
+    data = read_user_bytes(path, _TABLE, SPECTRAL_TABLE_MAX_BYTES)
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:  # UTF-16 or Latin-1: no table, perhaps a spectrometer export
+        raise NotATableError(
+            f"{where}: is not UTF-8 text ({err.reason} at byte {err.start}); expected {_TABLE}"
+        ) from err
 
-    comments, header, rows, missing = _parse_table(text, where, nan)
-    table = np.asarray(rows, dtype=float)
+    comments, header, rows, lines, missing = _parse_table(text, where, nan)
+    # The one set of row rules (descending reversed, repeats once, readings of one wavelength averaged with a
+    # warning, wavelengths that turn back refused): an ascending table comes back as it is.
+    table, row_lines, row_notes = in_wavelength_order(np.asarray(rows, dtype=float), lines, where)
     for column in tiny_columns(table[:, 1:]):
         raise SpectralDataError(
             f"{where}: column '{printable(_cut(header[column + 1]))}' peaks at {np.max(np.abs(table[:, column + 1])):.3g}; "
@@ -168,19 +195,23 @@ def load_spectra_csv(
         raise SpectralDataError(
             f"{where}: {len(spectrum_names)} names given for {table.shape[1] - 1} spectra; expected one per column"
         )
-    metadata: dict = {"path": where, "comments": comments, "header": tuple(header[1:])}
+    metadata: dict = {"path": where, "comments": comments, "header": tuple(header[1:]), "lines": tuple(row_lines)}
     if missing:
         metadata["nan_set_to_zero"] = missing
+    if row_notes:
+        metadata["row_order"] = row_notes
     return Spectra(grid, table[:, 1:], spectrum_names, kind=kind, unit=unit, source=source or where, metadata=metadata)
 
 
 def _parse_table(
     text: str, where: str, nan: Literal["error", "zero"]
-) -> tuple[list[str], list[str], list[list[float]], list[tuple[int, str]]]:
-    """A spectral table's comments, header, number rows and missing cells (line, column) set to 0."""
+) -> tuple[list[str], list[str], list[list[float]], list[int], list[tuple[int, str]]]:
+    """A spectral table's comments, header, number rows, the line of each row and missing cells (line, column) set
+    to 0."""
     comments: list[str] = []
     header: list[str] | None = None
     rows: list[list[float]] = []
+    lines: list[int] = []
     missing: list[tuple[int, str]] = []
     for line_number, raw_line in enumerate(text.splitlines(), start=1):
         line = raw_line.strip()
@@ -192,7 +223,7 @@ def _parse_table(
         cells = [cell.strip() for cell in line.split(",")]
         if header is None:
             if not cells[0].lower().startswith("wavelength") or len(cells) < 2:
-                raise SpectralDataError(
+                raise NotATableError(
                     f"{where}:{line_number}: header is '{printable(line[:60])}'; expected 'wavelength_nm,<name>,…'"
                 )
             header = cells
@@ -203,10 +234,13 @@ def _parse_table(
             )
         row, blanks = _parse_row(cells, header, f"{where}:{line_number}", nan)
         rows.append(row)
+        lines.append(line_number)
         missing += [(line_number, column) for column in blanks]
-    if header is None or len(rows) < 2:
+    if header is None or not rows:
         raise SpectralDataError(f"{where}: no data rows; expected a header and at least two wavelengths")
-    return comments, header, rows, missing
+    if len(rows) < 2:
+        raise SpectralDataError(f"{where}:{lines[0]}: one data row; expected at least two wavelengths")
+    return comments, header, rows, lines, missing
 
 
 def _parse_row(cells: list[str], header: list[str], where: str, nan: str) -> tuple[list[float], list[str]]:

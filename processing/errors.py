@@ -19,5 +19,10 @@ class ProcessingWarning(UserWarning):
     """Base class of the warnings emitted by the processing core."""
 
 
+class SpectralDataWarning(ProcessingWarning):
+    """A user's spectral file is read, but not as written: readings of one wavelength averaged, or values that are
+    not what the file's use assumes (a spectrometer's raw counts taken as a light)."""
+
+
 class TargetUnreachableWarning(ProcessingWarning):
     """The flash cannot bring ambient + flash to the target illuminant within the LED bounds."""

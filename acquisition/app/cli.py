@@ -326,14 +326,14 @@ def _outcome(words: list[str]) -> tuple[int, bool]:
     try:
         words = _take_memory_budget(words)
         parser = build_parser(words)
-        args = parser.parse_args(words)
-        _quiet_libraries(args.verbose)
-        configure_progress(bars=bars_wanted(bool(getattr(args, "json", False))))
-        if not getattr(args, "handler", None):
-            parser.print_help(sys.stderr)
-            return 2, False
         with warnings.catch_warnings():
-            warnings.showwarning = _show_warning
+            warnings.showwarning = _show_warning  # from the parsing on: a --target file's warning is read then
+            args = parser.parse_args(words)
+            _quiet_libraries(args.verbose)
+            configure_progress(bars=bars_wanted(bool(getattr(args, "json", False))))
+            if not getattr(args, "handler", None):
+                parser.print_help(sys.stderr)
+                return 2, False
             status = int(args.handler(args))
         return status, bool(getattr(args, "exit_at_once", False))
     except (KeyboardInterrupt, Terminated) as stop:

@@ -14,7 +14,7 @@ from msflash.acquisition.app.cli_common import (
     progress,
 )
 from msflash.acquisition.app.evaluation import evaluate_sequence, public_result
-from msflash.acquisition.app.options import flash_bounds_option, layout_options, target_value
+from msflash.acquisition.app.options import TARGET_HELP, flash_bounds_option, layout_options, target_value
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.acquisition.sequence.reader import read_sequence
@@ -65,9 +65,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     evaluate.add_argument("sequence", metavar="SEQ", help=SEQUENCE_HELP)
     evaluate.add_argument("--chart", required=True, choices=CHARTS, help="the chart in the scene")
     layout_options(evaluate)
-    evaluate.add_argument(
-        "--target", default="D65", type=target_value, help="complementary target illuminant (name or CSV file)"
-    )
+    evaluate.add_argument("--target", default="D65", type=target_value, help=TARGET_HELP)
     flash_bounds_option(evaluate)
     evaluate.add_argument("--out", default=None, help="output directory (default: evaluation/ beside the sequence)")
     evaluate.add_argument("--json", action="store_true", help="print the results as one JSON object")

@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import print_json, progress
-from msflash.acquisition.app.options import add_estimation_options, target_value
+from msflash.acquisition.app.options import TARGET_HELP, add_estimation_options, target_value
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 
 EXPORT_HELP = "write a sequence as DNG (raw frames), OME-TIFF (all frames), CSV (spectra) or EXR (linear images)"
@@ -78,7 +78,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--target",
         default="D65",
         type=target_value,
-        help="complementary flash target (name or CSV file), for csv and exr",
+        help=f"{TARGET_HELP}; for csv and exr",
     )
     add_estimation_options(export)
     export.add_argument(

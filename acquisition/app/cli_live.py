@@ -13,7 +13,7 @@ import argparse
 from pathlib import Path
 
 from msflash.acquisition.app.cli_common import UsageError, check_folder_can_be_made, progress
-from msflash.acquisition.app.options import target_value
+from msflash.acquisition.app.options import TARGET_HELP, target_value
 from msflash.acquisition.app.rig_choice import add_rig_options, open_from_args, rig_spec
 from msflash.acquisition.session.rig import rig_kind
 from msflash.acquisition.signals import STOPPING_SIGNALS, handlers_kept
@@ -98,8 +98,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--port", dest="tcp_port", type=_port, default=DEFAULT_PORT, help=f"TCP port (default {DEFAULT_PORT}; 0: any)"
     )
     live.add_argument("--runs", default="runs", metavar="DIR", help="folder of the run folders (default runs)")
-    live.add_argument(
-        "--target", default="D65", type=target_value, help="complementary target illuminant (name or CSV file)"
-    )
+    live.add_argument("--target", default="D65", type=target_value, help=TARGET_HELP)
     add_rig_options(live, live=True)
     live.set_defaults(handler=_live)

@@ -10,7 +10,13 @@ from pathlib import Path
 import numpy as np
 
 from msflash.acquisition.app.cli_common import UsageError, print_json, progress
-from msflash.acquisition.app.options import add_estimation_options, add_scheduler_options, target_value, tiles_value
+from msflash.acquisition.app.options import (
+    TARGET_HELP,
+    add_estimation_options,
+    add_scheduler_options,
+    target_value,
+    tiles_value,
+)
 from msflash.acquisition.sequence.locate import ARGUMENT_HELP as SEQUENCE_HELP
 from msflash.acquisition.sequence.locate import locate_sequence
 from msflash.acquisition.sequence.reader import read_sequence
@@ -313,7 +319,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--target",
         default="D65",
         type=target_value,
-        help="complementary target: an illuminant name (D65, A, FL2…) or a CSV file",
+        help=TARGET_HELP,
     )
     flash.add_argument(
         "--bounds",

@@ -30,9 +30,9 @@ from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.app.cli_common import UsageError, claimed_output, progress
-from msflash.acquisition.app.options import add_estimation_options, target_value
+from msflash.acquisition.app.options import TARGET_HELP, add_estimation_options, target_value
 from msflash.acquisition.app.rig_choice import add_rig_options, open_from_args, rig_spec
-from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA
+from msflash.acquisition.devices.sim_world import SIM_DEFAULT_CAMERA, led_files_shown
 from msflash.acquisition.errors import CaptureError
 from msflash.acquisition.progress import count
 from msflash.acquisition.sequence.async_writer import AsyncSequenceWriter
@@ -142,7 +142,7 @@ def _opening(args: argparse.Namespace, spec: str) -> str:
     """``opening rig 'SPEC'`` and, for a simulated world, what it is (printable: a file name may hold any bytes)."""
     world = (
         f" (ambient {args.ambient}, scene {args.scene}, camera {args.sim_camera or SIM_DEFAULT_CAMERA}, LEDs "
-        f"{args.led_spectra or f'paper {args.leds or 7}'})"
+        f"{led_files_shown(args.led_spectra) if args.led_spectra else f'paper {args.leds or 7}'})"
     )
     return printable(f"opening rig '{spec}'" + (world if spec in ("sim", "aravis-fake") else ""))
 
@@ -264,9 +264,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=("complementary", "matching"),
         help="flash to re-capture with (both are synthesised)",
     )
-    run.add_argument(
-        "--target", default="D65", type=target_value, help="complementary target illuminant (name or CSV file)"
-    )
+    run.add_argument("--target", default="D65", type=target_value, help=TARGET_HELP)
     add_estimation_options(run)
     run.add_argument(
         "--export",

@@ -13,9 +13,15 @@ from msflash.acquisition.session.rig import SimWorldOptions
 from msflash.processing.ambient import AMBIENT_METHODS
 from msflash.processing.user_numbers import plain_whole_number
 
+TARGET_HELP = (
+    "complementary target illuminant: a name (D65, A, FL2…), or a file: a table wavelength_nm,value or a "
+    "spectrometer export of the light"
+)
+"""The help of every ``--target`` (what :func:`target_value` takes)."""
+
 
 def target_value(text: str) -> str:
-    """argparse type of ``--target``: a CSV file or an illuminant name, both checked now (a file's coverage of the
+    """argparse type of ``--target``: a file (a table or a spectrometer export) or an illuminant name, both checked now (a file's coverage of the
     sequence's grid when it is used).
 
     A mistyped name is refused before a rig opens or a frame is captured, naming ``--target`` and the
@@ -37,7 +43,9 @@ def target_value(text: str) -> str:
     try:
         datasets.illuminant(text, DEFAULT_GRID, outside="zero")
     except SpectralDataError as err:
-        raise argparse.ArgumentTypeError(f"{err}; or a CSV file (wavelength_nm, value)") from None
+        raise argparse.ArgumentTypeError(
+            f"{err}; or a file: a table (wavelength_nm, value) or a spectrometer export of the light"
+        ) from None
     return text
 
 

@@ -14,6 +14,7 @@ import argparse
 import dataclasses
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -325,11 +326,31 @@ def _add_booth_options(parser: argparse.ArgumentParser, sync: bool = True) -> No
     parser.add_argument(
         "--led-spectra",
         default=None,
-        metavar="FILE.csv",
-        help="LED spectra: first column wavelength_nm, one column per booth channel at full drive "
-        "(energy); hw: the real booth's channels; sim: the emulated booth gets these channels "
-        "(names and peaks from the columns; the file must cover 400-700 nm)",
+        action=_LedFilesAction,
+        metavar="FILE",
+        help="LED spectra: a table (first column wavelength_nm, one column per booth channel at full drive, "
+        "energy), or spectrometer exports of the LEDs, the option once per channel in channel order (read as "
+        "'calibrate leds' reads them); hw: the real booth's channels; sim: the emulated booth gets these channels "
+        "(names and peaks from the columns or file names; a table must cover 400-700 nm)",
     )
+
+
+class _LedFilesAction(argparse.Action):
+    """``--led-spectra``: given once, its file (a string, as every other path option); given again, the files in
+    channel order (a tuple: one spectrometer export per LED)."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        given = getattr(namespace, self.dest, None)
+        if given is None:
+            setattr(namespace, self.dest, values)
+        else:
+            setattr(namespace, self.dest, (*((given,) if isinstance(given, str) else given), values))
 
 
 def _add_world_options(parser: argparse.ArgumentParser, booth_port_help: str | None = None) -> None:

@@ -11,6 +11,7 @@ says which range the file covers and which is needed. Every problem is a one-lin
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 from typing import Literal
 
@@ -45,6 +46,10 @@ def is_file(spec: str) -> bool:
     return path.suffix.lower() in _TABLE_SUFFIXES or (os.path.lexists(path) and not path.is_dir())
 
 
+class _NotATable(UsageError):
+    """:func:`read_spectra_file` of a file that does not start as a table (it may be a spectrometer export)."""
+
+
 def read_spectra_file(path: str | Path, kind: SpectralKind) -> Spectra:
     """A spectral table (energy units, reflectances unitless; :func:`processing.datasets.load_spectra_csv`)
     on its own grid; in a light or responsivity table, negative noise is clipped to 0 (a note on
@@ -61,11 +66,66 @@ def read_spectra_file(path: str | Path, kind: SpectralKind) -> Spectra:
             return table
         # Measured lights and responsivities: negative noise clipped, as every reader of measured spectra does.
         values, clipped = clip_negative_noise(table.wavelengths_nm, table.values, table.names, shown_path(Path(path)))
+    except datasets.NotATableError as err:
+        raise _NotATable(str(err)) from err
     except (SpectralDataError, OSError) as err:
         raise UsageError(str(err)) from err
     for item in clipped:
         progress(item.note(shown_path(Path(path))))
     return table.replace(values=values) if clipped else table
+
+
+LedFiles = str | Path | tuple[str | Path, ...]
+"""``--led-spectra``: one table (a column per channel), or spectrometer exports (one per channel, in channel order)."""
+
+
+def led_files_shown(spec: LedFiles) -> str:
+    """``--led-spectra``'s files as a message names them (several joined by commas)."""
+    paths = (spec,) if isinstance(spec, str | Path) else spec
+    return ", ".join(shown_path(path) for path in paths)
+
+
+def read_led_files(spec: LedFiles, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """The LED spectra ``--led-spectra`` names: a table on its own grid (:func:`read_spectra_file`), or the
+    spectrometer exports of the LEDs, one per channel, read onto ``grid`` as ``msflash calibrate leds`` reads them
+    (:func:`calibration.light_files.read_led_export_files`; what it notes and warns, on stderr).
+
+    Raises
+    ------
+    UsageError
+        One line naming the file (and line): a bad table, what ``calibrate leds`` refuses in an export, several
+        files of which one is a table.
+    """
+    paths = (spec,) if isinstance(spec, str | Path) else tuple(spec)
+    if len(paths) == 1:
+        try:
+            return read_spectra_file(paths[0], "spd")
+        except _NotATable:
+            pass  # a spectrometer export of one LED
+    for path in paths if len(paths) > 1 else ():
+        columns = _table_columns(path)
+        if columns > 1:
+            raise UsageError(
+                f"--led-spectra {shown_path(path)}: a table of {columns} LEDs among {len(paths)} files; expected that "
+                "table alone, or one spectrometer export (or one-LED table) per channel"
+            )
+    from msflash.calibration.light_files import read_led_export_files
+
+    try:
+        return read_led_export_files(paths, grid, progress)
+    except (SpectralDataError, OSError) as err:
+        raise UsageError(str(err)) from err
+
+
+def _table_columns(path: str | Path) -> int:
+    """How many spectra ``path`` holds if it is a spectral table (0 if it is not one, or a bad one: its reader says
+    why)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # read again, and said, by the export reader
+        try:
+            return datasets.load_spectra_csv(path, kind="spd", unit="energy").count
+        except (SpectralDataError, OSError):
+            return 0
 
 
 def read_responsivity_file(path: str | Path) -> Spectra:
@@ -127,8 +187,9 @@ def sim_camera(spec: str | None, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra
         raise UsageError(f"--sim-camera: {err}") from err
 
 
-def sim_leds(led_spectra: str | Path | None, n_leds: int | None, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
-    """The sim booth's LEDs: ``--led-spectra FILE.csv`` (one column per channel) or the paper's ``--leds N``
+def sim_leds(led_spectra: LedFiles | None, n_leds: int | None, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
+    """The sim booth's LEDs: ``--led-spectra FILE.csv`` (one column per channel, or one spectrometer export per
+    channel: :func:`read_led_files`) or the paper's ``--leds N``
     (3–7; neither: the paper's 7 LEDs). What the emulator can serve is checked when the rig opens.
 
     Raises
@@ -137,10 +198,12 @@ def sim_leds(led_spectra: str | Path | None, n_leds: int | None, grid: Wavelengt
         Both given, a count the paper does not define, or a bad or too narrow file.
     """
     if led_spectra is not None and n_leds is not None:
-        raise UsageError(f"--leds {n_leds} and --led-spectra {led_spectra}: two LED sets; expected one of them")
+        raise UsageError(
+            f"--leds {n_leds} and --led-spectra {led_files_shown(led_spectra)}: two LED sets; expected one of them"
+        )
     if led_spectra is not None:
-        where = f"--led-spectra {led_spectra}"
-        leds = on_grid(read_spectra_file(led_spectra, "spd"), where, grid)
+        where = f"--led-spectra {led_files_shown(led_spectra)}"
+        leds = on_grid(read_led_files(led_spectra, grid), where, grid)
         duplicated = sorted({n for n in leds.names if leds.names.count(n) > 1})
         if duplicated:
             raise UsageError(

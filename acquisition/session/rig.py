@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
+from msflash.acquisition.devices.sim_world import LedFiles
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.session.rigs.aravis_fake import open_aravis_fake_rig
 from msflash.acquisition.session.rigs.hardware import open_hw_rig
@@ -60,8 +61,8 @@ class SimWorldOptions:
     """``--sim-camera``: the simulated camera's responsivities (None: the default camera)."""
     n_leds: int | None = None
     """``--leds``: the paper's subset of this many LEDs (None and no ``led_spectra``: the paper's 7)."""
-    led_spectra: str | Path | Spectra | None = None
-    """``--led-spectra``: the booth's LEDs, one column per channel."""
+    led_spectra: LedFiles | Spectra | None = None
+    """``--led-spectra``: the booth's LEDs, one column per channel (or one spectrometer export per channel)."""
     flash_power: float | None = None
     """``--flash-power``: every LED at full drive gives at least this many times the ambient's signal."""
     flicker: MainsFlicker | None = None
@@ -119,7 +120,7 @@ class HwRigOptions:
     """``--port``: the booth's serial port; None discovers it."""
     interfaces: str = "usb3"
     calibration: str | Path | None = None
-    led_spectra: str | Path | None = None
+    led_spectra: LedFiles | None = None
     responsivity: str | Path | None = None
     log_serial: str | Path | None = None
     sync: str = "host"

@@ -8,13 +8,16 @@ complementary flash's target illuminant on the sequence's grid (:func:`target_il
 
 from __future__ import annotations
 
+import functools
 import os
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from msflash.acquisition.errors import RecordingError
+from msflash.acquisition.progress import progress
 from msflash.acquisition.sequence.format import Sequence
 from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
@@ -138,31 +141,79 @@ def is_target_file(target: str) -> bool:
     return Path(target).suffix.lower() in (".csv", ".txt") or os.path.lexists(target)
 
 
-def target_file_spectrum(target: str) -> Spectra:
+VISIBLE_TO_CAMERAS_NM = (300.0, 1100.0)
+"""Where a silicon camera sees: a target light with no power in this range cannot be matched by any flash."""
+
+
+def target_file_spectrum(target: str, say_warnings: bool = True) -> Spectra:
     """The one spectrum of a ``--target`` file, its negative noise clipped, as read (energy, the file's grid).
 
-    Needs no sequence, so ``--target`` is read when the command line is parsed: a missing, empty or dark file (or
-    one of several spectra) is refused before a rig opens, not after the frames were metered and captured.
+    The file is a spectral table ``wavelength_nm,value`` or a spectrometer export of the light
+    (:func:`calibration.light_files.read_measured_light`: one set of row rules for both). Needs no sequence, so
+    ``--target`` is read when the command line is parsed: a missing, empty or dark file (or one of several spectra)
+    is refused before a rig opens, not after the frames were metered and captured. A file is read once per version
+    (path, size, modification time): reading it again when the flash is solved gives the same spectrum without
+    saying its warnings (averaged rows, raw counts) a second time. ``say_warnings=False`` never says them: a reading
+    after the one that did (:func:`target_illuminant`, once per sequence, perhaps in a worker process).
 
     Raises
     ------
     RecordingError
-        Missing, more than one spectrum, negative beyond noise, or no light; the table reader's own errors.
+        Missing, more than one spectrum, negative beyond noise, or no light between 300 and 1100 nm; the readers'
+        own errors (:class:`~processing.errors.SpectralDataError`), naming the file and line.
     """
     path = Path(target)
     if not os.path.lexists(path):
         raise RecordingError(f"{target}: target illuminant file not found; expected a CSV file or a name like D65")
-    spectra = datasets.load_spectra_csv(path, kind="spd", unit="energy")
-    shown = shown_path(path)
+    try:
+        found = os.stat(path)
+    except OSError:  # a symlink loop, a dangling link: the reader refuses it by what it is
+        return _read_target(target, None, say_warnings)
+    return _read_target(target, (found.st_dev, found.st_ino, found.st_size, found.st_mtime_ns), say_warnings)
+
+
+@functools.lru_cache(maxsize=16)
+def _read_target(target: str, version: tuple[int, ...] | None, say_warnings: bool) -> Spectra:
+    """:func:`target_file_spectrum` of one version of the file (``version`` keys the cache only)."""
+    from msflash.calibration.light_files import read_measured_light
+
+    path = Path(target)
+    with warnings.catch_warnings(record=True) as said:  # said once the file is taken, not before a refusal
+        warnings.simplefilter("always")
+        light = read_measured_light(path, report=progress if say_warnings else _quiet)
+        spectra = _checked_target(light, shown_path(path))
+    for warning in said if say_warnings else ():
+        warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
+    spectra.values.setflags(write=False)  # one array for every reading of this version of the file
+    return spectra
+
+
+def _quiet(line: str) -> None:
+    """A report that says nothing (a target file read again)."""
+
+
+def _checked_target(spectra: Spectra, shown: str) -> Spectra:
+    """A target file's spectra with negative noise clipped, refused if not one light a camera sees."""
     if spectra.count != 1:  # its first column was taken: another file's numbers, silently
         raise RecordingError(
             f"--target {shown}: {spectra.count} spectra ({printable(', '.join(spectra.names))[:120]}); expected one "
             "target illuminant (wavelength_nm, value) — an exported spectra.csv holds several: keep the column meant"
         )
     # Negative noise clipped to 0 as every measured spectrum's is; beyond it, and no light at all, refused.
-    values, _ = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, f"--target {shown}")
+    lines = spectra.metadata.get("lines") or None
+    values, _ = clip_negative_noise(spectra.wavelengths_nm, spectra.values, spectra.names, f"--target {shown}", lines)
     if not values.max() > 0:
         raise RecordingError(f"--target {shown}: no light; expected a spectrum with some positive values")
+    low, high = VISIBLE_TO_CAMERAS_NM
+    seen = (spectra.wavelengths_nm >= low) & (spectra.wavelengths_nm <= high)
+    if not np.any(values[seen] > 0):
+        lit = np.flatnonzero(values[:, 0] > 0)
+        first = f":{lines[lit[0]]}" if lines else ""
+        raise RecordingError(
+            f"--target {shown}{first}: light only at {spectra.wavelengths_nm[lit[0]]:g}–"
+            f"{spectra.wavelengths_nm[lit[-1]]:g} nm; expected some light between {low:g} and {high:g} nm, where a "
+            "camera sees (wavelengths in nanometres?)"
+        )
     return spectra.replace(values=values)
 
 
@@ -170,10 +221,11 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
     """The complementary target ``i_d`` in photons on the sequence's grid: a name or a CSV file.
 
     Names are those of :func:`processing.datasets.illuminant` (D65, A, FL2, …); a file is a
-    two-column CSV ``wavelength_nm, value`` in energy units.
+    two-column CSV ``wavelength_nm, value`` in energy units, or a spectrometer export of the light
+    (:func:`target_file_spectrum`, which says the file's warnings: this reading, once per sequence, does not).
     """
     if is_target_file(target):
-        spectra = target_file_spectrum(target)
+        spectra = target_file_spectrum(target, say_warnings=False)  # said when --target was read (target_value)
         try:
             resampled = spectra.resample(sequence.grid, outside="error")
         except SpectralDataError as err:

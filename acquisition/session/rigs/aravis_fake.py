@@ -16,6 +16,7 @@ from typing import Any
 
 from msflash.acquisition.devices.aravis.pixel_layouts import camera_pixel_layout
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
+from msflash.acquisition.devices.sim_world import LedFiles
 from msflash.acquisition.devices.simulated_camera import SimulatedCamera
 from msflash.acquisition.devices.wired_fake import WiredFakeCamera
 from msflash.acquisition.errors import CameraSettingError, RigOpenError, UsageError
@@ -59,7 +60,7 @@ def open_aravis_fake_rig(
     seed: int = 0,
     camera: str | Spectra | None = None,
     n_leds: int | None = None,
-    led_spectra: str | Path | Spectra | None = None,
+    led_spectra: LedFiles | Spectra | None = None,
     flash_power: float | None = None,
     patch_px: int | None = None,
     lost_packet_ratio: float = 0.0,

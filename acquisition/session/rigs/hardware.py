@@ -15,10 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from msflash.acquisition.devices.aravis.pixel_layouts import camera_pixel_layout
-from msflash.acquisition.devices.sim_world import (
-    read_responsivity_file,
-    read_spectra_file,
-)
+from msflash.acquisition.devices.sim_world import LedFiles, read_led_files, read_responsivity_file
 from msflash.acquisition.errors import CameraNotFoundError, CameraSettingError, RigOpenError, UsageError
 from msflash.acquisition.progress import progress
 from msflash.acquisition.session.external_booth import open_checked_booth
@@ -35,7 +32,7 @@ CALIBRATION_RESPONSIVITY_FILES = ("camera_responsivity.csv", "responsivity.csv",
 
 
 def hw_spectra(
-    calibration: str | Path | None = None, led_spectra: str | Path | None = None, responsivity: str | Path | None = None
+    calibration: str | Path | None = None, led_spectra: LedFiles | None = None, responsivity: str | Path | None = None
 ) -> tuple[Spectra, Spectra | None, tuple[str, Path] | None]:
     """LED spectra, camera responsivities (on :data:`DEFAULT_GRID`) and the calibration they came from.
 
@@ -46,7 +43,9 @@ def hw_spectra(
     the files directly and win over the directory. Files are CSV tables read by
     :func:`processing.datasets.load_spectra_csv`: first column ``wavelength_nm``, one column per LED
     (in booth channel order) or per camera channel (R, G, B), energy units, each LED at full drive
-    with the true ratios between LEDs. Values outside a file's range are taken as zero.
+    with the true ratios between LEDs. Values outside a file's range are taken as zero. The LED
+    spectra may also be spectrometer exports, one per LED in channel order (``led_spectra`` a
+    tuple; :func:`acquisition.devices.sim_world.read_led_files`).
 
     The third item is (id, directory) when ``calibration`` is a ``msflash calibrate`` output (every
     sequence of the rig refers to it, :attr:`Rig.calibration`), else None.
@@ -56,7 +55,9 @@ def hw_spectra(
     UsageError
         Nothing gives the LED spectra, a named file or directory is missing, or a file is malformed.
     """
-    led_path = Path(led_spectra) if led_spectra else None
+    led_files: LedFiles | None = None
+    if led_spectra:
+        led_files = Path(led_spectra) if isinstance(led_spectra, str | Path) else tuple(led_spectra)
     resp_path = Path(responsivity) if responsivity else None
     leds: Spectra | None = None
     camera: Spectra | None = None
@@ -73,9 +74,9 @@ def hw_spectra(
             leds, camera, calibration_id = _load_calibration_set(directory)
             reference = (calibration_id, directory)
         else:
-            if led_path is None:
-                led_path = next((directory / n for n in CALIBRATION_LED_FILES if os.path.lexists(directory / n)), None)
-                if led_path is None:
+            if led_files is None:
+                led_files = next((directory / n for n in CALIBRATION_LED_FILES if os.path.lexists(directory / n)), None)
+                if led_files is None:
                     raise UsageError(
                         f"--calibration {directory}: no calibration.json or "
                         f"{' or '.join(CALIBRATION_LED_FILES)}; expected the LED spectra"
@@ -84,8 +85,8 @@ def hw_spectra(
                 resp_path = next(
                     (directory / n for n in CALIBRATION_RESPONSIVITY_FILES if os.path.lexists(directory / n)), None
                 )
-    if led_path is not None:
-        leds = read_spectra_file(led_path, "spd")
+    if led_files is not None:
+        leds = read_led_files(led_files, DEFAULT_GRID)
     if resp_path is not None:
         camera = read_responsivity_file(resp_path)
     if leds is None:
@@ -155,7 +156,7 @@ def open_hw_rig(
     port: str | None = None,
     interfaces: str = "usb3",
     calibration: str | Path | None = None,
-    led_spectra: str | Path | None = None,
+    led_spectra: LedFiles | None = None,
     responsivity: str | Path | None = None,
     log_serial: str | Path | None = None,
     sync: str = "host",

@@ -21,6 +21,8 @@ from msflash.acquisition.devices.exposure_light import EmulatorLight, FirmwareLi
 from msflash.acquisition.devices.mains_flicker import MainsFlicker
 from msflash.acquisition.devices.sim_default import SIM_DEFAULT_CFA
 from msflash.acquisition.devices.sim_world import (
+    LedFiles,
+    led_files_shown,
     sim_ambient,
     sim_camera,
     sim_leds,
@@ -53,7 +55,7 @@ def sim_world(
     seed: int,
     camera: str | Spectra | None,
     n_leds: int | None,
-    led_spectra: str | Path | Spectra | None,
+    led_spectra: LedFiles | Spectra | None,
     flash_power: float | None,
     patch_px: int | None = None,
     flicker: MainsFlicker | None = None,
@@ -74,7 +76,7 @@ def sim_world(
         leds, where = led_spectra, "LED spectra"
     else:
         leds = sim_leds(led_spectra, n_leds)
-        where = f"--led-spectra {led_spectra}" if led_spectra is not None else f"--leds {n_leds or 7}"
+        where = f"--led-spectra {led_files_shown(led_spectra)}" if led_spectra is not None else f"--leds {n_leds or 7}"
     check_emulated_booth(leds, where)
     try:
         optional: dict[str, Any] = {}
@@ -106,7 +108,7 @@ def open_sim_rig(
     seed: int = 0,
     camera: str | Spectra | None = None,
     n_leds: int | None = None,
-    led_spectra: str | Path | Spectra | None = None,
+    led_spectra: LedFiles | Spectra | None = None,
     log_serial: str | Path | None = None,
     flash_power: float | None = None,
     booth_port: str | None = None,
