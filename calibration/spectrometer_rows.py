@@ -33,13 +33,7 @@ def in_wavelength_order(
 ) -> tuple[np.ndarray, list[int], tuple[str, ...]]:
     """``table``'s rows (wavelength first) in ascending wavelength order, one row per wavelength; the line of each
     row, and what was done: the one set of row rules (:func:`processing.spectral_rows.in_wavelength_order`), which
-    the spectral table reader applies too, with the calibration package's error and warning.
-
-    Examples
-    --------
-    >>> table, lines, notes = in_wavelength_order(np.array([[420.0, 1], [410, 2], [410, 2], [400, 3]]), [5, 6, 7, 8], "x")
-    >>> table.tolist(), lines, notes
-    ([[400.0, 3.0], [410.0, 2.0], [420.0, 1.0]], [8, 6, 5], ('descending wavelengths: read in ascending order', 'line 7 repeats line 6: read once'))
+    the spectral table reader applies too, with the calibration package's error and warning (examples there).
 
     Raises
     ------

@@ -10,7 +10,7 @@ import json
 import math
 import subprocess
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from functools import cache
 from pathlib import Path
 
@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.sequence.format import SequenceCamera, SequenceLed
+from msflash.acquisition.sequence.reader import read_sequence
 from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session.analysis import DEFAULT_BIN_FACTOR, FrameStack, block_factor
 from msflash.acquisition.session.estimate_stream import SAMPLE_WEIGHTING
@@ -225,6 +226,24 @@ def write_test_sequence(
                 frame, "led", one_hot_levels(k)[index], exposure_us=exposures[index + 1], gain=gains[index + 1]
             )
     return directory
+
+
+def rewrite_sequence(source: Path, target: Path, frame: Callable[[int, str, np.ndarray], np.ndarray]) -> Path:
+    """The sequence at ``source`` written again by the project's writer to ``target``, each frame's pixels replaced by
+    ``frame(index, role, pixels)`` (same camera, LEDs, levels, exposures and gains)."""
+    sequence = read_sequence(source)
+    with SequenceWriter(
+        target,
+        wavelengths_nm=sequence.wavelengths_nm,
+        spectral_unit=sequence.spectral_unit,
+        camera=sequence.camera,
+        leds=sequence.leds,
+    ) as writer:
+        for index, entry in enumerate(sequence.frames):
+            pixels = frame(index, entry.role, sequence.load_frame(index))
+            writer.add_frame(pixels, entry.role, entry.led_levels, entry.exposure_us, entry.gain)
+        writer.finish()
+    return target
 
 
 def direct_lstsq_weights(

@@ -18,7 +18,7 @@ import numpy as np
 
 from msflash.acquisition.app.cli import main as msflash_main
 from msflash.acquisition.sequence.reader import read_sequence
-from msflash.acquisition.sequence.writer import SequenceWriter
+from tests.helpers import rewrite_sequence
 
 READ_NOISE = 4.0
 """Read noise added to every enlarged pixel, in counts."""
@@ -43,20 +43,11 @@ def write_large_sequence(out: Path, width: int = 4096, height: int = 3000, seed:
         status = msflash_main(["capture", "--rig", "sim", "--seed", str(seed), "--out", str(captured)])
         if status != 0:
             raise SystemExit(status)
-        small = read_sequence(captured / "sequence")
         rng = np.random.default_rng(seed)
-        white = small.camera.white_level
-        with SequenceWriter(
-            out,
-            wavelengths_nm=small.wavelengths_nm,
-            spectral_unit=small.spectral_unit,
-            camera=small.camera,
-            leds=small.leds,
-        ) as writer:
-            for index, entry in enumerate(small.frames):
-                frame = enlarged(small.load_frame(index), height, width, rng, white)
-                writer.add_frame(frame, entry.role, entry.led_levels, entry.exposure_us, entry.gain)
-            writer.finish()
+        white = read_sequence(captured / "sequence").camera.white_level
+        rewrite_sequence(
+            captured / "sequence", out, lambda _index, _role, pixels: enlarged(pixels, height, width, rng, white)
+        )
     return out
 
 

@@ -22,7 +22,6 @@ from msflash.acquisition.app.cli_common import dumps_json
 from msflash.acquisition.errors import UsageError
 from msflash.acquisition.sequence.format import Sequence
 from msflash.acquisition.sequence.reader import read_sequence
-from msflash.acquisition.sequence.writer import SequenceWriter
 from msflash.acquisition.session import analysis
 from msflash.acquisition.session.analysis import FrameStack, load_frame_stack
 from msflash.acquisition.session.prior_route import (
@@ -37,6 +36,7 @@ from msflash.processing.channel_statistics import accumulate_channel_statistics
 from msflash.processing.flicker import FlickerCheck, corrected_channel_statistics
 from msflash.processing.reference_patch import ReferencePatch
 from tests.acquisition.session.test_estimate_stream import N_LED_FRAMES, SHAPE, write_sequence
+from tests.helpers import rewrite_sequence
 from tests.processing.unseen_sequences import Case, render_case
 
 
@@ -210,22 +210,16 @@ def test_a_rectangle_is_checked_at_the_first_frame_when_no_header_said_the_size(
 
 def _with_saturated_card(source: Path, target: Path, rect: tuple[int, int, int, int]) -> Path:
     """``source`` written again by the project's writer with ``rect`` at the white level in every LED frame."""
-    sequence = read_sequence(source)
     x, y, width, height = rect
-    with SequenceWriter(
-        target,
-        wavelengths_nm=sequence.wavelengths_nm,
-        spectral_unit=sequence.spectral_unit,
-        camera=sequence.camera,
-        leds=sequence.leds,
-    ) as writer:
-        for index, entry in enumerate(sequence.frames):
-            pixels = sequence.load_frame(index).copy()
-            if entry.role == "led":
-                pixels[y : y + height, x : x + width] = sequence.camera.white_level
-            writer.add_frame(pixels, entry.role, entry.led_levels, entry.exposure_us, entry.gain)
-        writer.finish()
-    return target
+    white = read_sequence(source).camera.white_level
+
+    def saturated(index: int, role: str, pixels: np.ndarray) -> np.ndarray:
+        pixels = pixels.copy()
+        if role == "led":
+            pixels[y : y + height, x : x + width] = white
+        return pixels
+
+    return rewrite_sequence(source, target, saturated)
 
 
 def test_a_saturated_reference_is_refused_in_one_line(
