@@ -252,7 +252,7 @@ def _parse_row(cells: list[str], header: list[str], where: str, nan: str) -> tup
             if column == 0 or nan == "error":
                 raise SpectralDataError(
                     f"{where}: column '{header[column]}' is missing (NaN); expected a number "
-                    "(load with nan='zero' if zero is the right value)"
+                    "(write 0 where the value is zero)"
                 )
             blanks.append(header[column])
             row.append(0.0)

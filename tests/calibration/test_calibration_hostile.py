@@ -122,7 +122,7 @@ def test_a_hostile_calibration_file_exits_2_naming_file_and_field(tmp_path: Path
     [
         ("1e999", "holds '1e999'; expected a finite number"),
         ("9" * 5000, "holds '9999999999999999999999999999999999999... (5000 characters)'; expected a finite number"),
-        ("nan", "is missing (NaN)"),
+        ("nan", "is missing (NaN); expected a number (write 0 where the value is zero)"),
         ("-0.5", "column 'led440' at 410 nm is -0.5; expected a non-negative value"),
     ],
 )
