@@ -135,6 +135,9 @@ def load_spectra_csv(
 
     Lines starting with ``#`` are comments (kept in ``metadata["comments"]``), blank lines are
     skipped, the first other line is the header, and ``nan`` or an empty cell is a missing value.
+    Cells are separated by commas, or, where the header has none, by semicolons or tabs (a
+    spreadsheet saved in a locale whose decimal mark is a comma): then a decimal comma is read
+    as a point (``0,25`` is 0.25; ``1.234,5`` is refused as no number).
     The rows follow the one set of row rules of every user's spectral file
     (:func:`processing.spectral_rows.in_wavelength_order`): descending wavelengths are read in
     ascending order, a row written twice is read once, readings of one wavelength are averaged
@@ -203,6 +206,19 @@ def load_spectra_csv(
     return Spectra(grid, table[:, 1:], spectrum_names, kind=kind, unit=unit, source=source or where, metadata=metadata)
 
 
+def _separator(header: str) -> str:
+    r"""The cell separator a table's header line uses: ``,``; else ``;`` (a spreadsheet in a locale whose decimal mark
+    is a comma, as European Excel saves "CSV"), else a tab (a spreadsheet's "tab delimited" text).
+
+    >>> _separator("wavelength_nm,a,b"), _separator("wavelength_nm;a;b"), _separator("wavelength_nm\ta")
+    (',', ';', '\t')
+    """
+    for separator in (",", ";", "\t"):
+        if separator in header:
+            return separator
+    return ","
+
+
 def _parse_table(
     text: str, where: str, nan: Literal["error", "zero"]
 ) -> tuple[list[str], list[str], list[list[float]], list[int], list[tuple[int, str]]]:
@@ -213,6 +229,7 @@ def _parse_table(
     rows: list[list[float]] = []
     lines: list[int] = []
     missing: list[tuple[int, str]] = []
+    separator = ","
     for line_number, raw_line in enumerate(text.splitlines(), start=1):
         line = raw_line.strip()
         if not line:
@@ -220,14 +237,18 @@ def _parse_table(
         if line.startswith("#"):
             comments.append(line[1:].strip())
             continue
-        cells = [cell.strip() for cell in line.split(",")]
         if header is None:
+            separator = _separator(line)
+            cells = [cell.strip() for cell in line.split(separator)]
             if not cells[0].lower().startswith("wavelength") or len(cells) < 2:
                 raise NotATableError(
                     f"{where}:{line_number}: header is '{printable(line[:60])}'; expected 'wavelength_nm,<name>,…'"
                 )
             header = cells
             continue
+        cells = [cell.strip() for cell in line.split(separator)]
+        if separator != ",":  # a spreadsheet that writes ';' or a tab between cells writes a decimal comma
+            cells = [cell.replace(",", ".", 1) if cell.count(",") == 1 and "." not in cell else cell for cell in cells]
         if len(cells) != len(header):
             raise SpectralDataError(
                 f"{where}:{line_number}: {len(cells)} cells; expected {len(header)} as in the header"

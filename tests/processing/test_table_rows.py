@@ -98,3 +98,32 @@ def test_wavelengths_that_turn_back_are_refused_naming_the_file_and_both_lines(t
         f"{path}:6: wavelength 410 nm after 420 nm (line 5); expected the wavelengths in one order, ascending or "
         "descending (two scans in one file?)"
     )
+
+
+def test_a_table_saved_with_semicolons_and_decimal_commas_or_tabs_reads_as_the_comma_table(
+    ascending: tuple[Path, np.ndarray, np.ndarray],
+) -> None:
+    """European Excel saves "CSV" with cells between semicolons and a decimal comma; "tab delimited" text separates
+    cells by tabs. Both read to the comma table's numbers (refused before as no 'wavelength_nm,<name>,…' header)."""
+    path, _, _ = ascending
+    plain = datasets.load_spectra_csv(path, "spd", "energy")
+    text = path.read_bytes().decode("utf-8-sig")
+    for name, written in (
+        ("semicolons.csv", text.replace(",", ";").replace(".", ",")),
+        ("tabs.txt", text.replace(",", "\t")),
+    ):
+        other = path.with_name(name)
+        other.write_text(written)
+        read = datasets.load_spectra_csv(other, "spd", "energy")
+        assert read.grid == plain.grid and read.names == plain.names
+        np.testing.assert_array_equal(read.values, plain.values)
+
+
+def test_a_cell_with_a_thousands_mark_in_a_semicolon_table_is_refused_naming_file_line_and_column(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "thousands.csv"
+    path.write_text("wavelength_nm;lamp\n400;1,5\n410;1.234,5\n420;2\n")
+    with pytest.raises(SpectralDataError) as refused:
+        datasets.load_spectra_csv(path, "spd", "energy")
+    assert str(refused.value).startswith(f"{path}:3: column 'lamp' holds '1.234,5'; expected a number")
