@@ -62,17 +62,49 @@ def read_spectra_file(path: str | Path, kind: SpectralKind) -> Spectra:
     """
     try:
         table = datasets.load_spectra_csv(path, kind=kind, unit="none" if kind == "reflectance" else "energy")
-        if kind == "reflectance":
-            return table
-        # Measured lights and responsivities: negative noise clipped, as every reader of measured spectra does.
-        values, clipped = clip_negative_noise(table.wavelengths_nm, table.values, table.names, shown_path(Path(path)))
     except datasets.NotATableError as err:
         raise _NotATable(str(err)) from err
     except (SpectralDataError, OSError) as err:
         raise UsageError(str(err)) from err
+    return table if kind == "reflectance" else _noise_clipped(table, path)
+
+
+def _noise_clipped(measured: Spectra, path: str | Path) -> Spectra:
+    """A measured light's or responsivity's negative noise clipped to 0 (a note on stderr), as every reader of
+    measured spectra does; a value beyond noise refused (``UsageError`` naming the file)."""
+    try:
+        values, clipped = clip_negative_noise(
+            measured.wavelengths_nm, measured.values, measured.names, shown_path(Path(path))
+        )
+    except SpectralDataError as err:
+        raise UsageError(str(err)) from err
     for item in clipped:
         progress(item.note(shown_path(Path(path))))
-    return table.replace(values=values) if clipped else table
+    return measured.replace(values=values) if clipped else measured
+
+
+def read_light_file(path: str | Path) -> Spectra:
+    """A measured light: a spectral table (:func:`read_spectra_file`), or a spectrometer export of it read as
+    ``--target`` reads one (:func:`calibration.light_files.read_measured_light`: an AvaSoft stored dark taken off, a
+    warning for raw counts), negative noise clipped.
+
+    Raises
+    ------
+    UsageError
+        One line naming the file (and line): a bad table, what the export reader refuses, or both readers' reasons
+        for a file that is neither.
+    """
+    try:
+        return read_spectra_file(path, "spd")
+    except _NotATable:
+        pass  # a spectrometer export of the light
+    from msflash.calibration.light_files import read_measured_light
+
+    try:
+        light = read_measured_light(path, progress)
+    except (SpectralDataError, OSError) as err:
+        raise UsageError(str(err)) from err
+    return _noise_clipped(light, path)
 
 
 LedFiles = str | Path | tuple[str | Path, ...]
@@ -218,7 +250,8 @@ def sim_leds(led_spectra: LedFiles | None, n_leds: int | None, grid: WavelengthG
 
 
 def sim_ambient(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
-    """``--ambient``: a light by name (:func:`processing.lights.light_spectrum`) or a CSV ``wavelength_nm, value``.
+    """``--ambient``: a light by name (:func:`processing.lights.light_spectrum`), a CSV ``wavelength_nm, value`` or a
+    spectrometer export of the light (:func:`read_light_file`).
 
     Raises
     ------
@@ -232,7 +265,7 @@ def sim_ambient(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
         except SpectralDataError as err:
             raise UsageError(f"--ambient: {err}") from err
     where = f"--ambient {spec}"
-    light = on_grid(read_spectra_file(spec, "spd"), where, grid)
+    light = on_grid(read_light_file(spec), where, grid)
     if light.count != 1:
         raise UsageError(
             f"{where}: {light.count} spectra ({', '.join(light.names)}); expected one ambient (wavelength_nm, value)"
