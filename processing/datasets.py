@@ -135,9 +135,8 @@ def load_spectra_csv(
 
     Lines starting with ``#`` are comments (kept in ``metadata["comments"]``), blank lines are
     skipped, the first other line is the header, and ``nan`` or an empty cell is a missing value.
-    Cells are separated by commas, or, where the header has none, by semicolons or tabs (a
-    spreadsheet saved in a locale whose decimal mark is a comma): then a decimal comma is read
-    as a point (``0,25`` is 0.25; ``1.234,5`` is refused as no number).
+    Cells are separated by commas, else by the header's semicolons or tabs (:func:`_separator`),
+    where a decimal comma is read as a point (``0,25`` is 0.25; ``1.234,5`` is refused).
     The rows follow the one set of row rules of every user's spectral file
     (:func:`processing.spectral_rows.in_wavelength_order`): descending wavelengths are read in
     ascending order, a row written twice is read once, readings of one wavelength are averaged
