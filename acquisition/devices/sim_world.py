@@ -84,9 +84,9 @@ def _noise_clipped(measured: Spectra, path: str | Path) -> Spectra:
 
 
 def read_light_file(path: str | Path) -> Spectra:
-    """A measured light: a spectral table (:func:`read_spectra_file`), or a spectrometer export of it read as
-    ``--target`` reads one (:func:`calibration.light_files.read_measured_light`: an AvaSoft stored dark taken off, a
-    warning for raw counts), negative noise clipped.
+    """A measured light: a spectral table, or a spectrometer export of it, read as ``--target`` reads one
+    (:func:`calibration.light_files.read_measured_light`: an AvaSoft stored dark taken off, a warning for raw
+    counts), negative noise clipped.
 
     Raises
     ------
@@ -94,11 +94,7 @@ def read_light_file(path: str | Path) -> Spectra:
         One line naming the file (and line): a bad table, what the export reader refuses, or both readers' reasons
         for a file that is neither.
     """
-    try:
-        return read_spectra_file(path, "spd")
-    except _NotATable:
-        pass  # a spectrometer export of the light
-    from msflash.calibration.light_files import read_measured_light
+    from msflash.calibration.light_files import read_measured_light  # tries the table first, then the export
 
     try:
         light = read_measured_light(path, progress)
