@@ -20,6 +20,7 @@ import pytest
 
 from msflash.acquisition.app.cli import main
 from msflash.acquisition.session.sequence_spectra import target_file_spectrum
+from msflash.processing.spectra import Spectra
 from msflash.processing.user_files import shown_path
 from tests.calibration.spectrometer_writers import FORMATS, encoded, export_text
 
@@ -61,6 +62,18 @@ def _table(wavelengths: np.ndarray, values: np.ndarray) -> str:
     return "\r\n".join(["wavelength_nm,lamp", *(f"{w:g},{v:g}" for w, v in zip(wavelengths, values))]) + "\r\n"
 
 
+def _assert_read_as_the_table(sequence: Path, written: Path, table: Path, flash: dict) -> tuple[Spectra, str]:
+    """``written`` gives ``flash --target``'s flash of the ascending ``table`` (``flash``) and its spectrum, to the bit;
+    returns the spectrum read and the command's stderr."""
+    status, payload, err = _flash(sequence, written)
+    assert status == 0, err
+    assert payload == flash
+    read, expected = target_file_spectrum(str(written)), target_file_spectrum(str(table))
+    assert read.grid == expected.grid
+    np.testing.assert_array_equal(read.values, expected.values)
+    return read, err
+
+
 @pytest.fixture(scope="module")
 def ascending(base_sequence: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     """The ascending table of the light, and the flash ``flash --target`` solves with it."""
@@ -80,12 +93,7 @@ def test_a_descending_table_gives_the_flash_of_the_ascending_one(
     wavelengths, values = _light()
     down = tmp_path / "lamp-descending.csv"
     down.write_bytes(encoded(_table(wavelengths[::-1], values[::-1]), bom=True))
-    status, payload, err = _flash(base_sequence, down)
-    assert status == 0, err
-    assert payload == flash
-    read, expected = target_file_spectrum(str(down)), target_file_spectrum(str(table))
-    assert read.grid == expected.grid
-    np.testing.assert_array_equal(read.values, expected.values)
+    _assert_read_as_the_table(base_sequence, down, table, flash)
 
 
 EXPORTS = [
@@ -123,12 +131,7 @@ def test_a_spectrometer_export_gives_the_flash_of_the_table_of_its_numbers(
     export.write_bytes(
         encoded(export_text(form, wavelengths, sample, 0.01, 4, stored_dark=dark, name="lamp", **options), **file)
     )
-    status, payload, err = _flash(base_sequence, export)
-    assert status == 0, err
-    assert payload == flash
-    read, expected = target_file_spectrum(str(export)), target_file_spectrum(str(table))
-    assert read.grid == expected.grid
-    np.testing.assert_array_equal(read.values, expected.values)
+    read, err = _assert_read_as_the_table(base_sequence, export, table, flash)
     if form == "plain":  # "wavelength_nm,counts" under '#' comments: a table
         assert read.metadata["read_as"] == "table"
     else:
