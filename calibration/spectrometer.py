@@ -248,8 +248,8 @@ def _read_rows(text: str, source: str, column: int | None) -> _Rows:
     if len(data.rows) < 3:
         first = f":{data.lines[0]}" if data.lines else ""  # the line of a lone data row, for the user to look at
         raise CalibrationError(
-            f"{source}{first}: {len(data.rows)} data line{'' if len(data.rows) == 1 else 's'}; expected at least 3 lines of "
-            "'wavelength_nm, value'"
+            f"{source}{first}: {len(data.rows)} data line{'' if len(data.rows) == 1 else 's'}; expected at least 3 "
+            "lines of 'wavelength_nm, value'"
         )
     if data.width == 1:  # one value a line: the grid from the header, or refused naming what is expected
         wavelengths = header_wavelengths(data.header_lines, len(data.rows), source, data.lines[0])

@@ -21,8 +21,8 @@ TARGET_HELP = (
 
 
 def target_value(text: str) -> str:
-    """argparse type of ``--target``: a file (a table or a spectrometer export) or an illuminant name, both checked now (a file's coverage of the
-    sequence's grid when it is used).
+    """argparse type of ``--target``: a file (a table or a spectrometer export) or an illuminant name, both checked
+    now (a file's coverage of the sequence's grid when it is used).
 
     A mistyped name is refused before a rig opens or a frame is captured, naming ``--target`` and the
     names it was probably meant to be.
