@@ -63,9 +63,9 @@ class _Stop:
 
     One raise per command: a second signal (the terminal closing after a ``kill``, a service manager's SIGTERM
     repeated, Ctrl-C pressed again) would otherwise land inside the ``finally`` blocks the first one unwinds —
-    switching the LEDs off, finishing ``sequence.json`` — and cut them short. Ctrl-C pressed
-    :data:`FORCING_CTRL_C` times is the exception: the person insists, and the process ends at once. After :meth:`quiet` (the command
-    has finished) even the first is only recorded, for the CLI to report once its outcome is written."""
+    switching the LEDs off, finishing ``sequence.json`` — and cut them short. Ctrl-C pressed :data:`FORCING_CTRL_C`
+    times is the exception: the person insists, and the process ends at once. After :meth:`quiet` (the command has
+    finished) even the first is only recorded, for the CLI to report once its outcome is written."""
 
     def __init__(self) -> None:
         self.raising = True
