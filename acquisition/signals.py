@@ -32,9 +32,41 @@ STOPPING_SIGNALS = (signal.SIGINT, *TERMINATING_SIGNALS)
 """Every signal that stops a command: Ctrl-C, SIGTERM and SIGHUP."""
 
 
-class Terminated(SystemExit):
+class _Watched:
+    """A stop that tells the handler which raised it (:attr:`owner`) when it is dropped before anyone
+    :attr:`received` it.
+
+    Python raises a signal handler's exception at the next instruction of whatever Python code runs, and some C
+    code that calls Python code clears every exception it gets back: CPython 3.11's ``import`` of a module
+    ``sys.modules`` holds as an object with a Python ``__getattr__`` (colour-science's) asks it for ``__spec__``
+    and clears what it raised; ``PyObject_HasAttr`` and ``PyDict_GetItem`` do the same. A Ctrl-C landing there
+    vanished: the command ran to its end, and a second Ctrl-C was only recorded (about one ``msflash run`` in
+    ten, interrupted as it opened the rig). Freed unreceived, the stop asks its handler to deliver it again."""
+
+    owner: _Stop | None = None
+    signal_number = 0
+    received = False
+    """Set by whoever catches the stop and acts on it (:func:`received`): then dropping it loses nothing."""
+
+    def __del__(self) -> None:
+        if self.owner is not None and not self.received:
+            self.owner.lost(self.signal_number)
+
+
+class Terminated(_Watched, SystemExit):
     """SIGTERM or SIGHUP, raised by :func:`sigterm_as_exit` (exit status 128 + the signal's number): the CLI
     says so in one line."""
+
+
+class _Interrupted(_Watched, KeyboardInterrupt):
+    """Ctrl-C, as a command's handler raises it: a ``KeyboardInterrupt`` that is delivered again if it is lost."""
+
+
+def received(stop: BaseException) -> None:
+    """Say that ``stop`` (a ``KeyboardInterrupt`` or :class:`Terminated`) was caught and acted on: dropping it
+    after this does not deliver it again. For the places that end a command on a stop rather than re-raise it."""
+    if isinstance(stop, _Watched):
+        stop.received = True
 
 
 def _in_main_thread() -> bool:
@@ -73,7 +105,9 @@ class _Stop:
         """The signal raised, if one was."""
         self.late: list[int] = []
         """The signals recorded instead of raised."""
-        self.exception: BaseException | None = None
+        self.active = False
+        """Installed as the handler (:func:`_install` to :func:`_restore`): only then is a lost stop delivered again."""
+        self.quieted = False
 
     def __call__(self, number: int, _frame: object) -> None:
         if not self.raising:
@@ -83,23 +117,39 @@ class _Stop:
             return
         self.raising = False  # before raising: a signal landing while this one unwinds is recorded
         self.raised = number
-        self.exception = KeyboardInterrupt() if number == signal.SIGINT else Terminated(128 + number)
-        raise self.exception
+        stop: _Watched = _Interrupted() if number == signal.SIGINT else Terminated(128 + number)
+        stop.owner, stop.signal_number = self, number
+        raise cast(BaseException, stop)
 
     def swallowed(self, unraisable: Any) -> bool:
-        """Whether the exception Python could not raise (``sys.unraisablehook``) is the one this handler raised: then
-        the signal is delivered again, from a thread of its own, to land once the finalizer it hit has returned.
+        """Whether the exception Python could not raise (``sys.unraisablehook``) is one this handler raised: then
+        the signal is delivered again (:meth:`lost`), to land once the finalizer it hit has returned.
 
         A signal whose handler runs inside a ``__del__``, a weakref callback or a garbage collection raises there,
         and Python prints "Exception ignored in …" with a traceback and goes on: the stop was lost (the traceback
         seen once under load, with SIGTERM)."""
-        if self.exception is None or unraisable.exc_value is not self.exception:
+        stop = unraisable.exc_value
+        if not isinstance(stop, _Watched) or stop.owner is not self:
             return False
-        number, self.raising, self.raised, self.exception = cast(int, self.raised), True, None, None
+        stop.received = True  # delivered again now, not when the hook lets go of it
+        self.lost(stop.signal_number)
+        return True
+
+    def lost(self, number: int) -> None:
+        """The stop this handler raised for ``number`` was dropped unreceived (:class:`_Watched`): while the command
+        runs, deliver the signal again, from a thread of its own, to be raised anew; once it has finished
+        (:meth:`quiet`), record it in :attr:`late` for the CLI to say."""
+        if not self.active:
+            return
+        self.raised = None
+        if self.quieted:
+            self.late.append(number)
+            return
+        self.raising = True
         main = threading.main_thread().ident
-        assert main is not None  # the main thread has started: this runs in it
-        # Not threading.Thread: its start() waits for the thread, and the signal would land in that wait, inside this
-        # hook (whose exceptions Python prints too). The thread sends it once this hook has let go of ``leaving``.
+        assert main is not None  # the main thread has started: the handler ran in it
+        # Not threading.Thread: its start() waits for the thread, and the signal would land in that wait, inside the
+        # finalizer or hook calling this. The thread sends it once this call has let go of ``leaving``.
         leaving = _thread.allocate_lock()
         leaving.acquire()
 
@@ -109,17 +159,18 @@ class _Stop:
 
         _thread.start_new_thread(deliver, ())
         leaving.release()
-        return True
 
     def quiet(self) -> None:
         """From now on record every stopping signal rather than raise it."""
         self.raising = False
+        self.quieted = True
 
 
 def _install(stop: _Stop, numbers: tuple[int, ...]) -> dict[int, object]:
     """``stop`` as the handler of ``numbers``, but for a signal the process was told to ignore (``nohup`` ignores
     SIGHUP, a shell's background job SIGINT: the user asked to survive them); the previous handlers."""
     previous: dict[int, object] = {}
+    stop.active = True
     for number in numbers:
         if signal.getsignal(number) is not signal.SIG_IGN:
             previous[number] = signal.signal(number, stop)
@@ -168,6 +219,7 @@ def sigterm_as_exit() -> Iterator[None]:
             yield
     finally:
         stop.quiet()  # a signal while the handlers are put back is recorded, not raised out of this block
+        stop.active = False
         _restore(previous)
 
 
@@ -188,6 +240,7 @@ def command_signals() -> Iterator[_Stop]:
             yield stop
     finally:
         stop.quiet()
+        stop.active = False
         _restore(previous)
 
 

@@ -33,7 +33,7 @@ from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import bad_input_errors, runtime_errors
 from msflash.acquisition.progress import bars_wanted, close_bar
 from msflash.acquisition.progress import configure as configure_progress
-from msflash.acquisition.signals import Terminated, command_signals
+from msflash.acquisition.signals import Terminated, command_signals, received
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": ("msflash.acquisition.app.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
@@ -357,6 +357,7 @@ def _outcome(words: list[str]) -> tuple[int, bool]:
 
 def _stopped(words: Sequence[str], stop: BaseException) -> int:
     """The stop line of a command stopped by Ctrl-C (130) or SIGTERM/SIGHUP (128 + the signal's number), written."""
+    received(stop)  # acted on here: dropping it stops nothing twice
     if isinstance(stop, KeyboardInterrupt):
         line, code = _stop_line(words, "interrupted"), 130
     else:

@@ -21,7 +21,7 @@ from msflash.acquisition.app.cli_common import (
     serial_port,
     whole,
 )
-from msflash.acquisition.signals import sigterm_as_exit
+from msflash.acquisition.signals import received, sigterm_as_exit
 from msflash.led_controller.booth_probe import PROBE_PROTOCOLS, probe_booth
 from msflash.led_controller.doctor import Finding, run_doctor
 from msflash.led_controller.emulator import DEFAULT_NAMES, DEFAULT_PEAKS_NM, BoothEmulator
@@ -223,7 +223,8 @@ def booth_emulator(args: argparse.Namespace, *, stop: threading.Event | None = N
                 if server.closed:
                     progress("booth emulator: the link was hung up (fault close); stopped")
                     break
-        except (KeyboardInterrupt, SystemExit):
+        except (KeyboardInterrupt, SystemExit) as caught:
+            received(caught)
             progress("booth emulator stopped")
         finally:
             if state_file is not None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import signal
 import subprocess
 import sys
@@ -315,3 +316,62 @@ def test_a_sigterm_landing_inside_a_finalizer_still_stops_the_command_in_one_lin
     lines = _stderr_lines(capsys)
     assert len(lines) == 1 and lines[0].startswith("msflash: terminated (SIGTERM); LEDs off"), lines
     assert let_through == []
+
+
+class _ModuleThatRaisesSignal:
+    """A module as colour-science leaves it in ``sys.modules``: an object whose ``__getattr__`` is Python code. CPython
+    3.11's ``import`` of it asks for ``__spec__`` and clears whatever that raised; this one sends a signal there."""
+
+    def __init__(self, number: int) -> None:
+        self.number = number
+
+    def __getattr__(self, name: str) -> object:
+        if name == "__spec__":
+            signal.raise_signal(self.number)  # the handler runs here, inside the C code that clears its exception
+        raise AttributeError(name)
+
+
+@pytest.mark.parametrize("number", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stop_that_c_code_clears_is_delivered_again(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], let_through: list[int], number: int
+) -> None:
+    """The Ctrl-C sent as ``msflash run`` opened the rig landed in ``import colour`` (colour-science's module object
+    has a Python ``__getattr__``; CPython 3.11's import clears what its ``__spec__`` lookup raised): the run went on to
+    its end, exit 0, about one run in ten (tests/acquisition/app/test_cli_manners.py). The stop dropped unreceived is
+    delivered again and stops the command."""
+    import threading
+    import time
+
+    monkeypatch.setitem(sys.modules, "msflash_test_module_object", _ModuleThatRaisesSignal(number))
+    steps: list[str] = []
+
+    def capture(args: argparse.Namespace) -> int:
+        import msflash_test_module_object  # noqa: F401  # type: ignore[import-not-found]
+
+        steps.append("after the import")
+        deadline = time.monotonic() + 120  # a hang guard, not a timing: the signal comes back within milliseconds
+        while time.monotonic() < deadline:
+            threading.Event().wait(0.01)
+        steps.append("never stopped")
+        return 0
+
+    expected = 130 if number == signal.SIGINT else 128 + number
+    assert _run(monkeypatch, capture, ["capture"]) == expected
+    assert steps == ["after the import"]  # the import itself cleared the first delivery: C code, not ours
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and "LEDs off" in lines[0], lines
+    assert let_through == []
+
+
+def test_a_stop_caught_and_acted_on_is_not_delivered_again() -> None:
+    """Whoever ends a command on a stop says it :func:`received` it: dropping it then delivers nothing more."""
+    from msflash.acquisition.signals import command_signals, received
+
+    with command_signals() as stop:
+        with pytest.raises(KeyboardInterrupt) as raised:
+            signal.raise_signal(signal.SIGINT)
+        received(raised.value)
+        del raised
+        gc.collect()
+        assert stop.raised == signal.SIGINT and stop.raising is False
+    assert stop.late == []
