@@ -48,6 +48,7 @@ from msflash.processing.errors import SpectralDataError
 from msflash.processing.json_input import parse_json_document
 from msflash.processing.negative_values import blind_columns, clip_negative_noise
 from msflash.processing.spectra import WavelengthGrid
+from msflash.processing.spectral_rows import NANOMETRE_RANGE
 from msflash.processing.user_files import IMAGE_MAX_BYTES, JSON_MAX_BYTES, check_user_file, read_user_text, shown_path
 
 _log = logging.getLogger(__name__)
@@ -150,12 +151,6 @@ def _number_list(file: Path, field_name: str, value: Any, length: int | None, wh
         if not finite:
             raise RecordingError(f"{file}: {field_name}[{i}] is {item}; expected a finite number")
     return np.array(value, dtype=float)
-
-
-WAVELENGTH_RANGE_NM = (150.0, 3000.0)
-"""Where a sequence's ``wavelengths_nm`` may lie: ultraviolet to short-wave infrared. A grid in micrometres (0.4–0.7)
-or ångström (4000–7000) was read as nanometres, every spectrum and the estimate on it (the band's measured lights,
-the prior, the targets resampled to nothing) and printed as "0.4 nm"."""
 
 
 def _spectrum(file: Path, field_name: str, value: Any, wavelengths_nm: np.ndarray) -> np.ndarray:
@@ -372,7 +367,7 @@ def parse_document(file: Path, directory: Path, document: Any, *, check_files: b
         grid = WavelengthGrid.from_wavelengths(wavelengths, where="wavelengths_nm")
     except SpectralDataError as err:
         raise RecordingError(f"{file}: {err}") from err
-    low, high = WAVELENGTH_RANGE_NM
+    low, high = NANOMETRE_RANGE  # the rule of every user's spectral file: a grid in µm or Å is another unit
     if grid.start_nm < low or grid.stop_nm > high:
         top.fail(
             "wavelengths_nm",

@@ -262,7 +262,7 @@ def test_wavelengths_in_micrometres_are_refused(sample: Path, capsys: pytest.Cap
     (sample / "sequence.json").write_text(json.dumps(document))
     assert main(["estimate", str(sample), "--json"]) == 2
     line = _one_error_line(capsys.readouterr().err)
-    assert "wavelengths_nm spans 0.4–0.7; expected nanometres within 150–3000" in line
+    assert "wavelengths_nm spans 0.4–0.7; expected nanometres within 100–3000" in line
 
 
 def test_a_signal_inside_finish_after_the_file_says_complete_is_reported_as_complete(tmp_path: Path) -> None:
