@@ -152,9 +152,9 @@ def target_file_spectrum(target: str, say_warnings: bool = True) -> Spectra:
     (:func:`calibration.light_files.read_measured_light`: one set of row rules for both). Needs no sequence, so
     ``--target`` is read when the command line is parsed: a missing, empty or dark file (or one of several spectra)
     is refused before a rig opens, not after the frames were metered and captured. A file is read once per version
-    (path, size, modification time): reading it again when the flash is solved gives the same spectrum without
-    saying its warnings (averaged rows, raw counts) a second time. ``say_warnings=False`` never says them: a reading
-    after the one that did (:func:`target_illuminant`, once per sequence, perhaps in a worker process).
+    (path, size, modification time) in a process, and its warnings (averaged rows, raw counts) said once, by the first
+    reading with ``say_warnings`` (the one of the command line); ``say_warnings=False`` never says them
+    (:func:`target_illuminant`, once per sequence, perhaps in a worker process).
 
     Raises
     ------
@@ -168,28 +168,40 @@ def target_file_spectrum(target: str, say_warnings: bool = True) -> Spectra:
     try:
         found = os.stat(path)
     except OSError:  # a symlink loop, a dangling link: the reader refuses it by what it is
-        return _read_target(target, None, say_warnings)
-    return _read_target(target, (found.st_dev, found.st_ino, found.st_size, found.st_mtime_ns), say_warnings)
+        reading = _read_target(target, None)
+    else:
+        reading = _read_target(target, (found.st_dev, found.st_ino, found.st_size, found.st_mtime_ns))
+    if say_warnings and not reading.said:
+        reading.said = True
+        for line in reading.reports:
+            progress(line)
+        for warning in reading.warnings:
+            warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
+    return reading.spectra
+
+
+class _TargetReading:
+    """One reading of one version of a ``--target`` file: its spectrum, what the reader reported and warned, and
+    whether that was said yet (once per version, by the first reading that may say it)."""
+
+    def __init__(self, spectra: Spectra, reports: list[str], said: list[warnings.WarningMessage]) -> None:
+        self.spectra, self.reports, self.warnings, self.said = spectra, tuple(reports), tuple(said), False
 
 
 @functools.lru_cache(maxsize=16)
-def _read_target(target: str, version: tuple[int, ...] | None, say_warnings: bool) -> Spectra:
-    """:func:`target_file_spectrum` of one version of the file (``version`` keys the cache only)."""
+def _read_target(target: str, version: tuple[int, ...] | None) -> _TargetReading:
+    """:func:`target_file_spectrum`'s reading of one version of the file (``version`` keys the cache only): read
+    once, whether its warnings are said or not."""
     from msflash.calibration.light_files import read_measured_light
 
     path = Path(target)
+    reports: list[str] = []
     with warnings.catch_warnings(record=True) as said:  # said once the file is taken, not before a refusal
         warnings.simplefilter("always")
-        light = read_measured_light(path, report=progress if say_warnings else _quiet)
+        light = read_measured_light(path, report=reports.append)
         spectra = _checked_target(light, shown_path(path))
-    for warning in said if say_warnings else ():
-        warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
     spectra.values.setflags(write=False)  # one array for every reading of this version of the file
-    return spectra
-
-
-def _quiet(line: str) -> None:
-    """A report that says nothing (a target file read again)."""
+    return _TargetReading(spectra, reports, said)
 
 
 def _checked_target(spectra: Spectra, shown: str) -> Spectra:

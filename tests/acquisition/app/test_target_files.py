@@ -157,6 +157,29 @@ def test_two_readings_of_one_wavelength_are_averaged_and_said_once(base_sequence
     ]
 
 
+def test_a_target_file_is_read_once_per_command(
+    base_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Read when the command line is parsed (its warnings said) and wanted again when the flash is solved (quiet):
+    one reading of the file serves both, where the quiet one read it a second time."""
+    from msflash.calibration import light_files
+
+    wavelengths, values = _light()
+    path = tmp_path / "lamp.csv"
+    path.write_text(_table(wavelengths, values))
+    reads: list[Path] = []
+    real = light_files.read_measured_light
+
+    def counted(file: Path, **options: object) -> object:
+        reads.append(Path(file))
+        return real(file, **options)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(light_files, "read_measured_light", counted)
+    status, _, err = _flash(base_sequence, path)
+    assert status == 0, err
+    assert reads == [path]
+
+
 def _oceanview(wavelengths: np.ndarray, values: np.ndarray) -> list[str]:
     return export_text("oceanview", wavelengths, values, 0.01, 4, name="lamp").splitlines()
 
