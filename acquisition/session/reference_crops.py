@@ -273,6 +273,7 @@ class ReferenceCrops:
                 "frames; expected the stream to feed every frame it uses"
             )
         cfa = self.header.camera.cfa
+        leds, camera = led_spectra_photons(self.header), camera_responsivities_photons(self.header)  # for every patch
         patches = []
         for index, region in enumerate(self.regions):
             statistics = accumulate_channel_statistics(
@@ -290,12 +291,7 @@ class ReferenceCrops:
                     "white level"
                 )
             try:
-                patch = ReferencePatch.of(
-                    statistics,
-                    led_spectra_photons(self.header),
-                    camera_responsivities_photons(self.header),
-                    region.reflectance,
-                )
+                patch = ReferencePatch.of(statistics, leds, camera, region.reflectance)
             except SpectralDataError as error:
                 raise UsageError(f"{region.what}: {error}") from None
             patches.append(patch)
