@@ -108,11 +108,19 @@ class _Stop:
         self.active = False
         """Installed as the handler (:func:`_install` to :func:`_restore`): only then is a lost stop delivered again."""
         self.quieted = False
+        self.presses = 0
+        """Ctrl-C pressed so far: at :data:`FORCING_CTRL_C`, the process ends at once."""
+        self.again = False
 
     def __call__(self, number: int, _frame: object) -> None:
+        if number == signal.SIGINT:
+            if self.again:  # the one :meth:`lost` delivers again: not a press
+                self.again = False
+            else:
+                self.presses += 1
         if not self.raising:
             self.late.append(number)
-            if number == signal.SIGINT and self.late.count(signal.SIGINT) >= FORCING_CTRL_C - 1:
+            if self.presses >= FORCING_CTRL_C:
                 _forced_exit()
             return
         self.raising = False  # before raising: a signal landing while this one unwinds is recorded
@@ -145,7 +153,7 @@ class _Stop:
         if self.quieted:
             self.late.append(number)
             return
-        self.raising = True
+        self.raising, self.again = True, number == signal.SIGINT
         main = threading.main_thread().ident
         assert main is not None  # the main thread has started: the handler ran in it
         # Not threading.Thread: its start() waits for the thread, and the signal would land in that wait, inside the

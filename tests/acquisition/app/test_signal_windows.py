@@ -375,3 +375,20 @@ def test_a_stop_caught_and_acted_on_is_not_delivered_again() -> None:
         gc.collect()
         assert stop.raised == signal.SIGINT and stop.raising is False
     assert stop.late == []
+
+
+def test_ctrl_c_forces_the_exit_at_the_third_press_whether_or_not_the_first_was_raised(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """After the command finished (:meth:`_Stop.quiet`) no press is raised, and the presses were counted from the
+    recorded ones alone: the second Ctrl-C ended the process, its outcome not yet said. The third does, as during the
+    command."""
+    from msflash.acquisition import signals
+
+    forced: list[int] = []
+    monkeypatch.setattr(signals, "_forced_exit", lambda: forced.append(len(stop.late)))
+    stop = signals._Stop()
+    stop.quiet()
+    for _ in range(3):
+        stop(signal.SIGINT, None)
+    assert stop.late == [signal.SIGINT] * 3 and forced == [3]
