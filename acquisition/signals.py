@@ -22,6 +22,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 from typing import Any, cast
 
@@ -60,6 +61,13 @@ class Terminated(_Watched, SystemExit):
 
 class _Interrupted(_Watched, KeyboardInterrupt):
     """Ctrl-C, as a command's handler raises it: a ``KeyboardInterrupt`` that is delivered again if it is lost."""
+
+
+def _watched_stop(owner: _Stop, number: int) -> BaseException:
+    """The stop ``owner`` raises for ``number``: :class:`_Interrupted` for Ctrl-C, :class:`Terminated` else."""
+    stop: _Watched = _Interrupted() if number == signal.SIGINT else Terminated(128 + number)
+    stop.owner, stop.signal_number = owner, number
+    return cast(BaseException, stop)
 
 
 def received(stop: BaseException) -> None:
@@ -111,8 +119,11 @@ class _Stop:
         self.presses = 0
         """Ctrl-C pressed so far: at :data:`FORCING_CTRL_C`, the process ends at once."""
         self.again = False
+        self.in_flight = False
+        """A signal :meth:`lost` is delivering again has not landed yet (:meth:`settle` waits for it)."""
 
     def __call__(self, number: int, _frame: object) -> None:
+        self.in_flight = False
         if number == signal.SIGINT:
             if self.again:  # the one :meth:`lost` delivers again: not a press
                 self.again = False
@@ -125,9 +136,7 @@ class _Stop:
             return
         self.raising = False  # before raising: a signal landing while this one unwinds is recorded
         self.raised = number
-        stop: _Watched = _Interrupted() if number == signal.SIGINT else Terminated(128 + number)
-        stop.owner, stop.signal_number = self, number
-        raise cast(BaseException, stop)
+        raise _watched_stop(self, number)  # no local name: this frame, in its traceback, would keep it alive
 
     def swallowed(self, unraisable: Any) -> bool:
         """Whether the exception Python could not raise (``sys.unraisablehook``) is one this handler raised: then
@@ -153,7 +162,7 @@ class _Stop:
         if self.quieted:
             self.late.append(number)
             return
-        self.raising, self.again = True, number == signal.SIGINT
+        self.raising, self.again, self.in_flight = True, number == signal.SIGINT, True
         main = threading.main_thread().ident
         assert main is not None  # the main thread has started: the handler ran in it
         # Not threading.Thread: its start() waits for the thread, and the signal would land in that wait, inside the
@@ -172,6 +181,14 @@ class _Stop:
         """From now on record every stopping signal rather than raise it."""
         self.raising = False
         self.quieted = True
+
+    def settle(self) -> None:
+        """Wait, a second at most, for a signal :meth:`lost` is delivering again to land while this handler is still
+        installed (recorded in :attr:`late` once :meth:`quiet`): not after the command's handlers were put back, where
+        Python's own would raise it with a traceback."""
+        deadline = time.monotonic() + 1.0
+        while self.in_flight and time.monotonic() < deadline:
+            time.sleep(0.001)  # the signal interrupts the sleep, and its handler runs here
 
 
 def _install(stop: _Stop, numbers: tuple[int, ...]) -> dict[int, object]:
@@ -227,6 +244,7 @@ def sigterm_as_exit() -> Iterator[None]:
             yield
     finally:
         stop.quiet()  # a signal while the handlers are put back is recorded, not raised out of this block
+        stop.settle()
         stop.active = False
         _restore(previous)
 
@@ -248,6 +266,7 @@ def command_signals() -> Iterator[_Stop]:
             yield stop
     finally:
         stop.quiet()
+        stop.settle()
         stop.active = False
         _restore(previous)
 

@@ -312,6 +312,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             signals.quiet()  # from here a signal is recorded, and said below
         except (KeyboardInterrupt, Terminated) as stop:  # the first signal, landing while an outcome was written
             status, exit_at_once = _stopped(words, stop), False
+        signals.settle()  # a stop lost at the very end and delivered again lands here, to be said below
         if signals.raised is None and signals.late:  # it landed as the command finished: said, not lost
             number = signals.late[0]
             status = _stopped(words, KeyboardInterrupt() if number == signal.SIGINT else Terminated(128 + number))

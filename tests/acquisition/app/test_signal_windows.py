@@ -392,3 +392,24 @@ def test_ctrl_c_forces_the_exit_at_the_third_press_whether_or_not_the_first_was_
     for _ in range(3):
         stop(signal.SIGINT, None)
     assert stop.late == [signal.SIGINT] * 3 and forced == [3]
+
+
+def test_a_ctrl_c_whose_cleanup_failed_is_said_after_the_error(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C, then the cleanup it unwinds fails (the booth stops answering): the error is reported (one line) and
+    the stop, left only in that error's context and dropped with it as the command ends, is delivered again and said
+    — landing while the command's handler is still there, never as Python's own KeyboardInterrupt traceback."""
+    from msflash.acquisition.errors import BoothError
+
+    def capture(args: argparse.Namespace) -> int:
+        try:
+            signal.raise_signal(signal.SIGINT)
+        finally:
+            raise BoothError("booth on /dev/ttyACM0 stopped answering while the LEDs were switched off")
+        return 0
+
+    assert _run(monkeypatch, capture, ["capture"]) == 130
+    lines = _stderr_lines(capsys)
+    assert lines[0] == "msflash: error: booth on /dev/ttyACM0 stopped answering while the LEDs were switched off"
+    assert len(lines) == 2 and lines[1].startswith("msflash: interrupted"), lines
