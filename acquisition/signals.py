@@ -8,7 +8,7 @@ watchdog fires and half-written outputs behind. So :func:`command_signals` (the 
 instruction to its last) and :func:`sigterm_as_exit` (the Python API's capture blocks) turn them into exceptions —
 :class:`Terminated` is a ``SystemExit``: every ``with`` block unwinds as on Ctrl-C — *once*: a second signal is
 recorded, never raised inside the cleanup the first one unwinds; a signal the process ignores (``nohup``) stays
-ignored. :func:`hold_stopping_signals` holds all three across a short gap that must not be cut,
+ignored; a stop dropped unraised (C code that clears exceptions, a finalizer) is delivered again. :func:`hold_stopping_signals` holds all three across a short gap that must not be cut,
 :func:`signals_deferred` records them while a block that cannot be interrupted runs (:func:`deliver_deferred` raises
 the first afterwards), and :func:`handlers_kept` puts back what asyncio's loop replaced. Each works in the main
 thread only (Python delivers signals there); elsewhere it does nothing.
@@ -35,14 +35,11 @@ STOPPING_SIGNALS = (signal.SIGINT, *TERMINATING_SIGNALS)
 
 class _Watched:
     """A stop that tells the handler which raised it (:attr:`owner`) when it is dropped before anyone
-    :attr:`received` it.
+    :attr:`received` it: then the signal is delivered again (:meth:`_Stop.lost`).
 
-    Python raises a signal handler's exception at the next instruction of whatever Python code runs, and some C
-    code that calls Python code clears every exception it gets back: CPython 3.11's ``import`` of a module
-    ``sys.modules`` holds as an object with a Python ``__getattr__`` (colour-science's) asks it for ``__spec__``
-    and clears what it raised; ``PyObject_HasAttr`` and ``PyDict_GetItem`` do the same. A Ctrl-C landing there
-    vanished: the command ran to its end, and a second Ctrl-C was only recorded (about one ``msflash run`` in
-    ten, interrupted as it opened the rig). Freed unreceived, the stop asks its handler to deliver it again."""
+    A handler's exception is raised in whatever Python code runs next, and some C code calling Python code clears
+    every exception it gets back (CPython 3.11's ``import`` of a module object with a Python ``__getattr__``, as
+    colour-science's; ``PyObject_HasAttr``; ``PyDict_GetItem``): the stop would vanish there (docs/reliability.md)."""
 
     owner: _Stop | None = None
     signal_number = 0
