@@ -8,10 +8,11 @@ watchdog fires and half-written outputs behind. So :func:`command_signals` (the 
 instruction to its last) and :func:`sigterm_as_exit` (the Python API's capture blocks) turn them into exceptions —
 :class:`Terminated` is a ``SystemExit``: every ``with`` block unwinds as on Ctrl-C — *once*: a second signal is
 recorded, never raised inside the cleanup the first one unwinds; a signal the process ignores (``nohup``) stays
-ignored; a stop dropped unraised (C code that clears exceptions, a finalizer) is delivered again. :func:`hold_stopping_signals` holds all three across a short gap that must not be cut,
-:func:`signals_deferred` records them while a block that cannot be interrupted runs (:func:`deliver_deferred` raises
-the first afterwards), and :func:`handlers_kept` puts back what asyncio's loop replaced. Each works in the main
-thread only (Python delivers signals there); elsewhere it does nothing.
+ignored; a stop dropped unraised (C code that clears exceptions, a finalizer) is delivered again.
+:func:`hold_stopping_signals` holds all three across a short gap that must not be cut, :func:`signals_deferred` records
+them while a block that cannot be interrupted runs (:func:`deliver_deferred` raises the first afterwards), and
+:func:`handlers_kept` puts back what asyncio's loop replaced. Each works in the main thread only (Python delivers
+signals there); elsewhere it does nothing.
 """
 
 from __future__ import annotations
