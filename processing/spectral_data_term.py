@@ -227,8 +227,8 @@ def nonnegative_fit(design: np.ndarray, target: np.ndarray) -> tuple[np.ndarray,
     """``argmin ‖D a − z‖², a ≥ 0`` and the squared residual, columns scaled to unit norm first.
 
     One column in closed form; more by the NNLS core directly (:mod:`processing.scipy_cores`): the fits call this
-    tens of thousands of times on problems of ~30 × ≤ 12, where the public wrapper's checks cost ten times the
-    solve. Non-finite designs have no fit: zero amplitudes, infinite residual.
+    tens of thousands of times on problems of ~30 × ≤ 12, where the public wrapper's checks cost more than the
+    solve (docs/measurements.md). Non-finite designs have no fit: zero amplitudes, infinite residual.
     """
     columns = design.shape[1]
     if columns == 1:
