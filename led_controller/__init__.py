@@ -2,7 +2,7 @@
 
 The names below are loaded when first used (PEP 562): importing the package, or its ``errors``
 module alone (as every msflash command does, to name a booth failure), does not load the driver,
-pyserial and the emulator — some 0.15 s of a command's start.
+pyserial and the emulator (their share of a command's start: docs/measurements.md).
 """
 
 from __future__ import annotations

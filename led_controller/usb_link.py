@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 MEGA_BOOTLOADER_S = 1.6
 """How long a Mega 2560 reset by the port's open swallows the host's bytes before the firmware runs,
-in seconds: what issue 29 measured on a stock board ("~1.5–2 s"); the Arduino stk500v2 bootloader's
+in seconds: within what a stock board takes (docs/booth-firmware.md); the Arduino stk500v2 bootloader's
 own first wait is "about 1 second" (``boot_timeout``), the rest is the reset and the 16U2."""
 
 BOOTLOADER_BYTE_HOLD_S = 1.0

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-# ALPHA_GRID, DISCREPANCY_SIGMAS, discrepancy_alpha and gcv_alpha are re-exported: the α search was split from here.
+# ALPHA_GRID, DISCREPANCY_SIGMAS, discrepancy_alpha and gcv_alpha are re-exported from the α search's module.
 from msflash.processing.ambient_alpha import ALPHA_GRID as ALPHA_GRID
 from msflash.processing.ambient_alpha import DISCREPANCY_SIGMAS as DISCREPANCY_SIGMAS
 from msflash.processing.ambient_alpha import _discrepancy_search, _solve_penalised, _trace
@@ -136,9 +136,9 @@ class AmbientEstimate:
 class LedTerms:
     """What the estimation problems need of the LED spectra alone, computed once per LED set.
 
-    Every solve used to rebuild these from ``I`` (the roughness operator, its Gram matrix, the
-    rows of the non-negativity constraint); at k ≈ 7 that rebuilding cost as much as the solve.
-    :class:`AmbientModel` holds one; :data:`AMBIENT_METHODS` builds one per call.
+    The roughness operator, its Gram matrix and the rows of the non-negativity constraint depend on ``I``
+    alone: built here, not in every solve. :class:`AmbientModel` holds one; :data:`AMBIENT_METHODS` builds one
+    per call.
     """
 
     values: np.ndarray
@@ -166,9 +166,8 @@ class LedTerms:
     @classmethod
     def of(cls, led_values: np.ndarray) -> LedTerms:
         """The terms of the LED spectra ``I`` (n_wl × k): prepared once per set of values (the last
-        :data:`PREPARED_LED_SETS`), since every estimate of one LED set needs the same ones (a stream's
-        :func:`estimate_ambient` made them anew for each sequence: 0.1 ms, docs/speed.md). ``values`` is a
-        read-only copy, so a caller's later change to ``led_values`` cannot reach them."""
+        :data:`PREPARED_LED_SETS`), since every estimate of one LED set needs the same ones (the cost saved:
+        docs/speed.md). ``values`` is a read-only copy, so a caller's later change to ``led_values`` cannot reach them."""
         values = np.asarray(led_values, dtype=float)
         return _prepared_terms(values.shape, values.tobytes())
 

@@ -1,6 +1,6 @@
 """The penalised solve of eq. 5 and the choice of its roughness weight α (:mod:`processing.ambient`'s ``tikhonov``
 method): :func:`discrepancy_alpha` (the default, Morozov's discrepancy principle) and :func:`gcv_alpha` (generalised
-cross-validation). Split from :mod:`processing.ambient` by job (issue 31: modules of one job, ≤ 600 lines).
+cross-validation).
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def _solve_penalised(
 
 
 def _trace(matrix: np.ndarray) -> float:
-    """tr(M), as ``np.trace`` computes it (the same sum) without its ~7 µs of dispatch."""
+    """tr(M), as ``np.trace`` computes it (the same sum) without its dispatch (docs/measurements.md)."""
     return float(np.add.reduce(matrix.diagonal()))
 
 

@@ -1,7 +1,6 @@
 """The pixel-noise band of an ambient estimate (:meth:`processing.ambient.AmbientModel.spectrum_band`): the linear
 sandwich of the weights' covariance, and for an estimate solved with ``I w ≥ 0`` where the constraint may bind the
-scatter of seeded draws projected onto the constraint. Split from :mod:`processing.ambient` by job (issue 31: modules
-of one job, ≤ 600 lines).
+scatter of seeded draws projected onto the constraint.
 """
 
 from __future__ import annotations
@@ -90,7 +89,7 @@ def constrained_band(
     Where the estimate's spectrum ``I w`` (``weights`` given) lies :data:`BAND_MARGIN_Z` sandwich deviations or more
     above 0 wherever an LED emits, the constraint does not bind at ``w`` (so ``w`` is the unconstrained estimate) nor,
     but for a draw beyond 4σ, at any draw: the draws' scatter would be the sandwich's up to their sampling error
-    (≈ 9 % at 64 draws), and the band is the sandwich, exactly (docs/speed.md, 2026-11-29, rawspeed30d).
+    (≈ 9 % at 64 draws), and the band is the sandwich, exactly (docs/speed.md, rawspeed30d).
     """
     sandwich = sandwich_band(terms.values, weights_cov)
     if weights is not None and np.all(terms.values.dot(weights) >= BAND_MARGIN_Z * sandwich):

@@ -103,11 +103,11 @@ class BlockRows:
     One product at the end, rather than each new row's products with the rows already in as it arrives: the
     per-frame products read every filled row again for each frame (their sum over a stack is about n / 2 full
     products), so the whole estimate costs less, though the last frame's latency carries one full product
-    (≈ 1 ms for a 1280×1024 mosaic; docs/speed.md).
+    (docs/speed.md).
 
     Frames may be added from several threads (distinct rows); each frame's pass, the noise line and the moments run on
-    the thread that calls them (a second thread sharing a frame's pass, the fit or the probe's moments measured no
-    faster: docs/speed.md, 2026-11-28, third session).
+    the thread that calls them (why not a second thread for a frame's pass, the fit or the probe's moments:
+    docs/speed.md).
     """
 
     def __init__(
@@ -344,8 +344,8 @@ class BlockRows:
         """The statistics of the rows added so far (every row must be in); ``spec`` as for the raw frames.
 
         ``workers`` threads share the moment product; the moments do not depend on it (the chunks' products are
-        added in chunk order, :func:`processing.moment_products.gram_matrices`). The stream leaves it at 1: at
-        1280×1024 two threads took 3–8 % longer than one (docs/speed.md, 2026-11-28 third session).
+        added in chunk order, :func:`processing.moment_products.gram_matrices`). The stream leaves it at 1 (a second
+        thread is slower there: docs/speed.md).
         """
         rows = self.rows
         if len(self._filled) != rows.shape[0]:

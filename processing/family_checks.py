@@ -19,10 +19,9 @@ MISS_RATIO = 1.3
 """An estimate whose RMSE exceeds this multiple of the LED bound is a miss (the harness's definition)."""
 LED_WARNING = 1.13
 """The LEDs' estimate is flagged when its distance from the family's, over the family's LED bound, reaches this
-(:func:`predicted_ratio`). Re-chosen on the tuning rows of both suites with the Kaufman fits and the noise-aware
-``auto``: recall 7 of 14 misses at 11 % false alarms (1.1: 9 of 14 at 17 %)."""
+(:func:`predicted_ratio`). Chosen on the tuning rows of both suites (recall and false alarms: docs/measurements.md)."""
 PRIOR_WARNING = 1.2
-"""The same for the light prior's estimate: recall 18 of 24 at 17 % false alarms on the tuning rows of both suites."""
+"""The same for the light prior's estimate, chosen likewise (docs/measurements.md)."""
 FAMILY_WARNING = 1.05
 """The family's estimate is flagged when its evidence spread (the RMS of the candidates' spread, max-normalised, over
 its LED bound) times its held-out error over the LEDs' span's reaches this (:func:`self_check`): a wide spread

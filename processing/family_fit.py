@@ -213,8 +213,8 @@ def refine(
     the span of the active atoms projected out (Golub & Pereyra 2003, §3) — one evaluation of the atoms' tangent
     per step (``tangent_of(θ, a)`` in closed form, else forward differences of the atoms alone) rather than a
     non-negative fit per parameter. Steps are projected onto the bounds. Written out rather than scipy's
-    minimisers: their Fortran calls OpenBLAS, whose threads' wake-ups cost 10–20 ms a call on a busy 2-core
-    machine, where these problems (r ≈ 30 residuals, ≤ 12 parameters) take microseconds.
+    minimisers: their Fortran calls OpenBLAS, whose threads' wake-ups on a busy machine cost far more than these
+    problems (r ≈ 30 residuals, ≤ 12 parameters) take (docs/measurements.md).
     """
     lower = np.array([b[0] for b in bounds], float)
     upper = np.array([b[1] for b in bounds], float)

@@ -6,9 +6,8 @@ Levenberg–Marquardt step is a dozen calls of a microsecond's work each). Compi
 or a mixture of two side by side, judges every candidate on the held-out folds in one call and runs the greedy
 discharge fit and the coarse starts.
 
-**Opt-in** (:func:`prepare`): loading the compiled fits costs a process 1–2 s from numba's on-disk cache (and a
-first compile of ~30 s on a fresh install) against ~15 ms saved an estimate, so only a process that runs many
-estimates prepares them — the bench, a service, a batch through the Python API. A one-shot ``msflash estimate`` or
+**Opt-in** (:func:`prepare`): loading the compiled fits costs a process far more than one estimate saves (the
+figures: docs/light-families.md), so only a process that runs many estimates prepares them — the bench, a service, a batch through the Python API. A one-shot ``msflash estimate`` or
 a capture session takes the numpy route. ``MSFLASH_KERNELS=numba`` forces the compiled route, ``numpy`` or
 :func:`processing.frame_kernels.paused` turn it off. The two routes agree to rounding
 (tests/processing/test_family_kernels.py; the harness tables are the same to their last digit): the non-negative

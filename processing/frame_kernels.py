@@ -44,11 +44,10 @@ unset (or ``auto``), :func:`wanted` decides."""
 
 COMPILE_BYTES = 256 << 20
 """Frame bytes from which one call's work loads the kernels (:func:`wanted`): importing numba and
-loading the cached kernels costs a process about 0.5–1 s once, which the kernels win back only on
-stacks about this large (a 4096×3000 RGB16 stack of 8 frames is 590 MB; a 1280×1024 one, 63 MB,
-saves about 25 ms an estimate). A process that has loaded them (:func:`prepare`: the bench) uses
-them on any work. A capture session does not load them itself: numba's import holds the
-interpreter for up to seconds on a busy machine, and a camera's stream lost frames to it."""
+loading the cached kernels is a one-off cost per process that the kernels win back only on stacks
+about this large (the figures: docs/measurements.md). A process that has loaded them (:func:`prepare`: the bench) uses
+them on any work. A capture session does not load them itself: numba's import can hold the
+interpreter for seconds on a busy machine, and a camera's stream would lose frames to it."""
 
 
 def _mode() -> str:
@@ -314,7 +313,7 @@ def floor_level(
     """The ``position``-th smallest of ``ambient − black`` (block sums (N,) laid out ``layout`` = (block rows,
     channels, block columns)) over the blocks not ``left_out`` ((block rows, block columns) or None): the levels
     gathered in one compiled pass, the value by ``np.partition`` (:func:`processing.noise_level.ambient_block_weights`;
-    numpy's selection took a third of the time of a compiled quickselect here)."""
+    faster here than a compiled quickselect: docs/speed.md)."""
     masked = left_out is not None
     mask = np.ascontiguousarray(left_out, dtype=bool) if left_out is not None else _NO_BLOCKS
     levels = _compiled().floor_levels(ambient, mask, masked, layout[1], layout[2], float(black))

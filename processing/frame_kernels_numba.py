@@ -1,7 +1,7 @@
 """The numba kernels behind :mod:`processing.frame_kernels` (imported only through it; needs numba).
 
-Compiled on first use and cached on disk (``cache=True``): about 1–2 s per kernel specialisation
-(frame type, CFA period, channels, block size) once per installation, then a load of a few ms.
+Compiled on first use and cached on disk (``cache=True``): each kernel specialisation (frame type, CFA period,
+channels, block size) once per installation, then loaded from the cache (the cost: docs/speed.md).
 """
 
 from __future__ import annotations
@@ -46,11 +46,9 @@ def block_pass(raw, period_t, plane_channels_t, factor_t, white, stride, sums, d
 
     Each column of a block row's ``factor`` frame rows is summed in one sweep (the rows' values in
     registers, one store per column), with a running maximum for the whole block row; only a block
-    row that reaches ``white`` is searched block by block. Summing row by row into the column sums,
-    with a per-column maximum, as first built, loaded and stored them ``factor`` times. The column sums are
-    32-bit unsigned (numba widens signed 32-bit sums to 64-bit lanes); where a pixel column group holds an even
-    number of values (a mosaic's two CFA columns), each block adds two channels' column sums at once, packed in one
-    64-bit word (0.13 → 0.11 ms a 1280×1024 mosaic frame; the same integers).
+    row that reaches ``white`` is searched block by block. The column sums are 32-bit unsigned (numba widens
+    signed 32-bit sums to 64-bit lanes); where a pixel column group holds an even number of values (a mosaic's two
+    CFA columns), each block adds two channels' column sums at once, packed in one 64-bit word (the same integers).
     """
     period = len(period_t)
     group = len(plane_channels_t)  # values per pixel column group: period · C
@@ -302,8 +300,7 @@ def block_statistics(
     (:class:`processing.block_rows.BlockRows`) agrees to rounding, not to the bit. The map skips the transform's zeros
     (an LED image is two rows' difference, the ambient's one row less its black: 2 of R rows each), and in the
     (channel, block column) layout the images are mapped in place of their channel-order copy; both only leave out
-    additions of zero (the dense map's numbers to the bit on the bench's worlds; docs/speed.md, 2026-11-29, a fifth
-    session).
+    additions of zero (the dense map's numbers to the bit on the bench's worlds; docs/speed.md, rawblock30).
     """
     rows = values.shape[0]
     images = transform.shape[0]
@@ -322,7 +319,7 @@ def block_statistics(
         for i in range(gram_rows):
             left = weighted[i]
             # Four products with one weighted row in one sweep (its values loaded once, four independent sums):
-            # 4–5 % off the pass over the rows (docs/speed.md, 2026-11-29, rawest30).
+            # the gain: docs/speed.md, rawest30.
             fours = (i + 1) // 4 * 4
             for j in range(0, fours, 4):
                 right0 = values[j, base : base + inner]
@@ -381,7 +378,7 @@ def _image_moments(image, k, channels, width, fa, ff, aa):
     y_icb y_Kdb``, ``ff[i, c, d] += Σ_b y_icb y_idb`` and ``aa[c, d] += Σ_b y_Kcb y_Kdb`` (``ff`` and ``aa`` for
     ``d ≤ c`` only). Four channels (a mosaic's CFA planes) take each LED's 16 + 10 sums in two sweeps over the block
     columns (:func:`_led_sums4`); a sum a loop, as for other channel counts, spent more on each short loop's set-up and
-    final reduction than on its 80 products (docs/speed.md, 2026-11-29, rawspeed30d)."""
+    final reduction than on its 80 products (docs/speed.md, rawspeed30d)."""
     ambient = image[k]
     for i in range(k):
         led = image[i]

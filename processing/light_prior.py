@@ -444,7 +444,7 @@ def normal_equations(predictors: np.ndarray, moments: Moments) -> tuple[np.ndarr
     ff, fa, aa = moments.ff[0], moments.fa[0], moments.aa[0]
     q, channels, width = predictors.shape
     flat = predictors.reshape(q, channels * width)
-    # As matrix products (einsum's three-operand loops took ~20× longer on these 16 × 4 × 28 shapes).
+    # As matrix products, not einsum's three-operand loops (slower on these shapes: docs/light-families.md).
     hessian = (predictors.reshape(q * channels, width) @ ff).reshape(q, channels * width) @ flat.T
     linear = flat @ fa.T.reshape(channels * width)
     return 0.5 * (hessian + hessian.T), linear, float(np.trace(aa))

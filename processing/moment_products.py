@@ -33,8 +33,7 @@ cost many times the product: docs/measurements.md)."""
 SERIAL_PRODUCT = 1 << 18
 """Multiply-adds (m · n · k) of a matrix product that OpenBLAS still runs on the calling thread. Above, it splits some
 products across its threads — a (33 × 1024) Gram matrix, an (8 × 9) map of 16 320 columns — and on a busy 2-core
-machine their wake-ups cost 0.1–20 ms for a product of 0.1 ms alone (measured with ``OPENBLAS_NUM_THREADS`` 1 and 2
-interleaved, docs/speed.md)."""
+machine their wake-ups cost many times the product (docs/speed.md)."""
 
 
 def serial_columns(rows: int, outputs: int) -> int:

@@ -37,8 +37,8 @@ def _select(values, k, first, second):
     """The ``k``-th smallest of ``values`` (no NaN; left as they are), with ``first`` and ``second`` as scratch of its
     size. Each round splits the range around a median of three into the values below it (to the front of a scratch
     array) and above it (to the back), written without a branch: a data-dependent branch per value (Hoare's
-    partition) was mispredicted about every other time, and swapping in place waits on each store (2.2–2.7 µs for
-    320 values). The values equal to the pivot (many ties: squares of integer details) end the search."""
+    partition) is mispredicted about every other time, and swapping in place waits on each store (the figures:
+    docs/measurements.md). The values equal to the pivot (many ties: squares of integer details) end the search."""
     source, start, size = values, 0, values.size
     target = first
     while size > 1:

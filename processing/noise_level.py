@@ -21,8 +21,7 @@ cut at the 99.9th percentile of ``HH²`` itself (corrected for) drops what textu
 
 Why not the block sums' half differences (the moments' noise probe, :mod:`processing.block_rows`):
 on a mosaic the samples of one CFA plane lie 2 pixels apart, so texture a block's halves do not share
-filled the probe — 99 % of its energy on the simulated Bayer chart — and the line fitted to it put the
-weights up to 20× off either way across the levels (docs/raw-frames.md). Poisson-Gaussian fitting from one raw image: Foi et al.,
+fills the probe, and a line fitted to it puts the weights far off across the levels (docs/raw-frames.md). Poisson-Gaussian fitting from one raw image: Foi et al.,
 "Practical Poissonian-Gaussian noise modeling and fitting for single-image raw-data", IEEE TIP 2008.
 """
 
@@ -171,9 +170,10 @@ def _level_order(levels: np.ndarray, top: float) -> np.ndarray:
     """The indices that sort ``levels`` (≥ 0, largest ``top``), equal levels in index order: a stable argsort.
 
     Whole-number levels (the sums of integer samples less an integer black) up to 65535 (a 12-bit mosaic's
-    cells) are sorted as 16-bit integers, which numpy's stable sort takes by radix, 6× faster; larger whole
-    numbers as the distinct keys ``level · n + index``, which a plain argsort puts in the same order 3× faster
-    (the keys are exact while ``top · n + n < 2⁵³``). Other levels take the stable sort itself.
+    cells) are sorted as 16-bit integers, which numpy's stable sort takes by radix; larger whole numbers as the
+    distinct keys ``level · n + index``, which a plain argsort puts in the same order (the keys are exact while
+    ``top · n + n < 2⁵³``); both faster than the stable sort (docs/speed.md). Other levels take the stable sort
+    itself.
     """
     n = levels.size
     if top * n + n < 2.0**53 and np.array_equal(levels, np.trunc(levels)):
@@ -229,8 +229,8 @@ def fit_detail_line(
 
     ``compiled``: the same fit in one compiled call (:func:`processing.frame_kernels.detail_line`; the kernels must
     be loaded), for block rows that take the compiled route (:func:`processing.frame_kernels.statistics_compiled`):
-    it agrees with this numpy fit to rounding (its sums are taken in another order), and costs about a tenth of it
-    (a few dozen numpy calls on ~5 000 cells; docs/speed.md).
+    it agrees with this numpy fit to rounding (its sums are taken in another order), and costs far less than its
+    few dozen numpy calls (docs/speed.md).
 
     Examples
     --------
@@ -392,7 +392,7 @@ def ambient_block_weights(
     the floor's quantile by a compiled selection and the weights' steps before their normalisation in one compiled
     pass (:func:`processing.frame_kernels.floor_level`, :func:`processing.frame_kernels.inverse_variances`), the
     mean by numpy's: **the same weights to the bit** on both routes (a k-th smallest is one number; the same IEEE
-    operations in the same order), for a tenth of a millisecond less on a 1280×1024 mosaic (docs/speed.md).
+    operations in the same order), in less time (docs/speed.md).
     """
     if not compiled:
         blocks = ambient.reshape(layout).transpose(0, 2, 1)

@@ -1,8 +1,7 @@
 """The light prior against the LEDs' span: which predicts held-out pixels better (issue 17, build 3).
 
-Before issue 30 this was ``--model auto``'s choice; since then ``auto`` chooses among the physics families
-(:mod:`processing.light_families`), where the prior is one candidate. The choice stays a check of its own
-(:func:`choose_model`).
+``--model auto`` chooses among the physics families (:mod:`processing.light_families`), where the prior is one
+candidate; this choice is a check of its own (:func:`choose_model`).
 """
 
 from __future__ import annotations

@@ -21,11 +21,10 @@ from msflash.processing.spectral_data_term import Whitened
 
 PATCH_WEIGHT = 10.0
 """With a reference (:class:`ReferencePatch`), a candidate's evidence is ``√(held-out² + w · reference²)``, both
-relative errors. Chosen on the physics suite's tuning rows with a 24-patch chart: w 1 → 10 took the family model
-from 0.49 to 0.48 (0.53 without a chart), 100 no further."""
+relative errors. Chosen on the physics suite's tuning rows with a 24-patch chart (docs/measurements.md)."""
 PATCH_FIT_WEIGHT = 10.0
 """The calibrated estimate refits the chosen form's amplitudes with the reference's rows weighted to this multiple
-of the whole image's data term (1, 10 and 100 gave 0.47–0.48 on the same rows)."""
+of the whole image's data term (chosen on the same rows: docs/measurements.md)."""
 
 
 @dataclass(frozen=True)

@@ -154,7 +154,7 @@ def scene_form(statistics: ChannelStatistics, reduction: Reduction) -> SceneForm
 
     def terms(moments: Moments) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         # H_f[q,s] = Σ_c A_q,c S_ff,f A_s,cᵀ ; g_f[q] = Σ_c,l A[q,c,l] S_fa,f[l,c] ; E_f = tr S_aa,f
-        # (as products: einsum's loops took 7× longer on these 31 × 4 × 28 shapes)
+        # (as products, not einsum's loops: slower on these shapes, docs/measurements.md)
         folds = moments.ff.shape[0]
         products = np.matmul(stacked, moments.ff).reshape(folds, rank, channels * width)
         hessian = products @ flat_t
@@ -191,7 +191,7 @@ class Whitened:
     @classmethod
     def of(cls, hessian: np.ndarray, linear: np.ndarray, energy: float, lift: np.ndarray) -> Whitened:
         """From ``(H, g, E)`` and L; eigenvalues of H below 10⁻⁹ of the largest are raised to it."""
-        # scipy's LAPACK directly: numpy's eigh wakes OpenBLAS's threads (tens of ms on a busy machine for r ≈ 30).
+        # scipy's LAPACK directly: numpy's eigh wakes OpenBLAS's threads (docs/measurements.md).
         values, vectors, info = lapack.dsyevd(np.ascontiguousarray(hessian), compute_v=1, lower=1)
         if info != 0:
             values, vectors = np.linalg.eigh(hessian)
@@ -227,8 +227,8 @@ def nonnegative_fit(design: np.ndarray, target: np.ndarray) -> tuple[np.ndarray,
     """``argmin ‖D a − z‖², a ≥ 0`` and the squared residual, columns scaled to unit norm first.
 
     One column in closed form; more by the NNLS core directly (:mod:`processing.scipy_cores`): the fits call this
-    tens of thousands of times on problems of ~30 × ≤ 12, where the public wrapper's checks cost ten times the
-    solve. Non-finite designs have no fit: zero amplitudes, infinite residual.
+    tens of thousands of times on problems of ~30 × ≤ 12, where the public wrapper's checks cost more than the
+    solve (docs/measurements.md). Non-finite designs have no fit: zero amplitudes, infinite residual.
     """
     columns = design.shape[1]
     if columns == 1:

@@ -383,7 +383,7 @@ def _diagonal_transform(
     """:func:`channel_transform` where ``U`` is diagonal (one LED per frame, the usual plan), in Python floats: the
     same products as the array route (a sum or product over a row of ``U`` is its one diagonal term), so the same
     transform to the bit, from one array call instead of a dozen (each costs microseconds right after the frames'
-    pass has evicted numpy's code; docs/speed.md, 2026-11-29, rawspeed30d)."""
+    pass has evicted numpy's code; docs/speed.md, rawspeed30d)."""
     n = len(diagonal)
     rows = []
     for i, (unmix, scale) in enumerate(zip(diagonal, scales, strict=True)):

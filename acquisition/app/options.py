@@ -31,10 +31,10 @@ def target_value(text: str) -> str:
     from msflash.processing.errors import SpectralDataError
 
     if is_target_file(text):
-        try:  # read now: a missing or dark file was refused only after the rig had metered and captured
+        try:  # read now, so that a missing or dark file is refused before the rig meters or captures
             target_file_spectrum(text)
         except (ValueError, OSError) as err:  # every bad-input error of msflash is a ValueError
-            # argparse names the option itself: "argument --target: --target f.csv: …" said it twice
+            # argparse names the option itself ("argument --target: …"): the error's own prefix is dropped
             raise argparse.ArgumentTypeError(str(err).removeprefix("--target ")) from None
         return text
     from msflash.processing import datasets

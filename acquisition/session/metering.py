@@ -72,7 +72,7 @@ def sampled(pixels: np.ndarray, stride: int) -> np.ndarray:
         return pixels[::stride, ::stride]
     step = 2 * max(1, stride // 2)
     # Site (p, q) of every sampled quad is one strided slice: four slice copies, not a reshape of
-    # a transposed view (which numpy copies element by element, ~20× slower on the capture path).
+    # a transposed view (which numpy copies element by element, far slower: docs/measurements.md).
     first = pixels[0:height:step, 0:width:step]
     quads = np.empty((*first.shape, 4), dtype=pixels.dtype)
     for site, (p, q) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):

@@ -199,7 +199,7 @@ def estimate_read(sequence: Sequence, settings: EstimateSettings, report: Report
 
 def _check_every_led_captured(sequence: Sequence) -> None:
     """Refuse an interrupted sequence that holds no ambient frame or no frame lighting some LED, naming what is
-    missing (the solve's own refusal spoke of the levels' rank, not of the frames the capture never took).
+    missing (the solve's own refusal would speak of the levels' rank, not of the frames the capture never took).
 
     Raises
     ------

@@ -426,7 +426,7 @@ class Streaming(SyncLines):
         if not stopped:  # pragma: no cover - the thread may still push a buffer back
             pool.abandon()
         elif self._control_lost.is_set() or self._unreachable:
-            # Measured on the GigE fake killed mid-stream: 5 s here and 5 s more at close, in Aravis.
+            # Aravis waits out its retries here and again at close (how long: docs/measurements.md).
             log.warning(
                 "%s: releasing a camera that no longer answers; Aravis waits out its control "
                 "retries first (about 10 s)",
@@ -435,8 +435,7 @@ class Streaming(SyncLines):
             pool.release()
         elif self._stats.frames_incomplete or self._stats.frames_missing:
             # A stream that lost frames is not reused: Aravis may still hold a partial frame of
-            # it, which the next acquisition received in place of its first frame (seen on the
-            # lossy fake when a capture took a lost frame again: the new first frame never came).
+            # it, which the next acquisition would receive in place of its first frame.
             pool.release()
         else:
             self._spare = SpareStream(pool, self._n_buffers, self._layout_key)
