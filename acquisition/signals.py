@@ -230,7 +230,8 @@ def sigterm_as_exit() -> Iterator[None]:
     Then ``with LedBooth…`` blocks switch the LEDs off and writers finish or remove what they
     wrote, as on Ctrl-C. The previous handlers are restored on exit. Inside :func:`command_signals` (the CLI's
     ``main``) it changes nothing: the command's handler already does this, for the whole command. A signal the
-    process ignores (``nohup``'s SIGHUP) stays ignored.
+    process ignores (``nohup``'s SIGHUP) stays ignored. Code inside the block that catches the :class:`Terminated`
+    and carries on says so with :func:`received`; else, dropped, it is delivered again (:class:`_Watched`).
     """
     if not _in_main_thread() or isinstance(signal.getsignal(signal.SIGTERM), _Stop):
         yield
