@@ -413,3 +413,33 @@ def test_a_ctrl_c_whose_cleanup_failed_is_said_after_the_error(
     lines = _stderr_lines(capsys)
     assert lines[0] == "msflash: error: booth on /dev/ttyACM0 stopped answering while the LEDs were switched off"
     assert len(lines) == 2 and lines[1].startswith("msflash: interrupted"), lines
+
+
+def test_a_terminated_caught_in_an_api_block_is_delivered_again_unless_received() -> None:
+    """Inside ``sigterm_as_exit`` (the Python API's capture blocks), code that catches the stop and drops it has not
+    stopped: the signal comes back. Said :func:`received`, it does not (the handler has nothing in flight)."""
+    import threading
+    import time
+
+    from msflash.acquisition.signals import _Stop, received
+
+    with sigterm_as_exit():
+        handler = signal.getsignal(signal.SIGTERM)
+        assert isinstance(handler, _Stop)
+        try:
+            signal.raise_signal(signal.SIGTERM)
+        except Terminated as stop:
+            received(stop)
+        assert not handler.in_flight and handler.raised == signal.SIGTERM
+
+    steps: list[str] = []
+    with pytest.raises(Terminated), sigterm_as_exit():
+        try:
+            signal.raise_signal(signal.SIGTERM)
+        except Terminated:
+            steps.append("dropped")
+        deadline = time.monotonic() + 120  # a hang guard, not a timing: the signal comes back within milliseconds
+        while time.monotonic() < deadline:
+            threading.Event().wait(0.01)
+        steps.append("never stopped")
+    assert steps == ["dropped"]
