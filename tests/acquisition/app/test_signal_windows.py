@@ -17,6 +17,8 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -46,6 +48,15 @@ def _run(monkeypatch: pytest.MonkeyPatch, handler: Callable[[argparse.Namespace]
     monkeypatch.setattr(parser, "parse_args", lambda argv: argparse.Namespace(verbose=0, handler=handler))
     monkeypatch.setattr(cli, "build_parser", lambda argv=None: parser)
     return cli.main(words)
+
+
+def _until_stopped(steps: list[str]) -> None:
+    """Wait for the signal delivered again to stop the caller; ``"never stopped"`` in ``steps`` if it does not come
+    within 120 s (a hang guard, not a timing: it comes back within milliseconds)."""
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        threading.Event().wait(0.01)
+    steps.append("never stopped")
 
 
 def _stderr_lines(capsys: pytest.CaptureFixture[str]) -> list[str]:
@@ -292,8 +303,6 @@ def test_a_sigterm_landing_inside_a_finalizer_still_stops_the_command_in_one_lin
     """A handler that runs inside a ``__del__`` (or a weakref callback, a garbage collection) raises there; Python
     printed "Exception ignored in …" with the Terminated traceback and went on: the stop was lost (the SIGTERM
     traceback seen once under load). Now the signal is delivered again once the finalizer has returned."""
-    import threading
-    import time
 
     class Frame:
         def __del__(self) -> None:
@@ -305,10 +314,7 @@ def test_a_sigterm_landing_inside_a_finalizer_still_stops_the_command_in_one_lin
         frame = Frame()
         del frame
         steps.append("after the finalizer")
-        deadline = time.monotonic() + 120  # a hang guard, not a timing: the signal comes back within milliseconds
-        while time.monotonic() < deadline:
-            threading.Event().wait(0.01)
-        steps.append("never stopped")
+        _until_stopped(steps)
         return 0
 
     assert _run(monkeypatch, capture, ["capture"]) == 128 + signal.SIGTERM
@@ -339,9 +345,6 @@ def test_a_stop_that_c_code_clears_is_delivered_again(
     has a Python ``__getattr__``; CPython 3.11's import clears what its ``__spec__`` lookup raised): the run went on to
     its end, exit 0, about one run in ten (tests/acquisition/app/test_cli_manners.py). The stop dropped unreceived is
     delivered again and stops the command."""
-    import threading
-    import time
-
     monkeypatch.setitem(sys.modules, "msflash_test_module_object", _ModuleThatRaisesSignal(number))
     steps: list[str] = []
 
@@ -349,10 +352,7 @@ def test_a_stop_that_c_code_clears_is_delivered_again(
         import msflash_test_module_object  # noqa: F401  # type: ignore[import-not-found]
 
         steps.append("after the import")
-        deadline = time.monotonic() + 120  # a hang guard, not a timing: the signal comes back within milliseconds
-        while time.monotonic() < deadline:
-            threading.Event().wait(0.01)
-        steps.append("never stopped")
+        _until_stopped(steps)
         return 0
 
     expected = 130 if number == signal.SIGINT else 128 + number
@@ -418,9 +418,6 @@ def test_a_ctrl_c_whose_cleanup_failed_is_said_after_the_error(
 def test_a_terminated_caught_in_an_api_block_is_delivered_again_unless_received() -> None:
     """Inside ``sigterm_as_exit`` (the Python API's capture blocks), code that catches the stop and drops it has not
     stopped: the signal comes back. Said :func:`received`, it does not (the handler has nothing in flight)."""
-    import threading
-    import time
-
     from msflash.acquisition.signals import _Stop, received
 
     with sigterm_as_exit():
@@ -438,8 +435,5 @@ def test_a_terminated_caught_in_an_api_block_is_delivered_again_unless_received(
             signal.raise_signal(signal.SIGTERM)
         except Terminated:
             steps.append("dropped")
-        deadline = time.monotonic() + 120  # a hang guard, not a timing: the signal comes back within milliseconds
-        while time.monotonic() < deadline:
-            threading.Event().wait(0.01)
-        steps.append("never stopped")
+        _until_stopped(steps)
     assert steps == ["dropped"]
