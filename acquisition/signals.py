@@ -68,6 +68,20 @@ def _watched_stop(owner: _Stop, number: int) -> BaseException:
     return cast(BaseException, stop)
 
 
+def carried_stop(error: BaseException) -> BaseException | None:
+    """The stop ``error`` carries as its cause or context — a cleanup that failed while the stop unwound it — if one is
+    there that nobody :func:`received` and whose command still runs; else None. Not left to the stop's finalizer: kept
+    in a reference cycle (a frame that stored it), it would be freed by a collection, whenever that comes."""
+    seen: set[int] = set()
+    link: BaseException | None = error
+    while link is not None and id(link) not in seen:
+        seen.add(id(link))
+        if isinstance(link, _Watched) and not link.received and link.owner is not None and link.owner.active:
+            return link
+        link = link.__cause__ or link.__context__
+    return None
+
+
 def received(stop: BaseException) -> None:
     """Say that ``stop`` (a ``KeyboardInterrupt`` or :class:`Terminated`) was caught and acted on: dropping it
     after this does not deliver it again. For the places that end a command on a stop rather than re-raise it."""
@@ -119,6 +133,10 @@ class _Stop:
         self.again = False
         self.in_flight = False
         """A signal :meth:`lost` is delivering again has not landed yet (:meth:`settle` waits for it)."""
+        self.delivery = _thread.allocate_lock()
+        """Held while a signal is delivered again, and while the handler is closed: none is sent once it is."""
+        self.pending: int | None = None
+        """The signal :meth:`lost` is about to send again (not sent yet)."""
 
     def __call__(self, number: int, _frame: object) -> None:
         self.in_flight = False
@@ -168,9 +186,13 @@ class _Stop:
         leaving = _thread.allocate_lock()
         leaving.acquire()
 
+        self.pending = number
+
         def deliver() -> None:
-            with leaving:
-                signal.pthread_kill(main, number)
+            with leaving, self.delivery:
+                if self.pending is not None:  # else :meth:`close` took it: the handlers may be gone
+                    self.pending = None
+                    signal.pthread_kill(main, number)
 
         _thread.start_new_thread(deliver, ())
         leaving.release()
@@ -179,6 +201,19 @@ class _Stop:
         """From now on record every stopping signal rather than raise it."""
         self.raising = False
         self.quieted = True
+
+    def close(self) -> None:
+        """End the command's handling (idempotent): record from now on (:meth:`quiet`), let a signal being delivered
+        again land (:meth:`settle`), record one not sent yet instead of sending it later — before the handlers are put
+        back and before :attr:`late` is read."""
+        self.quiet()
+        self.settle()
+        with self.delivery:  # a delivering thread that has not sent by now never will: its signal is recorded
+            self.active = False
+            if self.pending is not None:
+                self.late.append(self.pending)
+                self.pending, self.in_flight = None, False
+        self.settle()  # one sent just before lands here, while this handler is still installed
 
     def settle(self) -> None:
         """Wait, a second at most, for a signal :meth:`lost` is delivering again to land while this handler is still
@@ -242,10 +277,10 @@ def sigterm_as_exit() -> Iterator[None]:
         with _redelivered_from_finalizers(stop):
             yield
     finally:
-        stop.quiet()  # a signal while the handlers are put back is recorded, not raised out of this block
-        stop.settle()
-        stop.active = False
+        stop.close()  # a signal while the handlers are put back is recorded, not raised out of this block
         _restore(previous)
+    if stop.raised is None and stop.late:  # the block ended as a stop came, or one it caught and dropped came back
+        raise Terminated(128 + stop.late[0])
 
 
 @contextlib.contextmanager
@@ -264,9 +299,7 @@ def command_signals() -> Iterator[_Stop]:
         with _redelivered_from_finalizers(stop):
             yield stop
     finally:
-        stop.quiet()
-        stop.settle()
-        stop.active = False
+        stop.close()
         _restore(previous)
 
 

@@ -33,7 +33,7 @@ from msflash.acquisition.app.cli_common import UsageError
 from msflash.acquisition.errors import bad_input_errors, runtime_errors
 from msflash.acquisition.progress import bars_wanted, close_bar
 from msflash.acquisition.progress import configure as configure_progress
-from msflash.acquisition.signals import Terminated, command_signals, received
+from msflash.acquisition.signals import Terminated, carried_stop, command_signals, received
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "estimate": ("msflash.acquisition.app.cli_process", "estimate the ambient illuminant spectrum of a sequence"),
@@ -312,7 +312,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             signals.quiet()  # from here a signal is recorded, and said below
         except (KeyboardInterrupt, Terminated) as stop:  # the first signal, landing while an outcome was written
             status, exit_at_once = _stopped(words, stop), False
-        signals.settle()  # a stop lost at the very end and delivered again lands here, to be said below
+        signals.close()  # a stop lost at the very end and delivered again is recorded by now, to be said below
         if signals.raised is None and signals.late:  # it landed as the command finished: said, not lost
             number = signals.late[0]
             status = _stopped(words, KeyboardInterrupt() if number == signal.SIGINT else Terminated(128 + number))
@@ -346,14 +346,21 @@ def _outcome(words: list[str]) -> tuple[int, bool]:
         return 141, False
     except bad_input_errors() as err:
         sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
-        return 2, False
+        return _or_its_stop(words, err, 2), False
     except runtime_errors() as err:
         sys.stderr.write(f"msflash: error: {_one_line(err)}\n")
-        return 1, False
+        return _or_its_stop(words, err, 1), False
     except Exception as err:  # the last line of defence: a bug, not bad input (KeyboardInterrupt/SystemExit pass)
-        return _crashed(words, err), False
+        return _or_its_stop(words, err, _crashed(words, err)), False
     finally:
         close_bar()
+
+
+def _or_its_stop(words: Sequence[str], error: BaseException, status: int) -> int:
+    """``status``, the error's (its line written); or, when the error was raised by a cleanup that a stop unwound
+    (:func:`~acquisition.signals.carried_stop`), the stop's, its line written after the error's."""
+    stop = carried_stop(error)
+    return status if stop is None else _stopped(words, stop)
 
 
 def _stopped(words: Sequence[str], stop: BaseException) -> int:

@@ -394,17 +394,24 @@ def test_ctrl_c_forces_the_exit_at_the_third_press_whether_or_not_the_first_was_
     assert stop.late == [signal.SIGINT] * 3 and forced == [3]
 
 
+@pytest.mark.parametrize("kept", [False, True], ids=["dropped", "kept-in-a-cycle"])
 def test_a_ctrl_c_whose_cleanup_failed_is_said_after_the_error(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], kept: bool
 ) -> None:
-    """Ctrl-C, then the cleanup it unwinds fails (the booth stops answering): the error is reported (one line) and
-    the stop, left only in that error's context and dropped with it as the command ends, is delivered again and said
-    — landing while the command's handler is still there, never as Python's own KeyboardInterrupt traceback."""
+    """Ctrl-C, then the cleanup it unwinds fails (the booth stops answering): the error is reported (one line), then
+    the stop that error carries as its context — whether nothing else holds it or a frame that stored it does, as the
+    capture engine's ``error = err`` (a reference cycle only a collection frees) — never dropped, never Python's own
+    KeyboardInterrupt traceback."""
     from msflash.acquisition.errors import BoothError
 
     def capture(args: argparse.Namespace) -> int:
         try:
-            signal.raise_signal(signal.SIGINT)
+            try:
+                signal.raise_signal(signal.SIGINT)
+            except BaseException as err:
+                if kept:
+                    error = err  # noqa: F841  # the frame keeps the stop, whose traceback keeps the frame
+                raise
         finally:
             raise BoothError("booth on /dev/ttyACM0 stopped answering while the LEDs were switched off")
         return 0
@@ -437,3 +444,52 @@ def test_a_terminated_caught_in_an_api_block_is_delivered_again_unless_received(
             steps.append("dropped")
         _until_stopped(steps)
     assert steps == ["dropped"]
+
+    with pytest.raises(Terminated) as raised, sigterm_as_exit():  # dropped as the block ends: raised as it leaves
+        try:
+            signal.raise_signal(signal.SIGTERM)
+        except Terminated:
+            pass
+    assert raised.value.code == 128 + signal.SIGTERM
+
+
+def test_a_stop_delivered_again_too_late_is_said_not_sent_after_the_handlers_are_gone() -> None:
+    """The thread that delivers a lost stop again is held back (a starved machine) past the end of the command: the
+    stop is recorded and said by the command (exit 143), not sent once Python's own handlers are back — SIGTERM's
+    default action would then kill the process after it had returned its status."""
+    script = textwrap.dedent(
+        """
+        import _thread, argparse, signal, sys, threading, time
+        from msflash.acquisition import signals
+        from msflash.acquisition.app import cli
+
+        def held_back(function, arguments):  # the delivering thread starts 2.5 s late (beyond settle's bound)
+            threading.Timer(2.5, function, arguments).start()
+        signals._thread = type("Late", (), {"start_new_thread": staticmethod(held_back),
+                                            "allocate_lock": staticmethod(_thread.allocate_lock)})
+
+        class ModuleObject:  # as colour-science's: CPython 3.11's import clears what __getattr__('__spec__') raised
+            def __getattr__(self, name):
+                if name == "__spec__":
+                    signal.raise_signal(signal.SIGTERM)
+                raise AttributeError(name)
+        sys.modules["module_object"] = ModuleObject()
+
+        def capture(args):
+            import module_object  # noqa
+            return 0
+
+        parser = cli.build_parser(["capture"])
+        parser.parse_args = lambda argv: argparse.Namespace(verbose=0, handler=capture)
+        cli.build_parser = lambda argv=None: parser
+        status = cli.main(["capture"])
+        print("main returned", status, flush=True)
+        time.sleep(3)  # the held-back thread runs meanwhile
+        print("survived", flush=True)
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=Path(__file__).parents[3]
+    )
+    assert done.stdout.splitlines() == ["main returned 143", "survived"], (done.stdout, done.stderr)
+    assert done.stderr.startswith("msflash: terminated (SIGTERM)"), done.stderr

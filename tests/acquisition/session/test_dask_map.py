@@ -136,7 +136,7 @@ def test_a_signal_while_the_local_cluster_starts_is_delivered_once_it_can_be_clo
         monkeypatch.setenv(GATE_VARIABLE, str(gate))  # the worker process inherits it
         sender = threading.Thread(target=signal_once_the_worker_waits, args=(held,))
         with dask.config.set({"distributed.worker.preload": [held.preload]}):
-            with sigterm_as_exit(), pytest.raises(raised):
+            with pytest.raises(raised), sigterm_as_exit():  # the stop leaves the block: caught outside it
                 sender.start()
                 with dask_mapper("local", 1) as mapper:
                     list(mapper(_tenfold, [0]))
