@@ -178,15 +178,13 @@ class _Stop:
         if self.quieted:
             self.late.append(number)
             return
-        self.raising, self.again, self.in_flight = True, number == signal.SIGINT, True
+        self.raising, self.again, self.in_flight, self.pending = True, number == signal.SIGINT, True, number
         main = threading.main_thread().ident
         assert main is not None  # the main thread has started: the handler ran in it
         # Not threading.Thread: its start() waits for the thread, and the signal would land in that wait, inside the
         # finalizer or hook calling this. The thread sends it once this call has let go of ``leaving``.
         leaving = _thread.allocate_lock()
         leaving.acquire()
-
-        self.pending = number
 
         def deliver() -> None:
             with leaving, self.delivery:
