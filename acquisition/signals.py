@@ -332,7 +332,8 @@ def hold_stopping_signals() -> Callable[[], None]:
     if not _in_main_thread():
         return lambda: None
     held: list[int] = []
-    previous = [signal.signal(number, lambda number, _frame: held.append(number)) for number in STOPPING_SIGNALS]
+    hold = _holding(held)
+    previous = [signal.signal(number, hold) for number in STOPPING_SIGNALS]
     released = False
 
     def release() -> None:
@@ -356,7 +357,8 @@ def signals_deferred(held: list[int]) -> Iterator[None]:
     if not _in_main_thread():
         yield
         return
-    previous = [signal.signal(number, lambda number, _frame: held.append(number)) for number in STOPPING_SIGNALS]
+    hold = _holding(held)
+    previous = [signal.signal(number, hold) for number in STOPPING_SIGNALS]
     try:
         yield
     finally:
@@ -367,4 +369,24 @@ def signals_deferred(held: list[int]) -> Iterator[None]:
 def deliver_deferred(held: list[int]) -> None:
     """Raise the first signal :func:`signals_deferred` recorded, as its own handler would have (KeyboardInterrupt…)."""
     if held:
-        signal.raise_signal(held.pop(0))
+        number = held.pop(0)
+        handler = signal.getsignal(number)
+        if number == signal.SIGINT and isinstance(handler, _Stop):
+            handler.again = True  # counted as a press when it was held
+        signal.raise_signal(number)
+
+
+def _holding(held: list[int]) -> Callable[[int, Any], None]:
+    """The handler that records the stopping signals in ``held`` (:func:`signals_deferred`,
+    :func:`hold_stopping_signals`) — counting each Ctrl-C towards the command's forced exit (:data:`FORCING_CTRL_C`),
+    so that a block that never returns (a dask cluster's start that hangs) can still be ended by insisting."""
+    command = signal.getsignal(signal.SIGINT)
+
+    def hold(number: int, _frame: Any) -> None:
+        held.append(number)
+        if number == signal.SIGINT and isinstance(command, _Stop):
+            command.presses += 1
+            if command.presses >= FORCING_CTRL_C:
+                _forced_exit()
+
+    return hold

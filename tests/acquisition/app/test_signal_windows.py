@@ -493,3 +493,26 @@ def test_a_stop_delivered_again_too_late_is_said_not_sent_after_the_handlers_are
     )
     assert done.stdout.splitlines() == ["main returned 143", "survived"], (done.stdout, done.stderr)
     assert done.stderr.startswith("msflash: terminated (SIGTERM)"), done.stderr
+
+
+def test_ctrl_c_pressed_while_signals_are_held_counts_towards_the_forced_exit(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A block that holds the signals (a dask cluster's start) and never returns could not be ended: the presses it
+    held were not counted. Now the third press ends the process; a held press delivered afterwards is not counted
+    twice."""
+    from msflash.acquisition import signals
+
+    forced: list[int] = []
+    with signals.command_signals() as stop:
+        monkeypatch.setattr(signals, "_forced_exit", lambda: forced.append(stop.presses))
+        held: list[int] = []
+        with signals.signals_deferred(held):
+            signal.raise_signal(signal.SIGINT)
+        with pytest.raises(KeyboardInterrupt) as raised:
+            signals.deliver_deferred(held)
+        signals.received(raised.value)
+        assert stop.presses == 1 and forced == []
+        with signals.signals_deferred(held):  # the cleanup's close of the cluster hangs; the person insists
+            signal.raise_signal(signal.SIGINT)
+            assert forced == []
+            signal.raise_signal(signal.SIGINT)
+        assert forced == [3]
