@@ -71,10 +71,12 @@ def read_spectra_file(path: str | Path, kind: SpectralKind) -> Spectra:
 
 def _noise_clipped(measured: Spectra, path: str | Path) -> Spectra:
     """A measured light's or responsivity's negative noise clipped to 0 (a note on stderr), as every reader of
-    measured spectra does; a value beyond noise refused (``UsageError`` naming the file)."""
+    measured spectra does; a value beyond noise refused (``UsageError`` naming the file and, when the reader kept
+    each row's line, the line)."""
+    lines = measured.metadata.get("lines") or None
     try:
         values, clipped = clip_negative_noise(
-            measured.wavelengths_nm, measured.values, measured.names, shown_path(Path(path))
+            measured.wavelengths_nm, measured.values, measured.names, shown_path(Path(path)), lines
         )
     except SpectralDataError as err:
         raise UsageError(str(err)) from err

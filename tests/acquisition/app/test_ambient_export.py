@@ -60,3 +60,19 @@ def test_an_ambient_file_that_is_neither_table_nor_export_is_refused_in_one_line
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(err) == 1, err
     assert err[0].startswith(f"msflash: error: {notes}") and "as an export" in err[0], err
+
+
+def test_an_ambient_value_beyond_noise_is_refused_naming_its_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    wavelengths, counts = _light()
+    rows = ["wavelength_nm,lamp"] + [f"{w:g},{c:g}" for w, c in zip(wavelengths, counts, strict=True)]
+    bad = len(rows) // 2
+    rows[bad] = f"{wavelengths[bad - 1]:g},{-counts.max():g}"  # a whole peak below zero: no noise
+    lamp = tmp_path / "lamp.csv"
+    lamp.write_text("# lamp, measured\n" + "\n".join(rows) + "\n")
+    status = main(["capture", "--rig", "sim", "--ambient", str(lamp), "--out", str(tmp_path / "c")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1, err
+    assert err[0].startswith(f"msflash: error: {lamp}:{bad + 2}: column 'lamp' at {wavelengths[bad - 1]:g} nm"), err
+    assert not (tmp_path / "c").exists()
