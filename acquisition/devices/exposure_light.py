@@ -122,10 +122,6 @@ def ambient_over_rows(
     return values
 
 
-def _unique_rows(request: ExposureRequest) -> bool:
-    return request.rows > 1 and request.line_time_us > 0
-
-
 class EmulatorLight:
     """:class:`ExposureLight` of the booth emulator in this process: its drive model, on its clock.
 
@@ -157,7 +153,7 @@ class EmulatorLight:
             window = skew < exposure
             if window:
                 emulator.exposure_active(True, at_s=start + skew)
-            offsets = request.row_offsets_s() if _unique_rows(request) else np.zeros(1)
+            offsets = request.row_offsets_s() if request.rows > 1 and request.line_time_us > 0 else np.zeros(1)
             levels = np.asarray(emulator.mean_levels(list(start + offsets), exposure), dtype=float)
             if window:
                 emulator.exposure_active(False, at_s=start + exposure)

@@ -84,11 +84,6 @@ class AsyncSequenceWriter:
 
     # -- what SequenceWriter offers ----------------------------------------------------------
     @property
-    def writer(self) -> SequenceWriter:
-        """The wrapped writer."""
-        return self._writer
-
-    @property
     def path(self) -> Path:
         """The ``sequence.json`` being written."""
         return self._writer.path

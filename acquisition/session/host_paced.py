@@ -43,9 +43,6 @@ class HostPaced:
     def _saved(self) -> str:
         return self._recorder.saved() if self._recorder is not None else ""
 
-    def _where(self, step: CaptureStep) -> str:
-        return f"{self._prefix}step {step.index} ({step.label})"
-
     def setup_sequence(self, plan: CapturePlan, flash_held: bool) -> None:
         """Cover the booth's watchdog for one step, prepare and start the camera."""
         self._plan, self._previous_id = plan, None
@@ -66,7 +63,7 @@ class HostPaced:
     def exec_step(self, position: int, step: CaptureStep) -> StepFrame:
         """``SET`` the levels, trigger, wait for the frame and check its id follows the previous one."""
         assert self._plan is not None
-        where = self._where(step)
+        where = f"{self._prefix}step {step.index} ({step.label})"
         cover, self._cover = self._cover, nullcontext()
         with cover, booth_errors_at(where, self._saved()):
             self.booth.set_levels(step.led_levels)

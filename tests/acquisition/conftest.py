@@ -61,7 +61,7 @@ def aravis() -> ModuleType:
 @pytest.fixture
 def fake_camera(aravis: ModuleType) -> Iterator[Any]:
     """AravisCamera on the in-process Fake_1, Mono16 320x240, built-in GenICam XML."""
-    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(None)
     camera = aravis.AravisCamera("Fake_1", interfaces="fake", pixel_format="Mono16", roi=(0, 0, 320, 240))
@@ -74,7 +74,8 @@ def fake_camera(aravis: ModuleType) -> Iterator[Any]:
 @pytest.fixture
 def sfnc_fake_camera(aravis: ModuleType) -> Iterator[Any]:
     """AravisCamera on the in-process Fake_1 loaded with msflash's SFNC XML."""
-    from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML, use_fake_genicam
+    from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(FAKE_SFNC_XML)
     try:

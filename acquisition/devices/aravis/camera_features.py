@@ -457,20 +457,6 @@ def _check_entry(camera: FeatureCamera, feature: str, entry: str, option: str) -
         )
 
 
-def check_lines(camera: FeatureCamera, options: CameraOptions) -> None:
-    """Refuse a ``trigger_line``/``strobe_line`` the camera has no such entry for, before any capture.
-
-    Raises
-    ------
-    CameraSettingError
-        Names the option, the feature (TriggerSource, LineSelector) and its entries.
-    """
-    if options.trigger_line is not None:
-        _check_entry(camera, "TriggerSource", options.trigger_line, f"--trigger-line {options.trigger_line}")
-    if options.strobe_line is not None:
-        _check_entry(camera, "LineSelector", options.strobe_line, f"--strobe-line {options.strobe_line}")
-
-
 def apply_camera_options(camera: FeatureCamera, options: CameraOptions) -> AppliedOptions:
     """Write binning, then the ROI, then each feature in order, then the gain; check the lines.
 
@@ -485,7 +471,10 @@ def apply_camera_options(camera: FeatureCamera, options: CameraOptions) -> Appli
     CameraSettingError
         The first option the camera cannot take, named with what it allows.
     """
-    check_lines(camera, options)
+    if options.trigger_line is not None:
+        _check_entry(camera, "TriggerSource", options.trigger_line, f"--trigger-line {options.trigger_line}")
+    if options.strobe_line is not None:
+        _check_entry(camera, "LineSelector", options.strobe_line, f"--strobe-line {options.strobe_line}")
     if options.gain_db is not None and options.gain_raw is not None:
         raise CameraSettingError(
             f"{camera.name}: --gain {options.gain_db:g} and --gain-raw {options.gain_raw:g}: expected one of them "

@@ -136,7 +136,8 @@ _builtin_fake_xml: str | None = None
 
 def _builtin_fake_xml_path() -> str:
     # Aravis 0.8.26 has no way to unset the fake's GenICam file name (None is refused, "" fails to
-    # load), so the built-in description is saved once, before msflash first replaces it.
+    # load), so the built-in description is saved once, before it is first replaced
+    # (tests/acquisition/support/fake_genicam.py).
     global _builtin_fake_xml
     with aravis_lock:
         if _builtin_fake_xml is None:
@@ -146,13 +147,3 @@ def _builtin_fake_xml_path() -> str:
                 out.write(xml[:size])
             _builtin_fake_xml = path
         return _builtin_fake_xml
-
-
-def use_fake_genicam(path: str | os.PathLike[str] | None = FAKE_SFNC_XML) -> None:
-    """Make the in-process ``Fake`` interface camera load ``path`` as its GenICam XML.
-
-    Takes effect for fake cameras opened afterwards (Aravis reads the file when the fake device
-    is created). ``None`` restores the fake's built-in description.
-    """
-    builtin = _builtin_fake_xml_path()
-    Aravis.set_fake_camera_genicam_filename(str(path) if path is not None else builtin)

@@ -148,7 +148,7 @@ class AravisGvFake:
         self.model = model
         self._registers = dict(registers or {})
         # None: the fake's built-in description, named explicitly — given no file, Aravis's fake
-        # reads the process-wide one use_fake_genicam last set for the in-process fake.
+        # reads the process-wide one last set for the in-process fake (the tests set it).
         self._xml = str(genicam_xml) if genicam_xml is not None else _builtin_fake_xml_path()
         self._frequency = trigger_frequency_hz
         self._lost = lost_packet_ratio

@@ -117,16 +117,14 @@ class ImageSettings(FeatureAccess):
     def set_exposure_us(self, exposure_us: float) -> float:
         """Set the exposure time; returns the value read back (microseconds)."""
         feature = self._exposure_feature
-        if self._is_integer(feature) or self._profile.integer_exposure:
+        integer = isinstance(self._live().get_feature(feature), Aravis.GcInteger)
+        if integer or self._profile.integer_exposure:
             exposure_us = float(round(exposure_us))
-        if isinstance(self._live().get_feature(feature), Aravis.GcInteger):
+        if integer:
             self._set_int(feature, int(exposure_us))
         else:
             self._set_float(feature, float(exposure_us))
         return self.exposure_us
-
-    def _is_integer(self, feature: str) -> bool:
-        return isinstance(self._live().get_feature(feature), Aravis.GcInteger)
 
     @property
     def exposure_us(self) -> float:

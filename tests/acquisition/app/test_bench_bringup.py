@@ -112,7 +112,7 @@ def test_run_on_the_hardware_rig_finds_the_mega_without_port(
     aravis: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The one Arduino Mega among the ports is the booth: run opens it (resetting it) with no --port."""
-    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(None)
     leds = datasets.paper_leds().resample(DEFAULT_GRID, outside="zero")

@@ -116,7 +116,7 @@ def test_booth_master_on_a_host_paced_adapter_is_refused_naming_booth_and_mode(
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(None)
     with serve_text_booth(7) as server:

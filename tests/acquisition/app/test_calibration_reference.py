@@ -40,7 +40,7 @@ def booth_port(calibration: Path) -> Iterator[str]:
 def test_a_sequence_refers_to_the_calibration_it_was_captured_with(
     aravis: ModuleType, calibration: Path, booth_port: str, tmp_path: Path
 ) -> None:
-    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(None)
     out = tmp_path / "runs" / "c"

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.devices.aravis.camera_records import StrobeConfig, TriggerConfig
-from msflash.acquisition.devices.aravis.discovery import list_devices, parse_interfaces, use_fake_genicam
+from msflash.acquisition.devices.aravis.discovery import list_devices, parse_interfaces
 from msflash.acquisition.devices.aravis.pixel_layouts import (
     PIXEL_FORMATS,
     decode_pixels,
@@ -24,6 +24,7 @@ from msflash.acquisition.devices.aravis.profiles import match_profile
 from msflash.acquisition.devices.camera import Camera
 from msflash.acquisition.errors import CameraError, CameraNotFoundError, DroppedFrameError, FrameLostError
 from msflash.acquisition.plan import CapturePlan
+from tests.acquisition.support.fake_genicam import use_fake_genicam
 
 pytestmark = pytest.mark.aravis
 

@@ -17,10 +17,11 @@ from types import ModuleType
 import numpy as np
 import pytest
 
-from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML, use_fake_genicam
+from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML
 from msflash.acquisition.devices.aravis.gv_fake import AravisGvFake
 from msflash.acquisition.errors import CameraError
 from msflash.acquisition.plan import CapturePlan
+from tests.acquisition.support.fake_genicam import use_fake_genicam
 
 pytestmark = pytest.mark.aravis
 

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from msflash.acquisition.devices.aravis.buffers import ZERO_COPY_PROTOCOLS
-from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
 from msflash.acquisition.devices.aravis.pixel_layouts import decode_pixels, is_zero_copy_format, view_pixels
 from msflash.acquisition.errors import CameraDisconnectedError, CameraError
 from msflash.acquisition.plan import CapturePlan
+from tests.acquisition.support.fake_genicam import use_fake_genicam
 
 pytestmark = pytest.mark.aravis
 

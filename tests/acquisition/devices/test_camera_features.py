@@ -28,12 +28,13 @@ from msflash.acquisition.devices.aravis.camera_features import (
     parse_feature,
     parse_roi,
 )
-from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML, use_fake_genicam
+from msflash.acquisition.devices.aravis.discovery import FAKE_SFNC_XML
 from msflash.acquisition.devices.aravis.profiles import CameraProfile, load_profiles
 from msflash.acquisition.errors import CameraSettingError
 from msflash.acquisition.plan import CapturePlan
 from msflash.acquisition.sequence.reader import read_sequence
 from msflash.processing import datasets
+from tests.acquisition.support.fake_genicam import use_fake_genicam
 from tests.acquisition.support.hw_rig import booth_on_pty, fake_camera_capture
 
 pytestmark = pytest.mark.aravis

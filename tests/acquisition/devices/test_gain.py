@@ -24,7 +24,6 @@ from msflash.acquisition.app.cli import main
 from msflash.acquisition.app.cli_common import dumps_json
 from msflash.acquisition.app.run_html import exposure_summary
 from msflash.acquisition.devices.aravis.camera_features import FeatureInfo
-from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
 from msflash.acquisition.devices.aravis.fake_models import FAKE_MODELS
 from msflash.acquisition.devices.aravis.gain import (
     GAIN_FEATURES,
@@ -43,6 +42,7 @@ from msflash.acquisition.session.live import LiveStream
 from msflash.acquisition.session.rig import open_aravis_fake_rig
 from msflash.acquisition.session.run import LedCapture
 from msflash.processing import datasets
+from tests.acquisition.support.fake_genicam import use_fake_genicam
 from tests.acquisition.support.hw_rig import booth_on_pty
 
 CAMERA = "camera X (serial 1)"

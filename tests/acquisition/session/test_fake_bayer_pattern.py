@@ -89,7 +89,7 @@ def test_the_fake_interfaces_camera_in_bayer_from_the_command_line(
     and ``msflash estimate`` take as a mosaic. The fake's Bayer test pattern saturates a sample of nearly every
     2 × 2 cell at any exposure and ignores the LEDs, so the estimate refuses its data (one line, exit 2) — the
     mosaic got as far as the estimator's saturation check, not refused for its format."""
-    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(None)
     out = tmp_path / "c"
@@ -144,7 +144,7 @@ def test_the_command_lines_pixel_format_is_checked_against_the_one_table(
 ) -> None:
     """``--pixel-format`` on the hardware rig: a name msflash does not decode, or one the camera does not offer,
     is one line naming the camera and the format (exit 2), before the booth is opened."""
-    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(None)
     options = ("--calibration", str(hw_calibration), "--pixel-format", pixel_format, "--out", str(tmp_path / "c"))

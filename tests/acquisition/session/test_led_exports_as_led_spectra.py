@@ -55,7 +55,7 @@ def test_the_sim_rig_takes_the_led_exports_calibrate_leds_reads(form: str, tmp_p
 @pytest.mark.aravis
 def test_the_hw_rig_takes_the_led_exports_calibrate_leds_reads(aravis: ModuleType, tmp_path: Path) -> None:
     """The Aravis Fake camera and the booth emulator for those three LEDs on a pty, as a user opens them."""
-    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(None)
     files, _, _ = _write_booth(tmp_path, "spectrawiz", dark=False, seed=12, bytes={"crlf": True})

@@ -45,7 +45,7 @@ def silent_pty() -> Iterator[str]:
 def test_capture_on_fake_camera_and_emulated_booth(
     aravis: ModuleType, hw_calibration: Path, hw_booth_port: str, tmp_path: Path
 ) -> None:
-    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(None)
     out = tmp_path / "c"
@@ -74,7 +74,7 @@ def test_capture_on_fake_camera_and_emulated_booth(
 def test_rig_hw_with_csv_files_and_led_off_at_close(
     aravis: ModuleType, hw_calibration: Path, hw_booth_port: str
 ) -> None:
-    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(None)
     with open_rig(
@@ -131,7 +131,7 @@ def test_no_camera_without_an_id_lists_what_was_found(
     aravis: ModuleType, hw_calibration: Path, hw_booth_port: str
 ) -> None:
     """No --camera: the single camera on the interfaces is taken; on fake there is exactly one."""
-    from msflash.acquisition.devices.aravis.discovery import use_fake_genicam
+    from tests.acquisition.support.fake_genicam import use_fake_genicam
 
     use_fake_genicam(None)
     with open_rig("hw", HwRigOptions(interfaces="fake", port=hw_booth_port, calibration=hw_calibration)) as rig:
