@@ -219,12 +219,6 @@ class PriorEstimate:
     warnings: tuple[str, ...] = ()
     """Reliability warnings (empty when none)."""
 
-    @property
-    def band(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lower, upper) one-sigma band."""
-        centre = self.spectrum.values[:, 0]
-        return centre - self.spectrum_std, centre + self.spectrum_std
-
 
 def plane_responsivities(responsivities: Spectra, channels: tuple[str, ...]) -> np.ndarray:
     """(n_wl, C) responsivity of each plane: the column named by each channel letter (R, G, B)."""
