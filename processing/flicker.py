@@ -33,7 +33,8 @@ has them, fit the mains frequency and phase to the gains (:func:`fit_mains`) for
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, field, replace
 
@@ -75,8 +76,30 @@ MAINS_TOLERANCE = 0.01
 _CHANNEL_INDEX = {"R": 0, "G": 1, "B": 2}
 
 _APPLY_GAINS: ContextVar[bool | np.ndarray] = ContextVar("msflash_apply_ambient_gains", default=True)
-"""True: a detected flicker's gains are applied as read; False: none are; an array: these shares are applied whatever
-was read. The last two serve studies (tests/harness/flicker.py's ``gains_not_applied`` and ``gains_applied``)."""
+"""True: a detected flicker's gains are applied as read; False: none are (:func:`gains_not_applied`); an array: these
+shares are applied whatever was read (:func:`gains_applied`). The last two serve studies."""
+
+
+@contextmanager
+def gains_not_applied() -> Iterator[None]:
+    """Within the block, flicker is still read and reported but no statistics are corrected: what the estimate
+    would be without the gain model (the flicker study's *plain* columns, tests/harness/flicker.py)."""
+    token = _APPLY_GAINS.set(False)
+    try:
+        yield
+    finally:
+        _APPLY_GAINS.reset(token)
+
+
+@contextmanager
+def gains_applied(offsets: np.ndarray) -> Iterator[None]:
+    """Within the block, every check corrects the LED images by ``offsets`` (one share per LED) whatever it read:
+    what the estimate would be with a perfect read (the flicker study's *oracle* columns, tests/harness/flicker.py)."""
+    token = _APPLY_GAINS.set(np.array(offsets, dtype=float))
+    try:
+        yield
+    finally:
+        _APPLY_GAINS.reset(token)
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ non-negative fit of the truth by the LEDs, :func:`tests.harness.metrics.led_boun
 
 Every model is also run the way ``msflash estimate`` runs it (:data:`MODELS`: the LED model global and local, the light
 prior, the families and ``auto``; :func:`acquisition.session.one_sequence.estimate_read`), on both renderings, and on the
-flickering one again with the gains read but not applied (:func:`gains_not_applied`).
+flickering one again with the gains read but not applied (:func:`processing.flicker.gains_not_applied`).
 
 **Paired draws (the measurement).** Each case is also rendered on :data:`DRAWS` noise draws with both arms on one
 noise realisation (:class:`tests.harness.render.CommonNoise`: they differ in the ambient's gain per frame and in
@@ -42,9 +42,8 @@ import pickle
 import shutil
 import tempfile
 import zlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -55,7 +54,7 @@ from msflash.acquisition.session import analysis, sequence_spectra
 from msflash.acquisition.session.one_sequence import EstimateSettings, estimate_read
 from msflash.processing.ambient import estimate_ambient
 from msflash.processing.errors import SpectralDataError
-from msflash.processing.flicker import _APPLY_GAINS, with_ambient_gains
+from msflash.processing.flicker import gains_applied, gains_not_applied, with_ambient_gains
 from tests.harness import metrics
 from tests.harness.cases import cases_of
 from tests.harness.render import CommonNoise, HarnessCase, render
@@ -158,28 +157,6 @@ class Row:
     """The noise draw of a paired measurement (:func:`measure` with ``draw``); ``None``: the unpaired one."""
     failures: tuple[str, ...] = ()
     """Models that refused a rendering (their ratio NaN): ``"<model> <rendering>: <message>"``."""
-
-
-@contextmanager
-def gains_not_applied() -> Iterator[None]:
-    """Within the block, flicker is still read and reported but no statistics are corrected: what the estimate
-    would be without the gain model (the study's *plain* columns)."""
-    token = _APPLY_GAINS.set(False)
-    try:
-        yield
-    finally:
-        _APPLY_GAINS.reset(token)
-
-
-@contextmanager
-def gains_applied(offsets: np.ndarray) -> Iterator[None]:
-    """Within the block, every check corrects the LED images by ``offsets`` (one share per LED) whatever it read:
-    what the estimate would be with a perfect read (the study's *oracle* columns)."""
-    token = _APPLY_GAINS.set(np.array(offsets, dtype=float))
-    try:
-        yield
-    finally:
-        _APPLY_GAINS.reset(token)
 
 
 def _estimates(directory: Path, true_offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, object]:
@@ -627,7 +604,7 @@ def report(rows: list[Row], command: str, paired: list[Row] | None = None, first
         ),
         "*led* `--method global`, *local* `--method local`, *prior*/*family*/*auto* `--model …` (default method). "
         "*gains applied*: msflash's default; *not applied*: the same read, the statistics left as they are "
-        "(`tests.harness.flicker.gains_not_applied`). Cost = mean flickering ÷ mean steady − 1.",
+        "(`processing.flicker.gains_not_applied`). Cost = mean flickering ÷ mean steady − 1.",
         "",
         *model_table(tuning, f"Tuning rows (lamp kinds {', '.join(TUNING_KINDS)})"),
         *model_table(held, "Held-out rows (the other lamp kinds; nothing was set on them)"),
