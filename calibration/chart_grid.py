@@ -36,8 +36,8 @@ class ChartGrid:
     Examples
     --------
     >>> grid = ChartGrid(4, 6, (5.5, 5.5), (10.0, 0.0), (0.0, 10.0), (0.8, 0.8), 0.004, 0.44, 24)
-    >>> grid.corner, grid.rotation_deg, grid.mirrored, grid.patch_centres()[1].tolist()
-    ('top-left', 0.0, False, [5.5, 15.5])
+    >>> grid.corner, grid.rotation_deg, grid.mirrored
+    ('top-left', 0.0, False)
     >>> int(grid.labels((46, 62))[5, 5]), int(grid.labels((46, 62))[15, 5]), int(grid.labels((46, 62))[0, 0])
     (0, 1, -1)
     """
@@ -90,12 +90,6 @@ class ChartGrid:
 
     def _basis(self) -> np.ndarray:
         return np.column_stack([self.column_step_xy, self.row_step_xy]).astype(float)
-
-    def patch_centres(self) -> np.ndarray:
-        """Centres (x, y) of the patches in chart order (column by column), shape (rows·columns, 2)."""
-        k = np.arange(self.rows * self.columns)
-        lattice = np.column_stack([k // self.rows, k % self.rows]).astype(float)
-        return lattice @ self._basis().T + np.asarray(self.origin_xy)
 
     def labels(self, shape: tuple[int, int], margin_px: int = 1, excluded: np.ndarray | None = None) -> np.ndarray:
         """Patch index of every usable pixel (−1 elsewhere), like a given layout's label map.

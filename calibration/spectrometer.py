@@ -84,10 +84,6 @@ class SpectrometerMeasurement:
         return bool(steps.size and np.max(np.abs(steps - steps.mean())) <= 1e-3 * steps.mean())
 
 
-def _is_comment(line: str) -> bool:
-    return line.startswith(_COMMENT_PREFIXES)
-
-
 def _cells(line: str) -> list[str]:
     """The cells of a line; decimal commas become points where the separators make them unambiguous
     (cells split by semicolons, tabs or blanks, each a number once its one comma is a point)."""
@@ -211,7 +207,7 @@ def _read_rows(text: str, source: str, column: int | None) -> _Rows:
         line = raw.strip().lstrip("\ufeff")
         if not line:
             continue
-        if _is_comment(line):
+        if line.startswith(_COMMENT_PREFIXES):
             if not data.rows:
                 data.header_lines.append((number, line))
             continue

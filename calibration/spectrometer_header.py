@@ -82,10 +82,6 @@ def header_number(text: str) -> float | None:
         return None
 
 
-def _seconds(value: float, unit: str) -> float:
-    return value * SECONDS_PER[unit.lower().replace("μ", "µ")]
-
-
 def _flag(text: str) -> bool | None:
     word = text.strip().split()[0].lower() if text.strip() else ""
     if word in ("true", "yes", "enabled", "on", "1", "はい"):
@@ -269,7 +265,7 @@ def _integration_seconds(found: _Found, source: str) -> float | None:
     stated: tuple[str, str, str] = found.values["integration_time_s"]  # type: ignore[assignment]
     text, unit, line = stated
     value = header_number(str(text))
-    seconds = _seconds(value, str(unit)) if value is not None else None
+    seconds = value * SECONDS_PER[str(unit).lower().replace("μ", "µ")] if value is not None else None
     if seconds is None or not math.isfinite(seconds) or seconds <= 0:
         raise CalibrationError(
             f"{source}:{found.lines['integration_time_s']}: '{str(line)[:60]}': integration time '{text}'; expected a "

@@ -19,8 +19,7 @@ LED-only images unmixed by ``pinv(levels)``), binned in ``factor × factor`` blo
 (C = 4 planes for a Bayer mosaic, two of them green), and blocks with any saturated member in any
 frame are dropped. With an even block size every block's half difference (even minus odd columns)
 measures the noise (errors in variables; see :mod:`processing.statistics`): its moments, mapped
-like the signal's, are :attr:`ChannelStatistics.noise` and :meth:`ChannelStatistics.denoised`
-subtracts them.
+like the signal's, are :attr:`ChannelStatistics.noise`, which the models subtract.
 """
 
 from __future__ import annotations
@@ -114,11 +113,6 @@ class ChannelStatistics:
     def n_blocks(self) -> int:
         """Valid blocks in all folds."""
         return int(self.counts.sum())
-
-    def denoised(self, moments: Moments | None = None) -> Moments:
-        """``moments`` (default: the observed ones) less the noise's share, fold by fold (unchanged without a probe)."""
-        moments = self.moments if moments is None else moments
-        return moments if self.noise is None else moments - self.noise
 
     def replicated(self, channels: tuple[str, ...]) -> ChannelStatistics:
         """One plane's statistics as ``len(channels)`` identical channels: a mono camera's frames, which format v1

@@ -305,11 +305,6 @@ class MixedIllumination:
         ones = np.ones(self.weights.shape[:2] + (1,))
         return MixedIllumination(spectra, np.concatenate([self.weights, ones], axis=-1))
 
-    def mean_spectrum(self, mask: np.ndarray | None = None) -> np.ndarray:
-        """The illumination averaged over the pixels of ``mask`` (all by default), photons, (n_wavelengths,)."""
-        weights = self.weights if mask is None else self.weights[np.asarray(mask, dtype=bool)]
-        return self.spectra.values @ weights.reshape(-1, self.spectra.count).mean(axis=0)
-
 
 def expected_response_mixed(
     scene: Scene,

@@ -125,7 +125,7 @@ class FamilyEstimate:
     """``√(J(e)/E)`` on all folds, as observed."""
     n_samples: int
     spread_std: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    """The evidence-weighted spread of the candidates about the chosen spectrum (:func:`evidence_spread`)."""
+    """The evidence-weighted spread of the candidates about the chosen spectrum (:func:`_weighted_spread`)."""
     reference: ReferencePatch | None = None
     """The reference patches that joined the evidence, if any."""
     warnings: tuple[str, ...] = ()
@@ -451,7 +451,7 @@ class FamilyModel:
         scaled: np.ndarray | None = None,
     ) -> np.ndarray:
         """±1σ: the chosen fit's tempered posterior (× :data:`POSTERIOR_SCALE`) and the evidence-weighted spread of
-        the candidates (:func:`evidence_spread`; ``scaled``: their spectra scaled onto the chosen one's, when
+        the candidates (:func:`_weighted_spread`; ``scaled``: their spectra scaled onto the chosen one's, when
         computed already) added in quadrature."""
         own = self.posterior_std(chosen, problem, n_samples)
         scaled = _scaled_spectra(chosen, candidates) if scaled is None else scaled
@@ -463,15 +463,6 @@ class FamilyModel:
         if chosen.fit.family in ("prior", "led"):
             return np.zeros(self.grid.size)
         return _band(chosen.fit, self.grid, problem, n_samples, self.kappa)
-
-
-def evidence_spread(
-    chosen: Candidate, candidates: list[Candidate], temperature: float | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(spread, average)``: the candidates' RMS distance from the chosen spectrum and their mean, weighted by
-    their evidence ``exp(−(err/err_best − 1)/τ)`` (τ = :data:`EVIDENCE_TEMPERATURE`), each scaled onto the chosen
-    one. Where the pixels cannot tell two families apart, the spread is wide."""
-    return _weighted_spread(chosen.fit.spectrum, candidates, _scaled_spectra(chosen, candidates), temperature)
 
 
 def _scaled_spectra(chosen: Candidate, candidates: list[Candidate]) -> np.ndarray:
@@ -490,7 +481,10 @@ def _scaled_spectra(chosen: Candidate, candidates: list[Candidate]) -> np.ndarra
 def _weighted_spread(
     spectrum: np.ndarray, candidates: list[Candidate], spectra: np.ndarray, temperature: float | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`evidence_spread` from the candidates' scaled spectra (:func:`_scaled_spectra`)."""
+    """``(spread, average)``: the candidates' RMS distance from ``spectrum`` (the chosen one's) and their mean,
+    weighted by their evidence ``exp(−(err/err_best − 1)/τ)`` (τ = :data:`EVIDENCE_TEMPERATURE` by default), from
+    their ``spectra`` each scaled onto the chosen one (:func:`_scaled_spectra`). Where the pixels cannot tell two
+    families apart, the spread is wide."""
     temperature = EVIDENCE_TEMPERATURE if temperature is None else temperature
     if not candidates:
         return np.zeros_like(spectrum), spectrum

@@ -75,8 +75,6 @@ class LightPrior:
     """Σ: their covariance, (q − 1, q − 1)."""
     training: tuple[str, ...]
     """The names of the training spectra (provenance: none is a held-out light or a near copy of one)."""
-    representation_error: float
-    """RMS over training lights of the part of each (unit-norm) light outside the basis."""
 
     @property
     def dims(self) -> int:
@@ -160,7 +158,6 @@ def learn_light_prior(grid: WavelengthGrid, dims: int = LIGHT_DIMS, exclude: tup
     vectors, _, _ = np.linalg.svd(centred, full_matrices=False)
     basis = np.column_stack([first, vectors[:, : dims - 1]])
     coefficients = basis[:, 1:].T @ scaled
-    outside = unit - basis @ (basis.T @ unit)
     names = tuple(n for n, k in zip(lights.names, keep) if k)
     return LightPrior(
         basis=lights.replace(
@@ -172,7 +169,6 @@ def learn_light_prior(grid: WavelengthGrid, dims: int = LIGHT_DIMS, exclude: tup
         mean=coefficients.mean(axis=1),
         covariance=np.cov(coefficients),
         training=names,
-        representation_error=float(np.sqrt(np.mean(outside**2)) * math.sqrt(grid.size)),
     )
 
 
@@ -222,12 +218,6 @@ class PriorEstimate:
     """Valid block samples (blocks × channels)."""
     warnings: tuple[str, ...] = ()
     """Reliability warnings (empty when none)."""
-
-    @property
-    def band(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lower, upper) one-sigma band."""
-        centre = self.spectrum.values[:, 0]
-        return centre - self.spectrum_std, centre + self.spectrum_std
 
 
 def plane_responsivities(responsivities: Spectra, channels: tuple[str, ...]) -> np.ndarray:

@@ -25,7 +25,7 @@ import numpy as np
 from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.image_formation import surface_responses
-from msflash.processing.spectra import Spectra, WavelengthGrid, require_same_grid
+from msflash.processing.spectra import Spectra, require_same_grid
 
 CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 
@@ -111,11 +111,6 @@ def demosaic_bilinear(mosaic: np.ndarray, cfa: str) -> np.ndarray:
     return np.stack(planes, axis=-1)
 
 
-def _observer(grid: WavelengthGrid) -> np.ndarray:
-    """CIE 1931 CMFs on ``grid`` (energy weights), shape (n_wavelengths, 3)."""
-    return datasets.cie1931_cmfs(grid).values
-
-
 def reflectances_to_xyz(reflectances: Spectra, illuminant: Spectra) -> np.ndarray:
     """CIE 1931 2° XYZ of each surface under an illuminant, shape (n_surfaces, 3), Y of a perfect white = 1.
 
@@ -133,7 +128,7 @@ def reflectances_to_xyz(reflectances: Spectra, illuminant: Spectra) -> np.ndarra
     grid = require_same_grid(reflectances, illuminant)
     if illuminant.kind != "spd" or illuminant.count != 1:
         raise SpectralDataError(f"{illuminant.source or 'illuminant'}: expected one spectrum of kind 'spd'")
-    observer = _observer(grid)
+    observer = datasets.cie1931_cmfs(grid).values  # energy weights, (n_wavelengths, 3)
     light = illuminant.to_unit("energy").values[:, 0]
     white_y = float(observer[:, 1] @ light)
     if white_y <= 0:

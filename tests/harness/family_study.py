@@ -34,6 +34,16 @@ def _paper_rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
     return metrics.rmse(estimate, truth) if np.any(estimate) and np.any(truth) else float("nan")
 
 
+def evidence_spread(
+    chosen: Any, candidates: list[Any], temperature: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(spread, average)``: the light families' evidence-weighted spread of ``candidates`` about ``chosen`` and
+    their weighted mean, each scaled onto the chosen one, at ``temperature`` (the estimate's own computation)."""
+    from msflash.processing.light_families import _scaled_spectra, _weighted_spread
+
+    return _weighted_spread(chosen.fit.spectrum, candidates, _scaled_spectra(chosen, candidates), temperature)
+
+
 def case_inputs(case: HarnessCase, cache: Path) -> tuple[Any, float, Any, Any, Any, Any]:
     """A case's rendering (cached), its truth's LED bound, its sequence, LED spectra and camera (photons) and frames."""
     from msflash.acquisition.sequence.reader import read_sequence
@@ -54,7 +64,7 @@ def study_case(case: HarnessCase, cache: Path) -> tuple[list[dict], dict]:
     from msflash.acquisition.session.sequence_spectra import (
         spectrum_in_sequence_unit,
     )
-    from msflash.processing.light_families import evidence_spread, family_model
+    from msflash.processing.light_families import family_model
     from msflash.processing.light_prior import prior_model
     from msflash.processing.spectral_data_term import scene_form
 

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from tests.harness import metrics
-from tests.harness.family_study import case_inputs, study_map, study_work
+from tests.harness.family_study import case_inputs, evidence_spread, study_map, study_work
 from tests.harness.render import HarnessCase
 
 HALVES = ((0, 2, 4), (1, 3))
@@ -100,7 +100,6 @@ def study_case(case: HarnessCase, cache: Path) -> dict:
     from msflash.processing.light_families import (
         AVERAGE_TEMPERATURE,
         CHECK_TEMPERATURE,
-        evidence_spread,
         family_model,
         training_terms,
     )
