@@ -10,7 +10,6 @@ says which range the file covers and which is needed. Every problem is a one-lin
 
 from __future__ import annotations
 
-import os
 import warnings
 from pathlib import Path
 from typing import Literal
@@ -24,7 +23,7 @@ from msflash.processing.errors import SpectralDataError
 from msflash.processing.names import unknown_name
 from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, SpectralKind, WavelengthGrid
-from msflash.processing.user_files import shown_path
+from msflash.processing.user_files import names_a_file, shown_path
 
 SimSceneName = Literal["chart110", "macbeth", "white"]
 SIM_SCENES: tuple[SimSceneName, ...] = ("chart110", "macbeth", "white")
@@ -32,18 +31,6 @@ SIM_SCENES: tuple[SimSceneName, ...] = ("chart110", "macbeth", "white")
 
 SIM_DEFAULT_CAMERA = "NikonD100"
 """The sim rig's camera unless ``--sim-camera`` names another."""
-
-_TABLE_SUFFIXES = (".csv", ".txt")
-
-
-def is_file(spec: str) -> bool:
-    """Whether an option's text names a file (a table suffix, or an existing path) rather than a name.
-
-    Any existing path but a directory counts (a FIFO, a device, a symlink loop), so the file reader
-    refuses it by what it is instead of it being looked up as a name.
-    """
-    path = Path(spec)
-    return path.suffix.lower() in _TABLE_SUFFIXES or (os.path.lexists(path) and not path.is_dir())
 
 
 class _NotATable(UsageError):
@@ -209,7 +196,7 @@ def sim_camera(spec: str | None, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra
     """
     spec = SIM_DEFAULT_CAMERA if spec is None else spec
     where = f"--sim-camera {spec}"
-    if is_file(spec):
+    if names_a_file(spec):
         return _nonnegative_light(on_grid(read_responsivity_file(spec), where, grid), where, "channel")
     try:
         return datasets.camera_responsivities(spec).resample(grid)
@@ -257,7 +244,7 @@ def sim_ambient(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
         An unknown name (every accepted one is listed), or a file that is bad, too narrow, holds
         more than one spectrum or no light.
     """
-    if not is_file(spec):
+    if not names_a_file(spec):
         try:
             return lights.light_spectrum(spec, grid)
         except SpectralDataError as err:
@@ -279,7 +266,7 @@ def sim_scene(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> SimSceneName | 
     UsageError
         An unknown name, or a file that is bad, too narrow or not reflectances in 0–1.
     """
-    if not is_file(spec):
+    if not names_a_file(spec):
         name = next((n for n in SIM_SCENES if n == spec), None)
         if name is None:
             raise UsageError(

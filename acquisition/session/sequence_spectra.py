@@ -23,7 +23,7 @@ from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import Spectra
-from msflash.processing.user_files import printable, shown_path
+from msflash.processing.user_files import names_a_file, printable, shown_path
 
 
 def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -> tuple[Sequence, list[str]]:
@@ -136,11 +136,6 @@ def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarr
     return spectrum.to_unit(sequence.spectral_unit).values[:, 0]
 
 
-def is_target_file(target: str) -> bool:
-    """Whether ``--target`` names a file (a ``.csv``/``.txt`` name, or anything on disk) rather than an illuminant."""
-    return Path(target).suffix.lower() in (".csv", ".txt") or os.path.lexists(target)
-
-
 VISIBLE_TO_CAMERAS_NM = (300.0, 1100.0)
 """Where a silicon camera sees: a target light with no power in this range cannot be matched by any flash."""
 
@@ -236,7 +231,7 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
     two-column CSV ``wavelength_nm, value`` in energy units, or a spectrometer export of the light
     (:func:`target_file_spectrum`, which says the file's warnings: this reading, once per sequence, does not).
     """
-    if is_target_file(target):
+    if names_a_file(target):
         spectra = target_file_spectrum(target, say_warnings=False)  # said when --target was read (target_value)
         try:
             resampled = spectra.resample(sequence.grid, outside="error")

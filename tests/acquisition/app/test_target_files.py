@@ -324,3 +324,26 @@ def test_the_python_api_says_a_target_files_warning_once(base_sequence: Path, tm
     averaged = [w for w in said if issubclass(w.category, SpectralDataWarning)]
     assert len(averaged) == 1 and f"{path}: 2 readings at {wavelengths[49]:g} nm" in str(averaged[0].message)
     np.testing.assert_array_equal(first.flash_weights, again.flash_weights)
+
+
+def test_a_folder_named_like_an_illuminant_leaves_the_name_an_illuminant(
+    base_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A folder ``D65`` in the working directory (a lab's runs sorted by light) is no target file: the default
+    ``--target D65`` and a typed ``--target A`` stay illuminants. On 9d2686d the default was read as the folder and
+    every ``flash`` and ``run`` there was refused ("D65: is a directory")."""
+    monkeypatch.chdir(tmp_path)
+    expected = {}
+    for name in ("D65", "A"):
+        status, out, err = _run(["flash", str(base_sequence), "--mode", "complementary", "--target", name, "--json"])
+        assert status == 0, err
+        expected[name] = json.loads(out)["flash_weights"]
+        (tmp_path / name).mkdir()
+    status, out, err = _run(["flash", str(base_sequence), "--mode", "complementary", "--json"])
+    assert status == 0 and json.loads(out)["flash_weights"] == expected["D65"], err
+    status, out, err = _run(["flash", str(base_sequence), "--mode", "complementary", "--target", "A", "--json"])
+    assert status == 0 and json.loads(out)["flash_weights"] == expected["A"], err
+    # A path is still a file, and a folder is refused as one, in one line naming it.
+    status, _, err = _run(["flash", str(base_sequence), "--mode", "complementary", "--target", "A/"])
+    lines = err.strip().splitlines()
+    assert status == 2 and len(lines) == 1 and "--target: A: is a directory" in lines[0], err
