@@ -156,10 +156,9 @@ def solve_flash(
     if not isinstance(target, str | os.PathLike):
         _refuse("solve_flash", "target", target, "an illuminant name (D65, A, …) or the path of a CSV file")
     from msflash.acquisition.session.analysis import solve_sequence_flash
-    from msflash.acquisition.session.sequence_spectra import target_file_spectrum
-    from msflash.processing.user_files import names_a_file
+    from msflash.acquisition.session.sequence_spectra import is_target_file, target_file_spectrum
 
-    if mode == "complementary" and names_a_file(os.fspath(target)):
+    if mode == "complementary" and is_target_file(os.fspath(target)):
         target_file_spectrum(os.fspath(target))  # read as the command line reads --target: its warnings said here
     return solve_sequence_flash(sequence, mode, estimate.ambient_weights, target)
 

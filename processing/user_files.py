@@ -23,6 +23,7 @@ from __future__ import annotations
 import errno
 import os
 import stat
+from collections.abc import Callable
 from pathlib import Path
 
 from msflash.processing.errors import SpectralDataError
@@ -49,22 +50,24 @@ TABLE_SUFFIXES = (".csv", ".txt")
 """Names of spectral tables: an option's value ending so is read as a file, whether or not it exists."""
 
 
-def names_a_file(text: str) -> bool:
+def names_a_file(text: str, is_name: Callable[[str], bool] | None = None) -> bool:
     """Whether an option that takes a name or a file (``--target D65|FILE``, the sim rig's ``--ambient``,
-    ``--scene``, ``--sim-camera``) names a file: a table suffix, a path separator, or anything on disk but a
-    directory.
+    ``--scene``, ``--sim-camera``) names a file: a table suffix, a path separator, or a word on disk that is
+    not a directory and not a name the option knows (``is_name``, asked only then).
 
     Anything existing but a directory counts (a FIFO, a device, a symlink loop), so the file reader refuses it by
-    what it is instead of it being looked up as a name. A directory does not: a folder ``D65`` in the working
-    directory leaves ``--target D65`` (the default) the illuminant; ``--target runs/`` is still read as a file, and
-    refused as a directory.
+    what it is instead of it being looked up as a name. A directory does not, nor does a file whose name the option
+    knows: a folder or a file ``D65`` in the working directory leaves ``--target D65`` (the default) the illuminant,
+    and ``./D65`` reads the file. ``--target runs/`` is read as a file, and refused as a directory.
 
     >>> names_a_file("D65"), names_a_file("lamp.CSV"), names_a_file("spectra/lamp")
     (False, True, True)
     """
     if Path(text).suffix.lower() in TABLE_SUFFIXES or any(sep in text for sep in (os.sep, os.altsep) if sep):
         return True
-    return os.path.lexists(text) and not os.path.isdir(text)
+    if not os.path.lexists(text) or os.path.isdir(text):
+        return False
+    return is_name is None or not is_name(text)
 
 
 def shown_path(path: str | bytes | os.PathLike) -> str:

@@ -27,11 +27,10 @@ def target_value(text: str) -> str:
     A mistyped name is refused before a rig opens or a frame is captured, naming ``--target`` and the
     names it was probably meant to be.
     """
-    from msflash.acquisition.session.sequence_spectra import target_file_spectrum
+    from msflash.acquisition.session.sequence_spectra import is_target_file, target_file_spectrum
     from msflash.processing.errors import SpectralDataError
-    from msflash.processing.user_files import names_a_file
 
-    if names_a_file(text):
+    if is_target_file(text):
         try:  # read now, so that a missing or dark file is refused before the rig meters or captures
             target_file_spectrum(text)
         except (ValueError, OSError) as err:  # every bad-input error of msflash is a ValueError

@@ -11,6 +11,7 @@ says which range the file covers and which is needed. Every problem is a one-lin
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
 
@@ -196,7 +197,7 @@ def sim_camera(spec: str | None, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra
     """
     spec = SIM_DEFAULT_CAMERA if spec is None else spec
     where = f"--sim-camera {spec}"
-    if names_a_file(spec):
+    if names_a_file(spec, lambda name: _resolves(datasets.camera_responsivities, name)):
         return _nonnegative_light(on_grid(read_responsivity_file(spec), where, grid), where, "channel")
     try:
         return datasets.camera_responsivities(spec).resample(grid)
@@ -244,7 +245,7 @@ def sim_ambient(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
         An unknown name (every accepted one is listed), or a file that is bad, too narrow, holds
         more than one spectrum or no light.
     """
-    if not names_a_file(spec):
+    if not names_a_file(spec, lambda name: _resolves(lights.light_spectrum, name)):
         try:
             return lights.light_spectrum(spec, grid)
         except SpectralDataError as err:
@@ -266,7 +267,7 @@ def sim_scene(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> SimSceneName | 
     UsageError
         An unknown name, or a file that is bad, too narrow or not reflectances in 0–1.
     """
-    if not names_a_file(spec):
+    if not names_a_file(spec, SIM_SCENES.__contains__):
         name = next((n for n in SIM_SCENES if n == spec), None)
         if name is None:
             raise UsageError(
@@ -280,3 +281,12 @@ def sim_scene(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> SimSceneName | 
         hint = " (a table in percent? divide by 100)" if high > 1 else ""
         raise UsageError(f"{where}: reflectances span {low:g}–{high:g}{hint}; expected values in 0–1")
     return surfaces
+
+
+def _resolves(lookup: Callable[[str], object], name: str) -> bool:
+    """Whether ``lookup`` knows ``name`` (a file of that name beside the command then leaves it a name)."""
+    try:
+        lookup(name)
+    except SpectralDataError:
+        return False
+    return True

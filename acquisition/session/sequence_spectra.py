@@ -22,7 +22,7 @@ from msflash.acquisition.sequence.format import Sequence
 from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.negative_values import clip_negative_noise
-from msflash.processing.spectra import Spectra
+from msflash.processing.spectra import DEFAULT_GRID, Spectra
 from msflash.processing.user_files import names_a_file, printable, shown_path
 
 
@@ -136,6 +136,20 @@ def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarr
     return spectrum.to_unit(sequence.spectral_unit).values[:, 0]
 
 
+def is_target_file(target: str) -> bool:
+    """Whether ``--target`` names a file (:func:`processing.user_files.names_a_file`); an illuminant's name is the
+    illuminant even where a file of that name lies beside the command (``./D65`` reads the file)."""
+    return names_a_file(target, _is_illuminant)
+
+
+def _is_illuminant(name: str) -> bool:
+    try:
+        datasets.illuminant(name, DEFAULT_GRID, outside="zero")
+    except SpectralDataError:
+        return False
+    return True
+
+
 VISIBLE_TO_CAMERAS_NM = (300.0, 1100.0)
 """Where a silicon camera sees: a target light with no power in this range cannot be matched by any flash."""
 
@@ -231,7 +245,7 @@ def target_illuminant(target: str, sequence: Sequence) -> Spectra:
     two-column CSV ``wavelength_nm, value`` in energy units, or a spectrometer export of the light
     (:func:`target_file_spectrum`, which says the file's warnings: this reading, once per sequence, does not).
     """
-    if names_a_file(target):
+    if is_target_file(target):
         spectra = target_file_spectrum(target, say_warnings=False)  # said when --target was read (target_value)
         try:
             resampled = spectra.resample(sequence.grid, outside="error")

@@ -76,3 +76,21 @@ def test_an_ambient_value_beyond_noise_is_refused_naming_its_line(
     assert status == 2 and len(err) == 1, err
     assert err[0].startswith(f"msflash: error: {lamp}:{bad + 2}: column 'lamp' at {wavelengths[bad - 1]:g} nm"), err
     assert not (tmp_path / "c").exists()
+
+
+def test_a_file_named_like_a_light_leaves_the_name_a_light(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A file ``tungsten`` beside the command does not replace the light ``--ambient tungsten`` names;
+    ``./tungsten`` reads it (as ``--target`` treats a file named like an illuminant)."""
+    monkeypatch.chdir(tmp_path)
+    named, _ = _capture(Path("tungsten"), tmp_path / "named")
+    wavelengths, counts = _light()
+    (tmp_path / "tungsten").write_text(_table(wavelengths, counts), newline="")
+    beside, _ = _capture(Path("tungsten"), tmp_path / "beside")
+    for frame, wanted in zip(beside, named, strict=True):
+        np.testing.assert_array_equal(frame, wanted)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        status = main(["capture", "--rig", "sim", "--seed", "5", "--ambient", "./tungsten", "--out", "file"])
+    assert status == 0, err.getvalue()
+    sequence = read_sequence(tmp_path / "file" / "sequence")
+    assert not np.array_equal(sequence.load_frame(0), named[0])

@@ -347,3 +347,20 @@ def test_a_folder_named_like_an_illuminant_leaves_the_name_an_illuminant(
     status, _, err = _run(["flash", str(base_sequence), "--mode", "complementary", "--target", "A/"])
     lines = err.strip().splitlines()
     assert status == 2 and len(lines) == 1 and "--target: A: is a directory" in lines[0], err
+
+
+def test_a_file_named_like_an_illuminant_is_read_only_as_a_path(
+    base_sequence: Path, ascending: tuple[Path, dict], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A file ``D65`` beside the command (a lamp's table saved without a suffix) does not silently replace the
+    illuminant the default ``--target D65`` names: the name wins, and ``./D65`` reads the file."""
+    monkeypatch.chdir(tmp_path)
+    status, out, err = _run(["flash", str(base_sequence), "--mode", "complementary", "--json"])
+    assert status == 0, err
+    d65 = json.loads(out)["flash_weights"]
+    (tmp_path / "D65").write_text(ascending[0].read_text(), newline="")
+    status, out, err = _run(["flash", str(base_sequence), "--mode", "complementary", "--json"])
+    assert status == 0 and json.loads(out)["flash_weights"] == d65, err
+    status, out, err = _run(["flash", str(base_sequence), "--mode", "complementary", "--target", "./D65", "--json"])
+    assert status == 0, err
+    assert json.loads(out)["flash_weights"] == ascending[1]["flash_weights"] != d65
