@@ -132,7 +132,7 @@ def estimate_ambient(
 
 
 def solve_flash(
-    sequence: Sequence, estimate: SequenceEstimate, mode: str = "matching", target: str = "D65"
+    sequence: Sequence, estimate: SequenceEstimate, mode: str = "matching", target: str | os.PathLike[str] = "D65"
 ) -> FlashSolution:
     """The LED mix that matches the ambient (eq. 7) or complements it towards ``target`` (eq. 8–9).
 
@@ -143,7 +143,8 @@ def solve_flash(
     target
         For ``complementary``: an illuminant name (D65, A, FL2, …), or a file: a table
         ``wavelength_nm, value`` in energy units or a spectrometer export of the light (its warnings —
-        rows averaged, raw counts — said once per version of the file).
+        rows averaged, raw counts — said once per version of the file). A ``pathlib.Path`` is always a file,
+        even one named like an illuminant; a string is read as ``--target`` reads it.
 
     Returns
     -------
@@ -158,8 +159,11 @@ def solve_flash(
     from msflash.acquisition.session.analysis import solve_sequence_flash
     from msflash.acquisition.session.sequence_spectra import is_target_file, target_file_spectrum
 
-    if mode == "complementary" and is_target_file(os.fspath(target)):
-        target_file_spectrum(os.fspath(target))  # read as the command line reads --target: its warnings said here
+    if isinstance(target, os.PathLike):  # a path, even named like an illuminant: read as "./D65" would be
+        target = os.fspath(target)
+        target = target if os.sep in target else os.path.join(os.curdir, target)
+    if mode == "complementary" and is_target_file(target):
+        target_file_spectrum(target)  # read as the command line reads --target: its warnings said here
     return solve_sequence_flash(sequence, mode, estimate.ambient_weights, target)
 
 

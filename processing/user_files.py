@@ -50,7 +50,7 @@ TABLE_SUFFIXES = (".csv", ".txt")
 """Names of spectral tables: an option's value ending so is read as a file, whether or not it exists."""
 
 
-def names_a_file(text: str, is_name: Callable[[str], bool] | None = None) -> bool:
+def names_a_file(text: str | os.PathLike[str], is_name: Callable[[str], bool] | None = None) -> bool:
     """Whether an option that takes a name or a file (``--target D65|FILE``, the sim rig's ``--ambient``,
     ``--scene``, ``--sim-camera``) names a file: a table suffix, a path separator, or a word on disk that is
     not a directory and not a name the option knows (``is_name``, asked only then).
@@ -63,6 +63,7 @@ def names_a_file(text: str, is_name: Callable[[str], bool] | None = None) -> boo
     >>> names_a_file("D65"), names_a_file("lamp.CSV"), names_a_file("spectra/lamp")
     (False, True, True)
     """
+    text = os.fspath(text)
     if Path(text).suffix.lower() in TABLE_SUFFIXES or any(sep in text for sep in (os.sep, os.altsep) if sep):
         return True
     if not os.path.lexists(text) or os.path.isdir(text):

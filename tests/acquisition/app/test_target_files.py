@@ -364,3 +364,25 @@ def test_a_file_named_like_an_illuminant_is_read_only_as_a_path(
     status, out, err = _run(["flash", str(base_sequence), "--mode", "complementary", "--target", "./D65", "--json"])
     assert status == 0, err
     assert json.loads(out)["flash_weights"] == ascending[1]["flash_weights"] != d65
+
+
+@pytest.mark.filterwarnings("ignore::msflash.processing.errors.TargetUnreachableWarning")
+def test_the_python_api_reads_a_path_as_a_file_and_a_string_as_the_command_line_does(
+    base_sequence: Path, ascending: tuple[Path, dict], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``msflash.solve_flash(…, target=Path("D65"))`` reads the file even where its name is an illuminant's, and a
+    ``Path`` without a suffix is read, not refused; the string ``"D65"`` stays the illuminant, as ``--target D65``.
+    On c35c0d4 a suffixless ``Path`` raised a TypeError."""
+    import msflash
+
+    monkeypatch.chdir(tmp_path)
+    for name in ("D65", "lamp"):
+        (tmp_path / name).write_text(ascending[0].read_text(), newline="")
+    sequence = msflash.read_sequence(base_sequence)
+    estimate = msflash.estimate_ambient(sequence)
+    lamp = ascending[1]["flash_weights"]
+    for target in (Path("D65"), Path("lamp"), "lamp", "./D65"):
+        weights = msflash.solve_flash(sequence, estimate, "complementary", target).flash_weights
+        assert weights.tolist() == lamp, target
+    d65 = msflash.solve_flash(sequence, estimate, "complementary", "D65").flash_weights
+    assert d65.tolist() != lamp
