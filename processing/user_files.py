@@ -71,6 +71,20 @@ def names_a_file(text: str | os.PathLike[str], is_name: Callable[[str], bool] | 
     return is_name is None or not is_name(text)
 
 
+def known_to(lookup: Callable[[str], object]) -> Callable[[str], bool]:
+    """An ``is_name`` for :func:`names_a_file`: whether ``lookup`` (an option's reader of a name, raising
+    ``SpectralDataError`` for a name it does not know) knows the word."""
+
+    def is_name(word: str) -> bool:
+        try:
+            lookup(word)
+        except SpectralDataError:
+            return False
+        return True
+
+    return is_name
+
+
 def shown_path(path: str | bytes | os.PathLike) -> str:
     """``path`` as one printable line: undecodable bytes as ``\\xNN``, control characters escaped.
 

@@ -11,7 +11,6 @@ says which range the file covers and which is needed. Every problem is a one-lin
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
 
@@ -24,7 +23,7 @@ from msflash.processing.errors import SpectralDataError
 from msflash.processing.names import unknown_name
 from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import DEFAULT_GRID, Spectra, SpectralKind, WavelengthGrid
-from msflash.processing.user_files import names_a_file, shown_path
+from msflash.processing.user_files import known_to, names_a_file, shown_path
 
 SimSceneName = Literal["chart110", "macbeth", "white"]
 SIM_SCENES: tuple[SimSceneName, ...] = ("chart110", "macbeth", "white")
@@ -197,7 +196,7 @@ def sim_camera(spec: str | None, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra
     """
     spec = SIM_DEFAULT_CAMERA if spec is None else spec
     where = f"--sim-camera {spec}"
-    if names_a_file(spec, lambda name: _resolves(datasets.camera_responsivities, name)):
+    if names_a_file(spec, known_to(datasets.camera_responsivities)):
         return _nonnegative_light(on_grid(read_responsivity_file(spec), where, grid), where, "channel")
     try:
         return datasets.camera_responsivities(spec).resample(grid)
@@ -245,7 +244,7 @@ def sim_ambient(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> Spectra:
         An unknown name (every accepted one is listed), or a file that is bad, too narrow, holds
         more than one spectrum or no light.
     """
-    if not names_a_file(spec, lambda name: _resolves(lights.light_spectrum, name)):
+    if not names_a_file(spec, known_to(lights.light_spectrum)):
         try:
             return lights.light_spectrum(spec, grid)
         except SpectralDataError as err:
@@ -281,12 +280,3 @@ def sim_scene(spec: str, grid: WavelengthGrid = DEFAULT_GRID) -> SimSceneName | 
         hint = " (a table in percent? divide by 100)" if high > 1 else ""
         raise UsageError(f"{where}: reflectances span {low:g}–{high:g}{hint}; expected values in 0–1")
     return surfaces
-
-
-def _resolves(lookup: Callable[[str], object], name: str) -> bool:
-    """Whether ``lookup`` knows ``name`` (a file of that name beside the command then leaves it a name)."""
-    try:
-        lookup(name)
-    except SpectralDataError:
-        return False
-    return True

@@ -23,7 +23,7 @@ from msflash.processing import datasets
 from msflash.processing.errors import SpectralDataError
 from msflash.processing.negative_values import clip_negative_noise
 from msflash.processing.spectra import DEFAULT_GRID, Spectra
-from msflash.processing.user_files import names_a_file, printable, shown_path
+from msflash.processing.user_files import known_to, names_a_file, printable, shown_path
 
 
 def apply_calibration(sequence: Sequence, directory: str | Path | None = None) -> tuple[Sequence, list[str]]:
@@ -139,15 +139,7 @@ def spectrum_in_sequence_unit(sequence: Sequence, spectrum: Spectra) -> np.ndarr
 def is_target_file(target: str) -> bool:
     """Whether ``--target`` names a file (:func:`processing.user_files.names_a_file`); an illuminant's name is the
     illuminant even where a file of that name lies beside the command (``./D65`` reads the file)."""
-    return names_a_file(target, _is_illuminant)
-
-
-def _is_illuminant(name: str) -> bool:
-    try:
-        datasets.illuminant(name, DEFAULT_GRID, outside="zero")
-    except SpectralDataError:
-        return False
-    return True
+    return names_a_file(target, known_to(lambda name: datasets.illuminant(name, DEFAULT_GRID, outside="zero")))
 
 
 VISIBLE_TO_CAMERAS_NM = (300.0, 1100.0)
